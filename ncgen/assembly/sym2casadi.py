@@ -1,0 +1,115 @@
+"""CasADi forms of SymPy expressions.
+
+A small, deterministic tree walker: every SymPy node maps to the CasADi operation of the
+same meaning.  The substitution dictionary gives, for each free symbol, a CasADi
+expression (SX/MX/DM) or a number; a symbol without a value is an error.
+"""
+from __future__ import annotations
+
+from functools import reduce
+
+import casadi as ca
+import sympy as sp
+
+from ncgen.errors import NcgenError
+
+_UNARY = {
+    sp.sin: ca.sin, sp.cos: ca.cos, sp.tan: ca.tan,
+    sp.asin: ca.asin, sp.acos: ca.acos, sp.atan: ca.atan,
+    sp.sinh: ca.sinh, sp.cosh: ca.cosh, sp.tanh: ca.tanh,
+    sp.exp: ca.exp, sp.log: ca.log, sp.Abs: ca.fabs, sp.sign: ca.sign,
+    sp.floor: ca.floor, sp.ceiling: ca.ceil,
+}
+
+_RELATIONS = {
+    sp.StrictLessThan: lambda a, b: a < b, sp.LessThan: lambda a, b: a <= b,
+    sp.StrictGreaterThan: lambda a, b: a > b, sp.GreaterThan: lambda a, b: a >= b,
+    sp.Equality: lambda a, b: a == b, sp.Unequality: lambda a, b: a != b,
+}
+
+
+def to_casadi(expr, values: dict):
+    """Translate ``expr`` (SymPy scalar or explicit matrix) to CasADi.
+
+    ``values`` maps each free symbol of ``expr`` to a CasADi expression or a float.
+    Matrices become a CasADi matrix of the same shape (type follows the values given).
+    """
+    memo: dict = {}
+    if isinstance(expr, sp.MatrixBase):
+        rows = [[_walk(expr[i, j], values, memo) for j in range(expr.shape[1])]
+                for i in range(expr.shape[0])]
+        return ca.vertcat(*[ca.horzcat(*r) for r in rows]) if rows and rows[0] else ca.DM.zeros(*expr.shape)
+    return _walk(sp.sympify(expr), values, memo)
+
+
+def _walk(e, values, memo):
+    hit = memo.get(e)
+    if hit is not None:
+        return hit
+    out = _convert(e, values, memo)
+    memo[e] = out
+    return out
+
+
+def _convert(e, values, memo):
+    if e.is_Symbol:
+        if e not in values:
+            raise NcgenError(f"to_casadi: no value given for symbol {e}")
+        return values[e]
+    if e.is_Integer:
+        return int(e)
+    if e.is_Number:
+        return float(e)
+    if e is sp.pi:
+        return ca.pi
+    if e is sp.E:
+        return ca.exp(1)
+    if e is sp.true:
+        return 1
+    if e is sp.false:
+        return 0
+    if isinstance(e, sp.Piecewise):
+        return _piecewise(e, values, memo)
+    args = [_walk(a, values, memo) for a in e.args]
+    if e.is_Add:
+        return reduce(lambda a, b: a + b, args)
+    if e.is_Mul:
+        return reduce(lambda a, b: a * b, args)
+    if e.is_Pow:
+        base, expo = args
+        if e.exp == sp.Rational(1, 2):
+            return ca.sqrt(base)
+        if e.exp == -1:
+            return 1 / base
+        if e.exp.is_Integer and e.exp > 0:
+            return ca.constpow(base, int(e.exp))
+        return base ** expo
+    f = _UNARY.get(type(e))
+    if f is not None:
+        return f(args[0])
+    if isinstance(e, sp.atan2):
+        return ca.atan2(args[0], args[1])
+    if isinstance(e, sp.Max):
+        return reduce(ca.fmax, args)
+    if isinstance(e, sp.Min):
+        return reduce(ca.fmin, args)
+    if type(e) in _RELATIONS:
+        return _RELATIONS[type(e)](args[0], args[1])
+    if isinstance(e, sp.And):
+        return reduce(ca.logic_and, args)
+    if isinstance(e, sp.Or):
+        return reduce(ca.logic_or, args)
+    if isinstance(e, sp.Not):
+        return ca.logic_not(args[0])
+    raise NcgenError(f"to_casadi: no CasADi form for {type(e).__name__} in {e}")
+
+
+def _piecewise(e, values, memo):
+    """``Piecewise((v1, c1), (v2, c2), ..., (vn, True))`` as nested ``if_else``."""
+    *branches, (default, last_cond) = e.args
+    if last_cond is not sp.true:
+        raise NcgenError(f"to_casadi: Piecewise without a default branch: {e}")
+    result = _walk(default, values, memo)
+    for val, cond in reversed(branches):
+        result = ca.if_else(_walk(cond, values, memo), _walk(val, values, memo), result)
+    return result

@@ -1,0 +1,31 @@
+"""Exceptions raised by ncgen.
+
+Every error a user can trigger is a subclass of :class:`NcgenError`, itself a
+``ValueError``, and its message says *what* was wrong (which member, joint, key or
+argument), *what was expected* and *what was found*.
+"""
+
+
+class NcgenError(ValueError):
+    """Base class of the errors ncgen raises for bad input."""
+
+
+class CoordinateTypeError(NcgenError):
+    """Unknown natural-coordinate type, or one that does not exist in the requested dimension."""
+
+
+class ShapeError(NcgenError):
+    """An array argument has the wrong shape."""
+
+
+class InertiaError(NcgenError):
+    """Non-positive mass, or an inertia tensor that is not symmetric positive definite or
+    violates the triangle inequality."""
+
+
+class BasisError(NcgenError):
+    """Degenerate local basis: coplanar or zero base vectors, or a point off a bar's axis."""
+
+
+class RotationError(NcgenError):
+    """A matrix given as a rotation is not orthonormal with determinant +1."""
