@@ -29,3 +29,11 @@ class BasisError(NcgenError):
 
 class RotationError(NcgenError):
     """A matrix given as a rotation is not orthonormal with determinant +1."""
+
+
+class CodegenError(NcgenError):
+    """Generating, compiling or loading a C package failed; the message says which file or command."""
+
+
+class CompilerNotFound(CodegenError):
+    """No usable C compiler: ``$CC`` does not run and none of cc, gcc, clang is on PATH."""
