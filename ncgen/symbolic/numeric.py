@@ -34,6 +34,8 @@ def numpy_function(expr, args: Sequence, key: tuple | None = None) -> Callable:
     fn = _CACHE.get(cache_key)
     if fn is None:
         flat = _flat_args(args)
+        if isinstance(expr, sp.Basic) and expr.has(sp.Trace):   # NumPy printer lacks Trace
+            expr = expr.replace(sp.Trace, lambda A: sp.Add(*[A[i, i] for i in range(A.shape[0])]))
         raw = sp.lambdify(flat, expr, modules="numpy", cse=True)
         is_matrix = isinstance(expr, (sp.MatrixBase, sp.MatrixExpr))
 

@@ -1,0 +1,78 @@
+"""Argument checks shared by every layer: shapes, finiteness, rotations.
+
+Each check returns a clean float array and raises a :mod:`ncgen.errors` exception whose
+message names the argument (``what``), what was expected and what was found.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ncgen.errors import InertiaError, RotationError, ShapeError
+
+ROTATION_TOL = 1e-9
+
+
+def _shape_of(x) -> str:
+    try:
+        return "shape " + str(np.shape(x))
+    except Exception:  # ragged input
+        return f"{type(x).__name__} {x!r}"
+
+
+def as_array(x, shape: tuple, what: str) -> np.ndarray:
+    """``x`` as a finite float array of exactly ``shape``."""
+    try:
+        a = np.asarray(x, dtype=float)
+    except (TypeError, ValueError):
+        raise ShapeError(f"{what}: expected numbers of shape {shape}, got {_shape_of(x)}") from None
+    if a.shape != tuple(shape):
+        if len(shape) == 1:
+            raise ShapeError(f"{what}: expected {shape[0]} numbers, got {_describe(a)}")
+        raise ShapeError(f"{what}: expected shape {tuple(shape)}, got {_describe(a)}")
+    if not np.all(np.isfinite(a)):
+        raise ShapeError(f"{what}: expected finite numbers, got {a.tolist()}")
+    return a
+
+
+def _describe(a: np.ndarray) -> str:
+    if a.ndim == 1:
+        return f"{a.shape[0]}"
+    if a.ndim == 0:
+        return "a scalar"
+    return f"shape {a.shape}"
+
+
+def as_vector(x, n: int, what: str) -> np.ndarray:
+    return as_array(x, (n,), what)
+
+
+def as_scalar(x, what: str) -> float:
+    try:
+        v = float(np.asarray(x, dtype=float).reshape(()))
+    except (TypeError, ValueError):
+        raise ShapeError(f"{what}: expected a number, got {x!r}") from None
+    if not np.isfinite(v):
+        raise ShapeError(f"{what}: expected a finite number, got {v}")
+    return v
+
+
+def positive(x, what: str) -> float:
+    v = as_scalar(x, what)
+    if v <= 0:
+        raise InertiaError(f"{what}: expected a positive number, got {v}")
+    return v
+
+
+def rotation(R, dim: int, what: str = "rotation") -> np.ndarray:
+    """A proper rotation matrix (``RᵀR = 1``, ``det R = +1`` to 1e-9); in 2D an angle is accepted."""
+    if dim == 2 and np.ndim(R) == 0:
+        a = as_scalar(R, what)
+        return np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    R = as_array(R, (dim, dim), what)
+    err = np.max(np.abs(R.T @ R - np.eye(dim)))
+    if err > ROTATION_TOL:
+        raise RotationError(f"{what}: expected an orthonormal matrix, |RᵀR - 1| = {err:.3g}")
+    det = np.linalg.det(R)
+    if det < 0:
+        raise RotationError(f"{what}: expected det = +1 (a proper rotation), got det = {det:.6g} (a reflection)")
+    return R
