@@ -1,0 +1,183 @@
+"""Compile a generated package into a shared library, cached by content.
+
+The cache lives in ``$NCGEN_CACHE_DIR`` (default ``~/.cache/ncgen``); an entry
+``<name>-<key>/`` holds ``lib<name>.so``, a copy of the package manifest and
+``build.json`` (commands used).  The key hashes the package's C sources and headers, the
+compiler (path and version) and the flags, so an unchanged package is never rebuilt.
+Entries are built in a temporary sibling directory and renamed into place under an
+exclusive lock, so concurrent builds of the same package are safe and yield one library.
+
+Flags: ``cflags`` argument, else ``$NCGEN_CFLAGS``, else ``-O2``; ``-fPIC`` and ``-shared``
+(and ``-lm``) are always added.  Sources are compiled in parallel (``jobs``, default: CPU
+count), one object per file.
+"""
+from __future__ import annotations
+
+import json
+import os
+import platform
+import shlex
+import shutil
+import subprocess
+import sys
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+from ncgen.codegen import fsutil, manifest
+from ncgen.codegen.compiler import Compiler, find_compiler
+from ncgen.codegen.package import Package
+from ncgen.errors import CodegenError
+
+DEFAULT_CFLAGS = ("-O2",)
+#: Bump when the way libraries are built changes, to invalidate old cache entries.
+BUILD_SCHEME = 1
+#: Seconds before a running compile prints its status line.
+PROGRESS_DELAY = 1.0
+
+
+@dataclass(frozen=True)
+class BuildResult:
+    """The compiled library (``path``; the object is also path-like) and whether it came
+    from the cache."""
+
+    path: Path
+    cached: bool
+    key: str
+    compiler: Compiler
+    cflags: tuple[str, ...]
+
+    def __fspath__(self) -> str:
+        return str(self.path)
+
+
+def cache_dir() -> Path:
+    """``$NCGEN_CACHE_DIR``, else ``~/.cache/ncgen``."""
+    env = os.environ.get("NCGEN_CACHE_DIR")
+    return Path(env) if env else Path.home() / ".cache" / "ncgen"
+
+
+def resolve_cflags(cflags: str | Sequence[str] | None) -> tuple[str, ...]:
+    """The user part of the flags: ``cflags``, else ``$NCGEN_CFLAGS``, else ``-O2``."""
+    if cflags is None:
+        env = os.environ.get("NCGEN_CFLAGS")
+        return tuple(shlex.split(env)) if env is not None else DEFAULT_CFLAGS
+    return tuple(shlex.split(cflags)) if isinstance(cflags, str) else tuple(cflags)
+
+
+def compile_package(pkg: Package | str | os.PathLike, cc: str | None = None,
+                    cflags: str | Sequence[str] | None = None, jobs: int | None = None) -> BuildResult:
+    """Build (or find in the cache) the shared library of package ``pkg``."""
+    pkg = pkg if isinstance(pkg, Package) else Package.open(pkg)
+    compiler = find_compiler(cc)
+    flags = resolve_cflags(cflags)
+    key = build_key(pkg, compiler, flags)
+    root = cache_dir()
+    entry = root / f"{pkg.name}-{key[:24]}"
+    library = entry / f"lib{pkg.name}.so"
+    result = BuildResult(path=library, cached=True, key=key, compiler=compiler, cflags=flags)
+    if library.is_file():
+        return result
+    root.mkdir(parents=True, exist_ok=True)
+    with fsutil.locked(root / f".{entry.name}.lock"):
+        if library.is_file():  # another process built it while we waited
+            return result
+        with fsutil.temporary_sibling(entry) as tmp:
+            commands = _build(pkg, compiler, flags, jobs, tmp)
+            (tmp / manifest.FILENAME).write_bytes((pkg.path / manifest.FILENAME).read_bytes())
+            (tmp / "build.json").write_text(json.dumps(
+                {"key": key, "package": pkg.name, "content_hash": pkg.content_hash,
+                 "compiler": compiler.version, "commands": commands}, indent=1) + "\n")
+            fsutil.default_mode_dir(tmp)
+            if entry.exists():  # left incomplete by hand or by a crashed ncgen version
+                shutil.rmtree(entry)
+            os.rename(tmp, entry)
+    return BuildResult(path=library, cached=False, key=key, compiler=compiler, cflags=flags)
+
+
+def build_key(pkg: Package, compiler: Compiler, flags: tuple[str, ...]) -> str:
+    """sha256 of what the library depends on: sources, headers, compiler, flags, platform."""
+    build = pkg.manifest["build"]
+    files = {rel: fsutil.sha256_file(pkg.path / rel) for rel in build["sources"] + build["headers"]}
+    data = {"scheme": BUILD_SCHEME, "name": pkg.name, "files": files, "compiler": list(compiler.argv),
+            "compiler_version": compiler.version, "cflags": list(flags),
+            "platform": [sys.platform, platform.machine()]}
+    return fsutil.sha256_bytes(manifest.canonical_json(data).encode())
+
+
+def _build(pkg: Package, compiler: Compiler, flags: tuple[str, ...], jobs: int | None,
+           out: Path) -> list[list[str]]:
+    """Compile every source of ``pkg`` to an object in ``out`` and link ``out/lib<name>.so``."""
+    sources = pkg.manifest["build"]["sources"]
+    compile_cmds = [[*compiler.argv, *flags, "-fPIC", "-I.", "-c", src, "-o", str(out / f"{src}.o")]
+                    for src in sources]
+    link_cmd = [*compiler.argv, *flags, "-shared", "-o", str(out / f"lib{pkg.name}.so"),
+                *(str(out / f"{src}.o") for src in sources), "-lm"]
+    progress = _Progress(f"compiling C package {pkg.name!r} ({len(sources)} files)", len(sources))
+    try:
+        workers = max(1, min(jobs or os.cpu_count() or 1, len(sources)))
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            for _ in pool.map(lambda cmd: _run(cmd, pkg.path, progress), compile_cmds):
+                pass
+        _run(link_cmd, pkg.path, None)
+        for src in sources:
+            (out / f"{src}.o").unlink()
+    finally:
+        progress.finish()
+    return [[arg.replace(str(out), "$BUILD_DIR") for arg in cmd] for cmd in compile_cmds + [link_cmd]]
+
+
+def _run(cmd: list[str], cwd: Path, progress: "_Progress | None") -> None:
+    try:
+        out = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True)
+    except OSError as e:
+        raise CodegenError(f"could not run the C compiler: {e}\ncommand: {shlex.join(cmd)}") from None
+    if out.returncode != 0:
+        raise CodegenError(f"C compilation failed (exit status {out.returncode}) in {cwd}\n"
+                           f"command: {shlex.join(cmd)}\n{_first_errors(out.stderr + out.stdout)}")
+    if progress is not None:
+        progress.step()
+
+
+def _first_errors(log: str, n: int = 12) -> str:
+    """The first ``n`` lines of the compiler output from the first line mentioning an error."""
+    lines = log.strip().splitlines()
+    start = next((i for i, line in enumerate(lines) if "error" in line.lower()), 0)
+    shown = lines[start:start + n]
+    more = len(lines) - start - len(shown)
+    return "\n".join(shown) + (f"\n... ({more} more lines)" if more > 0 else "")
+
+
+class _Progress:
+    """A status line on stderr, shown only if the work lasts longer than PROGRESS_DELAY."""
+
+    def __init__(self, what: str, total: int):
+        self.what, self.total, self.done = what, total, 0
+        self.start = time.monotonic()
+        self.shown = False
+        self.lock = threading.Lock()
+        self.timer = threading.Timer(PROGRESS_DELAY, self._show)
+        self.timer.daemon = True
+        self.timer.start()
+
+    def _show(self) -> None:
+        with self.lock:
+            self.shown = True
+            sys.stderr.write(f"ncgen: {self.what}: {self.done}/{self.total} compiled, "
+                             f"{time.monotonic() - self.start:.0f} s\n")
+            sys.stderr.flush()
+
+    def step(self) -> None:
+        with self.lock:
+            self.done += 1
+        if self.shown and self.done < self.total:
+            self._show()
+
+    def finish(self) -> None:
+        self.timer.cancel()
+        if self.shown:
+            sys.stderr.write(f"ncgen: {self.what}: done in {time.monotonic() - self.start:.1f} s\n")
+            sys.stderr.flush()

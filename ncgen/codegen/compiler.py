@@ -1,0 +1,58 @@
+"""Finding the system C compiler and its identity.
+
+Lookup order: the ``cc`` argument, else ``$CC`` (may hold a command with arguments, e.g.
+``"ccache gcc"``), else the first of ``cc``, ``gcc``, ``clang`` on PATH.  An explicit
+choice that does not exist is an error, never silently replaced by another compiler.
+"""
+from __future__ import annotations
+
+import os
+import shlex
+import shutil
+import subprocess
+from dataclasses import dataclass
+from functools import lru_cache
+
+from ncgen.errors import CompilerNotFound
+
+CANDIDATES = ("cc", "gcc", "clang")
+
+
+@dataclass(frozen=True)
+class Compiler:
+    """A C compiler command (``argv`` prefix) and the first line of its ``--version``."""
+
+    argv: tuple[str, ...]
+    version: str
+
+
+def find_compiler(cc: str | None = None) -> Compiler:
+    """The compiler to use (see module docstring); raises :class:`CompilerNotFound`."""
+    explicit = cc if cc is not None else os.environ.get("CC")
+    if explicit:
+        argv = shlex.split(explicit)
+        path = shutil.which(argv[0]) if argv else None
+        if path is None:
+            source = "the cc argument" if cc is not None else "$CC"
+            raise CompilerNotFound(f"C compiler {explicit!r} from {source} was not found on PATH; "
+                                   f"install it, fix {source}, or unset it to use one of "
+                                   f"{', '.join(CANDIDATES)}")
+        return _identify((path, *argv[1:]))
+    for name in CANDIDATES:
+        path = shutil.which(name)
+        if path is not None:
+            return _identify((path,))
+    raise CompilerNotFound(f"no C compiler found (looked for $CC, {', '.join(CANDIDATES)} on PATH)")
+
+
+@lru_cache(maxsize=16)
+def _identify(argv: tuple[str, ...]) -> Compiler:
+    try:
+        out = subprocess.run([*argv, "--version"], capture_output=True, text=True, timeout=60)
+    except OSError as e:
+        raise CompilerNotFound(f"C compiler {shlex.join(argv)} does not run: {e}") from None
+    if out.returncode != 0:
+        raise CompilerNotFound(f"C compiler {shlex.join(argv)} does not run: `--version` exited with "
+                               f"{out.returncode}: {(out.stderr or out.stdout).strip()[:300]}")
+    lines = (out.stdout or out.stderr).strip().splitlines()
+    return Compiler(argv=argv, version=lines[0] if lines else "")

@@ -1,0 +1,81 @@
+"""File-system helpers: hashing, advisory locks and replacing a directory by a finished one.
+
+Directories are always produced complete in a temporary sibling and then renamed into
+place, so a reader never sees a half-written directory.  Locks are ``fcntl.flock`` locks
+(POSIX), released when the context exits or the process dies.
+"""
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import hashlib
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Callable, Iterator
+
+
+def sha256_bytes(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def sha256_file(path: Path) -> str:
+    return sha256_bytes(Path(path).read_bytes())
+
+
+@contextlib.contextmanager
+def locked(path: Path) -> Iterator[None]:
+    """Hold an exclusive lock on ``path`` (a lock file, created if missing, or a directory)."""
+    path = Path(path)
+    fd = os.open(path, os.O_RDONLY) if path.is_dir() else os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # closing releases the lock
+
+
+@contextlib.contextmanager
+def temporary_sibling(target: Path) -> Iterator[Path]:
+    """A fresh empty directory next to ``target``, removed on exit unless it was renamed away."""
+    target = Path(target)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
+    try:
+        yield tmp
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def default_mode_dir(path: Path) -> None:
+    """Give ``path`` (made by mkdtemp, mode 0700) the mode a plain ``mkdir`` would."""
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(path, 0o777 & ~umask)
+
+
+def replace_dir(new: Path, target: Path, may_replace: Callable[[Path], None]) -> None:
+    """Move the complete directory ``new`` to ``target``.
+
+    If ``target`` exists, ``may_replace(target)`` is called (under a lock on the parent
+    directory, so concurrent writers are serialised) and must raise to refuse; the old
+    directory is then moved aside, ``new`` renamed into place and the old one deleted.
+    On failure the old directory is put back.
+    """
+    new, target = Path(new), Path(target)
+    with locked(target.parent):
+        if not target.exists():
+            os.rename(new, target)
+            return
+        may_replace(target)
+        old_root = Path(tempfile.mkdtemp(prefix=f".{target.name}.old-", dir=target.parent))
+        old = old_root / target.name
+        os.rename(target, old)
+        try:
+            os.rename(new, target)
+        except BaseException:
+            os.rename(old, target)
+            os.rmdir(old_root)
+            raise
+    shutil.rmtree(old_root, ignore_errors=True)

@@ -1,0 +1,276 @@
+"""Write a generated C package: CasADi kernels, documented header, build files, manifest.
+
+A package directory ``out_dir`` holds (for package name ``name``)::
+
+    <name>.h               the API: every function documented, metadata as macros/arrays
+    <name>_kernels_<k>.c/.h CasADi's code, C symbol of function f is <name>_<f>
+    <name>_meta.c          definitions of the metadata arrays
+    <extra sources>        hand-written templates rendered next to the kernels
+    main.c                 evaluates one function at the default inputs and prints it
+    Makefile, CMakeLists.txt   build lib<name>.so and <name>_main
+    manifest.json          signatures, hashes, versions (see ncgen.codegen.manifest)
+
+The output depends only on the inputs (no time, path or host), so it is byte-for-byte
+reproducible.  It is rendered completely in a temporary sibling and renamed into place;
+an existing ``out_dir`` is replaced only if it is an ncgen package (or empty).
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import casadi as ca
+
+from ncgen.codegen import cnames, fsutil, manifest
+from ncgen.codegen.doc import PackageDoc, check_identifier
+from ncgen.codegen.kernels import c_function, casadi_options, generate_kernels, group_functions
+from ncgen.codegen.render import render
+from ncgen.codegen.signature import function_signature
+from ncgen.errors import CodegenError
+
+#: Default bound on SX instructions per kernel file (see ncgen.codegen.kernels).
+MAX_FILE_INSTRUCTIONS = 20_000
+
+
+@dataclass(frozen=True)
+class ExtraSource:
+    """A template rendered into the package as ``output``, with ``context`` (plain JSON data)
+    added to the common template variables.  ``.c`` outputs are compiled into the library,
+    ``.h`` outputs are included at the end of ``<name>.h``."""
+
+    template: str
+    output: str
+    context: Mapping = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Package:
+    """A package on disk; ``functions`` are the original CasADi functions by name when the
+    package was just written (``None`` when opened from disk)."""
+
+    name: str
+    path: Path
+    manifest: dict
+    functions: Mapping[str, ca.Function] | None = None
+
+    @classmethod
+    def open(cls, path: str | os.PathLike) -> "Package":
+        """The package in directory ``path`` (its manifest is read, files are not checked)."""
+        data = manifest.read_manifest(Path(path))
+        return cls(name=data["name"], path=Path(path), manifest=data)
+
+    @property
+    def content_hash(self) -> str:
+        return self.manifest["content_hash"]
+
+    @property
+    def function_names(self) -> list[str]:
+        return [f["name"] for f in self.manifest["functions"]]
+
+    def c_name(self, function: str) -> str:
+        """The exported C symbol of ``function``."""
+        for f in self.manifest["functions"]:
+            if f["name"] == function:
+                return f["c_name"]
+        raise CodegenError(f"package {self.name!r} has no function {function!r}; "
+                           f"it has {self.function_names}")
+
+    def verify(self) -> None:
+        """Raise if a file listed in the manifest is missing or was modified."""
+        bad = manifest.modified_files(self.path, self.manifest)
+        if bad:
+            raise CodegenError(f"package {self.path} was modified after generation (files {bad}); "
+                               f"regenerate it instead of editing generated files")
+
+
+def write_package(name: str, functions: Sequence[ca.Function], out_dir: str | os.PathLike, *,
+                  doc: PackageDoc = PackageDoc(),
+                  max_file_instructions: int | None = MAX_FILE_INSTRUCTIONS,
+                  extra_sources: Sequence[ExtraSource] = (),
+                  template_dirs: Sequence[str | os.PathLike] = (),
+                  codegen_options: Mapping | None = None) -> Package:
+    """Generate the C package ``name`` for ``functions`` into ``out_dir`` (see module docstring).
+
+    ``max_file_instructions`` bounds the SX instructions per kernel file (``None``: one
+    file, ``0``: one file per function).  ``template_dirs`` are searched before the shipped
+    templates (for ``extra_sources``).  ``codegen_options`` are extra CasADi CodeGenerator
+    options (``with_header``, ``main``, ``mex``, ``cpp`` are fixed by ncgen).
+    """
+    out_dir = Path(out_dir)
+    check_identifier("package name", name)
+    functions = _checked_functions(functions)
+    _check_doc(doc, functions)
+    _check_replaceable(out_dir)
+
+    for s in extra_sources:
+        try:
+            manifest.canonical_json(dict(s.context))
+        except TypeError as e:
+            raise CodegenError(f"context of extra source {s.output!r} must be plain JSON data: {e}") from None
+    options = {"max_file_instructions": max_file_instructions,
+               "casadi_options": casadi_options(codegen_options),
+               "extra_sources": [[s.template, s.output, dict(s.context)] for s in extra_sources]}
+    c_funcs = [c_function(f, f"{name}_{f.name()}") for f in functions]
+    kernels = generate_kernels(name, c_funcs, group_functions(c_funcs, max_file_instructions),
+                               options["casadi_options"])
+    file_of = {c: k.stem + ".c" for k in kernels for c in k.functions}
+
+    header = f"{name}.h"
+    meta_c = f"{name}_meta.c"
+    extra_c = [s.output for s in extra_sources if s.output.endswith(".c")]
+    extra_h = [s.output for s in extra_sources if s.output.endswith(".h")]
+    fn_info = [_function_info(name, f, c, file_of[c.name()], doc) for f, c in zip(functions, c_funcs)]
+    build = {"sources": [k.stem + ".c" for k in kernels] + [meta_c] + extra_c,
+             "headers": [header] + [k.stem + ".h" for k in kernels] + extra_h,
+             "main": "main.c", "library": f"lib{name}.so", "executable": f"{name}_main"}
+    context = {
+        "name": name, "NAME": name.upper(), "header": header, "summary": cnames.c_comment(doc.summary),
+        "casadi_version": ca.__version__, "functions": fn_info, "build": build,
+        "metadata": _metadata_info(name, doc), "main_function": doc.main_function or functions[0].name(),
+    }
+    cnames.unique_macros([m["macro"] + suffix for m in context["metadata"]
+                          for suffix in (("", "_LEN") if "len" in m else ("",))]
+                         + [a["macro"] for f in fn_info for a in f["inputs"] + f["outputs"]])
+
+    files: dict[str, str] = {}
+    for k in kernels:
+        files[k.stem + ".c"] = render("kernels.c.j2", k.stem + ".c",
+                                      {**context, "code": k.c_code, "kernel_functions": k.functions})
+        files[k.stem + ".h"] = render("kernels.h.j2", k.stem + ".h",
+                                      {**context, "code": k.h_code, "guard": k.stem.upper() + "_H"})
+    files[meta_c] = render("meta.c.j2", meta_c, context)
+    for s in extra_sources:
+        if s.output in files or s.output in ("main.c", "Makefile", "CMakeLists.txt", header,
+                                             manifest.FILENAME) or Path(s.output).name != s.output:
+            raise CodegenError(f"extra source output {s.output!r} must be a new plain file name; "
+                               f"taken: {sorted(files)} and the fixed files")
+        files[s.output] = render(s.template, s.output, {**context, **s.context}, template_dirs)
+    files[header] = render("header.h.j2", header, context)
+    files["main.c"] = render("main.c.j2", "main.c", context)
+    files["Makefile"] = render("Makefile.j2", "Makefile", context)
+    files["CMakeLists.txt"] = render("CMakeLists.txt.j2", "CMakeLists.txt", context)
+
+    data = {rel: text.encode() for rel, text in files.items()}
+    digest = manifest.content_hash(name, functions, doc.to_json(), options)
+    data[manifest.FILENAME] = manifest.manifest_text(
+        name=name, content_hash=digest, functions=[_manifest_entry(f) for f in fn_info],
+        build=build, metadata=dict(doc.metadata), files=data).encode()
+
+    with fsutil.temporary_sibling(out_dir) as tmp:
+        for rel, blob in data.items():
+            (tmp / rel).write_bytes(blob)
+        fsutil.default_mode_dir(tmp)
+        fsutil.replace_dir(tmp, out_dir, _check_replaceable)
+    return Package(name=name, path=out_dir, manifest=manifest.read_manifest(out_dir),
+                   functions={f.name(): f for f in functions})
+
+
+def _checked_functions(functions) -> list[ca.Function]:
+    functions = list(functions)
+    if not functions:
+        raise CodegenError("write_package needs at least one casadi.Function, found none")
+    seen = set()
+    for f in functions:
+        if not isinstance(f, ca.Function):
+            raise CodegenError(f"expected casadi.Function objects, found {type(f).__name__} {f!r}")
+        check_identifier("function name", f.name())
+        if f.name() in seen:
+            raise CodegenError(f"two functions are named {f.name()!r}; names must be unique")
+        seen.add(f.name())
+        for i in range(f.n_in()):
+            check_identifier(f"input {i} name of {f.name()}", f.name_in(i))
+        for i in range(f.n_out()):
+            check_identifier(f"output {i} name of {f.name()}", f.name_out(i))
+    return functions
+
+
+def _check_doc(doc: PackageDoc, functions: list[ca.Function]) -> None:
+    """Every name the doc mentions must exist; defaults must have the right length."""
+    by_name = {f.name(): f for f in functions}
+    if doc.main_function is not None and doc.main_function not in by_name:
+        raise CodegenError(f"PackageDoc.main_function is {doc.main_function!r}, not one of the "
+                           f"functions {list(by_name)}")
+    for fname, fdoc in doc.functions.items():
+        f = by_name.get(fname)
+        if f is None:
+            raise CodegenError(f"PackageDoc.functions documents {fname!r}, which is not one of the "
+                               f"functions {list(by_name)}")
+        for kind, names in (("inputs", f.name_in()), ("outputs", f.name_out())):
+            for arg in getattr(fdoc, kind):
+                if arg not in names:
+                    raise CodegenError(f"PackageDoc.functions[{fname!r}].{kind} documents {arg!r}, "
+                                       f"which is not one of the {kind} of {fname}: {list(names)}")
+    for f in functions:
+        for i, arg in enumerate(f.name_in()):
+            key = doc.defaults.get(arg)
+            if key is not None and len(doc.metadata[key]) != f.nnz_in(i):
+                raise CodegenError(f"default of input {arg!r} of {f.name()} (metadata {key!r}) has "
+                                   f"{len(doc.metadata[key])} values, expected nnz = {f.nnz_in(i)}")
+
+
+def _check_replaceable(out_dir: Path) -> None:
+    """Raise unless ``out_dir`` is absent, an empty directory or an ncgen package."""
+    if not out_dir.exists():
+        return
+    if not out_dir.is_dir():
+        raise CodegenError(f"refusing to write the package to {out_dir}: it exists and is not a directory")
+    if not any(out_dir.iterdir()):
+        return
+    try:
+        manifest.read_manifest(out_dir)
+    except CodegenError as e:
+        raise CodegenError(f"refusing to replace {out_dir}: it exists and is not an ncgen package "
+                           f"({e}); remove it yourself or choose another output directory") from None
+
+
+def _function_info(name: str, f: ca.Function, c: ca.Function, file: str, doc: PackageDoc) -> dict:
+    """Template data of one function: signature plus documentation."""
+    fdoc = doc.functions.get(f.name())
+    sig = function_signature(f)
+    cname = c.name()
+
+    def args(kind: str, io: str) -> list[dict]:
+        out = []
+        for i, a in enumerate(sig[kind]):
+            adoc = getattr(fdoc, kind).get(a["name"]) if fdoc else None
+            default = doc.defaults.get(a["name"]) if kind == "inputs" else None
+            out.append({**a, "index": i, "meaning": cnames.c_comment(adoc.meaning) if adoc else "",
+                        "units": cnames.c_comment(adoc.units) if adoc else "",
+                        "default": f"{name}_{default}" if default else None,
+                        "macro": f"{cname}_{io}_{a['name']}_NNZ".upper()})
+        return out
+
+    return {"name": f.name(), "c_name": cname, "file": file, "n_instructions": c.n_instructions(),
+            "purpose": cnames.c_comment(fdoc.purpose) if fdoc else "",
+            "inputs": args("inputs", "in"), "outputs": args("outputs", "out")}
+
+
+def _manifest_entry(info: dict) -> dict:
+    keep = ("name", "shape", "nnz", "dense", "colind", "row")
+    return {"name": info["name"], "c_name": info["c_name"], "file": info["file"],
+            "n_instructions": info["n_instructions"],
+            "inputs": [{k: a[k] for k in keep} for a in info["inputs"]],
+            "outputs": [{k: a[k] for k in keep} for a in info["outputs"]]}
+
+
+def _metadata_info(name: str, doc: PackageDoc) -> list[dict]:
+    """Template data of the metadata: macro name, C spelling and kind of each entry."""
+    out = []
+    for key, value in doc.metadata.items():
+        item = {"key": key, "macro": f"{name}_{key}".upper(), "c_name": f"{name}_{key}",
+                "doc": cnames.c_comment(doc.metadata_doc.get(key, ""))}
+        if isinstance(value, int):
+            item.update(kind="int", literal=str(value))
+        elif isinstance(value, float):
+            item.update(kind="real", literal=cnames.c_real(value))
+        elif isinstance(value, str):
+            item.update(kind="string", literal=cnames.c_string(value))
+        elif value and isinstance(value[0], str):
+            item.update(kind="string_array", len=len(value),
+                        lines=cnames.wrap([cnames.c_string(v) for v in value], 4))
+        else:
+            item.update(kind="real_array", len=len(value), lines=cnames.wrap([cnames.c_real(v) for v in value], 4))
+        out.append(item)
+    return out
