@@ -1,0 +1,150 @@
+"""compile_package and load_functions: correctness, cache, concurrency, errors, VM fallback."""
+import os
+import shutil
+import stat
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import ncgen.codegen.load as load_module
+from ncgen.codegen import (ExtraSource, NoCompilerWarning, Package, compile_package, load_functions,
+                           write_package)
+from ncgen.errors import CodegenError, CompilerNotFound
+from test_codegen_samples import chain_doc, chain_functions, random_inputs
+
+pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc not installed")
+TESTS = Path(__file__).parent
+
+
+@pytest.fixture(autouse=True)
+def cache(tmp_path, monkeypatch) -> Path:
+    monkeypatch.setenv("NCGEN_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.delenv("NCGEN_CFLAGS", raising=False)
+    monkeypatch.delenv("CC", raising=False)
+    return tmp_path / "cache"
+
+
+@pytest.fixture
+def pkg(tmp_path) -> Package:
+    return write_package("chain", chain_functions(), tmp_path / "chain", doc=chain_doc(),
+                         max_file_instructions=100)
+
+
+def logging_compiler(tmp_path: Path, delay: float = 0.0) -> tuple[str, Path]:
+    """A `cc` wrapper that records its command lines (to count compiler runs) and sleeps
+    ``delay`` seconds before each compilation (to make builds overlap)."""
+    log = tmp_path / "cc.log"
+    script = tmp_path / "logcc"
+    script.write_text(f'#!/bin/sh\necho "$@" >> {log}\n'
+                      f'case "$*" in *" -c "*) sleep {delay};; esac\nexec gcc "$@"\n')
+    script.chmod(script.stat().st_mode | stat.S_IEXEC)
+    return str(script), log
+
+
+def test_compiled_equals_vm(pkg):
+    compiled = load_functions(pkg, backend="compiled")
+    vm = load_functions(pkg, backend="vm")
+    assert set(compiled) == set(vm) == {"phi", "gamma", "force", "mass"}
+    rng = np.random.default_rng(0)
+    for name, f in vm.items():
+        g = compiled[name]
+        assert g.name() == f"chain_{name}" and g.is_a("External")
+        for _ in range(5):
+            args = random_inputs(f, rng)
+            for i, (a, b) in enumerate(zip(f.call(args), g.call(args))):
+                assert a.sparsity() == b.sparsity() == f.sparsity_out(i)
+                np.testing.assert_allclose(np.array(b.nonzeros()), np.array(a.nonzeros()),
+                                           rtol=1e-12, atol=1e-12)
+
+
+def test_cache_hit_does_not_recompile(tmp_path, pkg):
+    cc, log = logging_compiler(tmp_path)
+    first = compile_package(pkg, cc=cc)
+    runs = [line for line in log.read_text().splitlines() if "-c " in line or "-shared" in line]
+    assert not first.cached and len(runs) == len(pkg.manifest["build"]["sources"]) + 1
+    mtime = first.path.stat().st_mtime_ns
+    second = compile_package(Package.open(pkg.path), cc=cc)
+    assert second.cached and second.path == first.path and second.key == first.key
+    assert second.path.stat().st_mtime_ns == mtime
+    runs_after = [line for line in log.read_text().splitlines() if "-c " in line or "-shared" in line]
+    assert runs_after == runs
+
+
+def test_key_depends_on_flags_and_sources(tmp_path, pkg, monkeypatch):
+    base = compile_package(pkg)
+    monkeypatch.setenv("NCGEN_CFLAGS", "-O1")
+    o1 = compile_package(pkg)
+    assert not o1.cached and o1.key != base.key and o1.cflags == ("-O1",)
+    assert compile_package(pkg, cflags="-O0 -g").cflags == ("-O0", "-g")
+    monkeypatch.delenv("NCGEN_CFLAGS")
+    smaller = write_package("chain", chain_functions()[:1], tmp_path / "other")
+    assert compile_package(smaller).key != base.key
+    assert compile_package(pkg).cached
+
+
+def test_two_processes_build_at_once(tmp_path, pkg, cache):
+    cc, _ = logging_compiler(tmp_path, delay=1.5)  # long enough to overlap and show progress
+    script = ("import sys; from ncgen.codegen import compile_package, load_functions\n"
+              "r = compile_package(sys.argv[1], cc=sys.argv[2]); load_functions(r, ['phi'])\n"
+              "print(r.path, r.cached)\n")
+    procs = [subprocess.Popen([sys.executable, "-c", script, str(pkg.path), cc], stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True, env=os.environ.copy()) for _ in range(2)]
+    outs = [p.communicate(timeout=120) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], outs
+    paths, cached = zip(*(out.split() for out, _ in outs))
+    assert paths[0] == paths[1] and sorted(cached) == ["False", "True"]
+    builder = outs[cached.index("False")][1]
+    assert "ncgen: compiling C package 'chain'" in builder and "done in" in builder
+    entries = [p for p in cache.iterdir() if not p.name.endswith(".lock")]
+    assert [p.name for p in entries] == [Path(paths[0]).parent.name]
+    assert sorted(p.name for p in entries[0].iterdir()) == ["build.json", "libchain.so", "manifest.json"]
+    assert compile_package(pkg, cc=cc).cached
+
+
+def test_compiler_error_is_clear(tmp_path, cache):
+    (tmp_path / "tpl").mkdir()
+    (tmp_path / "tpl" / "bad.c.j2").write_text("int {{ name }}_bad(void) { return undeclared_thing; }\n")
+    bad = write_package("chain", chain_functions()[:1], tmp_path / "bad", template_dirs=[tmp_path / "tpl"],
+                        extra_sources=[ExtraSource("bad.c.j2", "chain_bad.c")])
+    with pytest.raises(CodegenError) as info:
+        compile_package(bad)
+    msg = str(info.value)
+    assert "C compilation failed" in msg and "command: " in msg and "chain_bad.c" in msg
+    assert "undeclared_thing" in msg and "error" in msg
+    assert [p.name for p in cache.iterdir() if not p.name.endswith(".lock")] == []
+
+
+def test_load_from_library_and_directory(pkg):
+    built = compile_package(pkg)
+    by_path = load_functions(built.path, ["gamma"])
+    assert list(by_path) == ["gamma"] and by_path["gamma"].name() == "chain_gamma"
+    assert set(load_functions(str(pkg.path), backend="compiled")) == set(pkg.function_names)
+    with pytest.raises(CodegenError, match="has no function"):
+        load_functions(pkg, ["nope"])
+    with pytest.raises(CodegenError, match="opened from disk"):
+        load_functions(Package.open(pkg.path), backend="vm")
+    with pytest.raises(CodegenError, match="backend must be"):
+        load_functions(pkg, backend="fast")
+
+
+def test_missing_compiler(pkg, monkeypatch):
+    monkeypatch.setattr(load_module, "_warned_no_compiler", False)
+    monkeypatch.setenv("CC", "/nonexistent/cc")
+    monkeypatch.setenv("PATH", "")
+    with pytest.raises(CompilerNotFound, match="/nonexistent/cc"):
+        compile_package(pkg)
+    with pytest.raises(CompilerNotFound):
+        load_functions(pkg, backend="compiled")
+    with pytest.warns(NoCompilerWarning, match="falling back to CasADi's virtual machine"):
+        fns = load_functions(pkg, backend="auto")
+    assert all(fns[n] is pkg.functions[n] for n in pkg.function_names)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load_functions(pkg)  # warned once per process only
+    monkeypatch.delenv("CC")
+    with pytest.raises(CompilerNotFound, match=r"looked for \$CC, cc, gcc, clang"):
+        compile_package(pkg)
