@@ -1,0 +1,124 @@
+"""From a :class:`~ncgen.model.system.System` to a :class:`~ncgen.model.model.Model`:
+layout, CasADi expressions, constant mass matrix, redundancy and initial-state checks."""
+from __future__ import annotations
+
+import warnings
+
+import casadi as ca
+import numpy as np
+
+from ncgen.assembly.context import Context
+from ncgen.assembly.functions import system_functions
+from ncgen.assembly.initial_state import consistent_state, dependent_rows
+from ncgen.assembly.layout import Layout, make_layout
+from ncgen.assembly.mass import CholeskyFactor, assemble_mass
+from ncgen.model.members import ModelError
+
+#: Default Baumgarte coefficients (α, β) in 1/s: constraint errors decay like a critically
+#: damped oscillator with time constant 0.2 s.  IDAS keeps the drift small anyway; the
+#: terms only stop it from growing over long runs.
+BAUMGARTE = (5.0, 5.0)
+
+REDUNDANT_MODES = ("drop", "error", "keep")
+
+
+def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", tolerance: float = 1e-6,
+                t0: float = 0.0):
+    """Assemble ``system`` into a :class:`~ncgen.model.model.Model`.
+
+    ``redundant``: constraints linearly dependent at the initial configuration are
+    ``"drop"``-ped with a warning naming them, raise (``"error"``), or are kept
+    (``"keep"``, for analysis only: the DAE is then singular).  ``tolerance``: the largest
+    correction, relative to the system's size, that making the initial state consistent
+    may apply; beyond it the build fails and says where.
+    """
+    from ncgen.model.model import Model
+
+    if not system.members:
+        raise ModelError(f"system {system.name!r} has no members; add bodies, bars or points first")
+    if redundant not in REDUNDANT_MODES:
+        raise ModelError(f"redundant: expected one of {', '.join(REDUNDANT_MODES)}, got {redundant!r}")
+    alpha, beta = (float(x) for x in baumgarte)
+    members = list(system.members.values())
+    layout = make_layout(system.dim, members)
+    ctx = Context(system, layout)
+
+    labels, rows = constraint_rows(system, ctx)
+    F, V = force_terms(system, ctx)
+    M = assemble_mass(layout, members)
+    factor = CholeskyFactor(M, layout.coordinate_names)
+    q_init, v_init = initial_guess(layout, members)
+    p0 = np.concatenate([v for _, v in system.parameters.values()]) if system.parameters else np.zeros(0)
+
+    A_fn = ca.Function("A", [ctx.t, ctx.q, ctx.p], [ca.jacobian(ca.vertcat(*rows), ctx.q)]) \
+        if rows else None
+    dependent = dependent_rows(np.array(A_fn(t0, q_init, p0)) if A_fn else np.zeros((0, layout.nq)))
+    redundant_labels = [labels[i] for i in dependent]
+    if dependent and redundant == "error":
+        raise ModelError(f"system {system.name!r}: redundant constraints at the initial configuration: "
+                         f"{', '.join(redundant_labels)}; remove them or build(redundant='drop')")
+    if dependent and redundant == "drop":
+        warnings.warn(f"system {system.name!r}: dropping redundant constraints "
+                      f"{', '.join(redundant_labels)}", stacklevel=3)
+        keep = [i for i in range(len(rows)) if i not in set(dependent)]
+        labels, rows = [labels[i] for i in keep], [rows[i] for i in keep]
+
+    phi = ca.vertcat(*rows) if rows else ca.SX(0, 1)
+    functions = system_functions(ctx, phi, F, V, M, factor, alpha, beta, system)
+    state = consistent_state(functions, layout, labels, q_init, v_init, p0, t0, tolerance, factor)
+    return Model(system=system, layout=layout, labels=labels, functions=functions, M=M, factor=factor,
+                 state=state, p0=p0, baumgarte=(alpha, beta), redundant=redundant_labels,
+                 dropped=(redundant == "drop"), t0=t0)
+
+
+def constraint_rows(system, ctx: Context) -> tuple[list[str], list[ca.SX]]:
+    """Intrinsic constraints of every member (from its derivation), then joint equations."""
+    labels, rows = [], []
+    for m in system.members.values():
+        D = m.ctype.derivation
+        if not m.ctype.pairs:
+            continue
+        phi = ctx.instantiate(m, D.Phi)
+        names = "uvw"
+        for k, (s, t) in enumerate(m.ctype.pairs):
+            labels.append(f"{m.name}.rigid.{names[s]}{names[t]}")
+            rows.append(phi[k])
+    for j in system.joints:
+        for label, e in j.equations(ctx):
+            labels.append(label)
+            rows.append(e)
+    return labels, rows
+
+
+def force_terms(system, ctx: Context) -> tuple[ca.SX, ca.SX]:
+    """Generalised force ``F`` (gravity and force elements) and potential energy ``V``."""
+    g = ca.DM(system.gravity)
+    F = ca.SX.zeros(ctx.layout.nq)
+    V = ca.SX(0)
+    for m in system.members.values():
+        C = ca.DM(m.local.C(m.local.c_g))            # centre of mass r_G = C(c_g) q
+        F += ctx.scatter(m, ca.mtimes(C.T, m.local.mass * g))
+        V -= m.local.mass * ca.dot(g, ca.mtimes(C, ctx.q_of(m)))
+    for f in system.forces:
+        F += f.generalized(ctx)
+        V += f.potential(ctx)
+    return F, V
+
+
+def initial_guess(layout: Layout, members) -> tuple[np.ndarray, np.ndarray]:
+    """System q and v gathered from each member's initial pose and twist.  Where members
+    share a point, their velocities there must agree."""
+    q = np.full(layout.nq, np.nan)
+    v = np.full(layout.nq, np.nan)
+    src = [""] * layout.nq
+    for m in members:
+        for k, i in enumerate(layout.member_indices(m.name)):
+            if i is None:
+                continue
+            if np.isnan(v[i]):
+                q[i], v[i], src[i] = m.q0[k], m.qd0[k], m.name
+            elif abs(v[i] - m.qd0[k]) > 1e-9 * max(1.0, abs(v[i])):
+                raise ModelError(
+                    f"inconsistent initial velocity at the shared coordinate {layout.coordinate_names[i]}: "
+                    f"{src[i]} gives {v[i]:.6g} m/s, {m.name} gives {m.qd0[k]:.6g} m/s")
+    return q, v

@@ -1,0 +1,138 @@
+"""Assembly context: the CasADi symbols of a system and the per-member expressions that
+joints and forces are written with.
+
+Symbols: ``t`` (1), ``q`` and ``v`` (nq, v = q̇), ``u`` (inputs), ``p`` (parameters).
+A body-fixed point of member I is ``r = C(c) q_I`` and a body-fixed direction
+``d = (C(c_d) − C(0)) q_I = X(q_I) c_d``, both from the member's derivation; the ground's
+points and directions are constants.
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ncgen.assembly.layout import Layout
+from ncgen.assembly.sym2casadi import to_casadi
+from ncgen.errors import BasisError
+from ncgen.model.members import Member, ModelError
+from ncgen.symbolic.joints import primitive
+
+
+class Context:
+    """Symbols and member expressions of one system being assembled."""
+
+    def __init__(self, system, layout: Layout):
+        self.system = system
+        self.layout = layout
+        self.dim = system.dim
+        self.t = ca.SX.sym("t")
+        self.q = ca.SX.sym("q", layout.nq)
+        self.v = ca.SX.sym("v", layout.nq)
+        self.u = ca.vertcat(*system.inputs.values()) if system.inputs else ca.SX(0, 1)
+        self.p = ca.vertcat(*(s for s, _ in system.parameters.values())) if system.parameters else ca.SX(0, 1)
+        self._q_local: dict[str, ca.SX] = {}
+        self._v_local: dict[str, ca.SX] = {}
+        for name in system.members:
+            idx = layout.member_indices(name)
+            b = layout.member_constant(name)
+            self._q_local[name] = ca.vertcat(*[self.q[i] if i is not None else b[k] for k, i in enumerate(idx)])
+            self._v_local[name] = ca.vertcat(*[self.v[i] if i is not None else 0 for i in idx])
+
+    # -------------------------------------------------------------- members
+    def q_of(self, member: Member) -> ca.SX:
+        return self._q_local[member.name]
+
+    def v_of(self, member: Member) -> ca.SX:
+        return self._v_local[member.name]
+
+    def instantiate(self, member: Member, expr, extra: dict | None = None):
+        """A SymPy formula of ``member``'s derivation in CasADi (q ↦ q_I, q̇ ↦ v_I)."""
+        D = member.ctype.derivation
+        vals = dict(member.local.constants())
+        qI, vI = self.q_of(member), self.v_of(member)
+        vals.update({s: qI[k] for k, s in enumerate(D.q)})
+        vals.update({s: vI[k] for k, s in enumerate(D.qd)})
+        if extra:
+            vals.update(extra)
+        return to_casadi(expr, vals)
+
+    def scatter(self, member: Member, Q_local) -> ca.SX:
+        """``S_Iᵀ Q_I``: a member's generalised force as a system vector."""
+        out = ca.SX.zeros(self.layout.nq)
+        for k, i in enumerate(self.layout.member_indices(member.name)):
+            if i is not None:
+                out[i] += Q_local[k]
+        return out
+
+    # -------------------------------------------------- points and directions
+    def _local_point(self, member, world, what: str) -> np.ndarray:
+        rbar = member.to_local(world)
+        try:
+            member.local.affine(rbar)
+        except BasisError as e:
+            raise ModelError(f"{what}: {member.name} ({member.ctype.name} {member.kind}): {e}") from None
+        return rbar
+
+    def point(self, member, world, what: str):
+        """World position and velocity expressions of the point of ``member`` that is at
+        ``world`` in the initial configuration."""
+        if member.is_ground:
+            return ca.DM(np.asarray(world, float)), ca.DM.zeros(self.dim)
+        return self.local_point(member, self._local_point(member, world, what))
+
+    def local_point(self, member, rbar):
+        C = ca.DM(member.local.C(member.local.affine(rbar)))
+        return ca.mtimes(C, self.q_of(member)), ca.mtimes(C, self.v_of(member))
+
+    def direction(self, member, world_dir, what: str):
+        """Expression of the body-fixed direction of ``member`` equal to ``world_dir``
+        initially (its length is kept), and its rate."""
+        w = np.asarray(world_dir, float)
+        if member.is_ground:
+            return ca.DM(w), ca.DM.zeros(self.dim)
+        if member.kind == "point":
+            raise ModelError(f"{what}: {member.name} is a point member and carries no direction")
+        dbar = member.direction_to_local(w)
+        c = member.local.Xbar_pinv @ dbar
+        if np.linalg.norm(member.local.Xbar @ c - dbar) > 1e-9 * max(np.linalg.norm(dbar), 1e-300):
+            raise ModelError(f"{what}: bar {member.name} carries only its own axis as a direction, "
+                             f"and {w.tolist()} is not along it")
+        C = ca.DM(member.local.C(c) - member.local.C(np.zeros_like(c)))
+        return ca.mtimes(C, self.q_of(member)), ca.mtimes(C, self.v_of(member))
+
+    def carries_direction(self, member, world_dir) -> bool:
+        """Whether ``member`` can express ``world_dir`` as a body-fixed direction."""
+        if member.is_ground or member.kind == "body":
+            return True
+        if member.kind == "point":
+            return False
+        d = member.direction_to_local(np.asarray(world_dir, float))
+        return bool(np.linalg.norm(d[1:]) <= 1e-9 * np.linalg.norm(d))
+
+    def perpendiculars(self, member, world_axis, what: str) -> list:
+        """Body-fixed directions of ``member`` spanning the plane ⟂ ``world_axis`` (two in 3D,
+        one in 2D), each a unit vector initially."""
+        return [self.direction(member, n, what)[0] for n in perpendicular_basis(world_axis)]
+
+    def apply(self, name: str, *args):
+        """Instantiate the joint primitive ``name`` with CasADi arguments."""
+        prim = primitive(name, self.dim)
+        vals = {}
+        for sym, val in zip(prim.args, args, strict=True):
+            if hasattr(sym, "shape"):
+                vals.update({s: val[k] for k, s in enumerate(sym)})
+            else:
+                vals[sym] = val
+        return to_casadi(prim.expr, vals)
+
+
+def perpendicular_basis(axis) -> list[np.ndarray]:
+    """Unit vectors completing ``axis/|axis|`` to a right-handed orthonormal basis."""
+    a = np.asarray(axis, float)
+    a = a / np.linalg.norm(a)
+    if len(a) == 2:
+        return [np.array([-a[1], a[0]])]
+    helper = np.eye(3)[int(np.argmin(np.abs(a)))]
+    n1 = np.cross(a, helper)
+    n1 /= np.linalg.norm(n1)
+    return [n1, np.cross(a, n1)]

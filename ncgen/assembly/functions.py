@@ -1,0 +1,110 @@
+"""The whole-system CasADi functions (the contract every backend consumes).
+
+Arguments: ``t`` (s), ``q`` (natural coordinates, m), ``v = q̇``, ``lam`` (multipliers),
+``u`` (inputs), ``p`` (parameters).  Equations of motion (DESIGN.md):
+
+    M q̈ + Aᵀ λ = F(t, q, v, u, p),   Φ(t, q) = 0   ⇒   A q̈ = γ,
+    γ = −(∂(A v)/∂q) v − 2 ∂(A v)/∂t − Φ_tt
+
+(for the scleronomic, quadratic constraints ``γ_k = −vᵀ H_k v`` with constant ``H_k``:
+forward-mode AD of the linear-in-q product ``A v`` yields exactly that).  The index-1 DAE
+integrated by IDAS has ``x = [q; v]``, ``z = λ`` and
+
+    q̇ = v,   v̇ = a = M⁻¹ (F − Aᵀ λ),   0 = A a − γ + 2α Φ̇ + β² Φ     (Baumgarte).
+
+Functions (name: inputs -> outputs):
+
+* ``phi``: t, q, p -> phi;  ``A``: t, q, p -> A (sparse);  ``phi_t``: t, q, p -> phi_t
+* ``gamma``: t, q, v, p -> gamma;  ``F``: t, q, v, u, p -> F;  ``Minv``: b -> x = M⁻¹ b
+* ``ode``: t, q, v, lam, u, p -> qdot, vdot;  ``alg``: t, q, v, lam, u, p -> res
+* ``accel``: t, q, v, u, p -> a, lam  (the KKT system solved, Baumgarte terms included)
+* ``energy``: t, q, v, p -> T, V;  ``markers``: q, v -> r, rdot (dim × n_markers)
+* ``poses``: q -> R (dim × dim·n_members), p (dim × n_members)
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ncgen.assembly.context import Context
+from ncgen.assembly.mass import CholeskyFactor
+
+IN = {
+    "t": "time (s)", "q": "natural coordinates", "v": "coordinate rates q̇",
+    "lam": "Lagrange multipliers", "u": "inputs", "p": "parameters", "b": "right-hand side",
+}
+
+
+def system_functions(ctx: Context, phi, F, V, M: np.ndarray, factor: CholeskyFactor, alpha: float,
+                     beta: float, system) -> dict[str, ca.Function]:
+    t, q, v, u, p = ctx.t, ctx.q, ctx.v, ctx.u, ctx.p
+    nc = phi.shape[0]
+    lam = ca.SX.sym("lam", nc)
+    A = ca.jacobian(phi, q)
+    Av = ca.mtimes(A, v)
+    phi_t = ca.jacobian(phi, t)
+    gamma = -(ca.jtimes(Av, q, v) + 2 * ca.jacobian(Av, t) + ca.jacobian(phi_t, t))
+    phidot = Av + phi_t
+    a = factor.solve(F - ca.mtimes(A.T, lam))
+    alg = ca.mtimes(A, a) - gamma + 2 * alpha * phidot + beta**2 * phi
+    b = ca.SX.sym("b", ctx.layout.nq)
+    Msp = ca.sparsify(ca.DM(M))
+    T = 0.5 * ca.dot(v, ca.mtimes(Msp, v))
+
+    f = {}
+
+    def add(name, ins, outs, out_names):
+        f[name] = ca.Function(name, [{"t": t, "q": q, "v": v, "lam": lam, "u": u, "p": p, "b": b}[i] for i in ins],
+                              outs, list(ins), out_names)
+
+    add("phi", ("t", "q", "p"), [phi], ["phi"])
+    add("A", ("t", "q", "p"), [A], ["A"])
+    add("phi_t", ("t", "q", "p"), [phi_t], ["phi_t"])
+    add("gamma", ("t", "q", "v", "p"), [gamma], ["gamma"])
+    add("F", ("t", "q", "v", "u", "p"), [F], ["F"])
+    add("Minv", ("b",), [factor.solve(b)], ["x"])
+    add("ode", ("t", "q", "v", "lam", "u", "p"), [v, a], ["qdot", "vdot"])
+    add("alg", ("t", "q", "v", "lam", "u", "p"), [alg], ["res"])
+    add("energy", ("t", "q", "v", "p"), [T, V], ["T", "V"])
+    r, rd = _markers(ctx, system)
+    add("markers", ("q", "v"), [r, rd], ["r", "rdot"])
+    R, pos = _poses(ctx, system)
+    add("poses", ("q",), [R, pos], ["R", "p"])
+    f["accel"] = _accel(f, Msp, nc, alpha, beta, ctx.layout.nq, u.shape[0], p.shape[0])
+    return f
+
+
+def _markers(ctx: Context, system):
+    rs, rds = [], []
+    for m in system.members.values():
+        for local in m.markers.values():
+            r, rd = ctx.local_point(m, local)
+            rs.append(r)
+            rds.append(rd)
+    if not rs:
+        return ca.SX(ctx.dim, 0), ca.SX(ctx.dim, 0)
+    return ca.horzcat(*rs), ca.horzcat(*rds)
+
+
+def _poses(ctx: Context, system):
+    Rs, ps = [], []
+    for m in system.members.values():
+        D = m.ctype.derivation
+        ps.append(ctx.instantiate(m, D.p))
+        Rs.append(ctx.instantiate(m, D.R) if D.R is not None else ca.SX.eye(ctx.dim))
+    return ca.horzcat(*Rs), ca.horzcat(*ps)
+
+
+def _accel(f, M: ca.DM, nc: int, alpha: float, beta: float, nq: int, nu: int, npar: int) -> ca.Function:
+    """Explicit KKT form: ``[[M, Aᵀ], [A, 0]] [a; λ] = [F; γ − 2αΦ̇ − β²Φ]`` solved by
+    CasADi's sparse QR (an MX function calling the SX functions above)."""
+    t, q, v = ca.MX.sym("t"), ca.MX.sym("q", nq), ca.MX.sym("v", nq)
+    u, p = ca.MX.sym("u", nu), ca.MX.sym("p", npar)
+    A = f["A"](t, q, p)
+    phi = f["phi"](t, q, p)
+    phidot = ca.mtimes(A, v) + f["phi_t"](t, q, p)
+    rhs = ca.vertcat(f["F"](t, q, v, u, p), f["gamma"](t, q, v, p) - 2 * alpha * phidot - beta**2 * phi)
+    K = ca.blockcat([[ca.MX(M), A.T], [A, ca.MX(nc, nc)]])
+    sol = ca.solve(K, rhs, "qr")
+    return ca.Function("accel", [t, q, v, u, p], [sol[:nq], sol[nq:]],
+                       ["t", "q", "v", "u", "p"], ["a", "lam"])

@@ -1,0 +1,117 @@
+"""Consistent initial state and constraint redundancy.
+
+* positions: Gauss–Newton with minimum-norm steps ``Δq = −A⁺ Φ`` onto ``Φ(t0, q) = 0``;
+* velocities: the M-orthogonal projection onto ``A v + Φ_t = 0``,
+  ``v ← v − M⁻¹Aᵀ (A M⁻¹ Aᵀ)⁻¹ (A v + Φ_t)``;
+* multipliers and accelerations from the KKT system.
+A correction larger than ``tolerance`` × the system's size is an error that names the
+constraints that were violated and the coordinate that had to move most.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ncgen.model.members import ModelError
+
+#: Relative size of a row's component outside the span of the earlier rows below which it
+#: counts as linearly dependent.
+RANK_TOL = 1e-9
+
+
+@dataclass
+class State:
+    q0: np.ndarray
+    v0: np.ndarray
+    lam0: np.ndarray
+    a0: np.ndarray
+    dq: float      # largest position correction applied (m)
+    dv: float      # largest velocity correction applied (m/s)
+
+
+def dependent_rows(A: np.ndarray, tol: float = RANK_TOL) -> list[int]:
+    """Rows of ``A`` that depend linearly on earlier rows (greedy, in order, so intrinsic
+    constraints are kept and the later joint equations are the ones named)."""
+    if A.shape[0] == 0:
+        return []
+    norms = np.linalg.norm(A, axis=1)
+    zero = [i for i in range(A.shape[0]) if norms[i] == 0]
+    An = A / np.where(norms > 0, norms, 1)[:, None]
+    G = An @ An.T
+    try:
+        L = np.linalg.cholesky(G)
+        if np.min(np.diag(L)) > np.sqrt(tol) and not zero:
+            return []
+    except np.linalg.LinAlgError:
+        pass
+    basis: list[np.ndarray] = []
+    dependent = []
+    for i in range(A.shape[0]):
+        r = An[i].copy()
+        for b in basis:
+            r -= (b @ r) * b
+        for b in basis:
+            r -= (b @ r) * b
+        n = np.linalg.norm(r)
+        if norms[i] == 0 or n < tol ** 0.5:
+            dependent.append(i)
+        else:
+            basis.append(r / n)
+    return dependent
+
+
+def consistent_state(f, layout, labels, q, v, p, t0, tolerance, factor, max_iter: int = 50) -> State:
+    """Project ``(q, v)`` onto the constraints; see the module docstring."""
+    def phi(x):
+        return np.array(f["phi"](t0, x, p)).reshape(-1)
+
+    def A(x):
+        return np.array(f["A"](t0, x, p))
+
+    size = max(1.0, _extent(q))
+    q_init = q.copy()
+    res0 = phi(q)
+    for _ in range(max_iter):
+        r = phi(q)
+        if r.size == 0 or np.max(np.abs(r)) <= 1e-13 * size**2:
+            break
+        q = q - np.linalg.lstsq(A(q), r, rcond=None)[0]
+    else:
+        worst = int(np.argmax(np.abs(phi(q))))
+        raise ModelError(f"the constraints cannot be satisfied near the initial configuration: "
+                         f"{labels[worst]} keeps a residual of {abs(phi(q)[worst]):.3g}")
+    dq = np.abs(q - q_init)
+    if dq.size and dq.max() > tolerance * size:
+        k = int(np.argmax(dq))
+        worst = np.argsort(-np.abs(res0))[:3]
+        viol = ", ".join(f"{labels[i]} = {res0[i]:.3g}" for i in worst if abs(res0[i]) > 0)
+        raise ModelError(
+            f"inconsistent initial configuration: the constraints are violated ({viol}); making them "
+            f"hold moves {layout.coordinate_names[k]} by {dq[k]:.3g} m, more than the tolerance "
+            f"{tolerance:g} × {size:.3g} m. Fix the initial positions (or build(tolerance=...))")
+    A0 = A(q)
+    Minv = factor.solve_numeric
+    phi_t = np.array(f["phi_t"](t0, q, p)).reshape(-1)
+    v_init = v.copy()
+    if A0.shape[0]:
+        w = A0 @ v + phi_t
+        MiAT = Minv(A0.T)
+        K = A0 @ MiAT
+        v = v - MiAT @ np.linalg.solve(K, w)
+    dv = np.abs(v - v_init)
+    vscale = max(np.max(np.abs(v_init)) if v_init.size else 0.0, size)
+    if dv.size and dv.max() > tolerance * vscale:
+        k = int(np.argmax(dv))
+        raise ModelError(
+            f"inconsistent initial velocities: making them satisfy the constraints changes "
+            f"{layout.coordinate_names[k]} by {dv[k]:.3g} m/s, more than the tolerance {tolerance:g} × "
+            f"{vscale:.3g} m/s. Check the members' velocity and angular_velocity")
+    nu = f["F"].size1_in(3)
+    a, lam = f["accel"](t0, q, v, np.zeros(nu), p)
+    return State(q, v, np.array(lam).reshape(-1), np.array(a).reshape(-1),
+                 float(dq.max()) if dq.size else 0.0, float(dv.max()) if dv.size else 0.0)
+
+
+def _extent(q: np.ndarray) -> float:
+    return float(np.max(np.abs(q))) if q.size else 1.0

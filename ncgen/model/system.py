@@ -1,0 +1,238 @@
+"""``System``: the user-facing builder of a multibody model.
+
+>>> import ncgen as nc
+>>> s = nc.System("pendulum", gravity=(0, 0, -9.81))
+>>> b = s.add_bar("b", coords="rr", mass=1.0, ends=[s.ground.point((0, 0, 0)), (1, 0, 0)])
+>>> model = s.build()
+
+The dimension follows ``len(gravity)`` (2 = planar).  Positions, axes and velocities are
+given in world coordinates in the initial configuration; SI units throughout.
+"""
+from __future__ import annotations
+
+import numpy as np
+import casadi as ca
+
+from ncgen.model.members import Ground, Member, ModelError, NodeRef
+from ncgen.symbolic.coordinates import coordinate_type
+from ncgen.symbolic.member import RigidMember
+from ncgen.validation import as_scalar, as_vector, rotation
+
+DEFAULT_GRAVITY = (0.0, 0.0, -9.81)
+
+
+class System:
+    """A multibody system under construction; :meth:`build` turns it into a :class:`Model`."""
+
+    def __init__(self, name: str, gravity=DEFAULT_GRAVITY):
+        if not isinstance(name, str) or not name.isidentifier():
+            raise ModelError(f"system name: expected an identifier (letters, digits, _), got {name!r}")
+        g = np.asarray(gravity, dtype=float).reshape(-1) if np.ndim(gravity) == 1 else None
+        if g is None or g.size not in (2, 3):
+            raise ModelError(f"gravity: expected 2 (planar) or 3 numbers, got {gravity!r}")
+        self.name = name
+        self.dim = int(g.size)
+        self.gravity = as_vector(g, self.dim, "gravity")
+        self.ground = Ground(self.dim)
+        self.members: dict[str, Member] = {}
+        self.joints: list = []
+        self.forces: list = []
+        self.inputs: dict[str, ca.SX] = {}
+        self.parameters: dict[str, tuple[ca.SX, np.ndarray]] = {}
+
+    # ------------------------------------------------------------- members
+    def _new_name(self, name: str, what: str) -> str:
+        if not isinstance(name, str) or not name.isidentifier():
+            raise ModelError(f"{what} name: expected an identifier (letters, digits, _), got {name!r}")
+        if name in self.members or name == "ground" or name in self.inputs or name in self.parameters:
+            raise ModelError(f"{what} {name!r}: the name is already used in system {self.name!r}")
+        return name
+
+    def _ctype(self, coords, kind: str, name: str):
+        ct = coordinate_type(coords, self.dim)
+        if ct.kind != kind:
+            raise ModelError(f"{kind} {name!r}: coords={coords!r} is a {ct.kind} type in {self.dim}D")
+        return ct
+
+    def _omega(self, w, name):
+        if self.dim == 3:
+            return as_vector(w, 3, f"{name}: angular_velocity")
+        return as_scalar(w, f"{name}: angular_velocity (a scalar in a planar system)")
+
+    def _add(self, member: Member) -> Member:
+        self._check_shared(member)
+        self.members[member.name] = member
+        return member
+
+    def _check_shared(self, member: Member):
+        for slot, ref in member.shared.items():
+            if not isinstance(ref, NodeRef):
+                raise ModelError(f"{member.name}: shared slot {slot}: expected a node reference "
+                                 f"(other.node(...), bar.end(i) or system.ground.point(...)), got {ref!r}")
+            if not ref.member.is_ground and self.members.get(ref.member.name) is not ref.member:
+                raise ModelError(f"{member.name}: shares a point with {ref.member.name!r}, "
+                                 f"which is not a member of system {self.name!r}")
+            here = member.slot_position(slot)
+            gap = float(np.linalg.norm(here - np.asarray(ref.position)))
+            if gap > 1e-9 * max(1.0, float(np.linalg.norm(here))):
+                raise ModelError(
+                    f"{member.name}: basic point {member.ctype.slots[slot]} is at {here.tolist()} but the "
+                    f"shared {ref.label} is at {list(ref.position)}: {gap:.3g} m apart")
+
+    def add_body(self, name: str, coords: str = "ruvw", *, mass: float, inertia,
+                 position=None, rotation=None, velocity=None, angular_velocity=None,
+                 basis=None, share: dict | None = None) -> Member:
+        """A rigid body.  ``inertia``: 3×3 tensor about the centre of mass in body axes (a
+        scalar in 2D); ``position``: centre of mass; ``rotation``: body→world (2D: an angle
+        or 2×2 matrix); ``angular_velocity`` in world axes; ``basis``: the slot values in
+        the body frame, seed order (default: ``r̄_i = 0`` and unit axes); ``share``: maps
+        slot names (``"r_i"``, ``"r_j"``, ...) to nodes of other members or the ground."""
+        name = self._new_name(name, "body")
+        ct = self._ctype(coords, "body", name)
+        d = self.dim
+        local = RigidMember.body(ct, mass, inertia, basis=basis)
+        R = np.eye(d) if rotation is None else _rotation(rotation, d, name)
+        p = np.zeros(d) if position is None else as_vector(position, d, f"{name}: position")
+        v = np.zeros(d) if velocity is None else as_vector(velocity, d, f"{name}: velocity")
+        w = self._omega(np.zeros(3) if d == 3 and angular_velocity is None else
+                        (0.0 if angular_velocity is None else angular_velocity), name)
+        shared = {}
+        for key, ref in (share or {}).items():
+            shared[_slot_index(ct, key, name)] = ref
+        return self._add(Member(name, local, R, p, w, v, shared))
+
+    def add_bar(self, name: str, coords: str = "rr", *, mass: float, ends, inertia=None, com=None,
+                velocity=None, angular_velocity=None) -> Member:
+        """A rigid bar between ``ends`` (two world points, or nodes to share: ``other.end(1)``,
+        ``system.ground.point(p)``).  ``inertia``: transverse moment about the centre of
+        mass (default ``m L²/12``); ``com``: distance of the centre of mass from the first
+        end (default: the middle); ``velocity`` of the centre of mass; the component of
+        ``angular_velocity`` along the bar is ignored."""
+        name = self._new_name(name, "bar")
+        ct = self._ctype(coords, "bar", name)
+        d = self.dim
+        if not isinstance(ends, (list, tuple)) or len(ends) != 2:
+            raise ModelError(f"bar {name!r}: ends: expected two points, got {ends!r}")
+        pts, shared = [], {}
+        for i, e in enumerate(ends):
+            if isinstance(e, NodeRef):
+                pts.append(np.asarray(e.position))
+                if i == 1 and ct.name != "rr":
+                    raise ModelError(f"bar {name!r}: the second end of an '{ct.name}' bar is not a basic "
+                                     "point and cannot be shared; use coords='rr' or a Spherical joint")
+                shared[i] = e
+            else:
+                pts.append(as_vector(e, d, f"bar {name!r}: ends[{i}]"))
+        axis = pts[1] - pts[0]
+        L = float(np.linalg.norm(axis))
+        if L <= 0:
+            raise ModelError(f"bar {name!r}: its two ends coincide at {pts[0].tolist()}")
+        local = RigidMember.bar(ct, mass, L, inertia=inertia, com=com)
+        R = _frame_along(axis / L, local)
+        a = -local.rbar_i[0]
+        p = pts[0] + a * axis / L
+        v = np.zeros(d) if velocity is None else as_vector(velocity, d, f"{name}: velocity")
+        w = self._omega(np.zeros(3) if d == 3 and angular_velocity is None else
+                        (0.0 if angular_velocity is None else angular_velocity), name)
+        return self._add(Member(name, local, R, p, w, v, shared))
+
+    def add_point(self, name: str, *, mass: float, position, velocity=None) -> Member:
+        """A point mass; ``position`` may be a node of another member (``bar.end(1)``), which
+        adds the mass there without new coordinates."""
+        name = self._new_name(name, "point")
+        ct = coordinate_type("r", self.dim)
+        d = self.dim
+        shared = {}
+        if isinstance(position, NodeRef):
+            shared[0] = position
+            position = position.position
+        p = as_vector(position, d, f"point {name!r}: position")
+        v = np.zeros(d) if velocity is None else as_vector(velocity, d, f"{name}: velocity")
+        return self._add(Member(name, RigidMember.point(ct, mass), None, p, None, v, shared))
+
+    # ----------------------------------------------------- joints and forces
+    def add_joint(self, joint):
+        """Add a joint (``nc.Spherical``, ``nc.Revolute``, ...); returns it."""
+        from ncgen.model.joints import Joint
+        if not isinstance(joint, Joint):
+            raise ModelError(f"add_joint: expected a joint (nc.Spherical, nc.Revolute, ...), got {joint!r}")
+        joint.attach(self, index=len(self.joints))
+        self.joints.append(joint)
+        return joint
+
+    def add_force(self, force):
+        """Add a force element (``nc.Spring``, ``nc.PointForce``, ``nc.Torque``, ...); returns it."""
+        from ncgen.model.forces import Force
+        if not isinstance(force, Force):
+            raise ModelError(f"add_force: expected a force (nc.Spring, nc.PointForce, ...), got {force!r}")
+        force.attach(self, index=len(self.forces))
+        self.forces.append(force)
+        return force
+
+    def add_input(self, name: str, size: int = 1) -> ca.SX:
+        """A control input: a symbol that stays symbolic in every assembled function."""
+        name = self._new_name(name, "input")
+        if not isinstance(size, int) or size < 1:
+            raise ModelError(f"input {name!r}: size: expected a positive integer, got {size!r}")
+        u = ca.SX.sym(name, size)
+        self.inputs[name] = u
+        return u
+
+    def add_parameter(self, name: str, value) -> ca.SX:
+        """A parameter with a default ``value`` (scalar or vector): symbolic in every
+        assembled and generated function, so one kernel serves many values."""
+        name = self._new_name(name, "parameter")
+        val = np.atleast_1d(np.asarray(value, dtype=float)).reshape(-1)
+        if not np.all(np.isfinite(val)):
+            raise ModelError(f"parameter {name!r}: expected finite numbers, got {value!r}")
+        p = ca.SX.sym(name, val.size)
+        self.parameters[name] = (p, val)
+        return p
+
+    def member(self, name: str) -> Member:
+        try:
+            return self.members[name]
+        except KeyError:
+            known = ", ".join(self.members) or "none"
+            raise ModelError(f"no member named {name!r} in system {self.name!r} (members: {known})") from None
+
+    # ---------------------------------------------------------------- build
+    def build(self, **options):
+        """Validate and assemble: returns a :class:`~ncgen.model.model.Model`."""
+        from ncgen.assembly.build import build_model
+        return build_model(self, **options)
+
+    def __repr__(self) -> str:
+        return (f"System({self.name!r}, dim={self.dim}, members={len(self.members)}, "
+                f"joints={len(self.joints)}, forces={len(self.forces)})")
+
+
+def _rotation(R, d, name):
+    return rotation(R, d, f"{name}: rotation")
+
+
+def _slot_index(ct, key, name) -> int:
+    if isinstance(key, str):
+        if key not in ct.slots:
+            raise ModelError(f"body {name!r}: share: no slot {key!r}; a {ct.name} body has {', '.join(ct.slots)}")
+        key = ct.slots.index(key)
+    if key not in ct.point_slots:
+        raise ModelError(f"body {name!r}: share: slot {ct.slots[key]} is a vector, not a basic point")
+    return key
+
+
+def _frame_along(e1: np.ndarray, local: RigidMember) -> np.ndarray:
+    """The bar frame whose x̄ is ``e1``, completed exactly as the derivation completes it."""
+    q = local.q_from_pose(_any_frame(e1), np.zeros(len(e1)))
+    R, _ = local.pose(q)
+    return R
+
+
+def _any_frame(e1: np.ndarray) -> np.ndarray:
+    d = len(e1)
+    if d == 2:
+        return np.array([[e1[0], -e1[1]], [e1[1], e1[0]]])
+    helper = np.eye(3)[int(np.argmin(np.abs(e1)))]
+    e3 = np.cross(e1, helper)
+    e3 /= np.linalg.norm(e3)
+    return np.column_stack([e1, np.cross(e3, e1), e3])
