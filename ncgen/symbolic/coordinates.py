@@ -15,7 +15,9 @@ Everything below is *derived* from those definitions (nothing typed by hand):
 * ``Φ_q`` and the constant Hessians ``H_k = ∂²Φ_k/∂q²``;
 * ``M = Yᵀ (G ⊗ 1) Y`` with the generalised inertia ``G = [[m, m c_gᵀ], [m c_g, B]]``,
   ``c_g = X̄⁺ (r̄_g − r̄_i)`` and ``B = ∫ρ c cᵀ = X̄⁺ (J̄ + m r̄_i r̄_iᵀ) X̄⁺ᵀ`` (local frame at
-  the centre of mass, ``r̄_g = 0``), ``J̄ = ½ tr(Ī) 1 − Ī``;
+  the centre of mass, ``r̄_g = 0``), ``J̄ = ½ tr(Ī) 1 − Ī`` for a 3D body, ``½ Ī 1`` for a
+  planar body (``Ī`` its scalar moment) and ``diag(Ī_t, 0, ...)`` for a bar (``Ī_t`` its
+  transverse moment);
 * the pose ``R(q)``, ``p(q)`` and the angular velocity ``ω(q, q̇)`` of the member.
 
 Derivations are cached: each type is derived once per process.
@@ -57,7 +59,7 @@ def coordinate_type(name: str, dim: int = 3) -> "CoordinateType":
         hint = f" ({name!r} exists in {other[0]}D)" if other else ""
         raise CoordinateTypeError(
             f"coordinate type: expected one of {known} for dim={dim}, got {name!r}{hint}")
-    return _coordinate_type(name, dim)
+    return _coordinate_type(name, int(dim))
 
 
 @lru_cache(maxsize=None)
@@ -154,6 +156,18 @@ class CoordinateType:
     def derivation(self) -> "Derivation":
         return Derivation(self)
 
+    def report(self):
+        """The derivation step by step (:func:`ncgen.symbolic.teaching.coordinates_report`)."""
+        from ncgen.symbolic.teaching import coordinates_report
+        return coordinates_report(self.name, self.dim)
+
+    def _repr_markdown_(self) -> str:
+        return self.report().render("markdown")
+
+    def _repr_latex_(self) -> str:
+        from ncgen.symbolic.teaching import jupyter_latex
+        return jupyter_latex(self.report())
+
 
 class Derivation:
     """SymPy derivation of one coordinate type (see module docstring).
@@ -164,6 +178,16 @@ class Derivation:
     ``Xbar_inv`` (X̄⁻¹) and ``Gbar`` ((X̄ᵀX̄)⁻¹) for bodies, ``R_sym``, ``p_sym``,
     ``omega_sym``, ``v_sym`` (pose and twist, inputs of the inverse maps).
     """
+
+    def report(self):
+        """The derivation step by step, as a :class:`ncgen.symbolic.report.Report`."""
+        return self.ctype.report()
+
+    def _repr_markdown_(self) -> str:
+        return self.ctype._repr_markdown_()
+
+    def _repr_latex_(self) -> str:
+        return self.ctype._repr_latex_()
 
     def __init__(self, ctype: CoordinateType):
         self.ctype = ct = ctype
@@ -218,22 +242,28 @@ class Derivation:
         self.Xbar_sym = sp.MatrixSymbol("Xbar", d, k) if k else None
         self.rbar_i_sym = sp.MatrixSymbol("rbar_i", d, 1)
         self.Jbar_sym = sp.MatrixSymbol("Jbar", d, d)
-        self.Ibar_sym = sp.MatrixSymbol("Ibar", d, d) if ct.kind == "body" and d == 3 else None
         if k == 0:
+            self.Ibar_sym = None
+            self.Jbar_formula = None
             self.Xbar_pinv = None
             self.c_g_formula = None
             self.B_formula = None
-            self.Jbar_formula = None
             return
+        # J̄ = ∫ρ r̄ r̄ᵀ from the user's inertia Ī about the centre of mass
+        if ct.kind == "body" and d == 3:            # Ī: the 3×3 inertia tensor in body axes
+            self.Ibar_sym = sp.MatrixSymbol("Ibar", 3, 3)
+            self.Jbar_formula = sp.Trace(self.Ibar_sym) / 2 * sp.Identity(3) - self.Ibar_sym
+        elif ct.kind == "body":                     # Ī: the planar moment; only tr J̄ = Ī acts
+            self.Ibar_sym = sp.Symbol("Ibar", positive=True)
+            self.Jbar_formula = self.Ibar_sym / 2 * sp.eye(2)
+        else:                                       # bar: Ī_t, the transverse moment, = ∫ρ x̄²
+            self.Ibar_sym = sp.Symbol("Ibar_t", positive=True)
+            self.Jbar_formula = sp.diag(self.Ibar_sym, *[0] * (d - 1))
         X = self.Xbar_sym
         self.Xbar_pinv = X.I if ct.kind == "body" else (X.T * X).I * X.T
         self.c_g_formula = -self.Xbar_pinv * self.rbar_i_sym
         self.B_formula = self.Xbar_pinv * (self.Jbar_sym + self.m * self.rbar_i_sym * self.rbar_i_sym.T) \
             * self.Xbar_pinv.T
-        if self.Ibar_sym is not None:
-            self.Jbar_formula = sp.Trace(self.Ibar_sym) / 2 * sp.Identity(3) - self.Ibar_sym
-        else:
-            self.Jbar_formula = None
 
     # -- pose (R, p) and twist (ω, v) of the member's local frame (origin at the COM)
     def _derive_pose_and_twist(self):

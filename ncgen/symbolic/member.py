@@ -31,19 +31,17 @@ AXIS_TOL = 1e-9
 def inertia_J(ctype: CoordinateType, inertia, length: float | None = None) -> np.ndarray:
     """``J̄ = ∫ρ r̄ r̄ᵀ`` about the centre of mass from the user's inertia.
 
-    3D body: ``Ī`` (3×3, body axes, about the COM), ``J̄ = ½ tr(Ī) 1 − Ī`` (the derivation's
-    formula).  2D body: the scalar moment ``I`` about the COM, ``J̄ = ½ I 1`` (only tr J̄ is
-    seen by rigid motion).  Bar: the transverse moment ``I_t`` about the COM,
-    ``J̄ = diag(I_t, 0[, 0])``.
+    Evaluates the derivation's ``Jbar_formula``.  3D body: ``Ī`` (3×3, body axes, about the
+    COM), ``J̄ = ½ tr(Ī) 1 − Ī``.  2D body: the scalar moment ``I`` about the COM,
+    ``J̄ = ½ I 1`` (only tr J̄ is seen by rigid motion).  Bar: the transverse moment ``I_t``
+    about the COM, ``J̄ = diag(I_t, 0[, 0])``.
     """
-    d = ctype.dim
+    d, D = ctype.dim, ctype.derivation
+    J_of = numpy_function(D.Jbar_formula, [D.Ibar_sym], key=("Jbar", ctype.name, d))
     if ctype.kind == "bar":
-        It = positive(inertia, "inertia (transverse moment of the bar about its centre of mass)")
-        J = np.zeros((d, d))
-        J[0, 0] = It
-        return J
+        return J_of(positive(inertia, "inertia (transverse moment of the bar about its centre of mass)"))
     if d == 2:
-        return positive(inertia, "inertia (moment about the centre of mass)") / 2 * np.eye(2)
+        return J_of(positive(inertia, "inertia (moment about the centre of mass)"))
     Ib = as_array(inertia, (3, 3), "inertia")
     scale = max(np.max(np.abs(Ib)), 1e-300)
     if np.max(np.abs(Ib - Ib.T)) > 1e-9 * scale:
@@ -55,8 +53,7 @@ def inertia_J(ctype: CoordinateType, inertia, length: float | None = None) -> np
         raise InertiaError(
             f"inertia: principal moments {ev.tolist()} violate the triangle inequality "
             f"I1 + I2 >= I3 ({ev[0] + ev[1]:.6g} < {ev[2]:.6g}): no rigid body has them")
-    J = numpy_function(ctype.derivation.Jbar_formula, [ctype.derivation.Ibar_sym],
-                       key=("Jbar", ctype.name, d))(Ib)
+    J = J_of(Ib)
     if np.linalg.eigvalsh(J)[0] <= 1e-12 * scale:
         raise InertiaError(
             f"inertia: principal moments {ev.tolist()} satisfy I1 + I2 = I3: a flat body whose "
@@ -135,8 +132,13 @@ class RigidMember:
             if vol < COPLANAR_TOL:
                 raise BasisError(f"{ct.name}: base vectors are {'collinear' if ct.dim == 2 else 'coplanar'} "
                                  f"(normalised volume {vol:.3g}); they must span the body frame")
-        if ct.kind == "bar" and np.linalg.norm(X[1:, 0]) > AXIS_TOL * norms[0]:
-            raise BasisError(f"{ct.name}: a bar's base vector must lie along its local x̄ axis, got {X[:, 0]}")
+        if ct.kind == "bar":
+            if np.linalg.norm(X[1:, 0]) > AXIS_TOL * norms[0] or X[0, 0] < 0:
+                raise BasisError(f"{ct.name}: a bar's base vector must point along its local +x̄ axis "
+                                 f"(from its first end to its second), got {X[:, 0].tolist()}")
+            if np.linalg.norm(self.rbar_i[1:]) > AXIS_TOL * max(norms[0], abs(self.rbar_i[0])):
+                raise BasisError(f"{ct.name}: a bar's basic point r̄_i must lie on its local x̄ axis, "
+                                 f"got {self.rbar_i.tolist()}")
 
     # -------------------------------------------------------------- constants
     @cached_property
@@ -287,7 +289,7 @@ class RigidMember:
     def qd_from_twist(self, R, p, omega, v) -> np.ndarray:
         D = self.ctype.derivation
         R, p = self._pose_args(R, p)
-        w = self._omega(0.0 if omega is None else omega)
+        w = np.zeros(3 if self.ctype.dim == 3 else 1) if omega is None else self._omega(omega)
         v = as_vector(v, self.ctype.dim, "velocity")
         f = self._fn("qd_of_twist", D.qd_of_twist, D.R_sym, D.p_sym, D.omega_sym, D.v_sym)
         return f(R, p, w, v).reshape(-1)
