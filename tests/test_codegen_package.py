@@ -193,6 +193,9 @@ def test_extra_sources(tmp_path):
     ({"doc": PackageDoc(main_function="nope")}, "main_function"),
     ({"max_file_instructions": -1}, "max_file_instructions"),
     ({"codegen_options": {"with_header": False}}, "may not change"),
+    ({"extra_sources": [ExtraSource("main.c.j2", "main.c")]}, "extra source output 'main.c'"),
+    ({"extra_sources": [ExtraSource("a.j2", "sub/a.c")]}, "plain file name"),
+    ({"extra_sources": [ExtraSource("a.j2", "a.c", {"x": object()})]}, "plain JSON data"),
 ])
 def test_bad_arguments(tmp_path, kwargs, match):
     with pytest.raises(CodegenError, match=match):

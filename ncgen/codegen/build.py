@@ -116,7 +116,8 @@ def _build(pkg: Package, compiler: Compiler, flags: tuple[str, ...], jobs: int |
                     for src in sources]
     link_cmd = [*compiler.argv, *flags, "-shared", "-o", str(out / f"lib{pkg.name}.so"),
                 *(str(out / f"{src}.o") for src in sources), "-lm"]
-    progress = _Progress(f"compiling C package {pkg.name!r} ({len(sources)} files)", len(sources))
+    progress = _Progress(f"compiling C package {pkg.name!r} ({len(sources)} files, {shlex.join(flags)})",
+                         len(sources))
     try:
         workers = max(1, min(jobs or os.cpu_count() or 1, len(sources)))
         with ThreadPoolExecutor(max_workers=workers) as pool:
@@ -154,6 +155,8 @@ def _first_errors(log: str, n: int = 12) -> str:
 class _Progress:
     """A status line on stderr, shown only if the work lasts longer than PROGRESS_DELAY."""
 
+    SLOW = 10.0  # seconds after which the final line suggests cheaper flags
+
     def __init__(self, what: str, total: int):
         self.what, self.total, self.done = what, total, 0
         self.start = time.monotonic()
@@ -166,18 +169,23 @@ class _Progress:
     def _show(self) -> None:
         with self.lock:
             self.shown = True
-            sys.stderr.write(f"ncgen: {self.what}: {self.done}/{self.total} compiled, "
-                             f"{time.monotonic() - self.start:.0f} s\n")
-            sys.stderr.flush()
+            _status(f"{self.what}: {self.done}/{self.total} compiled, {time.monotonic() - self.start:.0f} s")
 
     def step(self) -> None:
         with self.lock:
             self.done += 1
-        if self.shown and self.done < self.total:
+            show = self.shown and self.done < self.total
+        if show:
             self._show()
 
     def finish(self) -> None:
         self.timer.cancel()
         if self.shown:
-            sys.stderr.write(f"ncgen: {self.what}: done in {time.monotonic() - self.start:.1f} s\n")
-            sys.stderr.flush()
+            elapsed = time.monotonic() - self.start
+            hint = " (NCGEN_CFLAGS=-O1 compiles large kernels faster)" if elapsed > self.SLOW else ""
+            _status(f"{self.what}: done in {elapsed:.1f} s{hint}")
+
+
+def _status(line: str) -> None:
+    sys.stderr.write(f"ncgen: {line}\n")
+    sys.stderr.flush()

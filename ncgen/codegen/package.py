@@ -32,6 +32,8 @@ from ncgen.errors import CodegenError
 
 #: Default bound on SX instructions per kernel file (see ncgen.codegen.kernels).
 MAX_FILE_INSTRUCTIONS = 20_000
+#: Files rendered from the template of the same name plus ".j2".
+_FIXED_FILES = ("main.c", "Makefile", "CMakeLists.txt")
 
 
 @dataclass(frozen=True)
@@ -102,28 +104,35 @@ def write_package(name: str, functions: Sequence[ca.Function], out_dir: str | os
     check_identifier("package name", name)
     functions = _checked_functions(functions)
     _check_doc(doc, functions)
+    _check_extra_sources(name, extra_sources)
     _check_replaceable(out_dir)
-
-    for s in extra_sources:
-        try:
-            manifest.canonical_json(dict(s.context))
-        except TypeError as e:
-            raise CodegenError(f"context of extra source {s.output!r} must be plain JSON data: {e}") from None
     options = {"max_file_instructions": max_file_instructions,
                "casadi_options": casadi_options(codegen_options),
                "extra_sources": [[s.template, s.output, dict(s.context)] for s in extra_sources]}
+    files = _render_files(name, functions, doc, options, extra_sources, template_dirs)
+    with fsutil.temporary_sibling(out_dir) as tmp:
+        for rel, blob in files.items():
+            (tmp / rel).write_bytes(blob)
+        fsutil.default_mode_dir(tmp)
+        fsutil.replace_dir(tmp, out_dir, _check_replaceable)
+    return Package(name=name, path=out_dir, manifest=manifest.read_manifest(out_dir),
+                   functions={f.name(): f for f in functions})
+
+
+def _render_files(name: str, functions: list[ca.Function], doc: PackageDoc, options: dict,
+                  extra_sources: Sequence[ExtraSource], template_dirs) -> dict[str, bytes]:
+    """Every file of the package, relative name -> bytes, manifest last."""
     c_funcs = [c_function(f, f"{name}_{f.name()}") for f in functions]
-    kernels = generate_kernels(name, c_funcs, group_functions(c_funcs, max_file_instructions),
+    kernels = generate_kernels(name, c_funcs, group_functions(c_funcs, options["max_file_instructions"]),
                                options["casadi_options"])
     file_of = {c: k.stem + ".c" for k in kernels for c in k.functions}
-
     header = f"{name}.h"
     meta_c = f"{name}_meta.c"
-    extra_c = [s.output for s in extra_sources if s.output.endswith(".c")]
-    extra_h = [s.output for s in extra_sources if s.output.endswith(".h")]
     fn_info = [_function_info(name, f, c, file_of[c.name()], doc) for f, c in zip(functions, c_funcs)]
-    build = {"sources": [k.stem + ".c" for k in kernels] + [meta_c] + extra_c,
-             "headers": [header] + [k.stem + ".h" for k in kernels] + extra_h,
+    build = {"sources": [k.stem + ".c" for k in kernels] + [meta_c]
+             + [s.output for s in extra_sources if s.output.endswith(".c")],
+             "headers": [header] + [k.stem + ".h" for k in kernels]
+             + [s.output for s in extra_sources if s.output.endswith(".h")],
              "main": "main.c", "library": f"lib{name}.so", "executable": f"{name}_main"}
     context = {
         "name": name, "NAME": name.upper(), "header": header, "summary": cnames.c_comment(doc.summary),
@@ -142,29 +151,31 @@ def write_package(name: str, functions: Sequence[ca.Function], out_dir: str | os
                                       {**context, "code": k.h_code, "guard": k.stem.upper() + "_H"})
     files[meta_c] = render("meta.c.j2", meta_c, context)
     for s in extra_sources:
-        if s.output in files or s.output in ("main.c", "Makefile", "CMakeLists.txt", header,
-                                             manifest.FILENAME) or Path(s.output).name != s.output:
-            raise CodegenError(f"extra source output {s.output!r} must be a new plain file name; "
-                               f"taken: {sorted(files)} and the fixed files")
         files[s.output] = render(s.template, s.output, {**context, **s.context}, template_dirs)
     files[header] = render("header.h.j2", header, context)
-    files["main.c"] = render("main.c.j2", "main.c", context)
-    files["Makefile"] = render("Makefile.j2", "Makefile", context)
-    files["CMakeLists.txt"] = render("CMakeLists.txt.j2", "CMakeLists.txt", context)
+    for fixed in _FIXED_FILES:
+        files[fixed] = render(fixed + ".j2", fixed, context)
 
     data = {rel: text.encode() for rel, text in files.items()}
-    digest = manifest.content_hash(name, functions, doc.to_json(), options)
     data[manifest.FILENAME] = manifest.manifest_text(
-        name=name, content_hash=digest, functions=[_manifest_entry(f) for f in fn_info],
-        build=build, metadata=dict(doc.metadata), files=data).encode()
+        name=name, content_hash=manifest.content_hash(name, functions, doc.to_json(), options),
+        functions=[_manifest_entry(f) for f in fn_info], build=build, metadata=dict(doc.metadata),
+        files=data).encode()
+    return data
 
-    with fsutil.temporary_sibling(out_dir) as tmp:
-        for rel, blob in data.items():
-            (tmp / rel).write_bytes(blob)
-        fsutil.default_mode_dir(tmp)
-        fsutil.replace_dir(tmp, out_dir, _check_replaceable)
-    return Package(name=name, path=out_dir, manifest=manifest.read_manifest(out_dir),
-                   functions={f.name(): f for f in functions})
+
+def _check_extra_sources(name: str, extra_sources: Sequence[ExtraSource]) -> None:
+    """Outputs must be new plain file names; contexts must be plain JSON data."""
+    taken = {*_FIXED_FILES, f"{name}.h", f"{name}_meta.c", manifest.FILENAME}
+    for s in extra_sources:
+        if s.output in taken or Path(s.output).name != s.output or s.output.startswith(f"{name}_kernels_"):
+            raise CodegenError(f"extra source output {s.output!r} must be a plain file name, not one of "
+                               f"{sorted(taken)} nor {name}_kernels_*, and not used twice")
+        taken.add(s.output)
+        try:
+            manifest.canonical_json(dict(s.context))
+        except (TypeError, ValueError) as e:
+            raise CodegenError(f"context of extra source {s.output!r} must be plain JSON data: {e}") from None
 
 
 def _checked_functions(functions) -> list[ca.Function]:
