@@ -8,6 +8,7 @@ complete document that ``pdflatex`` compiles; in Jupyter a report renders as Mar
 from __future__ import annotations
 
 import re
+import unicodedata
 from dataclasses import dataclass, field
 
 import sympy as sp
@@ -59,8 +60,8 @@ class Report:
 
 
 _TEXT_MACROS = [
-    (r"\\bar\{([A-Za-z])\}", "\\1\u0304"), (r"\\dot\{([A-Za-z])\}", "\\1\u0307"),
-    (r"\\ddot\{([A-Za-z])\}", "\\1\u0308"), (r"\\hat\{([A-Za-z])\}", "\\1\u0302"),
+    (r"\\bar\{([^{}\\])\}", "\\1\u0304"), (r"\\dot\{([^{}\\])\}", "\\1\u0307"),
+    (r"\\ddot\{([^{}\\])\}", "\\1\u0308"), (r"\\hat\{([^{}\\])\}", "\\1\u0302"),
     (r"\\mathbf\{([^}]*)\}", "\\1"), (r"\\boldsymbol\{([^}]*)\}", "\\1"),
     (r"\\mathrm\{([^}]*)\}", "\\1"), (r"\\operatorname\{([^}]*)\}", "\\1"),
     (r"\\text\{([^}]*)\}", "\\1"),
@@ -93,6 +94,11 @@ def latex_to_text(src: str) -> str:
     return out
 
 
+def _width(s: str) -> int:
+    """Displayed width: combining accents (x̄, ẋ) take no column."""
+    return sum(not unicodedata.combining(ch) for ch in s)
+
+
 def _prose_text(prose: str) -> str:
     return re.sub(r"\$([^$]+)\$", lambda m: latex_to_text(m.group(1)), prose)
 
@@ -111,7 +117,7 @@ def _render_text(r: Report) -> str:
             blines = body.split("\n")
             lhs = (e.lhs_text or latex_to_text(e.lhs)) + " = "
             mid = len(blines) // 2
-            pad = " " * len(lhs)
+            pad = " " * _width(lhs)
             lines += [("  " + (lhs if k == mid else pad) + bl).rstrip() for k, bl in enumerate(blines)]
             lines.append("")
     return "\n".join(lines).rstrip() + "\n"
