@@ -1,2 +1,188 @@
-def main(argv=None):
-    print("ncgen")
+"""The ``ncgen`` command line.
+
+Every subcommand is one function decorated with :func:`subcommand`: the decorator registers
+its name, one-line help, description and examples (shown by ``ncgen SUBCOMMAND --help``)
+and a function adding its arguments; the decorated function receives the parsed arguments
+and the subparser, and returns the exit code.  To add a subcommand, write::
+
+    def _frob_arguments(p: argparse.ArgumentParser) -> None:
+        p.add_argument("model", help="model file (TOML)")
+
+    @subcommand("frob", help="...", description="...", examples="ncgen frob m.toml",
+                arguments=_frob_arguments)
+    def frob(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+        ...
+        return 0
+
+Import heavy modules (CasADi, the runtime, compilers) inside the function so that
+``ncgen --help`` stays fast.
+Exit codes: 0 success, 1 failure while running, 2 bad usage (argparse's convention).
+Bad input raised as :class:`ncgen.errors.NcgenError` is reported without a traceback.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from ncgen import __version__
+from ncgen.errors import NcgenError
+
+
+@dataclass(frozen=True)
+class Subcommand:
+    name: str
+    help: str
+    description: str
+    examples: str
+    arguments: Callable[[argparse.ArgumentParser], None]
+    run: Callable[[argparse.Namespace, argparse.ArgumentParser], int]
+
+
+SUBCOMMANDS: dict[str, Subcommand] = {}
+
+
+def subcommand(name: str, *, help: str, description: str, examples: str,
+               arguments: Callable[[argparse.ArgumentParser], None]):
+    """Register the decorated ``run(args, parser) -> int`` as ``ncgen NAME``."""
+    def register(run):
+        if name in SUBCOMMANDS:
+            raise RuntimeError(f"ncgen subcommand {name!r} registered twice")
+        SUBCOMMANDS[name] = Subcommand(name, help, description, examples, arguments, run)
+        return run
+    return register
+
+
+def write_output(text: str, path: str | None) -> None:
+    """``text`` to stdout, or to ``path`` atomically (temporary file in the same directory,
+    then rename), so that a failed run never leaves a truncated file."""
+    if path is None or path == "-":
+        sys.stdout.write(text)
+        return
+    target = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent.resolve())
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+        os.chmod(tmp, _new_file_mode(target))
+        os.replace(tmp, target)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    print(f"wrote {target}", file=sys.stderr)
+
+
+def _new_file_mode(target: Path) -> int:
+    """The existing file's mode, or the default for a new file (0666 minus the umask)."""
+    if target.exists():
+        return target.stat().st_mode & 0o7777
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
+# --------------------------------------------------------------------------- derive
+def _type_list(dim: int) -> str:
+    from ncgen.symbolic.coordinates import TYPES
+    extra = ", se3 (rigid motion)" if dim == 3 else ""
+    return ", ".join(f"{n} ({kind})" for n, kind in TYPES[dim].items()) + extra
+
+
+def _derive_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("type", metavar="TYPE",
+                   help="coordinate type (see the list below) or 'se3' for the rigid-motion algebra")
+    p.add_argument("--dim", type=int, choices=(2, 3), default=None,
+                   help="dimension: 3 (default) or 2 for planar members")
+    p.add_argument("--format", choices=("text", "markdown", "latex"), default="text",
+                   help="text (terminal, default), markdown (with $$ math) or latex (a complete "
+                        "document for pdflatex)")
+    p.add_argument("-o", "--output", metavar="FILE", default=None,
+                   help="write to FILE instead of standard output")
+
+
+@subcommand(
+    "derive",
+    help="show the derivation of a natural-coordinate type, for teaching",
+    description=(
+        "Show, step by step, how a natural-coordinate type is derived from the seed's "
+        "definitions: coordinates and base vectors, the conversion matrix Y = Ybar (x) I, "
+        "the transformation C(c), the intrinsic constraints, their Jacobian and constant "
+        "Hessians, the mass matrix from mass, centre of mass and inertia, and the pose / "
+        "angular-velocity relations. Every formula shown is the one ncgen computes with.\n\n"
+        f"3D types: {_type_list(3)}\n"
+        f"2D types (--dim 2): {_type_list(2)}"),
+    examples=(
+        "ncgen derive rrvw                       # 3D body with two basic points, in the terminal\n"
+        "ncgen derive rr --dim 2 --format markdown\n"
+        "ncgen derive ruvw --format latex -o ruvw.tex && pdflatex ruvw.tex\n"
+        "ncgen derive se3                        # rigid-motion algebra (poses, twists, wrenches)"),
+    arguments=_derive_arguments,
+)
+def derive(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    if args.type == "se3":
+        if args.dim == 2:
+            parser.error("se3 is three-dimensional; drop --dim 2")
+        try:
+            from ncgen.symbolic.rigid_motion import se3_report
+        except ImportError as exc:
+            if getattr(exc, "name", None) not in ("ncgen.symbolic.rigid_motion", None):
+                raise
+            print("ncgen derive: the se3 derivation is not available yet "
+                  "(ncgen.symbolic.rigid_motion.se3_report is missing in this version)", file=sys.stderr)
+            return 1
+        report = se3_report()
+    else:
+        from ncgen.symbolic.coordinates import TYPES
+        from ncgen.symbolic.teaching import coordinates_report
+        dim = 3 if args.dim is None else args.dim
+        if args.type not in TYPES[dim]:
+            other = 5 - dim
+            hint = f" ({args.type!r} is a {other}D type: add --dim {other})" if args.type in TYPES[other] else ""
+            parser.error(f"unknown TYPE {args.type!r} for --dim {dim}{hint}\n"
+                         f"valid types for --dim {dim}: {_type_list(dim)}")
+        report = coordinates_report(args.type, dim)
+    write_output(report.render(args.format), args.output)
+    return 0
+
+
+# ----------------------------------------------------------------------------- main
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="ncgen",
+        description="Rigid multibody dynamics in natural coordinates: SymPy derivations, "
+                    "CasADi functions, generated C, simulation and optimisation.",
+        epilog="Run 'ncgen SUBCOMMAND --help' for a subcommand's options and examples.",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"ncgen {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="SUBCOMMAND", title="subcommands")
+    for cmd in SUBCOMMANDS.values():
+        p = sub.add_parser(cmd.name, help=cmd.help, description=cmd.description,
+                           epilog="examples:\n" + "\n".join("  " + line for line in cmd.examples.splitlines()),
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
+        cmd.arguments(p)
+        p.set_defaults(_subcommand=cmd, _parser=p)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run ``ncgen`` with ``argv`` (default ``sys.argv[1:]``); returns the exit code."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+        if args.command is None:
+            parser.print_help(sys.stderr)
+            return 2
+        return args._subcommand.run(args, args._parser)
+    except SystemExit as exc:            # argparse: --help, --version and usage errors
+        return 0 if exc.code is None else exc.code if isinstance(exc.code, int) else 1
+    except NcgenError as exc:
+        print(f"ncgen {args.command}: error: {exc}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
