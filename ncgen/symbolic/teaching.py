@@ -3,8 +3,9 @@
 :func:`coordinates_report` walks through a :class:`~ncgen.symbolic.coordinates.Derivation`
 in the seed's order and notation.  Every matrix or formula shown is an object of the
 derivation, or a factorisation of one that is checked when the report is built (for example
-``Y = Ȳ ⊗ I_d``: ``Ȳ`` is read off ``Y`` and the Kronecker product is compared with ``Y``);
-block formulas such as ``u = r_j − r_i`` are read off the derived matrices the same way.
+``Y = Ȳ ⊗ I_d``: ``Ȳ`` is read off ``Y`` and the Kronecker product is compared with ``Y``).
+Block formulas are obtained the same way: ``u = r_j − r_i`` is read off ``Y``, the blocks of
+``Φ_q`` off ``Φ_q``, and the block form of ``Φ`` is expanded and compared with ``Φ``.
 The prose only explains.
 """
 from __future__ import annotations
@@ -169,7 +170,12 @@ def _constraints(rep: Report, ct: CoordinateType, D: Derivation):
         "Rigidity keeps the lengths of the base vectors and the angles between them equal to "
         f"their values $\\bar{{x}}_s$ in the member's local frame: {ct.n_phi} quadratic "
         "constraint(s) $x_s^T x_t - \\bar{x}_s^T \\bar{x}_t = 0$, in the seed's order.")
-    st.eq(r"\Phi(q)", sp.BlockMatrix([[xs[s].T * xs[t] - xbars[s].T * xbars[t]] for s, t in ct.pairs]))
+    blocks = sp.BlockMatrix([[xs[s].T * xs[t] - xbars[s].T * xbars[t]] for s, t in ct.pairs])
+    explicit = {**{x: sp.ImmutableMatrix(v) for x, v in zip(xs, D.x)},
+                **{x: sp.ImmutableMatrix(v) for x, v in zip(xbars, D.xbar)}}
+    if not _is_zero(sp.Matrix(blocks.xreplace(explicit).as_explicit()) - D.Phi):
+        raise FactorisationError(f"{ct.name}: the block form of Φ differs from the derivation")
+    st.eq(r"\Phi(q)", blocks)
     st.eq(r"\Phi(q)", D.Phi)
     st = rep.step(
         "Constraint Jacobian",
