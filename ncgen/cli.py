@@ -155,7 +155,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="ncgen",
         description="Rigid multibody dynamics in natural coordinates: SymPy derivations, "
                     "CasADi functions, generated C, simulation and optimisation.",
-        epilog="Run 'ncgen SUBCOMMAND --help' for a subcommand's options and examples.",
+        epilog="examples:\n" + "".join(f"  {cmd.examples.splitlines()[0]}\n" for cmd in SUBCOMMANDS.values())
+               + "\nRun 'ncgen SUBCOMMAND --help' for a subcommand's options and more examples.",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"ncgen {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="SUBCOMMAND", title="subcommands")
