@@ -92,13 +92,19 @@ def write_package(name: str, functions: Sequence[ca.Function], out_dir: str | os
                   max_file_instructions: int | None = MAX_FILE_INSTRUCTIONS,
                   extra_sources: Sequence[ExtraSource] = (),
                   template_dirs: Sequence[str | os.PathLike] = (),
-                  codegen_options: Mapping | None = None) -> Package:
+                  codegen_options: Mapping | None = None,
+                  jacobians: Sequence[str] = ()) -> Package:
     """Generate the C package ``name`` for ``functions`` into ``out_dir`` (see module docstring).
 
     ``max_file_instructions`` bounds the SX instructions per kernel file (``None``: one
     file, ``0``: one file per function).  ``template_dirs`` are searched before the shipped
     templates (for ``extra_sources``).  ``codegen_options`` are extra CasADi CodeGenerator
     options (``with_header``, ``main``, ``mex``, ``cpp`` are fixed by ncgen).
+    ``jacobians`` names functions whose Jacobian (CasADi's ``f.jacobian()``: the inputs of
+    ``f``, then its nominal outputs; one block ``jac_<out>_<in>`` per output/input pair) is
+    generated too, as C symbol ``jac_<name>_<f>``: the symbol ``casadi.external`` looks up to
+    differentiate ``<name>_<f>``, so functions loaded from the compiled package have exact
+    derivatives (IDAS needs them, for instance).
     """
     out_dir = Path(out_dir)
     check_identifier("package name", name)
@@ -109,6 +115,8 @@ def write_package(name: str, functions: Sequence[ca.Function], out_dir: str | os
     options = {"max_file_instructions": max_file_instructions,
                "casadi_options": casadi_options(codegen_options),
                "extra_sources": [[s.template, s.output, dict(s.context)] for s in extra_sources]}
+    if jacobians:
+        options["jacobians"] = _checked_jacobians(jacobians, functions)
     files = _render_files(name, functions, doc, options, extra_sources, template_dirs)
     with fsutil.temporary_sibling(out_dir) as tmp:
         for rel, blob in files.items():
@@ -123,12 +131,20 @@ def _render_files(name: str, functions: list[ca.Function], doc: PackageDoc, opti
                   extra_sources: Sequence[ExtraSource], template_dirs) -> dict[str, bytes]:
     """Every file of the package, relative name -> bytes, manifest last."""
     c_funcs = [c_function(f, f"{name}_{f.name()}") for f in functions]
-    kernels = generate_kernels(name, c_funcs, group_functions(c_funcs, options["max_file_instructions"]),
+    with_jac = set(options.get("jacobians", ()))
+    kernel_funcs = []
+    for f, c in zip(functions, c_funcs):
+        kernel_funcs.append(c)
+        if f.name() in with_jac:
+            kernel_funcs.append(c_function(f.jacobian(), f"jac_{c.name()}"))
+    kernels = generate_kernels(name, kernel_funcs,
+                               group_functions(kernel_funcs, options["max_file_instructions"]),
                                options["casadi_options"])
     file_of = {c: k.stem + ".c" for k in kernels for c in k.functions}
     header = f"{name}.h"
     meta_c = f"{name}_meta.c"
-    fn_info = [_function_info(name, f, c, file_of[c.name()], doc) for f, c in zip(functions, c_funcs)]
+    fn_info = [_function_info(name, f, c, file_of[c.name()], doc, f.name() in with_jac)
+               for f, c in zip(functions, c_funcs)]
     build = {"sources": [k.stem + ".c" for k in kernels] + [meta_c]
              + [s.output for s in extra_sources if s.output.endswith(".c")],
              "headers": [header] + [k.stem + ".h" for k in kernels]
@@ -236,7 +252,18 @@ def _check_replaceable(out_dir: Path) -> None:
                            f"({e}); remove it yourself or choose another output directory") from None
 
 
-def _function_info(name: str, f: ca.Function, c: ca.Function, file: str, doc: PackageDoc) -> dict:
+def _checked_jacobians(jacobians: Sequence[str], functions: list[ca.Function]) -> list[str]:
+    names = [jacobians] if isinstance(jacobians, str) else list(jacobians)
+    known = [f.name() for f in functions]
+    bad = [n for n in names if n not in known]
+    if bad or len(set(names)) != len(names):
+        raise CodegenError(f"jacobians must name distinct functions of the package, found {names}; "
+                           f"the functions are {known}")
+    return names
+
+
+def _function_info(name: str, f: ca.Function, c: ca.Function, file: str, doc: PackageDoc,
+                   with_jacobian: bool = False) -> dict:
     """Template data of one function: signature plus documentation."""
     fdoc = doc.functions.get(f.name())
     sig = function_signature(f)
@@ -255,15 +282,19 @@ def _function_info(name: str, f: ca.Function, c: ca.Function, file: str, doc: Pa
 
     return {"name": f.name(), "c_name": cname, "file": file, "n_instructions": c.n_instructions(),
             "purpose": cnames.c_comment(fdoc.purpose) if fdoc else "",
+            "jacobian": f"jac_{cname}" if with_jacobian else None,
             "inputs": args("inputs", "in"), "outputs": args("outputs", "out")}
 
 
 def _manifest_entry(info: dict) -> dict:
     keep = ("name", "shape", "nnz", "dense", "colind", "row")
-    return {"name": info["name"], "c_name": info["c_name"], "file": info["file"],
-            "n_instructions": info["n_instructions"],
-            "inputs": [{k: a[k] for k in keep} for a in info["inputs"]],
-            "outputs": [{k: a[k] for k in keep} for a in info["outputs"]]}
+    entry = {"name": info["name"], "c_name": info["c_name"], "file": info["file"],
+             "n_instructions": info["n_instructions"],
+             "inputs": [{k: a[k] for k in keep} for a in info["inputs"]],
+             "outputs": [{k: a[k] for k in keep} for a in info["outputs"]]}
+    if info["jacobian"]:
+        entry["jacobian"] = info["jacobian"]
+    return entry
 
 
 def _metadata_info(name: str, doc: PackageDoc) -> list[dict]:
