@@ -37,3 +37,20 @@ class CodegenError(NcgenError):
 
 class CompilerNotFound(CodegenError):
     """No usable C compiler: ``$CC`` does not run and none of cc, gcc, clang is on PATH."""
+
+
+class OptimizationError(NcgenError):
+    """An optimal-control problem that is ill-posed, or that IPOPT did not solve.  The
+    message gives IPOPT's status and names the likely culprit (the condition, bound or
+    constraint group violated most at the last iterate); ``.result`` holds that iterate
+    when there is one."""
+
+    def __init__(self, message: str, result=None, status: str | None = None):
+        super().__init__(message)
+        self.result = result
+        self.status = status
+
+
+class ProblemFileError(NcgenError):
+    """A bad optimal-control problem file: the message names the key path (``final.v``)
+    and what was expected."""
