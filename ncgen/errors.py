@@ -54,3 +54,14 @@ class OptimizationError(NcgenError):
 class ProblemFileError(NcgenError):
     """A bad optimal-control problem file: the message names the key path (``final.v``)
     and what was expected."""
+
+
+class SimulationError(NcgenError):
+    """The integrator could not continue.  ``time`` is the last output time reached (s),
+    ``trajectory`` the :class:`~ncgen.runtime.trajectory.Trajectory` up to that time, and
+    the message names the likely cause and what to try."""
+
+    def __init__(self, message: str, *, time: float, trajectory=None):
+        super().__init__(message)
+        self.time = time
+        self.trajectory = trajectory
