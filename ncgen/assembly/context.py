@@ -14,6 +14,7 @@ import numpy as np
 from ncgen.assembly.layout import Layout
 from ncgen.assembly.sym2casadi import to_casadi
 from ncgen.errors import BasisError
+from ncgen.model.expressions import Scope, evaluate, scope
 from ncgen.model.members import Member, ModelError
 from ncgen.symbolic.joints import primitive
 
@@ -86,23 +87,33 @@ class Context:
 
     def direction(self, member, world_dir, what: str):
         """Expression of the body-fixed direction of ``member`` equal to ``world_dir``
-        initially (its length is kept), and its rate."""
+        initially (its length is kept), and its rate.
+
+        A body's directions are ``X(q) c_d``.  A 3D bar carries only its own axis ``u``; a
+        planar bar carries every direction ``(d̄_x u + d̄_y J u) / L`` (``J`` the rotation by
+        +90°, ``d̄`` the local direction), linear in q like a body's."""
         w = np.asarray(world_dir, float)
         if member.is_ground:
             return ca.DM(w), ca.DM.zeros(self.dim)
         if member.kind == "point":
             raise ModelError(f"{what}: {member.name} is a point member and carries no direction")
         dbar = member.direction_to_local(w)
-        c = member.local.Xbar_pinv @ dbar
-        if np.linalg.norm(member.local.Xbar @ c - dbar) > 1e-9 * max(np.linalg.norm(dbar), 1e-300):
+        loc = member.local
+        if member.kind == "bar" and self.dim == 2:
+            U = loc.C(np.ones(1)) - loc.C(np.zeros(1))            # u = U q
+            J = np.array([[0.0, -1.0], [1.0, 0.0]])
+            C = ca.DM((dbar[0] * U + dbar[1] * (J @ U)) / loc.Xbar[0, 0])
+            return ca.mtimes(C, self.q_of(member)), ca.mtimes(C, self.v_of(member))
+        c = loc.Xbar_pinv @ dbar
+        if np.linalg.norm(loc.Xbar @ c - dbar) > 1e-9 * max(np.linalg.norm(dbar), 1e-300):
             raise ModelError(f"{what}: bar {member.name} carries only its own axis as a direction, "
-                             f"and {w.tolist()} is not along it")
-        C = ca.DM(member.local.C(c) - member.local.C(np.zeros_like(c)))
+                             f"and {np.round(w, 12).tolist()} is not along it")
+        C = ca.DM(loc.C(c) - loc.C(np.zeros_like(c)))
         return ca.mtimes(C, self.q_of(member)), ca.mtimes(C, self.v_of(member))
 
     def carries_direction(self, member, world_dir) -> bool:
         """Whether ``member`` can express ``world_dir`` as a body-fixed direction."""
-        if member.is_ground or member.kind == "body":
+        if member.is_ground or member.kind == "body" or (member.kind == "bar" and self.dim == 2):
             return True
         if member.kind == "point":
             return False
@@ -113,6 +124,33 @@ class Context:
         """Body-fixed directions of ``member`` spanning the plane ⟂ ``world_axis`` (two in 3D,
         one in 2D), each a unit vector initially."""
         return [self.direction(member, n, what)[0] for n in perpendicular_basis(world_axis)]
+
+    def nearest_point(self, member, world) -> np.ndarray:
+        """The world point of ``member`` nearest to ``world`` in the initial configuration:
+        ``world`` itself for the ground and bodies, its projection onto a bar's axis, a
+        point member's position."""
+        w = np.asarray(world, float)
+        if member.is_ground or member.kind == "body":
+            return w
+        if member.kind == "point":
+            return member.p0.copy()
+        e = member.R0[:, 0]
+        return member.p0 + ((w - member.p0) @ e) * e
+
+    # ---------------------------------------------------------- values
+    def scope(self, *, inputs: bool = True, state: bool = False) -> Scope:
+        """Names usable in value expressions: ``t``, parameters, inputs (if ``inputs``) and
+        ``q``, ``v`` (if ``state``)."""
+        pars = {n: s for n, (s, _) in self.system.parameters.items()}
+        ins = dict(self.system.inputs) if inputs else {}
+        extra = {"q": self.q, "v": self.v} if state else {}
+        return scope(self.t, pars, ins, **extra)
+
+    def expression(self, value, size: int, what: str, *, inputs: bool = True, state: bool = False,
+                   call=None) -> ca.SX:
+        """A model value (number, text, SX, callable; :mod:`ncgen.model.expressions`) as an
+        SX column of ``size`` components over the names allowed here."""
+        return evaluate(value, self.scope(inputs=inputs, state=state), size, what, call=call)
 
     def apply(self, name: str, *args):
         """Instantiate the joint primitive ``name`` with CasADi arguments."""
