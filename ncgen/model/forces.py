@@ -1,16 +1,20 @@
 """Force elements: generalised forces ``Q(t, q, v, u, p)`` and their potential energies.
 
 Gravity is built in (``System(gravity=...)``).  Values that may vary (a force vector, a
-stiffness) are numbers, CasADi expressions of the system's inputs and parameters, or
-callables ``f(t)`` returning such expressions.  Points on members are given in the
-member's local frame (``(0.5, 0, 0)`` is the free end of a unit bar).
+stiffness) are numbers, text expressions such as ``"k*sin(t)"``, CasADi expressions of the
+system's inputs and parameters, or callables ``f(t)`` returning such values
+(:mod:`ncgen.model.expressions`).  Points on members are given in the member's local frame
+(``(0.5, 0, 0)`` is the free end of a unit bar); the ground's in the world frame.
+Units: N, N·m, N/m, N·s/m, N·m/rad, N·m·s/rad.
 """
 from __future__ import annotations
 
 import casadi as ca
 import numpy as np
 
-from ncgen.model.members import Ground, Member, ModelError
+from ncgen.errors import BasisError
+from ncgen.model.joint_base import check_members
+from ncgen.model.members import ModelError
 from ncgen.validation import as_vector
 
 
@@ -30,17 +34,20 @@ class Force:
     def attach(self, system, index: int):
         if self.system is not None:
             raise ModelError(f"{self.label}: already added to system {self.system.name!r}")
-        self.name = self.name or f"{self.kind.lower()}_{index}"
-        if any(f.name == self.name for f in system.forces):
-            raise ModelError(f"{self.label}: the name is already used by another force")
-        for m in self.members():
-            if isinstance(m, Ground):
-                continue
-            if not isinstance(m, Member) or system.members.get(m.name) is not m:
-                what = m.name if isinstance(m, Member) else repr(m)
-                raise ModelError(f"{self.label}: {what} is not a member of system {system.name!r}")
-        self.system = system
-        self.check(system)
+        given = self.name
+        self.name = given or f"{self.kind.lower()}_{index}"
+        try:
+            if not isinstance(self.name, str) or not self.name.isidentifier():
+                raise ModelError(f"force name: expected an identifier (letters, digits, _), got {self.name!r}")
+            if any(f.name == self.name for f in system.forces):
+                raise ModelError(f"{self.label}: the name is already used by another force "
+                                 f"of system {system.name!r}")
+            check_members(self.members(), system, self.label)
+            self.system = system
+            self.check(system)
+        except BaseException:
+            self.system, self.name = None, given
+            raise
 
     def members(self) -> list:
         return []
@@ -56,19 +63,20 @@ class Force:
         """Potential energy (J) of a conservative part, 0 otherwise."""
         return ca.SX(0)
 
-    def _value(self, ctx, value, shape: int, what: str) -> ca.SX:
-        v = value(ctx.t) if callable(value) else value
-        try:
-            v = ca.SX(v) if not isinstance(v, (ca.SX, ca.MX)) else v
-        except (NotImplementedError, TypeError, RuntimeError):
-            raise ModelError(f"{self.label}: {what}: expected numbers, a CasADi expression or a "
-                             f"callable f(t), got {value!r}") from None
-        if isinstance(v, ca.MX):
-            raise ModelError(f"{self.label}: {what}: MX expressions are not supported; use SX symbols")
-        v = ca.reshape(v, v.numel(), 1) if v.numel() == shape else v
-        if v.shape != (shape, 1):
-            raise ModelError(f"{self.label}: {what}: expected {shape} component(s), got shape {v.shape}")
-        return v
+    def _value(self, ctx, value, shape: int, what: str, *, inputs: bool = True) -> ca.SX:
+        """A value of this force (:mod:`ncgen.model.expressions`) as an SX column."""
+        return ctx.expression(value, shape, f"{self.label}: {what}", inputs=inputs)
+
+    def _local_point(self, member, at, what: str) -> np.ndarray:
+        """Check that ``member`` carries the local point ``at`` (``what`` names the argument)."""
+        x = as_vector(at, member.dim, f"{self.label}: {what}")
+        if not member.is_ground:
+            try:
+                member.local.affine(x)
+            except BasisError as e:
+                raise ModelError(f"{self.label}: {what} on {member.name} ({member.ctype.name} "
+                                 f"{member.kind}): {e}") from None
+        return x
 
     def __repr__(self) -> str:
         return f"<{self.label}>"
@@ -89,8 +97,7 @@ class PointForce(Force):
     def check(self, system):
         if self.member.is_ground:
             raise ModelError(f"{self.label}: a force on the ground does nothing")
-        at = as_vector(self.at, system.dim, f"{self.label}: at")
-        self.member.local.affine(at)
+        self._local_point(self.member, self.at, "at")
 
     def generalized(self, ctx):
         f = self._value(ctx, self.force, ctx.dim, "force")
@@ -140,9 +147,7 @@ class Spring(Force):
 
     def check(self, system):
         for m, at, w in ((self.a, self.at_a, "at_a"), (self.b, self.at_b, "at_b")):
-            x = as_vector(at, system.dim, f"{self.label}: {w}")
-            if not m.is_ground:
-                m.local.affine(x)
+            self._local_point(m, at, w)
         if self.a is self.b:
             raise ModelError(f"{self.label}: both ends on the same member exert no force")
 
@@ -180,8 +185,78 @@ class Spring(Force):
 
     def potential(self, ctx):
         _, _, _, length, _ = self._geometry(ctx)
-        k = self._value(ctx, self.k, 1, "k")
-        l0 = self._value(ctx, self.rest_length, 1, "rest_length")
+        k = self._value(ctx, self.k, 1, "k (in the potential energy)", inputs=False)
+        l0 = self._value(ctx, self.rest_length, 1, "rest_length (in the potential energy)", inputs=False)
         stretch = length - l0
         V = 0.5 * k * stretch**2
         return ca.if_else(stretch > 0, V, 0) if self.cable else V
+
+
+class TorsionalSpring(Force):
+    """Torsional spring-damper on a :class:`~ncgen.model.joints.Revolute` joint: the torque
+    ``τ = −k δ − c θ̇`` (N·m) about the hinge axis on B and ``−τ`` on A, where θ is the
+    rotation of B relative to A since the initial configuration and
+    ``δ = θ − rest_angle`` wrapped to (−π, π].
+
+    The angle is measured from body-fixed directions, ``θ = atan2(y, x)``
+    (:class:`~ncgen.model.joint_equations.AngleGauge`), and the generalised force is the
+    virtual work of the torque pair, ``Q = −(k δ + c θ̇) ∂θ/∂q`` with ``θ̇ = (∂θ/∂q) v``:
+    exact for bars across the axis too, and internal (no net torque on the system)."""
+
+    kind = "TorsionalSpring"
+
+    def __init__(self, joint, *, k, damping=0.0, rest_angle=0.0, name: str | None = None):
+        super().__init__(name)
+        self.joint, self.k, self.damping, self.rest_angle = joint, k, damping, rest_angle
+
+    def members(self):
+        from ncgen.model.joints import Revolute
+        if not isinstance(self.joint, Revolute):
+            raise ModelError(f"{self.label}: joint: expected a Revolute joint, got {self.joint!r}")
+        return self.joint.members()
+
+    def check(self, system):
+        if self.joint.system is not system:
+            raise ModelError(f"{self.label}: {self.joint.label} is not a joint of system {system.name!r}; "
+                             "add it with add_joint first")
+        from ncgen.assembly.context import Context
+        from ncgen.assembly.layout import make_layout
+        self.joint.gauge(Context(system, make_layout(system.dim, list(system.members.values()))))
+
+    def deflection(self, ctx) -> ca.SX:
+        """``δ = θ − rest_angle`` in (−π, π] (rad)."""
+        x, y = self.joint.gauge(ctx).terms(ctx)
+        r = self._value(ctx, self.rest_angle, 1, "rest_angle", inputs=False)
+        return ca.atan2(y * ca.cos(r) - x * ca.sin(r), x * ca.cos(r) + y * ca.sin(r))
+
+    def generalized(self, ctx):
+        delta = self.deflection(ctx)
+        k = self._value(ctx, self.k, 1, "k")
+        c = self._value(ctx, self.damping, 1, "damping")
+        rate = ca.jtimes(delta, ctx.q, ctx.v)
+        return -(k * delta + c * rate) * ca.gradient(delta, ctx.q)
+
+    def potential(self, ctx):
+        k = self._value(ctx, self.k, 1, "k (in the potential energy)", inputs=False)
+        return 0.5 * k * self.deflection(ctx) ** 2
+
+
+class GeneralizedForce(Force):
+    """A generalised force ``Q`` given directly (nq components, in the system's coordinate
+    order, ``model.coordinate_names``): a sequence of nq values (numbers or text over ``t``,
+    ``q``, ``v``, the inputs and parameters), a CasADi SX column of the inputs and
+    parameters, or a callable ``f(t, q, v, u, p)`` returning an nq-vector SX expression."""
+
+    kind = "GeneralizedForce"
+
+    def __init__(self, value, *, name: str | None = None):
+        super().__init__(name)
+        self.value = value
+
+    def generalized(self, ctx):
+        return ctx.expression(self.value, ctx.layout.nq, f"{self.label}: value", state=True,
+                              call=lambda f: f(ctx.t, ctx.q, ctx.v, ctx.u, ctx.p))
+
+
+FORCE_TYPES: dict[str, type[Force]] = {cls.kind: cls for cls in (
+    PointForce, Torque, Spring, TorsionalSpring, GeneralizedForce)}

@@ -1,213 +1,343 @@
-"""Joints: constraint equations between two members (or a member and the ground).
+"""The joint library.
 
-A joint is given in world coordinates in the initial configuration (``at=`` a point,
-``axis=`` a direction) and turned, at build time, into body-fixed points and directions
-of each member (:class:`ncgen.assembly.context.Context`).  Its equations are joint
-primitives (:mod:`ncgen.symbolic.joints`), so they are at most quadratic in q.
+Every joint is given in world coordinates in the initial configuration (``at``: a point;
+``axis``/``normal``: a direction) between two members ``A`` and ``B`` (either may be
+``system.ground``).  Number of equations (3D; planar in brackets), for two members that
+carry every direction (the ground, bodies; planar bars too):
 
-An optional ``drive`` prescribes the joint's relative motion as a function of time
-(rheonomic constraint): a number, a CasADi expression of the system's symbols, or a
-callable ``f(t)`` built from arithmetic and ``casadi`` functions.  For a revolute joint
-it is the rotation angle (rad) about ``axis`` since the initial configuration.
+=============  ====  ====================================================================
+Spherical        3   the points at ``at`` coincide  [none in 2D: use Revolute]
+Revolute         5   coincide + common ``axis``  [2: coincide]
+Prismatic        5   no relative rotation + B's point stays on A's line along ``axis``  [2]
+Cylindrical      4   common ``axis`` + point on line
+Universal        4   coincide + ``axis_a`` (on A) stays ⟂ ``axis_b`` (on B)
+Planar           3   common ``normal`` + B's point stays on A's plane
+Fixed            6   coincide + no relative rotation  [3]
+Distance         1   the two points ``at = (p_A, p_B)`` keep their distance  [1]
+PointOnLine      2   B's point at ``at`` stays on A's line through ``at`` along ``axis``  [1]
+PointOnPlane     1   B's point at ``at`` stays on A's plane through ``at`` with ``normal``
+=============  ====  ====================================================================
+
+With a bar the count drops by the bar's missing spin: e.g. a bar sliding along its own
+axis through a body (Prismatic) has 4 equations, a bar in a Revolute across the axis 4,
+Fixed to a bar 5.  What cannot be expressed is refused with a message saying why (a point
+off a bar's axis, a revolute about a bar's own axis, a direction a bar does not carry,
+orientation of a point member).  :mod:`ncgen.model.joint_equations` has the formulas.
+
+Drives (``drive=``; a number, a text expression such as ``"0.5*sin(2*t)"``, a CasADi
+expression of the parameters or a callable ``f(t)``) prescribe, as a function of time:
+Revolute — the rotation angle of B relative to A about ``axis`` since the initial
+configuration (rad); Prismatic — the displacement of B relative to A along ``axis`` since
+the initial configuration (m); Distance — the distance itself (m).  :class:`CoordinateDriver`
+prescribes one natural coordinate.
 """
 from __future__ import annotations
 
-import casadi as ca
 import numpy as np
 
-from ncgen.assembly.context import perpendicular_basis
-from ncgen.model.members import Ground, Member, ModelError
+from ncgen.model.joint_base import Joint
+from ncgen.model.joint_equations import (
+    align_axis, angle_gauge, coincidence, distance, is_along, is_full, kind_of, lock_orientation,
+    name_of, point_on_line, point_on_plane, require_orientation,
+)
+from ncgen.model.members import ModelError
 from ncgen.validation import as_vector
 
-
-class Joint:
-    """Base class: two members, a name, world ``at``/``axis`` and an optional ``drive``."""
-
-    kind = "Joint"
-
-    def __init__(self, A, B, *, at=None, axis=None, name: str | None = None, drive=None):
-        self.A, self.B = A, B
-        self._at, self._axis = at, axis
-        self.name = name
-        self.drive = drive
-        self.system = None
-
-    # -------------------------------------------------------------- checks
-    @property
-    def label(self) -> str:
-        return f"joint {self.name!r} ({self.kind} {_mname(self.A)}–{_mname(self.B)})"
-
-    def attach(self, system, index: int):
-        if self.system is not None:
-            raise ModelError(f"{self.label}: already added to system {self.system.name!r}")
-        self.name = self.name or f"{self.kind.lower()}_{index}"
-        if not isinstance(self.name, str) or not self.name.isidentifier():
-            raise ModelError(f"joint name: expected an identifier, got {self.name!r}")
-        if any(j.name == self.name for j in system.joints):
-            raise ModelError(f"{self.label}: the name is already used by another joint")
-        for role, m in (("first", self.A), ("second", self.B)):
-            if isinstance(m, Ground):
-                continue
-            if not isinstance(m, Member) or system.members.get(m.name) is not m:
-                what = m.name if isinstance(m, Member) else repr(m)
-                raise ModelError(f"{self.kind} joint {self.name!r}: the {role} member {what} is not a "
-                                 f"member of system {system.name!r}")
-        if self.A is self.B:
-            raise ModelError(f"{self.label}: joins a member to itself")
-        if self.A.is_ground and self.B.is_ground:
-            raise ModelError(f"{self.label}: joins the ground to itself")
-        self.system = system
-        self.check(system)
-
-    def check(self, system):
-        """Validate the joint's own arguments (subclasses)."""
-
-    def at(self) -> np.ndarray:
-        if self._at is None:
-            raise ModelError(f"{self.label}: at: expected a point, got nothing")
-        return as_vector(self._at, self.system.dim, f"{self.label}: at")
-
-    def axis(self) -> np.ndarray:
-        if self._axis is None:
-            raise ModelError(f"{self.label}: axis: expected a direction, got nothing")
-        a = as_vector(self._axis, self.system.dim, f"{self.label}: axis")
-        n = np.linalg.norm(a)
-        if n < 1e-12:
-            raise ModelError(f"{self.label}: axis: expected a non-zero direction, got {a.tolist()}")
-        return a / n
-
-    def drive_expr(self, ctx):
-        """The drive as a CasADi expression of (t, p)."""
-        d = self.drive
-        if callable(d):
-            d = d(ctx.t)
-        try:
-            return ca.SX(d)
-        except (NotImplementedError, TypeError, RuntimeError):
-            raise ModelError(f"{self.label}: drive: expected a number, a CasADi expression or a "
-                             f"callable f(t), got {self.drive!r}") from None
-
-    def equations(self, ctx) -> list[tuple[str, ca.SX]]:
-        """``[(label, expression)]``; each expression vanishes when the joint is satisfied."""
-        raise NotImplementedError
-
-    def _coincidence(self, ctx, point):
-        rA, _ = ctx.point(self.A, point, self.label)
-        rB, _ = ctx.point(self.B, point, self.label)
-        e = ctx.apply("coincidence", rA, rB)
-        return [(f"{self.name}.coincide.{'xyz'[k]}", e[k]) for k in range(ctx.dim)]
-
-    def __repr__(self) -> str:
-        return f"<{self.label}>"
-
-
-def _mname(m) -> str:
-    return "ground" if m.is_ground else m.name
+#: |cos| below which two directions count as perpendicular (Universal).
+PERPENDICULAR_TOL = 1e-9
 
 
 class Spherical(Joint):
-    """Ball joint: the point ``at`` of both members coincides (3 equations).  Sharing a
-    basic point between members (``ends=[other.end(1), ...]``) is the same joint with
-    fewer coordinates."""
+    """Ball joint: the points of A and B at ``at`` coincide (3 equations, 3D only).
+    Sharing a basic point between members (``ends=[other.end(1), ...]``) is the same joint
+    with fewer coordinates."""
 
     kind = "Spherical"
 
     def __init__(self, A, B, *, at, name=None):
-        super().__init__(A, B, at=at, name=name)
+        super().__init__(A, B, name=name, at=at)
 
-    def check(self, system):
-        if system.dim != 3:
-            raise ModelError(f"{self.label}: a planar system has no spherical joint; use Revolute")
-        self.at()
-
-    def equations(self, ctx):
-        return self._coincidence(ctx, self.at())
+    def geometry(self, ctx):
+        self.require_dim(3, "use Revolute")
+        return coincidence(ctx, self.A, self.B, self.at(), self.label, f"{self.name}.coincide")
 
 
 class Revolute(Joint):
-    """Hinge about ``axis`` through ``at``.  3D: coincidence (3) and axis alignment (2 for
-    two bodies; 1 for a bar, which must not lie along the axis).  2D: coincidence (2).
-    ``drive``: the rotation angle (rad) about ``axis`` since the initial configuration."""
+    """Hinge about ``axis`` (3D) through ``at``: coincidence (3) and a common axis (2 for
+    bodies and the ground; 1 with a bar across the axis, which keeps its angle to it).  A
+    bar cannot turn about its own axis, two bars share no axis.  Planar: coincidence (2),
+    no ``axis``.  ``drive``: rotation angle of B relative to A (rad, right-handed about
+    ``axis``; counter-clockwise in 2D) since the initial configuration."""
 
     kind = "Revolute"
+    drive_meaning = "rotation angle of B relative to A since the initial configuration, rad"
 
     def __init__(self, A, B, *, at, axis=None, name=None, drive=None):
-        super().__init__(A, B, at=at, axis=axis, name=name, drive=drive)
+        super().__init__(A, B, name=name, at=at, axis=axis, drive=drive)
 
-    def check(self, system):
-        self.at()
-        if system.dim == 3:
+    def geometry(self, ctx):
+        eqs = coincidence(ctx, self.A, self.B, self.at(), self.label, f"{self.name}.coincide")
+        if ctx.dim == 3:
             a = self.axis()
             for m in (self.A, self.B):
-                if not m.is_ground and m.kind == "point":
-                    raise ModelError(f"{self.label}: {m.name} is a point and has no orientation; use Spherical")
-                if not m.is_ground and m.kind == "bar":
-                    u = m.R0[:, 0]
-                    if abs(abs(u @ a) - 1) < 1e-9:
-                        raise ModelError(f"{self.label}: the axis lies along bar {m.name}; a bar cannot "
-                                         "rotate about its own axis (that rotation is not a coordinate)")
-            if all((not m.is_ground) and m.kind == "bar" for m in (self.A, self.B)):
-                raise ModelError(f"{self.label}: neither bar carries the hinge axis; make one of them a "
-                                 "body, or use Spherical joints (bars do not spin about their axis)")
-        elif self._axis is not None and np.size(self._axis) not in (0, 3):
-            raise ModelError(f"{self.label}: a planar revolute has no axis (it is ⟂ to the plane)")
-        if self.drive is not None and system.dim == 3:
-            if all((not m.is_ground) and m.kind != "body" for m in (self.A, self.B)):
-                raise ModelError(f"{self.label}: a driven revolute needs a body or the ground on one side")
-
-    def equations(self, ctx):
-        eqs = self._coincidence(ctx, self.at())
-        if ctx.dim == 3:
-            eqs += self._alignment(ctx)
+                if is_along(m, a):
+                    raise ModelError(f"{self.label}: the axis lies along bar {m.name}; a bar cannot "
+                                     "rotate about its own axis (that rotation is not a coordinate)")
+            eqs += align_axis(ctx, self.A, self.B, a, self.label, f"{self.name}.align")
+        elif self.options.get("axis") is not None:
+            raise ModelError(f"{self.label}: axis: a planar revolute turns about the normal of the "
+                             "plane; leave axis out")
         if self.drive is not None:
-            eqs.append((f"{self.name}.drive", self._drive(ctx)))
+            self.gauge(ctx)
         return eqs
 
-    def _alignment(self, ctx):
-        a = self.axis()
-        A, B = self.A, self.B
-        if ctx.carries_direction(A, a) and not _is_bar(A):
-            X, Y = A, B
-        else:
-            X, Y = B, A
-        if _is_bar(Y):   # Y's axis keeps its angle to the hinge axis carried by X
-            u0 = Y.R0[:, 0] * Y.local.Xbar[0, 0]
-            aX, _ = ctx.direction(X, a, self.label)
-            uY, _ = ctx.direction(Y, u0, self.label)
-            return [(f"{self.name}.align", ctx.apply("dot", aX, uY, float(u0 @ a)))]
-        aX, _ = ctx.direction(X, a, self.label)
-        return [(f"{self.name}.align.{k + 1}", ctx.apply("dot", aX, n, 0.0)[0])
-                for k, n in enumerate(ctx.perpendiculars(Y, a, self.label))]
+    def gauge(self, ctx):
+        """The :class:`~ncgen.model.joint_equations.AngleGauge` of this hinge."""
+        return angle_gauge(ctx, self.A, self.B, self.axis() if ctx.dim == 3 else None, self.label)
 
-    def _drive(self, ctx):
-        theta = self.drive_expr(ctx)
-        A, B = self.A, self.B
-        if ctx.dim == 2:
-            wA = _reference_direction(A)
-            wB = _reference_direction(B) if _is_bar(B) else wA
-            a, _ = ctx.direction(A, wA, self.label)
-            m1, _ = ctx.direction(B, wB, self.label)
-            theta0 = float(np.arctan2(wA[0] * wB[1] - wA[1] * wB[0], wA @ wB))
-            return ctx.apply("angle", a, m1, theta + theta0)[0]
-        axis = self.axis()
-        sign = 1.0
-        if _is_bar(B) or (B.kind == "point" if not B.is_ground else False):
-            A, B, sign = B, A, -1.0
-        wA = A.R0[:, 0] if _is_bar(A) else perpendicular_basis(axis)[0]
-        wA = wA - (wA @ axis) * axis
-        wA /= np.linalg.norm(wA)
-        a, _ = ctx.direction(A, wA * (A.local.Xbar[0, 0] if _is_bar(A) else 1.0), self.label)
-        m1, _ = ctx.direction(B, wA, self.label)
-        m2, _ = ctx.direction(B, np.cross(axis, wA), self.label)
-        return ctx.apply("angle", a, m1, m2, sign * theta)[0]
+    def drive_equations(self, ctx):
+        return [(f"{self.name}.drive", self.gauge(ctx).equation(ctx, self.drive_expr(ctx)))]
 
 
-def _is_bar(m) -> bool:
-    return (not m.is_ground) and m.kind == "bar"
+class Prismatic(Joint):
+    """Slider along ``axis``: no relative rotation (3 for bodies and the ground, 2 with a
+    bar, 1 in 2D) and B's point stays on A's line through ``at`` along ``axis`` (2; 1 in
+    2D).  A bar may slide in any direction, including its own axis; two bars cannot (3D).
+    ``drive``: displacement of B relative to A along ``axis`` (m) since the initial
+    configuration."""
+
+    kind = "Prismatic"
+    drive_meaning = "displacement of B relative to A along axis since the initial configuration, m"
+
+    def __init__(self, A, B, *, at, axis, name=None, drive=None):
+        super().__init__(A, B, name=name, at=at, axis=axis, drive=drive)
+
+    def _sides(self):
+        """(carrier of the line, other member, sign of B's displacement seen from it)."""
+        if is_full(self.A):
+            return self.A, self.B, 1.0
+        return self.B, self.A, -1.0
+
+    def geometry(self, ctx):
+        at, a = self.at(), self.axis()
+        eqs = lock_orientation(ctx, self.A, self.B, self.label, f"{self.name}.lock")
+        C, O, _ = self._sides()
+        return eqs + point_on_line(ctx, C, O, ctx.nearest_point(C, at), ctx.nearest_point(O, at), a,
+                                   self.label, f"{self.name}.line")
+
+    def drive_equations(self, ctx):
+        at, a = self.at(), self.axis()
+        C, O, sign = self._sides()
+        pC, pO = ctx.nearest_point(C, at), ctx.nearest_point(O, at)
+        rC, _ = ctx.point(C, pC, self.label)
+        rO, _ = ctx.point(O, pO, self.label)
+        aC, _ = ctx.direction(C, a, self.label)
+        s = float(a @ (pO - pC)) + sign * self.drive_expr(ctx)
+        return [(f"{self.name}.drive", ctx.apply("offset_dot", rC, rO, aC, s)[0])]
 
 
-def _reference_direction(m) -> np.ndarray:
-    """A direction the member carries: a bar's axis, else the world x axis."""
-    if _is_bar(m):
-        return m.R0[:, 0] * m.local.Xbar[0, 0]
-    return np.eye(m.dim if not m.is_ground else 2)[0]
+class Cylindrical(Joint):
+    """Common ``axis`` (2 for bodies and the ground; 1 with a bar across it) and the point
+    at ``at`` of the second side on the first side's line (2): B slides along and turns
+    about the axis (3D only).  The line is carried by the ground or a body."""
+
+    kind = "Cylindrical"
+
+    def __init__(self, A, B, *, at, axis, name=None):
+        super().__init__(A, B, name=name, at=at, axis=axis)
+
+    def geometry(self, ctx):
+        self.require_dim(3, "use Prismatic or Revolute")
+        at, a = self.at(), self.axis()
+        eqs = align_axis(ctx, self.A, self.B, a, self.label, f"{self.name}.align")
+        C, O = (self.A, self.B) if is_full(self.A) else (self.B, self.A)
+        return eqs + point_on_line(ctx, C, O, at, at, a, self.label, f"{self.name}.line")
+
+
+class Universal(Joint):
+    """Hooke joint: the points at ``at`` coincide (3) and ``axis_a``, carried by A, stays ⟂
+    ``axis_b``, carried by B (1); the two axes are ⟂ initially.  A bar carries only its own
+    axis (3D only)."""
+
+    kind = "Universal"
+
+    def __init__(self, A, B, *, at, axis_a, axis_b, name=None):
+        super().__init__(A, B, name=name, at=at, axis_a=axis_a, axis_b=axis_b)
+
+    def geometry(self, ctx):
+        self.require_dim(3, "use Revolute")
+        require_orientation(self.label, self.A, self.B)
+        a, b = self.direction("axis_a"), self.direction("axis_b")
+        if abs(a @ b) > PERPENDICULAR_TOL:
+            raise ModelError(f"{self.label}: axis_a and axis_b: expected perpendicular directions, "
+                             f"got an angle of {np.degrees(np.arccos(np.clip(a @ b, -1, 1))):.6g}°")
+        for m, d, key in ((self.A, a, "axis_a"), (self.B, b, "axis_b")):
+            if not ctx.carries_direction(m, d):
+                raise ModelError(f"{self.label}: {key} {np.round(d, 12).tolist()} is not along bar "
+                                 f"{m.name}, which carries only its own axis")
+        eqs = coincidence(ctx, self.A, self.B, self.at(), self.label, f"{self.name}.coincide")
+        aA, _ = ctx.direction(self.A, a, self.label)
+        bB, _ = ctx.direction(self.B, b, self.label)
+        return eqs + [(f"{self.name}.cross", ctx.apply("dot", aA, bB, 0.0)[0])]
+
+
+class Planar(Joint):
+    """B moves parallel to a plane of A: common ``normal`` (2 for bodies and the ground; 1
+    with a bar across it) and B's point at ``at`` stays on A's plane through ``at`` (1)
+    (3D only)."""
+
+    kind = "Planar"
+
+    def __init__(self, A, B, *, at, normal, name=None):
+        super().__init__(A, B, name=name, at=at, normal=normal)
+
+    def geometry(self, ctx):
+        self.require_dim(3, "a planar system is already planar")
+        at, n = self.at(), self.direction("normal")
+        eqs = align_axis(ctx, self.A, self.B, n, self.label, f"{self.name}.align")
+        C = next((m for m in (self.A, self.B) if is_full(m)), None) or \
+            next(m for m in (self.A, self.B) if is_along(m, n))
+        O = self.B if C is self.A else self.A
+        return eqs + point_on_plane(ctx, C, O, ctx.nearest_point(C, at), ctx.nearest_point(O, at), n,
+                                    self.label, f"{self.name}.plane")
+
+
+class Fixed(Joint):
+    """Weld: the points at ``at`` coincide and there is no relative rotation (6 for
+    bodies and the ground, 5 with a bar, 3 in 2D).  With a point member only the
+    coincidence remains (it has no orientation).  Two bars cannot be welded (3D)."""
+
+    kind = "Fixed"
+
+    def __init__(self, A, B, *, at, name=None):
+        super().__init__(A, B, name=name, at=at)
+
+    def geometry(self, ctx):
+        eqs = coincidence(ctx, self.A, self.B, self.at(), self.label, f"{self.name}.coincide")
+        if "point" in (kind_of(self.A), kind_of(self.B)):
+            return eqs
+        return eqs + lock_orientation(ctx, self.A, self.B, self.label, f"{self.name}.lock")
+
+
+class Distance(Joint):
+    """The point of A at ``at[0]`` and the point of B at ``at[1]`` keep their initial
+    distance (1 equation).  ``drive``: the distance itself as a function of time (m)."""
+
+    kind = "Distance"
+    drive_meaning = "distance between the two points, m"
+
+    def __init__(self, A, B, *, at, name=None, drive=None):
+        super().__init__(A, B, name=name, at=at, drive=drive)
+
+    def points(self) -> tuple[np.ndarray, np.ndarray]:
+        at = self.options.get("at")
+        d = self.system.dim
+        if at is None or np.ndim(at) != 2 or np.shape(at)[0] != 2:
+            raise ModelError(f"{self.label}: at: expected two points (one on each member), "
+                             f"got {at!r}")
+        pA = as_vector(at[0], d, f"{self.label}: at[0]")
+        pB = as_vector(at[1], d, f"{self.label}: at[1]")
+        if np.linalg.norm(pB - pA) < 1e-12 * max(1.0, np.linalg.norm(pA)):
+            raise ModelError(f"{self.label}: the two points coincide at {pA.tolist()}; a zero distance "
+                             f"is a coincidence: use {'Spherical' if d == 3 else 'Revolute'}")
+        return pA, pB
+
+    def geometry(self, ctx):
+        pA, pB = self.points()
+        eqs = distance(ctx, self.A, pA, self.B, pB, float(np.linalg.norm(pB - pA)), self.label,
+                       f"{self.name}.distance")
+        return [] if self.drive is not None else eqs
+
+    def drive_equations(self, ctx):
+        pA, pB = self.points()
+        return distance(ctx, self.A, pA, self.B, pB, self.drive_expr(ctx), self.label, f"{self.name}.drive")
+
+
+class PointOnLine(Joint):
+    """B's point at ``at`` stays on the line of A through ``at`` along ``axis`` (2
+    equations; 1 in 2D).  A carries the line: the ground or a body (or a bar in 2D)."""
+
+    kind = "PointOnLine"
+
+    def __init__(self, A, B, *, at, axis, name=None):
+        super().__init__(A, B, name=name, at=at, axis=axis)
+
+    def geometry(self, ctx):
+        at = self.at()
+        return point_on_line(ctx, self.A, self.B, at, at, self.axis(), self.label, f"{self.name}.line")
+
+
+class PointOnPlane(Joint):
+    """B's point at ``at`` stays on the plane of A through ``at`` with ``normal`` (1
+    equation, 3D only).  A carries the normal: the ground, a body, or a bar along it."""
+
+    kind = "PointOnPlane"
+
+    def __init__(self, A, B, *, at, normal, name=None):
+        super().__init__(A, B, name=name, at=at, normal=normal)
+
+    def geometry(self, ctx):
+        self.require_dim(3, "use PointOnLine")
+        at = self.at()
+        return point_on_plane(ctx, self.A, self.B, ctx.nearest_point(self.A, at), at,
+                              self.direction("normal"), self.label, f"{self.name}.plane")
+
+
+class CoordinateDriver(Joint):
+    """Prescribes one natural coordinate of ``member``: component ``axis`` (``"x"``, ``"y"``,
+    ``"z"`` or 0, 1, 2) of its slot ``slot`` (``"r_i"``, ``"r_j"``, ``"u"``, ... or the
+    index), equal to ``value`` (m; a number, text expression, CasADi expression or callable
+    of t).  Without ``value`` the coordinate keeps its initial value.  1 equation."""
+
+    kind = "CoordinateDriver"
+
+    def __init__(self, member, slot, axis, value=None, *, name=None):
+        super().__init__(member, None, name=name, slot=slot, axis=axis, value=value)
+
+    def members(self):
+        return [self.A]
+
+    def index(self) -> int:
+        """Index of the prescribed coordinate in the member's local coordinates."""
+        m = self.A
+        if m.is_ground:
+            raise ModelError(f"{self.label}: the ground has no coordinates")
+        ct, d = m.ctype, m.dim
+        slot, axis = self.options["slot"], self.options["axis"]
+        if isinstance(slot, str):
+            if slot not in ct.slots:
+                raise ModelError(f"{self.label}: slot: {m.name} ({ct.name}) has slots "
+                                 f"{', '.join(ct.slots)}, got {slot!r}")
+            slot = ct.slots.index(slot)
+        if not isinstance(slot, (int, np.integer)) or not 0 <= slot < len(ct.slots):
+            raise ModelError(f"{self.label}: slot: expected a slot name ({', '.join(ct.slots)}) or an "
+                             f"index below {len(ct.slots)}, got {slot!r}")
+        names = "xyz"[:d]
+        if isinstance(axis, str) and len(axis) == 1 and axis in names:
+            axis = names.index(axis)
+        if not isinstance(axis, (int, np.integer)) or isinstance(axis, bool) or not 0 <= axis < d:
+            raise ModelError(f"{self.label}: axis: expected one of {', '.join(names)} or an index below "
+                             f"{d}, got {axis!r}")
+        return int(slot) * d + int(axis)
+
+    def geometry(self, ctx):
+        k = self.index()
+        if ctx.layout.member_indices(self.A.name)[k] is None:
+            raise ModelError(f"{self.label}: {self.A.name}.{self.A.ctype.slots[k // ctx.dim]} is a ground "
+                             "point, not a coordinate")
+        return []
+
+    def equations(self, ctx):
+        self.geometry(ctx)
+        k = self.index()
+        value = self.options.get("value")
+        target = float(self.A.q0[k]) if value is None else ctx.expression(
+            value, 1, f"{self.label}: value (prescribed coordinate, m)", inputs=False)
+        return [(f"{self.name}.coordinate", ctx.q_of(self.A)[k] - target)]
+
+
+JOINT_TYPES: dict[str, type[Joint]] = {cls.kind: cls for cls in (
+    Spherical, Revolute, Prismatic, Cylindrical, Universal, Planar, Fixed, Distance, PointOnLine,
+    PointOnPlane, CoordinateDriver)}
+
+__all__ = ["JOINT_TYPES", "Joint", *JOINT_TYPES]

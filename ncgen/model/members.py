@@ -80,6 +80,7 @@ class Member:
         self.v0 = np.asarray(v0, dtype=float)
         self.shared = dict(shared)
         self.markers: dict[str, np.ndarray] = {}
+        self.spec: dict = {}     # the arguments it was created with (System.add_*), for to_toml
         self.q0 = local.q_from_pose(R0, p0)
         self.qd0 = local.qd_from_twist(R0, p0, omega0, v0)
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 import casadi as ca
 
+from ncgen.model.expressions import check_name
 from ncgen.model.members import Ground, Member, ModelError, NodeRef
 from ncgen.symbolic.coordinates import coordinate_type
 from ncgen.symbolic.member import RigidMember
@@ -46,6 +47,8 @@ class System:
             raise ModelError(f"{what} name: expected an identifier (letters, digits, _), got {name!r}")
         if name in self.members or name == "ground" or name in self.inputs or name in self.parameters:
             raise ModelError(f"{what} {name!r}: the name is already used in system {self.name!r}")
+        if what in ("input", "parameter"):
+            check_name(name, what)
         return name
 
     def _ctype(self, coords, kind: str, name: str):
@@ -99,7 +102,11 @@ class System:
         shared = {}
         for key, ref in (share or {}).items():
             shared[_slot_index(ct, key, name)] = ref
-        return self._add(Member(name, local, R, p, w, v, shared))
+        member = Member(name, local, R, p, w, v, shared)
+        member.spec = dict(kind="body", coords=ct.name, mass=mass, inertia=inertia, position=position,
+                           rotation=rotation, velocity=velocity, angular_velocity=angular_velocity,
+                           basis=basis, share={ct.slots[k]: ref for k, ref in shared.items()} or None)
+        return self._add(member)
 
     def add_bar(self, name: str, coords: str = "rr", *, mass: float, ends, inertia=None, com=None,
                 velocity=None, angular_velocity=None) -> Member:
@@ -134,7 +141,10 @@ class System:
         v = np.zeros(d) if velocity is None else as_vector(velocity, d, f"{name}: velocity")
         w = self._omega(np.zeros(3) if d == 3 and angular_velocity is None else
                         (0.0 if angular_velocity is None else angular_velocity), name)
-        return self._add(Member(name, local, R, p, w, v, shared))
+        member = Member(name, local, R, p, w, v, shared)
+        member.spec = dict(kind="bar", coords=ct.name, mass=mass, ends=list(ends), inertia=inertia, com=com,
+                           velocity=velocity, angular_velocity=angular_velocity)
+        return self._add(member)
 
     def add_point(self, name: str, *, mass: float, position, velocity=None) -> Member:
         """A point mass; ``position`` may be a node of another member (``bar.end(1)``), which
@@ -148,7 +158,9 @@ class System:
             position = position.position
         p = as_vector(position, d, f"point {name!r}: position")
         v = np.zeros(d) if velocity is None else as_vector(velocity, d, f"{name}: velocity")
-        return self._add(Member(name, RigidMember.point(ct, mass), None, p, None, v, shared))
+        member = Member(name, RigidMember.point(ct, mass), None, p, None, v, shared)
+        member.spec = dict(kind="point", mass=mass, position=shared.get(0, position), velocity=velocity)
+        return self._add(member)
 
     # ----------------------------------------------------- joints and forces
     def add_joint(self, joint):
@@ -198,9 +210,26 @@ class System:
 
     # ---------------------------------------------------------------- build
     def build(self, **options):
-        """Validate and assemble: returns a :class:`~ncgen.model.model.Model`."""
+        """Validate and assemble: returns a :class:`~ncgen.model.model.Model`.
+
+        Options (:func:`ncgen.assembly.build.build_model`): ``redundant`` ("drop", "error",
+        "keep"), ``tolerance`` (largest relative correction of the initial state),
+        ``assemble=True`` with ``fix=[...]`` (the initial poses are a guess to assemble by
+        Newton, keeping the named coordinates), ``baumgarte``, ``t0``."""
         from ncgen.assembly.build import build_model
         return build_model(self, **options)
+
+    # ----------------------------------------------------------------- TOML
+    @classmethod
+    def from_toml(cls, source) -> "System":
+        """A system from a TOML model file (a path) or TOML text; see docs/model-format.md."""
+        from ncgen.model.toml_io import system_from_toml
+        return system_from_toml(source)
+
+    def to_toml(self) -> str:
+        """The system as TOML text that :meth:`from_toml` reads back."""
+        from ncgen.model.toml_io import system_to_toml
+        return system_to_toml(self)
 
     def __repr__(self) -> str:
         return (f"System({self.name!r}, dim={self.dim}, members={len(self.members)}, "

@@ -1,0 +1,151 @@
+"""The :class:`Joint` base class: membership and name checks, geometry arguments, drives.
+
+A joint is given in world coordinates in the initial configuration (``at=`` a point,
+``axis=`` a direction) and turned, at build time, into body-fixed points and directions of
+each member through the :class:`~ncgen.assembly.context.Context`.  Its equations come from
+:mod:`ncgen.model.joint_equations`, so they are at most quadratic in q.
+
+Adding a joint to a system checks it at once: the members belong to the system, the
+arguments have the right shapes, and its geometry can be expressed with the members'
+coordinates (a bar carries points on its axis and its own direction only, a point member
+has no orientation).  Drives (prescribed relative motion, :attr:`Joint.drive`) are
+evaluated at build time, when every parameter is known.
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ncgen.model.members import Ground, Member, ModelError
+from ncgen.model.joint_equations import name_of
+from ncgen.validation import as_vector
+
+
+class Joint:
+    """Base class: members, a name, world geometry ``options`` and an optional ``drive``.
+
+    Subclasses set :attr:`kind`, store their constructor keywords in ``options`` (the TOML
+    writer reads them back) and implement :meth:`geometry` (and :meth:`drive_equations`
+    when they can be driven)."""
+
+    kind = "Joint"
+    #: Whether a drive is meaningful for this joint, and what it prescribes.
+    drive_meaning: str | None = None
+
+    def __init__(self, A, B, *, name: str | None = None, **options):
+        self.A, self.B = A, B
+        self.name = name
+        self.options = options
+        self.system = None
+
+    # -------------------------------------------------------------- identity
+    def members(self) -> list:
+        return [self.A, self.B]
+
+    @property
+    def label(self) -> str:
+        who = "–".join(name_of(m) if isinstance(m, (Member, Ground)) else repr(m) for m in self.members())
+        return f"joint {self.name!r} ({self.kind} {who})"
+
+    @property
+    def drive(self):
+        return self.options.get("drive")
+
+    def attach(self, system, index: int):
+        """Called by ``System.add_joint``: name, membership and geometry checks."""
+        if self.system is not None:
+            raise ModelError(f"{self.label}: already added to system {self.system.name!r}")
+        given = self.name
+        self.name = given or f"{self.kind.lower()}_{index}"
+        try:
+            if not isinstance(self.name, str) or not self.name.isidentifier():
+                raise ModelError(f"joint name: expected an identifier (letters, digits, _), got {self.name!r}")
+            if any(j.name == self.name for j in system.joints):
+                raise ModelError(f"{self.label}: the name is already used by another joint "
+                                 f"of system {system.name!r}")
+            check_members(self.members(), system, f"{self.kind} joint {self.name!r}")
+            ms = self.members()
+            if len(ms) == 2 and ms[0] is ms[1]:
+                raise ModelError(f"{self.label}: joins {'the ground' if ms[0].is_ground else 'a member'} "
+                                 "to itself")
+            if self.drive is not None and self.drive_meaning is None:
+                raise ModelError(f"{self.label}: a {self.kind} joint cannot be driven")
+            self.system = system
+            self.check(system)
+        except BaseException:
+            self.system, self.name = None, given
+            raise
+
+    def check(self, system):
+        """Validate the arguments and the geometry by writing the equations once."""
+        from ncgen.assembly.context import Context
+        from ncgen.assembly.layout import make_layout
+        ctx = Context(system, make_layout(system.dim, list(system.members.values())))
+        self.geometry(ctx)
+
+    # ------------------------------------------------------------- equations
+    def equations(self, ctx) -> list[tuple[str, ca.SX]]:
+        """``[(label, expression)]``; each expression vanishes when the joint holds."""
+        eqs = self.geometry(ctx)
+        if self.drive is not None:
+            eqs = eqs + self.drive_equations(ctx)
+        return eqs
+
+    def geometry(self, ctx) -> list[tuple[str, ca.SX]]:
+        raise NotImplementedError
+
+    def drive_equations(self, ctx) -> list[tuple[str, ca.SX]]:
+        raise NotImplementedError
+
+    def drive_expr(self, ctx) -> ca.SX:
+        """The drive as a scalar CasADi expression of t and the parameters."""
+        return ctx.expression(self.drive, 1, f"{self.label}: drive ({self.drive_meaning})", inputs=False)
+
+    # ------------------------------------------------------------- arguments
+    def vector(self, key: str) -> np.ndarray:
+        value = self.options.get(key)
+        if value is None:
+            raise ModelError(f"{self.label}: {key}: expected a point, got nothing")
+        return as_vector(value, self.system.dim, f"{self.label}: {key}")
+
+    def direction(self, key: str) -> np.ndarray:
+        """The unit vector of option ``key`` (refuses a zero vector)."""
+        value = self.options.get(key)
+        if value is None:
+            raise ModelError(f"{self.label}: {key}: expected a direction, got nothing")
+        a = as_vector(value, self.system.dim, f"{self.label}: {key}")
+        n = float(np.linalg.norm(a))
+        if n < 1e-12:
+            raise ModelError(f"{self.label}: {key}: expected a non-zero direction, got {a.tolist()}")
+        return a / n
+
+    def at(self) -> np.ndarray:
+        return self.vector("at")
+
+    def axis(self) -> np.ndarray:
+        return self.direction("axis")
+
+    def require_dim(self, dim: int, hint: str):
+        if self.system.dim != dim:
+            where = "a planar" if self.system.dim == 2 else "a 3D"
+            raise ModelError(f"{self.label}: {where} system has no {self.kind} joint; {hint}")
+
+    def __repr__(self) -> str:
+        return f"<{self.label}>"
+
+
+def check_members(members, system, what: str) -> None:
+    """Every member is the system's ground or one of its members."""
+    for i, m in enumerate(members):
+        role = f"{('first', 'second')[i]} member" if len(members) == 2 else "member"
+        if isinstance(m, Ground):
+            if m.dim != system.dim:
+                raise ModelError(f"{what}: the {role} is the ground of a {m.dim}D system, "
+                                 f"but system {system.name!r} is {system.dim}D")
+            continue
+        if not isinstance(m, Member):
+            raise ModelError(f"{what}: the {role}: expected a member of system {system.name!r} "
+                             f"(from add_body, add_bar, add_point) or system.ground, got {m!r}")
+        if system.members.get(m.name) is not m:
+            raise ModelError(f"{what}: the {role} {m.name!r} is not a member of system "
+                             f"{system.name!r}")
