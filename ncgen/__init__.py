@@ -4,9 +4,13 @@ SymPy derives every coordinate type's matrices (``ncgen.symbolic``); a ``System`
 bodies, bars and points with joints and forces is assembled into CasADi functions
 (``System.build()``), turned into C, simulated and optimised.
 """
+from ncgen.assembly.kinematics import assemble, dof_report, project_velocity, solve_kinematics
 from ncgen.errors import NcgenError
-from ncgen.model.forces import Force, PointForce, Spring, Torque
-from ncgen.model.joints import Joint, Revolute, Spherical
+from ncgen.model.forces import Force, GeneralizedForce, PointForce, Spring, Torque, TorsionalSpring
+from ncgen.model.joints import (
+    CoordinateDriver, Cylindrical, Distance, Fixed, Joint, Planar, PointOnLine, PointOnPlane, Prismatic,
+    Revolute, Spherical, Universal,
+)
 from ncgen.model.members import ModelError
 from ncgen.model.model import Model
 from ncgen.model.system import System
@@ -15,6 +19,8 @@ from ncgen.symbolic.coordinates import coordinate_type
 __version__ = "0.1.0"
 
 __all__ = [
-    "Force", "Joint", "Model", "ModelError", "NcgenError", "PointForce", "Revolute", "Spherical",
-    "Spring", "System", "Torque", "coordinate_type", "__version__",
+    "CoordinateDriver", "Cylindrical", "Distance", "Fixed", "Force", "GeneralizedForce", "Joint", "Model",
+    "ModelError", "NcgenError", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic",
+    "Revolute", "Spherical", "Spring", "System", "Torque", "TorsionalSpring", "Universal",
+    "assemble", "coordinate_type", "dof_report", "project_velocity", "solve_kinematics", "__version__",
 ]

@@ -10,6 +10,7 @@ import numpy as np
 from ncgen.assembly.context import Context
 from ncgen.assembly.functions import system_functions
 from ncgen.assembly.initial_state import consistent_state, dependent_rows
+from ncgen.assembly.kinematics import resolve_fix
 from ncgen.assembly.layout import Layout, make_layout
 from ncgen.assembly.mass import CholeskyFactor, assemble_mass
 from ncgen.model.members import ModelError
@@ -23,14 +24,17 @@ REDUNDANT_MODES = ("drop", "error", "keep")
 
 
 def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", tolerance: float = 1e-6,
-                t0: float = 0.0):
+                t0: float = 0.0, assemble: bool = False, fix=()):
     """Assemble ``system`` into a :class:`~ncgen.model.model.Model`.
 
     ``redundant``: constraints linearly dependent at the initial configuration are
     ``"drop"``-ped with a warning naming them, raise (``"error"``), or are kept
     (``"keep"``, for analysis only: the DAE is then singular).  ``tolerance``: the largest
     correction, relative to the system's size, that making the initial state consistent
-    may apply; beyond it the build fails and says where.
+    may apply; beyond it the build fails and says where.  ``assemble=True``: the members'
+    initial poses are only a guess; Newton moves them onto the constraints (drives at
+    ``t0`` included) without limit, keeping the coordinates named in ``fix``
+    (:func:`ncgen.assembly.kinematics.resolve_fix`) and their rates as given.
     """
     from ncgen.model.model import Model
 
@@ -43,6 +47,7 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     layout = make_layout(system.dim, members)
     ctx = Context(system, layout)
 
+    fixed = resolve_fix(layout, system.members, fix)
     labels, rows = constraint_rows(system, ctx)
     F, V = force_terms(system, ctx)
     M = assemble_mass(layout, members)
@@ -65,7 +70,8 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
 
     phi = ca.vertcat(*rows) if rows else ca.SX(0, 1)
     functions = system_functions(ctx, phi, F, V, M, factor, alpha, beta, system)
-    state = consistent_state(functions, layout, labels, q_init, v_init, p0, t0, tolerance, factor)
+    state = consistent_state(functions, layout, labels, q_init, v_init, p0, t0, tolerance, M,
+                             fixed=fixed, assemble=assemble)
     return Model(system=system, layout=layout, labels=labels, functions=functions, M=M, factor=factor,
                  state=state, p0=p0, baumgarte=(alpha, beta), redundant=redundant_labels,
                  dropped=(redundant == "drop"), t0=t0)

@@ -2,10 +2,12 @@
 
 * positions: Gauss–Newton with minimum-norm steps ``Δq = −A⁺ Φ`` onto ``Φ(t0, q) = 0``;
 * velocities: the M-orthogonal projection onto ``A v + Φ_t = 0``,
-  ``v ← v − M⁻¹Aᵀ (A M⁻¹ Aᵀ)⁻¹ (A v + Φ_t)``;
+  ``v ← v − M⁻¹Aᵀ (A M⁻¹ Aᵀ)⁺ (A v + Φ_t)``
+  (both from :mod:`ncgen.assembly.kinematics`, optionally keeping some coordinates fixed);
 * multipliers and accelerations from the KKT system.
 A correction larger than ``tolerance`` × the system's size is an error that names the
-constraints that were violated and the coordinate that had to move most.
+constraints that were violated and the coordinate that had to move most, unless the
+configuration is being assembled (``build(assemble=True)``).
 """
 from __future__ import annotations
 
@@ -28,6 +30,8 @@ class State:
     a0: np.ndarray
     dq: float      # largest position correction applied (m)
     dv: float      # largest velocity correction applied (m/s)
+    phi_given: float = 0.0        # max |Φ(t0, q)| of the state as given (m²)
+    velocity_given: float = 0.0   # max |A v + Φ_t| of the state as given (m²/s)
 
 
 def dependent_rows(A: np.ndarray, tol: float = RANK_TOL) -> list[int]:
@@ -61,47 +65,49 @@ def dependent_rows(A: np.ndarray, tol: float = RANK_TOL) -> list[int]:
     return dependent
 
 
-def consistent_state(f, layout, labels, q, v, p, t0, tolerance, factor, max_iter: int = 50) -> State:
-    """Project ``(q, v)`` onto the constraints; see the module docstring."""
+def consistent_state(f, layout, labels, q, v, p, t0, tolerance, M, *, fixed=(), assemble=False,
+                     max_iter: int = 50) -> State:
+    """Project ``(q, v)`` onto the constraints; see the module docstring.  ``fixed``: indices
+    of coordinates (and their rates) kept as given.  ``assemble``: no limit on the
+    corrections (the given configuration is only a guess)."""
+    from ncgen.assembly.kinematics import TOL, newton, project, system_size
+
     def phi(x):
         return np.array(f["phi"](t0, x, p)).reshape(-1)
 
     def A(x):
         return np.array(f["A"](t0, x, p))
 
-    size = max(1.0, _extent(q))
-    q_init = q.copy()
+    def phi_t(x):
+        return np.array(f["phi_t"](t0, x, p)).reshape(-1)
+
+    fixed = set(fixed)
+    free = [i for i in range(layout.nq) if i not in fixed]
+    size = system_size(q)
+    q_init, v_init = q.copy(), v.copy()
     res0 = phi(q)
-    for _ in range(max_iter):
+    vel0 = A(q) @ v + phi_t(q) if res0.size else res0
+    q, _, res = newton(phi, A, q, free, tol=TOL * size**2, max_iter=max_iter)
+    if res > TOL * size**2 or not np.isfinite(res):
         r = phi(q)
-        if r.size == 0 or np.max(np.abs(r)) <= 1e-13 * size**2:
-            break
-        q = q - np.linalg.lstsq(A(q), r, rcond=None)[0]
-    else:
-        worst = int(np.argmax(np.abs(phi(q))))
+        worst = int(np.nanargmax(np.abs(r)))
         raise ModelError(f"the constraints cannot be satisfied near the initial configuration: "
-                         f"{labels[worst]} keeps a residual of {abs(phi(q)[worst]):.3g}")
+                         f"{labels[worst]} keeps a residual of {abs(r[worst]):.3g}"
+                         + (f" with {len(fixed)} coordinate(s) fixed" if fixed else ""))
     dq = np.abs(q - q_init)
-    if dq.size and dq.max() > tolerance * size:
+    if not assemble and dq.size and dq.max() > tolerance * size:
         k = int(np.argmax(dq))
         worst = np.argsort(-np.abs(res0))[:3]
         viol = ", ".join(f"{labels[i]} = {res0[i]:.3g}" for i in worst if abs(res0[i]) > 0)
         raise ModelError(
             f"inconsistent initial configuration: the constraints are violated ({viol}); making them "
             f"hold moves {layout.coordinate_names[k]} by {dq[k]:.3g} m, more than the tolerance "
-            f"{tolerance:g} × {size:.3g} m. Fix the initial positions (or build(tolerance=...))")
-    A0 = A(q)
-    Minv = factor.solve_numeric
-    phi_t = np.array(f["phi_t"](t0, q, p)).reshape(-1)
-    v_init = v.copy()
-    if A0.shape[0]:
-        w = A0 @ v + phi_t
-        MiAT = Minv(A0.T)
-        K = A0 @ MiAT
-        v = v - MiAT @ np.linalg.solve(K, w)
+            f"{tolerance:g} × {size:.3g} m. Fix the initial positions, or build(assemble=True) to "
+            "assemble them (or build(tolerance=...))")
+    v = project(A(q), -phi_t(q), v, M, free)
     dv = np.abs(v - v_init)
     vscale = max(np.max(np.abs(v_init)) if v_init.size else 0.0, size)
-    if dv.size and dv.max() > tolerance * vscale:
+    if not assemble and dv.size and dv.max() > tolerance * vscale:
         k = int(np.argmax(dv))
         raise ModelError(
             f"inconsistent initial velocities: making them satisfy the constraints changes "
@@ -110,8 +116,6 @@ def consistent_state(f, layout, labels, q, v, p, t0, tolerance, factor, max_iter
     nu = f["F"].size1_in(3)
     a, lam = f["accel"](t0, q, v, np.zeros(nu), p)
     return State(q, v, np.array(lam).reshape(-1), np.array(a).reshape(-1),
-                 float(dq.max()) if dq.size else 0.0, float(dv.max()) if dv.size else 0.0)
-
-
-def _extent(q: np.ndarray) -> float:
-    return float(np.max(np.abs(q))) if q.size else 1.0
+                 float(dq.max()) if dq.size else 0.0, float(dv.max()) if dv.size else 0.0,
+                 float(np.max(np.abs(res0))) if res0.size else 0.0,
+                 float(np.max(np.abs(vel0))) if res0.size else 0.0)

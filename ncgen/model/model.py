@@ -35,6 +35,7 @@ class Model:
         self.q0, self.v0 = state.q0, state.v0
         self.lam0, self.a0 = state.lam0, state.a0
         self.initial_correction = (state.dq, state.dv)
+        self.initial_residual = (state.phi_given, state.velocity_given)
         self.baumgarte = baumgarte
         self.redundant = list(redundant)
         self.redundant_dropped = dropped and bool(redundant)

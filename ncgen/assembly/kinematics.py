@@ -1,0 +1,243 @@
+"""Kinematics on the constraint manifold: assembly, velocity projection, DOF, driven motion.
+
+* :func:`assemble` — Newton–Raphson onto ``Φ(t, q) = 0`` from an approximate ``q``, keeping
+  chosen coordinates fixed.  Each step is the minimum-norm correction of the free
+  coordinates, ``Δq_f = −A_f⁺ Φ`` (least squares: redundant constraints and spare degrees of
+  freedom are fine).
+* :func:`project_velocity` — the velocity closest to a given one in the kinetic-energy
+  metric that satisfies ``A v = −Φ_t``, again keeping chosen components fixed:
+  ``v_f = v̄_f + M_ff⁻¹ A_fᵀ μ`` with ``(A_f M_ff⁻¹ A_fᵀ) μ = −Φ_t − A v̄``.
+* :func:`dof_report` — rank of ``A``, degrees of freedom ``nq − rank A`` and the names of
+  the constraints that depend on earlier ones (:func:`~ncgen.assembly.initial_state.dependent_rows`).
+* :func:`solve_kinematics` — position, velocity and acceleration of a driven (0-DOF)
+  mechanism over a time grid: ``Φ(t, q) = 0``, ``A v = −Φ_t``, ``A a = γ``.
+
+Coordinates to keep fixed (``fix=``) are named like ``"crank.r_j.x"`` (one coordinate),
+``"crank.r_j"`` (a basic point or base vector), ``"crank"`` (every coordinate of a member)
+or given by index in q.  Driven joints need no fixing: their drives are constraints.
+Units: q in m, v in m/s, a in m/s², t in s.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ncgen.assembly.initial_state import dependent_rows
+from ncgen.model.expressions import did_you_mean
+from ncgen.model.members import ModelError
+
+#: Newton stops when max |Φ| ≤ TOL · (size of the system)² (Φ is in m²).
+TOL = 1e-13
+MAX_ITER = 50
+
+
+# ------------------------------------------------------------ coordinate names
+def resolve_fix(layout, members: dict, fix) -> list[int]:
+    """Indices in q of the coordinates named in ``fix`` (see the module docstring)."""
+    if isinstance(fix, (str, int, np.integer)):
+        fix = [fix]
+    out: set[int] = set()
+    d = layout.dim
+    for item in fix:
+        if isinstance(item, (int, np.integer)) and not isinstance(item, bool):
+            if not 0 <= item < layout.nq:
+                raise ModelError(f"fix: coordinate index {item} out of range (nq = {layout.nq})")
+            out.add(int(item))
+            continue
+        if not isinstance(item, str):
+            raise ModelError(f"fix: expected coordinate names or indices, got {item!r}")
+        parts = item.split(".")
+        m = members.get(parts[0])
+        if m is None or len(parts) > 3:
+            known = list(members) + layout.coordinate_names
+            raise ModelError(f"fix: no coordinate, slot or member named {item!r}{did_you_mean(item, known)}")
+        idx = layout.member_indices(m.name)
+        slots = m.ctype.slots
+        if len(parts) == 1:
+            chosen = range(len(idx))
+        else:
+            if parts[1] not in slots:
+                raise ModelError(f"fix: {m.name} ({m.ctype.name}) has slots {', '.join(slots)}, "
+                                 f"got {parts[1]!r}{did_you_mean(parts[1], slots)}")
+            s = slots.index(parts[1])
+            axes = "xyz"[:d]
+            if len(parts) == 3 and parts[2] not in axes:
+                raise ModelError(f"fix: axis of {item!r}: expected one of {', '.join(axes)}")
+            chosen = [s * d + axes.index(parts[2])] if len(parts) == 3 else range(s * d, s * d + d)
+        out.update(idx[k] for k in chosen if idx[k] is not None)
+    return sorted(out)
+
+
+# ------------------------------------------------------------------ numerics
+def newton(phi, jac, q, free, *, tol: float, max_iter: int = MAX_ITER):
+    """Minimum-norm Newton on the ``free`` entries of ``q``; returns ``(q, iterations,
+    max |Φ|)`` (the residual is above ``tol`` when it did not converge)."""
+    q = np.array(q, dtype=float)
+    free = np.asarray(free, dtype=int)
+    r = phi(q)
+    for it in range(max_iter + 1):
+        res = float(np.max(np.abs(r))) if r.size else 0.0
+        if res <= tol or it == max_iter or not np.all(np.isfinite(r)):
+            return q, it, res
+        step = np.linalg.lstsq(jac(q)[:, free], r, rcond=None)[0]
+        q[free] -= step
+        r = phi(q)
+    return q, max_iter, res
+
+
+def project(A: np.ndarray, b: np.ndarray, v: np.ndarray, M: np.ndarray, free) -> np.ndarray:
+    """The ``w`` closest to ``v`` in the metric ``M`` with ``A w = b`` and ``w = v`` outside
+    ``free`` (least squares when that is impossible)."""
+    w = np.array(v, dtype=float)
+    if A.shape[0] == 0:
+        return w
+    free = np.asarray(free, dtype=int)
+    Af = A[:, free]
+    MiAT = np.linalg.solve(M[np.ix_(free, free)], Af.T)
+    mu = np.linalg.lstsq(Af @ MiAT, b - A @ w, rcond=None)[0]
+    w[free] += MiAT @ mu
+    return w
+
+
+def system_size(q: np.ndarray) -> float:
+    """Length scale of a configuration (m): the largest |coordinate|, at least 1."""
+    return max(1.0, float(np.max(np.abs(q))) if q.size else 1.0)
+
+
+# ------------------------------------------------------------------ model API
+def _numeric(model, t, p):
+    t = model.t0 if t is None else float(t)
+    p = model.p0 if p is None else np.asarray(p, float)
+    f = model.functions
+
+    def phi(x):
+        return np.asarray(f["phi"](t, x, p), dtype=float).reshape(-1)
+
+    def jac(x):
+        return np.asarray(f["A"](t, x, p), dtype=float)
+
+    return t, p, phi, jac
+
+
+def _free(model, fix) -> np.ndarray:
+    fixed = set(resolve_fix(model.layout, model.system.members, fix))
+    return np.array([i for i in range(model.nq) if i not in fixed], dtype=int)
+
+
+def assemble(model, q=None, *, t=None, p=None, fix=(), tol: float = TOL, max_iter: int = MAX_ITER) -> np.ndarray:
+    """``q`` (default ``model.q0``) moved onto ``Φ(t, q) = 0`` by Newton, the coordinates in
+    ``fix`` kept; raises :class:`ModelError` naming the worst constraint if it fails."""
+    q = model.q0 if q is None else np.asarray(q, float)
+    t, p, phi, jac = _numeric(model, t, p)
+    free = _free(model, fix)
+    size = system_size(q)
+    q_new, it, res = newton(phi, jac, q, free, tol=tol * size**2, max_iter=max_iter)
+    if res > tol * size**2 or not np.isfinite(res):
+        r = phi(q_new)
+        worst = int(np.nanargmax(np.abs(r)))
+        hint = f" with {model.nq - free.size} coordinate(s) fixed" if free.size < model.nq else ""
+        raise ModelError(f"assembly failed{hint}: after {it} Newton iterations "
+                         f"{model.constraint_names[worst]} still has the residual {abs(r[worst]):.3g} "
+                         "(check the geometry, the drives and the fixed coordinates)")
+    return q_new
+
+
+def project_velocity(model, q, v=None, *, t=None, p=None, fix=()) -> np.ndarray:
+    """The velocity nearest to ``v`` (default ``model.v0``) in the kinetic-energy metric that
+    satisfies ``A v = −Φ_t`` at ``(t, q)``; the components in ``fix`` are kept."""
+    q = np.asarray(q, float)
+    v = model.v0 if v is None else np.asarray(v, float)
+    t, p, _, jac = _numeric(model, t, p)
+    phi_t = np.asarray(model.functions["phi_t"](t, q, p), dtype=float).reshape(-1)
+    return project(jac(q), -phi_t, v, model.M, _free(model, fix))
+
+
+@dataclass
+class DofReport:
+    """Constraint rank and degrees of freedom at one configuration."""
+
+    nq: int
+    nc: int
+    rank: int
+    dependent: list[str]                    # constraints depending on earlier ones, at q
+    dropped: list[str] = field(default_factory=list)   # dropped as redundant when building
+
+    @property
+    def dof(self) -> int:
+        return self.nq - self.rank
+
+    @property
+    def redundant(self) -> list[str]:
+        return self.dropped + self.dependent
+
+    def __str__(self) -> str:
+        red = ", ".join(self.redundant) or "none"
+        return (f"nq = {self.nq} coordinates, nc = {self.nc + len(self.dropped)} constraints, "
+                f"rank A = {self.rank}, DOF = {self.dof}\nredundant constraints: {red}")
+
+
+def dof_report(model, q=None, *, t=None, p=None) -> DofReport:
+    """Rank of ``A(t, q)`` (default the initial state) and the constraints that are linearly
+    dependent there; those dropped at build time are listed as ``dropped``."""
+    q = model.q0 if q is None else np.asarray(q, float)
+    _, _, _, jac = _numeric(model, t, p)
+    A = jac(q)
+    rank = int(np.linalg.matrix_rank(A)) if A.size else 0
+    dep = [model.constraint_names[i] for i in dependent_rows(A)]
+    return DofReport(model.nq, model.nc, rank, dep, list(model.redundant))
+
+
+@dataclass
+class KinematicSolution:
+    """Motion of a driven mechanism: rows of ``q``, ``v``, ``a`` are the times ``t``;
+    ``residual`` is the largest |Φ| met (m²)."""
+
+    t: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    residual: float
+
+
+def solve_kinematics(model, times, *, q=None, p=None, tol: float = TOL) -> KinematicSolution:
+    """Positions, velocities and accelerations of a mechanism whose every degree of freedom
+    is driven, at each of ``times`` (s, increasing), starting from ``q`` (default
+    ``model.q0``) and following the branch it is on."""
+    times = np.asarray(times, dtype=float).reshape(-1)
+    if times.size == 0 or np.any(np.diff(times) <= 0):
+        raise ModelError("solve_kinematics: times: expected an increasing, non-empty sequence")
+    p = model.p0 if p is None else np.asarray(p, float)
+    q = model.q0 if q is None else np.asarray(q, float)
+    f = model.functions
+    report = dof_report(model, q, t=times[0], p=p)
+    if report.dof > 0:
+        raise ModelError(f"solve_kinematics: the mechanism has {report.dof} degree(s) of freedom at "
+                         f"t = {times[0]:g} s; drive them (Revolute/Prismatic/Distance drive=..., "
+                         "CoordinateDriver) or use a dynamic simulation")
+    free = np.arange(model.nq)
+    Q, V, Acc = (np.zeros((times.size, model.nq)) for _ in range(3))
+    v = np.zeros(model.nq)
+    a = np.zeros(model.nq)
+    worst = 0.0
+    size = system_size(q)
+    for k, t in enumerate(times):
+        if k:
+            h = t - times[k - 1]
+            q = q + h * v + 0.5 * h * h * a
+        _, _, phi, jac = _numeric(model, t, p)
+        q, it, res = newton(phi, jac, q, free, tol=tol * size**2)
+        if res > tol * size**2 or not np.isfinite(res):
+            raise ModelError(f"solve_kinematics: no configuration found at t = {t:g} s (residual "
+                             f"{res:.3g} after {it} iterations): the drives may leave the reachable range")
+        A = jac(q)
+        if np.linalg.matrix_rank(A) < model.nq:
+            raise ModelError(f"solve_kinematics: singular configuration at t = {t:g} s "
+                             f"(rank A = {np.linalg.matrix_rank(A)} < nq = {model.nq})")
+        phi_t = np.asarray(f["phi_t"](t, q, p), dtype=float).reshape(-1)
+        v = np.linalg.lstsq(A, -phi_t, rcond=None)[0]
+        gamma = np.asarray(f["gamma"](t, q, v, p), dtype=float).reshape(-1)
+        a = np.linalg.lstsq(A, gamma, rcond=None)[0]
+        Q[k], V[k], Acc[k] = q, v, a
+        worst = max(worst, res)
+    return KinematicSolution(times, Q, V, Acc, worst)
