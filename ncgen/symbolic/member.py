@@ -106,7 +106,10 @@ class RigidMember:
         mass = positive(mass, "mass")
         a = L / 2 if com is None else as_scalar(com, "com (distance of the centre of mass from the first end)")
         if inertia is None:
-            inertia = mass * L**2 / 12 + mass * (a - L / 2) ** 2 if com is not None else mass * L**2 / 12
+            if abs(a - L / 2) > 1e-12 * L:
+                raise InertiaError(f"bar: com={a:g} is not the middle of the bar (L={L:g}), so it is not "
+                                   "uniform; give its transverse inertia about the centre of mass")
+            inertia = mass * L**2 / 12
         d = ct.dim
         rbar_i = np.zeros(d)
         rbar_i[0] = -a
