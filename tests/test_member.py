@@ -314,8 +314,6 @@ def test_point_twist_without_angular_velocity():
 
 
 def test_off_centre_bar_needs_its_inertia():
-    import pytest
-    from ncgen.errors import InertiaError
     with pytest.raises(InertiaError, match="not the middle"):
         RigidMember.bar("rr", 1.0, 2.0, com=0.5)
     assert RigidMember.bar("rr", 1.0, 2.0, com=1.0).Jbar[0, 0] == pytest.approx(1.0 * 4 / 12)
