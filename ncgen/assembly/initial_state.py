@@ -1,7 +1,8 @@
 """Consistent initial state and constraint redundancy.
 
 * positions: Gauss–Newton with minimum-norm steps ``Δq = −A⁺ Φ`` onto ``Φ(t0, q) = 0``;
-* velocities: the M-orthogonal projection onto ``A v + Φ_t = 0``,
+* velocities: the M-orthogonal projection onto ``A v + Φ_t = 0`` (the velocities that drives
+  prescribe, rows with ``Φ_t ≠ 0``, are imposed without counting as an inconsistency),
   ``v ← v − M⁻¹Aᵀ (A M⁻¹ Aᵀ)⁺ (A v + Φ_t)``
   (both from :mod:`ncgen.assembly.kinematics`, optionally keeping some coordinates fixed);
 * multipliers and accelerations from the KKT system.
@@ -104,14 +105,18 @@ def consistent_state(f, layout, labels, q, v, p, t0, tolerance, M, *, fixed=(), 
             f"hold moves {layout.coordinate_names[k]} by {dq[k]:.3g} m, more than the tolerance "
             f"{tolerance:g} × {size:.3g} m. Fix the initial positions, or build(assemble=True) to "
             "assemble them (or build(tolerance=...))")
-    v = project(A(q), -phi_t(q), v, M, free)
+    A0, rate = A(q), phi_t(q)
+    v = project(A0, -rate, v, M, free)
     dv = np.abs(v - v_init)
+    # drives set their own velocities: only the constraints without one (Φ_t = 0) judge the given state
+    steady = rate == 0
+    check = np.abs(project(A0[steady], np.zeros(int(steady.sum())), v_init, M, free) - v_init)
     vscale = max(np.max(np.abs(v_init)) if v_init.size else 0.0, size)
-    if not assemble and dv.size and dv.max() > tolerance * vscale:
-        k = int(np.argmax(dv))
+    if not assemble and check.size and check.max() > tolerance * vscale:
+        k = int(np.argmax(check))
         raise ModelError(
             f"inconsistent initial velocities: making them satisfy the constraints changes "
-            f"{layout.coordinate_names[k]} by {dv[k]:.3g} m/s, more than the tolerance {tolerance:g} × "
+            f"{layout.coordinate_names[k]} by {check[k]:.3g} m/s, more than the tolerance {tolerance:g} × "
             f"{vscale:.3g} m/s. Check the members' velocity and angular_velocity")
     nu = f["F"].size1_in(3)
     a, lam = f["accel"](t0, q, v, np.zeros(nu), p)

@@ -29,7 +29,7 @@ class Joint:
     when they can be driven)."""
 
     kind = "Joint"
-    #: Whether a drive is meaningful for this joint, and what it prescribes.
+    #: What a drive prescribes (drivable joints only), for messages.
     drive_meaning: str | None = None
 
     def __init__(self, A, B, *, name: str | None = None, **options):
@@ -68,8 +68,6 @@ class Joint:
             if len(ms) == 2 and ms[0] is ms[1]:
                 raise ModelError(f"{self.label}: joins {'the ground' if ms[0].is_ground else 'a member'} "
                                  "to itself")
-            if self.drive is not None and self.drive_meaning is None:
-                raise ModelError(f"{self.label}: a {self.kind} joint cannot be driven")
             self.system = system
             self.check(system)
         except BaseException:
