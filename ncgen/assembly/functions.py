@@ -17,9 +17,14 @@ Functions (name: inputs -> outputs):
 * ``phi``: t, q, p -> phi;  ``A``: t, q, p -> A (sparse);  ``phi_t``: t, q, p -> phi_t
 * ``gamma``: t, q, v, p -> gamma;  ``F``: t, q, v, u, p -> F;  ``Minv``: b -> x = M⁻¹ b
 * ``ode``: t, q, v, lam, u, p -> qdot, vdot;  ``alg``: t, q, v, lam, u, p -> res
+* ``dae``: t, x, z, u, p -> ode, alg  (the same with ``x = [q; v]``, ``z = λ``: IDAS's form)
 * ``accel``: t, q, v, u, p -> a, lam  (the KKT system solved, Baumgarte terms included)
 * ``energy``: t, q, v, p -> T, V;  ``markers``: q, v -> r, rdot (dim × n_markers)
 * ``poses``: q -> R (dim × dim·n_members), p (dim × n_members)
+
+Every function is an SX function except ``accel`` (MX: it calls the others and CasADi's
+sparse QR).  :data:`DOCS` gives the meaning and units of each function and argument; it is
+the one source of the generated C header's documentation (:mod:`ncgen.codegen.model_package`).
 """
 from __future__ import annotations
 
@@ -29,9 +34,57 @@ import numpy as np
 from ncgen.assembly.context import Context
 from ncgen.assembly.mass import CholeskyFactor
 
+#: Inputs shared by the functions: name -> (meaning, SI units).
 IN = {
-    "t": "time (s)", "q": "natural coordinates", "v": "coordinate rates q̇",
-    "lam": "Lagrange multipliers", "u": "inputs", "p": "parameters", "b": "right-hand side",
+    "t": ("time", "s"),
+    "q": ("natural coordinates q: basic points and base vectors of every member, layout order "
+          "(see coordinate_names)", "m"),
+    "v": ("coordinate rates q̇", "m/s"),
+    "lam": ("Lagrange multipliers λ, one per constraint (Aᵀλ is the constraint force)",
+            "N per unit of Φ"),
+    "u": ("inputs, in the order of input_names", "SI units of each input"),
+    "p": ("parameters, in the order of parameter_names", "SI units of each parameter"),
+    "b": ("right-hand side: a generalised force", "N"),
+    "x": ("state [q; v]", "m, m/s"),
+    "z": ("algebraic state: the Lagrange multipliers λ", "N per unit of Φ"),
+}
+
+#: Every function of :func:`system_functions`: its purpose and its outputs, name -> (meaning,
+#: SI units).  Inputs are documented by :data:`IN`.
+DOCS = {
+    "phi": ("constraint residuals Φ(t, q): intrinsic constraints of every member, then joint "
+            "equations, in the order of constraint_names",
+            {"phi": ("Φ", "m² or m, per constraint")}),
+    "A": ("constraint Jacobian A = ∂Φ/∂q (sparse, linear in q)",
+          {"A": ("A, nc × nq", "m or 1")}),
+    "phi_t": ("explicit time derivative ∂Φ/∂t (non-zero for driven joints only)",
+              {"phi_t": ("∂Φ/∂t", "units of Φ per s")}),
+    "gamma": ("acceleration right-hand side γ = −(∂(A q̇)/∂q) q̇ − 2 ∂(A q̇)/∂t − Φ_tt, "
+              "so that A q̈ = γ",
+              {"gamma": ("γ", "units of Φ per s²")}),
+    "F": ("generalised applied force F(t, q, q̇, u, p): gravity and force elements",
+          {"F": ("F", "N (N·m for rows of base vectors)")}),
+    "Minv": ("application of the constant inverse mass matrix: x = M⁻¹ b (two sparse "
+             "triangular solves with the Cholesky factor of M)",
+             {"x": ("M⁻¹ b", "m/s²")}),
+    "ode": ("differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ)",
+            {"qdot": ("q̇", "m/s"), "vdot": ("q̈ = a", "m/s²")}),
+    "alg": ("algebraic residual of the index-1 DAE: A a − γ + 2α Φ̇ + β² Φ (Baumgarte "
+            "stabilised acceleration constraints)",
+            {"res": ("residual, zero on solutions", "units of Φ per s²")}),
+    "dae": ("the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v] and z = λ",
+            {"ode": ("ẋ = [q̇; q̈]", "m/s, m/s²"), "alg": ("algebraic residual (as alg)", "units of Φ per s²")}),
+    "accel": ("accelerations and multipliers from the KKT system [[M, Aᵀ], [A, 0]] [a; λ] = "
+              "[F; γ − 2α Φ̇ − β² Φ], solved by sparse QR",
+              {"a": ("q̈", "m/s²"), "lam": ("λ", "N per unit of Φ")}),
+    "energy": ("kinetic energy T = ½ q̇ᵀ M q̇ and potential energy V (gravity and springs)",
+               {"T": ("kinetic energy", "J"), "V": ("potential energy", "J")}),
+    "markers": ("world positions and velocities of the named markers, one column each, in "
+                "the order of marker_names",
+                {"r": ("positions, dim × n_markers", "m"), "rdot": ("velocities, dim × n_markers", "m/s")}),
+    "poses": ("pose of every member: rotation local → world and centre of mass, one block "
+              "each, in the order of member_names",
+              {"R": ("rotations, dim × dim·n_members", "1"), "p": ("centres of mass, dim × n_members", "m")}),
 }
 
 
@@ -65,6 +118,7 @@ def system_functions(ctx: Context, phi, F, V, M: np.ndarray, factor: CholeskyFac
     add("Minv", ("b",), [factor.solve(b)], ["x"])
     add("ode", ("t", "q", "v", "lam", "u", "p"), [v, a], ["qdot", "vdot"])
     add("alg", ("t", "q", "v", "lam", "u", "p"), [alg], ["res"])
+    f["dae"] = _dae(f, ctx.layout.nq, nc, u.shape[0], p.shape[0])
     add("energy", ("t", "q", "v", "p"), [T, V], ["T", "V"])
     r, rd = _markers(ctx, system)
     add("markers", ("q", "v"), [r, rd], ["r", "rdot"])
@@ -93,6 +147,16 @@ def _poses(ctx: Context, system):
         ps.append(ctx.instantiate(m, D.p))
         Rs.append(ctx.instantiate(m, D.R) if D.R is not None else ca.SX.eye(ctx.dim))
     return ca.horzcat(*Rs), ca.horzcat(*ps)
+
+
+def _dae(f, nq: int, nc: int, nu: int, npar: int) -> ca.Function:
+    """``ode`` and ``alg`` with the state stacked, ``x = [q; v]``, ``z = λ`` (IDAS's form)."""
+    t, x, z = ca.SX.sym("t"), ca.SX.sym("x", 2 * nq), ca.SX.sym("z", nc)
+    u, p = ca.SX.sym("u", nu), ca.SX.sym("p", npar)
+    q, v = x[:nq], x[nq:]
+    qdot, vdot = f["ode"](t, q, v, z, u, p)
+    return ca.Function("dae", [t, x, z, u, p], [ca.vertcat(qdot, vdot), f["alg"](t, q, v, z, u, p)],
+                       ["t", "x", "z", "u", "p"], ["ode", "alg"])
 
 
 def _accel(f, M: ca.DM, nc: int, alpha: float, beta: float, nq: int, nu: int, npar: int) -> ca.Function:

@@ -2,9 +2,10 @@
 
 Each function ``f`` of package ``name`` is exported in C as ``<name>_<f>`` (so several
 packages can be linked into one program).  Functions are packed, in the order given, into
-files ``<name>_kernels_<k>.c`` holding at most ``max_file_instructions`` SX instructions
-each (a larger function gets a file of its own), so big models compile file by file, in
-parallel, with bounded memory.  ``None`` puts everything in one file, ``0`` one function
+files ``<name>_kernels_<k>.c`` holding at most ``max_file_instructions`` instructions each
+(SX instructions; an MX function that cannot be expanded counts its MX nodes; a larger
+function gets a file of its own), so big models compile file by file, in parallel, with
+bounded memory.  ``None`` puts everything in one file, ``0`` one function
 per file.
 """
 from __future__ import annotations
@@ -35,7 +36,9 @@ class KernelFile:
 
 
 def c_function(f: ca.Function, c_name: str) -> ca.Function:
-    """``f`` as an SX function named ``c_name`` (same algorithm, new name)."""
+    """``f`` named ``c_name``, same algorithm: expanded to an SX function when possible; an MX
+    function with nodes SX cannot evaluate (a linear solver such as ``solve(K, b, "qr")``)
+    stays MX, a wrapper calling ``f``, and CasADi generates its C as well."""
     if f.has_free():
         free = f.free_sx() if f.is_a("SXFunction") else f.free_mx()
         raise CodegenError(f"function {f.name()!r} has free symbols {[str(s) for s in free]}; "
@@ -43,8 +46,11 @@ def c_function(f: ca.Function, c_name: str) -> ca.Function:
     try:
         return f.expand(c_name)
     except RuntimeError as e:
-        raise CodegenError(f"function {f.name()!r} cannot be turned into an SX function for "
-                           f"code generation: {str(e).strip().splitlines()[-1]}") from None
+        if not (f.is_a("MXFunction") and "eval_sx not defined" in str(e)):
+            raise CodegenError(f"function {f.name()!r} cannot be turned into an SX function for "
+                               f"code generation: {str(e).strip().splitlines()[-1]}") from None
+    args = f.mx_in()
+    return ca.Function(c_name, args, f.call(args), f.name_in(), f.name_out())
 
 
 def group_functions(functions: Sequence[ca.Function], max_file_instructions: int | None) -> list[list[int]]:
