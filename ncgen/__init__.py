@@ -5,6 +5,7 @@ bodies, bars and points with joints and forces is assembled into CasADi function
 (``System.build()``), turned into C, simulated and optimised.
 """
 from ncgen.assembly.kinematics import assemble, dof_report, project_velocity, solve_kinematics
+from ncgen.codegen.model_package import generate
 from ncgen.errors import NcgenError
 from ncgen.model.forces import Force, GeneralizedForce, PointForce, Spring, Torque, TorsionalSpring
 from ncgen.model.joints import (
@@ -22,5 +23,5 @@ __all__ = [
     "CoordinateDriver", "Cylindrical", "Distance", "Fixed", "Force", "GeneralizedForce", "Joint", "Model",
     "ModelError", "NcgenError", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic",
     "Revolute", "Spherical", "Spring", "System", "Torque", "TorsionalSpring", "Universal",
-    "assemble", "coordinate_type", "dof_report", "project_velocity", "solve_kinematics", "__version__",
+    "assemble", "coordinate_type", "dof_report", "generate", "project_velocity", "solve_kinematics", "__version__",
 ]

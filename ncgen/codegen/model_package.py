@@ -1,0 +1,163 @@
+"""The C package of a model: ``generate(model, out_dir)``.
+
+The package (see :mod:`ncgen.codegen.package` for its files) holds the model's system
+functions (:mod:`ncgen.assembly.functions`: Φ, A, Φ_t, γ, F, M⁻¹ b, the DAE as ``ode``/``alg``
+and in IDAS's stacked form ``dae`` with its sparse Jacobian ``jac_<model>_dae``, the KKT
+solve ``accel``, energies, markers, poses), each documented in ``<model>.h`` from
+:data:`ncgen.assembly.functions.DOCS`, and the model as metadata: dimensions, the names of
+coordinates, constraints, inputs, parameters, members and markers, the consistent initial
+state (``t0``, ``q0``, ``v0``, ``lam0``, ``x0``, ``p0``), the constant mass matrix ``M``,
+gravity, the Baumgarte coefficients and ``model_hash``.  ``main.c`` evaluates ``accel`` (or
+any other function) at the initial state without Python.
+
+A package is made of *sections*: :data:`SECTIONS` lists functions ``model -> Section``
+whose functions, documentation, metadata and extra C sources are merged in order.  A
+feature that adds C to every model package (a compiled stepper, say) appends its own.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from typing import Callable, Mapping, Sequence
+
+import casadi as ca
+import numpy as np
+
+from ncgen.assembly.functions import DOCS, IN
+from ncgen.codegen.build import compile_package
+from ncgen.codegen.doc import PackageDoc
+from ncgen.codegen.fsutil import sha256_bytes
+from ncgen.codegen.manifest import canonical_json
+from ncgen.codegen.package import ExtraSource, Package, write_package
+
+#: The system functions in the package, in this order.
+SYSTEM_FUNCTIONS = ("phi", "A", "phi_t", "gamma", "F", "Minv", "ode", "alg", "dae", "accel",
+                    "energy", "markers", "poses")
+#: Functions generated with their Jacobian (IDAS differentiates ``dae``).
+SYSTEM_JACOBIANS = ("dae",)
+#: Function evaluated by ``main.c`` when called without arguments.
+MAIN_FUNCTION = "accel"
+#: Input name -> metadata key of its default value (used by ``main.c`` and documented).
+DEFAULTS = {"t": "t0", "q": "q0", "v": "v0", "lam": "lam0", "x": "x0", "z": "lam0", "p": "p0"}
+
+
+@dataclass(frozen=True)
+class Section:
+    """One part of a model package: CasADi ``functions`` and their ``docs``
+    (:class:`~ncgen.codegen.doc.FunctionDoc` data by function name), the names of those
+    generated with a Jacobian, ``metadata`` with its one-line ``metadata_doc``, and
+    ``extra_sources`` (templates rendered next to the kernels)."""
+
+    functions: Sequence[ca.Function] = ()
+    docs: Mapping[str, Mapping] = field(default_factory=dict)
+    jacobians: Sequence[str] = ()
+    metadata: Mapping[str, object] = field(default_factory=dict)
+    metadata_doc: Mapping[str, str] = field(default_factory=dict)
+    extra_sources: Sequence[ExtraSource] = ()
+
+
+def generate(model, out_dir: str | os.PathLike, *, cflags=None, compile: bool = False) -> Package:
+    """Write the C package of ``model`` (a :class:`~ncgen.model.model.Model`) to ``out_dir``.
+
+    The package is named after the model; its files depend only on the model (same model,
+    same bytes).  ``out_dir`` is replaced atomically if it holds an ncgen package.  With
+    ``compile=True`` the shared library is built now (with ``cflags``, see
+    :func:`~ncgen.codegen.build.compile_package`; cached by content), so that compile errors
+    surface here; otherwise it is built when first loaded.  Load the functions back with
+    ``ncgen.codegen.load_functions(pkg, backend="compiled")``.
+    """
+    sections = [make(model) for make in SECTIONS]
+    functions = [f for s in sections for f in s.functions]
+    metadata = {k: v for s in sections for k, v in s.metadata.items()}
+    doc = PackageDoc(
+        summary=_summary(model),
+        functions={k: v for s in sections for k, v in s.docs.items()},
+        metadata=metadata,
+        metadata_doc={k: v for s in sections for k, v in s.metadata_doc.items()},
+        defaults={arg: key for arg, key in DEFAULTS.items() if key in metadata},
+        main_function=MAIN_FUNCTION)
+    pkg = write_package(model.name, functions, out_dir, doc=doc,
+                        jacobians=[j for s in sections for j in s.jacobians],
+                        extra_sources=[e for s in sections for e in s.extra_sources])
+    if compile:
+        compile_package(pkg, cflags=cflags)
+    return pkg
+
+
+def system_section(model) -> Section:
+    """The system functions of ``model`` and its metadata."""
+    functions = [model.functions[name] for name in SYSTEM_FUNCTIONS]
+    docs = {f.name(): function_doc(f) for f in functions}
+    metadata, metadata_doc = model_metadata(model)
+    return Section(functions=functions, docs=docs, jacobians=SYSTEM_JACOBIANS,
+                   metadata=metadata, metadata_doc=metadata_doc)
+
+
+#: Makers of the sections of every model package, in order.
+SECTIONS: list[Callable[[object], Section]] = [system_section]
+
+
+def function_doc(f: ca.Function) -> dict:
+    """Documentation of system function ``f`` from :data:`~ncgen.assembly.functions.DOCS`
+    (purpose and outputs) and :data:`~ncgen.assembly.functions.IN` (inputs)."""
+    purpose, outputs = DOCS[f.name()]
+    return {"purpose": purpose, "inputs": {a: IN[a] for a in f.name_in()},
+            "outputs": {a: outputs[a] for a in f.name_out()}}
+
+
+def model_metadata(model) -> tuple[dict, dict]:
+    """``(metadata, metadata_doc)`` of ``model`` for :class:`~ncgen.codegen.doc.PackageDoc`."""
+    d = model.dim
+    entries = [
+        ("dim", d, "spatial dimension: 3, or 2 for a planar model"),
+        ("nq", model.nq, "number of natural coordinates q"),
+        ("nc", model.nc, "number of constraints Φ (and multipliers λ)"),
+        ("dof", model.dof, "degrees of freedom, nq - rank A(q0)"),
+        ("nu", model.nu, "number of input values u"),
+        ("np", model.np, "number of parameter values p"),
+        ("n_members", len(model.member_names), "number of members (bodies, bars, points)"),
+        ("n_markers", len(model.marker_names), "number of named markers"),
+        ("coordinate_names", model.coordinate_names, "name of each coordinate q[i]"),
+        ("constraint_names", model.constraint_names, "name of each constraint Phi[i]"),
+        ("input_names", _component_names(model.input_names, model.input_sizes), "name of each input u[i]"),
+        ("parameter_names", _component_names(model.parameter_names, model.parameter_sizes),
+         "name of each parameter p[i]"),
+        ("member_names", model.member_names, "members, in the order of the blocks of poses"),
+        ("marker_names", model.marker_names, "markers (member.marker), in the order of the columns of markers"),
+        ("t0", [model.t0], "initial time (s), one value"),
+        ("q0", model.q0, "consistent initial coordinates (m)"),
+        ("v0", model.v0, "consistent initial coordinate rates (m/s)"),
+        ("lam0", model.lam0, "initial Lagrange multipliers, consistent with q0, v0, p0 and zero inputs"),
+        ("x0", np.concatenate([model.q0, model.v0]), "initial DAE state [q0; v0]"),
+        ("p0", model.p0, "default parameter values"),
+        ("M", np.asarray(model.M).reshape(-1, order="F"), "constant mass matrix, nq x nq, column-major (kg)"),
+        ("gravity", model.gravity, "gravity vector (m/s^2)"),
+        ("baumgarte_alpha", float(model.baumgarte[0]), "Baumgarte coefficient alpha of alg and accel (1/s)"),
+        ("baumgarte_beta", float(model.baumgarte[1]), "Baumgarte coefficient beta of alg and accel (1/s)"),
+    ]
+    metadata = {k: v for k, v, _ in entries}
+    metadata_doc = {k: doc for k, _, doc in entries}
+    metadata["model_hash"] = model_hash(model, metadata)
+    metadata_doc["model_hash"] = ("sha256 of the model's system functions and the metadata above: "
+                                  "equal hashes, same model")
+    return metadata, metadata_doc
+
+
+def model_hash(model, metadata: Mapping) -> str:
+    """sha256 identifying ``model``: its serialised system functions and ``metadata``."""
+    plain = PackageDoc(metadata=metadata).metadata
+    data = {"functions": [[name, model.functions[name].serialize()] for name in SYSTEM_FUNCTIONS],
+            "metadata": plain}
+    return sha256_bytes(canonical_json(data).encode())
+
+
+def _component_names(names: Sequence[str], sizes: Sequence[int]) -> list[str]:
+    """One name per value: ``k`` for a scalar, ``f[0]``, ``f[1]``, ... for a vector ``f``."""
+    return [n if s == 1 else f"{n}[{i}]" for n, s in zip(names, sizes) for i in range(s)]
+
+
+def _summary(model) -> str:
+    return (f"Model {model.name!r} ({model.dim}D): nq = {model.nq} natural coordinates, "
+            f"nc = {model.nc} constraints, {model.dof} degrees of freedom, nu = {model.nu} inputs, "
+            f"np = {model.np} parameters; members: {', '.join(model.member_names)}. "
+            f"Generated by ncgen.generate from the model's CasADi functions.")
