@@ -7,7 +7,8 @@ A package directory ``out_dir`` holds (for package name ``name``)::
     <name>_meta.c          definitions of the metadata arrays
     <extra sources>        hand-written templates rendered next to the kernels
     main.c                 evaluates one function at the default inputs and prints it
-    Makefile, CMakeLists.txt   build lib<name>.so and <name>_main
+    <programs>.c           extra sources marked ``program``: stand-alone example programs
+    Makefile, CMakeLists.txt   build lib<name>.so, <name>_main and one executable per program
     manifest.json          signatures, hashes, versions (see ncgen.codegen.manifest)
 
 The output depends only on the inputs (no time, path or host), so it is byte-for-byte
@@ -40,11 +41,15 @@ _FIXED_FILES = ("main.c", "Makefile", "CMakeLists.txt")
 class ExtraSource:
     """A template rendered into the package as ``output``, with ``context`` (plain JSON data)
     added to the common template variables.  ``.c`` outputs are compiled into the library,
-    ``.h`` outputs are included at the end of ``<name>.h``."""
+    ``.h`` outputs are included at the end of ``<name>.h``.  With ``program=True`` a ``.c``
+    output is instead a stand-alone program (it has ``main``): the Makefile and
+    CMakeLists.txt build it into the executable named by its stem, linked with the
+    library's objects; :func:`~ncgen.codegen.build.compile_package` ignores it."""
 
     template: str
     output: str
     context: Mapping = field(default_factory=dict)
+    program: bool = False
 
 
 @dataclass(frozen=True)
@@ -114,7 +119,8 @@ def write_package(name: str, functions: Sequence[ca.Function], out_dir: str | os
     _check_replaceable(out_dir)
     options = {"max_file_instructions": max_file_instructions,
                "casadi_options": casadi_options(codegen_options),
-               "extra_sources": [[s.template, s.output, dict(s.context)] for s in extra_sources]}
+               "extra_sources": [[s.template, s.output, dict(s.context)] + (["program"] if s.program else [])
+                                 for s in extra_sources]}
     if jacobians:
         options["jacobians"] = _checked_jacobians(jacobians, functions)
     files = _render_files(name, functions, doc, options, extra_sources, template_dirs)
@@ -146,10 +152,13 @@ def _render_files(name: str, functions: list[ca.Function], doc: PackageDoc, opti
     fn_info = [_function_info(name, f, c, file_of[c.name()], doc, f.name() in with_jac)
                for f, c in zip(functions, c_funcs)]
     build = {"sources": [k.stem + ".c" for k in kernels] + [meta_c]
-             + [s.output for s in extra_sources if s.output.endswith(".c")],
+             + [s.output for s in extra_sources if s.output.endswith(".c") and not s.program],
              "headers": [header] + [k.stem + ".h" for k in kernels]
              + [s.output for s in extra_sources if s.output.endswith(".h")],
              "main": "main.c", "library": f"lib{name}.so", "executable": f"{name}_main"}
+    programs = [s.output for s in extra_sources if s.program]
+    if programs:
+        build["programs"] = programs
     context = {
         "name": name, "NAME": name.upper(), "header": header, "summary": cnames.c_comment(doc.summary),
         "casadi_version": ca.__version__, "functions": fn_info, "build": build,
@@ -188,6 +197,9 @@ def _check_extra_sources(name: str, extra_sources: Sequence[ExtraSource]) -> Non
             raise CodegenError(f"extra source output {s.output!r} must be a plain file name, not one of "
                                f"{sorted(taken)} nor {name}_kernels_*, and not used twice")
         taken.add(s.output)
+        if s.program and (not s.output.endswith(".c") or s.output[:-2] in (f"{name}_main", "main")):
+            raise CodegenError(f"extra source {s.output!r} is a program: its output must be a .c file "
+                               f"whose stem names the executable (not {name}_main)")
         try:
             manifest.canonical_json(dict(s.context))
         except (TypeError, ValueError) as e:
