@@ -99,7 +99,7 @@ def consistent_state(f, layout, labels, q, v, p, t0, tolerance, M, *, fixed=(), 
     if not assemble and dq.size and dq.max() > tolerance * size:
         k = int(np.argmax(dq))
         worst = np.argsort(-np.abs(res0))[:3]
-        viol = ", ".join(f"{labels[i]} = {res0[i]:.3g}" for i in worst if abs(res0[i]) > 0)
+        viol = ", ".join(f"{labels[i]} = {res0[i]:.3g}" for i in worst if abs(res0[i]) > TOL * size**2)
         raise ModelError(
             f"inconsistent initial configuration: the constraints are violated ({viol}); making them "
             f"hold moves {layout.coordinate_names[k]} by {dq[k]:.3g} m, more than the tolerance "
@@ -118,9 +118,28 @@ def consistent_state(f, layout, labels, q, v, p, t0, tolerance, M, *, fixed=(), 
             f"inconsistent initial velocities: making them satisfy the constraints changes "
             f"{layout.coordinate_names[k]} by {check[k]:.3g} m/s, more than the tolerance {tolerance:g} × "
             f"{vscale:.3g} m/s. Check the members' velocity and angular_velocity")
-    nu = f["F"].size1_in(3)
-    a, lam = f["accel"](t0, q, v, np.zeros(nu), p)
-    return State(q, v, np.array(lam).reshape(-1), np.array(a).reshape(-1),
+    a, lam = _multipliers(f, M, q, v, p, t0)
+    return State(q, v, lam, a,
                  float(dq.max()) if dq.size else 0.0, float(dv.max()) if dv.size else 0.0,
                  float(np.max(np.abs(res0))) if res0.size else 0.0,
                  float(np.max(np.abs(vel0))) if res0.size else 0.0)
+
+
+def _multipliers(f, M, q, v, p, t0):
+    """``(a, λ)`` from the KKT system at a consistent state; with redundant constraints kept
+    (singular KKT matrix) the minimum-norm least-squares solution."""
+    nu = f["F"].size1_in(3)
+    u = np.zeros(nu)
+    try:
+        a, lam = (np.array(x, dtype=float).reshape(-1) for x in f["accel"](t0, q, v, u, p))
+        if np.all(np.isfinite(a)) and np.all(np.isfinite(lam)):
+            return a, lam
+    except RuntimeError:
+        pass
+    A = np.array(f["A"](t0, q, p), dtype=float)
+    nc = A.shape[0]
+    K = np.block([[M, A.T], [A, np.zeros((nc, nc))]])
+    rhs = np.concatenate([np.array(f["F"](t0, q, v, u, p), dtype=float).reshape(-1),
+                          np.array(f["gamma"](t0, q, v, p), dtype=float).reshape(-1)])
+    sol = np.linalg.lstsq(K, rhs, rcond=None)[0]
+    return sol[:M.shape[0]], sol[M.shape[0]:]

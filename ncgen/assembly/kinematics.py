@@ -185,7 +185,7 @@ def dof_report(model, q=None, *, t=None, p=None) -> DofReport:
     A = jac(q)
     rank = int(np.linalg.matrix_rank(A)) if A.size else 0
     dep = [model.constraint_names[i] for i in dependent_rows(A)]
-    return DofReport(model.nq, model.nc, rank, dep, list(model.redundant))
+    return DofReport(model.nq, model.nc, rank, dep, list(model.redundant) if model.redundant_dropped else [])
 
 
 @dataclass
