@@ -10,7 +10,7 @@ Drives, forces, stiffnesses and every other "value" of a model accept
   Functions: :data:`FUNCTIONS`.  Operators: ``+ - * / **``, comparisons, ``and``, ``or``,
   ``not`` and ``a if c else b``;
 * a CasADi SX expression of the system's parameter and input symbols;
-* a sequence mixing numbers, strings and SX scalars (one per component);
+* a sequence mixing numbers, strings, SX scalars and callables (one per component);
 * a callable ``f(t)`` returning any of the above.
 
 :func:`to_text` prints an SX expression back in the same syntax, so that a model given with
@@ -308,6 +308,11 @@ def evaluate(value, sc: Scope, size: int, what: str, *, call=None) -> ca.SX:
     return e
 
 
+def _called(x, sc: Scope):
+    """A component given as a callable ``f(t)``, evaluated."""
+    return x(sc.t) if callable(x) and not isinstance(x, (ca.SX, ca.MX, ca.DM)) else x
+
+
 def _as_sx(v, sc: Scope, what: str) -> ca.SX:
     if isinstance(v, str):
         return parse(v, sc.names, what)
@@ -316,7 +321,7 @@ def _as_sx(v, sc: Scope, what: str) -> ca.SX:
     if isinstance(v, (ca.SX, ca.DM)):
         return ca.SX(v)
     if isinstance(v, (list, tuple)) or (isinstance(v, np.ndarray) and v.dtype == object):
-        parts = [_as_sx(x, sc, f"{what}[{i}]") for i, x in enumerate(v)]
+        parts = [_as_sx(_called(x, sc), sc, f"{what}[{i}]") for i, x in enumerate(v)]
         for i, p in enumerate(parts):
             if p.numel() != 1:
                 raise ExpressionError(f"{what}[{i}]: expected a scalar, got {p.numel()} components")
@@ -350,7 +355,7 @@ def value_to_toml(value, sc: Scope, what: str, *, call=None):
     if callable(value) and not isinstance(value, (ca.SX, ca.MX, ca.DM)):
         value = call(value) if call is not None else value(sc.t)
     if isinstance(value, (list, tuple)) or (isinstance(value, np.ndarray) and value.dtype == object):
-        return [value_to_toml(x, sc, f"{what}[{i}]") for i, x in enumerate(value)]
+        return [value_to_toml(_called(x, sc), sc, f"{what}[{i}]") for i, x in enumerate(value)]
     if isinstance(value, (ca.SX, ca.DM)):
         e = ca.SX(value)
         labels = sc.labels()

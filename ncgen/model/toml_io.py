@@ -97,6 +97,9 @@ class _Table:
         self.taken.add(k)
         if k not in self.data:
             if required:
+                for other in self.data:
+                    if other not in self.taken and did_you_mean(other, [k]):
+                        raise ModelError(f"{self.at(other)}: unknown key (did you mean {k!r}?)")
                 raise ModelError(f"{self.at(k)}: missing (required)")
             return default
         return self.data[k]
