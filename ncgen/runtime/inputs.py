@@ -1,0 +1,96 @@
+"""The output time grid, input signals and parameter values of a simulation.
+
+Grid: ``t_k = t0 + k·h``, ``k = 0..N``, with ``N = ⌈(t_end − t0)/dt⌉`` and ``h = (t_end − t0)/N``
+(``dt`` is shortened, if needed, so that ``t_end`` lies on the grid).
+
+Inputs (``model.nu`` values) are sampled on the grid, ``U[k] = u(t_k)``, and held between
+samples: ``"zoh"`` (zero-order hold) applies ``U[k]`` on ``[t_k, t_{k+1})``, as piecewise
+constant controls from an optimiser expect; ``"linear"`` interpolates between ``U[k]`` and
+``U[k+1]`` (first-order hold), closer to a smooth ``u(t)``.  Each grid interval is
+integrated separately by IDAS (it stops at every grid time), so the hold's kinks and jumps
+cost no accuracy.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ncgen.errors import NcgenError, ShapeError
+from ncgen.validation import as_vector
+
+HOLDS = ("zoh", "linear")
+
+
+def time_grid(t0: float, t_end: float, dt: float) -> np.ndarray:
+    """``t0, t0 + h, ..., t_end`` (see module docstring)."""
+    t0, t_end, dt = float(t0), float(t_end), float(dt)
+    if not all(map(math.isfinite, (t0, t_end, dt))) or dt <= 0:
+        raise NcgenError(f"dt: expected a positive finite step (s), got {dt!r}")
+    if not t_end > t0:
+        raise NcgenError(f"t_end: expected a time after t0 = {t0:g} s, got {t_end!r}")
+    n = max(1, math.ceil((t_end - t0) / dt - 1e-9))
+    return t0 + (t_end - t0) * np.arange(n + 1) / n
+
+
+def input_samples(u, model, t: np.ndarray) -> np.ndarray:
+    """``U``, shape ``(len(t), nu)``: ``u`` (None, a callable ``u(t)`` or samples on the grid)
+    evaluated on the grid ``t``."""
+    nu, n = model.nu, len(t)
+    if u is None:
+        return np.zeros((n, nu))
+    if nu == 0:
+        raise NcgenError(f"u: model {model.name!r} has no inputs, but u was given")
+    names = ", ".join(f"{k}[{s}]" for k, s in zip(model.input_names, model.input_sizes))
+    if callable(u):
+        U = np.empty((n, nu))
+        for k, tk in enumerate(t):
+            try:
+                val = np.asarray(u(float(tk)), dtype=float).reshape(-1)
+            except (TypeError, ValueError) as e:
+                raise NcgenError(f"u({tk:g}) failed: {e}") from None
+            if val.size != nu:
+                raise ShapeError(f"u({tk:g}) returned {val.size} value(s); model {model.name!r} has "
+                                 f"{nu} input value(s): {names}")
+            U[k] = val
+    else:
+        U = np.asarray(u, dtype=float)
+        if U.ndim == 1 and nu == 1:
+            U = U[:, None]
+        if U.shape not in ((n, nu), (n - 1, nu)):
+            raise ShapeError(f"u: expected samples of shape ({n}, {nu}) on the {n} grid times "
+                             f"(inputs {names}), or ({n - 1}, {nu}) for the {n - 1} intervals; "
+                             f"got shape {U.shape}")
+        if len(U) == n - 1:
+            U = np.vstack([U, U[-1:]])
+    bad = np.argwhere(~np.isfinite(U))
+    if bad.size:
+        k = int(bad[0, 0])
+        raise NcgenError(f"u: non-finite input {U[k].tolist()} at t = {t[k]:g} s")
+    return U
+
+
+def hold_columns(U: np.ndarray, t: np.ndarray, hold: str) -> np.ndarray:
+    """Per grid interval k, the integrator's piecewise-constant control column:
+    ``[U_k]`` (zoh) or ``[U_k; (U_{k+1} − U_k)/(t_{k+1} − t_k); t_k]`` (linear).  Shape
+    ``(n_columns, N)``."""
+    if hold not in HOLDS:
+        raise NcgenError(f"hold: expected one of {', '.join(HOLDS)}, got {hold!r}")
+    if hold == "zoh":
+        return U[:-1].T.copy()
+    slope = np.diff(U, axis=0) / np.diff(t)[:, None]
+    return np.vstack([U[:-1].T, slope.T, t[None, :-1]])
+
+
+def parameter_values(p, model) -> np.ndarray:
+    """The parameter vector: ``None`` (defaults), an array of ``model.np`` values, or a dict
+    by name (others keep their defaults)."""
+    if p is None:
+        return model.p0.copy()
+    if isinstance(p, dict):
+        try:
+            return model.parameters(**p)
+        except KeyError as e:
+            raise NcgenError(str(e.args[0])) from None
+    return as_vector(p, model.np, "p (parameter values)")
+

@@ -1,0 +1,145 @@
+"""``simulate``: a model's motion over a time grid, integrated by IDAS."""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from ncgen.assembly.initial_state import consistent_state
+from ncgen.errors import NcgenError, SimulationError
+from ncgen.model.members import ModelError
+from ncgen.runtime.dae import load_dae
+from ncgen.runtime.diagnose import explain, shift_time
+from ncgen.runtime.idas import ChunkedIDAS, ChunkFailure
+from ncgen.runtime.inputs import hold_columns, input_samples, parameter_values, time_grid
+from ncgen.runtime.progress import Progress
+from ncgen.runtime.trajectory import Trajectory
+from ncgen.validation import as_vector
+
+METHODS = ("idas",)
+#: The run is split into at most this many chunks (progress updates; see ncgen.runtime.idas).
+CHUNKS = 20
+
+
+def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: float = 1e-8,
+             atol: float = 1e-10, u=None, p=None, q0=None, v0=None, t0: float | None = None,
+             hold: str = "zoh", backend: str = "vm", progress: bool | None = None,
+             max_steps: int = 50_000, linear_solver: str = "csparse",
+             ic_tolerance: float = 1e-6) -> Trajectory:
+    """Integrate ``model`` from ``t0`` (default ``model.t0``) to ``t_end`` and return the
+    :class:`~ncgen.runtime.trajectory.Trajectory` on the grid ``t0, t0 + dt, ..., t_end``
+    (``dt`` shortened if needed so that ``t_end`` is on the grid).  Times in s.
+
+    Equations: the semi-explicit index-1 DAE ``q̇ = v``, ``v̇ = M⁻¹ (F − Aᵀ λ)``,
+    ``0 = A v̇ − γ + 2α Φ̇ + β² Φ`` with the model's Baumgarte coefficients
+    ``model.baumgarte = (α, β)`` (default 5 s⁻¹ each, set by ``System.build(baumgarte=...)``:
+    constraint drift decays like a critically damped oscillator with time constant 0.2 s;
+    IDAS keeps the drift small anyway, the terms stop it from growing over long runs).
+
+    * ``method``: ``"idas"`` (SUNDIALS IDAS through CasADi, variable-order BDF with error
+      control ``rtol`` (relative) and ``atol`` (absolute, in the units of q and v) on q and v).
+    * ``u``: inputs (``model.nu`` values): ``None`` (zeros), a callable ``u(t)``, or samples on
+      the grid, shape ``(len(t), nu)`` or ``(len(t) − 1, nu)``; held between grid times by
+      ``hold`` = ``"zoh"`` (sample k on ``[t_k, t_k+1)``) or ``"linear"`` (interpolated).
+    * ``p``: parameter values: ``None`` (the model's), an array, or a dict by name.
+    * ``q0``, ``v0``: initial coordinates and rates (default the model's, consistent at
+      ``model.t0``).  Whenever they are given, or ``p`` or ``t0`` differ from the model's,
+      they are projected onto the constraints (``Φ = 0`` by Gauss–Newton, then ``A v + Φ_t = 0``
+      in the mass metric); corrections larger than ``ic_tolerance`` × the system's size are
+      an error.  ``λ0`` then solves the KKT system with ``u(t0)``.
+    * ``backend``: ``"vm"`` (CasADi's virtual machine), ``"compiled"`` (the DAE and its
+      Jacobian as generated C, compiled once and cached) or ``"auto"`` (compiled when a C
+      compiler is available).
+    * ``progress``: a progress bar on stderr: ``True``, ``False``, or ``None`` = when stderr is a
+      terminal and the run takes more than a second.
+    * ``max_steps``: IDAS steps allowed per output interval; ``linear_solver``: CasADi's
+      sparse solver for the Newton systems (``"csparse"``, ``"qr"``, ...).
+
+    Raises :class:`~ncgen.errors.SimulationError` if IDAS fails; it names the time reached
+    and the likely cause, and carries the trajectory up to that time (``.trajectory``).
+    """
+    if method not in METHODS:
+        raise NcgenError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+    for name, tol in (("rtol", rtol), ("atol", atol), ("ic_tolerance", ic_tolerance)):
+        if not (math.isfinite(tol) and tol > 0):
+            raise NcgenError(f"{name}: expected a positive tolerance, got {tol!r}")
+    t0 = model.t0 if t0 is None else float(t0)
+    t = time_grid(t0, t_end, dt)
+    pv = parameter_values(p, model)
+    U = input_samples(u, model, t)
+    columns = hold_columns(U, t, hold)
+    q, v = initial_state(model, q0, v0, t0, pv, ic_tolerance)
+    lam = np.array(model.functions["accel"](t0, q, v, U[0], pv)[1]).reshape(-1)
+    dae, used = load_dae(model, backend)
+    runner = ChunkedIDAS(dae, h=float(t[1] - t[0]), nu=model.nu, hold=hold, rtol=rtol, atol=atol,
+                         max_steps=int(max_steps), linear_solver=linear_solver, expand=(used == "vm"))
+    bar = Progress(t0, t[-1], progress, label=f"simulating {model.name}: ")
+    start = time.perf_counter()
+    try:
+        X, Z, failure = _run(runner, t, np.concatenate([q, v]), lam, columns, pv, bar)
+    finally:
+        bar.close()
+    nq, k = model.nq, len(X) - 1
+    info = {"method": method, "backend": used, "rtol": rtol, "atol": atol, "hold": hold,
+            "linear_solver": linear_solver, "stats": dict(runner.stats),
+            "wall_time": time.perf_counter() - start, "complete": failure is None}
+    if failure is not None:
+        message = _failure_message(model, failure, t, k, X[k], Z[k], U[k], pv, dae)
+        info["message"] = message
+    traj = Trajectory.from_states(model, t[:k + 1], X[:, :nq], X[:, nq:], Z, U[:k + 1], pv, info)
+    if failure is not None:
+        raise SimulationError(message, time=float(t[k]), trajectory=traj)
+    return traj
+
+
+def initial_state(model, q0, v0, t0: float, p: np.ndarray, tolerance: float):
+    """Consistent ``(q, v)`` at ``t0`` (see :func:`simulate`)."""
+    if q0 is None and v0 is None and t0 == model.t0 and np.array_equal(p, model.p0):
+        return model.q0.copy(), model.v0.copy()
+    q = model.q0 if q0 is None else as_vector(q0, model.nq, "q0")
+    v = model.v0 if v0 is None else as_vector(v0, model.nq, "v0")
+    try:
+        state = consistent_state(model.functions, model.layout, model.constraint_names, q.copy(), v.copy(),
+                                 p, t0, tolerance, model.M)
+    except ModelError as e:
+        raise ModelError(f"simulate: initial state of {model.name!r} at t0 = {t0:g} s: {e}") from None
+    return state.q0, state.v0
+
+
+def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress):
+    """States on the grid up to the end or the first failure: ``(X, Z, failure or None)``.
+    A failed chunk is retried one interval at a time, to keep every state before the failure."""
+    n_int = len(t) - 1
+    chunk = max(1, math.ceil(n_int / CHUNKS))
+    X = np.empty((len(t), len(x0)))
+    Z = np.empty((len(t), len(z0)))
+    X[0], Z[0] = x0, z0
+    k = 0
+    while k < n_int:
+        n = min(chunk, n_int - k)
+        try:
+            X[k + 1:k + n + 1], Z[k + 1:k + n + 1] = runner.advance(t[k], X[k], Z[k], columns[:, k:k + n], p)
+            k += n
+        except ChunkFailure as failure:
+            if n == 1:
+                return X[:k + 1], Z[:k + 1], failure
+            for _ in range(n):
+                try:
+                    X[k + 1:k + 2], Z[k + 1:k + 2] = runner.advance(t[k], X[k], Z[k], columns[:, k:k + 1], p)
+                except ChunkFailure as single:
+                    return X[:k + 1], Z[:k + 1], single
+                k += 1
+        bar.update(t[k])
+    return X, Z, None
+
+
+def _failure_message(model, failure: ChunkFailure, t, k, x, z, u, p, dae) -> str:
+    nq = model.nq
+    said, t_fail = shift_time(failure.message, float(t[k]))
+    where = f" (IDAS gave up at t = {t_fail:.6g} s)" if t_fail is not None else ""
+    cause = explain(model, failure.flag, float(t[k]), x[:nq], x[nq:], z, u, p, dae)
+    detail = f" IDAS said: {said}" if said else ""
+    return (f"simulation of {model.name!r} failed between t = {t[k]:.6g} s and the next output time "
+            f"{t[k + 1]:.6g} s{where}: {cause}.{detail} The trajectory up to t = {t[k]:.6g} s is "
+            f"attached to this error as .trajectory.")

@@ -1,0 +1,209 @@
+"""``Trajectory``: the result of :func:`ncgen.simulate` (or a part of it, after a failure).
+
+Arrays are indexed by output step first (``n_t = len(t)`` steps), SI units:
+
+* ``t`` (s), ``q`` ``(n_t, nq)`` (m), ``v = q̇`` (m/s), ``lam`` ``(n_t, nc)`` multipliers,
+  ``u`` ``(n_t, nu)`` input samples, ``p`` ``(np,)`` parameter values;
+* ``kinetic``, ``potential`` and ``energy = kinetic + potential`` (J);
+* ``constraint_residual = |Φ(t, q)|∞`` (m²: natural-coordinate constraints are quadratic)
+  and ``velocity_residual = |A v + Φ_t|∞`` (m²/s), the drift of the two constraint levels;
+* ``markers`` ``(n_t, n_markers, dim)``, world positions of the model's named markers;
+* names: ``coordinate_names``, ``constraint_names``, ``input_names``, ``parameter_names``,
+  ``member_names``, ``marker_names`` and ``model_name``; ``info`` holds how it was computed
+  (method, backend, tolerances, integrator statistics, wall time, whether it is complete).
+
+Files: ``save("x.npz")`` keeps everything (:meth:`load` reads it back; pass the model to
+use :meth:`point` and :meth:`poses` again), ``save("x.csv")`` writes a table of ``t``, the
+coordinates (columns named by the coordinate names), energies and residuals.  Files are
+written to a temporary sibling and renamed, so a reader never sees a partial file.
+"""
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from ncgen.errors import NcgenError
+from ncgen.runtime import outputs
+
+NAME_KEYS = ("coordinate_names", "constraint_names", "input_names", "parameter_names",
+             "member_names", "marker_names")
+ARRAY_KEYS = ("t", "q", "v", "lam", "u", "p", "kinetic", "potential", "constraint_residual",
+              "velocity_residual", "markers")
+
+
+class Trajectory:
+    """Simulated states and derived quantities (see the module docstring)."""
+
+    def __init__(self, *, model_name: str, names: dict, info: dict, model=None, **arrays):
+        self.model = model
+        self.model_name = model_name
+        for key in NAME_KEYS:
+            setattr(self, key, list(names[key]))
+        for key in ARRAY_KEYS:
+            setattr(self, key, np.asarray(arrays[key], dtype=float))
+        self.info = dict(info)
+
+    @classmethod
+    def from_states(cls, model, t, q, v, lam, u, p, info: dict) -> "Trajectory":
+        """Evaluate the derived quantities of the states ``(t, q, v, lam)`` of ``model``."""
+        t, q, v = np.asarray(t, float), np.asarray(q, float), np.asarray(v, float)
+        T, V = outputs.energies(model, t, q, v, p)
+        r, rd = outputs.residuals(model, t, q, v, p)
+        names = {key: getattr(model, key) for key in NAME_KEYS}
+        return cls(model_name=model.name, names=names, info=info, model=model, t=t, q=q, v=v, lam=lam,
+                   u=u, p=p, kinetic=T, potential=V, constraint_residual=r, velocity_residual=rd,
+                   markers=outputs.markers(model, q, v))
+
+    # --------------------------------------------------------------- views
+    def __len__(self) -> int:
+        return len(self.t)
+
+    @property
+    def dim(self) -> int:
+        return self.markers.shape[2]
+
+    @property
+    def energy(self) -> np.ndarray:
+        """Total mechanical energy ``T + V`` (J) per step."""
+        return self.kinetic + self.potential
+
+    @property
+    def complete(self) -> bool:
+        """False for the partial trajectory attached to a :class:`~ncgen.errors.SimulationError`."""
+        return bool(self.info.get("complete", True))
+
+    @property
+    def energy_drift(self) -> float:
+        """``max |E − E(t0)|`` (J)."""
+        return float(np.max(np.abs(self.energy - self.energy[0]))) if len(self) else 0.0
+
+    @property
+    def energy_scale(self) -> float:
+        """``max(|E(t0)|, max T)`` (J): what relative energy drifts are relative to."""
+        return float(max(abs(self.energy[0]), np.max(self.kinetic))) if len(self) else 0.0
+
+    def _model(self, what: str):
+        if self.model is None:
+            raise NcgenError(f"{what} needs the model; this trajectory was loaded without it: "
+                             f"use Trajectory.load(path, model=model)")
+        return self.model
+
+    def point(self, member: str, local) -> np.ndarray:
+        """World positions ``(n_t, dim)`` of the point of ``member`` with local coordinates
+        ``local`` (member frame, m), from ``r = C(c) q_I``."""
+        model = self._model("point()")
+        m = model.member(member)
+        C = m.local.C(m.local.affine(np.asarray(local, dtype=float)))
+        return outputs.member_coordinates(model, member, self.q) @ np.asarray(C).T
+
+    def marker(self, name: str) -> np.ndarray:
+        """World positions ``(n_t, dim)`` of the marker ``"member.marker"``."""
+        if name not in self.marker_names:
+            known = ", ".join(self.marker_names) or "none"
+            raise NcgenError(f"no marker named {name!r} (markers: {known})")
+        return self.markers[:, self.marker_names.index(name)]
+
+    def poses(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(R, p)`` of every member per step: ``R`` ``(n_t, n_members, dim, dim)`` (local →
+        world; identity for points), ``p`` ``(n_t, n_members, dim)`` centres of mass."""
+        return outputs.poses(self._model("poses()"), self.q)
+
+    def summary(self) -> str:
+        """A few lines for people: span, integrator work, energy and constraint drift."""
+        info = self.info
+        lines = [f"Trajectory of model {self.model_name!r}: {len(self)} steps, "
+                 f"t = {self.t[0]:g} ... {self.t[-1]:g} s"]
+        stats = info.get("stats", {})
+        if info.get("method"):
+            lines.append(f"  integrator: {info['method']} ({info.get('backend', '?')} backend, "
+                         f"rtol {info.get('rtol', float('nan')):g}, atol {info.get('atol', float('nan')):g}): "
+                         f"{stats.get('nsteps', 0)} steps, {stats.get('netfails', 0)} error-test failures, "
+                         f"{info.get('wall_time', 0.0):.3g} s")
+        if len(self):
+            scale = self.energy_scale
+            rel = f" ({self.energy_drift / scale:.2g} relative)" if scale > 0 else ""
+            lines.append(f"  energy: E(t0) = {self.energy[0]:.6g} J, max |E - E(t0)| = "
+                         f"{self.energy_drift:.3g} J{rel}")
+            lines.append(f"  constraint drift: max |phi| = {np.max(self.constraint_residual):.3g}, "
+                         f"max |A v + phi_t| = {np.max(self.velocity_residual):.3g}")
+        if not self.complete:
+            lines.append(f"  INCOMPLETE: {info.get('message', 'the integration stopped early')}")
+        return "\n".join(lines)
+
+    def __repr__(self) -> str:
+        span = f"t = {self.t[0]:g} ... {self.t[-1]:g} s" if len(self) else "empty"
+        return (f"<Trajectory {self.model_name!r}: {len(self)} steps, {span}"
+                f"{'' if self.complete else ', incomplete'}>")
+
+    # ---------------------------------------------------------------- files
+    def save(self, path) -> Path:
+        """Write ``.npz`` (everything) or ``.csv`` (t, q, energies, residuals); returns the path."""
+        path = Path(path)
+        suffix = path.suffix.lower()
+        if suffix not in (".npz", ".csv"):
+            raise NcgenError(f"save: {path}: expected a .npz or .csv file name")
+        writer = self._write_npz if suffix == ".npz" else self._write_csv
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                writer(fh)
+            os.chmod(tmp, 0o666 & ~_umask())
+            os.replace(tmp, path)
+        except BaseException:
+            os.unlink(tmp)
+            raise
+        return path
+
+    def _write_npz(self, fh) -> None:
+        data = {key: getattr(self, key) for key in ARRAY_KEYS}
+        data.update({key: np.array(getattr(self, key), dtype=str) for key in NAME_KEYS})
+        data["model_name"] = np.array(self.model_name)
+        data["info_json"] = np.array(json.dumps(self.info, sort_keys=True, default=_json_default))
+        data["format"] = np.array("ncgen-trajectory-1")
+        np.savez_compressed(fh, **data)
+
+    def _write_csv(self, fh) -> None:
+        header = ["t", *self.coordinate_names, "energy", "kinetic", "potential",
+                  "constraint_residual", "velocity_residual"]
+        table = np.column_stack([self.t, self.q, self.energy, self.kinetic, self.potential,
+                                 self.constraint_residual, self.velocity_residual])
+        fh.write((",".join(header) + "\n").encode())
+        np.savetxt(fh, table, delimiter=",", fmt="%.17g")
+
+    @classmethod
+    def load(cls, path, model=None) -> "Trajectory":
+        """Read a trajectory saved as ``.npz``; ``model`` (the same model) enables
+        :meth:`point` and :meth:`poses`."""
+        path = Path(path)
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                if "format" not in data or str(data["format"]) != "ncgen-trajectory-1":
+                    raise NcgenError(f"{path} is not a trajectory saved by ncgen (.npz)")
+                arrays = {key: data[key] for key in ARRAY_KEYS}
+                names = {key: [str(s) for s in data[key]] for key in NAME_KEYS}
+                name = str(data["model_name"])
+                info = json.loads(str(data["info_json"]))
+        except (OSError, ValueError, KeyError) as e:
+            raise NcgenError(f"cannot read trajectory {path}: {e}") from None
+        if model is not None and (model.name != name or list(model.coordinate_names) != names["coordinate_names"]):
+            raise NcgenError(f"{path} holds a trajectory of model {name!r} with coordinates "
+                             f"{names['coordinate_names'][:4]}...; the model given is {model.name!r} "
+                             f"with {list(model.coordinate_names)[:4]}...")
+        return cls(model_name=name, names=names, info=info, model=model, **arrays)
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _json_default(x):
+    if isinstance(x, np.generic):
+        return x.item()
+    raise TypeError(f"not JSON serialisable: {x!r}")
