@@ -16,19 +16,22 @@ feature that adds C to every model package (a compiled stepper, say) appends its
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
 import casadi as ca
 import numpy as np
 
 from ncgen.assembly.functions import DOCS, IN
+from ncgen.codegen import fsutil
 from ncgen.codegen.build import compile_package
 from ncgen.codegen.doc import PackageDoc
 from ncgen.codegen.fsutil import sha256_bytes
 from ncgen.codegen.manifest import canonical_json
-from ncgen.codegen.package import ExtraSource, Package, write_package
+from ncgen.codegen.package import ExtraSource, Package, check_replaceable, write_package
 
 #: The system functions in the package, in this order.
 SYSTEM_FUNCTIONS = ("phi", "A", "phi_t", "gamma", "F", "Minv", "ode", "alg", "dae", "accel",
@@ -60,10 +63,11 @@ def generate(model, out_dir: str | os.PathLike, *, cflags=None, compile: bool = 
     """Write the C package of ``model`` (a :class:`~ncgen.model.model.Model`) to ``out_dir``.
 
     The package is named after the model; its files depend only on the model (same model,
-    same bytes).  ``out_dir`` is replaced atomically if it holds an ncgen package.  With
-    ``compile=True`` the shared library is built now (with ``cflags``, see
-    :func:`~ncgen.codegen.build.compile_package`; cached by content), so that compile errors
-    surface here; otherwise it is built when first loaded.  Load the functions back with
+    same bytes).  ``out_dir`` is replaced atomically if it holds an ncgen package (and
+    refused otherwise).  With ``compile=True`` the shared library is built now (with
+    ``cflags``, see :func:`~ncgen.codegen.build.compile_package`; cached by content) and the
+    package is moved into place only if that succeeds; otherwise the library is built when
+    first loaded.  Load the functions back with
     ``ncgen.codegen.load_functions(pkg, backend="compiled")``.
     """
     sections = [make(model) for make in SECTIONS]
@@ -76,12 +80,17 @@ def generate(model, out_dir: str | os.PathLike, *, cflags=None, compile: bool = 
         metadata_doc={k: v for s in sections for k, v in s.metadata_doc.items()},
         defaults={arg: key for arg, key in DEFAULTS.items() if key in metadata},
         main_function=MAIN_FUNCTION)
-    pkg = write_package(model.name, functions, out_dir, doc=doc,
-                        jacobians=[j for s in sections for j in s.jacobians],
-                        extra_sources=[e for s in sections for e in s.extra_sources])
-    if compile:
+    options = dict(doc=doc, jacobians=[j for s in sections for j in s.jacobians],
+                   extra_sources=[e for s in sections for e in s.extra_sources])
+    out_dir = Path(out_dir)
+    if not compile:
+        return write_package(model.name, functions, out_dir, **options)
+    check_replaceable(out_dir)
+    with fsutil.temporary_sibling(out_dir) as tmp:
+        pkg = write_package(model.name, functions, tmp / out_dir.name, **options)
         compile_package(pkg, cflags=cflags)
-    return pkg
+        fsutil.replace_dir(pkg.path, out_dir, check_replaceable)
+    return dataclasses.replace(pkg, path=out_dir)
 
 
 def system_section(model) -> Section:

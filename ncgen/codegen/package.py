@@ -116,7 +116,7 @@ def write_package(name: str, functions: Sequence[ca.Function], out_dir: str | os
     functions = _checked_functions(functions)
     _check_doc(doc, functions)
     _check_extra_sources(name, extra_sources)
-    _check_replaceable(out_dir)
+    check_replaceable(out_dir)
     options = {"max_file_instructions": max_file_instructions,
                "casadi_options": casadi_options(codegen_options),
                "extra_sources": [[s.template, s.output, dict(s.context)] + (["program"] if s.program else [])
@@ -128,7 +128,7 @@ def write_package(name: str, functions: Sequence[ca.Function], out_dir: str | os
         for rel, blob in files.items():
             (tmp / rel).write_bytes(blob)
         fsutil.default_mode_dir(tmp)
-        fsutil.replace_dir(tmp, out_dir, _check_replaceable)
+        fsutil.replace_dir(tmp, out_dir, check_replaceable)
     return Package(name=name, path=out_dir, manifest=manifest.read_manifest(out_dir),
                    functions={f.name(): f for f in functions})
 
@@ -249,7 +249,7 @@ def _check_doc(doc: PackageDoc, functions: list[ca.Function]) -> None:
                                    f"{len(doc.metadata[key])} values, expected nnz = {f.nnz_in(i)}")
 
 
-def _check_replaceable(out_dir: Path) -> None:
+def check_replaceable(out_dir: Path) -> None:
     """Raise unless ``out_dir`` is absent, an empty directory or an ncgen package."""
     if not out_dir.exists():
         return
