@@ -1,0 +1,102 @@
+"""The committed C packages in ``generated/`` are exactly what ncgen generates today.
+
+Every model file ``examples/*.toml`` has its package in ``generated/<model name>/``; this
+test regenerates them all into a temporary directory and compares them byte for byte, so
+generated code is reviewed like code: a change to the generator, the templates or an
+example shows up in the diff of the commit that causes it.  To update the packages after
+an intended change, run::
+
+    python tests/test_generated_up_to_date.py
+"""
+from __future__ import annotations
+
+import difflib
+import sys
+import time
+import warnings
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+EXAMPLES = ROOT / "examples"
+GENERATED = ROOT / "generated"
+#: Generating every shipped package must stay cheap (seconds, on a 2-core machine).
+TIME_BUDGET = 60.0
+#: Lines of unified diff shown per differing file.
+DIFF_LINES = 12
+
+
+def regenerate(root: Path) -> dict[str, float]:
+    """Generate the package of every ``examples/*.toml`` into ``root/<model>``; returns the
+    time (s) each took, model building included."""
+    import ncgen as nc
+
+    times = {}
+    for path in sorted(EXAMPLES.glob("*.toml")):
+        start = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")          # e.g. redundant constraints dropped
+            model = nc.System.from_toml(path).build()
+        nc.generate(model, root / model.name)
+        times[model.name] = time.perf_counter() - start
+    return times
+
+
+def differences(expected: Path, actual: Path) -> list[str]:
+    """Human-readable differences between two trees of packages (empty when equal)."""
+    out = []
+    exp = {p.relative_to(expected) for p in expected.rglob("*") if p.is_file()} if expected.is_dir() else set()
+    act = {p.relative_to(actual) for p in actual.rglob("*") if p.is_file()}
+    for rel in sorted(act - exp):
+        out.append(f"missing from generated/: {rel}")
+    for rel in sorted(exp - act):
+        out.append(f"not generated any more (remove it): generated/{rel}")
+    for rel in sorted(exp & act):
+        old, new = (expected / rel).read_bytes(), (actual / rel).read_bytes()
+        if old == new:
+            continue
+        diff = list(difflib.unified_diff(old.decode(errors="replace").splitlines(),
+                                         new.decode(errors="replace").splitlines(),
+                                         f"generated/{rel} (committed)", f"{rel} (generated now)",
+                                         n=1, lineterm=""))
+        changed = sum(1 for line in diff if line[:1] in "+-" and line[:3] not in ("+++", "---"))
+        shown = diff[:DIFF_LINES] + ([f"... ({len(diff) - DIFF_LINES} more diff lines)"]
+                                     if len(diff) > DIFF_LINES else [])
+        out.append(f"differs: generated/{rel} ({changed} changed lines)\n    " + "\n    ".join(shown))
+    return out
+
+
+def test_generated_packages_are_up_to_date(tmp_path):
+    times = regenerate(tmp_path)
+    problems = differences(GENERATED, tmp_path)
+    assert not problems, (
+        f"{len(problems)} difference(s) between the committed generated/ packages and what ncgen "
+        f"generates now. If the change is intended, run 'python tests/test_generated_up_to_date.py' "
+        f"and commit generated/ with it.\n" + "\n".join(problems))
+    total = sum(times.values())
+    slowest = ", ".join(f"{k} {v:.1f} s" for k, v in sorted(times.items(), key=lambda kv: -kv[1])[:3])
+    assert total < TIME_BUDGET, f"generating the shipped packages took {total:.0f} s (slowest: {slowest})"
+
+
+def test_every_example_is_shipped():
+    names = {p.name for p in GENERATED.iterdir() if p.is_dir()}
+    assert names, "generated/ is empty: run 'python tests/test_generated_up_to_date.py'"
+    assert len(names) == len(list(EXAMPLES.glob("*.toml"))), (
+        f"generated/ holds {sorted(names)}; expected one package per examples/*.toml")
+
+
+if __name__ == "__main__":
+    import shutil
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        took = regenerate(Path(tmp))
+        for name in sorted(took):
+            target = GENERATED / name
+            shutil.rmtree(target, ignore_errors=True)
+            shutil.copytree(Path(tmp) / name, target)
+            print(f"generated/{name}: {took[name]:.2f} s")
+    stale = sorted(p.name for p in GENERATED.iterdir() if p.is_dir() and p.name not in took)
+    for name in stale:
+        shutil.rmtree(GENERATED / name)
+        print(f"generated/{name}: removed (no examples/*.toml defines it)")
+    sys.exit(0)
