@@ -2,6 +2,7 @@
 every kind of bad input gives one clear message with the key path."""
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import casadi as ca
@@ -226,3 +227,11 @@ def test_unprintable_values_are_reported():
     s.add_force(nc.Torque(b, ca.vertcat(0, 0, ca.SX.sym("stranger"))))
     with pytest.raises(nc.ModelError, match=r"torque\[2\]: symbol 'stranger' is not one of the system's names"):
         s.to_toml()
+
+
+def test_the_documented_example_builds():
+    doc = (Path(__file__).resolve().parent.parent / "docs" / "model-format.md").read_text(encoding="utf-8")
+    example = re.findall(r"```toml\n(.*?)```", doc, re.S)[-1]
+    model = nc.System.from_toml(example).build()
+    report = nc.dof_report(model)
+    assert (model.nq, model.nc, report.rank, report.dof, model.nu, model.np) == (12, 10, 10, 2, 1, 3)
