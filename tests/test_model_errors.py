@@ -45,6 +45,8 @@ def test_references_to_missing_or_foreign_members():
     planar = nc.System("flat", gravity=(0, -9.81))
     with pytest.raises(nc.ModelError, match="the first member is the ground of a 2D system, but system 's' is 3D"):
         s.add_joint(nc.Spherical(planar.ground, bar, at=(0, 0, 0)))
+    with pytest.raises(nc.ModelError, match="shared slot r_i: a ground point of a 2D system in the 3D system 's'"):
+        s.add_body("b3", mass=1.0, inertia=np.eye(3), share={"r_i": planar.ground.point((0, 0))})
     with pytest.raises(nc.ModelError, match="shares a point with 'bar', which is not a member of system 's'"):
         s.add_bar("b2", mass=1.0, ends=[stranger.end(1), (2, 0, 0)])
     with pytest.raises(nc.ModelError, match="force 'torque_0' .*: the member 'bar' is not a member of system 's'"):

@@ -72,6 +72,9 @@ class System:
             if not isinstance(ref, NodeRef):
                 raise ModelError(f"{member.name}: shared slot {slot}: expected a node reference "
                                  f"(other.node(...), bar.end(i) or system.ground.point(...)), got {ref!r}")
+            if ref.member.is_ground and ref.member.dim != self.dim:
+                raise ModelError(f"{member.name}: shared slot {member.ctype.slots[slot]}: a ground point of a "
+                                 f"{ref.member.dim}D system in the {self.dim}D system {self.name!r}")
             if not ref.member.is_ground and self.members.get(ref.member.name) is not ref.member:
                 raise ModelError(f"{member.name}: shares a point with {ref.member.name!r}, "
                                  f"which is not a member of system {self.name!r}")
