@@ -26,8 +26,9 @@ from ncgen.codegen import FunctionDoc, Package, PackageDoc, write_package
 from ncgen.errors import InertiaError, NcgenError, RotationError, ShapeError
 from ncgen.symbolic.numeric import numpy_function
 from ncgen.symbolic.rigid_motion_forms import NAMES, form
+from ncgen.validation import ROTATION_TOL
 
-ROTATION_TOLERANCE = 1e-9
+ROTATION_TOLERANCE = ROTATION_TOL
 """Largest accepted ``max |RᵀR − 1|`` (and deviation of a homogeneous matrix's bottom row)."""
 
 INERTIA_TOLERANCE = 1e-9
@@ -89,7 +90,7 @@ def _array(x, name: str, core: tuple[int, ...]) -> np.ndarray:
     if a.ndim < len(core) or a.shape[a.ndim - len(core):] != core:
         raise ShapeError(f"{name}: expected an array of shape {_shape_text(core)}, found shape {a.shape}")
     if not np.all(np.isfinite(a)):
-        raise NcgenError(f"{name}: expected finite values, found NaN or infinity")
+        raise ShapeError(f"{name}: expected finite numbers, found NaN or infinity")
     return a
 
 
@@ -97,11 +98,13 @@ def _scalar(x, name: str) -> np.ndarray:
     return _array(x, name, ())
 
 
-def _vector(x, name: str, n: int = 3) -> np.ndarray:
+def check_vector(x, name: str, n: int = 3) -> np.ndarray:
+    """``x`` as an array of ``n``-vectors ``(..., n)``; raises naming ``name``."""
     return _array(x, name, (n,))
 
 
-def _rotation(R, name: str) -> np.ndarray:
+def check_rotation(R, name: str) -> np.ndarray:
+    """``R`` as an array of rotation matrices ``(..., 3, 3)``; raises naming ``name``."""
     R = _array(R, name, (3, 3))
     gram_error = np.max(np.abs(np.swapaxes(R, -1, -2) @ R - np.eye(3)), initial=0.0)
     det = np.linalg.det(R)
@@ -112,7 +115,8 @@ def _rotation(R, name: str) -> np.ndarray:
     return R
 
 
-def _homogeneous(H, name: str) -> np.ndarray:
+def check_homogeneous(H, name: str) -> np.ndarray:
+    """``H`` as an array of homogeneous matrices ``(..., 4, 4)``; raises naming ``name``."""
     H = _array(H, name, (4, 4))
     rows = H[..., 3, :].reshape(-1, 4)
     bottom_error = np.max(np.abs(rows - [0.0, 0.0, 0.0, 1.0]), axis=1, initial=0.0)
@@ -120,7 +124,7 @@ def _homogeneous(H, name: str) -> np.ndarray:
         worst = rows[np.argmax(bottom_error)]
         raise RotationError(f"{name}: expected a homogeneous matrix [[R, p], [0, 1]] with bottom row "
                             f"(0, 0, 0, 1), found bottom row {tuple(worst.tolist())}")
-    _rotation(H[..., :3, :3], f"{name}[:3, :3]")
+    check_rotation(H[..., :3, :3], f"{name}[:3, :3]")
     return H
 
 
@@ -132,7 +136,7 @@ def _positive(x, name: str, what: str) -> np.ndarray:
 
 
 def _positive_vector(x, name: str, what: str) -> np.ndarray:
-    a = _vector(x, name)
+    a = check_vector(x, name)
     if np.any(a <= 0):
         raise InertiaError(f"{name}: expected three positive {what}, found {a.tolist()}")
     return a
@@ -157,7 +161,8 @@ def _inertia_tensor(I, name: str) -> np.ndarray:
     return I
 
 
-def _mass_matrix(M, name: str) -> np.ndarray:
+def check_mass_matrix(M, name: str) -> np.ndarray:
+    """``M`` as an array of spatial mass matrices ``(..., 6, 6)``; raises naming ``name``."""
     M = _array(M, name, (6, 6))
     m = M[..., 3, 3]
     if np.any(m <= 0):
@@ -205,12 +210,12 @@ def rotzyx(az, ay, ax) -> np.ndarray:
 def zyx_angles(R_ab) -> np.ndarray:
     """``[az, ay, ax]`` with ``rotzyx(az, ay, ax) = R_ab``, ``ay ∈ [−π/2, π/2]``; at gimbal lock
     ``ax = 0`` (see :func:`ncgen.symbolic.rigid_motion.zyx_angles`)."""
-    return _evaluate("zyx_angles", _rotation(R_ab, "R_ab"))
+    return _evaluate("zyx_angles", check_rotation(R_ab, "R_ab"))
 
 
 def so3_hat(omega) -> np.ndarray:
     """``ω̂`` with ``ω̂ x = ω × x``; shape ``(..., 3, 3)``."""
-    return _evaluate("so3_hat", _vector(omega, "omega"))
+    return _evaluate("so3_hat", check_vector(omega, "omega"))
 
 
 def so3_vee(Omega) -> np.ndarray:
@@ -220,46 +225,46 @@ def so3_vee(Omega) -> np.ndarray:
 
 def exp_so3(omega) -> np.ndarray:
     """Rotation ``exp(ω̂)`` (Rodrigues) of the rotation vector ``omega`` (rad)."""
-    return _evaluate("exp_so3", _vector(omega, "omega"))
+    return _evaluate("exp_so3", check_vector(omega, "omega"))
 
 
 def log_so3(R_ab) -> np.ndarray:
     """Rotation vector ``ω`` with ``exp_so3(ω) = R_ab``, ``|ω| ≤ π``."""
-    return _evaluate("log_so3", _rotation(R_ab, "R_ab"))
+    return _evaluate("log_so3", check_rotation(R_ab, "R_ab"))
 
 
 # --- poses -----------------------------------------------------------------------------------
 
 def homogeneous(R_ab, p_ab) -> np.ndarray:
     """``H_ab = [[R_ab, p_ab], [0, 1]]``."""
-    return _evaluate("homogeneous", _rotation(R_ab, "R_ab"), _vector(p_ab, "p_ab"))
+    return _evaluate("homogeneous", check_rotation(R_ab, "R_ab"), check_vector(p_ab, "p_ab"))
 
 
 def translation(p_ab) -> np.ndarray:
     """``H_ab`` of the translation by ``p_ab`` (m)."""
-    return _evaluate("translation", _vector(p_ab, "p_ab"))
+    return _evaluate("translation", check_vector(p_ab, "p_ab"))
 
 
 def inverse(H_ab) -> np.ndarray:
     """``H_ba = H_ab⁻¹``."""
-    return _evaluate("inverse", _homogeneous(H_ab, "H_ab"))
+    return _evaluate("inverse", check_homogeneous(H_ab, "H_ab"))
 
 
 def transform_point(H_ab, x_b) -> np.ndarray:
     """``x_a = R_ab x_b + p_ab``."""
-    return _evaluate("transform_point", _homogeneous(H_ab, "H_ab"), _vector(x_b, "x_b"))
+    return _evaluate("transform_point", check_homogeneous(H_ab, "H_ab"), check_vector(x_b, "x_b"))
 
 
 def transform_vector(H_ab, u_b) -> np.ndarray:
     """``u_a = R_ab u_b`` (free vectors: directions, velocities, forces)."""
-    return _evaluate("transform_vector", _homogeneous(H_ab, "H_ab"), _vector(u_b, "u_b"))
+    return _evaluate("transform_vector", check_homogeneous(H_ab, "H_ab"), check_vector(u_b, "u_b"))
 
 
 # --- twists and wrenches ---------------------------------------------------------------------
 
 def se3_hat(T) -> np.ndarray:
     """``[[ω̂, v], [0, 0]]`` (4x4) of the twist ``T = [ω; v]``."""
-    return _evaluate("se3_hat", _vector(T, "T", 6))
+    return _evaluate("se3_hat", check_vector(T, "T", 6))
 
 
 def se3_vee(T_hat) -> np.ndarray:
@@ -269,47 +274,47 @@ def se3_vee(T_hat) -> np.ndarray:
 
 def Ad(H_ab) -> np.ndarray:
     """``Ad(H_ab) = [[R, 0], [p̂ R, R]]``; ``T_a = Ad(H_ab) T_b``."""
-    return _evaluate("Ad", _homogeneous(H_ab, "H_ab"))
+    return _evaluate("Ad", check_homogeneous(H_ab, "H_ab"))
 
 
 def Ad_inv(H_ab) -> np.ndarray:
     """``Ad(H_ab)⁻¹ = Ad(H_ba)``."""
-    return _evaluate("Ad_inv", _homogeneous(H_ab, "H_ab"))
+    return _evaluate("Ad_inv", check_homogeneous(H_ab, "H_ab"))
 
 
 def ad(T) -> np.ndarray:
     """``ad([ω; v]) = [[ω̂, 0], [v̂, ω̂]]``."""
-    return _evaluate("ad", _vector(T, "T", 6))
+    return _evaluate("ad", check_vector(T, "T", 6))
 
 
 def Ad_dot(H_ab, T_b) -> np.ndarray:
     """``d/dt Ad(H_ab) = Ad(H_ab) ad(T_b)``, ``T_b`` the body twist of b relative to a, in b."""
-    return _evaluate("Ad_dot", _homogeneous(H_ab, "H_ab"), _vector(T_b, "T_b", 6))
+    return _evaluate("Ad_dot", check_homogeneous(H_ab, "H_ab"), check_vector(T_b, "T_b", 6))
 
 
 def transport_twist(H_ab, T_b) -> np.ndarray:
     """``T_a = Ad(H_ab) T_b``."""
-    return _evaluate("transport_twist", _homogeneous(H_ab, "H_ab"), _vector(T_b, "T_b", 6))
+    return _evaluate("transport_twist", check_homogeneous(H_ab, "H_ab"), check_vector(T_b, "T_b", 6))
 
 
 def transport_wrench(H_ab, W_a) -> np.ndarray:
     """``W_b = Ad(H_ab)ᵀ W_a`` (moment taken about b's origin, in b's axes)."""
-    return _evaluate("transport_wrench", _homogeneous(H_ab, "H_ab"), _vector(W_a, "W_a", 6))
+    return _evaluate("transport_wrench", check_homogeneous(H_ab, "H_ab"), check_vector(W_a, "W_a", 6))
 
 
 def power(W, T) -> np.ndarray:
     """``Wᵀ T`` (W), wrench and twist expressed in the same frame."""
-    return _evaluate("power", _vector(W, "W", 6), _vector(T, "T", 6))
+    return _evaluate("power", check_vector(W, "W", 6), check_vector(T, "T", 6))
 
 
 def exp_se3(T) -> np.ndarray:
     """``H = exp(T̂)``: the pose reached from the identity with constant body twist ``T`` in 1 s."""
-    return _evaluate("exp_se3", _vector(T, "T", 6))
+    return _evaluate("exp_se3", check_vector(T, "T", 6))
 
 
 def log_se3(H_ab) -> np.ndarray:
     """Twist ``T = [ω; v]`` with ``exp_se3(T) = H_ab`` and ``|ω| ≤ π``."""
-    return _evaluate("log_se3", _homogeneous(H_ab, "H_ab"))
+    return _evaluate("log_se3", check_homogeneous(H_ab, "H_ab"))
 
 
 # --- mass matrices -----------------------------------------------------------------------------
@@ -317,24 +322,29 @@ def log_se3(H_ab) -> np.ndarray:
 def mass_matrix(m, r, I_o) -> np.ndarray:
     """``[[I_o, m r̂], [m r̂ᵀ, m 1]]``: mass ``m`` (kg), centre of mass ``r`` (m) seen from the
     frame, inertia ``I_o`` (kg·m²) about the frame's origin in its axes."""
-    return _evaluate("mass_matrix", _positive(m, "m", "mass"), _vector(r, "r"),
+    return _evaluate("mass_matrix", _positive(m, "m", "mass"), check_vector(r, "r"),
                      _inertia_tensor(I_o, "I_o"))
 
 
 def inertia_about_point(m, r, I_c) -> np.ndarray:
     """Parallel axis: ``I_o = I_c + m r̂ᵀ r̂`` for a centre of mass at ``r`` from the point o."""
-    return _evaluate("inertia_about_point", _positive(m, "m", "mass"), _vector(r, "r"),
+    return _evaluate("inertia_about_point", _positive(m, "m", "mass"), check_vector(r, "r"),
                      _inertia_tensor(I_c, "I_c"))
+
+
+def inertia_from_second_moment(S) -> np.ndarray:
+    """``I = tr(S) 1 − S`` from the second moment ``S = ∫ x xᵀ dm`` (kg·m²)."""
+    return _evaluate("inertia_from_second_moment", _array(S, "S", (3, 3)))
 
 
 def mass_matrix_parts(M) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(m, r, I_c)``: mass, centre of mass in the frame, inertia about the centre of mass."""
-    return _evaluate("mass_matrix_parts", _mass_matrix(M, "M"))
+    return _evaluate("mass_matrix_parts", check_mass_matrix(M, "M"))
 
 
 def transport_mass_matrix(M_a, H_ab) -> np.ndarray:
     """``M_b = Ad(H_ab)ᵀ M_a Ad(H_ab)``: the mass matrix at frame b from the one at frame a."""
-    return _evaluate("transport_mass_matrix", _mass_matrix(M_a, "M_a"), _homogeneous(H_ab, "H_ab"))
+    return _evaluate("transport_mass_matrix", check_mass_matrix(M_a, "M_a"), check_homogeneous(H_ab, "H_ab"))
 
 
 def principal_frame(M_a) -> tuple[np.ndarray, np.ndarray]:
@@ -383,14 +393,14 @@ def ellipsoid(semi_axes, m) -> np.ndarray:
 
 def newton_euler_bias(M_b, T_b) -> np.ndarray:
     """``−ad(T_b)ᵀ M_b T_b`` of ``M_b dT_b/dt − ad(T_b)ᵀ M_b T_b = W_b``."""
-    return _evaluate("newton_euler_bias", _mass_matrix(M_b, "M_b"), _vector(T_b, "T_b", 6))
+    return _evaluate("newton_euler_bias", check_mass_matrix(M_b, "M_b"), check_vector(T_b, "T_b", 6))
 
 
 def newton_euler_acceleration(M_b, T_b, W_b) -> np.ndarray:
     """``dT_b/dt = M_b⁻¹ (W_b + ad(T_b)ᵀ M_b T_b)``: body-twist derivative of a free rigid body
     under the total wrench ``W_b`` (in b, moment about b's origin)."""
-    M = _mass_matrix(M_b, "M_b")
-    rhs = _vector(W_b, "W_b", 6) - newton_euler_bias(M, T_b)
+    M = check_mass_matrix(M_b, "M_b")
+    rhs = check_vector(W_b, "W_b", 6) - newton_euler_bias(M, T_b)
     return np.linalg.solve(M, rhs[..., None])[..., 0]
 
 

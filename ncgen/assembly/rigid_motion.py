@@ -186,6 +186,11 @@ def inertia_about_point(m, r, I_c):
     return _call("inertia_about_point", m, r, I_c)
 
 
+def inertia_from_second_moment(S):
+    """``tr(S) 1 − S``."""
+    return _call("inertia_from_second_moment", S)
+
+
 def mass_matrix_parts(M):
     """``(m, r, I_c)`` of a spatial mass matrix."""
     return _call("mass_matrix_parts", M)

@@ -124,6 +124,7 @@ _SPECS: dict[str, tuple[tuple[Arg, ...], Callable]] = {
     "mass_matrix": ((_scalar("m"), _vec("r"), _mat("I_o", 3)), _plain(si.mass_matrix, "M")),
     "inertia_about_point": ((_scalar("m"), _vec("r"), _mat("I_c", 3)),
                             _plain(si.inertia_about_point, "I_o")),
+    "inertia_from_second_moment": ((_mat("S", 3),), _plain(si.inertia_from_second_moment, "I")),
     "mass_matrix_parts": ((_mat("M", 6),), _plain(si.mass_matrix_parts, "m", "r", "I_c")),
     "transport_mass_matrix": ((_mat("M_a", 6), _H), _plain(si.transport_mass_matrix, "M_b")),
     "box": ((_vec("half_extents"), _scalar("m")), _plain(si.box, "M")),

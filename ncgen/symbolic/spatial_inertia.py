@@ -9,7 +9,7 @@ about b's origin in b's axes; the kinetic energy is ``½ T_bᵀ M_b T_b`` for th
 ``T_b``.  Frame changes keep the energy: ``M_b = Ad(H_ab)ᵀ M_a Ad(H_ab)``.
 
 The inertia tensors of the primitive shapes are derived here by integrating second moments
-over the solid (``I = tr(S) 1 − S`` with ``S = ∫ x xᵀ dm``), once per process.
+over the solid (:func:`inertia_from_second_moment`), once per process.
 """
 from __future__ import annotations
 
@@ -64,8 +64,10 @@ _x, _y, _z, _rho, _phi, _theta = sp.symbols("x y z rho phi theta", real=True)
 _a, _b, _c, _h, _R = sp.symbols("a b c h R", positive=True)
 
 
-def _inertia_per_unit_mass(S: sp.Matrix) -> sp.Matrix:
-    """``I/m = tr(S) 1 − S`` from the per-unit-mass second moment ``S = ∫ x xᵀ dm / m``."""
+def inertia_from_second_moment(S) -> sp.Matrix:
+    """``I = tr(S) 1 − S``: the inertia tensor from the second moment ``S = ∫ x xᵀ dm`` about
+    the same point (``S`` is the natural coordinates' ``J̄`` when taken about the centre of mass)."""
+    S = sp.Matrix(S)
     return S.trace() * sp.eye(3) - S
 
 
@@ -107,14 +109,14 @@ def box(half_extents, m) -> sp.Matrix:
     x, y, z: ``I = m/3 diag(b² + c², a² + c², a² + b²)``."""
     a, b, c = as_vector(half_extents, 3)
     S = _box_second_moment().xreplace({_a: a, _b: b, _c: c})
-    return _at_centre(m, m * _inertia_per_unit_mass(S))
+    return _at_centre(m, m * inertia_from_second_moment(S))
 
 
 def cylinder(length, radius, m) -> sp.Matrix:
     """Mass matrix at the centre of a homogeneous cylinder of axis z (full ``length`` along z):
     ``I = m diag(r²/4 + l²/12, r²/4 + l²/12, r²/2)``."""
     S = _cylinder_second_moment().xreplace({_h: length, _R: radius})
-    return _at_centre(m, m * _inertia_per_unit_mass(S))
+    return _at_centre(m, m * inertia_from_second_moment(S))
 
 
 def ellipsoid(semi_axes, m) -> sp.Matrix:
@@ -122,7 +124,7 @@ def ellipsoid(semi_axes, m) -> sp.Matrix:
     x, y, z: the image of the unit ball by ``D = diag(a, b, c)``, so ``S = D S_ball D`` and
     ``I = m/5 diag(b² + c², a² + c², a² + b²)``."""
     D = sp.diag(*as_vector(semi_axes, 3))
-    return _at_centre(m, m * _inertia_per_unit_mass(D * _ball_second_moment() * D))
+    return _at_centre(m, m * inertia_from_second_moment(D * _ball_second_moment() * D))
 
 
 def sphere(radius, m) -> sp.Matrix:
