@@ -1,0 +1,115 @@
+"""Matplotlib drawing of a :class:`~ncgen.viz.scene.Scene`, with the Agg canvas (no display,
+no pyplot, no change to matplotlib's global backend).  Imported only when drawing."""
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from ncgen.viz.scene import Scene
+
+BAR_COLOR = "tab:blue"
+BODY_COLOR = "tab:orange"
+AXIS_COLORS = ("tab:red", "tab:green", "tab:blue")
+POINT_COLOR = "tab:purple"
+MARKER_COLOR = "k"
+ANCHOR_COLOR = "0.3"
+
+
+def figure(width: float, height: float) -> Figure:
+    """A figure on an Agg canvas."""
+    fig = Figure(figsize=(width, height))
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def scene_axes(fig: Figure, scene: Scene, position=111):
+    """2D axes with equal scales, or 3D axes with a cube box around the whole motion."""
+    lo, hi = scene.bounds()
+    centre, half = (lo + hi) / 2, max(float(np.max(hi - lo)) / 2, 1e-3) * 1.1
+    if scene.dim == 2:
+        ax = fig.add_subplot(position)
+        ax.set_aspect("equal")
+        ax.set_xlim(centre[0] - half, centre[0] + half)
+        ax.set_ylim(centre[1] - half, centre[1] + half)
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        ax.grid(True, alpha=0.3)
+        return ax
+    ax = fig.add_subplot(position, projection="3d")
+    for set_lim, c in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), centre):
+        set_lim(c - half, c + half)
+    ax.set_box_aspect((1, 1, 1))
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_zlabel("z (m)")
+    return ax
+
+
+class SceneArtists:
+    """The artists of one frame of ``scene`` on ``ax``; :meth:`show` moves them to frame k."""
+
+    def __init__(self, ax, scene: Scene):
+        self.ax, self.scene = ax, scene
+        lo, hi = scene.bounds()
+        self.axis_length = 0.12 * max(float(np.max(hi - lo)), 1e-3)
+        self.bars = [self._line(BAR_COLOR, lw=3) for _ in scene.bar_names]
+        self.axes = [[self._line(c, lw=1.5) for c in AXIS_COLORS[:scene.dim]] for _ in scene.body_names]
+        self.body_points = self._dots(BODY_COLOR, "o", 30)
+        self.points = self._dots(POINT_COLOR, "o", 50)
+        self.markers = self._dots(MARKER_COLOR, ".", 25)
+        if len(scene.anchors):
+            self._scatter(scene.anchors, ANCHOR_COLOR, "^", 60)
+        self.title = ax.set_title("")
+
+    def _line(self, color, lw):
+        return self.ax.plot(*([[0, 0]] * self.scene.dim), color=color, lw=lw)[0]
+
+    def _dots(self, color, marker, size):
+        return self.ax.plot(*([[]] * self.scene.dim), linestyle="none", marker=marker, color=color,
+                            markersize=np.sqrt(size))[0]
+
+    def _scatter(self, pts, color, marker, size):
+        self.ax.scatter(*pts.T, color=color, marker=marker, s=size, zorder=3)
+
+    def _set(self, artist, pts: np.ndarray) -> None:
+        pts = np.asarray(pts).reshape(-1, self.scene.dim)
+        artist.set_data(pts[:, 0], pts[:, 1])
+        if self.scene.dim == 3:
+            artist.set_3d_properties(pts[:, 2])
+
+    def show(self, k: int, t: float) -> list:
+        s = self.scene
+        for line, seg in zip(self.bars, s.bars[k]):
+            self._set(line, seg)
+        for lines, origin, R in zip(self.axes, s.body_origins[k], s.body_axes[k]):
+            for j, line in enumerate(lines):
+                self._set(line, [origin, origin + self.axis_length * R[:, j]])
+        self._set(self.body_points, s.body_points[k])
+        self._set(self.points, s.points[k])
+        self._set(self.markers, s.markers[k])
+        self.title.set_text(f"t = {t:.3f} s")
+        return [*self.bars, *(a for lines in self.axes for a in lines), self.body_points, self.points,
+                self.markers, self.title]
+
+
+def atomic_output(path: Path, write) -> Path:
+    """Call ``write(tmp)`` for a temporary sibling of ``path`` (same suffix), then rename it."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    try:
+        write(tmp)
+        mask = os.umask(0)
+        os.umask(mask)
+        os.chmod(tmp, 0o666 & ~mask)
+        os.replace(tmp, path)
+    except BaseException:
+        os.unlink(tmp)
+        raise
+    return path

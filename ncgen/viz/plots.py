@@ -1,0 +1,88 @@
+"""``plot(traj, path)``: a PNG summary of a simulation: energy drift, constraint drift and
+the motion of chosen points."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ncgen.errors import NcgenError
+from ncgen.viz.draw import atomic_output, figure
+
+
+def plot(traj, path, points=None, *, dpi: int = 100) -> Path:
+    """Write a PNG with four panels: ``E − E(t0)`` (J), the constraint drift ``|Φ|∞`` and
+    ``|A v + Φ_t|∞`` (log scale), the coordinates of ``points`` over time and their paths
+    (x–y plane in 2D, a 3D view in 3D).
+
+    ``points``: marker names (``"b1.tip"``) and/or ``(member, local_xyz)`` pairs; default:
+    every marker of the model.  Returns the path written."""
+    path = Path(path)
+    if path.suffix.lower() != ".png":
+        raise NcgenError(f"plot: {path}: expected a .png file name")
+    curves = _point_curves(traj, points)
+    fig = figure(11, 8)
+    t = traj.t
+    ax = fig.add_subplot(221)
+    scale = traj.energy_scale
+    ax.plot(t, traj.energy - traj.energy[0], color="tab:red")
+    ax.set_title(f"energy drift (E(t0) = {traj.energy[0]:.4g} J"
+                 + (f", max relative {traj.energy_drift / scale:.2g})" if scale > 0 else ")"))
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("E - E(t0) (J)")
+    ax.grid(True, alpha=0.3)
+
+    ax = fig.add_subplot(222)
+    for values, label in ((traj.constraint_residual, "|phi|_inf (m^2)"),
+                          (traj.velocity_residual, "|A v + phi_t|_inf (m^2/s)")):
+        ax.semilogy(t, np.where(values > 0, values, np.nan), label=label)     # exact zeros left out
+    ax.set_title("constraint drift")
+    ax.set_xlabel("t (s)")
+    ax.legend(loc="best", fontsize="small")
+    ax.grid(True, which="both", alpha=0.3)
+
+    ax = fig.add_subplot(223)
+    for label, xyz in curves:
+        for j, line_style in zip(range(traj.dim), ("-", "--", ":")):
+            ax.plot(t, xyz[:, j], line_style, label=f"{label} {'xyz'[j]}")
+    ax.set_title("points")
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("position (m)")
+    if curves:
+        ax.legend(loc="best", fontsize="x-small", ncol=traj.dim)
+    ax.grid(True, alpha=0.3)
+
+    ax = fig.add_subplot(224, projection="3d" if traj.dim == 3 else None)
+    for label, xyz in curves:
+        ax.plot(*xyz.T, label=label)
+        ax.scatter(*xyz[0], marker="o", s=15)
+    ax.set_title("paths (o: start)")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    if traj.dim == 3:
+        ax.set_zlabel("z (m)")
+    else:
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.grid(True, alpha=0.3)
+
+    fig.suptitle(f"{traj.model_name}: t = {t[0]:g} ... {t[-1]:g} s"
+                 + ("" if traj.complete else "  (INCOMPLETE: the integration failed)"))
+    fig.tight_layout()
+    return atomic_output(path, lambda tmp: fig.savefig(tmp, dpi=dpi, format="png"))
+
+
+def _point_curves(traj, points) -> list[tuple[str, np.ndarray]]:
+    """``(label, positions (n_t, dim))`` of the requested points."""
+    if points is None:
+        return [(name, traj.marker(name)) for name in traj.marker_names]
+    curves = []
+    for item in points:
+        if isinstance(item, str):
+            curves.append((item, traj.marker(item)))
+        elif isinstance(item, (tuple, list)) and len(item) == 2 and isinstance(item[0], str):
+            member, local = item
+            label = f"{member}{tuple(float(x) for x in np.asarray(local, float))}"
+            curves.append((label, traj.point(member, local)))
+        else:
+            raise NcgenError(f"plot: points: expected marker names or (member, local_xyz) pairs, got {item!r}")
+    return curves
