@@ -252,7 +252,7 @@ def _check_arguments(p: argparse.ArgumentParser) -> None:
 
 @subcommand(
     "check",
-    help="check a model: DOF, constraint rank, redundant constraints, consistency of the initial state",
+    help="DOF, constraint rank and initial-state check of a model",
     description=(
         "Build the model in MODEL.toml and print its members, joints and forces, its coordinates "
         "and constraints, the rank of the constraint Jacobian A, the degrees of freedom "
