@@ -100,3 +100,12 @@ def test_bad_values():
     with pytest.raises(nc.ModelError, match=r"drive \(rotation angle .*\): depends on the symbol 'x', which is not one "
                                             r"of the names usable here \(t, k\)"):
         s.build()
+
+
+def test_marker_off_a_bar():
+    s, bar = _bar_system()
+    with pytest.raises(nc.ModelError, match=r"marker bar.tip \(rr bar\): local point \[0.5, 0.1, 0.0\] is 0.1 m off "
+                                            r"the bar's axis"):
+        bar.add_marker("tip", (0.5, 0.1, 0))
+    with pytest.raises(nc.ModelError, match="bar: marker tip already|marker name: expected an identifier"):
+        bar.add_marker("a tip", (0.5, 0, 0))

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ncgen.errors import NcgenError
+from ncgen.errors import BasisError, NcgenError
 from ncgen.symbolic.coordinates import CoordinateType
 from ncgen.symbolic.member import RigidMember
 from ncgen.validation import as_vector
@@ -136,10 +136,16 @@ class Member:
 
     def add_marker(self, name: str, local) -> "Member":
         """Name a body-fixed point (local coordinates) for outputs, e.g. ``traj.point``."""
+        if not isinstance(name, str) or not name.isidentifier():
+            raise ModelError(f"{self.name}: marker name: expected an identifier, got {name!r}")
         if name in self.markers:
             raise ModelError(f"{self.name}: marker {name!r} already defined")
-        self.local.affine(as_vector(local, self.dim, f"{self.name}.{name}: local point"))  # validates
-        self.markers[name] = np.asarray(local, dtype=float)
+        point = as_vector(local, self.dim, f"{self.name}.{name}: local point")
+        try:
+            self.local.affine(point)
+        except BasisError as e:
+            raise ModelError(f"marker {self.name}.{name} ({self.ctype.name} {self.kind}): {e}") from None
+        self.markers[name] = point
         return self
 
     def __repr__(self) -> str:
