@@ -195,3 +195,22 @@ def test_casadi_force_of_time():
     s.add_force(nc.PointForce(pt, (0, 0, 0), force=lambda t: ca.vertcat(ca.sin(t), 0, 0)))
     traj = simulate(s.build(), 3.0, 0.1, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(traj.q[:, 0], (traj.t - np.sin(traj.t)) / 2.0, atol=1e-9)
+
+
+def test_driven_coordinate_started_at_another_time():
+    """x of a falling point prescribed as 0.3 sin 2t (a rheonomic constraint), started at
+    t0 = 0.5 s: x and ẋ follow the drive, y falls freely, λ = −m ẍ; the model's state (built
+    for t = 0) is only a guess there, hence ic_tolerance=None."""
+    s = nc.System("driven", gravity=(0, -G))
+    pt = s.add_point("pt", mass=1.5, position=(0.0, 1.0))
+    s.add_joint(nc.CoordinateDriver(pt, "r_i", "x", value=lambda t: 0.3 * ca.sin(2 * t)))
+    model = s.build()
+    with pytest.raises(nc.ModelError, match="ic_tolerance=None"):
+        simulate(model, 2.0, 0.1, t0=0.5)
+    traj = simulate(model, 2.0, 0.1, t0=0.5, rtol=1e-10, atol=1e-12, ic_tolerance=None)
+    t = traj.t
+    assert t[0] == 0.5
+    np.testing.assert_allclose(traj.q[:, 0], 0.3 * np.sin(2 * t), atol=1e-9)
+    np.testing.assert_allclose(traj.v[:, 0], 0.6 * np.cos(2 * t), atol=1e-8)
+    np.testing.assert_allclose(traj.q[:, 1], 1.0 - G * (t - 0.5) ** 2 / 2, atol=1e-7)
+    np.testing.assert_allclose(traj.lam[:, 0], 1.5 * 1.2 * np.sin(2 * t), atol=1e-6)

@@ -26,7 +26,7 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
              atol: float = 1e-10, u=None, p=None, q0=None, v0=None, t0: float | None = None,
              hold: str = "zoh", backend: str = "vm", progress: bool | None = None,
              max_steps: int = 50_000, linear_solver: str = "csparse",
-             ic_tolerance: float = 1e-6) -> Trajectory:
+             ic_tolerance: float | None = 1e-6) -> Trajectory:
     """Integrate ``model`` from ``t0`` (default ``model.t0``) to ``t_end`` and return the
     :class:`~ncgen.runtime.trajectory.Trajectory` on the grid ``t0, t0 + dt, ..., t_end``
     (``dt`` shortened if needed so that ``t_end`` is on the grid).  Times in s.
@@ -47,7 +47,9 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
       ``model.t0``).  Whenever they are given, or ``p`` or ``t0`` differ from the model's,
       they are projected onto the constraints (``Φ = 0`` by Gauss–Newton, then ``A v + Φ_t = 0``
       in the mass metric); corrections larger than ``ic_tolerance`` × the system's size are
-      an error.  ``λ0`` then solves the KKT system with ``u(t0)``.
+      an error (``ic_tolerance=None``: no limit, the given state is only a guess, e.g. when
+      starting a driven mechanism at another ``t0``).  ``λ0`` then solves the KKT system
+      with ``u(t0)``.
     * ``backend``: ``"vm"`` (CasADi's virtual machine), ``"compiled"`` (the DAE and its
       Jacobian as generated C, compiled once and cached) or ``"auto"`` (compiled when a C
       compiler is available).
@@ -61,7 +63,8 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
     """
     if method not in METHODS:
         raise NcgenError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
-    for name, tol in (("rtol", rtol), ("atol", atol), ("ic_tolerance", ic_tolerance)):
+    tolerances = {"rtol": rtol, "atol": atol, "ic_tolerance": 1.0 if ic_tolerance is None else ic_tolerance}
+    for name, tol in tolerances.items():
         if not (math.isfinite(tol) and tol > 0):
             raise NcgenError(f"{name}: expected a positive tolerance, got {tol!r}")
     t0 = model.t0 if t0 is None else float(t0)
@@ -93,7 +96,7 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
     return traj
 
 
-def initial_state(model, q0, v0, t0: float, p: np.ndarray, tolerance: float):
+def initial_state(model, q0, v0, t0: float, p: np.ndarray, tolerance: float | None):
     """Consistent ``(q, v)`` at ``t0`` (see :func:`simulate`)."""
     if q0 is None and v0 is None and t0 == model.t0 and np.array_equal(p, model.p0):
         return model.q0.copy(), model.v0.copy()
@@ -101,9 +104,11 @@ def initial_state(model, q0, v0, t0: float, p: np.ndarray, tolerance: float):
     v = model.v0 if v0 is None else as_vector(v0, model.nq, "v0")
     try:
         state = consistent_state(model.functions, model.layout, model.constraint_names, q.copy(), v.copy(),
-                                 p, t0, tolerance, model.M)
+                                 p, t0, 1.0 if tolerance is None else tolerance, model.M,
+                                 assemble=tolerance is None)
     except ModelError as e:
-        raise ModelError(f"simulate: initial state of {model.name!r} at t0 = {t0:g} s: {e}") from None
+        raise ModelError(f"simulate: initial state of {model.name!r} at t0 = {t0:g} s: {e}. In simulate: give "
+                         f"q0/v0 consistent at t0, or ic_tolerance=None to accept any correction") from None
     return state.q0, state.v0
 
 
