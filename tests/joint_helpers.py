@@ -5,7 +5,6 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-import ncgen as nc
 from ncgen.assembly.build import constraint_rows, initial_guess
 from ncgen.assembly.context import Context
 from ncgen.assembly.layout import make_layout

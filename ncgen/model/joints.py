@@ -38,7 +38,7 @@ import numpy as np
 from ncgen.model.joint_base import Joint
 from ncgen.model.joint_equations import (
     align_axis, angle_gauge, coincidence, distance, is_along, is_full, kind_of, lock_orientation,
-    name_of, point_on_line, point_on_plane, require_orientation,
+    point_on_line, point_on_plane, require_orientation,
 )
 from ncgen.model.members import ModelError
 from ncgen.validation import as_vector
