@@ -212,6 +212,11 @@ def _fd_check(model, t=0.3, seed=0):
     phi_t = model.functions["phi_t"](t, q, model.p0).full().ravel()
     fd_t = (model.phi(q, t=t + h) - model.phi(q, t=t - h)) / (2 * h)
     assert np.allclose(phi_t, fd_t, atol=1e-7)
+    # at most quadratic in q: the second difference along d is the same everywhere
+    d = rng.normal(size=model.nq)
+    q2 = q + rng.normal(size=model.nq)
+    curv = [(model.phi(x + d, t=t) - 2 * model.phi(x, t=t) + model.phi(x - d, t=t)) for x in (q, q2)]
+    assert np.allclose(curv[0], curv[1], atol=1e-9)
 
 
 DRIVES3 = {"Revolute": "0.3*sin(w*t)", "Prismatic": lambda t: 0.2 * t**2, "Distance": "0.5 + 0.1*t"}

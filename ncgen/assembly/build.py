@@ -34,7 +34,10 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     may apply; beyond it the build fails and says where.  ``assemble=True``: the members'
     initial poses are only a guess; Newton moves them onto the constraints (drives at
     ``t0`` included) without limit, keeping the coordinates named in ``fix``
-    (:func:`ncgen.assembly.kinematics.resolve_fix`) and their rates as given.
+    (:func:`ncgen.assembly.kinematics.resolve_fix`) and their rates as given.  Joints
+    given at world points hold in the given poses by construction; what needs assembling
+    is a drive or coordinate driver that prescribes another position at ``t0``.  To
+    assemble an arbitrary configuration vector use :func:`ncgen.assemble`.
     """
     from ncgen.model.model import Model
 
