@@ -220,13 +220,15 @@ _GENERATORS = {
 
 
 @lru_cache(maxsize=None)
-def taylor_in_square(name: str) -> sp.Expr:
-    """Taylor polynomial at 0 of the even function ``_GENERATORS[name](t)``, in ``s = t²``.
-
-    Returns an expression in the module's dummy ``s``; ``SERIES_TERMS`` terms.
-    """
+def _taylor(name: str) -> sp.Expr:
     poly = sp.series(_GENERATORS[name], _t, 0, 2 * SERIES_TERMS).removeO()
     return sp.expand(poly.subs(_t, sp.sqrt(_s)))
+
+
+def taylor_in_square(name: str, x_sq) -> sp.Expr:
+    """Taylor polynomial at 0 of the even function ``_GENERATORS[name](t)`` (``SERIES_TERMS``
+    terms), as a polynomial in ``x_sq = t²``; derived with :func:`sympy.series`."""
+    return _taylor(name).xreplace({_s: x_sq})
 
 
 def _lt(lhs, rhs) -> sp.Basic:
@@ -234,17 +236,18 @@ def _lt(lhs, rhs) -> sp.Basic:
     return sp.StrictLessThan(lhs, rhs, evaluate=False)
 
 
-def _series_or(name: str, x_sq, exact=None, small=None) -> sp.Expr:
-    """``Piecewise``: Taylor polynomial of ``_GENERATORS[name]`` in ``x_sq`` where ``small``
-    holds (by default ``x_sq < SERIES_THRESHOLD``), else ``exact(t)`` (by default the
-    generator itself) at ``t = √max(x_sq, SERIES_THRESHOLD)``.
+def coefficient(name: str, x_sq, exact=None, small=None) -> sp.Expr:
+    """An exp/log coefficient (``"sinc"``, ``"cosc"``, ``"sinc3"``, ``"dlog"``, ``"asinc"``) as a
+    ``Piecewise``: its Taylor polynomial in ``x_sq`` where ``small`` holds (by default
+    ``x_sq < SERIES_THRESHOLD``), else ``exact(t)`` (by default the closed form) at
+    ``t = √max(x_sq, SERIES_THRESHOLD)``.
 
     Conditions must not contain a ``Piecewise``: SymPy would fold it into the condition.
     """
     t = sp.sqrt(sp.Max(x_sq, SERIES_THRESHOLD, evaluate=False))
     closed = exact(t) if exact is not None else _GENERATORS[name].xreplace({_t: t})
     small = _lt(x_sq, SERIES_THRESHOLD) if small is None else small
-    return sp.Piecewise((taylor_in_square(name).xreplace({_s: x_sq}), small), (closed, True), evaluate=False)
+    return sp.Piecewise((taylor_in_square(name, x_sq), small), (closed, True), evaluate=False)
 
 
 def exp_so3(omega) -> sp.Matrix:
@@ -252,7 +255,7 @@ def exp_so3(omega) -> sp.Matrix:
     w = as_vector(omega, 3)
     theta_sq = w.dot(w)
     W = so3_hat(w)
-    return sp.eye(3) + _series_or("sinc", theta_sq) * W + _series_or("cosc", theta_sq) * W * W
+    return sp.eye(3) + coefficient("sinc", theta_sq) * W + coefficient("cosc", theta_sq) * W * W
 
 
 def exp_se3(T) -> sp.Matrix:
@@ -266,7 +269,7 @@ def exp_se3(T) -> sp.Matrix:
     w, v = T[:3, 0], T[3:, 0]
     theta_sq = w.dot(w)
     W = so3_hat(w)
-    V = sp.eye(3) + _series_or("cosc", theta_sq) * W + _series_or("sinc3", theta_sq) * W * W
+    V = sp.eye(3) + coefficient("cosc", theta_sq) * W + coefficient("sinc3", theta_sq) * W * W
     return homogeneous(exp_so3(w), V * v)
 
 
@@ -296,7 +299,7 @@ def log_so3(R_ab) -> sp.Matrix:
                                    (candidates[2][i], True), evaluate=False) for i in range(3)])
     near_pi = sp.atan2(axis.dot(a), c) * axis
 
-    factor = _series_or("asinc", sin_sq, exact=lambda s: sp.atan2(s, c) / s)
+    factor = coefficient("asinc", sin_sq, exact=lambda s: sp.atan2(s, c) / s)
     return sp.Matrix([sp.Piecewise((near_pi[i], _lt(c, 0)), (factor * a[i], True), evaluate=False)
                       for i in range(3)])
 
@@ -327,5 +330,12 @@ def log_se3_translation(omega, R_ab, p_ab) -> sp.Matrix:
     W = so3_hat(w)
     c, _, sin_sq = _angle_parts(sp.Matrix(R_ab))
     near_zero = _lt(sin_sq, SERIES_THRESHOLD) & (c > 0)
-    V_inv = sp.eye(3) - W / 2 + _series_or("dlog", w.dot(w), small=near_zero) * W * W
+    V_inv = sp.eye(3) - W / 2 + coefficient("dlog", w.dot(w), small=near_zero) * W * W
     return V_inv * as_vector(p_ab, 3)
+
+
+def se3_report():
+    """This module's derivation as a teaching report (``ncgen derive se3``); built by
+    :func:`ncgen.symbolic.se3_report.se3_report`."""
+    from ncgen.symbolic.se3_report import se3_report as build  # that module imports this one
+    return build()
