@@ -45,27 +45,27 @@ def _rotation_symbols() -> sp.Matrix:
 
 
 def _rotations(rep: Report) -> None:
-    a, az, ay, ax = sp.symbols("alpha psi theta phi", real=True)
+    a, az, ay, ax = sp.symbols("alpha a_z a_y a_x", real=True)
     st = rep.step(
         "Rotations",
         "A rotation matrix $R_{ab}$ has as columns the unit vectors of frame $b$ in the "
         "coordinates of frame $a$. Elementary rotations about the axes, and the yaw-pitch-roll "
-        "composition $R = R_z(\\psi) R_y(\\theta) R_x(\\phi)$ (moving axes z, y', x'').")
+        "composition $R = R_z(a_z) R_y(a_y) R_x(a_x)$ (yaw, pitch, roll about the moving axes z, y', x'').")
     st.eq(r"R_x(\alpha)", rm.rotx(a)).eq(r"R_y(\alpha)", rm.roty(a)).eq(r"R_z(\alpha)", rm.rotz(a))
     R = rm.rotzyx(az, ay, ax)
-    st.eq(r"R_z(\psi) R_y(\theta) R_x(\phi)", R)
+    st.eq(r"R_z(a_z) R_y(a_y) R_x(a_x)", R)
     angles = rm.zyx_angles(_rotation_symbols())
-    _check_small("zyx_angles(rotzyx(psi, theta, phi)) = (psi, theta, phi) at a sample point",
+    _check_small("zyx_angles(rotzyx(a_z, a_y, a_x)) = (a_z, a_y, a_x) at a sample point",
                 angles.subs(dict(zip(_rotation_symbols(), R))).subs({az: 0.3, ay: -0.4, ax: 1.1}).evalf()
                 - sp.Matrix([0.3, -0.4, 1.1]))
     st = rep.step(
         "Angles from a rotation",
         "Inverse of the composition, read from the last row and the first two rows of "
-        "$R = [r_{ij}]$: $\\theta \\in [-\\pi/2, \\pi/2]$. At gimbal lock ($\\cos\\theta = 0$) only "
-        "$\\psi \\mp \\phi$ is defined: $\\phi$ is set to 0 and $\\psi$ carries the whole rotation "
-        "about the vertical; $\\psi$ is computed from $R R_x(\\phi)^T = R_z(\\psi) R_y(\\theta)$ so "
-        "that the angles always reproduce $R$.")
-    st.eq(r"\phi", angles[2]).eq(r"\theta", angles[1]).eq(r"\psi", angles[0])
+        "$R = [r_{ij}]$: $a_y \\in [-\\pi/2, \\pi/2]$. At gimbal lock ($\\cos a_y = 0$) only "
+        "$a_z - a_x$ (or $a_z + a_x$) is defined: $a_x$ is set to 0 and $a_z$ carries the whole "
+        "rotation about the vertical. $a_z$ is computed from $R R_x(a_x)^T = R_z(a_z) R_y(a_y)$, so "
+        "the angles always reproduce $R$.")
+    st.eq("a_x", angles[2]).eq("a_y", angles[1]).eq("a_z", angles[0].xreplace({angles[2]: ax}))
 
 
 def _poses(rep: Report) -> None:
@@ -78,7 +78,7 @@ def _poses(rep: Report) -> None:
         "$R^{-1} = R^T$.")
     st.eq("H_{ab}", H).eq("H_{ba} = H_{ab}^{-1}", rm.inverse(H))
     st.eq("x_a", rm.transform_point(H, x))
-    H_sample = rm.homogeneous(rm.rotzyx(*sp.symbols("psi theta phi", real=True)), p)
+    H_sample = rm.homogeneous(rm.rotzyx(*sp.symbols("a_z a_y a_x", real=True)), p)
     _check_zero("H^-1 H = 1", rm.inverse(H_sample) * H_sample - sp.eye(4))
 
 
@@ -132,7 +132,13 @@ def _adjoints(rep: Report) -> None:
         "symbolically on the moving frame of the body-twist step; its lower-left block is shown "
         "(the diagonal blocks are $\\dot{R}$, the upper-right block is zero).")
     st.eq("T_b", T_b)
-    st.eq(r"\frac{d}{dt}(\hat{p} R)", rm.Ad_dot(H, T_b)[3:, :3].applyfunc(sp.trigsimp))
+    st.eq(r"\frac{d}{dt}(\hat{p} R)", lhs_text="d/dt (p̂ R)", rhs=rm.Ad_dot(H, T_b)[3:, :3].applyfunc(sp.trigsimp))
+
+
+def _closed_form(expr, x_sq):
+    """``expr`` with ``max(x_sq, SERIES_THRESHOLD)`` shown as ``x_sq`` (its value wherever the
+    closed-form branch is selected)."""
+    return expr.replace(lambda e: isinstance(e, sp.Max), lambda e: x_sq)
 
 
 def _exponential(rep: Report) -> None:
@@ -145,14 +151,16 @@ def _exponential(rep: Report) -> None:
         "$V = 1 + b(\\theta) \\hat{\\omega} + c(\\theta) \\hat{\\omega}^2$. Each coefficient is "
         "a Taylor polynomial in $\\theta^2$ below $\\theta^2 = 10^{-4}$ (derived with sympy.series; "
         "the closed forms lose digits there) and the closed form above, evaluated at "
-        "$\\max(\\theta^2, 10^{-4})$ so that neither branch is ever NaN. Example: the screw motion about z.")
-    st.eq(r"a(\theta) = \frac{\sin\theta}{\theta}", rm.coefficient("sinc", theta ** 2))
-    st.eq(r"b(\theta) = \frac{1 - \cos\theta}{\theta^2}", rm.coefficient("cosc", theta ** 2))
-    st.eq(r"c(\theta) = \frac{\theta - \sin\theta}{\theta^3}", rm.coefficient("sinc3", theta ** 2))
+        "$\\max(\\theta^2, 10^{-4})$ so that neither branch is ever NaN (shown here as $\\theta^2$, "
+        "its value wherever that branch is selected). Example: the screw motion about z.")
+    for name, lhs, text in (("sinc", r"a(\theta) = \frac{\sin\theta}{\theta}", "a(θ) = sin θ / θ"),
+                            ("cosc", r"b(\theta) = \frac{1 - \cos\theta}{\theta^2}", "b(θ) = (1 − cos θ) / θ²"),
+                            ("sinc3", r"c(\theta) = \frac{\theta - \sin\theta}{\theta^3}", "c(θ) = (θ − sin θ) / θ³")):
+        st.eq(lhs, _closed_form(rm.coefficient(name, theta ** 2), theta ** 2), lhs_text=text)
     v = _vec("v")
     screw = rm.exp_se3(sp.Matrix([0, 0, theta, *v])).subs(theta ** 2 < rm.SERIES_THRESHOLD, False)
-    st.eq(r"\exp(\widehat{[0, 0, \theta, v_x, v_y, v_z]})", sp.simplify(screw.subs(
-        sp.Max(theta ** 2, rm.SERIES_THRESHOLD, evaluate=False), theta ** 2)))
+    st.eq(r"\exp(\widehat{[0, 0, \theta, v_x, v_y, v_z]})", sp.simplify(_closed_form(screw, theta ** 2)),
+          lhs_text="exp([0, 0, θ, v_x, v_y, v_z]^)")
 
 
 def _logarithm(rep: Report) -> None:
@@ -167,8 +175,9 @@ def _logarithm(rep: Report) -> None:
         "largest diagonal entry of $(R + R^T)/2 - \\cos\\theta\\, 1 = (1 - \\cos\\theta)\\, u u^T$, "
         "oriented so that $u \\cdot a \\ge 0$, and $\\theta = \\mathrm{atan2}(u \\cdot a, \\cos\\theta)$. "
         "Then $v = V^{-1} p$ with $V^{-1} = 1 - \\hat{\\omega}/2 + d(\\theta)\\, \\hat{\\omega}^2$.")
-    st.eq(r"\frac{\arcsin s}{s}", rm.taylor_in_square("asinc", s ** 2) + sp.O(s ** (2 * rm.SERIES_TERMS)))
-    st.eq(r"d(\theta) = \frac{1 - (\theta/2)\cot(\theta/2)}{\theta^2}", rm.coefficient("dlog", theta ** 2))
+    st.eq(r"\frac{\arcsin s}{s}", lhs_text="arcsin(s) / s", rhs=rm.taylor_in_square("asinc", s ** 2) + sp.O(s ** (2 * rm.SERIES_TERMS)))
+    st.eq(r"d(\theta) = \frac{1 - (\theta/2)\cot(\theta/2)}{\theta^2}",
+          _closed_form(rm.coefficient("dlog", theta ** 2), theta ** 2), lhs_text="d(θ) = (1 − (θ/2) cot(θ/2)) / θ²")
     w = sp.Matrix([0, 0, theta])
     p = _vec("p")
     H = rm.exp_se3(w.col_join(rm.log_se3_translation(w, rm.rotz(theta), p)))
@@ -196,16 +205,17 @@ def _mass(rep: Report) -> None:
     st = rep.step(
         "Spatial mass matrix",
         "At a frame whose origin sees the centre of mass at $r$, the kinetic energy is "
-        "$\\tfrac12 T^T M T$ with $M = [[I_o, m \\hat{r}], [m \\hat{r}^T, m 1]]$ and $I_o$ the inertia "
+        "$T^T M T / 2$ with $M = [[I_o, m \\hat{r}], [m \\hat{r}^T, m 1]]$ and $I_o$ the inertia "
         "about the origin (parallel axes: $I_o = I_c + m \\hat{r}^T \\hat{r}$). Invariance of the "
         "energy under $T_a = \\mathrm{Ad}(H_{ab}) T_b$ gives the transport "
         "$M_b = \\mathrm{Ad}(H_{ab})^T M_a \\mathrm{Ad}(H_{ab})$: here from the centre of mass "
         "(frame a) to a frame b at $-r$.")
-    st.eq("I_o", rm.so3_hat(r).T * rm.so3_hat(r) * m + I_c)
+    st.eq("I_o", si.inertia_about_point(m, r, I_c))
     M_b = si.mass_matrix(m, r, si.inertia_about_point(m, r, I_c))
     M_c = si.mass_matrix(m, sp.zeros(3, 1), I_c)
     _check_zero("transport of the centre-of-mass matrix", si.transport_mass_matrix(M_c, rm.translation(-r)) - M_b)
-    st.eq("M", si.mass_matrix(m, r, sp.MatrixSymbol("I_o", 3, 3).as_explicit()))
+    I_o = sp.Matrix(3, 3, lambda i, j: sp.Symbol(f"I_o{min(i, j) + 1}{max(i, j) + 1}", real=True))
+    st.eq("M", si.mass_matrix(m, r, I_o))
     a, b, c, l, rho = sp.symbols("a b c l rho", positive=True)
     st = rep.step(
         "Homogeneous solids",
@@ -241,7 +251,8 @@ def _newton_euler(rep: Report) -> None:
         "$[[I, 0], [0, m 1]] \\dot{T} + [[\\hat{\\omega} I, 0], [0, m \\hat{\\omega}]] T = W$ "
         "(the seed's block matrix, corrected).")
     st.eq(r"-\mathrm{ad}(T)^T M T", bias)
-    st.eq(r"\begin{bmatrix} \hat{\omega} I & 0 \\ 0 & m \hat{\omega} \end{bmatrix}", N)
+    st.eq(r"\begin{bmatrix} \hat{\omega} I & 0 \\ 0 & m \hat{\omega} \end{bmatrix}", N,
+          lhs_text="[[ω̂ I, 0], [0, m ω̂]]")
 
 
 def se3_report() -> Report:
