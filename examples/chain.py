@@ -9,7 +9,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 
 import ncgen as nc
-from ncgen.codegen.model_package import model_metadata
+from ncgen.codegen.model_package import model_hash
 
 
 def chain(n: int = 5, length: float = 0.3, mass: float = 0.2) -> nc.System:
@@ -31,8 +31,7 @@ if __name__ == "__main__":
     print(model)
     if n == 5:
         toml_model = nc.System.from_toml(Path(__file__).with_name("chain.toml")).build()
-        same = model_metadata(model)[0]["model_hash"] == model_metadata(toml_model)[0]["model_hash"]
-        print("same model as chain.toml:", same)
+        print("same model as chain.toml:", model_hash(model) == model_hash(toml_model))
     traj = nc.simulate(model, t_end=3.0, dt=0.01, backend="auto")
     print(traj.summary())
     tip = traj.marker(f"bar{n}.tip")

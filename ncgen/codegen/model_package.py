@@ -146,14 +146,20 @@ def model_metadata(model) -> tuple[dict, dict]:
     ]
     metadata = {k: v for k, v, _ in entries}
     metadata_doc = {k: doc for k, _, doc in entries}
-    metadata["model_hash"] = model_hash(model, metadata)
+    metadata["model_hash"] = _hash(model, metadata)
     metadata_doc["model_hash"] = ("sha256 of the model's system functions and the metadata above: "
                                   "equal hashes, same model")
     return metadata, metadata_doc
 
 
-def model_hash(model, metadata: Mapping) -> str:
-    """sha256 identifying ``model``: its serialised system functions and ``metadata``."""
+def model_hash(model) -> str:
+    """sha256 identifying ``model``: equal hashes mean the same system functions, names,
+    dimensions, initial state and mass matrix (the ``model_hash`` of its package)."""
+    return model_metadata(model)[0]["model_hash"]
+
+
+def _hash(model, metadata: Mapping) -> str:
+    """sha256 of ``model``'s serialised system functions and ``metadata``."""
     plain = PackageDoc(metadata=metadata).metadata
     data = {"functions": [[name, model.functions[name].serialize()] for name in SYSTEM_FUNCTIONS],
             "metadata": plain}
