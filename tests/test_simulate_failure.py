@@ -66,3 +66,17 @@ def test_idas_time_is_made_absolute():
     msg, t = shift_time("At t = 0.01 and h = 1e-12, the error test failed repeatedly.", 2.5)
     assert t == pytest.approx(2.51) and msg.startswith("At t = 2.51 and h = 1e-12")
     assert shift_time("no time here", 1.0) == ("no time here", None)
+
+
+def test_redundant_constraints_kept_cannot_start():
+    """build(redundant="keep") with a joint repeating a shared point: the KKT system is
+    singular at t0, and the error names the redundant joint."""
+    s = nc.System("redundant")
+    b1 = s.add_bar("b1", mass=1.0, ends=[s.ground.point((0, 0, 0)), (0, 1.0, 0.0)])
+    b2 = s.add_bar("b2", mass=1.0, ends=[b1.end(1), (0, 1.0, -1.0)])
+    s.add_joint(nc.Spherical(b1, b2, at=(0, 1.0, 0)))
+    model = s.build(redundant="keep")
+    assert model.redundant
+    with pytest.raises(SimulationError, match="cannot start.*singular at t0 = 0 s.*spherical_0") as info:
+        simulate(model, 1.0, 0.1)
+    assert info.value.time == 0.0 and info.value.trajectory is None

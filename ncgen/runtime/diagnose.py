@@ -51,7 +51,8 @@ def shift_time(message: str, t_s: float) -> tuple[str, float | None]:
 
 
 def explain(model, flag: str, t: float, q, v, lam, u, p, dae) -> str:
-    """The likely cause of a failure right after the state ``(t, q, v, lam)``."""
+    """The likely cause of a failure right after the state ``(t, q, v, lam)``; ``flag`` is
+    IDAS's return flag (``""``: only describe the state)."""
     notes = []
     x = np.concatenate([q, v])
     ode, alg = (np.array(a).reshape(-1) for a in dae(t, x, lam, u, p))
@@ -69,7 +70,9 @@ def explain(model, flag: str, t: float, q, v, lam, u, p, dae) -> str:
             notes.append(f"the constraint Jacobian is nearly singular (sigma_min/sigma_max = {ratio:.1e}): "
                          f"a singular configuration (e.g. a linkage passing a dead point) or redundant "
                          f"constraints; constraints involved: {names}")
-    if lam.size and np.all(np.isfinite(lam)):
+    if flag and lam.size and np.all(np.isfinite(lam)):
         notes.append(f"max |lambda| = {np.max(np.abs(lam)):.3g}")
-    cause = _CAUSES.get(flag, f"IDAS stopped ({flag or 'unknown reason'})")
+    if not flag:
+        return "; ".join(notes) or "no obvious cause at this state"
+    cause = _CAUSES.get(flag, f"IDAS stopped ({flag})")
     return cause + (". At the last good state: " + "; ".join(notes) if notes else "")

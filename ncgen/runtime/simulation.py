@@ -73,8 +73,8 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
     U = input_samples(u, model, t)
     columns = hold_columns(U, t, hold)
     q, v = initial_state(model, q0, v0, t0, pv, ic_tolerance)
-    lam = np.array(model.functions["accel"](t0, q, v, U[0], pv)[1]).reshape(-1)
     dae, used = load_dae(model, backend)
+    lam = initial_multipliers(model, t0, q, v, U[0], pv, dae)
     runner = ChunkedIDAS(dae, h=float(t[1] - t[0]), nu=model.nu, hold=hold, rtol=rtol, atol=atol,
                          max_steps=int(max_steps), linear_solver=linear_solver, expand=(used == "vm"))
     bar = Progress(t0, t[-1], progress, label=f"simulating {model.name}: ")
@@ -110,6 +110,21 @@ def initial_state(model, q0, v0, t0: float, p: np.ndarray, tolerance: float | No
         raise ModelError(f"simulate: initial state of {model.name!r} at t0 = {t0:g} s: {e}. In simulate: give "
                          f"q0/v0 consistent at t0, or ic_tolerance=None to accept any correction") from None
     return state.q0, state.v0
+
+
+def initial_multipliers(model, t0: float, q, v, u, p, dae) -> np.ndarray:
+    """``λ0`` from the KKT system at the initial state; a singular system is a
+    :class:`~ncgen.errors.SimulationError` at ``t0`` (no trajectory)."""
+    try:
+        lam = np.array(model.functions["accel"](t0, q, v, u, p)[1]).reshape(-1)
+    except RuntimeError:
+        lam = np.full(model.nc, np.nan)
+    if np.all(np.isfinite(lam)):
+        return lam
+    cause = explain(model, "", t0, q, v, np.zeros(model.nc), u, p, dae)
+    raise SimulationError(f"simulation of {model.name!r} cannot start: the KKT system [[M, A^T], [A, 0]] "
+                          f"is singular at t0 = {t0:g} s, so the multipliers are undefined: {cause}",
+                          time=t0, trajectory=None)
 
 
 def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress):
