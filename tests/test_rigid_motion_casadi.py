@@ -1,5 +1,9 @@
 """Rigid-motion algebra: NumPy, CasADi and compiled C forms agree; CasADi derivatives are finite
 and correct at the singular points of exp and log."""
+import os
+import subprocess
+import sys
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -154,3 +158,15 @@ def test_numpy_casadi_and_c_agree(compiled, name):
         numeric = getattr(rm, name)(*args)
         assert_same(numeric, getattr(crm, name)(*args))
         assert_same(numeric, compiled[name](*args))
+
+
+def test_c_package_is_deterministic(tmp_path):
+    """Same package bytes from separate processes with different hash seeds."""
+    script = ("import sys, ncgen.rigid_motion as rm; "
+              "print(rm.write_c_package(sys.argv[1]).content_hash)")
+    hashes = set()
+    for seed in ("1", "2"):
+        run = subprocess.run([sys.executable, "-c", script, str(tmp_path / seed)], capture_output=True,
+                             text=True, env={**os.environ, "PYTHONHASHSEED": seed}, check=True)
+        hashes.add(run.stdout.strip())
+    assert len(hashes) == 1
