@@ -1,0 +1,130 @@
+"""The compiled stepper as C: its package section, and the library loaded with ctypes.
+
+:func:`stepper_section` adds to a model package (``nc.generate``) the kernels of
+:mod:`ncgen.runtime.stepper_kernels`, the Newton loop ``<model>_stepper.c`` with the API
+declared in ``<model>_stepper.h`` (``<model>_step``, ``<model>_simulate``; templates
+``stepper.c.j2``, ``stepper.h.j2``) and the example program ``<model>_simulate``
+(``simulate_main.c.j2``), which simulates from the model's initial state without Python.
+
+:func:`load_stepper` writes a package holding only that section (named after the model, so
+the C symbols are the same as in the full package), compiles it (cached by content, see
+:func:`ncgen.codegen.compile_package`) and binds ``<model>_simulate`` with ctypes; the
+result is kept per model for the life of the process.
+"""
+from __future__ import annotations
+
+import ctypes
+import tempfile
+import weakref
+
+import numpy as np
+
+from ncgen.codegen import PackageDoc, compile_package, write_package
+from ncgen.codegen.cnames import c_real
+from ncgen.codegen.package import ExtraSource
+from ncgen.runtime.stepper_kernels import DOCS, mass_scale, stepper_functions
+
+#: Status codes of ``<model>_step`` (``templates/c/stepper.h.j2``) and what they mean.
+STATUS = {
+    0: "converged",
+    1: "Newton's method did not converge within max_iter iterations (try a smaller step dt; "
+       "or the motion is singular there)",
+    2: "a residual or Newton update was not finite: the KKT matrix is singular (a singular "
+       "configuration or redundant constraints) or the forces are not finite",
+    3: "the velocity constraints are violated after the second half-step: the KKT matrix is "
+       "nearly singular (a singular configuration or redundant constraints)",
+    4: "a generated kernel returned an error",
+    5: "bad input (non-positive step, non-finite time) or out of memory",
+}
+#: The demo program's defaults: simulated time and step (s).
+DEMO_T_END, DEMO_H = 1.0, 1e-3
+
+_loaded: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def stepper_section(model):
+    """The stepper's part of ``model``'s C package (a
+    :class:`~ncgen.codegen.model_package.Section`)."""
+    from ncgen.codegen.model_package import Section
+
+    functions = stepper_functions(model)
+    return Section(functions=functions, docs=DOCS, extra_sources=extra_sources(model, functions))
+
+
+def extra_sources(model, functions) -> list[ExtraSource]:
+    """The Newton loop, its header and the example program, rendered for ``model``."""
+    name = model.name
+    context = {"nq": model.nq, "nc": model.nc, "nu": model.nu, "np": model.np,
+               "nnz_k": int(functions[0].sparsity_out("K").nnz()),
+               "mass_scale": c_real(mass_scale(model)),
+               "kernels": [f"{name}_{f.name()}" for f in functions]}
+    demo = {**context, "program": f"{name}_simulate", "t0": c_real(model.t0), "t_end": c_real(DEMO_T_END),
+            "h": c_real(DEMO_H), "q0": [c_real(x) for x in model.q0], "v0": [c_real(x) for x in model.v0],
+            "p0": [c_real(x) for x in model.p0]}
+    return [ExtraSource("stepper.c.j2", f"{name}_stepper.c", context),
+            ExtraSource("stepper.h.j2", f"{name}_stepper.h", context),
+            ExtraSource("simulate_main.c.j2", f"{name}_simulate.c", demo, program=True)]
+
+
+def write_stepper_package(model, out_dir):
+    """A package holding only the stepper of ``model`` (kernels, loop, example program)."""
+    section = stepper_section(model)
+    doc = PackageDoc(summary=f"Compiled stepper (RATTLE) of model {model.name!r}", functions=section.docs)
+    return write_package(model.name, section.functions, out_dir, doc=doc, extra_sources=section.extra_sources)
+
+
+class CompiledStepper:
+    """``<model>_simulate`` of a compiled stepper library, called on NumPy arrays."""
+
+    def __init__(self, library: str, name: str, nq: int, nc: int, nu: int, npar: int):
+        self.library = library
+        self.nq, self.nc, self.nu, self.np = nq, nc, nu, npar
+        self._lib = ctypes.CDLL(library)
+        dp, lp = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_long)
+        f = getattr(self._lib, f"{name}_simulate")
+        f.restype = ctypes.c_int
+        f.argtypes = [dp, dp, ctypes.c_double, ctypes.c_double, ctypes.c_long, ctypes.c_long, dp, ctypes.c_long,
+                      dp, dp, dp, dp, lp, ctypes.POINTER(_Options), lp]
+        self._simulate = f
+
+    def simulate(self, q0, v0, t0: float, h: float, n_steps: int, every: int, U: np.ndarray | None,
+                 p: np.ndarray, tol: float, max_iter: int):
+        """``(Q, V, LAM, ITER, status, steps_done)``: states after every ``every``-th of
+        ``n_steps`` steps (see ``<model>_simulate`` in ``<model>_stepper.h``).  ``U``: inputs
+        per step, shape ``(n_steps, nu)``, or None for zeros."""
+        rows = n_steps // every
+        Q, V = np.zeros((rows, self.nq)), np.zeros((rows, self.nq))
+        LAM, ITER = np.zeros((rows, self.nc)), np.zeros(rows, dtype=np.int_)
+        q0, v0 = np.ascontiguousarray(q0, float), np.ascontiguousarray(v0, float)
+        p = np.ascontiguousarray(p, float)
+        U = None if U is None or self.nu == 0 else np.ascontiguousarray(U, float)
+        done = ctypes.c_long(0)
+        status = self._simulate(_ptr(q0), _ptr(v0), float(t0), float(h), int(n_steps), int(every),
+                                _ptr(U), self.nu if U is not None else 0, _ptr(p), _ptr(Q), _ptr(V), _ptr(LAM),
+                                ITER.ctypes.data_as(ctypes.POINTER(ctypes.c_long)),
+                                ctypes.byref(_Options(float(tol), int(max_iter))), ctypes.byref(done))
+        return Q, V, LAM, ITER, int(status), int(done.value)
+
+
+class _Options(ctypes.Structure):
+    """``<model>_step_options``."""
+
+    _fields_ = [("tol", ctypes.c_double), ("max_iter", ctypes.c_int)]
+
+
+def _ptr(a: np.ndarray | None):
+    if a is None or a.size == 0:
+        return None
+    return a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+
+
+def load_stepper(model, cflags=None) -> CompiledStepper:
+    """The compiled stepper of ``model`` (generated, compiled and cached on first use)."""
+    key = tuple(cflags) if isinstance(cflags, (list, tuple)) else cflags
+    cache = _loaded.setdefault(model, {})
+    if key not in cache:
+        with tempfile.TemporaryDirectory(prefix="ncgen-stepper-") as tmp:
+            pkg = write_stepper_package(model, f"{tmp}/pkg")
+            built = compile_package(pkg, cflags=cflags)
+        cache[key] = CompiledStepper(str(built.path), model.name, model.nq, model.nc, model.nu, model.np)
+    return cache[key]
