@@ -216,7 +216,7 @@ def test_mass_matrix_construction_and_parts():
     M = rm.mass_matrix(m, r, I_o)
     m2, r2, I_c2 = rm.mass_matrix_parts(M)
     assert m2 == pytest.approx(m) and np.allclose(r2, r) and np.allclose(I_c2, I_c)
-    # kinetic energy of a rigid motion, summed over sample points of the body, is ½ TᵀMT
+    # the same matrix, transported from the centre of mass to a frame at −r from it
     np.testing.assert_allclose(M, rm.transport_mass_matrix(rm.mass_matrix(m, [0, 0, 0], I_c),
                                                            rm.translation(-r)), atol=1e-13)
 
