@@ -62,11 +62,12 @@ def test_plot_writes_a_png(tmp_path, request, which):
 def test_plot_chosen_points(tmp_path, spatial):
     out = plot(spatial, tmp_path / "p.png", points=["box.corner", ("bar", (0.1, 0, 0)), ("pt", (0, 0, 0))])
     assert out.read_bytes()[:8] == PNG
+    assert plot(spatial, tmp_path / "p.svg", points=["bar.mid"]).read_text().startswith("<?xml")
     with pytest.raises(NcgenError, match="expected marker names or"):
         plot(spatial, tmp_path / "q.png", points=[3])
     with pytest.raises(NcgenError, match="no marker named"):
         plot(spatial, tmp_path / "q.png", points=["nope"])
-    with pytest.raises(NcgenError, match=".png"):
+    with pytest.raises(NcgenError, match=".png, .pdf, .svg"):
         plot(spatial, tmp_path / "p.jpg")
 
 

@@ -20,13 +20,12 @@ written to a temporary sibling and renamed, so a reader never sees a partial fil
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from ncgen.errors import NcgenError
+from ncgen.files import atomic_path
 from ncgen.runtime import outputs
 
 NAME_KEYS = ("coordinate_names", "constraint_names", "input_names", "parameter_names",
@@ -148,15 +147,8 @@ class Trajectory:
             raise NcgenError(f"save: {path}: expected a .npz or .csv file name")
         writer = self._write_npz if suffix == ".npz" else self._write_csv
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                writer(fh)
-            os.chmod(tmp, 0o666 & ~_umask())
-            os.replace(tmp, path)
-        except BaseException:
-            os.unlink(tmp)
-            raise
+        with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+            writer(fh)
         return path
 
     def _write_npz(self, fh) -> None:
@@ -195,12 +187,6 @@ class Trajectory:
                              f"{names['coordinate_names'][:4]}...; the model given is {model.name!r} "
                              f"with {list(model.coordinate_names)[:4]}...")
         return cls(model_name=name, names=names, info=info, model=model, **arrays)
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
 
 
 def _json_default(x):

@@ -14,7 +14,8 @@ from pathlib import Path
 from matplotlib.animation import FFMpegWriter, PillowWriter
 
 from ncgen.errors import NcgenError
-from ncgen.viz.draw import SceneArtists, atomic_output, figure, scene_axes
+from ncgen.files import atomic_path
+from ncgen.viz.draw import SceneArtists, figure, scene_axes
 from ncgen.viz.scene import scene
 
 MAX_FPS = 30
@@ -44,10 +45,9 @@ def animate(traj, path, *, max_frames: int = 150, fps: float | None = None, size
     fig.suptitle(traj.model_name)
     writer = PillowWriter(fps=fps) if suffix == ".gif" else FFMpegWriter(fps=fps)
 
-    def write(tmp: str) -> None:
-        with writer.saving(fig, tmp, dpi):
-            for k in frames:                  # one draw per frame (FuncAnimation would draw twice)
-                artists.show(k, float(traj.t[k]))
-                writer.grab_frame()
-
-    return atomic_output(path, write)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp, writer.saving(fig, str(tmp), dpi):
+        for k in frames:                      # one draw per frame (FuncAnimation would draw twice)
+            artists.show(k, float(traj.t[k]))
+            writer.grab_frame()
+    return path

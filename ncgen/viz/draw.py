@@ -2,10 +2,6 @@
 no pyplot, no change to matplotlib's global backend).  Imported only when drawing."""
 from __future__ import annotations
 
-import os
-import tempfile
-from pathlib import Path
-
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
@@ -95,21 +91,3 @@ class SceneArtists:
         self.title.set_text(f"t = {t:.3f} s")
         return [*self.bars, *(a for lines in self.axes for a in lines), self.body_points, self.points,
                 self.markers, self.title]
-
-
-def atomic_output(path: Path, write) -> Path:
-    """Call ``write(tmp)`` for a temporary sibling of ``path`` (same suffix), then rename it."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    try:
-        write(tmp)
-        mask = os.umask(0)
-        os.umask(mask)
-        os.chmod(tmp, 0o666 & ~mask)
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
-    return path

@@ -1,4 +1,4 @@
-"""``plot(traj, path)``: a PNG summary of a simulation: energy drift, constraint drift and
+"""``plot(traj, path)``: a PNG (PDF, SVG) summary of a simulation: energy drift, constraint drift and
 the motion of chosen points."""
 from __future__ import annotations
 
@@ -7,19 +7,24 @@ from pathlib import Path
 import numpy as np
 
 from ncgen.errors import NcgenError
-from ncgen.viz.draw import atomic_output, figure
+from ncgen.files import atomic_path
+from ncgen.viz.draw import figure
+
+
+#: File types ``plot`` writes (by suffix).
+FORMATS = (".png", ".pdf", ".svg")
 
 
 def plot(traj, path, points=None, *, dpi: int = 100) -> Path:
-    """Write a PNG with four panels: ``E − E(t0)`` (J), the constraint drift ``|Φ|∞`` and
+    """Write a PNG (or PDF, SVG) with four panels: ``E − E(t0)`` (J), the constraint drift ``|Φ|∞`` and
     ``|A v + Φ_t|∞`` (log scale), the coordinates of ``points`` over time and their paths
     (x–y plane in 2D, a 3D view in 3D).
 
     ``points``: marker names (``"b1.tip"``) and/or ``(member, local_xyz)`` pairs; default:
     every marker of the model.  Returns the path written."""
     path = Path(path)
-    if path.suffix.lower() != ".png":
-        raise NcgenError(f"plot: {path}: expected a .png file name")
+    if path.suffix.lower() not in FORMATS:
+        raise NcgenError(f"plot: {path}: expected a file name ending in {', '.join(FORMATS)}")
     curves = _point_curves(traj, points)
     fig = figure(11, 8)
     t = traj.t
@@ -68,7 +73,10 @@ def plot(traj, path, points=None, *, dpi: int = 100) -> Path:
     fig.suptitle(f"{traj.model_name}: t = {t[0]:g} ... {t[-1]:g} s"
                  + ("" if traj.complete else "  (INCOMPLETE: the integration failed)"))
     fig.tight_layout()
-    return atomic_output(path, lambda tmp: fig.savefig(tmp, dpi=dpi, format="png"))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi, format=path.suffix.lower()[1:])
+    return path
 
 
 def _point_curves(traj, points) -> list[tuple[str, np.ndarray]]:
