@@ -116,12 +116,8 @@ class Trajectory:
         info = self.info
         lines = [f"Trajectory of model {self.model_name!r}: {len(self)} steps, "
                  f"t = {self.t[0]:g} ... {self.t[-1]:g} s"]
-        stats = info.get("stats", {})
         if info.get("method"):
-            lines.append(f"  integrator: {info['method']} ({info.get('backend', '?')} backend, "
-                         f"rtol {info.get('rtol', float('nan')):g}, atol {info.get('atol', float('nan')):g}): "
-                         f"{stats.get('nsteps', 0)} steps, {stats.get('netfails', 0)} error-test failures, "
-                         f"{info.get('wall_time', 0.0):.3g} s")
+            lines.append(f"  integrator: {info['method']} ({_settings(info)}): {_work(info)}")
         if len(self):
             scale = self.energy_scale
             rel = f" ({self.energy_drift / scale:.2g} relative)" if scale > 0 else ""
@@ -187,6 +183,19 @@ class Trajectory:
                              f"{names['coordinate_names'][:4]}...; the model given is {model.name!r} "
                              f"with {list(model.coordinate_names)[:4]}...")
         return cls(model_name=name, names=names, info=info, model=model, **arrays)
+
+
+def _settings(info: dict) -> str:
+    parts = [f"{info['backend']} backend"] if "backend" in info else []
+    parts += [f"{key} {info[key]:g}" for key in ("rtol", "atol", "h", "tol") if key in info]
+    return ", ".join(parts)
+
+
+def _work(info: dict) -> str:
+    stats = info.get("stats", {})
+    labels = {"nsteps": "steps", "netfails": "error-test failures", "newton_iterations": "Newton iterations"}
+    parts = [f"{stats[key]} {label}" for key, label in labels.items() if key in stats]
+    return ", ".join(parts + [f"{info.get('wall_time', 0.0):.3g} s"])
 
 
 def _json_default(x):
