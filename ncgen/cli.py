@@ -333,7 +333,7 @@ def _check_outputs(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
 
 @subcommand(
     "simulate",
-    help="simulate a model and save its trajectory (optionally a plot and an animation)",
+    help="simulate a model: trajectory, plot, animation",
     description=(
         "Build the model in MODEL.toml, integrate it from its consistent initial state to --t-end "
         "(inputs held at zero; use the Python API, nc.simulate(..., u=...), to drive them) and write "
@@ -385,7 +385,7 @@ def _demo_arguments(p: argparse.ArgumentParser) -> None:
 
 @subcommand(
     "demo",
-    help="the whole pipeline on a built-in model: derive, generate C, compile, simulate, check, plot",
+    help="the whole pipeline on a built-in heavy top",
     description=(
         "Run ncgen end to end on a heavy symmetric top spinning on a fixed tip (one 'ruvw' body "
         "whose tip is a ground point shared by its natural coordinates: 9 coordinates, 6 "
