@@ -1,0 +1,115 @@
+"""The constraint manifold at a configuration: consistent states and tangent projections.
+
+The transcriptions integrate the index-1 dynamics, whose invariants are ``Φ(q) = 0`` and
+``A v + Φ_t = 0``.  A full-state target ``q*`` (or ``v*``) therefore fixes only ``dof``
+independent quantities; imposing all ``nq`` components would repeat the ``nc`` invariants
+and make the NLP's constraint Jacobian rank-deficient.  Conditions on full states are
+imposed through ``Nᵀ (q − q*) = 0`` with ``N`` (nq × dof) an orthonormal basis of the null
+space of ``A`` at a reference configuration: together with the invariants they determine
+the state locally, and the rows are independent of the invariants' rows.  Only locally:
+a pendulum hanging down and upright has the same tangent coordinate, so a configuration
+condition also keeps ``q`` in a box of half-width ``BRANCH_RADIUS ×`` :func:`length_scale`
+around the target (an inequality, inactive at the solution).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ncgen.errors import OptimizationError
+
+#: Half-width of the box that selects the branch of a configuration condition, as a
+#: fraction of the shortest member dimension.
+BRANCH_RADIUS = 0.25
+
+#: Singular values of A below this fraction of the largest count as zero.
+RANK_TOL = 1e-9
+
+
+def tangent_basis(model, q, t=None, p=None) -> np.ndarray:
+    """Orthonormal basis (nq × dof) of the null space of ``A(q)``."""
+    A = np.atleast_2d(model.A(q, t=t, p=p))
+    if A.size == 0 or A.shape[0] == 0:
+        return np.eye(model.nq)
+    _, s, Vt = np.linalg.svd(A)
+    rank = int(np.sum(s > RANK_TOL * max(s[0], 1e-300)))
+    return Vt[rank:].T.copy()
+
+
+def consistent_configuration(model, q, *, t=None, p=None, what: str = "q", tolerance: float = 1e-3,
+                             max_iter: int = 50) -> np.ndarray:
+    """``q`` moved onto ``Φ = 0`` by minimum-norm Gauss–Newton steps; an
+    :class:`OptimizationError` if that needs more than ``tolerance`` × the model's size (m)."""
+    q = np.asarray(q, dtype=float).copy()
+    q_in = q.copy()
+    size = max(1.0, float(np.max(np.abs(q))) if q.size else 1.0)
+    for _ in range(max_iter):
+        r = np.atleast_1d(model.phi(q, t=t, p=p))
+        if r.size == 0 or np.max(np.abs(r)) <= 1e-14 * size ** 2:
+            break
+        q = q - np.linalg.lstsq(np.atleast_2d(model.A(q, t=t, p=p)), r, rcond=None)[0]
+    else:
+        r = np.atleast_1d(model.phi(q, t=t, p=p))
+        k = int(np.argmax(np.abs(r)))
+        raise OptimizationError(f"{what}: the constraints cannot be satisfied near the given configuration "
+                                f"({model.constraint_names[k]} keeps a residual of {abs(r[k]):.3g})")
+    dq = np.abs(q - q_in)
+    if dq.size and dq.max() > tolerance * size:
+        k = int(np.argmax(dq))
+        r0 = np.atleast_1d(model.phi(q_in, t=t, p=p))
+        worst = model.constraint_names[int(np.argmax(np.abs(r0)))]
+        raise OptimizationError(
+            f"{what}: the configuration violates the constraints ({worst} = {r0.max(initial=0):.3g}); "
+            f"making it consistent moves {model.coordinate_names[k]} by {dq[k]:.3g} m. Give a "
+            "configuration that satisfies the joints (e.g. from model.q0 or a simulation)")
+    return q
+
+
+def consistent_velocity(model, q, v, *, t=None, p=None) -> np.ndarray:
+    """The M-orthogonal projection of ``v`` onto ``A(q) v + Φ_t = 0``."""
+    A = np.atleast_2d(model.A(q, t=t, p=p))
+    v = np.asarray(v, dtype=float)
+    if A.shape[0] == 0:
+        return v.copy()
+    phi_t = np.array(model.functions["phi_t"](model.t0 if t is None else t, q,
+                                              model.p0 if p is None else p)).reshape(-1)
+    MiAT = model.mass_factor.solve_numeric(A.T)
+    return v - MiAT @ np.linalg.solve(A @ MiAT, A @ v + phi_t)
+
+
+def length_scale(model) -> float:
+    """The shortest member dimension (m): the smallest local base-vector length of any bar
+    or body (1 for unit direction vectors); 1 for a system of points."""
+    lengths = [float(np.min(np.linalg.norm(m.local.Xbar, axis=0)))
+               for m in model.system.members.values() if m.local.Xbar.size]
+    return min(lengths) if lengths else 1.0
+
+
+def resolve_configuration(model, spec, reference, *, t=None, p=None, what: str = "q") -> np.ndarray:
+    """A consistent configuration from a condition: a full ``q`` (projected), or a dict
+    ``{coordinate name: value}`` — those coordinates set in ``reference`` and kept while the
+    others are assembled onto ``Φ = 0`` (``ncgen.assemble``)."""
+    if not isinstance(spec, dict):
+        return consistent_configuration(model, spec, t=t, p=p, what=what)
+    from ncgen.assembly.kinematics import assemble
+    from ncgen.errors import NcgenError
+    q = np.asarray(reference, dtype=float).copy()
+    for name, value in spec.items():
+        q[model.coordinate_names.index(name)] = value
+    try:
+        return assemble(model, q, t=t, p=p, fix=list(spec))
+    except NcgenError as exc:
+        raise OptimizationError(f"{what}: no configuration satisfies the joints with "
+                                f"{', '.join(f'{k} = {v:g}' for k, v in spec.items())}: {exc}") from None
+
+
+def resolve_velocity(model, spec, q, *, t=None, p=None) -> np.ndarray:
+    """A velocity tangent to the constraints at ``q``: a full ``v`` (M-orthogonal
+    projection), or a dict ``{coordinate name: rate}`` — those rates kept, the others
+    nearest to zero in the kinetic-energy metric (``ncgen.project_velocity``)."""
+    if not isinstance(spec, dict):
+        return consistent_velocity(model, q, spec, t=t, p=p)
+    from ncgen.assembly.kinematics import project_velocity
+    v = np.zeros(model.nq)
+    for name, value in spec.items():
+        v[model.coordinate_names.index(name)] = value
+    return project_velocity(model, q, v, t=t, p=p, fix=list(spec))
