@@ -1,1 +1,12 @@
-"""ncgen.optim"""
+"""ncgen.optim: trajectory optimisation on a Model with ``casadi.Opti`` and IPOPT.
+
+``OptimalControl`` describes the problem (bounds, boundary conditions, costs, free
+parameters and final time); ``solve()`` transcribes it (Radau collocation by default, or
+multiple shooting with IDAS or a registered integrator) and returns an
+``OptimalTrajectory``.  See docs/optimal-control.md.
+"""
+from ncgen.optim.problem import OptimalControl
+from ncgen.optim.result import OptimalTrajectory, SolverStats
+from ncgen.optim.shooting import register_integrator
+
+__all__ = ["OptimalControl", "OptimalTrajectory", "SolverStats", "register_integrator"]

@@ -1,0 +1,141 @@
+"""Initial guesses for the NLP: rest, pose interpolation, or a previous motion.
+
+``"rest"`` holds the initial state with inputs 0 (clipped into their bounds);
+``"interpolate"`` moves every member's pose from the initial to the final configuration
+(:mod:`ncgen.optim.interpolate`), the default when ``final(q=...)`` is given.
+
+A previous motion is anything with ``t`` (s), ``q``, ``v`` (``len(t) × nq``) and optionally
+``lam`` and ``u`` (``len(t) × nu`` or ``(len(t) − 1) × nu``, held piecewise constant unless
+its ``info["hold"]`` is ``"linear"``):
+a simulation ``Trajectory`` or an :class:`~ncgen.optim.result.OptimalTrajectory`.  Its
+time span is stretched onto the horizon.  Multipliers missing from a guess are computed
+from the KKT system at the guessed states, and so are the accelerations.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ncgen.errors import OptimizationError
+from ncgen.optim.interpolate import pose_path
+from ncgen.optim.transcription import Guess
+
+
+def make_guess(ocp, warm_start, q_init: np.ndarray, v_init: np.ndarray, q_final: np.ndarray | None,
+               p: np.ndarray) -> tuple[Guess, np.ndarray]:
+    """``(guess, p_guess)`` for ``ocp``; ``q_init``, ``v_init``: the initial state to hold
+    at rest (the fixed one, or the model's); ``q_final``: the consistent final
+    configuration, if one is imposed."""
+    model = ocp.model
+    T = guess_duration(ocp, warm_start)
+    t0 = ocp.t0
+    u_rest = np.clip(np.zeros(model.nu), ocp.u_bounds[0], ocp.u_bounds[1])
+    bad = ~np.isfinite(u_rest)
+    u_rest[bad] = 0.0
+    if warm_start is None:
+        warm_start = "interpolate" if q_final is not None else "rest"
+    if isinstance(warm_start, str) and warm_start == "rest":
+        q_of = _constant(q_init)
+        v_of = _constant(v_init)
+        u_of = _constant(u_rest)
+        lam_of = None
+    elif isinstance(warm_start, str) and warm_start == "interpolate":
+        qf = q_final
+        if qf is None:
+            raise OptimizationError('warm_start="interpolate" needs a final configuration (final(q=...))')
+        tg = t0 + T * np.linspace(0.0, 1.0, 2 * ocp.N + 1)
+        qg = pose_path(model, q_init, qf, (tg - t0) / T, t=t0, p=p)
+        vg = np.gradient(qg, tg, axis=0)
+        q_of, v_of, _, _ = _from_motion(_Samples(tg, qg, vg), model, t0, T, u_rest)
+        u_of = _constant(u_rest)
+        lam_of = None
+    elif isinstance(warm_start, str):
+        raise OptimizationError(f'warm_start: expected "rest", "interpolate", a Trajectory or a previous '
+                                f"solution, got {warm_start!r}")
+    else:
+        q_of, v_of, lam_of, u_of = _from_motion(warm_start, model, t0, T, u_rest)
+    a_of, lam_kkt = _kkt(model, q_of, v_of, u_of, p)
+    lam_of = lam_kkt if lam_of is None else lam_of
+    p_guess = p.copy()
+    wp = getattr(warm_start, "p", None)
+    if wp is not None and np.size(wp) == p.size:
+        for i in ocp.p_free:
+            p_guess[i] = float(np.asarray(wp).reshape(-1)[i])
+    for i, (lo, hi) in ocp.p_free.items():
+        p_guess[i] = float(np.clip(p_guess[i], lo, hi))
+    return Guess(T=T, q=q_of, v=v_of, a=a_of, lam=lam_of, u=u_of), p_guess
+
+
+class _Samples:
+    def __init__(self, t, q, v):
+        self.t, self.q, self.v = t, q, v
+
+
+def guess_duration(ocp, warm_start) -> float:
+    """The horizon of the guess (s): the fixed one, or the warm start's clipped into the
+    bounds of a free final time (their midpoint without a warm start)."""
+    if ocp.t_final_bounds is None:
+        return ocp.t_final
+    t = getattr(warm_start, "t", None)
+    T = float(t[-1] - t[0]) if t is not None and len(t) > 1 else ocp.t_final
+    lo, hi = ocp.t_final_bounds
+    return float(np.clip(T, lo, hi))
+
+
+def _constant(x: np.ndarray):
+    x = np.asarray(x, dtype=float)
+
+    def f(t):
+        return np.tile(x, (len(np.atleast_1d(t)), 1))
+    return f
+
+
+def _from_motion(m, model, t0: float, T: float, u_rest: np.ndarray):
+    try:
+        tw = np.asarray(m.t, dtype=float).reshape(-1)
+        qw = np.asarray(m.q, dtype=float)
+        vw = np.asarray(m.v, dtype=float)
+    except AttributeError:
+        raise OptimizationError(f"warm_start: expected an object with t, q and v (a Trajectory or a previous "
+                                f"solution), got {type(m).__name__}") from None
+    n = tw.size
+    if n < 2 or qw.shape != (n, model.nq) or vw.shape != (n, model.nq):
+        raise OptimizationError(f"warm_start: expected t (n ≥ 2), q and v of shape (n, {model.nq}); got "
+                                f"t {tw.shape}, q {qw.shape}, v {vw.shape}")
+
+    def to_w(t):
+        return tw[0] + (np.asarray(t, dtype=float) - t0) / T * (tw[-1] - tw[0])
+
+    def sampled(X):
+        def f(t):
+            s = to_w(np.atleast_1d(t))
+            return np.column_stack([np.interp(s, tw, X[:, i]) for i in range(X.shape[1])]) \
+                if X.shape[1] else np.zeros((s.size, 0))
+        return f
+
+    lam = getattr(m, "lam", None)
+    lam_of = sampled(np.asarray(lam, float)) if lam is not None and np.shape(lam) == (n, model.nc) else None
+    u = getattr(m, "u", None)
+    u = None if u is None else np.asarray(u, dtype=float).reshape(-1, model.nu) if model.nu else None
+    linear = getattr(m, "info", {}).get("hold") == "linear"
+    if u is not None and (u.shape[0] == n - 1 or (u.shape[0] == n and not linear)):
+        def u_of(t):
+            s = to_w(np.atleast_1d(t))
+            k = np.clip(np.searchsorted(tw, s, side="right") - 1, 0, n - 2)
+            return u[k]
+    elif u is not None and u.shape[0] == n:
+        u_of = sampled(u)
+    else:
+        u_of = _constant(u_rest)
+    return sampled(qw), sampled(vw), lam_of, u_of
+
+
+def _kkt(model, q_of, v_of, u_of, p):
+    """Accelerations and multipliers of the guessed states from the KKT system."""
+    accel = model.functions["accel"]
+
+    def solve(t):
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        a, lam = accel.map(t.size)(t[None, :], q_of(t).T, v_of(t).T, u_of(t).T, p)
+        return np.array(a).reshape(model.nq, t.size).T, np.array(lam).reshape(model.nc, t.size).T
+
+    return (lambda t: solve(t)[0]), (lambda t: solve(t)[1])

@@ -1,0 +1,404 @@
+"""From an :class:`~ncgen.optim.problem.OptimalControl` to a solved ``casadi.Opti`` NLP.
+
+Constraint handling (why the equality-constraint Jacobian has full row rank):
+
+* the transcription imposes the index-1 dynamics only (ODE + algebraic equation for λ,
+  Baumgarte terms included); their rows are nonsingular in the interval unknowns;
+* the invariants ``Φ(q) = 0`` and ``A v + Φ_t = 0`` are imposed once, at the initial
+  node, and only where the initial state is a decision variable (a fixed initial state is
+  projected onto the constraints and enters as a constant);
+* full-state final and periodic conditions impose their ``dof`` tangent components
+  ``Nᵀ (x_N − x*)`` (:mod:`ncgen.optim.manifold`), never the ``nc`` components the
+  dynamics already keep; a box around the target (inequalities, inactive at the
+  solution) selects the branch;
+* bounds on inputs, states, parameters and the final time are simple variable bounds
+  (``detect_simple_bounds``), so they never enter the constraint Jacobian.
+
+Every constraint group is recorded with a label so that a failure can name the group
+violated most at the last iterate.
+"""
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ncgen.errors import OptimizationError
+from ncgen.optim.guess import guess_duration, make_guess
+from ncgen.optim.manifold import (BRANCH_RADIUS, consistent_configuration, length_scale, resolve_configuration,
+                                  resolve_velocity, tangent_basis)
+from ncgen.optim.problem import MODEL_STATE
+from ncgen.optim.result import OptimalTrajectory, SolverStats
+from ncgen.optim.transcription import Horizon
+
+SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+
+
+@dataclass
+class Group:
+    """A labelled block of constraints ``lb ≤ expr ≤ ub`` (``kind``: dynamics, invariant,
+    initial, final, periodic, path, bound)."""
+
+    label: str
+    kind: str
+    expr: object
+    lb: np.ndarray
+    ub: np.ndarray
+
+
+class NLP:
+    """The built problem: ``opti``, the constraint ``groups``, the discretisation ``disc``,
+    the final time ``T`` and parameter vector ``p`` (MX or numbers)."""
+
+    def __init__(self, ocp):
+        self.ocp = ocp
+        self.model = ocp.model
+        self.opti = ca.Opti()
+        self.groups: list[Group] = []
+        self.x_opt: np.ndarray | None = None
+
+    # ------------------------------------------------------------ constraints
+    def constrain(self, label: str, kind: str, expr, lb=0.0, ub=0.0):
+        expr = ca.vec(expr)
+        n = expr.shape[0]
+        if n == 0:
+            return
+        lb = np.broadcast_to(np.asarray(lb, dtype=float), (n,)).copy()
+        ub = np.broadcast_to(np.asarray(ub, dtype=float), (n,)).copy()
+        keep = np.isfinite(lb) | np.isfinite(ub)
+        if not keep.all():
+            idx = [int(i) for i in np.flatnonzero(keep)]
+            if not idx:
+                return
+            expr, lb, ub = expr[idx], lb[idx], ub[idx]
+        if np.array_equal(lb, ub):
+            self.opti.subject_to(expr == ca.DM(lb))
+        else:
+            self.opti.subject_to(self.opti.bounded(ca.DM(lb), expr, ca.DM(ub)))
+        self.groups.append(Group(label, kind, expr, lb, ub))
+
+    # ------------------------------------------------------------------ build
+    def build(self, warm_start):
+        ocp, model, opti = self.ocp, self.model, self.opti
+        f = model.functions
+        t0 = ocp.t0
+        # final time and parameters
+        if ocp.t_final_bounds is None:
+            self.T = ocp.t_final
+        else:
+            self.T = opti.variable()
+            self.constrain("bound on the final time", "bound", self.T, *ocp.t_final_bounds)
+        p_num = ocp.p_values.copy()
+        if ocp.p_free:
+            free = sorted(ocp.p_free)
+            self.p_var = opti.variable(len(free))
+            entries = [self.p_var[free.index(i)] if i in ocp.p_free else ca.MX(p_num[i])
+                       for i in range(model.np)]
+            self.p = ca.vertcat(*entries)
+            lo = [ocp.p_free[i][0] for i in free]
+            hi = [ocp.p_free[i][1] for i in free]
+            self.constrain("bounds on the free parameters", "bound", self.p_var, lo, hi)
+        else:
+            self.p_var = None
+            self.p = ca.DM(p_num)
+        # initial node
+        q_init, v_init = self._initial_state(p_num)
+        tN = t0 + guess_duration(ocp, warm_start)
+        self.q_final = None if ocp.final_spec["q"] is None else resolve_configuration(
+            model, ocp.final_spec["q"], model.q0 if q_init is None else q_init, t=tN, p=p_num, what="final q")
+        guess, p_guess = make_guess(ocp, warm_start,
+                                    model.q0 if q_init is None else q_init,
+                                    np.zeros(model.nq) if v_init is None else v_init, self.q_final, p_num)
+        self.guess = guess
+        self.q0 = opti.variable(model.nq) if q_init is None else ca.DM(q_init)
+        self.v0 = opti.variable(model.nq) if v_init is None else ca.DM(v_init)
+        hz = Horizon(t0=t0, T=self.T, p=self.p, q0=self.q0, v0=self.v0, N=ocp.N)
+        self.disc = disc = ocp.transcription.build(opti, model, hz)
+        for label, e in disc.defects:
+            self.constrain(label, "dynamics", e)
+        if q_init is None:
+            self.constrain("initial position invariant Φ(q₀) = 0", "invariant", f["phi"](t0, self.q0, self.p))
+        if q_init is None or v_init is None:
+            vel = ca.mtimes(f["A"](t0, self.q0, self.p), self.v0) + f["phi_t"](t0, self.q0, self.p)
+            if ca.symvar(vel):
+                self.constrain("initial velocity invariant A(q₀) v₀ + Φ_t = 0", "invariant", vel)
+        self._markers_at("initial", 0, ocp.initial_spec["markers"])
+        self._final_conditions(guess, q_init, p_num)
+        self._bounds(q_init, v_init)
+        self._path()
+        opti.minimize(self._objective())
+        # initial values
+        disc.set_guess(opti, guess)
+        g0 = np.array([t0])
+        if q_init is None:
+            opti.set_initial(self.q0, guess.q(g0)[0])
+        if v_init is None:
+            opti.set_initial(self.v0, guess.v(g0)[0])
+        if ocp.t_final_bounds is not None:
+            opti.set_initial(self.T, guess.T)
+        if self.p_var is not None:
+            opti.set_initial(self.p_var, [p_guess[i] for i in sorted(ocp.p_free)])
+
+    def _initial_state(self, p_num):
+        ocp, model = self.ocp, self.model
+        spec = ocp.initial_spec
+        q, v = spec["q"], spec["v"]
+        if q is MODEL_STATE:
+            q = model.q0
+        elif q is not None:
+            q = resolve_configuration(model, q, model.q0, t=ocp.t0, p=p_num, what="initial q")
+        if v is MODEL_STATE:
+            v = model.v0
+        elif isinstance(v, dict) and q is None:
+            raise OptimizationError("initial v given by coordinate names needs a fixed initial q")
+        if v is not None and q is not None:
+            vp = resolve_velocity(model, v, q, t=ocp.t0, p=p_num)
+            if not isinstance(v, dict) and np.max(np.abs(vp - v), initial=0.0) > 1e-6 * max(1.0, float(np.max(np.abs(v)))):
+                k = int(np.argmax(np.abs(vp - v)))
+                raise OptimizationError(f"initial v is not tangent to the constraints at the initial q: "
+                                        f"{model.coordinate_names[k]} would change by {vp[k] - v[k]:.3g} m/s")
+            v = vp
+        if q is not None and self.p_var is not None:
+            dep = ca.jacobian(model.functions["phi"](ocp.t0, ca.DM(q), self.p), self.p_var)
+            if dep.nnz():
+                raise OptimizationError("a free parameter enters the constraints Φ, so a fixed initial q "
+                                        "cannot be consistent for every value: leave the initial q free")
+        return q, v
+
+    def _markers_at(self, when: str, node: int, markers):
+        if not markers:
+            return
+        disc = self.disc
+        r, _ = self.model.functions["markers"](disc.q[:, node], disc.v[:, node])
+        for name, target in markers:
+            j = self.model.marker_names.index(name)
+            comp = [int(i) for i in np.flatnonzero(~np.isnan(target))]
+            self.constrain(f"{when} marker {name!r}", when, r[comp, j] - ca.DM(target[comp]))
+
+    def _final_conditions(self, guess, q_init, p_num):
+        ocp, model, disc = self.ocp, self.model, self.disc
+        spec, per = ocp.final_spec, ocp.periodic_spec
+        tN = ocp.t0 + guess.T
+        qN, vN = disc.q[:, -1], disc.v[:, -1]
+        radius = BRANCH_RADIUS * length_scale(model)
+        q_ref = None
+        if self.q_final is not None:
+            q_ref = self.q_final
+            N = tangent_basis(model, q_ref, t=tN, p=p_num)
+            self.constrain("final q (tangent components)", "final", ca.mtimes(N.T, qN - ca.DM(q_ref)))
+            self.constrain("final q (branch box)", "final", qN, q_ref - radius, q_ref + radius)
+        if spec["v"] is not None:
+            if q_ref is None:
+                q_ref = consistent_configuration(model, guess.q(np.array([tN]))[0], t=tN, p=p_num,
+                                                 what="final configuration of the initial guess", tolerance=1.0)
+            v_ref = resolve_velocity(model, spec["v"], q_ref, t=tN, p=p_num)
+            N = tangent_basis(model, q_ref, t=tN, p=p_num)
+            self.constrain("final v (tangent components)", "final", ca.mtimes(N.T, vN - ca.DM(v_ref)))
+        self._markers_at("final", -1, spec["markers"])
+        if per["q"] or per["v"]:
+            q_ref = q_init if q_init is not None else consistent_configuration(
+                model, guess.q(np.array([ocp.t0]))[0], t=ocp.t0, p=p_num,
+                what="initial configuration of the initial guess", tolerance=1.0)
+            N = ca.DM(tangent_basis(model, q_ref, t=ocp.t0, p=p_num))
+            if per["q"]:
+                self.constrain("periodic q (tangent components)", "periodic", ca.mtimes(N.T, qN - disc.q[:, 0]))
+                self.constrain("periodic q (branch box)", "periodic", qN - disc.q[:, 0], -radius, radius)
+            if per["v"]:
+                self.constrain("periodic v (tangent components)", "periodic", ca.mtimes(N.T, vN - disc.v[:, 0]))
+
+    def _bounds(self, q_init, v_init):
+        ocp, model, disc = self.ocp, self.model, self.disc
+        for i, name in enumerate(_component_names(model.input_names, model.input_sizes)):
+            lo, hi = ocp.u_bounds[:, i]
+            self.constrain(f"bound on input {name}", "bound", disc.U[i, :], lo, hi)
+        for x, x0, fixed, bounds, what in ((disc.path_q, self.q0, q_init, ocp.q_bounds, "coordinate"),
+                                           (disc.path_v, self.v0, v_init, ocp.v_bounds, "velocity of")):
+            for i, name in enumerate(model.coordinate_names):
+                lo, hi = bounds[:, i]
+                if not (np.isfinite(lo) or np.isfinite(hi)):
+                    continue
+                self.constrain(f"bound on {what} {name}", "bound", x[i, :], lo, hi)
+                if fixed is None:
+                    self.constrain(f"bound on {what} {name} (initial node)", "bound", x0[i], lo, hi)
+                elif not lo - 1e-12 <= fixed[i] <= hi + 1e-12:
+                    raise OptimizationError(f"the initial state violates the bound on {what} {name}: "
+                                            f"{fixed[i]:.6g} is outside [{lo:.6g}, {hi:.6g}]")
+
+    def _path(self):
+        ocp, model, disc = self.ocp, self.model, self.disc
+        if not ocp.marker_bounds:
+            return
+        nm = len(model.marker_names)
+        npts = disc.path_q.shape[1]
+        r, _ = model.functions["markers"].map(npts)(disc.path_q, disc.path_v)
+        for name, lo, hi in ocp.marker_bounds:
+            j = model.marker_names.index(name)
+            cols = list(range(j, nm * npts, nm))
+            for c in range(model.dim):
+                if np.isfinite(lo[c]) or np.isfinite(hi[c]):
+                    self.constrain(f"path constraint on marker {name!r} ({'xyz'[c]})", "path",
+                                   r[c, cols], lo[c], hi[c])
+
+    def _objective(self):
+        ocp, model, disc = self.ocp, self.model, self.disc
+        J = ca.MX(0)
+        h = self.T / ocp.N
+        if ocp.effort_R is not None and model.nu:
+            J += h * ca.sum1(ca.sum2(disc.U * ca.mtimes(ca.DM(ocp.effort_R), disc.U)))
+        if ocp.tracking:
+            nm = len(model.marker_names)
+            npts = disc.quad_q.shape[1]
+            r, _ = model.functions["markers"].map(npts)(disc.quad_q, disc.quad_v)
+            ref_t = disc.quad_t
+            for name, ref, w in ocp.tracking:
+                j = model.marker_names.index(name)
+                R = _reference(ref, ref_t, model.dim, name)
+                err = r[:, list(range(j, nm * npts, nm))] - R
+                J += w * ca.sum2(disc.quad_w * ca.sum1(err * err))
+        for label, term in ocp.terminal:
+            qN, vN = disc.q[:, -1], disc.v[:, -1]
+            if term[0] == "marker":
+                _, name, target, w = term
+                j = model.marker_names.index(name)
+                r, _ = model.functions["markers"](qN, vN)
+                comp = [int(i) for i in np.flatnonzero(~np.isnan(target))]
+                J += w * ca.sumsqr(r[comp, j] - ca.DM(target[comp]))
+            else:
+                _, fn, w = term
+                val = fn(qN, vN, self.p)
+                if not isinstance(val, (ca.MX, ca.DM, float, int)) or ca.MX(val).numel() != 1:
+                    raise OptimizationError(f"{label}: fn(q, v, p) must return a scalar CasADi expression")
+                J += w * val
+        if ocp.time_weight:
+            J += ocp.time_weight * self.T
+        return J
+
+    # ------------------------------------------------------------------ solve
+    def solve(self, *, max_iter: int, tol: float, verbose: bool, ipopt: dict):
+        ocp, opti = self.ocp, self.opti
+        options = {"tol": tol, "max_iter": max_iter, "print_level": 5 if verbose else 0, "sb": "yes",
+                   "hessian_approximation": ocp.transcription.hessian, **ipopt}
+        opti.solver("ipopt", {"expand": self.disc.expandable, "detect_simple_bounds": True,
+                              "print_time": False, "ipopt": options})
+        start = time.perf_counter()
+        sol = opti.solve_limited()
+        self.solve_time = time.perf_counter() - start
+        self.sol = sol
+        self.x_opt = np.array(sol.value(opti.x)).reshape(-1)
+        return sol
+
+
+def build_and_solve(ocp, warm_start, *, max_iter: int, tol: float, verbose: bool, ipopt: dict):
+    start = time.perf_counter()
+    nlp = NLP(ocp)
+    nlp.build(warm_start)
+    build_time = time.perf_counter() - start
+    sol = nlp.solve(max_iter=max_iter, tol=tol, verbose=verbose, ipopt=ipopt)
+    result = extract(nlp, sol, build_time)
+    if not result.stats.success:
+        raise OptimizationError(diagnose(nlp, sol, result), result=result, status=result.stats.status)
+    if result.stats.status != "Solve_Succeeded":
+        warnings.warn(f"IPOPT: {result.stats.status} (objective {result.stats.objective:.6g}, max defect "
+                      f"{result.stats.max_defect:.2e})", stacklevel=3)
+    return result
+
+
+def extract(nlp: NLP, sol, build_time: float) -> OptimalTrajectory:
+    """The solution (or last iterate) as an :class:`OptimalTrajectory`."""
+    ocp, model, disc = nlp.ocp, nlp.model, nlp.disc
+    val = sol.value
+    T = float(val(nlp.T)) if isinstance(nlp.T, ca.MX) else float(nlp.T)
+    p = np.array(val(nlp.p)).reshape(-1) if isinstance(nlp.p, ca.MX) else np.array(nlp.p).reshape(-1)
+    t = ocp.t0 + T * np.arange(ocp.N + 1) / ocp.N
+    q = np.array(val(disc.q)).reshape(model.nq, -1).T
+    v = np.array(val(disc.v)).reshape(model.nq, -1).T
+    u = np.array(val(disc.U)).reshape(model.nu, -1).T if model.nu else np.zeros((ocp.N, 0))
+    lam_rest = np.array(val(disc.lam)).reshape(model.nc, -1).T if model.nc else np.zeros((ocp.N, 0))
+    _, lam0 = model.accel(q[0], v[0], t=t[0], u=u[0] if model.nu else None, p=p)
+    lam = np.vstack([np.atleast_1d(lam0).reshape(1, model.nc), lam_rest])
+    st = nlp.opti.stats()
+    defect = max((float(np.max(np.abs(np.array(val(e))), initial=0.0)) for _, e in disc.defects), default=0.0)
+    violation = max((_violation(val, g) for g in nlp.groups), default=0.0)
+    status = st.get("return_status", "unknown")
+    stats = SolverStats(status=status, success=bool(st.get("success", False)) or status in SUCCESS,
+                        iterations=int(st.get("iter_count", -1)), objective=float(val(nlp.opti.f)),
+                        solve_time=nlp.solve_time, build_time=build_time, max_defect=defect,
+                        max_violation=violation, n_variables=int(nlp.opti.nx), n_constraints=int(nlp.opti.ng),
+                        method=ocp.transcription.describe())
+    return OptimalTrajectory.from_solution(model, t=t, q=q, v=v, lam=lam, u=u, p=p, stats=stats, nlp=nlp)
+
+
+def diagnose(nlp: NLP, sol, result: OptimalTrajectory) -> str:
+    """A message naming IPOPT's status, the constraint groups violated most at the last
+    iterate and the inputs that sit on their bounds."""
+    status = result.stats.status
+    ranked = sorted(((_violation(sol.value, g), g) for g in nlp.groups), key=lambda x: -x[0])
+    worst = [(v, g) for v, g in ranked if v > 1e-6][:3]
+    lines = [f"IPOPT did not solve the problem: {status} after {result.stats.iterations} iterations."]
+    if status == "Infeasible_Problem_Detected":
+        lines.append("The constraints look infeasible (IPOPT converged to a point of minimal violation).")
+    if worst:
+        lines.append("Largest violations at the last iterate: " +
+                     "; ".join(f"{g.label} ({v:.3g})" for v, g in worst) + ".")
+        culprit = worst[0][1]
+        hint = {"final": "check that the final conditions are reachable within the horizon and the bounds",
+                "initial": "check that the initial conditions agree with the joints",
+                "periodic": "check that a periodic motion exists within the bounds",
+                "path": "the path constraint may contradict the initial or final conditions",
+                "dynamics": "the motion is not dynamically feasible with these bounds and horizon: loosen the "
+                            "input bounds, lengthen the horizon or refine N",
+                "invariant": "the free initial state cannot satisfy the joints with the other conditions",
+                "bound": "the bounds contradict each other"}.get(culprit.kind, "")
+        lines.append(f"Likely culprit: {culprit.label}" + (f" — {hint}." if hint else "."))
+    saturated = _saturated_inputs(nlp, result)
+    if saturated:
+        lines.append("Inputs on their bounds in most intervals: " + ", ".join(saturated) + ".")
+    if status == "Maximum_Iterations_Exceeded":
+        lines.append("Raise max_iter, or warm start from a simulation or an easier problem's solution.")
+    return "\n".join(lines)
+
+
+def _violation(value, g: Group) -> float:
+    x = np.array(value(g.expr)).reshape(-1)
+    return float(np.max(np.maximum(g.lb - x, 0) + np.maximum(x - g.ub, 0), initial=0.0))
+
+
+def _saturated_inputs(nlp: NLP, result: OptimalTrajectory) -> list[str]:
+    ocp, out = nlp.ocp, []
+    names = _component_names(nlp.model.input_names, nlp.model.input_sizes)
+    for i, name in enumerate(names):
+        lo, hi = ocp.u_bounds[:, i]
+        u = result.u[:-1, i]
+        span = max(hi - lo, 1.0) if np.isfinite(hi - lo) else 1.0
+        at = (np.abs(u - lo) < 1e-3 * span) | (np.abs(u - hi) < 1e-3 * span)
+        if at.mean() > 0.5:
+            out.append(name)
+    return out
+
+
+def _component_names(names: list[str], sizes: list[int]) -> list[str]:
+    return [n if s == 1 else f"{n}[{k}]" for n, s in zip(names, sizes) for k in range(s)]
+
+
+def _reference(ref, times, dim: int, name: str):
+    """Reference positions at the quadrature times (``dim × n``)."""
+    if not callable(ref):
+        return ca.repmat(ca.DM(ref), 1, times.shape[1])
+    if isinstance(times, ca.DM):
+        tt = np.array(times).reshape(-1)
+        vals = np.array([np.asarray(ref(float(ti)), dtype=float).reshape(-1) for ti in tt])
+        if vals.shape != (tt.size, dim):
+            raise OptimizationError(f"track_marker {name!r}: reference(t) must return {dim} numbers")
+        return ca.DM(vals.T)
+    cols = []
+    try:
+        for i in range(times.shape[1]):
+            val = ref(times[0, i])
+            cols.append(ca.vec(val if isinstance(val, ca.MX) else ca.MX(ca.DM(val))))
+    except Exception as exc:
+        raise OptimizationError(f"track_marker {name!r}: with a free final time the reference is called with "
+                                f"CasADi symbols and failed ({exc}); use casadi functions in it") from None
+    return ca.horzcat(*cols)

@@ -1,0 +1,375 @@
+"""``OptimalControl``: the user-facing description of an optimal-control problem on a Model.
+
+>>> ocp = nc.OptimalControl(model, N=60, t_final=2.0)          # or t_final=(lo, hi): free
+>>> ocp.bound_input("force", -20, 20)
+>>> ocp.initial(q=model.q0, v=0)
+>>> ocp.final(q=q_up, v=0)
+>>> ocp.minimize_effort()
+>>> sol = ocp.solve()                                          # an OptimalTrajectory
+
+Conventions: time in s; ``q`` natural coordinates (m), ``v = q̇`` (m/s); inputs ``u`` and
+parameters ``p`` in the model's units; names as in ``model.input_names``,
+``model.parameter_names`` (``"k"`` or one component ``"k[1]"``), ``model.coordinate_names``
+(``"cart.r.x"``) and ``model.marker_names`` (``"pole.tip"``).  Inputs are piecewise
+constant over the ``N`` equal intervals.  Bounds and marker path constraints hold at every
+state point of the transcription (collocation points, or shooting nodes).
+
+Boundary conditions.  Unless :meth:`initial` is called the motion starts from the model's
+initial state ``(model.q0, model.v0)``; :meth:`initial` replaces that, and what it leaves
+``None`` is free.  Full-state targets (``final(q=...)``, ``final(v=...)``,
+:meth:`periodic`) fix only the ``dof`` tangent components (see
+:mod:`ncgen.optim.manifold`); marker conditions fix the components given.
+"""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from ncgen.errors import OptimizationError
+
+METHODS = ("collocation", "shooting")
+MODEL_STATE = "model"
+
+
+class OptimalControl:
+    """An optimal-control problem on ``model`` over ``N`` intervals.
+
+    ``t_final``: horizon length (s), a number (fixed) or ``(lower, upper)`` (free final
+    time, a decision variable); ``method``: ``"collocation"`` (Radau IIA of ``degree``,
+    default 3) or ``"shooting"`` (multiple shooting with ``integrator``, default IDAS;
+    ``integrator_options`` go to its factory); ``parameters``: values replacing the
+    model's defaults (``{"k": 50.0}``).
+    """
+
+    def __init__(self, model, N: int = 50, t_final=1.0, method: str = "collocation", *, degree: int = 3,
+                 integrator: str = "idas", integrator_options: dict | None = None,
+                 parameters: dict | None = None):
+        if not isinstance(N, (int, np.integer)) or isinstance(N, bool) or N < 1:
+            raise OptimizationError(f"N: expected a positive integer number of intervals, got {N!r}")
+        if method not in METHODS:
+            raise OptimizationError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+        self.model = model
+        self.N = int(N)
+        self.method = method
+        self.t0 = float(model.t0)
+        self.t_final, self.t_final_bounds = _horizon(t_final)
+        if method == "collocation":
+            from ncgen.optim.radau import RadauCollocation
+            try:
+                self.transcription = RadauCollocation(degree)
+            except ValueError as exc:
+                raise OptimizationError(str(exc)) from None
+        else:
+            from ncgen.optim.shooting import MultipleShooting
+            self.transcription = MultipleShooting(integrator, **(integrator_options or {}))
+        nq, nu = model.nq, model.nu
+        inf = np.inf
+        self.u_bounds = np.array([[-inf] * nu, [inf] * nu]).reshape(2, nu)
+        self.q_bounds = np.array([[-inf] * nq, [inf] * nq]).reshape(2, nq)
+        self.v_bounds = self.q_bounds.copy()
+        self.p_values = model.p0.copy()
+        self.p_free: dict[int, tuple[float, float]] = {}
+        self.marker_bounds: list[tuple[str, np.ndarray, np.ndarray]] = []
+        self.initial_spec = {"q": MODEL_STATE, "v": MODEL_STATE, "markers": []}
+        self.final_spec = {"q": None, "v": None, "markers": []}
+        self.periodic_spec = {"q": False, "v": False}
+        self.effort_R: np.ndarray | None = None
+        self.tracking: list[tuple[str, object, float]] = []
+        self.terminal: list[tuple[str, object]] = []
+        self.time_weight = 0.0
+        for name, value in (parameters or {}).items():
+            self.set_parameter(name, value)
+
+    # ------------------------------------------------------------------ names
+    def input_indices(self, name: str) -> list[int]:
+        """Indices into ``u`` of input ``name`` (all components) or ``name[i]``."""
+        return _indices(name, self.model.input_names, self.model.input_sizes, "input")
+
+    def parameter_indices(self, name: str) -> list[int]:
+        return _indices(name, self.model.parameter_names, self.model.parameter_sizes, "parameter")
+
+    def coordinate_index(self, name: str) -> int:
+        names = self.model.coordinate_names
+        if name not in names:
+            raise OptimizationError(f"no coordinate named {name!r}; coordinates: {', '.join(names)}")
+        return names.index(name)
+
+    def marker_index(self, name: str) -> int:
+        names = self.model.marker_names
+        if name not in names:
+            known = ", ".join(names) or "none (add them with member.add_marker(name, local_point))"
+            raise OptimizationError(f"no marker named {name!r}; markers: {known}")
+        return names.index(name)
+
+    # ----------------------------------------------------------------- bounds
+    def bound_input(self, name: str, lower=-np.inf, upper=np.inf) -> "OptimalControl":
+        """``lower ≤ u ≤ upper`` for input ``name`` (scalars or one value per component)."""
+        idx = self.input_indices(name)
+        self.u_bounds[:, idx] = _bound_pair(lower, upper, len(idx), f"input {name!r}")
+        return self
+
+    def bound_coordinate(self, name: str, lower=-np.inf, upper=np.inf) -> "OptimalControl":
+        """``lower ≤ q_i ≤ upper`` (m) along the whole motion."""
+        i = self.coordinate_index(name)
+        self.q_bounds[:, [i]] = _bound_pair(lower, upper, 1, f"coordinate {name!r}")
+        return self
+
+    def bound_velocity(self, name: str, lower=-np.inf, upper=np.inf) -> "OptimalControl":
+        """``lower ≤ q̇_i ≤ upper`` (m/s) along the whole motion."""
+        i = self.coordinate_index(name)
+        self.v_bounds[:, [i]] = _bound_pair(lower, upper, 1, f"velocity of {name!r}")
+        return self
+
+    def bound_marker(self, name: str, lower=None, upper=None) -> "OptimalControl":
+        """Path constraint ``lower ≤ r ≤ upper`` on a marker's world position (m); each
+        bound is a ``dim``-vector whose ``None`` entries are unbounded."""
+        self.marker_index(name)
+        d = self.model.dim
+        lo = _partial(lower, d, f"bound_marker {name!r}: lower", fill=-np.inf)
+        hi = _partial(upper, d, f"bound_marker {name!r}: upper", fill=np.inf)
+        if np.any(lo > hi):
+            raise OptimizationError(f"bound_marker {name!r}: lower {lo.tolist()} exceeds upper {hi.tolist()}")
+        self.marker_bounds.append((name, lo, hi))
+        return self
+
+    def set_parameter(self, name: str, value) -> "OptimalControl":
+        """Fix parameter ``name`` at ``value`` (instead of the model's default)."""
+        idx = self.parameter_indices(name)
+        self.p_values[idx] = _values(value, len(idx), f"parameter {name!r}")
+        return self
+
+    def free_parameter(self, name: str, lower=-np.inf, upper=np.inf, guess=None) -> "OptimalControl":
+        """Make parameter ``name`` a decision variable (constant over the motion) with
+        bounds; ``guess`` defaults to its current value (clipped into the bounds)."""
+        idx = self.parameter_indices(name)
+        lo, hi = _bound_pair(lower, upper, len(idx), f"parameter {name!r}")
+        if guess is not None:
+            self.p_values[idx] = _values(guess, len(idx), f"parameter {name!r}: guess")
+        for k, i in enumerate(idx):
+            self.p_free[i] = (float(lo[k]), float(hi[k]))
+        return self
+
+    # ------------------------------------------------------ boundary conditions
+    def initial(self, q=None, v=None, marker=None) -> "OptimalControl":
+        """Initial conditions, ``None`` = free.  ``q``: a full configuration (projected onto
+        the constraints) or ``{coordinate name: value}`` (those kept, the rest assembled
+        from ``model.q0``); ``v``: full rates, a scalar such as 0, or ``{name: rate}`` (the
+        rest as small as the constraints allow); ``marker``: ``(name, position)`` or a list
+        of them, ``None`` components free (needs a free ``q``)."""
+        self.initial_spec = {"q": self._state(q, "initial q"), "v": self._state(v, "initial v"),
+                             "markers": self._markers(marker, "initial")}
+        if self.initial_spec["markers"] and self.initial_spec["q"] is not None:
+            raise OptimizationError("initial: marker conditions need a free initial configuration; "
+                                    "pass q=None together with marker=...")
+        return self
+
+    def final(self, q=None, v=None, marker=None) -> "OptimalControl":
+        """Final conditions (``None`` = free): ``q``, ``v`` targets given as in
+        :meth:`initial` (a dict ``q`` is assembled from the initial configuration; their
+        ``dof`` tangent components are imposed), ``marker``: ``(name, position)`` or a list
+        of them.  ``v`` without ``q`` is taken in the tangent space of the guess's final
+        configuration: exact for ``v=0``."""
+        self.final_spec = {"q": self._state(q, "final q"), "v": self._state(v, "final v"),
+                           "markers": self._markers(marker, "final")}
+        self._check_periodic()
+        return self
+
+    def periodic(self, q: bool = True, v: bool = True) -> "OptimalControl":
+        """The final state equals the initial one (tangent components); frees the initial
+        state unless :meth:`initial` fixed it."""
+        self.periodic_spec = {"q": bool(q), "v": bool(v)}
+        if self.initial_spec["q"] is MODEL_STATE and q:
+            self.initial_spec["q"] = None
+        if self.initial_spec["v"] is MODEL_STATE and v:
+            self.initial_spec["v"] = None
+        self._check_periodic()
+        return self
+
+    def _check_periodic(self):
+        for key in ("q", "v"):
+            if self.periodic_spec[key] and self.final_spec[key] is not None:
+                raise OptimizationError(f"final {key} and periodic {key} both given: the final {key} would "
+                                        "be imposed twice; keep one of them")
+
+    def _state(self, x, what: str):
+        if x is None:
+            return None
+        if isinstance(x, dict):
+            out = {}
+            for name, value in x.items():
+                self.coordinate_index(name)
+                out[name] = float(_values(value, 1, f"{what}: {name}")[0])
+            if not out:
+                raise OptimizationError(f"{what}: an empty table; give coordinate values or None")
+            return out
+        if isinstance(x, str):
+            raise OptimizationError(f"{what}: expected numbers or None, got {x!r}")
+        a = np.asarray(x, dtype=float)
+        if a.ndim == 0:
+            a = np.full(self.model.nq, float(a))
+        if a.shape != (self.model.nq,) or not np.all(np.isfinite(a)):
+            raise OptimizationError(f"{what}: expected {self.model.nq} finite numbers "
+                                    f"({', '.join(self.model.coordinate_names)}), got shape {a.shape}")
+        return a
+
+    def _markers(self, spec, what: str) -> list[tuple[str, np.ndarray]]:
+        if spec is None:
+            return []
+        if isinstance(spec, tuple) and len(spec) == 2 and isinstance(spec[0], str):
+            spec = [spec]
+        out = []
+        for item in spec:
+            if not (isinstance(item, (tuple, list)) and len(item) == 2 and isinstance(item[0], str)):
+                raise OptimizationError(f"{what} marker: expected (name, position), got {item!r}")
+            name, pos = item
+            self.marker_index(name)
+            target = _partial(pos, self.model.dim, f"{what} marker {name!r}", fill=np.nan)
+            if np.all(np.isnan(target)):
+                raise OptimizationError(f"{what} marker {name!r}: every component is None; give at least one")
+            out.append((name, target))
+        return out
+
+    # ------------------------------------------------------------------ costs
+    def minimize_effort(self, weight=1.0) -> "OptimalControl":
+        """Add ``∫ uᵀ R u dt``: ``weight`` a number (``R = weight I``), a dict of per-input
+        weights (``{"force": 0.1}``, others 0) or an ``nu × nu`` matrix."""
+        nu = self.model.nu
+        if isinstance(weight, dict):
+            R = np.zeros((nu, nu))
+            for name, w in weight.items():
+                idx = self.input_indices(name)
+                R[idx, idx] = _values(w, len(idx), f"effort weight of {name!r}")
+        else:
+            w = np.asarray(weight, dtype=float)
+            R = w * np.eye(nu) if w.ndim == 0 else w
+        if R.shape != (nu, nu) or not np.allclose(R, R.T) or np.any(np.linalg.eigvalsh(R) < -1e-12):
+            raise OptimizationError(f"minimize_effort: expected a non-negative weight or a symmetric positive "
+                                    f"semidefinite {nu}×{nu} matrix, got {weight!r}")
+        self.effort_R = R if self.effort_R is None else self.effort_R + R
+        return self
+
+    def track_marker(self, name: str, reference, weight: float = 1.0) -> "OptimalControl":
+        """Add ``weight ∫ |r(t) − r_ref(t)|² dt`` (m²·s); ``reference``: a position or a
+        callable ``t -> position`` (called with numbers; with a free final time with CasADi
+        symbols, so use ``casadi`` functions in it)."""
+        self.marker_index(name)
+        if not callable(reference):
+            reference = _values(reference, self.model.dim, f"track_marker {name!r}: reference")
+        self.tracking.append((name, reference, _weight(weight, f"track_marker {name!r}")))
+        return self
+
+    def minimize_terminal(self, fn=None, *, marker=None, weight: float = 1.0) -> "OptimalControl":
+        """Add a terminal cost: ``weight · fn(q_N, v_N, p)`` (a CasADi scalar), or with
+        ``marker=(name, target)`` the squared distance ``weight |r(q_N) − target|²``."""
+        w = _weight(weight, "minimize_terminal")
+        if marker is not None:
+            (name, target), = self._markers(marker, "minimize_terminal")
+            self.terminal.append((f"terminal marker {name!r}", ("marker", name, target, w)))
+        elif callable(fn):
+            self.terminal.append((f"terminal cost {getattr(fn, '__name__', 'fn')}", ("fn", fn, w)))
+        else:
+            raise OptimizationError("minimize_terminal: give fn(q, v, p) or marker=(name, target)")
+        return self
+
+    def minimize_time(self, weight: float = 1.0) -> "OptimalControl":
+        """Add ``weight · T``; needs a free final time (``t_final=(lower, upper)``)."""
+        if self.t_final_bounds is None:
+            raise OptimizationError("minimize_time: the final time is fixed; pass t_final=(lower, upper)")
+        self.time_weight += _weight(weight, "minimize_time")
+        return self
+
+    # ------------------------------------------------------------------ solve
+    def solve(self, warm_start=None, *, max_iter: int = 1000, tol: float = 1e-8, verbose: bool = False,
+              ipopt: dict | None = None):
+        """Solve with IPOPT and return an :class:`~ncgen.optim.result.OptimalTrajectory`.
+
+        ``warm_start``: ``"rest"`` (the initial state held, inputs 0 clipped into their
+        bounds), ``"interpolate"`` (every member's pose moved from the initial to the final
+        configuration; the default when ``final(q=...)`` is given, else ``"rest"``), a
+        simulation ``Trajectory`` or a previous solution (times rescaled to the horizon).
+        ``tol``: IPOPT's tolerance; ``ipopt``: extra IPOPT options.  Raises
+        :class:`~ncgen.errors.OptimizationError` when IPOPT fails (with the last iterate
+        as ``exc.result``)."""
+        from ncgen.optim.nlp import build_and_solve
+        return build_and_solve(self, warm_start, max_iter=max_iter, tol=tol, verbose=verbose,
+                               ipopt=dict(ipopt or {}))
+
+    def __repr__(self) -> str:
+        T = self.t_final if self.t_final_bounds is None else f"free in {self.t_final_bounds}"
+        return (f"<OptimalControl on {self.model.name!r}: N={self.N}, T={T}, "
+                f"{self.transcription.describe()}>")
+
+
+def _horizon(t_final):
+    if np.ndim(t_final) == 0:
+        T = float(t_final)
+        if not np.isfinite(T) or T <= 0:
+            raise OptimizationError(f"t_final: expected a positive duration (s), got {t_final!r}")
+        return T, None
+    b = np.asarray(t_final, dtype=float).reshape(-1)
+    if b.size != 2 or not np.all(np.isfinite(b)) or not 0 < b[0] < b[1]:
+        raise OptimizationError(f"t_final: expected a duration or (lower, upper) with 0 < lower < upper, "
+                                f"got {t_final!r}")
+    return float(b.mean()), (float(b[0]), float(b[1]))
+
+
+def _indices(name: str, names: list[str], sizes: list[int], what: str) -> list[int]:
+    m = re.fullmatch(r"([A-Za-z_]\w*)(?:\[(\d+)\])?", name) if isinstance(name, str) else None
+    if m is None or m.group(1) not in names:
+        raise OptimizationError(f"no {what} named {name!r}; {what}s: {', '.join(names) or 'none'}")
+    i = names.index(m.group(1))
+    start = int(sum(sizes[:i]))
+    if m.group(2) is None:
+        return list(range(start, start + sizes[i]))
+    k = int(m.group(2))
+    if k >= sizes[i]:
+        raise OptimizationError(f"{what} {name!r}: {m.group(1)} has {sizes[i]} component(s)")
+    return [start + k]
+
+
+def _values(x, n: int, what: str) -> np.ndarray:
+    a = np.asarray(x, dtype=float).reshape(-1)
+    if a.size == 1:
+        a = np.full(n, a[0])
+    if a.size != n or not np.all(np.isfinite(a)):
+        raise OptimizationError(f"{what}: expected {n} finite number(s), got {x!r}")
+    return a
+
+
+def _bound_pair(lower, upper, n: int, what: str) -> np.ndarray:
+    out = []
+    for b, name in ((lower, "lower"), (upper, "upper")):
+        a = np.asarray(-np.inf if b is None and name == "lower" else np.inf if b is None else b,
+                       dtype=float).reshape(-1)
+        if a.size == 1:
+            a = np.full(n, a[0])
+        if a.size != n or np.any(np.isnan(a)):
+            raise OptimizationError(f"{what}: {name} bound: expected {n} number(s), got {b!r}")
+        out.append(a)
+    if np.any(out[0] > out[1]):
+        raise OptimizationError(f"{what}: lower bound {out[0].tolist()} exceeds upper bound {out[1].tolist()}")
+    return np.array(out)
+
+
+def _partial(x, d: int, what: str, fill: float) -> np.ndarray:
+    """A ``d``-vector whose ``None`` entries become ``fill``."""
+    if x is None:
+        return np.full(d, fill)
+    items = list(x) if isinstance(x, (list, tuple, np.ndarray)) else None
+    if items is None or len(items) != d:
+        raise OptimizationError(f"{what}: expected {d} components (None where free), got {x!r}")
+    try:
+        given = [None if e is None else float(e) for e in items]
+    except (TypeError, ValueError):
+        given = [np.nan]
+    if any(e is not None and not np.isfinite(e) for e in given):
+        raise OptimizationError(f"{what}: components must be finite numbers or None, got {x!r}")
+    return np.array([fill if e is None else e for e in given])
+
+
+def _weight(w, what: str) -> float:
+    w = float(w)
+    if not np.isfinite(w) or w < 0:
+        raise OptimizationError(f"{what}: weight: expected a non-negative number, got {w!r}")
+    return w
