@@ -15,6 +15,7 @@ from ncgen.model.joints import (
 from ncgen.model.members import ModelError
 from ncgen.model.model import Model
 from ncgen.model.system import System
+from ncgen.optim import OptimalControl, OptimalTrajectory
 from ncgen.runtime import Trajectory, simulate
 from ncgen.symbolic.coordinates import coordinate_type
 
@@ -22,7 +23,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "CoordinateDriver", "Cylindrical", "Distance", "Fixed", "Force", "GeneralizedForce", "Joint", "Model",
-    "ModelError", "NcgenError", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic",
+    "ModelError", "NcgenError", "OptimalControl", "OptimalTrajectory", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic",
     "Revolute", "Spherical", "Spring", "System", "Torque", "TorsionalSpring", "Trajectory", "Universal",
     "assemble", "coordinate_type", "dof_report", "generate", "project_velocity", "simulate", "solve_kinematics",
     "__version__",
