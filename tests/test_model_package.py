@@ -207,3 +207,16 @@ def test_replaces_an_older_package(tmp_path):
     pkg = nc.generate(example("heavy_top"), tmp_path / "pkg")
     assert pkg.name == "heavy_top" and (tmp_path / "pkg" / "heavy_top.h").is_file()
     assert not (tmp_path / "pkg" / "chain.h").exists()
+
+
+@needs_cc
+@pytest.mark.skipif(shutil.which("make") is None, reason="no make")
+def test_main_c_builds_without_constraints_parameters_or_markers(tmp_path):
+    """Empty metadata arrays (no p0, no lam0) are not C definitions: main.c uses zeros."""
+    s = nc.System("free", gravity=(0.0, 0.0, -9.81))
+    s.add_point("ball", mass=1.0, position=(0.0, 0.0, 0.0), velocity=(1.0, 0.0, 0.0))
+    pkg = nc.generate(s.build(), tmp_path / "free")
+    assert "Default: free_p0" not in (pkg.path / "free.h").read_text()
+    subprocess.run(["make", "-s"], cwd=pkg.path, check=True, capture_output=True)
+    out = subprocess.run([str(pkg.path / "free_main")], check=True, capture_output=True, text=True).stdout
+    assert "output a 3x1 nnz=3\n  0 0 0\n  1 0 0\n  2 0 -9.81" in out

@@ -93,7 +93,7 @@ extern const casadi_real cartpole_gravity[2];
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: cartpole_t0.
  *   arg[1] q: 10x1, nnz 10 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: cartpole_q0.
- *   arg[2] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: cartpole_p0.
+ *   arg[2] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] phi: 8x1, nnz 8 [m² or m, per constraint] Φ.
  */
@@ -108,7 +108,7 @@ extern const casadi_real cartpole_gravity[2];
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: cartpole_t0.
  *   arg[1] q: 10x1, nnz 10 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: cartpole_q0.
- *   arg[2] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: cartpole_p0.
+ *   arg[2] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] A: 8x10, nnz 18 (sparse) [m or 1] A, nc × nq.
  */
@@ -123,7 +123,7 @@ extern const casadi_real cartpole_gravity[2];
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: cartpole_t0.
  *   arg[1] q: 10x1, nnz 10 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: cartpole_q0.
- *   arg[2] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: cartpole_p0.
+ *   arg[2] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] phi_t: 8x1, nnz 0 (sparse) [units of Φ per s] ∂Φ/∂t.
  */
@@ -139,7 +139,7 @@ extern const casadi_real cartpole_gravity[2];
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: cartpole_t0.
  *   arg[1] q: 10x1, nnz 10 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: cartpole_q0.
  *   arg[2] v: 10x1, nnz 10 [m/s] coordinate rates q̇. Default: cartpole_v0.
- *   arg[3] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: cartpole_p0.
+ *   arg[3] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] gamma: 8x1, nnz 8 [units of Φ per s²] γ.
  */
@@ -157,7 +157,7 @@ extern const casadi_real cartpole_gravity[2];
  *   arg[1] q: 10x1, nnz 10 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: cartpole_q0.
  *   arg[2] v: 10x1, nnz 10 [m/s] coordinate rates q̇. Default: cartpole_v0.
  *   arg[3] u: 1x1, nnz 1 [SI units of each input] inputs, in the order of input_names. Default: zeros.
- *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: cartpole_p0.
+ *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] F: 10x1, nnz 10 [N (N·m for rows of base vectors)] F.
  */
@@ -188,7 +188,7 @@ extern const casadi_real cartpole_gravity[2];
  *   arg[2] v: 10x1, nnz 10 [m/s] coordinate rates q̇. Default: cartpole_v0.
  *   arg[3] lam: 8x1, nnz 8 [N per unit of Φ] Lagrange multipliers λ, one per constraint (Aᵀλ is the constraint force). Default: cartpole_lam0.
  *   arg[4] u: 1x1, nnz 1 [SI units of each input] inputs, in the order of input_names. Default: zeros.
- *   arg[5] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: cartpole_p0.
+ *   arg[5] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] qdot: 10x1, nnz 10 [m/s] q̇.
  *   res[1] vdot: 10x1, nnz 10 [m/s²] q̈ = a.
@@ -211,7 +211,7 @@ extern const casadi_real cartpole_gravity[2];
  *   arg[2] v: 10x1, nnz 10 [m/s] coordinate rates q̇. Default: cartpole_v0.
  *   arg[3] lam: 8x1, nnz 8 [N per unit of Φ] Lagrange multipliers λ, one per constraint (Aᵀλ is the constraint force). Default: cartpole_lam0.
  *   arg[4] u: 1x1, nnz 1 [SI units of each input] inputs, in the order of input_names. Default: zeros.
- *   arg[5] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: cartpole_p0.
+ *   arg[5] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] res: 8x1, nnz 8 [units of Φ per s²] residual, zero on solutions.
  */
@@ -233,7 +233,7 @@ extern const casadi_real cartpole_gravity[2];
  *   arg[1] x: 20x1, nnz 20 [m, m/s] state [q; v]. Default: cartpole_x0.
  *   arg[2] z: 8x1, nnz 8 [N per unit of Φ] algebraic state: the Lagrange multipliers λ. Default: cartpole_lam0.
  *   arg[3] u: 1x1, nnz 1 [SI units of each input] inputs, in the order of input_names. Default: zeros.
- *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: cartpole_p0.
+ *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] ode: 20x1, nnz 20 [m/s, m/s²] ẋ = [q̇; q̈].
  *   res[1] alg: 8x1, nnz 8 [units of Φ per s²] algebraic residual (as alg).
@@ -254,7 +254,7 @@ extern const casadi_real cartpole_gravity[2];
  *   arg[1] q: 10x1, nnz 10 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: cartpole_q0.
  *   arg[2] v: 10x1, nnz 10 [m/s] coordinate rates q̇. Default: cartpole_v0.
  *   arg[3] u: 1x1, nnz 1 [SI units of each input] inputs, in the order of input_names. Default: zeros.
- *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: cartpole_p0.
+ *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] a: 10x1, nnz 10 [m/s²] q̈.
  *   res[1] lam: 8x1, nnz 8 [N per unit of Φ] λ.
@@ -274,7 +274,7 @@ extern const casadi_real cartpole_gravity[2];
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: cartpole_t0.
  *   arg[1] q: 10x1, nnz 10 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: cartpole_q0.
  *   arg[2] v: 10x1, nnz 10 [m/s] coordinate rates q̇. Default: cartpole_v0.
- *   arg[3] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: cartpole_p0.
+ *   arg[3] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] T: 1x1, nnz 1 [J] kinetic energy.
  *   res[1] V: 1x1, nnz 1 [J] potential energy.

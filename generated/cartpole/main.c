@@ -32,30 +32,30 @@ typedef struct {
 static const casadi_real *const defaults_phi[] = {
   cartpole_t0,
   cartpole_q0,
-  cartpole_p0,
+  0,
   0};
 static const casadi_real *const defaults_A[] = {
   cartpole_t0,
   cartpole_q0,
-  cartpole_p0,
+  0,
   0};
 static const casadi_real *const defaults_phi_t[] = {
   cartpole_t0,
   cartpole_q0,
-  cartpole_p0,
+  0,
   0};
 static const casadi_real *const defaults_gamma[] = {
   cartpole_t0,
   cartpole_q0,
   cartpole_v0,
-  cartpole_p0,
+  0,
   0};
 static const casadi_real *const defaults_F[] = {
   cartpole_t0,
   cartpole_q0,
   cartpole_v0,
   0,
-  cartpole_p0,
+  0,
   0};
 static const casadi_real *const defaults_Minv[] = {
   0,
@@ -66,7 +66,7 @@ static const casadi_real *const defaults_ode[] = {
   cartpole_v0,
   cartpole_lam0,
   0,
-  cartpole_p0,
+  0,
   0};
 static const casadi_real *const defaults_alg[] = {
   cartpole_t0,
@@ -74,27 +74,27 @@ static const casadi_real *const defaults_alg[] = {
   cartpole_v0,
   cartpole_lam0,
   0,
-  cartpole_p0,
+  0,
   0};
 static const casadi_real *const defaults_dae[] = {
   cartpole_t0,
   cartpole_x0,
   cartpole_lam0,
   0,
-  cartpole_p0,
+  0,
   0};
 static const casadi_real *const defaults_accel[] = {
   cartpole_t0,
   cartpole_q0,
   cartpole_v0,
   0,
-  cartpole_p0,
+  0,
   0};
 static const casadi_real *const defaults_energy[] = {
   cartpole_t0,
   cartpole_q0,
   cartpole_v0,
-  cartpole_p0,
+  0,
   0};
 static const casadi_real *const defaults_markers[] = {
   cartpole_q0,

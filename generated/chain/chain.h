@@ -92,7 +92,7 @@ extern const casadi_real chain_gravity[3];
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: chain_t0.
  *   arg[1] q: 15x1, nnz 15 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: chain_q0.
- *   arg[2] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: chain_p0.
+ *   arg[2] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] phi: 5x1, nnz 5 [m² or m, per constraint] Φ.
  */
@@ -107,7 +107,7 @@ extern const casadi_real chain_gravity[3];
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: chain_t0.
  *   arg[1] q: 15x1, nnz 15 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: chain_q0.
- *   arg[2] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: chain_p0.
+ *   arg[2] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] A: 5x15, nnz 27 (sparse) [m or 1] A, nc × nq.
  */
@@ -122,7 +122,7 @@ extern const casadi_real chain_gravity[3];
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: chain_t0.
  *   arg[1] q: 15x1, nnz 15 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: chain_q0.
- *   arg[2] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: chain_p0.
+ *   arg[2] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] phi_t: 5x1, nnz 0 (sparse) [units of Φ per s] ∂Φ/∂t.
  */
@@ -138,7 +138,7 @@ extern const casadi_real chain_gravity[3];
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: chain_t0.
  *   arg[1] q: 15x1, nnz 15 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: chain_q0.
  *   arg[2] v: 15x1, nnz 15 [m/s] coordinate rates q̇. Default: chain_v0.
- *   arg[3] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: chain_p0.
+ *   arg[3] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] gamma: 5x1, nnz 5 [units of Φ per s²] γ.
  */
@@ -156,7 +156,7 @@ extern const casadi_real chain_gravity[3];
  *   arg[1] q: 15x1, nnz 15 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: chain_q0.
  *   arg[2] v: 15x1, nnz 15 [m/s] coordinate rates q̇. Default: chain_v0.
  *   arg[3] u: 0x1, nnz 0 [SI units of each input] inputs, in the order of input_names. Default: zeros.
- *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: chain_p0.
+ *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] F: 15x1, nnz 15 [N (N·m for rows of base vectors)] F.
  */
@@ -187,7 +187,7 @@ extern const casadi_real chain_gravity[3];
  *   arg[2] v: 15x1, nnz 15 [m/s] coordinate rates q̇. Default: chain_v0.
  *   arg[3] lam: 5x1, nnz 5 [N per unit of Φ] Lagrange multipliers λ, one per constraint (Aᵀλ is the constraint force). Default: chain_lam0.
  *   arg[4] u: 0x1, nnz 0 [SI units of each input] inputs, in the order of input_names. Default: zeros.
- *   arg[5] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: chain_p0.
+ *   arg[5] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] qdot: 15x1, nnz 15 [m/s] q̇.
  *   res[1] vdot: 15x1, nnz 15 [m/s²] q̈ = a.
@@ -210,7 +210,7 @@ extern const casadi_real chain_gravity[3];
  *   arg[2] v: 15x1, nnz 15 [m/s] coordinate rates q̇. Default: chain_v0.
  *   arg[3] lam: 5x1, nnz 5 [N per unit of Φ] Lagrange multipliers λ, one per constraint (Aᵀλ is the constraint force). Default: chain_lam0.
  *   arg[4] u: 0x1, nnz 0 [SI units of each input] inputs, in the order of input_names. Default: zeros.
- *   arg[5] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: chain_p0.
+ *   arg[5] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] res: 5x1, nnz 5 [units of Φ per s²] residual, zero on solutions.
  */
@@ -232,7 +232,7 @@ extern const casadi_real chain_gravity[3];
  *   arg[1] x: 30x1, nnz 30 [m, m/s] state [q; v]. Default: chain_x0.
  *   arg[2] z: 5x1, nnz 5 [N per unit of Φ] algebraic state: the Lagrange multipliers λ. Default: chain_lam0.
  *   arg[3] u: 0x1, nnz 0 [SI units of each input] inputs, in the order of input_names. Default: zeros.
- *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: chain_p0.
+ *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] ode: 30x1, nnz 30 [m/s, m/s²] ẋ = [q̇; q̈].
  *   res[1] alg: 5x1, nnz 5 [units of Φ per s²] algebraic residual (as alg).
@@ -253,7 +253,7 @@ extern const casadi_real chain_gravity[3];
  *   arg[1] q: 15x1, nnz 15 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: chain_q0.
  *   arg[2] v: 15x1, nnz 15 [m/s] coordinate rates q̇. Default: chain_v0.
  *   arg[3] u: 0x1, nnz 0 [SI units of each input] inputs, in the order of input_names. Default: zeros.
- *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: chain_p0.
+ *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] a: 15x1, nnz 15 [m/s²] q̈.
  *   res[1] lam: 5x1, nnz 5 [N per unit of Φ] λ.
@@ -273,7 +273,7 @@ extern const casadi_real chain_gravity[3];
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: chain_t0.
  *   arg[1] q: 15x1, nnz 15 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: chain_q0.
  *   arg[2] v: 15x1, nnz 15 [m/s] coordinate rates q̇. Default: chain_v0.
- *   arg[3] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: chain_p0.
+ *   arg[3] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] T: 1x1, nnz 1 [J] kinetic energy.
  *   res[1] V: 1x1, nnz 1 [J] potential energy.

@@ -32,30 +32,30 @@ typedef struct {
 static const casadi_real *const defaults_phi[] = {
   chain_t0,
   chain_q0,
-  chain_p0,
+  0,
   0};
 static const casadi_real *const defaults_A[] = {
   chain_t0,
   chain_q0,
-  chain_p0,
+  0,
   0};
 static const casadi_real *const defaults_phi_t[] = {
   chain_t0,
   chain_q0,
-  chain_p0,
+  0,
   0};
 static const casadi_real *const defaults_gamma[] = {
   chain_t0,
   chain_q0,
   chain_v0,
-  chain_p0,
+  0,
   0};
 static const casadi_real *const defaults_F[] = {
   chain_t0,
   chain_q0,
   chain_v0,
   0,
-  chain_p0,
+  0,
   0};
 static const casadi_real *const defaults_Minv[] = {
   0,
@@ -66,7 +66,7 @@ static const casadi_real *const defaults_ode[] = {
   chain_v0,
   chain_lam0,
   0,
-  chain_p0,
+  0,
   0};
 static const casadi_real *const defaults_alg[] = {
   chain_t0,
@@ -74,27 +74,27 @@ static const casadi_real *const defaults_alg[] = {
   chain_v0,
   chain_lam0,
   0,
-  chain_p0,
+  0,
   0};
 static const casadi_real *const defaults_dae[] = {
   chain_t0,
   chain_x0,
   chain_lam0,
   0,
-  chain_p0,
+  0,
   0};
 static const casadi_real *const defaults_accel[] = {
   chain_t0,
   chain_q0,
   chain_v0,
   0,
-  chain_p0,
+  0,
   0};
 static const casadi_real *const defaults_energy[] = {
   chain_t0,
   chain_q0,
   chain_v0,
-  chain_p0,
+  0,
   0};
 static const casadi_real *const defaults_markers[] = {
   chain_q0,

@@ -32,30 +32,30 @@ typedef struct {
 static const casadi_real *const defaults_phi[] = {
   double_pendulum_t0,
   double_pendulum_q0,
-  double_pendulum_p0,
+  0,
   0};
 static const casadi_real *const defaults_A[] = {
   double_pendulum_t0,
   double_pendulum_q0,
-  double_pendulum_p0,
+  0,
   0};
 static const casadi_real *const defaults_phi_t[] = {
   double_pendulum_t0,
   double_pendulum_q0,
-  double_pendulum_p0,
+  0,
   0};
 static const casadi_real *const defaults_gamma[] = {
   double_pendulum_t0,
   double_pendulum_q0,
   double_pendulum_v0,
-  double_pendulum_p0,
+  0,
   0};
 static const casadi_real *const defaults_F[] = {
   double_pendulum_t0,
   double_pendulum_q0,
   double_pendulum_v0,
   0,
-  double_pendulum_p0,
+  0,
   0};
 static const casadi_real *const defaults_Minv[] = {
   0,
@@ -66,7 +66,7 @@ static const casadi_real *const defaults_ode[] = {
   double_pendulum_v0,
   double_pendulum_lam0,
   0,
-  double_pendulum_p0,
+  0,
   0};
 static const casadi_real *const defaults_alg[] = {
   double_pendulum_t0,
@@ -74,27 +74,27 @@ static const casadi_real *const defaults_alg[] = {
   double_pendulum_v0,
   double_pendulum_lam0,
   0,
-  double_pendulum_p0,
+  0,
   0};
 static const casadi_real *const defaults_dae[] = {
   double_pendulum_t0,
   double_pendulum_x0,
   double_pendulum_lam0,
   0,
-  double_pendulum_p0,
+  0,
   0};
 static const casadi_real *const defaults_accel[] = {
   double_pendulum_t0,
   double_pendulum_q0,
   double_pendulum_v0,
   0,
-  double_pendulum_p0,
+  0,
   0};
 static const casadi_real *const defaults_energy[] = {
   double_pendulum_t0,
   double_pendulum_q0,
   double_pendulum_v0,
-  double_pendulum_p0,
+  0,
   0};
 static const casadi_real *const defaults_markers[] = {
   double_pendulum_q0,

@@ -92,7 +92,7 @@ extern const casadi_real fourbar_3d_gravity[3];
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_3d_t0.
  *   arg[1] q: 24x1, nnz 24 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: fourbar_3d_q0.
- *   arg[2] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: fourbar_3d_p0.
+ *   arg[2] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] phi: 23x1, nnz 23 [m² or m, per constraint] Φ.
  */
@@ -107,7 +107,7 @@ extern const casadi_real fourbar_3d_gravity[3];
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_3d_t0.
  *   arg[1] q: 24x1, nnz 24 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: fourbar_3d_q0.
- *   arg[2] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: fourbar_3d_p0.
+ *   arg[2] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] A: 23x24, nnz 105 (sparse) [m or 1] A, nc × nq.
  */
@@ -122,7 +122,7 @@ extern const casadi_real fourbar_3d_gravity[3];
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_3d_t0.
  *   arg[1] q: 24x1, nnz 24 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: fourbar_3d_q0.
- *   arg[2] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: fourbar_3d_p0.
+ *   arg[2] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] phi_t: 23x1, nnz 0 (sparse) [units of Φ per s] ∂Φ/∂t.
  */
@@ -138,7 +138,7 @@ extern const casadi_real fourbar_3d_gravity[3];
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_3d_t0.
  *   arg[1] q: 24x1, nnz 24 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: fourbar_3d_q0.
  *   arg[2] v: 24x1, nnz 24 [m/s] coordinate rates q̇. Default: fourbar_3d_v0.
- *   arg[3] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: fourbar_3d_p0.
+ *   arg[3] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] gamma: 23x1, nnz 23 [units of Φ per s²] γ.
  */
@@ -156,7 +156,7 @@ extern const casadi_real fourbar_3d_gravity[3];
  *   arg[1] q: 24x1, nnz 24 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: fourbar_3d_q0.
  *   arg[2] v: 24x1, nnz 24 [m/s] coordinate rates q̇. Default: fourbar_3d_v0.
  *   arg[3] u: 0x1, nnz 0 [SI units of each input] inputs, in the order of input_names. Default: zeros.
- *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: fourbar_3d_p0.
+ *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] F: 24x1, nnz 24 [N (N·m for rows of base vectors)] F.
  */
@@ -187,7 +187,7 @@ extern const casadi_real fourbar_3d_gravity[3];
  *   arg[2] v: 24x1, nnz 24 [m/s] coordinate rates q̇. Default: fourbar_3d_v0.
  *   arg[3] lam: 23x1, nnz 23 [N per unit of Φ] Lagrange multipliers λ, one per constraint (Aᵀλ is the constraint force). Default: fourbar_3d_lam0.
  *   arg[4] u: 0x1, nnz 0 [SI units of each input] inputs, in the order of input_names. Default: zeros.
- *   arg[5] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: fourbar_3d_p0.
+ *   arg[5] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] qdot: 24x1, nnz 24 [m/s] q̇.
  *   res[1] vdot: 24x1, nnz 24 [m/s²] q̈ = a.
@@ -210,7 +210,7 @@ extern const casadi_real fourbar_3d_gravity[3];
  *   arg[2] v: 24x1, nnz 24 [m/s] coordinate rates q̇. Default: fourbar_3d_v0.
  *   arg[3] lam: 23x1, nnz 23 [N per unit of Φ] Lagrange multipliers λ, one per constraint (Aᵀλ is the constraint force). Default: fourbar_3d_lam0.
  *   arg[4] u: 0x1, nnz 0 [SI units of each input] inputs, in the order of input_names. Default: zeros.
- *   arg[5] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: fourbar_3d_p0.
+ *   arg[5] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] res: 23x1, nnz 23 [units of Φ per s²] residual, zero on solutions.
  */
@@ -232,7 +232,7 @@ extern const casadi_real fourbar_3d_gravity[3];
  *   arg[1] x: 48x1, nnz 48 [m, m/s] state [q; v]. Default: fourbar_3d_x0.
  *   arg[2] z: 23x1, nnz 23 [N per unit of Φ] algebraic state: the Lagrange multipliers λ. Default: fourbar_3d_lam0.
  *   arg[3] u: 0x1, nnz 0 [SI units of each input] inputs, in the order of input_names. Default: zeros.
- *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: fourbar_3d_p0.
+ *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] ode: 48x1, nnz 48 [m/s, m/s²] ẋ = [q̇; q̈].
  *   res[1] alg: 23x1, nnz 23 [units of Φ per s²] algebraic residual (as alg).
@@ -253,7 +253,7 @@ extern const casadi_real fourbar_3d_gravity[3];
  *   arg[1] q: 24x1, nnz 24 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: fourbar_3d_q0.
  *   arg[2] v: 24x1, nnz 24 [m/s] coordinate rates q̇. Default: fourbar_3d_v0.
  *   arg[3] u: 0x1, nnz 0 [SI units of each input] inputs, in the order of input_names. Default: zeros.
- *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: fourbar_3d_p0.
+ *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] a: 24x1, nnz 24 [m/s²] q̈.
  *   res[1] lam: 23x1, nnz 23 [N per unit of Φ] λ.
@@ -273,7 +273,7 @@ extern const casadi_real fourbar_3d_gravity[3];
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_3d_t0.
  *   arg[1] q: 24x1, nnz 24 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: fourbar_3d_q0.
  *   arg[2] v: 24x1, nnz 24 [m/s] coordinate rates q̇. Default: fourbar_3d_v0.
- *   arg[3] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: fourbar_3d_p0.
+ *   arg[3] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] T: 1x1, nnz 1 [J] kinetic energy.
  *   res[1] V: 1x1, nnz 1 [J] potential energy.

@@ -32,30 +32,30 @@ typedef struct {
 static const casadi_real *const defaults_phi[] = {
   fourbar_3d_t0,
   fourbar_3d_q0,
-  fourbar_3d_p0,
+  0,
   0};
 static const casadi_real *const defaults_A[] = {
   fourbar_3d_t0,
   fourbar_3d_q0,
-  fourbar_3d_p0,
+  0,
   0};
 static const casadi_real *const defaults_phi_t[] = {
   fourbar_3d_t0,
   fourbar_3d_q0,
-  fourbar_3d_p0,
+  0,
   0};
 static const casadi_real *const defaults_gamma[] = {
   fourbar_3d_t0,
   fourbar_3d_q0,
   fourbar_3d_v0,
-  fourbar_3d_p0,
+  0,
   0};
 static const casadi_real *const defaults_F[] = {
   fourbar_3d_t0,
   fourbar_3d_q0,
   fourbar_3d_v0,
   0,
-  fourbar_3d_p0,
+  0,
   0};
 static const casadi_real *const defaults_Minv[] = {
   0,
@@ -66,7 +66,7 @@ static const casadi_real *const defaults_ode[] = {
   fourbar_3d_v0,
   fourbar_3d_lam0,
   0,
-  fourbar_3d_p0,
+  0,
   0};
 static const casadi_real *const defaults_alg[] = {
   fourbar_3d_t0,
@@ -74,27 +74,27 @@ static const casadi_real *const defaults_alg[] = {
   fourbar_3d_v0,
   fourbar_3d_lam0,
   0,
-  fourbar_3d_p0,
+  0,
   0};
 static const casadi_real *const defaults_dae[] = {
   fourbar_3d_t0,
   fourbar_3d_x0,
   fourbar_3d_lam0,
   0,
-  fourbar_3d_p0,
+  0,
   0};
 static const casadi_real *const defaults_accel[] = {
   fourbar_3d_t0,
   fourbar_3d_q0,
   fourbar_3d_v0,
   0,
-  fourbar_3d_p0,
+  0,
   0};
 static const casadi_real *const defaults_energy[] = {
   fourbar_3d_t0,
   fourbar_3d_q0,
   fourbar_3d_v0,
-  fourbar_3d_p0,
+  0,
   0};
 static const casadi_real *const defaults_markers[] = {
   fourbar_3d_q0,

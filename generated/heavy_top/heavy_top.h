@@ -92,7 +92,7 @@ extern const casadi_real heavy_top_gravity[3];
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: heavy_top_t0.
  *   arg[1] q: 9x1, nnz 9 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: heavy_top_q0.
- *   arg[2] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: heavy_top_p0.
+ *   arg[2] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] phi: 6x1, nnz 6 [m² or m, per constraint] Φ.
  */
@@ -107,7 +107,7 @@ extern const casadi_real heavy_top_gravity[3];
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: heavy_top_t0.
  *   arg[1] q: 9x1, nnz 9 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: heavy_top_q0.
- *   arg[2] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: heavy_top_p0.
+ *   arg[2] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] A: 6x9, nnz 27 (sparse) [m or 1] A, nc × nq.
  */
@@ -122,7 +122,7 @@ extern const casadi_real heavy_top_gravity[3];
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: heavy_top_t0.
  *   arg[1] q: 9x1, nnz 9 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: heavy_top_q0.
- *   arg[2] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: heavy_top_p0.
+ *   arg[2] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] phi_t: 6x1, nnz 0 (sparse) [units of Φ per s] ∂Φ/∂t.
  */
@@ -138,7 +138,7 @@ extern const casadi_real heavy_top_gravity[3];
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: heavy_top_t0.
  *   arg[1] q: 9x1, nnz 9 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: heavy_top_q0.
  *   arg[2] v: 9x1, nnz 9 [m/s] coordinate rates q̇. Default: heavy_top_v0.
- *   arg[3] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: heavy_top_p0.
+ *   arg[3] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] gamma: 6x1, nnz 6 [units of Φ per s²] γ.
  */
@@ -156,7 +156,7 @@ extern const casadi_real heavy_top_gravity[3];
  *   arg[1] q: 9x1, nnz 9 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: heavy_top_q0.
  *   arg[2] v: 9x1, nnz 9 [m/s] coordinate rates q̇. Default: heavy_top_v0.
  *   arg[3] u: 0x1, nnz 0 [SI units of each input] inputs, in the order of input_names. Default: zeros.
- *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: heavy_top_p0.
+ *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] F: 9x1, nnz 9 [N (N·m for rows of base vectors)] F.
  */
@@ -187,7 +187,7 @@ extern const casadi_real heavy_top_gravity[3];
  *   arg[2] v: 9x1, nnz 9 [m/s] coordinate rates q̇. Default: heavy_top_v0.
  *   arg[3] lam: 6x1, nnz 6 [N per unit of Φ] Lagrange multipliers λ, one per constraint (Aᵀλ is the constraint force). Default: heavy_top_lam0.
  *   arg[4] u: 0x1, nnz 0 [SI units of each input] inputs, in the order of input_names. Default: zeros.
- *   arg[5] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: heavy_top_p0.
+ *   arg[5] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] qdot: 9x1, nnz 9 [m/s] q̇.
  *   res[1] vdot: 9x1, nnz 9 [m/s²] q̈ = a.
@@ -210,7 +210,7 @@ extern const casadi_real heavy_top_gravity[3];
  *   arg[2] v: 9x1, nnz 9 [m/s] coordinate rates q̇. Default: heavy_top_v0.
  *   arg[3] lam: 6x1, nnz 6 [N per unit of Φ] Lagrange multipliers λ, one per constraint (Aᵀλ is the constraint force). Default: heavy_top_lam0.
  *   arg[4] u: 0x1, nnz 0 [SI units of each input] inputs, in the order of input_names. Default: zeros.
- *   arg[5] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: heavy_top_p0.
+ *   arg[5] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] res: 6x1, nnz 6 [units of Φ per s²] residual, zero on solutions.
  */
@@ -232,7 +232,7 @@ extern const casadi_real heavy_top_gravity[3];
  *   arg[1] x: 18x1, nnz 18 [m, m/s] state [q; v]. Default: heavy_top_x0.
  *   arg[2] z: 6x1, nnz 6 [N per unit of Φ] algebraic state: the Lagrange multipliers λ. Default: heavy_top_lam0.
  *   arg[3] u: 0x1, nnz 0 [SI units of each input] inputs, in the order of input_names. Default: zeros.
- *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: heavy_top_p0.
+ *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] ode: 18x1, nnz 18 [m/s, m/s²] ẋ = [q̇; q̈].
  *   res[1] alg: 6x1, nnz 6 [units of Φ per s²] algebraic residual (as alg).
@@ -253,7 +253,7 @@ extern const casadi_real heavy_top_gravity[3];
  *   arg[1] q: 9x1, nnz 9 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: heavy_top_q0.
  *   arg[2] v: 9x1, nnz 9 [m/s] coordinate rates q̇. Default: heavy_top_v0.
  *   arg[3] u: 0x1, nnz 0 [SI units of each input] inputs, in the order of input_names. Default: zeros.
- *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: heavy_top_p0.
+ *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] a: 9x1, nnz 9 [m/s²] q̈.
  *   res[1] lam: 6x1, nnz 6 [N per unit of Φ] λ.
@@ -273,7 +273,7 @@ extern const casadi_real heavy_top_gravity[3];
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: heavy_top_t0.
  *   arg[1] q: 9x1, nnz 9 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: heavy_top_q0.
  *   arg[2] v: 9x1, nnz 9 [m/s] coordinate rates q̇. Default: heavy_top_v0.
- *   arg[3] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: heavy_top_p0.
+ *   arg[3] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] T: 1x1, nnz 1 [J] kinetic energy.
  *   res[1] V: 1x1, nnz 1 [J] potential energy.

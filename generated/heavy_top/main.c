@@ -32,30 +32,30 @@ typedef struct {
 static const casadi_real *const defaults_phi[] = {
   heavy_top_t0,
   heavy_top_q0,
-  heavy_top_p0,
+  0,
   0};
 static const casadi_real *const defaults_A[] = {
   heavy_top_t0,
   heavy_top_q0,
-  heavy_top_p0,
+  0,
   0};
 static const casadi_real *const defaults_phi_t[] = {
   heavy_top_t0,
   heavy_top_q0,
-  heavy_top_p0,
+  0,
   0};
 static const casadi_real *const defaults_gamma[] = {
   heavy_top_t0,
   heavy_top_q0,
   heavy_top_v0,
-  heavy_top_p0,
+  0,
   0};
 static const casadi_real *const defaults_F[] = {
   heavy_top_t0,
   heavy_top_q0,
   heavy_top_v0,
   0,
-  heavy_top_p0,
+  0,
   0};
 static const casadi_real *const defaults_Minv[] = {
   0,
@@ -66,7 +66,7 @@ static const casadi_real *const defaults_ode[] = {
   heavy_top_v0,
   heavy_top_lam0,
   0,
-  heavy_top_p0,
+  0,
   0};
 static const casadi_real *const defaults_alg[] = {
   heavy_top_t0,
@@ -74,27 +74,27 @@ static const casadi_real *const defaults_alg[] = {
   heavy_top_v0,
   heavy_top_lam0,
   0,
-  heavy_top_p0,
+  0,
   0};
 static const casadi_real *const defaults_dae[] = {
   heavy_top_t0,
   heavy_top_x0,
   heavy_top_lam0,
   0,
-  heavy_top_p0,
+  0,
   0};
 static const casadi_real *const defaults_accel[] = {
   heavy_top_t0,
   heavy_top_q0,
   heavy_top_v0,
   0,
-  heavy_top_p0,
+  0,
   0};
 static const casadi_real *const defaults_energy[] = {
   heavy_top_t0,
   heavy_top_q0,
   heavy_top_v0,
-  heavy_top_p0,
+  0,
   0};
 static const casadi_real *const defaults_markers[] = {
   heavy_top_q0,

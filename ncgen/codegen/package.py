@@ -286,6 +286,8 @@ def _function_info(name: str, f: ca.Function, c: ca.Function, file: str, doc: Pa
         for i, a in enumerate(sig[kind]):
             adoc = getattr(fdoc, kind).get(a["name"]) if fdoc else None
             default = doc.defaults.get(a["name"]) if kind == "inputs" else None
+            if default is not None and not doc.metadata[default]:
+                default = None          # an empty array has no C definition: zeros (of nothing)
             out.append({**a, "index": i, "meaning": cnames.c_comment(adoc.meaning) if adoc else "",
                         "units": cnames.c_comment(adoc.units) if adoc else "",
                         "default": f"{name}_{default}" if default else None,
