@@ -378,7 +378,8 @@ def _demo_arguments(p: argparse.ArgumentParser) -> None:
                    help="directory for the C package, trajectory, plot and animation "
                         "(default ./ncgen-demo, created if needed)")
     p.add_argument("--animate", action="store_true", help="also write an animation (GIF)")
-    p.add_argument("--t-end", type=float, default=3.0, metavar="T", help="simulated time (s, default 3)")
+    p.add_argument("--t-end", type=float, default=1.4, metavar="T",
+                   help="simulated time (s, default 1.4: one turn of precession)")
     p.add_argument("--backend", default="compiled", choices=("compiled", "vm"),
                    help="compiled (generated C, default) or vm (CasADi's virtual machine, no compiler)")
 

@@ -160,10 +160,11 @@ def _cache_text(cached: bool | None) -> str:
     return {True: "cache hit", False: "cache miss: built", None: "skipped: vm backend"}[cached]
 
 
-def run_demo(out_dir, *, animate: bool = False, t_end: float = 3.0, dt: float = 0.002,
+def run_demo(out_dir, *, animate: bool = False, t_end: float = 1.4, dt: float = 0.002,
              top: Top = Top(), backend: str = "compiled", cflags=None) -> DemoResult:
     """Build, generate, compile, simulate, check and plot the top released without
-    precession (it nutates: the crown traces cusps); files go to ``out_dir``."""
+    precession (it nutates: the crown traces cusps; 1.4 s is about one turn of precession);
+    files go to ``out_dir``."""
     from ncgen.codegen.build import compile_package
     from ncgen.codegen.model_package import generate
     from ncgen.runtime import simulate

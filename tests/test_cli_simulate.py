@@ -129,3 +129,10 @@ def test_help_has_examples(capsys):
     assert main(["simulate", "--help"]) == 0
     out = capsys.readouterr().out
     assert "examples:" in out and "--param omega=20" in out and "--method" in out
+
+
+def test_animation(tmp_path, capsys):
+    run(capsys, ["simulate", str(EXAMPLES / "fourbar_planar.toml"), "--t-end", "0.1", "--dt", "0.02",
+                 "-o", str(tmp_path / "f.npz"), "--animate", str(tmp_path / "f.gif"), "--backend", "vm"])
+    assert (tmp_path / "f.gif").read_bytes()[:6] in (b"GIF89a", b"GIF87a")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f.gif", "f.npz"]
