@@ -29,7 +29,6 @@ from ncgen.assembly.functions import DOCS, IN
 from ncgen.codegen import fsutil
 from ncgen.codegen.build import compile_package
 from ncgen.codegen.doc import PackageDoc
-from ncgen.codegen.fsutil import sha256_bytes
 from ncgen.codegen.manifest import canonical_json
 from ncgen.codegen.package import ExtraSource, Package, check_replaceable, write_package
 
@@ -163,7 +162,7 @@ def _hash(model, metadata: Mapping) -> str:
     plain = PackageDoc(metadata=metadata).metadata
     data = {"functions": [[name, model.functions[name].serialize()] for name in SYSTEM_FUNCTIONS],
             "metadata": plain}
-    return sha256_bytes(canonical_json(data).encode())
+    return fsutil.sha256_bytes(canonical_json(data).encode())
 
 
 def _component_names(names: Sequence[str], sizes: Sequence[int]) -> list[str]:
