@@ -4,6 +4,7 @@ double pendulum over long runs)."""
 import os
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -12,8 +13,9 @@ import pytest
 import ncgen as nc
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
-MODELS = sorted(EXAMPLES.glob("*.toml"))
-SCRIPTS = sorted(EXAMPLES.glob("*.py"))
+MODELS = [p for p in sorted(EXAMPLES.glob("*.toml")) if "members" in tomllib.loads(p.read_text())]
+#: Scripts of the model files (optimisation scripts are tested with the optimiser).
+SCRIPTS = [p for p in sorted(EXAMPLES.glob("*.py")) if p.with_suffix(".toml") in MODELS]
 
 
 def load(name: str, **replace) -> nc.System:
