@@ -416,6 +416,8 @@ def demo(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
 
 # ----------------------------------------------------------------------------- main
 def build_parser() -> argparse.ArgumentParser:
+    import ncgen.optim.command  # noqa: F401  (registers 'optimize'; imports ncgen.cli, so not at the top)
+
     parser = argparse.ArgumentParser(
         prog="ncgen",
         description="Rigid multibody dynamics in natural coordinates: SymPy derivations, "
