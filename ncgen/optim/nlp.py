@@ -284,11 +284,13 @@ class NLP:
         opti.solver("ipopt", {"expand": self.disc.expandable, "detect_simple_bounds": True,
                               "print_time": False, "ipopt": options})
         start = time.perf_counter()
-        sol = opti.solve_limited()
+        try:
+            self.value = opti.solve_limited().value
+        except RuntimeError:               # IPOPT failed (infeasible, NaN, ...): the last iterate
+            self.value = opti.debug.value
         self.solve_time = time.perf_counter() - start
-        self.sol = sol
-        self.x_opt = np.array(sol.value(opti.x)).reshape(-1)
-        return sol
+        self.x_opt = np.array(self.value(opti.x)).reshape(-1)
+        return self.value
 
 
 def build_and_solve(ocp, warm_start, *, max_iter: int, tol: float, verbose: bool, ipopt: dict):
@@ -296,20 +298,20 @@ def build_and_solve(ocp, warm_start, *, max_iter: int, tol: float, verbose: bool
     nlp = NLP(ocp)
     nlp.build(warm_start)
     build_time = time.perf_counter() - start
-    sol = nlp.solve(max_iter=max_iter, tol=tol, verbose=verbose, ipopt=ipopt)
-    result = extract(nlp, sol, build_time)
+    value = nlp.solve(max_iter=max_iter, tol=tol, verbose=verbose, ipopt=ipopt)
+    result = extract(nlp, value, build_time)
     if not result.stats.success:
-        raise OptimizationError(diagnose(nlp, sol, result), result=result, status=result.stats.status)
+        raise OptimizationError(diagnose(nlp, value, result), result=result, status=result.stats.status)
     if result.stats.status != "Solve_Succeeded":
         warnings.warn(f"IPOPT: {result.stats.status} (objective {result.stats.objective:.6g}, max defect "
                       f"{result.stats.max_defect:.2e})", stacklevel=3)
     return result
 
 
-def extract(nlp: NLP, sol, build_time: float) -> OptimalTrajectory:
-    """The solution (or last iterate) as an :class:`OptimalTrajectory`."""
+def extract(nlp: NLP, val, build_time: float) -> OptimalTrajectory:
+    """The solution (or last iterate; ``val`` evaluates expressions there) as an
+    :class:`OptimalTrajectory`."""
     ocp, model, disc = nlp.ocp, nlp.model, nlp.disc
-    val = sol.value
     T = float(val(nlp.T)) if isinstance(nlp.T, ca.MX) else float(nlp.T)
     p = np.array(val(nlp.p)).reshape(-1) if isinstance(nlp.p, ca.MX) else np.array(nlp.p).reshape(-1)
     t = ocp.t0 + T * np.arange(ocp.N + 1) / ocp.N
@@ -331,11 +333,11 @@ def extract(nlp: NLP, sol, build_time: float) -> OptimalTrajectory:
     return OptimalTrajectory.from_solution(model, t=t, q=q, v=v, lam=lam, u=u, p=p, stats=stats, nlp=nlp)
 
 
-def diagnose(nlp: NLP, sol, result: OptimalTrajectory) -> str:
+def diagnose(nlp: NLP, value, result: OptimalTrajectory) -> str:
     """A message naming IPOPT's status, the constraint groups violated most at the last
     iterate and the inputs that sit on their bounds."""
     status = result.stats.status
-    ranked = sorted(((_violation(sol.value, g), g) for g in nlp.groups), key=lambda x: -x[0])
+    ranked = sorted(((_violation(value, g), g) for g in nlp.groups), key=lambda x: -x[0])
     worst = [(v, g) for v, g in ranked if v > 1e-6][:3]
     lines = [f"IPOPT did not solve the problem: {status} after {result.stats.iterations} iterations."]
     if status == "Infeasible_Problem_Detected":
@@ -344,6 +346,15 @@ def diagnose(nlp: NLP, sol, result: OptimalTrajectory) -> str:
         lines.append("Largest violations at the last iterate: " +
                      "; ".join(f"{g.label} ({v:.3g})" for v, g in worst) + ".")
         culprit = worst[0][1]
+        drift = result.constraint_residual
+        if np.max(drift, initial=0.0) > 1e-3 * length_scale(nlp.model) ** 2:
+            k = int(np.argmax(drift))
+            where = {0: "initial", len(drift) - 1: "final"}.get(k)
+            conditions = [g for g in nlp.groups if g.kind in (where, "periodic")] if where else []
+            if conditions:
+                culprit = conditions[0]
+                lines.append(f"The {where} configuration leaves the joints (max |Φ| = {drift[k]:.3g} there): "
+                             f"no configuration that satisfies the joints meets {culprit.label}.")
         hint = {"final": "check that the final conditions are reachable within the horizon and the bounds",
                 "initial": "check that the initial conditions agree with the joints",
                 "periodic": "check that a periodic motion exists within the bounds",
