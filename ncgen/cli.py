@@ -453,4 +453,5 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from ncgen.cli import main as _main   # the importable module, where every subcommand registers
+    sys.exit(_main())

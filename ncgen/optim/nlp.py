@@ -36,6 +36,10 @@ from ncgen.optim.transcription import Horizon
 
 SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 
+#: Constraint kinds relaxed by slacks when diagnosing a failure: the wishes (conditions and
+#: path constraints), never the physics (dynamics, invariants) or the bounds.
+RELAXABLE = ("initial", "final", "periodic", "path")
+
 
 @dataclass
 class Group:
@@ -53,12 +57,14 @@ class NLP:
     """The built problem: ``opti``, the constraint ``groups``, the discretisation ``disc``,
     the final time ``T`` and parameter vector ``p`` (MX or numbers)."""
 
-    def __init__(self, ocp):
+    def __init__(self, ocp, elastic: bool = False):
         self.ocp = ocp
         self.model = ocp.model
         self.opti = ca.Opti()
         self.groups: list[Group] = []
         self.x_opt: np.ndarray | None = None
+        self.elastic = elastic
+        self.slacks: dict[str, object] = {}
 
     # ------------------------------------------------------------ constraints
     def constrain(self, label: str, kind: str, expr, lb=0.0, ub=0.0):
@@ -74,11 +80,24 @@ class NLP:
             if not idx:
                 return
             expr, lb, ub = expr[idx], lb[idx], ub[idx]
-        if np.array_equal(lb, ub):
+        if self.elastic and kind in RELAXABLE:
+            self._relaxed(label, expr, lb, ub)
+        elif np.array_equal(lb, ub):
             self.opti.subject_to(expr == ca.DM(lb))
         else:
             self.opti.subject_to(self.opti.bounded(ca.DM(lb), expr, ca.DM(ub)))
         self.groups.append(Group(label, kind, expr, lb, ub))
+
+    def _relaxed(self, label: str, expr, lb: np.ndarray, ub: np.ndarray):
+        """``lb − s ≤ expr ≤ ub + s`` with a slack ``s ≥ 0`` per row (elastic mode)."""
+        s = self.opti.variable(expr.shape[0])
+        self.opti.subject_to(s >= 0)
+        lo, hi = [int(i) for i in np.flatnonzero(np.isfinite(lb))], [int(i) for i in np.flatnonzero(np.isfinite(ub))]
+        if lo:
+            self.opti.subject_to(expr[lo] - ca.DM(lb[lo]) >= -s[lo])
+        if hi:
+            self.opti.subject_to(expr[hi] - ca.DM(ub[hi]) <= s[hi])
+        self.slacks[label] = s
 
     # ------------------------------------------------------------------ build
     def build(self, warm_start):
@@ -129,7 +148,10 @@ class NLP:
         self._final_conditions(guess, q_init, p_num)
         self._bounds(q_init, v_init)
         self._path()
-        opti.minimize(self._objective())
+        if self.elastic:
+            opti.minimize(sum(ca.sum1(v) for v in self.slacks.values()) if self.slacks else ca.MX(0))
+        else:
+            opti.minimize(self._objective())
         # initial values
         disc.set_guess(opti, guess)
         g0 = np.array([t0])
@@ -279,7 +301,7 @@ class NLP:
     # ------------------------------------------------------------------ solve
     def solve(self, *, max_iter: int, tol: float, verbose: bool, ipopt: dict):
         ocp, opti = self.ocp, self.opti
-        options = {"tol": tol, "max_iter": max_iter, "print_level": 5 if verbose else 0, "sb": "yes",
+        options = {"tol": tol, "constr_viol_tol": tol, "max_iter": max_iter, "print_level": 5 if verbose else 0, "sb": "yes",
                    "hessian_approximation": ocp.transcription.hessian, **ipopt}
         opti.solver("ipopt", {"expand": self.disc.expandable, "detect_simple_bounds": True,
                               "print_time": False, "ipopt": options})
@@ -301,7 +323,8 @@ def build_and_solve(ocp, warm_start, *, max_iter: int, tol: float, verbose: bool
     value = nlp.solve(max_iter=max_iter, tol=tol, verbose=verbose, ipopt=ipopt)
     result = extract(nlp, value, build_time)
     if not result.stats.success:
-        raise OptimizationError(diagnose(nlp, value, result), result=result, status=result.stats.status)
+        raise OptimizationError(diagnose(nlp, value, result, tol=tol, ipopt=ipopt), result=result,
+                                status=result.stats.status)
     if result.stats.status != "Solve_Succeeded":
         warnings.warn(f"IPOPT: {result.stats.status} (objective {result.stats.objective:.6g}, max defect "
                       f"{result.stats.max_defect:.2e})", stacklevel=3)
@@ -333,28 +356,32 @@ def extract(nlp: NLP, val, build_time: float) -> OptimalTrajectory:
     return OptimalTrajectory.from_solution(model, t=t, q=q, v=v, lam=lam, u=u, p=p, stats=stats, nlp=nlp)
 
 
-def diagnose(nlp: NLP, value, result: OptimalTrajectory) -> str:
-    """A message naming IPOPT's status, the constraint groups violated most at the last
-    iterate and the inputs that sit on their bounds."""
+def diagnose(nlp: NLP, value, result: OptimalTrajectory, *, tol: float, ipopt: dict) -> str:
+    """A message naming IPOPT's status and the likely culprit.
+
+    The culprit is found in elastic mode: the problem is solved again from the last iterate
+    with every condition and path constraint relaxed by slacks whose sum is minimised,
+    dynamics, invariants and bounds kept.  The conditions the nearest feasible motion still
+    misses are the ones that cannot be met.  Should that solve fail too, the groups violated
+    most at the last iterate are named instead."""
     status = result.stats.status
-    ranked = sorted(((_violation(value, g), g) for g in nlp.groups), key=lambda x: -x[0])
-    worst = [(v, g) for v, g in ranked if v > 1e-6][:3]
     lines = [f"IPOPT did not solve the problem: {status} after {result.stats.iterations} iterations."]
     if status == "Infeasible_Problem_Detected":
         lines.append("The constraints look infeasible (IPOPT converged to a point of minimal violation).")
-    if worst:
-        lines.append("Largest violations at the last iterate: " +
-                     "; ".join(f"{g.label} ({v:.3g})" for v, g in worst) + ".")
-        culprit = worst[0][1]
-        drift = result.constraint_residual
-        if np.max(drift, initial=0.0) > 1e-3 * length_scale(nlp.model) ** 2:
-            k = int(np.argmax(drift))
-            where = {0: "initial", len(drift) - 1: "final"}.get(k)
-            conditions = [g for g in nlp.groups if g.kind in (where, "periodic")] if where else []
-            if conditions:
-                culprit = conditions[0]
-                lines.append(f"The {where} configuration leaves the joints (max |Φ| = {drift[k]:.3g} there): "
-                             f"no configuration that satisfies the joints meets {culprit.label}.")
+    misses = _elastic_misses(nlp, result, tol=tol, ipopt=ipopt)
+    culprit = None
+    if misses:
+        lines.append("With the conditions relaxed (dynamics and bounds kept), the nearest feasible motion misses "
+                     + "; ".join(f"{label} by {miss:.3g}" for label, miss in misses[:3]) + ".")
+        culprit = next(g for g in nlp.groups if g.label.split(" (")[0] == misses[0][0])
+    else:
+        ranked = sorted(((_violation(value, g), g) for g in nlp.groups), key=lambda x: -x[0])
+        worst = [(v, g) for v, g in ranked if v > 1e-6][:3]
+        if worst:
+            lines.append("Largest violations at the last iterate: " +
+                         "; ".join(f"{g.label} ({v:.3g})" for v, g in worst) + ".")
+            culprit = worst[0][1]
+    if culprit is not None:
         hint = {"final": "check that the final conditions are reachable within the horizon and the bounds",
                 "initial": "check that the initial conditions agree with the joints",
                 "periodic": "check that a periodic motion exists within the bounds",
@@ -363,13 +390,35 @@ def diagnose(nlp: NLP, value, result: OptimalTrajectory) -> str:
                             "input bounds, lengthen the horizon or refine N",
                 "invariant": "the free initial state cannot satisfy the joints with the other conditions",
                 "bound": "the bounds contradict each other"}.get(culprit.kind, "")
-        lines.append(f"Likely culprit: {culprit.label}" + (f" — {hint}." if hint else "."))
+        name = misses[0][0] if misses else culprit.label
+        lines.append(f"Likely culprit: {name}" + (f" — {hint}." if hint else "."))
     saturated = _saturated_inputs(nlp, result)
     if saturated:
         lines.append("Inputs on their bounds in most intervals: " + ", ".join(saturated) + ".")
-    if status == "Maximum_Iterations_Exceeded":
+    if status == "Maximum_Iterations_Exceeded" and not misses:
         lines.append("Raise max_iter, or warm start from a simulation or an easier problem's solution.")
     return "\n".join(lines)
+
+
+def _elastic_misses(nlp: NLP, result: OptimalTrajectory, *, tol: float, ipopt: dict) -> list[tuple[str, float]]:
+    """``[(label, largest slack)]`` of the conditions the elastic problem cannot meet,
+    largest first; empty if every condition can be met or the elastic solve fails."""
+    if not any(g.kind in RELAXABLE for g in nlp.groups):
+        return []
+    elastic = NLP(nlp.ocp, elastic=True)
+    try:
+        elastic.build(result)
+        value = elastic.solve(max_iter=500, tol=max(tol, 1e-8), verbose=False, ipopt=ipopt)
+    except (OptimizationError, RuntimeError):
+        return []
+    if elastic.opti.stats().get("return_status") not in SUCCESS:
+        return []
+    threshold = max(1e-6, 100 * tol)
+    misses: dict[str, float] = {}
+    for label, s in elastic.slacks.items():          # "final q (tangent components)" -> "final q"
+        name = label.split(" (")[0]
+        misses[name] = max(misses.get(name, 0.0), float(np.max(np.array(value(s)), initial=0.0)))
+    return sorted([(name, m) for name, m in misses.items() if m > threshold], key=lambda x: -x[1])
 
 
 def _violation(value, g: Group) -> float:

@@ -288,7 +288,8 @@ class OptimalControl:
         bounds), ``"interpolate"`` (every member's pose moved from the initial to the final
         configuration; the default when ``final(q=...)`` is given, else ``"rest"``), a
         simulation ``Trajectory`` or a previous solution (times rescaled to the horizon).
-        ``tol``: IPOPT's tolerance; ``ipopt``: extra IPOPT options.  Raises
+        ``tol``: IPOPT's tolerance, also on the unscaled constraint violation (so the
+        dynamics defects end below it); ``ipopt``: extra IPOPT options.  Raises
         :class:`~ncgen.errors.OptimizationError` when IPOPT fails (with the last iterate
         as ``exc.result``)."""
         from ncgen.optim.nlp import build_and_solve
