@@ -10,9 +10,10 @@ Integrators are pluggable: :func:`register_integrator` adds a factory
 ``factory(model, **options) -> casadi.Function`` whose function maps
 ``(x0[2nq], u[nu], p[np], t0, h) -> (xf[2nq], lamf[nc])`` (one interval of length ``h``
 seconds from time ``t0``, inputs constant, ``lamf`` the multipliers at the end).  IDAS is
-built in; the compiled fixed-step stepper of ``ncgen.runtime`` registers itself under
-``"stepper"`` once it provides such a function (it must be differentiable: CasADi
-derivatives or a ``casadi.external`` with Jacobians).
+built in, and so is ``"rattle"``: the scheme of the compiled fixed-step stepper
+(``ncgen.runtime.stepper_kernels``) written with CasADi's rootfinder, because IPOPT needs
+derivatives and the generated C stepper has none.  A factory for the C stepper itself
+would need its step's Jacobians (a ``casadi.external`` with ``jac_`` functions).
 """
 from __future__ import annotations
 
@@ -67,7 +68,41 @@ def idas_interval(model, *, rtol: float = IDAS_TOLERANCES[0], atol: float = IDAS
                        ["x0", "u", "p", "t0", "h"], ["xf", "lamf"])
 
 
+def rattle_interval(model, *, substeps: int = 4, tol: float = 1e-12, max_iter: int = 20) -> ca.Function:
+    """The compiled stepper's scheme (RATTLE, :mod:`ncgen.runtime.stepper_kernels`) over one
+    interval: ``substeps`` fixed steps of ``h / substeps``, each a Newton solve of the
+    first half-step (CasADi ``rootfinder``, derivatives by the implicit function theorem)
+    and the linear KKT solve of the second.  The same equations as the generated C stepper,
+    differentiable for IPOPT; both constraint levels hold at every node."""
+    from ncgen.runtime.stepper_kernels import stepper_functions
+
+    if not isinstance(substeps, int) or substeps < 1:
+        raise OptimizationError(f"rattle: substeps: expected a positive integer, got {substeps!r}")
+    newton, velocity = stepper_functions(model)[:2]
+    nq, nc, nu, npar = model.nq, model.nc, model.nu, model.np
+    x = ca.SX.sym("x", nq + nc)
+    t, h = ca.SX.sym("t"), ca.SX.sym("h")
+    q, v, u, p = ca.SX.sym("q", nq), ca.SX.sym("v", nq), ca.SX.sym("u", nu), ca.SX.sym("p", npar)
+    args = ca.vertcat(t, q, v, u, p, h)
+    residual = ca.Function("residual", [x, args], [newton(t, q, v, u, p, h, x[:nq], x[nq:])[0]])
+    half_step = ca.rootfinder("rattle_half_step", "newton", residual, {"abstol": tol, "max_iter": max_iter})
+    X0, U, P = ca.MX.sym("x0", 2 * nq), ca.MX.sym("u", nu), ca.MX.sym("p", npar)
+    T0, H = ca.MX.sym("t0"), ca.MX.sym("h")
+    hs = H / substeps
+    qk, vk, lam = X0[:nq], X0[nq:], ca.MX(nc, 1)
+    for k in range(substeps):
+        tk = T0 + k * hs
+        w = half_step(ca.vertcat(vk, ca.MX(nc, 1)), ca.vertcat(tk, qk, vk, U, P, hs))[:nq]
+        qk = qk + hs * w
+        b, K = velocity(tk + hs, qk, w, U, P, hs)
+        y = ca.solve(K, b, "qr")
+        vk, lam = y[:nq], 2 * y[nq:] / hs
+    return ca.Function("interval", [X0, U, P, T0, H], [ca.vertcat(qk, vk), lam],
+                       ["x0", "u", "p", "t0", "h"], ["xf", "lamf"])
+
+
 register_integrator("idas", idas_interval)
+register_integrator("rattle", rattle_interval)
 
 
 class MultipleShooting(Transcription):
