@@ -1,4 +1,5 @@
-"""``simulate``: a model's motion over a time grid, integrated by IDAS."""
+"""``simulate``: a model's motion over a time grid, integrated by IDAS or by the compiled
+stepper (:mod:`ncgen.runtime.stepper`)."""
 from __future__ import annotations
 
 import math
@@ -14,10 +15,11 @@ from ncgen.runtime.diagnose import explain, shift_time
 from ncgen.runtime.idas import ChunkedIDAS, ChunkFailure
 from ncgen.runtime.inputs import hold_columns, input_samples, parameter_values, time_grid
 from ncgen.runtime.progress import Progress
+from ncgen.runtime.stepper import MAX_ITER, TOL, simulate_stepper
 from ncgen.runtime.trajectory import Trajectory
 from ncgen.validation import as_vector
 
-METHODS = ("idas",)
+METHODS = ("idas", "stepper")
 #: The run is split into at most this many chunks (progress updates; see ncgen.runtime.idas).
 CHUNKS = 20
 
@@ -26,7 +28,8 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
              atol: float = 1e-10, u=None, p=None, q0=None, v0=None, t0: float | None = None,
              hold: str = "zoh", backend: str = "vm", progress: bool | None = None,
              max_steps: int = 50_000, linear_solver: str = "csparse",
-             ic_tolerance: float | None = 1e-6) -> Trajectory:
+             ic_tolerance: float | None = 1e-6, substeps: int = 1, newton_tol: float = TOL,
+             max_newton: int = MAX_ITER) -> Trajectory:
     """Integrate ``model`` from ``t0`` (default ``model.t0``) to ``t_end`` and return the
     :class:`~ncgen.runtime.trajectory.Trajectory` on the grid ``t0, t0 + dt, ..., t_end``
     (``dt`` shortened if needed so that ``t_end`` is on the grid).  Times in s.
@@ -57,6 +60,11 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
       terminal and the run takes more than a second.
     * ``max_steps``: IDAS steps allowed per output interval; ``linear_solver``: CasADi's
       sparse solver for the Newton systems (``"csparse"``, ``"qr"``, ...).
+    * ``method="stepper"``: the compiled fixed-step RATTLE stepper (generated C, Newton loop
+      included; :mod:`ncgen.runtime.stepper`), ``substeps`` steps of ``dt / substeps`` per
+      output interval, Newton tolerance ``newton_tol`` (both constraint levels hold to it at
+      every step) and at most ``max_newton`` iterations per step.  ``rtol``, ``atol``,
+      ``backend``, ``max_steps``, ``linear_solver`` and ``progress`` are IDAS's only.
 
     Raises :class:`~ncgen.errors.SimulationError` if IDAS fails; it names the time reached
     and the likely cause, and carries the trajectory up to that time (``.trajectory``).
@@ -73,6 +81,10 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
     U = input_samples(u, model, t)
     columns = hold_columns(U, t, hold)
     q, v = initial_state(model, q0, v0, t0, pv, ic_tolerance)
+    if method == "stepper":
+        lam = initial_multipliers(model, t0, q, v, U[0], pv, load_dae(model, "vm")[0])
+        return simulate_stepper(model, t, U, pv, q, v, lam, hold=hold, substeps=substeps, tol=newton_tol,
+                                max_iter=max_newton)
     dae, used = load_dae(model, backend)
     lam = initial_multipliers(model, t0, q, v, U[0], pv, dae)
     runner = ChunkedIDAS(dae, h=float(t[1] - t[0]), nu=model.nu, hold=hold, rtol=rtol, atol=atol,
