@@ -17,6 +17,7 @@ from ncgen.assembly.functions import DOCS, IN
 from ncgen.codegen import load_functions
 from ncgen.codegen.model_package import SYSTEM_FUNCTIONS, model_hash
 from ncgen.errors import CodegenError
+from ncgen.runtime.stepper_kernels import KERNELS as STEPPER_KERNELS
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"
@@ -52,7 +53,7 @@ def test_compiled_matches_vm_on_random_inputs(tmp_path, name, cflags):
     pkg = nc.generate(model, tmp_path / name)
     compiled = load_functions(pkg, backend="compiled", cflags=cflags)
     vm = load_functions(pkg, backend="vm")
-    assert set(compiled) == set(SYSTEM_FUNCTIONS)
+    assert set(compiled) == set(SYSTEM_FUNCTIONS) | set(STEPPER_KERNELS)
     rng = np.random.default_rng(7)
     for fname in SYSTEM_FUNCTIONS:
         assert compiled[fname].is_a("External")

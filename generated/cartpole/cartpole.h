@@ -314,8 +314,92 @@ extern const casadi_real cartpole_gravity[2];
 #define CARTPOLE_POSES_OUT_R_NNZ 8
 #define CARTPOLE_POSES_OUT_P_NNZ 4
 
+/* ---- cartpole_step_newton ----------------------------------------------------
+ * Stepper, first half-step: Newton residual r(w, nu) and its Jacobian K
+ * In cartpole_kernels_0.c; 249 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time at the start of the step. Default: cartpole_t0.
+ *   arg[1] q: 10x1, nnz 10 [m] coordinates at t. Default: cartpole_q0.
+ *   arg[2] v: 10x1, nnz 10 [m/s] coordinate rates at t. Default: cartpole_v0.
+ *   arg[3] u: 1x1, nnz 1 inputs, held over the step. Default: zeros.
+ *   arg[4] p: 0x1, nnz 0 parameters. Default: zeros.
+ *   arg[5] h: 1x1, nnz 1 [s] step. Default: zeros.
+ *   arg[6] w: 10x1, nnz 10 [m/s] midpoint rates v_{n+1/2}. Default: zeros.
+ *   arg[7] nu: 8x1, nnz 8 [N s/m^2] scaled multipliers h/2 lambda. Default: zeros.
+ * Outputs:
+ *   res[0] r: 18x1, nnz 18 [N s; m^2/s] [M (w - v) - h/2 F + A^T nu; Phi(t + h, q + h w) / h].
+ *   res[1] K: 18x18, nnz 50 (sparse) dr/d[w; nu], sparse.
+ */
+#define CARTPOLE_STEP_NEWTON_IN_T_NNZ 1
+#define CARTPOLE_STEP_NEWTON_IN_Q_NNZ 10
+#define CARTPOLE_STEP_NEWTON_IN_V_NNZ 10
+#define CARTPOLE_STEP_NEWTON_IN_U_NNZ 1
+#define CARTPOLE_STEP_NEWTON_IN_P_NNZ 0
+#define CARTPOLE_STEP_NEWTON_IN_H_NNZ 1
+#define CARTPOLE_STEP_NEWTON_IN_W_NNZ 10
+#define CARTPOLE_STEP_NEWTON_IN_NU_NNZ 8
+#define CARTPOLE_STEP_NEWTON_OUT_R_NNZ 18
+#define CARTPOLE_STEP_NEWTON_OUT_K_NNZ 50
+
+/* ---- cartpole_step_velocity ----------------------------------------------------
+ * Stepper, second half-step: KKT matrix and right-hand side for [v+; h/2 mu]
+ * In cartpole_kernels_0.c; 134 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time at the end of the step. Default: cartpole_t0.
+ *   arg[1] q: 10x1, nnz 10 [m] coordinates at the end. Default: cartpole_q0.
+ *   arg[2] w: 10x1, nnz 10 [m/s] midpoint rates. Default: zeros.
+ *   arg[3] u: 1x1, nnz 1 inputs, held over the step. Default: zeros.
+ *   arg[4] p: 0x1, nnz 0 parameters. Default: zeros.
+ *   arg[5] h: 1x1, nnz 1 [s] step. Default: zeros.
+ * Outputs:
+ *   res[0] b: 18x1, nnz 18 [N s; m^2/s] [M w + h/2 F; -Phi_t].
+ *   res[1] K: 18x18, nnz 50 (sparse) [[M, A^T], [A, 0]] in the pattern of step_newton's K.
+ */
+#define CARTPOLE_STEP_VELOCITY_IN_T_NNZ 1
+#define CARTPOLE_STEP_VELOCITY_IN_Q_NNZ 10
+#define CARTPOLE_STEP_VELOCITY_IN_W_NNZ 10
+#define CARTPOLE_STEP_VELOCITY_IN_U_NNZ 1
+#define CARTPOLE_STEP_VELOCITY_IN_P_NNZ 0
+#define CARTPOLE_STEP_VELOCITY_IN_H_NNZ 1
+#define CARTPOLE_STEP_VELOCITY_OUT_B_NNZ 18
+#define CARTPOLE_STEP_VELOCITY_OUT_K_NNZ 50
+
+/* ---- cartpole_step_check ----------------------------------------------------
+ * Stepper: constraint residuals of a state
+ * In cartpole_kernels_0.c; 106 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: cartpole_t0.
+ *   arg[1] q: 10x1, nnz 10 [m] coordinates. Default: cartpole_q0.
+ *   arg[2] v: 10x1, nnz 10 [m/s] coordinate rates. Default: cartpole_v0.
+ *   arg[3] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] phi_max: 1x1, nnz 1 [m^2] max |Phi(t, q)|.
+ *   res[1] phidot_max: 1x1, nnz 1 [m^2/s] max |A(t, q) v + Phi_t(t, q)|.
+ */
+#define CARTPOLE_STEP_CHECK_IN_T_NNZ 1
+#define CARTPOLE_STEP_CHECK_IN_Q_NNZ 10
+#define CARTPOLE_STEP_CHECK_IN_V_NNZ 10
+#define CARTPOLE_STEP_CHECK_IN_P_NNZ 0
+#define CARTPOLE_STEP_CHECK_OUT_PHI_MAX_NNZ 1
+#define CARTPOLE_STEP_CHECK_OUT_PHIDOT_MAX_NNZ 1
+
+/* ---- cartpole_step_solve ----------------------------------------------------
+ * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
+ * In cartpole_kernels_0.c; 940 instructions.
+ * Inputs:
+ *   arg[0] K: 18x18, nnz 50 (sparse) KKT matrix in the stepper's pattern. Default: zeros.
+ *   arg[1] r: 18x1, nnz 18 right-hand side. Default: zeros.
+ * Outputs:
+ *   res[0] x: 18x1, nnz 18 solution.
+ */
+#define CARTPOLE_STEP_SOLVE_IN_K_NNZ 50
+#define CARTPOLE_STEP_SOLVE_IN_R_NNZ 18
+#define CARTPOLE_STEP_SOLVE_OUT_X_NNZ 18
+
 #ifdef __cplusplus
 } /* extern "C" */
 #endif
+
+#include "cartpole_stepper.h"
 
 #endif /* NCGEN_CARTPOLE_H */

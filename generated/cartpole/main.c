@@ -103,6 +103,34 @@ static const casadi_real *const defaults_markers[] = {
 static const casadi_real *const defaults_poses[] = {
   cartpole_q0,
   0};
+static const casadi_real *const defaults_step_newton[] = {
+  cartpole_t0,
+  cartpole_q0,
+  cartpole_v0,
+  0,
+  0,
+  0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_velocity[] = {
+  cartpole_t0,
+  cartpole_q0,
+  0,
+  0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_check[] = {
+  cartpole_t0,
+  cartpole_q0,
+  cartpole_v0,
+  0,
+  0};
+static const casadi_real *const defaults_step_solve[] = {
+  0,
+  0,
+  0};
 
 static const kernel kernels[] = {
   {"phi", cartpole_phi, cartpole_phi_work, cartpole_phi_n_in, cartpole_phi_n_out,
@@ -157,6 +185,22 @@ static const kernel kernels[] = {
    cartpole_poses_name_in, cartpole_poses_name_out, cartpole_poses_sparsity_in, cartpole_poses_sparsity_out,
    cartpole_poses_checkout, cartpole_poses_release, cartpole_poses_incref, cartpole_poses_decref,
    defaults_poses},
+  {"step_newton", cartpole_step_newton, cartpole_step_newton_work, cartpole_step_newton_n_in, cartpole_step_newton_n_out,
+   cartpole_step_newton_name_in, cartpole_step_newton_name_out, cartpole_step_newton_sparsity_in, cartpole_step_newton_sparsity_out,
+   cartpole_step_newton_checkout, cartpole_step_newton_release, cartpole_step_newton_incref, cartpole_step_newton_decref,
+   defaults_step_newton},
+  {"step_velocity", cartpole_step_velocity, cartpole_step_velocity_work, cartpole_step_velocity_n_in, cartpole_step_velocity_n_out,
+   cartpole_step_velocity_name_in, cartpole_step_velocity_name_out, cartpole_step_velocity_sparsity_in, cartpole_step_velocity_sparsity_out,
+   cartpole_step_velocity_checkout, cartpole_step_velocity_release, cartpole_step_velocity_incref, cartpole_step_velocity_decref,
+   defaults_step_velocity},
+  {"step_check", cartpole_step_check, cartpole_step_check_work, cartpole_step_check_n_in, cartpole_step_check_n_out,
+   cartpole_step_check_name_in, cartpole_step_check_name_out, cartpole_step_check_sparsity_in, cartpole_step_check_sparsity_out,
+   cartpole_step_check_checkout, cartpole_step_check_release, cartpole_step_check_incref, cartpole_step_check_decref,
+   defaults_step_check},
+  {"step_solve", cartpole_step_solve, cartpole_step_solve_work, cartpole_step_solve_n_in, cartpole_step_solve_n_out,
+   cartpole_step_solve_name_in, cartpole_step_solve_name_out, cartpole_step_solve_sparsity_in, cartpole_step_solve_sparsity_out,
+   cartpole_step_solve_checkout, cartpole_step_solve_release, cartpole_step_solve_incref, cartpole_step_solve_decref,
+   defaults_step_solve},
 };
 
 static const size_t n_kernels = sizeof(kernels) / sizeof(kernels[0]);

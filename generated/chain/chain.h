@@ -313,8 +313,92 @@ extern const casadi_real chain_gravity[3];
 #define CHAIN_POSES_OUT_R_NNZ 45
 #define CHAIN_POSES_OUT_P_NNZ 15
 
+/* ---- chain_step_newton ----------------------------------------------------
+ * Stepper, first half-step: Newton residual r(w, nu) and its Jacobian K
+ * In chain_kernels_0.c; 459 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time at the start of the step. Default: chain_t0.
+ *   arg[1] q: 15x1, nnz 15 [m] coordinates at t. Default: chain_q0.
+ *   arg[2] v: 15x1, nnz 15 [m/s] coordinate rates at t. Default: chain_v0.
+ *   arg[3] u: 0x1, nnz 0 inputs, held over the step. Default: zeros.
+ *   arg[4] p: 0x1, nnz 0 parameters. Default: zeros.
+ *   arg[5] h: 1x1, nnz 1 [s] step. Default: zeros.
+ *   arg[6] w: 15x1, nnz 15 [m/s] midpoint rates v_{n+1/2}. Default: zeros.
+ *   arg[7] nu: 5x1, nnz 5 [N s/m^2] scaled multipliers h/2 lambda. Default: zeros.
+ * Outputs:
+ *   res[0] r: 20x1, nnz 20 [N s; m^2/s] [M (w - v) - h/2 F + A^T nu; Phi(t + h, q + h w) / h].
+ *   res[1] K: 20x20, nnz 93 (sparse) dr/d[w; nu], sparse.
+ */
+#define CHAIN_STEP_NEWTON_IN_T_NNZ 1
+#define CHAIN_STEP_NEWTON_IN_Q_NNZ 15
+#define CHAIN_STEP_NEWTON_IN_V_NNZ 15
+#define CHAIN_STEP_NEWTON_IN_U_NNZ 0
+#define CHAIN_STEP_NEWTON_IN_P_NNZ 0
+#define CHAIN_STEP_NEWTON_IN_H_NNZ 1
+#define CHAIN_STEP_NEWTON_IN_W_NNZ 15
+#define CHAIN_STEP_NEWTON_IN_NU_NNZ 5
+#define CHAIN_STEP_NEWTON_OUT_R_NNZ 20
+#define CHAIN_STEP_NEWTON_OUT_K_NNZ 93
+
+/* ---- chain_step_velocity ----------------------------------------------------
+ * Stepper, second half-step: KKT matrix and right-hand side for [v+; h/2 mu]
+ * In chain_kernels_0.c; 265 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time at the end of the step. Default: chain_t0.
+ *   arg[1] q: 15x1, nnz 15 [m] coordinates at the end. Default: chain_q0.
+ *   arg[2] w: 15x1, nnz 15 [m/s] midpoint rates. Default: zeros.
+ *   arg[3] u: 0x1, nnz 0 inputs, held over the step. Default: zeros.
+ *   arg[4] p: 0x1, nnz 0 parameters. Default: zeros.
+ *   arg[5] h: 1x1, nnz 1 [s] step. Default: zeros.
+ * Outputs:
+ *   res[0] b: 20x1, nnz 20 [N s; m^2/s] [M w + h/2 F; -Phi_t].
+ *   res[1] K: 20x20, nnz 93 (sparse) [[M, A^T], [A, 0]] in the pattern of step_newton's K.
+ */
+#define CHAIN_STEP_VELOCITY_IN_T_NNZ 1
+#define CHAIN_STEP_VELOCITY_IN_Q_NNZ 15
+#define CHAIN_STEP_VELOCITY_IN_W_NNZ 15
+#define CHAIN_STEP_VELOCITY_IN_U_NNZ 0
+#define CHAIN_STEP_VELOCITY_IN_P_NNZ 0
+#define CHAIN_STEP_VELOCITY_IN_H_NNZ 1
+#define CHAIN_STEP_VELOCITY_OUT_B_NNZ 20
+#define CHAIN_STEP_VELOCITY_OUT_K_NNZ 93
+
+/* ---- chain_step_check ----------------------------------------------------
+ * Stepper: constraint residuals of a state
+ * In chain_kernels_0.c; 173 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: chain_t0.
+ *   arg[1] q: 15x1, nnz 15 [m] coordinates. Default: chain_q0.
+ *   arg[2] v: 15x1, nnz 15 [m/s] coordinate rates. Default: chain_v0.
+ *   arg[3] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] phi_max: 1x1, nnz 1 [m^2] max |Phi(t, q)|.
+ *   res[1] phidot_max: 1x1, nnz 1 [m^2/s] max |A(t, q) v + Phi_t(t, q)|.
+ */
+#define CHAIN_STEP_CHECK_IN_T_NNZ 1
+#define CHAIN_STEP_CHECK_IN_Q_NNZ 15
+#define CHAIN_STEP_CHECK_IN_V_NNZ 15
+#define CHAIN_STEP_CHECK_IN_P_NNZ 0
+#define CHAIN_STEP_CHECK_OUT_PHI_MAX_NNZ 1
+#define CHAIN_STEP_CHECK_OUT_PHIDOT_MAX_NNZ 1
+
+/* ---- chain_step_solve ----------------------------------------------------
+ * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
+ * In chain_kernels_0.c; 3277 instructions.
+ * Inputs:
+ *   arg[0] K: 20x20, nnz 93 (sparse) KKT matrix in the stepper's pattern. Default: zeros.
+ *   arg[1] r: 20x1, nnz 20 right-hand side. Default: zeros.
+ * Outputs:
+ *   res[0] x: 20x1, nnz 20 solution.
+ */
+#define CHAIN_STEP_SOLVE_IN_K_NNZ 93
+#define CHAIN_STEP_SOLVE_IN_R_NNZ 20
+#define CHAIN_STEP_SOLVE_OUT_X_NNZ 20
+
 #ifdef __cplusplus
 } /* extern "C" */
 #endif
+
+#include "chain_stepper.h"
 
 #endif /* NCGEN_CHAIN_H */

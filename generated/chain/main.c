@@ -103,6 +103,34 @@ static const casadi_real *const defaults_markers[] = {
 static const casadi_real *const defaults_poses[] = {
   chain_q0,
   0};
+static const casadi_real *const defaults_step_newton[] = {
+  chain_t0,
+  chain_q0,
+  chain_v0,
+  0,
+  0,
+  0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_velocity[] = {
+  chain_t0,
+  chain_q0,
+  0,
+  0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_check[] = {
+  chain_t0,
+  chain_q0,
+  chain_v0,
+  0,
+  0};
+static const casadi_real *const defaults_step_solve[] = {
+  0,
+  0,
+  0};
 
 static const kernel kernels[] = {
   {"phi", chain_phi, chain_phi_work, chain_phi_n_in, chain_phi_n_out,
@@ -157,6 +185,22 @@ static const kernel kernels[] = {
    chain_poses_name_in, chain_poses_name_out, chain_poses_sparsity_in, chain_poses_sparsity_out,
    chain_poses_checkout, chain_poses_release, chain_poses_incref, chain_poses_decref,
    defaults_poses},
+  {"step_newton", chain_step_newton, chain_step_newton_work, chain_step_newton_n_in, chain_step_newton_n_out,
+   chain_step_newton_name_in, chain_step_newton_name_out, chain_step_newton_sparsity_in, chain_step_newton_sparsity_out,
+   chain_step_newton_checkout, chain_step_newton_release, chain_step_newton_incref, chain_step_newton_decref,
+   defaults_step_newton},
+  {"step_velocity", chain_step_velocity, chain_step_velocity_work, chain_step_velocity_n_in, chain_step_velocity_n_out,
+   chain_step_velocity_name_in, chain_step_velocity_name_out, chain_step_velocity_sparsity_in, chain_step_velocity_sparsity_out,
+   chain_step_velocity_checkout, chain_step_velocity_release, chain_step_velocity_incref, chain_step_velocity_decref,
+   defaults_step_velocity},
+  {"step_check", chain_step_check, chain_step_check_work, chain_step_check_n_in, chain_step_check_n_out,
+   chain_step_check_name_in, chain_step_check_name_out, chain_step_check_sparsity_in, chain_step_check_sparsity_out,
+   chain_step_check_checkout, chain_step_check_release, chain_step_check_incref, chain_step_check_decref,
+   defaults_step_check},
+  {"step_solve", chain_step_solve, chain_step_solve_work, chain_step_solve_n_in, chain_step_solve_n_out,
+   chain_step_solve_name_in, chain_step_solve_name_out, chain_step_solve_sparsity_in, chain_step_solve_sparsity_out,
+   chain_step_solve_checkout, chain_step_solve_release, chain_step_solve_incref, chain_step_solve_decref,
+   defaults_step_solve},
 };
 
 static const size_t n_kernels = sizeof(kernels) / sizeof(kernels[0]);

@@ -313,8 +313,92 @@ extern const casadi_real double_pendulum_gravity[3];
 #define DOUBLE_PENDULUM_POSES_OUT_R_NNZ 18
 #define DOUBLE_PENDULUM_POSES_OUT_P_NNZ 6
 
+/* ---- double_pendulum_step_newton ----------------------------------------------------
+ * Stepper, first half-step: Newton residual r(w, nu) and its Jacobian K
+ * In double_pendulum_kernels_0.c; 787 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time at the start of the step. Default: double_pendulum_t0.
+ *   arg[1] q: 24x1, nnz 24 [m] coordinates at t. Default: double_pendulum_q0.
+ *   arg[2] v: 24x1, nnz 24 [m/s] coordinate rates at t. Default: double_pendulum_v0.
+ *   arg[3] u: 0x1, nnz 0 inputs, held over the step. Default: zeros.
+ *   arg[4] p: 0x1, nnz 0 parameters. Default: zeros.
+ *   arg[5] h: 1x1, nnz 1 [s] step. Default: zeros.
+ *   arg[6] w: 24x1, nnz 24 [m/s] midpoint rates v_{n+1/2}. Default: zeros.
+ *   arg[7] nu: 22x1, nnz 22 [N s/m^2] scaled multipliers h/2 lambda. Default: zeros.
+ * Outputs:
+ *   res[0] r: 46x1, nnz 46 [N s; m^2/s] [M (w - v) - h/2 F + A^T nu; Phi(t + h, q + h w) / h].
+ *   res[1] K: 46x46, nnz 196 (sparse) dr/d[w; nu], sparse.
+ */
+#define DOUBLE_PENDULUM_STEP_NEWTON_IN_T_NNZ 1
+#define DOUBLE_PENDULUM_STEP_NEWTON_IN_Q_NNZ 24
+#define DOUBLE_PENDULUM_STEP_NEWTON_IN_V_NNZ 24
+#define DOUBLE_PENDULUM_STEP_NEWTON_IN_U_NNZ 0
+#define DOUBLE_PENDULUM_STEP_NEWTON_IN_P_NNZ 0
+#define DOUBLE_PENDULUM_STEP_NEWTON_IN_H_NNZ 1
+#define DOUBLE_PENDULUM_STEP_NEWTON_IN_W_NNZ 24
+#define DOUBLE_PENDULUM_STEP_NEWTON_IN_NU_NNZ 22
+#define DOUBLE_PENDULUM_STEP_NEWTON_OUT_R_NNZ 46
+#define DOUBLE_PENDULUM_STEP_NEWTON_OUT_K_NNZ 196
+
+/* ---- double_pendulum_step_velocity ----------------------------------------------------
+ * Stepper, second half-step: KKT matrix and right-hand side for [v+; h/2 mu]
+ * In double_pendulum_kernels_0.c; 346 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time at the end of the step. Default: double_pendulum_t0.
+ *   arg[1] q: 24x1, nnz 24 [m] coordinates at the end. Default: double_pendulum_q0.
+ *   arg[2] w: 24x1, nnz 24 [m/s] midpoint rates. Default: zeros.
+ *   arg[3] u: 0x1, nnz 0 inputs, held over the step. Default: zeros.
+ *   arg[4] p: 0x1, nnz 0 parameters. Default: zeros.
+ *   arg[5] h: 1x1, nnz 1 [s] step. Default: zeros.
+ * Outputs:
+ *   res[0] b: 46x1, nnz 46 [N s; m^2/s] [M w + h/2 F; -Phi_t].
+ *   res[1] K: 46x46, nnz 196 (sparse) [[M, A^T], [A, 0]] in the pattern of step_newton's K.
+ */
+#define DOUBLE_PENDULUM_STEP_VELOCITY_IN_T_NNZ 1
+#define DOUBLE_PENDULUM_STEP_VELOCITY_IN_Q_NNZ 24
+#define DOUBLE_PENDULUM_STEP_VELOCITY_IN_W_NNZ 24
+#define DOUBLE_PENDULUM_STEP_VELOCITY_IN_U_NNZ 0
+#define DOUBLE_PENDULUM_STEP_VELOCITY_IN_P_NNZ 0
+#define DOUBLE_PENDULUM_STEP_VELOCITY_IN_H_NNZ 1
+#define DOUBLE_PENDULUM_STEP_VELOCITY_OUT_B_NNZ 46
+#define DOUBLE_PENDULUM_STEP_VELOCITY_OUT_K_NNZ 196
+
+/* ---- double_pendulum_step_check ----------------------------------------------------
+ * Stepper: constraint residuals of a state
+ * In double_pendulum_kernels_0.c; 396 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: double_pendulum_t0.
+ *   arg[1] q: 24x1, nnz 24 [m] coordinates. Default: double_pendulum_q0.
+ *   arg[2] v: 24x1, nnz 24 [m/s] coordinate rates. Default: double_pendulum_v0.
+ *   arg[3] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] phi_max: 1x1, nnz 1 [m^2] max |Phi(t, q)|.
+ *   res[1] phidot_max: 1x1, nnz 1 [m^2/s] max |A(t, q) v + Phi_t(t, q)|.
+ */
+#define DOUBLE_PENDULUM_STEP_CHECK_IN_T_NNZ 1
+#define DOUBLE_PENDULUM_STEP_CHECK_IN_Q_NNZ 24
+#define DOUBLE_PENDULUM_STEP_CHECK_IN_V_NNZ 24
+#define DOUBLE_PENDULUM_STEP_CHECK_IN_P_NNZ 0
+#define DOUBLE_PENDULUM_STEP_CHECK_OUT_PHI_MAX_NNZ 1
+#define DOUBLE_PENDULUM_STEP_CHECK_OUT_PHIDOT_MAX_NNZ 1
+
+/* ---- double_pendulum_step_solve ----------------------------------------------------
+ * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
+ * In double_pendulum_kernels_0.c; 8691 instructions.
+ * Inputs:
+ *   arg[0] K: 46x46, nnz 196 (sparse) KKT matrix in the stepper's pattern. Default: zeros.
+ *   arg[1] r: 46x1, nnz 46 right-hand side. Default: zeros.
+ * Outputs:
+ *   res[0] x: 46x1, nnz 46 solution.
+ */
+#define DOUBLE_PENDULUM_STEP_SOLVE_IN_K_NNZ 196
+#define DOUBLE_PENDULUM_STEP_SOLVE_IN_R_NNZ 46
+#define DOUBLE_PENDULUM_STEP_SOLVE_OUT_X_NNZ 46
+
 #ifdef __cplusplus
 } /* extern "C" */
 #endif
+
+#include "double_pendulum_stepper.h"
 
 #endif /* NCGEN_DOUBLE_PENDULUM_H */

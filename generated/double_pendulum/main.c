@@ -103,6 +103,34 @@ static const casadi_real *const defaults_markers[] = {
 static const casadi_real *const defaults_poses[] = {
   double_pendulum_q0,
   0};
+static const casadi_real *const defaults_step_newton[] = {
+  double_pendulum_t0,
+  double_pendulum_q0,
+  double_pendulum_v0,
+  0,
+  0,
+  0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_velocity[] = {
+  double_pendulum_t0,
+  double_pendulum_q0,
+  0,
+  0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_check[] = {
+  double_pendulum_t0,
+  double_pendulum_q0,
+  double_pendulum_v0,
+  0,
+  0};
+static const casadi_real *const defaults_step_solve[] = {
+  0,
+  0,
+  0};
 
 static const kernel kernels[] = {
   {"phi", double_pendulum_phi, double_pendulum_phi_work, double_pendulum_phi_n_in, double_pendulum_phi_n_out,
@@ -157,6 +185,22 @@ static const kernel kernels[] = {
    double_pendulum_poses_name_in, double_pendulum_poses_name_out, double_pendulum_poses_sparsity_in, double_pendulum_poses_sparsity_out,
    double_pendulum_poses_checkout, double_pendulum_poses_release, double_pendulum_poses_incref, double_pendulum_poses_decref,
    defaults_poses},
+  {"step_newton", double_pendulum_step_newton, double_pendulum_step_newton_work, double_pendulum_step_newton_n_in, double_pendulum_step_newton_n_out,
+   double_pendulum_step_newton_name_in, double_pendulum_step_newton_name_out, double_pendulum_step_newton_sparsity_in, double_pendulum_step_newton_sparsity_out,
+   double_pendulum_step_newton_checkout, double_pendulum_step_newton_release, double_pendulum_step_newton_incref, double_pendulum_step_newton_decref,
+   defaults_step_newton},
+  {"step_velocity", double_pendulum_step_velocity, double_pendulum_step_velocity_work, double_pendulum_step_velocity_n_in, double_pendulum_step_velocity_n_out,
+   double_pendulum_step_velocity_name_in, double_pendulum_step_velocity_name_out, double_pendulum_step_velocity_sparsity_in, double_pendulum_step_velocity_sparsity_out,
+   double_pendulum_step_velocity_checkout, double_pendulum_step_velocity_release, double_pendulum_step_velocity_incref, double_pendulum_step_velocity_decref,
+   defaults_step_velocity},
+  {"step_check", double_pendulum_step_check, double_pendulum_step_check_work, double_pendulum_step_check_n_in, double_pendulum_step_check_n_out,
+   double_pendulum_step_check_name_in, double_pendulum_step_check_name_out, double_pendulum_step_check_sparsity_in, double_pendulum_step_check_sparsity_out,
+   double_pendulum_step_check_checkout, double_pendulum_step_check_release, double_pendulum_step_check_incref, double_pendulum_step_check_decref,
+   defaults_step_check},
+  {"step_solve", double_pendulum_step_solve, double_pendulum_step_solve_work, double_pendulum_step_solve_n_in, double_pendulum_step_solve_n_out,
+   double_pendulum_step_solve_name_in, double_pendulum_step_solve_name_out, double_pendulum_step_solve_sparsity_in, double_pendulum_step_solve_sparsity_out,
+   double_pendulum_step_solve_checkout, double_pendulum_step_solve_release, double_pendulum_step_solve_incref, double_pendulum_step_solve_decref,
+   defaults_step_solve},
 };
 
 static const size_t n_kernels = sizeof(kernels) / sizeof(kernels[0]);

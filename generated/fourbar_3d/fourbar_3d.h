@@ -18,6 +18,7 @@
 #define NCGEN_FOURBAR_3D_H
 
 #include "fourbar_3d_kernels_0.h"
+#include "fourbar_3d_kernels_1.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -313,8 +314,92 @@ extern const casadi_real fourbar_3d_gravity[3];
 #define FOURBAR_3D_POSES_OUT_R_NNZ 27
 #define FOURBAR_3D_POSES_OUT_P_NNZ 9
 
+/* ---- fourbar_3d_step_newton ----------------------------------------------------
+ * Stepper, first half-step: Newton residual r(w, nu) and its Jacobian K
+ * In fourbar_3d_kernels_0.c; 1016 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time at the start of the step. Default: fourbar_3d_t0.
+ *   arg[1] q: 24x1, nnz 24 [m] coordinates at t. Default: fourbar_3d_q0.
+ *   arg[2] v: 24x1, nnz 24 [m/s] coordinate rates at t. Default: fourbar_3d_v0.
+ *   arg[3] u: 0x1, nnz 0 inputs, held over the step. Default: zeros.
+ *   arg[4] p: 0x1, nnz 0 parameters. Default: zeros.
+ *   arg[5] h: 1x1, nnz 1 [s] step. Default: zeros.
+ *   arg[6] w: 24x1, nnz 24 [m/s] midpoint rates v_{n+1/2}. Default: zeros.
+ *   arg[7] nu: 23x1, nnz 23 [N s/m^2] scaled multipliers h/2 lambda. Default: zeros.
+ * Outputs:
+ *   res[0] r: 47x1, nnz 47 [N s; m^2/s] [M (w - v) - h/2 F + A^T nu; Phi(t + h, q + h w) / h].
+ *   res[1] K: 47x47, nnz 252 (sparse) dr/d[w; nu], sparse.
+ */
+#define FOURBAR_3D_STEP_NEWTON_IN_T_NNZ 1
+#define FOURBAR_3D_STEP_NEWTON_IN_Q_NNZ 24
+#define FOURBAR_3D_STEP_NEWTON_IN_V_NNZ 24
+#define FOURBAR_3D_STEP_NEWTON_IN_U_NNZ 0
+#define FOURBAR_3D_STEP_NEWTON_IN_P_NNZ 0
+#define FOURBAR_3D_STEP_NEWTON_IN_H_NNZ 1
+#define FOURBAR_3D_STEP_NEWTON_IN_W_NNZ 24
+#define FOURBAR_3D_STEP_NEWTON_IN_NU_NNZ 23
+#define FOURBAR_3D_STEP_NEWTON_OUT_R_NNZ 47
+#define FOURBAR_3D_STEP_NEWTON_OUT_K_NNZ 252
+
+/* ---- fourbar_3d_step_velocity ----------------------------------------------------
+ * Stepper, second half-step: KKT matrix and right-hand side for [v+; h/2 mu]
+ * In fourbar_3d_kernels_0.c; 498 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time at the end of the step. Default: fourbar_3d_t0.
+ *   arg[1] q: 24x1, nnz 24 [m] coordinates at the end. Default: fourbar_3d_q0.
+ *   arg[2] w: 24x1, nnz 24 [m/s] midpoint rates. Default: zeros.
+ *   arg[3] u: 0x1, nnz 0 inputs, held over the step. Default: zeros.
+ *   arg[4] p: 0x1, nnz 0 parameters. Default: zeros.
+ *   arg[5] h: 1x1, nnz 1 [s] step. Default: zeros.
+ * Outputs:
+ *   res[0] b: 47x1, nnz 47 [N s; m^2/s] [M w + h/2 F; -Phi_t].
+ *   res[1] K: 47x47, nnz 252 (sparse) [[M, A^T], [A, 0]] in the pattern of step_newton's K.
+ */
+#define FOURBAR_3D_STEP_VELOCITY_IN_T_NNZ 1
+#define FOURBAR_3D_STEP_VELOCITY_IN_Q_NNZ 24
+#define FOURBAR_3D_STEP_VELOCITY_IN_W_NNZ 24
+#define FOURBAR_3D_STEP_VELOCITY_IN_U_NNZ 0
+#define FOURBAR_3D_STEP_VELOCITY_IN_P_NNZ 0
+#define FOURBAR_3D_STEP_VELOCITY_IN_H_NNZ 1
+#define FOURBAR_3D_STEP_VELOCITY_OUT_B_NNZ 47
+#define FOURBAR_3D_STEP_VELOCITY_OUT_K_NNZ 252
+
+/* ---- fourbar_3d_step_check ----------------------------------------------------
+ * Stepper: constraint residuals of a state
+ * In fourbar_3d_kernels_0.c; 497 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_3d_t0.
+ *   arg[1] q: 24x1, nnz 24 [m] coordinates. Default: fourbar_3d_q0.
+ *   arg[2] v: 24x1, nnz 24 [m/s] coordinate rates. Default: fourbar_3d_v0.
+ *   arg[3] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] phi_max: 1x1, nnz 1 [m^2] max |Phi(t, q)|.
+ *   res[1] phidot_max: 1x1, nnz 1 [m^2/s] max |A(t, q) v + Phi_t(t, q)|.
+ */
+#define FOURBAR_3D_STEP_CHECK_IN_T_NNZ 1
+#define FOURBAR_3D_STEP_CHECK_IN_Q_NNZ 24
+#define FOURBAR_3D_STEP_CHECK_IN_V_NNZ 24
+#define FOURBAR_3D_STEP_CHECK_IN_P_NNZ 0
+#define FOURBAR_3D_STEP_CHECK_OUT_PHI_MAX_NNZ 1
+#define FOURBAR_3D_STEP_CHECK_OUT_PHIDOT_MAX_NNZ 1
+
+/* ---- fourbar_3d_step_solve ----------------------------------------------------
+ * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
+ * In fourbar_3d_kernels_1.c; 12260 instructions.
+ * Inputs:
+ *   arg[0] K: 47x47, nnz 252 (sparse) KKT matrix in the stepper's pattern. Default: zeros.
+ *   arg[1] r: 47x1, nnz 47 right-hand side. Default: zeros.
+ * Outputs:
+ *   res[0] x: 47x1, nnz 47 solution.
+ */
+#define FOURBAR_3D_STEP_SOLVE_IN_K_NNZ 252
+#define FOURBAR_3D_STEP_SOLVE_IN_R_NNZ 47
+#define FOURBAR_3D_STEP_SOLVE_OUT_X_NNZ 47
+
 #ifdef __cplusplus
 } /* extern "C" */
 #endif
+
+#include "fourbar_3d_stepper.h"
 
 #endif /* NCGEN_FOURBAR_3D_H */

@@ -315,8 +315,92 @@ extern const casadi_real fourbar_planar_gravity[2];
 #define FOURBAR_PLANAR_POSES_OUT_R_NNZ 12
 #define FOURBAR_PLANAR_POSES_OUT_P_NNZ 6
 
+/* ---- fourbar_planar_step_newton ----------------------------------------------------
+ * Stepper, first half-step: Newton residual r(w, nu) and its Jacobian K
+ * In fourbar_planar_kernels_0.c; 343 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time at the start of the step. Default: fourbar_planar_t0.
+ *   arg[1] q: 6x1, nnz 6 [m] coordinates at t. Default: fourbar_planar_q0.
+ *   arg[2] v: 6x1, nnz 6 [m/s] coordinate rates at t. Default: fourbar_planar_v0.
+ *   arg[3] u: 0x1, nnz 0 inputs, held over the step. Default: zeros.
+ *   arg[4] p: 1x1, nnz 1 parameters. Default: fourbar_planar_p0.
+ *   arg[5] h: 1x1, nnz 1 [s] step. Default: zeros.
+ *   arg[6] w: 6x1, nnz 6 [m/s] midpoint rates v_{n+1/2}. Default: zeros.
+ *   arg[7] nu: 5x1, nnz 5 [N s/m^2] scaled multipliers h/2 lambda. Default: zeros.
+ * Outputs:
+ *   res[0] r: 11x1, nnz 11 [N s; m^2/s] [M (w - v) - h/2 F + A^T nu; Phi(t + h, q + h w) / h].
+ *   res[1] K: 11x11, nnz 46 (sparse) dr/d[w; nu], sparse.
+ */
+#define FOURBAR_PLANAR_STEP_NEWTON_IN_T_NNZ 1
+#define FOURBAR_PLANAR_STEP_NEWTON_IN_Q_NNZ 6
+#define FOURBAR_PLANAR_STEP_NEWTON_IN_V_NNZ 6
+#define FOURBAR_PLANAR_STEP_NEWTON_IN_U_NNZ 0
+#define FOURBAR_PLANAR_STEP_NEWTON_IN_P_NNZ 1
+#define FOURBAR_PLANAR_STEP_NEWTON_IN_H_NNZ 1
+#define FOURBAR_PLANAR_STEP_NEWTON_IN_W_NNZ 6
+#define FOURBAR_PLANAR_STEP_NEWTON_IN_NU_NNZ 5
+#define FOURBAR_PLANAR_STEP_NEWTON_OUT_R_NNZ 11
+#define FOURBAR_PLANAR_STEP_NEWTON_OUT_K_NNZ 46
+
+/* ---- fourbar_planar_step_velocity ----------------------------------------------------
+ * Stepper, second half-step: KKT matrix and right-hand side for [v+; h/2 mu]
+ * In fourbar_planar_kernels_0.c; 200 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time at the end of the step. Default: fourbar_planar_t0.
+ *   arg[1] q: 6x1, nnz 6 [m] coordinates at the end. Default: fourbar_planar_q0.
+ *   arg[2] w: 6x1, nnz 6 [m/s] midpoint rates. Default: zeros.
+ *   arg[3] u: 0x1, nnz 0 inputs, held over the step. Default: zeros.
+ *   arg[4] p: 1x1, nnz 1 parameters. Default: fourbar_planar_p0.
+ *   arg[5] h: 1x1, nnz 1 [s] step. Default: zeros.
+ * Outputs:
+ *   res[0] b: 11x1, nnz 11 [N s; m^2/s] [M w + h/2 F; -Phi_t].
+ *   res[1] K: 11x11, nnz 46 (sparse) [[M, A^T], [A, 0]] in the pattern of step_newton's K.
+ */
+#define FOURBAR_PLANAR_STEP_VELOCITY_IN_T_NNZ 1
+#define FOURBAR_PLANAR_STEP_VELOCITY_IN_Q_NNZ 6
+#define FOURBAR_PLANAR_STEP_VELOCITY_IN_W_NNZ 6
+#define FOURBAR_PLANAR_STEP_VELOCITY_IN_U_NNZ 0
+#define FOURBAR_PLANAR_STEP_VELOCITY_IN_P_NNZ 1
+#define FOURBAR_PLANAR_STEP_VELOCITY_IN_H_NNZ 1
+#define FOURBAR_PLANAR_STEP_VELOCITY_OUT_B_NNZ 11
+#define FOURBAR_PLANAR_STEP_VELOCITY_OUT_K_NNZ 46
+
+/* ---- fourbar_planar_step_check ----------------------------------------------------
+ * Stepper: constraint residuals of a state
+ * In fourbar_planar_kernels_0.c; 84 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_planar_t0.
+ *   arg[1] q: 6x1, nnz 6 [m] coordinates. Default: fourbar_planar_q0.
+ *   arg[2] v: 6x1, nnz 6 [m/s] coordinate rates. Default: fourbar_planar_v0.
+ *   arg[3] p: 1x1, nnz 1 parameters. Default: fourbar_planar_p0.
+ * Outputs:
+ *   res[0] phi_max: 1x1, nnz 1 [m^2] max |Phi(t, q)|.
+ *   res[1] phidot_max: 1x1, nnz 1 [m^2/s] max |A(t, q) v + Phi_t(t, q)|.
+ */
+#define FOURBAR_PLANAR_STEP_CHECK_IN_T_NNZ 1
+#define FOURBAR_PLANAR_STEP_CHECK_IN_Q_NNZ 6
+#define FOURBAR_PLANAR_STEP_CHECK_IN_V_NNZ 6
+#define FOURBAR_PLANAR_STEP_CHECK_IN_P_NNZ 1
+#define FOURBAR_PLANAR_STEP_CHECK_OUT_PHI_MAX_NNZ 1
+#define FOURBAR_PLANAR_STEP_CHECK_OUT_PHIDOT_MAX_NNZ 1
+
+/* ---- fourbar_planar_step_solve ----------------------------------------------------
+ * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
+ * In fourbar_planar_kernels_0.c; 1204 instructions.
+ * Inputs:
+ *   arg[0] K: 11x11, nnz 46 (sparse) KKT matrix in the stepper's pattern. Default: zeros.
+ *   arg[1] r: 11x1, nnz 11 right-hand side. Default: zeros.
+ * Outputs:
+ *   res[0] x: 11x1, nnz 11 solution.
+ */
+#define FOURBAR_PLANAR_STEP_SOLVE_IN_K_NNZ 46
+#define FOURBAR_PLANAR_STEP_SOLVE_IN_R_NNZ 11
+#define FOURBAR_PLANAR_STEP_SOLVE_OUT_X_NNZ 11
+
 #ifdef __cplusplus
 } /* extern "C" */
 #endif
+
+#include "fourbar_planar_stepper.h"
 
 #endif /* NCGEN_FOURBAR_PLANAR_H */

@@ -103,6 +103,34 @@ static const casadi_real *const defaults_markers[] = {
 static const casadi_real *const defaults_poses[] = {
   fourbar_planar_q0,
   0};
+static const casadi_real *const defaults_step_newton[] = {
+  fourbar_planar_t0,
+  fourbar_planar_q0,
+  fourbar_planar_v0,
+  0,
+  fourbar_planar_p0,
+  0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_velocity[] = {
+  fourbar_planar_t0,
+  fourbar_planar_q0,
+  0,
+  0,
+  fourbar_planar_p0,
+  0,
+  0};
+static const casadi_real *const defaults_step_check[] = {
+  fourbar_planar_t0,
+  fourbar_planar_q0,
+  fourbar_planar_v0,
+  fourbar_planar_p0,
+  0};
+static const casadi_real *const defaults_step_solve[] = {
+  0,
+  0,
+  0};
 
 static const kernel kernels[] = {
   {"phi", fourbar_planar_phi, fourbar_planar_phi_work, fourbar_planar_phi_n_in, fourbar_planar_phi_n_out,
@@ -157,6 +185,22 @@ static const kernel kernels[] = {
    fourbar_planar_poses_name_in, fourbar_planar_poses_name_out, fourbar_planar_poses_sparsity_in, fourbar_planar_poses_sparsity_out,
    fourbar_planar_poses_checkout, fourbar_planar_poses_release, fourbar_planar_poses_incref, fourbar_planar_poses_decref,
    defaults_poses},
+  {"step_newton", fourbar_planar_step_newton, fourbar_planar_step_newton_work, fourbar_planar_step_newton_n_in, fourbar_planar_step_newton_n_out,
+   fourbar_planar_step_newton_name_in, fourbar_planar_step_newton_name_out, fourbar_planar_step_newton_sparsity_in, fourbar_planar_step_newton_sparsity_out,
+   fourbar_planar_step_newton_checkout, fourbar_planar_step_newton_release, fourbar_planar_step_newton_incref, fourbar_planar_step_newton_decref,
+   defaults_step_newton},
+  {"step_velocity", fourbar_planar_step_velocity, fourbar_planar_step_velocity_work, fourbar_planar_step_velocity_n_in, fourbar_planar_step_velocity_n_out,
+   fourbar_planar_step_velocity_name_in, fourbar_planar_step_velocity_name_out, fourbar_planar_step_velocity_sparsity_in, fourbar_planar_step_velocity_sparsity_out,
+   fourbar_planar_step_velocity_checkout, fourbar_planar_step_velocity_release, fourbar_planar_step_velocity_incref, fourbar_planar_step_velocity_decref,
+   defaults_step_velocity},
+  {"step_check", fourbar_planar_step_check, fourbar_planar_step_check_work, fourbar_planar_step_check_n_in, fourbar_planar_step_check_n_out,
+   fourbar_planar_step_check_name_in, fourbar_planar_step_check_name_out, fourbar_planar_step_check_sparsity_in, fourbar_planar_step_check_sparsity_out,
+   fourbar_planar_step_check_checkout, fourbar_planar_step_check_release, fourbar_planar_step_check_incref, fourbar_planar_step_check_decref,
+   defaults_step_check},
+  {"step_solve", fourbar_planar_step_solve, fourbar_planar_step_solve_work, fourbar_planar_step_solve_n_in, fourbar_planar_step_solve_n_out,
+   fourbar_planar_step_solve_name_in, fourbar_planar_step_solve_name_out, fourbar_planar_step_solve_sparsity_in, fourbar_planar_step_solve_sparsity_out,
+   fourbar_planar_step_solve_checkout, fourbar_planar_step_solve_release, fourbar_planar_step_solve_incref, fourbar_planar_step_solve_decref,
+   defaults_step_solve},
 };
 
 static const size_t n_kernels = sizeof(kernels) / sizeof(kernels[0]);

@@ -313,8 +313,92 @@ extern const casadi_real heavy_top_gravity[3];
 #define HEAVY_TOP_POSES_OUT_R_NNZ 9
 #define HEAVY_TOP_POSES_OUT_P_NNZ 3
 
+/* ---- heavy_top_step_newton ----------------------------------------------------
+ * Stepper, first half-step: Newton residual r(w, nu) and its Jacobian K
+ * In heavy_top_kernels_0.c; 267 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time at the start of the step. Default: heavy_top_t0.
+ *   arg[1] q: 9x1, nnz 9 [m] coordinates at t. Default: heavy_top_q0.
+ *   arg[2] v: 9x1, nnz 9 [m/s] coordinate rates at t. Default: heavy_top_v0.
+ *   arg[3] u: 0x1, nnz 0 inputs, held over the step. Default: zeros.
+ *   arg[4] p: 0x1, nnz 0 parameters. Default: zeros.
+ *   arg[5] h: 1x1, nnz 1 [s] step. Default: zeros.
+ *   arg[6] w: 9x1, nnz 9 [m/s] midpoint rates v_{n+1/2}. Default: zeros.
+ *   arg[7] nu: 6x1, nnz 6 [N s/m^2] scaled multipliers h/2 lambda. Default: zeros.
+ * Outputs:
+ *   res[0] r: 15x1, nnz 15 [N s; m^2/s] [M (w - v) - h/2 F + A^T nu; Phi(t + h, q + h w) / h].
+ *   res[1] K: 15x15, nnz 63 (sparse) dr/d[w; nu], sparse.
+ */
+#define HEAVY_TOP_STEP_NEWTON_IN_T_NNZ 1
+#define HEAVY_TOP_STEP_NEWTON_IN_Q_NNZ 9
+#define HEAVY_TOP_STEP_NEWTON_IN_V_NNZ 9
+#define HEAVY_TOP_STEP_NEWTON_IN_U_NNZ 0
+#define HEAVY_TOP_STEP_NEWTON_IN_P_NNZ 0
+#define HEAVY_TOP_STEP_NEWTON_IN_H_NNZ 1
+#define HEAVY_TOP_STEP_NEWTON_IN_W_NNZ 9
+#define HEAVY_TOP_STEP_NEWTON_IN_NU_NNZ 6
+#define HEAVY_TOP_STEP_NEWTON_OUT_R_NNZ 15
+#define HEAVY_TOP_STEP_NEWTON_OUT_K_NNZ 63
+
+/* ---- heavy_top_step_velocity ----------------------------------------------------
+ * Stepper, second half-step: KKT matrix and right-hand side for [v+; h/2 mu]
+ * In heavy_top_kernels_0.c; 123 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time at the end of the step. Default: heavy_top_t0.
+ *   arg[1] q: 9x1, nnz 9 [m] coordinates at the end. Default: heavy_top_q0.
+ *   arg[2] w: 9x1, nnz 9 [m/s] midpoint rates. Default: zeros.
+ *   arg[3] u: 0x1, nnz 0 inputs, held over the step. Default: zeros.
+ *   arg[4] p: 0x1, nnz 0 parameters. Default: zeros.
+ *   arg[5] h: 1x1, nnz 1 [s] step. Default: zeros.
+ * Outputs:
+ *   res[0] b: 15x1, nnz 15 [N s; m^2/s] [M w + h/2 F; -Phi_t].
+ *   res[1] K: 15x15, nnz 63 (sparse) [[M, A^T], [A, 0]] in the pattern of step_newton's K.
+ */
+#define HEAVY_TOP_STEP_VELOCITY_IN_T_NNZ 1
+#define HEAVY_TOP_STEP_VELOCITY_IN_Q_NNZ 9
+#define HEAVY_TOP_STEP_VELOCITY_IN_W_NNZ 9
+#define HEAVY_TOP_STEP_VELOCITY_IN_U_NNZ 0
+#define HEAVY_TOP_STEP_VELOCITY_IN_P_NNZ 0
+#define HEAVY_TOP_STEP_VELOCITY_IN_H_NNZ 1
+#define HEAVY_TOP_STEP_VELOCITY_OUT_B_NNZ 15
+#define HEAVY_TOP_STEP_VELOCITY_OUT_K_NNZ 63
+
+/* ---- heavy_top_step_check ----------------------------------------------------
+ * Stepper: constraint residuals of a state
+ * In heavy_top_kernels_0.c; 136 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: heavy_top_t0.
+ *   arg[1] q: 9x1, nnz 9 [m] coordinates. Default: heavy_top_q0.
+ *   arg[2] v: 9x1, nnz 9 [m/s] coordinate rates. Default: heavy_top_v0.
+ *   arg[3] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] phi_max: 1x1, nnz 1 [m^2] max |Phi(t, q)|.
+ *   res[1] phidot_max: 1x1, nnz 1 [m^2/s] max |A(t, q) v + Phi_t(t, q)|.
+ */
+#define HEAVY_TOP_STEP_CHECK_IN_T_NNZ 1
+#define HEAVY_TOP_STEP_CHECK_IN_Q_NNZ 9
+#define HEAVY_TOP_STEP_CHECK_IN_V_NNZ 9
+#define HEAVY_TOP_STEP_CHECK_IN_P_NNZ 0
+#define HEAVY_TOP_STEP_CHECK_OUT_PHI_MAX_NNZ 1
+#define HEAVY_TOP_STEP_CHECK_OUT_PHIDOT_MAX_NNZ 1
+
+/* ---- heavy_top_step_solve ----------------------------------------------------
+ * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
+ * In heavy_top_kernels_0.c; 2065 instructions.
+ * Inputs:
+ *   arg[0] K: 15x15, nnz 63 (sparse) KKT matrix in the stepper's pattern. Default: zeros.
+ *   arg[1] r: 15x1, nnz 15 right-hand side. Default: zeros.
+ * Outputs:
+ *   res[0] x: 15x1, nnz 15 solution.
+ */
+#define HEAVY_TOP_STEP_SOLVE_IN_K_NNZ 63
+#define HEAVY_TOP_STEP_SOLVE_IN_R_NNZ 15
+#define HEAVY_TOP_STEP_SOLVE_OUT_X_NNZ 15
+
 #ifdef __cplusplus
 } /* extern "C" */
 #endif
+
+#include "heavy_top_stepper.h"
 
 #endif /* NCGEN_HEAVY_TOP_H */

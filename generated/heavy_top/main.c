@@ -103,6 +103,34 @@ static const casadi_real *const defaults_markers[] = {
 static const casadi_real *const defaults_poses[] = {
   heavy_top_q0,
   0};
+static const casadi_real *const defaults_step_newton[] = {
+  heavy_top_t0,
+  heavy_top_q0,
+  heavy_top_v0,
+  0,
+  0,
+  0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_velocity[] = {
+  heavy_top_t0,
+  heavy_top_q0,
+  0,
+  0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_check[] = {
+  heavy_top_t0,
+  heavy_top_q0,
+  heavy_top_v0,
+  0,
+  0};
+static const casadi_real *const defaults_step_solve[] = {
+  0,
+  0,
+  0};
 
 static const kernel kernels[] = {
   {"phi", heavy_top_phi, heavy_top_phi_work, heavy_top_phi_n_in, heavy_top_phi_n_out,
@@ -157,6 +185,22 @@ static const kernel kernels[] = {
    heavy_top_poses_name_in, heavy_top_poses_name_out, heavy_top_poses_sparsity_in, heavy_top_poses_sparsity_out,
    heavy_top_poses_checkout, heavy_top_poses_release, heavy_top_poses_incref, heavy_top_poses_decref,
    defaults_poses},
+  {"step_newton", heavy_top_step_newton, heavy_top_step_newton_work, heavy_top_step_newton_n_in, heavy_top_step_newton_n_out,
+   heavy_top_step_newton_name_in, heavy_top_step_newton_name_out, heavy_top_step_newton_sparsity_in, heavy_top_step_newton_sparsity_out,
+   heavy_top_step_newton_checkout, heavy_top_step_newton_release, heavy_top_step_newton_incref, heavy_top_step_newton_decref,
+   defaults_step_newton},
+  {"step_velocity", heavy_top_step_velocity, heavy_top_step_velocity_work, heavy_top_step_velocity_n_in, heavy_top_step_velocity_n_out,
+   heavy_top_step_velocity_name_in, heavy_top_step_velocity_name_out, heavy_top_step_velocity_sparsity_in, heavy_top_step_velocity_sparsity_out,
+   heavy_top_step_velocity_checkout, heavy_top_step_velocity_release, heavy_top_step_velocity_incref, heavy_top_step_velocity_decref,
+   defaults_step_velocity},
+  {"step_check", heavy_top_step_check, heavy_top_step_check_work, heavy_top_step_check_n_in, heavy_top_step_check_n_out,
+   heavy_top_step_check_name_in, heavy_top_step_check_name_out, heavy_top_step_check_sparsity_in, heavy_top_step_check_sparsity_out,
+   heavy_top_step_check_checkout, heavy_top_step_check_release, heavy_top_step_check_incref, heavy_top_step_check_decref,
+   defaults_step_check},
+  {"step_solve", heavy_top_step_solve, heavy_top_step_solve_work, heavy_top_step_solve_n_in, heavy_top_step_solve_n_out,
+   heavy_top_step_solve_name_in, heavy_top_step_solve_name_out, heavy_top_step_solve_sparsity_in, heavy_top_step_solve_sparsity_out,
+   heavy_top_step_solve_checkout, heavy_top_step_solve_release, heavy_top_step_solve_incref, heavy_top_step_solve_decref,
+   defaults_step_solve},
 };
 
 static const size_t n_kernels = sizeof(kernels) / sizeof(kernels[0]);

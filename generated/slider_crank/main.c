@@ -103,6 +103,34 @@ static const casadi_real *const defaults_markers[] = {
 static const casadi_real *const defaults_poses[] = {
   slider_crank_q0,
   0};
+static const casadi_real *const defaults_step_newton[] = {
+  slider_crank_t0,
+  slider_crank_q0,
+  slider_crank_v0,
+  0,
+  slider_crank_p0,
+  0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_velocity[] = {
+  slider_crank_t0,
+  slider_crank_q0,
+  0,
+  0,
+  slider_crank_p0,
+  0,
+  0};
+static const casadi_real *const defaults_step_check[] = {
+  slider_crank_t0,
+  slider_crank_q0,
+  slider_crank_v0,
+  slider_crank_p0,
+  0};
+static const casadi_real *const defaults_step_solve[] = {
+  0,
+  0,
+  0};
 
 static const kernel kernels[] = {
   {"phi", slider_crank_phi, slider_crank_phi_work, slider_crank_phi_n_in, slider_crank_phi_n_out,
@@ -157,6 +185,22 @@ static const kernel kernels[] = {
    slider_crank_poses_name_in, slider_crank_poses_name_out, slider_crank_poses_sparsity_in, slider_crank_poses_sparsity_out,
    slider_crank_poses_checkout, slider_crank_poses_release, slider_crank_poses_incref, slider_crank_poses_decref,
    defaults_poses},
+  {"step_newton", slider_crank_step_newton, slider_crank_step_newton_work, slider_crank_step_newton_n_in, slider_crank_step_newton_n_out,
+   slider_crank_step_newton_name_in, slider_crank_step_newton_name_out, slider_crank_step_newton_sparsity_in, slider_crank_step_newton_sparsity_out,
+   slider_crank_step_newton_checkout, slider_crank_step_newton_release, slider_crank_step_newton_incref, slider_crank_step_newton_decref,
+   defaults_step_newton},
+  {"step_velocity", slider_crank_step_velocity, slider_crank_step_velocity_work, slider_crank_step_velocity_n_in, slider_crank_step_velocity_n_out,
+   slider_crank_step_velocity_name_in, slider_crank_step_velocity_name_out, slider_crank_step_velocity_sparsity_in, slider_crank_step_velocity_sparsity_out,
+   slider_crank_step_velocity_checkout, slider_crank_step_velocity_release, slider_crank_step_velocity_incref, slider_crank_step_velocity_decref,
+   defaults_step_velocity},
+  {"step_check", slider_crank_step_check, slider_crank_step_check_work, slider_crank_step_check_n_in, slider_crank_step_check_n_out,
+   slider_crank_step_check_name_in, slider_crank_step_check_name_out, slider_crank_step_check_sparsity_in, slider_crank_step_check_sparsity_out,
+   slider_crank_step_check_checkout, slider_crank_step_check_release, slider_crank_step_check_incref, slider_crank_step_check_decref,
+   defaults_step_check},
+  {"step_solve", slider_crank_step_solve, slider_crank_step_solve_work, slider_crank_step_solve_n_in, slider_crank_step_solve_n_out,
+   slider_crank_step_solve_name_in, slider_crank_step_solve_name_out, slider_crank_step_solve_sparsity_in, slider_crank_step_solve_sparsity_out,
+   slider_crank_step_solve_checkout, slider_crank_step_solve_release, slider_crank_step_solve_incref, slider_crank_step_solve_decref,
+   defaults_step_solve},
 };
 
 static const size_t n_kernels = sizeof(kernels) / sizeof(kernels[0]);

@@ -276,6 +276,78 @@ int slider_crank_poses_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi
 #define slider_crank_poses_SZ_RES 2
 #define slider_crank_poses_SZ_IW 0
 #define slider_crank_poses_SZ_W 0
+int slider_crank_step_newton(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int slider_crank_step_newton_checkout(void);
+void slider_crank_step_newton_release(int mem);
+void slider_crank_step_newton_incref(void);
+void slider_crank_step_newton_decref(void);
+casadi_int slider_crank_step_newton_n_in(void);
+casadi_int slider_crank_step_newton_n_out(void);
+casadi_real slider_crank_step_newton_default_in(casadi_int i);
+const char* slider_crank_step_newton_name_in(casadi_int i);
+const char* slider_crank_step_newton_name_out(casadi_int i);
+const casadi_int* slider_crank_step_newton_sparsity_in(casadi_int i);
+const casadi_int* slider_crank_step_newton_sparsity_out(casadi_int i);
+int slider_crank_step_newton_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int slider_crank_step_newton_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define slider_crank_step_newton_SZ_ARG 8
+#define slider_crank_step_newton_SZ_RES 2
+#define slider_crank_step_newton_SZ_IW 0
+#define slider_crank_step_newton_SZ_W 0
+int slider_crank_step_velocity(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int slider_crank_step_velocity_checkout(void);
+void slider_crank_step_velocity_release(int mem);
+void slider_crank_step_velocity_incref(void);
+void slider_crank_step_velocity_decref(void);
+casadi_int slider_crank_step_velocity_n_in(void);
+casadi_int slider_crank_step_velocity_n_out(void);
+casadi_real slider_crank_step_velocity_default_in(casadi_int i);
+const char* slider_crank_step_velocity_name_in(casadi_int i);
+const char* slider_crank_step_velocity_name_out(casadi_int i);
+const casadi_int* slider_crank_step_velocity_sparsity_in(casadi_int i);
+const casadi_int* slider_crank_step_velocity_sparsity_out(casadi_int i);
+int slider_crank_step_velocity_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int slider_crank_step_velocity_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define slider_crank_step_velocity_SZ_ARG 6
+#define slider_crank_step_velocity_SZ_RES 2
+#define slider_crank_step_velocity_SZ_IW 0
+#define slider_crank_step_velocity_SZ_W 0
+int slider_crank_step_check(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int slider_crank_step_check_checkout(void);
+void slider_crank_step_check_release(int mem);
+void slider_crank_step_check_incref(void);
+void slider_crank_step_check_decref(void);
+casadi_int slider_crank_step_check_n_in(void);
+casadi_int slider_crank_step_check_n_out(void);
+casadi_real slider_crank_step_check_default_in(casadi_int i);
+const char* slider_crank_step_check_name_in(casadi_int i);
+const char* slider_crank_step_check_name_out(casadi_int i);
+const casadi_int* slider_crank_step_check_sparsity_in(casadi_int i);
+const casadi_int* slider_crank_step_check_sparsity_out(casadi_int i);
+int slider_crank_step_check_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int slider_crank_step_check_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define slider_crank_step_check_SZ_ARG 4
+#define slider_crank_step_check_SZ_RES 2
+#define slider_crank_step_check_SZ_IW 0
+#define slider_crank_step_check_SZ_W 0
+int slider_crank_step_solve(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int slider_crank_step_solve_checkout(void);
+void slider_crank_step_solve_release(int mem);
+void slider_crank_step_solve_incref(void);
+void slider_crank_step_solve_decref(void);
+casadi_int slider_crank_step_solve_n_in(void);
+casadi_int slider_crank_step_solve_n_out(void);
+casadi_real slider_crank_step_solve_default_in(casadi_int i);
+const char* slider_crank_step_solve_name_in(casadi_int i);
+const char* slider_crank_step_solve_name_out(casadi_int i);
+const casadi_int* slider_crank_step_solve_sparsity_in(casadi_int i);
+const casadi_int* slider_crank_step_solve_sparsity_out(casadi_int i);
+int slider_crank_step_solve_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int slider_crank_step_solve_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define slider_crank_step_solve_SZ_ARG 2
+#define slider_crank_step_solve_SZ_RES 1
+#define slider_crank_step_solve_SZ_IW 0
+#define slider_crank_step_solve_SZ_W 0
 void slider_crank_kernels_0_casadi_version(int* major, int* minor, int* patch);
 int slider_crank_kernels_0_casadi_int_size(void);
 int slider_crank_kernels_0_casadi_real_size(void);

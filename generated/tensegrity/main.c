@@ -103,6 +103,34 @@ static const casadi_real *const defaults_markers[] = {
 static const casadi_real *const defaults_poses[] = {
   tensegrity_q0,
   0};
+static const casadi_real *const defaults_step_newton[] = {
+  tensegrity_t0,
+  tensegrity_q0,
+  tensegrity_v0,
+  0,
+  tensegrity_p0,
+  0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_velocity[] = {
+  tensegrity_t0,
+  tensegrity_q0,
+  0,
+  0,
+  tensegrity_p0,
+  0,
+  0};
+static const casadi_real *const defaults_step_check[] = {
+  tensegrity_t0,
+  tensegrity_q0,
+  tensegrity_v0,
+  tensegrity_p0,
+  0};
+static const casadi_real *const defaults_step_solve[] = {
+  0,
+  0,
+  0};
 
 static const kernel kernels[] = {
   {"phi", tensegrity_phi, tensegrity_phi_work, tensegrity_phi_n_in, tensegrity_phi_n_out,
@@ -157,6 +185,22 @@ static const kernel kernels[] = {
    tensegrity_poses_name_in, tensegrity_poses_name_out, tensegrity_poses_sparsity_in, tensegrity_poses_sparsity_out,
    tensegrity_poses_checkout, tensegrity_poses_release, tensegrity_poses_incref, tensegrity_poses_decref,
    defaults_poses},
+  {"step_newton", tensegrity_step_newton, tensegrity_step_newton_work, tensegrity_step_newton_n_in, tensegrity_step_newton_n_out,
+   tensegrity_step_newton_name_in, tensegrity_step_newton_name_out, tensegrity_step_newton_sparsity_in, tensegrity_step_newton_sparsity_out,
+   tensegrity_step_newton_checkout, tensegrity_step_newton_release, tensegrity_step_newton_incref, tensegrity_step_newton_decref,
+   defaults_step_newton},
+  {"step_velocity", tensegrity_step_velocity, tensegrity_step_velocity_work, tensegrity_step_velocity_n_in, tensegrity_step_velocity_n_out,
+   tensegrity_step_velocity_name_in, tensegrity_step_velocity_name_out, tensegrity_step_velocity_sparsity_in, tensegrity_step_velocity_sparsity_out,
+   tensegrity_step_velocity_checkout, tensegrity_step_velocity_release, tensegrity_step_velocity_incref, tensegrity_step_velocity_decref,
+   defaults_step_velocity},
+  {"step_check", tensegrity_step_check, tensegrity_step_check_work, tensegrity_step_check_n_in, tensegrity_step_check_n_out,
+   tensegrity_step_check_name_in, tensegrity_step_check_name_out, tensegrity_step_check_sparsity_in, tensegrity_step_check_sparsity_out,
+   tensegrity_step_check_checkout, tensegrity_step_check_release, tensegrity_step_check_incref, tensegrity_step_check_decref,
+   defaults_step_check},
+  {"step_solve", tensegrity_step_solve, tensegrity_step_solve_work, tensegrity_step_solve_n_in, tensegrity_step_solve_n_out,
+   tensegrity_step_solve_name_in, tensegrity_step_solve_name_out, tensegrity_step_solve_sparsity_in, tensegrity_step_solve_sparsity_out,
+   tensegrity_step_solve_checkout, tensegrity_step_solve_release, tensegrity_step_solve_incref, tensegrity_step_solve_decref,
+   defaults_step_solve},
 };
 
 static const size_t n_kernels = sizeof(kernels) / sizeof(kernels[0]);

@@ -317,8 +317,92 @@ extern const casadi_real tensegrity_gravity[3];
 #define TENSEGRITY_POSES_OUT_R_NNZ 27
 #define TENSEGRITY_POSES_OUT_P_NNZ 9
 
+/* ---- tensegrity_step_newton ----------------------------------------------------
+ * Stepper, first half-step: Newton residual r(w, nu) and its Jacobian K
+ * In tensegrity_kernels_2.c; 4537 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time at the start of the step. Default: tensegrity_t0.
+ *   arg[1] q: 18x1, nnz 18 [m] coordinates at t. Default: tensegrity_q0.
+ *   arg[2] v: 18x1, nnz 18 [m/s] coordinate rates at t. Default: tensegrity_v0.
+ *   arg[3] u: 0x1, nnz 0 inputs, held over the step. Default: zeros.
+ *   arg[4] p: 3x1, nnz 3 parameters. Default: tensegrity_p0.
+ *   arg[5] h: 1x1, nnz 1 [s] step. Default: zeros.
+ *   arg[6] w: 18x1, nnz 18 [m/s] midpoint rates v_{n+1/2}. Default: zeros.
+ *   arg[7] nu: 6x1, nnz 6 [N s/m^2] scaled multipliers h/2 lambda. Default: zeros.
+ * Outputs:
+ *   res[0] r: 24x1, nnz 24 [N s; m^2/s] [M (w - v) - h/2 F + A^T nu; Phi(t + h, q + h w) / h].
+ *   res[1] K: 24x24, nnz 372 (sparse) dr/d[w; nu], sparse.
+ */
+#define TENSEGRITY_STEP_NEWTON_IN_T_NNZ 1
+#define TENSEGRITY_STEP_NEWTON_IN_Q_NNZ 18
+#define TENSEGRITY_STEP_NEWTON_IN_V_NNZ 18
+#define TENSEGRITY_STEP_NEWTON_IN_U_NNZ 0
+#define TENSEGRITY_STEP_NEWTON_IN_P_NNZ 3
+#define TENSEGRITY_STEP_NEWTON_IN_H_NNZ 1
+#define TENSEGRITY_STEP_NEWTON_IN_W_NNZ 18
+#define TENSEGRITY_STEP_NEWTON_IN_NU_NNZ 6
+#define TENSEGRITY_STEP_NEWTON_OUT_R_NNZ 24
+#define TENSEGRITY_STEP_NEWTON_OUT_K_NNZ 372
+
+/* ---- tensegrity_step_velocity ----------------------------------------------------
+ * Stepper, second half-step: KKT matrix and right-hand side for [v+; h/2 mu]
+ * In tensegrity_kernels_2.c; 1414 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time at the end of the step. Default: tensegrity_t0.
+ *   arg[1] q: 18x1, nnz 18 [m] coordinates at the end. Default: tensegrity_q0.
+ *   arg[2] w: 18x1, nnz 18 [m/s] midpoint rates. Default: zeros.
+ *   arg[3] u: 0x1, nnz 0 inputs, held over the step. Default: zeros.
+ *   arg[4] p: 3x1, nnz 3 parameters. Default: tensegrity_p0.
+ *   arg[5] h: 1x1, nnz 1 [s] step. Default: zeros.
+ * Outputs:
+ *   res[0] b: 24x1, nnz 24 [N s; m^2/s] [M w + h/2 F; -Phi_t].
+ *   res[1] K: 24x24, nnz 372 (sparse) [[M, A^T], [A, 0]] in the pattern of step_newton's K.
+ */
+#define TENSEGRITY_STEP_VELOCITY_IN_T_NNZ 1
+#define TENSEGRITY_STEP_VELOCITY_IN_Q_NNZ 18
+#define TENSEGRITY_STEP_VELOCITY_IN_W_NNZ 18
+#define TENSEGRITY_STEP_VELOCITY_IN_U_NNZ 0
+#define TENSEGRITY_STEP_VELOCITY_IN_P_NNZ 3
+#define TENSEGRITY_STEP_VELOCITY_IN_H_NNZ 1
+#define TENSEGRITY_STEP_VELOCITY_OUT_B_NNZ 24
+#define TENSEGRITY_STEP_VELOCITY_OUT_K_NNZ 372
+
+/* ---- tensegrity_step_check ----------------------------------------------------
+ * Stepper: constraint residuals of a state
+ * In tensegrity_kernels_2.c; 160 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: tensegrity_t0.
+ *   arg[1] q: 18x1, nnz 18 [m] coordinates. Default: tensegrity_q0.
+ *   arg[2] v: 18x1, nnz 18 [m/s] coordinate rates. Default: tensegrity_v0.
+ *   arg[3] p: 3x1, nnz 3 parameters. Default: tensegrity_p0.
+ * Outputs:
+ *   res[0] phi_max: 1x1, nnz 1 [m^2] max |Phi(t, q)|.
+ *   res[1] phidot_max: 1x1, nnz 1 [m^2/s] max |A(t, q) v + Phi_t(t, q)|.
+ */
+#define TENSEGRITY_STEP_CHECK_IN_T_NNZ 1
+#define TENSEGRITY_STEP_CHECK_IN_Q_NNZ 18
+#define TENSEGRITY_STEP_CHECK_IN_V_NNZ 18
+#define TENSEGRITY_STEP_CHECK_IN_P_NNZ 3
+#define TENSEGRITY_STEP_CHECK_OUT_PHI_MAX_NNZ 1
+#define TENSEGRITY_STEP_CHECK_OUT_PHIDOT_MAX_NNZ 1
+
+/* ---- tensegrity_step_solve ----------------------------------------------------
+ * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
+ * In tensegrity_kernels_2.c; 10421 instructions.
+ * Inputs:
+ *   arg[0] K: 24x24, nnz 372 (sparse) KKT matrix in the stepper's pattern. Default: zeros.
+ *   arg[1] r: 24x1, nnz 24 right-hand side. Default: zeros.
+ * Outputs:
+ *   res[0] x: 24x1, nnz 24 solution.
+ */
+#define TENSEGRITY_STEP_SOLVE_IN_K_NNZ 372
+#define TENSEGRITY_STEP_SOLVE_IN_R_NNZ 24
+#define TENSEGRITY_STEP_SOLVE_OUT_X_NNZ 24
+
 #ifdef __cplusplus
 } /* extern "C" */
 #endif
+
+#include "tensegrity_stepper.h"
 
 #endif /* NCGEN_TENSEGRITY_H */

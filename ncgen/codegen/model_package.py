@@ -8,7 +8,9 @@ solve ``accel``, energies, markers, poses), each documented in ``<model>.h`` fro
 coordinates, constraints, inputs, parameters, members and markers, the consistent initial
 state (``t0``, ``q0``, ``v0``, ``lam0``, ``x0``, ``p0``), the constant mass matrix ``M``,
 gravity, the Baumgarte coefficients and ``model_hash``.  ``main.c`` evaluates ``accel`` (or
-any other function) at the initial state without Python.
+any other function) at the initial state without Python.  The compiled stepper
+(``<model>_step``, ``<model>_simulate`` in ``<model>_stepper.h``) and its example program
+``<model>_simulate`` complete it.
 
 A package is made of *sections*: :data:`SECTIONS` lists functions ``model -> Section``
 whose functions, documentation, metadata and extra C sources are merged in order.  A
@@ -101,8 +103,16 @@ def system_section(model) -> Section:
                    metadata=metadata, metadata_doc=metadata_doc)
 
 
+def _stepper_section(model) -> Section:
+    """The compiled stepper: ``<model>_step``, ``<model>_simulate`` and the example program
+    ``<model>_simulate`` (:mod:`ncgen.runtime.stepper_package`)."""
+    from ncgen.runtime.stepper_package import stepper_section
+
+    return stepper_section(model)
+
+
 #: Makers of the sections of every model package, in order.
-SECTIONS: list[Callable[[object], Section]] = [system_section]
+SECTIONS: list[Callable[[object], Section]] = [system_section, _stepper_section]
 
 
 def function_doc(f: ca.Function) -> dict:
