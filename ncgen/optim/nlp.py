@@ -36,6 +36,10 @@ from ncgen.optim.transcription import Horizon
 
 SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 
+#: Drift ``max |Φ|`` on the nodes, relative to the shortest member's length², above which
+#: the solution is reported as under-resolved (the transcription's error shows there).
+DRIFT_WARNING = 1e-3
+
 #: Constraint kinds relaxed by slacks when diagnosing a failure: the wishes (conditions and
 #: path constraints), never the physics (dynamics, invariants) or the bounds.
 RELAXABLE = ("initial", "final", "periodic", "path")
@@ -328,6 +332,12 @@ def build_and_solve(ocp, warm_start, *, max_iter: int, tol: float, verbose: bool
     if result.stats.status != "Solve_Succeeded":
         warnings.warn(f"IPOPT: {result.stats.status} (objective {result.stats.objective:.6g}, max defect "
                       f"{result.stats.max_defect:.2e})", stacklevel=3)
+    scale = length_scale(ocp.model) ** 2
+    drift = float(np.max(result.constraint_residual, initial=0.0))
+    if drift > DRIFT_WARNING * scale:
+        warnings.warn(f"the constraints drift by up to |Φ| = {drift:.3g} m² on the nodes ({drift / scale:.2g} of the "
+                      f"shortest member's length²): the mesh is too coarse for this motion, and the optimum may "
+                      f"exploit the discretisation error; increase N (now {ocp.N})", stacklevel=3)
     return result
 
 

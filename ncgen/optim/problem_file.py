@@ -3,7 +3,8 @@
 The format is documented in docs/optimal-control.md.  Every table is optional::
 
     model = "cartpole.toml"          # the model file, relative to this file
-    [horizon]        N, t_final (s, or [lower, upper]: free), method, degree, integrator
+    [horizon]        N, t_final (s, or [lower, upper]: free), method, degree, integrator,
+                     integrator_options = {...}
     [parameters]     name = value                   (fixed values)
     [free_parameters.NAME]  lower, upper, guess     (design parameters)
     [bounds.inputs] / [bounds.coordinates] / [bounds.velocities]   name = [lower, upper]
@@ -141,7 +142,7 @@ class _Reader:
         return ocp, self._solver(d.get("solver", {}))
 
     def _horizon(self, model, h):
-        h = self.table(h, "horizon", ("N", "t_final", "method", "degree", "integrator"))
+        h = self.table(h, "horizon", ("N", "t_final", "method", "degree", "integrator", "integrator_options"))
         N = h.get("N", 50)
         if isinstance(N, bool) or not isinstance(N, int) or N < 1:
             self.fail("horizon.N", "a positive integer", N)
@@ -157,8 +158,10 @@ class _Reader:
         integrator = h.get("integrator", "idas")
         if not isinstance(integrator, str):
             self.fail("horizon.integrator", "an integrator name", integrator)
+        options = dict(self.table(h.get("integrator_options", {}), "horizon.integrator_options", None))
         self.where = "horizon"
-        return OptimalControl(model, N=N, t_final=T, method=method, degree=degree, integrator=integrator)
+        return OptimalControl(model, N=N, t_final=T, method=method, degree=degree, integrator=integrator,
+                              integrator_options=options)
 
     def _bounds(self, ocp, b):
         b = self.table(b, "bounds", ("inputs", "coordinates", "velocities", "markers"))

@@ -126,7 +126,10 @@ class MultipleShooting(Transcription):
 
     def build(self, opti: ca.Opti, model, hz: Horizon) -> Discretisation:
         N, nq, nc, nu = hz.N, model.nq, model.nc, model.nu
-        step = INTEGRATORS[self.integrator](model, **self.options)
+        try:
+            step = INTEGRATORS[self.integrator](model, **self.options)
+        except (TypeError, RuntimeError) as exc:
+            raise OptimizationError(f"integrator {self.integrator!r} with options {self.options}: {exc}") from None
         Q = opti.variable(nq, N)
         V = opti.variable(nq, N)
         U = opti.variable(nu, N)
