@@ -54,8 +54,6 @@ def radau_coefficients(d: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 class RadauCollocation(Transcription):
     """Radau IIA collocation of degree ``degree`` (1 = implicit Euler, 3 = default)."""
 
-    name = "collocation"
-
     def __init__(self, degree: int = 3):
         if not isinstance(degree, int) or not 1 <= degree <= 9:
             raise ValueError(f"collocation degree: expected an integer 1..9, got {degree!r}")

@@ -110,8 +110,6 @@ class MultipleShooting(Transcription):
     solved with a limited-memory Hessian: exact second-order integrator sensitivities cost
     more than they save."""
 
-    name = "shooting"
-    expandable = False
     hessian = "limited-memory"
 
     def __init__(self, integrator: str = "idas", **options):

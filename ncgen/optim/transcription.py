@@ -54,7 +54,8 @@ class Discretisation:
     and path constraints are imposed; ``quad_t``, ``quad_q``, ``quad_v``, ``quad_w``: the
     quadrature rule ``∫ g dt ≈ Σ w_i g(t_i, q_i, v_i)`` for integral costs (weights in s);
     ``defects``: labelled dynamics equations ``e == 0``;
-    ``set_guess(opti, guess)``: initial values for the transcription's own variables.
+    ``set_guess(opti, guess)``: initial values for the transcription's own variables;
+    ``expandable``: the NLP may be expanded to SX (no integrator or rootfinder calls).
     """
 
     q: object
@@ -74,11 +75,9 @@ class Discretisation:
 
 
 class Transcription:
-    """Base class: ``name``, ``expandable`` (the NLP may be expanded to SX) and
-    :meth:`build`."""
+    """Base class: ``hessian`` (IPOPT's ``hessian_approximation``), :meth:`build` and
+    :meth:`describe`."""
 
-    name = "transcription"
-    expandable = True
     hessian = "exact"
 
     def build(self, opti: ca.Opti, model, horizon: Horizon) -> Discretisation:
