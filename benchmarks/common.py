@@ -1,0 +1,173 @@
+"""Shared pieces of the benchmarks: the machine, timing, the chain in ncgen and in MuJoCo.
+
+The chain (examples/chain.toml generalised to N bars): N uniform 'rr' bars of length
+L = 0.3 m and mass m = 0.2 kg, released from rest as a horizontal staircase in the x-y plane
+(bar k along +x for odd k, +y for even k), consecutive bars sharing an end (a spherical
+joint), the first end fixed at the origin, gravity (0, 0, −9.81) m/s².  The tip is the free
+end of the last bar.
+
+Its MuJoCo twin: one body per bar with a ball joint at the bar's first end, body frames
+parallel to the world at rest, an explicit ``<inertial>`` at the bar's centre with mass m and
+diagonal inertia m L²/12 about both transverse axes.  A natural-coordinate bar has no
+rotational inertia about its own axis (that rotation is not a coordinate), but MuJoCo
+requires positive inertias for a body with a ball joint, so the axial inertia is
+``AXIAL_INERTIA`` = 1e-6 kg m² (L²m/12 = 1.5e-3 kg m²).  The spin about a bar's axis is
+torque-free (joint forces act on the axis, gravity at the centre on the axis) and starts at
+zero, so it stays zero and its inertia does not change the motion; the work–precision
+benchmark checks this by comparing against 1e-4 kg m².  Geoms are visual only (no contact,
+no mass); no damping, no armature.
+"""
+from __future__ import annotations
+
+import os
+import platform
+import re
+import shutil
+import subprocess
+import time
+from typing import Callable
+
+import numpy as np
+
+L, MASS = 0.3, 0.2
+AXIAL_INERTIA = 1e-6
+GRAVITY = (0.0, 0.0, -9.81)
+
+
+# ---------------------------------------------------------------- machine
+def machine() -> str:
+    """CPU, cores, memory and the versions that matter, one line each."""
+    lines = []
+    cpu = _lscpu()
+    lines.append(f"CPU: {cpu.get('Model name', platform.processor() or '?')}, "
+                 f"{cpu.get('CPU(s)', os.cpu_count())} logical CPUs"
+                 + (f", hypervisor {cpu['Hypervisor vendor']}" if "Hypervisor vendor" in cpu else ""))
+    try:
+        with open("/proc/meminfo") as fh:
+            kb = int(re.search(r"MemTotal:\s+(\d+)", fh.read()).group(1))
+        lines.append(f"memory: {kb / 2**20:.1f} GiB")
+    except (OSError, AttributeError):
+        pass
+    import casadi
+    import numpy
+    versions = [f"Python {platform.python_version()}", f"numpy {numpy.__version__}", f"casadi {casadi.__version__}"]
+    try:
+        import mujoco
+        versions.append(f"mujoco {mujoco.__version__}")
+    except ImportError:
+        versions.append("mujoco not installed")
+    cc = shutil.which(os.environ.get("CC", "gcc")) or shutil.which("cc")
+    if cc:
+        out = subprocess.run([cc, "--version"], capture_output=True, text=True).stdout.splitlines()
+        versions.append(out[0] if out else cc)
+    lines.append("versions: " + ", ".join(versions))
+    lines.append(f"load average at start: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    return "\n".join(lines)
+
+
+def _lscpu() -> dict[str, str]:
+    try:
+        out = subprocess.run(["lscpu"], capture_output=True, text=True).stdout
+    except OSError:
+        return {}
+    return {k.strip(): v.strip() for k, _, v in (line.partition(":") for line in out.splitlines()) if v}
+
+
+def best_time(fn: Callable[[], object], repeat: int) -> tuple[float, object]:
+    """``(seconds, result)``: the fastest of ``repeat`` calls (the machine is shared; the
+    minimum is the least disturbed run) and the last result."""
+    best, result = float("inf"), None
+    for _ in range(repeat):
+        start = time.perf_counter()
+        result = fn()
+        best = min(best, time.perf_counter() - start)
+    return best, result
+
+
+# ---------------------------------------------------------------- chain
+def ends(n: int) -> list[np.ndarray]:
+    """The n + 1 joint positions of the staircase at rest (first one the fixed origin)."""
+    pts = [np.zeros(3)]
+    for k in range(1, n + 1):
+        step = np.array([L, 0.0, 0.0]) if k % 2 else np.array([0.0, L, 0.0])
+        pts.append(np.round(pts[-1] + step, 12))
+    return pts
+
+
+def chain_system(n: int):
+    """The chain as an ncgen System (model name ``chain<n>``)."""
+    import ncgen as nc
+
+    s = nc.System(f"chain{n}", gravity=GRAVITY)
+    start = s.ground.point((0.0, 0.0, 0.0))
+    for k, end in enumerate(ends(n)[1:], start=1):
+        start = s.add_bar(f"bar{k}", coords="rr", mass=MASS, ends=[start, tuple(end)]).end(1)
+    return s
+
+
+def ncgen_tip(q: np.ndarray) -> np.ndarray:
+    """World position of the tip from natural coordinates (its last point, m)."""
+    return np.asarray(q)[..., -3:]
+
+
+def chain_mjcf(n: int, *, integrator: str = "RK4", timestep: float = 1e-3, axial: float = AXIAL_INERTIA,
+               energy: bool = False) -> str:
+    """MJCF of the chain's MuJoCo twin (see the module docstring)."""
+    transverse = MASS * L**2 / 12
+    body, close = "", ""
+    for k in range(1, n + 1):
+        along_x = k % 2 == 1
+        d = (L, 0.0, 0.0) if along_x else (0.0, L, 0.0)
+        pos = "0 0 0" if k == 1 else (f"{L} 0 0" if not along_x else f"0 {L} 0")
+        inertia = (axial, transverse, transverse) if along_x else (transverse, axial, transverse)
+        body += (f'<body name="bar{k}" pos="{pos}"><joint type="ball" damping="0" armature="0"/>'
+                 f'<inertial pos="{d[0] / 2} {d[1] / 2} 0" mass="{MASS}" '
+                 f'diaginertia="{inertia[0]!r} {inertia[1]!r} {inertia[2]!r}"/>'
+                 f'<geom type="capsule" fromto="0 0 0 {d[0]} {d[1]} 0" size="0.01" mass="0" '
+                 f'contype="0" conaffinity="0"/>')
+        close += "</body>"
+    flags = '<flag contact="disable"' + (' energy="enable"' if energy else "") + "/>"
+    return (f'<mujoco model="chain{n}"><compiler inertiafromgeom="false" angle="radian"/>'
+            f'<option timestep="{timestep!r}" integrator="{integrator}" gravity="{GRAVITY[0]} {GRAVITY[1]} '
+            f'{GRAVITY[2]}">{flags}</option><worldbody>{body}{close}</worldbody></mujoco>')
+
+
+def mujoco_tip(n: int, data) -> np.ndarray:
+    """World position of the tip in MuJoCo (last body's frame origin + its bar vector)."""
+    d = np.array([L, 0.0, 0.0]) if n % 2 else np.array([0.0, L, 0.0])
+    return data.xpos[n] + data.xmat[n].reshape(3, 3) @ d
+
+
+def mujoco_run(n: int, integrator: str, timestep: float, t_end: float, axial: float = AXIAL_INERTIA):
+    """``(seconds, tip)``: a fresh MuJoCo chain stepped to ``t_end`` by ``mj_step`` in one
+    call (``nstep``, no Python in the loop); the model is compiled outside the timing."""
+    import mujoco
+
+    mujoco.set_mju_user_warning(_diverged)
+    model = mujoco.MjModel.from_xml_string(chain_mjcf(n, integrator=integrator, timestep=timestep, axial=axial))
+    data = mujoco.MjData(model)
+    steps = int(round(t_end / timestep))
+    start = time.perf_counter()
+    mujoco.mj_step(model, data, nstep=steps)
+    elapsed = time.perf_counter() - start
+    return elapsed, mujoco_tip(n, data)
+
+
+def _diverged(message: str) -> None:
+    """MuJoCo's warnings (an unstable run resets its state): the run's tip error shows it."""
+
+
+def time_at(errors, times, target: float) -> float:
+    """Wall time at which a work–precision curve reaches ``target`` error, by log-log
+    interpolation between the two runs bracketing it (sorted by error); NaN if no run of
+    the curve is at least that accurate."""
+    pts = sorted((e, t) for e, t in zip(errors, times) if np.isfinite(e) and e > 0)
+    if not pts or pts[0][0] > target:
+        return float("nan")
+    if pts[-1][0] <= target:
+        return min(t for e, t in pts)
+    for (e1, t1), (e2, t2) in zip(pts, pts[1:]):
+        if e1 <= target <= e2:
+            w = np.log(target / e1) / np.log(e2 / e1) if e2 > e1 else 0.0
+            return float(np.exp(np.log(t1) + w * (np.log(t2) - np.log(t1))))
+    return float("nan")
