@@ -1,0 +1,177 @@
+"""Kernel: one evaluation of the DAE residual and of its Jacobian — generated C vs CasADi's
+virtual machine vs NumPy.
+
+Model: the chain of N bars (benchmarks/common.py).  The DAE is the one IDAS integrates
+(``model.functions["dae"]``: x = [q; v], z = λ, ode = [v; M⁻¹(F − Aᵀλ)],
+alg = A a − γ + 2αΦ̇ + β²Φ); the Jacobian is ∂(ode, alg)/∂(x, z), as IDAS needs it.  Three
+SX functions — ``residual``, ``jacobian`` and ``both`` (residual and Jacobian from one
+evaluation, sharing subexpressions) — are timed
+
+* as generated C: written by ``ncgen.codegen.write_package``, compiled with the default
+  flags (-O2), loaded with ``casadi.external``;
+* on CasADi's virtual machine (the SX functions themselves);
+* in NumPy: the same equations written by hand for the chain with dense arrays (M⁻¹
+  precomputed), checked against CasADi's values.
+
+C and VM are evaluated ``BATCH`` times in one call of a serial ``map`` (CasADi's loop, no
+Python between evaluations) of the function followed by the sum of its outputs (scalar
+output: no batch of outputs to allocate; the sum adds one addition per output nonzero to
+C and VM alike), NumPy in a Python loop (that is how NumPy code runs).
+Times: microseconds per evaluation, best of ``--repeat``.
+
+    python benchmarks/kernel.py              N = 5, 20, 50
+    python benchmarks/kernel.py --smoke      N = 3, few evaluations (CI)
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+
+import casadi as ca
+import numpy as np
+
+from common import L, best_time, chain_system, machine
+
+BATCH = 2000
+
+
+def kernels(model) -> list[ca.Function]:
+    """``residual``, ``jacobian`` and ``both`` (see the module docstring)."""
+    dae = model.functions["dae"]
+    t, x, z, u, p = (ca.SX.sym(n, dae.sparsity_in(i)) for i, n in enumerate(dae.name_in()))
+    ode, alg = dae(t, x, z, u, p)
+    res = ca.vertcat(ode, alg)
+    jac = ca.jacobian(res, ca.vertcat(x, z))
+    names = ["t", "x", "z", "u", "p"]
+    return [ca.Function("residual", [t, x, z, u, p], [res], names, ["res"]),
+            ca.Function("jacobian", [t, x, z, u, p], [jac], names, ["jac"]),
+            ca.Function("both", [t, x, z, u, p], [res, jac], names, ["res", "jac"])]
+
+
+def summed(f: ca.Function) -> ca.Function:
+    """``f`` followed by the sum of all its output nonzeros: the same work with a scalar
+    output, so that a batch of evaluations does not allocate a batch of outputs."""
+    ins = f.sx_in()
+    total = sum(ca.sum1(o.nz[:]) for o in f.call(ins))
+    return ca.Function(f"{f.name()}_sum", ins, [total], f.name_in(), ["sum"])
+
+
+class NumpyChain:
+    """The chain's DAE residual and Jacobian in NumPy (dense; see the module docstring)."""
+
+    def __init__(self, model):
+        n = model.nc
+        self.n, self.nq = n, model.nq
+        self.Minv = np.linalg.inv(model.M)
+        self.F = model.F(model.q0, model.v0)
+        self.alpha, self.beta = model.baumgarte
+        D = np.eye(3 * n)                      # bar vectors U = D q (point k minus point k-1)
+        D[3:, :-3] -= np.eye(3 * (n - 1))
+        self.D = D
+
+    def _B(self, X):
+        """N × 3N: row k holds X_k (3 values) in block k."""
+        B = np.zeros((self.n, 3 * self.n))
+        B[np.repeat(np.arange(self.n), 3), np.arange(3 * self.n)] = X.reshape(-1)
+        return B
+
+    def residual(self, x, z, jacobian: bool = False):
+        nq = self.nq
+        q, v, lam = x[:nq], x[nq:], z
+        U, dU = (self.D @ q).reshape(-1, 3), (self.D @ v).reshape(-1, 3)
+        A = 2 * self._B(U) @ self.D
+        phi = np.sum(U * U, axis=1) - L**2
+        gamma = -2 * np.sum(dU * dU, axis=1)
+        a = self.Minv @ (self.F - A.T @ lam)
+        Av = A @ v
+        res = np.concatenate([v, a, A @ a - gamma + 2 * self.alpha * Av + self.beta**2 * phi])
+        if not jacobian:
+            return res
+        da_dq = -self.Minv @ (2 * self.D.T @ (np.repeat(lam, 3)[:, None] * self.D))
+        da_dlam = -self.Minv @ A.T
+        Da, Dv = (self.D @ a).reshape(-1, 3), dU
+        dalg_dq = A @ da_dq + 2 * self._B(Da) @ self.D + 4 * self.alpha * self._B(Dv) @ self.D + self.beta**2 * A
+        dalg_dv = 2 * self.alpha * A + 4 * self._B(Dv) @ self.D
+        J = np.zeros((2 * nq + self.n, 2 * nq + self.n))
+        J[:nq, nq:2 * nq] = np.eye(nq)
+        J[nq:2 * nq, :nq] = da_dq
+        J[nq:2 * nq, 2 * nq:] = da_dlam
+        J[2 * nq:, :nq] = dalg_dq
+        J[2 * nq:, nq:2 * nq] = dalg_dv
+        J[2 * nq:, 2 * nq:] = A @ da_dlam
+        return res, J
+
+
+def compiled(functions, name: str) -> dict[str, ca.Function]:
+    from ncgen.codegen import load_functions, write_package
+
+    with tempfile.TemporaryDirectory(prefix="ncgen-kernel-") as tmp:
+        pkg = write_package(name, functions, f"{tmp}/pkg")
+        return load_functions(pkg, backend="compiled")
+
+
+def per_call(f: ca.Function, args, batch: int, repeat: int) -> float:
+    """Microseconds per evaluation of ``f`` (a :func:`summed` kernel): ``batch`` evaluations
+    in one call of ``f.map(batch, "serial")``."""
+    mapped = f.map(batch, "serial")
+    cols = [np.tile(np.asarray(a, float).reshape(-1, 1), (1, batch)) for a in args]
+    secs, _ = best_time(lambda: mapped(*cols), repeat)
+    return secs / batch * 1e6
+
+
+def run(n: int, batch: int, repeat: int) -> None:
+    model = chain_system(n).build()
+    functions = kernels(model)
+    timed = [summed(f) for f in functions]
+    c = compiled(functions + timed, f"kernel_chain{n}")
+    rng = np.random.default_rng(0)
+    x = np.concatenate([model.q0 + 0.01 * rng.standard_normal(model.nq), rng.standard_normal(model.nq)])
+    z = rng.standard_normal(model.nc)
+    args = [0.0, x, z, np.zeros(model.nu), model.p0]
+    ref_res, ref_jac = (np.array(ca.densify(o)) for o in functions[2](*args))
+    npc = NumpyChain(model)
+    res, jac = npc.residual(x, z, jacobian=True)
+    check = max(np.max(np.abs(res - ref_res.ravel())), np.max(np.abs(jac - ref_jac)))
+    jc = np.array(ca.densify(c["both"](*args)[1]))
+    print(f"\n=== chain of N = {n} bars: nx = {2 * model.nq}, nz = {model.nc}, Jacobian nnz "
+          f"{functions[1].nnz_out(0)} of {jac.size} ===")
+    print(f"  NumPy vs CasADi values: max |difference| = {check:.1e}; C vs VM Jacobian: "
+          f"{np.max(np.abs(jc - ref_jac)):.1e}")
+    print(f"  {'kernel':<10} {'instructions':>12} {'C (us)':>10} {'VM (us)':>10} {'NumPy (us)':>11} "
+          f"{'VM/C':>7} {'NumPy/C':>8}")
+    numpy_calls = {"residual": lambda: npc.residual(x, z), "jacobian": lambda: npc.residual(x, z, True),
+                   "both": lambda: npc.residual(x, z, True)}
+    for f, g in zip(functions, timed):
+        name = f.name()
+        t_c = per_call(c[g.name()], args, batch, repeat)
+        t_vm = per_call(g, args, batch, repeat)
+        loops = max(1, batch // 10)
+        secs, _ = best_time(lambda: [numpy_calls[name]() for _ in range(loops)], repeat)
+        t_np = secs / loops * 1e6
+        print(f"  {name:<10} {f.n_instructions():>12} {t_c:>10.2f} {t_vm:>10.2f} {t_np:>11.2f} "
+              f"{t_vm / t_c:>7.1f} {t_np / t_c:>8.1f}")
+        if name == "both":
+            print(f"  RATIO VM / generated C, residual + Jacobian: {t_vm / t_c:.1f}; NumPy / generated C: "
+                  f"{t_np / t_c:.1f}")
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--smoke", action="store_true", help="tiny: runs in seconds (CI)")
+    parser.add_argument("--sizes", type=int, nargs="+", help="numbers of bars (default 5 20 50)")
+    parser.add_argument("--repeat", type=int, default=5, help="timing repetitions; the fastest counts")
+    args = parser.parse_args(argv)
+    sizes = args.sizes or ([3] if args.smoke else [5, 20, 50])
+    batch, repeat = (20, 1) if args.smoke else (BATCH, args.repeat)
+    print(machine())
+    start = time.perf_counter()
+    for n in sizes:
+        run(n, batch, repeat)
+    print(f"\n(total {time.perf_counter() - start:.1f} s)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
