@@ -7,8 +7,10 @@ alg = A a − γ + 2αΦ̇ + β²Φ); the Jacobian is ∂(ode, alg)/∂(x, z), a
 SX functions — ``residual``, ``jacobian`` and ``both`` (residual and Jacobian from one
 evaluation, sharing subexpressions) — are timed
 
-* as generated C: written by ``ncgen.codegen.write_package``, compiled with the default
-  flags (-O2), loaded with ``casadi.external``;
+* as generated C: written by ``ncgen.codegen.write_package`` and called in a C loop
+  (column "C": the generated code alone, gcc -O2), and loaded with ``casadi.external`` and
+  called by CasADi (column "C ext": adds CasADi's per-call overhead for external functions,
+  which dominates small kernels);
 * on CasADi's virtual machine (the SX functions themselves);
 * in NumPy: the same equations written by hand for the chain with dense arrays (M⁻¹
   precomputed), checked against CasADi's values.
@@ -28,6 +30,7 @@ import argparse
 import sys
 import tempfile
 import time
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -104,12 +107,59 @@ class NumpyChain:
         return res, J
 
 
-def compiled(functions, name: str) -> dict[str, ca.Function]:
+def compiled(functions, name: str, directory) -> dict[str, ca.Function]:
+    """The functions as a generated C package in ``directory``, compiled (default flags)
+    and loaded with ``casadi.external``."""
     from ncgen.codegen import load_functions, write_package
 
-    with tempfile.TemporaryDirectory(prefix="ncgen-kernel-") as tmp:
-        pkg = write_package(name, functions, f"{tmp}/pkg")
-        return load_functions(pkg, backend="compiled")
+    return load_functions(write_package(name, functions, directory), backend="compiled")
+
+
+HARNESS = """#include <stdio.h>
+#include <time.h>
+#include "{name}.h"
+static const casadi_real x[] = {{{x}}}, z[] = {{{z}}};
+static double now(void) {{ struct timespec t; clock_gettime(CLOCK_MONOTONIC, &t); return t.tv_sec + 1e-9 * t.tv_nsec; }}
+int main(void) {{
+  static casadi_real w[{sz_w}];
+  static casadi_int iw[{sz_iw}];
+  casadi_real t = 0, out, best, start;
+  const casadi_real *arg[{sz_arg}] = {{&t, x, z, 0, 0}};
+  casadi_real *res[{sz_res}] = {{&out}};
+  long k;
+  int rep;
+{calls}
+  return 0;
+}}
+"""
+CALL = """  for (best = 1e30, rep = 0; rep < {repeat}; ++rep) {{
+    start = now();
+    for (k = 0; k < {loops}; ++k) {{ {fn}(arg, res, iw, w, 0); t += 1e-300; }}
+    if (now() - start < best) best = now() - start;
+  }}
+  printf("{label} %.6f\\n", best / {loops} * 1e6);
+"""
+
+
+def from_c(pkg_dir, name: str, timed: list[ca.Function], x, z, loops: int, repeat: int) -> dict[str, float]:
+    """Microseconds per evaluation of each :func:`summed` kernel called in a C loop (the
+    generated code alone, compiled -O2 with the package's sources)."""
+    import shutil
+    import subprocess
+
+    cc = shutil.which("gcc") or shutil.which("cc")
+    if cc is None:
+        return {}
+    sizes = [max(getattr(f, k)() for f in timed) for k in ("sz_arg", "sz_res", "sz_iw", "sz_w")]
+    calls = "".join(CALL.format(repeat=repeat, loops=loops, fn=f"{name}_{f.name()}", label=f.name()) for f in timed)
+    text = HARNESS.format(name=name, x=", ".join(repr(float(v)) for v in x), z=", ".join(repr(float(v)) for v in z) or "0",
+                          sz_arg=max(5, sizes[0]), sz_res=max(1, sizes[1]), sz_iw=max(1, sizes[2]),
+                          sz_w=max(1, sizes[3]), calls=calls)
+    (pkg_dir / "harness.c").write_text(text)
+    sources = [p.name for p in sorted(pkg_dir.glob(f"{name}_kernels_*.c"))]
+    subprocess.run([cc, "-O2", "-o", "harness", "harness.c", *sources, "-lm"], cwd=pkg_dir, check=True)
+    out = subprocess.run([str(pkg_dir / "harness")], capture_output=True, text=True, check=True).stdout
+    return {line.split()[0]: float(line.split()[1]) for line in out.splitlines()}
 
 
 def per_call(f: ca.Function, args, batch: int, repeat: int) -> float:
@@ -125,10 +175,13 @@ def run(n: int, batch: int, repeat: int) -> None:
     model = chain_system(n).build()
     functions = kernels(model)
     timed = [summed(f) for f in functions]
-    c = compiled(functions + timed, f"kernel_chain{n}")
     rng = np.random.default_rng(0)
     x = np.concatenate([model.q0 + 0.01 * rng.standard_normal(model.nq), rng.standard_normal(model.nq)])
     z = rng.standard_normal(model.nc)
+    name = f"kernel_chain{n}"
+    with tempfile.TemporaryDirectory(prefix="ncgen-kernel-") as tmp:
+        c = compiled(functions + timed, name, Path(tmp) / name)
+        native = from_c(Path(tmp) / name, name, timed, x, z, loops=batch, repeat=repeat)
     args = [0.0, x, z, np.zeros(model.nu), model.p0]
     ref_res, ref_jac = (np.array(ca.densify(o)) for o in functions[2](*args))
     npc = NumpyChain(model)
@@ -139,18 +192,19 @@ def run(n: int, batch: int, repeat: int) -> None:
           f"{functions[1].nnz_out(0)} of {jac.size} ===")
     print(f"  NumPy vs CasADi values: max |difference| = {check:.1e}; C vs VM Jacobian: "
           f"{np.max(np.abs(jc - ref_jac)):.1e}")
-    print(f"  {'kernel':<10} {'instructions':>12} {'C (us)':>10} {'VM (us)':>10} {'NumPy (us)':>11} "
-          f"{'VM/C':>7} {'NumPy/C':>8}")
+    print(f"  {'kernel':<10} {'instructions':>12} {'C (us)':>10} {'C ext (us)':>11} {'VM (us)':>10} "
+          f"{'NumPy (us)':>11} {'VM/C':>7} {'NumPy/C':>8}")
     numpy_calls = {"residual": lambda: npc.residual(x, z), "jacobian": lambda: npc.residual(x, z, True),
                    "both": lambda: npc.residual(x, z, True)}
     for f, g in zip(functions, timed):
         name = f.name()
-        t_c = per_call(c[g.name()], args, batch, repeat)
+        t_ext = per_call(c[g.name()], args, batch, repeat)
+        t_c = native.get(g.name(), t_ext)
         t_vm = per_call(g, args, batch, repeat)
         loops = max(1, batch // 10)
         secs, _ = best_time(lambda: [numpy_calls[name]() for _ in range(loops)], repeat)
         t_np = secs / loops * 1e6
-        print(f"  {name:<10} {f.n_instructions():>12} {t_c:>10.2f} {t_vm:>10.2f} {t_np:>11.2f} "
+        print(f"  {name:<10} {f.n_instructions():>12} {t_c:>10.2f} {t_ext:>11.2f} {t_vm:>10.2f} {t_np:>11.2f} "
               f"{t_vm / t_c:>7.1f} {t_np / t_c:>8.1f}")
         if name == "both":
             print(f"  RATIO VM / generated C, residual + Jacobian: {t_vm / t_c:.1f}; NumPy / generated C: "
