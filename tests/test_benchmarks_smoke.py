@@ -1,0 +1,33 @@
+"""The benchmarks run (``--smoke``: tiny models, seconds) and print their comparisons.
+Nothing here is timed: the figures are the benchmarks' business, not CI's."""
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("mujoco")
+
+BENCHMARKS = Path(__file__).resolve().parent.parent / "benchmarks"
+pytestmark = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc") is None,
+                                reason="no C compiler")
+
+
+@pytest.mark.parametrize("script, expected", [
+    ("work_precision.py", ["=== chain of N = 2 bars", "RATIO ncgen stepper / MuJoCo RK4", "reference check"]),
+    ("kernel.py", ["=== chain of N = 3 bars", "RATIO VM / generated C"]),
+    ("build_scaling.py", ["=== ncgen: chain of N bars", "KanesMethod", "EXTRAPOLATED"]),
+    ("long_run.py", ["=== heavy top", "=== chain of 5 bars", "RATIO ncgen / MuJoCo RK4"]),
+])
+def test_smoke(tmp_path, script, expected):
+    env = {**os.environ, "NCGEN_CACHE_DIR": str(tmp_path / "cache")}
+    out = subprocess.run([sys.executable, str(BENCHMARKS / script), "--smoke"], cwd=BENCHMARKS,
+                         capture_output=True, text=True, env=env)
+    assert out.returncode == 0, out.stderr[-3000:]
+    for text in expected:
+        assert text in out.stdout, (text, out.stdout[-3000:])
+    assert "CPU:" in out.stdout and "versions:" in out.stdout
