@@ -2,8 +2,8 @@
 virtual machine vs NumPy.
 
 Model: the chain of N bars (benchmarks/common.py).  The DAE is the one IDAS integrates
-(``model.functions["dae"]``: x = [q; v], z = λ, ode = [v; M⁻¹(F − Aᵀλ)],
-alg = A a − γ + 2αΦ̇ + β²Φ); the Jacobian is ∂(ode, alg)/∂(x, z), as IDAS needs it.  Three
+(``model.functions["dae"]``: x = [q; v], z = [a; λ], ode = [v; a],
+alg = [M a + Aᵀλ − F; A a − γ + 2αΦ̇ + β²Φ]); the Jacobian is ∂(ode, alg)/∂(x, z), as IDAS needs it.  Three
 SX functions — ``residual``, ``jacobian`` and ``both`` (residual and Jacobian from one
 evaluation, sharing subexpressions) — are timed
 
@@ -12,8 +12,8 @@ evaluation, sharing subexpressions) — are timed
   called by CasADi (column "C ext": adds CasADi's per-call overhead for external functions,
   which dominates small kernels);
 * on CasADi's virtual machine (the SX functions themselves);
-* in NumPy: the same equations written by hand for the chain with dense arrays (M⁻¹
-  precomputed), checked against CasADi's values.
+* in NumPy: the same equations written by hand for the chain with dense arrays, checked
+  against CasADi's values.
 
 C and VM are evaluated ``BATCH`` times in one call of a serial ``map`` (CasADi's loop, no
 Python between evaluations) of the function followed by the sum of its outputs (scalar
@@ -67,10 +67,10 @@ class NumpyChain:
     def __init__(self, model):
         n = model.nc
         self.n, self.nq = n, model.nq
-        self.Minv = np.linalg.inv(model.M)
-        self.F = model.F(model.q0, model.v0)
+        self.M = model.M
+        self.F = model.F(model.q0, model.v0)            # gravity only: constant
         self.alpha, self.beta = model.baumgarte
-        D = np.eye(3 * n)                      # bar vectors U = D q (point k minus point k-1)
+        D = np.eye(3 * n)                                # bar vectors U = D q (point k minus point k-1)
         D[3:, :-3] -= np.eye(3 * (n - 1))
         self.D = D
 
@@ -81,29 +81,27 @@ class NumpyChain:
         return B
 
     def residual(self, x, z, jacobian: bool = False):
-        nq = self.nq
-        q, v, lam = x[:nq], x[nq:], z
+        """``[ode; alg]`` of ``dae`` (x = [q; v], z = [a; λ]) and, if asked, its Jacobian."""
+        nq, n = self.nq, self.n
+        q, v, a, lam = x[:nq], x[nq:], z[:nq], z[nq:]
         U, dU = (self.D @ q).reshape(-1, 3), (self.D @ v).reshape(-1, 3)
         A = 2 * self._B(U) @ self.D
         phi = np.sum(U * U, axis=1) - L**2
         gamma = -2 * np.sum(dU * dU, axis=1)
-        a = self.Minv @ (self.F - A.T @ lam)
-        Av = A @ v
-        res = np.concatenate([v, a, A @ a - gamma + 2 * self.alpha * Av + self.beta**2 * phi])
+        res = np.concatenate([v, a, self.M @ a + A.T @ lam - self.F,
+                              A @ a - gamma + 2 * self.alpha * (A @ v) + self.beta**2 * phi])
         if not jacobian:
             return res
-        da_dq = -self.Minv @ (2 * self.D.T @ (np.repeat(lam, 3)[:, None] * self.D))
-        da_dlam = -self.Minv @ A.T
-        Da, Dv = (self.D @ a).reshape(-1, 3), dU
-        dalg_dq = A @ da_dq + 2 * self._B(Da) @ self.D + 4 * self.alpha * self._B(Dv) @ self.D + self.beta**2 * A
-        dalg_dv = 2 * self.alpha * A + 4 * self._B(Dv) @ self.D
-        J = np.zeros((2 * nq + self.n, 2 * nq + self.n))
+        Bdv = self._B(dU) @ self.D
+        J = np.zeros((3 * nq + n, 3 * nq + n))
         J[:nq, nq:2 * nq] = np.eye(nq)
-        J[nq:2 * nq, :nq] = da_dq
-        J[nq:2 * nq, 2 * nq:] = da_dlam
-        J[2 * nq:, :nq] = dalg_dq
-        J[2 * nq:, nq:2 * nq] = dalg_dv
-        J[2 * nq:, 2 * nq:] = A @ da_dlam
+        J[nq:2 * nq, 2 * nq:3 * nq] = np.eye(nq)
+        J[2 * nq:3 * nq, :nq] = 2 * self.D.T @ (np.repeat(lam, 3)[:, None] * self.D)
+        J[2 * nq:3 * nq, 2 * nq:3 * nq] = self.M
+        J[2 * nq:3 * nq, 3 * nq:] = A.T
+        J[3 * nq:, :nq] = 2 * self._B((self.D @ a).reshape(-1, 3)) @ self.D + 4 * self.alpha * Bdv + self.beta**2 * A
+        J[3 * nq:, nq:2 * nq] = 2 * self.alpha * A + 4 * Bdv
+        J[3 * nq:, 2 * nq:3 * nq] = A
         return res, J
 
 
@@ -177,7 +175,7 @@ def run(n: int, batch: int, repeat: int) -> None:
     timed = [summed(f) for f in functions]
     rng = np.random.default_rng(0)
     x = np.concatenate([model.q0 + 0.01 * rng.standard_normal(model.nq), rng.standard_normal(model.nq)])
-    z = rng.standard_normal(model.nc)
+    z = rng.standard_normal(model.nq + model.nc)
     name = f"kernel_chain{n}"
     with tempfile.TemporaryDirectory(prefix="ncgen-kernel-") as tmp:
         c = compiled(functions + timed, name, Path(tmp) / name)
@@ -188,7 +186,7 @@ def run(n: int, batch: int, repeat: int) -> None:
     res, jac = npc.residual(x, z, jacobian=True)
     check = max(np.max(np.abs(res - ref_res.ravel())), np.max(np.abs(jac - ref_jac)))
     jc = np.array(ca.densify(c["both"](*args)[1]))
-    print(f"\n=== chain of N = {n} bars: nx = {2 * model.nq}, nz = {model.nc}, Jacobian nnz "
+    print(f"\n=== chain of N = {n} bars: nx = {2 * model.nq}, nz = {model.nq + model.nc}, Jacobian nnz "
           f"{functions[1].nnz_out(0)} of {jac.size} ===")
     print(f"  NumPy vs CasADi values: max |difference| = {check:.1e}; C vs VM Jacobian: "
           f"{np.max(np.abs(jc - ref_jac)):.1e}")

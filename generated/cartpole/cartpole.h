@@ -72,6 +72,9 @@ extern const casadi_real cartpole_lam0[8];
 /* initial DAE state [q0; v0] */
 #define CARTPOLE_X0_LEN 20
 extern const casadi_real cartpole_x0[20];
+/* initial algebraic state of dae, [a0; lam0] */
+#define CARTPOLE_Z0_LEN 18
+extern const casadi_real cartpole_z0[18];
 /* default parameter values */
 #define CARTPOLE_P0_LEN 0
 /* constant mass matrix, nq x nq, column-major (kg) */
@@ -85,7 +88,7 @@ extern const casadi_real cartpole_gravity[2];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define CARTPOLE_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define CARTPOLE_MODEL_HASH "6c43c8d654a294f82c6633c515701e2c7f937c17000c3cd4579292a8202387eb"
+#define CARTPOLE_MODEL_HASH "8ab1b2d9480606d1bba5538ad9623ee90145d87dabce425f0025552cc3d58e4f"
 
 /* ---- cartpole_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -224,27 +227,27 @@ extern const casadi_real cartpole_gravity[2];
 #define CARTPOLE_ALG_OUT_RES_NNZ 8
 
 /* ---- cartpole_dae ----------------------------------------------------
- * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v] and z = λ
- * In cartpole_kernels_0.c; 310 instructions.
+ * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v], z = [a; λ], ode = [v; a] and alg = [M a + Aᵀλ − F; A a − γ + 2α Φ̇ + β² Φ] (sparse Jacobian)
+ * In cartpole_kernels_0.c; 273 instructions.
  * Jacobian: jac_cartpole_dae() (CasADi's convention: the inputs, then the nominal outputs;
  * one output jac_<out>_<in> per pair), found by casadi.external for exact derivatives.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: cartpole_t0.
  *   arg[1] x: 20x1, nnz 20 [m, m/s] state [q; v]. Default: cartpole_x0.
- *   arg[2] z: 8x1, nnz 8 [N per unit of Φ] algebraic state: the Lagrange multipliers λ. Default: cartpole_lam0.
+ *   arg[2] z: 18x1, nnz 18 [m/s², N per unit of Φ] algebraic state [a; λ]: the accelerations q̈ and the Lagrange multipliers. Default: cartpole_z0.
  *   arg[3] u: 1x1, nnz 1 [SI units of each input] inputs, in the order of input_names. Default: zeros.
  *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] ode: 20x1, nnz 20 [m/s, m/s²] ẋ = [q̇; q̈].
- *   res[1] alg: 8x1, nnz 8 [units of Φ per s²] algebraic residual (as alg).
+ *   res[1] alg: 18x1, nnz 18 [N; units of Φ per s²] equations of motion and Baumgarte-stabilised acceleration constraints.
  */
 #define CARTPOLE_DAE_IN_T_NNZ 1
 #define CARTPOLE_DAE_IN_X_NNZ 20
-#define CARTPOLE_DAE_IN_Z_NNZ 8
+#define CARTPOLE_DAE_IN_Z_NNZ 18
 #define CARTPOLE_DAE_IN_U_NNZ 1
 #define CARTPOLE_DAE_IN_P_NNZ 0
 #define CARTPOLE_DAE_OUT_ODE_NNZ 20
-#define CARTPOLE_DAE_OUT_ALG_NNZ 8
+#define CARTPOLE_DAE_OUT_ALG_NNZ 18
 
 /* ---- cartpole_accel ----------------------------------------------------
  * accelerations and multipliers from the KKT system [[M, Aᵀ], [A, 0]] [a; λ] = [F; γ − 2α Φ̇ − β² Φ], solved by sparse QR

@@ -79,7 +79,7 @@ static const casadi_real *const defaults_alg[] = {
 static const casadi_real *const defaults_dae[] = {
   cartpole_t0,
   cartpole_x0,
-  cartpole_lam0,
+  cartpole_z0,
   0,
   0,
   0};

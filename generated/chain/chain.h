@@ -71,6 +71,9 @@ extern const casadi_real chain_lam0[5];
 /* initial DAE state [q0; v0] */
 #define CHAIN_X0_LEN 30
 extern const casadi_real chain_x0[30];
+/* initial algebraic state of dae, [a0; lam0] */
+#define CHAIN_Z0_LEN 20
+extern const casadi_real chain_z0[20];
 /* default parameter values */
 #define CHAIN_P0_LEN 0
 /* constant mass matrix, nq x nq, column-major (kg) */
@@ -84,7 +87,7 @@ extern const casadi_real chain_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define CHAIN_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define CHAIN_MODEL_HASH "7720a7f1ae4c32d638b2c67ff8b740818172a0b711eac62de374ab73c5c30a66"
+#define CHAIN_MODEL_HASH "5c99cd6bc777a1e69d1032707267be70460d26a9211c72be9eece6c6296b0ed8"
 
 /* ---- chain_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -223,27 +226,27 @@ extern const casadi_real chain_gravity[3];
 #define CHAIN_ALG_OUT_RES_NNZ 5
 
 /* ---- chain_dae ----------------------------------------------------
- * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v] and z = λ
- * In chain_kernels_0.c; 618 instructions.
+ * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v], z = [a; λ], ode = [v; a] and alg = [M a + Aᵀλ − F; A a − γ + 2α Φ̇ + β² Φ] (sparse Jacobian)
+ * In chain_kernels_0.c; 500 instructions.
  * Jacobian: jac_chain_dae() (CasADi's convention: the inputs, then the nominal outputs;
  * one output jac_<out>_<in> per pair), found by casadi.external for exact derivatives.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: chain_t0.
  *   arg[1] x: 30x1, nnz 30 [m, m/s] state [q; v]. Default: chain_x0.
- *   arg[2] z: 5x1, nnz 5 [N per unit of Φ] algebraic state: the Lagrange multipliers λ. Default: chain_lam0.
+ *   arg[2] z: 20x1, nnz 20 [m/s², N per unit of Φ] algebraic state [a; λ]: the accelerations q̈ and the Lagrange multipliers. Default: chain_z0.
  *   arg[3] u: 0x1, nnz 0 [SI units of each input] inputs, in the order of input_names. Default: zeros.
  *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] ode: 30x1, nnz 30 [m/s, m/s²] ẋ = [q̇; q̈].
- *   res[1] alg: 5x1, nnz 5 [units of Φ per s²] algebraic residual (as alg).
+ *   res[1] alg: 20x1, nnz 20 [N; units of Φ per s²] equations of motion and Baumgarte-stabilised acceleration constraints.
  */
 #define CHAIN_DAE_IN_T_NNZ 1
 #define CHAIN_DAE_IN_X_NNZ 30
-#define CHAIN_DAE_IN_Z_NNZ 5
+#define CHAIN_DAE_IN_Z_NNZ 20
 #define CHAIN_DAE_IN_U_NNZ 0
 #define CHAIN_DAE_IN_P_NNZ 0
 #define CHAIN_DAE_OUT_ODE_NNZ 30
-#define CHAIN_DAE_OUT_ALG_NNZ 5
+#define CHAIN_DAE_OUT_ALG_NNZ 20
 
 /* ---- chain_accel ----------------------------------------------------
  * accelerations and multipliers from the KKT system [[M, Aᵀ], [A, 0]] [a; λ] = [F; γ − 2α Φ̇ − β² Φ], solved by sparse QR

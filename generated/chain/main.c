@@ -79,7 +79,7 @@ static const casadi_real *const defaults_alg[] = {
 static const casadi_real *const defaults_dae[] = {
   chain_t0,
   chain_x0,
-  chain_lam0,
+  chain_z0,
   0,
   0,
   0};

@@ -71,6 +71,9 @@ extern const casadi_real double_pendulum_lam0[22];
 /* initial DAE state [q0; v0] */
 #define DOUBLE_PENDULUM_X0_LEN 48
 extern const casadi_real double_pendulum_x0[48];
+/* initial algebraic state of dae, [a0; lam0] */
+#define DOUBLE_PENDULUM_Z0_LEN 46
+extern const casadi_real double_pendulum_z0[46];
 /* default parameter values */
 #define DOUBLE_PENDULUM_P0_LEN 0
 /* constant mass matrix, nq x nq, column-major (kg) */
@@ -84,7 +87,7 @@ extern const casadi_real double_pendulum_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define DOUBLE_PENDULUM_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define DOUBLE_PENDULUM_MODEL_HASH "009e6d2bff8a2b403be21a7bf5c817f234ca6e356fe894121c32fc20ffdb06fe"
+#define DOUBLE_PENDULUM_MODEL_HASH "fa6cfbd81abf4d50a66fc6b6f048f7ed4a39658e6d82883a5aaae32628398f4e"
 
 /* ---- double_pendulum_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -223,27 +226,27 @@ extern const casadi_real double_pendulum_gravity[3];
 #define DOUBLE_PENDULUM_ALG_OUT_RES_NNZ 22
 
 /* ---- double_pendulum_dae ----------------------------------------------------
- * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v] and z = λ
- * In double_pendulum_kernels_0.c; 1167 instructions.
+ * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v], z = [a; λ], ode = [v; a] and alg = [M a + Aᵀλ − F; A a − γ + 2α Φ̇ + β² Φ] (sparse Jacobian)
+ * In double_pendulum_kernels_0.c; 1012 instructions.
  * Jacobian: jac_double_pendulum_dae() (CasADi's convention: the inputs, then the nominal outputs;
  * one output jac_<out>_<in> per pair), found by casadi.external for exact derivatives.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: double_pendulum_t0.
  *   arg[1] x: 48x1, nnz 48 [m, m/s] state [q; v]. Default: double_pendulum_x0.
- *   arg[2] z: 22x1, nnz 22 [N per unit of Φ] algebraic state: the Lagrange multipliers λ. Default: double_pendulum_lam0.
+ *   arg[2] z: 46x1, nnz 46 [m/s², N per unit of Φ] algebraic state [a; λ]: the accelerations q̈ and the Lagrange multipliers. Default: double_pendulum_z0.
  *   arg[3] u: 0x1, nnz 0 [SI units of each input] inputs, in the order of input_names. Default: zeros.
  *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] ode: 48x1, nnz 48 [m/s, m/s²] ẋ = [q̇; q̈].
- *   res[1] alg: 22x1, nnz 22 [units of Φ per s²] algebraic residual (as alg).
+ *   res[1] alg: 46x1, nnz 46 [N; units of Φ per s²] equations of motion and Baumgarte-stabilised acceleration constraints.
  */
 #define DOUBLE_PENDULUM_DAE_IN_T_NNZ 1
 #define DOUBLE_PENDULUM_DAE_IN_X_NNZ 48
-#define DOUBLE_PENDULUM_DAE_IN_Z_NNZ 22
+#define DOUBLE_PENDULUM_DAE_IN_Z_NNZ 46
 #define DOUBLE_PENDULUM_DAE_IN_U_NNZ 0
 #define DOUBLE_PENDULUM_DAE_IN_P_NNZ 0
 #define DOUBLE_PENDULUM_DAE_OUT_ODE_NNZ 48
-#define DOUBLE_PENDULUM_DAE_OUT_ALG_NNZ 22
+#define DOUBLE_PENDULUM_DAE_OUT_ALG_NNZ 46
 
 /* ---- double_pendulum_accel ----------------------------------------------------
  * accelerations and multipliers from the KKT system [[M, Aᵀ], [A, 0]] [a; λ] = [F; γ − 2α Φ̇ − β² Φ], solved by sparse QR

@@ -79,7 +79,7 @@ static const casadi_real *const defaults_alg[] = {
 static const casadi_real *const defaults_dae[] = {
   double_pendulum_t0,
   double_pendulum_x0,
-  double_pendulum_lam0,
+  double_pendulum_z0,
   0,
   0,
   0};

@@ -18,7 +18,6 @@
 #define NCGEN_FOURBAR_3D_H
 
 #include "fourbar_3d_kernels_0.h"
-#include "fourbar_3d_kernels_1.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -72,6 +71,9 @@ extern const casadi_real fourbar_3d_lam0[23];
 /* initial DAE state [q0; v0] */
 #define FOURBAR_3D_X0_LEN 48
 extern const casadi_real fourbar_3d_x0[48];
+/* initial algebraic state of dae, [a0; lam0] */
+#define FOURBAR_3D_Z0_LEN 47
+extern const casadi_real fourbar_3d_z0[47];
 /* default parameter values */
 #define FOURBAR_3D_P0_LEN 0
 /* constant mass matrix, nq x nq, column-major (kg) */
@@ -85,7 +87,7 @@ extern const casadi_real fourbar_3d_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define FOURBAR_3D_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define FOURBAR_3D_MODEL_HASH "dcacf461cdc4fa33b3810a9f7ac3a3558fca531b4880ed7831cd403e67696d4c"
+#define FOURBAR_3D_MODEL_HASH "beb73cf9e717963e55b65dae4424f28e5305573f0787e8c4ff49f4a719ab6601"
 
 /* ---- fourbar_3d_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -224,27 +226,27 @@ extern const casadi_real fourbar_3d_gravity[3];
 #define FOURBAR_3D_ALG_OUT_RES_NNZ 23
 
 /* ---- fourbar_3d_dae ----------------------------------------------------
- * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v] and z = λ
- * In fourbar_3d_kernels_0.c; 1542 instructions.
+ * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v], z = [a; λ], ode = [v; a] and alg = [M a + Aᵀλ − F; A a − γ + 2α Φ̇ + β² Φ] (sparse Jacobian)
+ * In fourbar_3d_kernels_0.c; 1286 instructions.
  * Jacobian: jac_fourbar_3d_dae() (CasADi's convention: the inputs, then the nominal outputs;
  * one output jac_<out>_<in> per pair), found by casadi.external for exact derivatives.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_3d_t0.
  *   arg[1] x: 48x1, nnz 48 [m, m/s] state [q; v]. Default: fourbar_3d_x0.
- *   arg[2] z: 23x1, nnz 23 [N per unit of Φ] algebraic state: the Lagrange multipliers λ. Default: fourbar_3d_lam0.
+ *   arg[2] z: 47x1, nnz 47 [m/s², N per unit of Φ] algebraic state [a; λ]: the accelerations q̈ and the Lagrange multipliers. Default: fourbar_3d_z0.
  *   arg[3] u: 0x1, nnz 0 [SI units of each input] inputs, in the order of input_names. Default: zeros.
  *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] ode: 48x1, nnz 48 [m/s, m/s²] ẋ = [q̇; q̈].
- *   res[1] alg: 23x1, nnz 23 [units of Φ per s²] algebraic residual (as alg).
+ *   res[1] alg: 47x1, nnz 47 [N; units of Φ per s²] equations of motion and Baumgarte-stabilised acceleration constraints.
  */
 #define FOURBAR_3D_DAE_IN_T_NNZ 1
 #define FOURBAR_3D_DAE_IN_X_NNZ 48
-#define FOURBAR_3D_DAE_IN_Z_NNZ 23
+#define FOURBAR_3D_DAE_IN_Z_NNZ 47
 #define FOURBAR_3D_DAE_IN_U_NNZ 0
 #define FOURBAR_3D_DAE_IN_P_NNZ 0
 #define FOURBAR_3D_DAE_OUT_ODE_NNZ 48
-#define FOURBAR_3D_DAE_OUT_ALG_NNZ 23
+#define FOURBAR_3D_DAE_OUT_ALG_NNZ 47
 
 /* ---- fourbar_3d_accel ----------------------------------------------------
  * accelerations and multipliers from the KKT system [[M, Aᵀ], [A, 0]] [a; λ] = [F; γ − 2α Φ̇ − β² Φ], solved by sparse QR
@@ -385,7 +387,7 @@ extern const casadi_real fourbar_3d_gravity[3];
 
 /* ---- fourbar_3d_step_solve ----------------------------------------------------
  * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
- * In fourbar_3d_kernels_1.c; 12260 instructions.
+ * In fourbar_3d_kernels_0.c; 12260 instructions.
  * Inputs:
  *   arg[0] K: 47x47, nnz 252 (sparse) KKT matrix in the stepper's pattern. Default: zeros.
  *   arg[1] r: 47x1, nnz 47 right-hand side. Default: zeros.

@@ -79,7 +79,7 @@ static const casadi_real *const defaults_alg[] = {
 static const casadi_real *const defaults_dae[] = {
   fourbar_3d_t0,
   fourbar_3d_x0,
-  fourbar_3d_lam0,
+  fourbar_3d_z0,
   0,
   0,
   0};

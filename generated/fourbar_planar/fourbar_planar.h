@@ -72,6 +72,9 @@ extern const casadi_real fourbar_planar_lam0[5];
 /* initial DAE state [q0; v0] */
 #define FOURBAR_PLANAR_X0_LEN 12
 extern const casadi_real fourbar_planar_x0[12];
+/* initial algebraic state of dae, [a0; lam0] */
+#define FOURBAR_PLANAR_Z0_LEN 11
+extern const casadi_real fourbar_planar_z0[11];
 /* default parameter values */
 #define FOURBAR_PLANAR_P0_LEN 1
 extern const casadi_real fourbar_planar_p0[1];
@@ -86,7 +89,7 @@ extern const casadi_real fourbar_planar_gravity[2];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define FOURBAR_PLANAR_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define FOURBAR_PLANAR_MODEL_HASH "46df89f665e529f662ef70eeffb20f76db48d827f4bb97f345384277dbe2279c"
+#define FOURBAR_PLANAR_MODEL_HASH "2911ed5512c759691ea86df905e3c12c45039b873f4ab3b1f4c640f467978a0f"
 
 /* ---- fourbar_planar_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -225,27 +228,27 @@ extern const casadi_real fourbar_planar_gravity[2];
 #define FOURBAR_PLANAR_ALG_OUT_RES_NNZ 5
 
 /* ---- fourbar_planar_dae ----------------------------------------------------
- * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v] and z = λ
- * In fourbar_planar_kernels_0.c; 400 instructions.
+ * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v], z = [a; λ], ode = [v; a] and alg = [M a + Aᵀλ − F; A a − γ + 2α Φ̇ + β² Φ] (sparse Jacobian)
+ * In fourbar_planar_kernels_0.c; 293 instructions.
  * Jacobian: jac_fourbar_planar_dae() (CasADi's convention: the inputs, then the nominal outputs;
  * one output jac_<out>_<in> per pair), found by casadi.external for exact derivatives.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_planar_t0.
  *   arg[1] x: 12x1, nnz 12 [m, m/s] state [q; v]. Default: fourbar_planar_x0.
- *   arg[2] z: 5x1, nnz 5 [N per unit of Φ] algebraic state: the Lagrange multipliers λ. Default: fourbar_planar_lam0.
+ *   arg[2] z: 11x1, nnz 11 [m/s², N per unit of Φ] algebraic state [a; λ]: the accelerations q̈ and the Lagrange multipliers. Default: fourbar_planar_z0.
  *   arg[3] u: 0x1, nnz 0 [SI units of each input] inputs, in the order of input_names. Default: zeros.
  *   arg[4] p: 1x1, nnz 1 [SI units of each parameter] parameters, in the order of parameter_names. Default: fourbar_planar_p0.
  * Outputs:
  *   res[0] ode: 12x1, nnz 12 [m/s, m/s²] ẋ = [q̇; q̈].
- *   res[1] alg: 5x1, nnz 5 [units of Φ per s²] algebraic residual (as alg).
+ *   res[1] alg: 11x1, nnz 11 [N; units of Φ per s²] equations of motion and Baumgarte-stabilised acceleration constraints.
  */
 #define FOURBAR_PLANAR_DAE_IN_T_NNZ 1
 #define FOURBAR_PLANAR_DAE_IN_X_NNZ 12
-#define FOURBAR_PLANAR_DAE_IN_Z_NNZ 5
+#define FOURBAR_PLANAR_DAE_IN_Z_NNZ 11
 #define FOURBAR_PLANAR_DAE_IN_U_NNZ 0
 #define FOURBAR_PLANAR_DAE_IN_P_NNZ 1
 #define FOURBAR_PLANAR_DAE_OUT_ODE_NNZ 12
-#define FOURBAR_PLANAR_DAE_OUT_ALG_NNZ 5
+#define FOURBAR_PLANAR_DAE_OUT_ALG_NNZ 11
 
 /* ---- fourbar_planar_accel ----------------------------------------------------
  * accelerations and multipliers from the KKT system [[M, Aᵀ], [A, 0]] [a; λ] = [F; γ − 2α Φ̇ − β² Φ], solved by sparse QR

@@ -79,7 +79,7 @@ static const casadi_real *const defaults_alg[] = {
 static const casadi_real *const defaults_dae[] = {
   fourbar_planar_t0,
   fourbar_planar_x0,
-  fourbar_planar_lam0,
+  fourbar_planar_z0,
   0,
   fourbar_planar_p0,
   0};

@@ -71,6 +71,9 @@ extern const casadi_real heavy_top_lam0[6];
 /* initial DAE state [q0; v0] */
 #define HEAVY_TOP_X0_LEN 18
 extern const casadi_real heavy_top_x0[18];
+/* initial algebraic state of dae, [a0; lam0] */
+#define HEAVY_TOP_Z0_LEN 15
+extern const casadi_real heavy_top_z0[15];
 /* default parameter values */
 #define HEAVY_TOP_P0_LEN 0
 /* constant mass matrix, nq x nq, column-major (kg) */
@@ -84,7 +87,7 @@ extern const casadi_real heavy_top_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define HEAVY_TOP_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define HEAVY_TOP_MODEL_HASH "2027d8dd9715bb2b53020b24f74d325e181efc839cbabaae8ba900050ebc5eb3"
+#define HEAVY_TOP_MODEL_HASH "c33d02ca2e4d755baeb1171bc5a7aab13972473593269eb31f2712984bd72e17"
 
 /* ---- heavy_top_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -223,27 +226,27 @@ extern const casadi_real heavy_top_gravity[3];
 #define HEAVY_TOP_ALG_OUT_RES_NNZ 6
 
 /* ---- heavy_top_dae ----------------------------------------------------
- * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v] and z = λ
- * In heavy_top_kernels_0.c; 424 instructions.
+ * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v], z = [a; λ], ode = [v; a] and alg = [M a + Aᵀλ − F; A a − γ + 2α Φ̇ + β² Φ] (sparse Jacobian)
+ * In heavy_top_kernels_0.c; 361 instructions.
  * Jacobian: jac_heavy_top_dae() (CasADi's convention: the inputs, then the nominal outputs;
  * one output jac_<out>_<in> per pair), found by casadi.external for exact derivatives.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: heavy_top_t0.
  *   arg[1] x: 18x1, nnz 18 [m, m/s] state [q; v]. Default: heavy_top_x0.
- *   arg[2] z: 6x1, nnz 6 [N per unit of Φ] algebraic state: the Lagrange multipliers λ. Default: heavy_top_lam0.
+ *   arg[2] z: 15x1, nnz 15 [m/s², N per unit of Φ] algebraic state [a; λ]: the accelerations q̈ and the Lagrange multipliers. Default: heavy_top_z0.
  *   arg[3] u: 0x1, nnz 0 [SI units of each input] inputs, in the order of input_names. Default: zeros.
  *   arg[4] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
  *   res[0] ode: 18x1, nnz 18 [m/s, m/s²] ẋ = [q̇; q̈].
- *   res[1] alg: 6x1, nnz 6 [units of Φ per s²] algebraic residual (as alg).
+ *   res[1] alg: 15x1, nnz 15 [N; units of Φ per s²] equations of motion and Baumgarte-stabilised acceleration constraints.
  */
 #define HEAVY_TOP_DAE_IN_T_NNZ 1
 #define HEAVY_TOP_DAE_IN_X_NNZ 18
-#define HEAVY_TOP_DAE_IN_Z_NNZ 6
+#define HEAVY_TOP_DAE_IN_Z_NNZ 15
 #define HEAVY_TOP_DAE_IN_U_NNZ 0
 #define HEAVY_TOP_DAE_IN_P_NNZ 0
 #define HEAVY_TOP_DAE_OUT_ODE_NNZ 18
-#define HEAVY_TOP_DAE_OUT_ALG_NNZ 6
+#define HEAVY_TOP_DAE_OUT_ALG_NNZ 15
 
 /* ---- heavy_top_accel ----------------------------------------------------
  * accelerations and multipliers from the KKT system [[M, Aᵀ], [A, 0]] [a; λ] = [F; γ − 2α Φ̇ − β² Φ], solved by sparse QR

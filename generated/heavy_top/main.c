@@ -79,7 +79,7 @@ static const casadi_real *const defaults_alg[] = {
 static const casadi_real *const defaults_dae[] = {
   heavy_top_t0,
   heavy_top_x0,
-  heavy_top_lam0,
+  heavy_top_z0,
   0,
   0,
   0};

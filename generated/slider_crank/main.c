@@ -79,7 +79,7 @@ static const casadi_real *const defaults_alg[] = {
 static const casadi_real *const defaults_dae[] = {
   slider_crank_t0,
   slider_crank_x0,
-  slider_crank_lam0,
+  slider_crank_z0,
   0,
   slider_crank_p0,
   0};

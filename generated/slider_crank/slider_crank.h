@@ -72,6 +72,9 @@ extern const casadi_real slider_crank_lam0[10];
 /* initial DAE state [q0; v0] */
 #define SLIDER_CRANK_X0_LEN 20
 extern const casadi_real slider_crank_x0[20];
+/* initial algebraic state of dae, [a0; lam0] */
+#define SLIDER_CRANK_Z0_LEN 20
+extern const casadi_real slider_crank_z0[20];
 /* default parameter values */
 #define SLIDER_CRANK_P0_LEN 1
 extern const casadi_real slider_crank_p0[1];
@@ -86,7 +89,7 @@ extern const casadi_real slider_crank_gravity[2];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define SLIDER_CRANK_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define SLIDER_CRANK_MODEL_HASH "75d8730e7ea676c14c3f48728604a5afcc87cc91c9fc5ea4f13930f4bf3f39f0"
+#define SLIDER_CRANK_MODEL_HASH "b02677e2b342e19d9a2beaacbedfd304dd2875de6795a7395cc9634c8612475a"
 
 /* ---- slider_crank_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -225,27 +228,27 @@ extern const casadi_real slider_crank_gravity[2];
 #define SLIDER_CRANK_ALG_OUT_RES_NNZ 10
 
 /* ---- slider_crank_dae ----------------------------------------------------
- * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v] and z = λ
- * In slider_crank_kernels_0.c; 555 instructions.
+ * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v], z = [a; λ], ode = [v; a] and alg = [M a + Aᵀλ − F; A a − γ + 2α Φ̇ + β² Φ] (sparse Jacobian)
+ * In slider_crank_kernels_0.c; 471 instructions.
  * Jacobian: jac_slider_crank_dae() (CasADi's convention: the inputs, then the nominal outputs;
  * one output jac_<out>_<in> per pair), found by casadi.external for exact derivatives.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: slider_crank_t0.
  *   arg[1] x: 20x1, nnz 20 [m, m/s] state [q; v]. Default: slider_crank_x0.
- *   arg[2] z: 10x1, nnz 10 [N per unit of Φ] algebraic state: the Lagrange multipliers λ. Default: slider_crank_lam0.
+ *   arg[2] z: 20x1, nnz 20 [m/s², N per unit of Φ] algebraic state [a; λ]: the accelerations q̈ and the Lagrange multipliers. Default: slider_crank_z0.
  *   arg[3] u: 0x1, nnz 0 [SI units of each input] inputs, in the order of input_names. Default: zeros.
  *   arg[4] p: 1x1, nnz 1 [SI units of each parameter] parameters, in the order of parameter_names. Default: slider_crank_p0.
  * Outputs:
  *   res[0] ode: 20x1, nnz 20 [m/s, m/s²] ẋ = [q̇; q̈].
- *   res[1] alg: 10x1, nnz 10 [units of Φ per s²] algebraic residual (as alg).
+ *   res[1] alg: 20x1, nnz 20 [N; units of Φ per s²] equations of motion and Baumgarte-stabilised acceleration constraints.
  */
 #define SLIDER_CRANK_DAE_IN_T_NNZ 1
 #define SLIDER_CRANK_DAE_IN_X_NNZ 20
-#define SLIDER_CRANK_DAE_IN_Z_NNZ 10
+#define SLIDER_CRANK_DAE_IN_Z_NNZ 20
 #define SLIDER_CRANK_DAE_IN_U_NNZ 0
 #define SLIDER_CRANK_DAE_IN_P_NNZ 1
 #define SLIDER_CRANK_DAE_OUT_ODE_NNZ 20
-#define SLIDER_CRANK_DAE_OUT_ALG_NNZ 10
+#define SLIDER_CRANK_DAE_OUT_ALG_NNZ 20
 
 /* ---- slider_crank_accel ----------------------------------------------------
  * accelerations and multipliers from the KKT system [[M, Aᵀ], [A, 0]] [a; λ] = [F; γ − 2α Φ̇ − β² Φ], solved by sparse QR

@@ -79,7 +79,7 @@ static const casadi_real *const defaults_alg[] = {
 static const casadi_real *const defaults_dae[] = {
   tensegrity_t0,
   tensegrity_x0,
-  tensegrity_lam0,
+  tensegrity_z0,
   0,
   tensegrity_p0,
   0};

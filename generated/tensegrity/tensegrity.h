@@ -19,7 +19,6 @@
 
 #include "tensegrity_kernels_0.h"
 #include "tensegrity_kernels_1.h"
-#include "tensegrity_kernels_2.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -74,6 +73,9 @@ extern const casadi_real tensegrity_lam0[6];
 /* initial DAE state [q0; v0] */
 #define TENSEGRITY_X0_LEN 36
 extern const casadi_real tensegrity_x0[36];
+/* initial algebraic state of dae, [a0; lam0] */
+#define TENSEGRITY_Z0_LEN 24
+extern const casadi_real tensegrity_z0[24];
 /* default parameter values */
 #define TENSEGRITY_P0_LEN 3
 extern const casadi_real tensegrity_p0[3];
@@ -88,7 +90,7 @@ extern const casadi_real tensegrity_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define TENSEGRITY_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define TENSEGRITY_MODEL_HASH "dc5d5e98faba028b9903aec063b13b6c333023c3e6e6fe206bc20d19e1c787ee"
+#define TENSEGRITY_MODEL_HASH "2f48706bee27ab3c09755e40ea3f46eab63b60d67cc279e0319ce5f4375e0256"
 
 /* ---- tensegrity_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -227,31 +229,31 @@ extern const casadi_real tensegrity_gravity[3];
 #define TENSEGRITY_ALG_OUT_RES_NNZ 6
 
 /* ---- tensegrity_dae ----------------------------------------------------
- * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v] and z = λ
- * In tensegrity_kernels_0.c; 2241 instructions.
+ * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v], z = [a; λ], ode = [v; a] and alg = [M a + Aᵀλ − F; A a − γ + 2α Φ̇ + β² Φ] (sparse Jacobian)
+ * In tensegrity_kernels_0.c; 1313 instructions.
  * Jacobian: jac_tensegrity_dae() (CasADi's convention: the inputs, then the nominal outputs;
  * one output jac_<out>_<in> per pair), found by casadi.external for exact derivatives.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: tensegrity_t0.
  *   arg[1] x: 36x1, nnz 36 [m, m/s] state [q; v]. Default: tensegrity_x0.
- *   arg[2] z: 6x1, nnz 6 [N per unit of Φ] algebraic state: the Lagrange multipliers λ. Default: tensegrity_lam0.
+ *   arg[2] z: 24x1, nnz 24 [m/s², N per unit of Φ] algebraic state [a; λ]: the accelerations q̈ and the Lagrange multipliers. Default: tensegrity_z0.
  *   arg[3] u: 0x1, nnz 0 [SI units of each input] inputs, in the order of input_names. Default: zeros.
  *   arg[4] p: 3x1, nnz 3 [SI units of each parameter] parameters, in the order of parameter_names. Default: tensegrity_p0.
  * Outputs:
  *   res[0] ode: 36x1, nnz 36 [m/s, m/s²] ẋ = [q̇; q̈].
- *   res[1] alg: 6x1, nnz 6 [units of Φ per s²] algebraic residual (as alg).
+ *   res[1] alg: 24x1, nnz 24 [N; units of Φ per s²] equations of motion and Baumgarte-stabilised acceleration constraints.
  */
 #define TENSEGRITY_DAE_IN_T_NNZ 1
 #define TENSEGRITY_DAE_IN_X_NNZ 36
-#define TENSEGRITY_DAE_IN_Z_NNZ 6
+#define TENSEGRITY_DAE_IN_Z_NNZ 24
 #define TENSEGRITY_DAE_IN_U_NNZ 0
 #define TENSEGRITY_DAE_IN_P_NNZ 3
 #define TENSEGRITY_DAE_OUT_ODE_NNZ 36
-#define TENSEGRITY_DAE_OUT_ALG_NNZ 6
+#define TENSEGRITY_DAE_OUT_ALG_NNZ 24
 
 /* ---- tensegrity_accel ----------------------------------------------------
  * accelerations and multipliers from the KKT system [[M, Aᵀ], [A, 0]] [a; λ] = [F; γ − 2α Φ̇ − β² Φ], solved by sparse QR
- * In tensegrity_kernels_2.c; 32 instructions.
+ * In tensegrity_kernels_0.c; 32 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: tensegrity_t0.
  *   arg[1] q: 18x1, nnz 18 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: tensegrity_q0.
@@ -272,7 +274,7 @@ extern const casadi_real tensegrity_gravity[3];
 
 /* ---- tensegrity_energy ----------------------------------------------------
  * kinetic energy T = ½ q̇ᵀ M q̇ and potential energy V (gravity and springs)
- * In tensegrity_kernels_2.c; 436 instructions.
+ * In tensegrity_kernels_0.c; 436 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: tensegrity_t0.
  *   arg[1] q: 18x1, nnz 18 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: tensegrity_q0.
@@ -291,7 +293,7 @@ extern const casadi_real tensegrity_gravity[3];
 
 /* ---- tensegrity_markers ----------------------------------------------------
  * world positions and velocities of the named markers, one column each, in the order of marker_names
- * In tensegrity_kernels_2.c; 12 instructions.
+ * In tensegrity_kernels_0.c; 12 instructions.
  * Inputs:
  *   arg[0] q: 18x1, nnz 18 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: tensegrity_q0.
  *   arg[1] v: 18x1, nnz 18 [m/s] coordinate rates q̇. Default: tensegrity_v0.
@@ -306,7 +308,7 @@ extern const casadi_real tensegrity_gravity[3];
 
 /* ---- tensegrity_poses ----------------------------------------------------
  * pose of every member: rotation local → world and centre of mass, one block each, in the order of member_names
- * In tensegrity_kernels_2.c; 315 instructions.
+ * In tensegrity_kernels_0.c; 315 instructions.
  * Inputs:
  *   arg[0] q: 18x1, nnz 18 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: tensegrity_q0.
  * Outputs:
@@ -319,7 +321,7 @@ extern const casadi_real tensegrity_gravity[3];
 
 /* ---- tensegrity_step_newton ----------------------------------------------------
  * Stepper, first half-step: Newton residual r(w, nu) and its Jacobian K
- * In tensegrity_kernels_2.c; 4537 instructions.
+ * In tensegrity_kernels_0.c; 4537 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time at the start of the step. Default: tensegrity_t0.
  *   arg[1] q: 18x1, nnz 18 [m] coordinates at t. Default: tensegrity_q0.
@@ -346,7 +348,7 @@ extern const casadi_real tensegrity_gravity[3];
 
 /* ---- tensegrity_step_velocity ----------------------------------------------------
  * Stepper, second half-step: KKT matrix and right-hand side for [v+; h/2 mu]
- * In tensegrity_kernels_2.c; 1414 instructions.
+ * In tensegrity_kernels_1.c; 1414 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time at the end of the step. Default: tensegrity_t0.
  *   arg[1] q: 18x1, nnz 18 [m] coordinates at the end. Default: tensegrity_q0.
@@ -369,7 +371,7 @@ extern const casadi_real tensegrity_gravity[3];
 
 /* ---- tensegrity_step_check ----------------------------------------------------
  * Stepper: constraint residuals of a state
- * In tensegrity_kernels_2.c; 160 instructions.
+ * In tensegrity_kernels_1.c; 160 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: tensegrity_t0.
  *   arg[1] q: 18x1, nnz 18 [m] coordinates. Default: tensegrity_q0.
@@ -388,7 +390,7 @@ extern const casadi_real tensegrity_gravity[3];
 
 /* ---- tensegrity_step_solve ----------------------------------------------------
  * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
- * In tensegrity_kernels_2.c; 10421 instructions.
+ * In tensegrity_kernels_1.c; 10421 instructions.
  * Inputs:
  *   arg[0] K: 24x24, nnz 372 (sparse) KKT matrix in the stepper's pattern. Default: zeros.
  *   arg[1] r: 24x1, nnz 24 right-hand side. Default: zeros.

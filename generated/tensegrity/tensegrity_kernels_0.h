@@ -186,6 +186,114 @@ int tensegrity_dae_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int
 #define tensegrity_dae_SZ_RES 2
 #define tensegrity_dae_SZ_IW 0
 #define tensegrity_dae_SZ_W 0
+int jac_tensegrity_dae(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int jac_tensegrity_dae_checkout(void);
+void jac_tensegrity_dae_release(int mem);
+void jac_tensegrity_dae_incref(void);
+void jac_tensegrity_dae_decref(void);
+casadi_int jac_tensegrity_dae_n_in(void);
+casadi_int jac_tensegrity_dae_n_out(void);
+casadi_real jac_tensegrity_dae_default_in(casadi_int i);
+const char* jac_tensegrity_dae_name_in(casadi_int i);
+const char* jac_tensegrity_dae_name_out(casadi_int i);
+const casadi_int* jac_tensegrity_dae_sparsity_in(casadi_int i);
+const casadi_int* jac_tensegrity_dae_sparsity_out(casadi_int i);
+int jac_tensegrity_dae_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int jac_tensegrity_dae_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define jac_tensegrity_dae_SZ_ARG 7
+#define jac_tensegrity_dae_SZ_RES 10
+#define jac_tensegrity_dae_SZ_IW 0
+#define jac_tensegrity_dae_SZ_W 0
+int tensegrity_accel(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int tensegrity_accel_checkout(void);
+void tensegrity_accel_release(int mem);
+void tensegrity_accel_incref(void);
+void tensegrity_accel_decref(void);
+casadi_int tensegrity_accel_n_in(void);
+casadi_int tensegrity_accel_n_out(void);
+casadi_real tensegrity_accel_default_in(casadi_int i);
+const char* tensegrity_accel_name_in(casadi_int i);
+const char* tensegrity_accel_name_out(casadi_int i);
+const casadi_int* tensegrity_accel_sparsity_in(casadi_int i);
+const casadi_int* tensegrity_accel_sparsity_out(casadi_int i);
+int tensegrity_accel_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int tensegrity_accel_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define tensegrity_accel_SZ_ARG 10
+#define tensegrity_accel_SZ_RES 3
+#define tensegrity_accel_SZ_IW 25
+#define tensegrity_accel_SZ_W 633
+int tensegrity_energy(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int tensegrity_energy_checkout(void);
+void tensegrity_energy_release(int mem);
+void tensegrity_energy_incref(void);
+void tensegrity_energy_decref(void);
+casadi_int tensegrity_energy_n_in(void);
+casadi_int tensegrity_energy_n_out(void);
+casadi_real tensegrity_energy_default_in(casadi_int i);
+const char* tensegrity_energy_name_in(casadi_int i);
+const char* tensegrity_energy_name_out(casadi_int i);
+const casadi_int* tensegrity_energy_sparsity_in(casadi_int i);
+const casadi_int* tensegrity_energy_sparsity_out(casadi_int i);
+int tensegrity_energy_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int tensegrity_energy_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define tensegrity_energy_SZ_ARG 4
+#define tensegrity_energy_SZ_RES 2
+#define tensegrity_energy_SZ_IW 0
+#define tensegrity_energy_SZ_W 0
+int tensegrity_markers(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int tensegrity_markers_checkout(void);
+void tensegrity_markers_release(int mem);
+void tensegrity_markers_incref(void);
+void tensegrity_markers_decref(void);
+casadi_int tensegrity_markers_n_in(void);
+casadi_int tensegrity_markers_n_out(void);
+casadi_real tensegrity_markers_default_in(casadi_int i);
+const char* tensegrity_markers_name_in(casadi_int i);
+const char* tensegrity_markers_name_out(casadi_int i);
+const casadi_int* tensegrity_markers_sparsity_in(casadi_int i);
+const casadi_int* tensegrity_markers_sparsity_out(casadi_int i);
+int tensegrity_markers_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int tensegrity_markers_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define tensegrity_markers_SZ_ARG 2
+#define tensegrity_markers_SZ_RES 2
+#define tensegrity_markers_SZ_IW 0
+#define tensegrity_markers_SZ_W 0
+int tensegrity_poses(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int tensegrity_poses_checkout(void);
+void tensegrity_poses_release(int mem);
+void tensegrity_poses_incref(void);
+void tensegrity_poses_decref(void);
+casadi_int tensegrity_poses_n_in(void);
+casadi_int tensegrity_poses_n_out(void);
+casadi_real tensegrity_poses_default_in(casadi_int i);
+const char* tensegrity_poses_name_in(casadi_int i);
+const char* tensegrity_poses_name_out(casadi_int i);
+const casadi_int* tensegrity_poses_sparsity_in(casadi_int i);
+const casadi_int* tensegrity_poses_sparsity_out(casadi_int i);
+int tensegrity_poses_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int tensegrity_poses_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define tensegrity_poses_SZ_ARG 1
+#define tensegrity_poses_SZ_RES 2
+#define tensegrity_poses_SZ_IW 0
+#define tensegrity_poses_SZ_W 0
+int tensegrity_step_newton(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int tensegrity_step_newton_checkout(void);
+void tensegrity_step_newton_release(int mem);
+void tensegrity_step_newton_incref(void);
+void tensegrity_step_newton_decref(void);
+casadi_int tensegrity_step_newton_n_in(void);
+casadi_int tensegrity_step_newton_n_out(void);
+casadi_real tensegrity_step_newton_default_in(casadi_int i);
+const char* tensegrity_step_newton_name_in(casadi_int i);
+const char* tensegrity_step_newton_name_out(casadi_int i);
+const casadi_int* tensegrity_step_newton_sparsity_in(casadi_int i);
+const casadi_int* tensegrity_step_newton_sparsity_out(casadi_int i);
+int tensegrity_step_newton_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int tensegrity_step_newton_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define tensegrity_step_newton_SZ_ARG 8
+#define tensegrity_step_newton_SZ_RES 2
+#define tensegrity_step_newton_SZ_IW 0
+#define tensegrity_step_newton_SZ_W 0
 void tensegrity_kernels_0_casadi_version(int* major, int* minor, int* patch);
 int tensegrity_kernels_0_casadi_int_size(void);
 int tensegrity_kernels_0_casadi_real_size(void);

@@ -17,10 +17,15 @@ Functions (name: inputs -> outputs):
 * ``phi``: t, q, p -> phi;  ``A``: t, q, p -> A (sparse);  ``phi_t``: t, q, p -> phi_t
 * ``gamma``: t, q, v, p -> gamma;  ``F``: t, q, v, u, p -> F;  ``Minv``: b -> x = M⁻¹ b
 * ``ode``: t, q, v, lam, u, p -> qdot, vdot;  ``alg``: t, q, v, lam, u, p -> res
-* ``dae``: t, x, z, u, p -> ode, alg  (the same with ``x = [q; v]``, ``z = λ``: IDAS's form)
+* ``dae``: t, x, z, u, p -> ode, alg  (IDAS's form, ``x = [q; v]``, ``z = [a; λ]``, see below)
 * ``accel``: t, q, v, u, p -> a, lam  (the KKT system solved, Baumgarte terms included)
 * ``energy``: t, q, v, p -> T, V;  ``markers``: q, v -> r, rdot (dim × n_markers)
 * ``poses``: q -> R (dim × dim·n_members), p (dim × n_members)
+
+``dae`` keeps the accelerations among the algebraic states, ``ode = [v; a]``,
+``alg = [M a + Aᵀλ − F; A a − γ + 2α Φ̇ + β² Φ]``: its Jacobian is as sparse as ``M`` and
+``A`` (O(n) nonzeros), whereas eliminating ``a = M⁻¹(F − Aᵀλ)`` makes it dense wherever
+``M⁻¹`` is — for a chain of n bars, O(n²) nonzeros and as many instructions in its C kernel.
 
 Every function is an SX function except ``accel`` (MX: it calls the others and CasADi's
 sparse QR).  :data:`DOCS` gives the meaning and units of each function and argument; it is
@@ -46,7 +51,7 @@ IN = {
     "p": ("parameters, in the order of parameter_names", "SI units of each parameter"),
     "b": ("right-hand side: a generalised force", "N"),
     "x": ("state [q; v]", "m, m/s"),
-    "z": ("algebraic state: the Lagrange multipliers λ", "N per unit of Φ"),
+    "z": ("algebraic state [a; λ]: the accelerations q̈ and the Lagrange multipliers", "m/s², N per unit of Φ"),
 }
 
 #: Every function of :func:`system_functions`: its purpose and its outputs, name -> (meaning,
@@ -72,8 +77,10 @@ DOCS = {
     "alg": ("algebraic residual of the index-1 DAE: A a − γ + 2α Φ̇ + β² Φ (Baumgarte "
             "stabilised acceleration constraints)",
             {"res": ("residual, zero on solutions", "units of Φ per s²")}),
-    "dae": ("the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v] and z = λ",
-            {"ode": ("ẋ = [q̇; q̈]", "m/s, m/s²"), "alg": ("algebraic residual (as alg)", "units of Φ per s²")}),
+    "dae": ("the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v], z = [a; λ], ode = [v; a] "
+            "and alg = [M a + Aᵀλ − F; A a − γ + 2α Φ̇ + β² Φ] (sparse Jacobian)",
+            {"ode": ("ẋ = [q̇; q̈]", "m/s, m/s²"),
+             "alg": ("equations of motion and Baumgarte-stabilised acceleration constraints", "N; units of Φ per s²")}),
     "accel": ("accelerations and multipliers from the KKT system [[M, Aᵀ], [A, 0]] [a; λ] = "
               "[F; γ − 2α Φ̇ − β² Φ], solved by sparse QR",
               {"a": ("q̈", "m/s²"), "lam": ("λ", "N per unit of Φ")}),
@@ -118,7 +125,7 @@ def system_functions(ctx: Context, phi, F, V, M: np.ndarray, factor: CholeskyFac
     add("Minv", ("b",), [factor.solve(b)], ["x"])
     add("ode", ("t", "q", "v", "lam", "u", "p"), [v, a], ["qdot", "vdot"])
     add("alg", ("t", "q", "v", "lam", "u", "p"), [alg], ["res"])
-    f["dae"] = _dae(f, ctx.layout.nq, nc, u.shape[0], p.shape[0])
+    f["dae"] = _dae(f, Msp, alpha, beta, ctx.layout.nq, nc, u.shape[0], p.shape[0])
     add("energy", ("t", "q", "v", "p"), [T, V], ["T", "V"])
     r, rd = _markers(ctx, system)
     add("markers", ("q", "v"), [r, rd], ["r", "rdot"])
@@ -149,14 +156,17 @@ def _poses(ctx: Context, system):
     return ca.horzcat(*Rs), ca.horzcat(*ps)
 
 
-def _dae(f, nq: int, nc: int, nu: int, npar: int) -> ca.Function:
-    """``ode`` and ``alg`` with the state stacked, ``x = [q; v]``, ``z = λ`` (IDAS's form)."""
-    t, x, z = ca.SX.sym("t"), ca.SX.sym("x", 2 * nq), ca.SX.sym("z", nc)
+def _dae(f, M: ca.DM, alpha: float, beta: float, nq: int, nc: int, nu: int, npar: int) -> ca.Function:
+    """IDAS's form: ``x = [q; v]``, ``z = [a; λ]``, ``ẋ = [v; a]``,
+    ``0 = [M a + Aᵀλ − F; A a − γ + 2α Φ̇ + β² Φ]`` (index 1: ∂alg/∂z is the KKT matrix)."""
+    t, x, z = ca.SX.sym("t"), ca.SX.sym("x", 2 * nq), ca.SX.sym("z", nq + nc)
     u, p = ca.SX.sym("u", nu), ca.SX.sym("p", npar)
-    q, v = x[:nq], x[nq:]
-    qdot, vdot = f["ode"](t, q, v, z, u, p)
-    return ca.Function("dae", [t, x, z, u, p], [ca.vertcat(qdot, vdot), f["alg"](t, q, v, z, u, p)],
-                       ["t", "x", "z", "u", "p"], ["ode", "alg"])
+    q, v, a, lam = x[:nq], x[nq:], z[:nq], z[nq:]
+    A = f["A"](t, q, p)
+    phidot = ca.mtimes(A, v) + f["phi_t"](t, q, p)
+    alg = ca.vertcat(ca.mtimes(M, a) + ca.mtimes(A.T, lam) - f["F"](t, q, v, u, p),
+                     ca.mtimes(A, a) - f["gamma"](t, q, v, p) + 2 * alpha * phidot + beta**2 * f["phi"](t, q, p))
+    return ca.Function("dae", [t, x, z, u, p], [ca.vertcat(v, a), alg], ["t", "x", "z", "u", "p"], ["ode", "alg"])
 
 
 def _accel(f, M: ca.DM, nc: int, alpha: float, beta: float, nq: int, nu: int, npar: int) -> ca.Function:

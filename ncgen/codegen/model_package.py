@@ -6,7 +6,7 @@ and in IDAS's stacked form ``dae`` with its sparse Jacobian ``jac_<model>_dae``,
 solve ``accel``, energies, markers, poses), each documented in ``<model>.h`` from
 :data:`ncgen.assembly.functions.DOCS`, and the model as metadata: dimensions, the names of
 coordinates, constraints, inputs, parameters, members and markers, the consistent initial
-state (``t0``, ``q0``, ``v0``, ``lam0``, ``x0``, ``p0``), the constant mass matrix ``M``,
+state (``t0``, ``q0``, ``v0``, ``lam0``, ``x0``, ``z0``, ``p0``), the constant mass matrix ``M``,
 gravity, the Baumgarte coefficients and ``model_hash``.  ``main.c`` evaluates ``accel`` (or
 any other function) at the initial state without Python.  The compiled stepper
 (``<model>_step``, ``<model>_simulate`` in ``<model>_stepper.h``) and its example program
@@ -42,7 +42,7 @@ SYSTEM_JACOBIANS = ("dae",)
 #: Function evaluated by ``main.c`` when called without arguments.
 MAIN_FUNCTION = "accel"
 #: Input name -> metadata key of its default value (used by ``main.c`` and documented).
-DEFAULTS = {"t": "t0", "q": "q0", "v": "v0", "lam": "lam0", "x": "x0", "z": "lam0", "p": "p0"}
+DEFAULTS = {"t": "t0", "q": "q0", "v": "v0", "lam": "lam0", "x": "x0", "z": "z0", "p": "p0"}
 
 
 @dataclass(frozen=True)
@@ -147,6 +147,7 @@ def model_metadata(model) -> tuple[dict, dict]:
         ("v0", model.v0, "consistent initial coordinate rates (m/s)"),
         ("lam0", model.lam0, "initial Lagrange multipliers, consistent with q0, v0, p0 and zero inputs"),
         ("x0", np.concatenate([model.q0, model.v0]), "initial DAE state [q0; v0]"),
+        ("z0", np.concatenate([model.a0, model.lam0]), "initial algebraic state of dae, [a0; lam0]"),
         ("p0", model.p0, "default parameter values"),
         ("M", np.asarray(model.M).reshape(-1, order="F"), "constant mass matrix, nq x nq, column-major (kg)"),
         ("gravity", model.gravity, "gravity vector (m/s^2)"),

@@ -1,5 +1,5 @@
-"""The model's DAE for a backend: ``dae(t, x, z, u, p) -> (ode, alg)``, ``x = [q; v]``, ``z = λ``
-(:mod:`ncgen.assembly.functions`).
+"""The model's DAE for a backend: ``dae(t, x, z, u, p) -> (ode, alg)``, ``x = [q; v]``,
+``z = [a; λ]`` (:mod:`ncgen.assembly.functions`).
 
 Backends: ``"vm"`` is the model's SX function (CasADi's virtual machine); ``"compiled"``
 generates the model's C package (:func:`ncgen.generate`, into a temporary directory: the

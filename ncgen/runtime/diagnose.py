@@ -55,7 +55,8 @@ def explain(model, flag: str, t: float, q, v, lam, u, p, dae) -> str:
     IDAS's return flag (``""``: only describe the state)."""
     notes = []
     x = np.concatenate([q, v])
-    ode, alg = (np.array(a).reshape(-1) for a in dae(t, x, lam, u, p))
+    accel = np.array(model.functions["ode"](t, q, v, lam, u, p)[1]).reshape(-1)   # M⁻¹(F − Aᵀλ)
+    ode, alg = (np.array(a).reshape(-1) for a in dae(t, x, np.concatenate([accel, lam]), u, p))
     if not (np.all(np.isfinite(ode)) and np.all(np.isfinite(alg))):
         bad = [model.coordinate_names[i] for i in np.flatnonzero(~np.isfinite(ode[model.nq:]))[:3]]
         notes.append("the accelerations are not finite" + (f" (at {', '.join(bad)})" if bad else "")

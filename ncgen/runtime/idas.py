@@ -12,7 +12,7 @@ first step from the true derivative.  The shift is linear in τ, which BDF metho
 exactly, so it changes the local errors by rounding only.  ncgen computes the consistent
 ``(x_s, z_s)`` itself; IDAS's ``calc_ic`` is never used.
 
-Settings: ``suppress_algebraic`` (λ is left out of the error test: for this index-1 DAE it is
+Settings: ``suppress_algebraic`` (z = [a; λ] is left out of the error test: for this index-1 DAE it is
 a function of x and its scale is unrelated to ``atol``; including it multiplied the
 error-test failures), sparse Jacobian ``∂(ode, alg)/∂(y, z)`` derived by CasADi (from the
 SX expressions, or through the compiled Jacobian kernel) and factorised by ``linear_solver``
@@ -25,6 +25,7 @@ import contextlib
 import io
 import sys
 from dataclasses import dataclass, field
+from typing import Callable
 
 import casadi as ca
 import numpy as np
@@ -48,6 +49,9 @@ class ChunkedIDAS:
     """IDAS for ``dae(t, x, z, u, p) -> (ode, alg)`` on a grid of step ``h`` (see module docstring).
 
     ``hold``: ``"zoh"`` or ``"linear"``; ``nu`` input values per grid interval column.
+    ``algebraic(t, x, u)``, if given, returns the algebraic state consistent with ``x`` and
+    the input ``u`` at ``t``: each chunk starts from it (an input that jumps at the chunk's
+    start changes the accelerations, which are algebraic states of ncgen's DAE).
     """
 
     dae: ca.Function
@@ -59,6 +63,7 @@ class ChunkedIDAS:
     max_steps: int
     linear_solver: str
     expand: bool
+    algebraic: Callable | None = None
     stats: dict = field(default_factory=lambda: dict.fromkeys(STAT_KEYS, 0))
 
     def __post_init__(self):
@@ -106,6 +111,8 @@ class ChunkedIDAS:
         """States ``(X, Z)`` at the ``n = columns.shape[1]`` grid times after ``t_s``, shapes
         ``(n, nx)`` and ``(n, nz)``; raises :class:`ChunkFailure`."""
         n = columns.shape[1]
+        if self.algebraic is not None:
+            z = self.algebraic(t_s, x, self._input(columns[:, 0], t_s))
         xdot = self.xdot(t_s, x, z, columns[:, 0], p)
         F = self.integrator(n)
         log = io.StringIO()

@@ -87,12 +87,14 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
                                 max_iter=max_newton)
     dae, used = load_dae(model, backend)
     lam = initial_multipliers(model, t0, q, v, U[0], pv, dae)
+    a = np.array(model.functions["ode"](t0, q, v, lam, U[0], pv)[1]).reshape(-1)
     runner = ChunkedIDAS(dae, h=float(t[1] - t[0]), nu=model.nu, hold=hold, rtol=rtol, atol=atol,
-                         max_steps=int(max_steps), linear_solver=linear_solver, expand=(used == "vm"))
+                         max_steps=int(max_steps), linear_solver=linear_solver, expand=(used == "vm"),
+                         algebraic=lambda tk, x, uk: _algebraic(model, tk, x, uk, pv))
     bar = Progress(t0, t[-1], progress, label=f"simulating {model.name}: ")
     start = time.perf_counter()
     try:
-        X, Z, failure = _run(runner, t, np.concatenate([q, v]), lam, columns, pv, bar)
+        X, Z, failure = _run(runner, t, np.concatenate([q, v]), np.concatenate([a, lam]), columns, pv, bar)
     finally:
         bar.close()
     nq, k = model.nq, len(X) - 1
@@ -100,9 +102,9 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
             "linear_solver": linear_solver, "stats": dict(runner.stats),
             "wall_time": time.perf_counter() - start, "complete": failure is None}
     if failure is not None:
-        message = _failure_message(model, failure, t, k, X[k], Z[k], U[k], pv, dae)
+        message = _failure_message(model, failure, t, k, X[k], Z[k, nq:], U[k], pv, dae)
         info["message"] = message
-    traj = Trajectory.from_states(model, t[:k + 1], X[:, :nq], X[:, nq:], Z, U[:k + 1], pv, info)
+    traj = Trajectory.from_states(model, t[:k + 1], X[:, :nq], X[:, nq:], Z[:, nq:], U[:k + 1], pv, info)
     if failure is not None:
         raise SimulationError(message, time=float(t[k]), trajectory=traj)
     return traj
@@ -139,6 +141,13 @@ def initial_multipliers(model, t0: float, q, v, u, p, dae) -> np.ndarray:
                           time=t0, trajectory=None)
 
 
+def _algebraic(model, t: float, x, u, p) -> np.ndarray:
+    """``z = [a; λ]`` consistent with the state ``x = [q; v]`` and input ``u`` at ``t``: the KKT
+    system, which is the DAE's algebraic equations."""
+    a, lam = model.functions["accel"](t, x[:model.nq], x[model.nq:], u, p)
+    return np.concatenate([np.array(a).reshape(-1), np.array(lam).reshape(-1)])
+
+
 def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress):
     """States on the grid up to the end or the first failure: ``(X, Z, failure or None)``.
     A failed chunk is retried one interval at a time, to keep every state before the failure."""
@@ -166,11 +175,11 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress):
     return X, Z, None
 
 
-def _failure_message(model, failure: ChunkFailure, t, k, x, z, u, p, dae) -> str:
+def _failure_message(model, failure: ChunkFailure, t, k, x, lam, u, p, dae) -> str:
     nq = model.nq
     said, t_fail = shift_time(failure.message, float(t[k]))
     where = f" (IDAS gave up at t = {t_fail:.6g} s)" if t_fail is not None else ""
-    cause = explain(model, failure.flag, float(t[k]), x[:nq], x[nq:], z, u, p, dae)
+    cause = explain(model, failure.flag, float(t[k]), x[:nq], x[nq:], lam, u, p, dae)
     detail = f" IDAS said: {said}" if said else ""
     return (f"simulation of {model.name!r} failed between t = {t[k]:.6g} s and the next output time "
             f"{t[k + 1]:.6g} s{where}: {cause}.{detail} The trajectory up to t = {t[k]:.6g} s is "
