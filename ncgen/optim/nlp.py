@@ -36,6 +36,12 @@ from ncgen.optim.transcription import Horizon
 
 SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 
+#: MUMPS pivot tolerance for IPOPT's KKT factorisations (IPOPT's default: 1e-6).  The
+#: multipliers and the small inertia entries of bodies' base vectors make the KKT matrices
+#: badly scaled; with the default, MUMPS's inertia was unreliable and IPOPT stalled with huge
+#: regularisation (a body pendulum: 300+ iterations or none; with 1e-4: 35).
+MUMPS_PIVTOL = 1e-4
+
 #: Drift ``max |Φ|`` on the nodes, relative to the shortest member's length², above which
 #: the solution is reported as under-resolved (the transcription's error shows there).
 DRIFT_WARNING = 1e-3
@@ -305,8 +311,9 @@ class NLP:
     # ------------------------------------------------------------------ solve
     def solve(self, *, max_iter: int, tol: float, verbose: bool, ipopt: dict):
         ocp, opti = self.ocp, self.opti
-        options = {"tol": tol, "constr_viol_tol": tol, "max_iter": max_iter, "print_level": 5 if verbose else 0, "sb": "yes",
-                   "hessian_approximation": ocp.transcription.hessian, **ipopt}
+        options = {"tol": tol, "constr_viol_tol": tol, "max_iter": max_iter, "print_level": 5 if verbose else 0,
+                   "sb": "yes", "hessian_approximation": ocp.transcription.hessian, "mumps_pivtol": MUMPS_PIVTOL,
+                   **ipopt}
         opti.solver("ipopt", {"expand": self.disc.expandable, "detect_simple_bounds": True,
                               "print_time": False, "ipopt": options})
         start = time.perf_counter()
