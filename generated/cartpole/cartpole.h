@@ -77,9 +77,6 @@ extern const casadi_real cartpole_x0[20];
 extern const casadi_real cartpole_z0[18];
 /* default parameter values */
 #define CARTPOLE_P0_LEN 0
-/* constant mass matrix, nq x nq, column-major (kg) */
-#define CARTPOLE_M_LEN 100
-extern const casadi_real cartpole_M[100];
 /* gravity vector (m/s^2) */
 #define CARTPOLE_GRAVITY_LEN 2
 extern const casadi_real cartpole_gravity[2];
@@ -88,7 +85,7 @@ extern const casadi_real cartpole_gravity[2];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define CARTPOLE_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define CARTPOLE_MODEL_HASH "8ab1b2d9480606d1bba5538ad9623ee90145d87dabce425f0025552cc3d58e4f"
+#define CARTPOLE_MODEL_HASH "63d302f01e4e44972b4f3d8673aefb0e9bdace47a5cf424d86b944f217e0b664"
 
 /* ---- cartpole_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -170,6 +167,16 @@ extern const casadi_real cartpole_gravity[2];
 #define CARTPOLE_F_IN_U_NNZ 1
 #define CARTPOLE_F_IN_P_NNZ 0
 #define CARTPOLE_F_OUT_F_NNZ 10
+
+/* ---- cartpole_mass ----------------------------------------------------
+ * the constant mass matrix M (sparse; no inputs)
+ * In cartpole_kernels_0.c; 19 instructions.
+ * Inputs:
+ *   (none)
+ * Outputs:
+ *   res[0] M: 10x10, nnz 14 (sparse) [kg (kg·m for mixed point/vector entries, kg·m² for vector/vector)] M, nq × nq.
+ */
+#define CARTPOLE_MASS_OUT_M_NNZ 14
 
 /* ---- cartpole_Minv ----------------------------------------------------
  * application of the constant inverse mass matrix: x = M⁻¹ b (two sparse triangular solves with the Cholesky factor of M)

@@ -114,6 +114,24 @@ int cartpole_F_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz
 #define cartpole_F_SZ_RES 1
 #define cartpole_F_SZ_IW 0
 #define cartpole_F_SZ_W 0
+int cartpole_mass(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int cartpole_mass_checkout(void);
+void cartpole_mass_release(int mem);
+void cartpole_mass_incref(void);
+void cartpole_mass_decref(void);
+casadi_int cartpole_mass_n_in(void);
+casadi_int cartpole_mass_n_out(void);
+casadi_real cartpole_mass_default_in(casadi_int i);
+const char* cartpole_mass_name_in(casadi_int i);
+const char* cartpole_mass_name_out(casadi_int i);
+const casadi_int* cartpole_mass_sparsity_in(casadi_int i);
+const casadi_int* cartpole_mass_sparsity_out(casadi_int i);
+int cartpole_mass_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int cartpole_mass_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define cartpole_mass_SZ_ARG 0
+#define cartpole_mass_SZ_RES 1
+#define cartpole_mass_SZ_IW 0
+#define cartpole_mass_SZ_W 0
 int cartpole_Minv(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int cartpole_Minv_checkout(void);
 void cartpole_Minv_release(int mem);

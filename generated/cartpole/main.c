@@ -57,6 +57,8 @@ static const casadi_real *const defaults_F[] = {
   0,
   0,
   0};
+static const casadi_real *const defaults_mass[] = {
+  0};
 static const casadi_real *const defaults_Minv[] = {
   0,
   0};
@@ -153,6 +155,10 @@ static const kernel kernels[] = {
    cartpole_F_name_in, cartpole_F_name_out, cartpole_F_sparsity_in, cartpole_F_sparsity_out,
    cartpole_F_checkout, cartpole_F_release, cartpole_F_incref, cartpole_F_decref,
    defaults_F},
+  {"mass", cartpole_mass, cartpole_mass_work, cartpole_mass_n_in, cartpole_mass_n_out,
+   cartpole_mass_name_in, cartpole_mass_name_out, cartpole_mass_sparsity_in, cartpole_mass_sparsity_out,
+   cartpole_mass_checkout, cartpole_mass_release, cartpole_mass_incref, cartpole_mass_decref,
+   defaults_mass},
   {"Minv", cartpole_Minv, cartpole_Minv_work, cartpole_Minv_n_in, cartpole_Minv_n_out,
    cartpole_Minv_name_in, cartpole_Minv_name_out, cartpole_Minv_sparsity_in, cartpole_Minv_sparsity_out,
    cartpole_Minv_checkout, cartpole_Minv_release, cartpole_Minv_incref, cartpole_Minv_decref,

@@ -76,9 +76,6 @@ extern const casadi_real chain_x0[30];
 extern const casadi_real chain_z0[20];
 /* default parameter values */
 #define CHAIN_P0_LEN 0
-/* constant mass matrix, nq x nq, column-major (kg) */
-#define CHAIN_M_LEN 225
-extern const casadi_real chain_M[225];
 /* gravity vector (m/s^2) */
 #define CHAIN_GRAVITY_LEN 3
 extern const casadi_real chain_gravity[3];
@@ -87,7 +84,7 @@ extern const casadi_real chain_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define CHAIN_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define CHAIN_MODEL_HASH "5c99cd6bc777a1e69d1032707267be70460d26a9211c72be9eece6c6296b0ed8"
+#define CHAIN_MODEL_HASH "f7adaec8469b6bd605cee562e74b590eaf7de9e288404d1523f5ed420c553cfd"
 
 /* ---- chain_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -169,6 +166,16 @@ extern const casadi_real chain_gravity[3];
 #define CHAIN_F_IN_U_NNZ 0
 #define CHAIN_F_IN_P_NNZ 0
 #define CHAIN_F_OUT_F_NNZ 15
+
+/* ---- chain_mass ----------------------------------------------------
+ * the constant mass matrix M (sparse; no inputs)
+ * In chain_kernels_0.c; 43 instructions.
+ * Inputs:
+ *   (none)
+ * Outputs:
+ *   res[0] M: 15x15, nnz 39 (sparse) [kg (kg·m for mixed point/vector entries, kg·m² for vector/vector)] M, nq × nq.
+ */
+#define CHAIN_MASS_OUT_M_NNZ 39
 
 /* ---- chain_Minv ----------------------------------------------------
  * application of the constant inverse mass matrix: x = M⁻¹ b (two sparse triangular solves with the Cholesky factor of M)

@@ -114,6 +114,24 @@ int chain_F_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw
 #define chain_F_SZ_RES 1
 #define chain_F_SZ_IW 0
 #define chain_F_SZ_W 0
+int chain_mass(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int chain_mass_checkout(void);
+void chain_mass_release(int mem);
+void chain_mass_incref(void);
+void chain_mass_decref(void);
+casadi_int chain_mass_n_in(void);
+casadi_int chain_mass_n_out(void);
+casadi_real chain_mass_default_in(casadi_int i);
+const char* chain_mass_name_in(casadi_int i);
+const char* chain_mass_name_out(casadi_int i);
+const casadi_int* chain_mass_sparsity_in(casadi_int i);
+const casadi_int* chain_mass_sparsity_out(casadi_int i);
+int chain_mass_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int chain_mass_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define chain_mass_SZ_ARG 0
+#define chain_mass_SZ_RES 1
+#define chain_mass_SZ_IW 0
+#define chain_mass_SZ_W 0
 int chain_Minv(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int chain_Minv_checkout(void);
 void chain_Minv_release(int mem);

@@ -57,6 +57,8 @@ static const casadi_real *const defaults_F[] = {
   0,
   0,
   0};
+static const casadi_real *const defaults_mass[] = {
+  0};
 static const casadi_real *const defaults_Minv[] = {
   0,
   0};
@@ -153,6 +155,10 @@ static const kernel kernels[] = {
    chain_F_name_in, chain_F_name_out, chain_F_sparsity_in, chain_F_sparsity_out,
    chain_F_checkout, chain_F_release, chain_F_incref, chain_F_decref,
    defaults_F},
+  {"mass", chain_mass, chain_mass_work, chain_mass_n_in, chain_mass_n_out,
+   chain_mass_name_in, chain_mass_name_out, chain_mass_sparsity_in, chain_mass_sparsity_out,
+   chain_mass_checkout, chain_mass_release, chain_mass_incref, chain_mass_decref,
+   defaults_mass},
   {"Minv", chain_Minv, chain_Minv_work, chain_Minv_n_in, chain_Minv_n_out,
    chain_Minv_name_in, chain_Minv_name_out, chain_Minv_sparsity_in, chain_Minv_sparsity_out,
    chain_Minv_checkout, chain_Minv_release, chain_Minv_incref, chain_Minv_decref,

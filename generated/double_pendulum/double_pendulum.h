@@ -76,9 +76,6 @@ extern const casadi_real double_pendulum_x0[48];
 extern const casadi_real double_pendulum_z0[46];
 /* default parameter values */
 #define DOUBLE_PENDULUM_P0_LEN 0
-/* constant mass matrix, nq x nq, column-major (kg) */
-#define DOUBLE_PENDULUM_M_LEN 576
-extern const casadi_real double_pendulum_M[576];
 /* gravity vector (m/s^2) */
 #define DOUBLE_PENDULUM_GRAVITY_LEN 3
 extern const casadi_real double_pendulum_gravity[3];
@@ -87,7 +84,7 @@ extern const casadi_real double_pendulum_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define DOUBLE_PENDULUM_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define DOUBLE_PENDULUM_MODEL_HASH "fa6cfbd81abf4d50a66fc6b6f048f7ed4a39658e6d82883a5aaae32628398f4e"
+#define DOUBLE_PENDULUM_MODEL_HASH "491c35276a7e43b10dac89b048a23b7f4f3a125c432f996fae1b6f31a41e42ec"
 
 /* ---- double_pendulum_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -169,6 +166,16 @@ extern const casadi_real double_pendulum_gravity[3];
 #define DOUBLE_PENDULUM_F_IN_U_NNZ 0
 #define DOUBLE_PENDULUM_F_IN_P_NNZ 0
 #define DOUBLE_PENDULUM_F_OUT_F_NNZ 24
+
+/* ---- double_pendulum_mass ----------------------------------------------------
+ * the constant mass matrix M (sparse; no inputs)
+ * In double_pendulum_kernels_0.c; 27 instructions.
+ * Inputs:
+ *   (none)
+ * Outputs:
+ *   res[0] M: 24x24, nnz 24 (sparse) [kg (kg·m for mixed point/vector entries, kg·m² for vector/vector)] M, nq × nq.
+ */
+#define DOUBLE_PENDULUM_MASS_OUT_M_NNZ 24
 
 /* ---- double_pendulum_Minv ----------------------------------------------------
  * application of the constant inverse mass matrix: x = M⁻¹ b (two sparse triangular solves with the Cholesky factor of M)

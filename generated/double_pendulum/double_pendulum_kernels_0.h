@@ -114,6 +114,24 @@ int double_pendulum_F_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_
 #define double_pendulum_F_SZ_RES 1
 #define double_pendulum_F_SZ_IW 0
 #define double_pendulum_F_SZ_W 0
+int double_pendulum_mass(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int double_pendulum_mass_checkout(void);
+void double_pendulum_mass_release(int mem);
+void double_pendulum_mass_incref(void);
+void double_pendulum_mass_decref(void);
+casadi_int double_pendulum_mass_n_in(void);
+casadi_int double_pendulum_mass_n_out(void);
+casadi_real double_pendulum_mass_default_in(casadi_int i);
+const char* double_pendulum_mass_name_in(casadi_int i);
+const char* double_pendulum_mass_name_out(casadi_int i);
+const casadi_int* double_pendulum_mass_sparsity_in(casadi_int i);
+const casadi_int* double_pendulum_mass_sparsity_out(casadi_int i);
+int double_pendulum_mass_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int double_pendulum_mass_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define double_pendulum_mass_SZ_ARG 0
+#define double_pendulum_mass_SZ_RES 1
+#define double_pendulum_mass_SZ_IW 0
+#define double_pendulum_mass_SZ_W 0
 int double_pendulum_Minv(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int double_pendulum_Minv_checkout(void);
 void double_pendulum_Minv_release(int mem);

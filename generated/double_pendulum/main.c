@@ -57,6 +57,8 @@ static const casadi_real *const defaults_F[] = {
   0,
   0,
   0};
+static const casadi_real *const defaults_mass[] = {
+  0};
 static const casadi_real *const defaults_Minv[] = {
   0,
   0};
@@ -153,6 +155,10 @@ static const kernel kernels[] = {
    double_pendulum_F_name_in, double_pendulum_F_name_out, double_pendulum_F_sparsity_in, double_pendulum_F_sparsity_out,
    double_pendulum_F_checkout, double_pendulum_F_release, double_pendulum_F_incref, double_pendulum_F_decref,
    defaults_F},
+  {"mass", double_pendulum_mass, double_pendulum_mass_work, double_pendulum_mass_n_in, double_pendulum_mass_n_out,
+   double_pendulum_mass_name_in, double_pendulum_mass_name_out, double_pendulum_mass_sparsity_in, double_pendulum_mass_sparsity_out,
+   double_pendulum_mass_checkout, double_pendulum_mass_release, double_pendulum_mass_incref, double_pendulum_mass_decref,
+   defaults_mass},
   {"Minv", double_pendulum_Minv, double_pendulum_Minv_work, double_pendulum_Minv_n_in, double_pendulum_Minv_n_out,
    double_pendulum_Minv_name_in, double_pendulum_Minv_name_out, double_pendulum_Minv_sparsity_in, double_pendulum_Minv_sparsity_out,
    double_pendulum_Minv_checkout, double_pendulum_Minv_release, double_pendulum_Minv_incref, double_pendulum_Minv_decref,

@@ -18,6 +18,7 @@
 #define NCGEN_FOURBAR_3D_H
 
 #include "fourbar_3d_kernels_0.h"
+#include "fourbar_3d_kernels_1.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -76,9 +77,6 @@ extern const casadi_real fourbar_3d_x0[48];
 extern const casadi_real fourbar_3d_z0[47];
 /* default parameter values */
 #define FOURBAR_3D_P0_LEN 0
-/* constant mass matrix, nq x nq, column-major (kg) */
-#define FOURBAR_3D_M_LEN 576
-extern const casadi_real fourbar_3d_M[576];
 /* gravity vector (m/s^2) */
 #define FOURBAR_3D_GRAVITY_LEN 3
 extern const casadi_real fourbar_3d_gravity[3];
@@ -87,7 +85,7 @@ extern const casadi_real fourbar_3d_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define FOURBAR_3D_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define FOURBAR_3D_MODEL_HASH "beb73cf9e717963e55b65dae4424f28e5305573f0787e8c4ff49f4a719ab6601"
+#define FOURBAR_3D_MODEL_HASH "ab67faaf0f42736655e99ea87e81ee0fd732b70fc45465f8b73c8ca83f9e0810"
 
 /* ---- fourbar_3d_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -169,6 +167,16 @@ extern const casadi_real fourbar_3d_gravity[3];
 #define FOURBAR_3D_F_IN_U_NNZ 0
 #define FOURBAR_3D_F_IN_P_NNZ 0
 #define FOURBAR_3D_F_OUT_F_NNZ 24
+
+/* ---- fourbar_3d_mass ----------------------------------------------------
+ * the constant mass matrix M (sparse; no inputs)
+ * In fourbar_3d_kernels_0.c; 51 instructions.
+ * Inputs:
+ *   (none)
+ * Outputs:
+ *   res[0] M: 24x24, nnz 42 (sparse) [kg (kg·m for mixed point/vector entries, kg·m² for vector/vector)] M, nq × nq.
+ */
+#define FOURBAR_3D_MASS_OUT_M_NNZ 42
 
 /* ---- fourbar_3d_Minv ----------------------------------------------------
  * application of the constant inverse mass matrix: x = M⁻¹ b (two sparse triangular solves with the Cholesky factor of M)
@@ -387,7 +395,7 @@ extern const casadi_real fourbar_3d_gravity[3];
 
 /* ---- fourbar_3d_step_solve ----------------------------------------------------
  * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
- * In fourbar_3d_kernels_0.c; 12260 instructions.
+ * In fourbar_3d_kernels_1.c; 12260 instructions.
  * Inputs:
  *   arg[0] K: 47x47, nnz 252 (sparse) KKT matrix in the stepper's pattern. Default: zeros.
  *   arg[1] r: 47x1, nnz 47 right-hand side. Default: zeros.

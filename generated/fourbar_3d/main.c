@@ -57,6 +57,8 @@ static const casadi_real *const defaults_F[] = {
   0,
   0,
   0};
+static const casadi_real *const defaults_mass[] = {
+  0};
 static const casadi_real *const defaults_Minv[] = {
   0,
   0};
@@ -153,6 +155,10 @@ static const kernel kernels[] = {
    fourbar_3d_F_name_in, fourbar_3d_F_name_out, fourbar_3d_F_sparsity_in, fourbar_3d_F_sparsity_out,
    fourbar_3d_F_checkout, fourbar_3d_F_release, fourbar_3d_F_incref, fourbar_3d_F_decref,
    defaults_F},
+  {"mass", fourbar_3d_mass, fourbar_3d_mass_work, fourbar_3d_mass_n_in, fourbar_3d_mass_n_out,
+   fourbar_3d_mass_name_in, fourbar_3d_mass_name_out, fourbar_3d_mass_sparsity_in, fourbar_3d_mass_sparsity_out,
+   fourbar_3d_mass_checkout, fourbar_3d_mass_release, fourbar_3d_mass_incref, fourbar_3d_mass_decref,
+   defaults_mass},
   {"Minv", fourbar_3d_Minv, fourbar_3d_Minv_work, fourbar_3d_Minv_n_in, fourbar_3d_Minv_n_out,
    fourbar_3d_Minv_name_in, fourbar_3d_Minv_name_out, fourbar_3d_Minv_sparsity_in, fourbar_3d_Minv_sparsity_out,
    fourbar_3d_Minv_checkout, fourbar_3d_Minv_release, fourbar_3d_Minv_incref, fourbar_3d_Minv_decref,

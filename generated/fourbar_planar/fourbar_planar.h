@@ -78,9 +78,6 @@ extern const casadi_real fourbar_planar_z0[11];
 /* default parameter values */
 #define FOURBAR_PLANAR_P0_LEN 1
 extern const casadi_real fourbar_planar_p0[1];
-/* constant mass matrix, nq x nq, column-major (kg) */
-#define FOURBAR_PLANAR_M_LEN 36
-extern const casadi_real fourbar_planar_M[36];
 /* gravity vector (m/s^2) */
 #define FOURBAR_PLANAR_GRAVITY_LEN 2
 extern const casadi_real fourbar_planar_gravity[2];
@@ -89,7 +86,7 @@ extern const casadi_real fourbar_planar_gravity[2];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define FOURBAR_PLANAR_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define FOURBAR_PLANAR_MODEL_HASH "2911ed5512c759691ea86df905e3c12c45039b873f4ab3b1f4c640f467978a0f"
+#define FOURBAR_PLANAR_MODEL_HASH "76af4a0f618ae853246b48ff84352c754b93522d606d5d08edb45f2f7125b39e"
 
 /* ---- fourbar_planar_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -171,6 +168,16 @@ extern const casadi_real fourbar_planar_gravity[2];
 #define FOURBAR_PLANAR_F_IN_U_NNZ 0
 #define FOURBAR_PLANAR_F_IN_P_NNZ 1
 #define FOURBAR_PLANAR_F_OUT_F_NNZ 6
+
+/* ---- fourbar_planar_mass ----------------------------------------------------
+ * the constant mass matrix M (sparse; no inputs)
+ * In fourbar_planar_kernels_0.c; 19 instructions.
+ * Inputs:
+ *   (none)
+ * Outputs:
+ *   res[0] M: 6x6, nnz 14 (sparse) [kg (kg·m for mixed point/vector entries, kg·m² for vector/vector)] M, nq × nq.
+ */
+#define FOURBAR_PLANAR_MASS_OUT_M_NNZ 14
 
 /* ---- fourbar_planar_Minv ----------------------------------------------------
  * application of the constant inverse mass matrix: x = M⁻¹ b (two sparse triangular solves with the Cholesky factor of M)

@@ -114,6 +114,24 @@ int fourbar_planar_F_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_i
 #define fourbar_planar_F_SZ_RES 1
 #define fourbar_planar_F_SZ_IW 0
 #define fourbar_planar_F_SZ_W 0
+int fourbar_planar_mass(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int fourbar_planar_mass_checkout(void);
+void fourbar_planar_mass_release(int mem);
+void fourbar_planar_mass_incref(void);
+void fourbar_planar_mass_decref(void);
+casadi_int fourbar_planar_mass_n_in(void);
+casadi_int fourbar_planar_mass_n_out(void);
+casadi_real fourbar_planar_mass_default_in(casadi_int i);
+const char* fourbar_planar_mass_name_in(casadi_int i);
+const char* fourbar_planar_mass_name_out(casadi_int i);
+const casadi_int* fourbar_planar_mass_sparsity_in(casadi_int i);
+const casadi_int* fourbar_planar_mass_sparsity_out(casadi_int i);
+int fourbar_planar_mass_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int fourbar_planar_mass_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define fourbar_planar_mass_SZ_ARG 0
+#define fourbar_planar_mass_SZ_RES 1
+#define fourbar_planar_mass_SZ_IW 0
+#define fourbar_planar_mass_SZ_W 0
 int fourbar_planar_Minv(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int fourbar_planar_Minv_checkout(void);
 void fourbar_planar_Minv_release(int mem);

@@ -57,6 +57,8 @@ static const casadi_real *const defaults_F[] = {
   0,
   fourbar_planar_p0,
   0};
+static const casadi_real *const defaults_mass[] = {
+  0};
 static const casadi_real *const defaults_Minv[] = {
   0,
   0};
@@ -153,6 +155,10 @@ static const kernel kernels[] = {
    fourbar_planar_F_name_in, fourbar_planar_F_name_out, fourbar_planar_F_sparsity_in, fourbar_planar_F_sparsity_out,
    fourbar_planar_F_checkout, fourbar_planar_F_release, fourbar_planar_F_incref, fourbar_planar_F_decref,
    defaults_F},
+  {"mass", fourbar_planar_mass, fourbar_planar_mass_work, fourbar_planar_mass_n_in, fourbar_planar_mass_n_out,
+   fourbar_planar_mass_name_in, fourbar_planar_mass_name_out, fourbar_planar_mass_sparsity_in, fourbar_planar_mass_sparsity_out,
+   fourbar_planar_mass_checkout, fourbar_planar_mass_release, fourbar_planar_mass_incref, fourbar_planar_mass_decref,
+   defaults_mass},
   {"Minv", fourbar_planar_Minv, fourbar_planar_Minv_work, fourbar_planar_Minv_n_in, fourbar_planar_Minv_n_out,
    fourbar_planar_Minv_name_in, fourbar_planar_Minv_name_out, fourbar_planar_Minv_sparsity_in, fourbar_planar_Minv_sparsity_out,
    fourbar_planar_Minv_checkout, fourbar_planar_Minv_release, fourbar_planar_Minv_incref, fourbar_planar_Minv_decref,

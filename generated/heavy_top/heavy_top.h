@@ -76,9 +76,6 @@ extern const casadi_real heavy_top_x0[18];
 extern const casadi_real heavy_top_z0[15];
 /* default parameter values */
 #define HEAVY_TOP_P0_LEN 0
-/* constant mass matrix, nq x nq, column-major (kg) */
-#define HEAVY_TOP_M_LEN 81
-extern const casadi_real heavy_top_M[81];
 /* gravity vector (m/s^2) */
 #define HEAVY_TOP_GRAVITY_LEN 3
 extern const casadi_real heavy_top_gravity[3];
@@ -87,7 +84,7 @@ extern const casadi_real heavy_top_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define HEAVY_TOP_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define HEAVY_TOP_MODEL_HASH "c33d02ca2e4d755baeb1171bc5a7aab13972473593269eb31f2712984bd72e17"
+#define HEAVY_TOP_MODEL_HASH "5827eabd2741e1f64b80ae63cb3cf696a37d781dc50b9199754777cfdfc33824"
 
 /* ---- heavy_top_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -169,6 +166,16 @@ extern const casadi_real heavy_top_gravity[3];
 #define HEAVY_TOP_F_IN_U_NNZ 0
 #define HEAVY_TOP_F_IN_P_NNZ 0
 #define HEAVY_TOP_F_OUT_F_NNZ 9
+
+/* ---- heavy_top_mass ----------------------------------------------------
+ * the constant mass matrix M (sparse; no inputs)
+ * In heavy_top_kernels_0.c; 11 instructions.
+ * Inputs:
+ *   (none)
+ * Outputs:
+ *   res[0] M: 9x9, nnz 9 (sparse) [kg (kg·m for mixed point/vector entries, kg·m² for vector/vector)] M, nq × nq.
+ */
+#define HEAVY_TOP_MASS_OUT_M_NNZ 9
 
 /* ---- heavy_top_Minv ----------------------------------------------------
  * application of the constant inverse mass matrix: x = M⁻¹ b (two sparse triangular solves with the Cholesky factor of M)

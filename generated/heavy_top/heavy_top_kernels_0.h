@@ -114,6 +114,24 @@ int heavy_top_F_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *s
 #define heavy_top_F_SZ_RES 1
 #define heavy_top_F_SZ_IW 0
 #define heavy_top_F_SZ_W 0
+int heavy_top_mass(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int heavy_top_mass_checkout(void);
+void heavy_top_mass_release(int mem);
+void heavy_top_mass_incref(void);
+void heavy_top_mass_decref(void);
+casadi_int heavy_top_mass_n_in(void);
+casadi_int heavy_top_mass_n_out(void);
+casadi_real heavy_top_mass_default_in(casadi_int i);
+const char* heavy_top_mass_name_in(casadi_int i);
+const char* heavy_top_mass_name_out(casadi_int i);
+const casadi_int* heavy_top_mass_sparsity_in(casadi_int i);
+const casadi_int* heavy_top_mass_sparsity_out(casadi_int i);
+int heavy_top_mass_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int heavy_top_mass_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define heavy_top_mass_SZ_ARG 0
+#define heavy_top_mass_SZ_RES 1
+#define heavy_top_mass_SZ_IW 0
+#define heavy_top_mass_SZ_W 0
 int heavy_top_Minv(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int heavy_top_Minv_checkout(void);
 void heavy_top_Minv_release(int mem);

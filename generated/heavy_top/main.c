@@ -57,6 +57,8 @@ static const casadi_real *const defaults_F[] = {
   0,
   0,
   0};
+static const casadi_real *const defaults_mass[] = {
+  0};
 static const casadi_real *const defaults_Minv[] = {
   0,
   0};
@@ -153,6 +155,10 @@ static const kernel kernels[] = {
    heavy_top_F_name_in, heavy_top_F_name_out, heavy_top_F_sparsity_in, heavy_top_F_sparsity_out,
    heavy_top_F_checkout, heavy_top_F_release, heavy_top_F_incref, heavy_top_F_decref,
    defaults_F},
+  {"mass", heavy_top_mass, heavy_top_mass_work, heavy_top_mass_n_in, heavy_top_mass_n_out,
+   heavy_top_mass_name_in, heavy_top_mass_name_out, heavy_top_mass_sparsity_in, heavy_top_mass_sparsity_out,
+   heavy_top_mass_checkout, heavy_top_mass_release, heavy_top_mass_incref, heavy_top_mass_decref,
+   defaults_mass},
   {"Minv", heavy_top_Minv, heavy_top_Minv_work, heavy_top_Minv_n_in, heavy_top_Minv_n_out,
    heavy_top_Minv_name_in, heavy_top_Minv_name_out, heavy_top_Minv_sparsity_in, heavy_top_Minv_sparsity_out,
    heavy_top_Minv_checkout, heavy_top_Minv_release, heavy_top_Minv_incref, heavy_top_Minv_decref,

@@ -57,6 +57,8 @@ static const casadi_real *const defaults_F[] = {
   0,
   slider_crank_p0,
   0};
+static const casadi_real *const defaults_mass[] = {
+  0};
 static const casadi_real *const defaults_Minv[] = {
   0,
   0};
@@ -153,6 +155,10 @@ static const kernel kernels[] = {
    slider_crank_F_name_in, slider_crank_F_name_out, slider_crank_F_sparsity_in, slider_crank_F_sparsity_out,
    slider_crank_F_checkout, slider_crank_F_release, slider_crank_F_incref, slider_crank_F_decref,
    defaults_F},
+  {"mass", slider_crank_mass, slider_crank_mass_work, slider_crank_mass_n_in, slider_crank_mass_n_out,
+   slider_crank_mass_name_in, slider_crank_mass_name_out, slider_crank_mass_sparsity_in, slider_crank_mass_sparsity_out,
+   slider_crank_mass_checkout, slider_crank_mass_release, slider_crank_mass_incref, slider_crank_mass_decref,
+   defaults_mass},
   {"Minv", slider_crank_Minv, slider_crank_Minv_work, slider_crank_Minv_n_in, slider_crank_Minv_n_out,
    slider_crank_Minv_name_in, slider_crank_Minv_name_out, slider_crank_Minv_sparsity_in, slider_crank_Minv_sparsity_out,
    slider_crank_Minv_checkout, slider_crank_Minv_release, slider_crank_Minv_incref, slider_crank_Minv_decref,

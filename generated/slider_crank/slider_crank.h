@@ -78,9 +78,6 @@ extern const casadi_real slider_crank_z0[20];
 /* default parameter values */
 #define SLIDER_CRANK_P0_LEN 1
 extern const casadi_real slider_crank_p0[1];
-/* constant mass matrix, nq x nq, column-major (kg) */
-#define SLIDER_CRANK_M_LEN 100
-extern const casadi_real slider_crank_M[100];
 /* gravity vector (m/s^2) */
 #define SLIDER_CRANK_GRAVITY_LEN 2
 extern const casadi_real slider_crank_gravity[2];
@@ -89,7 +86,7 @@ extern const casadi_real slider_crank_gravity[2];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define SLIDER_CRANK_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define SLIDER_CRANK_MODEL_HASH "b02677e2b342e19d9a2beaacbedfd304dd2875de6795a7395cc9634c8612475a"
+#define SLIDER_CRANK_MODEL_HASH "f6f4c6d4b0c2173eebb49e8dc77a1ef79c1ba90fc5c165ffb4511547b6c0b9c6"
 
 /* ---- slider_crank_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -171,6 +168,16 @@ extern const casadi_real slider_crank_gravity[2];
 #define SLIDER_CRANK_F_IN_U_NNZ 0
 #define SLIDER_CRANK_F_IN_P_NNZ 1
 #define SLIDER_CRANK_F_OUT_F_NNZ 10
+
+/* ---- slider_crank_mass ----------------------------------------------------
+ * the constant mass matrix M (sparse; no inputs)
+ * In slider_crank_kernels_0.c; 24 instructions.
+ * Inputs:
+ *   (none)
+ * Outputs:
+ *   res[0] M: 10x10, nnz 18 (sparse) [kg (kg·m for mixed point/vector entries, kg·m² for vector/vector)] M, nq × nq.
+ */
+#define SLIDER_CRANK_MASS_OUT_M_NNZ 18
 
 /* ---- slider_crank_Minv ----------------------------------------------------
  * application of the constant inverse mass matrix: x = M⁻¹ b (two sparse triangular solves with the Cholesky factor of M)

@@ -114,6 +114,24 @@ int slider_crank_F_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int
 #define slider_crank_F_SZ_RES 1
 #define slider_crank_F_SZ_IW 0
 #define slider_crank_F_SZ_W 0
+int slider_crank_mass(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int slider_crank_mass_checkout(void);
+void slider_crank_mass_release(int mem);
+void slider_crank_mass_incref(void);
+void slider_crank_mass_decref(void);
+casadi_int slider_crank_mass_n_in(void);
+casadi_int slider_crank_mass_n_out(void);
+casadi_real slider_crank_mass_default_in(casadi_int i);
+const char* slider_crank_mass_name_in(casadi_int i);
+const char* slider_crank_mass_name_out(casadi_int i);
+const casadi_int* slider_crank_mass_sparsity_in(casadi_int i);
+const casadi_int* slider_crank_mass_sparsity_out(casadi_int i);
+int slider_crank_mass_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int slider_crank_mass_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define slider_crank_mass_SZ_ARG 0
+#define slider_crank_mass_SZ_RES 1
+#define slider_crank_mass_SZ_IW 0
+#define slider_crank_mass_SZ_W 0
 int slider_crank_Minv(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int slider_crank_Minv_checkout(void);
 void slider_crank_Minv_release(int mem);

@@ -57,6 +57,8 @@ static const casadi_real *const defaults_F[] = {
   0,
   tensegrity_p0,
   0};
+static const casadi_real *const defaults_mass[] = {
+  0};
 static const casadi_real *const defaults_Minv[] = {
   0,
   0};
@@ -153,6 +155,10 @@ static const kernel kernels[] = {
    tensegrity_F_name_in, tensegrity_F_name_out, tensegrity_F_sparsity_in, tensegrity_F_sparsity_out,
    tensegrity_F_checkout, tensegrity_F_release, tensegrity_F_incref, tensegrity_F_decref,
    defaults_F},
+  {"mass", tensegrity_mass, tensegrity_mass_work, tensegrity_mass_n_in, tensegrity_mass_n_out,
+   tensegrity_mass_name_in, tensegrity_mass_name_out, tensegrity_mass_sparsity_in, tensegrity_mass_sparsity_out,
+   tensegrity_mass_checkout, tensegrity_mass_release, tensegrity_mass_incref, tensegrity_mass_decref,
+   defaults_mass},
   {"Minv", tensegrity_Minv, tensegrity_Minv_work, tensegrity_Minv_n_in, tensegrity_Minv_n_out,
    tensegrity_Minv_name_in, tensegrity_Minv_name_out, tensegrity_Minv_sparsity_in, tensegrity_Minv_sparsity_out,
    tensegrity_Minv_checkout, tensegrity_Minv_release, tensegrity_Minv_incref, tensegrity_Minv_decref,

@@ -79,9 +79,6 @@ extern const casadi_real tensegrity_z0[24];
 /* default parameter values */
 #define TENSEGRITY_P0_LEN 3
 extern const casadi_real tensegrity_p0[3];
-/* constant mass matrix, nq x nq, column-major (kg) */
-#define TENSEGRITY_M_LEN 324
-extern const casadi_real tensegrity_M[324];
 /* gravity vector (m/s^2) */
 #define TENSEGRITY_GRAVITY_LEN 3
 extern const casadi_real tensegrity_gravity[3];
@@ -90,7 +87,7 @@ extern const casadi_real tensegrity_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define TENSEGRITY_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define TENSEGRITY_MODEL_HASH "2f48706bee27ab3c09755e40ea3f46eab63b60d67cc279e0319ce5f4375e0256"
+#define TENSEGRITY_MODEL_HASH "3b8d83a922cbbe0a18fc1c3aa12e3e9e5390ca089ca2c3402af98edb8c7867b0"
 
 /* ---- tensegrity_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -172,6 +169,16 @@ extern const casadi_real tensegrity_gravity[3];
 #define TENSEGRITY_F_IN_U_NNZ 0
 #define TENSEGRITY_F_IN_P_NNZ 3
 #define TENSEGRITY_F_OUT_F_NNZ 18
+
+/* ---- tensegrity_mass ----------------------------------------------------
+ * the constant mass matrix M (sparse; no inputs)
+ * In tensegrity_kernels_0.c; 42 instructions.
+ * Inputs:
+ *   (none)
+ * Outputs:
+ *   res[0] M: 18x18, nnz 36 (sparse) [kg (kg·m for mixed point/vector entries, kg·m² for vector/vector)] M, nq × nq.
+ */
+#define TENSEGRITY_MASS_OUT_M_NNZ 36
 
 /* ---- tensegrity_Minv ----------------------------------------------------
  * application of the constant inverse mass matrix: x = M⁻¹ b (two sparse triangular solves with the Cholesky factor of M)

@@ -114,6 +114,24 @@ int tensegrity_F_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *
 #define tensegrity_F_SZ_RES 1
 #define tensegrity_F_SZ_IW 0
 #define tensegrity_F_SZ_W 0
+int tensegrity_mass(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int tensegrity_mass_checkout(void);
+void tensegrity_mass_release(int mem);
+void tensegrity_mass_incref(void);
+void tensegrity_mass_decref(void);
+casadi_int tensegrity_mass_n_in(void);
+casadi_int tensegrity_mass_n_out(void);
+casadi_real tensegrity_mass_default_in(casadi_int i);
+const char* tensegrity_mass_name_in(casadi_int i);
+const char* tensegrity_mass_name_out(casadi_int i);
+const casadi_int* tensegrity_mass_sparsity_in(casadi_int i);
+const casadi_int* tensegrity_mass_sparsity_out(casadi_int i);
+int tensegrity_mass_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int tensegrity_mass_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define tensegrity_mass_SZ_ARG 0
+#define tensegrity_mass_SZ_RES 1
+#define tensegrity_mass_SZ_IW 0
+#define tensegrity_mass_SZ_W 0
 int tensegrity_Minv(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int tensegrity_Minv_checkout(void);
 void tensegrity_Minv_release(int mem);

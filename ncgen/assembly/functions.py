@@ -16,6 +16,7 @@ Functions (name: inputs -> outputs):
 
 * ``phi``: t, q, p -> phi;  ``A``: t, q, p -> A (sparse);  ``phi_t``: t, q, p -> phi_t
 * ``gamma``: t, q, v, p -> gamma;  ``F``: t, q, v, u, p -> F;  ``Minv``: b -> x = M⁻¹ b
+* ``mass``: () -> M  (the constant mass matrix, sparse)
 * ``ode``: t, q, v, lam, u, p -> qdot, vdot;  ``alg``: t, q, v, lam, u, p -> res
 * ``dae``: t, x, z, u, p -> ode, alg  (IDAS's form, ``x = [q; v]``, ``z = [a; λ]``, see below)
 * ``accel``: t, q, v, u, p -> a, lam  (the KKT system solved, Baumgarte terms included)
@@ -69,6 +70,8 @@ DOCS = {
               {"gamma": ("γ", "units of Φ per s²")}),
     "F": ("generalised applied force F(t, q, q̇, u, p): gravity and force elements",
           {"F": ("F", "N (N·m for rows of base vectors)")}),
+    "mass": ("the constant mass matrix M (sparse; no inputs)",
+             {"M": ("M, nq × nq", "kg (kg·m for mixed point/vector entries, kg·m² for vector/vector)")}),
     "Minv": ("application of the constant inverse mass matrix: x = M⁻¹ b (two sparse "
              "triangular solves with the Cholesky factor of M)",
              {"x": ("M⁻¹ b", "m/s²")}),
@@ -122,6 +125,7 @@ def system_functions(ctx: Context, phi, F, V, M: np.ndarray, factor: CholeskyFac
     add("phi_t", ("t", "q", "p"), [phi_t], ["phi_t"])
     add("gamma", ("t", "q", "v", "p"), [gamma], ["gamma"])
     add("F", ("t", "q", "v", "u", "p"), [F], ["F"])
+    add("mass", (), [Msp], ["M"])
     add("Minv", ("b",), [factor.solve(b)], ["x"])
     add("ode", ("t", "q", "v", "lam", "u", "p"), [v, a], ["qdot", "vdot"])
     add("alg", ("t", "q", "v", "lam", "u", "p"), [alg], ["res"])

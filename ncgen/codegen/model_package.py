@@ -1,12 +1,13 @@
 """The C package of a model: ``generate(model, out_dir)``.
 
 The package (see :mod:`ncgen.codegen.package` for its files) holds the model's system
-functions (:mod:`ncgen.assembly.functions`: Φ, A, Φ_t, γ, F, M⁻¹ b, the DAE as ``ode``/``alg``
+functions (:mod:`ncgen.assembly.functions`: Φ, A, Φ_t, γ, F, M (``mass``, sparse), M⁻¹ b, the
+DAE as ``ode``/``alg``
 and in IDAS's stacked form ``dae`` with its sparse Jacobian ``jac_<model>_dae``, the KKT
 solve ``accel``, energies, markers, poses), each documented in ``<model>.h`` from
 :data:`ncgen.assembly.functions.DOCS`, and the model as metadata: dimensions, the names of
 coordinates, constraints, inputs, parameters, members and markers, the consistent initial
-state (``t0``, ``q0``, ``v0``, ``lam0``, ``x0``, ``z0``, ``p0``), the constant mass matrix ``M``,
+state (``t0``, ``q0``, ``v0``, ``lam0``, ``x0``, ``z0``, ``p0``),
 gravity, the Baumgarte coefficients and ``model_hash``.  ``main.c`` evaluates ``accel`` (or
 any other function) at the initial state without Python.  The compiled stepper
 (``<model>_step``, ``<model>_simulate`` in ``<model>_stepper.h``) and its example program
@@ -35,7 +36,7 @@ from ncgen.codegen.manifest import canonical_json
 from ncgen.codegen.package import ExtraSource, Package, check_replaceable, write_package
 
 #: The system functions in the package, in this order.
-SYSTEM_FUNCTIONS = ("phi", "A", "phi_t", "gamma", "F", "Minv", "ode", "alg", "dae", "accel",
+SYSTEM_FUNCTIONS = ("phi", "A", "phi_t", "gamma", "F", "mass", "Minv", "ode", "alg", "dae", "accel",
                     "energy", "markers", "poses")
 #: Functions generated with their Jacobian (IDAS differentiates ``dae``).
 SYSTEM_JACOBIANS = ("dae",)
@@ -149,7 +150,6 @@ def model_metadata(model) -> tuple[dict, dict]:
         ("x0", np.concatenate([model.q0, model.v0]), "initial DAE state [q0; v0]"),
         ("z0", np.concatenate([model.a0, model.lam0]), "initial algebraic state of dae, [a0; lam0]"),
         ("p0", model.p0, "default parameter values"),
-        ("M", np.asarray(model.M).reshape(-1, order="F"), "constant mass matrix, nq x nq, column-major (kg)"),
         ("gravity", model.gravity, "gravity vector (m/s^2)"),
         ("baumgarte_alpha", float(model.baumgarte[0]), "Baumgarte coefficient alpha of alg and accel (1/s)"),
         ("baumgarte_beta", float(model.baumgarte[1]), "Baumgarte coefficient beta of alg and accel (1/s)"),
