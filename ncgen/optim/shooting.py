@@ -41,30 +41,22 @@ def register_integrator(name: str, factory: Callable) -> None:
 
 def idas_interval(model, *, rtol: float = IDAS_TOLERANCES[0], atol: float = IDAS_TOLERANCES[1],
                   **options) -> ca.Function:
-    """IDAS on the model's index-1 DAE over one interval, in the scaled time τ ∈ [0, 1]
-    (``t = t0 + h τ``), so that ``h`` may be a decision variable (free final time)."""
+    """IDAS on the model's index-1 DAE in KKT form (``functions["dae"]``: ``x = [q; v]``,
+    ``z = [a; λ]``) over one interval, in the scaled time τ ∈ [0, 1] (``t = t0 + h τ``), so
+    that ``h`` may be a decision variable (free final time)."""
     nq, nc, nu, npar = model.nq, model.nc, model.nu, model.np
-    f = model.functions
     x = ca.SX.sym("x", 2 * nq)
-    z = ca.SX.sym("lam", nc)
+    z = ca.SX.sym("z", nq + nc)
     u = ca.SX.sym("u", nu)
     p = ca.SX.sym("p", npar)
     t0, h, tau = ca.SX.sym("t0"), ca.SX.sym("h"), ca.SX.sym("tau")
-    t = t0 + h * tau
-    q, v = x[:nq], x[nq:]
-    qdot, vdot = f["ode"](t, q, v, z, u, p)
-    dae = {"x": x, "p": ca.vertcat(u, p, t0, h), "t": tau, "ode": h * ca.vertcat(qdot, vdot)}
-    opts = {"reltol": rtol, "abstol": atol, **options}
-    if nc:
-        dae.update(z=z, alg=f["alg"](t, q, v, z, u, p))
-        integ = ca.integrator("interval", "idas", dae, 0.0, 1.0, opts)
-    else:
-        integ = ca.integrator("interval", "cvodes", dae, 0.0, 1.0, opts)
+    ode, alg = model.functions["dae"](t0 + h * tau, x, z, u, p)
+    dae = {"x": x, "z": z, "p": ca.vertcat(u, p, t0, h), "t": tau, "ode": h * ode, "alg": alg}
+    integ = ca.integrator("interval", "idas", dae, 0.0, 1.0, {"reltol": rtol, "abstol": atol, **options})
     X0, U, P = ca.MX.sym("x0", 2 * nq), ca.MX.sym("u", nu), ca.MX.sym("p", npar)
     T0, H = ca.MX.sym("t0"), ca.MX.sym("h")
     res = integ(x0=X0, p=ca.vertcat(U, P, T0, H))
-    lamf = res["zf"] if nc else ca.MX(0, 1)
-    return ca.Function("interval", [X0, U, P, T0, H], [res["xf"], lamf],
+    return ca.Function("interval", [X0, U, P, T0, H], [res["xf"], res["zf"][nq:]],
                        ["x0", "u", "p", "t0", "h"], ["xf", "lamf"])
 
 
