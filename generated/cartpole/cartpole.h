@@ -85,7 +85,7 @@ extern const casadi_real cartpole_gravity[2];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define CARTPOLE_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define CARTPOLE_MODEL_HASH "63d302f01e4e44972b4f3d8673aefb0e9bdace47a5cf424d86b944f217e0b664"
+#define CARTPOLE_MODEL_HASH "afd61171993b0e17fbe4ef3fbd4704dd3dcd2d2f4d3c9f3379d0388abfbff009"
 
 /* ---- cartpole_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names

@@ -84,7 +84,7 @@ extern const casadi_real chain_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define CHAIN_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define CHAIN_MODEL_HASH "f7adaec8469b6bd605cee562e74b590eaf7de9e288404d1523f5ed420c553cfd"
+#define CHAIN_MODEL_HASH "eebec0205f44c0f4133b1a6cf65a336a7b097c0fccfaffc3af8aad5d76ef2474"
 
 /* ---- chain_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names

@@ -607,8 +607,8 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a3=arg[1]? arg[1][2] : 0;
   a4=casadi_sq(a3);
   a1=(a1+a4);
-  a4=-8.9999999999999997e-02;
-  a1=(a1+a4);
+  a4=8.9999999999999997e-02;
+  a1=(a1-a4);
   if (res[0]!=0) res[0][0]=a1;
   a1=arg[1]? arg[1][3] : 0;
   a0=(a1-a0);
@@ -621,7 +621,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a3=(a2-a3);
   a3=casadi_sq(a3);
   a0=(a0+a3);
-  a0=(a0+a4);
+  a0=(a0-a4);
   if (res[0]!=0) res[0][1]=a0;
   a0=arg[1]? arg[1][6] : 0;
   a1=(a0-a1);
@@ -634,7 +634,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a2=(a5-a2);
   a2=casadi_sq(a2);
   a1=(a1+a2);
-  a1=(a1+a4);
+  a1=(a1-a4);
   if (res[0]!=0) res[0][2]=a1;
   a1=arg[1]? arg[1][9] : 0;
   a0=(a1-a0);
@@ -647,7 +647,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a5=(a3-a5);
   a5=casadi_sq(a5);
   a0=(a0+a5);
-  a0=(a0+a4);
+  a0=(a0-a4);
   if (res[0]!=0) res[0][3]=a0;
   a0=arg[1]? arg[1][12] : 0;
   a0=(a0-a1);
@@ -660,8 +660,8 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a1=(a1-a3);
   a1=casadi_sq(a1);
   a0=(a0+a1);
-  a1=-9.0000000000000024e-02;
-  a0=(a0+a1);
+  a1=9.0000000000000024e-02;
+  a0=(a0-a1);
   if (res[0]!=0) res[0][4]=a0;
   return 0;
 }
@@ -1395,13 +1395,13 @@ static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a00=arg[0]? arg[0][0] : 0;
   a01=3.6514837167011072e-01;
   a00=(a00/a01);
-  a02=9.1287092917527707e-02;
+  a02=9.1287092917527693e-02;
   a03=arg[0]? arg[0][3] : 0;
   a04=(a02*a00);
   a03=(a03-a04);
   a04=3.5355339059327379e-01;
   a03=(a03/a04);
-  a05=9.4280904158206350e-02;
+  a05=9.4280904158206363e-02;
   a06=arg[0]? arg[0][6] : 0;
   a07=(a05*a03);
   a06=(a06-a07);
@@ -1411,13 +1411,13 @@ static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a09=arg[0]? arg[0][9] : 0;
   a10=(a08*a06);
   a09=(a09-a10);
-  a10=3.5271059227752416e-01;
+  a10=3.5271059227752422e-01;
   a09=(a09/a10);
   a11=9.4506187404504075e-02;
   a12=arg[0]? arg[0][12] : 0;
   a13=(a11*a09);
   a12=(a12-a13);
-  a13=2.4028159981349265e-01;
+  a13=2.4028159981349267e-01;
   a12=(a12/a13);
   a12=(a12/a13);
   a14=(a11*a12);
@@ -1630,7 +1630,7 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a01=(a01-a05);
   a05=3.6514837167011072e-01;
   a01=(a01/a05);
-  a06=9.1287092917527707e-02;
+  a06=9.1287092917527693e-02;
   a07=(a06*a01);
   a00=(a00*a04);
   a08=arg[1]? arg[1][6] : 0;
@@ -1642,7 +1642,7 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a07=(a07-a00);
   a00=3.5355339059327379e-01;
   a07=(a07/a00);
-  a10=9.4280904158206350e-02;
+  a10=9.4280904158206363e-02;
   a03=(a03*a09);
   a11=arg[1]? arg[1][9] : 0;
   a08=(a11-a08);
@@ -1664,13 +1664,13 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a17=(a16*a11);
   a08=(a08-a17);
   a15=(a15-a08);
-  a08=3.5271059227752416e-01;
+  a08=3.5271059227752422e-01;
   a15=(a15/a08);
   a17=9.4506187404504075e-02;
   a16=(a16*a11);
   a18=(a17*a15);
   a16=(a16+a18);
-  a18=2.4028159981349265e-01;
+  a18=2.4028159981349267e-01;
   a16=(a16/a18);
   a16=(a16/a18);
   a19=(a17*a16);
@@ -1926,7 +1926,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a04=(a02-a04);
   a09=3.6514837167011072e-01;
   a04=(a04/a09);
-  a10=9.1287092917527707e-02;
+  a10=9.1287092917527693e-02;
   a11=(a07*a08);
   a12=arg[1]? arg[1][8] : 0;
   a05=(a12-a05);
@@ -1939,7 +1939,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a11=(a11-a15);
   a15=3.5355339059327379e-01;
   a11=(a11/a15);
-  a16=9.4280904158206350e-02;
+  a16=9.4280904158206363e-02;
   a17=(a13*a14);
   a18=arg[1]? arg[1][11] : 0;
   a12=(a18-a12);
@@ -1963,7 +1963,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a02=(a02-a23);
   a23=(a22*a17);
   a02=(a02-a23);
-  a23=3.5271059227752416e-01;
+  a23=3.5271059227752422e-01;
   a02=(a02/a23);
   a26=9.4506187404504075e-02;
   a27=-9.8100000000000009e-01;
@@ -1971,7 +1971,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a27=(a27-a28);
   a28=(a26*a02);
   a27=(a27-a28);
-  a28=2.4028159981349265e-01;
+  a28=2.4028159981349267e-01;
   a27=(a27/a28);
   a27=(a27/a28);
   a29=(a26*a27);
@@ -2123,8 +2123,8 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a30=(a30+a46);
   a00=casadi_sq(a00);
   a30=(a30+a00);
-  a00=-8.9999999999999997e-02;
-  a30=(a30+a00);
+  a00=8.9999999999999997e-02;
+  a30=(a30-a00);
   a30=(a31*a30);
   a29=(a29+a30);
   if (res[0]!=0) res[0][0]=a29;
@@ -2178,7 +2178,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a34=(a34+a49);
   a06=casadi_sq(a06);
   a34=(a34+a06);
-  a34=(a34+a00);
+  a34=(a34-a00);
   a34=(a31*a34);
   a32=(a32+a34);
   if (res[0]!=0) res[0][1]=a32;
@@ -2232,7 +2232,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a33=(a33+a48);
   a05=casadi_sq(a05);
   a33=(a33+a05);
-  a33=(a33+a00);
+  a33=(a33-a00);
   a33=(a31*a33);
   a32=(a32+a33);
   if (res[0]!=0) res[0][2]=a32;
@@ -2286,7 +2286,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a38=(a38+a52);
   a12=casadi_sq(a12);
   a38=(a38+a12);
-  a38=(a38+a00);
+  a38=(a38-a00);
   a38=(a31*a38);
   a37=(a37+a38);
   if (res[0]!=0) res[0][3]=a37;
@@ -2340,8 +2340,8 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a44=(a44+a56);
   a24=casadi_sq(a24);
   a44=(a44+a24);
-  a24=-9.0000000000000024e-02;
-  a44=(a44+a24);
+  a24=9.0000000000000024e-02;
+  a44=(a44-a24);
   a31=(a31*a44);
   a27=(a27+a31);
   if (res[0]!=0) res[0][4]=a27;
@@ -2715,8 +2715,8 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a44=(a44+a40);
   a40=casadi_sq(a41);
   a44=(a44+a40);
-  a40=-8.9999999999999997e-02;
-  a44=(a44+a40);
+  a40=8.9999999999999997e-02;
+  a44=(a44-a40);
   a44=(a34*a44);
   a50=(a50+a44);
   if (res[1]!=0) res[1][15]=a50;
@@ -2770,7 +2770,7 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a41=(a45-a41);
   a41=casadi_sq(a41);
   a33=(a33+a41);
-  a33=(a33+a40);
+  a33=(a33-a40);
   a33=(a34*a33);
   a50=(a50+a33);
   if (res[1]!=0) res[1][16]=a50;
@@ -2824,7 +2824,7 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a45=(a47-a45);
   a45=casadi_sq(a45);
   a37=(a37+a45);
-  a37=(a37+a40);
+  a37=(a37-a40);
   a37=(a34*a37);
   a50=(a50+a37);
   if (res[1]!=0) res[1][17]=a50;
@@ -2878,7 +2878,7 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a47=(a39-a47);
   a47=casadi_sq(a47);
   a48=(a48+a47);
-  a48=(a48+a40);
+  a48=(a48-a40);
   a48=(a34*a48);
   a50=(a50+a48);
   if (res[1]!=0) res[1][18]=a50;
@@ -2932,8 +2932,8 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a30=(a30-a39);
   a30=casadi_sq(a30);
   a61=(a61+a30);
-  a30=-9.0000000000000024e-02;
-  a61=(a61+a30);
+  a30=9.0000000000000024e-02;
+  a61=(a61-a30);
   a34=(a34*a61);
   a27=(a27+a34);
   if (res[1]!=0) res[1][19]=a27;
@@ -4206,8 +4206,8 @@ static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a3=arg[1]? arg[1][2] : 0;
   a4=casadi_sq(a3);
   a1=(a1+a4);
-  a4=-8.9999999999999997e-02;
-  a1=(a1+a4);
+  a4=8.9999999999999997e-02;
+  a1=(a1-a4);
   if (res[0]!=0) res[0][0]=a1;
   a1=arg[1]? arg[1][3] : 0;
   a0=(a1-a0);
@@ -4220,7 +4220,7 @@ static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a3=(a2-a3);
   a3=casadi_sq(a3);
   a0=(a0+a3);
-  a0=(a0+a4);
+  a0=(a0-a4);
   if (res[0]!=0) res[0][1]=a0;
   a0=arg[1]? arg[1][6] : 0;
   a1=(a0-a1);
@@ -4233,7 +4233,7 @@ static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a2=(a5-a2);
   a2=casadi_sq(a2);
   a1=(a1+a2);
-  a1=(a1+a4);
+  a1=(a1-a4);
   if (res[0]!=0) res[0][2]=a1;
   a1=arg[1]? arg[1][9] : 0;
   a0=(a1-a0);
@@ -4246,7 +4246,7 @@ static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a5=(a3-a5);
   a5=casadi_sq(a5);
   a0=(a0+a5);
-  a0=(a0+a4);
+  a0=(a0-a4);
   if (res[0]!=0) res[0][3]=a0;
   a0=arg[1]? arg[1][12] : 0;
   a0=(a0-a1);
@@ -4259,8 +4259,8 @@ static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a1=(a1-a3);
   a1=casadi_sq(a1);
   a0=(a0+a1);
-  a1=-9.0000000000000024e-02;
-  a0=(a0+a1);
+  a1=9.0000000000000024e-02;
+  a0=(a0-a1);
   if (res[0]!=0) res[0][4]=a0;
   return 0;
 }
@@ -5579,8 +5579,8 @@ static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a28=(a28+a14);
   a14=casadi_sq(a28);
   a01=(a01+a14);
-  a14=-8.9999999999999997e-02;
-  a01=(a01+a14);
+  a14=8.9999999999999997e-02;
+  a01=(a01-a14);
   a01=(a01/a26);
   if (res[0]!=0) res[0][15]=a01;
   a05=(a26*a05);
@@ -5597,7 +5597,7 @@ static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a23=(a30-a28);
   a03=casadi_sq(a23);
   a01=(a01+a03);
-  a01=(a01+a14);
+  a01=(a01-a14);
   a01=(a01/a26);
   if (res[0]!=0) res[0][16]=a01;
   a22=(a26*a22);
@@ -5614,7 +5614,7 @@ static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a30=(a39-a30);
   a10=casadi_sq(a30);
   a22=(a22+a10);
-  a22=(a22+a14);
+  a22=(a22-a14);
   a22=(a22/a26);
   if (res[0]!=0) res[0][17]=a22;
   a19=(a26*a19);
@@ -5631,7 +5631,7 @@ static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a39=(a48-a39);
   a16=casadi_sq(a39);
   a19=(a19+a16);
-  a19=(a19+a14);
+  a19=(a19-a14);
   a19=(a19/a26);
   if (res[0]!=0) res[0][18]=a19;
   a35=(a26*a35);
@@ -5648,8 +5648,8 @@ static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a25=(a25-a48);
   a48=casadi_sq(a25);
   a42=(a42+a48);
-  a48=-9.0000000000000024e-02;
-  a42=(a42+a48);
+  a48=9.0000000000000024e-02;
+  a42=(a42-a48);
   a42=(a42/a26);
   if (res[0]!=0) res[0][19]=a42;
   if (res[1]!=0) res[1][0]=a00;
@@ -6243,8 +6243,8 @@ static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a04=arg[1]? arg[1][2] : 0;
   a05=casadi_sq(a04);
   a02=(a02+a05);
-  a05=-8.9999999999999997e-02;
-  a02=(a02+a05);
+  a05=8.9999999999999997e-02;
+  a02=(a02-a05);
   a02=casadi_fabs(a02);
   a02=casadi_fmax(a00,a02);
   a06=arg[1]? arg[1][3] : 0;
@@ -6258,7 +6258,7 @@ static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a10=(a09-a04);
   a10=casadi_sq(a10);
   a07=(a07+a10);
-  a07=(a07+a05);
+  a07=(a07-a05);
   a07=casadi_fabs(a07);
   a02=casadi_fmax(a02,a07);
   a07=arg[1]? arg[1][6] : 0;
@@ -6272,7 +6272,7 @@ static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a13=(a12-a09);
   a13=casadi_sq(a13);
   a10=(a10+a13);
-  a10=(a10+a05);
+  a10=(a10-a05);
   a10=casadi_fabs(a10);
   a02=casadi_fmax(a02,a10);
   a10=arg[1]? arg[1][9] : 0;
@@ -6286,7 +6286,7 @@ static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a16=(a15-a12);
   a16=casadi_sq(a16);
   a13=(a13+a16);
-  a13=(a13+a05);
+  a13=(a13-a05);
   a13=casadi_fabs(a13);
   a02=casadi_fmax(a02,a13);
   a13=arg[1]? arg[1][12] : 0;
@@ -6300,8 +6300,8 @@ static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a18=(a17-a15);
   a18=casadi_sq(a18);
   a05=(a05+a18);
-  a18=-9.0000000000000024e-02;
-  a05=(a05+a18);
+  a18=9.0000000000000024e-02;
+  a05=(a05-a18);
   a05=casadi_fabs(a05);
   a02=casadi_fmax(a02,a05);
   if (res[0]!=0) res[0][0]=a02;

@@ -84,7 +84,7 @@ extern const casadi_real double_pendulum_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define DOUBLE_PENDULUM_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define DOUBLE_PENDULUM_MODEL_HASH "491c35276a7e43b10dac89b048a23b7f4f3a125c432f996fae1b6f31a41e42ec"
+#define DOUBLE_PENDULUM_MODEL_HASH "2bb615cbbd3ac8da8ad22f6714f15f2d228788c925484727b999cb613fd56cea"
 
 /* ---- double_pendulum_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names

@@ -85,11 +85,11 @@ extern const casadi_real fourbar_3d_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define FOURBAR_3D_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define FOURBAR_3D_MODEL_HASH "ab67faaf0f42736655e99ea87e81ee0fd732b70fc45465f8b73c8ca83f9e0810"
+#define FOURBAR_3D_MODEL_HASH "1440f031e92198f0c84c2c2aaf35d3d19cdb03525391c14c57dd3d7d851530f0"
 
 /* ---- fourbar_3d_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
- * In fourbar_3d_kernels_0.c; 191 instructions.
+ * In fourbar_3d_kernels_0.c; 190 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_3d_t0.
  *   arg[1] q: 24x1, nnz 24 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: fourbar_3d_q0.
@@ -214,7 +214,7 @@ extern const casadi_real fourbar_3d_gravity[3];
 
 /* ---- fourbar_3d_alg ----------------------------------------------------
  * algebraic residual of the index-1 DAE: A a − γ + 2α Φ̇ + β² Φ (Baumgarte stabilised acceleration constraints)
- * In fourbar_3d_kernels_0.c; 1181 instructions.
+ * In fourbar_3d_kernels_0.c; 1180 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_3d_t0.
  *   arg[1] q: 24x1, nnz 24 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: fourbar_3d_q0.
@@ -235,7 +235,7 @@ extern const casadi_real fourbar_3d_gravity[3];
 
 /* ---- fourbar_3d_dae ----------------------------------------------------
  * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v], z = [a; λ], ode = [v; a] and alg = [M a + Aᵀλ − F; A a − γ + 2α Φ̇ + β² Φ] (sparse Jacobian)
- * In fourbar_3d_kernels_0.c; 1286 instructions.
+ * In fourbar_3d_kernels_0.c; 1285 instructions.
  * Jacobian: jac_fourbar_3d_dae() (CasADi's convention: the inputs, then the nominal outputs;
  * one output jac_<out>_<in> per pair), found by casadi.external for exact derivatives.
  * Inputs:
@@ -376,7 +376,7 @@ extern const casadi_real fourbar_3d_gravity[3];
 
 /* ---- fourbar_3d_step_check ----------------------------------------------------
  * Stepper: constraint residuals of a state
- * In fourbar_3d_kernels_0.c; 497 instructions.
+ * In fourbar_3d_kernels_0.c; 496 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_3d_t0.
  *   arg[1] q: 24x1, nnz 24 [m] coordinates. Default: fourbar_3d_q0.

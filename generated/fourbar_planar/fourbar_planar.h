@@ -86,7 +86,7 @@ extern const casadi_real fourbar_planar_gravity[2];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define FOURBAR_PLANAR_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define FOURBAR_PLANAR_MODEL_HASH "76af4a0f618ae853246b48ff84352c754b93522d606d5d08edb45f2f7125b39e"
+#define FOURBAR_PLANAR_MODEL_HASH "6663726f7362c5a2c10db995b0c00db3e31a369baf205bce2c1f01aeb353145e"
 
 /* ---- fourbar_planar_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -327,7 +327,7 @@ extern const casadi_real fourbar_planar_gravity[2];
 
 /* ---- fourbar_planar_step_newton ----------------------------------------------------
  * Stepper, first half-step: Newton residual r(w, nu) and its Jacobian K
- * In fourbar_planar_kernels_0.c; 343 instructions.
+ * In fourbar_planar_kernels_0.c; 344 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time at the start of the step. Default: fourbar_planar_t0.
  *   arg[1] q: 6x1, nnz 6 [m] coordinates at t. Default: fourbar_planar_q0.

@@ -561,8 +561,8 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a03=arg[1]? arg[1][2] : 0;
   a04=casadi_sq(a03);
   a01=(a01+a04);
-  a04=-1.;
-  a01=(a01+a04);
+  a04=1.;
+  a01=(a01-a04);
   if (res[0]!=0) res[0][0]=a01;
   a01=arg[1]? arg[1][3] : 0;
   a05=casadi_sq(a01);
@@ -572,7 +572,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a07=arg[1]? arg[1][5] : 0;
   a08=casadi_sq(a07);
   a05=(a05+a08);
-  a05=(a05+a04);
+  a05=(a05-a04);
   if (res[0]!=0) res[0][1]=a05;
   a05=arg[1]? arg[1][6] : 0;
   a08=casadi_sq(a05);
@@ -582,7 +582,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a10=arg[1]? arg[1][8] : 0;
   a11=casadi_sq(a10);
   a08=(a08+a11);
-  a08=(a08+a04);
+  a08=(a08-a04);
   if (res[0]!=0) res[0][2]=a08;
   a08=(a01*a05);
   a04=(a06*a09);
@@ -1633,8 +1633,8 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a20=(a20+a15);
   a15=casadi_sq(a19);
   a20=(a20+a15);
-  a15=-1.;
-  a20=(a20+a15);
+  a15=1.;
+  a20=(a20-a15);
   a20=(a05*a20);
   a01=(a01+a20);
   if (res[0]!=0) res[0][0]=a01;
@@ -1693,7 +1693,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a25=(a25+a32);
   a32=casadi_sq(a22);
   a25=(a25+a32);
-  a25=(a25+a15);
+  a25=(a25-a15);
   a25=(a05*a25);
   a20=(a20+a25);
   if (res[0]!=0) res[0][1]=a20;
@@ -1754,7 +1754,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a12=(a12+a20);
   a20=casadi_sq(a21);
   a12=(a12+a20);
-  a12=(a12+a15);
+  a12=(a12-a15);
   a12=(a05*a12);
   a29=(a29+a12);
   if (res[0]!=0) res[0][2]=a29;
@@ -2144,8 +2144,8 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a32=(a32+a28);
   a28=casadi_sq(a29);
   a32=(a32+a28);
-  a28=-1.;
-  a32=(a32+a28);
+  a28=1.;
+  a32=(a32-a28);
   a32=(a21*a32);
   a18=(a18+a32);
   if (res[1]!=0) res[1][9]=a18;
@@ -2175,7 +2175,7 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a22=(a22+a19);
   a19=casadi_sq(a34);
   a22=(a22+a19);
-  a22=(a22+a28);
+  a22=(a22-a28);
   a22=(a21*a22);
   a18=(a18+a22);
   if (res[1]!=0) res[1][10]=a18;
@@ -2205,7 +2205,7 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a27=(a27+a35);
   a35=casadi_sq(a33);
   a27=(a27+a35);
-  a27=(a27+a28);
+  a27=(a27-a28);
   a27=(a21*a27);
   a18=(a18+a27);
   if (res[1]!=0) res[1][11]=a18;
@@ -3117,8 +3117,8 @@ static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a03=arg[1]? arg[1][2] : 0;
   a04=casadi_sq(a03);
   a01=(a01+a04);
-  a04=-1.;
-  a01=(a01+a04);
+  a04=1.;
+  a01=(a01-a04);
   if (res[0]!=0) res[0][0]=a01;
   a01=arg[1]? arg[1][3] : 0;
   a05=casadi_sq(a01);
@@ -3128,7 +3128,7 @@ static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a07=arg[1]? arg[1][5] : 0;
   a08=casadi_sq(a07);
   a05=(a05+a08);
-  a05=(a05+a04);
+  a05=(a05-a04);
   if (res[0]!=0) res[0][1]=a05;
   a05=arg[1]? arg[1][6] : 0;
   a08=casadi_sq(a05);
@@ -3138,7 +3138,7 @@ static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a10=arg[1]? arg[1][8] : 0;
   a11=casadi_sq(a10);
   a08=(a08+a11);
-  a08=(a08+a04);
+  a08=(a08-a04);
   if (res[0]!=0) res[0][2]=a08;
   a08=(a01*a05);
   a04=(a06*a09);
@@ -3794,8 +3794,8 @@ static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a06=(a16+a06);
   a28=casadi_sq(a06);
   a31=(a31+a28);
-  a28=-1.;
-  a31=(a31+a28);
+  a28=1.;
+  a31=(a31-a28);
   a31=(a31/a33);
   if (res[0]!=0) res[0][9]=a31;
   a13=(a33*a13);
@@ -3809,7 +3809,7 @@ static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a22=(a19+a22);
   a08=casadi_sq(a22);
   a31=(a31+a08);
-  a31=(a31+a28);
+  a31=(a31-a28);
   a31=(a31/a33);
   if (res[0]!=0) res[0][10]=a31;
   a21=(a33*a21);
@@ -3823,7 +3823,7 @@ static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a29=(a18+a29);
   a08=casadi_sq(a29);
   a31=(a31+a08);
-  a31=(a31+a28);
+  a31=(a31-a28);
   a31=(a31/a33);
   if (res[0]!=0) res[0][11]=a31;
   a31=(a13*a21);
@@ -4235,8 +4235,8 @@ static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a04=arg[1]? arg[1][2] : 0;
   a05=casadi_sq(a04);
   a02=(a02+a05);
-  a05=-1.;
-  a02=(a02+a05);
+  a05=1.;
+  a02=(a02-a05);
   a02=casadi_fabs(a02);
   a02=casadi_fmax(a00,a02);
   a06=arg[1]? arg[1][3] : 0;
@@ -4247,7 +4247,7 @@ static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a09=arg[1]? arg[1][5] : 0;
   a10=casadi_sq(a09);
   a07=(a07+a10);
-  a07=(a07+a05);
+  a07=(a07-a05);
   a07=casadi_fabs(a07);
   a02=casadi_fmax(a02,a07);
   a07=arg[1]? arg[1][6] : 0;
@@ -4258,7 +4258,7 @@ static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a12=arg[1]? arg[1][8] : 0;
   a13=casadi_sq(a12);
   a10=(a10+a13);
-  a10=(a10+a05);
+  a10=(a10-a05);
   a10=casadi_fabs(a10);
   a02=casadi_fmax(a02,a10);
   a10=(a06*a07);

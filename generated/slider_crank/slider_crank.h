@@ -86,7 +86,7 @@ extern const casadi_real slider_crank_gravity[2];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define SLIDER_CRANK_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define SLIDER_CRANK_MODEL_HASH "f6f4c6d4b0c2173eebb49e8dc77a1ef79c1ba90fc5c165ffb4511547b6c0b9c6"
+#define SLIDER_CRANK_MODEL_HASH "6b4c4b69b650eda7973d659a08db0130691c28be7a99385dc5a8bc0431cc4ed6"
 
 /* ---- slider_crank_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names

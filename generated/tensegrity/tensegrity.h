@@ -87,7 +87,7 @@ extern const casadi_real tensegrity_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define TENSEGRITY_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define TENSEGRITY_MODEL_HASH "3b8d83a922cbbe0a18fc1c3aa12e3e9e5390ca089ca2c3402af98edb8c7867b0"
+#define TENSEGRITY_MODEL_HASH "5410884e5bdae1f540362f594cb4ad49cbf28421abd1ce9ae31d244e1c9107e4"
 
 /* ---- tensegrity_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -182,7 +182,7 @@ extern const casadi_real tensegrity_gravity[3];
 
 /* ---- tensegrity_Minv ----------------------------------------------------
  * application of the constant inverse mass matrix: x = M⁻¹ b (two sparse triangular solves with the Cholesky factor of M)
- * In tensegrity_kernels_0.c; 114 instructions.
+ * In tensegrity_kernels_0.c; 113 instructions.
  * Inputs:
  *   arg[0] b: 18x1, nnz 18 [N] right-hand side: a generalised force. Default: zeros.
  * Outputs:
@@ -193,7 +193,7 @@ extern const casadi_real tensegrity_gravity[3];
 
 /* ---- tensegrity_ode ----------------------------------------------------
  * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ)
- * In tensegrity_kernels_0.c; 1075 instructions.
+ * In tensegrity_kernels_0.c; 1074 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: tensegrity_t0.
  *   arg[1] q: 18x1, nnz 18 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: tensegrity_q0.
@@ -216,7 +216,7 @@ extern const casadi_real tensegrity_gravity[3];
 
 /* ---- tensegrity_alg ----------------------------------------------------
  * algebraic residual of the index-1 DAE: A a − γ + 2α Φ̇ + β² Φ (Baumgarte stabilised acceleration constraints)
- * In tensegrity_kernels_0.c; 1232 instructions.
+ * In tensegrity_kernels_0.c; 1231 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: tensegrity_t0.
  *   arg[1] q: 18x1, nnz 18 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: tensegrity_q0.

@@ -1683,8 +1683,8 @@ static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a08=(a06-a07);
   a08=casadi_sq(a08);
   a03=(a03+a08);
-  a08=-5.8588457268119931e-01;
-  a03=(a03+a08);
+  a08=5.8588457268119931e-01;
+  a03=(a03-a08);
   a03=casadi_fabs(a03);
   a03=casadi_fmax(a00,a03);
   a09=arg[1]? arg[1][9] : 0;
@@ -1701,7 +1701,7 @@ static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a16=(a14-a15);
   a16=casadi_sq(a16);
   a11=(a11+a16);
-  a11=(a11+a08);
+  a11=(a11-a08);
   a11=casadi_fabs(a11);
   a03=casadi_fmax(a03,a11);
   a11=arg[1]? arg[1][15] : 0;
@@ -1718,8 +1718,8 @@ static int casadi_f1(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a21=(a19-a20);
   a21=casadi_sq(a21);
   a16=(a16+a21);
-  a21=-5.8588457268119964e-01;
-  a16=(a16+a21);
+  a21=5.8588457268119964e-01;
+  a16=(a16-a21);
   a16=casadi_fabs(a16);
   a03=casadi_fmax(a03,a16);
   a16=-7.2522739831691477e-17;

@@ -33,6 +33,7 @@ class Context:
         self.p = ca.vertcat(*(s for s, _ in system.parameters.values())) if system.parameters else ca.SX(0, 1)
         self._q_local: dict[str, ca.SX] = {}
         self._v_local: dict[str, ca.SX] = {}
+        self._instances: dict[tuple, tuple] = {}
         for name in system.members:
             idx = layout.member_indices(name)
             b = layout.member_constant(name)
@@ -47,15 +48,38 @@ class Context:
         return self._v_local[member.name]
 
     def instantiate(self, member: Member, expr, extra: dict | None = None):
-        """A SymPy formula of ``member``'s derivation in CasADi (q ↦ q_I, q̇ ↦ v_I)."""
-        D = member.ctype.derivation
-        vals = dict(member.local.constants())
+        """A SymPy formula of ``member``'s derivation in CasADi (q ↦ q_I, q̇ ↦ v_I).
+
+        Without ``extra`` values the formula is translated once per coordinate type into an
+        SX function of (q_I, q̇_I, the member's constants) and then called per member: the
+        SymPy tree walk costs far more than the call, which adds the same operations."""
+        constants = member.local.constants()
         qI, vI = self.q_of(member), self.v_of(member)
-        vals.update({s: qI[k] for k, s in enumerate(D.q)})
-        vals.update({s: vI[k] for k, s in enumerate(D.qd)})
         if extra:
+            D = member.ctype.derivation
+            vals = dict(constants)
+            vals.update({s: qI[k] for k, s in enumerate(D.q)})
+            vals.update({s: vI[k] for k, s in enumerate(D.qd)})
             vals.update(extra)
-        return to_casadi(expr, vals)
+            return to_casadi(expr, vals)
+        names, f = self._instance_function(member, expr, constants)
+        return f(qI, vI, ca.DM([float(constants[s]) for s in names]))
+
+    def _instance_function(self, member: Member, expr, constants: dict):
+        """``(constant symbols, f(q_I, q̇_I, c))`` for ``expr`` of ``member``'s type, cached."""
+        key = (member.ctype.name, id(expr), frozenset(constants))
+        hit = self._instances.get(key)
+        if hit is None or hit[0] is not expr:
+            names = tuple(sorted(constants, key=str))
+            D = member.ctype.derivation
+            q, v = ca.SX.sym("q", len(D.q)), ca.SX.sym("v", len(D.qd))
+            c = ca.SX.sym("c", len(names))
+            vals = {s: c[k] for k, s in enumerate(names)}
+            vals.update({s: q[k] for k, s in enumerate(D.q)})
+            vals.update({s: v[k] for k, s in enumerate(D.qd)})
+            hit = (expr, names, ca.Function("instance", [q, v, c], [to_casadi(expr, vals)]))
+            self._instances[key] = hit
+        return hit[1], hit[2]
 
     def scatter(self, member: Member, Q_local) -> ca.SX:
         """``S_Iᵀ Q_I``: a member's generalised force as a system vector."""

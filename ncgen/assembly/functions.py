@@ -38,7 +38,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.assembly.context import Context
-from ncgen.assembly.mass import CholeskyFactor
+from ncgen.assembly.mass import CholeskyFactor, sparse_dm
 
 #: Inputs shared by the functions: name -> (meaning, SI units).
 IN = {
@@ -111,7 +111,7 @@ def system_functions(ctx: Context, phi, F, V, M: np.ndarray, factor: CholeskyFac
     a = factor.solve(F - ca.mtimes(A.T, lam))
     alg = ca.mtimes(A, a) - gamma + 2 * alpha * phidot + beta**2 * phi
     b = ca.SX.sym("b", ctx.layout.nq)
-    Msp = ca.sparsify(ca.DM(M))
+    Msp = sparse_dm(M)
     T = 0.5 * ca.dot(v, ca.mtimes(Msp, v))
 
     f = {}

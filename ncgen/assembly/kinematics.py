@@ -21,9 +21,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import casadi as ca
 import numpy as np
 
 from ncgen.assembly.initial_state import dependent_rows
+from ncgen.assembly.mass import sparse_dm
 from ncgen.model.expressions import did_you_mean
 from ncgen.model.members import ModelError
 
@@ -88,16 +90,38 @@ def newton(phi, jac, q, free, *, tol: float, max_iter: int = MAX_ITER):
 
 def project(A: np.ndarray, b: np.ndarray, v: np.ndarray, M: np.ndarray, free) -> np.ndarray:
     """The ``w`` closest to ``v`` in the metric ``M`` with ``A w = b`` and ``w = v`` outside
-    ``free`` (least squares when that is impossible)."""
+    ``free`` (least squares when that is impossible).  The step ``δ = M⁻¹Aᵀμ`` with
+    ``A δ = b − A v`` comes from the sparse KKT system (O(n) for chain-like systems); only
+    rank-deficient constraints take the dense least-squares route."""
     w = np.array(v, dtype=float)
     if A.shape[0] == 0:
         return w
     free = np.asarray(free, dtype=int)
-    Af = A[:, free]
-    MiAT = np.linalg.solve(M[np.ix_(free, free)], Af.T)
-    mu = np.linalg.lstsq(Af @ MiAT, b - A @ w, rcond=None)[0]
-    w[free] += MiAT @ mu
+    Af, Mf = A[:, free], M[np.ix_(free, free)]
+    r = b - A @ w
+    step = _kkt_step(Mf, Af, r)
+    if step is None:
+        MiAT = np.linalg.solve(Mf, Af.T)
+        step = MiAT @ np.linalg.lstsq(Af @ MiAT, r, rcond=None)[0]
+    w[free] += step
     return w
+
+
+def _kkt_step(M: np.ndarray, A: np.ndarray, r: np.ndarray) -> np.ndarray | None:
+    """``δ`` of ``[[M, Aᵀ], [A, 0]] [δ; −μ] = [0; r]`` by sparse QR, or None if the system is
+    singular (dependent constraints)."""
+    n, m = M.shape[0], A.shape[0]
+    Ms, As = sparse_dm(M), sparse_dm(A)
+    K = ca.blockcat([[Ms, As.T], [As, ca.DM(m, m)]])
+    rhs = np.concatenate([np.zeros(n), r])
+    try:
+        x = np.array(ca.solve(K, ca.DM(rhs), "qr")).reshape(-1)
+    except RuntimeError:                       # CasADi's QR refuses a structurally singular K
+        return None
+    scale = 1.0 + float(np.max(np.abs(rhs)))
+    if not np.all(np.isfinite(x)) or np.max(np.abs(np.array(ca.mtimes(K, ca.DM(x))).reshape(-1) - rhs)) > 1e-9 * scale:
+        return None
+    return x[:n]
 
 
 def system_size(q: np.ndarray) -> float:

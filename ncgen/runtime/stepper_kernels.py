@@ -36,6 +36,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from ncgen.assembly.mass import sparse_dm
+
 #: Largest nnz(V) + nnz(R) of the QR factors for which the solve is unrolled into SX.
 SX_QR_MAX_NNZ = 3_000
 
@@ -79,7 +81,7 @@ def stepper_functions(model) -> list[ca.Function]:
     q, v, w = ca.SX.sym("q", nq), ca.SX.sym("v", nq), ca.SX.sym("w", nq)
     nu = ca.SX.sym("nu", nc)
     u, p = ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
-    M = ca.sparsify(ca.DM(model.M))
+    M = sparse_dm(model.M)
 
     r = ca.densify(ca.vertcat(ca.mtimes(M, w - v) - h / 2 * f["F"](t, q, w, u, p) + ca.mtimes(f["A"](t, q, p).T, nu),
                    f["phi"](t + h, q + h * w, p) / h))
