@@ -114,8 +114,10 @@ def spawn(kind: str, n: int, timeout: float, cflags: str | None) -> dict | None:
 
 
 def power_law(ns, ts) -> tuple[float, float]:
-    """``(c, k)`` of t = c n^k fitted (least squares in logs) on the last three points."""
-    x, y = np.log(np.asarray(ns[-3:], float)), np.log(np.asarray(ts[-3:], float))
+    """``(c, k)`` of t = c n^k fitted (least squares in logs) on the points with n at least
+    half the largest (the growth at small n is dominated by fixed costs)."""
+    keep = [i for i, n in enumerate(ns) if 2 * n >= ns[-1]]
+    x, y = np.log(np.asarray(ns, float)[keep]), np.log(np.asarray(ts, float)[keep])
     k, logc = np.polyfit(x, y, 1) if len(x) > 1 else (1.0, y[0])
     return float(np.exp(logc)), float(k)
 
@@ -170,7 +172,7 @@ def main(argv=None) -> int:
             break
     if len(ns) >= 2:
         c, k = power_law(ns, ts)
-        print(f"  fit on n = {ns[-3:] if len(ns) >= 3 else ns}: t = {c:.3g} s * n^{k:.2f}")
+        print(f"  fit on n = {min(n for n in ns if 2 * n >= ns[-1])}..{ns[-1]}: t = {c:.3g} s * n^{k:.2f}")
         for n in (10, 20, 100, 1000):
             if n > ns[-1]:
                 print(f"  EXTRAPOLATED (not measured): n = {n}: {c * n**k:.3g} s")
