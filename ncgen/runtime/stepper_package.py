@@ -94,7 +94,7 @@ class CompiledStepper:
         per step, shape ``(n_steps, nu)``, or None for zeros."""
         rows = n_steps // every
         Q, V = np.zeros((rows, self.nq)), np.zeros((rows, self.nq))
-        LAM, ITER = np.zeros((rows, self.nc)), np.zeros(rows, dtype=np.int_)
+        LAM, ITER = np.zeros((rows, self.nc)), np.zeros(rows, dtype=np.dtype(ctypes.c_long))
         q0, v0 = np.ascontiguousarray(q0, float), np.ascontiguousarray(v0, float)
         p = np.ascontiguousarray(p, float)
         U = None if U is None or self.nu == 0 else np.ascontiguousarray(U, float)
