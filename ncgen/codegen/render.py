@@ -6,6 +6,7 @@ and outputs never contain anything machine- or time-dependent unless a caller pa
 """
 from __future__ import annotations
 
+import importlib.util
 from functools import lru_cache
 from pathlib import Path
 from typing import Mapping, Sequence
@@ -30,11 +31,25 @@ def banner(template: str, output: str) -> str:
     raise CodegenError(f"no comment syntax known for {output!r} (known suffixes: {sorted(_COMMENT_STYLE)})")
 
 
+def shipped_templates_dir() -> Path:
+    """Directory of the shipped ``c`` templates: the installed ``ncgen._templates/c``, or, when
+    ``ncgen`` is imported from a source checkout (``python -c`` run in the repository), the
+    checkout's ``templates/c``."""
+    spec = importlib.util.find_spec("ncgen._templates")
+    if spec is not None and spec.submodule_search_locations:
+        return Path(list(spec.submodule_search_locations)[0]) / "c"
+    checkout = Path(__file__).resolve().parents[2] / "templates" / "c"
+    if checkout.is_dir():
+        return checkout
+    raise CodegenError("ncgen's C templates are missing: neither the package ncgen._templates nor "
+                       f"{checkout} exists; reinstall ncgen (pip install .)")
+
+
 @lru_cache(maxsize=8)
 def environment(extra_dirs: tuple[str, ...] = ()) -> jinja2.Environment:
     """Strict Jinja2 environment: ``extra_dirs`` first, then the shipped ``c`` templates."""
     loaders = [jinja2.FileSystemLoader(list(extra_dirs))] if extra_dirs else []
-    loaders.append(jinja2.PackageLoader("ncgen._templates", "c"))
+    loaders.append(jinja2.FileSystemLoader(str(shipped_templates_dir())))
     return jinja2.Environment(loader=jinja2.ChoiceLoader(loaders), undefined=jinja2.StrictUndefined,
                               trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True,
                               autoescape=False)
