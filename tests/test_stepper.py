@@ -158,10 +158,45 @@ def test_newton_failure_names_the_time_and_keeps_the_trajectory():
     assert info.value.trajectory is not None and len(info.value.trajectory) == 1
 
 
+def test_a_failing_step_is_split_into_two_half_steps():
+    """The double pendulum's first step of 0.3 s fails (Newton diverges); split once, it is
+    exactly the two steps of 0.15 s a finer run takes (same cold start, same predictor)."""
+    from ncgen.runtime.stepper_package import load_stepper
+
+    model = example(EXAMPLES / "double_pendulum.toml")
+    stepper = load_stepper(model)
+    args = (None, model.p0, TOL, 12)
+    *_, status, done, splits = stepper.simulate(model.q0, model.v0, 0.0, 0.3, 1, 1, *args, 0)
+    assert (status, done, splits) == (1, 0, 0)
+    Q, V, _, ITER, status, done, splits = stepper.simulate(model.q0, model.v0, 0.0, 0.3, 1, 1, *args, 1)
+    assert (status, done, splits) == (0, 1, 1)
+    Q2, V2, _, ITER2, status, done, splits = stepper.simulate(model.q0, model.v0, 0.0, 0.15, 2, 2, *args, 0)
+    assert (status, done, splits) == (0, 2, 0)
+    np.testing.assert_array_equal(Q, Q2)
+    np.testing.assert_array_equal(V, V2)
+    assert ITER[0] > ITER2[0]
+
+
+def test_split_steps_keep_the_grid_and_the_constraints():
+    """At dt = 0.2 s the double pendulum needs split steps (and fails without them); the
+    trajectory stays on the 0.2 s grid and on both constraint levels; after the first step
+    it is within the error such a coarse step makes (5 % of the motion) of IDAS."""
+    model = example(EXAMPLES / "double_pendulum.toml")
+    with pytest.raises(SimulationError, match="did not converge"):
+        nc.simulate(model, 1.2, 0.2, method="stepper", max_halvings=0)
+    traj = nc.simulate(model, 1.2, 0.2, method="stepper")
+    assert traj.info["stats"]["step_splits"] > 0
+    np.testing.assert_allclose(traj.t, np.linspace(0.0, 1.2, 7), atol=1e-12)
+    assert np.all(traj.constraint_residual <= TOL)
+    reference = nc.simulate(model, 1.2, 0.2, rtol=1e-10, atol=1e-12)
+    assert np.max(np.abs(traj.q[1] - reference.q[1])) < 0.05 * np.max(np.abs(reference.q - reference.q[0]))
+
+
 def test_bad_stepper_options():
     model = pendulum()
     for kwargs, match in (({"substeps": 0}, "substeps"), ({"newton_tol": -1.0}, "tol"),
-                          ({"max_newton": 0}, "max_iter"), ({"hold": "cubic"}, "hold")):
+                          ({"max_newton": 0}, "max_iter"), ({"hold": "cubic"}, "hold"),
+                          ({"max_halvings": -1}, "max_halvings"), ({"max_halvings": 11}, "max_halvings")):
         with pytest.raises(NcgenError, match=match):
             nc.simulate(model, 0.1, 0.01, method="stepper", **kwargs)
 

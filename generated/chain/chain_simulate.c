@@ -50,7 +50,7 @@ int main(int argc, char *argv[]) {
     return 2;
   }
   h = (t_end - t0) / n_steps;
-  status = chain_simulate(q0, v0, t0, h, n_steps, n_steps, 0, 0, p0, q, v, lam, &iterations, 0, &done);
+  status = chain_simulate(q0, v0, t0, h, n_steps, n_steps, 0, 0, p0, q, v, lam, &iterations, 0, &done, 0);
   if (status != CHAIN_STEP_OK) {
     fprintf(stderr, "%s: step %ld failed at t = %.17g s: %s (status %d)\n", argv[0], done + 1,
             t0 + done * h, status_text(status), status);

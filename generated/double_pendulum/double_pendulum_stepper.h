@@ -15,6 +15,11 @@
  * KKT Jacobian, double_pendulum_step_solve), the second is one linear KKT solve.  Inputs u are
  * held constant over the step (zero-order hold); parameters p are constant.
  *
+ * Where Newton fails on a step (no convergence, a non-finite update, violated velocity
+ * constraints) it is retried from the cold start [v; 0], then split into two steps of h/2,
+ * recursively, at most options->max_halvings times (the step then ends as 2, 4, ...
+ * smaller ones; the caller still gets the state at t + h).  Each split counts once.
+ *
  * Convergence (tol = options->tol): |Phi(t + h, q+)|_inf <= tol (m^2) and
  * |M (w - v) - h/2 F + A^T h/2 lambda|_inf <= tol * DOUBLE_PENDULUM_STEP_MASS_SCALE * (1 + |w|_inf);
  * afterwards |A v+ + Phi_t|_inf <= tol * (1 + |v+|_inf) is checked.
@@ -47,13 +52,18 @@ extern "C" {
 #define DOUBLE_PENDULUM_STEP_VELOCITY 3        /* the velocity constraints are violated after the
                                              second half-step (nearly singular KKT matrix) */
 #define DOUBLE_PENDULUM_STEP_KERNEL 4          /* a generated kernel returned an error */
-#define DOUBLE_PENDULUM_STEP_BAD_INPUT 5       /* h <= 0, a non-finite time or step count, or
-                                             out of memory */
+#define DOUBLE_PENDULUM_STEP_BAD_INPUT 5       /* h <= 0, a non-finite time or step count, bad
+                                             options, or out of memory */
 
-/* Newton options; double_pendulum_step_default_options() gives tol = 1e-10, max_iter = 12. */
+/* Deepest step splitting the workspace allows. */
+#define DOUBLE_PENDULUM_STEP_MAX_HALVINGS 10
+
+/* Newton options; double_pendulum_step_default_options() gives tol = 1e-10, max_iter = 12,
+ * max_halvings = 4. */
 typedef struct {
   casadi_real tol;  /* tolerance of the convergence tests above */
   int max_iter;     /* Newton iterations allowed per step (>= 1) */
+  int max_halvings; /* times a failing step may be halved (0 .. DOUBLE_PENDULUM_STEP_MAX_HALVINGS) */
 } double_pendulum_step_options;
 
 double_pendulum_step_options double_pendulum_step_default_options(void);
@@ -66,8 +76,8 @@ size_t double_pendulum_step_work_bytes(void);
  * work (double_pendulum_step_work_bytes() bytes, suitably aligned, e.g. from malloc; NULL: the
  * call allocates and frees its own).  Out: q_next, v_next (nq values; may not alias q, v),
  * lam (nc multipliers of M a + A^T lam = F at t + h, first-order accurate; may be NULL),
- * iterations (Newton iterations used; may be NULL).  Returns a status code (above); outputs
- * are meaningful only for DOUBLE_PENDULUM_STEP_OK. */
+ * iterations (Newton iterations used, over all attempts and parts; may be NULL).  Returns a
+ * status code (above); outputs are meaningful only for DOUBLE_PENDULUM_STEP_OK. */
 int double_pendulum_step(const casadi_real *q, const casadi_real *v, casadi_real t, const casadi_real *u,
                          const casadi_real *p, casadi_real h, casadi_real *q_next, casadi_real *v_next,
                          casadi_real *lam, int *iterations, const double_pendulum_step_options *options, void *work);
@@ -78,12 +88,13 @@ int double_pendulum_step(const casadi_real *q, const casadi_real *v, casadi_real
  * and lam_out (nc values) is the state after step (j + 1) * every; iter_out[j] sums the
  * Newton iterations of those `every` steps.  Any output may be NULL.  n_steps must be a
  * multiple of every.  Returns the status of the first step that failed (DOUBLE_PENDULUM_STEP_OK
- * if none) and sets *steps_done (if not NULL) to the number of steps completed. */
+ * if none) and sets *steps_done (if not NULL) to the number of steps completed and *splits
+ * (if not NULL) to the number of step splits (see above) they needed. */
 int double_pendulum_simulate(const casadi_real *q0, const casadi_real *v0, casadi_real t0, casadi_real h,
                              long n_steps, long every, const casadi_real *u, long u_stride,
                              const casadi_real *p, casadi_real *q_out, casadi_real *v_out,
                              casadi_real *lam_out, long *iter_out, const double_pendulum_step_options *options,
-                             long *steps_done);
+                             long *steps_done, long *splits);
 
 #ifdef __cplusplus
 } /* extern "C" */

@@ -36,6 +36,7 @@ typedef struct {
   casadi_real *dx;  /* Newton update */
   casadi_real *K;   /* KKT matrix nonzeros */
   casadi_real *chk; /* max |Phi|, max |A v + Phi_t| */
+  casadi_real *mid; /* states at the middle of split steps: [q; v] per splitting depth */
   casadi_real *w;   /* kernel work */
   casadi_int *iw;
 } workspace;
@@ -61,7 +62,7 @@ static void kernel_sizes(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz_
 /* Lays out the workspace in `block` (if not NULL) and returns its size in bytes. */
 static size_t layout(workspace *ws, char *block) {
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
-  size_t off[10], sizes[9], k;
+  size_t off[11], sizes[10], k;
   kernel_sizes(&sz_arg, &sz_res, &sz_iw, &sz_w);
   sizes[0] = (size_t) sz_arg * sizeof(const casadi_real *);
   sizes[1] = (size_t) sz_res * sizeof(casadi_real *);
@@ -70,8 +71,9 @@ static size_t layout(workspace *ws, char *block) {
   sizes[6] = 2 * sizeof(casadi_real);
   sizes[7] = (size_t) sz_w * sizeof(casadi_real);
   sizes[8] = (size_t) sz_iw * sizeof(casadi_int);
+  sizes[9] = 2 * NQ * SLIDER_CRANK_STEP_MAX_HALVINGS * sizeof(casadi_real);
   off[0] = 0;
-  for (k = 0; k < 9; ++k) off[k + 1] = off[k] + align_up(sizes[k]);
+  for (k = 0; k < 10; ++k) off[k + 1] = off[k] + align_up(sizes[k]);
   if (ws) {
     ws->arg = (const casadi_real **) (void *) (block + off[0]);
     ws->res = (casadi_real **) (void *) (block + off[1]);
@@ -82,8 +84,9 @@ static size_t layout(workspace *ws, char *block) {
     ws->chk = (casadi_real *) (void *) (block + off[6]);
     ws->w = (casadi_real *) (void *) (block + off[7]);
     ws->iw = (casadi_int *) (void *) (block + off[8]);
+    ws->mid = (casadi_real *) (void *) (block + off[9]);
   }
-  return off[9];
+  return off[10];
 }
 
 size_t slider_crank_step_work_bytes(void) {
@@ -94,6 +97,7 @@ slider_crank_step_options slider_crank_step_default_options(void) {
   slider_crank_step_options o;
   o.tol = 1e-10;
   o.max_iter = 12;
+  o.max_halvings = 4;
   return o;
 }
 
@@ -131,7 +135,9 @@ static int step(const casadi_real *q, const casadi_real *v, casadi_real t, const
   casadi_real t1 = t + h, tol = o->tol;
   int i, it;
   if (iterations) *iterations = 0;
-  if (!(h > 0) || !isfinite(t1) || !(tol > 0) || o->max_iter < 1) return SLIDER_CRANK_STEP_BAD_INPUT;
+  if (!(h > 0) || !isfinite(t1) || !(tol > 0) || o->max_iter < 1 || o->max_halvings < 0 ||
+      o->max_halvings > SLIDER_CRANK_STEP_MAX_HALVINGS)
+    return SLIDER_CRANK_STEP_BAD_INPUT;
 
   /* First half-step: Newton on x = [w; h/2 lambda]. */
   if (!warm) {
@@ -195,6 +201,42 @@ static int step(const casadi_real *q, const casadi_real *v, casadi_real t, const
   return SLIDER_CRANK_STEP_OK;
 }
 
+/* Warm start of the step after a successful one: w' = 2 v+ - w, h/2 lambda' = h/2 mu
+ * (exact for forces independent of v when the multipliers do not change). */
+static void predict(workspace *ws) {
+  int i;
+  for (i = 0; i < NQ; ++i) ws->x[i] = 2 * ws->dx[i] - ws->x[i];
+  for (i = NQ; i < NX; ++i) ws->x[i] = ws->dx[i];
+}
+
+static int recoverable(int status) {
+  return status == SLIDER_CRANK_STEP_NO_CONVERGENCE || status == SLIDER_CRANK_STEP_NOT_FINITE ||
+         status == SLIDER_CRANK_STEP_VELOCITY;
+}
+
+/* step(), retried from the cold start if a warm start fails, then split into two steps of
+ * h/2 (recursively, `depth` splits deep so far) if that fails too.  Adds the Newton
+ * iterations to *iterations and the splits to *splits. */
+static int step_split(const casadi_real *q, const casadi_real *v, casadi_real t, const casadi_real *u,
+                      const casadi_real *p, casadi_real h, casadi_real *q_next, casadi_real *v_next,
+                      casadi_real *lam, int *iterations, long *splits, const slider_crank_step_options *o,
+                      int warm, workspace *ws, int depth) {
+  casadi_real *q_mid = ws->mid + 2 * NQ * depth, *v_mid = q_mid + NQ;
+  int it, status = step(q, v, t, u, p, h, q_next, v_next, lam, &it, o, warm, ws);
+  *iterations += it;
+  if (status != SLIDER_CRANK_STEP_OK && warm && recoverable(status)) {
+    status = step(q, v, t, u, p, h, q_next, v_next, lam, &it, o, 0, ws);
+    *iterations += it;
+  }
+  if (status == SLIDER_CRANK_STEP_OK || !recoverable(status) || depth >= o->max_halvings) return status;
+  ++*splits;
+  status = step_split(q, v, t, u, p, h / 2, q_mid, v_mid, lam, iterations, splits, o, 0, ws, depth + 1);
+  if (status != SLIDER_CRANK_STEP_OK) return status;
+  predict(ws);
+  return step_split(q_mid, v_mid, t + h / 2, u, p, h / 2, q_next, v_next, lam, iterations, splits, o, 1, ws,
+                    depth + 1);
+}
+
 static const slider_crank_step_options *options_or_default(const slider_crank_step_options *options,
                                                       slider_crank_step_options *storage) {
   if (options) return options;
@@ -208,11 +250,13 @@ int slider_crank_step(const casadi_real *q, const casadi_real *v, casadi_real t,
   slider_crank_step_options defaults;
   workspace ws;
   char *block = work;
-  int status;
+  int status, iters = 0;
+  long splits = 0;
   if (!block && !(block = malloc(slider_crank_step_work_bytes()))) return SLIDER_CRANK_STEP_BAD_INPUT;
   layout(&ws, block);
-  status = step(q, v, t, u, p, h, q_next, v_next, lam, iterations, options_or_default(options, &defaults), 0,
-                &ws);
+  status = step_split(q, v, t, u, p, h, q_next, v_next, lam, &iters, &splits,
+                      options_or_default(options, &defaults), 0, &ws, 0);
+  if (iterations) *iterations = iters;
   if (!work) free(block);
   return status;
 }
@@ -221,15 +265,16 @@ int slider_crank_simulate(const casadi_real *q0, const casadi_real *v0, casadi_r
                           long n_steps, long every, const casadi_real *u, long u_stride,
                           const casadi_real *p, casadi_real *q_out, casadi_real *v_out,
                           casadi_real *lam_out, long *iter_out, const slider_crank_step_options *options,
-                          long *steps_done) {
+                          long *steps_done, long *splits) {
   slider_crank_step_options defaults;
   const slider_crank_step_options *o = options_or_default(options, &defaults);
   workspace ws;
   char *block;
   casadi_real *state, *q, *v, *q1, *v1, *lam, *swap;
-  long k, row = 0, iter_sum = 0;
-  int status = SLIDER_CRANK_STEP_OK, iters, i;
+  long k, row = 0, iter_sum = 0, n_splits = 0;
+  int status = SLIDER_CRANK_STEP_OK, iters;
   if (steps_done) *steps_done = 0;
+  if (splits) *splits = 0;
   if (n_steps < 0 || every < 1 || n_steps % every != 0) return SLIDER_CRANK_STEP_BAD_INPUT;
   block = malloc(slider_crank_step_work_bytes() + (4 * NQ + NC + 1) * sizeof(casadi_real));
   if (!block) return SLIDER_CRANK_STEP_BAD_INPUT;
@@ -242,13 +287,12 @@ int slider_crank_simulate(const casadi_real *q0, const casadi_real *v0, casadi_r
   memcpy(q, q0, NQ * sizeof *q);
   memcpy(v, v0, NQ * sizeof *v);
   for (k = 0; k < n_steps; ++k) {
-    status = step(q, v, t0 + k * h, u ? u + k * u_stride : 0, p, h, q1, v1, lam, &iters, o, k > 0, &ws);
+    iters = 0;
+    status = step_split(q, v, t0 + k * h, u ? u + k * u_stride : 0, p, h, q1, v1, lam, &iters, &n_splits, o,
+                        k > 0, &ws, 0);
     if (status != SLIDER_CRANK_STEP_OK) break;
     iter_sum += iters;
-    /* Predictor of the next step: w' = 2 v+ - w, h/2 lambda' = h/2 mu (exact for forces
-       independent of v when the multipliers do not change). */
-    for (i = 0; i < NQ; ++i) ws.x[i] = 2 * ws.dx[i] - ws.x[i];
-    for (i = NQ; i < NX; ++i) ws.x[i] = ws.dx[i];
+    predict(&ws);
     swap = q, q = q1, q1 = swap;
     swap = v, v = v1, v1 = swap;
     if ((k + 1) % every == 0) {
@@ -261,6 +305,7 @@ int slider_crank_simulate(const casadi_real *q0, const casadi_real *v0, casadi_r
     }
   }
   if (steps_done) *steps_done = k;
+  if (splits) *splits = n_splits;
   free(block);
   return status;
 }

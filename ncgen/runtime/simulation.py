@@ -15,7 +15,7 @@ from ncgen.runtime.diagnose import explain, shift_time
 from ncgen.runtime.idas import ChunkedIDAS, ChunkFailure
 from ncgen.runtime.inputs import hold_columns, input_samples, parameter_values, time_grid
 from ncgen.runtime.progress import Progress
-from ncgen.runtime.stepper import MAX_ITER, TOL, simulate_stepper
+from ncgen.runtime.stepper import MAX_HALVINGS, MAX_ITER, TOL, simulate_stepper
 from ncgen.runtime.trajectory import Trajectory
 from ncgen.validation import as_vector
 
@@ -29,7 +29,7 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
              hold: str = "zoh", backend: str = "vm", progress: bool | None = None,
              max_steps: int = 50_000, linear_solver: str = "csparse",
              ic_tolerance: float | None = 1e-6, substeps: int = 1, newton_tol: float = TOL,
-             max_newton: int = MAX_ITER) -> Trajectory:
+             max_newton: int = MAX_ITER, max_halvings: int = MAX_HALVINGS) -> Trajectory:
     """Integrate ``model`` from ``t0`` (default ``model.t0``) to ``t_end`` and return the
     :class:`~ncgen.runtime.trajectory.Trajectory` on the grid ``t0, t0 + dt, ..., t_end``
     (``dt`` shortened if needed so that ``t_end`` is on the grid).  Times in s.
@@ -63,7 +63,8 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
     * ``method="stepper"``: the compiled fixed-step RATTLE stepper (generated C, Newton loop
       included; :mod:`ncgen.runtime.stepper`), ``substeps`` steps of ``dt / substeps`` per
       output interval, Newton tolerance ``newton_tol`` (both constraint levels hold to it at
-      every step) and at most ``max_newton`` iterations per step.  ``rtol``, ``atol``,
+      every step) and at most ``max_newton`` iterations per step; a step whose Newton fails is
+      split in halves, at most ``max_halvings`` times (counted in ``info["stats"]``).  ``rtol``, ``atol``,
       ``backend``, ``max_steps``, ``linear_solver`` and ``progress`` are IDAS's only.
 
     Raises :class:`~ncgen.errors.SimulationError` if IDAS fails; it names the time reached
@@ -84,7 +85,7 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
     if method == "stepper":
         lam = initial_multipliers(model, t0, q, v, U[0], pv, load_dae(model, "vm")[0])
         return simulate_stepper(model, t, U, pv, q, v, lam, hold=hold, substeps=substeps, tol=newton_tol,
-                                max_iter=max_newton)
+                                max_iter=max_newton, max_halvings=max_halvings)
     dae, used = load_dae(model, backend)
     lam = initial_multipliers(model, t0, q, v, U[0], pv, dae)
     a = np.array(model.functions["ode"](t0, q, v, lam, U[0], pv)[1]).reshape(-1)

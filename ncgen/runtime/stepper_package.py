@@ -27,8 +27,8 @@ from ncgen.runtime.stepper_kernels import DOCS, mass_scale, stepper_functions
 #: Status codes of ``<model>_step`` (``templates/c/stepper.h.j2``) and what they mean.
 STATUS = {
     0: "converged",
-    1: "Newton's method did not converge within max_iter iterations (try a smaller step dt; "
-       "or the motion is singular there)",
+    1: "Newton's method did not converge within max_iter iterations, on the whole step nor on "
+       "its halves (try a smaller step dt or more max_halvings; or the motion is singular there)",
     2: "a residual or Newton update was not finite: the KKT matrix is singular (a singular "
        "configuration or redundant constraints) or the forces are not finite",
     3: "the velocity constraints are violated after the second half-step: the KKT matrix is "
@@ -36,6 +36,14 @@ STATUS = {
     4: "a generated kernel returned an error",
     5: "bad input (non-positive step, non-finite time) or out of memory",
 }
+#: Default Newton tolerance: |Φ|∞ ≤ tol (m²), momentum residual ≤ tol·max|M|·(1 + |w|∞),
+#: |A v + Φ_t|∞ ≤ tol·(1 + |v|∞) (see ``<model>_stepper.h``).
+TOL = 1e-10
+#: Default Newton iterations allowed per step.
+MAX_ITER = 12
+#: Default number of times a failing step may be split in halves, and the most the C
+#: workspace allows (``<MODEL>_STEP_MAX_HALVINGS``).
+MAX_HALVINGS, HALVINGS_LIMIT = 4, 10
 #: The demo program's defaults: simulated time and step (s).
 DEMO_T_END, DEMO_H = 1.0, 1e-3
 
@@ -56,7 +64,8 @@ def extra_sources(model, functions) -> list[ExtraSource]:
     name = model.name
     context = {"nq": model.nq, "nc": model.nc, "nu": model.nu, "np": model.np,
                "nnz_k": int(functions[0].sparsity_out("K").nnz()),
-               "mass_scale": c_real(mass_scale(model)),
+               "mass_scale": c_real(mass_scale(model)), "tol": c_real(TOL), "max_iter": MAX_ITER,
+               "max_halvings": MAX_HALVINGS, "halvings_limit": HALVINGS_LIMIT,
                "kernels": [f"{name}_{f.name()}" for f in functions]}
     demo = {**context, "program": f"{name}_simulate", "t0": c_real(model.t0), "t_end": c_real(DEMO_T_END),
             "h": c_real(DEMO_H), "q0": [c_real(x) for x in model.q0], "v0": [c_real(x) for x in model.v0],
@@ -84,12 +93,12 @@ class CompiledStepper:
         f = getattr(self._lib, f"{name}_simulate")
         f.restype = ctypes.c_int
         f.argtypes = [dp, dp, ctypes.c_double, ctypes.c_double, ctypes.c_long, ctypes.c_long, dp, ctypes.c_long,
-                      dp, dp, dp, dp, lp, ctypes.POINTER(_Options), lp]
+                      dp, dp, dp, dp, lp, ctypes.POINTER(_Options), lp, lp]
         self._simulate = f
 
     def simulate(self, q0, v0, t0: float, h: float, n_steps: int, every: int, U: np.ndarray | None,
-                 p: np.ndarray, tol: float, max_iter: int):
-        """``(Q, V, LAM, ITER, status, steps_done)``: states after every ``every``-th of
+                 p: np.ndarray, tol: float, max_iter: int, max_halvings: int):
+        """``(Q, V, LAM, ITER, status, steps_done, splits)``: states after every ``every``-th of
         ``n_steps`` steps (see ``<model>_simulate`` in ``<model>_stepper.h``).  ``U``: inputs
         per step, shape ``(n_steps, nu)``, or None for zeros."""
         rows = n_steps // every
@@ -98,18 +107,19 @@ class CompiledStepper:
         q0, v0 = np.ascontiguousarray(q0, float), np.ascontiguousarray(v0, float)
         p = np.ascontiguousarray(p, float)
         U = None if U is None or self.nu == 0 else np.ascontiguousarray(U, float)
-        done = ctypes.c_long(0)
+        done, splits = ctypes.c_long(0), ctypes.c_long(0)
         status = self._simulate(_ptr(q0), _ptr(v0), float(t0), float(h), int(n_steps), int(every),
                                 _ptr(U), self.nu if U is not None else 0, _ptr(p), _ptr(Q), _ptr(V), _ptr(LAM),
                                 ITER.ctypes.data_as(ctypes.POINTER(ctypes.c_long)),
-                                ctypes.byref(_Options(float(tol), int(max_iter))), ctypes.byref(done))
-        return Q, V, LAM, ITER, int(status), int(done.value)
+                                ctypes.byref(_Options(float(tol), int(max_iter), int(max_halvings))),
+                                ctypes.byref(done), ctypes.byref(splits))
+        return Q, V, LAM, ITER, int(status), int(done.value), int(splits.value)
 
 
 class _Options(ctypes.Structure):
     """``<model>_step_options``."""
 
-    _fields_ = [("tol", ctypes.c_double), ("max_iter", ctypes.c_int)]
+    _fields_ = [("tol", ctypes.c_double), ("max_iter", ctypes.c_int), ("max_halvings", ctypes.c_int)]
 
 
 def _ptr(a: np.ndarray | None):
