@@ -5,6 +5,8 @@ message names the argument (``what``), what was expected and what was found.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ncgen.errors import InertiaError, RotationError, ShapeError
@@ -67,7 +69,8 @@ def rotation(R, dim: int, what: str = "rotation") -> np.ndarray:
     """A proper rotation matrix (``RᵀR = 1``, ``det R = +1`` to 1e-9); in 2D an angle is accepted."""
     if dim == 2 and np.ndim(R) == 0:
         a = as_scalar(R, what)
-        return np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+        c, s = math.cos(a), math.sin(a)        # libm, not NumPy's CPU-dependent SIMD loops
+        return np.array([[c, -s], [s, c]])
     R = as_array(R, (dim, dim), what)
     err = np.max(np.abs(R.T @ R - np.eye(dim)))
     if err > ROTATION_TOL:

@@ -18,7 +18,6 @@
 #define NCGEN_FOURBAR_3D_H
 
 #include "fourbar_3d_kernels_0.h"
-#include "fourbar_3d_kernels_1.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -85,11 +84,11 @@ extern const casadi_real fourbar_3d_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define FOURBAR_3D_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define FOURBAR_3D_MODEL_HASH "1440f031e92198f0c84c2c2aaf35d3d19cdb03525391c14c57dd3d7d851530f0"
+#define FOURBAR_3D_MODEL_HASH "4f24867f99a8190f083f3f5c7aeec89bb2bf09f118cb5c4e9b46b473efa1e4c4"
 
 /* ---- fourbar_3d_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
- * In fourbar_3d_kernels_0.c; 190 instructions.
+ * In fourbar_3d_kernels_0.c; 169 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_3d_t0.
  *   arg[1] q: 24x1, nnz 24 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: fourbar_3d_q0.
@@ -104,18 +103,18 @@ extern const casadi_real fourbar_3d_gravity[3];
 
 /* ---- fourbar_3d_A ----------------------------------------------------
  * constraint Jacobian A = ∂Φ/∂q (sparse, linear in q)
- * In fourbar_3d_kernels_0.c; 195 instructions.
+ * In fourbar_3d_kernels_0.c; 183 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_3d_t0.
  *   arg[1] q: 24x1, nnz 24 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: fourbar_3d_q0.
  *   arg[2] p: 0x1, nnz 0 [SI units of each parameter] parameters, in the order of parameter_names. Default: zeros.
  * Outputs:
- *   res[0] A: 23x24, nnz 105 (sparse) [m or 1] A, nc × nq.
+ *   res[0] A: 23x24, nnz 96 (sparse) [m or 1] A, nc × nq.
  */
 #define FOURBAR_3D_A_IN_T_NNZ 1
 #define FOURBAR_3D_A_IN_Q_NNZ 24
 #define FOURBAR_3D_A_IN_P_NNZ 0
-#define FOURBAR_3D_A_OUT_A_NNZ 105
+#define FOURBAR_3D_A_OUT_A_NNZ 96
 
 /* ---- fourbar_3d_phi_t ----------------------------------------------------
  * explicit time derivative ∂Φ/∂t (non-zero for driven joints only)
@@ -191,7 +190,7 @@ extern const casadi_real fourbar_3d_gravity[3];
 
 /* ---- fourbar_3d_ode ----------------------------------------------------
  * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ)
- * In fourbar_3d_kernels_0.c; 459 instructions.
+ * In fourbar_3d_kernels_0.c; 438 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_3d_t0.
  *   arg[1] q: 24x1, nnz 24 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: fourbar_3d_q0.
@@ -214,7 +213,7 @@ extern const casadi_real fourbar_3d_gravity[3];
 
 /* ---- fourbar_3d_alg ----------------------------------------------------
  * algebraic residual of the index-1 DAE: A a − γ + 2α Φ̇ + β² Φ (Baumgarte stabilised acceleration constraints)
- * In fourbar_3d_kernels_0.c; 1180 instructions.
+ * In fourbar_3d_kernels_0.c; 1106 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_3d_t0.
  *   arg[1] q: 24x1, nnz 24 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: fourbar_3d_q0.
@@ -235,7 +234,7 @@ extern const casadi_real fourbar_3d_gravity[3];
 
 /* ---- fourbar_3d_dae ----------------------------------------------------
  * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v], z = [a; λ], ode = [v; a] and alg = [M a + Aᵀλ − F; A a − γ + 2α Φ̇ + β² Φ] (sparse Jacobian)
- * In fourbar_3d_kernels_0.c; 1285 instructions.
+ * In fourbar_3d_kernels_0.c; 1211 instructions.
  * Jacobian: jac_fourbar_3d_dae() (CasADi's convention: the inputs, then the nominal outputs;
  * one output jac_<out>_<in> per pair), found by casadi.external for exact derivatives.
  * Inputs:
@@ -279,7 +278,7 @@ extern const casadi_real fourbar_3d_gravity[3];
 
 /* ---- fourbar_3d_energy ----------------------------------------------------
  * kinetic energy T = ½ q̇ᵀ M q̇ and potential energy V (gravity and springs)
- * In fourbar_3d_kernels_0.c; 167 instructions.
+ * In fourbar_3d_kernels_0.c; 166 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_3d_t0.
  *   arg[1] q: 24x1, nnz 24 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: fourbar_3d_q0.
@@ -298,7 +297,7 @@ extern const casadi_real fourbar_3d_gravity[3];
 
 /* ---- fourbar_3d_markers ----------------------------------------------------
  * world positions and velocities of the named markers, one column each, in the order of marker_names
- * In fourbar_3d_kernels_0.c; 38 instructions.
+ * In fourbar_3d_kernels_0.c; 37 instructions.
  * Inputs:
  *   arg[0] q: 24x1, nnz 24 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: fourbar_3d_q0.
  *   arg[1] v: 24x1, nnz 24 [m/s] coordinate rates q̇. Default: fourbar_3d_v0.
@@ -313,7 +312,7 @@ extern const casadi_real fourbar_3d_gravity[3];
 
 /* ---- fourbar_3d_poses ----------------------------------------------------
  * pose of every member: rotation local → world and centre of mass, one block each, in the order of member_names
- * In fourbar_3d_kernels_0.c; 177 instructions.
+ * In fourbar_3d_kernels_0.c; 176 instructions.
  * Inputs:
  *   arg[0] q: 24x1, nnz 24 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: fourbar_3d_q0.
  * Outputs:
@@ -326,7 +325,7 @@ extern const casadi_real fourbar_3d_gravity[3];
 
 /* ---- fourbar_3d_step_newton ----------------------------------------------------
  * Stepper, first half-step: Newton residual r(w, nu) and its Jacobian K
- * In fourbar_3d_kernels_0.c; 1016 instructions.
+ * In fourbar_3d_kernels_0.c; 956 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time at the start of the step. Default: fourbar_3d_t0.
  *   arg[1] q: 24x1, nnz 24 [m] coordinates at t. Default: fourbar_3d_q0.
@@ -338,7 +337,7 @@ extern const casadi_real fourbar_3d_gravity[3];
  *   arg[7] nu: 23x1, nnz 23 [N s/m^2] scaled multipliers h/2 lambda. Default: zeros.
  * Outputs:
  *   res[0] r: 47x1, nnz 47 [N s; m^2/s] [M (w - v) - h/2 F + A^T nu; Phi(t + h, q + h w) / h].
- *   res[1] K: 47x47, nnz 252 (sparse) dr/d[w; nu], sparse.
+ *   res[1] K: 47x47, nnz 234 (sparse) dr/d[w; nu], sparse.
  */
 #define FOURBAR_3D_STEP_NEWTON_IN_T_NNZ 1
 #define FOURBAR_3D_STEP_NEWTON_IN_Q_NNZ 24
@@ -349,11 +348,11 @@ extern const casadi_real fourbar_3d_gravity[3];
 #define FOURBAR_3D_STEP_NEWTON_IN_W_NNZ 24
 #define FOURBAR_3D_STEP_NEWTON_IN_NU_NNZ 23
 #define FOURBAR_3D_STEP_NEWTON_OUT_R_NNZ 47
-#define FOURBAR_3D_STEP_NEWTON_OUT_K_NNZ 252
+#define FOURBAR_3D_STEP_NEWTON_OUT_K_NNZ 234
 
 /* ---- fourbar_3d_step_velocity ----------------------------------------------------
  * Stepper, second half-step: KKT matrix and right-hand side for [v+; h/2 mu]
- * In fourbar_3d_kernels_0.c; 498 instructions.
+ * In fourbar_3d_kernels_0.c; 477 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time at the end of the step. Default: fourbar_3d_t0.
  *   arg[1] q: 24x1, nnz 24 [m] coordinates at the end. Default: fourbar_3d_q0.
@@ -363,7 +362,7 @@ extern const casadi_real fourbar_3d_gravity[3];
  *   arg[5] h: 1x1, nnz 1 [s] step. Default: zeros.
  * Outputs:
  *   res[0] b: 47x1, nnz 47 [N s; m^2/s] [M w + h/2 F; -Phi_t].
- *   res[1] K: 47x47, nnz 252 (sparse) [[M, A^T], [A, 0]] in the pattern of step_newton's K.
+ *   res[1] K: 47x47, nnz 234 (sparse) [[M, A^T], [A, 0]] in the pattern of step_newton's K.
  */
 #define FOURBAR_3D_STEP_VELOCITY_IN_T_NNZ 1
 #define FOURBAR_3D_STEP_VELOCITY_IN_Q_NNZ 24
@@ -372,11 +371,11 @@ extern const casadi_real fourbar_3d_gravity[3];
 #define FOURBAR_3D_STEP_VELOCITY_IN_P_NNZ 0
 #define FOURBAR_3D_STEP_VELOCITY_IN_H_NNZ 1
 #define FOURBAR_3D_STEP_VELOCITY_OUT_B_NNZ 47
-#define FOURBAR_3D_STEP_VELOCITY_OUT_K_NNZ 252
+#define FOURBAR_3D_STEP_VELOCITY_OUT_K_NNZ 234
 
 /* ---- fourbar_3d_step_check ----------------------------------------------------
  * Stepper: constraint residuals of a state
- * In fourbar_3d_kernels_0.c; 496 instructions.
+ * In fourbar_3d_kernels_0.c; 454 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_3d_t0.
  *   arg[1] q: 24x1, nnz 24 [m] coordinates. Default: fourbar_3d_q0.
@@ -395,14 +394,14 @@ extern const casadi_real fourbar_3d_gravity[3];
 
 /* ---- fourbar_3d_step_solve ----------------------------------------------------
  * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
- * In fourbar_3d_kernels_1.c; 12260 instructions.
+ * In fourbar_3d_kernels_0.c; 10283 instructions.
  * Inputs:
- *   arg[0] K: 47x47, nnz 252 (sparse) KKT matrix in the stepper's pattern. Default: zeros.
+ *   arg[0] K: 47x47, nnz 234 (sparse) KKT matrix in the stepper's pattern. Default: zeros.
  *   arg[1] r: 47x1, nnz 47 right-hand side. Default: zeros.
  * Outputs:
  *   res[0] x: 47x1, nnz 47 solution.
  */
-#define FOURBAR_3D_STEP_SOLVE_IN_K_NNZ 252
+#define FOURBAR_3D_STEP_SOLVE_IN_K_NNZ 234
 #define FOURBAR_3D_STEP_SOLVE_IN_R_NNZ 47
 #define FOURBAR_3D_STEP_SOLVE_OUT_X_NNZ 47
 

@@ -239,7 +239,7 @@ int fourbar_3d_accel_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_i
 #define fourbar_3d_accel_SZ_ARG 10
 #define fourbar_3d_accel_SZ_RES 3
 #define fourbar_3d_accel_SZ_IW 48
-#define fourbar_3d_accel_SZ_W 2011
+#define fourbar_3d_accel_SZ_W 1855
 int fourbar_3d_energy(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int fourbar_3d_energy_checkout(void);
 void fourbar_3d_energy_release(int mem);
@@ -348,6 +348,24 @@ int fourbar_3d_step_check_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, cas
 #define fourbar_3d_step_check_SZ_RES 2
 #define fourbar_3d_step_check_SZ_IW 0
 #define fourbar_3d_step_check_SZ_W 0
+int fourbar_3d_step_solve(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int fourbar_3d_step_solve_checkout(void);
+void fourbar_3d_step_solve_release(int mem);
+void fourbar_3d_step_solve_incref(void);
+void fourbar_3d_step_solve_decref(void);
+casadi_int fourbar_3d_step_solve_n_in(void);
+casadi_int fourbar_3d_step_solve_n_out(void);
+casadi_real fourbar_3d_step_solve_default_in(casadi_int i);
+const char* fourbar_3d_step_solve_name_in(casadi_int i);
+const char* fourbar_3d_step_solve_name_out(casadi_int i);
+const casadi_int* fourbar_3d_step_solve_sparsity_in(casadi_int i);
+const casadi_int* fourbar_3d_step_solve_sparsity_out(casadi_int i);
+int fourbar_3d_step_solve_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int fourbar_3d_step_solve_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define fourbar_3d_step_solve_SZ_ARG 2
+#define fourbar_3d_step_solve_SZ_RES 1
+#define fourbar_3d_step_solve_SZ_IW 0
+#define fourbar_3d_step_solve_SZ_W 0
 void fourbar_3d_kernels_0_casadi_version(int* major, int* minor, int* patch);
 int fourbar_3d_kernels_0_casadi_int_size(void);
 int fourbar_3d_kernels_0_casadi_real_size(void);

@@ -84,7 +84,7 @@ extern const casadi_real heavy_top_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define HEAVY_TOP_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define HEAVY_TOP_MODEL_HASH "a21e7b5442958094dc30484305a6c4bf8449deb5d10e28674cdf02d82e305c30"
+#define HEAVY_TOP_MODEL_HASH "70e7cd51fcb5f85b1a3230e3fd97d998b632c694b6d10f3fb4b4af4856994858"
 
 /* ---- heavy_top_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names

@@ -15,7 +15,7 @@
 #include "heavy_top.h"
 
 static const casadi_real q0[9] = {0.8660254037844387, 0.0, -0.5, 0.0, 1.0, 0.0, 0.5, 0.0, 0.8660254037844387};
-static const casadi_real v0[9] = {0.0, 150.0, 0.0, -130.463267027199, 0.0, 74.03099298746586, 0.0, 1.1189129190664313, 0.0};
+static const casadi_real v0[9] = {0.0, 150.0, 0.0, -130.463267027199, 0.0, 74.03099298746586, 0.0, 1.1189129190664318, 0.0};
 static const casadi_real p0[1] = {0};
 
 static const char *status_text(int status) {

@@ -86,11 +86,11 @@ extern const casadi_real slider_crank_gravity[2];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define SLIDER_CRANK_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define SLIDER_CRANK_MODEL_HASH "6b4c4b69b650eda7973d659a08db0130691c28be7a99385dc5a8bc0431cc4ed6"
+#define SLIDER_CRANK_MODEL_HASH "99de4d885a7b48ea955e8ac184d4cc584e84857377387748e39a2600b8ea8d2f"
 
 /* ---- slider_crank_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
- * In slider_crank_kernels_0.c; 69 instructions.
+ * In slider_crank_kernels_0.c; 64 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: slider_crank_t0.
  *   arg[1] q: 10x1, nnz 10 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: slider_crank_q0.
@@ -105,18 +105,18 @@ extern const casadi_real slider_crank_gravity[2];
 
 /* ---- slider_crank_A ----------------------------------------------------
  * constraint Jacobian A = ∂Φ/∂q (sparse, linear in q)
- * In slider_crank_kernels_0.c; 68 instructions.
+ * In slider_crank_kernels_0.c; 65 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: slider_crank_t0.
  *   arg[1] q: 10x1, nnz 10 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: slider_crank_q0.
  *   arg[2] p: 1x1, nnz 1 [SI units of each parameter] parameters, in the order of parameter_names. Default: slider_crank_p0.
  * Outputs:
- *   res[0] A: 10x10, nnz 26 (sparse) [m or 1] A, nc × nq.
+ *   res[0] A: 10x10, nnz 24 (sparse) [m or 1] A, nc × nq.
  */
 #define SLIDER_CRANK_A_IN_T_NNZ 1
 #define SLIDER_CRANK_A_IN_Q_NNZ 10
 #define SLIDER_CRANK_A_IN_P_NNZ 1
-#define SLIDER_CRANK_A_OUT_A_NNZ 26
+#define SLIDER_CRANK_A_OUT_A_NNZ 24
 
 /* ---- slider_crank_phi_t ----------------------------------------------------
  * explicit time derivative ∂Φ/∂t (non-zero for driven joints only)
@@ -192,7 +192,7 @@ extern const casadi_real slider_crank_gravity[2];
 
 /* ---- slider_crank_ode ----------------------------------------------------
  * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ)
- * In slider_crank_kernels_0.c; 192 instructions.
+ * In slider_crank_kernels_0.c; 187 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: slider_crank_t0.
  *   arg[1] q: 10x1, nnz 10 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: slider_crank_q0.
@@ -215,7 +215,7 @@ extern const casadi_real slider_crank_gravity[2];
 
 /* ---- slider_crank_alg ----------------------------------------------------
  * algebraic residual of the index-1 DAE: A a − γ + 2α Φ̇ + β² Φ (Baumgarte stabilised acceleration constraints)
- * In slider_crank_kernels_0.c; 410 instructions.
+ * In slider_crank_kernels_0.c; 394 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: slider_crank_t0.
  *   arg[1] q: 10x1, nnz 10 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: slider_crank_q0.
@@ -236,7 +236,7 @@ extern const casadi_real slider_crank_gravity[2];
 
 /* ---- slider_crank_dae ----------------------------------------------------
  * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v], z = [a; λ], ode = [v; a] and alg = [M a + Aᵀλ − F; A a − γ + 2α Φ̇ + β² Φ] (sparse Jacobian)
- * In slider_crank_kernels_0.c; 471 instructions.
+ * In slider_crank_kernels_0.c; 455 instructions.
  * Jacobian: jac_slider_crank_dae() (CasADi's convention: the inputs, then the nominal outputs;
  * one output jac_<out>_<in> per pair), found by casadi.external for exact derivatives.
  * Inputs:
@@ -327,7 +327,7 @@ extern const casadi_real slider_crank_gravity[2];
 
 /* ---- slider_crank_step_newton ----------------------------------------------------
  * Stepper, first half-step: Newton residual r(w, nu) and its Jacobian K
- * In slider_crank_kernels_0.c; 413 instructions.
+ * In slider_crank_kernels_0.c; 399 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time at the start of the step. Default: slider_crank_t0.
  *   arg[1] q: 10x1, nnz 10 [m] coordinates at t. Default: slider_crank_q0.
@@ -339,7 +339,7 @@ extern const casadi_real slider_crank_gravity[2];
  *   arg[7] nu: 10x1, nnz 10 [N s/m^2] scaled multipliers h/2 lambda. Default: zeros.
  * Outputs:
  *   res[0] r: 20x1, nnz 20 [N s; m^2/s] [M (w - v) - h/2 F + A^T nu; Phi(t + h, q + h w) / h].
- *   res[1] K: 20x20, nnz 72 (sparse) dr/d[w; nu], sparse.
+ *   res[1] K: 20x20, nnz 68 (sparse) dr/d[w; nu], sparse.
  */
 #define SLIDER_CRANK_STEP_NEWTON_IN_T_NNZ 1
 #define SLIDER_CRANK_STEP_NEWTON_IN_Q_NNZ 10
@@ -350,11 +350,11 @@ extern const casadi_real slider_crank_gravity[2];
 #define SLIDER_CRANK_STEP_NEWTON_IN_W_NNZ 10
 #define SLIDER_CRANK_STEP_NEWTON_IN_NU_NNZ 10
 #define SLIDER_CRANK_STEP_NEWTON_OUT_R_NNZ 20
-#define SLIDER_CRANK_STEP_NEWTON_OUT_K_NNZ 72
+#define SLIDER_CRANK_STEP_NEWTON_OUT_K_NNZ 68
 
 /* ---- slider_crank_step_velocity ----------------------------------------------------
  * Stepper, second half-step: KKT matrix and right-hand side for [v+; h/2 mu]
- * In slider_crank_kernels_0.c; 231 instructions.
+ * In slider_crank_kernels_0.c; 226 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time at the end of the step. Default: slider_crank_t0.
  *   arg[1] q: 10x1, nnz 10 [m] coordinates at the end. Default: slider_crank_q0.
@@ -364,7 +364,7 @@ extern const casadi_real slider_crank_gravity[2];
  *   arg[5] h: 1x1, nnz 1 [s] step. Default: zeros.
  * Outputs:
  *   res[0] b: 20x1, nnz 20 [N s; m^2/s] [M w + h/2 F; -Phi_t].
- *   res[1] K: 20x20, nnz 72 (sparse) [[M, A^T], [A, 0]] in the pattern of step_newton's K.
+ *   res[1] K: 20x20, nnz 68 (sparse) [[M, A^T], [A, 0]] in the pattern of step_newton's K.
  */
 #define SLIDER_CRANK_STEP_VELOCITY_IN_T_NNZ 1
 #define SLIDER_CRANK_STEP_VELOCITY_IN_Q_NNZ 10
@@ -373,11 +373,11 @@ extern const casadi_real slider_crank_gravity[2];
 #define SLIDER_CRANK_STEP_VELOCITY_IN_P_NNZ 1
 #define SLIDER_CRANK_STEP_VELOCITY_IN_H_NNZ 1
 #define SLIDER_CRANK_STEP_VELOCITY_OUT_B_NNZ 20
-#define SLIDER_CRANK_STEP_VELOCITY_OUT_K_NNZ 72
+#define SLIDER_CRANK_STEP_VELOCITY_OUT_K_NNZ 68
 
 /* ---- slider_crank_step_check ----------------------------------------------------
  * Stepper: constraint residuals of a state
- * In slider_crank_kernels_0.c; 183 instructions.
+ * In slider_crank_kernels_0.c; 173 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: slider_crank_t0.
  *   arg[1] q: 10x1, nnz 10 [m] coordinates. Default: slider_crank_q0.
@@ -396,14 +396,14 @@ extern const casadi_real slider_crank_gravity[2];
 
 /* ---- slider_crank_step_solve ----------------------------------------------------
  * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
- * In slider_crank_kernels_0.c; 1633 instructions.
+ * In slider_crank_kernels_0.c; 1491 instructions.
  * Inputs:
- *   arg[0] K: 20x20, nnz 72 (sparse) KKT matrix in the stepper's pattern. Default: zeros.
+ *   arg[0] K: 20x20, nnz 68 (sparse) KKT matrix in the stepper's pattern. Default: zeros.
  *   arg[1] r: 20x1, nnz 20 right-hand side. Default: zeros.
  * Outputs:
  *   res[0] x: 20x1, nnz 20 solution.
  */
-#define SLIDER_CRANK_STEP_SOLVE_IN_K_NNZ 72
+#define SLIDER_CRANK_STEP_SOLVE_IN_K_NNZ 68
 #define SLIDER_CRANK_STEP_SOLVE_IN_R_NNZ 20
 #define SLIDER_CRANK_STEP_SOLVE_OUT_X_NNZ 20
 

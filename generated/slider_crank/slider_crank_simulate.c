@@ -15,7 +15,7 @@
 #include "slider_crank.h"
 
 static const casadi_real q0[10] = {6.938893903907228e-18, 0.0, 0.1, 0.0, 0.4, 0.0, 1.0, 0.0, 0.0, 1.0};
-static const casadi_real v0[10] = {0.0, 1.8301332671555315e-16, 0.0, 0.6283185307179587, 0.0, -2.7755575615628914e-17, 0.0, 0.0, 0.0, 0.0};
+static const casadi_real v0[10] = {0.0, 0.0, 0.0, 0.6283185307179585, 0.0, -2.772094606301025e-17, 0.0, 0.0, 0.0, 0.0};
 static const casadi_real p0[1] = {6.283185307179586};
 
 static const char *status_text(int status) {

@@ -87,11 +87,11 @@ extern const casadi_real tensegrity_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define TENSEGRITY_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define TENSEGRITY_MODEL_HASH "5410884e5bdae1f540362f594cb4ad49cbf28421abd1ce9ae31d244e1c9107e4"
+#define TENSEGRITY_MODEL_HASH "f1634714b761bfdab1e5c6e398e5bbc7339c82a72f03526502d53f5c9c4d013d"
 
 /* ---- tensegrity_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
- * In tensegrity_kernels_0.c; 63 instructions.
+ * In tensegrity_kernels_0.c; 53 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: tensegrity_t0.
  *   arg[1] q: 18x1, nnz 18 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: tensegrity_q0.
@@ -106,18 +106,18 @@ extern const casadi_real tensegrity_gravity[3];
 
 /* ---- tensegrity_A ----------------------------------------------------
  * constraint Jacobian A = ∂Φ/∂q (sparse, linear in q)
- * In tensegrity_kernels_0.c; 73 instructions.
+ * In tensegrity_kernels_0.c; 67 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: tensegrity_t0.
  *   arg[1] q: 18x1, nnz 18 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: tensegrity_q0.
  *   arg[2] p: 3x1, nnz 3 [SI units of each parameter] parameters, in the order of parameter_names. Default: tensegrity_p0.
  * Outputs:
- *   res[0] A: 6x18, nnz 24 (sparse) [m or 1] A, nc × nq.
+ *   res[0] A: 6x18, nnz 21 (sparse) [m or 1] A, nc × nq.
  */
 #define TENSEGRITY_A_IN_T_NNZ 1
 #define TENSEGRITY_A_IN_Q_NNZ 18
 #define TENSEGRITY_A_IN_P_NNZ 3
-#define TENSEGRITY_A_OUT_A_NNZ 24
+#define TENSEGRITY_A_OUT_A_NNZ 21
 
 /* ---- tensegrity_phi_t ----------------------------------------------------
  * explicit time derivative ∂Φ/∂t (non-zero for driven joints only)
@@ -153,7 +153,7 @@ extern const casadi_real tensegrity_gravity[3];
 
 /* ---- tensegrity_F ----------------------------------------------------
  * generalised applied force F(t, q, q̇, u, p): gravity and force elements
- * In tensegrity_kernels_0.c; 906 instructions.
+ * In tensegrity_kernels_0.c; 469 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: tensegrity_t0.
  *   arg[1] q: 18x1, nnz 18 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: tensegrity_q0.
@@ -193,7 +193,7 @@ extern const casadi_real tensegrity_gravity[3];
 
 /* ---- tensegrity_ode ----------------------------------------------------
  * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ)
- * In tensegrity_kernels_0.c; 1074 instructions.
+ * In tensegrity_kernels_0.c; 627 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: tensegrity_t0.
  *   arg[1] q: 18x1, nnz 18 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: tensegrity_q0.
@@ -216,7 +216,7 @@ extern const casadi_real tensegrity_gravity[3];
 
 /* ---- tensegrity_alg ----------------------------------------------------
  * algebraic residual of the index-1 DAE: A a − γ + 2α Φ̇ + β² Φ (Baumgarte stabilised acceleration constraints)
- * In tensegrity_kernels_0.c; 1231 instructions.
+ * In tensegrity_kernels_0.c; 763 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: tensegrity_t0.
  *   arg[1] q: 18x1, nnz 18 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: tensegrity_q0.
@@ -237,7 +237,7 @@ extern const casadi_real tensegrity_gravity[3];
 
 /* ---- tensegrity_dae ----------------------------------------------------
  * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v], z = [a; λ], ode = [v; a] and alg = [M a + Aᵀλ − F; A a − γ + 2α Φ̇ + β² Φ] (sparse Jacobian)
- * In tensegrity_kernels_0.c; 1313 instructions.
+ * In tensegrity_kernels_0.c; 845 instructions.
  * Jacobian: jac_tensegrity_dae() (CasADi's convention: the inputs, then the nominal outputs;
  * one output jac_<out>_<in> per pair), found by casadi.external for exact derivatives.
  * Inputs:
@@ -281,7 +281,7 @@ extern const casadi_real tensegrity_gravity[3];
 
 /* ---- tensegrity_energy ----------------------------------------------------
  * kinetic energy T = ½ q̇ᵀ M q̇ and potential energy V (gravity and springs)
- * In tensegrity_kernels_0.c; 436 instructions.
+ * In tensegrity_kernels_0.c; 323 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: tensegrity_t0.
  *   arg[1] q: 18x1, nnz 18 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: tensegrity_q0.
@@ -328,7 +328,7 @@ extern const casadi_real tensegrity_gravity[3];
 
 /* ---- tensegrity_step_newton ----------------------------------------------------
  * Stepper, first half-step: Newton residual r(w, nu) and its Jacobian K
- * In tensegrity_kernels_0.c; 4537 instructions.
+ * In tensegrity_kernels_0.c; 2074 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time at the start of the step. Default: tensegrity_t0.
  *   arg[1] q: 18x1, nnz 18 [m] coordinates at t. Default: tensegrity_q0.
@@ -340,7 +340,7 @@ extern const casadi_real tensegrity_gravity[3];
  *   arg[7] nu: 6x1, nnz 6 [N s/m^2] scaled multipliers h/2 lambda. Default: zeros.
  * Outputs:
  *   res[0] r: 24x1, nnz 24 [N s; m^2/s] [M (w - v) - h/2 F + A^T nu; Phi(t + h, q + h w) / h].
- *   res[1] K: 24x24, nnz 372 (sparse) dr/d[w; nu], sparse.
+ *   res[1] K: 24x24, nnz 276 (sparse) dr/d[w; nu], sparse.
  */
 #define TENSEGRITY_STEP_NEWTON_IN_T_NNZ 1
 #define TENSEGRITY_STEP_NEWTON_IN_Q_NNZ 18
@@ -351,11 +351,11 @@ extern const casadi_real tensegrity_gravity[3];
 #define TENSEGRITY_STEP_NEWTON_IN_W_NNZ 18
 #define TENSEGRITY_STEP_NEWTON_IN_NU_NNZ 6
 #define TENSEGRITY_STEP_NEWTON_OUT_R_NNZ 24
-#define TENSEGRITY_STEP_NEWTON_OUT_K_NNZ 372
+#define TENSEGRITY_STEP_NEWTON_OUT_K_NNZ 276
 
 /* ---- tensegrity_step_velocity ----------------------------------------------------
  * Stepper, second half-step: KKT matrix and right-hand side for [v+; h/2 mu]
- * In tensegrity_kernels_1.c; 1414 instructions.
+ * In tensegrity_kernels_0.c; 878 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time at the end of the step. Default: tensegrity_t0.
  *   arg[1] q: 18x1, nnz 18 [m] coordinates at the end. Default: tensegrity_q0.
@@ -365,7 +365,7 @@ extern const casadi_real tensegrity_gravity[3];
  *   arg[5] h: 1x1, nnz 1 [s] step. Default: zeros.
  * Outputs:
  *   res[0] b: 24x1, nnz 24 [N s; m^2/s] [M w + h/2 F; -Phi_t].
- *   res[1] K: 24x24, nnz 372 (sparse) [[M, A^T], [A, 0]] in the pattern of step_newton's K.
+ *   res[1] K: 24x24, nnz 276 (sparse) [[M, A^T], [A, 0]] in the pattern of step_newton's K.
  */
 #define TENSEGRITY_STEP_VELOCITY_IN_T_NNZ 1
 #define TENSEGRITY_STEP_VELOCITY_IN_Q_NNZ 18
@@ -374,11 +374,11 @@ extern const casadi_real tensegrity_gravity[3];
 #define TENSEGRITY_STEP_VELOCITY_IN_P_NNZ 3
 #define TENSEGRITY_STEP_VELOCITY_IN_H_NNZ 1
 #define TENSEGRITY_STEP_VELOCITY_OUT_B_NNZ 24
-#define TENSEGRITY_STEP_VELOCITY_OUT_K_NNZ 372
+#define TENSEGRITY_STEP_VELOCITY_OUT_K_NNZ 276
 
 /* ---- tensegrity_step_check ----------------------------------------------------
  * Stepper: constraint residuals of a state
- * In tensegrity_kernels_1.c; 160 instructions.
+ * In tensegrity_kernels_0.c; 143 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: tensegrity_t0.
  *   arg[1] q: 18x1, nnz 18 [m] coordinates. Default: tensegrity_q0.
@@ -397,14 +397,14 @@ extern const casadi_real tensegrity_gravity[3];
 
 /* ---- tensegrity_step_solve ----------------------------------------------------
  * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
- * In tensegrity_kernels_1.c; 10421 instructions.
+ * In tensegrity_kernels_1.c; 11848 instructions.
  * Inputs:
- *   arg[0] K: 24x24, nnz 372 (sparse) KKT matrix in the stepper's pattern. Default: zeros.
+ *   arg[0] K: 24x24, nnz 276 (sparse) KKT matrix in the stepper's pattern. Default: zeros.
  *   arg[1] r: 24x1, nnz 24 right-hand side. Default: zeros.
  * Outputs:
  *   res[0] x: 24x1, nnz 24 solution.
  */
-#define TENSEGRITY_STEP_SOLVE_IN_K_NNZ 372
+#define TENSEGRITY_STEP_SOLVE_IN_K_NNZ 276
 #define TENSEGRITY_STEP_SOLVE_IN_R_NNZ 24
 #define TENSEGRITY_STEP_SOLVE_OUT_X_NNZ 24
 

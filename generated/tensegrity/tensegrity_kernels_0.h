@@ -239,7 +239,7 @@ int tensegrity_accel_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_i
 #define tensegrity_accel_SZ_ARG 10
 #define tensegrity_accel_SZ_RES 3
 #define tensegrity_accel_SZ_IW 25
-#define tensegrity_accel_SZ_W 633
+#define tensegrity_accel_SZ_W 606
 int tensegrity_energy(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int tensegrity_energy_checkout(void);
 void tensegrity_energy_release(int mem);
@@ -312,6 +312,42 @@ int tensegrity_step_newton_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, ca
 #define tensegrity_step_newton_SZ_RES 2
 #define tensegrity_step_newton_SZ_IW 0
 #define tensegrity_step_newton_SZ_W 0
+int tensegrity_step_velocity(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int tensegrity_step_velocity_checkout(void);
+void tensegrity_step_velocity_release(int mem);
+void tensegrity_step_velocity_incref(void);
+void tensegrity_step_velocity_decref(void);
+casadi_int tensegrity_step_velocity_n_in(void);
+casadi_int tensegrity_step_velocity_n_out(void);
+casadi_real tensegrity_step_velocity_default_in(casadi_int i);
+const char* tensegrity_step_velocity_name_in(casadi_int i);
+const char* tensegrity_step_velocity_name_out(casadi_int i);
+const casadi_int* tensegrity_step_velocity_sparsity_in(casadi_int i);
+const casadi_int* tensegrity_step_velocity_sparsity_out(casadi_int i);
+int tensegrity_step_velocity_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int tensegrity_step_velocity_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define tensegrity_step_velocity_SZ_ARG 6
+#define tensegrity_step_velocity_SZ_RES 2
+#define tensegrity_step_velocity_SZ_IW 0
+#define tensegrity_step_velocity_SZ_W 0
+int tensegrity_step_check(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int tensegrity_step_check_checkout(void);
+void tensegrity_step_check_release(int mem);
+void tensegrity_step_check_incref(void);
+void tensegrity_step_check_decref(void);
+casadi_int tensegrity_step_check_n_in(void);
+casadi_int tensegrity_step_check_n_out(void);
+casadi_real tensegrity_step_check_default_in(casadi_int i);
+const char* tensegrity_step_check_name_in(casadi_int i);
+const char* tensegrity_step_check_name_out(casadi_int i);
+const casadi_int* tensegrity_step_check_sparsity_in(casadi_int i);
+const casadi_int* tensegrity_step_check_sparsity_out(casadi_int i);
+int tensegrity_step_check_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int tensegrity_step_check_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define tensegrity_step_check_SZ_ARG 4
+#define tensegrity_step_check_SZ_RES 2
+#define tensegrity_step_check_SZ_IW 0
+#define tensegrity_step_check_SZ_W 0
 void tensegrity_kernels_0_casadi_version(int* major, int* minor, int* patch);
 int tensegrity_kernels_0_casadi_int_size(void);
 int tensegrity_kernels_0_casadi_real_size(void);

@@ -14,7 +14,7 @@
 #define NC TENSEGRITY_STEP_NC
 #define NX (NQ + NC)
 /* Nonzeros of the KKT matrix K (the pattern of tensegrity_step_newton's output K). */
-#define NNZ_K 372
+#define NNZ_K 276
 #define ALIGN 16
 
 typedef int (*kernel_work)(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz_iw, casadi_int *sz_w);

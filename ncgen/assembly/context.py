@@ -16,6 +16,7 @@ from ncgen.assembly.sym2casadi import to_casadi
 from ncgen.errors import BasisError
 from ncgen.model.expressions import Scope, evaluate, scope
 from ncgen.model.members import Member, ModelError
+from ncgen.reproducible import dot, matmul, matvec, norm, snap
 from ncgen.symbolic.joints import primitive
 
 
@@ -115,7 +116,9 @@ class Context:
 
         A body's directions are ``X(q) c_d``.  A 3D bar carries only its own axis ``u``; a
         planar bar carries every direction ``(d̄_x u + d̄_y J u) / L`` (``J`` the rotation by
-        +90°, ``d̄`` the local direction), linear in q like a body's."""
+        +90°, ``d̄`` the local direction), linear in q like a body's.  The coefficients are
+        snapped (:func:`ncgen.reproducible.snap`): a direction along a base vector is exactly
+        that vector."""
         w = np.asarray(world_dir, float)
         if member.is_ground:
             return ca.DM(w), ca.DM.zeros(self.dim)
@@ -126,10 +129,11 @@ class Context:
         if member.kind == "bar" and self.dim == 2:
             U = loc.C(np.ones(1)) - loc.C(np.zeros(1))            # u = U q
             J = np.array([[0.0, -1.0], [1.0, 0.0]])
-            C = ca.DM((dbar[0] * U + dbar[1] * (J @ U)) / loc.Xbar[0, 0])
+            c = snap(dbar / loc.Xbar[0, 0])
+            C = ca.DM(c[0] * U + c[1] * matmul(J, U))
             return ca.mtimes(C, self.q_of(member)), ca.mtimes(C, self.v_of(member))
-        c = loc.Xbar_pinv @ dbar
-        if np.linalg.norm(loc.Xbar @ c - dbar) > 1e-9 * max(np.linalg.norm(dbar), 1e-300):
+        c = snap(matvec(loc.Xbar_pinv, dbar))
+        if norm(matvec(loc.Xbar, c) - dbar) > 1e-9 * max(norm(dbar), 1e-300):
             raise ModelError(f"{what}: bar {member.name} carries only its own axis as a direction, "
                              f"and {np.round(w, 12).tolist()} is not along it")
         C = ca.DM(loc.C(c) - loc.C(np.zeros_like(c)))
@@ -142,7 +146,7 @@ class Context:
         if member.kind == "point":
             return False
         d = member.direction_to_local(np.asarray(world_dir, float))
-        return bool(np.linalg.norm(d[1:]) <= 1e-9 * np.linalg.norm(d))
+        return bool(norm(d[1:]) <= 1e-9 * norm(d))
 
     def perpendiculars(self, member, world_axis, what: str) -> list:
         """Body-fixed directions of ``member`` spanning the plane ⟂ ``world_axis`` (two in 3D,
@@ -159,7 +163,7 @@ class Context:
         if member.kind == "point":
             return member.p0.copy()
         e = member.R0[:, 0]
-        return member.p0 + ((w - member.p0) @ e) * e
+        return member.p0 + dot(w - member.p0, e) * e
 
     # ---------------------------------------------------------- values
     def scope(self, *, inputs: bool = True, state: bool = False) -> Scope:
@@ -191,10 +195,10 @@ class Context:
 def perpendicular_basis(axis) -> list[np.ndarray]:
     """Unit vectors completing ``axis/|axis|`` to a right-handed orthonormal basis."""
     a = np.asarray(axis, float)
-    a = a / np.linalg.norm(a)
+    a = a / norm(a)
     if len(a) == 2:
         return [np.array([-a[1], a[0]])]
     helper = np.eye(3)[int(np.argmin(np.abs(a)))]
     n1 = np.cross(a, helper)
-    n1 /= np.linalg.norm(n1)
+    n1 /= norm(n1)
     return [n1, np.cross(a, n1)]

@@ -28,8 +28,9 @@ def assemble_mass(layout: Layout, members) -> np.ndarray:
 
 def sparse_dm(M: np.ndarray) -> ca.DM:
     """``M`` as a sparse CasADi matrix, built from its nonzeros (``ca.DM(M)`` first copies
-    every entry of the dense array: O(nq²))."""
-    rows, cols = np.nonzero(M)
+    every entry of the dense array: O(nq²)).  A DM's nonzeros are stored column by column,
+    so they are gathered in that order (``np.nonzero(M)`` lists them row by row)."""
+    cols, rows = np.nonzero(np.asarray(M).T)
     return ca.DM(ca.Sparsity.triplet(M.shape[0], M.shape[1], rows.tolist(), cols.tolist()), M[rows, cols])
 
 

@@ -18,6 +18,7 @@ import numpy as np
 
 from ncgen.model.members import Ground, Member, ModelError
 from ncgen.model.joint_equations import name_of
+from ncgen.reproducible import norm
 from ncgen.validation import as_vector
 
 
@@ -112,7 +113,7 @@ class Joint:
         if value is None:
             raise ModelError(f"{self.label}: {key}: expected a direction, got nothing")
         a = as_vector(value, self.system.dim, f"{self.label}: {key}")
-        n = float(np.linalg.norm(a))
+        n = norm(a)
         if n < 1e-12:
             raise ModelError(f"{self.label}: {key}: expected a non-zero direction, got {a.tolist()}")
         return a / n

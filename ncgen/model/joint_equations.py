@@ -22,6 +22,7 @@ import numpy as np
 
 from ncgen.assembly.context import perpendicular_basis
 from ncgen.model.members import ModelError
+from ncgen.reproducible import dot, norm
 
 #: |cos| above which a bar counts as lying along a direction.
 ALONG_TOL = 1e-9
@@ -52,7 +53,7 @@ def bar_axis(m) -> np.ndarray:
 
 def is_along(m, direction) -> bool:
     """Whether ``m`` is a bar lying along ``direction`` (a unit vector)."""
-    return kind_of(m) == "bar" and abs(abs(float(bar_axis(m) @ direction)) - 1.0) < ALONG_TOL
+    return kind_of(m) == "bar" and abs(abs(dot(bar_axis(m), direction)) - 1.0) < ALONG_TOL
 
 
 def require_orientation(label: str, *members) -> None:
@@ -110,7 +111,7 @@ def point_on_line(ctx, C, O, at_c, at_o, axis, label: str, prefix: str) -> Equat
     eqs = []
     for n in perpendicular_basis(axis):
         nC, _ = ctx.direction(C, n, label)
-        eqs.append(ctx.apply("offset_dot", rC, rO, nC, float(n @ gap))[0])
+        eqs.append(ctx.apply("offset_dot", rC, rO, nC, dot(n, gap))[0])
     return _names(prefix, eqs)
 
 
@@ -125,7 +126,7 @@ def point_on_plane(ctx, C, O, at_c, at_o, normal, label: str, prefix: str) -> Eq
     rO, _ = ctx.point(O, at_o, label)
     nC, _ = ctx.direction(C, normal, label)
     gap = np.asarray(at_o, float) - np.asarray(at_c, float)
-    return [(prefix, ctx.apply("offset_dot", rC, rO, nC, float(normal @ gap))[0])]
+    return [(prefix, ctx.apply("offset_dot", rC, rO, nC, dot(normal, gap))[0])]
 
 
 def align_axis(ctx, A, B, axis, label: str, prefix: str) -> Equations:
@@ -145,7 +146,7 @@ def align_axis(ctx, A, B, axis, label: str, prefix: str) -> Equations:
         if is_along(Y, axis):
             return _names(prefix, [_dot(ctx, n, uY, 0.0) for n in ctx.perpendiculars(F, axis, label)])
         aF, _ = ctx.direction(F, axis, label)
-        return _names(prefix, [_dot(ctx, aF, uY, axis @ u0)])
+        return _names(prefix, [_dot(ctx, aF, uY, dot(axis, u0))])
     along = [m for m in (A, B) if is_along(m, axis)]
     if len(along) != 1:
         why = "both lie along it" if along else "neither lies along it"
@@ -155,7 +156,7 @@ def align_axis(ctx, A, B, axis, label: str, prefix: str) -> Equations:
     Y = B if X is A else A
     uX, uX0 = _bar_u(ctx, X, label)
     uY, uY0 = _bar_u(ctx, Y, label)
-    return _names(prefix, [_dot(ctx, uX, uY, uX0 @ uY0)])
+    return _names(prefix, [_dot(ctx, uX, uY, dot(uX0, uY0))])
 
 
 def lock_orientation(ctx, A, B, label: str, prefix: str) -> Equations:
@@ -233,11 +234,11 @@ def angle_gauge(ctx, A, B, axis, label: str) -> AngleGauge:
         b, _ = ctx.direction(O, e1, label)
     else:
         b, u0 = _bar_u(ctx, O, label)
-        e1 = u0 - (u0 @ axis) * axis
-        if np.linalg.norm(e1) < 1e-9 * np.linalg.norm(u0):
+        e1 = u0 - dot(u0, axis) * axis
+        if norm(e1) < 1e-9 * norm(u0):
             raise ModelError(f"{label}: bar {O.name} lies along the axis; its rotation about it is "
                              "not a coordinate")
-        e1 = e1 / np.linalg.norm(e1)
+        e1 = e1 / norm(e1)
     m1, _ = ctx.direction(F, e1, label)
     m2, _ = ctx.direction(F, np.cross(axis, e1), label)
     return AngleGauge(3, b, m1, m2, sign)

@@ -41,6 +41,7 @@ from ncgen.model.joint_equations import (
     point_on_line, point_on_plane, require_orientation,
 )
 from ncgen.model.members import ModelError
+from ncgen.reproducible import dot, norm
 from ncgen.validation import as_vector
 
 #: |cos| below which two directions count as perpendicular (Universal).
@@ -132,7 +133,7 @@ class Prismatic(Joint):
         rC, _ = ctx.point(C, pC, self.label)
         rO, _ = ctx.point(O, pO, self.label)
         aC, _ = ctx.direction(C, a, self.label)
-        s = float(a @ (pO - pC)) + sign * self.drive_expr(ctx)
+        s = dot(a, pO - pC) + sign * self.drive_expr(ctx)
         return [(f"{self.name}.drive", ctx.apply("offset_dot", rC, rO, aC, s)[0])]
 
 
@@ -244,7 +245,7 @@ class Distance(Joint):
 
     def geometry(self, ctx):
         pA, pB = self.points()
-        eqs = distance(ctx, self.A, pA, self.B, pB, float(np.linalg.norm(pB - pA)), self.label,
+        eqs = distance(ctx, self.A, pA, self.B, pB, norm(pB - pA), self.label,
                        f"{self.name}.distance")
         return [] if self.drive is not None else eqs
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ncgen.reproducible import matvec
 from ncgen.errors import BasisError, NcgenError
 from ncgen.symbolic.coordinates import CoordinateType
 from ncgen.symbolic.member import RigidMember
@@ -97,12 +98,12 @@ class Member:
         """Local coordinates of a world point in the initial configuration."""
         w = as_vector(world, self.dim, f"{self.name}: world point")
         R = np.eye(self.dim) if self.R0 is None else self.R0
-        return R.T @ (w - self.p0)
+        return matvec(R.T, w - self.p0)
 
     def direction_to_local(self, world) -> np.ndarray:
         w = as_vector(world, self.dim, f"{self.name}: world direction")
         R = np.eye(self.dim) if self.R0 is None else self.R0
-        return R.T @ w
+        return matvec(R.T, w)
 
     def slot_position(self, slot: int) -> np.ndarray:
         """Initial world position of basic point ``slot``."""

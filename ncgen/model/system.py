@@ -15,6 +15,7 @@ import casadi as ca
 
 from ncgen.model.expressions import check_name
 from ncgen.model.members import Ground, Member, ModelError, NodeRef
+from ncgen.reproducible import norm
 from ncgen.symbolic.coordinates import coordinate_type
 from ncgen.symbolic.member import RigidMember
 from ncgen.validation import as_scalar, as_vector, rotation
@@ -134,7 +135,7 @@ class System:
             else:
                 pts.append(as_vector(e, d, f"bar {name!r}: ends[{i}]"))
         axis = pts[1] - pts[0]
-        L = float(np.linalg.norm(axis))
+        L = norm(axis)
         if L <= 0:
             raise ModelError(f"bar {name!r}: its two ends coincide at {pts[0].tolist()}")
         local = RigidMember.bar(ct, mass, L, inertia=inertia, com=com)
@@ -266,5 +267,5 @@ def _any_frame(e1: np.ndarray) -> np.ndarray:
         return np.array([[e1[0], -e1[1]], [e1[1], e1[0]]])
     helper = np.eye(3)[int(np.argmin(np.abs(e1)))]
     e3 = np.cross(e1, helper)
-    e3 /= np.linalg.norm(e3)
+    e3 /= norm(e3)
     return np.column_stack([e1, np.cross(e3, e1), e3])

@@ -18,6 +18,7 @@ from functools import cached_property
 import numpy as np
 
 from ncgen.errors import BasisError, InertiaError, ShapeError
+from ncgen.reproducible import inv, matmul, matvec, snap
 from ncgen.symbolic.coordinates import CoordinateType, coordinate_type
 from ncgen.symbolic.numeric import numpy_function
 from ncgen.validation import as_array, as_scalar, as_vector, positive, rotation
@@ -183,9 +184,9 @@ class RigidMember:
             for t in range(ct.k):
                 vals[D.B[s, t]] = self.B[s, t]
         if ct.kind == "body":
-            Xi = np.linalg.inv(self.Xbar)
+            Xi = inv(self.Xbar)
             vals.update(zip(D.Xbar_inv, Xi.reshape(-1)))
-            vals.update(zip(D.Gbar, (Xi @ Xi.T).reshape(-1)))
+            vals.update(zip(D.Gbar, matmul(Xi, Xi.T).reshape(-1)))
         return vals
 
     def _fn(self, name: str, expr, *groups):
@@ -227,15 +228,16 @@ class RigidMember:
 
     # ------------------------------------------------------------ points
     def affine(self, rbar) -> np.ndarray:
-        """Affine coordinates ``c = X̄⁺ (r̄ − r̄_i)`` of a local point; a bar's point must lie on
-        its axis and a point member's at its origin."""
+        """Affine coordinates ``c = X̄⁺ (r̄ − r̄_i)`` of a local point (entries within 1e-12 of
+        an integer snapped to it: basic points are exactly 0 or 1); a bar's point must lie
+        on its axis and a point member's at its origin."""
         ct = self.ctype
         rbar = as_vector(rbar, ct.dim, "local point")
         if ct.k == 0:
             if np.linalg.norm(rbar) > 0:
                 raise BasisError(f"a point member has only its origin; got local point {rbar.tolist()}")
             return np.zeros(0)
-        c = self.Xbar_pinv @ (rbar - self.rbar_i)
+        c = snap(matvec(self.Xbar_pinv, rbar - self.rbar_i))
         off = np.linalg.norm(self.Xbar @ c - (rbar - self.rbar_i))
         scale = max(np.linalg.norm(self.Xbar), np.linalg.norm(rbar - self.rbar_i), 1e-300)
         if off > AXIS_TOL * scale:
