@@ -4,8 +4,9 @@ deriving an n-link pendulum, side by side.
 ncgen, per N (chain of benchmarks/common.py), in a fresh child process with a fresh compile
 cache: ``System`` construction and ``build()`` (SymPy per coordinate type, CasADi assembly,
 consistent initial state), ``nc.generate`` (the model's C package: system functions, DAE
-Jacobian, stepper), ``compile_package`` (gcc, default flags unless ``--cflags``; files in
-parallel on all cores) and ``load_functions`` (casadi.external).  Wall time per phase and
+Jacobian, stepper), ``compile_package`` (gcc; ncgen's default flags, -O2 and -O0 for the
+files holding very long functions, unless ``--cflags``; files in parallel on all cores) and
+``load_functions`` (casadi.external).  Wall time per phase and
 peak resident memory: of the Python process (``RUSAGE_SELF``) and of the largest compiler
 process (``RUSAGE_CHILDREN``, measured in the child).
 
@@ -17,7 +18,7 @@ Each n runs in a child process too (time and peak memory).
 
     python benchmarks/build_scaling.py                 N = 10, 100, 1000
     python benchmarks/build_scaling.py --smoke         N = 2, 4 and n <= 3 (CI)
-    python benchmarks/build_scaling.py --sizes 10 100 --cflags=-O1
+    python benchmarks/build_scaling.py --sizes 10 100 --cflags=-O2   -O2 on every file
 """
 from __future__ import annotations
 
@@ -126,7 +127,8 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--smoke", action="store_true", help="tiny: runs in seconds (CI)")
     parser.add_argument("--sizes", type=int, nargs="+", help="numbers of bars (default 10 100 1000)")
-    parser.add_argument("--cflags", default=None, help="compiler flags (default: ncgen's, -O2)")
+    parser.add_argument("--cflags", default=None,
+                        help="compiler flags for every file (default: ncgen's, -O2 and -O0 for files with very long functions)")
     parser.add_argument("--timeout", type=float, default=1800.0, help="seconds allowed per N")
     parser.add_argument("--kane-cap", type=float, default=60.0, help="stop KanesMethod after a run this long (s)")
     parser.add_argument("--child", nargs=2, metavar=("KIND", "N"), help=argparse.SUPPRESS)
@@ -138,7 +140,8 @@ def main(argv=None) -> int:
     sizes = args.sizes or ([2, 4] if args.smoke else [10, 100, 1000])
     kane_cap, kane_max = (5.0, 3) if args.smoke else (args.kane_cap, 40)
     print(machine())
-    print(f"\n=== ncgen: chain of N bars, model -> C -> loaded library (cflags: {args.cflags or 'default -O2'}) ===")
+    flags = args.cflags or "ncgen default: -O2, -O0 for very long functions"
+    print(f"\n=== ncgen: chain of N bars, model -> C -> loaded library (cflags: {flags}) ===")
     print(f"  {'N':>5} {'nq':>5} {'build':>8} {'generate':>9} {'compile':>8} {'load':>7} {'total':>8} "
           f"{'C source':>9} {'RSS python':>11} {'RSS cc':>8}")
     rows = []

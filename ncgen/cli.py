@@ -211,7 +211,8 @@ def _generate_arguments(p: argparse.ArgumentParser) -> None:
                    help="also build the shared library now (cached by content); the package is "
                         "written only if compiling succeeds")
     p.add_argument("--cflags", metavar="FLAGS", default=None,
-                   help="C compiler flags for --compile (default: $NCGEN_CFLAGS, else -O2)")
+                   help="C compiler flags for --compile, for every file (default: $NCGEN_CFLAGS, "
+                        "else -O2, and -O0 for files holding functions too long for gcc's optimiser)")
 
 
 @subcommand(

@@ -34,7 +34,8 @@ ROTATION_TOLERANCE = ROTATION_TOL
 INERTIA_TOLERANCE = 1e-9
 """Relative tolerance of the symmetry and structure checks on inertia and mass matrices."""
 
-C_CORE = ("inverse", "Ad", "Ad_inv", "exp_se3", "log_se3", "transport_wrench")
+C_CORE = ("inverse", "Ad", "Ad_inv", "exp_se3", "log_se3", "transport_twist", "transport_wrench",
+          "transport_mass_matrix")
 """Functions of the generated C package (:func:`write_c_package`)."""
 
 

@@ -7,9 +7,12 @@ compiler (path and version) and the flags, so an unchanged package is never rebu
 Entries are built in a temporary sibling directory and renamed into place under an
 exclusive lock, so concurrent builds of the same package are safe and yield one library.
 
-Flags: ``cflags`` argument, else ``$NCGEN_CFLAGS``, else ``-O2``; ``-fPIC`` and ``-shared``
-(and ``-lm``) are always added.  Sources are compiled in parallel (``jobs``, default: CPU
-count), one object per file.
+Flags: ``cflags`` argument, else ``$NCGEN_CFLAGS``, else the defaults: ``-O2``, and ``-O0``
+for the package's ``build.large_sources`` (files holding a function so long that gcc's
+optimising passes would take minutes and gigabytes; see
+:data:`ncgen.codegen.package.LARGE_FUNCTION_INSTRUCTIONS`).  ``-fPIC`` and ``-shared`` (and
+``-lm``) are always added.  Sources are compiled in parallel (``jobs``, default: CPU count),
+one object per file.
 """
 from __future__ import annotations
 
@@ -33,8 +36,10 @@ from ncgen.codegen.package import Package
 from ncgen.errors import CodegenError
 
 DEFAULT_CFLAGS = ("-O2",)
+#: Default flags of a package's ``build.large_sources``.
+LARGE_CFLAGS = ("-O0",)
 #: Bump when the way libraries are built changes, to invalidate old cache entries.
-BUILD_SCHEME = 1
+BUILD_SCHEME = 2
 #: Seconds before a running compile prints its status line.
 PROGRESS_DELAY = 1.0
 
@@ -68,13 +73,25 @@ def resolve_cflags(cflags: str | Sequence[str] | None) -> tuple[str, ...]:
     return tuple(shlex.split(cflags)) if isinstance(cflags, str) else tuple(cflags)
 
 
+def source_cflags(pkg: Package, cflags: str | Sequence[str] | None) -> dict[str, tuple[str, ...]]:
+    """The flags of each source of ``pkg``: the user's for all (``cflags`` or
+    ``$NCGEN_CFLAGS``), else :data:`DEFAULT_CFLAGS`, and :data:`LARGE_CFLAGS` for the
+    manifest's ``build.large_sources``."""
+    build = pkg.manifest["build"]
+    flags = resolve_cflags(cflags)
+    chosen = cflags is not None or os.environ.get("NCGEN_CFLAGS") is not None
+    large = set() if chosen else set(build.get("large_sources", ()))
+    return {src: LARGE_CFLAGS if src in large else flags for src in build["sources"]}
+
+
 def compile_package(pkg: Package | str | os.PathLike, cc: str | None = None,
                     cflags: str | Sequence[str] | None = None, jobs: int | None = None) -> BuildResult:
     """Build (or find in the cache) the shared library of package ``pkg``."""
     pkg = pkg if isinstance(pkg, Package) else Package.open(pkg)
     compiler = find_compiler(cc)
     flags = resolve_cflags(cflags)
-    key = build_key(pkg, compiler, flags)
+    per_source = source_cflags(pkg, cflags)
+    key = build_key(pkg, compiler, per_source)
     root = cache_dir()
     entry = root / f"{pkg.name}-{key[:24]}"
     library = entry / f"lib{pkg.name}.so"
@@ -86,7 +103,7 @@ def compile_package(pkg: Package | str | os.PathLike, cc: str | None = None,
         if library.is_file():  # another process built it while we waited
             return result
         with fsutil.temporary_sibling(entry) as tmp:
-            commands = _build(pkg, compiler, flags, jobs, tmp)
+            commands = _build(pkg, compiler, flags, per_source, jobs, tmp)
             (tmp / manifest.FILENAME).write_bytes((pkg.path / manifest.FILENAME).read_bytes())
             (tmp / "build.json").write_text(json.dumps(
                 {"key": key, "package": pkg.name, "content_hash": pkg.content_hash,
@@ -98,30 +115,35 @@ def compile_package(pkg: Package | str | os.PathLike, cc: str | None = None,
     return BuildResult(path=library, cached=False, key=key, compiler=compiler, cflags=flags)
 
 
-def build_key(pkg: Package, compiler: Compiler, flags: tuple[str, ...]) -> str:
-    """sha256 of what the library depends on: sources, headers, compiler, flags, platform."""
+def build_key(pkg: Package, compiler: Compiler, per_source: dict[str, tuple[str, ...]]) -> str:
+    """sha256 of what the library depends on: sources, headers, compiler, flags of each
+    source, platform."""
     build = pkg.manifest["build"]
     files = {rel: fsutil.sha256_file(pkg.path / rel) for rel in build["sources"] + build["headers"]}
     data = {"scheme": BUILD_SCHEME, "name": pkg.name, "files": files, "compiler": list(compiler.argv),
-            "compiler_version": compiler.version, "cflags": list(flags),
+            "compiler_version": compiler.version, "cflags": {k: list(v) for k, v in per_source.items()},
             "platform": [sys.platform, platform.machine()]}
     return fsutil.sha256_bytes(manifest.canonical_json(data).encode())
 
 
-def _build(pkg: Package, compiler: Compiler, flags: tuple[str, ...], jobs: int | None,
-           out: Path) -> list[list[str]]:
-    """Compile every source of ``pkg`` to an object in ``out`` and link ``out/lib<name>.so``."""
+def _build(pkg: Package, compiler: Compiler, flags: tuple[str, ...], per_source: dict[str, tuple[str, ...]],
+           jobs: int | None, out: Path) -> list[list[str]]:
+    """Compile every source of ``pkg`` to an object in ``out`` (``per_source`` flags) and link
+    ``out/lib<name>.so`` (``flags``)."""
     sources = pkg.manifest["build"]["sources"]
-    compile_cmds = [[*compiler.argv, *flags, "-fPIC", "-I.", "-c", src, "-o", str(out / f"{src}.o")]
+    compile_cmds = [[*compiler.argv, *per_source[src], "-fPIC", "-I.", "-c", src, "-o", str(out / f"{src}.o")]
                     for src in sources]
     link_cmd = [*compiler.argv, *flags, "-shared", "-o", str(out / f"lib{pkg.name}.so"),
                 *(str(out / f"{src}.o") for src in sources), "-lm"]
-    progress = _Progress(f"compiling C package {pkg.name!r} ({len(sources)} files, {shlex.join(flags)})",
-                         len(sources))
+    large = [src for src in sources if per_source[src] != flags]
+    how = shlex.join(flags) + (f"; {len(large)} with {shlex.join(LARGE_CFLAGS)}: very long functions" if large else "")
+    progress = _Progress(f"compiling C package {pkg.name!r} ({len(sources)} files, {how})", len(sources))
     try:
         workers = max(1, min(jobs or os.cpu_count() or 1, len(sources)))
+        # longest files first, so that no core is left compiling a big one alone at the end
+        order = sorted(range(len(sources)), key=lambda i: -(pkg.path / sources[i]).stat().st_size)
         with ThreadPoolExecutor(max_workers=workers) as pool:
-            for _ in pool.map(lambda cmd: _run(cmd, pkg.path, progress), compile_cmds):
+            for _ in pool.map(lambda i: _run(compile_cmds[i], pkg.path, progress), order):
                 pass
         _run(link_cmd, pkg.path, None)
         for src in sources:
@@ -182,7 +204,7 @@ class _Progress:
         self.timer.cancel()
         if self.shown:
             elapsed = time.monotonic() - self.start
-            hint = " (NCGEN_CFLAGS=-O1 compiles large kernels faster)" if elapsed > self.SLOW else ""
+            hint = " (NCGEN_CFLAGS=-O0 compiles large kernels fastest)" if elapsed > self.SLOW else ""
             _status(f"{self.what}: done in {elapsed:.1f} s{hint}")
 
 
