@@ -118,10 +118,14 @@ def _kkt_step(M: np.ndarray, A: np.ndarray, r: np.ndarray) -> np.ndarray | None:
         x = np.array(ca.solve(K, ca.DM(rhs), "qr")).reshape(-1)
     except RuntimeError:                       # CasADi's QR refuses a structurally singular K
         return None
-    scale = 1.0 + float(np.max(np.abs(rhs)))
-    if not np.all(np.isfinite(x)) or np.max(np.abs(np.array(ca.mtimes(K, ca.DM(x))).reshape(-1) - rhs)) > 1e-9 * scale:
+    # checked against the dense inputs, not against K: a fault in building K shows up here
+    delta, mu = x[:n], -x[n:]
+    Md = M @ delta
+    scale = 1.0 + float(np.max(np.abs(np.concatenate([r, Md])), initial=0.0))
+    residual = max(np.max(np.abs(A @ delta - r), initial=0.0), np.max(np.abs(Md - A.T @ mu), initial=0.0))
+    if not np.all(np.isfinite(x)) or residual > 1e-9 * scale:
         return None
-    return x[:n]
+    return delta
 
 
 def system_size(q: np.ndarray) -> float:
