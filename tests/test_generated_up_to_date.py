@@ -6,13 +6,13 @@ test regenerates them all into a temporary directory and compares them byte for 
 generated code is reviewed like code: a change to the generator, the templates or an
 example shows up in the diff of the commit that causes it.
 
-Every constant inside the kernels is computed reproducibly (:mod:`ncgen.reproducible`), so
-the kernels are the same bytes on every machine.  The consistent initial state (``q0``,
-``v0``, ``λ0``, ``z0`` in the metadata) comes from sparse Newton and KKT solves, whose last
-bits depend on the CPU's BLAS kernels; so a numeric literal may differ by round-off
-(``RTOL``, ``ATOL``), and with it the sha256 digests that cover it.  Anything else — a token,
-a line, a number beyond round-off — is a difference.  To update the packages after an
-intended change, run::
+The constants inside the kernels are computed without BLAS or LAPACK
+(:mod:`ncgen.reproducible`), whose kernels are chosen per CPU and sum in different orders.
+The consistent initial state (``q0``, ``v0``, ``λ0``, ``z0`` in the metadata) comes from
+sparse Newton and KKT solves, whose last bits do depend on them; so a numeric literal may
+differ by round-off (``RTOL``, ``ATOL``), and with it the sha256 digests that cover it.
+Anything else — a token, a line, a number beyond round-off — is a difference.  To update
+the packages after an intended change, run::
 
     python tests/test_generated_up_to_date.py
 """

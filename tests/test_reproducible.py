@@ -59,3 +59,4 @@ def test_joint_at_a_basic_point_touches_only_that_point():
         cols = [model.coordinate_names[j] for j in range(model.nq) if sp.has_nz(i, j)]
         assert all(c.startswith("rocker.r_i.") for c in cols), (model.constraint_names[i], cols)
         assert sorted(np.abs(A[i, [model.coordinate_names.index(c) for c in cols]])) == [1.0]
+
