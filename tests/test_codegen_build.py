@@ -116,6 +116,11 @@ def test_very_long_functions_compile_without_optimisation(tmp_path, monkeypatch)
     compiles = {line.split(" -o ")[1].split()[0]: line for line in out.splitlines() if " -c " in line}
     assert "-O0" in compiles[large[0][:-2] + ".o"] and "-O2" not in compiles[large[0][:-2] + ".o"]
     assert all("-O2" in cmd for obj, cmd in compiles.items() if obj != large[0][:-2] + ".o")
+    total = sum(f.n_instructions() for f in functions)
+    monkeypatch.setattr(package_module, "LARGE_PACKAGE_INSTRUCTIONS", total - 1)
+    huge = write_package("chain", functions, tmp_path / "huge", doc=chain_doc(), max_file_instructions=0)
+    kernels = [src for src in huge.manifest["build"]["sources"] if "_kernels_" in src]
+    assert huge.manifest["build"]["large_sources"] == kernels and len(kernels) == len(functions)
 
 
 def test_two_processes_build_at_once(tmp_path, pkg, cache):

@@ -8,8 +8,8 @@ Entries are built in a temporary sibling directory and renamed into place under 
 exclusive lock, so concurrent builds of the same package are safe and yield one library.
 
 Flags: ``cflags`` argument, else ``$NCGEN_CFLAGS``, else the defaults: ``-O2``, and ``-O0``
-for the package's ``build.large_sources`` (files holding a function so long that gcc's
-optimising passes would take minutes and gigabytes; see
+for the package's ``build.large_sources`` (files holding a function so long, or belonging
+to a package so big, that gcc's optimising passes would take minutes and gigabytes; see
 :data:`ncgen.codegen.package.LARGE_FUNCTION_INSTRUCTIONS`).  ``-fPIC`` and ``-shared`` (and
 ``-lm``) are always added.  Sources are compiled in parallel (``jobs``, default: CPU count),
 one object per file.

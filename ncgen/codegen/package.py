@@ -33,14 +33,20 @@ from ncgen.errors import CodegenError
 
 #: Default bound on SX instructions per kernel file (see ncgen.codegen.kernels).
 MAX_FILE_INSTRUCTIONS = 20_000
-#: A kernel file holding a function longer than this (SX instructions) is listed in the
-#: manifest's ``build.large_sources``: gcc's optimising passes grow faster than linearly
+#: A kernel file holding a function longer than this (SX instructions), or any kernel file
+#: of a package longer than LARGE_PACKAGE_INSTRUCTIONS, is listed in the manifest's
+#: ``build.large_sources``: gcc's optimising passes grow faster than linearly
 #: with the length of one function (the 32 k-instruction DAE residual of a 300-bar chain
 #: compiles in 4 s at -O0, 32 s at -O2, 9 min and 4 GB at -O1), so the builds compile those
 #: files with ``-O0`` unless the user chooses the flags (:func:`ncgen.codegen.build.
 #: compile_package`, the Makefile's ``LARGE_CFLAGS``, CMake).  The price is speed: that
 #: residual takes 53 µs at -O0 and 9.6 µs at -O2 in a C loop.
 LARGE_FUNCTION_INSTRUCTIONS = 20_000
+#: Above this many SX instructions in all, every kernel file is a large source: -O2 costs
+#: ~0.5 ms per instruction even for short functions (0.1 ms at -O0), minutes for such a
+#: package, and its most used kernels (the DAE, its Jacobian, the stepper's Newton
+#: residual) are past LARGE_FUNCTION_INSTRUCTIONS already.
+LARGE_PACKAGE_INSTRUCTIONS = 200_000
 #: Files rendered from the template of the same name plus ".j2".
 _FIXED_FILES = ("main.c", "Makefile", "CMakeLists.txt")
 
@@ -166,7 +172,8 @@ def _render_files(name: str, functions: list[ca.Function], doc: PackageDoc, opti
              "main": "main.c", "library": f"lib{name}.so", "executable": f"{name}_main"}
     largest = {k.stem + ".c": max(f.n_instructions() for f in kernel_funcs if f.name() in k.functions)
                for k in kernels}
-    build["large_sources"] = [src for src, n in largest.items() if n > LARGE_FUNCTION_INSTRUCTIONS]
+    huge = sum(f.n_instructions() for f in kernel_funcs) > LARGE_PACKAGE_INSTRUCTIONS
+    build["large_sources"] = [src for src, n in largest.items() if huge or n > LARGE_FUNCTION_INSTRUCTIONS]
     programs = [s.output for s in extra_sources if s.program]
     if programs:
         build["programs"] = programs
