@@ -6,9 +6,9 @@ cache: ``System`` construction and ``build()`` (SymPy per coordinate type, CasAD
 consistent initial state), ``nc.generate`` (the model's C package: system functions, DAE
 Jacobian, stepper), ``compile_package`` (gcc; ncgen's default flags, -O2 and -O0 for the
 files holding very long functions, unless ``--cflags``; files in parallel on all cores) and
-``load_functions`` (casadi.external).  Wall time per phase and
-peak resident memory: of the Python process (``RUSAGE_SELF``) and of the largest compiler
-process (``RUSAGE_CHILDREN``, measured in the child).
+``load_functions`` (casadi.external).  Wall time per phase and peak resident memory: of
+the Python process (``RUSAGE_SELF``) and of the largest compiler process
+(``RUSAGE_CHILDREN``, measured in the child).
 
 SymPy: ``sympy.physics.mechanics.KanesMethod`` deriving the equations of motion (mass
 matrix and forcing, ``kanes_equations``) of a planar n-link pendulum of uniform rods, for

@@ -7,7 +7,9 @@ constant that should be 0 or 1 but is off by 1e-17 adds terms to an expression, 
 generated C differed in structure too.  Every number that becomes a constant of a model's
 functions (local coordinates of joint points and directions, bar lengths, local frames)
 is computed with these instead: plain IEEE products and correctly rounded sums
-(:func:`math.fsum`), so the bytes of a generated package depend only on the model.
+(:func:`math.fsum`), so the kernels of a generated package do not depend on the CPU's BLAS.
+(The consistent initial state stored as metadata still comes from sparse solves and may
+differ in its last bits.)
 """
 from __future__ import annotations
 
