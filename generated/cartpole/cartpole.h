@@ -85,7 +85,7 @@ extern const casadi_real cartpole_gravity[2];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define CARTPOLE_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define CARTPOLE_MODEL_HASH "7f4b932597a210cabbac09b556a22e1f1c5a33f21acef6958990501fa5278f24"
+#define CARTPOLE_MODEL_HASH "e202a6806276e0646632479e7d994116bd1e060a93f771fe55ab8a26af78f17e"
 
 /* ---- cartpole_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -191,7 +191,7 @@ extern const casadi_real cartpole_gravity[2];
 
 /* ---- cartpole_ode ----------------------------------------------------
  * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ)
- * In cartpole_kernels_0.c; 114 instructions.
+ * In cartpole_kernels_0.c; 112 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: cartpole_t0.
  *   arg[1] q: 10x1, nnz 10 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: cartpole_q0.
@@ -214,7 +214,7 @@ extern const casadi_real cartpole_gravity[2];
 
 /* ---- cartpole_alg ----------------------------------------------------
  * algebraic residual of the index-1 DAE: A a − γ + 2α Φ̇ + β² Φ (Baumgarte stabilised acceleration constraints)
- * In cartpole_kernels_0.c; 228 instructions.
+ * In cartpole_kernels_0.c; 226 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: cartpole_t0.
  *   arg[1] q: 10x1, nnz 10 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: cartpole_q0.
@@ -235,7 +235,7 @@ extern const casadi_real cartpole_gravity[2];
 
 /* ---- cartpole_dae ----------------------------------------------------
  * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v], z = [a; λ], ode = [v; a] and alg = [M a + Aᵀλ − F; A a − γ + 2α Φ̇ + β² Φ] (sparse Jacobian)
- * In cartpole_kernels_0.c; 272 instructions.
+ * In cartpole_kernels_0.c; 268 instructions.
  * Jacobian: jac_cartpole_dae() (CasADi's convention: the inputs, then the nominal outputs;
  * one output jac_<out>_<in> per pair), found by casadi.external for exact derivatives.
  * Inputs:
@@ -279,7 +279,7 @@ extern const casadi_real cartpole_gravity[2];
 
 /* ---- cartpole_energy ----------------------------------------------------
  * kinetic energy T = ½ q̇ᵀ M q̇ and potential energy V (gravity and springs)
- * In cartpole_kernels_0.c; 65 instructions.
+ * In cartpole_kernels_0.c; 64 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: cartpole_t0.
  *   arg[1] q: 10x1, nnz 10 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: cartpole_q0.

@@ -84,7 +84,7 @@ extern const casadi_real chain_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define CHAIN_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define CHAIN_MODEL_HASH "eebec0205f44c0f4133b1a6cf65a336a7b097c0fccfaffc3af8aad5d76ef2474"
+#define CHAIN_MODEL_HASH "98d581194fe20b46806e846744e94b94c95bff17afc57f6e2ba5a0d41b86e520"
 
 /* ---- chain_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -190,7 +190,7 @@ extern const casadi_real chain_gravity[3];
 
 /* ---- chain_ode ----------------------------------------------------
  * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ)
- * In chain_kernels_0.c; 231 instructions.
+ * In chain_kernels_0.c; 219 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: chain_t0.
  *   arg[1] q: 15x1, nnz 15 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: chain_q0.
@@ -213,7 +213,7 @@ extern const casadi_real chain_gravity[3];
 
 /* ---- chain_alg ----------------------------------------------------
  * algebraic residual of the index-1 DAE: A a − γ + 2α Φ̇ + β² Φ (Baumgarte stabilised acceleration constraints)
- * In chain_kernels_0.c; 433 instructions.
+ * In chain_kernels_0.c; 421 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: chain_t0.
  *   arg[1] q: 15x1, nnz 15 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: chain_q0.
@@ -234,7 +234,7 @@ extern const casadi_real chain_gravity[3];
 
 /* ---- chain_dae ----------------------------------------------------
  * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v], z = [a; λ], ode = [v; a] and alg = [M a + Aᵀλ − F; A a − γ + 2α Φ̇ + β² Φ] (sparse Jacobian)
- * In chain_kernels_0.c; 500 instructions.
+ * In chain_kernels_0.c; 470 instructions.
  * Jacobian: jac_chain_dae() (CasADi's convention: the inputs, then the nominal outputs;
  * one output jac_<out>_<in> per pair), found by casadi.external for exact derivatives.
  * Inputs:
@@ -278,7 +278,7 @@ extern const casadi_real chain_gravity[3];
 
 /* ---- chain_energy ----------------------------------------------------
  * kinetic energy T = ½ q̇ᵀ M q̇ and potential energy V (gravity and springs)
- * In chain_kernels_0.c; 145 instructions.
+ * In chain_kernels_0.c; 138 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: chain_t0.
  *   arg[1] q: 15x1, nnz 15 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: chain_q0.

@@ -84,7 +84,7 @@ extern const casadi_real double_pendulum_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define DOUBLE_PENDULUM_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define DOUBLE_PENDULUM_MODEL_HASH "2bb615cbbd3ac8da8ad22f6714f15f2d228788c925484727b999cb613fd56cea"
+#define DOUBLE_PENDULUM_MODEL_HASH "4ef62caa13f23d470767fe13e205796326fa3dc3d019a4400563b61eff555599"
 
 /* ---- double_pendulum_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -190,7 +190,7 @@ extern const casadi_real double_pendulum_gravity[3];
 
 /* ---- double_pendulum_ode ----------------------------------------------------
  * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ)
- * In double_pendulum_kernels_0.c; 329 instructions.
+ * In double_pendulum_kernels_0.c; 326 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: double_pendulum_t0.
  *   arg[1] q: 24x1, nnz 24 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: double_pendulum_q0.
@@ -213,7 +213,7 @@ extern const casadi_real double_pendulum_gravity[3];
 
 /* ---- double_pendulum_alg ----------------------------------------------------
  * algebraic residual of the index-1 DAE: A a − γ + 2α Φ̇ + β² Φ (Baumgarte stabilised acceleration constraints)
- * In double_pendulum_kernels_0.c; 906 instructions.
+ * In double_pendulum_kernels_0.c; 897 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: double_pendulum_t0.
  *   arg[1] q: 24x1, nnz 24 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: double_pendulum_q0.
@@ -234,7 +234,7 @@ extern const casadi_real double_pendulum_gravity[3];
 
 /* ---- double_pendulum_dae ----------------------------------------------------
  * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v], z = [a; λ], ode = [v; a] and alg = [M a + Aᵀλ − F; A a − γ + 2α Φ̇ + β² Φ] (sparse Jacobian)
- * In double_pendulum_kernels_0.c; 1012 instructions.
+ * In double_pendulum_kernels_0.c; 1003 instructions.
  * Jacobian: jac_double_pendulum_dae() (CasADi's convention: the inputs, then the nominal outputs;
  * one output jac_<out>_<in> per pair), found by casadi.external for exact derivatives.
  * Inputs:

@@ -84,7 +84,7 @@ extern const casadi_real fourbar_3d_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define FOURBAR_3D_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define FOURBAR_3D_MODEL_HASH "4f24867f99a8190f083f3f5c7aeec89bb2bf09f118cb5c4e9b46b473efa1e4c4"
+#define FOURBAR_3D_MODEL_HASH "9a7b17f015cd1cddc71b0d082b09b1587992c5ee9c654344dc2f94dd1550ab7d"
 
 /* ---- fourbar_3d_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -190,7 +190,7 @@ extern const casadi_real fourbar_3d_gravity[3];
 
 /* ---- fourbar_3d_ode ----------------------------------------------------
  * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ)
- * In fourbar_3d_kernels_0.c; 438 instructions.
+ * In fourbar_3d_kernels_0.c; 405 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_3d_t0.
  *   arg[1] q: 24x1, nnz 24 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: fourbar_3d_q0.
@@ -213,7 +213,7 @@ extern const casadi_real fourbar_3d_gravity[3];
 
 /* ---- fourbar_3d_alg ----------------------------------------------------
  * algebraic residual of the index-1 DAE: A a − γ + 2α Φ̇ + β² Φ (Baumgarte stabilised acceleration constraints)
- * In fourbar_3d_kernels_0.c; 1106 instructions.
+ * In fourbar_3d_kernels_0.c; 1073 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_3d_t0.
  *   arg[1] q: 24x1, nnz 24 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: fourbar_3d_q0.
@@ -234,7 +234,7 @@ extern const casadi_real fourbar_3d_gravity[3];
 
 /* ---- fourbar_3d_dae ----------------------------------------------------
  * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v], z = [a; λ], ode = [v; a] and alg = [M a + Aᵀλ − F; A a − γ + 2α Φ̇ + β² Φ] (sparse Jacobian)
- * In fourbar_3d_kernels_0.c; 1211 instructions.
+ * In fourbar_3d_kernels_0.c; 1169 instructions.
  * Jacobian: jac_fourbar_3d_dae() (CasADi's convention: the inputs, then the nominal outputs;
  * one output jac_<out>_<in> per pair), found by casadi.external for exact derivatives.
  * Inputs:
@@ -278,7 +278,7 @@ extern const casadi_real fourbar_3d_gravity[3];
 
 /* ---- fourbar_3d_energy ----------------------------------------------------
  * kinetic energy T = ½ q̇ᵀ M q̇ and potential energy V (gravity and springs)
- * In fourbar_3d_kernels_0.c; 166 instructions.
+ * In fourbar_3d_kernels_0.c; 163 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_3d_t0.
  *   arg[1] q: 24x1, nnz 24 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: fourbar_3d_q0.

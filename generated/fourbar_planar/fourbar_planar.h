@@ -86,7 +86,7 @@ extern const casadi_real fourbar_planar_gravity[2];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define FOURBAR_PLANAR_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define FOURBAR_PLANAR_MODEL_HASH "6663726f7362c5a2c10db995b0c00db3e31a369baf205bce2c1f01aeb353145e"
+#define FOURBAR_PLANAR_MODEL_HASH "fcde202dade8ffb145c95a467a90f2d1cd1b8a9cafe0700d331e75159a53357b"
 
 /* ---- fourbar_planar_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -192,7 +192,7 @@ extern const casadi_real fourbar_planar_gravity[2];
 
 /* ---- fourbar_planar_ode ----------------------------------------------------
  * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ)
- * In fourbar_planar_kernels_0.c; 168 instructions.
+ * In fourbar_planar_kernels_0.c; 159 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_planar_t0.
  *   arg[1] q: 6x1, nnz 6 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: fourbar_planar_q0.
@@ -215,7 +215,7 @@ extern const casadi_real fourbar_planar_gravity[2];
 
 /* ---- fourbar_planar_alg ----------------------------------------------------
  * algebraic residual of the index-1 DAE: A a − γ + 2α Φ̇ + β² Φ (Baumgarte stabilised acceleration constraints)
- * In fourbar_planar_kernels_0.c; 264 instructions.
+ * In fourbar_planar_kernels_0.c; 255 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_planar_t0.
  *   arg[1] q: 6x1, nnz 6 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: fourbar_planar_q0.
@@ -236,7 +236,7 @@ extern const casadi_real fourbar_planar_gravity[2];
 
 /* ---- fourbar_planar_dae ----------------------------------------------------
  * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v], z = [a; λ], ode = [v; a] and alg = [M a + Aᵀλ − F; A a − γ + 2α Φ̇ + β² Φ] (sparse Jacobian)
- * In fourbar_planar_kernels_0.c; 293 instructions.
+ * In fourbar_planar_kernels_0.c; 279 instructions.
  * Jacobian: jac_fourbar_planar_dae() (CasADi's convention: the inputs, then the nominal outputs;
  * one output jac_<out>_<in> per pair), found by casadi.external for exact derivatives.
  * Inputs:
@@ -280,7 +280,7 @@ extern const casadi_real fourbar_planar_gravity[2];
 
 /* ---- fourbar_planar_energy ----------------------------------------------------
  * kinetic energy T = ½ q̇ᵀ M q̇ and potential energy V (gravity and springs)
- * In fourbar_planar_kernels_0.c; 91 instructions.
+ * In fourbar_planar_kernels_0.c; 90 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_planar_t0.
  *   arg[1] q: 6x1, nnz 6 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: fourbar_planar_q0.

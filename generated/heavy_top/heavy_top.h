@@ -84,7 +84,7 @@ extern const casadi_real heavy_top_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define HEAVY_TOP_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define HEAVY_TOP_MODEL_HASH "70e7cd51fcb5f85b1a3230e3fd97d998b632c694b6d10f3fb4b4af4856994858"
+#define HEAVY_TOP_MODEL_HASH "66fd9d42de682ea2d5cfda958674e3c2427f9c16cb0e60a89c4bac16a45a4850"
 
 /* ---- heavy_top_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -278,7 +278,7 @@ extern const casadi_real heavy_top_gravity[3];
 
 /* ---- heavy_top_energy ----------------------------------------------------
  * kinetic energy T = ½ q̇ᵀ M q̇ and potential energy V (gravity and springs)
- * In heavy_top_kernels_0.c; 45 instructions.
+ * In heavy_top_kernels_0.c; 44 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: heavy_top_t0.
  *   arg[1] q: 9x1, nnz 9 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: heavy_top_q0.

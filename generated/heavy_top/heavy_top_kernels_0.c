@@ -3356,10 +3356,9 @@ static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a1=(a1+a3);
   a0=(a0*a1);
   if (res[0]!=0) res[0][0]=a0;
-  a0=-1.9620000000000001e-01;
+  a0=1.9620000000000001e-01;
   a1=arg[1]? arg[1][8] : 0;
   a0=(a0*a1);
-  a0=(-a0);
   if (res[1]!=0) res[1][0]=a0;
   return 0;
 }

@@ -86,7 +86,7 @@ extern const casadi_real slider_crank_gravity[2];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define SLIDER_CRANK_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define SLIDER_CRANK_MODEL_HASH "99de4d885a7b48ea955e8ac184d4cc584e84857377387748e39a2600b8ea8d2f"
+#define SLIDER_CRANK_MODEL_HASH "1179e47c78c190fe00d7c4898dd7d47341661b22e1ec797458028e5283d6a1c1"
 
 /* ---- slider_crank_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -192,7 +192,7 @@ extern const casadi_real slider_crank_gravity[2];
 
 /* ---- slider_crank_ode ----------------------------------------------------
  * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ)
- * In slider_crank_kernels_0.c; 187 instructions.
+ * In slider_crank_kernels_0.c; 178 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: slider_crank_t0.
  *   arg[1] q: 10x1, nnz 10 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: slider_crank_q0.
@@ -215,7 +215,7 @@ extern const casadi_real slider_crank_gravity[2];
 
 /* ---- slider_crank_alg ----------------------------------------------------
  * algebraic residual of the index-1 DAE: A a − γ + 2α Φ̇ + β² Φ (Baumgarte stabilised acceleration constraints)
- * In slider_crank_kernels_0.c; 394 instructions.
+ * In slider_crank_kernels_0.c; 375 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: slider_crank_t0.
  *   arg[1] q: 10x1, nnz 10 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: slider_crank_q0.
@@ -236,7 +236,7 @@ extern const casadi_real slider_crank_gravity[2];
 
 /* ---- slider_crank_dae ----------------------------------------------------
  * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v], z = [a; λ], ode = [v; a] and alg = [M a + Aᵀλ − F; A a − γ + 2α Φ̇ + β² Φ] (sparse Jacobian)
- * In slider_crank_kernels_0.c; 455 instructions.
+ * In slider_crank_kernels_0.c; 415 instructions.
  * Jacobian: jac_slider_crank_dae() (CasADi's convention: the inputs, then the nominal outputs;
  * one output jac_<out>_<in> per pair), found by casadi.external for exact derivatives.
  * Inputs:
@@ -280,7 +280,7 @@ extern const casadi_real slider_crank_gravity[2];
 
 /* ---- slider_crank_energy ----------------------------------------------------
  * kinetic energy T = ½ q̇ᵀ M q̇ and potential energy V (gravity and springs)
- * In slider_crank_kernels_0.c; 95 instructions.
+ * In slider_crank_kernels_0.c; 94 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: slider_crank_t0.
  *   arg[1] q: 10x1, nnz 10 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: slider_crank_q0.

@@ -87,7 +87,7 @@ extern const casadi_real tensegrity_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define TENSEGRITY_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define TENSEGRITY_MODEL_HASH "f1634714b761bfdab1e5c6e398e5bbc7339c82a72f03526502d53f5c9c4d013d"
+#define TENSEGRITY_MODEL_HASH "65dd3e660f6a2ef1ed0e471aa7142b81b34dca2779b8614b37ed722bc1af7592"
 
 /* ---- tensegrity_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
@@ -193,7 +193,7 @@ extern const casadi_real tensegrity_gravity[3];
 
 /* ---- tensegrity_ode ----------------------------------------------------
  * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ)
- * In tensegrity_kernels_0.c; 627 instructions.
+ * In tensegrity_kernels_0.c; 521 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: tensegrity_t0.
  *   arg[1] q: 18x1, nnz 18 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: tensegrity_q0.
@@ -216,7 +216,7 @@ extern const casadi_real tensegrity_gravity[3];
 
 /* ---- tensegrity_alg ----------------------------------------------------
  * algebraic residual of the index-1 DAE: A a − γ + 2α Φ̇ + β² Φ (Baumgarte stabilised acceleration constraints)
- * In tensegrity_kernels_0.c; 763 instructions.
+ * In tensegrity_kernels_0.c; 657 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: tensegrity_t0.
  *   arg[1] q: 18x1, nnz 18 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: tensegrity_q0.
@@ -237,7 +237,7 @@ extern const casadi_real tensegrity_gravity[3];
 
 /* ---- tensegrity_dae ----------------------------------------------------
  * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v], z = [a; λ], ode = [v; a] and alg = [M a + Aᵀλ − F; A a − γ + 2α Φ̇ + β² Φ] (sparse Jacobian)
- * In tensegrity_kernels_0.c; 845 instructions.
+ * In tensegrity_kernels_0.c; 730 instructions.
  * Jacobian: jac_tensegrity_dae() (CasADi's convention: the inputs, then the nominal outputs;
  * one output jac_<out>_<in> per pair), found by casadi.external for exact derivatives.
  * Inputs:
@@ -281,7 +281,7 @@ extern const casadi_real tensegrity_gravity[3];
 
 /* ---- tensegrity_energy ----------------------------------------------------
  * kinetic energy T = ½ q̇ᵀ M q̇ and potential energy V (gravity and springs)
- * In tensegrity_kernels_0.c; 323 instructions.
+ * In tensegrity_kernels_0.c; 299 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: tensegrity_t0.
  *   arg[1] q: 18x1, nnz 18 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: tensegrity_q0.

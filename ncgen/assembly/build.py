@@ -72,11 +72,11 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
         labels, rows = [labels[i] for i in keep], [rows[i] for i in keep]
 
     phi = ca.vertcat(*rows) if rows else ca.SX(0, 1)
-    functions = system_functions(ctx, phi, F, V, M, factor, alpha, beta, system)
+    functions, potential = system_functions(ctx, phi, F, V, M, factor, alpha, beta, system)
     state = consistent_state(functions, layout, labels, q_init, v_init, p0, t0, tolerance, M,
                              fixed=fixed, assemble=assemble)
     return Model(system=system, layout=layout, labels=labels, functions=functions, M=M, factor=factor,
-                 state=state, p0=p0, baumgarte=(alpha, beta), redundant=redundant_labels,
+                 potential=potential, state=state, p0=p0, baumgarte=(alpha, beta), redundant=redundant_labels,
                  dropped=(redundant == "drop"), t0=t0)
 
 
@@ -100,18 +100,19 @@ def constraint_rows(system, ctx: Context) -> tuple[list[str], list[ca.SX]]:
 
 
 def force_terms(system, ctx: Context) -> tuple[ca.SX, ca.SX]:
-    """Generalised force ``F`` (gravity and force elements) and potential energy ``V``."""
+    """Generalised force ``F`` (gravity and force elements) and the terms of the potential
+    energy ``V``: one per member (gravity), then one per force element."""
     g = ca.DM(system.gravity)
     F = ca.SX.zeros(ctx.layout.nq)
-    V = ca.SX(0)
+    V = []
     for m in system.members.values():
         C = ca.DM(m.local.C(m.local.c_g))            # centre of mass r_G = C(c_g) q
         F += ctx.scatter(m, ca.mtimes(C.T, m.local.mass * g))
-        V -= m.local.mass * ca.dot(g, ca.mtimes(C, ctx.q_of(m)))
+        V.append(-m.local.mass * ca.dot(g, ca.mtimes(C, ctx.q_of(m))))
     for f in system.forces:
         F += f.generalized(ctx)
-        V += f.potential(ctx)
-    return F, V
+        V.append(f.potential(ctx))
+    return F, ca.vertcat(*V)
 
 
 def initial_guess(layout: Layout, members) -> tuple[np.ndarray, np.ndarray]:

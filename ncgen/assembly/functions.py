@@ -99,25 +99,21 @@ DOCS = {
 
 
 def system_functions(ctx: Context, phi, F, V, M: np.ndarray, factor: CholeskyFactor, alpha: float,
-                     beta: float, system) -> dict[str, ca.Function]:
+                     beta: float, system) -> tuple[dict[str, ca.Function], ca.Function]:
+    """The functions of :data:`DOCS` by name, and ``V: t, q, p -> V`` (the terms of the
+    potential energy, column ``V`` of :func:`~ncgen.assembly.build.force_terms`)."""
     t, q, v, u, p = ctx.t, ctx.q, ctx.v, ctx.u, ctx.p
-    nc = phi.shape[0]
-    lam = ca.SX.sym("lam", nc)
     A = ca.jacobian(phi, q)
     Av = ca.mtimes(A, v)
     phi_t = ca.jacobian(phi, t)
     gamma = -(ca.jtimes(Av, q, v) + 2 * ca.jacobian(Av, t) + ca.jacobian(phi_t, t))
-    phidot = Av + phi_t
-    a = factor.solve(F - ca.mtimes(A.T, lam))
-    alg = ca.mtimes(A, a) - gamma + 2 * alpha * phidot + beta**2 * phi
     b = ca.SX.sym("b", ctx.layout.nq)
     Msp = sparse_dm(M)
-    T = 0.5 * ca.dot(v, ca.mtimes(Msp, v))
 
     f = {}
 
     def add(name, ins, outs, out_names):
-        f[name] = ca.Function(name, [{"t": t, "q": q, "v": v, "lam": lam, "u": u, "p": p, "b": b}[i] for i in ins],
+        f[name] = ca.Function(name, [{"t": t, "q": q, "v": v, "u": u, "p": p, "b": b}[i] for i in ins],
                               outs, list(ins), out_names)
 
     add("phi", ("t", "q", "p"), [phi], ["phi"])
@@ -127,16 +123,50 @@ def system_functions(ctx: Context, phi, F, V, M: np.ndarray, factor: CholeskyFac
     add("F", ("t", "q", "v", "u", "p"), [F], ["F"])
     add("mass", (), [Msp], ["M"])
     add("Minv", ("b",), [factor.solve(b)], ["x"])
-    add("ode", ("t", "q", "v", "lam", "u", "p"), [v, a], ["qdot", "vdot"])
-    add("alg", ("t", "q", "v", "lam", "u", "p"), [alg], ["res"])
-    f["dae"] = _dae(f, Msp, alpha, beta, ctx.layout.nq, nc, u.shape[0], p.shape[0])
-    add("energy", ("t", "q", "v", "p"), [T, V], ["T", "V"])
     r, rd = _markers(ctx, system)
     add("markers", ("q", "v"), [r, rd], ["r", "rdot"])
     R, pos = _poses(ctx, system)
     add("poses", ("q",), [R, pos], ["R", "p"])
-    f["accel"] = _accel(f, Msp, nc, alpha, beta, ctx.layout.nq, u.shape[0], p.shape[0])
-    return f
+    potential = ca.Function("V", [t, q, p], [V], ["t", "q", "p"], ["V"])
+    f.update(composite_functions(f, potential, Msp, alpha, beta, ca.SX))
+    return {name: f[name] for name in FUNCTIONS}, potential
+
+
+#: The system functions, in the order of :data:`DOCS`.
+FUNCTIONS = tuple(DOCS)
+
+
+def composite_functions(f: dict, potential: ca.Function, M: ca.DM, alpha: float, beta: float,
+                        sym) -> dict[str, ca.Function]:
+    """``ode``, ``alg``, ``dae``, ``energy`` and ``accel`` from the primitive functions ``f``
+    (``phi``, ``A``, ``phi_t``, ``gamma``, ``F``, ``Minv``) and ``potential: t, q, p -> V``,
+    the terms of the potential energy.
+
+    ``sym`` is the symbol type of the result: ``ca.SX`` inlines the primitives (one flat
+    expression per function, the model's form), ``ca.MX`` keeps them as calls (the form of
+    very large models, whose primitives are rerolled, see :mod:`ncgen.codegen.reroll`).
+    ``accel`` is MX either way (it calls CasADi's sparse QR)."""
+    nc, nq = f["A"].size1_out(0), f["A"].size2_out(0)
+    nu, npar = f["F"].numel_in(3), f["F"].numel_in(4)
+    t, q, v = sym.sym("t"), sym.sym("q", nq), sym.sym("v", nq)
+    lam, u, p = sym.sym("lam", nc), sym.sym("u", nu), sym.sym("p", npar)
+    A = f["A"](t, q, p)
+    phi = f["phi"](t, q, p)
+    phidot = ca.mtimes(A, v) + f["phi_t"](t, q, p)
+    gamma = f["gamma"](t, q, v, p)
+    a = f["Minv"](f["F"](t, q, v, u, p) - ca.mtimes(A.T, lam))
+    alg = ca.mtimes(A, a) - gamma + 2 * alpha * phidot + beta**2 * phi
+    T = 0.5 * ca.dot(v, ca.mtimes(M, v))
+    out = {
+        "ode": _function("ode", [t, q, v, lam, u, p], [v, a], ["t", "q", "v", "lam", "u", "p"],
+                         ["qdot", "vdot"]),
+        "alg": _function("alg", [t, q, v, lam, u, p], [alg], ["t", "q", "v", "lam", "u", "p"], ["res"]),
+        "dae": _dae(f, M, alpha, beta, nq, nc, nu, npar, sym),
+        "energy": _function("energy", [t, q, v, p], [T, ca.sum1(potential(t, q, p))], ["t", "q", "v", "p"],
+                            ["T", "V"]),
+    }
+    out["accel"] = _accel(f, M, nc, alpha, beta, nq, nu, npar)
+    return out
 
 
 def _markers(ctx: Context, system):
@@ -160,17 +190,25 @@ def _poses(ctx: Context, system):
     return ca.horzcat(*Rs), ca.horzcat(*ps)
 
 
-def _dae(f, M: ca.DM, alpha: float, beta: float, nq: int, nc: int, nu: int, npar: int) -> ca.Function:
+def _dae(f, M: ca.DM, alpha: float, beta: float, nq: int, nc: int, nu: int, npar: int, sym) -> ca.Function:
     """IDAS's form: ``x = [q; v]``, ``z = [a; λ]``, ``ẋ = [v; a]``,
     ``0 = [M a + Aᵀλ − F; A a − γ + 2α Φ̇ + β² Φ]`` (index 1: ∂alg/∂z is the KKT matrix)."""
-    t, x, z = ca.SX.sym("t"), ca.SX.sym("x", 2 * nq), ca.SX.sym("z", nq + nc)
-    u, p = ca.SX.sym("u", nu), ca.SX.sym("p", npar)
+    t, x, z = sym.sym("t"), sym.sym("x", 2 * nq), sym.sym("z", nq + nc)
+    u, p = sym.sym("u", nu), sym.sym("p", npar)
     q, v, a, lam = x[:nq], x[nq:], z[:nq], z[nq:]
     A = f["A"](t, q, p)
     phidot = ca.mtimes(A, v) + f["phi_t"](t, q, p)
     alg = ca.vertcat(ca.mtimes(M, a) + ca.mtimes(A.T, lam) - f["F"](t, q, v, u, p),
                      ca.mtimes(A, a) - f["gamma"](t, q, v, p) + 2 * alpha * phidot + beta**2 * f["phi"](t, q, p))
-    return ca.Function("dae", [t, x, z, u, p], [ca.vertcat(v, a), alg], ["t", "x", "z", "u", "p"], ["ode", "alg"])
+    return _function("dae", [t, x, z, u, p], [ca.vertcat(v, a), alg], ["t", "x", "z", "u", "p"], ["ode", "alg"])
+
+
+def _function(name: str, ins: list, outs: list, in_names: list[str], out_names: list[str]) -> ca.Function:
+    """A function of a composition; an SX one with common subexpressions of the inlined
+    primitives merged (``A`` evaluated by ``A`` and inside ``gamma``, for instance)."""
+    if isinstance(ins[0], ca.SX):
+        outs = ca.cse(outs)
+    return ca.Function(name, ins, outs, in_names, out_names)
 
 
 def _accel(f, M: ca.DM, nc: int, alpha: float, beta: float, nq: int, nu: int, npar: int) -> ca.Function:

@@ -60,8 +60,13 @@ class CholeskyFactor:
         self.nnz = int(n + len(vals))
 
     def solve(self, b):
-        """``M⁻¹ b`` for a CasADi column ``b`` (SX or MX), by two sparse triangular solves."""
+        """``M⁻¹ b`` for a CasADi column ``b`` by two sparse triangular solves: unrolled into
+        O(nnz(L)) operations for SX, two solve nodes with the constant ``L`` for MX (loops
+        over its pattern in generated C)."""
         n = self.n
+        if isinstance(b, ca.MX) and n:
+            L = ca.MX(self.lower())
+            return ca.solve(L.T, ca.solve(L, b))
         y = [None] * n
         for i in range(n):
             idx, vals = self.rows[i]
@@ -77,6 +82,16 @@ class CholeskyFactor:
                 acc = acc - lji * x[j]
             x[i] = acc / self.diag[i]
         return ca.vertcat(*x) if n else b
+
+    def lower(self) -> ca.DM:
+        """``L`` as a sparse CasADi matrix."""
+        rows = [i for i, (idx, _) in enumerate(self.rows) for _ in idx] + list(range(self.n))
+        cols = [int(j) for idx, _ in self.rows for j in idx] + list(range(self.n))
+        vals = [float(x) for _, v in self.rows for x in v] + [float(d) for d in self.diag]
+        sp, mapping = ca.Sparsity.triplet(self.n, self.n, rows, cols, True)
+        nz = np.zeros(sp.nnz())
+        nz[np.array(mapping, dtype=np.int64)] = vals
+        return ca.DM(sp, nz)
 
     def solve_numeric(self, b: np.ndarray) -> np.ndarray:
         L = self.dense()

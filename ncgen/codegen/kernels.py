@@ -17,6 +17,7 @@ from typing import Mapping, Sequence
 
 import casadi as ca
 
+from ncgen.codegen.reroll import reroll
 from ncgen.errors import CodegenError
 
 #: CodeGenerator options ncgen relies on; callers may add others but not change these.
@@ -35,20 +36,32 @@ class KernelFile:
     h_code: str
 
 
-def c_function(f: ca.Function, c_name: str) -> ca.Function:
-    """``f`` named ``c_name``, same algorithm: expanded to an SX function when possible; an MX
-    function with nodes SX cannot evaluate (a linear solver such as ``solve(K, b, "qr")``)
-    stays MX, a wrapper calling ``f``, and CasADi generates its C as well."""
+def c_function(f: ca.Function, c_name: str, reroll_instructions: int | None = None) -> ca.Function:
+    """``f`` named ``c_name``, same values, in the form CasADi generates C from.
+
+    Expanded to an SX function when possible.  Longer than ``reroll_instructions`` SX
+    instructions (``None``: never), an SX function is rerolled
+    (:func:`ncgen.codegen.reroll.reroll`: loops over short kernels instead of straight-line
+    code) and an MX function stays MX (a wrapper calling ``f``: its calls, rerolled
+    functions say, are generated as they are).  An MX function with nodes SX cannot
+    evaluate (a linear solver such as ``solve(K, b, "qr")``) stays MX too."""
     if f.has_free():
         free = f.free_sx() if f.is_a("SXFunction") else f.free_mx()
         raise CodegenError(f"function {f.name()!r} has free symbols {[str(s) for s in free]}; "
                            f"make them inputs before generating C")
     try:
-        return f.expand(c_name)
-    except RuntimeError as e:
-        if not (f.is_a("MXFunction") and "eval_sx not defined" in str(e)):
+        e = f.expand(c_name)
+    except RuntimeError as err:
+        if not (f.is_a("MXFunction") and "eval_sx not defined" in str(err)):
             raise CodegenError(f"function {f.name()!r} cannot be turned into an SX function for "
-                               f"code generation: {str(e).strip().splitlines()[-1]}") from None
+                               f"code generation: {str(err).strip().splitlines()[-1]}") from None
+        return _wrapper(f, c_name)
+    if reroll_instructions is None or e.n_instructions() <= reroll_instructions:
+        return e
+    return _wrapper(f, c_name) if f.is_a("MXFunction") else reroll(e)
+
+
+def _wrapper(f: ca.Function, c_name: str) -> ca.Function:
     args = f.mx_in()
     return ca.Function(c_name, args, f.call(args), f.name_in(), f.name_out())
 

@@ -32,6 +32,7 @@ from ncgen.assembly.functions import DOCS, IN
 from ncgen.codegen import fsutil
 from ncgen.codegen.build import compile_package
 from ncgen.codegen.doc import PackageDoc
+from ncgen.codegen.looped import package_functions
 from ncgen.codegen.manifest import canonical_json
 from ncgen.codegen.package import ExtraSource, Package, check_replaceable, write_package
 
@@ -96,8 +97,10 @@ def generate(model, out_dir: str | os.PathLike, *, cflags=None, compile: bool = 
 
 
 def system_section(model) -> Section:
-    """The system functions of ``model`` and its metadata."""
-    functions = [model.functions[name] for name in SYSTEM_FUNCTIONS]
+    """The system functions of ``model`` (:func:`ncgen.codegen.looped.package_functions`)
+    and its metadata."""
+    package = package_functions(model)
+    functions = [package[name] for name in SYSTEM_FUNCTIONS]
     docs = {f.name(): function_doc(f) for f in functions}
     metadata, metadata_doc = model_metadata(model)
     return Section(functions=functions, docs=docs, jacobians=SYSTEM_JACOBIANS,

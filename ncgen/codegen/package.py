@@ -28,6 +28,7 @@ from ncgen.codegen import cnames, fsutil, manifest
 from ncgen.codegen.doc import PackageDoc, check_identifier
 from ncgen.codegen.kernels import c_function, casadi_options, generate_kernels, group_functions
 from ncgen.codegen.render import render
+from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
 from ncgen.codegen.signature import function_signature
 from ncgen.errors import CodegenError
 
@@ -112,7 +113,8 @@ def write_package(name: str, functions: Sequence[ca.Function], out_dir: str | os
                   extra_sources: Sequence[ExtraSource] = (),
                   template_dirs: Sequence[str | os.PathLike] = (),
                   codegen_options: Mapping | None = None,
-                  jacobians: Sequence[str] = ()) -> Package:
+                  jacobians: Sequence[str] = (),
+                  reroll_instructions: int | None = REROLL_INSTRUCTIONS) -> Package:
     """Generate the C package ``name`` for ``functions`` into ``out_dir`` (see module docstring).
 
     ``max_file_instructions`` bounds the SX instructions per kernel file (``None``: one
@@ -123,7 +125,9 @@ def write_package(name: str, functions: Sequence[ca.Function], out_dir: str | os
     ``f``, then its nominal outputs; one block ``jac_<out>_<in>`` per output/input pair) is
     generated too, as C symbol ``jac_<name>_<f>``: the symbol ``casadi.external`` looks up to
     differentiate ``<name>_<f>``, so functions loaded from the compiled package have exact
-    derivatives (IDAS needs them, for instance).
+    derivatives (IDAS needs them, for instance).  Functions (and Jacobians) longer than
+    ``reroll_instructions`` SX instructions are generated as loops over short kernels where
+    they repeat alike blocks (:mod:`ncgen.codegen.reroll`; ``None``: always straight-line).
     """
     out_dir = Path(out_dir)
     check_identifier("package name", name)
@@ -131,7 +135,7 @@ def write_package(name: str, functions: Sequence[ca.Function], out_dir: str | os
     _check_doc(doc, functions)
     _check_extra_sources(name, extra_sources)
     check_replaceable(out_dir)
-    options = {"max_file_instructions": max_file_instructions,
+    options = {"max_file_instructions": max_file_instructions, "reroll_instructions": reroll_instructions,
                "casadi_options": casadi_options(codegen_options),
                "extra_sources": [[s.template, s.output, dict(s.context)] + (["program"] if s.program else [])
                                  for s in extra_sources]}
@@ -150,13 +154,14 @@ def write_package(name: str, functions: Sequence[ca.Function], out_dir: str | os
 def _render_files(name: str, functions: list[ca.Function], doc: PackageDoc, options: dict,
                   extra_sources: Sequence[ExtraSource], template_dirs) -> dict[str, bytes]:
     """Every file of the package, relative name -> bytes, manifest last."""
-    c_funcs = [c_function(f, f"{name}_{f.name()}") for f in functions]
+    limit = options["reroll_instructions"]
+    c_funcs = [c_function(f, f"{name}_{f.name()}", limit) for f in functions]
     with_jac = set(options.get("jacobians", ()))
     kernel_funcs = []
     for f, c in zip(functions, c_funcs):
         kernel_funcs.append(c)
         if f.name() in with_jac:
-            kernel_funcs.append(c_function(f.jacobian(), f"jac_{c.name()}"))
+            kernel_funcs.append(c_function(f.jacobian(), f"jac_{c.name()}", limit))
     kernels = generate_kernels(name, kernel_funcs,
                                group_functions(kernel_funcs, options["max_file_instructions"]),
                                options["casadi_options"])

@@ -14,7 +14,7 @@ from ncgen.validation import as_vector
 class Model:
     """A validated, assembled system (create it with ``System.build()``)."""
 
-    def __init__(self, *, system, layout, labels, functions, M, factor, state, p0, baumgarte,
+    def __init__(self, *, system, layout, labels, functions, M, factor, potential, state, p0, baumgarte,
                  redundant, dropped, t0):
         self.system = system
         self.name = system.name
@@ -23,6 +23,7 @@ class Model:
         self.functions = functions
         self.M = M
         self.mass_factor = factor
+        self.potential_terms = potential
         self.constraint_names = list(labels)
         self.coordinate_names = layout.coordinate_names
         self.input_names = list(system.inputs)

@@ -37,6 +37,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.assembly.mass import sparse_dm
+from ncgen.codegen.looped import is_large, primitives
 
 #: Largest nnz(V) + nnz(R) of the QR factors for which the solve is unrolled into SX.
 SX_QR_MAX_NNZ = 3_000
@@ -95,12 +96,21 @@ def stepper_functions(model) -> list[ca.Function]:
     velocity = ca.Function("step_velocity", [t, q, w, u, p, h], [b, K2],
                            ["t", "q", "w", "u", "p", "h"], ["b", "K"])
 
-    phidot = ca.mtimes(f["A"](t, q, p), v) + f["phi_t"](t, q, p)
-    check = ca.Function("step_check", [t, q, v, p],
-                        [ca.densify(ca.norm_inf(f["phi"](t, q, p))), ca.densify(ca.norm_inf(phidot))],
-                        ["t", "q", "v", "p"], ["phi_max", "phidot_max"])
+    return [newton, velocity, check_function(model), solve_function(K.sparsity())]
 
-    return [newton, velocity, check, solve_function(K.sparsity())]
+
+def check_function(model) -> ca.Function:
+    """``step_check``; for a large model an MX function of the rerolled primitives
+    (:mod:`ncgen.codegen.looped`: its two norms couple every constraint)."""
+    if is_large(model):
+        f, sym = primitives(model), ca.MX
+    else:
+        f, sym = model.functions, ca.SX
+    t, q, v, p = sym.sym("t"), sym.sym("q", model.nq), sym.sym("v", model.nq), sym.sym("p", model.np)
+    phidot = ca.mtimes(f["A"](t, q, p), v) + f["phi_t"](t, q, p)
+    return ca.Function("step_check", [t, q, v, p],
+                       [ca.densify(ca.norm_inf(f["phi"](t, q, p))), ca.densify(ca.norm_inf(phidot))],
+                       ["t", "q", "v", "p"], ["phi_max", "phidot_max"])
 
 
 def solve_function(pattern: ca.Sparsity) -> ca.Function:

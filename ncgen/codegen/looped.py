@@ -1,0 +1,57 @@
+"""The system functions of a very large model in the form its C package is generated from.
+
+Flat, ``ode``, ``alg`` and ``energy`` are single expressions over the whole model (``M⁻¹``
+and the energy sums couple every coordinate), so rerolling (:mod:`ncgen.codegen.reroll`)
+finds nothing that repeats in them.  When one of them is longer than
+:data:`~ncgen.codegen.reroll.REROLL_INSTRUCTIONS`, they are rebuilt from the same
+definitions (:func:`ncgen.assembly.functions.composite_functions`) as MX functions calling
+the rerolled primitives, ``M⁻¹ b`` as two triangular solves with the constant factor of
+``M`` and ``V`` as the sum of its rerolled terms.  ``accel`` calls the rerolled primitives
+too.  The other functions stay as they are: :func:`ncgen.codegen.package.write_package`
+rerolls each of them (and the DAE's Jacobian) by itself.
+"""
+from __future__ import annotations
+
+import weakref
+
+import casadi as ca
+
+from ncgen.assembly.functions import composite_functions
+from ncgen.assembly.mass import sparse_dm
+from ncgen.codegen.reroll import REROLL_INSTRUCTIONS, reroll
+
+#: Functions rebuilt from calls when the model is large.
+COMPOSITES = ("ode", "alg", "energy", "accel")
+#: The functions the composites call.
+PRIMITIVES = ("phi", "A", "phi_t", "gamma", "F")
+
+_primitives: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def is_large(model) -> bool:
+    """Whether a flat composite of ``model`` is longer than ``REROLL_INSTRUCTIONS``."""
+    return any(model.functions[n].n_instructions() > REROLL_INSTRUCTIONS for n in COMPOSITES if n != "accel")
+
+
+def primitives(model) -> dict[str, ca.Function]:
+    """The rerolled primitives of ``model``, ``Minv`` as triangular solves and ``V`` (the
+    rerolled terms of the potential energy); computed once per model."""
+    if model not in _primitives:
+        f = {n: reroll(model.functions[n]) for n in PRIMITIVES}
+        b = ca.MX.sym("b", model.nq)
+        f["Minv"] = ca.Function("Minv", [b], [model.mass_factor.solve(b)], ["b"], ["x"])
+        f["V"] = reroll(model.potential_terms)
+        _primitives[model] = f
+    return _primitives[model]
+
+
+def package_functions(model) -> dict[str, ca.Function]:
+    """``model.functions`` with the composites rebuilt from calls if the model is large."""
+    f = dict(model.functions)
+    if not is_large(model):
+        return f
+    prim = primitives(model)
+    alpha, beta = model.baumgarte
+    composite = composite_functions(prim, prim["V"], sparse_dm(model.M), alpha, beta, ca.MX)
+    f.update({n: composite[n] for n in COMPOSITES}, Minv=prim["Minv"])
+    return f
