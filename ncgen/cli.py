@@ -213,6 +213,24 @@ def _generate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cflags", metavar="FLAGS", default=None,
                    help="C compiler flags for --compile, for every file (default: $NCGEN_CFLAGS, "
                         "else -O2, and -O0 for files holding functions too long for gcc's optimiser)")
+    p.add_argument("--reroll", metavar="N", default=None, type=_reroll_limit,
+                   help="generate functions longer than N SX instructions as loops over short "
+                        "kernels found in them (compiles in seconds for any number of members, "
+                        "runs 1.5-4x slower than straight-line code at -O2); 'none': straight-line "
+                        "code only (default: ncgen.codegen.reroll.REROLL_INSTRUCTIONS, 4000)")
+
+
+def _reroll_limit(text: str) -> int | str:
+    """``--reroll``: a number of instructions, or ``"none"``."""
+    if text.strip().lower() == "none":
+        return "none"
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a number of instructions >= 0 or 'none', got {text!r}")
+    return value
 
 
 @subcommand(
@@ -235,7 +253,11 @@ def generate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from ncgen.codegen.model_package import generate as generate_package
 
     model = load_model(args.model)
-    pkg = generate_package(model, args.output, cflags=args.cflags, compile=args.compile)
+    from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
+
+    limit = {None: REROLL_INSTRUCTIONS, "none": None}.get(args.reroll, args.reroll)
+    pkg = generate_package(model, args.output, cflags=args.cflags, compile=args.compile,
+                           reroll_instructions=limit)
     print(f"wrote {pkg.path}: C package {pkg.name!r} ({len(pkg.manifest['files']) + 1} files, "
           f"{len(pkg.function_names)} functions; nq = {model.nq}, nc = {model.nc}, dof = {model.dof})",
           file=sys.stderr)

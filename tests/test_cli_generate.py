@@ -28,6 +28,24 @@ def test_compile(tmp_path, capsys):
     assert "compiled " in capsys.readouterr().err
 
 
+def test_reroll_sets_which_functions_become_loops(tmp_path):
+    """``--reroll 0`` loops every function with repeated blocks; ``--reroll none`` none."""
+    import json
+
+    sizes = {}
+    for flag in ("0", "none"):
+        out = tmp_path / flag
+        assert main(["generate", str(EXAMPLES / "chain.toml"), "-o", str(out), "--reroll", flag]) == 0
+        manifest = json.loads((out / "manifest.json").read_text())
+        sizes[flag] = {f["name"]: f["n_instructions"] for f in manifest["functions"]}
+    assert sizes["0"]["A"] < sizes["none"]["A"] and sizes["0"]["dae"] < sizes["none"]["dae"]
+
+
+def test_bad_reroll_value_is_named(capsys):
+    err = error_of(capsys, ["generate", str(EXAMPLES / "chain.toml"), "-o", "x", "--reroll", "many"], status=2)
+    assert "--reroll" in err and "'many'" in err
+
+
 def error_of(capsys, argv, status=1) -> str:
     assert main(argv) == status
     captured = capsys.readouterr()

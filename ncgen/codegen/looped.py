@@ -28,9 +28,11 @@ PRIMITIVES = ("phi", "A", "phi_t", "gamma", "F")
 _primitives: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
-def is_large(model) -> bool:
-    """Whether a flat composite of ``model`` is longer than ``REROLL_INSTRUCTIONS``."""
-    return any(model.functions[n].n_instructions() > REROLL_INSTRUCTIONS for n in COMPOSITES if n != "accel")
+def is_large(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS) -> bool:
+    """Whether a flat composite of ``model`` is longer than ``reroll_instructions``
+    (``None``: never)."""
+    return reroll_instructions is not None and any(
+        model.functions[n].n_instructions() > reroll_instructions for n in COMPOSITES if n != "accel")
 
 
 def primitives(model) -> dict[str, ca.Function]:
@@ -45,10 +47,10 @@ def primitives(model) -> dict[str, ca.Function]:
     return _primitives[model]
 
 
-def package_functions(model) -> dict[str, ca.Function]:
+def package_functions(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS) -> dict[str, ca.Function]:
     """``model.functions`` with the composites rebuilt from calls if the model is large."""
     f = dict(model.functions)
-    if not is_large(model):
+    if not is_large(model, reroll_instructions):
         return f
     prim = primitives(model)
     alpha, beta = model.baumgarte

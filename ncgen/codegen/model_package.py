@@ -35,6 +35,7 @@ from ncgen.codegen.doc import PackageDoc
 from ncgen.codegen.looped import package_functions
 from ncgen.codegen.manifest import canonical_json
 from ncgen.codegen.package import ExtraSource, Package, check_replaceable, write_package
+from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
 
 #: The system functions in the package, in this order.
 SYSTEM_FUNCTIONS = ("phi", "A", "phi_t", "gamma", "F", "mass", "Minv", "ode", "alg", "dae", "accel",
@@ -62,7 +63,8 @@ class Section:
     extra_sources: Sequence[ExtraSource] = ()
 
 
-def generate(model, out_dir: str | os.PathLike, *, cflags=None, compile: bool = False) -> Package:
+def generate(model, out_dir: str | os.PathLike, *, cflags=None, compile: bool = False,
+             reroll_instructions: int | None = REROLL_INSTRUCTIONS) -> Package:
     """Write the C package of ``model`` (a :class:`~ncgen.model.model.Model`) to ``out_dir``.
 
     The package is named after the model; its files depend only on the model (same model,
@@ -72,8 +74,15 @@ def generate(model, out_dir: str | os.PathLike, *, cflags=None, compile: bool = 
     package is moved into place only if that succeeds; otherwise the library is built when
     first loaded.  Load the functions back with
     ``ncgen.codegen.load_functions(pkg, backend="compiled")``.
+
+    ``reroll_instructions``: functions longer than this many SX instructions are generated
+    as loops over short kernels (:mod:`ncgen.codegen.reroll`, :mod:`ncgen.codegen.looped`):
+    C that compiles in seconds whatever the size of the model, at 1.5–4× the run time of
+    straight-line code compiled with -O2.  ``None`` generates straight-line code only: the
+    fastest kernels for a large model, if its compile time (minutes to hours at -O2 for
+    thousands of members) is acceptable.
     """
-    sections = [make(model) for make in SECTIONS]
+    sections = [make(model, reroll_instructions) for make in SECTIONS]
     functions = [f for s in sections for f in s.functions]
     metadata = {k: v for s in sections for k, v in s.metadata.items()}
     doc = PackageDoc(
@@ -84,6 +93,7 @@ def generate(model, out_dir: str | os.PathLike, *, cflags=None, compile: bool = 
         defaults={arg: key for arg, key in DEFAULTS.items() if key in metadata},
         main_function=MAIN_FUNCTION)
     options = dict(doc=doc, jacobians=[j for s in sections for j in s.jacobians],
+                   reroll_instructions=reroll_instructions,
                    extra_sources=[e for s in sections for e in s.extra_sources])
     out_dir = Path(out_dir)
     if not compile:
@@ -96,10 +106,10 @@ def generate(model, out_dir: str | os.PathLike, *, cflags=None, compile: bool = 
     return dataclasses.replace(pkg, path=out_dir)
 
 
-def system_section(model) -> Section:
+def system_section(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS) -> Section:
     """The system functions of ``model`` (:func:`ncgen.codegen.looped.package_functions`)
     and its metadata."""
-    package = package_functions(model)
+    package = package_functions(model, reroll_instructions)
     functions = [package[name] for name in SYSTEM_FUNCTIONS]
     docs = {f.name(): function_doc(f) for f in functions}
     metadata, metadata_doc = model_metadata(model)
@@ -107,16 +117,17 @@ def system_section(model) -> Section:
                    metadata=metadata, metadata_doc=metadata_doc)
 
 
-def _stepper_section(model) -> Section:
+def _stepper_section(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS) -> Section:
     """The compiled stepper: ``<model>_step``, ``<model>_simulate`` and the example program
     ``<model>_simulate`` (:mod:`ncgen.runtime.stepper_package`)."""
     from ncgen.runtime.stepper_package import stepper_section
 
-    return stepper_section(model)
+    return stepper_section(model, reroll_instructions)
 
 
-#: Makers of the sections of every model package, in order.
-SECTIONS: list[Callable[[object], Section]] = [system_section, _stepper_section]
+#: Makers of the sections of every model package, in order: ``make(model,
+#: reroll_instructions) -> Section``.
+SECTIONS: list[Callable[[object, int | None], Section]] = [system_section, _stepper_section]
 
 
 def function_doc(f: ca.Function) -> dict:

@@ -40,13 +40,12 @@ MAX_FILE_INSTRUCTIONS = 20_000
 #: with the length of one function (the 32 k-instruction DAE residual of a 300-bar chain
 #: compiles in 4 s at -O0, 32 s at -O2, 9 min and 4 GB at -O1), so the builds compile those
 #: files with ``-O0`` unless the user chooses the flags (:func:`ncgen.codegen.build.
-#: compile_package`, the Makefile's ``LARGE_CFLAGS``, CMake).  The price is speed: that
-#: residual takes 53 µs at -O0 and 9.6 µs at -O2 in a C loop.
+#: compile_package`, the Makefile's ``LARGE_CFLAGS``, CMake).  Long functions are rerolled
+#: first (``reroll_instructions``), so this only concerns those with nothing that repeats
+#: (or a package written with ``reroll_instructions=None``).
 LARGE_FUNCTION_INSTRUCTIONS = 20_000
 #: Above this many SX instructions in all, every kernel file is a large source: -O2 costs
-#: ~0.5 ms per instruction even for short functions (0.1 ms at -O0), minutes for such a
-#: package, and its most used kernels (the DAE, its Jacobian, the stepper's Newton
-#: residual) are past LARGE_FUNCTION_INSTRUCTIONS already.
+#: ~0.5 ms per instruction even for short functions (0.1 ms at -O0).
 LARGE_PACKAGE_INSTRUCTIONS = 200_000
 #: Files rendered from the template of the same name plus ".j2".
 _FIXED_FILES = ("main.c", "Makefile", "CMakeLists.txt")

@@ -18,8 +18,11 @@ alone, without any knowledge of the model:
 4. outputs that depend on no input are constants; the remaining outputs (rare shapes,
    large dependency sets) stay one flat SX function.
 
-The result is exact: every block is evaluated by the same operations on the same numbers
-as in ``f`` (each shape's kernel is checked against its first block when it is built).
+The shape of a block is read from ``f``'s printed algorithm (one work slot per
+instruction), walked depth-first from the block's outputs, so alike blocks read alike
+wherever they sit in ``f``.  The result is exact: every block is evaluated by the same
+operations on the same numbers as in ``f`` (the rerolled function is checked against
+``f`` at a probe point before it is returned).
 Generated C then grows with the number of shapes, not of members; the index and constant
 tables grow linearly but are data, which compilers read quickly.  The loops cost speed on
 small models (a call and a gather per block), so :data:`REROLL_INSTRUCTIONS` sets where

@@ -38,6 +38,7 @@ import numpy as np
 
 from ncgen.assembly.mass import sparse_dm
 from ncgen.codegen.looped import is_large, primitives
+from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
 
 #: Largest nnz(V) + nnz(R) of the QR factors for which the solve is unrolled into SX.
 SX_QR_MAX_NNZ = 3_000
@@ -74,8 +75,9 @@ DOCS = {
 }
 
 
-def stepper_functions(model) -> list[ca.Function]:
-    """The four kernels of :data:`KERNELS` for ``model`` (see the module docstring)."""
+def stepper_functions(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS) -> list[ca.Function]:
+    """The four kernels of :data:`KERNELS` for ``model`` (see the module docstring);
+    ``reroll_instructions`` as in :func:`ncgen.codegen.looped.is_large`."""
     f = model.functions
     nq, nc = model.nq, model.nc
     t, h = ca.SX.sym("t"), ca.SX.sym("h")
@@ -96,13 +98,13 @@ def stepper_functions(model) -> list[ca.Function]:
     velocity = ca.Function("step_velocity", [t, q, w, u, p, h], [b, K2],
                            ["t", "q", "w", "u", "p", "h"], ["b", "K"])
 
-    return [newton, velocity, check_function(model), solve_function(K.sparsity())]
+    return [newton, velocity, check_function(model, reroll_instructions), solve_function(K.sparsity())]
 
 
-def check_function(model) -> ca.Function:
+def check_function(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS) -> ca.Function:
     """``step_check``; for a large model an MX function of the rerolled primitives
     (:mod:`ncgen.codegen.looped`: its two norms couple every constraint)."""
-    if is_large(model):
+    if is_large(model, reroll_instructions):
         f, sym = primitives(model), ca.MX
     else:
         f, sym = model.functions, ca.SX

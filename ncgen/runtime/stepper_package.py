@@ -22,6 +22,7 @@ import numpy as np
 from ncgen.codegen import PackageDoc, compile_package, write_package
 from ncgen.codegen.cnames import c_real
 from ncgen.codegen.package import ExtraSource
+from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
 from ncgen.runtime.stepper_kernels import DOCS, mass_scale, stepper_functions
 
 #: Status codes of ``<model>_step`` (``templates/c/stepper.h.j2``) and what they mean.
@@ -50,12 +51,12 @@ DEMO_T_END, DEMO_H = 1.0, 1e-3
 _loaded: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
-def stepper_section(model):
+def stepper_section(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS):
     """The stepper's part of ``model``'s C package (a
     :class:`~ncgen.codegen.model_package.Section`)."""
     from ncgen.codegen.model_package import Section
 
-    functions = stepper_functions(model)
+    functions = stepper_functions(model, reroll_instructions)
     return Section(functions=functions, docs=DOCS, extra_sources=extra_sources(model, functions))
 
 
