@@ -216,8 +216,9 @@ def _generate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--reroll", metavar="N", default=None, type=_reroll_limit,
                    help="generate functions longer than N SX instructions as loops over short "
                         "kernels found in them (compiles in seconds for any number of members, "
-                        "runs 1.5-4x slower than straight-line code at -O2); 'none': straight-line "
-                        "code only (default: ncgen.codegen.reroll.REROLL_INSTRUCTIONS, 4000)")
+                        "runs about 1.5-2x slower than straight-line code at -O2); 'none': "
+                        "straight-line code only (default: ncgen.codegen.reroll.REROLL_INSTRUCTIONS, "
+                        "4000)")
 
 
 def _reroll_limit(text: str) -> int | str:

@@ -84,16 +84,17 @@ def test_constants_differing_per_block_are_lifted_into_one_kernel():
 
 
 def test_rare_shapes_global_rows_and_constants_stay_exact():
-    """A unique block, a row depending on everything (a sum) and constant rows are kept
-    outside the loops, in their places among the outputs."""
+    """A unique block, a row depending on everything (a sum), constant rows and copies of
+    inputs are kept outside the loops, in their places among the outputs."""
     x = ca.SX.sym("x", 300)
     rows = [ca.exp(x[i]) * x[i + 1] for i in range(0, 200, 2)]
     rows.insert(7, ca.sum1(x ** 2))                     # global: stays flat
     rows.insert(3, ca.atan2(x[250], x[251]) * x[252])   # one of a kind: stays flat
     rows.insert(50, ca.SX(4.25))                        # constant
-    f = ca.Function("f", [x], [ca.vertcat(*rows), ca.sin(x[:5])], ["x"], ["y", "z"])
+    rows.insert(20, x[299])                             # a copy of an input
+    f = ca.Function("f", [x], [ca.vertcat(*rows), ca.sin(x[:5]), x[100:140]], ["x"], ["y", "z", "w"])
     g = reroll(f)
-    assert g.is_a("MXFunction") and n_maps(g) == 2
+    assert g.is_a("MXFunction") and n_maps(g) == 2      # the copies are one gather, not a loop
     assert_same(f, g, rtol=1e-15)
 
 

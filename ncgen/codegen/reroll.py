@@ -15,8 +15,9 @@ alone, without any knowledge of the model:
    ``k(x_loc, c) → y_loc`` with the constants lifted to an input, evaluated for all its
    blocks by ``Function.map(K, "serial")`` (a loop in C) on the gathered ``x`` and the
    constant matrix ``[c_1 … c_K]``;
-4. outputs that depend on no input are constants; the remaining outputs (rare shapes,
-   large dependency sets) stay one flat SX function.
+4. outputs that depend on no input are constants, outputs that are an input are one
+   gather; the remaining outputs (rare shapes, large dependency sets) stay one flat SX
+   function.
 
 The shape of a block is read from ``f``'s printed algorithm (one work slot per
 instruction), walked depth-first from the block's outputs, so alike blocks read alike
@@ -75,12 +76,12 @@ def reroll(f: ca.Function, *, min_instances: int = MIN_INSTANCES,
     Y = ca.vertcat(*[y.nz[:] for y in outs]) if outs else ca.SX(0, 1)
     g = ca.Function("reroll", [X], [Y], {"live_variables": False})   # one work slot per instruction
     algorithm = _Algorithm(g)
-    shapes, constant_rows, flat_rows = _shapes(algorithm, _dependencies(g), max_block_inputs)
+    shapes, constant_rows, copied_rows, flat_rows = _shapes(algorithm, _dependencies(g), max_block_inputs)
     kept = [s for s in shapes if len(s.rows) >= min_instances]
     flat_rows += [r for s in shapes if len(s.rows) < min_instances for b in s.rows for r in b]
-    if not kept and not constant_rows:
+    if not kept and not constant_rows and not copied_rows:
         return f
-    r = _assemble(f, X, Y, algorithm, kept, sorted(constant_rows), sorted(flat_rows))
+    r = _assemble(f, X, Y, algorithm, kept, constant_rows, copied_rows, sorted(flat_rows))
     _check(f, r)
     return r
 
@@ -145,11 +146,14 @@ class _Algorithm:
 
 def _shapes(algorithm: _Algorithm, deps_of: list[np.ndarray], max_block_inputs: int):
     """Blocks of outputs with one dependency set grouped by shape (in order of first
-    appearance), the rows depending on nothing, the rows that stay flat."""
+    appearance), the rows depending on nothing, the rows that copy an input, the rows that
+    stay flat."""
     blocks: dict[bytes, list[int]] = {}
-    constant_rows, flat_rows = [], []
+    constant_rows, copied_rows, flat_rows = [], [], []
     for r, d in enumerate(deps_of):
-        if len(d) == 0:
+        if algorithm.input[algorithm.source[r]] >= 0:
+            copied_rows.append(r)
+        elif len(d) == 0:
             constant_rows.append(r)
         elif len(d) > max_block_inputs:
             flat_rows.append(r)
@@ -169,7 +173,7 @@ def _shapes(algorithm: _Algorithm, deps_of: list[np.ndarray], max_block_inputs: 
         s.rows.append(np.array(rows, dtype=np.int64))
         s.deps.append(np.array(deps, dtype=np.int64))
         s.consts.append([algorithm.g.instruction_constant(k) for k in cone if const[k]])
-    return list(shapes.values()), constant_rows, flat_rows
+    return list(shapes.values()), constant_rows, copied_rows, flat_rows
 
 
 def _kernel(name: str, algorithm: _Algorithm, s: _Shape) -> ca.Function:
@@ -199,7 +203,7 @@ def _kernel(name: str, algorithm: _Algorithm, s: _Shape) -> ca.Function:
 
 
 def _assemble(f: ca.Function, X: ca.SX, Y: ca.SX, algorithm: _Algorithm, shapes: list[_Shape],
-              constant_rows: list[int], flat_rows: list[int]) -> ca.Function:
+              constant_rows: list[int], copied_rows: list[int], flat_rows: list[int]) -> ca.Function:
     """The MX function: gather, mapped kernels, constants and the flat rest, scattered back
     into the outputs' nonzeros."""
     ins = [ca.MX.sym(f.name_in(i), f.sparsity_in(i)) for i in range(f.n_in())]
@@ -213,6 +217,9 @@ def _assemble(f: ca.Function, X: ca.SX, Y: ca.SX, algorithm: _Algorithm, shapes:
         c = ca.DM(np.array(s.consts, dtype=float).T.reshape(-1, K))
         pieces.append(ca.vec(kernel.map(K, "serial")(xg, c)))
         order.append(np.stack(s.rows, axis=1).ravel(order="F"))
+    if copied_rows:
+        pieces.append(Xm[[algorithm.input[algorithm.source[r]] for r in copied_rows]])
+        order.append(np.array(copied_rows, dtype=np.int64))
     if constant_rows:
         values = ca.Function("constants", [X], [Y[constant_rows]])(np.zeros(X.shape[0]))
         pieces.append(ca.MX(ca.DM(values)))
