@@ -189,3 +189,14 @@ def test_looped_package_is_reproducible(tmp_path):
     assert texts[0] == texts[1]
     kernels = b"".join(v for name, v in texts[0].items() if "_kernels_" in name and name.endswith(".c"))
     assert re.search(rb"for \(i=0; i<\d+; \+\+i\)", kernels)       # a mapped kernel's loop
+
+
+def test_large_models_reroll_shorter_functions(monkeypatch):
+    from ncgen.codegen import looped
+
+    model = long_chain(30)
+    assert looped.reroll_limit(model) == REROLL_INSTRUCTIONS
+    assert looped.reroll_limit(model, None) is None
+    monkeypatch.setattr(looped, "LARGE_MODEL_INSTRUCTIONS", 1_000)
+    assert looped.reroll_limit(model) == looped.LARGE_MODEL_REROLL
+    assert looped.reroll_limit(model, 500) == 500

@@ -25,7 +25,23 @@ COMPOSITES = ("ode", "alg", "energy", "accel")
 #: The functions the composites call.
 PRIMITIVES = ("phi", "A", "phi_t", "gamma", "F")
 
+#: A model whose flat system functions total more than this many SX instructions has its
+#: package's functions rerolled from LARGE_MODEL_REROLL instructions on: next to the loops,
+#: straight-line functions of a few thousand instructions would take most of the compile
+#: time at -O2 (0.5 ms per instruction).
+LARGE_MODEL_INSTRUCTIONS = 50_000
+LARGE_MODEL_REROLL = 1_000
+
 _primitives: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def reroll_limit(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS) -> int | None:
+    """The reroll threshold of ``model``'s package: ``reroll_instructions``, lowered to
+    :data:`LARGE_MODEL_REROLL` for a model larger than :data:`LARGE_MODEL_INSTRUCTIONS`."""
+    if reroll_instructions is None:
+        return None
+    total = sum(f.n_instructions() for f in model.functions.values())
+    return min(reroll_instructions, LARGE_MODEL_REROLL) if total > LARGE_MODEL_INSTRUCTIONS else reroll_instructions
 
 
 def is_large(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS) -> bool:

@@ -32,7 +32,7 @@ from ncgen.assembly.functions import DOCS, IN
 from ncgen.codegen import fsutil
 from ncgen.codegen.build import compile_package
 from ncgen.codegen.doc import PackageDoc
-from ncgen.codegen.looped import package_functions
+from ncgen.codegen.looped import package_functions, reroll_limit
 from ncgen.codegen.manifest import canonical_json
 from ncgen.codegen.package import ExtraSource, Package, check_replaceable, write_package
 from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
@@ -78,10 +78,12 @@ def generate(model, out_dir: str | os.PathLike, *, cflags=None, compile: bool = 
     ``reroll_instructions``: functions longer than this many SX instructions are generated
     as loops over short kernels (:mod:`ncgen.codegen.reroll`, :mod:`ncgen.codegen.looped`):
     C that compiles in seconds whatever the size of the model, at about 1.5–2× the run time
-    of straight-line code compiled with -O2.  ``None`` generates straight-line code only:
+    of straight-line code compiled with -O2 (lowered for a large model, see
+    :func:`ncgen.codegen.looped.reroll_limit`).  ``None`` generates straight-line code only:
     the fastest kernels for a large model, if its compile time (minutes to hours at -O2 for
     thousands of members) is acceptable.
     """
+    reroll_instructions = reroll_limit(model, reroll_instructions)
     sections = [make(model, reroll_instructions) for make in SECTIONS]
     functions = [f for s in sections for f in s.functions]
     metadata = {k: v for s in sections for k, v in s.metadata.items()}

@@ -22,6 +22,7 @@ import numpy as np
 from ncgen.codegen import PackageDoc, compile_package, write_package
 from ncgen.codegen.cnames import c_real
 from ncgen.codegen.package import ExtraSource
+from ncgen.codegen.looped import reroll_limit
 from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
 from ncgen.runtime.stepper_kernels import DOCS, mass_scale, stepper_functions
 
@@ -78,9 +79,11 @@ def extra_sources(model, functions) -> list[ExtraSource]:
 
 def write_stepper_package(model, out_dir):
     """A package holding only the stepper of ``model`` (kernels, loop, example program)."""
-    section = stepper_section(model)
+    limit = reroll_limit(model)
+    section = stepper_section(model, limit)
     doc = PackageDoc(summary=f"Compiled stepper (RATTLE) of model {model.name!r}", functions=section.docs)
-    return write_package(model.name, section.functions, out_dir, doc=doc, extra_sources=section.extra_sources)
+    return write_package(model.name, section.functions, out_dir, doc=doc, extra_sources=section.extra_sources,
+                         reroll_instructions=limit)
 
 
 class CompiledStepper:
