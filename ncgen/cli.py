@@ -218,7 +218,7 @@ def _generate_arguments(p: argparse.ArgumentParser) -> None:
                         "kernels found in them (compiles in seconds for any number of members, "
                         "runs about 1.5-2x slower than straight-line code at -O2); 'none': "
                         "straight-line code only (default: ncgen.codegen.reroll.REROLL_INSTRUCTIONS, "
-                        "4000)")
+                        "20000)")
 
 
 def _reroll_limit(text: str) -> int | str:

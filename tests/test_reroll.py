@@ -151,8 +151,8 @@ def test_generated_code_does_not_grow_with_the_number_of_members():
 @needs_cc
 def test_package_of_a_long_model_is_looped_compiles_at_o2_and_is_exact(tmp_path):
     model = long_chain(60)
-    assert is_large(model)
-    pkg = nc.generate(model, tmp_path / "pkg")
+    assert is_large(model, 1_000)
+    pkg = nc.generate(model, tmp_path / "pkg", reroll_instructions=1_000)
     manifest = json.loads((pkg.path / "manifest.json").read_text())
     sizes = {f["name"]: f["n_instructions"] for f in manifest["functions"]}
     for name in ("dae", "alg", "ode", "poses", "step_newton", "step_velocity"):
@@ -166,11 +166,15 @@ def test_package_of_a_long_model_is_looped_compiles_at_o2_and_is_exact(tmp_path)
 
 
 @needs_cc
-def test_looped_stepper_and_idas_agree_on_a_long_model():
+def test_looped_stepper_and_idas_agree_on_a_long_model(monkeypatch):
     """The compiled stepper built from looped kernels against IDAS on the flat functions,
     with the damped springs, the parameter and the input all acting."""
+    from ncgen.codegen import looped
+
     model = long_chain(45)
-    assert is_large(model) and model.functions["dae"].n_instructions() > REROLL_INSTRUCTIONS
+    monkeypatch.setattr(looped, "LARGE_MODEL_INSTRUCTIONS", 10_000)      # treat it as large
+    assert looped.reroll_limit(model) == looped.LARGE_MODEL_REROLL
+    assert is_large(model, looped.reroll_limit(model))
     u = lambda t: [0.5 * np.sin(5 * t)]
     p = {"k": 45.0}
     ref = nc.simulate(model, 0.2, 0.02, rtol=1e-10, atol=1e-10, u=u, p=p)
@@ -184,7 +188,7 @@ def test_looped_package_is_reproducible(tmp_path):
     tables do not depend on hashing or on the objects' identity."""
     texts = []
     for k in range(2):
-        pkg = nc.generate(long_chain(45), tmp_path / f"pkg{k}")
+        pkg = nc.generate(long_chain(45), tmp_path / f"pkg{k}", reroll_instructions=1_000)
         texts.append({p.name: p.read_bytes() for p in sorted(pkg.path.iterdir())})
     assert texts[0] == texts[1]
     kernels = b"".join(v for name, v in texts[0].items() if "_kernels_" in name and name.endswith(".c"))

@@ -25,11 +25,12 @@ COMPOSITES = ("ode", "alg", "energy", "accel")
 #: The functions the composites call.
 PRIMITIVES = ("phi", "A", "phi_t", "gamma", "F")
 
-#: A model whose flat system functions total more than this many SX instructions has its
-#: package's functions rerolled from LARGE_MODEL_REROLL instructions on: next to the loops,
-#: straight-line functions of a few thousand instructions would take most of the compile
-#: time at -O2 (0.5 ms per instruction).
-LARGE_MODEL_INSTRUCTIONS = 50_000
+#: A model whose flat system functions total more than this many SX instructions (a chain
+#: of ~90 bars) has its package's functions rerolled from LARGE_MODEL_REROLL instructions
+#: on: its straight-line code would take a minute or more to compile at -O2 (0.5 ms per
+#: instruction), and next to the loops the short straight-line functions would take most
+#: of the compile time.  Smaller models keep straight-line code, the fastest at run time.
+LARGE_MODEL_INSTRUCTIONS = 40_000
 LARGE_MODEL_REROLL = 1_000
 
 _primitives: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()

@@ -37,8 +37,10 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-#: Functions with more SX instructions than this are rerolled when a package is written.
-REROLL_INSTRUCTIONS = 4_000
+#: Functions with more SX instructions than this are rerolled when a package is written:
+#: from there on gcc's -O2 time grows faster than the length of a function (a 39 k
+#: function takes 27 s), while shorter straight-line code runs 1.5–3× faster than loops.
+REROLL_INSTRUCTIONS = 20_000
 #: A shape needs this many blocks to get a kernel; rarer ones stay flat.
 MIN_INSTANCES = 4
 #: Blocks depending on more input nonzeros than this stay flat (a global coupling, such as
