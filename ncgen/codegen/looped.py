@@ -7,7 +7,8 @@ finds nothing that repeats in them.  When one of them is longer than
 definitions (:func:`ncgen.assembly.functions.composite_functions`) as MX functions calling
 the rerolled primitives, ``M⁻¹ b`` as two triangular solves with the constant factor of
 ``M`` and ``V`` as the sum of its rerolled terms.  ``accel`` calls the rerolled primitives
-too.  The other functions stay as they are: :func:`ncgen.codegen.package.write_package`
+too, and the package exports the rerolled primitives themselves, so each is generated
+once.  The other functions stay as they are: :func:`ncgen.codegen.package.write_package`
 rerolls each of them (and the DAE's Jacobian) by itself.
 """
 from __future__ import annotations
@@ -65,12 +66,13 @@ def primitives(model) -> dict[str, ca.Function]:
 
 
 def package_functions(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS) -> dict[str, ca.Function]:
-    """``model.functions`` with the composites rebuilt from calls if the model is large."""
+    """``model.functions`` with, if the model is large, the primitives rerolled and the
+    composites rebuilt from calls to them (each rerolled function is generated once)."""
     f = dict(model.functions)
     if not is_large(model, reroll_instructions):
         return f
     prim = primitives(model)
     alpha, beta = model.baumgarte
     composite = composite_functions(prim, prim["V"], sparse_dm(model.M), alpha, beta, ca.MX)
-    f.update({n: composite[n] for n in COMPOSITES}, Minv=prim["Minv"])
+    f.update({n: composite[n] for n in COMPOSITES}, **{n: prim[n] for n in (*PRIMITIVES, "Minv")})
     return f
