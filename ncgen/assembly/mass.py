@@ -98,8 +98,4 @@ class CholeskyFactor:
         return np.linalg.solve(L.T, np.linalg.solve(L, b))
 
     def dense(self) -> np.ndarray:
-        L = np.zeros((self.n, self.n))
-        for i, (idx, vals) in enumerate(self.rows):
-            L[i, idx] = vals
-            L[i, i] = self.diag[i]
-        return L
+        return np.array(ca.densify(self.lower())) if self.n else np.zeros((0, 0))
