@@ -51,16 +51,17 @@ def test_same_bytes_from_another_process(tmp_path, pkg):
     assert files_of(tmp_path / "other") == files_of(pkg.path)
 
 
-def test_two_processes_write_at_once(tmp_path, pkg):
+def test_three_processes_write_at_once(tmp_path, pkg):
     script = (f"import sys; sys.path.insert(0, {str(TESTS)!r})\n"
               "from test_codegen_samples import chain_doc, chain_functions\n"
               "from ncgen.codegen import write_package\n"
-              "for _ in range(3):\n"
-              f"    write_package('chain', chain_functions(), {str(pkg.path)!r}, doc=chain_doc())\n")
+              "functions, doc = chain_functions(), chain_doc()\n"
+              "for _ in range(15):\n"
+              f"    write_package('chain', functions, {str(pkg.path)!r}, doc=doc)\n")
     procs = [subprocess.Popen([sys.executable, "-c", script], stderr=subprocess.PIPE, text=True)
-             for _ in range(2)]
+             for _ in range(3)]
     errors = [p.communicate(timeout=120)[1] for p in procs]
-    assert [p.returncode for p in procs] == [0, 0], errors
+    assert [p.returncode for p in procs] == [0, 0, 0], errors
     Package.open(pkg.path).verify()
     assert siblings(pkg.path) == []
 

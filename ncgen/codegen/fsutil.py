@@ -55,6 +55,18 @@ def default_mode_dir(path: Path) -> None:
     os.chmod(path, 0o777 & ~umask)
 
 
+def check_target(target: Path, may_replace: Callable[[Path], None]) -> None:
+    """Call ``may_replace(target)`` early (before any work), under the lock ``replace_dir`` takes.
+
+    The lock keeps the check from seeing a target that a concurrent writer is swapping.
+    """
+    target = Path(target)
+    if not target.parent.is_dir():
+        return
+    with locked(target.parent):
+        may_replace(target)
+
+
 def replace_dir(new: Path, target: Path, may_replace: Callable[[Path], None]) -> None:
     """Move the complete directory ``new`` to ``target``.
 

@@ -100,7 +100,7 @@ def generate(model, out_dir: str | os.PathLike, *, cflags=None, compile: bool = 
     out_dir = Path(out_dir)
     if not compile:
         return write_package(model.name, functions, out_dir, **options)
-    check_replaceable(out_dir)
+    fsutil.check_target(out_dir, check_replaceable)
     with fsutil.temporary_sibling(out_dir) as tmp:
         pkg = write_package(model.name, functions, tmp / out_dir.name, **options)
         compile_package(pkg, cflags=cflags)

@@ -133,7 +133,7 @@ def write_package(name: str, functions: Sequence[ca.Function], out_dir: str | os
     functions = _checked_functions(functions)
     _check_doc(doc, functions)
     _check_extra_sources(name, extra_sources)
-    check_replaceable(out_dir)
+    fsutil.check_target(out_dir, check_replaceable)
     options = {"max_file_instructions": max_file_instructions, "reroll_instructions": reroll_instructions,
                "casadi_options": casadi_options(codegen_options),
                "extra_sources": [[s.template, s.output, dict(s.context)] + (["program"] if s.program else [])
@@ -145,9 +145,9 @@ def write_package(name: str, functions: Sequence[ca.Function], out_dir: str | os
         for rel, blob in files.items():
             (tmp / rel).write_bytes(blob)
         fsutil.default_mode_dir(tmp)
+        written = manifest.read_manifest(tmp)
         fsutil.replace_dir(tmp, out_dir, check_replaceable)
-    return Package(name=name, path=out_dir, manifest=manifest.read_manifest(out_dir),
-                   functions={f.name(): f for f in functions})
+    return Package(name=name, path=out_dir, manifest=written, functions={f.name(): f for f in functions})
 
 
 def _render_files(name: str, functions: list[ca.Function], doc: PackageDoc, options: dict,
