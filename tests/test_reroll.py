@@ -204,3 +204,19 @@ def test_large_models_reroll_shorter_functions(monkeypatch):
     monkeypatch.setattr(looped, "LARGE_MODEL_INSTRUCTIONS", 1_000)
     assert looped.reroll_limit(model) == looped.LARGE_MODEL_REROLL
     assert looped.reroll_limit(model, 500) == 500
+
+
+def test_composites_in_mx_match_the_model_and_only_the_named_ones_are_built():
+    from ncgen.assembly.functions import composite_functions
+    from ncgen.assembly.mass import sparse_dm
+    from ncgen.codegen.looped import primitives
+
+    model = long_chain(8)
+    prim = primitives(model)
+    built = composite_functions(prim, prim["V"], sparse_dm(model.M), *model.baumgarte, ca.MX, ("alg", "energy"))
+    assert sorted(built) == ["alg", "energy"]
+    for name, f in built.items():
+        assert f.is_a("MXFunction")
+        assert_same(model.functions[name], f, rtol=1e-10)
+    with pytest.raises(ValueError, match="unknown function.*'dea'"):
+        composite_functions(prim, prim["V"], sparse_dm(model.M), *model.baumgarte, ca.MX, ("dea",))

@@ -34,6 +34,8 @@ the one source of the generated C header's documentation (:mod:`ncgen.codegen.mo
 """
 from __future__ import annotations
 
+from typing import Sequence
+
 import casadi as ca
 import numpy as np
 
@@ -136,11 +138,15 @@ def system_functions(ctx: Context, phi, F, V, M: np.ndarray, factor: CholeskyFac
 FUNCTIONS = tuple(DOCS)
 
 
+#: The functions :func:`composite_functions` builds from the primitives.
+COMPOSITES = ("ode", "alg", "dae", "energy", "accel")
+
+
 def composite_functions(f: dict, potential: ca.Function, M: ca.DM, alpha: float, beta: float,
-                        sym) -> dict[str, ca.Function]:
-    """``ode``, ``alg``, ``dae``, ``energy`` and ``accel`` from the primitive functions ``f``
-    (``phi``, ``A``, ``phi_t``, ``gamma``, ``F``, ``Minv``) and ``potential: t, q, p -> V``,
-    the terms of the potential energy.
+                        sym, names: Sequence[str] = COMPOSITES) -> dict[str, ca.Function]:
+    """The functions ``names`` (of ``ode``, ``alg``, ``dae``, ``energy``, ``accel``) from the
+    primitive functions ``f`` (``phi``, ``A``, ``phi_t``, ``gamma``, ``F``, ``Minv``) and
+    ``potential: t, q, p -> V``, the terms of the potential energy.
 
     ``sym`` is the symbol type of the result: ``ca.SX`` inlines the primitives (one flat
     expression per function, the model's form), ``ca.MX`` keeps them as calls (the form of
@@ -150,23 +156,32 @@ def composite_functions(f: dict, potential: ca.Function, M: ca.DM, alpha: float,
     nu, npar = f["F"].numel_in(3), f["F"].numel_in(4)
     t, q, v = sym.sym("t"), sym.sym("q", nq), sym.sym("v", nq)
     lam, u, p = sym.sym("lam", nc), sym.sym("u", nu), sym.sym("p", npar)
-    A = f["A"](t, q, p)
-    phi = f["phi"](t, q, p)
-    phidot = ca.mtimes(A, v) + f["phi_t"](t, q, p)
-    gamma = f["gamma"](t, q, v, p)
-    a = f["Minv"](f["F"](t, q, v, u, p) - ca.mtimes(A.T, lam))
-    alg = ca.mtimes(A, a) - gamma + 2 * alpha * phidot + beta**2 * phi
-    T = 0.5 * ca.dot(v, ca.mtimes(M, v))
-    out = {
-        "ode": _function("ode", [t, q, v, lam, u, p], [v, a], ["t", "q", "v", "lam", "u", "p"],
-                         ["qdot", "vdot"]),
-        "alg": _function("alg", [t, q, v, lam, u, p], [alg], ["t", "q", "v", "lam", "u", "p"], ["res"]),
-        "dae": _dae(f, M, alpha, beta, nq, nc, nu, npar, sym),
-        "energy": _function("energy", [t, q, v, p], [T, ca.sum1(potential(t, q, p))], ["t", "q", "v", "p"],
-                            ["T", "V"]),
+
+    def ode_alg():
+        A = f["A"](t, q, p)
+        phidot = ca.mtimes(A, v) + f["phi_t"](t, q, p)
+        a = f["Minv"](f["F"](t, q, v, u, p) - ca.mtimes(A.T, lam))
+        alg = ca.mtimes(A, a) - f["gamma"](t, q, v, p) + 2 * alpha * phidot + beta**2 * f["phi"](t, q, p)
+        return a, alg
+
+    def energy():
+        T = 0.5 * ca.dot(v, ca.mtimes(M, v))
+        return _function("energy", [t, q, v, p], [T, ca.sum1(potential(t, q, p))], ["t", "q", "v", "p"],
+                         ["T", "V"])
+
+    makers = {
+        "ode": lambda: _function("ode", [t, q, v, lam, u, p], [v, ode_alg()[0]],
+                                 ["t", "q", "v", "lam", "u", "p"], ["qdot", "vdot"]),
+        "alg": lambda: _function("alg", [t, q, v, lam, u, p], [ode_alg()[1]], ["t", "q", "v", "lam", "u", "p"],
+                                 ["res"]),
+        "dae": lambda: _dae(f, M, alpha, beta, nq, nc, nu, npar, sym),
+        "energy": energy,
+        "accel": lambda: _accel(f, M, nc, alpha, beta, nq, nu, npar),
     }
-    out["accel"] = _accel(f, M, nc, alpha, beta, nq, nu, npar)
-    return out
+    unknown = sorted(set(names) - set(makers))
+    if unknown:
+        raise ValueError(f"composite_functions: unknown function(s) {unknown}; expected some of {COMPOSITES}")
+    return {name: makers[name]() for name in names}
 
 
 def _markers(ctx: Context, system):

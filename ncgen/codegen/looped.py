@@ -21,8 +21,9 @@ from ncgen.assembly.functions import composite_functions
 from ncgen.assembly.mass import sparse_dm
 from ncgen.codegen.reroll import REROLL_INSTRUCTIONS, reroll
 
-#: Functions rebuilt from calls when the model is large.
-COMPOSITES = ("ode", "alg", "energy", "accel")
+#: Functions rebuilt from calls when the model is large (``dae`` stays flat: CasADi differentiates
+#: its SX exactly and the package rerolls it and its Jacobian).
+REBUILT = ("ode", "alg", "energy", "accel")
 #: The functions the composites call.
 PRIMITIVES = ("phi", "A", "phi_t", "gamma", "F")
 
@@ -50,7 +51,7 @@ def is_large(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS) -> bo
     """Whether a flat composite of ``model`` is longer than ``reroll_instructions``
     (``None``: never)."""
     return reroll_instructions is not None and any(
-        model.functions[n].n_instructions() > reroll_instructions for n in COMPOSITES if n != "accel")
+        model.functions[n].n_instructions() > reroll_instructions for n in REBUILT if n != "accel")
 
 
 def primitives(model) -> dict[str, ca.Function]:
@@ -73,6 +74,6 @@ def package_functions(model, reroll_instructions: int | None = REROLL_INSTRUCTIO
         return f
     prim = primitives(model)
     alpha, beta = model.baumgarte
-    composite = composite_functions(prim, prim["V"], sparse_dm(model.M), alpha, beta, ca.MX)
-    f.update({n: composite[n] for n in COMPOSITES}, **{n: prim[n] for n in (*PRIMITIVES, "Minv")})
+    f.update(composite_functions(prim, prim["V"], sparse_dm(model.M), alpha, beta, ca.MX, REBUILT))
+    f.update({n: prim[n] for n in (*PRIMITIVES, "Minv")})
     return f
