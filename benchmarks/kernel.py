@@ -21,12 +21,22 @@ output: no batch of outputs to allocate; the sum adds one addition per output no
 C and VM alike), NumPy in a Python loop (that is how NumPy code runs).
 Times: microseconds per evaluation, best of ``--repeat``.
 
-    python benchmarks/kernel.py              N = 5, 20, 50
-    python benchmarks/kernel.py --smoke      N = 3, few evaluations (CI)
+The looped mode times the form of large models instead: the residual and the Jacobian
+rerolled into loops of short kernels (``ncgen.codegen.reroll``, from 1000 SX instructions
+on, as ``nc.generate`` does for models over 40 k instructions) against the same functions
+as straight-line code at -O0 and -O2, each called in a C loop that writes its outputs, and
+the VM; it prints the compile times too (straight-line -O2 takes minutes beyond ~300 bars).
+
+    python benchmarks/kernel.py                    N = 5, 20, 50
+    python benchmarks/kernel.py --looped           N = 20, 300, 1000
+    python benchmarks/kernel.py [--looped] --smoke N = 3, few evaluations (CI)
 """
 from __future__ import annotations
 
 import argparse
+import re
+import shutil
+import subprocess
 import sys
 import tempfile
 import time
@@ -37,7 +47,11 @@ import numpy as np
 
 from common import L, best_time, chain_system, machine
 
+from ncgen.codegen.looped import LARGE_MODEL_REROLL
+
 BATCH = 2000
+#: SX instructions of work per timing repetition in the looped mode (sets its loop counts).
+LOOP_INSTRUCTIONS = 2e7
 
 
 def kernels(model) -> list[ca.Function]:
@@ -119,18 +133,18 @@ HARNESS = """#include <stdio.h>
 static const casadi_real x[] = {{{x}}}, z[] = {{{z}}};
 static double now(void) {{ struct timespec t; clock_gettime(CLOCK_MONOTONIC, &t); return t.tv_sec + 1e-9 * t.tv_nsec; }}
 int main(void) {{
-  static casadi_real w[{sz_w}];
+  static casadi_real w[{sz_w}], out[{sz_out}];
   static casadi_int iw[{sz_iw}];
-  casadi_real t = 0, out, best, start;
+  casadi_real t = 0, best, start;
   const casadi_real *arg[{sz_arg}] = {{&t, x, z, 0, 0}};
-  casadi_real *res[{sz_res}] = {{&out}};
+  casadi_real *res[{sz_res}];
   long k;
   int rep;
 {calls}
   return 0;
 }}
 """
-CALL = """  for (best = 1e30, rep = 0; rep < {repeat}; ++rep) {{
+CALL = """{outputs}  for (best = 1e30, rep = 0; rep < {repeat}; ++rep) {{
     start = now();
     for (k = 0; k < {loops}; ++k) {{ {fn}(arg, res, iw, w, 0); t += 1e-300; }}
     if (now() - start < best) best = now() - start;
@@ -139,25 +153,39 @@ CALL = """  for (best = 1e30, rep = 0; rep < {repeat}; ++rep) {{
 """
 
 
-def from_c(pkg_dir, name: str, timed: list[ca.Function], x, z, loops: int, repeat: int) -> dict[str, float]:
-    """Microseconds per evaluation of each :func:`summed` kernel called in a C loop (the
-    generated code alone, compiled -O2 with the package's sources)."""
-    import shutil
-    import subprocess
+def from_c(pkg_dir, name: str, timed: list[ca.Function], x, z, loops: int | dict[str, int], repeat: int,
+           cflags: str = "-O2") -> dict[str, float]:
+    """Microseconds per evaluation of each function of ``timed`` called in a C loop (the
+    generated code alone, compiled with ``cflags`` together with the package's sources);
+    each output is written to its own buffer.  ``loops``: evaluations per repetition, one
+    number or one per function name.  Empty without a C compiler."""
+    exe = build_harness(pkg_dir, name, timed, x, z, loops, repeat, cflags)
+    if exe is None:
+        return {}
+    out = subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout
+    return {line.split()[0]: float(line.split()[1]) for line in out.splitlines()}
 
+
+def build_harness(pkg_dir, name: str, timed: list[ca.Function], x, z, loops: int | dict[str, int], repeat: int,
+                  cflags: str = "-O2") -> Path | None:
+    """The timing program of :func:`from_c`, compiled in ``pkg_dir``; None without a C compiler."""
     cc = shutil.which("gcc") or shutil.which("cc")
     if cc is None:
-        return {}
+        return None
     sizes = [max(getattr(f, k)() for f in timed) for k in ("sz_arg", "sz_res", "sz_iw", "sz_w")]
-    calls = "".join(CALL.format(repeat=repeat, loops=loops, fn=f"{name}_{f.name()}", label=f.name()) for f in timed)
+    calls = []
+    for f in timed:
+        offsets = np.cumsum([0] + [f.nnz_out(i) for i in range(f.n_out())])
+        outputs = "".join(f"  res[{i}] = out + {offsets[i]};\n" for i in range(f.n_out()))
+        n = loops if isinstance(loops, int) else loops[f.name()]
+        calls.append(CALL.format(outputs=outputs, repeat=repeat, loops=n, fn=f"{name}_{f.name()}", label=f.name()))
     text = HARNESS.format(name=name, x=", ".join(repr(float(v)) for v in x), z=", ".join(repr(float(v)) for v in z) or "0",
                           sz_arg=max(5, sizes[0]), sz_res=max(1, sizes[1]), sz_iw=max(1, sizes[2]),
-                          sz_w=max(1, sizes[3]), calls=calls)
+                          sz_w=max(1, sizes[3]), sz_out=max(1, max(f.nnz_out() for f in timed)), calls="".join(calls))
     (pkg_dir / "harness.c").write_text(text)
     sources = [p.name for p in sorted(pkg_dir.glob(f"{name}_kernels_*.c"))]
-    subprocess.run([cc, "-O2", "-o", "harness", "harness.c", *sources, "-lm"], cwd=pkg_dir, check=True)
-    out = subprocess.run([str(pkg_dir / "harness")], capture_output=True, text=True, check=True).stdout
-    return {line.split()[0]: float(line.split()[1]) for line in out.splitlines()}
+    subprocess.run([cc, *cflags.split(), "-o", "harness", "harness.c", *sources, "-lm"], cwd=pkg_dir, check=True)
+    return pkg_dir / "harness"
 
 
 def per_call(f: ca.Function, args, batch: int, repeat: int) -> float:
@@ -169,13 +197,18 @@ def per_call(f: ca.Function, args, batch: int, repeat: int) -> float:
     return secs / batch * 1e6
 
 
+def point(model) -> tuple[np.ndarray, np.ndarray]:
+    """The evaluation point: x near the initial state, z random (fixed seed)."""
+    rng = np.random.default_rng(0)
+    x = np.concatenate([model.q0 + 0.01 * rng.standard_normal(model.nq), rng.standard_normal(model.nq)])
+    return x, rng.standard_normal(model.nq + model.nc)
+
+
 def run(n: int, batch: int, repeat: int) -> None:
     model = chain_system(n).build()
     functions = kernels(model)
     timed = [summed(f) for f in functions]
-    rng = np.random.default_rng(0)
-    x = np.concatenate([model.q0 + 0.01 * rng.standard_normal(model.nq), rng.standard_normal(model.nq)])
-    z = rng.standard_normal(model.nq + model.nc)
+    x, z = point(model)
     name = f"kernel_chain{n}"
     with tempfile.TemporaryDirectory(prefix="ncgen-kernel-") as tmp:
         c = compiled(functions + timed, name, Path(tmp) / name)
@@ -209,18 +242,83 @@ def run(n: int, batch: int, repeat: int) -> None:
                   f"{t_np / t_c:.1f}")
 
 
+def run_looped(n: int, repeat: int, flat_cap: int, loop_instructions: float, reroll: int) -> None:
+    """Looped against straight-line generated C for the residual and the Jacobian of the
+    N-bar chain, in a C loop (see the module docstring), and the VM.  ``reroll``: the
+    functions are rerolled from this many SX instructions on (large models: 1000)."""
+    from ncgen.codegen import load_functions, write_package
+
+    model = chain_system(n).build()
+    functions = kernels(model)[:2]
+    x, z = point(model)
+    args = [0.0, x, z, np.zeros(model.nu), model.p0]
+    loops = {f.name(): max(5, int(loop_instructions / f.n_instructions())) for f in functions}
+    name = f"looped_chain{n}"
+    times, builds = {}, {}
+    with tempfile.TemporaryDirectory(prefix="ncgen-looped-") as tmp:
+        looped = write_package(name, functions, Path(tmp) / "looped", reroll_instructions=reroll)
+        n_loops = sum(len(re.findall(r"for \(i=0; i<\d+; \+\+i\)", p.read_text()))
+                      for p in looped.path.glob("*_kernels_*.c"))
+        c = load_functions(looped, backend="compiled")
+        check = max(float(ca.mmax(ca.fabs(c[f.name()](*args) - f(*args)))) for f in functions)
+        variants = [("looped -O2", looped, "-O2"), ("flat -O0", None, "-O0")]
+        variants += [("flat -O2", None, "-O2")] if n <= flat_cap else []
+        flat = None
+        for label, pkg, flags in variants:
+            if pkg is None:
+                flat = flat or write_package(name, functions, Path(tmp) / "flat", reroll_instructions=None)
+                pkg = flat
+            start = time.perf_counter()
+            exe = build_harness(pkg.path, name, functions, x, z, loops, repeat, flags)
+            builds[label] = time.perf_counter() - start
+            if exe is not None:
+                out = subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout
+                times[label] = {line.split()[0]: float(line.split()[1]) for line in out.splitlines()}
+    if not times:
+        print("  (no C compiler: nothing to time)")
+        return
+    vm = {f.name(): per_call(summed(f), args, loops[f.name()], repeat) for f in functions}
+    labels = [label for label, *_ in variants]
+    print(f"\n=== looped vs straight-line C: chain of N = {n} bars, nx = {2 * model.nq}, "
+          f"nz = {model.nq + model.nc} ===")
+    print(f"  looped vs SX values: max |difference| = {check:.1e}; loops in the looped C: {n_loops}")
+    print("  compile (s, harness + package sources): " + ", ".join(f"{k} {v:.1f}" for k, v in builds.items())
+          + ("" if n <= flat_cap else f"; flat -O2 skipped (N > --flat-cap {flat_cap})"))
+    print(f"  {'kernel':<10} {'SX instr.':>10} " + " ".join(f"{k + ' (us)':>16}" for k in labels)
+          + f" {'VM (us)':>10} {'flat-O0/looped':>15} {'VM/looped':>10}")
+    for f in functions:
+        t = {k: times[k][f.name()] for k in labels}
+        print(f"  {f.name():<10} {f.n_instructions():>10} " + " ".join(f"{t[k]:>16.2f}" for k in labels)
+              + f" {vm[f.name()]:>10.2f} {t['flat -O0'] / t['looped -O2']:>15.2f} {vm[f.name()] / t['looped -O2']:>10.1f}")
+        if "flat -O2" in t:
+            print(f"  RATIO looped -O2 / flat -O2, {f.name()}: {t['looped -O2'] / t['flat -O2']:.2f}")
+        print(f"  RATIO VM / looped -O2, {f.name()}: {vm[f.name()] / t['looped -O2']:.1f}")
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--smoke", action="store_true", help="tiny: runs in seconds (CI)")
-    parser.add_argument("--sizes", type=int, nargs="+", help="numbers of bars (default 5 20 50)")
+    parser.add_argument("--sizes", type=int, nargs="+",
+                        help="numbers of bars (default 5 20 50; with --looped 20 300 1000)")
     parser.add_argument("--repeat", type=int, default=5, help="timing repetitions; the fastest counts")
+    parser.add_argument("--looped", action="store_true",
+                        help="time looped (rerolled) against straight-line generated C, the form of large models")
+    parser.add_argument("--flat-cap", type=int, default=300,
+                        help="with --looped: largest N whose straight-line code is compiled at -O2 "
+                             "(minutes of gcc beyond ~300 bars)")
     args = parser.parse_args(argv)
-    sizes = args.sizes or ([3] if args.smoke else [5, 20, 50])
-    batch, repeat = (20, 1) if args.smoke else (BATCH, args.repeat)
     print(machine())
     start = time.perf_counter()
-    for n in sizes:
-        run(n, batch, repeat)
+    if args.looped:
+        sizes = args.sizes or ([3] if args.smoke else [20, 300, 1000])
+        for n in sizes:
+            run_looped(n, 1 if args.smoke else args.repeat, args.flat_cap, 2e4 if args.smoke else LOOP_INSTRUCTIONS,
+                       100 if args.smoke else LARGE_MODEL_REROLL)
+    else:
+        sizes = args.sizes or ([3] if args.smoke else [5, 20, 50])
+        batch, repeat = (20, 1) if args.smoke else (BATCH, args.repeat)
+        for n in sizes:
+            run(n, batch, repeat)
     print(f"\n(total {time.perf_counter() - start:.1f} s)")
     return 0
 
