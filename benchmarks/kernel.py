@@ -128,27 +128,35 @@ def compiled(functions, name: str, directory) -> dict[str, ca.Function]:
 
 
 HARNESS = """#include <stdio.h>
+#include <stdlib.h>
 #include <time.h>
 #include "{name}.h"
 static const casadi_real x[] = {{{x}}}, z[] = {{{z}}};
+static casadi_real out[{sz_out}];
 static double now(void) {{ struct timespec t; clock_gettime(CLOCK_MONOTONIC, &t); return t.tv_sec + 1e-9 * t.tv_nsec; }}
 int main(void) {{
-  static casadi_real w[{sz_w}], out[{sz_out}];
-  static casadi_int iw[{sz_iw}];
   casadi_real t = 0, best, start;
-  const casadi_real *arg[{sz_arg}] = {{&t, x, z, 0, 0}};
-  casadi_real *res[{sz_res}];
+  casadi_int n_arg, n_res, n_iw, n_w, *iw;
+  const casadi_real **arg;
+  casadi_real **res, *w;
   long k;
-  int rep;
+  int rep, mem;
 {calls}
   return 0;
 }}
 """
-CALL = """{outputs}  for (best = 1e30, rep = 0; rep < {repeat}; ++rep) {{
+CALL = """  {fn}_work(&n_arg, &n_res, &n_iw, &n_w);
+  arg = calloc(n_arg + 5, sizeof *arg); res = calloc(n_res + 1, sizeof *res);
+  iw = calloc(n_iw + 1, sizeof *iw); w = calloc(n_w + 1, sizeof *w);
+  arg[0] = &t; arg[1] = x; arg[2] = z;
+{outputs}  mem = {fn}_checkout();
+  for (best = 1e30, rep = 0; rep < {repeat}; ++rep) {{
     start = now();
-    for (k = 0; k < {loops}; ++k) {{ {fn}(arg, res, iw, w, 0); t += 1e-300; }}
+    for (k = 0; k < {loops}; ++k) {{ {fn}(arg, res, iw, w, mem); t += 1e-300; }}
     if (now() - start < best) best = now() - start;
   }}
+  {fn}_release(mem);
+  free(arg); free(res); free(iw); free(w);
   printf("{label} %.6f\\n", best / {loops} * 1e6);
 """
 
@@ -172,7 +180,6 @@ def build_harness(pkg_dir, name: str, timed: list[ca.Function], x, z, loops: int
     cc = shutil.which("gcc") or shutil.which("cc")
     if cc is None:
         return None
-    sizes = [max(getattr(f, k)() for f in timed) for k in ("sz_arg", "sz_res", "sz_iw", "sz_w")]
     calls = []
     for f in timed:
         offsets = np.cumsum([0] + [f.nnz_out(i) for i in range(f.n_out())])
@@ -180,8 +187,7 @@ def build_harness(pkg_dir, name: str, timed: list[ca.Function], x, z, loops: int
         n = loops if isinstance(loops, int) else loops[f.name()]
         calls.append(CALL.format(outputs=outputs, repeat=repeat, loops=n, fn=f"{name}_{f.name()}", label=f.name()))
     text = HARNESS.format(name=name, x=", ".join(repr(float(v)) for v in x), z=", ".join(repr(float(v)) for v in z) or "0",
-                          sz_arg=max(5, sizes[0]), sz_res=max(1, sizes[1]), sz_iw=max(1, sizes[2]),
-                          sz_w=max(1, sizes[3]), sz_out=max(1, max(f.nnz_out() for f in timed)), calls="".join(calls))
+                          sz_out=max(1, max(f.nnz_out() for f in timed)), calls="".join(calls))
     (pkg_dir / "harness.c").write_text(text)
     sources = [p.name for p in sorted(pkg_dir.glob(f"{name}_kernels_*.c"))]
     subprocess.run([cc, *cflags.split(), "-o", "harness", "harness.c", *sources, "-lm"], cwd=pkg_dir, check=True)

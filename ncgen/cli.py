@@ -216,9 +216,9 @@ def _generate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--reroll", metavar="N", default=None, type=_reroll_limit,
                    help="generate functions longer than N SX instructions as loops over short "
                         "kernels found in them (compiles in seconds for any number of members, "
-                        "runs about 1.5-2x slower than straight-line code at -O2); 'none': "
-                        "straight-line code only (default: ncgen.codegen.reroll.REROLL_INSTRUCTIONS, "
-                        "20000)")
+                        "runs about 2-4x slower than straight-line code at -O2); 'none': "
+                        "straight-line code only (default: 20000, lowered to 1000 for a model whose "
+                        "functions total over 40000 instructions, a chain of about 90 bars)")
 
 
 def _reroll_limit(text: str) -> int | str:

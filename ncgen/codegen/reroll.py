@@ -39,7 +39,8 @@ import numpy as np
 
 #: Functions with more SX instructions than this are rerolled when a package is written:
 #: from there on gcc's -O2 time grows faster than the length of a function (a 39 k
-#: function takes 27 s), while shorter straight-line code runs 1.5–3× faster than loops.
+#: function takes 27 s), while shorter straight-line code runs 2–4× faster than loops
+#: (``benchmarks/kernel.py --looped``).
 REROLL_INSTRUCTIONS = 20_000
 #: A shape needs this many blocks to get a kernel; rarer ones stay flat.
 MIN_INSTANCES = 4
