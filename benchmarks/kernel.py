@@ -168,8 +168,11 @@ def from_c(pkg_dir, name: str, timed: list[ca.Function], x, z, loops: int | dict
     each output is written to its own buffer.  ``loops``: evaluations per repetition, one
     number or one per function name.  Empty without a C compiler."""
     exe = build_harness(pkg_dir, name, timed, x, z, loops, repeat, cflags)
-    if exe is None:
-        return {}
+    return {} if exe is None else run_harness(exe)
+
+
+def run_harness(exe: Path) -> dict[str, float]:
+    """Run a program of :func:`build_harness`: microseconds per evaluation by function name."""
     out = subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout
     return {line.split()[0]: float(line.split()[1]) for line in out.splitlines()}
 
@@ -251,7 +254,8 @@ def run(n: int, batch: int, repeat: int) -> None:
 def run_looped(n: int, repeat: int, flat_cap: int, loop_instructions: float, reroll: int) -> None:
     """Looped against straight-line generated C for the residual and the Jacobian of the
     N-bar chain, in a C loop (see the module docstring), and the VM.  ``reroll``: the
-    functions are rerolled from this many SX instructions on (large models: 1000)."""
+    functions are rerolled from this many SX instructions on (large models: 1000).  Needs a
+    C compiler (loading the looped package compiles it)."""
     from ncgen.codegen import load_functions, write_package
 
     model = chain_system(n).build()
@@ -277,12 +281,7 @@ def run_looped(n: int, repeat: int, flat_cap: int, loop_instructions: float, rer
             start = time.perf_counter()
             exe = build_harness(pkg.path, name, functions, x, z, loops, repeat, flags)
             builds[label] = time.perf_counter() - start
-            if exe is not None:
-                out = subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout
-                times[label] = {line.split()[0]: float(line.split()[1]) for line in out.splitlines()}
-    if not times:
-        print("  (no C compiler: nothing to time)")
-        return
+            times[label] = run_harness(exe)
     vm = {f.name(): per_call(summed(f), args, loops[f.name()], repeat) for f in functions}
     labels = [label for label, *_ in variants]
     print(f"\n=== looped vs straight-line C: chain of N = {n} bars, nx = {2 * model.nq}, "

@@ -34,6 +34,7 @@ the one source of the generated C header's documentation (:mod:`ncgen.codegen.mo
 """
 from __future__ import annotations
 
+import functools
 from typing import Sequence
 
 import casadi as ca
@@ -157,6 +158,7 @@ def composite_functions(f: dict, potential: ca.Function, M: ca.DM, alpha: float,
     t, q, v = sym.sym("t"), sym.sym("q", nq), sym.sym("v", nq)
     lam, u, p = sym.sym("lam", nc), sym.sym("u", nu), sym.sym("p", npar)
 
+    @functools.cache
     def ode_alg():
         A = f["A"](t, q, p)
         phidot = ca.mtimes(A, v) + f["phi_t"](t, q, p)

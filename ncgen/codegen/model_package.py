@@ -78,8 +78,8 @@ def generate(model, out_dir: str | os.PathLike, *, cflags=None, compile: bool = 
     ``reroll_instructions``: functions longer than this many SX instructions are generated
     as loops over short kernels (:mod:`ncgen.codegen.reroll`, :mod:`ncgen.codegen.looped`):
     C that compiles in seconds whatever the size of the model, at about 2–4× the run time
-    of straight-line code compiled with -O2 (``benchmarks/kernel.py --looped``) (lowered for a large model, see
-    :func:`ncgen.codegen.looped.reroll_limit`).  ``None`` generates straight-line code only:
+    of straight-line code compiled with -O2 (``benchmarks/kernel.py --looped``); the limit
+    is lowered for a large model (:func:`ncgen.codegen.looped.reroll_limit`).  ``None`` generates straight-line code only:
     the fastest kernels for a large model, if its compile time (minutes to hours at -O2 for
     thousands of members) is acceptable.
     """
