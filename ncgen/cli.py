@@ -252,10 +252,9 @@ def _reroll_limit(text: str) -> int | str:
 def generate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from ncgen.codegen.build import compile_package
     from ncgen.codegen.model_package import generate as generate_package
-
-    model = load_model(args.model)
     from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
 
+    model = load_model(args.model)
     limit = {None: REROLL_INSTRUCTIONS, "none": None}.get(args.reroll, args.reroll)
     pkg = generate_package(model, args.output, cflags=args.cflags, compile=args.compile,
                            reroll_instructions=limit)
