@@ -37,7 +37,7 @@ def top_mjcf(model, timestep: float, integrator: str) -> str:
     top = model.member("top")
     R, com = top.R0, top.p0
     local_com = R.T @ com                               # the tip is the world origin
-    J = top.local.Jbar                                  # J̄ = ½ tr(Ī) I − Ī  ⇒  Ī = tr(J̄) I − J̄
+    J = top.rigid.Jbar                                  # J̄ = ½ tr(Ī) I − Ī  ⇒  Ī = tr(J̄) I − J̄
     inertia = np.diag(np.trace(J) * np.eye(3) - J)
     quat = _quat(R)
     return (f'<mujoco model="heavy_top"><compiler inertiafromgeom="false" angle="radian"/>'
@@ -45,7 +45,7 @@ def top_mjcf(model, timestep: float, integrator: str) -> str:
             f'<flag contact="disable" energy="enable"/></option><worldbody>'
             f'<body name="top" pos="0 0 0" quat="{_nums(quat)}">'
             f'<joint type="ball" damping="0" armature="0"/>'
-            f'<inertial pos="{_nums(local_com)}" mass="{top.local.mass!r}" '
+            f'<inertial pos="{_nums(local_com)}" mass="{top.rigid.mass!r}" '
             f'diaginertia="{_nums(inertia)}"/></body></worldbody></mujoco>')
 
 

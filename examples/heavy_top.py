@@ -10,7 +10,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import ncgen as nc
-from ncgen.demo import Top, invariants
+from ncgen.cli.demo_job import Top, invariants
 
 top = Top(spin=150.0)                  # the parameters written in heavy_top.toml
 model = nc.System.from_toml(Path(__file__).with_name("heavy_top.toml")).build()

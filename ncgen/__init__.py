@@ -12,14 +12,14 @@ from ncgen.model.joints import (
     CoordinateDriver, Cylindrical, Distance, Fixed, Joint, Planar, PointOnLine, PointOnPlane, Prismatic,
     Revolute, Spherical, Universal,
 )
-from ncgen.model.members import ModelError
+from ncgen.errors import ModelError
 from ncgen.model.model import Model
 from ncgen.model.system import System
 from ncgen.optim import OptimalControl, OptimalTrajectory
 from ncgen.runtime import Trajectory, simulate
 from ncgen.symbolic.coordinates import coordinate_type
+from ncgen.version import __version__
 
-__version__ = "0.1.0"
 
 __all__ = [
     "CoordinateDriver", "Cylindrical", "Distance", "Fixed", "Force", "GeneralizedForce", "Joint", "Model",

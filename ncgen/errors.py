@@ -10,6 +10,10 @@ class NcgenError(ValueError):
     """Base class of the errors ncgen raises for bad input."""
 
 
+class ModelError(NcgenError):
+    """An invalid model: names, references, geometry or initial state."""
+
+
 class CoordinateTypeError(NcgenError):
     """Unknown natural-coordinate type, or one that does not exist in the requested dimension."""
 

@@ -74,3 +74,29 @@ def snap(c, tol: float = SNAP_TOL) -> np.ndarray:
     c = np.array(c, dtype=float)
     r = np.round(c)
     return np.where(np.abs(c - r) <= tol, r, c) + 0.0
+
+
+def perpendicular_basis(axis, *, unit: bool = False) -> list[np.ndarray]:
+    """Unit vectors ``n`` completing ``a = axis/|axis|`` to a right-handed orthonormal basis:
+    ``[n1]`` in 2D (``(a, n1)`` right-handed), ``[n1, a × n1]`` in 3D.  ``unit=True``: ``axis``
+    is taken as unit already (not normalised again, so no round-off is added)."""
+    a = np.asarray(axis, float)
+    if not unit:
+        a = a / norm(a)
+    if len(a) == 2:
+        return [np.array([-a[1], a[0]])]
+    helper = np.eye(3)[int(np.argmin(np.abs(a)))]
+    n1 = np.cross(a, helper)
+    n1 /= norm(n1)
+    return [n1, np.cross(a, n1)]
+
+
+def frame_along(e1) -> np.ndarray:
+    """A rotation matrix whose first column is the unit vector ``e1`` (columns ``e1``,
+    ``n1`` in 2D; ``e1``, ``−(e1 × n1)``, ``n1`` in 3D, with ``n1`` of
+    :func:`perpendicular_basis`)."""
+    e1 = np.asarray(e1, float)
+    n = perpendicular_basis(e1, unit=True)
+    if len(e1) == 2:
+        return np.column_stack([e1, n[0]])
+    return np.column_stack([e1, -n[1], n[0]])

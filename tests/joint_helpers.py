@@ -6,8 +6,8 @@ import casadi as ca
 import numpy as np
 
 from ncgen.assembly.build import constraint_rows, initial_guess
-from ncgen.assembly.context import Context
-from ncgen.assembly.layout import make_layout
+from ncgen.model.context import Context
+from ncgen.model.layout import make_layout
 
 AT3 = np.array([0.3, -0.2, 0.5])
 AXIS3 = np.array([1.0, 2.0, 2.0]) / 3.0                  # a generic unit direction

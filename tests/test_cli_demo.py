@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ncgen.cli import main
-from ncgen.demo import Top, heavy_top, invariants
+from ncgen.cli.demo_job import Top, heavy_top, invariants
 from ncgen.runtime import Trajectory
 
 #: The demo must finish within this on the 2-core reference machine, compile included.

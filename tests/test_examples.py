@@ -62,7 +62,7 @@ def cable_tensions(model, traj) -> np.ndarray:
     """Tension (N) of every cable per step, from the end points' positions."""
     p = dict(zip(model.parameter_names, model.p0))
     out = []
-    for f in model.system.forces:
+    for f in model.forces:
         ra, rb = traj.point(f.a.name, f.at_a), traj.point(f.b.name, f.at_b)
         rest = float(eval(f.rest_length, {}, p))                  # "L - c*tension/k_cable"
         out.append(p["k_cable"] * (np.linalg.norm(rb - ra, axis=1) - rest))

@@ -1,6 +1,6 @@
 """The heavy symmetric top against closed forms (independent of ncgen's equations).
 
-Top: one 'ruvw' body whose tip is a shared ground point (ncgen.demo.heavy_top).  Theory, with
+Top: one 'ruvw' body whose tip is a shared ground point (ncgen.cli.demo_job.heavy_top).  Theory, with
 θ the tilt, ω₃ the spin, I1' = I1 + m l² the transverse inertia about the tip:
 
 * steady precession at the rate Ω solving m g l = Ω (I3 ω₃ − I1' Ω cos θ) (Goldstein §5.7);
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import ncgen as nc
-from ncgen.demo import Top, heavy_top, invariants
+from ncgen.cli.demo_job import Top, heavy_top, invariants
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 

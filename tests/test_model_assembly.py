@@ -17,7 +17,7 @@ def _mixed_system():
     b2 = s.add_bar("b2", coords="ru", mass=0.4, ends=[b1.end(1), (1.5, 1.2, 0.4)], com=0.2, inertia=0.02)
     tip = s.add_point("tip", mass=0.3, position=b1.end(1))
     body.add_marker("corner", (0.3, -0.2, 0.1))
-    b2.add_marker("free_end", (b2.local.Xbar[0, 0] - 0.2, 0, 0))
+    b2.add_marker("free_end", (b2.rigid.Xbar[0, 0] - 0.2, 0, 0))
     return s, body, b1, b2, tip
 
 
@@ -40,15 +40,15 @@ def test_assembled_functions_match_the_symbolic_layer():
         qI = np.where([i is None for i in idx], m.q0, q[[i if i is not None else 0 for i in idx]])
         vI = np.where([i is None for i in idx], 0.0, v[[i if i is not None else 0 for i in idx]])
         n = m.ctype.n_phi
-        assert np.allclose(phi[row:row + n], m.local.phi(qI))
-        assert np.allclose(A[row:row + n][:, cols], m.local.phi_q(qI)[:, keep])
+        assert np.allclose(phi[row:row + n], m.rigid.phi(qI))
+        assert np.allclose(A[row:row + n][:, cols], m.rigid.phi_q(qI)[:, keep])
         row += n
-        M[np.ix_(cols, cols)] += m.local.M[np.ix_(keep, keep)]
-        F[cols] += m.local.force_at(np.zeros(3), m.local.mass * model.gravity)[keep]
-        T += 0.5 * vI @ m.local.M @ vI
-        markers += [m.local.position(qI, x) for x in m.markers.values()]
+        M[np.ix_(cols, cols)] += m.rigid.M[np.ix_(keep, keep)]
+        F[cols] += m.rigid.force_at(np.zeros(3), m.rigid.mass * model.gravity)[keep]
+        T += 0.5 * vI @ m.rigid.M @ vI
+        markers += [m.rigid.position(qI, x) for x in m.markers.values()]
         R, p = model.poses(q)
-        R_sym, p_sym = m.local.pose(qI)
+        R_sym, p_sym = m.rigid.pose(qI)
         k = model.member_names.index(m.name)
         assert np.allclose(p[k], p_sym)
         assert np.allclose(R[k], np.eye(3) if R_sym is None else R_sym)

@@ -129,8 +129,8 @@ def test_point_force_and_torque_match_the_symbolic_layer():
     q = model.q0 + 0.1 * rng.normal(size=model.nq)
     F = model.F(q, np.zeros(model.nq), t=1.0)
     ib, ir = model.layout.member_indices("body"), model.layout.member_indices("bar")
-    expect_body = body.local.force_at((0.2, -0.1, 0.3), f) + body.local.torque(q[ib], tau)
-    expect_bar = bar.local.force_at((0.3, 0, 0), [1, 2, 3]) + bar.local.torque(q[ir], tau_bar)
+    expect_body = body.rigid.force_at((0.2, -0.1, 0.3), f) + body.rigid.torque(q[ib], tau)
+    expect_bar = bar.rigid.force_at((0.3, 0, 0), [1, 2, 3]) + bar.rigid.torque(q[ir], tau_bar)
     assert np.allclose(F[ib], expect_body) and np.allclose(F[ir], expect_bar)
 
 

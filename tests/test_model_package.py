@@ -17,7 +17,7 @@ from ncgen.assembly.functions import DOCS, IN
 from ncgen.codegen import load_functions
 from ncgen.codegen.model_package import SYSTEM_FUNCTIONS, model_hash
 from ncgen.errors import CodegenError
-from ncgen.runtime.stepper_kernels import KERNELS as STEPPER_KERNELS
+from ncgen.assembly.stepper_equations import KERNELS as STEPPER_KERNELS
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"

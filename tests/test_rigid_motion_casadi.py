@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import ncgen.rigid_motion as rm
-from ncgen.assembly import rigid_motion as crm
+from ncgen.rigid_motion import casadi_forms as crm
 from ncgen.codegen import compile_package, load_functions
 from ncgen.errors import CompilerNotFound
 from ncgen.symbolic.rigid_motion_forms import NAMES, form

@@ -5,7 +5,7 @@ import pytest
 
 import ncgen.rigid_motion as rm
 from ncgen.errors import BasisError, CoordinateTypeError
-from ncgen.rigid_motion_bridge import (member_mass_matrix, member_pose, member_state, member_twist,
+from ncgen.rigid_motion.natural import (member_mass_matrix, member_pose, member_state, member_twist,
                                        member_wrench_force)
 from ncgen.symbolic.member import RigidMember
 

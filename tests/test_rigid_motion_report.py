@@ -5,7 +5,7 @@ import subprocess
 import pytest
 
 from ncgen.cli import main
-from ncgen.symbolic.rigid_motion import se3_report
+from ncgen.symbolic.se3_report import se3_report
 
 
 @pytest.fixture(scope="module")

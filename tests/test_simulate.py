@@ -51,7 +51,7 @@ def double_pendulum() -> nc.Model:
     ri, rj, w = np.array([0.6, 0.2, 0.3]), np.array([1.1, -0.3, 0.5]), np.array([0.0, 1.0, 2.0])
     b2 = s.add_bar("b2", mass=0.7, ends=[b1.end(1), rj], angular_velocity=w,
                    velocity=np.cross(w, (rj - ri) / 2))         # spinning about its shared end
-    b2.add_marker("tip", (b2.local.Xbar[0, 0] / 2, 0, 0))
+    b2.add_marker("tip", (b2.rigid.Xbar[0, 0] / 2, 0, 0))
     return s.build()
 
 

@@ -54,7 +54,7 @@ def test_orientation_and_angular_velocity_match_euler(tumbling):
     R, _ = traj.poses()
     assert np.max(np.abs(R[:, 0] - R_ref)) < 1e-7
     top = model.member("top")
-    w = np.array([top.local.twist(q, v)[0] for q, v in zip(traj.q, traj.v)])
+    w = np.array([top.rigid.twist(q, v)[0] for q, v in zip(traj.q, traj.v)])
     w_ref = np.einsum("nij,nj->ni", R_ref, w_body_ref)
     assert np.max(np.abs(w - w_ref)) < 1e-6
     assert np.ptp(w_ref, axis=0).max() > 1.0                 # it really tumbles
@@ -65,7 +65,7 @@ def test_momenta_conserved(tumbling):
     R, p = traj.poses()
     np.testing.assert_allclose(p[:, 0], np.array([0.1, 0.2, 0.3]) + np.outer(traj.t, v0), atol=1e-9)
     top = traj.model.member("top")
-    w = np.array([top.local.twist(q, v)[0] for q, v in zip(traj.q, traj.v)])
+    w = np.array([top.rigid.twist(q, v)[0] for q, v in zip(traj.q, traj.v)])
     L = np.einsum("nij,jk,nlk,nl->ni", R[:, 0], INERTIA, R[:, 0], w)    # R I Rᵀ ω
     assert np.max(np.abs(L - L[0])) < 1e-7 * np.linalg.norm(L[0])
     assert traj.energy_drift / traj.energy_scale < 1e-8

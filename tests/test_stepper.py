@@ -161,7 +161,7 @@ def test_newton_failure_names_the_time_and_keeps_the_trajectory():
 def test_a_failing_step_is_split_into_two_half_steps():
     """The double pendulum's first step of 0.3 s fails (Newton diverges); split once, it is
     exactly the two steps of 0.15 s a finer run takes (same cold start, same predictor)."""
-    from ncgen.runtime.stepper_package import load_stepper
+    from ncgen.runtime.stepper_library import load_stepper
 
     model = example(EXAMPLES / "double_pendulum.toml")
     stepper = load_stepper(model)

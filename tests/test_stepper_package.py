@@ -12,8 +12,9 @@ import pytest
 import ncgen as nc
 from ncgen.codegen import ExtraSource, compile_package, write_package
 from ncgen.errors import CodegenError
-from ncgen.runtime.stepper_kernels import stepper_functions
-from ncgen.runtime.stepper_package import load_stepper, write_stepper_package
+from ncgen.assembly.stepper_equations import stepper_functions
+from ncgen.codegen.stepper_package import write_stepper_package
+from ncgen.runtime.stepper_library import load_stepper
 
 needs_cc = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc") is None,
                               reason="no C compiler")

@@ -19,7 +19,7 @@ def _equations(rep: Report, lhs: str):
 
 @pytest.fixture(scope="module")
 def reports():
-    return {(d, n): coordinates_report(n, d) for d, n in ALL_TYPES}
+    return {(d, n): coordinates_report(coordinate_type(n, d)) for d, n in ALL_TYPES}
 
 
 @pytest.mark.parametrize("dim,name", ALL_TYPES, ids=IDS)
@@ -105,7 +105,7 @@ def test_renderings_have_every_step(reports, fmt):
 
 def test_text_alignment_with_accented_names():
     # regression: the padding of a multi-line equation counted the combining macron of Ȳ
-    text = coordinates_report("rr", 3).render("text")
+    text = coordinates_report(coordinate_type("rr", 3)).render("text")
     lines = text.splitlines()
     i = next(k for k, line in enumerate(lines) if "Y\u0304 = " in line)
     block = lines[i - 1:i + 2]
@@ -127,15 +127,7 @@ def test_jupyter_reprs():
 
 
 # ------------------------------------------------------------------------- pdflatex
-def _se3_available() -> bool:
-    try:
-        from ncgen.symbolic.rigid_motion import se3_report  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
-LATEX_CASES = [(n, str(d)) for d, n in ALL_TYPES] + ([("se3", "3")] if _se3_available() else [])
+LATEX_CASES = [(n, str(d)) for d, n in ALL_TYPES] + [("se3", "3")]
 
 
 @pytest.mark.skipif(shutil.which("pdflatex") is None, reason="pdflatex not installed")

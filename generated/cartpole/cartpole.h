@@ -325,7 +325,7 @@ extern const casadi_real cartpole_gravity[2];
 #define CARTPOLE_POSES_OUT_P_NNZ 4
 
 /* ---- cartpole_step_newton ----------------------------------------------------
- * Stepper, first half-step: Newton residual r(w, nu) and its Jacobian K
+ * Stepper, first half-step: Newton residual r(w, lam_h) and its Jacobian K
  * In cartpole_kernels_0.c; 248 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time at the start of the step. Default: cartpole_t0.
@@ -335,10 +335,10 @@ extern const casadi_real cartpole_gravity[2];
  *   arg[4] p: 0x1, nnz 0 parameters. Default: zeros.
  *   arg[5] h: 1x1, nnz 1 [s] step. Default: zeros.
  *   arg[6] w: 10x1, nnz 10 [m/s] midpoint rates v_{n+1/2}. Default: zeros.
- *   arg[7] nu: 8x1, nnz 8 [N s/m^2] scaled multipliers h/2 lambda. Default: zeros.
+ *   arg[7] lam_h: 8x1, nnz 8 [N s/m^2] scaled multipliers h/2 lambda. Default: zeros.
  * Outputs:
- *   res[0] r: 18x1, nnz 18 [N s; m^2/s] [M (w - v) - h/2 F + A^T nu; Phi(t + h, q + h w) / h].
- *   res[1] K: 18x18, nnz 50 (sparse) dr/d[w; nu], sparse.
+ *   res[0] r: 18x1, nnz 18 [N s; m^2/s] [M (w - v) - h/2 F + A^T lam_h; Phi(t + h, q + h w) / h].
+ *   res[1] K: 18x18, nnz 50 (sparse) dr/d[w; lam_h], sparse.
  */
 #define CARTPOLE_STEP_NEWTON_IN_T_NNZ 1
 #define CARTPOLE_STEP_NEWTON_IN_Q_NNZ 10
@@ -347,7 +347,7 @@ extern const casadi_real cartpole_gravity[2];
 #define CARTPOLE_STEP_NEWTON_IN_P_NNZ 0
 #define CARTPOLE_STEP_NEWTON_IN_H_NNZ 1
 #define CARTPOLE_STEP_NEWTON_IN_W_NNZ 10
-#define CARTPOLE_STEP_NEWTON_IN_NU_NNZ 8
+#define CARTPOLE_STEP_NEWTON_IN_LAM_H_NNZ 8
 #define CARTPOLE_STEP_NEWTON_OUT_R_NNZ 18
 #define CARTPOLE_STEP_NEWTON_OUT_K_NNZ 50
 

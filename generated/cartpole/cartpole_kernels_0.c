@@ -3285,7 +3285,7 @@ CASADI_SYMBOL_EXPORT int cartpole_poses_work_bytes(casadi_int *sz_arg, casadi_in
   return 0;
 }
 
-/* cartpole_step_newton:(t,q[10],v[10],u,p[0],h,w[10],nu[8])->(r[18],K[18x18,50nz]) */
+/* cartpole_step_newton:(t,q[10],v[10],u,p[0],h,w[10],lam_h[8])->(r[18],K[18x18,50nz]) */
 static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
@@ -3578,7 +3578,7 @@ CASADI_SYMBOL_EXPORT const char* cartpole_step_newton_name_in(casadi_int i) {
     case 4: return "p";
     case 5: return "h";
     case 6: return "w";
-    case 7: return "nu";
+    case 7: return "lam_h";
     default: return 0;
   }
 }

@@ -324,7 +324,7 @@ extern const casadi_real chain_gravity[3];
 #define CHAIN_POSES_OUT_P_NNZ 15
 
 /* ---- chain_step_newton ----------------------------------------------------
- * Stepper, first half-step: Newton residual r(w, nu) and its Jacobian K
+ * Stepper, first half-step: Newton residual r(w, lam_h) and its Jacobian K
  * In chain_kernels_0.c; 459 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time at the start of the step. Default: chain_t0.
@@ -334,10 +334,10 @@ extern const casadi_real chain_gravity[3];
  *   arg[4] p: 0x1, nnz 0 parameters. Default: zeros.
  *   arg[5] h: 1x1, nnz 1 [s] step. Default: zeros.
  *   arg[6] w: 15x1, nnz 15 [m/s] midpoint rates v_{n+1/2}. Default: zeros.
- *   arg[7] nu: 5x1, nnz 5 [N s/m^2] scaled multipliers h/2 lambda. Default: zeros.
+ *   arg[7] lam_h: 5x1, nnz 5 [N s/m^2] scaled multipliers h/2 lambda. Default: zeros.
  * Outputs:
- *   res[0] r: 20x1, nnz 20 [N s; m^2/s] [M (w - v) - h/2 F + A^T nu; Phi(t + h, q + h w) / h].
- *   res[1] K: 20x20, nnz 93 (sparse) dr/d[w; nu], sparse.
+ *   res[0] r: 20x1, nnz 20 [N s; m^2/s] [M (w - v) - h/2 F + A^T lam_h; Phi(t + h, q + h w) / h].
+ *   res[1] K: 20x20, nnz 93 (sparse) dr/d[w; lam_h], sparse.
  */
 #define CHAIN_STEP_NEWTON_IN_T_NNZ 1
 #define CHAIN_STEP_NEWTON_IN_Q_NNZ 15
@@ -346,7 +346,7 @@ extern const casadi_real chain_gravity[3];
 #define CHAIN_STEP_NEWTON_IN_P_NNZ 0
 #define CHAIN_STEP_NEWTON_IN_H_NNZ 1
 #define CHAIN_STEP_NEWTON_IN_W_NNZ 15
-#define CHAIN_STEP_NEWTON_IN_NU_NNZ 5
+#define CHAIN_STEP_NEWTON_IN_LAM_H_NNZ 5
 #define CHAIN_STEP_NEWTON_OUT_R_NNZ 20
 #define CHAIN_STEP_NEWTON_OUT_K_NNZ 93
 

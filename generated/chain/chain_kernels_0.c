@@ -5221,7 +5221,7 @@ CASADI_SYMBOL_EXPORT int chain_poses_work_bytes(casadi_int *sz_arg, casadi_int* 
   return 0;
 }
 
-/* chain_step_newton:(t,q[15],v[15],u[0],p[0],h,w[15],nu[5])->(r[20],K[20x20,93nz]) */
+/* chain_step_newton:(t,q[15],v[15],u[0],p[0],h,w[15],lam_h[5])->(r[20],K[20x20,93nz]) */
 static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
@@ -5726,7 +5726,7 @@ CASADI_SYMBOL_EXPORT const char* chain_step_newton_name_in(casadi_int i) {
     case 4: return "p";
     case 5: return "h";
     case 6: return "w";
-    case 7: return "nu";
+    case 7: return "lam_h";
     default: return 0;
   }
 }

@@ -324,7 +324,7 @@ extern const casadi_real double_pendulum_gravity[3];
 #define DOUBLE_PENDULUM_POSES_OUT_P_NNZ 6
 
 /* ---- double_pendulum_step_newton ----------------------------------------------------
- * Stepper, first half-step: Newton residual r(w, nu) and its Jacobian K
+ * Stepper, first half-step: Newton residual r(w, lam_h) and its Jacobian K
  * In double_pendulum_kernels_0.c; 787 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time at the start of the step. Default: double_pendulum_t0.
@@ -334,10 +334,10 @@ extern const casadi_real double_pendulum_gravity[3];
  *   arg[4] p: 0x1, nnz 0 parameters. Default: zeros.
  *   arg[5] h: 1x1, nnz 1 [s] step. Default: zeros.
  *   arg[6] w: 24x1, nnz 24 [m/s] midpoint rates v_{n+1/2}. Default: zeros.
- *   arg[7] nu: 22x1, nnz 22 [N s/m^2] scaled multipliers h/2 lambda. Default: zeros.
+ *   arg[7] lam_h: 22x1, nnz 22 [N s/m^2] scaled multipliers h/2 lambda. Default: zeros.
  * Outputs:
- *   res[0] r: 46x1, nnz 46 [N s; m^2/s] [M (w - v) - h/2 F + A^T nu; Phi(t + h, q + h w) / h].
- *   res[1] K: 46x46, nnz 196 (sparse) dr/d[w; nu], sparse.
+ *   res[0] r: 46x1, nnz 46 [N s; m^2/s] [M (w - v) - h/2 F + A^T lam_h; Phi(t + h, q + h w) / h].
+ *   res[1] K: 46x46, nnz 196 (sparse) dr/d[w; lam_h], sparse.
  */
 #define DOUBLE_PENDULUM_STEP_NEWTON_IN_T_NNZ 1
 #define DOUBLE_PENDULUM_STEP_NEWTON_IN_Q_NNZ 24
@@ -346,7 +346,7 @@ extern const casadi_real double_pendulum_gravity[3];
 #define DOUBLE_PENDULUM_STEP_NEWTON_IN_P_NNZ 0
 #define DOUBLE_PENDULUM_STEP_NEWTON_IN_H_NNZ 1
 #define DOUBLE_PENDULUM_STEP_NEWTON_IN_W_NNZ 24
-#define DOUBLE_PENDULUM_STEP_NEWTON_IN_NU_NNZ 22
+#define DOUBLE_PENDULUM_STEP_NEWTON_IN_LAM_H_NNZ 22
 #define DOUBLE_PENDULUM_STEP_NEWTON_OUT_R_NNZ 46
 #define DOUBLE_PENDULUM_STEP_NEWTON_OUT_K_NNZ 196
 

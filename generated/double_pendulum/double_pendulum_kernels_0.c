@@ -6797,7 +6797,7 @@ CASADI_SYMBOL_EXPORT int double_pendulum_poses_work_bytes(casadi_int *sz_arg, ca
   return 0;
 }
 
-/* double_pendulum_step_newton:(t,q[24],v[24],u[0],p[0],h,w[24],nu[22])->(r[46],K[46x46,196nz]) */
+/* double_pendulum_step_newton:(t,q[24],v[24],u[0],p[0],h,w[24],lam_h[22])->(r[46],K[46x46,196nz]) */
 static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
@@ -7631,7 +7631,7 @@ CASADI_SYMBOL_EXPORT const char* double_pendulum_step_newton_name_in(casadi_int 
     case 4: return "p";
     case 5: return "h";
     case 6: return "w";
-    case 7: return "nu";
+    case 7: return "lam_h";
     default: return 0;
   }
 }

@@ -326,7 +326,7 @@ extern const casadi_real fourbar_planar_gravity[2];
 #define FOURBAR_PLANAR_POSES_OUT_P_NNZ 6
 
 /* ---- fourbar_planar_step_newton ----------------------------------------------------
- * Stepper, first half-step: Newton residual r(w, nu) and its Jacobian K
+ * Stepper, first half-step: Newton residual r(w, lam_h) and its Jacobian K
  * In fourbar_planar_kernels_0.c; 344 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time at the start of the step. Default: fourbar_planar_t0.
@@ -336,10 +336,10 @@ extern const casadi_real fourbar_planar_gravity[2];
  *   arg[4] p: 1x1, nnz 1 parameters. Default: fourbar_planar_p0.
  *   arg[5] h: 1x1, nnz 1 [s] step. Default: zeros.
  *   arg[6] w: 6x1, nnz 6 [m/s] midpoint rates v_{n+1/2}. Default: zeros.
- *   arg[7] nu: 5x1, nnz 5 [N s/m^2] scaled multipliers h/2 lambda. Default: zeros.
+ *   arg[7] lam_h: 5x1, nnz 5 [N s/m^2] scaled multipliers h/2 lambda. Default: zeros.
  * Outputs:
- *   res[0] r: 11x1, nnz 11 [N s; m^2/s] [M (w - v) - h/2 F + A^T nu; Phi(t + h, q + h w) / h].
- *   res[1] K: 11x11, nnz 46 (sparse) dr/d[w; nu], sparse.
+ *   res[0] r: 11x1, nnz 11 [N s; m^2/s] [M (w - v) - h/2 F + A^T lam_h; Phi(t + h, q + h w) / h].
+ *   res[1] K: 11x11, nnz 46 (sparse) dr/d[w; lam_h], sparse.
  */
 #define FOURBAR_PLANAR_STEP_NEWTON_IN_T_NNZ 1
 #define FOURBAR_PLANAR_STEP_NEWTON_IN_Q_NNZ 6
@@ -348,7 +348,7 @@ extern const casadi_real fourbar_planar_gravity[2];
 #define FOURBAR_PLANAR_STEP_NEWTON_IN_P_NNZ 1
 #define FOURBAR_PLANAR_STEP_NEWTON_IN_H_NNZ 1
 #define FOURBAR_PLANAR_STEP_NEWTON_IN_W_NNZ 6
-#define FOURBAR_PLANAR_STEP_NEWTON_IN_NU_NNZ 5
+#define FOURBAR_PLANAR_STEP_NEWTON_IN_LAM_H_NNZ 5
 #define FOURBAR_PLANAR_STEP_NEWTON_OUT_R_NNZ 11
 #define FOURBAR_PLANAR_STEP_NEWTON_OUT_K_NNZ 46
 

@@ -324,7 +324,7 @@ extern const casadi_real heavy_top_gravity[3];
 #define HEAVY_TOP_POSES_OUT_P_NNZ 3
 
 /* ---- heavy_top_step_newton ----------------------------------------------------
- * Stepper, first half-step: Newton residual r(w, nu) and its Jacobian K
+ * Stepper, first half-step: Newton residual r(w, lam_h) and its Jacobian K
  * In heavy_top_kernels_0.c; 267 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time at the start of the step. Default: heavy_top_t0.
@@ -334,10 +334,10 @@ extern const casadi_real heavy_top_gravity[3];
  *   arg[4] p: 0x1, nnz 0 parameters. Default: zeros.
  *   arg[5] h: 1x1, nnz 1 [s] step. Default: zeros.
  *   arg[6] w: 9x1, nnz 9 [m/s] midpoint rates v_{n+1/2}. Default: zeros.
- *   arg[7] nu: 6x1, nnz 6 [N s/m^2] scaled multipliers h/2 lambda. Default: zeros.
+ *   arg[7] lam_h: 6x1, nnz 6 [N s/m^2] scaled multipliers h/2 lambda. Default: zeros.
  * Outputs:
- *   res[0] r: 15x1, nnz 15 [N s; m^2/s] [M (w - v) - h/2 F + A^T nu; Phi(t + h, q + h w) / h].
- *   res[1] K: 15x15, nnz 63 (sparse) dr/d[w; nu], sparse.
+ *   res[0] r: 15x1, nnz 15 [N s; m^2/s] [M (w - v) - h/2 F + A^T lam_h; Phi(t + h, q + h w) / h].
+ *   res[1] K: 15x15, nnz 63 (sparse) dr/d[w; lam_h], sparse.
  */
 #define HEAVY_TOP_STEP_NEWTON_IN_T_NNZ 1
 #define HEAVY_TOP_STEP_NEWTON_IN_Q_NNZ 9
@@ -346,7 +346,7 @@ extern const casadi_real heavy_top_gravity[3];
 #define HEAVY_TOP_STEP_NEWTON_IN_P_NNZ 0
 #define HEAVY_TOP_STEP_NEWTON_IN_H_NNZ 1
 #define HEAVY_TOP_STEP_NEWTON_IN_W_NNZ 9
-#define HEAVY_TOP_STEP_NEWTON_IN_NU_NNZ 6
+#define HEAVY_TOP_STEP_NEWTON_IN_LAM_H_NNZ 6
 #define HEAVY_TOP_STEP_NEWTON_OUT_R_NNZ 15
 #define HEAVY_TOP_STEP_NEWTON_OUT_K_NNZ 63
 

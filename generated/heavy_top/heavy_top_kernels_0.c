@@ -3646,7 +3646,7 @@ CASADI_SYMBOL_EXPORT int heavy_top_poses_work_bytes(casadi_int *sz_arg, casadi_i
   return 0;
 }
 
-/* heavy_top_step_newton:(t,q[9],v[9],u[0],p[0],h,w[9],nu[6])->(r[15],K[15x15,63nz]) */
+/* heavy_top_step_newton:(t,q[9],v[9],u[0],p[0],h,w[9],lam_h[6])->(r[15],K[15x15,63nz]) */
 static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
@@ -3957,7 +3957,7 @@ CASADI_SYMBOL_EXPORT const char* heavy_top_step_newton_name_in(casadi_int i) {
     case 4: return "p";
     case 5: return "h";
     case 6: return "w";
-    case 7: return "nu";
+    case 7: return "lam_h";
     default: return 0;
   }
 }

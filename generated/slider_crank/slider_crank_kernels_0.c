@@ -4548,7 +4548,7 @@ CASADI_SYMBOL_EXPORT int slider_crank_poses_work_bytes(casadi_int *sz_arg, casad
   return 0;
 }
 
-/* slider_crank_step_newton:(t,q[10],v[10],u[0],p,h,w[10],nu[10])->(r[20],K[20x20,68nz]) */
+/* slider_crank_step_newton:(t,q[10],v[10],u[0],p,h,w[10],lam_h[10])->(r[20],K[20x20,68nz]) */
 static int casadi_f20(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
@@ -4993,7 +4993,7 @@ CASADI_SYMBOL_EXPORT const char* slider_crank_step_newton_name_in(casadi_int i) 
     case 4: return "p";
     case 5: return "h";
     case 6: return "w";
-    case 7: return "nu";
+    case 7: return "lam_h";
     default: return 0;
   }
 }

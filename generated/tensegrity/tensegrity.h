@@ -327,7 +327,7 @@ extern const casadi_real tensegrity_gravity[3];
 #define TENSEGRITY_POSES_OUT_P_NNZ 9
 
 /* ---- tensegrity_step_newton ----------------------------------------------------
- * Stepper, first half-step: Newton residual r(w, nu) and its Jacobian K
+ * Stepper, first half-step: Newton residual r(w, lam_h) and its Jacobian K
  * In tensegrity_kernels_0.c; 2074 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time at the start of the step. Default: tensegrity_t0.
@@ -337,10 +337,10 @@ extern const casadi_real tensegrity_gravity[3];
  *   arg[4] p: 3x1, nnz 3 parameters. Default: tensegrity_p0.
  *   arg[5] h: 1x1, nnz 1 [s] step. Default: zeros.
  *   arg[6] w: 18x1, nnz 18 [m/s] midpoint rates v_{n+1/2}. Default: zeros.
- *   arg[7] nu: 6x1, nnz 6 [N s/m^2] scaled multipliers h/2 lambda. Default: zeros.
+ *   arg[7] lam_h: 6x1, nnz 6 [N s/m^2] scaled multipliers h/2 lambda. Default: zeros.
  * Outputs:
- *   res[0] r: 24x1, nnz 24 [N s; m^2/s] [M (w - v) - h/2 F + A^T nu; Phi(t + h, q + h w) / h].
- *   res[1] K: 24x24, nnz 276 (sparse) dr/d[w; nu], sparse.
+ *   res[0] r: 24x1, nnz 24 [N s; m^2/s] [M (w - v) - h/2 F + A^T lam_h; Phi(t + h, q + h w) / h].
+ *   res[1] K: 24x24, nnz 276 (sparse) dr/d[w; lam_h], sparse.
  */
 #define TENSEGRITY_STEP_NEWTON_IN_T_NNZ 1
 #define TENSEGRITY_STEP_NEWTON_IN_Q_NNZ 18
@@ -349,7 +349,7 @@ extern const casadi_real tensegrity_gravity[3];
 #define TENSEGRITY_STEP_NEWTON_IN_P_NNZ 3
 #define TENSEGRITY_STEP_NEWTON_IN_H_NNZ 1
 #define TENSEGRITY_STEP_NEWTON_IN_W_NNZ 18
-#define TENSEGRITY_STEP_NEWTON_IN_NU_NNZ 6
+#define TENSEGRITY_STEP_NEWTON_IN_LAM_H_NNZ 6
 #define TENSEGRITY_STEP_NEWTON_OUT_R_NNZ 24
 #define TENSEGRITY_STEP_NEWTON_OUT_K_NNZ 276
 

@@ -9538,7 +9538,7 @@ CASADI_SYMBOL_EXPORT int tensegrity_poses_work_bytes(casadi_int *sz_arg, casadi_
   return 0;
 }
 
-/* tensegrity_step_newton:(t,q[18],v[18],u[0],p[3],h,w[18],nu[6])->(r[24],K[24x24,276nz]) */
+/* tensegrity_step_newton:(t,q[18],v[18],u[0],p[3],h,w[18],lam_h[6])->(r[24],K[24x24,276nz]) */
 static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
@@ -11667,7 +11667,7 @@ CASADI_SYMBOL_EXPORT const char* tensegrity_step_newton_name_in(casadi_int i) {
     case 4: return "p";
     case 5: return "h";
     case 6: return "w";
-    case 7: return "nu";
+    case 7: return "lam_h";
     default: return 0;
   }
 }

@@ -2,18 +2,20 @@
 layout, CasADi expressions, constant mass matrix, redundancy and initial-state checks."""
 from __future__ import annotations
 
+import copy
 import warnings
 
 import casadi as ca
 import numpy as np
 
-from ncgen.assembly.context import Context
+from ncgen.model.context import Context
 from ncgen.assembly.functions import system_functions
-from ncgen.assembly.initial_state import consistent_state, dependent_rows
+from ncgen.assembly.initial_state import consistent_state
+from ncgen.assembly.rank import dependent_rows
 from ncgen.assembly.kinematics import resolve_fix
-from ncgen.assembly.layout import Layout, make_layout
+from ncgen.model.layout import Layout, make_layout
 from ncgen.assembly.mass import CholeskyFactor, assemble_mass
-from ncgen.model.members import ModelError
+from ncgen.errors import ModelError
 
 #: Default Baumgarte coefficients (α, β) in 1/s: constraint errors decay like a critically
 #: damped oscillator with time constant 0.2 s.  IDAS keeps the drift small anyway; the
@@ -41,6 +43,7 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     """
     from ncgen.model.model import Model
 
+    system = copy.deepcopy(system)       # the model's own description: later edits of the caller's system do not reach it
     if not system.members:
         raise ModelError(f"system {system.name!r} has no members; add bodies, bars or points first")
     if redundant not in REDUNDANT_MODES:
@@ -75,7 +78,7 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     functions, potential = system_functions(ctx, phi, F, V, M, factor, alpha, beta, system)
     state = consistent_state(functions, layout, labels, q_init, v_init, p0, t0, tolerance, M,
                              fixed=fixed, assemble=assemble)
-    return Model(system=system, layout=layout, labels=labels, functions=functions, M=M, factor=factor,
+    return Model(description=system, layout=layout, labels=labels, functions=functions, M=M, factor=factor,
                  potential=potential, state=state, p0=p0, baumgarte=(alpha, beta), redundant=redundant_labels,
                  dropped=(redundant == "drop"), t0=t0)
 
@@ -106,9 +109,9 @@ def force_terms(system, ctx: Context) -> tuple[ca.SX, ca.SX]:
     F = ca.SX.zeros(ctx.layout.nq)
     V = []
     for m in system.members.values():
-        C = ca.DM(m.local.C(m.local.c_g))            # centre of mass r_G = C(c_g) q
-        F += ctx.scatter(m, ca.mtimes(C.T, m.local.mass * g))
-        V.append(-m.local.mass * ca.dot(g, ca.mtimes(C, ctx.q_of(m))))
+        C = ca.DM(m.rigid.C(m.rigid.c_g))            # centre of mass r_G = C(c_g) q
+        F += ctx.scatter(m, ca.mtimes(C.T, m.rigid.mass * g))
+        V.append(-m.rigid.mass * ca.dot(g, ca.mtimes(C, ctx.q_of(m))))
     for f in system.forces:
         F += f.generalized(ctx)
         V.append(f.potential(ctx))

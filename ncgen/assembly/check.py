@@ -60,7 +60,7 @@ class CheckReport:
         lines.append(f"coordinates (nq = {m.nq}):")
         lines += _wrap(m.coordinate_names)
         lines.append(f"constraints (nc = {m.nc + len(self.dof.dropped)}):")
-        lines += _wrap(m.constraint_names + self.dof.dropped)
+        lines += _wrap([*m.constraint_names, *self.dof.dropped])
         d = self.dof
         lines.append(f"rank A = {d.rank}, DOF = {d.dof}")
         lines.append("redundant constraints: " + (", ".join(d.redundant) or "none")
@@ -116,7 +116,7 @@ def _members(s) -> list[str]:
     lines = [f"members ({len(s.members)}):"]
     for m in s.members.values():
         shared = [f"{m.ctype.slots[k]} = {ref.label}" for k, ref in sorted(m.shared.items())]
-        lines.append(f"  {m.name:<16} {m.kind:<5} {m.ctype.name:<4} mass {m.local.mass:g} kg"
+        lines.append(f"  {m.name:<16} {m.kind:<5} {m.ctype.name:<4} mass {m.rigid.mass:g} kg"
                      + (f"; shares {', '.join(shared)}" if shared else "")
                      + (f"; markers {', '.join(m.markers)}" if m.markers else ""))
     return lines

@@ -1,7 +1,7 @@
 """The whole-system CasADi functions (the contract every backend consumes).
 
 Arguments: ``t`` (s), ``q`` (natural coordinates, m), ``v = q̇``, ``lam`` (multipliers),
-``u`` (inputs), ``p`` (parameters).  Equations of motion (DESIGN.md):
+``u`` (inputs), ``p`` (parameters).  Equations of motion (docs/architecture.md)::
 
     M q̈ + Aᵀ λ = F(t, q, v, u, p),   Φ(t, q) = 0   ⇒   A q̈ = γ,
     γ = −(∂(A v)/∂q) v − 2 ∂(A v)/∂t − Φ_tt
@@ -40,7 +40,7 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 
-from ncgen.assembly.context import Context
+from ncgen.model.context import Context
 from ncgen.assembly.mass import CholeskyFactor, sparse_dm
 
 #: Inputs shared by the functions: name -> (meaning, SI units).

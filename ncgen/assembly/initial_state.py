@@ -16,12 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ncgen.model.members import ModelError
-
-#: Relative size of a row's component outside the span of the earlier rows below which it
-#: counts as linearly dependent.
-RANK_TOL = 1e-9
-
+from ncgen.assembly.kinematics import TOL, newton, project, system_size
+from ncgen.errors import ModelError
 
 @dataclass
 class State:
@@ -35,43 +31,11 @@ class State:
     velocity_given: float = 0.0   # max |A v + Φ_t| of the state as given (m²/s)
 
 
-def dependent_rows(A: np.ndarray, tol: float = RANK_TOL) -> list[int]:
-    """Rows of ``A`` that depend linearly on earlier rows (greedy, in order, so intrinsic
-    constraints are kept and the later joint equations are the ones named)."""
-    if A.shape[0] == 0:
-        return []
-    norms = np.linalg.norm(A, axis=1)
-    zero = [i for i in range(A.shape[0]) if norms[i] == 0]
-    An = A / np.where(norms > 0, norms, 1)[:, None]
-    G = An @ An.T
-    try:
-        L = np.linalg.cholesky(G)
-        if np.min(np.diag(L)) > np.sqrt(tol) and not zero:
-            return []
-    except np.linalg.LinAlgError:
-        pass
-    basis: list[np.ndarray] = []
-    dependent = []
-    for i in range(A.shape[0]):
-        r = An[i].copy()
-        for b in basis:
-            r -= (b @ r) * b
-        for b in basis:
-            r -= (b @ r) * b
-        n = np.linalg.norm(r)
-        if norms[i] == 0 or n < tol ** 0.5:
-            dependent.append(i)
-        else:
-            basis.append(r / n)
-    return dependent
-
-
 def consistent_state(f, layout, labels, q, v, p, t0, tolerance, M, *, fixed=(), assemble=False,
                      max_iter: int = 50) -> State:
     """Project ``(q, v)`` onto the constraints; see the module docstring.  ``fixed``: indices
     of coordinates (and their rates) kept as given.  ``assemble``: no limit on the
     corrections (the given configuration is only a guess)."""
-    from ncgen.assembly.kinematics import TOL, newton, project, system_size
 
     def phi(x):
         return np.array(f["phi"](t0, x, p)).reshape(-1)

@@ -8,7 +8,7 @@
   metric that satisfies ``A v = −Φ_t``, again keeping chosen components fixed:
   ``v_f = v̄_f + M_ff⁻¹ A_fᵀ μ`` with ``(A_f M_ff⁻¹ A_fᵀ) μ = −Φ_t − A v̄``.
 * :func:`dof_report` — rank of ``A``, degrees of freedom ``nq − rank A`` and the names of
-  the constraints that depend on earlier ones (:func:`~ncgen.assembly.initial_state.dependent_rows`).
+  the constraints that depend on earlier ones (:func:`~ncgen.assembly.rank.dependent_rows`).
 * :func:`solve_kinematics` — position, velocity and acceleration of a driven (0-DOF)
   mechanism over a time grid: ``Φ(t, q) = 0``, ``A v = −Φ_t``, ``A a = γ``.
 
@@ -24,10 +24,10 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from ncgen.assembly.initial_state import dependent_rows
+from ncgen.assembly.rank import dependent_rows
 from ncgen.assembly.mass import sparse_dm
 from ncgen.model.expressions import did_you_mean
-from ncgen.model.members import ModelError
+from ncgen.errors import ModelError
 
 #: Newton stops when max |Φ| ≤ TOL · (size of the system)² (Φ is in m²).
 TOL = 1e-13
@@ -149,7 +149,7 @@ def _numeric(model, t, p):
 
 
 def _free(model, fix) -> np.ndarray:
-    fixed = set(resolve_fix(model.layout, model.system.members, fix))
+    fixed = set(resolve_fix(model.layout, model.members, fix))
     return np.array([i for i in range(model.nq) if i not in fixed], dtype=int)
 
 

@@ -12,8 +12,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ncgen.assembly.layout import Layout
-from ncgen.model.members import ModelError
+from ncgen.model.layout import Layout
+from ncgen.errors import ModelError
 
 
 def assemble_mass(layout: Layout, members) -> np.ndarray:
@@ -22,7 +22,7 @@ def assemble_mass(layout: Layout, members) -> np.ndarray:
         idx = layout.member_indices(m.name)
         keep = [k for k, i in enumerate(idx) if i is not None]
         rows = [idx[k] for k in keep]
-        M[np.ix_(rows, rows)] += m.local.M[np.ix_(keep, keep)]
+        M[np.ix_(rows, rows)] += m.rigid.M[np.ix_(keep, keep)]
     return M
 
 

@@ -18,7 +18,7 @@ from typing import Iterable
 import casadi as ca
 
 from ncgen.codegen import manifest
-from ncgen.codegen.build import BuildResult, compile_package
+from ncgen.codegen.compile_cache import BuildResult, compile_package
 from ncgen.codegen.compiler import CANDIDATES
 from ncgen.codegen.package import Package
 from ncgen.errors import CodegenError, CompilerNotFound
@@ -38,7 +38,7 @@ def load_functions(source: Package | BuildResult | str | os.PathLike,
     """Functions ``names`` (default: all) of ``source``: a Package, a package directory,
     a BuildResult or a compiled library (``.so``; names are then looked up in the
     ``manifest.json`` next to it if present, else taken as C symbols).  ``cc``, ``cflags``,
-    ``jobs`` go to :func:`~ncgen.codegen.build.compile_package`."""
+    ``jobs`` go to :func:`~ncgen.codegen.compile_cache.compile_package`."""
     if backend not in BACKENDS:
         raise CodegenError(f"backend must be one of {BACKENDS}, found {backend!r}")
     if isinstance(source, BuildResult):
@@ -49,7 +49,7 @@ def load_functions(source: Package | BuildResult | str | os.PathLike,
             if backend == "vm":
                 raise CodegenError(f"backend 'vm' needs the CasADi functions, but {path} is a "
                                    f"compiled library; pass the Package returned by write_package")
-            return _external(path, names, _manifest_beside(path))
+            return external_functions(path, names, _manifest_beside(path))
         source = Package.open(path)
     pkg = source
     if backend == "vm":
@@ -59,9 +59,9 @@ def load_functions(source: Package | BuildResult | str | os.PathLike,
     except CompilerNotFound as e:
         if backend == "compiled" or pkg.functions is None:
             raise
-        _warn_no_compiler(e)
+        warn_no_compiler(e)
         return _vm(pkg, names)
-    return _external(built.path, names, pkg.manifest)
+    return external_functions(built.path, names, pkg.manifest)
 
 
 def _vm(pkg: Package, names: Iterable[str] | None) -> dict[str, ca.Function]:
@@ -72,7 +72,9 @@ def _vm(pkg: Package, names: Iterable[str] | None) -> dict[str, ca.Function]:
     return {n: pkg.functions[n] for n in _check_names(names, list(pkg.functions), pkg.name)}
 
 
-def _external(library: Path, names: Iterable[str] | None, data: dict | None) -> dict[str, ca.Function]:
+def external_functions(library: Path, names: Iterable[str] | None, data: dict | None) -> dict[str, ca.Function]:
+    """Functions ``names`` (default: all) of compiled ``library`` through ``casadi.external``;
+    ``data``: the package manifest (maps names to C symbols), or None to take names as symbols."""
     if data is None:
         if names is None:
             raise CodegenError(f"{library} has no manifest.json beside it; pass the C names of "
@@ -107,7 +109,8 @@ def _manifest_beside(library: Path) -> dict | None:
     return manifest.read_manifest(library.parent)
 
 
-def _warn_no_compiler(error: CompilerNotFound) -> None:
+def warn_no_compiler(error: CompilerNotFound) -> None:
+    """Warn once per process that no C compiler was found and the VM is used instead."""
     global _warned_no_compiler
     if _warned_no_compiler:
         return

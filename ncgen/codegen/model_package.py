@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import dataclasses
 import os
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
@@ -30,12 +29,14 @@ import numpy as np
 
 from ncgen.assembly.functions import DOCS, IN
 from ncgen.codegen import fsutil
-from ncgen.codegen.build import compile_package
+from ncgen.codegen.compile_cache import compile_package
 from ncgen.codegen.doc import PackageDoc
 from ncgen.codegen.looped import package_functions, reroll_limit
 from ncgen.codegen.manifest import canonical_json
-from ncgen.codegen.package import ExtraSource, Package, check_replaceable, write_package
+from ncgen.codegen.package import Package, check_replaceable, write_package
 from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
+from ncgen.codegen.section import Section
+from ncgen.codegen.stepper_package import stepper_section
 
 #: The system functions in the package, in this order.
 SYSTEM_FUNCTIONS = ("phi", "A", "phi_t", "gamma", "F", "mass", "Minv", "ode", "alg", "dae", "accel",
@@ -48,21 +49,6 @@ MAIN_FUNCTION = "accel"
 DEFAULTS = {"t": "t0", "q": "q0", "v": "v0", "lam": "lam0", "x": "x0", "z": "z0", "p": "p0"}
 
 
-@dataclass(frozen=True)
-class Section:
-    """One part of a model package: CasADi ``functions`` and their ``docs``
-    (:class:`~ncgen.codegen.doc.FunctionDoc` data by function name), the names of those
-    generated with a Jacobian, ``metadata`` with its one-line ``metadata_doc``, and
-    ``extra_sources`` (templates rendered next to the kernels)."""
-
-    functions: Sequence[ca.Function] = ()
-    docs: Mapping[str, Mapping] = field(default_factory=dict)
-    jacobians: Sequence[str] = ()
-    metadata: Mapping[str, object] = field(default_factory=dict)
-    metadata_doc: Mapping[str, str] = field(default_factory=dict)
-    extra_sources: Sequence[ExtraSource] = ()
-
-
 def generate(model, out_dir: str | os.PathLike, *, cflags=None, compile: bool = False,
              reroll_instructions: int | None = REROLL_INSTRUCTIONS) -> Package:
     """Write the C package of ``model`` (a :class:`~ncgen.model.model.Model`) to ``out_dir``.
@@ -70,7 +56,7 @@ def generate(model, out_dir: str | os.PathLike, *, cflags=None, compile: bool = 
     The package is named after the model; its files depend only on the model (same model,
     same bytes).  ``out_dir`` is replaced atomically if it holds an ncgen package (and
     refused otherwise).  With ``compile=True`` the shared library is built now (with
-    ``cflags``, see :func:`~ncgen.codegen.build.compile_package`; cached by content) and the
+    ``cflags``, see :func:`~ncgen.codegen.compile_cache.compile_package`; cached by content) and the
     package is moved into place only if that succeeds; otherwise the library is built when
     first loaded.  Load the functions back with
     ``ncgen.codegen.load_functions(pkg, backend="compiled")``.
@@ -119,17 +105,9 @@ def system_section(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS)
                    metadata=metadata, metadata_doc=metadata_doc)
 
 
-def _stepper_section(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS) -> Section:
-    """The compiled stepper: ``<model>_step``, ``<model>_simulate`` and the example program
-    ``<model>_simulate`` (:mod:`ncgen.runtime.stepper_package`)."""
-    from ncgen.runtime.stepper_package import stepper_section
-
-    return stepper_section(model, reroll_instructions)
-
-
 #: Makers of the sections of every model package, in order: ``make(model,
 #: reroll_instructions) -> Section``.
-SECTIONS: list[Callable[[object, int | None], Section]] = [system_section, _stepper_section]
+SECTIONS: list[Callable[[object, int | None], Section]] = [system_section, stepper_section]
 
 
 def function_doc(f: ca.Function) -> dict:

@@ -39,7 +39,7 @@ MAX_FILE_INSTRUCTIONS = 20_000
 #: ``build.large_sources``: gcc's optimising passes grow faster than linearly
 #: with the length of one function (the 32 k-instruction DAE residual of a 300-bar chain
 #: compiles in 4 s at -O0, 32 s at -O2, 9 min and 4 GB at -O1), so the builds compile those
-#: files with ``-O0`` unless the user chooses the flags (:func:`ncgen.codegen.build.
+#: files with ``-O0`` unless the user chooses the flags (:func:`ncgen.codegen.compile_cache.
 #: compile_package`, the Makefile's ``LARGE_CFLAGS``, CMake).  Long functions are rerolled
 #: first (``reroll_instructions``), so this only concerns those with nothing that repeats
 #: (or a package written with ``reroll_instructions=None``).
@@ -58,7 +58,7 @@ class ExtraSource:
     ``.h`` outputs are included at the end of ``<name>.h``.  With ``program=True`` a ``.c``
     output is instead a stand-alone program (it has ``main``): the Makefile and
     CMakeLists.txt build it into the executable named by its stem, linked with the
-    library's objects; :func:`~ncgen.codegen.build.compile_package` ignores it."""
+    library's objects; :func:`~ncgen.codegen.compile_cache.compile_package` ignores it."""
 
     template: str
     output: str

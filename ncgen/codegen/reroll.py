@@ -19,8 +19,8 @@ alone, without any knowledge of the model:
    gather; the remaining outputs (rare shapes, large dependency sets) stay one flat SX
    function.
 
-The shape of a block is read from ``f``'s printed algorithm (one work slot per
-instruction), walked depth-first from the block's outputs, so alike blocks read alike
+The shape of a block is read from ``f``'s algorithm (CasADi's instruction API, one work
+slot per instruction), walked depth-first from the block's outputs, so alike blocks read alike
 wherever they sit in ``f``.  The result is exact: every block is evaluated by the same
 operations on the same numbers as in ``f`` (the rerolled function is checked against
 ``f`` at a probe point before it is returned).
@@ -31,7 +31,6 @@ it pays.
 """
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -48,10 +47,6 @@ MIN_INSTANCES = 4
 #: a dense solve, does not repeat).
 MAX_BLOCK_INPUTS = 256
 
-_LINE = re.compile(r"^(?:@(\d+)|output\[0\]\[(\d+)\]) = (.*);$")
-_REF = re.compile(r"@(\d+)")
-_INPUT = re.compile(r"^input\[0\]\[(\d+)\]$")
-_CONST = re.compile(r"^-?(?:[0-9.]+(?:e[-+]?[0-9]+)?|nan|inf)$")
 
 
 @dataclass
@@ -98,34 +93,27 @@ def _dependencies(g: ca.Function) -> list[np.ndarray]:
 
 
 class _Algorithm:
-    """The instructions of ``g`` (one work slot each) read from its printed algorithm:
-    for instruction ``k``, ``text[k]`` its right-hand side with the operands blanked,
+    """The instructions of ``g`` (one work slot each, one input, one output) read through
+    CasADi's instruction API: for instruction ``k``, ``op[k]`` its operation code,
     ``refs[k]`` the instructions it reads, ``input[k]`` the input nonzero it loads (or -1),
     ``const[k]`` whether it is a numeric constant; ``source[r]`` computes output ``r``."""
 
     def __init__(self, g: ca.Function):
         self.g = g
-        lines = g.str(True).splitlines()[2:]
-        if len(lines) != g.n_instructions():
-            raise RuntimeError(f"reroll: cannot read the algorithm of {g.name()}")
         at_slot: dict[int, int] = {}
-        self.text, self.refs, self.input, self.const = [], [], [], []
+        self.op, self.refs, self.input, self.const = [], [], [], []
         self.source = [-1] * g.nnz_out(0)
-        for k, line in enumerate(lines):
-            m = _LINE.match(line)
-            if m is None:
-                raise RuntimeError(f"reroll: cannot read instruction {line!r} of {g.name()}")
-            slot, out, rhs = m.groups()
-            refs = [at_slot[int(r)] for r in _REF.findall(rhs)]
-            inp = _INPUT.match(rhs)
-            self.text.append(_REF.sub("@", rhs))
-            self.refs.append(refs)
-            self.input.append(int(inp.group(1)) if inp else -1)
-            self.const.append(bool(_CONST.match(rhs)))
-            if slot is not None:
-                at_slot[int(slot)] = k
+        for k in range(g.n_instructions()):
+            op, args = g.instruction_id(k), list(g.instruction_input(k))
+            if op == ca.OP_OUTPUT:
+                self.source[g.instruction_output(k)[1]] = at_slot[args[0]]
             else:
-                self.source[int(out)] = refs[0]
+                at_slot[g.instruction_output(k)[0]] = k
+            self.op.append(op)
+            self.refs.append([] if op in (ca.OP_INPUT, ca.OP_CONST) else [at_slot[a] for a in args]
+                             if op != ca.OP_OUTPUT else [at_slot[args[0]]])
+            self.input.append(args[1] if op == ca.OP_INPUT else -1)
+            self.const.append(op == ca.OP_CONST)
 
     def cone(self, rows) -> list[int]:
         """The instructions output ``rows`` need, in the order of a depth-first walk from
@@ -163,14 +151,14 @@ def _shapes(algorithm: _Algorithm, deps_of: list[np.ndarray], max_block_inputs: 
         else:
             blocks.setdefault(d.tobytes(), []).append(r)
     shapes: dict[tuple, _Shape] = {}
-    text, refs, inputs, const = algorithm.text, algorithm.refs, algorithm.input, algorithm.const
+    op, refs, inputs, const = algorithm.op, algorithm.refs, algorithm.input, algorithm.const
     for rows in blocks.values():
         cone = algorithm.cone(rows)
         deps = sorted({inputs[k] for k in cone if inputs[k] >= 0})
         local = {k: i for i, k in enumerate(cone)}
         slot = {x: i for i, x in enumerate(deps)}
         key = tuple(("c",) if const[k] else ("x", slot[inputs[k]]) if inputs[k] >= 0
-                    else (text[k], *[local[j] for j in refs[k]]) for k in cone) \
+                    else (op[k], *[local[j] for j in refs[k]]) for k in cone) \
             + (tuple(local[algorithm.source[r]] for r in rows),)
         s = shapes.setdefault(key, _Shape(cone))
         s.rows.append(np.array(rows, dtype=np.int64))

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from ncgen.model.members import ModelError
+from ncgen.errors import ModelError
 
 #: Longest text expression accepted (characters).
 MAX_TEXT = 10_000

@@ -14,7 +14,7 @@ import numpy as np
 
 from ncgen.errors import BasisError
 from ncgen.model.joint_base import check_members
-from ncgen.model.members import ModelError
+from ncgen.errors import ModelError
 from ncgen.validation import as_vector
 
 
@@ -72,7 +72,7 @@ class Force:
         x = as_vector(at, member.dim, f"{self.label}: {what}")
         if not member.is_ground:
             try:
-                member.local.affine(x)
+                member.rigid.affine(x)
             except BasisError as e:
                 raise ModelError(f"{self.label}: {what} on {member.name} ({member.ctype.name} "
                                  f"{member.kind}): {e}") from None
@@ -101,7 +101,7 @@ class PointForce(Force):
 
     def generalized(self, ctx):
         f = self._value(ctx, self.force, ctx.dim, "force")
-        C = ca.DM(self.member.local.C(self.member.local.affine(np.asarray(self.at, float))))
+        C = ca.DM(self.member.rigid.C(self.member.rigid.affine(np.asarray(self.at, float))))
         return ctx.scatter(self.member, ca.mtimes(C.T, f))
 
 
@@ -179,7 +179,7 @@ class Spring(Force):
         Q = ca.SX.zeros(ctx.layout.nq)
         for m, at, f in ((self.a, self.at_a, -f_b), (self.b, self.at_b, f_b)):
             if not m.is_ground:
-                C = ca.DM(m.local.C(m.local.affine(np.asarray(at, float))))
+                C = ca.DM(m.rigid.C(m.rigid.affine(np.asarray(at, float))))
                 Q += ctx.scatter(m, ca.mtimes(C.T, f))
         return Q
 
@@ -219,8 +219,8 @@ class TorsionalSpring(Force):
         if self.joint.system is not system:
             raise ModelError(f"{self.label}: {self.joint.label} is not a joint of system {system.name!r}; "
                              "add it with add_joint first")
-        from ncgen.assembly.context import Context
-        from ncgen.assembly.layout import make_layout
+        from ncgen.model.context import Context
+        from ncgen.model.layout import make_layout
         self.joint.gauge(Context(system, make_layout(system.dim, list(system.members.values()))))
 
     def deflection(self, ctx) -> ca.SX:

@@ -2,7 +2,7 @@
 
 A joint is given in world coordinates in the initial configuration (``at=`` a point,
 ``axis=`` a direction) and turned, at build time, into body-fixed points and directions of
-each member through the :class:`~ncgen.assembly.context.Context`.  Its equations come from
+each member through the :class:`~ncgen.model.context.Context`.  Its equations come from
 :mod:`ncgen.model.joint_equations`, so they are at most quadratic in q.
 
 Adding a joint to a system checks it at once: the members belong to the system, the
@@ -16,7 +16,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ncgen.model.members import Ground, Member, ModelError
+from ncgen.model.members import Ground, Member
+from ncgen.errors import ModelError
 from ncgen.model.joint_equations import name_of
 from ncgen.reproducible import norm
 from ncgen.validation import as_vector
@@ -77,8 +78,8 @@ class Joint:
 
     def check(self, system):
         """Validate the arguments and the geometry by writing the equations once."""
-        from ncgen.assembly.context import Context
-        from ncgen.assembly.layout import make_layout
+        from ncgen.model.context import Context
+        from ncgen.model.layout import make_layout
         ctx = Context(system, make_layout(system.dim, list(system.members.values())))
         self.geometry(ctx)
 

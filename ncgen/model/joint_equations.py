@@ -2,7 +2,7 @@
 
 Every function returns ``[(label, expression)]`` with expressions that vanish when the
 condition holds.  Geometry is given in world coordinates in the initial configuration and
-turned into body-fixed points and directions by the :class:`~ncgen.assembly.context.Context`
+turned into body-fixed points and directions by the :class:`~ncgen.model.context.Context`
 (linear in q), so each equation is at most quadratic in q.
 
 What a member can carry (3D): the ground and a body carry every point and direction; a bar
@@ -20,9 +20,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ncgen.assembly.context import perpendicular_basis
-from ncgen.model.members import ModelError
-from ncgen.reproducible import dot, norm
+from ncgen.errors import ModelError
+from ncgen.reproducible import dot, norm, perpendicular_basis
 
 #: |cos| above which a bar counts as lying along a direction.
 ALONG_TOL = 1e-9
@@ -66,7 +65,7 @@ def require_orientation(label: str, *members) -> None:
 
 def _bar_u(ctx, m, label):
     """The bar's axis vector ``u`` (its full length) and its initial value."""
-    u0 = bar_axis(m) * m.local.Xbar[0, 0]
+    u0 = bar_axis(m) * m.rigid.Xbar[0, 0]
     return ctx.direction(m, u0, label)[0], u0
 
 

@@ -40,7 +40,7 @@ from ncgen.model.joint_equations import (
     align_axis, angle_gauge, coincidence, distance, is_along, is_full, kind_of, lock_orientation,
     point_on_line, point_on_plane, require_orientation,
 )
-from ncgen.model.members import ModelError
+from ncgen.errors import ModelError
 from ncgen.reproducible import dot, norm
 from ncgen.validation import as_vector
 

@@ -16,14 +16,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ncgen.reproducible import matvec
-from ncgen.errors import BasisError, NcgenError
+from ncgen.errors import BasisError, ModelError
 from ncgen.symbolic.coordinates import CoordinateType
 from ncgen.symbolic.member import RigidMember
 from ncgen.validation import as_vector
-
-
-class ModelError(NcgenError):
-    """An invalid model: names, references, geometry or initial state."""
 
 
 @dataclass(frozen=True)
@@ -71,10 +67,10 @@ class Member:
 
     is_ground = False
 
-    def __init__(self, name: str, local: RigidMember, R0, p0, omega0, v0, shared: dict[int, NodeRef]):
+    def __init__(self, name: str, rigid: RigidMember, R0, p0, omega0, v0, shared: dict[int, NodeRef]):
         self.name = name
-        self.local = local
-        self.ctype: CoordinateType = local.ctype
+        self.rigid = rigid          # the member's constant description (mass, frame, derivation)
+        self.ctype: CoordinateType = rigid.ctype
         self.R0 = R0
         self.p0 = np.asarray(p0, dtype=float)
         self.omega0 = omega0
@@ -82,8 +78,8 @@ class Member:
         self.shared = dict(shared)
         self.markers: dict[str, np.ndarray] = {}
         self.spec: dict = {}     # the arguments it was created with (System.add_*), for to_toml
-        self.q0 = local.q_from_pose(R0, p0)
-        self.qd0 = local.qd_from_twist(R0, p0, omega0, v0)
+        self.q0 = rigid.q_from_pose(R0, p0)
+        self.qd0 = rigid.qd_from_twist(R0, p0, omega0, v0)
 
     @property
     def kind(self) -> str:
@@ -143,7 +139,7 @@ class Member:
             raise ModelError(f"{self.name}: marker {name!r} already defined")
         point = as_vector(local, self.dim, f"{self.name}.{name}: local point")
         try:
-            self.local.affine(point)
+            self.rigid.affine(point)
         except BasisError as e:
             raise ModelError(f"marker {self.name}.{name} ({self.ctype.name} {self.kind}): {e}") from None
         self.markers[name] = point

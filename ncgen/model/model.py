@@ -1,26 +1,59 @@
 """``Model``: a built system — dimensions, names, consistent initial state, the constant mass
 matrix and the whole-system CasADi functions (see :mod:`ncgen.assembly.functions`).
 
+A model is constant (Pinocchio's model/data split): it owns a private copy of the system's
+description made at ``build()`` (``model.members``, ``model.joints``, ``model.forces``), so
+editing the :class:`~ncgen.model.system.System` afterwards does not reach it, and its
+attributes and arrays cannot be reassigned or written.  What a run needs beyond it (loaded
+libraries, work arrays) lives in the runtime, keyed by the model.
+
 Numeric conveniences (``model.phi(q)``, ``model.A(q)``, ...) evaluate those functions with
 the default parameters and zero inputs unless told otherwise and return NumPy arrays.
 """
 from __future__ import annotations
 
+from types import MappingProxyType
+
 import numpy as np
 
+from ncgen.errors import ModelError
 from ncgen.validation import as_vector
 
 
-class Model:
-    """A validated, assembled system (create it with ``System.build()``)."""
+class ReadOnlyList(list):
+    """A list that refuses changes (a model's name lists: compares equal to plain lists)."""
 
-    def __init__(self, *, system, layout, labels, functions, M, factor, potential, state, p0, baumgarte,
+    def _refuse(self, *args, **kwargs):
+        raise TypeError("a Model's lists are read-only; copy with list(...) to change one")
+
+    append = extend = insert = remove = pop = clear = sort = reverse = _refuse
+    __setitem__ = __delitem__ = __iadd__ = __imul__ = _refuse
+
+
+def _frozen(value):
+    """``value`` made read-only: arrays lose their write flag, lists refuse changes."""
+    if isinstance(value, np.ndarray):
+        value = value.view()
+        value.flags.writeable = False
+        return value
+    if isinstance(value, list):
+        return ReadOnlyList(value)
+    return value
+
+
+class Model:
+    """A validated, assembled, constant system (create it with ``System.build()``)."""
+
+    def __init__(self, *, description, layout, labels, functions, M, factor, potential, state, p0, baumgarte,
                  redundant, dropped, t0):
-        self.system = system
+        system = description
+        self.members = MappingProxyType(dict(system.members))
+        self.joints = tuple(system.joints)
+        self.forces = tuple(system.forces)
         self.name = system.name
         self.dim = system.dim
         self.layout = layout
-        self.functions = functions
+        self.functions = MappingProxyType(dict(functions))
         self.M = M
         self.mass_factor = factor
         self.potential_terms = potential
@@ -42,6 +75,18 @@ class Model:
         self.redundant_dropped = dropped and bool(redundant)
         self.t0 = t0
         self.gravity = system.gravity.copy()
+        for key, value in vars(self).items():
+            object.__setattr__(self, key, _frozen(value))
+        object.__setattr__(self, "_frozen", True)
+
+    def __setattr__(self, key, value):
+        if getattr(self, "_frozen", False):
+            raise AttributeError(f"Model {self.name!r} is constant: build a new one with System.build() "
+                                 f"(cannot set {key!r})")
+        object.__setattr__(self, key, value)
+
+    def __delattr__(self, key):
+        raise AttributeError(f"Model {self.name!r} is constant (cannot delete {key!r})")
 
     # ------------------------------------------------------------ dimensions
     @property
@@ -132,7 +177,7 @@ class Model:
     def parameters(self, **values) -> np.ndarray:
         """The parameter vector with some entries replaced by name: ``model.parameters(k=50)``."""
         p = self.p0.copy()
-        offsets = np.cumsum([0] + self.parameter_sizes)
+        offsets = np.cumsum([0, *self.parameter_sizes])
         for name, val in values.items():
             if name not in self.parameter_names:
                 raise KeyError(f"unknown parameter {name!r}; parameters: {', '.join(self.parameter_names)}")
@@ -141,7 +186,12 @@ class Model:
         return p
 
     def member(self, name: str):
-        return self.system.member(name)
+        """The member ``name`` as it was when the model was built."""
+        try:
+            return self.members[name]
+        except KeyError:
+            known = ", ".join(self.members) or "none"
+            raise ModelError(f"no member named {name!r} in model {self.name!r} (members: {known})") from None
 
     def __repr__(self) -> str:
         return (f"<Model {self.name!r}: dim={self.dim}, nq={self.nq}, nc={self.nc}, dof={self.dof}, "

@@ -14,8 +14,9 @@ import numpy as np
 import casadi as ca
 
 from ncgen.model.expressions import check_name
-from ncgen.model.members import Ground, Member, ModelError, NodeRef
-from ncgen.reproducible import norm
+from ncgen.model.members import Ground, Member, NodeRef
+from ncgen.errors import ModelError
+from ncgen.reproducible import frame_along, norm
 from ncgen.symbolic.coordinates import coordinate_type
 from ncgen.symbolic.member import RigidMember
 from ncgen.validation import as_scalar, as_vector, rotation
@@ -228,7 +229,7 @@ class System:
     def from_toml(cls, source) -> "System":
         """A system from a TOML model file (a path) or TOML text; see docs/model-format.md."""
         from ncgen.model.toml_io import system_from_toml
-        return system_from_toml(source)
+        return system_from_toml(source, cls)
 
     def to_toml(self) -> str:
         """The system as TOML text that :meth:`from_toml` reads back."""
@@ -256,16 +257,6 @@ def _slot_index(ct, key, name) -> int:
 
 def _frame_along(e1: np.ndarray, local: RigidMember) -> np.ndarray:
     """The bar frame whose x̄ is ``e1``, completed exactly as the derivation completes it."""
-    q = local.q_from_pose(_any_frame(e1), np.zeros(len(e1)))
+    q = local.q_from_pose(frame_along(e1), np.zeros(len(e1)))
     R, _ = local.pose(q)
     return R
-
-
-def _any_frame(e1: np.ndarray) -> np.ndarray:
-    d = len(e1)
-    if d == 2:
-        return np.array([[e1[0], -e1[1]], [e1[1], e1[0]]])
-    helper = np.eye(3)[int(np.argmin(np.abs(e1)))]
-    e3 = np.cross(e1, helper)
-    e3 /= norm(e3)
-    return np.column_stack([e1, np.cross(e3, e1), e3])

@@ -30,21 +30,23 @@ from ncgen.model import toml_write
 from ncgen.model.expressions import did_you_mean, parse, scope, value_to_toml
 from ncgen.model.forces import FORCE_TYPES, GeneralizedForce, PointForce, Spring, Torque, TorsionalSpring
 from ncgen.model.joints import JOINT_TYPES, CoordinateDriver, Distance
-from ncgen.model.members import ModelError, NodeRef
+from ncgen.model.members import NodeRef
+from ncgen.errors import ModelError
 
 TOP_KEYS = ("system", "parameters", "inputs", "members", "joints", "forces")
 
 
 # ======================================================================= reading
-def system_from_toml(source):
-    """A :class:`~ncgen.model.system.System` from a path or TOML text."""
+def system_from_toml(source, system_class):
+    """A system (an instance of ``system_class``, :class:`~ncgen.model.system.System`) from a
+    path or TOML text."""
     text, origin = _source_text(source)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ModelError(f"{origin}: invalid TOML: {e}") from None
     try:
-        return _Loader(data, origin).system
+        return _Loader(data, origin, system_class).system
     except ModelError:
         raise
     except NcgenError as e:
@@ -142,8 +144,7 @@ def _matrix(v, n, path) -> list[list[float]]:
 
 
 class _Loader:
-    def __init__(self, data: dict, origin: str):
-        from ncgen.model.system import System
+    def __init__(self, data: dict, origin: str, system_class):
         top = _Table(data, "")
         for k in data:
             if k not in TOP_KEYS:
@@ -155,7 +156,7 @@ class _Loader:
         if not isinstance(gravity, list) or len(gravity) not in (2, 3) or not all(_is_number(x) for x in gravity):
             raise ModelError(f"system.gravity: expected 2 (planar) or 3 numbers, got {_describe(gravity)}")
         sysd.finish(("name", "gravity"))
-        self.s = System(name, gravity=[float(x) for x in gravity])
+        self.s = system_class(name, gravity=[float(x) for x in gravity])
         self.dim = self.s.dim
         self._parameters(_Table(top.get("parameters", {}), "parameters"))
         self._inputs(_Table(top.get("inputs", {}), "inputs"))
@@ -298,7 +299,7 @@ class _Loader:
         pars = {n: s for n, (s, _) in self.s.parameters.items()}
         extra = {}
         if state:
-            from ncgen.assembly.layout import make_layout
+            from ncgen.model.layout import make_layout
             nq = make_layout(self.dim, list(self.s.members.values())).nq
             extra = {"q": ca.SX.sym("q", nq), "v": ca.SX.sym("v", nq)}
         return scope(ca.SX.sym("t"), pars, dict(self.s.inputs) if inputs else {}, **extra)
@@ -514,7 +515,7 @@ def _force_entries(f, sc, system) -> dict:
         out.update(joint=f.joint.name, k=val(f.k, "k"), damping=val(f.damping, "damping"),
                    rest_angle=val(f.rest_angle, "rest_angle"))
     elif isinstance(f, GeneralizedForce):
-        from ncgen.assembly.layout import make_layout
+        from ncgen.model.layout import make_layout
         nq = make_layout(system.dim, list(system.members.values())).nq
         q, v = ca.SX.sym("q", nq), ca.SX.sym("v", nq)
         st = scope(sc.t, {n: s for n, (s, _) in system.parameters.items()}, dict(system.inputs), q=q, v=v)

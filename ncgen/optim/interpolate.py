@@ -12,35 +12,24 @@ from __future__ import annotations
 
 import numpy as np
 
+from ncgen import rigid_motion as rm
+
 
 def rotation_log(R: np.ndarray) -> np.ndarray:
-    """Rotation vector (rad) of a 3×3 rotation; an angle (shape (1,)) of a 2×2 one."""
+    """Rotation vector (rad) of a 3×3 rotation (:func:`ncgen.rigid_motion.log_so3`); the
+    angle, shape (1,), of a 2×2 one."""
     if R.shape == (2, 2):
         return np.array([np.arctan2(R[1, 0], R[0, 0])])
-    c = np.clip((np.trace(R) - 1) / 2, -1.0, 1.0)
-    angle = np.arccos(c)
-    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-    if angle < 1e-9:
-        return 0.5 * w
-    if np.pi - angle < 1e-6:
-        vals, vecs = np.linalg.eigh(0.5 * (R + R.T))
-        axis = vecs[:, int(np.argmax(vals))]
-        return angle * axis * (1.0 if axis @ w >= 0 else -1.0)
-    return angle / (2 * np.sin(angle)) * w
+    return rm.log_so3(R)
 
 
 def rotation_exp(w: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`rotation_log`."""
+    """Inverse of :func:`rotation_log` (:func:`ncgen.rigid_motion.exp_so3` in 3D)."""
     w = np.asarray(w, dtype=float)
     if w.size == 1:
         c, s = np.cos(w[0]), np.sin(w[0])
         return np.array([[c, -s], [s, c]])
-    angle = np.linalg.norm(w)
-    if angle < 1e-12:
-        return np.eye(3)
-    k = w / angle
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+    return rm.exp_so3(w)
 
 
 def pose_path(model, q_a: np.ndarray, q_b: np.ndarray, s: np.ndarray, *, t=None, p=None,
@@ -69,7 +58,7 @@ def pose_path(model, q_a: np.ndarray, q_b: np.ndarray, s: np.ndarray, *, t=None,
         G_rows.append(E @ S)
         c_rows.append(E @ layout.member_constant(name))
         step = rotation_log(Ra[j].T @ Rb[j])
-        targets.append((E, member.local, Ra[j], step))
+        targets.append((E, member.rigid, Ra[j], step))
     G = np.vstack(G_rows) if G_rows else np.zeros((0, model.nq))
     c = np.concatenate(c_rows) if c_rows else np.zeros(0)
     q_a, q_b = np.asarray(q_a, dtype=float), np.asarray(q_b, dtype=float)

@@ -79,8 +79,8 @@ def consistent_velocity(model, q, v, *, t=None, p=None) -> np.ndarray:
 def length_scale(model) -> float:
     """The shortest member dimension (m): the smallest local base-vector length of any bar
     or body (1 for unit direction vectors); 1 for a system of points."""
-    lengths = [float(np.min(np.linalg.norm(m.local.Xbar, axis=0)))
-               for m in model.system.members.values() if m.local.Xbar.size]
+    lengths = [float(np.min(np.linalg.norm(m.rigid.Xbar, axis=0)))
+               for m in model.members.values() if m.rigid.Xbar.size]
     return min(lengths) if lengths else 1.0
 
 

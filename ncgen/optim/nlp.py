@@ -30,9 +30,8 @@ from ncgen.errors import OptimizationError
 from ncgen.optim.guess import guess_duration, make_guess
 from ncgen.optim.manifold import (BRANCH_RADIUS, consistent_configuration, length_scale, resolve_configuration,
                                   resolve_velocity, tangent_basis)
-from ncgen.optim.problem import MODEL_STATE
 from ncgen.optim.result import OptimalTrajectory, SolverStats
-from ncgen.optim.transcription import Horizon
+from ncgen.optim.transcription import MODEL_STATE, Horizon
 
 SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 

@@ -27,9 +27,9 @@ import re
 import numpy as np
 
 from ncgen.errors import OptimizationError
+from ncgen.optim.transcription import MODEL_STATE
 
 METHODS = ("collocation", "shooting")
-MODEL_STATE = "model"
 
 
 class OptimalControl:

@@ -11,7 +11,7 @@ Integrators are pluggable: :func:`register_integrator` adds a factory
 ``(x0[2nq], u[nu], p[np], t0, h) -> (xf[2nq], lamf[nc])`` (one interval of length ``h``
 seconds from time ``t0``, inputs constant, ``lamf`` the multipliers at the end).  IDAS is
 built in, and so is ``"rattle"``: the scheme of the compiled fixed-step stepper
-(``ncgen.runtime.stepper_kernels``) written with CasADi's rootfinder, because IPOPT needs
+(``ncgen.assembly.stepper_equations``) written with CasADi's rootfinder, because IPOPT needs
 derivatives and the generated C stepper has none.  A factory for the C stepper itself
 would need its step's Jacobians (a ``casadi.external`` with ``jac_`` functions).
 """
@@ -61,12 +61,12 @@ def idas_interval(model, *, rtol: float = IDAS_TOLERANCES[0], atol: float = IDAS
 
 
 def rattle_interval(model, *, substeps: int = 4, tol: float = 1e-12, max_iter: int = 20) -> ca.Function:
-    """The compiled stepper's scheme (RATTLE, :mod:`ncgen.runtime.stepper_kernels`) over one
+    """The compiled stepper's scheme (RATTLE, :mod:`ncgen.assembly.stepper_equations`) over one
     interval: ``substeps`` fixed steps of ``h / substeps``, each a Newton solve of the
     first half-step (CasADi ``rootfinder``, derivatives by the implicit function theorem)
     and the linear KKT solve of the second.  The same equations as the generated C stepper,
     differentiable for IPOPT; both constraint levels hold at every node."""
-    from ncgen.runtime.stepper_kernels import stepper_functions
+    from ncgen.assembly.stepper_equations import stepper_functions
 
     if not isinstance(substeps, int) or substeps < 1:
         raise OptimizationError(f"rattle: substeps: expected a positive integer, got {substeps!r}")

@@ -17,6 +17,9 @@ from typing import Callable
 import casadi as ca
 import numpy as np
 
+#: Marks an initial state taken from the model (its consistent ``q0``/``v0``) rather than given.
+MODEL_STATE = "model"
+
 
 @dataclass
 class Horizon:

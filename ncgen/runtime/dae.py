@@ -2,24 +2,21 @@
 ``z = [a; λ]`` (:mod:`ncgen.assembly.functions`).
 
 Backends: ``"vm"`` is the model's SX function (CasADi's virtual machine); ``"compiled"``
-generates the model's C package (:func:`ncgen.generate`, into a temporary directory: the
-files depend only on the model, so the library built from them is found in the compile
-cache when the same model was generated or simulated before) and loads ``dae`` from it with
-``casadi.external``, which also finds its Jacobian kernel ``jac_<model>_dae`` and so gives
-IDAS exact derivatives; ``"auto"`` compiles when a C compiler is available and otherwise
-falls back to the VM with a warning.  Loaded functions are kept per model for the life of
-the process.
+loads ``dae`` with ``casadi.external`` from the model's compiled package
+(:func:`ncgen.runtime.library.compiled_model`, the one the stepper uses too), which also
+finds its Jacobian kernel ``jac_<model>_dae`` and so gives IDAS exact derivatives; ``"auto"``
+compiles when a C compiler is available and otherwise falls back to the VM with a warning.
+Loaded functions are kept per model for the life of the process.
 """
 from __future__ import annotations
 
-import tempfile
 import weakref
 
 import casadi as ca
 
-from ncgen.codegen import load_functions
-from ncgen.codegen.model_package import generate
-from ncgen.errors import NcgenError
+from ncgen.codegen.load import warn_no_compiler
+from ncgen.errors import CompilerNotFound, NcgenError
+from ncgen.runtime.library import compiled_functions
 
 BACKENDS = ("vm", "compiled", "auto")
 
@@ -35,10 +32,11 @@ def load_dae(model, backend: str) -> tuple[ca.Function, str]:
         return model.functions["dae"], "vm"
     cache = _loaded.setdefault(model, {})
     if "compiled" not in cache:
-        with tempfile.TemporaryDirectory(prefix="ncgen-dae-") as tmp:
-            pkg = generate(model, f"{tmp}/{model.name}")
-            f = load_functions(pkg, ["dae"], backend=backend)["dae"]
-        if not f.is_a("External"):
-            return f, "vm"
-        cache["compiled"] = f
+        try:
+            cache["compiled"] = compiled_functions(model, ["dae"])["dae"]
+        except CompilerNotFound as e:
+            if backend == "compiled":
+                raise
+            warn_no_compiler(e)
+            return model.functions["dae"], "vm"
     return cache["compiled"], "compiled"

@@ -9,7 +9,7 @@ import numpy as np
 
 from ncgen.assembly.initial_state import consistent_state
 from ncgen.errors import NcgenError, SimulationError
-from ncgen.model.members import ModelError
+from ncgen.errors import ModelError
 from ncgen.runtime.dae import load_dae
 from ncgen.runtime.diagnose import explain, shift_time
 from ncgen.runtime.idas import ChunkedIDAS, ChunkFailure

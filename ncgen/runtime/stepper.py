@@ -1,8 +1,8 @@
 """Simulation with the compiled fixed-step stepper (``nc.simulate(..., method="stepper")``).
 
-The scheme (RATTLE for constant mass matrices, see :mod:`ncgen.runtime.stepper_kernels`)
+The scheme (RATTLE for constant mass matrices, see :mod:`ncgen.assembly.stepper_equations`)
 runs entirely in generated C: ``<model>_simulate`` of the stepper library
-(:mod:`ncgen.runtime.stepper_package`) advances all steps in one call, Python only prepares
+(:mod:`ncgen.codegen.stepper_package`) advances all steps in one call, Python only prepares
 the inputs and wraps the result in a :class:`~ncgen.runtime.trajectory.Trajectory`.
 
 Steps: ``substeps`` fixed steps of ``h = dt / substeps`` per output interval ``dt`` (s); a
@@ -22,7 +22,8 @@ import numpy as np
 
 from ncgen.errors import NcgenError, SimulationError
 from ncgen.runtime.inputs import HOLDS
-from ncgen.runtime.stepper_package import HALVINGS_LIMIT, MAX_HALVINGS, MAX_ITER, STATUS, TOL, load_stepper
+from ncgen.codegen.stepper_package import HALVINGS_LIMIT, MAX_HALVINGS, MAX_ITER, STATUS, TOL
+from ncgen.runtime.stepper_library import load_stepper
 from ncgen.runtime.trajectory import Trajectory
 
 

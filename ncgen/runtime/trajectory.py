@@ -96,7 +96,7 @@ class Trajectory:
         ``local`` (member frame, m), from ``r = C(c) q_I``."""
         model = self._model("point()")
         m = model.member(member)
-        C = m.local.C(m.local.affine(np.asarray(local, dtype=float)))
+        C = m.rigid.C(m.rigid.affine(np.asarray(local, dtype=float)))
         return outputs.member_coordinates(model, member, self.q) @ np.asarray(C).T
 
     def marker(self, name: str) -> np.ndarray:

@@ -30,6 +30,7 @@ from functools import cached_property, lru_cache
 import sympy as sp
 
 from ncgen.errors import CoordinateTypeError
+from ncgen.symbolic.notation import AXES, POINT_NAMES, VECTOR_NAMES
 
 #: Known types per dimension, with their kind.
 TYPES: dict[int, dict[str, str]] = {
@@ -38,9 +39,6 @@ TYPES: dict[int, dict[str, str]] = {
     2: {"ruv": "body", "rrv": "body", "rrr": "body", "ru": "bar", "rr": "bar", "r": "point"},
 }
 
-POINT_NAMES = "ijkl"   # basic points r_i, r_j, r_k, r_l by slot
-VECTOR_NAMES = "uvw"   # base vectors x_1, x_2, x_3
-AXES = "xyz"
 
 
 def available_types(dim: int | None = None) -> list[tuple[int, str]]:
@@ -151,6 +149,9 @@ class CoordinateType:
     def __repr__(self) -> str:
         return f"CoordinateType({self.name!r}, dim={self.dim})"
 
+    def __deepcopy__(self, memo) -> "CoordinateType":
+        return self              # immutable, and its derivation is cached per (name, dim)
+
     # ------------------------------------------------------------- derivation
     @cached_property
     def derivation(self) -> "Derivation":
@@ -159,7 +160,7 @@ class CoordinateType:
     def report(self):
         """The derivation step by step (:func:`ncgen.symbolic.teaching.coordinates_report`)."""
         from ncgen.symbolic.teaching import coordinates_report
-        return coordinates_report(self.name, self.dim)
+        return coordinates_report(self)
 
     def _repr_markdown_(self) -> str:
         return self.report().render("markdown")

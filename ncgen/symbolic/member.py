@@ -63,7 +63,10 @@ def inertia_J(ctype: CoordinateType, inertia, length: float | None = None) -> np
 
 
 class RigidMember:
-    """Numeric local description of one member (see module docstring)."""
+    """Numeric local description of one member (see module docstring); constant once made."""
+
+    def __deepcopy__(self, memo) -> "RigidMember":
+        return self              # constant: copies of a model share it
 
     def __init__(self, ctype: CoordinateType, mass: float, rbar_i, Xbar, Jbar):
         self.ctype = ctype

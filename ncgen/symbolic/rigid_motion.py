@@ -332,10 +332,3 @@ def log_se3_translation(omega, R_ab, p_ab) -> sp.Matrix:
     near_zero = _lt(sin_sq, SERIES_THRESHOLD) & (c > 0)
     V_inv = sp.eye(3) - W / 2 + coefficient("dlog", w.dot(w), small=near_zero) * W * W
     return V_inv * as_vector(p_ab, 3)
-
-
-def se3_report():
-    """This module's derivation as a teaching report (``ncgen derive se3``); built by
-    :func:`ncgen.symbolic.se3_report.se3_report`."""
-    from ncgen.symbolic.se3_report import se3_report as build  # that module imports this one
-    return build()

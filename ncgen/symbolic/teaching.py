@@ -13,7 +13,7 @@ from __future__ import annotations
 import sympy as sp
 from sympy.matrices.expressions.kronecker import KroneckerProduct
 
-from ncgen.symbolic.coordinates import VECTOR_NAMES, CoordinateType, Derivation, coordinate_type
+from ncgen.symbolic.notation import VECTOR_NAMES
 from ncgen.symbolic.report import Report
 
 #: Expanded formulas with more terms than this per entry are described, not printed.
@@ -60,14 +60,14 @@ def _combination(coeffs, blocks, shape):
     return terms[0] if len(terms) == 1 else sp.MatAdd(*terms)
 
 
-def _vector_blocks(ct: CoordinateType):
+def _vector_blocks(ct):
     """Block symbols of the base vectors ``x_s`` and of their local values ``x̄_s``."""
     d = ct.dim
     return ([_block(VECTOR_NAMES[s], d) for s in range(ct.k)],
             [_block(f"{VECTOR_NAMES[s]}bar", d) for s in range(ct.k)])
 
 
-def _reference_name(ct: CoordinateType) -> str:
+def _reference_name(ct) -> str:
     """The seed's first type, to which ``Y`` converts: ``ruvw`` in 3D, ``ruv`` in 2D."""
     return "r" + VECTOR_NAMES[:ct.dim]
 
@@ -76,7 +76,7 @@ def _terms(M) -> int:
     return max((len(sp.Add.make_args(sp.expand(e))) for e in M), default=0)
 
 
-def phi_q_blocks(ct: CoordinateType, D: Derivation) -> sp.BlockMatrix:
+def phi_q_blocks(ct, D) -> sp.BlockMatrix:
     """``Φ_q`` in ``1×d`` blocks, each a combination ``Σ a_s x_sᵀ`` of base vectors.
 
     Read off the derived ``Φ_q``: substitute ``q = Y⁻¹ q_ref`` (``q_ref = [r_i; x_1; ...]``),
@@ -102,7 +102,7 @@ def phi_q_blocks(ct: CoordinateType, D: Derivation) -> sp.BlockMatrix:
 
 
 # ------------------------------------------------------------------------------- steps
-def _coordinates(rep: Report, ct: CoordinateType, D: Derivation, Ybar: sp.Matrix):
+def _coordinates(rep: Report, ct, D, Ybar: sp.Matrix):
     d = ct.dim
     slots = [_block(s, d) for s in ct.slots]
     st = rep.step(
@@ -123,7 +123,7 @@ def _coordinates(rep: Report, ct: CoordinateType, D: Derivation, Ybar: sp.Matrix
         st.eq("X", D.X)
 
 
-def _conversion(rep: Report, ct: CoordinateType, D: Derivation, Ybar: sp.Matrix):
+def _conversion(rep: Report, ct, D, Ybar: sp.Matrix):
     d, ref = ct.dim, _reference_name(ct)
     st = rep.step(
         "Conversion matrix Y",
@@ -141,7 +141,7 @@ def _conversion(rep: Report, ct: CoordinateType, D: Derivation, Ybar: sp.Matrix)
     st.eq(r"\bar{Y}^{-1}", kron_factor(D.Y_inv, d))
 
 
-def _transformation(rep: Report, ct: CoordinateType, D: Derivation):
+def _transformation(rep: Report, ct, D):
     d = ct.dim
     C_kron = kron_factor(D.C_kron, d)
     Cbar = kron_factor(D.C, d)
@@ -162,7 +162,7 @@ def _transformation(rep: Report, ct: CoordinateType, D: Derivation):
     st.eq("C(c)" if ct.k else "C", _kron(Cbar, d))
 
 
-def _constraints(rep: Report, ct: CoordinateType, D: Derivation):
+def _constraints(rep: Report, ct, D):
     d = ct.dim
     xs, xbars = _vector_blocks(ct)
     st = rep.step(
@@ -187,7 +187,7 @@ def _constraints(rep: Report, ct: CoordinateType, D: Derivation):
         st.eq(r"\Phi_q", D.Phi_q)
 
 
-def _hessians(rep: Report, ct: CoordinateType, D: Derivation):
+def _hessians(rep: Report, ct, D):
     d = ct.dim
     st = rep.step(
         "Constant Hessians",
@@ -200,7 +200,7 @@ def _hessians(rep: Report, ct: CoordinateType, D: Derivation):
         st.eq(f"H_{{{n}}}", _kron(kron_factor(H, d), d))
 
 
-def _mass(rep: Report, ct: CoordinateType, D: Derivation):
+def _mass(rep: Report, ct, D):
     d = ct.dim
     st = rep.step(
         "Mass matrix",
@@ -214,7 +214,7 @@ def _mass(rep: Report, ct: CoordinateType, D: Derivation):
     st.eq(r"\bar{M}", kron_factor(D.M, d))
 
 
-def _inertia(rep: Report, ct: CoordinateType, D: Derivation):
+def _inertia(rep: Report, ct, D):
     d = ct.dim
     what = {("body", 3): "the inertia tensor $\\bar{I}$ about the centre of mass, in body axes",
             ("body", 2): "the planar moment $\\bar{I}$ about the centre of mass; only "
@@ -237,7 +237,7 @@ def _inertia(rep: Report, ct: CoordinateType, D: Derivation):
         _bar_example(rep, ct, D)
 
 
-def _bar_example(rep: Report, ct: CoordinateType, D: Derivation):
+def _bar_example(rep: Report, ct, D):
     d = ct.dim
     L, a = sp.symbols("L a", positive=True)
     ex = sp.zeros(d, 1)
@@ -258,7 +258,7 @@ def _bar_example(rep: Report, ct: CoordinateType, D: Derivation):
     st.eq(r"\bar{M}_{\mathrm{uniform}}", Mbar.applyfunc(sp.factor))
 
 
-def _pose(rep: Report, ct: CoordinateType, D: Derivation):
+def _pose(rep: Report, ct, D):
     d = ct.dim
     if ct.kind == "body":
         Xbar = D.Xbar_sym
@@ -294,7 +294,7 @@ def _pose(rep: Report, ct: CoordinateType, D: Derivation):
                  "$\\tau$ acts through the generalised force $Q = W^T \\tau$.")
 
 
-def _inverse(rep: Report, ct: CoordinateType, D: Derivation):
+def _inverse(rep: Report, ct, D):
     if ct.kind == "point":
         text = "A point's coordinates are its position $p$ and their rates its velocity $v$."
     else:
@@ -307,9 +307,9 @@ def _inverse(rep: Report, ct: CoordinateType, D: Derivation):
     st.eq(r"\dot{q}", D.qd_of_twist)
 
 
-def coordinates_report(name: str, dim: int = 3) -> Report:
-    """The derivation of coordinate type ``name`` (dimension ``dim``) as a teaching report."""
-    ct = coordinate_type(name, dim)
+def coordinates_report(ct) -> Report:
+    """The derivation of coordinate type ``ct`` (a
+    :class:`~ncgen.symbolic.coordinates.CoordinateType`) as a teaching report."""
     D = ct.derivation
     Ybar = kron_factor(D.Y, ct.dim)
     rep = Report(

@@ -48,8 +48,8 @@ def scene(traj) -> Scene:
     bars = [m for m in members if m.kind == "bar"]
     bodies = [m for m in members if m.kind == "body"]
     points = [m for m in members if m.kind == "point"]
-    bar_ends = [np.stack([traj.point(m.name, m.local.rbar_i),
-                          traj.point(m.name, m.local.rbar_i + m.local.Xbar[:, 0])], axis=1) for m in bars]
+    bar_ends = [np.stack([traj.point(m.name, m.rigid.rbar_i),
+                          traj.point(m.name, m.rigid.rbar_i + m.rigid.Xbar[:, 0])], axis=1) for m in bars]
     body_points = [traj.point(m.name, local) for m in bodies for local in _basic_points(m)]
     R, p = traj.poses() if bodies else (np.zeros((n, 0, d, d)), np.zeros((n, 0, d)))
     index = [model.member_names.index(m.name) for m in bodies]
@@ -71,5 +71,5 @@ def scene(traj) -> Scene:
 def _basic_points(member) -> list[np.ndarray]:
     """Local positions of a member's basic points: ``r̄_i`` and ``r̄_i + x̄_k`` for each later
     point slot (slot k ≥ 1 holds column k − 1 of X̄)."""
-    local = member.local
+    local = member.rigid
     return [local.rbar_i] + [local.rbar_i + local.Xbar[:, s - 1] for s in member.ctype.point_slots if s >= 1]

@@ -17,15 +17,11 @@ message names the argument, what was expected and what was found.
 """
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
-from ncgen.assembly import rigid_motion as casadi_forms
-from ncgen.codegen import FunctionDoc, Package, PackageDoc, write_package
-from ncgen.errors import InertiaError, NcgenError, RotationError, ShapeError
+from ncgen.errors import InertiaError, RotationError, ShapeError
 from ncgen.symbolic.numeric import numpy_function
-from ncgen.symbolic.rigid_motion_forms import NAMES, form
+from ncgen.symbolic.rigid_motion_forms import form
 from ncgen.validation import ROTATION_TOL
 
 ROTATION_TOLERANCE = ROTATION_TOL
@@ -403,22 +399,3 @@ def newton_euler_acceleration(M_b, T_b, W_b) -> np.ndarray:
     M = check_mass_matrix(M_b, "M_b")
     rhs = check_vector(W_b, "W_b", 6) - newton_euler_bias(M, T_b)
     return np.linalg.solve(M, rhs[..., None])[..., 0]
-
-
-# --- generated C -------------------------------------------------------------------------------
-
-def write_c_package(out_dir: str | os.PathLike, name: str = "ncgen_rigid_motion",
-                    functions=C_CORE) -> Package:
-    """Write the C package of ``functions`` (default :data:`C_CORE`) to ``out_dir``.
-
-    The kernels are CasADi's C for the SX functions of :mod:`ncgen.assembly.rigid_motion`;
-    C symbol of function ``f``: ``<name>_<f>``.  Compile with
-    :func:`ncgen.codegen.compile_package`, load with :func:`ncgen.codegen.load_functions`.
-    """
-    unknown = [n for n in functions if n not in NAMES]
-    if unknown:
-        raise NcgenError(f"functions: expected names among {list(NAMES)}, found unknown {unknown}")
-    doc = PackageDoc(summary="Rigid-motion algebra (arboris conventions: H_ab pose of b in a, "
-                             "twists [w; v], wrenches [tau; f]), generated from ncgen.symbolic.rigid_motion",
-                     functions={n: FunctionDoc(purpose=form(n).doc) for n in functions})
-    return write_package(name, [casadi_forms.function(n) for n in functions], out_dir, doc=doc)

@@ -1,6 +1,6 @@
 """``ncgen optimize``: solve an optimal-control problem file (docs/optimal-control.md).
 
-Registered in :mod:`ncgen.cli` by importing this module.  Writes the optimal trajectory
+Writes the optimal trajectory
 (``.npz``, readable by ``nc.Trajectory.load``) and a plot, atomically: a failed solve
 leaves no file behind and exits with status 1 and IPOPT's diagnosis.
 """
@@ -11,7 +11,8 @@ import contextlib
 import sys
 from pathlib import Path
 
-from ncgen.cli import load_model, subcommand
+from ncgen.cli.common import load_model
+from ncgen.cli.registry import subcommand
 from ncgen.errors import ProblemFileError
 
 

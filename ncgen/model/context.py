@@ -11,12 +11,13 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ncgen.assembly.layout import Layout
-from ncgen.assembly.sym2casadi import to_casadi
+from ncgen.model.layout import Layout
+from ncgen.model.sym2casadi import to_casadi
 from ncgen.errors import BasisError
 from ncgen.model.expressions import Scope, evaluate, scope
-from ncgen.model.members import Member, ModelError
-from ncgen.reproducible import dot, matmul, matvec, norm, snap
+from ncgen.model.members import Member
+from ncgen.errors import ModelError
+from ncgen.reproducible import dot, matmul, matvec, norm, perpendicular_basis, snap
 from ncgen.symbolic.joints import primitive
 
 
@@ -54,7 +55,7 @@ class Context:
         Without ``extra`` values the formula is translated once per coordinate type into an
         SX function of (q_I, q̇_I, the member's constants) and then called per member: the
         SymPy tree walk costs far more than the call, which adds the same operations."""
-        constants = member.local.constants()
+        constants = member.rigid.constants()
         qI, vI = self.q_of(member), self.v_of(member)
         if extra:
             D = member.ctype.derivation
@@ -94,7 +95,7 @@ class Context:
     def _local_point(self, member, world, what: str) -> np.ndarray:
         rbar = member.to_local(world)
         try:
-            member.local.affine(rbar)
+            member.rigid.affine(rbar)
         except BasisError as e:
             raise ModelError(f"{what}: {member.name} ({member.ctype.name} {member.kind}): {e}") from None
         return rbar
@@ -107,7 +108,7 @@ class Context:
         return self.local_point(member, self._local_point(member, world, what))
 
     def local_point(self, member, rbar):
-        C = ca.DM(member.local.C(member.local.affine(rbar)))
+        C = ca.DM(member.rigid.C(member.rigid.affine(rbar)))
         return ca.mtimes(C, self.q_of(member)), ca.mtimes(C, self.v_of(member))
 
     def direction(self, member, world_dir, what: str):
@@ -125,7 +126,7 @@ class Context:
         if member.kind == "point":
             raise ModelError(f"{what}: {member.name} is a point member and carries no direction")
         dbar = member.direction_to_local(w)
-        loc = member.local
+        loc = member.rigid
         if member.kind == "bar" and self.dim == 2:
             U = loc.C(np.ones(1)) - loc.C(np.zeros(1))            # u = U q
             J = np.array([[0.0, -1.0], [1.0, 0.0]])
@@ -190,15 +191,3 @@ class Context:
             else:
                 vals[sym] = val
         return to_casadi(prim.expr, vals)
-
-
-def perpendicular_basis(axis) -> list[np.ndarray]:
-    """Unit vectors completing ``axis/|axis|`` to a right-handed orthonormal basis."""
-    a = np.asarray(axis, float)
-    a = a / norm(a)
-    if len(a) == 2:
-        return [np.array([-a[1], a[0]])]
-    helper = np.eye(3)[int(np.argmin(np.abs(a)))]
-    n1 = np.cross(a, helper)
-    n1 /= norm(n1)
-    return [n1, np.cross(a, n1)]

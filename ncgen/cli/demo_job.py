@@ -165,7 +165,7 @@ def run_demo(out_dir, *, animate: bool = False, t_end: float = 1.4, dt: float = 
     """Build, generate, compile, simulate, check and plot the top released without
     precession (it nutates: the crown traces cusps; 1.4 s is about one turn of precession);
     files go to ``out_dir``."""
-    from ncgen.codegen.build import compile_package
+    from ncgen.codegen.compile_cache import compile_package
     from ncgen.codegen.model_package import generate
     from ncgen.runtime import simulate
 

@@ -1,6 +1,6 @@
 """CasADi forms of the rigid-motion algebra, and its C package.
 
-Each function is the CasADi translation (:func:`ncgen.assembly.sym2casadi.to_casadi`) of the
+Each function is the CasADi translation (:func:`ncgen.model.sym2casadi.to_casadi`) of the
 SymPy formula of the same name in :mod:`ncgen.symbolic.rigid_motion` or
 :mod:`ncgen.symbolic.spatial_inertia` (table: :mod:`ncgen.symbolic.rigid_motion_forms`),
 held as one SX :class:`casadi.Function` per formula.  Calling it with SX arguments returns SX
@@ -18,7 +18,7 @@ from functools import lru_cache
 
 import casadi as ca
 
-from ncgen.assembly.sym2casadi import to_casadi
+from ncgen.model.sym2casadi import to_casadi
 from ncgen.symbolic.rigid_motion_forms import form
 
 

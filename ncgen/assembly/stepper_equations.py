@@ -26,7 +26,7 @@ first's), so a single sparse-QR kernel solves them.
 
 Kernels (name: inputs -> outputs; ``t`` in s, ``h`` in s):
 
-* ``step_newton``: t, q, v, u, p, h, w, nu -> r (nq + nc), K (sparse)
+* ``step_newton``: t, q, v, u, p, h, w, lam_h -> r (nq + nc), K (sparse)
 * ``step_velocity``: t (= t + h), q (= q⁺), w, u, p, h -> b (nq + nc), K (same pattern)
 * ``step_check``: t, q, v, p -> phi_max = ‖Φ‖∞ (m²), phidot_max = ‖A v + Φ_t‖∞ (m²/s)
 * ``step_solve``: K, r -> x = K⁻¹ r (sparse QR, generated as C; see :func:`solve_function`)
@@ -37,8 +37,6 @@ import casadi as ca
 import numpy as np
 
 from ncgen.assembly.mass import sparse_dm
-from ncgen.codegen.looped import is_large, primitives
-from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
 
 #: Largest nnz(V) + nnz(R) of the QR factors for which the solve is unrolled into SX.
 SX_QR_MAX_NNZ = 3_000
@@ -48,13 +46,13 @@ KERNELS = ("step_newton", "step_velocity", "step_check", "step_solve")
 
 DOCS = {
     "step_newton": {
-        "purpose": "Stepper, first half-step: Newton residual r(w, nu) and its Jacobian K",
+        "purpose": "Stepper, first half-step: Newton residual r(w, lam_h) and its Jacobian K",
         "inputs": {"t": ("time at the start of the step", "s"), "q": ("coordinates at t", "m"),
                    "v": ("coordinate rates at t", "m/s"), "u": ("inputs, held over the step", ""),
                    "p": ("parameters", ""), "h": ("step", "s"), "w": ("midpoint rates v_{n+1/2}", "m/s"),
-                   "nu": ("scaled multipliers h/2 lambda", "N s/m^2")},
-        "outputs": {"r": ("[M (w - v) - h/2 F + A^T nu; Phi(t + h, q + h w) / h]", "N s; m^2/s"),
-                    "K": ("dr/d[w; nu], sparse", "")}},
+                   "lam_h": ("scaled multipliers h/2 lambda", "N s/m^2")},
+        "outputs": {"r": ("[M (w - v) - h/2 F + A^T lam_h; Phi(t + h, q + h w) / h]", "N s; m^2/s"),
+                    "K": ("dr/d[w; lam_h], sparse", "")}},
     "step_velocity": {
         "purpose": "Stepper, second half-step: KKT matrix and right-hand side for [v+; h/2 mu]",
         "inputs": {"t": ("time at the end of the step", "s"), "q": ("coordinates at the end", "m"),
@@ -75,22 +73,22 @@ DOCS = {
 }
 
 
-def stepper_functions(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS) -> list[ca.Function]:
+def stepper_functions(model, primitives: dict[str, ca.Function] | None = None) -> list[ca.Function]:
     """The four kernels of :data:`KERNELS` for ``model`` (see the module docstring);
-    ``reroll_instructions`` as in :func:`ncgen.codegen.looped.is_large`."""
+    ``primitives`` as in :func:`check_function`."""
     f = model.functions
     nq, nc = model.nq, model.nc
     t, h = ca.SX.sym("t"), ca.SX.sym("h")
     q, v, w = ca.SX.sym("q", nq), ca.SX.sym("v", nq), ca.SX.sym("w", nq)
-    nu = ca.SX.sym("nu", nc)
+    lam_h = ca.SX.sym("lam_h", nc)
     u, p = ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
     M = sparse_dm(model.M)
 
-    r = ca.densify(ca.vertcat(ca.mtimes(M, w - v) - h / 2 * f["F"](t, q, w, u, p) + ca.mtimes(f["A"](t, q, p).T, nu),
+    r = ca.densify(ca.vertcat(ca.mtimes(M, w - v) - h / 2 * f["F"](t, q, w, u, p) + ca.mtimes(f["A"](t, q, p).T, lam_h),
                    f["phi"](t + h, q + h * w, p) / h))
-    K = ca.jacobian(r, ca.vertcat(w, nu))
-    newton = ca.Function("step_newton", [t, q, v, u, p, h, w, nu], [r, K],
-                         ["t", "q", "v", "u", "p", "h", "w", "nu"], ["r", "K"])
+    K = ca.jacobian(r, ca.vertcat(w, lam_h))
+    newton = ca.Function("step_newton", [t, q, v, u, p, h, w, lam_h], [r, K],
+                         ["t", "q", "v", "u", "p", "h", "w", "lam_h"], ["r", "K"])
 
     A = f["A"](t, q, p)
     b = ca.densify(ca.vertcat(ca.mtimes(M, w) + h / 2 * f["F"](t, q, w, u, p), -f["phi_t"](t, q, p)))
@@ -98,14 +96,16 @@ def stepper_functions(model, reroll_instructions: int | None = REROLL_INSTRUCTIO
     velocity = ca.Function("step_velocity", [t, q, w, u, p, h], [b, K2],
                            ["t", "q", "w", "u", "p", "h"], ["b", "K"])
 
-    return [newton, velocity, check_function(model, reroll_instructions), solve_function(K.sparsity())]
+    return [newton, velocity, check_function(model, primitives), solve_function(K.sparsity())]
 
 
-def check_function(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS) -> ca.Function:
-    """``step_check``; for a large model an MX function of the rerolled primitives
-    (:mod:`ncgen.codegen.looped`: its two norms couple every constraint)."""
-    if is_large(model, reroll_instructions):
-        f, sym = primitives(model), ca.MX
+def check_function(model, primitives: dict[str, ca.Function] | None = None) -> ca.Function:
+    """``step_check``: an SX function of ``model.functions``, or, given ``primitives``
+    (``phi``, ``A``, ``phi_t`` as called functions, e.g. the rerolled ones of a large
+    model's package, :func:`ncgen.codegen.looped.primitives`), an MX function calling them:
+    its two norms couple every constraint, so flat SX would not reroll."""
+    if primitives is not None:
+        f, sym = primitives, ca.MX
     else:
         f, sym = model.functions, ca.SX
     t, q, v, p = sym.sym("t"), sym.sym("q", model.nq), sym.sym("v", model.nq), sym.sym("p", model.np)

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ncgen import rigid_motion as rm
+from ncgen.rigid_motion import numeric as rm
 from ncgen.errors import CoordinateTypeError
 from ncgen.symbolic.member import RigidMember
 

@@ -1,0 +1,39 @@
+"""Which constraints depend linearly on the others, by name order."""
+from __future__ import annotations
+
+import numpy as np
+
+#: Relative size of a row's component outside the span of the earlier rows below which it
+#: counts as linearly dependent.
+RANK_TOL = 1e-9
+
+
+def dependent_rows(A: np.ndarray, tol: float = RANK_TOL) -> list[int]:
+    """Rows of ``A`` that depend linearly on earlier rows (greedy, in order, so intrinsic
+    constraints are kept and the later joint equations are the ones named)."""
+    if A.shape[0] == 0:
+        return []
+    norms = np.linalg.norm(A, axis=1)
+    zero = [i for i in range(A.shape[0]) if norms[i] == 0]
+    An = A / np.where(norms > 0, norms, 1)[:, None]
+    G = An @ An.T
+    try:
+        L = np.linalg.cholesky(G)
+        if np.min(np.diag(L)) > np.sqrt(tol) and not zero:
+            return []
+    except np.linalg.LinAlgError:
+        pass
+    basis: list[np.ndarray] = []
+    dependent = []
+    for i in range(A.shape[0]):
+        r = An[i].copy()
+        for b in basis:
+            r -= (b @ r) * b
+        for b in basis:
+            r -= (b @ r) * b
+        n = np.linalg.norm(r)
+        if norms[i] == 0 or n < tol ** 0.5:
+            dependent.append(i)
+        else:
+            basis.append(r / n)
+    return dependent

@@ -1,0 +1,74 @@
+"""The compiled stepper as C: its section of a model package.
+
+:func:`stepper_section` adds to a model package (``nc.generate``) the kernels of
+:mod:`ncgen.assembly.stepper_equations`, the Newton loop ``<model>_stepper.c`` with the API
+declared in ``<model>_stepper.h`` (``<model>_step``, ``<model>_simulate``; templates
+``stepper.c.j2``, ``stepper.h.j2``) and the example program ``<model>_simulate``
+(``simulate_main.c.j2``), which simulates from the model's initial state without Python.
+:mod:`ncgen.runtime.stepper_library` loads it from the model's compiled package.
+"""
+from __future__ import annotations
+
+
+from ncgen.codegen import PackageDoc, write_package
+from ncgen.codegen.cnames import c_real
+from ncgen.codegen.package import ExtraSource
+from ncgen.codegen.looped import is_large, primitives, reroll_limit
+from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
+from ncgen.codegen.section import Section
+from ncgen.assembly.stepper_equations import DOCS, mass_scale, stepper_functions
+
+#: Status codes of ``<model>_step`` (``templates/c/stepper.h.j2``) and what they mean.
+STATUS = {
+    0: "converged",
+    1: "Newton's method did not converge within max_iter iterations, on the whole step nor on "
+       "its halves (try a smaller step dt or more max_halvings; or the motion is singular there)",
+    2: "a residual or Newton update was not finite: the KKT matrix is singular (a singular "
+       "configuration or redundant constraints) or the forces are not finite",
+    3: "the velocity constraints are violated after the second half-step: the KKT matrix is "
+       "nearly singular (a singular configuration or redundant constraints)",
+    4: "a generated kernel returned an error",
+    5: "bad input (non-positive step, non-finite time) or out of memory",
+}
+#: Default Newton tolerance: |Φ|∞ ≤ tol (m²), momentum residual ≤ tol·max|M|·(1 + |w|∞),
+#: |A v + Φ_t|∞ ≤ tol·(1 + |v|∞) (see ``<model>_stepper.h``).
+TOL = 1e-10
+#: Default Newton iterations allowed per step.
+MAX_ITER = 12
+#: Default number of times a failing step may be split in halves, and the most the C
+#: workspace allows (``<MODEL>_STEP_MAX_HALVINGS``).
+MAX_HALVINGS, HALVINGS_LIMIT = 4, 10
+#: The demo program's defaults: simulated time and step (s).
+DEMO_T_END, DEMO_H = 1.0, 1e-3
+
+def stepper_section(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS):
+    """The stepper's part of ``model``'s C package (a
+    :class:`~ncgen.codegen.section.Section`)."""
+
+    functions = stepper_functions(model, primitives(model) if is_large(model, reroll_instructions) else None)
+    return Section(functions=functions, docs=DOCS, extra_sources=extra_sources(model, functions))
+
+
+def extra_sources(model, functions) -> list[ExtraSource]:
+    """The Newton loop, its header and the example program, rendered for ``model``."""
+    name = model.name
+    context = {"nq": model.nq, "nc": model.nc, "nu": model.nu, "np": model.np,
+               "nnz_k": int(functions[0].sparsity_out("K").nnz()),
+               "mass_scale": c_real(mass_scale(model)), "tol": c_real(TOL), "max_iter": MAX_ITER,
+               "max_halvings": MAX_HALVINGS, "halvings_limit": HALVINGS_LIMIT,
+               "kernels": [f"{name}_{f.name()}" for f in functions]}
+    demo = {**context, "program": f"{name}_simulate", "t0": c_real(model.t0), "t_end": c_real(DEMO_T_END),
+            "h": c_real(DEMO_H), "q0": [c_real(x) for x in model.q0], "v0": [c_real(x) for x in model.v0],
+            "p0": [c_real(x) for x in model.p0]}
+    return [ExtraSource("stepper.c.j2", f"{name}_stepper.c", context),
+            ExtraSource("stepper.h.j2", f"{name}_stepper.h", context),
+            ExtraSource("simulate_main.c.j2", f"{name}_simulate.c", demo, program=True)]
+
+
+def write_stepper_package(model, out_dir):
+    """A package holding only the stepper of ``model`` (kernels, loop, example program)."""
+    limit = reroll_limit(model)
+    section = stepper_section(model, limit)
+    doc = PackageDoc(summary=f"Compiled stepper (RATTLE) of model {model.name!r}", functions=section.docs)
+    return write_package(model.name, section.functions, out_dir, doc=doc, extra_sources=section.extra_sources,
+                         reroll_instructions=limit)

@@ -1,0 +1,137 @@
+"""The package is one chain of layers: no import cycle and no import that runs up the chain.
+
+Every ``import``/``from … import`` of an ``ncgen`` module is an edge, wherever it stands
+(module level or inside a function).  The layer order, lowest first (also in
+docs/architecture.md)::
+
+    base (errors, validation, reproducible, files, version)
+    ← symbolic ← model ← assembly ← codegen ← rigid_motion ← runtime ← viz ← optim ← cli ← ncgen (the package root)
+
+A module may import modules of its own layer and of lower ones.  The one exception is
+``System.build()`` (model), a convenience that calls :func:`ncgen.assembly.build.build_model`.
+"""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1] / "ncgen"
+
+LAYERS = ["base", "symbolic", "model", "assembly", "codegen", "rigid_motion", "runtime", "viz", "optim",
+          "cli", "root"]
+BASE = {"errors", "validation", "reproducible", "files", "version"}
+#: (importing module, imported module): the documented exceptions.
+EXCEPTIONS = {("ncgen.model.system", "ncgen.assembly.build")}
+
+
+def module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT.parent).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def modules() -> dict[str, Path]:
+    return {module_name(p): p for p in sorted(ROOT.rglob("*.py"))}
+
+
+def layer(module: str) -> str:
+    parts = module.split(".")
+    if len(parts) == 1:
+        return "root"
+    top = parts[1]
+    if top in BASE:
+        return "base"
+    if top in LAYERS:
+        return top
+    raise AssertionError(f"module {module} is in no layer: add its package to LAYERS or BASE in "
+                         f"{Path(__file__).name} and docs/architecture.md")
+
+
+def imports(module: str, path: Path, known: set[str]) -> set[str]:
+    """The ncgen modules ``module`` imports anywhere in its source."""
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            out.update(a.name for a in node.names if a.name.split(".")[0] == "ncgen")
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")[:len(package.split(".")) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            if target.split(".")[0] != "ncgen":
+                continue
+            for alias in node.names:
+                sub = f"{target}.{alias.name}"
+                out.add(sub if sub in known else target)
+    out.discard(module)
+    return out
+
+
+def graph() -> dict[str, set[str]]:
+    mods = modules()
+    return {m: imports(m, p, set(mods)) for m, p in mods.items()}
+
+
+def test_every_module_has_a_layer():
+    for m in modules():
+        layer(m)
+
+
+def test_no_upward_imports():
+    upward = []
+    for m, targets in graph().items():
+        for t in sorted(targets):
+            if LAYERS.index(layer(t)) > LAYERS.index(layer(m)) and (m, t) not in EXCEPTIONS:
+                upward.append(f"{m} ({layer(m)}) imports {t} ({layer(t)})")
+    assert not upward, "imports that run up the layers:\n" + "\n".join(upward)
+
+
+def test_no_import_cycles():
+    g = graph()
+    index, low, stack, on_stack, cycles = {}, {}, [], set(), []
+    counter = [0]
+
+    def visit(v):                     # Tarjan's strongly connected components
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on_stack.add(v)
+        for w in g.get(v, ()):
+            if w not in g:
+                continue
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                cycles.append(sorted(comp))
+
+    for v in g:
+        if v not in index:
+            visit(v)
+    assert not cycles, "import cycles:\n" + "\n".join(" ⇄ ".join(c) for c in cycles)
+
+
+@pytest.mark.parametrize("source, expected", [
+    ("from ncgen.runtime import simulate\n", {"ncgen.runtime"}),
+    ("def f():\n    import ncgen.cli\n", {"ncgen.cli"}),
+    ("from . import errors\n", {"ncgen.errors"}),
+])
+def test_the_parser_sees_every_kind_of_import(tmp_path, source, expected):
+    path = tmp_path / "probe.py"
+    path.write_text(source)
+    assert imports("ncgen.probe", path, set(modules())) == expected
