@@ -25,6 +25,10 @@ from ncgen.errors import NcgenError
 from ncgen.runtime.tangent import cached, classify, null_basis
 from ncgen.validation import as_vector
 
+#: Largest step of ``method="descent"`` where the reduced stiffness is not positive
+#: definite, relative to the system's size.
+MAX_DESCENT_STEP = 0.1
+
 
 @dataclass
 class Equilibrium:
@@ -153,17 +157,21 @@ def equilibrium(model, q_guess=None, u=None, p=None, *, t: float | None = None, 
                 "give a q_guess closer to the equilibrium, or check that one exists (loads a "
                 "mechanism cannot resist have none)")
         Kr = N.T @ K @ N
+        shifted = False
         if method == "descent":
             ev = np.linalg.eigvalsh(0.5 * (Kr + Kr.T)) if Kr.size else np.zeros(1)
             scale = float(np.abs(ev).max(initial=0))
             if ev.min(initial=np.inf) <= 1e-6 * scale:
-                mu = max(-ev.min() + 1e-3 * scale, np.linalg.norm(f) / (0.1 * q_scale))
-                Kr = Kr + mu * np.eye(Kr.shape[0])
+                mu = max(-ev.min() + 1e-3 * scale, np.linalg.norm(f) / (MAX_DESCENT_STEP * q_scale))
+                Kr, shifted = Kr + mu * np.eye(Kr.shape[0]), True
         dz = np.linalg.lstsq(Kr, f, rcond=None)[0]
         merit, alpha = f @ f, 1.0
         while True:
             trial = at(q + alpha * (N @ dz))
-            if trial[7] @ trial[7] <= (1 - 1e-4 * alpha) * merit or alpha < 1e-4:
+            # a shifted (descent) step is also accepted while the force still pushes along it:
+            # the potential keeps decreasing up to the new point
+            if (trial[7] @ trial[7] <= (1 - 1e-4 * alpha) * merit or alpha < 1e-4
+                    or (shifted and (trial[6].T @ trial[2]) @ dz >= 0)):
                 break
             alpha *= 0.5
         q, lam, G, phi, K, A, N, f = trial
