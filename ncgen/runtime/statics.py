@@ -25,9 +25,11 @@ from ncgen.errors import NcgenError
 from ncgen.runtime.tangent import cached, classify, null_basis
 from ncgen.validation import as_vector
 
-#: Largest step of ``method="descent"`` where the reduced stiffness is not positive
-#: definite, relative to the system's size.
+#: Largest step of ``method="descent"``, relative to the system's extent ``|q|∞``.
 MAX_DESCENT_STEP = 0.1
+#: Forces are converged to this times the largest stiffness times the system's size too
+#: (the round-off of ``k (l − l₀)`` with stiff springs).
+ROUNDOFF = 100 * np.finfo(float).eps
 
 
 @dataclass
@@ -117,8 +119,9 @@ def equilibrium(model, q_guess=None, u=None, p=None, *, t: float | None = None, 
     ``q + N Δz`` is projected back onto ``Φ = 0`` (Gauss–Newton); a backtracking line search
     on ``|Nᵀ G|`` keeps it from diverging.  This is Newton on the KKT system restricted to
     the constraints.  ``method="descent"`` (default) shifts ``K_r`` by ``μ I`` wherever it is
-    not positive definite, so that the steps go down the potential and end in a stable
-    equilibrium; ``method="newton"`` takes plain Newton steps and finds the nearest
+    not positive definite and limits steps to ``MAX_DESCENT_STEP`` × ``|q|∞``, accepting a
+    step while the unbalanced force still pushes along it, so that the steps go down the
+    potential and end in a stable equilibrium; ``method="newton"`` takes plain Newton steps and finds the nearest
     equilibrium of any stability (give a ``q_guess`` near an unstable one, such as a pendulum
     upright, to get it).
 
@@ -134,6 +137,7 @@ def equilibrium(model, q_guess=None, u=None, p=None, *, t: float | None = None, 
     u = np.zeros(model.nu) if u is None else as_vector(u, model.nu, "u")
     p = _parameters(model, p)
     q_scale = max(1.0, float(np.abs(q).max()))
+    extent = float(np.abs(q).max()) or 1.0
     phi_tol = tol * q_scale**2
     lam0 = np.zeros(model.nc)
 
@@ -149,7 +153,8 @@ def equilibrium(model, q_guess=None, u=None, p=None, *, t: float | None = None, 
     q, lam, G, phi, K, A, N, f = at(q)
     f_scale = max(1.0, float(np.abs(evaluate(model, q, lam0, t, u, p)[0]).max(initial=0)))
     it = 0
-    while not (np.abs(G).max(initial=0) <= tol * f_scale and np.abs(phi).max(initial=0) <= phi_tol):
+    while not (np.abs(G).max(initial=0) <= tol * f_scale + ROUNDOFF * np.abs(K).max(initial=0) * q_scale
+               and np.abs(phi).max(initial=0) <= phi_tol):
         if it >= max_iter or not np.all(np.isfinite(G)):
             raise NcgenError(
                 f"equilibrium of {model.name!r}: Newton did not converge in {it} iterations "
@@ -159,17 +164,25 @@ def equilibrium(model, q_guess=None, u=None, p=None, *, t: float | None = None, 
         Kr = N.T @ K @ N
         shifted = False
         if method == "descent":
-            ev = np.linalg.eigvalsh(0.5 * (Kr + Kr.T)) if Kr.size else np.zeros(1)
+            ev, V = np.linalg.eigh(0.5 * (Kr + Kr.T)) if Kr.size else (np.zeros(1), np.ones((1, 1)))
             scale = float(np.abs(ev).max(initial=0))
-            if ev.min(initial=np.inf) <= 1e-6 * scale:
-                mu = max(-ev.min() + 1e-3 * scale, np.linalg.norm(f) / (MAX_DESCENT_STEP * q_scale))
+            soft = ev <= 1e-6 * scale
+            # shift where the stiffness is negative, or zero along a direction the force pushes
+            # (zero-stiffness motions the force does not drive, rigid motions of a
+            # self-equilibrated structure, are left to the least-squares step)
+            if ev.min(initial=np.inf) < -1e-6 * scale or \
+                    np.linalg.norm(V[:, soft].T @ f) > 1e-6 * np.linalg.norm(f) + tol * f_scale:
+                mu = max(-ev.min() + 1e-3 * scale, np.linalg.norm(f) / (MAX_DESCENT_STEP * extent))
                 Kr, shifted = Kr + mu * np.eye(Kr.shape[0]), True
         dz = np.linalg.lstsq(Kr, f, rcond=None)[0]
+        if method == "descent" and np.linalg.norm(dz) > MAX_DESCENT_STEP * extent:
+            dz *= MAX_DESCENT_STEP * extent / np.linalg.norm(dz)
+            shifted = True
         merit, alpha = f @ f, 1.0
         while True:
             trial = at(q + alpha * (N @ dz))
-            # a shifted (descent) step is also accepted while the force still pushes along it:
-            # the potential keeps decreasing up to the new point
+            # a descent step is also accepted while the force still pushes along it: the
+            # potential keeps decreasing up to the new point
             if (trial[7] @ trial[7] <= (1 - 1e-4 * alpha) * merit or alpha < 1e-4
                     or (shifted and (trial[6].T @ trial[2]) @ dz >= 0)):
                 break
