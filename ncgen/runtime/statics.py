@@ -26,7 +26,7 @@ from ncgen.runtime.tangent import cached, classify, null_basis
 from ncgen.validation import as_vector
 
 #: Largest step of ``method="descent"``, relative to the system's extent ``|q|∞``.
-MAX_DESCENT_STEP = 0.1
+MAX_DESCENT_STEP = 0.25
 #: Forces are converged to this times the largest stiffness times the system's size too
 #: (the round-off of ``k (l − l₀)`` with stiff springs).
 ROUNDOFF = 100 * np.finfo(float).eps
