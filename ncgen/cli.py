@@ -440,6 +440,7 @@ def demo(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
 # ----------------------------------------------------------------------------- main
 def build_parser() -> argparse.ArgumentParser:
     import ncgen.optim.command  # noqa: F401  (registers 'optimize'; imports ncgen.cli, so not at the top)
+    import ncgen.cli_statics  # noqa: F401  (registers 'equilibrium' and 'modes')
 
     parser = argparse.ArgumentParser(
         prog="ncgen",
