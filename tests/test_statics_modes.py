@@ -49,6 +49,10 @@ def test_point_double_pendulum_closed_form():
     np.testing.assert_allclose(eq.q, [0, -l1, 0, -l1 - l2], atol=1e-9)
     # reactions: the rods carry the weight below them
     np.testing.assert_allclose(np.abs(eq.reaction[[1, 3]]), [m1 * G, m2 * G], rtol=1e-10)
+    reactions = {(j, m): (f, mo) for j, m, f, mo in eq.joint_reactions()}
+    np.testing.assert_allclose(reactions["distance_0", "p1"][0], [0, (m1 + m2) * G], atol=1e-8)
+    np.testing.assert_allclose(reactions["distance_1", "p1"][0], [0, -m2 * G], atol=1e-8)
+    np.testing.assert_allclose(reactions["distance_1", "p2"][0], [0, m2 * G], atol=1e-8)
     # closed form: ω² roots of det(K − ω² M), M = [[(m1+m2) l1², m2 l1 l2], [m2 l1 l2, m2 l2²]],
     # K = diag((m1+m2) g l1, m2 g l2):  a ω⁴ − b ω² + c = 0
     a = m1 * m2 * l1**2 * l2**2
@@ -126,6 +130,10 @@ def test_torsional_cantilever_tip_load_linear_closed_form():
     expected = -P / k * np.sum((L - xs) ** 2)
     np.testing.assert_allclose(tip, expected, rtol=1e-6)
     assert eq.stability == "stable"
+    # the root hinge holds the load: force P up at the hinge, i.e. moment −P l/2 about b0's centre
+    (f, mo), = [(f, mo) for j, m, f, mo in eq.joint_reactions() if j == "revolute_0"]
+    np.testing.assert_allclose(f, [0, P], atol=1e-9 * P)
+    np.testing.assert_allclose(mo, -P * length / 2, rtol=1e-5)
     # the reduced stiffness of the unloaded chain is the torsional stiffness in joint angles
     lin = nc.linearize(model, eq)
     assert np.all(np.linalg.eigvals(lin.A).real < 1e-9)

@@ -72,6 +72,13 @@ class Equilibrium:
         """Names of the slack cables."""
         return [name for name, _, _, slack in self.springs if slack]
 
+    def joint_reactions(self) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
+        """``(joint, member, force, moment)`` for every joint and member it acts on: the
+        resultant force (N, world axes) and moment about the member's centre of mass (N·m;
+        a scalar in 2D) that the joint's constraints exert on the member, from the virtual
+        work of ``−A_jᵀλ_j`` on the member's coordinates (see :func:`joint_reactions`)."""
+        return joint_reactions(self.model, self.q, self.lam, t=self.t, p=self.p)
+
     def multipliers(self) -> dict[str, float]:
         """``λ`` by constraint name."""
         return dict(zip(self.model.constraint_names, map(float, self.lam)))
@@ -88,6 +95,12 @@ class Equilibrium:
         if self.lam.size:
             lines += ["", f"{'constraint':<34}{'lambda':>14}"]
             lines += [f"{n:<34}{x:>14.6g}" for n, x in zip(self.model.constraint_names, self.lam)]
+        reactions = self.joint_reactions()
+        if reactions:
+            d = self.model.dim
+            lines += ["", f"{'joint':<16}{'on member':<16}{'force (N)':<{12 * d}}    moment about COM (N m)"]
+            lines += [f"{j:<16}{m:<16}" + "".join(f"{x:<12.5g}" for x in f) + "    "
+                      + "".join(f"{x:<12.5g}" for x in np.atleast_1d(mo)) for j, m, f, mo in reactions]
         if self.springs:
             lines += ["", f"{'spring':<20}{'tension (N)':>14}{'length (m)':>14}  state"]
             lines += [f"{n:<20}{T:>14.6g}{length:>14.6g}  {'SLACK' if s else 'taut'}"
@@ -220,6 +233,52 @@ def _result(model, q, lam, t, u, p, G, phi, K, A, it) -> Equilibrium:
                        reaction=-(A.T @ lam), K=K, N=N, K_reduced=Kr, stiffness_eigenvalues=ev,
                        stability=stability, n_zero=n_zero, n_negative=n_neg, asymmetry=asym,
                        springs=spring_states(model, q, np.zeros(model.nq), t, u, p))
+
+
+def joint_reactions(model, q, lam, *, t=None, p=None) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
+    """Resultant force and moment of each joint on each member it acts on.
+
+    The constraint rows of joint ``j`` are those labelled ``j.…`` (not a member's
+    ``m.rigid.…``); their generalised force on member ``m`` is ``Q = −A[j, m]ᵀ λ_j``.  A
+    virtual rigid motion ``δr = δp + δθ × r`` of the member's points and ``δu = δθ × u`` of
+    its base vectors does the work ``δpᵀ f + δθᵀ μ_O`` with ``f = Σ_points Q_r`` and
+    ``μ_O = Σ_points r × Q_r + Σ_vectors u × Q_u``; the moment about the centre of mass
+    ``p_G`` is ``μ_O − p_G × f``.  Exact for any member type; members sharing a node carry
+    no multiplier there and are not reported."""
+    q = np.asarray(q, float)
+    lam = np.asarray(lam, float)
+    A = model.A(q, t=t, p=p).reshape(-1, model.nq)
+    layout, d = model.layout, model.dim
+    members = set(model.member_names)
+    joints: dict[str, list[int]] = {}
+    for i, label in enumerate(model.constraint_names):
+        head, _, rest = label.partition(".")
+        if head in members and rest.startswith("rigid."):
+            continue
+        joints.setdefault(head, []).append(i)
+    _, com = model.poses(q)
+    out = []
+    for joint, rows in joints.items():
+        for k, name in enumerate(model.member_names):
+            idx = layout.member_indices(name)
+            cols = [i for i in idx if i is not None]
+            if not cols or not np.any(A[np.ix_(rows, cols)]):
+                continue
+            force = np.zeros(d)
+            moment = np.zeros(3)
+            for slot, n in enumerate(layout.slots[name]):
+                node = layout.nodes[n]
+                if node.fixed is not None:
+                    continue
+                sl = slice(node.index, node.index + d)
+                Q = -(A[rows, sl].T @ lam[rows])
+                x = q[sl]
+                if node.is_point:
+                    force += Q
+                moment += np.cross(np.append(x, 0) if d == 2 else x, np.append(Q, 0) if d == 2 else Q)
+            moment -= np.cross(np.append(com[k], 0) if d == 2 else com[k], np.append(force, 0) if d == 2 else force)
+            out.append((joint, name, force, moment[2] if d == 2 else moment))
+    return out
 
 
 def spring_states(model, q, v, t, u, p) -> list[tuple[str, float, float, bool]]:
