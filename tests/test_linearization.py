@@ -141,3 +141,21 @@ def test_generated_linearization_kernel(cartpole, tmp_path):
     np.testing.assert_allclose(np.array(xdot).reshape(-1), lin.xdot, rtol=1e-10, atol=1e-10)
     header = (pkg.path / "cartpole.h").read_text()
     assert "linearize" in header
+
+
+def test_spinning_top_matches_vector_field_differences():
+    """3D body with a shared ground point, spinning fast (gyroscopic terms): A and B of the
+    minimal model against central differences of the minimal vector field."""
+    top = nc.System.from_toml("examples/heavy_top.toml").build()
+    lin = nc.linearize(top, top.q0, top.v0)
+    dof = lin.N.shape[1]
+    assert dof == 3 and np.abs(lin.C[top.nq:, :dof]).max() > 1     # V_z matters at this speed
+
+    def field(x):
+        q, v = lin.state(x[:dof], x[dof:])
+        a, _ = top.accel(q, v)
+        return np.concatenate([lin.G @ v, lin.G @ a])
+
+    eps = 1e-4          # a is quadratic in w: central differences are exact there up to round-off
+    J = np.column_stack([(field(e * eps) - field(-e * eps)) / (2 * eps) for e in np.eye(2 * dof)])
+    np.testing.assert_allclose(J, lin.A, atol=1e-6 * np.abs(lin.A).max())
