@@ -64,6 +64,14 @@ def test_cartpole_upright_matches_textbook(cartpole):
     np.testing.assert_allclose(lin0.G @ lin0.N, np.eye(2), atol=1e-12)
 
 
+def test_save(cartpole, tmp_path):
+    lin = nc.linearize(cartpole, cartpole.q0)
+    lin.save(tmp_path / "lin.npz")
+    data = np.load(tmp_path / "lin.npz")
+    np.testing.assert_array_equal(data["A"], lin.A)
+    assert list(data["state_names"]) == ["z0", "z1", "w0", "w1"]
+
+
 def moving_state(model):
     """The initial configuration (pole 0.3 rad off the vertical) with the cart and the
     pole moving, and a push: far from any equilibrium."""

@@ -69,6 +69,16 @@ class LinearModel:
         v = tangent_velocity(m.A(q, t=self.t, p=self.p), self.G, self.G @ self.v + dw, phi_t)
         return q, v
 
+    def save(self, path) -> None:
+        """NPZ with ``A``, ``B``, ``C``, ``D``, ``xdot``, ``N``, ``G`` and the point
+        ``t``, ``q``, ``v``, ``u``, ``p`` (``np.load(path)`` reads it)."""
+        from ncgen.files import atomic_path
+        with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+            np.savez(fh, A=self.A, B=self.B, C=self.C, D=self.D, xdot=self.xdot, N=self.N, G=self.G,
+                     t=self.t, q=self.q, v=self.v, u=self.u, p=self.p,
+                     state_names=np.array(self.state_names),
+                     coordinate_names=np.array(self.model.coordinate_names))
+
     def coordinates(self, q, v) -> np.ndarray:
         """The state ``x = [G (q − q*); G v]`` of a configuration and rates."""
         return np.concatenate([self.G @ (np.asarray(q) - self.q), self.G @ np.asarray(v)])
