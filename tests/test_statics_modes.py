@@ -160,3 +160,11 @@ def test_no_equilibrium_is_reported():
     s.add_point("p", mass=1.0, position=(0.0, 0.0))
     with pytest.raises(NcgenError, match="did not converge"):
         nc.equilibrium(s.build(), max_iter=20)
+
+
+def test_bad_arguments_are_named():
+    model = bar_chain([1.0], [1.0])
+    with pytest.raises(NcgenError, match="method: expected 'descent' or 'newton'"):
+        nc.equilibrium(model, method="bfgs")
+    with pytest.raises(NcgenError, match="q_guess"):
+        nc.equilibrium(model, q_guess=[0.0, 1.0, 2.0])

@@ -134,13 +134,14 @@ def equilibrium(model, q_guess=None, u=None, p=None, *, t: float | None = None, 
     the constraints.  ``method="descent"`` (default) shifts ``K_r`` by ``μ I`` wherever it is
     not positive definite and limits steps to ``MAX_DESCENT_STEP`` × ``|q|∞``, accepting a
     step while the unbalanced force still pushes along it, so that the steps go down the
-    potential and end in a stable equilibrium; ``method="newton"`` takes plain Newton steps and finds the nearest
-    equilibrium of any stability (give a ``q_guess`` near an unstable one, such as a pendulum
-    upright, to get it).
+    potential and end in a stable equilibrium; ``method="newton"`` takes plain Newton steps
+    and finds the nearest equilibrium of any stability (give a ``q_guess`` near an unstable
+    one, such as a pendulum upright, to get it).
 
-    Converged when ``|F − Aᵀλ|∞ ≤ tol × s_F`` and ``|Φ|∞ ≤ tol × s_q²`` (``s_F`` the largest
-    applied generalised force at the guess, at least 1 N; ``s_q`` the size of the system, at
-    least 1 m).  Raises :class:`~ncgen.errors.NcgenError` if it does not converge.
+    Converged when ``|F − Aᵀλ|∞ ≤ tol × s_F + ROUNDOFF × |K|max × s_q`` and
+    ``|Φ|∞ ≤ tol × s_q²`` (``s_F`` the largest applied generalised force at the guess, at
+    least 1 N; ``s_q`` the size of the system, at least 1 m; the middle term is the round-off
+    of stiff springs).  Raises :class:`~ncgen.errors.NcgenError` if it does not converge.
     """
     if method not in ("descent", "newton"):
         raise NcgenError(f"equilibrium: method: expected 'descent' or 'newton', got {method!r}")
@@ -191,13 +192,14 @@ def equilibrium(model, q_guess=None, u=None, p=None, *, t: float | None = None, 
         if method == "descent" and np.linalg.norm(dz) > MAX_DESCENT_STEP * extent:
             dz *= MAX_DESCENT_STEP * extent / np.linalg.norm(dz)
             shifted = True
+        step = N @ dz
         merit, alpha = f @ f, 1.0
         while True:
-            trial = at(q + alpha * (N @ dz))
+            trial = at(q + alpha * step)
             # a descent step is also accepted while the force still pushes along it: the
             # potential keeps decreasing up to the new point
             if (trial[7] @ trial[7] <= (1 - 1e-4 * alpha) * merit or alpha < 1e-4
-                    or (shifted and (trial[6].T @ trial[2]) @ dz >= 0)):
+                    or (shifted and trial[2] @ step >= 0)):
                 break
             alpha *= 0.5
         q, lam, G, phi, K, A, N, f = trial
