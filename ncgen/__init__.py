@@ -17,14 +17,18 @@ from ncgen.model.model import Model
 from ncgen.model.system import System
 from ncgen.optim import OptimalControl, OptimalTrajectory
 from ncgen.runtime import Trajectory, simulate
+from ncgen.runtime.formfinding import Tensegrity, form_find
+from ncgen.runtime.linearization import LinearModel, linearize
+from ncgen.runtime.modes import Modes, modes
+from ncgen.runtime.statics import Equilibrium, equilibrium
 from ncgen.symbolic.coordinates import coordinate_type
 from ncgen.version import __version__
 
 
 __all__ = [
-    "CoordinateDriver", "Cylindrical", "Distance", "Fixed", "Force", "GeneralizedForce", "Joint", "Model",
+    "CoordinateDriver", "Cylindrical", "Distance", "Equilibrium", "LinearModel", "Modes", "Fixed", "Force", "GeneralizedForce", "Joint", "Model",
     "ModelError", "NcgenError", "OptimalControl", "OptimalTrajectory", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic",
-    "Revolute", "Spherical", "Spring", "System", "Torque", "TorsionalSpring", "Trajectory", "Universal",
-    "assemble", "coordinate_type", "dof_report", "generate", "project_velocity", "simulate", "solve_kinematics",
+    "Revolute", "Spherical", "Spring", "System", "Tensegrity", "Torque", "TorsionalSpring", "Trajectory", "Universal",
+    "assemble", "coordinate_type", "dof_report", "equilibrium", "form_find", "generate", "linearize", "modes", "project_velocity", "simulate", "solve_kinematics",
     "__version__",
 ]

@@ -15,6 +15,7 @@ from ncgen.assembly.rank import dependent_rows
 from ncgen.assembly.kinematics import resolve_fix
 from ncgen.model.layout import Layout, make_layout
 from ncgen.assembly.mass import CholeskyFactor, assemble_mass
+from ncgen.assembly.springs import spring_table
 from ncgen.errors import ModelError
 
 #: Default Baumgarte coefficients (α, β) in 1/s: constraint errors decay like a critically
@@ -80,7 +81,7 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
                              fixed=fixed, assemble=assemble)
     return Model(description=system, layout=layout, labels=labels, functions=functions, M=M, factor=factor,
                  potential=potential, state=state, p0=p0, baumgarte=(alpha, beta), redundant=redundant_labels,
-                 dropped=(redundant == "drop"), t0=t0)
+                 dropped=(redundant == "drop"), t0=t0, springs=spring_table(system, ctx))
 
 
 def constraint_rows(system, ctx: Context) -> tuple[list[str], list[ca.SX]]:

@@ -31,6 +31,7 @@ from ncgen.assembly.functions import DOCS, IN
 from ncgen.codegen import fsutil
 from ncgen.codegen.compile_cache import compile_package
 from ncgen.codegen.doc import PackageDoc
+from ncgen.codegen.linearization_package import linearization_section
 from ncgen.codegen.looped import package_functions, reroll_limit
 from ncgen.codegen.manifest import canonical_json
 from ncgen.codegen.package import Package, check_replaceable, write_package
@@ -50,7 +51,7 @@ DEFAULTS = {"t": "t0", "q": "q0", "v": "v0", "lam": "lam0", "x": "x0", "z": "z0"
 
 
 def generate(model, out_dir: str | os.PathLike, *, cflags=None, compile: bool = False,
-             reroll_instructions: int | None = REROLL_INSTRUCTIONS) -> Package:
+             reroll_instructions: int | None = REROLL_INSTRUCTIONS, linearization: bool = False) -> Package:
     """Write the C package of ``model`` (a :class:`~ncgen.model.model.Model`) to ``out_dir``.
 
     The package is named after the model; its files depend only on the model (same model,
@@ -68,9 +69,14 @@ def generate(model, out_dir: str | os.PathLike, *, cflags=None, compile: bool = 
     is lowered for a large model (:func:`ncgen.codegen.looped.reroll_limit`).  ``None`` generates straight-line code only:
     the fastest kernels for a large model, if its compile time (minutes to hours at -O2 for
     thousands of members) is acceptable.
+
+    ``linearization=True`` adds the kernel ``linearize`` (minimal-state ``A``, ``B``, ``C``
+    about any consistent state, :mod:`ncgen.codegen.linearization_package`).
     """
+
     reroll_instructions = reroll_limit(model, reroll_instructions)
-    sections = [make(model, reroll_instructions) for make in SECTIONS]
+    makers = SECTIONS + ([linearization_section] if linearization else [])
+    sections = [make(model, reroll_instructions) for make in makers]
     functions = [f for s in sections for f in s.functions]
     metadata = {k: v for s in sections for k, v in s.metadata.items()}
     doc = PackageDoc(

@@ -45,7 +45,7 @@ class Model:
     """A validated, assembled, constant system (create it with ``System.build()``)."""
 
     def __init__(self, *, description, layout, labels, functions, M, factor, potential, state, p0, baumgarte,
-                 redundant, dropped, t0):
+                 redundant, dropped, t0, springs=None):
         system = description
         self.members = MappingProxyType(dict(system.members))
         self.joints = tuple(system.joints)
@@ -75,6 +75,8 @@ class Model:
         self.redundant_dropped = dropped and bool(redundant)
         self.t0 = t0
         self.gravity = system.gravity.copy()
+        #: the springs and cables as plain data (:class:`ncgen.assembly.springs.SpringTable`)
+        self.springs = springs
         for key, value in vars(self).items():
             object.__setattr__(self, key, _frozen(value))
         object.__setattr__(self, "_frozen", True)

@@ -1,0 +1,159 @@
+"""``ncgen equilibrium`` and ``ncgen modes``: statics of a TOML model from the command line
+(:func:`ncgen.equilibrium`, :func:`ncgen.modes`)."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from ncgen.cli.common import load_model
+from ncgen.cli.registry import subcommand
+
+
+def _common_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("model", metavar="MODEL.toml", help="model file (TOML)")
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                   help="replace a parameter's default value (repeatable; a vector as NAME=1,2,3)")
+    p.add_argument("--input", action="append", default=[], metavar="NAME=VALUE",
+                   help="hold an input at a constant value (repeatable; default zero)")
+    p.add_argument("--method", default="descent", choices=("descent", "newton"),
+                   help="descent (default): Newton steps made to go down the potential, ends in a stable "
+                        "equilibrium; newton: plain Newton, the nearest equilibrium of any stability")
+    p.add_argument("--tol", type=float, default=1e-10, help="relative force tolerance (default 1e-10)")
+
+
+def _equilibrium_arguments(p: argparse.ArgumentParser) -> None:
+    _common_arguments(p)
+    p.add_argument("-o", "--output", metavar="FILE", default=None,
+                   help="write the equilibrium: .csv (name,value rows of q and lambda) or .npz")
+    p.add_argument("--plot", metavar="FILE.png", default=None, help="draw the equilibrium configuration")
+
+
+def _modes_arguments(p: argparse.ArgumentParser) -> None:
+    _common_arguments(p)
+    p.add_argument("-o", "--output", metavar="FILE", default=None,
+                   help="write the modes: .csv (mode, frequency_hz, omega2, kind) or .npz (with the shapes)")
+    p.add_argument("--plot", metavar="FILE.png", default=None, help="draw the first vibration mode shapes")
+    p.add_argument("--animate", metavar="FILE", default=None,
+                   help="animate one mode shape (.gif, or .mp4 with ffmpeg); see --mode")
+    p.add_argument("--mode", type=int, default=None, metavar="K",
+                   help="mode to animate, 1-based as in the table (default: the first vibration mode)")
+
+
+def _inputs(model, items: list[str]):
+    import numpy as np
+
+    from ncgen.errors import NcgenError
+    u = np.zeros(model.nu)
+    offsets = np.cumsum([0] + model.input_sizes)
+    for item in items:
+        name, sep, text = item.partition("=")
+        if not sep or name.strip() not in model.input_names:
+            raise NcgenError(f"--input {item!r}: expected NAME=VALUE with NAME one of "
+                             f"{', '.join(model.input_names) or '(the model has no inputs)'}")
+        i = model.input_names.index(name.strip())
+        try:
+            value = np.array([float(x) for x in text.split(",")])
+        except ValueError:
+            value = np.zeros(0)
+        if value.size != model.input_sizes[i]:
+            raise NcgenError(f"--input {item!r}: expected {model.input_sizes[i]} number(s), got {text!r}")
+        u[offsets[i]:offsets[i + 1]] = value
+    return u
+
+
+def _check_suffix(parser, option: str, name: str | None, suffixes: tuple[str, ...]) -> None:
+    if name is not None and Path(name).suffix.lower() not in suffixes:
+        parser.error(f"{option} {name!r}: expected a file name ending in {' or '.join(suffixes)}")
+
+
+def _solve(args):
+    from ncgen.runtime.statics import equilibrium
+    model = load_model(args.model, args.param)
+    return equilibrium(model, u=_inputs(model, args.input), method=args.method, tol=args.tol)
+
+
+@subcommand(
+    "equilibrium",
+    help="static equilibrium of a model: configuration, reactions, stability",
+    description=(
+        "Build the model in MODEL.toml and solve F(q) - A(q)^T lambda = 0, Phi(q) = 0 by Newton's method "
+        "on the constraints, from the model's initial configuration, with inputs held constant "
+        "(--input) and without velocities. Prints the configuration, the multipliers (reactions, N per "
+        "unit of each constraint), the spring and cable tensions (slack cables marked) and the "
+        "stability: the reduced tangent stiffness on the motions the constraints allow is positive "
+        "definite (stable), singular (neutral) or not (unstable)."),
+    examples=(
+        "ncgen equilibrium examples/double_pendulum.toml\n"
+        "ncgen equilibrium examples/tensegrity.toml --param tension=5 -o eq.csv --plot eq.png\n"
+        "ncgen equilibrium examples/cartpole.toml --input push=0 --method newton"),
+    arguments=_equilibrium_arguments,
+)
+def equilibrium_command(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    import numpy as np
+
+    from ncgen.cli.common import write_output
+    from ncgen.files import atomic_path
+    _check_suffix(parser, "-o/--output", args.output, (".csv", ".npz"))
+    _check_suffix(parser, "--plot", args.plot, (".png",))
+    eq = _solve(args)
+    print(eq.table(), end="")
+    model = eq.model
+    if args.output and args.output.lower().endswith(".npz"):
+        with atomic_path(args.output) as tmp, open(tmp, "wb") as fh:
+            np.savez(fh, q=eq.q, lam=eq.lam, u=eq.u, p=eq.p, K_reduced=eq.K_reduced,
+                     stiffness_eigenvalues=eq.stiffness_eigenvalues,
+                     coordinate_names=np.array(model.coordinate_names),
+                     constraint_names=np.array(model.constraint_names))
+        print(f"wrote {args.output}", file=sys.stderr)
+    elif args.output:
+        rows = ["name,value"] + [f"q:{n},{x:.17g}" for n, x in zip(model.coordinate_names, eq.q)]
+        rows += [f"lambda:{n},{x:.17g}" for n, x in zip(model.constraint_names, eq.lam)]
+        rows += [f"tension:{n},{T:.17g}" for n, T, _, _ in eq.springs]
+        write_output("\n".join(rows) + "\n", args.output)
+    if args.plot:
+        from ncgen.viz.modes import plot_configuration
+        plot_configuration(model, eq.q, args.plot, title=f"{model.name}: equilibrium ({eq.stability})")
+        print(f"wrote {args.plot}", file=sys.stderr)
+    return 0
+
+
+@subcommand(
+    "modes",
+    help="natural frequencies (Hz) and mode shapes about an equilibrium",
+    description=(
+        "Find the model's static equilibrium (as 'ncgen equilibrium') and solve K_r x = omega^2 M_r x "
+        "with the reduced tangent stiffness (geometric stiffness of prestressed springs and cables "
+        "included) and reduced mass on the motions the constraints allow. Prints one row per mode: "
+        "frequency (Hz), omega (rad/s), kind (vibration, zero: a mechanism or rigid motion, unstable) "
+        "and the coordinate that moves most."),
+    examples=(
+        "ncgen modes examples/double_pendulum.toml\n"
+        "ncgen modes examples/tensegrity.toml -o modes.csv --plot modes.png\n"
+        "ncgen modes examples/chain.toml --animate mode1.gif --mode 1"),
+    arguments=_modes_arguments,
+)
+def modes_command(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    from ncgen.runtime.modes import modes
+    _check_suffix(parser, "-o/--output", args.output, (".csv", ".npz"))
+    _check_suffix(parser, "--plot", args.plot, (".png",))
+    _check_suffix(parser, "--animate", args.animate, (".gif", ".mp4"))
+    eq = _solve(args)
+    result = modes(eq.model, eq)
+    print(result.table(), end="")
+    if args.output:
+        result.save(args.output)
+        print(f"wrote {args.output}", file=sys.stderr)
+    if args.plot:
+        from ncgen.viz.modes import plot_modes
+        plot_modes(result, args.plot)
+        print(f"wrote {args.plot}", file=sys.stderr)
+    if args.animate:
+        vib = [i for i, k in enumerate(result.kind) if k == "vibration"]
+        k = (vib[0] if vib else 0) if args.mode is None else args.mode - 1
+        if not 0 <= k < len(result.kind):
+            parser.error(f"--mode {args.mode}: expected a mode number in 1..{len(result.kind)}")
+        from ncgen.viz.modes import animate_mode
+        animate_mode(result, k, args.animate)
+        print(f"wrote {args.animate}", file=sys.stderr)
+    return 0

@@ -1,0 +1,301 @@
+"""``equilibrium``: static equilibrium of a model, its reactions and its stability.
+
+Solves ``G(q, λ) = F(t, q, 0, u, p) − Aᵀ λ = 0``, ``Φ(t, q) = 0`` by Newton's method on the
+KKT system
+
+    [ −K   −Aᵀ ] [Δq]     [G]
+    [  A    0  ] [Δλ] = − [Φ],      K = −∂G/∂q  (tangent stiffness, :mod:`ncgen.assembly.statics`),
+
+with a backtracking line search on ``½(|G|² + |Φ|²)``; steps are least-squares solutions,
+so zero-stiffness directions (a free-floating structure's rigid motions) leave the
+configuration where it is.  Stability is judged from the *reduced tangent stiffness*
+``K_r = Nᵀ K_s N`` (``K_s`` the symmetric part of K, ``N`` an orthonormal basis of
+``null A``, :mod:`ncgen.runtime.tangent`): positive definite (stable), singular
+(neutral: zero-stiffness motions) or indefinite (unstable).
+Units: q in m, forces in N, λ in N per unit of Φ, K in N/m (N·m for base-vector rows).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ncgen.assembly.statics import statics_function
+from ncgen.errors import NcgenError
+from ncgen.runtime.tangent import cached, classify, null_basis
+from ncgen.validation import as_vector
+
+#: Largest step of ``method="descent"``, relative to the system's extent ``|q|∞``.
+MAX_DESCENT_STEP = 0.25
+#: Forces are converged to this times the largest stiffness times the system's size too
+#: (the round-off of ``k (l − l₀)`` with stiff springs).
+ROUNDOFF = 100 * np.finfo(float).eps
+
+
+@dataclass
+class Equilibrium:
+    """Result of :func:`equilibrium`.
+
+    * ``q`` (m), ``lam`` (one per constraint, ``model.constraint_names``), ``u``, ``p``, ``t``;
+    * ``force_residual = |F − Aᵀλ|∞`` (N), ``constraint_residual = |Φ|∞``, ``iterations``;
+    * ``reaction``: the generalised constraint force ``−Aᵀλ`` (N), per coordinate;
+    * ``K`` tangent stiffness (nq × nq), ``N`` null-space basis of A, ``K_reduced = Nᵀ K_s N``
+      and its ``stiffness_eigenvalues`` (ascending); ``stability`` ``"stable"``,
+      ``"neutral"`` or ``"unstable"``, with ``n_zero`` and ``n_negative`` eigenvalues;
+      ``asymmetry = |K_r − K_rᵀ| / |K_r|`` (non-zero with non-conservative loads);
+    * ``springs``: per spring or cable, ``(name, tension N, length m, slack)``; a cable is
+      slack when its stretch ``k (l − l₀)`` is not positive (it then exerts no force).
+    """
+
+    model: object = field(repr=False)
+    q: np.ndarray
+    lam: np.ndarray
+    t: float
+    u: np.ndarray
+    p: np.ndarray
+    force_residual: float
+    constraint_residual: float
+    iterations: int
+    reaction: np.ndarray
+    K: np.ndarray = field(repr=False)
+    N: np.ndarray = field(repr=False)
+    K_reduced: np.ndarray = field(repr=False)
+    stiffness_eigenvalues: np.ndarray
+    stability: str
+    n_zero: int
+    n_negative: int
+    asymmetry: float
+    springs: list = field(default_factory=list)
+
+    @property
+    def slack(self) -> list[str]:
+        """Names of the slack cables."""
+        return [name for name, _, _, slack in self.springs if slack]
+
+    def joint_reactions(self) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
+        """``(joint, member, force, moment)`` for every joint and member it acts on: the
+        resultant force (N, world axes) and moment about the member's centre of mass (N·m;
+        a scalar in 2D) that the joint's constraints exert on the member, from the virtual
+        work of ``−A_jᵀλ_j`` on the member's coordinates (see :func:`joint_reactions`)."""
+        return joint_reactions(self.model, self.q, self.lam, t=self.t, p=self.p)
+
+    def multipliers(self) -> dict[str, float]:
+        """``λ`` by constraint name."""
+        return dict(zip(self.model.constraint_names, map(float, self.lam)))
+
+    def table(self) -> str:
+        """A readable summary: residuals, stability, multipliers and spring tensions."""
+        lines = [f"equilibrium of {self.model.name!r}: {self.iterations} Newton iteration(s), "
+                 f"|F - A'lam| = {self.force_residual:.3g} N, |Phi| = {self.constraint_residual:.3g}",
+                 f"stability: {self.stability} (reduced tangent stiffness: {len(self.stiffness_eigenvalues)} "
+                 f"eigenvalues, {self.n_negative} negative, {self.n_zero} zero; smallest "
+                 + (f"{self.stiffness_eigenvalues[0]:.6g})" if len(self.stiffness_eigenvalues) else "none)"),
+                 "", f"{'coordinate':<28}{'q':>14}"]
+        lines += [f"{n:<28}{x:>14.6g}" for n, x in zip(self.model.coordinate_names, self.q)]
+        if self.lam.size:
+            lines += ["", f"{'constraint':<34}{'lambda':>14}"]
+            lines += [f"{n:<34}{x:>14.6g}" for n, x in zip(self.model.constraint_names, self.lam)]
+        reactions = self.joint_reactions()
+        if reactions:
+            d = self.model.dim
+            lines += ["", f"{'joint':<16}{'on member':<16}{'force (N)':<{12 * d}}    moment about COM (N m)"]
+            lines += [f"{j:<16}{m:<16}" + "".join(f"{x:<12.5g}" for x in f) + "    "
+                      + "".join(f"{x:<12.5g}" for x in np.atleast_1d(mo)) for j, m, f, mo in reactions]
+        if self.springs:
+            lines += ["", f"{'spring':<20}{'tension (N)':>14}{'length (m)':>14}  state"]
+            lines += [f"{n:<20}{T:>14.6g}{length:>14.6g}  {'SLACK' if s else 'taut'}"
+                      for n, T, length, s in self.springs]
+        return "\n".join(lines) + "\n"
+
+
+def statics(model):
+    """The model's ``statics`` CasADi function (built once)."""
+    return cached(model, "statics", lambda: statics_function(model.functions))
+
+
+def evaluate(model, q, lam, t, u, p):
+    """``(G, Φ, K, A)`` as NumPy arrays."""
+    G, phi, K, A = statics(model)(t, q, lam, u, p)
+    return (np.array(G, float).reshape(-1), np.array(phi, float).reshape(-1), np.array(K, float),
+            np.array(A, float).reshape(-1, model.nq))
+
+
+def equilibrium(model, q_guess=None, u=None, p=None, *, t: float | None = None, method: str = "descent",
+                tol: float = 1e-10, max_iter: int = 100) -> Equilibrium:
+    """A static equilibrium of ``model`` near ``q_guess`` (default ``model.q0``) under the
+    constant inputs ``u`` (default zeros) and parameters ``p`` (default the model's; an
+    array or a dict by name), at time ``t`` (default ``model.t0``).
+
+    Newton's method on the constraint manifold: at a configuration with ``Φ = 0`` the
+    multipliers are the least-squares ``λ = (Aᵀ)⁺ F`` (so ``G = F − Aᵀλ`` is the unbalanced
+    force, tangent to the manifold), the step ``Δz`` solves ``K_r Δz = Nᵀ G`` and
+    ``q + N Δz`` is projected back onto ``Φ = 0`` (Gauss–Newton); a backtracking line search
+    on ``|Nᵀ G|`` keeps it from diverging.  This is Newton on the KKT system restricted to
+    the constraints.  ``method="descent"`` (default) shifts ``K_r`` by ``μ I`` wherever it is
+    not positive definite and limits steps to ``MAX_DESCENT_STEP`` × ``|q|∞``, accepting a
+    step while the unbalanced force still pushes along it, so that the steps go down the
+    potential and end in a stable equilibrium; ``method="newton"`` takes plain Newton steps
+    and finds the nearest equilibrium of any stability (give a ``q_guess`` near an unstable
+    one, such as a pendulum upright, to get it).
+
+    Converged when ``|F − Aᵀλ|∞ ≤ tol × s_F + ROUNDOFF × |K|max × s_q`` and
+    ``|Φ|∞ ≤ tol × s_q²`` (``s_F`` the largest applied generalised force at the guess, at
+    least 1 N; ``s_q`` the size of the system, at least 1 m; the middle term is the round-off
+    of stiff springs).  Raises :class:`~ncgen.errors.NcgenError` if it does not converge.
+    """
+    if method not in ("descent", "newton"):
+        raise NcgenError(f"equilibrium: method: expected 'descent' or 'newton', got {method!r}")
+    nq = model.nq
+    t = model.t0 if t is None else float(t)
+    q = np.array(model.q0 if q_guess is None else as_vector(q_guess, nq, "q_guess"), float)
+    u = np.zeros(model.nu) if u is None else as_vector(u, model.nu, "u")
+    p = _parameters(model, p)
+    q_scale = max(1.0, float(np.abs(q).max()))
+    extent = float(np.abs(q).max()) or 1.0
+    phi_tol = tol * q_scale**2
+    lam0 = np.zeros(model.nc)
+
+    def at(q):
+        """Everything at ``q`` projected onto the constraints, λ in the least-squares sense."""
+        q = _project(model, q, t, u, p, phi_tol)
+        F, phi, _, A = evaluate(model, q, lam0, t, u, p)
+        lam = np.linalg.lstsq(A.T, F, rcond=None)[0] if model.nc else lam0
+        G, phi, K, A = evaluate(model, q, lam, t, u, p)
+        N = null_basis(A, nq)
+        return q, lam, G, phi, K, A, N, N.T @ G
+
+    q, lam, G, phi, K, A, N, f = at(q)
+    f_scale = max(1.0, float(np.abs(evaluate(model, q, lam0, t, u, p)[0]).max(initial=0)))
+    it = 0
+    while not (np.abs(G).max(initial=0) <= tol * f_scale + ROUNDOFF * np.abs(K).max(initial=0) * q_scale
+               and np.abs(phi).max(initial=0) <= phi_tol):
+        if it >= max_iter or not np.all(np.isfinite(G)):
+            raise NcgenError(
+                f"equilibrium of {model.name!r}: Newton did not converge in {it} iterations "
+                f"(|F - A'lam| = {np.abs(G).max(initial=0):.3g} N, |Phi| = {np.abs(phi).max(initial=0):.3g}); "
+                "give a q_guess closer to the equilibrium, or check that one exists (loads a "
+                "mechanism cannot resist have none)")
+        Kr = N.T @ K @ N
+        shifted = False
+        if method == "descent":
+            ev, V = np.linalg.eigh(0.5 * (Kr + Kr.T)) if Kr.size else (np.zeros(1), np.ones((1, 1)))
+            scale = float(np.abs(ev).max(initial=0))
+            soft = ev <= 1e-6 * scale
+            # shift where the stiffness is negative, or zero along a direction the force pushes
+            # (zero-stiffness motions the force does not drive, rigid motions of a
+            # self-equilibrated structure, are left to the least-squares step)
+            if ev.min(initial=np.inf) < -1e-6 * scale or \
+                    np.linalg.norm(V[:, soft].T @ f) > 1e-6 * np.linalg.norm(f) + tol * f_scale:
+                mu = max(-ev.min() + 1e-3 * scale, np.linalg.norm(f) / (MAX_DESCENT_STEP * extent))
+                Kr, shifted = Kr + mu * np.eye(Kr.shape[0]), True
+        dz = np.linalg.lstsq(Kr, f, rcond=None)[0]
+        if method == "descent" and np.linalg.norm(dz) > MAX_DESCENT_STEP * extent:
+            dz *= MAX_DESCENT_STEP * extent / np.linalg.norm(dz)
+            shifted = True
+        step = N @ dz
+        merit, alpha = f @ f, 1.0
+        while True:
+            trial = at(q + alpha * step)
+            # a descent step is also accepted while the force still pushes along it: the
+            # potential keeps decreasing up to the new point
+            if (trial[7] @ trial[7] <= (1 - 1e-4 * alpha) * merit or alpha < 1e-4
+                    or (shifted and trial[2] @ step >= 0)):
+                break
+            alpha *= 0.5
+        q, lam, G, phi, K, A, N, f = trial
+        it += 1
+    return _result(model, q, lam, t, u, p, G, phi, K, A, it)
+
+
+def _project(model, q, t, u, p, tol: float, max_iter: int = 50) -> np.ndarray:
+    """``q`` moved onto ``Φ = 0`` by Gauss–Newton with minimum-norm steps ``Δq = −A⁺Φ``."""
+    lam0 = np.zeros(model.nc)
+    for _ in range(max_iter):
+        _, phi, _, A = evaluate(model, q, lam0, t, u, p)
+        if np.abs(phi).max(initial=0) <= tol:
+            return q
+        q = q - np.linalg.lstsq(A, phi, rcond=None)[0]
+    raise NcgenError(f"equilibrium of {model.name!r}: the constraints cannot be satisfied near the guess "
+                     f"(|Phi| = {np.abs(phi).max():.3g} after {max_iter} Gauss-Newton steps)")
+
+
+def _result(model, q, lam, t, u, p, G, phi, K, A, it) -> Equilibrium:
+    N = null_basis(A, model.nq)
+    Ks = 0.5 * (K + K.T)
+    Kr = N.T @ Ks @ N
+    Kr_full = N.T @ K @ N
+    ev = np.linalg.eigvalsh(Kr) if Kr.size else np.zeros(0)
+    scale = float(np.abs(np.diag(Ks)).max()) if Ks.size else 0.0
+    stability, n_zero, n_neg = classify(ev, scale)
+    norm = np.linalg.norm(Kr_full)
+    asym = float(np.linalg.norm(Kr_full - Kr_full.T) / norm) if norm > 0 else 0.0
+    return Equilibrium(model=model, q=q, lam=lam, t=t, u=u, p=p,
+                       force_residual=float(np.abs(G).max(initial=0)),
+                       constraint_residual=float(np.abs(phi).max(initial=0)), iterations=it,
+                       reaction=-(A.T @ lam), K=K, N=N, K_reduced=Kr, stiffness_eigenvalues=ev,
+                       stability=stability, n_zero=n_zero, n_negative=n_neg, asymmetry=asym,
+                       springs=spring_states(model, q, np.zeros(model.nq), t, u, p))
+
+
+def joint_reactions(model, q, lam, *, t=None, p=None) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
+    """Resultant force and moment of each joint on each member it acts on.
+
+    The constraint rows of joint ``j`` are those labelled ``j.…`` (not a member's
+    ``m.rigid.…``); their generalised force on member ``m`` is ``Q = −A[j, m]ᵀ λ_j``.  A
+    virtual rigid motion ``δr = δp + δθ × r`` of the member's points and ``δu = δθ × u`` of
+    its base vectors does the work ``δpᵀ f + δθᵀ μ_O`` with ``f = Σ_points Q_r`` and
+    ``μ_O = Σ_points r × Q_r + Σ_vectors u × Q_u``; the moment about the centre of mass
+    ``p_G`` is ``μ_O − p_G × f``.  Exact for any member type; members sharing a node carry
+    no multiplier there and are not reported."""
+    q = np.asarray(q, float)
+    lam = np.asarray(lam, float)
+    A = model.A(q, t=t, p=p).reshape(-1, model.nq)
+    layout, d = model.layout, model.dim
+    members = set(model.member_names)
+    joints: dict[str, list[int]] = {}
+    for i, label in enumerate(model.constraint_names):
+        head, _, rest = label.partition(".")
+        if head in members and rest.startswith("rigid."):
+            continue
+        joints.setdefault(head, []).append(i)
+    _, com = model.poses(q)
+    out = []
+    for joint, rows in joints.items():
+        for k, name in enumerate(model.member_names):
+            idx = layout.member_indices(name)
+            cols = [i for i in idx if i is not None]
+            if not cols or not np.any(A[np.ix_(rows, cols)]):
+                continue
+            force = np.zeros(d)
+            moment = np.zeros(3)
+            for slot, n in enumerate(layout.slots[name]):
+                node = layout.nodes[n]
+                if node.fixed is not None:
+                    continue
+                sl = slice(node.index, node.index + d)
+                Q = -(A[rows, sl].T @ lam[rows])
+                x = q[sl]
+                if node.is_point:
+                    force += Q
+                moment += np.cross(np.append(x, 0) if d == 2 else x, np.append(Q, 0) if d == 2 else Q)
+            moment -= np.cross(np.append(com[k], 0) if d == 2 else com[k], np.append(force, 0) if d == 2 else force)
+            out.append((joint, name, force, moment[2] if d == 2 else moment))
+    return out
+
+
+def spring_states(model, q, v, t, u, p) -> list[tuple[str, float, float, bool]]:
+    """``(name, tension, length, slack)`` of every spring and cable of ``model``."""
+    table = getattr(model, "springs", None)
+    if table is None or not table.names:
+        return []
+    T, length, pull = (np.array(x, float).reshape(-1) for x in table.function(t, q, v, u, p))
+    return [(n, float(T[i]), float(length[i]), bool(table.cable[i] and pull[i] <= 0))
+            for i, n in enumerate(table.names)]
+
+
+def _parameters(model, p) -> np.ndarray:
+    if p is None:
+        return model.p0
+    if isinstance(p, dict):
+        return model.parameters(**p)
+    return as_vector(p, model.np, "p")
