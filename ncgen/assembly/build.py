@@ -8,15 +8,15 @@ import warnings
 import casadi as ca
 import numpy as np
 
-from ncgen.model.context import Context
 from ncgen.assembly.functions import system_functions
 from ncgen.assembly.initial_state import consistent_state
-from ncgen.assembly.rank import dependent_rows
 from ncgen.assembly.kinematics import resolve_fix
-from ncgen.model.layout import Layout, make_layout
 from ncgen.assembly.mass import CholeskyFactor, assemble_mass
+from ncgen.assembly.rank import dependent_rows
 from ncgen.assembly.springs import spring_table
 from ncgen.errors import ModelError
+from ncgen.model.context import Context
+from ncgen.model.layout import Layout, make_layout
 
 #: Default Baumgarte coefficients (α, β) in 1/s: constraint errors decay like a critically
 #: damped oscillator with time constant 0.2 s.  IDAS keeps the drift small anyway; the

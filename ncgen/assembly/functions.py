@@ -40,8 +40,8 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 
-from ncgen.model.context import Context
 from ncgen.assembly.mass import CholeskyFactor, sparse_dm
+from ncgen.model.context import Context
 
 #: Inputs shared by the functions: name -> (meaning, SI units).
 IN = {

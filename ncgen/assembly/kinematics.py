@@ -24,10 +24,10 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from ncgen.assembly.rank import dependent_rows
 from ncgen.assembly.mass import sparse_dm
-from ncgen.model.expressions import did_you_mean
+from ncgen.assembly.rank import dependent_rows
 from ncgen.errors import ModelError
+from ncgen.model.expressions import did_you_mean
 
 #: Newton stops when max |Φ| ≤ TOL · (size of the system)² (Φ is in m²).
 TOL = 1e-13

@@ -12,8 +12,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ncgen.model.layout import Layout
 from ncgen.errors import ModelError
+from ncgen.model.layout import Layout
 
 
 def assemble_mass(layout: Layout, members) -> np.ndarray:

@@ -10,13 +10,13 @@ declared in ``<model>_stepper.h`` (``<model>_step``, ``<model>_simulate``; templ
 from __future__ import annotations
 
 
+from ncgen.assembly.stepper_equations import DOCS, mass_scale, stepper_functions
 from ncgen.codegen import PackageDoc, write_package
 from ncgen.codegen.cnames import c_real
-from ncgen.codegen.package import ExtraSource
 from ncgen.codegen.looped import is_large, primitives, reroll_limit
+from ncgen.codegen.package import ExtraSource
 from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
 from ncgen.codegen.section import Section
-from ncgen.assembly.stepper_equations import DOCS, mass_scale, stepper_functions
 
 #: Status codes of ``<model>_step`` (``templates/c/stepper.h.j2``) and what they mean.
 STATUS = {

@@ -11,12 +11,12 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ncgen.model.layout import Layout
-from ncgen.model.sym2casadi import to_casadi
 from ncgen.errors import BasisError
-from ncgen.model.expressions import Scope, evaluate, scope
-from ncgen.model.members import Member
 from ncgen.errors import ModelError
+from ncgen.model.expressions import Scope, evaluate, scope
+from ncgen.model.layout import Layout
+from ncgen.model.members import Member
+from ncgen.model.sym2casadi import to_casadi
 from ncgen.reproducible import dot, matmul, matvec, norm, perpendicular_basis, snap
 from ncgen.symbolic.joints import primitive
 

@@ -13,8 +13,8 @@ import casadi as ca
 import numpy as np
 
 from ncgen.errors import BasisError
-from ncgen.model.joint_base import check_members
 from ncgen.errors import ModelError
+from ncgen.model.joint_base import check_members
 from ncgen.validation import as_vector
 
 

@@ -16,9 +16,9 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ncgen.model.members import Ground, Member
 from ncgen.errors import ModelError
 from ncgen.model.joint_equations import name_of
+from ncgen.model.members import Ground, Member
 from ncgen.reproducible import norm
 from ncgen.validation import as_vector
 

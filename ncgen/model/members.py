@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ncgen.reproducible import matvec
 from ncgen.errors import BasisError, ModelError
+from ncgen.reproducible import matvec
 from ncgen.symbolic.coordinates import CoordinateType
 from ncgen.symbolic.member import RigidMember
 from ncgen.validation import as_vector

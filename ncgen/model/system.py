@@ -13,9 +13,9 @@ from __future__ import annotations
 import numpy as np
 import casadi as ca
 
+from ncgen.errors import ModelError
 from ncgen.model.expressions import check_name
 from ncgen.model.members import Ground, Member, NodeRef
-from ncgen.errors import ModelError
 from ncgen.reproducible import frame_along, norm
 from ncgen.symbolic.coordinates import coordinate_type
 from ncgen.symbolic.member import RigidMember

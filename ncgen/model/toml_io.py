@@ -26,12 +26,12 @@ import casadi as ca
 import numpy as np
 
 from ncgen.errors import NcgenError
+from ncgen.errors import ModelError
 from ncgen.model import toml_write
 from ncgen.model.expressions import did_you_mean, parse, scope, value_to_toml
 from ncgen.model.forces import FORCE_TYPES, GeneralizedForce, PointForce, Spring, Torque, TorsionalSpring
 from ncgen.model.joints import JOINT_TYPES, CoordinateDriver, Distance
 from ncgen.model.members import NodeRef
-from ncgen.errors import ModelError
 
 TOP_KEYS = ("system", "parameters", "inputs", "members", "joints", "forces")
 

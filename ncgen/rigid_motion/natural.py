@@ -20,8 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ncgen.rigid_motion import numeric as rm
 from ncgen.errors import CoordinateTypeError
+from ncgen.rigid_motion import numeric as rm
 from ncgen.symbolic.member import RigidMember
 
 

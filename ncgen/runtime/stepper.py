@@ -20,9 +20,9 @@ import time
 
 import numpy as np
 
+from ncgen.codegen.stepper_package import HALVINGS_LIMIT, MAX_HALVINGS, MAX_ITER, STATUS, TOL
 from ncgen.errors import NcgenError, SimulationError
 from ncgen.runtime.inputs import HOLDS
-from ncgen.codegen.stepper_package import HALVINGS_LIMIT, MAX_HALVINGS, MAX_ITER, STATUS, TOL
 from ncgen.runtime.stepper_library import load_stepper
 from ncgen.runtime.trajectory import Trajectory
 
