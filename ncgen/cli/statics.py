@@ -75,7 +75,7 @@ def _solve(args):
 
 @subcommand(
     "equilibrium",
-    help="static equilibrium of a model: configuration, reactions, stability",
+    help="static equilibrium: configuration, reactions, stability",
     description=(
         "Build the model in MODEL.toml and solve F(q) - A(q)^T lambda = 0, Phi(q) = 0 by Newton's method "
         "on the constraints, from the model's initial configuration, with inputs held constant "
