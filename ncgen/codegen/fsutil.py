@@ -2,7 +2,9 @@
 
 Directories are always produced complete in a temporary sibling and then renamed into
 place, so a reader never sees a half-written directory.  Locks are ``fcntl.flock`` locks
-(POSIX), released when the context exits or the process dies.
+(POSIX), released when the context exits or the process dies.  Temporary siblings are
+named after their owner process (:func:`ncgen.files.temporary_name`), and those left by a
+killed process are removed the next time a sibling of the same target is made.
 """
 from __future__ import annotations
 
@@ -14,6 +16,8 @@ import shutil
 import tempfile
 from pathlib import Path
 from typing import Callable, Iterator
+
+from ncgen.files import sweep_stale, temporary_name
 
 
 def sha256_bytes(data: bytes) -> str:
@@ -41,11 +45,45 @@ def temporary_sibling(target: Path) -> Iterator[Path]:
     """A fresh empty directory next to ``target``, removed on exit unless it was renamed away."""
     target = Path(target)
     target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=target.parent))
+    sweep_stale(target.parent, target.name)
+    tmp = Path(tempfile.mkdtemp(prefix=temporary_name(target.name), dir=target.parent))
     try:
         yield tmp
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def fsync_tree(path: Path) -> None:
+    """Flush every file under ``path`` and the directories themselves to disk, so that a
+    rename publishing ``path`` never exposes files whose data a crash could still lose."""
+    for root, _, files in os.walk(path):
+        for name in files:
+            fd = os.open(os.path.join(root, name), os.O_RDONLY)
+            try:
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+        fsync_dir(Path(root))
+
+
+def fsync_dir(path: Path) -> None:
+    """Flush the directory entry list of ``path`` (after a rename into it)."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    except OSError:         # some file systems cannot fsync a directory
+        pass
+    finally:
+        os.close(fd)
+
+
+def remove_dir(path: Path) -> None:
+    """Remove the directory ``path``: renamed aside first (one atomic step, so no reader sees
+    it half-deleted), then deleted."""
+    path = Path(path)
+    aside = Path(tempfile.mkdtemp(prefix=temporary_name(path.name, "old"), dir=path.parent))
+    os.rename(path, aside / path.name)
+    shutil.rmtree(aside, ignore_errors=True)
 
 
 def default_mode_dir(path: Path) -> None:
@@ -81,7 +119,7 @@ def replace_dir(new: Path, target: Path, may_replace: Callable[[Path], None]) ->
             os.rename(new, target)
             return
         may_replace(target)
-        old_root = Path(tempfile.mkdtemp(prefix=f".{target.name}.old-", dir=target.parent))
+        old_root = Path(tempfile.mkdtemp(prefix=temporary_name(target.name, "old"), dir=target.parent))
         old = old_root / target.name
         os.rename(target, old)
         try:
