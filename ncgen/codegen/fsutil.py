@@ -105,13 +105,15 @@ def check_target(target: Path, may_replace: Callable[[Path], None]) -> None:
         may_replace(target)
 
 
-def replace_dir(new: Path, target: Path, may_replace: Callable[[Path], None]) -> None:
+def replace_dir(new: Path, target: Path, may_replace: Callable[[Path], None],
+                carry: Callable[[Path], list[str]] | None = None) -> None:
     """Move the complete directory ``new`` to ``target``.
 
     If ``target`` exists, ``may_replace(target)`` is called (under a lock on the parent
-    directory, so concurrent writers are serialised) and must raise to refuse; the old
-    directory is then moved aside, ``new`` renamed into place and the old one deleted.
-    On failure the old directory is put back.
+    directory, so concurrent writers are serialised) and must raise to refuse; the entries
+    ``carry(target)`` names (top-level names: what the caller did not write) are moved into
+    ``new``, the old directory is moved aside, ``new`` renamed into place and the old one
+    deleted.  On failure everything is put back.
     """
     new, target = Path(new), Path(target)
     with locked(target.parent):
@@ -119,13 +121,24 @@ def replace_dir(new: Path, target: Path, may_replace: Callable[[Path], None]) ->
             os.rename(new, target)
             return
         may_replace(target)
-        old_root = Path(tempfile.mkdtemp(prefix=temporary_name(target.name, "old"), dir=target.parent))
-        old = old_root / target.name
-        os.rename(target, old)
+        moved: list[str] = []
+        try:
+            for name in (carry(target) if carry else ()):
+                os.rename(target / name, new / name)
+                moved.append(name)
+            old_root = Path(tempfile.mkdtemp(prefix=temporary_name(target.name, "old"), dir=target.parent))
+            old = old_root / target.name
+            os.rename(target, old)
+        except BaseException:
+            for name in moved:
+                os.rename(new / name, target / name)
+            raise
         try:
             os.rename(new, target)
         except BaseException:
             os.rename(old, target)
             os.rmdir(old_root)
+            for name in moved:
+                os.rename(new / name, target / name)
             raise
     shutil.rmtree(old_root, ignore_errors=True)

@@ -34,7 +34,7 @@ from ncgen.codegen.build import compile_package
 from ncgen.codegen.doc import PackageDoc
 from ncgen.codegen.looped import package_functions, reroll_limit
 from ncgen.codegen.manifest import canonical_json
-from ncgen.codegen.package import ExtraSource, Package, check_replaceable, write_package
+from ncgen.codegen.package import ExtraSource, Package, check_replaceable, publish, write_package
 from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
 
 #: The system functions in the package, in this order.
@@ -104,7 +104,7 @@ def generate(model, out_dir: str | os.PathLike, *, cflags=None, compile: bool = 
     with fsutil.temporary_sibling(out_dir) as tmp:
         pkg = write_package(model.name, functions, tmp / out_dir.name, **options)
         compile_package(pkg, cflags=cflags)
-        fsutil.replace_dir(pkg.path, out_dir, check_replaceable)
+        publish(pkg.path, out_dir)
     return dataclasses.replace(pkg, path=out_dir)
 
 
