@@ -14,6 +14,10 @@ class CoordinateTypeError(NcgenError):
     """Unknown natural-coordinate type, or one that does not exist in the requested dimension."""
 
 
+class InvalidName(NcgenError):
+    """A name that is not a short ASCII identifier (:func:`ncgen.validation.name`)."""
+
+
 class ShapeError(NcgenError):
     """An array argument has the wrong shape."""
 

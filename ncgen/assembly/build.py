@@ -12,6 +12,7 @@ from ncgen.assembly.functions import system_functions
 from ncgen.assembly.initial_state import consistent_state, dependent_rows
 from ncgen.assembly.kinematics import resolve_fix
 from ncgen.assembly.layout import Layout, make_layout
+from ncgen.assembly.limits import model_limits
 from ncgen.assembly.mass import CholeskyFactor, assemble_mass
 from ncgen.assembly.redundancy import classify
 from ncgen.model.members import ModelError
@@ -57,10 +58,12 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     fixed = resolve_fix(layout, system.members, fix)
     labels, rows = constraint_rows(system, ctx)
     F, V = force_terms(system, ctx)
+    limits = model_limits(system, ctx)
     M = assemble_mass(layout, members)
     factor = CholeskyFactor(M, layout.coordinate_names)
     q_init, v_init = initial_guess(layout, members)
     p0 = np.concatenate([v for _, v in system.parameters.values()]) if system.parameters else np.zeros(0)
+    limits.check(p0, where=f"system {system.name!r}: ")
 
     A_fn = ca.Function("A", [ctx.t, ctx.q, ctx.p], [ca.jacobian(ca.vertcat(*rows), ctx.q)]) \
         if rows else None
@@ -84,7 +87,7 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
                              fixed=fixed, assemble=assemble)
     return Model(system=system, layout=layout, labels=labels, functions=functions, M=M, factor=factor,
                  potential=potential, state=state, p0=p0, baumgarte=(alpha, beta), redundant=redundant_labels,
-                 dropped=(redundant == "drop"), t0=t0)
+                 dropped=(redundant == "drop"), t0=t0, limits=limits)
 
 
 def _check_droppable(name, labels, dependent, phi_fn, A_fn, q, p, t0) -> None:

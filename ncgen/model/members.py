@@ -20,10 +20,19 @@ from ncgen.errors import BasisError, NcgenError
 from ncgen.symbolic.coordinates import CoordinateType
 from ncgen.symbolic.member import RigidMember
 from ncgen.validation import as_vector
+from ncgen.validation import name as valid_name
 
 
 class ModelError(NcgenError):
     """An invalid model: names, references, geometry or initial state."""
+
+
+def model_name(value, what: str) -> str:
+    """``value`` checked by the one naming rule (:func:`ncgen.validation.name`), as a ModelError."""
+    try:
+        return valid_name(value, what)
+    except NcgenError as e:
+        raise ModelError(str(e)) from None
 
 
 @dataclass(frozen=True)
@@ -137,8 +146,7 @@ class Member:
 
     def add_marker(self, name: str, local) -> "Member":
         """Name a body-fixed point (local coordinates) for outputs, e.g. ``traj.point``."""
-        if not isinstance(name, str) or not name.isidentifier():
-            raise ModelError(f"{self.name}: marker name: expected an identifier, got {name!r}")
+        model_name(name, f"{self.name}: marker name")
         if name in self.markers:
             raise ModelError(f"{self.name}: marker {name!r} already defined")
         point = as_vector(local, self.dim, f"{self.name}.{name}: local point")

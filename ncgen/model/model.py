@@ -15,7 +15,7 @@ class Model:
     """A validated, assembled system (create it with ``System.build()``)."""
 
     def __init__(self, *, system, layout, labels, functions, M, factor, potential, state, p0, baumgarte,
-                 redundant, dropped, t0):
+                 redundant, dropped, t0, limits=None):
         self.system = system
         self.name = system.name
         self.dim = system.dim
@@ -42,6 +42,8 @@ class Model:
         self.redundant_dropped = dropped and bool(redundant)
         self.t0 = t0
         self.gravity = system.gravity.copy()
+        #: values that must stay >= 0 for any parameter vector (ncgen.assembly.limits.Limits)
+        self.limits = limits
 
     # ------------------------------------------------------------ dimensions
     @property
@@ -137,7 +139,11 @@ class Model:
             if name not in self.parameter_names:
                 raise KeyError(f"unknown parameter {name!r}; parameters: {', '.join(self.parameter_names)}")
             i = self.parameter_names.index(name)
-            p[offsets[i]:offsets[i + 1]] = np.atleast_1d(np.asarray(val, float)).reshape(-1)
+            size = self.parameter_sizes[i]
+            given = [val] if np.ndim(val) == 0 else val
+            p[offsets[i]:offsets[i + 1]] = as_vector(given, size, f"parameter {name!r}")
+        if self.limits is not None:
+            self.limits.check(p, where=f"model {self.name!r}: ")
         return p
 
     def member(self, name: str):

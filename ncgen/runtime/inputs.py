@@ -92,5 +92,13 @@ def parameter_values(p, model) -> np.ndarray:
             return model.parameters(**p)
         except KeyError as e:
             raise NcgenError(str(e.args[0])) from None
+    try:
+        values = np.asarray(p, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        values = None
+    if values is not None and values.shape == (model.np,):
+        offsets = np.cumsum([0] + model.parameter_sizes)
+        by_name = {n: values[offsets[i]:offsets[i + 1]] for i, n in enumerate(model.parameter_names)}
+        return model.parameters(**by_name)       # names the parameter that is wrong
     return as_vector(p, model.np, "p (parameter values)")
 
