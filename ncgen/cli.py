@@ -16,8 +16,10 @@ and the subparser, and returns the exit code.  To add a subcommand, write::
 
 Import heavy modules (CasADi, the runtime, compilers) inside the function so that
 ``ncgen --help`` stays fast.
-Exit codes: 0 success, 1 failure while running, 2 bad usage (argparse's convention).
-Bad input raised as :class:`ncgen.errors.NcgenError` is reported without a traceback.
+Exit codes: 0 success, 1 failure while running, 2 bad usage (argparse's convention), 70
+internal error (a bug), 130 interrupted.  Bad input raised as
+:class:`ncgen.errors.NcgenError` is reported without a traceback; so is anything else (see
+:func:`main`).
 """
 from __future__ import annotations
 
@@ -362,7 +364,9 @@ def _check_outputs(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
         "(inputs held at zero; use the Python API, nc.simulate(..., u=...), to drive them) and write "
         "the trajectory on the grid 0, dt, 2 dt, ... A summary (integrator work, energy and "
         "constraint drift) goes to standard output. Files are written only when the whole run "
-        "succeeds: a failed integration leaves nothing behind and says where and why it failed."),
+        "succeeds: a failed integration says where and why it failed, and writes the trajectory up "
+        "to that time to OUTPUT with '.incomplete' before the suffix (e.g. run.incomplete.npz, "
+        "whose info says complete = false)."),
     examples=(
         "ncgen simulate examples/chain.toml --t-end 2 --dt 0.01 -o chain.npz --plot chain.png\n"
         "ncgen simulate examples/heavy_top.toml --t-end 3 -o top.csv --animate top.gif\n"
@@ -376,10 +380,21 @@ def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from ncgen.files import atomic_path
     from ncgen.runtime import simulate as run
 
+    from ncgen.errors import SimulationError
+    from ncgen.files import incomplete_path
+
     _check_outputs(args, parser)
     model = load_model(args.model, args.param)
-    traj = run(model, t_end=args.t_end, dt=args.dt, method=args.method, backend=args.backend,
-               rtol=args.rtol, atol=args.atol)
+    try:
+        traj = run(model, t_end=args.t_end, dt=args.dt, method=args.method, backend=args.backend,
+                   rtol=args.rtol, atol=args.atol)
+    except SimulationError as e:
+        if e.trajectory is None or not len(e.trajectory):
+            raise
+        partial = e.trajectory.save(incomplete_path(args.output))
+        raise SimulationError(f"{e}\nThe partial trajectory (t = {e.trajectory.t[0]:g} ... "
+                              f"{e.trajectory.t[-1]:g} s, marked incomplete) was written to {partial}",
+                              time=e.time, trajectory=e.trajectory) from None
     print(traj.summary())
     with contextlib.ExitStack() as stack:
         traj.save(stack.enter_context(atomic_path(args.output)))
@@ -449,6 +464,8 @@ def build_parser() -> argparse.ArgumentParser:
                + "\nRun 'ncgen SUBCOMMAND --help' for a subcommand's options and more examples.",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"ncgen {__version__}")
+    parser.add_argument("--debug", action="store_true",
+                        help="print the Python traceback of an internal error (also NCGEN_DEBUG=1)")
     sub = parser.add_subparsers(dest="command", metavar="SUBCOMMAND", title="subcommands")
     for cmd in SUBCOMMANDS.values():
         p = sub.add_parser(cmd.name, help=cmd.help, description=cmd.description,
@@ -460,19 +477,51 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run ``ncgen`` with ``argv`` (default ``sys.argv[1:]``); returns the exit code."""
+    """Run ``ncgen`` with ``argv`` (default ``sys.argv[1:]``); returns the exit code.
+
+    Never shows a Python traceback for bad input: ncgen's errors, files that cannot be
+    read or written and running out of memory are one-line messages (exit 1), Ctrl-C exits
+    130, and anything else is reported as an internal error with where to report it; its
+    traceback is printed with ``--debug`` or ``NCGEN_DEBUG=1``."""
+    from ncgen.errors import REPORT_TO
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv or os.environ.get("NCGEN_DEBUG", "") not in ("", "0")
+    argv = [a for a in argv if a != "--debug"]
     parser = build_parser()
+    where = "ncgen"
     try:
         args = parser.parse_args(argv)
         if args.command is None:
             parser.print_help(sys.stderr)
             return 2
+        where = f"ncgen {args.command}"
         return args._subcommand.run(args, args._parser)
     except SystemExit as exc:            # argparse: --help, --version and usage errors
         return 0 if exc.code is None else exc.code if isinstance(exc.code, int) else 1
     except NcgenError as exc:
-        print(f"ncgen {args.command}: error: {exc}", file=sys.stderr)
+        print(f"{where}: error: {exc}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        print(f"{where}: interrupted", file=sys.stderr)
+        return 130
+    except OSError as exc:
+        target = f" {exc.filename}" if exc.filename else ""
+        print(f"{where}: error:{target}: {exc.strerror or exc}", file=sys.stderr)
+        return 1
+    except MemoryError:
+        print(f"{where}: error: out of memory; reduce the problem (a larger --dt, fewer members)",
+              file=sys.stderr)
+        return 1
+    except Exception as exc:             # a bug: say so, briefly
+        if debug:
+            import traceback
+            traceback.print_exc()
+        print(f"{where}: internal error ({type(exc).__name__}: {str(exc)[:300]}). This is a bug in "
+              f"ncgen, not in your input; please report it to {REPORT_TO}"
+              + ("" if debug else ". Run with --debug (or NCGEN_DEBUG=1) to see the traceback"),
+              file=sys.stderr)
+        return 70
 
 
 if __name__ == "__main__":

@@ -6,6 +6,10 @@ argument), *what was expected* and *what was found*.
 """
 
 
+#: Where to report an unexpected internal error (printed by the command line).
+REPORT_TO = "the ncgen issue tracker (the repository named in the README), with the command and this message"
+
+
 class NcgenError(ValueError):
     """Base class of the errors ncgen raises for bad input."""
 

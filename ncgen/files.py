@@ -98,6 +98,13 @@ def sweep_stale(directory: str | os.PathLike, target: str | None = None) -> list
     return removed
 
 
+def incomplete_path(target: str | os.PathLike) -> Path:
+    """Where the partial result of a failed run that was to write ``target`` goes:
+    ``name.incomplete.suffix`` beside it, so that nothing mistakes it for a finished one."""
+    target = Path(target)
+    return target.with_name(f"{target.stem}.incomplete{target.suffix}")
+
+
 @contextlib.contextmanager
 def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
     """A temporary sibling of ``target`` to write to; renamed onto ``target`` on success."""
