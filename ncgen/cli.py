@@ -156,6 +156,16 @@ def load_model(path: str, params: list[str] | None = None):
     """Build the model in TOML file ``path``; ``params`` (``name=value`` strings, a vector as
     ``name=1,2,3``) replace default parameter values.  Raises NcgenError with a message
     naming the file (and the key path, for invalid models)."""
+    system = read_system(path, params)
+    try:
+        return system.build()
+    except NcgenError as e:
+        raise type(e)(f"{path}: model {system.name!r} cannot be built: {e}") from None
+
+
+def read_system(path: str, params: list[str] | None = None):
+    """The System of TOML file ``path`` with the ``params`` overrides (see :func:`load_model`);
+    every error names the file."""
     from ncgen.model.members import ModelError
     from ncgen.model.system import System
 
@@ -170,10 +180,7 @@ def load_model(path: str, params: list[str] | None = None):
         raise type(e)(text if text.startswith(str(file)) else f"{path}: {text}") from None
     for name, value in _parameter_overrides(params or [], system):
         system.parameters[name] = (system.parameters[name][0], value)
-    try:
-        return system.build()
-    except NcgenError as e:
-        raise type(e)(f"{path}: model {system.name!r} cannot be built: {e}") from None
+    return system
 
 
 def _parameter_overrides(params: list[str], system) -> list[tuple]:
@@ -297,18 +304,10 @@ def _check_arguments(p: argparse.ArgumentParser) -> None:
 )
 def check(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from ncgen.assembly.check import check_system
-    from ncgen.model.members import ModelError
-    from ncgen.model.system import System
 
-    file = Path(args.model)
-    if not file.is_file():
-        what = "is a directory, not" if file.is_dir() else "does not exist; expected"
-        raise ModelError(f"model file {args.model!r} {what} a TOML model file (see the examples/ directory)")
     if not args.tolerance > 0:
         parser.error(f"--tolerance: expected a positive number, got {args.tolerance}")
-    system = System.from_toml(file)
-    for name, value in _parameter_overrides(args.param, system):
-        system.parameters[name] = (system.parameters[name][0], value)
+    system = read_system(args.model, args.param)
     report = check_system(system, tolerance=args.tolerance)
     sys.stdout.write(report.render(args.model))
     return 0 if report.ok else 1
