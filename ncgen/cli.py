@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import warnings
 import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -481,13 +482,26 @@ def main(argv: list[str] | None = None) -> int:
     Never shows a Python traceback for bad input: ncgen's errors, files that cannot be
     read or written and running out of memory are one-line messages (exit 1), Ctrl-C exits
     130, and anything else is reported as an internal error with where to report it; its
-    traceback is printed with ``--debug`` or ``NCGEN_DEBUG=1``."""
-    from ncgen.errors import REPORT_TO
-
+    traceback is printed with ``--debug`` or ``NCGEN_DEBUG=1``.  Warnings are one line,
+    ``ncgen: warning: ...``."""
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv or os.environ.get("NCGEN_DEBUG", "") not in ("", "0")
     argv = [a for a in argv if a != "--debug"]
     parser = build_parser()
+    with warnings.catch_warnings():
+        if not debug:                    # "ncgen: warning: ...", not a source line of ncgen
+            warnings.showwarning = _show_warning
+        return _run_main(parser, argv, debug)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    print(f"ncgen: warning: {message}", file=sys.stderr if file is None else file)
+
+
+def _run_main(parser: argparse.ArgumentParser, argv: list[str], debug: bool) -> int:
+    """:func:`main` inside its warning format: every outcome mapped to a message and an exit code."""
+    from ncgen.errors import REPORT_TO
+
     where = "ncgen"
     try:
         args = parser.parse_args(argv)

@@ -116,3 +116,22 @@ def test_unwritable_cache_is_a_clear_error(built_pkg, tmp_path, monkeypatch):
     from ncgen.errors import CodegenError
     with pytest.raises(CodegenError, match="compile cache"):
         compile_package(built_pkg)
+
+
+def test_cli_stepper_heals_a_truncated_cache(tmp_path, cache):
+    """``ncgen simulate --method stepper`` (library loaded with ctypes) after the cached
+    library was truncated: a note, a rebuild and the same result, not SIGBUS."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "NCGEN_CACHE_DIR": str(cache), "NCGEN_CFLAGS": "-O0"}
+    cmd = [sys.executable, "-m", "ncgen.cli", "simulate", str(ROOT / "examples" / "fourbar_planar.toml"),
+           "--t-end", "0.05", "--dt", "0.05", "--method", "stepper"]
+    first = subprocess.run(cmd + ["-o", str(tmp_path / "a.npz")], capture_output=True, text=True, env=env, timeout=300)
+    assert first.returncode == 0, first.stderr
+    libraries = list(cache.glob("*/lib*.so"))
+    assert libraries
+    for lib in libraries:
+        _damage(lib, "truncated")
+    second = subprocess.run(cmd + ["-o", str(tmp_path / "b.npz")], capture_output=True, text=True, env=env, timeout=300)
+    assert second.returncode == 0, second.stderr
+    assert "is damaged" in second.stderr and "Traceback" not in second.stderr
+    a, b = np.load(tmp_path / "a.npz"), np.load(tmp_path / "b.npz")
+    np.testing.assert_array_equal(a["q"], b["q"])
