@@ -102,8 +102,15 @@ def _check_droppable(name, labels, dependent, phi_fn, A_fn, q, p, t0) -> None:
             f"system {name!r}: the constraints {items} contradict the others: they are implied by "
             f"them near the initial configuration (dependent wherever the others hold) but violated. "
             f"Fix the joint (its drive, distance or points) or remove it")
-    if found.singular or found.unverified:
-        rows = list(found.singular) + found.unverified
+    if found.unverified:
+        raise ModelError(
+            f"system {name!r}: the constraints {named(found.unverified)} depend linearly on the others at "
+            f"the initial configuration, and whether they are implied by them could not be checked "
+            f"(Newton on the other constraints did not converge near it), so they are not dropped. "
+            f"Check the initial configuration, remove the constraints if they are redundant, or "
+            f"build(redundant='keep') for analysis only")
+    if found.singular:
+        rows = list(found.singular)
         raise ModelError(
             f"system {name!r}: the initial configuration is singular: the constraints {named(rows)} "
             f"depend linearly on the others there but are not implied by them nearby (they still "
