@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from ncgen import files
-from ncgen.codegen import compile_package, load_functions, write_package
+from ncgen.codegen import compile_package, write_package
 from ncgen.codegen.build import entry_problem
 from test_codegen_samples import chain_doc, chain_functions
 
