@@ -24,6 +24,8 @@ import time
 from pathlib import Path
 from typing import Iterator
 
+from ncgen.errors import NcgenError
+
 #: Age (s) after which a temporary entry whose owner cannot be checked counts as stale.
 STALE_AGE = 24 * 3600.0
 #: ``.<target>.tmp-<host>-<pid>-<random>`` (and ``.old-`` for directories being replaced).
@@ -96,6 +98,17 @@ def sweep_stale(directory: str | os.PathLike, target: str | None = None) -> list
         except OSError:
             pass
     return removed
+
+
+def decode_text(data: bytes, origin: str) -> str:
+    """The UTF-8 text of a file's bytes (a byte-order mark is accepted and dropped); another
+    encoding is an :class:`~ncgen.errors.NcgenError` naming ``origin``, the line and the byte."""
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        line = data[:e.start].count(b"\n") + 1
+        raise NcgenError(f"{origin}: not UTF-8 text: byte 0x{data[e.start]:02x} at line {line} cannot be "
+                         f"decoded; save the file as UTF-8") from None
 
 
 def incomplete_path(target: str | os.PathLike) -> Path:

@@ -242,3 +242,15 @@ def test_no_number_of_a_model_file_can_cause_an_internal_error(tmp_path, capsys)
             out = capsys.readouterr()
             assert code in (0, 1) and "Traceback" not in out.err + out.out, (m.group(), value, out.err)
             assert code == 0 or out.err.strip() or "error" in out.out, (m.group(), value)
+
+
+def test_problem_files_follow_the_same_encoding_rule(tmp_path):
+    from ncgen.errors import ProblemFileError
+    from ncgen.optim.problem_file import read_problem_file
+
+    path = tmp_path / "p.toml"
+    path.write_bytes(b'model = "m.toml"\n# caf\xe9\n')
+    with pytest.raises(ProblemFileError, match=f"{path}: not UTF-8 text: byte 0xe9 at line 2"):
+        read_problem_file(path)
+    path.write_bytes(b'\xef\xbb\xbfmodel = "m.toml"\n')
+    assert read_problem_file(path)[0] == {"model": "m.toml"}

@@ -26,6 +26,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.errors import NcgenError
+from ncgen.files import decode_text
 from ncgen.model import toml_write
 from ncgen.model.expressions import did_you_mean, parse, scope, value_to_toml
 from ncgen.model.forces import FORCE_TYPES, GeneralizedForce, PointForce, Spring, Torque, TorsionalSpring
@@ -58,22 +59,13 @@ def _source_text(source) -> tuple[str, str]:
         path = Path(source)
         try:
             return decode_text(path.read_bytes(), str(path)), str(path)
+        except NcgenError as e:
+            raise ModelError(str(e)) from None
         except OSError as e:
             raise ModelError(f"cannot read model file {str(path)!r}: {e.strerror}") from None
     if not isinstance(source, str):
         raise ModelError(f"from_toml: expected a path or TOML text, got {type(source).__name__}")
     return source.removeprefix("\ufeff"), "<toml text>"
-
-
-def decode_text(data: bytes, origin: str) -> str:
-    """The UTF-8 text of a file's bytes (a byte-order mark is accepted and dropped); other
-    encodings are an error naming the file, the line and the byte."""
-    try:
-        return data.decode("utf-8-sig")
-    except UnicodeDecodeError as e:
-        line = data[:e.start].count(b"\n") + 1
-        raise ModelError(f"{origin}: not UTF-8 text: byte 0x{data[e.start]:02x} at line {line} cannot be "
-                         f"decoded; save the file as UTF-8") from None
 
 
 def _describe(v) -> str:
