@@ -107,6 +107,8 @@ def test_killed_build_leftovers_are_swept(built_pkg, cache):
     compile_package(built_pkg)
     assert not leftover.exists()
     assert mine.exists() and unrelated.exists()
+    leftover.mkdir()                                                 # swept by a cache hit too
+    assert compile_package(built_pkg).cached and not leftover.exists()
 
 
 def test_unwritable_cache_is_a_clear_error(built_pkg, tmp_path, monkeypatch):

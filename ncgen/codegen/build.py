@@ -104,6 +104,7 @@ def compile_package(pkg: Package | str | os.PathLike, cc: str | None = None,
     entry = root / f"{pkg.name}-{key[:24]}"
     library = entry / f"lib{pkg.name}.so"
     result = BuildResult(path=library, cached=True, key=key, compiler=compiler, cflags=flags)
+    fsutil.sweep_stale(root)          # build folders of killed builds (owner gone)
     if entry_problem(entry, library) is None:
         return result
     try:
@@ -114,7 +115,6 @@ def compile_package(pkg: Package | str | os.PathLike, cc: str | None = None,
                 return result
             if entry.exists():
                 _status(f"cached library {library} is damaged ({problem}); rebuilding it")
-            fsutil.sweep_stale(root)
             with fsutil.temporary_sibling(entry) as tmp:
                 commands = _build(pkg, compiler, flags, per_source, jobs, tmp)
                 (tmp / manifest.FILENAME).write_bytes((pkg.path / manifest.FILENAME).read_bytes())
