@@ -43,7 +43,7 @@ def test_same_input_same_bytes(tmp_path, pkg):
 
 
 def test_same_bytes_from_another_process(tmp_path, pkg):
-    script = (f"import sys; sys.path.insert(0, {str(TESTS)!r})\n"
+    script = (f"import sys; sys.path[:0] = [{str(TESTS.parent)!r}, {str(TESTS)!r}]  # this checkout's ncgen\n"
               "from test_codegen_samples import chain_doc, chain_functions\n"
               "from ncgen.codegen import write_package\n"
               f"write_package('chain', chain_functions(), {str(tmp_path / 'other')!r}, doc=chain_doc())\n")
@@ -52,7 +52,7 @@ def test_same_bytes_from_another_process(tmp_path, pkg):
 
 
 def test_three_processes_write_at_once(tmp_path, pkg):
-    script = (f"import sys; sys.path.insert(0, {str(TESTS)!r})\n"
+    script = (f"import sys; sys.path[:0] = [{str(TESTS.parent)!r}, {str(TESTS)!r}]  # this checkout's ncgen\n"
               "from test_codegen_samples import chain_doc, chain_functions\n"
               "from ncgen.codegen import write_package\n"
               "functions, doc = chain_functions(), chain_doc()\n"
