@@ -6,6 +6,10 @@ argument), *what was expected* and *what was found*.
 """
 
 
+#: Where to report an unexpected internal error (printed by the command line).
+REPORT_TO = "the ncgen issue tracker (the repository named in the README), with the command and this message"
+
+
 class NcgenError(ValueError):
     """Base class of the errors ncgen raises for bad input."""
 
@@ -16,6 +20,10 @@ class ModelError(NcgenError):
 
 class CoordinateTypeError(NcgenError):
     """Unknown natural-coordinate type, or one that does not exist in the requested dimension."""
+
+
+class InvalidName(NcgenError):
+    """A name that is not a short ASCII identifier (:func:`ncgen.validation.name`)."""
 
 
 class ShapeError(NcgenError):

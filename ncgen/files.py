@@ -1,24 +1,130 @@
-"""Output files written whole or not at all.
+"""Output files and directories written whole or not at all, and the clean-up of what a
+killed run leaves behind.
 
 :func:`atomic_path` hands out a temporary path next to the target (same directory, same
 suffix, so that writers which infer the format from the name still work); the file is
 renamed onto the target when the block succeeds and deleted when it fails, so a reader
 never sees a partial file and a failed run leaves nothing behind.
+
+Every temporary name made here carries its owner: ``.<target>.tmp-<host>-<pid>-<random>``
+(:func:`temporary_name`).  A process killed before it could clean up leaves such an entry;
+:func:`sweep_stale` removes the entries of a directory whose owner process is gone (same
+host) or that are older than :data:`STALE_AGE` (another host, or names without an owner),
+and never touches anything else.
 """
 from __future__ import annotations
 
 import contextlib
 import os
+import re
+import shutil
+import socket
 import tempfile
+import time
 from pathlib import Path
 from typing import Iterator
+
+from ncgen.errors import NcgenError
+
+#: Age (s) after which a temporary entry whose owner cannot be checked counts as stale.
+STALE_AGE = 24 * 3600.0
+#: ``.<target>.tmp-<host>-<pid>-<random>`` (and ``.old-`` for directories being replaced).
+_OWNED = re.compile(r"^\..+\.(?:tmp|old)-(?P<host>[A-Za-z0-9_]*)-(?P<pid>\d+)-[^/]*$")
+#: Names written by older versions of ncgen, without an owner: only the age bound applies.
+_UNOWNED = re.compile(r"^\..+\.(?:tmp|old)-[a-z0-9_]{8}$")
+
+
+def _host() -> str:
+    return re.sub(r"[^A-Za-z0-9_]", "_", socket.gethostname())[:40]
+
+
+def temporary_name(target: str, kind: str = "tmp") -> str:
+    """The prefix of a temporary sibling of ``target`` (a file or directory name) owned by
+    this process: ``.<target>.<kind>-<host>-<pid>-`` (the caller adds a random part)."""
+    return f".{target}.{kind}-{_host()}-{os.getpid()}-"
+
+
+def _owner_gone(host: str, pid: int) -> bool | None:
+    """True if process ``pid`` of this host is gone, False if it runs, None if unknowable."""
+    if host != _host():
+        return None
+    if pid == os.getpid():
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    except OSError:        # exists, owned by someone else
+        return False
+    return False
+
+
+def is_stale(entry: Path, now: float | None = None) -> bool:
+    """Whether ``entry`` is a temporary left by a process that is gone (see module docstring)."""
+    m = _OWNED.match(entry.name)
+    if m is None and not _UNOWNED.match(entry.name):
+        return False
+    if m is not None:
+        gone = _owner_gone(m["host"], int(m["pid"]))
+        if gone is not None:
+            return gone
+    try:
+        age = (time.time() if now is None else now) - entry.lstat().st_mtime
+    except OSError:
+        return False
+    return age > STALE_AGE
+
+
+def sweep_stale(directory: str | os.PathLike, target: str | None = None) -> list[Path]:
+    """Remove the stale temporaries in ``directory`` (only those of ``target`` if given);
+    returns what was removed.  Errors (a concurrent sweep, permissions) are ignored."""
+    directory = Path(directory)
+    removed = []
+    try:
+        entries = list(directory.iterdir())
+    except OSError:
+        return removed
+    for entry in entries:
+        if target is not None and not entry.name.startswith(f".{target}."):
+            continue
+        if not is_stale(entry):
+            continue
+        try:
+            if entry.is_dir() and not entry.is_symlink():
+                shutil.rmtree(entry)
+            else:
+                entry.unlink()
+            removed.append(entry)
+        except OSError:
+            pass
+    return removed
+
+
+def decode_text(data: bytes, origin: str) -> str:
+    """The UTF-8 text of a file's bytes (a byte-order mark is accepted and dropped); another
+    encoding is an :class:`~ncgen.errors.NcgenError` naming ``origin``, the line and the byte."""
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        line = data[:e.start].count(b"\n") + 1
+        raise NcgenError(f"{origin}: not UTF-8 text: byte 0x{data[e.start]:02x} at line {line} cannot be "
+                         f"decoded; save the file as UTF-8") from None
+
+
+def incomplete_path(target: str | os.PathLike) -> Path:
+    """Where the partial result of a failed run that was to write ``target`` goes:
+    ``name.incomplete.suffix`` beside it, so that nothing mistakes it for a finished one."""
+    target = Path(target)
+    return target.with_name(f"{target.stem}.incomplete{target.suffix}")
 
 
 @contextlib.contextmanager
 def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
     """A temporary sibling of ``target`` to write to; renamed onto ``target`` on success."""
     target = Path(target)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=target.suffix, dir=target.parent.resolve())
+    parent = target.parent.resolve()
+    sweep_stale(parent, target.stem)
+    fd, tmp = tempfile.mkstemp(prefix=temporary_name(target.stem), suffix=target.suffix, dir=parent)
     os.close(fd)
     tmp = Path(tmp)
     try:

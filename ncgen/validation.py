@@ -1,38 +1,112 @@
-"""Argument checks shared by every layer: shapes, finiteness, rotations.
+"""Argument checks shared by every layer: names, numbers, shapes, rotations, run sizes.
 
-Each check returns a clean float array and raises a :mod:`ncgen.errors` exception whose
-message names the argument (``what``), what was expected and what was found.
+Each check returns a clean value and raises a :mod:`ncgen.errors` exception whose message
+names the argument (``what``), what was expected and what was found.  The Python API, the
+TOML loader and the command line all go through these, so one input is judged by one rule:
+
+* names (:func:`name`): ASCII identifiers ``[A-Za-z_][A-Za-z0-9_]*`` of at most
+  :data:`MAX_NAME` characters, because every name becomes part of C identifiers, file
+  names and CSV headers;
+* numbers (:func:`as_array`, :func:`as_scalar`): finite, of magnitude at most
+  :data:`MAX_MAGNITUDE` (so that products of two stay finite in double precision), integers
+  too long for a double included;
+* run sizes (:func:`allocation`): an output that would need more than
+  :data:`MAX_ALLOCATION` bytes is refused with the size it would need.
 """
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 
-from ncgen.errors import InertiaError, RotationError, ShapeError
+from ncgen.errors import InertiaError, InvalidName, NcgenError, RotationError, ShapeError
 
 ROTATION_TOL = 1e-9
+#: Longest name of a system, member, joint, force, marker, parameter or input.
+MAX_NAME = 64
+#: Largest magnitude of any number of a model or a run (SI units).
+MAX_MAGNITUDE = 1e100
+#: Largest array a run may allocate for its results (bytes); ``$NCGEN_MAX_BYTES`` overrides.
+MAX_ALLOCATION = 8 * 2**30
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
+def name(value, what: str) -> str:
+    """``value`` if it is an ASCII identifier of at most :data:`MAX_NAME` characters."""
+    rule = f"an identifier (ASCII letters, digits, _; not starting with a digit; at most {MAX_NAME} characters)"
+    if not isinstance(value, str):
+        raise InvalidName(f"{what}: expected {rule}, got {type(value).__name__} {value!r}")
+    shown = value if len(value) <= 40 else value[:37] + "..."
+    if len(value) > MAX_NAME:
+        raise InvalidName(f"{what}: expected {rule}, got {shown!r}: {len(value)} characters long "
+                          f"(names become C identifiers and file names)")
+    if not _NAME.fullmatch(value):
+        bad = next((c for c in value if not (c.isascii() and (c.isalnum() or c == "_"))), None)
+        why = (f"the character {bad!r} is not allowed" if bad is not None else
+               "it starts with a digit" if value else "it is empty")
+        raise InvalidName(f"{what}: expected {rule}, got {shown!r}: {why}")
+    return value
+
+
+def allocation(n_bytes: float, what: str, hint: str) -> None:
+    """Refuse an allocation of ``n_bytes`` above :data:`MAX_ALLOCATION` (or
+    ``$NCGEN_MAX_BYTES``), saying how much it would need and ``hint`` (what to change)."""
+    import os
+    limit = float(os.environ.get("NCGEN_MAX_BYTES", MAX_ALLOCATION))
+    if n_bytes > limit:
+        raise NcgenError(f"{what} would need {_bytes(n_bytes)} of memory, more than the limit of "
+                         f"{_bytes(limit)} (NCGEN_MAX_BYTES); {hint}")
+
+
+def _bytes(n: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"):
+        if n < 1024 or unit == "EiB":
+            return f"{n:.3g} {unit}"
+        n /= 1024
+    return f"{n:.3g} EiB"
+
+
+def _float_array(x) -> np.ndarray:
+    """``np.asarray(x, float)``; integers too long for a double raise OverflowError."""
+    return np.asarray(x, dtype=float)
+
+
+def _check_magnitude(a: np.ndarray, what: str) -> None:
+    if not np.all(np.isfinite(a)):
+        shown = a.tolist() if a.size <= 12 else f"{np.sum(~np.isfinite(a))} non-finite values"
+        raise ShapeError(f"{what}: expected finite numbers, got {shown}")
+    if a.size and np.max(np.abs(a)) > MAX_MAGNITUDE:
+        raise ShapeError(f"{what}: expected numbers of magnitude at most {MAX_MAGNITUDE:g}, got "
+                         f"{float(np.max(np.abs(a))):g}")
 
 
 def _shape_of(x) -> str:
+    """What ``x`` is, for a message: its shape if it is numeric, else (a prefix of) its repr."""
+    text = repr(x) if len(repr(x)) <= 60 else repr(x)[:57] + "..."
+    try:
+        np.asarray(x, dtype=object).astype(float)
+    except (TypeError, ValueError, OverflowError):
+        return f"{type(x).__name__} {text}"
     try:
         return "shape " + str(np.shape(x))
     except Exception:  # ragged input
-        return f"{type(x).__name__} {x!r}"
+        return f"{type(x).__name__} {text}"
 
 
 def as_array(x, shape: tuple, what: str) -> np.ndarray:
     """``x`` as a finite float array of exactly ``shape``."""
     try:
-        a = np.asarray(x, dtype=float)
+        a = _float_array(x)
+    except OverflowError:
+        raise ShapeError(f"{what}: a number is too large (more than {MAX_MAGNITUDE:g})") from None
     except (TypeError, ValueError):
         raise ShapeError(f"{what}: expected numbers of shape {shape}, got {_shape_of(x)}") from None
     if a.shape != tuple(shape):
         if len(shape) == 1:
             raise ShapeError(f"{what}: expected {shape[0]} numbers, got {_describe(a)}")
         raise ShapeError(f"{what}: expected shape {tuple(shape)}, got {_describe(a)}")
-    if not np.all(np.isfinite(a)):
-        raise ShapeError(f"{what}: expected finite numbers, got {a.tolist()}")
+    _check_magnitude(a, what)
     return a
 
 
@@ -50,11 +124,23 @@ def as_vector(x, n: int, what: str) -> np.ndarray:
 
 def as_scalar(x, what: str) -> float:
     try:
-        v = float(np.asarray(x, dtype=float).reshape(()))
+        v = float(_float_array(x).reshape(()))
+    except OverflowError:
+        raise ShapeError(f"{what}: the number is too large (more than {MAX_MAGNITUDE:g})") from None
     except (TypeError, ValueError):
-        raise ShapeError(f"{what}: expected a number, got {x!r}") from None
+        shown = repr(x) if len(repr(x)) <= 60 else repr(x)[:57] + "..."
+        raise ShapeError(f"{what}: expected a number, got {shown}") from None
     if not np.isfinite(v):
         raise ShapeError(f"{what}: expected a finite number, got {v}")
+    if abs(v) > MAX_MAGNITUDE:
+        raise ShapeError(f"{what}: expected a number of magnitude at most {MAX_MAGNITUDE:g}, got {v:g}")
+    return v
+
+
+def nonnegative(x, what: str) -> float:
+    v = as_scalar(x, what)
+    if v < 0:
+        raise ShapeError(f"{what}: expected a number >= 0, got {v:g}")
     return v
 
 

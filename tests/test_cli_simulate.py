@@ -116,13 +116,19 @@ def test_inconsistent_initial_state(tmp_path, capsys):
     assert [p.name for p in tmp_path.iterdir()] == ["m.toml"]
 
 
-def test_failing_integration_writes_nothing(tmp_path, capsys):
+def test_failing_integration_writes_the_partial_trajectory(tmp_path, capsys):
     (tmp_path / "blowup.toml").write_text(BLOWUP)
     err = run(capsys, ["simulate", str(tmp_path / "blowup.toml"), "--t-end", "1", "-o", str(tmp_path / "x.npz"),
                        "--plot", str(tmp_path / "x.png"), "--backend", "vm"], status=1).err
     assert err.startswith("ncgen simulate: error: simulation of 'blowup' failed between t = 0.49 s")
-    assert err.count("\n") == 1
-    assert [p.name for p in tmp_path.iterdir()] == ["blowup.toml"]
+    partial = tmp_path / "x.incomplete.npz"
+    assert err.rstrip().endswith(f"(t = 0 ... 0.49 s, marked incomplete) was written to {partial}")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["blowup.toml", "x.incomplete.npz"]
+    traj = Trajectory.load(partial)
+    assert not traj.complete and traj.t[-1] == pytest.approx(0.49) and len(traj) == 50
+    t = traj.t                  # z'' = (0.5 − t)⁻³ − g from rest: z = 1/(2(0.5 − t)) − 1 − 2t − g t²/2
+    exact = 1 / (2 * (0.5 - t)) - 1 - 2 * t - 9.81 * t**2 / 2
+    np.testing.assert_allclose(traj.q[:, 2], exact, rtol=1e-5, atol=1e-9)
 
 
 def test_help_has_examples(capsys):

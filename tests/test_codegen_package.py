@@ -43,7 +43,7 @@ def test_same_input_same_bytes(tmp_path, pkg):
 
 
 def test_same_bytes_from_another_process(tmp_path, pkg):
-    script = (f"import sys; sys.path.insert(0, {str(TESTS)!r})\n"
+    script = (f"import sys; sys.path[:0] = [{str(TESTS.parent)!r}, {str(TESTS)!r}]  # this checkout's ncgen\n"
               "from test_codegen_samples import chain_doc, chain_functions\n"
               "from ncgen.codegen import write_package\n"
               f"write_package('chain', chain_functions(), {str(tmp_path / 'other')!r}, doc=chain_doc())\n")
@@ -52,7 +52,7 @@ def test_same_bytes_from_another_process(tmp_path, pkg):
 
 
 def test_three_processes_write_at_once(tmp_path, pkg):
-    script = (f"import sys; sys.path.insert(0, {str(TESTS)!r})\n"
+    script = (f"import sys; sys.path[:0] = [{str(TESTS.parent)!r}, {str(TESTS)!r}]  # this checkout's ncgen\n"
               "from test_codegen_samples import chain_doc, chain_functions\n"
               "from ncgen.codegen import write_package\n"
               "functions, doc = chain_functions(), chain_doc()\n"
@@ -133,12 +133,37 @@ def test_split_into_files(tmp_path, limit, n_files):
 
 
 def test_replaces_previous_package(tmp_path, pkg):
+    """Only what ncgen wrote is replaced: generated files and build products go, the
+    user's files stay (issue 13)."""
     (pkg.path / "main.o").write_bytes(b"build product")
+    (pkg.path / "chain_main").write_bytes(b"build product")
+    (pkg.path / "notes.txt").write_text("precious")
     fns = chain_functions()[:1]
     new = write_package("chain", fns, pkg.path, max_file_instructions=0)
     assert new.function_names == ["phi"]
-    assert "main.o" not in files_of(pkg.path)
+    files = files_of(pkg.path)
+    assert "main.o" not in files and "chain_main" not in files
+    assert files["notes.txt"] == b"precious"
+    (pkg.path / "results").mkdir()
+    (pkg.path / "results" / "run.csv").write_text("1,2\n")
+    write_package("chain", fns, pkg.path, max_file_instructions=0)
+    assert (pkg.path / "results" / "run.csv").read_text() == "1,2\n"
     assert siblings(pkg.path) == []
+    new.verify()
+
+
+def test_refuses_to_lose_edits_or_user_files(tmp_path, pkg):
+    (pkg.path / "main.c").write_text("/* my edits */\n")
+    with pytest.raises(CodegenError, match="main.c were edited after generation"):
+        write_package("chain", chain_functions(), pkg.path)
+    assert (pkg.path / "main.c").read_text() == "/* my edits */\n"
+    fresh = write_package("chain", chain_functions()[:1], tmp_path / "fresh", max_file_instructions=0)
+    (fresh.path / "chain_kernels_3.c").write_text("mine")   # a user's file, named like a new generated one
+    with pytest.raises(CodegenError, match="chain_kernels_3.c was not written by ncgen"):
+        write_package("chain", chain_functions(), fresh.path, max_file_instructions=0)
+    assert (fresh.path / "chain_kernels_3.c").read_text() == "mine"
+    assert fresh.function_names == Package.open(fresh.path).function_names == ["phi"]
+    assert not [n for n in siblings(fresh.path) if n.startswith(".")]
 
 
 def test_refuses_to_replace_other_directory(tmp_path):

@@ -7,7 +7,10 @@
  * Starts from the model's consistent initial state at t0 = 0.0 s with the default
  * parameters and zero inputs.  Prints "t", "steps", "newton_iterations" and one line per
  * value, "q[i] = x", "v[i] = x", "lam[i] = x" (%.17g).  Exit status 0 on success, 1 if a
- * step failed (the message names the time), 2 on bad arguments. */
+ * step failed (the message names the time), 2 on bad arguments (the message names the
+ * argument: each is checked on its own, and the number of steps is range-checked before it
+ * is converted to an integer). */
+#include <errno.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -29,30 +32,57 @@ static const char *status_text(int status) {
   }
 }
 
-static int parse(const char *text, double *value) {
+/* Most steps a run may take (a larger count is almost surely a mistyped h). */
+#define MAX_STEPS 1000000000.0
+
+/* A positive finite normal number from the whole of text, or a message naming what. */
+static int parse(const char *program, const char *what, const char *text, double *value) {
   char *end;
+  errno = 0;
   *value = strtod(text, &end);
-  return *end == '\0' && isfinite(*value) && *value > 0;
+  if (end == text || *end != '\0') {
+    fprintf(stderr, "%s: %s: expected a number of seconds, got '%s'\n", program, what, text);
+    return 0;
+  }
+  if (errno == ERANGE || !isfinite(*value) || !(*value > 0) || *value < 1e-300) {
+    fprintf(stderr, "%s: %s: expected a positive finite number of seconds (at least 1e-300), got '%s'\n",
+            program, what, text);
+    return 0;
+  }
+  return 1;
 }
 
 int main(int argc, char *argv[]) {
   double t0 = 0.0, t_end = 1.0, h = 0.001;
   casadi_real q[9], v[9], lam[6];
+  double steps;
   long n_steps, done = 0, iterations = 0;
   int status, i;
-  if (argc > 3 || (argc > 1 && !parse(argv[1], &t_end)) || (argc > 2 && !parse(argv[2], &h))) {
-    fprintf(stderr, "usage: %s [t_end [h]]  (positive numbers, s)\n", argv[0]);
+  const char *program = argc > 0 ? argv[0] : "heavy_top_simulate";
+  if (argc > 3) {
+    fprintf(stderr, "%s: expected at most 2 arguments, got %d\nusage: %s [t_end [h]]  (positive numbers, s)\n",
+            program, argc - 1, program);
     return 2;
   }
-  n_steps = (long) ceil((t_end - t0) / h - 1e-9);
-  if (n_steps < 1) {
-    fprintf(stderr, "%s: t_end = %g s is not after t0 = %g s\n", argv[0], t_end, t0);
+  if ((argc > 1 && !parse(program, "t_end", argv[1], &t_end)) || (argc > 2 && !parse(program, "h", argv[2], &h))) {
+    fprintf(stderr, "usage: %s [t_end [h]]  (positive numbers, s)\n", program);
     return 2;
   }
+  if (!(t_end > t0)) {
+    fprintf(stderr, "%s: t_end: expected a time after t0 = %g s, got %g s\n", program, t0, t_end);
+    return 2;
+  }
+  steps = ceil((t_end - t0) / h - 1e-9);   /* checked before the conversion to long */
+  if (!isfinite(steps) || steps > MAX_STEPS) {
+    fprintf(stderr, "%s: h: %g s is too small for t_end - t0 = %g s (%.3g steps, at most %.0f)\n",
+            program, h, t_end - t0, steps, MAX_STEPS);
+    return 2;
+  }
+  n_steps = steps < 1 ? 1 : (long) steps;
   h = (t_end - t0) / n_steps;
   status = heavy_top_simulate(q0, v0, t0, h, n_steps, n_steps, 0, 0, p0, q, v, lam, &iterations, 0, &done, 0);
   if (status != HEAVY_TOP_STEP_OK) {
-    fprintf(stderr, "%s: step %ld failed at t = %.17g s: %s (status %d)\n", argv[0], done + 1,
+    fprintf(stderr, "%s: step %ld failed at t = %.17g s: %s (status %d)\n", program, done + 1,
             t0 + done * h, status_text(status), status);
     return 1;
   }

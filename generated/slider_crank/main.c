@@ -5,7 +5,8 @@
  * every input and output as "  row col value" lines (nonzeros in compressed-column order).
  *
  * Usage: slider_crank_main [function]    (default: accel; C name without
- * the "slider_crank_" prefix).  Inputs without a default are zero.  Exit status 0 on success. */
+ * the "slider_crank_" prefix).  Inputs without a default are zero.  Exit status 0 on success,
+ * 1 if the function failed, 2 on bad arguments (the message says which), 3 out of memory. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -286,13 +287,19 @@ static int evaluate(const kernel *f) {
 int main(int argc, char *argv[]) {
   const char *wanted = argc > 1 ? argv[1] : "accel";
   size_t k;
+  if (argc > 2) {
+    fprintf(stderr, "slider_crank_main: expected at most 1 argument (a function name), got %d\n"
+            "usage: slider_crank_main [function]\n", argc - 1);
+    return 2;
+  }
   for (k = 0; k < n_kernels; ++k) {
     if (strcmp(kernels[k].name, wanted) == 0) {
       printf("function %s\n", kernels[k].name);
       return evaluate(&kernels[k]);
     }
   }
-  fprintf(stderr, "slider_crank_main: no function '%s'; available:", wanted);
+  fprintf(stderr, "slider_crank_main: function: no function '%.80s'%s; available:", wanted,
+          strlen(wanted) > 80 ? "..." : "");
   for (k = 0; k < n_kernels; ++k) fprintf(stderr, " %s", kernels[k].name);
   fprintf(stderr, "\n");
   return 2;

@@ -5,7 +5,8 @@
  * every input and output as "  row col value" lines (nonzeros in compressed-column order).
  *
  * Usage: tensegrity_main [function]    (default: accel; C name without
- * the "tensegrity_" prefix).  Inputs without a default are zero.  Exit status 0 on success. */
+ * the "tensegrity_" prefix).  Inputs without a default are zero.  Exit status 0 on success,
+ * 1 if the function failed, 2 on bad arguments (the message says which), 3 out of memory. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -286,13 +287,19 @@ static int evaluate(const kernel *f) {
 int main(int argc, char *argv[]) {
   const char *wanted = argc > 1 ? argv[1] : "accel";
   size_t k;
+  if (argc > 2) {
+    fprintf(stderr, "tensegrity_main: expected at most 1 argument (a function name), got %d\n"
+            "usage: tensegrity_main [function]\n", argc - 1);
+    return 2;
+  }
   for (k = 0; k < n_kernels; ++k) {
     if (strcmp(kernels[k].name, wanted) == 0) {
       printf("function %s\n", kernels[k].name);
       return evaluate(&kernels[k]);
     }
   }
-  fprintf(stderr, "tensegrity_main: no function '%s'; available:", wanted);
+  fprintf(stderr, "tensegrity_main: function: no function '%.80s'%s; available:", wanted,
+          strlen(wanted) > 80 ? "..." : "");
   for (k = 0; k < n_kernels; ++k) fprintf(stderr, " %s", kernels[k].name);
   fprintf(stderr, "\n");
   return 2;

@@ -11,8 +11,10 @@ import numpy as np
 from ncgen.assembly.functions import system_functions
 from ncgen.assembly.initial_state import consistent_state
 from ncgen.assembly.kinematics import resolve_fix
+from ncgen.assembly.limits import model_limits
 from ncgen.assembly.mass import CholeskyFactor, assemble_mass
 from ncgen.assembly.rank import dependent_rows
+from ncgen.assembly.redundancy import classify
 from ncgen.assembly.springs import spring_table
 from ncgen.errors import ModelError
 from ncgen.model.context import Context
@@ -32,7 +34,10 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
 
     ``redundant``: constraints linearly dependent at the initial configuration are
     ``"drop"``-ped with a warning naming them, raise (``"error"``), or are kept
-    (``"keep"``, for analysis only: the DAE is then singular).  ``tolerance``: the largest
+    (``"keep"``, for analysis only: the DAE is then singular).  A dependent constraint is
+    dropped only if it is implied by the others near the initial configuration and
+    satisfied (:mod:`ncgen.assembly.redundancy`); one that contradicts the others, or that is
+    dependent only because the configuration is singular, is an error naming it.  ``tolerance``: the largest
     correction, relative to the system's size, that making the initial state consistent
     may apply; beyond it the build fails and says where.  ``assemble=True``: the members'
     initial poses are only a guess; Newton moves them onto the constraints (drives at
@@ -57,10 +62,12 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     fixed = resolve_fix(layout, system.members, fix)
     labels, rows = constraint_rows(system, ctx)
     F, V = force_terms(system, ctx)
+    limits = model_limits(system, ctx)
     M = assemble_mass(layout, members)
     factor = CholeskyFactor(M, layout.coordinate_names)
     q_init, v_init = initial_guess(layout, members)
     p0 = np.concatenate([v for _, v in system.parameters.values()]) if system.parameters else np.zeros(0)
+    limits.check(p0, where=f"system {system.name!r}: ")
 
     A_fn = ca.Function("A", [ctx.t, ctx.q, ctx.p], [ca.jacobian(ca.vertcat(*rows), ctx.q)]) \
         if rows else None
@@ -70,8 +77,11 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
         raise ModelError(f"system {system.name!r}: redundant constraints at the initial configuration: "
                          f"{', '.join(redundant_labels)}; remove them or build(redundant='drop')")
     if dependent and redundant == "drop":
+        phi_fn = ca.Function("phi", [ctx.t, ctx.q, ctx.p], [ca.vertcat(*rows)])
+        _check_droppable(system.name, labels, dependent, phi_fn, A_fn, q_init, p0, t0)
         warnings.warn(f"system {system.name!r}: dropping redundant constraints "
-                      f"{', '.join(redundant_labels)}", stacklevel=3)
+                      f"{', '.join(redundant_labels)} (implied by the others near the initial "
+                      f"configuration, and satisfied)", stacklevel=3)
         keep = [i for i in range(len(rows)) if i not in set(dependent)]
         labels, rows = [labels[i] for i in keep], [rows[i] for i in keep]
 
@@ -81,7 +91,38 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
                              fixed=fixed, assemble=assemble)
     return Model(description=system, layout=layout, labels=labels, functions=functions, M=M, factor=factor,
                  potential=potential, state=state, p0=p0, baumgarte=(alpha, beta), redundant=redundant_labels,
-                 dropped=(redundant == "drop"), t0=t0, springs=spring_table(system, ctx))
+                 dropped=(redundant == "drop"), t0=t0, springs=spring_table(system, ctx),
+                 limits=limits)
+
+
+def _check_droppable(name, labels, dependent, phi_fn, A_fn, q, p, t0) -> None:
+    """Raise unless every ``dependent`` row is implied by the others near ``q`` and satisfied
+    (:mod:`ncgen.assembly.redundancy`), naming the constraints that are not."""
+    found = classify(lambda t, x: np.array(phi_fn(t, x, p)).reshape(-1),
+                     lambda t, x: np.array(A_fn(t, x, p)), q, t0, dependent)
+    named = lambda rows: ", ".join(labels[i] for i in rows)   # noqa: E731
+    if found.violated:
+        items = ", ".join(f"{labels[i]} (Φ = {r:.3g})" for i, r in found.violated.items())
+        raise ModelError(
+            f"system {name!r}: the constraints {items} contradict the others: they are implied by "
+            f"them near the initial configuration (dependent wherever the others hold) but violated. "
+            f"Fix the joint (its drive, distance or points) or remove it")
+    if found.unverified:
+        raise ModelError(
+            f"system {name!r}: the constraints {named(found.unverified)} depend linearly on the others at "
+            f"the initial configuration, and whether they are implied by them could not be checked "
+            f"(Newton on the other constraints did not converge near it), so they are not dropped. "
+            f"Check the initial configuration, remove the constraints if they are redundant, or "
+            f"build(redundant='keep') for analysis only")
+    if found.singular:
+        rows = list(found.singular)
+        raise ModelError(
+            f"system {name!r}: the initial configuration is singular: the constraints {named(rows)} "
+            f"depend linearly on the others there but are not implied by them nearby (they still "
+            f"remove motion), so they cannot be dropped and a DAE keeping them is singular at t0. "
+            f"Start the mechanism away from the singular position (build(assemble=True) with a "
+            f"perturbed guess), remove those constraints if they are not meant, or build("
+            f"redundant='keep') for analysis only")
 
 
 def constraint_rows(system, ctx: Context) -> tuple[list[str], list[ca.SX]]:

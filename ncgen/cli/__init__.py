@@ -1,14 +1,18 @@
 """The ``ncgen`` command line: one module per subcommand (see :mod:`ncgen.cli.registry` for
 how to add one).
 
-Exit codes: 0 success, 1 failure while running, 2 bad usage (argparse's convention).
-Bad input raised as :class:`ncgen.errors.NcgenError` is reported without a traceback.
+Exit codes: 0 success, 1 failure while running, 2 bad usage (argparse's convention), 70
+internal error (a bug), 130 interrupted.  Bad input raised as
+:class:`ncgen.errors.NcgenError` is reported without a traceback; so is anything else (see
+:func:`main`).
 """
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
+import warnings
 
 from ncgen.cli.common import load_model, load_system, write_output
 from ncgen.cli.registry import SUBCOMMANDS, subcommand
@@ -32,6 +36,8 @@ def build_parser() -> argparse.ArgumentParser:
                + "\nRun 'ncgen SUBCOMMAND --help' for a subcommand's options and more examples.",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"ncgen {__version__}")
+    parser.add_argument("--debug", action="store_true",
+                        help="print the Python traceback of an internal error (also NCGEN_DEBUG=1)")
     sub = parser.add_subparsers(dest="command", metavar="SUBCOMMAND", title="subcommands")
     for cmd in SUBCOMMANDS.values():
         p = sub.add_parser(cmd.name, help=cmd.help, description=cmd.description,
@@ -43,16 +49,61 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run ``ncgen`` with ``argv`` (default ``sys.argv[1:]``); returns the exit code."""
+    """Run ``ncgen`` with ``argv`` (default ``sys.argv[1:]``); returns the exit code.
+
+    Never shows a Python traceback for bad input: ncgen's errors, files that cannot be
+    read or written and running out of memory are one-line messages (exit 1), Ctrl-C exits
+    130, and anything else is reported as an internal error with where to report it; its
+    traceback is printed with ``--debug`` or ``NCGEN_DEBUG=1``.  Warnings are one line,
+    ``ncgen: warning: ...``."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv or os.environ.get("NCGEN_DEBUG", "") not in ("", "0")
+    argv = [a for a in argv if a != "--debug"]
     parser = build_parser()
+    with warnings.catch_warnings():
+        if not debug:                    # "ncgen: warning: ...", not a source line of ncgen
+            warnings.showwarning = _show_warning
+        return _run_main(parser, argv, debug)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    print(f"ncgen: warning: {message}", file=sys.stderr if file is None else file)
+
+
+def _run_main(parser: argparse.ArgumentParser, argv: list[str], debug: bool) -> int:
+    """:func:`main` inside its warning format: every outcome mapped to a message and an exit code."""
+    from ncgen.errors import REPORT_TO
+
+    where = "ncgen"
     try:
         args = parser.parse_args(argv)
         if args.command is None:
             parser.print_help(sys.stderr)
             return 2
+        where = f"ncgen {args.command}"
         return args._subcommand.run(args, args._parser)
     except SystemExit as exc:            # argparse: --help, --version and usage errors
         return 0 if exc.code is None else exc.code if isinstance(exc.code, int) else 1
     except NcgenError as exc:
-        print(f"ncgen {args.command}: error: {exc}", file=sys.stderr)
+        print(f"{where}: error: {exc}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        print(f"{where}: interrupted", file=sys.stderr)
+        return 130
+    except OSError as exc:
+        target = f" {exc.filename}" if exc.filename else ""
+        print(f"{where}: error:{target}: {exc.strerror or exc}", file=sys.stderr)
+        return 1
+    except MemoryError:
+        print(f"{where}: error: out of memory; reduce the problem (a larger --dt, fewer members)",
+              file=sys.stderr)
+        return 1
+    except Exception as exc:             # a bug: say so, briefly
+        if debug:
+            import traceback
+            traceback.print_exc()
+        print(f"{where}: internal error ({type(exc).__name__}: {str(exc)[:300]}). This is a bug in "
+              f"ncgen, not in your input; please report it to {REPORT_TO}"
+              + ("" if debug else ". Run with --debug (or NCGEN_DEBUG=1) to see the traceback"),
+              file=sys.stderr)
+        return 70

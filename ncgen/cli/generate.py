@@ -11,8 +11,9 @@ from ncgen.cli.registry import subcommand
 def _generate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("model", metavar="MODEL.toml", help="model file (TOML)")
     p.add_argument("-o", "--output", metavar="DIR", required=True,
-                   help="package directory to write (replaced if it holds an ncgen package; "
-                        "refused if it holds anything else)")
+                   help="package directory to write; over an existing ncgen package only the files "
+                        "ncgen wrote (and their build products) are replaced, other files are kept; "
+                        "refused if DIR holds anything else or generated files were edited")
     p.add_argument("--compile", action="store_true",
                    help="also build the shared library now (cached by content); the package is "
                         "written only if compiling succeeds")

@@ -58,7 +58,9 @@ def _check_outputs(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
         "(inputs held at zero; use the Python API, nc.simulate(..., u=...), to drive them) and write "
         "the trajectory on the grid 0, dt, 2 dt, ... A summary (integrator work, energy and "
         "constraint drift) goes to standard output. Files are written only when the whole run "
-        "succeeds: a failed integration leaves nothing behind and says where and why it failed."),
+        "succeeds: a failed integration says where and why it failed, and writes the trajectory up "
+        "to that time to OUTPUT with '.incomplete' before the suffix (e.g. run.incomplete.npz, "
+        "whose info says complete = false)."),
     examples=(
         "ncgen simulate examples/chain.toml --t-end 2 --dt 0.01 -o chain.npz --plot chain.png\n"
         "ncgen simulate examples/heavy_top.toml --t-end 3 -o top.csv --animate top.gif\n"
@@ -69,13 +71,22 @@ def _check_outputs(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
 def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     import contextlib
 
-    from ncgen.files import atomic_path
+    from ncgen.errors import SimulationError
+    from ncgen.files import atomic_path, incomplete_path
     from ncgen.runtime import simulate as run
 
     _check_outputs(args, parser)
     model = load_model(args.model, args.param)
-    traj = run(model, t_end=args.t_end, dt=args.dt, method=args.method, backend=args.backend,
-               rtol=args.rtol, atol=args.atol)
+    try:
+        traj = run(model, t_end=args.t_end, dt=args.dt, method=args.method, backend=args.backend,
+                   rtol=args.rtol, atol=args.atol)
+    except SimulationError as e:
+        if e.trajectory is None or not len(e.trajectory):
+            raise
+        partial = e.trajectory.save(incomplete_path(args.output))
+        raise SimulationError(f"{e}\nThe partial trajectory (t = {e.trajectory.t[0]:g} ... "
+                              f"{e.trajectory.t[-1]:g} s, marked incomplete) was written to {partial}",
+                              time=e.time, trajectory=e.trajectory) from None
     print(traj.summary())
     with contextlib.ExitStack() as stack:
         traj.save(stack.enter_context(atomic_path(args.output)))

@@ -2,10 +2,19 @@
 
 The cache lives in ``$NCGEN_CACHE_DIR`` (default ``~/.cache/ncgen``); an entry
 ``<name>-<key>/`` holds ``lib<name>.so``, a copy of the package manifest and
-``build.json`` (commands used).  The key hashes the package's C sources and headers, the
+``build.json`` (commands used, and ``library_sha256``: the hash of the library recorded
+when the entry was published).  The key hashes the package's C sources and headers, the
 compiler (path and version) and the flags, so an unchanged package is never rebuilt.
-Entries are built in a temporary sibling directory and renamed into place under an
-exclusive lock, so concurrent builds of the same package are safe and yield one library.
+Entries are built in a temporary sibling directory, flushed to disk (fsync) and renamed
+into place under an exclusive lock, so concurrent builds of the same package are safe,
+yield one library, and a crash or a kill leaves either no entry or a complete one.
+
+Before a cached library is used its sha256 is checked against ``library_sha256``: a
+truncated, zeroed, garbage or empty file (or a missing/unreadable ``build.json``) is never
+loaded (``dlopen`` of such a file crashes the process with SIGBUS/SIGSEGV or fails with a
+raw OSError); the damaged entry is removed and rebuilt, with a note on stderr.  Temporary
+build folders left by killed builds are removed once their process is gone
+(:func:`ncgen.files.sweep_stale`).
 
 Flags: ``cflags`` argument, else ``$NCGEN_CFLAGS``, else the defaults: ``-O2``, and ``-O0``
 for the package's ``build.large_sources`` (files holding a function so long, or belonging
@@ -20,7 +29,6 @@ import json
 import os
 import platform
 import shlex
-import shutil
 import subprocess
 import sys
 import threading
@@ -39,7 +47,7 @@ DEFAULT_CFLAGS = ("-O2",)
 #: Default flags of a package's ``build.large_sources``.
 LARGE_CFLAGS = ("-O0",)
 #: Bump when the way libraries are built changes, to invalidate old cache entries.
-BUILD_SCHEME = 2
+BUILD_SCHEME = 3
 #: Seconds before a running compile prints its status line.
 PROGRESS_DELAY = 1.0
 
@@ -96,23 +104,57 @@ def compile_package(pkg: Package | str | os.PathLike, cc: str | None = None,
     entry = root / f"{pkg.name}-{key[:24]}"
     library = entry / f"lib{pkg.name}.so"
     result = BuildResult(path=library, cached=True, key=key, compiler=compiler, cflags=flags)
-    if library.is_file():
+    fsutil.sweep_stale(root)          # build folders of killed builds (owner gone)
+    if entry_problem(entry, library) is None:
         return result
-    root.mkdir(parents=True, exist_ok=True)
-    with fsutil.locked(root / f".{entry.name}.lock"):
-        if library.is_file():  # another process built it while we waited
-            return result
-        with fsutil.temporary_sibling(entry) as tmp:
-            commands = _build(pkg, compiler, flags, per_source, jobs, tmp)
-            (tmp / manifest.FILENAME).write_bytes((pkg.path / manifest.FILENAME).read_bytes())
-            (tmp / "build.json").write_text(json.dumps(
-                {"key": key, "package": pkg.name, "content_hash": pkg.content_hash,
-                 "compiler": compiler.version, "commands": commands}, indent=1) + "\n")
-            fsutil.default_mode_dir(tmp)
-            if entry.exists():  # left incomplete by hand or by a crashed ncgen version
-                shutil.rmtree(entry)
-            os.rename(tmp, entry)
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+        with fsutil.locked(root / f".{entry.name}.lock"):
+            problem = entry_problem(entry, library)
+            if problem is None:  # another process built it while we waited
+                return result
+            if entry.exists():
+                _status(f"cached library {library} is damaged ({problem}); rebuilding it")
+            with fsutil.temporary_sibling(entry) as tmp:
+                commands = _build(pkg, compiler, flags, per_source, jobs, tmp)
+                (tmp / manifest.FILENAME).write_bytes((pkg.path / manifest.FILENAME).read_bytes())
+                (tmp / BUILD_RECORD).write_text(json.dumps(
+                    {"key": key, "package": pkg.name, "content_hash": pkg.content_hash,
+                     "compiler": compiler.version, "commands": commands,
+                     "library_sha256": fsutil.sha256_file(tmp / library.name)}, indent=1) + "\n")
+                fsutil.default_mode_dir(tmp)
+                fsutil.fsync_tree(tmp)
+                if entry.exists():  # damaged, or left incomplete by hand or an older ncgen
+                    fsutil.remove_dir(entry)
+                os.rename(tmp, entry)
+                fsutil.fsync_dir(root)
+    except OSError as e:
+        raise CodegenError(f"could not write the compile cache {root}: {e.strerror or e} "
+                           f"({e.filename or root}); set NCGEN_CACHE_DIR to a writable directory") from None
     return BuildResult(path=library, cached=False, key=key, compiler=compiler, cflags=flags)
+
+
+#: The file of a cache entry recording how it was built and the library's sha256.
+BUILD_RECORD = "build.json"
+
+
+def entry_problem(entry: Path, library: Path) -> str | None:
+    """Why the cache entry ``entry`` may not be used (missing, no record, library hash
+    differing from the one recorded at publication), or ``None`` when it is intact."""
+    if not entry.exists():
+        return "missing"
+    try:
+        record = json.loads((entry / BUILD_RECORD).read_text())
+        expected = record["library_sha256"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return f"no readable {BUILD_RECORD} with the library's hash"
+    try:
+        actual = fsutil.sha256_file(library)
+    except OSError as e:
+        return f"library unreadable: {e.strerror or e}"
+    if actual != expected:
+        return f"library sha256 {actual[:12]}... differs from the {expected[:12]}... recorded when it was built"
+    return None
 
 
 def build_key(pkg: Package, compiler: Compiler, per_source: dict[str, tuple[str, ...]]) -> str:

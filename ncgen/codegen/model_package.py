@@ -34,7 +34,7 @@ from ncgen.codegen.doc import PackageDoc
 from ncgen.codegen.linearization_package import linearization_section
 from ncgen.codegen.looped import package_functions, reroll_limit
 from ncgen.codegen.manifest import canonical_json
-from ncgen.codegen.package import Package, check_replaceable, write_package
+from ncgen.codegen.package import Package, check_replaceable, publish, write_package
 from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
 from ncgen.codegen.section import Section
 from ncgen.codegen.stepper_package import stepper_section
@@ -96,7 +96,7 @@ def generate(model, out_dir: str | os.PathLike, *, cflags=None, compile: bool = 
     with fsutil.temporary_sibling(out_dir) as tmp:
         pkg = write_package(model.name, functions, tmp / out_dir.name, **options)
         compile_package(pkg, cflags=cflags)
-        fsutil.replace_dir(pkg.path, out_dir, check_replaceable)
+        publish(pkg.path, out_dir)
     return dataclasses.replace(pkg, path=out_dir)
 
 

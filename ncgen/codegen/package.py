@@ -13,7 +13,10 @@ A package directory ``out_dir`` holds (for package name ``name``)::
 
 The output depends only on the inputs (no time, path or host), so it is byte-for-byte
 reproducible.  It is rendered completely in a temporary sibling and renamed into place;
-an existing ``out_dir`` is replaced only if it is an ncgen package (or empty).
+an existing ``out_dir`` is replaced only if it is an ncgen package (or empty), and then
+only what ncgen wrote there is replaced: the files its manifest lists and what its
+Makefile builds.  Anything else in it (notes, results) is kept; generated files edited
+by hand make the write refuse rather than lose the edits.
 """
 from __future__ import annotations
 
@@ -146,7 +149,7 @@ def write_package(name: str, functions: Sequence[ca.Function], out_dir: str | os
             (tmp / rel).write_bytes(blob)
         fsutil.default_mode_dir(tmp)
         written = manifest.read_manifest(tmp)
-        fsutil.replace_dir(tmp, out_dir, check_replaceable)
+        publish(tmp, out_dir)
     return Package(name=name, path=out_dir, manifest=written, functions={f.name(): f for f in functions})
 
 
@@ -272,7 +275,8 @@ def _check_doc(doc: PackageDoc, functions: list[ca.Function]) -> None:
 
 
 def check_replaceable(out_dir: Path) -> None:
-    """Raise unless ``out_dir`` is absent, an empty directory or an ncgen package."""
+    """Raise unless ``out_dir`` is absent, an empty directory or an ncgen package whose
+    generated files are as generated (an edited one would be lost)."""
     if not out_dir.exists():
         return
     if not out_dir.is_dir():
@@ -280,10 +284,48 @@ def check_replaceable(out_dir: Path) -> None:
     if not any(out_dir.iterdir()):
         return
     try:
-        manifest.read_manifest(out_dir)
+        data = manifest.read_manifest(out_dir)
     except CodegenError as e:
         raise CodegenError(f"refusing to replace {out_dir}: it exists and is not an ncgen package "
                            f"({e}); remove it yourself or choose another output directory") from None
+    edited = [rel for rel in manifest.modified_files(out_dir, data) if (out_dir / rel).exists()]
+    if edited:
+        raise CodegenError(f"refusing to replace {out_dir}: its generated files {', '.join(edited)} were "
+                           f"edited after generation and would be lost; move them elsewhere (or delete "
+                           f"them) first")
+
+
+def generated_entries(out_dir: Path, data: dict) -> set[str]:
+    """Top-level names in the package ``out_dir`` that ncgen wrote: the manifest and its
+    files, and what the package's Makefile builds from them (objects, library, programs)."""
+    build = data.get("build", {})
+    names = {manifest.FILENAME, *(rel.split("/")[0] for rel in data.get("files", {}))}
+    names |= {rel[:-2] + ".o" for rel in data.get("files", {}) if rel.endswith(".c")}
+    names |= {build.get("library", ""), build.get("executable", "")}
+    names |= {prog[:-2] for prog in build.get("programs", ())}
+    return names - {""}
+
+
+def user_entries(out_dir: Path) -> list[str]:
+    """Top-level entries of the package ``out_dir`` that ncgen did not write (the user's
+    notes, results, a CMake build folder): kept when the package is regenerated."""
+    data = manifest.read_manifest(out_dir)
+    ours = generated_entries(out_dir, data)
+    return sorted(p.name for p in out_dir.iterdir() if p.name not in ours)
+
+
+def publish(new: Path, out_dir: Path) -> None:
+    """Put the complete package ``new`` in place of ``out_dir``, replacing only what ncgen
+    wrote there (:func:`user_entries` are moved into the new package); refuses (before
+    touching anything) if a user's entry has the name of a new generated file."""
+    def carry(target: Path) -> list[str]:
+        names = user_entries(target) if any(target.iterdir()) else []
+        clash = [n for n in names if (new / n).exists()]
+        if clash:
+            raise CodegenError(f"refusing to replace {target}: {', '.join(clash)} was not written by "
+                               f"ncgen but the new package writes a file of that name; move it away")
+        return names
+    fsutil.replace_dir(new, out_dir, check_replaceable, carry)
 
 
 def _checked_jacobians(jacobians: Sequence[str], functions: list[ca.Function]) -> list[str]:

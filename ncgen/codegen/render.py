@@ -32,15 +32,17 @@ def banner(template: str, output: str) -> str:
 
 
 def shipped_templates_dir() -> Path:
-    """Directory of the shipped ``c`` templates: the installed ``ncgen._templates/c``, or, when
-    ``ncgen`` is imported from a source checkout (``python -c`` run in the repository), the
-    checkout's ``templates/c``."""
+    """Directory of the shipped ``c`` templates: when ``ncgen`` is imported from a source
+    checkout (``python -c`` run in the repository, a git worktree), that checkout's
+    ``templates/c`` — an editable install elsewhere must not lend its templates to this
+    code — else the installed ``ncgen._templates/c``."""
+    source = Path(__file__).resolve().parents[2]
+    checkout = source / "templates" / "c"
+    if checkout.is_dir() and (source / "pyproject.toml").is_file():
+        return checkout
     spec = importlib.util.find_spec("ncgen._templates")
     if spec is not None and spec.submodule_search_locations:
         return Path(list(spec.submodule_search_locations)[0]) / "c"
-    checkout = Path(__file__).resolve().parents[2] / "templates" / "c"
-    if checkout.is_dir():
-        return checkout
     raise CodegenError("ncgen's C templates are missing: neither the package ncgen._templates nor "
                        f"{checkout} exists; reinstall ncgen (pip install .)")
 

@@ -27,6 +27,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.errors import ModelError
+from ncgen.validation import MAX_MAGNITUDE
 
 #: Longest text expression accepted (characters).
 MAX_TEXT = 10_000
@@ -104,9 +105,27 @@ def parse(text: str, names: dict[str, ca.SX], what: str) -> ca.SX:
     except SyntaxError as e:
         raise ExpressionError(f"{what}: invalid expression {text!r}: {e.msg}") from None
     try:
-        return ca.SX(_Parser(names, what, text).visit(tree.body))
+        e = ca.SX(_Parser(names, what, text).visit(tree.body))
     except RecursionError:
         raise ExpressionError(f"{what}: expression {text!r} is nested too deeply") from None
+    check_constant(e, what, text)
+    return e
+
+
+def check_constant(e: ca.SX, what: str, text: str | None = None) -> None:
+    """Refuse an expression whose constant components are not finite real numbers of
+    magnitude at most :data:`~ncgen.validation.MAX_MAGNITUDE` (``1/0``, ``sqrt(-1)``,
+    ``9**9**9**9``): they would only show up as NaN or inf when simulating."""
+    for i in range(e.numel()):
+        x = e[i]
+        if not x.is_constant():
+            continue
+        v = float(ca.DM(x))
+        if not math.isfinite(v) or abs(v) > MAX_MAGNITUDE:
+            given = f" {text!r}" if text is not None else ""
+            raise ExpressionError(f"{what}: the expression{given} evaluates to {v:g}"
+                                  + ("" if math.isfinite(v) else " (not a finite real number)")
+                                  + (f", larger than {MAX_MAGNITUDE:g}" if math.isfinite(v) else ""))
 
 
 class _Parser:
@@ -125,7 +144,30 @@ class _Parser:
     def visit_Constant(self, node):
         if isinstance(node.value, bool) or not isinstance(node.value, (int, float)):
             self.fail(f"constant {node.value!r} is not a number")
-        return float(node.value)
+        try:
+            value = float(node.value)
+        except OverflowError:
+            value = math.inf
+        if not abs(value) <= MAX_MAGNITUDE:
+            self.fail(f"constant {_short(node.value)} is too large (more than {MAX_MAGNITUDE:g})")
+        return value
+
+    def checked(self, what, f, *args):
+        """``f(*args)`` with folded constants kept finite and real."""
+        try:
+            out = f(*args)
+        except ZeroDivisionError:
+            self.fail(f"{what}: division by zero")
+        except OverflowError:
+            self.fail(f"{what}: the result is too large")
+        except (ValueError, TypeError) as e:
+            self.fail(f"{what}: {e}")
+        if isinstance(out, complex):
+            self.fail(f"{what}: the result is complex ({out:g})")
+        if isinstance(out, float) and not (math.isfinite(out) and abs(out) <= MAX_MAGNITUDE):
+            self.fail(f"{what}: the result is {out:g}, not a finite real number"
+                      + (f" of magnitude at most {MAX_MAGNITUDE:g}" if math.isfinite(out) else ""))
+        return out
 
     def visit_Name(self, node):
         if node.id in self.names:
@@ -143,7 +185,7 @@ class _Parser:
         f = ops.get(type(node.op))
         if f is None:
             self.fail(f"operator {type(node.op).__name__} is not allowed")
-        return f(self.visit(node.left), self.visit(node.right))
+        return self.checked(f"'{ast.unparse(node)}'", f, self.visit(node.left), self.visit(node.right))
 
     def visit_UnaryOp(self, node):
         x = self.visit(node.operand)
@@ -185,7 +227,10 @@ class _Parser:
         f, n = FUNCTIONS[node.func.id]
         if len(node.args) != n:
             self.fail(f"{node.func.id}() takes {n} argument{'s' * (n != 1)}, got {len(node.args)}")
-        return f(*(ca.SX(self.visit(a)) for a in node.args))
+        args = [self.visit(a) for a in node.args]
+        if all(isinstance(a, float) for a in args):      # constants: fold and check
+            return self.checked(f"'{ast.unparse(node)}'", lambda *x: float(ca.DM(f(*map(ca.DM, x)))), *args)
+        return f(*(ca.SX(a) for a in args))
 
     def visit_Subscript(self, node):
         if not isinstance(node.value, ast.Name):
@@ -201,6 +246,11 @@ class _Parser:
         if not -n <= i < n:
             self.fail(f"index {i} out of range: {node.value.id} has {n} component{'s' * (n != 1)}")
         return ca.SX(base)[i % n]
+
+
+def _short(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 30 else f"{text[:12]}...({len(text)} digits)"
 
 
 def _describe_node(node) -> str:
@@ -328,11 +378,14 @@ def _as_sx(v, sc: Scope, what: str) -> ca.SX:
         return ca.vertcat(*parts) if parts else ca.SX(0, 1)
     try:
         a = np.asarray(v, dtype=float)
+    except OverflowError:
+        raise ExpressionError(f"{what}: a number is too large (more than {MAX_MAGNITUDE:g})") from None
     except (TypeError, ValueError):
         raise ExpressionError(f"{what}: expected a number, a string expression, a CasADi SX "
                               f"expression or a callable, got {v!r}") from None
-    if not np.all(np.isfinite(a)):
-        raise ExpressionError(f"{what}: expected finite numbers, got {a.tolist()}")
+    if not np.all(np.isfinite(a)) or (a.size and np.max(np.abs(a)) > MAX_MAGNITUDE):
+        raise ExpressionError(f"{what}: expected finite numbers of magnitude at most {MAX_MAGNITUDE:g}, "
+                              f"got {a.tolist() if a.size <= 12 else 'a non-finite or huge value'}")
     return ca.SX(ca.DM(a.reshape(-1)))
 
 

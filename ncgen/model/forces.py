@@ -15,7 +15,8 @@ import numpy as np
 from ncgen.errors import BasisError
 from ncgen.errors import ModelError
 from ncgen.model.joint_base import check_members
-from ncgen.validation import as_vector
+from ncgen.model.members import model_name
+from ncgen.validation import as_scalar, as_vector
 
 
 class Force:
@@ -37,14 +38,14 @@ class Force:
         given = self.name
         self.name = given or f"{self.kind.lower()}_{index}"
         try:
-            if not isinstance(self.name, str) or not self.name.isidentifier():
-                raise ModelError(f"force name: expected an identifier (letters, digits, _), got {self.name!r}")
+            model_name(self.name, "force name")
             if any(f.name == self.name for f in system.forces):
                 raise ModelError(f"{self.label}: the name is already used by another force "
                                  f"of system {system.name!r}")
             check_members(self.members(), system, self.label)
             self.system = system
             self.check(system)
+            self._check_nonnegative()
         except BaseException:
             self.system, self.name = None, given
             raise
@@ -54,6 +55,19 @@ class Force:
 
     def check(self, system):
         """Validate arguments (subclasses)."""
+
+    def nonnegative(self) -> dict:
+        """Values that must be >= 0 (name -> value): numbers are checked when the force is
+        added, expressions of parameters when the model is built (:mod:`ncgen.assembly.limits`)."""
+        return {}
+
+    def _check_nonnegative(self) -> None:
+        for key, value in self.nonnegative().items():
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+                continue
+            v = as_scalar(value, f"{self.label}: {key}")
+            if v < 0:
+                raise ModelError(f"{self.label}: {key}: expected a number >= 0, got {v:g}")
 
     def generalized(self, ctx) -> ca.SX:
         """``Q`` as an nq-vector expression."""
@@ -151,6 +165,9 @@ class Spring(Force):
         if self.a is self.b:
             raise ModelError(f"{self.label}: both ends on the same member exert no force")
 
+    def nonnegative(self) -> dict:
+        return {"k": self.k, "damping": self.damping, "rest_length": self.rest_length}
+
     def _end(self, ctx, m, at):
         at = np.asarray(at, float)
         if m.is_ground:
@@ -222,6 +239,9 @@ class TorsionalSpring(Force):
         from ncgen.model.context import Context
         from ncgen.model.layout import make_layout
         self.joint.gauge(Context(system, make_layout(system.dim, list(system.members.values()))))
+
+    def nonnegative(self) -> dict:
+        return {"k": self.k, "damping": self.damping}
 
     def deflection(self, ctx) -> ca.SX:
         """``δ = θ − rest_angle`` in (−π, π] (rad)."""

@@ -18,7 +18,7 @@ import numpy as np
 
 from ncgen.errors import ModelError
 from ncgen.model.joint_equations import name_of
-from ncgen.model.members import Ground, Member
+from ncgen.model.members import Ground, Member, model_name
 from ncgen.reproducible import norm
 from ncgen.validation import as_vector
 
@@ -60,8 +60,7 @@ class Joint:
         given = self.name
         self.name = given or f"{self.kind.lower()}_{index}"
         try:
-            if not isinstance(self.name, str) or not self.name.isidentifier():
-                raise ModelError(f"joint name: expected an identifier (letters, digits, _), got {self.name!r}")
+            model_name(self.name, "joint name")
             if any(j.name == self.name for j in system.joints):
                 raise ModelError(f"{self.label}: the name is already used by another joint "
                                  f"of system {system.name!r}")

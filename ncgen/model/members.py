@@ -15,11 +15,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ncgen.errors import BasisError, ModelError
+from ncgen.errors import BasisError, ModelError, NcgenError
 from ncgen.reproducible import matvec
 from ncgen.symbolic.coordinates import CoordinateType
 from ncgen.symbolic.member import RigidMember
 from ncgen.validation import as_vector
+from ncgen.validation import name as valid_name
+
+
+def model_name(value, what: str) -> str:
+    """``value`` checked by the one naming rule (:func:`ncgen.validation.name`), as a ModelError."""
+    try:
+        return valid_name(value, what)
+    except NcgenError as e:
+        raise ModelError(str(e)) from None
 
 
 @dataclass(frozen=True)
@@ -133,8 +142,7 @@ class Member:
 
     def add_marker(self, name: str, local) -> "Member":
         """Name a body-fixed point (local coordinates) for outputs, e.g. ``traj.point``."""
-        if not isinstance(name, str) or not name.isidentifier():
-            raise ModelError(f"{self.name}: marker name: expected an identifier, got {name!r}")
+        model_name(name, f"{self.name}: marker name")
         if name in self.markers:
             raise ModelError(f"{self.name}: marker {name!r} already defined")
         point = as_vector(local, self.dim, f"{self.name}.{name}: local point")

@@ -45,7 +45,7 @@ class Model:
     """A validated, assembled, constant system (create it with ``System.build()``)."""
 
     def __init__(self, *, description, layout, labels, functions, M, factor, potential, state, p0, baumgarte,
-                 redundant, dropped, t0, springs=None):
+                 redundant, dropped, t0, springs=None, limits=None):
         system = description
         self.members = MappingProxyType(dict(system.members))
         self.joints = tuple(system.joints)
@@ -77,6 +77,8 @@ class Model:
         self.gravity = system.gravity.copy()
         #: the springs and cables as plain data (:class:`ncgen.assembly.springs.SpringTable`)
         self.springs = springs
+        #: values that must stay >= 0 for any parameter vector (ncgen.assembly.limits.Limits)
+        self.limits = limits
         for key, value in vars(self).items():
             object.__setattr__(self, key, _frozen(value))
         object.__setattr__(self, "_frozen", True)
@@ -184,7 +186,11 @@ class Model:
             if name not in self.parameter_names:
                 raise KeyError(f"unknown parameter {name!r}; parameters: {', '.join(self.parameter_names)}")
             i = self.parameter_names.index(name)
-            p[offsets[i]:offsets[i + 1]] = np.atleast_1d(np.asarray(val, float)).reshape(-1)
+            size = self.parameter_sizes[i]
+            given = [val] if np.ndim(val) == 0 else val
+            p[offsets[i]:offsets[i + 1]] = as_vector(given, size, f"parameter {name!r}")
+        if self.limits is not None:
+            self.limits.check(p, where=f"model {self.name!r}: ")
         return p
 
     def member(self, name: str):

@@ -13,9 +13,9 @@ from __future__ import annotations
 import numpy as np
 import casadi as ca
 
-from ncgen.errors import ModelError
+from ncgen.errors import ModelError, NcgenError
 from ncgen.model.expressions import check_name
-from ncgen.model.members import Ground, Member, NodeRef
+from ncgen.model.members import Ground, Member, NodeRef, model_name
 from ncgen.reproducible import frame_along, norm
 from ncgen.symbolic.coordinates import coordinate_type
 from ncgen.symbolic.member import RigidMember
@@ -28,8 +28,7 @@ class System:
     """A multibody system under construction; :meth:`build` turns it into a :class:`Model`."""
 
     def __init__(self, name: str, gravity=DEFAULT_GRAVITY):
-        if not isinstance(name, str) or not name.isidentifier():
-            raise ModelError(f"system name: expected an identifier (letters, digits, _), got {name!r}")
+        model_name(name, "system name")
         g = np.asarray(gravity, dtype=float).reshape(-1) if np.ndim(gravity) == 1 else None
         if g is None or g.size not in (2, 3):
             raise ModelError(f"gravity: expected 2 (planar) or 3 numbers, got {gravity!r}")
@@ -45,8 +44,7 @@ class System:
 
     # ------------------------------------------------------------- members
     def _new_name(self, name: str, what: str) -> str:
-        if not isinstance(name, str) or not name.isidentifier():
-            raise ModelError(f"{what} name: expected an identifier (letters, digits, _), got {name!r}")
+        model_name(name, f"{what} name")
         if name in self.members or name == "ground" or name in self.inputs or name in self.parameters:
             raise ModelError(f"{what} {name!r}: the name is already used in system {self.name!r}")
         if what in ("input", "parameter"):
@@ -199,9 +197,13 @@ class System:
         """A parameter with a default ``value`` (scalar or vector): symbolic in every
         assembled and generated function, so one kernel serves many values."""
         name = self._new_name(name, "parameter")
-        val = np.atleast_1d(np.asarray(value, dtype=float)).reshape(-1)
-        if not np.all(np.isfinite(val)):
-            raise ModelError(f"parameter {name!r}: expected finite numbers, got {value!r}")
+        given = [value] if np.ndim(value) == 0 else value
+        try:
+            val = as_vector(given, int(np.size(given)), f"parameter {name!r}")
+        except NcgenError as e:
+            raise ModelError(str(e)) from None
+        if val.size == 0:
+            raise ModelError(f"parameter {name!r}: expected at least one number, got {value!r}")
         p = ca.SX.sym(name, val.size)
         self.parameters[name] = (p, val)
         return p

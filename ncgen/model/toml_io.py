@@ -27,11 +27,13 @@ import numpy as np
 
 from ncgen.errors import NcgenError
 from ncgen.errors import ModelError
+from ncgen.files import decode_text
 from ncgen.model import toml_write
 from ncgen.model.expressions import did_you_mean, parse, scope, value_to_toml
 from ncgen.model.forces import FORCE_TYPES, GeneralizedForce, PointForce, Spring, Torque, TorsionalSpring
 from ncgen.model.joints import JOINT_TYPES, CoordinateDriver, Distance
 from ncgen.model.members import NodeRef
+from ncgen.validation import MAX_NAME, as_scalar
 
 TOP_KEYS = ("system", "parameters", "inputs", "members", "joints", "forces")
 
@@ -58,12 +60,14 @@ def _source_text(source) -> tuple[str, str]:
                                     and (source.endswith(".toml") or Path(source).is_file())):
         path = Path(source)
         try:
-            return path.read_text(encoding="utf-8"), str(path)
+            return decode_text(path.read_bytes(), str(path)), str(path)
+        except NcgenError as e:
+            raise ModelError(str(e)) from None
         except OSError as e:
             raise ModelError(f"cannot read model file {str(path)!r}: {e.strerror}") from None
     if not isinstance(source, str):
         raise ModelError(f"from_toml: expected a path or TOML text, got {type(source).__name__}")
-    return source, "<toml text>"
+    return source.removeprefix("\ufeff"), "<toml text>"
 
 
 def _describe(v) -> str:
@@ -116,7 +120,7 @@ class _Table:
 def _number(v, path) -> float:
     if not _is_number(v):
         raise ModelError(f"{path}: expected a number, got {_describe(v)}")
-    return float(v)
+    return as_scalar(v, path)
 
 
 def _string(v, path) -> str:
@@ -134,7 +138,7 @@ def _bool(v, path) -> bool:
 def _vector(v, n, path) -> list[float]:
     if not isinstance(v, list) or len(v) != n or not all(_is_number(x) for x in v):
         raise ModelError(f"{path}: expected {n} numbers, got {_describe(v)}")
-    return [float(x) for x in v]
+    return [as_scalar(x, f"{path}[{i}]") for i, x in enumerate(v)]
 
 
 def _matrix(v, n, path) -> list[list[float]]:
@@ -156,7 +160,7 @@ class _Loader:
         if not isinstance(gravity, list) or len(gravity) not in (2, 3) or not all(_is_number(x) for x in gravity):
             raise ModelError(f"system.gravity: expected 2 (planar) or 3 numbers, got {_describe(gravity)}")
         sysd.finish(("name", "gravity"))
-        self.s = system_class(name, gravity=[float(x) for x in gravity])
+        self.s = system_class(name, gravity=[as_scalar(x, f"system.gravity[{i}]") for i, x in enumerate(gravity)])
         self.dim = self.s.dim
         self._parameters(_Table(top.get("parameters", {}), "parameters"))
         self._inputs(_Table(top.get("inputs", {}), "inputs"))
@@ -179,9 +183,9 @@ class _Loader:
         for k, v in t.data.items():
             path = t.at(k)
             if _is_number(v):
-                val = float(v)
+                val = as_scalar(v, path)
             elif isinstance(v, list) and v and all(_is_number(x) for x in v):
-                val = [float(x) for x in v]
+                val = [as_scalar(x, f"{path}[{i}]") for i, x in enumerate(v)]
             else:
                 raise ModelError(f"{path}: expected a number or a list of numbers, got {_describe(v)}")
             self._wrap(path, self.s.add_parameter, k, val)
@@ -311,7 +315,7 @@ class _Loader:
         sc = sc or self._scope(**scope_kw)
         if n == 1 or isinstance(v, str):
             if _is_number(v) and n == 1:
-                return float(v)
+                return as_scalar(v, path)
             if not isinstance(v, str):
                 what = "a number or an expression string" if n == 1 else \
                     f"{n} numbers or expression strings, or one vector expression"
@@ -426,8 +430,8 @@ class _Loader:
 
 def _default_name(origin: str) -> str:
     stem = Path(origin).stem if origin != "<toml text>" else "model"
-    name = "".join(c if c.isalnum() or c == "_" else "_" for c in stem)
-    return name if name.isidentifier() else "model"
+    name = "".join(c if c.isascii() and (c.isalnum() or c == "_") else "_" for c in stem)[:MAX_NAME]
+    return name if name.isidentifier() and not name[0].isdigit() else "model"
 
 
 # ======================================================================= writing

@@ -25,7 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ncgen.errors import OptimizationError, ProblemFileError
+from ncgen.errors import NcgenError, OptimizationError, ProblemFileError
+from ncgen.files import decode_text
 from ncgen.optim.problem import METHODS, OptimalControl
 
 TOP_KEYS = ("model", "horizon", "parameters", "free_parameters", "bounds", "initial", "final", "periodic",
@@ -52,7 +53,9 @@ def read_problem_file(path) -> tuple[dict, str]:
     """``(data, origin)``: the parsed TOML of a problem file."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = decode_text(path.read_bytes(), str(path))
+    except NcgenError as exc:
+        raise ProblemFileError(str(exc)) from None
     except OSError as exc:
         raise ProblemFileError(f"problem file {str(path)!r}: cannot be read ({exc.strerror or exc})") from None
     try:

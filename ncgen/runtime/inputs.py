@@ -17,19 +17,30 @@ import math
 import numpy as np
 
 from ncgen.errors import NcgenError, ShapeError
-from ncgen.validation import as_vector
+from ncgen.validation import allocation, as_scalar, as_vector
 
 HOLDS = ("zoh", "linear")
 
 
-def time_grid(t0: float, t_end: float, dt: float) -> np.ndarray:
-    """``t0, t0 + h, ..., t_end`` (see module docstring)."""
-    t0, t_end, dt = float(t0), float(t_end), float(dt)
-    if not all(map(math.isfinite, (t0, t_end, dt))) or dt <= 0:
-        raise NcgenError(f"dt: expected a positive finite step (s), got {dt!r}")
+def time_grid(t0: float, t_end: float, dt: float, bytes_per_point: float = 8.0) -> np.ndarray:
+    """``t0, t0 + h, ..., t_end`` (see module docstring).  Each argument is checked on its own
+    and named; a grid whose results would need more than
+    :data:`~ncgen.validation.MAX_ALLOCATION` bytes (``bytes_per_point`` each) is refused
+    before anything is allocated."""
+    t0 = as_scalar(t0, "t0")
+    t_end = as_scalar(t_end, "t_end")
+    dt = as_scalar(dt, "dt")
+    if dt <= 0:
+        raise NcgenError(f"dt: expected a positive output step (s), got {dt:g}")
     if not t_end > t0:
-        raise NcgenError(f"t_end: expected a time after t0 = {t0:g} s, got {t_end!r}")
-    n = max(1, math.ceil((t_end - t0) / dt - 1e-9))
+        raise NcgenError(f"t_end: expected a time after t0 = {t0:g} s, got {t_end:g}")
+    steps = (t_end - t0) / dt
+    if not math.isfinite(steps) or steps > 2**53:
+        raise NcgenError(f"dt: {dt:g} s is too small for the span {t_end - t0:g} s ({steps:.3g} steps)")
+    n = max(1, math.ceil(steps - 1e-9))
+    allocation((n + 1) * bytes_per_point, f"the output grid t0 = {t0:g} ... t_end = {t_end:g} s with "
+               f"dt = {dt:g} s ({n + 1:,} points)", "use a larger dt (the output step; the integrator "
+               "chooses its own internal steps) or a shorter run")
     return t0 + (t_end - t0) * np.arange(n + 1) / n
 
 
@@ -92,5 +103,13 @@ def parameter_values(p, model) -> np.ndarray:
             return model.parameters(**p)
         except KeyError as e:
             raise NcgenError(str(e.args[0])) from None
+    try:
+        values = np.asarray(p, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        values = None
+    if values is not None and values.shape == (model.np,):
+        offsets = np.cumsum([0] + model.parameter_sizes)
+        by_name = {n: values[offsets[i]:offsets[i + 1]] for i, n in enumerate(model.parameter_names)}
+        return model.parameters(**by_name)       # names the parameter that is wrong
     return as_vector(p, model.np, "p (parameter values)")
 

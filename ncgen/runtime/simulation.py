@@ -17,7 +17,7 @@ from ncgen.runtime.inputs import hold_columns, input_samples, parameter_values, 
 from ncgen.runtime.progress import Progress
 from ncgen.runtime.stepper import MAX_HALVINGS, MAX_ITER, TOL, simulate_stepper
 from ncgen.runtime.trajectory import Trajectory
-from ncgen.validation import as_vector
+from ncgen.validation import as_scalar, as_vector
 
 METHODS = ("idas", "stepper")
 #: The run is split into at most this many chunks (progress updates; see ncgen.runtime.idas).
@@ -76,8 +76,8 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
     for name, tol in tolerances.items():
         if not (math.isfinite(tol) and tol > 0):
             raise NcgenError(f"{name}: expected a positive tolerance, got {tol!r}")
-    t0 = model.t0 if t0 is None else float(t0)
-    t = time_grid(t0, t_end, dt)
+    t0 = model.t0 if t0 is None else as_scalar(t0, "t0")
+    t = time_grid(t0, t_end, dt, bytes_per_point=point_bytes(model))
     pv = parameter_values(p, model)
     U = input_samples(u, model, t)
     columns = hold_columns(U, t, hold)
@@ -109,6 +109,13 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
     if failure is not None:
         raise SimulationError(message, time=float(t[k]), trajectory=traj)
     return traj
+
+
+def point_bytes(model) -> float:
+    """Bytes a trajectory holds per output time, counting the integrator's work arrays:
+    ``t``, q, v, a, λ, u, markers and their rates, energies, residuals, twice over."""
+    per = 1 + 3 * model.nq + 2 * model.nc + model.nu + 2 * model.dim * len(model.marker_names) + 4
+    return 2 * 8.0 * per
 
 
 def initial_state(model, q0, v0, t0: float, p: np.ndarray, tolerance: float | None):
