@@ -10,6 +10,7 @@ import numpy as np
 from ncgen.assembly.context import Context
 from ncgen.assembly.functions import system_functions
 from ncgen.assembly.initial_state import consistent_state, dependent_rows
+from ncgen.assembly.joint_space import JointSpace, actuator_forces, build_joint_coordinates
 from ncgen.assembly.kinematics import resolve_fix
 from ncgen.assembly.layout import Layout, make_layout
 from ncgen.assembly.mass import CholeskyFactor, assemble_mass
@@ -53,6 +54,9 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     fixed = resolve_fix(layout, system.members, fix)
     labels, rows = constraint_rows(system, ctx)
     F, V = force_terms(system, ctx)
+    coords, skipped = build_joint_coordinates(system, ctx)
+    actuation = actuator_forces(ctx, coords)
+    F = F + ca.mtimes(actuation[0], actuation[1])
     M = assemble_mass(layout, members)
     factor = CholeskyFactor(M, layout.coordinate_names)
     q_init, v_init = initial_guess(layout, members)
@@ -77,7 +81,7 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
                              fixed=fixed, assemble=assemble)
     return Model(system=system, layout=layout, labels=labels, functions=functions, M=M, factor=factor,
                  potential=potential, state=state, p0=p0, baumgarte=(alpha, beta), redundant=redundant_labels,
-                 dropped=(redundant == "drop"), t0=t0)
+                 dropped=(redundant == "drop"), t0=t0, joint_space=JointSpace(ctx, coords, skipped, actuation))
 
 
 def constraint_rows(system, ctx: Context) -> tuple[list[str], list[ca.SX]]:

@@ -15,7 +15,7 @@ class Model:
     """A validated, assembled system (create it with ``System.build()``)."""
 
     def __init__(self, *, system, layout, labels, functions, M, factor, potential, state, p0, baumgarte,
-                 redundant, dropped, t0):
+                 redundant, dropped, t0, joint_space=None):
         self.system = system
         self.name = system.name
         self.dim = system.dim
@@ -42,6 +42,34 @@ class Model:
         self.redundant_dropped = dropped and bool(redundant)
         self.t0 = t0
         self.gravity = system.gravity.copy()
+        self.joint_space = joint_space
+
+    # ------------------------------------------------------------ joint space
+    @property
+    def joint_names(self) -> list[str]:
+        """The joints that have coordinates, in model order (a floating base ``root`` first)."""
+        return list(self.joint_space.joint_names)
+
+    @property
+    def actuated_joints(self) -> list[str]:
+        """The joints with an actuator (``effort=``), in ``joint_names`` order."""
+        return list(self.joint_space.actuated)
+
+    @property
+    def joint_limits(self) -> dict[str, dict]:
+        """``{joint: {"lower", "upper", "velocity", "effort"}}`` as given (URDF ``<limit>``)."""
+        return {k: dict(v) for k, v in self.joint_space.limits.items() if v}
+
+    def to_joint_space(self, q, v=None, a=None):
+        """Joint positions ``qj`` (and rates ``vj``, accelerations ``aj`` when ``v``, ``a``
+        are given), concatenated in ``joint_names`` order (see
+        :mod:`ncgen.assembly.joint_coordinates` for each joint's coordinates)."""
+        return self.joint_space.to_joint_space(self, q, v, a)
+
+    def from_joint_space(self, qj, vj=None, *, t=None, p=None):
+        """``(q, v)`` with the given joint positions and rates (vectors in ``joint_names``
+        order, or dicts ``{joint: value}``; closed loops: the independent joints only)."""
+        return self.joint_space.from_joint_space(self, qj, vj, t=t, p=p)
 
     # ------------------------------------------------------------ dimensions
     @property

@@ -1,0 +1,369 @@
+"""Joint space of a model: joint coordinates in and out, joint actuators.
+
+:class:`JointSpace` holds the CasADi functions of the joint coordinates
+(:mod:`ncgen.assembly.joint_coordinates`) of every joint that has them, in model order
+(``joint_names``), and the maps between the two spaces:
+
+* :meth:`JointSpace.to_joint_space` — ``q_j = q_j(q)``, ``v_j = J(q) q̇``,
+  ``a_j = J(q) q̈ + J̇(q, q̇) q̇`` (exact, any model).
+* :meth:`JointSpace.from_joint_space` — the members' poses are propagated from the ground
+  through the joints (a spanning tree; Fixed joints included): for a tree this is exact.
+  Members left unreached and loop-closing joints are then settled by Newton on
+  ``[Φ(q); q_j,given(q) − q_j,given] = 0`` (minimum-norm steps), so for closed loops the
+  user names the independent joint coordinates (a dict) and the rest are assembled; the
+  rates solve ``[A; J_given] q̇ = [−Φ_t; v_j,given]``.
+
+Actuators: a joint with ``effort=`` (a number, text expression, input, callable of t) acts
+with the generalised force ``J(q)ᵀ τ`` (:func:`actuator_forces`): torques in N·m about
+its axis, forces in N along it, ``[f, τ]`` in B's frame for a free joint.
+"""
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ncgen.assembly.joint_coordinates import JointCoordinates, joint_coordinates
+from ncgen.assembly.kinematics import TOL, newton, system_size
+from ncgen.model.members import ModelError
+from ncgen.validation import as_vector
+
+
+def build_joint_coordinates(system, ctx) -> tuple[list[JointCoordinates], dict[str, str]]:
+    """The coordinates of every joint that has them, and ``{joint: why not}`` for the joints
+    whose members cannot carry them (a spherical joint to a bar, ...)."""
+    coords, skipped = [], {}
+    for j in system.joints:
+        try:
+            c = joint_coordinates(ctx, j)
+        except ModelError as e:
+            if j.options.get("effort") is not None:
+                raise
+            skipped[j.name] = str(e)
+            continue
+        if c is not None:
+            coords.append(c)
+    return coords, skipped
+
+
+def actuator_forces(ctx, coords: list[JointCoordinates]) -> tuple[ca.SX, ca.SX, list[str]]:
+    """``(B, τ, names)``: ``B = [J_kᵀ ...]`` (nq × Σ nv_k) and the efforts ``τ`` of the
+    actuated joints (``effort=`` given), so that their generalised force is ``B τ``."""
+    Bs, taus, names = [], [], []
+    for c in coords:
+        effort = c.joint.options.get("effort")
+        if effort is None:
+            continue
+        tau = ctx.expression(effort, c.nv, f"{c.joint.label}: effort (N·m or N, conjugate to "
+                             f"{', '.join(c.rate_names)})")
+        Bs.append(ca.jacobian(c.v, ctx.v).T)
+        taus.append(tau)
+        names.append(c.name)
+    if not Bs:
+        return ca.SX(ctx.layout.nq, 0), ca.SX(0, 1), []
+    return ca.horzcat(*Bs), ca.vertcat(*taus), names
+
+
+@dataclass
+class Edge:
+    """A joint of the spanning tree: member names, joint kind, frames and axes (world,
+    initial configuration) — plain data for :func:`relative_pose`."""
+
+    name: str
+    kind: str
+    A: str
+    B: str
+    frame_a: tuple[np.ndarray, np.ndarray]
+    frame_b: tuple[np.ndarray, np.ndarray]
+    axes: tuple
+
+
+class JointSpace:
+    """Joint coordinates of one model (built by :func:`ncgen.assembly.build.build_model`)."""
+
+    def __init__(self, ctx, coords: list[JointCoordinates], skipped: dict[str, str], actuation):
+        q, v = ctx.q, ctx.v
+        a = ca.SX.sym("a", ctx.layout.nq)
+        self.dim = ctx.dim
+        self.joint_names = [c.name for c in coords]
+        self.nq_joint = {c.name: c.nq for c in coords}
+        self.nv_joint = {c.name: c.nv for c in coords}
+        self.position_names = [n for c in coords for n in c.position_names]
+        self.rate_names = [n for c in coords for n in c.rate_names]
+        self.angles = np.array([x for c in coords for x in c.angles], dtype=bool)
+        self.skipped = dict(skipped)
+        qj = ca.vertcat(*[c.q for c in coords]) if coords else ca.SX(0, 1)
+        vj = ca.vertcat(*[c.v for c in coords]) if coords else ca.SX(0, 1)
+        J = ca.jacobian(vj, v)
+        bias = ca.jtimes(vj, q, v)
+        self.positions = ca.Function("joint_positions", [q], [qj], ["q"], ["qj"])
+        self.position_jacobian = ca.Function("joint_position_jacobian", [q], [ca.jacobian(qj, q)], ["q"], ["Jq"])
+        self.rates = ca.Function("joint_rates", [q, v], [vj], ["q", "v"], ["vj"])
+        self.jacobian = ca.Function("joint_jacobian", [q], [J], ["q"], ["J"])
+        self.accelerations = ca.Function("joint_accelerations", [q, v, a], [ca.mtimes(J, a) + bias],
+                                         ["q", "v", "a"], ["aj"])
+        self.bias = ca.Function("joint_bias", [q, v], [bias], ["q", "v"], ["Jdot_v"])
+        B, tau, self.actuated = actuation
+        self.actuation = ca.Function("actuation", [ctx.t, q, ctx.u, ctx.p], [B, tau],
+                                     ["t", "q", "u", "p"], ["B", "tau"])
+        self.edges = [_edge(c.joint) for c in coords] + \
+            [_edge(j) for j in ctx.system.joints if j.kind == "Fixed" and "point" not in
+             (getattr(j.A, "kind", "ground"), getattr(j.B, "kind", "ground"))]
+        self.limits = {c.name: dict(getattr(c.joint, "limits", None) or {}) for c in coords}
+        self.members = dict(ctx.system.members)
+
+    # ------------------------------------------------------------ sizes
+    @property
+    def nq(self) -> int:
+        return len(self.position_names)
+
+    @property
+    def nv(self) -> int:
+        return len(self.rate_names)
+
+    def slices(self, rates: bool = False) -> dict[str, slice]:
+        """``{joint: slice}`` into the position (or rate) vector."""
+        sizes = self.nv_joint if rates else self.nq_joint
+        out, k = {}, 0
+        for n in self.joint_names:
+            out[n] = slice(k, k + sizes[n])
+            k += sizes[n]
+        return out
+
+    def split(self, x, rates: bool = False) -> dict[str, np.ndarray]:
+        """A joint-space vector as ``{joint: values}``."""
+        x = np.asarray(x, float)
+        return {n: x[..., s] for n, s in self.slices(rates).items()}
+
+    # ------------------------------------------------------------ out
+    def to_joint_space(self, model, q, v=None, a=None):
+        """``q_j`` (and ``v_j``, ``a_j`` when ``v``, ``a`` are given), in ``joint_names`` order."""
+        q = as_vector(q, model.nq, "q")
+        out = [np.array(self.positions(q)).reshape(-1)]
+        if v is not None:
+            v = as_vector(v, model.nq, "v")
+            out.append(np.array(self.rates(q, v)).reshape(-1))
+            if a is not None:
+                a = as_vector(a, model.nq, "a")
+                out.append(np.array(self.accelerations(q, v, a)).reshape(-1))
+        elif a is not None:
+            raise ModelError("to_joint_space: a: accelerations need the rates v too")
+        return out[0] if len(out) == 1 else tuple(out)
+
+    # ------------------------------------------------------------ in
+    def _given(self, x, rates: bool, what: str) -> dict[str, np.ndarray]:
+        sizes = self.nv_joint if rates else self.nq_joint
+        if isinstance(x, dict):
+            out = {}
+            for name, val in x.items():
+                if name not in sizes:
+                    why = f" ({self.skipped[name]})" if name in self.skipped else ""
+                    raise ModelError(f"{what}: no joint with coordinates named {name!r}{why}; joints: "
+                                     f"{', '.join(self.joint_names) or 'none'}")
+                out[name] = as_vector(np.atleast_1d(np.asarray(val, float)), sizes[name], f"{what}[{name!r}]")
+            return out
+        n = self.nv if rates else self.nq
+        flat = as_vector(x, n, f"{what} (one value per joint coordinate, joint_names order; or a dict)")
+        return {name: flat[s] for name, s in self.slices(rates).items()}
+
+    def from_joint_space(self, model, qj, vj=None, *, t=None, p=None):
+        """``(q, v)`` from joint positions (and rates; zero if not given), see the module
+        docstring.  ``qj``, ``vj``: vectors in ``joint_names`` order or dicts ``{joint:
+        value}`` naming the independent joints of a closed loop."""
+        t = model.t0 if t is None else float(t)
+        p = model.p0 if p is None else as_vector(p, model.np, "p")
+        given = self._given(qj, False, "qj")
+        for name, x in given.items():
+            if self.nq_joint[name] in (4, 7) and self.dim == 3:      # unit quaternion, qw ≥ 0
+                qn = x[-4:]
+                n = np.linalg.norm(qn)
+                if not n > 0:
+                    raise ModelError(f"qj[{name!r}]: the quaternion [qx, qy, qz, qw] is zero")
+                x[-4:] = qn / n * (1.0 if qn[3] >= 0 else -1.0)
+        q = self._propagate(model, given)
+        q = self._settle(model, q, given, t, p)
+        v = self._velocity(model, q, vj, given, t, p)
+        return q, v
+
+    def _propagate(self, model, given) -> np.ndarray:
+        """Poses from the ground through the spanning tree; unreached members keep q0."""
+        initial = self.split(np.array(self.positions(model.q0)).reshape(-1))
+        values = {**initial, **given}
+        members = self.members
+        poses = {"ground": (np.eye(self.dim), np.zeros(self.dim))}
+        adjacent: dict[str, list[tuple[Edge, bool]]] = {}
+        for e in self.edges:
+            adjacent.setdefault(e.A, []).append((e, True))
+            adjacent.setdefault(e.B, []).append((e, False))
+        queue = deque(["ground"])
+        while queue:
+            here = queue.popleft()
+            for e, forward in adjacent.get(here, []):
+                there = e.B if forward else e.A
+                if there in poses:
+                    continue
+                T = relative_pose(e, values.get(e.name, np.zeros(0)), self.dim)
+                poses[there] = _carry(poses[here], e, T, forward, members)
+                queue.append(there)
+        q = model.q0.copy()
+        for name, (R, pos) in poses.items():
+            if name == "ground":
+                continue
+            m = members[name]
+            local = m.local.q_from_pose(R, pos)
+            for k, i in enumerate(model.layout.member_indices(name)):
+                if i is not None:
+                    q[i] = local[k]
+        return q
+
+    def _settle(self, model, q, given, t, p) -> np.ndarray:
+        rows = np.concatenate([np.arange(s.start, s.stop) for n, s in self.slices().items() if n in given]
+                              ).astype(int) if given else np.zeros(0, int)
+        target = np.concatenate([given[n] for n in self.joint_names if n in given]) if given else np.zeros(0)
+        wrap = self.angles[rows]
+        f = model.functions
+
+        def residual(x):
+            d = np.array(self.positions(x)).reshape(-1)[rows] - target
+            d[wrap] = (d[wrap] + np.pi) % (2 * np.pi) - np.pi
+            return np.concatenate([np.array(f["phi"](t, x, p)).reshape(-1), d])
+
+        def jac(x):
+            return np.vstack([np.array(f["A"](t, x, p)), np.array(self.position_jacobian(x))[rows]])
+
+        size = system_size(q)
+        tol = TOL * size**2
+        q_new, it, res = newton(residual, jac, q, np.arange(model.nq), tol=tol)
+        if not res <= tol:
+            r = residual(q_new)
+            worst = int(np.nanargmax(np.abs(r)))
+            names = model.constraint_names + [self.position_names[i] for i in rows]
+            raise ModelError(
+                f"from_joint_space: no configuration has these joint coordinates: after {it} Newton "
+                f"iterations {names[worst]} is still off by {abs(r[worst]):.3g}; in a closed loop give "
+                f"only independent joint coordinates as a dict {{joint: value}} (the others are assembled)")
+        return q_new
+
+    def _velocity(self, model, q, vj, given, t, p) -> np.ndarray:
+        f = model.functions
+        A = np.array(f["A"](t, q, p))
+        phi_t = np.array(f["phi_t"](t, q, p)).reshape(-1)
+        sl = self.slices(rates=True)
+        if vj is None:
+            rates = {n: np.zeros(self.nv_joint[n]) for n in given}
+        else:
+            rates = self._given(vj, True, "vj")
+        rows = np.concatenate([np.arange(sl[n].start, sl[n].stop) for n in self.joint_names if n in rates]
+                              ).astype(int) if rates else np.zeros(0, int)
+        target = np.concatenate([rates[n] for n in self.joint_names if n in rates]) if rates else np.zeros(0)
+        K = np.vstack([A, np.array(self.jacobian(q))[rows]])
+        b = np.concatenate([-phi_t, target])
+        v, *_ = np.linalg.lstsq(K, b, rcond=None)
+        rank = np.linalg.matrix_rank(K) if K.size else 0
+        if rank < model.nq:
+            raise ModelError(f"from_joint_space: the rates of joints {', '.join(rates) or 'none'} leave "
+                             f"{model.nq - rank} degree(s) of freedom undetermined; give the rates of "
+                             f"every joint of the tree ({', '.join(self.joint_names)})")
+        err = np.max(np.abs(K @ v - b), initial=0.0)
+        if err > 1e-8 * max(1.0, np.max(np.abs(b), initial=0.0)):
+            raise ModelError(f"from_joint_space: the joint rates are inconsistent with the constraints "
+                             f"(closed loop?): residual {err:.3g}; give only independent joint rates")
+        return v
+
+
+# --------------------------------------------------------------- the tree walk
+def _edge(j) -> Edge:
+    d = j.system.dim
+    eye = np.eye(d)
+    A, B = ("ground" if m.is_ground else m.name for m in (j.A, j.B))
+    if j.kind == "Free":
+        fa = (eye, np.zeros(d)) if j.A.is_ground else (j.A.R0, j.A.p0)
+        return Edge(j.name, j.kind, A, B, fa, (j.frame_rotation(), j.frame_origin()), ())
+    at = j.at()
+    axes = ()
+    if j.kind in ("Revolute",) and d == 3:
+        axes = (j.axis(),)
+    elif j.kind in ("Prismatic", "Cylindrical"):
+        axes = (j.axis(),)
+    elif j.kind == "Universal":
+        axes = (j.direction("axis_a"), j.direction("axis_b"))
+    elif j.kind == "Planar":
+        from ncgen.assembly.context import perpendicular_basis
+        n = j.direction("normal")
+        axes = (n, *perpendicular_basis(n))
+    return Edge(j.name, j.kind, A, B, (eye, at), (eye, at), axes)
+
+
+def rotation_about(axis, angle: float) -> np.ndarray:
+    """Rodrigues: rotation by ``angle`` (rad) about the unit ``axis``."""
+    k = np.asarray(axis, float)
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * (K @ K)
+
+
+def rotation_2d(angle: float) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s], [s, c]])
+
+
+def quaternion_matrix(quat) -> np.ndarray:
+    """Rotation matrix of the unit quaternion ``[qx, qy, qz, qw]``."""
+    x, y, z, w = np.asarray(quat, float) / np.linalg.norm(quat)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def relative_pose(e: Edge, x: np.ndarray, dim: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(R, p)`` of B's joint frame in A's for joint coordinates ``x``."""
+    rot = (lambda ax, th: rotation_about(ax, th)) if dim == 3 else (lambda ax, th: rotation_2d(th))
+    eye, zero = np.eye(dim), np.zeros(dim)
+    k = e.kind
+    if k == "Fixed":
+        return eye, zero
+    if k == "Revolute":
+        return rot(e.axes[0] if e.axes else None, x[0]), zero
+    if k == "Prismatic":
+        return eye, x[0] * e.axes[0]
+    if k == "Cylindrical":
+        return rot(e.axes[0], x[1]), x[0] * e.axes[0]
+    if k == "Universal":
+        return rotation_about(e.axes[0], x[0]) @ rotation_about(e.axes[1], x[1]), zero
+    if k == "Planar":
+        n, e1, e2 = e.axes
+        return rotation_about(n, x[2]), x[0] * e1 + x[1] * e2
+    if k == "Spherical":
+        return quaternion_matrix(x), zero
+    if k == "Free":
+        if dim == 2:
+            return rotation_2d(x[2]), x[:2]
+        return quaternion_matrix(x[3:]), x[:3]
+    raise ModelError(f"joint {e.name!r}: no relative pose for a {k} joint")
+
+
+def _carry(pose, e: Edge, T, forward: bool, members) -> tuple[np.ndarray, np.ndarray]:
+    """Pose of the member across joint ``e`` from the pose of the one on this side.
+
+    World pose of a frame fixed to member m that was ``H0`` initially: ``H_m H_m0⁻¹ H0``.
+    Forward (A → B): ``H_JB = H_JA T``, backward: ``H_JA = H_JB T⁻¹``."""
+    R, p = pose
+    here, there = (e.A, e.B) if forward else (e.B, e.A)
+    f_here, f_there = (e.frame_a, e.frame_b) if forward else (e.frame_b, e.frame_a)
+    Rt, pt = T if forward else (T[0].T, -T[0].T @ T[1])
+    R0h, p0h = _initial_pose(members, here, len(p))
+    RJ = R @ R0h.T @ f_here[0]
+    oJ = R @ (R0h.T @ (f_here[1] - p0h)) + p
+    RJ2, oJ2 = RJ @ Rt, RJ @ pt + oJ
+    R0t, p0t = _initial_pose(members, there, len(p))
+    Rm = RJ2 @ f_there[0].T @ R0t
+    pm = RJ2 @ (f_there[0].T @ (p0t - f_there[1])) + oJ2
+    return Rm, pm
+
+
+def _initial_pose(members, name: str, dim: int):
+    if name == "ground":
+        return np.eye(dim), np.zeros(dim)
+    m = members[name]
+    return (np.eye(dim) if m.R0 is None else m.R0), m.p0
