@@ -9,7 +9,7 @@ from ncgen.codegen.model_package import generate
 from ncgen.errors import NcgenError
 from ncgen.model.forces import Force, GeneralizedForce, PointForce, Spring, Torque, TorsionalSpring
 from ncgen.model.joints import (
-    CoordinateDriver, Cylindrical, Distance, Fixed, Joint, Planar, PointOnLine, PointOnPlane, Prismatic,
+    CoordinateDriver, Cylindrical, Distance, Fixed, Free, Joint, Mimic, Planar, PointOnLine, PointOnPlane, Prismatic,
     Revolute, Spherical, Universal,
 )
 from ncgen.model.members import ModelError
@@ -17,14 +17,15 @@ from ncgen.model.model import Model
 from ncgen.model.system import System
 from ncgen.optim import OptimalControl, OptimalTrajectory
 from ncgen.runtime import Trajectory, simulate
+from ncgen.runtime.joint_dynamics import forward_dynamics, inverse_dynamics
 from ncgen.symbolic.coordinates import coordinate_type
 
 __version__ = "0.1.0"
 
 __all__ = [
-    "CoordinateDriver", "Cylindrical", "Distance", "Fixed", "Force", "GeneralizedForce", "Joint", "Model",
+    "CoordinateDriver", "Cylindrical", "Distance", "Fixed", "Force", "Free", "Mimic", "GeneralizedForce", "Joint", "Model",
     "ModelError", "NcgenError", "OptimalControl", "OptimalTrajectory", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic",
     "Revolute", "Spherical", "Spring", "System", "Torque", "TorsionalSpring", "Trajectory", "Universal",
-    "assemble", "coordinate_type", "dof_report", "generate", "project_velocity", "simulate", "solve_kinematics",
+    "assemble", "coordinate_type", "dof_report", "forward_dynamics", "inverse_dynamics", "generate", "project_velocity", "simulate", "solve_kinematics",
     "__version__",
 ]

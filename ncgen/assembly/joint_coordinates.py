@@ -85,19 +85,12 @@ def _atan2(x, y):
 
 
 def _revolute(ctx, j):
-    x, y = j.gauge(ctx).terms(ctx)
-    th = _atan2(x, y)
+    th = j.coordinate(ctx)
     return JointCoordinates(j, th, _scalar_rates(ctx, th), [j.name], [j.name], [True])
 
 
 def _prismatic(ctx, j):
-    at, a = j.at(), j.axis()
-    C, O, sign = j._sides()
-    pC, pO = ctx.nearest_point(C, at), ctx.nearest_point(O, at)
-    rC, _ = ctx.point(C, pC, j.label)
-    rO, _ = ctx.point(O, pO, j.label)
-    aC, _ = ctx.direction(C, a, j.label)
-    s = sign * (ca.dot(rO - rC, aC) - dot(a, pO - pC))
+    s = j.coordinate(ctx)
     return JointCoordinates(j, s, _scalar_rates(ctx, s), [j.name], [j.name], [False])
 
 

@@ -38,6 +38,7 @@ prescribes one natural coordinate.
 """
 from __future__ import annotations
 
+import casadi as ca
 import numpy as np
 
 from ncgen.model.joint_base import Joint
@@ -104,6 +105,11 @@ class Revolute(Joint):
     def drive_equations(self, ctx):
         return [(f"{self.name}.drive", self.gauge(ctx).equation(ctx, self.drive_expr(ctx)))]
 
+    def coordinate(self, ctx) -> ca.SX:
+        """The joint angle θ (rad): ``atan2`` of the gauge, zero initially."""
+        x, y = self.gauge(ctx).terms(ctx)
+        return ca.atan2(y, x)
+
 
 class Prismatic(Joint):
     """Slider along ``axis``: no relative rotation (3 for bodies and the ground, 2 with a
@@ -140,6 +146,16 @@ class Prismatic(Joint):
         aC, _ = ctx.direction(C, a, self.label)
         s = dot(a, pO - pC) + sign * self.drive_expr(ctx)
         return [(f"{self.name}.drive", ctx.apply("offset_dot", rC, rO, aC, s)[0])]
+
+    def coordinate(self, ctx) -> ca.SX:
+        """The displacement s (m) of B relative to A along ``axis``, zero initially."""
+        at, a = self.at(), self.axis()
+        C, O, sign = self._sides()
+        pC, pO = ctx.nearest_point(C, at), ctx.nearest_point(O, at)
+        rC, _ = ctx.point(C, pC, self.label)
+        rO, _ = ctx.point(O, pO, self.label)
+        aC, _ = ctx.direction(C, a, self.label)
+        return sign * (ca.dot(rO - rC, aC) - dot(a, pO - pC))
 
 
 class Cylindrical(Joint):
@@ -320,6 +336,33 @@ class Free(Joint):
         return np.zeros(self.system.dim) if at is None else self.at()
 
 
+class Mimic(Joint):
+    """URDF ``<mimic>``: the coordinate of the ``follower`` joint (Revolute or Prismatic)
+    equals ``multiplier`` × the ``leader``'s + ``offset`` (rad or m; 1 equation).  Both
+    coordinates are zero in the initial configuration, so a non-zero ``offset`` needs
+    ``build(assemble=True)``."""
+
+    kind = "Mimic"
+
+    def __init__(self, leader, follower, *, multiplier=1.0, offset=0.0, name=None):
+        super().__init__(follower.A, follower.B, name=name, leader=leader, follower=follower,
+                         multiplier=float(multiplier), offset=float(offset))
+
+    def geometry(self, ctx):
+        for role in ("leader", "follower"):
+            j = self.options[role]
+            if not isinstance(j, (Revolute, Prismatic)) or j.system is not self.system:
+                raise ModelError(f"{self.label}: {role}: expected a Revolute or Prismatic joint of "
+                                 f"system {self.system.name!r}, got {j!r}")
+        return []
+
+    def equations(self, ctx):
+        self.geometry(ctx)
+        o = self.options
+        e = o["follower"].coordinate(ctx) - o["multiplier"] * o["leader"].coordinate(ctx) - o["offset"]
+        return [(f"{self.name}.mimic", e)]
+
+
 class CoordinateDriver(Joint):
     """Prescribes one natural coordinate of ``member``: component ``axis`` (``"x"``, ``"y"``,
     ``"z"`` or 0, 1, 2) of its slot ``slot`` (``"r_i"``, ``"r_j"``, ``"u"``, ... or the
@@ -375,6 +418,6 @@ class CoordinateDriver(Joint):
 
 JOINT_TYPES: dict[str, type[Joint]] = {cls.kind: cls for cls in (
     Spherical, Revolute, Prismatic, Cylindrical, Universal, Planar, Fixed, Distance, PointOnLine,
-    PointOnPlane, Free, CoordinateDriver)}
+    PointOnPlane, Free, Mimic, CoordinateDriver)}
 
 __all__ = ["JOINT_TYPES", "Joint", *JOINT_TYPES]

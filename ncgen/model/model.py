@@ -43,6 +43,19 @@ class Model:
         self.t0 = t0
         self.gravity = system.gravity.copy()
         self.joint_space = joint_space
+        self.frames = {k: (mem, np.array(R), np.array(pos)) for k, (mem, R, pos) in system.frames.items()}
+        self.visuals = [dict(v) for v in system.visuals]
+
+    def frame_pose(self, name: str, q) -> tuple[np.ndarray, np.ndarray]:
+        """World ``(R, p)`` of the named frame (``model.frames``, e.g. a URDF link) at ``q``."""
+        if name not in self.frames:
+            raise KeyError(f"no frame named {name!r}; frames: {', '.join(self.frames) or 'none'}")
+        member, R_loc, p_loc = self.frames[name]
+        if member == "ground":
+            return R_loc.copy(), p_loc.copy()
+        R, pos = self.poses(q)
+        i = self.member_names.index(member)
+        return R[i] @ R_loc, R[i] @ p_loc + pos[i]
 
     # ------------------------------------------------------------ joint space
     @property

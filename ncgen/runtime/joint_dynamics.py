@@ -1,0 +1,73 @@
+"""Forward and inverse dynamics at one state, natural coordinates or joint space.
+
+* :func:`forward_dynamics` — ``(q̈, λ)`` from ``M q̈ + Aᵀλ = F(t, q, q̇, u, p)``,
+  ``A q̈ = γ`` (the KKT system, no stabilisation terms: on the constraint manifold the
+  result is exact).  Joint accelerations: ``model.to_joint_space(q, v, a)``.
+* :func:`inverse_dynamics` — the efforts ``τ`` of the actuated joints (joints with
+  ``effort=``; every movable joint of a URDF) that produce the joint accelerations ``a_j``
+  at ``(q_j, v_j)``: ``q̈`` from ``[A; J] q̈ = [γ; a_j − J̇ q̇]``, then ``(λ, τ)`` from
+  ``Aᵀλ − B τ = F_passive − M q̈`` (``B`` the actuators' generalised-force map, ``F_passive``
+  the applied force without the actuators' own efforts).  Units: N·m for rotations, N for
+  translations, ``[f, τ]`` in the base frame for a free joint (Pinocchio's convention).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ncgen.model.members import ModelError
+from ncgen.validation import as_vector
+
+
+def _kkt(model, q, v, t, u, p):
+    f = model.functions
+    A = np.array(f["A"](t, q, p))
+    F = np.array(f["F"](t, q, v, u, p)).reshape(-1)
+    gamma = np.array(f["gamma"](t, q, v, p)).reshape(-1)
+    return A, F, gamma
+
+
+def forward_dynamics(model, q, v, u=None, p=None, t: float = 0.0):
+    """``(a, lam)``: accelerations q̈ (natural coordinates) and multipliers at ``(t, q, v)``
+    with inputs ``u`` (default zero) and parameters ``p`` (default ``model.p0``)."""
+    q = as_vector(q, model.nq, "q")
+    v = as_vector(v, model.nq, "v")
+    u = np.zeros(model.nu) if u is None else as_vector(u, model.nu, "u (model.input_names order)")
+    p = model.p0 if p is None else as_vector(p, model.np, "p")
+    A, F, gamma = _kkt(model, q, v, float(t), u, p)
+    nq, nc = model.nq, A.shape[0]
+    K = np.block([[model.M, A.T], [A, np.zeros((nc, nc))]])
+    try:
+        x = np.linalg.solve(K, np.concatenate([F, gamma]))
+    except np.linalg.LinAlgError:
+        raise ModelError("forward_dynamics: the KKT matrix [[M, Aᵀ], [A, 0]] is singular at this state "
+                         "(redundant constraints or a singular configuration; see nc.dof_report)") from None
+    return x[:nq], x[nq:]
+
+
+def inverse_dynamics(model, qj, vj, aj, p=None, t: float = 0.0) -> np.ndarray:
+    """Efforts of ``model.actuated_joints`` (concatenated, ``joint_names`` order) that give
+    the joint accelerations ``aj`` at joint positions ``qj`` and rates ``vj`` (vectors in
+    ``joint_names`` order)."""
+    js = model.joint_space
+    p = model.p0 if p is None else as_vector(p, model.np, "p")
+    t = float(t)
+    q, v = model.from_joint_space(qj, vj, t=t, p=p)
+    aj = as_vector(aj, js.nv, "aj (one value per joint rate, joint_names order)")
+    f = model.functions
+    A, _, gamma = _kkt(model, q, v, t, np.zeros(model.nu), p)
+    J = np.array(js.jacobian(q))
+    bias = np.array(js.bias(q, v)).reshape(-1)
+    K = np.vstack([A, J])
+    a, *_ = np.linalg.lstsq(K, np.concatenate([gamma, aj - bias]), rcond=None)
+    B, tau0 = (np.array(x) for x in js.actuation(t, q, np.zeros(model.nu), p))
+    if B.shape[1] == 0:
+        raise ModelError("inverse_dynamics: the model has no actuated joints (give joints effort=...)")
+    F = np.array(f["F"](t, q, v, np.zeros(model.nu), p)).reshape(-1) - B @ tau0.reshape(-1)
+    rhs = F - model.M @ a
+    G = np.hstack([A.T, -B])
+    x, *_ = np.linalg.lstsq(G, rhs, rcond=None)
+    err = np.max(np.abs(G @ x - rhs), initial=0.0)
+    if err > 1e-8 * max(1.0, np.max(np.abs(rhs), initial=0.0)):
+        raise ModelError(f"inverse_dynamics: these accelerations need efforts on joints without actuators "
+                         f"(residual {err:.3g} N); actuated joints: {', '.join(js.actuated)}")
+    return x[A.shape[0]:]
