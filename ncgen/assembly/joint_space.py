@@ -27,6 +27,7 @@ import numpy as np
 
 from ncgen.assembly.joint_coordinates import JointCoordinates, joint_coordinates
 from ncgen.assembly.kinematics import TOL, newton, system_size
+from ncgen.assembly.mass import sparse_dm
 from ncgen.model.members import ModelError
 from ncgen.validation import as_vector
 
@@ -260,17 +261,31 @@ class JointSpace:
         target = np.concatenate([rates[n] for n in self.joint_names if n in rates]) if rates else np.zeros(0)
         K = np.vstack([A, np.array(self.jacobian(q))[rows]])
         b = np.concatenate([-phi_t, target])
-        v, *_ = np.linalg.lstsq(K, b, rcond=None)
-        rank = np.linalg.matrix_rank(K) if K.size else 0
-        if rank < model.nq:
-            raise ModelError(f"from_joint_space: the rates of joints {', '.join(rates) or 'none'} leave "
-                             f"{model.nq - rank} degree(s) of freedom undetermined; give the rates of "
-                             f"every joint of the tree ({', '.join(self.joint_names)})")
-        err = np.max(np.abs(K @ v - b), initial=0.0)
-        if err > 1e-8 * max(1.0, np.max(np.abs(b), initial=0.0)):
-            raise ModelError(f"from_joint_space: the joint rates are inconsistent with the constraints "
-                             f"(closed loop?): residual {err:.3g}; give only independent joint rates")
+        v = solve_linear(K, b)
+        if v is None or K.shape[0] < model.nq:
+            raise ModelError(f"from_joint_space: the rates of joints {', '.join(rates) or 'none'} do not "
+                             f"determine the velocity uniquely, or contradict the constraints (closed loop?); "
+                             f"give the rates of every joint of a tree ({', '.join(self.joint_names)}), "
+                             "or of independent joints only")
         return v
+
+
+def solve_linear(K: np.ndarray, b: np.ndarray, tol: float = 1e-8) -> np.ndarray | None:
+    """``x`` with ``K x = b``: CasADi's sparse QR for a square ``K`` (dense LAPACK is slow
+    and thread-hungry at these sizes), least squares otherwise; None when no ``x`` fits to
+    ``tol`` relative to ``|b|`` (a singular or inconsistent system)."""
+    K, b = np.asarray(K, float), np.asarray(b, float)
+    if K.shape[0] == K.shape[1]:
+        try:
+            x = np.array(ca.solve(sparse_dm(K), ca.DM(b), "qr")).reshape(-1)
+        except RuntimeError:
+            return None
+    else:
+        x = np.linalg.lstsq(K, b, rcond=None)[0]
+    if not np.all(np.isfinite(x)):
+        return None
+    err = np.max(np.abs(K @ x - b), initial=0.0)
+    return x if err <= tol * max(1.0, np.max(np.abs(b), initial=0.0)) else None
 
 
 # --------------------------------------------------------------- the tree walk

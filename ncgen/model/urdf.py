@@ -68,7 +68,7 @@ def load_urdf(source):
         raise ModelError("URDF import needs the package yourdfpy (pip install yourdfpy)") from None
     text = str(source)
     if "<robot" in text:
-        handle, where = io.StringIO(text), "URDF text"
+        handle, where = io.BytesIO(text.encode()), "URDF text"
     else:
         path = Path(source)
         if not path.is_file():

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ncgen.assembly.joint_space import solve_linear
 from ncgen.model.members import ModelError
 from ncgen.validation import as_vector
 
@@ -36,18 +37,20 @@ def forward_dynamics(model, q, v, u=None, p=None, t: float = 0.0):
     A, F, gamma = _kkt(model, q, v, float(t), u, p)
     nq, nc = model.nq, A.shape[0]
     K = np.block([[model.M, A.T], [A, np.zeros((nc, nc))]])
-    try:
-        x = np.linalg.solve(K, np.concatenate([F, gamma]))
-    except np.linalg.LinAlgError:
+    x = solve_linear(K, np.concatenate([F, gamma]))
+    if x is None:
         raise ModelError("forward_dynamics: the KKT matrix [[M, Aᵀ], [A, 0]] is singular at this state "
-                         "(redundant constraints or a singular configuration; see nc.dof_report)") from None
+                         "(redundant constraints or a singular configuration; see nc.dof_report)")
     return x[:nq], x[nq:]
 
 
-def inverse_dynamics(model, qj, vj, aj, p=None, t: float = 0.0) -> np.ndarray:
+def inverse_dynamics(model, qj, vj, aj, p=None, t: float = 0.0, joints: str = "actuated") -> np.ndarray:
     """Efforts of ``model.actuated_joints`` (concatenated, ``joint_names`` order) that give
     the joint accelerations ``aj`` at joint positions ``qj`` and rates ``vj`` (vectors in
-    ``joint_names`` order)."""
+    ``joint_names`` order).  ``joints="all"``: efforts conjugate to every joint rate, as if
+    every joint were actuated (a floating base's wrench included; Pinocchio's ``rnea``)."""
+    if joints not in ("actuated", "all"):
+        raise ModelError(f"inverse_dynamics: joints: expected 'actuated' or 'all', got {joints!r}")
     js = model.joint_space
     p = model.p0 if p is None else as_vector(p, model.np, "p")
     t = float(t)
@@ -58,16 +61,20 @@ def inverse_dynamics(model, qj, vj, aj, p=None, t: float = 0.0) -> np.ndarray:
     J = np.array(js.jacobian(q))
     bias = np.array(js.bias(q, v)).reshape(-1)
     K = np.vstack([A, J])
-    a, *_ = np.linalg.lstsq(K, np.concatenate([gamma, aj - bias]), rcond=None)
+    a = solve_linear(K, np.concatenate([gamma, aj - bias]))
+    if a is None:
+        raise ModelError("inverse_dynamics: the joint accelerations do not determine q̈ (or contradict "
+                         "the constraints): give every joint's accelerations of a tree")
     B, tau0 = (np.array(x) for x in js.actuation(t, q, np.zeros(model.nu), p))
+    F = np.array(f["F"](t, q, v, np.zeros(model.nu), p)).reshape(-1) - B @ tau0.reshape(-1)
+    if joints == "all":
+        B = J.T
     if B.shape[1] == 0:
         raise ModelError("inverse_dynamics: the model has no actuated joints (give joints effort=...)")
-    F = np.array(f["F"](t, q, v, np.zeros(model.nu), p)).reshape(-1) - B @ tau0.reshape(-1)
     rhs = F - model.M @ a
     G = np.hstack([A.T, -B])
-    x, *_ = np.linalg.lstsq(G, rhs, rcond=None)
-    err = np.max(np.abs(G @ x - rhs), initial=0.0)
-    if err > 1e-8 * max(1.0, np.max(np.abs(rhs), initial=0.0)):
+    x = solve_linear(G, rhs)
+    if x is None:
         raise ModelError(f"inverse_dynamics: these accelerations need efforts on joints without actuators "
-                         f"(residual {err:.3g} N); actuated joints: {', '.join(js.actuated)}")
+                         f"(or the constraint forces are not unique); actuated joints: {', '.join(js.actuated)}")
     return x[A.shape[0]:]
