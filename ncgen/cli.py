@@ -162,7 +162,7 @@ def load_model(path: str, params: list[str] | None = None):
         what = "is a directory, not" if file.is_dir() else "does not exist; expected"
         raise ModelError(f"model file {path!r} {what} a TOML model file (see the examples/ directory)")
     try:
-        system = System.from_toml(file)
+        system = read_system(file)
     except NcgenError as e:
         text = str(e)
         raise type(e)(text if text.startswith(str(file)) else f"{path}: {text}") from None
@@ -172,6 +172,16 @@ def load_model(path: str, params: list[str] | None = None):
         return system.build()
     except NcgenError as e:
         raise type(e)(f"{path}: model {system.name!r} cannot be built: {e}") from None
+
+
+def read_system(file: Path):
+    """The system in a model file: URDF (``.urdf``, fixed base, joint torques as the input
+    ``tau``) or TOML (anything else)."""
+    from ncgen.model.system import System
+
+    if file.suffix.lower() == ".urdf":
+        return System.from_urdf(file)
+    return System.from_toml(file)
 
 
 def _parameter_overrides(params: list[str], system) -> list[tuple]:
@@ -203,7 +213,7 @@ def _parameter_overrides(params: list[str], system) -> list[tuple]:
 
 # ----------------------------------------------------------------------- generate
 def _generate_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", metavar="MODEL.toml", help="model file (TOML)")
+    p.add_argument("model", metavar="MODEL.toml", help="model file: TOML, or a URDF robot (.urdf)")
     p.add_argument("-o", "--output", metavar="DIR", required=True,
                    help="package directory to write (replaced if it holds an ncgen package; "
                         "refused if it holds anything else)")
@@ -246,7 +256,8 @@ def _reroll_limit(text: str) -> int | str:
         "manifest.json. The same model always gives the same bytes."),
     examples=(
         "ncgen generate examples/chain.toml -o chain_c       # then: make -C chain_c && chain_c/chain_main\n"
-        "ncgen generate examples/heavy_top.toml -o top --compile --cflags='-O3 -march=native'"),
+        "ncgen generate examples/heavy_top.toml -o top --compile --cflags='-O3 -march=native'\n"
+        "ncgen generate robot.urdf -o robot_c                 # URDF: joint torques are the input tau"),
     arguments=_generate_arguments,
 )
 def generate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
@@ -269,7 +280,7 @@ def generate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
 
 # -------------------------------------------------------------------------- check
 def _check_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", metavar="MODEL.toml", help="model file (TOML)")
+    p.add_argument("model", metavar="MODEL.toml", help="model file: TOML, or a URDF robot (.urdf)")
     p.add_argument("--tolerance", type=float, default=1e-6, metavar="TOL",
                    help="largest correction of the initial state, relative to the model's size, "
                         "that still counts as consistent (default 1e-6, as System.build)")
@@ -290,7 +301,8 @@ def _check_arguments(p: argparse.ArgumentParser) -> None:
     examples=(
         "ncgen check examples/fourbar_planar.toml\n"
         "ncgen check examples/fourbar_3d.toml --tolerance 1e-9\n"
-        "ncgen check mymodel.toml --param k=50 || echo 'fix the initial state'"),
+        "ncgen check mymodel.toml --param k=50 || echo 'fix the initial state'\n"
+        "ncgen check robot.urdf                               # a URDF robot, fixed base"),
     arguments=_check_arguments,
 )
 def check(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
@@ -304,7 +316,7 @@ def check(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         raise ModelError(f"model file {args.model!r} {what} a TOML model file (see the examples/ directory)")
     if not args.tolerance > 0:
         parser.error(f"--tolerance: expected a positive number, got {args.tolerance}")
-    system = System.from_toml(file)
+    system = read_system(file)
     for name, value in _parameter_overrides(args.param, system):
         system.parameters[name] = (system.parameters[name][0], value)
     report = check_system(system, tolerance=args.tolerance)
@@ -318,7 +330,7 @@ SUFFIXES = {"output": (".npz", ".csv"), "plot": (".png", ".pdf", ".svg"), "anima
 
 
 def _simulate_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", metavar="MODEL.toml", help="model file (TOML)")
+    p.add_argument("model", metavar="MODEL.toml", help="model file: TOML, or a URDF robot (.urdf)")
     p.add_argument("--t-end", type=float, required=True, metavar="T", help="final time (s)")
     p.add_argument("--dt", type=float, default=0.01, metavar="DT",
                    help="output step (s, default 0.01); IDAS chooses its own internal steps")
@@ -367,7 +379,8 @@ def _check_outputs(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
         "ncgen simulate examples/chain.toml --t-end 2 --dt 0.01 -o chain.npz --plot chain.png\n"
         "ncgen simulate examples/heavy_top.toml --t-end 3 -o top.csv --animate top.gif\n"
         "ncgen simulate examples/slider_crank.toml --t-end 1 -o sc.npz --param omega=20 --backend vm\n"
-        "ncgen simulate examples/tensegrity.toml --t-end 2 -o t.npz --method stepper"),
+        "ncgen simulate examples/tensegrity.toml --t-end 2 -o t.npz --method stepper\n"
+        "ncgen simulate robot.urdf --t-end 1 -o robot.csv   # URDF: falls under gravity, zero torque"),
     arguments=_simulate_arguments,
 )
 def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:

@@ -230,3 +230,56 @@ def test_joint_without_coordinates_is_listed_as_skipped():
     assert "ball" in m.joint_space.skipped
     with pytest.raises(nc.ModelError, match="bar"):
         m.from_joint_space({"ball": [0, 0, 0, 1]})
+
+
+PENDULUM_TOML = """
+[system]
+name = "pend"
+gravity = [0.0, -9.81]
+
+[[members]]
+name = "bar"
+kind = "bar"
+mass = 1.0
+ends = [[0.0, 0.0], [1.0, 0.0]]
+
+[[joints]]
+type = "Revolute"
+name = "pivot"
+between = ["ground", "bar"]
+at = [0.0, 0.0]
+
+[initial]
+pivot = -0.5
+
+[initial_rates]
+pivot = 1.0
+"""
+
+
+def test_toml_initial_state_in_joint_space_and_trajectory_outputs(tmp_path):
+    s = nc.System.from_toml(PENDULUM_TOML)
+    assert s.initial_joints == {"pivot": -0.5} and s.initial_joint_rates == {"pivot": 1.0}
+    assert nc.System.from_toml(s.to_toml()).initial_joints == {"pivot": -0.5}
+    m = s.build()
+    qj, vj = m.to_joint_space(m.q0, m.v0)
+    np.testing.assert_allclose([qj[0], vj[0]], [-0.5, 1.0], atol=1e-12)
+    traj = nc.simulate(m, 0.2, 0.1)
+    th, om = traj.joint("pivot")
+    assert th.shape == (3,) and abs(th[0] + 0.5) < 1e-12 and abs(om[0] - 1.0) < 1e-12
+    # energy of the pendulum from the joint-space outputs: T = ½ (m L²/3) ω², V = m g (L/2) sin θ
+    E = 0.5 * (1 / 3) * om**2 + G * 0.5 * np.sin(th)
+    np.testing.assert_allclose(E, traj.energy, atol=1e-6)
+    traj.save(tmp_path / "p.csv")
+    header = (tmp_path / "p.csv").read_text().splitlines()[0].split(",")
+    assert "qj.pivot" in header and "vj.pivot" in header
+    traj.save(tmp_path / "p.npz")
+    back = nc.Trajectory.load(tmp_path / "p.npz")
+    np.testing.assert_allclose(back.joint("pivot")[0], th)
+    with pytest.raises(nc.NcgenError, match="no joint with coordinates named 'elbow'"):
+        traj.joint("elbow")
+
+
+def test_toml_initial_names_a_joint():
+    with pytest.raises(nc.ModelError, match="initial.pivto: no joint named 'pivto'"):
+        nc.System.from_toml(PENDULUM_TOML.replace("pivot = -0.5", "pivto = -0.5"))

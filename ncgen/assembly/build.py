@@ -79,9 +79,14 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     functions, potential = system_functions(ctx, phi, F, V, M, factor, alpha, beta, system)
     state = consistent_state(functions, layout, labels, q_init, v_init, p0, t0, tolerance, M,
                              fixed=fixed, assemble=assemble)
-    return Model(system=system, layout=layout, labels=labels, functions=functions, M=M, factor=factor,
-                 potential=potential, state=state, p0=p0, baumgarte=(alpha, beta), redundant=redundant_labels,
-                 dropped=(redundant == "drop"), t0=t0, joint_space=JointSpace(ctx, coords, skipped, actuation))
+    model = Model(system=system, layout=layout, labels=labels, functions=functions, M=M, factor=factor,
+                  potential=potential, state=state, p0=p0, baumgarte=(alpha, beta), redundant=redundant_labels,
+                  dropped=(redundant == "drop"), t0=t0, joint_space=JointSpace(ctx, coords, skipped, actuation))
+    if system.initial_joints or system.initial_joint_rates:
+        q, v = model.joint_space.initial_state(model, system.initial_joints, system.initial_joint_rates)
+        state = consistent_state(functions, layout, labels, q, v, p0, t0, tolerance, M, fixed=fixed)
+        model.q0, model.v0, model.lam0, model.a0 = state.q0, state.v0, state.lam0, state.a0
+    return model
 
 
 def constraint_rows(system, ctx: Context) -> tuple[list[str], list[ca.SX]]:

@@ -188,6 +188,21 @@ class JointSpace:
         v = self._velocity(model, q, vj, given, t, p)
         return q, v
 
+    def initial_state(self, model, positions: dict, rates: dict):
+        """``(q, v)`` of a joint-space initial state: the named joints' positions and rates,
+        the others as in ``(model.q0, model.v0)`` (a closed loop: only the named ones)."""
+        t, p = model.t0, model.p0
+        given = self._given(dict(positions), False, "initial")
+        q = self._settle(model, self._propagate(model, given), given, t, p)
+        named = self._given(dict(rates), True, "initial_rates")
+        full = self.split(np.array(self.rates(model.q0, model.v0)).reshape(-1), rates=True)
+        try:
+            return q, self._velocity(model, q, {**full, **named}, given, t, p)
+        except ModelError:
+            if not named:
+                return q, self._velocity(model, q, None, given, t, p)
+            return q, self._velocity(model, q, named, given, t, p)
+
     def _propagate(self, model, given) -> np.ndarray:
         """Poses from the ground through the spanning tree; unreached members keep q0."""
         initial = self.split(np.array(self.positions(model.q0)).reshape(-1))

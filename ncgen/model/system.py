@@ -45,6 +45,11 @@ class System:
         self.frames: dict[str, tuple] = {}
         #: Visual geometry (URDF ``<visual>``), plain dicts in member frames.
         self.visuals: list[dict] = []
+        #: Joint-space initial state ``{joint: position}`` / ``{joint: rate}`` applied by
+        #: :meth:`build` (TOML ``initial = {elbow = 0.3}``, ``initial_rates``); joints not
+        #: named keep the coordinates and rates of the members' given poses and twists.
+        self.initial_joints: dict = {}
+        self.initial_joint_rates: dict = {}
 
     # ------------------------------------------------------------- members
     def _new_name(self, name: str, what: str) -> str:
