@@ -114,6 +114,7 @@ class JointSpace:
              (getattr(j.A, "kind", "ground"), getattr(j.B, "kind", "ground"))]
         self.limits = {c.name: dict(getattr(c.joint, "limits", None) or {}) for c in coords}
         self.members = dict(ctx.system.members)
+        self.joints = {j.name: j for j in ctx.system.joints}
 
     # ------------------------------------------------------------ sizes
     @property
