@@ -173,3 +173,34 @@ def test_ur5_falls_like_pinocchio():
     assert np.max(np.abs(vj1 - ref_v)) < 1e-5
     # and the motion is not trivial
     assert np.max(np.abs(ref_q - qj0)) > 0.1
+
+
+@pytest.mark.parametrize("name", ["ur5", "panda"])
+def test_joint_reactions_match_pinocchio_joint_forces(name):
+    """Under the torques of RNEA, each joint's reaction wrench on its child (world axes, about
+    the joint origin) plus the actuator torque about the axis is Pinocchio's ``data.f``
+    (the spatial force the parent exerts on the child, in joint axes)."""
+    model, pm = robot(name)
+    pd = pm.createData()
+    order = {n: k for k, n in enumerate(model.joint_names)}
+    pairs = sorted(pin_joints(model, pm), key=lambda x: order[x[0]])
+    for k, (qp, vp, _, ap) in enumerate(states(pm, seed=7)):
+        if k == 3:
+            break
+        tau = pin.rnea(pm, pd, qp, vp, ap)
+        forces = [f.copy() for f in pd.f]
+        pin.forwardKinematics(pm, pd, qp)
+        pin.computeJointJacobians(pm, pd, qp)
+        qj, vj = to_ncgen(model, pm, qp, vp)
+        q, v = model.from_joint_space(qj, vj)
+        u = np.concatenate([tau[jm.idx_v:jm.idx_v + jm.nv] for _, jm in pairs])
+        _, lam = nc.forward_dynamics(model, q, v, u=u)
+        reactions = nc.joint_reactions(model, q, lam, u=u)
+        for jid in range(1, pm.njoints):
+            r = reactions[ident(pm.names[jid])]
+            R = pd.oMi[jid].rotation
+            S = np.asarray(pd.joints[jid].S).reshape(-1)           # motion subspace [v; ω]
+            scale = max(1.0, np.max(np.abs(forces[jid].vector)))
+            np.testing.assert_allclose(r.point, pd.oMi[jid].translation, atol=1e-12)
+            assert np.max(np.abs(r.force + r.effort * (R @ S[:3]) - R @ forces[jid].linear)) < 1e-9 * scale
+            assert np.max(np.abs(r.moment + r.effort * (R @ S[3:]) - R @ forces[jid].angular)) < 1e-9 * scale
