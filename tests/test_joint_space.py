@@ -283,3 +283,19 @@ def test_toml_initial_state_in_joint_space_and_trajectory_outputs(tmp_path):
 def test_toml_initial_names_a_joint():
     with pytest.raises(nc.ModelError, match="initial.pivto: no joint named 'pivto'"):
         nc.System.from_toml(PENDULUM_TOML.replace("pivot = -0.5", "pivto = -0.5"))
+
+
+def test_toml_round_trip_of_actuators_and_free_joints():
+    s = nc.System("p", gravity=(0, -G))
+    tau = s.add_input("tau")
+    bar = s.add_bar("bar", mass=1.0, ends=[(0, 0), (1, 0)])
+    b = s.add_body("b", "ruv", mass=1.0, inertia=0.1, position=(2, 0))
+    s.add_joint(nc.Revolute(s.ground, bar, at=(0, 0), name="pivot", effort=tau))
+    s.add_joint(nc.Free(bar, b, at=(2, 0), rotation=0.3, name="fly"))
+    back = nc.System.from_toml(s.to_toml()).build()
+    m = s.build()
+    assert back.joint_names == ["pivot", "fly"] and back.actuated_joints == ["pivot"]
+    np.testing.assert_allclose(back.to_joint_space(back.q0), m.to_joint_space(m.q0), atol=1e-15)
+    q, v = m.from_joint_space([0.2, 0.1, 0.2, 0.3], [0.0, 0.1, 0.0, 0.0])
+    np.testing.assert_allclose(nc.forward_dynamics(back, q, v, u=[1.5])[0], nc.forward_dynamics(m, q, v, u=[1.5])[0],
+                               atol=1e-12)

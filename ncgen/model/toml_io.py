@@ -384,6 +384,11 @@ class _Loader:
         d = self.dim
         if k == "drive":
             return self._expr(v, path, inputs=False)
+        if k == "effort":
+            n = {"Cylindrical": 2, "Universal": 2, "Planar": 3, "Spherical": 3, "Free": 6 if d == 3 else 3}
+            return self._expr(v, path, n=n.get(cls.kind, 1))
+        if k == "rotation":
+            return _number(v, path) if d == 2 and _is_number(v) else _matrix(v, d, path)
         if cls is Distance and k == "at":
             if not isinstance(v, list) or len(v) != 2:
                 raise ModelError(f"{path}: expected two points (one on each member), got {_describe(v)}")
@@ -510,7 +515,7 @@ def _joint_entries(j, sc) -> dict:
     for k, v in j.options.items():
         if v is None:
             continue
-        if k in ("drive", "value"):
+        if k in ("drive", "value", "effort"):
             out[k] = value_to_toml(v, sc, f"{j.label}: {k}")
         elif k in ("slot", "axis") and isinstance(j, CoordinateDriver):
             out[k] = v if isinstance(v, str) else int(v)
