@@ -56,7 +56,8 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     F, V = force_terms(system, ctx)
     coords, skipped = build_joint_coordinates(system, ctx)
     actuation = actuator_forces(ctx, coords)
-    F = F + ca.mtimes(actuation[0], actuation[1])
+    if actuation[2]:
+        F = F + ca.mtimes(actuation[0], actuation[1])
     M = assemble_mass(layout, members)
     factor = CholeskyFactor(M, layout.coordinate_names)
     q_init, v_init = initial_guess(layout, members)
