@@ -17,7 +17,7 @@ from ncgen.model.model import Model
 from ncgen.model.system import System
 from ncgen.optim import OptimalControl, OptimalTrajectory
 from ncgen.runtime import Trajectory, simulate
-from ncgen.runtime.joint_dynamics import forward_dynamics, inverse_dynamics
+from ncgen.runtime.joint_dynamics import forward_dynamics, forward_dynamics_kernel, inverse_dynamics
 from ncgen.runtime.reactions import JointReaction, joint_reactions
 from ncgen.symbolic.coordinates import coordinate_type
 
@@ -27,6 +27,6 @@ __all__ = [
     "CoordinateDriver", "Cylindrical", "Distance", "Fixed", "Force", "Free", "Mimic", "GeneralizedForce", "Joint", "Model",
     "ModelError", "NcgenError", "OptimalControl", "OptimalTrajectory", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic",
     "Revolute", "Spherical", "Spring", "System", "Torque", "TorsionalSpring", "Trajectory", "Universal",
-    "JointReaction", "assemble", "coordinate_type", "dof_report", "forward_dynamics", "inverse_dynamics", "joint_reactions", "generate", "project_velocity", "simulate", "solve_kinematics",
+    "JointReaction", "assemble", "coordinate_type", "dof_report", "forward_dynamics", "forward_dynamics_kernel", "inverse_dynamics", "joint_reactions", "generate", "project_velocity", "simulate", "solve_kinematics",
     "__version__",
 ]
