@@ -115,6 +115,7 @@ class JointSpace:
         self.limits = {c.name: dict(getattr(c.joint, "limits", None) or {}) for c in coords}
         self.members = dict(ctx.system.members)
         self.joints = {j.name: j for j in ctx.system.joints}
+        self._initial = None            # (model.q0, its joint positions by joint), filled on first use
 
     # ------------------------------------------------------------ sizes
     @property
@@ -206,8 +207,9 @@ class JointSpace:
 
     def _propagate(self, model, given) -> np.ndarray:
         """Poses from the ground through the spanning tree; unreached members keep q0."""
-        initial = self.split(np.array(self.positions(model.q0)).reshape(-1))
-        values = {**initial, **given}
+        if self._initial is None or self._initial[0] is not model.q0:
+            self._initial = (model.q0, self.split(np.array(self.positions(model.q0)).reshape(-1)))
+        values = {**self._initial[1], **given}
         members = self.members
         poses = {"ground": (np.eye(self.dim), np.zeros(self.dim))}
         adjacent: dict[str, list[tuple[Edge, bool]]] = {}
