@@ -15,7 +15,10 @@ per call, best of ``--repeat`` batches of ``--calls`` calls from Python:
 * the same compiled kernel through ``casadi.external`` — "external";
 * a trivial compiled function (``y = 2x``, 3 entries) directly and through
   ``casadi.external``: the call overheads themselves;
-* ncgen joint space in and out: ``from_joint_space`` + direct kernel + ``to_joint_space``.
+* ncgen joint space in and out in one compiled call (``forward_dynamics_kernel(model,
+  joint_space=True)``: the tree map q_j → q, the same solve, a_j = J q̈ + J̇ q̇) — "joint kernel";
+* ncgen joint space in and out from Python: ``from_joint_space`` + direct kernel +
+  ``to_joint_space``.
 
 Then the humanoid: Talos (``talos_reduced.urdf``, floating base) from file to a loaded
 compiled library (``System.from_urdf`` → ``build`` → ``nc.generate(compile=True)`` →
@@ -103,6 +106,10 @@ def arm(calls, repeat):
     aj = model.to_joint_space(q, v, a)[2]
     a_pin = pin.aba(pm, pd, qp, vp, tp)
     err = max(abs(aj[model.joint_names.index(pm.names[j])] - a_pin[pm.joints[j].idx_v]) for j in range(1, pm.njoints))
+    kj = forward_dynamics_kernel(model, joint_space=True)
+    aj2 = kj(0.0, qj, vj, tau, model.p0)[0]
+    err = max(err, max(abs(aj2[model.joint_names.index(pm.names[j])] - a_pin[pm.joints[j].idx_v])
+                       for j in range(1, pm.njoints)))
     ext = ca.external(f"{model.name}_fd_{k.name}", str(k.library))
     p0 = model.p0
 
@@ -115,6 +122,7 @@ def arm(calls, repeat):
         "ncgen direct": per_call(lambda: k(0.0, q, v, tau, p0), calls, repeat),
         "ncgen kernel": per_call(k.call, calls, repeat),
         "ncgen external": per_call(lambda: ext(0.0, q, v, tau, p0), max(1, calls // 10), repeat),
+        "ncgen joint kernel": per_call(lambda: kj(0.0, qj, vj, tau, p0), calls, repeat),
         "ncgen joint space": per_call(joint_space, max(1, calls // 100), repeat),
     }
     return model, out, err, build
@@ -158,12 +166,13 @@ def main(argv=None) -> int:
     print(f"RATIO casadi.external / direct: {e / d:.1f}")
     model, t, err, build = arm(args.calls, args.repeat)
     print(f"=== Panda (9 DOF; ncgen nq = {model.nq}, nc = {model.nc}): forward dynamics from Python, µs per call")
-    print(f"  kernel built and loaded in {build:.1f} s; max |a_j(ncgen) - a(pinocchio.aba)| = {err:.2e}")
+    print(f"  kernel built and loaded in {build:.1f} s; max |a_j(ncgen kernels) - a(pinocchio.aba)| = {err:.2e}")
     for name, value in t.items():
         print(f"  {name:<20s} {value:10.2f}")
     print(f"RATIO ncgen direct / pinocchio.aba: {t['ncgen direct'] / t['pinocchio.aba']:.1f}")
     print(f"RATIO ncgen kernel / pinocchio.aba: {t['ncgen kernel'] / t['pinocchio.aba']:.1f}")
     print(f"RATIO ncgen external / ncgen direct: {t['ncgen external'] / t['ncgen direct']:.1f}")
+    print(f"RATIO ncgen joint kernel / pinocchio.aba: {t['ncgen joint kernel'] / t['pinocchio.aba']:.1f}")
     if not args.skip_humanoid:
         hm, stages = humanoid()
         print(f"=== Talos (floating base; {len(hm.member_names)} bodies, nq = {hm.nq}, nc = {hm.nc}): "

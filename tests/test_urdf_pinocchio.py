@@ -204,3 +204,26 @@ def test_joint_reactions_match_pinocchio_joint_forces(name):
             np.testing.assert_allclose(r.point, pd.oMi[jid].translation, atol=1e-12)
             assert np.max(np.abs(r.force + r.effort * (R @ S[:3]) - R @ forces[jid].linear)) < 1e-9 * scale
             assert np.max(np.abs(r.moment + r.effort * (R @ S[3:]) - R @ forces[jid].angular)) < 1e-9 * scale
+
+
+@pytest.mark.parametrize("name", ["panda", "solo12"])
+def test_joint_space_kernel_matches_aba(name):
+    """The one-function joint-space forward dynamics (tree map + Schur solve + a_j), as
+    compiled by ``forward_dynamics_kernel(joint_space=True)``, evaluated here by CasADi."""
+    from ncgen.runtime.joint_dynamics import joint_kkt_function
+
+    model, pm = robot(name)
+    pd = pm.createData()
+    f = joint_kkt_function(model)
+    order = {n: k for k, n in enumerate(model.joint_names)}
+    pairs = sorted(((n, jm) for n, jm in pin_joints(model, pm) if n != "root"), key=lambda x: order[x[0]])
+    for k, (qp, vp, taup, _) in enumerate(states(pm, seed=11)):
+        if k == 3:
+            break
+        if name == "solo12":
+            taup[:6] = 0.0
+        qj, vj = to_ncgen(model, pm, qp, vp)
+        u = np.concatenate([taup[jm.idx_v:jm.idx_v + jm.nv] for _, jm in pairs])
+        aj = np.array(f(0.0, qj, vj, u, model.p0)[0]).reshape(-1)
+        a_pin = pin.aba(pm, pd, qp, vp, taup)
+        assert np.max(np.abs(rates_to_pin(model, pm, aj) - a_pin)) <= 1e-8 * max(1.0, np.max(np.abs(a_pin)))

@@ -28,6 +28,7 @@ import numpy as np
 from ncgen.assembly.joint_coordinates import JointCoordinates, joint_coordinates
 from ncgen.assembly.kinematics import TOL, newton, system_size
 from ncgen.assembly.mass import sparse_dm
+from ncgen.assembly.sym2casadi import to_casadi
 from ncgen.model.members import ModelError
 from ncgen.validation import as_vector
 
@@ -205,6 +206,69 @@ class JointSpace:
                 return q, self._velocity(model, q, None, given, t, p)
             return q, self._velocity(model, q, named, given, t, p)
 
+    # ------------------------------------------------------------ symbolic tree map
+    def tree_function(self, layout) -> ca.Function:
+        """``(qj, vj) -> (q, v)`` as an SX function, for models whose members are all
+        reached from the ground through the joints with coordinates and Fixed joints and
+        have no other constraints between them (trees): the poses of :meth:`from_joint_space`
+        written symbolically, ``q̇ = (∂q/∂q_j) q̇_j`` with ``q̇_j`` from the rates (quaternion
+        rates ``½ q ⊗ [ω; 0]``, free-joint translation ``R v``).  Raises :class:`ModelError`
+        for other models."""
+        d = self.dim
+        qj, vj = ca.SX.sym("qj", self.nq), ca.SX.sym("vj", self.nv)
+        sq, sv = self.slices(), self.slices(rates=True)
+        poses = {"ground": (ca.SX.eye(d), ca.SX.zeros(d, 1))}
+        adjacent: dict[str, list[tuple[Edge, bool]]] = {}
+        for e in self.edges:
+            adjacent.setdefault(e.A, []).append((e, True))
+            adjacent.setdefault(e.B, []).append((e, False))
+        queue, used = deque(["ground"]), 0
+        while queue:
+            here = queue.popleft()
+            for e, forward in adjacent.get(here, []):
+                there = e.B if forward else e.A
+                if there in poses:
+                    continue
+                x = qj[sq[e.name]] if e.name in sq else ca.SX(0, 1)
+                T = relative_pose(e, x, d, sym=True)
+                poses[there] = _carry(poses[here], e, T, forward, self.members, sym=True)
+                queue.append(there)
+                used += 1
+        missing = [n for n in self.members if n not in poses]
+        if missing or used != len(self.edges):
+            raise ModelError(f"joint space: the model is not a tree of joints with coordinates "
+                             f"({'members not reached from the ground: ' + ', '.join(missing) if missing else 'a closed loop'}); "
+                             "use from_joint_space (Newton) instead")
+        q = [None] * layout.nq
+        for name, (R, pos) in poses.items():
+            if name == "ground":
+                continue
+            m = self.members[name]
+            D = m.ctype.derivation
+            vals = dict(m.local.constants())
+            vals.update({D.R_sym[a, b]: R[a, b] for a in range(d) for b in range(d)})
+            vals.update({D.p_sym[a]: pos[a] for a in range(d)})
+            local = to_casadi(D.q_of_pose, vals)
+            for k, i in enumerate(layout.member_indices(name)):
+                if i is not None and q[i] is None:
+                    q[i] = local[k]
+        q = ca.vertcat(*q)
+        qj_dot = []
+        for name in self.joint_names:
+            x, w = qj[sq[name]], vj[sv[name]]
+            kind = self.joints[name].kind
+            if kind == "Spherical":
+                qj_dot.append(_quaternion_rate(x, w))
+            elif kind == "Free" and d == 3:
+                R = quaternion_matrix(x[3:], sym=True)
+                qj_dot.append(ca.vertcat(ca.mtimes(R, w[:3]), _quaternion_rate(x[3:], w[3:])))
+            elif kind == "Free":
+                qj_dot.append(ca.vertcat(ca.mtimes(rotation_2d(x[2], sym=True), w[:2]), w[2]))
+            else:
+                qj_dot.append(w)
+        v = ca.jtimes(q, qj, ca.vertcat(*qj_dot)) if qj_dot else ca.SX.zeros(layout.nq)
+        return ca.Function("joint_tree", [qj, vj], [q, v], ["qj", "vj"], ["q", "v"])
+
     def _propagate(self, model, given) -> np.ndarray:
         """Poses from the ground through the spanning tree; unreached members keep q0."""
         if self._initial is None or self._initial[0] is not model.q0:
@@ -329,70 +393,103 @@ def _edge(j) -> Edge:
     return Edge(j.name, j.kind, A, B, (eye, at), (eye, at), axes)
 
 
-def rotation_about(axis, angle: float) -> np.ndarray:
-    """Rodrigues: rotation by ``angle`` (rad) about the unit ``axis``."""
+def rotation_about(axis, angle, sym: bool = False):
+    """Rodrigues: rotation by ``angle`` (rad) about the unit ``axis`` (SX when ``sym``)."""
     k = np.asarray(axis, float)
     K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    if sym:
+        return ca.DM.eye(3) + ca.sin(angle) * ca.DM(K) + (1 - ca.cos(angle)) * ca.DM(K @ K)
     return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * (K @ K)
 
 
-def rotation_2d(angle: float) -> np.ndarray:
+def rotation_2d(angle, sym: bool = False):
+    if sym:
+        c, s = ca.cos(angle), ca.sin(angle)
+        return ca.vertcat(ca.horzcat(c, -s), ca.horzcat(s, c))
     c, s = np.cos(angle), np.sin(angle)
     return np.array([[c, -s], [s, c]])
 
 
-def quaternion_matrix(quat) -> np.ndarray:
-    """Rotation matrix of the unit quaternion ``[qx, qy, qz, qw]``."""
+def quaternion_matrix(quat, sym: bool = False):
+    """Rotation matrix of the unit quaternion ``[qx, qy, qz, qw]`` (normalised first)."""
+    if sym:
+        x, y, z, w = (quat[i] / ca.norm_2(quat) for i in range(4))
+        rows = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
+        return ca.vertcat(*[ca.horzcat(*r) for r in rows])
     x, y, z, w = np.asarray(quat, float) / np.linalg.norm(quat)
     return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
                      [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
 
 
-def relative_pose(e: Edge, x: np.ndarray, dim: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(R, p)`` of B's joint frame in A's for joint coordinates ``x``."""
-    rot = (lambda ax, th: rotation_about(ax, th)) if dim == 3 else (lambda ax, th: rotation_2d(th))
-    eye, zero = np.eye(dim), np.zeros(dim)
+def _quaternion_rate(quat, omega):
+    """``q̇ = ½ q ⊗ [ω; 0]`` for ω in the rotated frame's axes ([qx, qy, qz, qw] order)."""
+    qv, qw = quat[:3], quat[3]
+    return 0.5 * ca.vertcat(qw * omega + ca.cross(qv, omega), -ca.dot(qv, omega))
+
+
+def relative_pose(e: Edge, x, dim: int, sym: bool = False):
+    """``(R, p)`` of B's joint frame in A's for joint coordinates ``x`` (SX when ``sym``)."""
+    if sym:
+        rot = (lambda ax, th: rotation_about(ax, th, True)) if dim == 3 else (lambda ax, th: rotation_2d(th, True))
+        eye, zero = ca.DM.eye(dim), ca.DM.zeros(dim, 1)
+    else:
+        rot = (lambda ax, th: rotation_about(ax, th)) if dim == 3 else (lambda ax, th: rotation_2d(th))
+        eye, zero = np.eye(dim), np.zeros(dim)
+    qm = (lambda x_: quaternion_matrix(x_, True)) if sym else quaternion_matrix
     k = e.kind
     if k == "Fixed":
         return eye, zero
     if k == "Revolute":
         return rot(e.axes[0] if e.axes else None, x[0]), zero
     if k == "Prismatic":
-        return eye, x[0] * e.axes[0]
+        return eye, x[0] * _const(e.axes[0], sym)
     if k == "Cylindrical":
-        return rot(e.axes[0], x[1]), x[0] * e.axes[0]
+        return rot(e.axes[0], x[1]), x[0] * _const(e.axes[0], sym)
     if k == "Universal":
-        return rotation_about(e.axes[0], x[0]) @ rotation_about(e.axes[1], x[1]), zero
+        Ra, Rb = rotation_about(e.axes[0], x[0], sym), rotation_about(e.axes[1], x[1], sym)
+        return (ca.mtimes(Ra, Rb) if sym else Ra @ Rb), zero
     if k == "Planar":
         n, e1, e2 = e.axes
-        return rotation_about(n, x[2]), x[0] * e1 + x[1] * e2
+        return rotation_about(n, x[2], sym), x[0] * _const(e1, sym) + x[1] * _const(e2, sym)
     if k == "Spherical":
-        return quaternion_matrix(x), zero
+        return qm(x), zero
     if k == "Free":
         if dim == 2:
-            return rotation_2d(x[2]), x[:2]
-        return quaternion_matrix(x[3:]), x[:3]
+            return rotation_2d(x[2], sym), x[:2]
+        return qm(x[3:]), x[:3]
     raise ModelError(f"joint {e.name!r}: no relative pose for a {k} joint")
 
 
-def _carry(pose, e: Edge, T, forward: bool, members) -> tuple[np.ndarray, np.ndarray]:
+def _const(x, sym: bool):
+    return ca.DM(np.asarray(x, float)) if sym else x
+
+
+def _carry(pose, e: Edge, T, forward: bool, members, sym: bool = False):
     """Pose of the member across joint ``e`` from the pose of the one on this side.
 
     World pose of a frame fixed to member m that was ``H0`` initially: ``H_m H_m0⁻¹ H0``.
     Forward (A → B): ``H_JB = H_JA T``, backward: ``H_JA = H_JB T⁻¹``."""
+    mul = ca.mtimes if sym else np.matmul
     R, p = pose
+    d = R.shape[0]
     here, there = (e.A, e.B) if forward else (e.B, e.A)
     f_here, f_there = (e.frame_a, e.frame_b) if forward else (e.frame_b, e.frame_a)
-    Rt, pt = T if forward else (T[0].T, -T[0].T @ T[1])
-    R0h, p0h = _initial_pose(members, here, len(p))
-    RJ = R @ R0h.T @ f_here[0]
-    oJ = R @ (R0h.T @ (f_here[1] - p0h)) + p
-    RJ2, oJ2 = RJ @ Rt, RJ @ pt + oJ
-    R0t, p0t = _initial_pose(members, there, len(p))
-    Rm = RJ2 @ f_there[0].T @ R0t
-    pm = RJ2 @ (f_there[0].T @ (p0t - f_there[1])) + oJ2
-    return Rm, pm
+    Rt, pt = T if forward else (T[0].T, -mul(T[0].T, T[1]))
+    R0h, p0h = _initial_pose(members, here, d)
+    R0t, p0t = _initial_pose(members, there, d)
+    a1 = R0h.T @ f_here[0]
+    b1 = R0h.T @ (f_here[1] - p0h)
+    a2 = f_there[0].T @ R0t
+    b2 = f_there[0].T @ (p0t - f_there[1])
+    if sym:
+        a1, b1, a2, b2 = (ca.DM(x) for x in (a1, b1, a2, b2))
+    RJ = mul(R, a1)
+    oJ = mul(R, b1) + p
+    RJ2, oJ2 = mul(RJ, Rt), mul(RJ, pt) + oJ
+    return mul(RJ2, a2), mul(RJ2, b2) + oJ2
 
 
 def _initial_pose(members, name: str, dim: int):

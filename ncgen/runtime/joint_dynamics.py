@@ -57,27 +57,43 @@ def kkt_function(model) -> ca.Function:
     return ca.Function("forward_dynamics", [t, q, v, u, p], [a, lam], ["t", "q", "v", "u", "p"], ["a", "lam"])
 
 
+def joint_kkt_function(model) -> ca.Function:
+    """``fd_j: (t, qj, vj, u, p) -> (aj, a, lam)``: joint space in and out for a tree
+    (:meth:`~ncgen.assembly.joint_space.JointSpace.tree_function`, then :func:`kkt_function`,
+    then ``a_j = J q̈ + J̇ q̇``)."""
+    js = model.joint_space
+    tree = js.tree_function(model.layout)
+    t, qj, vj = ca.MX.sym("t"), ca.MX.sym("qj", js.nq), ca.MX.sym("vj", js.nv)
+    u, p = ca.MX.sym("u", model.nu), ca.MX.sym("p", model.np)
+    q, v = tree(qj, vj)
+    a, lam = kkt_function(model)(t, q, v, u, p)
+    aj = js.accelerations(q, v, a)
+    return ca.Function("joint_forward_dynamics", [t, qj, vj, u, p], [aj, a, lam],
+                       ["t", "qj", "vj", "u", "p"], ["aj", "a", "lam"])
+
+
 _KERNELS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
-def forward_dynamics_kernel(model, *, cflags=None):
-    """The compiled :func:`kkt_function` of ``model`` as a
-    :class:`~ncgen.codegen.direct.DirectFunction` (built once per model; the library is
-    cached by content).  Call ``k(t, q, v, u, p)`` → ``[a, lam]`` (buffers reused by the
-    next call)."""
-    hit = _KERNELS.get(model)
+def forward_dynamics_kernel(model, *, joint_space: bool = False, cflags=None):
+    """The compiled :func:`kkt_function` of ``model`` (``joint_space=True``: the
+    :func:`joint_kkt_function`, trees only) as a :class:`~ncgen.codegen.direct.DirectFunction`,
+    built once per model (the library is cached by content).  Call ``k(t, q, v, u, p)`` →
+    ``[a, lam]``, or ``k(t, qj, vj, u, p)`` → ``[aj, a, lam]`` (buffers reused by the next
+    call)."""
+    kernels = _KERNELS.setdefault(model, {})
+    hit = kernels.get(joint_space)
     if hit is None:
         from ncgen.codegen.build import compile_package
         from ncgen.codegen.direct import DirectFunction
         from ncgen.codegen.package import write_package
 
-        f = kkt_function(model)
+        f = joint_kkt_function(model) if joint_space else kkt_function(model)
         with tempfile.TemporaryDirectory() as tmp:
-            pkg = write_package(f"{model.name}_fd", [f], Path(tmp) / "pkg")
+            pkg = write_package(f"{model.name}_{'jfd' if joint_space else 'fd'}", [f], Path(tmp) / "pkg")
             built = compile_package(pkg, cflags=cflags)
             c_name = next(x["c_name"] for x in pkg.manifest["functions"] if x["name"] == f.name())
-        hit = DirectFunction(built.path, c_name, f)
-        _KERNELS[model] = hit
+        hit = kernels[joint_space] = DirectFunction(built.path, c_name, f)
     return hit
 
 
