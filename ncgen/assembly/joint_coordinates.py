@@ -37,7 +37,6 @@ import numpy as np
 from ncgen.assembly.context import perpendicular_basis
 from ncgen.model.joint_equations import angle_gauge, is_full, kind_of, name_of
 from ncgen.model.members import ModelError
-from ncgen.reproducible import dot
 
 
 @dataclass

@@ -113,7 +113,7 @@ class JointSpace:
         self.edges = [_edge(c.joint) for c in coords] + \
             [_edge(j) for j in ctx.system.joints if j.kind == "Fixed" and "point" not in
              (getattr(j.A, "kind", "ground"), getattr(j.B, "kind", "ground"))]
-        self.limits = {c.name: dict(getattr(c.joint, "limits", None) or {}) for c in coords}
+        self.limits = {c.name: dict(c.joint.limits) for c in coords}
         self.members = dict(ctx.system.members)
         self.joints = {j.name: j for j in ctx.system.joints}
         self._initial = None            # (model.q0, its joint positions by joint), filled on first use

@@ -114,7 +114,6 @@ def system_from_urdf(source, *, floating_base: bool = False, gravity=(0.0, 0.0, 
     pose = {root: np.eye(4)}
     order = []
     group_of = {root: root}
-    movable = []
     stack = [root]
     while stack:
         here = stack.pop()
