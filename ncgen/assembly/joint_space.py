@@ -117,6 +117,7 @@ class JointSpace:
         self.members = dict(ctx.system.members)
         self.joints = {j.name: j for j in ctx.system.joints}
         self._initial = None            # (model.q0, its joint positions by joint), filled on first use
+        self._tree_fn = None            # (tree_function or None,), filled on first use
 
     # ------------------------------------------------------------ sizes
     @property
@@ -186,10 +187,37 @@ class JointSpace:
                 if not n > 0:
                     raise ModelError(f"qj[{name!r}]: the quaternion [qx, qy, qz, qw] is zero")
                 x[-4:] = qn / n * (1.0 if qn[3] >= 0 else -1.0)
+        if len(given) == len(self.joint_names) and self._tree(model) is not None:
+            rates = None if vj is None else self._given(vj, True, "vj")
+            if rates is None or len(rates) == len(self.joint_names):
+                x = np.concatenate([given[n] for n in self.joint_names])
+                w = np.zeros(self.nv) if rates is None else np.concatenate([rates[n] for n in self.joint_names])
+                q, v = (np.array(y).reshape(-1) for y in self._tree(model)(x, w))
+                if self._holds(model, q, v, t, p):
+                    return q, v
         q = self._propagate(model, given)
         q = self._settle(model, q, given, t, p)
         v = self._velocity(model, q, vj, given, t, p)
         return q, v
+
+    def _tree(self, model):
+        """The :meth:`tree_function` (built on first use), or None for a model that is not a tree."""
+        if self._tree_fn is None:
+            try:
+                self._tree_fn = (self.tree_function(model.layout),)
+            except ModelError:
+                self._tree_fn = (None,)
+        return self._tree_fn[0]
+
+    @staticmethod
+    def _holds(model, q, v, t, p) -> bool:
+        """Whether ``(q, v)`` satisfies both constraint levels (drives included) to round-off."""
+        f = model.functions
+        size = system_size(q)
+        phi = np.array(f["phi"](t, q, p)).reshape(-1)
+        vel = np.array(f["A"](t, q, p)) @ v + np.array(f["phi_t"](t, q, p)).reshape(-1)
+        return bool(np.all(np.abs(phi) <= TOL * size**2)
+                    and np.all(np.abs(vel) <= 1e-10 * size * (1.0 + np.max(np.abs(v), initial=0.0))))
 
     def initial_state(self, model, positions: dict, rates: dict):
         """``(q, v)`` of a joint-space initial state: the named joints' positions and rates,
