@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import ncgen as nc
-from ncgen.assembly.joint_space import quaternion_matrix
+from ncgen.assembly.joint_tree import quaternion_matrix
 
 G = 9.81
 

@@ -20,12 +20,14 @@ its axis, forces in N along it, ``[f, τ]`` in B's frame for a free joint.
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 
 from ncgen.assembly.joint_coordinates import JointCoordinates, joint_coordinates
+from ncgen.assembly.joint_tree import (
+    Edge, carry, edge_of, quaternion_matrix, quaternion_rate, relative_pose, rotation_2d,
+)
 from ncgen.assembly.kinematics import TOL, newton, system_size
 from ncgen.assembly.mass import sparse_dm
 from ncgen.assembly.sym2casadi import to_casadi
@@ -68,20 +70,6 @@ def actuator_forces(ctx, coords: list[JointCoordinates]) -> tuple[ca.SX, ca.SX, 
     return ca.horzcat(*Bs), ca.vertcat(*taus), names
 
 
-@dataclass
-class Edge:
-    """A joint of the spanning tree: member names, joint kind, frames and axes (world,
-    initial configuration) — plain data for :func:`relative_pose`."""
-
-    name: str
-    kind: str
-    A: str
-    B: str
-    frame_a: tuple[np.ndarray, np.ndarray]
-    frame_b: tuple[np.ndarray, np.ndarray]
-    axes: tuple
-
-
 class JointSpace:
     """Joint coordinates of one model (built by :func:`ncgen.assembly.build.build_model`)."""
 
@@ -110,8 +98,8 @@ class JointSpace:
         B, tau, self.actuated = actuation
         self.actuation = ca.Function("actuation", [ctx.t, q, ctx.u, ctx.p], [B, tau],
                                      ["t", "q", "u", "p"], ["B", "tau"])
-        self.edges = [_edge(c.joint) for c in coords] + \
-            [_edge(j) for j in ctx.system.joints if j.kind == "Fixed" and "point" not in
+        self.edges = [edge_of(c.joint) for c in coords] + \
+            [edge_of(j) for j in ctx.system.joints if j.kind == "Fixed" and "point" not in
              (getattr(j.A, "kind", "ground"), getattr(j.B, "kind", "ground"))]
         self.limits = {c.name: dict(c.joint.limits) for c in coords}
         self.members = dict(ctx.system.members)
@@ -259,7 +247,7 @@ class JointSpace:
                     continue
                 x = qj[sq[e.name]] if e.name in sq else ca.SX(0, 1)
                 T = relative_pose(e, x, d, sym=True)
-                poses[there] = _carry(poses[here], e, T, forward, self.members, sym=True)
+                poses[there] = carry(poses[here], e, T, forward, self.members, sym=True)
                 queue.append(there)
                 used += 1
         missing = [n for n in self.members if n not in poses]
@@ -286,10 +274,10 @@ class JointSpace:
             x, w = qj[sq[name]], vj[sv[name]]
             kind = self.joints[name].kind
             if kind == "Spherical":
-                qj_dot.append(_quaternion_rate(x, w))
+                qj_dot.append(quaternion_rate(x, w))
             elif kind == "Free" and d == 3:
                 R = quaternion_matrix(x[3:], sym=True)
-                qj_dot.append(ca.vertcat(ca.mtimes(R, w[:3]), _quaternion_rate(x[3:], w[3:])))
+                qj_dot.append(ca.vertcat(ca.mtimes(R, w[:3]), quaternion_rate(x[3:], w[3:])))
             elif kind == "Free":
                 qj_dot.append(ca.vertcat(ca.mtimes(rotation_2d(x[2], sym=True), w[:2]), w[2]))
             else:
@@ -316,7 +304,7 @@ class JointSpace:
                 if there in poses:
                     continue
                 T = relative_pose(e, values.get(e.name, np.zeros(0)), self.dim)
-                poses[there] = _carry(poses[here], e, T, forward, members)
+                poses[there] = carry(poses[here], e, T, forward, members)
                 queue.append(there)
         q = model.q0.copy()
         for name, (R, pos) in poses.items():
@@ -396,132 +384,3 @@ def solve_linear(K: np.ndarray, b: np.ndarray, tol: float = 1e-8) -> np.ndarray 
         return None
     err = np.max(np.abs(K @ x - b), initial=0.0)
     return x if err <= tol * max(1.0, np.max(np.abs(b), initial=0.0)) else None
-
-
-# --------------------------------------------------------------- the tree walk
-def _edge(j) -> Edge:
-    d = j.system.dim
-    eye = np.eye(d)
-    A, B = ("ground" if m.is_ground else m.name for m in (j.A, j.B))
-    if j.kind == "Free":
-        fa = (eye, np.zeros(d)) if j.A.is_ground else (j.A.R0, j.A.p0)
-        return Edge(j.name, j.kind, A, B, fa, (j.frame_rotation(), j.frame_origin()), ())
-    at = j.at()
-    axes = ()
-    if j.kind in ("Revolute",) and d == 3:
-        axes = (j.axis(),)
-    elif j.kind in ("Prismatic", "Cylindrical"):
-        axes = (j.axis(),)
-    elif j.kind == "Universal":
-        axes = (j.direction("axis_a"), j.direction("axis_b"))
-    elif j.kind == "Planar":
-        from ncgen.assembly.context import perpendicular_basis
-        n = j.direction("normal")
-        axes = (n, *perpendicular_basis(n))
-    return Edge(j.name, j.kind, A, B, (eye, at), (eye, at), axes)
-
-
-def rotation_about(axis, angle, sym: bool = False):
-    """Rodrigues: rotation by ``angle`` (rad) about the unit ``axis`` (SX when ``sym``)."""
-    k = np.asarray(axis, float)
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    if sym:
-        return ca.DM.eye(3) + ca.sin(angle) * ca.DM(K) + (1 - ca.cos(angle)) * ca.DM(K @ K)
-    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * (K @ K)
-
-
-def rotation_2d(angle, sym: bool = False):
-    if sym:
-        c, s = ca.cos(angle), ca.sin(angle)
-        return ca.vertcat(ca.horzcat(c, -s), ca.horzcat(s, c))
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([[c, -s], [s, c]])
-
-
-def quaternion_matrix(quat, sym: bool = False):
-    """Rotation matrix of the unit quaternion ``[qx, qy, qz, qw]`` (normalised first)."""
-    if sym:
-        x, y, z, w = (quat[i] / ca.norm_2(quat) for i in range(4))
-        rows = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
-        return ca.vertcat(*[ca.horzcat(*r) for r in rows])
-    x, y, z, w = np.asarray(quat, float) / np.linalg.norm(quat)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-
-
-def _quaternion_rate(quat, omega):
-    """``q̇ = ½ q ⊗ [ω; 0]`` for ω in the rotated frame's axes ([qx, qy, qz, qw] order)."""
-    qv, qw = quat[:3], quat[3]
-    return 0.5 * ca.vertcat(qw * omega + ca.cross(qv, omega), -ca.dot(qv, omega))
-
-
-def relative_pose(e: Edge, x, dim: int, sym: bool = False):
-    """``(R, p)`` of B's joint frame in A's for joint coordinates ``x`` (SX when ``sym``)."""
-    if sym:
-        rot = (lambda ax, th: rotation_about(ax, th, True)) if dim == 3 else (lambda ax, th: rotation_2d(th, True))
-        eye, zero = ca.DM.eye(dim), ca.DM.zeros(dim, 1)
-    else:
-        rot = (lambda ax, th: rotation_about(ax, th)) if dim == 3 else (lambda ax, th: rotation_2d(th))
-        eye, zero = np.eye(dim), np.zeros(dim)
-    qm = (lambda x_: quaternion_matrix(x_, True)) if sym else quaternion_matrix
-    k = e.kind
-    if k == "Fixed":
-        return eye, zero
-    if k == "Revolute":
-        return rot(e.axes[0] if e.axes else None, x[0]), zero
-    if k == "Prismatic":
-        return eye, x[0] * _const(e.axes[0], sym)
-    if k == "Cylindrical":
-        return rot(e.axes[0], x[1]), x[0] * _const(e.axes[0], sym)
-    if k == "Universal":
-        Ra, Rb = rotation_about(e.axes[0], x[0], sym), rotation_about(e.axes[1], x[1], sym)
-        return (ca.mtimes(Ra, Rb) if sym else Ra @ Rb), zero
-    if k == "Planar":
-        n, e1, e2 = e.axes
-        return rotation_about(n, x[2], sym), x[0] * _const(e1, sym) + x[1] * _const(e2, sym)
-    if k == "Spherical":
-        return qm(x), zero
-    if k == "Free":
-        if dim == 2:
-            return rotation_2d(x[2], sym), x[:2]
-        return qm(x[3:]), x[:3]
-    raise ModelError(f"joint {e.name!r}: no relative pose for a {k} joint")
-
-
-def _const(x, sym: bool):
-    return ca.DM(np.asarray(x, float)) if sym else x
-
-
-def _carry(pose, e: Edge, T, forward: bool, members, sym: bool = False):
-    """Pose of the member across joint ``e`` from the pose of the one on this side.
-
-    World pose of a frame fixed to member m that was ``H0`` initially: ``H_m H_m0⁻¹ H0``.
-    Forward (A → B): ``H_JB = H_JA T``, backward: ``H_JA = H_JB T⁻¹``."""
-    mul = ca.mtimes if sym else np.matmul
-    R, p = pose
-    d = R.shape[0]
-    here, there = (e.A, e.B) if forward else (e.B, e.A)
-    f_here, f_there = (e.frame_a, e.frame_b) if forward else (e.frame_b, e.frame_a)
-    Rt, pt = T if forward else (T[0].T, -mul(T[0].T, T[1]))
-    R0h, p0h = _initial_pose(members, here, d)
-    R0t, p0t = _initial_pose(members, there, d)
-    a1 = R0h.T @ f_here[0]
-    b1 = R0h.T @ (f_here[1] - p0h)
-    a2 = f_there[0].T @ R0t
-    b2 = f_there[0].T @ (p0t - f_there[1])
-    if sym:
-        a1, b1, a2, b2 = (ca.DM(x) for x in (a1, b1, a2, b2))
-    RJ = mul(R, a1)
-    oJ = mul(R, b1) + p
-    RJ2, oJ2 = mul(RJ, Rt), mul(RJ, pt) + oJ
-    return mul(RJ2, a2), mul(RJ2, b2) + oJ2
-
-
-def _initial_pose(members, name: str, dim: int):
-    if name == "ground":
-        return np.eye(dim), np.zeros(dim)
-    m = members[name]
-    return (np.eye(dim) if m.R0 is None else m.R0), m.p0
