@@ -81,3 +81,19 @@ def test_unknown_joint():
     model = bar_pendulum()
     with pytest.raises(nc.ModelError, match="no joint named 'elbow'"):
         nc.joint_reactions(model, model.q0, model.lam0, joints=["elbow"])
+
+
+def test_trajectory_reactions_follow_the_closed_form():
+    """Along a simulated swing, the pivot force is m a_G − m g at every output step."""
+    model = bar_pendulum()
+    q0, v0 = model.from_joint_space([0.3], [0.0])
+    traj = nc.simulate(model, 0.5, 0.1, q0=q0, v0=v0, rtol=1e-10, atol=1e-12)
+    force, moment, effort = traj.reaction("pivot")
+    th, om = traj.joint("pivot")
+    alpha = -G * L / 2 * np.cos(th) / (L**2 / 3)
+    e = np.column_stack([np.cos(th), np.sin(th)])
+    e_perp = np.column_stack([-np.sin(th), np.cos(th)])
+    a_G = L / 2 * (alpha[:, None] * e_perp - om[:, None] ** 2 * e)
+    np.testing.assert_allclose(force, MASS * a_G - MASS * np.array([0, -G]), atol=1e-6)
+    np.testing.assert_allclose(moment, 0, atol=1e-8)
+    assert effort is None and force.shape == (len(traj), 2)

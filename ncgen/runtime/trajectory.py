@@ -126,6 +126,21 @@ class Trajectory:
         x, xd = self.qj[:, pos], self.vj[:, rate]
         return (x[:, 0], xd[:, 0]) if len(pos) == 1 else (x, xd)
 
+    def reaction(self, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """``(force, moment, effort)`` of joint ``name`` per step, from the multipliers
+        (:func:`ncgen.runtime.reactions.joint_reactions`): force ``(n_t, dim)`` in N and moment
+        (N·m; ``(n_t, 3)``, or ``(n_t,)`` in 2D) on the joint's second member in world axes
+        about the joint point; ``effort`` ``(n_t, ...)`` for driven or actuated joints, else None."""
+        from ncgen.runtime.reactions import joint_reactions
+
+        model = self._model("reaction()")
+        rows = [joint_reactions(model, q, lam, v=v, t=t, u=u, p=self.p, joints=[name]).get(name)
+                for t, q, v, lam, u in zip(self.t, self.q, self.v, self.lam, self.u)]
+        if not rows or rows[0] is None:
+            raise NcgenError(f"joint {name!r} has no reaction (no equations and no actuator)")
+        effort = None if rows[0].effort is None else np.array([r.effort for r in rows])
+        return np.array([r.force for r in rows]), np.array([r.moment for r in rows]), effort
+
     def marker(self, name: str) -> np.ndarray:
         """World positions ``(n_t, dim)`` of the marker ``"member.marker"``."""
         if name not in self.marker_names:
