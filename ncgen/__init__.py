@@ -9,7 +9,7 @@ from ncgen.codegen.model_package import generate
 from ncgen.errors import NcgenError
 from ncgen.model.forces import Force, GeneralizedForce, PointForce, Spring, Torque, TorsionalSpring
 from ncgen.model.joints import (
-    CoordinateDriver, Cylindrical, Distance, Fixed, Joint, Planar, PointOnLine, PointOnPlane, Prismatic,
+    CoordinateDriver, Cylindrical, Distance, Fixed, Free, Joint, Mimic, Planar, PointOnLine, PointOnPlane, Prismatic,
     Revolute, Spherical, Universal,
 )
 from ncgen.errors import ModelError
@@ -21,14 +21,19 @@ from ncgen.runtime.formfinding import Tensegrity, form_find
 from ncgen.runtime.linearization import LinearModel, linearize
 from ncgen.runtime.modes import Modes, modes
 from ncgen.runtime.statics import Equilibrium, equilibrium
+from ncgen.runtime.joint_dynamics import forward_dynamics, forward_dynamics_kernel, inverse_dynamics
+from ncgen.runtime.reactions import JointReaction, joint_reactions
 from ncgen.symbolic.coordinates import coordinate_type
 from ncgen.version import __version__
 
 
 __all__ = [
-    "CoordinateDriver", "Cylindrical", "Distance", "Equilibrium", "LinearModel", "Modes", "Fixed", "Force", "GeneralizedForce", "Joint", "Model",
-    "ModelError", "NcgenError", "OptimalControl", "OptimalTrajectory", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic",
-    "Revolute", "Spherical", "Spring", "System", "Tensegrity", "Torque", "TorsionalSpring", "Trajectory", "Universal",
-    "assemble", "coordinate_type", "dof_report", "equilibrium", "form_find", "generate", "linearize", "modes", "project_velocity", "simulate", "solve_kinematics",
+    "CoordinateDriver", "Cylindrical", "Distance", "Equilibrium", "Fixed", "Force", "Free", "GeneralizedForce",
+    "Joint", "JointReaction", "LinearModel", "Mimic", "Model", "ModelError", "Modes", "NcgenError", "OptimalControl",
+    "OptimalTrajectory", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic", "Revolute", "Spherical",
+    "Spring", "System", "Tensegrity", "Torque", "TorsionalSpring", "Trajectory", "Universal",
+    "assemble", "coordinate_type", "dof_report", "equilibrium", "form_find", "forward_dynamics",
+    "forward_dynamics_kernel", "generate", "inverse_dynamics", "joint_reactions", "linearize", "modes",
+    "project_velocity", "simulate", "solve_kinematics",
     "__version__",
 ]

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import re
+import warnings
 
 import numpy as np
 
@@ -79,6 +80,15 @@ def _check_magnitude(a: np.ndarray, what: str) -> None:
     if a.size and np.max(np.abs(a)) > MAX_MAGNITUDE:
         raise ShapeError(f"{what}: expected numbers of magnitude at most {MAX_MAGNITUDE:g}, got "
                          f"{float(np.max(np.abs(a))):g}")
+
+
+#: Largest |RᵀR − 1| of a matrix accepted as a rotation given with printed precision (copied
+#: from a paper or another tool, ~6 digits); it is projected to the nearest rotation.
+PRINTED_ROTATION_TOL = 1e-5
+
+
+class RotationProjected(UserWarning):
+    """A rotation given with printed precision was replaced by the nearest rotation."""
 
 
 def _shape_of(x) -> str:
@@ -159,9 +169,16 @@ def rotation(R, dim: int, what: str = "rotation") -> np.ndarray:
         return np.array([[c, -s], [s, c]])
     R = as_array(R, (dim, dim), what)
     err = np.max(np.abs(R.T @ R - np.eye(dim)))
-    if err > ROTATION_TOL:
-        raise RotationError(f"{what}: expected an orthonormal matrix, |RᵀR - 1| = {err:.3g}")
+    if err > PRINTED_ROTATION_TOL:
+        raise RotationError(f"{what}: expected an orthonormal matrix, |RᵀR - 1| = {err:.3g} "
+                            f"(up to {PRINTED_ROTATION_TOL:g} is projected to the nearest rotation)")
     det = np.linalg.det(R)
     if det < 0:
         raise RotationError(f"{what}: expected det = +1 (a proper rotation), got det = {det:.6g} (a reflection)")
+    if err > ROTATION_TOL:
+        U, _, Vt = np.linalg.svd(R)
+        P = U @ Vt                                # the nearest rotation (polar factor), det +1 here
+        warnings.warn(f"{what}: |RᵀR - 1| = {err:.3g}: projected to the nearest rotation "
+                      f"(largest change of an entry {np.max(np.abs(P - R)):.3g})", RotationProjected, stacklevel=3)
+        return P
     return R

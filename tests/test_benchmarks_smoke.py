@@ -26,8 +26,13 @@ pytestmark = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc
                             "RATIO looped -O2 / flat -O2, jacobian", "RATIO VM / looped -O2, residual"]),
     ("build_scaling.py", ["=== ncgen: chain of N bars", "KanesMethod", "EXTRAPOLATED"]),
     ("long_run.py", ["=== heavy top", "=== chain of 5 bars", "RATIO ncgen / MuJoCo RK4"]),
+    ("joint_space.py", ["=== call overhead", "RATIO casadi.external / direct", "=== Panda",
+                        "RATIO ncgen direct / pinocchio.aba"]),
 ])
 def test_smoke(tmp_path, script, expected):
+    if script == "joint_space.py":
+        pytest.importorskip("pinocchio")
+        pytest.importorskip("yourdfpy")
     env = {**os.environ, "NCGEN_CACHE_DIR": str(tmp_path / "cache")}
     name, *options = script.split()
     out = subprocess.run([sys.executable, str(BENCHMARKS / name), *options, "--smoke"], cwd=BENCHMARKS,

@@ -317,3 +317,22 @@ def test_off_centre_bar_needs_its_inertia():
     with pytest.raises(InertiaError, match="not the middle"):
         RigidMember.bar("rr", 1.0, 2.0, com=0.5)
     assert RigidMember.bar("rr", 1.0, 2.0, com=1.0).Jbar[0, 0] == pytest.approx(1.0 * 4 / 12)
+
+
+def test_printed_rotation_is_projected_and_reported():
+    """|RᵀR − 1| ~ 1e-6 (6 printed digits) is projected to the nearest rotation with a warning."""
+    import warnings
+
+    from ncgen.validation import RotationProjected, rotation
+
+    c, s = np.cos(0.3), np.sin(0.3)
+    R = np.round(np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]), 6)
+    with pytest.warns(RotationProjected, match="projected to the nearest rotation"):
+        P = rotation(R, 3, "rotation")
+    np.testing.assert_allclose(P.T @ P, np.eye(3), atol=1e-15)
+    np.testing.assert_allclose(P, [[c, -s, 0], [s, c, 0], [0, 0, 1]], atol=1e-6)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rotation(np.eye(3), 3)                     # exact: no report
+    with pytest.raises(RotationError, match="orthonormal"):
+        rotation(np.diag([1.0, 1.0, 1.0001]), 3)

@@ -10,6 +10,7 @@ import numpy as np
 
 from ncgen.assembly.functions import system_functions
 from ncgen.assembly.initial_state import consistent_state
+from ncgen.assembly.joint_space import JointSpace, actuator_forces, build_joint_coordinates
 from ncgen.assembly.kinematics import resolve_fix
 from ncgen.assembly.limits import model_limits
 from ncgen.assembly.mass import CholeskyFactor, assemble_mass
@@ -63,6 +64,10 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     labels, rows = constraint_rows(system, ctx)
     F, V = force_terms(system, ctx)
     limits = model_limits(system, ctx)
+    coords, skipped = build_joint_coordinates(system, ctx)
+    actuation = actuator_forces(ctx, coords)
+    if actuation[2]:
+        F = F + ca.mtimes(actuation[0], actuation[1])
     M = assemble_mass(layout, members)
     factor = CholeskyFactor(M, layout.coordinate_names)
     q_init, v_init = initial_guess(layout, members)
@@ -89,10 +94,19 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     functions, potential = system_functions(ctx, phi, F, V, M, factor, alpha, beta, system)
     state = consistent_state(functions, layout, labels, q_init, v_init, p0, t0, tolerance, M,
                              fixed=fixed, assemble=assemble)
-    return Model(description=system, layout=layout, labels=labels, functions=functions, M=M, factor=factor,
-                 potential=potential, state=state, p0=p0, baumgarte=(alpha, beta), redundant=redundant_labels,
-                 dropped=(redundant == "drop"), t0=t0, springs=spring_table(system, ctx),
-                 limits=limits)
+    joint_space = JointSpace(ctx, coords, skipped, actuation)
+
+    def model_with(state):
+        return Model(description=system, layout=layout, labels=labels, functions=functions, M=M, factor=factor,
+                     potential=potential, state=state, p0=p0, baumgarte=(alpha, beta),
+                     redundant=redundant_labels, dropped=(redundant == "drop"), t0=t0,
+                     springs=spring_table(system, ctx), limits=limits, joint_space=joint_space)
+
+    model = model_with(state)
+    if system.initial_joints or system.initial_joint_rates:
+        q, v = joint_space.initial_state(model, system.initial_joints, system.initial_joint_rates)
+        model = model_with(consistent_state(functions, layout, labels, q, v, p0, t0, tolerance, M, fixed=fixed))
+    return model
 
 
 def _check_droppable(name, labels, dependent, phi_fn, A_fn, q, p, t0) -> None:

@@ -9,7 +9,7 @@ from ncgen.cli.registry import subcommand
 
 
 def _check_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", metavar="MODEL.toml", help="model file (TOML)")
+    p.add_argument("model", metavar="MODEL.toml", help="model file: TOML, or a URDF robot (.urdf)")
     p.add_argument("--tolerance", type=float, default=1e-6, metavar="TOL",
                    help="largest correction of the initial state, relative to the model's size, "
                         "that still counts as consistent (default 1e-6, as System.build)")
@@ -30,7 +30,8 @@ def _check_arguments(p: argparse.ArgumentParser) -> None:
     examples=(
         "ncgen check examples/fourbar_planar.toml\n"
         "ncgen check examples/fourbar_3d.toml --tolerance 1e-9\n"
-        "ncgen check mymodel.toml --param k=50 || echo 'fix the initial state'"),
+        "ncgen check mymodel.toml --param k=50 || echo 'fix the initial state'\n"
+        "ncgen check robot.urdf                               # a URDF robot, fixed base"),
     arguments=_check_arguments,
 )
 def check(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:

@@ -31,8 +31,9 @@ def load_model(path: str, params: list[str] | None = None):
 
 
 def load_system(path: str, params: list[str] | None = None):
-    """The :class:`~ncgen.model.system.System` in TOML file ``path``, with ``params`` as in
-    :func:`load_model`; errors name the file."""
+    """The :class:`~ncgen.model.system.System` in model file ``path`` — a URDF robot
+    (``.urdf``: fixed base, joint torques as the input ``tau``) or TOML (anything else) — with
+    ``params`` as in :func:`load_model`; errors name the file."""
     from ncgen.errors import ModelError
     from ncgen.model.system import System
 
@@ -41,7 +42,7 @@ def load_system(path: str, params: list[str] | None = None):
         what = "is a directory, not" if file.is_dir() else "does not exist; expected"
         raise ModelError(f"model file {path!r} {what} a TOML model file (see the examples/ directory)")
     try:
-        system = System.from_toml(file)
+        system = System.from_urdf(file) if file.suffix.lower() == ".urdf" else System.from_toml(file)
     except NcgenError as e:
         text = str(e)
         raise type(e)(text if text.startswith(str(file)) else f"{path}: {text}") from None

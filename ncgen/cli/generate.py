@@ -9,7 +9,7 @@ from ncgen.cli.registry import subcommand
 
 
 def _generate_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", metavar="MODEL.toml", help="model file (TOML)")
+    p.add_argument("model", metavar="MODEL.toml", help="model file: TOML, or a URDF robot (.urdf)")
     p.add_argument("-o", "--output", metavar="DIR", required=True,
                    help="package directory to write; over an existing ncgen package only the files "
                         "ncgen wrote (and their build products) are replaced, other files are kept; "
@@ -53,7 +53,8 @@ def _reroll_limit(text: str) -> int | str:
         "manifest.json. The same model always gives the same bytes."),
     examples=(
         "ncgen generate examples/chain.toml -o chain_c       # then: make -C chain_c && chain_c/chain_main\n"
-        "ncgen generate examples/heavy_top.toml -o top --compile --cflags='-O3 -march=native'"),
+        "ncgen generate examples/heavy_top.toml -o top --compile --cflags='-O3 -march=native'\n"
+        "ncgen generate robot.urdf -o robot_c                 # URDF: joint torques are the input tau"),
     arguments=_generate_arguments,
 )
 def generate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:

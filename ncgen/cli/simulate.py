@@ -14,7 +14,7 @@ SUFFIXES = {"output": (".npz", ".csv"), "plot": (".png", ".pdf", ".svg"), "anima
 
 
 def _simulate_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", metavar="MODEL.toml", help="model file (TOML)")
+    p.add_argument("model", metavar="MODEL.toml", help="model file: TOML, or a URDF robot (.urdf)")
     p.add_argument("--t-end", type=float, required=True, metavar="T", help="final time (s)")
     p.add_argument("--dt", type=float, default=0.01, metavar="DT",
                    help="output step (s, default 0.01); IDAS chooses its own internal steps")
@@ -65,7 +65,8 @@ def _check_outputs(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
         "ncgen simulate examples/chain.toml --t-end 2 --dt 0.01 -o chain.npz --plot chain.png\n"
         "ncgen simulate examples/heavy_top.toml --t-end 3 -o top.csv --animate top.gif\n"
         "ncgen simulate examples/slider_crank.toml --t-end 1 -o sc.npz --param omega=20 --backend vm\n"
-        "ncgen simulate examples/tensegrity.toml --t-end 2 -o t.npz --method stepper"),
+        "ncgen simulate examples/tensegrity.toml --t-end 2 -o t.npz --method stepper\n"
+        "ncgen simulate robot.urdf --t-end 1 -o robot.csv   # URDF: falls under gravity, zero torque"),
     arguments=_simulate_arguments,
 )
 def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:

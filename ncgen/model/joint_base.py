@@ -39,6 +39,9 @@ class Joint:
         self.name = name
         self.options = options
         self.system = None
+        #: Limits kept as data (``lower``, ``upper``, ``velocity``, ``effort``; SI units), e.g.
+        #: from a URDF ``<limit>``; ncgen does not enforce them.
+        self.limits: dict[str, float] = {}
 
     # -------------------------------------------------------------- identity
     def members(self) -> list:

@@ -24,6 +24,11 @@ Fixed to a bar 5.  What cannot be expressed is refused with a message saying why
 off a bar's axis, a revolute about a bar's own axis, a direction a bar does not carry,
 orientation of a point member).  :mod:`ncgen.model.joint_equations` has the formulas.
 
+Actuators (``effort=`` on Revolute, Prismatic, Cylindrical, Universal, Planar, Spherical,
+Free; a number, text expression, input or callable of t, one value per joint rate): the
+joint's torque (N·m) or force (N) conjugate to its rates
+(:mod:`ncgen.assembly.joint_coordinates`), acting as ``J(q)ᵀ τ``.
+
 Drives (``drive=``; a number, a text expression such as ``"0.5*sin(2*t)"``, a CasADi
 expression of the parameters or a callable ``f(t)``) prescribe, as a function of time:
 Revolute — the rotation angle of B relative to A about ``axis`` since the initial
@@ -33,6 +38,7 @@ prescribes one natural coordinate.
 """
 from __future__ import annotations
 
+import casadi as ca
 import numpy as np
 
 from ncgen.model.joint_base import Joint
@@ -42,7 +48,7 @@ from ncgen.model.joint_equations import (
 )
 from ncgen.errors import ModelError
 from ncgen.reproducible import dot, norm
-from ncgen.validation import as_vector
+from ncgen.validation import as_vector, rotation
 
 #: |cos| below which two directions count as perpendicular (Universal).
 PERPENDICULAR_TOL = 1e-9
@@ -55,8 +61,8 @@ class Spherical(Joint):
 
     kind = "Spherical"
 
-    def __init__(self, A, B, *, at, name=None):
-        super().__init__(A, B, name=name, at=at)
+    def __init__(self, A, B, *, at, name=None, effort=None):
+        super().__init__(A, B, name=name, at=at, effort=effort)
 
     def geometry(self, ctx):
         self.require_dim(3, "use Revolute")
@@ -73,8 +79,8 @@ class Revolute(Joint):
     kind = "Revolute"
     drive_meaning = "rotation angle of B relative to A since the initial configuration, rad"
 
-    def __init__(self, A, B, *, at, axis=None, name=None, drive=None):
-        super().__init__(A, B, name=name, at=at, axis=axis, drive=drive)
+    def __init__(self, A, B, *, at, axis=None, name=None, drive=None, effort=None):
+        super().__init__(A, B, name=name, at=at, axis=axis, drive=drive, effort=effort)
 
     def geometry(self, ctx):
         eqs = coincidence(ctx, self.A, self.B, self.at(), self.label, f"{self.name}.coincide")
@@ -99,6 +105,11 @@ class Revolute(Joint):
     def drive_equations(self, ctx):
         return [(f"{self.name}.drive", self.gauge(ctx).equation(ctx, self.drive_expr(ctx)))]
 
+    def coordinate(self, ctx) -> ca.SX:
+        """The joint angle θ (rad): ``atan2`` of the gauge, zero initially."""
+        x, y = self.gauge(ctx).terms(ctx)
+        return ca.atan2(y, x)
+
 
 class Prismatic(Joint):
     """Slider along ``axis``: no relative rotation (3 for bodies and the ground, 2 with a
@@ -110,8 +121,8 @@ class Prismatic(Joint):
     kind = "Prismatic"
     drive_meaning = "displacement of B relative to A along axis since the initial configuration, m"
 
-    def __init__(self, A, B, *, at, axis, name=None, drive=None):
-        super().__init__(A, B, name=name, at=at, axis=axis, drive=drive)
+    def __init__(self, A, B, *, at, axis, name=None, drive=None, effort=None):
+        super().__init__(A, B, name=name, at=at, axis=axis, drive=drive, effort=effort)
 
     def _sides(self):
         """(carrier of the line, other member, sign of B's displacement seen from it)."""
@@ -136,6 +147,16 @@ class Prismatic(Joint):
         s = dot(a, pO - pC) + sign * self.drive_expr(ctx)
         return [(f"{self.name}.drive", ctx.apply("offset_dot", rC, rO, aC, s)[0])]
 
+    def coordinate(self, ctx) -> ca.SX:
+        """The displacement s (m) of B relative to A along ``axis``, zero initially."""
+        at, a = self.at(), self.axis()
+        C, O, sign = self._sides()
+        pC, pO = ctx.nearest_point(C, at), ctx.nearest_point(O, at)
+        rC, _ = ctx.point(C, pC, self.label)
+        rO, _ = ctx.point(O, pO, self.label)
+        aC, _ = ctx.direction(C, a, self.label)
+        return sign * (ca.dot(rO - rC, aC) - dot(a, pO - pC))
+
 
 class Cylindrical(Joint):
     """Common ``axis`` (2 for bodies and the ground; 1 with a bar across it) and the point
@@ -144,8 +165,8 @@ class Cylindrical(Joint):
 
     kind = "Cylindrical"
 
-    def __init__(self, A, B, *, at, axis, name=None):
-        super().__init__(A, B, name=name, at=at, axis=axis)
+    def __init__(self, A, B, *, at, axis, name=None, effort=None):
+        super().__init__(A, B, name=name, at=at, axis=axis, effort=effort)
 
     def geometry(self, ctx):
         self.require_dim(3, "use Prismatic or Revolute")
@@ -162,8 +183,8 @@ class Universal(Joint):
 
     kind = "Universal"
 
-    def __init__(self, A, B, *, at, axis_a, axis_b, name=None):
-        super().__init__(A, B, name=name, at=at, axis_a=axis_a, axis_b=axis_b)
+    def __init__(self, A, B, *, at, axis_a, axis_b, name=None, effort=None):
+        super().__init__(A, B, name=name, at=at, axis_a=axis_a, axis_b=axis_b, effort=effort)
 
     def geometry(self, ctx):
         self.require_dim(3, "use Revolute")
@@ -189,8 +210,8 @@ class Planar(Joint):
 
     kind = "Planar"
 
-    def __init__(self, A, B, *, at, normal, name=None):
-        super().__init__(A, B, name=name, at=at, normal=normal)
+    def __init__(self, A, B, *, at, normal, name=None, effort=None):
+        super().__init__(A, B, name=name, at=at, normal=normal, effort=effort)
 
     def geometry(self, ctx):
         self.require_dim(3, "a planar system is already planar")
@@ -284,6 +305,64 @@ class PointOnPlane(Joint):
                               self.direction("normal"), self.label, f"{self.name}.plane")
 
 
+class Free(Joint):
+    """No constraint: B moves freely relative to A (the floating base of a robot is a
+    ``Free`` joint named ``root`` from the ground).  Its joint frame on B has its origin at
+    ``at`` and the axes of ``rotation`` (world, initial configuration; default the world
+    axes); on A it is A's frame (the world frame for the ground).  Joint coordinates follow
+    Pinocchio's free flyer: ``[x, y, z, qx, qy, qz, qw]`` of B's joint frame in A's, rates
+    ``[v, ω]`` of that frame in its own axes (planar: ``[x, y, θ]`` and ``[v_x, v_y, ω]``)."""
+
+    kind = "Free"
+
+    def __init__(self, A, B, *, at=None, rotation=None, name=None, effort=None):
+        super().__init__(A, B, name=name, at=at, rotation=rotation, effort=effort)
+
+    def geometry(self, ctx):
+        require_orientation(self.label, self.A, self.B)
+        if self.options.get("at") is not None:
+            self.at()
+        self.frame_rotation()
+        return []
+
+    def frame_rotation(self) -> np.ndarray:
+        """B's joint frame axes in the world, initial configuration."""
+        R = self.options.get("rotation")
+        d = self.system.dim
+        return np.eye(d) if R is None else rotation(R, d, f"{self.label}: rotation")
+
+    def frame_origin(self) -> np.ndarray:
+        at = self.options.get("at")
+        return np.zeros(self.system.dim) if at is None else self.at()
+
+
+class Mimic(Joint):
+    """URDF ``<mimic>``: the coordinate of the ``follower`` joint (Revolute or Prismatic)
+    equals ``multiplier`` × the ``leader``'s + ``offset`` (rad or m; 1 equation).  Both
+    coordinates are zero in the initial configuration, so a non-zero ``offset`` needs
+    ``build(assemble=True)``."""
+
+    kind = "Mimic"
+
+    def __init__(self, leader, follower, *, multiplier=1.0, offset=0.0, name=None):
+        super().__init__(follower.A, follower.B, name=name, leader=leader, follower=follower,
+                         multiplier=float(multiplier), offset=float(offset))
+
+    def geometry(self, ctx):
+        for role in ("leader", "follower"):
+            j = self.options[role]
+            if not isinstance(j, (Revolute, Prismatic)) or j.system is not self.system:
+                raise ModelError(f"{self.label}: {role}: expected a Revolute or Prismatic joint of "
+                                 f"system {self.system.name!r}, got {j!r}")
+        return []
+
+    def equations(self, ctx):
+        self.geometry(ctx)
+        o = self.options
+        e = o["follower"].coordinate(ctx) - o["multiplier"] * o["leader"].coordinate(ctx) - o["offset"]
+        return [(f"{self.name}.mimic", e)]
+
+
 class CoordinateDriver(Joint):
     """Prescribes one natural coordinate of ``member``: component ``axis`` (``"x"``, ``"y"``,
     ``"z"`` or 0, 1, 2) of its slot ``slot`` (``"r_i"``, ``"r_j"``, ``"u"``, ... or the
@@ -339,6 +418,6 @@ class CoordinateDriver(Joint):
 
 JOINT_TYPES: dict[str, type[Joint]] = {cls.kind: cls for cls in (
     Spherical, Revolute, Prismatic, Cylindrical, Universal, Planar, Fixed, Distance, PointOnLine,
-    PointOnPlane, CoordinateDriver)}
+    PointOnPlane, Free, Mimic, CoordinateDriver)}
 
 __all__ = ["JOINT_TYPES", "Joint", *JOINT_TYPES]

@@ -45,7 +45,7 @@ class Model:
     """A validated, assembled, constant system (create it with ``System.build()``)."""
 
     def __init__(self, *, description, layout, labels, functions, M, factor, potential, state, p0, baumgarte,
-                 redundant, dropped, t0, springs=None, limits=None):
+                 redundant, dropped, t0, springs=None, limits=None, joint_space=None):
         system = description
         self.members = MappingProxyType(dict(system.members))
         self.joints = tuple(system.joints)
@@ -79,6 +79,9 @@ class Model:
         self.springs = springs
         #: values that must stay >= 0 for any parameter vector (ncgen.assembly.limits.Limits)
         self.limits = limits
+        self.joint_space = joint_space
+        self.frames = MappingProxyType({k: (mem, np.array(R), np.array(pos)) for k, (mem, R, pos) in system.frames.items()})
+        self.visuals = [dict(v) for v in system.visuals]
         for key, value in vars(self).items():
             object.__setattr__(self, key, _frozen(value))
         object.__setattr__(self, "_frozen", True)
@@ -91,6 +94,44 @@ class Model:
 
     def __delattr__(self, key):
         raise AttributeError(f"Model {self.name!r} is constant (cannot delete {key!r})")
+
+    def frame_pose(self, name: str, q) -> tuple[np.ndarray, np.ndarray]:
+        """World ``(R, p)`` of the named frame (``model.frames``, e.g. a URDF link) at ``q``."""
+        if name not in self.frames:
+            raise KeyError(f"no frame named {name!r}; frames: {', '.join(self.frames) or 'none'}")
+        member, R_loc, p_loc = self.frames[name]
+        if member == "ground":
+            return R_loc.copy(), p_loc.copy()
+        R, pos = self.poses(q)
+        i = self.member_names.index(member)
+        return R[i] @ R_loc, R[i] @ p_loc + pos[i]
+
+    # ------------------------------------------------------------ joint space
+    @property
+    def joint_names(self) -> list[str]:
+        """The joints that have coordinates, in model order (a floating base ``root`` first)."""
+        return list(self.joint_space.joint_names)
+
+    @property
+    def actuated_joints(self) -> list[str]:
+        """The joints with an actuator (``effort=``), in ``joint_names`` order."""
+        return list(self.joint_space.actuated)
+
+    @property
+    def joint_limits(self) -> dict[str, dict]:
+        """``{joint: {"lower", "upper", "velocity", "effort"}}`` as given (URDF ``<limit>``)."""
+        return {k: dict(v) for k, v in self.joint_space.limits.items() if v}
+
+    def to_joint_space(self, q, v=None, a=None):
+        """Joint positions ``qj`` (and rates ``vj``, accelerations ``aj`` when ``v``, ``a``
+        are given), concatenated in ``joint_names`` order (see
+        :mod:`ncgen.assembly.joint_coordinates` for each joint's coordinates)."""
+        return self.joint_space.to_joint_space(self, q, v, a)
+
+    def from_joint_space(self, qj, vj=None, *, t=None, p=None):
+        """``(q, v)`` with the given joint positions and rates (vectors in ``joint_names``
+        order, or dicts ``{joint: value}``; closed loops: the independent joints only)."""
+        return self.joint_space.from_joint_space(self, qj, vj, t=t, p=p)
 
     # ------------------------------------------------------------ dimensions
     @property

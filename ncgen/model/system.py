@@ -41,6 +41,15 @@ class System:
         self.forces: list = []
         self.inputs: dict[str, ca.SX] = {}
         self.parameters: dict[str, tuple[ca.SX, np.ndarray]] = {}
+        #: Named frames ``{name: (member name or "ground", R_local, p_local)}`` (URDF links).
+        self.frames: dict[str, tuple] = {}
+        #: Visual geometry (URDF ``<visual>``), plain dicts in member frames.
+        self.visuals: list[dict] = []
+        #: Joint-space initial state ``{joint: position}`` / ``{joint: rate}`` applied by
+        #: :meth:`build` (TOML ``initial = {elbow = 0.3}``, ``initial_rates``); joints not
+        #: named keep the coordinates and rates of the members' given poses and twists.
+        self.initial_joints: dict = {}
+        self.initial_joint_rates: dict = {}
 
     # ------------------------------------------------------------- members
     def _new_name(self, name: str, what: str) -> str:
@@ -232,6 +241,15 @@ class System:
         """A system from a TOML model file (a path) or TOML text; see docs/model-format.md."""
         from ncgen.model.toml_io import system_from_toml
         return system_from_toml(source, cls)
+
+    @classmethod
+    def from_urdf(cls, source, floating_base: bool = False, gravity=DEFAULT_GRAVITY, name=None) -> "System":
+        """A robot from a URDF file (a path) or URDF text: links become bodies (fixed joints
+        merge them), movable joints are actuated by the input ``tau`` (one component per
+        joint, ``model.joint_names`` order); ``floating_base=True`` adds a free joint
+        ``root``.  See :mod:`ncgen.model.urdf`."""
+        from ncgen.model.urdf import system_from_urdf
+        return system_from_urdf(source, cls, floating_base=floating_base, gravity=gravity, name=name)
 
     def to_toml(self) -> str:
         """The system as TOML text that :meth:`from_toml` reads back."""

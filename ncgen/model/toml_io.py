@@ -35,7 +35,7 @@ from ncgen.model.joints import JOINT_TYPES, CoordinateDriver, Distance
 from ncgen.model.members import NodeRef
 from ncgen.validation import MAX_NAME, as_scalar
 
-TOP_KEYS = ("system", "parameters", "inputs", "members", "joints", "forces")
+TOP_KEYS = ("system", "parameters", "inputs", "members", "joints", "forces", "initial", "initial_rates")
 
 
 # ======================================================================= reading
@@ -170,7 +170,27 @@ class _Loader:
             self._joint(_Table(j, f"joints[{i}]"))
         for i, f in enumerate(self._array(top.get("forces", []), "forces")):
             self._force(_Table(f, f"forces[{i}]"))
+        for key in ("initial", "initial_rates"):
+            self._initial(top.get(key, {}), key)
         self.system = self.s
+
+    def _initial(self, table, key):
+        """``initial = {elbow = 0.3}``: joint positions (rad, m; a list for multi-coordinate
+        joints) of the initial state; ``initial_rates`` likewise for rates."""
+        if not isinstance(table, dict):
+            raise ModelError(f"{key}: expected a table {{joint = value}}, got {_describe(table)}")
+        names = [j.name for j in self.s.joints]
+        out = {}
+        for name, v in table.items():
+            path = f"{key}.{name}"
+            if name not in names:
+                raise ModelError(f"{path}: no joint named {name!r}{did_you_mean(name, names)}")
+            if isinstance(v, list):
+                out[name] = [_number(x, f"{path}[{i}]") for i, x in enumerate(v)]
+            else:
+                out[name] = _number(v, path)
+        target = self.s.initial_joints if key == "initial" else self.s.initial_joint_rates
+        target.update(out)
 
     @staticmethod
     def _array(v, path):
@@ -369,6 +389,11 @@ class _Loader:
         d = self.dim
         if k == "drive":
             return self._expr(v, path, inputs=False)
+        if k == "effort":
+            n = {"Cylindrical": 2, "Universal": 2, "Planar": 3, "Spherical": 3, "Free": 6 if d == 3 else 3}
+            return self._expr(v, path, n=n.get(cls.kind, 1))
+        if k == "rotation":
+            return _number(v, path) if d == 2 and _is_number(v) else _matrix(v, d, path)
         if cls is Distance and k == "at":
             if not isinstance(v, list) or len(v) != 2:
                 raise ModelError(f"{path}: expected two points (one on each member), got {_describe(v)}")
@@ -454,6 +479,9 @@ def system_to_toml(system) -> str:
         parts.append(toml_write.table("joints", _joint_entries(j, sc), array=True))
     for f in system.forces:
         parts.append(toml_write.table("forces", _force_entries(f, sc, system), array=True))
+    for key, values in (("initial", system.initial_joints), ("initial_rates", system.initial_joint_rates)):
+        if values:
+            parts.append(toml_write.table(key, {n: _plain(v) for n, v in values.items()}))
     return "\n".join(parts)
 
 
@@ -492,7 +520,7 @@ def _joint_entries(j, sc) -> dict:
     for k, v in j.options.items():
         if v is None:
             continue
-        if k in ("drive", "value"):
+        if k in ("drive", "value", "effort"):
             out[k] = value_to_toml(v, sc, f"{j.label}: {k}")
         elif k in ("slot", "axis") and isinstance(j, CoordinateDriver):
             out[k] = v if isinstance(v, str) else int(v)

@@ -260,6 +260,16 @@ class NLP:
 
     def _path(self):
         ocp, model, disc = self.ocp, self.model, self.disc
+        if ocp.joint_bounds:
+            js = model.joint_space
+            npts = disc.path_q.shape[1]
+            qj = js.positions.map(npts)(disc.path_q)
+            vj = js.rates.map(npts)(disc.path_q, disc.path_v)
+            rows = {"position": js.slices(), "rate": js.slices(rates=True)}
+            for name, kind, lo, hi in ocp.joint_bounds:
+                x = qj if kind == "position" else vj
+                self.constrain(f"path constraint on joint {name!r} ({kind})", "path",
+                               x[rows[kind][name].start, :], lo, hi)
         if not ocp.marker_bounds:
             return
         nm = len(model.marker_names)

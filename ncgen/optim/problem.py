@@ -71,6 +71,8 @@ class OptimalControl:
         self.p_values = model.p0.copy()
         self.p_free: dict[int, tuple[float, float]] = {}
         self.marker_bounds: list[tuple[str, np.ndarray, np.ndarray]] = []
+        #: Joint-space path constraints: (joint, "position" or "rate", lower, upper).
+        self.joint_bounds: list[tuple[str, str, float, float]] = []
         self.initial_spec = {"q": MODEL_STATE, "v": MODEL_STATE, "markers": []}
         self.final_spec = {"q": None, "v": None, "markers": []}
         self.periodic_spec = {"q": False, "v": False}
@@ -131,6 +133,42 @@ class OptimalControl:
         if np.any(lo > hi):
             raise OptimizationError(f"bound_marker {name!r}: lower {lo.tolist()} exceeds upper {hi.tolist()}")
         self.marker_bounds.append((name, lo, hi))
+        return self
+
+    def bound_joint(self, name: str, lower=-np.inf, upper=np.inf, *, rate=None) -> "OptimalControl":
+        """Path constraints on a joint with one coordinate: ``lower ≤ θ ≤ upper`` (rad or m)
+        and, with ``rate``, ``|θ̇| ≤ rate`` (rad/s or m/s)."""
+        js = self.model.joint_space
+        if name not in js.joint_names:
+            raise OptimizationError(f"bound_joint: no joint with coordinates named {name!r}; joints: "
+                                    f"{', '.join(js.joint_names) or 'none'}")
+        if js.nq_joint[name] != 1:
+            raise OptimizationError(f"bound_joint: joint {name!r} has {js.nq_joint[name]} coordinates; "
+                                    "only one-coordinate joints (Revolute, Prismatic) can be bounded")
+        lo, hi = (float(x) for x in _bound_pair(lower, upper, 1, f"joint {name!r}")[:, 0])
+        if np.isfinite(lo) or np.isfinite(hi):
+            self.joint_bounds.append((name, "position", lo, hi))
+        if rate is not None:
+            r = float(rate)
+            if not r >= 0:
+                raise OptimizationError(f"bound_joint {name!r}: rate: expected a bound ≥ 0, got {rate!r}")
+            self.joint_bounds.append((name, "rate", -r, r))
+        return self
+
+    def joint_limits(self) -> "OptimalControl":
+        """The model's joint limits (``model.joint_limits``, e.g. from a URDF) as bounds:
+        positions and rates as path constraints (:meth:`bound_joint`), efforts as bounds on
+        the input component that is the joint's effort (URDF: ``tau``)."""
+        model = self.model
+        js = model.joint_space
+        effort_input = _effort_inputs(model)
+        for name, lim in model.joint_limits.items():
+            if js.nq_joint[name] == 1:
+                self.bound_joint(name, lim.get("lower", -np.inf), lim.get("upper", np.inf),
+                                 rate=lim.get("velocity"))
+            if "effort" in lim and name in effort_input:
+                i = effort_input[name]
+                self.u_bounds[:, [i]] = _bound_pair(-lim["effort"], lim["effort"], 1, f"effort of joint {name!r}")
         return self
 
     def set_parameter(self, name: str, value) -> "OptimalControl":
@@ -374,3 +412,28 @@ def _weight(w, what: str) -> float:
     if not np.isfinite(w) or w < 0:
         raise OptimizationError(f"{what}: weight: expected a non-negative number, got {w!r}")
     return w
+
+
+def _effort_inputs(model) -> dict[str, int]:
+    """``{joint: index in u}`` for the actuated joints whose effort is exactly one input
+    component (τ = u_i), found by evaluating the actuation map at unit inputs."""
+    js = model.joint_space
+    if not js.actuated or model.nu == 0:
+        return {}
+    t, q, p = model.t0, model.q0, model.p0
+
+    def tau(u):
+        return np.array(js.actuation(t, q, u, p)[1]).reshape(-1)
+
+    base = tau(np.zeros(model.nu))
+    G = np.column_stack([tau(e) - base for e in np.eye(model.nu)])
+    out, k = {}, 0
+    for name in js.actuated:
+        n = js.nv_joint[name]
+        if n == 1 and base[k] == 0:
+            row = G[k]
+            hits = np.flatnonzero(row)
+            if hits.size == 1 and row[hits[0]] == 1.0:
+                out[name] = int(hits[0])
+        k += n
+    return out

@@ -65,3 +65,14 @@ def member_coordinates(model, member: str, q: np.ndarray) -> np.ndarray:
         if i is not None:
             qI[:, k] = q[:, i]
     return qI
+
+
+def joint_states(model, q, v) -> tuple[np.ndarray, np.ndarray]:
+    """Joint positions and rates ``(n_t, Σ n_j)`` per step (``model.joint_names`` order)."""
+    js = getattr(model, "joint_space", None)
+    n = len(q)
+    if js is None or not js.joint_names or n == 0:
+        return np.zeros((n, 0)), np.zeros((n, 0))
+    qj, = _mapped(js.positions, n, q.T)
+    vj, = _mapped(js.rates, n, q.T, v.T)
+    return np.array(qj).T.reshape(n, -1), np.array(vj).T.reshape(n, -1)

@@ -8,13 +8,16 @@ Arrays are indexed by output step first (``n_t = len(t)`` steps), SI units:
 * ``constraint_residual = |Φ(t, q)|∞`` (m²: natural-coordinate constraints are quadratic)
   and ``velocity_residual = |A v + Φ_t|∞`` (m²/s), the drift of the two constraint levels;
 * ``markers`` ``(n_t, n_markers, dim)``, world positions of the model's named markers;
+* ``qj``, ``vj`` ``(n_t, Σ n_j)``: joint positions and rates (``model.joint_names`` order,
+  columns named by ``joint_position_names``, ``joint_rate_names``); :meth:`joint` per joint;
 * names: ``coordinate_names``, ``constraint_names``, ``input_names``, ``parameter_names``,
   ``member_names``, ``marker_names`` and ``model_name``; ``info`` holds how it was computed
   (method, backend, tolerances, integrator statistics, wall time, whether it is complete).
 
 Files: ``save("x.npz")`` keeps everything (:meth:`load` reads it back; pass the model to
 use :meth:`point` and :meth:`poses` again), ``save("x.csv")`` writes a table of ``t``, the
-coordinates (columns named by the coordinate names), energies and residuals.  Files are
+coordinates (columns named by the coordinate names), the joint positions and rates (columns
+``qj.<name>``, ``vj.<name>``), energies and residuals.  Files are
 written to a temporary sibling and renamed, so a reader never sees a partial file.
 """
 from __future__ import annotations
@@ -32,6 +35,9 @@ NAME_KEYS = ("coordinate_names", "constraint_names", "input_names", "parameter_n
              "member_names", "marker_names")
 ARRAY_KEYS = ("t", "q", "v", "lam", "u", "p", "kinetic", "potential", "constraint_residual",
               "velocity_residual", "markers")
+#: Joint space (optional in files written before it existed).
+JOINT_NAME_KEYS = ("joint_names", "joint_position_names", "joint_rate_names")
+JOINT_ARRAY_KEYS = ("qj", "vj")
 
 
 class Trajectory:
@@ -44,6 +50,11 @@ class Trajectory:
             setattr(self, key, list(names[key]))
         for key in ARRAY_KEYS:
             setattr(self, key, np.asarray(arrays[key], dtype=float))
+        for key in JOINT_NAME_KEYS:
+            setattr(self, key, list(names.get(key, [])))
+        for key in JOINT_ARRAY_KEYS:
+            x = arrays.get(key)
+            setattr(self, key, np.zeros((len(self.t), 0)) if x is None else np.asarray(x, dtype=float))
         self.info = dict(info)
 
     @classmethod
@@ -53,9 +64,13 @@ class Trajectory:
         T, V = outputs.energies(model, t, q, v, p)
         r, rd = outputs.residuals(model, t, q, v, p)
         names = {key: getattr(model, key) for key in NAME_KEYS}
+        js = model.joint_space
+        names.update(joint_names=js.joint_names, joint_position_names=js.position_names,
+                     joint_rate_names=js.rate_names)
+        qj, vj = outputs.joint_states(model, q, v)
         return cls(model_name=model.name, names=names, info=info, model=model, t=t, q=q, v=v, lam=lam,
                    u=u, p=p, kinetic=T, potential=V, constraint_residual=r, velocity_residual=rd,
-                   markers=outputs.markers(model, q, v))
+                   markers=outputs.markers(model, q, v), qj=qj, vj=vj)
 
     # --------------------------------------------------------------- views
     def __len__(self) -> int:
@@ -98,6 +113,33 @@ class Trajectory:
         m = model.member(member)
         C = m.rigid.C(m.rigid.affine(np.asarray(local, dtype=float)))
         return outputs.member_coordinates(model, member, self.q) @ np.asarray(C).T
+
+    def joint(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """``(positions, rates)`` of joint ``name`` per step: ``(n_t,)`` each for a joint with
+        one coordinate (rad or m, rad/s or m/s), ``(n_t, k)`` otherwise (see
+        ``joint_position_names``)."""
+        if name not in self.joint_names:
+            known = ", ".join(self.joint_names) or "none"
+            raise NcgenError(f"no joint with coordinates named {name!r} (joints: {known})")
+        pos = [i for i, n in enumerate(self.joint_position_names) if n == name or n.startswith(name + ".")]
+        rate = [i for i, n in enumerate(self.joint_rate_names) if n == name or n.startswith(name + ".")]
+        x, xd = self.qj[:, pos], self.vj[:, rate]
+        return (x[:, 0], xd[:, 0]) if len(pos) == 1 else (x, xd)
+
+    def reaction(self, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """``(force, moment, effort)`` of joint ``name`` per step, from the multipliers
+        (:func:`ncgen.runtime.reactions.joint_reactions`): force ``(n_t, dim)`` in N and moment
+        (N·m; ``(n_t, 3)``, or ``(n_t,)`` in 2D) on the joint's second member in world axes
+        about the joint point; ``effort`` ``(n_t, ...)`` for driven or actuated joints, else None."""
+        from ncgen.runtime.reactions import joint_reactions
+
+        model = self._model("reaction()")
+        rows = [joint_reactions(model, q, lam, v=v, t=t, u=u, p=self.p, joints=[name]).get(name)
+                for t, q, v, lam, u in zip(self.t, self.q, self.v, self.lam, self.u)]
+        if not rows or rows[0] is None:
+            raise NcgenError(f"joint {name!r} has no reaction (no equations and no actuator)")
+        effort = None if rows[0].effort is None else np.array([r.effort for r in rows])
+        return np.array([r.force for r in rows]), np.array([r.moment for r in rows]), effort
 
     def marker(self, name: str) -> np.ndarray:
         """World positions ``(n_t, dim)`` of the marker ``"member.marker"``."""
@@ -149,16 +191,18 @@ class Trajectory:
 
     def _write_npz(self, fh) -> None:
         data = {key: getattr(self, key) for key in ARRAY_KEYS}
-        data.update({key: np.array(getattr(self, key), dtype=str) for key in NAME_KEYS})
+        data.update({key: getattr(self, key) for key in JOINT_ARRAY_KEYS})
+        data.update({key: np.array(getattr(self, key), dtype=str) for key in NAME_KEYS + JOINT_NAME_KEYS})
         data["model_name"] = np.array(self.model_name)
         data["info_json"] = np.array(json.dumps(self.info, sort_keys=True, default=_json_default))
         data["format"] = np.array("ncgen-trajectory-1")
         np.savez_compressed(fh, **data)
 
     def _write_csv(self, fh) -> None:
-        header = ["t", *self.coordinate_names, "energy", "kinetic", "potential",
+        header = ["t", *self.coordinate_names, *(f"qj.{n}" for n in self.joint_position_names),
+                  *(f"vj.{n}" for n in self.joint_rate_names), "energy", "kinetic", "potential",
                   "constraint_residual", "velocity_residual"]
-        table = np.column_stack([self.t, self.q, self.energy, self.kinetic, self.potential,
+        table = np.column_stack([self.t, self.q, self.qj, self.vj, self.energy, self.kinetic, self.potential,
                                  self.constraint_residual, self.velocity_residual])
         fh.write((",".join(header) + "\n").encode())
         np.savetxt(fh, table, delimiter=",", fmt="%.17g")
@@ -172,8 +216,8 @@ class Trajectory:
             with np.load(path, allow_pickle=False) as data:
                 if "format" not in data or str(data["format"]) != "ncgen-trajectory-1":
                     raise NcgenError(f"{path} is not a trajectory saved by ncgen (.npz)")
-                arrays = {key: data[key] for key in ARRAY_KEYS}
-                names = {key: [str(s) for s in data[key]] for key in NAME_KEYS}
+                arrays = {key: data[key] for key in ARRAY_KEYS + JOINT_ARRAY_KEYS if key in data}
+                names = {key: [str(s) for s in data[key]] for key in NAME_KEYS + JOINT_NAME_KEYS if key in data}
                 name = str(data["model_name"])
                 info = json.loads(str(data["info_json"]))
         except (OSError, ValueError, KeyError) as e:

@@ -194,12 +194,16 @@ class RigidMember:
 
     def _fn(self, name: str, expr, *groups):
         """NumPy function of ``expr`` in ``groups`` of symbols, constants bound."""
-        key = ("member", name, self.ctype.name, self.ctype.dim)
-        consts = self._constants
-        csyms = sorted((s for s in getattr(expr, "free_symbols", ()) if s in consts), key=str)
-        f = numpy_function(expr, [*groups, list(csyms)], key=key + (tuple(map(str, csyms)),))
-        cvals = [consts[s] for s in csyms]
-        return lambda *vals: f(*vals, cvals)
+        memo = self.__dict__.setdefault("_fn_memo", {})
+        hit = memo.get(name)
+        if hit is None or hit[0] is not expr:
+            key = ("member", name, self.ctype.name, self.ctype.dim)
+            consts = self._constants
+            csyms = sorted((s for s in getattr(expr, "free_symbols", ()) if s in consts), key=str)
+            f = numpy_function(expr, [*groups, list(csyms)], key=key + (tuple(map(str, csyms)),))
+            cvals = [consts[s] for s in csyms]
+            hit = memo[name] = (expr, lambda *vals: f(*vals, cvals))
+        return hit[1]
 
     # ----------------------------------------------------------- mass matrix
     @cached_property

@@ -1,0 +1,238 @@
+"""Joint coordinates and rates as CasADi expressions of the natural coordinates.
+
+Each joint that has coordinates gets its positions ``q_j(q)`` and rates ``v_j(q, q̇)``,
+zero in the initial configuration unless its frames say otherwise (the free joint of a
+floating base: the pose of the base frame in the world):
+
+==============  =======================================  ======================================
+joint           positions                                rates
+==============  =======================================  ======================================
+Revolute        θ, rad (the drive's angle gauge)         θ̇
+Prismatic       s, m (the drive's displacement)          ṡ
+Cylindrical     [s, θ] along / about ``axis``            [ṡ, θ̇]
+Universal       [θ_a, θ_b]: R = Rot(a, θ_a) Rot(b, θ_b)  [θ̇_a, θ̇_b]
+Planar          [x, y, θ]: offsets along the two         [ẋ, ẏ, θ̇]
+                directions ⟂ ``normal``, angle about it
+Spherical       [qx, qy, qz, qw] of B relative to A      ω of B relative to A, B's axes
+Free (3D)       [x, y, z, qx, qy, qz, qw]                [v, ω] of B's frame in its own axes
+Free (planar)   [x, y, θ]                                [v_x, v_y, ω] in B's frame axes
+==============  =======================================  ======================================
+
+Angles are right-handed about the joint's axis (counter-clockwise in 2D); quaternions are
+unit, ``qw ≥ 0``, in Pinocchio's order.  Spherical and Free joints measure the relative
+rotation of the joint frames: the world axes at ``at`` carried by each side (Free: A's
+frame and the frame given by ``at``/``rotation`` on B).  The joints' rates are exactly
+``J(q) q̇`` with ``J = ∂v_j/∂q̇``, so an effort ``τ`` conjugate to them (torque for
+angles, force for lengths, the wrench ``[f, τ]`` in B's frame for a free joint) acts as the
+generalised force ``Jᵀ τ``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+
+from ncgen.reproducible import perpendicular_basis
+from ncgen.model.joint_equations import angle_gauge, is_full, kind_of, name_of
+from ncgen.errors import ModelError
+
+
+@dataclass
+class JointCoordinates:
+    """Positions and rates of one joint: ``q`` (SX of the context's q), ``v`` (SX of q and
+    v), their names and which positions are angles (they wrap by 2π)."""
+
+    joint: object
+    q: ca.SX
+    v: ca.SX
+    position_names: list[str]
+    rate_names: list[str]
+    angles: list[bool] = field(default_factory=list)
+
+    @property
+    def name(self) -> str:
+        return self.joint.name
+
+    @property
+    def nq(self) -> int:
+        return int(self.q.numel())
+
+    @property
+    def nv(self) -> int:
+        return int(self.v.numel())
+
+
+def joint_coordinates(ctx, joint) -> JointCoordinates | None:
+    """The :class:`JointCoordinates` of ``joint``, or None for a joint without coordinates
+    (Fixed, Distance, PointOnLine, PointOnPlane, CoordinateDriver).  Raises
+    :class:`ModelError` when the joint's members cannot carry its coordinates (a bar's spin)."""
+    make = _BUILDERS.get(joint.kind)
+    if make is None:
+        return None
+    return make(ctx, joint)
+
+
+# ----------------------------------------------------------------- builders
+def _scalar_rates(ctx, q: ca.SX) -> ca.SX:
+    return ca.mtimes(ca.jacobian(q, ctx.q), ctx.v)
+
+
+def _atan2(x, y):
+    return ca.atan2(y, x)
+
+
+def _revolute(ctx, j):
+    th = j.coordinate(ctx)
+    return JointCoordinates(j, th, _scalar_rates(ctx, th), [j.name], [j.name], [True])
+
+
+def _prismatic(ctx, j):
+    s = j.coordinate(ctx)
+    return JointCoordinates(j, s, _scalar_rates(ctx, s), [j.name], [j.name], [False])
+
+
+def _cylindrical(ctx, j):
+    at, a = j.at(), j.axis()
+    C, O, sign = (j.A, j.B, 1.0) if is_full(j.A) else (j.B, j.A, -1.0)
+    rC, _ = ctx.point(C, at, j.label)
+    rO, _ = ctx.point(O, at, j.label)
+    aC, _ = ctx.direction(C, a, j.label)
+    s = sign * ca.dot(rO - rC, aC)
+    x, y = angle_gauge(ctx, j.A, j.B, a, j.label).terms(ctx)
+    q = ca.vertcat(s, _atan2(x, y))
+    names = [f"{j.name}.s", f"{j.name}.theta"]
+    return JointCoordinates(j, q, _scalar_rates(ctx, q), names, names, [False, True])
+
+
+def _universal(ctx, j):
+    _require_full(j, "its two angles")
+    a, b = j.direction("axis_a"), j.direction("axis_b")
+    c = np.cross(a, b)
+    aA, bA, cA = (ctx.direction(j.A, d, j.label)[0] for d in (a, b, c))
+    aB, bB, cB = (ctx.direction(j.B, d, j.label)[0] for d in (a, b, c))
+    th_a = _atan2(ca.dot(bA, bB), ca.dot(cA, bB))
+    th_b = _atan2(ca.dot(aB, aA), ca.dot(cB, aA))
+    q = ca.vertcat(th_a, th_b)
+    names = [f"{j.name}.theta_a", f"{j.name}.theta_b"]
+    return JointCoordinates(j, q, _scalar_rates(ctx, q), names, names, [True, True])
+
+
+def _planar(ctx, j):
+    _require_full(j, "its in-plane position and angle")
+    at, n = j.at(), j.direction("normal")
+    e1, e2 = perpendicular_basis(n)
+    rA, _ = ctx.point(j.A, at, j.label)
+    rB, _ = ctx.point(j.B, at, j.label)
+    d = rB - rA
+    x = ca.dot(d, ctx.direction(j.A, e1, j.label)[0])
+    y = ca.dot(d, ctx.direction(j.A, e2, j.label)[0])
+    gx, gy = angle_gauge(ctx, j.A, j.B, n, j.label).terms(ctx)
+    q = ca.vertcat(x, y, _atan2(gx, gy))
+    names = [f"{j.name}.{k}" for k in ("x", "y", "theta")]
+    return JointCoordinates(j, q, _scalar_rates(ctx, q), names, names, [False, False, True])
+
+
+def _spherical(ctx, j):
+    _require_full(j, "a relative rotation")
+    at = j.at()
+    R = _relative(ctx, j, (np.eye(3), at), (np.eye(3), at))[0]
+    q = quaternion(R)
+    w = _body_rate(ctx, R)
+    names = [f"{j.name}.{k}" for k in ("qx", "qy", "qz", "qw")]
+    rates = [f"{j.name}.{k}" for k in ("wx", "wy", "wz")]
+    return JointCoordinates(j, q, w, names, rates, [False] * 4)
+
+
+def _free(ctx, j):
+    _require_full(j, "a relative pose")
+    d = ctx.dim
+    frame_a = (np.eye(d), np.zeros(d)) if j.A.is_ground else (j.A.R0, j.A.p0)
+    R, p = _relative(ctx, j, frame_a, (j.frame_rotation(), j.frame_origin()))
+    pdot = ca.jtimes(p, ctx.q, ctx.v)
+    v_lin = ca.mtimes(R.T, pdot)
+    if d == 2:
+        th = ca.atan2(R[1, 0], R[0, 0])
+        q = ca.vertcat(p, th)
+        v = ca.vertcat(v_lin, _scalar_rates(ctx, th))
+        names = [f"{j.name}.{k}" for k in ("x", "y", "theta")]
+        rates = [f"{j.name}.{k}" for k in ("vx", "vy", "w")]
+        return JointCoordinates(j, q, v, names, rates, [False, False, True])
+    q = ca.vertcat(p, quaternion(R))
+    v = ca.vertcat(v_lin, _body_rate(ctx, R))
+    names = [f"{j.name}.{k}" for k in ("x", "y", "z", "qx", "qy", "qz", "qw")]
+    rates = [f"{j.name}.{k}" for k in ("vx", "vy", "vz", "wx", "wy", "wz")]
+    return JointCoordinates(j, q, v, names, rates, [False] * 7)
+
+
+_BUILDERS = {"Revolute": _revolute, "Prismatic": _prismatic, "Cylindrical": _cylindrical,
+             "Universal": _universal, "Planar": _planar, "Spherical": _spherical, "Free": _free}
+
+
+# ------------------------------------------------------------------ frames
+def _require_full(j, what: str):
+    for m in (j.A, j.B):
+        if not is_full(m):
+            k = kind_of(m)
+            raise ModelError(f"{j.label}: {name_of(m)} is a {k}, which does not carry {what} "
+                             "(a bar's spin is not a coordinate); the joint has no joint coordinates")
+
+
+def member_frame(ctx, m, R0, o0, label: str):
+    """World rotation and origin (SX) of the frame fixed to ``m`` whose world axes and origin
+    are ``R0``, ``o0`` in the initial configuration: ``R = R_m(q) R_m0ᵀ R0``."""
+    if m.is_ground:
+        return ca.DM(R0), ca.DM(np.asarray(o0, float))
+    D = m.ctype.derivation
+    R = ca.mtimes(ctx.instantiate(m, D.R), ca.DM(m.R0.T @ R0))
+    return R, ctx.point(m, o0, label)[0]
+
+
+def _relative(ctx, j, frame_a, frame_b):
+    """``(R, p)``: B's joint frame relative to A's, in A's frame axes."""
+    Ra, oa = member_frame(ctx, j.A, *frame_a, j.label)
+    Rb, ob = member_frame(ctx, j.B, *frame_b, j.label)
+    return ca.mtimes(Ra.T, Rb), ca.mtimes(Ra.T, ob - oa)
+
+
+def _body_rate(ctx, R) -> ca.SX:
+    """ω in the moving frame's axes: the vee of ``Rᵀ Ṙ`` (skew part)."""
+    Rdot = ca.reshape(ca.jtimes(ca.vec(R), ctx.q, ctx.v), 3, 3)
+    S = ca.mtimes(R.T, Rdot)
+    return 0.5 * ca.vertcat(S[2, 1] - S[1, 2], S[0, 2] - S[2, 0], S[1, 0] - S[0, 1])
+
+
+@lru_cache(maxsize=None)
+def _quaternion_function() -> ca.Function:
+    """``[qx, qy, qz, qw]`` of a rotation matrix (Shepperd's method: the branch of the
+    largest of ``qw², qx², qy², qz²``), sign chosen so that ``qw ≥ 0``."""
+    R = ca.SX.sym("R", 3, 3)
+    tr = R[0, 0] + R[1, 1] + R[2, 2]
+    diag = [tr, R[0, 0], R[1, 1], R[2, 2]]
+
+    def half_root(x):
+        return 0.5 * ca.sqrt(ca.fmax(x, 1e-300))
+
+    w0 = half_root(1 + tr)
+    x1 = half_root(1 + R[0, 0] - R[1, 1] - R[2, 2])
+    y2 = half_root(1 - R[0, 0] + R[1, 1] - R[2, 2])
+    z3 = half_root(1 - R[0, 0] - R[1, 1] + R[2, 2])
+    cands = [
+        ca.vertcat((R[2, 1] - R[1, 2]) / (4 * w0), (R[0, 2] - R[2, 0]) / (4 * w0), (R[1, 0] - R[0, 1]) / (4 * w0), w0),
+        ca.vertcat(x1, (R[0, 1] + R[1, 0]) / (4 * x1), (R[0, 2] + R[2, 0]) / (4 * x1), (R[2, 1] - R[1, 2]) / (4 * x1)),
+        ca.vertcat((R[0, 1] + R[1, 0]) / (4 * y2), y2, (R[1, 2] + R[2, 1]) / (4 * y2), (R[0, 2] - R[2, 0]) / (4 * y2)),
+        ca.vertcat((R[0, 2] + R[2, 0]) / (4 * z3), (R[1, 2] + R[2, 1]) / (4 * z3), z3, (R[1, 0] - R[0, 1]) / (4 * z3)),
+    ]
+    best = cands[3]
+    for k in (2, 1, 0):
+        largest = ca.logic_and(ca.logic_and(diag[k] >= diag[(k + 1) % 4], diag[k] >= diag[(k + 2) % 4]),
+                               diag[k] >= diag[(k + 3) % 4])
+        best = ca.if_else(largest, cands[k], best)
+    best = ca.if_else(best[3] < 0, -best, best)
+    return ca.Function("quaternion", [R], [best], ["R"], ["quat"])
+
+
+def quaternion(R) -> ca.SX:
+    """Unit quaternion ``[qx, qy, qz, qw]`` (``qw ≥ 0``) of the rotation matrix ``R``."""
+    return _quaternion_function()(R)

@@ -1,0 +1,386 @@
+"""Joint space of a model: joint coordinates in and out, joint actuators.
+
+:class:`JointSpace` holds the CasADi functions of the joint coordinates
+(:mod:`ncgen.assembly.joint_coordinates`) of every joint that has them, in model order
+(``joint_names``), and the maps between the two spaces:
+
+* :meth:`JointSpace.to_joint_space` — ``q_j = q_j(q)``, ``v_j = J(q) q̇``,
+  ``a_j = J(q) q̈ + J̇(q, q̇) q̇`` (exact, any model).
+* :meth:`JointSpace.from_joint_space` — the members' poses are propagated from the ground
+  through the joints (a spanning tree; Fixed joints included): for a tree this is exact.
+  Members left unreached and loop-closing joints are then settled by Newton on
+  ``[Φ(q); q_j,given(q) − q_j,given] = 0`` (minimum-norm steps), so for closed loops the
+  user names the independent joint coordinates (a dict) and the rest are assembled; the
+  rates solve ``[A; J_given] q̇ = [−Φ_t; v_j,given]``.
+
+Actuators: a joint with ``effort=`` (a number, text expression, input, callable of t) acts
+with the generalised force ``J(q)ᵀ τ`` (:func:`actuator_forces`): torques in N·m about
+its axis, forces in N along it, ``[f, τ]`` in B's frame for a free joint.
+"""
+from __future__ import annotations
+
+from collections import deque
+
+import casadi as ca
+import numpy as np
+
+from ncgen.assembly.joint_coordinates import JointCoordinates, joint_coordinates
+from ncgen.assembly.joint_tree import (
+    Edge, carry, edge_of, quaternion_matrix, quaternion_rate, relative_pose, rotation_2d,
+)
+from ncgen.assembly.kinematics import TOL, newton, system_size
+from ncgen.assembly.mass import sparse_dm
+from ncgen.model.sym2casadi import to_casadi
+from ncgen.errors import ModelError
+from ncgen.validation import as_vector
+
+
+def build_joint_coordinates(system, ctx) -> tuple[list[JointCoordinates], dict[str, str]]:
+    """The coordinates of every joint that has them, and ``{joint: why not}`` for the joints
+    whose members cannot carry them (a spherical joint to a bar, ...)."""
+    coords, skipped = [], {}
+    for j in system.joints:
+        try:
+            c = joint_coordinates(ctx, j)
+        except ModelError as e:
+            if j.options.get("effort") is not None:
+                raise
+            skipped[j.name] = str(e)
+            continue
+        if c is not None:
+            coords.append(c)
+    return coords, skipped
+
+
+def actuator_forces(ctx, coords: list[JointCoordinates]) -> tuple[ca.SX, ca.SX, list[str]]:
+    """``(B, τ, names)``: ``B = [J_kᵀ ...]`` (nq × Σ nv_k) and the efforts ``τ`` of the
+    actuated joints (``effort=`` given), so that their generalised force is ``B τ``."""
+    Bs, taus, names = [], [], []
+    for c in coords:
+        effort = c.joint.options.get("effort")
+        if effort is None:
+            continue
+        tau = ctx.expression(effort, c.nv, f"{c.joint.label}: effort (N·m or N, conjugate to "
+                             f"{', '.join(c.rate_names)})")
+        Bs.append(ca.jacobian(c.v, ctx.v).T)
+        taus.append(tau)
+        names.append(c.name)
+    if not Bs:
+        return ca.SX(ctx.layout.nq, 0), ca.SX(0, 1), []
+    return ca.horzcat(*Bs), ca.vertcat(*taus), names
+
+
+class JointSpace:
+    """Joint coordinates of one model (built by :func:`ncgen.assembly.build.build_model`)."""
+
+    def __init__(self, ctx, coords: list[JointCoordinates], skipped: dict[str, str], actuation):
+        q, v = ctx.q, ctx.v
+        a = ca.SX.sym("a", ctx.layout.nq)
+        self.dim = ctx.dim
+        self.joint_names = [c.name for c in coords]
+        self.nq_joint = {c.name: c.nq for c in coords}
+        self.nv_joint = {c.name: c.nv for c in coords}
+        self.position_names = [n for c in coords for n in c.position_names]
+        self.rate_names = [n for c in coords for n in c.rate_names]
+        self.angles = np.array([x for c in coords for x in c.angles], dtype=bool)
+        self.skipped = dict(skipped)
+        qj = ca.vertcat(*[c.q for c in coords]) if coords else ca.SX(0, 1)
+        vj = ca.vertcat(*[c.v for c in coords]) if coords else ca.SX(0, 1)
+        J = ca.jacobian(vj, v)
+        bias = ca.jtimes(vj, q, v)
+        self.positions = ca.Function("joint_positions", [q], [qj], ["q"], ["qj"])
+        self.position_jacobian = ca.Function("joint_position_jacobian", [q], [ca.jacobian(qj, q)], ["q"], ["Jq"])
+        self.rates = ca.Function("joint_rates", [q, v], [vj], ["q", "v"], ["vj"])
+        self.jacobian = ca.Function("joint_jacobian", [q], [J], ["q"], ["J"])
+        self.accelerations = ca.Function("joint_accelerations", [q, v, a], [ca.mtimes(J, a) + bias],
+                                         ["q", "v", "a"], ["aj"])
+        self.bias = ca.Function("joint_bias", [q, v], [bias], ["q", "v"], ["Jdot_v"])
+        B, tau, self.actuated = actuation
+        self.actuation = ca.Function("actuation", [ctx.t, q, ctx.u, ctx.p], [B, tau],
+                                     ["t", "q", "u", "p"], ["B", "tau"])
+        self.edges = [edge_of(c.joint) for c in coords] + \
+            [edge_of(j) for j in ctx.system.joints if j.kind == "Fixed" and "point" not in
+             (getattr(j.A, "kind", "ground"), getattr(j.B, "kind", "ground"))]
+        self.limits = {c.name: dict(c.joint.limits) for c in coords}
+        self.members = dict(ctx.system.members)
+        self.joints = {j.name: j for j in ctx.system.joints}
+        self._initial = None            # (model.q0, its joint positions by joint), filled on first use
+        self._tree_fn = None            # (tree_function or None,), filled on first use
+
+    # ------------------------------------------------------------ sizes
+    @property
+    def nq(self) -> int:
+        return len(self.position_names)
+
+    @property
+    def nv(self) -> int:
+        return len(self.rate_names)
+
+    def slices(self, rates: bool = False) -> dict[str, slice]:
+        """``{joint: slice}`` into the position (or rate) vector."""
+        sizes = self.nv_joint if rates else self.nq_joint
+        out, k = {}, 0
+        for n in self.joint_names:
+            out[n] = slice(k, k + sizes[n])
+            k += sizes[n]
+        return out
+
+    def split(self, x, rates: bool = False) -> dict[str, np.ndarray]:
+        """A joint-space vector as ``{joint: values}``."""
+        x = np.asarray(x, float)
+        return {n: x[..., s] for n, s in self.slices(rates).items()}
+
+    # ------------------------------------------------------------ out
+    def to_joint_space(self, model, q, v=None, a=None):
+        """``q_j`` (and ``v_j``, ``a_j`` when ``v``, ``a`` are given), in ``joint_names`` order."""
+        q = as_vector(q, model.nq, "q")
+        out = [np.array(self.positions(q)).reshape(-1)]
+        if v is not None:
+            v = as_vector(v, model.nq, "v")
+            out.append(np.array(self.rates(q, v)).reshape(-1))
+            if a is not None:
+                a = as_vector(a, model.nq, "a")
+                out.append(np.array(self.accelerations(q, v, a)).reshape(-1))
+        elif a is not None:
+            raise ModelError("to_joint_space: a: accelerations need the rates v too")
+        return out[0] if len(out) == 1 else tuple(out)
+
+    # ------------------------------------------------------------ in
+    def _given(self, x, rates: bool, what: str) -> dict[str, np.ndarray]:
+        sizes = self.nv_joint if rates else self.nq_joint
+        if isinstance(x, dict):
+            out = {}
+            for name, val in x.items():
+                if name not in sizes:
+                    why = f" ({self.skipped[name]})" if name in self.skipped else ""
+                    raise ModelError(f"{what}: no joint with coordinates named {name!r}{why}; joints: "
+                                     f"{', '.join(self.joint_names) or 'none'}")
+                out[name] = as_vector(np.atleast_1d(np.asarray(val, float)), sizes[name], f"{what}[{name!r}]")
+            return out
+        n = self.nv if rates else self.nq
+        flat = as_vector(x, n, f"{what} (one value per joint coordinate, joint_names order; or a dict)")
+        return {name: flat[s] for name, s in self.slices(rates).items()}
+
+    def from_joint_space(self, model, qj, vj=None, *, t=None, p=None):
+        """``(q, v)`` from joint positions (and rates; zero if not given), see the module
+        docstring.  ``qj``, ``vj``: vectors in ``joint_names`` order or dicts ``{joint:
+        value}`` naming the independent joints of a closed loop."""
+        t = model.t0 if t is None else float(t)
+        p = model.p0 if p is None else as_vector(p, model.np, "p")
+        given = self._given(qj, False, "qj")
+        for name, x in given.items():
+            if self.nq_joint[name] in (4, 7) and self.dim == 3:      # unit quaternion, qw ≥ 0
+                qn = x[-4:]
+                n = np.linalg.norm(qn)
+                if not n > 0:
+                    raise ModelError(f"qj[{name!r}]: the quaternion [qx, qy, qz, qw] is zero")
+                x[-4:] = qn / n * (1.0 if qn[3] >= 0 else -1.0)
+        if len(given) == len(self.joint_names) and self._tree(model) is not None:
+            rates = None if vj is None else self._given(vj, True, "vj")
+            if rates is None or len(rates) == len(self.joint_names):
+                x = np.concatenate([given[n] for n in self.joint_names])
+                w = np.zeros(self.nv) if rates is None else np.concatenate([rates[n] for n in self.joint_names])
+                q, v = (np.array(y).reshape(-1) for y in self._tree(model)(x, w))
+                if self._holds(model, q, v, t, p):
+                    return q, v
+        q = self._propagate(model, given)
+        q = self._settle(model, q, given, t, p)
+        v = self._velocity(model, q, vj, given, t, p)
+        return q, v
+
+    def _tree(self, model):
+        """The :meth:`tree_function` (built on first use), or None for a model that is not a tree."""
+        if self._tree_fn is None:
+            try:
+                self._tree_fn = (self.tree_function(model.layout),)
+            except ModelError:
+                self._tree_fn = (None,)
+        return self._tree_fn[0]
+
+    @staticmethod
+    def _holds(model, q, v, t, p) -> bool:
+        """Whether ``(q, v)`` satisfies both constraint levels (drives included) to round-off."""
+        f = model.functions
+        size = system_size(q)
+        phi = np.array(f["phi"](t, q, p)).reshape(-1)
+        vel = np.array(f["A"](t, q, p)) @ v + np.array(f["phi_t"](t, q, p)).reshape(-1)
+        return bool(np.all(np.abs(phi) <= TOL * size**2)
+                    and np.all(np.abs(vel) <= 1e-10 * size * (1.0 + np.max(np.abs(v), initial=0.0))))
+
+    def initial_state(self, model, positions: dict, rates: dict):
+        """``(q, v)`` of a joint-space initial state: the named joints' positions and rates,
+        the others as in ``(model.q0, model.v0)`` (a closed loop: only the named ones)."""
+        t, p = model.t0, model.p0
+        given = self._given(dict(positions), False, "initial")
+        q = self._settle(model, self._propagate(model, given), given, t, p)
+        named = self._given(dict(rates), True, "initial_rates")
+        full = self.split(np.array(self.rates(model.q0, model.v0)).reshape(-1), rates=True)
+        try:
+            return q, self._velocity(model, q, {**full, **named}, given, t, p)
+        except ModelError:
+            if not named:
+                return q, self._velocity(model, q, None, given, t, p)
+            return q, self._velocity(model, q, named, given, t, p)
+
+    # ------------------------------------------------------------ symbolic tree map
+    def tree_function(self, layout) -> ca.Function:
+        """``(qj, vj) -> (q, v)`` as an SX function, for models whose members are all
+        reached from the ground through the joints with coordinates and Fixed joints and
+        have no other constraints between them (trees): the poses of :meth:`from_joint_space`
+        written symbolically, ``q̇ = (∂q/∂q_j) q̇_j`` with ``q̇_j`` from the rates (quaternion
+        rates ``½ q ⊗ [ω; 0]``, free-joint translation ``R v``).  Raises :class:`ModelError`
+        for other models."""
+        d = self.dim
+        qj, vj = ca.SX.sym("qj", self.nq), ca.SX.sym("vj", self.nv)
+        sq, sv = self.slices(), self.slices(rates=True)
+        poses = {"ground": (ca.SX.eye(d), ca.SX.zeros(d, 1))}
+        adjacent: dict[str, list[tuple[Edge, bool]]] = {}
+        for e in self.edges:
+            adjacent.setdefault(e.A, []).append((e, True))
+            adjacent.setdefault(e.B, []).append((e, False))
+        queue, used = deque(["ground"]), 0
+        while queue:
+            here = queue.popleft()
+            for e, forward in adjacent.get(here, []):
+                there = e.B if forward else e.A
+                if there in poses:
+                    continue
+                x = qj[sq[e.name]] if e.name in sq else ca.SX(0, 1)
+                T = relative_pose(e, x, d, sym=True)
+                poses[there] = carry(poses[here], e, T, forward, self.members, sym=True)
+                queue.append(there)
+                used += 1
+        missing = [n for n in self.members if n not in poses]
+        if missing or used != len(self.edges):
+            raise ModelError(f"joint space: the model is not a tree of joints with coordinates "
+                             f"({'members not reached from the ground: ' + ', '.join(missing) if missing else 'a closed loop'}); "
+                             "use from_joint_space (Newton) instead")
+        q = [None] * layout.nq
+        for name, (R, pos) in poses.items():
+            if name == "ground":
+                continue
+            m = self.members[name]
+            D = m.ctype.derivation
+            vals = dict(m.rigid.constants())
+            vals.update({D.R_sym[a, b]: R[a, b] for a in range(d) for b in range(d)})
+            vals.update({D.p_sym[a]: pos[a] for a in range(d)})
+            local = to_casadi(D.q_of_pose, vals)
+            for k, i in enumerate(layout.member_indices(name)):
+                if i is not None and q[i] is None:
+                    q[i] = local[k]
+        q = ca.vertcat(*q)
+        qj_dot = []
+        for name in self.joint_names:
+            x, w = qj[sq[name]], vj[sv[name]]
+            kind = self.joints[name].kind
+            if kind == "Spherical":
+                qj_dot.append(quaternion_rate(x, w))
+            elif kind == "Free" and d == 3:
+                R = quaternion_matrix(x[3:], sym=True)
+                qj_dot.append(ca.vertcat(ca.mtimes(R, w[:3]), quaternion_rate(x[3:], w[3:])))
+            elif kind == "Free":
+                qj_dot.append(ca.vertcat(ca.mtimes(rotation_2d(x[2], sym=True), w[:2]), w[2]))
+            else:
+                qj_dot.append(w)
+        v = ca.jtimes(q, qj, ca.vertcat(*qj_dot)) if qj_dot else ca.SX.zeros(layout.nq)
+        return ca.Function("joint_tree", [qj, vj], [q, v], ["qj", "vj"], ["q", "v"])
+
+    def _propagate(self, model, given) -> np.ndarray:
+        """Poses from the ground through the spanning tree; unreached members keep q0."""
+        if self._initial is None or self._initial[0] is not model.q0:
+            self._initial = (model.q0, self.split(np.array(self.positions(model.q0)).reshape(-1)))
+        values = {**self._initial[1], **given}
+        members = self.members
+        poses = {"ground": (np.eye(self.dim), np.zeros(self.dim))}
+        adjacent: dict[str, list[tuple[Edge, bool]]] = {}
+        for e in self.edges:
+            adjacent.setdefault(e.A, []).append((e, True))
+            adjacent.setdefault(e.B, []).append((e, False))
+        queue = deque(["ground"])
+        while queue:
+            here = queue.popleft()
+            for e, forward in adjacent.get(here, []):
+                there = e.B if forward else e.A
+                if there in poses:
+                    continue
+                T = relative_pose(e, values.get(e.name, np.zeros(0)), self.dim)
+                poses[there] = carry(poses[here], e, T, forward, members)
+                queue.append(there)
+        q = model.q0.copy()
+        for name, (R, pos) in poses.items():
+            if name == "ground":
+                continue
+            m = members[name]
+            local = m.rigid.q_from_pose(R, pos)
+            for k, i in enumerate(model.layout.member_indices(name)):
+                if i is not None:
+                    q[i] = local[k]
+        return q
+
+    def _settle(self, model, q, given, t, p) -> np.ndarray:
+        rows = np.concatenate([np.arange(s.start, s.stop) for n, s in self.slices().items() if n in given]
+                              ).astype(int) if given else np.zeros(0, int)
+        target = np.concatenate([given[n] for n in self.joint_names if n in given]) if given else np.zeros(0)
+        wrap = self.angles[rows]
+        f = model.functions
+
+        def residual(x):
+            d = np.array(self.positions(x)).reshape(-1)[rows] - target
+            d[wrap] = (d[wrap] + np.pi) % (2 * np.pi) - np.pi
+            return np.concatenate([np.array(f["phi"](t, x, p)).reshape(-1), d])
+
+        def jac(x):
+            return np.vstack([np.array(f["A"](t, x, p)), np.array(self.position_jacobian(x))[rows]])
+
+        size = system_size(q)
+        tol = TOL * size**2
+        q_new, it, res = newton(residual, jac, q, np.arange(model.nq), tol=tol)
+        if not res <= tol:
+            r = residual(q_new)
+            worst = int(np.nanargmax(np.abs(r)))
+            names = model.constraint_names + [self.position_names[i] for i in rows]
+            raise ModelError(
+                f"from_joint_space: no configuration has these joint coordinates: after {it} Newton "
+                f"iterations {names[worst]} is still off by {abs(r[worst]):.3g}; in a closed loop give "
+                f"only independent joint coordinates as a dict {{joint: value}} (the others are assembled)")
+        return q_new
+
+    def _velocity(self, model, q, vj, given, t, p) -> np.ndarray:
+        f = model.functions
+        A = np.array(f["A"](t, q, p))
+        phi_t = np.array(f["phi_t"](t, q, p)).reshape(-1)
+        sl = self.slices(rates=True)
+        if vj is None:
+            rates = {n: np.zeros(self.nv_joint[n]) for n in given}
+        else:
+            rates = self._given(vj, True, "vj")
+        rows = np.concatenate([np.arange(sl[n].start, sl[n].stop) for n in self.joint_names if n in rates]
+                              ).astype(int) if rates else np.zeros(0, int)
+        target = np.concatenate([rates[n] for n in self.joint_names if n in rates]) if rates else np.zeros(0)
+        K = np.vstack([A, np.array(self.jacobian(q))[rows]])
+        b = np.concatenate([-phi_t, target])
+        v = solve_linear(K, b)
+        if v is None or K.shape[0] < model.nq:
+            raise ModelError(f"from_joint_space: the rates of joints {', '.join(rates) or 'none'} do not "
+                             f"determine the velocity uniquely, or contradict the constraints (closed loop?); "
+                             f"give the rates of every joint of a tree ({', '.join(self.joint_names)}), "
+                             "or of independent joints only")
+        return v
+
+
+def solve_linear(K: np.ndarray, b: np.ndarray, tol: float = 1e-8) -> np.ndarray | None:
+    """``x`` with ``K x = b``: CasADi's sparse QR for a square ``K`` (dense LAPACK is slow
+    and thread-hungry at these sizes), least squares otherwise; None when no ``x`` fits to
+    ``tol`` relative to ``|b|`` (a singular or inconsistent system)."""
+    K, b = np.asarray(K, float), np.asarray(b, float)
+    if K.shape[0] == K.shape[1]:
+        try:
+            x = np.array(ca.solve(sparse_dm(K), ca.DM(b), "qr")).reshape(-1)
+        except RuntimeError:
+            return None
+    else:
+        x = np.linalg.lstsq(K, b, rcond=None)[0]
+    if not np.all(np.isfinite(x)):
+        return None
+    err = np.max(np.abs(K @ x - b), initial=0.0)
+    return x if err <= tol * max(1.0, np.max(np.abs(b), initial=0.0)) else None

@@ -1,0 +1,162 @@
+"""Poses through the tree of joints: the relative pose of each joint's frames for given joint
+coordinates, and the pose of the member across a joint, numerically (NumPy) or symbolically
+(CasADi SX, ``sym=True``) — used by :mod:`ncgen.assembly.joint_space` to go from joint space
+to natural coordinates.
+
+Conventions: an :class:`Edge` holds a joint's frames on A and B (world axes and origin in the
+initial configuration) and its axes; ``relative_pose`` gives ``(R, p)`` of B's joint frame in
+A's; quaternions are ``[qx, qy, qz, qw]`` (Hamilton).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ncgen.reproducible import perpendicular_basis
+from ncgen.errors import ModelError
+
+
+@dataclass
+class Edge:
+    """A joint of the spanning tree: member names, joint kind, frames and axes (world,
+    initial configuration) — plain data for :func:`relative_pose`."""
+
+    name: str
+    kind: str
+    A: str
+    B: str
+    frame_a: tuple[np.ndarray, np.ndarray]
+    frame_b: tuple[np.ndarray, np.ndarray]
+    axes: tuple
+
+
+def edge_of(j) -> Edge:
+    """The :class:`Edge` of joint ``j`` (joint frames: world axes at ``at`` on both sides; a
+    Free joint: A's frame and B's given frame)."""
+    d = j.system.dim
+    eye = np.eye(d)
+    A, B = ("ground" if m.is_ground else m.name for m in (j.A, j.B))
+    if j.kind == "Free":
+        fa = (eye, np.zeros(d)) if j.A.is_ground else (j.A.R0, j.A.p0)
+        return Edge(j.name, j.kind, A, B, fa, (j.frame_rotation(), j.frame_origin()), ())
+    at = j.at()
+    axes = ()
+    if j.kind in ("Revolute",) and d == 3:
+        axes = (j.axis(),)
+    elif j.kind in ("Prismatic", "Cylindrical"):
+        axes = (j.axis(),)
+    elif j.kind == "Universal":
+        axes = (j.direction("axis_a"), j.direction("axis_b"))
+    elif j.kind == "Planar":
+        n = j.direction("normal")
+        axes = (n, *perpendicular_basis(n))
+    return Edge(j.name, j.kind, A, B, (eye, at), (eye, at), axes)
+
+
+def rotation_about(axis, angle, sym: bool = False):
+    """Rodrigues: rotation by ``angle`` (rad) about the unit ``axis`` (SX when ``sym``)."""
+    k = np.asarray(axis, float)
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    if sym:
+        return ca.DM.eye(3) + ca.sin(angle) * ca.DM(K) + (1 - ca.cos(angle)) * ca.DM(K @ K)
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * (K @ K)
+
+
+def rotation_2d(angle, sym: bool = False):
+    if sym:
+        c, s = ca.cos(angle), ca.sin(angle)
+        return ca.vertcat(ca.horzcat(c, -s), ca.horzcat(s, c))
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s], [s, c]])
+
+
+def quaternion_matrix(quat, sym: bool = False):
+    """Rotation matrix of the unit quaternion ``[qx, qy, qz, qw]`` (normalised first)."""
+    if sym:
+        x, y, z, w = (quat[i] / ca.norm_2(quat) for i in range(4))
+        rows = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
+        return ca.vertcat(*[ca.horzcat(*r) for r in rows])
+    x, y, z, w = np.asarray(quat, float) / np.linalg.norm(quat)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def quaternion_rate(quat, omega):
+    """``q̇ = ½ q ⊗ [ω; 0]`` for ω in the rotated frame's axes ([qx, qy, qz, qw] order)."""
+    qv, qw = quat[:3], quat[3]
+    return 0.5 * ca.vertcat(qw * omega + ca.cross(qv, omega), -ca.dot(qv, omega))
+
+
+def relative_pose(e: Edge, x, dim: int, sym: bool = False):
+    """``(R, p)`` of B's joint frame in A's for joint coordinates ``x`` (SX when ``sym``)."""
+    if sym:
+        rot = (lambda ax, th: rotation_about(ax, th, True)) if dim == 3 else (lambda ax, th: rotation_2d(th, True))
+        eye, zero = ca.DM.eye(dim), ca.DM.zeros(dim, 1)
+    else:
+        rot = (lambda ax, th: rotation_about(ax, th)) if dim == 3 else (lambda ax, th: rotation_2d(th))
+        eye, zero = np.eye(dim), np.zeros(dim)
+    qm = (lambda x_: quaternion_matrix(x_, True)) if sym else quaternion_matrix
+    k = e.kind
+    if k == "Fixed":
+        return eye, zero
+    if k == "Revolute":
+        return rot(e.axes[0] if e.axes else None, x[0]), zero
+    if k == "Prismatic":
+        return eye, x[0] * _const(e.axes[0], sym)
+    if k == "Cylindrical":
+        return rot(e.axes[0], x[1]), x[0] * _const(e.axes[0], sym)
+    if k == "Universal":
+        Ra, Rb = rotation_about(e.axes[0], x[0], sym), rotation_about(e.axes[1], x[1], sym)
+        return (ca.mtimes(Ra, Rb) if sym else Ra @ Rb), zero
+    if k == "Planar":
+        n, e1, e2 = e.axes
+        return rotation_about(n, x[2], sym), x[0] * _const(e1, sym) + x[1] * _const(e2, sym)
+    if k == "Spherical":
+        return qm(x), zero
+    if k == "Free":
+        if dim == 2:
+            return rotation_2d(x[2], sym), x[:2]
+        return qm(x[3:]), x[:3]
+    raise ModelError(f"joint {e.name!r}: no relative pose for a {k} joint")
+
+
+def _const(x, sym: bool):
+    return ca.DM(np.asarray(x, float)) if sym else x
+
+
+def carry(pose, e: Edge, T, forward: bool, members, sym: bool = False):
+    """Pose of the member across joint ``e`` from the pose of the one on this side.
+
+    World pose of a frame fixed to member m that was ``H0`` initially: ``H_m H_m0⁻¹ H0``.
+    Forward (A → B): ``H_JB = H_JA T``, backward: ``H_JA = H_JB T⁻¹``."""
+    mul = ca.mtimes if sym else np.matmul
+    R, p = pose
+    d = R.shape[0]
+    here, there = (e.A, e.B) if forward else (e.B, e.A)
+    f_here, f_there = (e.frame_a, e.frame_b) if forward else (e.frame_b, e.frame_a)
+    Rt, pt = T if forward else (T[0].T, -mul(T[0].T, T[1]))
+    R0h, p0h = initial_pose(members, here, d)
+    R0t, p0t = initial_pose(members, there, d)
+    a1 = R0h.T @ f_here[0]
+    b1 = R0h.T @ (f_here[1] - p0h)
+    a2 = f_there[0].T @ R0t
+    b2 = f_there[0].T @ (p0t - f_there[1])
+    if sym:
+        a1, b1, a2, b2 = (ca.DM(x) for x in (a1, b1, a2, b2))
+    RJ = mul(R, a1)
+    oJ = mul(R, b1) + p
+    RJ2, oJ2 = mul(RJ, Rt), mul(RJ, pt) + oJ
+    return mul(RJ2, a2), mul(RJ2, b2) + oJ2
+
+
+def initial_pose(members, name: str, dim: int):
+    """``(R0, p0)`` of a member's frame in the initial configuration (the ground: identity)."""
+    if name == "ground":
+        return np.eye(dim), np.zeros(dim)
+    m = members[name]
+    return (np.eye(dim) if m.R0 is None else m.R0), m.p0

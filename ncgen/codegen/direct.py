@@ -1,0 +1,80 @@
+"""Direct calls of compiled CasADi functions through ctypes, with preallocated buffers.
+
+``casadi.external`` costs ~15–20 µs per call from Python, more than a small kernel.
+:class:`DirectFunction` calls the generated C entry point itself::
+
+    int <fn>(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem)
+
+with the pointer tables, integer and real work arrays allocated once (sizes from
+``<fn>_work``) and one NumPy buffer per input and output (their nonzeros, CasADi's
+column-major order).  A call copies the inputs into their buffers, calls the kernel and
+returns the output buffers (overwritten by the next call; copy them to keep them).  The
+overhead is ~1–2 µs (measured in benchmarks/joint_space.py).  Not thread-safe: one object
+per thread.
+"""
+from __future__ import annotations
+
+import ctypes
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from ncgen.errors import CodegenError
+
+_INT = ctypes.c_longlong          # casadi_int of the generated code (long long by default)
+_REAL_P = ctypes.POINTER(ctypes.c_double)
+
+
+class DirectFunction:
+    """The compiled function ``c_name`` of ``library`` with the signature of ``f`` (the
+    CasADi function it was generated from: input and output sparsities, names)."""
+
+    def __init__(self, library, c_name: str, f: ca.Function):
+        self.library = Path(library)
+        self.name = f.name()
+        try:
+            self._lib = ctypes.CDLL(str(self.library))
+            fn = getattr(self._lib, c_name)
+            work = getattr(self._lib, f"{c_name}_work")
+        except (OSError, AttributeError) as e:
+            raise CodegenError(f"cannot load {c_name!r} from {self.library}: {e}") from None
+        fn.restype = ctypes.c_int
+        fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int]
+        sizes = [_INT() for _ in range(4)]
+        if work(*(ctypes.byref(s) for s in sizes)):
+            raise CodegenError(f"{c_name}_work failed in {self.library}")
+        sz_arg, sz_res, sz_iw, sz_w = (max(1, int(s.value)) for s in sizes)
+        self.inputs = [np.zeros(f.nnz_in(i)) for i in range(f.n_in())]
+        self.outputs = [np.zeros(f.nnz_out(i)) for i in range(f.n_out())]
+        self.input_names, self.output_names = f.name_in(), f.name_out()
+        self._arg = (_REAL_P * sz_arg)(*[b.ctypes.data_as(_REAL_P) for b in self.inputs])
+        self._res = (_REAL_P * sz_res)(*[b.ctypes.data_as(_REAL_P) for b in self.outputs])
+        self._iw = np.zeros(sz_iw, dtype=np.int64)
+        self._w = np.zeros(sz_w)
+        self._mem = 0
+        for suffix in ("incref",):
+            g = getattr(self._lib, f"{c_name}_{suffix}", None)
+            if g is not None:
+                g()
+        checkout = getattr(self._lib, f"{c_name}_checkout", None)
+        if checkout is not None:
+            checkout.restype = ctypes.c_int
+            self._mem = int(checkout())
+        self._fn = fn
+        self._args = (ctypes.addressof(self._arg), ctypes.addressof(self._res), self._iw.ctypes.data,
+                      self._w.ctypes.data, self._mem)
+
+    def call(self) -> list[np.ndarray]:
+        """Evaluate with the values already in :attr:`inputs`; returns :attr:`outputs`."""
+        if self._fn(*self._args):
+            raise CodegenError(f"{self.name}: the compiled kernel returned an error")
+        return self.outputs
+
+    def __call__(self, *args) -> list[np.ndarray]:
+        """Copy ``args`` (one array per input, its nonzeros) into the buffers and evaluate."""
+        for buf, x in zip(self.inputs, args):
+            buf[:] = x
+        if self._fn(*self._args):
+            raise CodegenError(f"{self.name}: the compiled kernel returned an error")
+        return self.outputs

@@ -1,0 +1,254 @@
+"""URDF import: a robot description as a :class:`~ncgen.model.system.System`.
+
+Parsing is yourdfpy's (meshes are not loaded); this module maps the parsed tree:
+
+* Links joined by ``fixed`` joints are merged into one member; their masses, centres of mass
+  and inertia tensors are lumped exactly (parallel-axis theorem).  Everything fixed to the
+  root link is the ground (or, with ``floating_base=True``, the root body).
+* Each merged group with mass becomes a body (``ruvw``) whose frame has the axes of the
+  group's first link and its origin at the group's centre of mass; ``<inertial>`` origins
+  and off-diagonal inertia are honoured.  A moving group without mass is refused, naming
+  its links (its natural coordinates would have no inertia).
+* ``revolute``/``continuous`` become :class:`~ncgen.model.joints.Revolute`, ``prismatic``
+  :class:`~ncgen.model.joints.Prismatic`, at the child link's origin along its axis (world,
+  zero configuration = the initial one, so joint coordinates match the URDF's).
+  ``<mimic>`` adds a :class:`~ncgen.model.joints.Mimic` equation (the follower is not
+  actuated).  ``floating``/``planar`` joints inside the tree are refused.
+* Every other movable joint is actuated by one component of the input ``tau`` (N·m or N),
+  in ``model.joint_names`` order; limits (``lower``, ``upper``, ``velocity``, ``effort``)
+  are kept as data (``model.joint_limits``).
+* ``floating_base=True``: the root is a body with a :class:`~ncgen.model.joints.Free`
+  joint named ``root`` (Pinocchio's free flyer at the root link's frame).
+* Link frames (``model.frames``, ``model.frame_pose``) and visual geometry
+  (``system.visuals``: boxes, cylinders, spheres; meshes by file name) are kept as data.
+
+Names: link and joint names become identifiers (characters other than letters, digits and
+``_`` replaced by ``_``).
+"""
+from __future__ import annotations
+
+import io
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ncgen.errors import ModelError
+
+MOVABLE = ("revolute", "continuous", "prismatic")
+
+#: Relative tolerance under which a principal moment sum ``I_a + I_b − I_c`` counts as zero
+#: (a thin disc or plate, whose natural-coordinate mass matrix is singular).
+FLAT_TOL = 1e-9
+
+
+@dataclass
+class Group:
+    """Links merged by fixed joints: the first link, every link's zero-configuration pose,
+    and the lumped mass properties (world axes, about the centre of mass)."""
+
+    root: str
+    links: list[str] = field(default_factory=list)
+    mass: float = 0.0
+    com: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    inertia: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
+
+
+def identifier(name: str) -> str:
+    s = re.sub(r"\W", "_", name)
+    return s if s and not s[0].isdigit() else f"_{s}"
+
+
+def load_urdf(source):
+    """The yourdfpy ``URDF`` of a path or of URDF text (meshes not loaded)."""
+    try:
+        import yourdfpy
+    except ImportError:
+        raise ModelError("URDF import needs the package yourdfpy (pip install yourdfpy)") from None
+    text = str(source)
+    if "<robot" in text:
+        handle, where = io.BytesIO(text.encode()), "URDF text"
+    else:
+        path = Path(source)
+        if not path.is_file():
+            raise ModelError(f"URDF: no file {str(path)!r} (expected a path to a .urdf file or URDF text)")
+        handle, where = str(path), str(path)
+    try:
+        return yourdfpy.URDF.load(handle, build_scene_graph=False, load_meshes=False,
+                                  build_collision_scene_graph=False, load_collision_meshes=False), where
+    except Exception as e:          # yourdfpy/lxml raise many types for malformed files
+        raise ModelError(f"URDF {where}: cannot parse it: {e}") from None
+
+
+def _origin(T) -> np.ndarray:
+    return np.eye(4) if T is None else np.asarray(T, float)
+
+
+def system_from_urdf(source, system_class, *, floating_base: bool = False, gravity=(0.0, 0.0, -9.81), name=None):
+    """A system (an instance of ``system_class``, :class:`~ncgen.model.system.System`) from a
+    URDF file or text; see the module docstring."""
+    from ncgen.model.joints import Free, Mimic, Prismatic, Revolute
+
+    urdf, where = load_urdf(source)
+    robot = urdf.robot
+    links = {ln.name: ln for ln in robot.links}
+    joints = list(robot.joints)
+    parent_of = {j.child: j for j in joints}
+    for j in joints:
+        for role, ln in (("parent", j.parent), ("child", j.child)):
+            if ln not in links:
+                raise ModelError(f"URDF {where}: joint {j.name!r}: {role} link {ln!r} is not defined")
+        if j.type not in MOVABLE + ("fixed",):
+            raise ModelError(f"URDF {where}: joint {j.name!r}: type {j.type!r} is not supported "
+                             f"(supported: {', '.join(MOVABLE)}, fixed)")
+    roots = [ln for ln in links if ln not in parent_of]
+    if len(roots) != 1:
+        raise ModelError(f"URDF {where}: expected one root link (a tree), found {roots}")
+    root = roots[0]
+    children: dict[str, list] = {}
+    for j in joints:
+        children.setdefault(j.parent, []).append(j)
+
+    # zero-configuration world poses, depth first in file order
+    pose = {root: np.eye(4)}
+    order = []
+    group_of = {root: root}
+    stack = [root]
+    while stack:
+        here = stack.pop()
+        order.append(here)
+        for j in reversed(children.get(here, [])):
+            pose[j.child] = pose[here] @ _origin(j.origin)
+            group_of[j.child] = group_of[here] if j.type == "fixed" else j.child
+            stack.append(j.child)
+    order_index = {ln: k for k, ln in enumerate(order)}
+    movable = sorted((j for j in joints if j.type != "fixed"), key=lambda j: order_index[j.child])
+
+    groups: dict[str, Group] = {}
+    for ln in order:
+        g = groups.setdefault(group_of[ln], Group(group_of[ln]))
+        g.links.append(ln)
+    for g in groups.values():
+        _lump(g, links, pose)
+
+    s = system_class(identifier(name or robot.name or "robot"), gravity=gravity)
+    member_of: dict[str, object] = {}
+    grounded = not floating_base
+    for gname, g in groups.items():
+        if gname == root and grounded:
+            member_of[gname] = s.ground
+            continue
+        moved_by = "the floating base" if gname == root else f"joint {parent_of[gname].name!r}"
+        if g.mass <= 0:
+            raise ModelError(f"URDF {where}: link(s) {', '.join(g.links)} (moved by {moved_by}) have no mass "
+                             "(no <inertial>); ncgen needs mass on every moving body: add an <inertial>, "
+                             "or make the joint fixed so the link is merged into its parent")
+        R = pose[gname][:3, :3]
+        I_body = R.T @ g.inertia @ R
+        _check_inertia(I_body, g, where, moved_by)
+        member_of[gname] = s.add_body(identifier(gname), mass=g.mass, inertia=I_body, position=g.com,
+                                      rotation=R)
+
+    tau = s.add_input("tau", len([j for j in movable if j.mimic is None])) if movable else None
+    s.frames = {}
+    s.visuals = []
+    for ln in order:
+        m = member_of[group_of[ln]]
+        s.frames[identifier(ln)] = (m.name if not m.is_ground else "ground",
+                                    *_local(m, pose[ln]))
+        for vis in links[ln].visuals or []:
+            s.visuals.append(_visual(ln, m, pose[ln] @ _origin(vis.origin), vis))
+
+    if floating_base:
+        s.add_joint(Free(s.ground, member_of[root], at=pose[root][:3, 3], rotation=pose[root][:3, :3],
+                         name="root"))
+    made = {}
+    k = 0
+    for j in movable:
+        T = pose[j.child]
+        axis = T[:3, :3] @ (np.asarray(j.axis, float) if j.axis is not None else np.array([1.0, 0, 0]))
+        A, B = member_of[group_of[j.parent]], member_of[group_of[j.child]]
+        effort = None
+        if j.mimic is None:
+            effort, k = tau[k], k + 1
+        cls = Prismatic if j.type == "prismatic" else Revolute
+        joint = s.add_joint(cls(A, B, at=T[:3, 3], axis=axis, name=identifier(j.name), effort=effort))
+        lim = j.limit
+        joint.limits = {} if lim is None else {
+            key: float(getattr(lim, key)) for key in ("lower", "upper", "velocity", "effort")
+            if getattr(lim, key) is not None and not (j.type == "continuous" and key in ("lower", "upper"))}
+        made[j.name] = joint
+    for j in movable:
+        if j.mimic is not None:
+            leader = made.get(j.mimic.joint)
+            if leader is None:
+                raise ModelError(f"URDF {where}: joint {j.name!r}: mimics {j.mimic.joint!r}, which is not a "
+                                 "movable joint of this robot")
+            s.add_joint(Mimic(leader, made[j.name], multiplier=j.mimic.multiplier or 1.0,
+                              offset=j.mimic.offset or 0.0, name=identifier(f"{j.name}_mimic")))
+    return s
+
+
+def _lump(g: Group, links, pose) -> None:
+    """Total mass, centre of mass and inertia about it (world axes) of a group's links."""
+    parts = []
+    for ln in g.links:
+        inert = links[ln].inertial
+        if inert is None or not inert.mass:
+            continue
+        T = pose[ln] @ _origin(inert.origin)
+        Rc = T[:3, :3]
+        I = np.zeros((3, 3)) if inert.inertia is None else np.asarray(inert.inertia, float)
+        parts.append((float(inert.mass), T[:3, 3], Rc @ I @ Rc.T))
+    g.mass = sum(m for m, _, _ in parts)
+    if g.mass <= 0:
+        return
+    g.com = sum(m * c for m, c, _ in parts) / g.mass
+    g.inertia = np.zeros((3, 3))
+    for m, c, I in parts:
+        d = c - g.com
+        g.inertia += I + m * (d @ d * np.eye(3) - np.outer(d, d))
+
+
+def _check_inertia(I, g: Group, where: str, moved_by: str) -> None:
+    """Refuse an inertia tensor that is not physical or is flat (a thin disc or plate)."""
+    I = 0.5 * (I + I.T)
+    e = np.linalg.eigvalsh(I)
+    slack = [e[1] + e[2] - e[0], e[0] + e[2] - e[1], e[0] + e[1] - e[2]]
+    scale = max(float(e.max()), 1e-300)
+    what = f"URDF {where}: link(s) {', '.join(g.links)} (moved by {moved_by})"
+    if e.min() < -FLAT_TOL * scale or min(slack) < -FLAT_TOL * scale:
+        raise ModelError(f"{what}: the inertia tensor is not physical (principal moments {e.tolist()} "
+                         "violate I_a + I_b ≥ I_c)")
+    if min(slack) <= FLAT_TOL * scale:
+        raise ModelError(f"{what}: a flat mass distribution (principal moments {e.tolist()}, "
+                         "I_a + I_b = I_c: a thin disc or plate); its natural-coordinate mass matrix "
+                         "is singular, which ncgen does not handle yet: thicken it slightly")
+
+
+def _local(m, T) -> tuple[np.ndarray, np.ndarray]:
+    """A world pose (zero configuration) in the member's local frame: ``(R, p)``."""
+    if m.is_ground:
+        return T[:3, :3].copy(), T[:3, 3].copy()
+    R0 = m.R0
+    return R0.T @ T[:3, :3], R0.T @ (T[:3, 3] - m.p0)
+
+
+def _visual(link: str, m, T, vis) -> dict:
+    g = vis.geometry
+    out = {"link": identifier(link), "member": "ground" if m.is_ground else m.name}
+    R, p = _local(m, T)
+    out["rotation"], out["position"] = R, p
+    if g is None:
+        out["shape"] = "none"
+    elif g.box is not None:
+        out.update(shape="box", size=np.asarray(g.box.size, float))
+    elif g.cylinder is not None:
+        out.update(shape="cylinder", radius=float(g.cylinder.radius), length=float(g.cylinder.length))
+    elif g.sphere is not None:
+        out.update(shape="sphere", radius=float(g.sphere.radius))
+    elif g.mesh is not None:
+        out.update(shape="mesh", filename=g.mesh.filename,
+                   scale=None if g.mesh.scale is None else np.asarray(g.mesh.scale, float).reshape(-1))
+    return out

@@ -1,0 +1,159 @@
+"""Forward and inverse dynamics at one state, natural coordinates or joint space.
+
+* :func:`forward_dynamics` — ``(q̈, λ)`` from ``M q̈ + Aᵀλ = F(t, q, q̇, u, p)``,
+  ``A q̈ = γ`` (the KKT system, no stabilisation terms: on the constraint manifold the
+  result is exact).  Joint accelerations: ``model.to_joint_space(q, v, a)``.
+* :func:`forward_dynamics_kernel` — the same KKT solve (CasADi's sparse QR) as one
+  compiled C function called through ctypes (:class:`~ncgen.codegen.direct.DirectFunction`,
+  ~1–2 µs overhead); ``forward_dynamics(..., backend="compiled")`` uses it (compiled once
+  per model, cached on disk by content).
+* :func:`inverse_dynamics` — the efforts ``τ`` of the actuated joints (joints with
+  ``effort=``; every movable joint of a URDF) that produce the joint accelerations ``a_j``
+  at ``(q_j, v_j)``: ``q̈`` from ``[A; J] q̈ = [γ; a_j − J̇ q̇]``, then ``(λ, τ)`` from
+  ``Aᵀλ − B τ = F_passive − M q̈`` (``B`` the actuators' generalised-force map, ``F_passive``
+  the applied force without the actuators' own efforts).  Units: N·m for rotations, N for
+  translations, ``[f, τ]`` in the base frame for a free joint (Pinocchio's convention).
+"""
+from __future__ import annotations
+
+import tempfile
+import weakref
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from ncgen.assembly.joint_space import solve_linear
+from ncgen.assembly.mass import sparse_dm
+from ncgen.errors import ModelError
+from ncgen.validation import as_vector
+
+
+def _kkt(model, q, v, t, u, p):
+    f = model.functions
+    A = np.array(f["A"](t, q, p))
+    F = np.array(f["F"](t, q, v, u, p)).reshape(-1)
+    gamma = np.array(f["gamma"](t, q, v, p)).reshape(-1)
+    return A, F, gamma
+
+
+def kkt_function(model) -> ca.Function:
+    """``fd: (t, q, v, u, p) -> (a, lam)`` by the Schur complement of the constant mass
+    matrix: ``(A M⁻¹ Aᵀ) λ = A M⁻¹ F − γ`` (sparse LDLᵀ; M⁻¹ is block-diagonal per member),
+    ``a = M⁻¹ (F − Aᵀ λ)``; no stabilisation terms.  Needs a non-singular M and
+    independent constraints (as the model's other paths do)."""
+    f = model.functions
+    t, q, v = ca.MX.sym("t"), ca.MX.sym("q", model.nq), ca.MX.sym("v", model.nq)
+    u, p = ca.MX.sym("u", model.nu), ca.MX.sym("p", model.np)
+    A = f["A"](t, q, p)
+    Minv = model.Minv
+    Minv[np.abs(Minv) < 1e-300] = 0.0
+    Mi = ca.MX(sparse_dm(Minv))
+    F = f["F"](t, q, v, u, p)
+    MiF = ca.mtimes(Mi, F)
+    S = ca.mtimes(ca.mtimes(A, Mi), A.T)
+    lam = ca.solve(S, ca.mtimes(A, MiF) - f["gamma"](t, q, v, p), "ldl")
+    a = MiF - ca.mtimes(Mi, ca.mtimes(A.T, lam))
+    return ca.Function("forward_dynamics", [t, q, v, u, p], [a, lam], ["t", "q", "v", "u", "p"], ["a", "lam"])
+
+
+def joint_kkt_function(model) -> ca.Function:
+    """``fd_j: (t, qj, vj, u, p) -> (aj, a, lam)``: joint space in and out for a tree
+    (:meth:`~ncgen.assembly.joint_space.JointSpace.tree_function`, then :func:`kkt_function`,
+    then ``a_j = J q̈ + J̇ q̇``)."""
+    js = model.joint_space
+    tree = js.tree_function(model.layout)
+    t, qj, vj = ca.MX.sym("t"), ca.MX.sym("qj", js.nq), ca.MX.sym("vj", js.nv)
+    u, p = ca.MX.sym("u", model.nu), ca.MX.sym("p", model.np)
+    q, v = tree(qj, vj)
+    a, lam = kkt_function(model)(t, q, v, u, p)
+    aj = js.accelerations(q, v, a)
+    return ca.Function("joint_forward_dynamics", [t, qj, vj, u, p], [aj, a, lam],
+                       ["t", "qj", "vj", "u", "p"], ["aj", "a", "lam"])
+
+
+_KERNELS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def forward_dynamics_kernel(model, *, joint_space: bool = False, cflags=None):
+    """The compiled :func:`kkt_function` of ``model`` (``joint_space=True``: the
+    :func:`joint_kkt_function`, trees only) as a :class:`~ncgen.codegen.direct.DirectFunction`,
+    built once per model (the library is cached by content).  Call ``k(t, q, v, u, p)`` →
+    ``[a, lam]``, or ``k(t, qj, vj, u, p)`` → ``[aj, a, lam]`` (buffers reused by the next
+    call)."""
+    kernels = _KERNELS.setdefault(model, {})
+    hit = kernels.get(joint_space)
+    if hit is None:
+        from ncgen.codegen.compile_cache import compile_package
+        from ncgen.codegen.direct import DirectFunction
+        from ncgen.codegen.package import write_package
+
+        f = joint_kkt_function(model) if joint_space else kkt_function(model)
+        with tempfile.TemporaryDirectory() as tmp:
+            pkg = write_package(f"{model.name}_{'jfd' if joint_space else 'fd'}", [f], Path(tmp) / "pkg")
+            built = compile_package(pkg, cflags=cflags)
+            c_name = next(x["c_name"] for x in pkg.manifest["functions"] if x["name"] == f.name())
+        hit = kernels[joint_space] = DirectFunction(built.path, c_name, f)
+    return hit
+
+
+def forward_dynamics(model, q, v, u=None, p=None, t: float = 0.0, *, backend: str = "numpy"):
+    """``(a, lam)``: accelerations q̈ (natural coordinates) and multipliers at ``(t, q, v)``
+    with inputs ``u`` (default zero) and parameters ``p`` (default ``model.p0``).
+    ``backend``: ``"numpy"`` (the KKT matrix assembled and solved here) or ``"compiled"``
+    (:func:`forward_dynamics_kernel`, the fast path for repeated calls)."""
+    q = as_vector(q, model.nq, "q")
+    v = as_vector(v, model.nq, "v")
+    u = np.zeros(model.nu) if u is None else as_vector(u, model.nu, "u (model.input_names order)")
+    p = model.p0 if p is None else as_vector(p, model.np, "p")
+    if backend == "compiled":
+        a, lam = forward_dynamics_kernel(model)(t, q, v, u, p)
+        if not (np.all(np.isfinite(a)) and np.all(np.isfinite(lam))):
+            raise ModelError("forward_dynamics: the KKT matrix [[M, Aᵀ], [A, 0]] is singular at this state")
+        return a.copy(), lam.copy()
+    if backend != "numpy":
+        raise ModelError(f"forward_dynamics: backend: expected 'numpy' or 'compiled', got {backend!r}")
+    A, F, gamma = _kkt(model, q, v, float(t), u, p)
+    nq, nc = model.nq, A.shape[0]
+    K = np.block([[model.M, A.T], [A, np.zeros((nc, nc))]])
+    x = solve_linear(K, np.concatenate([F, gamma]))
+    if x is None:
+        raise ModelError("forward_dynamics: the KKT matrix [[M, Aᵀ], [A, 0]] is singular at this state "
+                         "(redundant constraints or a singular configuration; see nc.dof_report)")
+    return x[:nq], x[nq:]
+
+
+def inverse_dynamics(model, qj, vj, aj, p=None, t: float = 0.0, joints: str = "actuated") -> np.ndarray:
+    """Efforts of ``model.actuated_joints`` (concatenated, ``joint_names`` order) that give
+    the joint accelerations ``aj`` at joint positions ``qj`` and rates ``vj`` (vectors in
+    ``joint_names`` order).  ``joints="all"``: efforts conjugate to every joint rate, as if
+    every joint were actuated (a floating base's wrench included; Pinocchio's ``rnea``)."""
+    if joints not in ("actuated", "all"):
+        raise ModelError(f"inverse_dynamics: joints: expected 'actuated' or 'all', got {joints!r}")
+    js = model.joint_space
+    p = model.p0 if p is None else as_vector(p, model.np, "p")
+    t = float(t)
+    q, v = model.from_joint_space(qj, vj, t=t, p=p)
+    aj = as_vector(aj, js.nv, "aj (one value per joint rate, joint_names order)")
+    f = model.functions
+    A, _, gamma = _kkt(model, q, v, t, np.zeros(model.nu), p)
+    J = np.array(js.jacobian(q))
+    bias = np.array(js.bias(q, v)).reshape(-1)
+    K = np.vstack([A, J])
+    a = solve_linear(K, np.concatenate([gamma, aj - bias]))
+    if a is None:
+        raise ModelError("inverse_dynamics: the joint accelerations do not determine q̈ (or contradict "
+                         "the constraints): give every joint's accelerations of a tree")
+    B, tau0 = (np.array(x) for x in js.actuation(t, q, np.zeros(model.nu), p))
+    F = np.array(f["F"](t, q, v, np.zeros(model.nu), p)).reshape(-1) - B @ tau0.reshape(-1)
+    if joints == "all":
+        B = J.T
+    if B.shape[1] == 0:
+        raise ModelError("inverse_dynamics: the model has no actuated joints (give joints effort=...)")
+    rhs = F - model.M @ a
+    G = np.hstack([A.T, -B])
+    x = solve_linear(G, rhs)
+    if x is None:
+        raise ModelError(f"inverse_dynamics: these accelerations need efforts on joints without actuators "
+                         f"(or the constraint forces are not unique); actuated joints: {', '.join(js.actuated)}")
+    return x[A.shape[0]:]
