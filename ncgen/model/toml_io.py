@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import inspect
 import tomllib
+from dataclasses import dataclass
 from pathlib import Path
 
 import casadi as ca
@@ -30,12 +31,80 @@ from ncgen.errors import ModelError
 from ncgen.files import decode_text
 from ncgen.model import toml_write
 from ncgen.model.expressions import did_you_mean, parse, scope, value_to_toml
-from ncgen.model.forces import FORCE_TYPES, GeneralizedForce, PointForce, Spring, Torque, TorsionalSpring
-from ncgen.model.joints import JOINT_TYPES, CoordinateDriver, Distance
+from ncgen.model.forces import FORCE_TYPES
+from ncgen.model.joints import JOINT_TYPES, CoordinateDriver
 from ncgen.model.members import NodeRef
 from ncgen.validation import MAX_NAME, as_scalar
 
 TOP_KEYS = ("system", "parameters", "inputs", "members", "joints", "forces", "initial", "initial_rates")
+
+
+@dataclass(frozen=True)
+class Field:
+    """One key of a member, joint or force table: its ``kind`` (how the value is read, see
+    :meth:`_Loader.value`), whether it is ``required``, and the constructor keyword it
+    becomes (``arg``: the key itself if empty; a tuple spreads a pair, e.g. ``between`` into
+    ``A, B``)."""
+
+    key: str
+    kind: str
+    required: bool = False
+    arg: str | tuple[str, ...] = ""
+    default: object = None          # used when the key is missing; a callable takes the dimension
+
+
+#: Keys of each member kind: the arguments of System.add_body / add_bar / add_point.
+MEMBER_FIELDS = {
+    "body": (Field("coords", "string", default=lambda dim: "ruvw"[:dim + 1]), Field("mass", "number", True), Field("inertia", "inertia", True),
+             Field("position", "vector"), Field("rotation", "rotation"), Field("velocity", "vector"),
+             Field("angular_velocity", "angular velocity"), Field("basis", "basis"), Field("share", "share")),
+    "bar": (Field("coords", "string"), Field("mass", "number", True), Field("ends", "ends", True),
+            Field("inertia", "number"), Field("com", "number"), Field("velocity", "vector"),
+            Field("angular_velocity", "angular velocity")),
+    "point": (Field("mass", "number", True), Field("position", "point or node", True), Field("velocity", "vector")),
+}
+
+#: Keys of each force type: the arguments of its class.
+FORCE_FIELDS = {
+    "PointForce": (Field("member", "member", True), Field("at", "vector", True), Field("force", "force", True)),
+    "Torque": (Field("member", "member", True), Field("torque", "torque", True)),
+    "Spring": (Field("between", "two members", True, ("a", "b")), Field("at_a", "vector", True),
+               Field("at_b", "vector", True), Field("k", "value", True), Field("rest_length", "value"),
+               Field("damping", "value"), Field("cable", "bool")),
+    "TorsionalSpring": (Field("joint", "joint", True), Field("k", "value", True), Field("damping", "value"),
+                        Field("rest_angle", "value of t and parameters")),
+    "GeneralizedForce": (Field("value", "generalized force", True),),
+}
+
+#: Joints whose keys are not ``between`` and their keyword arguments.
+SPECIAL_JOINT_FIELDS = {
+    "CoordinateDriver": (Field("member", "member, not the ground", True), Field("slot", "slot or axis", True),
+                         Field("axis", "slot or axis", True), Field("value", "value of t and parameters")),
+    "Mimic": (Field("leader", "joint", True), Field("follower", "joint", True), Field("multiplier", "number"),
+              Field("offset", "number")),
+}
+#: How a joint's keyword argument is read, where it is not a world vector.
+JOINT_ARGUMENT_KINDS = {"drive": "value of t and parameters", "rotation": "rotation", ("Distance", "at"): "two points"}
+#: Components of a joint's actuator effort (``effort``), where not one.
+EFFORT_SIZE = {"Cylindrical": 2, "Universal": 2, "Planar": 3, "Spherical": 3}
+
+
+def joint_fields(cls, dim: int) -> tuple[Field, ...]:
+    """The keys of joint type ``cls``: ``between`` (its two members) and its keyword-only
+    arguments (required when they have no default), or :data:`SPECIAL_JOINT_FIELDS`."""
+    if cls.kind in SPECIAL_JOINT_FIELDS:
+        return SPECIAL_JOINT_FIELDS[cls.kind]
+    fields = [Field("between", "two members", True, ("A", "B"))]
+    for k, p in inspect.signature(cls).parameters.items():
+        if p.kind != p.KEYWORD_ONLY or k == "name":
+            continue
+        if k == "effort":
+            n = (6 if dim == 3 else 3) if cls.kind == "Free" else EFFORT_SIZE.get(cls.kind, 1)
+            kind = f"value[{n}]"
+        else:
+            kind = JOINT_ARGUMENT_KINDS.get((cls.kind, k), JOINT_ARGUMENT_KINDS.get(k, "vector"))
+        fields.append(Field(k, kind, p.default is p.empty))
+    return tuple(fields)
 
 
 # ======================================================================= reading
@@ -224,70 +293,110 @@ class _Loader:
             raise ModelError(f"{path}: {e}") from None
 
     # --------------------------------------------------------------- members
-    MEMBER_KEYS = {
-        "body": ("name", "kind", "coords", "mass", "inertia", "position", "rotation", "velocity",
-                 "angular_velocity", "basis", "share", "markers"),
-        "bar": ("name", "kind", "coords", "mass", "ends", "inertia", "com", "velocity",
-                "angular_velocity", "markers"),
-        "point": ("name", "kind", "mass", "position", "velocity", "markers"),
-    }
-
     def _member(self, t: _Table):
-        d = self.dim
         name = _string(t.get("name", required=True), t.at("name"))
         kind = _string(t.get("kind", required=True), t.at("kind"))
-        if kind not in self.MEMBER_KEYS:
+        if kind not in MEMBER_FIELDS:
             raise ModelError(f"{t.at('kind')}: expected one of body, bar, point, got {kind!r}"
-                             f"{did_you_mean(kind, self.MEMBER_KEYS)}")
-        kw = {"mass": _number(t.get("mass", required=True), t.at("mass"))}
-        if t.get("velocity") is not None:
-            kw["velocity"] = _vector(t.data["velocity"], d, t.at("velocity"))
-        if kind != "point":
-            kw["coords"] = _string(t.get("coords", "ruvw"[:d + 1] if kind == "body" else "rr"), t.at("coords"))
-            w = t.get("angular_velocity")
-            if w is not None:
-                kw["angular_velocity"] = _vector(w, 3, t.at("angular_velocity")) if d == 3 else \
-                    _number(w, t.at("angular_velocity"))
-        if kind == "body":
-            self._body_args(t, kw)
-            add = self.s.add_body
-        elif kind == "bar":
-            ends = t.get("ends", required=True)
-            if not isinstance(ends, list) or len(ends) != 2:
-                raise ModelError(f"{t.at('ends')}: expected two points or nodes, got {_describe(ends)}")
-            kw["ends"] = [self._point_or_node(e, f"{t.at('ends')}[{i}]") for i, e in enumerate(ends)]
-            for k in ("inertia", "com"):
-                if t.get(k) is not None:
-                    kw[k] = _number(t.data[k], t.at(k))
-            add = self.s.add_bar
-        else:
-            kw["position"] = self._point_or_node(t.get("position", required=True), t.at("position"))
-            add = self.s.add_point
+                             f"{did_you_mean(kind, MEMBER_FIELDS)}")
         markers = _Table(t.get("markers", {}), t.at("markers"))
-        t.finish(self.MEMBER_KEYS[kind])
-        member = self._wrap(t.path, add, name, **kw)
+        kw = self._fields(t, MEMBER_FIELDS[kind], ("name", "kind", "markers"))
+        member = self._wrap(t.path, getattr(self.s, f"add_{kind}"), name, **kw)
         for k, v in markers.data.items():
-            self._wrap(markers.at(k), member.add_marker, k, _vector(v, d, markers.at(k)))
+            self._wrap(markers.at(k), member.add_marker, k, _vector(v, self.dim, markers.at(k)))
 
-    def _body_args(self, t: _Table, kw: dict):
+    # ------------------------------------------------------------ field tables
+    def _fields(self, t: _Table, fields, other_keys=()) -> dict:
+        """The keyword arguments of ``fields`` read from ``t`` (a missing optional key keeps
+        the constructor's default); every other key of ``t`` must be in ``other_keys``."""
+        kw = {}
+        for f in fields:
+            v = t.get(f.key, required=f.required)
+            if v is None:
+                if f.default is None:
+                    continue
+                value = f.default(self.dim) if callable(f.default) else f.default
+            else:
+                value = self.value(f.kind, v, t.at(f.key))
+            if isinstance(f.arg, tuple):
+                kw.update(zip(f.arg, value))
+            else:
+                kw[f.arg or f.key] = value
+        t.finish((*other_keys, *(f.key for f in fields)))
+        return kw
+
+    def value(self, kind: str, v, path):
+        """Value ``v`` at key ``path`` read as ``kind`` (see :data:`KINDS`)."""
         d = self.dim
-        inertia = t.get("inertia", required=True)
-        kw["inertia"] = _matrix(inertia, 3, t.at("inertia")) if d == 3 else _number(inertia, t.at("inertia"))
-        if t.get("position") is not None:
-            kw["position"] = _vector(t.data["position"], d, t.at("position"))
-        R = t.get("rotation")
-        if R is not None:
-            kw["rotation"] = _number(R, t.at("rotation")) if d == 2 and not isinstance(R, list) else \
-                _matrix(R, d, t.at("rotation"))
-        basis = t.get("basis")
-        if basis is not None:
-            if not isinstance(basis, list):
-                raise ModelError(f"{t.at('basis')}: expected a list of vectors, got {_describe(basis)}")
-            kw["basis"] = [_vector(b, d, f"{t.at('basis')}[{i}]") for i, b in enumerate(basis)]
-        share = t.get("share")
-        if share is not None:
-            st = _Table(share, t.at("share"), "a table of slot = node")
-            kw["share"] = {k: self._node(v, st.at(k)) for k, v in st.data.items()}
+        if kind == "number":
+            return _number(v, path)
+        if kind == "string":
+            return _string(v, path)
+        if kind == "bool":
+            return _bool(v, path)
+        if kind == "vector":
+            return _vector(v, d, path)
+        if kind == "two points":
+            if not isinstance(v, list) or len(v) != 2:
+                raise ModelError(f"{path}: expected two points (one on each member), got {_describe(v)}")
+            return [_vector(x, d, f"{path}[{i}]") for i, x in enumerate(v)]
+        if kind == "inertia":
+            return _matrix(v, 3, path) if d == 3 else _number(v, path)
+        if kind == "rotation":
+            return _number(v, path) if d == 2 and not isinstance(v, list) else _matrix(v, d, path)
+        if kind == "angular velocity":
+            return _vector(v, 3, path) if d == 3 else _number(v, path)
+        if kind == "basis":
+            if not isinstance(v, list):
+                raise ModelError(f"{path}: expected a list of vectors, got {_describe(v)}")
+            return [_vector(b, d, f"{path}[{i}]") for i, b in enumerate(v)]
+        if kind == "share":
+            st = _Table(v, path, "a table of slot = node")
+            return {k: self._node(x, st.at(k)) for k, x in st.data.items()}
+        if kind == "point or node":
+            return self._point_or_node(v, path)
+        if kind == "ends":
+            if not isinstance(v, list) or len(v) != 2:
+                raise ModelError(f"{path}: expected two points or nodes, got {_describe(v)}")
+            return [self._point_or_node(e, f"{path}[{i}]") for i, e in enumerate(v)]
+        if kind == "member":
+            return self._member_ref(v, path)
+        if kind == "member, not the ground":
+            return self._member_ref(v, path, ground=False)
+        if kind == "two members":
+            if not isinstance(v, list) or len(v) != 2:
+                raise ModelError(f"{path}: expected two member names (\"ground\" for the ground), "
+                                 f"got {_describe(v)}")
+            return [self._member_ref(m, f"{path}[{i}]") for i, m in enumerate(v)]
+        if kind == "joint":
+            return self._joint_ref(v, path)
+        if kind == "slot or axis":
+            if not isinstance(v, (str, int)) or isinstance(v, bool):
+                raise ModelError(f"{path}: expected a name or an index, got {_describe(v)}")
+            return v
+        if kind == "value":                     # of t, parameters and inputs
+            return self._expr(v, path)
+        if kind.startswith("value["):           # value[n]: n components
+            return self._expr(v, path, int(kind[6:-1]))
+        if kind == "value of t and parameters":
+            return self._expr(v, path, inputs=False)
+        if kind == "force":
+            return self._expr(v, path, d)
+        if kind == "torque":
+            return self._expr(v, path, 3 if d == 3 else 1)
+        if kind == "generalized force":
+            nq = self._scope(state=True).names["q"].numel()
+            return self._expr(v, path, nq, state=True)
+        raise AssertionError(f"unknown field kind {kind!r}")
+
+    def _joint_ref(self, name, path):
+        name = _string(name, path)
+        joint = next((j for j in self.s.joints if j.name == name), None)
+        if joint is None:
+            known = [j.name for j in self.s.joints]
+            raise ModelError(f"{path}: no joint named {name!r}{did_you_mean(name, known)} "
+                             f"(joints: {', '.join(known) or 'none'})")
+        return joint
 
     def _node(self, v, path) -> NodeRef:
         if isinstance(v, dict):
@@ -355,102 +464,17 @@ class _Loader:
         if cls is None:
             raise ModelError(f"{t.at('type')}: unknown joint type {typ!r}{did_you_mean(typ, JOINT_TYPES)}; "
                              f"expected one of {', '.join(JOINT_TYPES)}")
-        name = t.get("name")
-        kw = {"name": _string(name, t.at("name")) if name is not None else None}
-        keys = ["type", "name"]
-        if cls is CoordinateDriver:
-            keys += ["member", "slot", "axis", "value"]
-            args = [self._member_ref(t.get("member", required=True), t.at("member"), ground=False)]
-            for k in ("slot", "axis"):
-                v = t.get(k, required=True)
-                if not isinstance(v, (str, int)) or isinstance(v, bool):
-                    raise ModelError(f"{t.at(k)}: expected a name or an index, got {_describe(v)}")
-                args.append(v)
-            if t.get("value") is not None:
-                kw["value"] = self._expr(t.data["value"], t.at("value"), inputs=False)
-        else:
-            between = t.get("between", required=True)
-            if not isinstance(between, list) or len(between) != 2:
-                raise ModelError(f"{t.at('between')}: expected two member names (\"ground\" for the "
-                                 f"ground), got {_describe(between)}")
-            args = [self._member_ref(m, f"{t.at('between')}[{i}]") for i, m in enumerate(between)]
-            keys.append("between")
-            for k, p in inspect.signature(cls).parameters.items():
-                if p.kind != p.KEYWORD_ONLY or k == "name":
-                    continue
-                keys.append(k)
-                v = t.get(k, required=p.default is p.empty)
-                if v is not None:
-                    kw[k] = self._joint_value(cls, k, v, t.at(k))
-        t.finish(keys)
-        self._wrap(t.path, self.s.add_joint, cls(*args, **kw))
-
-    def _joint_value(self, cls, k, v, path):
-        d = self.dim
-        if k == "drive":
-            return self._expr(v, path, inputs=False)
-        if k == "effort":
-            n = {"Cylindrical": 2, "Universal": 2, "Planar": 3, "Spherical": 3, "Free": 6 if d == 3 else 3}
-            return self._expr(v, path, n=n.get(cls.kind, 1))
-        if k == "rotation":
-            return _number(v, path) if d == 2 and _is_number(v) else _matrix(v, d, path)
-        if cls is Distance and k == "at":
-            if not isinstance(v, list) or len(v) != 2:
-                raise ModelError(f"{path}: expected two points (one on each member), got {_describe(v)}")
-            return [_vector(x, d, f"{path}[{i}]") for i, x in enumerate(v)]
-        return _vector(v, d, path)
+        kw = self._fields(t, (Field("name", "string"), *joint_fields(cls, self.dim)), ("type",))
+        self._wrap(t.path, self.s.add_joint, cls(**kw))
 
     # ---------------------------------------------------------------- forces
     def _force(self, t: _Table):
-        d = self.dim
         typ = _string(t.get("type", required=True), t.at("type"))
         if typ not in FORCE_TYPES:
             raise ModelError(f"{t.at('type')}: unknown force type {typ!r}{did_you_mean(typ, FORCE_TYPES)}; "
                              f"expected one of {', '.join(FORCE_TYPES)}")
-        name = t.get("name")
-        kw = {"name": _string(name, t.at("name")) if name is not None else None}
-
-        def member(k="member"):
-            return self._member_ref(t.get(k, required=True), t.at(k))
-
-        def expr(k, n=1, default=None, **sk):
-            v = t.get(k, required=default is None)
-            return default if v is None else self._expr(v, t.at(k), n, **sk)
-
-        if typ == "PointForce":
-            keys = ("member", "at", "force")
-            f = PointForce(member(), _vector(t.get("at", required=True), d, t.at("at")), expr("force", d), **kw)
-        elif typ == "Torque":
-            keys = ("member", "torque")
-            f = Torque(member(), expr("torque", 3 if d == 3 else 1), **kw)
-        elif typ == "Spring":
-            keys = ("between", "at_a", "at_b", "k", "rest_length", "damping", "cable")
-            between = t.get("between", required=True)
-            if not isinstance(between, list) or len(between) != 2:
-                raise ModelError(f"{t.at('between')}: expected two member names, got {_describe(between)}")
-            a, b = (self._member_ref(m, f"{t.at('between')}[{i}]") for i, m in enumerate(between))
-            f = Spring(a, _vector(t.get("at_a", required=True), d, t.at("at_a")),
-                       b, _vector(t.get("at_b", required=True), d, t.at("at_b")),
-                       k=expr("k"), rest_length=expr("rest_length", default=0.0),
-                       damping=expr("damping", default=0.0),
-                       cable=_bool(t.get("cable", False), t.at("cable")), **kw)
-        elif typ == "TorsionalSpring":
-            keys = ("joint", "k", "damping", "rest_angle")
-            jname = _string(t.get("joint", required=True), t.at("joint"))
-            joint = next((j for j in self.s.joints if j.name == jname), None)
-            if joint is None:
-                known = [j.name for j in self.s.joints]
-                raise ModelError(f"{t.at('joint')}: no joint named {jname!r}{did_you_mean(jname, known)} "
-                                 f"(joints: {', '.join(known) or 'none'})")
-            f = TorsionalSpring(joint, k=expr("k"), damping=expr("damping", default=0.0),
-                                rest_angle=expr("rest_angle", default=0.0, inputs=False), **kw)
-        else:
-            keys = ("value",)
-            v = t.get("value", required=True)
-            nq = self._scope(state=True).names["q"].numel()
-            f = GeneralizedForce(self._expr(v, t.at("value"), nq, state=True), **kw)
-        t.finish(("type", "name", *keys))
-        self._wrap(t.path, self.s.add_force, f)
+        kw = self._fields(t, (Field("name", "string"), *FORCE_FIELDS[typ]), ("type",))
+        self._wrap(t.path, self.s.add_force, FORCE_TYPES[typ](**kw))
 
 
 def _default_name(origin: str) -> str:
@@ -516,7 +540,7 @@ def _joint_entries(j, sc) -> dict:
     if isinstance(j, CoordinateDriver):
         out["member"] = j.A.name
     else:
-        out["between"] = ["ground" if m.is_ground else m.name for m in j.members()]
+        out["between"] = [_member_name(m) for m in j.members()]
     for k, v in j.options.items():
         if v is None:
             continue
@@ -530,30 +554,37 @@ def _joint_entries(j, sc) -> dict:
 
 
 def _force_entries(f, sc, system) -> dict:
-    out = {"type": f.kind, "name": f.name}
-
-    def val(v, what):
-        return value_to_toml(v, sc, f"{f.label}: {what}")
-
-    if isinstance(f, PointForce):
-        out.update(member=f.member.name, at=_plain(f.at), force=val(f.force, "force"))
-    elif isinstance(f, Torque):
-        out.update(member=f.member.name, torque=val(f.torque, "torque"))
-    elif isinstance(f, Spring):
-        out.update(between=["ground" if m.is_ground else m.name for m in (f.a, f.b)], at_a=_plain(f.at_a),
-                   at_b=_plain(f.at_b), k=val(f.k, "k"), rest_length=val(f.rest_length, "rest_length"),
-                   damping=val(f.damping, "damping"), cable=f.cable)
-    elif isinstance(f, TorsionalSpring):
-        out.update(joint=f.joint.name, k=val(f.k, "k"), damping=val(f.damping, "damping"),
-                   rest_angle=val(f.rest_angle, "rest_angle"))
-    elif isinstance(f, GeneralizedForce):
-        from ncgen.model.layout import make_layout
-        nq = make_layout(system.dim, list(system.members.values())).nq
-        q, v = ca.SX.sym("q", nq), ca.SX.sym("v", nq)
-        st = scope(sc.t, {n: s for n, (s, _) in system.parameters.items()}, dict(system.inputs), q=q, v=v)
-        u = ca.vertcat(*system.inputs.values()) if system.inputs else ca.SX(0, 1)
-        p = ca.vertcat(*(s for s, _ in system.parameters.values())) if system.parameters else ca.SX(0, 1)
-        out["value"] = value_to_toml(f.value, st, f"{f.label}: value", call=lambda fn: fn(sc.t, q, v, u, p))
-    else:
+    """The table of force ``f``: the keys of :data:`FORCE_FIELDS`, read back from its attributes."""
+    if f.kind not in FORCE_FIELDS:
         raise ModelError(f"to_toml: {f.label} has no TOML form")
+    out = {"type": f.kind, "name": f.name}
+    for field in FORCE_FIELDS[f.kind]:
+        value = tuple(getattr(f, a) for a in field.arg) if isinstance(field.arg, tuple) else getattr(f, field.key)
+        if field.kind in ("member", "two members"):
+            out[field.key] = [_member_name(m) for m in value] if isinstance(value, tuple) else _member_name(value)
+        elif field.kind == "joint":
+            out[field.key] = value.name
+        elif field.kind == "bool":
+            out[field.key] = bool(value)
+        elif field.kind == "vector":
+            out[field.key] = _plain(value)
+        elif field.kind == "generalized force":
+            out[field.key] = _generalized_force(value, sc, system, f"{f.label}: {field.key}")
+        else:
+            out[field.key] = value_to_toml(value, sc, f"{f.label}: {field.key}")
     return out
+
+
+def _member_name(m) -> str:
+    return "ground" if m.is_ground else m.name
+
+
+def _generalized_force(value, sc, system, what: str):
+    """A GeneralizedForce's value as an expression of t, q, v, inputs and parameters."""
+    from ncgen.model.layout import make_layout
+    nq = make_layout(system.dim, list(system.members.values())).nq
+    q, v = ca.SX.sym("q", nq), ca.SX.sym("v", nq)
+    st = scope(sc.t, {n: s for n, (s, _) in system.parameters.items()}, dict(system.inputs), q=q, v=v)
+    u = ca.vertcat(*system.inputs.values()) if system.inputs else ca.SX(0, 1)
+    p = ca.vertcat(*(s for s, _ in system.parameters.values())) if system.parameters else ca.SX(0, 1)
+    return value_to_toml(value, st, what, call=lambda fn: fn(sc.t, q, v, u, p))
