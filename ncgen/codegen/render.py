@@ -32,15 +32,16 @@ def banner(template: str, output: str) -> str:
 
 
 def shipped_templates_dir() -> Path:
-    """Directory of the shipped ``c`` templates: the installed ``ncgen._templates/c``, or, when
-    ``ncgen`` is imported from a source checkout (``python -c`` run in the repository), the
-    checkout's ``templates/c``."""
-    spec = importlib.util.find_spec("ncgen._templates")
-    if spec is not None and spec.submodule_search_locations:
-        return Path(list(spec.submodule_search_locations)[0]) / "c"
+    """Directory of the shipped ``c`` templates: when ``ncgen`` is imported from a source
+    checkout, the checkout's ``templates/c`` (so that a worktree uses its own templates even
+    if another checkout is installed in editable mode), else the installed
+    ``ncgen._templates/c``."""
     checkout = Path(__file__).resolve().parents[2] / "templates" / "c"
     if checkout.is_dir():
         return checkout
+    spec = importlib.util.find_spec("ncgen._templates")
+    if spec is not None and spec.submodule_search_locations:
+        return Path(list(spec.submodule_search_locations)[0]) / "c"
     raise CodegenError("ncgen's C templates are missing: neither the package ncgen._templates nor "
                        f"{checkout} exists; reinstall ncgen (pip install .)")
 
