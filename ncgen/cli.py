@@ -337,8 +337,12 @@ def _simulate_arguments(p: argparse.ArgumentParser) -> None:
                         "(CasADi's virtual machine) or auto (compiled if a C compiler is found; default)")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    help="replace a parameter's default value (repeatable; a vector as NAME=1,2,3)")
-    p.add_argument("--rtol", type=float, default=1e-8, help="relative tolerance of IDAS (default 1e-8)")
-    p.add_argument("--atol", type=float, default=1e-10, help="absolute tolerance of IDAS (default 1e-10)")
+    p.add_argument("--rtol", type=float, default=None,
+                   help="relative tolerance: IDAS's (default 1e-8); with --method stepper, the stepper "
+                        "chooses its steps to meet it (default: fixed steps of DT, checked)")
+    p.add_argument("--atol", type=float, default=None,
+                   help="absolute tolerance (units of q and v): IDAS's (default 1e-10); the stepper's "
+                        "(default: rtol)")
 
 
 def _check_outputs(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
@@ -367,7 +371,7 @@ def _check_outputs(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
         "ncgen simulate examples/chain.toml --t-end 2 --dt 0.01 -o chain.npz --plot chain.png\n"
         "ncgen simulate examples/heavy_top.toml --t-end 3 -o top.csv --animate top.gif\n"
         "ncgen simulate examples/slider_crank.toml --t-end 1 -o sc.npz --param omega=20 --backend vm\n"
-        "ncgen simulate examples/tensegrity.toml --t-end 2 -o t.npz --method stepper"),
+        "ncgen simulate examples/tensegrity.toml --t-end 2 -o t.npz --method stepper --rtol 1e-6"),
     arguments=_simulate_arguments,
 )
 def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
