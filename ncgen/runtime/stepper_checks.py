@@ -22,6 +22,7 @@ cancel; on chaotic motions the true error can grow beyond it.
 from __future__ import annotations
 
 import math
+import weakref
 
 import casadi as ca
 import numpy as np
@@ -38,10 +39,19 @@ ERROR_FRACTION = 0.02
 NEWTON_LIMIT = 8
 
 
-def is_conservative(model, samples: int = 3, seed: int = 0) -> bool:
+_conservative: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def is_conservative(model) -> bool:
     """True if the model's forces are conservative and its constraints scleronomic:
-    ``Φ_t`` and ``∂V/∂t`` are structurally zero and ``F = −∇V`` at ``samples`` random states
-    with random rates and inputs (so that dampers, drives and input forces all count)."""
+    ``Φ_t`` and ``∂V/∂t`` are structurally zero and ``F = −∇V`` at random states with random
+    rates and inputs (so that dampers, drives and input forces all count).  Kept per model."""
+    if model not in _conservative:
+        _conservative[model] = _is_conservative(model)
+    return _conservative[model]
+
+
+def _is_conservative(model, samples: int = 3, seed: int = 0) -> bool:
     f = model.functions
     t, q, v = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq)
     u, p = ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
