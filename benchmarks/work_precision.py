@@ -15,7 +15,7 @@ benchmarks/common.py unless said otherwise):
 
 Error: the Euclidean distance (m) between the simulated tip and a reference tip from IDAS
 (compiled) at rtol = atol = 1e-12, cross-checked against the error-controlled stepper at
-rtol 1e-10 and MuJoCo RK4 at a tiny step (the differences are printed: they bound the
+rtol 1e-9 and MuJoCo RK4 at a tiny step (the differences are printed: they bound the
 reference's own error and the models' equivalence).
 
 Methods, each at several accuracies:
@@ -171,8 +171,8 @@ def reference_tip(case: Case, config) -> tuple[np.ndarray, dict[str, float]]:
     """The reference tip (IDAS, rtol 1e-12) and its distances to the cross-checks."""
     traj, _ = case.simulate(T_END, OUTPUT_DT, rtol=1e-12, atol=1e-12, backend="compiled", max_steps=10**7)
     ref = ncgen_tip(traj.q[-1])
-    stepper, _ = case.simulate(T_END, OUTPUT_DT, method="stepper", rtol=1e-10)
-    checks = {"ncgen stepper, rtol 1e-10": _err(ncgen_tip(stepper.q[-1]), ref)}
+    stepper, _ = case.simulate(T_END, OUTPUT_DT, method="stepper", rtol=1e-9)
+    checks = {"ncgen stepper, rtol 1e-9": _err(ncgen_tip(stepper.q[-1]), ref)}
     if case.has_mujoco:
         h = config["reference_step"]
         for axial in (AXIAL_INERTIA, 1e-4):

@@ -44,6 +44,9 @@ from ncgen.runtime.trajectory import NAME_KEYS, Trajectory
 #: Default: one step-doubling error estimate per this many fixed steps (an extra step of 2h
 #: each time, so about 1/10 more work).
 ESTIMATE_EVERY = 10
+#: With error control, the Newton tolerance is at most this fraction of min(rtol, atol)
+#: (floored at 1e-14), so that Newton's residual stays below the error estimates.
+NEWTON_FRACTION = 1e-3
 #: Default step attempts allowed per output interval with error control.
 MAX_STEPS = 100_000
 
@@ -133,6 +136,7 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, hold, tol, max_iter, rtol, 
               conservative) -> Trajectory:
     n_out = len(t) - 1
     dt = float(t[1] - t[0])
+    tol = min(tol, max(NEWTON_FRACTION * min(rtol, atol), 1e-14))
     start = time.perf_counter()
     Q, V, LAM, S, status, rows, h_next = stepper.simulate_adaptive(
         q0, v0, lam0, float(t[0]), dt, n_out, U if model.nu else None, hold == "linear", p, rtol, atol, 0.0,

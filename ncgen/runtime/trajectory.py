@@ -130,13 +130,21 @@ class Trajectory:
         elif len(self):
             scale = self.energy_scale
             rel = f" ({self.energy_drift / scale:.2g} relative)" if scale > 0 else ""
-            lines.append(f"  energy: E(t0) = {self.energy[0]:.6g} J, max |E - E(t0)| = "
+            what = "energy" if energy.get("conservative", self._conservative()) else \
+                "energy (not conserved: non-conservative forces or drives)"
+            lines.append(f"  {what}: E(t0) = {self.energy[0]:.6g} J, max |E - E(t0)| = "
                          f"{self.energy_drift:.3g} J{rel}")
             lines.append(f"  constraint drift: max |phi| = {np.max(self.constraint_residual):.3g}, "
                          f"max |A v + phi_t| = {np.max(self.velocity_residual):.3g}")
         if not self.complete:
             lines.append(f"  INCOMPLETE: {info.get('message', 'the integration stopped early')}")
         return "\n".join(lines)
+
+    def _conservative(self) -> bool:
+        """Whether the model conserves energy (True if unknown: loaded without the model)."""
+        from ncgen.runtime.stepper_checks import is_conservative
+
+        return True if self.model is None else is_conservative(self.model)
 
     def __repr__(self) -> str:
         span = f"t = {self.t[0]:g} ... {self.t[-1]:g} s" if len(self) else "empty"
