@@ -185,3 +185,26 @@ def test_outputs_from_c_match_the_model_functions():
     np.testing.assert_allclose(traj.velocity_residual, rd, atol=1e-16)
     np.testing.assert_allclose(traj.markers, outputs.markers(model, traj.q, traj.v), rtol=1e-14, atol=1e-15)
     assert traj.info["wall_time"] >= traj.info["stepping_time"]
+
+
+@pytest.mark.parametrize("hold", ["zoh", "linear"])
+def test_rtol_with_inputs_parameters_and_dampers(hold):
+    """Error control with an input force (held as IDAS holds it), a parameter and dampers."""
+    import casadi as ca
+
+    s = nc.System("acc_driven", gravity=(0.0, 0.0, -9.81))
+    bar = s.add_bar("bar", "rr", mass=1.0, ends=[s.ground.point((0.0, 0.0, 0.0)), (1.0, 0.0, 0.0)])
+    mass = s.add_point("mass", mass=0.5, position=(1.0, 0.3, -0.5), velocity=(0.0, 0.5, 0.0))
+    k = s.add_parameter("k", 40.0)
+    push = s.add_input("push")
+    s.add_force(nc.Spring(bar, (0.5, 0.0, 0.0), mass, (0.0, 0.0, 0.0), k=80.0, rest_length=0.4, damping=2.0))
+    s.add_force(nc.Spring(s.ground, (1.0, 0.0, 0.5), mass, (0.0, 0.0, 0.0), k=k, rest_length=0.8, damping=1.5))
+    s.add_force(nc.PointForce(mass, (0.0, 0.0, 0.0), force=ca.vertcat(0, push, 0)))
+    model = s.build()
+    kw = {"u": lambda t: [2.0 * np.sin(5 * t)], "p": {"k": 55.0}, "hold": hold}
+    ref = reference(model, 1.0, 0.05, **kw)
+    traj = nc.simulate(model, 1.0, 0.05, method="stepper", rtol=1e-7, **kw)
+    assert np.max(np.abs(traj.q - ref.q)) <= 1e-5 * size(ref.q)
+    assert np.max(np.abs(traj.v - ref.v)) <= 1e-5 * size(ref.v)
+    energy = traj.info["energy"]
+    assert energy["conservative"] is False and energy["relative"] < 1e-4     # work: trapezoidal, O(h²)
