@@ -129,7 +129,7 @@ def test_past_the_stability_limit_raises():
 def test_tensegrity_at_its_default_step_fails_loudly_and_the_suggested_step_is_accurate(tmp_path):
     """``ncgen simulate examples/tensegrity.toml --method stepper`` at the default dt: exit
     status 1 and a message naming the step to use; at that step the run passes its checks
-    and is within the stated accuracy (2 % of the size) of IDAS."""
+    and is within the stated accuracy (10 % of the size, an upper estimate) of IDAS."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         model = nc.System.from_toml(ROOT / "examples" / "tensegrity.toml").build()
@@ -142,7 +142,7 @@ def test_tensegrity_at_its_default_step_fails_loudly_and_the_suggested_step_is_a
     substeps = int(out.stderr.split("substeps=")[1].split(" ")[0])
     traj = nc.simulate(model, 0.5, 0.01, method="stepper", substeps=substeps)
     ref = reference(model, 0.5, 0.01)
-    assert np.max(np.abs(traj.q - ref.q)) <= ERROR_FRACTION * np.max(np.abs(model.q0))
+    assert np.max(np.abs(traj.q - ref.q)) <= 0.1 * ERROR_FRACTION * np.max(np.abs(model.q0))   # it aims at 1 %
     assert traj.info["energy"]["conservative"] is False
 
 
