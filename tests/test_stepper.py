@@ -137,7 +137,7 @@ def test_pendulum_matches_idas_and_its_multipliers():
 def test_energy_of_a_conservative_system_stays_bounded():
     """A spherical pendulum swinging and turning for 200 s (20 000 steps): the energy error
     oscillates (RATTLE is symplectic) instead of drifting.  (The phase error grows, so the
-    run is unchecked: checked, it stops where the estimated error passes 10 % of the size.)"""
+    run is unchecked: checked, it stops where the estimated error passes 1 % of the size.)"""
     s = nc.System("spherical_pendulum", gravity=(0.0, 0.0, -9.81))
     s.add_bar("bar", "rr", mass=1.0, ends=[s.ground.point((0.0, 0.0, 0.0)), (1.0, 0.0, 0.0)],
               velocity=(0.0, 1.0, 0.0), angular_velocity=(0.0, 0.0, 2.0))

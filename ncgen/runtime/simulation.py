@@ -67,9 +67,9 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
       output interval, Newton tolerance ``newton_tol`` (both constraint levels hold to it at
       every step) and at most ``max_newton`` iterations per step; a step whose Newton fails is
       split in halves, at most ``max_halvings`` times (counted in ``info["stats"]``).  The run
-      estimates its error (step doubling, ``info["error_estimate"]``) and is checked: split
+      estimates its error (a shadow run with steps of 2h, ``info["error_estimate"]``) and is checked: split
       steps, exploding Newton iterations, an energy change (conservative models) or energy
-      balance error (others) above 1 % or an estimated error above 10 % of the model's size raise
+      balance error (others) above 1 % or an estimated error above 1 % of the model's size raise
       :class:`~ncgen.errors.SimulationError` naming the step to use (``check=False``: no
       checks; see :mod:`ncgen.runtime.stepper_checks`).  With ``rtol`` (``atol`` default
       ``rtol``) the stepper chooses its steps instead (Richardson error estimate; ``order=4``:

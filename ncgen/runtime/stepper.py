@@ -11,11 +11,11 @@ Two modes:
 
 * **Fixed steps** (``rtol=None``): ``substeps`` steps of ``h = dt / substeps`` per output
   interval; a step whose Newton iteration fails is split into halves (at most
-  ``max_halvings`` times, recursively), so the output grid stays fixed.  Every
-  ``estimate_every``-th pair of steps is compared with one step of ``2h`` (step doubling) to
-  estimate the local error per step; the global error estimate sums these over the steps
-  (``info["error_estimate"]``).  The run is checked (see :mod:`ncgen.runtime.stepper_checks`)
-  and an untrustworthy one raises :class:`~ncgen.errors.SimulationError`.
+  ``max_halvings`` times, recursively), so the output grid stays fixed.  A shadow run with
+  steps of ``2h`` from the same start gives the global error estimate ``|y_h − y_2h| / 3``
+  (Richardson; ``info["error_estimate"]``, about half the work again; ``estimate=False``
+  skips it).  The run is checked (see :mod:`ncgen.runtime.stepper_checks`) and an
+  untrustworthy one raises :class:`~ncgen.errors.SimulationError`.
 * **Error control** (``rtol`` given): each step is taken whole and as two halves, the
   difference estimates the local error (Richardson), the step is accepted when every
   component of q and v is within ``atol + rtol |y|`` and continues from the Richardson
@@ -41,9 +41,6 @@ from ncgen.runtime.stepper_checks import energy_report, error_estimate, is_conse
 from ncgen.runtime.stepper_package import HALVINGS_LIMIT, MAX_HALVINGS, MAX_ITER, STATS, STATUS, TOL, load_stepper
 from ncgen.runtime.trajectory import NAME_KEYS, Trajectory
 
-#: Default: one step-doubling error estimate per this many fixed steps (an extra step of 2h
-#: each time, so about 1/10 more work).
-ESTIMATE_EVERY = 10
 #: With error control, the Newton tolerance is at most this fraction of min(rtol, atol)
 #: (floored at 1e-14), so that Newton's residual stays below the error estimates.
 NEWTON_FRACTION = 1e-3
@@ -55,25 +52,25 @@ def simulate_stepper(model, t: np.ndarray, U: np.ndarray, p: np.ndarray, q0: np.
                      lam0: np.ndarray, *, hold: str = "zoh", substeps: int = 1, tol: float = TOL,
                      max_iter: int = MAX_ITER, max_halvings: int = MAX_HALVINGS, rtol: float | None = None,
                      atol: float | None = None, order: int = 4, max_steps: int = MAX_STEPS,
-                     check: bool = True, estimate_every: int = ESTIMATE_EVERY, cflags=None) -> Trajectory:
+                     check: bool = True, estimate: bool = True, cflags=None) -> Trajectory:
     """Integrate ``model`` over the uniform grid ``t`` (s) from the consistent state
     ``(q0, v0)`` with multipliers ``lam0`` at ``t[0]``; ``U`` holds the input samples on the
     grid, shape ``(len(t), nu)``, ``p`` the parameter values.  ``rtol`` (and ``atol``, default
     ``rtol``, units of q and v) switch to error control (module docstring); ``check=False``
-    turns off the checks of a fixed-step run.  Raises :class:`~ncgen.errors.SimulationError`
+    turns off the checks of a fixed-step run, ``estimate=False`` its error estimate.  Raises :class:`~ncgen.errors.SimulationError`
     naming the time and the cause, with the trajectory up to the last output time before it."""
     substeps, max_iter, max_halvings = int(substeps), int(max_iter), int(max_halvings)
-    _check_options(substeps, tol, max_iter, max_halvings, hold, rtol, atol, order, max_steps, estimate_every)
+    _check_options(substeps, tol, max_iter, max_halvings, hold, rtol, atol, order, max_steps)
     stepper = load_stepper(model, cflags)
     conservative = is_conservative(model)
     if rtol is None:
         return _fixed(model, stepper, t, U, p, q0, v0, lam0, hold, substeps, tol, max_iter, max_halvings,
-                      check, int(estimate_every), conservative)
+                      check, bool(estimate), conservative)
     return _adaptive(model, stepper, t, U, p, q0, v0, lam0, hold, tol, max_iter, float(rtol),
                      float(rtol if atol is None else atol), order, int(max_steps), conservative)
 
 
-def _check_options(substeps, tol, max_iter, max_halvings, hold, rtol, atol, order, max_steps, estimate_every):
+def _check_options(substeps, tol, max_iter, max_halvings, hold, rtol, atol, order, max_steps):
     if substeps < 1:
         raise NcgenError(f"substeps: expected a positive number of steps per output interval, got {substeps}")
     if not (math.isfinite(tol) and tol > 0):
@@ -91,23 +88,21 @@ def _check_options(substeps, tol, max_iter, max_halvings, hold, rtol, atol, orde
         raise NcgenError(f"order: expected 2 (RATTLE) or 4 (Richardson-extrapolated RATTLE), got {order!r}")
     if int(max_steps) < 1:
         raise NcgenError(f"max_steps: expected a positive number of steps, got {max_steps!r}")
-    if int(estimate_every) < 0 or int(estimate_every) == 1:
-        raise NcgenError(f"estimate_every: expected 0 (no error estimate) or at least 2, got {estimate_every!r}")
 
 
 def _fixed(model, stepper, t, U, p, q0, v0, lam0, hold, substeps, tol, max_iter, max_halvings, check,
-           estimate_every, conservative) -> Trajectory:
+           estimate, conservative) -> Trajectory:
     n_out = len(t) - 1
     h = float(t[1] - t[0]) / substeps
     start = time.perf_counter()
     Q, V, LAM, S, status, done, splits = stepper.simulate_stats(
         q0, v0, lam0, float(t[0]), h, n_out * substeps, substeps, step_inputs(U, t, hold, substeps), p, tol,
-        max_iter, max_halvings, estimate_every, not conservative)
+        max_iter, max_halvings, estimate, not conservative)
     stepping = time.perf_counter() - start
     rows = done // substeps
     info = {"method": "stepper", "backend": "compiled", "scheme": "RATTLE", "h": h, "substeps": substeps,
             "hold": hold, "tol": tol, "max_iter": max_iter, "max_halvings": max_halvings,
-            "estimate_every": estimate_every, "stepping_time": stepping, "complete": status == 0,
+            "estimate": estimate, "stepping_time": stepping, "complete": status == 0,
             "stats": _stats(S[:rows], splits)}
     traj = _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info, conservative, start)
     if status != 0:

@@ -111,7 +111,7 @@ class CompiledStepper:
         f = getattr(self._lib, f"{name}_simulate_stats")
         f.restype = c_int
         f.argtypes = [dp, dp, dp, c_double, c_double, c_long, c_long, dp, c_long, dp, dp, dp, dp, dp,
-                      ctypes.POINTER(_Options), c_long, c_int, lp, lp]
+                      ctypes.POINTER(_Options), c_int, c_int, lp, lp]
         self._simulate_stats = f
         f = getattr(self._lib, f"{name}_simulate_adaptive")
         f.restype = c_int
@@ -148,7 +148,7 @@ class CompiledStepper:
                 np.zeros((rows, len(STATS))))
 
     def simulate_stats(self, q0, v0, lam0, t0: float, h: float, n_steps: int, every: int, U: np.ndarray | None,
-                       p: np.ndarray, tol: float, max_iter: int, max_halvings: int, estimate_every: int,
+                       p: np.ndarray, tol: float, max_iter: int, max_halvings: int, estimate: bool,
                        track_work: bool):
         """``(Q, V, LAM, STATS, status, steps_done, splits)``: fixed steps with per-row
         statistics (columns :data:`STATS`; see ``<model>_simulate_stats``).  ``U``: inputs
@@ -160,7 +160,7 @@ class CompiledStepper:
                                       int(n_steps), int(every), _ptr(U), self.nu if U is not None else 0,
                                       _ptr(_vec(p)), _ptr(Q), _ptr(V), _ptr(LAM), _ptr(S),
                                       ctypes.byref(_Options(float(tol), int(max_iter), int(max_halvings))),
-                                      int(estimate_every), int(bool(track_work)), ctypes.byref(done),
+                                      int(bool(estimate)), int(bool(track_work)), ctypes.byref(done),
                                       ctypes.byref(splits))
         return Q, V, LAM, S, int(status), int(done.value), int(splits.value)
 
