@@ -1,7 +1,8 @@
 """Shared pieces of the benchmarks: the machine, timing, the chain in ncgen and in MuJoCo.
 
 The chain (examples/chain.toml generalised to N bars): N uniform 'rr' bars of length
-L = 0.3 m and mass m = 0.2 kg, released from rest as a horizontal staircase in the x-y plane
+L = 0.3 m and mass m = 0.2 kg (other lengths and masses by argument; work_precision.py
+uses 1 m and 1 kg, and also writes the chain with explicit ``nc.Spherical`` joints), released from rest as a horizontal staircase in the x-y plane
 (bar k along +x for odd k, +y for even k), consecutive bars sharing an end (a spherical
 joint), the first end fixed at the origin, gravity (0, 0, −9.81) m/s².  The tip is the free
 end of the last bar.
