@@ -222,3 +222,12 @@ def test_rtol_with_inputs_parameters_and_dampers(hold):
     assert np.max(np.abs(traj.v - ref.v)) <= 1e-5 * size(ref.v)
     energy = traj.info["energy"]
     assert energy["conservative"] is False and energy["relative"] < 1e-4     # work: trapezoidal, O(h²)
+
+
+def test_without_the_estimate_the_same_steps_and_no_error_figure():
+    model = chain(2)
+    with_estimate = nc.simulate(model, 0.5, 0.1, method="stepper", substeps=50)
+    without = nc.simulate(model, 0.5, 0.1, method="stepper", substeps=50, estimate=False)
+    np.testing.assert_array_equal(with_estimate.q, without.q)
+    assert np.isfinite(with_estimate.info["error_estimate"]["q"])
+    assert np.isnan(without.info["error_estimate"]["q"])

@@ -30,7 +30,7 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
              max_steps: int = 50_000, linear_solver: str = "csparse",
              ic_tolerance: float | None = 1e-6, substeps: int = 1, newton_tol: float = TOL,
              max_newton: int = MAX_ITER, max_halvings: int = MAX_HALVINGS, order: int = 4,
-             check: bool = True) -> Trajectory:
+             check: bool = True, estimate: bool = True) -> Trajectory:
     """Integrate ``model`` from ``t0`` (default ``model.t0``) to ``t_end`` and return the
     :class:`~ncgen.runtime.trajectory.Trajectory` on the grid ``t0, t0 + dt, ..., t_end``
     (``dt`` shortened if needed so that ``t_end`` is on the grid).  Times in s.
@@ -66,15 +66,16 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
       included; :mod:`ncgen.runtime.stepper`), ``substeps`` steps of ``dt / substeps`` per
       output interval, Newton tolerance ``newton_tol`` (both constraint levels hold to it at
       every step) and at most ``max_newton`` iterations per step; a step whose Newton fails is
-      split in halves, at most ``max_halvings`` times (counted in ``info["stats"]``).  The run
-      estimates its error (a shadow run with steps of 2h, ``info["error_estimate"]``) and is checked: split
-      steps, exploding Newton iterations, an energy change (conservative models) or energy
-      balance error (others) above 1 % or an estimated error above 1 % of the model's size raise
-      :class:`~ncgen.errors.SimulationError` naming the step to use (``check=False``: no
-      checks; see :mod:`ncgen.runtime.stepper_checks`).  With ``rtol`` (``atol`` default
-      ``rtol``) the stepper chooses its steps instead (Richardson error estimate; ``order=4``:
-      extrapolated and projected, ``order=2``: plain RATTLE steps), at most ``max_steps``
-      step attempts per output interval.  ``backend``, ``linear_solver`` and ``progress`` are
+      split in halves, at most ``max_halvings`` times (counted in ``info["stats"]``).  The
+      run estimates its error (a shadow run with steps of 2h, ``info["error_estimate"]``)
+      and is checked: split steps, exploding Newton iterations, an energy change
+      (conservative models) or energy balance error (others) above 1 % or an estimated error
+      above 1 % of the model's size raise :class:`~ncgen.errors.SimulationError` naming the
+      step to use (``check=False``: no checks; ``estimate=False``: no shadow run, a third
+      less work, no error check; see :mod:`ncgen.runtime.stepper_checks`).  With ``rtol``
+      (``atol`` default ``rtol``) the stepper chooses its steps instead (Richardson error
+      estimate; ``order=4``: extrapolated and projected, ``order=2``: plain RATTLE steps),
+      at most ``max_steps`` step attempts per output interval.  ``backend``, ``linear_solver`` and ``progress`` are
       IDAS's only.
 
     Raises :class:`~ncgen.errors.SimulationError` if IDAS fails; it names the time reached
@@ -97,7 +98,7 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
         lam = initial_multipliers(model, t0, q, v, U[0], pv, load_dae(model, "vm")[0])
         return simulate_stepper(model, t, U, pv, q, v, lam, hold=hold, substeps=substeps, tol=newton_tol,
                                 max_iter=max_newton, max_halvings=max_halvings, rtol=rtol, atol=atol,
-                                order=order, max_steps=max_steps, check=check)
+                                order=order, max_steps=max_steps, check=check, estimate=estimate)
     rtol, atol = 1e-8 if rtol is None else rtol, 1e-10 if atol is None else atol
     dae, used = load_dae(model, backend)
     lam = initial_multipliers(model, t0, q, v, U[0], pv, dae)

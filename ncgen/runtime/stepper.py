@@ -57,8 +57,9 @@ def simulate_stepper(model, t: np.ndarray, U: np.ndarray, p: np.ndarray, q0: np.
     ``(q0, v0)`` with multipliers ``lam0`` at ``t[0]``; ``U`` holds the input samples on the
     grid, shape ``(len(t), nu)``, ``p`` the parameter values.  ``rtol`` (and ``atol``, default
     ``rtol``, units of q and v) switch to error control (module docstring); ``check=False``
-    turns off the checks of a fixed-step run, ``estimate=False`` its error estimate.  Raises :class:`~ncgen.errors.SimulationError`
-    naming the time and the cause, with the trajectory up to the last output time before it."""
+    turns off the checks of a fixed-step run, ``estimate=False`` its error estimate (and so
+    the error check).  Raises :class:`~ncgen.errors.SimulationError` naming the time and the
+    cause, with the trajectory up to the last output time before it."""
     substeps, max_iter, max_halvings = int(substeps), int(max_iter), int(max_halvings)
     _check_options(substeps, tol, max_iter, max_halvings, hold, rtol, atol, order, max_steps)
     stepper = load_stepper(model, cflags)
