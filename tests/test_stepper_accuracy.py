@@ -119,6 +119,9 @@ def test_a_chaotic_run_with_a_large_error_fails_loudly():
     v0 = spinning_state(model)
     with pytest.raises(SimulationError, match="estimated error in q") as failure:
         nc.simulate(model, 1.0, 0.1, method="stepper", substeps=50, v0=v0)
+    kept = failure.value.trajectory
+    assert not kept.complete and 0 < kept.t[-1] < 1.0
+    assert kept.info["error_estimate"]["q"] <= ERROR_FRACTION * np.max(np.abs(model.q0))   # the part kept
     substeps = int(str(failure.value).split("substeps=")[1].split(" ")[0])
     traj = nc.simulate(model, 1.0, 0.1, method="stepper", substeps=substeps, v0=v0)
     ref = reference(model, 1.0, 0.1, v0=v0)

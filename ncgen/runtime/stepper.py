@@ -123,7 +123,9 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, hold, substeps, tol, max_iter,
                        f"trustworthy: {reason}. The trajectory up to t = {kept.t[-1]:.6g} s, before the "
                        f"problem showed, is attached to this error as .trajectory "
                        f"(check=False returns the whole run unchecked).")
-            kept.info.update(complete=False, message=message)
+            work = np.concatenate([[0.0], S[:row, STATS.index("work")]])
+            kept.info.update(complete=False, message=message, error_estimate=error_estimate(S[:row], substeps),
+                             energy=energy_report(kept, work, conservative))
             raise SimulationError(message, time=float(kept.t[-1]), trajectory=kept)
     return traj
 
@@ -181,12 +183,12 @@ def _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info,
 
 
 def _truncate(traj: Trajectory, row: int) -> Trajectory:
-    """The trajectory up to sample ``row`` (the state before C row ``row``)."""
+    """The trajectory up to sample ``row`` (the state before C row ``row``), ``info`` copied."""
     keep = row + 1
     names = {key: getattr(traj, key) for key in NAME_KEYS}
     arrays = {key: getattr(traj, key)[:keep] for key in ("t", "q", "v", "lam", "u", "kinetic", "potential",
                                                          "constraint_residual", "velocity_residual", "markers")}
-    return Trajectory(model_name=traj.model_name, names=names, info=traj.info, model=traj.model, p=traj.p,
+    return Trajectory(model_name=traj.model_name, names=names, info=dict(traj.info), model=traj.model, p=traj.p,
                       **arrays)
 
 
