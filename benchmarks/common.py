@@ -1,7 +1,8 @@
 """Shared pieces of the benchmarks: the machine, timing, the chain in ncgen and in MuJoCo.
 
 The chain (examples/chain.toml generalised to N bars): N uniform 'rr' bars of length
-L = 0.3 m and mass m = 0.2 kg, released from rest as a horizontal staircase in the x-y plane
+L = 0.3 m and mass m = 0.2 kg (other lengths and masses by argument; work_precision.py
+uses 1 m and 1 kg, and also writes the chain with explicit ``nc.Spherical`` joints), released from rest as a horizontal staircase in the x-y plane
 (bar k along +x for odd k, +y for even k), consecutive bars sharing an end (a spherical
 joint), the first end fixed at the origin, gravity (0, 0, −9.81) m/s².  The tip is the free
 end of the last bar.
@@ -85,23 +86,35 @@ def best_time(fn: Callable[[], object], repeat: int) -> tuple[float, object]:
 
 
 # ---------------------------------------------------------------- chain
-def ends(n: int) -> list[np.ndarray]:
+def ends(n: int, length: float = L) -> list[np.ndarray]:
     """The n + 1 joint positions of the staircase at rest (first one the fixed origin)."""
     pts = [np.zeros(3)]
     for k in range(1, n + 1):
-        step = np.array([L, 0.0, 0.0]) if k % 2 else np.array([0.0, L, 0.0])
+        step = np.array([length, 0.0, 0.0]) if k % 2 else np.array([0.0, length, 0.0])
         pts.append(np.round(pts[-1] + step, 12))
     return pts
 
 
-def chain_system(n: int):
-    """The chain as an ncgen System (model name ``chain<n>``)."""
+def chain_system(n: int, length: float = L, mass: float = MASS, joints: str = "shared"):
+    """The chain as an ncgen System.  ``joints="shared"`` (model ``chain<n>``): consecutive
+    bars share their common end, the first end is a ground point; ``"explicit"`` (model
+    ``chain<n>_joints``): every bar has its own two ends, held by ``nc.Spherical`` joints to
+    the ground and to the bar before it, as a user coming from MuJoCo writes it."""
     import ncgen as nc
 
-    s = nc.System(f"chain{n}", gravity=GRAVITY)
-    start = s.ground.point((0.0, 0.0, 0.0))
-    for k, end in enumerate(ends(n)[1:], start=1):
-        start = s.add_bar(f"bar{k}", coords="rr", mass=MASS, ends=[start, tuple(end)]).end(1)
+    pts = ends(n, length)
+    if joints == "shared":
+        s = nc.System(f"chain{n}", gravity=GRAVITY)
+        start = s.ground.point((0.0, 0.0, 0.0))
+        for k, end in enumerate(pts[1:], start=1):
+            start = s.add_bar(f"bar{k}", coords="rr", mass=mass, ends=[start, tuple(end)]).end(1)
+        return s
+    s = nc.System(f"chain{n}_joints", gravity=GRAVITY)
+    previous = s.ground
+    for k in range(1, n + 1):
+        bar = s.add_bar(f"bar{k}", coords="rr", mass=mass, ends=[tuple(pts[k - 1]), tuple(pts[k])])
+        s.add_joint(nc.Spherical(previous, bar, at=tuple(pts[k - 1])))
+        previous = bar
     return s
 
 
@@ -111,8 +124,9 @@ def ncgen_tip(q: np.ndarray) -> np.ndarray:
 
 
 def chain_mjcf(n: int, *, integrator: str = "RK4", timestep: float = 1e-3, axial: float = AXIAL_INERTIA,
-               energy: bool = False) -> str:
+               energy: bool = False, length: float = L, mass: float = MASS) -> str:
     """MJCF of the chain's MuJoCo twin (see the module docstring)."""
+    L, MASS = length, mass
     transverse = MASS * L**2 / 12
     body, close = "", ""
     for k in range(1, n + 1):
@@ -132,25 +146,30 @@ def chain_mjcf(n: int, *, integrator: str = "RK4", timestep: float = 1e-3, axial
             f'{GRAVITY[2]}">{flags}</option><worldbody>{body}{close}</worldbody></mujoco>')
 
 
-def mujoco_tip(n: int, data) -> np.ndarray:
+def mujoco_tip(n: int, data, length: float = L) -> np.ndarray:
     """World position of the tip in MuJoCo (last body's frame origin + its bar vector)."""
-    d = np.array([L, 0.0, 0.0]) if n % 2 else np.array([0.0, L, 0.0])
+    d = np.array([length, 0.0, 0.0]) if n % 2 else np.array([0.0, length, 0.0])
     return data.xpos[n] + data.xmat[n].reshape(3, 3) @ d
 
 
-def mujoco_run(n: int, integrator: str, timestep: float, t_end: float, axial: float = AXIAL_INERTIA):
+def mujoco_run(n: int, integrator: str, timestep: float, t_end: float, axial: float = AXIAL_INERTIA,
+               length: float = L, mass: float = MASS, spin: float = 0.0):
     """``(seconds, tip)``: a fresh MuJoCo chain stepped to ``t_end`` by ``mj_step`` in one
-    call (``nstep``, no Python in the loop); the model is compiled outside the timing."""
+    call (``nstep``, no Python in the loop); the model is compiled outside the timing.
+    ``spin``: initial rigid rotation about the vertical (rad/s; the first ball joint's
+    rate, body frames being parallel to the world at rest)."""
     import mujoco
 
     mujoco.set_mju_user_warning(_diverged)
-    model = mujoco.MjModel.from_xml_string(chain_mjcf(n, integrator=integrator, timestep=timestep, axial=axial))
+    model = mujoco.MjModel.from_xml_string(chain_mjcf(n, integrator=integrator, timestep=timestep, axial=axial,
+                                                      length=length, mass=mass))
     data = mujoco.MjData(model)
+    data.qvel[2] = spin
     steps = int(round(t_end / timestep))
     start = time.perf_counter()
     mujoco.mj_step(model, data, nstep=steps)
     elapsed = time.perf_counter() - start
-    return elapsed, mujoco_tip(n, data)
+    return elapsed, mujoco_tip(n, data, length)
 
 
 def _diverged(message: str) -> None:

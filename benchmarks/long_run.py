@@ -105,7 +105,9 @@ def run_case(name, model, xml_of, qvel, t_end, h) -> None:
     import ncgen as nc
 
     print(f"\n=== {name}: {t_end:g} s, step {h:g} s ===")
-    traj = nc.simulate(model, t_end, SAMPLE, method="stepper", substeps=int(round(SAMPLE / h)))
+    # unchecked: over 100 s the phase error of any fixed step passes the checks' 1 % of the size;
+    # energy and constraint drift are what this benchmark measures
+    traj = nc.simulate(model, t_end, SAMPLE, method="stepper", substeps=int(round(SAMPLE / h)), check=False)
     scale = traj.energy_scale
     mx, first, last = drift(traj.energy, scale)
     print(f"  {'method':<22} {'max rel. energy error':>22} {'mean, first 10%':>16} {'mean, last 10%':>15} "

@@ -1,32 +1,49 @@
-"""Work–precision: tip error after 2 s versus wall time, ncgen against MuJoCo.
+"""Work–precision: tip error after 2 s versus wall time, ncgen against MuJoCo, on models as
+users write them.
 
-Model: the chain of N bars (benchmarks/common.py), released from rest, 2 s.  Error: the
-Euclidean distance (m) between the simulated tip and a reference tip from IDAS (compiled) at
-rtol = atol = 1e-12, cross-checked against the stepper at a tiny step and MuJoCo RK4 at a
-tiny step (the differences are printed: they bound the reference's own error and the
-models' equivalence).
+Cases (bars of 1 m and 1 kg, released from rest as the horizontal staircase of
+benchmarks/common.py unless said otherwise):
+
+* ``shared``: the chain of N = 20 bars written with shared points (``ends=[prev.end(1), ...]``);
+* ``joints``: the same chain written with explicit ``nc.Spherical`` joints (each bar its own
+  two ends: twice the coordinates, four times the constraints; this branch has no
+  coordinate-sharing pass, so it is integrated as written);
+* ``spinning``: the shared-point chain of 5 bars spinning about the vertical at 10 rad/s;
+* ``stiff``: a bar pendulum (1 m, 1 kg) with a 0.5 kg point mass on a spring of 1e4 N/m at its
+  tip (140 rad/s against 5 rad/s), ncgen only (no MuJoCo twin); the error is that of the
+  point mass.
+
+Error: the Euclidean distance (m) between the simulated tip and a reference tip from IDAS
+(compiled) at rtol = atol = 1e-12, cross-checked against the error-controlled stepper at
+rtol 1e-9 and MuJoCo RK4 at a tiny step (the differences are printed: they bound the
+reference's own error and the models' equivalence).
 
 Methods, each at several accuracies:
 
-* ncgen IDAS, compiled DAE and Jacobian: rtol = atol = 1e-4 ... 1e-11;
-* ncgen stepper (compiled RATTLE): fixed steps h;
+* ncgen IDAS, compiled DAE and Jacobian: rtol = atol = 1e-4 ... 1e-10;
+* ncgen stepper, fixed steps h (``substeps``; unchecked, ``check=False``, so that runs too
+  coarse to pass the stepper's own checks still give a point of the curve; the ones the
+  checks reject are marked);
+* ncgen stepper with error control (``rtol``: Richardson-extrapolated RATTLE, order 4);
 * MuJoCo ``mj_step`` with RK4, and with its default integrator (Euler: semi-implicit), at
   fixed steps (``nstep`` steps in one call).
 
-Times: integration only (compilation and model loading excluded), best of ``--repeat``
-runs.  ncgen times are ``traj.info["wall_time"]`` (the C stepper called once for all steps;
-IDAS through CasADi, chunked over a 0.1 s output grid).  Ratios: ncgen time / MuJoCo RK4
-time at equal tip error, interpolated log-log on each curve (targets: 1e-3 for the
-stepper, 1e-6 for IDAS).
+Times: best of ``--repeat`` runs, compilation and model loading excluded.  ncgen times are
+**end to end**: the whole ``nc.simulate`` call (consistent start, stepping, derived
+quantities, ``Trajectory``), measured around the call; for the stepper the stepping alone
+(``info["stepping_time"]``, the C loop) is printed beside it with their ratio.  Ratios:
+ncgen end-to-end time / MuJoCo RK4 time at equal tip error, interpolated log-log on each
+curve (targets: 1e-3 for the stepper, 1e-6 for IDAS), and the joints/shared ratio.
 
-    python benchmarks/work_precision.py            N = 1, 5, 20, 50 (several minutes)
-    python benchmarks/work_precision.py --smoke    N = 2, coarse (seconds; CI)
-    python benchmarks/work_precision.py --sizes 20 --repeat 5
+    python benchmarks/work_precision.py                     all cases (several minutes)
+    python benchmarks/work_precision.py --smoke             N = 2, coarse (seconds; CI)
+    python benchmarks/work_precision.py --cases shared joints --repeat 5
 """
 from __future__ import annotations
 
 import argparse
 import sys
+import time
 import warnings
 
 import numpy as np
@@ -35,56 +52,114 @@ from common import AXIAL_INERTIA, chain_system, machine, mujoco_run, ncgen_tip, 
 
 T_END = 2.0
 OUTPUT_DT = 0.1
-TARGETS = {"stepper": 1e-3, "idas": 1e-6}
+TARGETS = {"stepper": 1e-3, "stepper rtol": 1e-3, "idas": 1e-6}
+LENGTH, MASS = 1.0, 1.0
+SPIN = 10.0
 
 FULL = {
-    "sizes": [1, 5, 20, 50],
-    "rtols": [1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11],
-    "steps": [1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4],
-    "mujoco_steps": [1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4, 5e-5],
+    "cases": ["shared", "joints", "spinning", "stiff"],
+    "n": {"shared": 20, "joints": 20, "spinning": 5, "stiff": 1},
+    "rtols": [1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10],
+    "steps": [1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4],
+    "stepper_rtols": [1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8],
+    "mujoco_steps": [1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4],
     "reference_step": 2e-5,
 }
 SMOKE = {
-    "sizes": [2],
+    "cases": ["shared", "joints"],
+    "n": {"shared": 2, "joints": 2, "spinning": 2, "stiff": 1},
     "rtols": [1e-5, 1e-7],
     "steps": [1e-2, 5e-3],
+    "stepper_rtols": [1e-4, 1e-6],
     "mujoco_steps": [1e-2, 5e-3],
     "reference_step": 1e-3,
 }
 
 
-def ncgen_runs(model, reference, config, repeat):
-    """Curves ``{method: [(label, error, seconds)]}`` of the ncgen integrators."""
-    import ncgen as nc
+class Case:
+    """A benchmark model: its ncgen form, initial rates, tip and MuJoCo twin (or None)."""
+
+    def __init__(self, kind: str, n: int):
+        import ncgen as nc
+
+        self.kind, self.n = kind, n
+        if kind == "stiff":
+            s = nc.System("stiff_pendulum", gravity=(0.0, 0.0, -9.81))
+            bar = s.add_bar("bar", "rr", mass=1.0, ends=[s.ground.point((0.0, 0.0, 0.0)), (1.0, 0.0, 0.0)])
+            mass = s.add_point("mass", mass=0.5, position=(1.25, 0.0, 0.0), velocity=(0.0, 0.0, 0.3))
+            s.add_force(nc.Spring(bar, (0.5, 0.0, 0.0), mass, (0.0, 0.0, 0.0), k=1e4, rest_length=0.25))
+            self.title = "stiff-spring pendulum (1e4 N/m point mass at the tip of a 1 m bar)"
+        else:
+            s = chain_system(n, LENGTH, MASS, joints="explicit" if kind == "joints" else "shared")
+            how = "explicit nc.Spherical joints" if kind == "joints" else "shared points"
+            spin = f", spinning at {SPIN:g} rad/s about the vertical" if kind == "spinning" else ""
+            self.title = f"chain of N = {n} bars of {LENGTH:g} m, {MASS:g} kg, {how}{spin}"
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            self.model = s.build()
+        self.v0 = None
+        if kind == "spinning":
+            self.v0 = np.cross([0.0, 0.0, SPIN], self.model.q0.reshape(-1, 3)).reshape(-1)
+
+    @property
+    def has_mujoco(self) -> bool:
+        return self.kind != "stiff"
+
+    def simulate(self, t_end, dt, **kw):
+        import ncgen as nc
+
+        start = time.perf_counter()
+        traj = nc.simulate(self.model, t_end, dt, v0=self.v0, **kw)
+        return traj, time.perf_counter() - start
+
+    def mujoco(self, integrator, dt, axial=AXIAL_INERTIA):
+        return mujoco_run(self.n, integrator, dt, T_END, axial=axial, length=LENGTH, mass=MASS,
+                          spin=SPIN if self.kind == "spinning" else 0.0)
+
+
+def ncgen_runs(case: Case, reference, config, repeat):
+    """Curves ``{method: [(label, error, end-to-end s, stepping s or nan, note)]}``."""
     from ncgen.errors import SimulationError
 
-    curves = {"idas": [], "stepper": []}
-    nc.simulate(model, OUTPUT_DT, OUTPUT_DT, backend="compiled")            # compile outside timings
-    nc.simulate(model, OUTPUT_DT, OUTPUT_DT, method="stepper")
+    curves = {"idas": [], "stepper": [], "stepper rtol": []}
+    case.simulate(OUTPUT_DT, OUTPUT_DT, backend="compiled")                     # compile outside timings
+    case.simulate(OUTPUT_DT, OUTPUT_DT, method="stepper", substeps=100, check=False)
+
+    def best(runs):
+        return (min(w for _, w in runs), min(r.info.get("stepping_time", np.nan) for r, _ in runs), runs[-1][0])
+
     for rtol in config["rtols"]:
-        runs = [nc.simulate(model, T_END, OUTPUT_DT, rtol=rtol, atol=rtol, backend="compiled", max_steps=10**6)
-                for _ in range(repeat)]
-        wall = min(r.info["wall_time"] for r in runs)
-        curves["idas"].append((f"rtol {rtol:.0e}", _err(runs[-1].q[-1], reference), wall))
+        wall, _, traj = best([case.simulate(T_END, OUTPUT_DT, rtol=rtol, atol=rtol, backend="compiled",
+                                            max_steps=10**6) for _ in range(repeat)])
+        curves["idas"].append((f"rtol {rtol:.0e}", _err(traj.q[-1], reference), wall, np.nan, ""))
     for h in config["steps"]:
         sub = int(round(OUTPUT_DT / h))
         try:
-            runs = [nc.simulate(model, T_END, OUTPUT_DT, method="stepper", substeps=sub) for _ in range(repeat)]
+            wall, stepping, traj = best([case.simulate(T_END, OUTPUT_DT, method="stepper", substeps=sub, check=False)
+                                         for _ in range(repeat)])
         except SimulationError as e:
-            curves["stepper"].append((f"h {h:.0e}", float("nan"), float("nan")))
-            print(f"  (stepper, h = {h:.0e}: {str(e).split(':')[0]} at t = {e.time:g} s; left out)")
+            curves["stepper"].append((f"h {h:.0e}", np.nan, np.nan, np.nan, f"failed at t = {e.time:g} s"))
             continue
-        wall = min(r.info["wall_time"] for r in runs)
-        curves["stepper"].append((f"h {h:.0e}", _err(runs[-1].q[-1], reference), wall))
+        try:
+            case.simulate(T_END, OUTPUT_DT, method="stepper", substeps=sub)
+            note = "passes its checks"
+        except SimulationError as e:
+            note = "REJECTED by its checks: " + str(e).split("trustworthy: ")[-1].split(" by t")[0][:60]
+        curves["stepper"].append((f"h {h:.0e}", _err(traj.q[-1], reference), wall, stepping, note))
+    for rtol in config["stepper_rtols"]:
+        wall, stepping, traj = best([case.simulate(T_END, OUTPUT_DT, method="stepper", rtol=rtol)
+                                     for _ in range(repeat)])
+        note = f"{traj.info['stats']['nsteps']} steps, estimate {traj.info['error_estimate']['q']:.1e}"
+        curves["stepper rtol"].append((f"rtol {rtol:.0e}", _err(traj.q[-1], reference), wall, stepping, note))
     return curves
 
 
-def mujoco_runs(n, reference, config, repeat):
+def mujoco_runs(case: Case, reference, config, repeat):
     curves = {"mujoco RK4": [], "mujoco Euler (default)": []}
     for name, integrator in (("mujoco RK4", "RK4"), ("mujoco Euler (default)", "Euler")):
         for dt in config["mujoco_steps"]:
-            runs = [mujoco_run(n, integrator, dt, T_END) for _ in range(repeat)]
-            curves[name].append((f"dt {dt:.0e}", _err(runs[-1][1], reference), min(r[0] for r in runs)))
+            runs = [case.mujoco(integrator, dt) for _ in range(repeat)]
+            curves[name].append((f"dt {dt:.0e}", _err(runs[-1][1], reference), min(r[0] for r in runs), np.nan, ""))
     return curves
 
 
@@ -92,66 +167,90 @@ def _err(tip, reference) -> float:
     return float(np.linalg.norm(np.asarray(tip).reshape(-1)[-3:] - reference))
 
 
-def reference_tips(n, model, config) -> tuple[np.ndarray, dict[str, float]]:
+def reference_tip(case: Case, config) -> tuple[np.ndarray, dict[str, float]]:
     """The reference tip (IDAS, rtol 1e-12) and its distances to the cross-checks."""
-    import ncgen as nc
-
-    ref = ncgen_tip(nc.simulate(model, T_END, OUTPUT_DT, rtol=1e-12, atol=1e-12, backend="compiled",
-                                max_steps=10**7).q[-1])
-    h = config["reference_step"]
-    stepper = ncgen_tip(nc.simulate(model, T_END, OUTPUT_DT, method="stepper",
-                                    substeps=int(round(OUTPUT_DT / h))).q[-1])
-    checks = {f"ncgen stepper, h = {h:.0e}": _err(stepper, ref)}
-    for axial in (AXIAL_INERTIA, 1e-4):
-        _, tip = mujoco_run(n, "RK4", h, T_END, axial=axial)
-        checks[f"MuJoCo RK4, dt = {h:.0e}, axial inertia {axial:.0e}"] = _err(tip, ref)
+    traj, _ = case.simulate(T_END, OUTPUT_DT, rtol=1e-12, atol=1e-12, backend="compiled", max_steps=10**7)
+    ref = ncgen_tip(traj.q[-1])
+    stepper, _ = case.simulate(T_END, OUTPUT_DT, method="stepper", rtol=1e-9)
+    checks = {"ncgen stepper, rtol 1e-9": _err(ncgen_tip(stepper.q[-1]), ref)}
+    if case.has_mujoco:
+        h = config["reference_step"]
+        for axial in (AXIAL_INERTIA, 1e-4):
+            _, tip = case.mujoco("RK4", h, axial=axial)
+            checks[f"MuJoCo RK4, dt = {h:.0e}, axial inertia {axial:.0e}"] = _err(tip, ref)
     return ref, checks
 
 
-def report(n, curves, checks) -> None:
-    print(f"\n=== chain of N = {n} bars: tip error after {T_END:g} s vs wall time ===")
+def curve_time(runs, target) -> float:
+    return time_at([r[1] for r in runs], [r[2] for r in runs], target)
+
+
+def report(case: Case, curves, checks) -> dict[str, float]:
+    """Prints the curves and ratios; returns the stepper's end-to-end times at 1e-3."""
+    m = case.model
+    print(f"\n=== {case.title}: nq = {m.nq}, nc = {m.nc}; tip error after {T_END:g} s vs wall time ===")
     for what, dist in checks.items():
         print(f"  reference check: |tip({what}) - tip(IDAS rtol 1e-12)| = {dist:.2e} m")
     for method, runs in curves.items():
         print(f"  {method}")
-        for label, err, secs in runs:
-            print(f"    {label:<12} error {err:9.2e} m   time {secs * 1e3:10.3f} ms")
-    rk4 = curves["mujoco RK4"]
-    for method, target in TARGETS.items():
-        mine = time_at([e for _, e, _ in curves[method]], [t for _, _, t in curves[method]], target)
-        theirs = time_at([e for _, e, _ in rk4], [t for _, _, t in rk4], target)
-        print(f"  RATIO ncgen {method} / MuJoCo RK4 at tip error {target:.0e}: {mine / theirs:.2f} "
-              f"({mine * 1e3:.2f} ms vs {theirs * 1e3:.2f} ms)")
-    euler = curves["mujoco Euler (default)"]
-    best = min((e for _, e, _ in euler if np.isfinite(e)), default=float("nan"))
-    if not best <= TARGETS["stepper"]:
-        print(f"  MuJoCo Euler (default) does not reach {TARGETS['stepper']:.0e} at these steps "
-              f"(best tip error {best:.2e} m)")
+        for label, err, secs, stepping, note in runs:
+            line = f"    {label:<12} error {err:9.2e} m   end-to-end {secs * 1e3:10.3f} ms"
+            if np.isfinite(stepping):
+                line += f"   stepping {stepping * 1e3:9.3f} ms (x{secs / stepping:4.2f})"
+            print(line + (f"   {note}" if note else ""))
+    times = {}
+    if case.has_mujoco:
+        rk4 = curves["mujoco RK4"]
+        for method, target in TARGETS.items():
+            mine, theirs = curve_time(curves[method], target), curve_time(rk4, target)
+            times[method] = mine
+            print(f"  RATIO ncgen {method} (end to end) / MuJoCo RK4 at tip error {target:.0e}: "
+                  f"{mine / theirs:.2f} ({mine * 1e3:.2f} ms vs {theirs * 1e3:.2f} ms)")
+        euler = curves["mujoco Euler (default)"]
+        best = min((e for _, e, *_ in euler if np.isfinite(e)), default=float("nan"))
+        if not best <= TARGETS["stepper"]:
+            print(f"  MuJoCo Euler (default) does not reach {TARGETS['stepper']:.0e} at these steps "
+                  f"(best tip error {best:.2e} m)")
+        else:
+            theirs = curve_time(euler, TARGETS["stepper"])
+            mine = curve_time(curves["stepper"], TARGETS["stepper"])
+            print(f"  RATIO ncgen stepper / MuJoCo Euler at tip error {TARGETS['stepper']:.0e}: "
+                  f"{mine / theirs:.2f} ({mine * 1e3:.2f} ms vs {theirs * 1e3:.2f} ms)")
     else:
-        theirs = time_at([e for _, e, _ in euler], [t for _, _, t in euler], TARGETS["stepper"])
-        mine = time_at([e for _, e, _ in curves["stepper"]], [t for _, _, t in curves["stepper"]],
-                       TARGETS["stepper"])
-        print(f"  RATIO ncgen stepper / MuJoCo Euler at tip error {TARGETS['stepper']:.0e}: {mine / theirs:.2f} "
-              f"({mine * 1e3:.2f} ms vs {theirs * 1e3:.2f} ms)")
+        for method in ("stepper", "stepper rtol"):
+            times[method] = curve_time(curves[method], TARGETS[method])
+            print(f"  ncgen {method} at tip error {TARGETS[method]:.0e}: {times[method] * 1e3:.2f} ms end to end")
+    ratios = [r[2] / r[3] for method in ("stepper", "stepper rtol") for r in curves[method] if np.isfinite(r[3])]
+    if ratios:
+        print(f"  end-to-end / stepping time of the stepper runs: {min(ratios):.2f} ... {max(ratios):.2f}")
+    return times
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--smoke", action="store_true", help="tiny and coarse: runs in seconds (CI)")
-    parser.add_argument("--sizes", type=int, nargs="+", help="numbers of bars (default 1 5 20 50)")
+    parser.add_argument("--cases", nargs="+", choices=FULL["cases"], help="cases to run (default all)")
     parser.add_argument("--repeat", type=int, default=3, help="runs per point; the fastest counts")
     args = parser.parse_args(argv)
     config = dict(SMOKE if args.smoke else FULL)
-    if args.sizes:
-        config["sizes"] = args.sizes
+    if args.cases:
+        config["cases"] = args.cases
     repeat = 1 if args.smoke else args.repeat
     print(machine())
     warnings.simplefilter("ignore")
-    for n in config["sizes"]:
-        model = chain_system(n).build()
-        reference, checks = reference_tips(n, model, config)
-        curves = {**ncgen_runs(model, reference, config, repeat), **mujoco_runs(n, reference, config, repeat)}
-        report(n, curves, checks)
+    times = {}
+    for kind in config["cases"]:
+        case = Case(kind, config["n"][kind])
+        reference, checks = reference_tip(case, config)
+        curves = ncgen_runs(case, reference, config, repeat)
+        if case.has_mujoco:
+            curves.update(mujoco_runs(case, reference, config, repeat))
+        times[kind] = report(case, curves, checks)
+    if "shared" in times and "joints" in times:
+        for method in ("stepper", "stepper rtol"):
+            a, b = times["joints"].get(method, np.nan), times["shared"].get(method, np.nan)
+            print(f"\nRATIO explicit joints / shared points, ncgen {method} at tip error "
+                  f"{TARGETS[method]:.0e}: {a / b:.2f} ({a * 1e3:.2f} ms vs {b * 1e3:.2f} ms)")
     return 0
 
 

@@ -136,11 +136,12 @@ def test_pendulum_matches_idas_and_its_multipliers():
 # ------------------------------------------------------------------ long runs
 def test_energy_of_a_conservative_system_stays_bounded():
     """A spherical pendulum swinging and turning for 200 s (20 000 steps): the energy error
-    oscillates (RATTLE is symplectic) instead of drifting."""
+    oscillates (RATTLE is symplectic) instead of drifting.  (The phase error grows, so the
+    run is unchecked: checked, it stops where the estimated error passes 1 % of the size.)"""
     s = nc.System("spherical_pendulum", gravity=(0.0, 0.0, -9.81))
     s.add_bar("bar", "rr", mass=1.0, ends=[s.ground.point((0.0, 0.0, 0.0)), (1.0, 0.0, 0.0)],
               velocity=(0.0, 1.0, 0.0), angular_velocity=(0.0, 0.0, 2.0))
-    traj = nc.simulate(s.build(), 200.0, 0.01, method="stepper")
+    traj = nc.simulate(s.build(), 200.0, 0.01, method="stepper", check=False)
     error = np.abs(traj.energy - traj.energy[0]) / traj.energy_scale
     quarter = len(error) // 4
     assert np.max(error) < 1e-3
@@ -184,7 +185,10 @@ def test_split_steps_keep_the_grid_and_the_constraints():
     model = example(EXAMPLES / "double_pendulum.toml")
     with pytest.raises(SimulationError, match="did not converge"):
         nc.simulate(model, 1.2, 0.2, method="stepper", max_halvings=0)
-    traj = nc.simulate(model, 1.2, 0.2, method="stepper")
+    with pytest.raises(SimulationError, match=r"not trustworthy: .*substeps=") as failure:
+        nc.simulate(model, 1.2, 0.2, method="stepper")
+    assert failure.value.trajectory.t[-1] == 0.0
+    traj = nc.simulate(model, 1.2, 0.2, method="stepper", check=False)
     assert traj.info["stats"]["step_splits"] > 0
     np.testing.assert_allclose(traj.t, np.linspace(0.0, 1.2, 7), atol=1e-12)
     assert np.all(traj.constraint_residual <= TOL)

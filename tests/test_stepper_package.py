@@ -81,8 +81,9 @@ def test_header_documents_the_api(tmp_path):
 def test_kernel_patterns_match():
     """The second half-step's KKT matrix is stored in the Newton matrix's pattern, which the
     solve kernel expects."""
-    newton, velocity, _, solve = stepper_functions(double_pendulum())
+    newton, velocity, _, solve, project, *_ = stepper_functions(double_pendulum())
     assert velocity.sparsity_out("K") == newton.sparsity_out("K") == solve.sparsity_in("K")
+    assert project.sparsity_out("K") == newton.sparsity_out("K")
     assert newton.sparsity_out("r").is_dense() and velocity.sparsity_out("b").is_dense()
 
 

@@ -406,6 +406,69 @@ extern const casadi_real cartpole_gravity[2];
 #define CARTPOLE_STEP_SOLVE_IN_R_NNZ 18
 #define CARTPOLE_STEP_SOLVE_OUT_X_NNZ 18
 
+/* ---- cartpole_step_project ----------------------------------------------------
+ * Stepper: KKT matrix and constraint residuals for the projection onto both constraint levels
+ * In cartpole_kernels_0.c; 144 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: cartpole_t0.
+ *   arg[1] q: 10x1, nnz 10 [m] coordinates. Default: cartpole_q0.
+ *   arg[2] v: 10x1, nnz 10 [m/s] coordinate rates. Default: cartpole_v0.
+ *   arg[3] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] K: 18x18, nnz 50 (sparse) [[M, A^T], [A, 0]] in the pattern of step_newton's K.
+ *   res[1] phi: 8x1, nnz 8 [m^2] Phi(t, q).
+ *   res[2] phidot: 8x1, nnz 8 [m^2/s] A(t, q) v + Phi_t(t, q).
+ */
+#define CARTPOLE_STEP_PROJECT_IN_T_NNZ 1
+#define CARTPOLE_STEP_PROJECT_IN_Q_NNZ 10
+#define CARTPOLE_STEP_PROJECT_IN_V_NNZ 10
+#define CARTPOLE_STEP_PROJECT_IN_P_NNZ 0
+#define CARTPOLE_STEP_PROJECT_OUT_K_NNZ 50
+#define CARTPOLE_STEP_PROJECT_OUT_PHI_NNZ 8
+#define CARTPOLE_STEP_PROJECT_OUT_PHIDOT_NNZ 8
+
+/* ---- cartpole_step_power ----------------------------------------------------
+ * Stepper: power of the non-conservative forces and drives, dE/dt
+ * In cartpole_kernels_0.c; 4 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: cartpole_t0.
+ *   arg[1] q: 10x1, nnz 10 [m] coordinates. Default: cartpole_q0.
+ *   arg[2] v: 10x1, nnz 10 [m/s] coordinate rates. Default: cartpole_v0.
+ *   arg[3] lam: 8x1, nnz 8 [N per unit of Phi] multipliers. Default: cartpole_lam0.
+ *   arg[4] u: 1x1, nnz 1 inputs. Default: zeros.
+ *   arg[5] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] P: 1x1, nnz 1 [W] v^T (F + grad V) + dV/dt + lam^T Phi_t.
+ */
+#define CARTPOLE_STEP_POWER_IN_T_NNZ 1
+#define CARTPOLE_STEP_POWER_IN_Q_NNZ 10
+#define CARTPOLE_STEP_POWER_IN_V_NNZ 10
+#define CARTPOLE_STEP_POWER_IN_LAM_NNZ 8
+#define CARTPOLE_STEP_POWER_IN_U_NNZ 1
+#define CARTPOLE_STEP_POWER_IN_P_NNZ 0
+#define CARTPOLE_STEP_POWER_OUT_P_NNZ 1
+
+/* ---- cartpole_step_outputs ----------------------------------------------------
+ * Stepper: derived quantities of one trajectory sample
+ * In cartpole_kernels_0.c; 162 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: cartpole_t0.
+ *   arg[1] q: 10x1, nnz 10 [m] coordinates. Default: cartpole_q0.
+ *   arg[2] v: 10x1, nnz 10 [m/s] coordinate rates. Default: cartpole_v0.
+ *   arg[3] lam: 8x1, nnz 8 [N per unit of Phi] multipliers. Default: cartpole_lam0.
+ *   arg[4] u: 1x1, nnz 1 inputs. Default: zeros.
+ *   arg[5] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] y: 7x1, nnz 7 [J; J; m^2; m^2/s; W; m] [T; V; max|Phi|; max|A v + Phi_t|; P; marker positions, column-major].
+ */
+#define CARTPOLE_STEP_OUTPUTS_IN_T_NNZ 1
+#define CARTPOLE_STEP_OUTPUTS_IN_Q_NNZ 10
+#define CARTPOLE_STEP_OUTPUTS_IN_V_NNZ 10
+#define CARTPOLE_STEP_OUTPUTS_IN_LAM_NNZ 8
+#define CARTPOLE_STEP_OUTPUTS_IN_U_NNZ 1
+#define CARTPOLE_STEP_OUTPUTS_IN_P_NNZ 0
+#define CARTPOLE_STEP_OUTPUTS_OUT_Y_NNZ 7
+
 #ifdef __cplusplus
 } /* extern "C" */
 #endif

@@ -366,6 +366,60 @@ int cartpole_step_solve_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casad
 #define cartpole_step_solve_SZ_RES 1
 #define cartpole_step_solve_SZ_IW 0
 #define cartpole_step_solve_SZ_W 0
+int cartpole_step_project(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int cartpole_step_project_checkout(void);
+void cartpole_step_project_release(int mem);
+void cartpole_step_project_incref(void);
+void cartpole_step_project_decref(void);
+casadi_int cartpole_step_project_n_in(void);
+casadi_int cartpole_step_project_n_out(void);
+casadi_real cartpole_step_project_default_in(casadi_int i);
+const char* cartpole_step_project_name_in(casadi_int i);
+const char* cartpole_step_project_name_out(casadi_int i);
+const casadi_int* cartpole_step_project_sparsity_in(casadi_int i);
+const casadi_int* cartpole_step_project_sparsity_out(casadi_int i);
+int cartpole_step_project_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int cartpole_step_project_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define cartpole_step_project_SZ_ARG 4
+#define cartpole_step_project_SZ_RES 3
+#define cartpole_step_project_SZ_IW 0
+#define cartpole_step_project_SZ_W 0
+int cartpole_step_power(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int cartpole_step_power_checkout(void);
+void cartpole_step_power_release(int mem);
+void cartpole_step_power_incref(void);
+void cartpole_step_power_decref(void);
+casadi_int cartpole_step_power_n_in(void);
+casadi_int cartpole_step_power_n_out(void);
+casadi_real cartpole_step_power_default_in(casadi_int i);
+const char* cartpole_step_power_name_in(casadi_int i);
+const char* cartpole_step_power_name_out(casadi_int i);
+const casadi_int* cartpole_step_power_sparsity_in(casadi_int i);
+const casadi_int* cartpole_step_power_sparsity_out(casadi_int i);
+int cartpole_step_power_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int cartpole_step_power_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define cartpole_step_power_SZ_ARG 6
+#define cartpole_step_power_SZ_RES 1
+#define cartpole_step_power_SZ_IW 0
+#define cartpole_step_power_SZ_W 0
+int cartpole_step_outputs(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int cartpole_step_outputs_checkout(void);
+void cartpole_step_outputs_release(int mem);
+void cartpole_step_outputs_incref(void);
+void cartpole_step_outputs_decref(void);
+casadi_int cartpole_step_outputs_n_in(void);
+casadi_int cartpole_step_outputs_n_out(void);
+casadi_real cartpole_step_outputs_default_in(casadi_int i);
+const char* cartpole_step_outputs_name_in(casadi_int i);
+const char* cartpole_step_outputs_name_out(casadi_int i);
+const casadi_int* cartpole_step_outputs_sparsity_in(casadi_int i);
+const casadi_int* cartpole_step_outputs_sparsity_out(casadi_int i);
+int cartpole_step_outputs_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int cartpole_step_outputs_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define cartpole_step_outputs_SZ_ARG 6
+#define cartpole_step_outputs_SZ_RES 1
+#define cartpole_step_outputs_SZ_IW 0
+#define cartpole_step_outputs_SZ_W 0
 void cartpole_kernels_0_casadi_version(int* major, int* minor, int* patch);
 int cartpole_kernels_0_casadi_int_size(void);
 int cartpole_kernels_0_casadi_real_size(void);

@@ -24,6 +24,9 @@ static const kernel_work kernel_works[] = {
   cartpole_step_velocity_work,
   cartpole_step_check_work,
   cartpole_step_solve_work,
+  cartpole_step_project_work,
+  cartpole_step_power_work,
+  cartpole_step_outputs_work,
 };
 #define N_KERNELS (sizeof kernel_works / sizeof kernel_works[0])
 
@@ -35,7 +38,7 @@ typedef struct {
   casadi_real *r;   /* residual, then right-hand side */
   casadi_real *dx;  /* Newton update */
   casadi_real *K;   /* KKT matrix nonzeros */
-  casadi_real *chk; /* max |Phi|, max |A v + Phi_t| */
+  casadi_real *chk; /* max |Phi|, max |A v + Phi_t|, power P */
   casadi_real *mid; /* states at the middle of split steps: [q; v] per splitting depth */
   casadi_real *w;   /* kernel work */
   casadi_int *iw;
@@ -68,7 +71,7 @@ static size_t layout(workspace *ws, char *block) {
   sizes[1] = (size_t) sz_res * sizeof(casadi_real *);
   sizes[2] = sizes[3] = sizes[4] = NX * sizeof(casadi_real);
   sizes[5] = NNZ_K * sizeof(casadi_real);
-  sizes[6] = 2 * sizeof(casadi_real);
+  sizes[6] = 3 * sizeof(casadi_real);
   sizes[7] = (size_t) sz_w * sizeof(casadi_real);
   sizes[8] = (size_t) sz_iw * sizeof(casadi_int);
   sizes[9] = 2 * NQ * CARTPOLE_STEP_MAX_HALVINGS * sizeof(casadi_real);
@@ -261,51 +264,379 @@ int cartpole_step(const casadi_real *q, const casadi_real *v, casadi_real t, con
   return status;
 }
 
-int cartpole_simulate(const casadi_real *q0, const casadi_real *v0, casadi_real t0, casadi_real h,
-                      long n_steps, long every, const casadi_real *u, long u_stride,
-                      const casadi_real *p, casadi_real *q_out, casadi_real *v_out,
-                      casadi_real *lam_out, long *iter_out, const cartpole_step_options *options,
-                      long *steps_done, long *splits) {
-  cartpole_step_options defaults;
-  const cartpole_step_options *o = options_or_default(options, &defaults);
+/* P = dE/dt at (t, q, v, lam, u) (cartpole_step_power) into *P. */
+static int power(workspace *ws, casadi_real t, const casadi_real *q, const casadi_real *v, const casadi_real *lam,
+                 const casadi_real *u, const casadi_real *p, casadi_real *P) {
+  ws->arg[0] = &t;
+  ws->arg[1] = q;
+  ws->arg[2] = v;
+  ws->arg[3] = lam;
+  ws->arg[4] = u;
+  ws->arg[5] = p;
+  ws->res[0] = P;
+  return cartpole_step_power(ws->arg, ws->res, ws->iw, ws->w, 0) ? CARTPOLE_STEP_KERNEL : CARTPOLE_STEP_OK;
+}
+
+static void put_stats(casadi_real *row, long steps, long iterations, long splits, casadi_real err_q,
+                      casadi_real err_v, casadi_real work) {
+  row[0] = (casadi_real) steps;
+  row[1] = (casadi_real) iterations;
+  row[2] = (casadi_real) splits;
+  row[3] = err_q;
+  row[4] = err_v;
+  row[5] = work;
+}
+
+/* Fixed steps (see cartpole_simulate_stats).  With `estimate`, a shadow run with steps of
+ * 2h from the same start (one every second step) gives the global error estimate
+ * (y_h - y_2h) / 3 of RATTLE's order 2 after every even step. */
+static int run_fixed(const casadi_real *q0, const casadi_real *v0, const casadi_real *lam0, casadi_real t0,
+                     casadi_real h, long n_steps, long every, const casadi_real *u, long u_stride,
+                     const casadi_real *p, casadi_real *q_out, casadi_real *v_out, casadi_real *lam_out,
+                     long *iter_out, casadi_real *stats_out, const cartpole_step_options *o,
+                     int estimate, int track_work, long *steps_done, long *splits) {
   workspace ws;
   char *block;
-  casadi_real *state, *q, *v, *q1, *v1, *lam, *swap;
-  long k, row = 0, iter_sum = 0, n_splits = 0;
-  int status = CARTPOLE_STEP_OK, iters;
+  casadi_real *state, *q, *v, *q1, *v1, *lam, *swap, *q_s, *v_s, *q2, *v2, *x_save, *dx_save, *x_s, *dx_s, *u_bar;
+  casadi_real work = 0, p_old = 0, p_new, err_q = -1, err_v = -1;
+  long k = 0, i, row = 0, iter_sum = 0, n_splits = 0, row_splits = 0;
+  int status = CARTPOLE_STEP_OK, iters, shadow = estimate ? 1 : 0; /* 1: cold start, 2: warm, 0: off */
   if (steps_done) *steps_done = 0;
   if (splits) *splits = 0;
   if (n_steps < 0 || every < 1 || n_steps % every != 0) return CARTPOLE_STEP_BAD_INPUT;
-  block = malloc(cartpole_step_work_bytes() + (4 * NQ + NC + 1) * sizeof(casadi_real));
+  block = malloc(cartpole_step_work_bytes() + (8 * NQ + NC + 4 * NX + 1 + 1) * sizeof(casadi_real));
   if (!block) return CARTPOLE_STEP_BAD_INPUT;
   state = (casadi_real *) (block + layout(&ws, block));
   q = state;
   v = q + NQ;
   q1 = v + NQ;
   v1 = q1 + NQ;
-  lam = v1 + NQ;
+  q_s = v1 + NQ;
+  v_s = q_s + NQ;
+  q2 = v_s + NQ;
+  v2 = q2 + NQ;
+  lam = v2 + NQ;
+  x_save = lam + NC;
+  dx_save = x_save + NX;
+  x_s = dx_save + NX;
+  dx_s = x_s + NX;
+  u_bar = dx_s + NX;
   memcpy(q, q0, NQ * sizeof *q);
   memcpy(v, v0, NQ * sizeof *v);
+  memcpy(q_s, q0, NQ * sizeof *q);
+  memcpy(v_s, v0, NQ * sizeof *v);
+  for (i = 0; i < NC; ++i) lam[i] = lam0 ? lam0[i] : 0;
   for (k = 0; k < n_steps; ++k) {
+    const casadi_real *uk = u ? u + k * u_stride : 0;
+    casadi_real tk = t0 + k * h;
+    /* Work: trapezoidal rule over the step, both ends with the step's inputs. */
+    if (track_work && (status = power(&ws, tk, q, v, lam, uk, p, &p_old)) != CARTPOLE_STEP_OK) break;
     iters = 0;
-    status = step_split(q, v, t0 + k * h, u ? u + k * u_stride : 0, p, h, q1, v1, lam, &iters, &n_splits, o,
-                        k > 0, &ws, 0);
+    status = step_split(q, v, tk, uk, p, h, q1, v1, lam, &iters, &n_splits, o, k > 0, &ws, 0);
     if (status != CARTPOLE_STEP_OK) break;
     iter_sum += iters;
+    if (shadow && k % 2 == 1) {
+      /* The shadow's step of 2h over the last two steps, inputs averaged. */
+      const casadi_real *u2 = 0;
+      int iters2, ok;
+      if (u) {
+        for (i = 0; i < 1; ++i) u_bar[i] = (uk[i - u_stride] + uk[i]) / 2;
+        u2 = u_bar;
+      }
+      memcpy(x_save, ws.x, NX * sizeof *x_save);
+      memcpy(dx_save, ws.dx, NX * sizeof *dx_save);
+      if (shadow == 2) {
+        for (i = 0; i < NQ; ++i) ws.x[i] = 2 * dx_s[i] - x_s[i];
+        for (i = NQ; i < NX; ++i) ws.x[i] = dx_s[i];
+      }
+      ok = step(q_s, v_s, tk - h, u2, p, 2 * h, q2, v2, 0, &iters2, o, shadow == 2, &ws) == CARTPOLE_STEP_OK ||
+           (shadow == 2 && step(q_s, v_s, tk - h, u2, p, 2 * h, q2, v2, 0, &iters2, o, 0, &ws) == CARTPOLE_STEP_OK);
+      if (ok) {
+        memcpy(x_s, ws.x, NX * sizeof *x_s);
+        memcpy(dx_s, ws.dx, NX * sizeof *dx_s);
+        memcpy(q_s, q2, NQ * sizeof *q2);
+        memcpy(v_s, v2, NQ * sizeof *v2);
+        shadow = 2;
+        err_q = err_v = 0;
+        for (i = 0; i < NQ; ++i) {
+          casadi_real dq = fabs(q1[i] - q2[i]) / 3, dv = fabs(v1[i] - v2[i]) / 3;
+          if (!(dq <= err_q)) err_q = dq;
+          if (!(dv <= err_v)) err_v = dv;
+        }
+      } else {
+        shadow = 0; /* Newton fails at 2h: no estimate from here on */
+        err_q = err_v = -2;
+      }
+      memcpy(ws.x, x_save, NX * sizeof *x_save);
+      memcpy(ws.dx, dx_save, NX * sizeof *dx_save);
+    }
     predict(&ws);
     swap = q, q = q1, q1 = swap;
     swap = v, v = v1, v1 = swap;
+    if (track_work) {
+      if ((status = power(&ws, tk + h, q, v, lam, uk, p, &p_new)) != CARTPOLE_STEP_OK) {
+        ++k;
+        break;
+      }
+      work += h / 2 * (p_old + p_new);
+    }
     if ((k + 1) % every == 0) {
       if (q_out) memcpy(q_out + row * NQ, q, NQ * sizeof *q);
       if (v_out) memcpy(v_out + row * NQ, v, NQ * sizeof *v);
       if (lam_out) memcpy(lam_out + row * NC, lam, NC * sizeof *lam);
       if (iter_out) iter_out[row] = iter_sum;
+      if (stats_out)
+        put_stats(stats_out + row * CARTPOLE_STEP_NSTATS, every, iter_sum, n_splits - row_splits, err_q, err_v,
+                  work);
       iter_sum = 0;
+      row_splits = n_splits;
       ++row;
     }
   }
   if (steps_done) *steps_done = k;
   if (splits) *splits = n_splits;
+  free(block);
+  return status;
+}
+
+int cartpole_simulate(const casadi_real *q0, const casadi_real *v0, casadi_real t0, casadi_real h,
+                      long n_steps, long every, const casadi_real *u, long u_stride,
+                      const casadi_real *p, casadi_real *q_out, casadi_real *v_out,
+                      casadi_real *lam_out, long *iter_out, const cartpole_step_options *options,
+                      long *steps_done, long *splits) {
+  cartpole_step_options defaults;
+  return run_fixed(q0, v0, 0, t0, h, n_steps, every, u, u_stride, p, q_out, v_out, lam_out, iter_out, 0,
+                   options_or_default(options, &defaults), 0, 0, steps_done, splits);
+}
+
+int cartpole_simulate_stats(const casadi_real *q0, const casadi_real *v0, const casadi_real *lam0,
+                            casadi_real t0, casadi_real h, long n_steps, long every,
+                            const casadi_real *u, long u_stride, const casadi_real *p,
+                            casadi_real *q_out, casadi_real *v_out, casadi_real *lam_out,
+                            casadi_real *stats_out, const cartpole_step_options *options,
+                            int estimate, int track_work, long *steps_done, long *splits) {
+  cartpole_step_options defaults;
+  return run_fixed(q0, v0, lam0, t0, h, n_steps, every, u, u_stride, p, q_out, v_out, lam_out, 0, stats_out,
+                   options_or_default(options, &defaults), estimate, track_work, steps_done, splits);
+}
+
+/* Projection of (q, v) onto both constraint levels at t in the mass metric:
+ * [[M, A^T], [A, 0]] [dq; mu] = [0; Phi], q -= dq until |Phi|_inf <= tol, then the same
+ * with A v + Phi_t for v (exact: the velocity constraints are linear in v). */
+static int project(workspace *ws, casadi_real t, casadi_real *q, casadi_real *v, const casadi_real *p,
+                   const cartpole_step_options *o, casadi_real *phidot) {
+  int i, it;
+  for (it = 0;; ++it) {
+    ws->arg[0] = &t;
+    ws->arg[1] = q;
+    ws->arg[2] = v;
+    ws->arg[3] = p;
+    ws->res[0] = ws->K;
+    ws->res[1] = ws->r + NQ;
+    ws->res[2] = phidot;
+    if (cartpole_step_project(ws->arg, ws->res, ws->iw, ws->w, 0)) return CARTPOLE_STEP_KERNEL;
+    for (i = 0; i < NQ; ++i) ws->r[i] = 0;
+    if (!all_finite(ws->r + NQ, NC)) return CARTPOLE_STEP_NOT_FINITE;
+    if (norm_inf(ws->r + NQ, NC) <= o->tol) break;
+    if (it == o->max_iter) return CARTPOLE_STEP_NO_CONVERGENCE;
+    if (solve(ws, ws->K, ws->r, ws->dx)) return CARTPOLE_STEP_KERNEL;
+    if (!all_finite(ws->dx, NX)) return CARTPOLE_STEP_NOT_FINITE;
+    for (i = 0; i < NQ; ++i) q[i] -= ws->dx[i];
+  }
+  memcpy(ws->r + NQ, phidot, NC * sizeof *phidot);
+  if (solve(ws, ws->K, ws->r, ws->dx)) return CARTPOLE_STEP_KERNEL;
+  if (!all_finite(ws->dx, NX)) return CARTPOLE_STEP_NOT_FINITE;
+  for (i = 0; i < NQ; ++i) v[i] -= ws->dx[i];
+  return CARTPOLE_STEP_OK;
+}
+
+/* Newton start for a step of size h_new from rates v, after a step of size h_old that ended
+ * with [w; h_old/2 lambda] in x and [v+; h_old/2 mu] in dx: w' = v + h_new/h_old (v+ - w)
+ * (v+ - w = h_old/2 a), h_new/2 lambda' = h_new/h_old (h_old/2 mu). */
+static void predict_scaled(casadi_real *x_new, const casadi_real *x, const casadi_real *dx, const casadi_real *v,
+                           casadi_real ratio) {
+  int i;
+  for (i = 0; i < NQ; ++i) x_new[i] = v[i] + ratio * (dx[i] - x[i]);
+  for (i = NQ; i < NX; ++i) x_new[i] = ratio * dx[i];
+}
+
+/* Local error of the two half-steps `fine` against the whole step `big` from y = [q; v]:
+ * (fine - big) / 3 (the local error C h^3 of RATTLE gives big - fine = 3/4 C h^3).  Sets
+ * *err_q, *err_v to its largest component in q (m) and v (m/s); returns its largest
+ * component relative to atol + rtol max(|y_i|, |fine_i|) (NaN propagates). */
+static casadi_real local_error(const casadi_real *y, const casadi_real *big, const casadi_real *fine,
+                               casadi_real rtol, casadi_real atol, casadi_real *err_q, casadi_real *err_v) {
+  casadi_real e = 0, d;
+  int i;
+  *err_q = *err_v = 0;
+  for (i = 0; i < 2 * NQ; ++i) {
+    d = fabs(fine[i] - big[i]) / 3;
+    if (i < NQ) {
+      if (!(d <= *err_q)) *err_q = d;
+    } else if (!(d <= *err_v)) {
+      *err_v = d;
+    }
+    d /= atol + rtol * fmax(fabs(y[i]), fabs(fine[i]));
+    if (!(d <= e)) e = d;
+  }
+  return e;
+}
+
+int cartpole_simulate_adaptive(const casadi_real *q0, const casadi_real *v0, const casadi_real *lam0,
+                               casadi_real t0, casadi_real dt, long n_out, const casadi_real *u,
+                               long u_stride, int hold_linear, const casadi_real *p,
+                               casadi_real rtol, casadi_real atol, casadi_real h0, int extrapolate,
+                               long max_steps, int track_work, casadi_real *q_out,
+                               casadi_real *v_out, casadi_real *lam_out, casadi_real *stats_out,
+                               const cartpole_step_options *options, long *rows_done,
+                               casadi_real *h_next) {
+  cartpole_step_options defaults, single;
+  workspace ws;
+  char *block;
+  casadi_real *y, *big, *mid, *fine, *y_new, *lam, *lam_fine, *x_prev, *dx_prev, *x_big, *u_buf, *phidot;
+  casadi_real t = t0, H = h0 > 0 ? h0 : dt, h_prev = 0, work = 0, p_old = 0, p_new;
+  long row = 0, i;
+  int status = CARTPOLE_STEP_OK, have_prev = 0;
+  single = *options_or_default(options, &defaults);
+  single.max_halvings = 0;
+  if (rows_done) *rows_done = 0;
+  if (!(dt > 0) || n_out < 0 || !(rtol > 0) || !(atol > 0) || max_steps < 1 || !isfinite(t0 + dt * n_out))
+    return CARTPOLE_STEP_BAD_INPUT;
+  block = malloc(cartpole_step_work_bytes() + (10 * NQ + 3 * NC + 3 * NX + 1 + 1) * sizeof(casadi_real));
+  if (!block) return CARTPOLE_STEP_BAD_INPUT;
+  y = (casadi_real *) (block + layout(&ws, block));
+  big = y + 2 * NQ;
+  mid = big + 2 * NQ;
+  fine = mid + 2 * NQ;
+  y_new = fine + 2 * NQ;
+  lam = y_new + 2 * NQ;
+  lam_fine = lam + NC;
+  phidot = lam_fine + NC;
+  x_prev = phidot + NC;
+  dx_prev = x_prev + NX;
+  x_big = dx_prev + NX;
+  u_buf = x_big + NX;
+  memcpy(y, q0, NQ * sizeof *y);
+  memcpy(y + NQ, v0, NQ * sizeof *y);
+  for (i = 0; i < NC; ++i) lam[i] = lam0 ? lam0[i] : 0;
+  for (row = 0; row < n_out; ++row) {
+    casadi_real t_start = t0 + row * dt, t_end = t0 + (row + 1) * dt, sum_q = 0, sum_v = 0;
+    const casadi_real *u_row = u ? u + row * u_stride : 0;
+    long steps = 0, rejected = 0, attempts = 0, iter_sum = 0;
+    while (t < t_end) {
+      casadi_real Hs = H, e, err_q, err_v, factor;
+      const casadi_real *uk = u_row;
+      int land = 0, iters = 0;
+      long unused = 0;
+      if (++attempts > max_steps) {
+        status = CARTPOLE_STEP_TOO_MANY_STEPS;
+        goto done;
+      }
+      if (t + 1.01 * Hs >= t_end) {
+        Hs = t_end - t;
+        land = 1;
+      } else if (t + 2 * Hs > t_end) {
+        Hs = (t_end - t) / 2;
+      }
+      if (!(Hs > 1e-13 * (fabs(t) + dt))) {
+        status = CARTPOLE_STEP_TOO_SMALL;
+        goto done;
+      }
+      if (hold_linear && u) {
+        casadi_real frac = (t + Hs / 2 - t_start) / dt;
+        for (i = 0; i < 1; ++i) u_buf[i] = u_row[i] + frac * (u_row[u_stride + i] - u_row[i]);
+        uk = u_buf;
+      }
+      /* One step of Hs, then two of Hs/2 (each warm-started from the one before). */
+      if (have_prev) predict_scaled(ws.x, x_prev, dx_prev, y + NQ, Hs / h_prev);
+      status = step_split(y, y + NQ, t, uk, p, Hs, big, big + NQ, 0, &iters, &unused, &single, have_prev, &ws, 0);
+      if (status == CARTPOLE_STEP_OK) {
+        memcpy(x_big, ws.x, NX * sizeof *x_big);
+        for (i = 0; i < NQ; ++i) ws.x[i] = (y[NQ + i] + x_big[i]) / 2;
+        for (i = NQ; i < NX; ++i) ws.x[i] = x_big[i] / 2;
+        status = step_split(y, y + NQ, t, uk, p, Hs / 2, mid, mid + NQ, 0, &iters, &unused, &single, 1, &ws, 0);
+      }
+      if (status == CARTPOLE_STEP_OK) {
+        predict(&ws);
+        status = step_split(mid, mid + NQ, t + Hs / 2, uk, p, Hs / 2, fine, fine + NQ, lam_fine, &iters, &unused,
+                            &single, 1, &ws, 0);
+      }
+      iter_sum += iters;
+      if (status != CARTPOLE_STEP_OK) {
+        if (!recoverable(status)) goto done;
+        status = CARTPOLE_STEP_OK;
+        ++rejected;
+        H = Hs / 4;
+        have_prev = 0;
+        continue;
+      }
+      memcpy(x_prev, ws.x, NX * sizeof *x_prev);
+      memcpy(dx_prev, ws.dx, NX * sizeof *dx_prev);
+      h_prev = Hs / 2;
+      have_prev = 1;
+      e = local_error(y, big, fine, rtol, atol, &err_q, &err_v);
+      factor = e > 0 ? 0.9 * pow(e, -1.0 / 3) : 4;
+      factor = fmin(4, fmax(0.2, factor));
+      if (!(e <= 1)) {
+        ++rejected;
+        H = Hs * factor;
+        continue;
+      }
+      /* Accepted: Richardson extrapolation fine + (fine - big)/3 (order 4), projected. */
+      if (track_work && (status = power(&ws, t, y, y + NQ, lam, uk, p, &p_old)) != CARTPOLE_STEP_OK) goto done;
+      memcpy(y_new, fine, 2 * NQ * sizeof *y_new);
+      if (extrapolate) {
+        for (i = 0; i < 2 * NQ; ++i) y_new[i] += (fine[i] - big[i]) / 3;
+        if (project(&ws, t + Hs, y_new, y_new + NQ, p, &single, phidot) != CARTPOLE_STEP_OK)
+          memcpy(y_new, fine, 2 * NQ * sizeof *y_new);
+      }
+      memcpy(y, y_new, 2 * NQ * sizeof *y);
+      memcpy(lam, lam_fine, NC * sizeof *lam);
+      t = land ? t_end : t + Hs;
+      ++steps;
+      sum_q += err_q;
+      sum_v += err_v;
+      if (track_work) {
+        if ((status = power(&ws, t, y, y + NQ, lam, uk, p, &p_new)) != CARTPOLE_STEP_OK) goto done;
+        work += Hs / 2 * (p_old + p_new);
+      }
+      H = (land && Hs < H) ? fmax(H, Hs * factor) : Hs * factor;
+    }
+    if (q_out) memcpy(q_out + row * NQ, y, NQ * sizeof *y);
+    if (v_out) memcpy(v_out + row * NQ, y + NQ, NQ * sizeof *y);
+    if (lam_out) memcpy(lam_out + row * NC, lam, NC * sizeof *lam);
+    if (stats_out)
+      put_stats(stats_out + row * CARTPOLE_STEP_NSTATS, steps, iter_sum, rejected, sum_q, sum_v, work);
+  }
+done:
+  if (rows_done) *rows_done = row;
+  if (h_next) *h_next = H;
+  free(block);
+  return status;
+}
+
+int cartpole_outputs(long n, const casadi_real *t, const casadi_real *q, const casadi_real *v,
+                     const casadi_real *lam, const casadi_real *u, long u_stride, const casadi_real *p,
+                     casadi_real *y) {
+  workspace ws;
+  char *block = malloc(cartpole_step_work_bytes());
+  long k;
+  int status = CARTPOLE_STEP_OK;
+  if (!block) return CARTPOLE_STEP_BAD_INPUT;
+  layout(&ws, block);
+  for (k = 0; k < n; ++k) {
+    ws.arg[0] = t + k;
+    ws.arg[1] = q + k * NQ;
+    ws.arg[2] = v + k * NQ;
+    ws.arg[3] = lam ? lam + k * NC : 0;
+    ws.arg[4] = u ? u + k * u_stride : 0;
+    ws.arg[5] = p;
+    ws.res[0] = y + k * CARTPOLE_STEP_NOUT;
+    if (cartpole_step_outputs(ws.arg, ws.res, ws.iw, ws.w, 0)) {
+      status = CARTPOLE_STEP_KERNEL;
+      break;
+    }
+  }
   free(block);
   return status;
 }

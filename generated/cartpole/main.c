@@ -134,6 +134,28 @@ static const casadi_real *const defaults_step_solve[] = {
   0,
   0,
   0};
+static const casadi_real *const defaults_step_project[] = {
+  cartpole_t0,
+  cartpole_q0,
+  cartpole_v0,
+  0,
+  0};
+static const casadi_real *const defaults_step_power[] = {
+  cartpole_t0,
+  cartpole_q0,
+  cartpole_v0,
+  cartpole_lam0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_outputs[] = {
+  cartpole_t0,
+  cartpole_q0,
+  cartpole_v0,
+  cartpole_lam0,
+  0,
+  0,
+  0};
 
 static const kernel kernels[] = {
   {"phi", cartpole_phi, cartpole_phi_work, cartpole_phi_n_in, cartpole_phi_n_out,
@@ -208,6 +230,18 @@ static const kernel kernels[] = {
    cartpole_step_solve_name_in, cartpole_step_solve_name_out, cartpole_step_solve_sparsity_in, cartpole_step_solve_sparsity_out,
    cartpole_step_solve_checkout, cartpole_step_solve_release, cartpole_step_solve_incref, cartpole_step_solve_decref,
    defaults_step_solve},
+  {"step_project", cartpole_step_project, cartpole_step_project_work, cartpole_step_project_n_in, cartpole_step_project_n_out,
+   cartpole_step_project_name_in, cartpole_step_project_name_out, cartpole_step_project_sparsity_in, cartpole_step_project_sparsity_out,
+   cartpole_step_project_checkout, cartpole_step_project_release, cartpole_step_project_incref, cartpole_step_project_decref,
+   defaults_step_project},
+  {"step_power", cartpole_step_power, cartpole_step_power_work, cartpole_step_power_n_in, cartpole_step_power_n_out,
+   cartpole_step_power_name_in, cartpole_step_power_name_out, cartpole_step_power_sparsity_in, cartpole_step_power_sparsity_out,
+   cartpole_step_power_checkout, cartpole_step_power_release, cartpole_step_power_incref, cartpole_step_power_decref,
+   defaults_step_power},
+  {"step_outputs", cartpole_step_outputs, cartpole_step_outputs_work, cartpole_step_outputs_n_in, cartpole_step_outputs_n_out,
+   cartpole_step_outputs_name_in, cartpole_step_outputs_name_out, cartpole_step_outputs_sparsity_in, cartpole_step_outputs_sparsity_out,
+   cartpole_step_outputs_checkout, cartpole_step_outputs_release, cartpole_step_outputs_incref, cartpole_step_outputs_decref,
+   defaults_step_outputs},
 };
 
 static const size_t n_kernels = sizeof(kernels) / sizeof(kernels[0]);

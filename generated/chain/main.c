@@ -134,6 +134,28 @@ static const casadi_real *const defaults_step_solve[] = {
   0,
   0,
   0};
+static const casadi_real *const defaults_step_project[] = {
+  chain_t0,
+  chain_q0,
+  chain_v0,
+  0,
+  0};
+static const casadi_real *const defaults_step_power[] = {
+  chain_t0,
+  chain_q0,
+  chain_v0,
+  chain_lam0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_outputs[] = {
+  chain_t0,
+  chain_q0,
+  chain_v0,
+  chain_lam0,
+  0,
+  0,
+  0};
 
 static const kernel kernels[] = {
   {"phi", chain_phi, chain_phi_work, chain_phi_n_in, chain_phi_n_out,
@@ -208,6 +230,18 @@ static const kernel kernels[] = {
    chain_step_solve_name_in, chain_step_solve_name_out, chain_step_solve_sparsity_in, chain_step_solve_sparsity_out,
    chain_step_solve_checkout, chain_step_solve_release, chain_step_solve_incref, chain_step_solve_decref,
    defaults_step_solve},
+  {"step_project", chain_step_project, chain_step_project_work, chain_step_project_n_in, chain_step_project_n_out,
+   chain_step_project_name_in, chain_step_project_name_out, chain_step_project_sparsity_in, chain_step_project_sparsity_out,
+   chain_step_project_checkout, chain_step_project_release, chain_step_project_incref, chain_step_project_decref,
+   defaults_step_project},
+  {"step_power", chain_step_power, chain_step_power_work, chain_step_power_n_in, chain_step_power_n_out,
+   chain_step_power_name_in, chain_step_power_name_out, chain_step_power_sparsity_in, chain_step_power_sparsity_out,
+   chain_step_power_checkout, chain_step_power_release, chain_step_power_incref, chain_step_power_decref,
+   defaults_step_power},
+  {"step_outputs", chain_step_outputs, chain_step_outputs_work, chain_step_outputs_n_in, chain_step_outputs_n_out,
+   chain_step_outputs_name_in, chain_step_outputs_name_out, chain_step_outputs_sparsity_in, chain_step_outputs_sparsity_out,
+   chain_step_outputs_checkout, chain_step_outputs_release, chain_step_outputs_incref, chain_step_outputs_decref,
+   defaults_step_outputs},
 };
 
 static const size_t n_kernels = sizeof(kernels) / sizeof(kernels[0]);

@@ -405,6 +405,69 @@ extern const casadi_real double_pendulum_gravity[3];
 #define DOUBLE_PENDULUM_STEP_SOLVE_IN_R_NNZ 46
 #define DOUBLE_PENDULUM_STEP_SOLVE_OUT_X_NNZ 46
 
+/* ---- double_pendulum_step_project ----------------------------------------------------
+ * Stepper: KKT matrix and constraint residuals for the projection onto both constraint levels
+ * In double_pendulum_kernels_0.c; 571 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: double_pendulum_t0.
+ *   arg[1] q: 24x1, nnz 24 [m] coordinates. Default: double_pendulum_q0.
+ *   arg[2] v: 24x1, nnz 24 [m/s] coordinate rates. Default: double_pendulum_v0.
+ *   arg[3] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] K: 46x46, nnz 196 (sparse) [[M, A^T], [A, 0]] in the pattern of step_newton's K.
+ *   res[1] phi: 22x1, nnz 22 [m^2] Phi(t, q).
+ *   res[2] phidot: 22x1, nnz 22 [m^2/s] A(t, q) v + Phi_t(t, q).
+ */
+#define DOUBLE_PENDULUM_STEP_PROJECT_IN_T_NNZ 1
+#define DOUBLE_PENDULUM_STEP_PROJECT_IN_Q_NNZ 24
+#define DOUBLE_PENDULUM_STEP_PROJECT_IN_V_NNZ 24
+#define DOUBLE_PENDULUM_STEP_PROJECT_IN_P_NNZ 0
+#define DOUBLE_PENDULUM_STEP_PROJECT_OUT_K_NNZ 196
+#define DOUBLE_PENDULUM_STEP_PROJECT_OUT_PHI_NNZ 22
+#define DOUBLE_PENDULUM_STEP_PROJECT_OUT_PHIDOT_NNZ 22
+
+/* ---- double_pendulum_step_power ----------------------------------------------------
+ * Stepper: power of the non-conservative forces and drives, dE/dt
+ * In double_pendulum_kernels_0.c; 2 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: double_pendulum_t0.
+ *   arg[1] q: 24x1, nnz 24 [m] coordinates. Default: double_pendulum_q0.
+ *   arg[2] v: 24x1, nnz 24 [m/s] coordinate rates. Default: double_pendulum_v0.
+ *   arg[3] lam: 22x1, nnz 22 [N per unit of Phi] multipliers. Default: double_pendulum_lam0.
+ *   arg[4] u: 0x1, nnz 0 inputs. Default: zeros.
+ *   arg[5] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] P: 1x1, nnz 1 [W] v^T (F + grad V) + dV/dt + lam^T Phi_t.
+ */
+#define DOUBLE_PENDULUM_STEP_POWER_IN_T_NNZ 1
+#define DOUBLE_PENDULUM_STEP_POWER_IN_Q_NNZ 24
+#define DOUBLE_PENDULUM_STEP_POWER_IN_V_NNZ 24
+#define DOUBLE_PENDULUM_STEP_POWER_IN_LAM_NNZ 22
+#define DOUBLE_PENDULUM_STEP_POWER_IN_U_NNZ 0
+#define DOUBLE_PENDULUM_STEP_POWER_IN_P_NNZ 0
+#define DOUBLE_PENDULUM_STEP_POWER_OUT_P_NNZ 1
+
+/* ---- double_pendulum_step_outputs ----------------------------------------------------
+ * Stepper: derived quantities of one trajectory sample
+ * In double_pendulum_kernels_0.c; 482 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: double_pendulum_t0.
+ *   arg[1] q: 24x1, nnz 24 [m] coordinates. Default: double_pendulum_q0.
+ *   arg[2] v: 24x1, nnz 24 [m/s] coordinate rates. Default: double_pendulum_v0.
+ *   arg[3] lam: 22x1, nnz 22 [N per unit of Phi] multipliers. Default: double_pendulum_lam0.
+ *   arg[4] u: 0x1, nnz 0 inputs. Default: zeros.
+ *   arg[5] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] y: 8x1, nnz 8 [J; J; m^2; m^2/s; W; m] [T; V; max|Phi|; max|A v + Phi_t|; P; marker positions, column-major].
+ */
+#define DOUBLE_PENDULUM_STEP_OUTPUTS_IN_T_NNZ 1
+#define DOUBLE_PENDULUM_STEP_OUTPUTS_IN_Q_NNZ 24
+#define DOUBLE_PENDULUM_STEP_OUTPUTS_IN_V_NNZ 24
+#define DOUBLE_PENDULUM_STEP_OUTPUTS_IN_LAM_NNZ 22
+#define DOUBLE_PENDULUM_STEP_OUTPUTS_IN_U_NNZ 0
+#define DOUBLE_PENDULUM_STEP_OUTPUTS_IN_P_NNZ 0
+#define DOUBLE_PENDULUM_STEP_OUTPUTS_OUT_Y_NNZ 8
+
 #ifdef __cplusplus
 } /* extern "C" */
 #endif

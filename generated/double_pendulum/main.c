@@ -134,6 +134,28 @@ static const casadi_real *const defaults_step_solve[] = {
   0,
   0,
   0};
+static const casadi_real *const defaults_step_project[] = {
+  double_pendulum_t0,
+  double_pendulum_q0,
+  double_pendulum_v0,
+  0,
+  0};
+static const casadi_real *const defaults_step_power[] = {
+  double_pendulum_t0,
+  double_pendulum_q0,
+  double_pendulum_v0,
+  double_pendulum_lam0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_outputs[] = {
+  double_pendulum_t0,
+  double_pendulum_q0,
+  double_pendulum_v0,
+  double_pendulum_lam0,
+  0,
+  0,
+  0};
 
 static const kernel kernels[] = {
   {"phi", double_pendulum_phi, double_pendulum_phi_work, double_pendulum_phi_n_in, double_pendulum_phi_n_out,
@@ -208,6 +230,18 @@ static const kernel kernels[] = {
    double_pendulum_step_solve_name_in, double_pendulum_step_solve_name_out, double_pendulum_step_solve_sparsity_in, double_pendulum_step_solve_sparsity_out,
    double_pendulum_step_solve_checkout, double_pendulum_step_solve_release, double_pendulum_step_solve_incref, double_pendulum_step_solve_decref,
    defaults_step_solve},
+  {"step_project", double_pendulum_step_project, double_pendulum_step_project_work, double_pendulum_step_project_n_in, double_pendulum_step_project_n_out,
+   double_pendulum_step_project_name_in, double_pendulum_step_project_name_out, double_pendulum_step_project_sparsity_in, double_pendulum_step_project_sparsity_out,
+   double_pendulum_step_project_checkout, double_pendulum_step_project_release, double_pendulum_step_project_incref, double_pendulum_step_project_decref,
+   defaults_step_project},
+  {"step_power", double_pendulum_step_power, double_pendulum_step_power_work, double_pendulum_step_power_n_in, double_pendulum_step_power_n_out,
+   double_pendulum_step_power_name_in, double_pendulum_step_power_name_out, double_pendulum_step_power_sparsity_in, double_pendulum_step_power_sparsity_out,
+   double_pendulum_step_power_checkout, double_pendulum_step_power_release, double_pendulum_step_power_incref, double_pendulum_step_power_decref,
+   defaults_step_power},
+  {"step_outputs", double_pendulum_step_outputs, double_pendulum_step_outputs_work, double_pendulum_step_outputs_n_in, double_pendulum_step_outputs_n_out,
+   double_pendulum_step_outputs_name_in, double_pendulum_step_outputs_name_out, double_pendulum_step_outputs_sparsity_in, double_pendulum_step_outputs_sparsity_out,
+   double_pendulum_step_outputs_checkout, double_pendulum_step_outputs_release, double_pendulum_step_outputs_incref, double_pendulum_step_outputs_decref,
+   defaults_step_outputs},
 };
 
 static const size_t n_kernels = sizeof(kernels) / sizeof(kernels[0]);

@@ -405,6 +405,69 @@ extern const casadi_real fourbar_3d_gravity[3];
 #define FOURBAR_3D_STEP_SOLVE_IN_R_NNZ 47
 #define FOURBAR_3D_STEP_SOLVE_OUT_X_NNZ 47
 
+/* ---- fourbar_3d_step_project ----------------------------------------------------
+ * Stepper: KKT matrix and constraint residuals for the projection onto both constraint levels
+ * In fourbar_3d_kernels_0.c; 680 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_3d_t0.
+ *   arg[1] q: 24x1, nnz 24 [m] coordinates. Default: fourbar_3d_q0.
+ *   arg[2] v: 24x1, nnz 24 [m/s] coordinate rates. Default: fourbar_3d_v0.
+ *   arg[3] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] K: 47x47, nnz 234 (sparse) [[M, A^T], [A, 0]] in the pattern of step_newton's K.
+ *   res[1] phi: 23x1, nnz 23 [m^2] Phi(t, q).
+ *   res[2] phidot: 23x1, nnz 23 [m^2/s] A(t, q) v + Phi_t(t, q).
+ */
+#define FOURBAR_3D_STEP_PROJECT_IN_T_NNZ 1
+#define FOURBAR_3D_STEP_PROJECT_IN_Q_NNZ 24
+#define FOURBAR_3D_STEP_PROJECT_IN_V_NNZ 24
+#define FOURBAR_3D_STEP_PROJECT_IN_P_NNZ 0
+#define FOURBAR_3D_STEP_PROJECT_OUT_K_NNZ 234
+#define FOURBAR_3D_STEP_PROJECT_OUT_PHI_NNZ 23
+#define FOURBAR_3D_STEP_PROJECT_OUT_PHIDOT_NNZ 23
+
+/* ---- fourbar_3d_step_power ----------------------------------------------------
+ * Stepper: power of the non-conservative forces and drives, dE/dt
+ * In fourbar_3d_kernels_0.c; 2 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_3d_t0.
+ *   arg[1] q: 24x1, nnz 24 [m] coordinates. Default: fourbar_3d_q0.
+ *   arg[2] v: 24x1, nnz 24 [m/s] coordinate rates. Default: fourbar_3d_v0.
+ *   arg[3] lam: 23x1, nnz 23 [N per unit of Phi] multipliers. Default: fourbar_3d_lam0.
+ *   arg[4] u: 0x1, nnz 0 inputs. Default: zeros.
+ *   arg[5] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] P: 1x1, nnz 1 [W] v^T (F + grad V) + dV/dt + lam^T Phi_t.
+ */
+#define FOURBAR_3D_STEP_POWER_IN_T_NNZ 1
+#define FOURBAR_3D_STEP_POWER_IN_Q_NNZ 24
+#define FOURBAR_3D_STEP_POWER_IN_V_NNZ 24
+#define FOURBAR_3D_STEP_POWER_IN_LAM_NNZ 23
+#define FOURBAR_3D_STEP_POWER_IN_U_NNZ 0
+#define FOURBAR_3D_STEP_POWER_IN_P_NNZ 0
+#define FOURBAR_3D_STEP_POWER_OUT_P_NNZ 1
+
+/* ---- fourbar_3d_step_outputs ----------------------------------------------------
+ * Stepper: derived quantities of one trajectory sample
+ * In fourbar_3d_kernels_0.c; 602 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_3d_t0.
+ *   arg[1] q: 24x1, nnz 24 [m] coordinates. Default: fourbar_3d_q0.
+ *   arg[2] v: 24x1, nnz 24 [m/s] coordinate rates. Default: fourbar_3d_v0.
+ *   arg[3] lam: 23x1, nnz 23 [N per unit of Phi] multipliers. Default: fourbar_3d_lam0.
+ *   arg[4] u: 0x1, nnz 0 inputs. Default: zeros.
+ *   arg[5] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] y: 8x1, nnz 8 [J; J; m^2; m^2/s; W; m] [T; V; max|Phi|; max|A v + Phi_t|; P; marker positions, column-major].
+ */
+#define FOURBAR_3D_STEP_OUTPUTS_IN_T_NNZ 1
+#define FOURBAR_3D_STEP_OUTPUTS_IN_Q_NNZ 24
+#define FOURBAR_3D_STEP_OUTPUTS_IN_V_NNZ 24
+#define FOURBAR_3D_STEP_OUTPUTS_IN_LAM_NNZ 23
+#define FOURBAR_3D_STEP_OUTPUTS_IN_U_NNZ 0
+#define FOURBAR_3D_STEP_OUTPUTS_IN_P_NNZ 0
+#define FOURBAR_3D_STEP_OUTPUTS_OUT_Y_NNZ 8
+
 #ifdef __cplusplus
 } /* extern "C" */
 #endif

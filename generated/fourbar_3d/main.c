@@ -134,6 +134,28 @@ static const casadi_real *const defaults_step_solve[] = {
   0,
   0,
   0};
+static const casadi_real *const defaults_step_project[] = {
+  fourbar_3d_t0,
+  fourbar_3d_q0,
+  fourbar_3d_v0,
+  0,
+  0};
+static const casadi_real *const defaults_step_power[] = {
+  fourbar_3d_t0,
+  fourbar_3d_q0,
+  fourbar_3d_v0,
+  fourbar_3d_lam0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_outputs[] = {
+  fourbar_3d_t0,
+  fourbar_3d_q0,
+  fourbar_3d_v0,
+  fourbar_3d_lam0,
+  0,
+  0,
+  0};
 
 static const kernel kernels[] = {
   {"phi", fourbar_3d_phi, fourbar_3d_phi_work, fourbar_3d_phi_n_in, fourbar_3d_phi_n_out,
@@ -208,6 +230,18 @@ static const kernel kernels[] = {
    fourbar_3d_step_solve_name_in, fourbar_3d_step_solve_name_out, fourbar_3d_step_solve_sparsity_in, fourbar_3d_step_solve_sparsity_out,
    fourbar_3d_step_solve_checkout, fourbar_3d_step_solve_release, fourbar_3d_step_solve_incref, fourbar_3d_step_solve_decref,
    defaults_step_solve},
+  {"step_project", fourbar_3d_step_project, fourbar_3d_step_project_work, fourbar_3d_step_project_n_in, fourbar_3d_step_project_n_out,
+   fourbar_3d_step_project_name_in, fourbar_3d_step_project_name_out, fourbar_3d_step_project_sparsity_in, fourbar_3d_step_project_sparsity_out,
+   fourbar_3d_step_project_checkout, fourbar_3d_step_project_release, fourbar_3d_step_project_incref, fourbar_3d_step_project_decref,
+   defaults_step_project},
+  {"step_power", fourbar_3d_step_power, fourbar_3d_step_power_work, fourbar_3d_step_power_n_in, fourbar_3d_step_power_n_out,
+   fourbar_3d_step_power_name_in, fourbar_3d_step_power_name_out, fourbar_3d_step_power_sparsity_in, fourbar_3d_step_power_sparsity_out,
+   fourbar_3d_step_power_checkout, fourbar_3d_step_power_release, fourbar_3d_step_power_incref, fourbar_3d_step_power_decref,
+   defaults_step_power},
+  {"step_outputs", fourbar_3d_step_outputs, fourbar_3d_step_outputs_work, fourbar_3d_step_outputs_n_in, fourbar_3d_step_outputs_n_out,
+   fourbar_3d_step_outputs_name_in, fourbar_3d_step_outputs_name_out, fourbar_3d_step_outputs_sparsity_in, fourbar_3d_step_outputs_sparsity_out,
+   fourbar_3d_step_outputs_checkout, fourbar_3d_step_outputs_release, fourbar_3d_step_outputs_incref, fourbar_3d_step_outputs_decref,
+   defaults_step_outputs},
 };
 
 static const size_t n_kernels = sizeof(kernels) / sizeof(kernels[0]);

@@ -407,6 +407,69 @@ extern const casadi_real fourbar_planar_gravity[2];
 #define FOURBAR_PLANAR_STEP_SOLVE_IN_R_NNZ 11
 #define FOURBAR_PLANAR_STEP_SOLVE_OUT_X_NNZ 11
 
+/* ---- fourbar_planar_step_project ----------------------------------------------------
+ * Stepper: KKT matrix and constraint residuals for the projection onto both constraint levels
+ * In fourbar_planar_kernels_0.c; 133 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_planar_t0.
+ *   arg[1] q: 6x1, nnz 6 [m] coordinates. Default: fourbar_planar_q0.
+ *   arg[2] v: 6x1, nnz 6 [m/s] coordinate rates. Default: fourbar_planar_v0.
+ *   arg[3] p: 1x1, nnz 1 parameters. Default: fourbar_planar_p0.
+ * Outputs:
+ *   res[0] K: 11x11, nnz 46 (sparse) [[M, A^T], [A, 0]] in the pattern of step_newton's K.
+ *   res[1] phi: 5x1, nnz 5 [m^2] Phi(t, q).
+ *   res[2] phidot: 5x1, nnz 5 [m^2/s] A(t, q) v + Phi_t(t, q).
+ */
+#define FOURBAR_PLANAR_STEP_PROJECT_IN_T_NNZ 1
+#define FOURBAR_PLANAR_STEP_PROJECT_IN_Q_NNZ 6
+#define FOURBAR_PLANAR_STEP_PROJECT_IN_V_NNZ 6
+#define FOURBAR_PLANAR_STEP_PROJECT_IN_P_NNZ 1
+#define FOURBAR_PLANAR_STEP_PROJECT_OUT_K_NNZ 46
+#define FOURBAR_PLANAR_STEP_PROJECT_OUT_PHI_NNZ 5
+#define FOURBAR_PLANAR_STEP_PROJECT_OUT_PHIDOT_NNZ 5
+
+/* ---- fourbar_planar_step_power ----------------------------------------------------
+ * Stepper: power of the non-conservative forces and drives, dE/dt
+ * In fourbar_planar_kernels_0.c; 134 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_planar_t0.
+ *   arg[1] q: 6x1, nnz 6 [m] coordinates. Default: fourbar_planar_q0.
+ *   arg[2] v: 6x1, nnz 6 [m/s] coordinate rates. Default: fourbar_planar_v0.
+ *   arg[3] lam: 5x1, nnz 5 [N per unit of Phi] multipliers. Default: fourbar_planar_lam0.
+ *   arg[4] u: 0x1, nnz 0 inputs. Default: zeros.
+ *   arg[5] p: 1x1, nnz 1 parameters. Default: fourbar_planar_p0.
+ * Outputs:
+ *   res[0] P: 1x1, nnz 1 [W] v^T (F + grad V) + dV/dt + lam^T Phi_t.
+ */
+#define FOURBAR_PLANAR_STEP_POWER_IN_T_NNZ 1
+#define FOURBAR_PLANAR_STEP_POWER_IN_Q_NNZ 6
+#define FOURBAR_PLANAR_STEP_POWER_IN_V_NNZ 6
+#define FOURBAR_PLANAR_STEP_POWER_IN_LAM_NNZ 5
+#define FOURBAR_PLANAR_STEP_POWER_IN_U_NNZ 0
+#define FOURBAR_PLANAR_STEP_POWER_IN_P_NNZ 1
+#define FOURBAR_PLANAR_STEP_POWER_OUT_P_NNZ 1
+
+/* ---- fourbar_planar_step_outputs ----------------------------------------------------
+ * Stepper: derived quantities of one trajectory sample
+ * In fourbar_planar_kernels_0.c; 291 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_planar_t0.
+ *   arg[1] q: 6x1, nnz 6 [m] coordinates. Default: fourbar_planar_q0.
+ *   arg[2] v: 6x1, nnz 6 [m/s] coordinate rates. Default: fourbar_planar_v0.
+ *   arg[3] lam: 5x1, nnz 5 [N per unit of Phi] multipliers. Default: fourbar_planar_lam0.
+ *   arg[4] u: 0x1, nnz 0 inputs. Default: zeros.
+ *   arg[5] p: 1x1, nnz 1 parameters. Default: fourbar_planar_p0.
+ * Outputs:
+ *   res[0] y: 7x1, nnz 7 [J; J; m^2; m^2/s; W; m] [T; V; max|Phi|; max|A v + Phi_t|; P; marker positions, column-major].
+ */
+#define FOURBAR_PLANAR_STEP_OUTPUTS_IN_T_NNZ 1
+#define FOURBAR_PLANAR_STEP_OUTPUTS_IN_Q_NNZ 6
+#define FOURBAR_PLANAR_STEP_OUTPUTS_IN_V_NNZ 6
+#define FOURBAR_PLANAR_STEP_OUTPUTS_IN_LAM_NNZ 5
+#define FOURBAR_PLANAR_STEP_OUTPUTS_IN_U_NNZ 0
+#define FOURBAR_PLANAR_STEP_OUTPUTS_IN_P_NNZ 1
+#define FOURBAR_PLANAR_STEP_OUTPUTS_OUT_Y_NNZ 7
+
 #ifdef __cplusplus
 } /* extern "C" */
 #endif

@@ -405,6 +405,69 @@ extern const casadi_real heavy_top_gravity[3];
 #define HEAVY_TOP_STEP_SOLVE_IN_R_NNZ 15
 #define HEAVY_TOP_STEP_SOLVE_OUT_X_NNZ 15
 
+/* ---- heavy_top_step_project ----------------------------------------------------
+ * Stepper: KKT matrix and constraint residuals for the projection onto both constraint levels
+ * In heavy_top_kernels_0.c; 186 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: heavy_top_t0.
+ *   arg[1] q: 9x1, nnz 9 [m] coordinates. Default: heavy_top_q0.
+ *   arg[2] v: 9x1, nnz 9 [m/s] coordinate rates. Default: heavy_top_v0.
+ *   arg[3] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] K: 15x15, nnz 63 (sparse) [[M, A^T], [A, 0]] in the pattern of step_newton's K.
+ *   res[1] phi: 6x1, nnz 6 [m^2] Phi(t, q).
+ *   res[2] phidot: 6x1, nnz 6 [m^2/s] A(t, q) v + Phi_t(t, q).
+ */
+#define HEAVY_TOP_STEP_PROJECT_IN_T_NNZ 1
+#define HEAVY_TOP_STEP_PROJECT_IN_Q_NNZ 9
+#define HEAVY_TOP_STEP_PROJECT_IN_V_NNZ 9
+#define HEAVY_TOP_STEP_PROJECT_IN_P_NNZ 0
+#define HEAVY_TOP_STEP_PROJECT_OUT_K_NNZ 63
+#define HEAVY_TOP_STEP_PROJECT_OUT_PHI_NNZ 6
+#define HEAVY_TOP_STEP_PROJECT_OUT_PHIDOT_NNZ 6
+
+/* ---- heavy_top_step_power ----------------------------------------------------
+ * Stepper: power of the non-conservative forces and drives, dE/dt
+ * In heavy_top_kernels_0.c; 2 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: heavy_top_t0.
+ *   arg[1] q: 9x1, nnz 9 [m] coordinates. Default: heavy_top_q0.
+ *   arg[2] v: 9x1, nnz 9 [m/s] coordinate rates. Default: heavy_top_v0.
+ *   arg[3] lam: 6x1, nnz 6 [N per unit of Phi] multipliers. Default: heavy_top_lam0.
+ *   arg[4] u: 0x1, nnz 0 inputs. Default: zeros.
+ *   arg[5] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] P: 1x1, nnz 1 [W] v^T (F + grad V) + dV/dt + lam^T Phi_t.
+ */
+#define HEAVY_TOP_STEP_POWER_IN_T_NNZ 1
+#define HEAVY_TOP_STEP_POWER_IN_Q_NNZ 9
+#define HEAVY_TOP_STEP_POWER_IN_V_NNZ 9
+#define HEAVY_TOP_STEP_POWER_IN_LAM_NNZ 6
+#define HEAVY_TOP_STEP_POWER_IN_U_NNZ 0
+#define HEAVY_TOP_STEP_POWER_IN_P_NNZ 0
+#define HEAVY_TOP_STEP_POWER_OUT_P_NNZ 1
+
+/* ---- heavy_top_step_outputs ----------------------------------------------------
+ * Stepper: derived quantities of one trajectory sample
+ * In heavy_top_kernels_0.c; 178 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: heavy_top_t0.
+ *   arg[1] q: 9x1, nnz 9 [m] coordinates. Default: heavy_top_q0.
+ *   arg[2] v: 9x1, nnz 9 [m/s] coordinate rates. Default: heavy_top_v0.
+ *   arg[3] lam: 6x1, nnz 6 [N per unit of Phi] multipliers. Default: heavy_top_lam0.
+ *   arg[4] u: 0x1, nnz 0 inputs. Default: zeros.
+ *   arg[5] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] y: 8x1, nnz 8 [J; J; m^2; m^2/s; W; m] [T; V; max|Phi|; max|A v + Phi_t|; P; marker positions, column-major].
+ */
+#define HEAVY_TOP_STEP_OUTPUTS_IN_T_NNZ 1
+#define HEAVY_TOP_STEP_OUTPUTS_IN_Q_NNZ 9
+#define HEAVY_TOP_STEP_OUTPUTS_IN_V_NNZ 9
+#define HEAVY_TOP_STEP_OUTPUTS_IN_LAM_NNZ 6
+#define HEAVY_TOP_STEP_OUTPUTS_IN_U_NNZ 0
+#define HEAVY_TOP_STEP_OUTPUTS_IN_P_NNZ 0
+#define HEAVY_TOP_STEP_OUTPUTS_OUT_Y_NNZ 8
+
 #ifdef __cplusplus
 } /* extern "C" */
 #endif

@@ -134,6 +134,28 @@ static const casadi_real *const defaults_step_solve[] = {
   0,
   0,
   0};
+static const casadi_real *const defaults_step_project[] = {
+  heavy_top_t0,
+  heavy_top_q0,
+  heavy_top_v0,
+  0,
+  0};
+static const casadi_real *const defaults_step_power[] = {
+  heavy_top_t0,
+  heavy_top_q0,
+  heavy_top_v0,
+  heavy_top_lam0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_outputs[] = {
+  heavy_top_t0,
+  heavy_top_q0,
+  heavy_top_v0,
+  heavy_top_lam0,
+  0,
+  0,
+  0};
 
 static const kernel kernels[] = {
   {"phi", heavy_top_phi, heavy_top_phi_work, heavy_top_phi_n_in, heavy_top_phi_n_out,
@@ -208,6 +230,18 @@ static const kernel kernels[] = {
    heavy_top_step_solve_name_in, heavy_top_step_solve_name_out, heavy_top_step_solve_sparsity_in, heavy_top_step_solve_sparsity_out,
    heavy_top_step_solve_checkout, heavy_top_step_solve_release, heavy_top_step_solve_incref, heavy_top_step_solve_decref,
    defaults_step_solve},
+  {"step_project", heavy_top_step_project, heavy_top_step_project_work, heavy_top_step_project_n_in, heavy_top_step_project_n_out,
+   heavy_top_step_project_name_in, heavy_top_step_project_name_out, heavy_top_step_project_sparsity_in, heavy_top_step_project_sparsity_out,
+   heavy_top_step_project_checkout, heavy_top_step_project_release, heavy_top_step_project_incref, heavy_top_step_project_decref,
+   defaults_step_project},
+  {"step_power", heavy_top_step_power, heavy_top_step_power_work, heavy_top_step_power_n_in, heavy_top_step_power_n_out,
+   heavy_top_step_power_name_in, heavy_top_step_power_name_out, heavy_top_step_power_sparsity_in, heavy_top_step_power_sparsity_out,
+   heavy_top_step_power_checkout, heavy_top_step_power_release, heavy_top_step_power_incref, heavy_top_step_power_decref,
+   defaults_step_power},
+  {"step_outputs", heavy_top_step_outputs, heavy_top_step_outputs_work, heavy_top_step_outputs_n_in, heavy_top_step_outputs_n_out,
+   heavy_top_step_outputs_name_in, heavy_top_step_outputs_name_out, heavy_top_step_outputs_sparsity_in, heavy_top_step_outputs_sparsity_out,
+   heavy_top_step_outputs_checkout, heavy_top_step_outputs_release, heavy_top_step_outputs_incref, heavy_top_step_outputs_decref,
+   defaults_step_outputs},
 };
 
 static const size_t n_kernels = sizeof(kernels) / sizeof(kernels[0]);

@@ -134,6 +134,28 @@ static const casadi_real *const defaults_step_solve[] = {
   0,
   0,
   0};
+static const casadi_real *const defaults_step_project[] = {
+  slider_crank_t0,
+  slider_crank_q0,
+  slider_crank_v0,
+  slider_crank_p0,
+  0};
+static const casadi_real *const defaults_step_power[] = {
+  slider_crank_t0,
+  slider_crank_q0,
+  slider_crank_v0,
+  slider_crank_lam0,
+  0,
+  slider_crank_p0,
+  0};
+static const casadi_real *const defaults_step_outputs[] = {
+  slider_crank_t0,
+  slider_crank_q0,
+  slider_crank_v0,
+  slider_crank_lam0,
+  0,
+  slider_crank_p0,
+  0};
 
 static const kernel kernels[] = {
   {"phi", slider_crank_phi, slider_crank_phi_work, slider_crank_phi_n_in, slider_crank_phi_n_out,
@@ -208,6 +230,18 @@ static const kernel kernels[] = {
    slider_crank_step_solve_name_in, slider_crank_step_solve_name_out, slider_crank_step_solve_sparsity_in, slider_crank_step_solve_sparsity_out,
    slider_crank_step_solve_checkout, slider_crank_step_solve_release, slider_crank_step_solve_incref, slider_crank_step_solve_decref,
    defaults_step_solve},
+  {"step_project", slider_crank_step_project, slider_crank_step_project_work, slider_crank_step_project_n_in, slider_crank_step_project_n_out,
+   slider_crank_step_project_name_in, slider_crank_step_project_name_out, slider_crank_step_project_sparsity_in, slider_crank_step_project_sparsity_out,
+   slider_crank_step_project_checkout, slider_crank_step_project_release, slider_crank_step_project_incref, slider_crank_step_project_decref,
+   defaults_step_project},
+  {"step_power", slider_crank_step_power, slider_crank_step_power_work, slider_crank_step_power_n_in, slider_crank_step_power_n_out,
+   slider_crank_step_power_name_in, slider_crank_step_power_name_out, slider_crank_step_power_sparsity_in, slider_crank_step_power_sparsity_out,
+   slider_crank_step_power_checkout, slider_crank_step_power_release, slider_crank_step_power_incref, slider_crank_step_power_decref,
+   defaults_step_power},
+  {"step_outputs", slider_crank_step_outputs, slider_crank_step_outputs_work, slider_crank_step_outputs_n_in, slider_crank_step_outputs_n_out,
+   slider_crank_step_outputs_name_in, slider_crank_step_outputs_name_out, slider_crank_step_outputs_sparsity_in, slider_crank_step_outputs_sparsity_out,
+   slider_crank_step_outputs_checkout, slider_crank_step_outputs_release, slider_crank_step_outputs_incref, slider_crank_step_outputs_decref,
+   defaults_step_outputs},
 };
 
 static const size_t n_kernels = sizeof(kernels) / sizeof(kernels[0]);

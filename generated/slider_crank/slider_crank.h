@@ -407,6 +407,69 @@ extern const casadi_real slider_crank_gravity[2];
 #define SLIDER_CRANK_STEP_SOLVE_IN_R_NNZ 20
 #define SLIDER_CRANK_STEP_SOLVE_OUT_X_NNZ 20
 
+/* ---- slider_crank_step_project ----------------------------------------------------
+ * Stepper: KKT matrix and constraint residuals for the projection onto both constraint levels
+ * In slider_crank_kernels_0.c; 236 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: slider_crank_t0.
+ *   arg[1] q: 10x1, nnz 10 [m] coordinates. Default: slider_crank_q0.
+ *   arg[2] v: 10x1, nnz 10 [m/s] coordinate rates. Default: slider_crank_v0.
+ *   arg[3] p: 1x1, nnz 1 parameters. Default: slider_crank_p0.
+ * Outputs:
+ *   res[0] K: 20x20, nnz 68 (sparse) [[M, A^T], [A, 0]] in the pattern of step_newton's K.
+ *   res[1] phi: 10x1, nnz 10 [m^2] Phi(t, q).
+ *   res[2] phidot: 10x1, nnz 10 [m^2/s] A(t, q) v + Phi_t(t, q).
+ */
+#define SLIDER_CRANK_STEP_PROJECT_IN_T_NNZ 1
+#define SLIDER_CRANK_STEP_PROJECT_IN_Q_NNZ 10
+#define SLIDER_CRANK_STEP_PROJECT_IN_V_NNZ 10
+#define SLIDER_CRANK_STEP_PROJECT_IN_P_NNZ 1
+#define SLIDER_CRANK_STEP_PROJECT_OUT_K_NNZ 68
+#define SLIDER_CRANK_STEP_PROJECT_OUT_PHI_NNZ 10
+#define SLIDER_CRANK_STEP_PROJECT_OUT_PHIDOT_NNZ 10
+
+/* ---- slider_crank_step_power ----------------------------------------------------
+ * Stepper: power of the non-conservative forces and drives, dE/dt
+ * In slider_crank_kernels_0.c; 79 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: slider_crank_t0.
+ *   arg[1] q: 10x1, nnz 10 [m] coordinates. Default: slider_crank_q0.
+ *   arg[2] v: 10x1, nnz 10 [m/s] coordinate rates. Default: slider_crank_v0.
+ *   arg[3] lam: 10x1, nnz 10 [N per unit of Phi] multipliers. Default: slider_crank_lam0.
+ *   arg[4] u: 0x1, nnz 0 inputs. Default: zeros.
+ *   arg[5] p: 1x1, nnz 1 parameters. Default: slider_crank_p0.
+ * Outputs:
+ *   res[0] P: 1x1, nnz 1 [W] v^T (F + grad V) + dV/dt + lam^T Phi_t.
+ */
+#define SLIDER_CRANK_STEP_POWER_IN_T_NNZ 1
+#define SLIDER_CRANK_STEP_POWER_IN_Q_NNZ 10
+#define SLIDER_CRANK_STEP_POWER_IN_V_NNZ 10
+#define SLIDER_CRANK_STEP_POWER_IN_LAM_NNZ 10
+#define SLIDER_CRANK_STEP_POWER_IN_U_NNZ 0
+#define SLIDER_CRANK_STEP_POWER_IN_P_NNZ 1
+#define SLIDER_CRANK_STEP_POWER_OUT_P_NNZ 1
+
+/* ---- slider_crank_step_outputs ----------------------------------------------------
+ * Stepper: derived quantities of one trajectory sample
+ * In slider_crank_kernels_0.c; 326 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: slider_crank_t0.
+ *   arg[1] q: 10x1, nnz 10 [m] coordinates. Default: slider_crank_q0.
+ *   arg[2] v: 10x1, nnz 10 [m/s] coordinate rates. Default: slider_crank_v0.
+ *   arg[3] lam: 10x1, nnz 10 [N per unit of Phi] multipliers. Default: slider_crank_lam0.
+ *   arg[4] u: 0x1, nnz 0 inputs. Default: zeros.
+ *   arg[5] p: 1x1, nnz 1 parameters. Default: slider_crank_p0.
+ * Outputs:
+ *   res[0] y: 7x1, nnz 7 [J; J; m^2; m^2/s; W; m] [T; V; max|Phi|; max|A v + Phi_t|; P; marker positions, column-major].
+ */
+#define SLIDER_CRANK_STEP_OUTPUTS_IN_T_NNZ 1
+#define SLIDER_CRANK_STEP_OUTPUTS_IN_Q_NNZ 10
+#define SLIDER_CRANK_STEP_OUTPUTS_IN_V_NNZ 10
+#define SLIDER_CRANK_STEP_OUTPUTS_IN_LAM_NNZ 10
+#define SLIDER_CRANK_STEP_OUTPUTS_IN_U_NNZ 0
+#define SLIDER_CRANK_STEP_OUTPUTS_IN_P_NNZ 1
+#define SLIDER_CRANK_STEP_OUTPUTS_OUT_Y_NNZ 7
+
 #ifdef __cplusplus
 } /* extern "C" */
 #endif

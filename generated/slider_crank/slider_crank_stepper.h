@@ -54,6 +54,18 @@ extern "C" {
 #define SLIDER_CRANK_STEP_KERNEL 4          /* a generated kernel returned an error */
 #define SLIDER_CRANK_STEP_BAD_INPUT 5       /* h <= 0, a non-finite time or step count, bad
                                              options, or out of memory */
+#define SLIDER_CRANK_STEP_TOO_MANY_STEPS 6  /* adaptive: more than max_steps step attempts in
+                                             one output interval */
+#define SLIDER_CRANK_STEP_TOO_SMALL 7       /* adaptive: the step fell below 1e-13 (|t| + dt) */
+
+/* Columns of a row of stats_out (slider_crank_simulate_stats, slider_crank_simulate_adaptive):
+ * steps, Newton iterations, step splits (fixed) or rejected steps (adaptive), local error
+ * estimate in q (m) and in v (m/s), work W (J) of the non-conservative forces and drives
+ * since t0 (the integral of slider_crank_step_power; 0 unless track_work). */
+#define SLIDER_CRANK_STEP_NSTATS 6
+/* Values per sample of slider_crank_outputs: T, V (J), max |Phi| (m^2), max |A v + Phi_t|
+ * (m^2/s), P (W), then the marker positions (m), 2 per marker. */
+#define SLIDER_CRANK_STEP_NOUT 7
 
 /* Deepest step splitting the workspace allows. */
 #define SLIDER_CRANK_STEP_MAX_HALVINGS 10
@@ -95,6 +107,50 @@ int slider_crank_simulate(const casadi_real *q0, const casadi_real *v0, casadi_r
                           const casadi_real *p, casadi_real *q_out, casadi_real *v_out,
                           casadi_real *lam_out, long *iter_out, const slider_crank_step_options *options,
                           long *steps_done, long *splits);
+
+/* As slider_crank_simulate, with per-row statistics and error estimates.  lam0: multipliers at
+ * t0 (nc values, NULL for zeros; used for the work only).  stats_out (SLIDER_CRANK_STEP_NSTATS
+ * values per row, may be NULL): see above.  estimate != 0: a shadow run with steps of 2h
+ * from the same start (about half the work again) gives the global error estimate
+ * |y_h - y_2h| / 3 (RATTLE is of order 2) after every second step; the error columns hold
+ * the latest one (-1 before the first, -2 once a step of 2h failed: no estimate from
+ * there on).  track_work != 0: W accumulates the trapezoidal rule of P over the steps. */
+int slider_crank_simulate_stats(const casadi_real *q0, const casadi_real *v0, const casadi_real *lam0,
+                                casadi_real t0, casadi_real h, long n_steps, long every,
+                                const casadi_real *u, long u_stride, const casadi_real *p,
+                                casadi_real *q_out, casadi_real *v_out, casadi_real *lam_out,
+                                casadi_real *stats_out, const slider_crank_step_options *options,
+                                int estimate, int track_work, long *steps_done, long *splits);
+
+/* Error-controlled steps over n_out output intervals of dt from (q0, v0, lam0) at t0.  Each
+ * step of size H is taken once whole and once as two halves; (halves - whole) / 3 estimates
+ * the local error of the halves, and the step is accepted if every component of q and v
+ * is within atol + rtol max(|y_i|, |y_i+|).  An accepted step continues from the halves, or
+ * with extrapolate != 0 from the Richardson extrapolation halves + (halves - whole) / 3
+ * (order 4: RATTLE is symmetric) projected onto both constraint levels in the mass metric.
+ * Next step H (0.2 .. 4) * 0.9 e^(-1/3) for the relative error e; steps end on every output
+ * time.  Newton failures reject the step (H / 4) instead of splitting it.  u: samples at
+ * the output times (row k at u + k * u_stride; n_out + 1 rows if hold_linear, then the
+ * input of a step is interpolated at its midpoint, else row k is held over interval k).
+ * h0: first step (<= 0: dt).  max_steps: step attempts allowed per output interval.
+ * Outputs as in slider_crank_simulate_stats, one row per output time (the error columns sum
+ * the estimates of the row's steps); *rows_done: rows written; *h_next: the step it would
+ * take next.  Returns a status code. */
+int slider_crank_simulate_adaptive(const casadi_real *q0, const casadi_real *v0, const casadi_real *lam0,
+                                   casadi_real t0, casadi_real dt, long n_out, const casadi_real *u,
+                                   long u_stride, int hold_linear, const casadi_real *p,
+                                   casadi_real rtol, casadi_real atol, casadi_real h0, int extrapolate,
+                                   long max_steps, int track_work, casadi_real *q_out,
+                                   casadi_real *v_out, casadi_real *lam_out, casadi_real *stats_out,
+                                   const slider_crank_step_options *options, long *rows_done,
+                                   casadi_real *h_next);
+
+/* Derived quantities of n samples (t[k], row k of q, v (nq values), lam (nc values, or
+ * NULL), u (at u + k * u_stride, or NULL)): row k of y gets SLIDER_CRANK_STEP_NOUT values (see
+ * above).  Returns a status code. */
+int slider_crank_outputs(long n, const casadi_real *t, const casadi_real *q, const casadi_real *v,
+                         const casadi_real *lam, const casadi_real *u, long u_stride, const casadi_real *p,
+                         casadi_real *y);
 
 #ifdef __cplusplus
 } /* extern "C" */

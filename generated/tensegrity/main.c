@@ -134,6 +134,28 @@ static const casadi_real *const defaults_step_solve[] = {
   0,
   0,
   0};
+static const casadi_real *const defaults_step_project[] = {
+  tensegrity_t0,
+  tensegrity_q0,
+  tensegrity_v0,
+  tensegrity_p0,
+  0};
+static const casadi_real *const defaults_step_power[] = {
+  tensegrity_t0,
+  tensegrity_q0,
+  tensegrity_v0,
+  tensegrity_lam0,
+  0,
+  tensegrity_p0,
+  0};
+static const casadi_real *const defaults_step_outputs[] = {
+  tensegrity_t0,
+  tensegrity_q0,
+  tensegrity_v0,
+  tensegrity_lam0,
+  0,
+  tensegrity_p0,
+  0};
 
 static const kernel kernels[] = {
   {"phi", tensegrity_phi, tensegrity_phi_work, tensegrity_phi_n_in, tensegrity_phi_n_out,
@@ -208,6 +230,18 @@ static const kernel kernels[] = {
    tensegrity_step_solve_name_in, tensegrity_step_solve_name_out, tensegrity_step_solve_sparsity_in, tensegrity_step_solve_sparsity_out,
    tensegrity_step_solve_checkout, tensegrity_step_solve_release, tensegrity_step_solve_incref, tensegrity_step_solve_decref,
    defaults_step_solve},
+  {"step_project", tensegrity_step_project, tensegrity_step_project_work, tensegrity_step_project_n_in, tensegrity_step_project_n_out,
+   tensegrity_step_project_name_in, tensegrity_step_project_name_out, tensegrity_step_project_sparsity_in, tensegrity_step_project_sparsity_out,
+   tensegrity_step_project_checkout, tensegrity_step_project_release, tensegrity_step_project_incref, tensegrity_step_project_decref,
+   defaults_step_project},
+  {"step_power", tensegrity_step_power, tensegrity_step_power_work, tensegrity_step_power_n_in, tensegrity_step_power_n_out,
+   tensegrity_step_power_name_in, tensegrity_step_power_name_out, tensegrity_step_power_sparsity_in, tensegrity_step_power_sparsity_out,
+   tensegrity_step_power_checkout, tensegrity_step_power_release, tensegrity_step_power_incref, tensegrity_step_power_decref,
+   defaults_step_power},
+  {"step_outputs", tensegrity_step_outputs, tensegrity_step_outputs_work, tensegrity_step_outputs_n_in, tensegrity_step_outputs_n_out,
+   tensegrity_step_outputs_name_in, tensegrity_step_outputs_name_out, tensegrity_step_outputs_sparsity_in, tensegrity_step_outputs_sparsity_out,
+   tensegrity_step_outputs_checkout, tensegrity_step_outputs_release, tensegrity_step_outputs_incref, tensegrity_step_outputs_decref,
+   defaults_step_outputs},
 };
 
 static const size_t n_kernels = sizeof(kernels) / sizeof(kernels[0]);

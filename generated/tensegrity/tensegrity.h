@@ -408,6 +408,69 @@ extern const casadi_real tensegrity_gravity[3];
 #define TENSEGRITY_STEP_SOLVE_IN_R_NNZ 24
 #define TENSEGRITY_STEP_SOLVE_OUT_X_NNZ 24
 
+/* ---- tensegrity_step_project ----------------------------------------------------
+ * Stepper: KKT matrix and constraint residuals for the projection onto both constraint levels
+ * In tensegrity_kernels_1.c; 421 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: tensegrity_t0.
+ *   arg[1] q: 18x1, nnz 18 [m] coordinates. Default: tensegrity_q0.
+ *   arg[2] v: 18x1, nnz 18 [m/s] coordinate rates. Default: tensegrity_v0.
+ *   arg[3] p: 3x1, nnz 3 parameters. Default: tensegrity_p0.
+ * Outputs:
+ *   res[0] K: 24x24, nnz 276 (sparse) [[M, A^T], [A, 0]] in the pattern of step_newton's K.
+ *   res[1] phi: 6x1, nnz 6 [m^2] Phi(t, q).
+ *   res[2] phidot: 6x1, nnz 6 [m^2/s] A(t, q) v + Phi_t(t, q).
+ */
+#define TENSEGRITY_STEP_PROJECT_IN_T_NNZ 1
+#define TENSEGRITY_STEP_PROJECT_IN_Q_NNZ 18
+#define TENSEGRITY_STEP_PROJECT_IN_V_NNZ 18
+#define TENSEGRITY_STEP_PROJECT_IN_P_NNZ 3
+#define TENSEGRITY_STEP_PROJECT_OUT_K_NNZ 276
+#define TENSEGRITY_STEP_PROJECT_OUT_PHI_NNZ 6
+#define TENSEGRITY_STEP_PROJECT_OUT_PHIDOT_NNZ 6
+
+/* ---- tensegrity_step_power ----------------------------------------------------
+ * Stepper: power of the non-conservative forces and drives, dE/dt
+ * In tensegrity_kernels_1.c; 851 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: tensegrity_t0.
+ *   arg[1] q: 18x1, nnz 18 [m] coordinates. Default: tensegrity_q0.
+ *   arg[2] v: 18x1, nnz 18 [m/s] coordinate rates. Default: tensegrity_v0.
+ *   arg[3] lam: 6x1, nnz 6 [N per unit of Phi] multipliers. Default: tensegrity_lam0.
+ *   arg[4] u: 0x1, nnz 0 inputs. Default: zeros.
+ *   arg[5] p: 3x1, nnz 3 parameters. Default: tensegrity_p0.
+ * Outputs:
+ *   res[0] P: 1x1, nnz 1 [W] v^T (F + grad V) + dV/dt + lam^T Phi_t.
+ */
+#define TENSEGRITY_STEP_POWER_IN_T_NNZ 1
+#define TENSEGRITY_STEP_POWER_IN_Q_NNZ 18
+#define TENSEGRITY_STEP_POWER_IN_V_NNZ 18
+#define TENSEGRITY_STEP_POWER_IN_LAM_NNZ 6
+#define TENSEGRITY_STEP_POWER_IN_U_NNZ 0
+#define TENSEGRITY_STEP_POWER_IN_P_NNZ 3
+#define TENSEGRITY_STEP_POWER_OUT_P_NNZ 1
+
+/* ---- tensegrity_step_outputs ----------------------------------------------------
+ * Stepper: derived quantities of one trajectory sample
+ * In tensegrity_kernels_1.c; 1216 instructions.
+ * Inputs:
+ *   arg[0] t: 1x1, nnz 1 [s] time. Default: tensegrity_t0.
+ *   arg[1] q: 18x1, nnz 18 [m] coordinates. Default: tensegrity_q0.
+ *   arg[2] v: 18x1, nnz 18 [m/s] coordinate rates. Default: tensegrity_v0.
+ *   arg[3] lam: 6x1, nnz 6 [N per unit of Phi] multipliers. Default: tensegrity_lam0.
+ *   arg[4] u: 0x1, nnz 0 inputs. Default: zeros.
+ *   arg[5] p: 3x1, nnz 3 parameters. Default: tensegrity_p0.
+ * Outputs:
+ *   res[0] y: 8x1, nnz 8 [J; J; m^2; m^2/s; W; m] [T; V; max|Phi|; max|A v + Phi_t|; P; marker positions, column-major].
+ */
+#define TENSEGRITY_STEP_OUTPUTS_IN_T_NNZ 1
+#define TENSEGRITY_STEP_OUTPUTS_IN_Q_NNZ 18
+#define TENSEGRITY_STEP_OUTPUTS_IN_V_NNZ 18
+#define TENSEGRITY_STEP_OUTPUTS_IN_LAM_NNZ 6
+#define TENSEGRITY_STEP_OUTPUTS_IN_U_NNZ 0
+#define TENSEGRITY_STEP_OUTPUTS_IN_P_NNZ 3
+#define TENSEGRITY_STEP_OUTPUTS_OUT_Y_NNZ 8
+
 #ifdef __cplusplus
 } /* extern "C" */
 #endif

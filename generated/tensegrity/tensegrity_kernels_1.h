@@ -42,6 +42,60 @@ int tensegrity_step_solve_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, cas
 #define tensegrity_step_solve_SZ_RES 1
 #define tensegrity_step_solve_SZ_IW 0
 #define tensegrity_step_solve_SZ_W 0
+int tensegrity_step_project(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int tensegrity_step_project_checkout(void);
+void tensegrity_step_project_release(int mem);
+void tensegrity_step_project_incref(void);
+void tensegrity_step_project_decref(void);
+casadi_int tensegrity_step_project_n_in(void);
+casadi_int tensegrity_step_project_n_out(void);
+casadi_real tensegrity_step_project_default_in(casadi_int i);
+const char* tensegrity_step_project_name_in(casadi_int i);
+const char* tensegrity_step_project_name_out(casadi_int i);
+const casadi_int* tensegrity_step_project_sparsity_in(casadi_int i);
+const casadi_int* tensegrity_step_project_sparsity_out(casadi_int i);
+int tensegrity_step_project_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int tensegrity_step_project_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define tensegrity_step_project_SZ_ARG 4
+#define tensegrity_step_project_SZ_RES 3
+#define tensegrity_step_project_SZ_IW 0
+#define tensegrity_step_project_SZ_W 0
+int tensegrity_step_power(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int tensegrity_step_power_checkout(void);
+void tensegrity_step_power_release(int mem);
+void tensegrity_step_power_incref(void);
+void tensegrity_step_power_decref(void);
+casadi_int tensegrity_step_power_n_in(void);
+casadi_int tensegrity_step_power_n_out(void);
+casadi_real tensegrity_step_power_default_in(casadi_int i);
+const char* tensegrity_step_power_name_in(casadi_int i);
+const char* tensegrity_step_power_name_out(casadi_int i);
+const casadi_int* tensegrity_step_power_sparsity_in(casadi_int i);
+const casadi_int* tensegrity_step_power_sparsity_out(casadi_int i);
+int tensegrity_step_power_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int tensegrity_step_power_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define tensegrity_step_power_SZ_ARG 6
+#define tensegrity_step_power_SZ_RES 1
+#define tensegrity_step_power_SZ_IW 0
+#define tensegrity_step_power_SZ_W 0
+int tensegrity_step_outputs(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int tensegrity_step_outputs_checkout(void);
+void tensegrity_step_outputs_release(int mem);
+void tensegrity_step_outputs_incref(void);
+void tensegrity_step_outputs_decref(void);
+casadi_int tensegrity_step_outputs_n_in(void);
+casadi_int tensegrity_step_outputs_n_out(void);
+casadi_real tensegrity_step_outputs_default_in(casadi_int i);
+const char* tensegrity_step_outputs_name_in(casadi_int i);
+const char* tensegrity_step_outputs_name_out(casadi_int i);
+const casadi_int* tensegrity_step_outputs_sparsity_in(casadi_int i);
+const casadi_int* tensegrity_step_outputs_sparsity_out(casadi_int i);
+int tensegrity_step_outputs_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int tensegrity_step_outputs_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define tensegrity_step_outputs_SZ_ARG 6
+#define tensegrity_step_outputs_SZ_RES 1
+#define tensegrity_step_outputs_SZ_IW 0
+#define tensegrity_step_outputs_SZ_W 0
 void tensegrity_kernels_1_casadi_version(int* major, int* minor, int* patch);
 int tensegrity_kernels_1_casadi_int_size(void);
 int tensegrity_kernels_1_casadi_real_size(void);

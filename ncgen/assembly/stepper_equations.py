@@ -30,6 +30,14 @@ Kernels (name: inputs -> outputs; ``t`` in s, ``h`` in s):
 * ``step_velocity``: t (= t + h), q (= q⁺), w, u, p, h -> b (nq + nc), K (same pattern)
 * ``step_check``: t, q, v, p -> phi_max = ‖Φ‖∞ (m²), phidot_max = ‖A v + Φ_t‖∞ (m²/s)
 * ``step_solve``: K, r -> x = K⁻¹ r (sparse QR, generated as C; see :func:`solve_function`)
+* ``step_project``: t, q, v, p -> K = [[M, Aᵀ], [A, 0]] (same pattern), Φ, A v + Φ_t: the
+  mass-metric projection onto both constraint levels after an extrapolated step
+  (``K [Δq; μ] = [0; Φ]``, ``q ← q − Δq`` until ``|Φ|∞ ≤ tol``, then the same for ``v``)
+* ``step_power``: t, q, v, lam, u, p -> P = dE/dt = vᵀ(F + ∇V) + ∂V/∂t + λᵀΦ_t (W): the power
+  of the non-conservative forces and of the drives (rheonomic constraints), whose integral
+  closes the energy balance ``E(t) − E(t0) = W(t)``
+* ``step_outputs``: t, q, v, lam, u, p -> y = [T; V; |Φ|∞; |A v + Φ_t|∞; P; markers
+  (dim × n_markers, column-major)]: the derived quantities of a trajectory, one call per sample
 """
 from __future__ import annotations
 
@@ -42,7 +50,8 @@ from ncgen.assembly.mass import sparse_dm
 SX_QR_MAX_NNZ = 3_000
 
 #: Names of the kernels, in the order the package lists them.
-KERNELS = ("step_newton", "step_velocity", "step_check", "step_solve")
+KERNELS = ("step_newton", "step_velocity", "step_check", "step_solve", "step_project", "step_power",
+           "step_outputs")
 
 DOCS = {
     "step_newton": {
@@ -70,6 +79,23 @@ DOCS = {
         "purpose": "Stepper: x = K^-1 r by sparse Householder QR (AMD column order)",
         "inputs": {"K": ("KKT matrix in the stepper's pattern", ""), "r": ("right-hand side", "")},
         "outputs": {"x": ("solution", "")}},
+    "step_project": {
+        "purpose": "Stepper: KKT matrix and constraint residuals for the projection onto both constraint levels",
+        "inputs": {"t": ("time", "s"), "q": ("coordinates", "m"), "v": ("coordinate rates", "m/s"),
+                   "p": ("parameters", "")},
+        "outputs": {"K": ("[[M, A^T], [A, 0]] in the pattern of step_newton's K", ""),
+                    "phi": ("Phi(t, q)", "m^2"), "phidot": ("A(t, q) v + Phi_t(t, q)", "m^2/s")}},
+    "step_power": {
+        "purpose": "Stepper: power of the non-conservative forces and drives, dE/dt",
+        "inputs": {"t": ("time", "s"), "q": ("coordinates", "m"), "v": ("coordinate rates", "m/s"),
+                   "lam": ("multipliers", "N per unit of Phi"), "u": ("inputs", ""), "p": ("parameters", "")},
+        "outputs": {"P": ("v^T (F + grad V) + dV/dt + lam^T Phi_t", "W")}},
+    "step_outputs": {
+        "purpose": "Stepper: derived quantities of one trajectory sample",
+        "inputs": {"t": ("time", "s"), "q": ("coordinates", "m"), "v": ("coordinate rates", "m/s"),
+                   "lam": ("multipliers", "N per unit of Phi"), "u": ("inputs", ""), "p": ("parameters", "")},
+        "outputs": {"y": ("[T; V; max|Phi|; max|A v + Phi_t|; P; marker positions, column-major]",
+                          "J; J; m^2; m^2/s; W; m")}},
 }
 
 
@@ -96,7 +122,40 @@ def stepper_functions(model, primitives: dict[str, ca.Function] | None = None) -
     velocity = ca.Function("step_velocity", [t, q, w, u, p, h], [b, K2],
                            ["t", "q", "w", "u", "p", "h"], ["b", "K"])
 
-    return [newton, velocity, check_function(model, primitives), solve_function(K.sparsity())]
+    phi = f["phi"](t, q, p)
+    project = ca.Function("step_project", [t, q, v, p],
+                          [K2, ca.densify(phi), ca.densify(ca.mtimes(A, v) + f["phi_t"](t, q, p))],
+                          ["t", "q", "v", "p"], ["K", "phi", "phidot"])
+    check = check_function(model, primitives)
+    power = power_function(model)
+    return [newton, velocity, check, solve_function(K.sparsity()), project, power,
+            outputs_function(model, check, power)]
+
+
+def power_function(model) -> ca.Function:
+    """``step_power``: ``P = vᵀ(F + ∇V) + ∂V/∂t + λᵀΦ_t`` (W).  Along a motion
+    ``dE/dt = vᵀ M a + ∇V·v + ∂V/∂t`` with ``M a = F − Aᵀλ`` and ``A v = −Φ_t``, so ``P`` is
+    exactly the rate of change of ``E = T + V``; it vanishes for conservative models."""
+    f = model.functions
+    t, q, v = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq)
+    lam, u, p = ca.SX.sym("lam", model.nc), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
+    V = ca.sum1(model.potential_terms(t, q, p))
+    P = (ca.dot(v, f["F"](t, q, v, u, p) + ca.gradient(V, q)) + ca.jacobian(V, t)
+         + ca.dot(lam, f["phi_t"](t, q, p)))
+    return ca.Function("step_power", [t, q, v, lam, u, p], [ca.densify(P)], ["t", "q", "v", "lam", "u", "p"], ["P"])
+
+
+def outputs_function(model, check: ca.Function, power: ca.Function) -> ca.Function:
+    """``step_outputs`` (MX: calls the energy, marker, check and power functions)."""
+    t, q, v = ca.MX.sym("t"), ca.MX.sym("q", model.nq), ca.MX.sym("v", model.nq)
+    lam, u, p = ca.MX.sym("lam", model.nc), ca.MX.sym("u", model.nu), ca.MX.sym("p", model.np)
+    T, V = model.functions["energy"](t, q, v, p)
+    r_max, rd_max = check(t, q, v, p)
+    parts = [T, V, r_max, rd_max, power(t, q, v, lam, u, p)]
+    if model.marker_names:
+        parts.append(ca.vec(model.functions["markers"](q, v)[0]))
+    return ca.Function("step_outputs", [t, q, v, lam, u, p], [ca.densify(ca.vertcat(*parts))],
+                       ["t", "q", "v", "lam", "u", "p"], ["y"])
 
 
 def check_function(model, primitives: dict[str, ca.Function] | None = None) -> ca.Function:

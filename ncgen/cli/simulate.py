@@ -27,14 +27,22 @@ def _simulate_arguments(p: argparse.ArgumentParser) -> None:
                    help="also animate the motion (.gif, or .mp4 with ffmpeg)")
     p.add_argument("--method", default="idas", metavar="METHOD",
                    help="integrator: idas (variable-step BDF with error control, default) or stepper "
-                        "(the compiled fixed-step constraint-preserving stepper)")
+                        "(the compiled constraint-preserving stepper: fixed steps DT/N, see --substeps, "
+                        "or error-controlled with --rtol)")
+    p.add_argument("--substeps", type=int, default=1, metavar="N",
+                   help="stepper: fixed steps of DT/N per output interval (default 1); a run whose own "
+                        "checks find it untrustworthy stops with an error naming the N to use")
     p.add_argument("--backend", default="auto", choices=("auto", "compiled", "vm"),
                    help="where the equations run: compiled (generated C, built once and cached), vm "
                         "(CasADi's virtual machine) or auto (compiled if a C compiler is found; default)")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    help="replace a parameter's default value (repeatable; a vector as NAME=1,2,3)")
-    p.add_argument("--rtol", type=float, default=1e-8, help="relative tolerance of IDAS (default 1e-8)")
-    p.add_argument("--atol", type=float, default=1e-10, help="absolute tolerance of IDAS (default 1e-10)")
+    p.add_argument("--rtol", type=float, default=None,
+                   help="relative tolerance: IDAS's (default 1e-8); with --method stepper, the stepper "
+                        "chooses its steps to meet it (default: fixed steps of DT, checked)")
+    p.add_argument("--atol", type=float, default=None,
+                   help="absolute tolerance (units of q and v): IDAS's (default 1e-10); the stepper's "
+                        "(default: rtol)")
 
 
 def _check_outputs(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
@@ -65,7 +73,8 @@ def _check_outputs(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
         "ncgen simulate examples/chain.toml --t-end 2 --dt 0.01 -o chain.npz --plot chain.png\n"
         "ncgen simulate examples/heavy_top.toml --t-end 3 -o top.csv --animate top.gif\n"
         "ncgen simulate examples/slider_crank.toml --t-end 1 -o sc.npz --param omega=20 --backend vm\n"
-        "ncgen simulate examples/tensegrity.toml --t-end 2 -o t.npz --method stepper\n"
+        "ncgen simulate examples/tensegrity.toml --t-end 2 -o t.npz --method stepper --substeps 20\n"
+        "ncgen simulate examples/tensegrity.toml --t-end 2 -o t.npz --method stepper --rtol 1e-6\n"
         "ncgen simulate robot.urdf --t-end 1 -o robot.csv   # URDF: falls under gravity, zero torque"),
     arguments=_simulate_arguments,
 )
@@ -79,8 +88,9 @@ def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     _check_outputs(args, parser)
     model = load_model(args.model, args.param)
     try:
+        stepper = {"substeps": args.substeps} if args.method == "stepper" else {}
         traj = run(model, t_end=args.t_end, dt=args.dt, method=args.method, backend=args.backend,
-                   rtol=args.rtol, atol=args.atol)
+                   rtol=args.rtol, atol=args.atol, **stepper)
     except SimulationError as e:
         if e.trajectory is None or not len(e.trajectory):
             raise

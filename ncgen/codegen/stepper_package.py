@@ -29,7 +29,13 @@ STATUS = {
        "nearly singular (a singular configuration or redundant constraints)",
     4: "a generated kernel returned an error",
     5: "bad input (non-positive step, non-finite time) or out of memory",
+    6: "more step attempts than max_steps in one output interval (the error control keeps "
+       "rejecting steps: a singular or very stiff motion, or a tolerance below round-off)",
+    7: "the error-controlled step fell below 1e-13 (|t| + dt): the motion is singular there or "
+       "the tolerance is below round-off",
 }
+#: Columns of the per-output-row statistics of the C loops (``<MODEL>_STEP_NSTATS``).
+STATS = ("steps", "newton_iterations", "splits", "error_q", "error_v", "work")
 #: Default Newton tolerance: |Φ|∞ ≤ tol (m²), momentum residual ≤ tol·max|M|·(1 + |w|∞),
 #: |A v + Φ_t|∞ ≤ tol·(1 + |v|∞) (see ``<model>_stepper.h``).
 TOL = 1e-10
@@ -55,7 +61,8 @@ def extra_sources(model, functions) -> list[ExtraSource]:
     context = {"nq": model.nq, "nc": model.nc, "nu": model.nu, "np": model.np,
                "nnz_k": int(functions[0].sparsity_out("K").nnz()),
                "mass_scale": c_real(mass_scale(model)), "tol": c_real(TOL), "max_iter": MAX_ITER,
-               "max_halvings": MAX_HALVINGS, "halvings_limit": HALVINGS_LIMIT,
+               "max_halvings": MAX_HALVINGS, "halvings_limit": HALVINGS_LIMIT, "dim": model.dim,
+               "nout": n_outputs(model),
                "kernels": [f"{name}_{f.name()}" for f in functions]}
     demo = {**context, "program": f"{name}_simulate", "t0": c_real(model.t0), "t_end": c_real(DEMO_T_END),
             "h": c_real(DEMO_H), "q0": [c_real(x) for x in model.q0], "v0": [c_real(x) for x in model.v0],
@@ -63,6 +70,11 @@ def extra_sources(model, functions) -> list[ExtraSource]:
     return [ExtraSource("stepper.c.j2", f"{name}_stepper.c", context),
             ExtraSource("stepper.h.j2", f"{name}_stepper.h", context),
             ExtraSource("simulate_main.c.j2", f"{name}_simulate.c", demo, program=True)]
+
+
+def n_outputs(model) -> int:
+    """Values per sample of ``<model>_outputs``: T, V, max|Φ|, max|A v + Φ_t|, P, markers."""
+    return 5 + model.dim * len(model.marker_names)
 
 
 def write_stepper_package(model, out_dir):

@@ -24,12 +24,13 @@ METHODS = ("idas", "stepper")
 CHUNKS = 20
 
 
-def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: float = 1e-8,
-             atol: float = 1e-10, u=None, p=None, q0=None, v0=None, t0: float | None = None,
+def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: float | None = None,
+             atol: float | None = None, u=None, p=None, q0=None, v0=None, t0: float | None = None,
              hold: str = "zoh", backend: str = "vm", progress: bool | None = None,
              max_steps: int = 50_000, linear_solver: str = "csparse",
              ic_tolerance: float | None = 1e-6, substeps: int = 1, newton_tol: float = TOL,
-             max_newton: int = MAX_ITER, max_halvings: int = MAX_HALVINGS) -> Trajectory:
+             max_newton: int = MAX_ITER, max_halvings: int = MAX_HALVINGS, order: int = 4,
+             check: bool = True, estimate: bool = True) -> Trajectory:
     """Integrate ``model`` from ``t0`` (default ``model.t0``) to ``t_end`` and return the
     :class:`~ncgen.runtime.trajectory.Trajectory` on the grid ``t0, t0 + dt, ..., t_end``
     (``dt`` shortened if needed so that ``t_end`` is on the grid).  Times in s.
@@ -41,7 +42,8 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
     IDAS keeps the drift small anyway, the terms stop it from growing over long runs).
 
     * ``method``: ``"idas"`` (SUNDIALS IDAS through CasADi, variable-order BDF with error
-      control ``rtol`` (relative) and ``atol`` (absolute, in the units of q and v) on q and v).
+      control ``rtol`` (relative, default 1e-8) and ``atol`` (absolute, in the units of q and
+      v, default 1e-10) on q and v).
     * ``u``: inputs (``model.nu`` values): ``None`` (zeros), a callable ``u(t)``, or samples on
       the grid, shape ``(len(t), nu)`` or ``(len(t) − 1, nu)``; held between grid times by
       ``hold`` = ``"zoh"`` (sample k on ``[t_k, t_k+1)``) or ``"linear"`` (interpolated).
@@ -64,15 +66,25 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
       included; :mod:`ncgen.runtime.stepper`), ``substeps`` steps of ``dt / substeps`` per
       output interval, Newton tolerance ``newton_tol`` (both constraint levels hold to it at
       every step) and at most ``max_newton`` iterations per step; a step whose Newton fails is
-      split in halves, at most ``max_halvings`` times (counted in ``info["stats"]``).  ``rtol``, ``atol``,
-      ``backend``, ``max_steps``, ``linear_solver`` and ``progress`` are IDAS's only.
+      split in halves, at most ``max_halvings`` times (counted in ``info["stats"]``).  The
+      run estimates its error (a shadow run with steps of 2h, ``info["error_estimate"]``)
+      and is checked: split steps, exploding Newton iterations, an energy change
+      (conservative models) or energy balance error (others) above 1 % or an estimated error
+      above 1 % of the model's size raise :class:`~ncgen.errors.SimulationError` naming the
+      step to use (``check=False``: no checks; ``estimate=False``: no shadow run, a third
+      less work, no error check; see :mod:`ncgen.runtime.stepper_checks`).  With ``rtol``
+      (``atol`` default ``rtol``) the stepper chooses its steps instead (Richardson error
+      estimate; ``order=4``: extrapolated and projected, ``order=2``: plain RATTLE steps),
+      at most ``max_steps`` step attempts per output interval.  ``backend``, ``linear_solver`` and ``progress`` are
+      IDAS's only.
 
     Raises :class:`~ncgen.errors.SimulationError` if IDAS fails; it names the time reached
     and the likely cause, and carries the trajectory up to that time (``.trajectory``).
     """
     if method not in METHODS:
         raise NcgenError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
-    tolerances = {"rtol": rtol, "atol": atol, "ic_tolerance": 1.0 if ic_tolerance is None else ic_tolerance}
+    tolerances = {"rtol": 1.0 if rtol is None else rtol, "atol": 1.0 if atol is None else atol,
+                  "ic_tolerance": 1.0 if ic_tolerance is None else ic_tolerance}
     for name, tol in tolerances.items():
         if not (math.isfinite(tol) and tol > 0):
             raise NcgenError(f"{name}: expected a positive tolerance, got {tol!r}")
@@ -85,7 +97,9 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
     if method == "stepper":
         lam = initial_multipliers(model, t0, q, v, U[0], pv, load_dae(model, "vm")[0])
         return simulate_stepper(model, t, U, pv, q, v, lam, hold=hold, substeps=substeps, tol=newton_tol,
-                                max_iter=max_newton, max_halvings=max_halvings)
+                                max_iter=max_newton, max_halvings=max_halvings, rtol=rtol, atol=atol,
+                                order=order, max_steps=max_steps, check=check, estimate=estimate)
+    rtol, atol = 1e-8 if rtol is None else rtol, 1e-10 if atol is None else atol
     dae, used = load_dae(model, backend)
     lam = initial_multipliers(model, t0, q, v, U[0], pv, dae)
     a = np.array(model.functions["ode"](t0, q, v, lam, U[0], pv)[1]).reshape(-1)

@@ -1,17 +1,33 @@
-"""Simulation with the compiled fixed-step stepper (``nc.simulate(..., method="stepper")``).
+"""Simulation with the compiled stepper (``nc.simulate(..., method="stepper")``).
 
 The scheme (RATTLE for constant mass matrices, see :mod:`ncgen.assembly.stepper_equations`)
-runs entirely in generated C: ``<model>_simulate`` of the stepper library
-(:mod:`ncgen.codegen.stepper_package`) advances all steps in one call, Python only prepares
-the inputs and wraps the result in a :class:`~ncgen.runtime.trajectory.Trajectory`.
+runs entirely in generated C (:mod:`ncgen.codegen.stepper_package`, loaded by
+:mod:`ncgen.runtime.stepper_library`): the step loop, its error
+estimates and the derived quantities of the trajectory (energies, constraint residuals,
+markers: one compiled call over all samples).  Python prepares the inputs, checks the run
+(:mod:`ncgen.runtime.stepper_checks`) and wraps the result in a
+:class:`~ncgen.runtime.trajectory.Trajectory`.
 
-Steps: ``substeps`` fixed steps of ``h = dt / substeps`` per output interval ``dt`` (s); a
-step whose Newton iteration fails is split into halves (at most ``max_halvings`` times,
-recursively), so the output grid stays fixed.
-Inputs are constant over each step: with ``hold="zoh"`` the sample of its output interval,
-with ``hold="linear"`` the interpolated input at the step's midpoint (second order for
-smooth inputs).  Multipliers in the trajectory are those of the last half-step (first-order
-accurate in h); at ``t0`` they solve the KKT system.
+Two modes:
+
+* **Fixed steps** (``rtol=None``): ``substeps`` steps of ``h = dt / substeps`` per output
+  interval; a step whose Newton iteration fails is split into halves (at most
+  ``max_halvings`` times, recursively), so the output grid stays fixed.  A shadow run with
+  steps of ``2h`` from the same start gives the global error estimate ``|y_h − y_2h| / 3``
+  (Richardson; ``info["error_estimate"]``, about half the work again; ``estimate=False``
+  skips it).  The run is checked (see :mod:`ncgen.runtime.stepper_checks`) and an
+  untrustworthy one raises :class:`~ncgen.errors.SimulationError`.
+* **Error control** (``rtol`` given): each step is taken whole and as two halves, the
+  difference estimates the local error (Richardson), the step is accepted when every
+  component of q and v is within ``atol + rtol |y|`` and continues from the Richardson
+  extrapolation (order 4, RATTLE being symmetric) projected onto both constraint levels
+  (``order=2``: from the two halves, keeping RATTLE's symplecticity).  Steps end on every
+  output time.
+
+Inputs: with ``hold="zoh"`` the sample of the output interval, with ``hold="linear"`` the
+interpolated input at the step's midpoint (second order for smooth inputs).  Multipliers in
+the trajectory are those of the last half-step (first-order accurate in h); at ``t0`` they
+solve the KKT system.
 """
 from __future__ import annotations
 
@@ -20,23 +36,44 @@ import time
 
 import numpy as np
 
-from ncgen.codegen.stepper_package import HALVINGS_LIMIT, MAX_HALVINGS, MAX_ITER, STATUS, TOL
+from ncgen.codegen.stepper_package import HALVINGS_LIMIT, MAX_HALVINGS, MAX_ITER, STATS, STATUS, TOL
 from ncgen.errors import NcgenError, SimulationError
 from ncgen.runtime.inputs import HOLDS
+from ncgen.runtime.stepper_checks import energy_report, error_estimate, is_conservative, untrusted_row
 from ncgen.runtime.stepper_library import load_stepper
-from ncgen.runtime.trajectory import Trajectory
+from ncgen.runtime.trajectory import NAME_KEYS, Trajectory
 
+#: With error control, the Newton tolerance is at most this fraction of min(rtol, atol)
+#: (floored at 1e-14), so that Newton's residual stays below the error estimates.
+NEWTON_FRACTION = 1e-3
+#: Default step attempts allowed per output interval with error control.
+MAX_STEPS = 100_000
 
 
 def simulate_stepper(model, t: np.ndarray, U: np.ndarray, p: np.ndarray, q0: np.ndarray, v0: np.ndarray,
                      lam0: np.ndarray, *, hold: str = "zoh", substeps: int = 1, tol: float = TOL,
-                     max_iter: int = MAX_ITER, max_halvings: int = MAX_HALVINGS, cflags=None) -> Trajectory:
+                     max_iter: int = MAX_ITER, max_halvings: int = MAX_HALVINGS, rtol: float | None = None,
+                     atol: float | None = None, order: int = 4, max_steps: int = MAX_STEPS,
+                     check: bool = True, estimate: bool = True, cflags=None) -> Trajectory:
     """Integrate ``model`` over the uniform grid ``t`` (s) from the consistent state
     ``(q0, v0)`` with multipliers ``lam0`` at ``t[0]``; ``U`` holds the input samples on the
-    grid, shape ``(len(t), nu)``, ``p`` the parameter values.  Raises
-    :class:`~ncgen.errors.SimulationError` naming the time of the step that failed, with the
-    trajectory up to the last output time before it."""
+    grid, shape ``(len(t), nu)``, ``p`` the parameter values.  ``rtol`` (and ``atol``, default
+    ``rtol``, units of q and v) switch to error control (module docstring); ``check=False``
+    turns off the checks of a fixed-step run, ``estimate=False`` its error estimate (and so
+    the error check).  Raises :class:`~ncgen.errors.SimulationError` naming the time and the
+    cause, with the trajectory up to the last output time before it."""
     substeps, max_iter, max_halvings = int(substeps), int(max_iter), int(max_halvings)
+    _check_options(substeps, tol, max_iter, max_halvings, hold, rtol, atol, order, max_steps)
+    stepper = load_stepper(model, cflags)
+    conservative = is_conservative(model)
+    if rtol is None:
+        return _fixed(model, stepper, t, U, p, q0, v0, lam0, hold, substeps, tol, max_iter, max_halvings,
+                      check, bool(estimate), conservative)
+    return _adaptive(model, stepper, t, U, p, q0, v0, lam0, hold, tol, max_iter, float(rtol),
+                     float(rtol if atol is None else atol), order, int(max_steps), conservative)
+
+
+def _check_options(substeps, tol, max_iter, max_halvings, hold, rtol, atol, order, max_steps):
     if substeps < 1:
         raise NcgenError(f"substeps: expected a positive number of steps per output interval, got {substeps}")
     if not (math.isfinite(tol) and tol > 0):
@@ -47,31 +84,114 @@ def simulate_stepper(model, t: np.ndarray, U: np.ndarray, p: np.ndarray, q0: np.
         raise NcgenError(f"max_halvings: expected 0 to {HALVINGS_LIMIT} step halvings, got {max_halvings}")
     if hold not in HOLDS:
         raise NcgenError(f"hold: expected one of {', '.join(HOLDS)}, got {hold!r}")
+    for name, value in (("rtol", rtol), ("atol", atol)):
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise NcgenError(f"{name}: expected a positive tolerance, got {value!r}")
+    if order not in (2, 4):
+        raise NcgenError(f"order: expected 2 (RATTLE) or 4 (Richardson-extrapolated RATTLE), got {order!r}")
+    if int(max_steps) < 1:
+        raise NcgenError(f"max_steps: expected a positive number of steps, got {max_steps!r}")
+
+
+def _fixed(model, stepper, t, U, p, q0, v0, lam0, hold, substeps, tol, max_iter, max_halvings, check,
+           estimate, conservative) -> Trajectory:
     n_out = len(t) - 1
     h = float(t[1] - t[0]) / substeps
-    stepper = load_stepper(model, cflags)
     start = time.perf_counter()
-    Q, V, LAM, ITER, status, done, splits = stepper.simulate(q0, v0, float(t[0]), h, n_out * substeps, substeps,
-                                                             step_inputs(U, t, hold, substeps), p, tol, max_iter,
-                                                             max_halvings)
-    wall = time.perf_counter() - start
+    Q, V, LAM, S, status, done, splits = stepper.simulate_stats(
+        q0, v0, lam0, float(t[0]), h, n_out * substeps, substeps, step_inputs(U, t, hold, substeps), p, tol,
+        max_iter, max_halvings, estimate, not conservative)
+    stepping = time.perf_counter() - start
     rows = done // substeps
     info = {"method": "stepper", "backend": "compiled", "scheme": "RATTLE", "h": h, "substeps": substeps,
-            "hold": hold, "tol": tol, "max_iter": max_iter, "max_halvings": max_halvings, "wall_time": wall,
-            "complete": status == 0,
-            "stats": {"nsteps": done, "newton_iterations": int(ITER[:rows].sum()), "step_splits": splits}}
+            "hold": hold, "tol": tol, "max_iter": max_iter, "max_halvings": max_halvings,
+            "estimate": estimate, "stepping_time": stepping, "complete": status == 0,
+            "stats": _stats(S[:rows], splits)}
+    traj = _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info, conservative, start)
     if status != 0:
         t_fail = float(t[0]) + done * h
-        info["message"] = (f"simulation of {model.name!r} with the stepper failed in the step from "
-                           f"t = {t_fail:.6g} s to {t_fail + h:.6g} s (h = {h:.3g} s, halved up to "
-                           f"{max_halvings} times): "
-                           f"{STATUS.get(status, f'status {status}')}. The trajectory up to "
-                           f"t = {t[rows]:.6g} s is attached to this error as .trajectory.")
-    traj = Trajectory.from_states(model, t[:rows + 1], np.vstack([q0, Q[:rows]]), np.vstack([v0, V[:rows]]),
-                                  np.vstack([lam0, LAM[:rows]]), U[:rows + 1], p, info)
-    if status != 0:
-        raise SimulationError(info["message"], time=float(t[rows]), trajectory=traj)
+        message = (f"simulation of {model.name!r} with the stepper failed in the step from "
+                   f"t = {t_fail:.6g} s to {t_fail + h:.6g} s (h = {h:.3g} s, halved up to "
+                   f"{max_halvings} times): {STATUS.get(status, f'status {status}')}. The trajectory up to "
+                   f"t = {t[rows]:.6g} s is attached to this error as .trajectory.")
+        traj.info["message"] = message
+        raise SimulationError(message, time=float(t[rows]), trajectory=traj)
+    if check:
+        bad = untrusted_row(model, traj, S[:rows], h)
+        if bad is not None:
+            row, reason = bad
+            kept = _truncate(traj, row)
+            message = (f"simulation of {model.name!r} with the stepper (fixed step h = {h:.3g} s) is not "
+                       f"trustworthy: {reason}. The trajectory up to t = {kept.t[-1]:.6g} s, before the "
+                       f"problem showed, is attached to this error as .trajectory "
+                       f"(check=False returns the whole run unchecked).")
+            work = np.concatenate([[0.0], S[:row, STATS.index("work")]])
+            kept.info.update(complete=False, message=message, error_estimate=error_estimate(S[:row], substeps),
+                             energy=energy_report(kept, work, conservative))
+            raise SimulationError(message, time=float(kept.t[-1]), trajectory=kept)
     return traj
+
+
+def _adaptive(model, stepper, t, U, p, q0, v0, lam0, hold, tol, max_iter, rtol, atol, order, max_steps,
+              conservative) -> Trajectory:
+    n_out = len(t) - 1
+    dt = float(t[1] - t[0])
+    tol = min(tol, max(NEWTON_FRACTION * min(rtol, atol), 1e-14))
+    start = time.perf_counter()
+    Q, V, LAM, S, status, rows, h_next = stepper.simulate_adaptive(
+        q0, v0, lam0, float(t[0]), dt, n_out, U if model.nu else None, hold == "linear", p, rtol, atol, 0.0,
+        order == 4, max_steps, not conservative, tol, max_iter)
+    stepping = time.perf_counter() - start
+    info = {"method": "stepper", "backend": "compiled", "scheme": "RATTLE" if order == 2 else
+            "RATTLE, Richardson-extrapolated and projected", "order": order, "rtol": rtol, "atol": atol,
+            "hold": hold, "tol": tol, "max_iter": max_iter, "max_steps": max_steps, "stepping_time": stepping,
+            "complete": status == 0, "stats": _stats(S[:rows], int(S[:rows, 2].sum()))}
+    info["stats"]["rejected_steps"] = info["stats"].pop("step_splits")
+    traj = _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info, conservative, start)
+    if status != 0:
+        message = (f"simulation of {model.name!r} with the error-controlled stepper (rtol {rtol:g}, atol "
+                   f"{atol:g}) failed between t = {t[rows]:.6g} s and {t[rows + 1]:.6g} s (last step tried "
+                   f"{h_next:.3g} s): {STATUS.get(status, f'status {status}')}. The trajectory up to "
+                   f"t = {t[rows]:.6g} s is attached to this error as .trajectory.")
+        traj.info["message"] = message
+        raise SimulationError(message, time=float(t[rows]), trajectory=traj)
+    return traj
+
+
+def _stats(S: np.ndarray, splits: int) -> dict:
+    return {"nsteps": int(S[:, 0].sum()), "newton_iterations": int(S[:, 1].sum()), "step_splits": int(splits)}
+
+
+def _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info, conservative, start):
+    """The trajectory of the first ``rows`` output rows, derived quantities from the
+    compiled ``<model>_outputs``; sets the error estimate, the energy report and the wall
+    time (from ``start``) in ``info``."""
+    q = np.vstack([q0, Q[:rows]])
+    v = np.vstack([v0, V[:rows]])
+    lam = np.vstack([lam0, LAM[:rows]])
+    tt, u = t[:rows + 1], U[:rows + 1]
+    Y = stepper.outputs(tt, q, v, lam, u, p)
+    dim, n_markers = model.dim, len(model.marker_names)
+    markers = Y[:, 5:].reshape(len(tt), n_markers, dim)
+    work = np.concatenate([[0.0], S[:rows, STATS.index("work")]])
+    names = {key: getattr(model, key) for key in NAME_KEYS}
+    traj = Trajectory(model_name=model.name, names=names, info=info, model=model, t=tt, q=q, v=v, lam=lam, u=u,
+                      p=p, kinetic=Y[:, 0], potential=Y[:, 1], constraint_residual=Y[:, 2],
+                      velocity_residual=Y[:, 3], markers=markers)
+    traj.info["error_estimate"] = error_estimate(S[:rows], info.get("substeps"))
+    traj.info["energy"] = energy_report(traj, work, conservative)
+    traj.info["wall_time"] = time.perf_counter() - start
+    return traj
+
+
+def _truncate(traj: Trajectory, row: int) -> Trajectory:
+    """The trajectory up to sample ``row`` (the state before C row ``row``), ``info`` copied."""
+    keep = row + 1
+    names = {key: getattr(traj, key) for key in NAME_KEYS}
+    arrays = {key: getattr(traj, key)[:keep] for key in ("t", "q", "v", "lam", "u", "kinetic", "potential",
+                                                         "constraint_residual", "velocity_residual", "markers")}
+    return Trajectory(model_name=traj.model_name, names=names, info=dict(traj.info), model=traj.model, p=traj.p,
+                      **arrays)
 
 
 def step_inputs(U: np.ndarray, t: np.ndarray, hold: str, substeps: int) -> np.ndarray | None:

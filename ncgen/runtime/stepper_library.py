@@ -1,5 +1,5 @@
-"""The compiled stepper loaded with ctypes: ``<model>_simulate`` of the model's compiled
-package (its C: :mod:`ncgen.codegen.stepper_package`) called on NumPy arrays."""
+"""The compiled stepper loaded with ctypes: the loops of the model's compiled package (its C:
+:mod:`ncgen.codegen.stepper_package`) called on NumPy arrays."""
 from __future__ import annotations
 
 import ctypes
@@ -7,17 +7,19 @@ import weakref
 
 import numpy as np
 
+from ncgen.codegen.stepper_package import STATS, n_outputs
 from ncgen.runtime.library import compiled_model
 
 _loaded: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
 class CompiledStepper:
-    """``<model>_simulate`` of a compiled stepper library, called on NumPy arrays."""
+    """The loops of a compiled stepper library (``<model>_simulate``, ``_simulate_stats``,
+    ``_simulate_adaptive``, ``_outputs``), called on NumPy arrays."""
 
-    def __init__(self, library: str, name: str, nq: int, nc: int, nu: int, npar: int):
+    def __init__(self, library: str, name: str, nq: int, nc: int, nu: int, npar: int, nout: int):
         self.library = library
-        self.nq, self.nc, self.nu, self.np = nq, nc, nu, npar
+        self.nq, self.nc, self.nu, self.np, self.nout = nq, nc, nu, npar, nout
         self._lib = ctypes.CDLL(library)
         dp, lp = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_long)
         f = getattr(self._lib, f"{name}_simulate")
@@ -25,6 +27,21 @@ class CompiledStepper:
         f.argtypes = [dp, dp, ctypes.c_double, ctypes.c_double, ctypes.c_long, ctypes.c_long, dp, ctypes.c_long,
                       dp, dp, dp, dp, lp, ctypes.POINTER(_Options), lp, lp]
         self._simulate = f
+        c_double, c_long, c_int = ctypes.c_double, ctypes.c_long, ctypes.c_int
+        f = getattr(self._lib, f"{name}_simulate_stats")
+        f.restype = c_int
+        f.argtypes = [dp, dp, dp, c_double, c_double, c_long, c_long, dp, c_long, dp, dp, dp, dp, dp,
+                      ctypes.POINTER(_Options), c_int, c_int, lp, lp]
+        self._simulate_stats = f
+        f = getattr(self._lib, f"{name}_simulate_adaptive")
+        f.restype = c_int
+        f.argtypes = [dp, dp, dp, c_double, c_double, c_long, dp, c_long, c_int, dp, c_double, c_double, c_double,
+                      c_int, c_long, c_int, dp, dp, dp, dp, ctypes.POINTER(_Options), lp, dp]
+        self._simulate_adaptive = f
+        f = getattr(self._lib, f"{name}_outputs")
+        f.restype = c_int
+        f.argtypes = [c_long, dp, dp, dp, dp, dp, c_long, dp, dp]
+        self._outputs = f
 
     def simulate(self, q0, v0, t0: float, h: float, n_steps: int, every: int, U: np.ndarray | None,
                  p: np.ndarray, tol: float, max_iter: int, max_halvings: int):
@@ -44,6 +61,61 @@ class CompiledStepper:
                                 ctypes.byref(_Options(float(tol), int(max_iter), int(max_halvings))),
                                 ctypes.byref(done), ctypes.byref(splits))
         return Q, V, LAM, ITER, int(status), int(done.value), int(splits.value)
+
+    def _buffers(self, rows):
+        return (np.zeros((rows, self.nq)), np.zeros((rows, self.nq)), np.zeros((rows, self.nc)),
+                np.zeros((rows, len(STATS))))
+
+    def simulate_stats(self, q0, v0, lam0, t0: float, h: float, n_steps: int, every: int, U: np.ndarray | None,
+                       p: np.ndarray, tol: float, max_iter: int, max_halvings: int, estimate: bool,
+                       track_work: bool):
+        """``(Q, V, LAM, STATS, status, steps_done, splits)``: fixed steps with per-row
+        statistics (columns :data:`STATS`; see ``<model>_simulate_stats``).  ``U``: inputs
+        per step, shape ``(n_steps, nu)``, or None for zeros."""
+        Q, V, LAM, S = self._buffers(n_steps // every)
+        U = None if U is None or self.nu == 0 else np.ascontiguousarray(U, float)
+        done, splits = ctypes.c_long(0), ctypes.c_long(0)
+        status = self._simulate_stats(_ptr(_vec(q0)), _ptr(_vec(v0)), _ptr(_vec(lam0)), float(t0), float(h),
+                                      int(n_steps), int(every), _ptr(U), self.nu if U is not None else 0,
+                                      _ptr(_vec(p)), _ptr(Q), _ptr(V), _ptr(LAM), _ptr(S),
+                                      ctypes.byref(_Options(float(tol), int(max_iter), int(max_halvings))),
+                                      int(bool(estimate)), int(bool(track_work)), ctypes.byref(done),
+                                      ctypes.byref(splits))
+        return Q, V, LAM, S, int(status), int(done.value), int(splits.value)
+
+    def simulate_adaptive(self, q0, v0, lam0, t0: float, dt: float, n_out: int, U: np.ndarray | None,
+                          hold_linear: bool, p: np.ndarray, rtol: float, atol: float, h0: float, extrapolate: bool,
+                          max_steps: int, track_work: bool, tol: float, max_iter: int):
+        """``(Q, V, LAM, STATS, status, rows_done, h_next)``: error-controlled steps (see
+        ``<model>_simulate_adaptive``).  ``U``: input samples at the output times,
+        ``(n_out + 1, nu)``, or None for zeros."""
+        Q, V, LAM, S = self._buffers(n_out)
+        U = None if U is None or self.nu == 0 else np.ascontiguousarray(U, float)
+        rows, h_next = ctypes.c_long(0), ctypes.c_double(0.0)
+        status = self._simulate_adaptive(_ptr(_vec(q0)), _ptr(_vec(v0)), _ptr(_vec(lam0)), float(t0), float(dt),
+                                         int(n_out), _ptr(U), self.nu if U is not None else 0, int(bool(hold_linear)),
+                                         _ptr(_vec(p)), float(rtol), float(atol), float(h0), int(bool(extrapolate)),
+                                         int(max_steps), int(bool(track_work)), _ptr(Q), _ptr(V), _ptr(LAM),
+                                         _ptr(S), ctypes.byref(_Options(float(tol), int(max_iter), 0)),
+                                         ctypes.byref(rows), ctypes.byref(h_next))
+        return Q, V, LAM, S, int(status), int(rows.value), float(h_next.value)
+
+    def outputs(self, t, Q, V, LAM, U, p) -> np.ndarray:
+        """Rows ``[T, V, |Φ|∞, |A v + Φ_t|∞, P, markers...]`` of the samples (see
+        ``<model>_outputs``)."""
+        n = len(t)
+        Y = np.zeros((n, self.nout))
+        t, Q, V, LAM = (np.ascontiguousarray(a, float) for a in (t, Q, V, LAM))
+        U = None if U is None or self.nu == 0 else np.ascontiguousarray(U, float)
+        status = self._outputs(n, _ptr(t), _ptr(Q), _ptr(V), _ptr(LAM), _ptr(U), self.nu if U is not None else 0,
+                               _ptr(_vec(p)), _ptr(Y))
+        if status != 0:
+            raise RuntimeError(f"{self.library}: outputs failed with status {status}")
+        return Y
+
+
+def _vec(a):
+    return None if a is None else np.ascontiguousarray(a, float)
 
 
 class _Options(ctypes.Structure):
@@ -65,5 +137,6 @@ def load_stepper(model, cflags=None) -> CompiledStepper:
     cache = _loaded.setdefault(model, {})
     if key not in cache:
         library = compiled_model(model, cflags).library
-        cache[key] = CompiledStepper(str(library), model.name, model.nq, model.nc, model.nu, model.np)
+        cache[key] = CompiledStepper(str(library), model.name, model.nq, model.nc, model.nu, model.np,
+                                     n_outputs(model))
     return cache[key]

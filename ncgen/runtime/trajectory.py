@@ -160,16 +160,33 @@ class Trajectory:
                  f"t = {self.t[0]:g} ... {self.t[-1]:g} s"]
         if info.get("method"):
             lines.append(f"  integrator: {info['method']} ({_settings(info)}): {_work(info)}")
-        if len(self):
+        if "error_estimate" in info:
+            est = info["error_estimate"]
+            lines.append(f"  estimated error at the end: {est['q']:.3g} in q, {est['v']:.3g} in v "
+                         f"({est.get('how', '')})")
+        energy = info.get("energy", {})
+        if len(self) and energy.get("conservative") is False:
+            lines.append(f"  energy balance (non-conservative forces or drives): E(t0) = {self.energy[0]:.6g} J, "
+                         f"work W = {energy['work']:.6g} J, max |E - E(t0) - W| = {energy['balance_error']:.3g} J "
+                         f"({energy['relative']:.2g} relative)")
+        elif len(self):
             scale = self.energy_scale
             rel = f" ({self.energy_drift / scale:.2g} relative)" if scale > 0 else ""
-            lines.append(f"  energy: E(t0) = {self.energy[0]:.6g} J, max |E - E(t0)| = "
+            what = "energy" if energy.get("conservative", self._conservative()) else \
+                "energy (not conserved: non-conservative forces or drives)"
+            lines.append(f"  {what}: E(t0) = {self.energy[0]:.6g} J, max |E - E(t0)| = "
                          f"{self.energy_drift:.3g} J{rel}")
             lines.append(f"  constraint drift: max |phi| = {np.max(self.constraint_residual):.3g}, "
                          f"max |A v + phi_t| = {np.max(self.velocity_residual):.3g}")
         if not self.complete:
             lines.append(f"  INCOMPLETE: {info.get('message', 'the integration stopped early')}")
         return "\n".join(lines)
+
+    def _conservative(self) -> bool:
+        """Whether the model conserves energy (True if unknown: loaded without the model)."""
+        from ncgen.runtime.stepper_checks import is_conservative
+
+        return True if self.model is None else is_conservative(self.model)
 
     def __repr__(self) -> str:
         span = f"t = {self.t[0]:g} ... {self.t[-1]:g} s" if len(self) else "empty"
@@ -231,13 +248,14 @@ class Trajectory:
 
 def _settings(info: dict) -> str:
     parts = [f"{info['backend']} backend"] if "backend" in info else []
-    parts += [f"{key} {info[key]:g}" for key in ("rtol", "atol", "h", "tol") if key in info]
+    parts += [f"{key} {info[key]:g}" for key in ("rtol", "atol", "h", "order", "tol") if key in info]
     return ", ".join(parts)
 
 
 def _work(info: dict) -> str:
     stats = info.get("stats", {})
-    labels = {"nsteps": "steps", "netfails": "error-test failures", "newton_iterations": "Newton iterations"}
+    labels = {"nsteps": "steps", "netfails": "error-test failures", "newton_iterations": "Newton iterations",
+              "rejected_steps": "rejected steps", "step_splits": "step splits"}
     parts = [f"{stats[key]} {label}" for key, label in labels.items() if key in stats]
     return ", ".join(parts + [f"{info.get('wall_time', 0.0):.3g} s"])
 

@@ -1,0 +1,179 @@
+"""What a stepper run says about its own accuracy: error estimates, the energy report, and
+the checks that make an untrustworthy fixed-step run an error.
+
+A fixed-step run (:func:`ncgen.runtime.stepper.simulate_stepper` without ``rtol``) is
+**untrustworthy** from the first output interval where
+
+* a step had to be split (Newton's method did not converge at the step asked for);
+* Newton's method needed more than :data:`NEWTON_LIMIT` iterations per step on average;
+* the energy of a conservative model changed by more than :data:`ENERGY_FRACTION` of the
+  energy scale, or, for a model with non-conservative forces or drives, the energy balance
+  ``E(t) − E(t0) − W(t)`` (``W``: work of those forces and drives) is off by that much;
+* the estimated global error in q exceeds :data:`ERROR_FRACTION` of the model's size
+  ``max |q0|`` (m).
+
+Error estimates (``info["error_estimate"]``, in m for q and m/s for v): fixed steps, the
+global error ``|y_h − y_2h| / 3`` against a shadow run with steps of 2h (Richardson, valid
+while both runs are in the asymptotic regime; it follows error growth on chaotic motions);
+error control, the sum of the local estimates of the accepted steps (for ``order=4`` they
+estimate the error of the unextrapolated halves, so they are upper estimates; a sum of local
+errors misses the growth of errors on chaotic motions, as any local error control does).
+"""
+from __future__ import annotations
+
+import math
+import weakref
+
+import casadi as ca
+import numpy as np
+
+from ncgen.codegen.stepper_package import STATS
+
+#: Largest allowed change of a conservative model's energy, and error of the energy balance
+#: of a non-conservative one, as a fraction of the energy scale ``max(|E|, T, |V − V0|, |W|)``
+#: seen so far.
+ENERGY_FRACTION = 0.01
+#: Largest allowed estimated global error in q, as a fraction of the model's size max |q0|.
+ERROR_FRACTION = 0.01
+#: Most Newton iterations per step (average over an output interval) of a trusted run.
+NEWTON_LIMIT = 8
+
+
+_conservative: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def is_conservative(model) -> bool:
+    """True if the model's forces are conservative and its constraints scleronomic:
+    ``Φ_t`` and ``∂V/∂t`` are structurally zero and ``F = −∇V`` at random states with random
+    rates and inputs (so that dampers, drives and input forces all count).  Kept per model."""
+    if model not in _conservative:
+        _conservative[model] = _is_conservative(model)
+    return _conservative[model]
+
+
+def _is_conservative(model, samples: int = 3, seed: int = 0) -> bool:
+    f = model.functions
+    t, q, v = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq)
+    u, p = ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
+    V = ca.sum1(model.potential_terms(t, q, p))
+    if ca.depends_on(ca.densify(f["phi_t"](t, q, p)), ca.vertcat(t, q)) or ca.depends_on(V, t):
+        return False
+    if np.any(np.asarray(f["phi_t"](model.t0, model.q0, model.p0)) != 0):
+        return False
+    F = f["F"](t, q, v, u, p)
+    residual = ca.Function("F_nc", [t, q, v, u, p], [F + ca.gradient(V, q), F])
+    rng = np.random.default_rng(seed)
+    for _ in range(samples):
+        qs = model.q0 + 0.1 * rng.standard_normal(model.nq)
+        r, F_value = residual(model.t0 + rng.random(), qs, rng.standard_normal(model.nq),
+                              rng.standard_normal(model.nu), model.p0)
+        if np.max(np.abs(np.asarray(r)), initial=0.0) > 1e-9 * (1 + np.max(np.abs(np.asarray(F_value)), initial=0.0)):
+            return False
+    return True
+
+
+def global_estimates(S: np.ndarray, substeps: int | None) -> tuple[np.ndarray, np.ndarray]:
+    """Estimated global error in q (m) and v (m/s) at the end of each output row, from the
+    per-row statistics ``S`` of the C loops (columns :data:`STATS`); NaN where there is none."""
+    eq, ev = S[:, STATS.index("error_q")].copy(), S[:, STATS.index("error_v")].copy()
+    if substeps is None:                               # error control: sums of local estimates per row
+        return np.cumsum(eq), np.cumsum(ev)
+    for e in (eq, ev):                                 # fixed steps: the shadow run's estimates
+        e[e < 0] = np.nan
+    return eq, ev
+
+
+def error_estimate(S: np.ndarray, substeps: int | None) -> dict:
+    """``info["error_estimate"]``: the estimated global error at the end (m, m/s; NaN when
+    there is none) and how it was obtained."""
+    if not len(S):
+        return {"q": 0.0, "v": 0.0}
+    gq, gv = global_estimates(S, substeps)
+    if substeps is None:
+        how = "sum of the local error estimates of the accepted steps (Richardson, halves against whole steps)"
+    elif np.isnan(gq[-1]) and np.any(S[:, STATS.index("error_q")] == -2):
+        how = "none: the shadow run with steps of 2h failed (Newton), the step is near its limit"
+    elif np.isnan(gq[-1]):
+        how = "none (estimate=False, or a single step)"
+    else:
+        how = "Richardson: |y_h - y_2h| / 3 against a shadow run with steps of 2h"
+    return {"q": float(gq[-1]), "v": float(gv[-1]), "how": how}
+
+
+def _energy_scale(traj, work: np.ndarray) -> np.ndarray:
+    E = traj.energy
+    terms = np.abs(np.column_stack([E, traj.kinetic, traj.potential - traj.potential[0], work]))
+    return np.maximum.accumulate(terms.max(axis=1))
+
+
+def energy_error(traj, work: np.ndarray, conservative: bool) -> np.ndarray:
+    """Per sample: ``|E − E0|`` (conservative) or ``|E − E0 − W|`` (J)."""
+    E = traj.energy
+    return np.abs(E - E[0] - (0.0 if conservative else work))
+
+
+def energy_report(traj, work: np.ndarray, conservative: bool) -> dict:
+    """``info["energy"]``: energy drift of a conservative model, or the energy balance
+    (work ``W`` of the non-conservative forces and drives, and ``max |E − E0 − W|``)."""
+    if not len(traj):
+        return {"conservative": conservative}
+    err = energy_error(traj, work, conservative)
+    scale = float(_energy_scale(traj, work)[-1])
+    rel = float(err.max() / scale) if scale > 0 else 0.0
+    if conservative:
+        return {"conservative": True, "drift": float(err.max()), "relative": rel}
+    return {"conservative": False, "work": float(work[-1]), "balance_error": float(err.max()), "relative": rel}
+
+
+def untrusted_row(model, traj, S: np.ndarray, h: float) -> tuple[int, str] | None:
+    """``(row, reason)`` of the first output row where the fixed-step run stops being
+    trustworthy (module docstring), or None."""
+    if not len(S):
+        return None
+    conservative = traj.info["energy"]["conservative"]
+    work = np.concatenate([[0.0], S[:, STATS.index("work")]])
+    steps, iters, splits = (S[:, STATS.index(k)] for k in ("steps", "newton_iterations", "splits"))
+    gq, _ = global_estimates(S, traj.info.get("substeps"))
+    size = max(float(np.max(np.abs(model.q0), initial=0.0)), 1e-9)
+    e_rel = energy_error(traj, work, conservative)[1:] / np.maximum(_energy_scale(traj, work)[1:], 1e-300)
+    dt = h * traj.info.get("substeps", 1)
+    flags = {
+        "splits": splits > 0,
+        "newton": iters / np.maximum(steps, 1) > NEWTON_LIMIT,
+        "energy": e_rel > ENERGY_FRACTION,
+        "error": np.nan_to_num(gq) > ERROR_FRACTION * size,
+    }
+    first = {k: int(np.argmax(f)) for k, f in flags.items() if f.any()}
+    if not first:
+        return None
+    kind = min(first, key=first.get)
+    row = first[kind]
+    t_row = float(traj.t[row + 1])
+    suggest = _suggestion(h, dt, gq[row], size, kind)
+    if kind == "splits":
+        reason = (f"{int(splits.sum())} step(s) had to be split, the first by t = {t_row:.6g} s: Newton's method "
+                  f"does not converge at this step, which is far beyond the step the motion needs")
+    elif kind == "newton":
+        reason = (f"Newton's method needed {iters[row] / max(steps[row], 1):.3g} iterations per step by "
+                  f"t = {t_row:.6g} s (more than {NEWTON_LIMIT}): the step is too large for this motion")
+    elif kind == "energy":
+        what = ("energy of this conservative model changed" if conservative else
+                "energy balance E - E0 - W (W: work of its non-conservative forces and drives) is off")
+        reason = (f"the {what} by {e_rel[row]:.3g} of its energy scale by t = {t_row:.6g} s (more than "
+                  f"{ENERGY_FRACTION:g})")
+    else:
+        reason = (f"the estimated error in q reached {gq[row]:.3g} m by t = {t_row:.6g} s, more than "
+                  f"{ERROR_FRACTION:g} of the model's size {size:.3g} m")
+    return row, f"{reason}. {suggest}"
+
+
+def _suggestion(h: float, dt: float, err: float, size: float, kind: str) -> str:
+    """Which step to use instead: a quarter of ``h`` after split steps, exploding Newton
+    iterations or an energy error, half of it after a large error estimate, and in every
+    case no more than the step at which the estimate (∝ h²) would be 1 % of the size."""
+    h_new = h / 2 if kind == "error" else h / 4
+    if err > 0 and math.isfinite(err):
+        h_new = min(h_new, h * math.sqrt(0.1 * ERROR_FRACTION * size / err))
+    substeps = max(1, math.ceil(dt / h_new - 1e-9))
+    return (f"Use a step of at most {dt / substeps:.3g} s (substeps={substeps} with dt = {dt:.3g} s), or "
+            f"rtol=... to let the stepper choose its steps")
