@@ -7,6 +7,7 @@ import warnings
 import casadi as ca
 import numpy as np
 
+from ncgen.assembly.contacts import contact_functions, contact_specs, contact_terms, smooth_forces
 from ncgen.assembly.context import Context
 from ncgen.assembly.functions import system_functions
 from ncgen.assembly.initial_state import consistent_state, dependent_rows
@@ -21,10 +22,13 @@ from ncgen.model.members import ModelError
 BAUMGARTE = (5.0, 5.0)
 
 REDUNDANT_MODES = ("drop", "error", "keep")
+#: How contacts enter the model: compliant forces in F, or unilateral constraints for the
+#: nonsmooth compiled stepper (docs/contact.md).
+CONTACT_MODELS = ("smooth", "nonsmooth")
 
 
 def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", tolerance: float = 1e-6,
-                t0: float = 0.0, assemble: bool = False, fix=()):
+                t0: float = 0.0, assemble: bool = False, fix=(), contacts: str = "smooth"):
     """Assemble ``system`` into a :class:`~ncgen.model.model.Model`.
 
     ``redundant``: constraints linearly dependent at the initial configuration are
@@ -43,6 +47,8 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
 
     if not system.members:
         raise ModelError(f"system {system.name!r} has no members; add bodies, bars or points first")
+    if contacts not in CONTACT_MODELS:
+        raise ModelError(f"contacts: expected one of {', '.join(CONTACT_MODELS)}, got {contacts!r}")
     if redundant not in REDUNDANT_MODES:
         raise ModelError(f"redundant: expected one of {', '.join(REDUNDANT_MODES)}, got {redundant!r}")
     alpha, beta = (float(x) for x in baumgarte)
@@ -53,6 +59,10 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     fixed = resolve_fix(layout, system.members, fix)
     labels, rows = constraint_rows(system, ctx)
     F, V = force_terms(system, ctx)
+    terms = contact_terms(ctx, system.contacts)
+    if terms and contacts == "smooth":
+        _, _, Q, Vc = smooth_forces(ctx, terms)
+        F, V = F + Q, ca.vertcat(V, Vc)
     M = assemble_mass(layout, members)
     factor = CholeskyFactor(M, layout.coordinate_names)
     q_init, v_init = initial_guess(layout, members)
@@ -73,11 +83,14 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
 
     phi = ca.vertcat(*rows) if rows else ca.SX(0, 1)
     functions, potential = system_functions(ctx, phi, F, V, M, factor, alpha, beta, system)
+    if terms:
+        functions.update(contact_functions(ctx, terms))
     state = consistent_state(functions, layout, labels, q_init, v_init, p0, t0, tolerance, M,
                              fixed=fixed, assemble=assemble)
     return Model(system=system, layout=layout, labels=labels, functions=functions, M=M, factor=factor,
                  potential=potential, state=state, p0=p0, baumgarte=(alpha, beta), redundant=redundant_labels,
-                 dropped=(redundant == "drop"), t0=t0)
+                 dropped=(redundant == "drop"), t0=t0,
+                 contacts=contact_specs(system.contacts), contact_model=contacts)
 
 
 def constraint_rows(system, ctx: Context) -> tuple[list[str], list[ca.SX]]:

@@ -15,7 +15,7 @@ class Model:
     """A validated, assembled system (create it with ``System.build()``)."""
 
     def __init__(self, *, system, layout, labels, functions, M, factor, potential, state, p0, baumgarte,
-                 redundant, dropped, t0):
+                 redundant, dropped, t0, contacts=(), contact_model="smooth"):
         self.system = system
         self.name = system.name
         self.dim = system.dim
@@ -42,6 +42,11 @@ class Model:
         self.redundant_dropped = dropped and bool(redundant)
         self.t0 = t0
         self.gravity = system.gravity.copy()
+        #: Plain-data descriptions of the contacts (:mod:`ncgen.model.contacts`), in order.
+        self.contacts = [dict(c) for c in contacts]
+        self.contact_names = [c["name"] for c in self.contacts]
+        #: "smooth" (compliant forces in F) or "nonsmooth" (the compiled stepper's impacts).
+        self.contact_model = contact_model
 
     # ------------------------------------------------------------ dimensions
     @property
@@ -59,6 +64,11 @@ class Model:
     @property
     def np(self) -> int:
         return int(self.p0.size)
+
+    @property
+    def nk(self) -> int:
+        """Number of contacts."""
+        return len(self.contacts)
 
     @property
     def rank(self) -> int:
@@ -116,6 +126,15 @@ class Model:
         """``(T, V)``: kinetic and potential energy (J)."""
         T, V = self._call("energy", q=q, v=v, t=t, p=p)
         return float(np.asarray(T).item()), float(np.asarray(V).item())
+
+    def gap(self, q, p=None) -> np.ndarray:
+        """Contact gaps ``g(q)`` (m, positive apart), one per contact."""
+        return np.atleast_1d(self._call("gap", q=q, p=p))
+
+    def contact_jacobian(self, q, p=None):
+        """``(W_N, W_T)``: normal (nk × nq) and tangential (nk·(dim−1) × nq) contact Jacobians."""
+        WN, WT = self._call("contact_jacobian", q=q, p=p)
+        return np.atleast_2d(WN).reshape(self.nk, self.nq), np.atleast_2d(WT).reshape(-1, self.nq)
 
     def markers(self, q, v=None):
         """World positions (and velocities) of the named markers, ``dim × n_markers``."""
