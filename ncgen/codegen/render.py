@@ -35,12 +35,12 @@ def shipped_templates_dir() -> Path:
     """Directory of the shipped ``c`` templates: the installed ``ncgen._templates/c``, or, when
     ``ncgen`` is imported from a source checkout (``python -c`` run in the repository), the
     checkout's ``templates/c``."""
+    checkout = Path(__file__).resolve().parents[2] / "templates" / "c"
+    if checkout.is_dir() and (checkout.parents[1] / "pyproject.toml").is_file():
+        return checkout          # a source checkout: its own templates, whatever is installed
     spec = importlib.util.find_spec("ncgen._templates")
     if spec is not None and spec.submodule_search_locations:
         return Path(list(spec.submodule_search_locations)[0]) / "c"
-    checkout = Path(__file__).resolve().parents[2] / "templates" / "c"
-    if checkout.is_dir():
-        return checkout
     raise CodegenError("ncgen's C templates are missing: neither the package ncgen._templates nor "
                        f"{checkout} exists; reinstall ncgen (pip install .)")
 

@@ -50,7 +50,7 @@ def simulate_stepper(model, t: np.ndarray, U: np.ndarray, p: np.ndarray, q0: np.
     h = float(t[1] - t[0]) / substeps
     stepper = load_stepper(model, cflags)
     start = time.perf_counter()
-    Q, V, LAM, ITER, status, done, splits = stepper.simulate(q0, v0, float(t[0]), h, n_out * substeps, substeps,
+    Q, V, LAM, ITER, status, done, splits, IMP = stepper.simulate(q0, v0, float(t[0]), h, n_out * substeps, substeps,
                                                              step_inputs(U, t, hold, substeps), p, tol, max_iter,
                                                              max_halvings)
     wall = time.perf_counter() - start

@@ -30,6 +30,16 @@ Kernels (name: inputs -> outputs; ``t`` in s, ``h`` in s):
 * ``step_velocity``: t (= t + h), q (= q⁺), w, u, p, h -> b (nq + nc), K (same pattern)
 * ``step_check``: t, q, v, p -> phi_max = ‖Φ‖∞ (m²), phidot_max = ‖A v + Φ_t‖∞ (m²/s)
 * ``step_solve``: K, r -> x = K⁻¹ r (sparse QR, generated as C; see :func:`solve_function`)
+
+Models built with ``contacts="nonsmooth"`` (and at least one contact) get the nonsmooth
+variant (:mod:`ncgen.runtime.contact_step` documents the scheme): ``step_newton`` and
+``step_velocity`` take one more input, the generalised contact impulse ``j = Wᵀ P`` (N·s),
+half of which enters each half-step (``− j/2`` in r, ``+ j/2`` in b), and a fifth kernel
+
+* ``step_contact``: q, v, p -> g (nk, m), W (nk·dim × nq, dense: per contact its normal row,
+  then its tangent rows), U = W v (m/s)
+
+gives the gaps and contact Jacobians.  Contact-free models get exactly the kernels above.
 """
 from __future__ import annotations
 
@@ -43,7 +53,8 @@ from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
 #: Largest nnz(V) + nnz(R) of the QR factors for which the solve is unrolled into SX.
 SX_QR_MAX_NNZ = 3_000
 
-#: Names of the kernels, in the order the package lists them.
+#: Names of the kernels, in the order the package lists them (the nonsmooth contact
+#: stepper appends ``step_contact``).
 KERNELS = ("step_newton", "step_velocity", "step_check", "step_solve")
 
 DOCS = {
@@ -74,10 +85,36 @@ DOCS = {
         "outputs": {"x": ("solution", "")}},
 }
 
+#: Documentation of the nonsmooth contact stepper's kernels (where they differ).
+CONTACT_DOCS = {
+    "step_newton": {**DOCS["step_newton"],
+                    "inputs": {**DOCS["step_newton"]["inputs"],
+                               "j": ("generalised contact impulse W^T P of the step", "N s")},
+                    "outputs": {**DOCS["step_newton"]["outputs"],
+                                "r": ("[M (w - v) - h/2 F + A^T nu - j/2; Phi(t + h, q + h w) / h]",
+                                      "N s; m^2/s")}},
+    "step_velocity": {**DOCS["step_velocity"],
+                      "inputs": {**DOCS["step_velocity"]["inputs"],
+                                 "j": ("generalised contact impulse W^T P of the step", "N s")},
+                      "outputs": {**DOCS["step_velocity"]["outputs"],
+                                  "b": ("[M w + h/2 F + j/2; -Phi_t]", "N s; m^2/s")}},
+    "step_contact": {
+        "purpose": "Stepper: contact gaps, Jacobians (per contact: normal row, tangent rows) and velocities",
+        "inputs": {"q": ("coordinates", "m"), "v": ("coordinate rates", "m/s"), "p": ("parameters", "")},
+        "outputs": {"g": ("gaps, positive apart", "m"), "W": ("contact Jacobian, nk*dim x nq, dense", "1"),
+                    "U": ("contact velocities W v", "m/s")}},
+}
+
+
+def nonsmooth(model) -> bool:
+    """Whether ``model`` gets the nonsmooth contact stepper."""
+    return getattr(model, "contact_model", "smooth") == "nonsmooth" and getattr(model, "nk", 0) > 0
+
 
 def stepper_functions(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS) -> list[ca.Function]:
-    """The four kernels of :data:`KERNELS` for ``model`` (see the module docstring);
-    ``reroll_instructions`` as in :func:`ncgen.codegen.looped.is_large`."""
+    """The kernels of :data:`KERNELS` for ``model`` (see the module docstring), and
+    ``step_contact`` for the nonsmooth contact stepper; ``reroll_instructions`` as in
+    :func:`ncgen.codegen.looped.is_large`."""
     f = model.functions
     nq, nc = model.nq, model.nc
     t, h = ca.SX.sym("t"), ca.SX.sym("h")
@@ -85,20 +122,41 @@ def stepper_functions(model, reroll_instructions: int | None = REROLL_INSTRUCTIO
     nu = ca.SX.sym("nu", nc)
     u, p = ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
     M = sparse_dm(model.M)
+    contact = nonsmooth(model)
+    j = ca.SX.sym("j", nq) if contact else ca.SX.zeros(nq)
+    j_in, j_name = ([j], ["j"]) if contact else ([], [])
 
-    r = ca.densify(ca.vertcat(ca.mtimes(M, w - v) - h / 2 * f["F"](t, q, w, u, p) + ca.mtimes(f["A"](t, q, p).T, nu),
-                   f["phi"](t + h, q + h * w, p) / h))
+    balance = ca.mtimes(M, w - v) - h / 2 * f["F"](t, q, w, u, p) + ca.mtimes(f["A"](t, q, p).T, nu)
+    r = ca.densify(ca.vertcat(balance - j / 2 if contact else balance, f["phi"](t + h, q + h * w, p) / h))
     K = ca.jacobian(r, ca.vertcat(w, nu))
-    newton = ca.Function("step_newton", [t, q, v, u, p, h, w, nu], [r, K],
-                         ["t", "q", "v", "u", "p", "h", "w", "nu"], ["r", "K"])
+    newton = ca.Function("step_newton", [t, q, v, u, p, h, w, nu] + j_in, [r, K],
+                         ["t", "q", "v", "u", "p", "h", "w", "nu"] + j_name, ["r", "K"])
 
     A = f["A"](t, q, p)
-    b = ca.densify(ca.vertcat(ca.mtimes(M, w) + h / 2 * f["F"](t, q, w, u, p), -f["phi_t"](t, q, p)))
+    momentum = ca.mtimes(M, w) + h / 2 * f["F"](t, q, w, u, p)
+    b = ca.densify(ca.vertcat(momentum + j / 2 if contact else momentum, -f["phi_t"](t, q, p)))
     K2 = ca.project(ca.blockcat([[M, A.T], [A, ca.SX(nc, nc)]]), K.sparsity())
-    velocity = ca.Function("step_velocity", [t, q, w, u, p, h], [b, K2],
-                           ["t", "q", "w", "u", "p", "h"], ["b", "K"])
+    velocity = ca.Function("step_velocity", [t, q, w, u, p, h] + j_in, [b, K2],
+                           ["t", "q", "w", "u", "p", "h"] + j_name, ["b", "K"])
 
-    return [newton, velocity, check_function(model, reroll_instructions), solve_function(K.sparsity())]
+    out = [newton, velocity, check_function(model, reroll_instructions), solve_function(K.sparsity())]
+    if contact:
+        out.append(contact_function(model))
+    return out
+
+
+def contact_function(model) -> ca.Function:
+    """``step_contact: q, v, p -> g, W, U`` (see the module docstring)."""
+    q, v, p = ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq), ca.SX.sym("p", model.np)
+    g = model.functions["gap"](q, p)
+    WN, WT = model.functions["contact_jacobian"](q, p)
+    nt = model.dim - 1
+    rows = []
+    for k in range(model.nk):
+        rows += [WN[k, :], WT[k * nt:(k + 1) * nt, :]]
+    W = ca.densify(ca.vertcat(*rows))
+    return ca.Function("step_contact", [q, v, p], [ca.densify(g), W, ca.mtimes(W, v)],
+                       ["q", "v", "p"], ["g", "W", "U"])
 
 
 def check_function(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS) -> ca.Function:

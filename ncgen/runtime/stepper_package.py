@@ -24,7 +24,7 @@ from ncgen.codegen.cnames import c_real
 from ncgen.codegen.package import ExtraSource
 from ncgen.codegen.looped import reroll_limit
 from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
-from ncgen.runtime.stepper_kernels import DOCS, mass_scale, stepper_functions
+from ncgen.runtime.stepper_kernels import CONTACT_DOCS, DOCS, mass_scale, nonsmooth, stepper_functions
 
 #: Status codes of ``<model>_step`` (``templates/c/stepper.h.j2``) and what they mean.
 STATUS = {
@@ -46,6 +46,9 @@ MAX_ITER = 12
 #: Default number of times a failing step may be split in halves, and the most the C
 #: workspace allows (``<MODEL>_STEP_MAX_HALVINGS``).
 MAX_HALVINGS, HALVINGS_LIMIT = 4, 10
+#: Nonsmooth contact stepper: projected Gauss–Seidel sweeps allowed per step, and its
+#: convergence test (largest impulse change ≤ PGS_TOL × largest impulse).
+PGS_MAX_ITER, PGS_TOL = 2000, 1e-13
 #: The demo program's defaults: simulated time and step (s).
 DEMO_T_END, DEMO_H = 1.0, 1e-3
 
@@ -58,7 +61,8 @@ def stepper_section(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS
     from ncgen.codegen.model_package import Section
 
     functions = stepper_functions(model, reroll_instructions)
-    return Section(functions=functions, docs=DOCS, extra_sources=extra_sources(model, functions))
+    docs = {**DOCS, **CONTACT_DOCS} if nonsmooth(model) else DOCS
+    return Section(functions=functions, docs=docs, extra_sources=extra_sources(model, functions))
 
 
 def extra_sources(model, functions) -> list[ExtraSource]:
@@ -68,7 +72,11 @@ def extra_sources(model, functions) -> list[ExtraSource]:
                "nnz_k": int(functions[0].sparsity_out("K").nnz()),
                "mass_scale": c_real(mass_scale(model)), "tol": c_real(TOL), "max_iter": MAX_ITER,
                "max_halvings": MAX_HALVINGS, "halvings_limit": HALVINGS_LIMIT,
-               "kernels": [f"{name}_{f.name()}" for f in functions]}
+               "kernels": [f"{name}_{f.name()}" for f in functions], "step_fn": "step"}
+    if nonsmooth(model):
+        context.update(step_fn="contact_step", nk=model.nk, dim=model.dim, pgs_max_iter=PGS_MAX_ITER, pgs_tol=c_real(PGS_TOL),
+                       mu=[c_real(c["mu"]) for c in model.contacts],
+                       restitution=[c_real(c["restitution"]) for c in model.contacts])
     demo = {**context, "program": f"{name}_simulate", "t0": c_real(model.t0), "t_end": c_real(DEMO_T_END),
             "h": c_real(DEMO_H), "q0": [c_real(x) for x in model.q0], "v0": [c_real(x) for x in model.v0],
             "p0": [c_real(x) for x in model.p0]}
@@ -81,7 +89,8 @@ def write_stepper_package(model, out_dir):
     """A package holding only the stepper of ``model`` (kernels, loop, example program)."""
     limit = reroll_limit(model)
     section = stepper_section(model, limit)
-    doc = PackageDoc(summary=f"Compiled stepper (RATTLE) of model {model.name!r}", functions=section.docs)
+    scheme = "RATTLE with nonsmooth contacts" if nonsmooth(model) else "RATTLE"
+    doc = PackageDoc(summary=f"Compiled stepper ({scheme}) of model {model.name!r}", functions=section.docs)
     return write_package(model.name, section.functions, out_dir, doc=doc, extra_sources=section.extra_sources,
                          reroll_instructions=limit)
 
@@ -89,22 +98,24 @@ def write_stepper_package(model, out_dir):
 class CompiledStepper:
     """``<model>_simulate`` of a compiled stepper library, called on NumPy arrays."""
 
-    def __init__(self, library: str, name: str, nq: int, nc: int, nu: int, npar: int):
+    def __init__(self, library: str, name: str, nq: int, nc: int, nu: int, npar: int, nd: int = 0):
         self.library = library
         self.nq, self.nc, self.nu, self.np = nq, nc, nu, npar
+        self.nd = nd   # contact impulse components per step (nonsmooth contact stepper), else 0
         self._lib = ctypes.CDLL(library)
         dp, lp = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_long)
         f = getattr(self._lib, f"{name}_simulate")
         f.restype = ctypes.c_int
         f.argtypes = [dp, dp, ctypes.c_double, ctypes.c_double, ctypes.c_long, ctypes.c_long, dp, ctypes.c_long,
-                      dp, dp, dp, dp, lp, ctypes.POINTER(_Options), lp, lp]
+                      dp, dp, dp, dp, lp, ctypes.POINTER(_Options), lp, lp] + ([dp] if nd else [])
         self._simulate = f
 
     def simulate(self, q0, v0, t0: float, h: float, n_steps: int, every: int, U: np.ndarray | None,
                  p: np.ndarray, tol: float, max_iter: int, max_halvings: int):
-        """``(Q, V, LAM, ITER, status, steps_done, splits)``: states after every ``every``-th of
-        ``n_steps`` steps (see ``<model>_simulate`` in ``<model>_stepper.h``).  ``U``: inputs
-        per step, shape ``(n_steps, nu)``, or None for zeros."""
+        """``(Q, V, LAM, ITER, status, steps_done, splits, IMP)``: states after every ``every``-th of
+        ``n_steps`` steps (see ``<model>_simulate`` in ``<model>_stepper.h``) and, for the
+        nonsmooth contact stepper, the contact impulses summed over those steps (N·s, ``nd``
+        per row; else None).  ``U``: inputs per step, shape ``(n_steps, nu)``, or None for zeros."""
         rows = n_steps // every
         Q, V = np.zeros((rows, self.nq)), np.zeros((rows, self.nq))
         LAM, ITER = np.zeros((rows, self.nc)), np.zeros(rows, dtype=np.dtype(ctypes.c_long))
@@ -112,12 +123,14 @@ class CompiledStepper:
         p = np.ascontiguousarray(p, float)
         U = None if U is None or self.nu == 0 else np.ascontiguousarray(U, float)
         done, splits = ctypes.c_long(0), ctypes.c_long(0)
+        IMP = np.zeros((rows, self.nd)) if self.nd else None
+        extra = [_ptr(IMP)] if self.nd else []
         status = self._simulate(_ptr(q0), _ptr(v0), float(t0), float(h), int(n_steps), int(every),
                                 _ptr(U), self.nu if U is not None else 0, _ptr(p), _ptr(Q), _ptr(V), _ptr(LAM),
                                 ITER.ctypes.data_as(ctypes.POINTER(ctypes.c_long)),
                                 ctypes.byref(_Options(float(tol), int(max_iter), int(max_halvings))),
-                                ctypes.byref(done), ctypes.byref(splits))
-        return Q, V, LAM, ITER, int(status), int(done.value), int(splits.value)
+                                ctypes.byref(done), ctypes.byref(splits), *extra)
+        return Q, V, LAM, ITER, int(status), int(done.value), int(splits.value), IMP
 
 
 class _Options(ctypes.Structure):
@@ -140,5 +153,6 @@ def load_stepper(model, cflags=None) -> CompiledStepper:
         with tempfile.TemporaryDirectory(prefix="ncgen-stepper-") as tmp:
             pkg = write_stepper_package(model, f"{tmp}/pkg")
             built = compile_package(pkg, cflags=cflags)
-        cache[key] = CompiledStepper(str(built.path), model.name, model.nq, model.nc, model.nu, model.np)
+        nd = model.nk * model.dim if nonsmooth(model) else 0
+        cache[key] = CompiledStepper(str(built.path), model.name, model.nq, model.nc, model.nu, model.np, nd)
     return cache[key]
