@@ -55,7 +55,8 @@ def simulate_stepper(model, t: np.ndarray, U: np.ndarray, p: np.ndarray, q0: np.
                                                              max_halvings)
     wall = time.perf_counter() - start
     rows = done // substeps
-    info = {"method": "stepper", "backend": "compiled", "scheme": "RATTLE", "h": h, "substeps": substeps,
+    scheme = "RATTLE, nonsmooth contacts" if IMP is not None else "RATTLE"
+    info = {"method": "stepper", "backend": "compiled", "scheme": scheme, "h": h, "substeps": substeps,
             "hold": hold, "tol": tol, "max_iter": max_iter, "max_halvings": max_halvings, "wall_time": wall,
             "complete": status == 0,
             "stats": {"nsteps": done, "newton_iterations": int(ITER[:rows].sum()), "step_splits": splits}}
@@ -67,7 +68,8 @@ def simulate_stepper(model, t: np.ndarray, U: np.ndarray, p: np.ndarray, q0: np.
                            f"{STATUS.get(status, f'status {status}')}. The trajectory up to "
                            f"t = {t[rows]:.6g} s is attached to this error as .trajectory.")
     traj = Trajectory.from_states(model, t[:rows + 1], np.vstack([q0, Q[:rows]]), np.vstack([v0, V[:rows]]),
-                                  np.vstack([lam0, LAM[:rows]]), U[:rows + 1], p, info)
+                                  np.vstack([lam0, LAM[:rows]]), U[:rows + 1], p, info,
+                                  impulses=None if IMP is None else IMP[:rows])
     if status != 0:
         raise SimulationError(info["message"], time=float(t[rows]), trajectory=traj)
     return traj

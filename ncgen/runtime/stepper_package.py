@@ -72,9 +72,9 @@ def extra_sources(model, functions) -> list[ExtraSource]:
                "nnz_k": int(functions[0].sparsity_out("K").nnz()),
                "mass_scale": c_real(mass_scale(model)), "tol": c_real(TOL), "max_iter": MAX_ITER,
                "max_halvings": MAX_HALVINGS, "halvings_limit": HALVINGS_LIMIT,
-               "kernels": [f"{name}_{f.name()}" for f in functions], "step_fn": "step"}
+               "kernels": [f"{name}_{f.name()}" for f in functions]}
     if nonsmooth(model):
-        context.update(step_fn="contact_step", nk=model.nk, dim=model.dim, pgs_max_iter=PGS_MAX_ITER, pgs_tol=c_real(PGS_TOL),
+        context.update(nk=model.nk, dim=model.dim, pgs_max_iter=PGS_MAX_ITER, pgs_tol=c_real(PGS_TOL),
                        mu=[c_real(c["mu"]) for c in model.contacts],
                        restitution=[c_real(c["restitution"]) for c in model.contacts])
     demo = {**context, "program": f"{name}_simulate", "t0": c_real(model.t0), "t_end": c_real(DEMO_T_END),

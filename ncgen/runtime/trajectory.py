@@ -8,6 +8,9 @@ Arrays are indexed by output step first (``n_t = len(t)`` steps), SI units:
 * ``constraint_residual = |Φ(t, q)|∞`` (m²: natural-coordinate constraints are quadratic)
   and ``velocity_residual = |A v + Φ_t|∞`` (m²/s), the drift of the two constraint levels;
 * ``markers`` ``(n_t, n_markers, dim)``, world positions of the model's named markers;
+* with contacts (``contact_names``): ``gap`` ``(n_t, nk)`` (m), ``contact_normal`` (N),
+  ``contact_tangent`` ``(n_t, nk, dim − 1)`` (N) and ``contact_state`` (0 open, 1 stick,
+  2 slip), see :mod:`ncgen.runtime.contact_outputs`;
 * names: ``coordinate_names``, ``constraint_names``, ``input_names``, ``parameter_names``,
   ``member_names``, ``marker_names`` and ``model_name``; ``info`` holds how it was computed
   (method, backend, tolerances, integrator statistics, wall time, whether it is complete).
@@ -26,7 +29,7 @@ import numpy as np
 
 from ncgen.errors import NcgenError
 from ncgen.files import atomic_path
-from ncgen.runtime import outputs
+from ncgen.runtime import contact_outputs, outputs
 
 NAME_KEYS = ("coordinate_names", "constraint_names", "input_names", "parameter_names",
              "member_names", "marker_names")
@@ -44,18 +47,32 @@ class Trajectory:
             setattr(self, key, list(names[key]))
         for key in ARRAY_KEYS:
             setattr(self, key, np.asarray(arrays[key], dtype=float))
+        self.contact_names = list(names.get("contact_names", []))
+        n, nk = len(self.t), len(self.contact_names)
+        shapes = {"gap": (n, nk), "contact_normal": (n, nk), "contact_tangent": (n, nk, self.dim - 1),
+                  "contact_state": (n, nk)}
+        for key in contact_outputs.KEYS:
+            value = arrays.get(key)
+            setattr(self, key, np.zeros(shapes[key]) if value is None else np.asarray(value, dtype=float))
+        self.contact_state = self.contact_state.astype(int)
         self.info = dict(info)
 
     @classmethod
-    def from_states(cls, model, t, q, v, lam, u, p, info: dict) -> "Trajectory":
-        """Evaluate the derived quantities of the states ``(t, q, v, lam)`` of ``model``."""
+    def from_states(cls, model, t, q, v, lam, u, p, info: dict, impulses=None) -> "Trajectory":
+        """Evaluate the derived quantities of the states ``(t, q, v, lam)`` of ``model``;
+        ``impulses``: the nonsmooth stepper's contact impulse sums per output interval."""
         t, q, v = np.asarray(t, float), np.asarray(q, float), np.asarray(v, float)
         T, V = outputs.energies(model, t, q, v, p)
         r, rd = outputs.residuals(model, t, q, v, p)
         names = {key: getattr(model, key) for key in NAME_KEYS}
+        contacts = {}
+        if getattr(model, "nk", 0):
+            names["contact_names"] = model.contact_names
+            contacts = (contact_outputs.impulse_outputs(model, t, q, p, impulses) if impulses is not None
+                        else contact_outputs.smooth_outputs(model, t, q, v, p))
         return cls(model_name=model.name, names=names, info=info, model=model, t=t, q=q, v=v, lam=lam,
                    u=u, p=p, kinetic=T, potential=V, constraint_residual=r, velocity_residual=rd,
-                   markers=outputs.markers(model, q, v))
+                   markers=outputs.markers(model, q, v), **contacts)
 
     # --------------------------------------------------------------- views
     def __len__(self) -> int:
@@ -150,6 +167,9 @@ class Trajectory:
     def _write_npz(self, fh) -> None:
         data = {key: getattr(self, key) for key in ARRAY_KEYS}
         data.update({key: np.array(getattr(self, key), dtype=str) for key in NAME_KEYS})
+        if self.contact_names:
+            data["contact_names"] = np.array(self.contact_names, dtype=str)
+            data.update({key: getattr(self, key) for key in contact_outputs.KEYS})
         data["model_name"] = np.array(self.model_name)
         data["info_json"] = np.array(json.dumps(self.info, sort_keys=True, default=_json_default))
         data["format"] = np.array("ncgen-trajectory-1")
@@ -174,6 +194,9 @@ class Trajectory:
                     raise NcgenError(f"{path} is not a trajectory saved by ncgen (.npz)")
                 arrays = {key: data[key] for key in ARRAY_KEYS}
                 names = {key: [str(s) for s in data[key]] for key in NAME_KEYS}
+                if "contact_names" in data:
+                    names["contact_names"] = [str(s) for s in data["contact_names"]]
+                    arrays.update({key: data[key] for key in contact_outputs.KEYS})
                 name = str(data["model_name"])
                 info = json.loads(str(data["info_json"]))
         except (OSError, ValueError, KeyError) as e:

@@ -1,0 +1,272 @@
+"""Contacts: gaps and contact Jacobians against finite differences; the nonsmooth compiled
+stepper against closed forms (bounce heights, incline stick/slide, rolling), energy through
+random impacts, the standalone C program; the smooth (compliant) law with IDAS."""
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+import ncgen as nc
+from ncgen.errors import NcgenError
+from ncgen.runtime.contact_outputs import OPEN, SLIP, STICK
+
+G = 9.81
+
+
+def spinning_ball(R=0.1):
+    s = nc.System("ball")
+    b = s.add_body("ball", mass=1.3, inertia=0.4 * 1.3 * R**2 * np.eye(3), position=(0.1, -0.2, 0.5),
+                   rotation=_rot(0.3, 0.5), velocity=(1.0, 0.4, -2.0), angular_velocity=(0.7, 2.0, -1.1))
+    return s, b
+
+
+def _rot(a, b):
+    ca_, sa, cb, sb = np.cos(a), np.sin(a), np.cos(b), np.sin(b)
+    return np.array([[ca_, -sa, 0], [sa, ca_, 0], [0, 0, 1]]) @ np.array([[cb, 0, sb], [0, 1, 0], [-sb, 0, cb]])
+
+
+def material_velocity_fd(model, member, q, v, x_world, eps=1e-7):
+    """Velocity of the material point of ``member`` at ``x_world``: its local coordinates
+    at q, then the central difference of its world position along v."""
+    m = model.member(member)
+    R, p = model.poses(q)
+    k = model.member_names.index(member)
+    rbar = R[k].T @ (x_world - p[k])
+    return (m.local.position(q + eps * v, rbar) - m.local.position(q - eps * v, rbar)) / (2 * eps)
+
+
+# ----------------------------------------------------------------------------- kinematics
+def test_sphere_plane_gap_and_jacobians_against_finite_differences():
+    s, b = spinning_ball()
+    n = np.array([0.2, -0.1, 1.0]) / np.linalg.norm([0.2, -0.1, 1.0])
+    s.add_contact(nc.SpherePlane(b, (0.01, 0.02, 0.0), radius=0.1, point=(0, 0, -0.3), normal=n, mu=0.4))
+    model = s.build()
+    rng = np.random.default_rng(1)
+    for q, v in [(model.q0, model.v0), (model.q0 + 0.01 * rng.standard_normal(12), model.v0)]:
+        g = model.gap(q)
+        WN, WT = model.contact_jacobian(q)
+        dg = np.array([(model.gap(q + 1e-7 * e) - model.gap(q - 1e-7 * e))[0] / 2e-7 for e in np.eye(12)])
+        np.testing.assert_allclose(WN[0], dg, atol=1e-7)
+    # the normal Jacobian of a plane fixed to the ground is constant (the gap is linear in q)
+    WN2, _ = model.contact_jacobian(model.q0 + 0.05 * rng.standard_normal(12))
+    np.testing.assert_allclose(WN2, model.contact_jacobian(model.q0)[0], atol=1e-14)
+    # tangential velocity: the material point at the contact point, against finite differences
+    q, v = model.q0, model.v0
+    centre = model.member("ball").local.position(q, np.array([0.01, 0.02, 0.0]))
+    x = centre - 0.1 * n
+    vel = material_velocity_fd(model, "ball", q, v, x)
+    WN, WT = model.contact_jacobian(q)
+    t1, t2 = nc.assembly.context.perpendicular_basis(n)
+    np.testing.assert_allclose(WT @ v, [t1 @ vel, t2 @ vel], atol=1e-7)
+    np.testing.assert_allclose(WN @ v, [n @ vel], atol=1e-7)
+    assert g.shape == (1,) and abs(model.gap(model.q0)[0] - (n @ (centre - (0, 0, -0.3)) - 0.1)) < 1e-14
+
+
+def test_sphere_sphere_and_member_plane_relative_velocities():
+    s, b = spinning_ball()
+    c = s.add_body("c", mass=2.0, inertia=np.diag([0.15, 0.2, 0.25]), position=(0.3, 0.1, 0.2),
+                   velocity=(-0.5, 0.2, 0.3), angular_velocity=(-1.0, 0.5, 0.8))
+    s.add_contact(nc.SphereSphere(b, (0, 0, 0), 0.1, c, (0.05, 0, 0), 0.15, mu=0.3, name="pair"))
+    s.add_contact(nc.SpherePlane(b, (0, 0, 0), 0.1, plane=c, point=(0.3, 0.1, 0.0), normal=(0, 0, 1), name="table"))
+    model = s.build()
+    q, v = model.q0, model.v0
+    WN, WT = model.contact_jacobian(q)
+    ra = model.member("ball").local.position(q[:12], np.zeros(3))
+    rb = model.member("c").local.position(q[12:], np.array([0.05, 0, 0]))
+    n = (rb - ra) / np.linalg.norm(rb - ra)
+    np.testing.assert_allclose(model.gap(q)[0], np.linalg.norm(rb - ra) - 0.25, atol=1e-14)
+    # relative velocity of the two material points (b's surface minus a's surface)
+    rel_b = _member_velocity(model, "c", q, v, rb - 0.15 * n)
+    rel_a = _member_velocity(model, "ball", q, v, ra + 0.1 * n)
+    rel = rel_b - rel_a
+    np.testing.assert_allclose(WN[0] @ v, n @ rel, atol=1e-7)
+    np.testing.assert_allclose(np.linalg.norm(WT[:2] @ v), np.linalg.norm(rel - (n @ rel) * n), atol=1e-7)
+    # normal Jacobian = gradient of the gap (sphere-sphere)
+    dg = np.array([(model.gap(q + 1e-7 * e) - model.gap(q - 1e-7 * e))[0] / 2e-7 for e in np.eye(24)])
+    np.testing.assert_allclose(WN[0], dg, atol=1e-7)
+    # plane on a member: relative velocity of the sphere's point and the plane's point
+    R, _ = model.poses(q)
+    nz = R[1] @ np.array([0, 0, 1.0])
+    x = ra - 0.1 * nz
+    rel = _member_velocity(model, "ball", q, v, x) - _member_velocity(model, "c", q, v, x)
+    np.testing.assert_allclose(WN[1] @ v, nz @ rel, atol=1e-7)
+
+
+def _member_velocity(model, name, q, v, x, eps=1e-7):
+    k = model.member_names.index(name)
+    sl = slice(12 * k, 12 * k + 12)
+    m = model.member(name)
+    R, p = model.poses(q)
+    rbar = R[k].T @ (x - p[k])
+    return (m.local.position(q[sl] + eps * v[sl], rbar) - m.local.position(q[sl] - eps * v[sl], rbar)) / (2 * eps)
+
+
+def test_bad_contacts_are_named():
+    s = nc.System("bad")
+    b = s.add_body("b", mass=1.0, inertia=np.eye(3))
+    with pytest.raises(NcgenError, match="restitution"):
+        s.add_contact(nc.SpherePlane(b, radius=0.1, restitution=1.5))
+    with pytest.raises(NcgenError, match="radius"):
+        s.add_contact(nc.SpherePlane(b, radius=-1))
+    with pytest.raises(NcgenError, match="same member"):
+        s.add_contact(nc.SphereSphere(b, None, 0.1, b, None, 0.1))
+    with pytest.raises(NcgenError, match="contacts"):
+        s.build(contacts="soft")
+    s.add_contact(nc.SpherePlane(b, radius=0.1, name="c"))
+    with pytest.raises(NcgenError, match="already used"):
+        s.add_contact(nc.SpherePlane(b, radius=0.1, name="c"))
+    model = s.build(contacts="nonsmooth")
+    with pytest.raises(NcgenError, match="method='stepper'"):
+        nc.simulate(model, 0.1, 0.01)
+
+
+# ------------------------------------------------------------------ nonsmooth stepper
+@pytest.fixture(scope="module")
+def drops():
+    """Two point masses dropped from 1 m: e = 0.9 and e = 0."""
+    s = nc.System("drops")
+    for name, e, y in (("bouncy", 0.9, 0.0), ("dead", 0.0, 1.0)):
+        p = s.add_point(name, mass=1.0, position=(0, y, 1.0))
+        s.add_contact(nc.SpherePlane(p, radius=0.0, restitution=e, name=f"{name}_floor"))
+    return s.build(contacts="nonsmooth")
+
+
+def test_bounce_heights_follow_restitution(drops):
+    h = 1e-5
+    tr = nc.simulate(drops, 3.0, 1e-4, method="stepper", substeps=10)
+    z = tr.q[:, 2]
+    apex = [i for i in range(1, len(z) - 1) if z[i - 1] < z[i] >= z[i + 1]]
+    assert len(apex) >= 3
+    np.testing.assert_allclose(z[apex[:3]], 0.81 ** np.arange(1, 4), rtol=1e-3)
+    # e = 0: at rest after the first impact, penetration below h·v_impact/2, no drift
+    v_impact = np.sqrt(2 * G)
+    zd = tr.q[:, 5]
+    assert zd.min() > -h * v_impact / 2
+    rest = tr.t > 0.5
+    assert np.ptp(zd[rest]) < 1e-15 and np.max(np.abs(tr.v[rest, 5])) < 1e-12
+    # its contact force carries the weight once at rest; the open contact carries nothing
+    np.testing.assert_allclose(tr.contact_normal[rest, 1], G, rtol=1e-9)
+    assert np.all(tr.contact_state[rest, 1] != OPEN)
+    flight = (tr.t > 0.05) & (tr.t < 0.4)
+    assert np.all(tr.contact_normal[flight, 0] == 0) and np.all(tr.contact_state[flight, 0] == OPEN)
+
+
+@pytest.mark.skipif(shutil.which("make") is None, reason="make not installed")
+def test_c_program_simulates_contacts_like_python(drops, tmp_path):
+    pkg = nc.generate(drops, tmp_path / drops.name)
+    subprocess.run(["make", "-s"], cwd=pkg.path, check=True, capture_output=True)
+    out = subprocess.run([str(pkg.path / f"{drops.name}_simulate"), "1.0", "0.001"], cwd=pkg.path,
+                         capture_output=True, text=True, check=True).stdout
+    final = {}
+    for line in out.splitlines():
+        key, _, value = line.partition(" = ")
+        final.setdefault(key.split("[")[0], []).append(float(value))
+    tr = nc.simulate(drops, 1.0, 1.0, method="stepper", substeps=1000)
+    np.testing.assert_allclose(final["q"], tr.q[-1], atol=1e-12)
+    # closed form for the bouncing ball at t = 1 s (h = 1 ms: impact resolved to h·v)
+    t_hit = np.sqrt(2 / G)
+    v_up = 0.9 * G * t_hit
+    z = v_up * (1 - t_hit) - G / 2 * (1 - t_hit) ** 2
+    assert abs(final["q"][2] - z) < 5e-3
+
+
+@pytest.fixture(scope="module")
+def incline():
+    """Two blocks (point masses) on a 0.3 rad incline: μ = 0.2 < tan θ slides, μ = 0.5 sticks."""
+    th = 0.3
+    n = np.array([-np.sin(th), 0, np.cos(th)])
+    s = nc.System("incline")
+    for name, mu, y in (("slider", 0.2, 0.0), ("sticker", 0.5, 1.0)):
+        p = s.add_point(name, mass=2.0, position=(0, y, 0), velocity=(0, 0, 0))
+        s.add_contact(nc.SpherePlane(p, radius=0.0, point=(0, y, 0), normal=n, mu=mu, name=name))
+    return s.build(contacts="nonsmooth"), th
+
+
+def test_block_on_incline_slides_or_sticks(incline):
+    model, th = incline
+    dt = 0.01
+    tr = nc.simulate(model, 0.5, dt, method="stepper", substeps=10)
+    down = np.array([-np.cos(th), 0, -np.sin(th)])
+    a = np.diff(tr.v[:, :3] @ down) / dt
+    np.testing.assert_allclose(a, G * (np.sin(th) - 0.2 * np.cos(th)), rtol=1e-6)
+    np.testing.assert_allclose(tr.v[:, 3:], 0, atol=1e-12)
+    assert np.all(tr.contact_state[1:, 0] == SLIP) and np.all(tr.contact_state[1:, 1] == STICK)
+    np.testing.assert_allclose(tr.contact_normal[1:], 2 * G * np.cos(th), rtol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(tr.contact_tangent[1:, 0], axis=1), 0.2 * 2 * G * np.cos(th),
+                               rtol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(tr.contact_tangent[1:, 1], axis=1), 2 * G * np.sin(th), rtol=1e-9)
+    assert np.max(np.abs(tr.gap)) < 1e-12
+
+
+def test_sphere_rolls_without_slipping_or_slips():
+    th, R, m = 0.3, 0.1, 1.5
+    n = np.array([-np.sin(th), 0, np.cos(th)])
+    s = nc.System("roll")
+    for name, mu, y in (("roller", 1.0, 0.0), ("skidder", 0.05, 1.0)):
+        b = s.add_body(name, mass=m, inertia=0.4 * m * R**2 * np.eye(3), position=R * n + (0, y, 0))
+        s.add_contact(nc.SpherePlane(b, radius=R, point=(0, y, 0), normal=n, mu=mu, name=name))
+    model = s.build(contacts="nonsmooth")
+    dt = 0.01
+    tr = nc.simulate(model, 0.5, dt, method="stepper", substeps=10)
+    down = np.array([-np.cos(th), 0, -np.sin(th)])
+    a_roll = np.diff(tr.v[:, :3] @ down) / dt
+    a_slip = np.diff(tr.v[:, 12:15] @ down) / dt
+    np.testing.assert_allclose(a_roll, 5 / 7 * G * np.sin(th), rtol=2e-5)
+    np.testing.assert_allclose(a_slip, G * (np.sin(th) - 0.05 * np.cos(th)), rtol=1e-6)
+    assert np.all(tr.contact_state[1:, 0] == STICK) and np.all(tr.contact_state[1:, 1] == SLIP)
+    # rolling without slipping dissipates nothing (the scheme's error is O(h²): 4e-6 at h = 1 ms,
+    # 1e-6 at 0.5 ms, like the acceleration's)
+    M = model.M[:12, :12]
+    E = np.einsum("ti,ij,tj->t", tr.v[:, :12], M, tr.v[:, :12]) / 2 + m * G * tr.q[:, 2]
+    assert np.max(np.abs(E - E[0])) < 1e-5 * (E[-1] - m * G * tr.q[-1, 2])
+    assert tr.constraint_residual.max() < 1e-9
+
+
+def test_energy_never_increases_through_impacts():
+    """A box (8 corner contacts, e = 0.7, μ = 0.4) and a ball (e = 1) dropped with random
+    orientations and spins: the energy never rises above its initial value (beyond the
+    stepper's own O(h²) fluctuation) and the box comes to rest."""
+    s = nc.System("box")
+    a = np.array([0.2, 0.15, 0.1])
+    box = s.add_body("box", mass=2.0, inertia=2.0 / 3 * np.diag([a[1]**2 + a[2]**2, a[0]**2 + a[2]**2,
+                                                                    a[0]**2 + a[1]**2]), position=(0, 0, 1))
+    for i, corner in enumerate(np.array(np.meshgrid(*[[-1, 1]] * 3)).reshape(3, -1).T * a):
+        s.add_contact(nc.SpherePlane(box, corner, 0.0, mu=0.4, restitution=0.7, name=f"c{i}"))
+    ball = s.add_body("ball", mass=1.0, inertia=0.004 * np.eye(3), position=(3, 0, 1))
+    s.add_contact(nc.SpherePlane(ball, radius=0.1, mu=0.6, restitution=1.0, name="ball"))
+    model = s.build(contacts="nonsmooth")
+    rng = np.random.default_rng(7)
+    for trial in range(4):
+        R0 = _rot(*rng.uniform(-np.pi, np.pi, 2))
+        q0 = model.q0.copy()
+        q0[:12] = model.member("box").local.q_from_pose(R0, (0, 0, rng.uniform(0.4, 1.0)))
+        v0 = np.zeros(model.nq)
+        v0[:12] = model.member("box").local.qd_from_twist(R0, q0[:3], rng.normal(0, 3, 3), rng.normal(0, 1, 3))
+        v0[12:24] = model.member("ball").local.qd_from_twist(np.eye(3), q0[12:15], rng.normal(0, 5, 3),
+                                                             (rng.normal(0, 1), 0, -1))
+        tr = nc.simulate(model, 2.0, 0.01, method="stepper", substeps=10, q0=q0, v0=v0)
+        E = tr.energy
+        assert np.max(E - E[0]) < 1e-3 * tr.energy_scale, trial
+        assert tr.gap[:, :8].min() > -0.02
+        assert tr.constraint_residual.max() < 1e-9
+
+
+# ------------------------------------------------------------------------- smooth law
+def test_smooth_contact_rests_at_the_static_penetration_and_slides_with_idas():
+    th, m, k, n_exp = 0.2, 2.0, 1e5, 1.5
+    normal = np.array([-np.sin(th), 0, np.cos(th)])
+    s = nc.System("soft")
+    p = s.add_point("block", mass=m, position=(0, 0, 0))
+    s.add_contact(nc.SpherePlane(p, radius=0.0, normal=normal, mu=0.1, stiffness=k, damping=2e6,
+                                 exponent=n_exp, slip_velocity=1e-4))
+    model = s.build()                                   # contacts="smooth" by default
+    tr = nc.simulate(model, 1.0, 0.01, rtol=1e-9, atol=1e-11)
+    delta = (m * G * np.cos(th) / k) ** (1 / n_exp)     # static penetration under the weight
+    np.testing.assert_allclose(-tr.gap[-20:, 0], delta, rtol=1e-4)
+    np.testing.assert_allclose(tr.contact_normal[-20:, 0], m * G * np.cos(th), rtol=1e-4)
+    down = np.array([-np.cos(th), 0, -np.sin(th)])
+    speed = tr.v[:, :3] @ down
+    a = np.gradient(speed, tr.t)[-30:-5]
+    np.testing.assert_allclose(a, G * (np.sin(th) - 0.1 * np.cos(th)), rtol=1e-3)
+    assert np.all(tr.contact_state[-20:, 0] == SLIP)
