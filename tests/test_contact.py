@@ -270,3 +270,49 @@ def test_smooth_contact_rests_at_the_static_penetration_and_slides_with_idas():
     a = np.gradient(speed, tr.t)[-30:-5]
     np.testing.assert_allclose(a, G * (np.sin(th) - 0.1 * np.cos(th)), rtol=1e-3)
     assert np.all(tr.contact_state[-20:, 0] == SLIP)
+
+
+# ----------------------------------------------------------------------- TOML and check
+TOML = """
+[system]
+name = "pair"
+[[members]]
+name = "a"
+kind = "body"
+mass = 1.0
+inertia = [[0.004, 0, 0], [0, 0.004, 0], [0, 0, 0.004]]
+position = [0, 0, 0.1]
+[[members]]
+name = "b"
+kind = "point"
+mass = 0.5
+position = [0.0, 0.0, 0.5]
+[[contacts]]
+type = "SpherePlane"
+name = "floor"
+sphere = "a"
+radius = 0.1
+mu = 0.3
+restitution = 0.5
+[[contacts]]
+type = "SphereSphere"
+between = ["a", "b"]
+radius_a = 0.1
+radius_b = 0.05
+"""
+
+
+def test_contacts_from_toml_round_trip_and_check(tmp_path):
+    from ncgen.assembly.check import check_system
+    s = nc.System.from_toml(TOML)
+    assert [c.kind for c in s.contacts] == ["SpherePlane", "SphereSphere"]
+    assert s.contacts[0].mu == 0.3 and s.contacts[1].name == "spheresphere_1"
+    again = nc.System.from_toml(s.to_toml())
+    m1, m2 = s.build(), again.build()
+    assert m1.contacts == m2.contacts
+    np.testing.assert_allclose(m1.gap(m1.q0), [0.0, 0.25], atol=1e-15)
+    text = check_system(s).render()
+    assert "contacts (2):" in text and "floor" in text and "a – b" in text and "mu = 0.3, e = 0.5" in text
+    with pytest.raises(NcgenError, match=r"contacts\[1\].radius_a: unknown key"):
+        nc.System.from_toml(TOML.replace('type = "SphereSphere"', 'type = "SpherePlane"\nsphere = "b"')
+                            .replace("between = [\"a\", \"b\"]\n", ""))
