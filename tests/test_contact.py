@@ -316,3 +316,22 @@ def test_contacts_from_toml_round_trip_and_check(tmp_path):
     with pytest.raises(NcgenError, match=r"contacts\[1\].radius_a: unknown key"):
         nc.System.from_toml(TOML.replace('type = "SphereSphere"', 'type = "SpherePlane"\nsphere = "b"')
                             .replace("between = [\"a\", \"b\"]\n", ""))
+
+
+def test_contacts_are_drawn(drops, tmp_path):
+    from ncgen.viz.animation import animate
+    from ncgen.viz.plots import plot
+    from ncgen.viz.scene import scene
+    tr = nc.simulate(drops, 1.0, 0.01, method="stepper", substeps=10)
+    sc = scene(tr)
+    assert sc.sphere_centres.shape == (len(tr), 2, 3) and sc.planes.shape == (1, 2, 3)
+    loaded = ~np.isnan(sc.contact_points).any(axis=2)
+    np.testing.assert_array_equal(loaded, tr.contact_normal > 0)
+    np.testing.assert_allclose(sc.contact_points[loaded][:, 2], tr.q[:, [2, 5]][loaded], atol=1e-12)
+    assert plot(tr, tmp_path / "drops.png").stat().st_size > 0
+    assert animate(tr, tmp_path / "drops.gif", max_frames=5).stat().st_size > 0
+    saved = tr.save(tmp_path / "drops.npz")
+    back = nc.Trajectory.load(saved)
+    assert back.contact_names == tr.contact_names
+    np.testing.assert_array_equal(back.contact_normal, tr.contact_normal)
+    np.testing.assert_array_equal(back.contact_state, tr.contact_state)
