@@ -39,7 +39,14 @@ half of which enters each half-step (``− j/2`` in r, ``+ j/2`` in b), and a fi
 * ``step_contact``: q, v, p -> g (nk, m), W (nk·dim × nq, dense: per contact its normal row,
   then its tangent rows), U = W v (m/s)
 
-gives the gaps and contact Jacobians.  Contact-free models get exactly the kernels above.
+gives the gaps and contact Jacobians.  When the QR factors are small enough to unroll
+(:data:`SX_QR_MAX_NNZ`), two more split ``step_solve`` so that the Delassus matrix needs one
+factorisation per step and one cheap solve per contact row:
+
+* ``step_factor``: K -> V, R, beta (the sparse Householder QR of K)
+* ``step_backsolve``: V, R, beta, b -> x = K⁻¹ b
+
+Contact-free models get exactly the kernels above.
 """
 from __future__ import annotations
 
@@ -103,6 +110,15 @@ CONTACT_DOCS = {
         "inputs": {"q": ("coordinates", "m"), "v": ("coordinate rates", "m/s"), "p": ("parameters", "")},
         "outputs": {"g": ("gaps, positive apart", "m"), "W": ("contact Jacobian, nk*dim x nq, dense", "1"),
                     "U": ("contact velocities W v", "m/s")}},
+    "step_factor": {
+        "purpose": "Stepper: sparse Householder QR of the KKT matrix (for the contact Delassus matrix)",
+        "inputs": {"K": ("KKT matrix in the stepper's pattern", "")},
+        "outputs": {"V": ("Householder vectors", ""), "R": ("triangular factor", ""), "beta": ("reflector scales", "")}},
+    "step_backsolve": {
+        "purpose": "Stepper: x = K^-1 b from the factors of step_factor",
+        "inputs": {"V": ("Householder vectors", ""), "R": ("triangular factor", ""),
+                   "beta": ("reflector scales", ""), "b": ("right-hand side", "")},
+        "outputs": {"x": ("solution", "")}},
 }
 
 
@@ -142,7 +158,25 @@ def stepper_functions(model, reroll_instructions: int | None = REROLL_INSTRUCTIO
     out = [newton, velocity, check_function(model, reroll_instructions), solve_function(K.sparsity())]
     if contact:
         out.append(contact_function(model))
+        out += factor_functions(K.sparsity())
     return out
+
+
+def factor_functions(pattern: ca.Sparsity) -> list[ca.Function]:
+    """``[step_factor, step_backsolve]`` (see the module docstring), or ``[]`` when the
+    factors are too large to unroll (the C then calls ``step_solve`` per contact row)."""
+    n = pattern.size1()
+    V, R, *_ = ca.qr_sparse(ca.DM(pattern, 1.0), True)
+    if V.nnz() + R.nnz() > SX_QR_MAX_NNZ:
+        return []
+    K = ca.SX.sym("K", pattern)
+    V, R, beta, prinv, pc = ca.qr_sparse(K, True)
+    factor = ca.Function("step_factor", [K], [V, R, beta], ["K"], ["V", "R", "beta"])
+    Vs, Rs, bs = ca.SX.sym("V", V.sparsity()), ca.SX.sym("R", R.sparsity()), ca.SX.sym("beta", beta.shape[0])
+    r = ca.SX.sym("r", n)
+    backsolve = ca.Function("step_backsolve", [Vs, Rs, bs, r], [ca.qr_solve(r, Vs, Rs, bs, prinv, pc)],
+                            ["V", "R", "beta", "b"], ["x"])
+    return [factor, backsolve]
 
 
 def contact_function(model) -> ca.Function:

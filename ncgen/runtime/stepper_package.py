@@ -74,7 +74,11 @@ def extra_sources(model, functions) -> list[ExtraSource]:
                "max_halvings": MAX_HALVINGS, "halvings_limit": HALVINGS_LIMIT,
                "kernels": [f"{name}_{f.name()}" for f in functions]}
     if nonsmooth(model):
-        context.update(nk=model.nk, dim=model.dim, pgs_max_iter=PGS_MAX_ITER, pgs_tol=c_real(PGS_TOL),
+        factor = next((f for f in functions if f.name() == "step_factor"), None)
+        if factor is not None:
+            context.update(nnz_v=int(factor.sparsity_out(0).nnz()), nnz_r=int(factor.sparsity_out(1).nnz()),
+                           n_beta=int(factor.sparsity_out(2).nnz()))
+        context.update(factored=factor is not None, nk=model.nk, dim=model.dim, pgs_max_iter=PGS_MAX_ITER, pgs_tol=c_real(PGS_TOL),
                        mu=[c_real(c["mu"]) for c in model.contacts],
                        restitution=[c_real(c["restitution"]) for c in model.contacts])
     demo = {**context, "program": f"{name}_simulate", "t0": c_real(model.t0), "t_end": c_real(DEMO_T_END),
