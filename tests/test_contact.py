@@ -371,3 +371,16 @@ def test_ball_with_backspin_against_closed_form_and_mujoco():
             x.append(D.qpos[0])
     np.testing.assert_allclose(tr.q[1:, 0], x, atol=3e-4)
     np.testing.assert_allclose(D.qvel[0], tr.v[-1, 0], rtol=3e-4)
+
+
+def test_contact_doc_snippets_run(tmp_path, monkeypatch):
+    import re
+    from pathlib import Path
+    monkeypatch.chdir(tmp_path)
+    text = (Path(__file__).resolve().parents[1] / "docs" / "contact.md").read_text(encoding="utf-8")
+    blocks = re.findall(r"```python\n(.*?)```", text, re.S)
+    assert len(blocks) == 2
+    for code in blocks:
+        scope: dict = {}
+        exec(compile(code, "docs/contact.md", "exec"), scope)
+        assert scope["traj"].complete
