@@ -384,3 +384,35 @@ def test_contact_doc_snippets_run(tmp_path, monkeypatch):
         scope: dict = {}
         exec(compile(code, "docs/contact.md", "exec"), scope)
         assert scope["traj"].complete
+
+
+def test_planar_disc_rolls_and_block_slides():
+    th, R, m = 0.3, 0.1, 1.5
+    n = np.array([-np.sin(th), np.cos(th)])
+    s = nc.System("disc2d", gravity=(0, -G))
+    disc = s.add_body("disc", coords="ruv", mass=m, inertia=0.5 * m * R**2, position=R * n)
+    s.add_contact(nc.SpherePlane(disc, radius=R, normal=n, mu=1.0))
+    block = s.add_point("block", mass=1.0, position=(0, 1.0))
+    s.add_contact(nc.SpherePlane(block, point=(0, 1.0), normal=n, mu=0.1))
+    tr = nc.simulate(s.build(contacts="nonsmooth"), 0.5, 0.01, method="stepper", substeps=10)
+    down = np.array([-np.cos(th), -np.sin(th)])
+    np.testing.assert_allclose(np.diff(tr.v[:, :2] @ down) / 0.01, 2 / 3 * G * np.sin(th), rtol=2e-5)
+    np.testing.assert_allclose(np.diff(tr.v[:, -2:] @ down) / 0.01, G * (np.sin(th) - 0.1 * np.cos(th)), rtol=1e-9)
+    assert tr.contact_tangent.shape == (len(tr), 2, 1)
+
+
+def test_head_on_sphere_collision_follows_newton_restitution():
+    """Equal spheres, one at rest: after the impact v_a = (1 − e)/2 v, v_b = (1 + e)/2 v,
+    momentum conserved; a third sphere with e = 1 and twice the mass: exact elastic formulas."""
+    s = nc.System("billiard", gravity=(0, 0, 0))
+    a = s.add_point("a", mass=1.0, position=(0, 0, 0), velocity=(2.0, 0, 0))
+    b = s.add_point("b", mass=1.0, position=(0.5, 0, 0))
+    c = s.add_point("c", mass=1.0, position=(0, 1, 0), velocity=(3.0, 0, 0))
+    d = s.add_point("d", mass=2.0, position=(0.5, 1, 0))
+    s.add_contact(nc.SphereSphere(a, None, 0.1, b, None, 0.1, restitution=0.6, mu=0.5))
+    s.add_contact(nc.SphereSphere(c, None, 0.1, d, None, 0.1, restitution=1.0))
+    tr = nc.simulate(s.build(contacts="nonsmooth"), 0.5, 0.01, method="stepper", substeps=10)
+    np.testing.assert_allclose(tr.v[-1, [0, 3]], [0.4 * 2.0 / 2, 1.6 * 2.0 / 2], rtol=1e-12)
+    np.testing.assert_allclose(tr.v[-1, [6, 9]], [3.0 * (1 - 2) / 3, 3.0 * 2 / 3], rtol=1e-12)
+    np.testing.assert_allclose(tr.v[-1, [1, 2, 4, 5, 7, 8, 10, 11]], 0, atol=1e-14)
+    assert tr.gap.min() > -1e-3 * 3.0 / 2          # h·v/2
