@@ -416,3 +416,23 @@ def test_head_on_sphere_collision_follows_newton_restitution():
     np.testing.assert_allclose(tr.v[-1, [6, 9]], [3.0 * (1 - 2) / 3, 3.0 * 2 / 3], rtol=1e-12)
     np.testing.assert_allclose(tr.v[-1, [1, 2, 4, 5, 7, 8, 10, 11]], 0, atol=1e-14)
     assert tr.gap.min() > -1e-3 * 3.0 / 2          # h·v/2
+
+
+def test_optimal_control_through_smooth_friction():
+    """Push a 1 kg block 1 m in 1 s, rest to rest, against Coulomb friction (smooth law):
+    the push is a + μ g with the frictionless minimum-effort a(t) = 6 (1 − 2t), so the
+    least effort is ∫ a² + (μ g)² = 12 + (μ g)²."""
+    k, mu = 1e5, 0.3
+    s = nc.System("pushbox")
+    box = s.add_point("box", mass=1.0, position=(0, 0, -(G / k) ** (1 / 1.5)))
+    s.add_contact(nc.SpherePlane(box, mu=mu, stiffness=k, damping=3e4, slip_velocity=1e-2))
+    s.add_input("push", 1)
+    s.add_force(nc.PointForce(box, (0, 0, 0), force=["push", 0, 0]))
+    model = s.build()
+    ocp = nc.OptimalControl(model, N=40, t_final=1.0)
+    ocp.initial(q=model.q0, v=0)
+    ocp.final(q={"box.r_i.x": 1.0}, v=0)
+    ocp.minimize_effort()
+    sol = ocp.solve()
+    assert sol.stats.status == "Solve_Succeeded"
+    np.testing.assert_allclose(sol.stats.objective, 12 + (mu * G) ** 2, rtol=1e-2)
