@@ -61,7 +61,8 @@ def stepper_section(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS
     from ncgen.codegen.model_package import Section
 
     functions = stepper_functions(model, reroll_instructions)
-    docs = {**DOCS, **CONTACT_DOCS} if nonsmooth(model) else DOCS
+    names = {f.name() for f in functions}
+    docs = {k: v for k, v in {**DOCS, **CONTACT_DOCS}.items() if k in names} if nonsmooth(model) else DOCS
     return Section(functions=functions, docs=docs, extra_sources=extra_sources(model, functions))
 
 
