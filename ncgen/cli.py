@@ -150,10 +150,11 @@ def derive(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
 
 
 # ------------------------------------------------------------------------- models
-def load_model(path: str, params: list[str] | None = None):
+def load_model(path: str, params: list[str] | None = None, contacts: str = "smooth"):
     """Build the model in TOML file ``path``; ``params`` (``name=value`` strings, a vector as
     ``name=1,2,3``) replace default parameter values.  Raises NcgenError with a message
-    naming the file (and the key path, for invalid models)."""
+    naming the file (and the key path, for invalid models).  ``contacts``: how contacts
+    enter the model (``System.build(contacts=...)``)."""
     from ncgen.model.members import ModelError
     from ncgen.model.system import System
 
@@ -169,7 +170,7 @@ def load_model(path: str, params: list[str] | None = None):
     for name, value in _parameter_overrides(params or [], system):
         system.parameters[name] = (system.parameters[name][0], value)
     try:
-        return system.build()
+        return system.build(contacts=contacts)
     except NcgenError as e:
         raise type(e)(f"{path}: model {system.name!r} cannot be built: {e}") from None
 
@@ -332,6 +333,9 @@ def _simulate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", default="idas", metavar="METHOD",
                    help="integrator: idas (variable-step BDF with error control, default) or stepper "
                         "(the compiled fixed-step constraint-preserving stepper)")
+    p.add_argument("--contacts", default="smooth", choices=("smooth", "nonsmooth"),
+                   help="contacts of the model: smooth (compliant law, any method; default) or nonsmooth "
+                        "(rigid impacts and Coulomb friction; --method stepper only, the step is --dt)")
     p.add_argument("--backend", default="auto", choices=("auto", "compiled", "vm"),
                    help="where the equations run: compiled (generated C, built once and cached), vm "
                         "(CasADi's virtual machine) or auto (compiled if a C compiler is found; default)")
@@ -367,7 +371,8 @@ def _check_outputs(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
         "ncgen simulate examples/chain.toml --t-end 2 --dt 0.01 -o chain.npz --plot chain.png\n"
         "ncgen simulate examples/heavy_top.toml --t-end 3 -o top.csv --animate top.gif\n"
         "ncgen simulate examples/slider_crank.toml --t-end 1 -o sc.npz --param omega=20 --backend vm\n"
-        "ncgen simulate examples/tensegrity.toml --t-end 2 -o t.npz --method stepper"),
+        "ncgen simulate examples/tensegrity.toml --t-end 2 -o t.npz --method stepper\n"
+        "ncgen simulate balls.toml --t-end 2 --dt 1e-4 -o balls.npz --method stepper --contacts nonsmooth"),
     arguments=_simulate_arguments,
 )
 def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
@@ -377,7 +382,7 @@ def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from ncgen.runtime import simulate as run
 
     _check_outputs(args, parser)
-    model = load_model(args.model, args.param)
+    model = load_model(args.model, args.param, args.contacts)
     traj = run(model, t_end=args.t_end, dt=args.dt, method=args.method, backend=args.backend,
                rtol=args.rtol, atol=args.atol)
     print(traj.summary())

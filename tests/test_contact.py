@@ -458,3 +458,17 @@ def test_delassus_without_unrolled_factors_gives_the_same_motion(monkeypatch):
     plain = nc.simulate(model, 1.0, 0.01, method="stepper", substeps=5)
     assert fast.contact_normal.max() > 0
     np.testing.assert_allclose(plain.q, fast.q, atol=1e-9)
+
+
+def test_cli_simulates_nonsmooth_contacts(tmp_path):
+    import sys
+    model = tmp_path / "pair.toml"
+    model.write_text(TOML, encoding="utf-8")
+    out = subprocess.run([sys.executable, "-m", "ncgen.cli", "simulate", str(model), "--t-end", "0.3", "--dt",
+                          "0.001", "-o", str(tmp_path / "pair.npz"), "--method", "stepper", "--contacts", "nonsmooth"],
+                         capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    tr = nc.Trajectory.load(tmp_path / "pair.npz")
+    assert tr.contact_names == ["floor", "spheresphere_1"] and tr.info["scheme"] == "RATTLE, nonsmooth contacts"
+    # the point falls 0.25 m onto the ball resting on the floor (e = 0) and stays on top
+    assert tr.contact_normal[:, 1].max() > 0 and tr.gap.min() > -1e-3
