@@ -49,10 +49,11 @@ def simulate_stepper(model, t: np.ndarray, U: np.ndarray, p: np.ndarray, q0: np.
     n_out = len(t) - 1
     h = float(t[1] - t[0]) / substeps
     stepper = load_stepper(model, cflags)
+    IMP = np.zeros((n_out, stepper.nd)) if stepper.nd else None      # contact impulses per output interval
     start = time.perf_counter()
-    Q, V, LAM, ITER, status, done, splits, IMP = stepper.simulate(q0, v0, float(t[0]), h, n_out * substeps, substeps,
+    Q, V, LAM, ITER, status, done, splits = stepper.simulate(q0, v0, float(t[0]), h, n_out * substeps, substeps,
                                                              step_inputs(U, t, hold, substeps), p, tol, max_iter,
-                                                             max_halvings)
+                                                             max_halvings, impulse_out=IMP)
     wall = time.perf_counter() - start
     rows = done // substeps
     scheme = "RATTLE, nonsmooth contacts" if IMP is not None else "RATTLE"

@@ -116,11 +116,12 @@ class CompiledStepper:
         self._simulate = f
 
     def simulate(self, q0, v0, t0: float, h: float, n_steps: int, every: int, U: np.ndarray | None,
-                 p: np.ndarray, tol: float, max_iter: int, max_halvings: int):
-        """``(Q, V, LAM, ITER, status, steps_done, splits, IMP)``: states after every ``every``-th of
-        ``n_steps`` steps (see ``<model>_simulate`` in ``<model>_stepper.h``) and, for the
-        nonsmooth contact stepper, the contact impulses summed over those steps (N·s, ``nd``
-        per row; else None).  ``U``: inputs per step, shape ``(n_steps, nu)``, or None for zeros."""
+                 p: np.ndarray, tol: float, max_iter: int, max_halvings: int, impulse_out=None):
+        """``(Q, V, LAM, ITER, status, steps_done, splits)``: states after every ``every``-th of
+        ``n_steps`` steps (see ``<model>_simulate`` in ``<model>_stepper.h``).  ``U``: inputs
+        per step, shape ``(n_steps, nu)``, or None for zeros.  ``impulse_out`` (nonsmooth
+        contact stepper): an array of shape ``(n_steps // every, nd)`` that receives the
+        contact impulses summed over those steps (N·s), or None."""
         rows = n_steps // every
         Q, V = np.zeros((rows, self.nq)), np.zeros((rows, self.nq))
         LAM, ITER = np.zeros((rows, self.nc)), np.zeros(rows, dtype=np.dtype(ctypes.c_long))
@@ -128,14 +129,16 @@ class CompiledStepper:
         p = np.ascontiguousarray(p, float)
         U = None if U is None or self.nu == 0 else np.ascontiguousarray(U, float)
         done, splits = ctypes.c_long(0), ctypes.c_long(0)
-        IMP = np.zeros((rows, self.nd)) if self.nd else None
-        extra = [_ptr(IMP)] if self.nd else []
+        if impulse_out is not None and (impulse_out.shape != (rows, self.nd) or impulse_out.dtype != float
+                                        or not impulse_out.flags.c_contiguous):
+            raise ValueError(f"impulse_out: expected a C-contiguous float array of shape {(rows, self.nd)}")
+        extra = [_ptr(impulse_out)] if self.nd else []
         status = self._simulate(_ptr(q0), _ptr(v0), float(t0), float(h), int(n_steps), int(every),
                                 _ptr(U), self.nu if U is not None else 0, _ptr(p), _ptr(Q), _ptr(V), _ptr(LAM),
                                 ITER.ctypes.data_as(ctypes.POINTER(ctypes.c_long)),
                                 ctypes.byref(_Options(float(tol), int(max_iter), int(max_halvings))),
                                 ctypes.byref(done), ctypes.byref(splits), *extra)
-        return Q, V, LAM, ITER, int(status), int(done.value), int(splits.value), IMP
+        return Q, V, LAM, ITER, int(status), int(done.value), int(splits.value)
 
 
 class _Options(ctypes.Structure):
