@@ -81,7 +81,8 @@ def extra_sources(model, functions) -> list[ExtraSource]:
                            n_beta=int(factor.sparsity_out(2).nnz()))
         context.update(factored=factor is not None, nk=model.nk, dim=model.dim, pgs_max_iter=PGS_MAX_ITER, pgs_tol=c_real(PGS_TOL),
                        mu=[c_real(c["mu"]) for c in model.contacts],
-                       restitution=[c_real(c["restitution"]) for c in model.contacts])
+                       restitution=[c_real(c["restitution"]) for c in model.contacts],
+                       any_restitution=any(c["restitution"] > 0 for c in model.contacts))
     demo = {**context, "program": f"{name}_simulate", "t0": c_real(model.t0), "t_end": c_real(DEMO_T_END),
             "h": c_real(DEMO_H), "q0": [c_real(x) for x in model.q0], "v0": [c_real(x) for x in model.v0],
             "p0": [c_real(x) for x in model.p0]}
