@@ -30,7 +30,9 @@ pytestmark = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc
                     "RATIO ncgen / MuJoCo penetration"]),
 ])
 def test_smoke(tmp_path, script, expected):
-    env = {**os.environ, "NCGEN_CACHE_DIR": str(tmp_path / "cache")}
+    root = str(BENCHMARKS.parent)        # the checkout under test, whatever ncgen is installed
+    env = {**os.environ, "NCGEN_CACHE_DIR": str(tmp_path / "cache"),
+           "PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")]))}
     name, *options = script.split()
     out = subprocess.run([sys.executable, str(BENCHMARKS / name), *options, "--smoke"], cwd=BENCHMARKS,
                          capture_output=True, text=True, env=env)
