@@ -133,16 +133,15 @@ def drops():
 
 
 def test_bounce_heights_follow_restitution(drops):
-    h = 1e-5
-    tr = nc.simulate(drops, 3.0, 1e-4, method="stepper", substeps=10)
+    tr = nc.simulate(drops, 3.0, 1e-4, method="stepper", substeps=10)           # h = 10 µs
     z = tr.q[:, 2]
     apex = [i for i in range(1, len(z) - 1) if z[i - 1] < z[i] >= z[i + 1]]
     assert len(apex) >= 3
     np.testing.assert_allclose(z[apex[:3]], 0.81 ** np.arange(1, 4), rtol=1e-3)
-    # e = 0: at rest after the first impact, penetration below h·v_impact/2, no drift
-    v_impact = np.sqrt(2 * G)
+    # e = 0: at rest after the first impact, no penetration beyond the push-out tolerance
+    # (PENETRATION_TOL = 1e-8 m; without the push-out it would be up to h·v_impact/2), no drift
     zd = tr.q[:, 5]
-    assert zd.min() > -h * v_impact / 2
+    assert zd.min() > -1e-8
     rest = tr.t > 0.5
     assert np.ptp(zd[rest]) < 1e-15 and np.max(np.abs(tr.v[rest, 5])) < 1e-12
     # its contact force carries the weight once at rest; the open contact carries nothing
@@ -290,7 +289,7 @@ def test_energy_never_increases_through_impacts():
         tr = nc.simulate(model, 2.0, 0.01, method="stepper", substeps=10, q0=q0, v0=v0)
         E = tr.energy
         assert np.max(E - E[0]) < 1e-9 * tr.energy_scale, trial
-        assert tr.gap[:, :8].min() > -5e-3              # h·v/2 at most
+        assert tr.gap.min() > -1e-8                     # push-out tolerance
         assert tr.constraint_residual.max() < 1e-9
 
 
@@ -421,7 +420,7 @@ def test_head_on_sphere_collision_follows_newton_restitution():
     np.testing.assert_allclose(tr.v[-1, [0, 3]], [0.4 * 2.0 / 2, 1.6 * 2.0 / 2], rtol=1e-12)
     np.testing.assert_allclose(tr.v[-1, [6, 9]], [3.0 * (1 - 2) / 3, 3.0 * 2 / 3], rtol=1e-12)
     np.testing.assert_allclose(tr.v[-1, [1, 2, 4, 5, 7, 8, 10, 11]], 0, atol=1e-14)
-    assert tr.gap.min() > -1e-3 * 3.0 / 2          # h·v/2
+    assert tr.gap.min() > -1e-8
 
 
 def test_optimal_control_through_smooth_friction():

@@ -39,7 +39,7 @@ half of which enters each half-step (``− j/2`` in r, ``+ j/2`` in b), and a fi
 * ``step_contact``: q, v, p -> g (nk, m), W (nk·dim × nq, dense: per contact its normal row,
   then its tangent rows), U = W v (m/s)
 
-gives the gaps and contact Jacobians.  When the QR factors are small enough to unroll
+gives the gaps and contact Jacobians, and ``step_gap``: q, p -> g the gaps alone.  When the QR factors are small enough to unroll
 (:data:`SX_QR_MAX_NNZ`), two more split ``step_solve`` so that the Delassus matrix needs one
 factorisation per step and one cheap solve per contact row:
 
@@ -110,6 +110,10 @@ CONTACT_DOCS = {
         "inputs": {"q": ("coordinates", "m"), "v": ("coordinate rates", "m/s"), "p": ("parameters", "")},
         "outputs": {"g": ("gaps, positive apart", "m"), "W": ("contact Jacobian, nk*dim x nq, dense", "1"),
                     "U": ("contact velocities W v", "m/s")}},
+    "step_gap": {
+        "purpose": "Stepper: contact gaps",
+        "inputs": {"q": ("coordinates", "m"), "p": ("parameters", "")},
+        "outputs": {"g": ("gaps, positive apart", "m")}},
     "step_factor": {
         "purpose": "Stepper: sparse Householder QR of the KKT matrix (for the contact Delassus matrix)",
         "inputs": {"K": ("KKT matrix in the stepper's pattern", "")},
@@ -157,7 +161,7 @@ def stepper_functions(model, reroll_instructions: int | None = REROLL_INSTRUCTIO
 
     out = [newton, velocity, check_function(model, reroll_instructions), solve_function(K.sparsity())]
     if contact:
-        out.append(contact_function(model))
+        out += [contact_function(model), gap_function(model)]
         out += factor_functions(K.sparsity())
     return out
 
@@ -177,6 +181,12 @@ def factor_functions(pattern: ca.Sparsity) -> list[ca.Function]:
     backsolve = ca.Function("step_backsolve", [Vs, Rs, bs, r], [ca.qr_solve(r, Vs, Rs, bs, prinv, pc)],
                             ["V", "R", "beta", "b"], ["x"])
     return [factor, backsolve]
+
+
+def gap_function(model) -> ca.Function:
+    """``step_gap: q, p -> g`` (the gaps alone: cheap, for the end-of-step penetration test)."""
+    q, p = ca.SX.sym("q", model.nq), ca.SX.sym("p", model.np)
+    return ca.Function("step_gap", [q, p], [ca.densify(model.functions["gap"](q, p))], ["q", "p"], ["g"])
 
 
 def contact_function(model) -> ca.Function:
