@@ -55,6 +55,10 @@ PGS_MAX_ITER, PGS_TOL = 2000, 1e-13
 #: second order (~1e-8 m when the falling chain of benchmarks/contact.py lands), so a smaller
 #: tolerance would only repeat push-outs.
 PENETRATION_TOL = 1e-8
+#: Nonsmooth contact stepper: a step with closed contacts is retaken with corrected impulses
+#: (at most CONTACT_REFINE_MAX times) until its end-of-step contact velocities match the
+#: linearised prediction to CONTACT_REFINE_TOL (relative to 1 m/s or the largest of them).
+CONTACT_REFINE_MAX, CONTACT_REFINE_TOL = 10, 1e-10
 #: The demo program's defaults: simulated time and step (s).
 DEMO_T_END, DEMO_H = 1.0, 1e-3
 
@@ -86,6 +90,7 @@ def extra_sources(model, functions) -> list[ExtraSource]:
             context.update(nnz_v=int(factor.sparsity_out(0).nnz()), nnz_r=int(factor.sparsity_out(1).nnz()),
                            n_beta=int(factor.sparsity_out(2).nnz()))
         context.update(factored=factor is not None, nk=model.nk, dim=model.dim, pgs_max_iter=PGS_MAX_ITER, pgs_tol=c_real(PGS_TOL), penetration_tol=c_real(PENETRATION_TOL),
+                       refine_max=CONTACT_REFINE_MAX, refine_tol=c_real(CONTACT_REFINE_TOL),
                        mu=[c_real(c["mu"]) for c in model.contacts],
                        restitution=[c_real(c["restitution"]) for c in model.contacts],
                        any_restitution=any(c["restitution"] > 0 for c in model.contacts))
