@@ -34,12 +34,13 @@ Kernels (name: inputs -> outputs; ``t`` in s, ``h`` in s):
 Models built with ``contacts="nonsmooth"`` (and at least one contact) get the nonsmooth
 variant (:mod:`ncgen.runtime.contact_step` documents the scheme): ``step_newton`` and
 ``step_velocity`` take one more input, the generalised contact impulse ``j = Wᵀ P`` (N·s),
-half of which enters each half-step (``− j/2`` in r, ``+ j/2`` in b), and a fifth kernel
+half of which enters each half-step (``− j/2`` in r, ``+ j/2`` in b), and two more kernels
 
 * ``step_contact``: q, v, p -> g (nk, m), W (nk·dim × nq, dense: per contact its normal row,
   then its tangent rows), U = W v (m/s)
+* ``step_gap``: q, p -> g (the gaps alone)
 
-gives the gaps and contact Jacobians, and ``step_gap``: q, p -> g the gaps alone.  When the QR factors are small enough to unroll
+give the gaps and contact Jacobians.  When the QR factors are small enough to unroll
 (:data:`SX_QR_MAX_NNZ`), two more split ``step_solve`` so that the Delassus matrix needs one
 factorisation per step and one cheap solve per contact row:
 
@@ -117,7 +118,8 @@ CONTACT_DOCS = {
     "step_factor": {
         "purpose": "Stepper: sparse Householder QR of the KKT matrix (for the contact Delassus matrix)",
         "inputs": {"K": ("KKT matrix in the stepper's pattern", "")},
-        "outputs": {"V": ("Householder vectors", ""), "R": ("triangular factor", ""), "beta": ("reflector scales", "")}},
+        "outputs": {"V": ("Householder vectors", ""), "R": ("triangular factor", ""),
+                    "beta": ("reflector scales", "")}},
     "step_backsolve": {
         "purpose": "Stepper: x = K^-1 b from the factors of step_factor",
         "inputs": {"V": ("Householder vectors", ""), "R": ("triangular factor", ""),

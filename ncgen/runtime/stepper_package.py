@@ -89,7 +89,8 @@ def extra_sources(model, functions) -> list[ExtraSource]:
         if factor is not None:
             context.update(nnz_v=int(factor.sparsity_out(0).nnz()), nnz_r=int(factor.sparsity_out(1).nnz()),
                            n_beta=int(factor.sparsity_out(2).nnz()))
-        context.update(factored=factor is not None, nk=model.nk, dim=model.dim, pgs_max_iter=PGS_MAX_ITER, pgs_tol=c_real(PGS_TOL), penetration_tol=c_real(PENETRATION_TOL),
+        context.update(factored=factor is not None, nk=model.nk, dim=model.dim, pgs_max_iter=PGS_MAX_ITER,
+                       pgs_tol=c_real(PGS_TOL), penetration_tol=c_real(PENETRATION_TOL),
                        refine_max=CONTACT_REFINE_MAX, refine_tol=c_real(CONTACT_REFINE_TOL),
                        mu=[c_real(c["mu"]) for c in model.contacts],
                        restitution=[c_real(c["restitution"]) for c in model.contacts],
