@@ -472,3 +472,29 @@ def test_cli_simulates_nonsmooth_contacts(tmp_path):
     assert tr.contact_names == ["floor", "spheresphere_1"] and tr.info["scheme"] == "RATTLE, nonsmooth contacts"
     # the point falls 0.25 m onto the ball resting on the floor (e = 0) and stays on top
     assert tr.contact_normal[:, 1].max() > 0 and tr.gap.min() > -1e-3
+
+
+def test_block_tips_over_its_edge_iff_above_the_critical_spin():
+    """A planar block (2a × 2b, 4 corner contacts, μ = 2) set pivoting about its bottom-right
+    corner with angular velocity ω0 tips over iff ½ I_O ω0² > m g (r − b) (r: pivot to centre
+    of mass), the closed form for a rigid pivot; while it pivots no energy is lost."""
+    m, a, b = 2.0, 0.1, 0.3
+    inertia = m * ((2 * a) ** 2 + (2 * b) ** 2) / 12
+    r = np.hypot(a, b)
+    w_crit = np.sqrt(2 * m * G * (r - b) / (inertia + m * r**2))
+    s = nc.System("tip2d", gravity=(0, -G))
+    block = s.add_body("block", coords="ruv", mass=m, inertia=inertia, position=(0, b))
+    for i, corner in enumerate([(-a, -b), (a, -b), (a, b), (-a, b)]):
+        s.add_contact(nc.SpherePlane(block, corner, 0.0, mu=2.0, name=f"c{i}"))
+    model = s.build(contacts="nonsmooth")
+    centre, pivot = np.array([0.0, b]), np.array([a, 0.0])
+    for factor, tips in ((0.99, False), (1.01, True)):
+        w0 = -factor * w_crit                                # clockwise: over the right edge
+        v_centre = w0 * np.array([-(centre - pivot)[1], (centre - pivot)[0]])
+        v0 = model.member("block").local.qd_from_twist(np.eye(2), centre, w0, v_centre)
+        tr = nc.simulate(model, 1.5, 0.005, method="stepper", substeps=5, v0=v0)
+        x = tr.poses()[1][:, 0, 0]
+        assert (x.max() > a) == tips, (factor, x.max())
+        pivoting = tr.t < 0.15
+        assert np.ptp(tr.energy[pivoting]) < 1e-6 * tr.energy[0]
+        assert np.all(tr.contact_state[1:][pivoting[1:], 1] == STICK)
