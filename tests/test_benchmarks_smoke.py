@@ -28,6 +28,8 @@ pytestmark = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc
                             "RATIO looped -O2 / flat -O2, jacobian", "RATIO VM / looped -O2, residual"]),
     ("build_scaling.py", ["=== ncgen: chain of N bars", "KanesMethod", "EXTRAPOLATED"]),
     ("long_run.py", ["=== heavy top", "=== chain of 5 bars", "RATIO ncgen / MuJoCo RK4"]),
+    ("contact.py", ["=== chain of N = 3 bars falling on the ground", "RATIO ncgen / MuJoCo wall time",
+                    "RATIO ncgen / MuJoCo penetration"]),
     ("joint_space.py", ["=== call overhead", "RATIO casadi.external / direct", "=== Panda",
                         "RATIO ncgen direct / pinocchio.aba"]),
 ])
@@ -35,7 +37,9 @@ def test_smoke(tmp_path, script, expected):
     if script == "joint_space.py":
         pytest.importorskip("pinocchio")
         pytest.importorskip("yourdfpy")
-    env = {**os.environ, "NCGEN_CACHE_DIR": str(tmp_path / "cache")}
+    root = str(BENCHMARKS.parent)        # the checkout under test, whatever ncgen is installed
+    env = {**os.environ, "NCGEN_CACHE_DIR": str(tmp_path / "cache"),
+           "PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")]))}
     name, *options = script.split()
     out = subprocess.run([sys.executable, str(BENCHMARKS / name), *options, "--smoke"], cwd=BENCHMARKS,
                          capture_output=True, text=True, env=env)

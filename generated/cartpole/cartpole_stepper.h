@@ -114,7 +114,9 @@ int cartpole_simulate(const casadi_real *q0, const casadi_real *v0, casadi_real 
  * from the same start (about half the work again) gives the global error estimate
  * |y_h - y_2h| / 3 (RATTLE is of order 2) after every second step; the error columns hold
  * the latest one (-1 before the first, -2 once a step of 2h failed: no estimate from
- * there on).  track_work != 0: W accumulates the trapezoidal rule of P over the steps. */
+ * there on; models with contacts have no shadow run).  track_work != 0: W accumulates the
+ * trapezoidal rule of P over the steps (contact impulses not included).  impulse_out
+ * (contacts only): as in cartpole_simulate. */
 int cartpole_simulate_stats(const casadi_real *q0, const casadi_real *v0, const casadi_real *lam0,
                             casadi_real t0, casadi_real h, long n_steps, long every,
                             const casadi_real *u, long u_stride, const casadi_real *p,

@@ -8,6 +8,7 @@ import warnings
 import casadi as ca
 import numpy as np
 
+from ncgen.assembly.contacts import contact_functions, contact_specs, contact_terms, smooth_forces
 from ncgen.assembly.functions import system_functions
 from ncgen.assembly.initial_state import consistent_state
 from ncgen.assembly.joint_space import JointSpace, actuator_forces, build_joint_coordinates
@@ -27,10 +28,13 @@ from ncgen.model.layout import Layout, make_layout
 BAUMGARTE = (5.0, 5.0)
 
 REDUNDANT_MODES = ("drop", "error", "keep")
+#: How contacts enter the model: compliant forces in F, or unilateral constraints for the
+#: nonsmooth compiled stepper (docs/contact.md).
+CONTACT_MODELS = ("smooth", "nonsmooth")
 
 
 def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", tolerance: float = 1e-6,
-                t0: float = 0.0, assemble: bool = False, fix=()):
+                t0: float = 0.0, assemble: bool = False, fix=(), contacts: str = "smooth"):
     """Assemble ``system`` into a :class:`~ncgen.model.model.Model`.
 
     ``redundant``: constraints linearly dependent at the initial configuration are
@@ -53,6 +57,8 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     system = copy.deepcopy(system)       # the model's own description: later edits of the caller's system do not reach it
     if not system.members:
         raise ModelError(f"system {system.name!r} has no members; add bodies, bars or points first")
+    if contacts not in CONTACT_MODELS:
+        raise ModelError(f"contacts: expected one of {', '.join(CONTACT_MODELS)}, got {contacts!r}")
     if redundant not in REDUNDANT_MODES:
         raise ModelError(f"redundant: expected one of {', '.join(REDUNDANT_MODES)}, got {redundant!r}")
     alpha, beta = (float(x) for x in baumgarte)
@@ -68,6 +74,10 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     actuation = actuator_forces(ctx, coords)
     if actuation[2]:
         F = F + ca.mtimes(actuation[0], actuation[1])
+    terms = contact_terms(ctx, system.contacts)
+    if terms and contacts == "smooth":
+        _, _, Q, Vc = smooth_forces(ctx, terms)
+        F, V = F + Q, ca.vertcat(V, Vc)
     M = assemble_mass(layout, members)
     factor = CholeskyFactor(M, layout.coordinate_names)
     q_init, v_init = initial_guess(layout, members)
@@ -92,6 +102,8 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
 
     phi = ca.vertcat(*rows) if rows else ca.SX(0, 1)
     functions, potential = system_functions(ctx, phi, F, V, M, factor, alpha, beta, system)
+    if terms:
+        functions.update(contact_functions(ctx, terms))
     state = consistent_state(functions, layout, labels, q_init, v_init, p0, t0, tolerance, M,
                              fixed=fixed, assemble=assemble)
     joint_space = JointSpace(ctx, coords, skipped, actuation)
@@ -100,7 +112,8 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
         return Model(description=system, layout=layout, labels=labels, functions=functions, M=M, factor=factor,
                      potential=potential, state=state, p0=p0, baumgarte=(alpha, beta),
                      redundant=redundant_labels, dropped=(redundant == "drop"), t0=t0,
-                     springs=spring_table(system, ctx), limits=limits, joint_space=joint_space)
+                     springs=spring_table(system, ctx), limits=limits, joint_space=joint_space,
+                     contacts=contact_specs(system.contacts), contact_model=contacts)
 
     model = model_with(state)
     if system.initial_joints or system.initial_joint_rates:

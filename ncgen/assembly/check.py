@@ -49,6 +49,10 @@ class CheckReport:
                       for j in s.joints]
         if s.forces:
             lines.append(f"forces ({len(s.forces)}): " + ", ".join(f"{f.name} ({f.kind})" for f in s.forces))
+        if getattr(s, "contacts", None):
+            lines.append(f"contacts ({len(s.contacts)}):")
+            lines += [f"  {c.name:<16} {c.kind:<16} {' – '.join(_mname(x) for x in c.members())}  "
+                      f"mu = {c.mu:g}, e = {c.restitution:g}" for c in s.contacts]
         if s.parameters:
             lines.append("parameters: " + ", ".join(f"{n} = {_fmt(v)}" for n, (_, v) in s.parameters.items()))
         if s.inputs:

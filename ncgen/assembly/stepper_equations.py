@@ -38,6 +38,24 @@ Kernels (name: inputs -> outputs; ``t`` in s, ``h`` in s):
   closes the energy balance ``E(t) − E(t0) = W(t)``
 * ``step_outputs``: t, q, v, lam, u, p -> y = [T; V; |Φ|∞; |A v + Φ_t|∞; P; markers
   (dim × n_markers, column-major)]: the derived quantities of a trajectory, one call per sample
+
+Models built with ``contacts="nonsmooth"`` (and at least one contact) get the nonsmooth
+variant (docs/contact.md and ``contact_step`` in templates/c/stepper.c.j2 document the scheme): ``step_newton`` and
+``step_velocity`` take one more input, the generalised contact impulse ``j = Wᵀ P`` (N·s),
+half of which enters each half-step (``− j/2`` in r, ``+ j/2`` in b), and two more kernels
+
+* ``step_contact``: q, v, p -> g (nk, m), W (nk·dim × nq, dense: per contact its normal row,
+  then its tangent rows), U = W v (m/s)
+* ``step_gap``: q, p -> g (the gaps alone)
+
+give the gaps and contact Jacobians.  When the QR factors are small enough to unroll
+(:data:`SX_QR_MAX_NNZ`), two more split ``step_solve`` so that the Delassus matrix needs one
+factorisation per step and one cheap solve per contact row:
+
+* ``step_factor``: K -> V, R, beta (the sparse Householder QR of K)
+* ``step_backsolve``: V, R, beta, b -> x = K⁻¹ b
+
+Contact-free models get exactly the kernels above.
 """
 from __future__ import annotations
 
@@ -49,7 +67,9 @@ from ncgen.assembly.mass import sparse_dm
 #: Largest nnz(V) + nnz(R) of the QR factors for which the solve is unrolled into SX.
 SX_QR_MAX_NNZ = 3_000
 
-#: Names of the kernels, in the order the package lists them.
+#: Names of the kernels, in the order the package lists them (the nonsmooth contact
+#: stepper appends ``step_contact``, ``step_gap`` and, where small, ``step_factor`` and
+#: ``step_backsolve``).
 KERNELS = ("step_newton", "step_velocity", "step_check", "step_solve", "step_project", "step_power",
            "step_outputs")
 
@@ -98,10 +118,49 @@ DOCS = {
                           "J; J; m^2; m^2/s; W; m")}},
 }
 
+#: Documentation of the nonsmooth contact stepper's kernels (where they differ).
+CONTACT_DOCS = {
+    "step_newton": {**DOCS["step_newton"],
+                    "inputs": {**DOCS["step_newton"]["inputs"],
+                               "j": ("generalised contact impulse W^T P of the step", "N s")},
+                    "outputs": {**DOCS["step_newton"]["outputs"],
+                                "r": ("[M (w - v) - h/2 F + A^T nu - j/2; Phi(t + h, q + h w) / h]",
+                                      "N s; m^2/s")}},
+    "step_velocity": {**DOCS["step_velocity"],
+                      "inputs": {**DOCS["step_velocity"]["inputs"],
+                                 "j": ("generalised contact impulse W^T P of the step", "N s")},
+                      "outputs": {**DOCS["step_velocity"]["outputs"],
+                                  "b": ("[M w + h/2 F + j/2; -Phi_t]", "N s; m^2/s")}},
+    "step_contact": {
+        "purpose": "Stepper: contact gaps, Jacobians (per contact: normal row, tangent rows) and velocities",
+        "inputs": {"q": ("coordinates", "m"), "v": ("coordinate rates", "m/s"), "p": ("parameters", "")},
+        "outputs": {"g": ("gaps, positive apart", "m"), "W": ("contact Jacobian, nk*dim x nq, dense", "1"),
+                    "U": ("contact velocities W v", "m/s")}},
+    "step_gap": {
+        "purpose": "Stepper: contact gaps",
+        "inputs": {"q": ("coordinates", "m"), "p": ("parameters", "")},
+        "outputs": {"g": ("gaps, positive apart", "m")}},
+    "step_factor": {
+        "purpose": "Stepper: sparse Householder QR of the KKT matrix (for the contact Delassus matrix)",
+        "inputs": {"K": ("KKT matrix in the stepper's pattern", "")},
+        "outputs": {"V": ("Householder vectors", ""), "R": ("triangular factor", ""),
+                    "beta": ("reflector scales", "")}},
+    "step_backsolve": {
+        "purpose": "Stepper: x = K^-1 b from the factors of step_factor",
+        "inputs": {"V": ("Householder vectors", ""), "R": ("triangular factor", ""),
+                   "beta": ("reflector scales", ""), "b": ("right-hand side", "")},
+        "outputs": {"x": ("solution", "")}},
+}
+
+
+def nonsmooth(model) -> bool:
+    """Whether ``model`` gets the nonsmooth contact stepper."""
+    return getattr(model, "contact_model", "smooth") == "nonsmooth" and getattr(model, "nk", 0) > 0
+
 
 def stepper_functions(model, primitives: dict[str, ca.Function] | None = None) -> list[ca.Function]:
-    """The four kernels of :data:`KERNELS` for ``model`` (see the module docstring);
-    ``primitives`` as in :func:`check_function`."""
+    """The kernels of :data:`KERNELS` for ``model`` (see the module docstring), and the contact
+    kernels for the nonsmooth contact stepper; ``primitives`` as in :func:`check_function`."""
     f = model.functions
     nq, nc = model.nq, model.nc
     t, h = ca.SX.sym("t"), ca.SX.sym("h")
@@ -109,18 +168,22 @@ def stepper_functions(model, primitives: dict[str, ca.Function] | None = None) -
     lam_h = ca.SX.sym("lam_h", nc)
     u, p = ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
     M = sparse_dm(model.M)
+    contact = nonsmooth(model)
+    j = ca.SX.sym("j", nq) if contact else ca.SX.zeros(nq)
+    j_in, j_name = ([j], ["j"]) if contact else ([], [])
 
-    r = ca.densify(ca.vertcat(ca.mtimes(M, w - v) - h / 2 * f["F"](t, q, w, u, p) + ca.mtimes(f["A"](t, q, p).T, lam_h),
-                   f["phi"](t + h, q + h * w, p) / h))
+    balance = ca.mtimes(M, w - v) - h / 2 * f["F"](t, q, w, u, p) + ca.mtimes(f["A"](t, q, p).T, lam_h)
+    r = ca.densify(ca.vertcat(balance - j / 2 if contact else balance, f["phi"](t + h, q + h * w, p) / h))
     K = ca.jacobian(r, ca.vertcat(w, lam_h))
-    newton = ca.Function("step_newton", [t, q, v, u, p, h, w, lam_h], [r, K],
-                         ["t", "q", "v", "u", "p", "h", "w", "lam_h"], ["r", "K"])
+    newton = ca.Function("step_newton", [t, q, v, u, p, h, w, lam_h] + j_in, [r, K],
+                         ["t", "q", "v", "u", "p", "h", "w", "lam_h"] + j_name, ["r", "K"])
 
     A = f["A"](t, q, p)
-    b = ca.densify(ca.vertcat(ca.mtimes(M, w) + h / 2 * f["F"](t, q, w, u, p), -f["phi_t"](t, q, p)))
+    momentum = ca.mtimes(M, w) + h / 2 * f["F"](t, q, w, u, p)
+    b = ca.densify(ca.vertcat(momentum + j / 2 if contact else momentum, -f["phi_t"](t, q, p)))
     K2 = ca.project(ca.blockcat([[M, A.T], [A, ca.SX(nc, nc)]]), K.sparsity())
-    velocity = ca.Function("step_velocity", [t, q, w, u, p, h], [b, K2],
-                           ["t", "q", "w", "u", "p", "h"], ["b", "K"])
+    velocity = ca.Function("step_velocity", [t, q, w, u, p, h] + j_in, [b, K2],
+                           ["t", "q", "w", "u", "p", "h"] + j_name, ["b", "K"])
 
     phi = f["phi"](t, q, p)
     project = ca.Function("step_project", [t, q, v, p],
@@ -128,8 +191,48 @@ def stepper_functions(model, primitives: dict[str, ca.Function] | None = None) -
                           ["t", "q", "v", "p"], ["K", "phi", "phidot"])
     check = check_function(model, primitives)
     power = power_function(model)
-    return [newton, velocity, check, solve_function(K.sparsity()), project, power,
-            outputs_function(model, check, power)]
+    out = [newton, velocity, check, solve_function(K.sparsity()), project, power,
+           outputs_function(model, check, power)]
+    if contact:
+        out += [contact_function(model), gap_function(model)]
+        out += factor_functions(K.sparsity())
+    return out
+
+def factor_functions(pattern: ca.Sparsity) -> list[ca.Function]:
+    """``[step_factor, step_backsolve]`` (see the module docstring), or ``[]`` when the
+    factors are too large to unroll (the C then calls ``step_solve`` per contact row)."""
+    n = pattern.size1()
+    V, R, *_ = ca.qr_sparse(ca.DM(pattern, 1.0), True)
+    if V.nnz() + R.nnz() > SX_QR_MAX_NNZ:
+        return []
+    K = ca.SX.sym("K", pattern)
+    V, R, beta, prinv, pc = ca.qr_sparse(K, True)
+    factor = ca.Function("step_factor", [K], [V, R, beta], ["K"], ["V", "R", "beta"])
+    Vs, Rs, bs = ca.SX.sym("V", V.sparsity()), ca.SX.sym("R", R.sparsity()), ca.SX.sym("beta", beta.shape[0])
+    r = ca.SX.sym("r", n)
+    backsolve = ca.Function("step_backsolve", [Vs, Rs, bs, r], [ca.qr_solve(r, Vs, Rs, bs, prinv, pc)],
+                            ["V", "R", "beta", "b"], ["x"])
+    return [factor, backsolve]
+
+
+def gap_function(model) -> ca.Function:
+    """``step_gap: q, p -> g`` (the gaps alone: cheap, for the end-of-step penetration test)."""
+    q, p = ca.SX.sym("q", model.nq), ca.SX.sym("p", model.np)
+    return ca.Function("step_gap", [q, p], [ca.densify(model.functions["gap"](q, p))], ["q", "p"], ["g"])
+
+
+def contact_function(model) -> ca.Function:
+    """``step_contact: q, v, p -> g, W, U`` (see the module docstring)."""
+    q, v, p = ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq), ca.SX.sym("p", model.np)
+    g = model.functions["gap"](q, p)
+    WN, WT = model.functions["contact_jacobian"](q, p)
+    nt = model.dim - 1
+    rows = []
+    for k in range(model.nk):
+        rows += [WN[k, :], WT[k * nt:(k + 1) * nt, :]]
+    W = ca.densify(ca.vertcat(*rows))
+    return ca.Function("step_contact", [q, v, p], [ca.densify(g), W, ca.mtimes(W, v)],
+                       ["q", "v", "p"], ["g", "W", "U"])
 
 
 def power_function(model) -> ca.Function:

@@ -29,6 +29,9 @@ def _simulate_arguments(p: argparse.ArgumentParser) -> None:
                    help="integrator: idas (variable-step BDF with error control, default) or stepper "
                         "(the compiled constraint-preserving stepper: fixed steps DT/N, see --substeps, "
                         "or error-controlled with --rtol)")
+    p.add_argument("--contacts", default="smooth", choices=("smooth", "nonsmooth"),
+                   help="contacts of the model: smooth (compliant law, any method; default) or nonsmooth "
+                        "(rigid impacts and Coulomb friction; --method stepper only, fixed steps)")
     p.add_argument("--substeps", type=int, default=1, metavar="N",
                    help="stepper: fixed steps of DT/N per output interval (default 1); a run whose own "
                         "checks find it untrustworthy stops with an error naming the N to use")
@@ -75,6 +78,7 @@ def _check_outputs(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
         "ncgen simulate examples/slider_crank.toml --t-end 1 -o sc.npz --param omega=20 --backend vm\n"
         "ncgen simulate examples/tensegrity.toml --t-end 2 -o t.npz --method stepper --substeps 20\n"
         "ncgen simulate examples/tensegrity.toml --t-end 2 -o t.npz --method stepper --rtol 1e-6\n"
+        "ncgen simulate balls.toml --t-end 2 --dt 1e-4 -o balls.npz --method stepper --contacts nonsmooth\n"
         "ncgen simulate robot.urdf --t-end 1 -o robot.csv   # URDF: falls under gravity, zero torque"),
     arguments=_simulate_arguments,
 )
@@ -86,7 +90,7 @@ def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from ncgen.runtime import simulate as run
 
     _check_outputs(args, parser)
-    model = load_model(args.model, args.param)
+    model = load_model(args.model, args.param, args.contacts)
     try:
         stepper = {"substeps": args.substeps} if args.method == "stepper" else {}
         traj = run(model, t_end=args.t_end, dt=args.dt, method=args.method, backend=args.backend,

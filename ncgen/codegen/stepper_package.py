@@ -9,8 +9,10 @@ declared in ``<model>_stepper.h`` (``<model>_step``, ``<model>_simulate``; templ
 """
 from __future__ import annotations
 
+import numpy as np
 
-from ncgen.assembly.stepper_equations import DOCS, mass_scale, stepper_functions
+
+from ncgen.assembly.stepper_equations import CONTACT_DOCS, DOCS, mass_scale, nonsmooth, stepper_functions
 from ncgen.codegen import PackageDoc, write_package
 from ncgen.codegen.cnames import c_real
 from ncgen.codegen.looped import is_large, primitives, reroll_limit
@@ -44,6 +46,21 @@ MAX_ITER = 12
 #: Default number of times a failing step may be split in halves, and the most the C
 #: workspace allows (``<MODEL>_STEP_MAX_HALVINGS``).
 MAX_HALVINGS, HALVINGS_LIMIT = 4, 10
+#: Nonsmooth contact stepper: projected Gauss–Seidel sweeps allowed per step, and its
+#: convergence test: no sweep changes a contact velocity by more than PGS_TOL (1 + max |U|)
+#: (m/s; a test on the impulses would never pass where contacts are redundant, as under a
+#: box or a chain lying flat, whose impulses are not unique).
+PGS_MAX_ITER, PGS_TOL = 2000, 1e-12
+#: Nonsmooth contact stepper: a contact whose gap is below −PENETRATION_TOL (m) at the end of
+#: a step is put back on its surface (``push_out`` in ``stepper.c.j2``).  The push-out is
+#: linearised and followed by the projection back onto Φ = 0, which moves the gaps again at
+#: second order (~1e-8 m when the falling chain of benchmarks/contact.py lands), so a smaller
+#: tolerance would only repeat push-outs.
+PENETRATION_TOL = 1e-8
+#: Nonsmooth contact stepper: a step with closed contacts is retaken with corrected impulses
+#: (at most CONTACT_REFINE_MAX times) until its end-of-step contact velocities match the
+#: linearised prediction to CONTACT_REFINE_TOL (relative to 1 m/s or the largest of them).
+CONTACT_REFINE_MAX, CONTACT_REFINE_TOL = 10, 1e-8
 #: The demo program's defaults: simulated time and step (s).
 DEMO_T_END, DEMO_H = 1.0, 1e-3
 
@@ -52,7 +69,9 @@ def stepper_section(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS
     :class:`~ncgen.codegen.section.Section`)."""
 
     functions = stepper_functions(model, primitives(model) if is_large(model, reroll_instructions) else None)
-    return Section(functions=functions, docs=DOCS, extra_sources=extra_sources(model, functions))
+    names = {f.name() for f in functions}
+    docs = {k: v for k, v in {**DOCS, **CONTACT_DOCS}.items() if k in names} if nonsmooth(model) else DOCS
+    return Section(functions=functions, docs=docs, extra_sources=extra_sources(model, functions))
 
 
 def extra_sources(model, functions) -> list[ExtraSource]:
@@ -64,12 +83,29 @@ def extra_sources(model, functions) -> list[ExtraSource]:
                "max_halvings": MAX_HALVINGS, "halvings_limit": HALVINGS_LIMIT, "dim": model.dim,
                "nout": n_outputs(model),
                "kernels": [f"{name}_{f.name()}" for f in functions]}
+    if nonsmooth(model):
+        factor = next((f for f in functions if f.name() == "step_factor"), None)
+        if factor is not None:
+            context.update(nnz_v=int(factor.sparsity_out(0).nnz()), nnz_r=int(factor.sparsity_out(1).nnz()),
+                           n_beta=int(factor.sparsity_out(2).nnz()))
+        context.update(factored=factor is not None, nk=model.nk, pgs_max_iter=PGS_MAX_ITER,
+                       pgs_tol=c_real(PGS_TOL), penetration_tol=c_real(PENETRATION_TOL),
+                       refine_max=CONTACT_REFINE_MAX, refine_tol=c_real(CONTACT_REFINE_TOL),
+                       gravity_norm=c_real(float(np.linalg.norm(model.gravity))),
+                       mu=[c_real(c["mu"]) for c in model.contacts],
+                       restitution=[c_real(c["restitution"]) for c in model.contacts],
+                       any_restitution=any(c["restitution"] > 0 for c in model.contacts))
     demo = {**context, "program": f"{name}_simulate", "t0": c_real(model.t0), "t_end": c_real(DEMO_T_END),
             "h": c_real(DEMO_H), "q0": [c_real(x) for x in model.q0], "v0": [c_real(x) for x in model.v0],
             "p0": [c_real(x) for x in model.p0]}
     return [ExtraSource("stepper.c.j2", f"{name}_stepper.c", context),
             ExtraSource("stepper.h.j2", f"{name}_stepper.h", context),
             ExtraSource("simulate_main.c.j2", f"{name}_simulate.c", demo, program=True)]
+
+
+def n_impulses(model) -> int:
+    """Contact impulse components per step of the nonsmooth contact stepper (else 0)."""
+    return model.nk * model.dim if nonsmooth(model) else 0
 
 
 def n_outputs(model) -> int:

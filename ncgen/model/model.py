@@ -45,7 +45,8 @@ class Model:
     """A validated, assembled, constant system (create it with ``System.build()``)."""
 
     def __init__(self, *, description, layout, labels, functions, M, factor, potential, state, p0, baumgarte,
-                 redundant, dropped, t0, springs=None, limits=None, joint_space=None):
+                 redundant, dropped, t0, springs=None, limits=None, joint_space=None,
+                 contacts=(), contact_model="smooth"):
         system = description
         self.members = MappingProxyType(dict(system.members))
         self.joints = tuple(system.joints)
@@ -82,6 +83,11 @@ class Model:
         self.joint_space = joint_space
         self.frames = MappingProxyType({k: (mem, np.array(R), np.array(pos)) for k, (mem, R, pos) in system.frames.items()})
         self.visuals = [dict(v) for v in system.visuals]
+        #: Plain-data descriptions of the contacts (:mod:`ncgen.model.contacts`), in order.
+        self.contacts = [dict(c) for c in contacts]
+        self.contact_names = [c["name"] for c in self.contacts]
+        #: "smooth" (compliant forces in F) or "nonsmooth" (the compiled stepper's impacts).
+        self.contact_model = contact_model
         for key, value in vars(self).items():
             object.__setattr__(self, key, _frozen(value))
         object.__setattr__(self, "_frozen", True)
@@ -151,6 +157,11 @@ class Model:
         return int(self.p0.size)
 
     @property
+    def nk(self) -> int:
+        """Number of contacts."""
+        return len(self.contacts)
+
+    @property
     def rank(self) -> int:
         """Rank of A at the initial configuration."""
         A = self.A(self.q0)
@@ -206,6 +217,15 @@ class Model:
         """``(T, V)``: kinetic and potential energy (J)."""
         T, V = self._call("energy", q=q, v=v, t=t, p=p)
         return float(np.asarray(T).item()), float(np.asarray(V).item())
+
+    def gap(self, q, p=None) -> np.ndarray:
+        """Contact gaps ``g(q)`` (m, positive apart), one per contact."""
+        return np.atleast_1d(self._call("gap", q=q, p=p))
+
+    def contact_jacobian(self, q, p=None):
+        """``(W_N, W_T)``: normal (nk × nq) and tangential (nk·(dim−1) × nq) contact Jacobians."""
+        WN, WT = self._call("contact_jacobian", q=q, p=p)
+        return np.atleast_2d(WN).reshape(self.nk, self.nq), np.atleast_2d(WT).reshape(-1, self.nq)
 
     def markers(self, q, v=None):
         """World positions (and velocities) of the named markers, ``dim × n_markers``."""

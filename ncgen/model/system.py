@@ -39,6 +39,7 @@ class System:
         self.members: dict[str, Member] = {}
         self.joints: list = []
         self.forces: list = []
+        self.contacts: list = []
         self.inputs: dict[str, ca.SX] = {}
         self.parameters: dict[str, tuple[ca.SX, np.ndarray]] = {}
         #: Named frames ``{name: (member name or "ground", R_local, p_local)}`` (URDF links).
@@ -193,6 +194,16 @@ class System:
         self.forces.append(force)
         return force
 
+    def add_contact(self, contact):
+        """Add a unilateral contact (``nc.SpherePlane``, ``nc.SphereSphere``; see
+        :mod:`ncgen.model.contacts`); returns it."""
+        from ncgen.model.contacts import Contact
+        if not isinstance(contact, Contact):
+            raise ModelError(f"add_contact: expected a contact (nc.SpherePlane, nc.SphereSphere), got {contact!r}")
+        contact.attach(self, index=len(self.contacts))
+        self.contacts.append(contact)
+        return contact
+
     def add_input(self, name: str, size: int = 1) -> ca.SX:
         """A control input: a symbol that stays symbolic in every assembled function."""
         name = self._new_name(name, "input")
@@ -229,7 +240,9 @@ class System:
         """Validate and assemble: returns a :class:`~ncgen.model.model.Model`.
 
         Options (:func:`ncgen.assembly.build.build_model`): ``redundant`` ("drop", "error",
-        "keep"), ``tolerance`` (largest relative correction of the initial state),
+        "keep"), ``contacts`` ("smooth": compliant contact forces in F, for IDAS and optimal
+        control; "nonsmooth": unilateral constraints for the compiled stepper; see
+        docs/contact.md), ``tolerance`` (largest relative correction of the initial state),
         ``assemble=True`` with ``fix=[...]`` (the initial poses are a guess to assemble by
         Newton, keeping the named coordinates), ``baumgarte``, ``t0``."""
         from ncgen.assembly.build import build_model
@@ -258,7 +271,8 @@ class System:
 
     def __repr__(self) -> str:
         return (f"System({self.name!r}, dim={self.dim}, members={len(self.members)}, "
-                f"joints={len(self.joints)}, forces={len(self.forces)})")
+                f"joints={len(self.joints)}, forces={len(self.forces)}"
+                + (f", contacts={len(self.contacts)})" if self.contacts else ")"))
 
 
 def _rotation(R, d, name):

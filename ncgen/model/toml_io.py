@@ -10,6 +10,9 @@ Layout of a file (every table optional except ``members``)::
     [[joints]]    type = "Revolute", ..., name, between = ["ground", "crank"]
                   (CoordinateDriver: member = "crank"), and the joint's keywords
     [[forces]]    type = "Spring", ..., name, and the force's arguments
+    [[contacts]]  type = "SpherePlane" (sphere, at, radius, plane = "ground", point, normal)
+                  or "SphereSphere" (between = ["a", "b"], at_a, radius_a, at_b, radius_b),
+                  with mu, restitution, stiffness, damping, exponent, slip_velocity, name
 
 Shared basic points are written ``"crank.r_j"`` (slot ``r_j`` of member ``crank``) or
 ``{ground = [x, y, z]}``.  Values that may vary are numbers or expression strings
@@ -31,12 +34,16 @@ from ncgen.errors import ModelError
 from ncgen.files import decode_text
 from ncgen.model import toml_write
 from ncgen.model.expressions import did_you_mean, parse, scope, value_to_toml
+from ncgen.model.contacts import CONTACT_TYPES, SpherePlane, SphereSphere
 from ncgen.model.forces import FORCE_TYPES
 from ncgen.model.joints import JOINT_TYPES, CoordinateDriver
 from ncgen.model.members import NodeRef
 from ncgen.validation import MAX_NAME, as_scalar
 
-TOP_KEYS = ("system", "parameters", "inputs", "members", "joints", "forces", "initial", "initial_rates")
+TOP_KEYS = ("system", "parameters", "inputs", "members", "joints", "forces", "contacts", "initial",
+            "initial_rates")
+#: Material keys every contact table may have (:class:`~ncgen.model.contacts.Contact`).
+CONTACT_MATERIAL = ("mu", "restitution", "stiffness", "damping", "exponent", "slip_velocity")
 
 
 @dataclass(frozen=True)
@@ -239,6 +246,8 @@ class _Loader:
             self._joint(_Table(j, f"joints[{i}]"))
         for i, f in enumerate(self._array(top.get("forces", []), "forces")):
             self._force(_Table(f, f"forces[{i}]"))
+        for i, c in enumerate(self._array(top.get("contacts", []), "contacts")):
+            self._contact(_Table(c, f"contacts[{i}]"))
         for key in ("initial", "initial_rates"):
             self._initial(top.get(key, {}), key)
         self.system = self.s
@@ -476,6 +485,52 @@ class _Loader:
         kw = self._fields(t, (Field("name", "string"), *FORCE_FIELDS[typ]), ("type",))
         self._wrap(t.path, self.s.add_force, FORCE_TYPES[typ](**kw))
 
+    def _contact(self, t: _Table):
+        _contact_table(self, t)
+
+
+def _contact_table(loader, t: _Table):
+    """A contact from its table (see the module docstring)."""
+    d = loader.dim
+    typ = _string(t.get("type", required=True), t.at("type"))
+    if typ not in CONTACT_TYPES:
+        raise ModelError(f"{t.at('type')}: unknown contact type {typ!r}{did_you_mean(typ, CONTACT_TYPES)}; "
+                         f"expected one of {', '.join(CONTACT_TYPES)}")
+    kw = {k: _number(t.get(k), t.at(k)) for k in CONTACT_MATERIAL if t.get(k) is not None}
+    if t.get("name") is not None:
+        kw["name"] = _string(t.get("name"), t.at("name"))
+
+    def vec(k):
+        v = t.get(k)
+        return None if v is None else _vector(v, d, t.at(k))
+
+    def num(k):
+        return _number(t.get(k, 0.0), t.at(k))
+
+    if typ == "SpherePlane":
+        keys = ("sphere", "at", "radius", "plane", "point", "normal")
+        sphere = loader._member_ref(t.get("sphere", required=True), t.at("sphere"))
+        plane = loader._member_ref(t.get("plane", "ground"), t.at("plane"))
+        c = SpherePlane(sphere, vec("at"), num("radius"), plane=plane, point=vec("point"), normal=vec("normal"), **kw)
+    else:
+        keys = ("between", "at_a", "radius_a", "at_b", "radius_b")
+        between = t.get("between", required=True)
+        if not isinstance(between, list) or len(between) != 2:
+            raise ModelError(f"{t.at('between')}: expected two member names, got {_describe(between)}")
+        a, b = (loader._member_ref(m, f"{t.at('between')}[{i}]") for i, m in enumerate(between))
+        c = SphereSphere(a, vec("at_a"), num("radius_a"), b, vec("at_b"), num("radius_b"), **kw)
+    t.finish(("type", "name", *CONTACT_MATERIAL, *keys))
+    loader._wrap(t.path, loader.s.add_contact, c)
+
+
+def _contact_entries(c) -> dict:
+    spec = c.spec()
+    out = {"type": spec.pop("type"), "name": spec.pop("name")}
+    if isinstance(c, SphereSphere):
+        out["between"] = [spec.pop("a"), spec.pop("b")]
+    out.update({k: _plain(v) for k, v in spec.items()})
+    return out
+
 
 def _default_name(origin: str) -> str:
     stem = Path(origin).stem if origin != "<toml text>" else "model"
@@ -503,6 +558,8 @@ def system_to_toml(system) -> str:
         parts.append(toml_write.table("joints", _joint_entries(j, sc), array=True))
     for f in system.forces:
         parts.append(toml_write.table("forces", _force_entries(f, sc, system), array=True))
+    for c in system.contacts:
+        parts.append(toml_write.table("contacts", _contact_entries(c), array=True))
     for key, values in (("initial", system.initial_joints), ("initial_rates", system.initial_joint_rates)):
         if values:
             parts.append(toml_write.table(key, {n: _plain(v) for n, v in values.items()}))

@@ -88,6 +88,10 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
     for name, tol in tolerances.items():
         if not (math.isfinite(tol) and tol > 0):
             raise NcgenError(f"{name}: expected a positive tolerance, got {tol!r}")
+    if method == "idas" and getattr(model, "contact_model", "smooth") == "nonsmooth" and model.nk:
+        raise NcgenError(f"simulate: model {model.name!r} was built with contacts='nonsmooth', which only "
+                         "the compiled stepper handles: use method='stepper', or build the model with "
+                         "contacts='smooth' (compliant contacts) for IDAS")
     t0 = model.t0 if t0 is None else as_scalar(t0, "t0")
     t = time_grid(t0, t_end, dt, bytes_per_point=point_bytes(model))
     pv = parameter_values(p, model)

@@ -41,7 +41,7 @@ from ncgen.errors import NcgenError, SimulationError
 from ncgen.runtime.inputs import HOLDS
 from ncgen.runtime.stepper_checks import energy_report, error_estimate, is_conservative, untrusted_row
 from ncgen.runtime.stepper_library import load_stepper
-from ncgen.runtime.trajectory import NAME_KEYS, Trajectory
+from ncgen.runtime.trajectory import NAME_KEYS, Trajectory, derived_outputs
 
 #: With error control, the Newton tolerance is at most this fraction of min(rtol, atol)
 #: (floored at 1e-14), so that Newton's residual stays below the error estimates.
@@ -66,6 +66,9 @@ def simulate_stepper(model, t: np.ndarray, U: np.ndarray, p: np.ndarray, q0: np.
     _check_options(substeps, tol, max_iter, max_halvings, hold, rtol, atol, order, max_steps)
     stepper = load_stepper(model, cflags)
     conservative = is_conservative(model)
+    if rtol is not None and stepper.nd:
+        raise NcgenError(f"rtol: model {model.name!r} has nonsmooth contacts, whose impacts the error control "
+                         f"cannot follow; use fixed steps (substeps=N) or build it with contacts='smooth'")
     if rtol is None:
         return _fixed(model, stepper, t, U, p, q0, v0, lam0, hold, substeps, tol, max_iter, max_halvings,
                       check, bool(estimate), conservative)
@@ -97,17 +100,20 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, hold, substeps, tol, max_iter,
            estimate, conservative) -> Trajectory:
     n_out = len(t) - 1
     h = float(t[1] - t[0]) / substeps
+    contacts = stepper.nd > 0                  # nonsmooth contacts: no shadow run, no energy check
+    IMP = np.zeros((n_out, stepper.nd)) if contacts else None      # contact impulses per output interval
     start = time.perf_counter()
     Q, V, LAM, S, status, done, splits = stepper.simulate_stats(
         q0, v0, lam0, float(t[0]), h, n_out * substeps, substeps, step_inputs(U, t, hold, substeps), p, tol,
-        max_iter, max_halvings, estimate, not conservative)
+        max_iter, max_halvings, estimate and not contacts, not conservative, impulse_out=IMP)
     stepping = time.perf_counter() - start
     rows = done // substeps
-    info = {"method": "stepper", "backend": "compiled", "scheme": "RATTLE", "h": h, "substeps": substeps,
-            "hold": hold, "tol": tol, "max_iter": max_iter, "max_halvings": max_halvings,
-            "estimate": estimate, "stepping_time": stepping, "complete": status == 0,
+    info = {"method": "stepper", "backend": "compiled", "scheme": "RATTLE, nonsmooth contacts" if contacts else
+            "RATTLE", "h": h, "substeps": substeps, "hold": hold, "tol": tol, "max_iter": max_iter,
+            "max_halvings": max_halvings, "estimate": estimate and not contacts, "stepping_time": stepping, "complete": status == 0,
             "stats": _stats(S[:rows], splits)}
-    traj = _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info, conservative, start)
+    traj = _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info, conservative, start,
+                       None if IMP is None else IMP[:rows])
     if status != 0:
         t_fail = float(t[0]) + done * h
         message = (f"simulation of {model.name!r} with the stepper failed in the step from "
@@ -117,10 +123,10 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, hold, substeps, tol, max_iter,
         traj.info["message"] = message
         raise SimulationError(message, time=float(t[rows]), trajectory=traj)
     if check:
-        bad = untrusted_row(model, traj, S[:rows], h)
+        bad = untrusted_row(model, traj, S[:rows], h, energy=not contacts)
         if bad is not None:
             row, reason = bad
-            kept = _truncate(traj, row)
+            kept = traj.head(row + 1)          # the states before C row `row`
             message = (f"simulation of {model.name!r} with the stepper (fixed step h = {h:.3g} s) is not "
                        f"trustworthy: {reason}. The trajectory up to t = {kept.t[-1]:.6g} s, before the "
                        f"problem showed, is attached to this error as .trajectory "
@@ -162,9 +168,12 @@ def _stats(S: np.ndarray, splits: int) -> dict:
     return {"nsteps": int(S[:, 0].sum()), "newton_iterations": int(S[:, 1].sum()), "step_splits": int(splits)}
 
 
-def _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info, conservative, start):
+def _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info, conservative, start,
+                impulses=None):
     """The trajectory of the first ``rows`` output rows, derived quantities from the
-    compiled ``<model>_outputs``; sets the error estimate, the energy report and the wall
+    compiled ``<model>_outputs`` (joint states and contact outputs from
+    :func:`~ncgen.runtime.trajectory.derived_outputs`; ``impulses``: the nonsmooth contact
+    impulses per output interval); sets the error estimate, the energy report and the wall
     time (from ``start``) in ``info``."""
     q = np.vstack([q0, Q[:rows]])
     v = np.vstack([v0, V[:rows]])
@@ -175,23 +184,14 @@ def _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info,
     markers = Y[:, 5:].reshape(len(tt), n_markers, dim)
     work = np.concatenate([[0.0], S[:rows, STATS.index("work")]])
     names = {key: getattr(model, key) for key in NAME_KEYS}
-    traj = Trajectory(model_name=model.name, names=names, info=info, model=model, t=tt, q=q, v=v, lam=lam, u=u,
-                      p=p, kinetic=Y[:, 0], potential=Y[:, 1], constraint_residual=Y[:, 2],
-                      velocity_residual=Y[:, 3], markers=markers)
+    extra_names, extra = derived_outputs(model, tt, q, v, p, impulses)
+    traj = Trajectory(model_name=model.name, names={**names, **extra_names}, info=info, model=model, t=tt, q=q,
+                      v=v, lam=lam, u=u, p=p, kinetic=Y[:, 0], potential=Y[:, 1], constraint_residual=Y[:, 2],
+                      velocity_residual=Y[:, 3], markers=markers, **extra)
     traj.info["error_estimate"] = error_estimate(S[:rows], info.get("substeps"))
     traj.info["energy"] = energy_report(traj, work, conservative)
     traj.info["wall_time"] = time.perf_counter() - start
     return traj
-
-
-def _truncate(traj: Trajectory, row: int) -> Trajectory:
-    """The trajectory up to sample ``row`` (the state before C row ``row``), ``info`` copied."""
-    keep = row + 1
-    names = {key: getattr(traj, key) for key in NAME_KEYS}
-    arrays = {key: getattr(traj, key)[:keep] for key in ("t", "q", "v", "lam", "u", "kinetic", "potential",
-                                                         "constraint_residual", "velocity_residual", "markers")}
-    return Trajectory(model_name=traj.model_name, names=names, info=dict(traj.info), model=traj.model, p=traj.p,
-                      **arrays)
 
 
 def step_inputs(U: np.ndarray, t: np.ndarray, hold: str, substeps: int) -> np.ndarray | None:

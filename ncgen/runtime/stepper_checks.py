@@ -125,9 +125,10 @@ def energy_report(traj, work: np.ndarray, conservative: bool) -> dict:
     return {"conservative": False, "work": float(work[-1]), "balance_error": float(err.max()), "relative": rel}
 
 
-def untrusted_row(model, traj, S: np.ndarray, h: float) -> tuple[int, str] | None:
+def untrusted_row(model, traj, S: np.ndarray, h: float, energy: bool = True) -> tuple[int, str] | None:
     """``(row, reason)`` of the first output row where the fixed-step run stops being
-    trustworthy (module docstring), or None."""
+    trustworthy (module docstring), or None; ``energy=False`` leaves out the energy check
+    (nonsmooth contacts: their impulses' work is not in the balance)."""
     if not len(S):
         return None
     conservative = traj.info["energy"]["conservative"]
@@ -140,7 +141,7 @@ def untrusted_row(model, traj, S: np.ndarray, h: float) -> tuple[int, str] | Non
     flags = {
         "splits": splits > 0,
         "newton": iters / np.maximum(steps, 1) > NEWTON_LIMIT,
-        "energy": e_rel > ENERGY_FRACTION,
+        "energy": (e_rel > ENERGY_FRACTION) & energy,
         "error": np.nan_to_num(gq) > ERROR_FRACTION * size,
     }
     first = {k: int(np.argmax(f)) for k, f in flags.items() if f.any()}

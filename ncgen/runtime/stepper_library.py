@@ -7,7 +7,7 @@ import weakref
 
 import numpy as np
 
-from ncgen.codegen.stepper_package import STATS, n_outputs
+from ncgen.codegen.stepper_package import STATS, n_impulses, n_outputs
 from ncgen.runtime.library import compiled_model
 
 _loaded: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
@@ -17,21 +17,22 @@ class CompiledStepper:
     """The loops of a compiled stepper library (``<model>_simulate``, ``_simulate_stats``,
     ``_simulate_adaptive``, ``_outputs``), called on NumPy arrays."""
 
-    def __init__(self, library: str, name: str, nq: int, nc: int, nu: int, npar: int, nout: int):
+    def __init__(self, library: str, name: str, nq: int, nc: int, nu: int, npar: int, nout: int, nd: int = 0):
         self.library = library
         self.nq, self.nc, self.nu, self.np, self.nout = nq, nc, nu, npar, nout
+        self.nd = nd   # contact impulse components per step (nonsmooth contact stepper), else 0
         self._lib = ctypes.CDLL(library)
         dp, lp = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_long)
         f = getattr(self._lib, f"{name}_simulate")
         f.restype = ctypes.c_int
         f.argtypes = [dp, dp, ctypes.c_double, ctypes.c_double, ctypes.c_long, ctypes.c_long, dp, ctypes.c_long,
-                      dp, dp, dp, dp, lp, ctypes.POINTER(_Options), lp, lp]
+                      dp, dp, dp, dp, lp, ctypes.POINTER(_Options), lp, lp] + ([dp] if nd else [])
         self._simulate = f
         c_double, c_long, c_int = ctypes.c_double, ctypes.c_long, ctypes.c_int
         f = getattr(self._lib, f"{name}_simulate_stats")
         f.restype = c_int
         f.argtypes = [dp, dp, dp, c_double, c_double, c_long, c_long, dp, c_long, dp, dp, dp, dp, dp,
-                      ctypes.POINTER(_Options), c_int, c_int, lp, lp]
+                      ctypes.POINTER(_Options), c_int, c_int, lp, lp] + ([dp] if nd else [])
         self._simulate_stats = f
         f = getattr(self._lib, f"{name}_simulate_adaptive")
         f.restype = c_int
@@ -44,10 +45,12 @@ class CompiledStepper:
         self._outputs = f
 
     def simulate(self, q0, v0, t0: float, h: float, n_steps: int, every: int, U: np.ndarray | None,
-                 p: np.ndarray, tol: float, max_iter: int, max_halvings: int):
+                 p: np.ndarray, tol: float, max_iter: int, max_halvings: int, impulse_out=None):
         """``(Q, V, LAM, ITER, status, steps_done, splits)``: states after every ``every``-th of
         ``n_steps`` steps (see ``<model>_simulate`` in ``<model>_stepper.h``).  ``U``: inputs
-        per step, shape ``(n_steps, nu)``, or None for zeros."""
+        per step, shape ``(n_steps, nu)``, or None for zeros.  ``impulse_out`` (nonsmooth
+        contact stepper): an array of shape ``(n_steps // every, nd)`` that receives the
+        contact impulses summed over those steps (N·s), or None."""
         rows = n_steps // every
         Q, V = np.zeros((rows, self.nq)), np.zeros((rows, self.nq))
         LAM, ITER = np.zeros((rows, self.nc)), np.zeros(rows, dtype=np.dtype(ctypes.c_long))
@@ -59,8 +62,15 @@ class CompiledStepper:
                                 _ptr(U), self.nu if U is not None else 0, _ptr(p), _ptr(Q), _ptr(V), _ptr(LAM),
                                 ITER.ctypes.data_as(ctypes.POINTER(ctypes.c_long)),
                                 ctypes.byref(_Options(float(tol), int(max_iter), int(max_halvings))),
-                                ctypes.byref(done), ctypes.byref(splits))
+                                ctypes.byref(done), ctypes.byref(splits), *self._impulses(impulse_out, rows))
         return Q, V, LAM, ITER, int(status), int(done.value), int(splits.value)
+
+    def _impulses(self, impulse_out, rows) -> list:
+        """The trailing ``impulse_out`` argument of the contact stepper's loops (none without contacts)."""
+        if impulse_out is not None and (impulse_out.shape != (rows, self.nd) or impulse_out.dtype != float
+                                        or not impulse_out.flags.c_contiguous):
+            raise ValueError(f"impulse_out: expected a C-contiguous float array of shape {(rows, self.nd)}")
+        return [_ptr(impulse_out)] if self.nd else []
 
     def _buffers(self, rows):
         return (np.zeros((rows, self.nq)), np.zeros((rows, self.nq)), np.zeros((rows, self.nc)),
@@ -68,7 +78,7 @@ class CompiledStepper:
 
     def simulate_stats(self, q0, v0, lam0, t0: float, h: float, n_steps: int, every: int, U: np.ndarray | None,
                        p: np.ndarray, tol: float, max_iter: int, max_halvings: int, estimate: bool,
-                       track_work: bool):
+                       track_work: bool, impulse_out=None):
         """``(Q, V, LAM, STATS, status, steps_done, splits)``: fixed steps with per-row
         statistics (columns :data:`STATS`; see ``<model>_simulate_stats``).  ``U``: inputs
         per step, shape ``(n_steps, nu)``, or None for zeros."""
@@ -80,7 +90,7 @@ class CompiledStepper:
                                       _ptr(_vec(p)), _ptr(Q), _ptr(V), _ptr(LAM), _ptr(S),
                                       ctypes.byref(_Options(float(tol), int(max_iter), int(max_halvings))),
                                       int(bool(estimate)), int(bool(track_work)), ctypes.byref(done),
-                                      ctypes.byref(splits))
+                                      ctypes.byref(splits), *self._impulses(impulse_out, n_steps // every))
         return Q, V, LAM, S, int(status), int(done.value), int(splits.value)
 
     def simulate_adaptive(self, q0, v0, lam0, t0: float, dt: float, n_out: int, U: np.ndarray | None,
@@ -138,5 +148,5 @@ def load_stepper(model, cflags=None) -> CompiledStepper:
     if key not in cache:
         library = compiled_model(model, cflags).library
         cache[key] = CompiledStepper(str(library), model.name, model.nq, model.nc, model.nu, model.np,
-                                     n_outputs(model))
+                                     n_outputs(model), n_impulses(model))
     return cache[key]

@@ -10,6 +10,9 @@ Arrays are indexed by output step first (``n_t = len(t)`` steps), SI units:
 * ``markers`` ``(n_t, n_markers, dim)``, world positions of the model's named markers;
 * ``qj``, ``vj`` ``(n_t, Σ n_j)``: joint positions and rates (``model.joint_names`` order,
   columns named by ``joint_position_names``, ``joint_rate_names``); :meth:`joint` per joint;
+* with contacts (``contact_names``): ``gap`` ``(n_t, nk)`` (m), ``contact_normal`` (N),
+  ``contact_tangent`` ``(n_t, nk, dim − 1)`` (N) and ``contact_state`` (0 open, 1 stick,
+  2 slip), see :mod:`ncgen.runtime.contact_outputs`;
 * names: ``coordinate_names``, ``constraint_names``, ``input_names``, ``parameter_names``,
   ``member_names``, ``marker_names`` and ``model_name``; ``info`` holds how it was computed
   (method, backend, tolerances, integrator statistics, wall time, whether it is complete).
@@ -29,7 +32,7 @@ import numpy as np
 
 from ncgen.errors import NcgenError
 from ncgen.files import atomic_path
-from ncgen.runtime import outputs
+from ncgen.runtime import contact_outputs, outputs
 
 NAME_KEYS = ("coordinate_names", "constraint_names", "input_names", "parameter_names",
              "member_names", "marker_names")
@@ -38,6 +41,22 @@ ARRAY_KEYS = ("t", "q", "v", "lam", "u", "p", "kinetic", "potential", "constrain
 #: Joint space (optional in files written before it existed).
 JOINT_NAME_KEYS = ("joint_names", "joint_position_names", "joint_rate_names")
 JOINT_ARRAY_KEYS = ("qj", "vj")
+
+
+def derived_outputs(model, t, q, v, p, impulses=None) -> tuple[dict, dict]:
+    """``(names, arrays)`` of the outputs beyond the states, energies and markers: the joint
+    states (``model.joint_names``) and, for a model with contacts, the contact outputs —
+    from the nonsmooth stepper's ``impulses`` per output interval, or from the compliant law."""
+    js = model.joint_space
+    names = dict(joint_names=js.joint_names, joint_position_names=js.position_names,
+                 joint_rate_names=js.rate_names)
+    qj, vj = outputs.joint_states(model, q, v)
+    arrays = {"qj": qj, "vj": vj}
+    if getattr(model, "nk", 0):
+        names["contact_names"] = model.contact_names
+        arrays.update(contact_outputs.impulse_outputs(model, t, q, p, impulses) if impulses is not None
+                      else contact_outputs.smooth_outputs(model, t, q, v, p))
+    return names, arrays
 
 
 class Trajectory:
@@ -55,22 +74,37 @@ class Trajectory:
         for key in JOINT_ARRAY_KEYS:
             x = arrays.get(key)
             setattr(self, key, np.zeros((len(self.t), 0)) if x is None else np.asarray(x, dtype=float))
+        self.contact_names = list(names.get("contact_names", []))
+        n, nk = len(self.t), len(self.contact_names)
+        shapes = {"gap": (n, nk), "contact_normal": (n, nk), "contact_tangent": (n, nk, self.dim - 1),
+                  "contact_state": (n, nk)}
+        for key in contact_outputs.KEYS:
+            value = arrays.get(key)
+            setattr(self, key, np.zeros(shapes[key]) if value is None else np.asarray(value, dtype=float))
+        self.contact_state = self.contact_state.astype(int)
         self.info = dict(info)
 
     @classmethod
-    def from_states(cls, model, t, q, v, lam, u, p, info: dict) -> "Trajectory":
-        """Evaluate the derived quantities of the states ``(t, q, v, lam)`` of ``model``."""
+    def from_states(cls, model, t, q, v, lam, u, p, info: dict, impulses=None) -> "Trajectory":
+        """Evaluate the derived quantities of the states ``(t, q, v, lam)`` of ``model``;
+        ``impulses``: the nonsmooth stepper's contact impulse sums per output interval."""
         t, q, v = np.asarray(t, float), np.asarray(q, float), np.asarray(v, float)
         T, V = outputs.energies(model, t, q, v, p)
         r, rd = outputs.residuals(model, t, q, v, p)
         names = {key: getattr(model, key) for key in NAME_KEYS}
-        js = model.joint_space
-        names.update(joint_names=js.joint_names, joint_position_names=js.position_names,
-                     joint_rate_names=js.rate_names)
-        qj, vj = outputs.joint_states(model, q, v)
-        return cls(model_name=model.name, names=names, info=info, model=model, t=t, q=q, v=v, lam=lam,
-                   u=u, p=p, kinetic=T, potential=V, constraint_residual=r, velocity_residual=rd,
-                   markers=outputs.markers(model, q, v), qj=qj, vj=vj)
+        extra_names, extra = derived_outputs(model, t, q, v, p, impulses)
+        return cls(model_name=model.name, names={**names, **extra_names}, info=info, model=model, t=t, q=q, v=v,
+                   lam=lam, u=u, p=p, kinetic=T, potential=V, constraint_residual=r, velocity_residual=rd,
+                   markers=outputs.markers(model, q, v), **extra)
+
+    def head(self, n: int) -> "Trajectory":
+        """The first ``n`` samples (every per-sample array cut, names and ``info`` copied)."""
+        names = {key: list(getattr(self, key)) for key in NAME_KEYS + JOINT_NAME_KEYS}
+        names["contact_names"] = list(self.contact_names)
+        arrays = {key: getattr(self, key)[:n] for key in ARRAY_KEYS + JOINT_ARRAY_KEYS + contact_outputs.KEYS
+                  if key != "p"}
+        return Trajectory(model_name=self.model_name, names=names, info=dict(self.info), model=self.model,
+                          p=self.p, **arrays)
 
     # --------------------------------------------------------------- views
     def __len__(self) -> int:
@@ -210,6 +244,9 @@ class Trajectory:
         data = {key: getattr(self, key) for key in ARRAY_KEYS}
         data.update({key: getattr(self, key) for key in JOINT_ARRAY_KEYS})
         data.update({key: np.array(getattr(self, key), dtype=str) for key in NAME_KEYS + JOINT_NAME_KEYS})
+        if self.contact_names:
+            data["contact_names"] = np.array(self.contact_names, dtype=str)
+            data.update({key: getattr(self, key) for key in contact_outputs.KEYS})
         data["model_name"] = np.array(self.model_name)
         data["info_json"] = np.array(json.dumps(self.info, sort_keys=True, default=_json_default))
         data["format"] = np.array("ncgen-trajectory-1")
@@ -235,6 +272,9 @@ class Trajectory:
                     raise NcgenError(f"{path} is not a trajectory saved by ncgen (.npz)")
                 arrays = {key: data[key] for key in ARRAY_KEYS + JOINT_ARRAY_KEYS if key in data}
                 names = {key: [str(s) for s in data[key]] for key in NAME_KEYS + JOINT_NAME_KEYS if key in data}
+                if "contact_names" in data:
+                    names["contact_names"] = [str(s) for s in data["contact_names"]]
+                    arrays.update({key: data[key] for key in contact_outputs.KEYS})
                 name = str(data["model_name"])
                 info = json.loads(str(data["info_json"]))
         except (OSError, ValueError, KeyError) as e:

@@ -14,6 +14,9 @@ AXIS_COLORS = ("tab:red", "tab:green", "tab:blue")
 POINT_COLOR = "tab:purple"
 MARKER_COLOR = "k"
 ANCHOR_COLOR = "0.3"
+SPHERE_COLOR = "tab:gray"
+PLANE_COLOR = "0.5"
+CONTACT_COLOR = "tab:red"
 
 
 def figure(width: float, height: float) -> Figure:
@@ -60,7 +63,38 @@ class SceneArtists:
         self.markers = self._dots(MARKER_COLOR, ".", 25)
         if len(scene.anchors):
             self._scatter(scene.anchors, ANCHOR_COLOR, "^", 60)
+        self.spheres = [self._line(SPHERE_COLOR, lw=1) for _ in scene.sphere_radii]
+        self.contacts = self._dots(CONTACT_COLOR, "x", 60)
+        for point, normal in scene.planes:
+            self._plane(point, normal)
         self.title = ax.set_title("")
+
+    def _plane(self, point, normal):
+        """A ground plane: its trace across the scene's box (a line in 2D, a square in 3D)."""
+        lo, hi = self.scene.bounds()
+        half = max(float(np.max(hi - lo)) / 2, 1e-3) * 1.1
+        mid = (lo + hi) / 2
+        centre = mid - np.dot(mid - point, normal) * normal       # the box centre projected on the plane
+        if self.scene.dim == 2:
+            t = np.array([-normal[1], normal[0]])
+            pts = [centre + s * half * t for s in (-1, 1)]
+        else:
+            helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
+            t1 = np.cross(normal, helper)
+            t1 /= np.linalg.norm(t1)
+            t2 = np.cross(normal, t1)
+            pts = [centre + half * (a * t1 + b * t2) for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1), (-1, -1))]
+        self.ax.plot(*np.asarray(pts).T, color=PLANE_COLOR, lw=1, ls="--")
+
+    def _circles(self, centre, radius) -> np.ndarray:
+        """A circle (2D) or three great circles (3D) of a sphere, as one polyline."""
+        a = np.linspace(0, 2 * np.pi, 41)
+        c, s = np.cos(a), np.sin(a)
+        if self.scene.dim == 2:
+            return centre + radius * np.column_stack([c, s])
+        z = np.zeros_like(a)
+        rings = [np.column_stack(r) for r in ((c, s, z), (c, z, s), (z, c, s))]
+        return centre + radius * np.concatenate(rings)
 
     def _line(self, color, lw):
         return self.ax.plot(*([[0, 0]] * self.scene.dim), color=color, lw=lw)[0]
@@ -88,6 +122,10 @@ class SceneArtists:
         self._set(self.body_points, s.body_points[k])
         self._set(self.points, s.points[k])
         self._set(self.markers, s.markers[k])
+        for line, centre, radius in zip(self.spheres, s.sphere_centres[k], s.sphere_radii):
+            self._set(line, self._circles(centre, radius))
+        loaded = s.contact_points[k]
+        self._set(self.contacts, loaded[~np.isnan(loaded).any(axis=1)])
         self.title.set_text(f"t = {t:.3f} s")
         return [*self.bars, *(a for lines in self.axes for a in lines), self.body_points, self.points,
-                self.markers, self.title]
+                self.markers, *self.spheres, self.contacts, self.title]

@@ -26,9 +26,10 @@ def plot(traj, path, points=None, *, dpi: int = 100) -> Path:
     if path.suffix.lower() not in FORMATS:
         raise NcgenError(f"plot: {path}: expected a file name ending in {', '.join(FORMATS)}")
     curves = _point_curves(traj, points)
-    fig = figure(11, 8)
+    rows = 3 if traj.contact_names else 2
+    fig = figure(11, 4 * rows)
     t = traj.t
-    ax = fig.add_subplot(221)
+    ax = fig.add_subplot(rows, 2, 1)
     scale = traj.energy_scale
     ax.plot(t, traj.energy - traj.energy[0], color="tab:red")
     ax.set_title(f"energy drift (E(t0) = {traj.energy[0]:.4g} J"
@@ -37,7 +38,7 @@ def plot(traj, path, points=None, *, dpi: int = 100) -> Path:
     ax.set_ylabel("E - E(t0) (J)")
     ax.grid(True, alpha=0.3)
 
-    ax = fig.add_subplot(222)
+    ax = fig.add_subplot(rows, 2, 2)
     for values, label in ((traj.constraint_residual, "|phi|_inf (m^2)"),
                           (traj.velocity_residual, "|A v + phi_t|_inf (m^2/s)")):
         ax.semilogy(t, np.where(values > 0, values, np.nan), label=label)     # exact zeros left out
@@ -46,7 +47,7 @@ def plot(traj, path, points=None, *, dpi: int = 100) -> Path:
     ax.legend(loc="best", fontsize="small")
     ax.grid(True, which="both", alpha=0.3)
 
-    ax = fig.add_subplot(223)
+    ax = fig.add_subplot(rows, 2, 3)
     for label, xyz in curves:
         for j, line_style in zip(range(traj.dim), ("-", "--", ":")):
             ax.plot(t, xyz[:, j], line_style, label=f"{label} {'xyz'[j]}")
@@ -57,7 +58,7 @@ def plot(traj, path, points=None, *, dpi: int = 100) -> Path:
         ax.legend(loc="best", fontsize="x-small", ncol=traj.dim)
     ax.grid(True, alpha=0.3)
 
-    ax = fig.add_subplot(224, projection="3d" if traj.dim == 3 else None)
+    ax = fig.add_subplot(rows, 2, 4, projection="3d" if traj.dim == 3 else None)
     for label, xyz in curves:
         ax.plot(*xyz.T, label=label)
         ax.scatter(*xyz[0], marker="o", s=15)
@@ -70,6 +71,8 @@ def plot(traj, path, points=None, *, dpi: int = 100) -> Path:
         ax.set_aspect("equal", adjustable="datalim")
         ax.grid(True, alpha=0.3)
 
+    if traj.contact_names:
+        _contact_panels(fig, traj, rows)
     fig.suptitle(f"{traj.model_name}: t = {t[0]:g} ... {t[-1]:g} s"
                  + ("" if traj.complete else "  (INCOMPLETE: the integration failed)"))
     fig.tight_layout()
@@ -77,6 +80,29 @@ def plot(traj, path, points=None, *, dpi: int = 100) -> Path:
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=dpi, format=path.suffix.lower()[1:])
     return path
+
+
+def _contact_panels(fig, traj, rows: int) -> None:
+    """Normal and tangential contact forces (N), and gaps (m), per contact."""
+    ax = fig.add_subplot(rows, 2, 5)
+    for k, name in enumerate(traj.contact_names):
+        line, = ax.plot(traj.t, traj.contact_normal[:, k], label=f"{name} normal")
+        ax.plot(traj.t, np.linalg.norm(traj.contact_tangent[:, k], axis=1), ":", color=line.get_color(),
+                label=f"{name} |tangential|")
+    ax.set_title("contact forces")
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("force (N)")
+    ax.legend(loc="best", fontsize="x-small")
+    ax.grid(True, alpha=0.3)
+    ax = fig.add_subplot(rows, 2, 6)
+    for k, name in enumerate(traj.contact_names):
+        ax.plot(traj.t, traj.gap[:, k], label=name)
+    ax.axhline(0, color="k", lw=0.8)
+    ax.set_title("gaps (< 0: penetration)")
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("gap (m)")
+    ax.legend(loc="best", fontsize="x-small")
+    ax.grid(True, alpha=0.3)
 
 
 def _point_curves(traj, points) -> list[tuple[str, np.ndarray]]:

@@ -4,7 +4,9 @@
 * bodies: the frame (centre of mass and the rotation's columns as axes) and the basic
   points of the body (``r_i``, ``r_j``, ... : the points its natural coordinates name);
 * point members: their positions; markers: their positions;
-* ground-fixed basic points: constant positions, drawn as anchors.
+* ground-fixed basic points: constant positions, drawn as anchors;
+* contacts: the spheres (centres per frame and radii), the planes fixed to the ground
+  (a point and a unit normal each) and, per frame, the contact points that carry a force.
 Positions in m, world frame.
 """
 from __future__ import annotations
@@ -28,11 +30,24 @@ class Scene:
     points: np.ndarray          # (n_t, n_points, dim): point members
     markers: np.ndarray         # (n_t, n_markers, dim)
     anchors: np.ndarray         # (n_anchors, dim): ground-fixed points
+    sphere_centres: np.ndarray = None   # (n_t, n_spheres, dim)
+    sphere_radii: np.ndarray = None     # (n_spheres,)
+    planes: np.ndarray = None           # (n_planes, 2, dim): point and unit normal of ground planes
+    contact_points: np.ndarray = None   # (n_t, nk, dim): contact point, NaN while it carries no force
+
+    def __post_init__(self):
+        n, d = self.markers.shape[0], self.dim
+        defaults = {"sphere_centres": np.zeros((n, 0, d)), "sphere_radii": np.zeros(0),
+                    "planes": np.zeros((0, 2, d)), "contact_points": np.zeros((n, 0, d))}
+        for key, value in defaults.items():
+            if getattr(self, key) is None:
+                setattr(self, key, value)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Smallest and largest coordinate over all frames and drawn things."""
         clouds = [a.reshape(-1, self.dim) for a in (self.bars, self.body_origins, self.body_points,
-                                                   self.points, self.markers, self.anchors) if a.size]
+                                                   self.points, self.markers, self.anchors,
+                                                   self.sphere_centres) if a.size]
         allpts = np.concatenate(clouds) if clouds else np.zeros((1, self.dim))
         return allpts.min(axis=0), allpts.max(axis=0)
 
@@ -65,7 +80,42 @@ def scene(traj) -> Scene:
         else np.zeros((n, 0, d)),
         markers=traj.markers,
         anchors=np.array([node.fixed for node in model.layout.nodes if node.fixed is not None]).reshape(-1, d),
+        **contact_scene(traj, model),
     )
+
+
+def contact_scene(traj, model) -> dict:
+    """Spheres, ground planes and loaded contact points of ``traj`` (see :class:`Scene`)."""
+    if not getattr(model, "nk", 0):
+        return {}
+    n, d = len(traj), traj.dim
+    centres, radii, planes, points = [], [], [], []
+    for k, c in enumerate(model.contacts):
+        if c["type"] == "SpherePlane":
+            centre = traj.point(c["sphere"], c["at"])
+            centres.append(centre)
+            radii.append(c["radius"])
+            if c["plane"] == "ground":
+                planes.append([c["point"], c["normal"]])
+            if c["plane"] == "ground":
+                normal = np.asarray(c["normal"], float)
+            else:
+                R = traj.poses()[0][:, model.member_names.index(c["plane"])]
+                normal = np.einsum("tij,j->ti", R, model.member(c["plane"]).direction_to_local(c["normal"]))
+            contact = centre - c["radius"] * np.broadcast_to(normal, (n, d))
+        else:
+            ca_, cb = traj.point(c["a"], c["at_a"]), traj.point(c["b"], c["at_b"])
+            centres += [ca_, cb]
+            radii += [c["radius_a"], c["radius_b"]]
+            u = (cb - ca_) / np.linalg.norm(cb - ca_, axis=1, keepdims=True)
+            contact = ca_ + c["radius_a"] * u
+        points.append(np.where(traj.contact_normal[:, k:k + 1] > 0, contact, np.nan))
+    unique = {}
+    for plane in planes:
+        unique.setdefault(tuple(np.round(np.ravel(plane), 12)), plane)
+    return {"sphere_centres": np.stack(centres, axis=1), "sphere_radii": np.asarray(radii, float),
+            "planes": np.asarray(list(unique.values()), float).reshape(-1, 2, d),
+            "contact_points": np.stack(points, axis=1)}
 
 
 def _basic_points(member) -> list[np.ndarray]:

@@ -1,0 +1,168 @@
+"""A chain falling onto the ground: the ncgen nonsmooth contact stepper beside MuJoCo.
+
+Model: the chain of benchmarks/common.py (N uniform 'rr' bars, L = 0.3 m, m = 0.2 kg, a
+staircase in x-y) with its first end free instead of fixed, lifted so that node k is at
+height 0.3 + 0.02 k m, released from rest.  Every node (bar end) carries a sphere of radius
+r = 0.02 m in contact with the ground plane z = 0: Coulomb friction μ = 0.5, restitution
+e = 0.  The MuJoCo twin: the same bodies (free joint on the first bar, ball joints after,
+explicit inertias as in common.py) with massless sphere geoms at the nodes, friction 0.5,
+elliptic cones, default soft-contact parameters (solref 0.02 s, solimp default), the same
+fixed step h for both.
+
+What is compared, in one run:
+
+* wall time per simulated second, best of ``--repeat`` runs (ncgen: the compiled stepper,
+  one C call; MuJoCo: ``mj_step`` with ``nstep``, no Python in the loop; both outside
+  compile/build time); "with sampling" adds the output every 10 ms (ncgen: Trajectory
+  outputs; MuJoCo: a Python loop reading energies and depths);
+* penetration: the largest depth of a node sphere below the ground, over the run (m);
+* energy gain: max over the run of E(t) − E(0) (J; ≤ 0 means the contacts never created
+  energy; the fall turns potential energy into kinetic and the contacts dissipate it);
+* ncgen only: the bilateral constraint drift max |Φ| (MuJoCo's joints cannot drift).
+
+    python benchmarks/contact.py [--sizes 5 20] [--t-end 2] [--h 1e-3] [--repeat 3]
+    python benchmarks/contact.py --smoke
+"""
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from common import GRAVITY, L, MASS, AXIAL_INERTIA, best_time, ends, machine
+
+RADIUS, MU, HEIGHT, TILT = 0.02, 0.5, 0.3, 0.02
+SAMPLE = 0.01
+
+
+def nodes(n: int) -> list[np.ndarray]:
+    """The n + 1 node positions at release."""
+    return [p + np.array([0.0, 0.0, HEIGHT + TILT * k]) for k, p in enumerate(ends(n))]
+
+
+def chain_with_contacts(n: int):
+    """The ncgen model (contacts="nonsmooth")."""
+    import ncgen as nc
+
+    s = nc.System(f"fallchain{n}", gravity=GRAVITY)
+    pts = nodes(n)
+    start = tuple(pts[0])
+    for k in range(1, n + 1):
+        bar = s.add_bar(f"bar{k}", coords="rr", mass=MASS, ends=[start, tuple(pts[k])])
+        half = np.linalg.norm(pts[k] - pts[k - 1]) / 2
+        if k == 1:
+            s.add_contact(nc.SpherePlane(bar, (-half, 0, 0), RADIUS, mu=MU, name="node0"))
+        s.add_contact(nc.SpherePlane(bar, (half, 0, 0), RADIUS, mu=MU, name=f"node{k}"))
+        start = bar.end(1)
+    return s.build(contacts="nonsmooth")
+
+
+def chain_mjcf(n: int, h: float) -> str:
+    """The MuJoCo twin (see the module docstring)."""
+    pts = nodes(n)
+    transverse = MASS * L**2 / 12
+    body, close = "", ""
+    for k in range(1, n + 1):
+        d = pts[k] - pts[k - 1]
+        # body frame at the bar's first node, axes parallel to the world at release
+        pos = pts[0] if k == 1 else pts[k - 1] - pts[k - 2]
+        joint = "<freejoint/>" if k == 1 else '<joint type="ball" damping="0" armature="0"/>'
+        u = d / np.linalg.norm(d)
+        J = transverse * (np.eye(3) - np.outer(u, u)) + AXIAL_INERTIA * np.outer(u, u)
+        full = (J[0, 0], J[1, 1], J[2, 2], J[0, 1], J[0, 2], J[1, 2])
+        body += (f'<body name="bar{k}" pos="{_nums(pos)}">{joint}'
+                 f'<inertial pos="{_nums(d / 2)}" mass="{MASS}" fullinertia="{_nums(full)}"/>')
+        if k == 1:
+            body += f'<geom type="sphere" size="{RADIUS}" pos="0 0 0" mass="0"/>'
+        body += f'<geom type="sphere" size="{RADIUS}" pos="{_nums(d)}" mass="0"/>'
+        close += "</body>"
+    return (f'<mujoco model="fallchain{n}"><compiler inertiafromgeom="false" angle="radian"/>'
+            f'<option timestep="{h!r}" gravity="{_nums(GRAVITY)}" cone="elliptic">'
+            f'<flag energy="enable"/></option>'
+            f'<default><geom friction="{MU} 0 0" condim="3" contype="1" conaffinity="0"/></default>'
+            f'<worldbody><geom type="plane" size="20 20 0.1" contype="0" conaffinity="1"/>'
+            f'{body}{close}</worldbody></mujoco>')
+
+
+def _nums(x) -> str:
+    return " ".join(repr(float(v)) for v in x)
+
+
+def run_ncgen(n: int, t_end: float, h: float, repeat: int):
+    import ncgen as nc
+
+    model = chain_with_contacts(n)
+    substeps = int(round(SAMPLE / h))
+    nc.simulate(model, SAMPLE, SAMPLE, method="stepper", substeps=substeps)        # compile outside timings
+    runs = [nc.simulate(model, t_end, SAMPLE, method="stepper", substeps=substeps) for _ in range(repeat)]
+    traj = runs[-1]
+    stepper = min(r.info["wall_time"] for r in runs)             # the C call alone
+    wall, _ = best_time(lambda: nc.simulate(model, t_end, SAMPLE, method="stepper", substeps=substeps), 1)
+    return {"wall": wall, "stepper": stepper, "penetration": max(0.0, -float(traj.gap.min())),
+            "energy_gain": float(np.max(traj.energy - traj.energy[0])), "E0": float(traj.energy[0]),
+            "E_end": float(traj.energy[-1]), "drift": float(traj.constraint_residual.max()),
+            "rest_height": float(traj.q[-1, 2::3].mean())}
+
+
+def run_mujoco(n: int, t_end: float, h: float, repeat: int):
+    import mujoco
+
+    model = mujoco.MjModel.from_xml_string(chain_mjcf(n, h))
+    per_sample = int(round(SAMPLE / h))
+    samples = int(round(t_end / SAMPLE))
+    node_geoms = [g for g in range(model.ngeom) if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_SPHERE]
+
+    def run():
+        data = mujoco.MjData(model)
+        mujoco.mj_forward(model, data)
+        E = [data.energy.sum()]
+        depth = 0.0
+        for _ in range(samples):
+            mujoco.mj_step(model, data, nstep=per_sample)
+            E.append(data.energy.sum())
+            depth = max(depth, float(np.max(RADIUS - data.geom_xpos[node_geoms, 2])))
+        return np.array(E), depth, data
+
+    wall, (E, depth, data) = best_time(run, repeat)
+    def pure_run():
+        data2 = mujoco.MjData(model)
+        start = time.perf_counter()
+        mujoco.mj_step(model, data2, nstep=samples * per_sample)
+        return time.perf_counter() - start
+
+    pure = min(pure_run() for _ in range(repeat))
+    return {"wall": wall, "stepper": pure, "penetration": depth, "energy_gain": float(np.max(E - E[0])),
+            "E0": float(E[0]), "E_end": float(E[-1]),
+            "rest_height": float(np.mean(data.geom_xpos[node_geoms, 2]))}
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--sizes", type=int, nargs="+", default=[5, 20], help="numbers of bars (default 5 20)")
+    parser.add_argument("--t-end", type=float, default=2.0, help="simulated time, s (default 2)")
+    parser.add_argument("--h", type=float, default=1e-3, help="fixed step of both, s (default 1e-3)")
+    parser.add_argument("--repeat", type=int, default=3, help="runs per timing, the best kept (default 3)")
+    parser.add_argument("--smoke", action="store_true", help="N = 3, 0.3 s, one run (CI)")
+    args = parser.parse_args(argv)
+    if args.smoke:
+        args.sizes, args.t_end, args.repeat = [3], 0.3, 1
+    print(machine())
+    for n in args.sizes:
+        print(f"\n=== chain of N = {n} bars falling on the ground, {args.t_end:g} s, h = {args.h:g} s")
+        ours = run_ncgen(n, args.t_end, args.h, args.repeat)
+        theirs = run_mujoco(n, args.t_end, args.h, args.repeat)
+        for name, r in (("ncgen stepper", ours), ("MuJoCo (Euler, soft contacts)", theirs)):
+            print(f"{name:<30} wall per simulated s {r['stepper'] / args.t_end * 1e3:8.2f} ms "
+                  f"(with sampling {r['wall'] / args.t_end * 1e3:.2f} ms), penetration {r['penetration']:.2e} m, "
+                  f"energy gain {r['energy_gain']:.2e} J, E(0) = {r['E0']:.4f} J, E(end) = {r['E_end']:.4f} J, "
+                  f"mean node height at the end {r['rest_height']:.4f} m")
+        print(f"ncgen bilateral constraint drift max |phi| = {ours['drift']:.2e} m^2")
+        print(f"RATIO ncgen / MuJoCo wall time per simulated second: {ours['stepper'] / theirs['stepper']:.2f}")
+        ratio = ours["penetration"] / theirs["penetration"] if theirs["penetration"] > 0 else float("nan")
+        print(f"RATIO ncgen / MuJoCo penetration: {ratio:.3g}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,151 @@
+"""Contact kinematics and the smooth (compliant) contact law as CasADi expressions.
+
+For contact k (:mod:`ncgen.model.contacts`) with unit normal ``n`` and tangent basis
+``t₁, t₂`` (one tangent in planar systems):
+
+* gap ``g_k(q)`` (m): sphere–plane ``nᵀ (r_s − x_p) − R``, sphere–sphere
+  ``|r_b − r_a| − R_a − R_b``.  A body-fixed point is ``r = C(c) q``, so against a
+  plane fixed to the ground the gap is linear in q and its Jacobian constant.
+* contact Jacobians ``W_N`` (1 × nq) and ``W_T`` ((dim − 1) × nq): the normal and
+  tangential components of the relative velocity of the two material points at the contact
+  point, ``[n, t₁, t₂]ᵀ (v_second − v_first) = [W_N; W_T] q̇``.  A material point at the world
+  point x of member I moves with ``ṙ_ref + ω × (x − r_ref)`` (``ω`` from the member's
+  derivation: a 3D bar does not spin about its axis); with the contact point on the sphere's
+  surface, ``W_N = ∂g/∂q`` (exactly, except for a plane carried by a member, where it is the
+  relative normal velocity at the contact point).
+* generalised contact force ``Q = W_Nᵀ f_N + W_Tᵀ f_T`` for normal force ``f_N`` and
+  tangential components ``f_T`` (N) on the second element.
+
+Smooth law (``System.build(contacts="smooth")``, documented in docs/contact.md):
+Hunt–Crossley ``f_N = max(0, δⁿ (k + d δ̇))`` with ``δ = max(0, −g)``, ``δ̇ = −W_N q̇``, and
+regularised Coulomb friction ``f_T = −μ f_N v_T / sqrt(|v_T|² + v_s²)`` with
+``v_T = W_T q̇``; the spring's potential ``k δⁿ⁺¹/(n + 1)`` joins the potential energy.
+"""
+from __future__ import annotations
+
+import casadi as ca
+
+from ncgen.model.context import Context, perpendicular_basis
+from ncgen.model.contacts import SpherePlane, SphereSphere
+
+
+class ContactTerms:
+    """Gap, normal/tangential Jacobians (in q only) of one contact, as SX."""
+
+    def __init__(self, contact, g, WN, WT):
+        self.contact, self.g, self.WN, self.WT = contact, g, WN, WT
+
+
+def contact_terms(ctx: Context, contacts) -> list[ContactTerms]:
+    """The :class:`ContactTerms` of every contact, in order."""
+    return [_sphere_plane(ctx, c) if isinstance(c, SpherePlane) else _sphere_sphere(ctx, c) for c in contacts]
+
+
+def _omega_cross(ctx: Context, member, d):
+    """``ω × d`` for member ``member`` (zero for points); ``ω`` linear in q̇."""
+    D = member.ctype.derivation
+    if getattr(D, "omega", None) is None:
+        return ca.SX.zeros(ctx.dim)
+    w = ctx.instantiate(member, D.omega)
+    if ctx.dim == 2:
+        return w[0] * ca.vertcat(-d[1], d[0])
+    return ca.cross(w, d)
+
+
+def _material_velocity(ctx: Context, member, r_ref, rdot_ref, x):
+    """Velocity of the material point of ``member`` at the world point ``x``."""
+    if member.is_ground:
+        return ca.SX.zeros(ctx.dim)
+    return rdot_ref + _omega_cross(ctx, member, x - r_ref)
+
+
+def _jacobians(ctx: Context, n, tangents, rel):
+    rows = [ca.dot(n, rel)] + [ca.dot(t, rel) for t in tangents]
+    W = ca.jacobian(ca.vertcat(*rows), ctx.v)
+    return W[0, :], W[1:, :]
+
+
+def _sphere_plane(ctx: Context, c: SpherePlane) -> ContactTerms:
+    r_s, rd_s = ctx.local_point(c.sphere, c.at)
+    P = c.plane
+    what = c.label
+    if P.is_ground:
+        n, x_p = ca.DM(c.normal), ca.DM(c.point)
+        tangents = [ca.DM(t) for t in perpendicular_basis(c.normal)]
+        vel_plane = lambda x: ca.SX.zeros(ctx.dim)  # noqa: E731
+    else:
+        n = ctx.direction(P, c.normal, what)[0]
+        x_p, xd_p = ctx.point(P, c.point, what)
+        tangents = ctx.perpendiculars(P, c.normal, what)
+        vel_plane = lambda x: _material_velocity(ctx, P, x_p, xd_p, x)  # noqa: E731
+    g = ca.dot(n, r_s - x_p) - c.radius
+    x = r_s - c.radius * n
+    rel = _material_velocity(ctx, c.sphere, r_s, rd_s, x) - vel_plane(x)
+    WN, WT = _jacobians(ctx, n, tangents, rel)
+    return ContactTerms(c, g, WN, WT)
+
+
+def _sphere_sphere(ctx: Context, c: SphereSphere) -> ContactTerms:
+    r_a, rd_a = ctx.local_point(c.a, c.at_a)
+    r_b, rd_b = ctx.local_point(c.b, c.at_b)
+    d = r_b - r_a
+    length = ca.sqrt(ca.sumsqr(d))
+    n = d / length
+    g = length - c.radius_a - c.radius_b
+    rel = (_material_velocity(ctx, c.b, r_b, rd_b, r_b - c.radius_b * n)
+           - _material_velocity(ctx, c.a, r_a, rd_a, r_a + c.radius_a * n))
+    WN, WT = _jacobians(ctx, n, tangent_basis(n), rel)
+    return ContactTerms(c, g, WN, WT)
+
+
+def tangent_basis(n) -> list:
+    """Unit tangents completing the unit normal ``n`` (SX) to a right-handed basis: in 3D
+    ``t₁ ∝ n × e`` with ``e`` the axis of ``z``, ``x`` least aligned with ``n``."""
+    if n.shape[0] == 2:
+        return [ca.vertcat(-n[1], n[0])]
+    helper = ca.if_else(ca.fabs(n[2]) < 0.8, ca.DM([0, 0, 1]), ca.DM([1, 0, 0]))
+    t1 = ca.cross(n, helper)
+    t1 = t1 / ca.sqrt(ca.sumsqr(t1))
+    return [t1, ca.cross(n, t1)]
+
+
+def smooth_forces(ctx: Context, terms: list[ContactTerms]):
+    """``(f_N (nk), f_T (nk·(dim−1)), Q (nq), V (nk))``: the smooth law's contact forces (N),
+    their generalised force and the contact springs' potential energies (J)."""
+    fN, fT, V = [], [], []
+    Q = ca.SX.zeros(ctx.layout.nq)
+    for k in terms:
+        c = k.contact
+        delta = ca.fmax(0, -k.g)
+        rate = -ca.mtimes(k.WN, ctx.v)
+        dn = delta ** c.exponent
+        f_n = ca.fmax(0, dn * (c.stiffness + c.damping * rate))
+        vT = ca.mtimes(k.WT, ctx.v)
+        f_t = -c.mu * f_n * vT / ca.sqrt(ca.sumsqr(vT) + c.slip_velocity ** 2)
+        Q += ca.mtimes(k.WN.T, f_n) + ca.mtimes(k.WT.T, f_t)
+        fN.append(f_n)
+        fT.append(f_t)
+        V.append(c.stiffness * delta ** (c.exponent + 1) / (c.exponent + 1))
+    return ca.vertcat(*fN), ca.vertcat(*fT), Q, ca.vertcat(*V)
+
+
+def contact_functions(ctx: Context, terms: list[ContactTerms]) -> dict[str, ca.Function]:
+    """``gap: q, p -> g``; ``contact_jacobian: q, p -> WN (nk × nq), WT (nk·(dim−1) × nq)``
+    (rows of contact k: ``k`` and ``k·(dim−1) ...``); ``contact_force: t, q, v, p -> fN, fT``
+    (the smooth law, N, whether or not the model uses it)."""
+    q, v, p, t = ctx.q, ctx.v, ctx.p, ctx.t
+    g = ca.vertcat(*[k.g for k in terms])
+    WN = ca.vertcat(*[k.WN for k in terms])
+    WT = ca.vertcat(*[k.WT for k in terms])
+    fN, fT, _, _ = smooth_forces(ctx, terms)
+    return {
+        "gap": ca.Function("gap", [q, p], [g], ["q", "p"], ["g"]),
+        "contact_jacobian": ca.Function("contact_jacobian", [q, p], [WN, WT], ["q", "p"], ["WN", "WT"]),
+        "contact_force": ca.Function("contact_force", [t, q, v, p], [fN, fT], ["t", "q", "v", "p"], ["fN", "fT"]),
+    }
+
+
+def contact_specs(contacts) -> list[dict]:
+    """Plain-data description of the contacts (``model.contacts``)."""
+    return [c.spec() for c in contacts]
+
