@@ -14,7 +14,9 @@ from ncgen.runtime.dae import load_dae
 from ncgen.runtime.diagnose import explain, shift_time
 from ncgen.runtime.idas import ChunkedIDAS, ChunkFailure
 from ncgen.runtime.inputs import hold_columns, input_samples, parameter_values, time_grid
+from ncgen.runtime.manifold import ManifoldProjector, robust_algebraic
 from ncgen.runtime.progress import Progress
+from ncgen.runtime.rattle_bridge import RattleFailure, rattle_interval
 from ncgen.runtime.stepper import MAX_HALVINGS, MAX_ITER, TOL, simulate_stepper
 from ncgen.runtime.trajectory import Trajectory
 from ncgen.validation import as_vector
@@ -22,6 +24,10 @@ from ncgen.validation import as_vector
 METHODS = ("idas", "stepper")
 #: The run is split into at most this many chunks (progress updates; see ncgen.runtime.idas).
 CHUNKS = 20
+#: Output intervals per IDAS call when projecting (``simulate(project=True)``).
+PROJECTED_CHUNK = 1
+#: Largest number of RATTLE steps across one output interval (see ``_bridge``).
+BRIDGE_MAX_STEPS = 20_000
 
 
 def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: float = 1e-8,
@@ -29,7 +35,7 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
              hold: str = "zoh", backend: str = "vm", progress: bool | None = None,
              max_steps: int = 50_000, linear_solver: str = "csparse",
              ic_tolerance: float | None = 1e-6, substeps: int = 1, newton_tol: float = TOL,
-             max_newton: int = MAX_ITER, max_halvings: int = MAX_HALVINGS) -> Trajectory:
+             max_newton: int = MAX_ITER, max_halvings: int = MAX_HALVINGS, project: bool = False) -> Trajectory:
     """Integrate ``model`` from ``t0`` (default ``model.t0``) to ``t_end`` and return the
     :class:`~ncgen.runtime.trajectory.Trajectory` on the grid ``t0, t0 + dt, ..., t_end``
     (``dt`` shortened if needed so that ``t_end`` is on the grid).  Times in s.
@@ -60,6 +66,17 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
       terminal and the run takes more than a second.
     * ``max_steps``: IDAS steps allowed per output interval; ``linear_solver``: CasADi's
       sparse solver for the Newton systems (``"csparse"``, ``"qr"``, ...).
+    * ``project`` (IDAS): after every output interval, project ``q`` and ``v`` back onto
+      ``Φ = 0`` and ``A v + Φ_t = 0`` in the mass metric with a rank-robust (truncated)
+      pseudo-inverse (:mod:`ncgen.runtime.manifold`), and integrate one output interval per
+      IDAS call; an interval whose IDAS call fails right at its start (a start at a singular
+      configuration, where the KKT matrix is singular) is redone from the previous output
+      time over two intervals.  This keeps a linkage on its physical branch through singular
+      positions (a parallelogram passing the flat position) at ``rtol=1e-10`` (the N four-bar
+      of the IFToMM benchmark A02 within a few µm of the exact motion; see
+      ``tests/test_singular_positions.py``).  It costs an IDAS restart per output interval
+      (several times slower on ordinary models), so it is off by default: without it IDAS
+      runs over chunks of many intervals and the state is never changed.
     * ``method="stepper"``: the compiled fixed-step RATTLE stepper (generated C, Newton loop
       included; :mod:`ncgen.runtime.stepper`), ``substeps`` steps of ``dt / substeps`` per
       output interval, Newton tolerance ``newton_tol`` (both constraint levels hold to it at
@@ -92,15 +109,21 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
     runner = ChunkedIDAS(dae, h=float(t[1] - t[0]), nu=model.nu, hold=hold, rtol=rtol, atol=atol,
                          max_steps=int(max_steps), linear_solver=linear_solver, expand=(used == "vm"),
                          algebraic=lambda tk, x, uk: _algebraic(model, tk, x, uk, pv))
+    projector = ManifoldProjector(model, pv, atol) if project else None
     bar = Progress(t0, t[-1], progress, label=f"simulating {model.name}: ")
     start = time.perf_counter()
     try:
-        X, Z, failure = _run(runner, t, np.concatenate([q, v]), np.concatenate([a, lam]), columns, pv, bar)
+        bridge = _bridge(model, runner, pv, rtol, atol) if project else None
+        X, Z, failure = _run(runner, t, np.concatenate([q, v]), np.concatenate([a, lam]), columns, pv, bar,
+                             projector, bridge)
     finally:
         bar.close()
     nq, k = model.nq, len(X) - 1
+    stats = dict(runner.stats)
+    if projector is not None:
+        stats.update(projector.counts, restarts=runner.restarts, rattle_intervals=bridge.count)
     info = {"method": method, "backend": used, "rtol": rtol, "atol": atol, "hold": hold,
-            "linear_solver": linear_solver, "stats": dict(runner.stats),
+            "linear_solver": linear_solver, "stats": stats, "project": project,
             "wall_time": time.perf_counter() - start, "complete": failure is None}
     if failure is not None:
         message = _failure_message(model, failure, t, k, X[k], Z[k, nq:], U[k], pv, dae)
@@ -144,34 +167,88 @@ def initial_multipliers(model, t0: float, q, v, u, p, dae) -> np.ndarray:
 
 def _algebraic(model, t: float, x, u, p) -> np.ndarray:
     """``z = [a; λ]`` consistent with the state ``x = [q; v]`` and input ``u`` at ``t``: the KKT
-    system, which is the DAE's algebraic equations."""
-    a, lam = model.functions["accel"](t, x[:model.nq], x[model.nq:], u, p)
-    return np.concatenate([np.array(a).reshape(-1), np.array(lam).reshape(-1)])
+    system, which is the DAE's algebraic equations, solved rank-robustly
+    (:func:`~ncgen.runtime.manifold.robust_algebraic`).  Non-finite values raise
+    :class:`~ncgen.runtime.idas.ChunkFailure` (never a raw CasADi error)."""
+    z = robust_algebraic(model, t, x[:model.nq], x[model.nq:], u, p)
+    if not np.all(np.isfinite(z)):
+        raise ChunkFailure("KKT_FAIL", f"At t = 0, the accelerations and multipliers are not finite "
+                           f"at the start of the output interval", "accel")
+    return z
 
 
-def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress):
+class _bridge:
+    """IDAS's last resort over one output interval: :func:`~ncgen.runtime.rattle_bridge.rattle_interval`
+    with steps of about ``sqrt(rtol)`` s (at most :data:`BRIDGE_MAX_STEPS`); ``count`` of uses."""
+
+    def __init__(self, model, runner: ChunkedIDAS, p, rtol: float, atol: float):
+        self.model, self.runner, self.p, self.rtol, self.atol = model, runner, p, rtol, atol
+        self.count = 0
+
+    def __call__(self, t0: float, t1: float, x, column):
+        n = min(BRIDGE_MAX_STEPS, max(1, math.ceil((t1 - t0) / math.sqrt(self.rtol))))
+        u = self.runner._input(column, t0)
+        try:
+            x1 = rattle_interval(self.model, t0, x, u, self.p, t1 - t0, n, self.atol)
+        except RattleFailure as e:
+            raise ChunkFailure("RATTLE_FAIL", str(e), "rattle") from None
+        self.count += 1
+        return x1, _algebraic(self.model, t1, x1, self.runner._input(column, t1), self.p)
+
+
+def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=None, bridge=None):
     """States on the grid up to the end or the first failure: ``(X, Z, failure or None)``.
-    A failed chunk is retried one interval at a time, to keep every state before the failure."""
+
+    IDAS runs over chunks of several output intervals; a failed chunk is retried one interval
+    at a time, to keep every state before the failure.  With ``projector`` (see
+    :func:`simulate`, ``project``) the chunks are short (:data:`PROJECTED_CHUNK` intervals),
+    the state is projected at the end of each, and an interval that fails is redone from
+    the previous output time over two intervals, and if that fails too, crossed by ``bridge``
+    (rank-robust RATTLE steps)."""
     n_int = len(t) - 1
-    chunk = max(1, math.ceil(n_int / CHUNKS))
+    chunk = PROJECTED_CHUNK if projector is not None else max(1, math.ceil(n_int / CHUNKS))
     X = np.empty((len(t), len(x0)))
     Z = np.empty((len(t), len(z0)))
     X[0], Z[0] = x0, z0
+
+    def advance(k, n):
+        X[k + 1:k + n + 1], Z[k + 1:k + n + 1] = runner.advance(t[k], X[k], Z[k], columns[:, k:k + n], p)
+
+    def recover(k, failure: ChunkFailure):
+        """Interval k after IDAS failed on it, near a singular configuration: redone from
+        t[k−1], else bridged (projecting).  Elsewhere the failure stands."""
+        if projector is None or not projector.near_singular(t[k], X[k]):
+            raise failure
+        if k > 0:
+            try:
+                advance(k - 1, 2)            # across the start that failed (a singular configuration)
+                runner.restarts += 1
+                return
+            except ChunkFailure:
+                pass
+        X[k + 1], Z[k + 1] = bridge(t[k], t[k + 1], X[k], columns[:, k])
+
     k = 0
     while k < n_int:
         n = min(chunk, n_int - k)
         try:
-            X[k + 1:k + n + 1], Z[k + 1:k + n + 1] = runner.advance(t[k], X[k], Z[k], columns[:, k:k + n], p)
+            advance(k, n)
             k += n
         except ChunkFailure as failure:
-            if n == 1:
-                return X[:k + 1], Z[:k + 1], failure
-            for _ in range(n):
-                try:
-                    X[k + 1:k + 2], Z[k + 1:k + 2] = runner.advance(t[k], X[k], Z[k], columns[:, k:k + 1], p)
-                except ChunkFailure as single:
-                    return X[:k + 1], Z[:k + 1], single
-                k += 1
+            try:
+                if n == 1:
+                    recover(k, failure)
+                    k += 1
+                for _ in range(n if n > 1 else 0):
+                    try:
+                        advance(k, 1)
+                    except ChunkFailure as single:
+                        recover(k, single)
+                    k += 1
+            except ChunkFailure as last:
+                return X[:k + 1], Z[:k + 1], last
+        if projector is not None:
+            X[k] = projector(t[k], X[k])
         bar.update(t[k])
     return X, Z, None
 
