@@ -14,6 +14,7 @@ from ncgen.assembly.kinematics import resolve_fix
 from ncgen.assembly.layout import Layout, make_layout
 from ncgen.assembly.mass import CholeskyFactor, assemble_mass
 from ncgen.model.members import ModelError
+from ncgen.model.sharing import SharingPlan, intrinsic_key, share_coordinates
 
 #: Default Baumgarte coefficients (α, β) in 1/s: constraint errors decay like a critically
 #: damped oscillator with time constant 0.2 s.  IDAS keeps the drift small anyway; the
@@ -24,7 +25,7 @@ REDUNDANT_MODES = ("drop", "error", "keep")
 
 
 def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", tolerance: float = 1e-6,
-                t0: float = 0.0, assemble: bool = False, fix=()):
+                t0: float = 0.0, assemble: bool = False, fix=(), share: bool = True):
     """Assemble ``system`` into a :class:`~ncgen.model.model.Model`.
 
     ``redundant``: constraints linearly dependent at the initial configuration are
@@ -37,7 +38,9 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     (:func:`ncgen.assembly.kinematics.resolve_fix`) and their rates as given.  Joints
     given at world points hold in the given poses by construction; what needs assembling
     is a drive or coordinate driver that prescribes another position at ``t0``.  To
-    assemble an arbitrary configuration vector use :func:`ncgen.assemble`.
+    assemble an arbitrary configuration vector use :func:`ncgen.assemble`.  ``share``:
+    eliminate the joints that shared coordinates can express (:mod:`ncgen.model.sharing`;
+    ``model.sharing`` says which); ``share=False`` keeps every joint's equations.
     """
     from ncgen.model.model import Model
 
@@ -46,12 +49,15 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     if redundant not in REDUNDANT_MODES:
         raise ModelError(f"redundant: expected one of {', '.join(REDUNDANT_MODES)}, got {redundant!r}")
     alpha, beta = (float(x) for x in baumgarte)
+    plan = None
+    if share:
+        system, plan = share_coordinates(system)
     members = list(system.members.values())
     layout = make_layout(system.dim, members)
     ctx = Context(system, layout)
 
     fixed = resolve_fix(layout, system.members, fix)
-    labels, rows = constraint_rows(system, ctx)
+    labels, rows = constraint_rows(system, ctx, plan)
     F, V = force_terms(system, ctx)
     M = assemble_mass(layout, members)
     factor = CholeskyFactor(M, layout.coordinate_names)
@@ -77,12 +83,15 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
                              fixed=fixed, assemble=assemble)
     return Model(system=system, layout=layout, labels=labels, functions=functions, M=M, factor=factor,
                  potential=potential, state=state, p0=p0, baumgarte=(alpha, beta), redundant=redundant_labels,
-                 dropped=(redundant == "drop"), t0=t0)
+                 dropped=(redundant == "drop"), t0=t0, sharing=plan)
 
 
-def constraint_rows(system, ctx: Context) -> tuple[list[str], list[ca.SX]]:
-    """Intrinsic constraints of every member (from its derivation), then joint equations."""
-    labels, rows = [], []
+def constraint_rows(system, ctx: Context, plan: SharingPlan | None = None) -> tuple[list[str], list[ca.SX]]:
+    """Intrinsic constraints of every member (from its derivation), then joint equations.
+    With a sharing ``plan``, the equations that the shared coordinates imply are left out
+    (listed in ``plan.removed``): joint equations the plan drops, and rigidity constraints
+    stated twice or between fixed nodes only (:func:`~ncgen.model.sharing.intrinsic_key`)."""
+    labels, rows, seen = [], [], set()
     for m in system.members.values():
         D = m.ctype.derivation
         if not m.ctype.pairs:
@@ -90,10 +99,20 @@ def constraint_rows(system, ctx: Context) -> tuple[list[str], list[ca.SX]]:
         phi = ctx.instantiate(m, D.Phi)
         names = "uvw"
         for k, (s, t) in enumerate(m.ctype.pairs):
-            labels.append(f"{m.name}.rigid.{names[s]}{names[t]}")
+            label = f"{m.name}.rigid.{names[s]}{names[t]}"
+            if plan is not None:
+                key = intrinsic_key(ctx.layout, m, (s, t))
+                if key is None or key in seen:
+                    plan.removed.append(label)
+                    continue
+                seen.add(key)
+            labels.append(label)
             rows.append(phi[k])
     for j in system.joints:
         for label, e in j.equations(ctx):
+            if plan is not None and not plan.keeps(j.name, label):
+                plan.removed.append(label)
+                continue
             labels.append(label)
             rows.append(e)
     return labels, rows

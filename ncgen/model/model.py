@@ -15,7 +15,7 @@ class Model:
     """A validated, assembled system (create it with ``System.build()``)."""
 
     def __init__(self, *, system, layout, labels, functions, M, factor, potential, state, p0, baumgarte,
-                 redundant, dropped, t0):
+                 redundant, dropped, t0, sharing=None):
         self.system = system
         self.name = system.name
         self.dim = system.dim
@@ -42,6 +42,8 @@ class Model:
         self.redundant_dropped = dropped and bool(redundant)
         self.t0 = t0
         self.gravity = system.gravity.copy()
+        #: :class:`~ncgen.model.sharing.SharingPlan` of ``build(share=True)`` (None with share=False).
+        self.sharing = sharing
 
     # ------------------------------------------------------------ dimensions
     @property

@@ -219,7 +219,9 @@ class System:
         Options (:func:`ncgen.assembly.build.build_model`): ``redundant`` ("drop", "error",
         "keep"), ``tolerance`` (largest relative correction of the initial state),
         ``assemble=True`` with ``fix=[...]`` (the initial poses are a guess to assemble by
-        Newton, keeping the named coordinates), ``baumgarte``, ``t0``."""
+        Newton, keeping the named coordinates), ``baumgarte``, ``t0``, ``share`` (default
+        True: joints that shared coordinates express are eliminated, see
+        :mod:`ncgen.model.sharing`; ``model.sharing`` reports it)."""
         from ncgen.assembly.build import build_model
         return build_model(self, **options)
 
