@@ -40,7 +40,8 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     is a drive or coordinate driver that prescribes another position at ``t0``.  To
     assemble an arbitrary configuration vector use :func:`ncgen.assemble`.  ``share``:
     eliminate the joints that shared coordinates can express (:mod:`ncgen.model.sharing`;
-    ``model.sharing`` says which); ``share=False`` keeps every joint's equations.
+    ``model.sharing`` says which); ``share=False`` keeps every joint's equations, and so
+    does ``fix`` (it names coordinates as written).
     """
     from ncgen.model.model import Model
 
@@ -50,7 +51,7 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
         raise ModelError(f"redundant: expected one of {', '.join(REDUNDANT_MODES)}, got {redundant!r}")
     alpha, beta = (float(x) for x in baumgarte)
     plan = None
-    if share:
+    if share and not fix:          # fix names coordinates as written: no sharing then
         system, plan = share_coordinates(system)
     members = list(system.members.values())
     layout = make_layout(system.dim, members)
@@ -68,12 +69,16 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
         if rows else None
     dependent = dependent_rows(np.array(A_fn(t0, q_init, p0)) if A_fn else np.zeros((0, layout.nq)))
     redundant_labels = [labels[i] for i in dependent]
+    hint = ""
+    if dependent and plan is not None and plan.eliminated:
+        hint = (f" (coordinate sharing replaced the joints {', '.join(plan.eliminated)} by shared coordinates; "
+                "build(share=False) keeps their equations, so the redundant ones are named)")
     if dependent and redundant == "error":
         raise ModelError(f"system {system.name!r}: redundant constraints at the initial configuration: "
-                         f"{', '.join(redundant_labels)}; remove them or build(redundant='drop')")
+                         f"{', '.join(redundant_labels)}{hint}; remove them or build(redundant='drop')")
     if dependent and redundant == "drop":
         warnings.warn(f"system {system.name!r}: dropping redundant constraints "
-                      f"{', '.join(redundant_labels)}", stacklevel=3)
+                      f"{', '.join(redundant_labels)}{hint}", stacklevel=3)
         keep = [i for i in range(len(rows)) if i not in set(dependent)]
         labels, rows = [labels[i] for i in keep], [rows[i] for i in keep]
 

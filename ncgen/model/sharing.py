@@ -62,6 +62,7 @@ class SharingPlan:
     nq_before: int = 0
     dropped: dict[str, tuple[str, ...]] = field(default_factory=dict)
     removed: list[str] = field(default_factory=list)
+    off: str | None = None       # why the pass did nothing, if it was skipped
 
     @property
     def nc_removed(self) -> int:
@@ -135,6 +136,11 @@ def share_coordinates(system):
     from ncgen.assembly.layout import make_layout     # noqa: PLC0415  (moves to ncgen.model)
 
     plan = SharingPlan(nq_before=make_layout(system.dim, list(system.members.values())).nq)
+    by_index = [f.name for f in system.forces if f.kind == "GeneralizedForce"]
+    if by_index:
+        plan.off = (f"the generalised force(s) {', '.join(by_index)} index q and v as written, so the "
+                    "coordinates are kept as written")
+        return system, plan
     sys_c = copy.deepcopy(system)
     d = sys_c.dim
     members = list(sys_c.members.values())
@@ -165,8 +171,11 @@ def share_coordinates(system):
     def gid(m) -> str:
         return "ground" if m.is_ground else gfind(m.name)
 
+    frozen = {gfind(j.A.name) for j in sys_c.joints if j.kind == "CoordinateDriver" and not j.A.is_ground}
+
     def rebasable(g: str) -> bool:
-        return g != "ground" and groups[g][0].kind == "body"
+        """Bodies (welded groups) not named by a CoordinateDriver, whose slots must keep their meaning."""
+        return g != "ground" and groups[g][0].kind == "body" and g not in frozen
 
     # requests of every re-basable group, in joint order: points (world) and axes (world, unit)
     points: dict[str, list[np.ndarray]] = {g: [] for g in groups if rebasable(g)}
@@ -199,9 +208,10 @@ def share_coordinates(system):
             continue
         pts, vecs = _choose_basis(d, points[g], vectors[g], body_list[0], scale)
         for b in body_list:
-            old = b.ctype.name
+            old, q_old = b.ctype.name, b.q0
             _rebase(b, pts, vecs, d)
-            plan.rebased[b.name] = f"{old} -> {b.ctype.name}"
+            if old != b.ctype.name or q_old.shape != b.q0.shape or not np.allclose(q_old, b.q0, rtol=0, atol=1e-12):
+                plan.rebased[b.name] = f"{old} -> {b.ctype.name}"
     for b in ground_group:                            # welded to the ground: every node fixed
         old = b.ctype.name
         pts, vecs = _choose_basis(d, [], [], b, scale)
@@ -310,9 +320,12 @@ def _second_point_to_ground(A, B, at, axis, point_key, classes, scale, welded_to
 
 def _choose_basis(d: int, points: list, vectors: list, body: Member, scale: float):
     """World basic points and unit base vectors for a body (group): the requested points
-    and axes in order while they stay affinely independent (at most d + 1 slots, points
-    first), completed by the body's own axes."""
+    (those that already are basic points first, in their order, so their names stay) and
+    axes while they stay affinely independent (at most d + 1 slots, points first),
+    completed by the body's own axes."""
     pts: list[np.ndarray] = []
+    existing = [body.slot_position(s) for s in body.ctype.point_slots]
+    points = [e for e in existing if any(_same(e, p, scale) for p in points)] + list(points)
     for p in points:
         p = np.asarray(p, float)
         if len(pts) == d + 1 or any(_same(p, q, scale) for q in pts):
