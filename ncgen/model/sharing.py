@@ -144,6 +144,7 @@ def share_coordinates(system):
     sys_c = copy.deepcopy(system)
     d = sys_c.dim
     members = list(sys_c.members.values())
+    old_shares = {m.name: dict(m.shared) for m in members}      # before re-basing clears them
     scale = max([1.0] + [norm(m.p0) for m in members])
 
     # welded groups of bodies (and the ground)
@@ -221,7 +222,6 @@ def share_coordinates(system):
     # node classes
     classes = _Classes()
     welded_to_ground = {b.name for b in ground_group}
-    old_shares = {m.name: dict(m.shared) for m in members}
 
     def point_key(m, world):
         """The node key of ``m``'s basic point at ``world``, or None."""
@@ -335,6 +335,11 @@ def _choose_basis(d: int, points: list, vectors: list, body: Member, scale: floa
     if not pts:
         pts = [body.slot_position(0)]
     spans = [q - pts[0] for q in pts[1:]]
+    for e in existing:                       # the body's other basic points, while there is room
+        if len(spans) + len(vectors) < d and not any(_same(e, q, scale) for q in pts) \
+                and _independent(spans + [e - pts[0]], d):
+            pts.append(e)
+            spans.append(e - pts[0])
     vecs: list[np.ndarray] = []
     for a in vectors:
         a = np.asarray(a, float) / norm(a)
