@@ -135,3 +135,34 @@ def test_a_joint_off_the_basic_points_is_kept():
     model = s.build()
     assert "mid" not in model.sharing.eliminated
     assert any(n.startswith("mid.coincide") for n in model.constraint_names)
+
+
+def test_bodies_welded_to_the_ground_and_to_each_other():
+    """A Fixed weld to the ground leaves a body without coordinates; a weld between two
+    bodies merges them (one set of nodes, the masses add); a CoordinateDriver's body is kept."""
+    s = nc.System("welds", gravity=(0, -9.81))
+    base = s.add_body("base", "ruv", mass=1.0, inertia=0.1, position=(0, 0))
+    arm = s.add_body("arm", "ruv", mass=1.0, inertia=0.1, position=(0.5, 0))
+    tip = s.add_body("tip", "ruv", mass=0.5, inertia=0.05, position=(1.0, 0))
+    s.add_joint(nc.Fixed(s.ground, base, at=(0, 0), name="weld0"))
+    s.add_joint(nc.Revolute(base, arm, at=(0.2, 0), name="pin"))
+    s.add_joint(nc.Fixed(arm, tip, at=(0.8, 0), name="weld1"))
+    shared, explicit = s.build(), s.build(share=False)
+    assert set(shared.sharing.eliminated) == {"weld0", "pin", "weld1"}
+    assert shared.dof == explicit.dof == 1
+    assert shared.layout.member_indices("base") == [None] * 6
+    assert shared.layout.member_indices("arm") == shared.layout.member_indices("tip")
+    a = nc.simulate(shared, 0.5, 0.05, rtol=1e-12, atol=1e-12)
+    b = nc.simulate(explicit, 0.5, 0.05, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(poses(shared, a), poses(explicit, b), atol=1e-8, rtol=0)
+    assert np.max(np.abs(poses(shared, a) - poses(shared, a)[0])) > 0.1
+
+
+def test_a_coordinate_driver_keeps_its_body_as_written():
+    s = nc.System("driver", gravity=(0, -9.81))
+    body = s.add_body("body", coords="rrv", mass=1.0, inertia=0.1, position=(0.5, 0))
+    s.add_joint(nc.Revolute(s.ground, body, at=(0, 0), name="pin"))
+    s.add_joint(nc.CoordinateDriver(body, "r_j", "y", "0.1*t", name="lift"))
+    model = s.build()
+    assert "body" not in model.sharing.rebased and "pin" not in model.sharing.eliminated
+    assert model.dof == s.build(share=False).dof == 0

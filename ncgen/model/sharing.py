@@ -80,22 +80,21 @@ class _Classes:
 
     def __init__(self):
         self.parent: dict = {}
+        self.sets: dict = {}
 
     def find(self, a):
-        self.parent.setdefault(a, a)
+        if a not in self.parent:
+            self.parent[a], self.sets[a] = a, {a}
         while self.parent[a] != a:
             self.parent[a] = self.parent[self.parent[a]]
             a = self.parent[a]
         return a
 
-    def members_of(self, root) -> list:
-        return [k for k in self.parent if self.find(k) == root]
-
     def can_union(self, a, b) -> bool:
         ra, rb = self.find(a), self.find(b)
         if ra == rb:
             return True
-        both = self.members_of(ra) + self.members_of(rb)
+        both = self.sets[ra] | self.sets[rb]
         fixed = {k[1:] for k in both if k[0] == "ground"}
         owners = [k[0] for k in both if k[0] != "ground"]
         return len(fixed) <= 1 and len(owners) == len(set(owners))
@@ -106,6 +105,7 @@ class _Classes:
         ra, rb = self.find(a), self.find(b)
         if ra != rb:
             self.parent[rb] = ra
+            self.sets[ra] |= self.sets.pop(rb)
         return True
 
 
@@ -156,9 +156,10 @@ def share_coordinates(system):
             n = group[n]
         return n
 
+    driven = {j.A.name for j in sys_c.joints if j.kind == "CoordinateDriver" and not j.A.is_ground}
     welds = []
     for j in sys_c.joints:
-        if _candidate(j, d) == "weld":
+        if _candidate(j, d) == "weld" and not any(m.name in driven for m in j.members() if not m.is_ground):
             a, b = (gfind("ground" if m.is_ground else m.name) for m in j.members())
             if a != b:
                 if b == "ground":
@@ -172,7 +173,7 @@ def share_coordinates(system):
     def gid(m) -> str:
         return "ground" if m.is_ground else gfind(m.name)
 
-    frozen = {gfind(j.A.name) for j in sys_c.joints if j.kind == "CoordinateDriver" and not j.A.is_ground}
+    frozen = {gfind(n) for n in driven}
 
     def rebasable(g: str) -> bool:
         """Bodies (welded groups) not named by a CoordinateDriver, whose slots must keep their meaning."""
@@ -255,7 +256,10 @@ def share_coordinates(system):
         for slot, ref in old_shares[m.name].items():
             ka = point_key(m, np.asarray(ref.position))
             kb = point_key(ref.member, np.asarray(ref.position))
-            classes.union(ka, kb)
+            if ka is None or kb is None or not classes.union(ka, kb):
+                plan.off = (f"{m.name} shares {ref.label}, which the re-based bodies cannot keep as a basic "
+                            "point (too many points on one welded group), so the coordinates are kept as written")
+                return system, plan
     for g, body_list in groups.items():               # welded bodies: one set of nodes
         for b in body_list:
             for s in range(len(b.ctype.slots)):
