@@ -56,12 +56,22 @@ class ManifoldProjector:
         if self.Minv is None:
             return False
         A = self._A(t, x[:self.nq])
+        if not np.all(np.isfinite(A)):
+            return False
         s = np.linalg.svd(A, compute_uv=False)
         return bool(np.all(np.isfinite(s)) and s[0] > 0 and s[-1] < NEAR_SINGULAR * s[0])
 
     def __call__(self, t: float, x: np.ndarray) -> np.ndarray:
-        if self.Minv is None:
+        """The projected state (``x`` itself where it is not finite or the solve fails: the
+        integrator's next call reports that)."""
+        if self.Minv is None or not np.all(np.isfinite(x)):
             return x
+        try:
+            return self._project(t, x)
+        except np.linalg.LinAlgError:
+            return x
+
+    def _project(self, t: float, x: np.ndarray) -> np.ndarray:
         nq = self.nq
         q, v = x[:nq].copy(), x[nq:].copy()
         r = self._phi(t, q)
@@ -105,4 +115,7 @@ def robust_algebraic(model, t: float, q, v, u, p) -> np.ndarray:
     K = np.block([[model.M, A.T], [A, np.zeros((nc, nc))]])
     if not np.all(np.isfinite(K)) or not np.all(np.isfinite(rhs)):
         return np.full(model.nq + nc, np.nan)
-    return np.linalg.lstsq(K, rhs, rcond=None)[0]
+    try:
+        return np.linalg.lstsq(K, rhs, rcond=None)[0]
+    except np.linalg.LinAlgError:
+        return np.full(model.nq + nc, np.nan)

@@ -30,7 +30,10 @@ class RattleFailure(Exception):
 
 
 def _pinv_solve(K: np.ndarray, r: np.ndarray) -> np.ndarray:
-    return np.linalg.lstsq(K, r, rcond=RCOND)[0]
+    try:
+        return np.linalg.lstsq(K, r, rcond=RCOND)[0]
+    except np.linalg.LinAlgError as e:
+        raise RattleFailure(f"the least-squares solve failed ({e})") from None
 
 
 def rattle_interval(model, t0: float, x: np.ndarray, u, p, h_end: float, n: int, tol: float) -> np.ndarray:
