@@ -10,7 +10,7 @@ nq, nc, and the stepper's wall time per step (``traj.info["wall_time"]``, the co
 loop) for T seconds at step h, best of ``--repeat`` runs, plus the tip of the last bar at T
 to show that the three are one mechanism.
 
-    python benchmarks/sharing_chain.py [--n 20] [--t-end 2] [--h 1e-3] [--repeat 3]
+    python benchmarks/sharing_chain.py [--n 20] [--t-end 2] [--h 1e-3] [--repeat 3] [--smoke]
 """
 from __future__ import annotations
 
@@ -21,7 +21,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 import ncgen as nc  # noqa: E402
+from common import machine  # noqa: E402
 
 
 def chain(n: int, explicit: bool) -> nc.System:
@@ -55,7 +57,12 @@ def main(argv=None) -> int:
     ap.add_argument("--t-end", type=float, default=2.0)
     ap.add_argument("--h", type=float, default=1e-3)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--smoke", action="store_true", help="3 bars, 10 steps, one run (CI)")
     a = ap.parse_args(argv)
+    if a.smoke:
+        a.n, a.t_end, a.h, a.repeat = 3, 0.01, 1e-3, 1
+    print(machine())
+    print(f"=== chain of N = {a.n} bars, {a.t_end:g} s at h = {a.h:g} s (stepper)")
     cases = {"explicit joints, build()": chain(a.n, True).build(),
              "explicit joints, build(share=False)": chain(a.n, True).build(share=False),
              "shared points (ends=[prev.end(1), ...])": chain(a.n, False).build()}

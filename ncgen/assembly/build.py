@@ -52,7 +52,9 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     alpha, beta = (float(x) for x in baumgarte)
     plan = None
     if share and not fix:          # fix names coordinates as written: no sharing then
+        nq_before = make_layout(system.dim, list(system.members.values())).nq
         system, plan = share_coordinates(system)
+        plan.nq_before = nq_before
     members = list(system.members.values())
     layout = make_layout(system.dim, members)
     ctx = Context(system, layout)

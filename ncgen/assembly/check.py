@@ -138,7 +138,8 @@ def _sharing(model, nc: int) -> list[str]:
                      + ", ".join(f"{n} ({how})" for n, how in plan.eliminated.items()))
     lines += [f"  joint {n} partly: {how}" for n, how in plan.partial.items()]
     if plan.rebased:
-        lines.append("  bodies re-based on their joints: " + ", ".join(f"{n} ({how})" for n, how in plan.rebased.items()))
+        lines.append("  bodies re-based on their joints: "
+                     + ", ".join(f"{n} ({how})" for n, how in plan.rebased.items()))
     return lines
 
 

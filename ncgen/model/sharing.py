@@ -53,7 +53,7 @@ class SharingPlan:
     ``eliminated``: joint name → what replaced it ("shared point", "shared point and axis",
     "merged"); ``partial``: joint name → what was shared and which equations remain;
     ``rebased``: body name → "old type -> new type"; ``nq_before``: coordinates without
-    sharing; ``dropped``: joint name → label prefixes of the equations implied;
+    sharing (set by the build, which lays the system out); ``dropped``: joint name → label prefixes of the equations implied;
     ``removed``: labels of the equations left out (filled by the build)."""
 
     eliminated: dict[str, str] = field(default_factory=dict)
@@ -133,9 +133,7 @@ def _candidate(joint, dim: int) -> str | None:
 def share_coordinates(system):
     """A copy of ``system`` with joints replaced by shared coordinates, and its
     :class:`SharingPlan` (see the module docstring).  ``system`` is not changed."""
-    from ncgen.assembly.layout import make_layout     # noqa: PLC0415  (moves to ncgen.model)
-
-    plan = SharingPlan(nq_before=make_layout(system.dim, list(system.members.values())).nq)
+    plan = SharingPlan()
     by_index = [f.name for f in system.forces if f.kind == "GeneralizedForce"]
     if by_index:
         plan.off = (f"the generalised force(s) {', '.join(by_index)} index q and v as written, so the "

@@ -172,8 +172,8 @@ def _algebraic(model, t: float, x, u, p) -> np.ndarray:
     :class:`~ncgen.runtime.idas.ChunkFailure` (never a raw CasADi error)."""
     z = robust_algebraic(model, t, x[:model.nq], x[model.nq:], u, p)
     if not np.all(np.isfinite(z)):
-        raise ChunkFailure("KKT_FAIL", f"At t = 0, the accelerations and multipliers are not finite "
-                           f"at the start of the output interval", "accel")
+        raise ChunkFailure("KKT_FAIL", "At t = 0, the accelerations and multipliers are not finite "
+                           "at the start of the output interval", "accel")
     return z
 
 
