@@ -47,7 +47,7 @@ def measure(model, t_end: float, h: float, repeat: int):
         traj = nc.simulate(model, t_end, h, method="stepper")
         best = min(best, traj.info["wall_time"])
     steps = round(t_end / h)
-    tip = np.asarray(model.markers(traj.q[-1])).reshape(-1)
+    tip = np.asarray(model.markers(traj.q[-1])[0]).reshape(-1)
     return best / steps * 1e6, tip
 
 
