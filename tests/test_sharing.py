@@ -166,3 +166,15 @@ def test_a_coordinate_driver_keeps_its_body_as_written():
     model = s.build()
     assert "body" not in model.sharing.rebased and "pin" not in model.sharing.eliminated
     assert model.dof == s.build(share=False).dof == 0
+
+
+def test_a_joint_at_a_point_already_shared_is_implied():
+    """A ball joint repeating a shared point adds nothing: it is eliminated as implied
+    (without sharing it is a redundant constraint)."""
+    s = nc.System("twice")
+    b1 = s.add_bar("b1", mass=1.0, ends=[s.ground.point((0, 0, 0)), (0, 1.0, 0.0)])
+    b2 = s.add_bar("b2", mass=1.0, ends=[b1.end(1), (0, 1.0, -1.0)])
+    s.add_joint(nc.Spherical(b1, b2, at=(0, 1.0, 0), name="again"))
+    model = s.build(redundant="error")
+    assert model.sharing.eliminated == {"again": "implied: the point was already shared"}
+    assert model.dof == 4 and not model.redundant

@@ -82,12 +82,22 @@ def test_rattle_bridge_crosses_the_flat_position_at_second_order():
     assert 3.5 < errors[0] / errors[1] < 4.5
 
 
+@pytest.mark.parametrize("N", [1, 10])
+def test_idas_by_default_switches_to_projection_at_the_first_flat_position(N):
+    """project="auto" (the default): the chunk that meets the first near-singular
+    configuration is redone projected, and the run stays on the physical branch."""
+    model = n_fourbar(N)
+    traj = nc.simulate(model, 1.0, 0.01, rtol=1e-10, atol=1e-12)
+    assert traj.info["project"] == "auto" and traj.info["projected_from"] < 0.42    # the first flat position
+    assert tip_error(traj, N) < 1e-5
+
+
 def test_idas_without_projection_leaves_the_branch_or_stops():
     """The failure mode the projection removes (kept visible): without it, IDAS either
     switches to the crossed branch at the first flat position or stops with a SimulationError."""
     model = n_fourbar(1)
     try:
-        traj = nc.simulate(model, 1.0, 0.01, rtol=1e-10, atol=1e-12)
+        traj = nc.simulate(model, 1.0, 0.01, rtol=1e-10, atol=1e-12, project=False)
     except SimulationError as e:
         assert e.trajectory is not None
         return

@@ -278,10 +278,11 @@ def share_coordinates(system):
             continue
         at = j.at()
         ka, kb = point_key(A, at), point_key(B, at)
+        already = ka is not None and kb is not None and classes.find(ka) == classes.find(kb)
         if ka is None or kb is None or not classes.union(ka, kb):
             continue
         parts = [f"{j.name}.coincide"]
-        what = "shared point"
+        what = "implied: the point was already shared" if already else "shared point"
         if how == "hinge":
             axis = j.axis()
             va, vb = vector_key(A, axis), vector_key(B, axis)

@@ -51,15 +51,17 @@ class ManifoldProjector:
         MiAT = self.Minv @ A.T
         return MiAT @ np.linalg.lstsq(A @ MiAT, r, rcond=RCOND)[0]
 
-    def near_singular(self, t: float, x: np.ndarray) -> bool:
-        """Whether ``A`` at ``x`` is close to losing rank (:data:`NEAR_SINGULAR`)."""
+    def near_singular(self, t: float, x: np.ndarray, ratio: float | None = None) -> bool:
+        """Whether ``A`` at ``x`` is close to losing rank: ``σ_min/σ_max`` below ``ratio``
+        (default :data:`NEAR_SINGULAR`)."""
         if self.Minv is None:
             return False
         A = self._A(t, x[:self.nq])
         if not np.all(np.isfinite(A)):
             return False
         s = np.linalg.svd(A, compute_uv=False)
-        return bool(np.all(np.isfinite(s)) and s[0] > 0 and s[-1] < NEAR_SINGULAR * s[0])
+        limit = NEAR_SINGULAR if ratio is None else ratio
+        return bool(np.all(np.isfinite(s)) and s[0] > 0 and s[-1] < limit * s[0])
 
     def __call__(self, t: float, x: np.ndarray) -> np.ndarray:
         """The projected state (``x`` itself where it is not finite or the solve fails: the

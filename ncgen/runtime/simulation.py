@@ -24,6 +24,10 @@ from ncgen.validation import as_vector
 METHODS = ("idas", "stepper")
 #: The run is split into at most this many chunks (progress updates; see ncgen.runtime.idas).
 CHUNKS = 20
+#: ``σ_min/σ_max`` of A below which ``project="auto"`` switches to projecting.
+AUTO_SINGULAR = 0.05
+#: Largest ``nq · nc`` that ``project="auto"`` watches (an SVD of A per output time).
+AUTO_MAX_SIZE = 100_000
 #: Output intervals per IDAS call when projecting (``simulate(project=True)``).
 PROJECTED_CHUNK = 1
 #: Largest number of RATTLE steps across one output interval (see ``_bridge``).
@@ -35,7 +39,7 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
              hold: str = "zoh", backend: str = "vm", progress: bool | None = None,
              max_steps: int = 50_000, linear_solver: str = "csparse",
              ic_tolerance: float | None = 1e-6, substeps: int = 1, newton_tol: float = TOL,
-             max_newton: int = MAX_ITER, max_halvings: int = MAX_HALVINGS, project: bool = False) -> Trajectory:
+             max_newton: int = MAX_ITER, max_halvings: int = MAX_HALVINGS, project: bool | str = "auto") -> Trajectory:
     """Integrate ``model`` from ``t0`` (default ``model.t0``) to ``t_end`` and return the
     :class:`~ncgen.runtime.trajectory.Trajectory` on the grid ``t0, t0 + dt, ..., t_end``
     (``dt`` shortened if needed so that ``t_end`` is on the grid).  Times in s.
@@ -66,17 +70,22 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
       terminal and the run takes more than a second.
     * ``max_steps``: IDAS steps allowed per output interval; ``linear_solver``: CasADi's
       sparse solver for the Newton systems (``"csparse"``, ``"qr"``, ...).
-    * ``project`` (IDAS): after every output interval, project ``q`` and ``v`` back onto
-      ``Φ = 0`` and ``A v + Φ_t = 0`` in the mass metric with a rank-robust (truncated)
-      pseudo-inverse (:mod:`ncgen.runtime.manifold`), and integrate one output interval per
-      IDAS call; an interval whose IDAS call fails right at its start (a start at a singular
-      configuration, where the KKT matrix is singular) is redone from the previous output
-      time over two intervals.  This keeps a linkage on its physical branch through singular
-      positions (a parallelogram passing the flat position) at ``rtol=1e-10`` (the N four-bar
-      of the IFToMM benchmark A02 within a few µm of the exact motion; see
-      ``tests/test_singular_positions.py``).  It costs an IDAS restart per output interval
-      (several times slower on ordinary models), so it is off by default: without it IDAS
-      runs over chunks of many intervals and the state is never changed.
+    * ``project`` (IDAS): ``True``: after every output interval, project ``q`` and ``v`` back
+      onto ``Φ = 0`` and ``A v + Φ_t = 0`` in the mass metric with a rank-robust (truncated)
+      pseudo-inverse (:mod:`ncgen.runtime.manifold`), integrating one output interval per
+      IDAS call; an interval that IDAS cannot integrate next to a singular configuration
+      (where the KKT matrix is singular) is redone from the previous output time over two
+      intervals, else crossed by rank-robust RATTLE steps
+      (:mod:`ncgen.runtime.rattle_bridge`).  This keeps a linkage on its physical branch
+      through singular positions (the N four-bar of the IFToMM benchmark A02 passes its flat
+      positions within a few µm of the exact motion at ``rtol=1e-10``, see
+      ``tests/test_singular_positions.py``) but costs an IDAS restart per output interval.
+      ``False``: IDAS over chunks of many intervals, the state never changed.  ``"auto"``
+      (default): as ``False`` until an output configuration is near-singular
+      (``σ_min/σ_max`` of ``A`` below :data:`AUTO_SINGULAR`) or a chunk fails, then that chunk
+      is redone and the rest of the run made as ``True`` (``info["project"]`` says which).
+      The check costs an SVD of ``A`` per output time, so ``"auto"`` watches only models
+      with ``nq · nc ≤`` :data:`AUTO_MAX_SIZE`; larger ones need ``project=True`` explicitly.
     * ``method="stepper"``: the compiled fixed-step RATTLE stepper (generated C, Newton loop
       included; :mod:`ncgen.runtime.stepper`), ``substeps`` steps of ``dt / substeps`` per
       output interval, Newton tolerance ``newton_tol`` (both constraint levels hold to it at
@@ -109,13 +118,16 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
     runner = ChunkedIDAS(dae, h=float(t[1] - t[0]), nu=model.nu, hold=hold, rtol=rtol, atol=atol,
                          max_steps=int(max_steps), linear_solver=linear_solver, expand=(used == "vm"),
                          algebraic=lambda tk, x, uk: _algebraic(model, tk, x, uk, pv))
-    projector = ManifoldProjector(model, pv, atol) if project else None
+    if project not in (True, False, "auto"):
+        raise NcgenError(f"project: expected True, False or 'auto', got {project!r}")
+    watch = project == "auto" and model.nq * model.nc <= AUTO_MAX_SIZE and model.nc > 0
+    projector = ManifoldProjector(model, pv, atol) if project is True or watch else None
+    bridge = _bridge(model, runner, pv, rtol, atol) if projector is not None else None
     bar = Progress(t0, t[-1], progress, label=f"simulating {model.name}: ")
     start = time.perf_counter()
     try:
-        bridge = _bridge(model, runner, pv, rtol, atol) if project else None
-        X, Z, failure = _run(runner, t, np.concatenate([q, v]), np.concatenate([a, lam]), columns, pv, bar,
-                             projector, bridge)
+        X, Z, failure, projected_from = _run(runner, t, np.concatenate([q, v]), np.concatenate([a, lam]), columns,
+                                             pv, bar, projector, bridge, auto=watch)
     finally:
         bar.close()
     nq, k = model.nq, len(X) - 1
@@ -124,6 +136,7 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
         stats.update(projector.counts, restarts=runner.restarts, rattle_intervals=bridge.count)
     info = {"method": method, "backend": used, "rtol": rtol, "atol": atol, "hold": hold,
             "linear_solver": linear_solver, "stats": stats, "project": project,
+            "projected_from": None if projected_from is None else float(t[projected_from]),
             "wall_time": time.perf_counter() - start, "complete": failure is None}
     if failure is not None:
         message = _failure_message(model, failure, t, k, X[k], Z[k, nq:], U[k], pv, dae)
@@ -196,20 +209,23 @@ class _bridge:
         return x1, _algebraic(self.model, t1, x1, self.runner._input(column, t1), self.p)
 
 
-def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=None, bridge=None):
-    """States on the grid up to the end or the first failure: ``(X, Z, failure or None)``.
+def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=None, bridge=None, auto=False):
+    """States on the grid up to the end or the first failure: ``(X, Z, failure or None,
+    index of the output time from which the run was projected, or None)``.
 
-    IDAS runs over chunks of several output intervals; a failed chunk is retried one interval
-    at a time, to keep every state before the failure.  With ``projector`` (see
-    :func:`simulate`, ``project``) the chunks are short (:data:`PROJECTED_CHUNK` intervals),
-    the state is projected at the end of each, and an interval that fails is redone from
-    the previous output time over two intervals, and if that fails too, crossed by ``bridge``
-    (rank-robust RATTLE steps)."""
+    Unprojected: IDAS over chunks of several output intervals; a failed chunk is retried
+    one interval at a time, to keep every state before the failure.  Projected (see
+    :func:`simulate`, ``project``): chunks of :data:`PROJECTED_CHUNK` intervals, the state
+    projected at the end of each, an interval that fails near a singular configuration
+    redone from the previous output time over two intervals, else crossed by ``bridge``.
+    ``auto``: unprojected until a chunk meets a near-singular configuration, or an interval
+    fails next to one; then that chunk (interval) is redone projected, and so is the rest."""
     n_int = len(t) - 1
-    chunk = PROJECTED_CHUNK if projector is not None else max(1, math.ceil(n_int / CHUNKS))
+    projecting = projector is not None and not auto
     X = np.empty((len(t), len(x0)))
     Z = np.empty((len(t), len(z0)))
     X[0], Z[0] = x0, z0
+    since = 0 if projecting else None
 
     def advance(k, n):
         X[k + 1:k + n + 1], Z[k + 1:k + n + 1] = runner.advance(t[k], X[k], Z[k], columns[:, k:k + n], p)
@@ -217,7 +233,7 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
     def recover(k, failure: ChunkFailure):
         """Interval k after IDAS failed on it, near a singular configuration: redone from
         t[k−1], else bridged (projecting).  Elsewhere the failure stands."""
-        if projector is None or not projector.near_singular(t[k], X[k]):
+        if not projecting or not projector.near_singular(t[k], X[k]):
             raise failure
         if k > 0:
             try:
@@ -228,29 +244,49 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
                 pass
         X[k + 1], Z[k + 1] = bridge(t[k], t[k + 1], X[k], columns[:, k])
 
+    def handle(k, failure: ChunkFailure) -> bool:
+        """Interval k failed: True to redo it projected (auto, near-singular), else recovered
+        or re-raised by :func:`recover`."""
+        if auto and not projecting and projector.near_singular(t[k], X[k], AUTO_SINGULAR):
+            return True
+        recover(k, failure)
+        return False
+
     k = 0
     while k < n_int:
+        chunk = PROJECTED_CHUNK if projecting else max(1, math.ceil(n_int / CHUNKS))
         n = min(chunk, n_int - k)
         try:
             advance(k, n)
+            if auto and not projecting and any(projector.near_singular(t[i], X[i], AUTO_SINGULAR)
+                                                for i in range(k + 1, k + n + 1)):
+                projecting, since = True, k          # redo this chunk projected
+                continue
             k += n
         except ChunkFailure as failure:
             try:
+                switched = False
                 if n == 1:
-                    recover(k, failure)
-                    k += 1
-                for _ in range(n if n > 1 else 0):
-                    try:
-                        advance(k, 1)
-                    except ChunkFailure as single:
-                        recover(k, single)
-                    k += 1
+                    switched = handle(k, failure)
+                    k += not switched
+                else:
+                    for _ in range(n):
+                        try:
+                            advance(k, 1)
+                        except ChunkFailure as single:
+                            switched = handle(k, single)
+                            if switched:
+                                break
+                        k += 1
+                if switched:
+                    projecting, since = True, k
+                    continue
             except ChunkFailure as last:
-                return X[:k + 1], Z[:k + 1], last
-        if projector is not None:
+                return X[:k + 1], Z[:k + 1], last, since
+        if projecting:
             X[k] = projector(t[k], X[k])
         bar.update(t[k])
-    return X, Z, None
+    return X, Z, None, since
 
 
 def _failure_message(model, failure: ChunkFailure, t, k, x, lam, u, p, dae) -> str:
