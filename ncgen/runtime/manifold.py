@@ -22,7 +22,7 @@ import numpy as np
 RCOND = 1e-10
 #: ``σ_min/σ_max`` of ``A`` below which a configuration counts as near-singular (an IDAS
 #: failure there is recovered from, see :func:`ncgen.runtime.simulation.simulate`).
-NEAR_SINGULAR = 1e-2
+NEAR_SINGULAR = 0.05
 #: Gauss–Newton iterations of the position projection at most.
 MAX_ITER = 8
 

@@ -32,6 +32,10 @@ AUTO_MAX_SIZE = 100_000
 PROJECTED_CHUNK = 1
 #: Largest number of RATTLE steps across one output interval (see ``_bridge``).
 BRIDGE_MAX_STEPS = 20_000
+#: RATTLE steps (at least) of the check of an IDAS restart across a singular configuration,
+#: and the relative difference it accepts.
+BRIDGE_CHECK_STEPS = 50
+BRIDGE_CHECK_TOL = 1e-4
 
 
 def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: float = 1e-8,
@@ -133,7 +137,8 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
     nq, k = model.nq, len(X) - 1
     stats = dict(runner.stats)
     if projector is not None:
-        stats.update(projector.counts, restarts=runner.restarts, rattle_intervals=bridge.count)
+        stats.update(projector.counts, restarts=runner.restarts, rejected_restarts=runner.rejected_restarts,
+                     rejected_steps=runner.rejected_steps, rattle_intervals=bridge.count)
     info = {"method": method, "backend": used, "rtol": rtol, "atol": atol, "hold": hold,
             "linear_solver": linear_solver, "stats": stats, "project": project,
             "projected_from": None if projected_from is None else float(t[projected_from]),
@@ -208,6 +213,18 @@ class _bridge:
         self.count += 1
         return x1, _algebraic(self.model, t1, x1, self.runner._input(column, t1), self.p)
 
+    def agrees(self, t0: float, t1: float, x0, x1, column) -> bool:
+        """Whether ``x1`` (IDAS across a singular configuration) is where a coarse RATTLE run
+        from ``x0`` lands (input held at its ``t0`` value), within :data:`BRIDGE_CHECK_TOL` relative: IDAS can cross onto
+        another branch there (the velocities then differ at order one)."""
+        n = min(BRIDGE_MAX_STEPS, max(BRIDGE_CHECK_STEPS, math.ceil((t1 - t0) / 1e-4)))
+        try:
+            coarse = rattle_interval(self.model, t0, x0, self.runner._input(column, t0), self.p, t1 - t0, n,
+                                     self.atol)
+        except RattleFailure:
+            return True                       # no second opinion: keep IDAS's answer
+        return bool(np.max(np.abs(coarse - x1)) <= BRIDGE_CHECK_TOL * (1.0 + np.max(np.abs(x1))))
+
 
 def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=None, bridge=None, auto=False):
     """States on the grid up to the end or the first failure: ``(X, Z, failure or None,
@@ -216,8 +233,10 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
     Unprojected: IDAS over chunks of several output intervals; a failed chunk is retried
     one interval at a time, to keep every state before the failure.  Projected (see
     :func:`simulate`, ``project``): chunks of :data:`PROJECTED_CHUNK` intervals, the state
-    projected at the end of each, an interval that fails near a singular configuration
-    redone from the previous output time over two intervals, else crossed by ``bridge``.
+    projected at the end of each, an interval next to a near-singular configuration
+    checked against a coarse RATTLE run (bridged if they disagree), one that fails there
+    redone from the previous output time over two intervals (kept if a coarse RATTLE run
+    agrees, see ``_bridge.agrees``), else crossed by ``bridge``.
     ``auto``: unprojected until a chunk meets a near-singular configuration, or an interval
     fails next to one; then that chunk (interval) is redone projected, and so is the rest."""
     n_int = len(t) - 1
@@ -236,13 +255,24 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
         if not projecting or not projector.near_singular(t[k], X[k]):
             raise failure
         if k > 0:
+            kept = X[k].copy(), Z[k].copy()
             try:
                 advance(k - 1, 2)            # across the start that failed (a singular configuration)
                 runner.restarts += 1
-                return
+                if bridge.agrees(t[k - 1], t[k + 1], X[k - 1], X[k + 1], columns[:, k - 1]):
+                    return
+                runner.rejected_restarts += 1  # IDAS crossed onto another branch: bridge instead
             except ChunkFailure:
                 pass
+            X[k], Z[k] = kept
         X[k + 1], Z[k + 1] = bridge(t[k], t[k + 1], X[k], columns[:, k])
+
+    def checked(k) -> bool:
+        """False if interval k touches a near-singular configuration and a coarse RATTLE run
+        disagrees with IDAS's result (IDAS went onto another branch)."""
+        if not (projector.near_singular(t[k], X[k]) or projector.near_singular(t[k + 1], X[k + 1])):
+            return True
+        return bridge.agrees(t[k], t[k + 1], X[k], X[k + 1], columns[:, k])
 
     def handle(k, failure: ChunkFailure) -> bool:
         """Interval k failed: True to redo it projected (auto, near-singular), else recovered
@@ -258,6 +288,9 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
         n = min(chunk, n_int - k)
         try:
             advance(k, n)
+            if projecting and n == 1 and not checked(k):
+                runner.rejected_steps += 1     # IDAS crossed onto another branch: bridge instead
+                X[k + 1], Z[k + 1] = bridge(t[k], t[k + 1], X[k], columns[:, k])
             if auto and not projecting and any(projector.near_singular(t[i], X[i], AUTO_SINGULAR)
                                                 for i in range(k + 1, k + n + 1)):
                 projecting, since = True, k          # redo this chunk projected
