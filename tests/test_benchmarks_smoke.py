@@ -32,6 +32,7 @@ pytestmark = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc
                     "RATIO ncgen / MuJoCo penetration"]),
     ("joint_space.py", ["=== call overhead", "RATIO casadi.external / direct", "=== Panda",
                         "RATIO ncgen direct / pinocchio.aba"]),
+    ("sharing_chain.py", ["=== chain of N = 3 bars", "RATIO explicit (shared by build) / shared-point chain"]),
 ])
 def test_smoke(tmp_path, script, expected):
     if script == "joint_space.py":

@@ -107,7 +107,7 @@ def test_spherical_and_free_rates_are_in_the_moving_frame():
     b = s.add_body("b", mass=1.0, inertia=np.diag([0.1, 0.2, 0.25]), position=(0, 0, 0), rotation=R,
                    angular_velocity=w)
     s.add_joint(nc.Spherical(s.ground, b, at=(0, 0, 0), name="ball"))
-    m = s.build()
+    m = s.build(share=False)            # the body's own coordinates are then the system's
     _, vj = m.to_joint_space(m.q0, m.v0)
     np.testing.assert_allclose(vj, w, atol=1e-14)      # the joint frames have world axes initially
     qj, vj = m.to_joint_space(*m.from_joint_space([0.3, -0.2, 0.1, 0.9], [0.1, 0.2, 0.3]))

@@ -351,7 +351,7 @@ def _double_pendulum(shared: bool):
     b1.add_marker("elbow", (0.5, 0, 0))
     if not shared:
         s.add_joint(nc.Spherical(b1, b2, at=(1, 0, 0)))
-    return s.build()
+    return s.build(share=False)         # the joint as equations (sharing would make it the other form)
 
 
 def _rk4(model, q, v, dt, n):

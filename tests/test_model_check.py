@@ -15,7 +15,9 @@ def test_consistent_example(capsys):
     assert main(["check", str(EXAMPLES / "fourbar_3d.toml")]) == 0
     out = capsys.readouterr().out
     for text in ("members (3):", "coupler          bar   rr   mass 0.8 kg; shares r_i = crank.r_j, r_j = rocker.r_j",
-                 "coordinates (nq = 24):", "constraints (nc = 23):", "rank A = 23, DOF = 1",
+                 "coordinates (nq = 12):", "constraints (nc = 11):", "rank A = 11, DOF = 1",
+                 "coordinate sharing: nq 24 -> 12, nc 23 -> 11",
+                 "joints eliminated (2): crank_hinge (shared point and axis), rocker_hinge (shared point and axis)",
                  "redundant constraints: none", "max |Φ| = ", "consistent: yes"):
         assert text in out
 
@@ -32,7 +34,7 @@ def test_redundant_constraints_are_named(tmp_path, capsys):
     path.write_text(s.to_toml(), encoding="utf-8")
     assert main(["check", str(path)]) == 0
     out = capsys.readouterr().out
-    assert "rank A = 12, DOF = 0" in out and "redundant constraints: extra.distance (dropped when building)" in out
+    assert "rank A = 6, DOF = 0" in out and "joints eliminated (3): O (shared point)" in out and "redundant constraints: extra.distance (dropped when building)" in out
 
 
 def test_inconsistent_initial_state_exits_1(tmp_path, capsys):

@@ -104,13 +104,14 @@ def test_header_documents_functions_and_model(tmp_path):
         assert f"---- cartpole_{name} " in header
         purpose = DOCS[name][0]
         assert " ".join(purpose.split())[:40] in " ".join(header.split())
-    assert "arg[1] q: 10x1, nnz 10 [m] natural coordinates" in header
-    assert "res[0] A: 8x10" in header and "(sparse)" in header
+    # 8 coordinates: coordinate sharing makes the hinge the pole's first end, a point of the cart
+    assert "arg[1] q: 8x1, nnz 8 [m] natural coordinates" in header
+    assert "res[0] A: 6x8" in header and "(sparse)" in header
     assert "Jacobian: jac_cartpole_dae()" in header
-    for macro, value in (("NQ", 10), ("NC", 8), ("DOF", 2), ("NU", 1), ("NP", 0), ("DIM", 2)):
+    for macro, value in (("NQ", 8), ("NC", 6), ("DOF", 2), ("NU", 1), ("NP", 0), ("DIM", 2)):
         assert f"#define CARTPOLE_{macro} {value}\n" in header
-    assert "extern const casadi_real cartpole_q0[10];" in header
-    assert "extern const char *const cartpole_coordinate_names[10];" in header
+    assert "extern const casadi_real cartpole_q0[8];" in header
+    assert "extern const char *const cartpole_coordinate_names[8];" in header
 
 
 def test_manifest_metadata_is_the_model(tmp_path):

@@ -1,4 +1,5 @@
-"""Joint reactions and actuator efforts in SI units against closed forms (Newton–Euler)."""
+"""Joint reactions and actuator efforts in SI units against closed forms (Newton–Euler).
+Models are built with share=False: a reaction comes from its joint's multipliers."""
 from __future__ import annotations
 
 import numpy as np
@@ -13,7 +14,7 @@ def bar_pendulum(drive=None):
     s = nc.System("pendulum", gravity=(0, -G))
     bar = s.add_bar("bar", mass=MASS, ends=[(0, 0), (L, 0)])
     s.add_joint(nc.Revolute(s.ground, bar, at=(0, 0), name="pivot", drive=drive))
-    return s.build()
+    return s.build(share=False)
 
 
 def test_pendulum_pivot_force():
@@ -47,7 +48,7 @@ def test_actuated_joint_reports_its_effort():
     tau = s.add_input("tau")
     bar = s.add_bar("bar", mass=MASS, ends=[(0, 0), (L, 0)])
     s.add_joint(nc.Revolute(s.ground, bar, at=(0, 0), name="pivot", effort=tau))
-    model = s.build()
+    model = s.build(share=False)
     q, v = model.from_joint_space([0.2], [0.0])
     _, lam = nc.forward_dynamics(model, q, v, u=[3.5])
     r = nc.joint_reactions(model, q, lam, u=[3.5])["pivot"]
@@ -61,7 +62,7 @@ def test_3d_hinge_wrench_obeys_euler():
     I_G = np.array([[0.05, 0.01, 0.0], [0.01, 0.08, 0.02], [0.0, 0.02, 0.06]])
     b = s.add_body("b", mass=MASS, inertia=I_G, position=(0.4, 0.1, -0.2))
     s.add_joint(nc.Revolute(s.ground, b, at=(0, 0, 0), axis=(0, 1, 0), name="hinge"))
-    model = s.build()
+    model = s.build(share=False)
     q, v = model.from_joint_space([0.7], [1.1])
     a, lam = nc.forward_dynamics(model, q, v)
     _, vj, aj = model.to_joint_space(q, v, a)
@@ -97,3 +98,14 @@ def test_trajectory_reactions_follow_the_closed_form():
     np.testing.assert_allclose(force, MASS * a_G - MASS * np.array([0, -G]), atol=1e-6)
     np.testing.assert_allclose(moment, 0, atol=1e-8)
     assert effort is None and force.shape == (len(traj), 2)
+
+
+def test_a_joint_replaced_by_shared_coordinates_says_so():
+    s = nc.System("hinge", gravity=(0, -G))
+    bar = s.add_bar("bar", mass=MASS, ends=[(0, 0), (L, 0)])
+    s.add_joint(nc.Revolute(s.ground, bar, at=(0, 0), name="pivot"))
+    model = s.build()
+    assert "pivot" in model.sharing.eliminated
+    assert "pivot" not in nc.joint_reactions(model, model.q0, model.lam0)
+    with pytest.raises(nc.NcgenError, match="share=False"):
+        nc.joint_reactions(model, model.q0, model.lam0, joints=["pivot"])

@@ -234,4 +234,4 @@ def test_the_documented_example_builds():
     example = re.findall(r"```toml\n(.*?)```", doc, re.S)[-1]
     model = nc.System.from_toml(example).build()
     report = nc.dof_report(model)
-    assert (model.nq, model.nc, report.rank, report.dof, model.nu, model.np) == (12, 10, 10, 2, 1, 3)
+    assert (model.nq, model.nc, report.rank, report.dof, model.nu, model.np) == (10, 8, 8, 2, 1, 3)

@@ -47,10 +47,12 @@ def robot_file(rel: str) -> Path:
 
 
 @cache
-def robot(name: str):
+def robot(name: str, share: bool = True):
+    """``(ncgen model, Pinocchio model)``; ``share=False`` keeps every joint's equations (and
+    multipliers, which the joint reactions need)."""
     rel, floating = ROBOTS[name]
     text = re.sub(r"<mimic[^>]*/>", "", robot_file(rel).read_text())
-    model = nc.System.from_urdf(text, floating_base=floating).build()
+    model = nc.System.from_urdf(text, floating_base=floating).build(share=share)
     pm = pin.buildModelFromXML(text, pin.JointModelFreeFlyer()) if floating else pin.buildModelFromXML(text)
     return model, pm
 
@@ -180,7 +182,7 @@ def test_joint_reactions_match_pinocchio_joint_forces(name):
     """Under the torques of RNEA, each joint's reaction wrench on its child (world axes, about
     the joint origin) plus the actuator torque about the axis is Pinocchio's ``data.f``
     (the spatial force the parent exerts on the child, in joint axes)."""
-    model, pm = robot(name)
+    model, pm = robot(name, share=False)
     pd = pm.createData()
     order = {n: k for k, n in enumerate(model.joint_names)}
     pairs = sorted(pin_joints(model, pm), key=lambda x: order[x[0]])

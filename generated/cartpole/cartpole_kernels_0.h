@@ -238,8 +238,8 @@ int cartpole_accel_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_i
 int cartpole_accel_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define cartpole_accel_SZ_ARG 10
 #define cartpole_accel_SZ_RES 3
-#define cartpole_accel_SZ_IW 19
-#define cartpole_accel_SZ_W 395
+#define cartpole_accel_SZ_IW 15
+#define cartpole_accel_SZ_W 312
 int cartpole_energy(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int cartpole_energy_checkout(void);
 void cartpole_energy_release(int mem);

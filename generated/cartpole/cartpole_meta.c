@@ -4,15 +4,14 @@
 /* Definitions of the metadata arrays declared in cartpole.h. */
 #include "cartpole.h"
 
-const char *const cartpole_coordinate_names[10] = {
+const char *const cartpole_coordinate_names[8] = {
   "cart.r_i.x", "cart.r_i.y", "cart.u.x", "cart.u.y",
-  "cart.v.x", "cart.v.y", "pole.r_i.x", "pole.r_i.y",
-  "pole.r_j.x", "pole.r_j.y"
+  "cart.v.x", "cart.v.y", "pole.r_j.x", "pole.r_j.y"
 };
 
-const char *const cartpole_constraint_names[8] = {
+const char *const cartpole_constraint_names[6] = {
   "cart.rigid.uu", "cart.rigid.vv", "cart.rigid.uv", "pole.rigid.uu",
-  "rail.lock", "rail.line", "hinge.coincide.x", "hinge.coincide.y"
+  "rail.lock", "rail.line"
 };
 
 const char *const cartpole_input_names[1] = {
@@ -31,37 +30,33 @@ const casadi_real cartpole_t0[1] = {
   0.0
 };
 
-const casadi_real cartpole_q0[10] = {
+const casadi_real cartpole_q0[8] = {
   0.0, 0.0, 1.0, 0.0,
-  0.0, 1.0, 0.0, 0.0,
-  0.14776010333066977, -0.477668244562803
+  0.0, 1.0, 0.14776010333066977, -0.477668244562803
 };
 
-const casadi_real cartpole_v0[10] = {
-  0.0, 0.0, 0.0, 0.0,
-  0.0, 0.0, 0.0, 0.0,
-  0.0, 0.0
-};
-
-const casadi_real cartpole_lam0[8] = {
-  0.0, 0.0, 0.0, 0.925636825338314,
-  0.0, -11.626941952386115, -0.39077769416760694, 1.8169419523861152
-};
-
-const casadi_real cartpole_x0[20] = {
-  0.0, 0.0, 1.0, 0.0,
-  0.0, 1.0, 0.0, 0.0,
-  0.14776010333066977, -0.477668244562803, 0.0, 0.0,
+const casadi_real cartpole_v0[8] = {
   0.0, 0.0, 0.0, 0.0,
   0.0, 0.0, 0.0, 0.0
 };
 
-const casadi_real cartpole_z0[18] = {
-  0.390777694167607, -9.398669373958975e-18, 0.0, 0.0,
-  0.0, 0.0, 0.3907776941676072, -1.8797338747917953e-17,
-  -4.298554635843674, -1.4505804761388459, 0.0, 0.0,
-  0.0, 0.925636825338314, 0.0, -11.626941952386115,
-  -0.39077769416760694, 1.8169419523861152
+const casadi_real cartpole_lam0[6] = {
+  0.0, 0.0, 0.0, 0.9256368253383144,
+  0.0, -11.626941952386115
+};
+
+const casadi_real cartpole_x0[16] = {
+  0.0, 0.0, 1.0, 0.0,
+  0.0, 1.0, 0.14776010333066977, -0.477668244562803,
+  0.0, 0.0, 0.0, 0.0,
+  0.0, 0.0, 0.0, 0.0
+};
+
+const casadi_real cartpole_z0[14] = {
+  0.39077769416760716, 1.6330437601170345e-16, 0.0, 0.0,
+  0.0, 0.0, -4.298554635843678, -1.4505804761388466,
+  0.0, 0.0, 0.0, 0.9256368253383144,
+  0.0, -11.626941952386115
 };
 
 const casadi_real cartpole_gravity[2] = {

@@ -17,8 +17,8 @@
 
 #include "cartpole.h"
 
-static const casadi_real q0[10] = {0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.14776010333066977, -0.477668244562803};
-static const casadi_real v0[10] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+static const casadi_real q0[8] = {0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.14776010333066977, -0.477668244562803};
+static const casadi_real v0[8] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
 static const casadi_real p0[1] = {0};
 
 static const char *status_text(int status) {
@@ -54,7 +54,7 @@ static int parse(const char *program, const char *what, const char *text, double
 
 int main(int argc, char *argv[]) {
   double t0 = 0.0, t_end = 1.0, h = 0.001;
-  casadi_real q[10], v[10], lam[8];
+  casadi_real q[8], v[8], lam[6];
   double steps;
   long n_steps, done = 0, iterations = 0;
   int status, i;

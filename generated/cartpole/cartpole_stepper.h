@@ -35,12 +35,12 @@
 extern "C" {
 #endif
 
-#define CARTPOLE_STEP_NQ 10
-#define CARTPOLE_STEP_NC 8
+#define CARTPOLE_STEP_NQ 8
+#define CARTPOLE_STEP_NC 6
 #define CARTPOLE_STEP_NU 1
 #define CARTPOLE_STEP_NP 0
 /* max |M_ij| (kg), the scale of the momentum residual. */
-#define CARTPOLE_STEP_MASS_SCALE 1.0
+#define CARTPOLE_STEP_MASS_SCALE 1.0666666666666667
 
 /* Status codes of cartpole_step and cartpole_simulate. */
 #define CARTPOLE_STEP_OK 0              /* converged, both constraint levels within tol */

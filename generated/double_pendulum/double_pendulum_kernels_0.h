@@ -238,8 +238,8 @@ int double_pendulum_accel_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_in
 int double_pendulum_accel_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define double_pendulum_accel_SZ_ARG 10
 #define double_pendulum_accel_SZ_RES 3
-#define double_pendulum_accel_SZ_IW 47
-#define double_pendulum_accel_SZ_W 1614
+#define double_pendulum_accel_SZ_IW 23
+#define double_pendulum_accel_SZ_W 680
 int double_pendulum_energy(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int double_pendulum_energy_checkout(void);
 void double_pendulum_energy_release(int mem);

@@ -4,22 +4,16 @@
 /* Definitions of the metadata arrays declared in double_pendulum.h. */
 #include "double_pendulum.h"
 
-const char *const double_pendulum_coordinate_names[24] = {
-  "link1.r_i.x", "link1.r_i.y", "link1.r_i.z", "link1.u.x",
-  "link1.u.y", "link1.u.z", "link1.v.x", "link1.v.y",
-  "link1.v.z", "link1.w.x", "link1.w.y", "link1.w.z",
-  "link2.r_i.x", "link2.r_i.y", "link2.r_i.z", "link2.u.x",
-  "link2.u.y", "link2.u.z", "link2.v.x", "link2.v.y",
-  "link2.v.z", "link2.w.x", "link2.w.y", "link2.w.z"
+const char *const double_pendulum_coordinate_names[12] = {
+  "link1.r_j.x", "link1.r_j.y", "link1.r_j.z", "link1.w.x",
+  "link1.w.y", "link1.w.z", "link2.r_j.x", "link2.r_j.y",
+  "link2.r_j.z", "link2.w.x", "link2.w.y", "link2.w.z"
 };
 
-const char *const double_pendulum_constraint_names[22] = {
-  "link1.rigid.uu", "link1.rigid.vv", "link1.rigid.ww", "link1.rigid.vw",
-  "link1.rigid.uw", "link1.rigid.uv", "link2.rigid.uu", "link2.rigid.vv",
-  "link2.rigid.ww", "link2.rigid.vw", "link2.rigid.uw", "link2.rigid.uv",
-  "shoulder.coincide.x", "shoulder.coincide.y", "shoulder.coincide.z", "shoulder.align.1",
-  "shoulder.align.2", "elbow.coincide.x", "elbow.coincide.y", "elbow.coincide.z",
-  "elbow.align.1", "elbow.align.2"
+const char *const double_pendulum_constraint_names[10] = {
+  "link1.rigid.uu", "link1.rigid.ww", "link1.rigid.vw", "link1.rigid.uw",
+  "link1.rigid.uv", "link2.rigid.uu", "link2.rigid.ww", "link2.rigid.vw",
+  "link2.rigid.uw", "link2.rigid.uv"
 };
 
 const char *const double_pendulum_member_names[2] = {
@@ -34,61 +28,40 @@ const casadi_real double_pendulum_t0[1] = {
   0.0
 };
 
-const casadi_real double_pendulum_q0[24] = {
-  0.25, 0.0, 0.0, 1.0,
-  0.0, 0.0, 0.0, 1.0,
-  0.0, 0.0, 0.0, 1.0,
-  0.75, 0.0, 0.0, 1.0,
-  0.0, 0.0, 0.0, 1.0,
+const casadi_real double_pendulum_q0[12] = {
+  0.5, 0.0, 0.0, 0.0,
+  0.0, 1.0, 0.75, 0.0,
   0.0, 0.0, 0.0, 1.0
 };
 
-const casadi_real double_pendulum_v0[24] = {
-  0.0, 0.0, 0.0, 0.0,
-  0.0, 0.0, 0.0, 0.0,
-  0.0, 0.0, 0.0, 0.0,
+const casadi_real double_pendulum_v0[12] = {
   0.0, 0.0, 0.0, 0.0,
   0.0, 0.0, 0.0, 0.0,
   0.0, 0.0, 0.0, 0.0
 };
 
-const casadi_real double_pendulum_lam0[22] = {
-  -6.005592767231037e-17, 0.0, 0.0, 2.1018166929549482e-18,
-  -0.012553047433315371, -1.0279619667839623e-15, -6.164227481217636e-18, 0.0,
-  0.0, 7.015775036748188e-19, 0.004091657865921413, -6.5485697188489125e-18,
-  1.5203169799408204e-16, -5.755662181231652e-17, 2.8362577829898346, 2.4511475361220298e-18,
-  -1.0535117638395546e-15, 9.567680747634982e-17, -4.3762559200066923e-17, -0.6972185003531073,
-  1.4031550066207852e-18, -6.250649893238014e-17
+const casadi_real double_pendulum_lam0[10] = {
+  7.264631170384702e-16, 0.0, 0.0, -0.02510609486663154,
+  -2.3120984477579966e-16, 1.3609860553114709e-16, 0.0, 0.0,
+  0.016366631463705397, -6.490788278938377e-16
 };
 
-const casadi_real double_pendulum_x0[48] = {
-  0.25, 0.0, 0.0, 1.0,
+const casadi_real double_pendulum_x0[24] = {
+  0.5, 0.0, 0.0, 0.0,
+  0.0, 1.0, 0.75, 0.0,
   0.0, 0.0, 0.0, 1.0,
-  0.0, 0.0, 0.0, 1.0,
-  0.75, 0.0, 0.0, 1.0,
-  0.0, 0.0, 0.0, 1.0,
-  0.0, 0.0, 0.0, 1.0,
-  0.0, 0.0, 0.0, 0.0,
-  0.0, 0.0, 0.0, 0.0,
-  0.0, 0.0, 0.0, 0.0,
   0.0, 0.0, 0.0, 0.0,
   0.0, 0.0, 0.0, 0.0,
   0.0, 0.0, 0.0, 0.0
 };
 
-const casadi_real double_pendulum_z0[46] = {
-  4.1833121453486996e-17, -1.3794062612249604e-17, -6.276523716657059, 4.6948423092215535e-18,
-  -1.05770097354085e-17, -25.106094866628244, 1.5579114381618143e-17, 0.0,
-  -1.3973233726683248e-15, 25.106094866628247, 6.986616863341623e-16, 0.0,
-  6.953916566441342e-17, -3.2612749021669434e-17, -10.507218500353108, 1.5787672867386805e-18,
-  -2.0098495188680888e-17, 8.183315731844027, 2.0101764448099203e-17, 0.0,
-  -1.397323377042048e-15, -8.18331573184403, 1.3973233755841402e-15, 0.0,
-  -6.005592767231037e-17, 0.0, 0.0, 2.1018166929549482e-18,
-  -0.012553047433315371, -1.0279619667839623e-15, -6.164227481217636e-18, 0.0,
-  0.0, 7.015775036748188e-19, 0.004091657865921413, -6.5485697188489125e-18,
-  1.5203169799408204e-16, -5.755662181231652e-17, 2.8362577829898346, 2.4511475361220298e-18,
-  -1.0535117638395546e-15, 9.567680747634982e-17, -4.3762559200066923e-17, -0.6972185003531073,
-  1.4031550066207852e-18, -6.250649893238014e-17
+const casadi_real double_pendulum_z0[22] = {
+  -3.0557331459205197e-16, -4.3883021169029353e-16, -12.553047433314092, 25.106094866628183,
+  0.0, 0.0, -1.5138064443628137e-16, 3.7742807131100543e-16,
+  -10.507218500353115, -8.183315731843916, 0.0, 0.0,
+  7.264631170384702e-16, 0.0, 0.0, -0.02510609486663154,
+  -2.3120984477579966e-16, 1.3609860553114709e-16, 0.0, 0.0,
+  0.016366631463705397, -6.490788278938377e-16
 };
 
 const casadi_real double_pendulum_gravity[3] = {

@@ -17,8 +17,8 @@
 
 #include "double_pendulum.h"
 
-static const casadi_real q0[24] = {0.25, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.75, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0};
-static const casadi_real v0[24] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+static const casadi_real q0[12] = {0.5, 0.0, 0.0, 0.0, 0.0, 1.0, 0.75, 0.0, 0.0, 0.0, 0.0, 1.0};
+static const casadi_real v0[12] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
 static const casadi_real p0[1] = {0};
 
 static const char *status_text(int status) {
@@ -54,7 +54,7 @@ static int parse(const char *program, const char *what, const char *text, double
 
 int main(int argc, char *argv[]) {
   double t0 = 0.0, t_end = 1.0, h = 0.001;
-  casadi_real q[24], v[24], lam[22];
+  casadi_real q[12], v[12], lam[10];
   double steps;
   long n_steps, done = 0, iterations = 0;
   int status, i;

@@ -14,7 +14,7 @@
 #define NC DOUBLE_PENDULUM_STEP_NC
 #define NX (NQ + NC)
 /* Nonzeros of the KKT matrix K (the pattern of double_pendulum_step_newton's output K). */
-#define NNZ_K 196
+#define NNZ_K 88
 #define ALIGN 16
 
 typedef int (*kernel_work)(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz_iw, casadi_int *sz_w);

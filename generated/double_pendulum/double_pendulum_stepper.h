@@ -35,12 +35,12 @@
 extern "C" {
 #endif
 
-#define DOUBLE_PENDULUM_STEP_NQ 24
-#define DOUBLE_PENDULUM_STEP_NC 22
+#define DOUBLE_PENDULUM_STEP_NQ 12
+#define DOUBLE_PENDULUM_STEP_NC 10
 #define DOUBLE_PENDULUM_STEP_NU 0
 #define DOUBLE_PENDULUM_STEP_NP 0
 /* max |M_ij| (kg), the scale of the momentum residual. */
-#define DOUBLE_PENDULUM_STEP_MASS_SCALE 1.0
+#define DOUBLE_PENDULUM_STEP_MASS_SCALE 1.3328
 
 /* Status codes of double_pendulum_step and double_pendulum_simulate. */
 #define DOUBLE_PENDULUM_STEP_OK 0              /* converged, both constraint levels within tol */

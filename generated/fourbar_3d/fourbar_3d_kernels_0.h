@@ -238,8 +238,8 @@ int fourbar_3d_accel_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz
 int fourbar_3d_accel_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define fourbar_3d_accel_SZ_ARG 10
 #define fourbar_3d_accel_SZ_RES 3
-#define fourbar_3d_accel_SZ_IW 48
-#define fourbar_3d_accel_SZ_W 1855
+#define fourbar_3d_accel_SZ_IW 24
+#define fourbar_3d_accel_SZ_W 713
 int fourbar_3d_energy(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int fourbar_3d_energy_checkout(void);
 void fourbar_3d_energy_release(int mem);

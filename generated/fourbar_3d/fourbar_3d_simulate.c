@@ -17,8 +17,8 @@
 
 #include "fourbar_3d.h"
 
-static const casadi_real q0[24] = {0.0, 0.0, 0.0, 0.8660254037844387, 0.49999999999999994, 0.0, -0.49999999999999994, 0.8660254037844387, 0.0, 0.0, 0.0, 1.0, 2.0, 0.0, 1.0, 2.0, 0.7500000000000002, 2.299038105676658, 0.0, -0.8660254037844386, 0.5000000000000001, 1.0, 0.0, 0.0};
-static const casadi_real v0[24] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+static const casadi_real q0[12] = {0.8660254037844387, 0.49999999999999994, 0.0, -0.4999999999999999, 0.8660254037844387, 0.0, 2.0, 0.7500000000000002, 2.299038105676658, -5.551115123125781e-17, -0.8660254037844386, 0.5000000000000001};
+static const casadi_real v0[12] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
 static const casadi_real p0[1] = {0};
 
 static const char *status_text(int status) {
@@ -54,7 +54,7 @@ static int parse(const char *program, const char *what, const char *text, double
 
 int main(int argc, char *argv[]) {
   double t0 = 0.0, t_end = 1.0, h = 0.001;
-  casadi_real q[24], v[24], lam[23];
+  casadi_real q[12], v[12], lam[11];
   double steps;
   long n_steps, done = 0, iterations = 0;
   int status, i;

@@ -14,7 +14,7 @@
 #define NC FOURBAR_3D_STEP_NC
 #define NX (NQ + NC)
 /* Nonzeros of the KKT matrix K (the pattern of fourbar_3d_step_newton's output K). */
-#define NNZ_K 234
+#define NNZ_K 92
 #define ALIGN 16
 
 typedef int (*kernel_work)(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz_iw, casadi_int *sz_w);

@@ -35,8 +35,8 @@
 extern "C" {
 #endif
 
-#define FOURBAR_3D_STEP_NQ 24
-#define FOURBAR_3D_STEP_NC 23
+#define FOURBAR_3D_STEP_NQ 12
+#define FOURBAR_3D_STEP_NC 11
 #define FOURBAR_3D_STEP_NU 0
 #define FOURBAR_3D_STEP_NP 0
 /* max |M_ij| (kg), the scale of the momentum residual. */

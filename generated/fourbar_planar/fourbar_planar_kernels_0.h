@@ -238,8 +238,8 @@ int fourbar_planar_accel_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int
 int fourbar_planar_accel_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define fourbar_planar_accel_SZ_ARG 10
 #define fourbar_planar_accel_SZ_RES 3
-#define fourbar_planar_accel_SZ_IW 12
-#define fourbar_planar_accel_SZ_W 300
+#define fourbar_planar_accel_SZ_IW 8
+#define fourbar_planar_accel_SZ_W 194
 int fourbar_planar_energy(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int fourbar_planar_energy_checkout(void);
 void fourbar_planar_energy_release(int mem);

@@ -4,14 +4,12 @@
 /* Definitions of the metadata arrays declared in fourbar_planar.h. */
 #include "fourbar_planar.h"
 
-const char *const fourbar_planar_coordinate_names[6] = {
-  "crank.r_i.x", "crank.r_i.y", "crank.r_j.x", "crank.r_j.y",
-  "coupler.r_j.x", "coupler.r_j.y"
+const char *const fourbar_planar_coordinate_names[4] = {
+  "crank.r_j.x", "crank.r_j.y", "coupler.r_j.x", "coupler.r_j.y"
 };
 
-const char *const fourbar_planar_constraint_names[5] = {
-  "crank.rigid.uu", "coupler.rigid.uu", "rocker.rigid.uu", "crank_pivot.coincide.x",
-  "crank_pivot.coincide.y"
+const char *const fourbar_planar_constraint_names[3] = {
+  "crank.rigid.uu", "coupler.rigid.uu", "rocker.rigid.uu"
 };
 
 const char *const fourbar_planar_parameter_names[1] = {
@@ -30,31 +28,26 @@ const casadi_real fourbar_planar_t0[1] = {
   0.0
 };
 
-const casadi_real fourbar_planar_q0[6] = {
-  0.0, 0.0, 0.5000000000000001, 0.8660254037844386,
-  3.0428529212959905, 2.4578479506333157
+const casadi_real fourbar_planar_q0[4] = {
+  0.5000000000000001, 0.8660254037844386, 3.0428529212959905, 2.4578479506333157
 };
 
-const casadi_real fourbar_planar_v0[6] = {
-  0.0, 0.0, 0.0, 0.0,
-  0.0, 0.0
-};
-
-const casadi_real fourbar_planar_lam0[5] = {
-  -6.572201834165653, -0.8247353701336391, -2.130956378589725, 6.816937675771086,
-  13.69458919034103
-};
-
-const casadi_real fourbar_planar_x0[12] = {
-  0.0, 0.0, 0.5000000000000001, 0.8660254037844386,
-  3.0428529212959905, 2.4578479506333157, 0.0, 0.0,
+const casadi_real fourbar_planar_v0[4] = {
   0.0, 0.0, 0.0, 0.0
 };
 
-const casadi_real fourbar_planar_z0[11] = {
-  -3.1347473636475e-16, 0.0, 2.9368300992651726, -1.695579648374944,
-  1.6798144433651985, 0.31243684758910045, -6.572201834165653, -0.8247353701336391,
-  -2.130956378589725, 6.816937675771086, 13.69458919034103
+const casadi_real fourbar_planar_lam0[3] = {
+  -6.572201834165654, -0.8247353701336391, -2.1309563785897248
+};
+
+const casadi_real fourbar_planar_x0[8] = {
+  0.5000000000000001, 0.8660254037844386, 3.0428529212959905, 2.4578479506333157,
+  0.0, 0.0, 0.0, 0.0
+};
+
+const casadi_real fourbar_planar_z0[7] = {
+  2.936830099265171, -1.6955796483749426, 1.679814443365199, 0.31243684758909984,
+  -6.572201834165654, -0.8247353701336391, -2.1309563785897248
 };
 
 const casadi_real fourbar_planar_p0[1] = {

@@ -17,8 +17,8 @@
 
 #include "fourbar_planar.h"
 
-static const casadi_real q0[6] = {0.0, 0.0, 0.5000000000000001, 0.8660254037844386, 3.0428529212959905, 2.4578479506333157};
-static const casadi_real v0[6] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+static const casadi_real q0[4] = {0.5000000000000001, 0.8660254037844386, 3.0428529212959905, 2.4578479506333157};
+static const casadi_real v0[4] = {0.0, 0.0, 0.0, 0.0};
 static const casadi_real p0[1] = {2.0};
 
 static const char *status_text(int status) {
@@ -54,7 +54,7 @@ static int parse(const char *program, const char *what, const char *text, double
 
 int main(int argc, char *argv[]) {
   double t0 = 0.0, t_end = 1.0, h = 0.001;
-  casadi_real q[6], v[6], lam[5];
+  casadi_real q[4], v[4], lam[3];
   double steps;
   long n_steps, done = 0, iterations = 0;
   int status, i;

@@ -14,7 +14,7 @@
 #define NC FOURBAR_PLANAR_STEP_NC
 #define NX (NQ + NC)
 /* Nonzeros of the KKT matrix K (the pattern of fourbar_planar_step_newton's output K). */
-#define NNZ_K 46
+#define NNZ_K 26
 #define ALIGN 16
 
 typedef int (*kernel_work)(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz_iw, casadi_int *sz_w);

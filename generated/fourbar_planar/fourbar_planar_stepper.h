@@ -35,8 +35,8 @@
 extern "C" {
 #endif
 
-#define FOURBAR_PLANAR_STEP_NQ 6
-#define FOURBAR_PLANAR_STEP_NC 5
+#define FOURBAR_PLANAR_STEP_NQ 4
+#define FOURBAR_PLANAR_STEP_NC 3
 #define FOURBAR_PLANAR_STEP_NU 0
 #define FOURBAR_PLANAR_STEP_NP 1
 /* max |M_ij| (kg), the scale of the momentum residual. */

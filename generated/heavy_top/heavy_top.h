@@ -84,11 +84,11 @@ extern const casadi_real heavy_top_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define HEAVY_TOP_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define HEAVY_TOP_MODEL_HASH "66fd9d42de682ea2d5cfda958674e3c2427f9c16cb0e60a89c4bac16a45a4850"
+#define HEAVY_TOP_MODEL_HASH "46fa6bfe32ab6c6465f9914b8f00e014347476fb8682200a858dacd9e7a005d3"
 
 /* ---- heavy_top_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names
- * In heavy_top_kernels_0.c; 49 instructions.
+ * In heavy_top_kernels_0.c; 53 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: heavy_top_t0.
  *   arg[1] q: 9x1, nnz 9 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: heavy_top_q0.
@@ -150,7 +150,7 @@ extern const casadi_real heavy_top_gravity[3];
 
 /* ---- heavy_top_F ----------------------------------------------------
  * generalised applied force F(t, q, q̇, u, p): gravity and force elements
- * In heavy_top_kernels_0.c; 11 instructions.
+ * In heavy_top_kernels_0.c; 12 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: heavy_top_t0.
  *   arg[1] q: 9x1, nnz 9 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: heavy_top_q0.
@@ -169,17 +169,17 @@ extern const casadi_real heavy_top_gravity[3];
 
 /* ---- heavy_top_mass ----------------------------------------------------
  * the constant mass matrix M (sparse; no inputs)
- * In heavy_top_kernels_0.c; 11 instructions.
+ * In heavy_top_kernels_0.c; 18 instructions.
  * Inputs:
  *   (none)
  * Outputs:
- *   res[0] M: 9x9, nnz 9 (sparse) [kg (kg·m for mixed point/vector entries, kg·m² for vector/vector)] M, nq × nq.
+ *   res[0] M: 9x9, nnz 15 (sparse) [kg (kg·m for mixed point/vector entries, kg·m² for vector/vector)] M, nq × nq.
  */
-#define HEAVY_TOP_MASS_OUT_M_NNZ 9
+#define HEAVY_TOP_MASS_OUT_M_NNZ 15
 
 /* ---- heavy_top_Minv ----------------------------------------------------
  * application of the constant inverse mass matrix: x = M⁻¹ b (two sparse triangular solves with the Cholesky factor of M)
- * In heavy_top_kernels_0.c; 38 instructions.
+ * In heavy_top_kernels_0.c; 51 instructions.
  * Inputs:
  *   arg[0] b: 9x1, nnz 9 [N] right-hand side: a generalised force. Default: zeros.
  * Outputs:
@@ -190,7 +190,7 @@ extern const casadi_real heavy_top_gravity[3];
 
 /* ---- heavy_top_ode ----------------------------------------------------
  * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ)
- * In heavy_top_kernels_0.c; 126 instructions.
+ * In heavy_top_kernels_0.c; 138 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: heavy_top_t0.
  *   arg[1] q: 9x1, nnz 9 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: heavy_top_q0.
@@ -213,7 +213,7 @@ extern const casadi_real heavy_top_gravity[3];
 
 /* ---- heavy_top_alg ----------------------------------------------------
  * algebraic residual of the index-1 DAE: A a − γ + 2α Φ̇ + β² Φ (Baumgarte stabilised acceleration constraints)
- * In heavy_top_kernels_0.c; 325 instructions.
+ * In heavy_top_kernels_0.c; 344 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: heavy_top_t0.
  *   arg[1] q: 9x1, nnz 9 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: heavy_top_q0.
@@ -234,7 +234,7 @@ extern const casadi_real heavy_top_gravity[3];
 
 /* ---- heavy_top_dae ----------------------------------------------------
  * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v], z = [a; λ], ode = [v; a] and alg = [M a + Aᵀλ − F; A a − γ + 2α Φ̇ + β² Φ] (sparse Jacobian)
- * In heavy_top_kernels_0.c; 361 instructions.
+ * In heavy_top_kernels_0.c; 380 instructions.
  * Jacobian: jac_heavy_top_dae() (CasADi's convention: the inputs, then the nominal outputs;
  * one output jac_<out>_<in> per pair), found by casadi.external for exact derivatives.
  * Inputs:
@@ -278,7 +278,7 @@ extern const casadi_real heavy_top_gravity[3];
 
 /* ---- heavy_top_energy ----------------------------------------------------
  * kinetic energy T = ½ q̇ᵀ M q̇ and potential energy V (gravity and springs)
- * In heavy_top_kernels_0.c; 44 instructions.
+ * In heavy_top_kernels_0.c; 63 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: heavy_top_t0.
  *   arg[1] q: 9x1, nnz 9 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: heavy_top_q0.
@@ -312,7 +312,7 @@ extern const casadi_real heavy_top_gravity[3];
 
 /* ---- heavy_top_poses ----------------------------------------------------
  * pose of every member: rotation local → world and centre of mass, one block each, in the order of member_names
- * In heavy_top_kernels_0.c; 25 instructions.
+ * In heavy_top_kernels_0.c; 39 instructions.
  * Inputs:
  *   arg[0] q: 9x1, nnz 9 [m] natural coordinates q: basic points and base vectors of every member, layout order (see coordinate_names). Default: heavy_top_q0.
  * Outputs:
@@ -325,7 +325,7 @@ extern const casadi_real heavy_top_gravity[3];
 
 /* ---- heavy_top_step_newton ----------------------------------------------------
  * Stepper, first half-step: Newton residual r(w, lam_h) and its Jacobian K
- * In heavy_top_kernels_0.c; 267 instructions.
+ * In heavy_top_kernels_0.c; 293 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time at the start of the step. Default: heavy_top_t0.
  *   arg[1] q: 9x1, nnz 9 [m] coordinates at t. Default: heavy_top_q0.
@@ -337,7 +337,7 @@ extern const casadi_real heavy_top_gravity[3];
  *   arg[7] lam_h: 6x1, nnz 6 [N s/m^2] scaled multipliers h/2 lambda. Default: zeros.
  * Outputs:
  *   res[0] r: 15x1, nnz 15 [N s; m^2/s] [M (w - v) - h/2 F + A^T lam_h; Phi(t + h, q + h w) / h].
- *   res[1] K: 15x15, nnz 63 (sparse) dr/d[w; lam_h], sparse.
+ *   res[1] K: 15x15, nnz 69 (sparse) dr/d[w; lam_h], sparse.
  */
 #define HEAVY_TOP_STEP_NEWTON_IN_T_NNZ 1
 #define HEAVY_TOP_STEP_NEWTON_IN_Q_NNZ 9
@@ -348,11 +348,11 @@ extern const casadi_real heavy_top_gravity[3];
 #define HEAVY_TOP_STEP_NEWTON_IN_W_NNZ 9
 #define HEAVY_TOP_STEP_NEWTON_IN_LAM_H_NNZ 6
 #define HEAVY_TOP_STEP_NEWTON_OUT_R_NNZ 15
-#define HEAVY_TOP_STEP_NEWTON_OUT_K_NNZ 63
+#define HEAVY_TOP_STEP_NEWTON_OUT_K_NNZ 69
 
 /* ---- heavy_top_step_velocity ----------------------------------------------------
  * Stepper, second half-step: KKT matrix and right-hand side for [v+; h/2 mu]
- * In heavy_top_kernels_0.c; 123 instructions.
+ * In heavy_top_kernels_0.c; 145 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time at the end of the step. Default: heavy_top_t0.
  *   arg[1] q: 9x1, nnz 9 [m] coordinates at the end. Default: heavy_top_q0.
@@ -362,7 +362,7 @@ extern const casadi_real heavy_top_gravity[3];
  *   arg[5] h: 1x1, nnz 1 [s] step. Default: zeros.
  * Outputs:
  *   res[0] b: 15x1, nnz 15 [N s; m^2/s] [M w + h/2 F; -Phi_t].
- *   res[1] K: 15x15, nnz 63 (sparse) [[M, A^T], [A, 0]] in the pattern of step_newton's K.
+ *   res[1] K: 15x15, nnz 69 (sparse) [[M, A^T], [A, 0]] in the pattern of step_newton's K.
  */
 #define HEAVY_TOP_STEP_VELOCITY_IN_T_NNZ 1
 #define HEAVY_TOP_STEP_VELOCITY_IN_Q_NNZ 9
@@ -371,11 +371,11 @@ extern const casadi_real heavy_top_gravity[3];
 #define HEAVY_TOP_STEP_VELOCITY_IN_P_NNZ 0
 #define HEAVY_TOP_STEP_VELOCITY_IN_H_NNZ 1
 #define HEAVY_TOP_STEP_VELOCITY_OUT_B_NNZ 15
-#define HEAVY_TOP_STEP_VELOCITY_OUT_K_NNZ 63
+#define HEAVY_TOP_STEP_VELOCITY_OUT_K_NNZ 69
 
 /* ---- heavy_top_step_check ----------------------------------------------------
  * Stepper: constraint residuals of a state
- * In heavy_top_kernels_0.c; 136 instructions.
+ * In heavy_top_kernels_0.c; 140 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: heavy_top_t0.
  *   arg[1] q: 9x1, nnz 9 [m] coordinates. Default: heavy_top_q0.
@@ -394,27 +394,27 @@ extern const casadi_real heavy_top_gravity[3];
 
 /* ---- heavy_top_step_solve ----------------------------------------------------
  * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
- * In heavy_top_kernels_0.c; 2065 instructions.
+ * In heavy_top_kernels_0.c; 2707 instructions.
  * Inputs:
- *   arg[0] K: 15x15, nnz 63 (sparse) KKT matrix in the stepper's pattern. Default: zeros.
+ *   arg[0] K: 15x15, nnz 69 (sparse) KKT matrix in the stepper's pattern. Default: zeros.
  *   arg[1] r: 15x1, nnz 15 right-hand side. Default: zeros.
  * Outputs:
  *   res[0] x: 15x1, nnz 15 solution.
  */
-#define HEAVY_TOP_STEP_SOLVE_IN_K_NNZ 63
+#define HEAVY_TOP_STEP_SOLVE_IN_K_NNZ 69
 #define HEAVY_TOP_STEP_SOLVE_IN_R_NNZ 15
 #define HEAVY_TOP_STEP_SOLVE_OUT_X_NNZ 15
 
 /* ---- heavy_top_step_project ----------------------------------------------------
  * Stepper: KKT matrix and constraint residuals for the projection onto both constraint levels
- * In heavy_top_kernels_0.c; 186 instructions.
+ * In heavy_top_kernels_0.c; 197 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: heavy_top_t0.
  *   arg[1] q: 9x1, nnz 9 [m] coordinates. Default: heavy_top_q0.
  *   arg[2] v: 9x1, nnz 9 [m/s] coordinate rates. Default: heavy_top_v0.
  *   arg[3] p: 0x1, nnz 0 parameters. Default: zeros.
  * Outputs:
- *   res[0] K: 15x15, nnz 63 (sparse) [[M, A^T], [A, 0]] in the pattern of step_newton's K.
+ *   res[0] K: 15x15, nnz 69 (sparse) [[M, A^T], [A, 0]] in the pattern of step_newton's K.
  *   res[1] phi: 6x1, nnz 6 [m^2] Phi(t, q).
  *   res[2] phidot: 6x1, nnz 6 [m^2/s] A(t, q) v + Phi_t(t, q).
  */
@@ -422,7 +422,7 @@ extern const casadi_real heavy_top_gravity[3];
 #define HEAVY_TOP_STEP_PROJECT_IN_Q_NNZ 9
 #define HEAVY_TOP_STEP_PROJECT_IN_V_NNZ 9
 #define HEAVY_TOP_STEP_PROJECT_IN_P_NNZ 0
-#define HEAVY_TOP_STEP_PROJECT_OUT_K_NNZ 63
+#define HEAVY_TOP_STEP_PROJECT_OUT_K_NNZ 69
 #define HEAVY_TOP_STEP_PROJECT_OUT_PHI_NNZ 6
 #define HEAVY_TOP_STEP_PROJECT_OUT_PHIDOT_NNZ 6
 
@@ -449,7 +449,7 @@ extern const casadi_real heavy_top_gravity[3];
 
 /* ---- heavy_top_step_outputs ----------------------------------------------------
  * Stepper: derived quantities of one trajectory sample
- * In heavy_top_kernels_0.c; 178 instructions.
+ * In heavy_top_kernels_0.c; 200 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: heavy_top_t0.
  *   arg[1] q: 9x1, nnz 9 [m] coordinates. Default: heavy_top_q0.

@@ -239,7 +239,7 @@ int heavy_top_accel_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_in
 #define heavy_top_accel_SZ_ARG 10
 #define heavy_top_accel_SZ_RES 3
 #define heavy_top_accel_SZ_IW 16
-#define heavy_top_accel_SZ_W 484
+#define heavy_top_accel_SZ_W 532
 int heavy_top_energy(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int heavy_top_energy_checkout(void);
 void heavy_top_energy_release(int mem);

@@ -14,7 +14,7 @@
 #define NC HEAVY_TOP_STEP_NC
 #define NX (NQ + NC)
 /* Nonzeros of the KKT matrix K (the pattern of heavy_top_step_newton's output K). */
-#define NNZ_K 63
+#define NNZ_K 69
 #define ALIGN 16
 
 typedef int (*kernel_work)(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz_iw, casadi_int *sz_w);

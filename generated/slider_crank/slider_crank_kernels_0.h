@@ -238,8 +238,8 @@ int slider_crank_accel_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *
 int slider_crank_accel_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define slider_crank_accel_SZ_ARG 10
 #define slider_crank_accel_SZ_RES 3
-#define slider_crank_accel_SZ_IW 21
-#define slider_crank_accel_SZ_W 522
+#define slider_crank_accel_SZ_IW 17
+#define slider_crank_accel_SZ_W 388
 int slider_crank_energy(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int slider_crank_energy_checkout(void);
 void slider_crank_energy_release(int mem);

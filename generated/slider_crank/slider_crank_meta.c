@@ -4,16 +4,14 @@
 /* Definitions of the metadata arrays declared in slider_crank.h. */
 #include "slider_crank.h"
 
-const char *const slider_crank_coordinate_names[10] = {
-  "crank.r_i.x", "crank.r_i.y", "crank.r_j.x", "crank.r_j.y",
-  "slider.r_i.x", "slider.r_i.y", "slider.u.x", "slider.u.y",
-  "slider.v.x", "slider.v.y"
+const char *const slider_crank_coordinate_names[8] = {
+  "crank.r_j.x", "crank.r_j.y", "slider.r_i.x", "slider.r_i.y",
+  "slider.u.x", "slider.u.y", "slider.v.x", "slider.v.y"
 };
 
-const char *const slider_crank_constraint_names[10] = {
+const char *const slider_crank_constraint_names[8] = {
   "crank.rigid.uu", "slider.rigid.uu", "slider.rigid.vv", "slider.rigid.uv",
-  "rod.rigid.uu", "motor.coincide.x", "motor.coincide.y", "motor.drive",
-  "guide.lock", "guide.line"
+  "rod.rigid.uu", "motor.drive", "guide.lock", "guide.line"
 };
 
 const char *const slider_crank_parameter_names[1] = {
@@ -32,38 +30,33 @@ const casadi_real slider_crank_t0[1] = {
   0.0
 };
 
-const casadi_real slider_crank_q0[10] = {
-  6.938893903907228e-18, 0.0, 0.1, 0.0,
-  0.4, 0.0, 1.0, 0.0,
-  0.0, 1.0
+const casadi_real slider_crank_q0[8] = {
+  0.1, 0.0, 0.4, 0.0,
+  1.0, 0.0, 0.0, 1.0
 };
 
-const casadi_real slider_crank_v0[10] = {
-  0.0, 0.0, 0.0, 0.6283185307179585,
-  0.0, -2.772094606301025e-17, 0.0, 0.0,
-  0.0, 0.0
-};
-
-const casadi_real slider_crank_lam0[10] = {
-  136.51753628403057, 0.0, 0.0, 0.0,
-  43.31260000554589, -27.63249407017576, 6.376500000000001, -0.3924000000000001,
-  0.0, -11.281500000000003
-};
-
-const casadi_real slider_crank_x0[20] = {
-  6.938893903907228e-18, 0.0, 0.1, 0.0,
-  0.4, 0.0, 1.0, 0.0,
-  0.0, 1.0, 0.0, 0.0,
-  0.0, 0.6283185307179585, 0.0, -2.772094606301025e-17,
+const casadi_real slider_crank_v0[8] = {
+  0.0, 0.6283185307179586, 0.0, 0.0,
   0.0, 0.0, 0.0, 0.0
 };
 
-const casadi_real slider_crank_z0[20] = {
-  4.0960511134015664e-15, -2.3924033603406062e-15, -3.947841760435758, -2.3703343874066517e-15,
-  -5.263789013914328, 1.8647317544009034e-15, 0.0, 0.0,
-  0.0, 0.0, 136.51753628403057, 0.0,
-  0.0, 0.0, 43.31260000554589, -27.63249407017576,
-  6.376500000000001, -0.3924000000000001, 0.0, -11.281500000000003
+const casadi_real slider_crank_lam0[8] = {
+  136.51753628403046, 0.0, 0.0, 0.0,
+  43.31260000554586, -0.3924, 0.0, -11.281500000000007
+};
+
+const casadi_real slider_crank_x0[16] = {
+  0.1, 0.0, 0.4, 0.0,
+  1.0, 0.0, 0.0, 1.0,
+  0.0, 0.6283185307179586, 0.0, 0.0,
+  0.0, 0.0, 0.0, 0.0
+};
+
+const casadi_real slider_crank_z0[16] = {
+  -3.9478417604357277, -2.849659558040505e-17, -5.263789013914313, 4.962053741869469e-15,
+  0.0, 0.0, 0.0, 0.0,
+  136.51753628403046, 0.0, 0.0, 0.0,
+  43.31260000554586, -0.3924, 0.0, -11.281500000000007
 };
 
 const casadi_real slider_crank_p0[1] = {

@@ -14,7 +14,7 @@
 #define NC SLIDER_CRANK_STEP_NC
 #define NX (NQ + NC)
 /* Nonzeros of the KKT matrix K (the pattern of slider_crank_step_newton's output K). */
-#define NNZ_K 68
+#define NNZ_K 50
 #define ALIGN 16
 
 typedef int (*kernel_work)(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz_iw, casadi_int *sz_w);

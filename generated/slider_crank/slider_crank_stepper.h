@@ -35,8 +35,8 @@
 extern "C" {
 #endif
 
-#define SLIDER_CRANK_STEP_NQ 10
-#define SLIDER_CRANK_STEP_NC 10
+#define SLIDER_CRANK_STEP_NQ 8
+#define SLIDER_CRANK_STEP_NC 8
 #define SLIDER_CRANK_STEP_NU 0
 #define SLIDER_CRANK_STEP_NP 1
 /* max |M_ij| (kg), the scale of the momentum residual. */

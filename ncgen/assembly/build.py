@@ -21,6 +21,7 @@ from ncgen.assembly.springs import spring_table
 from ncgen.errors import ModelError
 from ncgen.model.context import Context
 from ncgen.model.layout import Layout, make_layout
+from ncgen.model.sharing import SharingPlan, intrinsic_key, share_coordinates
 
 #: Default Baumgarte coefficients (α, β) in 1/s: constraint errors decay like a critically
 #: damped oscillator with time constant 0.2 s.  IDAS keeps the drift small anyway; the
@@ -34,7 +35,8 @@ CONTACT_MODELS = ("smooth", "nonsmooth")
 
 
 def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", tolerance: float = 1e-6,
-                t0: float = 0.0, assemble: bool = False, fix=(), contacts: str = "smooth"):
+                t0: float = 0.0, assemble: bool = False, fix=(), contacts: str = "smooth",
+                share: bool = True):
     """Assemble ``system`` into a :class:`~ncgen.model.model.Model`.
 
     ``redundant``: constraints linearly dependent at the initial configuration are
@@ -50,7 +52,10 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     (:func:`ncgen.assembly.kinematics.resolve_fix`) and their rates as given.  Joints
     given at world points hold in the given poses by construction; what needs assembling
     is a drive or coordinate driver that prescribes another position at ``t0``.  To
-    assemble an arbitrary configuration vector use :func:`ncgen.assemble`.
+    assemble an arbitrary configuration vector use :func:`ncgen.assemble`.  ``share``:
+    eliminate the joints that shared coordinates can express (:mod:`ncgen.model.sharing`;
+    ``model.sharing`` says which); ``share=False`` keeps every joint's equations, and so
+    does ``fix`` (it names coordinates as written).
     """
     from ncgen.model.model import Model
 
@@ -62,12 +67,17 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     if redundant not in REDUNDANT_MODES:
         raise ModelError(f"redundant: expected one of {', '.join(REDUNDANT_MODES)}, got {redundant!r}")
     alpha, beta = (float(x) for x in baumgarte)
+    plan = None
+    if share and not fix:          # fix names coordinates as written: no sharing then
+        nq_before = make_layout(system.dim, list(system.members.values())).nq
+        system, plan = share_coordinates(system)
+        plan.nq_before = nq_before
     members = list(system.members.values())
     layout = make_layout(system.dim, members)
     ctx = Context(system, layout)
 
     fixed = resolve_fix(layout, system.members, fix)
-    labels, rows = constraint_rows(system, ctx)
+    labels, rows = constraint_rows(system, ctx, plan)
     F, V = force_terms(system, ctx)
     limits = model_limits(system, ctx)
     coords, skipped = build_joint_coordinates(system, ctx)
@@ -88,15 +98,19 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
         if rows else None
     dependent = dependent_rows(np.array(A_fn(t0, q_init, p0)) if A_fn else np.zeros((0, layout.nq)))
     redundant_labels = [labels[i] for i in dependent]
+    hint = ""
+    if dependent and plan is not None and plan.eliminated:
+        hint = (f" (coordinate sharing replaced the joints {', '.join(plan.eliminated)} by shared coordinates; "
+                "build(share=False) keeps their equations, so the redundant ones are named)")
     if dependent and redundant == "error":
         raise ModelError(f"system {system.name!r}: redundant constraints at the initial configuration: "
-                         f"{', '.join(redundant_labels)}; remove them or build(redundant='drop')")
+                         f"{', '.join(redundant_labels)}{hint}; remove them or build(redundant='drop')")
     if dependent and redundant == "drop":
         phi_fn = ca.Function("phi", [ctx.t, ctx.q, ctx.p], [ca.vertcat(*rows)])
         _check_droppable(system.name, labels, dependent, phi_fn, A_fn, q_init, p0, t0)
         warnings.warn(f"system {system.name!r}: dropping redundant constraints "
                       f"{', '.join(redundant_labels)} (implied by the others near the initial "
-                      f"configuration, and satisfied)", stacklevel=3)
+                      f"configuration, and satisfied){hint}", stacklevel=3)
         keep = [i for i in range(len(rows)) if i not in set(dependent)]
         labels, rows = [labels[i] for i in keep], [rows[i] for i in keep]
 
@@ -113,7 +127,7 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
                      potential=potential, state=state, p0=p0, baumgarte=(alpha, beta),
                      redundant=redundant_labels, dropped=(redundant == "drop"), t0=t0,
                      springs=spring_table(system, ctx), limits=limits, joint_space=joint_space,
-                     contacts=contact_specs(system.contacts), contact_model=contacts)
+                     contacts=contact_specs(system.contacts), contact_model=contacts, sharing=plan)
 
     model = model_with(state)
     if system.initial_joints or system.initial_joint_rates:
@@ -152,9 +166,12 @@ def _check_droppable(name, labels, dependent, phi_fn, A_fn, q, p, t0) -> None:
             f"redundant='keep') for analysis only")
 
 
-def constraint_rows(system, ctx: Context) -> tuple[list[str], list[ca.SX]]:
-    """Intrinsic constraints of every member (from its derivation), then joint equations."""
-    labels, rows = [], []
+def constraint_rows(system, ctx: Context, plan: SharingPlan | None = None) -> tuple[list[str], list[ca.SX]]:
+    """Intrinsic constraints of every member (from its derivation), then joint equations.
+    With a sharing ``plan``, the equations that the shared coordinates imply are left out
+    (listed in ``plan.removed``): joint equations the plan drops, and rigidity constraints
+    stated twice or between fixed nodes only (:func:`~ncgen.model.sharing.intrinsic_key`)."""
+    labels, rows, seen = [], [], set()
     for m in system.members.values():
         D = m.ctype.derivation
         if not m.ctype.pairs:
@@ -162,10 +179,20 @@ def constraint_rows(system, ctx: Context) -> tuple[list[str], list[ca.SX]]:
         phi = ctx.instantiate(m, D.Phi)
         names = "uvw"
         for k, (s, t) in enumerate(m.ctype.pairs):
-            labels.append(f"{m.name}.rigid.{names[s]}{names[t]}")
+            label = f"{m.name}.rigid.{names[s]}{names[t]}"
+            if plan is not None:
+                key = intrinsic_key(ctx.layout, m, (s, t))
+                if key is None or key in seen:
+                    plan.removed.append(label)
+                    continue
+                seen.add(key)
+            labels.append(label)
             rows.append(phi[k])
     for j in system.joints:
         for label, e in j.equations(ctx):
+            if plan is not None and not plan.keeps(j.name, label):
+                plan.removed.append(label)
+                continue
             labels.append(label)
             rows.append(e)
     return labels, rows

@@ -3,7 +3,8 @@
 :func:`check_system` builds the system twice at most: once with the default tolerance, to
 know whether the initial state as given is consistent (the same rule as ``System.build``),
 and, if not, once more without a limit to report everything else.  The report lists the
-members, coordinates, constraints, the rank of ``A``, the degrees of freedom, redundant
+members, coordinates, constraints, what coordinate sharing eliminated (joints, and nq and
+nc before and after, :mod:`ncgen.model.sharing`), the rank of ``A``, the degrees of freedom, redundant
 constraints and the residuals of the given initial state: ``max |Φ(q)|`` (m²) and
 ``max |A v + Φ_t|`` (m²/s).
 """
@@ -66,6 +67,7 @@ class CheckReport:
         lines.append(f"constraints (nc = {m.nc + len(self.dof.dropped)}):")
         lines += _wrap([*m.constraint_names, *self.dof.dropped])
         d = self.dof
+        lines += _sharing(m, m.nc + len(d.dropped))
         lines.append(f"rank A = {d.rank}, DOF = {d.dof}")
         lines.append("redundant constraints: " + (", ".join(d.redundant) or "none")
                      + (" (dropped when building)" if d.dropped else ""))
@@ -82,14 +84,15 @@ class CheckReport:
         return "\n".join(lines) + "\n"
 
 
-def check_system(system, *, tolerance: float = DEFAULT_TOLERANCE) -> CheckReport:
-    """Build ``system`` and report on it (see the module docstring)."""
+def check_system(system, *, tolerance: float = DEFAULT_TOLERANCE, share: bool = True) -> CheckReport:
+    """Build ``system`` (with coordinate sharing unless ``share=False``) and report on it
+    (see the module docstring)."""
     report = CheckReport(system)
     caught: list = []
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            report.model = system.build(tolerance=tolerance)
+            report.model = system.build(tolerance=tolerance, share=share)
     except NcgenError as e:
         if "inconsistent initial" not in str(e):
             report.error = str(e)
@@ -98,7 +101,7 @@ def check_system(system, *, tolerance: float = DEFAULT_TOLERANCE) -> CheckReport
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
-                report.model = system.build(tolerance=np.inf)
+                report.model = system.build(tolerance=np.inf, share=share)
         except NcgenError as e2:
             report.error = str(e2)
             return report
@@ -123,6 +126,24 @@ def _members(s) -> list[str]:
         lines.append(f"  {m.name:<16} {m.kind:<5} {m.ctype.name:<4} mass {m.rigid.mass:g} kg"
                      + (f"; shares {', '.join(shared)}" if shared else "")
                      + (f"; markers {', '.join(m.markers)}" if m.markers else ""))
+    return lines
+
+
+def _sharing(model, nc: int) -> list[str]:
+    """What coordinate sharing did (``model.sharing``, :mod:`ncgen.model.sharing`)."""
+    plan = model.sharing
+    if plan is None:
+        return ["coordinate sharing: off (build(share=False))"]
+    if plan.off:
+        return [f"coordinate sharing: none ({plan.off})"]
+    lines = [f"coordinate sharing: nq {plan.nq_before} -> {model.nq}, nc {nc + plan.nc_removed} -> {nc}"]
+    if plan.eliminated:
+        lines.append(f"  joints eliminated ({len(plan.eliminated)}): "
+                     + ", ".join(f"{n} ({how})" for n, how in plan.eliminated.items()))
+    lines += [f"  joint {n} partly: {how}" for n, how in plan.partial.items()]
+    if plan.rebased:
+        lines.append("  bodies re-based on their joints: "
+                     + ", ".join(f"{n} ({how})" for n, how in plan.rebased.items()))
     return lines
 
 

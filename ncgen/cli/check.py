@@ -15,6 +15,9 @@ def _check_arguments(p: argparse.ArgumentParser) -> None:
                         "that still counts as consistent (default 1e-6, as System.build)")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    help="replace a parameter's default value (repeatable; a vector as NAME=1,2,3)")
+    p.add_argument("--no-share", action="store_true",
+                   help="keep every joint's equations (System.build(share=False)) instead of eliminating "
+                        "the joints that shared coordinates express")
 
 
 @subcommand(
@@ -24,12 +27,15 @@ def _check_arguments(p: argparse.ArgumentParser) -> None:
         "Build the model in MODEL.toml and print its members, joints and forces, its coordinates "
         "and constraints, the rank of the constraint Jacobian A, the degrees of freedom "
         "(nq - rank A), the redundant constraints by name, and the residuals of the initial state "
-        "as given (max |Phi| and max |A v + Phi_t|) with the corrections that make it consistent. "
+        "as given (max |Phi| and max |A v + Phi_t|) with the corrections that make it consistent, "
+        "and what coordinate sharing did: the joints eliminated (replaced by shared basic points "
+        "and axes, or merged bodies) with nq and nc before and after. "
         "Exit code 0 if the model builds and its initial state is consistent within the "
         "tolerance, 1 otherwise."),
     examples=(
         "ncgen check examples/fourbar_planar.toml\n"
         "ncgen check examples/fourbar_3d.toml --tolerance 1e-9\n"
+        "ncgen check examples/fourbar_3d.toml --no-share   # every joint as equations\n"
         "ncgen check mymodel.toml --param k=50 || echo 'fix the initial state'\n"
         "ncgen check robot.urdf                               # a URDF robot, fixed base"),
     arguments=_check_arguments,
@@ -40,6 +46,6 @@ def check(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     if not args.tolerance > 0:
         parser.error(f"--tolerance: expected a positive number, got {args.tolerance}")
     system = load_system(args.model, args.param)
-    report = check_system(system, tolerance=args.tolerance)
+    report = check_system(system, tolerance=args.tolerance, share=not args.no_share)
     sys.stdout.write(report.render(args.model))
     return 0 if report.ok else 1

@@ -46,7 +46,7 @@ class Model:
 
     def __init__(self, *, description, layout, labels, functions, M, factor, potential, state, p0, baumgarte,
                  redundant, dropped, t0, springs=None, limits=None, joint_space=None,
-                 contacts=(), contact_model="smooth"):
+                 contacts=(), contact_model="smooth", sharing=None):
         system = description
         self.members = MappingProxyType(dict(system.members))
         self.joints = tuple(system.joints)
@@ -88,6 +88,8 @@ class Model:
         self.contact_names = [c["name"] for c in self.contacts]
         #: "smooth" (compliant forces in F) or "nonsmooth" (the compiled stepper's impacts).
         self.contact_model = contact_model
+        #: :class:`~ncgen.model.sharing.SharingPlan` of ``build(share=True)`` (None with share=False).
+        self.sharing = sharing
         for key, value in vars(self).items():
             object.__setattr__(self, key, _frozen(value))
         object.__setattr__(self, "_frozen", True)

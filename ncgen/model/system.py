@@ -244,7 +244,9 @@ class System:
         control; "nonsmooth": unilateral constraints for the compiled stepper; see
         docs/contact.md), ``tolerance`` (largest relative correction of the initial state),
         ``assemble=True`` with ``fix=[...]`` (the initial poses are a guess to assemble by
-        Newton, keeping the named coordinates), ``baumgarte``, ``t0``."""
+        Newton, keeping the named coordinates), ``baumgarte``, ``t0``, ``share`` (default
+        True: joints that shared coordinates express are eliminated, see
+        :mod:`ncgen.model.sharing`; ``model.sharing`` reports it)."""
         from ncgen.assembly.build import build_model
         return build_model(self, **options)
 

@@ -27,6 +27,8 @@ _CAUSES = {
                        "configuration or redundant constraints) or not finite",
     "IDA_RES_FAIL": "the DAE residual could not be evaluated (non-finite forces or inputs)",
     "IDA_REP_RES_ERR": "the DAE residual repeatedly returned errors (non-finite forces or inputs)",
+    "KKT_FAIL": "the accelerations and multipliers (the KKT system) are not finite at the start of the "
+                "interval, even by least squares: the forces, inputs or constraint functions are not finite",
     "IDA_TOO_MUCH_ACC": "the tolerances are too small for double precision: use a larger rtol/atol",
 }
 

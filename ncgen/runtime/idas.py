@@ -65,6 +65,9 @@ class ChunkedIDAS:
     expand: bool
     algebraic: Callable | None = None
     stats: dict = field(default_factory=lambda: dict.fromkeys(STAT_KEYS, 0))
+    restarts: int = 0     # intervals redone from the previous output time (ncgen.runtime.simulation)
+    rejected_restarts: int = 0   # ... whose result a RATTLE check rejected (another branch)
+    rejected_steps: int = 0      # output intervals next to a singular configuration rejected likewise
 
     def __post_init__(self):
         self.nx = self.dae.size1_in(1)

@@ -81,7 +81,8 @@ def _wrench(model, member, Q_full: np.ndarray, q: np.ndarray, point_local):
 
 
 def joint_reactions(model, q, lam, *, v=None, t=None, u=None, p=None, joints=None) -> dict[str, JointReaction]:
-    """Reactions of ``joints`` (default: every joint with equations) at the state ``q`` with
+    """Reactions of ``joints`` (default: every joint with equations; joints that coordinate
+    sharing replaced, ``model.sharing``, have none: build with ``share=False`` for them) at the state ``q`` with
     multipliers ``lam`` (from :func:`~ncgen.runtime.joint_dynamics.forward_dynamics`, or a
     trajectory's ``lam``); ``u``, ``v``, ``t``, ``p`` for the efforts of actuated joints."""
     q = as_vector(q, model.nq, "q")
@@ -104,6 +105,13 @@ def joint_reactions(model, q, lam, *, v=None, t=None, u=None, p=None, joints=Non
             raise ModelError(f"joint_reactions: no joint named {name!r}; joints: {', '.join(by_name)}")
         if j.kind in ("CoordinateDriver", "Mimic"):
             continue
+        shared = model.sharing is not None and (name in model.sharing.eliminated or name in model.sharing.partial)
+        if shared:
+            if joints is None:
+                continue
+            raise ModelError(f"joint_reactions: joint {name!r} was replaced by shared coordinates at build() "
+                             f"({model.sharing.eliminated.get(name) or model.sharing.partial.get(name)}), so it "
+                             f"has no multipliers to give its reaction; build the model with share=False")
         rows, drive = _rows(model, name)
         if not rows and name not in efforts:
             continue

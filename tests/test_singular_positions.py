@@ -1,0 +1,133 @@
+"""IDAS through singular positions: the N four-bar of the IFToMM benchmark A02.
+
+N + 1 cranks (bars of 1 m, 1 kg) hinged to the ground at x = 0, 1, ..., N and N couplers
+(1 m, 1 kg) joining their tips: a chain of parallelograms.  Released at rest with the cranks
+at θ0 = 45°, it falls through the flat position θ = 0 (all bars on the x axis, A loses rank
+and the crossed branch meets the physical one).  On the physical branch every crank keeps the
+same angle θ and the couplers translate, so the motion is that of one pendulum:
+
+    ((N+1)/3 + N) m L² θ̈ = −((N+1)/2 + N) m g L cos θ
+
+whose solution (here by DOP853 at 1e-13, an independent integrator of a one-line ODE) is the
+reference for the tip of the first crank, (cos θ, sin θ).
+"""
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+import ncgen as nc
+from ncgen.errors import SimulationError
+from ncgen.runtime import simulation
+from ncgen.runtime.rattle_bridge import rattle_interval
+
+G = 9.81
+THETA0 = np.pi / 4
+
+
+def n_fourbar(N: int, **build):
+    s = nc.System(f"nfourbar{N}", gravity=(0, -G))
+    c, sn = np.cos(THETA0), np.sin(THETA0)
+    cranks = [s.add_bar(f"crank{k}", mass=1.0, ends=[s.ground.point((k, 0)), (k + c, sn)])
+              for k in range(N + 1)]
+    for k in range(N):
+        s.add_bar(f"coupler{k}", mass=1.0, ends=[cranks[k].end(1), cranks[k + 1].end(1)])
+    return s.build(**build)
+
+
+def exact_tip(N: int, t: np.ndarray) -> np.ndarray:
+    k = G * ((N + 1) / 2 + N) / ((N + 1) / 3 + N)
+    sol = solve_ivp(lambda _, y: [y[1], -k * np.cos(y[0])], (t[0], t[-1]), [THETA0, 0.0], t_eval=t,
+                    method="DOP853", rtol=1e-13, atol=1e-13)
+    return np.column_stack([np.cos(sol.y[0]), np.sin(sol.y[0])])
+
+
+def tip_error(traj, N):
+    ref = exact_tip(N, traj.t)
+    return np.max(np.linalg.norm(traj.q[:, :2] - ref, axis=1))
+
+
+def test_model_is_singular_when_flat():
+    """The reference really passes the singular position: DOF 1 at 45°, A rank-deficient flat."""
+    model = n_fourbar(2)
+    assert model.dof == 1
+    flat = np.array([1.0, 0.0, 2.0, 0.0, 3.0, 0.0])        # crank tips on the x axis
+    s = np.linalg.svd(model.A(flat), compute_uv=False)
+    assert s[-1] < 1e-12 * s[0]
+
+
+@pytest.mark.parametrize("N, t_end", [(1, 5.0), (10, 1.0)])
+def test_idas_with_projection_stays_on_the_physical_branch(N, t_end):
+    """project=True: through every flat position (at t ≈ 0.42 s, ...) on the parallelogram
+    branch; the plain run (project=False) is the known failure this fixes.  N = 1 over 5 s
+    includes intervals that start next to a flat position (IDAS cannot start there: they
+    are redone from the previous output time)."""
+    model = n_fourbar(N)
+    traj = nc.simulate(model, t_end, 0.01, rtol=1e-10, atol=1e-12, project=True)
+    assert traj.complete
+    assert tip_error(traj, N) < 1e-5
+    assert np.max(np.abs([model.phi(q) for q in traj.q])) < 1e-9
+    if N == 1:
+        assert traj.info["stats"]["restarts"] >= 1
+
+
+def test_rattle_bridge_crosses_the_flat_position_at_second_order():
+    """The NumPy RATTLE bridge (rank-robust) from rest at 45° through the flat position at
+    t ≈ 0.42 s to 0.5 s: on the physical branch, error ÷ 4 when the step is halved."""
+    model = n_fourbar(1)
+    x0 = np.concatenate([model.q0, model.v0])
+    ref = exact_tip(1, np.array([0.0, 0.5]))[-1]
+    errors = [np.linalg.norm(rattle_interval(model, 0.0, x0, np.zeros(0), model.p0, 0.5, n, 1e-14)[:2] - ref)
+              for n in (250, 500)]
+    assert errors[1] < 3e-6
+    assert 3.5 < errors[0] / errors[1] < 4.5
+
+
+@pytest.mark.parametrize("N", [1, 10])
+def test_idas_by_default_switches_to_projection_at_the_first_flat_position(N):
+    """project="auto" (the default): the chunk that meets the first near-singular
+    configuration is redone projected, and the run stays on the physical branch."""
+    model = n_fourbar(N)
+    traj = nc.simulate(model, 1.0, 0.01, rtol=1e-10, atol=1e-12)
+    assert traj.info["project"] == "auto" and traj.info["projected_from"] < 0.42    # the first flat position
+    assert tip_error(traj, N) < 1e-5
+
+
+def test_idas_without_projection_leaves_the_branch_or_stops():
+    """The failure mode the projection removes (kept visible): without it, IDAS either
+    switches to the crossed branch at the first flat position or stops with a SimulationError."""
+    model = n_fourbar(1)
+    try:
+        traj = nc.simulate(model, 1.0, 0.01, rtol=1e-10, atol=1e-12, project=False)
+    except SimulationError as e:
+        assert e.trajectory is not None
+        return
+    assert tip_error(traj, 1) > 1e-2
+
+
+def test_stepper_stays_on_the_physical_branch():
+    """The RATTLE stepper through the flat positions (second order: error ∝ dt²)."""
+    model = n_fourbar(1)
+    traj = nc.simulate(model, 2.0, 0.01, method="stepper", substeps=20)
+    assert tip_error(traj, 1) < 1e-4
+
+
+def test_a_failing_kkt_start_is_a_simulation_error(monkeypatch):
+    """An interval starting where the KKT system cannot be solved (here: accel made to fail)
+    is a SimulationError with the time reached and the trajectory, never a raw CasADi error."""
+    model = n_fourbar(1)
+
+    def broken(*_):
+        return np.full(model.nq + model.nc, np.nan)
+
+    calls = {"n": 0}
+    real = simulation.robust_algebraic
+
+    def fails_later(m, t, q, v, u, p):
+        calls["n"] += 1
+        return broken() if t > 0.25 else real(m, t, q, v, u, p)
+
+    monkeypatch.setattr(simulation, "robust_algebraic", fails_later)
+    with pytest.raises(SimulationError, match="not finite") as info:
+        nc.simulate(model, 1.0, 0.01, rtol=1e-8)
+    e = info.value
+    assert 0.2 <= e.time <= 0.3 and e.trajectory is not None and len(e.trajectory) > 1
