@@ -34,7 +34,7 @@ from ncgen.errors import ModelError
 from ncgen.files import decode_text
 from ncgen.model import toml_write
 from ncgen.model.expressions import did_you_mean, parse, scope, value_to_toml
-from ncgen.model.contacts import CONTACT_TYPES, SpherePlane, SphereSphere
+from ncgen.model.contacts import CONTACT_TYPES, SphereSphere
 from ncgen.model.forces import FORCE_TYPES
 from ncgen.model.joints import JOINT_TYPES, CoordinateDriver
 from ncgen.model.members import NodeRef
@@ -81,6 +81,14 @@ FORCE_FIELDS = {
     "TorsionalSpring": (Field("joint", "joint", True), Field("k", "value", True), Field("damping", "value"),
                         Field("rest_angle", "value of t and parameters")),
     "GeneralizedForce": (Field("value", "generalized force", True),),
+}
+
+#: Keys of each contact type besides the material (:data:`CONTACT_MATERIAL`).
+CONTACT_FIELDS = {
+    "SpherePlane": (Field("sphere", "member", True), Field("at", "vector"), Field("radius", "number"),
+                    Field("plane", "member"), Field("point", "vector"), Field("normal", "vector")),
+    "SphereSphere": (Field("between", "two members", True, ("a", "b")), Field("at_a", "vector"),
+                     Field("radius_a", "number"), Field("at_b", "vector"), Field("radius_b", "number")),
 }
 
 #: Joints whose keys are not ``between`` and their keyword arguments.
@@ -486,41 +494,13 @@ class _Loader:
         self._wrap(t.path, self.s.add_force, FORCE_TYPES[typ](**kw))
 
     def _contact(self, t: _Table):
-        _contact_table(self, t)
-
-
-def _contact_table(loader, t: _Table):
-    """A contact from its table (see the module docstring)."""
-    d = loader.dim
-    typ = _string(t.get("type", required=True), t.at("type"))
-    if typ not in CONTACT_TYPES:
-        raise ModelError(f"{t.at('type')}: unknown contact type {typ!r}{did_you_mean(typ, CONTACT_TYPES)}; "
-                         f"expected one of {', '.join(CONTACT_TYPES)}")
-    kw = {k: _number(t.get(k), t.at(k)) for k in CONTACT_MATERIAL if t.get(k) is not None}
-    if t.get("name") is not None:
-        kw["name"] = _string(t.get("name"), t.at("name"))
-
-    def vec(k):
-        v = t.get(k)
-        return None if v is None else _vector(v, d, t.at(k))
-
-    def num(k):
-        return _number(t.get(k, 0.0), t.at(k))
-
-    if typ == "SpherePlane":
-        keys = ("sphere", "at", "radius", "plane", "point", "normal")
-        sphere = loader._member_ref(t.get("sphere", required=True), t.at("sphere"))
-        plane = loader._member_ref(t.get("plane", "ground"), t.at("plane"))
-        c = SpherePlane(sphere, vec("at"), num("radius"), plane=plane, point=vec("point"), normal=vec("normal"), **kw)
-    else:
-        keys = ("between", "at_a", "radius_a", "at_b", "radius_b")
-        between = t.get("between", required=True)
-        if not isinstance(between, list) or len(between) != 2:
-            raise ModelError(f"{t.at('between')}: expected two member names, got {_describe(between)}")
-        a, b = (loader._member_ref(m, f"{t.at('between')}[{i}]") for i, m in enumerate(between))
-        c = SphereSphere(a, vec("at_a"), num("radius_a"), b, vec("at_b"), num("radius_b"), **kw)
-    t.finish(("type", "name", *CONTACT_MATERIAL, *keys))
-    loader._wrap(t.path, loader.s.add_contact, c)
+        typ = _string(t.get("type", required=True), t.at("type"))
+        if typ not in CONTACT_TYPES:
+            raise ModelError(f"{t.at('type')}: unknown contact type {typ!r}{did_you_mean(typ, CONTACT_TYPES)}; "
+                             f"expected one of {', '.join(CONTACT_TYPES)}")
+        fields = (Field("name", "string"), *CONTACT_FIELDS[typ], *(Field(k, "number") for k in CONTACT_MATERIAL))
+        kw = self._fields(t, fields, ("type",))
+        self._wrap(t.path, self.s.add_contact, CONTACT_TYPES[typ](**kw))
 
 
 def _contact_entries(c) -> dict:
