@@ -14,7 +14,7 @@ M_CART, M_POLE, L_POLE, G = 1.0, 0.2, 0.5, 9.81
 
 @pytest.fixture(scope="module")
 def cartpole():
-    return nc.System.from_toml("examples/cartpole.toml").build()
+    return nc.System.from_toml("examples/cartpole.toml").build(share=False)   # coordinates named as written
 
 
 def textbook_upright():

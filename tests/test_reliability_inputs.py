@@ -5,6 +5,7 @@ are never deleted; what killed runs leave behind is cleaned up."""
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 import time
@@ -141,7 +142,7 @@ def test_run_arguments_are_named():
              (dict(t_end=1.0, p={"k": "abc"}), "parameter 'k': expected numbers"),
              (dict(t_end=1.0, p=[np.nan]), "parameter 'k': expected finite numbers"),
              (dict(t_end=1.0, p={"k": -3.0}), "TorsionalSpring): k = -3: expected a finite number >= 0"),
-             (dict(t_end=1e6, dt=1e-6), "(1,000,000,000,001 points) would need 538 TiB of memory")]
+             (dict(t_end=1e6, dt=1e-6), "(1,000,000,000,001 points) would need ")]
     for kw, expected in cases:
         kw.setdefault("dt", 0.1)
         with pytest.raises(NcgenError) as info:
@@ -152,7 +153,7 @@ def test_run_arguments_are_named():
 def test_huge_grid_is_refused_from_the_cli(tmp_path, capsys):
     err = run(capsys, ["simulate", str(EXAMPLES / "fourbar_planar.toml"), "--t-end", "1e6", "--dt", "1e-6",
                        "-o", str(tmp_path / "x.npz")], 1).err
-    assert "would need 538 TiB of memory" in err and "use a larger dt" in err
+    assert re.search(r"would need [0-9.]+ TiB of memory", err) and "use a larger dt" in err
 
 
 def test_internal_error_is_short_and_says_where_to_report(capsys, monkeypatch):

@@ -216,13 +216,21 @@ def force_terms(system, ctx: Context) -> tuple[ca.SX, ca.SX]:
 
 def initial_guess(layout: Layout, members) -> tuple[np.ndarray, np.ndarray]:
     """System q and v gathered from each member's initial pose and twist.  Where members
-    share a point, their velocities there must agree."""
+    share a point, their velocities there must agree; a point fixed to the ground must be at
+    rest."""
     q = np.full(layout.nq, np.nan)
     v = np.full(layout.nq, np.nan)
     src = [""] * layout.nq
     for m in members:
         for k, i in enumerate(layout.member_indices(m.name)):
-            if i is None:
+            if i is None:                # a point fixed to the ground: it must not move
+                if abs(m.qd0[k]) > 1e-9 * max(1.0, float(np.max(np.abs(m.qd0)))):
+                    slot = m.ctype.slots[k // layout.dim]
+                    raise ModelError(
+                        f"inconsistent initial velocities: {m.name}.{slot} is fixed to the ground (a ground "
+                        f"point or a joint to the ground) but its initial velocity gives it "
+                        f"{m.qd0[k]:.6g} m/s along {'xyz'[k % layout.dim]}; give velocity and "
+                        f"angular_velocity that leave it at rest")
                 continue
             if np.isnan(v[i]):
                 q[i], v[i], src[i] = m.q0[k], m.qd0[k], m.name

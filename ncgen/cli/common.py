@@ -19,14 +19,14 @@ def write_output(text: str, path: str | None) -> None:
     print(f"wrote {path}", file=sys.stderr)
 
 
-def load_model(path: str, params: list[str] | None = None, contacts: str = "smooth"):
+def load_model(path: str, params: list[str] | None = None, contacts: str = "smooth", share: bool = True):
     """Build the model in TOML file ``path``; ``params`` (``name=value`` strings, a vector as
     ``name=1,2,3``) replace default parameter values.  Raises NcgenError with a message
-    naming the file (and the key path, for invalid models).  ``contacts``: how contacts
-    enter the model (``System.build(contacts=...)``)."""
+    naming the file (and the key path, for invalid models).  ``contacts``, ``share``: as in
+    ``System.build``."""
     system = load_system(path, params)
     try:
-        return system.build(contacts=contacts)
+        return system.build(contacts=contacts, share=share)
     except NcgenError as e:
         raise type(e)(f"{path}: model {system.name!r} cannot be built: {e}") from None
 

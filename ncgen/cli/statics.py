@@ -20,6 +20,10 @@ def _common_arguments(p: argparse.ArgumentParser) -> None:
                    help="descent (default): Newton steps made to go down the potential, ends in a stable "
                         "equilibrium; newton: plain Newton, the nearest equilibrium of any stability")
     p.add_argument("--tol", type=float, default=1e-10, help="relative force tolerance (default 1e-10)")
+    p.add_argument("--no-share", action="store_true",
+                   help="keep every joint's equations (System.build(share=False)), so that every joint "
+                        "reports its reaction; by default joints that shared coordinates express are "
+                        "replaced by them and have no multipliers")
 
 
 def _equilibrium_arguments(p: argparse.ArgumentParser) -> None:
@@ -69,7 +73,7 @@ def _check_suffix(parser, option: str, name: str | None, suffixes: tuple[str, ..
 
 def _solve(args):
     from ncgen.runtime.statics import equilibrium
-    model = load_model(args.model, args.param)
+    model = load_model(args.model, args.param, share=not args.no_share)
     return equilibrium(model, u=_inputs(model, args.input), method=args.method, tol=args.tol)
 
 
