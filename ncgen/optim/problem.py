@@ -10,7 +10,7 @@
 Conventions: time in s; ``q`` natural coordinates (m), ``v = q̇`` (m/s); inputs ``u`` and
 parameters ``p`` in the model's units; names as in ``model.input_names``,
 ``model.parameter_names`` (``"k"`` or one component ``"k[1]"``), ``model.coordinate_names``
-(``"cart.r.x"``) and ``model.marker_names`` (``"pole.tip"``).  Inputs are piecewise
+(``"cart.r_i.x"``) and ``model.marker_names`` (``"pole.tip"``).  Inputs are piecewise
 constant over the ``N`` equal intervals.  Bounds and marker path constraints hold at every
 state point of the transcription (collocation points, or shooting nodes).
 
@@ -37,13 +37,14 @@ class OptimalControl:
 
     ``t_final``: horizon length (s), a number (fixed) or ``(lower, upper)`` (free final
     time, a decision variable); ``method``: ``"collocation"`` (Radau IIA of ``degree``,
-    default 3) or ``"shooting"`` (multiple shooting with ``integrator``, default IDAS;
+    default 3, on the constraint ``form`` ``"ggl"`` (default), ``"index3"`` or ``"index1"``:
+    see :mod:`ncgen.optim.radau`) or ``"shooting"`` (multiple shooting with ``integrator``, default IDAS;
     ``integrator_options`` go to its factory); ``parameters``: values replacing the
     model's defaults (``{"k": 50.0}``).
     """
 
     def __init__(self, model, N: int = 50, t_final=1.0, method: str = "collocation", *, degree: int = 3,
-                 integrator: str = "idas", integrator_options: dict | None = None,
+                 form: str = "ggl", integrator: str = "idas", integrator_options: dict | None = None,
                  parameters: dict | None = None):
         if not isinstance(N, (int, np.integer)) or isinstance(N, bool) or N < 1:
             raise OptimizationError(f"N: expected a positive integer number of intervals, got {N!r}")
@@ -57,7 +58,7 @@ class OptimalControl:
         if method == "collocation":
             from ncgen.optim.radau import RadauCollocation
             try:
-                self.transcription = RadauCollocation(degree)
+                self.transcription = RadauCollocation(degree, form)
             except ValueError as exc:
                 raise OptimizationError(str(exc)) from None
         else:
