@@ -22,6 +22,7 @@ initial state ``(model.q0, model.v0)``; :meth:`initial` replaces that, and what 
 """
 from __future__ import annotations
 
+import copy
 import re
 
 import numpy as np
@@ -29,6 +30,7 @@ import numpy as np
 from ncgen.errors import OptimizationError
 
 METHODS = ("collocation", "shooting")
+LINEAR_SOLVERS = ("mumps", "spral", "ma27", "ma57", "ma77", "ma86", "ma97", "pardiso", "pardisomkl")
 MODEL_STATE = "model"
 
 
@@ -282,20 +284,40 @@ class OptimalControl:
 
     # ------------------------------------------------------------------ solve
     def solve(self, warm_start=None, *, max_iter: int = 1000, tol: float = 1e-8, verbose: bool = False,
-              ipopt: dict | None = None):
+              ipopt: dict | None = None, linear_solver: str = "mumps", diagnose: float | bool = True,
+              coarse_start: bool = False):
         """Solve with IPOPT and return an :class:`~ncgen.optim.result.OptimalTrajectory`.
 
-        ``warm_start``: ``"rest"`` (the initial state held, inputs 0 clipped into their
-        bounds), ``"interpolate"`` (every member's pose moved from the initial to the final
-        configuration; the default when ``final(q=...)`` is given, else ``"rest"``), a
-        simulation ``Trajectory`` or a previous solution (times rescaled to the horizon).
+        ``warm_start``: ``"rest"`` (the initial configuration held at rest by the inputs
+        that hold it, clipped into their bounds), ``"interpolate"`` (every member's pose
+        moved from the initial to the final configuration, at rest at the ends where the
+        problem says so, inputs by inverse dynamics; the default when ``final(q=...)`` is
+        given, else ``"rest"``), a simulation ``Trajectory`` or a previous solution (times
+        rescaled to the horizon).  ``coarse_start``: first solve on ``N // 2`` intervals
+        from that guess, then on ``N`` from the coarse solution.
         ``tol``: IPOPT's tolerance, also on the unscaled constraint violation (so the
-        dynamics defects end below it); ``ipopt``: extra IPOPT options.  Raises
-        :class:`~ncgen.errors.OptimizationError` when IPOPT fails (with the last iterate
-        as ``exc.result``)."""
+        dynamics defects end below it); ``ipopt``: any IPOPT options, passed through
+        (they override ncgen's); ``linear_solver``: IPOPT's KKT solver (``"mumps"``,
+        ``"spral"``; ``"ma27"``, ``"ma57"``, ... with the HSL library).
+        ``diagnose``: wall-clock seconds allowed for the relaxed re-solve that names the
+        condition in conflict when IPOPT fails (``True``: 10 s, ``False``/0: skip it).
+        Raises :class:`~ncgen.errors.OptimizationError` when IPOPT fails (with the last
+        iterate as ``exc.result``)."""
+        from ncgen.optim.diagnostics import DIAGNOSIS_BUDGET
         from ncgen.optim.nlp import build_and_solve
-        return build_and_solve(self, warm_start, max_iter=max_iter, tol=tol, verbose=verbose,
-                               ipopt=dict(ipopt or {}))
+        if linear_solver not in LINEAR_SOLVERS:
+            raise OptimizationError(f"linear_solver: expected one of {', '.join(LINEAR_SOLVERS)}, "
+                                    f"got {linear_solver!r}")
+        budget = DIAGNOSIS_BUDGET if diagnose is True else float(diagnose or 0.0)
+        if budget < 0 or not np.isfinite(budget):
+            raise OptimizationError(f"diagnose: expected True, False or a number of seconds ≥ 0, got {diagnose!r}")
+        options = dict(max_iter=max_iter, tol=tol, verbose=verbose, ipopt=dict(ipopt or {}),
+                       linear_solver=linear_solver, diagnose_budget=budget)
+        if coarse_start and self.N >= 2:
+            coarse = copy.copy(self)
+            coarse.N = self.N // 2
+            warm_start = build_and_solve(coarse, warm_start, **options)
+        return build_and_solve(self, warm_start, **options)
 
     def __repr__(self) -> str:
         T = self.t_final if self.t_final_bounds is None else f"free in {self.t_final_bounds}"
