@@ -26,6 +26,9 @@ pytestmark = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc
                             "RATIO looped -O2 / flat -O2, jacobian", "RATIO VM / looped -O2, residual"]),
     ("build_scaling.py", ["=== ncgen: chain of N bars", "KanesMethod", "EXTRAPOLATED"]),
     ("long_run.py", ["=== heavy top", "=== chain of 5 bars", "RATIO ncgen / MuJoCo RK4"]),
+    ("optimal_control.py", [re.compile(r"cartpole +8 \|"), re.compile(r"acrobot +8 \|"), re.compile(r"arm3d +8 \|"),
+                            "RATIO ncgen / minimal, iterations", "RATIO ncgen / minimal, solve time",
+                            "converged: ncgen 3/3, minimal 3/3"]),
 ])
 def test_smoke(tmp_path, script, expected):
     env = {**os.environ, "NCGEN_CACHE_DIR": str(tmp_path / "cache")}

@@ -24,7 +24,7 @@ import numpy as np
 
 from ncgen.errors import OptimizationError
 from ncgen.optim.interpolate import pose_path
-from ncgen.optim.manifold import consistent_velocity
+from ncgen.optim.manifold import consistent_configuration, consistent_velocity
 from ncgen.optim.transcription import Guess
 
 
@@ -51,10 +51,16 @@ def make_guess(ocp, warm_start, q_init: np.ndarray, v_init: np.ndarray, q_final:
                 raise OptimizationError('warm_start="interpolate" needs a final configuration (final(q=...))')
             at_rest = (not np.any(v_init), _final_at_rest(ocp))
             tau = (tg - t0) / T
-            s_of = {(True, True): 3 * tau ** 2 - 2 * tau ** 3, (True, False): tau ** 2,
-                    (False, True): 1 - (1 - tau) ** 2, (False, False): tau}[at_rest]
-            qg = pose_path(model, q_init, q_final, s_of, t=t0, p=p)
-            vg = np.gradient(qg, tg, axis=0)
+            s_of, ds_dt = {(True, True): (3 * tau ** 2 - 2 * tau ** 3, 6 * tau * (1 - tau)),
+                           (True, False): (tau ** 2, 2 * tau),
+                           (False, True): (1 - (1 - tau) ** 2, 2 * (1 - tau)),
+                           (False, False): (tau, np.ones_like(tau))}[at_rest]
+            grid = np.linspace(0.0, 1.0, tau.size)           # the path on a uniform grid of s ...
+            q_s = pose_path(model, q_init, q_final, grid, t=t0, p=p)
+            dq_ds = np.gradient(q_s, grid, axis=0, edge_order=2)
+            qg = np.column_stack([np.interp(s_of, grid, q_s[:, i]) for i in range(model.nq)])
+            qg = np.array([consistent_configuration(model, q, t=t0, p=p, what="guess", tolerance=1.0) for q in qg])
+            vg = np.column_stack([np.interp(s_of, grid, dq_ds[:, i]) for i in range(model.nq)]) * (ds_dt / T)[:, None]
             vg = np.array([consistent_velocity(model, q, v, t=ti, p=p) for ti, q, v in zip(tg, qg, vg)])
         ag = np.gradient(vg, tg, axis=0)
         ug, lg = inverse_dynamics(model, ocp, tg, qg, vg, ag, u_rest, p)

@@ -33,6 +33,7 @@ from ncgen.optim.manifold import (BRANCH_RADIUS, consistent_configuration, lengt
                                   resolve_velocity, tangent_basis)
 from ncgen.optim.problem import MODEL_STATE
 from ncgen.optim.result import OptimalTrajectory, SolverStats
+from ncgen.optim.targets import pose_target
 from ncgen.optim.transcription import Horizon
 
 
@@ -136,8 +137,13 @@ class NLP:
         # initial node
         q_init, v_init = self._initial_state(p_num)
         tN = t0 + guess_duration(ocp, warm_start)
+        q_start = model.q0 if q_init is None else q_init
         self.q_final = None if ocp.final_spec["q"] is None else resolve_configuration(
-            model, ocp.final_spec["q"], model.q0 if q_init is None else q_init, t=tN, p=p_num, what="final q")
+            model, ocp.final_spec["q"], q_start, t=tN, p=p_num, what="final q")
+        self.pose_target = None
+        if ocp.final_spec.get("pose"):
+            self.pose_target = pose_target(model, ocp.final_spec["pose"], q_start, t=tN, p=p_num)
+            self.q_final = self.pose_target.q_ref
         guess, p_guess = make_guess(ocp, warm_start,
                                     model.q0 if q_init is None else q_init,
                                     np.zeros(model.nq) if v_init is None else v_init, self.q_final, p_num)
@@ -217,7 +223,15 @@ class NLP:
         qN, vN = disc.q[:, -1], disc.v[:, -1]
         radius = BRANCH_RADIUS * length_scale(model)
         q_ref = None
-        if self.q_final is not None:
+        if self.pose_target is not None:
+            target = self.pose_target
+            q_ref = target.q_ref
+            W = target.rows(model, t=tN, p=p_num)
+            self.constrain(f"{target.label} (independent components)", "final", ca.mtimes(ca.DM(W), qN - ca.DM(q_ref)))
+            Sq = ca.mtimes(ca.DM(target.S), qN)
+            Sr = target.S @ q_ref
+            self.constrain(f"{target.label} (branch box)", "final", Sq, Sr - radius, Sr + radius)
+        elif self.q_final is not None:
             q_ref = self.q_final
             N = tangent_basis(model, q_ref, t=tN, p=p_num)
             self.constrain("final q (tangent components)", "final", ca.mtimes(N.T, qN - ca.DM(q_ref)))

@@ -75,7 +75,7 @@ class OptimalControl:
         self.p_free: dict[int, tuple[float, float]] = {}
         self.marker_bounds: list[tuple[str, np.ndarray, np.ndarray]] = []
         self.initial_spec = {"q": MODEL_STATE, "v": MODEL_STATE, "markers": []}
-        self.final_spec = {"q": None, "v": None, "markers": []}
+        self.final_spec = {"q": None, "v": None, "markers": [], "pose": None}
         self.periodic_spec = {"q": False, "v": False}
         self.effort_R: np.ndarray | None = None
         self.tracking: list[tuple[str, object, float]] = []
@@ -167,14 +167,21 @@ class OptimalControl:
                                     "pass q=None together with marker=...")
         return self
 
-    def final(self, q=None, v=None, marker=None) -> "OptimalControl":
+    def final(self, q=None, v=None, marker=None, pose=None) -> "OptimalControl":
         """Final conditions (``None`` = free): ``q``, ``v`` targets given as in
         :meth:`initial` (a dict ``q`` is assembled from the initial configuration; their
         ``dof`` tangent components are imposed), ``marker``: ``(name, position)`` or a list
-        of them.  ``v`` without ``q`` is taken in the tangent space of the guess's final
-        configuration: exact for ``v=0``."""
+        of them; ``pose``: ``{member name: (rotation, position)}`` — a member's frame
+        (rotation body→world, 3×3, or an angle in planar systems; position of its origin,
+        m: a body's centre of mass as given to ``add_body``), the other members left to the
+        joints (:mod:`ncgen.optim.targets`).  ``v`` without ``q`` is taken in the tangent
+        space of the guess's final configuration: exact for ``v=0``."""
+        if pose is not None and q is not None:
+            raise OptimizationError("final: give q or pose, not both (a pose fixes part of q)")
+        if pose is not None and (not isinstance(pose, dict) or not pose):
+            raise OptimizationError(f"final pose: expected {{member name: (rotation, position)}}, got {pose!r}")
         self.final_spec = {"q": self._state(q, "final q"), "v": self._state(v, "final v"),
-                           "markers": self._markers(marker, "final")}
+                           "markers": self._markers(marker, "final"), "pose": pose}
         self._check_periodic()
         return self
 
@@ -191,7 +198,8 @@ class OptimalControl:
 
     def _check_periodic(self):
         for key in ("q", "v"):
-            if self.periodic_spec[key] and self.final_spec[key] is not None:
+            if self.periodic_spec[key] and (self.final_spec[key] is not None
+                                            or key == "q" and self.final_spec.get("pose") is not None):
                 raise OptimizationError(f"final {key} and periodic {key} both given: the final {key} would "
                                         "be imposed twice; keep one of them")
 
