@@ -2,11 +2,15 @@
 
 Constraint handling (why the equality-constraint Jacobian has full row rank):
 
-* the transcription imposes the index-1 dynamics only (ODE + algebraic equation for λ,
-  Baumgarte terms included); their rows are nonsingular in the interval unknowns;
-* the invariants ``Φ(q) = 0`` and ``A v + Φ_t = 0`` are imposed once, at the initial
-  node, and only where the initial state is a decision variable (a fixed initial state is
+* the transcription's rows are square and nonsingular in each interval's own unknowns
+  (:mod:`ncgen.optim.radau`: the GGL form imposes ``Φ = 0`` and ``A v + Φ_t = 0`` at the
+  collocation points, never at the initial node; the index-1 form and shooting keep them
+  as invariants);
+* at the initial node the invariants ``Φ(q) = 0`` and ``A v + Φ_t = 0`` are imposed once,
+  and only where the initial state is a decision variable (a fixed initial state is
   projected onto the constraints and enters as a constant);
+* partial targets (a member's pose) impose only their independent rows
+  (:mod:`ncgen.optim.targets`);
 * full-state final and periodic conditions impose their ``dof`` tangent components
   ``Nᵀ (x_N − x*)`` (:mod:`ncgen.optim.manifold`), never the ``nc`` components the
   dynamics already keep; a box around the target (inequalities, inactive at the
@@ -14,8 +18,8 @@ Constraint handling (why the equality-constraint Jacobian has full row rank):
 * bounds on inputs, states, parameters and the final time are simple variable bounds
   (``detect_simple_bounds``), so they never enter the constraint Jacobian.
 
-Every constraint group is recorded with a label so that a failure can name the group
-violated most at the last iterate.
+Every constraint group is recorded with a label so that a failure can name it
+(:mod:`ncgen.optim.diagnostics`).
 """
 from __future__ import annotations
 
