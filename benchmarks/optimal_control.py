@@ -11,7 +11,7 @@ Cases (SI units; inputs piecewise constant over N equal intervals; cost ∫ uᵀ
 * ``arm3d`` — 3D: two rods (``ruvw`` bodies, 0.5 kg, 0.4 m, radius 2 cm) on hinges about
   y (shoulder at the origin, elbow at the first rod's end), both motorised,
   |τ| ≤ 5 N·m, gravity −z; from hanging at rest to shoulder +90° and elbow +90° at rest in
-  T = 1 s, R = 1.
+  T = 1 s, R = 1; in ncgen the target is the forearm's pose (``final(pose=...)``).
 
 The minimal formulation has the joint angles as coordinates (cart x and pole angle; the
 links' angles), its equations of motion from the Lagrangian ``L = T − V`` (mass matrix
@@ -22,7 +22,10 @@ IPOPT with its default options, and a naive guess: the joint angles interpolated
 from start to end, inputs 0.  ncgen solves from its default guess (``ocp.solve()``).
 
 Printed per case and N: IPOPT iterations, solve time (s, IPOPT call only), cost, and the
-ratios ncgen / minimal; ``RATIO`` lines summarise.  Targets (issue 18): iterations ≤ 2×,
+ratios ncgen / minimal; "at ncgen opt" is the minimal formulation solved again from ncgen's
+optimum (joint angles and inputs at the nodes, the same winding), the check that both
+reach the same optimum, and "rel diff" compares ncgen's cost with it; ``RATIO`` lines
+summarise.  Targets (issue 18): iterations ≤ 2×,
 time ≤ 10×, costs within 1e-3 (relative) at equal N.
 
     python benchmarks/optimal_control.py                 N = 30, 40, 80, every case
