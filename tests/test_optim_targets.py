@@ -111,3 +111,33 @@ def test_coarse_start_solves_the_fine_problem_from_the_coarse_solution():
     assert coarse.stats.success and coarse.q.shape == direct.q.shape
     np.testing.assert_allclose(coarse.q[-1], [0, 1, 0, 2], atol=1e-8)
     assert coarse.stats.iterations < direct.stats.iterations     # the fine solve starts near an optimum
+
+
+def test_guess_turn_chooses_the_direction_of_a_rotation():
+    """Planar: a pendulum swung up clockwise passes x < 0 halfway; 3D: the forearm's half
+    turn about −y instead of the shortest arc's axis; an axis the turn is not about is an
+    error naming the member."""
+    from optim_models import pendulum
+    model = pendulum()
+    mid = {}
+    for turn in (None, -1):
+        ocp = nc.OptimalControl(model, N=10, t_final=1.0).final(q=[0, 1], v=0)
+        if turn is not None:
+            ocp.guess_turn("bar", turn)
+        g, _ = make_guess(ocp, None, model.q0, np.zeros(2), np.array([0, 1.0]), model.p0)
+        mid[turn] = g.q(np.array([0.5]))[0]
+    np.testing.assert_allclose(mid[None], [1, 0], atol=1e-9)
+    np.testing.assert_allclose(mid[-1], [-1, 0], atol=1e-9)
+
+    arm = arm_system().build()
+    _, (R2, p2), _ = arm_frames(np.pi / 2, np.pi / 2)
+    ocp = nc.OptimalControl(arm, N=4, t_final=1.0).final(pose={"fore": (R2, p2)}, v=0)
+    ocp.guess_turn("fore", (0, -1, 0))
+    q_final = arm_system(np.pi / 2, np.pi / 2).build().q0
+    g, _ = make_guess(ocp, None, arm.q0, np.zeros(arm.nq), q_final, arm.p0)
+    R, _ = arm.poses(g.q(np.array([0.5]))[0])
+    c = np.cos(-np.pi / 2)
+    np.testing.assert_allclose(R[1], [[c, 0, -1], [0, 1, 0], [1, 0, c]], atol=1e-4)   # roty(−π/2), sampled guess
+    ocp.guess_turn("fore", (1, 0, 0))
+    with pytest.raises(OptimizationError, match="guess_turn 'fore'.*not about"):
+        make_guess(ocp, None, arm.q0, np.zeros(arm.nq), q_final, arm.p0)

@@ -56,7 +56,7 @@ def make_guess(ocp, warm_start, q_init: np.ndarray, v_init: np.ndarray, q_final:
                            (False, True): (1 - (1 - tau) ** 2, 2 * (1 - tau)),
                            (False, False): (tau, np.ones_like(tau))}[at_rest]
             grid = np.linspace(0.0, 1.0, tau.size)           # the path on a uniform grid of s ...
-            q_s = pose_path(model, q_init, q_final, grid, t=t0, p=p)
+            q_s = pose_path(model, q_init, q_final, grid, t=t0, p=p, turns=ocp.guess_turns)
             dq_ds = np.gradient(q_s, grid, axis=0, edge_order=2)
             qg = np.column_stack([np.interp(s_of, grid, q_s[:, i]) for i in range(model.nq)])
             qg = np.array([consistent_configuration(model, q, t=t0, p=p, what="guess", tolerance=1.0) for q in qg])

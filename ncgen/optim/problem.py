@@ -81,6 +81,7 @@ class OptimalControl:
         self.tracking: list[tuple[str, object, float]] = []
         self.terminal: list[tuple[str, object]] = []
         self.time_weight = 0.0
+        self.guess_turns: dict[str, object] = {}
         for name, value in (parameters or {}).items():
             self.set_parameter(name, value)
 
@@ -240,6 +241,17 @@ class OptimalControl:
                 raise OptimizationError(f"{what} marker {name!r}: every component is None; give at least one")
             out.append((name, target))
         return out
+
+    def guess_turn(self, member: str, axis) -> "OptimalControl":
+        """In the interpolated guess, turn ``member`` the positive way about ``axis`` (a
+        world direction in 3D, about which its rotation from the initial to the final pose
+        must be; ``+1`` counter-clockwise or ``−1`` clockwise in a plane) instead of along
+        the shortest arc."""
+        if member not in self.model.member_names:
+            raise OptimizationError(f"guess_turn: no member named {member!r}; members: "
+                                    f"{', '.join(self.model.member_names)}")
+        self.guess_turns[member] = axis
+        return self
 
     # ------------------------------------------------------------------ costs
     def minimize_effort(self, weight=1.0) -> "OptimalControl":
