@@ -30,6 +30,7 @@ time ≤ 10×, costs within 1e-3 (relative) at equal N.
 
     python benchmarks/optimal_control.py                 N = 30, 40, 80, every case
     python benchmarks/optimal_control.py --cases arm3d --sizes 30
+    python benchmarks/optimal_control.py --coarse-start  ncgen solves on N/2 first (totals reported)
     python benchmarks/optimal_control.py --quick         N = 8 (seconds; CI)
 """
 from __future__ import annotations
@@ -302,23 +303,27 @@ CASES = {"cartpole": (cartpole_ncgen, cartpole_minimal, cartpole_angles),
          "arm3d": (arm_ncgen, arm_minimal, arm_angles)}
 
 
-def solve_ncgen(make, angles, N: int, max_iter: int, form: str) -> dict:
-    """ncgen from its default guess; ``path``: ``(t, joint angles, u)`` of its result."""
+def solve_ncgen(make, angles, N: int, max_iter: int, form: str, coarse_start: bool = False) -> dict:
+    """ncgen from its default guess (with ``coarse_start``: first on N // 2 intervals, then on
+    N from that solution, iterations and times summed); ``path``: ``(t, joint angles, u)``."""
     import ncgen as nc
-    ocp = make(N)
-    if form != "ggl":
-        from ncgen.optim.radau import RadauCollocation
-        ocp.transcription = RadauCollocation(3, form)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        try:
-            sol = ocp.solve(max_iter=max_iter)
-            st, ok = sol.stats, True
-        except nc.errors.OptimizationError as exc:
-            sol, ok = exc.result, False
-            st = sol.stats
+    iterations, elapsed, warm = 0, 0.0, None
+    for n in ([N // 2, N] if coarse_start else [N]):
+        ocp = make(n)
+        if form != "ggl":
+            from ncgen.optim.radau import RadauCollocation
+            ocp.transcription = RadauCollocation(3, form)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            try:
+                sol = ocp.solve(warm_start=warm, max_iter=max_iter, diagnose=False)
+                st, ok = sol.stats, True
+            except nc.errors.OptimizationError as exc:
+                sol, ok = exc.result, False
+                st = sol.stats
+        iterations, elapsed, warm = iterations + st.iterations, elapsed + st.solve_time, sol
     th = np.unwrap(np.array([angles(ocp.model, q) for q in sol.q]), axis=0)
-    return {"iterations": st.iterations, "time": st.solve_time, "cost": st.objective, "success": ok and st.success,
+    return {"iterations": iterations, "time": elapsed, "cost": st.objective, "success": ok and st.success,
             "size": f"{st.n_variables}x{st.n_constraints}", "path": (sol.t - sol.t[0], th, sol.u[:-1])}
 
 
@@ -329,6 +334,8 @@ def main(argv=None) -> int:
     ap.add_argument("--max-iter", type=int, default=1000)
     ap.add_argument("--form", default="ggl", choices=["ggl", "index3", "index1"],
                     help="ncgen's collocation form (ncgen.optim.radau)")
+    ap.add_argument("--coarse-start", action="store_true",
+                    help="ncgen solves on N // 2 first (solve(coarse_start=True)); iterations and times summed")
     ap.add_argument("--quick", "--smoke", action="store_true", help="N = 8 only (seconds)")
     args = ap.parse_args(argv)
     sizes = [8] if args.quick else args.sizes
@@ -339,7 +346,7 @@ def main(argv=None) -> int:
     for case in args.cases:
         make, minimal, angles = CASES[case]
         for N in sizes:
-            a = solve_ncgen(make, angles, N, args.max_iter, args.form)
+            a = solve_ncgen(make, angles, N, args.max_iter, args.form, args.coarse_start)
             b = solve_minimal(minimal(), N)
             c = solve_minimal(minimal(), N, guess=a["path"])     # the same local optimum as ncgen's
             rel = abs(a["cost"] - c["cost"]) / max(abs(c["cost"]), 1e-12)
