@@ -33,6 +33,9 @@ pytestmark = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc
     ("joint_space.py", ["=== call overhead", "RATIO casadi.external / direct", "=== Panda",
                         "RATIO ncgen direct / pinocchio.aba"]),
     ("sharing_chain.py", ["=== chain of N = 3 bars", "RATIO explicit (shared by build) / shared-point chain"]),
+    ("optimal_control.py", [re.compile(r"cartpole +8 \|"), re.compile(r"acrobot +8 \|"), re.compile(r"arm3d +8 \|"),
+                            "RATIO ncgen / minimal, iterations", "RATIO ncgen / minimal, solve time",
+                            "converged: ncgen 3/3, minimal 3/3"]),
 ])
 def test_smoke(tmp_path, script, expected):
     if script == "joint_space.py":

@@ -1,6 +1,8 @@
 """Trajectory optimisation end to end: cart-pole swing-up (convergence, defects, final
 state, re-simulation with nc.simulate, warm start, multiple shooting) and closed-form
 optimal controls of the double integrator."""
+import copy
+
 import numpy as np
 import pytest
 
@@ -46,14 +48,21 @@ def test_equality_jacobian_has_full_row_rank(swingup):
 
 def test_resimulating_the_inputs_reproduces_the_motion(swingup):
     """IDAS (tight tolerances) with the optimal inputs held piecewise constant follows the
-    optimised nodes to 1 mm: the transcription error of Radau IIA(3) at N = 40."""
-    model, _, sol = swingup
-    h = sol.t[1] - sol.t[0]
-    sim = nc.simulate(model, sol.t[-1], h, u=sol.u, hold="zoh", q0=sol.q[0], v0=sol.v[0],
-                      rtol=1e-9, atol=1e-11)
-    np.testing.assert_allclose(sim.t, sol.t, atol=1e-12)
-    assert np.max(np.abs(sim.q - sol.q)) < 1e-3
-    assert np.max(np.abs(sim.marker("pole.tip") - sol.marker("pole.tip"))) < 1e-3
+    optimised nodes, and the gap is the transcription error: below 5 cm at N = 40 (the
+    open-loop replay of a motion that ends balancing upright amplifies it) and below 1 mm,
+    more than 10× smaller, at N = 80."""
+    model, ocp, sol = swingup
+
+    def gap(s):
+        h = s.t[1] - s.t[0]
+        sim = nc.simulate(model, s.t[-1], h, u=s.u, hold="zoh", q0=s.q[0], v0=s.v[0], rtol=1e-9, atol=1e-11)
+        np.testing.assert_allclose(sim.t, s.t, atol=1e-12)
+        return max(np.max(np.abs(sim.q - s.q)), np.max(np.abs(sim.marker("pole.tip") - s.marker("pole.tip"))))
+
+    fine = copy.copy(ocp)
+    fine.N = 80
+    coarse_gap, fine_gap = gap(sol), gap(fine.solve(warm_start=sol))
+    assert coarse_gap < 5e-2 and fine_gap < 1e-3 and fine_gap < coarse_gap / 10, (coarse_gap, fine_gap)
 
 
 def test_warm_start_from_the_solution_converges_at_once(swingup):

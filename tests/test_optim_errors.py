@@ -43,8 +43,39 @@ def test_too_weak_a_motor_names_the_final_condition_and_the_saturated_input(mode
         ocp.solve()
     msg = str(info.value)
     assert info.value.status in ("Infeasible_Problem_Detected", "Restoration_Failed")
-    assert "the nearest feasible motion misses final q by" in msg and "Likely culprit: final q —" in msg
+    assert "the nearest feasible motion misses final q by" in msg
+    assert "Likely culprit: final q against the bounds on tau —" in msg
     assert "Inputs on their bounds in most intervals: tau" in msg
+
+
+def test_diagnosis_can_be_turned_off_and_then_says_it_does_not_know(model):
+    """No relaxed re-solve: the message says the cause is unknown and calls the largest
+    violations symptoms, never a culprit (and the failure costs one solve, not two)."""
+    ocp = nc.OptimalControl(model, N=12, t_final=1.0)
+    ocp.bound_input("tau", -1, 1)
+    ocp.final(q=[0.0, 1.0], v=0)
+    with pytest.raises(OptimizationError) as info:
+        ocp.solve(diagnose=False)
+    msg = str(info.value)
+    assert "Which condition conflicts is not known (the relaxed re-solve is off" in msg
+    assert "Likely culprit" not in msg and "symptoms, not necessarily the cause" in msg
+
+
+def test_diagnosis_out_of_budget_says_it_does_not_know(model):
+    ocp = nc.OptimalControl(model, N=12, t_final=1.0)
+    ocp.bound_input("tau", -1, 1)
+    ocp.final(q=[0.0, 1.0], v=0)
+    with pytest.raises(OptimizationError) as info:
+        ocp.solve(diagnose=1e-6)
+    msg = str(info.value)
+    assert "Which condition conflicts is not known (the relaxed re-solve ended with" in msg
+    assert "budget of 1e-06 s" in msg and "Likely culprit" not in msg
+
+
+def test_unavailable_linear_solver_is_named(model):
+    ocp = nc.OptimalControl(model, N=4, t_final=1.0)
+    with pytest.raises(OptimizationError, match="linear_solver: expected one of mumps"):
+        ocp.solve(linear_solver="lu")
 
 
 def test_iteration_limit_is_a_failure_with_advice(model):

@@ -62,14 +62,16 @@ def test_every_problem_feature_is_honoured():
 
 
 @pytest.mark.parametrize("case", ["fixed both ends", "free start with marker", "periodic", "free time",
-                                  "final marker only", "shooting"])
+                                  "final marker only", "final pose", "index3 form", "index1 form", "shooting"])
 def test_equality_constraints_are_never_redundant(case):
     """Rank of the equality Jacobian = its number of rows, whatever is imposed: the
     invariants only where the initial state is free, full-state targets through their
     tangent components."""
     model = cartpole()
     method = "shooting" if case == "shooting" else "collocation"
-    ocp = nc.OptimalControl(model, N=8, t_final=(1.0, 3.0) if case == "free time" else 1.5, method=method)
+    form = case.split()[0] if case.endswith("form") else "ggl"
+    ocp = nc.OptimalControl(model, N=8, t_final=(1.0, 3.0) if case == "free time" else 1.5, method=method,
+                            form=form)
     ocp.bound_input("force", -30, 30)
     ocp.minimize_effort()
     if case == "free start with marker":
@@ -80,6 +82,8 @@ def test_equality_constraints_are_never_redundant(case):
         ocp.track_marker("pole.tip", (0.3, -0.4))
     elif case == "final marker only":
         ocp.final(marker=("pole.tip", (0.4, None)), v=0)
+    elif case == "final pose":                       # the pole hanging (x̄ along −y) below x = 0.4
+        ocp.final(pose={"pole": (-np.pi / 2, (0.4, -0.25))}, v=0)
     else:
         ocp.final(q={"cart.r_i.x": 0.4, "pole.r_j.x": 0.4, "pole.r_j.y": -0.5}, v=0)
         if case == "free time":

@@ -1,4 +1,9 @@
-"""Checks of a solved NLP: rank of the equality constraints, derivatives IPOPT used.
+"""Diagnoses of a failed solve, and checks of a solved NLP.
+
+* :func:`diagnose` — the message of a failed solve: IPOPT's status and, when a relaxed
+  re-solve (elastic mode, bounded by a wall-clock budget) can tell, the condition that
+  conflicts; otherwise it says it does not know and lists the largest violations at the
+  last iterate as symptoms.
 
 * :func:`equality_rank` — the Jacobian of the equality constraints at the solution must
   have full row rank (LICQ for the equalities); :mod:`ncgen.optim.nlp` explains why the
@@ -13,6 +18,114 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
+
+from ncgen.errors import OptimizationError
+
+#: Constraint kinds relaxed by slacks when diagnosing a failure: the wishes (conditions and
+#: path constraints), never the physics (dynamics, invariants) or the bounds.
+RELAXABLE = ("initial", "final", "periodic", "path")
+#: Default wall-clock budget (s) of the relaxed re-solve that names a conflicting condition.
+DIAGNOSIS_BUDGET = 10.0
+
+#: Iteration limit of that re-solve.
+DIAGNOSIS_MAX_ITER = 300
+
+SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+
+HINTS = {"final": "check that the final conditions are reachable within the horizon and the bounds",
+         "initial": "check that the initial conditions agree with the joints",
+         "periodic": "check that a periodic motion exists within the bounds",
+         "path": "the path constraint may contradict the initial or final conditions"}
+
+
+def diagnose(nlp, value, result, *, tol: float, ipopt: dict, budget: float = DIAGNOSIS_BUDGET,
+             linear_solver: str = "mumps") -> str:
+    """A message naming IPOPT's status and, if it can be found, the condition that conflicts.
+
+    The conflict is found in elastic mode: the problem is solved again from the last
+    iterate with every condition and path constraint relaxed by slacks whose sum is
+    minimised, dynamics, invariants and bounds kept, within ``budget`` seconds of wall
+    time (0 or ``None``: not at all).  The conditions the nearest feasible motion still
+    misses are the ones that cannot be met (with the inputs on their bounds, if any are
+    saturated).  If the re-solve is skipped, fails or runs out of time, the message says
+    that the cause is unknown and lists the largest violations at the last iterate."""
+    status = result.stats.status
+    lines = [f"IPOPT did not solve the problem: {status} after {result.stats.iterations} iterations."]
+    if status == "Infeasible_Problem_Detected":
+        lines.append("The constraints look infeasible (IPOPT converged to a point of minimal violation).")
+    misses, why = elastic_misses(nlp, result, tol=tol, ipopt=ipopt, budget=budget, linear_solver=linear_solver)
+    saturated = saturated_inputs(nlp, result)
+    if misses:
+        lines.append("With the conditions relaxed (dynamics and bounds kept), the nearest feasible motion misses "
+                     + "; ".join(f"{label} by {miss:.3g}" for label, miss in misses[:3]) + ".")
+        kind = next(g.kind for g in nlp.groups if g.label.split(" (")[0] == misses[0][0])
+        conflict = misses[0][0] + (f" against the bounds on {', '.join(saturated)}" if saturated else "")
+        lines.append(f"Likely culprit: {conflict} — {HINTS.get(kind, 'loosen it')}.")
+    else:
+        if why == "feasible":
+            lines.append("Every condition can be met with the dynamics and bounds (a relaxed re-solve met them), "
+                         "so this is a convergence failure, not a conflict.")
+        else:
+            lines.append(f"Which condition conflicts is not known ({why}).")
+        ranked = sorted(((violation_of(value, g), g) for g in nlp.groups), key=lambda x: -x[0])
+        worst = [(v, g) for v, g in ranked if v > 1e-6][:3]
+        if worst:
+            lines.append("Largest violations at the last iterate (symptoms, not necessarily the cause): " +
+                         "; ".join(f"{g.label} ({v:.3g})" for v, g in worst) + ".")
+    if saturated:
+        lines.append("Inputs on their bounds in most intervals: " + ", ".join(saturated) + ".")
+    if status == "Maximum_Iterations_Exceeded" and not misses:
+        lines.append("Raise max_iter, warm start from a simulation or an easier problem's solution, or try "
+                     "solve(coarse_start=True).")
+    return "\n".join(lines)
+
+
+def elastic_misses(nlp, result, *, tol: float, ipopt: dict, budget, linear_solver: str = "mumps"):
+    """``([(label, largest slack)], why)``: the conditions the elastic problem cannot meet,
+    largest first, and why the list is empty (``"feasible"``, or the reason the re-solve
+    gave no answer)."""
+    if not budget:
+        return [], "the relaxed re-solve is off: solve(diagnose=seconds) turns it on"
+    if not any(g.kind in RELAXABLE for g in nlp.groups):
+        return [], "there are no conditions to relax"
+    elastic = type(nlp)(nlp.ocp, elastic=True)      # the same NLP with its conditions relaxed
+    try:
+        elastic.build(result)
+        value = elastic.solve(max_iter=DIAGNOSIS_MAX_ITER, tol=max(tol, 1e-8), verbose=False, ipopt=ipopt,
+                              linear_solver=linear_solver, max_wall_time=float(budget))
+    except (OptimizationError, RuntimeError) as exc:
+        return [], f"the relaxed re-solve failed: {exc}"
+    status = elastic.opti.stats().get("return_status")
+    if status not in SUCCESS:
+        return [], f"the relaxed re-solve ended with {status} within its budget of {float(budget):g} s"
+    threshold = max(1e-6, 100 * tol)
+    misses: dict[str, float] = {}
+    for label, s in elastic.slacks.items():          # "final q (tangent components)" -> "final q"
+        name = label.split(" (")[0]
+        misses[name] = max(misses.get(name, 0.0), float(np.max(np.array(value(s)), initial=0.0)))
+    out = sorted([(name, m) for name, m in misses.items() if m > threshold], key=lambda x: -x[1])
+    return out, "feasible"
+
+
+def violation_of(value, g) -> float:
+    """Largest violation of the constraint group ``g`` where ``value`` evaluates."""
+    x = np.array(value(g.expr)).reshape(-1)
+    return float(np.max(np.maximum(g.lb - x, 0) + np.maximum(x - g.ub, 0), initial=0.0))
+
+
+def saturated_inputs(nlp, result) -> list[str]:
+    """Input components on a bound in more than half of the intervals."""
+    ocp, out = nlp.ocp, []
+    names = [n if s == 1 else f"{n}[{k}]" for n, s in zip(nlp.model.input_names, nlp.model.input_sizes)
+             for k in range(s)]
+    for i, name in enumerate(names):
+        lo, hi = ocp.u_bounds[:, i]
+        u = result.u[:-1, i]
+        span = max(hi - lo, 1.0) if np.isfinite(hi - lo) else 1.0
+        at = (np.abs(u - lo) < 1e-3 * span) | (np.abs(u - hi) < 1e-3 * span)
+        if at.mean() > 0.5:
+            out.append(name)
+    return out
 
 
 @dataclass

@@ -1,8 +1,15 @@
 """Initial guesses for the NLP: rest, pose interpolation, or a previous motion.
 
-``"rest"`` holds the initial state with inputs 0 (clipped into their bounds);
-``"interpolate"`` moves every member's pose from the initial to the final configuration
-(:mod:`ncgen.optim.interpolate`), the default when ``final(q=...)`` is given.
+``"rest"`` holds the initial configuration at rest, with the inputs that hold it there
+(static inverse dynamics, least squares, clipped into their bounds);
+``"interpolate"`` (the default when ``final(q=...)`` is given) moves every member's pose
+from the initial to the final configuration (:mod:`ncgen.optim.interpolate`) with a
+timing that starts and ends at rest where the problem says so (initial ``v = 0``,
+``final(v=0)``: the smoothstep ``s = 3τ² − 2τ³``), velocities tangent to the constraints,
+and the inputs that best produce this motion (inverse dynamics: ``M q̈ + Aᵀ λ = F(u)`` in
+least squares for ``(u, λ)``, linear in ``u`` about the rest inputs, then clipped).  So the
+guess lies on the constraint manifold and the dynamics hold as far as the inputs can make
+them.
 
 A previous motion is anything with ``t`` (s), ``q``, ``v`` (``len(t) × nq``) and optionally
 ``lam`` and ``u`` (``len(t) × nu`` or ``(len(t) − 1) × nu``, held piecewise constant unless
@@ -17,6 +24,7 @@ import numpy as np
 
 from ncgen.errors import OptimizationError
 from ncgen.optim.interpolate import pose_path
+from ncgen.optim.manifold import consistent_configuration, consistent_velocity
 from ncgen.optim.transcription import Guess
 
 
@@ -33,28 +41,38 @@ def make_guess(ocp, warm_start, q_init: np.ndarray, v_init: np.ndarray, q_final:
     u_rest[bad] = 0.0
     if warm_start is None:
         warm_start = "interpolate" if q_final is not None else "rest"
-    if isinstance(warm_start, str) and warm_start == "rest":
-        q_of = _constant(q_init)
-        v_of = _constant(v_init)
-        u_of = _constant(u_rest)
-        lam_of = None
-    elif isinstance(warm_start, str) and warm_start == "interpolate":
-        qf = q_final
-        if qf is None:
-            raise OptimizationError('warm_start="interpolate" needs a final configuration (final(q=...))')
-        tg = t0 + T * np.linspace(0.0, 1.0, 2 * ocp.N + 1)
-        qg = pose_path(model, q_init, qf, (tg - t0) / T, t=t0, p=p)
-        vg = np.gradient(qg, tg, axis=0)
-        q_of, v_of, _, _ = _from_motion(_Samples(tg, qg, vg), model, t0, T, u_rest)
-        u_of = _constant(u_rest)
-        lam_of = None
+    if isinstance(warm_start, str) and warm_start in ("rest", "interpolate"):
+        tg = t0 + T * np.linspace(0.0, 1.0, 4 * ocp.N + 1)
+        if warm_start == "rest":
+            qg = np.tile(np.asarray(q_init, dtype=float), (tg.size, 1))
+            vg = np.tile(np.asarray(v_init, dtype=float), (tg.size, 1))
+        else:
+            if q_final is None:
+                raise OptimizationError('warm_start="interpolate" needs a final configuration (final(q=...))')
+            at_rest = (not np.any(v_init), _final_at_rest(ocp))
+            tau = (tg - t0) / T
+            s_of, ds_dt = {(True, True): (3 * tau ** 2 - 2 * tau ** 3, 6 * tau * (1 - tau)),
+                           (True, False): (tau ** 2, 2 * tau),
+                           (False, True): (1 - (1 - tau) ** 2, 2 * (1 - tau)),
+                           (False, False): (tau, np.ones_like(tau))}[at_rest]
+            grid = np.linspace(0.0, 1.0, tau.size)           # the path on a uniform grid of s ...
+            q_s = pose_path(model, q_init, q_final, grid, t=t0, p=p, turns=ocp.guess_turns)
+            dq_ds = np.gradient(q_s, grid, axis=0, edge_order=2)
+            qg = np.column_stack([np.interp(s_of, grid, q_s[:, i]) for i in range(model.nq)])
+            qg = np.array([consistent_configuration(model, q, t=t0, p=p, what="guess", tolerance=1.0) for q in qg])
+            vg = np.column_stack([np.interp(s_of, grid, dq_ds[:, i]) for i in range(model.nq)]) * (ds_dt / T)[:, None]
+            vg = np.array([consistent_velocity(model, q, v, t=ti, p=p) for ti, q, v in zip(tg, qg, vg)])
+        ag = np.gradient(vg, tg, axis=0)
+        ug, lg = inverse_dynamics(model, ocp, tg, qg, vg, ag, u_rest, p)
+        q_of, v_of, lam_of, u_of = _from_motion(_Samples(tg, qg, vg, lg, ug), model, t0, T, u_rest)
+        a_of = _sampled(tg, ag, t0, T)
     elif isinstance(warm_start, str):
         raise OptimizationError(f'warm_start: expected "rest", "interpolate", a Trajectory or a previous '
                                 f"solution, got {warm_start!r}")
     else:
         q_of, v_of, lam_of, u_of = _from_motion(warm_start, model, t0, T, u_rest)
-    a_of, lam_kkt = _kkt(model, q_of, v_of, u_of, p)
-    lam_of = lam_kkt if lam_of is None else lam_of
+        a_of, lam_kkt = _kkt(model, q_of, v_of, u_of, p)
+        lam_of = lam_kkt if lam_of is None else lam_of
     p_guess = p.copy()
     wp = getattr(warm_start, "p", None)
     if wp is not None and np.size(wp) == p.size:
@@ -66,8 +84,52 @@ def make_guess(ocp, warm_start, q_init: np.ndarray, v_init: np.ndarray, q_final:
 
 
 class _Samples:
-    def __init__(self, t, q, v):
-        self.t, self.q, self.v = t, q, v
+    def __init__(self, t, q, v, lam=None, u=None):
+        self.t, self.q, self.v, self.lam, self.u = t, q, v, lam, u
+        self.info = {"hold": "linear"}
+
+
+def _final_at_rest(ocp) -> bool:
+    v = ocp.final_spec["v"]
+    if v is None:
+        return False
+    if isinstance(v, dict):
+        return not any(v.values())
+    return not np.any(v)
+
+
+def _sampled(tg, X, t0, T):
+    def f(t):
+        s = np.atleast_1d(np.asarray(t, dtype=float))
+        return np.column_stack([np.interp(s, tg, X[:, i]) for i in range(X.shape[1])]) if X.shape[1] \
+            else np.zeros((s.size, 0))
+    return f
+
+
+def inverse_dynamics(model, ocp, t, q, v, a, u0, p) -> tuple[np.ndarray, np.ndarray]:
+    """``(u, λ)`` (``len(t) × nu``, ``len(t) × nc``) that best produce the accelerations ``a``:
+    ``M a + Aᵀ λ = F(u)`` in least squares, ``F`` linearised in ``u`` about ``u0``, the inputs
+    clipped into their bounds and ``λ`` recomputed for the clipped inputs."""
+    import casadi as ca
+    f = model.functions
+    nu, nc, M = model.nu, model.nc, np.asarray(model.M)
+    ts, qs, vs, us, ps = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq), \
+        ca.SX.sym("u", nu), ca.SX.sym("p", model.np)
+    F = f["F"](ts, qs, vs, us, ps)
+    FB = ca.Function("FB", [ts, qs, vs, us, ps], [F, ca.jacobian(F, us), f["A"](ts, qs, ps)])
+    U, LAM = np.zeros((t.size, nu)), np.zeros((t.size, nc))
+    lo, hi = ocp.u_bounds
+    for i in range(t.size):
+        F0, B, A = (np.array(x, dtype=float).reshape(s) for x, s in
+                    zip(FB(t[i], q[i], v[i], u0, p), ((model.nq,), (model.nq, nu), (nc, model.nq))))
+        rhs = M @ a[i] - F0
+        K = np.hstack([-B, A.T])
+        x = np.linalg.lstsq(K, -rhs, rcond=None)[0] if K.size else np.zeros(0)
+        u = np.clip(u0 + x[:nu], lo, hi)
+        U[i] = u
+        if nc:
+            LAM[i] = np.linalg.lstsq(A.T, -(rhs - B @ (u - u0)), rcond=None)[0]
+    return U, LAM
 
 
 def guess_duration(ocp, warm_start) -> float:

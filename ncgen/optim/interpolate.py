@@ -6,7 +6,8 @@ Linear interpolation of natural coordinates themselves would shrink the members 
 pendulum swinging up would pass through its pivot, where ``A = 0``) and, from a
 mirror-symmetric start, keeps the guess on the symmetry plane where Newton's method cannot
 leave it; pose interpolation does neither.  A half turn is taken counter-clockwise (about
-+z in a plane, about the first axis found in 3D).
++z in a plane, about the first axis found in 3D) unless ``turns`` gives a member its
+direction (:func:`turn_about`).
 """
 from __future__ import annotations
 
@@ -32,15 +33,38 @@ def rotation_exp(w: np.ndarray) -> np.ndarray:
     return rm.exp_so3(w)
 
 
+def turn_about(step: np.ndarray, axis, R_a: np.ndarray, name: str) -> np.ndarray:
+    """The rotation vector ``step`` (body frame of the start pose ``R_a``) of a member's turn,
+    made to go the positive way about ``axis``: a world direction in 3D (the turn must be
+    about it), ``+1`` (counter-clockwise) or ``−1`` (clockwise) in a plane."""
+    from ncgen.errors import OptimizationError
+    angle = float(np.linalg.norm(step))
+    if step.size == 1:
+        sign = float(np.sign(np.asarray(axis, dtype=float).reshape(-1)[0]))
+        if sign == 0 or np.size(axis) != 1:
+            raise OptimizationError(f"guess_turn {name!r}: expected +1 (counter-clockwise) or -1 in a planar system")
+        return step + 2 * np.pi * sign if step[0] * sign < 0 else step
+    a = np.asarray(axis, dtype=float).reshape(-1)
+    if a.size != 3 or not np.linalg.norm(a) > 0:
+        raise OptimizationError(f"guess_turn {name!r}: expected an axis (3 numbers, world frame), got {axis!r}")
+    a_body = R_a.T @ a / np.linalg.norm(a)
+    if angle < 1e-12:
+        return step
+    if np.linalg.norm(np.cross(step / angle, a_body)) > 1e-6:
+        raise OptimizationError(f"guess_turn {name!r}: the member's rotation from the initial to the final pose "
+                                f"is not about {a.tolist()}")
+    return angle * a_body if step @ a_body > 0 else (2 * np.pi - angle) * a_body
+
+
 def pose_path(model, q_a: np.ndarray, q_b: np.ndarray, s: np.ndarray, *, t=None, p=None,
-              anchor: float = 1e-3, max_iter: int = 30) -> np.ndarray:
+              anchor: float = 1e-3, max_iter: int = 30, turns: dict | None = None) -> np.ndarray:
     """Configurations (``len(s) × nq``) at fractions ``s ∈ [0, 1]`` from ``q_a`` to ``q_b``.
 
     Each member's base vectors (``X = Y[dim:] q_member``, linear in q) are rotated along the
     shortest arc between their initial and final directions; ``q(s)`` is the configuration
     on ``Φ = 0`` whose base vectors are closest to those targets, with a weak pull
     (``anchor``) towards the linear interpolation of the coordinates for what rotations
-    do not fix (translations).  Solved by Gauss–Newton on the KKT system, continuing from
+    do not fix (translations).  ``turns``: ``{member name: axis}`` (:func:`turn_about`).  Solved by Gauss–Newton on the KKT system, continuing from
     the previous ``s``."""
     Ra, _ = model.poses(q_a)
     Rb, _ = model.poses(q_b)
@@ -58,6 +82,8 @@ def pose_path(model, q_a: np.ndarray, q_b: np.ndarray, s: np.ndarray, *, t=None,
         G_rows.append(E @ S)
         c_rows.append(E @ layout.member_constant(name))
         step = rotation_log(Ra[j].T @ Rb[j])
+        if turns and name in turns:
+            step = turn_about(step, turns[name], Ra[j], name)
         targets.append((E, member.rigid, Ra[j], step))
     G = np.vstack(G_rows) if G_rows else np.zeros((0, model.nq))
     c = np.concatenate(c_rows) if c_rows else np.zeros(0)

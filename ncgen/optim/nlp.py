@@ -2,11 +2,15 @@
 
 Constraint handling (why the equality-constraint Jacobian has full row rank):
 
-* the transcription imposes the index-1 dynamics only (ODE + algebraic equation for λ,
-  Baumgarte terms included); their rows are nonsingular in the interval unknowns;
-* the invariants ``Φ(q) = 0`` and ``A v + Φ_t = 0`` are imposed once, at the initial
-  node, and only where the initial state is a decision variable (a fixed initial state is
+* the transcription's rows are square and nonsingular in each interval's own unknowns
+  (:mod:`ncgen.optim.radau`: the GGL form imposes ``Φ = 0`` and ``A v + Φ_t = 0`` at the
+  collocation points, never at the initial node; the index-1 form and shooting keep them
+  as invariants);
+* at the initial node the invariants ``Φ(q) = 0`` and ``A v + Φ_t = 0`` are imposed once,
+  and only where the initial state is a decision variable (a fixed initial state is
   projected onto the constraints and enters as a constant);
+* partial targets (a member's pose) impose only their independent rows
+  (:mod:`ncgen.optim.targets`);
 * full-state final and periodic conditions impose their ``dof`` tangent components
   ``Nᵀ (x_N − x*)`` (:mod:`ncgen.optim.manifold`), never the ``nc`` components the
   dynamics already keep; a box around the target (inequalities, inactive at the
@@ -14,8 +18,8 @@ Constraint handling (why the equality-constraint Jacobian has full row rank):
 * bounds on inputs, states, parameters and the final time are simple variable bounds
   (``detect_simple_bounds``), so they never enter the constraint Jacobian.
 
-Every constraint group is recorded with a label so that a failure can name the group
-violated most at the last iterate.
+Every constraint group is recorded with a label so that a failure can name it
+(:mod:`ncgen.optim.diagnostics`).
 """
 from __future__ import annotations
 
@@ -27,27 +31,24 @@ import casadi as ca
 import numpy as np
 
 from ncgen.errors import OptimizationError
+from ncgen.optim.diagnostics import DIAGNOSIS_BUDGET, RELAXABLE, SUCCESS, diagnose, violation_of
 from ncgen.optim.guess import guess_duration, make_guess
 from ncgen.optim.manifold import (BRANCH_RADIUS, consistent_configuration, length_scale, resolve_configuration,
                                   resolve_velocity, tangent_basis)
 from ncgen.optim.result import OptimalTrajectory, SolverStats
+from ncgen.optim.targets import pose_target
 from ncgen.optim.transcription import MODEL_STATE, Horizon
 
-SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 
-#: MUMPS pivot tolerance for IPOPT's KKT factorisations (IPOPT's default: 1e-6).  The
-#: multipliers and the small inertia entries of bodies' base vectors make the KKT matrices
-#: badly scaled; with the default, MUMPS's inertia was unreliable and IPOPT stalled with huge
-#: regularisation (a body pendulum: 300+ iterations or none; with 1e-4: 35).
-MUMPS_PIVTOL = 1e-4
+#: IPOPT options ncgen sets (``tol`` and ``max_iter`` come from ``solve``); everything else
+#: is IPOPT's default, measured on benchmarks/optimal_control.py (benchmarks/README.md).
+#: A former hard-coded ``mumps_pivtol = 1e-4`` cost 10× the iterations on the double
+#: pendulum swing-up (425 vs 43) and is gone; ``ipopt={...}`` passes any option through.
+IPOPT_DEFAULTS = {"sb": "yes"}
 
 #: Drift ``max |Φ|`` on the nodes, relative to the shortest member's length², above which
 #: the solution is reported as under-resolved (the transcription's error shows there).
 DRIFT_WARNING = 1e-3
-
-#: Constraint kinds relaxed by slacks when diagnosing a failure: the wishes (conditions and
-#: path constraints), never the physics (dynamics, invariants) or the bounds.
-RELAXABLE = ("initial", "final", "periodic", "path")
 
 
 @dataclass
@@ -135,8 +136,13 @@ class NLP:
         # initial node
         q_init, v_init = self._initial_state(p_num)
         tN = t0 + guess_duration(ocp, warm_start)
+        q_start = model.q0 if q_init is None else q_init
         self.q_final = None if ocp.final_spec["q"] is None else resolve_configuration(
-            model, ocp.final_spec["q"], model.q0 if q_init is None else q_init, t=tN, p=p_num, what="final q")
+            model, ocp.final_spec["q"], q_start, t=tN, p=p_num, what="final q")
+        self.pose_target = None
+        if ocp.final_spec.get("pose"):
+            self.pose_target = pose_target(model, ocp.final_spec["pose"], q_start, t=tN, p=p_num)
+            self.q_final = self.pose_target.q_ref
         guess, p_guess = make_guess(ocp, warm_start,
                                     model.q0 if q_init is None else q_init,
                                     np.zeros(model.nq) if v_init is None else v_init, self.q_final, p_num)
@@ -216,7 +222,15 @@ class NLP:
         qN, vN = disc.q[:, -1], disc.v[:, -1]
         radius = BRANCH_RADIUS * length_scale(model)
         q_ref = None
-        if self.q_final is not None:
+        if self.pose_target is not None:
+            target = self.pose_target
+            q_ref = target.q_ref
+            W = target.rows(model, t=tN, p=p_num)
+            self.constrain(f"{target.label} (independent components)", "final", ca.mtimes(ca.DM(W), qN - ca.DM(q_ref)))
+            Sq = ca.mtimes(ca.DM(target.S), qN)
+            Sr = target.S @ q_ref
+            self.constrain(f"{target.label} (branch box)", "final", Sq, Sr - radius, Sr + radius)
+        elif self.q_final is not None:
             q_ref = self.q_final
             N = tangent_basis(model, q_ref, t=tN, p=p_num)
             self.constrain("final q (tangent components)", "final", ca.mtimes(N.T, qN - ca.DM(q_ref)))
@@ -318,11 +332,14 @@ class NLP:
         return J
 
     # ------------------------------------------------------------------ solve
-    def solve(self, *, max_iter: int, tol: float, verbose: bool, ipopt: dict):
+    def solve(self, *, max_iter: int, tol: float, verbose: bool, ipopt: dict, linear_solver: str = "mumps",
+              max_wall_time: float | None = None):
         ocp, opti = self.ocp, self.opti
-        options = {"tol": tol, "constr_viol_tol": tol, "max_iter": max_iter, "print_level": 5 if verbose else 0,
-                   "sb": "yes", "hessian_approximation": ocp.transcription.hessian, "mumps_pivtol": MUMPS_PIVTOL,
-                   **ipopt}
+        options = {**IPOPT_DEFAULTS, "tol": tol, "constr_viol_tol": tol, "max_iter": max_iter,
+                   "print_level": 5 if verbose else 0, "hessian_approximation": ocp.transcription.hessian,
+                   "linear_solver": linear_solver, **ipopt}
+        if max_wall_time is not None:
+            options["max_wall_time"] = float(max_wall_time)
         opti.solver("ipopt", {"expand": self.disc.expandable, "detect_simple_bounds": True,
                               "print_time": False, "ipopt": options})
         start = time.perf_counter()
@@ -330,21 +347,28 @@ class NLP:
             self.value = opti.solve_limited().value
         except RuntimeError:               # IPOPT failed (infeasible, NaN, ...): the last iterate
             self.value = opti.debug.value
+        status = opti.stats().get("return_status", "")
+        if status in ("Invalid_Option", "Invalid_Problem_Definition"):
+            raise OptimizationError(f"IPOPT refused its options ({status}): check ipopt={ipopt!r} and "
+                                    f"linear_solver={options['linear_solver']!r} (MUMPS and SPRAL ship with "
+                                    "CasADi; ma27, ma57, ... need the HSL library)")
         self.solve_time = time.perf_counter() - start
         self.x_opt = np.array(self.value(opti.x)).reshape(-1)
         return self.value
 
 
-def build_and_solve(ocp, warm_start, *, max_iter: int, tol: float, verbose: bool, ipopt: dict):
+def build_and_solve(ocp, warm_start, *, max_iter: int, tol: float, verbose: bool, ipopt: dict,
+                    linear_solver: str = "mumps", diagnose_budget: float = DIAGNOSIS_BUDGET):
     start = time.perf_counter()
     nlp = NLP(ocp)
     nlp.build(warm_start)
     build_time = time.perf_counter() - start
-    value = nlp.solve(max_iter=max_iter, tol=tol, verbose=verbose, ipopt=ipopt)
+    value = nlp.solve(max_iter=max_iter, tol=tol, verbose=verbose, ipopt=ipopt, linear_solver=linear_solver)
     result = extract(nlp, value, build_time)
     if not result.stats.success:
-        raise OptimizationError(diagnose(nlp, value, result, tol=tol, ipopt=ipopt), result=result,
-                                status=result.stats.status)
+        message = diagnose(nlp, value, result, tol=tol, ipopt=ipopt, budget=diagnose_budget,
+                           linear_solver=linear_solver)
+        raise OptimizationError(message, result=result, status=result.stats.status)
     if result.stats.status != "Solve_Succeeded":
         warnings.warn(f"IPOPT: {result.stats.status} (objective {result.stats.objective:.6g}, max defect "
                       f"{result.stats.max_defect:.2e})", stacklevel=3)
@@ -372,7 +396,7 @@ def extract(nlp: NLP, val, build_time: float) -> OptimalTrajectory:
     lam = np.vstack([np.atleast_1d(lam0).reshape(1, model.nc), lam_rest])
     st = nlp.opti.stats()
     defect = max((float(np.max(np.abs(np.array(val(e))), initial=0.0)) for _, e in disc.defects), default=0.0)
-    violation = max((_violation(val, g) for g in nlp.groups), default=0.0)
+    violation = max((violation_of(val, g) for g in nlp.groups), default=0.0)
     status = st.get("return_status", "unknown")
     stats = SolverStats(status=status, success=bool(st.get("success", False)) or status in SUCCESS,
                         iterations=int(st.get("iter_count", -1)), objective=float(val(nlp.opti.f)),
@@ -380,89 +404,6 @@ def extract(nlp: NLP, val, build_time: float) -> OptimalTrajectory:
                         max_violation=violation, n_variables=int(nlp.opti.nx), n_constraints=int(nlp.opti.ng),
                         method=ocp.transcription.describe())
     return OptimalTrajectory.from_solution(model, t=t, q=q, v=v, lam=lam, u=u, p=p, stats=stats, nlp=nlp)
-
-
-def diagnose(nlp: NLP, value, result: OptimalTrajectory, *, tol: float, ipopt: dict) -> str:
-    """A message naming IPOPT's status and the likely culprit.
-
-    The culprit is found in elastic mode: the problem is solved again from the last iterate
-    with every condition and path constraint relaxed by slacks whose sum is minimised,
-    dynamics, invariants and bounds kept.  The conditions the nearest feasible motion still
-    misses are the ones that cannot be met.  Should that solve fail too, the groups violated
-    most at the last iterate are named instead."""
-    status = result.stats.status
-    lines = [f"IPOPT did not solve the problem: {status} after {result.stats.iterations} iterations."]
-    if status == "Infeasible_Problem_Detected":
-        lines.append("The constraints look infeasible (IPOPT converged to a point of minimal violation).")
-    misses = _elastic_misses(nlp, result, tol=tol, ipopt=ipopt)
-    culprit = None
-    if misses:
-        lines.append("With the conditions relaxed (dynamics and bounds kept), the nearest feasible motion misses "
-                     + "; ".join(f"{label} by {miss:.3g}" for label, miss in misses[:3]) + ".")
-        culprit = next(g for g in nlp.groups if g.label.split(" (")[0] == misses[0][0])
-    else:
-        ranked = sorted(((_violation(value, g), g) for g in nlp.groups), key=lambda x: -x[0])
-        worst = [(v, g) for v, g in ranked if v > 1e-6][:3]
-        if worst:
-            lines.append("Largest violations at the last iterate: " +
-                         "; ".join(f"{g.label} ({v:.3g})" for v, g in worst) + ".")
-            culprit = worst[0][1]
-    if culprit is not None:
-        hint = {"final": "check that the final conditions are reachable within the horizon and the bounds",
-                "initial": "check that the initial conditions agree with the joints",
-                "periodic": "check that a periodic motion exists within the bounds",
-                "path": "the path constraint may contradict the initial or final conditions",
-                "dynamics": "the motion is not dynamically feasible with these bounds and horizon: loosen the "
-                            "input bounds, lengthen the horizon or refine N",
-                "invariant": "the free initial state cannot satisfy the joints with the other conditions",
-                "bound": "the bounds contradict each other"}.get(culprit.kind, "")
-        name = misses[0][0] if misses else culprit.label
-        lines.append(f"Likely culprit: {name}" + (f" — {hint}." if hint else "."))
-    saturated = _saturated_inputs(nlp, result)
-    if saturated:
-        lines.append("Inputs on their bounds in most intervals: " + ", ".join(saturated) + ".")
-    if status == "Maximum_Iterations_Exceeded" and not misses:
-        lines.append("Raise max_iter, or warm start from a simulation or an easier problem's solution.")
-    return "\n".join(lines)
-
-
-def _elastic_misses(nlp: NLP, result: OptimalTrajectory, *, tol: float, ipopt: dict) -> list[tuple[str, float]]:
-    """``[(label, largest slack)]`` of the conditions the elastic problem cannot meet,
-    largest first; empty if every condition can be met or the elastic solve fails."""
-    if not any(g.kind in RELAXABLE for g in nlp.groups):
-        return []
-    elastic = NLP(nlp.ocp, elastic=True)
-    try:
-        elastic.build(result)
-        value = elastic.solve(max_iter=500, tol=max(tol, 1e-8), verbose=False, ipopt=ipopt)
-    except (OptimizationError, RuntimeError):
-        return []
-    if elastic.opti.stats().get("return_status") not in SUCCESS:
-        return []
-    threshold = max(1e-6, 100 * tol)
-    misses: dict[str, float] = {}
-    for label, s in elastic.slacks.items():          # "final q (tangent components)" -> "final q"
-        name = label.split(" (")[0]
-        misses[name] = max(misses.get(name, 0.0), float(np.max(np.array(value(s)), initial=0.0)))
-    return sorted([(name, m) for name, m in misses.items() if m > threshold], key=lambda x: -x[1])
-
-
-def _violation(value, g: Group) -> float:
-    x = np.array(value(g.expr)).reshape(-1)
-    return float(np.max(np.maximum(g.lb - x, 0) + np.maximum(x - g.ub, 0), initial=0.0))
-
-
-def _saturated_inputs(nlp: NLP, result: OptimalTrajectory) -> list[str]:
-    ocp, out = nlp.ocp, []
-    names = _component_names(nlp.model.input_names, nlp.model.input_sizes)
-    for i, name in enumerate(names):
-        lo, hi = ocp.u_bounds[:, i]
-        u = result.u[:-1, i]
-        span = max(hi - lo, 1.0) if np.isfinite(hi - lo) else 1.0
-        at = (np.abs(u - lo) < 1e-3 * span) | (np.abs(u - hi) < 1e-3 * span)
-        if at.mean() > 0.5:
-            out.append(name)
-    return out
 
 
 def _component_names(names: list[str], sizes: list[int]) -> list[str]:

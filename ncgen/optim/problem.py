@@ -10,7 +10,7 @@
 Conventions: time in s; ``q`` natural coordinates (m), ``v = q̇`` (m/s); inputs ``u`` and
 parameters ``p`` in the model's units; names as in ``model.input_names``,
 ``model.parameter_names`` (``"k"`` or one component ``"k[1]"``), ``model.coordinate_names``
-(``"cart.r.x"``) and ``model.marker_names`` (``"pole.tip"``).  Inputs are piecewise
+(``"cart.r_i.x"``) and ``model.marker_names`` (``"pole.tip"``).  Inputs are piecewise
 constant over the ``N`` equal intervals.  Bounds and marker path constraints hold at every
 state point of the transcription (collocation points, or shooting nodes).
 
@@ -22,6 +22,7 @@ initial state ``(model.q0, model.v0)``; :meth:`initial` replaces that, and what 
 """
 from __future__ import annotations
 
+import copy
 import re
 
 import numpy as np
@@ -30,6 +31,7 @@ from ncgen.errors import OptimizationError
 from ncgen.optim.transcription import MODEL_STATE
 
 METHODS = ("collocation", "shooting")
+LINEAR_SOLVERS = ("mumps", "spral", "ma27", "ma57", "ma77", "ma86", "ma97", "pardiso", "pardisomkl")
 
 
 class OptimalControl:
@@ -37,13 +39,14 @@ class OptimalControl:
 
     ``t_final``: horizon length (s), a number (fixed) or ``(lower, upper)`` (free final
     time, a decision variable); ``method``: ``"collocation"`` (Radau IIA of ``degree``,
-    default 3) or ``"shooting"`` (multiple shooting with ``integrator``, default IDAS;
+    default 3, on the constraint ``form`` ``"ggl"`` (default), ``"index3"`` or ``"index1"``:
+    see :mod:`ncgen.optim.radau`) or ``"shooting"`` (multiple shooting with ``integrator``, default IDAS;
     ``integrator_options`` go to its factory); ``parameters``: values replacing the
     model's defaults (``{"k": 50.0}``).
     """
 
     def __init__(self, model, N: int = 50, t_final=1.0, method: str = "collocation", *, degree: int = 3,
-                 integrator: str = "idas", integrator_options: dict | None = None,
+                 form: str = "ggl", integrator: str = "idas", integrator_options: dict | None = None,
                  parameters: dict | None = None):
         if not isinstance(N, (int, np.integer)) or isinstance(N, bool) or N < 1:
             raise OptimizationError(f"N: expected a positive integer number of intervals, got {N!r}")
@@ -57,7 +60,7 @@ class OptimalControl:
         if method == "collocation":
             from ncgen.optim.radau import RadauCollocation
             try:
-                self.transcription = RadauCollocation(degree)
+                self.transcription = RadauCollocation(degree, form)
             except ValueError as exc:
                 raise OptimizationError(str(exc)) from None
         else:
@@ -74,12 +77,13 @@ class OptimalControl:
         #: Joint-space path constraints: (joint, "position" or "rate", lower, upper).
         self.joint_bounds: list[tuple[str, str, float, float]] = []
         self.initial_spec = {"q": MODEL_STATE, "v": MODEL_STATE, "markers": []}
-        self.final_spec = {"q": None, "v": None, "markers": []}
+        self.final_spec = {"q": None, "v": None, "markers": [], "pose": None}
         self.periodic_spec = {"q": False, "v": False}
         self.effort_R: np.ndarray | None = None
         self.tracking: list[tuple[str, object, float]] = []
         self.terminal: list[tuple[str, object]] = []
         self.time_weight = 0.0
+        self.guess_turns: dict[str, object] = {}
         for name, value in (parameters or {}).items():
             self.set_parameter(name, value)
 
@@ -202,14 +206,21 @@ class OptimalControl:
                                     "pass q=None together with marker=...")
         return self
 
-    def final(self, q=None, v=None, marker=None) -> "OptimalControl":
+    def final(self, q=None, v=None, marker=None, pose=None) -> "OptimalControl":
         """Final conditions (``None`` = free): ``q``, ``v`` targets given as in
         :meth:`initial` (a dict ``q`` is assembled from the initial configuration; their
         ``dof`` tangent components are imposed), ``marker``: ``(name, position)`` or a list
-        of them.  ``v`` without ``q`` is taken in the tangent space of the guess's final
-        configuration: exact for ``v=0``."""
+        of them; ``pose``: ``{member name: (rotation, position)}`` — a member's frame
+        (rotation body→world, 3×3, or an angle in planar systems; position of its origin,
+        m: a body's centre of mass as given to ``add_body``), the other members left to the
+        joints (:mod:`ncgen.optim.targets`).  ``v`` without ``q`` is taken in the tangent
+        space of the guess's final configuration: exact for ``v=0``."""
+        if pose is not None and q is not None:
+            raise OptimizationError("final: give q or pose, not both (a pose fixes part of q)")
+        if pose is not None and (not isinstance(pose, dict) or not pose):
+            raise OptimizationError(f"final pose: expected {{member name: (rotation, position)}}, got {pose!r}")
         self.final_spec = {"q": self._state(q, "final q"), "v": self._state(v, "final v"),
-                           "markers": self._markers(marker, "final")}
+                           "markers": self._markers(marker, "final"), "pose": pose}
         self._check_periodic()
         return self
 
@@ -226,7 +237,8 @@ class OptimalControl:
 
     def _check_periodic(self):
         for key in ("q", "v"):
-            if self.periodic_spec[key] and self.final_spec[key] is not None:
+            if self.periodic_spec[key] and (self.final_spec[key] is not None
+                                            or key == "q" and self.final_spec.get("pose") is not None):
                 raise OptimizationError(f"final {key} and periodic {key} both given: the final {key} would "
                                         "be imposed twice; keep one of them")
 
@@ -267,6 +279,17 @@ class OptimalControl:
                 raise OptimizationError(f"{what} marker {name!r}: every component is None; give at least one")
             out.append((name, target))
         return out
+
+    def guess_turn(self, member: str, axis) -> "OptimalControl":
+        """In the interpolated guess, turn ``member`` the positive way about ``axis`` (a
+        world direction in 3D, about which its rotation from the initial to the final pose
+        must be; ``+1`` counter-clockwise or ``−1`` clockwise in a plane) instead of along
+        the shortest arc."""
+        if member not in self.model.member_names:
+            raise OptimizationError(f"guess_turn: no member named {member!r}; members: "
+                                    f"{', '.join(self.model.member_names)}")
+        self.guess_turns[member] = axis
+        return self
 
     # ------------------------------------------------------------------ costs
     def minimize_effort(self, weight=1.0) -> "OptimalControl":
@@ -319,20 +342,40 @@ class OptimalControl:
 
     # ------------------------------------------------------------------ solve
     def solve(self, warm_start=None, *, max_iter: int = 1000, tol: float = 1e-8, verbose: bool = False,
-              ipopt: dict | None = None):
+              ipopt: dict | None = None, linear_solver: str = "mumps", diagnose: float | bool = True,
+              coarse_start: bool = False):
         """Solve with IPOPT and return an :class:`~ncgen.optim.result.OptimalTrajectory`.
 
-        ``warm_start``: ``"rest"`` (the initial state held, inputs 0 clipped into their
-        bounds), ``"interpolate"`` (every member's pose moved from the initial to the final
-        configuration; the default when ``final(q=...)`` is given, else ``"rest"``), a
-        simulation ``Trajectory`` or a previous solution (times rescaled to the horizon).
+        ``warm_start``: ``"rest"`` (the initial configuration held at rest by the inputs
+        that hold it, clipped into their bounds), ``"interpolate"`` (every member's pose
+        moved from the initial to the final configuration, at rest at the ends where the
+        problem says so, inputs by inverse dynamics; the default when ``final(q=...)`` is
+        given, else ``"rest"``), a simulation ``Trajectory`` or a previous solution (times
+        rescaled to the horizon).  ``coarse_start``: first solve on ``N // 2`` intervals
+        from that guess, then on ``N`` from the coarse solution.
         ``tol``: IPOPT's tolerance, also on the unscaled constraint violation (so the
-        dynamics defects end below it); ``ipopt``: extra IPOPT options.  Raises
-        :class:`~ncgen.errors.OptimizationError` when IPOPT fails (with the last iterate
-        as ``exc.result``)."""
+        dynamics defects end below it); ``ipopt``: any IPOPT options, passed through
+        (they override ncgen's); ``linear_solver``: IPOPT's KKT solver (``"mumps"``,
+        ``"spral"``; ``"ma27"``, ``"ma57"``, ... with the HSL library).
+        ``diagnose``: wall-clock seconds allowed for the relaxed re-solve that names the
+        condition in conflict when IPOPT fails (``True``: 10 s, ``False``/0: skip it).
+        Raises :class:`~ncgen.errors.OptimizationError` when IPOPT fails (with the last
+        iterate as ``exc.result``)."""
+        from ncgen.optim.diagnostics import DIAGNOSIS_BUDGET
         from ncgen.optim.nlp import build_and_solve
-        return build_and_solve(self, warm_start, max_iter=max_iter, tol=tol, verbose=verbose,
-                               ipopt=dict(ipopt or {}))
+        if linear_solver not in LINEAR_SOLVERS:
+            raise OptimizationError(f"linear_solver: expected one of {', '.join(LINEAR_SOLVERS)}, "
+                                    f"got {linear_solver!r}")
+        budget = DIAGNOSIS_BUDGET if diagnose is True else float(diagnose or 0.0)
+        if budget < 0 or not np.isfinite(budget):
+            raise OptimizationError(f"diagnose: expected True, False or a number of seconds ≥ 0, got {diagnose!r}")
+        options = dict(max_iter=max_iter, tol=tol, verbose=verbose, ipopt=dict(ipopt or {}),
+                       linear_solver=linear_solver, diagnose_budget=budget)
+        if coarse_start and self.N >= 2:
+            coarse = copy.copy(self)
+            coarse.N = self.N // 2
+            warm_start = build_and_solve(coarse, warm_start, **options)
+        return build_and_solve(self, warm_start, **options)
 
     def __repr__(self) -> str:
         T = self.t_final if self.t_final_bounds is None else f"free in {self.t_final_bounds}"

@@ -3,7 +3,7 @@
 The format is documented in docs/optimal-control.md.  Every table is optional::
 
     model = "cartpole.toml"          # the model file, relative to this file
-    [horizon]        N, t_final (s, or [lower, upper]: free), method, degree, integrator,
+    [horizon]        N, t_final (s, or [lower, upper]: free), method, degree, form, integrator,
                      integrator_options = {...}
     [parameters]     name = value                   (fixed values)
     [free_parameters.NAME]  lower, upper, guess     (design parameters)
@@ -28,6 +28,7 @@ import numpy as np
 from ncgen.errors import NcgenError, OptimizationError, ProblemFileError
 from ncgen.files import decode_text
 from ncgen.optim.problem import METHODS, OptimalControl
+from ncgen.optim.radau import FORMS
 
 TOP_KEYS = ("model", "horizon", "parameters", "free_parameters", "bounds", "initial", "final", "periodic",
             "cost", "solver")
@@ -145,7 +146,8 @@ class _Reader:
         return ocp, self._solver(d.get("solver", {}))
 
     def _horizon(self, model, h):
-        h = self.table(h, "horizon", ("N", "t_final", "method", "degree", "integrator", "integrator_options"))
+        h = self.table(h, "horizon", ("N", "t_final", "method", "degree", "form", "integrator",
+                                           "integrator_options"))
         N = h.get("N", 50)
         if isinstance(N, bool) or not isinstance(N, int) or N < 1:
             self.fail("horizon.N", "a positive integer", N)
@@ -158,13 +160,16 @@ class _Reader:
         degree = h.get("degree", 3)
         if isinstance(degree, bool) or not isinstance(degree, int):
             self.fail("horizon.degree", "an integer 1..9", degree)
+        form = h.get("form", "ggl")
+        if form not in FORMS:
+            self.fail("horizon.form", " or ".join(f'"{f}"' for f in FORMS), form)
         integrator = h.get("integrator", "idas")
         if not isinstance(integrator, str):
             self.fail("horizon.integrator", "an integrator name", integrator)
         options = dict(self.table(h.get("integrator_options", {}), "horizon.integrator_options", None))
         self.where = "horizon"
-        return OptimalControl(model, N=N, t_final=T, method=method, degree=degree, integrator=integrator,
-                              integrator_options=options)
+        return OptimalControl(model, N=N, t_final=T, method=method, degree=degree, form=form,
+                              integrator=integrator, integrator_options=options)
 
     def _bounds(self, ocp, b):
         b = self.table(b, "bounds", ("inputs", "coordinates", "velocities", "markers"))

@@ -1,29 +1,36 @@
 """Direct collocation at Legendre–Gauss–Radau points (Radau IIA), the default transcription.
 
-On interval ``k`` the state ``x = [q; v]`` is the polynomial of degree ``d`` through the
-node ``x_k`` (τ = 0) and the collocation states ``x_{k,j}`` at the Radau points
-``0 < τ_1 < … < τ_d = 1``.  At every collocation point the index-1 DAE of the model
-(:mod:`ncgen.assembly.functions`, Baumgarte terms included) holds:
+On interval ``k`` the coordinates ``q`` are the polynomial of degree ``d`` through the node
+``q_k`` (τ = 0) and the collocation values ``q_{k,j}`` at the Radau points
+``0 < τ_1 < … < τ_d = 1``; the velocities are its derivative there and the velocity
+polynomial through ``v_k`` and ``v_{k,j}`` is collocated in turn:
 
-    Σ_r C_rj x_{k,r} = h [v_{k,j}; a_{k,j}],
-    M a_{k,j} + Aᵀ λ_{k,j} = F,   A a_{k,j} = γ − 2α Φ̇ − β² Φ,
+    v_{k,j} = (1/h) Σ_r C_rj q_{k,r},     M (1/h) Σ_r C_rj v_{k,r} + Aᵀ λ_{k,j} = F,
 
-with ``C_rj = ℓ_r'(τ_j)`` the derivatives of the Lagrange basis.  The accelerations and
-multipliers are unknowns at every collocation point, defined by the equations of motion in
-KKT form, ``M a + Aᵀ λ = F`` and ``A a = γ − 2α Φ̇ − β² Φ`` (the index-1 DAE of
-:mod:`ncgen.assembly.functions` without forming ``M⁻¹``: sparser rows, and no ``1/m``
-amplification for light members).  Since τ_d = 1 the last
-collocation state is the next node (``x_{k+1} = x_{k,d}``: no separate continuity
-constraint) and the multipliers at nodes 1..N are collocation unknowns.
+with ``C_rj = ℓ_r'(τ_j)`` the derivatives of the Lagrange basis.  Two forms of the
+constraints (``form``):
 
-Why Radau: order ``2d − 1`` at the nodes (5 for the default ``d = 3``), stiffly accurate
-and L-stable (stiff springs, large Baumgarte gains), and the algebraic equations are
-enforced at the interval ends, so every node is a consistent DAE state; inputs piecewise
-constant per interval, as in multiple shooting.  The Jacobian of one interval's
-collocation and algebraic equations with respect to its own unknowns ``(x_{k,j}, λ_{k,j})``
-``(x_{k,j}, a_{k,j}, λ_{k,j})`` couples ``C ⊗ I`` with the KKT block ``[[M, Aᵀ], [A, 0]]``:
-nonsingular for small ``h`` when ``A`` has full rank, so the dynamics rows never cost the
-NLP rank.
+* ``"index3"`` (default): ``Φ(q_{k,j}) = 0`` at every collocation point — Radau IIA on the
+  index-3 equations of motion (Hairer & Wanner, *Solving ODEs II*, VII.4).  The unknowns
+  are ``q_{k,j}`` and ``λ_{k,j}`` only (``v`` and ``q̈`` are expressions of them), so one
+  collocation point carries ``nq + nc`` unknowns and as many equations; the positions
+  satisfy the joints exactly at every point (no drift for the optimiser to exploit), the
+  velocity invariant ``A v = 0`` to the order of the method.
+* ``"index1"``: the index-1 DAE with Baumgarte terms, ``A q̈ = γ − 2α Φ̇ − β² Φ``, and
+  ``v``, ``q̈`` as unknowns: ``3 nq + nc`` unknowns per point.  The positions drift off
+  ``Φ = 0`` between the nodes' exact start and the end (measured on the benchmark 3D arm at
+  N = 10: max |Φ| = 0.08 m², and the optimum exploited it); kept for comparison.
+
+Either way the equations of one interval are square in its own unknowns, with Jacobian
+``C ⊗ I`` coupled to the KKT block ``[[M, Aᵀ], [A, 0]]`` (index 1) or to ``[[M/h², Aᵀ],
+[A, 0]]`` (index 3): nonsingular for small ``h`` when ``A`` has full rank, so the dynamics
+rows never cost the NLP rank.
+
+Why Radau: order ``2d − 1`` at the nodes (5 for the default ``d = 3``) for the positions,
+stiffly accurate and L-stable (stiff springs), the constraints enforced at the interval
+ends, so every node is a consistent state.  Since τ_d = 1 the last collocation value is the
+next node (no separate continuity constraint); the multipliers at nodes 1..N are
+collocation unknowns.  Inputs piecewise constant per interval, as in multiple shooting.
 """
 from __future__ import annotations
 
@@ -31,6 +38,9 @@ import casadi as ca
 import numpy as np
 
 from ncgen.optim.transcription import Discretisation, Horizon, Transcription, guess_times, node_times
+
+#: The constraint forms (see the module docstring).
+FORMS = ("ggl", "index3", "index1")
 
 
 def radau_coefficients(d: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -52,41 +62,66 @@ def radau_coefficients(d: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 class RadauCollocation(Transcription):
-    """Radau IIA collocation of degree ``degree`` (1 = implicit Euler, 3 = default)."""
+    """Radau IIA collocation of degree ``degree`` (1 = implicit Euler, 3 = default) on the
+    ``form`` of the constraints (``"index3"``, default, or ``"index1"``)."""
 
-    def __init__(self, degree: int = 3):
+    def __init__(self, degree: int = 3, form: str = "ggl"):
         if not isinstance(degree, int) or not 1 <= degree <= 9:
             raise ValueError(f"collocation degree: expected an integer 1..9, got {degree!r}")
+        if form not in FORMS:
+            raise ValueError(f"collocation form: expected one of {', '.join(FORMS)}, got {form!r}")
         self.degree = degree
+        self.form = form
 
     def describe(self) -> str:
-        return f"Radau IIA collocation, degree {self.degree}"
+        return f"Radau IIA collocation, degree {self.degree}, {self.form.replace('index', 'index-')} form"
 
     def build(self, opti: ca.Opti, model, hz: Horizon) -> Discretisation:
         d, N, nq, nc, nu = self.degree, hz.N, model.nq, model.nc, model.nu
         tau, C, b = radau_coefficients(d)
-        Q = opti.variable(nq, N * d)
-        V = opti.variable(nq, N * d)
-        Acc = opti.variable(nq, N * d)
-        L = opti.variable(nc, N * d)
-        U = opti.variable(nu, N)
+        Cm = ca.DM(C)
         h = hz.T / N
         t = node_times(hz, tau[1:])
+        Q = opti.variable(nq, N * d)
+        L = opti.variable(nc, N * d)
+        U = opti.variable(nu, N)
         Urep = ca.reshape(ca.repmat(U, d, 1), nu, N * d)   # column k·d + j holds u_k
-        eom, alg = kkt_residuals(model).map(N * d)(t, Q, V, Acc, L, Urep, hz.p)
-        X = ca.vertcat(Q, V)
-        Xdot = ca.vertcat(V, Acc)
-        x_start = ca.vertcat(hz.q0, hz.v0)
-        defects = []
-        Cm = ca.DM(C)
-        for k in range(N):
-            cols = slice(k * d, (k + 1) * d)
-            Xk = ca.horzcat(x_start, X[:, cols])
-            res = ca.mtimes(Xk, Cm) - h * Xdot[:, cols]
-            defects.append((f"dynamics (collocation, interval {k})", ca.vec(res)))
-            x_start = X[:, k * d + d - 1]
-        defects.append(("dynamics (equations of motion M a + Aᵀλ = F)", ca.vec(eom)))
-        defects.append(("dynamics (acceleration constraints, Baumgarte)", ca.vec(alg)))
+        Acc = Mu = None
+        if self.form in ("index3", "ggl"):
+            if self.form == "ggl":
+                Mu = opti.variable(nc, N * d)
+            Qdot = []                                  # (1/h) Σ_r C_rj q_{k,r}
+            q_start = hz.q0
+            for k in range(N):
+                Qdot.append(ca.mtimes(ca.horzcat(q_start, Q[:, k * d:(k + 1) * d]), Cm) / h)
+                q_start = Q[:, k * d + d - 1]
+            Qdot = ca.horzcat(*Qdot)
+            V = Qdot if Mu is None else ggl_velocity(model).map(N * d)(t, Q, Qdot, Mu, hz.p)
+            Vdot, v_start = [], hz.v0                  # Σ_r C_rj v_{k,r} = h q̈_{k,j}
+            for k in range(N):
+                Vk = V[:, k * d:(k + 1) * d]
+                Vdot.append(ca.mtimes(ca.horzcat(v_start, Vk), Cm))
+                v_start = Vk[:, d - 1]
+            eom, con = kkt_residuals(model, "index3").map(N * d)(t, Q, V, ca.horzcat(*Vdot), L, Urep, hz.p, h)
+            defects = [("dynamics (equations of motion M q̈ + Aᵀλ = F)", ca.vec(eom)),
+                       ("dynamics (joints Φ(q) = 0 at the collocation points)", ca.vec(con))]
+            if Mu is not None:
+                vel = velocity_constraint(model).map(N * d)(t, Q, V, hz.p)
+                defects.append(("dynamics (joint velocities A v + Φ_t = 0 at the collocation points)", ca.vec(vel)))
+        else:
+            V = opti.variable(nq, N * d)
+            Acc = opti.variable(nq, N * d)
+            eom, con = kkt_residuals(model, "index1").map(N * d)(t, Q, V, Acc, L, Urep, hz.p, h)
+            X, Xdot = ca.vertcat(Q, V), ca.vertcat(V, Acc)
+            x_start = ca.vertcat(hz.q0, hz.v0)
+            defects = []
+            for k in range(N):
+                cols = slice(k * d, (k + 1) * d)
+                res = ca.mtimes(ca.horzcat(x_start, X[:, cols]), Cm) - h * Xdot[:, cols]
+                defects.append((f"dynamics (collocation, interval {k})", ca.vec(res)))
+                x_start = X[:, k * d + d - 1]
+            defects.append(("dynamics (equations of motion M a + Aᵀλ = F)", ca.vec(eom)))
+            defects.append(("dynamics (acceleration constraints, Baumgarte)", ca.vec(con)))
         last = list(range(d - 1, N * d, d))
         q_nodes = ca.horzcat(hz.q0, Q[:, last])
         v_nodes = ca.horzcat(hz.v0, V[:, last])
@@ -95,10 +130,13 @@ class RadauCollocation(Transcription):
         def set_guess(o: ca.Opti, g):
             tg = guess_times(hz, g.T, tau[1:])
             o.set_initial(Q, g.q(tg).T)
-            o.set_initial(V, g.v(tg).T)
-            o.set_initial(Acc, g.a(tg).T)
+            if Acc is not None:
+                o.set_initial(V, g.v(tg).T)
+                o.set_initial(Acc, g.a(tg).T)
             if nc:
                 o.set_initial(L, g.lam(tg).T)
+            if Mu is not None:
+                o.set_initial(Mu, 0)
             if nu:
                 o.set_initial(U, g.u(guess_times(hz, g.T, [0.0])).T)
 
@@ -107,18 +145,42 @@ class RadauCollocation(Transcription):
                               set_guess=set_guess, expandable=True)
 
 
-def kkt_residuals(model) -> ca.Function:
-    """``(t, q, v, a, λ, u, p) -> (M a + Aᵀ λ − F, A a − γ + 2α Φ̇ + β² Φ)``: the equations of
-    motion and the Baumgarte-stabilised acceleration constraints, with the accelerations
-    and multipliers as unknowns (no M⁻¹, so the rows stay sparse and well scaled)."""
+def kkt_residuals(model, form: str = "index1") -> ca.Function:
+    """``(t, q, v, a, λ, u, p, h) -> (eom, con)``: the equations of motion with the
+    accelerations and multipliers as unknowns (no M⁻¹, so the rows stay sparse and well
+    scaled) and the constraint rows.  ``"index1"``: ``eom = M a + Aᵀ λ − F``,
+    ``con = A a − γ + 2α Φ̇ + β² Φ`` (Baumgarte); ``"index3"``: ``a`` is ``h q̈``,
+    ``eom = M a / h + Aᵀ λ − F`` and ``con = Φ(q)``."""
     f = model.functions
     alpha, beta = model.baumgarte
     nq, nc, nu, npar = model.nq, model.nc, model.nu, model.np
     t, q, v, a = ca.SX.sym("t"), ca.SX.sym("q", nq), ca.SX.sym("v", nq), ca.SX.sym("a", nq)
-    lam, u, p = ca.SX.sym("lam", nc), ca.SX.sym("u", nu), ca.SX.sym("p", npar)
+    lam, u, p, h = ca.SX.sym("lam", nc), ca.SX.sym("u", nu), ca.SX.sym("p", npar), ca.SX.sym("h")
     A = f["A"](t, q, p)
-    phidot = ca.mtimes(A, v) + f["phi_t"](t, q, p)
-    eom = ca.mtimes(ca.DM(model.M), a) + ca.mtimes(A.T, lam) - f["F"](t, q, v, u, p)
-    acc = ca.mtimes(A, a) - f["gamma"](t, q, v, p) + 2 * alpha * phidot + beta ** 2 * f["phi"](t, q, p)
-    return ca.Function("kkt_residuals", [t, q, v, a, lam, u, p], [eom, acc],
-                       ["t", "q", "v", "a", "lam", "u", "p"], ["eom", "acc"])
+    acc = a / h if form == "index3" else a
+    eom = ca.mtimes(ca.DM(model.M), acc) + ca.mtimes(A.T, lam) - f["F"](t, q, v, u, p)
+    if form == "index3":
+        con = f["phi"](t, q, p)
+    else:
+        phidot = ca.mtimes(A, v) + f["phi_t"](t, q, p)
+        con = ca.mtimes(A, a) - f["gamma"](t, q, v, p) + 2 * alpha * phidot + beta ** 2 * f["phi"](t, q, p)
+    return ca.Function("kkt_residuals", [t, q, v, a, lam, u, p, h], [eom, con],
+                       ["t", "q", "v", "a", "lam", "u", "p", "h"], ["eom", "con"])
+
+
+def ggl_velocity(model) -> ca.Function:
+    """``(t, q, q̇_c, μ, p) -> v = q̇_c − Aᵀ μ``: the velocity of the stabilised (GGL) form,
+    ``q̇ = v + Aᵀ μ``, from the derivative ``q̇_c`` of the collocation polynomial."""
+    f = model.functions
+    t, q, qdot = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("qdot", model.nq)
+    mu, p = ca.SX.sym("mu", model.nc), ca.SX.sym("p", model.np)
+    v = qdot - ca.mtimes(f["A"](t, q, p).T, mu)
+    return ca.Function("ggl_velocity", [t, q, qdot, mu, p], [v], ["t", "q", "qdot", "mu", "p"], ["v"])
+
+
+def velocity_constraint(model) -> ca.Function:
+    """``(t, q, v, p) -> A(q) v + Φ_t``."""
+    f = model.functions
+    t, q, v, p = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq), ca.SX.sym("p", model.np)
+    return ca.Function("velocity_constraint", [t, q, v, p], [ca.mtimes(f["A"](t, q, p), v) + f["phi_t"](t, q, p)],
+                       ["t", "q", "v", "p"], ["phidot"])
