@@ -109,3 +109,20 @@ def test_marker_off_a_bar():
         bar.add_marker("tip", (0.5, 0.1, 0))
     with pytest.raises(nc.ModelError, match="bar: marker tip already|marker name: expected an identifier"):
         bar.add_marker("a tip", (0.5, 0, 0))
+
+
+@pytest.mark.parametrize("share", [True, False])
+def test_a_point_fixed_to_the_ground_must_start_at_rest(share):
+    """A bar hinged at its first end, spun about its centre: the hinge would have to move at
+    1.5 m/s.  Dropping that silently (the tip then moves at 1.5 m/s, not 3) is refused."""
+    s = nc.System("spun", gravity=(0, -9.81))
+    bar = s.add_bar("bar", mass=1.0, ends=[(0, 0), (3, 0)], angular_velocity=1.0)
+    s.add_joint(nc.Revolute(s.ground, bar, at=(0, 0)))
+    with pytest.raises(nc.ModelError, match="inconsistent initial velocities"):
+        s.build(share=share)
+    ok = nc.System("spun_ok", gravity=(0, -9.81))
+    bar = ok.add_bar("bar", mass=1.0, ends=[(0, 0), (3, 0)], angular_velocity=1.0, velocity=(0, 1.5))
+    ok.add_joint(nc.Revolute(ok.ground, bar, at=(0, 0)))
+    model = ok.build(share=share)
+    i = model.coordinate_names.index("bar.r_j.y")
+    assert model.v0[i] == pytest.approx(3.0)                 # the tip: ω × 3 m

@@ -12,7 +12,7 @@ from ncgen.assembly.contacts import contact_functions, contact_specs, contact_te
 from ncgen.assembly.functions import system_functions
 from ncgen.assembly.initial_state import consistent_state
 from ncgen.assembly.joint_space import JointSpace, actuator_forces, build_joint_coordinates
-from ncgen.assembly.kinematics import resolve_fix
+from ncgen.assembly.kinematics import resolve_fix, system_size
 from ncgen.assembly.limits import model_limits
 from ncgen.assembly.mass import CholeskyFactor, assemble_mass
 from ncgen.assembly.rank import dependent_rows
@@ -90,7 +90,7 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
         F, V = F + Q, ca.vertcat(V, Vc)
     M = assemble_mass(layout, members)
     factor = CholeskyFactor(M, layout.coordinate_names)
-    q_init, v_init = initial_guess(layout, members)
+    q_init, v_init, moving = initial_guess(layout, members)
     p0 = np.concatenate([v for _, v in system.parameters.values()]) if system.parameters else np.zeros(0)
     limits.check(p0, where=f"system {system.name!r}: ")
 
@@ -120,6 +120,8 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
         functions.update(contact_functions(ctx, terms))
     state = consistent_state(functions, layout, labels, q_init, v_init, p0, t0, tolerance, M,
                              fixed=fixed, assemble=assemble)
+    if not assemble:
+        check_fixed_points_at_rest(moving, v_init, q_init, tolerance)
     joint_space = JointSpace(ctx, coords, skipped, actuation)
 
     def model_with(state):
@@ -214,23 +216,18 @@ def force_terms(system, ctx: Context) -> tuple[ca.SX, ca.SX]:
     return F, ca.vertcat(*V)
 
 
-def initial_guess(layout: Layout, members) -> tuple[np.ndarray, np.ndarray]:
-    """System q and v gathered from each member's initial pose and twist.  Where members
-    share a point, their velocities there must agree; a point fixed to the ground must be at
-    rest."""
+def initial_guess(layout: Layout, members) -> tuple[np.ndarray, np.ndarray, list]:
+    """System q and v gathered from each member's initial pose and twist, and the velocity
+    components given to points fixed to the ground ``[(point, axis, m/s)]``, which ``q̇``
+    cannot hold.  Where members share a point, their velocities there must agree."""
+    moving = []
     q = np.full(layout.nq, np.nan)
     v = np.full(layout.nq, np.nan)
     src = [""] * layout.nq
     for m in members:
         for k, i in enumerate(layout.member_indices(m.name)):
-            if i is None:                # a point fixed to the ground: it must not move
-                if abs(m.qd0[k]) > 1e-9 * max(1.0, float(np.max(np.abs(m.qd0)))):
-                    slot = m.ctype.slots[k // layout.dim]
-                    raise ModelError(
-                        f"inconsistent initial velocities: {m.name}.{slot} is fixed to the ground (a ground "
-                        f"point or a joint to the ground) but its initial velocity gives it "
-                        f"{m.qd0[k]:.6g} m/s along {'xyz'[k % layout.dim]}; give velocity and "
-                        f"angular_velocity that leave it at rest")
+            if i is None:                # a point fixed to the ground: its given velocity is dropped
+                moving.append((f"{m.name}.{m.ctype.slots[k // layout.dim]}", "xyz"[k % layout.dim], m.qd0[k]))
                 continue
             if np.isnan(v[i]):
                 q[i], v[i], src[i] = m.q0[k], m.qd0[k], m.name
@@ -238,4 +235,20 @@ def initial_guess(layout: Layout, members) -> tuple[np.ndarray, np.ndarray]:
                 raise ModelError(
                     f"inconsistent initial velocity at the shared coordinate {layout.coordinate_names[i]}: "
                     f"{src[i]} gives {v[i]:.6g} m/s, {m.name} gives {m.qd0[k]:.6g} m/s")
-    return q, v
+    return q, v, moving
+
+
+def check_fixed_points_at_rest(moving, v, q, tolerance: float) -> None:
+    """Raise if a point fixed to the ground was given a velocity above the tolerance of the
+    initial state (``tolerance`` × the velocity scale, as for the constraints): its motion would
+    be dropped silently, and the member would move otherwise than given."""
+    if not moving:
+        return
+    point, axis, speed = max(moving, key=lambda x: abs(x[2]))
+    scale = max(float(np.max(np.abs(v), initial=0.0)), system_size(q))
+    if abs(speed) > tolerance * scale:
+        raise ModelError(
+            f"inconsistent initial velocities: {point} is fixed to the ground (a ground point, or a joint "
+            f"to the ground that coordinate sharing made one) but the member's velocity and "
+            f"angular_velocity give it {speed:.6g} m/s along {axis}, more than the tolerance "
+            f"{tolerance:g} × {scale:.3g} m/s; give velocities that leave it at rest")
