@@ -4,6 +4,7 @@ SymPy derives every coordinate type's matrices (``ncgen.symbolic``); a ``System`
 bodies, bars and points with joints and forces is assembled into CasADi functions
 (``System.build()``), turned into C, simulated and optimised.
 """
+from ncgen import viz  # nc.viz.plot, nc.viz.animate (cheap: matplotlib loads on use)
 from ncgen.assembly.kinematics import assemble, dof_report, project_velocity, solve_kinematics
 from ncgen.codegen.model_package import generate
 from ncgen.errors import NcgenError
@@ -36,5 +37,5 @@ __all__ = [
     "assemble", "coordinate_type", "dof_report", "equilibrium", "form_find", "forward_dynamics",
     "forward_dynamics_kernel", "generate", "inverse_dynamics", "joint_reactions", "linearize", "modes",
     "project_velocity", "simulate", "solve_kinematics",
-    "__version__",
+    "__version__", "viz",
 ]
