@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from ncgen.errors import OptimizationError
+from ncgen.runtime.tangent import null_basis
 
 #: Half-width of the box that selects the branch of a configuration condition, as a
 #: fraction of the shortest member dimension.
@@ -26,13 +27,8 @@ RANK_TOL = 1e-9
 
 
 def tangent_basis(model, q, t=None, p=None) -> np.ndarray:
-    """Orthonormal basis (nq × dof) of the null space of ``A(q)``."""
-    A = np.atleast_2d(model.A(q, t=t, p=p))
-    if A.size == 0 or A.shape[0] == 0:
-        return np.eye(model.nq)
-    _, s, Vt = np.linalg.svd(A)
-    rank = int(np.sum(s > RANK_TOL * max(s[0], 1e-300)))
-    return Vt[rank:].T.copy()
+    """Orthonormal basis (nq × dof) of the null space of ``A(q)`` (:func:`ncgen.runtime.tangent.null_basis`)."""
+    return null_basis(model.A(q, t=t, p=p), model.nq, RANK_TOL)
 
 
 def consistent_configuration(model, q, *, t=None, p=None, what: str = "q", tolerance: float = 1e-3,

@@ -32,13 +32,14 @@ def cached(model, key: str, make: Callable):
     return store[key]
 
 
-def null_basis(A: np.ndarray, nq: int) -> np.ndarray:
-    """Orthonormal basis of ``null A`` (nq × dof), columns signed reproducibly."""
+def null_basis(A: np.ndarray, nq: int, tol: float = RANK_TOL) -> np.ndarray:
+    """Orthonormal basis of ``null A`` (nq × dof), columns signed reproducibly; singular
+    values below ``tol`` × the largest count as zero."""
     A = np.asarray(A, float).reshape(-1, nq)
     if A.shape[0] == 0:
         return np.eye(nq)
     _, s, Vt = np.linalg.svd(A)
-    rank = int(np.sum(s > RANK_TOL * max(s.max(), 1e-300))) if s.size else 0
+    rank = int(np.sum(s > tol * max(s.max(), 1e-300))) if s.size else 0
     N = Vt[rank:].T.copy()
     for j in range(N.shape[1]):
         i = int(np.argmax(np.abs(N[:, j])))
