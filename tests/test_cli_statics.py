@@ -36,6 +36,16 @@ def test_equilibrium_table_and_files(capsys, tmp_path):
     assert (tmp_path / "eq.png").stat().st_size > 1000
 
 
+def test_equilibrium_npz(capsys, tmp_path):
+    run(capsys, ["equilibrium", str(EXAMPLES / "double_pendulum.toml"), "-o", str(tmp_path / "eq.npz"),
+                 "--no-share"])
+    data = np.load(tmp_path / "eq.npz")
+    names = list(data["coordinate_names"])
+    assert data["q"][names.index("link1.r_i.z")] == pytest.approx(-0.25, abs=1e-9)
+    assert data["lam"].shape == data["constraint_names"].shape
+    assert np.all(np.linalg.eigvalsh(data["K_reduced"] + data["K_reduced"].T) > 0)   # hanging: stable
+
+
 def test_modes_table_and_csv(capsys, tmp_path):
     out = run(capsys, ["modes", str(EXAMPLES / "double_pendulum.toml"), "-o", str(tmp_path / "m.csv"),
                        "--plot", str(tmp_path / "m.png")]).out

@@ -94,27 +94,14 @@ def _solve(args):
     arguments=_equilibrium_arguments,
 )
 def equilibrium_command(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
-    import numpy as np
-
-    from ncgen.cli.common import write_output
-    from ncgen.files import atomic_path
     _check_suffix(parser, "-o/--output", args.output, (".csv", ".npz"))
     _check_suffix(parser, "--plot", args.plot, (".png",))
     eq = _solve(args)
     print(eq.table(), end="")
     model = eq.model
-    if args.output and args.output.lower().endswith(".npz"):
-        with atomic_path(args.output) as tmp, open(tmp, "wb") as fh:
-            np.savez(fh, q=eq.q, lam=eq.lam, u=eq.u, p=eq.p, K_reduced=eq.K_reduced,
-                     stiffness_eigenvalues=eq.stiffness_eigenvalues,
-                     coordinate_names=np.array(model.coordinate_names),
-                     constraint_names=np.array(model.constraint_names))
+    if args.output:
+        eq.save(args.output)
         print(f"wrote {args.output}", file=sys.stderr)
-    elif args.output:
-        rows = ["name,value"] + [f"q:{n},{x:.17g}" for n, x in zip(model.coordinate_names, eq.q)]
-        rows += [f"lambda:{n},{x:.17g}" for n, x in zip(model.constraint_names, eq.lam)]
-        rows += [f"tension:{n},{T:.17g}" for n, T, _, _ in eq.springs]
-        write_output("\n".join(rows) + "\n", args.output)
     if args.plot:
         from ncgen.viz.modes import plot_configuration
         plot_configuration(model, eq.q, args.plot, title=f"{model.name}: equilibrium ({eq.stability})")

@@ -72,6 +72,28 @@ class Equilibrium:
         """Names of the slack cables."""
         return [name for name, _, _, slack in self.springs if slack]
 
+    def save(self, path) -> None:
+        """Write the equilibrium: ``.npz`` (q, λ, u, p, K_reduced, stiffness eigenvalues and
+        the coordinate and constraint names) or ``.csv`` (``name,value`` rows: ``q:<coordinate>``,
+        ``lambda:<constraint>``, ``tension:<spring>`` in N). Written atomically."""
+        from pathlib import Path
+
+        from ncgen.files import atomic_path
+        path = Path(path)
+        model = self.model
+        with atomic_path(path) as tmp:
+            if path.suffix.lower() == ".npz":
+                with open(tmp, "wb") as fh:
+                    np.savez(fh, q=self.q, lam=self.lam, u=self.u, p=self.p, K_reduced=self.K_reduced,
+                             stiffness_eigenvalues=self.stiffness_eigenvalues,
+                             coordinate_names=np.array(model.coordinate_names),
+                             constraint_names=np.array(model.constraint_names))
+            else:
+                rows = ["name,value"] + [f"q:{n},{x:.17g}" for n, x in zip(model.coordinate_names, self.q)]
+                rows += [f"lambda:{n},{x:.17g}" for n, x in zip(model.constraint_names, self.lam)]
+                rows += [f"tension:{n},{T:.17g}" for n, T, _, _ in self.springs]
+                tmp.write_text("\n".join(rows) + "\n")
+
     def joint_reactions(self) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
         """``(joint, member, force, moment)`` for every joint and member it acts on: the
         resultant force (N, world axes) and moment about the member's centre of mass (N·m;
