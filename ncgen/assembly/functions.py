@@ -40,7 +40,7 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 
-from ncgen.assembly.mass import CholeskyFactor, sparse_dm
+from ncgen.assembly.mass import CholeskyFactor, SingularMass, sparse_dm
 from ncgen.model.context import Context
 
 #: Inputs shared by the functions: name -> (meaning, SI units).
@@ -101,7 +101,7 @@ DOCS = {
 }
 
 
-def system_functions(ctx: Context, phi, F, V, M: np.ndarray, factor: CholeskyFactor, alpha: float,
+def system_functions(ctx: Context, phi, F, V, M: np.ndarray, factor: CholeskyFactor | SingularMass, alpha: float,
                      beta: float, system) -> tuple[dict[str, ca.Function], ca.Function]:
     """The functions of :data:`DOCS` by name, and ``V: t, q, p -> V`` (the terms of the
     potential energy, column ``V`` of :func:`~ncgen.assembly.build.force_terms`)."""
@@ -125,13 +125,13 @@ def system_functions(ctx: Context, phi, F, V, M: np.ndarray, factor: CholeskyFac
     add("gamma", ("t", "q", "v", "p"), [gamma], ["gamma"])
     add("F", ("t", "q", "v", "u", "p"), [F], ["F"])
     add("mass", (), [Msp], ["M"])
-    add("Minv", ("b",), [factor.solve(b)], ["x"])
+    add("Minv", ("b",), [factor.solve(b) if factor.regular else ca.mtimes(pseudo_inverse(M), b)], ["x"])
     r, rd = _markers(ctx, system)
     add("markers", ("q", "v"), [r, rd], ["r", "rdot"])
     R, pos = _poses(ctx, system)
     add("poses", ("q",), [R, pos], ["R", "p"])
     potential = ca.Function("V", [t, q, p], [V], ["t", "q", "p"], ["V"])
-    f.update(composite_functions(f, potential, Msp, alpha, beta, ca.SX))
+    f.update(composite_functions(f, potential, Msp, alpha, beta, ca.SX, regular=factor.regular))
     return {name: f[name] for name in FUNCTIONS}, potential
 
 
@@ -143,8 +143,16 @@ FUNCTIONS = tuple(DOCS)
 COMPOSITES = ("ode", "alg", "dae", "energy", "accel")
 
 
+def pseudo_inverse(M: np.ndarray) -> ca.DM:
+    """``M⁺`` (sparse): what ``Minv`` applies for a singular ``M`` (a flat body).  The
+    equations of motion never use it; they go through the augmented mass matrix."""
+    P = np.linalg.pinv(M, hermitian=True)
+    P[np.abs(P) < 1e-12 * max(float(np.max(np.abs(P), initial=0.0)), 1e-300)] = 0.0
+    return sparse_dm(P)
+
+
 def composite_functions(f: dict, potential: ca.Function, M: ca.DM, alpha: float, beta: float,
-                        sym, names: Sequence[str] = COMPOSITES) -> dict[str, ca.Function]:
+                        sym, names: Sequence[str] = COMPOSITES, regular: bool = True) -> dict[str, ca.Function]:
     """The functions ``names`` (of ``ode``, ``alg``, ``dae``, ``energy``, ``accel``) from the
     primitive functions ``f`` (``phi``, ``A``, ``phi_t``, ``gamma``, ``F``, ``Minv``) and
     ``potential: t, q, p -> V``, the terms of the potential energy.
@@ -152,7 +160,11 @@ def composite_functions(f: dict, potential: ca.Function, M: ca.DM, alpha: float,
     ``sym`` is the symbol type of the result: ``ca.SX`` inlines the primitives (one flat
     expression per function, the model's form), ``ca.MX`` keeps them as calls (the form of
     very large models, whose primitives are rerolled, see :mod:`ncgen.codegen.reroll`).
-    ``accel`` is MX either way (it calls CasADi's sparse QR)."""
+    ``accel`` is MX either way (it calls CasADi's sparse QR).
+
+    ``regular=False`` (a singular ``M``, :mod:`ncgen.assembly.mass`): ``ode``/``alg`` solve
+    ``M̄ a = F − Aᵀλ + κ Aᵀc`` with ``M̄ = M + κ AᵀA`` and ``c = γ − 2αΦ̇ − β²Φ``, which is
+    ``M a = F − Aᵀλ`` wherever ``alg = A a − c`` vanishes (symbolic QR of ``M̄``: small models)."""
     nc, nq = f["A"].size1_out(0), f["A"].size2_out(0)
     nu, npar = f["F"].numel_in(3), f["F"].numel_in(4)
     t, q, v = sym.sym("t"), sym.sym("q", nq), sym.sym("v", nq)
@@ -162,9 +174,13 @@ def composite_functions(f: dict, potential: ca.Function, M: ca.DM, alpha: float,
     def ode_alg():
         A = f["A"](t, q, p)
         phidot = ca.mtimes(A, v) + f["phi_t"](t, q, p)
-        a = f["Minv"](f["F"](t, q, v, u, p) - ca.mtimes(A.T, lam))
-        alg = ca.mtimes(A, a) - f["gamma"](t, q, v, p) + 2 * alpha * phidot + beta**2 * f["phi"](t, q, p)
-        return a, alg
+        c = f["gamma"](t, q, v, p) - 2 * alpha * phidot - beta**2 * f["phi"](t, q, p)
+        if regular:
+            a = f["Minv"](f["F"](t, q, v, u, p) - ca.mtimes(A.T, lam))
+        else:
+            k = float(np.max(np.array(ca.diag(M)), initial=1.0))
+            a = ca.solve(M + k * ca.mtimes(A.T, A), f["F"](t, q, v, u, p) - ca.mtimes(A.T, lam - k * c))
+        return a, ca.mtimes(A, a) - c
 
     def energy():
         T = 0.5 * ca.dot(v, ca.mtimes(M, v))

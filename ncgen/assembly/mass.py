@@ -6,6 +6,21 @@ coordinates).  Shared points couple members, so ``M`` is sparse but not block di
 constant) and ``M⁻¹ b`` is the pair of sparse triangular solves ``L⁻ᵀ (L⁻¹ b)``, whose
 CasADi expression costs O(nnz(L)).  The factorisation is sparse too (CasADi's LDLᵀ in the
 natural order, ``L = (I + L̃) D^½``): a dense one costs O(nq³), seconds for a 1000-bar chain.
+
+A flat body (a thin disc or plate: principal moments with I1 + I2 = I3) has a singular
+``M``: its mass lies in a plane, so the base vector normal to it carries no inertia.  The
+dynamics are still regular when ``M`` is positive definite on the tangent space of the
+constraints, ``null(A)``.  :func:`mass_factor` then returns a :class:`SingularMass`, and
+every path that needs ``M⁻¹`` uses the augmented mass matrix (de Jalón & Bayo)
+
+    M̄(q) = M + κ A(q)ᵀ A(q),
+
+which is positive definite exactly when ``M`` is on ``null(A)``.  It is exact wherever ``A x``
+is known: in a projection (``min ½ δᵀMδ`` subject to ``A δ = r`` has the same minimiser in
+the ``M̄`` metric, since ``δᵀM̄δ = δᵀMδ + κ|r|²`` on the feasible set) and in the equations
+of motion (``M a = F − Aᵀλ`` with ``A a = c`` is ``M̄ a = F − Aᵀλ + κ Aᵀc``).  Regular
+mass matrices keep the constant factor (:class:`CholeskyFactor`).  ``κ`` (:func:`kappa`)
+only scales ``AᵀA`` to ``M``; it does not change any result.
 """
 from __future__ import annotations
 
@@ -14,6 +29,10 @@ import numpy as np
 
 from ncgen.errors import ModelError
 from ncgen.model.layout import Layout
+
+#: A mass matrix counts as singular when a pivot of its LDLᵀ, after scaling ``M`` to a unit
+#: diagonal, is below this (a body thinner than about 3e-5 of its size).
+SINGULAR_PIVOT_TOL = 1e-9
 
 
 def assemble_mass(layout: Layout, members) -> np.ndarray:
@@ -34,8 +53,74 @@ def sparse_dm(M: np.ndarray) -> ca.DM:
     return ca.DM(ca.Sparsity.triplet(M.shape[0], M.shape[1], rows.tolist(), cols.tolist()), M[rows, cols])
 
 
+def mass_factor(M: np.ndarray, names: list[str]) -> "CholeskyFactor | SingularMass":
+    """The constant factor of a regular ``M``, or a :class:`SingularMass` (see module docstring)."""
+    return CholeskyFactor(M, names) if is_regular(M) else SingularMass(M, names)
+
+
+def is_regular(M: np.ndarray) -> bool:
+    """Whether ``M`` is numerically positive definite (:data:`SINGULAR_PIVOT_TOL`)."""
+    n = M.shape[0]
+    if n == 0:
+        return True
+    d = np.sqrt(np.maximum(np.diag(M), 1e-300))
+    Ms = M / d[:, None] / d[None, :]
+    D, _, _ = ca.ldl(sparse_dm(Ms), False)
+    return bool(np.all(np.array(D).reshape(-1) > SINGULAR_PIVOT_TOL))
+
+
+def mass_is_regular(model) -> bool:
+    """Whether ``model``'s mass matrix is regular (its constant ``M⁻¹`` exists); False for a
+    model with a flat body, whose every ``M⁻¹`` goes through :func:`augmented_mass`."""
+    return bool(model.mass_factor.regular)
+
+
+def kappa(M: np.ndarray, A: np.ndarray) -> float:
+    """The scale ``κ`` of ``M̄ = M + κ AᵀA``: ``max diag M / max diag AᵀA`` (kg per unit of A²)."""
+    aa = float(np.max(np.sum(A * A, axis=0), initial=0.0))
+    return float(np.max(np.diag(M), initial=1.0)) / aa if aa > 0 else 1.0
+
+
+def augmented_mass(M: np.ndarray, A: np.ndarray) -> np.ndarray:
+    """``M̄ = M + κ AᵀA`` (dense; see module docstring)."""
+    return M + kappa(M, A) * (A.T @ A)
+
+
+class SingularMass:
+    """A singular constant ``M`` (a flat body): no constant inverse; :meth:`solve_with` applies
+    ``M̄(q)⁻¹`` for the constraint Jacobian of the state at hand."""
+
+    regular = False
+
+    def __init__(self, M: np.ndarray, names: list[str]):
+        self.n = M.shape[0]
+        self.M = np.array(M, dtype=float)
+        w, V = np.linalg.eigh(self.M)
+        self.null = V[:, w <= SINGULAR_PIVOT_TOL * max(float(w.max(initial=0.0)), 1e-300)]
+        self.names = list(names)
+
+    def solve_with(self, A: np.ndarray, B: np.ndarray) -> np.ndarray:
+        """``M̄⁻¹ B`` with ``M̄ = M + κ AᵀA``; raises :class:`ModelError` when ``M̄`` is singular
+        (a motion without inertia that the constraints ``A`` leave free)."""
+        Mbar = augmented_mass(self.M, np.asarray(A, dtype=float).reshape(-1, self.n))
+        try:
+            L = np.linalg.cholesky(Mbar)
+        except np.linalg.LinAlgError:
+            raise ModelError("the mass matrix is singular on the constraint tangent space: a motion has no "
+                             "inertia (see ncgen.assembly.mass.check_tangent_inertia)") from None
+        return np.linalg.solve(L.T, np.linalg.solve(L, B))
+
+    def solve(self, b):
+        raise ModelError("the mass matrix is singular (a flat body): M⁻¹ does not exist; use the "
+                         "augmented mass matrix (ncgen.assembly.mass.augmented_mass)")
+
+    solve_numeric = solve
+
+
 class CholeskyFactor:
     """``M = L Lᵀ`` with ``L`` stored row-wise sparse."""
+
+    regular = True
 
     def __init__(self, M: np.ndarray, names: list[str]):
         self.n = n = M.shape[0]
@@ -93,9 +178,55 @@ class CholeskyFactor:
         nz[np.array(mapping, dtype=np.int64)] = vals
         return ca.DM(sp, nz)
 
+    def solve_with(self, A: np.ndarray, B: np.ndarray) -> np.ndarray:
+        """``M⁻¹ B`` (``A`` is ignored: for a regular ``M`` the augmented form is not needed)."""
+        return self.solve_numeric(B)
+
     def solve_numeric(self, b: np.ndarray) -> np.ndarray:
         L = self.dense()
         return np.linalg.solve(L.T, np.linalg.solve(L, b))
 
     def dense(self) -> np.ndarray:
         return np.array(ca.densify(self.lower())) if self.n else np.zeros((0, 0))
+
+
+#: ``M`` counts as positive definite on ``null(A)`` when the smallest eigenvalue of the
+#: Jacobi-scaled reduced mass matrix ``Nᵀ M N`` exceeds this.
+TANGENT_INERTIA_TOL = 1e-9
+
+
+def check_tangent_inertia(M: np.ndarray, A: np.ndarray, layout: Layout, members, where: str) -> None:
+    """Raise :class:`ModelError` unless ``M`` is positive definite on ``null(A)`` (``A`` at
+    the initial configuration): otherwise a motion allowed by the constraints has no inertia
+    (a line-like body free to spin about its line, a point-like body free to turn), and the
+    equations of motion do not determine it.  Names the members that move in that motion."""
+    n = M.shape[0]
+    if n == 0:
+        return
+    d = np.sqrt(np.maximum(np.diag(M), 1e-300))
+    Ms = M / d[:, None] / d[None, :]
+    As = A / d[None, :] if A.size else np.zeros((0, n))
+    if As.shape[0]:
+        _, s, Vt = np.linalg.svd(As)
+        rank = int(np.sum(s > 1e-10 * max(float(s[0]), 1e-300)))
+        N = Vt[rank:].T
+    else:
+        N = np.eye(n)
+    if N.shape[1] == 0:
+        return
+    w, Y = np.linalg.eigh(N.T @ Ms @ N)
+    if w[0] > TANGENT_INERTIA_TOL:
+        return
+    z = (N @ Y[:, 0]) / d
+    z = z / np.max(np.abs(z))
+    moving = []
+    for m in members:
+        idx = [i for i in layout.member_indices(m.name) if i is not None]
+        if idx and np.max(np.abs(z[idx])) > 1e-6:
+            moving.append(m.name)
+    raise ModelError(
+        f"{where}: a motion allowed by the constraints has no inertia (the mass matrix is singular on "
+        f"the constraint tangent space at the initial configuration), so the equations of motion do "
+        f"not determine it; it moves member(s) {', '.join(moving)}: a point mass, a line-like body "
+        f"free to spin about its line or a flat body free to turn its normal needs inertia for that "
+        f"motion (give the body thickness or a non-zero moment) or a joint that stops it")
