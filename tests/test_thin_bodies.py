@@ -260,3 +260,15 @@ def test_line_like_body_whose_spin_is_stopped_is_accepted():
     assert not mass_is_regular(model)
     traj = nc.simulate(model, t_end=0.2, dt=0.01, rtol=1e-10, atol=1e-12)
     assert traj.energy_drift < 1e-8 * max(traj.energy_scale, 1.0)
+
+
+def test_thin_plate_linearisation_and_modes_give_the_pendulum_frequency():
+    """About the hanging rest state, the linearised plate pendulum and its modal analysis give
+    ω² = m g d / I_hinge = 3 g / (2 b)."""
+    model = plate_pendulum()
+    omega2 = 3 * G / (2 * PLATE_B)
+    lin = nc.linearize(model, model.q0)
+    assert np.sort(np.linalg.eigvals(lin.A).imag ** 2)[-1] == pytest.approx(omega2, rel=1e-9)
+    md = nc.modes(model)
+    assert list(md.kind) == ["vibration"]
+    assert md.omega2[0] == pytest.approx(omega2, rel=1e-9)
