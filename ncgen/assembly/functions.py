@@ -162,9 +162,8 @@ def composite_functions(f: dict, potential: ca.Function, M: ca.DM, alpha: float,
     very large models, whose primitives are rerolled, see :mod:`ncgen.codegen.reroll`).
     ``accel`` is MX either way (it calls CasADi's sparse QR).
 
-    ``regular=False`` (a singular ``M``, :mod:`ncgen.assembly.mass`): ``ode``/``alg`` solve
-    ``M̄ a = F − Aᵀλ + κ Aᵀc`` with ``M̄ = M + κ AᵀA`` and ``c = γ − 2αΦ̇ − β²Φ``, which is
-    ``M a = F − Aᵀλ`` wherever ``alg = A a − c`` vanishes (symbolic QR of ``M̄``: small models)."""
+    ``regular=False`` (a singular ``M``, :mod:`ncgen.assembly.mass`): ``ode`` and ``alg`` are
+    :func:`_augmented_ode_alg` (MX, sparse QR of the augmented mass matrix)."""
     nc, nq = f["A"].size1_out(0), f["A"].size2_out(0)
     nu, npar = f["F"].numel_in(3), f["F"].numel_in(4)
     t, q, v = sym.sym("t"), sym.sym("q", nq), sym.sym("v", nq)
@@ -172,15 +171,13 @@ def composite_functions(f: dict, potential: ca.Function, M: ca.DM, alpha: float,
 
     @functools.cache
     def ode_alg():
+        if not regular:
+            return _augmented_ode_alg(f, M, alpha, beta, nq, nc, nu, npar)
         A = f["A"](t, q, p)
         phidot = ca.mtimes(A, v) + f["phi_t"](t, q, p)
-        c = f["gamma"](t, q, v, p) - 2 * alpha * phidot - beta**2 * f["phi"](t, q, p)
-        if regular:
-            a = f["Minv"](f["F"](t, q, v, u, p) - ca.mtimes(A.T, lam))
-        else:
-            k = float(np.max(np.array(ca.diag(M)), initial=1.0))
-            a = ca.solve(M + k * ca.mtimes(A.T, A), f["F"](t, q, v, u, p) - ca.mtimes(A.T, lam - k * c))
-        return a, ca.mtimes(A, a) - c
+        a = f["Minv"](f["F"](t, q, v, u, p) - ca.mtimes(A.T, lam))
+        alg = ca.mtimes(A, a) - f["gamma"](t, q, v, p) + 2 * alpha * phidot + beta**2 * f["phi"](t, q, p)
+        return a, alg
 
     def energy():
         T = 0.5 * ca.dot(v, ca.mtimes(M, v))
@@ -188,10 +185,10 @@ def composite_functions(f: dict, potential: ca.Function, M: ca.DM, alpha: float,
                          ["T", "V"])
 
     makers = {
-        "ode": lambda: _function("ode", [t, q, v, lam, u, p], [v, ode_alg()[0]],
-                                 ["t", "q", "v", "lam", "u", "p"], ["qdot", "vdot"]),
-        "alg": lambda: _function("alg", [t, q, v, lam, u, p], [ode_alg()[1]], ["t", "q", "v", "lam", "u", "p"],
-                                 ["res"]),
+        "ode": lambda: ode_alg()[0] if not regular else
+        _function("ode", [t, q, v, lam, u, p], [v, ode_alg()[0]], ["t", "q", "v", "lam", "u", "p"], ["qdot", "vdot"]),
+        "alg": lambda: ode_alg()[1] if not regular else
+        _function("alg", [t, q, v, lam, u, p], [ode_alg()[1]], ["t", "q", "v", "lam", "u", "p"], ["res"]),
         "dae": lambda: _dae(f, M, alpha, beta, nq, nc, nu, npar, sym),
         "energy": energy,
         "accel": lambda: _accel(f, M, nc, alpha, beta, nq, nu, npar),
@@ -242,6 +239,25 @@ def _function(name: str, ins: list, outs: list, in_names: list[str], out_names: 
     if isinstance(ins[0], ca.SX):
         outs = ca.cse(outs)
     return ca.Function(name, ins, outs, in_names, out_names)
+
+
+def _augmented_ode_alg(f, M: ca.DM, alpha: float, beta: float, nq: int, nc: int, nu: int,
+                       npar: int) -> tuple[ca.Function, ca.Function]:
+    """``ode`` and ``alg`` of a singular ``M`` (a flat body): ``M̄ a = F − Aᵀλ + κ Aᵀc`` with
+    ``M̄ = M + κ AᵀA``, ``c = γ − 2αΦ̇ − β²Φ`` and ``alg = A a − c``, so that ``M a = F − Aᵀλ``
+    wherever ``alg`` vanishes.  ``M̄`` depends on ``q``: MX functions calling the primitives
+    and CasADi's sparse QR (as ``accel``), not an SX expansion of its inverse (O(nq³)).
+    ``κ = max diag M`` (constraint rows are O(1) in natural coordinates); it only scales."""
+    t, q, v = ca.MX.sym("t"), ca.MX.sym("q", nq), ca.MX.sym("v", nq)
+    lam, u, p = ca.MX.sym("lam", nc), ca.MX.sym("u", nu), ca.MX.sym("p", npar)
+    A = f["A"](t, q, p)
+    phidot = ca.mtimes(A, v) + f["phi_t"](t, q, p)
+    c = f["gamma"](t, q, v, p) - 2 * alpha * phidot - beta**2 * f["phi"](t, q, p)
+    k = float(np.max(np.array(ca.diag(M)), initial=1.0))
+    a = ca.solve(ca.MX(M) + k * ca.mtimes(A.T, A), f["F"](t, q, v, u, p) - ca.mtimes(A.T, lam - k * c), "qr")
+    ins, names = [t, q, v, lam, u, p], ["t", "q", "v", "lam", "u", "p"]
+    return (ca.Function("ode", ins, [v, a], names, ["qdot", "vdot"]),
+            ca.Function("alg", ins, [ca.mtimes(A, a) - c], names, ["res"]))
 
 
 def _accel(f, M: ca.DM, nc: int, alpha: float, beta: float, nq: int, nu: int, npar: int) -> ca.Function:
