@@ -296,3 +296,15 @@ def test_thin_plate_linearisation_and_modes_give_the_pendulum_frequency():
     md = nc.modes(model)
     assert list(md.kind) == ["vibration"]
     assert md.omega2[0] == pytest.approx(omega2, rel=1e-9)
+
+
+def test_check_report_says_the_mass_matrix_is_singular():
+    from ncgen.assembly.check import check_system
+    s = nc.System("free_disc", gravity=(0.0, 0.0, -G))
+    s.add_body("disc", mass=MASS, inertia=DISC)
+    out = check_system(s).render()
+    assert "mass matrix: singular" in out and "consistent: yes" in out
+    s = nc.System("rod_in_space")
+    s.add_body("rod", mass=1.0, inertia=np.diag([0.0, 0.1, 0.1]))
+    out = check_system(s).render()
+    assert "no inertia" in out and "rod" in out and "consistent: no" in out
