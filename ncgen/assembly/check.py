@@ -70,8 +70,9 @@ class CheckReport:
         lines += _sharing(m, m.nc + len(d.dropped))
         lines.append(f"rank A = {d.rank}, DOF = {d.dof}")
         if not m.mass_factor.regular:
-            lines.append("mass matrix: singular (a flat or line-like body), positive definite on the constraint "
-                         "tangent space (augmented mass matrix, docs/architecture.md)")
+            flat = ", ".join(m.mass_factor.flat) or "coordinates without inertia"
+            lines.append(f"mass matrix: singular ({flat}), positive definite on the constraint tangent space "
+                         "(augmented mass matrix, docs/architecture.md)")
         lines.append("redundant constraints: " + (", ".join(d.redundant) or "none")
                      + (" (dropped when building)" if d.dropped else ""))
         phi_res, vel_res = m.initial_residual

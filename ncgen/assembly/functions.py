@@ -125,7 +125,7 @@ def system_functions(ctx: Context, phi, F, V, M: np.ndarray, factor: CholeskyFac
     add("gamma", ("t", "q", "v", "p"), [gamma], ["gamma"])
     add("F", ("t", "q", "v", "u", "p"), [F], ["F"])
     add("mass", (), [Msp], ["M"])
-    add("Minv", ("b",), [factor.solve(b) if factor.regular else ca.mtimes(pseudo_inverse(M), b)], ["x"])
+    add("Minv", ("b",), [factor.solve(b) if factor.regular else factor.pseudo_solve(b)], ["x"])
     r, rd = _markers(ctx, system)
     add("markers", ("q", "v"), [r, rd], ["r", "rdot"])
     R, pos = _poses(ctx, system)
@@ -141,14 +141,6 @@ FUNCTIONS = tuple(DOCS)
 
 #: The functions :func:`composite_functions` builds from the primitives.
 COMPOSITES = ("ode", "alg", "dae", "energy", "accel")
-
-
-def pseudo_inverse(M: np.ndarray) -> ca.DM:
-    """``M⁺`` (sparse): what ``Minv`` applies for a singular ``M`` (a flat body).  The
-    equations of motion never use it; they go through the augmented mass matrix."""
-    P = np.linalg.pinv(M, hermitian=True)
-    P[np.abs(P) < 1e-12 * max(float(np.max(np.abs(P), initial=0.0)), 1e-300)] = 0.0
-    return sparse_dm(P)
 
 
 def composite_functions(f: dict, potential: ca.Function, M: ca.DM, alpha: float, beta: float,

@@ -31,8 +31,16 @@ from ncgen.errors import ModelError
 from ncgen.model.layout import Layout
 
 #: A mass matrix counts as singular when a pivot of its LDLᵀ, after scaling ``M`` to a unit
-#: diagonal, is below this (a body thinner than about 3e-5 of its size).
+#: diagonal, is below this.
 SINGULAR_PIVOT_TOL = 1e-9
+#: A body counts as flat (or line- or point-like) when the smallest eigenvalue of its
+#: ``J̄ = ∫ρ r̄ r̄ᵀ`` is below this fraction of the largest: a disc thinner than about 3e-4 of
+#: its radius.  Its ``M`` is then treated as singular, even if slightly regular: a constant
+#: ``M⁻¹`` would amplify rounding by the inverse of that ratio.
+FLAT_TOL = 1e-8
+#: Diagonal entries of ``M`` below this fraction of the largest are scaled as if they were
+#: that size (Jacobi scaling of coordinates without inertia).
+SCALE_FLOOR = 1e-12
 
 
 def assemble_mass(layout: Layout, members) -> np.ndarray:
@@ -53,9 +61,36 @@ def sparse_dm(M: np.ndarray) -> ca.DM:
     return ca.DM(ca.Sparsity.triplet(M.shape[0], M.shape[1], rows.tolist(), cols.tolist()), M[rows, cols])
 
 
-def mass_factor(M: np.ndarray, names: list[str]) -> "CholeskyFactor | SingularMass":
-    """The constant factor of a regular ``M``, or a :class:`SingularMass` (see module docstring)."""
-    return CholeskyFactor(M, names) if is_regular(M) else SingularMass(M, names)
+def flat_members(members, layout: Layout) -> list[str]:
+    """Names of the 3D bodies whose mass lies (nearly) in a plane, on a line or at a point
+    (:data:`FLAT_TOL`) and whose free coordinates (``layout``) include a direction without
+    (enough) inertia: a thin disc's normal, unless a joint fixes it."""
+    out = []
+    for m in members:
+        if m.kind != "body" or m.rigid.Jbar.shape[0] != 3:
+            continue
+        w = np.linalg.eigvalsh(m.rigid.Jbar)
+        if w[0] > FLAT_TOL * max(float(w[-1]), 1e-300):
+            continue
+        free = [k for k, i in enumerate(layout.member_indices(m.name)) if i is not None]
+        Mf = m.rigid.M[np.ix_(free, free)]
+        if free and np.linalg.eigvalsh(Mf)[0] <= FLAT_TOL * max(float(w[-1]), 1e-300):
+            out.append(m.name)
+    return out
+
+
+def mass_factor(M: np.ndarray, names: list[str], flat: list[str] = ()) -> "CholeskyFactor | SingularMass":
+    """The constant factor of a regular ``M``, or a :class:`SingularMass` when ``M`` is
+    singular or a member is ``flat`` (see module docstring)."""
+    if not flat and is_regular(M):
+        return CholeskyFactor(M, names)
+    return SingularMass(M, names, flat)
+
+
+def jacobi_scale(M: np.ndarray) -> np.ndarray:
+    """``d`` with ``M / (d dᵀ)`` of unit diagonal (floored at :data:`SCALE_FLOOR`)."""
+    diag = np.diag(M)
+    return np.sqrt(np.maximum(diag, SCALE_FLOOR * max(float(np.max(diag, initial=0.0)), 1e-300)))
 
 
 def is_regular(M: np.ndarray) -> bool:
@@ -63,9 +98,8 @@ def is_regular(M: np.ndarray) -> bool:
     n = M.shape[0]
     if n == 0:
         return True
-    d = np.sqrt(np.maximum(np.diag(M), 1e-300))
-    Ms = M / d[:, None] / d[None, :]
-    D, _, _ = ca.ldl(sparse_dm(Ms), False)
+    d = jacobi_scale(M)
+    D, _, _ = ca.ldl(sparse_dm(M / d[:, None] / d[None, :]), False)
     return bool(np.all(np.array(D).reshape(-1) > SINGULAR_PIVOT_TOL))
 
 
@@ -88,16 +122,25 @@ def augmented_mass(M: np.ndarray, A: np.ndarray) -> np.ndarray:
 
 class SingularMass:
     """A singular constant ``M`` (a flat body): no constant inverse; :meth:`solve_with` applies
-    ``M̄(q)⁻¹`` for the constraint Jacobian of the state at hand."""
+    ``M̄(q)⁻¹`` for the constraint Jacobian of the state at hand, :meth:`pseudo_solve` the
+    pseudo-inverse ``M⁺ = (M + c P)⁻¹ − P/c`` (``P`` the orthogonal projector onto
+    ``null(M)``, ``c = max diag M``), with the sparse factor of ``M + c P``."""
 
     regular = False
 
-    def __init__(self, M: np.ndarray, names: list[str]):
-        self.n = M.shape[0]
+    def __init__(self, M: np.ndarray, names: list[str], flat: list[str] = ()):
+        self.n = n = M.shape[0]
         self.M = np.array(M, dtype=float)
-        w, V = np.linalg.eigh(self.M)
-        self.null = V[:, w <= SINGULAR_PIVOT_TOL * max(float(w.max(initial=0.0)), 1e-300)]
-        self.names = list(names)
+        self.flat = list(flat)
+        d = jacobi_scale(self.M)
+        w, V = np.linalg.eigh(self.M / d[:, None] / d[None, :])
+        Z = V[:, w <= SINGULAR_PIVOT_TOL] / d[:, None]         # null(M) = D^-½ null(M_s)
+        Q = np.linalg.qr(Z)[0] if Z.shape[1] else np.zeros((n, 0))
+        P = Q @ Q.T
+        P[np.abs(P) < 1e-14] = 0.0
+        self.c = float(np.max(np.diag(self.M), initial=1.0))
+        self.P = P
+        self._regularised = CholeskyFactor(self.M + self.c * P, names) if is_regular(self.M + self.c * P) else None
 
     def solve_with(self, A: np.ndarray, B: np.ndarray) -> np.ndarray:
         """``M̄⁻¹ B`` with ``M̄ = M + κ AᵀA``; raises :class:`ModelError` when ``M̄`` is singular
@@ -109,6 +152,14 @@ class SingularMass:
             raise ModelError("the mass matrix is singular on the constraint tangent space: a motion has no "
                              "inertia (see ncgen.assembly.mass.check_tangent_inertia)") from None
         return np.linalg.solve(L.T, np.linalg.solve(L, B))
+
+    def pseudo_solve(self, b):
+        """``M⁺ b`` for a CasADi column ``b`` (what the ``Minv`` function applies)."""
+        if self._regularised is None:            # M + cP ill-conditioned: the dense pseudo-inverse
+            Mp = np.linalg.pinv(self.M, hermitian=True)
+            Mp[np.abs(Mp) < 1e-12 * max(float(np.max(np.abs(Mp), initial=0.0)), 1e-300)] = 0.0
+            return ca.mtimes(sparse_dm(Mp), b)
+        return self._regularised.solve(b) - ca.mtimes(sparse_dm(self.P), b) / self.c
 
     def solve(self, b):
         raise ModelError("the mass matrix is singular (a flat body): M⁻¹ does not exist; use the "
@@ -203,7 +254,7 @@ def check_tangent_inertia(M: np.ndarray, A: np.ndarray, layout: Layout, members,
     n = M.shape[0]
     if n == 0:
         return
-    d = np.sqrt(np.maximum(np.diag(M), 1e-300))
+    d = jacobi_scale(M)
     Ms = M / d[:, None] / d[None, :]
     As = A / d[None, :] if A.size else np.zeros((0, n))
     if As.shape[0]:

@@ -17,7 +17,7 @@ import weakref
 
 import casadi as ca
 
-from ncgen.assembly.functions import composite_functions, pseudo_inverse
+from ncgen.assembly.functions import composite_functions
 from ncgen.assembly.mass import sparse_dm
 from ncgen.codegen.reroll import REROLL_INSTRUCTIONS, reroll
 
@@ -60,7 +60,7 @@ def primitives(model) -> dict[str, ca.Function]:
     if model not in _primitives:
         f = {n: reroll(model.functions[n]) for n in PRIMITIVES}
         b = ca.MX.sym("b", model.nq)
-        x = model.mass_factor.solve(b) if model.mass_factor.regular else ca.mtimes(pseudo_inverse(model.M), b)
+        x = model.mass_factor.solve(b) if model.mass_factor.regular else model.mass_factor.pseudo_solve(b)
         f["Minv"] = ca.Function("Minv", [b], [x], ["b"], ["x"])
         f["V"] = reroll(model.potential_terms)
         _primitives[model] = f
