@@ -79,12 +79,27 @@ def flat_members(members, layout: Layout) -> list[str]:
     return out
 
 
-def mass_factor(M: np.ndarray, names: list[str], flat: list[str] = ()) -> "CholeskyFactor | SingularMass":
+def flat_support(members, layout: Layout, flat: list[str]) -> np.ndarray:
+    """Indices of the coordinates that only ``flat`` members move: ``null(M)`` lies in their
+    span (``zᵀMz = Σ_I z_Iᵀ M_I z_I`` vanishes only if every regular member's ``z_I`` does)."""
+    own, other = set(), set()
+    for m in members:
+        idx = {i for i in layout.member_indices(m.name) if i is not None}
+        (own if m.name in flat else other).update(idx)
+    return np.array(sorted(own - other), dtype=int)
+
+
+def mass_factor(M: np.ndarray, names: list[str], flat: list[str] = (),
+                support: np.ndarray | None = None) -> "CholeskyFactor | SingularMass":
     """The constant factor of a regular ``M``, or a :class:`SingularMass` when ``M`` is
-    singular or a member is ``flat`` (see module docstring)."""
-    if not flat and is_regular(M):
-        return CholeskyFactor(M, names)
-    return SingularMass(M, names, flat)
+    singular or a member is ``flat`` (see module docstring); ``support``: where ``null(M)``
+    lies (:func:`flat_support`; default: anywhere)."""
+    if not flat:
+        try:
+            return CholeskyFactor(M, names)
+        except SingularMassError:
+            support = None
+    return SingularMass(M, names, flat, support)
 
 
 def jacobi_scale(M: np.ndarray) -> np.ndarray:
@@ -93,14 +108,22 @@ def jacobi_scale(M: np.ndarray) -> np.ndarray:
     return np.sqrt(np.maximum(diag, SCALE_FLOOR * max(float(np.max(diag, initial=0.0)), 1e-300)))
 
 
+def scaled_pivots(D, M: np.ndarray) -> np.ndarray:
+    """The pivots of the LDLᵀ of the Jacobi-scaled ``M`` from those ``D`` of ``M`` itself
+    (scaling by ``S`` keeps the unit triangle: pivot ``k`` becomes ``D_k / d_k²``)."""
+    return np.array(D).reshape(-1) / jacobi_scale(M) ** 2
+
+
 def is_regular(M: np.ndarray) -> bool:
     """Whether ``M`` is numerically positive definite (:data:`SINGULAR_PIVOT_TOL`)."""
-    n = M.shape[0]
-    if n == 0:
+    if M.shape[0] == 0:
         return True
-    d = jacobi_scale(M)
-    D, _, _ = ca.ldl(sparse_dm(M / d[:, None] / d[None, :]), False)
-    return bool(np.all(np.array(D).reshape(-1) > SINGULAR_PIVOT_TOL))
+    D, _, _ = ca.ldl(sparse_dm(M), False)
+    return bool(np.all(scaled_pivots(D, M) > SINGULAR_PIVOT_TOL))
+
+
+class SingularMassError(ModelError):
+    """``M`` is not (numerically) positive definite: no constant Cholesky factor."""
 
 
 def mass_is_regular(model) -> bool:
@@ -128,19 +151,25 @@ class SingularMass:
 
     regular = False
 
-    def __init__(self, M: np.ndarray, names: list[str], flat: list[str] = ()):
+    def __init__(self, M: np.ndarray, names: list[str], flat: list[str] = (), support: np.ndarray | None = None):
         self.n = n = M.shape[0]
         self.M = np.array(M, dtype=float)
         self.flat = list(flat)
-        d = jacobi_scale(self.M)
-        w, V = np.linalg.eigh(self.M / d[:, None] / d[None, :])
-        Z = V[:, w <= SINGULAR_PIVOT_TOL] / d[:, None]         # null(M) = D^-½ null(M_s)
+        S = np.arange(n) if support is None else np.asarray(support, dtype=int)
+        Mss = self.M[np.ix_(S, S)]
+        d = jacobi_scale(Mss)
+        w, V = np.linalg.eigh(Mss / d[:, None] / d[None, :]) if S.size else (np.zeros(0), np.zeros((0, 0)))
+        Z = np.zeros((n, int(np.sum(w <= SINGULAR_PIVOT_TOL))))
+        Z[S] = V[:, w <= SINGULAR_PIVOT_TOL] / d[:, None]        # null(M) = D^-½ null(M_s), on S
         Q = np.linalg.qr(Z)[0] if Z.shape[1] else np.zeros((n, 0))
         P = Q @ Q.T
         P[np.abs(P) < 1e-14] = 0.0
         self.c = float(np.max(np.diag(self.M), initial=1.0))
         self.P = P
-        self._regularised = CholeskyFactor(self.M + self.c * P, names) if is_regular(self.M + self.c * P) else None
+        try:
+            self._regularised = CholeskyFactor(self.M + self.c * P, names)
+        except SingularMassError:
+            self._regularised = None
 
     def solve_with(self, A: np.ndarray, B: np.ndarray) -> np.ndarray:
         """``M̄⁻¹ B`` with ``M̄ = M + κ AᵀA``; raises :class:`ModelError` when ``M̄`` is singular
@@ -177,11 +206,11 @@ class CholeskyFactor:
         self.n = n = M.shape[0]
         D, LT, _ = ca.ldl(sparse_dm(M), False) if n else (ca.DM(0, 1), ca.DM(0, 0), [])
         d = np.array(D).reshape(-1)
-        if not np.all(d > 0):
+        if n and not np.all(scaled_pivots(D, M) > SINGULAR_PIVOT_TOL):
             diag = np.diag(M)
             bad = [names[i] for i in np.flatnonzero(diag <= 0)]
-            raise ModelError("the mass matrix is not positive definite"
-                             + (f"; coordinates without mass: {', '.join(bad)}" if bad else ""))
+            raise SingularMassError("the mass matrix is not positive definite"
+                                    + (f"; coordinates without mass: {', '.join(bad)}" if bad else ""))
         self.diag = np.sqrt(d)
         # L = (I + L̃) D^½ with L̃ = LTᵀ strictly lower: entry (i, j), j < i, is LT[j, i] √d_j
         cols_of, rows_of = LT.sparsity().get_triplet()          # LT[r, c]: r < c
