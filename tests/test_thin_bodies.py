@@ -320,3 +320,19 @@ def test_check_report_says_the_mass_matrix_is_singular():
     s.add_body("rod", mass=1.0, inertia=np.diag([0.0, 0.1, 0.1]))
     out = check_system(s).render()
     assert "no inertia" in out and "rod" in out and "consistent: no" in out
+
+
+def test_disc_given_a_printed_rotation_is_projected_and_reported():
+    """A rotation copied with 6 decimals (|RᵀR − 1| ~ 1e-6) is projected to the nearest
+    rotation, with a warning naming the correction; 1e-4 off stays an error."""
+    from ncgen.validation import RotationProjected
+    R = np.round(rot_x(0.3) @ np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]]) @ rot_x(1.1), 6)
+    s = nc.System("printed")
+    with pytest.warns(RotationProjected, match="projected to the nearest rotation"):
+        s.add_body("disc", mass=MASS, inertia=DISC, rotation=R)
+    model = s.build()
+    Rm = np.array(model.functions["poses"](model.q0)[0])
+    np.testing.assert_allclose(Rm.T @ Rm, np.eye(3), atol=1e-14)
+    np.testing.assert_allclose(Rm, R, atol=2e-6)
+    with pytest.raises(nc.NcgenError, match="orthonormal"):
+        nc.System("off").add_body("disc", mass=MASS, inertia=DISC, rotation=R + 1e-4 * np.eye(3))
