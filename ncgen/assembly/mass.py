@@ -10,8 +10,9 @@ natural order, ``L = (I + L̃) D^½``): a dense one costs O(nq³), seconds for a
 A flat body (a thin disc or plate: principal moments with I1 + I2 = I3) has a singular
 ``M``: its mass lies in a plane, so the base vector normal to it carries no inertia.  The
 dynamics are still regular when ``M`` is positive definite on the tangent space of the
-constraints, ``null(A)``.  :func:`mass_factor` then returns a :class:`SingularMass`, and
-every path that needs ``M⁻¹`` uses the augmented mass matrix (de Jalón & Bayo)
+constraints, ``null(A)`` (:func:`check_tangent_inertia`).  :func:`mass_factor` then returns
+a :class:`SingularMass`; KKT paths are unchanged, and every path that needs ``M⁻¹`` uses
+the KKT system instead or the augmented mass matrix (de Jalón & Bayo; docs/architecture.md)
 
     M̄(q) = M + κ A(q)ᵀ A(q),
 
