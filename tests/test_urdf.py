@@ -87,14 +87,6 @@ def test_massless_moving_link_is_refused_by_name():
         nc.System.from_urdf(text)
 
 
-def test_flat_inertia_is_refused_by_name():
-    text = urdf("""<link name="disc"><inertial><mass value="1"/>
-  <inertia ixx="0.25" ixy="0" ixz="0" iyy="0.25" iyz="0" izz="0.5"/></inertial></link>
-<joint name="j" type="continuous"><parent link="base"/><child link="disc"/><axis xyz="0 0 1"/></joint>""")
-    with pytest.raises(nc.ModelError, match=r"disc.*thin disc or plate"):
-        nc.System.from_urdf(text)
-
-
 def test_unsupported_joint_type_and_bad_input():
     text = urdf(f"""{LINK1}
 <joint name="j" type="floating"><parent link="base"/><child link="link1"/></joint>""")

@@ -14,7 +14,7 @@ from ncgen.assembly.initial_state import consistent_state
 from ncgen.assembly.joint_space import JointSpace, actuator_forces, build_joint_coordinates
 from ncgen.assembly.kinematics import resolve_fix, system_size
 from ncgen.assembly.limits import model_limits
-from ncgen.assembly.mass import CholeskyFactor, assemble_mass
+from ncgen.assembly.mass import assemble_mass, check_tangent_inertia, flat_members, flat_support, mass_factor
 from ncgen.assembly.rank import dependent_rows
 from ncgen.assembly.redundancy import classify
 from ncgen.assembly.springs import spring_table
@@ -89,7 +89,8 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
         _, _, Q, Vc = smooth_forces(ctx, terms)
         F, V = F + Q, ca.vertcat(V, Vc)
     M = assemble_mass(layout, members)
-    factor = CholeskyFactor(M, layout.coordinate_names)
+    flat = flat_members(members, layout)
+    factor = mass_factor(M, layout.coordinate_names, flat, flat_support(members, layout, flat))
     q_init, v_init, moving = initial_guess(layout, members)
     p0 = np.concatenate([v for _, v in system.parameters.values()]) if system.parameters else np.zeros(0)
     limits.check(p0, where=f"system {system.name!r}: ")
@@ -115,6 +116,9 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
         labels, rows = [labels[i] for i in keep], [rows[i] for i in keep]
 
     phi = ca.vertcat(*rows) if rows else ca.SX(0, 1)
+    if not factor.regular:        # a flat body: M must be positive definite on null(A)
+        A0 = np.array(ca.Function("A", [ctx.t, ctx.q, ctx.p], [ca.jacobian(phi, ctx.q)])(t0, q_init, p0))
+        check_tangent_inertia(M, A0, layout, members, f"system {system.name!r}")
     functions, potential = system_functions(ctx, phi, F, V, M, factor, alpha, beta, system)
     if terms:
         functions.update(contact_functions(ctx, terms))

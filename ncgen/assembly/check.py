@@ -69,6 +69,10 @@ class CheckReport:
         d = self.dof
         lines += _sharing(m, m.nc + len(d.dropped))
         lines.append(f"rank A = {d.rank}, DOF = {d.dof}")
+        if not m.mass_factor.regular:
+            flat = ", ".join(m.mass_factor.flat) or "coordinates without inertia"
+            lines.append(f"mass matrix: singular ({flat}), positive definite on the constraint tangent space "
+                         "(augmented mass matrix, docs/architecture.md)")
         lines.append("redundant constraints: " + (", ".join(d.redundant) or "none")
                      + (" (dropped when building)" if d.dropped else ""))
         phi_res, vel_res = m.initial_residual

@@ -40,7 +40,7 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 
-from ncgen.assembly.mass import CholeskyFactor, sparse_dm
+from ncgen.assembly.mass import CholeskyFactor, SingularMass, sparse_dm
 from ncgen.model.context import Context
 
 #: Inputs shared by the functions: name -> (meaning, SI units).
@@ -101,7 +101,7 @@ DOCS = {
 }
 
 
-def system_functions(ctx: Context, phi, F, V, M: np.ndarray, factor: CholeskyFactor, alpha: float,
+def system_functions(ctx: Context, phi, F, V, M: np.ndarray, factor: CholeskyFactor | SingularMass, alpha: float,
                      beta: float, system) -> tuple[dict[str, ca.Function], ca.Function]:
     """The functions of :data:`DOCS` by name, and ``V: t, q, p -> V`` (the terms of the
     potential energy, column ``V`` of :func:`~ncgen.assembly.build.force_terms`)."""
@@ -125,13 +125,13 @@ def system_functions(ctx: Context, phi, F, V, M: np.ndarray, factor: CholeskyFac
     add("gamma", ("t", "q", "v", "p"), [gamma], ["gamma"])
     add("F", ("t", "q", "v", "u", "p"), [F], ["F"])
     add("mass", (), [Msp], ["M"])
-    add("Minv", ("b",), [factor.solve(b)], ["x"])
+    add("Minv", ("b",), [factor.solve(b) if factor.regular else factor.pseudo_solve(b)], ["x"])
     r, rd = _markers(ctx, system)
     add("markers", ("q", "v"), [r, rd], ["r", "rdot"])
     R, pos = _poses(ctx, system)
     add("poses", ("q",), [R, pos], ["R", "p"])
     potential = ca.Function("V", [t, q, p], [V], ["t", "q", "p"], ["V"])
-    f.update(composite_functions(f, potential, Msp, alpha, beta, ca.SX))
+    f.update(composite_functions(f, potential, Msp, alpha, beta, ca.SX, regular=factor.regular))
     return {name: f[name] for name in FUNCTIONS}, potential
 
 
@@ -144,7 +144,7 @@ COMPOSITES = ("ode", "alg", "dae", "energy", "accel")
 
 
 def composite_functions(f: dict, potential: ca.Function, M: ca.DM, alpha: float, beta: float,
-                        sym, names: Sequence[str] = COMPOSITES) -> dict[str, ca.Function]:
+                        sym, names: Sequence[str] = COMPOSITES, regular: bool = True) -> dict[str, ca.Function]:
     """The functions ``names`` (of ``ode``, ``alg``, ``dae``, ``energy``, ``accel``) from the
     primitive functions ``f`` (``phi``, ``A``, ``phi_t``, ``gamma``, ``F``, ``Minv``) and
     ``potential: t, q, p -> V``, the terms of the potential energy.
@@ -152,7 +152,10 @@ def composite_functions(f: dict, potential: ca.Function, M: ca.DM, alpha: float,
     ``sym`` is the symbol type of the result: ``ca.SX`` inlines the primitives (one flat
     expression per function, the model's form), ``ca.MX`` keeps them as calls (the form of
     very large models, whose primitives are rerolled, see :mod:`ncgen.codegen.reroll`).
-    ``accel`` is MX either way (it calls CasADi's sparse QR)."""
+    ``accel`` is MX either way (it calls CasADi's sparse QR).
+
+    ``regular=False`` (a singular ``M``, :mod:`ncgen.assembly.mass`): ``ode`` and ``alg`` are
+    :func:`_augmented_ode_alg` (MX, sparse QR of the augmented mass matrix)."""
     nc, nq = f["A"].size1_out(0), f["A"].size2_out(0)
     nu, npar = f["F"].numel_in(3), f["F"].numel_in(4)
     t, q, v = sym.sym("t"), sym.sym("q", nq), sym.sym("v", nq)
@@ -160,6 +163,8 @@ def composite_functions(f: dict, potential: ca.Function, M: ca.DM, alpha: float,
 
     @functools.cache
     def ode_alg():
+        if not regular:
+            return _augmented_ode_alg(f, M, alpha, beta, nq, nc, nu, npar)
         A = f["A"](t, q, p)
         phidot = ca.mtimes(A, v) + f["phi_t"](t, q, p)
         a = f["Minv"](f["F"](t, q, v, u, p) - ca.mtimes(A.T, lam))
@@ -172,10 +177,10 @@ def composite_functions(f: dict, potential: ca.Function, M: ca.DM, alpha: float,
                          ["T", "V"])
 
     makers = {
-        "ode": lambda: _function("ode", [t, q, v, lam, u, p], [v, ode_alg()[0]],
-                                 ["t", "q", "v", "lam", "u", "p"], ["qdot", "vdot"]),
-        "alg": lambda: _function("alg", [t, q, v, lam, u, p], [ode_alg()[1]], ["t", "q", "v", "lam", "u", "p"],
-                                 ["res"]),
+        "ode": lambda: ode_alg()[0] if not regular else
+        _function("ode", [t, q, v, lam, u, p], [v, ode_alg()[0]], ["t", "q", "v", "lam", "u", "p"], ["qdot", "vdot"]),
+        "alg": lambda: ode_alg()[1] if not regular else
+        _function("alg", [t, q, v, lam, u, p], [ode_alg()[1]], ["t", "q", "v", "lam", "u", "p"], ["res"]),
         "dae": lambda: _dae(f, M, alpha, beta, nq, nc, nu, npar, sym),
         "energy": energy,
         "accel": lambda: _accel(f, M, nc, alpha, beta, nq, nu, npar),
@@ -226,6 +231,25 @@ def _function(name: str, ins: list, outs: list, in_names: list[str], out_names: 
     if isinstance(ins[0], ca.SX):
         outs = ca.cse(outs)
     return ca.Function(name, ins, outs, in_names, out_names)
+
+
+def _augmented_ode_alg(f, M: ca.DM, alpha: float, beta: float, nq: int, nc: int, nu: int,
+                       npar: int) -> tuple[ca.Function, ca.Function]:
+    """``ode`` and ``alg`` of a singular ``M`` (a flat body): ``M̄ a = F − Aᵀλ + κ Aᵀc`` with
+    ``M̄ = M + κ AᵀA``, ``c = γ − 2αΦ̇ − β²Φ`` and ``alg = A a − c``, so that ``M a = F − Aᵀλ``
+    wherever ``alg`` vanishes.  ``M̄`` depends on ``q``: MX functions calling the primitives
+    and CasADi's sparse QR (as ``accel``), not an SX expansion of its inverse (O(nq³)).
+    ``κ = max diag M`` (constraint rows are O(1) in natural coordinates); it only scales."""
+    t, q, v = ca.MX.sym("t"), ca.MX.sym("q", nq), ca.MX.sym("v", nq)
+    lam, u, p = ca.MX.sym("lam", nc), ca.MX.sym("u", nu), ca.MX.sym("p", npar)
+    A = f["A"](t, q, p)
+    phidot = ca.mtimes(A, v) + f["phi_t"](t, q, p)
+    c = f["gamma"](t, q, v, p) - 2 * alpha * phidot - beta**2 * f["phi"](t, q, p)
+    k = float(np.max(np.array(ca.diag(M)), initial=1.0))
+    a = ca.solve(ca.MX(M) + k * ca.mtimes(A.T, A), f["F"](t, q, v, u, p) - ca.mtimes(A.T, lam - k * c), "qr")
+    ins, names = [t, q, v, lam, u, p], ["t", "q", "v", "lam", "u", "p"]
+    return (ca.Function("ode", ins, [v, a], names, ["qdot", "vdot"]),
+            ca.Function("alg", ins, [ca.mtimes(A, a) - c], names, ["res"]))
 
 
 def _accel(f, M: ca.DM, nc: int, alpha: float, beta: float, nq: int, nu: int, npar: int) -> ca.Function:

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from ncgen.assembly.mass import sparse_dm
+from ncgen.assembly.mass import augmented_mass, is_regular, sparse_dm
 from ncgen.assembly.rank import dependent_rows
 from ncgen.errors import ModelError
 from ncgen.model.expressions import did_you_mean
@@ -101,7 +101,7 @@ def project(A: np.ndarray, b: np.ndarray, v: np.ndarray, M: np.ndarray, free) ->
     r = b - A @ w
     step = _kkt_step(Mf, Af, r)
     if step is None:
-        MiAT = np.linalg.solve(Mf, Af.T)
+        MiAT = np.linalg.solve(augmented_mass(Mf, Af) if not is_regular(Mf) else Mf, Af.T)
         step = MiAT @ np.linalg.lstsq(Af @ MiAT, r, rcond=None)[0]
     w[free] += step
     return w

@@ -60,7 +60,8 @@ def primitives(model) -> dict[str, ca.Function]:
     if model not in _primitives:
         f = {n: reroll(model.functions[n]) for n in PRIMITIVES}
         b = ca.MX.sym("b", model.nq)
-        f["Minv"] = ca.Function("Minv", [b], [model.mass_factor.solve(b)], ["b"], ["x"])
+        x = model.mass_factor.solve(b) if model.mass_factor.regular else model.mass_factor.pseudo_solve(b)
+        f["Minv"] = ca.Function("Minv", [b], [x], ["b"], ["x"])
         f["V"] = reroll(model.potential_terms)
         _primitives[model] = f
     return _primitives[model]
@@ -74,6 +75,7 @@ def package_functions(model, reroll_instructions: int | None = REROLL_INSTRUCTIO
         return f
     prim = primitives(model)
     alpha, beta = model.baumgarte
-    f.update(composite_functions(prim, prim["V"], sparse_dm(model.M), alpha, beta, ca.MX, REBUILT))
+    f.update(composite_functions(prim, prim["V"], sparse_dm(model.M), alpha, beta, ca.MX, REBUILT,
+                                 regular=model.mass_factor.regular))
     f.update({n: prim[n] for n in (*PRIMITIVES, "Minv")})
     return f

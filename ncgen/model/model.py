@@ -176,7 +176,8 @@ class Model:
 
     @property
     def Minv(self) -> np.ndarray:
-        """Dense M⁻¹ (constant; for small models and checks)."""
+        """Dense M⁻¹ (constant; for small models and checks).  Raises ModelError for a
+        singular M (a flat body; see :mod:`ncgen.assembly.mass`)."""
         return self.mass_factor.solve_numeric(np.eye(self.nq))
 
     # ------------------------------------------------------------- numerics

@@ -212,7 +212,8 @@ def _lump(g: Group, links, pose) -> None:
 
 
 def _check_inertia(I, g: Group, where: str, moved_by: str) -> None:
-    """Refuse an inertia tensor that is not physical or is flat (a thin disc or plate)."""
+    """Refuse an inertia tensor that is not physical.  A flat one (a thin disc or plate,
+    I_a + I_b = I_c) is accepted: its singular mass matrix is handled (ncgen.assembly.mass)."""
     I = 0.5 * (I + I.T)
     e = np.linalg.eigvalsh(I)
     slack = [e[1] + e[2] - e[0], e[0] + e[2] - e[1], e[0] + e[1] - e[2]]
@@ -221,10 +222,6 @@ def _check_inertia(I, g: Group, where: str, moved_by: str) -> None:
     if e.min() < -FLAT_TOL * scale or min(slack) < -FLAT_TOL * scale:
         raise ModelError(f"{what}: the inertia tensor is not physical (principal moments {e.tolist()} "
                          "violate I_a + I_b ≥ I_c)")
-    if min(slack) <= FLAT_TOL * scale:
-        raise ModelError(f"{what}: a flat mass distribution (principal moments {e.tolist()}, "
-                         "I_a + I_b = I_c: a thin disc or plate); its natural-coordinate mass matrix "
-                         "is singular, which ncgen does not handle yet: thicken it slightly")
 
 
 def _local(m, T) -> tuple[np.ndarray, np.ndarray]:

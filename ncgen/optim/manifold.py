@@ -68,7 +68,7 @@ def consistent_velocity(model, q, v, *, t=None, p=None) -> np.ndarray:
         return v.copy()
     phi_t = np.array(model.functions["phi_t"](model.t0 if t is None else t, q,
                                               model.p0 if p is None else p)).reshape(-1)
-    MiAT = model.mass_factor.solve_numeric(A.T)
+    MiAT = model.mass_factor.solve_with(A, A.T)      # M⁻¹Aᵀ (M̄⁻¹Aᵀ for a singular M: same projection)
     return v - MiAT @ np.linalg.solve(A @ MiAT, A @ v + phi_t)
 
 

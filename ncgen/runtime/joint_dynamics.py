@@ -24,7 +24,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.assembly.joint_space import solve_linear
-from ncgen.assembly.mass import sparse_dm
+from ncgen.assembly.mass import mass_is_regular, sparse_dm
 from ncgen.errors import ModelError
 from ncgen.validation import as_vector
 
@@ -41,7 +41,10 @@ def kkt_function(model) -> ca.Function:
     """``fd: (t, q, v, u, p) -> (a, lam)`` by the Schur complement of the constant mass
     matrix: ``(A M⁻¹ Aᵀ) λ = A M⁻¹ F − γ`` (sparse LDLᵀ; M⁻¹ is block-diagonal per member),
     ``a = M⁻¹ (F − Aᵀ λ)``; no stabilisation terms.  Needs a non-singular M and
-    independent constraints (as the model's other paths do)."""
+    independent constraints (as the model's other paths do); a singular M (a flat body,
+    :func:`~ncgen.assembly.mass.mass_is_regular` false) takes :func:`kkt_qr_function`."""
+    if not mass_is_regular(model):
+        return kkt_qr_function(model)
     f = model.functions
     t, q, v = ca.MX.sym("t"), ca.MX.sym("q", model.nq), ca.MX.sym("v", model.nq)
     u, p = ca.MX.sym("u", model.nu), ca.MX.sym("p", model.np)
@@ -55,6 +58,20 @@ def kkt_function(model) -> ca.Function:
     lam = ca.solve(S, ca.mtimes(A, MiF) - f["gamma"](t, q, v, p), "ldl")
     a = MiF - ca.mtimes(Mi, ca.mtimes(A.T, lam))
     return ca.Function("forward_dynamics", [t, q, v, u, p], [a, lam], ["t", "q", "v", "u", "p"], ["a", "lam"])
+
+
+def kkt_qr_function(model) -> ca.Function:
+    """``fd: (t, q, v, u, p) -> (a, lam)`` from the KKT system ``[[M, Aᵀ], [A, 0]] [a; λ] =
+    [F; γ]`` by CasADi's sparse QR: needs no ``M⁻¹``, only ``M`` positive definite on
+    ``null(A)`` (the path of a singular M)."""
+    f = model.functions
+    t, q, v = ca.MX.sym("t"), ca.MX.sym("q", model.nq), ca.MX.sym("v", model.nq)
+    u, p = ca.MX.sym("u", model.nu), ca.MX.sym("p", model.np)
+    A = f["A"](t, q, p)
+    K = ca.blockcat([[ca.MX(sparse_dm(model.M)), A.T], [A, ca.MX(model.nc, model.nc)]])
+    x = ca.solve(K, ca.vertcat(f["F"](t, q, v, u, p), f["gamma"](t, q, v, p)), "qr")
+    return ca.Function("forward_dynamics", [t, q, v, u, p], [x[:model.nq], x[model.nq:]],
+                       ["t", "q", "v", "u", "p"], ["a", "lam"])
 
 
 def joint_kkt_function(model) -> ca.Function:

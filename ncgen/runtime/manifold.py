@@ -11,7 +11,9 @@ interval the runner therefore projects the state back, in the mass metric:
 
 with the pseudo-inverse truncated at :data:`RCOND` × the largest singular value: a
 direction in which the constraints are (nearly) dependent takes no step, so the projection
-never jumps to another branch.  :func:`robust_algebraic` solves the KKT system for
+never jumps to another branch.  With a singular ``M`` (a flat body), ``M⁻¹`` is the inverse
+of the augmented ``M̄ = M + κAᵀA`` at the ``A`` of the step (the same projection, see
+:mod:`ncgen.assembly.mass`).  :func:`robust_algebraic` solves the KKT system for
 ``z = [a; λ]`` the same way when CasADi's sparse QR fails on a singular configuration.
 """
 from __future__ import annotations
@@ -37,7 +39,9 @@ class ManifoldProjector:
         self.nq = model.nq
         self.p = p
         self.tol = tol
-        self.Minv = model.mass_factor.solve_numeric(np.eye(model.nq)) if model.nc else None
+        self.active = model.nc > 0
+        self.factor = model.mass_factor
+        self.Minv = self.factor.solve_numeric(np.eye(model.nq)) if self.active and self.factor.regular else None
         self.counts = {"position_projections": 0, "velocity_projections": 0}
 
     def _phi(self, t, q):
@@ -48,13 +52,13 @@ class ManifoldProjector:
 
     def _step(self, A, r):
         """``M⁻¹Aᵀ (A M⁻¹ Aᵀ)⁺ r`` with the truncated pseudo-inverse."""
-        MiAT = self.Minv @ A.T
+        MiAT = self.Minv @ A.T if self.Minv is not None else self.factor.solve_with(A, A.T)
         return MiAT @ np.linalg.lstsq(A @ MiAT, r, rcond=RCOND)[0]
 
     def near_singular(self, t: float, x: np.ndarray, ratio: float | None = None) -> bool:
         """Whether ``A`` at ``x`` is close to losing rank: ``σ_min/σ_max`` below ``ratio``
         (default :data:`NEAR_SINGULAR`)."""
-        if self.Minv is None:
+        if not self.active:
             return False
         A = self._A(t, x[:self.nq])
         if not np.all(np.isfinite(A)):
@@ -66,7 +70,7 @@ class ManifoldProjector:
     def __call__(self, t: float, x: np.ndarray) -> np.ndarray:
         """The projected state (``x`` itself where it is not finite or the solve fails: the
         integrator's next call reports that)."""
-        if self.Minv is None or not np.all(np.isfinite(x)):
+        if not self.active or not np.all(np.isfinite(x)):
             return x
         try:
             return self._project(t, x)

@@ -12,6 +12,10 @@ no step and the motion stays on its branch:
     v½ = v + h/2 M⁻¹ (F − A(q)ᵀ λ)
     v₊ = v½ + h/2 M⁻¹ (F₊ − A(q₊)ᵀ μ),         A(q₊) v₊ + Φ_t = 0     (μ linear)
 
+With a singular ``M`` (a flat body) each ``M⁻¹`` is that of the augmented ``M̄ = M + κAᵀA``
+with the ``A`` of its half-step (:mod:`ncgen.assembly.mass`): ``M̄ δ = r − Aᵀλ̃`` is
+``M δ = r − Aᵀ(λ̃ + κ A δ)``, the same step with a shifted multiplier, and ``v½ = v + δ/h``.
+
 ``F`` is evaluated at the start of the step and ``F₊`` at ``(q₊, v½)``: exact for forces that
 do not depend on the velocity, first order in the velocity-dependent part otherwise.
 """
@@ -40,7 +44,11 @@ def rattle_interval(model, t0: float, x: np.ndarray, u, p, h_end: float, n: int,
     """The state ``[q; v]`` at ``t0 + h_end`` after ``n`` steps from ``x`` at ``t0`` with input
     ``u`` (held); ``tol``: ``max |Φ|`` accepted (m²).  Raises :class:`RattleFailure`."""
     f, nq = model.functions, model.nq
-    Minv = model.mass_factor.solve_numeric(np.eye(nq))
+    factor = model.mass_factor
+    Minv = factor.solve_numeric(np.eye(nq)) if factor.regular else None
+
+    def inverse(A):                   # M⁻¹, or M̄⁻¹ for the A of the half-step (singular M)
+        return Minv if Minv is not None else factor.solve_with(A, np.eye(nq))
     h = h_end / n
     q, v = x[:nq].copy(), x[nq:].copy()
 
@@ -56,8 +64,9 @@ def rattle_interval(model, t0: float, x: np.ndarray, u, p, h_end: float, n: int,
     t = t0
     for _ in range(n):
         A0, F0 = A(t, q), F(t, q, v)
-        MiAT0 = Minv @ A0.T
-        free = q + h * v + 0.5 * h * h * (Minv @ F0)
+        Mi0 = inverse(A0)
+        MiAT0 = Mi0 @ A0.T
+        free = q + h * v + 0.5 * h * h * (Mi0 @ F0)
         lam = np.zeros(A0.shape[0])
         t1 = t + h
         for _ in range(MAX_ITER):
@@ -72,11 +81,12 @@ def rattle_interval(model, t0: float, x: np.ndarray, u, p, h_end: float, n: int,
         else:
             raise RattleFailure(f"the position constraints did not converge at t = {t1:.6g} s "
                                 f"(max |Φ| = {np.max(np.abs(r)):.3g})")
-        v_half = v + 0.5 * h * (Minv @ (F0 - A0.T @ lam))
+        v_half = (q1 - q) / h              # = v + h/2 M⁻¹ (F − Aᵀλ)
         A1 = A(t1, q1)
         F1 = F(t1, q1, v_half)
-        pred = v_half + 0.5 * h * (Minv @ F1)
-        MiAT1 = Minv @ A1.T
+        Mi1 = inverse(A1)
+        pred = v_half + 0.5 * h * (Mi1 @ F1)
+        MiAT1 = Mi1 @ A1.T
         rv = A1 @ pred + np.array(f["phi_t"](t1, q1, p), dtype=float).reshape(-1)
         mu = _pinv_solve(0.5 * h * (A1 @ MiAT1), rv)
         q, v, t = q1, pred - 0.5 * h * (MiAT1 @ mu), t1

@@ -48,18 +48,16 @@ def inertia_J(ctype: CoordinateType, inertia, length: float | None = None) -> np
     if np.max(np.abs(Ib - Ib.T)) > 1e-9 * scale:
         raise InertiaError(f"inertia: expected a symmetric 3x3 matrix, got {Ib.tolist()}")
     ev = np.linalg.eigvalsh(Ib)
-    if ev[0] <= 0:
-        raise InertiaError(f"inertia: expected positive principal moments, got {ev.tolist()}")
+    if ev[0] < -1e-12 * scale:
+        raise InertiaError(f"inertia: expected positive principal moments (or zero, for a body whose mass "
+                           f"lies on a line), got {ev.tolist()}")
     if ev[0] + ev[1] < ev[2] * (1 - 1e-12):
         raise InertiaError(
             f"inertia: principal moments {ev.tolist()} violate the triangle inequality "
             f"I1 + I2 >= I3 ({ev[0] + ev[1]:.6g} < {ev[2]:.6g}): no rigid body has them")
-    J = J_of(Ib)
-    if np.linalg.eigvalsh(J)[0] <= 1e-12 * scale:
-        raise InertiaError(
-            f"inertia: principal moments {ev.tolist()} satisfy I1 + I2 = I3: a flat body whose "
-            "natural-coordinate mass matrix is singular; give it some thickness")
-    return J
+    # I1 + I2 = I3 (a thin disc or plate) makes J̄, and so M, singular: accepted; the model
+    # checks that M is positive definite on the constraint tangent space (assembly.mass)
+    return J_of(Ib)
 
 
 class RigidMember:
