@@ -22,6 +22,7 @@ import numpy as np
 
 from ncgen.assembly.statics import statics_function
 from ncgen.errors import NcgenError
+from ncgen.runtime.reactions import unshared_state
 from ncgen.runtime.tangent import cached, classify, null_basis
 from ncgen.validation import as_vector
 
@@ -76,8 +77,20 @@ class Equilibrium:
         """``(joint, member, force, moment)`` for every joint and member it acts on: the
         resultant force (N, world axes) and moment about the member's centre of mass (N·m;
         a scalar in 2D) that the joint's constraints exert on the member, from the virtual
-        work of ``−A_jᵀλ_j`` on the member's coordinates (see :func:`joint_reactions`)."""
-        return joint_reactions(self.model, self.q, self.lam, t=self.t, p=self.p)
+        work of ``−A_jᵀλ_j`` on the member's coordinates (see :func:`joint_reactions`).  Joints
+        that coordinate sharing eliminated are included, from the model's ``share=False`` form
+        (:func:`ncgen.runtime.reactions.unshared_state`)."""
+        model = self.model
+        out = joint_reactions(model, self.q, self.lam, t=self.t, p=self.p)
+        plan = model.sharing
+        names = [] if plan is None else [*plan.eliminated, *(n for n in plan.partial if n not in plan.eliminated)]
+        if names:
+            A = model.A(self.q, t=self.t, p=self.p).reshape(model.nc, model.nq)
+            um, q_u, _, lam_u = unshared_state(model, self.q, self.lam, A, np.zeros(model.nq), self.t, self.u,
+                                               self.p, names)
+            mine = {j for j, *_ in out}
+            out += [r for r in joint_reactions(um, q_u, lam_u, t=self.t, p=self.p) if r[0] in names and r[0] not in mine]
+        return out
 
     def multipliers(self) -> dict[str, float]:
         """``λ`` by constraint name."""
@@ -246,7 +259,7 @@ def joint_reactions(model, q, lam, *, t=None, p=None) -> list[tuple[str, str, np
     its base vectors does the work ``δpᵀ f + δθᵀ μ_O`` with ``f = Σ_points Q_r`` and
     ``μ_O = Σ_points r × Q_r + Σ_vectors u × Q_u``; the moment about the centre of mass
     ``p_G`` is ``μ_O − p_G × f``.  Exact for any member type; members sharing a node carry
-    no multiplier there and are not reported."""
+    no multiplier there and are not reported here (``Equilibrium.joint_reactions`` adds them)."""
     q = np.asarray(q, float)
     lam = np.asarray(lam, float)
     A = model.A(q, t=t, p=p).reshape(-1, model.nq)
