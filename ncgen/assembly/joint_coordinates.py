@@ -18,6 +18,32 @@ Free (3D)       [x, y, z, qx, qy, qz, qw]                [v, ω] of B's frame in
 Free (planar)   [x, y, θ]                                [v_x, v_y, ω] in B's frame axes
 ==============  =======================================  ======================================
 
+Joints to a 3D bar (which has no spin about its own axis) have the coordinates of what is
+measurable, **of the bar relative to the other member** (a body or the ground, "C"), in C's
+joint frame (world axes at ``at`` carried by C):
+
+==============  =======================================  ======================================
+Spherical       [swing_1, swing_2], rad: the rotation    their time derivatives
+                vector θ k of the smallest rotation
+                taking the bar's initial direction u₀
+                to its current one (k ⟂ u₀), along
+                e₁, e₂ = perpendicular_basis(u₀)
+Universal       θ_a (B the bar, along ``axis_b``) or     θ̇
+                θ_b (A the bar): the other angle is the
+                bar's spin
+Planar          [x, y], m, of the bar's point nearest    [ẋ, ẏ(, θ̇)]
+                ``at`` in C's plane (e₁, e₂ ⟂ normal);
+                a bar across the normal adds θ, its
+                angle about the normal
+==============  =======================================  ======================================
+
+The swing is defined while the bar is less than π from its initial direction (it is
+singular pointing back along −u₀).  Undefined, so those joints have no coordinates (listed
+with the reason in ``model.joint_space.skipped``, named by any error that asks for them): a
+spin about a bar's own axis; anything of a joint between two 3D bars (only the angle between
+their axes is defined, with no smooth rate where they align) or with a point member (no
+orientation); a Free joint with a bar or point member.
+
 Angles are right-handed about the joint's axis (counter-clockwise in 2D); quaternions are
 unit, ``qw ≥ 0``, in Pinocchio's order.  Spherical and Free joints measure the relative
 rotation of the joint frames: the world axes at ``at`` carried by each side (Free: A's
@@ -35,7 +61,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.reproducible import perpendicular_basis
-from ncgen.model.joint_equations import angle_gauge, is_full, kind_of, name_of
+from ncgen.model.joint_equations import angle_gauge, bar_axis, is_along, is_full, kind_of, name_of
 from ncgen.errors import ModelError
 
 
@@ -107,42 +133,91 @@ def _cylindrical(ctx, j):
 
 
 def _universal(ctx, j):
-    _require_full(j, "its two angles")
+    C, O = _full_and_bar(j, "a Universal joint")
     a, b = j.direction("axis_a"), j.direction("axis_b")
     c = np.cross(a, b)
-    aA, bA, cA = (ctx.direction(j.A, d, j.label)[0] for d in (a, b, c))
-    aB, bB, cB = (ctx.direction(j.B, d, j.label)[0] for d in (a, b, c))
-    th_a = _atan2(ca.dot(bA, bB), ca.dot(cA, bB))
-    th_b = _atan2(ca.dot(aB, aA), ca.dot(cB, aA))
-    q = ca.vertcat(th_a, th_b)
-    names = [f"{j.name}.theta_a", f"{j.name}.theta_b"]
-    return JointCoordinates(j, q, _scalar_rates(ctx, q), names, names, [True, True])
+    A_dirs = (a,) if O is j.A else (a, b, c)        # a bar carries only its own axis
+    B_dirs = (b,) if O is j.B else (a, b, c)
+    onA = dict(zip("abc" if len(A_dirs) == 3 else "a", (ctx.direction(j.A, d, j.label)[0] for d in A_dirs)))
+    onB = dict(zip("abc" if len(B_dirs) == 3 else "b", (ctx.direction(j.B, d, j.label)[0] for d in B_dirs)))
+    q, names = [], []
+    if O is not j.A:                                  # θ_a needs A's b, c and B's b
+        q.append(_atan2(ca.dot(onA["b"], onB["b"]), ca.dot(onA["c"], onB["b"])))
+        names.append(f"{j.name}.theta_a")
+    if O is not j.B:                                  # θ_b needs B's a, c and A's a
+        q.append(_atan2(ca.dot(onB["a"], onA["a"]), ca.dot(onB["c"], onA["a"])))
+        names.append(f"{j.name}.theta_b")
+    q = ca.vertcat(*q)
+    return JointCoordinates(j, q, _scalar_rates(ctx, q), names, names, [True] * len(names))
 
 
 def _planar(ctx, j):
-    _require_full(j, "its in-plane position and angle")
+    C, O = _full_and_bar(j, "a Planar joint")
     at, n = j.at(), j.direction("normal")
     e1, e2 = perpendicular_basis(n)
-    rA, _ = ctx.point(j.A, at, j.label)
-    rB, _ = ctx.point(j.B, at, j.label)
-    d = rB - rA
-    x = ca.dot(d, ctx.direction(j.A, e1, j.label)[0])
-    y = ca.dot(d, ctx.direction(j.A, e2, j.label)[0])
-    gx, gy = angle_gauge(ctx, j.A, j.B, n, j.label).terms(ctx)
-    q = ca.vertcat(x, y, _atan2(gx, gy))
-    names = [f"{j.name}.{k}" for k in ("x", "y", "theta")]
-    return JointCoordinates(j, q, _scalar_rates(ctx, q), names, names, [False, False, True])
+    if O is None:
+        rA, _ = ctx.point(j.A, at, j.label)
+        rB, _ = ctx.point(j.B, at, j.label)
+        d = rB - rA
+        x = ca.dot(d, ctx.direction(j.A, e1, j.label)[0])
+        y = ca.dot(d, ctx.direction(j.A, e2, j.label)[0])
+        gx, gy = angle_gauge(ctx, j.A, j.B, n, j.label).terms(ctx)
+        q = ca.vertcat(x, y, _atan2(gx, gy))
+        names = [f"{j.name}.{k}" for k in ("x", "y", "theta")]
+        return JointCoordinates(j, q, _scalar_rates(ctx, q), names, names, [False, False, True])
+    R, o = member_frame(ctx, C, np.eye(3), at, j.label)
+    near = ctx.nearest_point(O, at)
+    d = ca.mtimes(R.T, ctx.point(O, near, j.label)[0] - o) - ca.DM(near - at)
+    parts, names, angles = [ca.dot(d, ca.DM(e1)), ca.dot(d, ca.DM(e2))], ["x", "y"], [False, False]
+    if not is_along(O, n):                            # a bar across the normal: its angle about it
+        u0 = bar_axis(O)
+        u = ca.mtimes(R.T, ctx.direction(O, u0, j.label)[0])
+        p0 = u0 - (u0 @ n) * n
+        up = u - ca.dot(u, ca.DM(n)) * ca.DM(n)
+        parts.append(_atan2(ca.dot(ca.DM(p0), up), ca.dot(ca.DM(n), ca.cross(ca.DM(p0), up))))
+        names.append("theta")
+        angles.append(True)
+    q = ca.vertcat(*parts)
+    names = [f"{j.name}.{k}" for k in names]
+    return JointCoordinates(j, q, _scalar_rates(ctx, q), names, names, angles)
 
 
 def _spherical(ctx, j):
-    _require_full(j, "a relative rotation")
+    C, O = _full_and_bar(j, "a Spherical joint")
     at = j.at()
-    R = _relative(ctx, j, (np.eye(3), at), (np.eye(3), at))[0]
-    q = quaternion(R)
-    w = _body_rate(ctx, R)
-    names = [f"{j.name}.{k}" for k in ("qx", "qy", "qz", "qw")]
-    rates = [f"{j.name}.{k}" for k in ("wx", "wy", "wz")]
-    return JointCoordinates(j, q, w, names, rates, [False] * 4)
+    if O is None:
+        R = _relative(ctx, j, (np.eye(3), at), (np.eye(3), at))[0]
+        q = quaternion(R)
+        w = _body_rate(ctx, R)
+        names = [f"{j.name}.{k}" for k in ("qx", "qy", "qz", "qw")]
+        rates = [f"{j.name}.{k}" for k in ("wx", "wy", "wz")]
+        return JointCoordinates(j, q, w, names, rates, [False] * 4)
+    R, _ = member_frame(ctx, C, np.eye(3), at, j.label)
+    u0 = bar_axis(O)
+    u = ca.mtimes(R.T, ctx.direction(O, u0, j.label)[0])
+    q = swing(u0, u)
+    names = [f"{j.name}.swing_1", f"{j.name}.swing_2"]
+    return JointCoordinates(j, q, _scalar_rates(ctx, q), names, names, [False, False])
+
+
+#: Below this sin²θ (θ < 1e-3 rad) the swing uses the series of θ / sin θ.
+SWING_SERIES = 1e-6
+
+
+def swing(u0, u) -> ca.SX:
+    """``[φ·e₁, φ·e₂]`` of the rotation vector ``φ = θ k`` of the smallest rotation taking the
+    unit ``u0`` to ``u`` (``θ`` the angle between them, ``k = u0 × u / |u0 × u|``), with
+    ``e₁, e₂ = perpendicular_basis(u0)``: ``φ = (θ / sin θ) (u0 × u)``, by the series
+    ``asin(s)/s = 1 + s²/6 + 3s⁴/40 + 5s⁶/112`` for small angles so that it and its derivatives
+    stay smooth through ``θ = 0``."""
+    e1, e2 = perpendicular_basis(u0)
+    w = ca.cross(ca.DM(u0), u)
+    s2 = ca.dot(w, w)
+    c = ca.dot(ca.DM(u0), u)
+    s = ca.sqrt(ca.fmax(s2, 1e-300))
+    factor = ca.if_else(ca.logic_and(s2 < SWING_SERIES, c > 0),
+                        1 + s2 / 6 + 3 * s2**2 / 40 + 5 * s2**3 / 112, ca.atan2(s, c) / s)
+    return ca.vertcat(factor * ca.dot(w, ca.DM(e1)), factor * ca.dot(w, ca.DM(e2)))
 
 
 def _free(ctx, j):
@@ -171,6 +246,22 @@ _BUILDERS = {"Revolute": _revolute, "Prismatic": _prismatic, "Cylindrical": _cyl
 
 
 # ------------------------------------------------------------------ frames
+def _full_and_bar(j, what: str):
+    """``(C, O)``: the joint's full member (ground or body) and its 3D bar, or ``(None, None)``
+    when both are full; :class:`ModelError` naming why there are no coordinates otherwise."""
+    if is_full(j.A) and is_full(j.B):
+        return None, None
+    points = [name_of(m) for m in (j.A, j.B) if kind_of(m) == "point"]
+    if points:
+        raise ModelError(f"{j.label}: {points[0]} is a point member, which has no orientation, so {what} "
+                         "with it has no joint coordinates (its point coincides and nothing else is measured)")
+    if not is_full(j.A) and not is_full(j.B):
+        raise ModelError(f"{j.label}: {what} between two bars has no joint coordinates: a bar has no spin "
+                         "about its own axis, so only the angle between their axes is defined (with no "
+                         "smooth rate where they align)")
+    return (j.A, j.B) if is_full(j.A) else (j.B, j.A)
+
+
 def _require_full(j, what: str):
     for m in (j.A, j.B):
         if not is_full(m):

@@ -16,6 +16,7 @@ import numpy as np
 
 from ncgen.reproducible import perpendicular_basis
 from ncgen.errors import ModelError
+from ncgen.model.joint_equations import bar_axis, is_along, is_full
 
 
 @dataclass
@@ -30,6 +31,9 @@ class Edge:
     frame_a: tuple[np.ndarray, np.ndarray]
     frame_b: tuple[np.ndarray, np.ndarray]
     axes: tuple
+    #: a joint to a 3D bar (A: the full member, B: the bar): its coordinates give the bar's
+    #: pose from the other's, never the other way (the bar's spin is not in them)
+    one_way: bool = False
 
 
 def edge_of(j) -> Edge:
@@ -42,6 +46,8 @@ def edge_of(j) -> Edge:
         fa = (eye, np.zeros(d)) if j.A.is_ground else (j.A.R0, j.A.p0)
         return Edge(j.name, j.kind, A, B, fa, (j.frame_rotation(), j.frame_origin()), ())
     at = j.at()
+    if j.kind in ("Spherical", "Universal", "Planar") and not (is_full(j.A) and is_full(j.B)):
+        return _bar_edge(j, at)
     axes = ()
     if j.kind in ("Revolute",) and d == 3:
         axes = (j.axis(),)
@@ -55,6 +61,24 @@ def edge_of(j) -> Edge:
     return Edge(j.name, j.kind, A, B, (eye, at), (eye, at), axes)
 
 
+def _bar_edge(j, at) -> Edge:
+    """The one-way :class:`Edge` of a Spherical, Universal or Planar joint between a full member
+    C and a 3D bar O (:mod:`ncgen.assembly.joint_coordinates`): from C's frame at ``at`` to the
+    bar's frame at its point nearest ``at``."""
+    C, O = (j.A, j.B) if is_full(j.A) else (j.B, j.A)
+    names = ["ground" if m.is_ground else m.name for m in (C, O)]
+    near = O.p0 + np.dot(at - O.p0, bar_axis(O)) * bar_axis(O)
+    eye = np.eye(3)
+    if j.kind == "Spherical":
+        kind, axes = "Swing", tuple(perpendicular_basis(bar_axis(O)))
+    elif j.kind == "Universal":                      # θ_a about a (B the bar), or θ_b about b, of B in A
+        kind, axes = "Revolute", ((j.direction("axis_a"),) if O is j.B else (-j.direction("axis_b"),))
+    else:
+        n = j.direction("normal")
+        kind, axes = "PlanarBar", (n, *perpendicular_basis(n), near - at, not is_along(O, n))
+    return Edge(j.name, kind, *names, (eye, at), (eye, near), axes, one_way=True)
+
+
 def rotation_about(axis, angle, sym: bool = False):
     """Rodrigues: rotation by ``angle`` (rad) about the unit ``axis`` (SX when ``sym``)."""
     k = np.asarray(axis, float)
@@ -62,6 +86,23 @@ def rotation_about(axis, angle, sym: bool = False):
     if sym:
         return ca.DM.eye(3) + ca.sin(angle) * ca.DM(K) + (1 - ca.cos(angle)) * ca.DM(K @ K)
     return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * (K @ K)
+
+
+def rotation_vector(phi, sym: bool = False):
+    """``exp(φ̂)``: rotation by ``|φ|`` about ``φ`` (SX when ``sym``; series near ``φ = 0``)."""
+    if sym:
+        t2 = ca.dot(phi, phi)
+        t = ca.sqrt(ca.fmax(t2, 1e-300))
+        small = t2 < 1e-8
+        a = ca.if_else(small, 1 - t2 / 6 + t2**2 / 120, ca.sin(t) / t)
+        b = ca.if_else(small, 0.5 - t2 / 24 + t2**2 / 720, (1 - ca.cos(t)) / t2)
+        K = ca.skew(phi)
+        return ca.DM.eye(3) + a * K + b * ca.mtimes(K, K)
+    phi = np.asarray(phi, float)
+    t = float(np.linalg.norm(phi))
+    if t == 0.0:
+        return np.eye(3)
+    return rotation_about(phi / t, t)
 
 
 def rotation_2d(angle, sym: bool = False):
@@ -118,6 +159,12 @@ def relative_pose(e: Edge, x, dim: int, sym: bool = False):
         return rotation_about(n, x[2], sym), x[0] * _const(e1, sym) + x[1] * _const(e2, sym)
     if k == "Spherical":
         return qm(x), zero
+    if k == "Swing":                                 # rotation vector x₁ e₁ + x₂ e₂
+        return rotation_vector(x[0] * _const(e.axes[0], sym) + x[1] * _const(e.axes[1], sym), sym), zero
+    if k == "PlanarBar":
+        n, e1, e2, p0, turns = e.axes
+        p = _const(p0, sym) + x[0] * _const(e1, sym) + x[1] * _const(e2, sym)
+        return (rotation_about(n, x[2], sym) if turns else eye), p
     if k == "Free":
         if dim == 2:
             return rotation_2d(x[2], sym), x[:2]

@@ -120,7 +120,11 @@ class Model:
     # ------------------------------------------------------------ joint space
     @property
     def joint_names(self) -> list[str]:
-        """The joints that have coordinates, in model order (a floating base ``root`` first)."""
+        """The joints that have coordinates, in model order (a floating base ``root`` first).
+        A joint to a 3D bar has only what is measurable (no spin about the bar's axis: a ball
+        joint gives the bar's swing, two angles); joints with nothing defined (Spherical,
+        Universal or Planar between two 3D bars or with a point member) are left out, and
+        ``model.joint_space.skipped`` says why (:mod:`ncgen.assembly.joint_coordinates`)."""
         return list(self.joint_space.joint_names)
 
     @property
