@@ -64,6 +64,18 @@ def test_ball_joint_to_a_bar_gives_its_swing(A_body, share):
         np.testing.assert_allclose(R_A.T @ u, expected, atol=1e-12)
 
 
+def test_bar_written_first_is_measured_in_the_other_members_frame():
+    s = nc.System("reversed")
+    s.add_bar("bar", mass=1.0, ends=[(0, 0, 1.0), (1.0, 0.3, 1.2)])
+    s.add_joint(nc.Spherical(s.members["bar"], s.ground, at=(0, 0, 1.0), name="ball"))
+    model = s.build()
+    q, _ = round_trip(model, np.array([0.3, -0.5]), np.array([0.2, 0.9]))
+    u0 = np.array([1.0, 0.3, 0.2]) / np.linalg.norm([1.0, 0.3, 0.2])
+    e1, e2 = nc.reproducible.perpendicular_basis(u0)
+    R, _ = model.poses(q)
+    np.testing.assert_allclose(R[0][:, 0], Rotation.from_rotvec(0.3 * e1 - 0.5 * e2).apply(u0), atol=1e-12)
+
+
 def test_swing_rates_are_smooth_through_zero():
     """At the initial direction (swing 0, where the exact formula θ/sin θ is 0/0) the rates
     are finite, what was asked, and equal to finite differences."""
