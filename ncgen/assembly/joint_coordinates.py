@@ -55,11 +55,11 @@ generalised force ``Jᵀ τ``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import lru_cache
 
 import casadi as ca
 import numpy as np
 
+from ncgen.assembly import rotation_forms
 from ncgen.reproducible import perpendicular_basis
 from ncgen.model.joint_equations import angle_gauge, bar_axis, is_along, is_full, kind_of, name_of
 from ncgen.errors import ModelError
@@ -200,24 +200,14 @@ def _spherical(ctx, j):
     return JointCoordinates(j, q, _scalar_rates(ctx, q), names, names, [False, False])
 
 
-#: Below this sin²θ (θ < 1e-3 rad) the swing uses the series of θ / sin θ.
-SWING_SERIES = 1e-6
-
-
 def swing(u0, u) -> ca.SX:
-    """``[φ·e₁, φ·e₂]`` of the rotation vector ``φ = θ k`` of the smallest rotation taking the
-    unit ``u0`` to ``u`` (``θ`` the angle between them, ``k = u0 × u / |u0 × u|``), with
-    ``e₁, e₂ = perpendicular_basis(u0)``: ``φ = (θ / sin θ) (u0 × u)``, by the series
-    ``asin(s)/s = 1 + s²/6 + 3s⁴/40 + 5s⁶/112`` for small angles so that it and its derivatives
-    stay smooth through ``θ = 0``."""
+    """``[φ·e₁, φ·e₂]``, ``e₁, e₂ = perpendicular_basis(u0)``, of the rotation vector ``φ`` of
+    the smallest rotation taking the unit ``u0`` to ``u``
+    (:func:`ncgen.symbolic.rigid_motion.swing`: ``φ = (θ / sin θ)(u0 × u)``, a series near
+    θ = 0 so that it and its derivatives stay smooth there)."""
     e1, e2 = perpendicular_basis(u0)
-    w = ca.cross(ca.DM(u0), u)
-    s2 = ca.dot(w, w)
-    c = ca.dot(ca.DM(u0), u)
-    s = ca.sqrt(ca.fmax(s2, 1e-300))
-    factor = ca.if_else(ca.logic_and(s2 < SWING_SERIES, c > 0),
-                        1 + s2 / 6 + 3 * s2**2 / 40 + 5 * s2**3 / 112, ca.atan2(s, c) / s)
-    return ca.vertcat(factor * ca.dot(w, ca.DM(e1)), factor * ca.dot(w, ca.DM(e2)))
+    phi = rotation_forms.swing(ca.DM(u0), u)
+    return ca.vertcat(ca.dot(phi, ca.DM(e1)), ca.dot(phi, ca.DM(e2)))
 
 
 def _free(ctx, j):
@@ -294,36 +284,7 @@ def _body_rate(ctx, R) -> ca.SX:
     return 0.5 * ca.vertcat(S[2, 1] - S[1, 2], S[0, 2] - S[2, 0], S[1, 0] - S[0, 1])
 
 
-@lru_cache(maxsize=None)
-def _quaternion_function() -> ca.Function:
-    """``[qx, qy, qz, qw]`` of a rotation matrix (Shepperd's method: the branch of the
-    largest of ``qw², qx², qy², qz²``), sign chosen so that ``qw ≥ 0``."""
-    R = ca.SX.sym("R", 3, 3)
-    tr = R[0, 0] + R[1, 1] + R[2, 2]
-    diag = [tr, R[0, 0], R[1, 1], R[2, 2]]
-
-    def half_root(x):
-        return 0.5 * ca.sqrt(ca.fmax(x, 1e-300))
-
-    w0 = half_root(1 + tr)
-    x1 = half_root(1 + R[0, 0] - R[1, 1] - R[2, 2])
-    y2 = half_root(1 - R[0, 0] + R[1, 1] - R[2, 2])
-    z3 = half_root(1 - R[0, 0] - R[1, 1] + R[2, 2])
-    cands = [
-        ca.vertcat((R[2, 1] - R[1, 2]) / (4 * w0), (R[0, 2] - R[2, 0]) / (4 * w0), (R[1, 0] - R[0, 1]) / (4 * w0), w0),
-        ca.vertcat(x1, (R[0, 1] + R[1, 0]) / (4 * x1), (R[0, 2] + R[2, 0]) / (4 * x1), (R[2, 1] - R[1, 2]) / (4 * x1)),
-        ca.vertcat((R[0, 1] + R[1, 0]) / (4 * y2), y2, (R[1, 2] + R[2, 1]) / (4 * y2), (R[0, 2] - R[2, 0]) / (4 * y2)),
-        ca.vertcat((R[0, 2] + R[2, 0]) / (4 * z3), (R[1, 2] + R[2, 1]) / (4 * z3), z3, (R[1, 0] - R[0, 1]) / (4 * z3)),
-    ]
-    best = cands[3]
-    for k in (2, 1, 0):
-        largest = ca.logic_and(ca.logic_and(diag[k] >= diag[(k + 1) % 4], diag[k] >= diag[(k + 2) % 4]),
-                               diag[k] >= diag[(k + 3) % 4])
-        best = ca.if_else(largest, cands[k], best)
-    best = ca.if_else(best[3] < 0, -best, best)
-    return ca.Function("quaternion", [R], [best], ["R"], ["quat"])
-
-
 def quaternion(R) -> ca.SX:
-    """Unit quaternion ``[qx, qy, qz, qw]`` (``qw ≥ 0``) of the rotation matrix ``R``."""
-    return _quaternion_function()(R)
+    """Unit quaternion ``[qx, qy, qz, qw]`` (``qw ≥ 0``) of the rotation matrix ``R``
+    (Shepperd's method, :func:`ncgen.symbolic.rigid_motion.quaternion`)."""
+    return rotation_forms.quaternion(R)

@@ -15,6 +15,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.reproducible import perpendicular_basis
+from ncgen.assembly.rotation_forms import exp_so3
 from ncgen.errors import ModelError
 from ncgen.model.joint_equations import bar_axis, is_along, is_full
 
@@ -89,20 +90,11 @@ def rotation_about(axis, angle, sym: bool = False):
 
 
 def rotation_vector(phi, sym: bool = False):
-    """``exp(φ̂)``: rotation by ``|φ|`` about ``φ`` (SX when ``sym``; series near ``φ = 0``)."""
+    """``exp(φ̂)``: rotation by ``|φ|`` about ``φ`` (SX when ``sym``;
+    :func:`ncgen.symbolic.rigid_motion.exp_so3`)."""
     if sym:
-        t2 = ca.dot(phi, phi)
-        t = ca.sqrt(ca.fmax(t2, 1e-300))
-        small = t2 < 1e-8
-        a = ca.if_else(small, 1 - t2 / 6 + t2**2 / 120, ca.sin(t) / t)
-        b = ca.if_else(small, 0.5 - t2 / 24 + t2**2 / 720, (1 - ca.cos(t)) / t2)
-        K = ca.skew(phi)
-        return ca.DM.eye(3) + a * K + b * ca.mtimes(K, K)
-    phi = np.asarray(phi, float)
-    t = float(np.linalg.norm(phi))
-    if t == 0.0:
-        return np.eye(3)
-    return rotation_about(phi / t, t)
+        return exp_so3(phi)
+    return np.array(exp_so3(np.asarray(phi, float).reshape(3, 1)), float)
 
 
 def rotation_2d(angle, sym: bool = False):
