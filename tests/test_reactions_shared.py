@@ -189,6 +189,21 @@ def test_weld_transmits_the_static_wrench():
     eq = nc.equilibrium(model)                                        # statics report it too
     rows = {(j, mem): (f, mo) for j, mem, f, mo in eq.joint_reactions()}
     close(rows[("weld", "two")][0], -m2 * g, 1e-9)
+    assert "hinge" in model.sharing.partial                           # point and axis shared, drive kept
+    close(rows[("hinge", "one")][0], -(1.5 + m2) * g, 1e-9)           # the whole reaction, not the drive's
+
+
+def test_equilibrium_table_says_when_the_unshared_form_fails():
+    s, _ = welded_pair(drive="0.0")
+    model = s.build()
+
+    def fail():
+        raise ModelError("made to fail")
+    model.unshared._build = fail
+    eq = nc.equilibrium(model)
+    with pytest.raises(ModelError, match="made to fail"):
+        eq.joint_reactions()
+    assert "not shown: the reactions of joints eliminated by coordinate sharing need" in eq.table()
 
 
 def test_weld_wrench_in_motion_obeys_newton_euler():
