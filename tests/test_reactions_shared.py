@@ -235,12 +235,14 @@ def test_shared_reactions_equal_share_false(make):
     shared, explicit = make().build(), make().build(share=False)
     names = [*shared.sharing.eliminated, *shared.sharing.partial]
     assert names
-    traj = nc.simulate(shared, 0.3, 0.1, rtol=1e-10, atol=1e-10)
-    for q, v in zip(traj.q[1:], traj.v[1:]):
-        S, c = shared.unshared.coordinate_map(shared)
+    rng = np.random.default_rng(5)
+    S, c = shared.unshared.coordinate_map(shared)
+    for _ in range(3):                                 # random consistent states near the initial one
+        q = nc.assemble(shared, shared.q0 + 0.05 * rng.standard_normal(shared.nq))
+        v = nc.project_velocity(shared, q, rng.standard_normal(shared.nq))
         qu, vu = explicit_state(shared, explicit, q, v)
-        close(S @ q + c, qu, 1e-8)                     # q is on the constraints to IDAS's tolerance
-        close(S @ v, vu, 1e-8)
+        close(S @ q + c, qu, 1e-10)
+        close(S @ v, vu, 1e-10)
         _, lam = nc.forward_dynamics(shared, q, v)
         _, lam_u = nc.forward_dynamics(explicit, qu, vu)
         rs = nc.joint_reactions(shared, q, lam, v=v)
