@@ -287,3 +287,15 @@ def test_missing_velocities_are_refused_when_forces_need_them():
     with pytest.raises(ModelError, match="need the velocities"):
         nc.joint_reactions(damped, q, lam, joints=["elbow"])
     assert "elbow" in nc.joint_reactions(damped, q, lam, v=v)
+
+
+def test_a_wrong_coordinate_map_is_caught_by_the_balance_check():
+    """The unshared equations of motion are checked after the multipliers are solved: a map
+    that does not carry the motion (here scaled by 1.01) raises instead of giving numbers."""
+    model = robot().build()
+    q, v = model.q0, model.v0
+    _, lam = nc.forward_dynamics(model, q, v)
+    S, c = model.unshared.coordinate_map(model)
+    model.unshared._map = (1.01 * S, c)
+    with pytest.raises(ModelError, match="leave a residual"):
+        nc.joint_reactions(model, q, lam, v=v, joints=["elbow"])

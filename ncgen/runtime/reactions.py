@@ -143,7 +143,9 @@ def joint_reactions(model, q, lam, *, v=None, t=None, u=None, p=None, joints=Non
 
 
 #: Largest residual of the unshared equations of motion, relative to their terms, accepted when
-#: recovering the multipliers of eliminated joints.
+#: recovering the multipliers of eliminated joints.  Any ``lam`` balances them at a state on the
+#: constraints (``a`` follows from it), so this guards the map between the two forms and states
+#: far off the constraints.
 BALANCE_TOL = 1e-6
 
 
@@ -177,8 +179,7 @@ def unshared_state(model, q, lam, A, v, t, u, p, names):
     um = form.model()
     S, c = form.coordinate_map(model)
     if v is None:
-        moving = [m.name for m in (model, um) if m.functions["F"].which_depends("v", ["F"], 1, True)[0]]
-        if moving:
+        if any(m.functions["F"].which_depends("v", ["F"], 1, True)[0] for m in (model, um)):
             raise ModelError(f"joint_reactions: the reactions of {', '.join(names)} (eliminated by coordinate "
                              f"sharing) need the velocities v: model {model.name!r} has velocity-dependent "
                              f"forces")
@@ -195,9 +196,9 @@ def unshared_state(model, q, lam, A, v, t, u, p, names):
     if residual > BALANCE_TOL * max(scale, 1e-300):
         raise ModelError(
             f"joint_reactions: the reactions of {', '.join(names)} (eliminated by coordinate sharing) could "
-            f"not be recovered: the given multipliers do not balance the equations of motion at q "
-            f"(residual {residual:.3g} N against {scale:.3g} N). Pass the multipliers of this model at "
-            f"this state (nc.forward_dynamics, or a trajectory's lam) with its v, u and t")
+            f"not be recovered: the equations of motion of the model's share=False form leave a residual "
+            f"of {residual:.3g} N (terms of {scale:.3g} N) at this state; is q on the constraints? Pass a "
+            f"consistent state with its multipliers (nc.forward_dynamics, or a trajectory's q, v, lam)")
     return um, q_u, v_u, lam_u
 
 
