@@ -33,6 +33,8 @@ pytestmark = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc
     ("joint_space.py", ["=== call overhead", "RATIO casadi.external / direct", "=== Panda",
                         "RATIO ncgen direct / pinocchio.aba"]),
     ("sharing_chain.py", ["=== chain of N = 3 bars", "RATIO explicit (shared by build) / shared-point chain"]),
+    ("reactions_shared.py", ["=== explicit-joint chain of N = 3 bars", "unshared form built on first use",
+                             "RATIO shared / share=False, joint_reactions per state"]),
     ("optimal_control.py", [re.compile(r"cartpole +8 \|"), re.compile(r"acrobot +8 \|"), re.compile(r"arm3d +8 \|"),
                             "RATIO ncgen / minimal, iterations", "RATIO ncgen / minimal, solve time",
                             "converged: ncgen 3/3, minimal 3/3"]),

@@ -78,3 +78,14 @@ def test_mode_animation(tmp_path):
     traj = modes.trajectory(k, cycles=1, frames_per_cycle=4)
     assert traj.constraint_residual.max() < 1e-10          # frames stay on the constraints
     np.testing.assert_allclose(traj.q[0], modes.equilibrium.q, atol=1e-12)
+
+
+def test_equilibrium_reports_joints_eliminated_by_sharing(capsys):
+    """Default build (sharing): the hinges of the hanging double pendulum are shared
+    coordinates, and the table still gives their reactions: the shoulder carries both 1 kg
+    links, the elbow one."""
+    out = run(capsys, ["equilibrium", str(EXAMPLES / "double_pendulum.toml")]).out
+    rows = [line.split() for line in out.splitlines() if line.startswith(("shoulder ", "elbow "))]
+    table = {(r[0], r[1]): [float(x) for x in r[2:5]] for r in rows}
+    np.testing.assert_allclose(table[("shoulder", "link1")], [0, 0, 2 * 9.81], atol=1e-9)
+    np.testing.assert_allclose(table[("elbow", "link2")], [0, 0, 9.81], atol=1e-9)

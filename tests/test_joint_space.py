@@ -222,14 +222,18 @@ def test_mimic_joint_holds():
 
 
 def test_joint_without_coordinates_is_listed_as_skipped():
+    """A ball joint between two bars has nothing measurable but the angle between them (tests
+    of the joints to one bar: tests/test_joint_space_bars.py)."""
     s = nc.System("bars")
     a = s.add_bar("a", mass=1.0, ends=[(0, 0, 0), (1, 0, 0)])
+    b = s.add_bar("b", mass=1.0, ends=[(1, 0, 0), (2, 0, 0)])
     s.add_joint(nc.Spherical(s.ground, a, at=(0, 0, 0), name="ball"))
+    s.add_joint(nc.Spherical(a, b, at=(1, 0, 0), name="elbow"))
     m = s.build()
-    assert m.joint_names == []
-    assert "ball" in m.joint_space.skipped
-    with pytest.raises(nc.ModelError, match="bar"):
-        m.from_joint_space({"ball": [0, 0, 0, 1]})
+    assert m.joint_names == ["ball"]
+    assert "two bars" in m.joint_space.skipped["elbow"]
+    with pytest.raises(nc.ModelError, match="between two bars"):
+        m.from_joint_space({"elbow": [0, 0, 0, 1]})
 
 
 PENDULUM_TOML = """

@@ -1,5 +1,6 @@
 """Joint reactions and actuator efforts in SI units against closed forms (Newton–Euler).
-Models are built with share=False: a reaction comes from its joint's multipliers."""
+Models are built with share=False: a reaction comes from its joint's multipliers (the
+joints eliminated by sharing: tests/test_reactions_shared.py)."""
 from __future__ import annotations
 
 import numpy as np
@@ -100,12 +101,14 @@ def test_trajectory_reactions_follow_the_closed_form():
     assert effort is None and force.shape == (len(traj), 2)
 
 
-def test_a_joint_replaced_by_shared_coordinates_says_so():
+def test_a_joint_replaced_by_shared_coordinates_reports_its_reaction():
+    """Sharing (the default) eliminates the pivot; its reaction still comes out: a bar
+    released from rest horizontally has α = 3g/(2L), so the pivot carries m g / 4."""
     s = nc.System("hinge", gravity=(0, -G))
     bar = s.add_bar("bar", mass=MASS, ends=[(0, 0), (L, 0)])
     s.add_joint(nc.Revolute(s.ground, bar, at=(0, 0), name="pivot"))
     model = s.build()
     assert "pivot" in model.sharing.eliminated
-    assert "pivot" not in nc.joint_reactions(model, model.q0, model.lam0)
-    with pytest.raises(nc.NcgenError, match="share=False"):
-        nc.joint_reactions(model, model.q0, model.lam0, joints=["pivot"])
+    r = nc.joint_reactions(model, model.q0, model.lam0)["pivot"]
+    np.testing.assert_allclose(r.force, [0, MASS * G / 4], atol=1e-12)
+    assert r.member == "bar" and abs(r.moment) < 1e-12

@@ -177,12 +177,17 @@ def test_ur5_falls_like_pinocchio():
     assert np.max(np.abs(ref_q - qj0)) > 0.1
 
 
+@pytest.mark.parametrize("share", [False, True])
 @pytest.mark.parametrize("name", ["ur5", "panda"])
-def test_joint_reactions_match_pinocchio_joint_forces(name):
+def test_joint_reactions_match_pinocchio_joint_forces(name, share):
     """Under the torques of RNEA, each joint's reaction wrench on its child (world axes, about
     the joint origin) plus the actuator torque about the axis is Pinocchio's ``data.f``
-    (the spatial force the parent exerts on the child, in joint axes)."""
-    model, pm = robot(name, share=False)
+    (the spatial force the parent exerts on the child, in joint axes).  With sharing (the
+    default build) the hinges are shared points and axes, and their reactions come from the
+    model's unshared form."""
+    model, pm = robot(name, share=share)
+    if share:
+        assert model.sharing.eliminated
     pd = pm.createData()
     order = {n: k for k, n in enumerate(model.joint_names)}
     pairs = sorted(pin_joints(model, pm), key=lambda x: order[x[0]])

@@ -18,6 +18,7 @@ from ncgen.assembly.mass import assemble_mass, check_tangent_inertia, flat_membe
 from ncgen.assembly.rank import dependent_rows
 from ncgen.assembly.redundancy import classify
 from ncgen.assembly.springs import spring_table
+from ncgen.assembly.unshared import UnsharedForm
 from ncgen.errors import ModelError
 from ncgen.model.context import Context
 from ncgen.model.layout import Layout, make_layout
@@ -67,11 +68,16 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     if redundant not in REDUNDANT_MODES:
         raise ModelError(f"redundant: expected one of {', '.join(REDUNDANT_MODES)}, got {redundant!r}")
     alpha, beta = (float(x) for x in baumgarte)
-    plan = None
+    plan = unshared = None
     if share and not fix:          # fix names coordinates as written: no sharing then
         nq_before = make_layout(system.dim, list(system.members.values())).nq
+        source = system
         system, plan = share_coordinates(system)
         plan.nq_before = nq_before
+        if plan.eliminated or plan.partial:
+            options = dict(baumgarte=baumgarte, redundant=redundant, tolerance=tolerance, t0=t0,
+                           assemble=assemble, contacts=contacts)
+            unshared = UnsharedForm(lambda: build_model(source, share=False, **options))
     members = list(system.members.values())
     layout = make_layout(system.dim, members)
     ctx = Context(system, layout)
@@ -133,7 +139,8 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
                      potential=potential, state=state, p0=p0, baumgarte=(alpha, beta),
                      redundant=redundant_labels, dropped=(redundant == "drop"), t0=t0,
                      springs=spring_table(system, ctx), limits=limits, joint_space=joint_space,
-                     contacts=contact_specs(system.contacts), contact_model=contacts, sharing=plan)
+                     contacts=contact_specs(system.contacts), contact_model=contacts, sharing=plan,
+                     unshared=unshared)
 
     model = model_with(state)
     if system.initial_joints or system.initial_joint_rates:

@@ -18,6 +18,32 @@ Free (3D)       [x, y, z, qx, qy, qz, qw]                [v, ω] of B's frame in
 Free (planar)   [x, y, θ]                                [v_x, v_y, ω] in B's frame axes
 ==============  =======================================  ======================================
 
+Joints to a 3D bar (which has no spin about its own axis) have the coordinates of what is
+measurable, **of the bar relative to the other member** (a body or the ground, "C"), in C's
+joint frame (world axes at ``at`` carried by C):
+
+==============  =======================================  ======================================
+Spherical       [swing_1, swing_2], rad: the rotation    their time derivatives
+                vector θ k of the smallest rotation
+                taking the bar's initial direction u₀
+                to its current one (k ⟂ u₀), along
+                e₁, e₂ = perpendicular_basis(u₀)
+Universal       θ_a (B the bar, along ``axis_b``) or     θ̇
+                θ_b (A the bar): the other angle is the
+                bar's spin
+Planar          [x, y], m, of the bar's point nearest    [ẋ, ẏ(, θ̇)]
+                ``at`` in C's plane (e₁, e₂ ⟂ normal);
+                a bar across the normal adds θ, its
+                angle about the normal
+==============  =======================================  ======================================
+
+The swing is defined while the bar is less than π from its initial direction (it is
+singular pointing back along −u₀).  Undefined, so those joints have no coordinates (listed
+with the reason in ``model.joint_space.skipped``, named by any error that asks for them): a
+spin about a bar's own axis; anything of a joint between two 3D bars (only the angle between
+their axes is defined, with no smooth rate where they align) or with a point member (no
+orientation); a Free joint with a bar or point member.
+
 Angles are right-handed about the joint's axis (counter-clockwise in 2D); quaternions are
 unit, ``qw ≥ 0``, in Pinocchio's order.  Spherical and Free joints measure the relative
 rotation of the joint frames: the world axes at ``at`` carried by each side (Free: A's
@@ -29,13 +55,13 @@ generalised force ``Jᵀ τ``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import lru_cache
 
 import casadi as ca
 import numpy as np
 
+from ncgen.assembly import rotation_forms
 from ncgen.reproducible import perpendicular_basis
-from ncgen.model.joint_equations import angle_gauge, is_full, kind_of, name_of
+from ncgen.model.joint_equations import angle_gauge, bar_axis, is_along, is_full, kind_of, name_of
 from ncgen.errors import ModelError
 
 
@@ -107,42 +133,81 @@ def _cylindrical(ctx, j):
 
 
 def _universal(ctx, j):
-    _require_full(j, "its two angles")
+    C, O = _full_and_bar(j, "a Universal joint")
     a, b = j.direction("axis_a"), j.direction("axis_b")
     c = np.cross(a, b)
-    aA, bA, cA = (ctx.direction(j.A, d, j.label)[0] for d in (a, b, c))
-    aB, bB, cB = (ctx.direction(j.B, d, j.label)[0] for d in (a, b, c))
-    th_a = _atan2(ca.dot(bA, bB), ca.dot(cA, bB))
-    th_b = _atan2(ca.dot(aB, aA), ca.dot(cB, aA))
-    q = ca.vertcat(th_a, th_b)
-    names = [f"{j.name}.theta_a", f"{j.name}.theta_b"]
-    return JointCoordinates(j, q, _scalar_rates(ctx, q), names, names, [True, True])
+    A_dirs = (a,) if O is j.A else (a, b, c)        # a bar carries only its own axis
+    B_dirs = (b,) if O is j.B else (a, b, c)
+    onA = dict(zip("abc" if len(A_dirs) == 3 else "a", (ctx.direction(j.A, d, j.label)[0] for d in A_dirs)))
+    onB = dict(zip("abc" if len(B_dirs) == 3 else "b", (ctx.direction(j.B, d, j.label)[0] for d in B_dirs)))
+    q, names = [], []
+    if O is not j.A:                                  # θ_a needs A's b, c and B's b
+        q.append(_atan2(ca.dot(onA["b"], onB["b"]), ca.dot(onA["c"], onB["b"])))
+        names.append(f"{j.name}.theta_a")
+    if O is not j.B:                                  # θ_b needs B's a, c and A's a
+        q.append(_atan2(ca.dot(onB["a"], onA["a"]), ca.dot(onB["c"], onA["a"])))
+        names.append(f"{j.name}.theta_b")
+    q = ca.vertcat(*q)
+    return JointCoordinates(j, q, _scalar_rates(ctx, q), names, names, [True] * len(names))
 
 
 def _planar(ctx, j):
-    _require_full(j, "its in-plane position and angle")
+    C, O = _full_and_bar(j, "a Planar joint")
     at, n = j.at(), j.direction("normal")
     e1, e2 = perpendicular_basis(n)
-    rA, _ = ctx.point(j.A, at, j.label)
-    rB, _ = ctx.point(j.B, at, j.label)
-    d = rB - rA
-    x = ca.dot(d, ctx.direction(j.A, e1, j.label)[0])
-    y = ca.dot(d, ctx.direction(j.A, e2, j.label)[0])
-    gx, gy = angle_gauge(ctx, j.A, j.B, n, j.label).terms(ctx)
-    q = ca.vertcat(x, y, _atan2(gx, gy))
-    names = [f"{j.name}.{k}" for k in ("x", "y", "theta")]
-    return JointCoordinates(j, q, _scalar_rates(ctx, q), names, names, [False, False, True])
+    if O is None:
+        rA, _ = ctx.point(j.A, at, j.label)
+        rB, _ = ctx.point(j.B, at, j.label)
+        d = rB - rA
+        x = ca.dot(d, ctx.direction(j.A, e1, j.label)[0])
+        y = ca.dot(d, ctx.direction(j.A, e2, j.label)[0])
+        gx, gy = angle_gauge(ctx, j.A, j.B, n, j.label).terms(ctx)
+        q = ca.vertcat(x, y, _atan2(gx, gy))
+        names = [f"{j.name}.{k}" for k in ("x", "y", "theta")]
+        return JointCoordinates(j, q, _scalar_rates(ctx, q), names, names, [False, False, True])
+    R, o = member_frame(ctx, C, np.eye(3), at, j.label)
+    near = ctx.nearest_point(O, at)
+    d = ca.mtimes(R.T, ctx.point(O, near, j.label)[0] - o) - ca.DM(near - at)
+    parts, names, angles = [ca.dot(d, ca.DM(e1)), ca.dot(d, ca.DM(e2))], ["x", "y"], [False, False]
+    if not is_along(O, n):                            # a bar across the normal: its angle about it
+        u0 = bar_axis(O)
+        u = ca.mtimes(R.T, ctx.direction(O, u0, j.label)[0])
+        p0 = u0 - (u0 @ n) * n
+        up = u - ca.dot(u, ca.DM(n)) * ca.DM(n)
+        parts.append(_atan2(ca.dot(ca.DM(p0), up), ca.dot(ca.DM(n), ca.cross(ca.DM(p0), up))))
+        names.append("theta")
+        angles.append(True)
+    q = ca.vertcat(*parts)
+    names = [f"{j.name}.{k}" for k in names]
+    return JointCoordinates(j, q, _scalar_rates(ctx, q), names, names, angles)
 
 
 def _spherical(ctx, j):
-    _require_full(j, "a relative rotation")
+    C, O = _full_and_bar(j, "a Spherical joint")
     at = j.at()
-    R = _relative(ctx, j, (np.eye(3), at), (np.eye(3), at))[0]
-    q = quaternion(R)
-    w = _body_rate(ctx, R)
-    names = [f"{j.name}.{k}" for k in ("qx", "qy", "qz", "qw")]
-    rates = [f"{j.name}.{k}" for k in ("wx", "wy", "wz")]
-    return JointCoordinates(j, q, w, names, rates, [False] * 4)
+    if O is None:
+        R = _relative(ctx, j, (np.eye(3), at), (np.eye(3), at))[0]
+        q = quaternion(R)
+        w = _body_rate(ctx, R)
+        names = [f"{j.name}.{k}" for k in ("qx", "qy", "qz", "qw")]
+        rates = [f"{j.name}.{k}" for k in ("wx", "wy", "wz")]
+        return JointCoordinates(j, q, w, names, rates, [False] * 4)
+    R, _ = member_frame(ctx, C, np.eye(3), at, j.label)
+    u0 = bar_axis(O)
+    u = ca.mtimes(R.T, ctx.direction(O, u0, j.label)[0])
+    q = swing(u0, u)
+    names = [f"{j.name}.swing_1", f"{j.name}.swing_2"]
+    return JointCoordinates(j, q, _scalar_rates(ctx, q), names, names, [False, False])
+
+
+def swing(u0, u) -> ca.SX:
+    """``[φ·e₁, φ·e₂]``, ``e₁, e₂ = perpendicular_basis(u0)``, of the rotation vector ``φ`` of
+    the smallest rotation taking the unit ``u0`` to ``u``
+    (:func:`ncgen.symbolic.rigid_motion.swing`: ``φ = (θ / sin θ)(u0 × u)``, a series near
+    θ = 0 so that it and its derivatives stay smooth there)."""
+    e1, e2 = perpendicular_basis(u0)
+    phi = rotation_forms.swing(ca.DM(u0), u)
+    return ca.vertcat(ca.dot(phi, ca.DM(e1)), ca.dot(phi, ca.DM(e2)))
 
 
 def _free(ctx, j):
@@ -171,6 +236,22 @@ _BUILDERS = {"Revolute": _revolute, "Prismatic": _prismatic, "Cylindrical": _cyl
 
 
 # ------------------------------------------------------------------ frames
+def _full_and_bar(j, what: str):
+    """``(C, O)``: the joint's full member (ground or body) and its 3D bar, or ``(None, None)``
+    when both are full; :class:`ModelError` naming why there are no coordinates otherwise."""
+    if is_full(j.A) and is_full(j.B):
+        return None, None
+    points = [name_of(m) for m in (j.A, j.B) if kind_of(m) == "point"]
+    if points:
+        raise ModelError(f"{j.label}: {points[0]} is a point member, which has no orientation, so {what} "
+                         "with it has no joint coordinates (its point coincides and nothing else is measured)")
+    if not is_full(j.A) and not is_full(j.B):
+        raise ModelError(f"{j.label}: {what} between two bars has no joint coordinates: a bar has no spin "
+                         "about its own axis, so only the angle between their axes is defined (with no "
+                         "smooth rate where they align)")
+    return (j.A, j.B) if is_full(j.A) else (j.B, j.A)
+
+
 def _require_full(j, what: str):
     for m in (j.A, j.B):
         if not is_full(m):
@@ -203,36 +284,7 @@ def _body_rate(ctx, R) -> ca.SX:
     return 0.5 * ca.vertcat(S[2, 1] - S[1, 2], S[0, 2] - S[2, 0], S[1, 0] - S[0, 1])
 
 
-@lru_cache(maxsize=None)
-def _quaternion_function() -> ca.Function:
-    """``[qx, qy, qz, qw]`` of a rotation matrix (Shepperd's method: the branch of the
-    largest of ``qw², qx², qy², qz²``), sign chosen so that ``qw ≥ 0``."""
-    R = ca.SX.sym("R", 3, 3)
-    tr = R[0, 0] + R[1, 1] + R[2, 2]
-    diag = [tr, R[0, 0], R[1, 1], R[2, 2]]
-
-    def half_root(x):
-        return 0.5 * ca.sqrt(ca.fmax(x, 1e-300))
-
-    w0 = half_root(1 + tr)
-    x1 = half_root(1 + R[0, 0] - R[1, 1] - R[2, 2])
-    y2 = half_root(1 - R[0, 0] + R[1, 1] - R[2, 2])
-    z3 = half_root(1 - R[0, 0] - R[1, 1] + R[2, 2])
-    cands = [
-        ca.vertcat((R[2, 1] - R[1, 2]) / (4 * w0), (R[0, 2] - R[2, 0]) / (4 * w0), (R[1, 0] - R[0, 1]) / (4 * w0), w0),
-        ca.vertcat(x1, (R[0, 1] + R[1, 0]) / (4 * x1), (R[0, 2] + R[2, 0]) / (4 * x1), (R[2, 1] - R[1, 2]) / (4 * x1)),
-        ca.vertcat((R[0, 1] + R[1, 0]) / (4 * y2), y2, (R[1, 2] + R[2, 1]) / (4 * y2), (R[0, 2] - R[2, 0]) / (4 * y2)),
-        ca.vertcat((R[0, 2] + R[2, 0]) / (4 * z3), (R[1, 2] + R[2, 1]) / (4 * z3), z3, (R[1, 0] - R[0, 1]) / (4 * z3)),
-    ]
-    best = cands[3]
-    for k in (2, 1, 0):
-        largest = ca.logic_and(ca.logic_and(diag[k] >= diag[(k + 1) % 4], diag[k] >= diag[(k + 2) % 4]),
-                               diag[k] >= diag[(k + 3) % 4])
-        best = ca.if_else(largest, cands[k], best)
-    best = ca.if_else(best[3] < 0, -best, best)
-    return ca.Function("quaternion", [R], [best], ["R"], ["quat"])
-
-
 def quaternion(R) -> ca.SX:
-    """Unit quaternion ``[qx, qy, qz, qw]`` (``qw ≥ 0``) of the rotation matrix ``R``."""
-    return _quaternion_function()(R)
+    """Unit quaternion ``[qx, qy, qz, qw]`` (``qw ≥ 0``) of the rotation matrix ``R``
+    (Shepperd's method, :func:`ncgen.symbolic.rigid_motion.quaternion`)."""
+    return rotation_forms.quaternion(R)

@@ -238,12 +238,12 @@ class JointSpace:
         for e in self.edges:
             adjacent.setdefault(e.A, []).append((e, True))
             adjacent.setdefault(e.B, []).append((e, False))
-        queue, used = deque(["ground"]), 0
+        queue, used, spinless = deque(["ground"]), 0, set()
         while queue:
             here = queue.popleft()
             for e, forward in adjacent.get(here, []):
                 there = e.B if forward else e.A
-                if there in poses:
+                if there in poses or not _passable(e, forward, here, spinless):
                     continue
                 x = qj[sq[e.name]] if e.name in sq else ca.SX(0, 1)
                 T = relative_pose(e, x, d, sym=True)
@@ -273,7 +273,7 @@ class JointSpace:
         for name in self.joint_names:
             x, w = qj[sq[name]], vj[sv[name]]
             kind = self.joints[name].kind
-            if kind == "Spherical":
+            if kind == "Spherical" and self.nq_joint[name] == 4:      # a quaternion (not a bar's swing)
                 qj_dot.append(quaternion_rate(x, w))
             elif kind == "Free" and d == 3:
                 R = quaternion_matrix(x[3:], sym=True)
@@ -296,12 +296,12 @@ class JointSpace:
         for e in self.edges:
             adjacent.setdefault(e.A, []).append((e, True))
             adjacent.setdefault(e.B, []).append((e, False))
-        queue = deque(["ground"])
+        queue, spinless = deque(["ground"]), set()
         while queue:
             here = queue.popleft()
             for e, forward in adjacent.get(here, []):
                 there = e.B if forward else e.A
-                if there in poses:
+                if there in poses or not _passable(e, forward, here, spinless):
                     continue
                 T = relative_pose(e, values.get(e.name, np.zeros(0)), self.dim)
                 poses[there] = carry(poses[here], e, T, forward, members)
@@ -366,6 +366,17 @@ class JointSpace:
                              f"give the rates of every joint of a tree ({', '.join(self.joint_names)}), "
                              "or of independent joints only")
         return v
+
+
+def _passable(e: Edge, forward: bool, here: str, spinless: set) -> bool:
+    """Whether the tree walk may carry a pose across ``e`` from ``here``: not out of a bar
+    reached through a one-way edge (its spin is not known), and a one-way edge only from its
+    full member to the bar (which is then marked ``spinless``)."""
+    if here in spinless or (e.one_way and not forward):
+        return False
+    if e.one_way:
+        spinless.add(e.B)
+    return True
 
 
 def solve_linear(K: np.ndarray, b: np.ndarray, tol: float = 1e-8) -> np.ndarray | None:

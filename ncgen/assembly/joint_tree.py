@@ -15,7 +15,9 @@ import casadi as ca
 import numpy as np
 
 from ncgen.reproducible import perpendicular_basis
+from ncgen.assembly.rotation_forms import exp_so3
 from ncgen.errors import ModelError
+from ncgen.model.joint_equations import bar_axis, is_along, is_full
 
 
 @dataclass
@@ -30,6 +32,9 @@ class Edge:
     frame_a: tuple[np.ndarray, np.ndarray]
     frame_b: tuple[np.ndarray, np.ndarray]
     axes: tuple
+    #: a joint to a 3D bar (A: the full member, B: the bar): its coordinates give the bar's
+    #: pose from the other's, never the other way (the bar's spin is not in them)
+    one_way: bool = False
 
 
 def edge_of(j) -> Edge:
@@ -42,6 +47,8 @@ def edge_of(j) -> Edge:
         fa = (eye, np.zeros(d)) if j.A.is_ground else (j.A.R0, j.A.p0)
         return Edge(j.name, j.kind, A, B, fa, (j.frame_rotation(), j.frame_origin()), ())
     at = j.at()
+    if j.kind in ("Spherical", "Universal", "Planar") and not (is_full(j.A) and is_full(j.B)):
+        return _bar_edge(j, at)
     axes = ()
     if j.kind in ("Revolute",) and d == 3:
         axes = (j.axis(),)
@@ -55,6 +62,24 @@ def edge_of(j) -> Edge:
     return Edge(j.name, j.kind, A, B, (eye, at), (eye, at), axes)
 
 
+def _bar_edge(j, at) -> Edge:
+    """The one-way :class:`Edge` of a Spherical, Universal or Planar joint between a full member
+    C and a 3D bar O (:mod:`ncgen.assembly.joint_coordinates`): from C's frame at ``at`` to the
+    bar's frame at its point nearest ``at``."""
+    C, O = (j.A, j.B) if is_full(j.A) else (j.B, j.A)
+    names = ["ground" if m.is_ground else m.name for m in (C, O)]
+    near = O.p0 + np.dot(at - O.p0, bar_axis(O)) * bar_axis(O)
+    eye = np.eye(3)
+    if j.kind == "Spherical":
+        kind, axes = "Swing", tuple(perpendicular_basis(bar_axis(O)))
+    elif j.kind == "Universal":                      # θ_a about a (B the bar), or θ_b about b, of B in A
+        kind, axes = "Revolute", ((j.direction("axis_a"),) if O is j.B else (-j.direction("axis_b"),))
+    else:
+        n = j.direction("normal")
+        kind, axes = "PlanarBar", (n, *perpendicular_basis(n), near - at, not is_along(O, n))
+    return Edge(j.name, kind, *names, (eye, at), (eye, near), axes, one_way=True)
+
+
 def rotation_about(axis, angle, sym: bool = False):
     """Rodrigues: rotation by ``angle`` (rad) about the unit ``axis`` (SX when ``sym``)."""
     k = np.asarray(axis, float)
@@ -62,6 +87,14 @@ def rotation_about(axis, angle, sym: bool = False):
     if sym:
         return ca.DM.eye(3) + ca.sin(angle) * ca.DM(K) + (1 - ca.cos(angle)) * ca.DM(K @ K)
     return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * (K @ K)
+
+
+def rotation_vector(phi, sym: bool = False):
+    """``exp(φ̂)``: rotation by ``|φ|`` about ``φ`` (SX when ``sym``;
+    :func:`ncgen.symbolic.rigid_motion.exp_so3`)."""
+    if sym:
+        return exp_so3(phi)
+    return np.array(exp_so3(np.asarray(phi, float).reshape(3, 1)), float)
 
 
 def rotation_2d(angle, sym: bool = False):
@@ -118,6 +151,12 @@ def relative_pose(e: Edge, x, dim: int, sym: bool = False):
         return rotation_about(n, x[2], sym), x[0] * _const(e1, sym) + x[1] * _const(e2, sym)
     if k == "Spherical":
         return qm(x), zero
+    if k == "Swing":                                 # rotation vector x₁ e₁ + x₂ e₂
+        return rotation_vector(x[0] * _const(e.axes[0], sym) + x[1] * _const(e.axes[1], sym), sym), zero
+    if k == "PlanarBar":
+        n, e1, e2, p0, turns = e.axes
+        p = _const(p0, sym) + x[0] * _const(e1, sym) + x[1] * _const(e2, sym)
+        return (rotation_about(n, x[2], sym) if turns else eye), p
     if k == "Free":
         if dim == 2:
             return rotation_2d(x[2], sym), x[:2]

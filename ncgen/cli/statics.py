@@ -22,8 +22,8 @@ def _common_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tol", type=float, default=1e-10, help="relative force tolerance (default 1e-10)")
     p.add_argument("--no-share", action="store_true",
                    help="keep every joint's equations (System.build(share=False)), so that every joint "
-                        "reports its reaction; by default joints that shared coordinates express are "
-                        "replaced by them and have no multipliers")
+                        "has multipliers of its own; by default joints that shared coordinates express are "
+                        "replaced by them, and their reactions come from the unshared form of the model")
 
 
 def _equilibrium_arguments(p: argparse.ArgumentParser) -> None:

@@ -46,7 +46,7 @@ class Model:
 
     def __init__(self, *, description, layout, labels, functions, M, factor, potential, state, p0, baumgarte,
                  redundant, dropped, t0, springs=None, limits=None, joint_space=None,
-                 contacts=(), contact_model="smooth", sharing=None):
+                 contacts=(), contact_model="smooth", sharing=None, unshared=None):
         system = description
         self.members = MappingProxyType(dict(system.members))
         self.joints = tuple(system.joints)
@@ -90,6 +90,9 @@ class Model:
         self.contact_model = contact_model
         #: :class:`~ncgen.model.sharing.SharingPlan` of ``build(share=True)`` (None with share=False).
         self.sharing = sharing
+        #: the same system built with ``share=False``, on first use (reactions of the eliminated
+        #: joints; :class:`ncgen.assembly.unshared.UnsharedForm`), or None
+        self.unshared = unshared
         for key, value in vars(self).items():
             object.__setattr__(self, key, _frozen(value))
         object.__setattr__(self, "_frozen", True)
@@ -117,7 +120,11 @@ class Model:
     # ------------------------------------------------------------ joint space
     @property
     def joint_names(self) -> list[str]:
-        """The joints that have coordinates, in model order (a floating base ``root`` first)."""
+        """The joints that have coordinates, in model order (a floating base ``root`` first).
+        A joint to a 3D bar has only what is measurable (no spin about the bar's axis: a ball
+        joint gives the bar's swing, two angles); joints with nothing defined (Spherical,
+        Universal or Planar between two 3D bars or with a point member) are left out, and
+        ``model.joint_space.skipped`` says why (:mod:`ncgen.assembly.joint_coordinates`)."""
         return list(self.joint_space.joint_names)
 
     @property

@@ -17,14 +17,22 @@ centre-of-mass velocity ``v`` and angular velocity ``ω``, ``Q_Bᵀ q̇_B(v, ω)
   apart), from the drive's own multiplier; a joint with ``effort=`` reports the value of
   its effort.  None otherwise.
 
-Not covered: the forces carried by shared basic points (members sharing coordinates:
-an eliminated spherical joint) are inside the shared coordinates and have no multiplier.
+Joints that coordinate sharing eliminated (``model.sharing``: a shared point or axis, a
+weld merged) have no multipliers of their own.  Their reactions come from the same system
+built with ``share=False`` (:class:`ncgen.assembly.unshared.UnsharedForm`, built on first
+use): its coordinates are ``q_u = S q + c``, ``v_u = S v``, ``a_u = S a`` with
+``a = M⁻¹(F − Aᵀλ)`` from the given multipliers, and its multipliers solve its own equations
+of motion ``A_uᵀ λ_u = F_u − M_u a_u`` (least squares; the residual is checked).  Its rows of
+the eliminated joints then give the reactions as above, in the same frames and units, equal
+to what ``build(share=False)`` reports.  A weld (``Fixed``) reports the wrench transmitted
+through it.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
 
 from ncgen.errors import ModelError
 from ncgen.validation import as_vector
@@ -81,10 +89,11 @@ def _wrench(model, member, Q_full: np.ndarray, q: np.ndarray, point_local):
 
 
 def joint_reactions(model, q, lam, *, v=None, t=None, u=None, p=None, joints=None) -> dict[str, JointReaction]:
-    """Reactions of ``joints`` (default: every joint with equations; joints that coordinate
-    sharing replaced, ``model.sharing``, have none: build with ``share=False`` for them) at the state ``q`` with
-    multipliers ``lam`` (from :func:`~ncgen.runtime.joint_dynamics.forward_dynamics`, or a
-    trajectory's ``lam``); ``u``, ``v``, ``t``, ``p`` for the efforts of actuated joints."""
+    """Reactions of ``joints`` (default: every joint with equations, those that coordinate
+    sharing eliminated included) at the state ``q`` with multipliers ``lam`` (from
+    :func:`~ncgen.runtime.joint_dynamics.forward_dynamics`, or a trajectory's ``lam``);
+    ``u``, ``t``, ``p`` for the efforts of actuated joints and the applied forces; ``v`` is
+    needed for the reactions of eliminated joints when a force depends on velocities."""
     q = as_vector(q, model.nq, "q")
     lam = as_vector(lam, model.nc, "lam (one multiplier per constraint)")
     t = model.t0 if t is None else float(t)
@@ -98,20 +107,17 @@ def joint_reactions(model, q, lam, *, v=None, t=None, u=None, p=None, joints=Non
     efforts = {n: tau[offsets[k]:offsets[k + 1]] for k, n in enumerate(js.actuated)}
     by_name = js.joints
     names = list(by_name) if joints is None else list(joints)
-    out = {}
+    out, eliminated = {}, []
     for name in names:
         j = by_name.get(name)
         if j is None:
             raise ModelError(f"joint_reactions: no joint named {name!r}; joints: {', '.join(by_name)}")
         if j.kind in ("CoordinateDriver", "Mimic"):
             continue
-        shared = model.sharing is not None and (name in model.sharing.eliminated or name in model.sharing.partial)
-        if shared:
-            if joints is None:
-                continue
-            raise ModelError(f"joint_reactions: joint {name!r} was replaced by shared coordinates at build() "
-                             f"({model.sharing.eliminated.get(name) or model.sharing.partial.get(name)}), so it "
-                             f"has no multipliers to give its reaction; build the model with share=False")
+        if model.sharing is not None and (name in model.sharing.eliminated or name in model.sharing.partial):
+            eliminated.append(name)
+            out[name] = None
+            continue
         rows, drive = _rows(model, name)
         if not rows and name not in efforts:
             continue
@@ -131,7 +137,69 @@ def joint_reactions(model, q, lam, *, v=None, t=None, u=None, p=None, joints=Non
             e = efforts[name]
             effort = float(e[0]) if e.size == 1 else e
         out[name] = JointReaction(name, "ground" if j.B.is_ground else j.B.name, P, sign * f, sign * m, effort)
-    return out
+    if eliminated:
+        out.update(_eliminated(model, q, lam, A, v, t, u, p, eliminated))
+    return {k: r for k, r in out.items() if r is not None}
+
+
+#: Largest residual of the unshared equations of motion, relative to their terms, accepted when
+#: recovering the multipliers of eliminated joints.  Any ``lam`` balances them at a state on the
+#: constraints (``a`` follows from it), so this guards the map between the two forms and states
+#: far off the constraints.
+BALANCE_TOL = 1e-6
+
+
+def _eliminated(model, q, lam, A, v, t, u, p, names) -> dict[str, JointReaction]:
+    """Reactions of the joints ``names`` that coordinate sharing eliminated, through the
+    model's unshared form (module docstring)."""
+    um, q_u, v_u, lam_u = unshared_state(model, q, lam, A, v, t, u, p, names)
+    return joint_reactions(um, q_u, lam_u, v=v_u, t=t, u=u, p=p, joints=names)
+
+
+def _least_squares(B: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``x`` minimising ``|B x − b|``: by QR when ``B`` has full column rank (the usual case,
+    ~10× cheaper than an SVD), else the minimum-norm SVD solution."""
+    if B.shape[1] == 0:
+        return np.zeros(0)
+    Q, R = np.linalg.qr(B)
+    d = np.abs(np.diag(R))
+    if d.min() > 1e-10 * d.max():
+        return scipy.linalg.solve_triangular(R, Q.T @ b)
+    return np.linalg.lstsq(B, b, rcond=None)[0]
+
+
+def unshared_state(model, q, lam, A, v, t, u, p, names):
+    """``(unshared model, q_u, v_u, λ_u)``: the state of the ``share=False`` form of ``model``
+    and its multipliers, from the state and multipliers ``lam`` of ``model`` (``A`` its
+    constraint Jacobian at ``q``; ``names``: the eliminated joints asked for, for messages)."""
+    form = model.unshared
+    if form is None:
+        raise ModelError(f"joint_reactions: model {model.name!r} has no unshared form for the eliminated "
+                         f"joints {', '.join(names)}")
+    um = form.model()
+    S, c = form.coordinate_map(model)
+    if v is None:
+        if any(m.functions["F"].which_depends("v", ["F"], 1, True)[0] for m in (model, um)):
+            raise ModelError(f"joint_reactions: the reactions of {', '.join(names)} (eliminated by coordinate "
+                             f"sharing) need the velocities v: model {model.name!r} has velocity-dependent "
+                             f"forces")
+        v = np.zeros(model.nq)
+    v = as_vector(v, model.nq, "v")
+    a = model.mass_factor.solve_numeric(model.F(q, v, t=t, u=u, p=p) - A.T @ lam)
+    q_u, v_u = S @ q + c, S @ v
+    F_u, Ma_u = um.F(q_u, v_u, t=t, u=u, p=p), np.asarray(um.M) @ (S @ a)
+    A_u = np.asarray(um.A(q_u, t=t, p=p)).reshape(um.nc, um.nq)
+    rhs = F_u - Ma_u
+    lam_u = _least_squares(A_u.T, rhs)
+    residual = float(np.linalg.norm(A_u.T @ lam_u - rhs))
+    scale = float(np.linalg.norm(F_u) + np.linalg.norm(Ma_u) + np.linalg.norm(A_u.T @ lam_u))
+    if residual > BALANCE_TOL * max(scale, 1e-300):
+        raise ModelError(
+            f"joint_reactions: the reactions of {', '.join(names)} (eliminated by coordinate sharing) could "
+            f"not be recovered: the equations of motion of the model's share=False form leave a residual "
+            f"of {residual:.3g} N (terms of {scale:.3g} N) at this state; is q on the constraints? Pass a "
+            f"consistent state with its multipliers (nc.forward_dynamics, or a trajectory's q, v, lam)")
+    return um, q_u, v_u, lam_u
 
 
 def _nearest(bar, world):

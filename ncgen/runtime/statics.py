@@ -21,7 +21,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ncgen.assembly.statics import statics_function
-from ncgen.errors import NcgenError
+from ncgen.errors import ModelError, NcgenError
+from ncgen.runtime.reactions import unshared_state
 from ncgen.runtime.tangent import cached, classify, null_basis
 from ncgen.validation import as_vector
 
@@ -98,8 +99,22 @@ class Equilibrium:
         """``(joint, member, force, moment)`` for every joint and member it acts on: the
         resultant force (N, world axes) and moment about the member's centre of mass (N·m;
         a scalar in 2D) that the joint's constraints exert on the member, from the virtual
-        work of ``−A_jᵀλ_j`` on the member's coordinates (see :func:`joint_reactions`)."""
-        return joint_reactions(self.model, self.q, self.lam, t=self.t, p=self.p)
+        work of ``−A_jᵀλ_j`` on the member's coordinates (see :func:`joint_reactions`).  Joints
+        that coordinate sharing eliminated (wholly or in part) are included, from the model's
+        ``share=False`` form (:func:`ncgen.runtime.reactions.unshared_state`)."""
+        model = self.model
+        out = joint_reactions(model, self.q, self.lam, t=self.t, p=self.p)
+        plan = model.sharing
+        names = set() if plan is None else {*plan.eliminated, *plan.partial}
+        if not names:
+            return out
+        A = model.A(self.q, t=self.t, p=self.p).reshape(model.nc, model.nq)
+        um, q_u, _, lam_u = unshared_state(model, self.q, self.lam, A, np.zeros(model.nq), self.t, self.u,
+                                           self.p, sorted(names))
+        out = [r for r in out if r[0] not in names] + \
+            [r for r in joint_reactions(um, q_u, lam_u, t=self.t, p=self.p) if r[0] in names]
+        order = {j.name: k for k, j in enumerate(model.joints)}
+        return sorted(out, key=lambda r: order.get(r[0], len(order)))
 
     def multipliers(self) -> dict[str, float]:
         """``λ`` by constraint name."""
@@ -117,7 +132,12 @@ class Equilibrium:
         if self.lam.size:
             lines += ["", f"{'constraint':<34}{'lambda':>14}"]
             lines += [f"{n:<34}{x:>14.6g}" for n, x in zip(self.model.constraint_names, self.lam)]
-        reactions = self.joint_reactions()
+        try:
+            reactions, missing = self.joint_reactions(), None
+        except ModelError as e:          # the unshared form of a shared model could not be made
+            reactions, missing = joint_reactions(self.model, self.q, self.lam, t=self.t, p=self.p), str(e)
+        if missing:
+            lines += ["", f"reactions of the joints eliminated by coordinate sharing are not shown: {missing}"]
         if reactions:
             d = self.model.dim
             lines += ["", f"{'joint':<16}{'on member':<16}{'force (N)':<{12 * d}}    moment about COM (N m)"]
@@ -268,7 +288,7 @@ def joint_reactions(model, q, lam, *, t=None, p=None) -> list[tuple[str, str, np
     its base vectors does the work ``δpᵀ f + δθᵀ μ_O`` with ``f = Σ_points Q_r`` and
     ``μ_O = Σ_points r × Q_r + Σ_vectors u × Q_u``; the moment about the centre of mass
     ``p_G`` is ``μ_O − p_G × f``.  Exact for any member type; members sharing a node carry
-    no multiplier there and are not reported."""
+    no multiplier there and are not reported here (``Equilibrium.joint_reactions`` adds them)."""
     q = np.asarray(q, float)
     lam = np.asarray(lam, float)
     A = model.A(q, t=t, p=p).reshape(-1, model.nq)

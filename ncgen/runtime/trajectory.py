@@ -154,7 +154,9 @@ class Trajectory:
         ``joint_position_names``)."""
         if name not in self.joint_names:
             known = ", ".join(self.joint_names) or "none"
-            raise NcgenError(f"no joint with coordinates named {name!r} (joints: {known})")
+            js = getattr(self.model, "joint_space", None)
+            why = f": {js.skipped[name]}" if js is not None and name in js.skipped else ""
+            raise NcgenError(f"no joint with coordinates named {name!r}{why} (joints: {known})")
         pos = [i for i, n in enumerate(self.joint_position_names) if n == name or n.startswith(name + ".")]
         rate = [i for i, n in enumerate(self.joint_rate_names) if n == name or n.startswith(name + ".")]
         x, xd = self.qj[:, pos], self.vj[:, rate]

@@ -332,3 +332,59 @@ def log_se3_translation(omega, R_ab, p_ab) -> sp.Matrix:
     near_zero = _lt(sin_sq, SERIES_THRESHOLD) & (c > 0)
     V_inv = sp.eye(3) - W / 2 + coefficient("dlog", w.dot(w), small=near_zero) * W * W
     return V_inv * as_vector(p_ab, 3)
+
+
+# --- quaternions and swings --------------------------------------------------------------------
+
+def _sign_of(x) -> sp.Expr:
+    """``−1`` where ``x < 0``, else ``1`` (``x`` free of ``Piecewise``)."""
+    return sp.Piecewise((-1, _lt(x, 0)), (1, True), evaluate=False)
+
+
+def quaternion(R_ab) -> sp.Matrix:
+    """Unit quaternion ``[qx, qy, qz, qw]`` (Hamilton, Pinocchio's order) of the rotation
+    ``R_ab``, with ``qw ≥ 0``.
+
+    Shepperd's method: of ``4qw² = 1 + tr R`` and ``4qx² = 1 + R₀₀ − R₁₁ − R₂₂`` (and y, z
+    alike) the largest is ≥ 1, so its root is well conditioned and the other components
+    follow from the off-diagonal sums and differences divided by it.  The branch is the
+    largest of ``tr R, R₀₀, R₁₁, R₂₂`` (``qw² ≥ qx² ⇔ tr R ≥ R₀₀``, ...).  Each branch is
+    multiplied by the sign of its ``qw`` (a Piecewise-free expression there); the roots
+    are taken of ``max(·, 1)``, which never changes the selected branch and keeps the others
+    finite."""
+    R = sp.Matrix(R_ab)
+    tr = R.trace()
+
+    def root(x):
+        return sp.sqrt(sp.Max(x, 1, evaluate=False)) / 2
+
+    w, x, y, z = (root(1 + tr), root(1 + R[0, 0] - R[1, 1] - R[2, 2]),
+                  root(1 - R[0, 0] + R[1, 1] - R[2, 2]), root(1 - R[0, 0] - R[1, 1] + R[2, 2]))
+    d21, d02, d10 = R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]
+    s01, s02, s12 = R[0, 1] + R[1, 0], R[0, 2] + R[2, 0], R[1, 2] + R[2, 1]
+    branches = [
+        ([d21 / (4 * w), d02 / (4 * w), d10 / (4 * w), w], 1),
+        ([x, s01 / (4 * x), s02 / (4 * x), d21 / (4 * x)], _sign_of(d21)),
+        ([s01 / (4 * y), y, s12 / (4 * y), d02 / (4 * y)], _sign_of(d02)),
+        ([s02 / (4 * z), s12 / (4 * z), z, d10 / (4 * z)], _sign_of(d10)),
+    ]
+    ge = lambda a, b: sp.GreaterThan(a, b, evaluate=False)   # noqa: E731
+    conditions = [ge(tr, R[0, 0]) & ge(tr, R[1, 1]) & ge(tr, R[2, 2]),
+                  ge(R[0, 0], R[1, 1]) & ge(R[0, 0], R[2, 2]),
+                  ge(R[1, 1], R[2, 2]), sp.true]
+    return sp.Matrix([sp.Piecewise(*[(sign * comps[i], cond) for (comps, sign), cond in zip(branches, conditions)],
+                                   evaluate=False) for i in range(4)])
+
+
+def swing(u0, u) -> sp.Matrix:
+    """Rotation vector ``φ = θ k`` of the smallest rotation taking the unit direction ``u0`` to
+    the unit direction ``u`` (``k = u0 × u / |u0 × u|``, ``θ = atan2(|u0 × u|, u0·u)``):
+    ``φ = (θ / sin θ)(u0 × u)``, ⟂ ``u0``.  The factor is ``asin(s)/s`` (``s = |u0 × u|``), a
+    Taylor polynomial in ``s²`` near θ = 0; defined for θ < π (singular at ``u = −u0``)."""
+    u0, u = as_vector(u0, 3), as_vector(u, 3)
+    w = u0.cross(u)
+    s_sq, c = w.dot(w), u0.dot(u)
+    s = sp.sqrt(sp.Max(s_sq, sp.Rational(1, 10**300), evaluate=False))
+    near_zero = _lt(s_sq, SERIES_THRESHOLD) & sp.StrictGreaterThan(c, 0, evaluate=False)
+    factor = coefficient("asinc", s_sq, exact=lambda t: sp.atan2(s, c) / s, small=near_zero)
+    return factor * w
