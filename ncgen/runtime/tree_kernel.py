@@ -18,6 +18,7 @@ has exactly as many degrees of freedom as joint rates).
 """
 from __future__ import annotations
 
+import ctypes
 import tempfile
 import weakref
 from pathlib import Path
@@ -50,7 +51,9 @@ class JointDynamicsKernel:
         self.model, self.direct, self.method = model, direct, method
         self.nq, self.nv, self.nu = model.joint_space.nq, model.joint_space.nv, model.nu
         t, self._qj, self._vj, self._u, self._p = direct.inputs
-        self._aj, self._check = direct.outputs
+        self._aj, check = direct.outputs
+        self._check = (ctypes.c_double * 2).from_address(check.ctypes.data)    # Python floats on indexing
+        self._keep = check
         self._fn, self._args = direct._fn, direct._args
         self.set(t=model.t0, p=model.p0)
 
