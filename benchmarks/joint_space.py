@@ -13,7 +13,9 @@ per call, best of ``--repeat`` batches of ``--calls`` calls from Python:
   (≤ 2× ``pinocchio.aba``);
 * the same with the inputs already in its buffers (``k.direct.call``) — "joint kernel, call
   only" — and the same C function in a C loop (a small harness compiled here, timed with
-  ``clock_gettime``) — "joint kernel, C loop": the kernel itself;
+  ``clock_gettime``) — "joint kernel, C loop": the kernel itself (default flags, -O2; and
+  compiled with ``cflags="-O3 -march=native"``, for a local cache only: such a library is
+  not portable);
 * the same through ``casadi.external``, and ``nc.joint_forward_dynamics`` (validated inputs,
   the same kernel);
 * the previous compiled paths: natural coordinates in and out
@@ -178,6 +180,8 @@ def arm(calls, repeat):
         "ncgen joint kernel": per_call(lambda: kj(qj, vj, tau), calls, repeat),
         "ncgen joint kernel, call only": per_call(kj.direct.call, calls, repeat),
         "ncgen joint kernel, C loop": c_loop(kj.direct, 20 * calls, repeat),
+        "ncgen joint kernel, C loop, -O3 -march=native": c_loop(
+            nc.joint_forward_dynamics_kernel(model, cflags="-O3 -march=native").direct, 20 * calls, repeat),
         "ncgen joint kernel, casadi.external": per_call(lambda: ext(t_, qj, vj, tau, p0), max(1, calls // 10), repeat),
         "nc.joint_forward_dynamics": per_call(lambda: nc.joint_forward_dynamics(model, qj, vj, tau),
                                               max(1, calls // 10), repeat),
