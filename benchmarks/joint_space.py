@@ -228,6 +228,9 @@ def _humanoid_stages(path, package: bool):
     (qp, vp, tp), (qj, vj, u) = pin_state(model, pm, seed=1)
     a_pin = pin.aba(pm, pm.createData(), qp, vp, tp)
     err = np.max(np.abs(to_pin(model, pm, k(qj, vj, u)) - a_pin)) / max(1.0, np.max(np.abs(a_pin)))
+    pd = pm.createData()
+    calls = {"joint kernel call, µs": per_call(lambda: k(qj, vj, u), 500, 3),
+             "pinocchio.aba call, µs": per_call(lambda: pin.aba(pm, pd, qp, vp, tp), 500, 3)}
     if package:
         t3 = time.perf_counter()
         with tempfile.TemporaryDirectory() as tmp:
@@ -237,7 +240,7 @@ def _humanoid_stages(path, package: bool):
             load_functions(pkg, backend="compiled")
             full["load"] = time.perf_counter() - t4
         full["total (with from_urdf, build)"] = kernel["from_urdf"] + kernel["build"] + time.perf_counter() - t3
-    return model, k, kernel, full, err
+    return model, k, kernel, full, err, calls
 
 
 def main(argv=None) -> int:
@@ -260,19 +263,21 @@ def main(argv=None) -> int:
     print(f"  joint kernel ({kj.method} form, {kj.direct.name}) built and loaded in {build:.1f} s")
     print(f"  max |a_j - a(pinocchio.aba)| / max(1, |a|): joint kernel {err:.1e}, KKT kernel {err_kkt:.1e}")
     for name, value in t.items():
-        print(f"  {name:<40s} {value:10.2f}")
+        print(f"  {name:<46s} {value:10.2f}")
     print(f"RATIO ncgen joint kernel / pinocchio.aba: {t['ncgen joint kernel'] / t['pinocchio.aba']:.2f}   (target <= 2)")
     print(f"RATIO ncgen joint kernel C loop / pinocchio.aba: {t['ncgen joint kernel, C loop'] / t['pinocchio.aba']:.2f}")
     print(f"RATIO ncgen joint space via the KKT kernel / pinocchio.aba: "
           f"{t['ncgen joint space via the KKT kernel'] / t['pinocchio.aba']:.1f}")
     if not args.skip_humanoid:
-        hm, hk, kernel, full, herr = humanoid(not args.skip_package)
+        hm, hk, kernel, full, herr, calls = humanoid(not args.skip_package)
         print(f"=== Talos (floating base; {len(hm.member_names)} bodies, {hm.joint_space.nv} joint rates, "
               f"nq = {hm.nq}, nc = {hm.nc}): URDF file to loaded compiled library, empty cache")
         print(f"  joint kernel ({hk.method} form): max |a_j - a(pinocchio.aba)| / max(1, |a|) = {herr:.1e}")
         for name, value in kernel.items():
             print(f"  {name:<40s} {value:8.1f} s")
         print(f"TALOS URDF file to loaded joint-space dynamics library: {kernel['total']:.1f} s   (target < 30 s)")
+        print("  " + ", ".join(f"{name} {value:.1f}" for name, value in calls.items())
+              + " (default flags: a function over LARGE_FUNCTION_INSTRUCTIONS is compiled at -O0)")
         if full:
             print("  the whole simulation package (nc.generate + compile + load_functions), same model:")
             for name, value in full.items():
