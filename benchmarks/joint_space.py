@@ -276,8 +276,7 @@ def main(argv=None) -> int:
         for name, value in kernel.items():
             print(f"  {name:<40s} {value:8.1f} s")
         print(f"TALOS URDF file to loaded joint-space dynamics library: {kernel['total']:.1f} s   (target < 30 s)")
-        print("  " + ", ".join(f"{name} {value:.1f}" for name, value in calls.items())
-              + " (default flags: a function over LARGE_FUNCTION_INSTRUCTIONS is compiled at -O0)")
+        print("  " + ", ".join(f"{name} {value:.1f}" for name, value in calls.items()))
         if full:
             print("  the whole simulation package (nc.generate + compile + load_functions), same model:")
             for name, value in full.items():
