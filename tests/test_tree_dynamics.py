@@ -136,3 +136,43 @@ def test_written_out_cholesky():
     L = np.linalg.cholesky(S)
     assert abs(float(r_num) - min(L[k, k] ** 2 / S[k, k] for k in range(3))) < 1e-14
     assert float(f(np.ones((3, 3)), np.ones(3))[1]) <= 0.0          # singular: a zero pivot
+
+
+def test_joint_motion_subspace_and_its_rate_against_finite_differences(tree):
+    """Per joint of every type: the child's world twist is ``[ω_p; v_p] + S w`` and
+    ``c = Ṡ w``, against central differences of the child's pose and of ``S w`` along a
+    motion of the parent with twist ``[ω_p; v_p]`` at t = 0 and of the joint (``x + ẋ t``)."""
+    import casadi as ca
+    from scipy.spatial.transform import Rotation
+
+    from ncgen.assembly.tree_dynamics import _edge_function
+
+    js = tree.joint_space
+    rng = np.random.default_rng(7)
+    h = 1e-6
+    for here, there, e, forward in js.spanning_tree():
+        f = _edge_function(js, e, forward)
+        nq, nv = js.nq_joint.get(e.name, 0), js.nv_joint.get(e.name, 0)
+        Rp, pp = Rotation.random(random_state=rng).as_matrix(), rng.normal(size=3)
+        wp, vp = rng.normal(size=3), rng.normal(size=3)
+        x, w = rng.uniform(-1, 1, nq), rng.normal(size=nv)
+        if nq in (4, 7):
+            x[-4:] /= np.linalg.norm(x[-4:])
+        xs = ca.SX.sym("x", nq)
+        xdot = np.array(ca.Function("xd", [xs], [js.position_rates(e.name, xs, ca.DM(w))])(x)).reshape(-1) \
+            if nq else np.zeros(0)
+
+        def at(t):
+            turn = Rotation.from_rotvec(wp * t).as_matrix()
+            R, p = turn @ Rp, turn @ pp + vp * t          # ṗ = v_p + ω_p × p_p at t = 0
+            out = f(R, p, wp, vp, x + xdot * t, w)
+            return [np.array(o) for o in out]
+
+        Rc, pc, S, c = at(0.0)
+        (Rm, pm, Sm, _), (Rq, pq, Sq, _) = at(-h), at(h)
+        W = (Rq - Rm) / (2 * h) @ Rc.T
+        omega = 0.5 * np.array([W[2, 1] - W[1, 2], W[0, 2] - W[2, 0], W[1, 0] - W[0, 1]])
+        twist = np.concatenate([omega, (pq - pm).reshape(-1) / (2 * h) - np.cross(omega, pc.reshape(-1))])
+        np.testing.assert_allclose(twist, np.concatenate([wp, vp]) + (S @ w if nv else 0.0), atol=1e-7)
+        if nv:
+            np.testing.assert_allclose(c.reshape(-1), (Sq - Sm) @ w / (2 * h), atol=1e-6)
