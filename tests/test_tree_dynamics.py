@@ -176,3 +176,28 @@ def test_joint_motion_subspace_and_its_rate_against_finite_differences(tree):
         np.testing.assert_allclose(twist, np.concatenate([wp, vp]) + (S @ w if nv else 0.0), atol=1e-7)
         if nv:
             np.testing.assert_allclose(c.reshape(-1), (Sq - Sm) @ w / (2 * h), atol=1e-6)
+
+
+def test_uniform_gravity_is_recognised_only_when_it_is_all_the_passive_force(tree):
+    """Gravity alone rides on the ground's acceleration; any other force (a spring, a
+    constant point force) keeps the general wrench path — both checked against the KKT solve."""
+    from ncgen.assembly.tree_dynamics import _owned, uniform_gravity
+
+    assert uniform_gravity(tree, _owned(tree, tree.joint_space.spanning_tree())) is None   # the spring
+    for extra in (False, True):
+        s = nc.System("arm", gravity=(0.0, 1.0, -G))
+        b0 = s.add_body("b0", mass=1.0, inertia=np.diag([0.1, 0.2, 0.25]), position=(0.5, 0, 0))
+        b1 = s.add_body("b1", mass=2.0, inertia=np.diag([0.2, 0.1, 0.25]), position=(1.5, 0, 0))
+        s.add_joint(nc.Revolute(s.ground, b0, at=(0, 0, 0), axis=(0, 1, 0), name="j0"))
+        s.add_joint(nc.Revolute(b0, b1, at=(1, 0, 0), axis=(0, 0.6, 0.8), name="j1"))
+        if extra:
+            s.add_force(nc.PointForce(b1, (0.2, 0.1, 0.0), (0.0, 3.0, 1.0)))
+        model = s.build()
+        g = uniform_gravity(model, _owned(model, model.joint_space.spanning_tree()))
+        assert g is None if extra else np.allclose(g, [0.0, 1.0, -G], atol=1e-12)
+        f = recursive_dynamics_function(model)
+        rng = np.random.default_rng(2)
+        for _ in range(3):
+            qj, vj = rng.uniform(-1, 1, 2), rng.normal(size=2)
+            ref = kkt_path(model, qj, vj, None)
+            np.testing.assert_allclose(np.array(f(0.0, qj, vj, [], [])[0]).reshape(-1), ref, atol=1e-10 * max(1, np.max(np.abs(ref))))

@@ -206,13 +206,49 @@ def _edge_function(js, e, forward: bool) -> ca.Function:
     return ca.Function("edge", [Rp, pp, wp, vp, x, w], [Rc, pc, S, c])
 
 
+def _owned(model, tree) -> dict[str, list[tuple[int, int]]]:
+    """``{member: [(local slot, system index)]}``: each system coordinate given to the first
+    member (breadth-first) that has it."""
+    seen, out = set(), {}
+    for _, name, _, _ in tree:
+        out[name] = []
+        for k, i in enumerate(model.layout.member_indices(name)):
+            if i is not None and i not in seen:
+                seen.add(i)
+                out[name].append((k, i))
+    return out
+
+
+def uniform_gravity(model, owned) -> np.ndarray | None:
+    """``g`` (m/s²) when the passive forces are exactly a uniform gravity field (constant,
+    independent of the state, inputs and parameters): ``F_passive = Σ_m S_mᵀ M_m T_m g``,
+    ``T_m`` a member's natural-coordinate rates under a unit translation, ``S_m`` the
+    scatter onto the free coordinates (a member's coordinates fixed to the ground do not
+    move, so this is not ``M T g``); else None."""
+    js = model.joint_space
+    f = js.passive_force
+    ins = f.sx_in()
+    if ca.depends_on(f(*ins), ca.vertcat(*[ca.vec(x) for x in ins])):
+        return None
+    F0 = np.array(f(*[np.zeros(x.shape) for x in ins])).reshape(-1)
+    B = np.zeros((model.nq, 3))
+    for name in owned:
+        T = np.array(member_twist_map(js, name)(np.eye(3), np.zeros(3)))[:, 3:]
+        local = np.asarray(js.members[name].rigid.M, float) @ T
+        for k, i in enumerate(model.layout.member_indices(name)):
+            if i is not None:
+                B[i] += local[k]
+    g = np.linalg.lstsq(B, F0, rcond=None)[0]
+    return g if np.max(np.abs(B @ g - F0), initial=0.0) <= 1e-12 * max(1.0, np.max(np.abs(F0), initial=0.0)) else None
+
+
 def recursive_dynamics_function(model) -> ca.Function:
     """``(t, qj, vj, u, p) -> (aj, check)`` like :func:`tree_dynamics_function`, computed
     recursively over the tree in world (ground) coordinates, spatial vectors ``[ω; v_O]``
     about the world origin (3D trees only): twists ``v_c = v_p + S w`` and bias accelerations
     ``a_c = a_p + Ṡ w`` outwards; body forces ``f = I a + v ×* I v − f_ext`` (``f_ext``: the
-    passive natural-coordinate forces ``F`` of the member's coordinates as a wrench, ``Qᵀ F``)
-    summed inwards, giving the bias ``C = Sᵀ f``; ``M_j`` by composite inertias (CRBA).
+    passive natural-coordinate forces ``F`` of the member's coordinates as a wrench, ``Qᵀ F``;
+    a uniform gravity is instead the ground's acceleration ``[0; −g]``) summed inwards, giving the bias ``C = Sᵀ f``; ``M_j`` by composite inertias (CRBA).
     ``M_j a_j = τ − C``, solved by the same written-out Cholesky, leaves first (no fill-in)."""
     js = model.joint_space
     if js.dim != 3:
@@ -221,8 +257,11 @@ def recursive_dynamics_function(model) -> ca.Function:
     t, u, p = ca.SX.sym("t"), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
     qj, vj = ca.SX.sym("qj", js.nq), ca.SX.sym("vj", js.nv)
     sq, sv = js.slices(), js.slices(rates=True)
+    owned = _owned(model, tree)
+    g = uniform_gravity(model, owned)
     pose = {"ground": (ca.SX.eye(3), ca.SX.zeros(3))}
-    twist, acc = {"ground": ca.SX.zeros(6)}, {"ground": ca.SX.zeros(6)}
+    base = ca.SX.zeros(6) if g is None else ca.vertcat(ca.SX.zeros(3), -ca.DM(g))
+    twist, acc = {"ground": ca.SX.zeros(6)}, {"ground": base}
     motion, parent = {}, {}
     for here, there, e, forward in tree:
         x = qj[sq[e.name]] if e.name in sq else ca.SX(0, 1)
@@ -232,19 +271,17 @@ def recursive_dynamics_function(model) -> ca.Function:
         twist[there] = twist[here] + ca.mtimes(S, w)
         acc[there] = acc[here] + c
         motion[there], parent[there] = (e.name, S), here
-    # natural coordinates, their rates and the passive forces as wrenches
-    q, v = [None] * model.nq, [None] * model.nq
-    owned, Qs = {}, {}
+    # natural coordinates, their rates and the passive forces as wrenches (unless they are
+    # a uniform gravity, then carried by the ground's acceleration −g)
+    q, v, Qs = [None] * model.nq, [None] * model.nq, {}
     for _, name, _, _ in tree:
         Qs[name] = member_twist_map(js, name)(*pose[name])
         local_q = js.member_coordinates(name, *pose[name])
         local_v = ca.mtimes(Qs[name], twist[name])
-        owned[name] = []
-        for k, i in enumerate(model.layout.member_indices(name)):
-            if i is not None and q[i] is None:
-                q[i], v[i] = local_q[k], local_v[k]
-                owned[name].append((k, i))
-    q, v = ca.vertcat(*q), ca.vertcat(*v)
+        for k, i in owned[name]:
+            q[i], v[i] = local_q[k], local_v[k]
+    q = ca.vertcat(*[ca.SX(0) if x is None else x for x in q])
+    v = ca.vertcat(*[ca.SX(0) if x is None else x for x in v])
     F = js.passive_force(t, q, v, u, p)
     force, inertia = {}, {}
     for _, name, _, _ in tree:
@@ -256,7 +293,7 @@ def recursive_dynamics_function(model) -> ca.Function:
         I = ca.vertcat(ca.horzcat(ca.mtimes(ca.mtimes(R, ca.DM(Ibar)), R.T) - mass * ca.mtimes(Cx, Cx), mass * Cx),
                        ca.horzcat(-mass * Cx, mass * ca.SX.eye(3)))
         fext = ca.SX.zeros(6)
-        if owned[name]:
+        if owned[name] and g is None:
             ks, idx = [k for k, _ in owned[name]], [i for _, i in owned[name]]
             fext = ca.mtimes(Qs[name][ks, :].T, F[idx])
         inertia[name] = I
