@@ -84,6 +84,13 @@ def test_planar_pendulum_compiled_closed_form():
         expected = (t - mass * G * L / 2 * np.cos(th)) / (mass * L**2 / 3)
         assert abs(k([th], [om], [t])[0] - expected) < 1e-12 * max(1, abs(expected))
         assert abs(nc.joint_forward_dynamics(model, [th], [om], [t])[0] - expected) < 1e-12 * max(1, abs(expected))
+    a = k([0.4], [1.3], [3.0])                  # the kernel's buffer: nc.joint_forward_dynamics has its own
+    kept = a.copy()
+    nc.joint_forward_dynamics(model, [-1.0], [0.0], [0.0])
+    np.testing.assert_array_equal(a, kept)
+    k2 = k.copy()
+    k2([-1.0], [0.0], [0.0])
+    np.testing.assert_array_equal(a, kept)
     with pytest.raises(nc.ModelError, match="expected qj of 1, vj of 1 and u of 1 values; got 2"):
         k([0.1, 0.2], [0.0], [0.0])
     with pytest.raises(nc.ModelError, match="accelerations are not finite"):

@@ -40,6 +40,7 @@ METHODS = ("auto", "recursive", "projection")
 O1_INSTRUCTIONS = 40_000
 
 _KERNELS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+_PRIVATE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()     # joint_forward_dynamics' own copies
 
 
 class JointDynamicsKernel:
@@ -61,6 +62,12 @@ class JointDynamicsKernel:
         self._keep = check
         self._fn, self._args = direct._fn, direct._args
         self.set(t=model.t0, p=model.p0)
+
+    def copy(self) -> "JointDynamicsKernel":
+        """The same compiled kernel with buffers (and time, parameters) of its own."""
+        k = JointDynamicsKernel(self.model, self.direct.copy(), self.method)
+        k.set(t=float(self.direct.inputs[0][0]), p=self._p)
+        return k
 
     def set(self, *, t=None, p=None) -> None:
         """Time ``t`` (s) and parameters ``p`` (``model.parameter_names`` order) of later calls."""
@@ -198,10 +205,12 @@ def joint_forward_dynamics(model, qj, vj, u=None, p=None, t: float = 0.0, *, bac
     p = model.p0 if p is None else as_vector(p, model.np, "p")
     qj = _unit_quaternions(js, qj)
     if backend == "compiled":
-        try:
-            k = joint_forward_dynamics_kernel(model)
-        except ModelError:
-            k = None
+        k = _PRIVATE.get(model)
+        if k is None:
+            try:
+                k = _PRIVATE[model] = joint_forward_dynamics_kernel(model).copy()
+            except ModelError:
+                k = None
         if k is not None:
             k.set(t=t, p=p)
             return k(qj, vj, u).copy()
