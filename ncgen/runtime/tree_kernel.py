@@ -34,8 +34,8 @@ from ncgen.validation import as_vector
 PIVOT_TOL = 1e-12
 METHODS = ("auto", "recursive", "projection")
 #: Kernels longer than the package's LARGE_FUNCTION_INSTRUCTIONS (compiled at -O0 by default)
-#: but at most this long are compiled at -O1: the Talos humanoid's (38 joint rates, 30 k
-#: instructions) compiles in 4.5 s at -O1 and runs in 9 µs, against 50 µs at -O0; gcc's
+#: but at most this long are compiled at -O1: the Talos humanoid's (38 joint rates, 29 k
+#: instructions) compiles in 4.2–4.5 s at -O1 and runs in 9–17 µs, against 50 µs at -O0; gcc's
 #: -O1 time grows faster than linearly (a 40-hinge chain, 55 k instructions: 20 s).
 O1_INSTRUCTIONS = 40_000
 
