@@ -106,6 +106,32 @@ def _skew(w) -> ca.SX:
     return ca.vertcat(ca.horzcat(0, -w[2], w[1]), ca.horzcat(w[2], 0, -w[0]), ca.horzcat(-w[1], w[0], 0))
 
 
+def _world_inertia(mass: float, cw, R, Ibar: np.ndarray) -> tuple:
+    """A rigid body's spatial inertia about the world origin, world axes, as ``(m, h, J)``:
+    ``h = m c`` (c the centre of mass), ``J = R Ī Rᵀ + m (|c|² 1 − c cᵀ)`` (symmetric, built
+    from its lower triangle).  The matrix is ``[[J, [h]×], [−[h]×, m 1]]``."""
+    RI = ca.mtimes(R, ca.DM(Ibar))
+    J = ca.SX(3, 3)
+    cc = ca.dot(cw, cw)
+    for i in range(3):
+        for j in range(i + 1):
+            e = ca.dot(RI[i, :].T, R[j, :].T) - mass * cw[i] * cw[j] + (mass * cc if i == j else 0)
+            J[i, j] = e
+            J[j, i] = e
+    return mass, mass * cw, J
+
+
+def _apply(I: tuple, s) -> ca.SX:
+    """``I s`` for ``I = (m, h, J)`` (:func:`_world_inertia`) and motion vectors ``s``
+    (6 × k): ``[J α + h × a; m a − h × α]`` column by column."""
+    m, h, J = I
+    cols = []
+    for k in range(s.size2()):
+        w, a = s[:3, k], s[3:, k]
+        cols.append(ca.vertcat(ca.mtimes(J, w) + ca.cross(h, a), m * a - ca.cross(h, w)))
+    return ca.horzcat(*cols) if cols else ca.SX(6, 0)
+
+
 def _cross_force(v, f) -> ca.SX:
     """``v ×* f`` for a spatial velocity ``v = [ω; v_O]`` and force ``f = [n_O; f]``."""
     return ca.vertcat(ca.cross(v[:3], f[:3]) + ca.cross(v[3:], f[3:]), ca.cross(v[:3], f[3:]))
@@ -288,16 +314,13 @@ def recursive_dynamics_function(model) -> ca.Function:
         Q = member_twist_map(js, name)
         mass, c, Ibar = member_inertia(js, name, Q)
         R, pos = pose[name]
-        cw = pos + ca.mtimes(R, ca.DM(c))
-        Cx = _skew(cw)
-        I = ca.vertcat(ca.horzcat(ca.mtimes(ca.mtimes(R, ca.DM(Ibar)), R.T) - mass * ca.mtimes(Cx, Cx), mass * Cx),
-                       ca.horzcat(-mass * Cx, mass * ca.SX.eye(3)))
+        I = _world_inertia(mass, pos + ca.mtimes(R, ca.DM(c)), R, Ibar)
         fext = ca.SX.zeros(6)
         if owned[name] and g is None:
             ks, idx = [k for k, _ in owned[name]], [i for _, i in owned[name]]
             fext = ca.mtimes(Qs[name][ks, :].T, F[idx])
         inertia[name] = I
-        force[name] = ca.mtimes(I, acc[name]) + _cross_force(twist[name], ca.mtimes(I, twist[name])) - fext
+        force[name] = _apply(I, acc[name]) + _cross_force(twist[name], _apply(I, twist[name])) - fext
     n = js.nv
     bias = ca.SX.zeros(n)
     Mj = ca.SX(n, n)
@@ -305,13 +328,13 @@ def recursive_dynamics_function(model) -> ca.Function:
     for here, there, _, _ in reversed(tree):
         if here != "ground":
             force[here] = force[here] + force[there]
-            composite[here] = composite[here] + composite[there]
+            composite[here] = tuple(a + b for a, b in zip(composite[here], composite[there]))
     for _, there, e, _ in tree:
         name, S = motion[there]
         if S.size2() == 0:
             continue
         bias[sv[name]] = ca.mtimes(S.T, force[there])
-        Fm = ca.mtimes(composite[there], S)
+        Fm = _apply(composite[there], S)
         Mj[sv[name], sv[name]] = ca.mtimes(S.T, Fm)
         node = parent[there]
         while node != "ground":
