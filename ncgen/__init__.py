@@ -24,6 +24,7 @@ from ncgen.runtime.linearization import LinearModel, linearize
 from ncgen.runtime.modes import Modes, modes
 from ncgen.runtime.statics import Equilibrium, equilibrium
 from ncgen.runtime.joint_dynamics import forward_dynamics, forward_dynamics_kernel, inverse_dynamics
+from ncgen.runtime.tree_kernel import joint_forward_dynamics, joint_forward_dynamics_kernel
 from ncgen.runtime.reactions import JointReaction, joint_reactions
 from ncgen.symbolic.coordinates import coordinate_type
 from ncgen.version import __version__
@@ -35,7 +36,8 @@ __all__ = [
     "OptimalTrajectory", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic", "Revolute", "SpherePlane", "SphereSphere", "Spherical",
     "Spring", "System", "Tensegrity", "Torque", "TorsionalSpring", "Trajectory", "Universal",
     "assemble", "coordinate_type", "dof_report", "equilibrium", "form_find", "forward_dynamics",
-    "forward_dynamics_kernel", "generate", "inverse_dynamics", "joint_reactions", "linearize", "modes",
+    "forward_dynamics_kernel", "generate", "inverse_dynamics", "joint_forward_dynamics",
+    "joint_forward_dynamics_kernel", "joint_reactions", "linearize", "modes",
     "project_velocity", "simulate", "solve_kinematics",
     "__version__", "viz",
 ]

@@ -123,6 +123,28 @@ def test_very_long_functions_compile_without_optimisation(tmp_path, monkeypatch)
     assert huge.manifest["build"]["large_sources"] == kernels and len(kernels) == len(functions)
 
 
+def test_long_functions_called_through_mx_count_as_long(tmp_path, monkeypatch):
+    """An MX function (a wrapper kept as MX: longer than ``reroll_instructions``) whose own
+    nodes are few but which calls a long SX function puts its file in ``large_sources``."""
+    import casadi as ca
+
+    import ncgen.codegen.package as package_module
+
+    x = ca.SX.sym("x", 4)
+    y = x
+    for k in range(60):
+        y = ca.sin(y * (1.0 + 0.01 * k)) + ca.cos(y[::-1])
+    g = ca.Function("g", [x], [y])
+    X = ca.MX.sym("X", 4)
+    f = ca.Function("f", [X], [g(X) * 2.0])
+    assert f.n_instructions() < 10 < g.n_instructions()
+    monkeypatch.setattr(package_module, "LARGE_FUNCTION_INSTRUCTIONS", g.n_instructions() - 1)
+    pkg = write_package("wrapped", [f], tmp_path / "wrapped", reroll_instructions=10)
+    assert pkg.manifest["build"]["large_sources"] == ["wrapped_kernels_0.c"]
+    monkeypatch.setattr(package_module, "LARGE_FUNCTION_INSTRUCTIONS", g.n_instructions())
+    assert write_package("wrapped", [f], tmp_path / "again", reroll_instructions=10).manifest["build"]["large_sources"] == []
+
+
 def test_two_processes_build_at_once(tmp_path, pkg, cache):
     cc, _ = logging_compiler(tmp_path, delay=1.5)  # long enough to overlap and show progress
     script = ("import sys; from ncgen.codegen import compile_package, load_functions\n"

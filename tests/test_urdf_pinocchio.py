@@ -234,3 +234,31 @@ def test_joint_space_kernel_matches_aba(name):
         aj = np.array(f(0.0, qj, vj, u, model.p0)[0]).reshape(-1)
         a_pin = pin.aba(pm, pd, qp, vp, taup)
         assert np.max(np.abs(rates_to_pin(model, pm, aj) - a_pin)) <= 1e-8 * max(1.0, np.max(np.abs(a_pin)))
+
+
+@pytest.mark.parametrize("name", list(ROBOTS))
+def test_joint_forward_dynamics_kernel_matches_aba(name):
+    """The joint-space tree kernel (recursive form), at 20 random states: compiled and
+    called directly for the Panda (``nc.joint_forward_dynamics_kernel``), its CasADi function
+    evaluated for UR5 and Solo12 (the same expressions; compiling them would add seconds)."""
+    from ncgen.assembly.tree_dynamics import recursive_dynamics_function
+
+    model, pm = robot(name)
+    pd = pm.createData()
+    if name == "panda":
+        k = nc.joint_forward_dynamics_kernel(model)
+        assert k.method == "recursive"
+    else:
+        f = recursive_dynamics_function(model)
+
+        def k(qj, vj, u):
+            return np.array(f(model.t0, qj, vj, u, model.p0)[0]).reshape(-1)
+    order = {n: i for i, n in enumerate(model.joint_names)}
+    pairs = sorted(((n, jm) for n, jm in pin_joints(model, pm) if n != "root"), key=lambda x: order[x[0]])
+    for qp, vp, taup, _ in states(pm, seed=23):
+        if ROBOTS[name][1]:
+            taup[:6] = 0.0
+        qj, vj = to_ncgen(model, pm, qp, vp)
+        u = np.concatenate([taup[jm.idx_v:jm.idx_v + jm.nv] for _, jm in pairs])
+        a_pin = pin.aba(pm, pd, qp, vp, taup)
+        assert np.max(np.abs(rates_to_pin(model, pm, k(qj, vj, u)) - a_pin)) <= 1e-8 * max(1.0, np.max(np.abs(a_pin)))

@@ -88,12 +88,13 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     limits = model_limits(system, ctx)
     coords, skipped = build_joint_coordinates(system, ctx)
     actuation = actuator_forces(ctx, coords)
+    passive = F
     if actuation[2]:
         F = F + ca.mtimes(actuation[0], actuation[1])
     terms = contact_terms(ctx, system.contacts)
     if terms and contacts == "smooth":
         _, _, Q, Vc = smooth_forces(ctx, terms)
-        F, V = F + Q, ca.vertcat(V, Vc)
+        F, V, passive = F + Q, ca.vertcat(V, Vc), passive + Q
     M = assemble_mass(layout, members)
     flat = flat_members(members, layout)
     factor = mass_factor(M, layout.coordinate_names, flat, flat_support(members, layout, flat))
@@ -132,7 +133,7 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
                              fixed=fixed, assemble=assemble)
     if not assemble:
         check_fixed_points_at_rest(moving, v_init, q_init, tolerance)
-    joint_space = JointSpace(ctx, coords, skipped, actuation)
+    joint_space = JointSpace(ctx, coords, skipped, actuation, passive)
 
     def model_with(state):
         return Model(description=system, layout=layout, labels=labels, functions=functions, M=M, factor=factor,

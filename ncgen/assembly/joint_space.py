@@ -73,7 +73,7 @@ def actuator_forces(ctx, coords: list[JointCoordinates]) -> tuple[ca.SX, ca.SX, 
 class JointSpace:
     """Joint coordinates of one model (built by :func:`ncgen.assembly.build.build_model`)."""
 
-    def __init__(self, ctx, coords: list[JointCoordinates], skipped: dict[str, str], actuation):
+    def __init__(self, ctx, coords: list[JointCoordinates], skipped: dict[str, str], actuation, passive):
         q, v = ctx.q, ctx.v
         a = ca.SX.sym("a", ctx.layout.nq)
         self.dim = ctx.dim
@@ -98,6 +98,8 @@ class JointSpace:
         B, tau, self.actuated = actuation
         self.actuation = ca.Function("actuation", [ctx.t, q, ctx.u, ctx.p], [B, tau],
                                      ["t", "q", "u", "p"], ["B", "tau"])
+        self.passive_force = ca.Function("passive_force", [ctx.t, q, v, ctx.u, ctx.p], [passive],
+                                         ["t", "q", "v", "u", "p"], ["F"])
         self.edges = [edge_of(c.joint) for c in coords] + \
             [edge_of(j) for j in ctx.system.joints if j.kind == "Fixed" and "point" not in
              (getattr(j.A, "kind", "ground"), getattr(j.B, "kind", "ground"))]
@@ -230,60 +232,82 @@ class JointSpace:
         written symbolically, ``q̇ = (∂q/∂q_j) q̇_j`` with ``q̇_j`` from the rates (quaternion
         rates ``½ q ⊗ [ω; 0]``, free-joint translation ``R v``).  Raises :class:`ModelError`
         for other models."""
-        d = self.dim
-        qj, vj = ca.SX.sym("qj", self.nq), ca.SX.sym("vj", self.nv)
-        sq, sv = self.slices(), self.slices(rates=True)
-        poses = {"ground": (ca.SX.eye(d), ca.SX.zeros(d, 1))}
+        qj, vj, q, qj_dot = self.tree_map(layout)
+        v = ca.jtimes(q, qj, qj_dot) if self.nv else ca.SX.zeros(layout.nq)
+        return ca.Function("joint_tree", [qj, vj], [q, v], ["qj", "vj"], ["q", "v"])
+
+    def spanning_tree(self) -> list[tuple[str, str, Edge, bool]]:
+        """``(here, there, edge, forward)`` for every joint of a tree, breadth-first from the
+        ground (``forward``: ``here`` is the joint's A).  Raises :class:`ModelError` when a
+        member is not reached or a joint closes a loop."""
         adjacent: dict[str, list[tuple[Edge, bool]]] = {}
         for e in self.edges:
             adjacent.setdefault(e.A, []).append((e, True))
             adjacent.setdefault(e.B, []).append((e, False))
-        queue, used, spinless = deque(["ground"]), 0, set()
+        reached, queue, out, spinless = {"ground"}, deque(["ground"]), [], set()
         while queue:
             here = queue.popleft()
             for e, forward in adjacent.get(here, []):
                 there = e.B if forward else e.A
-                if there in poses or not _passable(e, forward, here, spinless):
+                if there in reached or not _passable(e, forward, here, spinless):
                     continue
-                x = qj[sq[e.name]] if e.name in sq else ca.SX(0, 1)
-                T = relative_pose(e, x, d, sym=True)
-                poses[there] = carry(poses[here], e, T, forward, self.members, sym=True)
+                reached.add(there)
+                out.append((here, there, e, forward))
                 queue.append(there)
-                used += 1
-        missing = [n for n in self.members if n not in poses]
-        if missing or used != len(self.edges):
+        missing = [n for n in self.members if n not in reached]
+        if missing or len(out) != len(self.edges):
             raise ModelError(f"joint space: the model is not a tree of joints with coordinates "
                              f"({'members not reached from the ground: ' + ', '.join(missing) if missing else 'a closed loop'}); "
                              "use from_joint_space (Newton) instead")
+        return out
+
+    def position_rates(self, name: str, x, w):
+        """``q̇_j`` of joint ``name`` from its positions ``x`` and rates ``w`` (SX):
+        quaternion rates ``½ q ⊗ [ω; 0]``, free-joint translation ``R v``, else ``w``."""
+        kind = self.joints[name].kind
+        if kind == "Spherical" and self.nq_joint[name] == 4:      # a quaternion (not a bar's swing)
+            return quaternion_rate(x, w)
+        if kind == "Free" and self.dim == 3:
+            R = quaternion_matrix(x[3:], sym=True)
+            return ca.vertcat(ca.mtimes(R, w[:3]), quaternion_rate(x[3:], w[3:]))
+        if kind == "Free":
+            return ca.vertcat(ca.mtimes(rotation_2d(x[2], sym=True), w[:2]), w[2])
+        return w
+
+    def tree_map(self, layout) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
+        """``(qj, vj, q, q̇_j)``: the symbols of the joint positions and rates, the natural
+        coordinates ``q(q_j)`` and the position rates ``q̇_j(q_j, v_j)`` as SX (see
+        :meth:`tree_function`; raises :class:`ModelError` for a model that is not a tree)."""
+        d = self.dim
+        qj, vj = ca.SX.sym("qj", self.nq), ca.SX.sym("vj", self.nv)
+        sq, sv = self.slices(), self.slices(rates=True)
+        poses = {"ground": (ca.SX.eye(d), ca.SX.zeros(d, 1))}
+        for here, there, e, forward in self.spanning_tree():
+            x = qj[sq[e.name]] if e.name in sq else ca.SX(0, 1)
+            T = relative_pose(e, x, d, sym=True)
+            poses[there] = carry(poses[here], e, T, forward, self.members, sym=True)
         q = [None] * layout.nq
         for name, (R, pos) in poses.items():
             if name == "ground":
                 continue
-            m = self.members[name]
-            D = m.ctype.derivation
-            vals = dict(m.rigid.constants())
-            vals.update({D.R_sym[a, b]: R[a, b] for a in range(d) for b in range(d)})
-            vals.update({D.p_sym[a]: pos[a] for a in range(d)})
-            local = to_casadi(D.q_of_pose, vals)
+            local = self.member_coordinates(name, R, pos)
             for k, i in enumerate(layout.member_indices(name)):
                 if i is not None and q[i] is None:
                     q[i] = local[k]
         q = ca.vertcat(*q)
-        qj_dot = []
-        for name in self.joint_names:
-            x, w = qj[sq[name]], vj[sv[name]]
-            kind = self.joints[name].kind
-            if kind == "Spherical" and self.nq_joint[name] == 4:      # a quaternion (not a bar's swing)
-                qj_dot.append(quaternion_rate(x, w))
-            elif kind == "Free" and d == 3:
-                R = quaternion_matrix(x[3:], sym=True)
-                qj_dot.append(ca.vertcat(ca.mtimes(R, w[:3]), quaternion_rate(x[3:], w[3:])))
-            elif kind == "Free":
-                qj_dot.append(ca.vertcat(ca.mtimes(rotation_2d(x[2], sym=True), w[:2]), w[2]))
-            else:
-                qj_dot.append(w)
-        v = ca.jtimes(q, qj, ca.vertcat(*qj_dot)) if qj_dot else ca.SX.zeros(layout.nq)
-        return ca.Function("joint_tree", [qj, vj], [q, v], ["qj", "vj"], ["q", "v"])
+        qj_dot = [self.position_rates(n, qj[sq[n]], vj[sv[n]]) for n in self.joint_names]
+        return qj, vj, q, ca.vertcat(*qj_dot) if qj_dot else ca.SX(0, 1)
+
+    def member_coordinates(self, name: str, R, pos):
+        """The natural coordinates of member ``name`` (its own slots) at the pose ``(R, pos)``
+        of its frame (SX)."""
+        m = self.members[name]
+        D = m.ctype.derivation
+        d = self.dim
+        vals = dict(m.rigid.constants())
+        vals.update({D.R_sym[a, b]: R[a, b] for a in range(d) for b in range(d)})
+        vals.update({D.p_sym[a]: pos[a] for a in range(d)})
+        return to_casadi(D.q_of_pose, vals)
 
     def _propagate(self, model, given) -> np.ndarray:
         """Poses from the ground through the spanning tree; unreached members keep q0."""

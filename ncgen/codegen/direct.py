@@ -32,7 +32,7 @@ class DirectFunction:
 
     def __init__(self, library, c_name: str, f: ca.Function):
         self.library = Path(library)
-        self.name = f.name()
+        self.name, self.c_name, self.function = f.name(), c_name, f
         try:
             self._lib = ctypes.CDLL(str(self.library))
             fn = getattr(self._lib, c_name)
@@ -64,6 +64,10 @@ class DirectFunction:
         self._fn = fn
         self._args = (ctypes.addressof(self._arg), ctypes.addressof(self._res), self._iw.ctypes.data,
                       self._w.ctypes.data, self._mem)
+
+    def copy(self) -> "DirectFunction":
+        """The same compiled function with buffers and work arrays of its own."""
+        return DirectFunction(self.library, self.c_name, self.function)
 
     def call(self) -> list[np.ndarray]:
         """Evaluate with the values already in :attr:`inputs`; returns :attr:`outputs`."""

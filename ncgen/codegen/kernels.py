@@ -66,6 +66,15 @@ def _wrapper(f: ca.Function, c_name: str) -> ca.Function:
     return ca.Function(c_name, args, f.call(args), f.name_in(), f.name_out())
 
 
+def max_function_size(f: ca.Function) -> int:
+    """Instructions of the longest C function generated for ``f``: ``f`` itself (SX
+    instructions, or MX nodes) or any function it embeds (a system Jacobian, an MX wrapper,
+    counts a few nodes but calls SX functions of tens of thousands of instructions)."""
+    def own(g):
+        return g.n_instructions() if g.is_a("SXFunction") or g.is_a("MXFunction") else 0
+    return max([own(f)] + [own(g) for g in f.find_functions(-1)])
+
+
 def group_functions(functions: Sequence[ca.Function], max_file_instructions: int | None) -> list[list[int]]:
     """Indices of ``functions`` packed in order into groups of bounded instruction count."""
     if max_file_instructions is None:

@@ -29,7 +29,7 @@ import casadi as ca
 
 from ncgen.codegen import cnames, fsutil, manifest
 from ncgen.codegen.doc import PackageDoc, check_identifier
-from ncgen.codegen.kernels import c_function, casadi_options, generate_kernels, group_functions
+from ncgen.codegen.kernels import c_function, casadi_options, generate_kernels, group_functions, max_function_size
 from ncgen.codegen.render import render
 from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
 from ncgen.codegen.signature import function_signature
@@ -37,7 +37,8 @@ from ncgen.errors import CodegenError
 
 #: Default bound on SX instructions per kernel file (see ncgen.codegen.kernels).
 MAX_FILE_INSTRUCTIONS = 20_000
-#: A kernel file holding a function longer than this (SX instructions), or any kernel file
+#: A kernel file holding a function longer than this (SX instructions; functions that an MX
+#: function calls included, :func:`~ncgen.codegen.kernels.max_function_size`), or any kernel file
 #: of a package longer than LARGE_PACKAGE_INSTRUCTIONS, is listed in the manifest's
 #: ``build.large_sources``: gcc's optimising passes grow faster than linearly
 #: with the length of one function (the 32 k-instruction DAE residual of a 300-bar chain
@@ -177,7 +178,7 @@ def _render_files(name: str, functions: list[ca.Function], doc: PackageDoc, opti
              "headers": [header] + [k.stem + ".h" for k in kernels]
              + [s.output for s in extra_sources if s.output.endswith(".h")],
              "main": "main.c", "library": f"lib{name}.so", "executable": f"{name}_main"}
-    largest = {k.stem + ".c": max(f.n_instructions() for f in kernel_funcs if f.name() in k.functions)
+    largest = {k.stem + ".c": max(max_function_size(f) for f in kernel_funcs if f.name() in k.functions)
                for k in kernels}
     huge = sum(f.n_instructions() for f in kernel_funcs) > LARGE_PACKAGE_INSTRUCTIONS
     build["large_sources"] = [src for src, n in largest.items() if huge or n > LARGE_FUNCTION_INSTRUCTIONS]

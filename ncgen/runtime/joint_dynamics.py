@@ -7,6 +7,8 @@
   compiled C function called through ctypes (:class:`~ncgen.codegen.direct.DirectFunction`,
   ~1–2 µs overhead); ``forward_dynamics(..., backend="compiled")`` uses it (compiled once
   per model, cached on disk by content).
+* Joint space in and out for trees, faster: :func:`ncgen.runtime.tree_kernel.joint_forward_dynamics`
+  (``nc.joint_forward_dynamics``; no multipliers, no KKT system).
 * :func:`inverse_dynamics` — the efforts ``τ`` of the actuated joints (joints with
   ``effort=``; every movable joint of a URDF) that produce the joint accelerations ``a_j``
   at ``(q_j, v_j)``: ``q̈`` from ``[A; J] q̈ = [γ; a_j − J̇ q̇]``, then ``(λ, τ)`` from
@@ -94,7 +96,9 @@ _KERNELS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 def forward_dynamics_kernel(model, *, joint_space: bool = False, cflags=None):
     """The compiled :func:`kkt_function` of ``model`` (``joint_space=True``: the
-    :func:`joint_kkt_function`, trees only) as a :class:`~ncgen.codegen.direct.DirectFunction`,
+    :func:`joint_kkt_function`, trees only; for ``a_j`` alone
+    :func:`~ncgen.runtime.tree_kernel.joint_forward_dynamics_kernel` is several times faster)
+    as a :class:`~ncgen.codegen.direct.DirectFunction`,
     built once per model (the library is cached by content).  Call ``k(t, q, v, u, p)`` →
     ``[a, lam]``, or ``k(t, qj, vj, u, p)`` → ``[aj, a, lam]`` (buffers reused by the next
     call)."""
