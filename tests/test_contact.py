@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import ncgen as nc
+from ncgen.codegen.stepper_package import REPEAT_TOL
 from ncgen.errors import NcgenError
 from ncgen.reproducible import perpendicular_basis
 from ncgen.runtime.contact_outputs import OPEN, SLIP, STICK
@@ -144,9 +145,13 @@ def test_bounce_heights_follow_restitution(drops):
     zd = tr.q[:, 5]
     assert zd.min() > -1e-8
     rest = tr.t > 0.5
-    assert np.ptp(zd[rest]) < 1e-15 and np.max(np.abs(tr.v[rest, 5])) < 1e-12
-    # its contact force carries the weight once at rest; the open contact carries nothing
-    np.testing.assert_allclose(tr.contact_normal[rest, 1], G, rtol=1e-9)
+    # (at rest each step repeats the last impulses while the contact velocities stay within
+    # REPEAT_TOL (1 + max|U|), max|U| the other ball's, so the height may creep at that rate)
+    creep = REPEAT_TOL * (1 + np.abs(tr.v[:, 2]).max())
+    assert np.ptp(zd[rest]) < creep * (tr.t[-1] - 0.5) and np.max(np.abs(tr.v[rest, 5])) < creep
+    # its contact force carries the weight once at rest (to m·creep/dt where a full contact
+    # solve takes up the creep); the open contact carries nothing
+    np.testing.assert_allclose(tr.contact_normal[rest, 1], G, rtol=1e-9, atol=creep / 1e-4)
     assert np.all(tr.contact_state[rest, 1] != OPEN)
     flight = (tr.t > 0.05) & (tr.t < 0.4)
     assert np.all(tr.contact_normal[flight, 0] == 0) and np.all(tr.contact_state[flight, 0] == OPEN)

@@ -7,7 +7,7 @@ import weakref
 
 import numpy as np
 
-from ncgen.codegen.stepper_package import STATS, n_impulses, n_outputs
+from ncgen.codegen.stepper_package import n_impulses, n_outputs, n_stats
 from ncgen.runtime.library import compiled_model
 
 _loaded: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
@@ -74,7 +74,7 @@ class CompiledStepper:
 
     def _buffers(self, rows):
         return (np.zeros((rows, self.nq)), np.zeros((rows, self.nq)), np.zeros((rows, self.nc)),
-                np.zeros((rows, len(STATS))))
+                np.zeros((rows, n_stats(self.nd))))
 
     def simulate_stats(self, q0, v0, lam0, t0: float, h: float, n_steps: int, every: int, U: np.ndarray | None,
                        p: np.ndarray, tol: float, max_iter: int, max_halvings: int, estimate: bool,
