@@ -504,3 +504,33 @@ def test_block_tips_over_its_edge_iff_above_the_critical_spin():
         pivoting = tr.t < 0.15
         assert np.ptp(tr.energy[pivoting]) < 1e-6 * tr.energy[0]
         assert np.all(tr.contact_state[1:][pivoting[1:], 1] == STICK)
+
+
+def test_unconverged_contact_solves_are_reported(monkeypatch):
+    """A contact solve that stops at the projected Gauss–Seidel sweep limit is counted in
+    info["contacts"] and warned about; where its last sweep still moved a contact velocity by
+    more than PGS_TRUST the run is untrustworthy (SimulationError).  Forced here with a limit
+    of one sweep, which an impact never meets (its first sweep changes the impulse)."""
+    import ncgen.codegen.stepper_package as package
+    from ncgen.errors import SimulationError
+
+    s = nc.System("one_sweep")
+    p = s.add_point("p", mass=1.0, position=(0, 0, 0.05))
+    s.add_contact(nc.SpherePlane(p, radius=0.0, name="floor"))
+    s.add_contact(nc.SpherePlane(p, radius=0.0, point=(0, 0, 0), normal=(0, 0.6, 0.8), name="slope"))
+    monkeypatch.setattr(package, "PGS_MAX_ITER", 1)
+    model = s.build(contacts="nonsmooth")
+    with pytest.raises(SimulationError, match="contact impulses did not converge"):
+        nc.simulate(model, 0.2, 0.01, method="stepper", substeps=10)
+    with pytest.warns(UserWarning, match="stopped at"):
+        tr = nc.simulate(model, 0.2, 0.01, method="stepper", substeps=10, check=False)
+    report = tr.info["contacts"]
+    assert report["pgs_unconverged"] >= 1 and report["pgs_residual"] > 1e-3
+    # with the default limit the same drop converges: nothing to report, and it comes to rest
+    monkeypatch.undo()
+    model = s.build(contacts="nonsmooth")
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        tr = nc.simulate(model, 0.2, 0.01, method="stepper", substeps=10)
+    assert tr.info["contacts"]["pgs_unconverged"] == 0 and tr.gap.min() > -1e-8
