@@ -279,6 +279,9 @@ def box_and_ball(name="box"):
     return s.build(contacts="nonsmooth")
 
 
+# the box landing flat on four corners with friction: some contact solves stop at the sweep
+# limit with small residuals (reported by a warning, which is not what this test is about)
+@pytest.mark.filterwarnings("ignore:simulate.*contact solve")
 def test_energy_never_increases_through_impacts():
     """The box and the ball of :func:`box_and_ball` dropped with random orientations and
     spins: the energy never rises above its initial value beyond the O(h²) error of an impact

@@ -150,8 +150,8 @@ def _warn_unconverged(model, report: dict) -> None:
         warnings.warn(f"simulate: {report['pgs_unconverged']} contact solve(s) of {model.name!r} stopped at "
                       f"{report['pgs_max_sweeps']} projected Gauss-Seidel sweeps before the contact velocities "
                       f"settled to {report['pgs_tol']:g} (1 + max|U|) m/s; the last sweep still changed one by up to "
-                      f"{report['pgs_residual']:.3g} (1 + max|U|) m/s (info['contacts']; redundant contacts with "
-                      f"friction, as under a body or chain lying flat, make it crawl or cycle)", stacklevel=5)
+                      f"{report['pgs_residual']:.3g} (1 + max|U|) m/s (info['contacts']; redundant contacts, as under "
+                      f"a body or a chain lying flat or in a pile, make it crawl, and friction can make it cycle)", stacklevel=5)
 
 
 def _adaptive(model, stepper, t, U, p, q0, v0, lam0, hold, tol, max_iter, rtol, atol, order, max_steps,

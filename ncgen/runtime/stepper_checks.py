@@ -204,8 +204,8 @@ def untrusted_row(model, traj, S: np.ndarray, h: float, contacts: bool = False) 
     elif kind == "contacts":
         reason = (f"the contact impulses did not converge by t = {t_row:.6g} s: projected Gauss-Seidel stopped "
                   f"at {PGS_MAX_ITER} sweeps with a last sweep still changing a contact velocity by "
-                  f"{residual[row]:.3g} (1 + max|U|) m/s (more than {PGS_TRUST:g}; redundant contacts with "
-                  f"friction can make it cycle)")
+                  f"{residual[row]:.3g} (1 + max|U|) m/s (more than {PGS_TRUST:g}; redundant contacts make "
+                  f"it crawl, and friction can make it cycle)")
     else:
         reason = (f"the estimated error in q reached {gq[row]:.3g} m by t = {t_row:.6g} s, more than "
                   f"{ERROR_FRACTION:g} of the model's size {size:.3g} m")
