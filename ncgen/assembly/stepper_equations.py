@@ -48,9 +48,12 @@ half of which enters each half-step (``− j/2`` in r, ``+ j/2`` in b), and two 
   then its tangent rows), U = W v (m/s)
 * ``step_gap``: q, p -> g (the gaps alone)
 
-give the gaps and contact Jacobians.  When the QR factors are small enough to unroll
-(:data:`SX_QR_MAX_NNZ`), two more split ``step_solve`` so that the Delassus matrix needs one
-factorisation per step and one cheap solve per contact row:
+give the gaps and contact Jacobians.  When the constant mass matrix is regular the C forms
+the Delassus matrix from ``M⁻¹`` and the Schur complement ``A M⁻¹ Aᵀ`` (no kernel: ``A`` is
+read from ``K``; :func:`ncgen.codegen.stepper_package.schur_context`).  For the other
+cases, and where that complement is singular, when the QR factors are small enough to
+unroll (:data:`SX_QR_MAX_NNZ`), two more split ``step_solve`` so that the Delassus matrix
+needs one factorisation per step and one cheap solve per contact row:
 
 * ``step_factor``: K -> V, R, beta (the sparse Householder QR of K)
 * ``step_backsolve``: V, R, beta, b -> x = K⁻¹ b
