@@ -112,6 +112,8 @@ def extra_sources(model, functions) -> list[ExtraSource]:
                        restitution=[c_real(c["restitution"]) for c in model.contacts],
                        any_restitution=any(c["restitution"] > 0 for c in model.contacts))
         context.update(schur_context(model, functions[0].sparsity_out("K")))
+        wt = next(f for f in functions if f.name() == "step_contact").sparsity_out("Wt")
+        context.update(wt_colind=list(wt.colind()), wt_row=list(wt.row()))
     demo = {**context, "program": f"{name}_simulate", "t0": c_real(model.t0), "t_end": c_real(DEMO_T_END),
             "h": c_real(DEMO_H), "q0": [c_real(x) for x in model.q0], "v0": [c_real(x) for x in model.v0],
             "p0": [c_real(x) for x in model.p0]}
