@@ -590,3 +590,20 @@ def test_unconverged_contact_solves_are_reported(monkeypatch):
         warnings.simplefilter("error")
         tr = nc.simulate(model, 0.2, 0.01, method="stepper", substeps=10)
     assert tr.info["contacts"]["pgs_unconverged"] == 0 and tr.gap.min() > -1e-8
+
+
+def test_energy_check_with_contacts_is_one_sided(monkeypatch, drops):
+    """The stepper's energy check on a contact model flags a rise of E only (contacts take
+    energy out): the drops lose a third of their energy without complaint even with the
+    check's threshold at 1e-6 of the energy scale (a two-sided check would stop them at the
+    first impact).  That the check runs at all: with a negative threshold every sample is
+    a "rise", and the run is refused naming it."""
+    from ncgen.errors import SimulationError
+    import ncgen.runtime.stepper_checks as checks
+
+    monkeypatch.setattr(checks, "ENERGY_FRACTION", 1e-6)
+    tr = nc.simulate(drops, 1.0, 1e-3, method="stepper", substeps=10)
+    assert tr.energy[-1] < 0.7 * tr.energy[0]
+    monkeypatch.setattr(checks, "ENERGY_FRACTION", -0.5)
+    with pytest.raises(SimulationError, match="rose through its contacts"):
+        nc.simulate(drops, 1.0, 1e-3, method="stepper", substeps=10)
