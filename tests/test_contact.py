@@ -456,19 +456,27 @@ def test_optimal_control_through_smooth_friction():
     np.testing.assert_allclose(sol.stats.objective, 12 + (mu * G) ** 2, rtol=1e-2)
 
 
-def test_delassus_without_unrolled_factors_gives_the_same_motion(monkeypatch):
-    """Models too large to unroll the QR factors compute the Delassus matrix with one
-    step_solve per contact row instead of step_factor/step_backsolve: same motion."""
+def test_delassus_paths_give_the_same_motion(monkeypatch):
+    """The three ways the C forms the Delassus matrix give the same motion: from the constant
+    M⁻¹ and the Schur complement A M⁻¹ Aᵀ (regular M, the default here), from the unrolled
+    QR factors of the KKT matrix (what a singular M gets; forced with MINV_MAX_NQ = 0), and
+    with one step_solve per contact row (models too large to unroll the factors; forced
+    with SX_QR_MAX_NNZ = 0 as well)."""
     import ncgen.assembly.stepper_equations as kernels
+    import ncgen.codegen.stepper_package as package
 
-    fast = nc.simulate(box_and_ball(), 1.0, 0.01, method="stepper", substeps=10)
+    schur = nc.simulate(box_and_ball(), 1.0, 0.01, method="stepper", substeps=10)
+    assert package.schur_context(box_and_ball(), kernels.stepper_functions(box_and_ball())[0].sparsity_out("K"))[
+        "schur"]
+    monkeypatch.setattr(package, "MINV_MAX_NQ", 0)
+    factored = nc.simulate(box_and_ball("box_qr"), 1.0, 0.01, method="stepper", substeps=10)
     monkeypatch.setattr(kernels, "SX_QR_MAX_NNZ", 0)
     model = box_and_ball("box_plain")
     assert "step_factor" not in [f.name() for f in kernels.stepper_functions(model)]
     plain = nc.simulate(model, 1.0, 0.01, method="stepper", substeps=10)
-    assert np.count_nonzero(fast.contact_normal[:, :8]) > 0
-    np.testing.assert_allclose(plain.q, fast.q, atol=1e-9)
-
+    assert np.count_nonzero(schur.contact_normal[:, :8]) > 0
+    np.testing.assert_allclose(factored.q, schur.q, atol=1e-9)
+    np.testing.assert_allclose(plain.q, schur.q, atol=1e-9)
 
 def test_cli_simulates_nonsmooth_contacts(tmp_path):
     import sys
