@@ -80,8 +80,10 @@ class CompiledStepper:
                        p: np.ndarray, tol: float, max_iter: int, max_halvings: int, estimate: bool,
                        track_work: bool, impulse_out=None):
         """``(Q, V, LAM, STATS, status, steps_done, splits)``: fixed steps with per-row
-        statistics (columns :data:`STATS`; see ``<model>_simulate_stats``).  ``U``: inputs
-        per step, shape ``(n_steps, nu)``, or None for zeros."""
+        statistics (columns :data:`~ncgen.codegen.stepper_package.STATS`, then for the
+        nonsmooth contact stepper :data:`~ncgen.codegen.stepper_package.CONTACT_STATS`; see
+        ``<model>_simulate_stats``).  ``U``: inputs per step, shape ``(n_steps, nu)``, or None
+        for zeros."""
         Q, V, LAM, S = self._buffers(n_steps // every)
         U = None if U is None or self.nu == 0 else np.ascontiguousarray(U, float)
         done, splits = ctypes.c_long(0), ctypes.c_long(0)
