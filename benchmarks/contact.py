@@ -233,7 +233,8 @@ def compare(label: str, model, xml: str, t_end: float, h: float, repeat: int) ->
               f"energy gain {r['energy_gain']:.2e} J, E(0) = {r['E0']:.4f} J, E(end) = {r['E_end']:.4f} J, "
               f"mean height at the end {r['rest_height']:.4f} m")
     print(f"ncgen bilateral constraint drift max |phi| = {ours['drift']:.2e} m^2; contact solves at the sweep limit: "
-          f"{ours['contacts']['pgs_unconverged']} (largest last change {ours['contacts']['pgs_residual']:.2g})")
+          f"{ours['contacts']['pgs_unconverged']} (largest last change {ours['contacts']['pgs_residual']:.2g}); "
+          f"deepest penetration at the end of any step {ours['contacts']['penetration']:.2e} m")
     print(f"RATIO ncgen / MuJoCo wall time per simulated second ({label}, equal step): "
           f"{ours['stepper'] / theirs['stepper']:.2f}")
     ratio = ours["penetration"] / theirs["penetration"] if theirs["penetration"] > 0 else float("nan")

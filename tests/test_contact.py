@@ -145,6 +145,9 @@ def test_bounce_heights_follow_restitution(drops):
     # (PENETRATION_TOL = 1e-8 m; without the push-out it would be up to h·v_impact/2), no drift
     zd = tr.q[:, 5]
     assert zd.min() > -1e-8
+    # the deepest penetration at the end of any step is reported; no sample is deeper
+    depth = tr.info["contacts"]["penetration"]
+    assert depth <= 1e-8 and -tr.gap.min() <= depth + 1e-15
     rest = tr.t > 0.5
     # (at rest each step repeats the last impulses while the contact velocities stay within
     # REPEAT_TOL (1 + max|U|), max|U| the other ball's, so the height may creep at that rate)

@@ -39,9 +39,10 @@ STATUS = {
 #: Columns of the per-output-row statistics of the C loops (``<MODEL>_STEP_NSTATS``).
 STATS = ("steps", "newton_iterations", "splits", "error_q", "error_v", "work")
 #: Columns the nonsmooth contact stepper appends to :data:`STATS` (fixed steps): contact
-#: solves whose projected Gauss–Seidel stopped at PGS_MAX_ITER sweeps, and the largest
-#: last-sweep change of a contact velocity among them, relative to 1 + max |U|.
-CONTACT_STATS = ("pgs_unconverged", "pgs_residual")
+#: solves whose projected Gauss–Seidel stopped at PGS_MAX_ITER sweeps, the largest
+#: last-sweep change of a contact velocity among them, relative to 1 + max |U|, and the
+#: deepest penetration (m) left at the end of a step (after the push-out).
+CONTACT_STATS = ("pgs_unconverged", "pgs_residual", "penetration")
 #: Default Newton tolerance: |Φ|∞ ≤ tol (m²), momentum residual ≤ tol·max|M|·(1 + |w|∞),
 #: |A v + Φ_t|∞ ≤ tol·(1 + |v|∞) (see ``<model>_stepper.h``).
 TOL = 1e-10

@@ -144,8 +144,13 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, hold, substeps, tol, max_iter,
 
 
 def _warn_unconverged(model, report: dict) -> None:
-    """A warning when some contact solves stopped at the sweep limit (see
+    """Warnings when some contact solves stopped at the sweep limit, and when the push-out
+    left a penetration deeper than ten times its tolerance (see
     :func:`~ncgen.runtime.stepper_checks.contact_report`)."""
+    if report["penetration"] > 10 * report["penetration_tol"]:
+        warnings.warn(f"simulate: contacts of {model.name!r} ended a step up to {report['penetration']:.3g} m inside "
+                      f"(the push-out aims at {report['penetration_tol']:g} m; its Gauss-Seidel crawls on redundant "
+                      f"contacts; info['contacts'])", stacklevel=5)
     if report["pgs_unconverged"]:
         warnings.warn(f"simulate: {report['pgs_unconverged']} contact solve(s) of {model.name!r} stopped at "
                       f"{report['pgs_max_sweeps']} projected Gauss-Seidel sweeps before the contact velocities "

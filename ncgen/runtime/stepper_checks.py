@@ -37,7 +37,7 @@ import weakref
 import casadi as ca
 import numpy as np
 
-from ncgen.codegen.stepper_package import CONTACT_STATS, PGS_MAX_ITER, PGS_TOL, STATS
+from ncgen.codegen.stepper_package import CONTACT_STATS, PENETRATION_TOL, PGS_MAX_ITER, PGS_TOL, STATS
 
 #: Largest allowed change of a conservative model's energy, and error of the energy balance
 #: of a non-conservative one, as a fraction of the energy scale ``max(|E|, T, |V − V0|, |W|)``
@@ -144,11 +144,13 @@ def contact_report(S: np.ndarray) -> dict:
     """``info["contacts"]`` of a fixed-step run with nonsmooth contacts: the contact solves
     whose projected Gauss–Seidel stopped at its sweep limit (``pgs_unconverged``) and the
     largest last-sweep change of a contact velocity among them, relative to 1 + max |U|
-    (``pgs_residual``), beside the limit and the tolerance it did not reach."""
-    unconverged = S[:, len(STATS) + CONTACT_STATS.index("pgs_unconverged")]
-    residual = S[:, len(STATS) + CONTACT_STATS.index("pgs_residual")]
+    (``pgs_residual``), beside the limit and the tolerance it did not reach; the deepest
+    penetration left at the end of any step, after the push-out (``penetration``, m; the
+    push-out aims at ``penetration_tol``)."""
+    unconverged, residual, depth = (S[:, len(STATS) + CONTACT_STATS.index(k)] for k in CONTACT_STATS)
     return {"pgs_unconverged": int(unconverged.sum()), "pgs_residual": float(residual.max(initial=0.0)),
-            "pgs_max_sweeps": PGS_MAX_ITER, "pgs_tol": PGS_TOL}
+            "pgs_max_sweeps": PGS_MAX_ITER, "pgs_tol": PGS_TOL, "penetration": float(depth.max(initial=0.0)),
+            "penetration_tol": PENETRATION_TOL}
 
 
 def untrusted_row(model, traj, S: np.ndarray, h: float, contacts: bool = False) -> tuple[int, str] | None:
