@@ -3,11 +3,13 @@ stepper against closed forms (bounce heights, incline stick/slide, rolling), ene
 random impacts, the standalone C program; the smooth (compliant) law with IDAS."""
 import shutil
 import subprocess
+import warnings
 
 import numpy as np
 import pytest
 
 import ncgen as nc
+from ncgen.codegen.stepper_package import REPEAT_TOL
 from ncgen.errors import NcgenError
 from ncgen.reproducible import perpendicular_basis
 from ncgen.runtime.contact_outputs import OPEN, SLIP, STICK
@@ -143,10 +145,17 @@ def test_bounce_heights_follow_restitution(drops):
     # (PENETRATION_TOL = 1e-8 m; without the push-out it would be up to h·v_impact/2), no drift
     zd = tr.q[:, 5]
     assert zd.min() > -1e-8
+    # the deepest penetration at the end of any step is reported; no sample is deeper
+    depth = tr.info["contacts"]["penetration"]
+    assert depth <= 1e-8 and -tr.gap.min() <= depth + 1e-15
     rest = tr.t > 0.5
-    assert np.ptp(zd[rest]) < 1e-15 and np.max(np.abs(tr.v[rest, 5])) < 1e-12
-    # its contact force carries the weight once at rest; the open contact carries nothing
-    np.testing.assert_allclose(tr.contact_normal[rest, 1], G, rtol=1e-9)
+    # (at rest each step repeats the last impulses while the contact velocities stay within
+    # REPEAT_TOL (1 + max|U|), max|U| the other ball's, so the height may creep at that rate)
+    creep = REPEAT_TOL * (1 + np.abs(tr.v[:, 2]).max())
+    assert np.ptp(zd[rest]) < creep * (tr.t[-1] - 0.5) and np.max(np.abs(tr.v[rest, 5])) < creep
+    # its contact force carries the weight once at rest (to m·creep/dt where a full contact
+    # solve takes up the creep); the open contact carries nothing
+    np.testing.assert_allclose(tr.contact_normal[rest, 1], G, rtol=1e-9, atol=creep / 1e-4)
     assert np.all(tr.contact_state[rest, 1] != OPEN)
     flight = (tr.t > 0.05) & (tr.t < 0.4)
     assert np.all(tr.contact_normal[flight, 0] == 0) and np.all(tr.contact_state[flight, 0] == OPEN)
@@ -273,6 +282,9 @@ def box_and_ball(name="box"):
     return s.build(contacts="nonsmooth")
 
 
+# the box landing flat on four corners with friction: some contact solves stop at the sweep
+# limit with small residuals (reported by a warning, which is not what this test is about)
+@pytest.mark.filterwarnings("ignore:simulate.*contact solve")
 def test_energy_never_increases_through_impacts():
     """The box and the ball of :func:`box_and_ball` dropped with random orientations and
     spins: the energy never rises above its initial value beyond the O(h²) error of an impact
@@ -447,19 +459,27 @@ def test_optimal_control_through_smooth_friction():
     np.testing.assert_allclose(sol.stats.objective, 12 + (mu * G) ** 2, rtol=1e-2)
 
 
-def test_delassus_without_unrolled_factors_gives_the_same_motion(monkeypatch):
-    """Models too large to unroll the QR factors compute the Delassus matrix with one
-    step_solve per contact row instead of step_factor/step_backsolve: same motion."""
+def test_delassus_paths_give_the_same_motion(monkeypatch):
+    """The three ways the C forms the Delassus matrix give the same motion: from the constant
+    M⁻¹ and the Schur complement A M⁻¹ Aᵀ (regular M, the default here), from the unrolled
+    QR factors of the KKT matrix (what a singular M gets; forced with MINV_MAX_NQ = 0), and
+    with one step_solve per contact row (models too large to unroll the factors; forced
+    with SX_QR_MAX_NNZ = 0 as well)."""
     import ncgen.assembly.stepper_equations as kernels
+    import ncgen.codegen.stepper_package as package
 
-    fast = nc.simulate(box_and_ball(), 1.0, 0.01, method="stepper", substeps=10)
+    schur = nc.simulate(box_and_ball(), 1.0, 0.01, method="stepper", substeps=10)
+    assert package.schur_context(box_and_ball(), kernels.stepper_functions(box_and_ball())[0].sparsity_out("K"))[
+        "schur"]
+    monkeypatch.setattr(package, "MINV_MAX_NQ", 0)
+    factored = nc.simulate(box_and_ball("box_qr"), 1.0, 0.01, method="stepper", substeps=10)
     monkeypatch.setattr(kernels, "SX_QR_MAX_NNZ", 0)
     model = box_and_ball("box_plain")
     assert "step_factor" not in [f.name() for f in kernels.stepper_functions(model)]
     plain = nc.simulate(model, 1.0, 0.01, method="stepper", substeps=10)
-    assert np.count_nonzero(fast.contact_normal[:, :8]) > 0
-    np.testing.assert_allclose(plain.q, fast.q, atol=1e-9)
-
+    assert np.count_nonzero(schur.contact_normal[:, :8]) > 0
+    np.testing.assert_allclose(factored.q, schur.q, atol=1e-9)
+    np.testing.assert_allclose(plain.q, schur.q, atol=1e-9)
 
 def test_cli_simulates_nonsmooth_contacts(tmp_path):
     import sys
@@ -499,3 +519,102 @@ def test_block_tips_over_its_edge_iff_above_the_critical_spin():
         pivoting = tr.t < 0.15
         assert np.ptp(tr.energy[pivoting]) < 1e-6 * tr.energy[0]
         assert np.all(tr.contact_state[1:][pivoting[1:], 1] == STICK)
+
+
+def test_box_tips_over_its_edge_like_mujoco():
+    """A 3D box (0.1 × 0.16 × 0.3 m, 1.5 kg, 8 corner points, μ = 1, e = 0) standing on the
+    ground, set pivoting about its bottom edge x = +0.05 m with 0.9 and 1.1 times the critical
+    spin ω_c = sqrt(2 m g (r − c) / I_O) of a rigid pivot, against MuJoCo with the same mass,
+    inertia, gravity, friction and initial state (a box geom, condim 3, elliptic cone,
+    impratio 10, stiff contacts solref 0.002 s, h = 0.25 ms).  Matched: the rigid-body data,
+    the initial state and μ.  Not matched: MuJoCo's contacts are soft (they sink ~0.1 mm and
+    creep), and its impacts have no restitution coefficient (damping ratio 1 instead of
+    e = 0), so the comparison stops before the box lands again.  Agreement: the centre of
+    mass to 1.5e-4 m over the pivot (measured 7e-5 and 1.3e-4 m), and the outcome: it tips
+    onto its side (centre at 0.05 m) iff ω0 > ω_c, in both."""
+    mujoco = pytest.importorskip("mujoco")
+    m, a = 1.5, np.array([0.05, 0.08, 0.15])
+    inertia = m / 3 * np.diag([a[1]**2 + a[2]**2, a[0]**2 + a[2]**2, a[0]**2 + a[1]**2])
+    r = np.hypot(a[0], a[2])
+    w_crit = np.sqrt(2 * m * G * (r - a[2]) / (inertia[1, 1] + m * r**2))
+    s = nc.System("tip3d")
+    box = s.add_body("box", mass=m, inertia=inertia, position=(0, 0, a[2]))
+    for i, corner in enumerate(np.array(np.meshgrid(*[[-1, 1]] * 3)).reshape(3, -1).T * a):
+        s.add_contact(nc.SpherePlane(box, corner, 0.0, mu=1.0, name=f"c{i}"))
+    model = s.build(contacts="nonsmooth")
+    xml = f"""<mujoco><option timestep="2.5e-4" gravity="0 0 -{G}" cone="elliptic" impratio="10"/>
+        <worldbody><geom type="plane" size="5 5 0.1" friction="1 0 0"/>
+        <body pos="0 0 {a[2]}"><freejoint/><inertial pos="0 0 0" mass="{m}" diaginertia="{_nums(np.diag(inertia))}"/>
+        <geom type="box" size="{_nums(a)}" friction="1 0 0" condim="3" solref="0.002 1"/></body>
+        </worldbody></mujoco>"""
+    twin = mujoco.MjModel.from_xml_string(xml)
+    for factor in (0.9, 1.1):
+        w = np.array([0.0, factor * w_crit, 0.0])
+        v = np.cross(w, [-a[0], 0.0, a[2]])                   # the pivot edge at rest
+        v0 = model.member("box").rigid.qd_from_twist(np.eye(3), (0, 0, a[2]), w, v)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")                   # corners landing flat: redundant contacts
+            tr = nc.simulate(model, 1.0, 0.005, method="stepper", substeps=5, v0=v0)
+        ours = tr.point("box", (0, 0, 0))
+        data = mujoco.MjData(twin)
+        data.qvel[:3], data.qvel[3:6] = v, w
+        mujoco.mj_forward(twin, data)
+        theirs = [data.xpos[1].copy()]
+        for _ in range(len(tr.t) - 1):
+            mujoco.mj_step(twin, data, nstep=20)
+            theirs.append(data.xpos[1].copy())
+        theirs = np.array(theirs)
+        pivot = tr.t < 0.4                                    # before it lands again
+        assert np.abs(ours[pivot] - theirs[pivot]).max() < 1.5e-4, factor
+        for centre in (ours[-1], theirs[-1]):
+            assert abs(centre[2] - a[0]) < 2e-3 if factor > 1 else centre[2] > a[2] - 2e-3, (factor, centre)
+
+
+def _nums(x) -> str:
+    return " ".join(repr(float(v)) for v in x)
+
+def test_unconverged_contact_solves_are_reported(monkeypatch):
+    """A contact solve that stops at the projected Gauss–Seidel sweep limit is counted in
+    info["contacts"] and warned about; where its last sweep still moved a contact velocity by
+    more than PGS_TRUST the run is untrustworthy (SimulationError).  Forced here with a limit
+    of one sweep, which an impact never meets (its first sweep changes the impulse)."""
+    import ncgen.codegen.stepper_package as package
+    from ncgen.errors import SimulationError
+
+    s = nc.System("one_sweep")
+    p = s.add_point("p", mass=1.0, position=(0, 0, 0.05))
+    s.add_contact(nc.SpherePlane(p, radius=0.0, name="floor"))
+    s.add_contact(nc.SpherePlane(p, radius=0.0, point=(0, 0, 0), normal=(0, 0.6, 0.8), name="slope"))
+    monkeypatch.setattr(package, "PGS_MAX_ITER", 1)
+    model = s.build(contacts="nonsmooth")
+    with pytest.raises(SimulationError, match="contact impulses did not converge"):
+        nc.simulate(model, 0.2, 0.01, method="stepper", substeps=10)
+    with pytest.warns(UserWarning, match="stopped at"):
+        tr = nc.simulate(model, 0.2, 0.01, method="stepper", substeps=10, check=False)
+    report = tr.info["contacts"]
+    assert report["pgs_unconverged"] >= 1 and report["pgs_residual"] > 1e-3
+    # with the default limit the same drop converges: nothing to report, and it comes to rest
+    monkeypatch.undo()
+    model = s.build(contacts="nonsmooth")
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        tr = nc.simulate(model, 0.2, 0.01, method="stepper", substeps=10)
+    assert tr.info["contacts"]["pgs_unconverged"] == 0 and tr.gap.min() > -1e-8
+
+
+def test_energy_check_with_contacts_is_one_sided(monkeypatch, drops):
+    """The stepper's energy check on a contact model flags a rise of E only (contacts take
+    energy out): the drops lose a third of their energy without complaint even with the
+    check's threshold at 1e-6 of the energy scale (a two-sided check would stop them at the
+    first impact).  That the check runs at all: with a negative threshold every sample is
+    a "rise", and the run is refused naming it."""
+    from ncgen.errors import SimulationError
+    import ncgen.runtime.stepper_checks as checks
+
+    monkeypatch.setattr(checks, "ENERGY_FRACTION", 1e-6)
+    tr = nc.simulate(drops, 1.0, 1e-3, method="stepper", substeps=10)
+    assert tr.energy[-1] < 0.7 * tr.energy[0]
+    monkeypatch.setattr(checks, "ENERGY_FRACTION", -0.5)
+    with pytest.raises(SimulationError, match="rose through its contacts"):
+        nc.simulate(drops, 1.0, 1e-3, method="stepper", substeps=10)

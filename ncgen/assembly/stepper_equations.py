@@ -44,13 +44,17 @@ variant (docs/contact.md and ``contact_step`` in templates/c/stepper.c.j2 docume
 ``step_velocity`` take one more input, the generalised contact impulse ``j = Wᵀ P`` (N·s),
 half of which enters each half-step (``− j/2`` in r, ``+ j/2`` in b), and two more kernels
 
-* ``step_contact``: q, v, p -> g (nk, m), W (nk·dim × nq, dense: per contact its normal row,
-  then its tangent rows), U = W v (m/s)
+* ``step_contact``: q, v, p -> g (nk, m), Wt = Wᵀ (nq × nk·dim, sparse: column r is row r of
+  the contact Jacobian W, per contact its normal row, then its tangent rows; a row touches
+  the coordinates of one or two members), U = W v (m/s)
 * ``step_gap``: q, p -> g (the gaps alone)
 
-give the gaps and contact Jacobians.  When the QR factors are small enough to unroll
-(:data:`SX_QR_MAX_NNZ`), two more split ``step_solve`` so that the Delassus matrix needs one
-factorisation per step and one cheap solve per contact row:
+give the gaps and contact Jacobians.  When the constant mass matrix is regular the C forms
+the Delassus matrix from ``M⁻¹`` and the Schur complement ``A M⁻¹ Aᵀ`` (no kernel: ``A`` is
+read from ``K``; :func:`ncgen.codegen.stepper_package.schur_context`).  For the other
+cases, and where that complement is singular, when the QR factors are small enough to
+unroll (:data:`SX_QR_MAX_NNZ`), two more split ``step_solve`` so that the Delassus matrix
+needs one factorisation per step and one cheap solve per contact row:
 
 * ``step_factor``: K -> V, R, beta (the sparse Householder QR of K)
 * ``step_backsolve``: V, R, beta, b -> x = K⁻¹ b
@@ -134,7 +138,8 @@ CONTACT_DOCS = {
     "step_contact": {
         "purpose": "Stepper: contact gaps, Jacobians (per contact: normal row, tangent rows) and velocities",
         "inputs": {"q": ("coordinates", "m"), "v": ("coordinate rates", "m/s"), "p": ("parameters", "")},
-        "outputs": {"g": ("gaps, positive apart", "m"), "W": ("contact Jacobian, nk*dim x nq, dense", "1"),
+        "outputs": {"g": ("gaps, positive apart", "m"),
+                    "Wt": ("transposed contact Jacobian W^T, nq x nk*dim, sparse (column r: row r of W)", "1"),
                     "U": ("contact velocities W v", "m/s")}},
     "step_gap": {
         "purpose": "Stepper: contact gaps",
@@ -230,9 +235,9 @@ def contact_function(model) -> ca.Function:
     rows = []
     for k in range(model.nk):
         rows += [WN[k, :], WT[k * nt:(k + 1) * nt, :]]
-    W = ca.densify(ca.vertcat(*rows))
-    return ca.Function("step_contact", [q, v, p], [ca.densify(g), W, ca.mtimes(W, v)],
-                       ["q", "v", "p"], ["g", "W", "U"])
+    W = ca.vertcat(*rows)
+    return ca.Function("step_contact", [q, v, p], [ca.densify(g), W.T, ca.densify(ca.mtimes(W, v))],
+                       ["q", "v", "p"], ["g", "Wt", "U"])
 
 
 def power_function(model) -> ca.Function:

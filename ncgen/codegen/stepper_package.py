@@ -38,6 +38,11 @@ STATUS = {
 }
 #: Columns of the per-output-row statistics of the C loops (``<MODEL>_STEP_NSTATS``).
 STATS = ("steps", "newton_iterations", "splits", "error_q", "error_v", "work")
+#: Columns the nonsmooth contact stepper appends to :data:`STATS` (fixed steps): contact
+#: solves whose projected Gauss–Seidel stopped at PGS_MAX_ITER sweeps, the largest
+#: last-sweep change of a contact velocity among them, relative to 1 + max |U|, and the
+#: deepest penetration (m) left at the end of a step (after the push-out).
+CONTACT_STATS = ("pgs_unconverged", "pgs_residual", "penetration")
 #: Default Newton tolerance: |Φ|∞ ≤ tol (m²), momentum residual ≤ tol·max|M|·(1 + |w|∞),
 #: |A v + Φ_t|∞ ≤ tol·(1 + |v|∞) (see ``<model>_stepper.h``).
 TOL = 1e-10
@@ -49,8 +54,11 @@ MAX_HALVINGS, HALVINGS_LIMIT = 4, 10
 #: Nonsmooth contact stepper: projected Gauss–Seidel sweeps allowed per step, and its
 #: convergence test: no sweep changes a contact velocity by more than PGS_TOL (1 + max |U|)
 #: (m/s; a test on the impulses would never pass where contacts are redundant, as under a
-#: box or a chain lying flat, whose impulses are not unique).
-PGS_MAX_ITER, PGS_TOL = 2000, 1e-12
+#: box or a chain lying flat, whose impulses are not unique).  A solve that reaches the
+#: sweep limit is counted (:data:`CONTACT_STATS`): where redundant contacts with friction
+#: make PGS crawl or cycle, more sweeps mostly cost time (the falling chain of
+#: benchmarks/contact.py: 2000 sweeps instead of 300 moved its final state by 4e-8 m).
+PGS_MAX_ITER, PGS_TOL = 300, 1e-12
 #: Nonsmooth contact stepper: a contact whose gap is below −PENETRATION_TOL (m) at the end of
 #: a step is put back on its surface (``push_out`` in ``stepper.c.j2``).  The push-out is
 #: linearised and followed by the projection back onto Φ = 0, which moves the gaps again at
@@ -61,6 +69,15 @@ PENETRATION_TOL = 1e-8
 #: (at most CONTACT_REFINE_MAX times) until its end-of-step contact velocities match the
 #: linearised prediction to CONTACT_REFINE_TOL (relative to 1 m/s or the largest of them).
 CONTACT_REFINE_MAX, CONTACT_REFINE_TOL = 10, 1e-8
+#: Nonsmooth contact stepper: a step first tries the last step's impulses again and keeps
+#: them if the contact laws hold on the measured end velocities to REPEAT_TOL (1 + max |U|)
+#: m/s and the loaded contacts' Jacobian rows did not move by more than REPEAT_TOL
+#: (``repeat_step`` in ``stepper.c.j2``): at rest that is every step.
+REPEAT_TOL = 1e-12
+#: Nonsmooth contact stepper: the Delassus matrix comes from the constant M⁻¹ (stored dense
+#: in the C) and the Schur complement A M⁻¹ Aᵀ when M is regular (condition number below
+#: MINV_MAX_COND) and nq ≤ MINV_MAX_NQ; else from the sparse QR of the whole KKT matrix.
+MINV_MAX_NQ, MINV_MAX_COND = 400, 1e12
 #: The demo program's defaults: simulated time and step (s).
 DEMO_T_END, DEMO_H = 1.0, 1e-3
 
@@ -81,7 +98,7 @@ def extra_sources(model, functions) -> list[ExtraSource]:
                "nnz_k": int(functions[0].sparsity_out("K").nnz()),
                "mass_scale": c_real(mass_scale(model)), "tol": c_real(TOL), "max_iter": MAX_ITER,
                "max_halvings": MAX_HALVINGS, "halvings_limit": HALVINGS_LIMIT, "dim": model.dim,
-               "nout": n_outputs(model),
+               "nout": n_outputs(model), "nstats": len(STATS) + (len(CONTACT_STATS) if nonsmooth(model) else 0),
                "kernels": [f"{name}_{f.name()}" for f in functions]}
     if nonsmooth(model):
         factor = next((f for f in functions if f.name() == "step_factor"), None)
@@ -90,11 +107,14 @@ def extra_sources(model, functions) -> list[ExtraSource]:
                            n_beta=int(factor.sparsity_out(2).nnz()))
         context.update(factored=factor is not None, nk=model.nk, pgs_max_iter=PGS_MAX_ITER,
                        pgs_tol=c_real(PGS_TOL), penetration_tol=c_real(PENETRATION_TOL),
-                       refine_max=CONTACT_REFINE_MAX, refine_tol=c_real(CONTACT_REFINE_TOL),
+                       refine_max=CONTACT_REFINE_MAX, refine_tol=c_real(CONTACT_REFINE_TOL), repeat_tol=c_real(REPEAT_TOL),
                        gravity_norm=c_real(float(np.linalg.norm(model.gravity))),
                        mu=[c_real(c["mu"]) for c in model.contacts],
                        restitution=[c_real(c["restitution"]) for c in model.contacts],
                        any_restitution=any(c["restitution"] > 0 for c in model.contacts))
+        context.update(schur_context(model, functions[0].sparsity_out("K")))
+        wt = next(f for f in functions if f.name() == "step_contact").sparsity_out("Wt")
+        context.update(wt_colind=list(wt.colind()), wt_row=list(wt.row()))
     demo = {**context, "program": f"{name}_simulate", "t0": c_real(model.t0), "t_end": c_real(DEMO_T_END),
             "h": c_real(DEMO_H), "q0": [c_real(x) for x in model.q0], "v0": [c_real(x) for x in model.v0],
             "p0": [c_real(x) for x in model.p0]}
@@ -103,9 +123,38 @@ def extra_sources(model, functions) -> list[ExtraSource]:
             ExtraSource("simulate_main.c.j2", f"{name}_simulate.c", demo, program=True)]
 
 
+def schur_context(model, K) -> dict:
+    """The template context of the Delassus matrix by the Schur complement (see
+    :data:`MINV_MAX_NQ`): ``schur`` (whether it applies), ``minv`` (M⁻¹, column-major) and
+    where A's nonzeros sit in the nonzeros of the KKT matrix pattern ``K`` (``a_nz``,
+    ``a_row``, ``a_col``)."""
+    M = np.asarray(model.M, dtype=float)
+    nq = model.nq
+    if nq > MINV_MAX_NQ or not np.all(np.isfinite(M)) or np.linalg.cond(M) > MINV_MAX_COND:
+        return {"schur": False}
+    minv = np.linalg.inv(M)
+    minv = (minv + minv.T) / 2
+    colind, row = K.colind(), K.row()
+    a_nz, a_row, a_col = [], [], []
+    for j in range(nq):
+        for k in range(colind[j], colind[j + 1]):
+            if row[k] >= nq:
+                a_nz.append(k)
+                a_row.append(row[k] - nq)
+                a_col.append(j)
+    return {"schur": True, "minv": [c_real(x) for x in minv.ravel(order="F")], "a_nz": a_nz, "a_row": a_row,
+            "a_col": a_col}
+
+
 def n_impulses(model) -> int:
     """Contact impulse components per step of the nonsmooth contact stepper (else 0)."""
     return model.nk * model.dim if nonsmooth(model) else 0
+
+
+def n_stats(nd: int) -> int:
+    """Columns of the C loops' per-row statistics (``<MODEL>_STEP_NSTATS``) for ``nd``
+    contact impulse components per step (:func:`n_impulses`)."""
+    return len(STATS) + (len(CONTACT_STATS) if nd else 0)
 
 
 def n_outputs(model) -> int:

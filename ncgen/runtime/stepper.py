@@ -33,13 +33,15 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 
 import numpy as np
 
 from ncgen.codegen.stepper_package import HALVINGS_LIMIT, MAX_HALVINGS, MAX_ITER, STATS, STATUS, TOL
 from ncgen.errors import NcgenError, SimulationError
 from ncgen.runtime.inputs import HOLDS
-from ncgen.runtime.stepper_checks import energy_report, error_estimate, is_conservative, untrusted_row
+from ncgen.runtime.stepper_checks import (contact_report, energy_report, error_estimate, is_conservative,
+                                          untrusted_row)
 from ncgen.runtime.stepper_library import load_stepper
 from ncgen.runtime.trajectory import NAME_KEYS, Trajectory, derived_outputs
 
@@ -100,7 +102,7 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, hold, substeps, tol, max_iter,
            estimate, conservative) -> Trajectory:
     n_out = len(t) - 1
     h = float(t[1] - t[0]) / substeps
-    contacts = stepper.nd > 0                  # nonsmooth contacts: no shadow run, no energy check
+    contacts = stepper.nd > 0          # nonsmooth contacts: no shadow run, one-sided energy check
     IMP = np.zeros((n_out, stepper.nd)) if contacts else None      # contact impulses per output interval
     start = time.perf_counter()
     Q, V, LAM, S, status, done, splits = stepper.simulate_stats(
@@ -114,6 +116,9 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, hold, substeps, tol, max_iter,
             "stats": _stats(S[:rows], splits)}
     traj = _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info, conservative, start,
                        None if IMP is None else IMP[:rows])
+    if contacts:
+        traj.info["contacts"] = contact_report(S[:rows])
+        _warn_unconverged(model, traj.info["contacts"])
     if status != 0:
         t_fail = float(t[0]) + done * h
         message = (f"simulation of {model.name!r} with the stepper failed in the step from "
@@ -123,7 +128,7 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, hold, substeps, tol, max_iter,
         traj.info["message"] = message
         raise SimulationError(message, time=float(t[rows]), trajectory=traj)
     if check:
-        bad = untrusted_row(model, traj, S[:rows], h, energy=not contacts)
+        bad = untrusted_row(model, traj, S[:rows], h, contacts=contacts)
         if bad is not None:
             row, reason = bad
             kept = traj.head(row + 1)          # the states before C row `row`
@@ -136,6 +141,22 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, hold, substeps, tol, max_iter,
                              energy=energy_report(kept, work, conservative))
             raise SimulationError(message, time=float(kept.t[-1]), trajectory=kept)
     return traj
+
+
+def _warn_unconverged(model, report: dict) -> None:
+    """Warnings when some contact solves stopped at the sweep limit, and when the push-out
+    left a penetration deeper than ten times its tolerance (see
+    :func:`~ncgen.runtime.stepper_checks.contact_report`)."""
+    if report["penetration"] > 10 * report["penetration_tol"]:
+        warnings.warn(f"simulate: contacts of {model.name!r} ended a step up to {report['penetration']:.3g} m inside "
+                      f"(the push-out aims at {report['penetration_tol']:g} m; its Gauss-Seidel crawls on redundant "
+                      f"contacts; info['contacts'])", stacklevel=5)
+    if report["pgs_unconverged"]:
+        warnings.warn(f"simulate: {report['pgs_unconverged']} contact solve(s) of {model.name!r} stopped at "
+                      f"{report['pgs_max_sweeps']} projected Gauss-Seidel sweeps before the contact velocities "
+                      f"settled to {report['pgs_tol']:g} (1 + max|U|) m/s; the last sweep still changed one by up to "
+                      f"{report['pgs_residual']:.3g} (1 + max|U|) m/s (info['contacts']; redundant contacts, as under "
+                      f"a body or a chain lying flat or in a pile, make it crawl, and friction can make it cycle)", stacklevel=5)
 
 
 def _adaptive(model, stepper, t, U, p, q0, v0, lam0, hold, tol, max_iter, rtol, atol, order, max_steps,

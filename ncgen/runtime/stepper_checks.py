@@ -10,7 +10,17 @@ A fixed-step run (:func:`ncgen.runtime.stepper.simulate_stepper` without ``rtol`
   energy scale, or, for a model with non-conservative forces or drives, the energy balance
   ``E(t) − E(t0) − W(t)`` (``W``: work of those forces and drives) is off by that much;
 * the estimated global error in q exceeds :data:`ERROR_FRACTION` of the model's size
-  ``max |q0|`` (m).
+  ``max |q0|`` (m);
+* nonsmooth contacts: a contact solve stopped at its sweep limit with a last sweep that
+  still changed a contact velocity by more than :data:`PGS_TRUST` (1 + max |U|) m/s.
+
+Models with nonsmooth contacts get no shadow run: an impact falls into different steps of
+the run and of its shadow (steps of 2h), so their difference measures where the impact was
+resolved, not the integration error (it is first order in h there).  Their energy check is
+one-sided: contacts with restitution e ≤ 1 and Coulomb friction only take energy out, so
+the run is flagged where ``E − E0 − W`` *rises* above :data:`ENERGY_FRACTION` of the energy
+scale (W: the work of the non-conservative forces and drives; the contact impulses' work is
+not in it), and a loss is what the contacts dissipate.
 
 Error estimates (``info["error_estimate"]``, in m for q and m/s for v): fixed steps, the
 global error ``|y_h − y_2h| / 3`` against a shadow run with steps of 2h (Richardson, valid
@@ -27,7 +37,7 @@ import weakref
 import casadi as ca
 import numpy as np
 
-from ncgen.codegen.stepper_package import STATS
+from ncgen.codegen.stepper_package import CONTACT_STATS, PENETRATION_TOL, PGS_MAX_ITER, PGS_TOL, STATS
 
 #: Largest allowed change of a conservative model's energy, and error of the energy balance
 #: of a non-conservative one, as a fraction of the energy scale ``max(|E|, T, |V − V0|, |W|)``
@@ -37,6 +47,11 @@ ENERGY_FRACTION = 0.01
 ERROR_FRACTION = 0.01
 #: Most Newton iterations per step (average over an output interval) of a trusted run.
 NEWTON_LIMIT = 8
+#: Nonsmooth contacts: the largest last-sweep change of a contact velocity, relative to
+#: 1 + max |U| (m/s per m/s), of a contact solve that stopped at its sweep limit in a trusted
+#: run.  Below it such a solve is reported (``info["contacts"]`` and a warning), above it
+#: the run is untrustworthy.
+PGS_TRUST = 1e-3
 
 
 _conservative: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
@@ -125,10 +140,23 @@ def energy_report(traj, work: np.ndarray, conservative: bool) -> dict:
     return {"conservative": False, "work": float(work[-1]), "balance_error": float(err.max()), "relative": rel}
 
 
-def untrusted_row(model, traj, S: np.ndarray, h: float, energy: bool = True) -> tuple[int, str] | None:
+def contact_report(S: np.ndarray) -> dict:
+    """``info["contacts"]`` of a fixed-step run with nonsmooth contacts: the contact solves
+    whose projected Gauss–Seidel stopped at its sweep limit (``pgs_unconverged``) and the
+    largest last-sweep change of a contact velocity among them, relative to 1 + max |U|
+    (``pgs_residual``), beside the limit and the tolerance it did not reach; the deepest
+    penetration left at the end of any step, after the push-out (``penetration``, m; the
+    push-out aims at ``penetration_tol``)."""
+    unconverged, residual, depth = (S[:, len(STATS) + CONTACT_STATS.index(k)] for k in CONTACT_STATS)
+    return {"pgs_unconverged": int(unconverged.sum()), "pgs_residual": float(residual.max(initial=0.0)),
+            "pgs_max_sweeps": PGS_MAX_ITER, "pgs_tol": PGS_TOL, "penetration": float(depth.max(initial=0.0)),
+            "penetration_tol": PENETRATION_TOL}
+
+
+def untrusted_row(model, traj, S: np.ndarray, h: float, contacts: bool = False) -> tuple[int, str] | None:
     """``(row, reason)`` of the first output row where the fixed-step run stops being
-    trustworthy (module docstring), or None; ``energy=False`` leaves out the energy check
-    (nonsmooth contacts: their impulses' work is not in the balance)."""
+    trustworthy (module docstring), or None; ``contacts``: a run of the nonsmooth contact
+    stepper (one-sided energy check, contact solves checked)."""
     if not len(S):
         return None
     conservative = traj.info["energy"]["conservative"]
@@ -136,13 +164,21 @@ def untrusted_row(model, traj, S: np.ndarray, h: float, energy: bool = True) -> 
     steps, iters, splits = (S[:, STATS.index(k)] for k in ("steps", "newton_iterations", "splits"))
     gq, _ = global_estimates(S, traj.info.get("substeps"))
     size = max(float(np.max(np.abs(model.q0), initial=0.0)), 1e-9)
-    e_rel = energy_error(traj, work, conservative)[1:] / np.maximum(_energy_scale(traj, work)[1:], 1e-300)
+    scale = np.maximum(_energy_scale(traj, work)[1:], 1e-300)
+    if contacts:
+        E = traj.energy
+        e_rel = (E - E[0] - work)[1:] / scale           # a gain only: contacts dissipate
+        residual = S[:, len(STATS) + CONTACT_STATS.index("pgs_residual")]
+    else:
+        e_rel = energy_error(traj, work, conservative)[1:] / scale
+        residual = np.zeros(len(S))
     dt = h * traj.info.get("substeps", 1)
     flags = {
         "splits": splits > 0,
         "newton": iters / np.maximum(steps, 1) > NEWTON_LIMIT,
-        "energy": (e_rel > ENERGY_FRACTION) & energy,
+        "energy": e_rel > ENERGY_FRACTION,
         "error": np.nan_to_num(gq) > ERROR_FRACTION * size,
+        "contacts": residual > PGS_TRUST,
     }
     first = {k: int(np.argmax(f)) for k, f in flags.items() if f.any()}
     if not first:
@@ -158,10 +194,20 @@ def untrusted_row(model, traj, S: np.ndarray, h: float, energy: bool = True) -> 
         reason = (f"Newton's method needed {iters[row] / max(steps[row], 1):.3g} iterations per step by "
                   f"t = {t_row:.6g} s (more than {NEWTON_LIMIT}): the step is too large for this motion")
     elif kind == "energy":
-        what = ("energy of this conservative model changed" if conservative else
-                "energy balance E - E0 - W (W: work of its non-conservative forces and drives) is off")
+        if contacts:
+            what = ("energy of this model rose through its contacts" if conservative else
+                    "energy balance E - E0 - W (W: work of its non-conservative forces and drives) rose through "
+                    "its contacts")
+        else:
+            what = ("energy of this conservative model changed" if conservative else
+                    "energy balance E - E0 - W (W: work of its non-conservative forces and drives) is off")
         reason = (f"the {what} by {e_rel[row]:.3g} of its energy scale by t = {t_row:.6g} s (more than "
                   f"{ENERGY_FRACTION:g})")
+    elif kind == "contacts":
+        reason = (f"the contact impulses did not converge by t = {t_row:.6g} s: projected Gauss-Seidel stopped "
+                  f"at {PGS_MAX_ITER} sweeps with a last sweep still changing a contact velocity by "
+                  f"{residual[row]:.3g} (1 + max|U|) m/s (more than {PGS_TRUST:g}; redundant contacts make "
+                  f"it crawl, and friction can make it cycle)")
     else:
         reason = (f"the estimated error in q reached {gq[row]:.3g} m by t = {t_row:.6g} s, more than "
                   f"{ERROR_FRACTION:g} of the model's size {size:.3g} m")
@@ -169,6 +215,13 @@ def untrusted_row(model, traj, S: np.ndarray, h: float, energy: bool = True) -> 
 
 
 def _suggestion(h: float, dt: float, err: float, size: float, kind: str) -> str:
+    if kind == "contacts":
+        return ("A smaller step makes the contact problems smaller changes of the last one (warm start); "
+                "check=False returns the run unchecked")
+    return _step_suggestion(h, dt, err, size, kind)
+
+
+def _step_suggestion(h: float, dt: float, err: float, size: float, kind: str) -> str:
     """Which step to use instead: a quarter of ``h`` after split steps, exploding Newton
     iterations or an energy error, half of it after a large error estimate, and in every
     case no more than the step at which the estimate (∝ h²) would be 1 % of the size."""

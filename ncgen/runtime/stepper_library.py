@@ -7,7 +7,7 @@ import weakref
 
 import numpy as np
 
-from ncgen.codegen.stepper_package import STATS, n_impulses, n_outputs
+from ncgen.codegen.stepper_package import n_impulses, n_outputs, n_stats
 from ncgen.runtime.library import compiled_model
 
 _loaded: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
@@ -74,14 +74,16 @@ class CompiledStepper:
 
     def _buffers(self, rows):
         return (np.zeros((rows, self.nq)), np.zeros((rows, self.nq)), np.zeros((rows, self.nc)),
-                np.zeros((rows, len(STATS))))
+                np.zeros((rows, n_stats(self.nd))))
 
     def simulate_stats(self, q0, v0, lam0, t0: float, h: float, n_steps: int, every: int, U: np.ndarray | None,
                        p: np.ndarray, tol: float, max_iter: int, max_halvings: int, estimate: bool,
                        track_work: bool, impulse_out=None):
         """``(Q, V, LAM, STATS, status, steps_done, splits)``: fixed steps with per-row
-        statistics (columns :data:`STATS`; see ``<model>_simulate_stats``).  ``U``: inputs
-        per step, shape ``(n_steps, nu)``, or None for zeros."""
+        statistics (columns :data:`~ncgen.codegen.stepper_package.STATS`, then for the
+        nonsmooth contact stepper :data:`~ncgen.codegen.stepper_package.CONTACT_STATS`; see
+        ``<model>_simulate_stats``).  ``U``: inputs per step, shape ``(n_steps, nu)``, or None
+        for zeros."""
         Q, V, LAM, S = self._buffers(n_steps // every)
         U = None if U is None or self.nu == 0 else np.ascontiguousarray(U, float)
         done, splits = ctypes.c_long(0), ctypes.c_long(0)
