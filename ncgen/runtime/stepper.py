@@ -142,7 +142,7 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, hold, tol, max_iter, rtol, 
               conservative) -> Trajectory:
     n_out = len(t) - 1
     dt = float(t[1] - t[0])
-    tol = min(tol, max(NEWTON_FRACTION * min(rtol, atol), 1e-14))
+    tol = newton_tolerance(rtol, atol, tol)
     start = time.perf_counter()
     Q, V, LAM, S, status, rows, h_next = stepper.simulate_adaptive(
         q0, v0, lam0, float(t[0]), dt, n_out, U if model.nu else None, hold == "linear", p, rtol, atol, 0.0,
@@ -162,6 +162,12 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, hold, tol, max_iter, rtol, 
         traj.info["message"] = message
         raise SimulationError(message, time=float(t[rows]), trajectory=traj)
     return traj
+
+
+def newton_tolerance(rtol: float, atol: float, tol: float = TOL) -> float:
+    """The Newton tolerance of an error-controlled run: ``tol``, at most
+    :data:`NEWTON_FRACTION` × ``min(rtol, atol)`` (floored at 1e-14)."""
+    return min(tol, max(NEWTON_FRACTION * min(rtol, atol), 1e-14))
 
 
 def _stats(S: np.ndarray, splits: int) -> dict:
