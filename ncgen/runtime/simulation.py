@@ -16,7 +16,7 @@ from ncgen.runtime.dae import load_dae
 from ncgen.runtime.diagnose import explain, shift_time
 from ncgen.runtime.idas import ChunkedIDAS, ChunkFailure
 from ncgen.runtime.inputs import hold_columns, input_samples, parameter_values, time_grid
-from ncgen.runtime.manifold import ManifoldProjector, robust_algebraic
+from ncgen.runtime.manifold import NEAR_SINGULAR, ManifoldProjector, robust_algebraic
 from ncgen.runtime.progress import Progress
 from ncgen.runtime.rattle_bridge import RattleFailure, compiled_interval, rattle_interval
 from ncgen.runtime.stepper import MAX_HALVINGS, MAX_ITER, TOL, simulate_stepper
@@ -30,7 +30,7 @@ CHUNKS = 20
 #: Largest ``nq · nc`` that ``project="auto"`` watches (an SVD of A per output time).
 AUTO_MAX_SIZE = 100_000
 #: Output intervals per IDAS call at most while watching for singular configurations
-#: (``project="auto"``): a chunk that meets one is cut there and its rest redone.
+#: (``project="auto"``; shorter where ``σ_min/σ_max`` of A falls towards the limit).
 WATCHED_CHUNK = 10
 #: IDAS steps per output interval at most while watching (``project="auto"`` or ``True``):
 #: IDAS can spend its whole ``max_steps`` creeping up to a singular configuration.  A chunk
@@ -305,51 +305,70 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
     index of the first output time from which the run was bridged or projected, or None)``.
 
     IDAS over chunks of several output intervals (one with ``project=True``); a failed
-    chunk is retried one interval at a time, to keep every state before the failure.
+    chunk is retried one interval at a time, to keep every state before the failure
+    (watching: only its first interval, then chunks again).
     With a ``projector`` (``project`` True or ``"auto"``, see :func:`simulate`) every output
-    configuration is watched: the chunk is cut at the last output before the first
-    near-singular one, and every interval that starts or ends at a near-singular
-    configuration, or that IDAS fails on not far from one (:data:`FAILING_NEAR_SINGULAR`), is
-    crossed by ``bridge`` instead, from the projected state.  ``auto=False``: the state is
-    also projected after every interval."""
+    configuration is watched (``σ_min/σ_max`` of A): a chunk is at most :data:`WATCHED_CHUNK`
+    intervals and ends about halfway to where that ratio, extrapolated from the last two
+    outputs, would reach the near-singular limit;
+    a chunk that reaches it anyway is cut at the last output before; every interval that
+    starts or ends at a near-singular configuration, or that IDAS fails on not far from one
+    (:data:`FAILING_NEAR_SINGULAR`), is crossed by ``bridge`` instead, from the projected
+    state.  ``auto=False``: the state is also projected after every interval."""
     n_int = len(t) - 1
     watching = projector is not None
-    chunk = max(1, math.ceil(n_int / CHUNKS))
-    chunk = 1 if watching and not auto else min(chunk, WATCHED_CHUNK) if watching else chunk
+    full = 1 if watching and not auto else max(1, math.ceil(n_int / CHUNKS))
     X = np.empty((len(t), len(x0)))
     Z = np.empty((len(t), len(z0)))
+    R = np.full(len(t), np.nan)          # σ_min/σ_max of A at the output times (watching)
     X[0], Z[0] = x0, z0
     since = None if auto or not watching else 0
+    steps = [WATCHED_MAX_STEPS if watching else None]
 
     def advance(k, n, max_steps=None):
         X[k + 1:k + n + 1], Z[k + 1:k + n + 1] = runner.advance(t[k], X[k], Z[k], columns[:, k:k + n], p, max_steps)
+        R[k + 1:k + n + 1] = np.nan
 
-    def near(i, ratio=None) -> bool:
-        return projector.near_singular(t[i], X[i], ratio)
+    def ratio(i) -> float:
+        if np.isnan(R[i]):
+            R[i] = projector.ratio(t[i], X[i])
+        return R[i]
+
+    def near(i, limit=NEAR_SINGULAR) -> bool:
+        return ratio(i) < limit * projector.scale
+
+    def chunk(k) -> int:
+        """Intervals of the next IDAS call from output k (see above)."""
+        if not watching:
+            return full
+        n = min(full, WATCHED_CHUNK)
+        drop = ratio(k - 1) - ratio(k) if k > 0 else 0.0
+        if drop > 0:
+            n = int(min(n, max(1, 0.5 * (ratio(k) - NEAR_SINGULAR * projector.scale) / drop)))
+        return n
 
     def bridged(k) -> int:
         nonlocal since
         since = k if since is None else since
         X[k] = projector(t[k], X[k])
         X[k + 1], Z[k + 1] = bridge(t[k], t[k + 1], X[k], columns[:, k])
+        R[k:k + 2] = np.nan
         return k + 1
-
-    limit = [WATCHED_MAX_STEPS if watching else None]
 
     def single(k) -> int:
         """Interval k by IDAS (first with the watched step limit), else, watching and not far
         from a singular configuration (:data:`FAILING_NEAR_SINGULAR`), bridged.  An interval
         that needs more steps than the limit away from one lifts the limit for the run."""
         try:
-            advance(k, 1, limit[0])
+            advance(k, 1, steps[0])
             return k + 1
         except ChunkFailure:
             if watching and near(k, FAILING_NEAR_SINGULAR):
                 return bridged(k)
-            if limit[0] is None:
+            if steps[0] is None:
                 raise
         advance(k, 1)
-        limit[0] = None
+        steps[0] = None
         return k + 1
 
     k = 0
@@ -358,13 +377,13 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
             if watching and near(k):
                 k = bridged(k)
             else:
-                k0, n = k, min(chunk, n_int - k)
+                k0, n = k, min(chunk(k), n_int - k)
                 try:
-                    advance(k, n, limit[0])
+                    advance(k, n, steps[0])
                     k += n
                 except ChunkFailure:
                     k = single(k)
-                    while k < k0 + n and not (watching and near(k)):
+                    while not watching and k < k0 + n:
                         k = single(k)
                 if watching:
                     first = next((i for i in range(k0 + 1, k + 1) if near(i)), None)
@@ -374,6 +393,7 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
             return X[:k + 1], Z[:k + 1], last, since
         if watching and not auto:
             X[k] = projector(t[k], X[k])
+            R[k] = np.nan
         bar.update(t[k])
     return X, Z, None, since
 
