@@ -3,8 +3,12 @@
 IDAS integrates the index-1 DAE (Baumgarte-stabilised acceleration constraints), so the
 positions drift off ``Φ = 0`` by the integration error; where the constraint Jacobian
 loses rank (a parallelogram passing its flat position, where the crossed branch meets the
-physical one) that drift is enough to leave the physical branch.  After every output
-interval the runner therefore projects the state back, in the mass metric:
+physical one) that drift is enough to leave the physical branch.  The runner
+(:func:`ncgen.runtime.simulation.simulate`, ``project``) therefore watches how close ``A``
+is to losing rank (:meth:`ManifoldProjector.near_singular`), hands the intervals next to a
+singular configuration to RATTLE (:mod:`ncgen.runtime.rattle_bridge`), and projects the
+state back before them (and, with ``project=True``, after every output interval), in the
+mass metric:
 
     positions:  q ← q − M⁻¹Aᵀ (A M⁻¹ Aᵀ)⁺ Φ        (Gauss–Newton, a few iterations)
     velocities: v ← v − M⁻¹Aᵀ (A M⁻¹ Aᵀ)⁺ (A v + Φ_t)
