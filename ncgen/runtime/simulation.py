@@ -73,7 +73,10 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
 
     * ``method``: ``"idas"`` (SUNDIALS IDAS through CasADi, variable-order BDF with error
       control ``rtol`` (relative, default 1e-8) and ``atol`` (absolute, in the units of q and
-      v, default 1e-10) on q and v).
+      v, default 1e-10) on q and v).  For both methods ``rtol``/``atol`` bound the **local**
+      error, the error each step makes; the global error at the end is a small multiple of
+      the tolerance on regular motions and grows without such a bound on chaotic ones
+      (``docs/python-guide.md``, "What rtol means").
     * ``u``: inputs (``model.nu`` values): ``None`` (zeros), a callable ``u(t)``, or samples on
       the grid, shape ``(len(t), nu)`` or ``(len(t) − 1, nu)``; held between grid times by
       ``hold`` = ``"zoh"`` (sample k on ``[t_k, t_k+1)``) or ``"linear"`` (interpolated).
@@ -123,7 +126,11 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
       less work, no error check; see :mod:`ncgen.runtime.stepper_checks`).  With ``rtol``
       (``atol`` default ``rtol``) the stepper chooses its steps instead (Richardson error
       estimate; ``order=4``: extrapolated and projected, ``order=2``: plain RATTLE steps),
-      at most ``max_steps`` step attempts per output interval.  ``backend``, ``linear_solver`` and ``progress`` are
+      at most ``max_steps`` step attempts per output interval; a shadow run at 10× looser
+      tolerances estimates the global error (``estimate=False`` skips it), and the run warns
+      (:class:`~ncgen.errors.AccuracyWarning`) where that estimate ends above 100× the
+      tolerance and raises where it passes 1 % of the model's size (``check=False``: neither).
+      ``backend``, ``linear_solver`` and ``progress`` are
       IDAS's only.
 
     Raises :class:`~ncgen.errors.SimulationError` if IDAS fails; it names the time reached
