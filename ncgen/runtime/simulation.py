@@ -29,8 +29,8 @@ METHODS = ("idas", "stepper")
 CHUNKS = 20
 #: Largest ``nq · nc`` that ``project="auto"`` watches (an SVD of A per output time).
 AUTO_MAX_SIZE = 100_000
-#: Output intervals per IDAS call at most while watching for singular configurations
-#: (``project="auto"``; shorter where ``σ_min/σ_max`` of A falls towards the limit).
+#: Output intervals of the first IDAS call while watching for singular configurations
+#: (``project="auto"``; later chunks are sized from how fast ``σ_min/σ_max`` of A changes).
 WATCHED_CHUNK = 10
 #: IDAS steps per output interval at most while watching (``project="auto"`` or ``True``):
 #: IDAS can spend its whole ``max_steps`` creeping up to a singular configuration.  A chunk
@@ -315,9 +315,9 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
     chunk is retried one interval at a time, to keep every state before the failure
     (watching: only its first interval, then chunks again).
     With a ``projector`` (``project`` True or ``"auto"``, see :func:`simulate`) every output
-    configuration is watched (``σ_min/σ_max`` of A): a chunk is at most :data:`WATCHED_CHUNK`
-    intervals and ends about halfway to where that ratio, extrapolated from the last two
-    outputs, would reach the near-singular limit;
+    configuration is watched (``σ_min/σ_max`` of A): the first chunk is at most
+    :data:`WATCHED_CHUNK` intervals, later ones end about halfway to where that ratio would
+    reach the near-singular limit if it fell at the fastest rate seen so far;
     a chunk that reaches it anyway is cut at the last output before; every interval that
     starts or ends at a near-singular configuration, or that IDAS fails on not far from one
     (:data:`FAILING_NEAR_SINGULAR`), is crossed by ``bridge`` instead, from the projected
@@ -344,15 +344,23 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
     def near(i, limit=NEAR_SINGULAR) -> bool:
         return ratio(i) < limit * projector.scale
 
+    speed = [np.nan]                      # the fastest change of that ratio seen, per output interval
+
     def chunk(k) -> int:
         """Intervals of the next IDAS call from output k (see above)."""
         if not watching:
             return full
-        n = min(full, WATCHED_CHUNK)
-        drop = ratio(k - 1) - ratio(k) if k > 0 else 0.0
-        if drop > 0:
-            n = int(min(n, max(1, 0.5 * (ratio(k) - NEAR_SINGULAR * projector.scale) / drop)))
-        return n
+        if not np.isfinite(speed[0]):
+            return min(full, WATCHED_CHUNK)
+        room = ratio(k) - NEAR_SINGULAR * projector.scale
+        n = min(full, max(1.0, 0.5 * room / max(speed[0], 1e-300)))
+        return full if n == full else 2 ** int(math.log2(n))     # few lengths: one integrator each
+
+    def observe(k0, k):
+        """Update ``speed`` from the ratios at outputs k0 ... k."""
+        r = np.array([ratio(i) for i in range(k0, k + 1)])
+        if len(r) > 1:
+            speed[0] = np.nanmax([np.max(np.abs(np.diff(r))), 0.0 if np.isnan(speed[0]) else speed[0]])
 
     def bridged(k) -> int:
         nonlocal since
@@ -394,6 +402,7 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
                         k = single(k)
                 if watching:
                     first = next((i for i in range(k0 + 1, k + 1) if near(i)), None)
+                    observe(k0, k if first is None else first)
                     if first is not None:            # cut before it, cross it by the bridge
                         k = bridged(first - 1)
         except ChunkFailure as last:
