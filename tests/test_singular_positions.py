@@ -185,3 +185,19 @@ def test_a_failing_kkt_start_is_a_simulation_error(monkeypatch):
         nc.simulate(model, 1.0, 0.01, rtol=1e-8)
     e = info.value
     assert 0.2 <= e.time <= 0.3 and e.trajectory is not None and len(e.trajectory) > 1
+
+
+def test_watching_leaves_a_regular_run_alone():
+    """A model far from any singular configuration, with more IDAS steps per output interval
+    than the watched limit (a stiff spring, 1 s outputs): the default run lifts the limit and
+    gives IDAS's own result (project=False), bridging nothing."""
+    s = nc.System("stiff_watch", gravity=(0.0, 0.0, -9.81))
+    bar = s.add_bar("bar", "rr", mass=1.0, ends=[s.ground.point((0.0, 0.0, 0.0)), (1.0, 0.0, 0.0)])
+    mass = s.add_point("mass", mass=0.5, position=(1.25, 0.0, 0.0), velocity=(0.0, 0.0, 0.3))
+    s.add_force(nc.Spring(bar, (0.5, 0.0, 0.0), mass, (0.0, 0.0, 0.0), k=1e4, rest_length=0.25))
+    model = s.build()
+    watched = nc.simulate(model, 4.0, 1.0, rtol=1e-10, atol=1e-12)
+    plain = nc.simulate(model, 4.0, 1.0, rtol=1e-10, atol=1e-12, project=False)
+    assert watched.info["stats"]["rattle_intervals"] == 0 and watched.info["projected_from"] is None
+    assert watched.info["stats"]["nsteps"] > 4 * simulation.WATCHED_MAX_STEPS
+    np.testing.assert_allclose(watched.q, plain.q, rtol=0, atol=1e-9)
