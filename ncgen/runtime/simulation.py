@@ -110,7 +110,7 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
       the branch.  ``info["projected_from"]`` is the first such output time,
       ``info["stats"]["rattle_intervals"]`` their number.  The N four-bar of the IFToMM
       benchmark A02 over 10 s (eight flat positions) then stays within 2e-7 m of the exact
-      motion at ``rtol=1e-11`` (1e-6 m at ``1e-10``) in 1–5 s for N = 1, 2, 10
+      motion at ``rtol=1e-11`` (2e-6 m at ``1e-10``) in 1–5 s for N = 1, 2, 10
       (``tests/test_singular_positions.py``).  ``True``: the same, with one IDAS call per
       output interval and the state projected after each.  ``False``: IDAS alone.
     * ``method="stepper"``: the compiled fixed-step RATTLE stepper (generated C, Newton loop
