@@ -77,3 +77,8 @@ class SimulationError(NcgenError):
         super().__init__(message)
         self.time = time
         self.trajectory = trajectory
+
+
+class AccuracyWarning(UserWarning):
+    """A run that completed but whose own error estimate says it is less accurate than its
+    tolerances ask (e.g. the stepper with ``rtol`` on a motion along which errors grow)."""

@@ -8,6 +8,7 @@ import warnings
 import casadi as ca
 import numpy as np
 
+from ncgen.assembly.drive_assembly import assemble_drives
 from ncgen.assembly.contacts import contact_functions, contact_specs, contact_terms, smooth_forces
 from ncgen.assembly.functions import system_functions
 from ncgen.assembly.initial_state import consistent_state
@@ -49,7 +50,8 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     correction, relative to the system's size, that making the initial state consistent
     may apply; beyond it the build fails and says where.  ``assemble=True``: the members'
     initial poses are only a guess; Newton moves them onto the constraints (drives at
-    ``t0`` included) without limit, keeping the coordinates named in ``fix``
+    ``t0`` included, continued from the given poses to their values at ``t0``, before the
+    redundancy checks: :mod:`ncgen.assembly.drive_assembly`) without limit, keeping the coordinates named in ``fix``
     (:func:`ncgen.assembly.kinematics.resolve_fix`) and their rates as given.  Joints
     given at world points hold in the given poses by construction; what needs assembling
     is a drive or coordinate driver that prescribes another position at ``t0``.  To
@@ -102,6 +104,8 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     p0 = np.concatenate([v for _, v in system.parameters.values()]) if system.parameters else np.zeros(0)
     limits.check(p0, where=f"system {system.name!r}: ")
 
+    if assemble:                    # drives move the mechanism first: the checks below see where they put it
+        q_init = assemble_drives(system, ctx, lambda c: constraint_rows(system, c, plan)[1], q_init, p0, t0, fixed)
     A_fn = ca.Function("A", [ctx.t, ctx.q, ctx.p], [ca.jacobian(ca.vertcat(*rows), ctx.q)]) \
         if rows else None
     dependent = dependent_rows(np.array(A_fn(t0, q_init, p0)) if A_fn else np.zeros((0, layout.nq)))

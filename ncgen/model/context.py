@@ -36,6 +36,8 @@ class Context:
         self._q_local: dict[str, ca.SX] = {}
         self._v_local: dict[str, ca.SX] = {}
         self._instances: dict[tuple, tuple] = {}
+        #: joint name -> f(drive expression) replacing it (assembly by continuation of the drives)
+        self.drive_blend: dict = {}
         for name in system.members:
             idx = layout.member_indices(name)
             b = layout.member_constant(name)

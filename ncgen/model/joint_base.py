@@ -100,8 +100,11 @@ class Joint:
         raise NotImplementedError
 
     def drive_expr(self, ctx) -> ca.SX:
-        """The drive as a scalar CasADi expression of t and the parameters."""
-        return ctx.expression(self.drive, 1, f"{self.label}: drive ({self.drive_meaning})", inputs=False)
+        """The drive as a scalar CasADi expression of t and the parameters (passed through
+        ``ctx.drive_blend[name]`` where the assembly continues it from the measured value)."""
+        expr = ctx.expression(self.drive, 1, f"{self.label}: drive ({self.drive_meaning})", inputs=False)
+        blend = ctx.drive_blend.get(self.name)
+        return expr if blend is None else blend(expr)
 
     # ------------------------------------------------------------- arguments
     def vector(self, key: str) -> np.ndarray:

@@ -29,6 +29,8 @@ _CAUSES = {
     "IDA_REP_RES_ERR": "the DAE residual repeatedly returned errors (non-finite forces or inputs)",
     "KKT_FAIL": "the accelerations and multipliers (the KKT system) are not finite at the start of the "
                 "interval, even by least squares: the forces, inputs or constraint functions are not finite",
+    "RATTLE_FAIL": "IDAS cannot cross this interval next to a singular configuration and the RATTLE "
+                   "steps that stand in for it failed too (see the message; a larger rtol/atol can help)",
     "IDA_TOO_MUCH_ACC": "the tolerances are too small for double precision: use a larger rtol/atol",
 }
 

@@ -65,16 +65,13 @@ class ChunkedIDAS:
     expand: bool
     algebraic: Callable | None = None
     stats: dict = field(default_factory=lambda: dict.fromkeys(STAT_KEYS, 0))
-    restarts: int = 0     # intervals redone from the previous output time (ncgen.runtime.simulation)
-    rejected_restarts: int = 0   # ... whose result a RATTLE check rejected (another branch)
-    rejected_steps: int = 0      # output intervals next to a singular configuration rejected likewise
 
     def __post_init__(self):
         self.nx = self.dae.size1_in(1)
         self.nz = self.dae.size1_in(2)
         self.np = self.dae.size1_in(4)
         self.oracle = self._shifted_oracle()
-        self._integrators: dict[int, ca.Function] = {}
+        self._integrators: dict[tuple[int, int], ca.Function] = {}
 
     def _input(self, column, t):
         """The input value at absolute time ``t`` from an interval's control column."""
@@ -94,30 +91,34 @@ class ChunkedIDAS:
         return ca.Function("ncgen_shifted_dae", [tau, y, z, P, U],
                            [ode - xdot_s, alg, ca.MX(0, 1), ca.MX(0, 1)], ca.dyn_in(), ca.dyn_out())
 
-    def integrator(self, n: int) -> ca.Function:
-        """The integrator over ``n`` grid intervals (built on first use)."""
-        if n not in self._integrators:
+    def integrator(self, n: int, max_steps: int | None = None) -> ca.Function:
+        """The integrator over ``n`` grid intervals, at most ``max_steps`` (default
+        ``self.max_steps``) steps per interval (built on first use)."""
+        max_steps = self.max_steps if max_steps is None else min(max_steps, self.max_steps)
+        if (n, max_steps) not in self._integrators:
             opts = {"calc_ic": False, "reltol": self.rtol, "abstol": self.atol,
-                    "max_num_steps": self.max_steps, "suppress_algebraic": True,
+                    "max_num_steps": max_steps, "suppress_algebraic": True,
                     "linear_solver": self.linear_solver}
             if self.expand:
                 opts["expand"] = True
-            self._integrators[n] = ca.integrator(f"ncgen_idas_{n}", "idas", self.oracle, 0.0,
-                                                 [self.h * k for k in range(1, n + 1)], opts)
-        return self._integrators[n]
+            self._integrators[n, max_steps] = ca.integrator(f"ncgen_idas_{n}", "idas", self.oracle, 0.0,
+                                                            [self.h * k for k in range(1, n + 1)], opts)
+        return self._integrators[n, max_steps]
 
     def xdot(self, t: float, x, z, column, p) -> np.ndarray:
         """``ẋ = f(t, x, z, u(t), p)``."""
         return np.array(self.dae(t, x, z, self._input(column, t), p)[0]).reshape(-1)
 
-    def advance(self, t_s: float, x, z, columns: np.ndarray, p) -> tuple[np.ndarray, np.ndarray]:
+    def advance(self, t_s: float, x, z, columns: np.ndarray, p, max_steps: int | None = None
+                ) -> tuple[np.ndarray, np.ndarray]:
         """States ``(X, Z)`` at the ``n = columns.shape[1]`` grid times after ``t_s``, shapes
-        ``(n, nx)`` and ``(n, nz)``; raises :class:`ChunkFailure`."""
+        ``(n, nx)`` and ``(n, nz)``, at most ``max_steps`` steps per interval (default
+        ``self.max_steps``); raises :class:`ChunkFailure`."""
         n = columns.shape[1]
         if self.algebraic is not None:
             z = self.algebraic(t_s, x, self._input(columns[:, 0], t_s))
         xdot = self.xdot(t_s, x, z, columns[:, 0], p)
-        F = self.integrator(n)
+        F = self.integrator(n, max_steps)
         log = io.StringIO()
         try:
             with contextlib.redirect_stderr(log):

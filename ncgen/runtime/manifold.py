@@ -3,8 +3,12 @@
 IDAS integrates the index-1 DAE (Baumgarte-stabilised acceleration constraints), so the
 positions drift off ``Φ = 0`` by the integration error; where the constraint Jacobian
 loses rank (a parallelogram passing its flat position, where the crossed branch meets the
-physical one) that drift is enough to leave the physical branch.  After every output
-interval the runner therefore projects the state back, in the mass metric:
+physical one) that drift is enough to leave the physical branch.  The runner
+(:func:`ncgen.runtime.simulation.simulate`, ``project``) therefore watches how close ``A``
+is to losing rank (:meth:`ManifoldProjector.near_singular`), hands the intervals next to a
+singular configuration to RATTLE (:mod:`ncgen.runtime.rattle_bridge`), and projects the
+state back before them (and, with ``project=True``, after every output interval), in the
+mass metric:
 
     positions:  q ← q − M⁻¹Aᵀ (A M⁻¹ Aᵀ)⁺ Φ        (Gauss–Newton, a few iterations)
     velocities: v ← v − M⁻¹Aᵀ (A M⁻¹ Aᵀ)⁺ (A v + Φ_t)
@@ -22,9 +26,16 @@ import numpy as np
 
 #: Singular values of ``A M⁻¹ Aᵀ`` below this fraction of the largest are treated as zero.
 RCOND = 1e-10
-#: ``σ_min/σ_max`` of ``A`` below which a configuration counts as near-singular (an IDAS
-#: failure there is recovered from, see :func:`ncgen.runtime.simulation.simulate`).
+#: ``σ_min/σ_max`` of ``A`` below which a configuration counts as near-singular (IDAS is
+#: replaced there, see :func:`ncgen.runtime.simulation.simulate`), for a model that starts
+#: well-conditioned; scaled by the starting ratio over :data:`WELL_CONDITIONED` where that is
+#: smaller (a long chain of parallelograms is less well conditioned everywhere: the N
+#: four-bar of IFToMM A02 starts at 0.38 for N = 1, 0.093 for N = 10, 0.025 for N = 40, and
+#: its ratio is about proportional to the sine of the crank angle; the scaled limit is
+#: reached 5–6° from its flat positions for every N).
 NEAR_SINGULAR = 0.05
+#: Starting ``σ_min/σ_max`` of ``A`` from which the limits are not scaled down.
+WELL_CONDITIONED = 0.4
 #: Gauss–Newton iterations of the position projection at most.
 MAX_ITER = 8
 
@@ -43,6 +54,22 @@ class ManifoldProjector:
         self.factor = model.mass_factor
         self.Minv = self.factor.solve_numeric(np.eye(model.nq)) if self.active and self.factor.regular else None
         self.counts = {"position_projections": 0, "velocity_projections": 0}
+        self.scale = 1.0
+
+    def ratio(self, t: float, x: np.ndarray) -> float:
+        """``σ_min/σ_max`` of ``A`` at ``x`` (1 where ``A`` is empty or not finite)."""
+        if not self.active:
+            return 1.0
+        A = self._A(t, x[:self.nq])
+        if not np.all(np.isfinite(A)):
+            return 1.0
+        s = np.linalg.svd(A, compute_uv=False)
+        return float(s[-1] / s[0]) if np.all(np.isfinite(s)) and s[0] > 0 else 1.0
+
+    def start(self, t: float, x: np.ndarray):
+        """Scale the near-singular limits by this starting configuration's ``σ_min/σ_max``
+        over :data:`WELL_CONDITIONED`, where below 1."""
+        self.scale = min(1.0, self.ratio(t, x) / WELL_CONDITIONED)
 
     def _phi(self, t, q):
         return np.array(self.f["phi"](t, q, self.p), dtype=float).reshape(-1)
@@ -57,15 +84,9 @@ class ManifoldProjector:
 
     def near_singular(self, t: float, x: np.ndarray, ratio: float | None = None) -> bool:
         """Whether ``A`` at ``x`` is close to losing rank: ``σ_min/σ_max`` below ``ratio``
-        (default :data:`NEAR_SINGULAR`)."""
-        if not self.active:
-            return False
-        A = self._A(t, x[:self.nq])
-        if not np.all(np.isfinite(A)):
-            return False
-        s = np.linalg.svd(A, compute_uv=False)
+        (default :data:`NEAR_SINGULAR`) times the scale set by :meth:`start`."""
         limit = NEAR_SINGULAR if ratio is None else ratio
-        return bool(np.all(np.isfinite(s)) and s[0] > 0 and s[-1] < limit * s[0])
+        return self.ratio(t, x) < limit * self.scale
 
     def __call__(self, t: float, x: np.ndarray) -> np.ndarray:
         """The projected state (``x`` itself where it is not finite or the solve fails: the

@@ -4,38 +4,53 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 
 import numpy as np
 
 from ncgen.assembly.initial_state import consistent_state
-from ncgen.errors import NcgenError, SimulationError
+from ncgen.codegen.load import NoCompilerWarning
+from ncgen.errors import CompilerNotFound, NcgenError, SimulationError
 from ncgen.errors import ModelError
 from ncgen.runtime.dae import load_dae
 from ncgen.runtime.diagnose import explain, shift_time
 from ncgen.runtime.idas import ChunkedIDAS, ChunkFailure
 from ncgen.runtime.inputs import hold_columns, input_samples, parameter_values, time_grid
-from ncgen.runtime.manifold import ManifoldProjector, robust_algebraic
+from ncgen.runtime.manifold import NEAR_SINGULAR, ManifoldProjector, robust_algebraic
 from ncgen.runtime.progress import Progress
-from ncgen.runtime.rattle_bridge import RattleFailure, rattle_interval
+from ncgen.runtime.rattle_bridge import RattleFailure, compiled_interval, rattle_interval
 from ncgen.runtime.stepper import MAX_HALVINGS, MAX_ITER, TOL, simulate_stepper
+from ncgen.runtime.stepper_library import load_stepper
 from ncgen.runtime.trajectory import Trajectory
 from ncgen.validation import as_scalar, as_vector
 
 METHODS = ("idas", "stepper")
 #: The run is split into at most this many chunks (progress updates; see ncgen.runtime.idas).
 CHUNKS = 20
-#: ``σ_min/σ_max`` of A below which ``project="auto"`` switches to projecting.
-AUTO_SINGULAR = 0.05
 #: Largest ``nq · nc`` that ``project="auto"`` watches (an SVD of A per output time).
 AUTO_MAX_SIZE = 100_000
-#: Output intervals per IDAS call when projecting (``simulate(project=True)``).
-PROJECTED_CHUNK = 1
-#: Largest number of RATTLE steps across one output interval (see ``_bridge``).
+#: Output intervals of the first IDAS call while watching for singular configurations
+#: (``project="auto"``; later chunks are sized from how fast ``σ_min/σ_max`` of A changes).
+WATCHED_CHUNK = 10
+#: IDAS steps per output interval at most while watching (``project="auto"`` or ``True``):
+#: IDAS can spend its whole ``max_steps`` creeping up to a singular configuration.  A chunk
+#: that fails is retried interval by interval; an interval that needs more steps away from
+#: a singular configuration gets the full ``max_steps`` and lifts the limit for the run.
+WATCHED_MAX_STEPS = 1_000
+#: ``σ_min/σ_max`` of A at the start of an interval that IDAS fails on (projecting), below
+#: which the failure is put down to a singular configuration ahead and the interval bridged.
+FAILING_NEAR_SINGULAR = 0.25
+#: Smallest tolerance of the compiled stepper standing in for IDAS next to a singular
+#: configuration.  There its error estimate has a round-off floor (the Newton residual
+#: divided by σ_min of A, which shrinks with the step), so tighter tolerances make the step
+#: collapse; it is of order 4 against an order-2 estimate, so its actual error is 10–100×
+#: below the tolerance (the N four-bar of IFToMM A02: 4e-11 m over 2 s at 1e-9).
+BRIDGE_MIN_TOL = 1e-9
+#: Loosest tolerance it is retried with where its step still collapses (``_bridge._stepped``).
+BRIDGE_MAX_TOL = 1e-6
+#: Largest number of NumPy RATTLE steps across one output interval (``_bridge`` without a
+#: C compiler).
 BRIDGE_MAX_STEPS = 20_000
-#: RATTLE steps (at least) of the check of an IDAS restart across a singular configuration,
-#: and the relative difference it accepts.
-BRIDGE_CHECK_STEPS = 50
-BRIDGE_CHECK_TOL = 1e-4
 
 
 def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: float | None = None,
@@ -58,7 +73,10 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
 
     * ``method``: ``"idas"`` (SUNDIALS IDAS through CasADi, variable-order BDF with error
       control ``rtol`` (relative, default 1e-8) and ``atol`` (absolute, in the units of q and
-      v, default 1e-10) on q and v).
+      v, default 1e-10) on q and v).  For both methods ``rtol``/``atol`` bound the **local**
+      error, the error each step makes; the global error at the end is a small multiple of
+      the tolerance on regular motions and grows without such a bound on chaotic ones
+      (``docs/python-guide.md``, "What rtol means").
     * ``u``: inputs (``model.nu`` values): ``None`` (zeros), a callable ``u(t)``, or samples on
       the grid, shape ``(len(t), nu)`` or ``(len(t) − 1, nu)``; held between grid times by
       ``hold`` = ``"zoh"`` (sample k on ``[t_k, t_k+1)``) or ``"linear"`` (interpolated).
@@ -77,24 +95,24 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
       terminal and the run takes more than a second.
     * ``max_steps``: IDAS steps allowed per output interval; ``linear_solver``: CasADi's
       sparse solver for the Newton systems (``"csparse"``, ``"qr"``, ...).
-    * ``project`` (IDAS): ``True``: after every output interval, project ``q`` and ``v`` back
-      onto ``Φ = 0`` and ``A v + Φ_t = 0`` in the mass metric with a rank-robust (truncated)
-      pseudo-inverse (:mod:`ncgen.runtime.manifold`), integrating one output interval per
-      IDAS call; an interval that IDAS cannot integrate next to a singular configuration
-      (where the KKT matrix is singular) is redone from the previous output time over two
-      intervals, else crossed by rank-robust RATTLE steps
-      (:mod:`ncgen.runtime.rattle_bridge`); an interval next to a near-singular configuration
-      is checked against a coarse RATTLE run and bridged if IDAS went onto another branch.
-      This keeps a linkage on its physical branch through singular positions (the N four-bar
-      of the IFToMM benchmark A02 over 10 s: within 4–5 µm of the exact motion at
-      ``rtol=1e-10``, 0.6 µm at ``rtol=1e-11``; ``tests/test_singular_positions.py``) but
-      costs an IDAS restart per output interval.
-      ``False``: IDAS over chunks of many intervals, the state never changed.  ``"auto"``
-      (default): as ``False`` until an output configuration is near-singular
-      (``σ_min/σ_max`` of ``A`` below :data:`AUTO_SINGULAR`) or a chunk fails, then that chunk
-      is redone and the rest of the run made as ``True`` (``info["project"]`` says which).
-      The check costs an SVD of ``A`` per output time, so ``"auto"`` watches only models
-      with ``nq · nc ≤`` :data:`AUTO_MAX_SIZE`; larger ones need ``project=True`` explicitly.
+    * ``project`` (IDAS), for linkages that pass singular positions (where ``A`` loses rank
+      and another branch of ``Φ = 0`` meets the physical one, e.g. a parallelogram passing
+      flat; there the KKT matrix of the index-1 DAE is singular and IDAS either fails or
+      drifts onto the other branch).  ``"auto"`` (default): the run watches ``σ_min/σ_max``
+      of ``A`` at every output time (an SVD each; only models with ``nq · nc ≤``
+      :data:`AUTO_MAX_SIZE`), in IDAS chunks of at most :data:`WATCHED_CHUNK` intervals,
+      shorter as the ratio falls; every output interval that starts or ends near-singular
+      (ratio below :data:`~ncgen.runtime.manifold.NEAR_SINGULAR`, scaled by the starting
+      ratio, see :mod:`ncgen.runtime.manifold`), or that IDAS fails on close to one, is
+      crossed instead by the model's compiled error-controlled RATTLE stepper (order 4,
+      tolerance ``max(rtol, atol, 1e-9)``, from the state projected onto both constraint
+      levels; compiled on first use; :mod:`ncgen.runtime.rattle_bridge`), which stays on
+      the branch.  ``info["projected_from"]`` is the first such output time,
+      ``info["stats"]["rattle_intervals"]`` their number.  The N four-bar of the IFToMM
+      benchmark A02 over 10 s (eight flat positions) then stays within 2e-7 m of the exact
+      motion at ``rtol=1e-11`` (2e-6 m at ``1e-10``) in 1–5 s for N = 1, 2, 10
+      (``tests/test_singular_positions.py``).  ``True``: the same, with one IDAS call per
+      output interval and the state projected after each.  ``False``: IDAS alone.
     * ``method="stepper"``: the compiled fixed-step RATTLE stepper (generated C, Newton loop
       included; :mod:`ncgen.runtime.stepper`), ``substeps`` steps of ``dt / substeps`` per
       output interval, Newton tolerance ``newton_tol`` (both constraint levels hold to it at
@@ -108,7 +126,11 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
       less work, no error check; see :mod:`ncgen.runtime.stepper_checks`).  With ``rtol``
       (``atol`` default ``rtol``) the stepper chooses its steps instead (Richardson error
       estimate; ``order=4``: extrapolated and projected, ``order=2``: plain RATTLE steps),
-      at most ``max_steps`` step attempts per output interval.  ``backend``, ``linear_solver`` and ``progress`` are
+      at most ``max_steps`` step attempts per output interval; a shadow run at 10× looser
+      tolerances estimates the global error (``estimate=False`` skips it), and the run warns
+      (:class:`~ncgen.errors.AccuracyWarning`) where that estimate ends above 100× the
+      tolerance and raises where it passes 1 % of the model's size (``check=False``: neither).
+      ``backend``, ``linear_solver`` and ``progress`` are
       IDAS's only.
 
     Raises :class:`~ncgen.errors.SimulationError` if IDAS fails; it names the time reached
@@ -147,6 +169,8 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
         raise NcgenError(f"project: expected True, False or 'auto', got {project!r}")
     watch = project == "auto" and model.nq * model.nc <= AUTO_MAX_SIZE and model.nc > 0
     projector = ManifoldProjector(model, pv, atol) if project is True or watch else None
+    if projector is not None:
+        projector.start(t0, np.concatenate([q, v]))
     bridge = _bridge(model, runner, pv, rtol, atol) if projector is not None else None
     bar = Progress(t0, t[-1], progress, label=f"simulating {model.name}: ")
     start = time.perf_counter()
@@ -158,8 +182,7 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
     nq, k = model.nq, len(X) - 1
     stats = dict(runner.stats)
     if projector is not None:
-        stats.update(projector.counts, restarts=runner.restarts, rejected_restarts=runner.rejected_restarts,
-                     rejected_steps=runner.rejected_steps, rattle_intervals=bridge.count)
+        stats.update(projector.counts, rattle_intervals=bridge.count, rattle_loosened=bridge.loosened)
     info = {"method": method, "backend": used, "rtol": rtol, "atol": atol, "hold": hold,
             "linear_solver": linear_solver, "stats": stats, "project": project,
             "projected_from": None if projected_from is None else float(t[projected_from]),
@@ -224,128 +247,169 @@ def _algebraic(model, t: float, x, u, p) -> np.ndarray:
 
 
 class _bridge:
-    """IDAS's last resort over one output interval: :func:`~ncgen.runtime.rattle_bridge.rattle_interval`
-    with steps of about ``sqrt(rtol)`` s (at most :data:`BRIDGE_MAX_STEPS`); ``count`` of uses."""
+    """IDAS's stand-in over one output interval next to a singular configuration
+    (:mod:`ncgen.runtime.rattle_bridge`): the model's compiled error-controlled stepper
+    (compiled on first use) with both tolerances ``max(rtol, atol, BRIDGE_MIN_TOL)``, or,
+    without a C compiler, NumPy RATTLE steps of about ``sqrt(rtol)`` s (at most
+    :data:`BRIDGE_MAX_STEPS`); ``count`` of uses."""
 
     def __init__(self, model, runner: ChunkedIDAS, p, rtol: float, atol: float):
         self.model, self.runner, self.p, self.rtol, self.atol = model, runner, p, rtol, atol
-        self.count = 0
+        self.tol = max(rtol, atol, BRIDGE_MIN_TOL)
+        self.count = self.loosened = 0
+        self.stepper = None            # the compiled stepper; False: no C compiler
+        self.h_next, self.t_next = 0.0, None
+
+    def _compiled(self):
+        if self.stepper is None:
+            try:
+                self.stepper = load_stepper(self.model)
+            except CompilerNotFound as e:
+                warnings.warn(f"no C compiler found ({e}): IDAS is replaced next to singular configurations by "
+                              f"NumPy RATTLE steps of about sqrt(rtol) s, slower and less accurate than the "
+                              f"compiled stepper; install gcc", NoCompilerWarning, stacklevel=4)
+                self.stepper = False
+        return self.stepper
+
+    def _stepped(self, stepper, t0: float, t1: float, x, u0, u1):
+        """The compiled stepper over ``[t0, t1]``; where its step collapses (the round-off
+        floor of its error estimate where a step crosses the singular configuration), retried
+        with 10× looser tolerances up to :data:`BRIDGE_MAX_TOL` (``loosened`` counts it)."""
+        lam = _algebraic(self.model, t0, x, u0, self.p)[self.model.nq:]
+        U = np.vstack([u0, u1]) if self.model.nu else None
+        h0 = self.h_next if self.t_next == t0 else 0.0
+        tol = self.tol
+        while True:
+            try:
+                x1, self.h_next = compiled_interval(stepper, x, lam, t0, t1 - t0, U, self.runner.hold == "linear",
+                                                    self.p, tol, tol, h0)
+                self.t_next = t1
+                return x1
+            except RattleFailure:
+                if tol * 10 > BRIDGE_MAX_TOL:
+                    raise
+                tol, h0 = 10 * tol, 0.0
+                self.loosened += 1
 
     def __call__(self, t0: float, t1: float, x, column):
-        n = min(BRIDGE_MAX_STEPS, max(1, math.ceil((t1 - t0) / math.sqrt(self.rtol))))
-        u = self.runner._input(column, t0)
+        """``(x1, z1)``: the state and algebraic state at ``t1`` from ``x`` at ``t0``."""
+        u0, u1 = self.runner._input(column, t0), self.runner._input(column, t1)
+        stepper = self._compiled()
         try:
-            x1 = rattle_interval(self.model, t0, x, u, self.p, t1 - t0, n, self.atol)
+            if stepper:
+                x1 = self._stepped(stepper, t0, t1, x, u0, u1)
+            else:
+                n = min(BRIDGE_MAX_STEPS, max(1, math.ceil((t1 - t0) / math.sqrt(self.rtol))))
+                x1 = rattle_interval(self.model, t0, x, u0, self.p, t1 - t0, n, self.atol)
         except RattleFailure as e:
             raise ChunkFailure("RATTLE_FAIL", str(e), "rattle") from None
         self.count += 1
-        return x1, _algebraic(self.model, t1, x1, self.runner._input(column, t1), self.p)
-
-    def agrees(self, t0: float, t1: float, x0, x1, column) -> bool:
-        """Whether ``x1`` (IDAS across a singular configuration) is where a coarse RATTLE run
-        from ``x0`` lands (input held at its ``t0`` value), within :data:`BRIDGE_CHECK_TOL` relative: IDAS can cross onto
-        another branch there (the velocities then differ at order one)."""
-        n = min(BRIDGE_MAX_STEPS, max(BRIDGE_CHECK_STEPS, math.ceil((t1 - t0) / 1e-4)))
-        try:
-            coarse = rattle_interval(self.model, t0, x0, self.runner._input(column, t0), self.p, t1 - t0, n,
-                                     self.atol)
-        except RattleFailure:
-            return True                       # no second opinion: keep IDAS's answer
-        return bool(np.max(np.abs(coarse - x1)) <= BRIDGE_CHECK_TOL * (1.0 + np.max(np.abs(x1))))
+        return x1, _algebraic(self.model, t1, x1, u1, self.p)
 
 
 def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=None, bridge=None, auto=False):
     """States on the grid up to the end or the first failure: ``(X, Z, failure or None,
-    index of the output time from which the run was projected, or None)``.
+    index of the first output time from which the run was bridged or projected, or None)``.
 
-    Unprojected: IDAS over chunks of several output intervals; a failed chunk is retried
-    one interval at a time, to keep every state before the failure.  Projected (see
-    :func:`simulate`, ``project``): chunks of :data:`PROJECTED_CHUNK` intervals, the state
-    projected at the end of each, an interval next to a near-singular configuration
-    checked against a coarse RATTLE run (bridged if they disagree), one that fails there
-    redone from the previous output time over two intervals (kept if a coarse RATTLE run
-    agrees, see ``_bridge.agrees``), else crossed by ``bridge``.
-    ``auto``: unprojected until a chunk meets a near-singular configuration, or an interval
-    fails next to one; then that chunk (interval) is redone projected, and so is the rest."""
+    IDAS over chunks of several output intervals (one with ``project=True``); a failed
+    chunk is retried one interval at a time, to keep every state before the failure
+    (watching: only its first interval, then chunks again).
+    With a ``projector`` (``project`` True or ``"auto"``, see :func:`simulate`) every output
+    configuration is watched (``σ_min/σ_max`` of A): the first chunk is at most
+    :data:`WATCHED_CHUNK` intervals, later ones end about halfway to where that ratio would
+    reach the near-singular limit if it fell at the fastest rate seen so far;
+    a chunk that reaches it anyway is cut at the last output before; every interval that
+    starts or ends at a near-singular configuration, or that IDAS fails on not far from one
+    (:data:`FAILING_NEAR_SINGULAR`), is crossed by ``bridge`` instead, from the projected
+    state.  ``auto=False``: the state is also projected after every interval."""
     n_int = len(t) - 1
-    projecting = projector is not None and not auto
+    watching = projector is not None
+    full = 1 if watching and not auto else max(1, math.ceil(n_int / CHUNKS))
     X = np.empty((len(t), len(x0)))
     Z = np.empty((len(t), len(z0)))
+    R = np.full(len(t), np.nan)          # σ_min/σ_max of A at the output times (watching)
     X[0], Z[0] = x0, z0
-    since = 0 if projecting else None
+    since = None if auto or not watching else 0
+    steps = [WATCHED_MAX_STEPS if watching else None]
 
-    def advance(k, n):
-        X[k + 1:k + n + 1], Z[k + 1:k + n + 1] = runner.advance(t[k], X[k], Z[k], columns[:, k:k + n], p)
+    def advance(k, n, max_steps=None):
+        X[k + 1:k + n + 1], Z[k + 1:k + n + 1] = runner.advance(t[k], X[k], Z[k], columns[:, k:k + n], p, max_steps)
+        R[k + 1:k + n + 1] = np.nan
 
-    def recover(k, failure: ChunkFailure):
-        """Interval k after IDAS failed on it, near a singular configuration: redone from
-        t[k−1], else bridged (projecting).  Elsewhere the failure stands."""
-        if not projecting or not projector.near_singular(t[k], X[k]):
-            raise failure
-        if k > 0:
-            kept = X[k].copy(), Z[k].copy()
-            try:
-                advance(k - 1, 2)            # across the start that failed (a singular configuration)
-                runner.restarts += 1
-                if bridge.agrees(t[k - 1], t[k + 1], X[k - 1], X[k + 1], columns[:, k - 1]):
-                    return
-                runner.rejected_restarts += 1  # IDAS crossed onto another branch: bridge instead
-            except ChunkFailure:
-                pass
-            X[k], Z[k] = kept
+    def ratio(i) -> float:
+        if np.isnan(R[i]):
+            R[i] = projector.ratio(t[i], X[i])
+        return R[i]
+
+    def near(i, limit=NEAR_SINGULAR) -> bool:
+        return ratio(i) < limit * projector.scale
+
+    speed = [np.nan]                      # the fastest change of that ratio seen, per output interval
+
+    def chunk(k) -> int:
+        """Intervals of the next IDAS call from output k (see above)."""
+        if not watching:
+            return full
+        if not np.isfinite(speed[0]):
+            return min(full, WATCHED_CHUNK)
+        room = ratio(k) - NEAR_SINGULAR * projector.scale
+        n = min(full, max(1.0, 0.5 * room / max(speed[0], 1e-300)))
+        return full if n == full else 2 ** int(math.log2(n))     # few lengths: one integrator each
+
+    def observe(k0, k):
+        """Update ``speed`` from the ratios at outputs k0 ... k."""
+        r = np.array([ratio(i) for i in range(k0, k + 1)])
+        if len(r) > 1:
+            speed[0] = np.nanmax([np.max(np.abs(np.diff(r))), 0.0 if np.isnan(speed[0]) else speed[0]])
+
+    def bridged(k) -> int:
+        nonlocal since
+        since = k if since is None else since
+        X[k] = projector(t[k], X[k])
         X[k + 1], Z[k + 1] = bridge(t[k], t[k + 1], X[k], columns[:, k])
+        R[k:k + 2] = np.nan
+        return k + 1
 
-    def checked(k) -> bool:
-        """False if interval k touches a near-singular configuration and a coarse RATTLE run
-        disagrees with IDAS's result (IDAS went onto another branch)."""
-        if not (projector.near_singular(t[k], X[k]) or projector.near_singular(t[k + 1], X[k + 1])):
-            return True
-        return bridge.agrees(t[k], t[k + 1], X[k], X[k + 1], columns[:, k])
-
-    def handle(k, failure: ChunkFailure) -> bool:
-        """Interval k failed: True to redo it projected (auto, near-singular), else recovered
-        or re-raised by :func:`recover`."""
-        if auto and not projecting and projector.near_singular(t[k], X[k], AUTO_SINGULAR):
-            return True
-        recover(k, failure)
-        return False
+    def single(k) -> int:
+        """Interval k by IDAS (first with the watched step limit), else, watching and not far
+        from a singular configuration (:data:`FAILING_NEAR_SINGULAR`), bridged.  An interval
+        that needs more steps than the limit away from one lifts the limit for the run."""
+        try:
+            advance(k, 1, steps[0])
+            return k + 1
+        except ChunkFailure:
+            if watching and near(k, FAILING_NEAR_SINGULAR):
+                return bridged(k)
+            if steps[0] is None:
+                raise
+        advance(k, 1)
+        steps[0] = None
+        return k + 1
 
     k = 0
     while k < n_int:
-        chunk = PROJECTED_CHUNK if projecting else max(1, math.ceil(n_int / CHUNKS))
-        n = min(chunk, n_int - k)
         try:
-            advance(k, n)
-            if projecting and n == 1 and not checked(k):
-                runner.rejected_steps += 1     # IDAS crossed onto another branch: bridge instead
-                X[k + 1], Z[k + 1] = bridge(t[k], t[k + 1], X[k], columns[:, k])
-            if auto and not projecting and any(projector.near_singular(t[i], X[i], AUTO_SINGULAR)
-                                                for i in range(k + 1, k + n + 1)):
-                projecting, since = True, k          # redo this chunk projected
-                continue
-            k += n
-        except ChunkFailure as failure:
-            try:
-                switched = False
-                if n == 1:
-                    switched = handle(k, failure)
-                    k += not switched
-                else:
-                    for _ in range(n):
-                        try:
-                            advance(k, 1)
-                        except ChunkFailure as single:
-                            switched = handle(k, single)
-                            if switched:
-                                break
-                        k += 1
-                if switched:
-                    projecting, since = True, k
-                    continue
-            except ChunkFailure as last:
-                return X[:k + 1], Z[:k + 1], last, since
-        if projecting:
+            if watching and near(k):
+                k = bridged(k)
+            else:
+                k0, n = k, min(chunk(k), n_int - k)
+                try:
+                    advance(k, n, steps[0])
+                    k += n
+                except ChunkFailure:
+                    k = single(k)
+                    while not watching and k < k0 + n:
+                        k = single(k)
+                if watching:
+                    first = next((i for i in range(k0 + 1, k + 1) if near(i)), None)
+                    observe(k0, k if first is None else first)
+                    if first is not None:            # cut before it, cross it by the bridge
+                        k = bridged(first - 1)
+        except ChunkFailure as last:
+            return X[:k + 1], Z[:k + 1], last, since
+        if watching and not auto:
             X[k] = projector(t[k], X[k])
+            R[k] = np.nan
         bar.update(t[k])
     return X, Z, None, since
 

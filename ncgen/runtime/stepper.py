@@ -22,7 +22,9 @@ Two modes:
   component of q and v is within ``atol + rtol |y|`` and continues from the Richardson
   extrapolation (order 4, RATTLE being symmetric) projected onto both constraint levels
   (``order=2``: from the two halves, keeping RATTLE's symplecticity).  Steps end on every
-  output time.
+  output time.  ``rtol`` bounds this local error; a shadow run at 10× looser tolerances
+  estimates the global error (:mod:`ncgen.runtime.stepper_checks`), and the run warns or
+  raises where that estimate says the tolerance was not met.
 
 Inputs: with ``hold="zoh"`` the sample of the output interval, with ``hold="linear"`` the
 interpolated input at the step's midpoint (second order for smooth inputs).  Multipliers in
@@ -38,9 +40,11 @@ import warnings
 import numpy as np
 
 from ncgen.codegen.stepper_package import HALVINGS_LIMIT, MAX_HALVINGS, MAX_ITER, STATS, STATUS, TOL
-from ncgen.errors import NcgenError, SimulationError
+from ncgen.errors import AccuracyWarning, NcgenError, SimulationError
 from ncgen.runtime.inputs import HOLDS
-from ncgen.runtime.stepper_checks import (contact_report, energy_report, error_estimate, is_conservative,
+from ncgen.runtime.stepper_checks import (ERROR_FRACTION, GLOBAL_FACTOR, SHADOW_FACTOR, contact_report,
+                                          energy_report, error_estimate, is_conservative, shadow_estimates,
+                                          shadow_report, untrusted_global_row,
                                           untrusted_row)
 from ncgen.runtime.stepper_library import load_stepper
 from ncgen.runtime.trajectory import NAME_KEYS, Trajectory, derived_outputs
@@ -75,7 +79,8 @@ def simulate_stepper(model, t: np.ndarray, U: np.ndarray, p: np.ndarray, q0: np.
         return _fixed(model, stepper, t, U, p, q0, v0, lam0, hold, substeps, tol, max_iter, max_halvings,
                       check, bool(estimate), conservative)
     return _adaptive(model, stepper, t, U, p, q0, v0, lam0, hold, tol, max_iter, float(rtol),
-                     float(rtol if atol is None else atol), order, int(max_steps), conservative)
+                     float(rtol if atol is None else atol), order, int(max_steps), conservative, check,
+                     bool(estimate))
 
 
 def _check_options(substeps, tol, max_iter, max_halvings, hold, rtol, atol, order, max_steps):
@@ -160,19 +165,24 @@ def _warn_unconverged(model, report: dict) -> None:
 
 
 def _adaptive(model, stepper, t, U, p, q0, v0, lam0, hold, tol, max_iter, rtol, atol, order, max_steps,
-              conservative) -> Trajectory:
+              conservative, check, estimate) -> Trajectory:
     n_out = len(t) - 1
     dt = float(t[1] - t[0])
-    tol = min(tol, max(NEWTON_FRACTION * min(rtol, atol), 1e-14))
     start = time.perf_counter()
-    Q, V, LAM, S, status, rows, h_next = stepper.simulate_adaptive(
-        q0, v0, lam0, float(t[0]), dt, n_out, U if model.nu else None, hold == "linear", p, rtol, atol, 0.0,
-        order == 4, max_steps, not conservative, tol, max_iter)
+
+    def run(rtol, atol):
+        return stepper.simulate_adaptive(q0, v0, lam0, float(t[0]), dt, n_out, U if model.nu else None,
+                                         hold == "linear", p, rtol, atol, 0.0, order == 4, max_steps,
+                                         not conservative, newton_tolerance(rtol, atol, tol), max_iter)
+
+    Q, V, LAM, S, status, rows, h_next = run(rtol, atol)
+    shadow = run(SHADOW_FACTOR * rtol, SHADOW_FACTOR * atol) if estimate and status == 0 else None
     stepping = time.perf_counter() - start
     info = {"method": "stepper", "backend": "compiled", "scheme": "RATTLE" if order == 2 else
             "RATTLE, Richardson-extrapolated and projected", "order": order, "rtol": rtol, "atol": atol,
-            "hold": hold, "tol": tol, "max_iter": max_iter, "max_steps": max_steps, "stepping_time": stepping,
-            "complete": status == 0, "stats": _stats(S[:rows], int(S[:rows, 2].sum()))}
+            "hold": hold, "tol": newton_tolerance(rtol, atol, tol), "max_iter": max_iter, "max_steps": max_steps,
+            "estimate": estimate, "stepping_time": stepping, "complete": status == 0,
+            "stats": _stats(S[:rows], int(S[:rows, 2].sum()))}
     info["stats"]["rejected_steps"] = info["stats"].pop("step_splits")
     traj = _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info, conservative, start)
     if status != 0:
@@ -182,7 +192,43 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, hold, tol, max_iter, rtol, 
                    f"t = {t[rows]:.6g} s is attached to this error as .trajectory.")
         traj.info["message"] = message
         raise SimulationError(message, time=float(t[rows]), trajectory=traj)
+    if shadow is not None:
+        eq, ev = shadow_estimates(Q, V, shadow, rows)
+        traj.info["error_estimate"] = shadow_report(traj, eq, ev, rtol, atol)
+        if check:
+            _check_global(model, traj, eq, rtol, atol)
     return traj
+
+
+def _check_global(model, traj, eq, rtol, atol):
+    """Raise where the global estimate in q passes 1 % of the model's size (as for fixed
+    steps), warn (:class:`~ncgen.errors.AccuracyWarning`) where it passes
+    :data:`~ncgen.runtime.stepper_checks.GLOBAL_FACTOR` × the tolerance."""
+    row = untrusted_global_row(model, eq)
+    if row is not None:
+        kept = traj.head(row + 1)
+        message = (f"simulation of {model.name!r} with the error-controlled stepper (rtol {rtol:g}, atol {atol:g}) "
+                   f"is not trustworthy: the estimated global error in q reached {eq[row]:.3g} m by "
+                   f"t = {traj.t[row + 1]:.6g} s, more than {ERROR_FRACTION:g} of the model's size. rtol bounds "
+                   f"the error of each step; errors that grow along the motion (chaotic or fast-spinning "
+                   f"motion) need a smaller rtol, or the motion cannot be followed that far. The trajectory up "
+                   f"to t = {kept.t[-1]:.6g} s is attached to this error as .trajectory (check=False returns "
+                   f"the whole run unchecked).")
+        kept.info.update(complete=False, message=message)
+        raise SimulationError(message, time=float(kept.t[-1]), trajectory=kept)
+    report = traj.info["error_estimate"]
+    if report["exceeds_tolerance"]:
+        warnings.warn(f"simulation of {model.name!r} with the error-controlled stepper: the estimated global "
+                      f"error at the end ({report['q']:.3g} in q, {report['v']:.3g} in v) is more than "
+                      f"{GLOBAL_FACTOR:g} times the tolerance (rtol {rtol:g}, atol {atol:g}): rtol bounds the "
+                      f"error of each step, and errors grow along this motion; use a smaller rtol if the end "
+                      f"state matters (traj.info['error_estimate'])", AccuracyWarning, stacklevel=4)
+
+
+def newton_tolerance(rtol: float, atol: float, tol: float = TOL) -> float:
+    """The Newton tolerance of an error-controlled run: ``tol``, at most
+    :data:`NEWTON_FRACTION` × ``min(rtol, atol)`` (floored at 1e-14)."""
+    return min(tol, max(NEWTON_FRACTION * min(rtol, atol), 1e-14))
 
 
 def _stats(S: np.ndarray, splits: int) -> dict:
