@@ -76,9 +76,11 @@ DOCS = {
     "mass": ("the constant mass matrix M (sparse; no inputs)",
              {"M": ("M, nq × nq", "kg (kg·m for mixed point/vector entries, kg·m² for vector/vector)")}),
     "Minv": ("application of the constant inverse mass matrix: x = M⁻¹ b (two sparse "
-             "triangular solves with the Cholesky factor of M)",
+             "triangular solves with the Cholesky factor of M); for a singular M (a flat body) "
+             "the pseudo-inverse M⁺ b",
              {"x": ("M⁻¹ b", "m/s²")}),
-    "ode": ("differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ)",
+    "ode": ("differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ) (for a "
+            "singular M, from the augmented mass matrix M + κ AᵀA, exact where A a = γ)",
             {"qdot": ("q̇", "m/s"), "vdot": ("q̈ = a", "m/s²")}),
     "alg": ("algebraic residual of the index-1 DAE: A a − γ + 2α Φ̇ + β² Φ (Baumgarte "
             "stabilised acceleration constraints)",
