@@ -113,3 +113,13 @@ def test_cylindrical_and_prismatic_free_fall_along_the_axis():
         model = s.build()
         a, _ = model.accel(model.q0, model.v0)
         assert np.allclose(a[:3], -9.81 * 0.8 * axis) and np.allclose(a[3:], 0)
+
+
+def test_markers_are_dim_by_n_also_for_one_marker():
+    s = nc.System("one_marker")
+    rod = s.add_bar("rod", mass=1.0, ends=[(0, 0, 0), (0, 0, -2)], velocity=(0.5, 0, 0))
+    rod.add_marker("tip", (1.0, 0, 0))
+    model = s.build()
+    r, rdot = model.markers(model.q0, model.v0)
+    assert r.shape == rdot.shape == (3, 1)
+    assert np.allclose(r[:, 0], [0, 0, -2]) and np.allclose(rdot[:, 0], [0.5, 0, 0])

@@ -238,9 +238,12 @@ class Model:
         return np.atleast_2d(WN).reshape(self.nk, self.nq), np.atleast_2d(WT).reshape(-1, self.nq)
 
     def markers(self, q, v=None):
-        """World positions (and velocities) of the named markers, ``dim × n_markers``."""
+        """``(r, ṙ)``: world positions (m) and velocities (m/s) of the named markers, each
+        ``dim × n_markers`` (columns in ``marker_names`` order, also for one marker)."""
         v = np.zeros(self.nq) if v is None else v
-        return self._call("markers", q=q, v=v)
+        r, rdot = self._call("markers", q=q, v=v)
+        shape = (self.dim, len(self.marker_names))
+        return np.reshape(r, shape), np.reshape(rdot, shape)
 
     def poses(self, q):
         """``(R, p)`` of every member: ``R`` is ``n × dim × dim``, ``p`` is ``n × dim``."""
