@@ -201,7 +201,8 @@ class DofReport:
 
     def __str__(self) -> str:
         red = ", ".join(self.redundant) or "none"
-        return (f"nq = {self.nq} coordinates, nc = {self.nc + len(self.dropped)} constraints, "
+        written = f" ({self.nc + len(self.dropped)} as written, {len(self.dropped)} dropped)" if self.dropped else ""
+        return (f"nq = {self.nq} coordinates, nc = {self.nc} constraints{written}, "
                 f"rank A = {self.rank}, DOF = {self.dof}\nredundant constraints: {red}")
 
 
