@@ -147,15 +147,27 @@ class NLP:
                                     model.q0 if q_init is None else q_init,
                                     np.zeros(model.nq) if v_init is None else v_init, self.q_final, p_num)
         self.guess = guess
-        self.q0 = opti.variable(model.nq) if q_init is None else ca.DM(q_init)
-        self.v0 = opti.variable(model.nq) if v_init is None else ca.DM(v_init)
-        hz = Horizon(t0=t0, T=self.T, p=self.p, q0=self.q0, v0=self.v0, N=ocp.N)
+        joint = getattr(ocp.transcription, "joint_space", False)
+        if joint:                   # the initial node in joint coordinates; q₀ = q(q_j0) holds Φ = 0
+            js = model.joint_space
+            self.x0 = opti.variable(js.nq) if q_init is None else ca.DM(js.positions(q_init))
+            self.w0 = opti.variable(js.nv) if v_init is None else ca.DM(
+                js.rates(q_init if q_init is not None else model.q0, v_init))
+            if v_init is not None and q_init is None:
+                raise OptimizationError("the joint-space form needs the initial q fixed when the initial v is "
+                                        "(or use form='ggl')")
+            self.q0, self.v0 = js.tree_function(model.layout)(self.x0, self.w0)
+            hz = Horizon(t0=t0, T=self.T, p=self.p, q0=self.x0, v0=self.w0, N=ocp.N)
+        else:
+            self.q0 = opti.variable(model.nq) if q_init is None else ca.DM(q_init)
+            self.v0 = opti.variable(model.nq) if v_init is None else ca.DM(v_init)
+            hz = Horizon(t0=t0, T=self.T, p=self.p, q0=self.q0, v0=self.v0, N=ocp.N)
         self.disc = disc = ocp.transcription.build(opti, model, hz)
         for label, e in disc.defects:
             self.constrain(label, "dynamics", e)
-        if q_init is None:
+        if not joint and q_init is None:
             self.constrain("initial position invariant Φ(q₀) = 0", "invariant", f["phi"](t0, self.q0, self.p))
-        if q_init is None or v_init is None:
+        if not joint and (q_init is None or v_init is None):
             vel = ca.mtimes(f["A"](t0, self.q0, self.p), self.v0) + f["phi_t"](t0, self.q0, self.p)
             if ca.symvar(vel):
                 self.constrain("initial velocity invariant A(q₀) v₀ + Φ_t = 0", "invariant", vel)
@@ -168,12 +180,13 @@ class NLP:
         else:
             opti.minimize(self._objective())
         # initial values
-        disc.set_guess(opti, guess)
+        start = disc.set_guess(opti, guess)
         g0 = np.array([t0])
+        x0, w0 = (self.x0, self.w0) if joint else (self.q0, self.v0)
         if q_init is None:
-            opti.set_initial(self.q0, guess.q(g0)[0])
+            opti.set_initial(x0, start[0] if joint else guess.q(g0)[0])
         if v_init is None:
-            opti.set_initial(self.v0, guess.v(g0)[0])
+            opti.set_initial(w0, start[1] if joint else guess.v(g0)[0])
         if ocp.t_final_bounds is not None:
             opti.set_initial(self.T, guess.T)
         if self.p_var is not None:
@@ -277,8 +290,11 @@ class NLP:
         if ocp.joint_bounds:
             js = model.joint_space
             npts = disc.path_q.shape[1]
-            qj = js.positions.map(npts)(disc.path_q)
-            vj = js.rates.map(npts)(disc.path_q, disc.path_v)
+            if disc.path_qj is not None:
+                qj, vj = disc.path_qj, disc.path_vj
+            else:
+                qj = js.positions.map(npts)(disc.path_q)
+                vj = js.rates.map(npts)(disc.path_q, disc.path_v)
             rows = {"position": js.slices(), "rate": js.slices(rates=True)}
             for name, kind, lo, hi in ocp.joint_bounds:
                 x = qj if kind == "position" else vj
@@ -391,9 +407,13 @@ def extract(nlp: NLP, val, build_time: float) -> OptimalTrajectory:
     q = np.array(val(disc.q)).reshape(model.nq, -1).T
     v = np.array(val(disc.v)).reshape(model.nq, -1).T
     u = np.array(val(disc.U)).reshape(model.nu, -1).T if model.nu else np.zeros((ocp.N, 0))
-    lam_rest = np.array(val(disc.lam)).reshape(model.nc, -1).T if model.nc else np.zeros((ocp.N, 0))
-    _, lam0 = model.accel(q[0], v[0], t=t[0], u=u[0] if model.nu else None, p=p)
-    lam = np.vstack([np.atleast_1d(lam0).reshape(1, model.nc), lam_rest])
+    lam = np.zeros((ocp.N + 1, model.nc))
+    nodes = range(ocp.N + 1) if disc.lam is None else [0]      # the rest from the transcription's unknowns
+    for k in nodes:
+        _, lam_k = model.accel(q[k], v[k], t=t[k], u=u[min(k, ocp.N - 1)] if model.nu else None, p=p)
+        lam[k] = np.atleast_1d(lam_k).reshape(model.nc)
+    if disc.lam is not None and model.nc:
+        lam[1:] = np.array(val(disc.lam)).reshape(model.nc, -1).T
     st = nlp.opti.stats()
     defect = max((float(np.max(np.abs(np.array(val(e))), initial=0.0)) for _, e in disc.defects), default=0.0)
     violation = max((violation_of(val, g) for g in nlp.groups), default=0.0)

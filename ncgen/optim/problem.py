@@ -39,14 +39,16 @@ class OptimalControl:
 
     ``t_final``: horizon length (s), a number (fixed) or ``(lower, upper)`` (free final
     time, a decision variable); ``method``: ``"collocation"`` (Radau IIA of ``degree``,
-    default 3, on the constraint ``form`` ``"ggl"`` (default), ``"index3"`` or ``"index1"``:
-    see :mod:`ncgen.optim.radau`) or ``"shooting"`` (multiple shooting with ``integrator``, default IDAS;
+    default 3, in the ``form`` ``"joint"`` (joint coordinates as states, trees only:
+    :mod:`ncgen.optim.joint_radau`), ``"ggl"``, ``"index3"`` or ``"index1"`` (natural
+    coordinates: :mod:`ncgen.optim.radau`); ``"auto"`` (default): ``"joint"`` when the model
+    allows it, else ``"ggl"``) or ``"shooting"`` (multiple shooting with ``integrator``, default IDAS;
     ``integrator_options`` go to its factory); ``parameters``: values replacing the
     model's defaults (``{"k": 50.0}``).
     """
 
     def __init__(self, model, N: int = 50, t_final=1.0, method: str = "collocation", *, degree: int = 3,
-                 form: str = "ggl", integrator: str = "idas", integrator_options: dict | None = None,
+                 form: str = "auto", integrator: str = "idas", integrator_options: dict | None = None,
                  parameters: dict | None = None):
         if not isinstance(N, (int, np.integer)) or isinstance(N, bool) or N < 1:
             raise OptimizationError(f"N: expected a positive integer number of intervals, got {N!r}")
@@ -58,11 +60,7 @@ class OptimalControl:
         self.t0 = float(model.t0)
         self.t_final, self.t_final_bounds = _horizon(t_final)
         if method == "collocation":
-            from ncgen.optim.radau import RadauCollocation
-            try:
-                self.transcription = RadauCollocation(degree, form)
-            except ValueError as exc:
-                raise OptimizationError(str(exc)) from None
+            self.transcription = _collocation(model, degree, form)
         else:
             from ncgen.optim.shooting import MultipleShooting
             self.transcription = MultipleShooting(integrator, **(integrator_options or {}))
@@ -381,6 +379,28 @@ class OptimalControl:
         T = self.t_final if self.t_final_bounds is None else f"free in {self.t_final_bounds}"
         return (f"<OptimalControl on {self.model.name!r}: N={self.N}, T={T}, "
                 f"{self.transcription.describe()}>")
+
+
+#: Collocation forms: ``"auto"`` picks ``"joint"`` for trees, ``"ggl"`` otherwise.
+FORMS = ("auto", "joint", "ggl", "index3", "index1")
+
+
+def _collocation(model, degree: int, form: str):
+    from ncgen.optim.joint_radau import JointRadauCollocation, joint_space_reason
+    from ncgen.optim.radau import RadauCollocation
+    if form not in FORMS:
+        raise OptimizationError(f"collocation form: expected one of {', '.join(FORMS)}, got {form!r}")
+    try:
+        if form in ("auto", "joint"):
+            why = joint_space_reason(model)
+            if why is None:
+                return JointRadauCollocation(degree)
+            if form == "joint":
+                raise OptimizationError(f"form='joint': {why}; use form='ggl' (natural coordinates)")
+            form = "ggl"
+        return RadauCollocation(degree, form)
+    except ValueError as exc:
+        raise OptimizationError(str(exc)) from None
 
 
 def _horizon(t_final):

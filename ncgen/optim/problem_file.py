@@ -27,8 +27,7 @@ import numpy as np
 
 from ncgen.errors import NcgenError, OptimizationError, ProblemFileError
 from ncgen.files import decode_text
-from ncgen.optim.problem import METHODS, OptimalControl
-from ncgen.optim.radau import FORMS
+from ncgen.optim.problem import FORMS, METHODS, OptimalControl
 
 TOP_KEYS = ("model", "horizon", "parameters", "free_parameters", "bounds", "initial", "final", "periodic",
             "cost", "solver")
@@ -160,7 +159,7 @@ class _Reader:
         degree = h.get("degree", 3)
         if isinstance(degree, bool) or not isinstance(degree, int):
             self.fail("horizon.degree", "an integer 1..9", degree)
-        form = h.get("form", "ggl")
+        form = h.get("form", "auto")
         if form not in FORMS:
             self.fail("horizon.form", " or ".join(f'"{f}"' for f in FORMS), form)
         integrator = h.get("integrator", "idas")
