@@ -172,10 +172,10 @@ def cartpole_minimal() -> MinimalProblem:
                           np.zeros(4), np.array([0, np.pi, 0, 0]), 20.0, 2.0, 1.0, [(0, -1.5, 1.5)])
 
 
-def cartpole_ncgen(N: int):
+def cartpole_ncgen(N: int, form: str = "auto"):
     import ncgen as nc
     model = nc.System.from_toml(ROOT / "examples" / "cartpole.toml").build()
-    ocp = nc.OptimalControl(model, N=N, t_final=2.0)
+    ocp = nc.OptimalControl(model, N=N, t_final=2.0, form=form)
     ocp.bound_input("push", -20, 20)
     ocp.bound_coordinate("cart.r_i.x", -1.5, 1.5)
     ocp.initial(q={"cart.r_i.x": 0.0, "pole.r_j.x": 0.0, "pole.r_j.y": -0.5}, v=0)
@@ -196,16 +196,18 @@ def acrobot_minimal() -> MinimalProblem:
                           np.zeros(4), np.array([np.pi, 0, 0, 0]), 15.0, 4.0, 0.1)
 
 
-def acrobot_ncgen(N: int):
+def acrobot_ncgen(N: int, form: str = "auto"):
     import ncgen as nc
     s = nc.System("acrobot", gravity=(0, -G))
-    upper = s.add_bar("upper", mass=1.0, ends=[s.ground.point((0, 0)), (0, -1)])
-    fore = s.add_bar("fore", mass=1.0, ends=[upper.end(1), (0, -2)])
+    upper = s.add_bar("upper", mass=1.0, ends=[(0, 0), (0, -1)])
+    fore = s.add_bar("fore", mass=1.0, ends=[(0, -1), (0, -2)])
+    s.add_joint(nc.Revolute(s.ground, upper, at=(0, 0), name="shoulder"))
+    s.add_joint(nc.Revolute(upper, fore, at=(0, -1), name="elbow"))
     tau = s.add_input("tau")                       # elbow motor, N·m
     s.add_force(nc.Torque(upper, -tau))
     s.add_force(nc.Torque(fore, tau))
     model = s.build()
-    ocp = nc.OptimalControl(model, N=N, t_final=4.0)
+    ocp = nc.OptimalControl(model, N=N, t_final=4.0, form=form)
     ocp.bound_input("tau", -15, 15)
     ocp.final(q=[0, 1, 0, 2], v=0)
     ocp.minimize_effort(0.1)
@@ -260,10 +262,10 @@ def arm_system(a1: float = 0.0, a2: float = 0.0):
     return s
 
 
-def arm_ncgen(N: int):
+def arm_ncgen(N: int, form: str = "auto"):
     import ncgen as nc
-    model = arm_system().build(share=False)      # as measured; pose targets do not yet assemble with shared hinge axes
-    ocp = nc.OptimalControl(model, N=N, t_final=1.0)
+    model = arm_system().build()
+    ocp = nc.OptimalControl(model, N=N, t_final=1.0, form=form)
     ocp.bound_input("tau", -5, 5)
     _, fore, _ = arm_frames(np.pi / 2, np.pi / 2)
     ocp.final(pose={"fore": fore}, v=0)           # the forearm's pose; the joints place the upper rod
@@ -309,10 +311,7 @@ def solve_ncgen(make, angles, N: int, max_iter: int, form: str, coarse_start: bo
     import ncgen as nc
     iterations, elapsed, warm = 0, 0.0, None
     for n in ([N // 2, N] if coarse_start else [N]):
-        ocp = make(n)
-        if form != "ggl":
-            from ncgen.optim.radau import RadauCollocation
-            ocp.transcription = RadauCollocation(3, form)
+        ocp = make(n, form)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             try:
@@ -332,8 +331,8 @@ def main(argv=None) -> int:
     ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
     ap.add_argument("--sizes", nargs="+", type=int, default=[30, 40, 80], help="numbers of intervals N")
     ap.add_argument("--max-iter", type=int, default=1000)
-    ap.add_argument("--form", default="ggl", choices=["ggl", "index3", "index1"],
-                    help="ncgen's collocation form (ncgen.optim.radau)")
+    ap.add_argument("--form", default="auto", choices=["auto", "joint", "ggl", "index3", "index1"],
+                    help="ncgen's collocation form (auto: joint space for trees; ncgen.optim.joint_radau, .radau)")
     ap.add_argument("--coarse-start", action="store_true",
                     help="ncgen solves on N // 2 first (solve(coarse_start=True)); iterations and times summed")
     ap.add_argument("--quick", "--smoke", action="store_true", help="N = 8 only (seconds)")

@@ -24,6 +24,7 @@ from ncgen.errors import NcgenError, OptimizationError
 from ncgen.optim.manifold import RANK_TOL, tangent_basis
 
 
+
 @dataclass
 class PartialTarget:
     """``q_ref``: a consistent configuration meeting the target; ``S`` (k × nq): the
@@ -49,9 +50,8 @@ def pose_target(model, poses: dict, reference, *, t=None, p=None) -> PartialTarg
     """The target ``{member name: (rotation, position)}`` (rotation: 3×3 body→world, or an
     angle / 2×2 matrix in planar systems; position: the member frame's origin, m — a body's
     centre of mass as in ``add_body``, a bar's centre) from the configuration ``reference``."""
-    from ncgen.assembly.kinematics import assemble
     q = np.asarray(reference, dtype=float).copy()
-    fixed: list[int] = []
+    moves = []
     for name, value in poses.items():
         if name not in model.member_names:
             raise OptimizationError(f"final pose: no member named {name!r}; members: {', '.join(model.member_names)}")
@@ -61,19 +61,75 @@ def pose_target(model, poses: dict, reference, *, t=None, p=None) -> PartialTarg
         except (TypeError, ValueError, NcgenError) as exc:
             raise OptimizationError(f"final pose of {name!r}: expected (rotation, position) of the member's frame "
                                     f"({exc})") from None
-        for k, i in enumerate(model.layout.member_indices(name)):
+        moves.append((model.layout.member_indices(name), qm))
+    fixed = sorted({i for idx, _ in moves for i in idx if i is not None})
+    label = "final pose of " + ", ".join(repr(n) for n in poses)
+    for idx, qm in moves:
+        for k, i in enumerate(idx):
             if i is not None:
                 q[i] = qm[k]
-                fixed.append(i)
-    fixed = sorted(set(fixed))
-    label = "final pose of " + ", ".join(repr(n) for n in poses)
-    try:
-        q_ref = assemble(model, q, t=t, p=p, fix=[model.coordinate_names[i] for i in fixed])
-    except NcgenError as exc:
-        raise OptimizationError(f"{label}: the joints cannot reach it: {exc}") from None
+    q_ref = _assemble_towards(model, q, [model.coordinate_names[i] for i in fixed], label, t, p)
     miss = np.max(np.abs(q_ref[fixed] - q[fixed]), initial=0.0)
     if miss > 1e-6 * max(1.0, float(np.max(np.abs(q)))):
         raise OptimizationError(f"{label}: the joints cannot reach it (the nearest configuration is {miss:.3g} m off)")
     S = np.zeros((len(fixed), model.nq))
     S[np.arange(len(fixed)), fixed] = 1.0
     return PartialTarget(q_ref, S, label)
+
+
+def _assemble_towards(model, x, fix: list[str], label: str, t, p) -> np.ndarray:
+    """The configuration on ``Φ = 0`` with the coordinates ``fix`` as in ``x`` (a member's
+    target pose): Newton from ``x``; if that fails and the model is a tree,
+    by inverse kinematics in joint space (:func:`joint_space_fit`).  Newton in natural
+    coordinates can stall from far: with coordinate sharing a member's pose fixes a shared
+    hinge axis and point, and from a symmetric start the other member's free vectors get no
+    component towards their solution (measured on the benchmark 3D arm)."""
+    from ncgen.assembly.kinematics import assemble
+    from ncgen.optim.joint_radau import joint_space_reason
+    try:
+        return assemble(model, x, t=t, p=p, fix=fix)
+    except NcgenError as exc:
+        if joint_space_reason(model) is not None:
+            raise OptimizationError(f"{label}: the joints cannot reach it: {exc}") from None
+        first = exc
+    rows = np.array([model.coordinate_names.index(n) for n in fix], dtype=int)
+    fitted = joint_space_fit(model, x, rows, x[rows])
+    if fitted is None:
+        raise OptimizationError(f"{label}: the joints cannot reach it: {first}; inverse kinematics in joint "
+                                "space did not reach it either") from None
+    return fitted
+
+
+def joint_space_fit(model, q_start, rows: np.ndarray, values: np.ndarray, *, max_iter: int = 200,
+                    restarts: int = 8) -> np.ndarray | None:
+    """A tree's configuration ``q(q_j)`` with ``q[rows] = values`` (m), by Levenberg–Marquardt
+    on the joint coordinates from those of ``q_start`` (then from ``restarts`` random ones);
+    None if none fits to round-off."""
+    import casadi as ca
+    js = model.joint_space
+    tree = js.tree_function(model.layout)
+    x = ca.SX.sym("qj", js.nq)
+    qx = tree(x, ca.DM.zeros(js.nv))[0]
+    res = qx[[int(i) for i in rows]] - ca.DM(values)
+    fn = ca.Function("fit", [x], [res, ca.jacobian(res, x)])
+    tol = 1e-12 * max(1.0, float(np.max(np.abs(values), initial=0.0)))
+    rng = np.random.default_rng(1)
+    starts = [np.array(js.positions(q_start)).reshape(-1)] + \
+        [rng.uniform(-np.pi, np.pi, js.nq) for _ in range(restarts)]
+    for y in starts:
+        mu = 1e-3
+        for _ in range(max_iter):
+            r, J = (np.array(z) for z in fn(y))
+            r = r.reshape(-1)
+            cost = r @ r
+            if np.sqrt(cost) < tol:
+                return np.array(tree(y, np.zeros(js.nv))[0]).reshape(-1)
+            step = np.linalg.solve(J.T @ J + mu * np.eye(js.nq), -J.T @ r)
+            r_new = np.array(fn(y + step)[0]).reshape(-1)
+            if r_new @ r_new < cost:
+                y, mu = y + step, max(mu / 3, 1e-12)
+            else:
+                mu *= 10
+                if mu > 1e8:
+                    break
+    return None
