@@ -100,8 +100,8 @@ def radau(d: int = 3):
 
 
 def solve_minimal(prob: MinimalProblem, N: int, d: int = 3, guess=None) -> dict:
-    """Solve at ``N`` intervals from the linear guess, or from ``guess = (t, θ, u)``: joint
-    angles at times ``t`` on [0, T] (velocities by differences) and ``N`` inputs."""
+    """Solve at ``N`` intervals from the linear guess, or from ``guess = (t, θ, θ̇, u)``: joint
+    angles and rates at times ``t`` on [0, T] and ``N`` inputs."""
     ode = lagrange_ode(prob)
     tau, C, _ = radau(d)
     nx = 2 * prob.n
@@ -125,10 +125,9 @@ def solve_minimal(prob: MinimalProblem, N: int, d: int = 3, guess=None) -> dict:
         opti.set_initial(X, (np.outer(1 - s, prob.x_start) + np.outer(s, prob.x_end)).T)
         opti.set_initial(U, 0)
     else:
-        tg, th, ug = guess
+        tg, th, dth, ug = guess
         turns = np.round((th[-1] - prob.x_end[:prob.n]) / (2 * np.pi))     # the winding ncgen took
         prob.x_end = np.concatenate([prob.x_end[:prob.n] + 2 * np.pi * turns, prob.x_end[prob.n:]])
-        dth = np.gradient(th, tg, axis=0)
         x = np.hstack([th, dth])
         opti.set_initial(X, np.array([np.interp(s * prob.T, tg, x[:, i]) for i in range(nx)]))
         opti.set_initial(U, np.asarray(ug).T)
@@ -322,8 +321,9 @@ def solve_ncgen(make, angles, N: int, max_iter: int, form: str, coarse_start: bo
                 st = sol.stats
         iterations, elapsed, warm = iterations + st.iterations, elapsed + st.solve_time, sol
     th = np.unwrap(np.array([angles(ocp.model, q) for q in sol.q]), axis=0)
+    dth = np.array([ocp.model.to_joint_space(q, v)[1] for q, v in zip(sol.q, sol.v)])
     return {"iterations": iterations, "time": elapsed, "cost": st.objective, "success": ok and st.success,
-            "size": f"{st.n_variables}x{st.n_constraints}", "path": (sol.t - sol.t[0], th, sol.u[:-1])}
+            "size": f"{st.n_variables}x{st.n_constraints}", "path": (sol.t - sol.t[0], th, dth, sol.u[:-1])}
 
 
 def main(argv=None) -> int:

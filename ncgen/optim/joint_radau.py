@@ -11,7 +11,10 @@ the equations of motion projected on the joints (d'Alembert: ``J`` spans the tan
 
     r = Jᵀ (M (J a_j + J̇ v_j) − F(t, q, q̇, u, p)) = 0        (n_j rows per point; N·m or N)
 
-in implicit form (no mass-matrix solve, so the rows stay sparse and cheap).  As in the
+in implicit form (no mass-matrix solve, so the rows stay sparse and cheap), each row divided
+by the joint's inertia ``(Jᵀ M J)_ii`` at the initial configuration so that it reads as an
+acceleration (rad/s², m/s²) like an explicit ODE's (:func:`joint_inertias`; measured on the
+benchmark acrobot: 137 → 61 iterations at N = 30, the cart-pole and 3D arm unchanged).  As in the
 ``index3`` form of :mod:`ncgen.optim.radau` only the joint coordinates at the collocation
 points are unknowns: the rates are the derivative of their polynomial, the accelerations
 the derivative of the rates' polynomial — Radau IIA on ``(q_j, v_j)`` with the stage
@@ -79,6 +82,18 @@ def joint_dynamics_residual(model) -> ca.Function:
                        ["t", "qj", "vj", "aj", "u", "p"], ["r", "q", "v"])
 
 
+def joint_inertias(model, qj) -> np.ndarray:
+    """The diagonal of the joint-space mass matrix ``Jᵀ M J`` at joint coordinates ``qj``
+    (kg·m² for a rotation, kg for a translation; 1 where it vanishes): the row scales that
+    make the residuals accelerations (rad/s², m/s²), as in an explicit ODE."""
+    js = model.joint_space
+    x = ca.SX.sym("qj", js.nq)
+    q = js.tree_function(model.layout)(x, ca.DM.zeros(js.nv))[0]
+    J = np.array(ca.Function("J", [x], [ca.jacobian(q, x)])(qj))
+    m = np.einsum("ij,ik,kj->j", J, np.asarray(model.M), J)
+    return np.where(m > 1e-12 * max(float(np.max(m, initial=0.0)), 1e-300), m, 1.0)
+
+
 class JointRadauCollocation(Transcription):
     """Radau IIA collocation of degree ``degree`` in joint space (module docstring).  The
     builder gives the initial node as joint coordinates and rates (``Horizon.q0``,
@@ -119,7 +134,9 @@ class JointRadauCollocation(Transcription):
         q0, v0 = tree(hz.q0, hz.v0)
         last = list(range(d - 1, N * d, d))
         w = ca.repmat(ca.DM(b).T, 1, N) * h
-        defects = [("dynamics (joint-space equations of motion Jᵀ(M q̈ − F) = 0)", ca.vec(res))]
+        q_scale = np.array(hz.q0).reshape(-1) if isinstance(hz.q0, ca.DM) else js.positions(model.q0)
+        res = res / ca.DM(joint_inertias(model, q_scale))
+        defects = [("dynamics (joint-space equations of motion M_j⁻¹ Jᵀ(M q̈ − F) = 0)", ca.vec(res))]
 
         def set_guess(o: ca.Opti, g):
             tg = np.concatenate([[hz.t0], guess_times(hz, g.T, tau[1:])])
