@@ -36,7 +36,7 @@ from ncgen.optim.guess import guess_duration, make_guess
 from ncgen.optim.manifold import (BRANCH_RADIUS, consistent_configuration, length_scale, resolve_configuration,
                                   resolve_velocity, tangent_basis)
 from ncgen.optim.result import OptimalTrajectory, SolverStats
-from ncgen.optim.targets import pose_target
+from ncgen.optim.targets import joint_target, pose_target
 from ncgen.optim.transcription import MODEL_STATE, Horizon
 
 
@@ -139,10 +139,13 @@ class NLP:
         q_start = model.q0 if q_init is None else q_init
         self.q_final = None if ocp.final_spec["q"] is None else resolve_configuration(
             model, ocp.final_spec["q"], q_start, t=tN, p=p_num, what="final q")
-        self.pose_target = None
+        self.pose_target = self.joint_target = None
         if ocp.final_spec.get("pose"):
             self.pose_target = pose_target(model, ocp.final_spec["pose"], q_start, t=tN, p=p_num)
             self.q_final = self.pose_target.q_ref
+        if ocp.final_spec.get("joints"):
+            self.joint_target = joint_target(model, ocp.final_spec["joints"], q_start, t=tN, p=p_num)
+            self.q_final = self.joint_target.q_ref
         guess, p_guess = make_guess(ocp, warm_start,
                                     model.q0 if q_init is None else q_init,
                                     np.zeros(model.nq) if v_init is None else v_init, self.q_final, p_num)
@@ -243,6 +246,13 @@ class NLP:
             Sq = ca.mtimes(ca.DM(target.S), qN)
             Sr = target.S @ q_ref
             self.constrain(f"{target.label} (branch box)", "final", Sq, Sr - radius, Sr + radius)
+        elif self.joint_target is not None:
+            target = self.joint_target
+            q_ref = target.q_ref
+            qj = disc.qj[:, -1] if disc.qj is not None else model.joint_space.positions(qN)
+            eq, branch = target.residuals(qj)
+            self.constrain(target.label, "final", eq)
+            self.constrain(f"{target.label} (branch)", "final", branch, 0.0, np.inf)
         elif self.q_final is not None:
             q_ref = self.q_final
             N = tangent_basis(model, q_ref, t=tN, p=p_num)

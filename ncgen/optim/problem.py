@@ -75,7 +75,7 @@ class OptimalControl:
         #: Joint-space path constraints: (joint, "position" or "rate", lower, upper).
         self.joint_bounds: list[tuple[str, str, float, float]] = []
         self.initial_spec = {"q": MODEL_STATE, "v": MODEL_STATE, "markers": []}
-        self.final_spec = {"q": None, "v": None, "markers": [], "pose": None}
+        self.final_spec = {"q": None, "v": None, "markers": [], "pose": None, "joints": None}
         self.periodic_spec = {"q": False, "v": False}
         self.effort_R: np.ndarray | None = None
         self.tracking: list[tuple[str, object, float]] = []
@@ -191,12 +191,18 @@ class OptimalControl:
         return self
 
     # ------------------------------------------------------ boundary conditions
-    def initial(self, q=None, v=None, marker=None) -> "OptimalControl":
+    def initial(self, q=None, v=None, marker=None, joints=None) -> "OptimalControl":
         """Initial conditions, ``None`` = free.  ``q``: a full configuration (projected onto
         the constraints) or ``{coordinate name: value}`` (those kept, the rest assembled
-        from ``model.q0``); ``v``: full rates, a scalar such as 0, or ``{name: rate}`` (the
+        from ``model.q0``); ``joints``: instead of ``q``, ``{joint name: coordinate(s)}``
+        (rad or m, ``model.joint_space``; the other joints as in ``model.q0``, a closed
+        loop assembled); ``v``: full rates, a scalar such as 0, or ``{name: rate}`` (the
         rest as small as the constraints allow); ``marker``: ``(name, position)`` or a list
         of them, ``None`` components free (needs a free ``q``)."""
+        if joints is not None:
+            if q is not None:
+                raise OptimizationError("initial: give q or joints, not both")
+            q = self._joint_configuration(joints, "initial joints")
         self.initial_spec = {"q": self._state(q, "initial q"), "v": self._state(v, "initial v"),
                              "markers": self._markers(marker, "initial")}
         if self.initial_spec["markers"] and self.initial_spec["q"] is not None:
@@ -204,21 +210,28 @@ class OptimalControl:
                                     "pass q=None together with marker=...")
         return self
 
-    def final(self, q=None, v=None, marker=None, pose=None) -> "OptimalControl":
+    def final(self, q=None, v=None, marker=None, pose=None, joints=None) -> "OptimalControl":
         """Final conditions (``None`` = free): ``q``, ``v`` targets given as in
         :meth:`initial` (a dict ``q`` is assembled from the initial configuration; their
         ``dof`` tangent components are imposed), ``marker``: ``(name, position)`` or a list
         of them; ``pose``: ``{member name: (rotation, position)}`` — a member's frame
         (rotation body→world, 3×3, or an angle in planar systems; position of its origin,
         m: a body's centre of mass as given to ``add_body``), the other members left to the
-        joints (:mod:`ncgen.optim.targets`).  ``v`` without ``q`` is taken in the tangent
-        space of the guess's final configuration: exact for ``v=0``."""
-        if pose is not None and q is not None:
-            raise OptimizationError("final: give q or pose, not both (a pose fixes part of q)")
+        joints (:mod:`ncgen.optim.targets`); ``joints``: ``{joint name: coordinate(s)}`` (rad or
+        m, ``model.joint_space``; angles reached in any winding, the other joints free; in a
+        closed loop name independent joints only).  ``v`` without ``q`` is taken in the
+        tangent space of the final configuration (the target's, else the guess's): exact for
+        ``v=0``."""
+        given = [k for k, x in (("q", q), ("pose", pose), ("joints", joints)) if x is not None]
+        if len(given) > 1:
+            raise OptimizationError(f"final: give one of q, pose, joints (got {', '.join(given)}): each fixes "
+                                    "part of the configuration")
         if pose is not None and (not isinstance(pose, dict) or not pose):
             raise OptimizationError(f"final pose: expected {{member name: (rotation, position)}}, got {pose!r}")
+        if joints is not None:
+            self._joint_configuration(joints, "final joints")
         self.final_spec = {"q": self._state(q, "final q"), "v": self._state(v, "final v"),
-                           "markers": self._markers(marker, "final"), "pose": pose}
+                           "markers": self._markers(marker, "final"), "pose": pose, "joints": joints}
         self._check_periodic()
         return self
 
@@ -235,10 +248,16 @@ class OptimalControl:
 
     def _check_periodic(self):
         for key in ("q", "v"):
-            if self.periodic_spec[key] and (self.final_spec[key] is not None
-                                            or key == "q" and self.final_spec.get("pose") is not None):
+            if self.periodic_spec[key] and (self.final_spec[key] is not None or key == "q" and (
+                    self.final_spec.get("pose") is not None or self.final_spec.get("joints") is not None)):
                 raise OptimizationError(f"final {key} and periodic {key} both given: the final {key} would "
                                         "be imposed twice; keep one of them")
+
+    def _joint_configuration(self, joints, what: str) -> np.ndarray:
+        """The configuration with these joint coordinates, the others as in ``model.q0``
+        (checks the names and sizes)."""
+        from ncgen.optim.targets import joint_target
+        return joint_target(self.model, joints, self.model.q0, what=what).q_ref
 
     def _state(self, x, what: str):
         if x is None:

@@ -133,3 +133,75 @@ def joint_space_fit(model, q_start, rows: np.ndarray, values: np.ndarray, *, max
                 if mu > 1e8:
                     break
     return None
+
+
+@dataclass
+class JointTarget:
+    """Joint coordinates to reach: ``index`` into the joint-position vector
+    (``model.joint_space.position_names``), ``values`` (rad or m), ``angles`` (which are
+    angles, taken modulo 2π), ``q_ref``: a consistent configuration with them (for the
+    guess and the velocity conditions), ``label``: for messages."""
+
+    index: np.ndarray
+    values: np.ndarray
+    angles: np.ndarray
+    q_ref: np.ndarray
+    label: str
+
+    def residuals(self, qj):
+        """``(equalities, branch)`` at joint positions ``qj`` (CasADi): ``x − x*`` for lengths,
+        ``sin(θ − θ*)`` for angles (any winding) with the branch ``cos(θ − θ*) ≥ 0``."""
+        import casadi as ca
+        x = qj[[int(i) for i in self.index]]
+        d = x - ca.DM(self.values)
+        a = [int(k) for k in np.flatnonzero(self.angles)]
+        lin = [int(k) for k in np.flatnonzero(~self.angles)]
+        eq = ca.vertcat(*([d[lin]] if lin else []), *([ca.sin(d[a])] if a else []))
+        return eq, (ca.cos(d[a]) if a else ca.DM.zeros(0, 1))
+
+
+def joint_target(model, joints: dict, reference, *, what: str = "final joints", t=None, p=None) -> JointTarget:
+    """The target ``{joint name: value}`` (rad or m; a list for a joint with several
+    coordinates) from the configuration ``reference``: the other joints of a tree keep their
+    coordinates there; in a closed loop the named joints must be independent and the rest
+    are assembled (:meth:`~ncgen.assembly.joint_space.JointSpace.from_joint_space`)."""
+    from ncgen.optim.joint_radau import QUATERNION_JOINTS, joint_space_reason
+    js = model.joint_space
+    if not isinstance(joints, dict) or not joints:
+        raise OptimizationError(f"{what}: expected {{joint name: value}}, got {joints!r}")
+    sl = js.slices()
+    given, index = {}, []
+    for name, value in joints.items():
+        if name not in js.nq_joint:
+            why = f" ({js.skipped[name]})" if name in js.skipped else ""
+            raise OptimizationError(f"{what}: no joint with coordinates named {name!r}{why}; joints: "
+                                    f"{', '.join(js.joint_names) or 'none'}")
+        if js.joints[name].kind in QUATERNION_JOINTS:
+            raise OptimizationError(f"{what}: joint {name!r} ({js.joints[name].kind}) has quaternion coordinates; "
+                                    "give the pose of the member it carries instead (final(pose=...))")
+        x = np.atleast_1d(np.asarray(value, dtype=float)).reshape(-1)
+        n = js.nq_joint[name]
+        if x.size != n or not np.all(np.isfinite(x)):
+            names = js.position_names[sl[name]]
+            raise OptimizationError(f"{what}[{name!r}]: expected {n} finite number(s) ({', '.join(names)}), "
+                                    f"got {value!r}")
+        given[name] = x
+        index.extend(range(sl[name].start, sl[name].stop))
+    index = np.array(index, dtype=int)
+    values = np.concatenate([given[n] for n in joints])
+    label = f"{what} " + ", ".join(repr(n) for n in joints)
+    try:
+        if joint_space_reason(model) is None:          # a tree: the others keep their coordinates
+            x = np.array(js.positions(np.asarray(reference, dtype=float))).reshape(-1)
+            x[index] = values
+            q_ref = js.from_joint_space(model, x, t=t, p=p)[0]
+        else:
+            q_ref = js.from_joint_space(model, given, t=t, p=p)[0]
+    except NcgenError as exc:
+        raise OptimizationError(f"{label}: the joints cannot reach it: {exc}") from None
+    B = np.array(js.position_jacobian(q_ref))[index] @ tangent_basis(model, q_ref, t=t, p=p)
+    s = np.linalg.svd(B, compute_uv=False) if B.size else np.zeros(0)
+    if s.size < index.size or s[-1] <= RANK_TOL * max(s[0], 1e-300):
+        raise OptimizationError(f"{label}: these joint coordinates are not independent (in a closed loop "
+                                "give only independent joints; the others follow)")
+    return JointTarget(index, values, js.angles[index], q_ref, label)
