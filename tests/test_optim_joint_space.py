@@ -126,3 +126,47 @@ def test_joint_inertias_are_the_rods_moments_about_the_hinges():
     I1 = bench.ARM_M * bench.ARM_L ** 2 / 12 + bench.ARM_M * bench.ARM_RADIUS ** 2 / 4
     I_sh = 2 * I1 + bench.ARM_M * (bench.ARM_L / 2) ** 2 + bench.ARM_M * (1.5 * bench.ARM_L) ** 2
     np.testing.assert_allclose(m, [I_sh, I1 + bench.ARM_M * (bench.ARM_L / 2) ** 2], rtol=1e-12)
+
+
+ARM_PROBLEM = """
+[horizon]
+N = 6
+t_final = 1.0
+[bounds.inputs]
+tau = [-5, 5]
+[final]
+v = 0
+{target}
+[cost]
+effort = 1.0
+"""
+
+
+@pytest.mark.parametrize("target", [
+    "joints = {shoulder = 1.5707963267948966, elbow = 1.5707963267948966}",
+    "[final.pose.fore]\nrotation = [[-1, 0, 0], [0, 1, 0], [0, 0, -1]]\nposition = [-0.4, 0.0, 0.2]",
+])
+def test_problem_file_joint_and_pose_targets(target):
+    """Both spellings of the arm's end configuration in a problem file reach it."""
+    import tomllib
+    from ncgen.optim.problem_file import problem_from_data
+    model = bench.arm_system().build()
+    ocp, options = problem_from_data(tomllib.loads(ARM_PROBLEM.format(target=target)), model, "arm.toml")
+    sol = ocp.solve(max_iter=options.max_iter, tol=options.tol)
+    np.testing.assert_allclose(model.to_joint_space(sol.q[-1]), [np.pi / 2, np.pi / 2], atol=1e-8)
+    R, p = model.poses(sol.q[-1])
+    np.testing.assert_allclose(R[1], bench.arm_frames(np.pi / 2, np.pi / 2)[1][0], atol=1e-8)
+
+
+@pytest.mark.parametrize("target, key", [
+    ("joints = {elbow = 'up'}", "final.joints.elbow: expected a number"),
+    ("joints = {wrist = 1.0}", "final: final joints: no joint with coordinates named 'wrist'"),
+    ("[final.pose.fore]\nrotation = [[1, 0, 0]]\nposition = [0, 0, 0]", "final.pose.fore.rotation: expected 3 rows"),
+    ("[final.pose.fore]\nrotation = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]", "final.pose.fore.position: missing"),
+])
+def test_problem_file_bad_targets_name_the_key(target, key):
+    import tomllib
+    from ncgen.errors import ProblemFileError
+    from ncgen.optim.problem_file import problem_from_data
+    with pytest.raises(ProblemFileError, match=key.replace("(", r"\(")):
+        problem_from_data(tomllib.loads(ARM_PROBLEM.format(target=target)), bench.arm_system().build(), "arm.toml")
