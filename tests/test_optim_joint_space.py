@@ -170,3 +170,19 @@ def test_problem_file_bad_targets_name_the_key(target, key):
     from ncgen.optim.problem_file import problem_from_data
     with pytest.raises(ProblemFileError, match=key.replace("(", r"\(")):
         problem_from_data(tomllib.loads(ARM_PROBLEM.format(target=target)), bench.arm_system().build(), "arm.toml")
+
+
+def test_free_initial_configuration_at_rest_in_joint_space():
+    """initial(q=None, v=0): the start is a decision variable (no invariants needed), at rest;
+    a nonzero initial velocity with a free q is refused by name."""
+    ocp = arm_ocp(6, "joint")
+    ocp.initial(q=None, v=0)
+    ocp.final(joints={"elbow": 0.5}, v=0)
+    sol = ocp.solve()
+    np.testing.assert_allclose(sol.v[0], 0.0, atol=1e-12)
+    assert abs(ocp.model.to_joint_space(sol.q[-1])[1] - 0.5) < 1e-8
+    assert sol.constraint_residual.max() < 1e-12
+    bad = arm_ocp(4, "joint")
+    bad.initial(q=None, v=np.ones(bad.model.nq))
+    with pytest.raises(OptimizationError, match="nonzero velocity with a free initial q"):
+        bad.solve()

@@ -153,12 +153,15 @@ class NLP:
         joint = getattr(ocp.transcription, "joint_space", False)
         if joint:                   # the initial node in joint coordinates; q₀ = q(q_j0) holds Φ = 0
             js = model.joint_space
+            self._check_joint_space(q_start, p_num)
             self.x0 = opti.variable(js.nq) if q_init is None else ca.DM(js.positions(q_init))
-            self.w0 = opti.variable(js.nv) if v_init is None else ca.DM(
-                js.rates(q_init if q_init is not None else model.q0, v_init))
-            if v_init is not None and q_init is None:
-                raise OptimizationError("the joint-space form needs the initial q fixed when the initial v is "
-                                        "(or use form='ggl')")
+            if v_init is None:
+                self.w0 = opti.variable(js.nv)
+            elif q_init is not None or not np.any(v_init):
+                self.w0 = ca.DM(js.rates(q_start, v_init))
+            else:
+                raise OptimizationError("initial v: a nonzero velocity with a free initial q cannot be given in the "
+                                        "joint-space form; fix the initial q, or use form='ggl'")
             self.q0, self.v0 = js.tree_function(model.layout)(self.x0, self.w0)
             hz = Horizon(t0=t0, T=self.T, p=self.p, q0=self.x0, v0=self.w0, N=ocp.N)
         else:
@@ -194,6 +197,23 @@ class NLP:
             opti.set_initial(self.T, guess.T)
         if self.p_var is not None:
             opti.set_initial(self.p_var, [p_guess[i] for i in sorted(ocp.p_free)])
+
+    def _check_joint_space(self, q_start, p_num):
+        """The joint-space form's forward kinematics uses the model's geometry: refuse it
+        where parameters change the constraints (a free parameter in Φ, or fixed values that
+        move the start off q(q_j))."""
+        model, ocp = self.model, self.ocp
+        js = model.joint_space
+        if self.p_var is not None:
+            dep = ca.jacobian(model.functions["phi"](ocp.t0, ca.DM(q_start), self.p), self.p_var)
+            if dep.nnz():
+                raise OptimizationError("a free parameter enters the constraints Φ, which the joint-space form "
+                                        "cannot follow: use form='ggl'")
+        q = np.array(js.tree_function(model.layout)(js.positions(q_start), np.zeros(js.nv))[0]).reshape(-1)
+        phi = np.max(np.abs(np.array(model.functions["phi"](ocp.t0, q, p_num))), initial=0.0)
+        if not phi <= 1e-9 * max(1.0, float(np.max(np.abs(q)))) ** 2:
+            raise OptimizationError(f"the joints' forward kinematics misses the constraints by {phi:.3g} with these "
+                                    "parameter values (a parameter changes the geometry): use form='ggl'")
 
     def _initial_state(self, p_num):
         ocp, model = self.ocp, self.model
