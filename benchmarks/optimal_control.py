@@ -6,12 +6,19 @@ Cases (SI units; inputs piecewise constant over N equal intervals; cost ∫ uᵀ
 * ``cartpole`` — examples/cartpole_swingup.py: cart 1 kg on a rail, uniform pole 0.2 kg,
   0.5 m on a hinge at the cart; from hanging to upright at rest in 2 s, |push| ≤ 20 N,
   |cart x| ≤ 1.5 m, R = 1.
-* ``acrobot`` — two uniform 1 m, 1 kg links (planar), motor at the elbow only,
-  |τ| ≤ 15 N·m; from hanging to upright at rest in 4 s, R = 0.1.
+* ``acrobot`` — two uniform 1 m, 1 kg links (planar bars on Revolute joints "shoulder" and
+  "elbow"), motor at the elbow only, |τ| ≤ 15 N·m; from hanging to upright at rest in 4 s,
+  R = 0.1.
 * ``arm3d`` — 3D: two rods (``ruvw`` bodies, 0.5 kg, 0.4 m, radius 2 cm) on hinges about
   y (shoulder at the origin, elbow at the first rod's end), both motorised,
   |τ| ≤ 5 N·m, gravity −z; from hanging at rest to shoulder +90° and elbow +90° at rest in
-  T = 1 s, R = 1; in ncgen the target is the forearm's pose (``final(pose=...)``).
+  T = 1 s, R = 1; in ncgen the target is the forearm's pose (``final(pose=...)``), the
+  model built with coordinate sharing (the default).
+
+ncgen's collocation form is its default, ``"auto"``: all three models are trees of joints,
+so the joint-space form (:mod:`ncgen.optim.joint_radau`; joint coordinates as states,
+natural coordinates ``q(q_j)`` in the costs and targets); ``--form ggl`` measures the
+natural-coordinate GGL form instead.
 
 The minimal formulation has the joint angles as coordinates (cart x and pole angle; the
 links' angles), its equations of motion from the Lagrangian ``L = T − V`` (mass matrix
@@ -26,10 +33,14 @@ ratios ncgen / minimal; "at ncgen opt" is the minimal formulation solved again f
 optimum (joint angles and inputs at the nodes, the same winding), the check that both
 reach the same optimum, and "rel diff" compares ncgen's cost with it; ``RATIO`` lines
 summarise.  Targets (issue 18): iterations ≤ 2×,
-time ≤ 10×, costs within 1e-3 (relative) at equal N.
+time ≤ 10×, costs within 1e-3 (relative) at equal N.  The joint-space form and the minimal
+formulation are the same discrete problem (Radau IIA(3) on the joint angles, rates
+eliminated or not), so at the same optimum their costs agree to round-off; the natural
+forms collocate other coordinates and agree only as N grows.
 
     python benchmarks/optimal_control.py                 N = 30, 40, 80, every case
     python benchmarks/optimal_control.py --cases arm3d --sizes 30
+    python benchmarks/optimal_control.py --form ggl      natural-coordinate GGL form
     python benchmarks/optimal_control.py --coarse-start  ncgen solves on N/2 first (totals reported)
     python benchmarks/optimal_control.py --quick         N = 8 (seconds; CI)
 """
