@@ -27,6 +27,8 @@ quaternions) are not handled; such models use the natural-coordinate GGL form.
 """
 from __future__ import annotations
 
+import weakref
+
 import casadi as ca
 import numpy as np
 
@@ -38,12 +40,21 @@ from ncgen.optim.transcription import Discretisation, Horizon, Transcription, gu
 QUATERNION_JOINTS = ("Spherical", "Free")
 
 
+_REASONS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
 def joint_space_reason(model) -> str | None:
     """Why ``model`` cannot be transcribed in joint space (None if it can): it must be a
     tree of joints with coordinates (every member reached from the ground through them),
     with rates that are the derivatives of the coordinates, no other constraints and no
     drives (``Φ(q(q_j)) = 0`` for every ``q_j`` and ``t``), and as many joint rates as
-    degrees of freedom."""
+    degrees of freedom.  Cached per model."""
+    if model not in _REASONS:
+        _REASONS[model] = (_reason(model),)
+    return _REASONS[model][0]
+
+
+def _reason(model) -> str | None:
     js = getattr(model, "joint_space", None)
     if js is None or not js.joint_names:
         return "the model has no joints with joint coordinates"
