@@ -3,8 +3,7 @@
 ``"rest"`` holds the initial configuration at rest, with the inputs that hold it there
 (static inverse dynamics, least squares, clipped into their bounds);
 ``"interpolate"`` (the default when ``final(q=...)`` is given) moves every member's pose
-from the initial to the final configuration (:mod:`ncgen.optim.interpolate`; for a tree
-without ``guess_turn``: the joint coordinates, linearly, the shorter way) with a
+from the initial to the final configuration (:mod:`ncgen.optim.interpolate`) with a
 timing that starts and ends at rest where the problem says so (initial ``v = 0``,
 ``final(v=0)``: the smoothstep ``s = 3τ² − 2τ³``), velocities tangent to the constraints,
 and the inputs that best produce this motion (inverse dynamics: ``M q̈ + Aᵀ λ = F(u)`` in
@@ -24,8 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from ncgen.errors import OptimizationError
-from ncgen.optim.interpolate import joint_path, pose_path
-from ncgen.optim.joint_radau import joint_space_reason
+from ncgen.optim.interpolate import pose_path
 from ncgen.optim.manifold import consistent_configuration, consistent_velocity
 from ncgen.optim.transcription import Guess
 
@@ -58,10 +56,7 @@ def make_guess(ocp, warm_start, q_init: np.ndarray, v_init: np.ndarray, q_final:
                            (False, True): (1 - (1 - tau) ** 2, 2 * (1 - tau)),
                            (False, False): (tau, np.ones_like(tau))}[at_rest]
             grid = np.linspace(0.0, 1.0, tau.size)           # the path on a uniform grid of s ...
-            if ocp.guess_turns or joint_space_reason(model) is not None:
-                q_s = pose_path(model, q_init, q_final, grid, t=t0, p=p, turns=ocp.guess_turns)
-            else:
-                q_s = joint_path(model, q_init, q_final, grid)
+            q_s = pose_path(model, q_init, q_final, grid, t=t0, p=p, turns=ocp.guess_turns)
             dq_ds = np.gradient(q_s, grid, axis=0, edge_order=2)
             qg = np.column_stack([np.interp(s_of, grid, q_s[:, i]) for i in range(model.nq)])
             qg = np.array([consistent_configuration(model, q, t=t0, p=p, what="guess", tolerance=1.0) for q in qg])
