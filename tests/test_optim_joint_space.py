@@ -52,6 +52,10 @@ def test_auto_form_picks_joint_space_for_trees_only():
     assert isinstance(nc.OptimalControl(model, N=4).transcription, RadauCollocation)
     with pytest.raises(OptimizationError, match="form='joint'.*no joints"):
         nc.OptimalControl(model, N=4, form="joint")
+    loop = nc.System.from_toml(Path(__file__).resolve().parent.parent / "examples" / "fourbar_planar.toml").build()
+    assert isinstance(nc.OptimalControl(loop, N=4).transcription, RadauCollocation)
+    with pytest.raises(OptimizationError, match=r"form='joint': joint space: the model is not a tree .*form='ggl'"):
+        nc.OptimalControl(loop, N=4, form="joint")
 
 
 def test_joint_space_optimum_is_the_minimal_formulations():

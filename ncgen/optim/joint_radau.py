@@ -64,7 +64,7 @@ def _reason(model) -> str | None:
     try:
         tree = js.tree_function(model.layout)
     except ModelError as exc:
-        return str(exc)
+        return str(exc).split("; use from_joint_space")[0]
     if js.nv != model.dof:
         return f"{js.nv} joint rates for {model.dof} degrees of freedom"
     rng = np.random.default_rng(0)
