@@ -11,8 +11,14 @@ as the target has independent degrees of freedom once the joints hold, so they n
 repeat a joint equation or a member's own constraints (LICQ), plus a box around ``S q_ref``
 that selects the branch.
 
-Joint angles (from the joint-space layer, when it exists) fit the same mould: a resolver
-returning the configuration with those angles and the coordinates they move.
+With coordinate sharing a member's pose may fix shared hinge axes and points, from which
+natural-coordinate Newton can stall; for trees the reference is then found by inverse
+kinematics in joint space (:func:`joint_space_fit`).
+
+Joint coordinates (:class:`JointTarget`, ``final(joints=...)``) are imposed on the joint
+positions directly — the states of the joint-space transcription, or
+``model.joint_space.positions(q_N)`` in natural coordinates: ``x_N − x*`` for lengths,
+``sin(θ_N − θ*)`` with the branch ``cos(θ_N − θ*) ≥ 0`` for angles (any winding).
 """
 from __future__ import annotations
 
