@@ -6,12 +6,19 @@ Cases (SI units; inputs piecewise constant over N equal intervals; cost ∫ uᵀ
 * ``cartpole`` — examples/cartpole_swingup.py: cart 1 kg on a rail, uniform pole 0.2 kg,
   0.5 m on a hinge at the cart; from hanging to upright at rest in 2 s, |push| ≤ 20 N,
   |cart x| ≤ 1.5 m, R = 1.
-* ``acrobot`` — two uniform 1 m, 1 kg links (planar), motor at the elbow only,
-  |τ| ≤ 15 N·m; from hanging to upright at rest in 4 s, R = 0.1.
+* ``acrobot`` — two uniform 1 m, 1 kg links (planar bars on Revolute joints "shoulder" and
+  "elbow"), motor at the elbow only, |τ| ≤ 15 N·m; from hanging to upright at rest in 4 s,
+  R = 0.1.
 * ``arm3d`` — 3D: two rods (``ruvw`` bodies, 0.5 kg, 0.4 m, radius 2 cm) on hinges about
   y (shoulder at the origin, elbow at the first rod's end), both motorised,
   |τ| ≤ 5 N·m, gravity −z; from hanging at rest to shoulder +90° and elbow +90° at rest in
-  T = 1 s, R = 1; in ncgen the target is the forearm's pose (``final(pose=...)``).
+  T = 1 s, R = 1; in ncgen the target is the forearm's pose (``final(pose=...)``), the
+  model built with coordinate sharing (the default).
+
+ncgen's collocation form is its default, ``"auto"``: all three models are trees of joints,
+so the joint-space form (:mod:`ncgen.optim.joint_radau`; joint coordinates as states,
+natural coordinates ``q(q_j)`` in the costs and targets); ``--form ggl`` measures the
+natural-coordinate GGL form instead.
 
 The minimal formulation has the joint angles as coordinates (cart x and pole angle; the
 links' angles), its equations of motion from the Lagrangian ``L = T − V`` (mass matrix
@@ -26,10 +33,14 @@ ratios ncgen / minimal; "at ncgen opt" is the minimal formulation solved again f
 optimum (joint angles and inputs at the nodes, the same winding), the check that both
 reach the same optimum, and "rel diff" compares ncgen's cost with it; ``RATIO`` lines
 summarise.  Targets (issue 18): iterations ≤ 2×,
-time ≤ 10×, costs within 1e-3 (relative) at equal N.
+time ≤ 10×, costs within 1e-3 (relative) at equal N.  The joint-space form and the minimal
+formulation are the same discrete problem (Radau IIA(3) on the joint angles, rates
+eliminated or not), so at the same optimum their costs agree to round-off; the natural
+forms collocate other coordinates and agree only as N grows.
 
     python benchmarks/optimal_control.py                 N = 30, 40, 80, every case
     python benchmarks/optimal_control.py --cases arm3d --sizes 30
+    python benchmarks/optimal_control.py --form ggl      natural-coordinate GGL form
     python benchmarks/optimal_control.py --coarse-start  ncgen solves on N/2 first (totals reported)
     python benchmarks/optimal_control.py --quick         N = 8 (seconds; CI)
 """
@@ -100,8 +111,8 @@ def radau(d: int = 3):
 
 
 def solve_minimal(prob: MinimalProblem, N: int, d: int = 3, guess=None) -> dict:
-    """Solve at ``N`` intervals from the linear guess, or from ``guess = (t, θ, u)``: joint
-    angles at times ``t`` on [0, T] (velocities by differences) and ``N`` inputs."""
+    """Solve at ``N`` intervals from the linear guess, or from ``guess = (t, θ, θ̇, u)``: joint
+    angles and rates at times ``t`` on [0, T] and ``N`` inputs."""
     ode = lagrange_ode(prob)
     tau, C, _ = radau(d)
     nx = 2 * prob.n
@@ -125,10 +136,9 @@ def solve_minimal(prob: MinimalProblem, N: int, d: int = 3, guess=None) -> dict:
         opti.set_initial(X, (np.outer(1 - s, prob.x_start) + np.outer(s, prob.x_end)).T)
         opti.set_initial(U, 0)
     else:
-        tg, th, ug = guess
+        tg, th, dth, ug = guess
         turns = np.round((th[-1] - prob.x_end[:prob.n]) / (2 * np.pi))     # the winding ncgen took
         prob.x_end = np.concatenate([prob.x_end[:prob.n] + 2 * np.pi * turns, prob.x_end[prob.n:]])
-        dth = np.gradient(th, tg, axis=0)
         x = np.hstack([th, dth])
         opti.set_initial(X, np.array([np.interp(s * prob.T, tg, x[:, i]) for i in range(nx)]))
         opti.set_initial(U, np.asarray(ug).T)
@@ -172,10 +182,10 @@ def cartpole_minimal() -> MinimalProblem:
                           np.zeros(4), np.array([0, np.pi, 0, 0]), 20.0, 2.0, 1.0, [(0, -1.5, 1.5)])
 
 
-def cartpole_ncgen(N: int):
+def cartpole_ncgen(N: int, form: str = "auto"):
     import ncgen as nc
     model = nc.System.from_toml(ROOT / "examples" / "cartpole.toml").build()
-    ocp = nc.OptimalControl(model, N=N, t_final=2.0)
+    ocp = nc.OptimalControl(model, N=N, t_final=2.0, form=form)
     ocp.bound_input("push", -20, 20)
     ocp.bound_coordinate("cart.r_i.x", -1.5, 1.5)
     ocp.initial(q={"cart.r_i.x": 0.0, "pole.r_j.x": 0.0, "pole.r_j.y": -0.5}, v=0)
@@ -196,16 +206,18 @@ def acrobot_minimal() -> MinimalProblem:
                           np.zeros(4), np.array([np.pi, 0, 0, 0]), 15.0, 4.0, 0.1)
 
 
-def acrobot_ncgen(N: int):
+def acrobot_ncgen(N: int, form: str = "auto"):
     import ncgen as nc
     s = nc.System("acrobot", gravity=(0, -G))
-    upper = s.add_bar("upper", mass=1.0, ends=[s.ground.point((0, 0)), (0, -1)])
-    fore = s.add_bar("fore", mass=1.0, ends=[upper.end(1), (0, -2)])
+    upper = s.add_bar("upper", mass=1.0, ends=[(0, 0), (0, -1)])
+    fore = s.add_bar("fore", mass=1.0, ends=[(0, -1), (0, -2)])
+    s.add_joint(nc.Revolute(s.ground, upper, at=(0, 0), name="shoulder"))
+    s.add_joint(nc.Revolute(upper, fore, at=(0, -1), name="elbow"))
     tau = s.add_input("tau")                       # elbow motor, N·m
     s.add_force(nc.Torque(upper, -tau))
     s.add_force(nc.Torque(fore, tau))
     model = s.build()
-    ocp = nc.OptimalControl(model, N=N, t_final=4.0)
+    ocp = nc.OptimalControl(model, N=N, t_final=4.0, form=form)
     ocp.bound_input("tau", -15, 15)
     ocp.final(q=[0, 1, 0, 2], v=0)
     ocp.minimize_effort(0.1)
@@ -260,10 +272,10 @@ def arm_system(a1: float = 0.0, a2: float = 0.0):
     return s
 
 
-def arm_ncgen(N: int):
+def arm_ncgen(N: int, form: str = "auto"):
     import ncgen as nc
-    model = arm_system().build(share=False)      # as measured; pose targets do not yet assemble with shared hinge axes
-    ocp = nc.OptimalControl(model, N=N, t_final=1.0)
+    model = arm_system().build()
+    ocp = nc.OptimalControl(model, N=N, t_final=1.0, form=form)
     ocp.bound_input("tau", -5, 5)
     _, fore, _ = arm_frames(np.pi / 2, np.pi / 2)
     ocp.final(pose={"fore": fore}, v=0)           # the forearm's pose; the joints place the upper rod
@@ -309,10 +321,7 @@ def solve_ncgen(make, angles, N: int, max_iter: int, form: str, coarse_start: bo
     import ncgen as nc
     iterations, elapsed, warm = 0, 0.0, None
     for n in ([N // 2, N] if coarse_start else [N]):
-        ocp = make(n)
-        if form != "ggl":
-            from ncgen.optim.radau import RadauCollocation
-            ocp.transcription = RadauCollocation(3, form)
+        ocp = make(n, form)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             try:
@@ -323,8 +332,9 @@ def solve_ncgen(make, angles, N: int, max_iter: int, form: str, coarse_start: bo
                 st = sol.stats
         iterations, elapsed, warm = iterations + st.iterations, elapsed + st.solve_time, sol
     th = np.unwrap(np.array([angles(ocp.model, q) for q in sol.q]), axis=0)
+    dth = np.array([ocp.model.to_joint_space(q, v)[1] for q, v in zip(sol.q, sol.v)])
     return {"iterations": iterations, "time": elapsed, "cost": st.objective, "success": ok and st.success,
-            "size": f"{st.n_variables}x{st.n_constraints}", "path": (sol.t - sol.t[0], th, sol.u[:-1])}
+            "size": f"{st.n_variables}x{st.n_constraints}", "path": (sol.t - sol.t[0], th, dth, sol.u[:-1])}
 
 
 def main(argv=None) -> int:
@@ -332,8 +342,8 @@ def main(argv=None) -> int:
     ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
     ap.add_argument("--sizes", nargs="+", type=int, default=[30, 40, 80], help="numbers of intervals N")
     ap.add_argument("--max-iter", type=int, default=1000)
-    ap.add_argument("--form", default="ggl", choices=["ggl", "index3", "index1"],
-                    help="ncgen's collocation form (ncgen.optim.radau)")
+    ap.add_argument("--form", default="auto", choices=["auto", "joint", "ggl", "index3", "index1"],
+                    help="ncgen's collocation form (auto: joint space for trees; ncgen.optim.joint_radau, .radau)")
     ap.add_argument("--coarse-start", action="store_true",
                     help="ncgen solves on N // 2 first (solve(coarse_start=True)); iterations and times summed")
     ap.add_argument("--quick", "--smoke", action="store_true", help="N = 8 only (seconds)")

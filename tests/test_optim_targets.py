@@ -30,11 +30,14 @@ def double_pendulum(motors: int = 2):
     return s.build()
 
 
-def test_final_pose_of_a_3d_member_places_the_rest_by_the_joints():
+@pytest.mark.parametrize("form, share", [("joint", True), ("ggl", True), ("ggl", False)])
+def test_final_pose_of_a_3d_member_places_the_rest_by_the_joints(form, share):
     """The forearm's pose (rotation and centre) as the target; the upper rod must end where
-    the hinges put it (shoulder +90° about y), at rest."""
-    model = arm_system().build(share=False)    # pose targets assemble from far only without shared hinge axes (see notes)
-    ocp = nc.OptimalControl(model, N=8, t_final=1.0)
+    the hinges put it (shoulder +90° about y), at rest.  With coordinate sharing (the
+    default) the hinge axes and the elbow are shared coordinates: natural-coordinate Newton
+    stalls from the hanging start and the target is found by joint-space inverse kinematics."""
+    model = arm_system().build(share=share)
+    ocp = nc.OptimalControl(model, N=8, t_final=1.0, form=form)
     ocp.bound_input("tau", -5, 5)
     (R1, p1), (R2, p2), _ = arm_frames(np.pi / 2, np.pi / 2)
     ocp.final(pose={"fore": (R2, p2)}, v=0)

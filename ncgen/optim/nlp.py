@@ -36,7 +36,7 @@ from ncgen.optim.guess import guess_duration, make_guess
 from ncgen.optim.manifold import (BRANCH_RADIUS, consistent_configuration, length_scale, resolve_configuration,
                                   resolve_velocity, tangent_basis)
 from ncgen.optim.result import OptimalTrajectory, SolverStats
-from ncgen.optim.targets import pose_target
+from ncgen.optim.targets import joint_target, pose_target
 from ncgen.optim.transcription import MODEL_STATE, Horizon
 
 
@@ -139,23 +139,41 @@ class NLP:
         q_start = model.q0 if q_init is None else q_init
         self.q_final = None if ocp.final_spec["q"] is None else resolve_configuration(
             model, ocp.final_spec["q"], q_start, t=tN, p=p_num, what="final q")
-        self.pose_target = None
+        self.pose_target = self.joint_target = None
         if ocp.final_spec.get("pose"):
             self.pose_target = pose_target(model, ocp.final_spec["pose"], q_start, t=tN, p=p_num)
             self.q_final = self.pose_target.q_ref
+        if ocp.final_spec.get("joints"):
+            self.joint_target = joint_target(model, ocp.final_spec["joints"], q_start, t=tN, p=p_num)
+            self.q_final = self.joint_target.q_ref
         guess, p_guess = make_guess(ocp, warm_start,
                                     model.q0 if q_init is None else q_init,
                                     np.zeros(model.nq) if v_init is None else v_init, self.q_final, p_num)
         self.guess = guess
-        self.q0 = opti.variable(model.nq) if q_init is None else ca.DM(q_init)
-        self.v0 = opti.variable(model.nq) if v_init is None else ca.DM(v_init)
-        hz = Horizon(t0=t0, T=self.T, p=self.p, q0=self.q0, v0=self.v0, N=ocp.N)
+        joint = getattr(ocp.transcription, "joint_space", False)
+        if joint:                   # the initial node in joint coordinates; q₀ = q(q_j0) holds Φ = 0
+            js = model.joint_space
+            self._check_joint_space(q_start, p_num)
+            self.x0 = opti.variable(js.nq) if q_init is None else ca.DM(js.positions(q_init))
+            if v_init is None:
+                self.w0 = opti.variable(js.nv)
+            elif q_init is not None or not np.any(v_init):
+                self.w0 = ca.DM(js.rates(q_start, v_init))
+            else:
+                raise OptimizationError("initial v: a nonzero velocity with a free initial q cannot be given in the "
+                                        "joint-space form; fix the initial q, or use form='ggl'")
+            self.q0, self.v0 = js.tree_function(model.layout)(self.x0, self.w0)
+            hz = Horizon(t0=t0, T=self.T, p=self.p, q0=self.x0, v0=self.w0, N=ocp.N)
+        else:
+            self.q0 = opti.variable(model.nq) if q_init is None else ca.DM(q_init)
+            self.v0 = opti.variable(model.nq) if v_init is None else ca.DM(v_init)
+            hz = Horizon(t0=t0, T=self.T, p=self.p, q0=self.q0, v0=self.v0, N=ocp.N)
         self.disc = disc = ocp.transcription.build(opti, model, hz)
         for label, e in disc.defects:
             self.constrain(label, "dynamics", e)
-        if q_init is None:
+        if not joint and q_init is None:
             self.constrain("initial position invariant Φ(q₀) = 0", "invariant", f["phi"](t0, self.q0, self.p))
-        if q_init is None or v_init is None:
+        if not joint and (q_init is None or v_init is None):
             vel = ca.mtimes(f["A"](t0, self.q0, self.p), self.v0) + f["phi_t"](t0, self.q0, self.p)
             if ca.symvar(vel):
                 self.constrain("initial velocity invariant A(q₀) v₀ + Φ_t = 0", "invariant", vel)
@@ -168,16 +186,34 @@ class NLP:
         else:
             opti.minimize(self._objective())
         # initial values
-        disc.set_guess(opti, guess)
+        start = disc.set_guess(opti, guess)
         g0 = np.array([t0])
+        x0, w0 = (self.x0, self.w0) if joint else (self.q0, self.v0)
         if q_init is None:
-            opti.set_initial(self.q0, guess.q(g0)[0])
+            opti.set_initial(x0, start[0] if joint else guess.q(g0)[0])
         if v_init is None:
-            opti.set_initial(self.v0, guess.v(g0)[0])
+            opti.set_initial(w0, start[1] if joint else guess.v(g0)[0])
         if ocp.t_final_bounds is not None:
             opti.set_initial(self.T, guess.T)
         if self.p_var is not None:
             opti.set_initial(self.p_var, [p_guess[i] for i in sorted(ocp.p_free)])
+
+    def _check_joint_space(self, q_start, p_num):
+        """The joint-space form's forward kinematics uses the model's geometry: refuse it
+        where parameters change the constraints (a free parameter in Φ, or fixed values that
+        move the start off q(q_j))."""
+        model, ocp = self.model, self.ocp
+        js = model.joint_space
+        if self.p_var is not None:
+            dep = ca.jacobian(model.functions["phi"](ocp.t0, ca.DM(q_start), self.p), self.p_var)
+            if dep.nnz():
+                raise OptimizationError("a free parameter enters the constraints Φ, which the joint-space form "
+                                        "cannot follow: use form='ggl'")
+        q = np.array(js.tree_function(model.layout)(js.positions(q_start), np.zeros(js.nv))[0]).reshape(-1)
+        phi = np.max(np.abs(np.array(model.functions["phi"](ocp.t0, q, p_num))), initial=0.0)
+        if not phi <= 1e-9 * max(1.0, float(np.max(np.abs(q)))) ** 2:
+            raise OptimizationError(f"the joints' forward kinematics misses the constraints by {phi:.3g} with these "
+                                    "parameter values (a parameter changes the geometry): use form='ggl'")
 
     def _initial_state(self, p_num):
         ocp, model = self.ocp, self.model
@@ -230,6 +266,13 @@ class NLP:
             Sq = ca.mtimes(ca.DM(target.S), qN)
             Sr = target.S @ q_ref
             self.constrain(f"{target.label} (branch box)", "final", Sq, Sr - radius, Sr + radius)
+        elif self.joint_target is not None:
+            target = self.joint_target
+            q_ref = target.q_ref
+            qj = disc.qj[:, -1] if disc.qj is not None else model.joint_space.positions(qN)
+            eq, branch = target.residuals(qj)
+            self.constrain(target.label, "final", eq)
+            self.constrain(f"{target.label} (branch)", "final", branch, 0.0, np.inf)
         elif self.q_final is not None:
             q_ref = self.q_final
             N = tangent_basis(model, q_ref, t=tN, p=p_num)
@@ -277,8 +320,11 @@ class NLP:
         if ocp.joint_bounds:
             js = model.joint_space
             npts = disc.path_q.shape[1]
-            qj = js.positions.map(npts)(disc.path_q)
-            vj = js.rates.map(npts)(disc.path_q, disc.path_v)
+            if disc.path_qj is not None:
+                qj, vj = disc.path_qj, disc.path_vj
+            else:
+                qj = js.positions.map(npts)(disc.path_q)
+                vj = js.rates.map(npts)(disc.path_q, disc.path_v)
             rows = {"position": js.slices(), "rate": js.slices(rates=True)}
             for name, kind, lo, hi in ocp.joint_bounds:
                 x = qj if kind == "position" else vj
@@ -391,9 +437,13 @@ def extract(nlp: NLP, val, build_time: float) -> OptimalTrajectory:
     q = np.array(val(disc.q)).reshape(model.nq, -1).T
     v = np.array(val(disc.v)).reshape(model.nq, -1).T
     u = np.array(val(disc.U)).reshape(model.nu, -1).T if model.nu else np.zeros((ocp.N, 0))
-    lam_rest = np.array(val(disc.lam)).reshape(model.nc, -1).T if model.nc else np.zeros((ocp.N, 0))
-    _, lam0 = model.accel(q[0], v[0], t=t[0], u=u[0] if model.nu else None, p=p)
-    lam = np.vstack([np.atleast_1d(lam0).reshape(1, model.nc), lam_rest])
+    lam = np.zeros((ocp.N + 1, model.nc))
+    nodes = range(ocp.N + 1) if disc.lam is None else [0]      # the rest from the transcription's unknowns
+    for k in nodes:
+        _, lam_k = model.accel(q[k], v[k], t=t[k], u=u[min(k, ocp.N - 1)] if model.nu else None, p=p)
+        lam[k] = np.atleast_1d(lam_k).reshape(model.nc)
+    if disc.lam is not None and model.nc:
+        lam[1:] = np.array(val(disc.lam)).reshape(model.nc, -1).T
     st = nlp.opti.stats()
     defect = max((float(np.max(np.abs(np.array(val(e))), initial=0.0)) for _, e in disc.defects), default=0.0)
     violation = max((violation_of(val, g) for g in nlp.groups), default=0.0)

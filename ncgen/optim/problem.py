@@ -39,14 +39,16 @@ class OptimalControl:
 
     ``t_final``: horizon length (s), a number (fixed) or ``(lower, upper)`` (free final
     time, a decision variable); ``method``: ``"collocation"`` (Radau IIA of ``degree``,
-    default 3, on the constraint ``form`` ``"ggl"`` (default), ``"index3"`` or ``"index1"``:
-    see :mod:`ncgen.optim.radau`) or ``"shooting"`` (multiple shooting with ``integrator``, default IDAS;
+    default 3, in the ``form`` ``"joint"`` (joint coordinates as states, trees only:
+    :mod:`ncgen.optim.joint_radau`), ``"ggl"``, ``"index3"`` or ``"index1"`` (natural
+    coordinates: :mod:`ncgen.optim.radau`); ``"auto"`` (default): ``"joint"`` when the model
+    allows it, else ``"ggl"``) or ``"shooting"`` (multiple shooting with ``integrator``, default IDAS;
     ``integrator_options`` go to its factory); ``parameters``: values replacing the
     model's defaults (``{"k": 50.0}``).
     """
 
     def __init__(self, model, N: int = 50, t_final=1.0, method: str = "collocation", *, degree: int = 3,
-                 form: str = "ggl", integrator: str = "idas", integrator_options: dict | None = None,
+                 form: str = "auto", integrator: str = "idas", integrator_options: dict | None = None,
                  parameters: dict | None = None):
         if not isinstance(N, (int, np.integer)) or isinstance(N, bool) or N < 1:
             raise OptimizationError(f"N: expected a positive integer number of intervals, got {N!r}")
@@ -58,11 +60,7 @@ class OptimalControl:
         self.t0 = float(model.t0)
         self.t_final, self.t_final_bounds = _horizon(t_final)
         if method == "collocation":
-            from ncgen.optim.radau import RadauCollocation
-            try:
-                self.transcription = RadauCollocation(degree, form)
-            except ValueError as exc:
-                raise OptimizationError(str(exc)) from None
+            self.transcription = _collocation(model, degree, form)
         else:
             from ncgen.optim.shooting import MultipleShooting
             self.transcription = MultipleShooting(integrator, **(integrator_options or {}))
@@ -77,7 +75,7 @@ class OptimalControl:
         #: Joint-space path constraints: (joint, "position" or "rate", lower, upper).
         self.joint_bounds: list[tuple[str, str, float, float]] = []
         self.initial_spec = {"q": MODEL_STATE, "v": MODEL_STATE, "markers": []}
-        self.final_spec = {"q": None, "v": None, "markers": [], "pose": None}
+        self.final_spec = {"q": None, "v": None, "markers": [], "pose": None, "joints": None}
         self.periodic_spec = {"q": False, "v": False}
         self.effort_R: np.ndarray | None = None
         self.tracking: list[tuple[str, object, float]] = []
@@ -193,12 +191,18 @@ class OptimalControl:
         return self
 
     # ------------------------------------------------------ boundary conditions
-    def initial(self, q=None, v=None, marker=None) -> "OptimalControl":
+    def initial(self, q=None, v=None, marker=None, joints=None) -> "OptimalControl":
         """Initial conditions, ``None`` = free.  ``q``: a full configuration (projected onto
         the constraints) or ``{coordinate name: value}`` (those kept, the rest assembled
-        from ``model.q0``); ``v``: full rates, a scalar such as 0, or ``{name: rate}`` (the
+        from ``model.q0``); ``joints``: instead of ``q``, ``{joint name: coordinate(s)}``
+        (rad or m, ``model.joint_space``; the other joints as in ``model.q0``, a closed
+        loop assembled); ``v``: full rates, a scalar such as 0, or ``{name: rate}`` (the
         rest as small as the constraints allow); ``marker``: ``(name, position)`` or a list
         of them, ``None`` components free (needs a free ``q``)."""
+        if joints is not None:
+            if q is not None:
+                raise OptimizationError("initial: give q or joints, not both")
+            q = self._joint_configuration(joints, "initial joints")
         self.initial_spec = {"q": self._state(q, "initial q"), "v": self._state(v, "initial v"),
                              "markers": self._markers(marker, "initial")}
         if self.initial_spec["markers"] and self.initial_spec["q"] is not None:
@@ -206,21 +210,28 @@ class OptimalControl:
                                     "pass q=None together with marker=...")
         return self
 
-    def final(self, q=None, v=None, marker=None, pose=None) -> "OptimalControl":
+    def final(self, q=None, v=None, marker=None, pose=None, joints=None) -> "OptimalControl":
         """Final conditions (``None`` = free): ``q``, ``v`` targets given as in
         :meth:`initial` (a dict ``q`` is assembled from the initial configuration; their
         ``dof`` tangent components are imposed), ``marker``: ``(name, position)`` or a list
         of them; ``pose``: ``{member name: (rotation, position)}`` — a member's frame
         (rotation body→world, 3×3, or an angle in planar systems; position of its origin,
         m: a body's centre of mass as given to ``add_body``), the other members left to the
-        joints (:mod:`ncgen.optim.targets`).  ``v`` without ``q`` is taken in the tangent
-        space of the guess's final configuration: exact for ``v=0``."""
-        if pose is not None and q is not None:
-            raise OptimizationError("final: give q or pose, not both (a pose fixes part of q)")
+        joints (:mod:`ncgen.optim.targets`); ``joints``: ``{joint name: coordinate(s)}`` (rad or
+        m, ``model.joint_space``; angles reached in any winding, the other joints free; in a
+        closed loop name independent joints only).  ``v`` without ``q`` is taken in the
+        tangent space of the final configuration (the target's, else the guess's): exact for
+        ``v=0``."""
+        given = [k for k, x in (("q", q), ("pose", pose), ("joints", joints)) if x is not None]
+        if len(given) > 1:
+            raise OptimizationError(f"final: give one of q, pose, joints (got {', '.join(given)}): each fixes "
+                                    "part of the configuration")
         if pose is not None and (not isinstance(pose, dict) or not pose):
             raise OptimizationError(f"final pose: expected {{member name: (rotation, position)}}, got {pose!r}")
+        if joints is not None:
+            self._joint_configuration(joints, "final joints")
         self.final_spec = {"q": self._state(q, "final q"), "v": self._state(v, "final v"),
-                           "markers": self._markers(marker, "final"), "pose": pose}
+                           "markers": self._markers(marker, "final"), "pose": pose, "joints": joints}
         self._check_periodic()
         return self
 
@@ -237,10 +248,16 @@ class OptimalControl:
 
     def _check_periodic(self):
         for key in ("q", "v"):
-            if self.periodic_spec[key] and (self.final_spec[key] is not None
-                                            or key == "q" and self.final_spec.get("pose") is not None):
+            if self.periodic_spec[key] and (self.final_spec[key] is not None or key == "q" and (
+                    self.final_spec.get("pose") is not None or self.final_spec.get("joints") is not None)):
                 raise OptimizationError(f"final {key} and periodic {key} both given: the final {key} would "
                                         "be imposed twice; keep one of them")
+
+    def _joint_configuration(self, joints, what: str) -> np.ndarray:
+        """The configuration with these joint coordinates, the others as in ``model.q0``
+        (checks the names and sizes)."""
+        from ncgen.optim.targets import joint_target
+        return joint_target(self.model, joints, self.model.q0, what=what).q_ref
 
     def _state(self, x, what: str):
         if x is None:
@@ -381,6 +398,28 @@ class OptimalControl:
         T = self.t_final if self.t_final_bounds is None else f"free in {self.t_final_bounds}"
         return (f"<OptimalControl on {self.model.name!r}: N={self.N}, T={T}, "
                 f"{self.transcription.describe()}>")
+
+
+#: Collocation forms: ``"auto"`` picks ``"joint"`` for trees, ``"ggl"`` otherwise.
+FORMS = ("auto", "joint", "ggl", "index3", "index1")
+
+
+def _collocation(model, degree: int, form: str):
+    from ncgen.optim.joint_radau import JointRadauCollocation, joint_space_reason
+    from ncgen.optim.radau import RadauCollocation
+    if form not in FORMS:
+        raise OptimizationError(f"collocation form: expected one of {', '.join(FORMS)}, got {form!r}")
+    try:
+        if form in ("auto", "joint"):
+            why = joint_space_reason(model)
+            if why is None:
+                return JointRadauCollocation(degree)
+            if form == "joint":
+                raise OptimizationError(f"form='joint': {why}; use form='ggl' (natural coordinates)")
+            form = "ggl"
+        return RadauCollocation(degree, form)
+    except ValueError as exc:
+        raise OptimizationError(str(exc)) from None
 
 
 def _horizon(t_final):

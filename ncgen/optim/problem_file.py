@@ -9,7 +9,8 @@ The format is documented in docs/optimal-control.md.  Every table is optional::
     [free_parameters.NAME]  lower, upper, guess     (design parameters)
     [bounds.inputs] / [bounds.coordinates] / [bounds.velocities]   name = [lower, upper]
     [bounds.markers.NAME]   lower = [...], upper = [...]   ("free" = unbounded component)
-    [initial] / [final]     q, v, markers = {NAME = [x, y(, z)]}
+    [initial] / [final]     q, v, markers = {NAME = [x, y(, z)]}, joints = {JOINT = value}
+    [final.pose.MEMBER]     rotation = 3×3 rows (body→world; an angle in a plane), position
     [periodic]       q = true, v = true
     [cost]           effort, time, [[cost.track]], [[cost.terminal]]
     [solver]         max_iter, tol, warm_start, ipopt = {...}
@@ -27,8 +28,7 @@ import numpy as np
 
 from ncgen.errors import NcgenError, OptimizationError, ProblemFileError
 from ncgen.files import decode_text
-from ncgen.optim.problem import METHODS, OptimalControl
-from ncgen.optim.radau import FORMS
+from ncgen.optim.problem import FORMS, METHODS, OptimalControl
 
 TOP_KEYS = ("model", "horizon", "parameters", "free_parameters", "bounds", "initial", "final", "periodic",
             "cost", "solver")
@@ -160,7 +160,7 @@ class _Reader:
         degree = h.get("degree", 3)
         if isinstance(degree, bool) or not isinstance(degree, int):
             self.fail("horizon.degree", "an integer 1..9", degree)
-        form = h.get("form", "ggl")
+        form = h.get("form", "auto")
         if form not in FORMS:
             self.fail("horizon.form", " or ".join(f'"{f}"' for f in FORMS), form)
         integrator = h.get("integrator", "idas")
@@ -202,6 +202,37 @@ class _Reader:
             return {k: self.number(x, f"{path}.{k}") for k, x in value.items()}
         self.fail(path, f'"free", a number, {nq} numbers or a table of coordinate values', value)
 
+    def _joints(self, value, path: str) -> dict:
+        """``{joint = angle or length, ...}`` (a list for a joint with several coordinates)."""
+        out = {}
+        for name, x in self.table(value, path, None).items():
+            out[name] = self.numbers(x, f"{path}.{name}") if isinstance(x, list) else self.number(x, f"{path}.{name}")
+        if not out:
+            self.fail(path, "a table {joint name = value, ...}", value)
+        return out
+
+    def _poses(self, value, path: str, dim: int) -> dict:
+        """``{MEMBER = {rotation = 3×3 rows (an angle in a plane), position = [...]}}``."""
+        out = {}
+        for name, spec in self.table(value, path, None).items():
+            where = f"{path}.{name}"
+            spec = self.table(spec, where, ("rotation", "position"))
+            for k in ("rotation", "position"):
+                if k not in spec:
+                    raise ProblemFileError(f"{self.origin}: {where}.{k}: missing (expected "
+                                           f"{'the member frame rotation' if k == 'rotation' else f'{dim} numbers'})")
+            if dim == 2:
+                R = self.number(spec["rotation"], f"{where}.rotation")
+            else:
+                rows = spec["rotation"]
+                if not isinstance(rows, list) or len(rows) != 3:
+                    self.fail(f"{where}.rotation", "3 rows of 3 numbers (body→world)", rows)
+                R = np.array([self.numbers(r, f"{where}.rotation[{i}]", 3) for i, r in enumerate(rows)])
+            out[name] = (R, np.array(self.numbers(spec["position"], f"{where}.position", dim)))
+        if not out:
+            self.fail(path, "a table of member poses", value)
+        return out
+
     def _markers(self, value, path: str, dim: int):
         out = []
         for name, pos in self.table(value, path, None).items():
@@ -211,20 +242,25 @@ class _Reader:
     def _conditions(self, ocp, d):
         nq, dim = ocp.model.nq, ocp.model.dim
         if "initial" in d:
-            t = self.table(d["initial"], "initial", ("q", "v", "markers"))
+            t = self.table(d["initial"], "initial", ("q", "v", "markers", "joints"))
+            joints = self._joints(t["joints"], "initial.joints") if "joints" in t else None
             q = "model" if t.get("q", "model") == "model" else self._state(t["q"], "initial.q", nq)
             v = "model" if t.get("v", "model") == "model" else self._state(t["v"], "initial.v", nq)
             markers = self._markers(t.get("markers", {}), "initial.markers", dim)
             self.where = "initial"
-            ocp.initial(q=ocp.model.q0 if q == "model" else q, v=ocp.model.v0 if v == "model" else v,
-                        marker=markers)
+            if joints is not None and "q" in t:
+                raise ProblemFileError(f"{self.origin}: initial: give q or joints, not both")
+            ocp.initial(q=None if joints is not None else ocp.model.q0 if q == "model" else q,
+                        v=ocp.model.v0 if v == "model" else v, marker=markers, joints=joints)
         if "final" in d:
-            t = self.table(d["final"], "final", ("q", "v", "markers"))
+            t = self.table(d["final"], "final", ("q", "v", "markers", "joints", "pose"))
             q = self._state(t["q"], "final.q", nq) if "q" in t else None
             v = self._state(t["v"], "final.v", nq) if "v" in t else None
             markers = self._markers(t.get("markers", {}), "final.markers", dim)
+            joints = self._joints(t["joints"], "final.joints") if "joints" in t else None
+            pose = self._poses(t["pose"], "final.pose", dim) if "pose" in t else None
             self.where = "final"
-            ocp.final(q=q, v=v, marker=markers)
+            ocp.final(q=q, v=v, marker=markers, joints=joints, pose=pose)
         if "periodic" in d:
             t = self.table(d["periodic"], "periodic", ("q", "v"))
             for k in ("q", "v"):

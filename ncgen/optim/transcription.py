@@ -58,7 +58,10 @@ class Discretisation:
     quadrature rule ``∫ g dt ≈ Σ w_i g(t_i, q_i, v_i)`` for integral costs (weights in s);
     ``defects``: labelled dynamics equations ``e == 0``;
     ``set_guess(opti, guess)``: initial values for the transcription's own variables;
-    ``expandable``: the NLP may be expanded to SX (no integrator or rootfinder calls).
+    ``expandable``: the NLP may be expanded to SX (no integrator or rootfinder calls);
+    joint-space transcriptions (:mod:`ncgen.optim.joint_radau`) also give ``qj``, ``vj``
+    (joint coordinates and rates at the nodes) and ``path_qj``, ``path_vj`` (at the state
+    points), and ``lam = None`` (no multipliers: they are computed at the nodes afterwards).
     """
 
     q: object
@@ -75,6 +78,10 @@ class Discretisation:
     defects: list = field(default_factory=list)
     set_guess: Callable = None
     expandable: bool = True
+    qj: object = None
+    vj: object = None
+    path_qj: object = None
+    path_vj: object = None
 
 
 class Transcription:
