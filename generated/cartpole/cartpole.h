@@ -179,7 +179,7 @@ extern const casadi_real cartpole_gravity[2];
 #define CARTPOLE_MASS_OUT_M_NNZ 12
 
 /* ---- cartpole_Minv ----------------------------------------------------
- * application of the constant inverse mass matrix: x = M⁻¹ b (two sparse triangular solves with the Cholesky factor of M)
+ * application of the constant inverse mass matrix: x = M⁻¹ b (two sparse triangular solves with the Cholesky factor of M); for a singular M (a flat body) the pseudo-inverse M⁺ b
  * In cartpole_kernels_0.c; 44 instructions.
  * Inputs:
  *   arg[0] b: 8x1, nnz 8 [N] right-hand side: a generalised force. Default: zeros.
@@ -190,7 +190,7 @@ extern const casadi_real cartpole_gravity[2];
 #define CARTPOLE_MINV_OUT_X_NNZ 8
 
 /* ---- cartpole_ode ----------------------------------------------------
- * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ)
+ * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ) (for a singular M, from the augmented mass matrix M + κ AᵀA, exact where A a = γ)
  * In cartpole_kernels_0.c; 101 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: cartpole_t0.

@@ -178,7 +178,7 @@ extern const casadi_real chain_gravity[3];
 #define CHAIN_MASS_OUT_M_NNZ 39
 
 /* ---- chain_Minv ----------------------------------------------------
- * application of the constant inverse mass matrix: x = M⁻¹ b (two sparse triangular solves with the Cholesky factor of M)
+ * application of the constant inverse mass matrix: x = M⁻¹ b (two sparse triangular solves with the Cholesky factor of M); for a singular M (a flat body) the pseudo-inverse M⁺ b
  * In chain_kernels_0.c; 117 instructions.
  * Inputs:
  *   arg[0] b: 15x1, nnz 15 [N] right-hand side: a generalised force. Default: zeros.
@@ -189,7 +189,7 @@ extern const casadi_real chain_gravity[3];
 #define CHAIN_MINV_OUT_X_NNZ 15
 
 /* ---- chain_ode ----------------------------------------------------
- * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ)
+ * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ) (for a singular M, from the augmented mass matrix M + κ AᵀA, exact where A a = γ)
  * In chain_kernels_0.c; 219 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: chain_t0.

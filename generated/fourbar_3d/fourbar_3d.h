@@ -178,7 +178,7 @@ extern const casadi_real fourbar_3d_gravity[3];
 #define FOURBAR_3D_MASS_OUT_M_NNZ 24
 
 /* ---- fourbar_3d_Minv ----------------------------------------------------
- * application of the constant inverse mass matrix: x = M⁻¹ b (two sparse triangular solves with the Cholesky factor of M)
+ * application of the constant inverse mass matrix: x = M⁻¹ b (two sparse triangular solves with the Cholesky factor of M); for a singular M (a flat body) the pseudo-inverse M⁺ b
  * In fourbar_3d_kernels_0.c; 91 instructions.
  * Inputs:
  *   arg[0] b: 12x1, nnz 12 [N] right-hand side: a generalised force. Default: zeros.
@@ -189,7 +189,7 @@ extern const casadi_real fourbar_3d_gravity[3];
 #define FOURBAR_3D_MINV_OUT_X_NNZ 12
 
 /* ---- fourbar_3d_ode ----------------------------------------------------
- * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ)
+ * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ) (for a singular M, from the augmented mass matrix M + κ AᵀA, exact where A a = γ)
  * In fourbar_3d_kernels_0.c; 207 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_3d_t0.

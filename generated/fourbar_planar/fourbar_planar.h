@@ -180,7 +180,7 @@ extern const casadi_real fourbar_planar_gravity[2];
 #define FOURBAR_PLANAR_MASS_OUT_M_NNZ 8
 
 /* ---- fourbar_planar_Minv ----------------------------------------------------
- * application of the constant inverse mass matrix: x = M⁻¹ b (two sparse triangular solves with the Cholesky factor of M)
+ * application of the constant inverse mass matrix: x = M⁻¹ b (two sparse triangular solves with the Cholesky factor of M); for a singular M (a flat body) the pseudo-inverse M⁺ b
  * In fourbar_planar_kernels_0.c; 27 instructions.
  * Inputs:
  *   arg[0] b: 4x1, nnz 4 [N] right-hand side: a generalised force. Default: zeros.
@@ -191,7 +191,7 @@ extern const casadi_real fourbar_planar_gravity[2];
 #define FOURBAR_PLANAR_MINV_OUT_X_NNZ 4
 
 /* ---- fourbar_planar_ode ----------------------------------------------------
- * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ)
+ * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ) (for a singular M, from the augmented mass matrix M + κ AᵀA, exact where A a = γ)
  * In fourbar_planar_kernels_0.c; 102 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: fourbar_planar_t0.

@@ -178,7 +178,7 @@ extern const casadi_real heavy_top_gravity[3];
 #define HEAVY_TOP_MASS_OUT_M_NNZ 15
 
 /* ---- heavy_top_Minv ----------------------------------------------------
- * application of the constant inverse mass matrix: x = M⁻¹ b (two sparse triangular solves with the Cholesky factor of M)
+ * application of the constant inverse mass matrix: x = M⁻¹ b (two sparse triangular solves with the Cholesky factor of M); for a singular M (a flat body) the pseudo-inverse M⁺ b
  * In heavy_top_kernels_0.c; 51 instructions.
  * Inputs:
  *   arg[0] b: 9x1, nnz 9 [N] right-hand side: a generalised force. Default: zeros.
@@ -189,7 +189,7 @@ extern const casadi_real heavy_top_gravity[3];
 #define HEAVY_TOP_MINV_OUT_X_NNZ 9
 
 /* ---- heavy_top_ode ----------------------------------------------------
- * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ)
+ * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ) (for a singular M, from the augmented mass matrix M + κ AᵀA, exact where A a = γ)
  * In heavy_top_kernels_0.c; 138 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: heavy_top_t0.

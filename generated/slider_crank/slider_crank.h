@@ -180,7 +180,7 @@ extern const casadi_real slider_crank_gravity[2];
 #define SLIDER_CRANK_MASS_OUT_M_NNZ 12
 
 /* ---- slider_crank_Minv ----------------------------------------------------
- * application of the constant inverse mass matrix: x = M⁻¹ b (two sparse triangular solves with the Cholesky factor of M)
+ * application of the constant inverse mass matrix: x = M⁻¹ b (two sparse triangular solves with the Cholesky factor of M); for a singular M (a flat body) the pseudo-inverse M⁺ b
  * In slider_crank_kernels_0.c; 44 instructions.
  * Inputs:
  *   arg[0] b: 8x1, nnz 8 [N] right-hand side: a generalised force. Default: zeros.
@@ -191,7 +191,7 @@ extern const casadi_real slider_crank_gravity[2];
 #define SLIDER_CRANK_MINV_OUT_X_NNZ 8
 
 /* ---- slider_crank_ode ----------------------------------------------------
- * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ)
+ * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ) (for a singular M, from the augmented mass matrix M + κ AᵀA, exact where A a = γ)
  * In slider_crank_kernels_0.c; 141 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: slider_crank_t0.

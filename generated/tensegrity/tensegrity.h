@@ -181,7 +181,7 @@ extern const casadi_real tensegrity_gravity[3];
 #define TENSEGRITY_MASS_OUT_M_NNZ 36
 
 /* ---- tensegrity_Minv ----------------------------------------------------
- * application of the constant inverse mass matrix: x = M⁻¹ b (two sparse triangular solves with the Cholesky factor of M)
+ * application of the constant inverse mass matrix: x = M⁻¹ b (two sparse triangular solves with the Cholesky factor of M); for a singular M (a flat body) the pseudo-inverse M⁺ b
  * In tensegrity_kernels_0.c; 113 instructions.
  * Inputs:
  *   arg[0] b: 18x1, nnz 18 [N] right-hand side: a generalised force. Default: zeros.
@@ -192,7 +192,7 @@ extern const casadi_real tensegrity_gravity[3];
 #define TENSEGRITY_MINV_OUT_X_NNZ 18
 
 /* ---- tensegrity_ode ----------------------------------------------------
- * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ)
+ * differential part of the index-1 DAE: q̇ = v, v̇ = a = M⁻¹ (F − Aᵀ λ) (for a singular M, from the augmented mass matrix M + κ AᵀA, exact where A a = γ)
  * In tensegrity_kernels_0.c; 521 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: tensegrity_t0.
