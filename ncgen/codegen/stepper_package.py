@@ -88,7 +88,7 @@ MINV_MAX_NQ, MINV_MAX_COND = 400, 1e12
 #: then accepted (counted in the ``floor_steps`` column of :data:`STATS`), and the next steps
 #: are accepted up to FLOOR_MARGIN × that floor, which decays by FLOOR_DECAY per step.
 FLOOR_SPAN, FLOOR_ORDER, FLOOR_MAX, FLOOR_MARGIN, FLOOR_DECAY, FLOOR_STEPS = 8, 0.5, 1e-7, 2, 0.5, 50
-FLOOR_JUMPS = 3
+FLOOR_JUMPS, FLOOR_CRAWL = 3, 0.5
 BACK_SHRINK, BACK_STRETCH, BACK_MAX = 64, 1.5, 8
 #: The demo program's defaults: simulated time and step (s).
 DEMO_T_END, DEMO_H = 1.0, 1e-3
@@ -114,7 +114,7 @@ def extra_sources(model, functions) -> list[ExtraSource]:
                "kernels": [f"{name}_{f.name()}" for f in functions], "nstats_base": len(STATS),
                "floor_column": STATS.index("floor_steps"), "floor_span": FLOOR_SPAN,
                "floor_order": c_real(FLOOR_ORDER), "floor_max": c_real(FLOOR_MAX), "floor_margin": c_real(FLOOR_MARGIN),
-               "floor_decay": c_real(FLOOR_DECAY), "floor_steps": FLOOR_STEPS, "floor_jumps": FLOOR_JUMPS,
+               "floor_decay": c_real(FLOOR_DECAY), "floor_steps": FLOOR_STEPS, "floor_jumps": FLOOR_JUMPS, "floor_crawl": c_real(FLOOR_CRAWL),
                "back_shrink": c_real(BACK_SHRINK), "back_stretch": c_real(BACK_STRETCH), "back_max": BACK_MAX}
     if nonsmooth(model):
         factor = next((f for f in functions if f.name() == "step_factor"), None)
