@@ -37,7 +37,7 @@ STATUS = {
        "the tolerance is below round-off",
 }
 #: Columns of the per-output-row statistics of the C loops (``<MODEL>_STEP_NSTATS``).
-STATS = ("steps", "newton_iterations", "splits", "error_q", "error_v", "work", "floor_steps")
+STATS = ("steps", "newton_iterations", "splits", "error_q", "error_v", "work")
 #: Columns the nonsmooth contact stepper appends to :data:`STATS` (fixed steps): contact
 #: solves whose projected Gauss–Seidel stopped at PGS_MAX_ITER sweeps, the largest
 #: last-sweep change of a contact velocity among them, relative to 1 + max |U|, and the
@@ -78,18 +78,6 @@ REPEAT_TOL = 1e-12
 #: in the C) and the Schur complement A M⁻¹ Aᵀ when M is regular (condition number below
 #: MINV_MAX_COND) and nq ≤ MINV_MAX_NQ; else from the sparse QR of the whole KKT matrix.
 MINV_MAX_NQ, MINV_MAX_COND = 400, 1e12
-#: Error control at the round-off floor of the local error estimate (``floor_reached`` in
-#: ``stepper.c.j2``).  Near a singular configuration the KKT solves amplify round-off and
-#: the Richardson estimate stops falling with the step (measured on the N four-bar at a flat
-#: position: level at ~2e-10 m/s from H = 7e-6 s down to 6e-13 s).  A rejected step is at
-#: that floor when a step FLOOR_SPAN times shorter at the same t has an estimate that fell by
-#: less than (span)^FLOOR_ORDER (the estimate falls as H³, or H¹ across a force jump) and
-#: whose error is at most FLOOR_MAX (1 + |q|∞) in q and FLOOR_MAX (1 + |v|∞) in v.  It is
-#: then accepted (counted in the ``floor_steps`` column of :data:`STATS`), and the next steps
-#: are accepted up to FLOOR_MARGIN × that floor, which decays by FLOOR_DECAY per step.
-FLOOR_SPAN, FLOOR_ORDER, FLOOR_MAX, FLOOR_MARGIN, FLOOR_DECAY, FLOOR_STEPS = 8, 0.5, 1e-7, 2, 0.5, 50
-FLOOR_JUMPS, FLOOR_CRAWL = 3, 0.5
-BACK_SHRINK, BACK_STRETCH, BACK_MAX = 64, 1.5, 8
 #: The demo program's defaults: simulated time and step (s).
 DEMO_T_END, DEMO_H = 1.0, 1e-3
 
@@ -111,11 +99,7 @@ def extra_sources(model, functions) -> list[ExtraSource]:
                "mass_scale": c_real(mass_scale(model)), "tol": c_real(TOL), "max_iter": MAX_ITER,
                "max_halvings": MAX_HALVINGS, "halvings_limit": HALVINGS_LIMIT, "dim": model.dim,
                "nout": n_outputs(model), "nstats": len(STATS) + (len(CONTACT_STATS) if nonsmooth(model) else 0),
-               "kernels": [f"{name}_{f.name()}" for f in functions], "nstats_base": len(STATS),
-               "floor_column": STATS.index("floor_steps"), "floor_span": FLOOR_SPAN,
-               "floor_order": c_real(FLOOR_ORDER), "floor_max": c_real(FLOOR_MAX), "floor_margin": c_real(FLOOR_MARGIN),
-               "floor_decay": c_real(FLOOR_DECAY), "floor_steps": FLOOR_STEPS, "floor_jumps": FLOOR_JUMPS, "floor_crawl": c_real(FLOOR_CRAWL),
-               "back_shrink": c_real(BACK_SHRINK), "back_stretch": c_real(BACK_STRETCH), "back_max": BACK_MAX}
+               "kernels": [f"{name}_{f.name()}" for f in functions]}
     if nonsmooth(model):
         factor = next((f for f in functions if f.name() == "step_factor"), None)
         if factor is not None:
