@@ -95,6 +95,16 @@ def test_stepper_at_tight_rtol_crosses_the_flat_positions(N):
     assert not traj.info["error_estimate"]["exceeds_tolerance"]
 
 
+def test_stepper_below_round_off_still_fails_loudly():
+    """The tangent estimate is no licence to accept noise: at rtol 1e-16 (below double
+    round-off) the steps are rejected until the run stops with a SimulationError, with the
+    trajectory up to there."""
+    model = n_fourbar(1)
+    with pytest.raises(SimulationError, match="error-controlled stepper") as failure:
+        nc.simulate(model, 1.0, 0.01, method="stepper", rtol=1e-16)
+    assert failure.value.trajectory.t[-1] < 1.0
+
+
 @pytest.mark.parametrize("N, t_end", [(1, 2.0), (10, 1.0)])
 def test_idas_with_projection_stays_on_the_physical_branch(N, t_end):
     """project=True: one output interval per IDAS call, projected after each; through every
