@@ -80,6 +80,31 @@ def test_stepper_with_rtol_follows_the_exact_motion_over_10_s(N):
     assert tip_error(traj, N) < 1e-6
 
 
+@pytest.mark.parametrize("N", [1, 10])
+def test_stepper_at_tight_rtol_crosses_the_flat_positions(N):
+    """rtol 1e-11: next to a flat position the KKT solves are ill-conditioned and the part of
+    the step-doubling difference normal to the constraints stops falling with the step (it
+    made the step collapse, status 7, at rtol below ~1e-9); measured on the tangent part the
+    estimate stays regular.  All eight flat positions in 10 s, to 1e-9 m of the exact motion
+    (measured: 8e-11 m for N = 1, 4.7e-11 m for N = 10), with few rejected steps."""
+    model = n_fourbar(N)
+    traj = nc.simulate(model, 10.0, 0.01, method="stepper", rtol=1e-11)
+    assert traj.complete
+    assert tip_error(traj, N) < 1e-9
+    assert traj.info["stats"]["rejected_steps"] < 100
+    assert not traj.info["error_estimate"]["exceeds_tolerance"]
+
+
+def test_stepper_below_round_off_still_fails_loudly():
+    """The tangent estimate is no licence to accept noise: at rtol 1e-16 (below double
+    round-off) the steps are rejected until the run stops with a SimulationError, with the
+    trajectory up to there."""
+    model = n_fourbar(1)
+    with pytest.raises(SimulationError, match="error-controlled stepper") as failure:
+        nc.simulate(model, 1.0, 0.01, method="stepper", rtol=1e-16)
+    assert failure.value.trajectory.t[-1] < 1.0
+
+
 @pytest.mark.parametrize("N, t_end", [(1, 2.0), (10, 1.0)])
 def test_idas_with_projection_stays_on_the_physical_branch(N, t_end):
     """project=True: one output interval per IDAS call, projected after each; through every

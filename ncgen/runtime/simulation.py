@@ -40,14 +40,11 @@ WATCHED_MAX_STEPS = 1_000
 #: ``σ_min/σ_max`` of A at the start of an interval that IDAS fails on (projecting), below
 #: which the failure is put down to a singular configuration ahead and the interval bridged.
 FAILING_NEAR_SINGULAR = 0.25
-#: Smallest tolerance of the compiled stepper standing in for IDAS next to a singular
-#: configuration.  There its error estimate has a round-off floor (the Newton residual
-#: divided by σ_min of A, which shrinks with the step), so tighter tolerances make the step
-#: collapse; it is of order 4 against an order-2 estimate, so its actual error is 10–100×
-#: below the tolerance (the N four-bar of IFToMM A02: 4e-11 m over 2 s at 1e-9).
-BRIDGE_MIN_TOL = 1e-9
-#: Loosest tolerance it is retried with where its step still collapses (``_bridge._stepped``).
-BRIDGE_MAX_TOL = 1e-6
+#: Smallest rtol and atol of the compiled stepper standing in for IDAS next to a singular
+#: configuration: the tightest at which it was measured through the flat positions of the
+#: N four-bar of IFToMM A02 (N = 1, 10; rtol 1e-10 to 1e-12 cross all eight in 10 s, its
+#: error estimate being taken on the tangent part of the step, see ``stepper.c.j2``).
+BRIDGE_MIN_TOL = 1e-12
 #: Largest number of NumPy RATTLE steps across one output interval (``_bridge`` without a
 #: C compiler).
 BRIDGE_MAX_STEPS = 20_000
@@ -182,7 +179,7 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
     nq, k = model.nq, len(X) - 1
     stats = dict(runner.stats)
     if projector is not None:
-        stats.update(projector.counts, rattle_intervals=bridge.count, rattle_loosened=bridge.loosened)
+        stats.update(projector.counts, rattle_intervals=bridge.count)
     info = {"method": method, "backend": used, "rtol": rtol, "atol": atol, "hold": hold,
             "linear_solver": linear_solver, "stats": stats, "project": project,
             "projected_from": None if projected_from is None else float(t[projected_from]),
@@ -249,14 +246,15 @@ def _algebraic(model, t: float, x, u, p) -> np.ndarray:
 class _bridge:
     """IDAS's stand-in over one output interval next to a singular configuration
     (:mod:`ncgen.runtime.rattle_bridge`): the model's compiled error-controlled stepper
-    (compiled on first use) with both tolerances ``max(rtol, atol, BRIDGE_MIN_TOL)``, or,
+    (compiled on first use) with tolerances ``max(rtol, BRIDGE_MIN_TOL)`` and
+    ``max(atol, BRIDGE_MIN_TOL)``, or,
     without a C compiler, NumPy RATTLE steps of about ``sqrt(rtol)`` s (at most
     :data:`BRIDGE_MAX_STEPS`); ``count`` of uses."""
 
     def __init__(self, model, runner: ChunkedIDAS, p, rtol: float, atol: float):
         self.model, self.runner, self.p, self.rtol, self.atol = model, runner, p, rtol, atol
-        self.tol = max(rtol, atol, BRIDGE_MIN_TOL)
-        self.count = self.loosened = 0
+        self.tols = max(rtol, BRIDGE_MIN_TOL), max(atol, BRIDGE_MIN_TOL)
+        self.count = 0
         self.stepper = None            # the compiled stepper; False: no C compiler
         self.h_next, self.t_next = 0.0, None
 
@@ -272,24 +270,15 @@ class _bridge:
         return self.stepper
 
     def _stepped(self, stepper, t0: float, t1: float, x, u0, u1):
-        """The compiled stepper over ``[t0, t1]``; where its step collapses (the round-off
-        floor of its error estimate where a step crosses the singular configuration), retried
-        with 10× looser tolerances up to :data:`BRIDGE_MAX_TOL` (``loosened`` counts it)."""
+        """The compiled stepper over ``[t0, t1]`` (raises
+        :class:`~ncgen.runtime.rattle_bridge.RattleFailure`)."""
         lam = _algebraic(self.model, t0, x, u0, self.p)[self.model.nq:]
         U = np.vstack([u0, u1]) if self.model.nu else None
         h0 = self.h_next if self.t_next == t0 else 0.0
-        tol = self.tol
-        while True:
-            try:
-                x1, self.h_next = compiled_interval(stepper, x, lam, t0, t1 - t0, U, self.runner.hold == "linear",
-                                                    self.p, tol, tol, h0)
-                self.t_next = t1
-                return x1
-            except RattleFailure:
-                if tol * 10 > BRIDGE_MAX_TOL:
-                    raise
-                tol, h0 = 10 * tol, 0.0
-                self.loosened += 1
+        x1, self.h_next = compiled_interval(stepper, x, lam, t0, t1 - t0, U, self.runner.hold == "linear", self.p,
+                                            *self.tols, h0)
+        self.t_next = t1
+        return x1
 
     def __call__(self, t0: float, t1: float, x, column):
         """``(x1, z1)``: the state and algebraic state at ``t1`` from ``x`` at ``t0``."""

@@ -18,7 +18,10 @@ Two modes:
   skips it).  The run is checked (see :mod:`ncgen.runtime.stepper_checks`) and an
   untrustworthy one raises :class:`~ncgen.errors.SimulationError`.
 * **Error control** (``rtol`` given): each step is taken whole and as two halves, the
-  difference estimates the local error (Richardson), the step is accepted when every
+  difference estimates the local error (Richardson; where the whole difference fails the
+  test, its part tangent to the constraints: the normal part is a constraint residual that,
+  next to a singular configuration, carries the round-off of the ill-conditioned KKT
+  solves), the step is accepted when every
   component of q and v is within ``atol + rtol |y|`` and continues from the Richardson
   extrapolation (order 4, RATTLE being symmetric) projected onto both constraint levels
   (``order=2``: from the two halves, keeping RATTLE's symplecticity).  Steps end on every
