@@ -46,7 +46,9 @@ half of which enters each half-step (``− j/2`` in r, ``+ j/2`` in b), and two 
 
 * ``step_contact``: q, v, p -> g (nk, m), Wt = Wᵀ (nq × nk·dim, sparse: column r is row r of
   the contact Jacobian W, per contact its normal row, then its tangent rows; a row touches
-  the coordinates of one or two members), U = W v (m/s)
+  the coordinates of one or two members; a frictionless contact's tangent rows are
+  structural zeros, as no tangential impulse acts there, so its tangent basis is never
+  computed), U = W v (m/s)
 * ``step_gap``: q, p -> g (the gaps alone)
 
 give the gaps and contact Jacobians.  When the constant mass matrix is regular the C forms
@@ -233,8 +235,8 @@ def contact_function(model) -> ca.Function:
     WN, WT = model.functions["contact_jacobian"](q, p)
     nt = model.dim - 1
     rows = []
-    for k in range(model.nk):
-        rows += [WN[k, :], WT[k * nt:(k + 1) * nt, :]]
+    for k, contact in enumerate(model.contacts):
+        rows += [WN[k, :], WT[k * nt:(k + 1) * nt, :] if contact["mu"] > 0 else ca.SX(nt, model.nq)]
     W = ca.vertcat(*rows)
     return ca.Function("step_contact", [q, v, p], [ca.densify(g), W.T, ca.densify(ca.mtimes(W, v))],
                        ["q", "v", "p"], ["g", "Wt", "U"])

@@ -157,8 +157,8 @@ def _warn_unconverged(model, report: dict) -> None:
     :func:`~ncgen.runtime.stepper_checks.contact_report`)."""
     if report["penetration"] > 10 * report["penetration_tol"]:
         warnings.warn(f"simulate: contacts of {model.name!r} ended a step up to {report['penetration']:.3g} m inside "
-                      f"(the push-out aims at {report['penetration_tol']:g} m; its Gauss-Seidel crawls on redundant "
-                      f"contacts; info['contacts'])", stacklevel=5)
+                      f"(the push-out aims at {report['penetration_tol']:g} m and is repeated at most 4 times "
+                      f"per step; info['contacts'])", stacklevel=5)
     if report["pgs_unconverged"]:
         warnings.warn(f"simulate: {report['pgs_unconverged']} contact solve(s) of {model.name!r} stopped at "
                       f"{report['pgs_max_sweeps']} projected Gauss-Seidel sweeps before the contact velocities "
