@@ -354,3 +354,18 @@ def test_spinning_coin_bounces_on_the_floor_with_the_nonsmooth_stepper():
     R = axes(model, traj, "coin")[-1]
     np.testing.assert_allclose(R, np.array([[math.cos(24.0), -math.sin(24.0), 0], [math.sin(24.0), math.cos(24.0), 0],
                                             [0, 0, 1]]), atol=1e-4)   # RATTLE phase error O((ωh)² ωt)
+
+
+def test_nearly_flat_coin_forms_its_delassus_matrix_without_the_constant_inverse():
+    """A coin 1e-4 of its radius thick has a regular M (condition ~1e9, below the stepper's
+    MINV_MAX_COND) but counts as flat: the contact stepper must not store its M⁻¹."""
+    from ncgen.assembly.stepper_equations import stepper_functions
+    from ncgen.codegen.stepper_package import schur_context
+    h = 1e-4 * RADIUS
+    inertia = np.diag([MASS * (3 * RADIUS**2 + h**2) / 12] * 2 + [MASS * RADIUS**2 / 2])
+    s = nc.System("thin_coin", gravity=(0.0, 0.0, -G))
+    b = s.add_body("coin", mass=MASS, inertia=inertia, position=(0.0, 0.0, 0.5))
+    s.add_contact(nc.SpherePlane(b, (0.0, 0.0, 0.0), radius=0.0, restitution=0.5, name="floor"))
+    model = s.build(contacts="nonsmooth")
+    assert not mass_is_regular(model)
+    assert not schur_context(model, stepper_functions(model)[0].sparsity_out("K"))["schur"]

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 
+from ncgen.assembly.mass import mass_is_regular
 from ncgen.assembly.stepper_equations import CONTACT_DOCS, DOCS, mass_scale, nonsmooth, stepper_functions
 from ncgen.codegen import PackageDoc, write_package
 from ncgen.codegen.cnames import c_real
@@ -75,8 +76,9 @@ CONTACT_REFINE_MAX, CONTACT_REFINE_TOL = 10, 1e-8
 #: (``repeat_step`` in ``stepper.c.j2``): at rest that is every step.
 REPEAT_TOL = 1e-12
 #: Nonsmooth contact stepper: the Delassus matrix comes from the constant M⁻¹ (stored dense
-#: in the C) and the Schur complement A M⁻¹ Aᵀ when M is regular (condition number below
-#: MINV_MAX_COND) and nq ≤ MINV_MAX_NQ; else from the sparse QR of the whole KKT matrix.
+#: in the C) and the Schur complement A M⁻¹ Aᵀ when M is regular (``mass_is_regular``: no
+#: flat or nearly flat body; condition number below MINV_MAX_COND) and nq ≤ MINV_MAX_NQ;
+#: else from the sparse QR of the whole KKT matrix.
 MINV_MAX_NQ, MINV_MAX_COND = 400, 1e12
 #: The demo program's defaults: simulated time and step (s).
 DEMO_T_END, DEMO_H = 1.0, 1e-3
@@ -130,7 +132,8 @@ def schur_context(model, K) -> dict:
     ``a_row``, ``a_col``)."""
     M = np.asarray(model.M, dtype=float)
     nq = model.nq
-    if nq > MINV_MAX_NQ or not np.all(np.isfinite(M)) or np.linalg.cond(M) > MINV_MAX_COND:
+    if (nq > MINV_MAX_NQ or not mass_is_regular(model) or not np.all(np.isfinite(M))
+            or np.linalg.cond(M) > MINV_MAX_COND):
         return {"schur": False}
     minv = np.linalg.inv(M)
     minv = (minv + minv.T) / 2
