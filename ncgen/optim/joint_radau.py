@@ -32,6 +32,7 @@ import weakref
 import casadi as ca
 import numpy as np
 
+from ncgen.assembly.tree_dynamics import recursive_inverse_dynamics_function
 from ncgen.errors import ModelError
 from ncgen.optim.radau import radau_coefficients
 from ncgen.optim.transcription import Discretisation, Horizon, Transcription, guess_times, node_times
@@ -80,15 +81,21 @@ def _reason(model) -> str | None:
 def joint_dynamics_residual(model) -> ca.Function:
     """``(t, q_j, v_j, a_j, u, p) -> (r, q, v)``: the joint-space residual
     ``r = Jᵀ (M (J a_j + J̇ v_j) − F)`` and the natural coordinates and rates (module
-    docstring)."""
+    docstring).  In 3D ``r`` is computed by recursive Newton–Euler
+    (:func:`~ncgen.assembly.tree_dynamics.recursive_inverse_dynamics_function`, the same
+    quantity): on the Panda 3.5 k SX instructions instead of 10.7 k with ``J`` formed, and an
+    exact Hessian of ``λᵀ r`` per point of 0.10 M instead of 0.22 M."""
     js = model.joint_space
     tree = js.tree_function(model.layout)
     t, u, p = ca.SX.sym("t"), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
     qj, vj, aj = ca.SX.sym("qj", js.nq), ca.SX.sym("vj", js.nv), ca.SX.sym("aj", js.nv)
     q, v = tree(qj, vj)
-    J = ca.jacobian(q, qj)
-    a = ca.jtimes(v, ca.vertcat(qj, vj), ca.vertcat(vj, aj))          # J a_j + J̇ v_j
-    r = ca.mtimes(J.T, ca.mtimes(ca.DM(model.M), a) - model.functions["F"](t, q, v, u, p))
+    if js.dim == 3:
+        r = recursive_inverse_dynamics_function(model)(t, qj, vj, aj, u, p)
+    else:
+        J = ca.jacobian(q, qj)
+        a = ca.jtimes(v, ca.vertcat(qj, vj), ca.vertcat(vj, aj))      # J a_j + J̇ v_j
+        r = ca.mtimes(J.T, ca.mtimes(ca.DM(model.M), a) - model.functions["F"](t, q, v, u, p))
     return ca.Function("joint_dynamics_residual", [t, qj, vj, aj, u, p], [r, q, v],
                        ["t", "qj", "vj", "aj", "u", "p"], ["r", "q", "v"])
 
