@@ -41,6 +41,10 @@ from ncgen.optim.transcription import Discretisation, Horizon, Transcription, gu
 QUATERNION_JOINTS = ("Spherical", "Free")
 
 
+#: Joint rates and accelerations at the collocation points as NLP unknowns (linked to the
+#: coordinates by linear rows), so each point's residual depends on its own unknowns only.
+POINT_RATES = True
+
 _REASONS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
@@ -147,6 +151,12 @@ class JointRadauCollocation(Transcription):
             Vj.append(Vk)
             q_start, v_start = Qj[:, k * d + d - 1], Vk[:, d - 1]
         Vj, Aj = ca.horzcat(*Vj), ca.horzcat(*Aj)
+        rates = []
+        if POINT_RATES:
+            Vv, Av = opti.variable(nj, N * d), opti.variable(nj, N * d)
+            rates = [("joint rates at the collocation points", ca.vec(Vv - Vj)),
+                     ("joint accelerations at the collocation points", ca.vec(Av - Aj))]
+            Vj, Aj = Vv, Av
         res, Q, V = joint_dynamics_residual(model).map(N * d)(t, Qj, Vj, Aj, Urep, hz.p)
         tree = js.tree_function(model.layout)
         q0, v0 = tree(hz.q0, hz.v0)
@@ -154,7 +164,7 @@ class JointRadauCollocation(Transcription):
         w = ca.repmat(ca.DM(b).T, 1, N) * h
         q_scale = np.array(hz.q0).reshape(-1) if isinstance(hz.q0, ca.DM) else js.positions(model.q0)
         res = res / ca.DM(joint_inertias(model, q_scale))
-        defects = [("dynamics (joint-space equations of motion M_j⁻¹ Jᵀ(M q̈ − F) = 0)", ca.vec(res))]
+        defects = [("dynamics (joint-space equations of motion M_j⁻¹ Jᵀ(M q̈ − F) = 0)", ca.vec(res))] + rates
 
         def set_guess(o: ca.Opti, g):
             tg = np.concatenate([[hz.t0], guess_times(hz, g.T, tau[1:])])
@@ -166,9 +176,19 @@ class JointRadauCollocation(Transcription):
                 turns = np.round((np.array(start).reshape(-1) - qjg[:, 0]) / (2 * np.pi)) * js.angles
                 qjg += 2 * np.pi * turns[:, None]
             o.set_initial(Qj, qjg[:, 1:])
+            vj0 = np.array(js.rates(qg[0], vg[0])).reshape(-1)
+            if POINT_RATES:
+                vs, acc, v_prev = [], [], vj0
+                for k in range(N):
+                    Vk = np.column_stack([qjg[:, k * d], qjg[:, k * d + 1:(k + 1) * d + 1]]) @ C / (g.T / N)
+                    acc.append(np.column_stack([v_prev, Vk]) @ C / (g.T / N))
+                    vs.append(Vk)
+                    v_prev = Vk[:, -1]
+                o.set_initial(Vv, np.hstack(vs))
+                o.set_initial(Av, np.hstack(acc))
             if nu:
                 o.set_initial(U, g.u(guess_times(hz, g.T, [0.0])).T)
-            return qjg[:, 0], np.array(js.rates(qg[0], vg[0])).reshape(-1)
+            return qjg[:, 0], vj0
 
         return Discretisation(q=ca.horzcat(q0, Q[:, last]), v=ca.horzcat(v0, V[:, last]), lam=None, U=U,
                               path_t=t, path_q=Q, path_v=V, quad_t=t, quad_q=Q, quad_v=V, quad_w=w,
