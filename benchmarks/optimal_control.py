@@ -43,6 +43,12 @@ forms collocate other coordinates and agree only as N grows.
     python benchmarks/optimal_control.py --form ggl      natural-coordinate GGL form
     python benchmarks/optimal_control.py --coarse-start  ncgen solves on N/2 first (totals reported)
     python benchmarks/optimal_control.py --quick         N = 8 (seconds; CI)
+    python benchmarks/optimal_control.py --cases arm3d --sizes 8 --panda 20   the Panda line
+
+A separate ``PANDA setup`` line (not a ratio; skipped with ``--quick`` or ``--panda 0``)
+times a point-to-point motion of the Panda arm (URDF from example-robot-data) at N = 20:
+model build, NLP build (guess included), the solve call (CasADi's expansion and exact
+Hessian, then IPOPT) and the share of IPOPT's function evaluations.
 """
 from __future__ import annotations
 
@@ -337,6 +343,39 @@ def solve_ncgen(make, angles, N: int, max_iter: int, form: str, coarse_start: bo
             "size": f"{st.n_variables}x{st.n_constraints}", "path": (sol.t - sol.t[0], th, dth, sol.u[:-1])}
 
 
+def panda_setup(N: int) -> str:
+    """The Panda (example-robot-data URDF, 9 joints, mimic coupling of the fingers removed)
+    from rest at the model's q0 to 0.3 rad on its seven arm joints at rest in 1 s, |τ| ≤
+    80 N·m, minimum effort, N intervals (joint-space form): model build, NLP build (guess
+    included), the solve call (CasADi's expansion and exact derivatives, then IPOPT) and
+    IPOPT's function evaluations, in seconds."""
+    import importlib.metadata as md
+    import re
+
+    import ncgen as nc
+    try:
+        urdf = next(Path(f.locate()) for f in md.files("example-robot-data") or []
+                    if str(f).endswith("panda_description/urdf/panda.urdf"))
+    except (md.PackageNotFoundError, StopIteration):
+        return "PANDA setup: skipped (pip install example-robot-data)"
+    start = time.perf_counter()
+    model = nc.System.from_urdf(re.sub(r"<mimic[^>]*/>", "", urdf.read_text())).build()
+    t_model = time.perf_counter() - start
+    ocp = nc.OptimalControl(model, N=N, t_final=1.0).minimize_effort().bound_input("tau", -80.0, 80.0)
+    ocp.final(joints={n: 0.3 for n in model.joint_space.joint_names[:7]}, v=0)
+    start = time.perf_counter()
+    try:
+        sol, ok = ocp.solve(diagnose=False), True
+    except nc.errors.OptimizationError as exc:
+        sol, ok = exc.result, False
+    total = time.perf_counter() - start
+    st = sol.stats
+    evals = sum(v for k, v in sol.nlp.opti.stats().items() if k.startswith("t_wall_nlp_"))
+    return (f"PANDA setup (N = {N}, {st.n_variables} unknowns, {'converged' if ok else 'FAILED'}, {st.iterations} "
+            f"iterations): model {t_model:.1f} s, NLP build {st.build_time:.1f} s, solve call {st.solve_time:.1f} s "
+            f"(of which function evaluations {evals:.1f} s), total {total:.1f} s")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
@@ -346,7 +385,8 @@ def main(argv=None) -> int:
                     help="ncgen's collocation form (auto: joint space for trees; ncgen.optim.joint_radau, .radau)")
     ap.add_argument("--coarse-start", action="store_true",
                     help="ncgen solves on N // 2 first (solve(coarse_start=True)); iterations and times summed")
-    ap.add_argument("--quick", "--smoke", action="store_true", help="N = 8 only (seconds)")
+    ap.add_argument("--quick", "--smoke", action="store_true", help="N = 8 only (seconds), no Panda line")
+    ap.add_argument("--panda", type=int, default=20, help="N of the Panda setup-time line (0: skip it)")
     args = ap.parse_args(argv)
     sizes = [8] if args.quick else args.sizes
     print(machine())
@@ -374,6 +414,8 @@ def main(argv=None) -> int:
     print(f"relative cost difference at ncgen's optimum (worst case): {cost:.1e}   (target ≤ 1e-3)")
     print(f"converged: ncgen {sum(r[2]['success'] for r in rows)}/{len(rows)}, "
           f"minimal {sum(r[3]['success'] for r in rows)}/{len(rows)}")
+    if args.panda and not args.quick:
+        print(panda_setup(args.panda))
     return 0
 
 

@@ -351,3 +351,66 @@ def recursive_dynamics_function(model) -> ca.Function:
     aj = ca.SX.zeros(n)
     aj[order] = y
     return _function(t, qj, vj, u, p, aj, pivot)
+
+
+def recursive_inverse_dynamics_function(model) -> ca.Function:
+    """``(t, qj, vj, aj, u, p) -> r``: the joint-space equations of motion as a residual,
+    ``r = M_j a_j + C − τ`` (N·m or N per joint rate; ``τ`` the actuated joints' efforts,
+    :func:`joint_efforts`), by recursive Newton–Euler over the tree in the world frame
+    (3D trees whose rates are the derivatives of their coordinates): accelerations
+    ``a_c = a_p + S a_j + Ṡ w`` outwards (the ground's ``[0; −g]`` for a uniform gravity),
+    body forces ``f = I a + v ×* I v − f_ext`` summed inwards, ``r = Sᵀ f − τ``.  The same
+    quantities as :func:`recursive_dynamics_function` without ``M_j``: linear in ``a_j`` and
+    O(number of members) operations, so its derivatives stay cheap (the joint-space
+    collocation's rows, :mod:`ncgen.optim.joint_radau`)."""
+    js = model.joint_space
+    if js.dim != 3:
+        raise ModelError("recursive joint-space dynamics: 3D models only")
+    tree = js.spanning_tree()
+    t, u, p = ca.SX.sym("t"), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
+    qj, vj, aj = ca.SX.sym("qj", js.nq), ca.SX.sym("vj", js.nv), ca.SX.sym("aj", js.nv)
+    sq, sv = js.slices(), js.slices(rates=True)
+    owned = _owned(model, tree)
+    g = uniform_gravity(model, owned)
+    pose = {"ground": (ca.SX.eye(3), ca.SX.zeros(3))}
+    twist = {"ground": ca.SX.zeros(6)}
+    acc = {"ground": ca.SX.zeros(6) if g is None else ca.vertcat(ca.SX.zeros(3), -ca.DM(g))}
+    motion = {}
+    for here, there, e, forward in tree:
+        x = qj[sq[e.name]] if e.name in sq else ca.SX(0, 1)
+        w = vj[sv[e.name]] if e.name in sv else ca.SX(0, 1)
+        a = aj[sv[e.name]] if e.name in sv else ca.SX(0, 1)
+        Rc, pc, S, c = _edge_function(js, e, forward)(*pose[here], twist[here][:3], twist[here][3:], x, w)
+        pose[there] = (Rc, pc)
+        twist[there] = twist[here] + ca.mtimes(S, w)
+        acc[there] = acc[here] + c + ca.mtimes(S, a)
+        motion[there] = (e.name, S)
+    q, v, Qs = [None] * model.nq, [None] * model.nq, {}
+    for _, name, _, _ in tree:
+        Qs[name] = member_twist_map(js, name)(*pose[name])
+        local_q = js.member_coordinates(name, *pose[name])
+        local_v = ca.mtimes(Qs[name], twist[name])
+        for k, i in owned[name]:
+            q[i], v[i] = local_q[k], local_v[k]
+    q = ca.vertcat(*[ca.SX(0) if x is None else x for x in q])
+    v = ca.vertcat(*[ca.SX(0) if x is None else x for x in v])
+    F = js.passive_force(t, q, v, u, p)
+    force = {}
+    for _, name, _, _ in tree:
+        mass, c, Ibar = member_inertia(js, name, member_twist_map(js, name))
+        R, pos = pose[name]
+        I = _world_inertia(mass, pos + ca.mtimes(R, ca.DM(c)), R, Ibar)
+        fext = ca.SX.zeros(6)
+        if owned[name] and g is None:
+            ks, idx = [k for k, _ in owned[name]], [i for _, i in owned[name]]
+            fext = ca.mtimes(Qs[name][ks, :].T, F[idx])
+        force[name] = _apply(I, acc[name]) + _cross_force(twist[name], _apply(I, twist[name])) - fext
+    for here, there, _, _ in reversed(tree):
+        if here != "ground":
+            force[here] = force[here] + force[there]
+    r = -joint_efforts(js, js.actuation(t, q, u, p)[1])
+    for _, there, _, _ in tree:
+        name, S = motion[there]
+        if S.size2():
+            r[sv[name]] = r[sv[name]] + ca.mtimes(S.T, force[there])
+    return ca.Function("joint_inverse_dynamics", [t, qj, vj, aj, u, p], [r], ["t", "qj", "vj", "aj", "u", "p"], ["r"])

@@ -97,15 +97,30 @@ def pose_path(model, q_a: np.ndarray, q_b: np.ndarray, s: np.ndarray, *, t=None,
                                  for E, local, R, step in targets]) if targets else np.zeros(0)
         q_lin = (1 - sk) * q_a + sk * q_b
         H = G.T @ G + anchor * np.eye(model.nq)
+        last = np.inf
         for _ in range(max_iter):
             grad = G.T @ (G @ q + c - target) + anchor * (q - q_lin)
             A = np.atleast_2d(model.A(q, t=t, p=p)).reshape(-1, model.nq)
             phi = np.atleast_1d(model.phi(q, t=t, p=p))
             K = np.block([[H, A.T], [A, np.zeros((A.shape[0], A.shape[0]))]])
-            dq = np.linalg.lstsq(K, -np.concatenate([grad, phi]), rcond=None)[0][:model.nq]
+            dq = _kkt_step(K, -np.concatenate([grad, phi]))[:model.nq]
             q = q + dq
-            if np.max(np.abs(dq), initial=0.0) < 1e-12 * max(1.0, np.max(np.abs(q))):
+            step = np.max(np.abs(dq), initial=0.0)
+            if step < 1e-12 * max(1.0, np.max(np.abs(q))) or step >= last:   # converged, or stalled at round-off
                 break
+            last = step
         out.append(q.copy())
     return np.array(out)
 
+
+
+def _kkt_step(K: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``K⁻¹ b`` by LU (the KKT matrix is nonsingular when the constraint Jacobian has full
+    rank), least squares when it is singular or the LU result is not finite."""
+    try:
+        x = np.linalg.solve(K, b)
+        if np.all(np.isfinite(x)):
+            return x
+    except np.linalg.LinAlgError:
+        pass
+    return np.linalg.lstsq(K, b, rcond=None)[0]
