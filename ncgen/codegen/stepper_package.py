@@ -65,6 +65,12 @@ PGS_MAX_ITER, PGS_TOL = 300, 1e-12
 #: second order (~1e-8 m when the falling chain of benchmarks/contact.py lands), so a smaller
 #: tolerance would only repeat push-outs.
 PENETRATION_TOL = 1e-8
+#: Nonsmooth contact stepper: a contact still open at the end of the free step, with e = 0 and
+#: a gap below GAP_REACH h/2 × the fastest approach speed of a closed contact, takes part in
+#: the step's contact problem with U_N ≥ min(0, U_free,N − 2 g/h): the impulses on its
+#: neighbours may close it within the step but not push it through its surface, so the
+#: push-out rarely runs (``contact_step`` in ``stepper.c.j2``).
+GAP_REACH = 2.0
 #: Nonsmooth contact stepper: a step with closed contacts is retaken with corrected impulses
 #: (at most CONTACT_REFINE_MAX times) until its end-of-step contact velocities match the
 #: linearised prediction to CONTACT_REFINE_TOL (relative to 1 m/s or the largest of them).
@@ -106,7 +112,7 @@ def extra_sources(model, functions) -> list[ExtraSource]:
             context.update(nnz_v=int(factor.sparsity_out(0).nnz()), nnz_r=int(factor.sparsity_out(1).nnz()),
                            n_beta=int(factor.sparsity_out(2).nnz()))
         context.update(factored=factor is not None, nk=model.nk, pgs_max_iter=PGS_MAX_ITER,
-                       pgs_tol=c_real(PGS_TOL), penetration_tol=c_real(PENETRATION_TOL),
+                       pgs_tol=c_real(PGS_TOL), penetration_tol=c_real(PENETRATION_TOL), gap_reach=c_real(GAP_REACH),
                        refine_max=CONTACT_REFINE_MAX, refine_tol=c_real(CONTACT_REFINE_TOL), repeat_tol=c_real(REPEAT_TOL),
                        gravity_norm=c_real(float(np.linalg.norm(model.gravity))),
                        mu=[c_real(c["mu"]) for c in model.contacts],
