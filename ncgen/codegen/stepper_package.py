@@ -131,7 +131,9 @@ def extra_sources(model, functions) -> list[ExtraSource]:
 
 def schur_context(model, K) -> dict:
     """The template context of the Delassus matrix by the Schur complement (see
-    :data:`MINV_MAX_NQ`): ``schur`` (whether it applies), ``minv`` (M⁻¹, column-major) and
+    :data:`MINV_MAX_NQ`): ``schur`` (whether it applies), ``minv`` (M⁻¹, column-major), its
+    nonzeros by columns (``minv_colind``, ``minv_row``: members that share no coordinate give
+    zero blocks) and
     where A's nonzeros sit in the nonzeros of the KKT matrix pattern ``K`` (``a_nz``,
     ``a_row``, ``a_col``)."""
     M = np.asarray(model.M, dtype=float)
@@ -148,8 +150,12 @@ def schur_context(model, K) -> dict:
                 a_nz.append(k)
                 a_row.append(row[k] - nq)
                 a_col.append(j)
-    return {"schur": True, "minv": [c_real(x) for x in minv.ravel(order="F")], "a_nz": a_nz, "a_row": a_row,
-            "a_col": a_col}
+    minv_colind, minv_row = [0], []                     # M⁻¹'s nonzeros by columns (members apart: 0)
+    for j in range(nq):
+        minv_row += [int(i) for i in np.flatnonzero(minv[:, j])]
+        minv_colind.append(len(minv_row))
+    return {"schur": True, "minv": [c_real(x) for x in minv.ravel(order="F")], "minv_colind": minv_colind,
+            "minv_row": minv_row, "a_nz": a_nz, "a_row": a_row, "a_col": a_col}
 
 
 def n_impulses(model) -> int:
