@@ -3,8 +3,11 @@
 A pile is full of redundant contacts (a sphere held by more contacts than it has degrees of
 freedom), on which projected Gauss–Seidel alone crawls; the stepper finishes its sweeps with
 Newton steps on the contacts that carry an impulse (``lcp_newton`` in ``stepper.c.j2``).
+A frictionless contact about to close (open after the free step, but closed within it by
+its neighbours' impulses) takes part in the step's contact problem (``contact_step``).
 References: statics (the floor carries the whole weight), the closed-form rest geometry, the
-push-out's stated tolerance, and energy that never rises (restitution 0).
+push-out's stated tolerance, energy that never rises (restitution 0), and the closed-form
+perfectly inelastic impact of a row of spheres.
 """
 from __future__ import annotations
 
@@ -75,4 +78,33 @@ def test_dropped_pile_never_sinks_in_nor_gains_energy():
     assert -tr.gap.min() <= PENETRATION_TOL
     assert np.max(tr.energy - tr.energy[0]) <= 1e-9 * abs(tr.energy[0])
     assert tr.energy[-1] < tr.energy[0] - 0.1                       # the impacts dissipated
+    assert tr.info["contacts"]["pgs_unconverged"] == 0
+
+
+def test_row_of_spheres_struck_moves_as_one_in_the_impact_step():
+    """Three equal spheres on a line without gravity: B and C at rest, 1e-7 m apart; A
+    strikes B at v = 1 m/s, restitution 0.  Perfectly inelastic (closed form): all three end
+    at v/3, momentum M v is kept and kinetic energy M v²/3 is lost.  C's contact is still
+    open at the end of the impact step's free step, but B's push closes it within the step:
+    the stepper takes it into that step's contact problem (a contact about to close), so C
+    already moves at v/3 (to 1e-3: the 1e-7 m gap closes at 2e-4 m/s) when the impact step
+    ends, instead of being pushed out of B afterwards.  No step ends deeper than the
+    push-out tolerance, and every solve converges."""
+    v, h, gap = 1.0, 1e-3, 1e-7
+    s = nc.System("row3", gravity=(0, 0, 0))
+    xs = (-2 * R - 0.5 * v * h, 0.0, 2 * R + gap)              # A closes on B within the first step
+    balls = [s.add_point(f"ball{k}", mass=M, position=(x, 0, 0), velocity=(v if k == 0 else 0, 0, 0))
+             for k, x in enumerate(xs)]
+    for i, j in ((0, 1), (1, 2), (0, 2)):
+        s.add_contact(nc.SphereSphere(balls[i], None, R, balls[j], None, R, name=f"pair{i}_{j}"))
+    model = s.build(contacts="nonsmooth")
+    one = nc.simulate(model, h, h, method="stepper")                 # the impact step alone
+    vx = one.v[-1, 0::3]
+    np.testing.assert_allclose(vx, v / 3, rtol=1e-3)
+    tr = nc.simulate(model, 0.05, 0.01, method="stepper", substeps=10)
+    vx = tr.v[-1, 0::3]
+    np.testing.assert_allclose(vx, v / 3, rtol=1e-9)
+    np.testing.assert_allclose(M * vx.sum(), M * v, rtol=1e-12)
+    np.testing.assert_allclose(tr.energy[0] - tr.energy[-1], M * v**2 / 3, rtol=1e-9)
+    assert tr.info["contacts"]["penetration"] <= PENETRATION_TOL
     assert tr.info["contacts"]["pgs_unconverged"] == 0

@@ -66,6 +66,12 @@ PGS_MAX_ITER, PGS_TOL = 300, 1e-12
 #: second order (~1e-8 m when the falling chain of benchmarks/contact.py lands), so a smaller
 #: tolerance would only repeat push-outs.
 PENETRATION_TOL = 1e-8
+#: Nonsmooth contact stepper: a frictionless contact still open at the end of the free step,
+#: with e = 0 and a gap below GAP_REACH h/2 × the fastest approach speed of a closed contact,
+#: takes part in the step's contact problem with U_N ≥ min(0, U_free,N − 2 g/h): the impulses
+#: on its neighbours may close it within the step but not push it through its surface, so the
+#: push-out rarely runs (``contact_step`` in ``stepper.c.j2``).
+GAP_REACH = 2.0
 #: Nonsmooth contact stepper: a step with closed contacts is retaken with corrected impulses
 #: (at most CONTACT_REFINE_MAX times) until its end-of-step contact velocities match the
 #: linearised prediction to CONTACT_REFINE_TOL (relative to 1 m/s or the largest of them).
@@ -108,7 +114,7 @@ def extra_sources(model, functions) -> list[ExtraSource]:
             context.update(nnz_v=int(factor.sparsity_out(0).nnz()), nnz_r=int(factor.sparsity_out(1).nnz()),
                            n_beta=int(factor.sparsity_out(2).nnz()))
         context.update(factored=factor is not None, nk=model.nk, pgs_max_iter=PGS_MAX_ITER,
-                       pgs_tol=c_real(PGS_TOL), penetration_tol=c_real(PENETRATION_TOL),
+                       pgs_tol=c_real(PGS_TOL), penetration_tol=c_real(PENETRATION_TOL), gap_reach=c_real(GAP_REACH),
                        refine_max=CONTACT_REFINE_MAX, refine_tol=c_real(CONTACT_REFINE_TOL), repeat_tol=c_real(REPEAT_TOL),
                        gravity_norm=c_real(float(np.linalg.norm(model.gravity))),
                        mu=[c_real(c["mu"]) for c in model.contacts],
@@ -127,7 +133,9 @@ def extra_sources(model, functions) -> list[ExtraSource]:
 
 def schur_context(model, K) -> dict:
     """The template context of the Delassus matrix by the Schur complement (see
-    :data:`MINV_MAX_NQ`): ``schur`` (whether it applies), ``minv`` (M⁻¹, column-major) and
+    :data:`MINV_MAX_NQ`): ``schur`` (whether it applies), ``minv`` (M⁻¹, column-major), its
+    nonzeros by columns (``minv_colind``, ``minv_row``: members that share no coordinate give
+    zero blocks) and
     where A's nonzeros sit in the nonzeros of the KKT matrix pattern ``K`` (``a_nz``,
     ``a_row``, ``a_col``)."""
     M = np.asarray(model.M, dtype=float)
@@ -145,8 +153,12 @@ def schur_context(model, K) -> dict:
                 a_nz.append(k)
                 a_row.append(row[k] - nq)
                 a_col.append(j)
-    return {"schur": True, "minv": [c_real(x) for x in minv.ravel(order="F")], "a_nz": a_nz, "a_row": a_row,
-            "a_col": a_col}
+    minv_colind, minv_row = [0], []                     # M⁻¹'s nonzeros by columns (members apart: 0)
+    for j in range(nq):
+        minv_row += [int(i) for i in np.flatnonzero(minv[:, j])]
+        minv_colind.append(len(minv_row))
+    return {"schur": True, "minv": [c_real(x) for x in minv.ravel(order="F")], "minv_colind": minv_colind,
+            "minv_row": minv_row, "a_nz": a_nz, "a_row": a_row, "a_col": a_col}
 
 
 def n_impulses(model) -> int:
