@@ -81,7 +81,7 @@ def child_kane(n: int) -> dict:
     frame = me.ReferenceFrame("N")
     origin = me.Point("O")
     origin.set_vel(frame, 0)
-    bodies, loads, joint, parent = [], [], origin, frame
+    bodies, loads, joint = [], [], origin
     for i in range(n):
         link = frame.orientnew(f"B{i}", "Axis", (q[i], frame.z))
         link.set_ang_vel(frame, u[i] * frame.z)
@@ -92,7 +92,7 @@ def child_kane(n: int) -> dict:
         inertia = me.inertia(link, 0, 0, m * l**2 / 12)
         bodies.append(me.RigidBody(f"rod{i}", centre, link, m, (inertia, centre)))
         loads.append((centre, -m * g * frame.y))
-        joint, parent = end, link
+        joint = end
     kane = me.KanesMethod(frame, q_ind=q, u_ind=u, kd_eqs=[qd - ud for qd, ud in zip(me.dynamicsymbols(f"q:{n}", 1), u)])
     kane.kanes_equations(bodies, loads)
     ops = sp.count_ops(kane.mass_matrix) + sp.count_ops(kane.forcing)

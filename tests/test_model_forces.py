@@ -77,7 +77,7 @@ def test_torsional_spring_with_a_bar_across_the_axis_conserves_energy():
 
 def test_generalized_force_text_and_callable():
     s = nc.System("gf", gravity=(0, 0, 0))
-    k = s.add_parameter("k", 2.0)
+    s.add_parameter("k", 2.0)
     s.add_input("push", 3)
     s.add_point("pt", mass=1.0, position=(1, 2, 3))
     s.add_force(nc.GeneralizedForce(["-k*q[0]", "push[1]", "0.5*sin(t) - v[2]"]))

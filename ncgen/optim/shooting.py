@@ -115,7 +115,7 @@ class MultipleShooting(Transcription):
         return f"multiple shooting ({self.integrator})"
 
     def build(self, opti: ca.Opti, model, hz: Horizon) -> Discretisation:
-        N, nq, nc, nu = hz.N, model.nq, model.nc, model.nu
+        N, nq, nu = hz.N, model.nq, model.nu
         try:
             step = INTEGRATORS[self.integrator](model, **self.options)
         except (TypeError, RuntimeError) as exc:
