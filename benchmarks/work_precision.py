@@ -213,6 +213,12 @@ def report(case: Case, curves, checks) -> dict[str, float]:
         for method, target in TARGETS.items():
             mine, theirs = curve_time(curves[method], target), curve_time(rk4, target)
             times[method] = mine
+            if not (np.isfinite(mine) and np.isfinite(theirs)):
+                who = " and ".join(n for n, x in ((f"ncgen {method}", mine), ("MuJoCo RK4", theirs))
+                                   if not np.isfinite(x))
+                print(f"  RATIO ncgen {method} (end to end) / MuJoCo RK4 at tip error {target:.0e}: none "
+                      f"({who} not reaching it at the steps or tolerances run, or rejected by the checks)")
+                continue
             print(f"  RATIO ncgen {method} (end to end) / MuJoCo RK4 at tip error {target:.0e}: "
                   f"{mine / theirs:.2f} ({mine * 1e3:.2f} ms vs {theirs * 1e3:.2f} ms)")
         euler = curves["mujoco Euler (default)"]
