@@ -268,149 +268,126 @@ def uniform_gravity(model, owned) -> np.ndarray | None:
     return g if np.max(np.abs(B @ g - F0), initial=0.0) <= 1e-12 * max(1.0, np.max(np.abs(F0), initial=0.0)) else None
 
 
+class _Recursion:
+    """The Newton–Euler recursion shared by :func:`recursive_dynamics_function` and
+    :func:`recursive_inverse_dynamics_function` (3D trees, world frame, spatial vectors
+    ``[ω; v_O]`` about the world origin): poses, twists ``v_c = v_p + S w`` and accelerations
+    ``a_c = a_p + Ṡ w (+ S a_j)`` outwards (a uniform gravity as the ground's ``[0; −g]``),
+    then body forces ``f = I a + v ×* I v − f_ext`` (``f_ext = Qᵀ F``, the passive
+    natural-coordinate forces of the member as a wrench) summed inwards into ``force``.
+    ``aj=None``: without joint accelerations (the bias forces of forward dynamics)."""
+
+    def __init__(self, model, aj: ca.SX | None = None):
+        js = self.js = model.joint_space
+        if js.dim != 3:
+            raise ModelError("recursive joint-space dynamics: 3D models only")
+        self.tree = tree = js.spanning_tree()
+        self.t, self.u, self.p = t, u, p = ca.SX.sym("t"), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
+        self.qj, self.vj = qj, vj = ca.SX.sym("qj", js.nq), ca.SX.sym("vj", js.nv)
+        sq = js.slices()
+        self.sv = sv = js.slices(rates=True)
+        owned = _owned(model, tree)
+        g = uniform_gravity(model, owned)
+        pose = {"ground": (ca.SX.eye(3), ca.SX.zeros(3))}
+        twist = {"ground": ca.SX.zeros(6)}
+        acc = {"ground": ca.SX.zeros(6) if g is None else ca.vertcat(ca.SX.zeros(3), -ca.DM(g))}
+        self.motion, self.parent = {}, {}
+        for here, there, e, forward in tree:
+            x = qj[sq[e.name]] if e.name in sq else ca.SX(0, 1)
+            w = vj[sv[e.name]] if e.name in sv else ca.SX(0, 1)
+            Rc, pc, S, c = _edge_function(js, e, forward)(*pose[here], twist[here][:3], twist[here][3:], x, w)
+            pose[there] = (Rc, pc)
+            twist[there] = twist[here] + ca.mtimes(S, w)
+            acc[there] = acc[here] + c
+            if aj is not None and e.name in sv:
+                acc[there] = acc[there] + ca.mtimes(S, aj[sv[e.name]])
+            self.motion[there], self.parent[there] = (e.name, S), here
+        q, v, Qs = [None] * model.nq, [None] * model.nq, {}
+        for _, name, _, _ in tree:
+            Qs[name] = member_twist_map(js, name)(*pose[name])
+            local_q = js.member_coordinates(name, *pose[name])
+            local_v = ca.mtimes(Qs[name], twist[name])
+            for k, i in owned[name]:
+                q[i], v[i] = local_q[k], local_v[k]
+        self.q = q = ca.vertcat(*[ca.SX(0) if x is None else x for x in q])
+        v = ca.vertcat(*[ca.SX(0) if x is None else x for x in v])
+        F = js.passive_force(t, q, v, u, p)
+        self.inertia, force = {}, {}
+        for _, name, _, _ in tree:
+            mass, c, Ibar = member_inertia(js, name, member_twist_map(js, name))
+            R, pos = pose[name]
+            I = _world_inertia(mass, pos + ca.mtimes(R, ca.DM(c)), R, Ibar)
+            fext = ca.SX.zeros(6)
+            if owned[name] and g is None:
+                ks, idx = [k for k, _ in owned[name]], [i for _, i in owned[name]]
+                fext = ca.mtimes(Qs[name][ks, :].T, F[idx])
+            self.inertia[name] = I
+            force[name] = _apply(I, acc[name]) + _cross_force(twist[name], _apply(I, twist[name])) - fext
+        for here, there, _, _ in reversed(tree):
+            if here != "ground":
+                force[here] = force[here] + force[there]
+        self.force = force
+
+    def efforts(self) -> ca.SX:
+        """``τ`` of the actuated joints placed at their joint rates (:func:`joint_efforts`)."""
+        return joint_efforts(self.js, self.js.actuation(self.t, self.q, self.u, self.p)[1])
+
+    def projected_forces(self) -> ca.SX:
+        """``Sᵀ f`` per joint rate (the summed body force beyond each joint)."""
+        out = ca.SX.zeros(self.js.nv)
+        for _, there, _, _ in self.tree:
+            name, S = self.motion[there]
+            if S.size2():
+                out[self.sv[name]] = ca.mtimes(S.T, self.force[there])
+        return out
+
+
 def recursive_dynamics_function(model) -> ca.Function:
     """``(t, qj, vj, u, p) -> (aj, check)`` like :func:`tree_dynamics_function`, computed
-    recursively over the tree in world (ground) coordinates, spatial vectors ``[ω; v_O]``
-    about the world origin (3D trees only): twists ``v_c = v_p + S w`` and bias accelerations
-    ``a_c = a_p + Ṡ w`` outwards; body forces ``f = I a + v ×* I v − f_ext`` (``f_ext``: the
-    passive natural-coordinate forces ``F`` of the member's coordinates as a wrench, ``Qᵀ F``;
-    a uniform gravity is instead the ground's acceleration ``[0; −g]``) summed inwards, giving the bias ``C = Sᵀ f``; ``M_j`` by composite inertias (CRBA).
-    ``M_j a_j = τ − C``, solved by the same written-out Cholesky, leaves first (no fill-in)."""
-    js = model.joint_space
-    if js.dim != 3:
-        raise ModelError("recursive joint-space dynamics: 3D models only")
-    tree = js.spanning_tree()
-    t, u, p = ca.SX.sym("t"), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
-    qj, vj = ca.SX.sym("qj", js.nq), ca.SX.sym("vj", js.nv)
-    sq, sv = js.slices(), js.slices(rates=True)
-    owned = _owned(model, tree)
-    g = uniform_gravity(model, owned)
-    pose = {"ground": (ca.SX.eye(3), ca.SX.zeros(3))}
-    base = ca.SX.zeros(6) if g is None else ca.vertcat(ca.SX.zeros(3), -ca.DM(g))
-    twist, acc = {"ground": ca.SX.zeros(6)}, {"ground": base}
-    motion, parent = {}, {}
-    for here, there, e, forward in tree:
-        x = qj[sq[e.name]] if e.name in sq else ca.SX(0, 1)
-        w = vj[sv[e.name]] if e.name in sv else ca.SX(0, 1)
-        Rc, pc, S, c = _edge_function(js, e, forward)(*pose[here], twist[here][:3], twist[here][3:], x, w)
-        pose[there] = (Rc, pc)
-        twist[there] = twist[here] + ca.mtimes(S, w)
-        acc[there] = acc[here] + c
-        motion[there], parent[there] = (e.name, S), here
-    # natural coordinates, their rates and the passive forces as wrenches (unless they are
-    # a uniform gravity, then carried by the ground's acceleration −g)
-    q, v, Qs = [None] * model.nq, [None] * model.nq, {}
-    for _, name, _, _ in tree:
-        Qs[name] = member_twist_map(js, name)(*pose[name])
-        local_q = js.member_coordinates(name, *pose[name])
-        local_v = ca.mtimes(Qs[name], twist[name])
-        for k, i in owned[name]:
-            q[i], v[i] = local_q[k], local_v[k]
-    q = ca.vertcat(*[ca.SX(0) if x is None else x for x in q])
-    v = ca.vertcat(*[ca.SX(0) if x is None else x for x in v])
-    F = js.passive_force(t, q, v, u, p)
-    force, inertia = {}, {}
-    for _, name, _, _ in tree:
-        Q = member_twist_map(js, name)
-        mass, c, Ibar = member_inertia(js, name, Q)
-        R, pos = pose[name]
-        I = _world_inertia(mass, pos + ca.mtimes(R, ca.DM(c)), R, Ibar)
-        fext = ca.SX.zeros(6)
-        if owned[name] and g is None:
-            ks, idx = [k for k, _ in owned[name]], [i for _, i in owned[name]]
-            fext = ca.mtimes(Qs[name][ks, :].T, F[idx])
-        inertia[name] = I
-        force[name] = _apply(I, acc[name]) + _cross_force(twist[name], _apply(I, twist[name])) - fext
-    n = js.nv
-    bias = ca.SX.zeros(n)
+    recursively over the tree (:class:`_Recursion`, without joint accelerations), giving the
+    bias ``C = Sᵀ f``; ``M_j`` by composite inertias (CRBA).  ``M_j a_j = τ − C``, solved by
+    the same written-out Cholesky, leaves first (no fill-in)."""
+    rec = _Recursion(model)
+    tree, motion, sv = rec.tree, rec.motion, rec.sv
+    n = rec.js.nv
     Mj = ca.SX(n, n)
-    composite = dict(inertia)
+    composite = dict(rec.inertia)
     for here, there, _, _ in reversed(tree):
         if here != "ground":
-            force[here] = force[here] + force[there]
             composite[here] = tuple(a + b for a, b in zip(composite[here], composite[there]))
     for _, there, e, _ in tree:
         name, S = motion[there]
         if S.size2() == 0:
             continue
-        bias[sv[name]] = ca.mtimes(S.T, force[there])
         Fm = _apply(composite[there], S)
         Mj[sv[name], sv[name]] = ca.mtimes(S.T, Fm)
-        node = parent[there]
+        node = rec.parent[there]
         while node != "ground":
             up, Su = motion[node]
             if Su.size2():
                 block = ca.mtimes(Su.T, Fm)
                 Mj[sv[up], sv[name]] = block
                 Mj[sv[name], sv[up]] = block.T
-            node = parent[node]
+            node = rec.parent[node]
     order = [i for _, there, _, _ in reversed(tree) if motion[there][1].size2()
              for i in range(sv[motion[there][0]].start, sv[motion[there][0]].stop)]
-    rhs = joint_efforts(js, js.actuation(t, q, u, p)[1]) - bias
+    rhs = rec.efforts() - rec.projected_forces()
     y, pivot = cholesky_solve(Mj[order, order], rhs[order])
     aj = ca.SX.zeros(n)
     aj[order] = y
-    return _function(t, qj, vj, u, p, aj, pivot)
+    return _function(rec.t, rec.qj, rec.vj, rec.u, rec.p, aj, pivot)
 
 
 def recursive_inverse_dynamics_function(model) -> ca.Function:
     """``(t, qj, vj, aj, u, p) -> r``: the joint-space equations of motion as a residual,
     ``r = M_j a_j + C − τ`` (N·m or N per joint rate; ``τ`` the actuated joints' efforts,
-    :func:`joint_efforts`), by recursive Newton–Euler over the tree in the world frame
-    (3D trees whose rates are the derivatives of their coordinates): accelerations
-    ``a_c = a_p + S a_j + Ṡ w`` outwards (the ground's ``[0; −g]`` for a uniform gravity),
-    body forces ``f = I a + v ×* I v − f_ext`` summed inwards, ``r = Sᵀ f − τ``.  The same
-    quantities as :func:`recursive_dynamics_function` without ``M_j``: linear in ``a_j`` and
-    O(number of members) operations, so its derivatives stay cheap (the joint-space
-    collocation's rows, :mod:`ncgen.optim.joint_radau`)."""
-    js = model.joint_space
-    if js.dim != 3:
-        raise ModelError("recursive joint-space dynamics: 3D models only")
-    tree = js.spanning_tree()
-    t, u, p = ca.SX.sym("t"), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
-    qj, vj, aj = ca.SX.sym("qj", js.nq), ca.SX.sym("vj", js.nv), ca.SX.sym("aj", js.nv)
-    sq, sv = js.slices(), js.slices(rates=True)
-    owned = _owned(model, tree)
-    g = uniform_gravity(model, owned)
-    pose = {"ground": (ca.SX.eye(3), ca.SX.zeros(3))}
-    twist = {"ground": ca.SX.zeros(6)}
-    acc = {"ground": ca.SX.zeros(6) if g is None else ca.vertcat(ca.SX.zeros(3), -ca.DM(g))}
-    motion = {}
-    for here, there, e, forward in tree:
-        x = qj[sq[e.name]] if e.name in sq else ca.SX(0, 1)
-        w = vj[sv[e.name]] if e.name in sv else ca.SX(0, 1)
-        a = aj[sv[e.name]] if e.name in sv else ca.SX(0, 1)
-        Rc, pc, S, c = _edge_function(js, e, forward)(*pose[here], twist[here][:3], twist[here][3:], x, w)
-        pose[there] = (Rc, pc)
-        twist[there] = twist[here] + ca.mtimes(S, w)
-        acc[there] = acc[here] + c + ca.mtimes(S, a)
-        motion[there] = (e.name, S)
-    q, v, Qs = [None] * model.nq, [None] * model.nq, {}
-    for _, name, _, _ in tree:
-        Qs[name] = member_twist_map(js, name)(*pose[name])
-        local_q = js.member_coordinates(name, *pose[name])
-        local_v = ca.mtimes(Qs[name], twist[name])
-        for k, i in owned[name]:
-            q[i], v[i] = local_q[k], local_v[k]
-    q = ca.vertcat(*[ca.SX(0) if x is None else x for x in q])
-    v = ca.vertcat(*[ca.SX(0) if x is None else x for x in v])
-    F = js.passive_force(t, q, v, u, p)
-    force = {}
-    for _, name, _, _ in tree:
-        mass, c, Ibar = member_inertia(js, name, member_twist_map(js, name))
-        R, pos = pose[name]
-        I = _world_inertia(mass, pos + ca.mtimes(R, ca.DM(c)), R, Ibar)
-        fext = ca.SX.zeros(6)
-        if owned[name] and g is None:
-            ks, idx = [k for k, _ in owned[name]], [i for _, i in owned[name]]
-            fext = ca.mtimes(Qs[name][ks, :].T, F[idx])
-        force[name] = _apply(I, acc[name]) + _cross_force(twist[name], _apply(I, twist[name])) - fext
-    for here, there, _, _ in reversed(tree):
-        if here != "ground":
-            force[here] = force[here] + force[there]
-    r = -joint_efforts(js, js.actuation(t, q, u, p)[1])
-    for _, there, _, _ in tree:
-        name, S = motion[there]
-        if S.size2():
-            r[sv[name]] = r[sv[name]] + ca.mtimes(S.T, force[there])
-    return ca.Function("joint_inverse_dynamics", [t, qj, vj, aj, u, p], [r], ["t", "qj", "vj", "aj", "u", "p"], ["r"])
+    :func:`joint_efforts`), by recursive Newton–Euler (:class:`_Recursion` with the joint
+    accelerations): ``r = Sᵀ f − τ``.  The same quantities as
+    :func:`recursive_dynamics_function` without ``M_j``: linear in ``a_j`` and O(number of
+    members) operations, so its derivatives stay cheap (the joint-space collocation's rows,
+    :mod:`ncgen.optim.joint_radau`)."""
+    aj = ca.SX.sym("aj", model.joint_space.nv)
+    rec = _Recursion(model, aj)
+    r = rec.projected_forces() - rec.efforts()
+    return ca.Function("joint_inverse_dynamics", [rec.t, rec.qj, rec.vj, aj, rec.u, rec.p], [r],
+                       ["t", "qj", "vj", "aj", "u", "p"], ["r"])
