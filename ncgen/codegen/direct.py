@@ -82,3 +82,18 @@ class DirectFunction:
         if self._fn(*self._args):
             raise CodegenError(f"{self.name}: the compiled kernel returned an error")
         return self.outputs
+
+
+def compile_direct(name: str, f: ca.Function, cflags: str | None = None) -> DirectFunction:
+    """``f`` generated as the one-function C package ``name``, compiled (the library is
+    cached by content, :mod:`ncgen.codegen.compile_cache`) and loaded for direct calls."""
+    import tempfile
+
+    from ncgen.codegen.compile_cache import compile_package
+    from ncgen.codegen.package import write_package
+
+    with tempfile.TemporaryDirectory() as tmp:
+        pkg = write_package(name, [f], Path(tmp) / "pkg")
+        built = compile_package(pkg, cflags=cflags)
+        c_name = next(x["c_name"] for x in pkg.manifest["functions"] if x["name"] == f.name())
+    return DirectFunction(built.path, c_name, f)

@@ -18,9 +18,7 @@
 """
 from __future__ import annotations
 
-import tempfile
 import weakref
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -105,16 +103,10 @@ def forward_dynamics_kernel(model, *, joint_space: bool = False, cflags=None):
     kernels = _KERNELS.setdefault(model, {})
     hit = kernels.get(joint_space)
     if hit is None:
-        from ncgen.codegen.compile_cache import compile_package
-        from ncgen.codegen.direct import DirectFunction
-        from ncgen.codegen.package import write_package
+        from ncgen.codegen.direct import compile_direct
 
         f = joint_kkt_function(model) if joint_space else kkt_function(model)
-        with tempfile.TemporaryDirectory() as tmp:
-            pkg = write_package(f"{model.name}_{'jfd' if joint_space else 'fd'}", [f], Path(tmp) / "pkg")
-            built = compile_package(pkg, cflags=cflags)
-            c_name = next(x["c_name"] for x in pkg.manifest["functions"] if x["name"] == f.name())
-        hit = kernels[joint_space] = DirectFunction(built.path, c_name, f)
+        hit = kernels[joint_space] = compile_direct(f"{model.name}_{'jfd' if joint_space else 'fd'}", f, cflags)
     return hit
 
 

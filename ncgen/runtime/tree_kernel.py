@@ -19,9 +19,7 @@ has exactly as many degrees of freedom as joint rates).
 from __future__ import annotations
 
 import ctypes
-import tempfile
 import weakref
-from pathlib import Path
 
 import numpy as np
 
@@ -160,18 +158,13 @@ def joint_forward_dynamics_kernel(model, *, method: str = "auto", cflags=None) -
 def _compile(model, f, cflags):
     import os
 
-    from ncgen.codegen.compile_cache import compile_package
-    from ncgen.codegen.direct import DirectFunction
-    from ncgen.codegen.package import LARGE_FUNCTION_INSTRUCTIONS, write_package
+    from ncgen.codegen.direct import compile_direct
+    from ncgen.codegen.package import LARGE_FUNCTION_INSTRUCTIONS
 
     if cflags is None and "NCGEN_CFLAGS" not in os.environ and \
             LARGE_FUNCTION_INSTRUCTIONS < f.n_instructions() <= O1_INSTRUCTIONS:
         cflags = "-O1"
-    with tempfile.TemporaryDirectory() as tmp:
-        pkg = write_package(f"{model.name}_jfd_tree", [f], Path(tmp) / "pkg")
-        built = compile_package(pkg, cflags=cflags)
-        c_name = next(x["c_name"] for x in pkg.manifest["functions"] if x["name"] == f.name())
-    return DirectFunction(built.path, c_name, f)
+    return compile_direct(f"{model.name}_jfd_tree", f, cflags)
 
 
 def _unit_quaternions(js, qj: np.ndarray) -> np.ndarray:
