@@ -58,3 +58,36 @@ def test_every_runtime_file_is_unit_tested():
     included = "".join((TESTS / s).read_text() for s, _ in PROGRAMS)
     for path in sorted(RUNTIME.glob("*.h")):
         assert f'#include "{path.name}"' in included, path.name
+
+
+def test_packages_carry_the_runtime_verbatim(tmp_path):
+    """A model package holds the runtime files as they are in templates/c/runtime (under the
+    do-not-edit banner), the contact half only with nonsmooth contacts; <model>_stepper.c
+    includes them, <model>.h does not; the build lists them as headers (Makefile dependencies,
+    compile-cache key)."""
+    import ncgen as nc
+    from ncgen.codegen.render import banner
+
+    s = nc.System("ball")
+    b = s.add_point("ball", mass=1.0, position=(0.0, 0.0, 0.5))
+    s.add_contact(nc.SpherePlane(b, None, 0.1))
+    for contacts, files in [("smooth", ["ncgen_rattle.h", "ncgen_fixed.h", "ncgen_adaptive.h"]),
+                            ("nonsmooth", ["ncgen_rattle.h", "ncgen_contact.h", "ncgen_fixed.h", "ncgen_adaptive.h"])]:
+        pkg = nc.generate(s.build(contacts=contacts), tmp_path / contacts)
+        stepper = (pkg.path / "ball_stepper.c").read_text()
+        assert sorted(p.name for p in pkg.path.glob("ncgen_*.h")) == sorted(files)
+        for f in files:
+            text = (pkg.path / f).read_text()
+            assert text == banner(f"c/runtime/{f}", f) + (RUNTIME / f).read_text()
+            assert f'#include "{f}"' in stepper and f not in (pkg.path / "ball.h").read_text()
+            assert f in pkg.manifest["build"]["headers"] and f in (pkg.path / "Makefile").read_text()
+
+
+def test_included_sources_are_checked():
+    from ncgen.codegen.package import ExtraSource, _check_extra_sources
+    from ncgen.errors import CodegenError
+
+    for bad in (ExtraSource("runtime/ncgen_rattle.h", "x.c", included=True),
+                ExtraSource("runtime/ncgen_rattle.h", "x.h", {"a": 1}, included=True)):
+        with pytest.raises(CodegenError, match="included by another source"):
+            _check_extra_sources("m", [bad])

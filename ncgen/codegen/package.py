@@ -65,8 +65,8 @@ class ExtraSource:
     library's objects; :func:`~ncgen.codegen.compile_cache.compile_package` ignores it.
     With ``included=True`` the template is a plain C file (no Jinja, e.g. the stepper's
     ``runtime/ncgen_rattle.h``), copied as it is under the banner: a ``.h`` output that
-    another source of the package ``#include``\ s, listed among the build's headers (so
-    the Makefile and the compile cache depend on it) but not included by ``<name>.h``."""
+    another source of the package includes, listed among the build's headers (so the
+    Makefile and the compile cache depend on it) but not included by ``<name>.h``."""
 
     template: str
     output: str
