@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from ncgen.errors import OptimizationError
-from ncgen.runtime.tangent import null_basis
+from ncgen.analysis.tangent import null_basis
 
 #: Half-width of the box that selects the branch of a configuration condition, as a
 #: fraction of the shortest member dimension.
@@ -27,7 +27,7 @@ RANK_TOL = 1e-9
 
 
 def tangent_basis(model, q, t=None, p=None) -> np.ndarray:
-    """Orthonormal basis (nq × dof) of the null space of ``A(q)`` (:func:`ncgen.runtime.tangent.null_basis`)."""
+    """Orthonormal basis (nq × dof) of the null space of ``A(q)`` (:func:`ncgen.analysis.tangent.null_basis`)."""
     return null_basis(model.A(q, t=t, p=p), model.nq, RANK_TOL)
 
 
