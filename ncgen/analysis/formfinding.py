@@ -34,7 +34,7 @@ import numpy as np
 from ncgen.errors import NcgenError
 from ncgen.analysis.modes import Modes, modes
 from ncgen.analysis.statics import Equilibrium, equilibrium
-from ncgen.analysis.tangent import classify
+from ncgen.analysis.stability import classify
 
 #: Eigenvalues of D below this times max |ρ| count as zero (force density method).
 FDM_TOL = 1e-9

@@ -2,7 +2,7 @@
 model about a consistent state, in independent coordinates.
 
 State ``x = [z; w]`` with ``z = G (q − q*)`` and ``w = G v`` (2·dof entries).  By default
-``N`` is the orthonormal basis of ``null A(q*)`` from the SVD (:mod:`ncgen.analysis.tangent`)
+``N`` is the orthonormal basis of ``null A(q*)`` from the SVD (:mod:`ncgen.assembly.manifold`)
 and ``G = Nᵀ``; ``coordinates=G`` (dof × nq) chooses other independent coordinates, for
 instance rows of ``∂(joint angles)/∂q`` so that ``z`` are joint-angle deviations.  Outputs
 ``y = [δq; δv]`` (the natural coordinates and rates to first order), ``D = 0``.  The
@@ -17,7 +17,8 @@ import numpy as np
 from ncgen.assembly.linearization import linearization_function
 from ncgen.errors import NcgenError
 from ncgen.analysis.statics import _parameters
-from ncgen.analysis.tangent import cached, coordinate_basis, manifold_point, tangent_velocity
+from ncgen.analysis.stability import cached
+from ncgen.assembly.manifold import coordinate_basis, manifold_point, tangent_velocity
 from ncgen.validation import as_vector
 
 #: A state is consistent when |Φ| and |A v + Φ_t| are below this times the system's size².

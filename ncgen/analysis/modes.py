@@ -19,7 +19,8 @@ import numpy as np
 import scipy.linalg
 
 from ncgen.analysis.statics import Equilibrium, equilibrium
-from ncgen.analysis.tangent import ZERO_TOL, manifold_point
+from ncgen.analysis.stability import ZERO_TOL
+from ncgen.assembly.manifold import manifold_point
 
 
 @dataclass

@@ -10,7 +10,7 @@ with a backtracking line search on ``½(|G|² + |Φ|²)``; steps are least-squar
 so zero-stiffness directions (a free-floating structure's rigid motions) leave the
 configuration where it is.  Stability is judged from the *reduced tangent stiffness*
 ``K_r = Nᵀ K_s N`` (``K_s`` the symmetric part of K, ``N`` an orthonormal basis of
-``null A``, :mod:`ncgen.analysis.tangent`): positive definite (stable), singular
+``null A``, :mod:`ncgen.assembly.manifold`): positive definite (stable), singular
 (neutral: zero-stiffness motions) or indefinite (unstable).
 Units: q in m, forces in N, λ in N per unit of Φ, K in N/m (N·m for base-vector rows).
 """
@@ -23,7 +23,8 @@ import numpy as np
 from ncgen.assembly.statics import statics_function
 from ncgen.errors import ModelError, NcgenError
 from ncgen.analysis.reactions import unshared_state
-from ncgen.analysis.tangent import cached, classify, null_basis
+from ncgen.analysis.stability import cached, classify
+from ncgen.assembly.manifold import null_basis
 from ncgen.validation import as_vector
 
 #: Largest step of ``method="descent"``, relative to the system's extent ``|q|∞``.

@@ -12,7 +12,7 @@ Constraint handling (why the equality-constraint Jacobian has full row rank):
 * partial targets (a member's pose) impose only their independent rows
   (:mod:`ncgen.optim.targets`);
 * full-state final and periodic conditions impose their ``dof`` tangent components
-  ``Nᵀ (x_N − x*)`` (:mod:`ncgen.optim.manifold`), never the ``nc`` components the
+  ``Nᵀ (x_N − x*)`` (:mod:`ncgen.optim.conditions`), never the ``nc`` components the
   dynamics already keep; a box around the target (inequalities, inactive at the
   solution) selects the branch;
 * bounds on inputs, states, parameters and the final time are simple variable bounds
@@ -33,8 +33,9 @@ import numpy as np
 from ncgen.errors import OptimizationError
 from ncgen.optim.diagnostics import DIAGNOSIS_BUDGET, RELAXABLE, SUCCESS, diagnose, violation_of
 from ncgen.optim.guess import guess_duration, make_guess
-from ncgen.optim.manifold import (BRANCH_RADIUS, consistent_configuration, length_scale, resolve_configuration,
-                                  resolve_velocity, tangent_basis)
+from ncgen.assembly.manifold import tangent_basis
+from ncgen.optim.conditions import (BRANCH_RADIUS, consistent_configuration, length_scale, resolve_configuration,
+                                    resolve_velocity)
 from ncgen.optim.result import OptimalTrajectory, SolverStats
 from ncgen.optim.targets import joint_target, pose_target
 from ncgen.optim.transcription import MODEL_STATE, Horizon

@@ -16,7 +16,7 @@ from ncgen.runtime.dae import load_dae
 from ncgen.runtime.diagnose import explain, shift_time
 from ncgen.runtime.idas import ChunkedIDAS, ChunkFailure
 from ncgen.runtime.inputs import hold_columns, input_samples, parameter_values, time_grid
-from ncgen.runtime.manifold import NEAR_SINGULAR, ManifoldProjector, robust_algebraic
+from ncgen.assembly.manifold import NEAR_SINGULAR, ManifoldProjector, robust_algebraic
 from ncgen.runtime.progress import Progress
 from ncgen.runtime.rattle_bridge import RattleFailure, compiled_interval, rattle_interval
 from ncgen.runtime.stepper import MAX_HALVINGS, MAX_ITER, TOL, simulate_stepper
@@ -99,8 +99,8 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
       of ``A`` at every output time (an SVD each; only models with ``nq · nc ≤``
       :data:`AUTO_MAX_SIZE`), in IDAS chunks of at most :data:`WATCHED_CHUNK` intervals,
       shorter as the ratio falls; every output interval that starts or ends near-singular
-      (ratio below :data:`~ncgen.runtime.manifold.NEAR_SINGULAR`, scaled by the starting
-      ratio, see :mod:`ncgen.runtime.manifold`), or that IDAS fails on close to one, is
+      (ratio below :data:`~ncgen.assembly.manifold.NEAR_SINGULAR`, scaled by the starting
+      ratio, see :mod:`ncgen.assembly.manifold`), or that IDAS fails on close to one, is
       crossed instead by the model's compiled error-controlled RATTLE stepper (order 4,
       tolerance ``max(rtol, atol, 1e-9)``, from the state projected onto both constraint
       levels; compiled on first use; :mod:`ncgen.runtime.rattle_bridge`), which stays on
@@ -234,7 +234,7 @@ def initial_multipliers(model, t0: float, q, v, u, p, dae) -> np.ndarray:
 def _algebraic(model, t: float, x, u, p) -> np.ndarray:
     """``z = [a; λ]`` consistent with the state ``x = [q; v]`` and input ``u`` at ``t``: the KKT
     system, which is the DAE's algebraic equations, solved rank-robustly
-    (:func:`~ncgen.runtime.manifold.robust_algebraic`).  Non-finite values raise
+    (:func:`~ncgen.assembly.manifold.robust_algebraic`).  Non-finite values raise
     :class:`~ncgen.runtime.idas.ChunkFailure` (never a raw CasADi error)."""
     z = robust_algebraic(model, t, x[:model.nq], x[model.nq:], u, p)
     if not np.all(np.isfinite(z)):
