@@ -5,20 +5,20 @@ The null-space basis, charts and tangent velocities are in :mod:`ncgen.assembly.
 """
 from __future__ import annotations
 
-import weakref
 from typing import Callable
 
 import numpy as np
 
+from ncgen.model.data import model_data
+
 #: Eigenvalues of the reduced stiffness within this times its largest |eigenvalue| are zero.
 ZERO_TOL = 1e-8
 
-_CACHE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-
 
 def cached(model, key: str, make: Callable):
-    """``make()`` once per model and key (CasADi functions built on demand)."""
-    store = _CACHE.setdefault(model, {})
+    """``make()`` once per model and key (CasADi functions built on demand, kept in
+    ``model.data.functions``)."""
+    store = model_data(model).functions
     if key not in store:
         store[key] = make()
     return store[key]

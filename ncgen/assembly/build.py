@@ -80,7 +80,7 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
         if plan.eliminated or plan.partial:
             options = dict(baumgarte=baumgarte, redundant=redundant, tolerance=tolerance, t0=t0,
                            assemble=assemble, contacts=contacts)
-            unshared = UnsharedForm(lambda: build_model(source, share=False, **options))
+            unshared = UnsharedForm(source, options, build_model)
     members = list(system.members.values())
     layout = make_layout(system.dim, members)
     ctx = Context(system, layout)

@@ -18,13 +18,12 @@
 """
 from __future__ import annotations
 
-import weakref
-
 import numpy as np
 
 from ncgen.assembly.derived import joint_kkt_function, kkt_function
 from ncgen.assembly.joint_space import solve_linear
 from ncgen.errors import ModelError
+from ncgen.model.data import model_data
 from ncgen.validation import as_vector
 
 
@@ -36,9 +35,6 @@ def _kkt(model, q, v, t, u, p):
     return A, F, gamma
 
 
-_KERNELS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-
-
 def forward_dynamics_kernel(model, *, joint_space: bool = False, cflags=None):
     """The compiled :func:`~ncgen.assembly.derived.kkt_function` of ``model`` (``joint_space=True``:
     the :func:`~ncgen.assembly.derived.joint_kkt_function`, trees only; for ``a_j`` alone
@@ -47,7 +43,7 @@ def forward_dynamics_kernel(model, *, joint_space: bool = False, cflags=None):
     built once per model (the library is cached by content).  Call ``k(t, q, v, u, p)`` →
     ``[a, lam]``, or ``k(t, qj, vj, u, p)`` → ``[aj, a, lam]`` (buffers reused by the next
     call)."""
-    kernels = _KERNELS.setdefault(model, {})
+    kernels = model_data(model).forward_dynamics_kernels
     hit = kernels.get(joint_space)
     if hit is None:
         from ncgen.codegen.direct import compile_direct

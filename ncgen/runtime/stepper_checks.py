@@ -41,12 +41,12 @@ misses that growth.
 from __future__ import annotations
 
 import math
-import weakref
 
 import casadi as ca
 import numpy as np
 
 from ncgen.codegen.stepper_package import CONTACT_STATS, PENETRATION_TOL, PGS_MAX_ITER, PGS_TOL, STATS
+from ncgen.model.data import model_data
 
 #: Largest allowed change of a conservative model's energy, and error of the energy balance
 #: of a non-conservative one, as a fraction of the energy scale ``max(|E|, T, |V − V0|, |W|)``
@@ -69,16 +69,15 @@ SHADOW_FACTOR = 10.0
 GLOBAL_FACTOR = 100.0
 
 
-_conservative: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-
 
 def is_conservative(model) -> bool:
     """True if the model's forces are conservative and its constraints scleronomic:
     ``Φ_t`` and ``∂V/∂t`` are structurally zero and ``F = −∇V`` at random states with random
-    rates and inputs (so that dampers, drives and input forces all count).  Kept per model."""
-    if model not in _conservative:
-        _conservative[model] = _is_conservative(model)
-    return _conservative[model]
+    rates and inputs (so that dampers, drives and input forces all count).  Kept in the model's data."""
+    data = model_data(model)
+    if data.conservative is None:
+        data.conservative = _is_conservative(model)
+    return data.conservative
 
 
 def _is_conservative(model, samples: int = 3, seed: int = 0) -> bool:
