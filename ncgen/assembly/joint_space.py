@@ -240,20 +240,8 @@ class JointSpace:
         """``(here, there, edge, forward)`` for every joint of a tree, breadth-first from the
         ground (``forward``: ``here`` is the joint's A).  Raises :class:`ModelError` when a
         member is not reached or a joint closes a loop."""
-        adjacent: dict[str, list[tuple[Edge, bool]]] = {}
-        for e in self.edges:
-            adjacent.setdefault(e.A, []).append((e, True))
-            adjacent.setdefault(e.B, []).append((e, False))
-        reached, queue, out, spinless = {"ground"}, deque(["ground"]), [], set()
-        while queue:
-            here = queue.popleft()
-            for e, forward in adjacent.get(here, []):
-                there = e.B if forward else e.A
-                if there in reached or not _passable(e, forward, here, spinless):
-                    continue
-                reached.add(there)
-                out.append((here, there, e, forward))
-                queue.append(there)
+        out = list(_walk(self.edges))
+        reached = {"ground"} | {there for _, there, _, _ in out}
         missing = [n for n in self.members if n not in reached]
         if missing or len(out) != len(self.edges):
             raise ModelError(f"joint space: the model is not a tree of joints with coordinates "
@@ -316,20 +304,9 @@ class JointSpace:
         values = {**self._initial[1], **given}
         members = self.members
         poses = {"ground": (np.eye(self.dim), np.zeros(self.dim))}
-        adjacent: dict[str, list[tuple[Edge, bool]]] = {}
-        for e in self.edges:
-            adjacent.setdefault(e.A, []).append((e, True))
-            adjacent.setdefault(e.B, []).append((e, False))
-        queue, spinless = deque(["ground"]), set()
-        while queue:
-            here = queue.popleft()
-            for e, forward in adjacent.get(here, []):
-                there = e.B if forward else e.A
-                if there in poses or not _passable(e, forward, here, spinless):
-                    continue
-                T = relative_pose(e, values.get(e.name, np.zeros(0)), self.dim)
-                poses[there] = carry(poses[here], e, T, forward, members)
-                queue.append(there)
+        for here, there, e, forward in _walk(self.edges):
+            T = relative_pose(e, values.get(e.name, np.zeros(0)), self.dim)
+            poses[there] = carry(poses[here], e, T, forward, members)
         q = model.q0.copy()
         for name, (R, pos) in poses.items():
             if name == "ground":
@@ -390,6 +367,26 @@ class JointSpace:
                              f"give the rates of every joint of a tree ({', '.join(self.joint_names)}), "
                              "or of independent joints only")
         return v
+
+
+def _walk(edges):
+    """``(here, there, edge, forward)`` breadth-first from the ground through the joints
+    ``edges``, each member reached once (the first way found), across passable edges only
+    (:func:`_passable`)."""
+    adjacent: dict[str, list[tuple[Edge, bool]]] = {}
+    for e in edges:
+        adjacent.setdefault(e.A, []).append((e, True))
+        adjacent.setdefault(e.B, []).append((e, False))
+    reached, queue, spinless = {"ground"}, deque(["ground"]), set()
+    while queue:
+        here = queue.popleft()
+        for e, forward in adjacent.get(here, []):
+            there = e.B if forward else e.A
+            if there in reached or not _passable(e, forward, here, spinless):
+                continue
+            reached.add(there)
+            yield here, there, e, forward
+            queue.append(there)
 
 
 def _passable(e: Edge, forward: bool, here: str, spinless: set) -> bool:

@@ -42,6 +42,12 @@ def _frozen(value):
     return value
 
 
+def component_names(names, sizes) -> list[str]:
+    """One name per value of inputs or parameters: ``k`` for a scalar, ``f[0]``, ``f[1]``, ...
+    for a vector ``f`` (the order of ``u`` and ``p``)."""
+    return [n if s == 1 else f"{n}[{i}]" for n, s in zip(names, sizes) for i in range(s)]
+
+
 class Model:
     """A validated, assembled, constant system (create it with ``System.build()``)."""
 
