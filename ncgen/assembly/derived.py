@@ -8,7 +8,9 @@
   ``accel`` with the Baumgarte terms at zero (the path of a singular ``M``);
 * :func:`joint_kkt_function` — joint space in and out for a tree;
 * :func:`residual_function` — the constraint drift ``|Φ|∞``, ``|A v + Φ_t|∞`` of a state;
-* :func:`slip_function` — the contacts' tangential velocities ``W_T v``.
+* :func:`slip_function` — the contacts' tangential velocities ``W_T v``;
+* :func:`potential_force_residual_function` — ``F + ∇V``, zero for conservative forces
+  (with :func:`depends_on_time`: the stepper's energy check).
 
 No stabilisation terms: on the constraint manifold the accelerations are exact.
 """
@@ -86,3 +88,23 @@ def slip_function(model) -> ca.Function:
     stacked per contact (:mod:`ncgen.assembly.contacts`)."""
     qs, vs, ps = ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq), ca.SX.sym("p", model.np)
     return ca.Function("slip", [qs, vs, ps], [ca.mtimes(model.functions["contact_jacobian"](qs, ps)[1], vs)])
+
+
+def depends_on_time(model) -> bool:
+    """Whether ``Φ_t`` depends on ``t`` or ``q``, or the potential energy ``V`` on ``t``
+    (structurally: from the expressions, not from values)."""
+    f = model.functions
+    t, q, p = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("p", model.np)
+    V = ca.sum1(model.potential_terms(t, q, p))
+    return bool(ca.depends_on(ca.densify(f["phi_t"](t, q, p)), ca.vertcat(t, q)) or ca.depends_on(V, t))
+
+
+def potential_force_residual_function(model) -> ca.Function:
+    """``F_nc: (t, q, v, u, p) -> (F + ∇_q V, F)``: the applied force minus the negative
+    gradient of the potential energy (N; zero for conservative forces), and ``F``."""
+    f = model.functions
+    t, q, v = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq)
+    u, p = ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
+    V = ca.sum1(model.potential_terms(t, q, p))
+    F = f["F"](t, q, v, u, p)
+    return ca.Function("F_nc", [t, q, v, u, p], [F + ca.gradient(V, q), F])

@@ -42,8 +42,9 @@ from __future__ import annotations
 
 import math
 
-import casadi as ca
 import numpy as np
+
+from ncgen.assembly.derived import depends_on_time, potential_force_residual_function
 
 from ncgen.codegen.stepper_package import CONTACT_STATS, PENETRATION_TOL, PGS_MAX_ITER, PGS_TOL, STATS
 from ncgen.model.data import model_data
@@ -81,16 +82,11 @@ def is_conservative(model) -> bool:
 
 
 def _is_conservative(model, samples: int = 3, seed: int = 0) -> bool:
-    f = model.functions
-    t, q, v = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq)
-    u, p = ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
-    V = ca.sum1(model.potential_terms(t, q, p))
-    if ca.depends_on(ca.densify(f["phi_t"](t, q, p)), ca.vertcat(t, q)) or ca.depends_on(V, t):
+    if depends_on_time(model):
         return False
-    if np.any(np.asarray(f["phi_t"](model.t0, model.q0, model.p0)) != 0):
+    if np.any(np.asarray(model.functions["phi_t"](model.t0, model.q0, model.p0)) != 0):
         return False
-    F = f["F"](t, q, v, u, p)
-    residual = ca.Function("F_nc", [t, q, v, u, p], [F + ca.gradient(V, q), F])
+    residual = potential_force_residual_function(model)
     rng = np.random.default_rng(seed)
     for _ in range(samples):
         qs = model.q0 + 0.1 * rng.standard_normal(model.nq)
