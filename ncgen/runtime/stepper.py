@@ -37,17 +37,15 @@ solve the KKT system.
 from __future__ import annotations
 
 import time
-import warnings
 
 import numpy as np
 
 from ncgen.codegen.stepper_package import STATS, STATUS, TOL
-from ncgen.errors import AccuracyWarning, NcgenError, SimulationError
+from ncgen.errors import NcgenError, SimulationError
 from ncgen.runtime.options import SimulationOptions
-from ncgen.runtime.stepper_checks import (ERROR_FRACTION, GLOBAL_FACTOR, SHADOW_FACTOR, contact_report,
-                                          energy_report, error_estimate, is_conservative, shadow_estimates,
-                                          shadow_report, untrusted_global_row,
-                                          untrusted_row)
+from ncgen.runtime.stepper_checks import (SHADOW_FACTOR, check_fixed, check_global, contact_report, energy_report,
+                                          error_estimate, is_conservative, shadow_estimates, shadow_report,
+                                          warn_unconverged)
 from ncgen.runtime.stepper_library import load_stepper
 from ncgen.runtime.trajectory import NAME_KEYS, Trajectory, derived_outputs
 
@@ -104,7 +102,7 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, conse
                        None if IMP is None else IMP[:rows])
     if contacts:
         traj.info["contacts"] = contact_report(S[:rows])
-        _warn_unconverged(model, traj.info["contacts"])
+        warn_unconverged(model, traj.info["contacts"])
     if status != 0:
         t_fail = float(t[0]) + done * h
         message = (f"simulation of {model.name!r} with the stepper failed in the step from "
@@ -114,35 +112,8 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, conse
         traj.info["message"] = message
         raise SimulationError(message, time=float(t[rows]), trajectory=traj)
     if check:
-        bad = untrusted_row(model, traj, S[:rows], h, contacts=contacts)
-        if bad is not None:
-            row, reason = bad
-            kept = traj.head(row + 1)          # the states before C row `row`
-            message = (f"simulation of {model.name!r} with the stepper (fixed step h = {h:.3g} s) is not "
-                       f"trustworthy: {reason}. The trajectory up to t = {kept.t[-1]:.6g} s, before the "
-                       f"problem showed, is attached to this error as .trajectory "
-                       f"(check=False returns the whole run unchecked).")
-            work = np.concatenate([[0.0], S[:row, STATS.index("work")]])
-            kept.info.update(complete=False, message=message, error_estimate=error_estimate(S[:row], substeps),
-                             energy=energy_report(kept, work, conservative))
-            raise SimulationError(message, time=float(kept.t[-1]), trajectory=kept)
+        check_fixed(model, traj, S[:rows], h, substeps, contacts, conservative)
     return traj
-
-
-def _warn_unconverged(model, report: dict) -> None:
-    """Warnings when some contact solves stopped at the sweep limit, and when the push-out
-    left a penetration deeper than ten times its tolerance (see
-    :func:`~ncgen.runtime.stepper_checks.contact_report`)."""
-    if report["penetration"] > 10 * report["penetration_tol"]:
-        warnings.warn(f"simulate: contacts of {model.name!r} ended a step up to {report['penetration']:.3g} m inside "
-                      f"(the push-out aims at {report['penetration_tol']:g} m and is repeated at most 4 times "
-                      f"per step; info['contacts'])", stacklevel=5)
-    if report["pgs_unconverged"]:
-        warnings.warn(f"simulate: {report['pgs_unconverged']} contact solve(s) of {model.name!r} stopped at "
-                      f"{report['pgs_max_sweeps']} projected Gauss-Seidel sweeps before the contact velocities "
-                      f"settled to {report['pgs_tol']:g} (1 + max|U|) m/s; the last sweep still changed one by up to "
-                      f"{report['pgs_residual']:.3g} (1 + max|U|) m/s (info['contacts']; redundant contacts, as under "
-                      f"a body or a chain lying flat or in a pile, make it crawl, and friction can make it cycle)", stacklevel=5)
 
 
 def _adaptive(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, conservative: bool) -> Trajectory:
@@ -181,33 +152,8 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, co
         eq, ev = shadow_estimates(Q, V, shadow, rows)
         traj.info["error_estimate"] = shadow_report(traj, eq, ev, rtol, atol)
         if check:
-            _check_global(model, traj, eq, rtol, atol)
+            check_global(model, traj, eq, rtol, atol)
     return traj
-
-
-def _check_global(model, traj, eq, rtol, atol):
-    """Raise where the global estimate in q passes 1 % of the model's size (as for fixed
-    steps), warn (:class:`~ncgen.errors.AccuracyWarning`) where it passes
-    :data:`~ncgen.runtime.stepper_checks.GLOBAL_FACTOR` × the tolerance."""
-    row = untrusted_global_row(model, eq)
-    if row is not None:
-        kept = traj.head(row + 1)
-        message = (f"simulation of {model.name!r} with the error-controlled stepper (rtol {rtol:g}, atol {atol:g}) "
-                   f"is not trustworthy: the estimated global error in q reached {eq[row]:.3g} m by "
-                   f"t = {traj.t[row + 1]:.6g} s, more than {ERROR_FRACTION:g} of the model's size. rtol bounds "
-                   f"the error of each step; errors that grow along the motion (chaotic or fast-spinning "
-                   f"motion) need a smaller rtol, or the motion cannot be followed that far. The trajectory up "
-                   f"to t = {kept.t[-1]:.6g} s is attached to this error as .trajectory (check=False returns "
-                   f"the whole run unchecked).")
-        kept.info.update(complete=False, message=message)
-        raise SimulationError(message, time=float(kept.t[-1]), trajectory=kept)
-    report = traj.info["error_estimate"]
-    if report["exceeds_tolerance"]:
-        warnings.warn(f"simulation of {model.name!r} with the error-controlled stepper: the estimated global "
-                      f"error at the end ({report['q']:.3g} in q, {report['v']:.3g} in v) is more than "
-                      f"{GLOBAL_FACTOR:g} times the tolerance (rtol {rtol:g}, atol {atol:g}): rtol bounds the "
-                      f"error of each step, and errors grow along this motion; use a smaller rtol if the end "
-                      f"state matters (traj.info['error_estimate'])", AccuracyWarning, stacklevel=4)
 
 
 def newton_tolerance(rtol: float, atol: float, tol: float = TOL) -> float:
