@@ -136,8 +136,9 @@ class SimulationOptions:
             if name not in fields:
                 raise NcgenError(f"simulate: no option named {name!r}{did_you_mean(name, fields)}; options: "
                                  f"{', '.join(fields)}")
-        base = cls() if options is None else options
-        return dataclasses.replace(base, **shortcuts) if shortcuts else base
+        if options is None:
+            return cls(**shortcuts)
+        return dataclasses.replace(options, **shortcuts) if shortcuts else options
 
 
 def _real(x) -> bool:
