@@ -45,6 +45,11 @@ class ModelData:
     tree_kernels: dict = field(default_factory=dict)
     #: ``nc.joint_forward_dynamics``' own copy of the default tree kernel (False: none).
     tree_kernel: object = None
+    #: ``(f,)``: the joint-space tree map ``(q_j, v_j) -> (q, v)``, f None for a model that is
+    #: not a tree (``JointSpace._tree`` in :mod:`ncgen.assembly.joint_space`).
+    joint_tree_function: tuple | None = None
+    #: The joint positions at ``model.q0``, by joint (``JointSpace._propagate``).
+    joint_positions0: dict | None = None
     #: The rerolled primitives of a large model (:func:`ncgen.codegen.looped.rerolled_primitives`).
     rerolled: dict | None = None
     #: ``{name: casadi.Function}``: analysis functions built on demand
