@@ -336,7 +336,7 @@ extern const casadi_real falling_chain_gravity[3];
  *   arg[7] lam_h: 3x1, nnz 3 [N s/m^2] scaled multipliers h/2 lambda. Default: zeros.
  *   arg[8] j: 15x1, nnz 15 [N s] generalised contact impulse W^T P of the step. Default: zeros.
  * Outputs:
- *   res[0] r: 18x1, nnz 18 [N s; m^2/s] [M (w - v) - h/2 F + A^T nu - j/2; Phi(t + h, q + h w) / h].
+ *   res[0] r: 18x1, nnz 18 [N s; m^2/s] [M (w - v) - h/2 F + A^T lam_h - j/2; Phi(t + h, q + h w) / h].
  *   res[1] K: 18x18, nnz 69 (sparse) dr/d[w; lam_h], sparse.
  */
 #define FALLING_CHAIN_STEP_NEWTON_IN_T_NNZ 1
