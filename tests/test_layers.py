@@ -7,8 +7,9 @@ docs/architecture.md)::
     base (errors, validation, reproducible, files, version)
     ← symbolic ← model ← assembly ← codegen ← rigid_motion ← runtime ← viz ← optim ← cli ← ncgen (the package root)
 
-A module may import modules of its own layer and of lower ones.  The one exception is
-``System.build()`` (model), a convenience that calls :func:`ncgen.assembly.build.build_model`.
+A module may import modules of its own layer and of lower ones.  The exceptions are
+``System.build()`` (model), a convenience that calls :func:`ncgen.assembly.build.build_model`,
+and ``Trajectory.to_html()`` (runtime), which calls :func:`ncgen.viz.html.to_html`.
 """
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ LAYERS = ["base", "symbolic", "model", "assembly", "codegen", "rigid_motion", "r
           "cli", "root"]
 BASE = {"errors", "validation", "reproducible", "files", "version"}
 #: (importing module, imported module): the documented exceptions.
-EXCEPTIONS = {("ncgen.model.system", "ncgen.assembly.build")}
+EXCEPTIONS = {("ncgen.model.system", "ncgen.assembly.build"), ("ncgen.runtime.trajectory", "ncgen.viz.html")}
 
 
 def module_name(path: Path) -> str:

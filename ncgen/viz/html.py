@@ -1,0 +1,291 @@
+"""``to_html(traj, path)``: one self-contained, offline HTML page of a run — an interactive 3D
+view (three.js, inlined with its licence) with play/pause, a time slider, speed, trails and
+plots (energy, constraint residual, joint positions, contact gaps and forces) whose cursor
+follows the time.  ``page.html?t=1.5`` opens paused at t = 1.5 s.
+
+Data are float32 in base64 (poses as position + quaternion per member and frame, at most
+``fps`` frames per simulated second); mesh vertices are quantised to 16 bits.  The 3D view
+takes the window less the plot panel (``PANEL_WIDTH`` px, right) and the control bar
+(``CONTROLS_HEIGHT`` px, bottom); the camera is computed here (:func:`camera`), so a
+point's pixel is known in Python (:func:`project`)."""
+from __future__ import annotations
+
+import base64
+import json
+import math
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from ncgen.errors import NcgenError
+from ncgen.files import atomic_path
+from ncgen.version import __version__
+from ncgen.viz import geometry, meshes
+from ncgen.viz.scene import scene as make_scene
+
+FPS = 60
+PANEL_WIDTH = 360
+CONTROLS_HEIGHT = 48
+FOV = 40.0                      # vertical field of view of the perspective camera (deg)
+#: Direction from the target to the camera, in (right, forward, up) of the gravity frame.
+VIEW_DIRECTION = (1.0, -1.6, 0.9)
+MAX_JOINT_CURVES = 12
+
+
+def to_html(traj, path, *, fps: float = FPS, colors: dict | None = None, mesh_paths=(), title: str | None = None,
+            trails: bool = True) -> Path:
+    """Write the page of ``traj`` (a :class:`~ncgen.runtime.trajectory.Trajectory` with its
+    model) to ``path`` (``.html``); ``colors`` maps member names to CSS colours;
+    ``mesh_paths``: extra folders holding mesh files.  Returns the path."""
+    path = Path(path)
+    if path.suffix.lower() not in (".html", ".htm"):
+        raise NcgenError(f"to_html: {path}: expected a file name ending in .html")
+    data = page_data(traj, fps=fps, colors=colors, mesh_paths=mesh_paths, trails=trails)
+    text = render_page(data, title or f"{traj.model_name} — ncgen")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        Path(tmp).write_text(text, encoding="utf-8")
+    return path
+
+
+# ----------------------------------------------------------------- rendering
+def templates_dir() -> Path:
+    """The shipped ``html`` templates (``templates/html``, installed as ``ncgen._templates/html``)."""
+    from ncgen.codegen.render import shipped_templates_dir
+    return shipped_templates_dir("html")
+
+
+def render_page(data: dict, title: str) -> str:
+    """The HTML text of a page showing ``data`` (:func:`page_data`)."""
+    import jinja2
+
+    folder = templates_dir()
+    vendor = folder / "vendor" / "three"
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(folder)), undefined=jinja2.StrictUndefined,
+                             autoescape=False, keep_trailing_newline=True)
+    payload = json.dumps(data, separators=(",", ":"), allow_nan=False).replace("</", "<\\/")
+    return env.get_template("viewer.html.j2").render(
+        title=_escape(title), data_json=payload, version=__version__,
+        three_js=(vendor / "three.module.min.js").read_text(encoding="utf-8"),
+        orbit_js=(vendor / "OrbitControls.js").read_text(encoding="utf-8"),
+        three_version=(vendor / "VERSION").read_text(encoding="utf-8").strip(),
+        three_license=_escape((vendor / "LICENSE").read_text(encoding="utf-8")),
+        panel_width=PANEL_WIDTH, controls_height=CONTROLS_HEIGHT)
+
+
+def _escape(text: str) -> str:
+    return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+
+
+def _pack(a, dtype=np.float32) -> dict:
+    """An array as ``{"shape", "dtype", "b64"}`` (little-endian)."""
+    a = np.ascontiguousarray(np.asarray(a).astype(np.dtype(dtype).newbyteorder("<")))
+    return {"shape": list(a.shape), "dtype": np.dtype(dtype).name, "b64": base64.b64encode(a.tobytes()).decode()}
+
+
+# ------------------------------------------------------------------- camera
+def camera(lo, hi, dim: int, gravity, aspect: float = 1.0) -> dict:
+    """Camera looking at the box ``lo``–``hi`` (3D, m): perspective from above and in front
+    (up = −gravity) in 3D, orthographic along −z in a planar system."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    target = (lo + hi) / 2
+    radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-3)
+    if dim == 2:
+        g = np.asarray(gravity, float)
+        up = embed_up(-g if np.linalg.norm(g) > 0 else np.array([0.0, 1.0]))
+        return {"ortho": True, "target": target.tolist(), "position": (target + [0, 0, 4 * radius]).tolist(),
+                "up": up.tolist(), "half_height": 1.1 * radius, "near": 0.01 * radius, "far": 10 * radius}
+    g = np.asarray(gravity, float)
+    up = -g / np.linalg.norm(g) if np.linalg.norm(g) > 0 else np.array([0.0, 0.0, 1.0])
+    helper = np.eye(3)[int(np.argmin(np.abs(up)))]
+    right = np.cross(helper, up)
+    right /= np.linalg.norm(right)
+    forward = np.cross(up, right)
+    d = np.array(VIEW_DIRECTION) @ np.array([right, forward, up])
+    d /= np.linalg.norm(d)
+    half = math.radians(FOV) / 2
+    distance = 0.9 * radius / math.sin(min(half, math.atan(aspect * math.tan(half))))
+    return {"ortho": False, "target": target.tolist(), "position": (target + distance * d).tolist(),
+            "up": up.tolist(), "fov": FOV, "near": distance / 100, "far": distance * 10}
+
+
+def embed_up(v) -> np.ndarray:
+    v = np.asarray(v, float)
+    return np.array([v[0], v[1], 0.0]) / np.linalg.norm(v)
+
+
+def view_size(width: int, height: int, has_panel: bool) -> tuple[int, int]:
+    """Size (px) of the 3D view in a window of ``width`` × ``height``."""
+    return width - (PANEL_WIDTH if has_panel else 0), height - CONTROLS_HEIGHT
+
+
+def project(cam: dict, points, width: int, height: int) -> np.ndarray:
+    """Pixel coordinates ``(n, 2)`` (x right, y down, origin at the view's top-left corner) of
+    world points ``(n, 3)`` seen by ``cam`` in a view of ``width`` × ``height`` px."""
+    eye, target, up = (np.asarray(cam[k], float) for k in ("position", "target", "up"))
+    z = eye - target
+    z /= np.linalg.norm(z)
+    x = np.cross(up, z)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    rel = np.asarray(points, float).reshape(-1, 3) - eye
+    xc, yc, zc = rel @ x, rel @ y, rel @ z
+    aspect = width / height
+    if cam["ortho"]:
+        h = cam["half_height"]
+        ndc = np.column_stack([xc / (h * aspect), yc / h])
+    else:
+        f = 1 / math.tan(math.radians(cam["fov"]) / 2)
+        ndc = np.column_stack([f / aspect * xc / -zc, f * yc / -zc])
+    return np.column_stack([(ndc[:, 0] + 1) / 2 * width, (1 - ndc[:, 1]) / 2 * height])
+
+
+# --------------------------------------------------------------------- data
+def frame_indices(t: np.ndarray, fps: float) -> np.ndarray:
+    """Indices of at most ``fps`` samples per second of ``t`` (first and last kept)."""
+    n = len(t)
+    if n < 2:
+        return np.arange(n)
+    count = min(n, int(math.ceil((t[-1] - t[0]) * fps)) + 1)
+    grid = np.linspace(t[0], t[-1], max(count, 2))
+    idx = np.unique(np.clip(np.searchsorted(t, grid), 0, n - 1))
+    return idx
+
+
+def page_data(traj, *, fps: float = FPS, colors=None, mesh_paths=(), trails: bool = True) -> dict:
+    """Everything the page draws, as JSON-ready data (see the module docstring)."""
+    from scipy.spatial.transform import Rotation
+
+    model = traj.model
+    sc = make_scene(traj)           # raises a clear error without a model
+    d = traj.dim
+    idx = frame_indices(traj.t, fps)
+    lo, hi = sc.bounds()
+    lo, hi = geometry.embed(lo, d), geometry.embed(hi, d)
+    size = max(float(np.max(hi - lo)), 1e-3)
+    prims = geometry.member_primitives(model, size, colors)
+    R, p = traj.poses()
+    R, p = geometry.embed_rotation(R[idx]), geometry.embed(p[idx], d)
+    n, k = p.shape[:2]
+    quat = Rotation.from_matrix(R.reshape(-1, 3, 3)).as_quat().reshape(n, k, 4) if k else np.zeros((n, 0, 4))
+    mesh_table: dict[str, int] = {}
+    mesh_list: list[dict] = []
+    reach = 0.0
+    members = []
+    for name in [*model.member_names, "ground"]:
+        if name not in prims:
+            continue
+        parts = []
+        for prim in prims[name]:
+            part = _part(prim, mesh_table, mesh_list, mesh_paths)
+            if part is None:
+                continue
+            parts.append(part)
+            reach = max(reach, part.pop("_reach"))
+        members.append({"name": name, "index": model.member_names.index(name) if name != "ground" else -1,
+                        "parts": parts})
+    lo, hi = lo - reach, hi + reach
+    springs = _springs(traj, idx)
+    contacts = {"radii": sc.sphere_radii.tolist(),
+                "centres": _pack(geometry.embed(sc.sphere_centres[idx], d)) if len(sc.sphere_radii) else None,
+                "planes": [[geometry.embed(pt, d).tolist(), geometry.embed(nr, d).tolist()] for pt, nr in sc.planes],
+                "points": _pack(np.nan_to_num(geometry.embed(sc.contact_points[idx], d), nan=1e30))
+                if sc.contact_points.shape[1] else None}
+    markers = geometry.embed(traj.markers[idx], d)
+    if markers.shape[1] == 0 and model.member_names:
+        markers, trail_names = p, list(model.member_names)         # no markers: trails of the centres of mass
+    else:
+        trail_names = list(traj.marker_names)
+    for entry in mesh_list:
+        entry.pop("_extent")
+    return {
+        "version": __version__, "model": traj.model_name, "dim": d, "complete": traj.complete,
+        "t": _pack(traj.t[idx], np.float64), "position": _pack(p), "quaternion": _pack(quat),
+        "members": members, "meshes": mesh_list,
+        "anchors": geometry.embed(sc.anchors, d).tolist(),
+        "springs": springs, "contacts": contacts,
+        "trails": {"names": trail_names, "positions": _pack(markers), "on": bool(trails)},
+        "camera": camera(lo, hi, d, model.gravity), "size": size,
+        "bounds": [lo.tolist(), hi.tolist()],
+        "plots": plots(traj, idx),
+    }
+
+
+def _part(prim: geometry.Primitive, table: dict, mesh_list: list, mesh_paths) -> dict | None:
+    part = {"kind": prim.kind, "size": prim.size.tolist(), "R": prim.R.tolist(), "p": prim.p.tolist(),
+            "color": prim.color, "role": prim.role}
+    if prim.kind != "mesh":
+        part["_reach"] = float(np.linalg.norm(prim.p) + np.linalg.norm(prim.half_extent()))
+        return part
+    try:
+        path = str(meshes.resolve(prim.filename, mesh_paths))
+        if path not in table:
+            v, f, color = meshes.load(path)
+            q, low, high = meshes.quantize(v)
+            table[path] = len(mesh_list)
+            mesh_list.append({"file": Path(path).name, "vertices": _pack(q, np.uint16), "low": low.tolist(),
+                              "high": high.tolist(), "faces": _pack(f, np.uint16 if len(v) <= 65535 else np.uint32),
+                              "color": color, "_extent": float(np.max(np.linalg.norm(v, axis=1)))})
+    except meshes.MeshError as e:
+        warnings.warn(f"to_html: {e}; drawing nothing in its place", stacklevel=3)
+        return None
+    entry = mesh_list[table[path]]
+    part["mesh"] = table[path]
+    if entry["color"] is not None:
+        part["color"] = entry["color"]
+    part["_reach"] = float(np.linalg.norm(prim.p) + entry["_extent"] * float(np.max(prim.size)))
+    return part
+
+
+def _springs(traj, idx) -> list[dict]:
+    """Ends ``(n, 2, 3)`` of every spring and cable per frame, whether a cable is slack, rest length."""
+    from ncgen.model.forces import Spring
+
+    model = traj.model
+    springs = [f for f in model.forces if isinstance(f, Spring)]
+    if not springs:
+        return []
+    d = traj.dim
+    f = model.springs.function
+    pulls = np.array([np.asarray(f(traj.t[i], traj.q[i], traj.v[i], traj.u[i], traj.p)[2]).ravel() for i in idx])
+    out = []
+    for s_i, s in enumerate(springs):
+        ends = [np.broadcast_to(np.asarray(at, float), (len(idx), d)) if m.is_ground else traj.point(m.name, at)[idx]
+                for m, at in ((s.a, s.at_a), (s.b, s.at_b))]
+        rest = float(s.rest_length) if isinstance(s.rest_length, (int, float)) else None
+        out.append({"name": s.name, "cable": s.cable, "rest_length": rest,
+                    "ends": _pack(geometry.embed(np.stack(ends, axis=1), d)),
+                    "slack": _pack((pulls[:, s_i] <= 0) if s.cable else np.zeros(len(idx), bool), np.uint8)})
+    return out
+
+
+def plots(traj, idx) -> list[dict]:
+    """Panels of curves: energy, constraint residual, joint positions, contact gaps and forces."""
+    out = [{"title": f"energy E − E(t0), E(t0) = {traj.energy[0]:.6g} J", "unit": "J", "log": False,
+            "series": [{"label": "E − E(t0)", "y": _pack(traj.energy[idx] - traj.energy[0])}]},
+           {"title": "constraint residual |Φ|∞", "unit": "m²", "log": True,
+            "series": [{"label": "|Φ|∞", "y": _pack(_positive(traj.constraint_residual[idx]))},
+                       {"label": "|A v + Φ_t|∞ (m²/s)", "y": _pack(_positive(traj.velocity_residual[idx]))}]}]
+    if traj.joint_position_names:
+        cols = list(range(min(len(traj.joint_position_names), MAX_JOINT_CURVES)))
+        out.append({"title": "joint positions" + (f" (first {len(cols)})"
+                                                  if len(cols) < len(traj.joint_position_names) else ""),
+                    "unit": "rad or m", "log": False,
+                    "series": [{"label": traj.joint_position_names[c], "y": _pack(traj.qj[idx, c])} for c in cols]})
+    elif traj.marker_names:
+        out.append({"title": "markers", "unit": "m", "log": False,
+                    "series": [{"label": f"{name} {'xyz'[j]}", "y": _pack(traj.markers[idx, m, j])}
+                               for m, name in enumerate(traj.marker_names[:4]) for j in range(traj.dim)]})
+    if traj.contact_names:
+        out.append({"title": "contact gaps (< 0: penetration)", "unit": "m", "log": False,
+                    "series": [{"label": c, "y": _pack(traj.gap[idx, k])} for k, c in enumerate(traj.contact_names)]})
+        out.append({"title": "contact normal forces", "unit": "N", "log": False,
+                    "series": [{"label": c, "y": _pack(traj.contact_normal[idx, k])}
+                               for k, c in enumerate(traj.contact_names)]})
+    return out
+
+
+def _positive(x: np.ndarray) -> np.ndarray:
+    """``x`` with zeros (nothing to draw on a log scale) as NaN."""
+    return np.where(x > 0, x, np.nan)
