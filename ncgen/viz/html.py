@@ -277,6 +277,12 @@ def plots(traj, idx) -> list[dict]:
         out.append({"title": "markers", "unit": "m", "log": False,
                     "series": [{"label": f"{name} {'xyz'[j]}", "y": _pack(traj.markers[idx, m, j])}
                                for m, name in enumerate(traj.marker_names[:4]) for j in range(traj.dim)]})
+    if traj.u.shape[1] and np.any(traj.u[idx]):
+        names = [f"{n}[{i}]" if size > 1 else n for n, size in zip(traj.input_names, _input_sizes(traj))
+                 for i in range(size)]
+        out.append({"title": "inputs", "unit": "N, N·m", "log": False,
+                    "series": [{"label": names[c], "y": _pack(traj.u[idx, c])}
+                               for c in range(min(traj.u.shape[1], MAX_JOINT_CURVES))]})
     if traj.contact_names:
         out.append({"title": "contact gaps (< 0: penetration)", "unit": "m", "log": False,
                     "series": [{"label": c, "y": _pack(traj.gap[idx, k])} for k, c in enumerate(traj.contact_names)]})
@@ -289,3 +295,8 @@ def plots(traj, idx) -> list[dict]:
 def _positive(x: np.ndarray) -> np.ndarray:
     """``x`` with zeros (nothing to draw on a log scale) as NaN."""
     return np.where(x > 0, x, np.nan)
+
+
+def _input_sizes(traj) -> list[int]:
+    sizes = getattr(traj.model, "input_sizes", None)
+    return list(sizes) if sizes is not None else [1] * traj.u.shape[1]
