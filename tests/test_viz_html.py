@@ -262,3 +262,31 @@ def test_a_urdf_robot_page_has_its_meshes(tmp_path):
             tol = 1e-4 * np.ptp(world)
             np.testing.assert_allclose(lo, world.min(axis=0), atol=tol, err_msg=member["name"])
             np.testing.assert_allclose(hi, world.max(axis=0), atol=tol, err_msg=member["name"])
+
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+def test_cli_writes_pages_for_simulate_optimize_modes_and_equilibrium(tmp_path, capsys):
+    from ncgen.cli import main
+
+    assert main(["simulate", str(EXAMPLES / "heavy_top.toml"), "--t-end", "0.2", "--backend", "vm",
+                 "--html", str(tmp_path / "top.html")]) == 0
+    data = json.loads(re.search(r'<script type="application/json" id="scene-data">(.*?)</script>',
+                                (tmp_path / "top.html").read_text(encoding="utf-8"), re.S).group(1))
+    assert data["model"] == "heavy_top" and data["trails"]["names"] == ["top.crown"]
+    assert [m["name"] for m in data["members"]] == ["top"]
+    assert main(["modes", str(EXAMPLES / "double_pendulum.toml"), "--html", str(tmp_path / "mode.html")]) == 0
+    assert main(["equilibrium", str(EXAMPLES / "tensegrity.toml"), "--html", str(tmp_path / "eq.html")]) == 0
+    assert re.search(r"<title>tensegrity: equilibrium \((stable|neutral|unstable)\)</title>",
+                     (tmp_path / "eq.html").read_text(encoding="utf-8"))
+    assert main(["optimize", str(EXAMPLES / "cartpole_swingup.toml"), "--no-plot", "-o", str(tmp_path / "cp.npz"),
+                 "--html", str(tmp_path / "cp.html")]) == 0
+    assert (tmp_path / "cp.html").stat().st_size > 0
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as stop:
+        main(["simulate", str(EXAMPLES / "heavy_top.toml")])
+    assert stop.value.code == 2 and "nothing to write" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["simulate", str(EXAMPLES / "heavy_top.toml"), "--html", str(tmp_path / "x.png")])
+    assert "expected a file name ending in .html" in capsys.readouterr().err

@@ -218,7 +218,7 @@ def _joint(model, joint, size: float) -> tuple[str, Primitive] | None:
     if kind in ("Revolute", "Universal") and axis is not None:
         return host.name, Primitive("cylinder", np.array([r, 5 * r]), z_to(axis), local, JOINT_COLOR, role="joint")
     if kind in ("Prismatic", "Cylindrical") and axis is not None:
-        return host.name, Primitive("cylinder", np.array([0.4 * r, 20 * r]), z_to(axis), local, JOINT_COLOR,
+        return host.name, Primitive("cylinder", np.array([0.4 * r, 8 * r]), z_to(axis), local, JOINT_COLOR,
                                     role="joint")
     if kind in ("Spherical", "Revolute", "Universal", "Fixed"):
         return host.name, Primitive("sphere", np.array([1.2 * r]), p=local, color=JOINT_COLOR, role="joint")

@@ -34,14 +34,15 @@ MAX_JOINT_CURVES = 12
 
 
 def to_html(traj, path, *, fps: float = FPS, colors: dict | None = None, mesh_paths=(), title: str | None = None,
-            trails: bool = True) -> Path:
+            trails: bool = True, plots: bool = True) -> Path:
     """Write the page of ``traj`` (a :class:`~ncgen.runtime.trajectory.Trajectory` with its
     model) to ``path`` (``.html``); ``colors`` maps member names to CSS colours;
-    ``mesh_paths``: extra folders holding mesh files.  Returns the path."""
+    ``mesh_paths``: extra folders holding mesh files; ``plots=False``: the 3D view alone (a
+    single configuration).  Returns the path."""
     path = Path(path)
     if path.suffix.lower() not in (".html", ".htm"):
         raise NcgenError(f"to_html: {path}: expected a file name ending in .html")
-    data = page_data(traj, fps=fps, colors=colors, mesh_paths=mesh_paths, trails=trails)
+    data = page_data(traj, fps=fps, colors=colors, mesh_paths=mesh_paths, trails=trails, with_plots=plots)
     text = render_page(data, title or f"{traj.model_name} — ncgen")
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
@@ -153,7 +154,8 @@ def frame_indices(t: np.ndarray, fps: float) -> np.ndarray:
     return idx
 
 
-def page_data(traj, *, fps: float = FPS, colors=None, mesh_paths=(), trails: bool = True) -> dict:
+def page_data(traj, *, fps: float = FPS, colors=None, mesh_paths=(), trails: bool = True,
+              with_plots: bool = True) -> dict:
     """Everything the page draws, as JSON-ready data (see the module docstring)."""
     from scipy.spatial.transform import Rotation
 
@@ -194,7 +196,8 @@ def page_data(traj, *, fps: float = FPS, colors=None, mesh_paths=(), trails: boo
                 if sc.contact_points.shape[1] else None}
     markers = geometry.embed(traj.markers[idx], d)
     if markers.shape[1] == 0 and model.member_names:
-        markers, trail_names = p, list(model.member_names)         # no markers: trails of the centres of mass
+        # no markers: the trail of the last member's centre of mass (a robot's hand, a chain's end)
+        markers, trail_names = p[:, -1:], list(model.member_names[-1:])
     else:
         trail_names = list(traj.marker_names)
     for entry in mesh_list:
@@ -208,7 +211,7 @@ def page_data(traj, *, fps: float = FPS, colors=None, mesh_paths=(), trails: boo
         "trails": {"names": trail_names, "positions": _pack(markers), "on": bool(trails)},
         "camera": camera(lo, hi, d, model.gravity), "size": size,
         "bounds": [lo.tolist(), hi.tolist()],
-        "plots": plots(traj, idx),
+        "plots": plots(traj, idx) if with_plots and len(idx) > 1 else [],
     }
 
 
