@@ -223,3 +223,46 @@ def _joint(model, joint, size: float) -> tuple[str, Primitive] | None:
     if kind in ("Spherical", "Revolute", "Universal", "Fixed"):
         return host.name, Primitive("sphere", np.array([1.2 * r]), p=local, color=JOINT_COLOR, role="joint")
     return None
+
+
+def outline(prim: Primitive, segments: int = 24) -> np.ndarray:
+    """Line drawing of a primitive in its member frame: ``(m, 3)`` points, NaN rows between
+    separate strokes (box edges; cylinder and capsule end circles and four sides; three
+    principal ellipses of spheres and ellipsoids; a stick's axis).  Meshes: no rows."""
+    a = np.linspace(0, 2 * np.pi, segments + 1)
+    c, s, z = np.cos(a), np.sin(a), np.zeros_like(a)
+    gap = np.full((1, 3), np.nan)
+    strokes = []
+    if prim.kind == "box":
+        h = prim.size / 2
+        square = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1], [-1, -1]], float)
+        for zs in (-1, 1):
+            strokes.append(np.column_stack([square * h[:2], np.full(5, zs * h[2])]))
+        for x, y in square[:4]:
+            strokes.append(np.array([[x * h[0], y * h[1], -h[2]], [x * h[0], y * h[1], h[2]]]))
+    elif prim.kind in ("cylinder", "capsule"):
+        r, half = prim.size[0], prim.size[1] / 2
+        if prim.role == "stick":
+            strokes.append(np.array([[0, 0, -half], [0, 0, half]]))
+        else:
+            for zs in (-half, half):
+                strokes.append(np.column_stack([r * c, r * s, np.full_like(a, zs)]))
+            for k in range(4):
+                x, y = r * np.cos(k * np.pi / 2), r * np.sin(k * np.pi / 2)
+                strokes.append(np.array([[x, y, -half], [x, y, half]]))
+            if prim.kind == "capsule":
+                arc = np.linspace(0, np.pi, segments // 2 + 1)
+                for sign in (-1, 1):
+                    for axis in (0, 1):
+                        pts = np.zeros((len(arc), 3))
+                        pts[:, axis] = r * np.cos(arc)
+                        pts[:, 2] = sign * (half + r * np.sin(arc))
+                        strokes.append(pts)
+    elif prim.kind in ("sphere", "ellipsoid"):
+        semi = np.full(3, prim.size[0]) if prim.kind == "sphere" else prim.size
+        for ring in ((c, s, z), (c, z, s), (z, c, s)):
+            strokes.append(np.column_stack(ring) * semi)
+    if not strokes:
+        return np.zeros((0, 3))
+    local = np.concatenate([x for stroke in strokes for x in (stroke, gap)][:-1])
+    return local @ prim.R.T + prim.p

@@ -22,7 +22,7 @@ from ncgen.errors import NcgenError
 from ncgen.files import atomic_path
 from ncgen.version import __version__
 from ncgen.viz import geometry, meshes
-from ncgen.viz.scene import scene as make_scene
+from ncgen.viz.scene import scene as make_scene, spring_scene
 
 FPS = 60
 PANEL_WIDTH = 360
@@ -245,22 +245,14 @@ def _springs(traj, idx) -> list[dict]:
     """Ends ``(n, 2, 3)`` of every spring and cable per frame, whether a cable is slack, rest length."""
     from ncgen.model.forces import Spring
 
-    model = traj.model
-    springs = [f for f in model.forces if isinstance(f, Spring)]
-    if not springs:
+    data = spring_scene(traj, idx)
+    if not data:
         return []
-    d = traj.dim
-    f = model.springs.function
-    pulls = np.array([np.asarray(f(traj.t[i], traj.q[i], traj.v[i], traj.u[i], traj.p)[2]).ravel() for i in idx])
-    out = []
-    for s_i, s in enumerate(springs):
-        ends = [np.broadcast_to(np.asarray(at, float), (len(idx), d)) if m.is_ground else traj.point(m.name, at)[idx]
-                for m, at in ((s.a, s.at_a), (s.b, s.at_b))]
-        rest = float(s.rest_length) if isinstance(s.rest_length, (int, float)) else None
-        out.append({"name": s.name, "cable": s.cable, "rest_length": rest,
-                    "ends": _pack(geometry.embed(np.stack(ends, axis=1), d)),
-                    "slack": _pack((pulls[:, s_i] <= 0) if s.cable else np.zeros(len(idx), bool), np.uint8)})
-    return out
+    springs = [f for f in traj.model.forces if isinstance(f, Spring)]
+    return [{"name": s.name, "cable": s.cable,
+             "rest_length": float(s.rest_length) if isinstance(s.rest_length, (int, float)) else None,
+             "ends": _pack(geometry.embed(data["spring_ends"][:, i], traj.dim)),
+             "slack": _pack(data["spring_slack"][:, i], np.uint8)} for i, s in enumerate(springs)]
 
 
 def plots(traj, idx) -> list[dict]:

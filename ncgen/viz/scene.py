@@ -6,7 +6,10 @@
 * point members: their positions; markers: their positions;
 * ground-fixed basic points: constant positions, drawn as anchors;
 * contacts: the spheres (centres per frame and radii), the planes fixed to the ground
-  (a point and a unit normal each) and, per frame, the contact points that carry a force.
+  (a point and a unit normal each) and, per frame, the contact points that carry a force;
+* shapes (:mod:`ncgen.viz.geometry`): every member's pose per frame and the line drawings
+  of its primitives in its frame (``outlines``), bars' colours;
+* springs and cables: their ends per frame, which are cables and when a cable is slack.
 Positions in m, world frame.
 """
 from __future__ import annotations
@@ -16,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ncgen.errors import NcgenError
+from ncgen.viz import geometry
 
 
 @dataclass
@@ -34,11 +38,25 @@ class Scene:
     sphere_radii: np.ndarray = None     # (n_spheres,)
     planes: np.ndarray = None           # (n_planes, 2, dim): point and unit normal of ground planes
     contact_points: np.ndarray = None   # (n_t, nk, dim): contact point, NaN while it carries no force
+    member_R: np.ndarray = None         # (n_t, n_members, dim, dim): every member's rotation
+    member_p: np.ndarray = None         # (n_t, n_members, dim): and centre of mass
+    outlines: list = None               # [(member index, -1: ground; local points (m, 3); colour)]
+    bar_colors: list = None             # colour of each bar
+    body_outlined: list = None          # per body: drawn by outlines (else by its axes)
+    spring_ends: np.ndarray = None      # (n_t, n_springs, 2, dim)
+    spring_cable: np.ndarray = None     # (n_springs,) True: a cable
+    spring_slack: np.ndarray = None     # (n_t, n_springs) True: a cable without tension
+    pad: float = 0.0                    # how far shapes reach beyond the points above (m)
 
     def __post_init__(self):
         n, d = self.markers.shape[0], self.dim
         defaults = {"sphere_centres": np.zeros((n, 0, d)), "sphere_radii": np.zeros(0),
-                    "planes": np.zeros((0, 2, d)), "contact_points": np.zeros((n, 0, d))}
+                    "planes": np.zeros((0, 2, d)), "contact_points": np.zeros((n, 0, d)),
+                    "member_R": np.zeros((n, 0, d, d)), "member_p": np.zeros((n, 0, d)), "outlines": [],
+                    "bar_colors": [geometry.PALETTE[0]] * len(self.bar_names),
+                    "body_outlined": [False] * len(self.body_names),
+                    "spring_ends": np.zeros((n, 0, 2, d)), "spring_cable": np.zeros(0, bool),
+                    "spring_slack": np.zeros((n, 0), bool)}
         for key, value in defaults.items():
             if getattr(self, key) is None:
                 setattr(self, key, value)
@@ -47,13 +65,14 @@ class Scene:
         """Smallest and largest coordinate over all frames and drawn things."""
         clouds = [a.reshape(-1, self.dim) for a in (self.bars, self.body_origins, self.body_points,
                                                    self.points, self.markers, self.anchors,
-                                                   self.sphere_centres) if a.size]
+                                                   self.sphere_centres, self.spring_ends) if a.size]
         allpts = np.concatenate(clouds) if clouds else np.zeros((1, self.dim))
-        return allpts.min(axis=0), allpts.max(axis=0)
+        return allpts.min(axis=0) - self.pad, allpts.max(axis=0) + self.pad
 
 
-def scene(traj) -> Scene:
-    """The scene of ``traj`` (it needs its model: see ``Trajectory.load(path, model=...)``)."""
+def scene(traj, colors: dict | None = None) -> Scene:
+    """The scene of ``traj`` (it needs its model: see ``Trajectory.load(path, model=...)``);
+    ``colors`` maps member names to colours."""
     model = traj.model
     if model is None:
         raise NcgenError("drawing a trajectory needs its model; this one was loaded without it: "
@@ -68,7 +87,7 @@ def scene(traj) -> Scene:
     body_points = [traj.point(m.name, local) for m in bodies for local in _basic_points(m)]
     R, p = traj.poses() if bodies else (np.zeros((n, 0, d, d)), np.zeros((n, 0, d)))
     index = [model.member_names.index(m.name) for m in bodies]
-    return Scene(
+    sc = Scene(
         dim=d,
         bar_names=[m.name for m in bars],
         bars=np.stack(bar_ends, axis=1) if bars else np.zeros((n, 0, 2, d)),
@@ -81,7 +100,56 @@ def scene(traj) -> Scene:
         markers=traj.markers,
         anchors=np.array([node.fixed for node in model.layout.nodes if node.fixed is not None]).reshape(-1, d),
         **contact_scene(traj, model),
+        **spring_scene(traj),
     )
+    _shapes(sc, traj, model, colors)
+    return sc
+
+
+def _shapes(sc: Scene, traj, model, colors) -> None:
+    """Fill the member poses and outlines of ``sc`` (see :mod:`ncgen.viz.geometry`)."""
+    lo, hi = sc.bounds()
+    size = max(float(np.max(hi - lo)), 1e-3)
+    prims = geometry.member_primitives(model, size, colors)
+    if model.member_names:
+        sc.member_R, sc.member_p = traj.poses()
+    outlined = set()
+    for name, parts in prims.items():
+        k = model.member_names.index(name) if name != "ground" else -1
+        m = model.member(name) if k >= 0 else None
+        for prim in parts:
+            if m is not None and m.kind == "bar" and m.shape is None and prim.role == "member":
+                continue                                 # a plain bar: drawn as a thick segment
+            pts = geometry.outline(prim)
+            if len(pts):
+                sc.outlines.append((k, pts, prim.color))
+                if k >= 0:
+                    sc.pad = max(sc.pad, float(np.nanmax(np.linalg.norm(pts, axis=1))))
+                if prim.role == "member":
+                    outlined.add(name)
+    sc.bar_colors = [prims[name][0].color if prims.get(name) else geometry.PALETTE[0] for name in sc.bar_names]
+    sc.body_outlined = [name in outlined for name in sc.body_names]
+
+
+def spring_scene(traj, idx=None) -> dict:
+    """Ends of every spring and cable per frame (``idx``: the frames, default all), which are
+    cables and when a cable is slack (its pull ``k (l − l₀) + c l̇`` is not positive)."""
+    from ncgen.model.forces import Spring
+
+    model = traj.model
+    springs = [f for f in model.forces if isinstance(f, Spring)]
+    if not springs:
+        return {}
+    idx = np.arange(len(traj)) if idx is None else np.asarray(idx)
+    d = traj.dim
+    f = model.springs.function
+    pulls = np.array([np.asarray(f(traj.t[i], traj.q[i], traj.v[i], traj.u[i], traj.p)[2]).ravel() for i in idx])
+    ends = [np.stack([np.broadcast_to(np.asarray(at, float), (len(idx), d)) if m.is_ground
+                      else traj.point(m.name, at)[idx] for m, at in ((s.a, s.at_a), (s.b, s.at_b))], axis=1)
+            for s in springs]
+    cable = np.array([s.cable for s in springs])
+    return {"spring_ends": np.stack(ends, axis=1), "spring_cable": cable,
+            "spring_slack": (pulls <= 0) & cable[None, :]}
 
 
 def contact_scene(traj, model) -> dict:
