@@ -15,7 +15,6 @@ output step), fewer if the first frames show that drawing them all would take lo
 """
 from __future__ import annotations
 
-import math
 import time
 from pathlib import Path
 
@@ -37,13 +36,10 @@ PROBE = 5
 ENCODING = 1.7
 
 
-def frame_steps(n: int, count: int) -> list[int]:
-    """About ``count`` evenly spaced indices of ``range(n)``, first and last included."""
-    step = max(1, math.ceil(n / max(count, 1)))
-    frames = list(range(0, n, step))
-    if frames[-1] != n - 1:
-        frames.append(n - 1)
-    return frames
+def frame_steps(first: int, last: int, count: int) -> list[int]:
+    """``count`` (at most ``last − first + 1``) evenly spaced indices from ``first`` to ``last``."""
+    count = max(1, min(count, last - first + 1))
+    return sorted({int(round(x)) for x in np.linspace(first, last, count)})
 
 
 def animate(traj, path, *, max_frames: int = 150, fps: float | None = None, size: float = 6.0,
@@ -60,7 +56,7 @@ def animate(traj, path, *, max_frames: int = 150, fps: float | None = None, size
     began = time.monotonic()
     sc = scene(traj)
     n = len(traj)
-    frames = frame_steps(n, max_frames)
+    frames = frame_steps(0, n - 1, max_frames)
     fig = figure(size, size)
     fig.set_dpi(dpi)
     ax = scene_axes(fig, sc)
@@ -88,7 +84,7 @@ def animate(traj, path, *, max_frames: int = 150, fps: float | None = None, size
             fit = max(MIN_FRAMES, PROBE + int((budget - (now - began)) / max(per_frame, 1e-6)))
             if fit < len(frames):
                 done = frames[:PROBE]
-                frames = done + [f for f in frame_steps(n, fit) if f > done[-1]]
+                frames = done + frame_steps(done[-1] + 1, n - 1, fit - PROBE)
         bar.update(float(traj.t[k]))
     bar.close()
     if fps is None:
