@@ -160,12 +160,12 @@ def page_data(traj, *, fps: float = FPS, colors=None, mesh_paths=(), trails: boo
     from scipy.spatial.transform import Rotation
 
     model = traj.model
-    sc = make_scene(traj)           # raises a clear error without a model
+    sc = make_scene(traj, colors)           # raises a clear error without a model
     d = traj.dim
     idx = frame_indices(traj.t, fps)
     lo, hi = sc.bounds()
     lo, hi = geometry.embed(lo, d), geometry.embed(hi, d)
-    size = max(float(np.max(hi - lo)), 1e-3)
+    size = sc.size
     prims = geometry.member_primitives(model, size, colors)
     R, p = traj.poses()
     R, p = geometry.embed_rotation(R[idx]), geometry.embed(p[idx], d)
@@ -173,7 +173,7 @@ def page_data(traj, *, fps: float = FPS, colors=None, mesh_paths=(), trails: boo
     quat = Rotation.from_matrix(R.reshape(-1, 3, 3)).as_quat().reshape(n, k, 4) if k else np.zeros((n, 0, 4))
     mesh_table: dict[str, int] = {}
     mesh_list: list[dict] = []
-    reach = 0.0
+    reach = [lo, hi]
     members = []
     for name in [*model.member_names, "ground"]:
         if name not in prims:
@@ -184,10 +184,15 @@ def page_data(traj, *, fps: float = FPS, colors=None, mesh_paths=(), trails: boo
             if part is None:
                 continue
             parts.append(part)
-            reach = max(reach, part.pop("_reach"))
+            extent = part.pop("_extent", None)
+            if extent is not None:              # a mesh: its centre's path ± its size
+                i = model.member_names.index(name) if name != "ground" else None
+                centre = np.asarray(part["p"])[None] if i is None else \
+                    np.einsum("tij,j->ti", R[:, i], np.asarray(part["p"])) + p[:, i]
+                reach += [np.min(centre, axis=0) - extent, np.max(centre, axis=0) + extent]
         members.append({"name": name, "index": model.member_names.index(name) if name != "ground" else -1,
                         "parts": parts})
-    lo, hi = lo - reach, hi + reach
+    lo, hi = np.min(np.atleast_2d(reach), axis=0), np.max(np.atleast_2d(reach), axis=0)
     springs = _springs(traj, idx)
     contacts = {"radii": sc.sphere_radii.tolist(),
                 "centres": _pack(geometry.embed(sc.sphere_centres[idx], d)) if len(sc.sphere_radii) else None,
@@ -219,7 +224,6 @@ def _part(prim: geometry.Primitive, table: dict, mesh_list: list, mesh_paths) ->
     part = {"kind": prim.kind, "size": prim.size.tolist(), "R": prim.R.tolist(), "p": prim.p.tolist(),
             "color": prim.color, "role": prim.role}
     if prim.kind != "mesh":
-        part["_reach"] = float(np.linalg.norm(prim.p) + np.linalg.norm(prim.half_extent()))
         return part
     try:
         path = str(meshes.resolve(prim.filename, mesh_paths))
@@ -237,7 +241,7 @@ def _part(prim: geometry.Primitive, table: dict, mesh_list: list, mesh_paths) ->
     part["mesh"] = table[path]
     if entry["color"] is not None:
         part["color"] = entry["color"]
-    part["_reach"] = float(np.linalg.norm(prim.p) + entry["_extent"] * float(np.max(prim.size)))
+    part["_extent"] = entry["_extent"] * float(np.max(prim.size))
     return part
 
 

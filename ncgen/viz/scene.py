@@ -46,7 +46,8 @@ class Scene:
     spring_ends: np.ndarray = None      # (n_t, n_springs, 2, dim)
     spring_cable: np.ndarray = None     # (n_springs,) True: a cable
     spring_slack: np.ndarray = None     # (n_t, n_springs) True: a cable without tension
-    pad: float = 0.0                    # how far shapes reach beyond the points above (m)
+    shape_box: np.ndarray = None        # (2, dim): smallest and largest coordinate of the outlines
+    size: float = 1.0                   # the scene's size (m) that default shapes are scaled by
 
     def __post_init__(self):
         n, d = self.markers.shape[0], self.dim
@@ -66,8 +67,10 @@ class Scene:
         clouds = [a.reshape(-1, self.dim) for a in (self.bars, self.body_origins, self.body_points,
                                                    self.points, self.markers, self.anchors,
                                                    self.sphere_centres, self.spring_ends) if a.size]
+        if self.shape_box is not None:
+            clouds.append(self.shape_box)
         allpts = np.concatenate(clouds) if clouds else np.zeros((1, self.dim))
-        return allpts.min(axis=0) - self.pad, allpts.max(axis=0) + self.pad
+        return allpts.min(axis=0), allpts.max(axis=0)
 
 
 def scene(traj, colors: dict | None = None) -> Scene:
@@ -109,8 +112,8 @@ def scene(traj, colors: dict | None = None) -> Scene:
 def _shapes(sc: Scene, traj, model, colors) -> None:
     """Fill the member poses and outlines of ``sc`` (see :mod:`ncgen.viz.geometry`)."""
     lo, hi = sc.bounds()
-    size = max(float(np.max(hi - lo)), 1e-3)
-    prims = geometry.member_primitives(model, size, colors)
+    sc.size = max(float(np.max(hi - lo)), 1e-3)
+    prims = geometry.member_primitives(model, sc.size, colors)
     if model.member_names:
         sc.member_R, sc.member_p = traj.poses()
     outlined = set()
@@ -123,12 +126,26 @@ def _shapes(sc: Scene, traj, model, colors) -> None:
             pts = geometry.outline(prim)
             if len(pts):
                 sc.outlines.append((k, pts, prim.color))
-                if k >= 0:
-                    sc.pad = max(sc.pad, float(np.nanmax(np.linalg.norm(pts, axis=1))))
                 if prim.role == "member":
                     outlined.add(name)
+    sc.shape_box = _outline_box(sc)
     sc.bar_colors = [prims[name][0].color if prims.get(name) else geometry.PALETTE[0] for name in sc.bar_names]
     sc.body_outlined = [name in outlined for name in sc.body_names]
+
+
+def _outline_box(sc: Scene, frames: int = 200) -> np.ndarray | None:
+    """Smallest and largest world coordinate of every outline over (at most ``frames``) frames."""
+    if not sc.outlines:
+        return None
+    d, n = sc.dim, sc.member_p.shape[0]
+    sub = slice(None, None, max(1, n // frames))
+    boxes = []
+    for k, pts, _ in sc.outlines:
+        local = pts[~np.isnan(pts).any(axis=1), :d]
+        world = local[None] if k < 0 else \
+            np.einsum("tij,mj->tmi", sc.member_R[sub, k], local) + sc.member_p[sub, k][:, None, :]
+        boxes += [world.reshape(-1, d).min(axis=0), world.reshape(-1, d).max(axis=0)]
+    return np.array([np.min(boxes, axis=0), np.max(boxes, axis=0)])
 
 
 def spring_scene(traj, idx=None) -> dict:
