@@ -209,6 +209,11 @@ def test_html_refuses_a_bad_file_name_and_a_trajectory_without_its_model(tmp_pat
     traj = nc.simulate(model, 0.05, 0.01)
     with pytest.raises(nc.NcgenError, match="expected a file name ending in .html"):
         traj.to_html(tmp_path / "x.png")
+    q = np.where(traj.t[:, None] > 0.025, np.nan, traj.q)
+    broken = nc.Trajectory.from_states(model, traj.t, q, traj.v, traj.lam, traj.u, traj.p, {"complete": False})
+    with pytest.raises(nc.NcgenError, match=r"non-finite coordinates from t = 0.03 s on"):
+        broken.to_html(tmp_path / "broken.html")
+    assert not (tmp_path / "broken.html").exists()
     traj.save(tmp_path / "x.npz")
     with pytest.raises(nc.NcgenError, match="needs its model"):
         nc.Trajectory.load(tmp_path / "x.npz").to_html(tmp_path / "x.html")

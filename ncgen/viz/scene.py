@@ -81,6 +81,10 @@ def scene(traj, colors: dict | None = None) -> Scene:
         raise NcgenError("drawing a trajectory needs its model; this one was loaded without it: "
                          "use Trajectory.load(path, model=model)")
     n, d = len(traj), traj.dim
+    bad = ~np.isfinite(traj.q).all(axis=1)
+    if bad.any():
+        raise NcgenError(f"drawing: the trajectory of {traj.model_name!r} has non-finite coordinates from "
+                         f"t = {traj.t[bad.argmax()]:g} s on; draw the part before: traj.head({int(bad.argmax())})")
     members = [model.member(name) for name in model.member_names]
     bars = [m for m in members if m.kind == "bar"]
     bodies = [m for m in members if m.kind == "body"]
@@ -160,7 +164,10 @@ def spring_scene(traj, idx=None) -> dict:
     idx = np.arange(len(traj)) if idx is None else np.asarray(idx)
     d = traj.dim
     f = model.springs.function
-    pulls = np.array([np.asarray(f(traj.t[i], traj.q[i], traj.v[i], traj.u[i], traj.p)[2]).ravel() for i in idx])
+    n = len(idx)
+    batch = f.map(n)(traj.t[idx][None, :], traj.q[idx].T, traj.v[idx].T, traj.u[idx].T,
+                     np.tile(np.reshape(traj.p, (-1, 1)), (1, n)))
+    pulls = np.asarray(batch[2]).reshape(len(springs), n).T
     ends = [np.stack([np.broadcast_to(np.asarray(at, float), (len(idx), d)) if m.is_ground
                       else traj.point(m.name, at)[idx] for m, at in ((s.a, s.at_a), (s.b, s.at_b))], axis=1)
             for s in springs]
