@@ -106,7 +106,7 @@ def camera(lo, hi, dim: int, gravity, aspect: float = 1.0) -> dict:
     d = np.array(VIEW_DIRECTION) @ np.array([right, forward, up])
     d /= np.linalg.norm(d)
     half = math.radians(FOV) / 2
-    distance = 0.9 * radius / math.sin(min(half, math.atan(aspect * math.tan(half))))
+    distance = 1.2 * radius / math.sin(min(half, math.atan(aspect * math.tan(half))))
     return {"ortho": False, "target": target.tolist(), "position": (target + distance * d).tolist(),
             "up": up.tolist(), "fov": FOV, "near": distance / 100, "far": distance * 10}
 
