@@ -198,7 +198,9 @@ def page_data(traj, *, fps: float = FPS, colors=None, mesh_paths=(), trails: boo
                 "centres": _pack(geometry.embed(sc.sphere_centres[idx], d)) if len(sc.sphere_radii) else None,
                 "planes": [[geometry.embed(pt, d).tolist(), geometry.embed(nr, d).tolist()] for pt, nr in sc.planes],
                 "points": _pack(np.nan_to_num(geometry.embed(sc.contact_points[idx], d), nan=1e30))
-                if sc.contact_points.shape[1] else None}
+                if sc.contact_points.shape[1] else None,
+                "forces": _pack(geometry.embed(sc.contact_forces[idx], d)) if sc.contact_points.shape[1] else None,
+                "force_scale": _force_scale(sc.contact_forces)}
     markers = geometry.embed(traj.markers[idx], d)
     if markers.shape[1] == 0 and model.member_names:
         # no markers: the trail of the last member's centre of mass (a robot's hand, a chain's end)
@@ -299,3 +301,8 @@ def _positive(x: np.ndarray) -> np.ndarray:
 def _input_sizes(traj) -> list[int]:
     sizes = getattr(traj.model, "input_sizes", None)
     return list(sizes) if sizes is not None else [1] * traj.u.shape[1]
+
+
+def _force_scale(forces: np.ndarray) -> float:
+    """The largest contact force (N; 0 without any): the page draws it 1/5 of the scene's size."""
+    return float(np.max(np.linalg.norm(forces, axis=-1))) if forces.size else 0.0

@@ -38,6 +38,7 @@ class Scene:
     sphere_radii: np.ndarray = None     # (n_spheres,)
     planes: np.ndarray = None           # (n_planes, 2, dim): point and unit normal of ground planes
     contact_points: np.ndarray = None   # (n_t, nk, dim): contact point, NaN while it carries no force
+    contact_forces: np.ndarray = None   # (n_t, nk, dim): normal force on the sphere (first sphere) (N)
     member_R: np.ndarray = None         # (n_t, n_members, dim, dim): every member's rotation
     member_p: np.ndarray = None         # (n_t, n_members, dim): and centre of mass
     outlines: list = None               # [(member index, -1: ground; local points (m, 3); colour)]
@@ -53,6 +54,7 @@ class Scene:
         n, d = self.markers.shape[0], self.dim
         defaults = {"sphere_centres": np.zeros((n, 0, d)), "sphere_radii": np.zeros(0),
                     "planes": np.zeros((0, 2, d)), "contact_points": np.zeros((n, 0, d)),
+                    "contact_forces": np.zeros((n, 0, d)),
                     "member_R": np.zeros((n, 0, d, d)), "member_p": np.zeros((n, 0, d)), "outlines": [],
                     "bar_colors": [geometry.PALETTE[0]] * len(self.bar_names),
                     "body_outlined": [False] * len(self.body_names),
@@ -181,7 +183,7 @@ def contact_scene(traj, model) -> dict:
     if not getattr(model, "nk", 0):
         return {}
     n, d = len(traj), traj.dim
-    centres, radii, planes, points = [], [], [], []
+    centres, radii, planes, points, forces = [], [], [], [], []
     for k, c in enumerate(model.contacts):
         if c["type"] == "SpherePlane":
             centre = traj.point(c["sphere"], c["at"])
@@ -194,20 +196,23 @@ def contact_scene(traj, model) -> dict:
             else:
                 R = traj.poses()[0][:, model.member_names.index(c["plane"])]
                 normal = np.einsum("tij,j->ti", R, model.member(c["plane"]).direction_to_local(c["normal"]))
-            contact = centre - c["radius"] * np.broadcast_to(normal, (n, d))
+            push = np.broadcast_to(normal, (n, d))             # the plane pushes the sphere along its normal
+            contact = centre - c["radius"] * push
         else:
             ca_, cb = traj.point(c["a"], c["at_a"]), traj.point(c["b"], c["at_b"])
             centres += [ca_, cb]
             radii += [c["radius_a"], c["radius_b"]]
             u = (cb - ca_) / np.linalg.norm(cb - ca_, axis=1, keepdims=True)
             contact = ca_ + c["radius_a"] * u
+            push = -u                                          # b pushes a away
         points.append(np.where(traj.contact_normal[:, k:k + 1] > 0, contact, np.nan))
+        forces.append(traj.contact_normal[:, k:k + 1] * push)
     unique = {}
     for plane in planes:
         unique.setdefault(tuple(np.round(np.ravel(plane), 12)), plane)
     return {"sphere_centres": np.stack(centres, axis=1), "sphere_radii": np.asarray(radii, float),
             "planes": np.asarray(list(unique.values()), float).reshape(-1, 2, d),
-            "contact_points": np.stack(points, axis=1)}
+            "contact_points": np.stack(points, axis=1), "contact_forces": np.stack(forces, axis=1)}
 
 
 def _basic_points(member) -> list[np.ndarray]:
