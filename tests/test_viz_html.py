@@ -304,3 +304,14 @@ def test_cli_writes_pages_for_simulate_optimize_modes_and_equilibrium(tmp_path, 
     assert "nothing to write" in capsys.readouterr().err
     assert main(["simulate", str(EXAMPLES / "heavy_top.toml"), "--html", str(tmp_path / "x.png")]) == 2
     assert "expected a file name ending in .html" in capsys.readouterr().err
+
+
+def test_a_missing_mesh_file_warns_and_draws_the_inertia_box(tmp_path):
+    s = nc.System("meshy")
+    s.add_body("part", mass=1.0, inertia=np.diag([0.01, 0.02, 0.03]), shape=nc.Mesh(tmp_path / "nowhere.stl"))
+    model = s.build()
+    traj = nc.simulate(model, 0.02, 0.01)
+    with pytest.warns(UserWarning, match=r"nowhere.stl.*file not found.*mesh_paths"):
+        data = html.page_data(traj)
+    parts = data["members"][0]["parts"]
+    assert [p["kind"] for p in parts] == ["box"] and not data["meshes"]

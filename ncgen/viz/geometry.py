@@ -50,21 +50,6 @@ class Primitive:
     filename: str | None = None
     role: str = "member"            # member, joint, stick
 
-    def half_extent(self) -> np.ndarray:
-        """Half edges of the primitive's own bounding box (before placement; meshes: unknown, zeros)."""
-        s = self.size
-        if self.kind == "box":
-            return s / 2
-        if self.kind == "cylinder":
-            return np.array([s[0], s[0], s[1] / 2])
-        if self.kind == "capsule":
-            return np.array([s[0], s[0], s[1] / 2 + s[0]])
-        if self.kind == "sphere":
-            return np.full(3, s[0])
-        if self.kind == "ellipsoid":
-            return s.copy()
-        return np.zeros(3)
-
 
 def embed(x, dim: int) -> np.ndarray:
     """A 2D vector as (x, y, 0); 3D unchanged."""

@@ -94,7 +94,7 @@ def camera(lo, hi, dim: int, gravity, aspect: float = 1.0) -> dict:
     radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-3)
     if dim == 2:
         g = np.asarray(gravity, float)
-        up = embed_up(-g if np.linalg.norm(g) > 0 else np.array([0.0, 1.0]))
+        up = _in_plane_up(-g if np.linalg.norm(g) > 0 else np.array([0.0, 1.0]))
         return {"ortho": True, "target": target.tolist(), "position": (target + [0, 0, 4 * radius]).tolist(),
                 "up": up.tolist(), "half_height": 1.1 * radius, "near": 0.01 * radius, "far": 10 * radius}
     g = np.asarray(gravity, float)
@@ -111,7 +111,7 @@ def camera(lo, hi, dim: int, gravity, aspect: float = 1.0) -> dict:
             "up": up.tolist(), "fov": FOV, "near": distance / 100, "far": distance * 10}
 
 
-def embed_up(v) -> np.ndarray:
+def _in_plane_up(v) -> np.ndarray:
     v = np.asarray(v, float)
     return np.array([v[0], v[1], 0.0]) / np.linalg.norm(v)
 
@@ -178,10 +178,11 @@ def page_data(traj, *, fps: float = FPS, colors=None, mesh_paths=(), trails: boo
     for name in [*model.member_names, "ground"]:
         if name not in prims:
             continue
-        parts = []
+        parts, missing = [], False
         for prim in prims[name]:
             part = _part(prim, mesh_table, mesh_list, mesh_paths)
             if part is None:
+                missing = True
                 continue
             parts.append(part)
             extent = part.pop("_extent", None)
@@ -190,6 +191,9 @@ def page_data(traj, *, fps: float = FPS, colors=None, mesh_paths=(), trails: boo
                 centre = np.asarray(part["p"])[None] if i is None else \
                     np.einsum("tij,j->ti", R[:, i], np.asarray(part["p"])) + p[:, i]
                 reach += [np.min(centre, axis=0) - extent, np.max(centre, axis=0) + extent]
+        if missing and name != "ground" and not any(part["role"] == "member" for part in parts) \
+                and model.member(name).kind == "body":       # its meshes could not be read: its inertia box
+            parts.append(_part(geometry.inertia_box(model.member(name), size, geometry.PALETTE[0]), {}, [], ()))
         members.append({"name": name, "index": model.member_names.index(name) if name != "ground" else -1,
                         "parts": parts})
     lo, hi = np.min(np.atleast_2d(reach), axis=0), np.max(np.atleast_2d(reach), axis=0)
@@ -237,7 +241,7 @@ def _part(prim: geometry.Primitive, table: dict, mesh_list: list, mesh_paths) ->
                               "high": high.tolist(), "faces": _pack(f, np.uint16 if len(v) <= 65535 else np.uint32),
                               "color": color, "_extent": float(np.max(np.linalg.norm(v, axis=1)))})
     except meshes.MeshError as e:
-        warnings.warn(f"to_html: {e}; drawing nothing in its place", stacklevel=3)
+        warnings.warn(f"to_html: {e}; drawing the member's inertia box instead", stacklevel=3)
         return None
     entry = mesh_list[table[path]]
     part["mesh"] = table[path]
