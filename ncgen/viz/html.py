@@ -22,7 +22,7 @@ from ncgen.errors import NcgenError
 from ncgen.files import atomic_path
 from ncgen.version import __version__
 from ncgen.viz import geometry, meshes
-from ncgen.viz.scene import scene as make_scene, spring_scene
+from ncgen.viz.scene import scene as make_scene
 
 FPS = 60
 PANEL_WIDTH = 360
@@ -167,37 +167,12 @@ def page_data(traj, *, fps: float = FPS, colors=None, mesh_paths=(), trails: boo
     lo, hi = geometry.embed(lo, d), geometry.embed(hi, d)
     size = sc.size
     prims = geometry.member_primitives(model, size, colors)
-    R, p = traj.poses()
-    R, p = geometry.embed_rotation(R[idx]), geometry.embed(p[idx], d)
+    R, p = geometry.embed_rotation(sc.member_R[idx]), geometry.embed(sc.member_p[idx], d)
     n, k = p.shape[:2]
     quat = Rotation.from_matrix(R.reshape(-1, 3, 3)).as_quat().reshape(n, k, 4) if k else np.zeros((n, 0, 4))
-    mesh_table: dict[str, int] = {}
-    mesh_list: list[dict] = []
-    reach = [lo, hi]
-    members = []
-    for name in [*model.member_names, "ground"]:
-        if name not in prims:
-            continue
-        parts, missing = [], False
-        for prim in prims[name]:
-            part = _part(prim, mesh_table, mesh_list, mesh_paths)
-            if part is None:
-                missing = True
-                continue
-            parts.append(part)
-            extent = part.pop("_extent", None)
-            if extent is not None:              # a mesh: its centre's path ± its size
-                i = model.member_names.index(name) if name != "ground" else None
-                centre = np.asarray(part["p"])[None] if i is None else \
-                    np.einsum("tij,j->ti", R[:, i], np.asarray(part["p"])) + p[:, i]
-                reach += [np.min(centre, axis=0) - extent, np.max(centre, axis=0) + extent]
-        if missing and name != "ground" and not any(part["role"] == "member" for part in parts) \
-                and model.member(name).kind == "body":       # its meshes could not be read: its inertia box
-            parts.append(_part(geometry.inertia_box(model.member(name), size, geometry.PALETTE[0]), {}, [], ()))
-        members.append({"name": name, "index": model.member_names.index(name) if name != "ground" else -1,
-                        "parts": parts})
-    lo, hi = np.min(np.atleast_2d(reach), axis=0), np.max(np.atleast_2d(reach), axis=0)
-    springs = _springs(traj, idx)
+    members, mesh_list, boxes = _members(model, prims, R, p, size, mesh_paths)
+    lo, hi = np.min([lo, *boxes], axis=0), np.max([hi, *boxes], axis=0)
+    springs = _springs(traj, sc, idx)
     contacts = {"radii": sc.sphere_radii.tolist(),
                 "centres": _pack(geometry.embed(sc.sphere_centres[idx], d)) if len(sc.sphere_radii) else None,
                 "planes": [[geometry.embed(pt, d).tolist(), geometry.embed(nr, d).tolist()] for pt, nr in sc.planes],
@@ -211,8 +186,6 @@ def page_data(traj, *, fps: float = FPS, colors=None, mesh_paths=(), trails: boo
         markers, trail_names = p[:, -1:], list(model.member_names[-1:])
     else:
         trail_names = list(traj.marker_names)
-    for entry in mesh_list:
-        entry.pop("_extent")
     return {
         "version": __version__, "model": traj.model_name, "dim": d, "complete": traj.complete,
         "t": _pack(traj.t[idx], np.float64), "position": _pack(p), "quaternion": _pack(quat),
@@ -224,6 +197,37 @@ def page_data(traj, *, fps: float = FPS, colors=None, mesh_paths=(), trails: boo
         "bounds": [lo.tolist(), hi.tolist()],
         "plots": plots(traj, idx) if with_plots and len(idx) > 1 else [],
     }
+
+
+def _members(model, prims, R, p, size: float, mesh_paths) -> tuple[list, list, list]:
+    """``(members, meshes, corners)``: each member's parts as page data, the mesh table, and
+    corners of boxes holding every mesh over the motion (its centre's path ± its size)."""
+    table: dict[str, int] = {}
+    mesh_list: list[dict] = []
+    boxes, members = [], []
+    for name in [*model.member_names, "ground"]:
+        if name not in prims:
+            continue
+        i = model.member_names.index(name) if name != "ground" else -1
+        parts, missing = [], False
+        for prim in prims[name]:
+            part = _part(prim, table, mesh_list, mesh_paths)
+            if part is None:
+                missing = True
+                continue
+            parts.append(part)
+            extent = part.pop("_extent", None)
+            if extent is not None:
+                centre = np.asarray(part["p"])[None] if i < 0 else \
+                    np.einsum("tij,j->ti", R[:, i], np.asarray(part["p"])) + p[:, i]
+                boxes += [np.min(centre, axis=0) - extent, np.max(centre, axis=0) + extent]
+        if missing and i >= 0 and model.member(name).kind == "body" and \
+                not any(part["role"] == "member" for part in parts):   # its meshes could not be read
+            parts.append(_part(geometry.inertia_box(model.member(name), size, geometry.PALETTE[0]), {}, [], ()))
+        members.append({"name": name, "index": i, "parts": parts})
+    for entry in mesh_list:
+        entry.pop("_extent")
+    return members, mesh_list, boxes
 
 
 def _part(prim: geometry.Primitive, table: dict, mesh_list: list, mesh_paths) -> dict | None:
@@ -251,18 +255,15 @@ def _part(prim: geometry.Primitive, table: dict, mesh_list: list, mesh_paths) ->
     return part
 
 
-def _springs(traj, idx) -> list[dict]:
+def _springs(traj, sc, idx) -> list[dict]:
     """Ends ``(n, 2, 3)`` of every spring and cable per frame, whether a cable is slack, rest length."""
     from ncgen.model.forces import Spring
 
-    data = spring_scene(traj, idx)
-    if not data:
-        return []
     springs = [f for f in traj.model.forces if isinstance(f, Spring)]
     return [{"name": s.name, "cable": s.cable,
              "rest_length": float(s.rest_length) if isinstance(s.rest_length, (int, float)) else None,
-             "ends": _pack(geometry.embed(data["spring_ends"][:, i], traj.dim)),
-             "slack": _pack(data["spring_slack"][:, i], np.uint8)} for i, s in enumerate(springs)]
+             "ends": _pack(geometry.embed(sc.spring_ends[idx, i], traj.dim)),
+             "slack": _pack(sc.spring_slack[idx, i], np.uint8)} for i, s in enumerate(springs)]
 
 
 def plots(traj, idx) -> list[dict]:
