@@ -61,7 +61,7 @@ def animate(traj, path, *, max_frames: int = 150, fps: float | None = None, size
     fig.set_dpi(dpi)
     ax = scene_axes(fig, sc)
     artists = SceneArtists(ax, sc)
-    fig.suptitle(traj.model_name)
+    artists.prefix = f"{traj.model_name}: "
     moving = artists.show(0, float(traj.t[0]))
     for artist in moving:
         artist.set_animated(True)

@@ -86,6 +86,8 @@ class SceneArtists:
         for point, normal in scene.planes:
             self._plane(point, normal)
         self.title = ax.set_title("")
+        #: text before the time in the title (e.g. the model's name)
+        self.prefix = ""
 
     def _plane(self, point, normal):
         """A ground plane: its trace across the scene's box (a line in 2D, a square in 3D)."""
@@ -177,7 +179,7 @@ class SceneArtists:
             self._set(line, self._circles(centre, radius))
         loaded = s.contact_points[k]
         self._set(self.contacts, loaded[~np.isnan(loaded).any(axis=1)])
-        self.title.set_text(f"t = {t:.3f} s")
+        self.title.set_text(f"{self.prefix}t = {t:.3f} s")
         return [*self.bars, *(a for lines in self.axes for a in lines), *(o[2] for o in self.outlines),
                 *self.springs, *self.trails, self.body_points, self.points, self.markers, *self.spheres,
                 self.contacts, self.title]
