@@ -130,6 +130,11 @@ def test_drawn_parts_have_the_bounding_boxes_of_their_shapes(tmp_path):
                     velocity=(-0.45, 0.9, 0.0))
     s.add_joint(nc.Spherical(s.ground, bar, at=(0.0, 0.0, 0.0)))
     s.add_force(nc.Spring(bar, (0.0, 0.0, 0.0), body, (0.0, 0.0, 0.0), k=10.0, rest_length=0.3))
+    s.add_body("egg", mass=1.0, inertia=np.diag([0.01, 0.02, 0.02]), position=(-0.5, 0.0, 0.3), rotation=R.T,
+               angular_velocity=(1.0, 2.0, 0.5), shape=nc.Ellipsoid(0.15, 0.1, 0.05, rotation=R))
+    s.add_bar("rod", mass=1.0, ends=[(0.0, -0.6, 0.0), (0.3, -0.6, 0.4)], angular_velocity=(2.0, 0, 0),
+              shape=nc.Capsule(0.03, 0.4))
+    s.add_point("dot", mass=1.0, position=(0.0, 0.6, 0.2), velocity=(0.5, 0.0, 1.0), shape=nc.Sphere(0.07))
     model = s.build()
     traj = nc.simulate(model, 0.5, 0.05)
     page = traj.to_html(tmp_path / "s.html")
@@ -140,20 +145,32 @@ def test_drawn_parts_have_the_bounding_boxes_of_their_shapes(tmp_path):
     prims = geometry.member_primitives(model, size)
     Rs, ps = traj.poses()
     idx = html.frame_indices(traj.t, html.FPS)[k]
-    for name in ("body", "bar"):
+    kinds = set()
+    for name in ("body", "bar", "egg", "rod", "dot"):
         i = model.member_names.index(name)
+        Ri, pi = Rs[idx, i], ps[idx, i]
         for prim, (lo, hi) in zip(prims[name], got["parts"][name]):
+            centre = Ri @ prim.p + pi
             if prim.kind == "box":
-                corners = box_corners(prim, Rs[idx, i], ps[idx, i])
+                corners = box_corners(prim, Ri, pi)
                 want = corners.min(axis=0), corners.max(axis=0)
                 tol = 1e-5
             elif prim.kind == "cylinder":
-                want = cylinder_box(prim, Rs[idx, i], ps[idx, i])
+                want = cylinder_box(prim, Ri, pi)
                 tol = 0.02 * prim.size[0] + 1e-5        # a 24-gon stands for the circle
+            elif prim.kind == "capsule":                 # segment ⊕ ball: |a| L/2 + r
+                half = np.abs(Ri @ prim.R[:, 2]) * prim.size[1] / 2 + prim.size[0]
+                want, tol = (centre - half, centre + half), 0.02 * prim.size[0]
+            elif prim.kind in ("ellipsoid", "sphere"):  # √(Σ_j (M_ij s_j)²), M = R R_s
+                semi = np.resize(prim.size, 3)
+                half = np.sqrt(((Ri @ prim.R) ** 2) @ semi ** 2)
+                want, tol = (centre - half, centre + half), 0.02 * semi.max()
             else:
                 continue
+            kinds.add(prim.kind)
             np.testing.assert_allclose(lo, want[0], atol=tol, err_msg=f"{name} {prim.kind}")
             np.testing.assert_allclose(hi, want[1], atol=tol, err_msg=f"{name} {prim.kind}")
+    assert kinds >= {"box", "cylinder", "capsule", "ellipsoid", "sphere"}
     # the bar's cylinder runs from end to end
     cyl = prims["bar"][0]
     ends = traj.point("bar", (-0.5 * np.linalg.norm([0.6, 0.3, 0.2]), 0, 0))[idx], \
