@@ -54,6 +54,17 @@ def report(page: Path, t: float, tmp_path: Path) -> tuple[dict, list[str]]:
     return json.loads(found.group(1)), console
 
 
+@needs_chromium
+def test_console_capture_sees_page_errors(tmp_path):
+    """The console check of the tests above can fail: an error and an exception are seen."""
+    page = tmp_path / "bad.html"
+    page.write_text('<!doctype html><link rel="icon" href="data:,"><script>console.error("boom");'
+                    'null.x;</script>', encoding="utf-8")
+    _, console = chromium(page.as_uri(), tmp_path, "--dump-dom")
+    text = "\n".join(console)
+    assert "boom" in text and "TypeError" in text
+
+
 def pendulum(dim: int):
     """A box swinging about a hinge at the origin, its centre of mass 0.5 m away (red)."""
     g = (0.0, -9.81) if dim == 2 else (0.0, 0.0, -9.81)
