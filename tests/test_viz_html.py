@@ -284,6 +284,9 @@ def test_a_urdf_robot_page_has_its_meshes(tmp_path):
         v = np.asarray(entry["low"]) + q / 65535 * (np.asarray(entry["high"]) - np.asarray(entry["low"]))
         np.testing.assert_allclose(v.min(axis=0), source.bounds[0], atol=1e-4 * np.ptp(source.bounds))
         np.testing.assert_allclose(v.max(axis=0), source.bounds[1], atol=1e-4 * np.ptp(source.bounds))
+    from ncgen.viz.scene import scene
+    sc = scene(traj.head(2))                   # line drawings (matplotlib) show each mesh's bounding box
+    assert all(sc.body_outlined), [n for n, o in zip(sc.body_names, sc.body_outlined) if not o]
     page = traj.to_html(tmp_path / "panda.html")
     assert page.stat().st_size < 5e6
     if CHROMIUM is None:

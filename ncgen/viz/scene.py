@@ -129,7 +129,7 @@ def _shapes(sc: Scene, traj, model, colors) -> None:
         for prim in parts:
             if m is not None and m.kind == "bar" and m.shape is None and prim.role == "member":
                 continue                                 # a plain bar: drawn as a thick segment
-            pts = geometry.outline(prim)
+            pts = geometry.outline(_mesh_box(prim) if prim.kind == "mesh" else prim)
             if len(pts):
                 sc.outlines.append((k, pts, prim.color))
                 if prim.role == "member":
@@ -137,6 +137,20 @@ def _shapes(sc: Scene, traj, model, colors) -> None:
     sc.shape_box = _outline_box(sc)
     sc.bar_colors = [prims[name][0].color if prims.get(name) else geometry.PALETTE[0] for name in sc.bar_names]
     sc.body_outlined = [name in outlined for name in sc.body_names]
+
+
+def _mesh_box(prim: geometry.Primitive) -> geometry.Primitive:
+    """The bounding box of a mesh primitive's vertices (same placement and colour), what line
+    drawings show of a mesh; the mesh itself when its file cannot be read (nothing drawn)."""
+    from ncgen.viz import meshes
+
+    try:
+        vertices = meshes.load(str(meshes.resolve(prim.filename)))[0] * prim.size
+    except meshes.MeshError:
+        return prim
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    return geometry.Primitive("box", np.maximum(hi - lo, 1e-9), prim.R, prim.R @ ((lo + hi) / 2) + prim.p,
+                              prim.color, role=prim.role)
 
 
 def _outline_box(sc: Scene, frames: int = 200) -> np.ndarray | None:
