@@ -189,6 +189,13 @@ class Trajectory:
         world; identity for points), ``p`` ``(n_t, n_members, dim)`` centres of mass."""
         return outputs.poses(self._model("poses()"), self.q)
 
+    def to_html(self, path, **options) -> Path:
+        """Write an offline interactive 3D page of this run (:func:`ncgen.viz.html.to_html`:
+        ``colors``, ``mesh_paths``, ``fps``, ``title``, ``trails``); ``?t=SECONDS`` in its
+        URL opens it paused at that time.  Returns the path."""
+        from ncgen.viz.html import to_html
+        return to_html(self, path, **options)
+
     def summary(self) -> str:
         """A few lines for people: span, integrator work, energy and constraint drift."""
         info = self.info
