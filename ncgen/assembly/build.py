@@ -9,7 +9,8 @@ import casadi as ca
 import numpy as np
 
 from ncgen.assembly.drive_assembly import assemble_drives
-from ncgen.assembly.contacts import contact_functions, contact_specs, contact_terms, smooth_forces
+from ncgen.assembly.contacts import (check_initial_gaps, contact_functions, contact_specs, contact_terms,
+                                     smooth_forces)
 from ncgen.assembly.functions import system_functions
 from ncgen.assembly.initial_state import consistent_state
 from ncgen.assembly.joint_space import JointSpace, actuator_forces, build_joint_coordinates
@@ -151,6 +152,8 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     if system.initial_joints or system.initial_joint_rates:
         q, v = joint_space.initial_state(model, system.initial_joints, system.initial_joint_rates)
         model = model_with(consistent_state(functions, layout, labels, q, v, p0, t0, tolerance, M, fixed=fixed))
+    if terms:
+        check_initial_gaps(system.name, system.contacts, functions["gap"], model.q0, p0, contacts)
     return model
 
 

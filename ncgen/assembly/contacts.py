@@ -24,7 +24,9 @@ regularised Coulomb friction ``f_T = −μ f_N v_T / sqrt(|v_T|² + v_s²)`` wit
 from __future__ import annotations
 
 import casadi as ca
+import numpy as np
 
+from ncgen.errors import ModelError
 from ncgen.model.context import Context, perpendicular_basis
 from ncgen.model.contacts import SpherePlane, SphereSphere
 
@@ -143,6 +145,37 @@ def contact_functions(ctx: Context, terms: list[ContactTerms]) -> dict[str, ca.F
         "contact_jacobian": ca.Function("contact_jacobian", [q, p], [WN, WT], ["q", "p"], ["WN", "WT"]),
         "contact_force": ca.Function("contact_force", [t, q, v, p], [fN, fT], ["t", "q", "v", "p"], ["fN", "fT"]),
     }
+
+
+#: Deepest initial penetration (m) the nonsmooth stepper accepts: deeper overlaps are refused
+#: by :func:`check_initial_gaps` (the step's push-out resolves only what arises within a step).
+INITIAL_PENETRATION_TOL = 1e-6
+
+
+def check_initial_gaps(system_name: str, contacts, gap, q, p, contact_model: str) -> np.ndarray:
+    """The gaps ``g`` (m) of ``contacts`` at ``(q, p)``, after refusing what no run can start
+    from, naming the contact and the depth: coincident sphere centres (the normal is
+    undefined); with ``contact_model="nonsmooth"`` any penetration deeper than
+    :data:`INITIAL_PENETRATION_TOL`; with the smooth law a penetration deeper than the sphere
+    (its centre past the plane or the other sphere's centre), which no compliant force can
+    have put there."""
+    g = np.array(gap(q, p), float).reshape(-1)
+    for c, gk in zip(contacts, g):
+        radius = c.radius if c.kind == "SpherePlane" else c.radius_a + c.radius_b
+        if c.kind == "SphereSphere" and gk + radius <= 1e-12 * max(radius, 1.0):
+            raise ModelError(f"system {system_name!r}: {c.label}: the centres of the spheres on {c.a.name!r} "
+                             f"and {c.b.name!r} coincide in the initial configuration (the contact normal is "
+                             "undefined); move one of the members")
+        depth = -gk
+        limit = INITIAL_PENETRATION_TOL if contact_model == "nonsmooth" else radius
+        if depth > limit:
+            why = (f"the nonsmooth stepper starts from at most {INITIAL_PENETRATION_TOL:g} m"
+                   if contact_model == "nonsmooth" else "deeper than the sphere's radius: its centre is past the "
+                   "surface, where the compliant law pushes it the wrong way")
+            raise ModelError(f"system {system_name!r}: {c.label}: the initial configuration penetrates by "
+                             f"{depth:.6g} m (gap {gk:.6g} m); {why}. Start the members apart (move them by "
+                             f"at least {depth:.6g} m along the contact normal)")
+    return g
 
 
 def contact_specs(contacts) -> list[dict]:
