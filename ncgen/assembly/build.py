@@ -153,7 +153,8 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
         q, v = joint_space.initial_state(model, system.initial_joints, system.initial_joint_rates)
         model = model_with(consistent_state(functions, layout, labels, q, v, p0, t0, tolerance, M, fixed=fixed))
     if terms:
-        check_initial_gaps(system.name, system.contacts, functions["gap"], model.q0, p0, contacts)
+        weight = sum(m.rigid.mass for m in members) * float(np.linalg.norm(system.gravity))
+        check_initial_gaps(system.name, system.contacts, functions["gap"], model.q0, p0, contacts, weight)
     return model
 
 
