@@ -137,11 +137,12 @@ class Model:
         """``{joint: {"lower", "upper", "velocity", "effort"}}`` as given (URDF ``<limit>``)."""
         return {k: dict(v) for k, v in self.joint_space.limits.items() if v}
 
-    def to_joint_space(self, q, v=None, a=None):
+    def to_joint_space(self, q, v=None, a=None, *, t=None, p=None):
         """Joint positions ``qj`` (and rates ``vj``, accelerations ``aj`` when ``v``, ``a``
         are given), concatenated in ``joint_names`` order (see
-        :mod:`ncgen.assembly.joint_coordinates` for each joint's coordinates)."""
-        return self.joint_space.to_joint_space(self, q, v, a)
+        :mod:`ncgen.assembly.joint_coordinates` for each joint's coordinates); a state off
+        the constraints (at time ``t``, parameters ``p``) is refused."""
+        return self.joint_space.to_joint_space(self, q, v, a, t=t, p=p)
 
     def from_joint_space(self, qj, vj=None, *, t=None, p=None):
         """``(q, v)`` with the given joint positions and rates (vectors in ``joint_names``
