@@ -87,8 +87,9 @@ def _run_main(parser: argparse.ArgumentParser, argv: list[str], debug: bool) -> 
     except NcgenError as exc:
         print(f"{where}: error: {exc}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        print(f"{where}: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as exc:
+        said = f": {exc}" if str(exc) else ""
+        print(f"{where}: interrupted{said}", file=sys.stderr)
         return 130
     except OSError as exc:
         target = f" {exc.filename}" if exc.filename else ""

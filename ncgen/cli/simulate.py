@@ -85,7 +85,7 @@ def _check_outputs(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
 def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     import contextlib
 
-    from ncgen.errors import SimulationError
+    from ncgen.errors import SimulationError, SimulationInterrupted
     from ncgen.files import atomic_path, incomplete_path
     from ncgen.runtime import simulate as run
 
@@ -95,13 +95,15 @@ def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         stepper = {"substeps": args.substeps} if args.method == "stepper" else {}
         traj = run(model, t_end=args.t_end, dt=args.dt, method=args.method, backend=args.backend,
                    rtol=args.rtol, atol=args.atol, **stepper)
-    except SimulationError as e:
+    except (SimulationError, SimulationInterrupted) as e:
         if e.trajectory is None or not len(e.trajectory):
             raise
         partial = e.trajectory.save(incomplete_path(args.output))
-        raise SimulationError(f"{e}\nThe partial trajectory (t = {e.trajectory.t[0]:g} ... "
-                              f"{e.trajectory.t[-1]:g} s, marked incomplete) was written to {partial}",
-                              time=e.time, trajectory=e.trajectory) from None
+        said = (f"{e}\nThe partial trajectory (t = {e.trajectory.t[0]:g} ... {e.trajectory.t[-1]:g} s, marked "
+                f"incomplete) was written to {partial}")
+        if isinstance(e, SimulationInterrupted):
+            raise SimulationInterrupted(said, time=e.time, trajectory=e.trajectory) from None
+        raise SimulationError(said, time=e.time, trajectory=e.trajectory) from None
     print(traj.summary())
     with contextlib.ExitStack() as stack:
         traj.save(stack.enter_context(atomic_path(args.output)))

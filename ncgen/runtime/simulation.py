@@ -10,7 +10,7 @@ import numpy as np
 
 from ncgen.assembly.initial_state import consistent_state
 from ncgen.codegen.load import NoCompilerWarning
-from ncgen.errors import CompilerNotFound, NcgenError, SimulationError
+from ncgen.errors import CompilerNotFound, NcgenError, SimulationError, SimulationInterrupted
 from ncgen.errors import ModelError
 from ncgen.runtime.dae import load_dae
 from ncgen.runtime.diagnose import explain, shift_time
@@ -25,6 +25,8 @@ from ncgen.runtime.trajectory import Trajectory
 from ncgen.validation import as_scalar, as_vector
 
 METHODS = ("idas", "stepper")
+#: What :func:`_run` returns as its failure when Ctrl-C stopped it.
+INTERRUPTED = "interrupted"
 #: The run is split into at most this many chunks (progress updates; see ncgen.runtime.idas).
 CHUNKS = 20
 #: Largest ``nq · nc`` that ``project="auto"`` watches (an SVD of A per output time).
@@ -184,10 +186,15 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
             "linear_solver": linear_solver, "stats": stats, "project": project,
             "projected_from": None if projected_from is None else float(t[projected_from]),
             "wall_time": time.perf_counter() - start, "complete": failure is None}
-    if failure is not None:
+    if failure is INTERRUPTED:
+        message = f"simulation of {model.name!r} interrupted (Ctrl-C) at t = {t[k]:.6g} s"
+        info["message"] = message
+    elif failure is not None:
         message = _failure_message(model, failure, t, k, X[k], Z[k, nq:], U[k], pv, dae)
         info["message"] = message
     traj = Trajectory.from_states(model, t[:k + 1], X[:, :nq], X[:, nq:], Z[:, nq:], U[:k + 1], pv, info)
+    if failure is INTERRUPTED:
+        raise SimulationInterrupted(message, time=float(t[k]), trajectory=traj)
     if failure is not None:
         raise SimulationError(message, time=float(t[k]), trajectory=traj)
     return traj
@@ -396,6 +403,8 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
                         k = bridged(first - 1)
         except ChunkFailure as last:
             return X[:k + 1], Z[:k + 1], last, since
+        except KeyboardInterrupt:
+            return X[:k + 1], Z[:k + 1], INTERRUPTED, since
         if watching and not auto:
             X[k] = projector(t[k], X[k])
             R[k] = np.nan
