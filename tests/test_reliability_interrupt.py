@@ -64,3 +64,44 @@ def test_interrupt_in_python_carries_the_trajectory_so_far():
         words = out.split("stopped", 1)[1].split()
         assert float(words[0]) > 0 and int(words[1]) > 1 and words[2] == "False" and words[3] == "True"
     assert issubclass(SimulationInterrupted, KeyboardInterrupt)
+
+
+def test_ctrl_c_stops_ipopt_at_its_next_iteration(tmp_path):
+    for name in ("cartpole.toml", "cartpole_swingup.toml"):
+        text = (ROOT / "examples" / name).read_text()
+        (tmp_path / name).write_text(text.replace("N = 50 ", "N = 300 ").replace("tol = 1e-8", "tol = 1e-8\nverbose = true"))
+    old = tmp_path / "sw.npz"
+    old.write_bytes(b"the previous result")
+    p = subprocess.Popen([sys.executable, "-m", "ncgen.cli", "optimize", str(tmp_path / "cartpole_swingup.toml"),
+                          "-o", str(old)], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         start_new_session=True, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    printed = ""
+    while not any(line.split()[:1] == ["1"] for line in printed.splitlines()):   # IPOPT's first iteration
+        line = p.stdout.readline()
+        assert line, f"ended before IPOPT's first iteration: {printed[-2000:]}"
+        printed += line
+    sent = time.monotonic()
+    os.killpg(p.pid, signal.SIGINT)
+    out, err = p.communicate(timeout=60)
+    assert "EXIT: Optimal" not in out, "the solve ended before the interrupt could stop it"
+    assert p.returncode == 130, printed[-1000:] + out[-1000:] + err
+    assert time.monotonic() - sent < 10.0
+    assert "interrupted" in err and "Traceback" not in err
+    assert old.read_bytes() == b"the previous result"
+
+
+def test_deferred_interrupt_raises_on_leaving_and_replaces_the_solver_failure():
+    from ncgen.interrupts import deferred_interrupt
+    with pytest.raises(KeyboardInterrupt):
+        with deferred_interrupt() as flag:
+            signal.raise_signal(signal.SIGINT)
+            assert flag.hit
+    with pytest.raises(KeyboardInterrupt):
+        with deferred_interrupt():
+            signal.raise_signal(signal.SIGINT)
+            raise RuntimeError("User_Requested_Stop")
+    with pytest.raises(RuntimeError):
+        with deferred_interrupt():
+            raise RuntimeError("a real failure")
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
