@@ -11,6 +11,7 @@ import numpy as np
 from ncgen.assembly.initial_state import consistent_state
 from ncgen.codegen.load import NoCompilerWarning
 from ncgen.errors import CompilerNotFound, NcgenError, SimulationError, SimulationInterrupted
+from ncgen.interrupts import raise_if_interrupted, sticky_interrupt
 from ncgen.errors import ModelError
 from ncgen.runtime.dae import load_dae
 from ncgen.runtime.diagnose import explain, shift_time
@@ -145,10 +146,12 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
     U = input_samples(u, model, t)
     columns = hold_columns(U, t, opts.hold)
     q, v = initial_state(model, q0, v0, t0, pv, opts.ic_tolerance)
-    if opts.method == "stepper":
-        lam = initial_multipliers(model, t0, q, v, U[0], pv, load_dae(model, "vm")[0])
-        return simulate_stepper(model, t, U, pv, q, v, lam, opts)
-    return _simulate_idas(model, t, U, columns, pv, q, v, opts)
+    with sticky_interrupt():               # a Ctrl-C that CasADi swallows is raised again between chunks
+        raise_if_interrupted()
+        if opts.method == "stepper":
+            lam = initial_multipliers(model, t0, q, v, U[0], pv, load_dae(model, "vm")[0])
+            return simulate_stepper(model, t, U, pv, q, v, lam, opts)
+        return _simulate_idas(model, t, U, columns, pv, q, v, opts)
 
 
 def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions) -> Trajectory:
@@ -380,6 +383,7 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
     k = 0
     while k < n_int:
         try:
+            raise_if_interrupted()
             if watching and near(k):
                 k = bridged(k)
             else:
