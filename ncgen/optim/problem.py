@@ -27,7 +27,7 @@ import re
 
 import numpy as np
 
-from ncgen.errors import OptimizationError
+from ncgen.errors import NcgenError, OptimizationError
 from ncgen.validation import as_scalar
 from ncgen.optim.transcription import MODEL_STATE
 
@@ -96,9 +96,16 @@ class OptimalControl:
 
     def coordinate_index(self, name: str) -> int:
         names = self.model.coordinate_names
-        if name not in names:
-            raise OptimizationError(f"no coordinate named {name!r}; coordinates: {', '.join(names)}")
-        return names.index(name)
+        if name in names:
+            return names.index(name)
+        try:
+            self.model.coordinate(name)
+        except NcgenError:
+            raise OptimizationError(f"no coordinate named {name!r}; coordinates: {', '.join(names)}") from None
+        raise OptimizationError(f"coordinate {name!r} is one as written that coordinate sharing re-based (see "
+                                f"model.sharing); optimal-control bounds and targets take the model's coordinates "
+                                f"({', '.join(names[:8])}{', ...' if len(names) > 8 else ''}), a marker or a pose "
+                                "target, or build the model with share=False")
 
     def marker_index(self, name: str) -> int:
         names = self.model.marker_names
