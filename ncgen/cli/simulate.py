@@ -111,8 +111,7 @@ def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
             partial.append(e.trajectory.to_html(incomplete_path(args.html)))
         if not partial:
             raise
-        said = (f"{e}
-The partial trajectory (t = {e.trajectory.t[0]:g} ... {e.trajectory.t[-1]:g} s, marked "
+        said = (f"{e}\nThe partial trajectory (t = {e.trajectory.t[0]:g} ... {e.trajectory.t[-1]:g} s, marked "
                 f"incomplete) was written to {' and '.join(str(x) for x in partial)}")
         if isinstance(e, SimulationInterrupted):
             raise SimulationInterrupted(said, time=e.time, trajectory=e.trajectory) from None
