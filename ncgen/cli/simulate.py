@@ -93,7 +93,7 @@ def _check_outputs(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
 def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     import contextlib
 
-    from ncgen.errors import SimulationError
+    from ncgen.errors import SimulationError, SimulationInterrupted
     from ncgen.files import atomic_path, incomplete_path
     from ncgen.runtime import simulate as run
 
@@ -103,7 +103,7 @@ def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         stepper = {"substeps": args.substeps} if args.method == "stepper" else {}
         traj = run(model, t_end=args.t_end, dt=args.dt, method=args.method, backend=args.backend,
                    rtol=args.rtol, atol=args.atol, **stepper)
-    except SimulationError as e:
+    except (SimulationError, SimulationInterrupted) as e:
         if e.trajectory is None or not len(e.trajectory):
             raise
         partial = [e.trajectory.save(incomplete_path(args.output))] if args.output else []
@@ -111,10 +111,11 @@ def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
             partial.append(e.trajectory.to_html(incomplete_path(args.html)))
         if not partial:
             raise
-        raise SimulationError(f"{e}\nThe partial trajectory (t = {e.trajectory.t[0]:g} ... "
-                              f"{e.trajectory.t[-1]:g} s, marked incomplete) was written to "
-                              f"{' and '.join(str(x) for x in partial)}",
-                              time=e.time, trajectory=e.trajectory) from None
+        said = (f"{e}\nThe partial trajectory (t = {e.trajectory.t[0]:g} ... {e.trajectory.t[-1]:g} s, marked "
+                f"incomplete) was written to {' and '.join(str(x) for x in partial)}")
+        if isinstance(e, SimulationInterrupted):
+            raise SimulationInterrupted(said, time=e.time, trajectory=e.trajectory) from None
+        raise SimulationError(said, time=e.time, trajectory=e.trajectory) from None
     print(traj.summary())
     with contextlib.ExitStack() as stack:
         if args.output:
