@@ -8,7 +8,7 @@ from ncgen import viz  # nc.viz.plot, nc.viz.animate (cheap: matplotlib loads on
 from ncgen.assembly.kinematics import assemble, dof_report, project_velocity, solve_kinematics
 from ncgen.codegen.model_package import generate
 from ncgen.errors import NcgenError
-from ncgen.model.contacts import Contact, SpherePlane, SphereSphere
+from ncgen.model.contacts import BoxPlane, CapsulePlane, Contact, CylinderPlane, SpherePlane, SphereSphere
 from ncgen.model.forces import Force, GeneralizedForce, PointForce, Spring, Torque, TorsionalSpring
 from ncgen.model.joints import (
     CoordinateDriver, Cylindrical, Distance, Fixed, Free, Joint, Mimic, Planar, PointOnLine, PointOnPlane, Prismatic,
@@ -32,7 +32,7 @@ from ncgen.version import __version__
 
 
 __all__ = [
-    "Box", "Capsule", "Contact", "CoordinateDriver", "Cylinder", "Ellipsoid", "Mesh", "Shape", "Sphere", "Cylindrical", "Distance", "Equilibrium", "Fixed", "Force", "Free", "GeneralizedForce",
+    "Box", "BoxPlane", "Capsule", "CapsulePlane", "Contact", "CylinderPlane", "CoordinateDriver", "Cylinder", "Ellipsoid", "Mesh", "Shape", "Sphere", "Cylindrical", "Distance", "Equilibrium", "Fixed", "Force", "Free", "GeneralizedForce",
     "Joint", "JointReaction", "LinearModel", "Mimic", "Model", "ModelError", "Modes", "NcgenError", "OptimalControl",
     "OptimalTrajectory", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic", "Revolute", "SimulationOptions", "SpherePlane", "SphereSphere", "Spherical",
     "Spring", "System", "Tensegrity", "Torque", "TorsionalSpring", "Trajectory", "Universal",

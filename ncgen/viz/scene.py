@@ -199,7 +199,7 @@ def contact_scene(traj, model) -> dict:
     n, d = len(traj), traj.dim
     centres, radii, planes, points, forces = [], [], [], [], []
     for k, c in enumerate(model.contacts):
-        if c["type"] == "SpherePlane":
+        if "plane" in c:                                       # a sphere (or a shape's point) on a plane
             centre = traj.point(c["sphere"], c["at"])
             centres.append(centre)
             radii.append(c["radius"])
