@@ -55,7 +55,7 @@ def test_shape_gaps_and_jacobians_against_closed_forms_and_finite_differences():
     s.add_contact(nc.CylinderPlane(cyl, radius=0.1, length=0.5, normal=n, mu=0.5, name="cy"))
     model = s.build(contacts="nonsmooth")
     assert model.contact_names[:9] == [f"bx.corner{i}" for i in range(8)] + ["cp.end0"]
-    assert model.contact_names[10:] == ["cy.end0", "cy.end1"] + [f"cy.rim{i}" for i in range(6)]
+    assert model.contact_names[10:] == ["cy.end0", "cy.end1"] + [f"cy.face{i}" for i in range(6)]
     assert model.contacts[3]["element"] == "bx" and model.contacts[3]["type"] == "BoxPlane"
     q, v = model.q0, model.v0
     g = model.gap(q)
@@ -67,7 +67,7 @@ def test_shape_gaps_and_jacobians_against_closed_forms_and_finite_differences():
     ends = [n @ (o + s_ * 0.25 * ax) for o in (origin["cap"], origin["cyl"]) for s_ in (-1, 1)]
     np.testing.assert_allclose(g[8:10], np.array(ends[:2]) - 0.1, atol=1e-14)
     np.testing.assert_allclose(g[10:12], np.array(ends[2:]) - 0.1 * np.sqrt(1 - (n @ ax) ** 2), atol=1e-12)
-    assert np.all(g[12:] > g[10:12].min() - 1e-12)   # fixed rim points are never below the lowest
+    assert np.all(g[12:] > g[10:12].min() - 1e-12)   # the face points are never below the rim's lowest
     # W_N = ∂g/∂q along every motion the constraints allow (the rim point's W_N is the
     # derivative of the lowest point only while the body's axis stays a unit vector)
     WN, WT = model.contact_jacobian(q)
@@ -93,8 +93,8 @@ def test_bad_shapes_are_named():
         s.add_contact(nc.BoxPlane(b, size=(1, -2, 1), name="bx"))
     with pytest.raises(ModelError, match=r"body: a CapsulePlane needs a rigid body, got the point 'p'"):
         s.add_contact(nc.CapsulePlane(p, radius=0.1, length=0.2, name="cp"))
-    with pytest.raises(ModelError, match=r"rim_points: expected 0 or an integer >= 3"):
-        s.add_contact(nc.CylinderPlane(b, radius=0.1, length=0.2, rim_points=2, name="cy"))
+    with pytest.raises(ModelError, match=r"face_points: expected 0 or an integer >= 3"):
+        s.add_contact(nc.CylinderPlane(b, radius=0.1, length=0.2, face_points=2, name="cy"))
     with pytest.raises(ModelError, match=r"radius: expected a number \(m\), got None"):
         s.add_contact(nc.CylinderPlane(b, radius=None, length=0.2, name="cy"))
     assert not s.contacts
@@ -137,13 +137,13 @@ name = "can_floor"
 body = "can"
 radius = 0.1
 length = 0.3
-rim_points = 4
+face_points = 4
 normal = [0, 0, 1]
 """
     s = nc.System.from_toml(text)
     model = s.build(contacts="nonsmooth")
     assert model.contact_names == [f"box_floor.corner{i}" for i in range(8)] + ["can_floor.end0", "can_floor.end1"] \
-        + [f"can_floor.rim{i}" for i in range(8)]
+        + [f"can_floor.face{i}" for i in range(8)]
     again = nc.System.from_toml(s.to_toml()).build(contacts="nonsmooth")
     assert again.contacts == model.contacts
     np.testing.assert_allclose(model.gap(model.q0)[:8], [0.3] * 4 + [0.7] * 4, atol=1e-14)
@@ -239,3 +239,50 @@ def test_box_on_incline_tips_iff_tan_alpha_exceeds_base_over_height(blocks):
         else:
             assert tilt.max() < 1e-9, tilt.max()
             assert np.ptp(tr.point(name, (0, 0, 0)) @ incline(alpha)[1]) < 1e-9
+
+
+# ------------------------------------------------------------------------ rollers
+THETA, R_ROLL, L_ROLL, M_ROLL = 0.3, 0.08, 0.3, 1.5
+I_AXIS, I_TRANS = 0.5 * M_ROLL * R_ROLL ** 2, 0.04
+
+
+@pytest.fixture(scope="module")
+def rollers():
+    """A capsule and cylinders (3 points per end face by default, none, 16)
+    lying across an incline θ = 0.3 rad (axis along y), μ = 1, released at rest; and a
+    cylinder dropped 1 cm onto the flat on an end face."""
+    s = nc.System("rollers")
+    n, _ = incline(THETA)
+    inertia = np.diag([I_TRANS, I_TRANS, I_AXIS])
+    for name, cls, y, kw in (("capsule", nc.CapsulePlane, 0, {}), ("cylinder", nc.CylinderPlane, 1, {}),
+                             ("bare", nc.CylinderPlane, 2, {"face_points": 0}),
+                             ("many", nc.CylinderPlane, 3, {"face_points": 16})):
+        b = s.add_body(name, mass=M_ROLL, inertia=inertia, rotation=R_y(-THETA) @ R_x(-np.pi / 2),
+                       position=np.array([0, y, 0]) + n * R_ROLL)
+        s.add_contact(cls(b, radius=R_ROLL, length=L_ROLL, point=(0, y, 0), normal=n, mu=1.0, name=name, **kw))
+    can = s.add_body("can", mass=M_ROLL, inertia=inertia, position=(0, 5, L_ROLL / 2 + 0.01))
+    s.add_contact(nc.CylinderPlane(can, radius=R_ROLL, length=L_ROLL, point=(0, 5, 0), mu=1.0, name="can"))
+    model = s.build(contacts="nonsmooth")
+    return model, simulate(model, 1.0)
+
+
+@pytest.mark.parametrize("name", ["capsule", "cylinder", "bare", "many"])
+def test_capsule_and_cylinder_roll_down_an_incline_at_the_closed_form_acceleration(rollers, name):
+    _, tr = rollers
+    n, down = incline(THETA)
+    x = tr.point(name, (0, 0, 0))
+    a = np.diff(x @ down, 2) / H ** 2
+    np.testing.assert_allclose(a, G * np.sin(THETA) / (1 + I_AXIS / (M_ROLL * R_ROLL ** 2)), rtol=1e-4)
+    np.testing.assert_allclose(x @ n, R_ROLL, atol=1e-9)
+    axis = tr.point(name, (0, 0, 1)) - x
+    np.testing.assert_allclose(axis, [[0, 1, 0]] * len(x), atol=1e-9)
+
+
+def test_cylinder_dropped_on_its_end_stands_on_its_face(rollers):
+    _, tr = rollers
+    k = [i for i, c in enumerate(tr.contact_names) if c.startswith("can.")]
+    rest = tr.t > 0.2
+    np.testing.assert_allclose(tr.contact_normal[rest][:, k].sum(axis=1), M_ROLL * G, rtol=1e-9)
+    np.testing.assert_allclose(tr.point("can", (0, 0, 0))[rest], [[0, 5, L_ROLL / 2]] * rest.sum(), atol=1e-8)
+    top = [tr.contact_names.index(c) for c in ("can.end1", "can.face3", "can.face4", "can.face5")]
+    assert np.all(tr.contact_normal[:, top] == 0)

@@ -345,43 +345,47 @@ class CapsulePlane(ShapePlane):
 class CylinderPlane(ShapePlane):
     """A cylinder of ``radius`` r (m) and ``length`` L (m) along the body's z (as in URDF),
     centred at ``at``, against a plane.  Each end face contributes its exact lowest rim point
-    (``<name>.end0``, ``<name>.end1``: the gap of the rim circle, smooth except within 1e-6
-    rad of standing upright; :mod:`ncgen.assembly.contacts`), so a cylinder rolls and lies
-    exactly; and ``rim_points`` (default 3) fixed points equally spaced on each rim
-    (``<name>.rim0 …``, rim 0 at z = −L/2), so it stands on an end face.  While it rolls the
-    fixed points only touch as they pass the bottom, where the exact point already holds."""
+    (``<name>.end0``, ``<name>.end1``: the lowest point of the rim circle, smooth except within
+    ~1e-6 rad of standing upright, where it moves to the face centre;
+    :mod:`ncgen.assembly.contacts`), so a cylinder rolls, lies and pivots on a rim exactly; and
+    ``face_points`` (default 3) fixed points equally spaced on each end face at half the
+    radius (``<name>.face0 …``, face 0 at z = −L/2), so it stands on an end.  Inside the rim,
+    they never touch while the cylinder lies or rolls (a point on the rim itself would strike
+    the plane each time it passed the bottom), and once it tilts the exact rim point is lower.
+    """
 
     kind = "CylinderPlane"
 
-    def __init__(self, body, radius=None, length=None, *, rim_points=3, **kw):
+    def __init__(self, body, radius=None, length=None, *, face_points=3, **kw):
         super().__init__(body, **kw)
-        self.radius, self.length, self.rim_points = radius, length, rim_points
+        self.radius, self.length, self.face_points = radius, length, face_points
 
     def _check_shape(self, dim):
         self._need_3d(dim)
         self.radius = self._length(self.radius, "radius")
         self.length = self._length(self.length, "length")
-        n = self.rim_points
+        n = self.face_points
         if isinstance(n, float) and n.is_integer():
             n = int(n)
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0 or n in (1, 2):
-            raise ModelError(f"{self.label}: rim_points: expected 0 or an integer >= 3 (points per rim), "
-                             f"got {self.rim_points!r}")
-        self.rim_points = int(n)
+            raise ModelError(f"{self.label}: face_points: expected 0 or an integer >= 3 (points per end face), "
+                             f"got {self.face_points!r}")
+        self.face_points = int(n)
 
     def local_spheres(self):
         out = [(f"end{i}", np.array([0.0, 0.0, s * self.length / 2]), 0.0, self.radius)
                for i, s in enumerate((-1, 1))]
-        n = self.rim_points
+        n = self.face_points
         for i, s in enumerate((-1, 1)):
             for j in range(n):
                 phi = 2 * math.pi * j / n
-                out.append((f"rim{i * n + j}", np.array([self.radius * math.cos(phi), self.radius * math.sin(phi),
-                                                         s * self.length / 2]), 0.0))
+                rho = self.radius / 2
+                out.append((f"face{i * n + j}", np.array([rho * math.cos(phi), rho * math.sin(phi), s * self.length / 2]),
+                            0.0))
         return out
 
     def spec(self):
-        return {**super().spec(), "radius": self.radius, "length": self.length, "rim_points": self.rim_points}
+        return {**super().spec(), "radius": self.radius, "length": self.length, "face_points": self.face_points}
 
 
 def point_contacts(contacts) -> list:

@@ -13,7 +13,7 @@ Layout of a file (every table optional except ``members``)::
     [[contacts]]  type = "SpherePlane" (sphere, at, radius, plane = "ground", point, normal)
                   or "SphereSphere" (between = ["a", "b"], at_a, radius_a, at_b, radius_b),
                   or "BoxPlane" (body, size, at) / "CapsulePlane" (body, radius, length, at) /
-                  "CylinderPlane" (body, radius, length, rim_points, at), each with plane, point, normal,
+                  "CylinderPlane" (body, radius, length, face_points, at), each with plane, point, normal,
                   with mu, restitution, stiffness, damping, exponent, slip_velocity, name
 
 Shared basic points are written ``"crank.r_j"`` (slot ``r_j`` of member ``crank``) or
@@ -99,7 +99,7 @@ CONTACT_FIELDS = {
     "CapsulePlane": (Field("body", "member", True), Field("radius", "number", True), Field("length", "number", True),
                      *_SHAPE_PLANE),
     "CylinderPlane": (Field("body", "member", True), Field("radius", "number", True), Field("length", "number", True),
-                      Field("rim_points", "number"), *_SHAPE_PLANE),
+                      Field("face_points", "number"), *_SHAPE_PLANE),
 }
 
 #: Joints whose keys are not ``between`` and their keyword arguments.
