@@ -286,3 +286,17 @@ def test_cylinder_dropped_on_its_end_stands_on_its_face(rollers):
     np.testing.assert_allclose(tr.point("can", (0, 0, 0))[rest], [[0, 5, L_ROLL / 2]] * rest.sum(), atol=1e-8)
     top = [tr.contact_names.index(c) for c in ("can.end1", "can.face3", "can.face4", "can.face5")]
     assert np.all(tr.contact_normal[:, top] == 0)
+
+
+def test_smooth_box_rests_on_its_four_corners_at_the_static_penetration():
+    """Compliant law (IDAS): four equal corner springs each carry m g / 4 (determinate here),
+    so each sinks ``δ = (m g / (4 k))^(1/n)``."""
+    k, n_exp = 1e5, 1.5
+    s = nc.System("soft_box")
+    box = s.add_body("box", mass=M_BOX, inertia=box_inertia(M_BOX, BOX), position=(0, 0, BOX[2] / 2))
+    s.add_contact(nc.BoxPlane(box, size=BOX, mu=0.5, stiffness=k, damping=2e6, exponent=n_exp, name="soft"))
+    tr = nc.simulate(s.build(), 1.0, 0.01, rtol=1e-9, atol=1e-11)
+    delta = (M_BOX * G / 4 / k) ** (1 / n_exp)
+    np.testing.assert_allclose(-tr.gap[-20:, :4], delta, rtol=1e-4)
+    np.testing.assert_allclose(tr.contact_normal[-20:, :4], M_BOX * G / 4, rtol=1e-4)
+    assert np.all(tr.contact_normal[:, 4:] == 0)
