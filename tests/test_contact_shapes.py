@@ -300,3 +300,15 @@ def test_smooth_box_rests_on_its_four_corners_at_the_static_penetration():
     np.testing.assert_allclose(-tr.gap[-20:, :4], delta, rtol=1e-4)
     np.testing.assert_allclose(tr.contact_normal[-20:, :4], M_BOX * G / 4, rtol=1e-4)
     assert np.all(tr.contact_normal[:, 4:] == 0)
+
+
+def test_shape_contact_points_are_drawn_on_the_plane(rollers):
+    from ncgen.viz.scene import scene
+    _, tr = rollers
+    sc = scene(tr)
+    n, _ = incline(THETA)
+    for name in ("cylinder.end0", "cylinder.end1", "capsule.end0"):
+        k = tr.contact_names.index(name)
+        loaded = tr.contact_normal[:, k] > 0
+        assert loaded[1:].all()
+        np.testing.assert_allclose(sc.contact_points[loaded, k] @ n, 0, atol=1e-8)
