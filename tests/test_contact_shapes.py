@@ -52,7 +52,8 @@ def test_shape_gaps_and_jacobians_against_closed_forms_and_finite_differences():
     at = np.array([0.01, 0.02, -0.03])
     s.add_contact(nc.BoxPlane(box, size=(0.2, 0.3, 0.4), at=at, normal=n, point=(0, 0, 0.1), mu=0.5, name="bx"))
     s.add_contact(nc.CapsulePlane(cap, radius=0.1, length=0.5, normal=n, mu=0.5, name="cp"))
-    s.add_contact(nc.CylinderPlane(cyl, radius=0.1, length=0.5, normal=n, mu=0.5, name="cy"))
+    Rs = R_x(0.5) @ R_y(-0.2)                          # the cylinder's axes in its body's frame
+    s.add_contact(nc.CylinderPlane(cyl, radius=0.1, length=0.5, at=at, rotation=Rs, normal=n, mu=0.5, name="cy"))
     model = s.build(contacts="nonsmooth")
     assert model.contact_names[:9] == [f"bx.corner{i}" for i in range(8)] + ["cp.end0"]
     assert model.contact_names[10:] == ["cy.end0", "cy.end1"] + [f"cy.face{i}" for i in range(6)]
@@ -64,9 +65,11 @@ def test_shape_gaps_and_jacobians_against_closed_forms_and_finite_differences():
     corners = [at + np.array([(1 if i >> j & 1 else -1) * (0.2, 0.3, 0.4)[j] / 2 for j in range(3)]) for i in range(8)]
     np.testing.assert_allclose(g[:8], [n @ (origin["box"] + rot @ c - (0, 0, 0.1)) for c in corners], atol=1e-14)
     ax = rot[:, 2]
-    ends = [n @ (o + s_ * 0.25 * ax) for o in (origin["cap"], origin["cyl"]) for s_ in (-1, 1)]
-    np.testing.assert_allclose(g[8:10], np.array(ends[:2]) - 0.1, atol=1e-14)
-    np.testing.assert_allclose(g[10:12], np.array(ends[2:]) - 0.1 * np.sqrt(1 - (n @ ax) ** 2), atol=1e-12)
+    ends = [n @ (origin["cap"] + s_ * 0.25 * ax) for s_ in (-1, 1)]
+    np.testing.assert_allclose(g[8:10], np.array(ends) - 0.1, atol=1e-14)
+    ax = rot @ Rs[:, 2]
+    ends = [n @ (origin["cyl"] + rot @ at + s_ * 0.25 * ax) for s_ in (-1, 1)]
+    np.testing.assert_allclose(g[10:12], np.array(ends) - 0.1 * np.sqrt(1 - (n @ ax) ** 2), atol=1e-12)
     assert np.all(g[12:] > g[10:12].min() - 1e-12)   # the face points are never below the rim's lowest
     # W_N = ∂g/∂q along every motion the constraints allow (the rim point's W_N is the
     # derivative of the lowest point only while the body's axis stays a unit vector)

@@ -91,7 +91,7 @@ def _sphere_plane(ctx: Context, c) -> ContactTerms:
         vel_plane = lambda x: _material_velocity(ctx, P, x_p, xd_p, x)  # noqa: E731
     rho = getattr(c, "rim_radius", 0.0)
     if rho > 0:
-        axis = ctx.local_point(c.sphere, np.asarray(c.at) + (0.0, 0.0, 1.0))[0] - r_s
+        axis = ctx.local_point(c.sphere, np.asarray(c.at) + c.axis)[0] - r_s
         w = n - ca.dot(n, axis) * axis
         centre = r_s - rho * w / ca.sqrt(ca.sumsqr(w) + RIM_EPS ** 2)
     else:

@@ -31,7 +31,7 @@ import numpy as np
 from ncgen.errors import BasisError
 from ncgen.model.joint_base import attach_element, check_members
 from ncgen.errors import ModelError
-from ncgen.validation import as_vector
+from ncgen.validation import as_vector, rotation as as_rotation
 
 #: Defaults of the smooth law (steel-like ball of a few kg: a 1 kg ball rests ~0.1 mm deep).
 STIFFNESS, DAMPING, EXPONENT, SLIP_VELOCITY = 1e6, 1e5, 1.5, 1e-3
@@ -209,26 +209,29 @@ class ShapePoint(SpherePlane):
     cylinder's rim)."""
 
     def __init__(self, element, suffix: str, offset, radius: float, rim_radius: float = 0.0):
-        super().__init__(element.body, element.at + offset, radius, plane=element.plane, point=element.point,
+        super().__init__(element.body, element.at + element.rotation @ offset, radius, plane=element.plane,
+                         point=element.point,
                          normal=element.normal, mu=element.mu, restitution=element.restitution,
                          stiffness=element.stiffness, damping=element.damping, exponent=element.exponent,
                          slip_velocity=element.slip_velocity, name=f"{element.name}.{suffix}")
         self.kind, self.element, self.rim_radius = element.kind, element.name, rim_radius
+        self.axis = element.rotation[:, -1]               # the shape's z in the body's frame
 
     def spec(self):
-        return {**super().spec(), "element": self.element, "rim_radius": self.rim_radius}
+        return {**super().spec(), "element": self.element, "rim_radius": self.rim_radius, "axis": self.axis.tolist()}
 
 
 class ShapePlane(Contact):
     """Base of a body-fixed shape against a plane, given as point contacts: spheres of the
     shape's body (radius ≥ 0) against the plane, each a :class:`SpherePlane` named
     ``<name>.<point>`` (``model.contact_names``, trajectories).  The shape is centred at the
-    local point ``at`` of ``body`` (default its origin) with its axes along the body's; the
-    plane keywords are those of :class:`SpherePlane`."""
+    local point ``at`` of ``body`` (default its origin) with its axes along the columns of
+    ``rotation`` (in the body's frame; default the body's axes); the plane keywords are those
+    of :class:`SpherePlane`."""
 
-    def __init__(self, body, *, at=None, plane=None, point=None, normal=None, **material):
+    def __init__(self, body, *, at=None, rotation=None, plane=None, point=None, normal=None, **material):
         super().__init__(**material)
-        self.body, self.at = body, at
+        self.body, self.at, self.rotation = body, at, rotation
         self.plane, self.point, self.normal = plane, point, normal
         self._points: list = []
 
@@ -256,6 +259,7 @@ class ShapePlane(Contact):
                              f"{'ground' if self.body.is_ground else self.body.kind} {self.body.name!r}")
         self._check_shape(d)
         self.at = as_vector(np.zeros(d) if self.at is None else self.at, d, f"{self.label}: at")
+        self.rotation = np.eye(d) if self.rotation is None else as_rotation(self.rotation, d, f"{self.label}: rotation")
         self._points = []
         for suffix, offset, radius, *rim in self.local_spheres():
             sp = ShapePoint(self, suffix, offset, radius, *rim)
@@ -286,7 +290,8 @@ class ShapePlane(Contact):
         return list(self._points)
 
     def spec(self):
-        return {**super().spec(), "body": self.body.name, "at": np.asarray(self.at).tolist(), "plane": self.plane.name,
+        return {**super().spec(), "body": self.body.name, "at": np.asarray(self.at).tolist(),
+                "rotation": self.rotation.tolist(), "plane": self.plane.name,
                 "point": self.point.tolist(), "normal": self.normal.tolist()}
 
 

@@ -12,9 +12,9 @@ Layout of a file (every table optional except ``members``)::
     [[forces]]    type = "Spring", ..., name, and the force's arguments
     [[contacts]]  type = "SpherePlane" (sphere, at, radius, plane = "ground", point, normal)
                   or "SphereSphere" (between = ["a", "b"], at_a, radius_a, at_b, radius_b),
-                  or "BoxPlane" (body, size, at) / "CapsulePlane" (body, radius, length, at) /
-                  "CylinderPlane" (body, radius, length, face_points, at), each with plane, point, normal,
-                  with mu, restitution, stiffness, damping, exponent, slip_velocity, name
+                  or "BoxPlane" (body, size) / "CapsulePlane" (body, radius, length) /
+                  "CylinderPlane" (body, radius, length, face_points), each with at, rotation, plane,
+                  point, normal; all with mu, restitution, stiffness, damping, exponent, slip_velocity, name
 
 Shared basic points are written ``"crank.r_j"`` (slot ``r_j`` of member ``crank``) or
 ``{ground = [x, y, z]}``.  Values that may vary are numbers or expression strings
@@ -88,7 +88,7 @@ FORCE_FIELDS = {
     "GeneralizedForce": (Field("value", "generalized force", True),),
 }
 
-_SHAPE_PLANE = (Field("at", "vector"), Field("plane", "member"), Field("point", "vector"), Field("normal", "vector"))
+_SHAPE_PLANE = (Field("at", "vector"), Field("rotation", "rotation"), Field("plane", "member"), Field("point", "vector"), Field("normal", "vector"))
 #: Keys of each contact type besides the material (:data:`CONTACT_MATERIAL`).
 CONTACT_FIELDS = {
     "SpherePlane": (Field("sphere", "member", True), Field("at", "vector"), Field("radius", "number"),

@@ -212,7 +212,7 @@ def contact_scene(traj, model) -> dict:
                 normal = np.einsum("tij,j->ti", R, model.member(c["plane"]).direction_to_local(c["normal"]))
             push = np.broadcast_to(normal, (n, d))             # the plane pushes the sphere along its normal
             if c.get("rim_radius", 0) > 0:                     # a cylinder rim's lowest point
-                axis = traj.point(c["sphere"], np.add(c["at"], (0.0, 0.0, 1.0))) - centre
+                axis = traj.point(c["sphere"], np.add(c["at"], c["axis"])) - centre
                 w = push - np.sum(push * axis, axis=1, keepdims=True) * axis
                 centre = centre - c["rim_radius"] * w / np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-12)
             contact = centre - c["radius"] * push
