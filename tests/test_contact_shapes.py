@@ -315,3 +315,39 @@ def test_shape_contact_points_are_drawn_on_the_plane(rollers):
         loaded = tr.contact_normal[:, k] > 0
         assert loaded[1:].all()
         np.testing.assert_allclose(sc.contact_points[loaded, k] @ n, 0, atol=1e-8)
+
+
+URDF = """<robot name="crate">
+  <link name="base">
+    <inertial><origin xyz="0 0 0"/><mass value="2.0"/>
+      <inertia ixx="0.02" ixy="0" ixz="0" iyy="0.03" iyz="0" izz="0.04"/></inertial>
+    <collision><origin xyz="0.01 0 0.1" rpy="0 0 0.3"/><geometry><box size="0.2 0.3 0.1"/></geometry></collision>
+    <collision><origin xyz="0 0.1 0.3" rpy="1.5707963267948966 0 0"/>
+      <geometry><cylinder radius="0.05" length="0.2"/></geometry></collision>
+    <collision><origin xyz="0.2 0 0.2"/><geometry><sphere radius="0.03"/></geometry></collision>
+    <collision><geometry><mesh filename="crate.stl"/></geometry></collision>
+  </link>
+</robot>"""
+
+
+def test_urdf_collision_boxes_cylinders_spheres_become_ground_contacts():
+    s = nc.System.from_urdf(URDF, floating_base=True, collisions={"mu": 0.7})
+    assert [c.name for c in s.contacts] == ["base_collision0", "base_collision1", "base_collision2"]
+    assert s.skipped_collisions == ["base_collision3"]
+    assert all(c.mu == 0.7 for c in s.contacts)
+    model = s.build(contacts="nonsmooth")
+    assert model.contact_names[:8] == [f"base_collision0.corner{i}" for i in range(8)]
+    assert model.contact_names[-1] == "base_collision2"
+    g = model.gap(model.q0)
+    # the link frame is the world frame at q0: the box's corners at 0.1 ∓ 0.05 m; the
+    # cylinder's axis is along y (horizontal), its rims' lowest points a radius below 0.3 m
+    np.testing.assert_allclose(np.sort(g[:8]), [0.05] * 4 + [0.15] * 4, atol=1e-12)
+    np.testing.assert_allclose(g[8:10], 0.3 - 0.05, atol=1e-12)
+    # face points at half the radius, angle φ_j = 2πj/3 from the shape's x; its y is up
+    np.testing.assert_allclose(g[10:16], np.tile(0.3 + 0.025 * np.sin(np.arange(3) * 2 * np.pi / 3), 2), atol=1e-12)
+    np.testing.assert_allclose(g[-1], 0.2 - 0.03, atol=1e-12)
+    assert nc.System.from_urdf(URDF, floating_base=True).contacts == []
+    with pytest.raises(ModelError, match=r"collisions: expected True, False or a dict"):
+        nc.System.from_urdf(URDF, floating_base=True, collisions="yes")
+    with pytest.raises(ModelError, match=r"collisions: .*unexpected keyword argument 'friction'"):
+        nc.System.from_urdf(URDF, floating_base=True, collisions={"friction": 0.7})
