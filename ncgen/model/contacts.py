@@ -351,7 +351,7 @@ class CylinderPlane(ShapePlane):
     """A cylinder of ``radius`` r (m) and ``length`` L (m) along the body's z (as in URDF),
     centred at ``at``, against a plane.  Each end face contributes its exact lowest rim point
     (``<name>.end0``, ``<name>.end1``: the lowest point of the rim circle, smooth except within
-    ~1e-6 rad of standing upright, where it moves to the face centre;
+    ~1e-4 rad of standing upright, where it moves to the face centre;
     :mod:`ncgen.assembly.contacts`), so a cylinder rolls, lies and pivots on a rim exactly; and
     ``face_points`` (default 3) fixed points equally spaced on each end face at half the
     radius (``<name>.face0 …``, face 0 at z = −L/2), so it stands on an end.  Inside the rim,
