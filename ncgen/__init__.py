@@ -24,6 +24,7 @@ from ncgen.runtime.linearization import LinearModel, linearize
 from ncgen.runtime.modes import Modes, modes
 from ncgen.runtime.statics import Equilibrium, equilibrium
 from ncgen.runtime.joint_dynamics import forward_dynamics, forward_dynamics_kernel, inverse_dynamics
+from ncgen.runtime.tree_algorithms import aba, aba_derivatives, algorithm_kernel, crba, rnea, rnea_derivatives
 from ncgen.runtime.tree_kernel import joint_forward_dynamics, joint_forward_dynamics_kernel
 from ncgen.runtime.reactions import JointReaction, joint_reactions
 from ncgen.symbolic.coordinates import coordinate_type
@@ -38,6 +39,7 @@ __all__ = [
     "assemble", "coordinate_type", "dof_report", "equilibrium", "form_find", "forward_dynamics",
     "forward_dynamics_kernel", "generate", "inverse_dynamics", "joint_forward_dynamics",
     "joint_forward_dynamics_kernel", "joint_reactions", "linearize", "modes",
+    "aba", "aba_derivatives", "algorithm_kernel", "crba", "rnea", "rnea_derivatives",
     "project_velocity", "simulate", "solve_kinematics",
     "__version__", "viz",
 ]

@@ -99,7 +99,7 @@ def test_planar_pendulum_compiled_closed_form():
         nc.joint_forward_dynamics_kernel(model, method="aba")
 
 
-def test_models_that_are_not_trees_fall_back_to_the_kkt_solve():
+def test_models_that_are_not_trees_fall_back_to_the_kkt_solve_and_mimic_joints_get_the_kernel():
     s = nc.System("loop", gravity=(0, -G))
     crank = s.add_bar("crank", mass=1.0, ends=[(0, 0), (0, 1)])
     coupler = s.add_bar("coupler", mass=1.0, ends=[(0, 1), (2, 1)])
@@ -121,11 +121,14 @@ def test_models_that_are_not_trees_fall_back_to_the_kkt_solve():
     j2 = s.add_joint(nc.Prismatic(s.ground, b2, at=(0.5, 1, 0), axis=(0, 0, 1), name="f2"))
     s.add_joint(nc.Mimic(j1, j2, multiplier=-2.0, name="link"))
     mimic = s.build()
-    with pytest.raises(nc.ModelError, match="constraints besides its tree"):
-        nc.joint_forward_dynamics_kernel(mimic)
+    # a mimic joint is not a loop: the kernel takes it (the follower set from its leader);
     # f1 + f2 masses move together: z̈1 (m + 4m) = −m g + 2 m g
+    k = nc.joint_forward_dynamics_kernel(mimic)
+    np.testing.assert_allclose(k([0.1, -0.2], [0.0, 0.0]), [G / 5, -2 * G / 5], atol=1e-12)
     np.testing.assert_allclose(nc.joint_forward_dynamics(mimic, [0.1, -0.2], [0.0, 0.0]), [G / 5, -2 * G / 5],
                                atol=1e-12)
+    np.testing.assert_allclose(nc.joint_forward_dynamics(mimic, [0.1, -0.2], [0.3, -0.6], backend="numpy"),
+                               k([0.1, -0.2], [0.3, -0.6]), atol=1e-12)
 
 
 def test_written_out_cholesky():

@@ -32,8 +32,9 @@ from ncgen.rigid_motion import casadi_forms as crm
 
 def cholesky_solve(K: ca.SX, b: ca.SX) -> tuple[ca.SX, ca.SX]:
     """``(x, r)``: ``x = K⁻¹ b`` for a symmetric positive definite ``K`` (only its lower
-    triangle is read) by ``K = L Lᵀ``, and ``r = min_k d_k / K_kk`` over the pivots ``d_k``
-    (before their square roots).  Structural zeros of ``K`` are kept as zeros."""
+    triangle is read) by ``K = L Lᵀ`` (factored once for every column of ``b``), and
+    ``r = min_k d_k / K_kk`` over the pivots ``d_k`` (before their square roots).  Structural
+    zeros of ``K`` are kept as zeros."""
     n = K.size1()
     L = [[None] * n for _ in range(n)]
     ratios = []
@@ -44,16 +45,19 @@ def cholesky_solve(K: ca.SX, b: ca.SX) -> tuple[ca.SX, ca.SX]:
         for i in range(k + 1, n):
             s = K[i, k] - sum((L[i][j] * L[k][j] for j in range(k)), ca.SX(0))
             L[i][k] = s / L[k][k]
-    y = [None] * n
-    for i in range(n):
-        y[i] = (b[i] - sum((L[i][j] * y[j] for j in range(i)), ca.SX(0))) / L[i][i]
-    x = [None] * n
-    for i in reversed(range(n)):
-        x[i] = (y[i] - sum((L[j][i] * x[j] for j in range(i + 1, n)), ca.SX(0))) / L[i][i]
+    cols = []
+    for c in range(b.size2()):
+        y = [None] * n
+        for i in range(n):
+            y[i] = (b[i, c] - sum((L[i][j] * y[j] for j in range(i)), ca.SX(0))) / L[i][i]
+        x = [None] * n
+        for i in reversed(range(n)):
+            x[i] = (y[i] - sum((L[j][i] * x[j] for j in range(i + 1, n)), ca.SX(0))) / L[i][i]
+        cols.append(ca.vertcat(*x) if n else ca.SX(0, 1))
     r = ratios[0] if ratios else ca.SX(1)
     for z in ratios[1:]:
         r = ca.fmin(r, z)
-    return ca.vertcat(*x) if n else ca.SX(0, 1), r
+    return ca.horzcat(*cols) if cols else ca.SX(n, 0), r
 
 
 def joint_efforts(js, tau: ca.SX) -> ca.SX:
@@ -241,6 +245,68 @@ def uniform_gravity(model, owned) -> np.ndarray | None:
     return g if np.max(np.abs(B @ g - F0), initial=0.0) <= 1e-12 * max(1.0, np.max(np.abs(F0), initial=0.0)) else None
 
 
+def mimic_relations(model) -> list[tuple[str, str, float, float]]:
+    """``(follower, leader, k, offset)`` of every :class:`~ncgen.model.joints.Mimic` joint of
+    ``model`` (``θ_follower = k θ_leader + offset``), leaders resolved through chains of
+    mimics.  Raises :class:`ModelError` when a joint mimics itself (a cycle) or a joint
+    without exactly one coordinate."""
+    js = model.joint_space
+    direct = {}
+    for j in model.joints:
+        if j.kind == "Mimic":
+            o = j.options
+            f, lead = o["follower"].name, o["leader"].name
+            for role, n in (("follower", f), ("leader", lead)):
+                if js.nv_joint.get(n) != 1:
+                    raise ModelError(f"joint {j.name!r}: the {role} {n!r} is not a joint with one coordinate")
+            if f in direct:
+                raise ModelError(f"joint {j.name!r}: joint {f!r} already mimics {direct[f][0]!r}")
+            direct[f] = (lead, o["multiplier"], o["offset"])
+    out = []
+    for f, (lead, k, off) in direct.items():
+        seen = {f}
+        while lead in direct:
+            if lead in seen:
+                raise ModelError(f"mimic joints: {f!r} mimics itself through {' -> '.join(sorted(seen))}")
+            seen.add(lead)
+            lead2, k2, off2 = direct[lead]
+            lead, k, off = lead2, k * k2, k * off2 + off
+        out.append((f, lead, float(k), float(off)))
+    return out
+
+
+class MimicMap:
+    """The joint rates of a tree with mimic joints: ``v_j = G v_i`` (``G``: nv × nv_i, an
+    identity column per independent rate, ``k`` at a follower's row in its leader's column),
+    ``q_j`` the same map plus the offsets.  ``independent``: the indices of the independent
+    rates in ``v_j`` (``model.joint_names`` order); without mimic joints ``G = 1``."""
+
+    def __init__(self, model):
+        js = model.joint_space
+        sq, sv = js.slices(), js.slices(rates=True)
+        self.relations = mimic_relations(model)
+        self.follows = {sv[f].start: (sv[lead].start, k) for f, lead, k, _ in self.relations}
+        self.position = {sq[f].start: (sq[lead].start, k, off) for f, lead, k, off in self.relations}
+        self.independent = [i for i in range(js.nv) if i not in self.follows]
+        G = np.zeros((js.nv, len(self.independent)))
+        col = {i: c for c, i in enumerate(self.independent)}
+        for i in range(js.nv):
+            lead, k = self.follows.get(i, (i, 1.0))
+            G[i, col[lead]] = k
+        self.G = G
+
+    def positions(self, qj):
+        """``q_j`` with every follower's position set from its leader's (SX)."""
+        rows = [self.position[i][1] * qj[self.position[i][0]] + self.position[i][2] if i in self.position else qj[i]
+                for i in range(qj.numel())]
+        return ca.vertcat(*rows) if rows else qj
+
+    def rates(self, vj):
+        """``v_j`` with every follower's rate set from its leader's (SX): ``G v_j[independent]``."""
+        rows = [self.follows[i][1] * vj[self.follows[i][0]] if i in self.follows else vj[i] for i in range(vj.numel())]
+        return ca.vertcat(*rows) if rows else vj
+
+
 class _Recursion:
     """The Newton–Euler recursion shared by :func:`recursive_dynamics_function` and
     :func:`recursive_inverse_dynamics_function` (3D trees; twists, accelerations and wrenches
@@ -248,7 +314,9 @@ class _Recursion:
     ``dT_c = dT_p + Ṡ_g w (+ S_g a_j)`` outwards (a uniform gravity as the ground's
     ``[0; −g]``), then member wrenches ``W_g = M_g dT − ad(T)ᵀ M_g T − W_ext``
     (``W_ext = Qᵀ F``, the member's passive natural-coordinate
-    forces as a wrench) summed inwards into ``wrench``; the bias ``−ad(T)ᵀ (M_g T)`` is
+    forces as a wrench) summed inwards into ``wrench``.  Mimic joints: the followers'
+    positions, rates and accelerations are set from their leaders' (:class:`MimicMap`) before
+    the recursion; the bias ``−ad(T)ᵀ (M_g T)`` is
     ``crm.newton_euler_bias`` evaluated as two products (its SymPy form is expanded).  ``aj=None``: without joint
     accelerations (the bias forces of forward dynamics)."""
 
@@ -258,7 +326,10 @@ class _Recursion:
             raise ModelError("recursive joint-space dynamics: 3D models only")
         self.tree = tree = js.spanning_tree()
         self.t, self.u, self.p = t, u, p = ca.SX.sym("t"), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
-        self.qj, self.vj = qj, vj = ca.SX.sym("qj", js.nq), ca.SX.sym("vj", js.nv)
+        self.qj, self.vj = ca.SX.sym("qj", js.nq), ca.SX.sym("vj", js.nv)
+        self.mimic = mimic = MimicMap(model)
+        qj, vj = mimic.positions(self.qj), mimic.rates(self.vj)
+        aj = None if aj is None else mimic.rates(aj)
         sq = js.slices()
         self.sv = sv = js.slices(rates=True)
         owned = _owned(model, tree)
@@ -318,12 +389,10 @@ class _Recursion:
         return out
 
 
-def recursive_dynamics_function(model) -> ca.Function:
-    """``(t, qj, vj, u, p) -> (aj, check)`` like :func:`tree_dynamics_function`, computed
-    recursively over the tree (:class:`_Recursion`, without joint accelerations), giving the
-    bias ``C = Sᵀ f``; ``M_j`` by composite inertias (CRBA).  ``M_j a_j = τ − C``, solved by
-    the same written-out Cholesky, leaves first (no fill-in)."""
-    rec = _Recursion(model)
+def composite_mass_matrix(rec: _Recursion) -> ca.SX:
+    """``M_j`` (nv × nv, both triangles) by composite inertias (CRBA): ``(M_j)_ik = S_iᵀ M^c_k S_k``
+    for ``i`` an ancestor of (or equal to) ``k``, ``M^c_k`` the summed mass matrices of the
+    subtree beyond joint ``k`` (in g)."""
     tree, motion, sv = rec.tree, rec.motion, rec.sv
     n = rec.js.nv
     Mj = ca.SX(n, n)
@@ -345,25 +414,54 @@ def recursive_dynamics_function(model) -> ca.Function:
                 Mj[sv[up], sv[name]] = block
                 Mj[sv[name], sv[up]] = block.T
             node = rec.parent[node]
-    order = [i for _, there, _, _ in reversed(tree) if motion[there][1].size2()
-             for i in range(sv[motion[there][0]].start, sv[motion[there][0]].stop)]
-    rhs = rec.efforts() - rec.projected_forces()
-    y, pivot = cholesky_solve(Mj[order, order], rhs[order])
-    aj = ca.SX.zeros(n)
-    aj[order] = y
-    return _function(rec.t, rec.qj, rec.vj, rec.u, rec.p, aj, pivot)
+    return Mj
+
+
+def leaves_first(rec: _Recursion) -> list[int]:
+    """The positions in ``rec.mimic.independent`` of the independent joint rates, joints of
+    the deepest members first (a Cholesky factor of ``M_j`` in this order has no fill-in)."""
+    col = {i: c for c, i in enumerate(rec.mimic.independent)}
+    return [col[i] for _, there, _, _ in reversed(rec.tree) if rec.motion[there][1].size2()
+            for i in range(rec.sv[rec.motion[there][0]].start, rec.sv[rec.motion[there][0]].stop) if i in col]
+
+
+def independent_solve(rec: _Recursion, M_i: ca.SX, b: ca.SX) -> tuple[ca.SX, ca.SX]:
+    """``(M_i⁻¹ b, pivot)`` by :func:`cholesky_solve` in the :func:`leaves_first` order (``b``
+    a vector or a matrix of columns)."""
+    order = leaves_first(rec)
+    x = ca.SX.zeros(b.size1(), b.size2())
+    y, pivot = cholesky_solve(M_i[order, order], b[order, :])
+    if order:
+        x[order, :] = y
+    return x, pivot
+
+
+def recursive_dynamics_function(model) -> ca.Function:
+    """``(t, qj, vj, u, p) -> (aj, check)`` like :func:`tree_dynamics_function`, computed
+    recursively over the tree (:class:`_Recursion`, without joint accelerations), giving the
+    bias ``C = S_gᵀ W_g``; ``M_j`` by composite inertias (:func:`composite_mass_matrix`).
+    ``M_i a_i = Gᵀ (τ − C)`` with ``M_i = Gᵀ M_j G`` (:class:`MimicMap`; ``G = 1`` without
+    mimic joints), solved by the written-out Cholesky, leaves first (no fill-in); ``aj = G a_i``
+    (a follower's entries of ``qj``, ``vj`` are ignored: set from its leader's)."""
+    rec = _Recursion(model)
+    G = ca.DM(rec.mimic.G)
+    M_i = ca.mtimes([G.T, composite_mass_matrix(rec), G])
+    rhs = ca.mtimes(G.T, rec.efforts() - rec.projected_forces())
+    a_i, pivot = independent_solve(rec, M_i, rhs)
+    return _function(rec.t, rec.qj, rec.vj, rec.u, rec.p, ca.mtimes(G, a_i), pivot)
 
 
 def recursive_inverse_dynamics_function(model) -> ca.Function:
     """``(t, qj, vj, aj, u, p) -> r``: the joint-space equations of motion as a residual,
     ``r = M_j a_j + C − τ`` (N·m or N per joint rate; ``τ`` the actuated joints' efforts,
     :func:`joint_efforts`), by recursive Newton–Euler (:class:`_Recursion` with the joint
-    accelerations): ``r = Sᵀ f − τ``.  The same quantities as
+    accelerations): ``r = Gᵀ (S_gᵀ W_g − τ)`` (one row per independent rate,
+    :class:`MimicMap`).  The same quantities as
     :func:`recursive_dynamics_function` without ``M_j``: linear in ``a_j`` and O(number of
     members) operations, so its derivatives stay cheap (the joint-space collocation's rows,
     :mod:`ncgen.optim.joint_radau`)."""
     aj = ca.SX.sym("aj", model.joint_space.nv)
     rec = _Recursion(model, aj)
-    r = rec.projected_forces() - rec.efforts()
+    r = ca.mtimes(ca.DM(rec.mimic.G).T, rec.projected_forces() - rec.efforts())
     return ca.Function("joint_inverse_dynamics", [rec.t, rec.qj, rec.vj, aj, rec.u, rec.p], [r],
                        ["t", "qj", "vj", "aj", "u", "p"], ["r"])

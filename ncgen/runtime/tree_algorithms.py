@@ -1,0 +1,278 @@
+"""Compiled rigid-body algorithms of trees, called from Python with ~1 µs overhead: RNEA,
+CRBA, ABA and the derivatives of RNEA and ABA (SX functions of
+:mod:`ncgen.assembly.tree_algorithms`, one small C library each, compiled on first use and
+cached on disk by content, called through :class:`~ncgen.codegen.direct.DirectFunction`).
+
+* :func:`rnea` — ``τ(qj, vj, aj)``;  :func:`crba` — ``M(qj)``;  :func:`aba` — ``aj(qj, vj, τ)``;
+* :func:`rnea_derivatives` — ``(τ, ∂τ/∂q, ∂τ/∂v, ∂τ/∂a)``;
+* :func:`aba_derivatives` — ``(aj, ∂a/∂q, ∂a/∂v, ∂a/∂τ)``;
+* :func:`algorithm_kernel` — the compiled kernel itself (:class:`AlgorithmKernel`), for loops;
+* :func:`joint_linearization` — ``nc.linearize(model, qj, vj, u, space="joint")``: the
+  joint-space ``A``, ``B`` from the ABA derivatives (:class:`JointLinearModel`).
+
+Conventions are Pinocchio's (``pinocchio.rnea``, ``crba``, ``aba``,
+``computeRNEADerivatives``, ``computeABADerivatives``): joint positions ``qj`` and rates
+``vj``, ``aj`` in ``model.joint_names`` order (a free joint: ``[x, y, z, qx, qy, qz, qw]`` and
+``[v, ω]`` in its frame), efforts ``τ`` and every derivative per independent joint rate
+(mimic followers left out), position derivatives in the tangent space, gravity and the
+model's other passive forces included at inputs ``u = 0``.  Models: trees of joints with
+coordinates, mimic joints allowed (:func:`~ncgen.runtime.tree_check.check_tree`), 3D.
+"""
+from __future__ import annotations
+
+import ctypes
+import weakref
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ncgen.errors import ModelError
+from ncgen.runtime.tree_check import PIVOT_TOL, check_tree, compile_tree_function, unit_quaternions
+from ncgen.validation import as_vector
+
+#: ``name: (inputs after t before p, outputs)`` of every algorithm.
+ALGORITHMS = {
+    "rnea": (("qj", "vj", "aj"), ("tau",)),
+    "crba": (("qj",), ("M",)),
+    "aba": (("qj", "vj", "tau"), ("aj",)),
+    "rnea_derivatives": (("qj", "vj", "aj"), ("tau", "dtau_dq", "dtau_dv", "dtau_da")),
+    "aba_derivatives": (("qj", "vj", "tau"), ("aj", "da_dq", "da_dv", "da_dtau")),
+}
+_KERNELS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+class AlgorithmKernel:
+    """``k(*args) -> outputs``: one compiled algorithm of a tree (:data:`ALGORITHMS`: ``args``
+    are its inputs, ``qj`` with unit quaternions).  Time and parameters are ``model.t0``,
+    ``model.p0`` until :meth:`set`.  Returns the output buffers (one array, or a tuple;
+    overwritten by the next call: copy them to keep them; matrices are column-major views,
+    shape ``(n, n)``).  ABA and its derivatives raise :class:`ModelError` for a singular mass
+    matrix or a non-finite result.  Not thread-safe: one kernel per thread (:meth:`copy`)."""
+
+    def __init__(self, model, name: str, direct):
+        self.model, self.name, self.direct = model, name, direct
+        self.input_names, out_names = ALGORITHMS[name]
+        self._inputs = direct.inputs[1:1 + len(self.input_names)]
+        self._p = direct.inputs[-1]
+        self._sizes = [b.size for b in self._inputs]
+        outs = []
+        for o, f_out in zip(direct.outputs, range(len(out_names))):
+            shape = direct.function.size_out(f_out)
+            outs.append(o.reshape(shape[::-1]).T if shape[1] > 1 else o)
+        self._outputs = outs[0] if len(outs) == 1 else tuple(outs)
+        self._check = None
+        if direct.function.n_out() > len(out_names):
+            check = direct.outputs[-1]
+            self._check = (ctypes.c_double * 2).from_address(check.ctypes.data)
+        self._fn, self._args = direct._fn, direct._args
+        self.set(t=model.t0, p=model.p0)
+
+    def copy(self) -> "AlgorithmKernel":
+        """The same compiled kernel with buffers (and time, parameters) of its own."""
+        k = AlgorithmKernel(self.model, self.name, self.direct.copy())
+        k.set(t=float(self.direct.inputs[0][0]), p=self._p)
+        return k
+
+    def set(self, *, t=None, p=None) -> None:
+        """Time ``t`` (s) and parameters ``p`` (``model.parameter_names`` order) of later calls."""
+        if t is not None:
+            self.direct.inputs[0][...] = float(t)
+        if p is not None:
+            self._p[...] = as_vector(p, self.model.np, "p")
+
+    def __call__(self, *args):
+        inputs = self._inputs
+        if len(args) != len(inputs):
+            self._bad_arguments(args)
+        for buf, x in zip(inputs, args):
+            buf[...] = x
+        if self._fn(*self._args):
+            raise ModelError(f"{self.name}: the compiled kernel returned an error")
+        check = self._check
+        if check is not None and not (check[0] > PIVOT_TOL and check[1] - check[1] == 0.0):
+            self._singular()
+        return self._outputs
+
+    def _bad_arguments(self, args):
+        raise ModelError(f"{self.name}: expected {len(self._inputs)} arguments ({', '.join(self.input_names)}) "
+                         f"of {', '.join(map(str, self._sizes))} values, got {len(args)}")
+
+    def _singular(self):
+        check = self._check
+        if np.isfinite(check[0]) and not check[0] > PIVOT_TOL:
+            raise ModelError(f"{self.name}: the joint-space mass matrix is singular at this state "
+                             f"(smallest relative Cholesky pivot {check[0]:.3g})")
+        raise ModelError(f"{self.name}: the result is not finite (non-finite qj, vj or tau?)")
+
+
+def algorithm_kernel(model, name: str, *, cflags=None) -> AlgorithmKernel:
+    """The compiled algorithm ``name`` (a key of :data:`ALGORITHMS`) of the tree ``model``,
+    built once per model (the library is cached by content).  Raises :class:`ModelError` for a
+    model that is not a tree (:func:`~ncgen.runtime.tree_check.check_tree`) or not 3D."""
+    from ncgen.assembly import tree_algorithms
+
+    if name not in ALGORITHMS:
+        raise ModelError(f"algorithm_kernel: name: expected one of {', '.join(ALGORITHMS)}, got {name!r}")
+    kernels = _KERNELS.setdefault(model, {})
+    hit = kernels.get((name, cflags))
+    if isinstance(hit, ModelError):
+        raise hit
+    if hit is not None:
+        return hit
+    try:
+        check_tree(model)
+        if model.joint_space.dim != 3:
+            raise ModelError(f"{name}: compiled rigid-body algorithms take 3D models only")
+        f = getattr(tree_algorithms, f"{name}_function")(model)
+    except ModelError as e:
+        kernels[(name, cflags)] = e
+        raise
+    hit = kernels[(name, cflags)] = AlgorithmKernel(model, name, compile_tree_function(model, f, cflags, name))
+    return hit
+
+
+_APPLIES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def rnea_applies(model) -> list[int] | None:
+    """The indices (in ``v_j``) of the independent joint rates of ``model`` when the compiled
+    algorithms take it (a 3D tree, mimic joints allowed), else None (checked once per model)."""
+    from ncgen.assembly.tree_dynamics import MimicMap
+
+    if model not in _APPLIES:
+        try:
+            check_tree(model)
+            _APPLIES[model] = MimicMap(model).independent if model.joint_space.dim == 3 else None
+        except ModelError:
+            _APPLIES[model] = None
+    return _APPLIES[model]
+
+
+def _run(model, name: str, args: dict, p, t: float):
+    js = model.joint_space
+    k = algorithm_kernel(model, name)
+    sizes = {"qj": js.nq, "vj": js.nv, "aj": js.nv, "tau": k._sizes[-1]}
+    values = []
+    for a in k.input_names:
+        what = {"qj": "joint positions", "vj": "joint rates", "aj": "joint accelerations",
+                "tau": "efforts of the independent joint rates"}[a]
+        x = as_vector(args[a], sizes[a], f"{a} ({what}, joint_names order)")
+        values.append(unit_quaternions(js, x) if a == "qj" else x)
+    k.set(t=t, p=model.p0 if p is None else p)
+    out = k(*values)
+    return tuple(np.array(o) for o in out) if isinstance(out, tuple) else np.array(out)
+
+
+def rnea(model, qj, vj, aj, *, p=None, t: float = 0.0) -> np.ndarray:
+    """``τ``: the efforts of the independent joint rates giving accelerations ``aj`` at
+    ``(qj, vj)`` (module docstring; Pinocchio's ``rnea``)."""
+    return _run(model, "rnea", {"qj": qj, "vj": vj, "aj": aj}, p, t)
+
+
+def crba(model, qj, *, p=None, t: float = 0.0) -> np.ndarray:
+    """``M``: the joint-space mass matrix of the independent rates (Pinocchio's ``crba``, both triangles)."""
+    return _run(model, "crba", {"qj": qj}, p, t)
+
+
+def aba(model, qj, vj, tau, *, p=None, t: float = 0.0) -> np.ndarray:
+    """``aj``: joint accelerations under the efforts ``tau`` of the independent rates (Pinocchio's ``aba``)."""
+    return _run(model, "aba", {"qj": qj, "vj": vj, "tau": tau}, p, t)
+
+
+def rnea_derivatives(model, qj, vj, aj, *, p=None, t: float = 0.0) -> tuple[np.ndarray, ...]:
+    """``(τ, ∂τ/∂q, ∂τ/∂v, ∂τ/∂a)`` (Pinocchio's ``computeRNEADerivatives``; ∂τ/∂a = M)."""
+    return _run(model, "rnea_derivatives", {"qj": qj, "vj": vj, "aj": aj}, p, t)
+
+
+def aba_derivatives(model, qj, vj, tau, *, p=None, t: float = 0.0) -> tuple[np.ndarray, ...]:
+    """``(aj, ∂a/∂q, ∂a/∂v, ∂a/∂τ)`` (Pinocchio's ``computeABADerivatives``; ∂a/∂τ = M⁻¹;
+    rows per independent rate)."""
+    return _run(model, "aba_derivatives", {"qj": qj, "vj": vj, "tau": tau}, p, t)
+
+
+# --------------------------------------------------------------------------- joint-space linearisation
+@dataclass
+class JointLinearModel:
+    """``δẋ = A δx + B δu`` about ``(t, qj, vj, u, p)`` in joint space: ``x = [δ; v_i]``,
+    ``δ`` the tangent-space position deviation of the independent joint rates (``q_j ⊕ Gδ``,
+    Pinocchio's ``integrate``: angles and lengths add, a spherical joint turns by ``exp(δ̂)``
+    in its own axes, a free joint moves by the SE(3) exponential in its own frame) and
+    ``v_i`` the independent rates.  ``A = [[K, 1], [∂a/∂q, ∂a/∂v]]``, ``B = [[0], [∂a/∂τ ∂τ/∂u]]``;
+    ``K`` is zero for angles and lengths, ``−ω̂`` for a spherical joint and ``−ad(T)`` (its
+    twist ``T`` in its frame, Pinocchio's ``[v; ω]`` order) for a free joint.  ``xdot = [v_i; a_i]``:
+    the state derivative at the point (not zero away from equilibria).  ``state_names``:
+    ``q:<rate name>`` then ``v:<rate name>``."""
+
+    model: object = field(repr=False)
+    A: np.ndarray
+    B: np.ndarray
+    xdot: np.ndarray
+    t: float
+    qj: np.ndarray = field(repr=False)
+    vj: np.ndarray = field(repr=False)
+    u: np.ndarray = field(repr=False)
+    p: np.ndarray = field(repr=False)
+    state_names: list = field(repr=False, default_factory=list)
+
+    @property
+    def eigenvalues(self) -> np.ndarray:
+        return np.linalg.eigvals(self.A)
+
+
+def _efforts_function(model):
+    """``(t, q, u, p) -> τ_i``: the efforts of the independent joint rates from the inputs
+    (actuated joints' efforts, :func:`~ncgen.assembly.tree_dynamics.joint_efforts`, summed
+    onto the leaders of mimic joints), and ``∂τ_i/∂u``."""
+    import casadi as ca
+
+    from ncgen.assembly.tree_dynamics import MimicMap, joint_efforts
+
+    js = model.joint_space
+    t, q, u, p = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
+    v = ca.SX.sym("v", model.nq)
+    if ca.depends_on(js.passive_force(t, q, v, u, p), u):
+        raise ModelError("linearize(space='joint'): the model's inputs act on it besides through joint "
+                         "efforts (forces with inputs); use the natural-coordinate linearisation")
+    tau = ca.mtimes(ca.DM(MimicMap(model).G).T, joint_efforts(js, js.actuation(t, q, u, p)[1]))
+    return ca.Function("efforts", [t, q, u, p], [tau, ca.jacobian(tau, u)])
+
+
+def joint_linearization(model, qj, vj=None, u=None, p=None, t: float | None = None) -> JointLinearModel:
+    """The joint-space linear model of a 3D tree about ``(qj, vj)`` with inputs ``u``
+    (:class:`JointLinearModel`), from the compiled ABA derivatives (matching Pinocchio's
+    ``computeABADerivatives`` at any state)."""
+    from ncgen.rigid_motion import ad, so3_hat
+
+    js = model.joint_space
+    independent = rnea_applies(model)
+    if independent is None:
+        check_tree(model)
+        raise ModelError("linearize(space='joint'): 3D trees only")
+    t = model.t0 if t is None else float(t)
+    qj = unit_quaternions(js, as_vector(qj, js.nq, "qj (joint positions, joint_names order)"))
+    vj = np.zeros(js.nv) if vj is None else as_vector(vj, js.nv, "vj (joint rates, joint_names order)")
+    u = np.zeros(model.nu) if u is None else as_vector(u, model.nu, "u (model.input_names order)")
+    p = model.p0 if p is None else as_vector(p, model.np, "p")
+    q, _ = model.from_joint_space(qj, vj, t=t, p=p)
+    tau, dtau_du = (np.array(x, float) for x in _efforts_function(model)(t, q, u, p))
+    a, da_dq, da_dv, da_dtau = aba_derivatives(model, qj, vj, tau.reshape(-1), p=p, t=t)
+    n = len(independent)
+    col = {i: c for c, i in enumerate(independent)}
+    K = np.zeros((n, n))
+    sv = js.slices(rates=True)
+    for name in js.joint_names:
+        kind, s = js.joints[name].kind, sv[name]
+        w = vj[s]
+        if kind == "Spherical" and js.nq_joint[name] == 4:
+            idx = [col[i] for i in range(s.start, s.stop)]
+            K[np.ix_(idx, idx)] = -so3_hat(w)
+        elif kind == "Free":
+            idx = [col[i] for i in range(s.start, s.stop)]
+            ad_T = ad(np.concatenate([w[3:], w[:3]]))              # arboris [ω; v] order
+            swap = np.r_[3:6, 0:3]
+            K[np.ix_(idx, idx)] = -ad_T[np.ix_(swap, swap)]
+    A = np.block([[K, np.eye(n)], [da_dq, da_dv]])
+    B = np.vstack([np.zeros((n, model.nu)), da_dtau @ dtau_du.reshape(n, model.nu)])
+    names = [js.rate_names[i] for i in independent]
+    return JointLinearModel(model=model, A=A, B=B, xdot=np.concatenate([vj[independent], a[independent]]), t=t,
+                            qj=qj, vj=vj, u=u, p=p, state_names=[f"q:{x}" for x in names] + [f"v:{x}" for x in names])
