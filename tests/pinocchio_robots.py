@@ -22,6 +22,7 @@ ROBOTS = {
     "ur5": ("ur_description/urdf/ur5_robot.urdf", False),
     "solo12": ("solo_description/robots/solo12.urdf", True),
     "talos": ("talos_data/robots/talos_reduced.urdf", True),
+    "so101": ("so_arm_description/urdf/so101.urdf", False),
 }
 
 

@@ -217,3 +217,22 @@ def test_linearize_space_is_checked():
     model = model_of("ur5")
     with pytest.raises(nc.NcgenError, match="space"):
         nc.linearize(model, np.zeros(6), space="cartesian")
+
+
+@pytest.mark.parametrize("share", [True, False])
+def test_an_arm_with_a_nearly_coplanar_wrist_builds_with_defaults_and_gets_the_kernel(share):
+    """The SO-101 (6 joints): at its zero pose the wrist's roll axis, flex axis and the line
+    between its joint points are coplanar to 2e-6 rad, which made the shared coordinates'
+    rigidity equations dependent ("initial configuration is singular"); now the body's own axes
+    complete its basis.  Both forms get the forward-dynamics kernel, which agrees with
+    ``pinocchio.aba`` at random states."""
+    model = nc.System.from_urdf(urdf_text("so101")).build(share=share)
+    _, pm = pinocchio_models("so101")
+    jm = JointMap(model, pm)
+    d = pm.createData()
+    k = nc.joint_forward_dynamics_kernel(model)
+    rng = np.random.default_rng(5)
+    for _ in range(N_STATES):
+        qp = pin.randomConfiguration(pm, -np.full(pm.nq, 1.5), np.full(pm.nq, 1.5))
+        vj, u = rng.normal(size=pm.nv), rng.normal(size=model.nu)
+        close(k(jm.q_to_ncgen(qp), vj, u), jm.P.T @ pin.aba(pm, d, qp, jm.P @ vj, jm.P @ u), "so101 aba")
