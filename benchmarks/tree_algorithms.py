@@ -14,9 +14,9 @@ ratio ncgen / Pinocchio of the time per call:
   ``pinocchio.computeABADerivatives`` (target ≤ 1.0×; Talos only with ``--talos-derivatives``:
   its kernel is a long C function, see the build times printed).
 
-Interleaved: ``--rounds`` rounds, each timing a batch of ``--calls`` calls of one side then of
-the other (the order alternating), so that both see the same machine load; the ratio of each
-round's pair is kept and the minimum and median ratios are printed with each side's best time
+Interleaved: ``--rounds`` rounds, each timing three batches of ``--calls`` calls of each side,
+alternating, so that both see the same machine load; the ratio of each round's best batches
+is kept and the minimum and median ratios are printed with each side's best time
 per call.  The machine (CPU model, load average) is printed first: on a shared machine the
 medians move with the load, the minima less.
 
@@ -25,7 +25,7 @@ Then the build: seconds from the URDF text to the loaded forward-dynamics kernel
 with an empty compile cache and again with the cache filled (targets: 7-DOF arm ≤ 1 s empty,
 ≤ 50 ms cached; Talos ≤ 5 s), split into stages.
 
-    python benchmarks/tree_algorithms.py [--robots panda ur5 talos] [--calls 1000] [--rounds 15]
+    python benchmarks/tree_algorithms.py [--robots panda ur5 talos] [--calls 1000] [--rounds 9]
                                          [--talos-derivatives] [--skip-build] [--smoke]
 """
 from __future__ import annotations
@@ -59,16 +59,20 @@ def batch_time(fn, calls: int) -> float:
     return (time.perf_counter() - t) / calls
 
 
-def interleaved(ours, theirs, calls: int, rounds: int) -> dict:
-    """Best µs per call of each side and the min and median of the per-round ratios."""
+def interleaved(ours, theirs, calls: int, rounds: int, pairs: int = 3) -> dict:
+    """Best µs per call of each side and the min and median of the per-round ratios; a round
+    alternates ``pairs`` batches of each side and compares their best batches (a preempted
+    batch does not make a ratio)."""
     for f in (ours, theirs):                       # warm up
         batch_time(f, max(1, calls // 10))
     ratios, best_ours, best_theirs = [], float("inf"), float("inf")
     for r in range(rounds):
-        if r % 2:
-            b, a = batch_time(theirs, calls), batch_time(ours, calls)
-        else:
-            a, b = batch_time(ours, calls), batch_time(theirs, calls)
+        a = b = float("inf")
+        for k in range(pairs):
+            if (r + k) % 2:
+                b, a = min(b, batch_time(theirs, calls)), min(a, batch_time(ours, calls))
+            else:
+                a, b = min(a, batch_time(ours, calls)), min(b, batch_time(theirs, calls))
         ratios.append(a / b)
         best_ours, best_theirs = min(best_ours, a), min(best_theirs, b)
     return {"ncgen_us": best_ours * 1e6, "pinocchio_us": best_theirs * 1e6,
@@ -103,7 +107,9 @@ def robot_pairs(name: str, calls: int, rounds: int, derivatives: bool) -> dict:
     fd = nc.joint_forward_dynamics_kernel(model)
     out["fd_build_s"] = time.perf_counter() - t
     act = [i for n in model.actuated_joints for i in range(*model.joint_space.slices(rates=True)[n].indices(10**6))]
-    u = tau_i[[mimic.independent.index(i) for i in act]]             # URDF: the actuated rates are the independent ones
+    cols = [mimic.independent.index(i) for i in act]
+    tau_i[[c for c in range(n_i) if c not in cols]] = 0.0                 # a free base is not actuated
+    u = tau_i[cols]                                                    # URDF: the actuated rates are the independent ones
     full = jm.P @ (jm.P.T @ P @ tau_i)                                 # Pinocchio's efforts (followers: none)
     out["fd_agreement"] = float(np.max(np.abs(fd(qj, vj, u) - nc.aba(model, qj, vj, tau_i))))
     out["fd"] = interleaved(lambda: fd(qj, vj, u), lambda: pin.aba(pm, d, qp, vp, full), calls, rounds)
@@ -172,7 +178,7 @@ def main(argv=None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--robots", nargs="+", default=list(ROBOT_ARGS), choices=list(ROBOT_ARGS))
     ap.add_argument("--calls", type=int, default=1000, help="calls per timed batch (default 1000)")
-    ap.add_argument("--rounds", type=int, default=15, help="interleaved rounds (default 15)")
+    ap.add_argument("--rounds", type=int, default=9, help="interleaved rounds (default 9, 3 batch pairs each)")
     ap.add_argument("--talos-derivatives", action="store_true", help="also build and time Talos' ABA derivatives")
     ap.add_argument("--skip-build", action="store_true", help="leave out the URDF-to-kernel build times")
     ap.add_argument("--smoke", action="store_true", help="tiny run (UR5, few calls) to check the script works")

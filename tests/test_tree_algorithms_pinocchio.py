@@ -236,3 +236,30 @@ def test_an_arm_with_a_nearly_coplanar_wrist_builds_with_defaults_and_gets_the_k
         qp = pin.randomConfiguration(pm, -np.full(pm.nq, 1.5), np.full(pm.nq, 1.5))
         vj, u = rng.normal(size=pm.nv), rng.normal(size=model.nu)
         close(k(jm.q_to_ncgen(qp), vj, u), jm.P.T @ pin.aba(pm, d, qp, jm.P @ vj, jm.P @ u), "so101 aba")
+
+
+def test_the_fast_call_and_the_ctypes_path_agree(monkeypatch):
+    """The CPython accelerator (:mod:`ncgen.codegen.fast_call`) and the plain ctypes path
+    give the same numbers and the same errors (a copy made without the accelerator)."""
+    from ncgen.codegen import fast_call
+
+    model = model_of("ur5")
+    fast = nc.algorithm_kernel(model, "rnea")
+    fd = nc.joint_forward_dynamics_kernel(model)
+    monkeypatch.setattr(fast_call, "_MODULE", [None])
+    slow, fd_slow = fast.copy(), fd.copy()
+    assert slow._fast is None and fd_slow._fast is None
+    rng = np.random.default_rng(2)
+    for _ in range(3):
+        qj, vj, aj = rng.normal(size=6), rng.normal(size=6), rng.normal(size=6)
+        np.testing.assert_array_equal(fast(qj, vj, aj), slow(qj, vj, aj))
+        np.testing.assert_array_equal(fd(qj, vj, aj), fd_slow(qj, vj, aj))
+        np.testing.assert_array_equal(fast(list(qj), list(vj), list(aj)), slow(qj, vj, aj))
+    for k in (fast, slow):
+        with pytest.raises(nc.ModelError, match="expected 3 arguments"):
+            k(np.zeros(5), np.zeros(6), np.zeros(6))
+    for k in (fd, fd_slow):
+        with pytest.raises(nc.ModelError, match="expected qj of 6"):
+            k(np.zeros(5), np.zeros(6), np.zeros(6))
+        with pytest.raises(nc.ModelError, match="not finite"):
+            k(np.zeros(6), np.full(6, np.inf), np.zeros(6))

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ncgen.codegen.fast_call import fast_caller
 from ncgen.errors import ModelError
 from ncgen.runtime.tree_check import PIVOT_TOL, check_tree, compile_tree_function, unit_quaternions
 from ncgen.validation import as_vector
@@ -65,6 +66,8 @@ class AlgorithmKernel:
             check = direct.outputs[-1]
             self._check = (ctypes.c_double * 2).from_address(check.ctypes.data)
         self._fn, self._args = direct._fn, direct._args
+        self._fast = fast_caller(direct, len(self._inputs), first=1, result=self._outputs,
+                                 check=None if self._check is None else direct.outputs[-1], tol=PIVOT_TOL)
         self.set(t=model.t0, p=model.p0)
 
     def copy(self) -> "AlgorithmKernel":
@@ -81,8 +84,17 @@ class AlgorithmKernel:
             self._p[...] = as_vector(p, self.model.np, "p")
 
     def __call__(self, *args):
+        fast = self._fast
+        if fast is not None:
+            try:
+                out = fast(*args)
+            except (TypeError, ValueError):
+                self._bad_arguments(args)
+            if out is None:
+                self._singular()
+            return out
         inputs = self._inputs
-        if len(args) != len(inputs):
+        if len(args) != len(inputs) or [np.size(x) for x in args] != self._sizes:
             self._bad_arguments(args)
         for buf, x in zip(inputs, args):
             buf[...] = x
@@ -94,8 +106,11 @@ class AlgorithmKernel:
         return self._outputs
 
     def _bad_arguments(self, args):
+        if [np.size(x) for x in args] == self._sizes:
+            raise ModelError(f"{self.name}: {', '.join(self.input_names)} must be sequences of numbers")
         raise ModelError(f"{self.name}: expected {len(self._inputs)} arguments ({', '.join(self.input_names)}) "
-                         f"of {', '.join(map(str, self._sizes))} values, got {len(args)}")
+                         f"of {', '.join(map(str, self._sizes))} values, got {len(args)} of "
+                         f"{', '.join(str(np.size(x)) for x in args)}")
 
     def _singular(self):
         check = self._check

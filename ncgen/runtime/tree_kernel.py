@@ -25,6 +25,7 @@ import weakref
 
 import numpy as np
 
+from ncgen.codegen.fast_call import fast_caller
 from ncgen.errors import ModelError
 from ncgen.runtime.joint_dynamics import forward_dynamics
 from ncgen.runtime.tree_check import PIVOT_TOL, check_tree, compile_tree_function, unit_quaternions
@@ -53,6 +54,8 @@ class JointDynamicsKernel:
         self._check = (ctypes.c_double * 2).from_address(check.ctypes.data)    # Python floats on indexing
         self._keep = check
         self._fn, self._args = direct._fn, direct._args
+        self._zero_u = np.zeros(self.nu)
+        self._fast = fast_caller(direct, 3, first=1, check=check, tol=PIVOT_TOL, result=self._aj)
         self.set(t=model.t0, p=model.p0)
 
     def copy(self) -> "JointDynamicsKernel":
@@ -69,6 +72,15 @@ class JointDynamicsKernel:
             self._p[...] = as_vector(p, self.model.np, "p")
 
     def __call__(self, qj, vj, u=None) -> np.ndarray:
+        fast = self._fast
+        if fast is not None:
+            try:
+                out = fast(qj, vj, self._zero_u if u is None else u)
+            except (TypeError, ValueError):
+                self._bad_sizes(qj, vj, u)
+            if out is None:
+                self._singular()
+            return out
         if len(qj) != self.nq or len(vj) != self.nv or (u is not None and len(u) != self.nu):
             self._bad_sizes(qj, vj, u)
         self._qj[...] = qj
@@ -80,6 +92,9 @@ class JointDynamicsKernel:
         return self._aj
 
     def _bad_sizes(self, qj, vj, u):
+        sizes = [np.size(qj), np.size(vj), self.nu if u is None else np.size(u)]
+        if sizes == [self.nq, self.nv, self.nu]:
+            raise ModelError("joint forward dynamics: qj, vj and u must be sequences of numbers")
         raise ModelError(f"joint forward dynamics: expected qj of {self.nq}, vj of {self.nv} and u of "
                          f"{self.nu} values; got {len(qj)}, {len(vj)} and {'None' if u is None else len(u)}")
 
