@@ -17,7 +17,8 @@ ratio ncgen / Pinocchio of the time per call:
 Interleaved: ``--rounds`` rounds, each timing three batches of ``--calls`` calls of each side,
 alternating, so that both see the same machine load; the ratio of each round's best batches
 is kept and the minimum and median ratios are printed with each side's best time
-per call.  The machine (CPU model, load average) is printed first: on a shared machine the
+per call and their ratio ("best/best": on a loaded machine the per-round ratios swing when
+one side's batches are all preempted; the best times are the least disturbed).  The machine (CPU model, load average) is printed first: on a shared machine the
 medians move with the load, the minima less.
 
 Then the build: seconds from the URDF text to the loaded forward-dynamics kernel
@@ -196,7 +197,8 @@ def main(argv=None) -> int:
                 r = res[key]
                 print(f"  {label}: ncgen {r['ncgen_us']:.2f} µs, pinocchio {r['pinocchio_us']:.2f} µs per call"
                       + (f" ({res[key + '_note']})" if key + "_note" in res else ""))
-                print(f"RATIO {name} ncgen {label}: min {r['ratio_min']:.2f}  median {r['ratio_median']:.2f}")
+                print(f"RATIO {name} ncgen {label}: min {r['ratio_min']:.2f}  median {r['ratio_median']:.2f}  "
+                      f"best/best {r['ncgen_us'] / r['pinocchio_us']:.2f}")
         for key in ("fd_agreement", "rnea_agreement"):       # fd: the kernel vs nc.aba; rnea: vs Pinocchio
             if key in res:
                 print(f"  {key}: {res[key]:.2e}")
