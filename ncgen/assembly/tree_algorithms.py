@@ -16,6 +16,7 @@ inputs ``u = 0``; ``τ`` is what the joints add.
 - :func:`aba_function`: ``(t, qj, vj, τ, p) -> (aj, check)``: ``a_i = M_i⁻¹ (τ − τ_rnea(a=0))``,
   ``aj = G a_i`` (``check`` as in :func:`~ncgen.assembly.tree_dynamics.recursive_dynamics_function`);
 - :func:`rnea_derivatives_function`: ``(t, qj, vj, aj, p) -> (τ, ∂τ/∂q, ∂τ/∂v, ∂τ/∂a = M_i)``;
+- :func:`efforts_function`: ``(t, q, u, p) -> (τ_i, ∂τ_i/∂u)``, the efforts of the inputs;
 - :func:`aba_derivatives_function`: ``(t, qj, vj, τ, p) -> (aj, ∂a/∂q, ∂a/∂v, ∂a/∂τ = M_i⁻¹, check)``
   by ``∂a/∂x = −M_i⁻¹ ∂τ_rnea/∂x`` at ``a = a(q, v, τ)`` (the identity ``τ_rnea(q, v, a(q, v, τ)) = τ``
   differentiated), ``∂τ_rnea/∂x`` by CasADi's AD of the recursion — no finite differences.
@@ -30,7 +31,8 @@ from __future__ import annotations
 
 import casadi as ca
 
-from ncgen.assembly.tree_dynamics import _Recursion, composite_mass_matrix, independent_solve
+from ncgen.assembly.tree_dynamics import MimicMap, _Recursion, composite_mass_matrix, independent_solve, joint_efforts
+from ncgen.errors import ModelError
 
 
 def _function(name, inputs, outputs, input_names, output_names) -> ca.Function:
@@ -124,3 +126,17 @@ def aba_derivatives_function(model) -> ca.Function:
     return _function("aba_derivatives", [rec.t, rec.qj, rec.vj, tau, rec.p],
                      [aj, sol[:, :n], sol[:, n:2 * n], sol[:, 2 * n:], ca.vertcat(pivot, ca.sum1(aj))],
                      ["t", "qj", "vj", "tau", "p"], ["aj", "da_dq", "da_dv", "da_dtau", "check"])
+
+
+def efforts_function(model) -> ca.Function:
+    """``(t, q, u, p) -> τ_i``: the efforts of the independent joint rates from the inputs
+    (actuated joints' efforts, :func:`~ncgen.assembly.tree_dynamics.joint_efforts`, summed
+    onto the leaders of mimic joints), and ``∂τ_i/∂u``."""
+    js = model.joint_space
+    t, q, u, p = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
+    v = ca.SX.sym("v", model.nq)
+    if ca.depends_on(js.passive_force(t, q, v, u, p), u):
+        raise ModelError("the model's inputs act on it besides through joint efforts (forces with "
+                         "inputs): the joint-space algorithms take passive forces at u = 0")
+    tau = ca.mtimes(ca.DM(MimicMap(model).G).T, joint_efforts(js, js.actuation(t, q, u, p)[1]))
+    return ca.Function("efforts", [t, q, u, p], [tau, ca.jacobian(tau, u)])

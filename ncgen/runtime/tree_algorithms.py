@@ -6,9 +6,9 @@ cached on disk by content, called through :class:`~ncgen.codegen.direct.DirectFu
 * :func:`rnea` — ``τ(qj, vj, aj)``;  :func:`crba` — ``M(qj)``;  :func:`aba` — ``aj(qj, vj, τ)``;
 * :func:`rnea_derivatives` — ``(τ, ∂τ/∂q, ∂τ/∂v, ∂τ/∂a)``;
 * :func:`aba_derivatives` — ``(aj, ∂a/∂q, ∂a/∂v, ∂a/∂τ)``;
-* :func:`algorithm_kernel` — the compiled kernel itself (:class:`AlgorithmKernel`), for loops;
-* :func:`joint_linearization` — ``nc.linearize(model, qj, vj, u, space="joint")``: the
-  joint-space ``A``, ``B`` from the ABA derivatives (:class:`JointLinearModel`).
+* :func:`algorithm_kernel` — the compiled kernel itself (:class:`AlgorithmKernel`), for loops
+  (``nc.linearize(model, qj, vj, u, space="joint")`` uses the ABA derivatives:
+  :mod:`ncgen.analysis.joint_linearization`).
 
 Conventions are Pinocchio's (``pinocchio.rnea``, ``crba``, ``aba``,
 ``computeRNEADerivatives``, ``computeABADerivatives``): joint positions ``qj`` and rates
@@ -21,13 +21,12 @@ coordinates, mimic joints allowed (:func:`~ncgen.runtime.tree_check.check_tree`)
 from __future__ import annotations
 
 import ctypes
-import weakref
-from dataclasses import dataclass, field
 
 import numpy as np
 
 from ncgen.codegen.fast_call import fast_caller
 from ncgen.errors import ModelError
+from ncgen.model.data import model_data
 from ncgen.runtime.tree_check import PIVOT_TOL, check_tree, compile_tree_function, unit_quaternions
 from ncgen.validation import as_vector
 
@@ -39,7 +38,6 @@ ALGORITHMS = {
     "rnea_derivatives": (("qj", "vj", "aj"), ("tau", "dtau_dq", "dtau_dv", "dtau_da")),
     "aba_derivatives": (("qj", "vj", "tau"), ("aj", "da_dq", "da_dv", "da_dtau")),
 }
-_KERNELS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
 class AlgorithmKernel:
@@ -128,7 +126,7 @@ def algorithm_kernel(model, name: str, *, cflags=None) -> AlgorithmKernel:
 
     if name not in ALGORITHMS:
         raise ModelError(f"algorithm_kernel: name: expected one of {', '.join(ALGORITHMS)}, got {name!r}")
-    kernels = _KERNELS.setdefault(model, {})
+    kernels = model_data(model).algorithm_kernels
     hit = kernels.get((name, cflags))
     if isinstance(hit, ModelError):
         raise hit
@@ -146,21 +144,19 @@ def algorithm_kernel(model, name: str, *, cflags=None) -> AlgorithmKernel:
     return hit
 
 
-_APPLIES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-
-
 def rnea_applies(model) -> list[int] | None:
     """The indices (in ``v_j``) of the independent joint rates of ``model`` when the compiled
     algorithms take it (a 3D tree, mimic joints allowed), else None (checked once per model)."""
     from ncgen.assembly.tree_dynamics import MimicMap
 
-    if model not in _APPLIES:
+    data = model_data(model)
+    if data.algorithm_rates is None:
         try:
             check_tree(model)
-            _APPLIES[model] = MimicMap(model).independent if model.joint_space.dim == 3 else None
+            data.algorithm_rates = (MimicMap(model).independent if model.joint_space.dim == 3 else None,)
         except ModelError:
-            _APPLIES[model] = None
-    return _APPLIES[model]
+            data.algorithm_rates = (None,)
+    return data.algorithm_rates[0]
 
 
 def _run(model, name: str, args: dict, p, t: float):
@@ -203,91 +199,3 @@ def aba_derivatives(model, qj, vj, tau, *, p=None, t: float = 0.0) -> tuple[np.n
     """``(aj, ∂a/∂q, ∂a/∂v, ∂a/∂τ)`` (Pinocchio's ``computeABADerivatives``; ∂a/∂τ = M⁻¹;
     rows per independent rate)."""
     return _run(model, "aba_derivatives", {"qj": qj, "vj": vj, "tau": tau}, p, t)
-
-
-# --------------------------------------------------------------------------- joint-space linearisation
-@dataclass
-class JointLinearModel:
-    """``δẋ = A δx + B δu`` about ``(t, qj, vj, u, p)`` in joint space: ``x = [δ; v_i]``,
-    ``δ`` the tangent-space position deviation of the independent joint rates (``q_j ⊕ Gδ``,
-    Pinocchio's ``integrate``: angles and lengths add, a spherical joint turns by ``exp(δ̂)``
-    in its own axes, a free joint moves by the SE(3) exponential in its own frame) and
-    ``v_i`` the independent rates.  ``A = [[K, 1], [∂a/∂q, ∂a/∂v]]``, ``B = [[0], [∂a/∂τ ∂τ/∂u]]``;
-    ``K`` is zero for angles and lengths, ``−ω̂`` for a spherical joint and ``−ad(T)`` (its
-    twist ``T`` in its frame, Pinocchio's ``[v; ω]`` order) for a free joint.  ``xdot = [v_i; a_i]``:
-    the state derivative at the point (not zero away from equilibria).  ``state_names``:
-    ``q:<rate name>`` then ``v:<rate name>``."""
-
-    model: object = field(repr=False)
-    A: np.ndarray
-    B: np.ndarray
-    xdot: np.ndarray
-    t: float
-    qj: np.ndarray = field(repr=False)
-    vj: np.ndarray = field(repr=False)
-    u: np.ndarray = field(repr=False)
-    p: np.ndarray = field(repr=False)
-    state_names: list = field(repr=False, default_factory=list)
-
-    @property
-    def eigenvalues(self) -> np.ndarray:
-        return np.linalg.eigvals(self.A)
-
-
-def _efforts_function(model):
-    """``(t, q, u, p) -> τ_i``: the efforts of the independent joint rates from the inputs
-    (actuated joints' efforts, :func:`~ncgen.assembly.tree_dynamics.joint_efforts`, summed
-    onto the leaders of mimic joints), and ``∂τ_i/∂u``."""
-    import casadi as ca
-
-    from ncgen.assembly.tree_dynamics import MimicMap, joint_efforts
-
-    js = model.joint_space
-    t, q, u, p = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
-    v = ca.SX.sym("v", model.nq)
-    if ca.depends_on(js.passive_force(t, q, v, u, p), u):
-        raise ModelError("linearize(space='joint'): the model's inputs act on it besides through joint "
-                         "efforts (forces with inputs); use the natural-coordinate linearisation")
-    tau = ca.mtimes(ca.DM(MimicMap(model).G).T, joint_efforts(js, js.actuation(t, q, u, p)[1]))
-    return ca.Function("efforts", [t, q, u, p], [tau, ca.jacobian(tau, u)])
-
-
-def joint_linearization(model, qj, vj=None, u=None, p=None, t: float | None = None) -> JointLinearModel:
-    """The joint-space linear model of a 3D tree about ``(qj, vj)`` with inputs ``u``
-    (:class:`JointLinearModel`), from the compiled ABA derivatives (matching Pinocchio's
-    ``computeABADerivatives`` at any state)."""
-    from ncgen.rigid_motion import ad, so3_hat
-
-    js = model.joint_space
-    independent = rnea_applies(model)
-    if independent is None:
-        check_tree(model)
-        raise ModelError("linearize(space='joint'): 3D trees only")
-    t = model.t0 if t is None else float(t)
-    qj = unit_quaternions(js, as_vector(qj, js.nq, "qj (joint positions, joint_names order)"))
-    vj = np.zeros(js.nv) if vj is None else as_vector(vj, js.nv, "vj (joint rates, joint_names order)")
-    u = np.zeros(model.nu) if u is None else as_vector(u, model.nu, "u (model.input_names order)")
-    p = model.p0 if p is None else as_vector(p, model.np, "p")
-    q, _ = model.from_joint_space(qj, vj, t=t, p=p)
-    tau, dtau_du = (np.array(x, float) for x in _efforts_function(model)(t, q, u, p))
-    a, da_dq, da_dv, da_dtau = aba_derivatives(model, qj, vj, tau.reshape(-1), p=p, t=t)
-    n = len(independent)
-    col = {i: c for c, i in enumerate(independent)}
-    K = np.zeros((n, n))
-    sv = js.slices(rates=True)
-    for name in js.joint_names:
-        kind, s = js.joints[name].kind, sv[name]
-        w = vj[s]
-        if kind == "Spherical" and js.nq_joint[name] == 4:
-            idx = [col[i] for i in range(s.start, s.stop)]
-            K[np.ix_(idx, idx)] = -so3_hat(w)
-        elif kind == "Free":
-            idx = [col[i] for i in range(s.start, s.stop)]
-            ad_T = ad(np.concatenate([w[3:], w[:3]]))              # arboris [ω; v] order
-            swap = np.r_[3:6, 0:3]
-            K[np.ix_(idx, idx)] = -ad_T[np.ix_(swap, swap)]
-    A = np.block([[K, np.eye(n)], [da_dq, da_dv]])
-    B = np.vstack([np.zeros((n, model.nu)), da_dtau @ dtau_du.reshape(n, model.nu)])
-    names = [js.rate_names[i] for i in independent]
-    return JointLinearModel(model=model, A=A, B=B, xdot=np.concatenate([vj[independent], a[independent]]), t=t,
-                            qj=qj, vj=vj, u=u, p=p, state_names=[f"q:{x}" for x in names] + [f"v:{x}" for x in names])

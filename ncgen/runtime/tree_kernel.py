@@ -21,19 +21,17 @@ degrees of freedom as independent joint rates).
 from __future__ import annotations
 
 import ctypes
-import weakref
 
 import numpy as np
 
 from ncgen.codegen.fast_call import fast_caller
 from ncgen.errors import ModelError
+from ncgen.model.data import model_data
 from ncgen.runtime.joint_dynamics import forward_dynamics
 from ncgen.runtime.tree_check import PIVOT_TOL, check_tree, compile_tree_function, unit_quaternions
 from ncgen.validation import as_vector
 
 METHODS = ("auto", "recursive", "projection")
-_KERNELS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-_PRIVATE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()     # joint_forward_dynamics' own copies
 
 
 class JointDynamicsKernel:
@@ -117,7 +115,7 @@ def joint_forward_dynamics_kernel(model, *, method: str = "auto", cflags=None) -
 
     if method not in METHODS:
         raise ModelError(f"joint_forward_dynamics_kernel: method: expected one of {', '.join(METHODS)}, got {method!r}")
-    kernels = _KERNELS.setdefault(model, {})
+    kernels = model_data(model).tree_kernels
     hit = kernels.get((method, cflags))
     if isinstance(hit, ModelError):
         raise hit
@@ -160,13 +158,14 @@ def joint_forward_dynamics(model, qj, vj, u=None, p=None, t: float = 0.0, *, bac
     p = model.p0 if p is None else as_vector(p, model.np, "p")
     qj = unit_quaternions(js, qj)
     if backend == "compiled":
-        k = _PRIVATE.get(model)
-        if k is None:
+        data = model_data(model)
+        if data.tree_kernel is None:
             try:
-                k = _PRIVATE[model] = joint_forward_dynamics_kernel(model).copy()
+                data.tree_kernel = joint_forward_dynamics_kernel(model).copy()
             except ModelError:
-                k = None
-        if k is not None:
+                data.tree_kernel = False
+        k = data.tree_kernel
+        if k:
             k.set(t=t, p=p)
             return k(qj, vj, u).copy()
     q, v = model.from_joint_space(qj, vj, t=t, p=p)
