@@ -84,3 +84,20 @@ class JointMap:
         for n, jm in self.joints:
             qp[jm.idx_q:jm.idx_q + jm.nq] = qj[self.sq[n]]
         return qp
+
+
+def random_configuration(pm, rng, bound: float = 1.5) -> np.ndarray:
+    """A random configuration of Pinocchio model ``pm`` from NumPy's ``rng`` (joint values in
+    ``[−bound, bound]``, a free flyer's position too and a uniform unit quaternion) — not
+    ``pinocchio.randomConfiguration``, whose global generator other tests' states depend on."""
+    q = pin.neutral(pm)
+    for jid in range(1, pm.njoints):
+        jm = pm.joints[jid]
+        if jm.shortname() == "JointModelFreeFlyer":
+            quat = rng.normal(size=4)
+            q[jm.idx_q:jm.idx_q + 7] = np.concatenate([rng.uniform(-bound, bound, 3), quat / np.linalg.norm(quat)])
+        elif jm.nq == 1:
+            q[jm.idx_q] = rng.uniform(-bound, bound)
+        elif jm.nq:
+            raise NotImplementedError(f"random_configuration: joint {pm.names[jid]} ({jm.shortname()})")
+    return q

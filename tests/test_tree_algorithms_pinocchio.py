@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pinocchio_robots import ROBOTS, JointMap, pin, pinocchio_models, urdf_text
+from pinocchio_robots import ROBOTS, JointMap, pin, pinocchio_models, random_configuration, urdf_text
 
 import ncgen as nc  # noqa: E402
 from ncgen.assembly.tree_dynamics import MimicMap  # noqa: E402
@@ -47,7 +47,7 @@ def states(model, pm, jm, mimic, seed):
     rng = np.random.default_rng(seed)
     n_i = mimic.G.shape[1]
     for _ in range(N_STATES):
-        qj = jm.q_to_ncgen(pin.randomConfiguration(pm, -np.full(pm.nq, 1.5), np.full(pm.nq, 1.5)))
+        qj = jm.q_to_ncgen(random_configuration(pm, rng))
         for i, (lead, k, offset) in mimic.position.items():
             qj[i] = k * qj[lead] + offset
         yield qj, jm.q_to_pin(qj, pm.nq), rng.normal(size=n_i), 5 * rng.normal(size=n_i), rng.normal(size=n_i)
@@ -180,7 +180,7 @@ def test_joint_space_linearization_matches_pinocchio_away_from_equilibrium(name)
     jm = JointMap(model, pm)
     d = pm.createData()
     rng = np.random.default_rng(11)
-    qp = pin.randomConfiguration(pm, -np.full(pm.nq, 1.5), np.full(pm.nq, 1.5))
+    qp = random_configuration(pm, rng)
     qj = jm.q_to_ncgen(qp)
     vj = rng.normal(size=model.joint_space.nv)
     u = rng.normal(size=model.nu)
@@ -233,7 +233,7 @@ def test_an_arm_with_a_nearly_coplanar_wrist_builds_with_defaults_and_gets_the_k
     k = nc.joint_forward_dynamics_kernel(model)
     rng = np.random.default_rng(5)
     for _ in range(N_STATES):
-        qp = pin.randomConfiguration(pm, -np.full(pm.nq, 1.5), np.full(pm.nq, 1.5))
+        qp = random_configuration(pm, rng)
         vj, u = rng.normal(size=pm.nv), rng.normal(size=model.nu)
         close(k(jm.q_to_ncgen(qp), vj, u), jm.P.T @ pin.aba(pm, d, qp, jm.P @ vj, jm.P @ u), "so101 aba")
 
