@@ -90,6 +90,16 @@ class JointLoop:
         fn.restype = ctypes.c_int
         self._fn = fn
         self.quat = np.array(quaternion_offsets(model.joint_space), dtype=np.int32)
+        self.tree = model.joint_space.tree_function(model.layout)
+        self._maps: dict = {}
+
+    def mapped(self, what: str, n: int) -> ca.Function:
+        """``what`` (``"tree"``, ``"ode"``, ``"accel"``) evaluated at ``n`` points in one call."""
+        key = (what, n)
+        if key not in self._maps:
+            f = {"tree": self.tree, "ode": self.ode, "accel": self.model.functions["accel"]}[what]
+            self._maps[key] = f.map(n)
+        return self._maps[key]
 
     def run(self, method: int, t: np.ndarray, X: np.ndarray, W: np.ndarray, S, p: np.ndarray, rtol: float,
             atol: float, substeps: int, max_steps: int, stop: bool, stats: np.ndarray) -> tuple[int, int]:
@@ -242,14 +252,11 @@ def _trajectory(model, loop: JointLoop, t, X, W, p, info) -> Trajectory:
     """The natural-coordinate trajectory of the joint states ``X`` (module docstring)."""
     js = model.joint_space
     n = len(t)
-    tree = js.tree_function(model.layout).map(n)
-    Q, V = (np.array(y).T for y in tree(X[:, :js.nq].T, X[:, js.nq:].T))
+    Q, V = (np.array(y).T for y in loop.mapped("tree", n)(X[:, :js.nq].T, X[:, js.nq:].T))
     P = np.repeat(np.asarray(p, float)[:, None], n, axis=1)
     Wt = W[:n].T if model.nu else np.zeros((0, n))
-    _, _, Ua = loop.ode.map(n)(t[None, :], X.T, Wt, P) if loop.ode.n_out() > 2 else (None, None, Wt)
-    Ua = np.array(Ua).T.reshape(n, model.nu)
-    accel = model.functions["accel"].map(n)
-    lam = np.array(accel(t[None, :], Q.T, V.T, Ua.T, P)[1]).T.reshape(n, model.nc)
+    Ua = np.array(loop.mapped("ode", n)(t[None, :], X.T, Wt, P)[2]).T.reshape(n, model.nu)
+    lam = np.array(loop.mapped("accel", n)(t[None, :], Q.T, V.T, Ua.T, P)[1]).T.reshape(n, model.nc)
     traj = Trajectory.from_states(model, t, Q, V, lam, Ua, p, info)
     traj.qj, traj.vj = X[:, :js.nq].copy(), X[:, js.nq:].copy()
     return traj

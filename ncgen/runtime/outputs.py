@@ -5,6 +5,8 @@ Arrays are stacked by time step first: ``q`` is ``(n_t, nq)``, results ``(n_t, .
 """
 from __future__ import annotations
 
+import weakref
+
 import casadi as ca
 import numpy as np
 
@@ -21,8 +23,19 @@ def energies(model, t, q, v, p) -> tuple[np.ndarray, np.ndarray]:
     return np.array(T).reshape(-1), np.array(V).reshape(-1)
 
 
+_RESIDUALS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
 def residual_function(model) -> ca.Function:
-    """``(t, q, v, p) -> (|Φ|∞, |A v + Φ_t|∞)``: position and velocity constraint drift."""
+    """``(t, q, v, p) -> (|Φ|∞, |A v + Φ_t|∞)``: position and velocity constraint drift
+    (built once per model)."""
+    hit = _RESIDUALS.get(model)
+    if hit is None:
+        hit = _RESIDUALS[model] = _residual_function(model)
+    return hit
+
+
+def _residual_function(model) -> ca.Function:
     f = model.functions
     t, q, v = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq)
     p = ca.SX.sym("p", model.np)

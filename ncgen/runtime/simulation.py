@@ -381,6 +381,8 @@ def initial_state(model, q0, v0, t0: float, p: np.ndarray, tolerance: float | No
         return model.q0.copy(), model.v0.copy()
     q = model.q0 if q0 is None else as_vector(q0, model.nq, "q0")
     v = model.v0 if v0 is None else as_vector(v0, model.nq, "v0")
+    if t0 == model.t0 and np.array_equal(p, model.p0) and model.joint_space._holds(model, q, v, t0, p):
+        return q.copy(), v.copy()          # consistent to round-off already (e.g. from from_joint_space)
     try:
         state = consistent_state(model.functions, model.layout, model.constraint_names, q.copy(), v.copy(),
                                  p, t0, 1.0 if tolerance is None else tolerance, model.M,
