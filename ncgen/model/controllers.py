@@ -183,3 +183,23 @@ def controller_from_dict(data: dict, where: str = "controller") -> Controller:
             raise ModelError(f"{where}.{key}: missing (a number or one per actuated joint rate)")
     args = {k: data[k] for k in allowed[kind][1:] if k in data}
     return PD(**args) if kind == "pd" else ComputedTorque(**args)
+
+
+def controller_to_dict(c: Controller) -> dict:
+    """The TOML table of a :class:`PD` or :class:`ComputedTorque` with plain (numeric) gains and
+    targets; other controllers cannot be written (a :class:`ModelError` says so)."""
+    if not isinstance(c, PD):
+        raise ModelError(f"{c.name}: only PD and computed-torque controllers can be written to TOML "
+                         f"(a {c.kind} law is Python code)")
+    keys = ("kp", "kd", "target", "rate") + (("acceleration",) if isinstance(c, ComputedTorque) else ())
+    out = {"kind": c.kind}
+    for k in keys:
+        v = getattr(c, k)
+        if callable(v):
+            raise ModelError(f"{c.name}: {k} is a function of time, which TOML cannot hold")
+        if isinstance(v, dict):
+            out[k] = {n: np.asarray(x, float).tolist() for n, x in v.items()}
+        else:
+            arr = np.asarray(v, float)
+            out[k] = float(arr) if arr.ndim == 0 else arr.reshape(-1).tolist()
+    return out
