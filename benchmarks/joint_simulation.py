@@ -5,8 +5,10 @@ final-angle accuracy.
 Robots (example-robot-data, as shipped; the Panda's ``<mimic>`` tag dropped for all engines,
 ``<dynamics>`` dropped, limits and contacts off in MuJoCo): the Panda (9 joints, fixed base)
 from a bent pose at rest, and Talos (``talos_reduced.urdf``, floating base, 32 joints,
-``--talos``), falling 1 s under gravity with zero torque.  MuJoCo loads the same URDF
-(visual and collision geometry removed), RK4 integrator.
+``--talos``) tumbling from a bent pose with random joint rates and base twist (0.5 rad/s,
+m/s; at rest it would fall without relative motion), 1 s under gravity with zero torque.
+MuJoCo loads the same URDF (visual and collision geometry removed; a free joint added to
+Talos's root), RK4 integrator.
 
 Reference: scipy DOP853 on ``pinocchio.aba`` at rtol = atol = 1e-13.  Error: the largest
 final joint-angle error (rad; for Talos the joint angles and the base position).
@@ -86,7 +88,9 @@ class Robot:
         for j in range(start, self.pm.nq):
             if np.isfinite(lo[j]) and np.isfinite(hi[j]) and hi[j] - lo[j] < 10:
                 q0[j] = lo[j] + (hi[j] - lo[j]) * (0.3 + 0.4 * rng.random())
-        self.q0, self.v0 = q0, np.zeros(self.pm.nv)
+        self.q0 = q0
+        # a floating robot at rest falls without relative motion (uniform gravity): give it a tumble
+        self.v0 = 0.5 * rng.standard_normal(self.pm.nv) if self.floating else np.zeros(self.pm.nv)
         self.joint_names = [ident(self.pm.names[j]) for j in range(1, self.pm.njoints)
                             if self.pm.joints[j].shortname() != "JointModelFreeFlyer"]
         self.reference = self._reference()
@@ -129,14 +133,15 @@ class Robot:
     def ncgen_state(self, model):
         js = model.joint_space
         sq = js.slices()
-        qj = np.zeros(js.nq)
+        sv = js.slices(rates=True)
+        qj, vj = np.zeros(js.nq), np.zeros(js.nv)
         k = 7 if self.floating else 0
         if self.floating:
-            qj[sq["root"]] = self.q0[:7]
+            qj[sq["root"]], vj[sv["root"]] = self.q0[:7], self.v0[:6]
         for n in self.joint_names:
-            qj[sq[n]] = self.q0[k]
+            qj[sq[n]], vj[sv[n]] = self.q0[k], self.v0[k - 1 if self.floating else k]
             k += 1
-        return model.from_joint_space(qj, np.zeros(js.nv))
+        return model.from_joint_space(qj, vj)
 
     def ncgen_final(self, model, traj) -> np.ndarray:
         sq = model.joint_space.slices()
@@ -154,7 +159,10 @@ class Robot:
     def mujoco_model(self, h: float):
         import mujoco
 
-        m = mujoco.MjModel.from_xml_string(self.mj_text)
+        spec = mujoco.MjSpec.from_string(self.mj_text)
+        if self.floating:
+            spec.worldbody.first_body().add_freejoint()
+        m = spec.compile()
         m.opt.timestep = h
         m.opt.integrator = mujoco.mjtIntegrator.mjINT_RK4
         m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
@@ -173,6 +181,12 @@ class Robot:
         if self.floating:        # MuJoCo quaternions are [w, x, y, z]
             qpos[3:7] = [self.q0[6], self.q0[3], self.q0[4], self.q0[5]]
         d.qpos[:] = qpos
+        qvel = self.v0.copy()
+        if self.floating:        # MuJoCo: the free joint's linear velocity in world axes
+            import pinocchio as pin
+            R = pin.Quaternion(self.q0[6], self.q0[3], self.q0[4], self.q0[5]).toRotationMatrix()
+            qvel[:3] = R @ self.v0[:3]
+        d.qvel[:] = qvel
         for _ in range(int(round(1.0 / h))):
             mujoco.mj_step(m, d)
         q = d.qpos.copy()
