@@ -409,3 +409,15 @@ def test_cli_simulate_with_a_compiled_controller(tmp_path, capsys):
     assert abs(traj.qj[-1, 0] + 2.0 * G * 0.4 / 400.0) < 2e-3
     assert main(["simulate", str(path), "--t-end", "1", "-o", str(out), "--controller", "kind = pd"]) != 0
     assert "--controller 'kind = pd': not the keys of a TOML table" in capsys.readouterr().err
+
+
+def test_armature_adds_to_the_joint_inertia():
+    """A constant torque τ on a vertical hinge with armature a: θ = τ t² / (2 (I + a)); IDAS
+    refuses armature by name."""
+    s, I, _ = link(axis=(0, 0, 1))
+    s.joints[0].set_dynamics(armature=0.25)
+    model = s.build()
+    traj = nc.simulate(model, 1.0, 0.25, u=[0.7], joint_dynamics=True, rtol=1e-11, atol=1e-12)
+    np.testing.assert_allclose(traj.qj[:, 0], 0.7 * traj.t**2 / (2 * (I + 0.25)), rtol=1e-9, atol=1e-12)
+    with pytest.raises(NcgenError, match="armature.*method='joint' only"):
+        nc.simulate(model, 1.0, 0.25, method="idas", joint_dynamics=True)

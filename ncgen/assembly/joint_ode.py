@@ -22,8 +22,9 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from ncgen.assembly.tree_dynamics import cholesky_solve
 from ncgen.errors import ModelError
-from ncgen.model.joint_dynamics import has_dynamics, joint_effort
+from ncgen.model.joint_dynamics import armature, has_dynamics, joint_effort
 
 
 def quaternion_offsets(js) -> list[int]:
@@ -162,3 +163,30 @@ def natural_inputs_function(model, inverse_dynamics: ca.Function | None = None, 
     if not used:
         return None
     return ca.Function("natural_inputs", [t, q, v, p], [u], ["t", "q", "v", "p"], ["u"])
+
+
+def armature_vector(model) -> np.ndarray:
+    """Armature per joint rate (``joint.dynamics["armature"]``; Revolute and Prismatic joints)."""
+    js = model.joint_space
+    out = np.zeros(js.nv)
+    for n, s in js.slices(rates=True).items():
+        a = armature(js.joints[n])
+        if a and js.nv_joint[n] != 1:
+            raise ModelError(f"joint {n!r}: armature applies to one-coordinate joints (Revolute, Prismatic)")
+        out[s] = a
+    return out
+
+
+def armature_dynamics_function(model, inverse_dynamics: ca.Function, arm: np.ndarray) -> ca.Function:
+    """``(t, qj, vj, u, p) -> (aj, check)`` with armature: ``(M_j + diag(arm)) a_j = τ − C``,
+    from the inverse dynamics residual ``r = M_j a_j + C − τ`` (linear in ``a_j``:
+    ``M_j = ∂r/∂a_j``, ``τ − C = −r(0)``), solved by the written-out Cholesky."""
+    js = model.joint_space
+    t, u, p = ca.SX.sym("t"), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
+    qj, vj, aj = ca.SX.sym("qj", js.nq), ca.SX.sym("vj", js.nv), ca.SX.sym("aj", js.nv)
+    r = inverse_dynamics(t, qj, vj, aj, u, p)
+    M = ca.jacobian(r, aj) + ca.diag(ca.DM(arm))
+    b = -ca.substitute(r, aj, ca.SX.zeros(js.nv))
+    x, pivot = cholesky_solve(M, b)
+    return ca.Function("joint_forward_dynamics_armature", [t, qj, vj, u, p], [x, ca.vertcat(pivot, ca.sum1(x))],
+                       ["t", "qj", "vj", "u", "p"], ["aj", "check"])

@@ -43,14 +43,14 @@ class Joint:
         #: ``<limit>``: bounds in optimal control; ``lower``/``upper`` act in simulation when
         #: asked (``simulate(joint_dynamics=True)``, :mod:`ncgen.model.joint_dynamics`).
         self.limits: dict[str, float] = {}
-        #: Joint dynamics (``damping``, ``friction``, limit law ``limit_stiffness``,
+        #: Joint dynamics (``damping``, ``friction``, ``armature``, limit law ``limit_stiffness``,
         #: ``limit_damping``, ``friction_velocity``), e.g. from a URDF ``<dynamics>``; set with
         #: :meth:`set_dynamics` (checked), see :mod:`ncgen.model.joint_dynamics`.
         self.dynamics: dict[str, float] = {}
 
     def set_dynamics(self, **values) -> "Joint":
         """Set joint dynamics and limits: ``damping`` (N·m·s/rad or N·s/m), ``friction``
-        (N·m or N), ``lower``/``upper`` (rad or m), ``limit_stiffness``, ``limit_damping``,
+        (N·m or N), ``armature`` (kg·m² or kg), ``lower``/``upper`` (rad or m), ``limit_stiffness``, ``limit_damping``,
         ``friction_velocity`` (see :mod:`ncgen.model.joint_dynamics`).  Returns the joint."""
         from ncgen.model.joint_dynamics import set_joint_dynamics
         set_joint_dynamics(self, values)

@@ -14,6 +14,9 @@ The law, per joint coordinate ``x`` (rad or m) and rate ``w`` (rad/s or m/s), an
   regularised by ``tanh`` over the rate scale ``w_f`` = ``friction_velocity`` (default
   :data:`FRICTION_VELOCITY`): a smooth law that explicit and BDF integrators can take (a
   stuck joint creeps at rates below ``w_f``).
+* ``armature`` (kg·m² or kg: a rotor's reflected inertia) adds to the joint's diagonal of
+  the joint-space mass matrix, ``(M_j + diag(armature)) a_j = τ − C``: joint-space
+  simulation only (the natural-coordinate mass matrix is constant; IDAS refuses it).
 * the limit is a one-sided spring-damper (stiff penalty): stiffness ``k`` =
   ``limit_stiffness`` (default :data:`LIMIT_STIFFNESS`), damping ``c`` = ``limit_damping``
   (default :data:`LIMIT_DAMPING`); it only pushes back (the ``max``), never pulls.  A joint
@@ -36,7 +39,7 @@ LIMIT_STIFFNESS = 1.0e4
 LIMIT_DAMPING = 10.0
 #: Default rate scale of the regularised Coulomb friction (rad/s or m/s).
 FRICTION_VELOCITY = 1.0e-2
-DYNAMICS_KEYS = ("damping", "friction", "limit_stiffness", "limit_damping", "friction_velocity")
+DYNAMICS_KEYS = ("damping", "friction", "limit_stiffness", "limit_damping", "friction_velocity", "armature")
 LIMIT_KEYS = ("lower", "upper")
 #: Joint kinds with one coordinate, where the law applies.
 KINDS = ("Revolute", "Prismatic")
@@ -57,6 +60,7 @@ def set_joint_dynamics(joint, values: dict) -> None:
             if math.isnan(x):
                 raise ModelError(f"{joint.label}: {key}: expected a number, got nan")
         elif not (math.isfinite(x) and x >= 0) or (key == "friction_velocity" and x == 0):
+            # every other key is a finite number >= 0 (friction_velocity > 0)
             raise ModelError(f"{joint.label}: {key}: expected a finite number "
                              f"{'> 0' if key == 'friction_velocity' else '>= 0'}, got {x!r}")
     merged = {**joint.limits, **{k: float(v) for k, v in values.items() if k in LIMIT_KEYS}}
@@ -96,3 +100,8 @@ def joint_effort(joint, x, w):
         dl = lower - x
         tau = tau + ca.if_else(dl > 0, ca.fmax(0, k * dl - c * w), 0)
     return tau
+
+
+def armature(joint) -> float:
+    """The joint's armature (0 when not given)."""
+    return float((getattr(joint, "dynamics", {}) or {}).get("armature", 0.0))

@@ -143,12 +143,15 @@ def joint_loop(model, controller=None, joint_dynamics: bool = False, cflags=None
     why = joint_space_applies(model)
     if why is not None:
         raise ModelError(f"simulate(method='joint'): model {model.name!r} cannot be simulated in joint space: {why}")
+    from ncgen.assembly.joint_ode import armature_dynamics_function, armature_vector
+
+    arm = armature_vector(model) if joint_dynamics else np.zeros(0)
     inverse = None
-    if isinstance(controller, ComputedTorque):
+    if isinstance(controller, ComputedTorque) or np.any(arm):
         from ncgen.assembly.tree_dynamics import recursive_inverse_dynamics_function
         inverse = recursive_inverse_dynamics_function(model)
-    ode = joint_ode_function(model, dynamics_function(model), inverse, controller=controller,
-                             joint_dynamics=joint_dynamics)
+    dynamics = armature_dynamics_function(model, inverse, arm) if np.any(arm) else dynamics_function(model)
+    ode = joint_ode_function(model, dynamics, inverse, controller=controller, joint_dynamics=joint_dynamics)
     name = f"{model.name}_jsim"
     loop = JointLoop(model, build_joint_loop(name, ode, PIVOT_TOL, cflags), ode, name)
     loops[key] = (controller, loop)

@@ -261,7 +261,11 @@ def _natural_inputs(model, controller, joint_dynamics: bool):
     """``(t, q, v, p) -> u_extra`` of a compiled controller and the joint dynamics, or None."""
     if controller is None and not joint_dynamics:
         return None
-    from ncgen.assembly.joint_ode import natural_inputs_function
+    from ncgen.assembly.joint_ode import armature_vector, natural_inputs_function
+
+    if joint_dynamics and np.any(armature_vector(model)):
+        raise NcgenError("joint_dynamics: armature (joint.dynamics['armature']) is honoured by method='joint' only "
+                         "(the natural-coordinate mass matrix is constant); use method='joint' or drop it")
     from ncgen.model.controllers import ComputedTorque
 
     inverse = None
