@@ -421,3 +421,34 @@ def test_armature_adds_to_the_joint_inertia():
     np.testing.assert_allclose(traj.qj[:, 0], 0.7 * traj.t**2 / (2 * (I + 0.25)), rtol=1e-9, atol=1e-12)
     with pytest.raises(NcgenError, match="armature.*method='joint' only"):
         nc.simulate(model, 1.0, 0.25, method="idas", joint_dynamics=True)
+
+
+def test_spherical_joint_heavy_top_matches_idas():
+    """A heavy top on a ball joint (unit quaternion in joint space): the joint loop and IDAS
+    agree, and the quaternion stays on the unit sphere."""
+    s = nc.System("top")
+    R = np.linalg.qr(np.array([[1.0, 0.2, 0.1], [0.1, 1.0, 0.3], [0.2, 0.1, 1.0]]))[0]
+    R = R if np.linalg.det(R) > 0 else -R
+    w, c = R @ [0.3, 0.0, 25.0], R @ [0, 0, 0.2]
+    top = s.add_body("top", mass=1.5, inertia=np.diag([0.02, 0.02, 0.035]), position=c, rotation=R,
+                     angular_velocity=w, velocity=np.cross(w, c))
+    s.add_joint(nc.Spherical(s.ground, top, at=(0, 0, 0)))
+    model = s.build()
+    a = nc.simulate(model, 1.0, 0.1, method="joint", rtol=1e-11, atol=1e-12)
+    b = nc.simulate(model, 1.0, 0.1, method="idas", rtol=1e-11, atol=1e-12)
+    assert model.joint_space.nq_joint[model.joint_names[0]] == 4
+    assert np.max(np.abs(a.q - b.q)) < 1e-7
+    assert np.max(np.abs(np.linalg.norm(a.qj[:, :4], axis=1) - 1)) < 1e-14
+    assert abs(a.energy[-1] - a.energy[0]) < 1e-8 * max(1.0, abs(a.energy[0]))
+
+
+def test_input_samples_with_linear_hold_match_idas():
+    s, _, _ = link()
+    model = s.build()
+    t = np.linspace(0.0, 1.0, 11)
+    U = np.sin(3 * t)[:, None]
+    a = nc.simulate(model, 1.0, 0.1, method="joint", u=U, hold="linear", rtol=1e-11, atol=1e-12)
+    b = nc.simulate(model, 1.0, 0.1, method="idas", u=U, hold="linear", rtol=1e-11, atol=1e-12)
+    assert np.max(np.abs(np.angle(np.exp(1j * (a.qj - b.qj))))) < 1e-8     # IDAS's angles wrap at ±π
+    assert a.qj.max() > np.pi                                               # the joint loop's do not
+    np.testing.assert_allclose(a.u, U)

@@ -211,11 +211,12 @@ def simulate_joint(model, t: np.ndarray, U: np.ndarray, hold: str, p: np.ndarray
             bar.update(float(t[k]))
     finally:
         bar.close()
-    info = {"method": "joint", "integrator": integrator, "rtol": rtol, "atol": atol, "hold": hold,
-            "substeps": substeps if integrator == "rk4" else None,
+    steps = {"rtol": rtol, "atol": atol} if integrator == "dopri5" else \
+        {"h": float(t[1] - t[0]) / substeps, "substeps": substeps}
+    info = {"method": "joint", "integrator": integrator, **steps, "hold": hold,
             "controller": None if controller is None else controller.describe(),
             "feedback": None if feedback is None else feedback[0], "joint_dynamics": bool(joint_dynamics),
-            "stats": {"steps": int(stats[0]), "rejected": int(stats[1]), "evaluations": int(stats[2])},
+            "stats": {"nsteps": int(stats[0]), "rejected_steps": int(stats[1]), "evaluations": int(stats[2])},
             "build_time": build_time, "wall_time": time.perf_counter() - start, "complete": status == 0}
     traj = _trajectory(model, loop, t[:k + 1], X[:k + 1], W[:k + 1], p, info)
     if status:
