@@ -25,7 +25,7 @@ def _simulate_arguments(p: argparse.ArgumentParser) -> None:
                    help="also plot energy drift, constraint drift and the markers (.png, .pdf, .svg)")
     p.add_argument("--animate", metavar="FILE", default=None,
                    help="also animate the motion (.gif, or .mp4 with ffmpeg)")
-    p.add_argument("--method", default="auto", choices=("auto", "joint", "idas", "stepper"),
+    p.add_argument("--method", default="auto", metavar="METHOD",
                    help="integrator: auto (default: joint for a tree without contacts, else idas), joint "
                         "(joint coordinates in a compiled C loop: Dormand-Prince 5(4) with error control, or "
                         "--integrator rk4 with --substeps), idas (variable-step BDF with error control) or "
