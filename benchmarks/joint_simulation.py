@@ -5,7 +5,7 @@ final-angle accuracy.
 Robots (example-robot-data, as shipped; the Panda's ``<mimic>`` tag dropped for all engines,
 ``<dynamics>`` dropped, limits and contacts off in MuJoCo): the Panda (9 joints, fixed base)
 from a bent pose at rest, and Talos (``talos_reduced.urdf``, floating base, 32 joints,
-``--talos``) tumbling from a bent pose with random joint rates and base twist (0.5 rad/s,
+``--talos``) tumbling from a bent pose with random joint rates and base twist (2 rad/s,
 m/s; at rest it would fall without relative motion), 1 s under gravity with zero torque.
 MuJoCo loads the same URDF (visual and collision geometry removed; a free joint added to
 Talos's root), RK4 integrator.
@@ -90,7 +90,7 @@ class Robot:
                 q0[j] = lo[j] + (hi[j] - lo[j]) * (0.3 + 0.4 * rng.random())
         self.q0 = q0
         # a floating robot at rest falls without relative motion (uniform gravity): give it a tumble
-        self.v0 = 0.5 * rng.standard_normal(self.pm.nv) if self.floating else np.zeros(self.pm.nv)
+        self.v0 = 2.0 * rng.standard_normal(self.pm.nv) if self.floating else np.zeros(self.pm.nv)
         self.joint_names = [ident(self.pm.names[j]) for j in range(1, self.pm.njoints)
                             if self.pm.joints[j].shortname() != "JointModelFreeFlyer"]
         self.reference = self._reference()
@@ -172,26 +172,36 @@ class Robot:
         m.dof_armature[:] = 0
         return m
 
+    def _mujoco_index(self, m):
+        """Pinocchio's one-coordinate joints' (q index, v index) -> MuJoCo's (qpos, qvel) address, by name."""
+        by_name = {m.joint(i).name: (int(m.jnt_qposadr[i]), int(m.jnt_dofadr[i])) for i in range(m.njnt)}
+        out = []
+        for j in range(1, self.pm.njoints):
+            jm = self.pm.joints[j]
+            if jm.shortname() != "JointModelFreeFlyer":
+                out.append((jm.idx_q, jm.idx_v, *by_name[self.pm.names[j]]))
+        return out
+
     def mujoco_run(self, h: float, m=None):
         import mujoco
 
         m = self.mujoco_model(h) if m is None else m
         d = mujoco.MjData(m)
-        qpos = self.q0.copy()
-        if self.floating:        # MuJoCo quaternions are [w, x, y, z]
-            qpos[3:7] = [self.q0[6], self.q0[3], self.q0[4], self.q0[5]]
-        d.qpos[:] = qpos
-        qvel = self.v0.copy()
-        if self.floating:        # MuJoCo: the free joint's linear velocity in world axes
+        index = self._mujoco_index(m)
+        for iq, iv, mq, mv in index:
+            d.qpos[mq], d.qvel[mv] = self.q0[iq], self.v0[iv]
+        if self.floating:        # MuJoCo: quaternion [w, x, y, z], linear velocity in world axes
             import pinocchio as pin
             R = pin.Quaternion(self.q0[6], self.q0[3], self.q0[4], self.q0[5]).toRotationMatrix()
-            qvel[:3] = R @ self.v0[:3]
-        d.qvel[:] = qvel
+            d.qpos[:7] = [*self.q0[:3], self.q0[6], self.q0[3], self.q0[4], self.q0[5]]
+            d.qvel[:6] = [*(R @ self.v0[:3]), *self.v0[3:6]]
         for _ in range(int(round(1.0 / h))):
             mujoco.mj_step(m, d)
-        q = d.qpos.copy()
+        q = np.zeros(self.pm.nq)
+        for iq, _, mq, _ in index:
+            q[iq] = d.qpos[mq]
         if self.floating:
-            q[3:7] = [q[4], q[5], q[6], q[3]]
+            q[:7] = [*d.qpos[:3], d.qpos[4], d.qpos[5], d.qpos[6], d.qpos[3]]
         return m, self.compared(q)
 
 
