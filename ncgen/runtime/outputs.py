@@ -10,6 +10,8 @@ import weakref
 import casadi as ca
 import numpy as np
 
+from ncgen.assembly.derived import residual_function
+
 
 def _mapped(f: ca.Function, n: int, *columns):
     """``f`` on ``n`` instances; each argument has one column per instance, or is shared."""
@@ -23,30 +25,15 @@ def energies(model, t, q, v, p) -> tuple[np.ndarray, np.ndarray]:
     return np.array(T).reshape(-1), np.array(V).reshape(-1)
 
 
-_RESIDUALS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-
-
-def residual_function(model) -> ca.Function:
-    """``(t, q, v, p) -> (|Φ|∞, |A v + Φ_t|∞)``: position and velocity constraint drift
-    (built once per model)."""
-    hit = _RESIDUALS.get(model)
-    if hit is None:
-        hit = _RESIDUALS[model] = _residual_function(model)
-    return hit
-
-
-def _residual_function(model) -> ca.Function:
-    f = model.functions
-    t, q, v = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq)
-    p = ca.SX.sym("p", model.np)
-    phi = f["phi"](t, q, p)
-    phidot = ca.mtimes(f["A"](t, q, p), v) + f["phi_t"](t, q, p)
-    return ca.Function("residuals", [t, q, v, p], [ca.norm_inf(phi), ca.norm_inf(phidot)])
+_RESIDUALS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()     # residual_function per model
 
 
 def residuals(model, t, q, v, p) -> tuple[np.ndarray, np.ndarray]:
     """``|Φ(t, q)|∞`` (m²) and ``|A v + Φ_t|∞`` (m²/s) per step."""
-    r, rd = _mapped(residual_function(model), len(t), np.asarray(t)[None, :], q.T, v.T, p)
+    f = _RESIDUALS.get(model)
+    if f is None:
+        f = _RESIDUALS[model] = residual_function(model)
+    r, rd = _mapped(f, len(t), np.asarray(t)[None, :], q.T, v.T, p)
     return np.array(r).reshape(-1), np.array(rd).reshape(-1)
 
 

@@ -18,15 +18,15 @@ from ncgen.runtime.idas import ChunkedIDAS, ChunkFailure
 from ncgen.model.controllers import Controller
 from ncgen.runtime.inputs import feedback_kind, hold_columns, input_samples, parameter_values, time_grid
 from ncgen.runtime.joint_simulation import joint_space_applies, simulate_joint
-from ncgen.runtime.manifold import NEAR_SINGULAR, ManifoldProjector, robust_algebraic
+from ncgen.assembly.manifold import NEAR_SINGULAR, ManifoldProjector, robust_algebraic
 from ncgen.runtime.progress import Progress
 from ncgen.runtime.rattle_bridge import RattleFailure, compiled_interval, rattle_interval
-from ncgen.runtime.stepper import MAX_HALVINGS, MAX_ITER, TOL, simulate_stepper
+from ncgen.runtime.options import SimulationOptions
+from ncgen.runtime.stepper import simulate_stepper
 from ncgen.runtime.stepper_library import load_stepper
 from ncgen.runtime.trajectory import Trajectory
 from ncgen.validation import as_scalar, as_vector
 
-METHODS = ("auto", "joint", "idas", "stepper")
 #: The run is split into at most this many chunks (progress updates; see ncgen.runtime.idas).
 CHUNKS = 20
 #: Largest ``nq · nc`` that ``project="auto"`` watches (an SVD of A per output time).
@@ -52,18 +52,16 @@ BRIDGE_MIN_TOL = 1e-12
 BRIDGE_MAX_STEPS = 20_000
 
 
-def simulate(model, t_end: float, dt: float, *, method: str = "auto", rtol: float | None = None,
-             atol: float | None = None, u=None, p=None, q0=None, v0=None, t0: float | None = None,
-             hold: str = "zoh", backend: str = "vm", progress: bool | None = None,
-             max_steps: int = 50_000, linear_solver: str = "csparse",
-             ic_tolerance: float | None = 1e-6, substeps: int = 1, newton_tol: float = TOL,
-             max_newton: int = MAX_ITER, max_halvings: int = MAX_HALVINGS, order: int = 4,
-             check: bool = True, estimate: bool = True,
-             project: bool | str = "auto", integrator: str | None = None,
-             joint_dynamics: bool = False) -> Trajectory:
+def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None, t0: float | None = None,
+             options: SimulationOptions | None = None, **shortcuts) -> Trajectory:
     """Integrate ``model`` from ``t0`` (default ``model.t0``) to ``t_end`` and return the
     :class:`~ncgen.runtime.trajectory.Trajectory` on the grid ``t0, t0 + dt, ..., t_end``
     (``dt`` shortened if needed so that ``t_end`` is on the grid).  Times in s.
+
+    How to integrate is ``options`` (:class:`~ncgen.runtime.options.SimulationOptions`,
+    ``nc.SimulationOptions``: defaults, validated once); every field of it can also be given
+    as a keyword argument (``method=``, ``rtol=``, ``substeps=``, ...), which overrides
+    ``options`` for this call.  The options:
 
     Equations: the semi-explicit index-1 DAE ``q̇ = v``, ``v̇ = M⁻¹ (F − Aᵀ λ)``,
     ``0 = A v̇ − γ + 2α Φ̇ + β² Φ`` with the model's Baumgarte coefficients
@@ -123,8 +121,8 @@ def simulate(model, t_end: float, dt: float, *, method: str = "auto", rtol: floa
       of ``A`` at every output time (an SVD each; only models with ``nq · nc ≤``
       :data:`AUTO_MAX_SIZE`), in IDAS chunks of at most :data:`WATCHED_CHUNK` intervals,
       shorter as the ratio falls; every output interval that starts or ends near-singular
-      (ratio below :data:`~ncgen.runtime.manifold.NEAR_SINGULAR`, scaled by the starting
-      ratio, see :mod:`ncgen.runtime.manifold`), or that IDAS fails on close to one, is
+      (ratio below :data:`~ncgen.assembly.manifold.NEAR_SINGULAR`, scaled by the starting
+      ratio, see :mod:`ncgen.assembly.manifold`), or that IDAS fails on close to one, is
       crossed instead by the model's compiled error-controlled RATTLE stepper (order 4,
       tolerance ``max(rtol, atol, 1e-9)``, from the state projected onto both constraint
       levels; compiled on first use; :mod:`ncgen.runtime.rattle_bridge`), which stays on
@@ -157,14 +155,8 @@ def simulate(model, t_end: float, dt: float, *, method: str = "auto", rtol: floa
     Raises :class:`~ncgen.errors.SimulationError` if IDAS fails; it names the time reached
     and the likely cause, and carries the trajectory up to that time (``.trajectory``).
     """
-    if method not in METHODS:
-        raise NcgenError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
-    tolerances = {"rtol": 1.0 if rtol is None else rtol, "atol": 1.0 if atol is None else atol,
-                  "ic_tolerance": 1.0 if ic_tolerance is None else ic_tolerance}
-    for name, tol in tolerances.items():
-        if not (math.isfinite(tol) and tol > 0):
-            raise NcgenError(f"{name}: expected a positive tolerance, got {tol!r}")
-    if method in ("idas", "auto") and getattr(model, "contact_model", "smooth") == "nonsmooth" and model.nk:
+    opts = SimulationOptions.resolve(options, **shortcuts)
+    if opts.method in ("idas", "auto") and getattr(model, "contact_model", "smooth") == "nonsmooth" and model.nk:
         raise NcgenError(f"simulate: model {model.name!r} was built with contacts='nonsmooth', which only "
                          "the compiled stepper handles: use method='stepper', or build the model with "
                          "contacts='smooth' (compliant contacts) for IDAS")
@@ -175,35 +167,40 @@ def simulate(model, t_end: float, dt: float, *, method: str = "auto", rtol: floa
     kind = feedback_kind(u) if controller is None else None
     feedback = (kind, u) if kind in ("natural", "joint") else None
     U = input_samples(None if controller is not None else u, model, t)
-    columns = hold_columns(U, t, hold)
-    q, v = initial_state(model, q0, v0, t0, pv, ic_tolerance)
-    why_not = None
+    columns = hold_columns(U, t, opts.hold)
+    q, v = initial_state(model, q0, v0, t0, pv, opts.ic_tolerance)
+    method, why_not = opts.method, None
     if method == "auto":
         why_not = joint_space_applies(model)
         method = "joint" if why_not is None else "idas"
     if method == "joint":
-        traj = simulate_joint(model, t, U, hold, pv, q, v, integrator=integrator, rtol=rtol, atol=atol,
-                              substeps=substeps, max_steps=max_steps, feedback=feedback, controller=controller,
-                              joint_dynamics=joint_dynamics, progress=progress)
-        return traj
-    if integrator is not None:
-        raise NcgenError(f"integrator: only method='joint' takes an integrator (got {integrator!r} with "
+        return simulate_joint(model, t, U, opts.hold, pv, q, v, integrator=opts.integrator, rtol=opts.rtol,
+                              atol=opts.atol, substeps=opts.substeps, max_steps=opts.max_steps, feedback=feedback,
+                              controller=controller, joint_dynamics=opts.joint_dynamics, progress=opts.progress)
+    if opts.integrator is not None:
+        raise NcgenError(f"integrator: only method='joint' takes an integrator (got {opts.integrator!r} with "
                          f"method={method!r})")
-    if method == "stepper" and (controller is not None or joint_dynamics):
+    if method == "stepper" and (controller is not None or opts.joint_dynamics):
         raise NcgenError("method='stepper' does not take a compiled controller or joint_dynamics=True; use "
                          "method='joint' (trees) or 'idas', or give u as a Python callable u(t, q, v)")
     if method == "stepper" and feedback is not None:
-        return _stepwise_stepper(model, t, U, pv, q, v, feedback, hold, substeps=substeps, tol=newton_tol,
-                                 max_iter=max_newton, max_halvings=max_halvings, rtol=rtol, atol=atol,
-                                 order=order, max_steps=max_steps)
+        return _stepwise_stepper(model, t, U, pv, q, v, feedback, opts)
     if method == "stepper":
         lam = initial_multipliers(model, t0, q, v, U[0], pv, load_dae(model, "vm")[0])
-        return simulate_stepper(model, t, U, pv, q, v, lam, hold=hold, substeps=substeps, tol=newton_tol,
-                                max_iter=max_newton, max_halvings=max_halvings, rtol=rtol, atol=atol,
-                                order=order, max_steps=max_steps, check=check, estimate=estimate)
-    rtol, atol = 1e-8 if rtol is None else rtol, 1e-10 if atol is None else atol
-    dae, used = load_dae(model, backend)
-    extra = _natural_inputs(model, controller, joint_dynamics)
+        return simulate_stepper(model, t, U, pv, q, v, lam, opts)
+    return _simulate_idas(model, t, U, columns, pv, q, v, opts, controller=controller, feedback=feedback,
+                          why_not=why_not)
+
+
+def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions, *, controller=None, feedback=None,
+                   why_not=None) -> Trajectory:
+    """IDAS over the grid ``t`` from the consistent state ``(q, v)`` (see :func:`simulate`);
+    a compiled ``controller`` and the joint dynamics enter its DAE, a Python ``feedback`` is
+    called at the start of every output interval."""
+    t0, hold, project = float(t[0]), opts.hold, opts.project
+    rtol, atol = 1e-8 if opts.rtol is None else opts.rtol, 1e-10 if opts.atol is None else opts.atol
+    dae, used = load_dae(model, opts.backend)
+    extra = _natural_inputs(model, controller, opts.joint_dynamics)
     if extra is not None:
         dae = _with_inputs(model, dae, extra)
     if feedback is not None:
@@ -213,23 +210,21 @@ def simulate(model, t_end: float, dt: float, *, method: str = "auto", rtol: floa
     lam = initial_multipliers(model, t0, q, v, u0, pv, dae)
     a = np.array(model.functions["ode"](t0, q, v, lam, u0, pv)[1]).reshape(-1)
     runner = ChunkedIDAS(dae, h=float(t[1] - t[0]), nu=model.nu, hold=hold, rtol=rtol, atol=atol,
-                         max_steps=int(max_steps), linear_solver=linear_solver, expand=(used == "vm"),
+                         max_steps=opts.max_steps, linear_solver=opts.linear_solver, expand=(used == "vm"),
                          algebraic=lambda tk, x, uk: _algebraic(
                              model, tk, x, uk + _extra_value(model, extra, tk, x[:model.nq], x[model.nq:], pv), pv))
     if feedback is not None:
         if hold != "zoh":
             raise NcgenError("hold='linear' with a feedback u(t, q, v): the feedback is held over each output "
                              "interval (zoh); use hold='zoh'")
-        return _idas_feedback(model, runner, t, q, v, a, lam, U, pv, feedback, progress, method, used, rtol,
-                              atol, linear_solver, dae)
-    if project not in (True, False, "auto"):
-        raise NcgenError(f"project: expected True, False or 'auto', got {project!r}")
+        return _idas_feedback(model, runner, t, q, v, a, lam, U, pv, feedback, opts.progress, "idas", used, rtol,
+                              atol, opts.linear_solver, dae)
     watch = project == "auto" and model.nq * model.nc <= AUTO_MAX_SIZE and model.nc > 0
     projector = ManifoldProjector(model, pv, atol) if project is True or watch else None
     if projector is not None:
         projector.start(t0, np.concatenate([q, v]))
     bridge = _bridge(model, runner, pv, rtol, atol) if projector is not None else None
-    bar = Progress(t0, t[-1], progress, label=f"simulating {model.name}: ")
+    bar = Progress(t0, t[-1], opts.progress, label=f"simulating {model.name}: ")
     start = time.perf_counter()
     try:
         X, Z, failure, projected_from = _run(runner, t, np.concatenate([q, v]), np.concatenate([a, lam]), columns,
@@ -240,10 +235,10 @@ def simulate(model, t_end: float, dt: float, *, method: str = "auto", rtol: floa
     stats = dict(runner.stats)
     if projector is not None:
         stats.update(projector.counts, rattle_intervals=bridge.count)
-    info = {"method": method, "backend": used, "rtol": rtol, "atol": atol, "hold": hold,
-            "auto": why_not, "joint_dynamics": bool(joint_dynamics),
+    info = {"method": "idas", "backend": used, "rtol": rtol, "atol": atol, "hold": hold,
+            "auto": why_not, "joint_dynamics": bool(opts.joint_dynamics),
             "controller": None if controller is None else controller.describe(),
-            "linear_solver": linear_solver, "stats": stats, "project": project,
+            "linear_solver": opts.linear_solver, "stats": stats, "project": project,
             "projected_from": None if projected_from is None else float(t[projected_from]),
             "wall_time": time.perf_counter() - start, "complete": failure is None}
     if failure is not None:
@@ -339,37 +334,6 @@ def _idas_feedback(model, runner, t, q, v, a, lam, U, p, feedback, progress, met
     return traj
 
 
-def _stepwise_stepper(model, t, U, p, q, v, feedback, hold, **options) -> Trajectory:
-    """The compiled stepper one output interval at a time, the feedback evaluated at the
-    start of each (checks and the shadow error estimate off: they need the whole run)."""
-    if hold != "zoh":
-        raise NcgenError("hold='linear' with a feedback u(t, q, v): the feedback is held over each output "
-                         "interval (zoh); use hold='zoh'")
-    nq = model.nq
-    dae = load_dae(model, "vm")[0]
-    Q, V, LAM, UU = [q], [v], [], []
-    start = time.perf_counter()
-    for k in range(len(t) - 1):
-        uk = _natural_feedback(model, feedback, float(t[k]), Q[-1], V[-1], p)
-        lam = initial_multipliers(model, float(t[k]), Q[-1], V[-1], uk, p, dae)
-        LAM.append(lam)
-        UU.append(uk)
-        try:
-            part = simulate_stepper(model, t[k:k + 2], np.vstack([uk, uk]), p, Q[-1], V[-1], lam, hold="zoh",
-                                    check=False, estimate=False, **options)
-        except SimulationError as e:
-            info = {"method": "stepper", "feedback": feedback[0], "complete": False, "message": str(e)}
-            traj = Trajectory.from_states(model, t[:k + 1], np.array(Q), np.array(V), np.array(LAM),
-                                          np.array(UU), p, info)
-            raise SimulationError(str(e), time=float(t[k]), trajectory=traj) from None
-        Q.append(part.q[-1])
-        V.append(part.v[-1])
-    LAM.append(part.lam[-1])
-    UU.append(UU[-1])
-    info = {"method": "stepper", "backend": "compiled", "feedback": feedback[0], "hold": "zoh",
-            "wall_time": time.perf_counter() - start, "complete": True,
-            **{k: options[k] for k in ("rtol", "atol", "substeps")}}
-    return Trajectory.from_states(model, t, np.array(Q), np.array(V), np.array(LAM), np.array(UU), p, info)
 
 
 def point_bytes(model) -> float:
@@ -415,7 +379,7 @@ def initial_multipliers(model, t0: float, q, v, u, p, dae) -> np.ndarray:
 def _algebraic(model, t: float, x, u, p) -> np.ndarray:
     """``z = [a; λ]`` consistent with the state ``x = [q; v]`` and input ``u`` at ``t``: the KKT
     system, which is the DAE's algebraic equations, solved rank-robustly
-    (:func:`~ncgen.runtime.manifold.robust_algebraic`).  Non-finite values raise
+    (:func:`~ncgen.assembly.manifold.robust_algebraic`).  Non-finite values raise
     :class:`~ncgen.runtime.idas.ChunkFailure` (never a raw CasADi error)."""
     z = robust_algebraic(model, t, x[:model.nq], x[model.nq:], u, p)
     if not np.all(np.isfinite(z)):
@@ -593,3 +557,35 @@ def _failure_message(model, failure: ChunkFailure, t, k, x, lam, u, p, dae) -> s
     return (f"simulation of {model.name!r} failed between t = {t[k]:.6g} s and the next output time "
             f"{t[k + 1]:.6g} s{where}: {cause}.{detail} The trajectory up to t = {t[k]:.6g} s is "
             f"attached to this error as .trajectory.")
+def _stepwise_stepper(model, t, U, p, q, v, feedback, opts: SimulationOptions) -> Trajectory:
+    """The compiled stepper one output interval at a time, the feedback evaluated at the
+    start of each (checks and the shadow error estimate off: they need the whole run)."""
+    import dataclasses
+
+    if opts.hold != "zoh":
+        raise NcgenError("hold='linear' with a feedback u(t, q, v): the feedback is held over each output "
+                         "interval (zoh); use hold='zoh'")
+    step_opts = dataclasses.replace(opts, method="stepper", check=False, estimate=False)
+    dae = load_dae(model, "vm")[0]
+    Q, V, LAM, UU = [q], [v], [], []
+    start = time.perf_counter()
+    for k in range(len(t) - 1):
+        uk = _natural_feedback(model, feedback, float(t[k]), Q[-1], V[-1], p)
+        lam = initial_multipliers(model, float(t[k]), Q[-1], V[-1], uk, p, dae)
+        LAM.append(lam)
+        UU.append(uk)
+        try:
+            part = simulate_stepper(model, t[k:k + 2], np.vstack([uk, uk]), p, Q[-1], V[-1], lam, step_opts)
+        except SimulationError as e:
+            info = {"method": "stepper", "feedback": feedback[0], "complete": False, "message": str(e)}
+            traj = Trajectory.from_states(model, t[:k + 1], np.array(Q), np.array(V), np.array(LAM),
+                                          np.array(UU), p, info)
+            raise SimulationError(str(e), time=float(t[k]), trajectory=traj) from None
+        Q.append(part.q[-1])
+        V.append(part.v[-1])
+    LAM.append(part.lam[-1])
+    UU.append(UU[-1])
+    info = {"method": "stepper", "backend": "compiled", "feedback": feedback[0], "hold": "zoh",
+            "wall_time": time.perf_counter() - start, "complete": True, "substeps": opts.substeps,
+            **({"rtol": opts.rtol, "atol": opts.rtol if opts.atol is None else opts.atol} if opts.rtol else {})}
+    return Trajectory.from_states(model, t, np.array(Q), np.array(V), np.array(LAM), np.array(UU), p, info)
