@@ -25,7 +25,6 @@ from __future__ import annotations
 import ctypes
 import math
 import time
-import weakref
 
 import casadi as ca
 import numpy as np
@@ -43,17 +42,17 @@ _STATUS = {1: "the joint-space mass matrix is singular or the accelerations are 
            3: "the step size fell to round-off (a discontinuity or a stiff law)",
            4: "out of memory"}
 
-_LOOPS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-_APPLIES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
 def joint_space_applies(model) -> str | None:
     """Why ``model`` cannot be simulated in joint space, or None when it can: a tree of joints
     with coordinates and no other constraints (:func:`~ncgen.runtime.tree_kernel.check_tree`),
     no contacts, and a C compiler."""
-    hit = _APPLIES.get(model)
-    if hit is not None:
-        return hit or None
+    from ncgen.model.data import model_data
+
+    data = model_data(model)
+    if data.joint_simulation_reason is not None:
+        return data.joint_simulation_reason[0]
     from ncgen.codegen.compiler import find_compiler
     from ncgen.runtime.tree_kernel import check_tree
 
@@ -70,7 +69,7 @@ def joint_space_applies(model) -> str | None:
                 find_compiler()
             except CompilerNotFound as e:
                 reason = str(e)
-    _APPLIES[model] = reason
+    data.joint_simulation_reason = (reason or None,)
     return reason or None
 
 
@@ -135,7 +134,9 @@ def joint_loop(model, controller=None, joint_dynamics: bool = False, cflags=None
     from ncgen.model.controllers import ComputedTorque
     from ncgen.runtime.tree_kernel import PIVOT_TOL
 
-    loops = _LOOPS.setdefault(model, {})
+    from ncgen.model.data import model_data
+
+    loops = model_data(model).joint_loops
     key = (id(controller), bool(joint_dynamics), cflags)
     hit = loops.get(key)
     if hit is not None and hit[0] is controller:

@@ -5,12 +5,11 @@ Arrays are stacked by time step first: ``q`` is ``(n_t, nq)``, results ``(n_t, .
 """
 from __future__ import annotations
 
-import weakref
-
 import casadi as ca
 import numpy as np
 
 from ncgen.assembly.derived import residual_function
+from ncgen.model.data import model_data
 
 
 def _mapped(f: ca.Function, n: int, *columns):
@@ -25,14 +24,12 @@ def energies(model, t, q, v, p) -> tuple[np.ndarray, np.ndarray]:
     return np.array(T).reshape(-1), np.array(V).reshape(-1)
 
 
-_RESIDUALS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()     # residual_function per model
-
-
 def residuals(model, t, q, v, p) -> tuple[np.ndarray, np.ndarray]:
     """``|Φ(t, q)|∞`` (m²) and ``|A v + Φ_t|∞`` (m²/s) per step."""
-    f = _RESIDUALS.get(model)
+    functions = model_data(model).functions
+    f = functions.get("residuals")
     if f is None:
-        f = _RESIDUALS[model] = residual_function(model)
+        f = functions["residuals"] = residual_function(model)
     r, rd = _mapped(f, len(t), np.asarray(t)[None, :], q.T, v.T, p)
     return np.array(r).reshape(-1), np.array(rd).reshape(-1)
 
