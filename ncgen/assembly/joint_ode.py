@@ -190,3 +190,14 @@ def armature_dynamics_function(model, inverse_dynamics: ca.Function, arm: np.nda
     x, pivot = cholesky_solve(M, b)
     return ca.Function("joint_forward_dynamics_armature", [t, qj, vj, u, p], [x, ca.vertcat(pivot, ca.sum1(x))],
                        ["t", "qj", "vj", "u", "p"], ["aj", "check"])
+
+
+def dae_with_inputs(model, dae: ca.Function, extra: ca.Function) -> ca.Function:
+    """IDAS's ``dae`` ``(t, x, z, u, p)`` with ``u + extra(t, q, v, p)`` in place of ``u``
+    (:func:`natural_inputs_function`: a compiled controller, the joint dynamics)."""
+    t, x, z = ca.MX.sym("t"), ca.MX.sym("x", dae.size1_in(1)), ca.MX.sym("z", dae.size1_in(2))
+    u, p = ca.MX.sym("u", dae.size1_in(3)), ca.MX.sym("p", dae.size1_in(4))
+    nq = model.nq
+    out = dae(t, x, z, u + extra(t, x[:nq], x[nq:], p), p)
+    return ca.Function(f"{dae.name()}_inputs", [t, x, z, u, p], list(out),
+                       [dae.name_in(i) for i in range(5)], [dae.name_out(i) for i in range(dae.n_out())])

@@ -15,6 +15,7 @@ from ncgen.errors import ModelError
 from ncgen.runtime.dae import load_dae
 from ncgen.runtime.diagnose import explain, shift_time
 from ncgen.runtime.idas import ChunkedIDAS, ChunkFailure
+from ncgen.assembly.joint_ode import dae_with_inputs
 from ncgen.model.controllers import Controller
 from ncgen.runtime.inputs import feedback_kind, hold_columns, input_samples, parameter_values, time_grid
 from ncgen.runtime.joint_simulation import joint_space_applies, simulate_joint
@@ -202,7 +203,7 @@ def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions, *, c
     dae, used = load_dae(model, opts.backend)
     extra = _natural_inputs(model, controller, opts.joint_dynamics)
     if extra is not None:
-        dae = _with_inputs(model, dae, extra)
+        dae = dae_with_inputs(model, dae, extra)
     if feedback is not None:
         U[0] = _natural_feedback(model, feedback, t0, q, v, pv)
         columns = hold_columns(U, t, hold)
@@ -274,18 +275,6 @@ def _extra_value(model, extra, t: float, q, v, p) -> np.ndarray:
     if extra is None:
         return np.zeros(model.nu)
     return np.array(extra(t, q, v, p)).reshape(-1)
-
-
-def _with_inputs(model, dae, extra):
-    """The DAE with ``u + u_extra(t, q, v, p)`` in place of ``u`` (compiled controller, joint dynamics)."""
-    import casadi as ca
-
-    t, x, z = ca.MX.sym("t"), ca.MX.sym("x", dae.size1_in(1)), ca.MX.sym("z", dae.size1_in(2))
-    u, p = ca.MX.sym("u", dae.size1_in(3)), ca.MX.sym("p", dae.size1_in(4))
-    nq = model.nq
-    out = dae(t, x, z, u + extra(t, x[:nq], x[nq:], p), p)
-    return ca.Function(f"{dae.name()}_inputs", [t, x, z, u, p], list(out),
-                       [dae.name_in(i) for i in range(5)], [dae.name_out(i) for i in range(dae.n_out())])
 
 
 def _natural_feedback(model, feedback, t: float, q, v, p) -> np.ndarray:
