@@ -452,3 +452,27 @@ def test_input_samples_with_linear_hold_match_idas():
     assert np.max(np.abs(np.angle(np.exp(1j * (a.qj - b.qj))))) < 1e-8     # IDAS's angles wrap at ±π
     assert a.qj.max() > np.pi                                               # the joint loop's do not
     np.testing.assert_allclose(a.u, U)
+
+
+@pytest.mark.parametrize("with_input", [True, False])
+def test_generated_loop_compiles_warning_free(tmp_path, with_input):
+    """The loop's C (templates/c/joint_loop.c.j2 with the generated ODE) under -Wall -Wextra -Werror."""
+    import shutil
+    import subprocess
+
+    from ncgen.assembly.joint_ode import joint_ode_function
+    from ncgen.codegen.package import ExtraSource, write_package
+    from ncgen.runtime.joint_simulation import dynamics_function
+
+    cc = shutil.which("gcc") or shutil.which("cc")
+    if cc is None:
+        pytest.skip("no C compiler")
+    s, _, _ = link(with_input=with_input)
+    model = s.build()
+    ode = joint_ode_function(model, dynamics_function(model))
+    ctx = {"ode": "w_joint_ode", "nx": ode.nnz_in(1), "nw": ode.nnz_in(2), "np": ode.nnz_in(3), "pivot_tol": "1e-12"}
+    pkg = write_package("w", [ode], tmp_path / "pkg", extra_sources=[ExtraSource("joint_loop.c.j2", "w_loop.c", ctx)])
+    for src in pkg.manifest["build"]["sources"]:
+        r = subprocess.run([cc, "-Wall", "-Wextra", "-Werror", "-c", src, "-o", str(tmp_path / "x.o")],
+                           cwd=pkg.path, capture_output=True, text=True)
+        assert r.returncode == 0, (src, r.stderr)
