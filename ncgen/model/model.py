@@ -90,6 +90,8 @@ class Model:
         self.joint_space = joint_space
         self.frames = MappingProxyType({k: (mem, np.array(R), np.array(pos)) for k, (mem, R, pos) in system.frames.items()})
         self.visuals = [dict(v) for v in system.visuals]
+        #: the system's compiled controller (TOML ``[controller]``) or None
+        self.controller = getattr(system, "controller", None)
         #: Plain-data descriptions of the contacts (:mod:`ncgen.model.contacts`), in order.
         self.contacts = [dict(c) for c in contacts]
         self.contact_names = [c["name"] for c in self.contacts]

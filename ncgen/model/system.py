@@ -46,6 +46,9 @@ class System:
         self.frames: dict[str, tuple] = {}
         #: Visual geometry (URDF ``<visual>``), plain dicts in member frames.
         self.visuals: list[dict] = []
+        #: A compiled controller (:mod:`ncgen.model.controllers`; TOML ``[controller]``) that
+        #: ``ncgen simulate`` runs; the Python API passes controllers as ``simulate(u=...)``.
+        self.controller = None
         #: Joint-space initial state ``{joint: position}`` / ``{joint: rate}`` applied by
         #: :meth:`build` (TOML ``initial = {elbow = 0.3}``, ``initial_rates``); joints not
         #: named keep the coordinates and rates of the members' given poses and twists.
