@@ -16,8 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ncgen.assembly.kinematics import TOL, newton, system_size
-from ncgen.assembly.manifold import project
+from ncgen.assembly.manifold import NEWTON_TOL as TOL, newton, project, system_size
 from ncgen.errors import ModelError
 
 @dataclass
