@@ -9,6 +9,7 @@ import warnings
 import numpy as np
 
 from ncgen.assembly.initial_state import consistent_state
+from ncgen.assembly.manifold import NEAR_SINGULAR, ManifoldProjector, robust_algebraic
 from ncgen.codegen.load import NoCompilerWarning
 from ncgen.errors import CompilerNotFound, NcgenError, SimulationError
 from ncgen.errors import ModelError
@@ -16,7 +17,6 @@ from ncgen.runtime.dae import load_dae
 from ncgen.runtime.diagnose import explain, shift_time
 from ncgen.runtime.idas import ChunkedIDAS, ChunkFailure
 from ncgen.runtime.inputs import hold_columns, input_samples, parameter_values, time_grid
-from ncgen.assembly.manifold import NEAR_SINGULAR, ManifoldProjector, robust_algebraic
 from ncgen.runtime.progress import Progress
 from ncgen.runtime.rattle_bridge import RattleFailure, compiled_interval, rattle_interval
 from ncgen.runtime.options import SimulationOptions
@@ -56,16 +56,16 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
     :class:`~ncgen.runtime.trajectory.Trajectory` on the grid ``t0, t0 + dt, ..., t_end``
     (``dt`` shortened if needed so that ``t_end`` is on the grid).  Times in s.
 
-    How to integrate is ``options`` (:class:`~ncgen.runtime.options.SimulationOptions`,
-    ``nc.SimulationOptions``: defaults, validated once); every field of it can also be given
-    as a keyword argument (``method=``, ``rtol=``, ``substeps=``, ...), which overrides
-    ``options`` for this call.  The options:
-
     Equations: the semi-explicit index-1 DAE ``q̇ = v``, ``v̇ = M⁻¹ (F − Aᵀ λ)``,
     ``0 = A v̇ − γ + 2α Φ̇ + β² Φ`` with the model's Baumgarte coefficients
     ``model.baumgarte = (α, β)`` (default 5 s⁻¹ each, set by ``System.build(baumgarte=...)``:
     constraint drift decays like a critically damped oscillator with time constant 0.2 s;
     IDAS keeps the drift small anyway, the terms stop it from growing over long runs).
+
+    How to integrate is ``options`` (:class:`~ncgen.runtime.options.SimulationOptions`,
+    ``nc.SimulationOptions``: defaults, validated once); every field of it can also be given
+    as a keyword argument (``method=``, ``rtol=``, ``substeps=``, ...), which overrides
+    ``options`` for this call.  The run's data and the options:
 
     * ``method``: ``"idas"`` (SUNDIALS IDAS through CasADi, variable-order BDF with error
       control ``rtol`` (relative, default 1e-8) and ``atol`` (absolute, in the units of q and
