@@ -2,6 +2,8 @@
 stepper (:mod:`ncgen.runtime.stepper`)."""
 from __future__ import annotations
 
+import dataclasses
+import inspect
 import math
 import time
 import warnings
@@ -50,6 +52,19 @@ BRIDGE_MIN_TOL = 1e-12
 BRIDGE_MAX_STEPS = 20_000
 
 
+def _show_shortcuts(f):
+    """``f`` with a signature that lists the option shortcuts (``help``, editors): each field of
+    :class:`~ncgen.runtime.options.SimulationOptions` as a keyword with its default, in place of
+    ``**shortcuts``."""
+    sig = inspect.signature(f)
+    params = [q for q in sig.parameters.values() if q.kind is not inspect.Parameter.VAR_KEYWORD]
+    params += [inspect.Parameter(fl.name, inspect.Parameter.KEYWORD_ONLY, default=fl.default, annotation=fl.type)
+               for fl in dataclasses.fields(SimulationOptions)]
+    f.__signature__ = sig.replace(parameters=params)
+    return f
+
+
+@_show_shortcuts
 def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None, t0: float | None = None,
              options: SimulationOptions | None = None, **shortcuts) -> Trajectory:
     """Integrate ``model`` from ``t0`` (default ``model.t0``) to ``t_end`` and return the
