@@ -12,7 +12,8 @@
   :class:`ManifoldProjector` (positions by Gauss–Newton, then velocities) and
   :func:`project` (with coordinates held fixed, by the sparse KKT system).
 * **KKT solves**: :func:`project`'s ``[[M, Aᵀ], [A, 0]]`` step by sparse QR, and
-  :func:`robust_algebraic` for ``z = [a; λ]`` where ``A`` loses rank.
+  :func:`kkt_least_squares` (:func:`robust_algebraic`, the initial multipliers) for
+  ``z = [a; λ]`` where ``A`` loses rank.
 * **Charts**: :func:`manifold_point` and :func:`tangent_velocity` (independent coordinates
   ``z = G (q − q*)`` and rates ``w = G v``).
 
@@ -313,14 +314,20 @@ def robust_algebraic(model, t: float, q, v, u, p) -> np.ndarray:
     rhs = np.concatenate([np.array(f["F"](t, q, v, u, p), dtype=float).reshape(-1),
                           np.array(f["gamma"](t, q, v, p), dtype=float).reshape(-1)
                           - 2 * alpha * phidot - beta**2 * phi])
+    return kkt_least_squares(model.M, A, rhs)
+
+
+def kkt_least_squares(M: np.ndarray, A: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """``z`` of ``[[M, Aᵀ], [A, 0]] z = rhs``, the minimum-norm least-squares solution (so a
+    rank-deficient ``A`` is fine); NaN where the system is not finite or the solve fails."""
     nc = A.shape[0]
-    K = np.block([[model.M, A.T], [A, np.zeros((nc, nc))]])
+    K = np.block([[M, A.T], [A, np.zeros((nc, nc))]])
     if not np.all(np.isfinite(K)) or not np.all(np.isfinite(rhs)):
-        return np.full(model.nq + nc, np.nan)
+        return np.full(K.shape[0], np.nan)
     try:
         return np.linalg.lstsq(K, rhs, rcond=None)[0]
     except np.linalg.LinAlgError:
-        return np.full(model.nq + nc, np.nan)
+        return np.full(K.shape[0], np.nan)
 
 
 # ------------------------------------------------------------ inertia on the tangent space
