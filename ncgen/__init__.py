@@ -16,6 +16,7 @@ from ncgen.model.joints import (
 )
 from ncgen.errors import ModelError
 from ncgen.model.model import Model
+from ncgen.model.shapes import Box, Capsule, Cylinder, Ellipsoid, Mesh, Shape, Sphere
 from ncgen.model.system import System
 from ncgen.optim import OptimalControl, OptimalTrajectory
 from ncgen.runtime import SimulationOptions, Trajectory, simulate
@@ -31,7 +32,7 @@ from ncgen.version import __version__
 
 
 __all__ = [
-    "Contact", "CoordinateDriver", "Cylindrical", "Distance", "Equilibrium", "Fixed", "Force", "Free", "GeneralizedForce",
+    "Box", "Capsule", "Contact", "CoordinateDriver", "Cylinder", "Ellipsoid", "Mesh", "Shape", "Sphere", "Cylindrical", "Distance", "Equilibrium", "Fixed", "Force", "Free", "GeneralizedForce",
     "Joint", "JointReaction", "LinearModel", "Mimic", "Model", "ModelError", "Modes", "NcgenError", "OptimalControl",
     "OptimalTrajectory", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic", "Revolute", "SimulationOptions", "SpherePlane", "SphereSphere", "Spherical",
     "Spring", "System", "Tensegrity", "Torque", "TorsionalSpring", "Trajectory", "Universal",

@@ -10,21 +10,26 @@ from ncgen.cli.registry import subcommand
 
 
 #: Output kinds of 'ncgen simulate' and the file suffixes each accepts.
-SUFFIXES = {"output": (".npz", ".csv"), "plot": (".png", ".pdf", ".svg"), "animate": (".gif", ".mp4")}
+SUFFIXES = {"output": (".npz", ".csv"), "plot": (".png", ".pdf", ".svg"), "animate": (".gif", ".mp4"),
+            "html": (".html",)}
 
 
 def _simulate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("model", metavar="MODEL.toml", help="model file: TOML, or a URDF robot (.urdf)")
-    p.add_argument("--t-end", type=float, required=True, metavar="T", help="final time (s)")
+    p.add_argument("--t-end", type=float, default=2.0, metavar="T", help="final time (s, default 2)")
     p.add_argument("--dt", type=float, default=0.01, metavar="DT",
                    help="output step (s, default 0.01); IDAS chooses its own internal steps")
-    p.add_argument("-o", "--output", metavar="FILE", required=True,
+    p.add_argument("-o", "--output", metavar="FILE", default=None,
                    help="trajectory file: .npz (everything, nc.Trajectory.load reads it) or .csv "
-                        "(t, coordinates, energies, constraint residuals)")
+                        "(t, coordinates, energies, constraint residuals); needed unless --plot, "
+                        "--animate or --html is given")
     p.add_argument("--plot", metavar="FILE", default=None,
                    help="also plot energy drift, constraint drift and the markers (.png, .pdf, .svg)")
     p.add_argument("--animate", metavar="FILE", default=None,
                    help="also animate the motion (.gif, or .mp4 with ffmpeg)")
+    p.add_argument("--html", metavar="FILE.html", default=None,
+                   help="also write an interactive 3D page of the run (opens offline in any browser: "
+                        "orbit, play, time slider, plots; FILE.html?t=1.5 opens paused at t = 1.5 s)")
     p.add_argument("--method", default="idas", metavar="METHOD",
                    help="integrator: idas (variable-step BDF with error control, default) or stepper "
                         "(the compiled constraint-preserving stepper: fixed steps DT/N, see --substeps, "
@@ -50,6 +55,8 @@ def _simulate_arguments(p: argparse.ArgumentParser) -> None:
 
 def _check_outputs(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
     """Usage errors in the output file names, found before any work is done."""
+    if not any(getattr(args, kind) for kind in SUFFIXES):
+        parser.error("nothing to write: give -o/--output FILE.npz (or .csv), --plot, --animate or --html")
     for kind, suffixes in SUFFIXES.items():
         name = getattr(args, kind)
         if name is None:
@@ -74,6 +81,7 @@ def _check_outputs(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
         "whose info says complete = false)."),
     examples=(
         "ncgen simulate examples/chain.toml --t-end 2 --dt 0.01 -o chain.npz --plot chain.png\n"
+        "ncgen simulate examples/heavy_top.toml --html top.html      # open top.html in a browser\n"
         "ncgen simulate examples/heavy_top.toml --t-end 3 -o top.csv --animate top.gif\n"
         "ncgen simulate examples/slider_crank.toml --t-end 1 -o sc.npz --param omega=20 --backend vm\n"
         "ncgen simulate examples/tensegrity.toml --t-end 2 -o t.npz --method stepper --substeps 20\n"
@@ -85,7 +93,7 @@ def _check_outputs(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
 def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     import contextlib
 
-    from ncgen.errors import SimulationError
+    from ncgen.errors import SimulationError, SimulationInterrupted
     from ncgen.files import atomic_path, incomplete_path
     from ncgen.runtime import simulate as run
 
@@ -95,23 +103,33 @@ def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         stepper = {"substeps": args.substeps} if args.method == "stepper" else {}
         traj = run(model, t_end=args.t_end, dt=args.dt, method=args.method, backend=args.backend,
                    rtol=args.rtol, atol=args.atol, **stepper)
-    except SimulationError as e:
+    except (SimulationError, SimulationInterrupted) as e:
         if e.trajectory is None or not len(e.trajectory):
             raise
-        partial = e.trajectory.save(incomplete_path(args.output))
-        raise SimulationError(f"{e}\nThe partial trajectory (t = {e.trajectory.t[0]:g} ... "
-                              f"{e.trajectory.t[-1]:g} s, marked incomplete) was written to {partial}",
-                              time=e.time, trajectory=e.trajectory) from None
+        partial = [e.trajectory.save(incomplete_path(args.output))] if args.output else []
+        if args.html:
+            partial.append(e.trajectory.to_html(incomplete_path(args.html)))
+        if not partial:
+            raise
+        said = (f"{e}\nThe partial trajectory (t = {e.trajectory.t[0]:g} ... {e.trajectory.t[-1]:g} s, marked "
+                f"incomplete) was written to {' and '.join(str(x) for x in partial)}")
+        if isinstance(e, SimulationInterrupted):
+            raise SimulationInterrupted(said, time=e.time, trajectory=e.trajectory) from None
+        raise SimulationError(said, time=e.time, trajectory=e.trajectory) from None
     print(traj.summary())
     with contextlib.ExitStack() as stack:
-        traj.save(stack.enter_context(atomic_path(args.output)))
+        if args.output:
+            traj.save(stack.enter_context(atomic_path(args.output)))
         if args.plot:
             from ncgen.viz import plot
             plot(traj, stack.enter_context(atomic_path(args.plot)))
         if args.animate:
             from ncgen.viz import animate
             animate(traj, stack.enter_context(atomic_path(args.animate)))
-    for name in (args.output, args.plot, args.animate):
+        if args.html:
+            from ncgen.viz.html import to_html
+            to_html(traj, stack.enter_context(atomic_path(args.html)))
+    for name in (args.output, args.plot, args.animate, args.html):
         if name:
             print(f"wrote {name}", file=sys.stderr)
     return 0

@@ -13,7 +13,8 @@ import numpy as np
 from ncgen.assembly.initial_state import consistent_state
 from ncgen.assembly.manifold import NEAR_SINGULAR, ManifoldProjector, robust_algebraic
 from ncgen.codegen.load import NoCompilerWarning
-from ncgen.errors import CompilerNotFound, NcgenError, SimulationError
+from ncgen.errors import CompilerNotFound, NcgenError, SimulationError, SimulationInterrupted
+from ncgen.interrupts import raise_if_interrupted, sticky_interrupt
 from ncgen.errors import ModelError
 from ncgen.runtime.dae import load_dae
 from ncgen.runtime.diagnose import explain, shift_time
@@ -27,6 +28,8 @@ from ncgen.runtime.stepper_library import load_stepper
 from ncgen.runtime.trajectory import Trajectory
 from ncgen.validation import as_scalar, as_vector
 
+#: What :func:`_run` returns as its failure when Ctrl-C stopped it.
+INTERRUPTED = "interrupted"
 #: The run is split into at most this many chunks (progress updates; see ncgen.runtime.idas).
 CHUNKS = 20
 #: Largest ``nq · nc`` that ``project="auto"`` watches (an SVD of A per output time).
@@ -158,10 +161,12 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
     U = input_samples(u, model, t)
     columns = hold_columns(U, t, opts.hold)
     q, v = initial_state(model, q0, v0, t0, pv, opts.ic_tolerance)
-    if opts.method == "stepper":
-        lam = initial_multipliers(model, t0, q, v, U[0], pv, load_dae(model, "vm")[0])
-        return simulate_stepper(model, t, U, pv, q, v, lam, opts)
-    return _simulate_idas(model, t, U, columns, pv, q, v, opts)
+    with sticky_interrupt():               # a Ctrl-C that CasADi swallows is raised again between chunks
+        raise_if_interrupted()
+        if opts.method == "stepper":
+            lam = initial_multipliers(model, t0, q, v, U[0], pv, load_dae(model, "vm")[0])
+            return simulate_stepper(model, t, U, pv, q, v, lam, opts)
+        return _simulate_idas(model, t, U, columns, pv, q, v, opts)
 
 
 def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions) -> Trajectory:
@@ -194,10 +199,15 @@ def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions) -> T
             "linear_solver": opts.linear_solver, "stats": stats, "project": project,
             "projected_from": None if projected_from is None else float(t[projected_from]),
             "wall_time": time.perf_counter() - start, "complete": failure is None}
-    if failure is not None:
+    if failure is INTERRUPTED:
+        message = f"simulation of {model.name!r} interrupted (Ctrl-C) at t = {t[k]:.6g} s"
+        info["message"] = message
+    elif failure is not None:
         message = _failure_message(model, failure, t, k, X[k], Z[k, nq:], U[k], pv, dae)
         info["message"] = message
     traj = Trajectory.from_states(model, t[:k + 1], X[:, :nq], X[:, nq:], Z[:, nq:], U[:k + 1], pv, info)
+    if failure is INTERRUPTED:
+        raise SimulationInterrupted(message, time=float(t[k]), trajectory=traj)
     if failure is not None:
         raise SimulationError(message, time=float(t[k]), trajectory=traj)
     return traj
@@ -388,6 +398,7 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
     k = 0
     while k < n_int:
         try:
+            raise_if_interrupted()
             if watching and near(k):
                 k = bridged(k)
             else:
@@ -406,6 +417,8 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
                         k = bridged(first - 1)
         except ChunkFailure as last:
             return X[:k + 1], Z[:k + 1], last, since
+        except KeyboardInterrupt:
+            return X[:k + 1], Z[:k + 1], INTERRUPTED, since
         if watching and not auto:
             X[k] = projector(t[k], X[k])
             R[k] = np.nan
