@@ -76,3 +76,10 @@ def test_options_object_and_shortcuts_give_the_same_run():
     assert opts.rtol == 1e-9                                            # which is left as it was
     E = a.energy                                   # a conservative run: energy kept to the tolerance
     assert np.max(np.abs(E - E[0])) < 1e-6 * max(1.0, abs(E[0]))
+
+
+def test_simulate_signature_lists_every_option():
+    import inspect
+    params = inspect.signature(nc.simulate).parameters
+    for f in dataclasses.fields(nc.SimulationOptions):
+        assert params[f.name].default == f.default and params[f.name].kind is inspect.Parameter.KEYWORD_ONLY

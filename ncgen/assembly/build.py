@@ -14,7 +14,8 @@ from ncgen.assembly.contacts import (check_initial_gaps, contact_functions, cont
 from ncgen.assembly.functions import system_functions
 from ncgen.assembly.initial_state import consistent_state
 from ncgen.assembly.joint_space import JointSpace, actuator_forces, build_joint_coordinates
-from ncgen.assembly.kinematics import resolve_fix, system_size
+from ncgen.assembly.kinematics import resolve_fix
+from ncgen.assembly.manifold import system_size
 from ncgen.assembly.limits import model_limits
 from ncgen.assembly.manifold import check_tangent_inertia
 from ncgen.assembly.mass import assemble_mass, flat_members, flat_support, mass_factor

@@ -2,6 +2,8 @@
 stepper (:mod:`ncgen.runtime.stepper`)."""
 from __future__ import annotations
 
+import dataclasses
+import inspect
 import math
 import time
 import warnings
@@ -9,6 +11,7 @@ import warnings
 import numpy as np
 
 from ncgen.assembly.initial_state import consistent_state
+from ncgen.assembly.manifold import NEAR_SINGULAR, ManifoldProjector, robust_algebraic
 from ncgen.codegen.load import NoCompilerWarning
 from ncgen.errors import CompilerNotFound, NcgenError, SimulationError, SimulationInterrupted
 from ncgen.interrupts import raise_if_interrupted, sticky_interrupt
@@ -56,22 +59,35 @@ BRIDGE_MIN_TOL = 1e-12
 BRIDGE_MAX_STEPS = 20_000
 
 
+def _show_shortcuts(f):
+    """``f`` with a signature that lists the option shortcuts (``help``, editors): each field of
+    :class:`~ncgen.runtime.options.SimulationOptions` as a keyword with its default, in place of
+    ``**shortcuts``."""
+    sig = inspect.signature(f)
+    params = [q for q in sig.parameters.values() if q.kind is not inspect.Parameter.VAR_KEYWORD]
+    params += [inspect.Parameter(fl.name, inspect.Parameter.KEYWORD_ONLY, default=fl.default, annotation=fl.type)
+               for fl in dataclasses.fields(SimulationOptions)]
+    f.__signature__ = sig.replace(parameters=params)
+    return f
+
+
+@_show_shortcuts
 def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None, t0: float | None = None,
              options: SimulationOptions | None = None, **shortcuts) -> Trajectory:
     """Integrate ``model`` from ``t0`` (default ``model.t0``) to ``t_end`` and return the
     :class:`~ncgen.runtime.trajectory.Trajectory` on the grid ``t0, t0 + dt, ..., t_end``
     (``dt`` shortened if needed so that ``t_end`` is on the grid).  Times in s.
 
-    How to integrate is ``options`` (:class:`~ncgen.runtime.options.SimulationOptions`,
-    ``nc.SimulationOptions``: defaults, validated once); every field of it can also be given
-    as a keyword argument (``method=``, ``rtol=``, ``substeps=``, ...), which overrides
-    ``options`` for this call.  The options:
-
     Equations: the semi-explicit index-1 DAE ``q̇ = v``, ``v̇ = M⁻¹ (F − Aᵀ λ)``,
     ``0 = A v̇ − γ + 2α Φ̇ + β² Φ`` with the model's Baumgarte coefficients
     ``model.baumgarte = (α, β)`` (default 5 s⁻¹ each, set by ``System.build(baumgarte=...)``:
     constraint drift decays like a critically damped oscillator with time constant 0.2 s;
     IDAS keeps the drift small anyway, the terms stop it from growing over long runs).
+
+    How to integrate is ``options`` (:class:`~ncgen.runtime.options.SimulationOptions`,
+    ``nc.SimulationOptions``: defaults, validated once); every field of it can also be given
+    as a keyword argument (``method=``, ``rtol=``, ``substeps=``, ...), which overrides
+    ``options`` for this call.  The run's data and the options:
 
     * ``method``: ``"auto"`` (default): ``"joint"`` for a tree without contacts when a C
       compiler is available (:func:`~ncgen.runtime.joint_simulation.joint_space_applies`),
