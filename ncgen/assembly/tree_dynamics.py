@@ -86,6 +86,9 @@ def tree_dynamics_function(model) -> ca.Function:
     :class:`~ncgen.errors.ModelError` (from ``tree_map``) for a model that is not a tree;
     whether the tree's constraints are all the model's is for the caller to check."""
     js = model.joint_space
+    if mimic_relations(model):
+        raise ModelError("joint forward dynamics: the projected form does not take mimic joints "
+                         "(the recursive form does: 3D models of rigid bodies)")
     qj, vj, q, qj_dot = js.tree_map(model.layout)
     t, u, p = ca.SX.sym("t"), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
     v = ca.jtimes(q, qj, qj_dot)

@@ -33,6 +33,8 @@ def check_tree(model) -> None:
     if js.nv == 0:
         raise ModelError("joint forward dynamics: the model has no joints with coordinates")
     mimic = MimicMap(model)
+    if mimic.relations and js.dim != 3:
+        raise ModelError("joint forward dynamics: mimic joints are taken by the recursive form only (3D models)")
     rng = np.random.default_rng(1)
     qj = np.array(js.positions(model.q0)).reshape(-1) + 0.1 * rng.standard_normal(js.nq)
     for name, s in js.slices().items():
