@@ -263,3 +263,15 @@ def test_the_fast_call_and_the_ctypes_path_agree(monkeypatch):
             k(np.zeros(5), np.zeros(6), np.zeros(6))
         with pytest.raises(nc.ModelError, match="not finite"):
             k(np.zeros(6), np.full(6, np.inf), np.zeros(6))
+
+
+def test_panda_as_shipped_simulates_in_joint_space_with_its_mimic_finger():
+    """The stock Panda (mimic finger) now gets the joint-space simulation: the fingers stay
+    equal and the arm agrees with IDAS on the natural coordinates (the constrained DAE,
+    mimic equation included) at tight tolerance."""
+    model = model_of("panda")
+    tj = nc.simulate(model, 0.2, 0.01, method="joint")
+    ti = nc.simulate(model, 0.2, 0.01, method="idas", rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(tj.joint("panda_finger_joint2")[0], tj.joint("panda_finger_joint1")[0], atol=1e-14)
+    for name in ("panda_joint2", "panda_joint4", "panda_joint6"):
+        np.testing.assert_allclose(tj.joint(name)[0], ti.joint(name)[0], atol=1e-8)
