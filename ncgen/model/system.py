@@ -10,6 +10,8 @@ given in world coordinates in the initial configuration; SI units throughout.
 """
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import casadi as ca
 
@@ -271,10 +273,46 @@ class System:
         from ncgen.model.toml_io import system_to_toml
         return system_to_toml(self)
 
+    def description(self) -> tuple:
+        """``(toml, frames, visuals)``: what the system is, as plain data (its TOML text, and
+        the named frames and visual geometry that TOML does not hold); :func:`from_description`
+        makes the same system again.  Pickling a system sends this."""
+        try:
+            text = self.to_toml()
+        except NcgenError as e:
+            raise TypeError(f"system {self.name!r} cannot be pickled: its description is written as TOML, "
+                            f"and {e}") from None
+        frames = {k: (mem, np.array(R), np.array(p)) for k, (mem, R, p) in self.frames.items()}
+        return text, frames, [dict(v) for v in self.visuals]
+
+    def __reduce__(self):
+        return from_description, self.description()
+
+    @classmethod
+    def rebuilt_model(cls, description: tuple, options: dict, expected_hash: str):
+        """The model of a pickle (:meth:`ncgen.model.model.Model.__reduce__`): the one of this
+        process with that content hash, else built from ``description`` with the build
+        ``options`` and checked against ``expected_hash``."""
+        from ncgen.model.model import keep_rebuilt, known_model
+        model = known_model(expected_hash)
+        if model is None:
+            with warnings.catch_warnings():   # said when it was first built (e.g. dropped constraints)
+                warnings.simplefilter("ignore")
+                model = keep_rebuilt(from_description(*description).build(**options), expected_hash)
+        return model
+
     def __repr__(self) -> str:
         return (f"System({self.name!r}, dim={self.dim}, members={len(self.members)}, "
                 f"joints={len(self.joints)}, forces={len(self.forces)}"
                 + (f", contacts={len(self.contacts)})" if self.contacts else ")"))
+
+
+def from_description(toml: str, frames: dict, visuals: list) -> System:
+    """The system of :meth:`System.description` (how a pickled system is read back)."""
+    system = System.from_toml(toml)
+    system.frames = {k: (mem, np.array(R), np.array(p)) for k, (mem, R, p) in frames.items()}
+    system.visuals = [dict(v) for v in visuals]
+    return system
 
 
 def _rotation(R, d, name):
