@@ -20,6 +20,8 @@ from ncgen.model.system import System
 from ncgen.optim import OptimalControl, OptimalTrajectory
 from ncgen.runtime import Trajectory, simulate
 from ncgen.runtime.batch import BatchResult, simulate_batch
+from ncgen.runtime.samples import Samples
+from ncgen.runtime.sweep import SweepResult, open_sweep, sweep
 from ncgen.runtime.formfinding import Tensegrity, form_find
 from ncgen.runtime.linearization import LinearModel, linearize
 from ncgen.runtime.modes import Modes, modes
@@ -34,11 +36,11 @@ from ncgen.version import __version__
 __all__ = [
     "BatchResult", "Contact", "CoordinateDriver", "Cylindrical", "Distance", "Equilibrium", "Fixed", "Force", "Free", "GeneralizedForce",
     "Joint", "JointReaction", "LinearModel", "Mimic", "Model", "ModelError", "Modes", "NcgenError", "OptimalControl",
-    "OptimalTrajectory", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic", "Revolute", "SpherePlane", "SphereSphere", "Spherical",
-    "Spring", "System", "Tensegrity", "Torque", "TorsionalSpring", "Trajectory", "Universal",
+    "OptimalTrajectory", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic", "Revolute", "Samples", "SpherePlane", "SphereSphere", "Spherical",
+    "Spring", "SweepResult", "System", "Tensegrity", "Torque", "TorsionalSpring", "Trajectory", "Universal",
     "assemble", "coordinate_type", "dof_report", "equilibrium", "form_find", "forward_dynamics",
     "forward_dynamics_kernel", "generate", "inverse_dynamics", "joint_forward_dynamics",
-    "joint_forward_dynamics_kernel", "joint_reactions", "linearize", "modes",
-    "project_velocity", "simulate", "simulate_batch", "solve_kinematics",
+    "joint_forward_dynamics_kernel", "joint_reactions", "linearize", "modes", "open_sweep",
+    "project_velocity", "simulate", "simulate_batch", "solve_kinematics", "sweep",
     "__version__", "viz",
 ]
