@@ -222,7 +222,7 @@ class _Runs:
                 if project:
                     self.LAM[i, 0] = initial_multipliers(model, t0, q, v, self.U[i][0], pv, dae)
             except NcgenError as e:
-                self.status[i], self.message[i] = STATUS_SETUP, f"run {i} could not start: {e}"
+                self.status[i], self.message[i] = STATUS_SETUP, f"could not start: {e}"
                 self.Q[i, 0] = self.V[i, 0] = np.nan
         if not project:
             self._multipliers(t0)
@@ -240,7 +240,7 @@ class _Runs:
         self.LAM[ok, 0] = lam[ok]
         for i in np.flatnonzero(ok & ~np.all(np.isfinite(lam), axis=1)):
             self.status[i] = STATUS_SETUP
-            self.message[i] = (f"run {i} could not start: the KKT system [[M, A^T], [A, 0]] is singular at "
+            self.message[i] = (f"could not start: the KKT system [[M, A^T], [A, 0]] is singular at "
                                f"t0 = {t0:g} s (a singular configuration, or the state is not consistent: "
                                f"project=True makes it so)")
 
@@ -271,7 +271,7 @@ class _Runs:
             if status != 0:
                 self.status[i] = status
                 t_fail = float(self.t[0]) + done.value * self.h
-                self.message[i] = (f"run {i}: the stepper failed in the step from t = {t_fail:.6g} s to "
+                self.message[i] = (f"the stepper failed in the step from t = {t_fail:.6g} s to "
                                    f"{t_fail + self.h:.6g} s: {STATUS.get(status, f'status {status}')}")
                 self._blank(i, rows + 1)
             if self.check:
@@ -294,7 +294,7 @@ class _Runs:
         if bad is not None and self.status[i] == 0:
             row, reason = bad
             self.status[i] = STATUS_UNTRUSTED
-            self.message[i] = f"run {i} is not trustworthy: {reason}"
+            self.message[i] = f"not trustworthy: {reason}"
             self._blank(i, row + 1)
 
     def _blank(self, i: int, k: int) -> None:

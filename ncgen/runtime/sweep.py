@@ -198,7 +198,7 @@ def _idas_runs(model, P, job):
             traj = simulate(model, job["t_end"], job["dt"], method="idas", p=P[i], u=job["u"], progress=False,
                             **job["options"])
         except NcgenError as e:
-            status[i], message[i] = STATUS_FAILED, f"run {i}: {e}"
+            status[i], message[i] = STATUS_FAILED, str(e)
             traj = getattr(e, "trajectory", None)
             if traj is None:
                 continue
