@@ -48,7 +48,7 @@ def _arguments(p: argparse.ArgumentParser) -> None:
 
 @subcommand(
     "sweep",
-    help="run a model over a grid or samples of parameter values (local cores or a Dask cluster)",
+    help="run a parameter grid or samples on all cores or Dask",
     description=(
         "Run the model in MODEL.toml once per parameter set, from its initial state to --t-end, and "
         "stream the results to a Zarr store: one array per output, shaped (runs, times, ...), and a "
