@@ -402,23 +402,8 @@ def _plain(x):
     return x.item() if hasattr(x, "item") else x
 
 
-class _NoBar:
-    def update(self, n):
-        pass
-
-    def close(self):
-        pass
-
-
 def _bar(total: int, initial: int, progress, name: str):
-    """A tqdm bar on stderr (``progress`` None: when stderr is a terminal)."""
-    if progress is False:
-        return _NoBar()
-    try:
-        from tqdm.auto import tqdm
-    except ImportError:
-        if progress:
-            raise NcgenError("sweep(progress=True) needs tqdm: pip install 'ncgen[sweep]'") from None
-        return _NoBar()
-    return tqdm(total=total, initial=initial, unit="run", desc=f"sweep {name}", disable=None if progress is None
-                else not progress, smoothing=0.1)
+    """A tqdm bar of runs on stderr (``progress`` None: when stderr is a terminal)."""
+    from tqdm.auto import tqdm
+    return tqdm(total=total, initial=initial, unit="run", desc=f"sweep {name}",
+                disable=None if progress is None else not progress, smoothing=0.1)
