@@ -32,6 +32,8 @@ pytestmark = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc
                     "RATIO ncgen / MuJoCo penetration"]),
     ("joint_space.py", ["=== call overhead", "RATIO casadi.external / direct", "=== Panda",
                         "RATIO ncgen joint kernel / pinocchio.aba", "RATIO ncgen joint kernel C loop"]),
+    ("batch.py", ["=== scaling: 8 runs", "RATIO one thread / two threads", "per-run cost of one-step runs",
+                  "RATIO ncgen / mujoco.rollout, 1 thread(s)", "RATIO ncgen / mujoco.rollout, 2 thread(s)"]),
     ("sharing_chain.py", ["=== chain of N = 3 bars", "RATIO explicit (shared by build) / shared-point chain"]),
     ("reactions_shared.py", ["=== explicit-joint chain of N = 3 bars", "unshared form built on first use",
                              "RATIO shared / share=False, joint_reactions per state"]),

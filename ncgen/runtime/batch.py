@@ -234,7 +234,7 @@ class _Runs:
         if not model.nc:
             return
         U0 = np.array([self.U[i][0] for i in range(n)]).reshape(n, model.nu)
-        accel = compiled_functions(model, ["accel"])["accel"].map(n, "thread", self.workers)
+        accel = _compiled_accel(model).map(n, "thread", self.workers)
         lam = np.array(accel(t0, self.Q[:, 0].T, self.V[:, 0].T, U0.T, self.P.T)[1]).T
         ok = self.status == 0
         self.LAM[ok, 0] = lam[ok]
@@ -363,6 +363,14 @@ class _Address:
 
 
 _raw: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+_accel: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def _compiled_accel(model):
+    """The model's compiled ``accel`` (loaded once per model)."""
+    if model not in _accel:
+        _accel[model] = compiled_functions(model, ["accel"])["accel"]
+    return _accel[model]
 
 
 def _raw_loops(stepper):
