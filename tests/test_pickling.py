@@ -102,3 +102,17 @@ def test_spawn_pool_runs_the_stepper_without_recompiling(tmp_path, monkeypatch):
     assert sorted((tmp_path / "cache").glob("slider_crank-*")) == entries      # no second build
     assert (entries[0] / "build.json").read_text() == record
     assert json.loads(record)["content_hash"]
+
+
+def test_urdf_model_keeps_its_frames_and_joint_limits():
+    from test_urdf import ARM
+    model = nc.System.from_urdf(ARM).build()
+    data = pickle.dumps(model)
+    forget_models()
+    again = pickle.loads(data)
+    assert again.joint_limits == model.joint_limits == {"j1": {"velocity": 3.0, "effort": 10.0}}
+    q, _ = model.from_joint_space([0.7])
+    for name in model.frames:
+        R, p = model.frame_pose(name, q)
+        R2, p2 = again.frame_pose(name, q)
+        assert np.array_equal(R, R2) and np.array_equal(p, p2)

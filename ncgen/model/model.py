@@ -331,7 +331,8 @@ def content_hash(model: Model) -> str:
         h.update(np.ascontiguousarray(a, dtype=float).tobytes())
     names = [model.name, model.coordinate_names, model.constraint_names, model.input_names, model.input_sizes,
              model.parameter_names, model.parameter_sizes, model.marker_names, model.contact_model, model.t0,
-             list(model.baumgarte)]
+             list(model.baumgarte), model.member_names, sorted(model.frames), model.joint_names,
+             model.joint_limits]
     h.update(repr(names).encode())
     return h.hexdigest()
 

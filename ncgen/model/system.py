@@ -274,16 +274,18 @@ class System:
         return system_to_toml(self)
 
     def description(self) -> tuple:
-        """``(toml, frames, visuals)``: what the system is, as plain data (its TOML text, and
-        the named frames and visual geometry that TOML does not hold); :func:`from_description`
-        makes the same system again.  Pickling a system sends this."""
+        """``(toml, frames, visuals, joint_limits)``: what the system is, as plain data (its
+        TOML text, and the named frames, visual geometry and joint limits, e.g. of a URDF, that
+        TOML does not hold); :func:`from_description` makes the same system again.  Pickling a
+        system sends this."""
         try:
             text = self.to_toml()
         except NcgenError as e:
             raise TypeError(f"system {self.name!r} cannot be pickled: its description is written as TOML, "
                             f"and {e}") from None
         frames = {k: (mem, np.array(R), np.array(p)) for k, (mem, R, p) in self.frames.items()}
-        return text, frames, [dict(v) for v in self.visuals]
+        limits = {j.name: dict(j.limits) for j in self.joints if j.limits}
+        return text, frames, [dict(v) for v in self.visuals], limits
 
     def __reduce__(self):
         return from_description, self.description()
@@ -307,11 +309,13 @@ class System:
                 + (f", contacts={len(self.contacts)})" if self.contacts else ")"))
 
 
-def from_description(toml: str, frames: dict, visuals: list) -> System:
+def from_description(toml: str, frames: dict, visuals: list, joint_limits: dict) -> System:
     """The system of :meth:`System.description` (how a pickled system is read back)."""
     system = System.from_toml(toml)
     system.frames = {k: (mem, np.array(R), np.array(p)) for k, (mem, R, p) in frames.items()}
     system.visuals = [dict(v) for v in visuals]
+    for joint in system.joints:
+        joint.limits = dict(joint_limits.get(joint.name, {}))
     return system
 
 
