@@ -176,7 +176,7 @@ def main(argv=None) -> int:
     p.add_argument("--runs", type=int, default=1000)
     p.add_argument("--rollout-runs", type=int, default=200)
     p.add_argument("--t-end", type=float, default=2.0)
-    p.add_argument("--h", type=float, default=2e-3, help="ncgen's step (s)")
+    p.add_argument("--h", type=float, default=1e-3, help="ncgen's step (s)")
     p.add_argument("--repeat", type=int, default=3)
     p.add_argument("--smoke", action="store_true", help="tiny: seconds")
     args = p.parse_args(argv)

@@ -95,6 +95,24 @@ def test_interrupted_sweep_resumes_without_repeating_runs(slider_crank, tmp_path
         nc.sweep(slider_crank, {"omega": omegas + 1}, t_end=T_END, dt=DT, path=path, workers=1, chunk=1)
 
 
+def test_monte_carlo_on_initial_states_and_inputs_equals_the_serial_loop():
+    cartpole = nc.System.from_toml(EXAMPLES / "cartpole.toml").build()
+    pushed = nc.simulate(cartpole, 0.3, 0.01, method="stepper", u=lambda t: [2.0])
+    q0, v0 = pushed.q[::10], pushed.v[::10]                   # 4 consistent states
+    U = np.random.default_rng(2).uniform(-1, 1, size=(4, 21, 1))
+    for method in ("stepper", "idas"):
+        result = nc.sweep(cartpole, None, t_end=0.2, dt=0.01, q0=q0, v0=v0, u=U, method=method, workers=2, chunk=1,
+                          outputs=["q", "v"], progress=False)
+        assert result.info["failed"] == 0 and list(result.summary["run"]) == [0, 1, 2, 3]
+        for i in range(4):
+            traj = nc.simulate(cartpole, 0.2, 0.01, method=method, q0=q0[i], v0=v0[i], u=U[i])
+            assert np.array_equal(result["q"][i], traj.q) and np.array_equal(result["v"][i], traj.v)
+    with pytest.raises(NcgenError, match=r"arrays of one number of runs \(found \[2, 4\]\)"):
+        nc.sweep(cartpole, None, t_end=0.2, dt=0.01, q0=q0, u=U[:2])
+    with pytest.raises(NcgenError, match=r"u: expected an array of shape \(len\(t\), nu\) or .* with 4 runs"):
+        nc.sweep(cartpole, nc.Samples([], np.zeros((4, 0))), t_end=0.2, dt=0.01, u=U[:2])
+
+
 def test_a_failing_run_is_reported_with_its_parameters(slider_crank):
     result = nc.sweep(slider_crank, {"omega": [4.0, 60.0, 5.0]}, t_end=0.5, dt=0.01, workers=2, progress=False)
     assert list(result.summary["status"]) == [0, STATUS_UNTRUSTED, 0] and result.info["failed"] == 1

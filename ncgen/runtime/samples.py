@@ -17,7 +17,9 @@ class Samples:
 
     def __init__(self, names, values):
         self.names = [str(n) for n in names]
-        self.values = np.array(values, dtype=float).reshape(-1, len(self.names))
+        values = np.array(values, dtype=float)
+        self.values = values.reshape(len(values), len(self.names)) if values.ndim == 2 else \
+            values.reshape(-1, len(self.names))
         if len(set(self.names)) != len(self.names):
             raise NcgenError(f"samples: a parameter is named twice in {self.names}")
         if not np.all(np.isfinite(self.values)):

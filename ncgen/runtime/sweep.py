@@ -90,18 +90,21 @@ class SweepResult:
 
 
 def sweep(model, params, *, t_end: float, dt: float, method: str = "stepper", outputs=("q",), path=None,
-          client=None, workers: int | None = None, chunk: int | None = None, u=None, progress: bool | None = None,
-          **options) -> SweepResult:
+          client=None, workers: int | None = None, chunk: int | None = None, u=None, q0=None, v0=None,
+          progress: bool | None = None, **options) -> SweepResult:
     """Run ``model`` once per parameter set of ``params`` from ``model.t0`` to ``t_end`` on
     the grid of step ``dt`` (s).
 
-    * ``params``: a dict ``{name: values}`` (the full grid), a pandas DataFrame or
+    * ``params``: None (only ``u``, ``q0`` or ``v0`` vary, one run per row), a dict
+      ``{name: values}`` (the full grid), a pandas DataFrame or
       ``nc.Samples.table({...})`` (one run per row), or a sampler
       (``nc.Samples.latin_hypercube(n, bounds, seed=...)``, ``.sobol``, ``.random``); names
       are model parameters, the others keep their values.
     * ``method``: ``"stepper"`` (:func:`~ncgen.simulate_batch`, checked as a single run) or
       ``"idas"`` (:func:`~ncgen.simulate` per run); ``options`` go to them (``substeps``,
-      ``rtol``, ...).  ``u``: inputs for every run, samples on the grid ``(len(t), nu)``.
+      ``rtol``, ...).  ``u``: inputs, samples on the grid ``(len(t), nu)`` for every run or
+      ``(runs, len(t), nu)``; ``q0``, ``v0``: initial states, ``(nq,)`` or ``(runs, nq)``
+      (Monte-Carlo on the initial state; projected onto the constraints as in ``simulate``).
     * ``outputs``: per-run arrays to keep, from :data:`OUTPUTS`; the summary always has one
       row per run: the parameters, ``status`` (0: complete), ``message``, ``t_reached``, the
       energy at start and end, the largest constraint residual, seconds and worker.
@@ -118,25 +121,33 @@ def sweep(model, params, *, t_end: float, dt: float, method: str = "stepper", ou
     unknown = [o for o in outputs if o not in OUTPUTS]
     if unknown:
         raise NcgenError(f"outputs: unknown {', '.join(map(repr, unknown))}; expected some of {', '.join(OUTPUTS)}")
-    samples = as_samples(params)
-    P = _parameter_rows(model, samples)
     t = time_grid(model.t0, t_end, dt)
+    if params is None:                     # only initial states or inputs vary
+        runs = {len(a) for a, k in ((u, 3), (q0, 2), (v0, 2)) if a is not None and np.ndim(a) == k}
+        if len(runs) != 1:
+            raise NcgenError("params=None: give per-run u (runs, len(t), nu), q0 or v0 (runs, nq) arrays of one "
+                             f"number of runs (found {sorted(runs) or 'none'})")
+        samples = Samples([], np.zeros((runs.pop(), 0)))
+    else:
+        samples = as_samples(params)
+    P = _parameter_rows(model, samples)
     n = len(samples)
-    if u is not None:
-        u = np.asarray(u, dtype=float)
+    per_run = _per_run(model, n, len(t), u=u, q0=q0, v0=v0)
     _check_options(method, options)
     where, n_workers = _where(client, workers, method)
     if method == "stepper":
         load_stepper(model)        # compiled (or found in the cache) once, before the workers start
     chunk = _chunk(chunk, n, n_workers)
-    store = _Store(path, model, samples, t, method, outputs, options, chunk, u) if path is not None else None
+    store = _Store(path, model, samples, t, method, outputs, options, chunk, per_run) if path is not None else None
     done = store.done() if store is not None else set()
     todo = [range(i, min(i + chunk, n)) for i in range(0, n, chunk) if i not in done]
     collected = _Collected(samples) if store is None else None
     bar = _bar(n, n - sum(len(c) for c in todo), progress, model.name)
-    job = dict(t_end=float(t_end), dt=float(dt), method=method, outputs=outputs, options=options, u=u)
+    job = dict(t_end=float(t_end), dt=float(dt), method=method, outputs=outputs, options=options,
+               shared={k: v for k, (v, each) in per_run.items() if not each})
+    per_task = {k: v for k, (v, each) in per_run.items() if each}
     try:
-        for first, result in _execute(client, where, n_workers, model, P, todo, job):
+        for first, result in _execute(client, where, n_workers, model, P, per_task, todo, job):
             (store or collected).put(first, result)
             bar.update(len(result["summary"]["run"]))
     finally:
@@ -153,20 +164,21 @@ def sweep(model, params, *, t_end: float, dt: float, method: str = "stepper", ou
 
 
 # ---------------------------------------------------------------- the runs of one task
-def run_chunk(model, runs: range, P: np.ndarray, job: dict) -> dict:
-    """The runs ``runs`` (parameter rows ``P``) of a sweep: ``{"summary": columns,
-    "arrays": {output: (len(runs), time, ...)}}``.  Runs on a worker; never raises for a
-    failed run."""
+def run_chunk(model, runs: range, P: np.ndarray, job: dict, each: dict | None = None) -> dict:
+    """The runs ``runs`` (parameter rows ``P``; ``each``: their rows of the per-run ``u``,
+    ``q0``, ``v0``) of a sweep: ``{"summary": columns, "arrays": {output: (len(runs), time,
+    ...)}}``.  Runs on a worker; never raises for a failed run."""
     start = time.perf_counter()
     method, outputs, options = job["method"], job["outputs"], job["options"]
+    given = {**job["shared"], **(each or {})}
     if method == "stepper":
         from ncgen.runtime.batch import simulate_batch
-        b = simulate_batch(model, job["t_end"], job["dt"], p=P, u=job["u"], workers=1, **options)
+        b = simulate_batch(model, job["t_end"], job["dt"], p=P, workers=1, **given, **options)
         data = {"q": b.q, "v": b.v, "lam": b.lam, "kinetic": b.kinetic, "potential": b.potential,
                 "constraint_residual": b.constraint_residual, "markers": b.markers}
         status, message, t = b.status, b.message, b.t
     else:
-        data, status, message, t = _idas_runs(model, P, job)
+        data, status, message, t = _idas_runs(model, P, job, given, each or {})
     seconds = (time.perf_counter() - start) / len(runs)
     E = data["kinetic"] + data["potential"]
     finite = np.isfinite(E)
@@ -183,7 +195,7 @@ def run_chunk(model, runs: range, P: np.ndarray, job: dict) -> dict:
     return {"summary": summary, "arrays": {o: data[o] for o in outputs}}
 
 
-def _idas_runs(model, P, job):
+def _idas_runs(model, P, job, given, each):
     """One :func:`~ncgen.simulate` per run (IDAS), failures caught."""
     from ncgen.runtime.simulation import simulate
     t = time_grid(model.t0, job["t_end"], job["dt"])
@@ -195,7 +207,8 @@ def _idas_runs(model, P, job):
     status, message = np.zeros(n, dtype=int), [""] * n
     for i in range(n):
         try:
-            traj = simulate(model, job["t_end"], job["dt"], method="idas", p=P[i], u=job["u"], progress=False,
+            own = {k: (v[i] if k in each else v) for k, v in given.items()}
+            traj = simulate(model, job["t_end"], job["dt"], method="idas", p=P[i], progress=False, **own,
                             **job["options"])
         except NcgenError as e:
             status[i], message[i] = STATUS_FAILED, str(e)
@@ -241,14 +254,18 @@ def _chunk(chunk, n: int, workers: int) -> int:
     return int(chunk)
 
 
-def _execute(client, where, workers, model, P, todo, job):
+def _execute(client, where, workers, model, P, per_task, todo, job):
     """``(first run, result)`` of every task as they finish."""
+
+    def rows(c):
+        return {k: v[c.start:c.stop] for k, v in per_task.items()}
+
     if not todo:
         return
     if where == "dask":
         from distributed import as_completed
         [remote_model] = client.scatter([model], broadcast=True)
-        futures = {client.submit(run_chunk, remote_model, c, P[c.start:c.stop], job, pure=False): c.start
+        futures = {client.submit(run_chunk, remote_model, c, P[c.start:c.stop], job, rows(c), pure=False): c.start
                    for c in todo}
         for future in as_completed(futures):
             yield futures[future], future.result()
@@ -259,7 +276,7 @@ def _execute(client, where, workers, model, P, todo, job):
         import multiprocessing
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
     with pool:
-        pending = {pool.submit(run_chunk, model, c, P[c.start:c.stop], job): c.start for c in todo}
+        pending = {pool.submit(run_chunk, model, c, P[c.start:c.stop], job, rows(c)): c.start for c in todo}
         while pending:
             finished, _ = wait(pending, return_when=FIRST_COMPLETED)
             for future in finished:
@@ -267,6 +284,23 @@ def _execute(client, where, workers, model, P, todo, job):
 
 
 # ---------------------------------------------------------------- parameters
+def _per_run(model, n: int, n_t: int, **given) -> dict:
+    """``{name: (array, per run?)}`` of the given ``u``, ``q0``, ``v0``, shapes checked."""
+    one = {"u": 2, "q0": 1, "v0": 1}
+    out = {}
+    for name, value in given.items():
+        if value is None:
+            continue
+        a = np.asarray(value, dtype=float)
+        each = a.ndim == one[name] + 1
+        if a.ndim not in (one[name], one[name] + 1) or (each and len(a) != n):
+            shape = "(len(t), nu) or (runs, len(t), nu)" if name == "u" else "(nq,) or (runs, nq)"
+            raise NcgenError(f"{name}: expected an array of shape {shape} with {n} runs, got shape {a.shape}")
+        out[name] = (a, each)
+    return out
+
+
+
 def _parameter_rows(model, samples: Samples) -> np.ndarray:
     """The full parameter vector of every run (named entries replaced), checked up front."""
     sizes = dict(zip(model.parameter_names, model.parameter_sizes))
@@ -315,7 +349,7 @@ def _summary_columns(parts: list[dict], samples: Samples) -> dict:
 class _Store:
     """A sweep's Zarr store and Parquet summary parts (module docstring)."""
 
-    def __init__(self, path, model, samples, t, method, outputs, options, chunk, u):
+    def __init__(self, path, model, samples, t, method, outputs, options, chunk, per_run):
         try:
             import pyarrow  # noqa: F401
             import zarr
@@ -326,7 +360,8 @@ class _Store:
         spec = {"model": model.name, "content_hash": model.content_hash, "runs": len(samples),
                 "parameters": samples.names, "samples_sha256": _sha(samples.values), "t0": float(t[0]),
                 "t_end": float(t[-1]), "n_times": len(t), "method": method, "outputs": outputs, "chunk": chunk,
-                "options": json.loads(json.dumps(options, default=repr)), "u_sha256": None if u is None else _sha(u)}
+                "options": json.loads(json.dumps(options, default=repr)),
+                "per_run_sha256": {k: _sha(v) for k, (v, _) in sorted(per_run.items())}}
         group = zarr.open_group(str(self.path), mode="a")
         known = group.attrs.get(SPEC_KEY)
         if known is not None and known != spec:
