@@ -132,12 +132,12 @@ def sweep(model, params, *, t_end: float, dt: float, method: str = "stepper", ou
         samples = as_samples(params)
     P = _parameter_rows(model, samples)
     n = len(samples)
-    per_run = _per_run(model, n, len(t), u=u, q0=q0, v0=v0)
+    per_run = _per_run(model, n, u=u, q0=q0, v0=v0)
     _check_options(method, options)
     where, n_workers = _where(client, workers, method)
     if method == "stepper":
         load_stepper(model)        # compiled (or found in the cache) once, before the workers start
-    chunk = _chunk(chunk, n, n_workers)
+    chunk = _chunk(chunk if chunk is not None or path is None else _stored_chunk(path), n, n_workers)
     store = _Store(path, model, samples, t, method, outputs, options, chunk, per_run) if path is not None else None
     done = store.done() if store is not None else set()
     todo = [range(i, min(i + chunk, n)) for i in range(0, n, chunk) if i not in done]
@@ -284,7 +284,7 @@ def _execute(client, where, workers, model, P, per_task, todo, job):
 
 
 # ---------------------------------------------------------------- parameters
-def _per_run(model, n: int, n_t: int, **given) -> dict:
+def _per_run(model, n: int, **given) -> dict:
     """``{name: (array, per run?)}`` of the given ``u``, ``q0``, ``v0``, shapes checked."""
     one = {"u": 2, "q0": 1, "v0": 1}
     out = {}
@@ -420,6 +420,18 @@ def open_sweep(path) -> tuple[dict, dict]:
     keys = list(tables[0]) if tables else []
     summary = {k: np.concatenate([np.asarray(t[k]) for t in tables]) for k in keys}
     return summary, {name: group[name] for name in [*spec["outputs"], "t"]}
+
+
+def _stored_chunk(path) -> int | None:
+    """The runs per task of the sweep already at ``path`` (a resumed sweep keeps its tasks,
+    whatever the number of workers now), or None."""
+    spec = Path(path) / "zarr.json"
+    if not spec.is_file():
+        return None
+    try:
+        return int(json.loads(spec.read_text())["attributes"][SPEC_KEY]["chunk"])
+    except (ValueError, KeyError, TypeError):
+        return None
 
 
 def _shapes(model, n_t: int) -> dict:
