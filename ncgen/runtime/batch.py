@@ -26,9 +26,9 @@ import numpy as np
 
 from ncgen.codegen.stepper_package import MAX_HALVINGS, MAX_ITER, STATUS, TOL, n_stats
 from ncgen.errors import NcgenError
-from ncgen.runtime.inputs import HOLDS, input_samples, parameter_values, time_grid
+from ncgen.runtime.inputs import input_samples, parameter_values, time_grid
 from ncgen.runtime.simulation import initial_multipliers, initial_state, point_bytes
-from ncgen.runtime.stepper import _trajectory, step_inputs
+from ncgen.runtime.stepper import _check_options, _trajectory, step_inputs
 from ncgen.runtime.stepper_checks import is_conservative, untrusted_row
 from ncgen.runtime.dae import load_dae
 from ncgen.runtime.library import compiled_functions
@@ -104,8 +104,8 @@ def simulate_batch(model, t_end: float, dt: float, *, q0=None, v0=None, p=None, 
     ``q0``/``v0`` are given or its ``p`` differs from the model's, its initial state is
     projected onto the constraints as :func:`ncgen.simulate` does (``ic_tolerance``), in
     Python, a few milliseconds per run; ``project=False`` trusts the given states as
-    consistent (only the multipliers ``λ0`` are computed, for all runs in one CasADi call):
-    then preparing a run costs a few µs.
+    consistent (only the multipliers ``λ0`` are computed, for all runs in one compiled
+    call): then preparing a run costs about 20 µs, its KKT solve included.
     ``check`` (default): each run is checked as a single run is (a shadow run with steps of
     2h estimates its error, about half the work again; split steps, exploding Newton
     iterations, energy drift or an estimated error above 1 % of the model's size: see
@@ -116,10 +116,7 @@ def simulate_batch(model, t_end: float, dt: float, *, q0=None, v0=None, p=None, 
     Returns a :class:`BatchResult`; failed runs are reported there, never raised.
     """
     start = time.perf_counter()
-    if hold not in HOLDS:
-        raise NcgenError(f"hold: expected one of {', '.join(HOLDS)}, got {hold!r}")
-    if int(substeps) < 1:
-        raise NcgenError(f"substeps: expected a positive number of steps per output interval, got {substeps!r}")
+    _check_options(int(substeps), newton_tol, int(max_newton), int(max_halvings), hold, None, None, 4, 1)
     t0 = model.t0 if t0 is None else as_scalar(t0, "t0")
     t = time_grid(t0, t_end, dt, bytes_per_point=point_bytes(model))
     n = _batch_size(model, q0, v0, p, u, len(t))
