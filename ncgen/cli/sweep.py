@@ -93,7 +93,8 @@ def sweep(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     finally:
         if client is not None:
             client.close()
-    print(result.report())
+    if not result.info["reported"]:         # else printed under the progress bar
+        print(result.report())
     for failure in result.failures[:10]:
         values = ", ".join(f"{k}={failure[k]:g}" for k in samples.names)
         print(f"  run {failure['run']} ({values}): {failure['message']}")

@@ -27,6 +27,7 @@ import json
 import math
 import os
 import socket
+import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
@@ -112,7 +113,8 @@ def sweep(model, params, *, t_end: float, dt: float, method: str = "stepper", ou
       with the same ``path`` resumes it (finished runs are not repeated).  None: in memory.
     * ``client``: a ``dask.distributed.Client`` (``pip install 'ncgen[dask]'``); else the
       local cores, ``workers`` of them (default: all).  ``chunk``: runs per task.
-    * ``progress``: a progress bar (tqdm) on stderr; None: when stderr is a terminal.
+    * ``progress``: a progress bar (tqdm) on stderr, then the summary line
+      (:meth:`SweepResult.report`: runs, failures, runs/s); None: when stderr is a terminal.
     """
     start = time.perf_counter()
     if method not in METHODS:
@@ -143,6 +145,7 @@ def sweep(model, params, *, t_end: float, dt: float, method: str = "stepper", ou
     todo = [range(i, min(i + chunk, n)) for i in range(0, n, chunk) if i not in done]
     collected = _Collected(samples) if store is None else None
     bar = _bar(n, n - sum(len(c) for c in todo), progress, model.name)
+    shown = not bar.disable
     job = dict(t_end=float(t_end), dt=float(dt), method=method, outputs=outputs, options=options,
                shared={k: v for k, (v, each) in per_run.items() if not each})
     per_task = {k: v for k, (v, each) in per_run.items() if each}
@@ -158,9 +161,12 @@ def sweep(model, params, *, t_end: float, dt: float, method: str = "stepper", ou
     info = dict(model=model.name, runs=n, computed=computed, resumed=n - computed,
                 failed=int(np.sum(summary["status"] != 0)), wall_time=wall,
                 runs_per_s=computed / wall if wall > 0 else float("nan"), where=where, workers=n_workers,
-                chunk=chunk, method=method)
-    return SweepResult(summary=summary, arrays=arrays, t=t, samples=samples,
-                       path=None if path is None else Path(path), info=info)
+                chunk=chunk, method=method, reported=shown)
+    result = SweepResult(summary=summary, arrays=arrays, t=t, samples=samples,
+                         path=None if path is None else Path(path), info=info)
+    if shown:                        # the bar was shown: its summary line under it
+        print(result.report(), file=sys.stderr)
+    return result
 
 
 # ---------------------------------------------------------------- the runs of one task
