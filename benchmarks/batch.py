@@ -17,7 +17,9 @@ rates are ``ω_k − ω_(k−1)`` (body frames are parallel to the world at rest
    stepper at h = ``--h``, MuJoCo RK4 at the largest step of STEPS whose error is at most
    ncgen's.  Both then run the whole batch unchecked (``check=False``: MuJoCo checks nothing
    either) on 1 and 2 threads (``Rollout(nthread=...)``), alternately; RATIO ncgen time /
-   MuJoCo time (< 1: ncgen faster).  ``mujoco.rollout`` records the state after every
+   MuJoCo time (< 1: ncgen faster), and the same with MuJoCo's time scaled to the step at
+   which its error equals ncgen's (log-log interpolation between the steps bracketing it:
+   RK4 is fourth order, RATTLE second).  ``mujoco.rollout`` records the state after every
    step (its only mode); ``simulate_batch`` records every output time, here every 0.1 s.
 
     python benchmarks/batch.py                     1000 runs of 2 s (minutes on a loaded machine)
@@ -145,14 +147,15 @@ def against_rollout(model, args) -> None:
     ours = ncgen_batch(model, V0[:k], args.t_end, args.h, 1, False)
     err_ncgen = float(np.max(np.linalg.norm(ours.q[:, -1, -3:] - ref, axis=1)))
     print(f"ncgen stepper h = {args.h:g} s: tip error {err_ncgen:.2e} m")
-    chosen = None
+    chosen, errors = None, {}
     for step in STEPS:
         mj, states = mujoco_setup(step, QVEL[:k])
         _, qpos = mujoco_rollout(mj, states, args.t_end, 1)
-        err = float(np.max(np.linalg.norm(mujoco_tips(mj, qpos) - ref, axis=1)))
+        err = errors[step] = float(np.max(np.linalg.norm(mujoco_tips(mj, qpos) - ref, axis=1)))
         print(f"MuJoCo RK4 dt = {step:g} s: tip error {err:.2e} m")
         if chosen is None and err <= err_ncgen:
             chosen = step
+    equal = equal_error_step(errors, err_ncgen)
     if chosen is None:
         print(f"no MuJoCo step of {STEPS} is as accurate as ncgen's; using the smallest")
         chosen = STEPS[-1]
@@ -169,6 +172,22 @@ def against_rollout(model, args) -> None:
         print(f"{threads} thread(s): ncgen simulate_batch best {min(t_nc):.3f} s ({n / min(t_nc):.0f} runs/s), "
               f"mujoco.rollout best {min(t_mj):.3f} s ({n / min(t_mj):.0f} runs/s)")
         print(f"RATIO ncgen / mujoco.rollout, {threads} thread(s): min {ratio.min():.2f}, median {np.median(ratio):.2f}")
+        if equal is not None:
+            scale = equal / chosen       # MuJoCo's time goes as its number of steps: chosen / equal of it
+            print(f"  at exactly equal error (MuJoCo dt = {equal:.3g} s, log-log interpolated; its time scaled by the "
+                  f"step count): RATIO min {ratio.min() * scale:.2f}, median {np.median(ratio) * scale:.2f}")
+
+
+
+def equal_error_step(errors: dict, target: float) -> float | None:
+    """MuJoCo's step at which its tip error equals ``target``, log-log interpolated between
+    the two steps bracketing it, or None."""
+    pts = sorted(errors.items())
+    for (h1, e1), (h2, e2) in zip(pts, pts[1:]):
+        if e1 <= target <= e2 and e1 > 0 and e2 > e1:
+            w = np.log(target / e1) / np.log(e2 / e1)
+            return float(np.exp(np.log(h1) + w * (np.log(h2) - np.log(h1))))
+    return None
 
 
 def main(argv=None) -> int:
