@@ -84,7 +84,8 @@ def test_interrupted_sweep_resumes_without_repeating_runs(slider_crank, tmp_path
     assert len(parts) == 2
     ran = []
     run_chunk = sweep_module.run_chunk
-    monkeypatch.setattr(sweep_module, "run_chunk", lambda m, runs, P, job: ran.extend(runs) or run_chunk(m, runs, P, job))
+    monkeypatch.setattr(sweep_module, "run_chunk",
+                        lambda m, runs, *rest: ran.extend(runs) or run_chunk(m, runs, *rest))
     result = nc.sweep(slider_crank, {"omega": omegas}, t_end=T_END, dt=DT, path=path, workers=1, chunk=1,
                       progress=False)
     assert sorted(ran) == sorted(set(range(6)) - set(written)) and result.info["resumed"] == 2
