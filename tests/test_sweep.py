@@ -151,3 +151,44 @@ def test_bad_sweep_arguments_are_named(slider_crank):
         nc.sweep(slider_crank, {"omega": [1]}, t_end=0.1, dt=0.01, outputs=["x"])
     with pytest.raises(NcgenError, match="method='stepper' takes no option 'rtol'"):
         nc.sweep(slider_crank, {"omega": [1]}, t_end=0.1, dt=0.01, rtol=1e-6)
+
+
+KILLED_SWEEP = """
+import sys
+import numpy as np
+import ncgen as nc
+model = nc.System.from_toml(sys.argv[1]).build()
+nc.sweep(model, {"omega": np.linspace(3.0, 6.0, 200)}, t_end=0.4, dt=0.005, path=sys.argv[2], workers=1, chunk=1,
+         progress=False)
+"""
+
+
+def test_sweep_killed_by_sigkill_resumes(slider_crank, tmp_path):
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    path = tmp_path / "killed.zarr"
+    nc.simulate(slider_crank, 0.1, 0.005, method="stepper")          # compiled before the child starts
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    child = subprocess.Popen([sys.executable, "-c", KILLED_SWEEP, str(EXAMPLES / "slider_crank.toml"), str(path)],
+                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 240
+    while len(list((path / "summary").glob("part-*.parquet"))) < 5 and time.monotonic() < deadline:
+        assert child.poll() is None, "the sweep ended before it could be killed"
+        time.sleep(0.01)
+    child.send_signal(signal.SIGKILL)
+    child.wait()
+    before = {p.name: p.stat().st_mtime_ns for p in (path / "summary").glob("part-*.parquet")}
+    assert 5 <= len(before) < 200
+    omegas = np.linspace(3.0, 6.0, 200)
+    result = nc.sweep(slider_crank, {"omega": omegas}, t_end=0.4, dt=0.005, path=path, workers=1, chunk=1,
+                      progress=False)
+    assert result.info["resumed"] == len(before) and result.info["computed"] == 200 - len(before)
+    assert {p.name: p.stat().st_mtime_ns for p in (path / "summary").glob("part-*.parquet") if p.name in before} \
+        == before
+    assert list(result.summary["run"]) == list(range(200)) and result.info["failed"] == 0
+    for i in (0, len(before) - 1, len(before), 199):          # finished before the kill, at it, after it
+        traj = nc.simulate(slider_crank, 0.4, 0.005, method="stepper", p={"omega": omegas[i]})
+        assert np.array_equal(result["q"][i], traj.q)
