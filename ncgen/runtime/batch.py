@@ -26,14 +26,14 @@ import numpy as np
 
 from ncgen.codegen.stepper_package import MAX_HALVINGS, MAX_ITER, STATUS, TOL, n_stats
 from ncgen.errors import NcgenError
+from ncgen.runtime.dae import load_dae
 from ncgen.runtime.inputs import input_samples, parameter_values, time_grid
+from ncgen.runtime.library import compiled_functions
 from ncgen.runtime.simulation import initial_multipliers, initial_state, point_bytes
 from ncgen.runtime.stepper import _check_options, _trajectory, step_inputs
 from ncgen.runtime.stepper_checks import is_conservative, untrusted_row
-from ncgen.runtime.dae import load_dae
-from ncgen.runtime.library import compiled_functions
 from ncgen.runtime.stepper_library import _Options, load_stepper
-from ncgen.validation import as_scalar, as_vector
+from ncgen.validation import as_scalar
 
 #: ``status`` of a run that could not start (its initial state, parameters or inputs).
 STATUS_SETUP = -1
