@@ -10,6 +10,7 @@ given in world coordinates in the initial configuration; SI units throughout.
 """
 from __future__ import annotations
 
+import copy
 import warnings
 
 import numpy as np
@@ -280,15 +281,22 @@ class System:
         system sends this."""
         try:
             text = self.to_toml()
-        except NcgenError as e:
+        except (NcgenError, TypeError, ValueError) as e:
             raise TypeError(f"system {self.name!r} cannot be pickled: its description is written as TOML, "
-                            f"and {e}") from None
+                            f"and that failed: {e}") from None
         frames = {k: (mem, np.array(R), np.array(p)) for k, (mem, R, p) in self.frames.items()}
         limits = {j.name: dict(j.limits) for j in self.joints if j.limits}
         return text, frames, [dict(v) for v in self.visuals], limits
 
     def __reduce__(self):
         return from_description, self.description()
+
+    def __deepcopy__(self, memo) -> "System":
+        """A member-by-member copy (as without :meth:`__reduce__`, which pickling uses)."""
+        new = object.__new__(type(self))
+        memo[id(self)] = new
+        new.__dict__.update(copy.deepcopy(self.__dict__, memo))
+        return new
 
     @classmethod
     def rebuilt_model(cls, description: tuple, options: dict, expected_hash: str):
