@@ -124,6 +124,12 @@ class Model:
             object.__setattr__(self, "_content_hash", known)
         return known
 
+    def __copy__(self) -> "Model":
+        return self              # constant: copies share it (pickling goes by description instead)
+
+    def __deepcopy__(self, memo) -> "Model":
+        return self
+
     def __reduce__(self):
         """Pickled by description: the system's TOML text (with frames and visuals), the
         build options and :attr:`content_hash`; unpickling rebuilds the model once per
