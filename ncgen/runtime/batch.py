@@ -17,7 +17,6 @@ from __future__ import annotations
 import ctypes
 import os
 import time
-import weakref
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from types import SimpleNamespace
@@ -30,7 +29,8 @@ from ncgen.runtime.dae import load_dae
 from ncgen.runtime.inputs import input_samples, parameter_values, time_grid
 from ncgen.runtime.library import compiled_functions
 from ncgen.runtime.simulation import initial_multipliers, initial_state, point_bytes
-from ncgen.runtime.stepper import _check_options, _trajectory, step_inputs
+from ncgen.runtime.options import SimulationOptions
+from ncgen.runtime.stepper import _trajectory, step_inputs
 from ncgen.runtime.stepper_checks import is_conservative, untrusted_row
 from ncgen.runtime.stepper_library import _Options, load_stepper
 from ncgen.validation import as_scalar
@@ -116,7 +116,8 @@ def simulate_batch(model, t_end: float, dt: float, *, q0=None, v0=None, p=None, 
     Returns a :class:`BatchResult`; failed runs are reported there, never raised.
     """
     start = time.perf_counter()
-    _check_options(int(substeps), newton_tol, int(max_newton), int(max_halvings), hold, None, None, 4, 1)
+    SimulationOptions(method="stepper", hold=hold, substeps=substeps, newton_tol=newton_tol, max_newton=max_newton,
+                      max_halvings=max_halvings, ic_tolerance=ic_tolerance)      # checked as for a single run
     t0 = model.t0 if t0 is None else as_scalar(t0, "t0")
     t = time_grid(t0, t_end, dt, bytes_per_point=point_bytes(model))
     n = _batch_size(model, q0, v0, p, u, len(t))
@@ -243,7 +244,7 @@ class _Runs:
 
     def integrate(self, chunk: range) -> None:
         """The compiled loop over the runs of ``chunk`` (GIL released while it runs)."""
-        st, raw = self.stepper, _raw_loops(self.stepper)
+        st, raw = self.stepper, _raw_loops(self.model, self.stepper)
         done, splits = ctypes.c_long(0), ctypes.c_long(0)
         n_steps = self.n_out * self.substeps
         extra = [None] if st.nd else []
@@ -359,22 +360,21 @@ class _Address:
         return self.base + i * self.strides[0] + (k * self.strides[1] if k else 0)
 
 
-_raw: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-_accel: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-
-
 def _compiled_accel(model):
-    """The model's compiled ``accel`` (loaded once per model)."""
-    if model not in _accel:
-        _accel[model] = compiled_functions(model, ["accel"])["accel"]
-    return _accel[model]
+    """The model's compiled ``accel`` (loaded once per model, kept in its data)."""
+    data = model.data
+    if data.batch_accel is None:
+        data.batch_accel = compiled_functions(model, ["accel"])["accel"]
+    return data.batch_accel
 
 
-def _raw_loops(stepper):
+def _raw_loops(model, stepper):
     """``<model>_simulate`` and ``_simulate_stats`` of ``stepper``'s library bound with
-    address arguments (``c_void_p``: plain integers pass without conversion objects); the
-    signatures are those of :class:`~ncgen.runtime.stepper_library.CompiledStepper`."""
-    if stepper not in _raw:
+    address arguments (``c_void_p``: plain integers pass without conversion objects; kept in
+    the model's data by library); the signatures are those of
+    :class:`~ncgen.runtime.stepper_library.CompiledStepper`."""
+    loops = model.data.batch_loops
+    if stepper.library not in loops:
         lib = ctypes.CDLL(stepper.library)
         name = stepper._simulate.__name__[:-len("_simulate")]
         vp, lp, d, lg, i = ctypes.c_void_p, ctypes.c_void_p, ctypes.c_double, ctypes.c_long, ctypes.c_int
@@ -385,5 +385,5 @@ def _raw_loops(stepper):
         stats = getattr(lib, f"{name}_simulate_stats")
         stats.restype = i
         stats.argtypes = [vp, vp, vp, d, d, lg, lg, vp, lg, vp, vp, vp, vp, vp, vp, i, i, lp, lp] + extra
-        _raw[stepper] = SimpleNamespace(simulate=simulate, simulate_stats=stats, lib=lib)
-    return _raw[stepper]
+        loops[stepper.library] = SimpleNamespace(simulate=simulate, simulate_stats=stats, lib=lib)
+    return loops[stepper.library]

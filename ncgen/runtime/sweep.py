@@ -229,11 +229,15 @@ def _idas_runs(model, P, job, given, each):
 
 def _check_options(method: str, options: dict) -> None:
     """Options of the runs, named if ``simulate_batch`` / ``simulate`` does not take them."""
+    import dataclasses
+
     from ncgen.runtime.batch import simulate_batch
-    from ncgen.runtime.simulation import simulate
-    fn = simulate_batch if method == "stepper" else simulate
-    taken = set(inspect.signature(fn).parameters) - {"model", "t_end", "dt", "p", "u", "q0", "v0", "workers",
-                                                     "method", "progress"}
+    from ncgen.runtime.options import SimulationOptions
+    if method == "stepper":
+        taken = set(inspect.signature(simulate_batch).parameters)
+    else:
+        taken = {f.name for f in dataclasses.fields(SimulationOptions)} | {"t0"}
+    taken -= {"model", "t_end", "dt", "p", "u", "q0", "v0", "workers", "method", "progress"}
     unknown = sorted(set(options) - taken)
     if unknown:
         raise NcgenError(f"sweep: method={method!r} takes no option {', '.join(map(repr, unknown))} "
