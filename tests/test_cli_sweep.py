@@ -53,3 +53,25 @@ def test_sweep_help_teaches(capsys):
     text = capsys.readouterr().out
     for needed in ("--scheduler", "resumes", "k=10:100:10", "lhs:N", "nc.open_sweep", "status"):
         assert needed in text
+
+
+def test_sweep_on_a_dask_scheduler(tmp_path, capsys):
+    import pytest
+    distributed = pytest.importorskip("distributed")
+    out = str(tmp_path / "dask.zarr")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        argv = ["sweep", EXAMPLE, "--param", "omega=3,5", "--t-end", "0.2", "--dt", "0.005", "-o", out,
+                "--scheduler", cluster.scheduler_address, "--chunk", "1"]
+        assert main(argv) == 0
+    said = capsys.readouterr().out
+    assert "2 runs, 0 failed, 2 computed" in said and "runs/s, dask)" in said
+    summary, arrays = nc.open_sweep(out)
+    model = nc.System.from_toml(EXAMPLE).build()
+    assert np.array_equal(arrays["q"][1], nc.simulate(model, 0.2, 0.005, method="stepper", p={"omega": 5.0}).q)
+
+
+def test_unreachable_scheduler_is_a_clear_error(tmp_path, capsys):
+    argv = ["sweep", EXAMPLE, "--param", "omega=3", "--t-end", "0.1", "-o", str(tmp_path / "x.zarr"),
+            "--scheduler", "tcp://127.0.0.1:9"]
+    assert main(argv) == 1
+    assert "cannot reach the Dask scheduler" in capsys.readouterr().err

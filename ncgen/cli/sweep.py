@@ -149,7 +149,7 @@ def _client(address: str):
     except ImportError:
         raise NcgenError("--scheduler needs Dask's distributed scheduler: pip install 'ncgen[dask]'") from None
     try:
-        return Client(address, timeout=30)
+        return Client(address, timeout=10)
     except (OSError, TimeoutError) as e:
         raise NcgenError(f"--scheduler {address}: cannot reach the Dask scheduler ({e}); start one with "
                          "'dask scheduler' and workers with 'dask worker ADDRESS' (docs/sweeps.md)") from None
