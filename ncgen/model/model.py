@@ -125,11 +125,10 @@ class Model:
         """sha256 of what the model computes: every CasADi function (serialised), the mass
         matrix, the initial state, the parameters and the names; equal for two builds of the
         same description."""
-        known = self.__dict__.get("_content_hash")
-        if known is None:
-            known = content_hash(self)
-            object.__setattr__(self, "_content_hash", known)
-        return known
+        data = self.data
+        if data.content_hash is None:
+            data.content_hash = content_hash(self)
+        return data.content_hash
 
     def __copy__(self) -> "Model":
         return self              # constant: copies share it (pickling goes by description instead)
@@ -145,12 +144,11 @@ class Model:
         compile cache (``ncgen.codegen.compile_cache``), which the same content hits."""
         if self.recipe is None:
             raise TypeError(f"model {self.name!r} cannot be pickled: it was not made by System.build()")
-        text = self.__dict__.get("_description")
-        if text is None:
-            text = self.recipe[0].description()
-            object.__setattr__(self, "_description", text)
+        data = self.data
+        if data.description is None:
+            data.description = self.recipe[0].description()
         _known[self.content_hash] = self
-        return type(self.recipe[0]).rebuilt_model, (text, self.recipe[1], self.content_hash)
+        return type(self.recipe[0]).rebuilt_model, (data.description, self.recipe[1], self.content_hash)
 
     @property
     def data(self) -> ModelData:
