@@ -62,7 +62,7 @@ def test_idas_sweep_in_spawned_processes_equals_the_serial_loop(slider_crank):
                       progress=False)
     assert result.info["where"] == "processes"
     for i, w in enumerate(omegas):
-        assert np.array_equal(result["q"][i], nc.simulate(slider_crank, 0.2, 0.01, p={"omega": w}).q)
+        assert np.array_equal(result["q"][i], nc.simulate(slider_crank, 0.2, 0.01, method="idas", p={"omega": w}).q)
 
 
 def test_interrupted_sweep_resumes_without_repeating_runs(slider_crank, tmp_path, monkeypatch):
