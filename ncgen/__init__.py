@@ -9,6 +9,7 @@ from ncgen.assembly.kinematics import assemble, dof_report, project_velocity, so
 from ncgen.codegen.model_package import generate
 from ncgen.errors import NcgenError
 from ncgen.model.contacts import Contact, SpherePlane, SphereSphere
+from ncgen.model.controllers import PD, ComputedTorque, Controller
 from ncgen.model.forces import Force, GeneralizedForce, PointForce, Spring, Torque, TorsionalSpring
 from ncgen.model.joints import (
     CoordinateDriver, Cylindrical, Distance, Fixed, Free, Joint, Mimic, Planar, PointOnLine, PointOnPlane, Prismatic,
@@ -16,6 +17,7 @@ from ncgen.model.joints import (
 )
 from ncgen.errors import ModelError
 from ncgen.model.model import Model
+from ncgen.model.shapes import Box, Capsule, Cylinder, Ellipsoid, Mesh, Shape, Sphere
 from ncgen.model.system import System
 from ncgen.optim import OptimalControl, OptimalTrajectory
 from ncgen.runtime import SimulationOptions, Trajectory, simulate
@@ -31,9 +33,9 @@ from ncgen.version import __version__
 
 
 __all__ = [
-    "Contact", "CoordinateDriver", "Cylindrical", "Distance", "Equilibrium", "Fixed", "Force", "Free", "GeneralizedForce",
+    "Box", "Capsule", "ComputedTorque", "Contact", "Controller", "CoordinateDriver", "Cylinder", "Ellipsoid", "Mesh", "Shape", "Sphere", "Cylindrical", "Distance", "Equilibrium", "Fixed", "Force", "Free", "GeneralizedForce",
     "Joint", "JointReaction", "LinearModel", "Mimic", "Model", "ModelError", "Modes", "NcgenError", "OptimalControl",
-    "OptimalTrajectory", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic", "Revolute", "SimulationOptions", "SpherePlane", "SphereSphere", "Spherical",
+    "OptimalTrajectory", "PD", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic", "Revolute", "SimulationOptions", "SpherePlane", "SphereSphere", "Spherical",
     "Spring", "System", "Tensegrity", "Torque", "TorsionalSpring", "Trajectory", "Universal",
     "assemble", "coordinate_type", "dof_report", "equilibrium", "form_find", "forward_dynamics",
     "forward_dynamics_kernel", "generate", "inverse_dynamics", "joint_forward_dynamics",

@@ -14,7 +14,8 @@ A model can have these compiled libraries (docs/architecture.md):
   are loaded from it;
 * the **forward-dynamics kernel** (``forward_dynamics_kernels``): ``kkt_function`` (or its
   joint-space form) alone;
-* the **tree kernel** (``tree_kernels``): the joint-space forward dynamics of a tree alone.
+* the **tree kernel** (``tree_kernels``): the joint-space forward dynamics of a tree alone;
+* the **joint-space loops** (``joint_loops``): the joint-space ODE and its integration loop.
 """
 from __future__ import annotations
 
@@ -58,6 +59,12 @@ class ModelData:
     #: ``(reason,)``: why the model has no joint-space transcription (reason None: it has one)
     #: (:func:`ncgen.optim.joint_radau.joint_space_reason`).
     joint_space_reason: tuple | None = None
+    #: ``{(controller id, joint_dynamics, cflags): (controller, JointLoop)}``: the compiled
+    #: joint-space simulation loops (:func:`ncgen.runtime.joint_simulation.joint_loop`).
+    joint_loops: dict = field(default_factory=dict)
+    #: ``(reason,)``: why ``simulate`` cannot run the model in joint space (reason None: it can)
+    #: (:func:`ncgen.runtime.joint_simulation.joint_space_applies`).
+    joint_simulation_reason: tuple | None = None
     #: The model built with ``share=False`` and the map ``(S, c)`` to its coordinates
     #: (:class:`ncgen.assembly.unshared.UnsharedForm`).
     unshared_model: object = None

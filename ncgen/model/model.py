@@ -90,6 +90,8 @@ class Model:
         self.joint_space = joint_space
         self.frames = MappingProxyType({k: (mem, np.array(R), np.array(pos)) for k, (mem, R, pos) in system.frames.items()})
         self.visuals = [dict(v) for v in system.visuals]
+        #: the system's compiled controller (TOML ``[controller]``) or None
+        self.controller = getattr(system, "controller", None)
         #: Plain-data descriptions of the contacts (:mod:`ncgen.model.contacts`), in order.
         self.contacts = [dict(c) for c in contacts]
         self.contact_names = [c["name"] for c in self.contacts]
@@ -150,16 +152,39 @@ class Model:
         """``{joint: {"lower", "upper", "velocity", "effort"}}`` as given (URDF ``<limit>``)."""
         return {k: dict(v) for k, v in self.joint_space.limits.items() if v}
 
-    def to_joint_space(self, q, v=None, a=None):
+    def to_joint_space(self, q, v=None, a=None, *, t=None, p=None):
         """Joint positions ``qj`` (and rates ``vj``, accelerations ``aj`` when ``v``, ``a``
         are given), concatenated in ``joint_names`` order (see
-        :mod:`ncgen.assembly.joint_coordinates` for each joint's coordinates)."""
-        return self.joint_space.to_joint_space(self, q, v, a)
+        :mod:`ncgen.assembly.joint_coordinates` for each joint's coordinates); a state off
+        the constraints (at time ``t``, parameters ``p``) is refused."""
+        return self.joint_space.to_joint_space(self, q, v, a, t=t, p=p)
 
     def from_joint_space(self, qj, vj=None, *, t=None, p=None):
         """``(q, v)`` with the given joint positions and rates (vectors in ``joint_names``
         order, or dicts ``{joint: value}``; closed loops: the independent joints only)."""
         return self.joint_space.from_joint_space(self, qj, vj, t=t, p=p)
+
+    def coordinate(self, name: str) -> tuple[np.ndarray, float]:
+        """``(s, c)`` with the coordinate ``name`` equal to ``s · q + c`` (m) and its rate to
+        ``s · v``: one of :attr:`coordinate_names` (``s`` a unit row), or a coordinate as
+        written (``"upper.r_i.x"``) that coordinate sharing re-based or merged (a row of the
+        affine map to the ``share=False`` coordinates, :mod:`ncgen.assembly.unshared`; its
+        first use builds that form, ~0.2 s).  Raises :class:`ModelError` naming what exists."""
+        if name in self.coordinate_names:
+            s = np.zeros(self.nq)
+            s[self.coordinate_names.index(name)] = 1.0
+            return s, 0.0
+        if self.unshared is not None and isinstance(name, str) and name.split(".")[0] in self.member_names:
+            written = self.unshared.model(self)
+            if name in written.coordinate_names:
+                S, c = self.unshared.coordinate_map(self)
+                i = written.coordinate_names.index(name)
+                return S[i].copy(), float(c[i])
+        from ncgen.model.expressions import did_you_mean
+        shown = ", ".join(self.coordinate_names[:12]) + (", ..." if self.nq > 12 else "")
+        aside = "; coordinates as written before coordinate sharing resolve too" if self.unshared else ""
+        raise ModelError(f"model {self.name!r}: no coordinate named {name!r}"
+                         f"{did_you_mean(str(name), self.coordinate_names)} (coordinates: {shown}{aside})")
 
     # ------------------------------------------------------------ dimensions
     @property
