@@ -77,6 +77,14 @@ class ModelData:
     #: (:class:`ncgen.assembly.unshared.UnsharedForm`).
     unshared_model: object = None
     unshared_map: tuple | None = None
+    #: :attr:`Model.content_hash <ncgen.model.model.Model.content_hash>`, and the system's
+    #: description a pickle sends (``System.description()``), computed on first use.
+    content_hash: str | None = None
+    description: tuple | None = None
+    #: ``{library: loops}``: the stepper's loops bound for addresses, and the compiled
+    #: ``accel`` of the initial multipliers (:mod:`ncgen.runtime.batch`).
+    batch_loops: dict = field(default_factory=dict)
+    batch_accel: object = None
 
 
 _DATA: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
