@@ -29,6 +29,7 @@ from ncgen.analysis.linearization import LinearModel, linearize
 from ncgen.analysis.modes import Modes, modes
 from ncgen.analysis.statics import Equilibrium, equilibrium
 from ncgen.runtime.joint_dynamics import forward_dynamics, forward_dynamics_kernel, inverse_dynamics
+from ncgen.runtime.tree_algorithms import aba, aba_derivatives, algorithm_kernel, crba, rnea, rnea_derivatives
 from ncgen.runtime.tree_kernel import joint_forward_dynamics, joint_forward_dynamics_kernel
 from ncgen.analysis.reactions import JointReaction, joint_reactions
 from ncgen.symbolic.coordinates import coordinate_type
@@ -43,6 +44,7 @@ __all__ = [
     "assemble", "coordinate_type", "dof_report", "equilibrium", "form_find", "forward_dynamics",
     "forward_dynamics_kernel", "generate", "inverse_dynamics", "joint_forward_dynamics",
     "joint_forward_dynamics_kernel", "joint_reactions", "linearize", "modes", "open_sweep",
+    "aba", "aba_derivatives", "algorithm_kernel", "crba", "rnea", "rnea_derivatives",
     "project_velocity", "simulate", "simulate_batch", "solve_kinematics", "sweep",
     "__version__", "viz",
 ]

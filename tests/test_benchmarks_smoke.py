@@ -32,6 +32,9 @@ pytestmark = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc
                     "RATIO ncgen / MuJoCo penetration"]),
     ("joint_space.py", ["=== call overhead", "RATIO casadi.external / direct", "=== Panda",
                         "RATIO ncgen joint kernel / pinocchio.aba", "RATIO ncgen joint kernel C loop"]),
+    ("tree_algorithms.py", ["=== ur5", "RATIO ur5 ncgen forward dynamics / pinocchio.aba",
+                            "RATIO ur5 ncgen RNEA / pinocchio.rnea",
+                            "RATIO ur5 ncgen ABA derivatives / pinocchio.computeABADerivatives"]),
     ("animation.py", ["=== slider_crank", "RATIO PillowWriter / ncgen animate", "to_html:"]),
     ("joint_simulation.py", ["=== panda: 1 s fall", "RATIO ncgen / MuJoCo RK4, end to end, DOPRI5",
                              "RATIO ncgen / MuJoCo RK4, simulate only, DOPRI5", "agrees with Pinocchio"]),
@@ -45,7 +48,7 @@ pytestmark = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc
                             "converged: ncgen 3/3, minimal 3/3"]),
 ])
 def test_smoke(tmp_path, script, expected):
-    if script in ("joint_space.py", "joint_simulation.py"):
+    if script in ("joint_space.py", "joint_simulation.py", "tree_algorithms.py"):
         pytest.importorskip("pinocchio")
         pytest.importorskip("yourdfpy")
     root = str(BENCHMARKS.parent)        # the checkout under test, whatever ncgen is installed

@@ -15,7 +15,9 @@ A model can have these compiled libraries (docs/architecture.md):
 * the **forward-dynamics kernel** (``forward_dynamics_kernels``): ``kkt_function`` (or its
   joint-space form) alone;
 * the **tree kernel** (``tree_kernels``): the joint-space forward dynamics of a tree alone;
-* the **joint-space loops** (``joint_loops``): the joint-space ODE and its integration loop.
+* the **joint-space loops** (``joint_loops``): the joint-space ODE and its integration loop;
+* the **tree algorithms** (``algorithm_kernels``): RNEA, CRBA, ABA and their derivatives,
+  one library each.
 """
 from __future__ import annotations
 
@@ -46,6 +48,12 @@ class ModelData:
     tree_kernels: dict = field(default_factory=dict)
     #: ``nc.joint_forward_dynamics``' own copy of the default tree kernel (False: none).
     tree_kernel: object = None
+    #: ``{(name, cflags): AlgorithmKernel or the ModelError of a non-tree}``: RNEA, CRBA, ABA
+    #: and the derivatives, each its own library (:func:`ncgen.runtime.tree_algorithms.algorithm_kernel`).
+    algorithm_kernels: dict = field(default_factory=dict)
+    #: ``(indices,)``: the independent joint rates when the compiled algorithms take the model,
+    #: indices None when not (:func:`ncgen.runtime.tree_algorithms.rnea_applies`).
+    algorithm_rates: tuple | None = None
     #: ``(f,)``: the joint-space tree map ``(q_j, v_j) -> (q, v)``, f None for a model that is
     #: not a tree (``JointSpace._tree`` in :mod:`ncgen.assembly.joint_space`).
     joint_tree_function: tuple | None = None
