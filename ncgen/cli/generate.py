@@ -19,7 +19,7 @@ def _generate_arguments(p: argparse.ArgumentParser) -> None:
                         "written only if compiling succeeds")
     p.add_argument("--cflags", metavar="FLAGS", default=None,
                    help="C compiler flags for --compile, for every file (default: $NCGEN_CFLAGS, "
-                        "else -O2, and -O0 for files holding functions too long for gcc's optimiser)")
+                        "else -O2, and -O1 for files holding functions so long that -O2 takes several times longer)")
     p.add_argument("--reroll", metavar="N", default=None, type=_reroll_limit,
                    help="generate functions longer than N SX instructions as loops over short "
                         "kernels found in them (compiles in seconds for any number of members, "

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from ncgen.cli.common import load_model
 from ncgen.cli.registry import subcommand
+from ncgen.runtime.backend_policy import RULE
 
 
 #: Output kinds of 'ncgen simulate' and the file suffixes each accepts.
@@ -36,8 +37,8 @@ def _simulate_arguments(p: argparse.ArgumentParser) -> None:
                    help="stepper: fixed steps of DT/N per output interval (default 1); a run whose own "
                         "checks find it untrustworthy stops with an error naming the N to use")
     p.add_argument("--backend", default="auto", choices=("auto", "compiled", "vm"),
-                   help="where the equations run: compiled (generated C, built once and cached), vm "
-                        "(CasADi's virtual machine) or auto (compiled if a C compiler is found; default)")
+                   help="where IDAS evaluates the equations: compiled (generated C, built once and "
+                        "cached by content), vm (CasADi's virtual machine) or " + RULE)
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    help="replace a parameter's default value (repeatable; a vector as NAME=1,2,3)")
     p.add_argument("--rtol", type=float, default=None,

@@ -11,7 +11,8 @@ import numpy as np
 from ncgen.assembly.initial_state import consistent_state
 from ncgen.codegen.load import NoCompilerWarning
 from ncgen.errors import CompilerNotFound, NcgenError, SimulationError
-from ncgen.errors import ModelError
+from ncgen.errors import ModelError, option
+from ncgen.runtime.backend_policy import choose_backend
 from ncgen.runtime.dae import load_dae
 from ncgen.runtime.diagnose import explain, shift_time
 from ncgen.runtime.idas import ChunkedIDAS, ChunkFailure
@@ -52,7 +53,7 @@ BRIDGE_MAX_STEPS = 20_000
 
 def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: float | None = None,
              atol: float | None = None, u=None, p=None, q0=None, v0=None, t0: float | None = None,
-             hold: str = "zoh", backend: str = "vm", progress: bool | None = None,
+             hold: str = "zoh", backend: str = "auto", progress: bool | None = None,
              max_steps: int = 50_000, linear_solver: str = "csparse",
              ic_tolerance: float | None = 1e-6, substeps: int = 1, newton_tol: float = TOL,
              max_newton: int = MAX_ITER, max_halvings: int = MAX_HALVINGS, order: int = 4,
@@ -86,8 +87,10 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
       starting a driven mechanism at another ``t0``).  ``λ0`` then solves the KKT system
       with ``u(t0)``.
     * ``backend``: ``"vm"`` (CasADi's virtual machine), ``"compiled"`` (the DAE and its
-      Jacobian as generated C, compiled once and cached) or ``"auto"`` (compiled when a C
-      compiler is available).
+      Jacobian as generated C, compiled once and cached) or ``"auto"`` (default: start on the
+      VM, compile only when the run is long enough to pay for it; the rule is
+      :func:`ncgen.runtime.backend_policy.choose_backend`, the same as the CLI's;
+      ``info["backend_reason"]`` says why).
     * ``progress``: a progress bar on stderr: ``True``, ``False``, or ``None`` = when stderr is a
       terminal and the run takes more than a second.
     * ``max_steps``: IDAS steps allowed per output interval; ``linear_solver``: CasADi's
@@ -141,9 +144,11 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
         if not (math.isfinite(tol) and tol > 0):
             raise NcgenError(f"{name}: expected a positive tolerance, got {tol!r}")
     if method == "idas" and getattr(model, "contact_model", "smooth") == "nonsmooth" and model.nk:
-        raise NcgenError(f"simulate: model {model.name!r} was built with contacts='nonsmooth', which only "
-                         "the compiled stepper handles: use method='stepper', or build the model with "
-                         "contacts='smooth' (compliant contacts) for IDAS")
+        built = option("contacts='nonsmooth'", "--contacts nonsmooth")
+        stepper = option("method='stepper'", "--method stepper")
+        smooth = option("build the model with contacts='smooth'", "--contacts smooth")
+        raise NcgenError(f"simulate: model {model.name!r} was built with {built}, which only the compiled "
+                         f"stepper handles: use {stepper}, or {smooth} (compliant contacts) for IDAS")
     t0 = model.t0 if t0 is None else as_scalar(t0, "t0")
     t = time_grid(t0, t_end, dt, bytes_per_point=point_bytes(model))
     pv = parameter_values(p, model)
@@ -152,11 +157,18 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
     q, v = initial_state(model, q0, v0, t0, pv, ic_tolerance)
     if method == "stepper":
         lam = initial_multipliers(model, t0, q, v, U[0], pv, load_dae(model, "vm")[0])
+        try:
+            load_stepper(model)
+        except CompilerNotFound as e:
+            stepper, idas = option("method='stepper'", "--method stepper"), option("method='idas'", "--method idas")
+            raise CompilerNotFound(f"{e}: the stepper ({stepper}) is generated C and needs one; install gcc, "
+                                   f"or use IDAS ({idas}), which runs on CasADi's virtual machine") from None
         return simulate_stepper(model, t, U, pv, q, v, lam, hold=hold, substeps=substeps, tol=newton_tol,
                                 max_iter=max_newton, max_halvings=max_halvings, rtol=rtol, atol=atol,
                                 order=order, max_steps=max_steps, check=check, estimate=estimate)
     rtol, atol = 1e-8 if rtol is None else rtol, 1e-10 if atol is None else atol
-    dae, used = load_dae(model, backend)
+    choice = choose_backend(model, len(t) - 1, backend)
+    dae, used = load_dae(model, "auto" if backend == "auto" and choice.backend == "compiled" else choice.backend)
     lam = initial_multipliers(model, t0, q, v, U[0], pv, dae)
     a = np.array(model.functions["ode"](t0, q, v, lam, U[0], pv)[1]).reshape(-1)
     runner = ChunkedIDAS(dae, h=float(t[1] - t[0]), nu=model.nu, hold=hold, rtol=rtol, atol=atol,
@@ -180,7 +192,8 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
     stats = dict(runner.stats)
     if projector is not None:
         stats.update(projector.counts, rattle_intervals=bridge.count)
-    info = {"method": method, "backend": used, "rtol": rtol, "atol": atol, "hold": hold,
+    info = {"method": method, "backend": used, "backend_reason": choice.reason if used == choice.backend
+            else "no C compiler", "rtol": rtol, "atol": atol, "hold": hold,
             "linear_solver": linear_solver, "stats": stats, "project": project,
             "projected_from": None if projected_from is None else float(t[projected_from]),
             "wall_time": time.perf_counter() - start, "complete": failure is None}

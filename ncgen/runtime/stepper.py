@@ -43,7 +43,7 @@ import warnings
 import numpy as np
 
 from ncgen.codegen.stepper_package import HALVINGS_LIMIT, MAX_HALVINGS, MAX_ITER, STATS, STATUS, TOL
-from ncgen.errors import AccuracyWarning, NcgenError, SimulationError
+from ncgen.errors import AccuracyWarning, NcgenError, SimulationError, option
 from ncgen.runtime.inputs import HOLDS
 from ncgen.runtime.stepper_checks import (ERROR_FRACTION, GLOBAL_FACTOR, SHADOW_FACTOR, contact_report,
                                           energy_report, error_estimate, is_conservative, shadow_estimates,
@@ -77,7 +77,8 @@ def simulate_stepper(model, t: np.ndarray, U: np.ndarray, p: np.ndarray, q0: np.
     conservative = is_conservative(model)
     if rtol is not None and stepper.nd:
         raise NcgenError(f"rtol: model {model.name!r} has nonsmooth contacts, whose impacts the error control "
-                         f"cannot follow; use fixed steps (substeps=N) or build it with contacts='smooth'")
+                         f"cannot follow; use fixed steps ({option('substeps=N', '--substeps N')}) or "
+                         + option("build it with contacts='smooth'", "--contacts smooth"))
     if rtol is None:
         return _fixed(model, stepper, t, U, p, q0, v0, lam0, hold, substeps, tol, max_iter, max_halvings,
                       check, bool(estimate), conservative)

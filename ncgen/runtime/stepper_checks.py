@@ -46,6 +46,7 @@ import weakref
 import casadi as ca
 import numpy as np
 
+from ncgen.errors import option
 from ncgen.codegen.stepper_package import CONTACT_STATS, PENETRATION_TOL, PGS_MAX_ITER, PGS_TOL, STATS
 
 #: Largest allowed change of a conservative model's energy, and error of the energy balance
@@ -278,5 +279,6 @@ def _step_suggestion(h: float, dt: float, err: float, size: float, kind: str) ->
     if err > 0 and math.isfinite(err):
         h_new = min(h_new, h * math.sqrt(0.1 * ERROR_FRACTION * size / err))
     substeps = max(1, math.ceil(dt / h_new - 1e-9))
-    return (f"Use a step of at most {dt / substeps:.3g} s (substeps={substeps} with dt = {dt:.3g} s), or "
-            f"rtol=... to let the stepper choose its steps")
+    return (f"Use a step of at most {dt / substeps:.3g} s ({option('substeps=', '--substeps ')}{substeps} with "
+            f"{option('dt = ', '--dt ')}{dt:.3g} s), or {option('rtol=...', '--rtol RTOL')} to let the stepper "
+            f"choose its steps")

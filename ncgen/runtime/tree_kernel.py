@@ -31,7 +31,7 @@ from ncgen.validation import as_vector
 #: (``d_k / (M_j)_kk ≥ 1 / cond``): below it the dynamics are refused as singular.
 PIVOT_TOL = 1e-12
 METHODS = ("auto", "recursive", "projection")
-#: Kernels longer than the package's LARGE_FUNCTION_INSTRUCTIONS (compiled at -O0 by default)
+#: Kernels longer than the package's LARGE_FUNCTION_INSTRUCTIONS (compiled at -O1 by default)
 #: but at most this long are compiled at -O1: the Talos humanoid's (38 joint rates, 29 k
 #: instructions) compiles in 4.2–4.5 s at -O1 and runs in 9–17 µs, against 50 µs at -O0; gcc's
 #: -O1 time grows faster than linearly (a 40-hinge chain, 55 k instructions: 20 s).
@@ -123,7 +123,7 @@ def joint_forward_dynamics_kernel(model, *, method: str = "auto", cflags=None) -
     """The compiled joint-space forward dynamics of the tree ``model`` (built once per model
     and method; the library is cached by content; ``cflags`` as for
     :func:`~ncgen.codegen.compile_cache.compile_package`, by default -O2, or -O1 up to
-    :data:`O1_INSTRUCTIONS` and -O0 beyond for long kernels).  ``method``: ``"recursive"`` (3D),
+    :data:`O1_INSTRUCTIONS` and the package's large-source flags beyond).  ``method``: ``"recursive"`` (3D),
     ``"projection"`` (``M_j = Gᵀ M G`` by AD of the tree map) or ``"auto"`` (recursive in
     3D when every member is a rigid body, else projection).  Raises :class:`ModelError` for
     a model that is not a tree (:func:`check_tree`)."""
