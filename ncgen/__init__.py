@@ -5,6 +5,7 @@ bodies, bars and points with joints and forces is assembled into CasADi function
 (``System.build()``), turned into C, simulated and optimised.
 """
 from ncgen import viz  # nc.viz.plot, nc.viz.animate (cheap: matplotlib loads on use)
+from ncgen import robots  # nc.robots.urdf_path("panda"): example-robot-data's URDFs
 from ncgen.assembly.kinematics import assemble, dof_report, project_velocity, solve_kinematics
 from ncgen.codegen.model_package import generate
 from ncgen.errors import NcgenError
@@ -39,5 +40,5 @@ __all__ = [
     "forward_dynamics_kernel", "generate", "inverse_dynamics", "joint_forward_dynamics",
     "joint_forward_dynamics_kernel", "joint_reactions", "linearize", "modes",
     "project_velocity", "simulate", "solve_kinematics",
-    "__version__", "viz",
+    "__version__", "robots", "viz",
 ]

@@ -4,7 +4,7 @@ Every ``import``/``from … import`` of an ``ncgen`` module is an edge, wherever
 (module level or inside a function).  The layer order, lowest first (also in
 docs/architecture.md)::
 
-    base (errors, validation, reproducible, files, version)
+    base (errors, validation, reproducible, files, version, robots, progress)
     ← symbolic ← model ← assembly ← codegen ← rigid_motion ← runtime ← viz ← optim ← cli ← ncgen (the package root)
 
 A module may import modules of its own layer and of lower ones.  The one exception is
@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[1] / "ncgen"
 
 LAYERS = ["base", "symbolic", "model", "assembly", "codegen", "rigid_motion", "runtime", "viz", "optim",
           "cli", "root"]
-BASE = {"errors", "validation", "reproducible", "files", "version"}
+BASE = {"errors", "validation", "reproducible", "files", "version", "robots", "progress"}
 #: (importing module, imported module): the documented exceptions.
 EXCEPTIONS = {("ncgen.model.system", "ncgen.assembly.build")}
 
