@@ -21,9 +21,10 @@ def _simulate_arguments(p: argparse.ArgumentParser) -> None:
                    help="output step (s, default 0.01); IDAS chooses its own internal steps")
     p.add_argument("-o", "--output", metavar="FILE", required=True,
                    help="trajectory file: .npz (everything, nc.Trajectory.load reads it) or .csv "
-                        "(t, coordinates, energies, constraint residuals)")
+                        "(t, q, v, joint angles and rates, markers, energies, residuals, contact gaps and forces; "
+                        "units in the header)")
     p.add_argument("--plot", metavar="FILE", default=None,
-                   help="also plot energy drift, constraint drift and the markers (.png, .pdf, .svg)")
+                   help="also plot the energy (its drift, or the balance of a dissipative run), the constraint drift and the markers (.png, .pdf, .svg)")
     p.add_argument("--animate", metavar="FILE", default=None,
                    help="also animate the motion (.gif, or .mp4 with ffmpeg)")
     p.add_argument("--method", default="idas", metavar="METHOD",
@@ -68,7 +69,8 @@ def _check_outputs(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
     description=(
         "Build the model in MODEL.toml, integrate it from its consistent initial state to --t-end "
         "(inputs held at zero; use the Python API, nc.simulate(..., u=...), to drive them) and write "
-        "the trajectory on the grid 0, dt, 2 dt, ... A summary (integrator work, energy and "
+        "the trajectory on the grid 0, dt, 2 dt, ... A summary (integrator work, energy drift or, for "
+        "dissipative runs, the energy balance: work of contacts, dampers, inputs and its residual; "
         "constraint drift) goes to standard output. Files are written only when the whole run "
         "succeeds: a failed integration says where and why it failed, and writes the trajectory up "
         "to that time to OUTPUT with '.incomplete' before the suffix (e.g. run.incomplete.npz, "

@@ -14,6 +14,8 @@ from ncgen.errors import CompilerNotFound, NcgenError, SimulationError
 from ncgen.errors import ModelError, option
 from ncgen.runtime.backend_policy import choose_backend
 from ncgen.runtime.dae import load_dae
+from ncgen.runtime.energy_balance import idas_report
+from ncgen.runtime.stepper_checks import is_conservative
 from ncgen.runtime.diagnose import explain, shift_time
 from ncgen.runtime.idas import ChunkedIDAS, ChunkFailure
 from ncgen.runtime.inputs import hold_columns, input_samples, parameter_values, time_grid
@@ -201,6 +203,7 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
         message = _failure_message(model, failure, t, k, X[k], Z[k, nq:], U[k], pv, dae)
         info["message"] = message
     traj = Trajectory.from_states(model, t[:k + 1], X[:, :nq], X[:, nq:], Z[:, nq:], U[:k + 1], pv, info)
+    traj.info["energy"] = idas_report(model, traj, is_conservative(model, inputs=bool(np.any(U[:k + 1] != 0))))
     if failure is not None:
         raise SimulationError(message, time=float(t[k]), trajectory=traj)
     return traj

@@ -43,6 +43,7 @@ import warnings
 import numpy as np
 
 from ncgen.codegen.stepper_package import HALVINGS_LIMIT, MAX_HALVINGS, MAX_ITER, STATS, STATUS, TOL
+from ncgen.runtime.energy_balance import balance_parts
 from ncgen.errors import AccuracyWarning, NcgenError, SimulationError, option
 from ncgen.runtime.inputs import HOLDS
 from ncgen.runtime.stepper_checks import (ERROR_FRACTION, GLOBAL_FACTOR, SHADOW_FACTOR, contact_report,
@@ -74,7 +75,7 @@ def simulate_stepper(model, t: np.ndarray, U: np.ndarray, p: np.ndarray, q0: np.
     substeps, max_iter, max_halvings = int(substeps), int(max_iter), int(max_halvings)
     _check_options(substeps, tol, max_iter, max_halvings, hold, rtol, atol, order, max_steps)
     stepper = load_stepper(model, cflags)
-    conservative = is_conservative(model)
+    conservative = is_conservative(model, inputs=bool(np.any(np.asarray(U) != 0)))
     if rtol is not None and stepper.nd:
         raise NcgenError(f"rtol: model {model.name!r} has nonsmooth contacts, whose impacts the error control "
                          f"cannot follow; use fixed steps ({option('substeps=N', '--substeps N')}) or "
@@ -261,6 +262,8 @@ def _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info,
                       velocity_residual=Y[:, 3], markers=markers, **extra)
     traj.info["error_estimate"] = error_estimate(S[:rows], info.get("substeps"))
     traj.info["energy"] = energy_report(traj, work, conservative)
+    if not conservative and len(traj):
+        traj.info["energy"]["parts"] = balance_parts(model, traj)
     traj.info["wall_time"] = time.perf_counter() - start
     return traj
 

@@ -73,16 +73,20 @@ GLOBAL_FACTOR = 100.0
 _conservative: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
-def is_conservative(model) -> bool:
+def is_conservative(model, inputs: bool = True) -> bool:
     """True if the model's forces are conservative and its constraints scleronomic:
     ``Φ_t`` and ``∂V/∂t`` are structurally zero and ``F = −∇V`` at random states with random
-    rates and inputs (so that dampers, drives and input forces all count).  Kept per model."""
-    if model not in _conservative:
-        _conservative[model] = _is_conservative(model)
-    return _conservative[model]
+    rates and inputs (so that dampers, drives and input forces all count; ``inputs=False``:
+    with the inputs at zero, as in a run that does not drive them).  Kept per model."""
+    cache = _conservative.setdefault(model, {})
+    if inputs not in cache:
+        cache[inputs] = _is_conservative(model, inputs=inputs)
+    return cache[inputs]
 
 
-def _is_conservative(model, samples: int = 3, seed: int = 0) -> bool:
+def _is_conservative(model, samples: int = 3, seed: int = 0, inputs: bool = True) -> bool:
+    if _dissipative_contacts(model):
+        return False
     f = model.functions
     t, q, v = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq)
     u, p = ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
@@ -97,10 +101,18 @@ def _is_conservative(model, samples: int = 3, seed: int = 0) -> bool:
     for _ in range(samples):
         qs = model.q0 + 0.1 * rng.standard_normal(model.nq)
         r, F_value = residual(model.t0 + rng.random(), qs, rng.standard_normal(model.nq),
-                              rng.standard_normal(model.nu), model.p0)
+                              rng.standard_normal(model.nu) if inputs else np.zeros(model.nu), model.p0)
         if np.max(np.abs(np.asarray(r)), initial=0.0) > 1e-9 * (1 + np.max(np.abs(np.asarray(F_value)), initial=0.0)):
             return False
     return True
+
+
+def _dissipative_contacts(model) -> bool:
+    """Whether a contact can dissipate: friction, smooth damping, or an impact with e < 1
+    (random states near q0 rarely touch, so contacts are judged by their parameters)."""
+    smooth = getattr(model, "contact_model", "smooth") == "smooth"
+    return any(c["mu"] > 0 or (c["damping"] > 0 if smooth else c["restitution"] < 1)
+               for c in getattr(model, "contacts", ()) or ())
 
 
 def global_estimates(S: np.ndarray, substeps: int | None) -> tuple[np.ndarray, np.ndarray]:

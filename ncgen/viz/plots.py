@@ -1,4 +1,4 @@
-"""``plot(traj, path)``: a PNG (PDF, SVG) summary of a simulation: energy drift, constraint drift and
+"""``plot(traj, path)``: a PNG (PDF, SVG) summary of a simulation: energy (drift, or balance of a dissipative run), constraint drift and
 the motion of chosen points."""
 from __future__ import annotations
 
@@ -31,9 +31,19 @@ def plot(traj, path, points=None, *, dpi: int = 100) -> Path:
     t = traj.t
     ax = fig.add_subplot(rows, 2, 1)
     scale = traj.energy_scale
-    ax.plot(t, traj.energy - traj.energy[0], color="tab:red")
-    ax.set_title(f"energy drift (E(t0) = {traj.energy[0]:.4g} J"
-                 + (f", max relative {traj.energy_drift / scale:.2g})" if scale > 0 else ")"))
+    ax.plot(t, traj.energy - traj.energy[0], color="tab:red", label="E - E(t0)")
+    if traj.info.get("energy", {}).get("conservative") is False and traj.model is not None:
+        from ncgen.runtime.energy_balance import works
+        w = works(traj.model, t, traj.q, traj.v, traj.lam, traj.u, traj.p)
+        for key, style in (("contacts", ":"), ("dampers", "--"), ("inputs", "-."), ("drives", "-.")):
+            if np.any(w[key] != 0):
+                ax.plot(t, w[key], style, lw=0.9, label=f"work of {key}")
+        ax.plot(t, traj.energy - traj.energy[0] - w["total"], color="k", lw=0.8, label="residual E - E(t0) - W")
+        ax.legend(fontsize=7)
+        ax.set_title(f"energy balance (E(t0) = {traj.energy[0]:.4g} J)")
+    else:
+        ax.set_title(f"energy, conservative (E(t0) = {traj.energy[0]:.4g} J"
+                     + (f", max relative change {traj.energy_drift / scale:.2g})" if scale > 0 else ")"))
     ax.set_xlabel("t (s)")
     ax.set_ylabel("E - E(t0) (J)")
     ax.grid(True, alpha=0.3)
