@@ -220,15 +220,18 @@ def _first_errors(log: str, n: int = 12) -> str:
 
 
 class _Progress:
-    """A status line on stderr, shown only if the work lasts longer than PROGRESS_DELAY."""
-
-    SLOW = 10.0  # seconds after which the final line suggests cheaper flags
+    """Progress of a compile: a tqdm bar over the files on a terminal (:mod:`ncgen.progress`),
+    else status lines on stderr for logs, shown only if the work lasts longer than
+    PROGRESS_DELAY; both end with a line saying how long it took."""
 
     def __init__(self, what: str, total: int):
+        from ncgen.progress import bar, enabled
+
         self.what, self.total, self.done = what, total, 0
         self.start = time.monotonic()
         self.shown = False
         self.lock = threading.Lock()
+        self.bar = bar(total, "compiling C", unit="file", mode=None) if enabled(None) else None
         self.timer = threading.Timer(PROGRESS_DELAY, self._show)
         self.timer.daemon = True
         self.timer.start()
@@ -236,21 +239,25 @@ class _Progress:
     def _show(self) -> None:
         with self.lock:
             self.shown = True
+            if self.bar is not None:
+                return
             _status(f"{self.what}: {self.done}/{self.total} compiled, {time.monotonic() - self.start:.0f} s")
 
     def step(self) -> None:
         with self.lock:
             self.done += 1
+            if self.bar is not None:
+                self.bar.update(1)
             show = self.shown and self.done < self.total
         if show:
             self._show()
 
     def finish(self) -> None:
         self.timer.cancel()
+        if self.bar is not None:
+            self.bar.close()
         if self.shown:
-            elapsed = time.monotonic() - self.start
-            hint = ""
-            _status(f"{self.what}: done in {elapsed:.1f} s{hint}")
+            _status(f"{self.what}: done in {time.monotonic() - self.start:.1f} s")
 
 
 def _status(line: str) -> None:

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from ncgen.progress import bar, enabled
 from ncgen.errors import OptimizationError
 from ncgen.optim.diagnostics import DIAGNOSIS_BUDGET, RELAXABLE, SUCCESS, diagnose, violation_of
 from ncgen.optim.guess import guess_duration, make_guess
@@ -389,10 +390,17 @@ class NLP:
         opti.solver("ipopt", {"expand": self.disc.expandable, "detect_simple_bounds": True,
                               "print_time": False, "ipopt": options})
         start = time.perf_counter()
-        try:
-            self.value = opti.solve_limited().value
-        except RuntimeError:               # IPOPT failed (infeasible, NaN, ...): the last iterate
-            self.value = opti.debug.value
+        shown = enabled(None) and not verbose          # IPOPT's own log replaces the bar
+        with bar(max_iter, "IPOPT", unit="iter", mode=None if shown else False) as progress:
+            if shown:
+                opti.callback(lambda _: progress.update(1))
+            try:
+                self.value = opti.solve_limited().value
+            except RuntimeError:               # IPOPT failed (infeasible, NaN, ...): the last iterate
+                self.value = opti.debug.value
+            finally:
+                if shown:
+                    opti.callback()
         status = opti.stats().get("return_status", "")
         if status in ("Invalid_Option", "Invalid_Problem_Definition"):
             raise OptimizationError(f"IPOPT refused its options ({status}): check ipopt={ipopt!r} and "

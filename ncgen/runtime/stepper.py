@@ -43,6 +43,7 @@ import warnings
 import numpy as np
 
 from ncgen.codegen.stepper_package import HALVINGS_LIMIT, MAX_HALVINGS, MAX_ITER, STATS, STATUS, TOL
+from ncgen.progress import Ticker
 from ncgen.runtime.energy_balance import balance_parts
 from ncgen.errors import AccuracyWarning, NcgenError, SimulationError, option
 from ncgen.runtime.inputs import HOLDS
@@ -115,9 +116,10 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, hold, substeps, tol, max_iter,
     contacts = stepper.nd > 0          # nonsmooth contacts: no shadow run, one-sided energy check
     IMP = np.zeros((n_out, stepper.nd)) if contacts else None      # contact impulses per output interval
     start = time.perf_counter()
-    Q, V, LAM, S, status, done, splits = stepper.simulate_stats(
-        q0, v0, lam0, float(t[0]), h, n_out * substeps, substeps, step_inputs(U, t, hold, substeps), p, tol,
-        max_iter, max_halvings, estimate and not contacts, not conservative, impulse_out=IMP)
+    with Ticker(f"stepper: {model.name}, {n_out * substeps:,} steps"):
+        Q, V, LAM, S, status, done, splits = stepper.simulate_stats(
+            q0, v0, lam0, float(t[0]), h, n_out * substeps, substeps, step_inputs(U, t, hold, substeps), p, tol,
+            max_iter, max_halvings, estimate and not contacts, not conservative, impulse_out=IMP)
     stepping = time.perf_counter() - start
     rows = done // substeps
     info = {"method": "stepper", "backend": "compiled", "scheme": "RATTLE, nonsmooth contacts" if contacts else
@@ -180,8 +182,9 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, hold, tol, max_iter, rtol, 
                                          hold == "linear", p, rtol, atol, 0.0, order == 4, max_steps,
                                          not conservative, newton_tolerance(rtol, atol, tol), max_iter)
 
-    Q, V, LAM, S, status, rows, h_next = run(rtol, atol)
-    shadow = run(SHADOW_FACTOR * rtol, SHADOW_FACTOR * atol) if estimate and status == 0 else None
+    with Ticker(f"stepper: {model.name}, rtol {rtol:g}"):
+        Q, V, LAM, S, status, rows, h_next = run(rtol, atol)
+        shadow = run(SHADOW_FACTOR * rtol, SHADOW_FACTOR * atol) if estimate and status == 0 else None
     stepping = time.perf_counter() - start
     info = {"method": "stepper", "backend": "compiled", "scheme": "RATTLE" if order == 2 else
             "RATTLE, Richardson-extrapolated and projected", "order": order, "rtol": rtol, "atol": atol,

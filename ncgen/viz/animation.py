@@ -15,6 +15,7 @@ from matplotlib.animation import FFMpegWriter, PillowWriter
 
 from ncgen.errors import NcgenError
 from ncgen.files import atomic_path
+from ncgen.progress import bar
 from ncgen.viz.draw import SceneArtists, figure, scene_axes
 from ncgen.viz.scene import scene
 
@@ -46,8 +47,10 @@ def animate(traj, path, *, max_frames: int = 150, fps: float | None = None, size
     writer = PillowWriter(fps=fps) if suffix == ".gif" else FFMpegWriter(fps=fps)
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp, writer.saving(fig, str(tmp), dpi):
+    with atomic_path(path) as tmp, writer.saving(fig, str(tmp), dpi), \
+            bar(len(frames), f"rendering {path.name}", unit="frame") as progress:
         for k in frames:                      # one draw per frame (FuncAnimation would draw twice)
             artists.show(k, float(traj.t[k]))
             writer.grab_frame()
+            progress.update(1)
     return path
