@@ -5,28 +5,24 @@ import argparse
 import sys
 from pathlib import Path
 
-from ncgen.cli.common import load_model
+from ncgen.cli.common import check_files, file_arguments, load_model, model_arguments
 from ncgen.cli.registry import subcommand
 from ncgen.runtime.backend_policy import RULE
 
 
-#: Output kinds of 'ncgen simulate' and the file suffixes each accepts.
-SUFFIXES = {"output": (".npz", ".csv"), "plot": (".png", ".pdf", ".svg"), "animate": (".gif", ".mp4")}
+#: What -o/--output accepts.
+OUTPUTS = (".npz", ".csv")
 
 
 def _simulate_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", metavar="MODEL.toml", help="model file: TOML, or a URDF robot (.urdf)")
+    model_arguments(p)
     p.add_argument("--t-end", type=float, required=True, metavar="T", help="final time (s)")
     p.add_argument("--dt", type=float, default=0.01, metavar="DT",
                    help="output step (s, default 0.01); IDAS chooses its own internal steps")
-    p.add_argument("-o", "--output", metavar="FILE", required=True,
-                   help="trajectory file: .npz (everything, nc.Trajectory.load reads it) or .csv "
-                        "(t, q, v, joint angles and rates, markers, energies, residuals, contact gaps and forces; "
-                        "units in the header)")
-    p.add_argument("--plot", metavar="FILE", default=None,
-                   help="also plot the energy (its drift, or the balance of a dissipative run), the constraint drift and the markers (.png, .pdf, .svg)")
-    p.add_argument("--animate", metavar="FILE", default=None,
-                   help="also animate the motion (.gif, or .mp4 with ffmpeg)")
+    file_arguments(p, OUTPUTS, "the trajectory: .npz (everything, nc.Trajectory.load reads it) or .csv (t, q, v, "
+                   "joint angles and rates, markers, energies, residuals, contact gaps and forces; units in the "
+                   "header)", plot="the energy (drift, or the balance of a dissipative run), constraint drift "
+                   "and markers", animate="the motion")
     p.add_argument("--method", default="idas", metavar="METHOD",
                    help="integrator: idas (variable-step BDF with error control, default) or stepper "
                         "(the compiled constraint-preserving stepper: fixed steps DT/N, see --substeps, "
@@ -40,8 +36,6 @@ def _simulate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--backend", default="auto", choices=("auto", "compiled", "vm"),
                    help="where IDAS evaluates the equations: compiled (generated C, built once and "
                         "cached by content), vm (CasADi's virtual machine) or " + RULE)
-    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
-                   help="replace a parameter's default value (repeatable; a vector as NAME=1,2,3)")
     p.add_argument("--rtol", type=float, default=None,
                    help="relative tolerance: IDAS's (default 1e-8); with --method stepper, the stepper "
                         "chooses its steps to meet it (default: fixed steps of DT, checked)")
@@ -50,30 +44,17 @@ def _simulate_arguments(p: argparse.ArgumentParser) -> None:
                         "(default: rtol)")
 
 
-def _check_outputs(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
-    """Usage errors in the output file names, found before any work is done."""
-    for kind, suffixes in SUFFIXES.items():
-        name = getattr(args, kind)
-        if name is None:
-            continue
-        option = "-o/--output" if kind == "output" else f"--{kind}"
-        if Path(name).suffix.lower() not in suffixes:
-            parser.error(f"{option} {name!r}: expected a file name ending in {' or '.join(suffixes)}")
-        if not Path(name).resolve().parent.is_dir():
-            parser.error(f"{option} {name!r}: directory {str(Path(name).parent)!r} does not exist")
-
-
 @subcommand(
     "simulate",
     help="simulate a model: trajectory, plot, animation",
     description=(
-        "Build the model in MODEL.toml, integrate it from its consistent initial state to --t-end "
-        "(inputs held at zero; use the Python API, nc.simulate(..., u=...), to drive them) and write "
-        "the trajectory on the grid 0, dt, 2 dt, ... A summary (integrator work, energy drift or, for "
+        "Build the model in MODEL (TOML or URDF), integrate it from its consistent initial state to --t-end "
+        "(inputs held at zero; use the Python API, nc.simulate(..., u=...), to drive them) on the grid "
+        "0, dt, 2 dt, ..., writing the trajectory to -o FILE if given. A summary (integrator work, energy drift or, for "
         "dissipative runs, the energy balance: work of contacts, dampers, inputs and its residual; "
         "constraint drift) goes to standard output. Files are written only when the whole run "
         "succeeds: a failed integration says where and why it failed, and writes the trajectory up "
-        "to that time to OUTPUT with '.incomplete' before the suffix (e.g. run.incomplete.npz, "
+        "to that time to OUTPUT (default MODEL.npz) with '.incomplete' before the suffix (e.g. run.incomplete.npz, "
         "whose info says complete = false)."),
     examples=(
         "ncgen simulate examples/chain.toml --t-end 2 --dt 0.01 -o chain.npz --plot chain.png\n"
@@ -82,7 +63,8 @@ def _check_outputs(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
         "ncgen simulate examples/tensegrity.toml --t-end 2 -o t.npz --method stepper --substeps 20\n"
         "ncgen simulate examples/tensegrity.toml --t-end 2 -o t.npz --method stepper --rtol 1e-6\n"
         "ncgen simulate balls.toml --t-end 2 --dt 1e-4 -o balls.npz --method stepper --contacts nonsmooth\n"
-        "ncgen simulate robot.urdf --t-end 1 -o robot.csv   # URDF: falls under gravity, zero torque"),
+        "ncgen simulate robot.urdf --t-end 1 -o robot.csv   # URDF: falls under gravity, zero torque\n"
+        "ncgen simulate solo12.urdf --floating-base --t-end 0.5   # a free-floating base; summary only"),
     arguments=_simulate_arguments,
 )
 def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
@@ -92,8 +74,8 @@ def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from ncgen.files import atomic_path, incomplete_path
     from ncgen.runtime import simulate as run
 
-    _check_outputs(args, parser)
-    model = load_model(args.model, args.param, args.contacts)
+    check_files(args, parser, OUTPUTS)
+    model = load_model(args.model, args.param, args.contacts, floating_base=args.floating_base)
     try:
         stepper = {"substeps": args.substeps} if args.method == "stepper" else {}
         traj = run(model, t_end=args.t_end, dt=args.dt, method=args.method, backend=args.backend,
@@ -101,13 +83,14 @@ def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     except SimulationError as e:
         if e.trajectory is None or not len(e.trajectory):
             raise
-        partial = e.trajectory.save(incomplete_path(args.output))
+        partial = e.trajectory.save(incomplete_path(args.output or f"{Path(args.model).stem}.npz"))
         raise SimulationError(f"{e}\nThe partial trajectory (t = {e.trajectory.t[0]:g} ... "
                               f"{e.trajectory.t[-1]:g} s, marked incomplete) was written to {partial}",
                               time=e.time, trajectory=e.trajectory) from None
     print(traj.summary())
     with contextlib.ExitStack() as stack:
-        traj.save(stack.enter_context(atomic_path(args.output)))
+        if args.output:
+            traj.save(stack.enter_context(atomic_path(args.output)))
         if args.plot:
             from ncgen.viz import plot
             plot(traj, stack.enter_context(atomic_path(args.plot)))
