@@ -47,7 +47,8 @@ from ncgen.errors import CodegenError
 DEFAULT_CFLAGS = ("-O2",)
 #: Default flags of a package's ``build.large_sources``: the 31 k-instruction KKT solve of
 #: the 40-bar chain's stepper compiles in 4.6 s (CPU) at -O1, 1.9 s at -O0, ~9 s at -O2, and
-#: runs in 24 us at -O1, 27 us at -O2, 77 us at -O0 (benchmarks/README.md, "Compile flags").
+#: runs in 24 us at -O1, 27 us at -O2, 77 us at -O0 (benchmarks/README.md, "Compile flags of long
+#: functions").
 LARGE_CFLAGS = ("-O1",)
 #: Bump when the way libraries are built changes, to invalidate old cache entries.
 BUILD_SCHEME = 4
