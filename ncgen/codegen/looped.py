@@ -28,13 +28,11 @@ REBUILT = ("ode", "alg", "energy", "accel")
 PRIMITIVES = ("phi", "A", "phi_t", "gamma", "F")
 
 #: A model whose flat system functions total more than this many SX instructions (a chain
-#: of ~67 bars) has its package's functions rerolled from LARGE_MODEL_REROLL instructions
-#: on: its straight-line code would take minutes to compile at -O2 (0.5 ms per
-#: instruction) and its stepper's KKT solve minutes at -O1 (80-bar chain: 267 s at machine
-#: load 12, against 22 s for the rerolled 160-bar chain; benchmarks/first_run.py), and next
-#: to the loops the short straight-line functions would take most of the compile time.
-#: Smaller models keep straight-line code, the fastest at run time.
-LARGE_MODEL_INSTRUCTIONS = 30_000
+#: of ~90 bars) has its package's functions rerolled from LARGE_MODEL_REROLL instructions
+#: on: its straight-line code would take a minute or more to compile at -O2 (0.5 ms per
+#: instruction), and next to the loops the short straight-line functions would take most
+#: of the compile time.  Smaller models keep straight-line code, the fastest at run time.
+LARGE_MODEL_INSTRUCTIONS = 40_000
 LARGE_MODEL_REROLL = 1_000
 
 _primitives: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
