@@ -4,11 +4,14 @@ Every ``import``/``from … import`` of an ``ncgen`` module is an edge, wherever
 (module level or inside a function).  The layer order, lowest first (also in
 docs/architecture.md)::
 
-    base (errors, validation, reproducible, files, version, robots, progress)
-    ← symbolic ← model ← assembly ← codegen ← rigid_motion ← runtime ← viz ← optim ← cli ← ncgen (the package root)
+    base (errors, validation, reproducible, files, interrupts, version, robots, progress)
+    ← symbolic ← model ← assembly ← codegen ← rigid_motion ← runtime ← analysis ← viz ← optim ← cli
+    ← ncgen (the package root)
 
-A module may import modules of its own layer and of lower ones.  The one exception is
-``System.build()`` (model), a convenience that calls :func:`ncgen.assembly.build.build_model`.
+A module may import modules of its own layer and of lower ones.  The exceptions, all
+conveniences: ``System.build()`` (model) calls :func:`ncgen.assembly.build.build_model`,
+``Trajectory.reaction()`` (runtime) calls :func:`ncgen.analysis.reactions.joint_reactions`, and
+``Trajectory.to_html()`` (runtime) calls :func:`ncgen.viz.html.to_html`.
 """
 from __future__ import annotations
 
@@ -19,11 +22,13 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1] / "ncgen"
 
-LAYERS = ["base", "symbolic", "model", "assembly", "codegen", "rigid_motion", "runtime", "viz", "optim",
+LAYERS = ["base", "symbolic", "model", "assembly", "codegen", "rigid_motion", "runtime", "analysis", "viz", "optim",
           "cli", "root"]
-BASE = {"errors", "validation", "reproducible", "files", "version", "robots", "progress"}
+BASE = {"errors", "validation", "reproducible", "files", "interrupts", "version", "robots", "progress"}
 #: (importing module, imported module): the documented exceptions.
-EXCEPTIONS = {("ncgen.model.system", "ncgen.assembly.build")}
+EXCEPTIONS = {("ncgen.model.system", "ncgen.assembly.build"),
+              ("ncgen.runtime.trajectory", "ncgen.analysis.reactions"),
+              ("ncgen.runtime.trajectory", "ncgen.viz.html")}
 
 
 def module_name(path: Path) -> str:

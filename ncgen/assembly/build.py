@@ -9,18 +9,21 @@ import casadi as ca
 import numpy as np
 
 from ncgen.assembly.drive_assembly import assemble_drives
-from ncgen.assembly.contacts import contact_functions, contact_specs, contact_terms, smooth_forces
+from ncgen.assembly.contacts import (check_initial_gaps, contact_functions, contact_specs, contact_terms,
+                                     smooth_forces)
 from ncgen.assembly.functions import system_functions
 from ncgen.assembly.initial_state import consistent_state
 from ncgen.assembly.joint_space import JointSpace, actuator_forces, build_joint_coordinates
 from ncgen.assembly.kinematics import resolve_fix, system_size
 from ncgen.assembly.limits import model_limits
-from ncgen.assembly.mass import assemble_mass, check_tangent_inertia, flat_members, flat_support, mass_factor
+from ncgen.assembly.manifold import check_tangent_inertia
+from ncgen.assembly.mass import assemble_mass, flat_members, flat_support, mass_factor
 from ncgen.assembly.rank import dependent_rows
 from ncgen.assembly.redundancy import classify
 from ncgen.assembly.springs import spring_table
 from ncgen.assembly.unshared import UnsharedForm
 from ncgen.errors import ModelError
+from ncgen.interrupts import raise_if_interrupted
 from ncgen.model.context import Context
 from ncgen.model.layout import Layout, make_layout
 from ncgen.model.sharing import SharingPlan, intrinsic_key, share_coordinates
@@ -79,7 +82,7 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
         if plan.eliminated or plan.partial:
             options = dict(baumgarte=baumgarte, redundant=redundant, tolerance=tolerance, t0=t0,
                            assemble=assemble, contacts=contacts)
-            unshared = UnsharedForm(lambda: build_model(source, share=False, **options))
+            unshared = UnsharedForm(source, options, build_model)
     members = list(system.members.values())
     layout = make_layout(system.dim, members)
     ctx = Context(system, layout)
@@ -151,6 +154,10 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     if system.initial_joints or system.initial_joint_rates:
         q, v = joint_space.initial_state(model, system.initial_joints, system.initial_joint_rates)
         model = model_with(consistent_state(functions, layout, labels, q, v, p0, t0, tolerance, M, fixed=fixed))
+    raise_if_interrupted()               # a Ctrl-C that CasADi swallowed while the functions were built
+    if terms:
+        weight = sum(m.rigid.mass for m in members) * float(np.linalg.norm(system.gravity))
+        check_initial_gaps(system.name, system.contacts, functions["gap"], model.q0, p0, contacts, weight)
     return model
 
 

@@ -37,7 +37,7 @@ def model_arguments(p) -> None:
 
 
 def file_arguments(p, output: tuple[str, ...] | None, what: str, plot: str | None = None,
-                   animate: str | None = None) -> None:
+                   animate: str | None = None, html: str | None = None) -> None:
     """-o/--output, --plot and --animate with the same rules in every subcommand: each is
     optional, a file is written only when named (atomically, after the work succeeded), and
     the help names every accepted suffix."""
@@ -49,6 +49,8 @@ def file_arguments(p, output: tuple[str, ...] | None, what: str, plot: str | Non
     if animate is not None:
         p.add_argument("--animate", metavar="FILE", default=None,
                        help=f"also animate {animate} (.gif, or .mp4 with ffmpeg)")
+    if html is not None:
+        p.add_argument("--html", metavar="FILE", default=None, help=f"also write {html} (.html)")
 
 
 def check_files(args, parser, output: tuple[str, ...] | None) -> None:
@@ -56,7 +58,7 @@ def check_files(args, parser, output: tuple[str, ...] | None) -> None:
     from pathlib import Path
 
     kinds = {"output": ("-o/--output", output), "plot": ("--plot", PLOT_SUFFIXES),
-             "animate": ("--animate", ANIMATE_SUFFIXES)}
+             "animate": ("--animate", ANIMATE_SUFFIXES), "html": ("--html", (".html",))}
     for kind, (option, suffixes) in kinds.items():
         name = getattr(args, kind, None)
         if name is None or suffixes is None:

@@ -23,7 +23,8 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--problem", metavar="PROBLEM.toml", default=None,
                    help="the problem file, when FILE is the model (its 'model' key is then ignored)")
     file_arguments(p, (".npz",), "the optimal trajectory (.npz; nc.Trajectory.load reads it)",
-                   plot="the motion, inputs, markers and constraint drift", animate="the motion")
+                   plot="the motion, inputs, markers and constraint drift", animate="the motion",
+                   html="an interactive 3D page of the optimal motion (opens offline in any browser)")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    help="replace a model parameter's default value (repeatable)")
     p.add_argument("--floating-base", action="store_true",
@@ -43,7 +44,8 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     examples=(
         "ncgen optimize examples/cartpole_swingup.toml -o swingup.npz --plot swingup.png\n"
         "ncgen optimize examples/cartpole.toml --problem examples/cartpole_swingup.toml -o cp.npz\n"
-        "ncgen optimize examples/cartpole_swingup.toml --plot cp.pdf --animate cp.gif -v"),
+        "ncgen optimize examples/cartpole_swingup.toml --plot cp.pdf --animate cp.gif -v\n"
+        "ncgen optimize examples/cartpole_swingup.toml --html cp.html"),
     arguments=_arguments,
 )
 def optimize(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
@@ -77,7 +79,10 @@ def optimize(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         if args.animate:
             from ncgen.viz import animate
             animate(sol, stack.enter_context(atomic_path(args.animate)))
-    for name in (output, plot, args.animate):
+        if args.html:
+            from ncgen.viz.html import to_html
+            to_html(sol, stack.enter_context(atomic_path(args.html)))
+    for name in (output, plot, args.animate, args.html):
         if name:
             print(f"wrote {name}", file=sys.stderr)
     return 0

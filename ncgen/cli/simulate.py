@@ -16,13 +16,15 @@ OUTPUTS = (".npz", ".csv")
 
 def _simulate_arguments(p: argparse.ArgumentParser) -> None:
     model_arguments(p)
-    p.add_argument("--t-end", type=float, required=True, metavar="T", help="final time (s)")
+    p.add_argument("--t-end", type=float, default=2.0, metavar="T", help="final time (s, default 2)")
     p.add_argument("--dt", type=float, default=0.01, metavar="DT",
                    help="output step (s, default 0.01); IDAS chooses its own internal steps")
     file_arguments(p, OUTPUTS, "the trajectory: .npz (everything, nc.Trajectory.load reads it) or .csv (t, q, v, "
                    "joint angles and rates, markers, energies, residuals, contact gaps and forces; units in the "
                    "header)", plot="the energy (drift, or the balance of a dissipative run), constraint drift "
-                   "and markers", animate="the motion")
+                   "and markers", animate="the motion",
+                   html="an interactive 3D page of the run (opens offline in any browser: orbit, play, time "
+                        "slider, plots; FILE.html?t=1.5 opens paused at t = 1.5 s)")
     p.add_argument("--method", default="idas", metavar="METHOD",
                    help="integrator: idas (variable-step BDF with error control, default) or stepper "
                         "(the compiled constraint-preserving stepper: fixed steps DT/N, see --substeps, "
@@ -58,6 +60,7 @@ def _simulate_arguments(p: argparse.ArgumentParser) -> None:
         "whose info says complete = false)."),
     examples=(
         "ncgen simulate examples/chain.toml --t-end 2 --dt 0.01 -o chain.npz --plot chain.png\n"
+        "ncgen simulate examples/heavy_top.toml --html top.html      # open top.html in a browser\n"
         "ncgen simulate examples/heavy_top.toml --t-end 3 -o top.csv --animate top.gif\n"
         "ncgen simulate examples/slider_crank.toml --t-end 1 -o sc.npz --param omega=20 --backend vm\n"
         "ncgen simulate examples/tensegrity.toml --t-end 2 -o t.npz --method stepper --substeps 20\n"
@@ -70,7 +73,7 @@ def _simulate_arguments(p: argparse.ArgumentParser) -> None:
 def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     import contextlib
 
-    from ncgen.errors import SimulationError
+    from ncgen.errors import SimulationError, SimulationInterrupted
     from ncgen.files import atomic_path, incomplete_path
     from ncgen.runtime import simulate as run
 
@@ -80,13 +83,19 @@ def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         stepper = {"substeps": args.substeps} if args.method == "stepper" else {}
         traj = run(model, t_end=args.t_end, dt=args.dt, method=args.method, backend=args.backend,
                    rtol=args.rtol, atol=args.atol, **stepper)
-    except SimulationError as e:
+    except (SimulationError, SimulationInterrupted) as e:
         if e.trajectory is None or not len(e.trajectory):
             raise
-        partial = e.trajectory.save(incomplete_path(args.output or f"{Path(args.model).stem}.npz"))
-        raise SimulationError(f"{e}\nThe partial trajectory (t = {e.trajectory.t[0]:g} ... "
-                              f"{e.trajectory.t[-1]:g} s, marked incomplete) was written to {partial}",
-                              time=e.time, trajectory=e.trajectory) from None
+        partial = [e.trajectory.save(incomplete_path(args.output))] if args.output else []
+        if args.html:
+            partial.append(e.trajectory.to_html(incomplete_path(args.html)))
+        if not partial:
+            raise
+        said = (f"{e}\nThe partial trajectory (t = {e.trajectory.t[0]:g} ... {e.trajectory.t[-1]:g} s, marked "
+                f"incomplete) was written to {' and '.join(str(x) for x in partial)}")
+        if isinstance(e, SimulationInterrupted):
+            raise SimulationInterrupted(said, time=e.time, trajectory=e.trajectory) from None
+        raise SimulationError(said, time=e.time, trajectory=e.trajectory) from None
     print(traj.summary())
     with contextlib.ExitStack() as stack:
         if args.output:
@@ -97,7 +106,10 @@ def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         if args.animate:
             from ncgen.viz import animate
             animate(traj, stack.enter_context(atomic_path(args.animate)))
-    for name in (args.output, args.plot, args.animate):
+        if args.html:
+            from ncgen.viz.html import to_html
+            to_html(traj, stack.enter_context(atomic_path(args.html)))
+    for name in (args.output, args.plot, args.animate, args.html):
         if name:
             print(f"wrote {name}", file=sys.stderr)
     return 0

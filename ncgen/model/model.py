@@ -17,6 +17,7 @@ from types import MappingProxyType
 import numpy as np
 
 from ncgen.errors import ModelError
+from ncgen.model.data import ModelData, model_data
 from ncgen.validation import as_vector
 
 
@@ -39,6 +40,12 @@ def _frozen(value):
     if isinstance(value, list):
         return ReadOnlyList(value)
     return value
+
+
+def component_names(names, sizes) -> list[str]:
+    """One name per value of inputs or parameters: ``k`` for a scalar, ``f[0]``, ``f[1]``, ...
+    for a vector ``f`` (the order of ``u`` and ``p``)."""
+    return [n if s == 1 else f"{n}[{i}]" for n, s in zip(names, sizes) for i in range(s)]
 
 
 class Model:
@@ -90,8 +97,8 @@ class Model:
         self.contact_model = contact_model
         #: :class:`~ncgen.model.sharing.SharingPlan` of ``build(share=True)`` (None with share=False).
         self.sharing = sharing
-        #: the same system built with ``share=False``, on first use (reactions of the eliminated
-        #: joints; :class:`ncgen.assembly.unshared.UnsharedForm`), or None
+        #: how to build the same system with ``share=False`` (reactions of the eliminated joints;
+        #: :class:`ncgen.assembly.unshared.UnsharedForm`; the built model is kept in ``data``), or None
         self.unshared = unshared
         for key, value in vars(self).items():
             object.__setattr__(self, key, _frozen(value))
@@ -105,6 +112,12 @@ class Model:
 
     def __delattr__(self, key):
         raise AttributeError(f"Model {self.name!r} is constant (cannot delete {key!r})")
+
+    @property
+    def data(self) -> ModelData:
+        """The model's run-time data: compiled libraries, loaded kernels, functions built on
+        demand (:class:`~ncgen.model.data.ModelData`); not part of the constant model."""
+        return model_data(self)
 
     def frame_pose(self, name: str, q) -> tuple[np.ndarray, np.ndarray]:
         """World ``(R, p)`` of the named frame (``model.frames``, e.g. a URDF link) at ``q``."""
@@ -137,16 +150,39 @@ class Model:
         """``{joint: {"lower", "upper", "velocity", "effort"}}`` as given (URDF ``<limit>``)."""
         return {k: dict(v) for k, v in self.joint_space.limits.items() if v}
 
-    def to_joint_space(self, q, v=None, a=None):
+    def to_joint_space(self, q, v=None, a=None, *, t=None, p=None):
         """Joint positions ``qj`` (and rates ``vj``, accelerations ``aj`` when ``v``, ``a``
         are given), concatenated in ``joint_names`` order (see
-        :mod:`ncgen.assembly.joint_coordinates` for each joint's coordinates)."""
-        return self.joint_space.to_joint_space(self, q, v, a)
+        :mod:`ncgen.assembly.joint_coordinates` for each joint's coordinates); a state off
+        the constraints (at time ``t``, parameters ``p``) is refused."""
+        return self.joint_space.to_joint_space(self, q, v, a, t=t, p=p)
 
     def from_joint_space(self, qj, vj=None, *, t=None, p=None):
         """``(q, v)`` with the given joint positions and rates (vectors in ``joint_names``
         order, or dicts ``{joint: value}``; closed loops: the independent joints only)."""
         return self.joint_space.from_joint_space(self, qj, vj, t=t, p=p)
+
+    def coordinate(self, name: str) -> tuple[np.ndarray, float]:
+        """``(s, c)`` with the coordinate ``name`` equal to ``s · q + c`` (m) and its rate to
+        ``s · v``: one of :attr:`coordinate_names` (``s`` a unit row), or a coordinate as
+        written (``"upper.r_i.x"``) that coordinate sharing re-based or merged (a row of the
+        affine map to the ``share=False`` coordinates, :mod:`ncgen.assembly.unshared`; its
+        first use builds that form, ~0.2 s).  Raises :class:`ModelError` naming what exists."""
+        if name in self.coordinate_names:
+            s = np.zeros(self.nq)
+            s[self.coordinate_names.index(name)] = 1.0
+            return s, 0.0
+        if self.unshared is not None and isinstance(name, str) and name.split(".")[0] in self.member_names:
+            written = self.unshared.model(self)
+            if name in written.coordinate_names:
+                S, c = self.unshared.coordinate_map(self)
+                i = written.coordinate_names.index(name)
+                return S[i].copy(), float(c[i])
+        from ncgen.model.expressions import did_you_mean
+        shown = ", ".join(self.coordinate_names[:12]) + (", ..." if self.nq > 12 else "")
+        aside = "; coordinates as written before coordinate sharing resolve too" if self.unshared else ""
+        raise ModelError(f"model {self.name!r}: no coordinate named {name!r}"
+                         f"{did_you_mean(str(name), self.coordinate_names)} (coordinates: {shown}{aside})")
 
     # ------------------------------------------------------------ dimensions
     @property

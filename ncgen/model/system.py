@@ -97,12 +97,14 @@ class System:
 
     def add_body(self, name: str, coords: str = "ruvw", *, mass: float, inertia,
                  position=None, rotation=None, velocity=None, angular_velocity=None,
-                 basis=None, share: dict | None = None) -> Member:
+                 basis=None, share: dict | None = None, shape=None) -> Member:
         """A rigid body.  ``inertia``: 3×3 tensor about the centre of mass in body axes (a
         scalar in 2D); ``position``: centre of mass; ``rotation``: body→world (2D: an angle
         or 2×2 matrix); ``angular_velocity`` in world axes; ``basis``: the slot values in
         the body frame, seed order (default: ``r̄_i = 0`` and unit axes); ``share``: maps
-        slot names (``"r_i"``, ``"r_j"``, ...) to nodes of other members or the ground."""
+        slot names (``"r_i"``, ``"r_j"``, ...) to nodes of other members or the ground;
+        ``shape``: what viewers draw (``nc.Box(a, b, c)``, ... :mod:`ncgen.model.shapes`;
+        default: the box of the same inertia)."""
         name = self._new_name(name, "body")
         ct = self._ctype(coords, "body", name)
         d = self.dim
@@ -119,15 +121,16 @@ class System:
         member.spec = dict(kind="body", coords=ct.name, mass=mass, inertia=inertia, position=position,
                            rotation=rotation, velocity=velocity, angular_velocity=angular_velocity,
                            basis=basis, share={ct.slots[k]: ref for k, ref in shared.items()} or None)
-        return self._add(member)
+        return self._add(member.set_shape(shape))
 
     def add_bar(self, name: str, coords: str = "rr", *, mass: float, ends, inertia=None, com=None,
-                velocity=None, angular_velocity=None) -> Member:
+                velocity=None, angular_velocity=None, shape=None) -> Member:
         """A rigid bar between ``ends`` (two world points, or nodes to share: ``other.end(1)``,
         ``system.ground.point(p)``).  ``inertia``: transverse moment about the centre of
         mass (default ``m L²/12``); ``com``: distance of the centre of mass from the first
         end (default: the middle); ``velocity`` of the centre of mass; the component of
-        ``angular_velocity`` along the bar is ignored."""
+        ``angular_velocity`` along the bar is ignored; ``shape``: what viewers draw (default:
+        a cylinder between the ends)."""
         name = self._new_name(name, "bar")
         ct = self._ctype(coords, "bar", name)
         d = self.dim
@@ -157,11 +160,12 @@ class System:
         member = Member(name, local, R, p, w, v, shared)
         member.spec = dict(kind="bar", coords=ct.name, mass=mass, ends=list(ends), inertia=inertia, com=com,
                            velocity=velocity, angular_velocity=angular_velocity)
-        return self._add(member)
+        return self._add(member.set_shape(shape))
 
-    def add_point(self, name: str, *, mass: float, position, velocity=None) -> Member:
+    def add_point(self, name: str, *, mass: float, position, velocity=None, shape=None) -> Member:
         """A point mass; ``position`` may be a node of another member (``bar.end(1)``), which
-        adds the mass there without new coordinates."""
+        adds the mass there without new coordinates; ``shape``: what viewers draw (default: a
+        small sphere)."""
         name = self._new_name(name, "point")
         ct = coordinate_type("r", self.dim)
         d = self.dim
@@ -173,7 +177,7 @@ class System:
         v = np.zeros(d) if velocity is None else as_vector(velocity, d, f"{name}: velocity")
         member = Member(name, RigidMember.point(ct, mass), None, p, None, v, shared)
         member.spec = dict(kind="point", mass=mass, position=shared.get(0, position), velocity=velocity)
-        return self._add(member)
+        return self._add(member.set_shape(shape))
 
     # ----------------------------------------------------- joints and forces
     def add_joint(self, joint):

@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from ncgen.errors import ModelError
+from ncgen.model.urdf_checks import check_urdf_document
 
 MOVABLE = ("revolute", "continuous", "prismatic")
 
@@ -67,13 +68,19 @@ def load_urdf(source):
     except ImportError:
         raise ModelError("URDF import needs the package yourdfpy (pip install yourdfpy)") from None
     text = str(source)
-    if "<robot" in text:
-        handle, where = io.BytesIO(text.encode()), "URDF text"
+    if "<" in text:
+        where = "URDF text"
     else:
         path = Path(source)
         if not path.is_file():
             raise ModelError(f"URDF: no file {str(path)!r} (expected a path to a .urdf file or URDF text)")
-        handle, where = str(path), str(path)
+        where = str(path)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as e:
+            raise ModelError(f"URDF {where}: cannot read it: {e}") from None
+    check_urdf_document(text, where)
+    handle = io.BytesIO(text.encode()) if where == "URDF text" else where
     try:
         return yourdfpy.URDF.load(handle, build_scene_graph=False, load_meshes=False,
                                   build_collision_scene_graph=False, load_collision_meshes=False), where

@@ -12,7 +12,7 @@ Constraint handling (why the equality-constraint Jacobian has full row rank):
 * partial targets (a member's pose) impose only their independent rows
   (:mod:`ncgen.optim.targets`);
 * full-state final and periodic conditions impose their ``dof`` tangent components
-  ``Nᵀ (x_N − x*)`` (:mod:`ncgen.optim.manifold`), never the ``nc`` components the
+  ``Nᵀ (x_N − x*)`` (:mod:`ncgen.optim.conditions`), never the ``nc`` components the
   dynamics already keep; a box around the target (inequalities, inactive at the
   solution) selects the branch;
 * bounds on inputs, states, parameters and the final time are simple variable bounds
@@ -32,10 +32,13 @@ import numpy as np
 
 from ncgen.progress import bar, enabled
 from ncgen.errors import OptimizationError
+from ncgen.interrupts import deferred_interrupt
+from ncgen.model.model import component_names
 from ncgen.optim.diagnostics import DIAGNOSIS_BUDGET, RELAXABLE, SUCCESS, diagnose, violation_of
 from ncgen.optim.guess import guess_duration, make_guess
-from ncgen.optim.manifold import (BRANCH_RADIUS, consistent_configuration, length_scale, resolve_configuration,
-                                  resolve_velocity, tangent_basis)
+from ncgen.assembly.manifold import tangent_basis
+from ncgen.optim.conditions import (BRANCH_RADIUS, consistent_configuration, length_scale, resolve_configuration,
+                                    resolve_velocity)
 from ncgen.optim.result import OptimalTrajectory, SolverStats
 from ncgen.optim.targets import joint_target, pose_target
 from ncgen.optim.transcription import MODEL_STATE, Horizon
@@ -300,7 +303,7 @@ class NLP:
 
     def _bounds(self, q_init, v_init):
         ocp, model, disc = self.ocp, self.model, self.disc
-        for i, name in enumerate(_component_names(model.input_names, model.input_sizes)):
+        for i, name in enumerate(component_names(model.input_names, model.input_sizes)):
             lo, hi = ocp.u_bounds[:, i]
             self.constrain(f"bound on input {name}", "bound", disc.U[i, :], lo, hi)
         for x, x0, fixed, bounds, what in ((disc.path_q, self.q0, q_init, ocp.q_bounds, "coordinate"),
@@ -391,16 +394,16 @@ class NLP:
                               "print_time": False, "ipopt": options})
         start = time.perf_counter()
         shown = enabled(None) and not verbose          # IPOPT's own log replaces the bar
-        with bar(max_iter, "IPOPT", unit="iter", mode=None if shown else False) as progress:
-            if shown:
-                opti.callback(lambda _: progress.update(1))
+        with deferred_interrupt() as interrupt, \
+                bar(max_iter, "IPOPT", unit="iter", mode=None if shown else False) as progress:
+            def each_iteration(i):                       # Ctrl-C stops IPOPT at its next iteration
+                interrupt.check(i)
+                progress.update(1)
+            opti.callback(each_iteration)
             try:
                 self.value = opti.solve_limited().value
             except RuntimeError:               # IPOPT failed (infeasible, NaN, ...): the last iterate
                 self.value = opti.debug.value
-            finally:
-                if shown:
-                    opti.callback()
         status = opti.stats().get("return_status", "")
         if status in ("Invalid_Option", "Invalid_Problem_Definition"):
             raise OptimizationError(f"IPOPT refused its options ({status}): check ipopt={ipopt!r} and "
@@ -462,10 +465,6 @@ def extract(nlp: NLP, val, build_time: float) -> OptimalTrajectory:
                         max_violation=violation, n_variables=int(nlp.opti.nx), n_constraints=int(nlp.opti.ng),
                         method=ocp.transcription.describe())
     return OptimalTrajectory.from_solution(model, t=t, q=q, v=v, lam=lam, u=u, p=p, stats=stats, nlp=nlp)
-
-
-def _component_names(names: list[str], sizes: list[int]) -> list[str]:
-    return [n if s == 1 else f"{n}[{k}]" for n, s in zip(names, sizes) for k in range(s)]
 
 
 def _reference(ref, times, dim: int, name: str):

@@ -148,6 +148,16 @@ class Trajectory:
         C = m.rigid.C(m.rigid.affine(np.asarray(local, dtype=float)))
         return outputs.member_coordinates(model, member, self.q) @ np.asarray(C).T
 
+    def coordinate(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """``(values, rates)`` per step (m, m/s) of the coordinate ``name``: one of
+        ``coordinate_names`` or one as written before coordinate sharing re-based its member
+        (:meth:`~ncgen.model.model.Model.coordinate`)."""
+        if name in self.coordinate_names:
+            i = self.coordinate_names.index(name)
+            return self.q[:, i].copy(), self.v[:, i].copy()
+        s, c = self._model(f"the coordinate {name!r}").coordinate(name)
+        return self.q @ s + c, self.v @ s
+
     def joint(self, name: str) -> tuple[np.ndarray, np.ndarray]:
         """``(positions, rates)`` of joint ``name`` per step: ``(n_t,)`` each for a joint with
         one coordinate (rad or m, rad/s or m/s), ``(n_t, k)`` otherwise (see
@@ -164,10 +174,10 @@ class Trajectory:
 
     def reaction(self, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """``(force, moment, effort)`` of joint ``name`` per step, from the multipliers
-        (:func:`ncgen.runtime.reactions.joint_reactions`): force ``(n_t, dim)`` in N and moment
+        (:func:`ncgen.analysis.reactions.joint_reactions`): force ``(n_t, dim)`` in N and moment
         (N·m; ``(n_t, 3)``, or ``(n_t,)`` in 2D) on the joint's second member in world axes
         about the joint point; ``effort`` ``(n_t, ...)`` for driven or actuated joints, else None."""
-        from ncgen.runtime.reactions import joint_reactions
+        from ncgen.analysis.reactions import joint_reactions
 
         model = self._model("reaction()")
         rows = [joint_reactions(model, q, lam, v=v, t=t, u=u, p=self.p, joints=[name]).get(name)
@@ -188,6 +198,13 @@ class Trajectory:
         """``(R, p)`` of every member per step: ``R`` ``(n_t, n_members, dim, dim)`` (local →
         world; identity for points), ``p`` ``(n_t, n_members, dim)`` centres of mass."""
         return outputs.poses(self._model("poses()"), self.q)
+
+    def to_html(self, path, **options) -> Path:
+        """Write an offline interactive 3D page of this run (:func:`ncgen.viz.html.to_html`:
+        ``colors``, ``mesh_paths``, ``fps``, ``title``, ``trails``); ``?t=SECONDS`` in its
+        URL opens it paused at that time.  Returns the path."""
+        from ncgen.viz.html import to_html
+        return to_html(self, path, **options)
 
     def summary(self) -> str:
         """A few lines for people: span, integrator work, energy and constraint drift."""

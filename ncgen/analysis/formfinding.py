@@ -7,7 +7,7 @@ Topology: ``nodes`` (n × dim, a guess of the configuration), ``struts`` and ``c
 
 * **rest lengths** (``rest_lengths``, one per cable, and the cable stiffness
   ``stiffness``, N/m): the struts keep their lengths in ``nodes``; the configuration is the
-  stable static equilibrium :func:`~ncgen.runtime.statics.equilibrium` reaches from
+  stable static equilibrium :func:`~ncgen.analysis.statics.equilibrium` reaches from
   ``nodes`` (descent Newton; rigid motions are zero-stiffness directions it leaves alone).
 * **force densities** (``force_densities``: one per cable, then one per strut, N/m; cables
   positive, struts negative): the force density method.  With the incidence matrix ``C``
@@ -32,9 +32,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ncgen.errors import NcgenError
-from ncgen.runtime.modes import Modes, modes
-from ncgen.runtime.statics import Equilibrium, equilibrium
-from ncgen.runtime.tangent import classify
+from ncgen.analysis.modes import Modes, modes
+from ncgen.analysis.statics import Equilibrium, equilibrium
+from ncgen.analysis.stability import classify
 
 #: Eigenvalues of D below this times max |ρ| count as zero (force density method).
 FDM_TOL = 1e-9
@@ -92,6 +92,12 @@ def form_find(nodes, struts, cables, *, rest_lengths=None, force_densities=None,
     nodes = np.array(nodes, float)
     if nodes.ndim != 2 or nodes.shape[1] not in (2, 3):
         raise NcgenError(f"form_find: nodes: expected an n × 2 or n × 3 array, got shape {nodes.shape}")
+    for what, x in (("nodes", nodes), ("stiffness", stiffness), ("rest_lengths", rest_lengths),
+                    ("force_densities", force_densities), ("strut_mass", strut_mass), ("node_mass", node_mass)):
+        a = None if x is None else np.asarray(x, float)
+        if a is not None and not np.all(np.isfinite(a)):
+            raise NcgenError(f"form_find: {what}: expected finite numbers, found {a[~np.isfinite(a)][0]} at "
+                             f"index {tuple(np.argwhere(~np.isfinite(a))[0].tolist())}")
     struts, cables = _pairs(struts, len(nodes), "struts"), _pairs(cables, len(nodes), "cables")
     on = [i for s in struts for i in s]
     if len(set(on)) < len(on):
