@@ -48,7 +48,7 @@ def compiled_model(model, cflags=None) -> CompiledModel:
 
 def is_loaded(model) -> bool:
     """Whether this process has already compiled (or found in the cache) ``model``'s package."""
-    return bool(_built.get(model))
+    return bool(model_data(model).libraries)
 
 
 def compiled_functions(model, names, cflags=None) -> dict[str, ca.Function]:
