@@ -6,7 +6,8 @@ python block followed directly by a ```` ```text ```` block must print exactly t
 doctest-style: whitespace runs compare as one space, ``...`` matches any text (wall times,
 paths), and numbers compare with a relative tolerance (``1e-3`` unless the block's info
 string says ``text tol=0.05``) and an absolute one of ``1e-9``.  A python block that calls
-``print`` without such a text block after it is an error: every printed result on a page
+``print`` without such a text block after it is an error (except under ``if __name__ ==
+"__main__":``, which does not run here): every printed result on a page
 is one the test compares.
 """
 from __future__ import annotations
@@ -57,13 +58,19 @@ def sections(path: Path) -> list[tuple[str, list[Snippet]]]:
     return out
 
 
+def prints(s: Snippet) -> bool:
+    """Whether the snippet prints when run here (code under ``if __name__ == "__main__":``,
+    such as a process pool's, does not run in the page's namespace)."""
+    return bool(re.search(r"^\s*print\(", s.code, re.M)) and "__main__" not in s.code
+
+
 def run_section(where: str, snippets: list[Snippet], namespace: dict | None = None) -> dict:
     """Run ``snippets`` in one namespace; raise AssertionError naming the snippet on a failure
     or on printed output differing from the page."""
     namespace = {"__name__": "doc_snippet"} if namespace is None else namespace
     for s in snippets:
         here = f"{where}, line {s.line}"
-        if re.search(r"^\s*print\(", s.code, re.M) and s.expected is None:
+        if prints(s) and s.expected is None:
             raise AssertionError(f"{here}: the snippet prints, but no ```text block after it shows what")
         buffer = io.StringIO()
         try:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from doc_snippets import compare, run_section, sections
+from doc_snippets import compare, prints, run_section, sections
 
 ROOT = Path(__file__).resolve().parents[1]
 #: docs/python-guide.md runs section by section in tests/test_python_guide.py.
@@ -39,7 +39,7 @@ def test_page_runs_and_prints_what_it_says(page):
 
 def test_every_page_with_prints_shows_outputs():
     printing = [(p.name, t) for p, t, snippets in CASES for s in snippets
-                if re.search(r"^\s*print\(", s.code, re.M) and s.expected is None]
+                if prints(s) and s.expected is None]
     assert not printing, f"snippets print without a ```text block after them: {printing}"
 
 
