@@ -5,6 +5,7 @@ bodies, bars and points with joints and forces is assembled into CasADi function
 (``System.build()``), turned into C, simulated and optimised.
 """
 from ncgen import viz  # nc.viz.plot, nc.viz.animate (cheap: matplotlib loads on use)
+from ncgen import robots  # nc.robots.urdf_path("panda"): example-robot-data's URDFs
 from ncgen.assembly.kinematics import assemble, dof_report, project_velocity, solve_kinematics
 from ncgen.codegen.model_package import generate
 from ncgen.errors import NcgenError
@@ -46,5 +47,5 @@ __all__ = [
     "joint_forward_dynamics_kernel", "joint_reactions", "linearize", "modes", "open_sweep",
     "aba", "aba_derivatives", "algorithm_kernel", "crba", "rnea", "rnea_derivatives",
     "project_velocity", "simulate", "simulate_batch", "solve_kinematics", "sweep",
-    "__version__", "viz",
+    "__version__", "robots", "viz",
 ]

@@ -26,6 +26,8 @@ pytestmark = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc
     ("kernel.py --looped", ["=== looped vs straight-line C: chain of N = 3 bars", "max |difference| = 0.0e+00",
                             re.compile(r"loops in the looped C: [1-9]"),
                             "RATIO looped -O2 / flat -O2, jacobian", "RATIO VM / looped -O2, residual"]),
+    ("first_run.py", ["=== first ncgen simulate, cold cache", "vm backend", "=== model -> loaded library",
+                      "monotonic in N"]),
     ("build_scaling.py", ["=== ncgen: chain of N bars", "KanesMethod", "EXTRAPOLATED"]),
     ("long_run.py", ["=== heavy top", "=== chain of 5 bars", "RATIO ncgen / MuJoCo RK4"]),
     ("contact.py", ["=== chain of N = 3 bars falling on the ground", "RATIO ncgen / MuJoCo wall time",

@@ -4,7 +4,7 @@ Every ``import``/``from … import`` of an ``ncgen`` module is an edge, wherever
 (module level or inside a function).  The layer order, lowest first (also in
 docs/architecture.md)::
 
-    base (errors, validation, reproducible, files, interrupts, version)
+    base (errors, validation, reproducible, files, interrupts, version, robots, progress)
     ← symbolic ← model ← rigid_motion ← assembly ← codegen ← runtime ← analysis ← viz ← optim ← cli
     ← ncgen (the package root)
 
@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parents[1] / "ncgen"
 
 LAYERS = ["base", "symbolic", "model", "rigid_motion", "assembly", "codegen", "runtime", "analysis", "viz", "optim",
           "cli", "root"]
-BASE = {"errors", "validation", "reproducible", "files", "interrupts", "version"}
+BASE = {"errors", "validation", "reproducible", "files", "interrupts", "version", "robots", "progress"}
 #: (importing module, imported module): the documented exceptions.
 EXCEPTIONS = {("ncgen.model.system", "ncgen.assembly.build"),
               ("ncgen.runtime.trajectory", "ncgen.analysis.reactions"),
