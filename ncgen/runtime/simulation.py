@@ -93,8 +93,8 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
     ``options`` for this call.  The run's data and the options:
 
     * ``method``: ``"auto"`` (default): ``"joint"`` for a tree without contacts when a C
-      compiler is available (:func:`~ncgen.runtime.joint_simulation.joint_space_applies`),
-      else ``"idas"``; ``info["method"]`` says which ran (``info["auto"]`` why not joint).
+      compiler is available (:func:`~ncgen.runtime.joint_simulation.joint_space_applies`)
+      and ``backend`` is not ``"vm"``, else ``"idas"``; ``info["method"]`` says which ran (``info["auto"]`` why not joint).
       ``"joint"``: the joint coordinates ``q_j``, ``v_j`` integrated by a compiled C loop
       around the joint-space forward dynamics (:mod:`ncgen.runtime.joint_simulation`):
       ``integrator="dopri5"`` (default; Dormand–Prince 5(4), error control ``rtol``/``atol``
@@ -199,8 +199,8 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
     with sticky_interrupt():               # a Ctrl-C that CasADi swallows is raised again between chunks
         raise_if_interrupted()
         method, why_not = opts.method, None
-        if method == "auto":
-            why_not = joint_space_applies(model)
+        if method == "auto":               # the joint loop is compiled: backend="vm" asks for no compiling
+            why_not = "backend='vm' compiles nothing" if opts.backend == "vm" else joint_space_applies(model)
             method = "joint" if why_not is None else "idas"
         if method == "joint":
             return simulate_joint(model, t, U, opts.hold, pv, q, v, integrator=opts.integrator,
