@@ -5,7 +5,7 @@ Every ``import``/``from … import`` of an ``ncgen`` module is an edge, wherever
 docs/architecture.md)::
 
     base (errors, validation, reproducible, files, version)
-    ← symbolic ← model ← assembly ← codegen ← rigid_motion ← runtime ← viz ← optim ← cli ← ncgen (the package root)
+    ← symbolic ← model ← assembly ← codegen ← rigid_motion ← runtime ← viz ← optim ← control ← cli ← ncgen (the package root)
 
 A module may import modules of its own layer and of lower ones.  The one exception is
 ``System.build()`` (model), a convenience that calls :func:`ncgen.assembly.build.build_model`.
@@ -20,7 +20,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1] / "ncgen"
 
 LAYERS = ["base", "symbolic", "model", "assembly", "codegen", "rigid_motion", "runtime", "viz", "optim",
-          "cli", "root"]
+          "control", "cli", "root"]
 BASE = {"errors", "validation", "reproducible", "files", "version"}
 #: (importing module, imported module): the documented exceptions.
 EXCEPTIONS = {("ncgen.model.system", "ncgen.assembly.build")}

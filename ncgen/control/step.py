@@ -138,7 +138,7 @@ class StepFunction:
         if dX.shape != (N, self.nx) or not np.all(np.isfinite(dX)):
             raise NcgenError(f"dX: expected finite ∂J/∂X of shape ({N}, {self.nx}), got shape {dX.shape}")
         self.rollout(x0, U, p, t0)                     # refuses a rollout that did not converge
-        dx0, dU, dp = self._rollout_lib(N)["rollout_adjoint"](x0, U.T.ravel(order="F"), p, t0, dX.T.ravel())
+        dx0, dU, dp = self._rollout_lib(N)["rollout_adjoint"](x0, U.T.ravel(order="F"), p, t0, dX.ravel())
         out = (dx0.copy(), dU.reshape(self.nu, N, order="F").T.copy())
         return out + (dp.copy(),) if parameters else out
 
