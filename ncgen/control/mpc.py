@@ -1,0 +1,173 @@
+"""``nc.MPC(ocp)``: a receding-horizon controller for an ``OptimalControl`` problem, one
+compiled C function per control step.
+
+Each control step runs a fixed number of sequential-quadratic-programming iterations
+(``iterations=1``: the real-time iteration of Diehl et al., 2005) on the problem of
+:mod:`ncgen.control.mpc_problem`, from the previous step's solution shifted by one interval
+(warm start).  One iteration, with the guess ``(X̄, Ū)`` (states at the ``N + 1`` nodes,
+inputs on the ``N`` intervals):
+
+1. the step and its exact Jacobians at every node, ``x̄⁺_k, A_k, B_k``
+   (:mod:`ncgen.control.discrete`, implicit function theorem);
+2. the QP in ``(δX, δU)``: minimise ``½ δᵀ H δ + gᵀ δ`` (``g``, ``H``: gradient and Hessian of
+   the cost at the guess — a Gauss–Newton Hessian: the dynamics' curvature is left out, which
+   is exact for the quadratic costs of ``OptimalControl``), subject to
+   ``δx_0 = x − x̄_0``, ``δx_{k+1} = A_k δx_k + B_k δu_k + x̄⁺_k − x̄_{k+1}`` and the OCP's bounds
+   moved by the guess; solved by CasADi's active-set ``qrqp`` (sparse QR of the KKT system);
+3. ``X̄ ← X̄ + δX``, ``Ū ← Ū + δU``.
+
+The states are natural coordinates: each ``A_k`` has rank ``2 dof`` (it maps onto the
+tangent space at ``x̄⁺_k``); the equality constraints fix every ``δx_k`` from ``δx_0`` and the
+inputs, so the QP is well posed without a minimal parametrisation.
+
+The whole control step — iterations, QP, shift — is the CasADi function ``mpc_step``
+``(x, t, X̄, Ū) -> (u, X̄', Ū')`` (``X̄'``, ``Ū'``: the solution shifted by one interval, the
+last node and input repeated), generated as C.  ``mpc(x, t)`` calls that C through
+:class:`ncgen.codegen.direct.DirectFunction`; :func:`ncgen.control.export.export_mpc` writes
+the same function into a standalone package: Python and C compute the same numbers.
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ncgen.control.discrete import step_functions
+from ncgen.control.mpc_problem import mpc_problem
+from ncgen.errors import OptimizationError
+
+SOLVERS = ("sqp",)
+#: Added to the diagonal of the QP Hessian (keeps it positive definite on the inputs).
+REGULARIZATION = 1e-8
+
+
+def mpc_function(model, problem, *, iterations: int = 1, regularization: float = REGULARIZATION,
+                 qp_max_iter: int = 100) -> ca.Function:
+    """The CasADi function ``mpc_step: (x, t, X, U) -> (u, X', U')`` (see the module docstring)."""
+    h, N, p = problem.h, problem.N, problem.p
+    nx, nu = 2 * model.nq, model.nu
+    jac = step_functions(model, h)["step_jac"].map(N)
+
+    # cost, its gradient and (Gauss–Newton) Hessian in y = [vec X; vec U] (SX)
+    Xs, Us = ca.SX.sym("X", nx, N + 1), ca.SX.sym("U", nu, N)
+    J = sum(problem.stage(Xs[:, k], Us[:, k]) for k in range(N)) + problem.terminal(Xs[:, N])
+    y = ca.vertcat(ca.vec(Xs), ca.vec(Us))
+    H_sx, g_sx = ca.hessian(J, y)
+    H_sx = H_sx + regularization * ca.SX.eye(y.numel())
+    cost = ca.Function("mpc_cost", [Xs, Us], [H_sx, g_sx])
+
+    nX, nU = nx * (N + 1), nu * N
+    # the condensed QP's general rows: the bounded state components at nodes 1..N
+    lo_x, hi_x = problem.x_bounds
+    bounded = np.flatnonzero(np.isfinite(lo_x) | np.isfinite(hi_x))
+    rows = [nx * k + i for k in range(1, N + 1) for i in bounded]
+    H_sp = ca.Sparsity.dense(nU, nU)
+    A_sp = ca.Sparsity.dense(len(rows), nU)
+    qp = ca.conic("mpc_qp", "qrqp", {"h": H_sp, "a": A_sp},
+                  {"print_iter": False, "print_header": False, "print_info": False, "max_iter": qp_max_iter,
+                   "error_on_fail": False})
+
+    x, t = ca.MX.sym("x", nx), ca.MX.sym("t")
+    X, U = ca.MX.sym("X", nx, N + 1), ca.MX.sym("U", nu, N)
+    lo_u, hi_u = (ca.DM(b) for b in problem.u_bounds)
+    times = t + h * ca.DM(np.arange(N)).T
+    Xg, Ug = X, U
+    for _ in range(iterations):
+        x1, A, B, _, _ = jac(Xg[:, :N], Ug, ca.repmat(ca.DM(p), 1, N), times)
+        H, g = cost(Xg, Ug)
+        S, s = condense(A, B, x - Xg[:, 0], x1 - Xg[:, 1:], N)
+        H_XX, H_XU, H_UU = H[:nX, :nX], H[:nX, nX:], H[nX:, nX:]
+        HS = ca.mtimes(H_XX, S) + H_XU
+        Hc = ca.mtimes(S.T, HS) + ca.mtimes(H_XU.T, S) + H_UU
+        gc = ca.mtimes(S.T, ca.mtimes(H_XX, s) + g[:nX]) + ca.mtimes(H_XU.T, s) + g[nX:]
+        Xv = ca.vec(Xg)
+        Xs = Xv + s
+        lba = ca.DM(np.tile(lo_x[bounded], N)) - Xs[rows]
+        uba = ca.DM(np.tile(hi_x[bounded], N)) - Xs[rows]
+        lbx = ca.vec(ca.repmat(lo_u, 1, N) - Ug)
+        ubx = ca.vec(ca.repmat(hi_u, 1, N) - Ug)
+        dU = qp(h=0.5 * (Hc + Hc.T), g=gc, a=S[rows, :], lba=lba, uba=uba, lbx=lbx, ubx=ubx)["x"]
+        Xg = ca.reshape(Xs + ca.mtimes(S, dU), nx, N + 1)
+        Ug = Ug + ca.reshape(dU, nu, N)
+    X_shift = ca.horzcat(Xg[:, 1:], Xg[:, N])
+    U_shift = ca.horzcat(Ug[:, 1:], Ug[:, N - 1])
+    return ca.Function("mpc_step", [x, t, X, U], [Ug[:, 0], X_shift, U_shift],
+                       ["x", "t", "X_guess", "U_guess"], ["u", "X_next", "U_next"])
+
+
+def condense(A, B, d0, defects, N: int):
+    """``(S, s)`` with ``vec δX = S vec δU + s`` from ``δx_0 = d0`` and
+    ``δx_{k+1} = A_k δx_k + B_k δu_k + defects_k`` (``A``: nx × nx·N, ``B``: nx × nu·N)."""
+    nx, nu = A.size1(), B.size2() // N
+    S_rows, s_rows = [ca.MX(nx, nu * N)], [d0]
+    for k in range(N):
+        A_k, B_k = A[:, nx * k:nx * (k + 1)], B[:, nu * k:nu * (k + 1)]
+        pad = [ca.MX(nx, nu * k), B_k, ca.MX(nx, nu * (N - k - 1))]
+        S_rows.append(ca.mtimes(A_k, S_rows[-1]) + ca.horzcat(*pad))
+        s_rows.append(ca.mtimes(A_k, s_rows[-1]) + defects[:, k])
+    return ca.vertcat(*S_rows), ca.vertcat(*s_rows)
+
+
+class MPC:
+    """A receding-horizon controller for ``ocp`` (an :class:`~ncgen.optim.problem.OptimalControl`):
+    ``u = mpc(x, t)``.
+
+    ``solver``: ``"sqp"`` (Gauss–Newton SQP with CasADi's ``qrqp``, generated C);
+    ``iterations``: SQP iterations per control step (1: real-time iteration);
+    ``terminal_weight``: weight ``W`` of the OCP's final conditions, soft in MPC
+    (:mod:`ncgen.control.mpc_problem`).  The horizon is the OCP's: ``N`` intervals of
+    ``h = t_final / N`` seconds, and ``mpc`` is meant to be called every ``h`` seconds.
+    ``mpc.reset(x, iterations=...)`` (also done by the first call) sets the guess to ``x``
+    held with zero inputs (clipped into their bounds) and iterates on it."""
+
+    def __init__(self, ocp, solver: str = "sqp", *, iterations: int = 1, terminal_weight: float = 1e3,
+                 regularization: float = REGULARIZATION, qp_max_iter: int = 100):
+        if solver not in SOLVERS:
+            hint = (" (Fatrop: not wired up yet; see docs/control.md)" if solver == "fatrop" else "")
+            raise OptimizationError(f"MPC: solver: expected one of {', '.join(SOLVERS)}, got {solver!r}{hint}")
+        if not isinstance(iterations, int) or iterations < 1:
+            raise OptimizationError(f"MPC: iterations: expected a positive integer, got {iterations!r}")
+        self.ocp, self.model = ocp, ocp.model
+        self.problem = mpc_problem(ocp, terminal_weight)
+        self.h, self.N = self.problem.h, self.problem.N
+        self.nx, self.nu = 2 * self.model.nq, self.model.nu
+        self.iterations = iterations
+        self.function = mpc_function(self.model, self.problem, iterations=iterations,
+                                     regularization=regularization, qp_max_iter=qp_max_iter)
+        from ncgen.control.step import _compile
+        self._fn = _compile(f"{self.model.name}_mpc", [self.function])["mpc_step"]
+        self.X = self.U = None
+
+    def __repr__(self) -> str:
+        return (f"<MPC of {self.model.name!r}: N={self.N}, h={self.h} s, {self.iterations} SQP "
+                f"iteration(s) per step, qrqp>")
+
+    def initial_guess(self, x) -> tuple[np.ndarray, np.ndarray]:
+        """``(X, U)``: ``x`` at every node, inputs zero clipped into their bounds."""
+        u0 = np.clip(np.zeros(self.nu), *self.problem.u_bounds)
+        return np.tile(x, (self.N + 1, 1)), np.tile(u0, (self.N, 1))
+
+    def reset(self, x, t: float | None = None, iterations: int = 0) -> None:
+        """Start again from the guess of :meth:`initial_guess`, then run ``iterations``
+        control steps at ``x`` without moving on (to converge the first solution)."""
+        from ncgen.control.step import _vector
+        x = _vector(x, self.nx, "x", "the state [q; v]")
+        self.X, self.U = self.initial_guess(x)
+        t = self.model.t0 if t is None else float(t)
+        for _ in range(iterations):
+            _, X, U = self._fn(x, t, self.X.ravel(), self.U.ravel())
+            self.X = np.vstack([self.X[:1], X.reshape(self.N + 1, self.nx)[:-1]])
+            self.U = np.vstack([self.U[:1], U.reshape(self.N, self.nu)[:-1]])
+
+    def __call__(self, x, t: float | None = None) -> np.ndarray:
+        """The input to apply now, from the measured state ``x`` at time ``t``."""
+        from ncgen.control.step import _vector
+        x = _vector(x, self.nx, "x", "the state [q; v]")
+        if self.X is None:
+            self.reset(x)
+        t = self.model.t0 if t is None else float(t)
+        u, X, U = self._fn(x, t, self.X.ravel(), self.U.ravel())
+        if not np.all(np.isfinite(u)):
+            raise OptimizationError(f"MPC of {self.model.name!r}: the control step returned {u.tolist()} "
+                                    "(a step of the model failed along the horizon); reset() the guess")
+        self.X, self.U = X.reshape(self.N + 1, self.nx).copy(), U.reshape(self.N, self.nu).copy()
+        return u.copy()
