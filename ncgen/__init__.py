@@ -7,7 +7,7 @@ bodies, bars and points with joints and forces is assembled into CasADi function
 from ncgen import viz  # nc.viz.plot, nc.viz.animate (cheap: matplotlib loads on use)
 from ncgen.assembly.kinematics import assemble, dof_report, project_velocity, solve_kinematics
 from ncgen.codegen.model_package import generate
-from ncgen.control import StepDidNotConverge, StepFunction, ilqr, step_function
+from ncgen.control import MPC, StepDidNotConverge, StepFunction, export_mpc, ilqr, step_function
 from ncgen.errors import NcgenError
 from ncgen.model.contacts import Contact, SpherePlane, SphereSphere
 from ncgen.model.forces import Force, GeneralizedForce, PointForce, Spring, Torque, TorsionalSpring
@@ -33,10 +33,10 @@ from ncgen.version import __version__
 
 __all__ = [
     "Contact", "CoordinateDriver", "Cylindrical", "Distance", "Equilibrium", "Fixed", "Force", "Free", "GeneralizedForce",
-    "Joint", "JointReaction", "LinearModel", "Mimic", "Model", "ModelError", "Modes", "NcgenError", "OptimalControl",
+    "Joint", "JointReaction", "LinearModel", "MPC", "Mimic", "Model", "ModelError", "Modes", "NcgenError", "OptimalControl",
     "OptimalTrajectory", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic", "Revolute", "SpherePlane", "SphereSphere", "Spherical",
     "Spring", "StepDidNotConverge", "StepFunction", "System", "Tensegrity", "Torque", "TorsionalSpring", "Trajectory", "Universal",
-    "assemble", "coordinate_type", "dof_report", "equilibrium", "form_find", "forward_dynamics",
+    "assemble", "coordinate_type", "dof_report", "equilibrium", "export_mpc", "form_find", "forward_dynamics",
     "forward_dynamics_kernel", "generate", "ilqr", "inverse_dynamics", "joint_forward_dynamics",
     "joint_forward_dynamics_kernel", "joint_reactions", "linearize", "modes",
     "project_velocity", "simulate", "solve_kinematics", "step_function",

@@ -42,7 +42,8 @@ REGULARIZATION = 1e-8
 
 def mpc_function(model, problem, *, iterations: int = 1, regularization: float = REGULARIZATION,
                  qp_max_iter: int = 100) -> ca.Function:
-    """The CasADi function ``mpc_step: (x, t, X, U) -> (u, X', U')`` (see the module docstring)."""
+    """The CasADi function ``mpc_solve: (x, t, X̄, Ū) -> (u, X, U)``: ``iterations`` SQP
+    iterations from the guess; ``u = U[:, 0]`` (see the module docstring)."""
     h, N, p = problem.h, problem.N, problem.p
     nx, nu = 2 * model.nq, model.nu
     jac = step_functions(model, h)["step_jac"].map(N)
@@ -88,10 +89,8 @@ def mpc_function(model, problem, *, iterations: int = 1, regularization: float =
         dU = qp(h=0.5 * (Hc + Hc.T), g=gc, a=S[rows, :], lba=lba, uba=uba, lbx=lbx, ubx=ubx)["x"]
         Xg = ca.reshape(Xs + ca.mtimes(S, dU), nx, N + 1)
         Ug = Ug + ca.reshape(dU, nu, N)
-    X_shift = ca.horzcat(Xg[:, 1:], Xg[:, N])
-    U_shift = ca.horzcat(Ug[:, 1:], Ug[:, N - 1])
-    return ca.Function("mpc_step", [x, t, X, U], [Ug[:, 0], X_shift, U_shift],
-                       ["x", "t", "X_guess", "U_guess"], ["u", "X_next", "U_next"])
+    return ca.Function("mpc_solve", [x, t, X, U], [Ug[:, 0], Xg, Ug],
+                       ["x", "t", "X_guess", "U_guess"], ["u", "X_sol", "U_sol"])
 
 
 def condense(A, B, d0, defects, N: int):
@@ -134,8 +133,9 @@ class MPC:
         self.function = mpc_function(self.model, self.problem, iterations=iterations,
                                      regularization=regularization, qp_max_iter=qp_max_iter)
         from ncgen.control.step import _compile
-        self._fn = _compile(f"{self.model.name}_mpc", [self.function])["mpc_step"]
-        self.X = self.U = None
+        self._fn = _compile(f"{self.model.name}_mpc", [self.function])["mpc_solve"]
+        self.u_rest = np.clip(np.zeros(self.nu), *self.problem.u_bounds)
+        self.X = self.U = self.solution = None
 
     def __repr__(self) -> str:
         return (f"<MPC of {self.model.name!r}: N={self.N}, h={self.h} s, {self.iterations} SQP "
@@ -143,23 +143,23 @@ class MPC:
 
     def initial_guess(self, x) -> tuple[np.ndarray, np.ndarray]:
         """``(X, U)``: ``x`` at every node, inputs zero clipped into their bounds."""
-        u0 = np.clip(np.zeros(self.nu), *self.problem.u_bounds)
-        return np.tile(x, (self.N + 1, 1)), np.tile(u0, (self.N, 1))
+        return np.tile(x, (self.N + 1, 1)), np.tile(self.u_rest, (self.N, 1))
 
     def reset(self, x, t: float | None = None, iterations: int = 0) -> None:
         """Start again from the guess of :meth:`initial_guess`, then run ``iterations``
-        control steps at ``x`` without moving on (to converge the first solution)."""
+        solves at ``x`` without shifting (to converge the first solution)."""
         from ncgen.control.step import _vector
         x = _vector(x, self.nx, "x", "the state [q; v]")
         self.X, self.U = self.initial_guess(x)
         t = self.model.t0 if t is None else float(t)
         for _ in range(iterations):
             _, X, U = self._fn(x, t, self.X.ravel(), self.U.ravel())
-            self.X = np.vstack([self.X[:1], X.reshape(self.N + 1, self.nx)[:-1]])
-            self.U = np.vstack([self.U[:1], U.reshape(self.N, self.nu)[:-1]])
+            self.X, self.U = X.reshape(self.N + 1, self.nx).copy(), U.reshape(self.N, self.nu).copy()
 
     def __call__(self, x, t: float | None = None) -> np.ndarray:
-        """The input to apply now, from the measured state ``x`` at time ``t``."""
+        """The input to apply now, from the measured state ``x`` at time ``t``; the solution
+        (``mpc.solution``: states and inputs along the horizon), shifted by one interval,
+        is the next call's guess."""
         from ncgen.control.step import _vector
         x = _vector(x, self.nx, "x", "the state [q; v]")
         if self.X is None:
@@ -169,5 +169,8 @@ class MPC:
         if not np.all(np.isfinite(u)):
             raise OptimizationError(f"MPC of {self.model.name!r}: the control step returned {u.tolist()} "
                                     "(a step of the model failed along the horizon); reset() the guess")
-        self.X, self.U = X.reshape(self.N + 1, self.nx).copy(), U.reshape(self.N, self.nu).copy()
+        X, U = X.reshape(self.N + 1, self.nx).copy(), U.reshape(self.N, self.nu).copy()
+        self.solution = (X, U)
+        self.X = np.vstack([X[1:], X[-1:]])
+        self.U = np.vstack([U[1:], U[-1:]])
         return u.copy()
