@@ -20,7 +20,7 @@ from ncgen.errors import NcgenError
 from ncgen.version import __version__
 
 #: The subcommand modules, in the order ``ncgen --help`` lists them.
-SUBCOMMAND_MODULES = ("derive", "generate", "check", "simulate", "optimize", "statics", "demo")
+SUBCOMMAND_MODULES = ("derive", "generate", "check", "simulate", "optimize", "mpc", "statics", "demo")
 
 __all__ = ["SUBCOMMANDS", "build_parser", "load_model", "load_system", "main", "subcommand", "write_output"]
 
