@@ -4,8 +4,9 @@ problem as a standalone C package that builds with ``make`` and runs without Pyt
 The package (written by :func:`ncgen.codegen.package.write_package`, so it is reproducible,
 written in a temporary sibling and renamed into place, with a manifest) holds:
 
-* ``<name>_mpc_solve``: the control step of :mod:`ncgen.control.mpc` (SQP iterations on the
-  condensed QP, CasADi's ``qrqp``), generated C, self-contained;
+* ``<name>_mpc_qp_data``, ``<name>_mpc_qp``, ``<name>_mpc_update``: one SQP iteration of
+  :mod:`ncgen.control.mpc` (the condensed QP, CasADi's ``qrqp``, the new iterate), generated
+  C, self-contained;
 * ``<name>_plant_step``: one RATTLE step of ``h / substeps`` (:mod:`ncgen.control.discrete`),
   the plant of the demo;
 * ``<name>_mpc.h``/``.c``: the API ``<name>_mpc_init``, ``<name>_mpc_step(m, x, t, u_out)``,
@@ -26,7 +27,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.control.discrete import step_functions
-from ncgen.control.mpc import REGULARIZATION, mpc_function
+from ncgen.control.mpc import REGULARIZATION, mpc_functions
 from ncgen.control.mpc_problem import mpc_problem
 from ncgen.control.step import RESIDUAL_TOL
 from ncgen.errors import NcgenError
@@ -87,14 +88,18 @@ def export_mpc(ocp, path, *, name: str | None = None, iterations: int = 1, termi
     x0 = np.concatenate([model.q0, model.v0]) if x0 is None else np.asarray(x0, dtype=float).reshape(-1)
     if x0.size != nx or not np.all(np.isfinite(x0)):
         raise NcgenError(f"export_mpc: x0: expected {nx} finite numbers (the state [q; v]), got {x0.size}")
-    solve = mpc_function(model, problem, iterations=iterations, regularization=REGULARIZATION)
+    fns = mpc_functions(model, problem, regularization=REGULARIZATION)
     plant = plant_function(model, problem.h / substeps)
+    data, qp, update = fns
     u_rest = np.clip(np.zeros(nu), *problem.u_bounds)
     pl = pulses(disturbance, nu)
     context = {
         "model_name": model.name, "N": problem.N, "h": f"{problem.h:g}", "h_c": _c(problem.h),
         "iterations": iterations, "nx": nx, "nu": nu, "np": model.np, "substeps": substeps,
-        "sz_arg": solve.sz_arg(), "sz_res": solve.sz_res(), "sz_iw": solve.sz_iw(), "sz_w": solve.sz_w(),
+        "sz_arg": max(f.sz_arg() for f in fns), "sz_res": max(f.sz_res() for f in fns),
+        "sz_iw": max(f.sz_iw() for f in fns), "sz_w": max(f.sz_w() for f in fns),
+        "nnz": {f"{f.name()}_{io}{i}": (f.nnz_in(i) if io == "in" else f.nnz_out(i))
+                for f in fns for io in ("in", "out") for i in range(f.n_in() if io == "in" else f.n_out())},
         "plant_sz_arg": plant.sz_arg(), "plant_sz_res": plant.sz_res(), "plant_sz_iw": plant.sz_iw(),
         "plant_sz_w": plant.sz_w(), "plant_tol": _c(plant_tolerance(model)),
         "u_rest": ", ".join(_c(v) for v in u_rest) or "0", "params": ", ".join(_c(v) for v in problem.p) or "0",
@@ -107,7 +112,7 @@ def export_mpc(ocp, path, *, name: str | None = None, iterations: int = 1, termi
     extra = [ExtraSource("mpc/mpc.h.j2", f"{name}_mpc.h", context),
              ExtraSource("mpc/mpc.c.j2", f"{name}_mpc.c", context),
              ExtraSource("mpc/demo.c.j2", "demo.c", context, program=True)]
-    return write_package(name, [solve, plant], Path(path), extra_sources=extra, reroll_instructions=None)
+    return write_package(name, [data, qp, update, plant], Path(path), extra_sources=extra, reroll_instructions=None)
 
 
 def plant_tolerance(model) -> float:

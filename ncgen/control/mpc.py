@@ -40,10 +40,16 @@ SOLVERS = ("sqp",)
 REGULARIZATION = 1e-8
 
 
-def mpc_function(model, problem, *, iterations: int = 1, regularization: float = REGULARIZATION,
-                 qp_max_iter: int = 100) -> ca.Function:
-    """The CasADi function ``mpc_solve: (x, t, X̄, Ū) -> (u, X, U)``: ``iterations`` SQP
-    iterations from the guess; ``u = U[:, 0]`` (see the module docstring)."""
+def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
+                  qp_max_iter: int = 100) -> list[ca.Function]:
+    """The three CasADi functions of one SQP iteration (see the module docstring):
+
+    * ``mpc_qp_data: (x, t, X̄, Ū) -> (H, g, A, lba, uba, lbx, ubx, Xs, S)``: the condensed QP
+      in ``δU`` (``vec δX = S δU + (Xs − vec X̄)``);
+    * ``mpc_qp``: CasADi's ``qrqp`` on it (returns its last iterate also when it reports a
+      failure: the caller decides);
+    * ``mpc_update: (Xs, S, Ū, δU) -> (X, U)``: the new iterate.
+    """
     h, N, p = problem.h, problem.N, problem.p
     nx, nu = 2 * model.nq, model.nu
     jac = step_functions(model, h)["step_jac"].map(N)
@@ -55,15 +61,12 @@ def mpc_function(model, problem, *, iterations: int = 1, regularization: float =
     H_sx, g_sx = ca.hessian(J, y)
     H_sx = H_sx + regularization * ca.SX.eye(y.numel())
     cost = ca.Function("mpc_cost", [Xs, Us], [H_sx, g_sx])
-
     nX, nU = nx * (N + 1), nu * N
     # the condensed QP's general rows: the bounded state components at nodes 1..N
     lo_x, hi_x = problem.x_bounds
     bounded = np.flatnonzero(np.isfinite(lo_x) | np.isfinite(hi_x))
     rows = [nx * k + i for k in range(1, N + 1) for i in bounded]
-    H_sp = ca.Sparsity.dense(nU, nU)
-    A_sp = ca.Sparsity.dense(len(rows), nU)
-    qp = ca.conic("mpc_qp", "qrqp", {"h": H_sp, "a": A_sp},
+    qp = ca.conic("mpc_qp", "qrqp", {"h": ca.Sparsity.dense(nU, nU), "a": ca.Sparsity.dense(len(rows), nU)},
                   {"print_iter": False, "print_header": False, "print_info": False, "max_iter": qp_max_iter,
                    "error_on_fail": False})
 
@@ -71,26 +74,25 @@ def mpc_function(model, problem, *, iterations: int = 1, regularization: float =
     X, U = ca.MX.sym("X", nx, N + 1), ca.MX.sym("U", nu, N)
     lo_u, hi_u = (ca.DM(b) for b in problem.u_bounds)
     times = t + h * ca.DM(np.arange(N)).T
-    Xg, Ug = X, U
-    for _ in range(iterations):
-        x1, A, B, _, _ = jac(Xg[:, :N], Ug, ca.repmat(ca.DM(p), 1, N), times)
-        H, g = cost(Xg, Ug)
-        S, s = condense(A, B, x - Xg[:, 0], x1 - Xg[:, 1:], N)
-        H_XX, H_XU, H_UU = H[:nX, :nX], H[:nX, nX:], H[nX:, nX:]
-        HS = ca.mtimes(H_XX, S) + H_XU
-        Hc = ca.mtimes(S.T, HS) + ca.mtimes(H_XU.T, S) + H_UU
-        gc = ca.mtimes(S.T, ca.mtimes(H_XX, s) + g[:nX]) + ca.mtimes(H_XU.T, s) + g[nX:]
-        Xv = ca.vec(Xg)
-        Xs = Xv + s
-        lba = ca.DM(np.tile(lo_x[bounded], N)) - Xs[rows]
-        uba = ca.DM(np.tile(hi_x[bounded], N)) - Xs[rows]
-        lbx = ca.vec(ca.repmat(lo_u, 1, N) - Ug)
-        ubx = ca.vec(ca.repmat(hi_u, 1, N) - Ug)
-        dU = qp(h=0.5 * (Hc + Hc.T), g=gc, a=S[rows, :], lba=lba, uba=uba, lbx=lbx, ubx=ubx)["x"]
-        Xg = ca.reshape(Xs + ca.mtimes(S, dU), nx, N + 1)
-        Ug = Ug + ca.reshape(dU, nu, N)
-    return ca.Function("mpc_solve", [x, t, X, U], [Ug[:, 0], Xg, Ug],
-                       ["x", "t", "X_guess", "U_guess"], ["u", "X_sol", "U_sol"])
+    x1, A, B, _, _ = jac(X[:, :N], U, ca.repmat(ca.DM(p), 1, N), times)
+    H, g = cost(X, U)
+    S, s = condense(A, B, x - X[:, 0], x1 - X[:, 1:], N)
+    H_XX, H_XU, H_UU = H[:nX, :nX], H[:nX, nX:], H[nX:, nX:]
+    Hc = ca.mtimes(S.T, ca.mtimes(H_XX, S) + H_XU) + ca.mtimes(H_XU.T, S) + H_UU
+    gc = ca.mtimes(S.T, ca.mtimes(H_XX, s) + g[:nX]) + ca.mtimes(H_XU.T, s) + g[nX:]
+    Xn = ca.vec(X) + s
+    data = ca.Function(
+        "mpc_qp_data", [x, t, X, U],
+        [ca.densify(e) for e in (0.5 * (Hc + Hc.T), gc, S[rows, :], ca.DM(np.tile(lo_x[bounded], N)) - Xn[rows],
+                                 ca.DM(np.tile(hi_x[bounded], N)) - Xn[rows], ca.vec(ca.repmat(lo_u, 1, N) - U),
+                                 ca.vec(ca.repmat(hi_u, 1, N) - U), Xn, S)],
+        ["x", "t", "X_guess", "U_guess"], ["H", "g", "A", "lba", "uba", "lbx", "ubx", "Xs", "S"])
+    Xs_, S_, U_, dU = ca.MX.sym("Xs", nX), ca.MX.sym("S", nX, nU), ca.MX.sym("U", nu, N), ca.MX.sym("dU", nU)
+    update = ca.Function("mpc_update", [Xs_, S_, U_, dU],
+                         [ca.densify(ca.reshape(Xs_ + ca.mtimes(S_, dU), nx, N + 1)),
+                          ca.densify(U_ + ca.reshape(dU, nu, N))],
+                         ["Xs", "S", "U_guess", "dU"], ["X_sol", "U_sol"])
+    return [data, qp, update]
 
 
 def condense(A, B, d0, defects, N: int):
@@ -130,16 +132,32 @@ class MPC:
         self.h, self.N = self.problem.h, self.problem.N
         self.nx, self.nu = 2 * self.model.nq, self.model.nu
         self.iterations = iterations
-        self.function = mpc_function(self.model, self.problem, iterations=iterations,
-                                     regularization=regularization, qp_max_iter=qp_max_iter)
+        self.functions = mpc_functions(self.model, self.problem, regularization=regularization,
+                                       qp_max_iter=qp_max_iter)
         from ncgen.control.step import _compile
-        self._fn = _compile(f"{self.model.name}_mpc", [self.function])["mpc_solve"]
+        lib = _compile(f"{self.model.name}_mpc", self.functions)
+        self._data, self._qp, self._update = (lib[f.name()] for f in self.functions)
+        #: qrqp's status of each QP of the last control step (0: converged).
+        self.qp_status: list[int] = []
         self.u_rest = np.clip(np.zeros(self.nu), *self.problem.u_bounds)
         self.X = self.U = self.solution = None
 
     def __repr__(self) -> str:
         return (f"<MPC of {self.model.name!r}: N={self.N}, h={self.h} s, {self.iterations} SQP "
                 f"iteration(s) per step, qrqp>")
+
+    def _solve(self, x, t: float, X: np.ndarray, U: np.ndarray):
+        """``iterations`` SQP iterations from the guess ``(X, U)``: ``(X, U)`` after them.  A QP
+        that qrqp reports as failed (it stalls on degenerate QPs whose solution is the
+        starting point, at convergence) still gives its last iterate, as in the C package."""
+        self.qp_status = []
+        for _ in range(self.iterations):
+            H, g, A, lba, uba, lbx, ubx, Xs, S = (o.copy() for o in self._data(x, t, X.ravel(), U.ravel()))
+            self.qp_status.append(self._qp.status_call(H, g, A, lba, uba, lbx, ubx, 0.0, 0.0, 0.0))
+            dU = self._qp.outputs[0].copy()
+            Xn, Un = self._update(Xs, S, U.ravel(), dU)
+            X, U = Xn.reshape(self.N + 1, self.nx).copy(), Un.reshape(self.N, self.nu).copy()
+        return X, U
 
     def initial_guess(self, x) -> tuple[np.ndarray, np.ndarray]:
         """``(X, U)``: ``x`` at every node, inputs zero clipped into their bounds."""
@@ -153,8 +171,7 @@ class MPC:
         self.X, self.U = self.initial_guess(x)
         t = self.model.t0 if t is None else float(t)
         for _ in range(iterations):
-            _, X, U = self._fn(x, t, self.X.ravel(), self.U.ravel())
-            self.X, self.U = X.reshape(self.N + 1, self.nx).copy(), U.reshape(self.N, self.nu).copy()
+            self.X, self.U = self._solve(x, t, self.X, self.U)
 
     def __call__(self, x, t: float | None = None) -> np.ndarray:
         """The input to apply now, from the measured state ``x`` at time ``t``; the solution
@@ -165,11 +182,11 @@ class MPC:
         if self.X is None:
             self.reset(x)
         t = self.model.t0 if t is None else float(t)
-        u, X, U = self._fn(x, t, self.X.ravel(), self.U.ravel())
+        X, U = self._solve(x, t, self.X, self.U)
+        u = U[0].copy()
         if not np.all(np.isfinite(u)):
             raise OptimizationError(f"MPC of {self.model.name!r}: the control step returned {u.tolist()} "
                                     "(a step of the model failed along the horizon); reset() the guess")
-        X, U = X.reshape(self.N + 1, self.nx).copy(), U.reshape(self.N, self.nu).copy()
         self.solution = (X, U)
         self.X = np.vstack([X[1:], X[-1:]])
         self.U = np.vstack([U[1:], U[-1:]])
