@@ -16,37 +16,59 @@ from ncgen.control.discrete import step_residual
 from ncgen.errors import OptimizationError
 
 
+class DiscreteOCP:
+    """The discrete problem over ``N`` steps, built once (the initial state a parameter):
+    :meth:`solve` re-solves it from another state and guess."""
+
+    def __init__(self, st, N: int, costs, *, p=None, t0=None, tol: float = 1e-10, max_iter: int = 3000,
+                 verbose: bool = False):
+        model, h = st.model, st.h
+        self.st, self.N = st, N
+        stage_d, terminal_d = cost_functions(costs, st.nx, st.nu)
+        nq, nc = model.nq, model.nc
+        _, _, self.p, self.t0 = st._args(np.zeros(st.nx), np.zeros(st.nu), p, t0)
+        G = step_residual(model, h)
+        opti = ca.Opti()
+        self.x0 = opti.parameter(st.nx)
+        self.X = ca.horzcat(self.x0, opti.variable(st.nx, N))
+        self.Z = opti.variable(2 * (nq + nc), N)
+        self.U = opti.variable(st.nu, N)
+        X, Z, U = self.X, self.Z, self.U
+        times = self.t0 + h * np.arange(N)
+        for k in range(N):
+            opti.subject_to(G(Z[:, k], X[:, k], U[:, k], self.p, times[k]) == 0)
+            opti.subject_to(X[:, k + 1] == ca.vertcat(X[:nq, k] + h * Z[:nq, k], Z[nq + nc:2 * nq + nc, k]))
+        self.J = ca.sum2(stage_d.map(N)(X[:, :N], U)[0]) + terminal_d(X[:, N])[0]
+        opti.minimize(self.J)
+        opti.solver("ipopt", {"expand": True, "print_time": verbose},
+                    {"tol": tol, "max_iter": max_iter, "print_level": 5 if verbose else 0, "sb": "yes"})
+        self.opti = opti
+
+    def solve(self, x0, U0) -> tuple[np.ndarray, np.ndarray, float]:
+        """``(X, U, cost)`` from ``x0``, started from the rollout of ``U0``."""
+        st, N, opti = self.st, self.N, self.opti
+        nq, nc = st.model.nq, st.model.nc
+        U0 = st._inputs(U0)
+        x0 = st._args(x0, U0[0], self.p, self.t0)[0]
+        X_guess = np.vstack([x0, st.rollout(x0, U0, self.p, self.t0)])
+        opti.set_value(self.x0, x0)
+        opti.set_initial(self.X[:, 1:], X_guess[1:].T)
+        w = (X_guess[1:, :nq] - X_guess[:-1, :nq]) / st.h
+        opti.set_initial(self.Z, np.hstack([w, np.zeros((N, nc)), X_guess[1:, nq:], np.zeros((N, nc))]).T)
+        opti.set_initial(self.U, U0.T)
+        try:
+            sol = opti.solve()
+        except RuntimeError as exc:
+            raise OptimizationError(f"IPOPT on the discrete problem failed: {opti.stats()['return_status']} "
+                                    f"({exc})") from None
+        Xs = np.array(sol.value(self.X)).T
+        Us = np.array(sol.value(self.U)).reshape(st.nu, N).T
+        return Xs, Us, float(sol.value(self.J))
+
+
 def solve_discrete(st, x0, U0, costs, *, p=None, t0=None, tol: float = 1e-10, max_iter: int = 3000,
                    verbose: bool = False) -> tuple[np.ndarray, np.ndarray, float]:
     """``(X, U, cost)``: IPOPT on the discrete problem, started from the rollout of ``U0``."""
-    model, h = st.model, st.h
-    stage_d, terminal_d = cost_functions(costs, st.nx, st.nu)
     U0 = st._inputs(U0)
-    N, nq, nc = U0.shape[0], model.nq, model.nc
-    x0, _, p, t0 = st._args(x0, U0[0], p, t0)
-    G = step_residual(model, h)
-    X_guess = np.vstack([x0, st.rollout(x0, U0, p, t0)])
-    opti = ca.Opti()
-    X = ca.horzcat(ca.DM(x0), opti.variable(st.nx, N))
-    Z = opti.variable(2 * (nq + nc), N)
-    U = opti.variable(st.nu, N)
-    times = t0 + h * np.arange(N)
-    for k in range(N):
-        opti.subject_to(G(Z[:, k], X[:, k], U[:, k], p, times[k]) == 0)
-        opti.subject_to(X[:, k + 1] == ca.vertcat(X[:nq, k] + h * Z[:nq, k], Z[nq + nc:2 * nq + nc, k]))
-    J = ca.sum2(stage_d.map(N)(X[:, :N], U)[0]) + terminal_d(X[:, N])[0]
-    opti.minimize(J)
-    opti.set_initial(X[:, 1:], X_guess[1:].T)
-    w = (X_guess[1:, :nq] - X_guess[:-1, :nq]) / h
-    opti.set_initial(Z, np.hstack([w, np.zeros((N, nc)), X_guess[1:, nq:], np.zeros((N, nc))]).T)
-    opti.set_initial(U, U0.T)
-    opti.solver("ipopt", {"expand": True, "print_time": verbose},
-                {"tol": tol, "max_iter": max_iter, "print_level": 5 if verbose else 0, "sb": "yes"})
-    try:
-        sol = opti.solve()
-    except RuntimeError as exc:
-        raise OptimizationError(f"IPOPT on the discrete problem failed: {opti.stats()['return_status']} "
-                                f"({exc})") from None
-    Xs = np.array(sol.value(X)).T
-    Us = np.array(sol.value(U)).reshape(st.nu, N).T
-    return Xs, Us, float(sol.value(J))
+    return DiscreteOCP(st, U0.shape[0], costs, p=p, t0=t0, tol=tol, max_iter=max_iter,
+                       verbose=verbose).solve(x0, U0)
