@@ -152,7 +152,8 @@ def test_rollout_gradient_matches_central_differences_over_1000_steps(cases):
         Um[k] -= eps
         fd = (J(x0, Up) - J(x0, Um)) / (2 * eps)
         assert abs(dU[k, 0] - fd) < REL * np.max(np.abs(dU)), k
-    fd_p = (float(np.sum(W * st.rollout(x0, U, p=[40.0 + 1e-4]))) - float(np.sum(W * st.rollout(x0, U, p=[40.0 - 1e-4])))) / 2e-4
+    fd_p = (float(np.sum(W * st.rollout(x0, U, p=[40.0 + 1e-4])))
+            - float(np.sum(W * st.rollout(x0, U, p=[40.0 - 1e-4])))) / 2e-4
     assert abs(dp[0] - fd_p) < REL * max(abs(fd_p), 1.0)
 
 
