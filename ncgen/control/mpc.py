@@ -1,5 +1,5 @@
-"""``nc.MPC(ocp)``: a receding-horizon controller for an ``OptimalControl`` problem, one
-compiled C function per control step.
+"""``nc.MPC(ocp)``: a receding-horizon controller for an ``OptimalControl`` problem, in
+generated C.
 
 Each control step runs a fixed number of sequential-quadratic-programming iterations
 (``iterations=1``: the real-time iteration of Diehl et al., 2005) on the problem of
@@ -13,18 +13,22 @@ inputs on the ``N`` intervals):
    the cost at the guess — a Gauss–Newton Hessian: the dynamics' curvature is left out, which
    is exact for the quadratic costs of ``OptimalControl``), subject to
    ``δx_0 = x − x̄_0``, ``δx_{k+1} = A_k δx_k + B_k δu_k + x̄⁺_k − x̄_{k+1}`` and the OCP's bounds
-   moved by the guess; solved by CasADi's active-set ``qrqp`` (sparse QR of the KKT system);
+   moved by the guess — condensed onto the inputs (``vec δX = S δU + s``, :func:`condense`:
+   ``N·nu`` variables, the bounded state components as general rows) and solved by CasADi's
+   active-set ``qrqp``;
 3. ``X̄ ← X̄ + δX``, ``Ū ← Ū + δU``.
 
 The states are natural coordinates: each ``A_k`` has rank ``2 dof`` (it maps onto the
-tangent space at ``x̄⁺_k``); the equality constraints fix every ``δx_k`` from ``δx_0`` and the
-inputs, so the QP is well posed without a minimal parametrisation.
+tangent space at ``x̄⁺_k``); the dynamics fix every ``δx_k`` from ``δx_0`` and the inputs, so
+the condensed QP needs no minimal parametrisation.
 
-The whole control step — iterations, QP, shift — is the CasADi function ``mpc_step``
-``(x, t, X̄, Ū) -> (u, X̄', Ū')`` (``X̄'``, ``Ū'``: the solution shifted by one interval, the
-last node and input repeated), generated as C.  ``mpc(x, t)`` calls that C through
-:class:`ncgen.codegen.direct.DirectFunction`; :func:`ncgen.control.export.export_mpc` writes
-the same function into a standalone package: Python and C compute the same numbers.
+An iteration is three generated functions (:func:`mpc_functions`): the QP's data, ``qrqp``
+and the update.  They are separate so that the caller sees ``qrqp``'s status: it can stall on
+a degenerate QP whose solution is its starting point (at convergence, gradients of 1e-12)
+and then reports a failure although its last iterate is the solution; that iterate is used.
+``mpc(x, t)`` calls the three through :class:`ncgen.codegen.direct.DirectFunction`;
+:func:`ncgen.control.export.export_mpc` writes the same functions and the same loop in C, so
+Python and C compute the same numbers.
 """
 from __future__ import annotations
 
