@@ -15,9 +15,11 @@ The step of the compiled stepper (:mod:`ncgen.assembly.stepper_equations`, whose
 ``z`` is found by CasADi's ``fast_newton`` rootfinder (sparse QR of ``G_z``, at most
 ``max_iter`` iterations, stopping when ``‖G‖∞ ≤ abstol`` or the Newton step is below
 ``abstol_step``; it generates self-contained C), started from ``z₀ = [v; 0; v; 0]``.
-CasADi differentiates the rootfinder by the implicit function theorem,
-``∂z/∂(x, u, p) = −G_z⁻¹ G_(x, u, p)`` (a sparse QR solve at the solution, no finite
-differences, no differentiation through the iterations), so
+The derivatives come from the implicit function theorem,
+``∂z/∂(x, u, p) = −G_z⁻¹ G_(x, u, p)`` at the solution — one sparse QR factorisation of
+``G_z`` for all columns (``step_jac``; no finite differences, no differentiation through the
+iterations; CasADi's own derivative of the rootfinder, the same formula, serves the reverse
+mode of rollouts), so
 
     A = ∂x⁺/∂x,   B = ∂x⁺/∂u,   C = ∂x⁺/∂p
 
@@ -71,8 +73,20 @@ def step_functions(model, h: float, *, abstol: float = ABSTOL, abstol_step: floa
     res = ca.norm_inf(G(z, x, u, p, t))
     names = ["x", "u", "p", "t"]
     step = ca.Function("step", [x, u, p, t], [x1, res], names, ["x1", "res"])
+    # implicit function theorem, written out: one sparse QR of G_z for all 2nq + nu + np columns
+    y = ca.vertcat(xs, us, ps)
+    Gs = G(zs, xs, us, ps, ts)
+    sensitivities = ca.Function("step_sensitivities", [zs, xs, us, ps, ts],
+                                [ca.jacobian(Gs, zs), ca.densify(ca.jacobian(Gs, y))])
+    G_z, G_y = sensitivities(z, x, u, p, t)
+    Z_y = -ca.solve(G_z, G_y, "qr")                            # ∂z/∂(x, u, p)
+    ny = y.numel()
+    X1_y = ca.vertcat(ca.horzcat(ca.DM.eye(nq), ca.DM(nq, ny - nq)) + h * Z_y[:nq, :],
+                      Z_y[nq + nc:2 * nq + nc, :])             # x⁺ = [q + h w; v⁺]
+    nu_ = model.nu
     jac = ca.Function("step_jac", [x, u, p, t],
-                      [x1] + [ca.densify(ca.jacobian(x1, a)) for a in (x, u, p)] + [res],
+                      [x1] + [ca.densify(X1_y[:, c]) for c in (slice(0, 2 * nq), slice(2 * nq, 2 * nq + nu_),
+                                                               slice(2 * nq + nu_, ny))] + [res],
                       names, ["x1", "A", "B", "C", "res"])
     return {"step": step, "step_jac": jac}
 
