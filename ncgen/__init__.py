@@ -19,14 +19,14 @@ from ncgen.errors import ModelError
 from ncgen.model.model import Model
 from ncgen.model.system import System
 from ncgen.optim import OptimalControl, OptimalTrajectory
-from ncgen.runtime import Trajectory, simulate
-from ncgen.runtime.formfinding import Tensegrity, form_find
-from ncgen.runtime.linearization import LinearModel, linearize
-from ncgen.runtime.modes import Modes, modes
-from ncgen.runtime.statics import Equilibrium, equilibrium
+from ncgen.runtime import SimulationOptions, Trajectory, simulate
+from ncgen.analysis.formfinding import Tensegrity, form_find
+from ncgen.analysis.linearization import LinearModel, linearize
+from ncgen.analysis.modes import Modes, modes
+from ncgen.analysis.statics import Equilibrium, equilibrium
 from ncgen.runtime.joint_dynamics import forward_dynamics, forward_dynamics_kernel, inverse_dynamics
 from ncgen.runtime.tree_kernel import joint_forward_dynamics, joint_forward_dynamics_kernel
-from ncgen.runtime.reactions import JointReaction, joint_reactions
+from ncgen.analysis.reactions import JointReaction, joint_reactions
 from ncgen.symbolic.coordinates import coordinate_type
 from ncgen.version import __version__
 
@@ -34,7 +34,7 @@ from ncgen.version import __version__
 __all__ = [
     "Contact", "CoordinateDriver", "Cylindrical", "Distance", "Equilibrium", "Fixed", "Force", "Free", "GeneralizedForce",
     "Joint", "JointReaction", "LinearModel", "MPC", "Mimic", "Model", "ModelError", "Modes", "NcgenError", "OptimalControl",
-    "OptimalTrajectory", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic", "Revolute", "SpherePlane", "SphereSphere", "Spherical",
+    "OptimalTrajectory", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic", "Revolute", "SimulationOptions", "SpherePlane", "SphereSphere", "Spherical",
     "Spring", "StepDidNotConverge", "StepFunction", "System", "Tensegrity", "Torque", "TorsionalSpring", "Trajectory", "Universal",
     "assemble", "coordinate_type", "dof_report", "equilibrium", "export_mpc", "form_find", "forward_dynamics",
     "forward_dynamics_kernel", "generate", "ilqr", "inverse_dynamics", "joint_forward_dynamics",

@@ -187,7 +187,7 @@ def test_sparse_matrices_keep_their_entries_in_place():
 def test_velocity_projection_is_the_kinetic_energy_nearest_solution():
     """At the slider-crank's dead centre with the motor at ω, the projection of v = 0 is the
     unique velocity of the driven mechanism: crank tip ω r upwards, slider at rest."""
-    from ncgen.assembly.kinematics import project
+    from ncgen.assembly.manifold import project
 
     model = _load("slider_crank")
     omega = float(model.p0[0])

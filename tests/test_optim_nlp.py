@@ -9,7 +9,7 @@ import pytest
 import ncgen as nc
 from ncgen.optim.diagnostics import derivative_check, equality_rank
 from ncgen.optim.interpolate import pose_path
-from ncgen.optim.manifold import tangent_basis
+from ncgen.assembly.manifold import tangent_basis
 from ncgen.optim.radau import radau_coefficients
 
 from optim_models import cartpole, pendulum

@@ -199,7 +199,7 @@ def test_equilibrium_table_says_when_the_unshared_form_fails():
 
     def fail():
         raise ModelError("made to fail")
-    model.unshared._build = fail
+    model.unshared.build = fail
     eq = nc.equilibrium(model)
     with pytest.raises(ModelError, match="made to fail"):
         eq.joint_reactions()
@@ -296,6 +296,6 @@ def test_a_wrong_coordinate_map_is_caught_by_the_balance_check():
     q, v = model.q0, model.v0
     _, lam = nc.forward_dynamics(model, q, v)
     S, c = model.unshared.coordinate_map(model)
-    model.unshared._map = (1.01 * S, c)
+    model.data.unshared_map = (1.01 * S, c)
     with pytest.raises(ModelError, match="leave a residual"):
         nc.joint_reactions(model, q, lam, v=v, joints=["elbow"])

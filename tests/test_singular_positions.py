@@ -20,7 +20,7 @@ import ncgen as nc
 from ncgen.codegen.load import NoCompilerWarning
 from ncgen.errors import CompilerNotFound, SimulationError
 from ncgen.runtime import simulation
-from ncgen.runtime.manifold import ManifoldProjector
+from ncgen.assembly.manifold import ManifoldProjector
 from ncgen.runtime.rattle_bridge import rattle_interval
 
 G = 9.81

@@ -217,7 +217,7 @@ def test_joint_reactions_match_pinocchio_joint_forces(name, share):
 def test_joint_space_kernel_matches_aba(name):
     """The one-function joint-space forward dynamics (tree map + Schur solve + a_j), as
     compiled by ``forward_dynamics_kernel(joint_space=True)``, evaluated here by CasADi."""
-    from ncgen.runtime.joint_dynamics import joint_kkt_function
+    from ncgen.assembly.derived import joint_kkt_function
 
     model, pm = robot(name)
     pd = pm.createData()

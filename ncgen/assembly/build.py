@@ -15,7 +15,8 @@ from ncgen.assembly.initial_state import consistent_state
 from ncgen.assembly.joint_space import JointSpace, actuator_forces, build_joint_coordinates
 from ncgen.assembly.kinematics import resolve_fix, system_size
 from ncgen.assembly.limits import model_limits
-from ncgen.assembly.mass import assemble_mass, check_tangent_inertia, flat_members, flat_support, mass_factor
+from ncgen.assembly.manifold import check_tangent_inertia
+from ncgen.assembly.mass import assemble_mass, flat_members, flat_support, mass_factor
 from ncgen.assembly.rank import dependent_rows
 from ncgen.assembly.redundancy import classify
 from ncgen.assembly.springs import spring_table
@@ -79,7 +80,7 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
         if plan.eliminated or plan.partial:
             options = dict(baumgarte=baumgarte, redundant=redundant, tolerance=tolerance, t0=t0,
                            assemble=assemble, contacts=contacts)
-            unshared = UnsharedForm(lambda: build_model(source, share=False, **options))
+            unshared = UnsharedForm(source, options, build_model)
     members = list(system.members.values())
     layout = make_layout(system.dim, members)
     ctx = Context(system, layout)

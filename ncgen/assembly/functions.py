@@ -254,16 +254,20 @@ def _augmented_ode_alg(f, M: ca.DM, alpha: float, beta: float, nq: int, nc: int,
             ca.Function("alg", ins, [ca.mtimes(A, a) - c], names, ["res"]))
 
 
-def _accel(f, M: ca.DM, nc: int, alpha: float, beta: float, nq: int, nu: int, npar: int) -> ca.Function:
+def _accel(f, M: ca.DM, nc: int, alpha: float, beta: float, nq: int, nu: int, npar: int,
+           name: str = "accel") -> ca.Function:
     """Explicit KKT form: ``[[M, Aᵀ], [A, 0]] [a; λ] = [F; γ − 2αΦ̇ − β²Φ]`` solved by
-    CasADi's sparse QR (an MX function calling the SX functions above)."""
+    CasADi's sparse QR (an MX function calling the SX functions above); with ``α = β = 0``
+    the unstabilised forward dynamics (:func:`ncgen.assembly.derived.kkt_qr_function`)."""
     t, q, v = ca.MX.sym("t"), ca.MX.sym("q", nq), ca.MX.sym("v", nq)
     u, p = ca.MX.sym("u", nu), ca.MX.sym("p", npar)
     A = f["A"](t, q, p)
-    phi = f["phi"](t, q, p)
-    phidot = ca.mtimes(A, v) + f["phi_t"](t, q, p)
-    rhs = ca.vertcat(f["F"](t, q, v, u, p), f["gamma"](t, q, v, p) - 2 * alpha * phidot - beta**2 * phi)
+    c = f["gamma"](t, q, v, p)
+    if alpha or beta:                    # α = β = 0: Φ and Φ_t are not evaluated at all
+        phidot = ca.mtimes(A, v) + f["phi_t"](t, q, p)
+        c = c - 2 * alpha * phidot - beta**2 * f["phi"](t, q, p)
+    rhs = ca.vertcat(f["F"](t, q, v, u, p), c)
     K = ca.blockcat([[ca.MX(M), A.T], [A, ca.MX(nc, nc)]])
     sol = ca.solve(K, rhs, "qr")
-    return ca.Function("accel", [t, q, v, u, p], [sol[:nq], sol[nq:]],
+    return ca.Function(name, [t, q, v, u, p], [sol[:nq], sol[nq:]],
                        ["t", "q", "v", "u", "p"], ["a", "lam"])

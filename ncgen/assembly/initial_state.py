@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ncgen.assembly.kinematics import TOL, newton, project, system_size
+from ncgen.assembly.kinematics import TOL, newton, system_size
+from ncgen.assembly.manifold import project
 from ncgen.errors import ModelError
 
 @dataclass

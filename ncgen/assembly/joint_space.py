@@ -30,6 +30,7 @@ from ncgen.assembly.joint_tree import (
 )
 from ncgen.assembly.kinematics import TOL, newton, system_size
 from ncgen.assembly.mass import sparse_dm
+from ncgen.model.data import model_data
 from ncgen.model.sym2casadi import to_casadi
 from ncgen.errors import ModelError
 from ncgen.validation import as_vector
@@ -106,8 +107,6 @@ class JointSpace:
         self.limits = {c.name: dict(c.joint.limits) for c in coords}
         self.members = dict(ctx.system.members)
         self.joints = {j.name: j for j in ctx.system.joints}
-        self._initial = None            # (model.q0, its joint positions by joint), filled on first use
-        self._tree_fn = None            # (tree_function or None,), filled on first use
 
     # ------------------------------------------------------------ sizes
     @property
@@ -191,13 +190,15 @@ class JointSpace:
         return q, v
 
     def _tree(self, model):
-        """The :meth:`tree_function` (built on first use), or None for a model that is not a tree."""
-        if self._tree_fn is None:
+        """The :meth:`tree_function` (built on first use, kept in ``model.data``), or None for a
+        model that is not a tree."""
+        data = model_data(model)
+        if data.joint_tree_function is None:
             try:
-                self._tree_fn = (self.tree_function(model.layout),)
+                data.joint_tree_function = (self.tree_function(model.layout),)
             except ModelError:
-                self._tree_fn = (None,)
-        return self._tree_fn[0]
+                data.joint_tree_function = (None,)
+        return data.joint_tree_function[0]
 
     @staticmethod
     def _holds(model, q, v, t, p) -> bool:
@@ -240,20 +241,8 @@ class JointSpace:
         """``(here, there, edge, forward)`` for every joint of a tree, breadth-first from the
         ground (``forward``: ``here`` is the joint's A).  Raises :class:`ModelError` when a
         member is not reached or a joint closes a loop."""
-        adjacent: dict[str, list[tuple[Edge, bool]]] = {}
-        for e in self.edges:
-            adjacent.setdefault(e.A, []).append((e, True))
-            adjacent.setdefault(e.B, []).append((e, False))
-        reached, queue, out, spinless = {"ground"}, deque(["ground"]), [], set()
-        while queue:
-            here = queue.popleft()
-            for e, forward in adjacent.get(here, []):
-                there = e.B if forward else e.A
-                if there in reached or not _passable(e, forward, here, spinless):
-                    continue
-                reached.add(there)
-                out.append((here, there, e, forward))
-                queue.append(there)
+        out = list(_walk(self.edges))
+        reached = {"ground"} | {there for _, there, _, _ in out}
         missing = [n for n in self.members if n not in reached]
         if missing or len(out) != len(self.edges):
             raise ModelError(f"joint space: the model is not a tree of joints with coordinates "
@@ -311,25 +300,15 @@ class JointSpace:
 
     def _propagate(self, model, given) -> np.ndarray:
         """Poses from the ground through the spanning tree; unreached members keep q0."""
-        if self._initial is None or self._initial[0] is not model.q0:
-            self._initial = (model.q0, self.split(np.array(self.positions(model.q0)).reshape(-1)))
-        values = {**self._initial[1], **given}
+        data = model_data(model)
+        if data.joint_positions0 is None:
+            data.joint_positions0 = self.split(np.array(self.positions(model.q0)).reshape(-1))
+        values = {**data.joint_positions0, **given}
         members = self.members
         poses = {"ground": (np.eye(self.dim), np.zeros(self.dim))}
-        adjacent: dict[str, list[tuple[Edge, bool]]] = {}
-        for e in self.edges:
-            adjacent.setdefault(e.A, []).append((e, True))
-            adjacent.setdefault(e.B, []).append((e, False))
-        queue, spinless = deque(["ground"]), set()
-        while queue:
-            here = queue.popleft()
-            for e, forward in adjacent.get(here, []):
-                there = e.B if forward else e.A
-                if there in poses or not _passable(e, forward, here, spinless):
-                    continue
-                T = relative_pose(e, values.get(e.name, np.zeros(0)), self.dim)
-                poses[there] = carry(poses[here], e, T, forward, members)
-                queue.append(there)
+        for here, there, e, forward in _walk(self.edges):
+            T = relative_pose(e, values.get(e.name, np.zeros(0)), self.dim)
+            poses[there] = carry(poses[here], e, T, forward, members)
         q = model.q0.copy()
         for name, (R, pos) in poses.items():
             if name == "ground":
@@ -390,6 +369,26 @@ class JointSpace:
                              f"give the rates of every joint of a tree ({', '.join(self.joint_names)}), "
                              "or of independent joints only")
         return v
+
+
+def _walk(edges):
+    """``(here, there, edge, forward)`` breadth-first from the ground through the joints
+    ``edges``, each member reached once (the first way found), across passable edges only
+    (:func:`_passable`)."""
+    adjacent: dict[str, list[tuple[Edge, bool]]] = {}
+    for e in edges:
+        adjacent.setdefault(e.A, []).append((e, True))
+        adjacent.setdefault(e.B, []).append((e, False))
+    reached, queue, spinless = {"ground"}, deque(["ground"]), set()
+    while queue:
+        here = queue.popleft()
+        for e, forward in adjacent.get(here, []):
+            there = e.B if forward else e.A
+            if there in reached or not _passable(e, forward, here, spinless):
+                continue
+            reached.add(there)
+            yield here, there, e, forward
+            queue.append(there)
 
 
 def _passable(e: Edge, forward: bool, here: str, spinless: set) -> bool:

@@ -21,10 +21,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import casadi as ca
 import numpy as np
 
-from ncgen.assembly.mass import augmented_mass, is_regular, sparse_dm
+from ncgen.assembly.manifold import project
 from ncgen.assembly.rank import dependent_rows
 from ncgen.errors import ModelError
 from ncgen.model.expressions import did_you_mean
@@ -86,46 +85,6 @@ def newton(phi, jac, q, free, *, tol: float, max_iter: int = MAX_ITER):
         q[free] -= step
         r = phi(q)
     return q, max_iter, res
-
-
-def project(A: np.ndarray, b: np.ndarray, v: np.ndarray, M: np.ndarray, free) -> np.ndarray:
-    """The ``w`` closest to ``v`` in the metric ``M`` with ``A w = b`` and ``w = v`` outside
-    ``free`` (least squares when that is impossible).  The step ``δ = M⁻¹Aᵀμ`` with
-    ``A δ = b − A v`` comes from the sparse KKT system (O(n) for chain-like systems); only
-    rank-deficient constraints take the dense least-squares route."""
-    w = np.array(v, dtype=float)
-    if A.shape[0] == 0:
-        return w
-    free = np.asarray(free, dtype=int)
-    Af, Mf = A[:, free], M[np.ix_(free, free)]
-    r = b - A @ w
-    step = _kkt_step(Mf, Af, r)
-    if step is None:
-        MiAT = np.linalg.solve(augmented_mass(Mf, Af) if not is_regular(Mf) else Mf, Af.T)
-        step = MiAT @ np.linalg.lstsq(Af @ MiAT, r, rcond=None)[0]
-    w[free] += step
-    return w
-
-
-def _kkt_step(M: np.ndarray, A: np.ndarray, r: np.ndarray) -> np.ndarray | None:
-    """``δ`` of ``[[M, Aᵀ], [A, 0]] [δ; −μ] = [0; r]`` by sparse QR, or None if the system is
-    singular (dependent constraints)."""
-    n, m = M.shape[0], A.shape[0]
-    Ms, As = sparse_dm(M), sparse_dm(A)
-    K = ca.blockcat([[Ms, As.T], [As, ca.DM(m, m)]])
-    rhs = np.concatenate([np.zeros(n), r])
-    try:
-        x = np.array(ca.solve(K, ca.DM(rhs), "qr")).reshape(-1)
-    except RuntimeError:                       # CasADi's QR refuses a structurally singular K
-        return None
-    # checked against the dense inputs, not against K: a fault in building K shows up here
-    delta, mu = x[:n], -x[n:]
-    Md = M @ delta
-    scale = 1.0 + float(np.max(np.abs(np.concatenate([r, Md])), initial=0.0))
-    residual = max(np.max(np.abs(A @ delta - r), initial=0.0), np.max(np.abs(Md - A.T @ mu), initial=0.0))
-    if not np.all(np.isfinite(x)) or residual > 1e-9 * scale:
-        return None
-    return delta
 
 
 def system_size(q: np.ndarray) -> float:

@@ -3,7 +3,7 @@ functions (so that it can also be generated as a C kernel for LQR/MPC code).
 
 Independent coordinates about a consistent state ``(q*, v*)`` (``Φ = 0``, ``A v* + Φ_t = 0``):
 ``z = G (q − q*)`` and ``w = ż = G v``, where ``G`` (dof × nq) and the tangent basis ``N``
-(nq × dof) satisfy ``A N = 0`` and ``G N = I`` (:mod:`ncgen.runtime.tangent`).  Near ``q*``
+(nq × dof) satisfy ``A N = 0`` and ``G N = I`` (:mod:`ncgen.assembly.manifold`).  Near ``q*``
 the configuration with coordinates ``z`` is ``q(z) = q* + N z + O(z²)``, and the rates with
 ``G v = w`` on the velocity constraint are ``v(z, w) = v* + V_z z + N w + O(2)`` with
 

@@ -10,7 +10,7 @@ natural order, ``L = (I + L̃) D^½``): a dense one costs O(nq³), seconds for a
 A flat body (a thin disc or plate: principal moments with I1 + I2 = I3) has a singular
 ``M``: its mass lies in a plane, so the base vector normal to it carries no inertia.  The
 dynamics are still regular when ``M`` is positive definite on the tangent space of the
-constraints, ``null(A)`` (:func:`check_tangent_inertia`).  :func:`mass_factor` then returns
+constraints, ``null(A)`` (:func:`ncgen.assembly.manifold.check_tangent_inertia`).  :func:`mass_factor` then returns
 a :class:`SingularMass`; KKT paths are unchanged, and every path that needs ``M⁻¹`` uses
 the KKT system instead or the augmented mass matrix (de Jalón & Bayo; docs/architecture.md)
 
@@ -271,43 +271,3 @@ class CholeskyFactor:
         return np.array(ca.densify(self.lower())) if self.n else np.zeros((0, 0))
 
 
-#: ``M`` counts as positive definite on ``null(A)`` when the smallest eigenvalue of the
-#: Jacobi-scaled reduced mass matrix ``Nᵀ M N`` exceeds this.
-TANGENT_INERTIA_TOL = 1e-9
-
-
-def check_tangent_inertia(M: np.ndarray, A: np.ndarray, layout: Layout, members, where: str) -> None:
-    """Raise :class:`ModelError` unless ``M`` is positive definite on ``null(A)`` (``A`` at
-    the initial configuration): otherwise a motion allowed by the constraints has no inertia
-    (a line-like body free to spin about its line, a point-like body free to turn), and the
-    equations of motion do not determine it.  Names the members that move in that motion."""
-    n = M.shape[0]
-    if n == 0:
-        return
-    d = jacobi_scale(M)
-    Ms = M / d[:, None] / d[None, :]
-    As = A / d[None, :] if A.size else np.zeros((0, n))
-    if As.shape[0]:
-        _, s, Vt = np.linalg.svd(As)
-        rank = int(np.sum(s > 1e-10 * max(float(s[0]), 1e-300)))
-        N = Vt[rank:].T
-    else:
-        N = np.eye(n)
-    if N.shape[1] == 0:
-        return
-    w, Y = np.linalg.eigh(N.T @ Ms @ N)
-    if w[0] > TANGENT_INERTIA_TOL:
-        return
-    z = (N @ Y[:, 0]) / d
-    z = z / np.max(np.abs(z))
-    moving = []
-    for m in members:
-        idx = [i for i in layout.member_indices(m.name) if i is not None]
-        if idx and np.max(np.abs(z[idx])) > 1e-6:
-            moving.append(m.name)
-    raise ModelError(
-        f"{where}: a motion allowed by the constraints has no inertia (the mass matrix is singular on "
-        f"the constraint tangent space at the initial configuration), so the equations of motion do "
-        f"not determine it; it moves member(s) {', '.join(moving)}: a point mass, a line-like body "
-        f"free to spin about its line or a flat body free to turn its normal needs inertia for that "
-        f"motion (give the body thickness or a non-zero moment) or a joint that stops it")

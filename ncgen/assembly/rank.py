@@ -5,10 +5,10 @@ import numpy as np
 
 #: Relative size of a row's component outside the span of the earlier rows below which it
 #: counts as linearly dependent.
-RANK_TOL = 1e-9
+DEPENDENT_TOL = 1e-9
 
 
-def dependent_rows(A: np.ndarray, tol: float = RANK_TOL) -> list[int]:
+def dependent_rows(A: np.ndarray, tol: float = DEPENDENT_TOL) -> list[int]:
     """Rows of ``A`` that depend linearly on earlier rows (greedy, in order, so intrinsic
     constraints are kept and the later joint equations are the ones named)."""
     if A.shape[0] == 0:

@@ -130,7 +130,7 @@ CONTACT_DOCS = {
                     "inputs": {**DOCS["step_newton"]["inputs"],
                                "j": ("generalised contact impulse W^T P of the step", "N s")},
                     "outputs": {**DOCS["step_newton"]["outputs"],
-                                "r": ("[M (w - v) - h/2 F + A^T nu - j/2; Phi(t + h, q + h w) / h]",
+                                "r": ("[M (w - v) - h/2 F + A^T lam_h - j/2; Phi(t + h, q + h w) / h]",
                                       "N s; m^2/s")}},
     "step_velocity": {**DOCS["step_velocity"],
                       "inputs": {**DOCS["step_velocity"]["inputs"],

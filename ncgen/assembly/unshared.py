@@ -21,34 +21,44 @@ import warnings
 import numpy as np
 
 from ncgen.errors import ModelError, NcgenError
+from ncgen.model.data import model_data
 
 
 class UnsharedForm:
-    """The model built with ``share=False`` (``build()`` on first call of :meth:`model`) and
-    the map ``(S, c)`` from the shared coordinates to its coordinates."""
+    """How to build the ``share=False`` form of a shared model: the system as written
+    (``source``), the build options and ``builder`` (:func:`ncgen.assembly.build.build_model`).
+    Constant; the built model and the map ``(S, c)``
+    from the shared coordinates to its coordinates are kept in the shared model's data
+    (``model.data.unshared_model``, ``model.data.unshared_map``)."""
 
-    def __init__(self, build):
-        self._build = build
-        self._model = None
-        self._map = None
+    def __init__(self, source, options: dict, builder):
+        self.source = source
+        self.options = dict(options)
+        self.builder = builder
 
-    def model(self):
+    def build(self):
         """The ``share=False`` model of the same system (same build options)."""
-        if self._model is None:
+        return self.builder(self.source, share=False, **self.options)
+
+    def model(self, shared):
+        """The ``share=False`` model of ``shared`` (built on first use)."""
+        data = model_data(shared)
+        if data.unshared_model is None:
             try:
                 with warnings.catch_warnings():      # the shared build already reported on the system
                     warnings.simplefilter("ignore")
-                    self._model = self._build()
+                    data.unshared_model = self.build()
             except NcgenError as e:
                 raise ModelError(f"the reactions of joints eliminated by coordinate sharing need the model "
                                  f"built with share=False, which failed: {e}") from None
-        return self._model
+        return data.unshared_model
 
     def coordinate_map(self, shared) -> tuple[np.ndarray, np.ndarray]:
         """``(S, c)`` with ``q_u = S q_s + c`` (``S``: unshared nq × shared nq)."""
-        if self._map is None:
-            self._map = coordinate_map(shared, self.model())
-        return self._map
+        data = model_data(shared)
+        if data.unshared_map is None:
+            data.unshared_map = coordinate_map(shared, self.model(shared))
+        return data.unshared_map
 
 
 def member_map(shared_member, unshared_member) -> np.ndarray:

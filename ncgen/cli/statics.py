@@ -72,7 +72,7 @@ def _check_suffix(parser, option: str, name: str | None, suffixes: tuple[str, ..
 
 
 def _solve(args):
-    from ncgen.runtime.statics import equilibrium
+    from ncgen.analysis.statics import equilibrium
     model = load_model(args.model, args.param, share=not args.no_share)
     return equilibrium(model, u=_inputs(model, args.input), method=args.method, tol=args.tol)
 
@@ -125,7 +125,7 @@ def equilibrium_command(args: argparse.Namespace, parser: argparse.ArgumentParse
     arguments=_modes_arguments,
 )
 def modes_command(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
-    from ncgen.runtime.modes import modes
+    from ncgen.analysis.modes import modes
     _check_suffix(parser, "-o/--output", args.output, (".csv", ".npz"))
     _check_suffix(parser, "--plot", args.plot, (".png",))
     _check_suffix(parser, "--animate", args.animate, (".gif", ".mp4"))

@@ -13,13 +13,12 @@ rerolls each of them (and the DAE's Jacobian) by itself.
 """
 from __future__ import annotations
 
-import weakref
-
 import casadi as ca
 
 from ncgen.assembly.functions import composite_functions
 from ncgen.assembly.mass import sparse_dm
 from ncgen.codegen.reroll import REROLL_INSTRUCTIONS, reroll
+from ncgen.model.data import model_data
 
 #: Functions rebuilt from calls when the model is large (``dae`` stays flat: CasADi differentiates
 #: its SX exactly and the package rerolls it and its Jacobian).
@@ -34,8 +33,6 @@ PRIMITIVES = ("phi", "A", "phi_t", "gamma", "F")
 #: of the compile time.  Smaller models keep straight-line code, the fastest at run time.
 LARGE_MODEL_INSTRUCTIONS = 40_000
 LARGE_MODEL_REROLL = 1_000
-
-_primitives: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
 def reroll_limit(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS) -> int | None:
@@ -57,14 +54,15 @@ def is_large(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS) -> bo
 def primitives(model) -> dict[str, ca.Function]:
     """The rerolled primitives of ``model``, ``Minv`` as triangular solves and ``V`` (the
     rerolled terms of the potential energy); computed once per model."""
-    if model not in _primitives:
+    data = model_data(model)
+    if data.rerolled is None:
         f = {n: reroll(model.functions[n]) for n in PRIMITIVES}
         b = ca.MX.sym("b", model.nq)
         x = model.mass_factor.solve(b) if model.mass_factor.regular else model.mass_factor.pseudo_solve(b)
         f["Minv"] = ca.Function("Minv", [b], [x], ["b"], ["x"])
         f["V"] = reroll(model.potential_terms)
-        _primitives[model] = f
-    return _primitives[model]
+        data.rerolled = f
+    return data.rerolled
 
 
 def package_functions(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS) -> dict[str, ca.Function]:

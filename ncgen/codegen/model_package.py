@@ -22,7 +22,7 @@ from __future__ import annotations
 import dataclasses
 import os
 from pathlib import Path
-from typing import Callable, Mapping, Sequence
+from typing import Callable, Mapping
 
 import casadi as ca
 import numpy as np
@@ -38,6 +38,7 @@ from ncgen.codegen.package import Package, check_replaceable, publish, write_pac
 from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
 from ncgen.codegen.section import Section
 from ncgen.codegen.stepper_package import stepper_section
+from ncgen.model.model import component_names
 
 #: The system functions in the package, in this order.
 SYSTEM_FUNCTIONS = ("phi", "A", "phi_t", "gamma", "F", "mass", "Minv", "ode", "alg", "dae", "accel",
@@ -138,8 +139,8 @@ def model_metadata(model) -> tuple[dict, dict]:
         ("n_markers", len(model.marker_names), "number of named markers"),
         ("coordinate_names", model.coordinate_names, "name of each coordinate q[i]"),
         ("constraint_names", model.constraint_names, "name of each constraint Phi[i]"),
-        ("input_names", _component_names(model.input_names, model.input_sizes), "name of each input u[i]"),
-        ("parameter_names", _component_names(model.parameter_names, model.parameter_sizes),
+        ("input_names", component_names(model.input_names, model.input_sizes), "name of each input u[i]"),
+        ("parameter_names", component_names(model.parameter_names, model.parameter_sizes),
          "name of each parameter p[i]"),
         ("member_names", model.member_names, "members, in the order of the blocks of poses"),
         ("marker_names", model.marker_names, "markers (member.marker), in the order of the columns of markers"),
@@ -174,11 +175,6 @@ def _hash(model, metadata: Mapping) -> str:
     data = {"functions": [[name, model.functions[name].serialize()] for name in SYSTEM_FUNCTIONS],
             "metadata": plain}
     return fsutil.sha256_bytes(canonical_json(data).encode())
-
-
-def _component_names(names: Sequence[str], sizes: Sequence[int]) -> list[str]:
-    """One name per value: ``k`` for a scalar, ``f[0]``, ``f[1]``, ... for a vector ``f``."""
-    return [n if s == 1 else f"{n}[{i}]" for n, s in zip(names, sizes) for i in range(s)]
 
 
 def _summary(model) -> str:

@@ -80,10 +80,10 @@ def mpc_problem(ocp, terminal_weight: float) -> MPCProblem:
     t_end = ocp.t0 + ocp.t_final
     q_f = v_f = None
     if ocp.final_spec["q"] is not None:
-        from ncgen.optim.manifold import resolve_configuration
+        from ncgen.optim.conditions import resolve_configuration
         q_f = resolve_configuration(model, ocp.final_spec["q"], model.q0, t=t_end, p=p, what="final q")
     if ocp.final_spec["v"] is not None:
-        from ncgen.optim.manifold import resolve_velocity
+        from ncgen.optim.conditions import resolve_velocity
         v_f = resolve_velocity(model, ocp.final_spec["v"], model.q0 if q_f is None else q_f, t=t_end, p=p)
 
     def terminal(x):

@@ -146,7 +146,7 @@ class StepFunction:
     def tangent_basis(self, x, p=None, t=None) -> np.ndarray:
         """``T(x)``: orthonormal basis (nx × 2 dof) of the tangent space of the state
         manifold ``{Φ = 0, A v + Φ_t = 0}`` at ``x``."""
-        from ncgen.runtime.tangent import null_basis
+        from ncgen.assembly.manifold import null_basis
         x, _, p, t = self._args(x, np.zeros(self.nu), p, t)
         return null_basis(np.array(self._J(x, p, t)), self.nx)
 

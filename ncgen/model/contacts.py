@@ -27,12 +27,17 @@ import math
 import numpy as np
 
 from ncgen.errors import BasisError
-from ncgen.model.joint_base import check_members
+from ncgen.model.joint_base import attach_element, check_members
 from ncgen.errors import ModelError
 from ncgen.validation import as_vector
 
 #: Defaults of the smooth law (steel-like ball of a few kg: a 1 kg ball rests ~0.1 mm deep).
 STIFFNESS, DAMPING, EXPONENT, SLIP_VELOCITY = 1e6, 1e5, 1.5, 1e-3
+
+
+def _check_name(name) -> None:
+    if not isinstance(name, str) or not name.isidentifier():
+        raise ModelError(f"contact name: expected an identifier (letters, digits, _), got {name!r}")
 
 
 class Contact:
@@ -56,23 +61,13 @@ class Contact:
 
     def attach(self, system, index: int):
         """Called by ``System.add_contact``: name, membership and argument checks."""
-        if self.system is not None:
-            raise ModelError(f"{self.label}: already added to system {self.system.name!r}")
-        given = self.name
-        self.name = given or f"{self.kind.lower()}_{index}"
-        try:
-            if not isinstance(self.name, str) or not self.name.isidentifier():
-                raise ModelError(f"contact name: expected an identifier (letters, digits, _), got {self.name!r}")
-            if any(c.name == self.name for c in system.contacts):
-                raise ModelError(f"{self.label}: the name is already used by another contact "
-                                 f"of system {system.name!r}")
+        def validate():
             check_members(self.members(), system, self.label)
             self._check_material()
             self.check(system)
             self.system = system
-        except BaseException:
-            self.system, self.name = None, given
-            raise
+
+        attach_element(self, system, index, system.contacts, "contact", _check_name, validate)
 
     def _check_material(self):
         checks = (("mu", self.mu, 0.0, math.inf), ("restitution", self.restitution, 0.0, 1.0),

@@ -14,7 +14,7 @@ import numpy as np
 
 from ncgen.errors import BasisError
 from ncgen.errors import ModelError
-from ncgen.model.joint_base import check_members
+from ncgen.model.joint_base import attach_element, check_members
 from ncgen.model.members import model_name
 from ncgen.validation import as_scalar, as_vector
 
@@ -33,22 +33,14 @@ class Force:
         return f"force {self.name!r} ({self.kind})"
 
     def attach(self, system, index: int):
-        if self.system is not None:
-            raise ModelError(f"{self.label}: already added to system {self.system.name!r}")
-        given = self.name
-        self.name = given or f"{self.kind.lower()}_{index}"
-        try:
-            model_name(self.name, "force name")
-            if any(f.name == self.name for f in system.forces):
-                raise ModelError(f"{self.label}: the name is already used by another force "
-                                 f"of system {system.name!r}")
+        """Called by ``System.add_force``: name, membership and argument checks."""
+        def validate():
             check_members(self.members(), system, self.label)
             self.system = system
             self.check(system)
             self._check_nonnegative()
-        except BaseException:
-            self.system, self.name = None, given
-            raise
+
+        attach_element(self, system, index, system.forces, "force", lambda n: model_name(n, "force name"), validate)
 
     def members(self) -> list:
         return []

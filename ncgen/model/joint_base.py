@@ -58,15 +58,7 @@ class Joint:
 
     def attach(self, system, index: int):
         """Called by ``System.add_joint``: name, membership and geometry checks."""
-        if self.system is not None:
-            raise ModelError(f"{self.label}: already added to system {self.system.name!r}")
-        given = self.name
-        self.name = given or f"{self.kind.lower()}_{index}"
-        try:
-            model_name(self.name, "joint name")
-            if any(j.name == self.name for j in system.joints):
-                raise ModelError(f"{self.label}: the name is already used by another joint "
-                                 f"of system {system.name!r}")
+        def validate():
             check_members(self.members(), system, f"{self.kind} joint {self.name!r}")
             ms = self.members()
             if len(ms) == 2 and ms[0] is ms[1]:
@@ -74,9 +66,8 @@ class Joint:
                                  "to itself")
             self.system = system
             self.check(system)
-        except BaseException:
-            self.system, self.name = None, given
-            raise
+
+        attach_element(self, system, index, system.joints, "joint", lambda n: model_name(n, "joint name"), validate)
 
     def check(self, system):
         """Validate the arguments and the geometry by writing the equations once."""
@@ -137,6 +128,26 @@ class Joint:
 
     def __repr__(self) -> str:
         return f"<{self.label}>"
+
+
+def attach_element(element, system, index: int, siblings, what: str, check_name, validate) -> None:
+    """Add a joint, force or contact to ``system`` (their ``attach``): name it (the name given,
+    else ``<kind>_<index>``), check the name (``check_name(name)``) and that no other
+    ``what`` in ``siblings`` has it, then ``validate()``.  On any error the element is left
+    as it was: unattached, its name as given."""
+    if element.system is not None:
+        raise ModelError(f"{element.label}: already added to system {element.system.name!r}")
+    given = element.name
+    element.name = given or f"{element.kind.lower()}_{index}"
+    try:
+        check_name(element.name)
+        if any(x.name == element.name for x in siblings):
+            raise ModelError(f"{element.label}: the name is already used by another {what} "
+                             f"of system {system.name!r}")
+        validate()
+    except BaseException:
+        element.system, element.name = None, given
+        raise
 
 
 def check_members(members, system, what: str) -> None:

@@ -17,6 +17,7 @@ from types import MappingProxyType
 import numpy as np
 
 from ncgen.errors import ModelError
+from ncgen.model.data import ModelData, model_data
 from ncgen.validation import as_vector
 
 
@@ -39,6 +40,12 @@ def _frozen(value):
     if isinstance(value, list):
         return ReadOnlyList(value)
     return value
+
+
+def component_names(names, sizes) -> list[str]:
+    """One name per value of inputs or parameters: ``k`` for a scalar, ``f[0]``, ``f[1]``, ...
+    for a vector ``f`` (the order of ``u`` and ``p``)."""
+    return [n if s == 1 else f"{n}[{i}]" for n, s in zip(names, sizes) for i in range(s)]
 
 
 class Model:
@@ -90,8 +97,8 @@ class Model:
         self.contact_model = contact_model
         #: :class:`~ncgen.model.sharing.SharingPlan` of ``build(share=True)`` (None with share=False).
         self.sharing = sharing
-        #: the same system built with ``share=False``, on first use (reactions of the eliminated
-        #: joints; :class:`ncgen.assembly.unshared.UnsharedForm`), or None
+        #: how to build the same system with ``share=False`` (reactions of the eliminated joints;
+        #: :class:`ncgen.assembly.unshared.UnsharedForm`; the built model is kept in ``data``), or None
         self.unshared = unshared
         for key, value in vars(self).items():
             object.__setattr__(self, key, _frozen(value))
@@ -105,6 +112,12 @@ class Model:
 
     def __delattr__(self, key):
         raise AttributeError(f"Model {self.name!r} is constant (cannot delete {key!r})")
+
+    @property
+    def data(self) -> ModelData:
+        """The model's run-time data: compiled libraries, loaded kernels, functions built on
+        demand (:class:`~ncgen.model.data.ModelData`); not part of the constant model."""
+        return model_data(self)
 
     def frame_pose(self, name: str, q) -> tuple[np.ndarray, np.ndarray]:
         """World ``(R, p)`` of the named frame (``model.frames``, e.g. a URDF link) at ``q``."""

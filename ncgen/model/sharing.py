@@ -74,21 +74,49 @@ class SharingPlan:
 
 
 # --------------------------------------------------------------------------- helpers
-class _Classes:
-    """Union–find over node keys with the checks that keep a merge meaningful: one fixed
-    value per class, and never two slots of the same member."""
+class _UnionFind:
+    """Disjoint sets over hashable keys, each key its own set until merged (path halving);
+    :meth:`union` keeps the root of its first argument's set."""
 
     def __init__(self):
         self.parent: dict = {}
-        self.sets: dict = {}
+
+    def _add(self, a):
+        self.parent[a] = a
 
     def find(self, a):
         if a not in self.parent:
-            self.parent[a], self.sets[a] = a, {a}
+            self._add(a)
         while self.parent[a] != a:
             self.parent[a] = self.parent[self.parent[a]]
             a = self.parent[a]
         return a
+
+    def _merge(self, ra, rb):
+        self.parent[rb] = ra
+
+    def union(self, a, b) -> bool:
+        ra, rb = self.find(a), self.find(b)
+        if ra != rb:
+            self._merge(ra, rb)
+        return True
+
+
+class _Classes(_UnionFind):
+    """Node classes: a union–find over node keys with the checks that keep a merge
+    meaningful: one fixed value per class, and never two slots of the same member."""
+
+    def __init__(self):
+        super().__init__()
+        self.sets: dict = {}
+
+    def _add(self, a):
+        super()._add(a)
+        self.sets[a] = {a}
+
+    def _merge(self, ra, rb):
+        super()._merge(ra, rb)
+        self.sets[ra] |= self.sets.pop(rb)
 
     def can_union(self, a, b) -> bool:
         ra, rb = self.find(a), self.find(b)
@@ -100,13 +128,7 @@ class _Classes:
         return len(fixed) <= 1 and len(owners) == len(set(owners))
 
     def union(self, a, b) -> bool:
-        if not self.can_union(a, b):
-            return False
-        ra, rb = self.find(a), self.find(b)
-        if ra != rb:
-            self.parent[rb] = ra
-            self.sets[ra] |= self.sets.pop(rb)
-        return True
+        return self.can_union(a, b) and super().union(a, b)
 
 
 def _key(v) -> tuple:
@@ -132,7 +154,13 @@ def _candidate(joint, dim: int) -> str | None:
 # ----------------------------------------------------------------------- the pass
 def share_coordinates(system):
     """A copy of ``system`` with joints replaced by shared coordinates, and its
-    :class:`SharingPlan` (see the module docstring).  ``system`` is not changed."""
+    :class:`SharingPlan` (see the module docstring).  ``system`` is not changed.
+
+    Steps: group the welded bodies (:class:`_Welds`); re-base each group on the points and
+    axes its joints ask for (:func:`_rebase_groups`); make node classes from the user's
+    shares and the welds (:func:`_share_given`, :func:`_share_welds`) and from the point and
+    hinge joints (:func:`_share_joints`); give each member its ``shared`` slots
+    (:func:`_apply_classes`)."""
     plan = SharingPlan()
     by_index = [f.name for f in system.forces if f.kind == "GeneralizedForce"]
     if by_index:
@@ -140,53 +168,71 @@ def share_coordinates(system):
                     "coordinates are kept as written")
         return system, plan
     sys_c = copy.deepcopy(system)
-    d = sys_c.dim
     members = list(sys_c.members.values())
     old_shares = {m.name: dict(m.shared) for m in members}      # before re-basing clears them
     scale = max([1.0] + [norm(m.p0) for m in members])
-
-    # welded groups of bodies (and the ground)
-    group = {m.name: m.name for m in members}
-    group["ground"] = "ground"
-
-    def gfind(n):
-        while group[n] != n:
-            n = group[n]
-        return n
-
-    driven = {j.A.name for j in sys_c.joints if j.kind == "CoordinateDriver" and not j.A.is_ground}
-    welds = []
-    for j in sys_c.joints:
-        if _candidate(j, d) == "weld" and not any(m.name in driven for m in j.members() if not m.is_ground):
-            a, b = (gfind("ground" if m.is_ground else m.name) for m in j.members())
-            if a != b:
-                if b == "ground":
-                    a, b = b, a
-                group[b] = a
-                welds.append(j)
-    groups: dict[str, list[Member]] = {}
+    welds = _Welds(sys_c, members)
+    _rebase_groups(sys_c, members, welds, plan, scale)
+    keys = _NodeKeys(welds.ground_bodies, scale)
+    classes = _Classes()
     for m in members:
-        groups.setdefault(gfind(m.name), []).append(m)
+        for slot in range(len(m.ctype.slots)):
+            classes.find((m.name, slot))
+    refused = _share_given(members, old_shares, keys, classes)
+    if refused:
+        plan.off = refused
+        return system, plan
+    _share_welds(welds, classes, plan)
+    _share_joints(sys_c, welds, keys, classes, plan, scale)
+    _apply_classes(sys_c, members, classes)
+    return sys_c, plan
 
-    def gid(m) -> str:
-        return "ground" if m.is_ground else gfind(m.name)
 
-    frozen = {gfind(n) for n in driven}
+class _Welds:
+    """Bodies welded together (``Fixed`` joints between bodies or to the ground), as groups
+    named by a root member ("ground" for those welded to it).  Bodies named by a
+    ``CoordinateDriver`` are not merged (their slots must keep their meaning)."""
 
-    def rebasable(g: str) -> bool:
+    def __init__(self, system, members: list[Member]):
+        d = system.dim
+        self.driven = {j.A.name for j in system.joints if j.kind == "CoordinateDriver" and not j.A.is_ground}
+        self._uf = _UnionFind()
+        self.joints = []
+        for j in system.joints:
+            if _candidate(j, d) == "weld" and not any(m.name in self.driven for m in j.members() if not m.is_ground):
+                a, b = (self._uf.find("ground" if m.is_ground else m.name) for m in j.members())
+                if a != b:
+                    self._uf.union(*((b, a) if b == "ground" else (a, b)))     # the ground stays a root
+                    self.joints.append(j)
+        self.groups: dict[str, list[Member]] = {}
+        for m in members:
+            self.groups.setdefault(self._uf.find(m.name), []).append(m)
+        self.frozen = {self._uf.find(n) for n in self.driven}
+        self.ground_bodies = {b.name for b in self.groups.get("ground", [])}
+
+    def gid(self, m) -> str:
+        return "ground" if m.is_ground else self._uf.find(m.name)
+
+    def rebasable(self, g: str) -> bool:
         """Bodies (welded groups) not named by a CoordinateDriver, whose slots must keep their meaning."""
-        return g != "ground" and groups[g][0].kind == "body" and g not in frozen
+        return g != "ground" and self.groups[g][0].kind == "body" and g not in self.frozen
 
+
+def _rebase_groups(system, members: list[Member], welds: _Welds, plan: SharingPlan, scale: float) -> None:
+    """Give every re-basable group the world basic points and axes its joints ask for (those
+    with something to share), and every body welded to the ground fixed nodes; records
+    ``plan.rebased``."""
+    d = system.dim
+    gid = welds.gid
     # requests of every re-basable group, in joint order: points (world) and axes (world, unit)
-    points: dict[str, list[np.ndarray]] = {g: [] for g in groups if rebasable(g)}
-    vectors: dict[str, list[np.ndarray]] = {g: [] for g in groups if rebasable(g)}
+    points: dict[str, list[np.ndarray]] = {g: [] for g in welds.groups if welds.rebasable(g)}
+    vectors: dict[str, list[np.ndarray]] = {g: [] for g in welds.groups if welds.rebasable(g)}
     for m in members:                                   # basic points already shared stay basic points
         for slot, ref in m.shared.items():
             for who, s in ((m, slot), (ref.member, ref.slot)):
-                if not who.is_ground and rebasable(gid(who)):
+                if not who.is_ground and welds.rebasable(gid(who)):
                     points[gid(who)].append(who.slot_position(s))
-    ground_group = groups.get("ground", [])
-    for j in sys_c.joints:
+    for j in system.joints:
         how = _candidate(j, d)
         if how in ("point", "hinge"):
             ga, gb = (gid(m) for m in j.members())
@@ -201,10 +247,8 @@ def share_coordinates(system):
                 for g in (ga, gb):
                     if g in vectors:
                         vectors[g].append(a)
-
-    # choose each group's world basis and re-base its bodies (those with something to share)
-    for g, body_list in groups.items():
-        if g == "ground" or not rebasable(g) or not (points[g] or vectors[g] or len(body_list) > 1):
+    for g, body_list in welds.groups.items():
+        if g == "ground" or not welds.rebasable(g) or not (points[g] or vectors[g] or len(body_list) > 1):
             continue
         pts, vecs = _choose_basis(d, points[g], vectors[g], body_list[0], scale)
         for b in body_list:
@@ -212,29 +256,32 @@ def share_coordinates(system):
             _rebase(b, pts, vecs, d)
             if old != b.ctype.name or q_old.shape != b.q0.shape or not np.allclose(q_old, b.q0, rtol=0, atol=1e-12):
                 plan.rebased[b.name] = f"{old} -> {b.ctype.name}"
-    for b in ground_group:                            # welded to the ground: every node fixed
+    for b in welds.groups.get("ground", []):          # welded to the ground: every node fixed
         old = b.ctype.name
         pts, vecs = _choose_basis(d, [], [], b, scale)
         _rebase(b, pts, vecs, d)
         plan.rebased[b.name] = f"{old} -> {b.ctype.name}, welded to the ground (no coordinates)"
 
-    # node classes
-    classes = _Classes()
-    welded_to_ground = {b.name for b in ground_group}
 
-    def point_key(m, world):
+class _NodeKeys:
+    """Node keys: ``(member, slot)`` for a member's slot, ``("ground", "p" or "v", values…)``
+    for a fixed point or axis (the ground's, or a body welded to it)."""
+
+    def __init__(self, welded_to_ground: set, scale: float):
+        self.welded_to_ground, self.scale = welded_to_ground, scale
+
+    def point(self, m, world):
         """The node key of ``m``'s basic point at ``world``, or None."""
-        if m.is_ground:
-            return ("ground", "p") + _key(world)
-        if m.name in welded_to_ground:
+        if m.is_ground or m.name in self.welded_to_ground:
             return ("ground", "p") + _key(world)
         for s in m.ctype.point_slots:
-            if _same(m.slot_position(s), world, scale):
+            if _same(m.slot_position(s), world, self.scale):
                 return (m.name, s)
         return None
 
-    def vector_key(m, axis):
-        if m.is_ground or m.name in welded_to_ground:
+    def vector(self, m, axis):
+        """The node key of ``m``'s base vector along ``axis`` (``("flip", …)`` if opposite), or None."""
+        if m.is_ground or m.name in self.welded_to_ground:
             return ("ground", "v") + _key(axis)
         if m.kind != "body":
             return None
@@ -247,18 +294,23 @@ def share_coordinates(system):
                 return ("flip", m.name, s)
         return None
 
+
+def _share_given(members: list[Member], old_shares: dict, keys: _NodeKeys, classes: _Classes) -> str | None:
+    """Classes from the shares the user wrote; why the pass must stop, or None."""
     for m in members:
-        for s in range(len(m.ctype.slots)):
-            classes.find((m.name, s))
-    for m in members:                                  # shares the user wrote
         for slot, ref in old_shares[m.name].items():
-            ka = point_key(m, np.asarray(ref.position))
-            kb = point_key(ref.member, np.asarray(ref.position))
+            ka = keys.point(m, np.asarray(ref.position))
+            kb = keys.point(ref.member, np.asarray(ref.position))
             if ka is None or kb is None or not classes.union(ka, kb):
-                plan.off = (f"{m.name} shares {ref.label}, which the re-based bodies cannot keep as a basic "
-                            "point (too many points on one welded group), so the coordinates are kept as written")
-                return system, plan
-    for g, body_list in groups.items():               # welded bodies: one set of nodes
+                return (f"{m.name} shares {ref.label}, which the re-based bodies cannot keep as a basic "
+                        "point (too many points on one welded group), so the coordinates are kept as written")
+    return None
+
+
+def _share_welds(welds: _Welds, classes: _Classes, plan: SharingPlan) -> None:
+    """Welded bodies: one set of nodes (fixed ones for those welded to the ground); the
+    welds are eliminated."""
+    for g, body_list in welds.groups.items():
         for b in body_list:
             for s in range(len(b.ctype.slots)):
                 if g == "ground":
@@ -266,18 +318,25 @@ def share_coordinates(system):
                     classes.union((b.name, s), ("ground", kind) + _key(b.slot_position(s)))
                 elif b is not body_list[0]:
                     classes.union((body_list[0].name, s), (b.name, s))
-    for j in welds:
+    for j in welds.joints:
         plan.eliminated[j.name] = "merged"
         plan.dropped[j.name] = (f"{j.name}.coincide", f"{j.name}.lock")
-    for j in sys_c.joints:
+
+
+def _share_joints(system, welds: _Welds, keys: _NodeKeys, classes: _Classes, plan: SharingPlan,
+                  scale: float) -> None:
+    """Point joints share their point, hinges their point and axis (or a second point on an
+    axis fixed to the ground) where the classes allow it; records what each eliminated."""
+    d = system.dim
+    for j in system.joints:
         how = _candidate(j, d)
         if how not in ("point", "hinge"):
             continue
         A, B = j.members()
-        if gid(A) == gid(B):
+        if welds.gid(A) == welds.gid(B):
             continue
         at = j.at()
-        ka, kb = point_key(A, at), point_key(B, at)
+        ka, kb = keys.point(A, at), keys.point(B, at)
         already = ka is not None and kb is not None and classes.find(ka) == classes.find(kb)
         if ka is None or kb is None or not classes.union(ka, kb):
             continue
@@ -285,12 +344,12 @@ def share_coordinates(system):
         what = "implied: the point was already shared" if already else "shared point"
         if how == "hinge":
             axis = j.axis()
-            va, vb = vector_key(A, axis), vector_key(B, axis)
+            va, vb = keys.vector(A, axis), keys.vector(B, axis)
             if va is not None and vb is not None and va[0] != "flip" and vb[0] != "flip" \
                     and classes.union(va, vb):
                 parts.append(f"{j.name}.align")
                 what = "shared point and axis"
-            elif _second_point_to_ground(A, B, at, axis, point_key, classes, scale, welded_to_ground):
+            elif _second_point_to_ground(A, B, at, axis, keys.point, classes, scale, keys.welded_to_ground):
                 parts.append(f"{j.name}.align")
                 what = "two shared points on the axis"
             else:
@@ -300,9 +359,6 @@ def share_coordinates(system):
         elif j.name not in plan.partial:
             plan.eliminated[j.name] = what
         plan.dropped[j.name] = tuple(parts)
-
-    _apply_classes(sys_c, members, classes)
-    return sys_c, plan
 
 
 def _second_point_to_ground(A, B, at, axis, point_key, classes, scale, welded_to_ground) -> bool:

@@ -24,7 +24,8 @@ import numpy as np
 
 from ncgen.errors import OptimizationError
 from ncgen.optim.interpolate import pose_path
-from ncgen.optim.manifold import consistent_configuration, consistent_velocity
+from ncgen.assembly.manifold import consistent_velocity
+from ncgen.optim.conditions import consistent_configuration
 from ncgen.optim.transcription import Guess
 
 

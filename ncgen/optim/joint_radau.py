@@ -30,13 +30,12 @@ quaternions) are not handled; such models use the natural-coordinate GGL form.
 """
 from __future__ import annotations
 
-import weakref
-
 import casadi as ca
 import numpy as np
 
 from ncgen.assembly.tree_dynamics import recursive_inverse_dynamics_function
 from ncgen.errors import ModelError
+from ncgen.model.data import model_data
 from ncgen.optim.radau import radau_coefficients
 from ncgen.optim.transcription import Discretisation, Horizon, Transcription, guess_times, node_times
 
@@ -48,8 +47,6 @@ QUATERNION_JOINTS = ("Spherical", "Free")
 #: coordinates by linear rows), so each point's residual depends on its own unknowns only.
 POINT_RATES = True
 
-_REASONS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-
 
 def joint_space_reason(model) -> str | None:
     """Why ``model`` cannot be transcribed in joint space (None if it can): it must be a
@@ -57,9 +54,10 @@ def joint_space_reason(model) -> str | None:
     with rates that are the derivatives of the coordinates, no other constraints and no
     drives (``Φ(q(q_j)) = 0`` for every ``q_j`` and ``t``), and as many joint rates as
     degrees of freedom.  Cached per model."""
-    if model not in _REASONS:
-        _REASONS[model] = (_reason(model),)
-    return _REASONS[model][0]
+    data = model_data(model)
+    if data.joint_space_reason is None:
+        data.joint_space_reason = (_reason(model),)
+    return data.joint_space_reason[0]
 
 
 def _reason(model) -> str | None:

@@ -12,7 +12,7 @@ Constraint handling (why the equality-constraint Jacobian has full row rank):
 * partial targets (a member's pose) impose only their independent rows
   (:mod:`ncgen.optim.targets`);
 * full-state final and periodic conditions impose their ``dof`` tangent components
-  ``Nᵀ (x_N − x*)`` (:mod:`ncgen.optim.manifold`), never the ``nc`` components the
+  ``Nᵀ (x_N − x*)`` (:mod:`ncgen.optim.conditions`), never the ``nc`` components the
   dynamics already keep; a box around the target (inequalities, inactive at the
   solution) selects the branch;
 * bounds on inputs, states, parameters and the final time are simple variable bounds
@@ -31,10 +31,12 @@ import casadi as ca
 import numpy as np
 
 from ncgen.errors import OptimizationError
+from ncgen.model.model import component_names
 from ncgen.optim.diagnostics import DIAGNOSIS_BUDGET, RELAXABLE, SUCCESS, diagnose, violation_of
 from ncgen.optim.guess import guess_duration, make_guess
-from ncgen.optim.manifold import (BRANCH_RADIUS, consistent_configuration, length_scale, resolve_configuration,
-                                  resolve_velocity, tangent_basis)
+from ncgen.assembly.manifold import tangent_basis
+from ncgen.optim.conditions import (BRANCH_RADIUS, consistent_configuration, length_scale, resolve_configuration,
+                                    resolve_velocity)
 from ncgen.optim.result import OptimalTrajectory, SolverStats
 from ncgen.optim.targets import joint_target, pose_target
 from ncgen.optim.transcription import MODEL_STATE, Horizon
@@ -299,7 +301,7 @@ class NLP:
 
     def _bounds(self, q_init, v_init):
         ocp, model, disc = self.ocp, self.model, self.disc
-        for i, name in enumerate(_component_names(model.input_names, model.input_sizes)):
+        for i, name in enumerate(component_names(model.input_names, model.input_sizes)):
             lo, hi = ocp.u_bounds[:, i]
             self.constrain(f"bound on input {name}", "bound", disc.U[i, :], lo, hi)
         for x, x0, fixed, bounds, what in ((disc.path_q, self.q0, q_init, ocp.q_bounds, "coordinate"),
@@ -454,10 +456,6 @@ def extract(nlp: NLP, val, build_time: float) -> OptimalTrajectory:
                         max_violation=violation, n_variables=int(nlp.opti.nx), n_constraints=int(nlp.opti.ng),
                         method=ocp.transcription.describe())
     return OptimalTrajectory.from_solution(model, t=t, q=q, v=v, lam=lam, u=u, p=p, stats=stats, nlp=nlp)
-
-
-def _component_names(names: list[str], sizes: list[int]) -> list[str]:
-    return [n if s == 1 else f"{n}[{k}]" for n, s in zip(names, sizes) for k in range(s)]
 
 
 def _reference(ref, times, dim: int, name: str):

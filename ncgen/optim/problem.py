@@ -18,7 +18,7 @@ Boundary conditions.  Unless :meth:`initial` is called the motion starts from th
 initial state ``(model.q0, model.v0)``; :meth:`initial` replaces that, and what it leaves
 ``None`` is free.  Full-state targets (``final(q=...)``, ``final(v=...)``,
 :meth:`periodic`) fix only the ``dof`` tangent components (see
-:mod:`ncgen.optim.manifold`); marker conditions fix the components given.
+:mod:`ncgen.optim.conditions`); marker conditions fix the components given.
 """
 from __future__ import annotations
 

@@ -6,7 +6,7 @@ reference configuration ``q_ref`` that meets it (the member's natural coordinate
 pose, the other coordinates assembled onto ``Φ = 0`` from the initial configuration) and
 the selection ``S`` of the coordinates it fixes.  The NLP imposes the rows
 ``Wᵀ S (q_N − q_ref) = 0`` with ``W`` an orthonormal basis of the range of ``S N`` (``N``: the
-tangent basis of the constraints at ``q_ref``, :mod:`ncgen.optim.manifold`): as many rows
+tangent basis of the constraints at ``q_ref``, :mod:`ncgen.optim.conditions`): as many rows
 as the target has independent degrees of freedom once the joints hold, so they never
 repeat a joint equation or a member's own constraints (LICQ), plus a box around ``S q_ref``
 that selects the branch.
@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ncgen.errors import NcgenError, OptimizationError
-from ncgen.optim.manifold import RANK_TOL, tangent_basis
+from ncgen.assembly.manifold import RANK_TOL, tangent_basis
 
 
 

@@ -17,8 +17,9 @@ stepper): the mean force over the output interval ending at that time, impulse s
 """
 from __future__ import annotations
 
-import casadi as ca
 import numpy as np
+
+from ncgen.assembly.derived import slip_function
 
 #: Values of ``contact_state``.
 OPEN, STICK, SLIP = 0, 1, 2
@@ -49,10 +50,7 @@ def smooth_outputs(model, t, q, v, p) -> dict:
 def _tangent_speeds(model, q, v, p) -> np.ndarray:
     """``(n_t, nk)`` slip speeds ``|W_T v|`` (m/s)."""
     nk, nt = model.nk, model.dim - 1
-    qs, vs, ps = ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq), ca.SX.sym("p", model.np)
-    vT = ca.mtimes(model.functions["contact_jacobian"](qs, ps)[1], vs)
-    f = ca.Function("slip", [qs, vs, ps], [vT])
-    out = np.array(f.map(len(q))(q.T, v.T, p)).reshape(nk, nt, len(q))
+    out = np.array(slip_function(model).map(len(q))(q.T, v.T, p)).reshape(nk, nt, len(q))
     return np.linalg.norm(out, axis=1).T
 
 

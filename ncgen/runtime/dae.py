@@ -6,21 +6,18 @@ loads ``dae`` with ``casadi.external`` from the model's compiled package
 (:func:`ncgen.runtime.library.compiled_model`, the one the stepper uses too), which also
 finds its Jacobian kernel ``jac_<model>_dae`` and so gives IDAS exact derivatives; ``"auto"``
 compiles when a C compiler is available and otherwise falls back to the VM with a warning.
-Loaded functions are kept per model for the life of the process.
+The loaded function is kept in the model's data (``model.data.dae``).
 """
 from __future__ import annotations
-
-import weakref
 
 import casadi as ca
 
 from ncgen.codegen.load import warn_no_compiler
 from ncgen.errors import CompilerNotFound, NcgenError
+from ncgen.model.data import model_data
 from ncgen.runtime.library import compiled_functions
 
 BACKENDS = ("vm", "compiled", "auto")
-
-_loaded: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
 def load_dae(model, backend: str) -> tuple[ca.Function, str]:
@@ -30,13 +27,13 @@ def load_dae(model, backend: str) -> tuple[ca.Function, str]:
         raise NcgenError(f"backend: expected one of {', '.join(BACKENDS)}, got {backend!r}")
     if backend == "vm":
         return model.functions["dae"], "vm"
-    cache = _loaded.setdefault(model, {})
-    if "compiled" not in cache:
+    data = model_data(model)
+    if data.dae is None:
         try:
-            cache["compiled"] = compiled_functions(model, ["dae"])["dae"]
+            data.dae = compiled_functions(model, ["dae"])["dae"]
         except CompilerNotFound as e:
             if backend == "compiled":
                 raise
             warn_no_compiler(e)
             return model.functions["dae"], "vm"
-    return cache["compiled"], "compiled"
+    return data.dae, "compiled"

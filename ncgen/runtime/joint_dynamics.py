@@ -3,7 +3,7 @@
 * :func:`forward_dynamics` — ``(q̈, λ)`` from ``M q̈ + Aᵀλ = F(t, q, q̇, u, p)``,
   ``A q̈ = γ`` (the KKT system, no stabilisation terms: on the constraint manifold the
   result is exact).  Joint accelerations: ``model.to_joint_space(q, v, a)``.
-* :func:`forward_dynamics_kernel` — the same KKT solve (CasADi's sparse QR) as one
+* :func:`forward_dynamics_kernel` — the same solve (:func:`ncgen.assembly.derived.kkt_function`) as one
   compiled C function called through ctypes (:class:`~ncgen.codegen.direct.DirectFunction`,
   ~1–2 µs overhead); ``forward_dynamics(..., backend="compiled")`` uses it (compiled once
   per model, cached on disk by content).
@@ -18,14 +18,12 @@
 """
 from __future__ import annotations
 
-import weakref
-
-import casadi as ca
 import numpy as np
 
+from ncgen.assembly.derived import joint_kkt_function, kkt_function
 from ncgen.assembly.joint_space import solve_linear
-from ncgen.assembly.mass import mass_is_regular, sparse_dm
 from ncgen.errors import ModelError
+from ncgen.model.data import model_data
 from ncgen.validation import as_vector
 
 
@@ -37,70 +35,15 @@ def _kkt(model, q, v, t, u, p):
     return A, F, gamma
 
 
-def kkt_function(model) -> ca.Function:
-    """``fd: (t, q, v, u, p) -> (a, lam)`` by the Schur complement of the constant mass
-    matrix: ``(A M⁻¹ Aᵀ) λ = A M⁻¹ F − γ`` (sparse LDLᵀ; M⁻¹ is block-diagonal per member),
-    ``a = M⁻¹ (F − Aᵀ λ)``; no stabilisation terms.  Needs a non-singular M and
-    independent constraints (as the model's other paths do); a singular M (a flat body,
-    :func:`~ncgen.assembly.mass.mass_is_regular` false) takes :func:`kkt_qr_function`."""
-    if not mass_is_regular(model):
-        return kkt_qr_function(model)
-    f = model.functions
-    t, q, v = ca.MX.sym("t"), ca.MX.sym("q", model.nq), ca.MX.sym("v", model.nq)
-    u, p = ca.MX.sym("u", model.nu), ca.MX.sym("p", model.np)
-    A = f["A"](t, q, p)
-    Minv = model.Minv
-    Minv[np.abs(Minv) < 1e-300] = 0.0
-    Mi = ca.MX(sparse_dm(Minv))
-    F = f["F"](t, q, v, u, p)
-    MiF = ca.mtimes(Mi, F)
-    S = ca.mtimes(ca.mtimes(A, Mi), A.T)
-    lam = ca.solve(S, ca.mtimes(A, MiF) - f["gamma"](t, q, v, p), "ldl")
-    a = MiF - ca.mtimes(Mi, ca.mtimes(A.T, lam))
-    return ca.Function("forward_dynamics", [t, q, v, u, p], [a, lam], ["t", "q", "v", "u", "p"], ["a", "lam"])
-
-
-def kkt_qr_function(model) -> ca.Function:
-    """``fd: (t, q, v, u, p) -> (a, lam)`` from the KKT system ``[[M, Aᵀ], [A, 0]] [a; λ] =
-    [F; γ]`` by CasADi's sparse QR: needs no ``M⁻¹``, only ``M`` positive definite on
-    ``null(A)`` (the path of a singular M)."""
-    f = model.functions
-    t, q, v = ca.MX.sym("t"), ca.MX.sym("q", model.nq), ca.MX.sym("v", model.nq)
-    u, p = ca.MX.sym("u", model.nu), ca.MX.sym("p", model.np)
-    A = f["A"](t, q, p)
-    K = ca.blockcat([[ca.MX(sparse_dm(model.M)), A.T], [A, ca.MX(model.nc, model.nc)]])
-    x = ca.solve(K, ca.vertcat(f["F"](t, q, v, u, p), f["gamma"](t, q, v, p)), "qr")
-    return ca.Function("forward_dynamics", [t, q, v, u, p], [x[:model.nq], x[model.nq:]],
-                       ["t", "q", "v", "u", "p"], ["a", "lam"])
-
-
-def joint_kkt_function(model) -> ca.Function:
-    """``fd_j: (t, qj, vj, u, p) -> (aj, a, lam)``: joint space in and out for a tree
-    (:meth:`~ncgen.assembly.joint_space.JointSpace.tree_function`, then :func:`kkt_function`,
-    then ``a_j = J q̈ + J̇ q̇``)."""
-    js = model.joint_space
-    tree = js.tree_function(model.layout)
-    t, qj, vj = ca.MX.sym("t"), ca.MX.sym("qj", js.nq), ca.MX.sym("vj", js.nv)
-    u, p = ca.MX.sym("u", model.nu), ca.MX.sym("p", model.np)
-    q, v = tree(qj, vj)
-    a, lam = kkt_function(model)(t, q, v, u, p)
-    aj = js.accelerations(q, v, a)
-    return ca.Function("joint_forward_dynamics", [t, qj, vj, u, p], [aj, a, lam],
-                       ["t", "qj", "vj", "u", "p"], ["aj", "a", "lam"])
-
-
-_KERNELS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-
-
 def forward_dynamics_kernel(model, *, joint_space: bool = False, cflags=None):
-    """The compiled :func:`kkt_function` of ``model`` (``joint_space=True``: the
-    :func:`joint_kkt_function`, trees only; for ``a_j`` alone
+    """The compiled :func:`~ncgen.assembly.derived.kkt_function` of ``model`` (``joint_space=True``:
+    the :func:`~ncgen.assembly.derived.joint_kkt_function`, trees only; for ``a_j`` alone
     :func:`~ncgen.runtime.tree_kernel.joint_forward_dynamics_kernel` is several times faster)
     as a :class:`~ncgen.codegen.direct.DirectFunction`,
     built once per model (the library is cached by content).  Call ``k(t, q, v, u, p)`` →
     ``[a, lam]``, or ``k(t, qj, vj, u, p)`` → ``[aj, a, lam]`` (buffers reused by the next
     call)."""
-    kernels = _KERNELS.setdefault(model, {})
+    kernels = model_data(model).forward_dynamics_kernels
     hit = kernels.get(joint_space)
     if hit is None:
         from ncgen.codegen.direct import compile_direct

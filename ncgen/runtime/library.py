@@ -3,13 +3,12 @@
 IDAS's ``dae`` (:mod:`ncgen.runtime.dae`), the stepper (:mod:`ncgen.runtime.stepper_library`)
 and any kernel loaded with :func:`compiled_functions`.
 
-The model is constant; what a run needs beyond it (loaded libraries, buffers) lives here
-and in the loaders, keyed by the model object, so a model can be shared between runs.
+The model is constant; what a run needs beyond it (the compiled library, loaded functions)
+lives in its data (:class:`ncgen.model.data.ModelData`), so a model can be shared between runs.
 """
 from __future__ import annotations
 
 import tempfile
-import weakref
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,8 +17,7 @@ import casadi as ca
 from ncgen.codegen import compile_package
 from ncgen.codegen.load import external_functions
 from ncgen.codegen.model_package import generate
-
-_built: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+from ncgen.model.data import model_data
 
 
 @dataclass(frozen=True)
@@ -39,7 +37,7 @@ def compiled_model(model, cflags=None) -> CompiledModel:
     """The compiled package of ``model`` (``cflags`` as in
     :func:`~ncgen.codegen.compile_package`), built on first use and kept for the process."""
     key = tuple(cflags) if isinstance(cflags, (list, tuple)) else cflags
-    cache = _built.setdefault(model, {})
+    cache = model_data(model).libraries
     if key not in cache:
         with tempfile.TemporaryDirectory(prefix="ncgen-") as tmp:
             pkg = generate(model, f"{tmp}/{model.name}")

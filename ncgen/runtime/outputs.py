@@ -8,6 +8,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from ncgen.assembly.derived import residual_function
+
 
 def _mapped(f: ca.Function, n: int, *columns):
     """``f`` on ``n`` instances; each argument has one column per instance, or is shared."""
@@ -19,16 +21,6 @@ def energies(model, t, q, v, p) -> tuple[np.ndarray, np.ndarray]:
     """Kinetic ``T = ½ vᵀ M v`` and potential ``V`` energy (J) per step."""
     T, V = _mapped(model.functions["energy"], len(t), np.asarray(t)[None, :], q.T, v.T, p)
     return np.array(T).reshape(-1), np.array(V).reshape(-1)
-
-
-def residual_function(model) -> ca.Function:
-    """``(t, q, v, p) -> (|Φ|∞, |A v + Φ_t|∞)``: position and velocity constraint drift."""
-    f = model.functions
-    t, q, v = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq)
-    p = ca.SX.sym("p", model.np)
-    phi = f["phi"](t, q, p)
-    phidot = ca.mtimes(f["A"](t, q, p), v) + f["phi_t"](t, q, p)
-    return ca.Function("residuals", [t, q, v, p], [ca.norm_inf(phi), ca.norm_inf(phidot)])
 
 
 def residuals(model, t, q, v, p) -> tuple[np.ndarray, np.ndarray]:

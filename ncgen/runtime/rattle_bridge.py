@@ -13,7 +13,7 @@ branch.  Two forms:
   the tolerance and cheap (generated C).  Used whenever a C compiler is available.
 * :func:`rattle_interval` (the fallback without a compiler): ``n`` NumPy RATTLE steps of
   ``h`` (second order), each solved with the truncated pseudo-inverse of ``A M⁻¹ Aᵀ``
-(:data:`ncgen.runtime.manifold.RCOND`), so a (nearly) dependent constraint direction takes
+(:data:`ncgen.assembly.manifold.RANK_TOL`), so a (nearly) dependent constraint direction takes
 no step and the motion stays on its branch:
 
     q₊ = q + h v + h²/2 M⁻¹ (F − A(q)ᵀ λ),      Φ(t₊, q₊) = 0            (λ by Gauss–Newton)
@@ -32,7 +32,7 @@ from __future__ import annotations
 import numpy as np
 
 from ncgen.codegen.stepper_package import MAX_ITER as STEPPER_MAX_ITER, STATUS
-from ncgen.runtime.manifold import RCOND
+from ncgen.assembly.manifold import RANK_TOL
 from ncgen.runtime.stepper import MAX_STEPS, newton_tolerance
 
 #: Gauss–Newton iterations per step at most.
@@ -64,7 +64,7 @@ def compiled_interval(stepper, x: np.ndarray, lam: np.ndarray, t0: float, dt: fl
 
 def _pinv_solve(K: np.ndarray, r: np.ndarray) -> np.ndarray:
     try:
-        return np.linalg.lstsq(K, r, rcond=RCOND)[0]
+        return np.linalg.lstsq(K, r, rcond=RANK_TOL)[0]
     except np.linalg.LinAlgError as e:
         raise RattleFailure(f"the least-squares solve failed ({e})") from None
 

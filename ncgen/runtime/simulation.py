@@ -16,15 +16,15 @@ from ncgen.runtime.dae import load_dae
 from ncgen.runtime.diagnose import explain, shift_time
 from ncgen.runtime.idas import ChunkedIDAS, ChunkFailure
 from ncgen.runtime.inputs import hold_columns, input_samples, parameter_values, time_grid
-from ncgen.runtime.manifold import NEAR_SINGULAR, ManifoldProjector, robust_algebraic
+from ncgen.assembly.manifold import NEAR_SINGULAR, ManifoldProjector, robust_algebraic
 from ncgen.runtime.progress import Progress
 from ncgen.runtime.rattle_bridge import RattleFailure, compiled_interval, rattle_interval
-from ncgen.runtime.stepper import MAX_HALVINGS, MAX_ITER, TOL, simulate_stepper
+from ncgen.runtime.options import SimulationOptions
+from ncgen.runtime.stepper import simulate_stepper
 from ncgen.runtime.stepper_library import load_stepper
 from ncgen.runtime.trajectory import Trajectory
 from ncgen.validation import as_scalar, as_vector
 
-METHODS = ("idas", "stepper")
 #: The run is split into at most this many chunks (progress updates; see ncgen.runtime.idas).
 CHUNKS = 20
 #: Largest ``nq · nc`` that ``project="auto"`` watches (an SVD of A per output time).
@@ -50,17 +50,16 @@ BRIDGE_MIN_TOL = 1e-12
 BRIDGE_MAX_STEPS = 20_000
 
 
-def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: float | None = None,
-             atol: float | None = None, u=None, p=None, q0=None, v0=None, t0: float | None = None,
-             hold: str = "zoh", backend: str = "vm", progress: bool | None = None,
-             max_steps: int = 50_000, linear_solver: str = "csparse",
-             ic_tolerance: float | None = 1e-6, substeps: int = 1, newton_tol: float = TOL,
-             max_newton: int = MAX_ITER, max_halvings: int = MAX_HALVINGS, order: int = 4,
-             check: bool = True, estimate: bool = True,
-             project: bool | str = "auto") -> Trajectory:
+def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None, t0: float | None = None,
+             options: SimulationOptions | None = None, **shortcuts) -> Trajectory:
     """Integrate ``model`` from ``t0`` (default ``model.t0``) to ``t_end`` and return the
     :class:`~ncgen.runtime.trajectory.Trajectory` on the grid ``t0, t0 + dt, ..., t_end``
     (``dt`` shortened if needed so that ``t_end`` is on the grid).  Times in s.
+
+    How to integrate is ``options`` (:class:`~ncgen.runtime.options.SimulationOptions`,
+    ``nc.SimulationOptions``: defaults, validated once); every field of it can also be given
+    as a keyword argument (``method=``, ``rtol=``, ``substeps=``, ...), which overrides
+    ``options`` for this call.  The options:
 
     Equations: the semi-explicit index-1 DAE ``q̇ = v``, ``v̇ = M⁻¹ (F − Aᵀ λ)``,
     ``0 = A v̇ − γ + 2α Φ̇ + β² Φ`` with the model's Baumgarte coefficients
@@ -99,8 +98,8 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
       of ``A`` at every output time (an SVD each; only models with ``nq · nc ≤``
       :data:`AUTO_MAX_SIZE`), in IDAS chunks of at most :data:`WATCHED_CHUNK` intervals,
       shorter as the ratio falls; every output interval that starts or ends near-singular
-      (ratio below :data:`~ncgen.runtime.manifold.NEAR_SINGULAR`, scaled by the starting
-      ratio, see :mod:`ncgen.runtime.manifold`), or that IDAS fails on close to one, is
+      (ratio below :data:`~ncgen.assembly.manifold.NEAR_SINGULAR`, scaled by the starting
+      ratio, see :mod:`ncgen.assembly.manifold`), or that IDAS fails on close to one, is
       crossed instead by the model's compiled error-controlled RATTLE stepper (order 4,
       tolerance ``max(rtol, atol, 1e-9)``, from the state projected onto both constraint
       levels; compiled on first use; :mod:`ncgen.runtime.rattle_bridge`), which stays on
@@ -133,14 +132,8 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
     Raises :class:`~ncgen.errors.SimulationError` if IDAS fails; it names the time reached
     and the likely cause, and carries the trajectory up to that time (``.trajectory``).
     """
-    if method not in METHODS:
-        raise NcgenError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
-    tolerances = {"rtol": 1.0 if rtol is None else rtol, "atol": 1.0 if atol is None else atol,
-                  "ic_tolerance": 1.0 if ic_tolerance is None else ic_tolerance}
-    for name, tol in tolerances.items():
-        if not (math.isfinite(tol) and tol > 0):
-            raise NcgenError(f"{name}: expected a positive tolerance, got {tol!r}")
-    if method == "idas" and getattr(model, "contact_model", "smooth") == "nonsmooth" and model.nk:
+    opts = SimulationOptions.resolve(options, **shortcuts)
+    if opts.method == "idas" and getattr(model, "contact_model", "smooth") == "nonsmooth" and model.nk:
         raise NcgenError(f"simulate: model {model.name!r} was built with contacts='nonsmooth', which only "
                          "the compiled stepper handles: use method='stepper', or build the model with "
                          "contacts='smooth' (compliant contacts) for IDAS")
@@ -148,28 +141,30 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
     t = time_grid(t0, t_end, dt, bytes_per_point=point_bytes(model))
     pv = parameter_values(p, model)
     U = input_samples(u, model, t)
-    columns = hold_columns(U, t, hold)
-    q, v = initial_state(model, q0, v0, t0, pv, ic_tolerance)
-    if method == "stepper":
+    columns = hold_columns(U, t, opts.hold)
+    q, v = initial_state(model, q0, v0, t0, pv, opts.ic_tolerance)
+    if opts.method == "stepper":
         lam = initial_multipliers(model, t0, q, v, U[0], pv, load_dae(model, "vm")[0])
-        return simulate_stepper(model, t, U, pv, q, v, lam, hold=hold, substeps=substeps, tol=newton_tol,
-                                max_iter=max_newton, max_halvings=max_halvings, rtol=rtol, atol=atol,
-                                order=order, max_steps=max_steps, check=check, estimate=estimate)
-    rtol, atol = 1e-8 if rtol is None else rtol, 1e-10 if atol is None else atol
-    dae, used = load_dae(model, backend)
+        return simulate_stepper(model, t, U, pv, q, v, lam, opts)
+    return _simulate_idas(model, t, U, columns, pv, q, v, opts)
+
+
+def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions) -> Trajectory:
+    """IDAS over the grid ``t`` from the consistent state ``(q, v)`` (see :func:`simulate`)."""
+    t0, hold, project = float(t[0]), opts.hold, opts.project
+    rtol, atol = 1e-8 if opts.rtol is None else opts.rtol, 1e-10 if opts.atol is None else opts.atol
+    dae, used = load_dae(model, opts.backend)
     lam = initial_multipliers(model, t0, q, v, U[0], pv, dae)
     a = np.array(model.functions["ode"](t0, q, v, lam, U[0], pv)[1]).reshape(-1)
     runner = ChunkedIDAS(dae, h=float(t[1] - t[0]), nu=model.nu, hold=hold, rtol=rtol, atol=atol,
-                         max_steps=int(max_steps), linear_solver=linear_solver, expand=(used == "vm"),
+                         max_steps=opts.max_steps, linear_solver=opts.linear_solver, expand=(used == "vm"),
                          algebraic=lambda tk, x, uk: _algebraic(model, tk, x, uk, pv))
-    if project not in (True, False, "auto"):
-        raise NcgenError(f"project: expected True, False or 'auto', got {project!r}")
     watch = project == "auto" and model.nq * model.nc <= AUTO_MAX_SIZE and model.nc > 0
     projector = ManifoldProjector(model, pv, atol) if project is True or watch else None
     if projector is not None:
         projector.start(t0, np.concatenate([q, v]))
     bridge = _bridge(model, runner, pv, rtol, atol) if projector is not None else None
-    bar = Progress(t0, t[-1], progress, label=f"simulating {model.name}: ")
+    bar = Progress(t0, t[-1], opts.progress, label=f"simulating {model.name}: ")
     start = time.perf_counter()
     try:
         X, Z, failure, projected_from = _run(runner, t, np.concatenate([q, v]), np.concatenate([a, lam]), columns,
@@ -180,8 +175,8 @@ def simulate(model, t_end: float, dt: float, *, method: str = "idas", rtol: floa
     stats = dict(runner.stats)
     if projector is not None:
         stats.update(projector.counts, rattle_intervals=bridge.count)
-    info = {"method": method, "backend": used, "rtol": rtol, "atol": atol, "hold": hold,
-            "linear_solver": linear_solver, "stats": stats, "project": project,
+    info = {"method": opts.method, "backend": used, "rtol": rtol, "atol": atol, "hold": hold,
+            "linear_solver": opts.linear_solver, "stats": stats, "project": project,
             "projected_from": None if projected_from is None else float(t[projected_from]),
             "wall_time": time.perf_counter() - start, "complete": failure is None}
     if failure is not None:
@@ -234,7 +229,7 @@ def initial_multipliers(model, t0: float, q, v, u, p, dae) -> np.ndarray:
 def _algebraic(model, t: float, x, u, p) -> np.ndarray:
     """``z = [a; λ]`` consistent with the state ``x = [q; v]`` and input ``u`` at ``t``: the KKT
     system, which is the DAE's algebraic equations, solved rank-robustly
-    (:func:`~ncgen.runtime.manifold.robust_algebraic`).  Non-finite values raise
+    (:func:`~ncgen.assembly.manifold.robust_algebraic`).  Non-finite values raise
     :class:`~ncgen.runtime.idas.ChunkFailure` (never a raw CasADi error)."""
     z = robust_algebraic(model, t, x[:model.nq], x[model.nq:], u, p)
     if not np.all(np.isfinite(z)):

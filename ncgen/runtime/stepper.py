@@ -36,78 +36,54 @@ solve the KKT system.
 """
 from __future__ import annotations
 
-import math
 import time
-import warnings
 
 import numpy as np
 
-from ncgen.codegen.stepper_package import HALVINGS_LIMIT, MAX_HALVINGS, MAX_ITER, STATS, STATUS, TOL
-from ncgen.errors import AccuracyWarning, NcgenError, SimulationError
-from ncgen.runtime.inputs import HOLDS
-from ncgen.runtime.stepper_checks import (ERROR_FRACTION, GLOBAL_FACTOR, SHADOW_FACTOR, contact_report,
-                                          energy_report, error_estimate, is_conservative, shadow_estimates,
-                                          shadow_report, untrusted_global_row,
-                                          untrusted_row)
+from ncgen.codegen.stepper_package import STATS, STATUS, TOL
+from ncgen.errors import NcgenError, SimulationError
+from ncgen.runtime.options import SimulationOptions
+from ncgen.runtime.stepper_checks import (SHADOW_FACTOR, check_fixed, check_global, contact_report, energy_report,
+                                          error_estimate, is_conservative, shadow_estimates, shadow_report,
+                                          warn_unconverged)
 from ncgen.runtime.stepper_library import load_stepper
 from ncgen.runtime.trajectory import NAME_KEYS, Trajectory, derived_outputs
 
 #: With error control, the Newton tolerance is at most this fraction of min(rtol, atol)
 #: (floored at 1e-14), so that Newton's residual stays below the error estimates.
 NEWTON_FRACTION = 1e-3
-#: Default step attempts allowed per output interval with error control.
+#: Step attempts allowed per output interval of the RATTLE bridge
+#: (:func:`ncgen.runtime.rattle_bridge.compiled_interval`).
 MAX_STEPS = 100_000
 
 
 def simulate_stepper(model, t: np.ndarray, U: np.ndarray, p: np.ndarray, q0: np.ndarray, v0: np.ndarray,
-                     lam0: np.ndarray, *, hold: str = "zoh", substeps: int = 1, tol: float = TOL,
-                     max_iter: int = MAX_ITER, max_halvings: int = MAX_HALVINGS, rtol: float | None = None,
-                     atol: float | None = None, order: int = 4, max_steps: int = MAX_STEPS,
-                     check: bool = True, estimate: bool = True, cflags=None) -> Trajectory:
+                     lam0: np.ndarray, options: SimulationOptions | None = None, *, cflags=None,
+                     **shortcuts) -> Trajectory:
     """Integrate ``model`` over the uniform grid ``t`` (s) from the consistent state
     ``(q0, v0)`` with multipliers ``lam0`` at ``t[0]``; ``U`` holds the input samples on the
-    grid, shape ``(len(t), nu)``, ``p`` the parameter values.  ``rtol`` (and ``atol``, default
-    ``rtol``, units of q and v) switch to error control (module docstring); ``check=False``
-    turns off the checks of a fixed-step run, ``estimate=False`` its error estimate (and so
-    the error check).  Raises :class:`~ncgen.errors.SimulationError` naming the time and the
-    cause, with the trajectory up to the last output time before it."""
-    substeps, max_iter, max_halvings = int(substeps), int(max_iter), int(max_halvings)
-    _check_options(substeps, tol, max_iter, max_halvings, hold, rtol, atol, order, max_steps)
+    grid, shape ``(len(t), nu)``, ``p`` the parameter values.  ``options``
+    (:class:`~ncgen.runtime.options.SimulationOptions`; keyword arguments are shortcuts for
+    its fields): ``rtol`` (and ``atol``, default ``rtol``, units of q and v) switch to error
+    control (module docstring); ``check=False`` turns off the checks of a fixed-step run,
+    ``estimate=False`` its error estimate (and so the error check).  Raises
+    :class:`~ncgen.errors.SimulationError` naming the time and the cause, with the
+    trajectory up to the last output time before it."""
+    opts = SimulationOptions.resolve(options, **shortcuts)
     stepper = load_stepper(model, cflags)
     conservative = is_conservative(model)
-    if rtol is not None and stepper.nd:
+    if opts.rtol is not None and stepper.nd:
         raise NcgenError(f"rtol: model {model.name!r} has nonsmooth contacts, whose impacts the error control "
                          f"cannot follow; use fixed steps (substeps=N) or build it with contacts='smooth'")
-    if rtol is None:
-        return _fixed(model, stepper, t, U, p, q0, v0, lam0, hold, substeps, tol, max_iter, max_halvings,
-                      check, bool(estimate), conservative)
-    return _adaptive(model, stepper, t, U, p, q0, v0, lam0, hold, tol, max_iter, float(rtol),
-                     float(rtol if atol is None else atol), order, int(max_steps), conservative, check,
-                     bool(estimate))
+    run = _fixed if opts.rtol is None else _adaptive
+    return run(model, stepper, t, U, p, q0, v0, lam0, opts, conservative)
 
 
-def _check_options(substeps, tol, max_iter, max_halvings, hold, rtol, atol, order, max_steps):
-    if substeps < 1:
-        raise NcgenError(f"substeps: expected a positive number of steps per output interval, got {substeps}")
-    if not (math.isfinite(tol) and tol > 0):
-        raise NcgenError(f"tol: expected a positive Newton tolerance, got {tol!r}")
-    if max_iter < 1:
-        raise NcgenError(f"max_iter: expected at least one Newton iteration, got {max_iter}")
-    if not 0 <= max_halvings <= HALVINGS_LIMIT:
-        raise NcgenError(f"max_halvings: expected 0 to {HALVINGS_LIMIT} step halvings, got {max_halvings}")
-    if hold not in HOLDS:
-        raise NcgenError(f"hold: expected one of {', '.join(HOLDS)}, got {hold!r}")
-    for name, value in (("rtol", rtol), ("atol", atol)):
-        if value is not None and not (math.isfinite(value) and value > 0):
-            raise NcgenError(f"{name}: expected a positive tolerance, got {value!r}")
-    if order not in (2, 4):
-        raise NcgenError(f"order: expected 2 (RATTLE) or 4 (Richardson-extrapolated RATTLE), got {order!r}")
-    if int(max_steps) < 1:
-        raise NcgenError(f"max_steps: expected a positive number of steps, got {max_steps!r}")
-
-
-def _fixed(model, stepper, t, U, p, q0, v0, lam0, hold, substeps, tol, max_iter, max_halvings, check,
-           estimate, conservative) -> Trajectory:
+def _fixed(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, conservative: bool) -> Trajectory:
+    """Fixed steps (module docstring)."""
+    hold, substeps, tol, max_iter, max_halvings = opts.hold, opts.substeps, opts.newton_tol, opts.max_newton, \
+        opts.max_halvings
+    check, estimate = opts.check, opts.estimate
     n_out = len(t) - 1
     h = float(t[1] - t[0]) / substeps
     contacts = stepper.nd > 0          # nonsmooth contacts: no shadow run, one-sided energy check
@@ -126,7 +102,7 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, hold, substeps, tol, max_iter,
                        None if IMP is None else IMP[:rows])
     if contacts:
         traj.info["contacts"] = contact_report(S[:rows])
-        _warn_unconverged(model, traj.info["contacts"])
+        warn_unconverged(model, traj.info["contacts"])
     if status != 0:
         t_fail = float(t[0]) + done * h
         message = (f"simulation of {model.name!r} with the stepper failed in the step from "
@@ -136,39 +112,16 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, hold, substeps, tol, max_iter,
         traj.info["message"] = message
         raise SimulationError(message, time=float(t[rows]), trajectory=traj)
     if check:
-        bad = untrusted_row(model, traj, S[:rows], h, contacts=contacts)
-        if bad is not None:
-            row, reason = bad
-            kept = traj.head(row + 1)          # the states before C row `row`
-            message = (f"simulation of {model.name!r} with the stepper (fixed step h = {h:.3g} s) is not "
-                       f"trustworthy: {reason}. The trajectory up to t = {kept.t[-1]:.6g} s, before the "
-                       f"problem showed, is attached to this error as .trajectory "
-                       f"(check=False returns the whole run unchecked).")
-            work = np.concatenate([[0.0], S[:row, STATS.index("work")]])
-            kept.info.update(complete=False, message=message, error_estimate=error_estimate(S[:row], substeps),
-                             energy=energy_report(kept, work, conservative))
-            raise SimulationError(message, time=float(kept.t[-1]), trajectory=kept)
+        check_fixed(model, traj, S[:rows], h, substeps, contacts, conservative)
     return traj
 
 
-def _warn_unconverged(model, report: dict) -> None:
-    """Warnings when some contact solves stopped at the sweep limit, and when the push-out
-    left a penetration deeper than ten times its tolerance (see
-    :func:`~ncgen.runtime.stepper_checks.contact_report`)."""
-    if report["penetration"] > 10 * report["penetration_tol"]:
-        warnings.warn(f"simulate: contacts of {model.name!r} ended a step up to {report['penetration']:.3g} m inside "
-                      f"(the push-out aims at {report['penetration_tol']:g} m and is repeated at most 4 times "
-                      f"per step; info['contacts'])", stacklevel=5)
-    if report["pgs_unconverged"]:
-        warnings.warn(f"simulate: {report['pgs_unconverged']} contact solve(s) of {model.name!r} stopped at "
-                      f"{report['pgs_max_sweeps']} projected Gauss-Seidel sweeps before the contact velocities "
-                      f"settled to {report['pgs_tol']:g} (1 + max|U|) m/s; the last sweep still changed one by up to "
-                      f"{report['pgs_residual']:.3g} (1 + max|U|) m/s (info['contacts']; redundant contacts, as under "
-                      f"a body or a chain lying flat or in a pile, make it crawl, and friction can make it cycle)", stacklevel=5)
-
-
-def _adaptive(model, stepper, t, U, p, q0, v0, lam0, hold, tol, max_iter, rtol, atol, order, max_steps,
-              conservative, check, estimate) -> Trajectory:
+def _adaptive(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, conservative: bool) -> Trajectory:
+    """Error control (module docstring)."""
+    hold, tol, max_iter, order, max_steps = opts.hold, opts.newton_tol, opts.max_newton, opts.order, opts.max_steps
+    check, estimate = opts.check, opts.estimate
+    rtol = opts.rtol
+    atol = rtol if opts.atol is None else opts.atol
     n_out = len(t) - 1
     dt = float(t[1] - t[0])
     start = time.perf_counter()
@@ -199,33 +152,8 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, hold, tol, max_iter, rtol, 
         eq, ev = shadow_estimates(Q, V, shadow, rows)
         traj.info["error_estimate"] = shadow_report(traj, eq, ev, rtol, atol)
         if check:
-            _check_global(model, traj, eq, rtol, atol)
+            check_global(model, traj, eq, rtol, atol)
     return traj
-
-
-def _check_global(model, traj, eq, rtol, atol):
-    """Raise where the global estimate in q passes 1 % of the model's size (as for fixed
-    steps), warn (:class:`~ncgen.errors.AccuracyWarning`) where it passes
-    :data:`~ncgen.runtime.stepper_checks.GLOBAL_FACTOR` × the tolerance."""
-    row = untrusted_global_row(model, eq)
-    if row is not None:
-        kept = traj.head(row + 1)
-        message = (f"simulation of {model.name!r} with the error-controlled stepper (rtol {rtol:g}, atol {atol:g}) "
-                   f"is not trustworthy: the estimated global error in q reached {eq[row]:.3g} m by "
-                   f"t = {traj.t[row + 1]:.6g} s, more than {ERROR_FRACTION:g} of the model's size. rtol bounds "
-                   f"the error of each step; errors that grow along the motion (chaotic or fast-spinning "
-                   f"motion) need a smaller rtol, or the motion cannot be followed that far. The trajectory up "
-                   f"to t = {kept.t[-1]:.6g} s is attached to this error as .trajectory (check=False returns "
-                   f"the whole run unchecked).")
-        kept.info.update(complete=False, message=message)
-        raise SimulationError(message, time=float(kept.t[-1]), trajectory=kept)
-    report = traj.info["error_estimate"]
-    if report["exceeds_tolerance"]:
-        warnings.warn(f"simulation of {model.name!r} with the error-controlled stepper: the estimated global "
-                      f"error at the end ({report['q']:.3g} in q, {report['v']:.3g} in v) is more than "
-                      f"{GLOBAL_FACTOR:g} times the tolerance (rtol {rtol:g}, atol {atol:g}): rtol bounds the "
-                      f"error of each step, and errors grow along this motion; use a smaller rtol if the end "
-                      f"state matters (traj.info['error_estimate'])", AccuracyWarning, stacklevel=4)
 
 
 def newton_tolerance(rtol: float, atol: float, tol: float = TOL) -> float:

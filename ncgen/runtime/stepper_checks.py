@@ -1,5 +1,7 @@
 """What a stepper run says about its own accuracy: error estimates, the energy report, and
-the checks that make an untrustworthy fixed-step run an error.
+the checks the driver (:mod:`ncgen.runtime.stepper`) calls last: :func:`check_fixed` and
+:func:`check_global` make an untrustworthy run an error (or a warning),
+:func:`warn_unconverged` reports contact solves that stopped early.
 
 A fixed-step run (:func:`ncgen.runtime.stepper.simulate_stepper` without ``rtol``) is
 **untrustworthy** from the first output interval where
@@ -41,12 +43,14 @@ misses that growth.
 from __future__ import annotations
 
 import math
-import weakref
+import warnings
 
-import casadi as ca
 import numpy as np
 
+from ncgen.assembly.derived import depends_on_time, potential_force_residual_function
 from ncgen.codegen.stepper_package import CONTACT_STATS, PENETRATION_TOL, PGS_MAX_ITER, PGS_TOL, STATS
+from ncgen.errors import AccuracyWarning, SimulationError
+from ncgen.model.data import model_data
 
 #: Largest allowed change of a conservative model's energy, and error of the energy balance
 #: of a non-conservative one, as a fraction of the energy scale ``max(|E|, T, |V − V0|, |W|)``
@@ -69,29 +73,82 @@ SHADOW_FACTOR = 10.0
 GLOBAL_FACTOR = 100.0
 
 
-_conservative: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+def check_fixed(model, traj, S: np.ndarray, h: float, substeps: int, contacts: bool, conservative: bool) -> None:
+    """Raise :class:`~ncgen.errors.SimulationError` from the first output interval where a
+    fixed-step run is untrustworthy (module docstring), with the trajectory before it."""
+    bad = untrusted_row(model, traj, S, h, contacts=contacts)
+    if bad is None:
+        return
+    row, reason = bad
+    kept = traj.head(row + 1)          # the states before C row `row`
+    message = (f"simulation of {model.name!r} with the stepper (fixed step h = {h:.3g} s) is not "
+               f"trustworthy: {reason}. The trajectory up to t = {kept.t[-1]:.6g} s, before the "
+               f"problem showed, is attached to this error as .trajectory "
+               f"(check=False returns the whole run unchecked).")
+    work = np.concatenate([[0.0], S[:row, STATS.index("work")]])
+    kept.info.update(complete=False, message=message, error_estimate=error_estimate(S[:row], substeps),
+                     energy=energy_report(kept, work, conservative))
+    raise SimulationError(message, time=float(kept.t[-1]), trajectory=kept)
+
+
+def check_global(model, traj, eq, rtol, atol):
+    """Raise where the global estimate in q passes 1 % of the model's size (as for fixed
+    steps), warn (:class:`~ncgen.errors.AccuracyWarning`) where it passes
+    :data:`GLOBAL_FACTOR` × the tolerance."""
+    row = untrusted_global_row(model, eq)
+    if row is not None:
+        kept = traj.head(row + 1)
+        message = (f"simulation of {model.name!r} with the error-controlled stepper (rtol {rtol:g}, atol {atol:g}) "
+                   f"is not trustworthy: the estimated global error in q reached {eq[row]:.3g} m by "
+                   f"t = {traj.t[row + 1]:.6g} s, more than {ERROR_FRACTION:g} of the model's size. rtol bounds "
+                   f"the error of each step; errors that grow along the motion (chaotic or fast-spinning "
+                   f"motion) need a smaller rtol, or the motion cannot be followed that far. The trajectory up "
+                   f"to t = {kept.t[-1]:.6g} s is attached to this error as .trajectory (check=False returns "
+                   f"the whole run unchecked).")
+        kept.info.update(complete=False, message=message)
+        raise SimulationError(message, time=float(kept.t[-1]), trajectory=kept)
+    report = traj.info["error_estimate"]
+    if report["exceeds_tolerance"]:
+        warnings.warn(f"simulation of {model.name!r} with the error-controlled stepper: the estimated global "
+                      f"error at the end ({report['q']:.3g} in q, {report['v']:.3g} in v) is more than "
+                      f"{GLOBAL_FACTOR:g} times the tolerance (rtol {rtol:g}, atol {atol:g}): rtol bounds the "
+                      f"error of each step, and errors grow along this motion; use a smaller rtol if the end "
+                      f"state matters (traj.info['error_estimate'])", AccuracyWarning, stacklevel=4)
+
+
+def warn_unconverged(model, report: dict) -> None:
+    """Warnings when some contact solves stopped at the sweep limit, and when the push-out
+    left a penetration deeper than ten times its tolerance (see
+    :func:`~ncgen.runtime.stepper_checks.contact_report`)."""
+    if report["penetration"] > 10 * report["penetration_tol"]:
+        warnings.warn(f"simulate: contacts of {model.name!r} ended a step up to {report['penetration']:.3g} m inside "
+                      f"(the push-out aims at {report['penetration_tol']:g} m and is repeated at most 4 times "
+                      f"per step; info['contacts'])", stacklevel=5)
+    if report["pgs_unconverged"]:
+        warnings.warn(f"simulate: {report['pgs_unconverged']} contact solve(s) of {model.name!r} stopped at "
+                      f"{report['pgs_max_sweeps']} projected Gauss-Seidel sweeps before the contact velocities "
+                      f"settled to {report['pgs_tol']:g} (1 + max|U|) m/s; the last sweep still changed one by up to "
+                      f"{report['pgs_residual']:.3g} (1 + max|U|) m/s (info['contacts']; redundant contacts, as under "
+                      f"a body or a chain lying flat or in a pile, make it crawl, and friction can make it cycle)", stacklevel=5)
 
 
 def is_conservative(model) -> bool:
     """True if the model's forces are conservative and its constraints scleronomic:
     ``Φ_t`` and ``∂V/∂t`` are structurally zero and ``F = −∇V`` at random states with random
-    rates and inputs (so that dampers, drives and input forces all count).  Kept per model."""
-    if model not in _conservative:
-        _conservative[model] = _is_conservative(model)
-    return _conservative[model]
+    rates and inputs (so that dampers, drives and input forces all count).  Kept in the model's data."""
+    data = model_data(model)
+    if data.conservative is None:
+        data.conservative = _is_conservative(model)
+    return data.conservative
 
 
 def _is_conservative(model, samples: int = 3, seed: int = 0) -> bool:
-    f = model.functions
-    t, q, v = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq)
-    u, p = ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
-    V = ca.sum1(model.potential_terms(t, q, p))
-    if ca.depends_on(ca.densify(f["phi_t"](t, q, p)), ca.vertcat(t, q)) or ca.depends_on(V, t):
+    if depends_on_time(model):
         return False
-    if np.any(np.asarray(f["phi_t"](model.t0, model.q0, model.p0)) != 0):
+    if np.any(np.asarray(model.functions["phi_t"](model.t0, model.q0, model.p0)) != 0):
         return False
-    F = f["F"](t, q, v, u, p)
-    residual = ca.Function("F_nc", [t, q, v, u, p], [F + ca.gradient(V, q), F])
+    residual = potential_force_residual_function(model)
     rng = np.random.default_rng(seed)
     for _ in range(samples):
         qs = model.q0 + 0.1 * rng.standard_normal(model.nq)

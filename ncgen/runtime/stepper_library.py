@@ -3,14 +3,12 @@
 from __future__ import annotations
 
 import ctypes
-import weakref
 
 import numpy as np
 
 from ncgen.codegen.stepper_package import n_impulses, n_outputs, n_stats
+from ncgen.model.data import model_data
 from ncgen.runtime.library import compiled_model
-
-_loaded: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
 class CompiledStepper:
@@ -146,7 +144,7 @@ def load_stepper(model, cflags=None) -> CompiledStepper:
     """The compiled stepper of ``model``, bound from its compiled package
     (:func:`ncgen.runtime.library.compiled_model`, shared with IDAS and the kernels)."""
     key = tuple(cflags) if isinstance(cflags, (list, tuple)) else cflags
-    cache = _loaded.setdefault(model, {})
+    cache = model_data(model).steppers
     if key not in cache:
         library = compiled_model(model, cflags).library
         cache[key] = CompiledStepper(str(library), model.name, model.nq, model.nc, model.nu, model.np,

@@ -164,10 +164,10 @@ class Trajectory:
 
     def reaction(self, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """``(force, moment, effort)`` of joint ``name`` per step, from the multipliers
-        (:func:`ncgen.runtime.reactions.joint_reactions`): force ``(n_t, dim)`` in N and moment
+        (:func:`ncgen.analysis.reactions.joint_reactions`): force ``(n_t, dim)`` in N and moment
         (N·m; ``(n_t, 3)``, or ``(n_t,)`` in 2D) on the joint's second member in world axes
         about the joint point; ``effort`` ``(n_t, ...)`` for driven or actuated joints, else None."""
-        from ncgen.runtime.reactions import joint_reactions
+        from ncgen.analysis.reactions import joint_reactions
 
         model = self._model("reaction()")
         rows = [joint_reactions(model, q, lam, v=v, t=t, u=u, p=self.p, joints=[name]).get(name)

@@ -19,11 +19,11 @@ has exactly as many degrees of freedom as joint rates).
 from __future__ import annotations
 
 import ctypes
-import weakref
 
 import numpy as np
 
 from ncgen.errors import ModelError
+from ncgen.model.data import model_data
 from ncgen.runtime.joint_dynamics import forward_dynamics
 from ncgen.validation import as_vector
 
@@ -37,8 +37,6 @@ METHODS = ("auto", "recursive", "projection")
 #: -O1 time grows faster than linearly (a 40-hinge chain, 55 k instructions: 20 s).
 O1_INSTRUCTIONS = 40_000
 
-_KERNELS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-_PRIVATE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()     # joint_forward_dynamics' own copies
 
 
 class JointDynamicsKernel:
@@ -131,7 +129,7 @@ def joint_forward_dynamics_kernel(model, *, method: str = "auto", cflags=None) -
 
     if method not in METHODS:
         raise ModelError(f"joint_forward_dynamics_kernel: method: expected one of {', '.join(METHODS)}, got {method!r}")
-    kernels = _KERNELS.setdefault(model, {})
+    kernels = model_data(model).tree_kernels
     hit = kernels.get((method, cflags))
     if isinstance(hit, ModelError):
         raise hit
@@ -198,13 +196,14 @@ def joint_forward_dynamics(model, qj, vj, u=None, p=None, t: float = 0.0, *, bac
     p = model.p0 if p is None else as_vector(p, model.np, "p")
     qj = _unit_quaternions(js, qj)
     if backend == "compiled":
-        k = _PRIVATE.get(model)
-        if k is None:
+        data = model_data(model)
+        if data.tree_kernel is None:
             try:
-                k = _PRIVATE[model] = joint_forward_dynamics_kernel(model).copy()
+                data.tree_kernel = joint_forward_dynamics_kernel(model).copy()
             except ModelError:
-                k = None
-        if k is not None:
+                data.tree_kernel = False
+        k = data.tree_kernel
+        if k:
             k.set(t=t, p=p)
             return k(qj, vj, u).copy()
     q, v = model.from_joint_space(qj, vj, t=t, p=p)

@@ -147,8 +147,3 @@ def newton_euler_bias(M_b, T_b) -> sp.Matrix:
     """
     T = as_vector(T_b, 6)
     return -ad(T).T * sp.Matrix(M_b) * T
-
-
-def newton_euler_residual(M_b, T_b, dT_b, W_b) -> sp.Matrix:
-    """``M_b dT_b/dt − ad(T_b)ᵀ M_b T_b − W_b``; zero along a motion of the body."""
-    return sp.Matrix(M_b) * as_vector(dT_b, 6) + newton_euler_bias(M_b, T_b) - as_vector(W_b, 6)

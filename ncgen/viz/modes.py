@@ -1,7 +1,7 @@
 """Pictures of statics results: the equilibrium configuration and mode shapes (PNG).
 
 Each mode is drawn at its two extreme deflections (``±`` amplitude, solid and faded) over
-the equilibrium, one panel per mode, from :meth:`ncgen.runtime.modes.Modes.trajectory`."""
+the equilibrium, one panel per mode, from :meth:`ncgen.analysis.modes.Modes.trajectory`."""
 from __future__ import annotations
 
 import math
@@ -65,7 +65,7 @@ def animate_mode(modes, index: int, path, *, amplitude: float | None = None, cyc
                  frames_per_cycle: int = 40, **kwargs):
     """Write an animation (``.gif``/``.mp4``, :func:`ncgen.viz.animate`) of mode ``index``
     (0-based) of ``modes`` (:func:`ncgen.modes`): the motion of
-    :meth:`~ncgen.runtime.modes.Modes.trajectory`, drawn on the constraint manifold for
+    :meth:`~ncgen.analysis.modes.Modes.trajectory`, drawn on the constraint manifold for
     ``cycles`` periods; ``amplitude`` in m of the largest coordinate motion (default 5 % of
     the system's size)."""
     return animate(modes.trajectory(index, amplitude=amplitude, cycles=cycles,

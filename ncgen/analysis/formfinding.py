@@ -7,7 +7,7 @@ Topology: ``nodes`` (n × dim, a guess of the configuration), ``struts`` and ``c
 
 * **rest lengths** (``rest_lengths``, one per cable, and the cable stiffness
   ``stiffness``, N/m): the struts keep their lengths in ``nodes``; the configuration is the
-  stable static equilibrium :func:`~ncgen.runtime.statics.equilibrium` reaches from
+  stable static equilibrium :func:`~ncgen.analysis.statics.equilibrium` reaches from
   ``nodes`` (descent Newton; rigid motions are zero-stiffness directions it leaves alone).
 * **force densities** (``force_densities``: one per cable, then one per strut, N/m; cables
   positive, struts negative): the force density method.  With the incidence matrix ``C``
@@ -32,9 +32,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ncgen.errors import NcgenError
-from ncgen.runtime.modes import Modes, modes
-from ncgen.runtime.statics import Equilibrium, equilibrium
-from ncgen.runtime.tangent import classify
+from ncgen.analysis.modes import Modes, modes
+from ncgen.analysis.statics import Equilibrium, equilibrium
+from ncgen.analysis.stability import classify
 
 #: Eigenvalues of D below this times max |ρ| count as zero (force density method).
 FDM_TOL = 1e-9

@@ -1,4 +1,5 @@
-"""The constraint manifold at a configuration: consistent states and tangent projections.
+"""Conditions on full states in optimal control: consistent configurations and velocities
+(the manifold's numerics are in :mod:`ncgen.assembly.manifold`).
 
 The transcriptions integrate the index-1 dynamics, whose invariants are ``Φ(q) = 0`` and
 ``A v + Φ_t = 0``.  A full-state target ``q*`` (or ``v*``) therefore fixes only ``dof``
@@ -15,20 +16,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from ncgen.assembly.manifold import consistent_velocity
 from ncgen.errors import OptimizationError
-from ncgen.runtime.tangent import null_basis
 
 #: Half-width of the box that selects the branch of a configuration condition, as a
 #: fraction of the shortest member dimension.
 BRANCH_RADIUS = 0.25
 
-#: Singular values of A below this fraction of the largest count as zero.
-RANK_TOL = 1e-9
-
-
-def tangent_basis(model, q, t=None, p=None) -> np.ndarray:
-    """Orthonormal basis (nq × dof) of the null space of ``A(q)`` (:func:`ncgen.runtime.tangent.null_basis`)."""
-    return null_basis(model.A(q, t=t, p=p), model.nq, RANK_TOL)
 
 
 def consistent_configuration(model, q, *, t=None, p=None, what: str = "q", tolerance: float = 1e-3,
@@ -58,18 +52,6 @@ def consistent_configuration(model, q, *, t=None, p=None, what: str = "q", toler
             f"making it consistent moves {model.coordinate_names[k]} by {dq[k]:.3g} m. Give a "
             "configuration that satisfies the joints (e.g. from model.q0 or a simulation)")
     return q
-
-
-def consistent_velocity(model, q, v, *, t=None, p=None) -> np.ndarray:
-    """The M-orthogonal projection of ``v`` onto ``A(q) v + Φ_t = 0``."""
-    A = np.atleast_2d(model.A(q, t=t, p=p))
-    v = np.asarray(v, dtype=float)
-    if A.shape[0] == 0:
-        return v.copy()
-    phi_t = np.array(model.functions["phi_t"](model.t0 if t is None else t, q,
-                                              model.p0 if p is None else p)).reshape(-1)
-    MiAT = model.mass_factor.solve_with(A, A.T)      # M⁻¹Aᵀ (M̄⁻¹Aᵀ for a singular M: same projection)
-    return v - MiAT @ np.linalg.solve(A @ MiAT, A @ v + phi_t)
 
 
 def length_scale(model) -> float:

@@ -2,7 +2,7 @@
 
 Small motions ``q = q* + N z`` on the constraint manifold (``N`` orthonormal basis of
 ``null A(q*)``) obey ``M_r z̈ + K_r z = 0`` with the reduced mass ``M_r = Nᵀ M N`` and the
-reduced tangent stiffness ``K_r = Nᵀ K_s N`` (:mod:`ncgen.runtime.statics`: it holds the
+reduced tangent stiffness ``K_r = Nᵀ K_s N`` (:mod:`ncgen.analysis.statics`: it holds the
 springs' elastic and geometric stiffness — prestressed cables stiffen a structure — and the
 constraint curvature weighted by the reactions).  The generalised eigenproblem
 ``K_r x = ω² M_r x`` gives ``ω² ≥ 0``: frequencies ``f = ω / 2π`` (Hz); ``ω² ≈ 0``: a
@@ -18,8 +18,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
-from ncgen.runtime.statics import Equilibrium, equilibrium
-from ncgen.runtime.tangent import ZERO_TOL, manifold_point
+from ncgen.analysis.statics import Equilibrium, equilibrium
+from ncgen.analysis.stability import ZERO_TOL
+from ncgen.assembly.manifold import manifold_point
 
 
 @dataclass
@@ -89,7 +90,7 @@ class Modes:
 
 def modes(model, eq: Equilibrium | None = None, **equilibrium_options) -> Modes:
     """Natural frequencies and mode shapes of ``model`` about ``eq`` (default: the
-    equilibrium :func:`~ncgen.runtime.statics.equilibrium` finds with
+    equilibrium :func:`~ncgen.analysis.statics.equilibrium` finds with
     ``equilibrium_options``); see the module docstring."""
     if eq is None:
         eq = equilibrium(model, **equilibrium_options)

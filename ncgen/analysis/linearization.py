@@ -2,7 +2,7 @@
 model about a consistent state, in independent coordinates.
 
 State ``x = [z; w]`` with ``z = G (q − q*)`` and ``w = G v`` (2·dof entries).  By default
-``N`` is the orthonormal basis of ``null A(q*)`` from the SVD (:mod:`ncgen.runtime.tangent`)
+``N`` is the orthonormal basis of ``null A(q*)`` from the SVD (:mod:`ncgen.assembly.manifold`)
 and ``G = Nᵀ``; ``coordinates=G`` (dof × nq) chooses other independent coordinates, for
 instance rows of ``∂(joint angles)/∂q`` so that ``z`` are joint-angle deviations.  Outputs
 ``y = [δq; δv]`` (the natural coordinates and rates to first order), ``D = 0``.  The
@@ -16,8 +16,9 @@ import numpy as np
 
 from ncgen.assembly.linearization import linearization_function
 from ncgen.errors import NcgenError
-from ncgen.runtime.statics import _parameters
-from ncgen.runtime.tangent import cached, coordinate_basis, manifold_point, tangent_velocity
+from ncgen.analysis.statics import _parameters
+from ncgen.analysis.stability import cached
+from ncgen.assembly.manifold import coordinate_basis, manifold_point, tangent_velocity
 from ncgen.validation import as_vector
 
 #: A state is consistent when |Φ| and |A v + Φ_t| are below this times the system's size².
@@ -96,10 +97,10 @@ def linearize(model, q, v=None, u=None, p=None, *, t: float | None = None, coord
     default zeros) with inputs ``u`` (default zeros), parameters ``p`` (default the model's;
     array or dict by name) at time ``t`` (default ``model.t0``).  ``coordinates``: the
     matrix ``G`` (dof × nq) of independent coordinates (default ``Nᵀ``, ``N`` orthonormal).
-    ``q`` may also be an :class:`~ncgen.runtime.statics.Equilibrium` (its ``q``, ``u``, ``p``, ``t``).
+    ``q`` may also be an :class:`~ncgen.analysis.statics.Equilibrium` (its ``q``, ``u``, ``p``, ``t``).
     See the module docstring; redundant constraints must have been dropped (the default
     of ``System.build``)."""
-    from ncgen.runtime.statics import Equilibrium
+    from ncgen.analysis.statics import Equilibrium
     if isinstance(q, Equilibrium):
         eq = q
         q, u, p, t = eq.q, eq.u if u is None else u, eq.p if p is None else p, eq.t if t is None else t

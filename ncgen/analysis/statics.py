@@ -10,7 +10,7 @@ with a backtracking line search on ``½(|G|² + |Φ|²)``; steps are least-squar
 so zero-stiffness directions (a free-floating structure's rigid motions) leave the
 configuration where it is.  Stability is judged from the *reduced tangent stiffness*
 ``K_r = Nᵀ K_s N`` (``K_s`` the symmetric part of K, ``N`` an orthonormal basis of
-``null A``, :mod:`ncgen.runtime.tangent`): positive definite (stable), singular
+``null A``, :mod:`ncgen.assembly.manifold`): positive definite (stable), singular
 (neutral: zero-stiffness motions) or indefinite (unstable).
 Units: q in m, forces in N, λ in N per unit of Φ, K in N/m (N·m for base-vector rows).
 """
@@ -22,8 +22,9 @@ import numpy as np
 
 from ncgen.assembly.statics import statics_function
 from ncgen.errors import ModelError, NcgenError
-from ncgen.runtime.reactions import unshared_state
-from ncgen.runtime.tangent import cached, classify, null_basis
+from ncgen.analysis.reactions import unshared_state
+from ncgen.analysis.stability import cached, classify
+from ncgen.assembly.manifold import null_basis
 from ncgen.validation import as_vector
 
 #: Largest step of ``method="descent"``, relative to the system's extent ``|q|∞``.
@@ -101,7 +102,7 @@ class Equilibrium:
         a scalar in 2D) that the joint's constraints exert on the member, from the virtual
         work of ``−A_jᵀλ_j`` on the member's coordinates (see :func:`joint_reactions`).  Joints
         that coordinate sharing eliminated (wholly or in part) are included, from the model's
-        ``share=False`` form (:func:`ncgen.runtime.reactions.unshared_state`)."""
+        ``share=False`` form (:func:`ncgen.analysis.reactions.unshared_state`)."""
         model = self.model
         out = joint_reactions(model, self.q, self.lam, t=self.t, p=self.p)
         plan = model.sharing

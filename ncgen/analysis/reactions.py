@@ -176,7 +176,7 @@ def unshared_state(model, q, lam, A, v, t, u, p, names):
     if form is None:
         raise ModelError(f"joint_reactions: model {model.name!r} has no unshared form for the eliminated "
                          f"joints {', '.join(names)}")
-    um = form.model()
+    um = form.model(model)
     S, c = form.coordinate_map(model)
     if v is None:
         if any(m.functions["F"].which_depends("v", ["F"], 1, True)[0] for m in (model, um)):

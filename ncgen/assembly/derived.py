@@ -1,0 +1,110 @@
+"""Whole-system CasADi functions built on demand from a model's function set
+(``model.functions``), outside the model's C package.
+
+* :func:`kkt_function` — forward dynamics ``(t, q, v, u, p) -> (a, λ)`` by the Schur
+  complement of the constant mass matrix (compiled alone by
+  :func:`ncgen.runtime.joint_dynamics.forward_dynamics_kernel`);
+* :func:`kkt_qr_function` — the same from the KKT system by sparse QR: the model's
+  ``accel`` with the Baumgarte terms at zero (the path of a singular ``M``);
+* :func:`joint_kkt_function` — joint space in and out for a tree;
+* :func:`residual_function` — the constraint drift ``|Φ|∞``, ``|A v + Φ_t|∞`` of a state;
+* :func:`slip_function` — the contacts' tangential velocities ``W_T v``;
+* :func:`potential_force_residual_function` — ``F + ∇V``, zero for conservative forces
+  (with :func:`depends_on_time`: the stepper's energy check).
+
+No stabilisation terms: on the constraint manifold the accelerations are exact.
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ncgen.assembly.functions import _accel
+from ncgen.assembly.mass import mass_is_regular, sparse_dm
+
+
+def _symbols(model):
+    t, q, v = ca.MX.sym("t"), ca.MX.sym("q", model.nq), ca.MX.sym("v", model.nq)
+    return t, q, v, ca.MX.sym("u", model.nu), ca.MX.sym("p", model.np)
+
+
+def kkt_function(model) -> ca.Function:
+    """``fd: (t, q, v, u, p) -> (a, lam)`` by the Schur complement of the constant mass
+    matrix: ``(A M⁻¹ Aᵀ) λ = A M⁻¹ F − γ`` (sparse LDLᵀ; M⁻¹ is block-diagonal per member),
+    ``a = M⁻¹ (F − Aᵀ λ)``; no stabilisation terms.  Needs a non-singular M and
+    independent constraints (as the model's other paths do); a singular M (a flat body,
+    :func:`~ncgen.assembly.mass.mass_is_regular` false) takes :func:`kkt_qr_function`."""
+    if not mass_is_regular(model):
+        return kkt_qr_function(model)
+    f = model.functions
+    t, q, v, u, p = _symbols(model)
+    A = f["A"](t, q, p)
+    Minv = model.Minv
+    Minv[np.abs(Minv) < 1e-300] = 0.0
+    Mi = ca.MX(sparse_dm(Minv))
+    F = f["F"](t, q, v, u, p)
+    MiF = ca.mtimes(Mi, F)
+    S = ca.mtimes(ca.mtimes(A, Mi), A.T)
+    lam = ca.solve(S, ca.mtimes(A, MiF) - f["gamma"](t, q, v, p), "ldl")
+    a = MiF - ca.mtimes(Mi, ca.mtimes(A.T, lam))
+    return ca.Function("forward_dynamics", [t, q, v, u, p], [a, lam], ["t", "q", "v", "u", "p"], ["a", "lam"])
+
+
+def kkt_qr_function(model) -> ca.Function:
+    """``fd: (t, q, v, u, p) -> (a, lam)`` from the KKT system ``[[M, Aᵀ], [A, 0]] [a; λ] =
+    [F; γ]`` by CasADi's sparse QR: the model's ``accel`` with ``α = β = 0``; needs no
+    ``M⁻¹``, only ``M`` positive definite on ``null(A)`` (the path of a singular M)."""
+    return _accel(model.functions, sparse_dm(model.M), model.nc, 0.0, 0.0, model.nq, model.nu, model.np,
+                  name="forward_dynamics")
+
+
+def joint_kkt_function(model) -> ca.Function:
+    """``fd_j: (t, qj, vj, u, p) -> (aj, a, lam)``: joint space in and out for a tree
+    (:meth:`~ncgen.assembly.joint_space.JointSpace.tree_function`, then :func:`kkt_function`,
+    then ``a_j = J q̈ + J̇ q̇``)."""
+    js = model.joint_space
+    tree = js.tree_function(model.layout)
+    t, qj, vj = ca.MX.sym("t"), ca.MX.sym("qj", js.nq), ca.MX.sym("vj", js.nv)
+    u, p = ca.MX.sym("u", model.nu), ca.MX.sym("p", model.np)
+    q, v = tree(qj, vj)
+    a, lam = kkt_function(model)(t, q, v, u, p)
+    aj = js.accelerations(q, v, a)
+    return ca.Function("joint_forward_dynamics", [t, qj, vj, u, p], [aj, a, lam],
+                       ["t", "qj", "vj", "u", "p"], ["aj", "a", "lam"])
+
+
+def residual_function(model) -> ca.Function:
+    """``(t, q, v, p) -> (|Φ|∞, |A v + Φ_t|∞)``: position and velocity constraint drift."""
+    f = model.functions
+    t, q, v = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq)
+    p = ca.SX.sym("p", model.np)
+    phi = f["phi"](t, q, p)
+    phidot = ca.mtimes(f["A"](t, q, p), v) + f["phi_t"](t, q, p)
+    return ca.Function("residuals", [t, q, v, p], [ca.norm_inf(phi), ca.norm_inf(phidot)])
+
+
+def slip_function(model) -> ca.Function:
+    """``(q, v, p) -> W_T v``: the contacts' tangential velocities (m/s), ``(nk·(dim − 1))``
+    stacked per contact (:mod:`ncgen.assembly.contacts`)."""
+    qs, vs, ps = ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq), ca.SX.sym("p", model.np)
+    return ca.Function("slip", [qs, vs, ps], [ca.mtimes(model.functions["contact_jacobian"](qs, ps)[1], vs)])
+
+
+def depends_on_time(model) -> bool:
+    """Whether ``Φ_t`` depends on ``t`` or ``q``, or the potential energy ``V`` on ``t``
+    (structurally: from the expressions, not from values)."""
+    f = model.functions
+    t, q, p = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("p", model.np)
+    V = ca.sum1(model.potential_terms(t, q, p))
+    return bool(ca.depends_on(ca.densify(f["phi_t"](t, q, p)), ca.vertcat(t, q)) or ca.depends_on(V, t))
+
+
+def potential_force_residual_function(model) -> ca.Function:
+    """``F_nc: (t, q, v, u, p) -> (F + ∇_q V, F)``: the applied force minus the negative
+    gradient of the potential energy (N; zero for conservative forces), and ``F``."""
+    f = model.functions
+    t, q, v = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq)
+    u, p = ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
+    V = ca.sum1(model.potential_terms(t, q, p))
+    F = f["F"](t, q, v, u, p)
+    return ca.Function("F_nc", [t, q, v, u, p], [F + ca.gradient(V, q), F])

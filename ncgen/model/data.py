@@ -1,0 +1,75 @@
+"""A model's run-time data, in one place (Pinocchio's ``Data`` beside its ``Model``).
+
+A :class:`~ncgen.model.model.Model` is constant.  Everything a process computes for it
+beyond the model itself — the compiled libraries, the kernels loaded from them, functions
+built on demand, the lazily built ``share=False`` form — lives in its :class:`ModelData`,
+``model.data`` (:func:`model_data`).  The data is keyed by the model object (a weak
+reference: it goes with the model), is never part of the model's pickled state, and is
+filled slot by slot on first use by the module that owns the slot.
+
+A model can have these compiled libraries (docs/architecture.md):
+
+* the **model package** (``libraries``): every function of ``model.functions`` and the
+  compiled stepper, one library per set of compiler flags; IDAS's ``dae`` and the stepper
+  are loaded from it;
+* the **forward-dynamics kernel** (``forward_dynamics_kernels``): ``kkt_function`` (or its
+  joint-space form) alone;
+* the **tree kernel** (``tree_kernels``): the joint-space forward dynamics of a tree alone.
+"""
+from __future__ import annotations
+
+import weakref
+from dataclasses import dataclass, field
+
+
+@dataclass(eq=False)
+class ModelData:
+    """The run-time data of one model; each slot names the module that fills it."""
+
+    #: ``{cflags key: CompiledModel}``: the model package compiled
+    #: (:func:`ncgen.runtime.library.compiled_model`).
+    libraries: dict = field(default_factory=dict)
+    #: IDAS's ``dae`` loaded from the model package, or None (:func:`ncgen.runtime.dae.load_dae`).
+    dae: object = None
+    #: ``{cflags key: CompiledStepper}``: the stepper's loops loaded from the model package
+    #: (:func:`ncgen.runtime.stepper_library.load_stepper`).
+    steppers: dict = field(default_factory=dict)
+    #: Whether the forces are conservative and the constraints scleronomic, or None
+    #: (:func:`ncgen.runtime.stepper_checks.is_conservative`).
+    conservative: bool | None = None
+    #: ``{joint_space: DirectFunction}``: the compiled forward dynamics
+    #: (:func:`ncgen.runtime.joint_dynamics.forward_dynamics_kernel`).
+    forward_dynamics_kernels: dict = field(default_factory=dict)
+    #: ``{(method, cflags): JointDynamicsKernel or the ModelError of a non-tree}``
+    #: (:func:`ncgen.runtime.tree_kernel.joint_forward_dynamics_kernel`).
+    tree_kernels: dict = field(default_factory=dict)
+    #: ``nc.joint_forward_dynamics``' own copy of the default tree kernel (False: none).
+    tree_kernel: object = None
+    #: ``(f,)``: the joint-space tree map ``(q_j, v_j) -> (q, v)``, f None for a model that is
+    #: not a tree (``JointSpace._tree`` in :mod:`ncgen.assembly.joint_space`).
+    joint_tree_function: tuple | None = None
+    #: The joint positions at ``model.q0``, by joint (``JointSpace._propagate``).
+    joint_positions0: dict | None = None
+    #: The rerolled primitives of a large model (:func:`ncgen.codegen.looped.rerolled_primitives`).
+    rerolled: dict | None = None
+    #: ``{name: casadi.Function}``: analysis functions built on demand
+    #: (:func:`ncgen.analysis.stability.cached`: statics, linearisation).
+    functions: dict = field(default_factory=dict)
+    #: ``(reason,)``: why the model has no joint-space transcription (reason None: it has one)
+    #: (:func:`ncgen.optim.joint_radau.joint_space_reason`).
+    joint_space_reason: tuple | None = None
+    #: The model built with ``share=False`` and the map ``(S, c)`` to its coordinates
+    #: (:class:`ncgen.assembly.unshared.UnsharedForm`).
+    unshared_model: object = None
+    unshared_map: tuple | None = None
+
+
+_DATA: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def model_data(model) -> ModelData:
+    """The :class:`ModelData` of ``model``, created empty on first use."""
+    data = _DATA.get(model)
+    if data is None:
+        data = _DATA[model] = ModelData()
+    return data

@@ -1,0 +1,149 @@
+"""``SimulationOptions``: how :func:`ncgen.simulate` integrates, in one documented object
+(as MuJoCo's ``mjOption`` or Drake's ``SimulatorConfig``).
+
+The run's data — the model, the time grid, inputs ``u``, parameters ``p``, the initial state
+``q0``, ``v0``, ``t0`` — are arguments of ``simulate``; everything about the integrator is
+here.  The object is frozen and validated once, when made: a bad value raises
+:class:`~ncgen.errors.NcgenError` naming the option, what was expected and what was given.
+``simulate(model, t_end, dt, options=opts, rtol=1e-9)`` takes ``options`` whole, and its
+keyword arguments are shortcuts for the same fields (:meth:`SimulationOptions.resolve`)::
+
+    opts = nc.SimulationOptions(method="stepper", substeps=4)
+    traj = nc.simulate(model, 2.0, 0.01, options=opts)
+    traj = nc.simulate(model, 2.0, 0.01, method="stepper", substeps=4)      # the same run
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import numbers
+from dataclasses import dataclass
+
+import numpy as np
+
+from ncgen.codegen.stepper_package import HALVINGS_LIMIT, MAX_HALVINGS, MAX_ITER, TOL
+from ncgen.errors import NcgenError
+from ncgen.model.expressions import did_you_mean
+from ncgen.runtime.dae import BACKENDS
+from ncgen.runtime.inputs import HOLDS
+
+METHODS = ("idas", "stepper")
+PROJECTS = (True, False, "auto")
+
+
+@dataclass(frozen=True)
+class SimulationOptions:
+    """Options of :func:`ncgen.simulate` (see its docstring for how each acts).
+
+    Both methods:
+
+    * ``method``: ``"idas"`` (SUNDIALS IDAS, variable-order BDF) or ``"stepper"`` (the
+      compiled RATTLE stepper).
+    * ``rtol``, ``atol``: local error tolerances (relative; absolute in the units of q and v).
+      IDAS: default 1e-8 and 1e-10.  Stepper: None = fixed steps; ``rtol`` given = error
+      control (``atol`` default ``rtol``).
+    * ``hold``: inputs between grid times, ``"zoh"`` (sample k on ``[t_k, t_k+1)``) or
+      ``"linear"``.
+    * ``max_steps``: integrator steps (IDAS) or step attempts (error-controlled stepper)
+      allowed per output interval.
+    * ``ic_tolerance``: largest correction of a given initial state, as a fraction of the
+      system's size (None: any).
+
+    IDAS only: ``backend`` (``"vm"``, ``"compiled"``, ``"auto"``), ``linear_solver``
+    (CasADi's sparse solver of the Newton systems), ``progress`` (a progress bar: True,
+    False, None = on a terminal for runs longer than a second), ``project`` (``"auto"``,
+    True, False: crossing singular configurations).
+
+    Stepper only: ``substeps`` (fixed steps per output interval), ``newton_tol`` (Newton
+    tolerance on both constraint levels), ``max_newton`` (Newton iterations per step),
+    ``max_halvings`` (splits of a step whose Newton fails, 0 to 10), ``order`` (2 or 4, error
+    control), ``check`` (make an untrustworthy run an error), ``estimate`` (the shadow run
+    of the global error estimate).
+    """
+
+    method: str = "idas"
+    rtol: float | None = None
+    atol: float | None = None
+    hold: str = "zoh"
+    max_steps: int = 50_000
+    ic_tolerance: float | None = 1e-6
+    backend: str = "vm"
+    linear_solver: str = "csparse"
+    progress: bool | None = None
+    project: bool | str = "auto"
+    substeps: int = 1
+    newton_tol: float = TOL
+    max_newton: int = MAX_ITER
+    max_halvings: int = MAX_HALVINGS
+    order: int = 4
+    check: bool = True
+    estimate: bool = True
+
+    def __post_init__(self):
+        for name in ("max_steps", "substeps", "max_newton", "max_halvings", "order"):
+            value = getattr(self, name)           # 4.0 or numpy.int64(4) count as 4
+            if _real(value) and math.isfinite(value) and int(value) == value:
+                object.__setattr__(self, name, int(value))
+        for name in ("rtol", "atol", "ic_tolerance", "newton_tol"):
+            value = getattr(self, name)
+            if _real(value):
+                object.__setattr__(self, name, float(value))
+        for name in ("check", "estimate"):
+            value = getattr(self, name)
+            if isinstance(value, (bool, np.bool_)) or value in (0, 1):
+                object.__setattr__(self, name, bool(value))
+        if self.method not in METHODS:
+            raise NcgenError(f"method: expected one of {', '.join(METHODS)}, got {self.method!r}")
+        for name in ("rtol", "atol", "ic_tolerance"):
+            value = getattr(self, name)
+            if value is not None and not (_real(value) and math.isfinite(value) and value > 0):
+                raise NcgenError(f"{name}: expected a positive tolerance, got {value!r}")
+        if self.hold not in HOLDS:
+            raise NcgenError(f"hold: expected one of {', '.join(HOLDS)}, got {self.hold!r}")
+        if self.backend not in BACKENDS:
+            raise NcgenError(f"backend: expected one of {', '.join(BACKENDS)}, got {self.backend!r}")
+        if not isinstance(self.linear_solver, str):
+            raise NcgenError(f"linear_solver: expected the name of a CasADi linear solver, got {self.linear_solver!r}")
+        if self.progress not in (True, False, None):
+            raise NcgenError(f"progress: expected True, False or None, got {self.progress!r}")
+        if not any(self.project is v or (isinstance(v, str) and self.project == v) for v in PROJECTS):
+            raise NcgenError(f"project: expected True, False or 'auto', got {self.project!r}")
+        if not _count(self.max_steps, 1):
+            raise NcgenError(f"max_steps: expected a positive number of steps, got {self.max_steps!r}")
+        if not _count(self.substeps, 1):
+            raise NcgenError(f"substeps: expected a positive number of steps per output interval, got {self.substeps!r}")
+        if not (_real(self.newton_tol) and math.isfinite(self.newton_tol) and self.newton_tol > 0):
+            raise NcgenError(f"newton_tol: expected a positive Newton tolerance, got {self.newton_tol!r}")
+        if not _count(self.max_newton, 1):
+            raise NcgenError(f"max_newton: expected at least one Newton iteration per step (the stepper's "
+                             f"max_iter), got {self.max_newton!r}")
+        if not (_count(self.max_halvings, 0) and self.max_halvings <= HALVINGS_LIMIT):
+            raise NcgenError(f"max_halvings: expected 0 to {HALVINGS_LIMIT} step halvings, got {self.max_halvings!r}")
+        if self.order not in (2, 4) or isinstance(self.order, bool):
+            raise NcgenError(f"order: expected 2 (RATTLE) or 4 (Richardson-extrapolated RATTLE), got {self.order!r}")
+        for name in ("check", "estimate"):
+            if not isinstance(getattr(self, name), bool):
+                raise NcgenError(f"{name}: expected True or False, got {getattr(self, name)!r}")
+
+    @classmethod
+    def resolve(cls, options: "SimulationOptions | None" = None, **shortcuts) -> "SimulationOptions":
+        """``options`` (default: the defaults) with the fields in ``shortcuts`` replaced, validated;
+        an unknown name is an error naming the known ones."""
+        if options is not None and not isinstance(options, cls):
+            raise NcgenError(f"options: expected an nc.SimulationOptions, got {type(options).__name__}")
+        fields = [f.name for f in dataclasses.fields(cls)]
+        for name in shortcuts:
+            if name not in fields:
+                raise NcgenError(f"simulate: no option named {name!r}{did_you_mean(name, fields)}; options: "
+                                 f"{', '.join(fields)}")
+        if options is None:
+            return cls(**shortcuts)
+        return dataclasses.replace(options, **shortcuts) if shortcuts else options
+
+
+def _real(x) -> bool:
+    return isinstance(x, numbers.Real) and not isinstance(x, (bool, np.bool_))
+
+
+def _count(x, lowest: int) -> bool:
+    return isinstance(x, int) and not isinstance(x, bool) and x >= lowest
