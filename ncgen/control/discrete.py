@@ -79,8 +79,8 @@ def step_functions(model, h: float, *, abstol: float = ABSTOL, abstol_step: floa
     sensitivities = ca.Function("step_sensitivities", [zs, xs, us, ps, ts],
                                 [ca.jacobian(Gs, zs), ca.densify(ca.jacobian(Gs, y))])
     G_z, G_y = sensitivities(z, x, u, p, t)
-    Z_y = -ca.solve(G_z, G_y, "qr")                            # ∂z/∂(x, u, p)
     ny = y.numel()
+    Z_y = -qr_solve_columns(G_z, G_y, ca.jacobian(Gs, zs).sparsity(), ny)
     X1_y = ca.vertcat(ca.horzcat(ca.DM.eye(nq), ca.DM(nq, ny - nq)) + h * Z_y[:nq, :],
                       Z_y[nq + nc:2 * nq + nc, :])             # x⁺ = [q + h w; v⁺]
     nu_ = model.nu
@@ -89,6 +89,28 @@ def step_functions(model, h: float, *, abstol: float = ABSTOL, abstol_step: floa
                                                                slice(2 * nq + nu_, ny))] + [res],
                       names, ["x1", "A", "B", "C", "res"])
     return {"step": step, "step_jac": jac}
+
+
+#: Largest nnz(V) + nnz(R) of the QR factors of ``G_z`` unrolled into SX (beyond: CasADi's
+#: ``qr`` linear solver, generated as loops, several times slower per solve).
+SX_QR_MAX_NNZ = 20_000
+
+
+def qr_solve_columns(K: ca.MX, B: ca.MX, pattern: ca.Sparsity, ncol: int) -> ca.MX:
+    """``K⁻¹ B`` for the ``ncol`` columns of ``B`` with one factorisation: the sparse
+    Householder QR of ``K`` (pattern ``pattern``) unrolled into an SX function, then an SX
+    back-substitution mapped over the columns (a loop in C)."""
+    V, R, *_ = ca.qr_sparse(ca.DM(pattern, 1.0), True)
+    if V.nnz() + R.nnz() > SX_QR_MAX_NNZ:
+        return ca.solve(K, B, "qr")
+    Ks = ca.SX.sym("K", pattern)
+    V, R, beta, prinv, pc = ca.qr_sparse(Ks, True)
+    factor = ca.Function("qr_factor", [Ks], [V, R, beta])
+    Vs, Rs, bs = ca.SX.sym("V", V.sparsity()), ca.SX.sym("R", R.sparsity()), ca.SX.sym("beta", beta.shape[0])
+    b = ca.SX.sym("b", pattern.size1())
+    back = ca.Function("qr_backsolve", [Vs, Rs, bs, b], [ca.qr_solve(b, Vs, Rs, bs, prinv, pc)])
+    Vn, Rn, bn = factor(K)
+    return back.map("qr_backsolve_columns", "serial", ncol, [0, 1, 2], [])(Vn, Rn, bn, B)
 
 
 def rollout_functions(step: ca.Function, N: int, h: float) -> dict[str, ca.Function]:
