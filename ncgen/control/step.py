@@ -176,7 +176,9 @@ def _compile(name: str, functions: list) -> dict:
     from ncgen.codegen.package import write_package
 
     with tempfile.TemporaryDirectory() as tmp:
-        pkg = write_package(name, functions, Path(tmp) / "pkg")
+        # not rerolled: the exported MPC package is written the same way, so that Python and
+        # C run the same arithmetic in the same order
+        pkg = write_package(name, functions, Path(tmp) / "pkg", reroll_instructions=None)
         built = compile_package(pkg)
         names = {f.name(): pkg.c_name(f.name()) for f in functions}
     return {f.name(): DirectFunction(built.path, names[f.name()], f) for f in functions}
