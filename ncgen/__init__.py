@@ -10,6 +10,7 @@ from ncgen.codegen.model_package import generate
 from ncgen.control import MPC, StepDidNotConverge, StepFunction, export_mpc, ilqr, step_function
 from ncgen.errors import NcgenError
 from ncgen.model.contacts import Contact, SpherePlane, SphereSphere
+from ncgen.model.controllers import PD, ComputedTorque, Controller
 from ncgen.model.forces import Force, GeneralizedForce, PointForce, Spring, Torque, TorsionalSpring
 from ncgen.model.joints import (
     CoordinateDriver, Cylindrical, Distance, Fixed, Free, Joint, Mimic, Planar, PointOnLine, PointOnPlane, Prismatic,
@@ -17,9 +18,13 @@ from ncgen.model.joints import (
 )
 from ncgen.errors import ModelError
 from ncgen.model.model import Model
+from ncgen.model.shapes import Box, Capsule, Cylinder, Ellipsoid, Mesh, Shape, Sphere
 from ncgen.model.system import System
 from ncgen.optim import OptimalControl, OptimalTrajectory
 from ncgen.runtime import SimulationOptions, Trajectory, simulate
+from ncgen.runtime.batch import BatchResult, simulate_batch
+from ncgen.runtime.samples import Samples
+from ncgen.runtime.sweep import SweepResult, open_sweep, sweep
 from ncgen.analysis.formfinding import Tensegrity, form_find
 from ncgen.analysis.linearization import LinearModel, linearize
 from ncgen.analysis.modes import Modes, modes
@@ -32,13 +37,13 @@ from ncgen.version import __version__
 
 
 __all__ = [
-    "Contact", "CoordinateDriver", "Cylindrical", "Distance", "Equilibrium", "Fixed", "Force", "Free", "GeneralizedForce",
+    "BatchResult", "Box", "Capsule", "ComputedTorque", "Contact", "Controller", "CoordinateDriver", "Cylinder", "Ellipsoid", "Mesh", "Shape", "Sphere", "Cylindrical", "Distance", "Equilibrium", "Fixed", "Force", "Free", "GeneralizedForce",
     "Joint", "JointReaction", "LinearModel", "MPC", "Mimic", "Model", "ModelError", "Modes", "NcgenError", "OptimalControl",
-    "OptimalTrajectory", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic", "Revolute", "SimulationOptions", "SpherePlane", "SphereSphere", "Spherical",
-    "Spring", "StepDidNotConverge", "StepFunction", "System", "Tensegrity", "Torque", "TorsionalSpring", "Trajectory", "Universal",
+    "OptimalTrajectory", "PD", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic", "Revolute", "Samples", "SimulationOptions", "SpherePlane", "SphereSphere", "Spherical",
+    "Spring", "StepDidNotConverge", "StepFunction", "SweepResult", "System", "Tensegrity", "Torque", "TorsionalSpring", "Trajectory", "Universal",
     "assemble", "coordinate_type", "dof_report", "equilibrium", "export_mpc", "form_find", "forward_dynamics",
     "forward_dynamics_kernel", "generate", "ilqr", "inverse_dynamics", "joint_forward_dynamics",
-    "joint_forward_dynamics_kernel", "joint_reactions", "linearize", "modes",
-    "project_velocity", "simulate", "solve_kinematics", "step_function",
+    "joint_forward_dynamics_kernel", "joint_reactions", "linearize", "modes", "open_sweep",
+    "project_velocity", "simulate", "simulate_batch", "solve_kinematics", "step_function", "sweep",
     "__version__", "viz",
 ]

@@ -79,6 +79,17 @@ class SimulationError(NcgenError):
         self.trajectory = trajectory
 
 
+class SimulationInterrupted(KeyboardInterrupt):
+    """A run stopped by Ctrl-C (SIGINT).  ``time`` is the last output time reached (s),
+    ``trajectory`` the :class:`~ncgen.runtime.trajectory.Trajectory` up to that time (marked
+    incomplete).  A ``KeyboardInterrupt``, so that code that stops on Ctrl-C still does."""
+
+    def __init__(self, message: str, *, time: float, trajectory=None):
+        super().__init__(message)
+        self.time = time
+        self.trajectory = trajectory
+
+
 class AccuracyWarning(UserWarning):
     """A run that completed but whose own error estimate says it is less accurate than its
     tolerances ask (e.g. the stepper with ``rtol`` on a motion along which errors grow)."""

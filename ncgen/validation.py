@@ -167,14 +167,26 @@ def rotation(R, dim: int, what: str = "rotation") -> np.ndarray:
         a = as_scalar(R, what)
         c, s = math.cos(a), math.sin(a)        # libm, not NumPy's CPU-dependent SIMD loops
         return np.array([[c, -s], [s, c]])
-    R = as_array(R, (dim, dim), what)
-    err = np.max(np.abs(R.T @ R - np.eye(dim)))
+    return nearest_rotation(as_array(R, (dim, dim), what), what)
+
+
+def nearest_rotation(R: np.ndarray, what: str) -> np.ndarray:
+    """Rotation matrices ``R`` (shape ``(..., d, d)``) as given when ``max |RᵀR − 1|`` is at
+    most :data:`ROTATION_TOL`; up to :data:`PRINTED_ROTATION_TOL` (a rotation copied with
+    printed precision) each is replaced by its nearest rotation (the polar factor ``U Vᵀ`` of
+    its SVD) with a :class:`RotationProjected` warning; beyond that, or with ``det R < 0``, a
+    :class:`~ncgen.errors.RotationError` says what was found.  The one rule for every entry
+    point that takes a rotation."""
+    R = np.asarray(R, float)
+    d = R.shape[-1]
+    err = float(np.max(np.abs(np.swapaxes(R, -1, -2) @ R - np.eye(d)), initial=0.0))
     if err > PRINTED_ROTATION_TOL:
         raise RotationError(f"{what}: expected an orthonormal matrix, |RᵀR - 1| = {err:.3g} "
                             f"(up to {PRINTED_ROTATION_TOL:g} is projected to the nearest rotation)")
     det = np.linalg.det(R)
-    if det < 0:
-        raise RotationError(f"{what}: expected det = +1 (a proper rotation), got det = {det:.6g} (a reflection)")
+    if np.any(det < 0):
+        raise RotationError(f"{what}: expected det = +1 (a proper rotation), got det = {float(np.min(det)):.6g} "
+                            "(a reflection)")
     if err > ROTATION_TOL:
         U, _, Vt = np.linalg.svd(R)
         P = U @ Vt                                # the nearest rotation (polar factor), det +1 here

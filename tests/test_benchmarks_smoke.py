@@ -32,6 +32,11 @@ pytestmark = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc
                     "RATIO ncgen / MuJoCo penetration"]),
     ("joint_space.py", ["=== call overhead", "RATIO casadi.external / direct", "=== Panda",
                         "RATIO ncgen joint kernel / pinocchio.aba", "RATIO ncgen joint kernel C loop"]),
+    ("animation.py", ["=== slider_crank", "RATIO PillowWriter / ncgen animate", "to_html:"]),
+    ("joint_simulation.py", ["=== panda: 1 s fall", "RATIO ncgen / MuJoCo RK4, end to end, DOPRI5",
+                             "RATIO ncgen / MuJoCo RK4, simulate only, DOPRI5", "agrees with Pinocchio"]),
+    ("batch.py", ["=== scaling: 8 runs", "RATIO one thread / two threads", "per-run cost of one-step runs",
+                  "RATIO ncgen / mujoco.rollout, 1 thread(s)", "RATIO ncgen / mujoco.rollout, 2 thread(s)"]),
     ("sharing_chain.py", ["=== chain of N = 3 bars", "RATIO explicit (shared by build) / shared-point chain"]),
     ("reactions_shared.py", ["=== explicit-joint chain of N = 3 bars", "unshared form built on first use",
                              "RATIO shared / share=False, joint_reactions per state"]),
@@ -42,7 +47,7 @@ pytestmark = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc
                     "=== cart-pole MPC", "RATIO IPOPT re-solve / MPC step"]),
 ])
 def test_smoke(tmp_path, script, expected):
-    if script == "joint_space.py":
+    if script in ("joint_space.py", "joint_simulation.py"):
         pytest.importorskip("pinocchio")
         pytest.importorskip("yourdfpy")
     root = str(BENCHMARKS.parent)        # the checkout under test, whatever ncgen is installed

@@ -107,7 +107,7 @@ def _member_velocity(model, name, q, v, x, eps=1e-7):
 
 def test_bad_contacts_are_named():
     s = nc.System("bad")
-    b = s.add_body("b", mass=1.0, inertia=np.eye(3))
+    b = s.add_body("b", mass=1.0, inertia=np.eye(3), position=(0, 0, 1))
     with pytest.raises(NcgenError, match="restitution"):
         s.add_contact(nc.SpherePlane(b, radius=0.1, restitution=1.5))
     with pytest.raises(NcgenError, match="radius"):

@@ -4,13 +4,14 @@ Every ``import``/``from … import`` of an ``ncgen`` module is an edge, wherever
 (module level or inside a function).  The layer order, lowest first (also in
 docs/architecture.md)::
 
-    base (errors, validation, reproducible, files, version)
+    base (errors, validation, reproducible, files, interrupts, version)
     ← symbolic ← model ← assembly ← codegen ← rigid_motion ← runtime ← analysis ← viz ← optim ← control ← cli
     ← ncgen (the package root)
 
-A module may import modules of its own layer and of lower ones.  The exceptions, both
-conveniences: ``System.build()`` (model) calls :func:`ncgen.assembly.build.build_model`, and
-``Trajectory.reaction()`` (runtime) calls :func:`ncgen.analysis.reactions.joint_reactions`.
+A module may import modules of its own layer and of lower ones.  The exceptions, all
+conveniences: ``System.build()`` (model) calls :func:`ncgen.assembly.build.build_model`,
+``Trajectory.reaction()`` (runtime) calls :func:`ncgen.analysis.reactions.joint_reactions`, and
+``Trajectory.to_html()`` (runtime) calls :func:`ncgen.viz.html.to_html`.
 """
 from __future__ import annotations
 
@@ -23,10 +24,11 @@ ROOT = Path(__file__).resolve().parents[1] / "ncgen"
 
 LAYERS = ["base", "symbolic", "model", "assembly", "codegen", "rigid_motion", "runtime", "analysis", "viz", "optim",
           "control", "cli", "root"]
-BASE = {"errors", "validation", "reproducible", "files", "version"}
+BASE = {"errors", "validation", "reproducible", "files", "interrupts", "version"}
 #: (importing module, imported module): the documented exceptions.
 EXCEPTIONS = {("ncgen.model.system", "ncgen.assembly.build"),
-              ("ncgen.runtime.trajectory", "ncgen.analysis.reactions")}
+              ("ncgen.runtime.trajectory", "ncgen.analysis.reactions"),
+              ("ncgen.runtime.trajectory", "ncgen.viz.html")}
 
 
 def module_name(path: Path) -> str:

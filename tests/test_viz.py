@@ -99,3 +99,92 @@ def test_import_ncgen_does_not_import_matplotlib():
     code = "import sys, ncgen, ncgen.viz; print('matplotlib' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+# ------------------------------------------------------------------ shapes in matplotlib
+@pytest.fixture(scope="module")
+def sprung():
+    """A bar on a ball joint, a box-shaped body hung from it by a spring, a slack cable."""
+    s = nc.System("sprung")
+    bar = s.add_bar("bar", mass=1.0, ends=[(0.0, 0.0, 0.0), (0.5, 0.0, 0.0)])
+    s.add_joint(nc.Spherical(s.ground, bar, at=(0.0, 0.0, 0.0)))
+    R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    box = s.add_body("box", mass=1.0, inertia=np.diag([0.01, 0.02, 0.03]), position=(0.5, 0.0, -0.4), rotation=R,
+                     shape=nc.Box(0.2, 0.1, 0.05))
+    s.add_force(nc.Spring(bar, (0.25, 0.0, 0.0), box, (0.0, 0.0, 0.0), k=200.0, rest_length=0.3))
+    s.add_force(nc.Spring(s.ground, (0.0, 0.0, -0.2), box, (0.0, 0.0, 0.0), k=50.0, rest_length=2.0, cable=True))
+    return nc.simulate(s.build(), 0.3, 0.01)
+
+
+def test_animation_frames_draw_the_shapes_where_the_members_are(sprung):
+    from ncgen.viz.draw import SceneArtists, figure, scene_axes
+
+    sc = scene(sprung)
+    fig = figure(4, 4)
+    artists = SceneArtists(scene_axes(fig, sc), sc)
+    k = 20
+    artists.show(k, float(sprung.t[k]))
+    data = lambda line: np.column_stack(line.get_data_3d())        # noqa: E731
+    L = 0.5
+    ends = np.array([sprung.point("bar", (-L / 2, 0, 0))[k], sprung.point("bar", (L / 2, 0, 0))[k]])
+    np.testing.assert_allclose(data(artists.bars[0]), ends, atol=1e-12)            # a thick segment end to end
+    i_box = sprung.member_names.index("box")
+    box_lines = [data(line) for i, _, line in artists.outlines if i == i_box]
+    assert box_lines, "the box body has no outline"
+    pts = box_lines[0][~np.isnan(box_lines[0]).any(axis=1)]
+    corners = np.array([sprung.point("box", (sx * 0.1, sy * 0.05, sz * 0.025))[k]
+                        for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    np.testing.assert_allclose(pts.min(axis=0), corners.min(axis=0), atol=1e-12)  # its bounding box
+    np.testing.assert_allclose(pts.max(axis=0), corners.max(axis=0), atol=1e-12)
+    coil, cable = (data(line) for line in artists.springs)
+    np.testing.assert_allclose(coil[[0, -1]], [sprung.point("bar", (0.25, 0, 0))[k], sprung.point("box", (0, 0, 0))[k]],
+                               atol=1e-12)
+    assert len(coil) > 50 and np.max(np.linalg.norm(np.diff(coil, axis=0), axis=1)) < 0.2   # a coil, not a line
+    np.testing.assert_allclose(cable, [[0.0, 0.0, -0.2], sprung.point("box", (0, 0, 0))[k]], atol=1e-12)
+    assert artists.springs[1].get_linestyle() == "--", "a slack cable is drawn dashed"
+
+
+def test_animation_fits_its_time_budget_and_shows_progress(sprung, tmp_path, capsys):
+    from PIL import Image
+
+    from ncgen.viz.animation import MIN_FRAMES
+
+    animate(sprung, tmp_path / "all.gif", budget=None, progress=False)
+    assert Image.open(tmp_path / "all.gif").n_frames == len(sprung)
+    animate(sprung, tmp_path / "few.gif", budget=1e-6, progress=True)
+    assert Image.open(tmp_path / "few.gif").n_frames == MIN_FRAMES
+    assert "animation [" in capsys.readouterr().err
+
+
+def test_summary_has_no_empty_panel_and_states_small_units():
+    from ncgen.viz.plots import summary_figure, unit_scale
+
+    s = nc.System("arm")                                  # joints, no markers: joint positions and a path
+    a = s.add_body("a", mass=1.0, inertia=np.diag([0.01, 0.01, 0.002]), position=(0.0, 0.0, -0.2))
+    b = s.add_body("b", mass=1.0, inertia=np.diag([0.01, 0.01, 0.002]), position=(0.0, 0.2, -0.4))
+    s.add_joint(nc.Revolute(s.ground, a, at=(0.0, 0.0, 0.0), axis=(1.0, 0.0, 0.0)))
+    s.add_joint(nc.Revolute(a, b, at=(0.0, 0.0, -0.4), axis=(1.0, 0.0, 0.0)))
+    traj = nc.simulate(s.build(), 0.5, 0.01)
+    fig = summary_figure(traj)
+    for ax in fig.axes:
+        assert ax.lines or ax.collections, f"empty panel {ax.get_title()!r}"
+    assert fig.axes[2].get_title() == "joint positions" and len(fig.axes[2].lines) == 2
+    assert "(rad or m)" in fig.axes[2].get_ylabel()
+    assert unit_scale(np.array([3e-7, -1e-7]), "J") == (1e-7, "1e-07 J")
+    assert unit_scale(np.array([0.5, 20.0]), "J") == (1.0, "J")
+
+
+def test_a_tiny_wobble_is_drawn_flat(tmp_path):
+    from ncgen.viz.plots import summary_figure
+
+    s = nc.System("circle")                            # a point on a horizontal circle: z constant to round-off
+    p = s.add_point("p", mass=1.0, position=(0.1, 0.0, 0.0), velocity=(0.0, 0.5, 0.0))
+    s.add_joint(nc.Distance(s.ground, p, at=[(0.0, 0.0, 0.0), (0.1, 0.0, 0.0)]))
+    s.add_force(nc.PointForce(p, (0.0, 0.0, 0.0), force=(0.0, 0.0, 9.81)))
+    p.add_marker("m", (0.0, 0.0, 0.0))
+    traj = nc.simulate(s.build(), 1.0, 0.01)
+    fig = summary_figure(traj)
+    path = fig.axes[3]
+    spans = [np.ptp(lim) for lim in (path.get_xlim(), path.get_ylim(), path.get_zlim())]
+    np.testing.assert_allclose(spans, spans[0], rtol=1e-12)          # equal scales: the circle's z range is flat
+    assert not path.zaxis.get_major_formatter().get_offset()

@@ -92,6 +92,12 @@ def form_find(nodes, struts, cables, *, rest_lengths=None, force_densities=None,
     nodes = np.array(nodes, float)
     if nodes.ndim != 2 or nodes.shape[1] not in (2, 3):
         raise NcgenError(f"form_find: nodes: expected an n × 2 or n × 3 array, got shape {nodes.shape}")
+    for what, x in (("nodes", nodes), ("stiffness", stiffness), ("rest_lengths", rest_lengths),
+                    ("force_densities", force_densities), ("strut_mass", strut_mass), ("node_mass", node_mass)):
+        a = None if x is None else np.asarray(x, float)
+        if a is not None and not np.all(np.isfinite(a)):
+            raise NcgenError(f"form_find: {what}: expected finite numbers, found {a[~np.isfinite(a)][0]} at "
+                             f"index {tuple(np.argwhere(~np.isfinite(a))[0].tolist())}")
     struts, cables = _pairs(struts, len(nodes), "struts"), _pairs(cables, len(nodes), "cables")
     on = [i for s in struts for i in s]
     if len(set(on)) < len(on):

@@ -25,7 +25,7 @@ from ncgen.errors import ModelError, NcgenError
 from ncgen.analysis.reactions import unshared_state
 from ncgen.analysis.stability import cached, classify
 from ncgen.assembly.manifold import null_basis
-from ncgen.validation import as_vector
+from ncgen.validation import as_scalar, as_vector
 
 #: Largest step of ``method="descent"``, relative to the system's extent ``|q|∞``.
 MAX_DESCENT_STEP = 0.25
@@ -188,6 +188,11 @@ def equilibrium(model, q_guess=None, u=None, p=None, *, t: float | None = None, 
     """
     if method not in ("descent", "newton"):
         raise NcgenError(f"equilibrium: method: expected 'descent' or 'newton', got {method!r}")
+    tol = as_scalar(tol, "equilibrium: tol")
+    if tol <= 0:
+        raise NcgenError(f"equilibrium: tol: expected a number > 0 (relative), got {tol:g}")
+    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
+        raise NcgenError(f"equilibrium: max_iter: expected an integer ≥ 1, got {max_iter!r}")
     nq = model.nq
     t = model.t0 if t is None else float(t)
     q = np.array(model.q0 if q_guess is None else as_vector(q_guess, nq, "q_guess"), float)

@@ -9,11 +9,13 @@ import casadi as ca
 import numpy as np
 
 from ncgen.assembly.drive_assembly import assemble_drives
-from ncgen.assembly.contacts import contact_functions, contact_specs, contact_terms, smooth_forces
+from ncgen.assembly.contacts import (check_initial_gaps, contact_functions, contact_specs, contact_terms,
+                                     smooth_forces)
 from ncgen.assembly.functions import system_functions
 from ncgen.assembly.initial_state import consistent_state
 from ncgen.assembly.joint_space import JointSpace, actuator_forces, build_joint_coordinates
-from ncgen.assembly.kinematics import resolve_fix, system_size
+from ncgen.assembly.kinematics import resolve_fix
+from ncgen.assembly.manifold import system_size
 from ncgen.assembly.limits import model_limits
 from ncgen.assembly.manifold import check_tangent_inertia
 from ncgen.assembly.mass import assemble_mass, flat_members, flat_support, mass_factor
@@ -22,6 +24,7 @@ from ncgen.assembly.redundancy import classify
 from ncgen.assembly.springs import spring_table
 from ncgen.assembly.unshared import UnsharedForm
 from ncgen.errors import ModelError
+from ncgen.interrupts import raise_if_interrupted
 from ncgen.model.context import Context
 from ncgen.model.layout import Layout, make_layout
 from ncgen.model.sharing import SharingPlan, intrinsic_key, share_coordinates
@@ -71,6 +74,8 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     if redundant not in REDUNDANT_MODES:
         raise ModelError(f"redundant: expected one of {', '.join(REDUNDANT_MODES)}, got {redundant!r}")
     alpha, beta = (float(x) for x in baumgarte)
+    recipe = (system, dict(baumgarte=(alpha, beta), redundant=redundant, tolerance=tolerance, t0=t0,
+                           assemble=assemble, fix=tuple(fix), contacts=contacts, share=share))
     plan = unshared = None
     if share and not fix:          # fix names coordinates as written: no sharing then
         nq_before = make_layout(system.dim, list(system.members.values())).nq
@@ -146,12 +151,16 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
                      redundant=redundant_labels, dropped=(redundant == "drop"), t0=t0,
                      springs=spring_table(system, ctx), limits=limits, joint_space=joint_space,
                      contacts=contact_specs(system.contacts), contact_model=contacts, sharing=plan,
-                     unshared=unshared)
+                     unshared=unshared, recipe=recipe)
 
     model = model_with(state)
     if system.initial_joints or system.initial_joint_rates:
         q, v = joint_space.initial_state(model, system.initial_joints, system.initial_joint_rates)
         model = model_with(consistent_state(functions, layout, labels, q, v, p0, t0, tolerance, M, fixed=fixed))
+    raise_if_interrupted()               # a Ctrl-C that CasADi swallowed while the functions were built
+    if terms:
+        weight = sum(m.rigid.mass for m in members) * float(np.linalg.norm(system.gravity))
+        check_initial_gaps(system.name, system.contacts, functions["gap"], model.q0, p0, contacts, weight)
     return model
 
 

@@ -79,6 +79,10 @@ class CheckReport:
         dq, dv = m.initial_correction
         lines.append(f"initial state as given: max |Φ| = {phi_res:.3g} m², max |A v + Φ_t| = {vel_res:.3g} m²/s")
         lines.append(f"  corrections making it consistent: {dq:.3g} m (positions), {dv:.3g} m/s (velocities)")
+        if "gap" in m.functions:
+            gaps = np.array(m.functions["gap"](m.q0, m.p0), float).reshape(-1)
+            lines.append("initial gaps (m, < 0 penetrating): " + ", ".join(
+                f"{c['name']} {g:.6g}" for c, g in zip(m.contacts, gaps)))
         for w in self.warnings:
             lines.append(f"warning: {w}")
         if self.inconsistency:

@@ -24,7 +24,9 @@ regularised Coulomb friction ``f_T = −μ f_N v_T / sqrt(|v_T|² + v_s²)`` wit
 from __future__ import annotations
 
 import casadi as ca
+import numpy as np
 
+from ncgen.errors import ModelError
 from ncgen.model.context import Context, perpendicular_basis
 from ncgen.model.contacts import SpherePlane, SphereSphere
 
@@ -143,6 +145,46 @@ def contact_functions(ctx: Context, terms: list[ContactTerms]) -> dict[str, ca.F
         "contact_jacobian": ca.Function("contact_jacobian", [q, p], [WN, WT], ["q", "p"], ["WN", "WT"]),
         "contact_force": ca.Function("contact_force", [t, q, v, p], [fN, fT], ["t", "q", "v", "p"], ["fN", "fT"]),
     }
+
+
+#: Deepest initial penetration (m) the nonsmooth stepper accepts: deeper overlaps are refused
+#: by :func:`check_initial_gaps` (the step's push-out resolves only what arises within a step).
+INITIAL_PENETRATION_TOL = 1e-6
+
+
+def check_initial_gaps(system_name: str, contacts, gap, q, p, contact_model: str, weight: float) -> np.ndarray:
+    """The gaps ``g`` (m) of ``contacts`` at ``(q, p)``, after refusing what no run can start
+    from, naming the contact and the depth:
+
+    * coincident sphere centres (the normal is undefined);
+    * ``contact_model="nonsmooth"``: a penetration deeper than :data:`INITIAL_PENETRATION_TOL`;
+    * the smooth law: two spheres overlapping past a centre (the normal, from centre to
+      centre, points the wrong way), or a sphere deeper in a plane than its radius and than
+      ten times the depth ``(W/k)^(1/n)`` at which the contact alone would carry the system's
+      weight ``W`` (N) — a start that launches the members.
+    """
+    g = np.array(gap(q, p), float).reshape(-1)
+    for c, gk in zip(contacts, g):
+        radius = c.radius if c.kind == "SpherePlane" else c.radius_a + c.radius_b
+        if c.kind == "SphereSphere" and gk + radius <= 1e-12 * max(radius, 1.0):
+            raise ModelError(f"system {system_name!r}: {c.label}: the centres of the spheres on {c.a.name!r} "
+                             f"and {c.b.name!r} coincide in the initial configuration (the contact normal is "
+                             "undefined); move one of the members")
+        depth = -gk
+        if contact_model == "nonsmooth":
+            limit, why = INITIAL_PENETRATION_TOL, f"the nonsmooth stepper starts from at most {INITIAL_PENETRATION_TOL:g} m"
+        elif c.kind == "SphereSphere":
+            limit, why = radius, "past a sphere's centre, where the compliant law pushes the spheres the wrong way"
+        else:
+            resting = (weight / c.stiffness) ** (1.0 / c.exponent)
+            limit = max(radius, 10 * resting)
+            why = (f"deeper than the sphere's radius and than 10 × the depth {resting:.3g} m at which the compliant "
+                   "law carries the system's weight: the run would start with an explosion")
+        if depth > limit:
+            raise ModelError(f"system {system_name!r}: {c.label}: the initial configuration penetrates by "
+                             f"{depth:.6g} m (gap {gk:.6g} m); {why}. Start the members apart (move them by "
+                             f"at least {depth:.6g} m along the contact normal)")
+    return g
 
 
 def contact_specs(contacts) -> list[dict]:

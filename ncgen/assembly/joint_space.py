@@ -28,12 +28,17 @@ from ncgen.assembly.joint_coordinates import JointCoordinates, joint_coordinates
 from ncgen.assembly.joint_tree import (
     Edge, carry, edge_of, quaternion_matrix, quaternion_rate, relative_pose, rotation_2d,
 )
-from ncgen.assembly.kinematics import TOL, newton, system_size
+from ncgen.assembly.manifold import NEWTON_TOL as TOL, newton, system_size
 from ncgen.assembly.mass import sparse_dm
 from ncgen.model.data import model_data
 from ncgen.model.sym2casadi import to_casadi
 from ncgen.errors import ModelError
 from ncgen.validation import as_vector
+
+#: Largest constraint residual (relative to the squared size of q, or to |q| |v| for rates)
+#: of a state whose joint coordinates :meth:`JointSpace.to_joint_space` returns: loose enough
+#: for any integrator's drift, far below a state that is not on the constraints at all.
+OFF_MANIFOLD_TOL = 1e-4
 
 
 def build_joint_coordinates(system, ctx) -> tuple[list[JointCoordinates], dict[str, str]]:
@@ -132,12 +137,28 @@ class JointSpace:
         return {n: x[..., s] for n, s in self.slices(rates).items()}
 
     # ------------------------------------------------------------ out
-    def to_joint_space(self, model, q, v=None, a=None):
-        """``q_j`` (and ``v_j``, ``a_j`` when ``v``, ``a`` are given), in ``joint_names`` order."""
+    def to_joint_space(self, model, q, v=None, a=None, *, t=None, p=None):
+        """``q_j`` (and ``v_j``, ``a_j`` when ``v``, ``a`` are given), in ``joint_names`` order.
+        Refuses a state off the constraints at time ``t`` (default ``model.t0``) by more than
+        :data:`OFF_MANIFOLD_TOL` (relative; joint angles of such a state mean nothing)."""
         q = as_vector(q, model.nq, "q")
+        s = max(1.0, float(np.abs(q).max(initial=0.0)))
+        off = float(np.abs(model.phi(q, t=t, p=p)).max(initial=0.0))
+        if off > OFF_MANIFOLD_TOL * s * s:
+            raise ModelError(f"to_joint_space: q is off the constraints: max |Φ(q)| = {off:.3g} m² (accepted up "
+                             f"to {OFF_MANIFOLD_TOL * s * s:.3g} m²); joint coordinates of such a state are "
+                             "meaningless: project it onto the constraints first (nc.simulate and "
+                             "model.from_joint_space give consistent states)")
         out = [np.array(self.positions(q)).reshape(-1)]
         if v is not None:
             v = as_vector(v, model.nq, "v")
+            w = max(1.0, float(np.abs(v).max(initial=0.0)))
+            phi_t = np.array(model.functions["phi_t"](model.t0 if t is None else t, q,
+                                                      model.p0 if p is None else p)).reshape(-1)
+            off = float(np.abs(model.A(q, t=t, p=p) @ v + phi_t).max(initial=0.0))
+            if off > OFF_MANIFOLD_TOL * s * w:
+                raise ModelError(f"to_joint_space: v is off the constraints: max |A v + Φ_t| = {off:.3g} m²/s "
+                                 f"(accepted up to {OFF_MANIFOLD_TOL * s * w:.3g} m²/s); project it first")
             out.append(np.array(self.rates(q, v)).reshape(-1))
             if a is not None:
                 a = as_vector(a, model.nq, "a")

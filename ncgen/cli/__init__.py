@@ -17,10 +17,11 @@ import warnings
 from ncgen.cli.common import load_model, load_system, write_output
 from ncgen.cli.registry import SUBCOMMANDS, subcommand
 from ncgen.errors import NcgenError
+from ncgen.interrupts import sticky_interrupt
 from ncgen.version import __version__
 
 #: The subcommand modules, in the order ``ncgen --help`` lists them.
-SUBCOMMAND_MODULES = ("derive", "generate", "check", "simulate", "optimize", "mpc", "statics", "demo")
+SUBCOMMAND_MODULES = ("derive", "generate", "check", "simulate", "sweep", "optimize", "mpc", "statics", "demo")
 
 __all__ = ["SUBCOMMANDS", "build_parser", "load_model", "load_system", "main", "subcommand", "write_output"]
 
@@ -81,14 +82,16 @@ def _run_main(parser: argparse.ArgumentParser, argv: list[str], debug: bool) -> 
             parser.print_help(sys.stderr)
             return 2
         where = f"ncgen {args.command}"
-        return args._subcommand.run(args, args._parser)
+        with sticky_interrupt():         # a Ctrl-C that CasADi swallows is raised again at the next checkpoint
+            return args._subcommand.run(args, args._parser)
     except SystemExit as exc:            # argparse: --help, --version and usage errors
         return 0 if exc.code is None else exc.code if isinstance(exc.code, int) else 1
     except NcgenError as exc:
         print(f"{where}: error: {exc}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        print(f"{where}: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as exc:
+        said = f": {exc}" if str(exc) else ""
+        print(f"{where}: interrupted{said}", file=sys.stderr)
         return 130
     except OSError as exc:
         target = f" {exc.filename}" if exc.filename else ""

@@ -30,6 +30,8 @@ def _arguments(p: argparse.ArgumentParser) -> None:
                         ".png, in the current directory)")
     p.add_argument("--no-plot", action="store_true", help="do not plot")
     p.add_argument("--animate", metavar="FILE", default=None, help="also animate the motion (.gif)")
+    p.add_argument("--html", metavar="FILE.html", default=None,
+                   help="also write an interactive 3D page of the optimal motion (opens offline in any browser)")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    help="replace a model parameter's default value (repeatable)")
     p.add_argument("-v", "--verbose", action="store_true", help="show IPOPT's iterations")
@@ -48,7 +50,8 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     examples=(
         "ncgen optimize examples/cartpole_swingup.toml                 # writes cartpole_swingup.npz/.png\n"
         "ncgen optimize examples/cartpole.toml --problem examples/cartpole_swingup.toml -o cp.npz\n"
-        "ncgen optimize examples/cartpole_swingup.toml --plot cp.pdf --animate cp.gif -v"),
+        "ncgen optimize examples/cartpole_swingup.toml --plot cp.pdf --animate cp.gif -v\n"
+        "ncgen optimize examples/cartpole_swingup.toml --html cp.html"),
     arguments=_arguments,
 )
 def optimize(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
@@ -65,7 +68,9 @@ def optimize(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         parser.error(f"--plot {str(plot)!r}: expected a file name ending in {' or '.join(FORMATS)}")
     if args.animate and Path(args.animate).suffix.lower() not in (".gif", ".mp4"):
         parser.error(f"--animate {args.animate!r}: expected a file name ending in .gif or .mp4")
-    for name in (output, plot, args.animate and Path(args.animate)):
+    if args.html and Path(args.html).suffix.lower() != ".html":
+        parser.error(f"--html {args.html!r}: expected a file name ending in .html")
+    for name in (output, plot, args.animate and Path(args.animate), args.html and Path(args.html)):
         if name and not name.resolve().parent.is_dir():
             parser.error(f"{name}: directory {str(name.parent)!r} does not exist")
     data, origin = read_problem_file(problem)
@@ -90,7 +95,10 @@ def optimize(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         if args.animate:
             from ncgen.viz import animate
             animate(sol, stack.enter_context(atomic_path(args.animate)))
-    for name in (output, plot, args.animate):
+        if args.html:
+            from ncgen.viz.html import to_html
+            to_html(sol, stack.enter_context(atomic_path(args.html)))
+    for name in (output, plot, args.animate, args.html):
         if name:
             print(f"wrote {name}", file=sys.stderr)
     return 0

@@ -31,6 +31,8 @@ def _equilibrium_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("-o", "--output", metavar="FILE", default=None,
                    help="write the equilibrium: .csv (name,value rows of q and lambda) or .npz")
     p.add_argument("--plot", metavar="FILE.png", default=None, help="draw the equilibrium configuration")
+    p.add_argument("--html", metavar="FILE.html", default=None,
+                   help="an interactive 3D page of the equilibrium configuration (opens offline)")
 
 
 def _modes_arguments(p: argparse.ArgumentParser) -> None:
@@ -40,8 +42,11 @@ def _modes_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--plot", metavar="FILE.png", default=None, help="draw the first vibration mode shapes")
     p.add_argument("--animate", metavar="FILE", default=None,
                    help="animate one mode shape (.gif, or .mp4 with ffmpeg); see --mode")
+    p.add_argument("--html", metavar="FILE.html", default=None,
+                   help="an interactive 3D page of one mode shape in motion (opens offline); see --mode")
     p.add_argument("--mode", type=int, default=None, metavar="K",
-                   help="mode to animate, 1-based as in the table (default: the first vibration mode)")
+                   help="mode to animate (--animate, --html), 1-based as in the table (default: the first "
+                        "vibration mode)")
 
 
 def _inputs(model, items: list[str]):
@@ -90,12 +95,14 @@ def _solve(args):
     examples=(
         "ncgen equilibrium examples/double_pendulum.toml\n"
         "ncgen equilibrium examples/tensegrity.toml --param tension=5 -o eq.csv --plot eq.png\n"
-        "ncgen equilibrium examples/cartpole.toml --input push=0 --method newton"),
+        "ncgen equilibrium examples/cartpole.toml --input push=0 --method newton\n"
+        "ncgen equilibrium examples/tensegrity.toml --html eq.html"),
     arguments=_equilibrium_arguments,
 )
 def equilibrium_command(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     _check_suffix(parser, "-o/--output", args.output, (".csv", ".npz"))
     _check_suffix(parser, "--plot", args.plot, (".png",))
+    _check_suffix(parser, "--html", args.html, (".html",))
     eq = _solve(args)
     print(eq.table(), end="")
     model = eq.model
@@ -106,6 +113,15 @@ def equilibrium_command(args: argparse.Namespace, parser: argparse.ArgumentParse
         from ncgen.viz.modes import plot_configuration
         plot_configuration(model, eq.q, args.plot, title=f"{model.name}: equilibrium ({eq.stability})")
         print(f"wrote {args.plot}", file=sys.stderr)
+    if args.html:
+        import numpy as np
+
+        from ncgen.runtime.trajectory import Trajectory
+        from ncgen.viz.html import to_html
+        still = Trajectory.from_states(model, np.zeros(1), eq.q[None, :], np.zeros((1, model.nq)), eq.lam[None, :],
+                                       eq.u[None, :], eq.p, {"method": "equilibrium", "complete": True})
+        to_html(still, args.html, title=f"{model.name}: equilibrium ({eq.stability})", plots=False)
+        print(f"wrote {args.html}", file=sys.stderr)
     return 0
 
 
@@ -121,7 +137,8 @@ def equilibrium_command(args: argparse.Namespace, parser: argparse.ArgumentParse
     examples=(
         "ncgen modes examples/double_pendulum.toml\n"
         "ncgen modes examples/tensegrity.toml -o modes.csv --plot modes.png\n"
-        "ncgen modes examples/chain.toml --animate mode1.gif --mode 1"),
+        "ncgen modes examples/chain.toml --animate mode1.gif --mode 1\n"
+        "ncgen modes examples/tensegrity.toml --html mode2.html --mode 2"),
     arguments=_modes_arguments,
 )
 def modes_command(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
@@ -129,6 +146,7 @@ def modes_command(args: argparse.Namespace, parser: argparse.ArgumentParser) -> 
     _check_suffix(parser, "-o/--output", args.output, (".csv", ".npz"))
     _check_suffix(parser, "--plot", args.plot, (".png",))
     _check_suffix(parser, "--animate", args.animate, (".gif", ".mp4"))
+    _check_suffix(parser, "--html", args.html, (".html",))
     eq = _solve(args)
     result = modes(eq.model, eq)
     print(result.table(), end="")
@@ -139,11 +157,17 @@ def modes_command(args: argparse.Namespace, parser: argparse.ArgumentParser) -> 
         from ncgen.viz.modes import plot_modes
         plot_modes(result, args.plot)
         print(f"wrote {args.plot}", file=sys.stderr)
-    if args.animate:
+    if args.animate or args.html:
         vib = [i for i, k in enumerate(result.kind) if k == "vibration"]
         k = (vib[0] if vib else 0) if args.mode is None else args.mode - 1
         if not 0 <= k < len(result.kind):
             parser.error(f"--mode {args.mode}: expected a mode number in 1..{len(result.kind)}")
+    if args.html:
+        from ncgen.viz.html import to_html
+        what = f"{result.frequencies[k]:.4g} Hz" if result.kind[k] == "vibration" else result.kind[k]
+        to_html(result.trajectory(k, cycles=4), args.html, title=f"{eq.model.name}: mode {k + 1} ({what})")
+        print(f"wrote {args.html}", file=sys.stderr)
+    if args.animate:
         from ncgen.viz.modes import animate_mode
         animate_mode(result, k, args.animate)
         print(f"wrote {args.animate}", file=sys.stderr)

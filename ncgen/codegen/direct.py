@@ -20,7 +20,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ncgen.errors import CodegenError
+from ncgen.errors import CodegenError, ShapeError
 
 _INT = ctypes.c_longlong          # casadi_int of the generated code (long long by default)
 _REAL_P = ctypes.POINTER(ctypes.c_double)
@@ -84,12 +84,50 @@ class DirectFunction:
         return int(self._fn(*self._args))
 
     def __call__(self, *args) -> list[np.ndarray]:
-        """Copy ``args`` (one array per input, its nonzeros) into the buffers and evaluate."""
-        for buf, x in zip(self.inputs, args):
-            buf[:] = x
+        """Copy ``args`` (one array per input, its nonzeros) into the buffers and evaluate.
+        Raises :class:`~ncgen.errors.ShapeError` naming the input for a wrong number of
+        arguments or a wrong size (no broadcasting).  Values are not tested for finiteness
+        on this path (the test would cost as much as the call: a NaN in gives NaN out);
+        :meth:`checked` does it."""
+        if len(args) != len(self.inputs):
+            raise ShapeError(f"{self.name}: expected {len(self.inputs)} arguments "
+                             f"({', '.join(self.input_names)}), got {len(args)}")
+        try:
+            for buf, x in zip(self.inputs, args):
+                buf[:] = x
+                if len(x) != buf.size:       # a length-1 argument would broadcast
+                    raise ValueError
+        except (ValueError, TypeError):      # scalars, nested lists, wrong sizes: the careful way
+            self._copy_checked(args)
         if self._fn(*self._args):
             raise CodegenError(f"{self.name}: the compiled kernel returned an error")
         return self.outputs
+
+    def checked(self, *args) -> list[np.ndarray]:
+        """As calling the object, with every argument also tested for finite values."""
+        if len(args) != len(self.inputs):
+            raise ShapeError(f"{self.name}: expected {len(self.inputs)} arguments "
+                             f"({', '.join(self.input_names)}), got {len(args)}")
+        self._copy_checked(args)
+        return self.call()
+
+    def _copy_checked(self, args):
+        """Copy ``args`` into the buffers, raising for the first of a wrong size or with a
+        non-finite value."""
+        for name, buf, x in zip(self.input_names, self.inputs, args):
+            try:
+                a = np.asarray(x, dtype=float).ravel()
+            except (TypeError, ValueError):
+                raise ShapeError(f"{self.name}: argument {name!r}: expected {buf.size} numbers, got "
+                                 f"{type(x).__name__}") from None
+            if a.size != buf.size:
+                raise ShapeError(f"{self.name}: argument {name!r}: expected {buf.size} values, got {a.size} "
+                                 f"(shape {np.shape(x)})")
+            bad = np.flatnonzero(~np.isfinite(a))
+            if bad.size:
+                raise ShapeError(f"{self.name}: argument {name!r}: expected finite numbers, found "
+                                 f"{a[bad[0]]} at index {int(bad[0])}")
+            buf[:] = a
 
 
 def compile_direct(name: str, f: ca.Function, cflags: str | None = None) -> DirectFunction:

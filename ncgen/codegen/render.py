@@ -31,18 +31,18 @@ def banner(template: str, output: str) -> str:
     raise CodegenError(f"no comment syntax known for {output!r} (known suffixes: {sorted(_COMMENT_STYLE)})")
 
 
-def shipped_templates_dir() -> Path:
-    """Directory of the shipped ``c`` templates: when ``ncgen`` is imported from a source
-    checkout (``python -c`` run in the repository, a git worktree), that checkout's
-    ``templates/c`` — an editable install elsewhere must not lend its templates to this
-    code — else the installed ``ncgen._templates/c``."""
+def shipped_templates_dir(sub: str = "c") -> Path:
+    """Directory of the shipped ``c`` templates (or those of folder ``sub``): when ``ncgen``
+    is imported from a source checkout (``python -c`` run in the repository, a git worktree),
+    that checkout's ``templates/c`` — an editable install elsewhere must not lend its
+    templates to this code — else the installed ``ncgen._templates/c``."""
     source = Path(__file__).resolve().parents[2]
-    checkout = source / "templates" / "c"
+    checkout = source / "templates" / sub
     if checkout.is_dir() and (source / "pyproject.toml").is_file():
         return checkout
     spec = importlib.util.find_spec("ncgen._templates")
     if spec is not None and spec.submodule_search_locations:
-        return Path(list(spec.submodule_search_locations)[0]) / "c"
+        return Path(list(spec.submodule_search_locations)[0]) / sub
     raise CodegenError("ncgen's C templates are missing: neither the package ncgen._templates nor "
                        f"{checkout} exists; reinstall ncgen (pip install .)")
 

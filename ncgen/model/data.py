@@ -14,7 +14,8 @@ A model can have these compiled libraries (docs/architecture.md):
   are loaded from it;
 * the **forward-dynamics kernel** (``forward_dynamics_kernels``): ``kkt_function`` (or its
   joint-space form) alone;
-* the **tree kernel** (``tree_kernels``): the joint-space forward dynamics of a tree alone.
+* the **tree kernel** (``tree_kernels``): the joint-space forward dynamics of a tree alone;
+* the **joint-space loops** (``joint_loops``): the joint-space ODE and its integration loop.
 """
 from __future__ import annotations
 
@@ -58,10 +59,24 @@ class ModelData:
     #: ``(reason,)``: why the model has no joint-space transcription (reason None: it has one)
     #: (:func:`ncgen.optim.joint_radau.joint_space_reason`).
     joint_space_reason: tuple | None = None
+    #: ``{(controller id, joint_dynamics, cflags): (controller, JointLoop)}``: the compiled
+    #: joint-space simulation loops (:func:`ncgen.runtime.joint_simulation.joint_loop`).
+    joint_loops: dict = field(default_factory=dict)
+    #: ``(reason,)``: why ``simulate`` cannot run the model in joint space (reason None: it can)
+    #: (:func:`ncgen.runtime.joint_simulation.joint_space_applies`).
+    joint_simulation_reason: tuple | None = None
     #: The model built with ``share=False`` and the map ``(S, c)`` to its coordinates
     #: (:class:`ncgen.assembly.unshared.UnsharedForm`).
     unshared_model: object = None
     unshared_map: tuple | None = None
+    #: :attr:`Model.content_hash <ncgen.model.model.Model.content_hash>`, and the system's
+    #: description a pickle sends (``System.description()``), computed on first use.
+    content_hash: str | None = None
+    description: tuple | None = None
+    #: ``{library: loops}``: the stepper's loops bound for addresses, and the compiled
+    #: ``accel`` of the initial multipliers (:mod:`ncgen.runtime.batch`).
+    batch_loops: dict = field(default_factory=dict)
+    batch_accel: object = None
 
 
 _DATA: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()

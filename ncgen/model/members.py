@@ -87,6 +87,8 @@ class Member:
         self.shared = dict(shared)
         self.markers: dict[str, np.ndarray] = {}
         self.spec: dict = {}     # the arguments it was created with (System.add_*), for to_toml
+        #: what the viewers draw (:mod:`ncgen.model.shapes`); None: a shape from the inertia
+        self.shape = None
         self.q0 = rigid.q_from_pose(R0, p0)
         self.qd0 = rigid.qd_from_twist(R0, p0, omega0, v0)
 
@@ -151,6 +153,14 @@ class Member:
         except BasisError as e:
             raise ModelError(f"marker {self.name}.{name} ({self.ctype.name} {self.kind}): {e}") from None
         self.markers[name] = point
+        return self
+
+    def set_shape(self, shape) -> "Member":
+        """Draw this member as ``shape`` (``nc.Box``, ``nc.Cylinder``, ``nc.Sphere``, ...,
+        :mod:`ncgen.model.shapes`), in its local frame; None: the default."""
+        from ncgen.model.shapes import check_shape
+        self.shape = check_shape(shape, f"{self.kind} {self.name!r}")
+        self.spec["shape"] = self.shape
         return self
 
     def __repr__(self) -> str:

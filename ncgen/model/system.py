@@ -10,6 +10,9 @@ given in world coordinates in the initial configuration; SI units throughout.
 """
 from __future__ import annotations
 
+import copy
+import warnings
+
 import numpy as np
 import casadi as ca
 
@@ -46,6 +49,9 @@ class System:
         self.frames: dict[str, tuple] = {}
         #: Visual geometry (URDF ``<visual>``), plain dicts in member frames.
         self.visuals: list[dict] = []
+        #: A compiled controller (:mod:`ncgen.model.controllers`; TOML ``[controller]``) that
+        #: ``ncgen simulate`` runs; the Python API passes controllers as ``simulate(u=...)``.
+        self.controller = None
         #: Joint-space initial state ``{joint: position}`` / ``{joint: rate}`` applied by
         #: :meth:`build` (TOML ``initial = {elbow = 0.3}``, ``initial_rates``); joints not
         #: named keep the coordinates and rates of the members' given poses and twists.
@@ -97,12 +103,14 @@ class System:
 
     def add_body(self, name: str, coords: str = "ruvw", *, mass: float, inertia,
                  position=None, rotation=None, velocity=None, angular_velocity=None,
-                 basis=None, share: dict | None = None) -> Member:
+                 basis=None, share: dict | None = None, shape=None) -> Member:
         """A rigid body.  ``inertia``: 3×3 tensor about the centre of mass in body axes (a
         scalar in 2D); ``position``: centre of mass; ``rotation``: body→world (2D: an angle
         or 2×2 matrix); ``angular_velocity`` in world axes; ``basis``: the slot values in
         the body frame, seed order (default: ``r̄_i = 0`` and unit axes); ``share``: maps
-        slot names (``"r_i"``, ``"r_j"``, ...) to nodes of other members or the ground."""
+        slot names (``"r_i"``, ``"r_j"``, ...) to nodes of other members or the ground;
+        ``shape``: what viewers draw (``nc.Box(a, b, c)``, ... :mod:`ncgen.model.shapes`;
+        default: the box of the same inertia)."""
         name = self._new_name(name, "body")
         ct = self._ctype(coords, "body", name)
         d = self.dim
@@ -119,15 +127,16 @@ class System:
         member.spec = dict(kind="body", coords=ct.name, mass=mass, inertia=inertia, position=position,
                            rotation=rotation, velocity=velocity, angular_velocity=angular_velocity,
                            basis=basis, share={ct.slots[k]: ref for k, ref in shared.items()} or None)
-        return self._add(member)
+        return self._add(member.set_shape(shape))
 
     def add_bar(self, name: str, coords: str = "rr", *, mass: float, ends, inertia=None, com=None,
-                velocity=None, angular_velocity=None) -> Member:
+                velocity=None, angular_velocity=None, shape=None) -> Member:
         """A rigid bar between ``ends`` (two world points, or nodes to share: ``other.end(1)``,
         ``system.ground.point(p)``).  ``inertia``: transverse moment about the centre of
         mass (default ``m L²/12``); ``com``: distance of the centre of mass from the first
         end (default: the middle); ``velocity`` of the centre of mass; the component of
-        ``angular_velocity`` along the bar is ignored."""
+        ``angular_velocity`` along the bar is ignored; ``shape``: what viewers draw (default:
+        a cylinder between the ends)."""
         name = self._new_name(name, "bar")
         ct = self._ctype(coords, "bar", name)
         d = self.dim
@@ -157,11 +166,12 @@ class System:
         member = Member(name, local, R, p, w, v, shared)
         member.spec = dict(kind="bar", coords=ct.name, mass=mass, ends=list(ends), inertia=inertia, com=com,
                            velocity=velocity, angular_velocity=angular_velocity)
-        return self._add(member)
+        return self._add(member.set_shape(shape))
 
-    def add_point(self, name: str, *, mass: float, position, velocity=None) -> Member:
+    def add_point(self, name: str, *, mass: float, position, velocity=None, shape=None) -> Member:
         """A point mass; ``position`` may be a node of another member (``bar.end(1)``), which
-        adds the mass there without new coordinates."""
+        adds the mass there without new coordinates; ``shape``: what viewers draw (default: a
+        small sphere)."""
         name = self._new_name(name, "point")
         ct = coordinate_type("r", self.dim)
         d = self.dim
@@ -173,7 +183,7 @@ class System:
         v = np.zeros(d) if velocity is None else as_vector(velocity, d, f"{name}: velocity")
         member = Member(name, RigidMember.point(ct, mass), None, p, None, v, shared)
         member.spec = dict(kind="point", mass=mass, position=shared.get(0, position), velocity=velocity)
-        return self._add(member)
+        return self._add(member.set_shape(shape))
 
     # ----------------------------------------------------- joints and forces
     def add_joint(self, joint):
@@ -271,10 +281,57 @@ class System:
         from ncgen.model.toml_io import system_to_toml
         return system_to_toml(self)
 
+    def description(self) -> tuple:
+        """``(toml, frames, visuals, joint_limits)``: what the system is, as plain data (its
+        TOML text, and the named frames, visual geometry and joint limits, e.g. of a URDF, that
+        TOML does not hold); :func:`from_description` makes the same system again.  Pickling a
+        system sends this."""
+        try:
+            text = self.to_toml()
+        except (NcgenError, TypeError, ValueError) as e:
+            raise TypeError(f"system {self.name!r} cannot be pickled: its description is written as TOML, "
+                            f"and that failed: {e}") from None
+        frames = {k: (mem, np.array(R), np.array(p)) for k, (mem, R, p) in self.frames.items()}
+        limits = {j.name: dict(j.limits) for j in self.joints if j.limits}
+        return text, frames, [dict(v) for v in self.visuals], limits
+
+    def __reduce__(self):
+        return from_description, self.description()
+
+    def __deepcopy__(self, memo) -> "System":
+        """A member-by-member copy (as without :meth:`__reduce__`, which pickling uses)."""
+        new = object.__new__(type(self))
+        memo[id(self)] = new
+        new.__dict__.update(copy.deepcopy(self.__dict__, memo))
+        return new
+
+    @classmethod
+    def rebuilt_model(cls, description: tuple, options: dict, expected_hash: str):
+        """The model of a pickle (:meth:`ncgen.model.model.Model.__reduce__`): the one of this
+        process with that content hash, else built from ``description`` with the build
+        ``options`` and checked against ``expected_hash``."""
+        from ncgen.model.model import keep_rebuilt, known_model
+        model = known_model(expected_hash)
+        if model is None:
+            with warnings.catch_warnings():   # said when it was first built (e.g. dropped constraints)
+                warnings.simplefilter("ignore")
+                model = keep_rebuilt(from_description(*description).build(**options), expected_hash)
+        return model
+
     def __repr__(self) -> str:
         return (f"System({self.name!r}, dim={self.dim}, members={len(self.members)}, "
                 f"joints={len(self.joints)}, forces={len(self.forces)}"
                 + (f", contacts={len(self.contacts)})" if self.contacts else ")"))
+
+
+def from_description(toml: str, frames: dict, visuals: list, joint_limits: dict) -> System:
+    """The system of :meth:`System.description` (how a pickled system is read back)."""
+    system = System.from_toml(toml)
+    system.frames = {k: (mem, np.array(R), np.array(p)) for k, (mem, R, p) in frames.items()}
+    system.visuals = [dict(v) for v in visuals]
+    for joint in system.joints:
+        joint.limits = dict(joint_limits.get(joint.name, {}))
+    return system
 
 
 def _rotation(R, d, name):

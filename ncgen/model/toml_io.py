@@ -38,10 +38,11 @@ from ncgen.model.contacts import CONTACT_TYPES, SphereSphere
 from ncgen.model.forces import FORCE_TYPES
 from ncgen.model.joints import JOINT_TYPES, CoordinateDriver
 from ncgen.model.members import NodeRef
+from ncgen.model.shapes import shape_from_table
 from ncgen.validation import MAX_NAME, as_scalar
 
 TOP_KEYS = ("system", "parameters", "inputs", "members", "joints", "forces", "contacts", "initial",
-            "initial_rates")
+            "initial_rates", "controller")
 #: Material keys every contact table may have (:class:`~ncgen.model.contacts.Contact`).
 CONTACT_MATERIAL = ("mu", "restitution", "stiffness", "damping", "exponent", "slip_velocity")
 
@@ -64,11 +65,13 @@ class Field:
 MEMBER_FIELDS = {
     "body": (Field("coords", "string", default=lambda dim: "ruvw"[:dim + 1]), Field("mass", "number", True), Field("inertia", "inertia", True),
              Field("position", "vector"), Field("rotation", "rotation"), Field("velocity", "vector"),
-             Field("angular_velocity", "angular velocity"), Field("basis", "basis"), Field("share", "share")),
+             Field("angular_velocity", "angular velocity"), Field("basis", "basis"), Field("share", "share"),
+             Field("shape", "shape")),
     "bar": (Field("coords", "string"), Field("mass", "number", True), Field("ends", "ends", True),
             Field("inertia", "number"), Field("com", "number"), Field("velocity", "vector"),
-            Field("angular_velocity", "angular velocity")),
-    "point": (Field("mass", "number", True), Field("position", "point or node", True), Field("velocity", "vector")),
+            Field("angular_velocity", "angular velocity"), Field("shape", "shape")),
+    "point": (Field("mass", "number", True), Field("position", "point or node", True), Field("velocity", "vector"),
+              Field("shape", "shape")),
 }
 
 #: Keys of each force type: the arguments of its class.
@@ -246,6 +249,7 @@ class _Loader:
         sysd.finish(("name", "gravity"))
         self.s = system_class(name, gravity=[as_scalar(x, f"system.gravity[{i}]") for i, x in enumerate(gravity)])
         self.dim = self.s.dim
+        self.base = Path(origin).parent if origin != "<toml text>" else None
         self._parameters(_Table(top.get("parameters", {}), "parameters"))
         self._inputs(_Table(top.get("inputs", {}), "inputs"))
         for i, m in enumerate(self._array(top.get("members", required=True), "members")):
@@ -258,6 +262,9 @@ class _Loader:
             self._contact(_Table(c, f"contacts[{i}]"))
         for key in ("initial", "initial_rates"):
             self._initial(top.get(key, {}), key)
+        if "controller" in data:
+            from ncgen.model.controllers import controller_from_dict
+            self.s.controller = controller_from_dict(data["controller"], "controller")
         self.system = self.s
 
     def _initial(self, table, key):
@@ -372,6 +379,8 @@ class _Loader:
             return {k: self._node(x, st.at(k)) for k, x in st.data.items()}
         if kind == "point or node":
             return self._point_or_node(v, path)
+        if kind == "shape":
+            return shape_from_table(v, path, self.base)
         if kind == "ends":
             if not isinstance(v, list) or len(v) != 2:
                 raise ModelError(f"{path}: expected two points or nodes, got {_describe(v)}")
@@ -543,6 +552,10 @@ def system_to_toml(system) -> str:
     for key, values in (("initial", system.initial_joints), ("initial_rates", system.initial_joint_rates)):
         if values:
             parts.append(toml_write.table(key, {n: _plain(v) for n, v in values.items()}))
+    ctrl = getattr(system, "controller", None)
+    if ctrl is not None:
+        from ncgen.model.controllers import controller_to_dict
+        parts.append(toml_write.table("controller", controller_to_dict(ctrl)))
     return "\n".join(parts)
 
 
@@ -566,7 +579,8 @@ def _member_entries(m) -> dict:
     if not m.spec:
         raise ModelError(f"to_toml: member {m.name!r} was not created by System.add_body/add_bar/add_point")
     out = {"name": m.name, "kind": m.spec["kind"]}
-    out.update({k: _plain(v) for k, v in m.spec.items() if v is not None and k != "kind"})
+    out.update({k: v.to_toml() if k == "shape" else _plain(v) for k, v in m.spec.items()
+                if v is not None and k != "kind"})
     if m.markers:
         out["markers"] = {k: _plain(v) for k, v in m.markers.items()}
     return out

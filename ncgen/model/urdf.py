@@ -16,7 +16,9 @@ Parsing is yourdfpy's (meshes are not loaded); this module maps the parsed tree:
   actuated).  ``floating``/``planar`` joints inside the tree are refused.
 * Every other movable joint is actuated by one component of the input ``tau`` (N·m or N),
   in ``model.joint_names`` order; limits (``lower``, ``upper``, ``velocity``, ``effort``)
-  are kept as data (``model.joint_limits``).
+  are kept as data (``model.joint_limits``), ``<dynamics damping friction>`` too
+  (``joint.dynamics``); both act in simulation with ``simulate(joint_dynamics=True)``
+  (:mod:`ncgen.model.joint_dynamics`).
 * ``floating_base=True``: the root is a body with a :class:`~ncgen.model.joints.Free`
   joint named ``root`` (Pinocchio's free flyer at the root link's frame).
 * Link frames (``model.frames``, ``model.frame_pose``) and visual geometry
@@ -35,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from ncgen.errors import ModelError
+from ncgen.model.urdf_checks import check_urdf_document
 
 MOVABLE = ("revolute", "continuous", "prismatic")
 
@@ -67,13 +70,19 @@ def load_urdf(source):
     except ImportError:
         raise ModelError("URDF import needs the package yourdfpy (pip install yourdfpy)") from None
     text = str(source)
-    if "<robot" in text:
-        handle, where = io.BytesIO(text.encode()), "URDF text"
+    if "<" in text:
+        where = "URDF text"
     else:
         path = Path(source)
         if not path.is_file():
             raise ModelError(f"URDF: no file {str(path)!r} (expected a path to a .urdf file or URDF text)")
-        handle, where = str(path), str(path)
+        where = str(path)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as e:
+            raise ModelError(f"URDF {where}: cannot read it: {e}") from None
+    check_urdf_document(text, where)
+    handle = io.BytesIO(text.encode()) if where == "URDF text" else where
     try:
         return yourdfpy.URDF.load(handle, build_scene_graph=False, load_meshes=False,
                                   build_collision_scene_graph=False, load_collision_meshes=False), where
@@ -178,6 +187,9 @@ def system_from_urdf(source, system_class, *, floating_base: bool = False, gravi
         joint.limits = {} if lim is None else {
             key: float(getattr(lim, key)) for key in ("lower", "upper", "velocity", "effort")
             if getattr(lim, key) is not None and not (j.type == "continuous" and key in ("lower", "upper"))}
+        dyn = j.dynamics
+        if dyn is not None:
+            joint.set_dynamics(**{k: getattr(dyn, k) for k in ("damping", "friction") if getattr(dyn, k)})
         made[j.name] = joint
     for j in movable:
         if j.mimic is not None:

@@ -164,6 +164,14 @@ def _from_motion(m, model, t0: float, T: float, u_rest: np.ndarray):
     if n < 2 or qw.shape != (n, model.nq) or vw.shape != (n, model.nq):
         raise OptimizationError(f"warm_start: expected t (n ≥ 2), q and v of shape (n, {model.nq}); got "
                                 f"t {tw.shape}, q {qw.shape}, v {vw.shape}")
+    for what, X in (("t", tw), ("q", qw), ("v", vw), ("u", getattr(m, "u", None)), ("lam", getattr(m, "lam", None))):
+        bad = None if X is None else np.argwhere(~np.isfinite(np.asarray(X, dtype=float)))
+        if bad is not None and bad.size:
+            raise OptimizationError(f"warm_start.{what}: expected finite numbers, found "
+                                    f"{np.asarray(X, dtype=float)[tuple(bad[0])]} at index {tuple(bad[0].tolist())} "
+                                    f"({len(bad)} non-finite entries)")
+    if np.any(np.diff(tw) <= 0):
+        raise OptimizationError("warm_start.t: expected increasing times")
 
     def to_w(t):
         return tw[0] + (np.asarray(t, dtype=float) - t0) / T * (tw[-1] - tw[0])

@@ -31,6 +31,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.errors import OptimizationError
+from ncgen.interrupts import deferred_interrupt
 from ncgen.model.model import component_names
 from ncgen.optim.diagnostics import DIAGNOSIS_BUDGET, RELAXABLE, SUCCESS, diagnose, violation_of
 from ncgen.optim.guess import guess_duration, make_guess
@@ -391,10 +392,12 @@ class NLP:
         opti.solver("ipopt", {"expand": self.disc.expandable, "detect_simple_bounds": True,
                               "print_time": False, "ipopt": options})
         start = time.perf_counter()
-        try:
-            self.value = opti.solve_limited().value
-        except RuntimeError:               # IPOPT failed (infeasible, NaN, ...): the last iterate
-            self.value = opti.debug.value
+        with deferred_interrupt() as interrupt:          # Ctrl-C stops IPOPT at its next iteration
+            opti.callback(interrupt.check)
+            try:
+                self.value = opti.solve_limited().value
+            except RuntimeError:               # IPOPT failed (infeasible, NaN, ...): the last iterate
+                self.value = opti.debug.value
         status = opti.stats().get("return_status", "")
         if status in ("Invalid_Option", "Invalid_Problem_Definition"):
             raise OptimizationError(f"IPOPT refused its options ({status}): check ipopt={ipopt!r} and "

@@ -27,7 +27,8 @@ import re
 
 import numpy as np
 
-from ncgen.errors import OptimizationError
+from ncgen.errors import NcgenError, OptimizationError
+from ncgen.validation import as_scalar
 from ncgen.optim.transcription import MODEL_STATE
 
 METHODS = ("collocation", "shooting")
@@ -95,9 +96,16 @@ class OptimalControl:
 
     def coordinate_index(self, name: str) -> int:
         names = self.model.coordinate_names
-        if name not in names:
-            raise OptimizationError(f"no coordinate named {name!r}; coordinates: {', '.join(names)}")
-        return names.index(name)
+        if name in names:
+            return names.index(name)
+        try:
+            self.model.coordinate(name)
+        except NcgenError:
+            raise OptimizationError(f"no coordinate named {name!r}; coordinates: {', '.join(names)}") from None
+        raise OptimizationError(f"coordinate {name!r} is one as written that coordinate sharing re-based (see "
+                                f"model.sharing); optimal-control bounds and targets take the model's coordinates "
+                                f"({', '.join(names[:8])}{', ...' if len(names) > 8 else ''}), a marker or a pose "
+                                "target, or build the model with share=False")
 
     def marker_index(self, name: str) -> int:
         names = self.model.marker_names
@@ -379,6 +387,7 @@ class OptimalControl:
         Raises :class:`~ncgen.errors.OptimizationError` when IPOPT fails (with the last
         iterate as ``exc.result``)."""
         from ncgen.optim.diagnostics import DIAGNOSIS_BUDGET
+        from ncgen.optim.ipopt_options import check_ipopt_options
         from ncgen.optim.nlp import build_and_solve
         if linear_solver not in LINEAR_SOLVERS:
             raise OptimizationError(f"linear_solver: expected one of {', '.join(LINEAR_SOLVERS)}, "
@@ -386,7 +395,13 @@ class OptimalControl:
         budget = DIAGNOSIS_BUDGET if diagnose is True else float(diagnose or 0.0)
         if budget < 0 or not np.isfinite(budget):
             raise OptimizationError(f"diagnose: expected True, False or a number of seconds ≥ 0, got {diagnose!r}")
-        options = dict(max_iter=max_iter, tol=tol, verbose=verbose, ipopt=dict(ipopt or {}),
+        if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 0:
+            raise OptimizationError(f"max_iter: expected an integer ≥ 0, got {max_iter!r}")
+        tol = as_scalar(tol, "tol")
+        if tol <= 0:
+            raise OptimizationError(f"tol: expected a number > 0, got {tol:g}")
+        ipopt = check_ipopt_options(ipopt, "ipopt")
+        options = dict(max_iter=int(max_iter), tol=tol, verbose=verbose, ipopt=ipopt,
                        linear_solver=linear_solver, diagnose_budget=budget)
         if coarse_start and self.N >= 2:
             coarse = copy.copy(self)

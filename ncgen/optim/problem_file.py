@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ncgen.errors import NcgenError, OptimizationError, ProblemFileError
+from ncgen.optim.ipopt_options import check_ipopt_options
 from ncgen.files import decode_text
 from ncgen.optim.problem import FORMS, METHODS, OptimalControl
 
@@ -317,7 +318,10 @@ class _Reader:
                 self.fail("solver.verbose", "true or false", s["verbose"])
             opts.verbose = s["verbose"]
         if "ipopt" in s:
-            opts.ipopt = dict(self.table(s["ipopt"], "solver.ipopt", None))
+            try:
+                opts.ipopt = check_ipopt_options(self.table(s["ipopt"], "solver.ipopt", None), "solver.ipopt")
+            except OptimizationError as e:
+                raise ProblemFileError(f"{self.origin}: {e}") from None
         return opts
 
 

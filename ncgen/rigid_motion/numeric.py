@@ -10,8 +10,8 @@ wrenches ``[τ; f]``, ``T_a = Ad(H_ab) T_b``, ``W_b = Ad(H_ab)ᵀ W_a``.  SI uni
 Arguments may carry leading batch dimensions (``H_ab`` of shape ``(..., 4, 4)``, ``T`` of shape
 ``(..., 6)``, angles of shape ``(...)``); batch dimensions broadcast against each other and
 lead the result.  Bad input raises :class:`~ncgen.errors.ShapeError` (wrong shape),
-:class:`~ncgen.errors.RotationError` (a rotation or homogeneous matrix that is not one, within
-``ROTATION_TOLERANCE``) or :class:`~ncgen.errors.InertiaError` (non-positive mass or size,
+:class:`~ncgen.errors.RotationError` (a rotation or homogeneous matrix that is not one, beyond the
+printed precision that :func:`ncgen.validation.nearest_rotation` projects) or :class:`~ncgen.errors.InertiaError` (non-positive mass or size,
 an inertia that is not symmetric positive definite or violates the triangle inequality); the
 message names the argument, what was expected and what was found.
 """
@@ -22,7 +22,7 @@ import numpy as np
 from ncgen.errors import InertiaError, RotationError, ShapeError
 from ncgen.symbolic.numeric import numpy_function
 from ncgen.symbolic.rigid_motion_forms import form
-from ncgen.validation import ROTATION_TOL
+from ncgen.validation import ROTATION_TOL, nearest_rotation
 
 ROTATION_TOLERANCE = ROTATION_TOL
 """Largest accepted ``max |RᵀR − 1|`` (and deviation of a homogeneous matrix's bottom row)."""
@@ -101,15 +101,10 @@ def check_vector(x, name: str, n: int = 3) -> np.ndarray:
 
 
 def check_rotation(R, name: str) -> np.ndarray:
-    """``R`` as an array of rotation matrices ``(..., 3, 3)``; raises naming ``name``."""
-    R = _array(R, name, (3, 3))
-    gram_error = np.max(np.abs(np.swapaxes(R, -1, -2) @ R - np.eye(3)), initial=0.0)
-    det = np.linalg.det(R)
-    if gram_error > ROTATION_TOLERANCE or np.any(det <= 0):
-        raise RotationError(
-            f"{name}: expected a rotation matrix (RᵀR = 1 within {ROTATION_TOLERANCE:g}, det R = +1), "
-            f"found max |RᵀR − 1| = {gram_error:.3g}, min det R = {np.min(det):.6g}")
-    return R
+    """``R`` as an array of rotation matrices ``(..., 3, 3)``, those given with printed
+    precision projected onto SO(3) (:func:`ncgen.validation.nearest_rotation`, the one rule);
+    raises naming ``name``."""
+    return nearest_rotation(_array(R, name, (3, 3)), name)
 
 
 def check_homogeneous(H, name: str) -> np.ndarray:
@@ -121,7 +116,8 @@ def check_homogeneous(H, name: str) -> np.ndarray:
         worst = rows[np.argmax(bottom_error)]
         raise RotationError(f"{name}: expected a homogeneous matrix [[R, p], [0, 1]] with bottom row "
                             f"(0, 0, 0, 1), found bottom row {tuple(worst.tolist())}")
-    check_rotation(H[..., :3, :3], f"{name}[:3, :3]")
+    H = H.copy()
+    H[..., :3, :3] = check_rotation(H[..., :3, :3], f"{name}[:3, :3]")
     return H
 
 

@@ -124,6 +124,8 @@ class ChunkedIDAS:
             with contextlib.redirect_stderr(log):
                 res = F(x0=x, z0=z, p=np.concatenate([p, [t_s], xdot]), u=columns)
         except RuntimeError as e:
+            if "KeyboardInterrupt" in log.getvalue():     # CasADi reports Ctrl-C as a residual failure
+                raise KeyboardInterrupt from None
             raise ChunkFailure(idas_flag(e), log.getvalue().strip(), str(e)) from None
         if log.getvalue().strip():
             sys.stderr.write(log.getvalue())

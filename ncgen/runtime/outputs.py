@@ -9,6 +9,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.assembly.derived import residual_function
+from ncgen.model.data import model_data
 
 
 def _mapped(f: ca.Function, n: int, *columns):
@@ -25,7 +26,11 @@ def energies(model, t, q, v, p) -> tuple[np.ndarray, np.ndarray]:
 
 def residuals(model, t, q, v, p) -> tuple[np.ndarray, np.ndarray]:
     """``|Φ(t, q)|∞`` (m²) and ``|A v + Φ_t|∞`` (m²/s) per step."""
-    r, rd = _mapped(residual_function(model), len(t), np.asarray(t)[None, :], q.T, v.T, p)
+    functions = model_data(model).functions
+    f = functions.get("residuals")
+    if f is None:
+        f = functions["residuals"] = residual_function(model)
+    r, rd = _mapped(f, len(t), np.asarray(t)[None, :], q.T, v.T, p)
     return np.array(r).reshape(-1), np.array(rd).reshape(-1)
 
 

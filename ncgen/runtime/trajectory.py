@@ -148,6 +148,16 @@ class Trajectory:
         C = m.rigid.C(m.rigid.affine(np.asarray(local, dtype=float)))
         return outputs.member_coordinates(model, member, self.q) @ np.asarray(C).T
 
+    def coordinate(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """``(values, rates)`` per step (m, m/s) of the coordinate ``name``: one of
+        ``coordinate_names`` or one as written before coordinate sharing re-based its member
+        (:meth:`~ncgen.model.model.Model.coordinate`)."""
+        if name in self.coordinate_names:
+            i = self.coordinate_names.index(name)
+            return self.q[:, i].copy(), self.v[:, i].copy()
+        s, c = self._model(f"the coordinate {name!r}").coordinate(name)
+        return self.q @ s + c, self.v @ s
+
     def joint(self, name: str) -> tuple[np.ndarray, np.ndarray]:
         """``(positions, rates)`` of joint ``name`` per step: ``(n_t,)`` each for a joint with
         one coordinate (rad or m, rad/s or m/s), ``(n_t, k)`` otherwise (see
@@ -188,6 +198,13 @@ class Trajectory:
         """``(R, p)`` of every member per step: ``R`` ``(n_t, n_members, dim, dim)`` (local →
         world; identity for points), ``p`` ``(n_t, n_members, dim)`` centres of mass."""
         return outputs.poses(self._model("poses()"), self.q)
+
+    def to_html(self, path, **options) -> Path:
+        """Write an offline interactive 3D page of this run (:func:`ncgen.viz.html.to_html`:
+        ``colors``, ``mesh_paths``, ``fps``, ``title``, ``trails``); ``?t=SECONDS`` in its
+        URL opens it paused at that time.  Returns the path."""
+        from ncgen.viz.html import to_html
+        return to_html(self, path, **options)
 
     def summary(self) -> str:
         """A few lines for people: span, integrator work, energy and constraint drift."""

@@ -1,7 +1,9 @@
 """ncgen.viz: pictures of trajectories (matplotlib, Agg canvas; imported only when used).
 
 * :func:`plot` — PNG with energy drift, constraint drift and chosen points;
-* :func:`animate` — GIF (or MP4 with ffmpeg) of the moving system.
+* :func:`animate` — GIF (or MP4 with ffmpeg) of the moving system;
+* :func:`to_html` — one self-contained, offline HTML page with an interactive 3D view and
+  plots (also ``traj.to_html(path)``).
 """
 
 
@@ -17,4 +19,10 @@ def animate(traj, path, **kwargs):
     return _animate(traj, path, **kwargs)
 
 
-__all__ = ["animate", "plot"]
+def to_html(traj, path, **kwargs):
+    """See :func:`ncgen.viz.html.to_html`."""
+    from ncgen.viz.html import to_html as _to_html
+    return _to_html(traj, path, **kwargs)
+
+
+__all__ = ["animate", "plot", "to_html"]

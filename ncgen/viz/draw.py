@@ -8,6 +8,13 @@ from matplotlib.figure import Figure
 
 from ncgen.viz.scene import Scene
 
+SPRING_COLOR = "tab:green"
+CABLE_COLOR = "tab:red"
+SLACK_COLOR = "0.6"
+TRAIL_COLOR = "tab:gray"
+#: Turns of a drawn spring coil, its radius relative to the scene's size.
+COIL_TURNS, COIL_RADIUS = 8, 0.02
+
 BAR_COLOR = "tab:blue"
 BODY_COLOR = "tab:orange"
 AXIS_COLORS = ("tab:red", "tab:green", "tab:blue")
@@ -56,8 +63,19 @@ class SceneArtists:
         self.ax, self.scene = ax, scene
         lo, hi = scene.bounds()
         self.axis_length = 0.12 * max(float(np.max(hi - lo)), 1e-3)
-        self.bars = [self._line(BAR_COLOR, lw=3) for _ in scene.bar_names]
-        self.axes = [[self._line(c, lw=1.5) for c in AXIS_COLORS[:scene.dim]] for _ in scene.body_names]
+        self.size = max(float(np.max(hi - lo)), 1e-3)
+        self.bars = [self._line(color, lw=4) for color in scene.bar_colors]
+        self.axes = [[self._line(c, lw=1.5) for c in AXIS_COLORS[:scene.dim]] if not outlined else []
+                     for outlined in scene.body_outlined]
+        self.outlines = []
+        for k, pts, color in scene.outlines:
+            if k < 0:
+                self.ax.plot(*pts[:, :scene.dim].T, color=color, lw=1)
+            else:
+                self.outlines.append((k, pts[:, :scene.dim], self._line(color, lw=1.2)))
+        self.springs = [self._line(CABLE_COLOR if cable else SPRING_COLOR, lw=1.5 if cable else 1)
+                        for cable in scene.spring_cable]
+        self.trails = [self._line(TRAIL_COLOR, lw=0.8) for _ in range(scene.markers.shape[1])]
         self.body_points = self._dots(BODY_COLOR, "o", 30)
         self.points = self._dots(POINT_COLOR, "o", 50)
         self.markers = self._dots(MARKER_COLOR, ".", 25)
@@ -68,6 +86,8 @@ class SceneArtists:
         for point, normal in scene.planes:
             self._plane(point, normal)
         self.title = ax.set_title("")
+        #: text before the time in the title (e.g. the model's name)
+        self.prefix = ""
 
     def _plane(self, point, normal):
         """A ground plane: its trace across the scene's box (a line in 2D, a square in 3D)."""
@@ -112,10 +132,43 @@ class SceneArtists:
         if self.scene.dim == 3:
             artist.set_3d_properties(pts[:, 2])
 
+    def _coil(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """A coil (3D) or zigzag (2D) from ``a`` to ``b``, straight over its first and last tenth."""
+        d = b - a
+        length = float(np.linalg.norm(d))
+        if length == 0:
+            return np.array([a, b])
+        u = d / length
+        s = np.linspace(0.1, 0.9, 16 * COIL_TURNS + 1)
+        r = COIL_RADIUS * self.size
+        theta = 2 * np.pi * COIL_TURNS * (s - 0.1) / 0.8
+        if self.scene.dim == 2:
+            side = np.array([-u[1], u[0]])
+            body = a + np.outer(s, d) + r * np.outer(np.sin(theta), side)
+        else:
+            e1 = np.cross(u, np.eye(3)[int(np.argmin(np.abs(u)))])
+            e1 /= np.linalg.norm(e1)
+            e2 = np.cross(u, e1)
+            body = a + np.outer(s, d) + r * (np.outer(np.cos(theta) - 1, e1) + np.outer(np.sin(theta), e2))
+        return np.vstack([a, body, b])
+
     def show(self, k: int, t: float) -> list:
         s = self.scene
         for line, seg in zip(self.bars, s.bars[k]):
             self._set(line, seg)
+        for i, pts, line in self.outlines:
+            self._set(line, pts @ s.member_R[k, i].T + s.member_p[k, i])
+        for j, line in enumerate(self.springs):
+            a, b = s.spring_ends[k, j]
+            if s.spring_cable[j]:
+                slack = bool(s.spring_slack[k, j])
+                line.set_linestyle("--" if slack else "-")
+                line.set_color(SLACK_COLOR if slack else CABLE_COLOR)
+                self._set(line, [a, b])
+            else:
+                self._set(line, self._coil(a, b))
+        for j, line in enumerate(self.trails):
+            self._set(line, s.markers[:k + 1, j])
         for lines, origin, R in zip(self.axes, s.body_origins[k], s.body_axes[k]):
             for j, line in enumerate(lines):
                 self._set(line, [origin, origin + self.axis_length * R[:, j]])
@@ -126,6 +179,7 @@ class SceneArtists:
             self._set(line, self._circles(centre, radius))
         loaded = s.contact_points[k]
         self._set(self.contacts, loaded[~np.isnan(loaded).any(axis=1)])
-        self.title.set_text(f"t = {t:.3f} s")
-        return [*self.bars, *(a for lines in self.axes for a in lines), self.body_points, self.points,
-                self.markers, *self.spheres, self.contacts, self.title]
+        self.title.set_text(f"{self.prefix}t = {t:.3f} s")
+        return [*self.bars, *(a for lines in self.axes for a in lines), *(o[2] for o in self.outlines),
+                *self.springs, *self.trails, self.body_points, self.points, self.markers, *self.spheres,
+                self.contacts, self.title]

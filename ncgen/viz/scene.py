@@ -6,7 +6,10 @@
 * point members: their positions; markers: their positions;
 * ground-fixed basic points: constant positions, drawn as anchors;
 * contacts: the spheres (centres per frame and radii), the planes fixed to the ground
-  (a point and a unit normal each) and, per frame, the contact points that carry a force.
+  (a point and a unit normal each) and, per frame, the contact points that carry a force;
+* shapes (:mod:`ncgen.viz.geometry`): every member's pose per frame and the line drawings
+  of its primitives in its frame (``outlines``), bars' colours;
+* springs and cables: their ends per frame, which are cables and when a cable is slack.
 Positions in m, world frame.
 """
 from __future__ import annotations
@@ -16,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ncgen.errors import NcgenError
+from ncgen.viz import geometry
 
 
 @dataclass
@@ -34,11 +38,28 @@ class Scene:
     sphere_radii: np.ndarray = None     # (n_spheres,)
     planes: np.ndarray = None           # (n_planes, 2, dim): point and unit normal of ground planes
     contact_points: np.ndarray = None   # (n_t, nk, dim): contact point, NaN while it carries no force
+    contact_forces: np.ndarray = None   # (n_t, nk, dim): normal force on the sphere (first sphere) (N)
+    member_R: np.ndarray = None         # (n_t, n_members, dim, dim): every member's rotation
+    member_p: np.ndarray = None         # (n_t, n_members, dim): and centre of mass
+    outlines: list = None               # [(member index, -1: ground; local points (m, 3); colour)]
+    bar_colors: list = None             # colour of each bar
+    body_outlined: list = None          # per body: drawn by outlines (else by its axes)
+    spring_ends: np.ndarray = None      # (n_t, n_springs, 2, dim)
+    spring_cable: np.ndarray = None     # (n_springs,) True: a cable
+    spring_slack: np.ndarray = None     # (n_t, n_springs) True: a cable without tension
+    shape_box: np.ndarray = None        # (2, dim): smallest and largest coordinate of the outlines
+    size: float = 1.0                   # the scene's size (m) that default shapes are scaled by
 
     def __post_init__(self):
         n, d = self.markers.shape[0], self.dim
         defaults = {"sphere_centres": np.zeros((n, 0, d)), "sphere_radii": np.zeros(0),
-                    "planes": np.zeros((0, 2, d)), "contact_points": np.zeros((n, 0, d))}
+                    "planes": np.zeros((0, 2, d)), "contact_points": np.zeros((n, 0, d)),
+                    "contact_forces": np.zeros((n, 0, d)),
+                    "member_R": np.zeros((n, 0, d, d)), "member_p": np.zeros((n, 0, d)), "outlines": [],
+                    "bar_colors": [geometry.PALETTE[0]] * len(self.bar_names),
+                    "body_outlined": [False] * len(self.body_names),
+                    "spring_ends": np.zeros((n, 0, 2, d)), "spring_cable": np.zeros(0, bool),
+                    "spring_slack": np.zeros((n, 0), bool)}
         for key, value in defaults.items():
             if getattr(self, key) is None:
                 setattr(self, key, value)
@@ -47,18 +68,25 @@ class Scene:
         """Smallest and largest coordinate over all frames and drawn things."""
         clouds = [a.reshape(-1, self.dim) for a in (self.bars, self.body_origins, self.body_points,
                                                    self.points, self.markers, self.anchors,
-                                                   self.sphere_centres) if a.size]
+                                                   self.sphere_centres, self.spring_ends) if a.size]
+        if self.shape_box is not None:
+            clouds.append(self.shape_box)
         allpts = np.concatenate(clouds) if clouds else np.zeros((1, self.dim))
         return allpts.min(axis=0), allpts.max(axis=0)
 
 
-def scene(traj) -> Scene:
-    """The scene of ``traj`` (it needs its model: see ``Trajectory.load(path, model=...)``)."""
+def scene(traj, colors: dict | None = None) -> Scene:
+    """The scene of ``traj`` (it needs its model: see ``Trajectory.load(path, model=...)``);
+    ``colors`` maps member names to colours."""
     model = traj.model
     if model is None:
         raise NcgenError("drawing a trajectory needs its model; this one was loaded without it: "
                          "use Trajectory.load(path, model=model)")
     n, d = len(traj), traj.dim
+    bad = ~np.isfinite(traj.q).all(axis=1)
+    if bad.any():
+        raise NcgenError(f"drawing: the trajectory of {traj.model_name!r} has non-finite coordinates from "
+                         f"t = {traj.t[bad.argmax()]:g} s on; draw the part before: traj.head({int(bad.argmax())})")
     members = [model.member(name) for name in model.member_names]
     bars = [m for m in members if m.kind == "bar"]
     bodies = [m for m in members if m.kind == "body"]
@@ -68,7 +96,7 @@ def scene(traj) -> Scene:
     body_points = [traj.point(m.name, local) for m in bodies for local in _basic_points(m)]
     R, p = traj.poses() if bodies else (np.zeros((n, 0, d, d)), np.zeros((n, 0, d)))
     index = [model.member_names.index(m.name) for m in bodies]
-    return Scene(
+    sc = Scene(
         dim=d,
         bar_names=[m.name for m in bars],
         bars=np.stack(bar_ends, axis=1) if bars else np.zeros((n, 0, 2, d)),
@@ -81,7 +109,87 @@ def scene(traj) -> Scene:
         markers=traj.markers,
         anchors=np.array([node.fixed for node in model.layout.nodes if node.fixed is not None]).reshape(-1, d),
         **contact_scene(traj, model),
+        **spring_scene(traj),
     )
+    _shapes(sc, traj, model, colors)
+    return sc
+
+
+def _shapes(sc: Scene, traj, model, colors) -> None:
+    """Fill the member poses and outlines of ``sc`` (see :mod:`ncgen.viz.geometry`)."""
+    lo, hi = sc.bounds()
+    sc.size = max(float(np.max(hi - lo)), 1e-3)
+    prims = geometry.member_primitives(model, sc.size, colors)
+    if model.member_names:
+        sc.member_R, sc.member_p = traj.poses()
+    outlined = set()
+    for name, parts in prims.items():
+        k = model.member_names.index(name) if name != "ground" else -1
+        m = model.member(name) if k >= 0 else None
+        for prim in parts:
+            if m is not None and m.kind == "bar" and m.shape is None and prim.role == "member":
+                continue                                 # a plain bar: drawn as a thick segment
+            pts = geometry.outline(_mesh_box(prim) if prim.kind == "mesh" else prim)
+            if len(pts):
+                sc.outlines.append((k, pts, prim.color))
+                if prim.role == "member":
+                    outlined.add(name)
+    sc.shape_box = _outline_box(sc)
+    sc.bar_colors = [prims[name][0].color if prims.get(name) else geometry.PALETTE[0] for name in sc.bar_names]
+    sc.body_outlined = [name in outlined for name in sc.body_names]
+
+
+def _mesh_box(prim: geometry.Primitive) -> geometry.Primitive:
+    """The bounding box of a mesh primitive's vertices (same placement and colour), what line
+    drawings show of a mesh; the mesh itself when its file cannot be read (nothing drawn)."""
+    from ncgen.viz import meshes
+
+    try:
+        vertices = meshes.load(str(meshes.resolve(prim.filename)))[0] * prim.size
+    except meshes.MeshError:
+        return prim
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    return geometry.Primitive("box", np.maximum(hi - lo, 1e-9), prim.R, prim.R @ ((lo + hi) / 2) + prim.p,
+                              prim.color, role=prim.role)
+
+
+def _outline_box(sc: Scene, frames: int = 200) -> np.ndarray | None:
+    """Smallest and largest world coordinate of every outline over (at most ``frames``) frames."""
+    if not sc.outlines:
+        return None
+    d, n = sc.dim, sc.member_p.shape[0]
+    sub = slice(None, None, max(1, n // frames))
+    boxes = []
+    for k, pts, _ in sc.outlines:
+        local = pts[~np.isnan(pts).any(axis=1), :d]
+        world = local[None] if k < 0 else \
+            np.einsum("tij,mj->tmi", sc.member_R[sub, k], local) + sc.member_p[sub, k][:, None, :]
+        boxes += [world.reshape(-1, d).min(axis=0), world.reshape(-1, d).max(axis=0)]
+    return np.array([np.min(boxes, axis=0), np.max(boxes, axis=0)])
+
+
+def spring_scene(traj, idx=None) -> dict:
+    """Ends of every spring and cable per frame (``idx``: the frames, default all), which are
+    cables and when a cable is slack (its pull ``k (l − l₀) + c l̇`` is not positive)."""
+    from ncgen.model.forces import Spring
+
+    model = traj.model
+    springs = [f for f in model.forces if isinstance(f, Spring)]
+    if not springs:
+        return {}
+    idx = np.arange(len(traj)) if idx is None else np.asarray(idx)
+    d = traj.dim
+    f = model.springs.function
+    n = len(idx)
+    batch = f.map(n)(traj.t[idx][None, :], traj.q[idx].T, traj.v[idx].T, traj.u[idx].T,
+                     np.tile(np.reshape(traj.p, (-1, 1)), (1, n)))
+    pulls = np.asarray(batch[2]).reshape(len(springs), n).T
+    ends = [np.stack([np.broadcast_to(np.asarray(at, float), (len(idx), d)) if m.is_ground
+                      else traj.point(m.name, at)[idx] for m, at in ((s.a, s.at_a), (s.b, s.at_b))], axis=1)
+            for s in springs]
+    cable = np.array([s.cable for s in springs])
+    return {"spring_ends": np.stack(ends, axis=1), "spring_cable": cable,
+            "spring_slack": (pulls <= 0) & cable[None, :]}
 
 
 def contact_scene(traj, model) -> dict:
@@ -89,7 +197,7 @@ def contact_scene(traj, model) -> dict:
     if not getattr(model, "nk", 0):
         return {}
     n, d = len(traj), traj.dim
-    centres, radii, planes, points = [], [], [], []
+    centres, radii, planes, points, forces = [], [], [], [], []
     for k, c in enumerate(model.contacts):
         if c["type"] == "SpherePlane":
             centre = traj.point(c["sphere"], c["at"])
@@ -102,20 +210,23 @@ def contact_scene(traj, model) -> dict:
             else:
                 R = traj.poses()[0][:, model.member_names.index(c["plane"])]
                 normal = np.einsum("tij,j->ti", R, model.member(c["plane"]).direction_to_local(c["normal"]))
-            contact = centre - c["radius"] * np.broadcast_to(normal, (n, d))
+            push = np.broadcast_to(normal, (n, d))             # the plane pushes the sphere along its normal
+            contact = centre - c["radius"] * push
         else:
             ca_, cb = traj.point(c["a"], c["at_a"]), traj.point(c["b"], c["at_b"])
             centres += [ca_, cb]
             radii += [c["radius_a"], c["radius_b"]]
             u = (cb - ca_) / np.linalg.norm(cb - ca_, axis=1, keepdims=True)
             contact = ca_ + c["radius_a"] * u
+            push = -u                                          # b pushes a away
         points.append(np.where(traj.contact_normal[:, k:k + 1] > 0, contact, np.nan))
+        forces.append(traj.contact_normal[:, k:k + 1] * push)
     unique = {}
     for plane in planes:
         unique.setdefault(tuple(np.round(np.ravel(plane), 12)), plane)
     return {"sphere_centres": np.stack(centres, axis=1), "sphere_radii": np.asarray(radii, float),
             "planes": np.asarray(list(unique.values()), float).reshape(-1, 2, d),
-            "contact_points": np.stack(points, axis=1)}
+            "contact_points": np.stack(points, axis=1), "contact_forces": np.stack(forces, axis=1)}
 
 
 def _basic_points(member) -> list[np.ndarray]:

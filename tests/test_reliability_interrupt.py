@@ -1,0 +1,107 @@
+"""Ctrl-C (SIGINT to the process group, as a terminal sends it) stops a run within seconds
+with exit code 130, leaves the previous result file untouched and writes the partial
+trajectory as ``*.incomplete.*``."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+import ncgen as nc
+from ncgen.errors import SimulationInterrupted
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def interrupt_after(cmd, seconds, cwd):
+    p = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         start_new_session=True, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    time.sleep(seconds)
+    sent = time.monotonic()
+    os.killpg(p.pid, signal.SIGINT)
+    try:
+        out, err = p.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        p.kill()
+        out, err = p.communicate()
+        pytest.fail(f"still running 60 s after SIGINT: {err[-500:]}")
+    return p.returncode, out, err, time.monotonic() - sent
+
+
+def test_ctrl_c_stops_an_idas_run_keeps_the_old_result_and_writes_the_partial_one(tmp_path):
+    old = tmp_path / "chain.npz"
+    old.write_bytes(b"the previous result")
+    cmd = [sys.executable, "-m", "ncgen.cli", "simulate", str(ROOT / "examples" / "chain.toml"), "--t-end", "5000",
+           "--dt", "0.01", "-o", str(old), "--backend", "vm"]
+    rc, out, err, after = interrupt_after(cmd, 12.0, tmp_path)
+    assert rc == 130, err
+    assert "interrupted" in err and "internal error" not in err and "Traceback" not in err
+    assert after < 10.0
+    assert old.read_bytes() == b"the previous result"
+    partial = tmp_path / "chain.incomplete.npz"
+    if "partial trajectory" in err:                       # the run had started (not still building)
+        traj = nc.runtime.Trajectory.load(partial)
+        assert 0 < traj.t[-1] < 5000 and not traj.complete
+
+
+def test_interrupt_in_python_carries_the_trajectory_so_far():
+    code = ("import ncgen as nc, sys\n"
+            f"m = nc.System.from_toml({str(ROOT / 'examples' / 'chain.toml')!r}).build()\n"
+            "print('built', flush=True)\n"
+            "try:\n"
+            "    nc.simulate(m, 5000.0, 0.01, backend='vm')\n"
+            "except nc.errors.SimulationInterrupted as e:\n"
+            "    print('stopped', e.time, len(e.trajectory), e.trajectory.complete, isinstance(e, KeyboardInterrupt))\n")
+    rc, out, err, _ = interrupt_after([sys.executable, "-c", code], 12.0, ROOT)
+    assert rc == 0, err
+    if "built" in out:
+        words = out.split("stopped", 1)[1].split()
+        assert float(words[0]) > 0 and int(words[1]) > 1 and words[2] == "False" and words[3] == "True"
+    assert issubclass(SimulationInterrupted, KeyboardInterrupt)
+
+
+def test_ctrl_c_stops_ipopt_at_its_next_iteration(tmp_path):
+    for name in ("cartpole.toml", "cartpole_swingup.toml"):
+        text = (ROOT / "examples" / name).read_text()
+        (tmp_path / name).write_text(text.replace("N = 50 ", "N = 300 ").replace("tol = 1e-8", "tol = 1e-8\nverbose = true"))
+    old = tmp_path / "sw.npz"
+    old.write_bytes(b"the previous result")
+    p = subprocess.Popen([sys.executable, "-m", "ncgen.cli", "optimize", str(tmp_path / "cartpole_swingup.toml"),
+                          "-o", str(old)], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         start_new_session=True, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    printed = ""
+    while not any(line.split()[:1] == ["1"] for line in printed.splitlines()):   # IPOPT's first iteration
+        line = p.stdout.readline()
+        assert line, f"ended before IPOPT's first iteration: {printed[-2000:]}"
+        printed += line
+    sent = time.monotonic()
+    os.killpg(p.pid, signal.SIGINT)
+    out, err = p.communicate(timeout=60)
+    assert "EXIT: Optimal" not in out, "the solve ended before the interrupt could stop it"
+    assert p.returncode == 130, printed[-1000:] + out[-1000:] + err
+    assert time.monotonic() - sent < 10.0
+    assert "interrupted" in err and "Traceback" not in err
+    assert old.read_bytes() == b"the previous result"
+
+
+def test_deferred_interrupt_raises_on_leaving_and_replaces_the_solver_failure():
+    from ncgen.interrupts import deferred_interrupt
+    with pytest.raises(KeyboardInterrupt):
+        with deferred_interrupt() as flag:
+            signal.raise_signal(signal.SIGINT)
+            assert flag.hit
+    with pytest.raises(KeyboardInterrupt):
+        with deferred_interrupt():
+            signal.raise_signal(signal.SIGINT)
+            raise RuntimeError("User_Requested_Stop")
+    with pytest.raises(RuntimeError):
+        with deferred_interrupt():
+            raise RuntimeError("a real failure")
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
