@@ -2,7 +2,7 @@
 
 A pile is full of redundant contacts (a sphere held by more contacts than it has degrees of
 freedom), on which projected Gauss–Seidel alone crawls; the stepper finishes its sweeps with
-Newton steps on the contacts that carry an impulse (``lcp_newton`` in ``stepper.c.j2``).
+Newton steps on the contacts that carry an impulse (``lcp_newton`` in ``templates/c/runtime/ncgen_contact.h``).
 A frictionless contact about to close (open after the free step, but closed within it by
 its neighbours' impulses) takes part in the step's contact problem (``contact_step``).
 References: statics (the floor carries the whole weight), the closed-form rest geometry, the

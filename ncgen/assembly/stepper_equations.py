@@ -1,5 +1,5 @@
 """The CasADi kernels of the compiled stepper; the Newton loop that calls them is C
-(``templates/c/stepper.c.j2``).
+(``templates/c/runtime/``, glued to a model by ``templates/c/stepper.c.j2``).
 
 Scheme: RATTLE for constant mass matrices, in its Lobatto IIIA–IIIB form that also takes
 velocity-dependent forces (springs with dampers).  One step from ``(t, q, v)`` with step
@@ -40,7 +40,7 @@ Kernels (name: inputs -> outputs; ``t`` in s, ``h`` in s):
   (dim × n_markers, column-major)]: the derived quantities of a trajectory, one call per sample
 
 Models built with ``contacts="nonsmooth"`` (and at least one contact) get the nonsmooth
-variant (docs/contact.md and ``contact_step`` in templates/c/stepper.c.j2 document the scheme): ``step_newton`` and
+variant (docs/contact.md and ``contact_step`` in templates/c/runtime/ncgen_contact.h document the scheme): ``step_newton`` and
 ``step_velocity`` take one more input, the generalised contact impulse ``j = Wᵀ P`` (N·s),
 half of which enters each half-step (``− j/2`` in r, ``+ j/2`` in b), and two more kernels
 

@@ -30,7 +30,7 @@ import casadi as ca
 from ncgen.codegen import cnames, fsutil, manifest
 from ncgen.codegen.doc import PackageDoc, check_identifier
 from ncgen.codegen.kernels import c_function, casadi_options, generate_kernels, group_functions, max_function_size
-from ncgen.codegen.render import render
+from ncgen.codegen.render import copy_source, render
 from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
 from ncgen.codegen.signature import function_signature
 from ncgen.errors import CodegenError
@@ -62,12 +62,17 @@ class ExtraSource:
     ``.h`` outputs are included at the end of ``<name>.h``.  With ``program=True`` a ``.c``
     output is instead a stand-alone program (it has ``main``): the Makefile and
     CMakeLists.txt build it into the executable named by its stem, linked with the
-    library's objects; :func:`~ncgen.codegen.compile_cache.compile_package` ignores it."""
+    library's objects; :func:`~ncgen.codegen.compile_cache.compile_package` ignores it.
+    With ``included=True`` the template is a plain C file (no Jinja, e.g. the stepper's
+    ``runtime/ncgen_rattle.h``), copied as it is under the banner: a ``.h`` output that
+    another source of the package includes, listed among the build's headers (so the
+    Makefile and the compile cache depend on it) but not included by ``<name>.h``."""
 
     template: str
     output: str
     context: Mapping = field(default_factory=dict)
     program: bool = False
+    included: bool = False
 
 
 @dataclass(frozen=True)
@@ -141,7 +146,7 @@ def write_package(name: str, functions: Sequence[ca.Function], out_dir: str | os
     options = {"max_file_instructions": max_file_instructions, "reroll_instructions": reroll_instructions,
                "casadi_options": casadi_options(codegen_options),
                "extra_sources": [[s.template, s.output, dict(s.context)] + (["program"] if s.program else [])
-                                 for s in extra_sources]}
+                                 + (["included"] if s.included else []) for s in extra_sources]}
     if jacobians:
         options["jacobians"] = _checked_jacobians(jacobians, functions)
     files = _render_files(name, functions, doc, options, extra_sources, template_dirs)
@@ -189,6 +194,7 @@ def _render_files(name: str, functions: list[ca.Function], doc: PackageDoc, opti
         "name": name, "NAME": name.upper(), "header": header, "summary": cnames.c_comment(doc.summary),
         "casadi_version": ca.__version__, "functions": fn_info, "build": build,
         "metadata": _metadata_info(name, doc), "main_function": doc.main_function or functions[0].name(),
+        "included_headers": [s.output for s in extra_sources if s.included],
     }
     cnames.unique_macros([m["macro"] + suffix for m in context["metadata"]
                           for suffix in (("", "_LEN") if "len" in m else ("",))]
@@ -202,7 +208,8 @@ def _render_files(name: str, functions: list[ca.Function], doc: PackageDoc, opti
                                       {**context, "code": k.h_code, "guard": k.stem.upper() + "_H"})
     files[meta_c] = render("meta.c.j2", meta_c, context)
     for s in extra_sources:
-        files[s.output] = render(s.template, s.output, {**context, **s.context}, template_dirs)
+        files[s.output] = (copy_source(s.template, s.output) if s.included else
+                           render(s.template, s.output, {**context, **s.context}, template_dirs))
     files[header] = render("header.h.j2", header, context)
     for fixed in _FIXED_FILES:
         files[fixed] = render(fixed + ".j2", fixed, context)
@@ -223,6 +230,9 @@ def _check_extra_sources(name: str, extra_sources: Sequence[ExtraSource]) -> Non
             raise CodegenError(f"extra source output {s.output!r} must be a plain file name, not one of "
                                f"{sorted(taken)} nor {name}_kernels_*, and not used twice")
         taken.add(s.output)
+        if s.included and (s.program or not s.output.endswith(".h") or s.context):
+            raise CodegenError(f"extra source {s.output!r} is included by another source: its output must "
+                               f"be a .h file, not a program, and it takes no context (it is copied as it is)")
         if s.program and (not s.output.endswith(".c") or s.output[:-2] in (f"{name}_main", "main")):
             raise CodegenError(f"extra source {s.output!r} is a program: its output must be a .c file "
                                f"whose stem names the executable (not {name}_main)")

@@ -68,3 +68,14 @@ def render(template: str, output: str, context: Mapping, extra_dirs: Sequence[st
                            f"{type(e).__name__}: {e}") from e
     shipped = not any((Path(d) / template).is_file() for d in extra_dirs)
     return banner(f"c/{template}" if shipped else template, output) + text
+
+
+def copy_source(template: str, output: str) -> str:
+    """The shipped plain file ``template`` (no Jinja: C source such as the stepper's
+    ``runtime/ncgen_rattle.h``) for file ``output``: the banner, then its text unchanged."""
+    path = shipped_templates_dir() / template
+    try:
+        text = path.read_text()
+    except OSError as e:
+        raise CodegenError(f"copying {output} from {path} failed: {e}; reinstall ncgen (pip install .)") from e
+    return banner(f"c/{template}", output) + text

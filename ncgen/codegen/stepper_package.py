@@ -3,7 +3,8 @@
 :func:`stepper_section` adds to a model package (``nc.generate``) the kernels of
 :mod:`ncgen.assembly.stepper_equations`, the Newton loop ``<model>_stepper.c`` with the API
 declared in ``<model>_stepper.h`` (``<model>_step``, ``<model>_simulate``; templates
-``stepper.c.j2``, ``stepper.h.j2``) and the example program ``<model>_simulate``
+``stepper.c.j2``, ``stepper.h.j2``: the model's sizes, kernels and data around the
+model-independent C of :func:`runtime_files`, copied into the package) and the example program ``<model>_simulate``
 (``simulate_main.c.j2``), which simulates from the model's initial state without Python.
 :mod:`ncgen.runtime.stepper_library` loads it from the model's compiled package.
 """
@@ -61,7 +62,7 @@ MAX_HALVINGS, HALVINGS_LIMIT = 4, 10
 #: benchmarks/contact.py: 2000 sweeps instead of 300 moved its final state by 4e-8 m).
 PGS_MAX_ITER, PGS_TOL = 300, 1e-12
 #: Nonsmooth contact stepper: a contact whose gap is below −PENETRATION_TOL (m) at the end of
-#: a step is put back on its surface (``push_out`` in ``stepper.c.j2``).  The push-out is
+#: a step is put back on its surface (``push_out`` in ``runtime/ncgen_contact.h``).  The push-out is
 #: linearised and followed by the projection back onto Φ = 0, which moves the gaps again at
 #: second order (~1e-8 m when the falling chain of benchmarks/contact.py lands), so a smaller
 #: tolerance would only repeat push-outs.
@@ -70,7 +71,7 @@ PENETRATION_TOL = 1e-8
 #: with e = 0 and a gap below GAP_REACH h/2 × the fastest approach speed of a closed contact,
 #: takes part in the step's contact problem with U_N ≥ min(0, U_free,N − 2 g/h): the impulses
 #: on its neighbours may close it within the step but not push it through its surface, so the
-#: push-out rarely runs (``contact_step`` in ``stepper.c.j2``).
+#: push-out rarely runs (``contact_step`` in ``runtime/ncgen_contact.h``).
 GAP_REACH = 2.0
 #: Nonsmooth contact stepper: a step with closed contacts is retaken with corrected impulses
 #: (at most CONTACT_REFINE_MAX times) until its end-of-step contact velocities match the
@@ -79,7 +80,7 @@ CONTACT_REFINE_MAX, CONTACT_REFINE_TOL = 10, 1e-8
 #: Nonsmooth contact stepper: a step first tries the last step's impulses again and keeps
 #: them if the contact laws hold on the measured end velocities to REPEAT_TOL (1 + max |U|)
 #: m/s and the loaded contacts' Jacobian rows did not move by more than REPEAT_TOL
-#: (``repeat_step`` in ``stepper.c.j2``): at rest that is every step.
+#: (``repeat_step`` in ``runtime/ncgen_contact.h``): at rest that is every step.
 REPEAT_TOL = 1e-12
 #: Nonsmooth contact stepper: the Delassus matrix comes from the constant M⁻¹ (stored dense
 #: in the C) and the Schur complement A M⁻¹ Aᵀ when M is regular (``mass_is_regular``: no
@@ -126,9 +127,18 @@ def extra_sources(model, functions) -> list[ExtraSource]:
     demo = {**context, "program": f"{name}_simulate", "t0": c_real(model.t0), "t_end": c_real(DEMO_T_END),
             "h": c_real(DEMO_H), "q0": [c_real(x) for x in model.q0], "v0": [c_real(x) for x in model.v0],
             "p0": [c_real(x) for x in model.p0]}
-    return [ExtraSource("stepper.c.j2", f"{name}_stepper.c", context),
+    runtime = [ExtraSource(f"runtime/{f}", f, included=True) for f in runtime_files(model)]
+    return [*runtime, ExtraSource("stepper.c.j2", f"{name}_stepper.c", context),
             ExtraSource("stepper.h.j2", f"{name}_stepper.h", context),
             ExtraSource("simulate_main.c.j2", f"{name}_simulate.c", demo, program=True)]
+
+
+def runtime_files(model) -> list[str]:
+    """The model-independent C of the stepper that ``<model>_stepper.c`` includes, in order
+    (``templates/c/runtime/``, copied into the package): the RATTLE step, the contact
+    solver (nonsmooth contacts only), fixed-step runs, error-controlled runs."""
+    contact = ["ncgen_contact.h"] if nonsmooth(model) else []
+    return ["ncgen_rattle.h", *contact, "ncgen_fixed.h", "ncgen_adaptive.h"]
 
 
 def schur_context(model, K) -> dict:

@@ -52,7 +52,7 @@ FAILING_NEAR_SINGULAR = 0.25
 #: Smallest rtol and atol of the compiled stepper standing in for IDAS next to a singular
 #: configuration: the tightest at which it was measured through the flat positions of the
 #: N four-bar of IFToMM A02 (N = 1, 10; rtol 1e-10 to 1e-12 cross all eight in 10 s, its
-#: error estimate being taken on the tangent part of the step, see ``stepper.c.j2``).
+#: error estimate being taken on the tangent part of the step, see ``templates/c/runtime/ncgen_adaptive.h``).
 BRIDGE_MIN_TOL = 1e-12
 #: Largest number of NumPy RATTLE steps across one output interval (``_bridge`` without a
 #: C compiler).

@@ -1,0 +1,772 @@
+/* Nonsmooth contacts for the RATTLE stepper of ncgen_rattle.h: the contact impulses of a
+ * step by projected Gauss-Seidel (pgs(), with Newton steps on frictionless sets,
+ * lcp_newton()) on the Delassus matrix (delassus()), the repeat of the last step's
+ * impulses (repeat_step()), the push-out of penetrating contacts (push_out()) and the
+ * contact step around them (contact_step()).  Plain C99, model-independent; included after
+ * ncgen_rattle.h when NCGEN_CONTACTS is defined (see ncgen_rattle.h).  The scheme is
+ * documented in docs/contact.md and <model>_stepper.h.
+ *
+ * What the including file defines first (besides ncgen_rattle.h's list):
+ *   NK, DC                     contacts, impulse components per contact (normal, then
+ *                              DC - 1 tangents): ND = NK DC rows
+ *   NNZ_W, wt_colind, wt_row   the pattern of the contact Jacobian W by rows: row r has
+ *                              nonzeros k = wt_colind[r] .. wt_colind[r + 1] - 1, in
+ *                              columns wt_row[k]
+ *   mu, restitution            per contact: Coulomb's friction coefficient, Newton's e
+ *   ANY_RESTITUTION            defined if some restitution is > 0
+ *   PGS_MAX_ITER, PGS_TOL      sweeps of pgs() and its convergence test
+ *   CONTACT_REFINE_MAX, CONTACT_REFINE_TOL   refinements of a step after an impact
+ *   GRAVITY_NORM               |gravity| (m/s^2), the scale of an impact
+ *   PENETRATION_TOL            gaps below -PENETRATION_TOL (m) are pushed out
+ *   GAP_REACH                  open contacts within GAP_REACH h/2 of the fastest closing
+ *                              speed take part in a step's contact problem
+ *   REPEAT_TOL                 tolerance of repeat_step()
+ *   KERNEL_GAP, KERNEL_CONTACT the gap and contact kernels
+ *   CONTACT_FACTORED           defined if the KKT matrix is factored once per contact
+ *                              solve: then NNZ_V, NNZ_R, N_BETA (sizes of its QR factors),
+ *                              KERNEL_FACTOR, KERNEL_BACKSOLVE
+ *   CONTACT_SCHUR              defined if the Delassus matrix comes from the constant M^-1:
+ *                              then minv (NQ x NQ, column-major), its nonzeros by columns
+ *                              minv_colind, minv_row, and where A sits in the KKT matrix,
+ *                              NNZ_A and (if NNZ_A > 0) a_nz, a_row, a_col
+ */
+
+/* Impulses that change a contact velocity by more than CONTACT_IMPACT_STEPS steps of gravity
+ * make an impact (contact_step() refines it). */
+#define CONTACT_IMPACT_STEPS 10
+/* push_out(): passes at most. */
+#define PUSH_OUT_MAX 4
+/* lcp_newton(): first after NEWTON_FIRST sweeps (then after twice as many); relative pivot
+ * below which a row counts as dependent on the rows before it; solves at most. */
+#define NEWTON_FIRST 4
+#define NEWTON_PIVOT 1e-10
+#define NEWTON_SOLVES 4
+
+/* Clears what the contact steps accumulate and their warm start (before a run). */
+static void contact_clear(workspace *ws) {
+  memset(ws->Pacc, 0, ND * sizeof(casadi_real));
+  memset(ws->F, 0, ND * sizeof(casadi_real));
+  ws->pgs_unconverged = 0;
+  ws->pgs_residual = 0;
+  ws->penetration = 0;
+  ws->repeat = 1;
+}
+
+/* Ends an output row: the impulses summed since the last row into impulse (ND values) and
+ * the contact statistics into columns 6, 7, 8 of stats (each may be NULL), then clears them. */
+static void contact_row(workspace *ws, casadi_real *impulse, casadi_real *stats) {
+  if (impulse) memcpy(impulse, ws->Pacc, ND * sizeof(casadi_real));
+  memset(ws->Pacc, 0, ND * sizeof(casadi_real));
+  if (stats) {
+    stats[6] = (casadi_real) ws->pgs_unconverged;
+    stats[7] = ws->pgs_residual;
+    stats[8] = ws->penetration;
+  }
+  ws->pgs_unconverged = 0;
+  ws->pgs_residual = 0;
+  ws->penetration = 0;
+}
+
+/* Adds impulse dP to active row r: P, the contact velocities U, and the largest change of a
+ * row's own velocity |G_rr dP| to *change. */
+static void pgs_update(workspace *ws, int nr, int r, casadi_real dP, casadi_real *change) {
+  const casadi_real *gr = ws->G + r * nr;
+  int k;
+  casadi_real c;
+  if (dP == 0) return;
+  ws->P[r] += dP;
+  for (k = (int) ws->gp[r]; k < ws->gp[r + 1]; ++k) ws->U[ws->gi[k]] += gr[ws->gi[k]] * dP;
+  c = fabs(ws->G[r + r * nr] * dP);
+  if (c > *change) *change = c;
+}
+
+/* The nonzeros of the n x n matrix ws->G by columns (ws->gp, ws->gi), for pgs_update(): G is
+ * sparse where contacts share no member (a pile: a contact couples with those of its one or
+ * two spheres). */
+static void g_pattern(workspace *ws, int n) {
+  int a, r, k = 0;
+  for (r = 0; r < n; ++r) {
+    ws->gp[r] = k;
+    for (a = 0; a < n; ++a)
+      if (ws->G[a + r * n] != 0) ws->gi[k++] = a;
+  }
+  ws->gp[n] = k;
+}
+
+/* S = the Cholesky factor of G_AA, A = the m rows idx of the n x n matrix ws->G, by rows
+ * (row i at S + i NK, lower triangle; NK >= m as only normal rows take part); a pivot below
+ * NEWTON_PIVOT of its diagonal is dropped (its column zero).  Row i of the factor depends
+ * on rows 0..i of G_AA only, so the rows that idx shares, as a prefix, with the last factor's
+ * rows (ws->fset) are kept.  G_AA is sparse (contacts couple only through the members they
+ * share): row i of the factor is zero left of its first nonzero in G_AA (ws->fset + NK + i,
+ * its envelope), and the products skip those zeros. */
+static void factor_rows(workspace *ws, int n, const int *idx, int m) {
+  casadi_real *S = ws->S;
+  casadi_int *fset = ws->fset, *start = ws->fset + NK;
+  int i, j, k, p = 0;
+  if (ws->fm > 0)
+    while (p < m && p < ws->fm && fset[p] == idx[p]) ++p;
+  for (i = p; i < m; ++i) {
+    casadi_real *li = S + i * NK, d, d0;
+    int f = 0;
+    for (j = 0; j <= i; ++j) li[j] = ws->G[idx[i] + idx[j] * n];
+    while (f < i && li[f] == 0) ++f;
+    start[i] = f;
+    fset[i] = idx[i];
+    for (j = f; j < i; ++j) {
+      const casadi_real *lj = S + j * NK;
+      casadi_real v = li[j];
+      if (lj[j] == 0) { /* a dropped pivot: its column is zero */
+        li[j] = 0;
+        continue;
+      }
+      for (k = f > start[j] ? f : (int) start[j]; k < j; ++k) v -= li[k] * lj[k];
+      li[j] = v / lj[j];
+    }
+    d = d0 = li[i];
+    for (k = f; k < i; ++k) d -= li[k] * li[k];
+    li[i] = d > NEWTON_PIVOT * d0 ? sqrt(d) : 0;
+  }
+  ws->fm = m;
+}
+
+/* Newton steps of the frictionless contact problem (the LCP U + b >= 0 _|_ P >= 0 with
+ * U = U_0 + G P on the n rows in ws->U, ws->P, ws->G; b = 0 if null): on the rows with an
+ * impulse, solves G_AA dP_A = -(U + b)_A, which zeroes their velocities, by Cholesky.  A
+ * pivot below NEWTON_PIVOT of its diagonal marks a row that depends on the rows before it
+ * (redundant contacts: a sphere in a corner, a pile): it keeps its impulse, and the others'
+ * solve it too, as the equations are consistent at the solution.  If an impulse would turn
+ * negative, the step stops where the first one reaches 0 (a descent step of the convex
+ * problem min 1/2 P^T G P + (U_0 + b)^T P, P >= 0), that row leaves the set and the
+ * solve is repeated, at most NEWTON_SOLVES times.  pgs() then checks the result, and
+ * carries on from it if some row without an impulse ends with U + b < 0.  Projected
+ * Gauss-Seidel alone crawls on redundant sets (hundreds of sweeps); this finishes them
+ * once its sweeps have found the set. */
+static void lcp_newton(workspace *ws, int n, const casadi_real *b) {
+  casadi_real *S = ws->S, x[NK], change = 0;
+  int idx[NK], in[NK], m, i, k, solve;
+  for (solve = 0; solve < NEWTON_SOLVES; ++solve) {
+    casadi_real step = 1;
+    /* the rows with an impulse: those of the last factor first, in its order (so that its
+     * rows up to the first one that left are kept), then the others */
+    for (i = 0; i < n; ++i) in[i] = ws->P[i] > 0;
+    m = 0;
+    if (ws->fm > 0)
+      for (i = 0; i < ws->fm; ++i)
+        if (in[ws->fset[i]]) {
+          idx[m++] = (int) ws->fset[i];
+          in[ws->fset[i]] = 0;
+        }
+    for (i = 0; i < n; ++i)
+      if (in[i]) idx[m++] = i;
+    if (!m) return;
+    for (i = 0; i < m; ++i) x[i] = -(ws->U[idx[i]] + (b ? b[idx[i]] : 0));
+    factor_rows(ws, n, idx, m);
+    for (i = 0; i < m; ++i) { /* L y = x, y_i = 0 on a dropped pivot */
+      const casadi_real *li = S + i * NK;
+      if (li[i] == 0) { x[i] = 0; continue; }
+      for (k = (int) ws->fset[NK + i]; k < i; ++k) x[i] -= li[k] * x[k];
+      x[i] /= li[i];
+    }
+    for (i = m - 1; i >= 0; --i) { /* L^T dP = y, by columns of L^T: x_i done, then subtracted */
+      const casadi_real *li = S + i * NK;
+      if (li[i] == 0) x[i] = 0;
+      else x[i] /= li[i];
+      for (k = (int) ws->fset[NK + i]; k < i; ++k) x[k] -= li[k] * x[i];
+    }
+    for (i = 0; i < m; ++i) {
+      if (!isfinite(x[i])) return;
+      if (ws->P[idx[i]] + step * x[i] < 0) step = -ws->P[idx[i]] / x[i];
+    }
+    for (i = 0; i < m; ++i) /* the blocking rows land on exactly 0 */
+      pgs_update(ws, n, idx[i], ws->P[idx[i]] + step * x[i] > 0 ? step * x[i] : -ws->P[idx[i]], &change);
+    if (step == 1) return;
+  }
+}
+
+/* Projected Gauss-Seidel on the na active contacts: finds impulses P (N s) with
+ *   U_N + b >= 0  _|_  P_N >= 0,  b = bias[c] = e min(U-_N, 0)  (Newton's impact law at velocity level)
+ *   (for a contact still open at the end of the free step, b >= 0: see contact_step())
+ *   |P_T| <= mu P_N, P_T = -mu P_N V_T / |V_T| if V_T != 0, V_T = U_T + e U-_T  (Coulomb's cone)
+ * (U- the velocities at the start of the step).  Coulomb's law on U_T + e U-_T rather than on U_T
+ * keeps every impact dissipative for 0 <= e <= 1 (on U_T alone, Newton's law with friction can
+ * create energy: Kane's paradox); for a lasting contact U-_T ~ U_T and it is Coulomb's law.
+ * where U = U_0 + G P are the contact velocities at the end of the step, linearised: ws->U
+ * holds U of the active rows for the impulses ws->P on entry, and on exit.  Returns whether
+ * it converged within PGS_MAX_ITER sweeps; ws->pgs_last gets the last sweep's largest change
+ * of a contact velocity relative to 1 + max |U| (m/s per m/s).  When every active contact
+ * is frictionless, lcp_newton() steps after NEWTON_FIRST, 2 NEWTON_FIRST, ... sweeps finish
+ * what the sweeps crawl on (redundant contacts). */
+static int pgs(workspace *ws, int na, const int *first, const casadi_real *bias) {
+  int nr = first[na], c, d, sweep, newton_at = NEWTON_FIRST;
+  ws->pgs_last = 0;
+  ws->pgs_sweeps = PGS_MAX_ITER;
+  for (sweep = 0; sweep < PGS_MAX_ITER; ++sweep) {
+    casadi_real change = 0, size = 0;
+    for (c = 0; c < na; ++c) {
+      int r0 = first[c], k = (int) ws->act[c];
+      casadi_real gnn = ws->G[r0 + r0 * nr];
+      if (gnn > 0) {
+        casadi_real un = ws->U[r0] + bias[c];
+        pgs_update(ws, nr, r0, fmax(0, ws->P[r0] - un / gnn) - ws->P[r0], &change);
+      }
+      if (first[c + 1] > r0 + 1) { /* friction: its tangent rows follow the normal row */
+        casadi_real gt = 0, pt[DC], norm = 0, limit = mu[k] * ws->P[r0];
+        for (d = 1; d < DC; ++d) gt = fmax(gt, ws->G[(r0 + d) + (r0 + d) * nr]);
+        if (gt > 0) {
+          for (d = 1; d < DC; ++d) {
+            pt[d] = ws->P[r0 + d] - (ws->U[r0 + d] + restitution[k] * ws->Um[k * DC + d]) / gt;
+            norm += pt[d] * pt[d];
+          }
+          norm = sqrt(norm);
+          for (d = 1; d < DC; ++d)
+            pgs_update(ws, nr, r0 + d, (norm > limit ? pt[d] * limit / norm : pt[d]) - ws->P[r0 + d], &change);
+        }
+      }
+      for (d = r0; d < first[c + 1]; ++d) size = fmax(size, fabs(ws->U[d]));
+    }
+    ws->pgs_last = change / (1 + size);
+    if (change <= PGS_TOL * (1 + size)) { /* a sweep changes no velocity by more than that */
+      ws->pgs_sweeps = sweep;
+      return 1;
+    }
+    if (nr == na && sweep + 1 == newton_at) { /* frictionless: Newton steps after 4, 8, 16, ... sweeps */
+      lcp_newton(ws, nr, bias);
+      newton_at *= 2;
+    }
+  }
+  return 0;
+}
+
+/* X_a = [M A^T; A 0]^-1 [W_r^T; 0] (first NQ rows) for the rows r = rows[a], a < n, with the
+ * KKT matrix in ws->K (one factorisation, then one back-substitution per row), and
+ * G = W_rows X (n x n).  Uses ws->W (rows of the contact Jacobian), ws->rhs, ws->fac. */
+static int delassus_kkt(workspace *ws, const int *rows, int n) {
+  int a, b, i;
+#ifdef CONTACT_FACTORED
+  ws->arg[0] = ws->K;
+  ws->res[0] = ws->fac;
+  ws->res[1] = ws->fac + NNZ_V;
+  ws->res[2] = ws->fac + NNZ_V + NNZ_R;
+  if (KERNEL_FACTOR(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+#endif
+  for (a = 0; a < n; ++a) {
+    for (i = 0; i < NX; ++i) ws->rhs[i] = 0;
+    for (i = wt_colind[rows[a]]; i < wt_colind[rows[a] + 1]; ++i) ws->rhs[wt_row[i]] = ws->W[i];
+#ifdef CONTACT_FACTORED
+    ws->arg[0] = ws->fac;
+    ws->arg[1] = ws->fac + NNZ_V;
+    ws->arg[2] = ws->fac + NNZ_V + NNZ_R;
+    ws->arg[3] = ws->rhs;
+    ws->res[0] = ws->rhs + NX;
+    if (KERNEL_BACKSOLVE(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+#else
+    if (solve(ws, ws->K, ws->rhs, ws->rhs + NX)) return STEP_KERNEL;
+#endif
+    memcpy(ws->Xc + a * NQ, ws->rhs + NX, NQ * sizeof(casadi_real));
+  }
+  for (a = 0; a < n; ++a)
+    for (b = 0; b < n; ++b) {
+      casadi_real s = 0;
+      for (i = wt_colind[rows[a]]; i < wt_colind[rows[a] + 1]; ++i) s += ws->W[i] * ws->Xc[b * NQ + wt_row[i]];
+      ws->G[a + b * n] = s;
+    }
+  return all_finite(ws->G, n * n) ? STEP_OK : STEP_NOT_FINITE;
+}
+#ifdef CONTACT_SCHUR
+
+/* The Delassus matrix of delassus_kkt() from the constant M^-1 and the Schur complement of
+ * the KKT matrix: with B = M^-1 W_r^T (in ws->Xc), T = A M^-1, S = A M^-1 A^T = L L^T,
+ * Z = L^-1 A B and Y = L^-T Z,
+ *   X = B - T^T Y   and   G = W_r X = W_r B - Z^T Z,
+ * X kept as (B, Y, T) and applied by x_add().  A is read from the KKT matrix in ws->K.  Falls
+ * back to delassus_kkt() where S is not numerically positive definite (redundant or
+ * singular constraints). */
+static int delassus(workspace *ws, const int *rows, int n) {
+  casadi_real *T = ws->T, *L = ws->L, *Z = ws->Z, *Y = ws->Y, *B = ws->Xc;
+  int a, b, i, j, k;
+  memset(T, 0, NC * NQ * sizeof(casadi_real));
+  memset(L, 0, NC * NC * sizeof(casadi_real));
+#if NNZ_A > 0
+  for (k = 0; k < NNZ_A; ++k) { /* T = A M^-1 (row a_row[k] += A_k * row a_col[k] of M^-1) */
+    const casadi_real aij = ws->K[a_nz[k]], *m = minv + a_col[k] * NQ;
+    casadi_real *t = T + a_row[k] * NQ;
+    for (j = 0; j < NQ; ++j) t[j] += aij * m[j];
+  }
+  for (k = 0; k < NNZ_A; ++k) { /* S = T A^T */
+    const casadi_real aij = ws->K[a_nz[k]];
+    for (i = 0; i < NC; ++i) L[i + a_row[k] * NC] += T[i * NQ + a_col[k]] * aij;
+  }
+#endif
+  for (j = 0; j < NC; ++j) { /* Cholesky, lower triangle of L in place */
+    casadi_real d = L[j + j * NC], s0 = d;
+    for (k = 0; k < j; ++k) d -= L[j + k * NC] * L[j + k * NC];
+    if (!(d > 1e-12 * s0)) {
+      ws->schur = 0;
+      return delassus_kkt(ws, rows, n);
+    }
+    d = sqrt(d);
+    L[j + j * NC] = d;
+    for (i = j + 1; i < NC; ++i) {
+      casadi_real v = L[i + j * NC];
+      for (k = 0; k < j; ++k) v -= L[i + k * NC] * L[j + k * NC];
+      L[i + j * NC] = v / d;
+    }
+  }
+  ws->schur = 1;
+  for (a = 0; a < n; ++a) {
+    casadi_real *ba = B + a * NQ, *za = Z + a * NC, *ya = Y + a * NC;
+    memset(ba, 0, NQ * sizeof(casadi_real));
+    for (k = wt_colind[rows[a]]; k < wt_colind[rows[a] + 1]; ++k) { /* B_a = M^-1 W_r^T */
+      const casadi_real w = ws->W[k], *m = minv + wt_row[k] * NQ;
+      for (j = minv_colind[wt_row[k]]; j < minv_colind[wt_row[k] + 1]; ++j) ba[minv_row[j]] += w * m[minv_row[j]];
+    }
+    memset(za, 0, NC * sizeof(casadi_real));
+#if NNZ_A > 0
+    for (k = 0; k < NNZ_A; ++k) za[a_row[k]] += ws->K[a_nz[k]] * ba[a_col[k]]; /* A B_a */
+#endif
+    for (i = 0; i < NC; ++i) { /* Z_a = L^-1 A B_a */
+      for (k = 0; k < i; ++k) za[i] -= L[i + k * NC] * za[k];
+      za[i] /= L[i + i * NC];
+    }
+    for (i = NC - 1; i >= 0; --i) { /* Y_a = L^-T Z_a */
+      casadi_real v = za[i];
+      for (k = i + 1; k < NC; ++k) v -= L[k + i * NC] * ya[k];
+      ya[i] = v / L[i + i * NC];
+    }
+  }
+  for (a = 0; a < n; ++a) {
+    const int k0 = wt_colind[rows[a]], k1 = wt_colind[rows[a] + 1];
+    for (b = a; b < n; ++b) {
+      casadi_real s = 0;
+      const casadi_real *bb = B + b * NQ, *za = Z + a * NC, *zb = Z + b * NC;
+      for (k = k0; k < k1; ++k) s += ws->W[k] * bb[wt_row[k]];
+      for (i = 0; i < NC; ++i) s -= za[i] * zb[i];
+      ws->G[a + b * n] = ws->G[b + a * n] = s;
+    }
+  }
+  return all_finite(ws->G, n * n) ? STEP_OK : STEP_NOT_FINITE;
+}
+
+/* out += s X c for the columns X_a (a < n) of the last delassus(): X c = B c - T^T (Y c). */
+static void x_add(workspace *ws, int n, const casadi_real *c, casadi_real s, casadi_real *out) {
+  casadi_real y[NC + 1];
+  int a, i, j;
+  if (!ws->schur) {
+    for (a = 0; a < n; ++a)
+      for (i = 0; i < NQ; ++i) out[i] += s * ws->Xc[a * NQ + i] * c[a];
+    return;
+  }
+  for (j = 0; j < NC; ++j) y[j] = 0;
+  for (a = 0; a < n; ++a) {
+    const casadi_real *ya = ws->Y + a * NC, *ba = ws->Xc + a * NQ;
+    casadi_real ca = s * c[a];
+    if (ca == 0) continue;
+    for (i = 0; i < NQ; ++i) out[i] += ca * ba[i];
+    for (j = 0; j < NC; ++j) y[j] += ca * ya[j];
+  }
+  for (j = 0; j < NC; ++j) {
+    const casadi_real *t = ws->T + j * NQ;
+    for (i = 0; i < NQ; ++i) out[i] -= y[j] * t[i];
+  }
+}
+#else
+
+/* The generic Delassus matrix (the mass matrix is singular, or too large to invert). */
+static int delassus(workspace *ws, const int *rows, int n) {
+  return delassus_kkt(ws, rows, n);
+}
+
+/* out += s X c for the columns X_a (a < n) of the last delassus(). */
+static void x_add(workspace *ws, int n, const casadi_real *c, casadi_real s, casadi_real *out) {
+  int a, i;
+  for (a = 0; a < n; ++a)
+    for (i = 0; i < NQ; ++i) out[i] += s * ws->Xc[a * NQ + i] * c[a];
+}
+#endif
+
+/* Contacts that end the step inside (gap < -PENETRATION_TOL) are put back on their surface: the
+ * displacement dq = sum_a X_a pi_a, smallest in the KKT metric, with pi >= 0 and the
+ * linearised gaps g + G pi >= 0 _|_ pi of every contact within reach (gap below
+ * PENETRATION_TOL + twice the deepest penetration; projected Gauss-Seidel on the normal rows
+ * with lcp_newton() steps, to 1e-12 of the deepest gap); then
+ * Newton back onto Phi = 0 and the velocities projected onto A v + Phi_t = 0.  A position
+ * correction: it removes the penetration of the step an impact is resolved in (at most
+ * h v / 2) and adds no momentum but the bilateral constraints'. */
+static int push_out(const casadi_real *p, casadi_real t1, casadi_real *q_next, casadi_real *v_next,
+                    const step_options *o, workspace *ws, int *pushed) {
+  int i, a, k, n = 0, it, sweep, newton_at = NEWTON_FIRST, rows[NK];
+  casadi_real one = 1, zero = 0, t0 = t1 - 1, deepest = 0;
+  ws->arg[0] = q_next;
+  ws->arg[1] = p;
+  ws->res[0] = ws->g;
+  if (KERNEL_GAP(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+  for (k = 0; k < NK; ++k)
+    if (ws->g[k] < -PENETRATION_TOL) {
+      ++n;
+      deepest = fmax(deepest, -ws->g[k]);
+    }
+  *pushed = n;
+  if (!n) return STEP_OK;
+  /* every contact within reach of the push (gap below twice the deepest penetration) takes
+   * part, so that pushing one out pushes no other in (a column of spheres: else one pass
+   * per sphere) */
+  for (n = k = 0; k < NK; ++k)
+    if (ws->g[k] < PENETRATION_TOL + 2 * deepest) rows[n++] = k * DC;
+  ws->arg[0] = q_next;
+  ws->arg[1] = v_next;
+  ws->arg[2] = p;
+  ws->res[0] = ws->g;
+  ws->res[1] = ws->W;
+  ws->res[2] = 0;
+  if (KERNEL_CONTACT(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+  /* ws->K holds [M A^T; A 0] at q_next (the last second half-step). */
+  ws->fm = -1;
+  if ((k = delassus(ws, rows, n)) != STEP_OK) return k;
+  g_pattern(ws, n);
+  for (a = 0; a < n; ++a) {
+    ws->P[a] = 0;
+    ws->U[a] = ws->g[rows[a] / DC];
+  }
+  for (sweep = 0; sweep < PGS_MAX_ITER; ++sweep) {
+    casadi_real change = 0;
+    for (a = 0; a < n; ++a)
+      if (ws->G[a + a * n] > 0)
+        pgs_update(ws, n, a, fmax(0, ws->P[a] - ws->U[a] / ws->G[a + a * n]) - ws->P[a], &change);
+    if (change <= PGS_TOL * (PENETRATION_TOL + deepest)) break; /* gaps to 1e-12 of the deepest */
+    if (sweep + 1 == newton_at) {
+      lcp_newton(ws, n, 0);
+      newton_at *= 2;
+    }
+  }
+  x_add(ws, n, ws->P, 1, q_next);
+  /* Newton back onto Phi(t1, q) = 0: step_newton at (t1 - 1, q, w = 0, h = 1) gives Phi(t1, q) and
+   * K = [M - 1/2 dF/dv, A^T; A(t1, q), 0]. */
+  for (it = 0;; ++it) {
+    ws->arg[0] = &t0;
+    ws->arg[1] = q_next;
+    ws->arg[2] = 0;
+    ws->arg[3] = 0;
+    ws->arg[4] = p;
+    ws->arg[5] = &one;
+    ws->arg[6] = 0;
+    ws->arg[7] = 0;
+    ws->arg[8] = 0;
+    ws->res[0] = ws->r;
+    ws->res[1] = ws->K;
+    if (KERNEL_NEWTON(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+    if (norm_inf(ws->r + NQ, NC) <= o->tol) break;
+    if (it == o->max_iter) return STEP_NO_CONVERGENCE;
+    for (i = 0; i < NQ; ++i) ws->rhs[i] = 0;
+    memcpy(ws->rhs + NQ, ws->r + NQ, NC * sizeof(casadi_real));
+    if (solve(ws, ws->K, ws->rhs, ws->rhs + NX)) return STEP_KERNEL;
+    if (!all_finite(ws->rhs + NX, NX)) return STEP_NOT_FINITE;
+    for (i = 0; i < NQ; ++i) q_next[i] -= ws->rhs[NX + i];
+  }
+  /* velocities: [M A^T; A 0] [v; mu] = [M v_next; -Phi_t] (step_velocity with h = 0, j = 0) */
+  ws->arg[0] = &t1;
+  ws->arg[1] = q_next;
+  ws->arg[2] = v_next;
+  ws->arg[3] = 0;
+  ws->arg[4] = p;
+  ws->arg[5] = &zero;
+  ws->arg[6] = 0;
+  ws->res[0] = ws->rhs;
+  ws->res[1] = ws->K;
+  if (KERNEL_VELOCITY(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+  if (solve(ws, ws->K, ws->rhs, ws->rhs + NX)) return STEP_KERNEL;
+  if (!all_finite(ws->rhs + NX, NQ)) return STEP_NOT_FINITE;
+  memcpy(v_next, ws->rhs + NX, NQ * sizeof(casadi_real));
+  return STEP_OK;
+}
+
+/* Whether the impulses P (rows of contact k at P + k DC) satisfy, with the end-of-step
+ * contact velocities U and those at the start Um, Newton's impact law and Coulomb's law
+ * (the conditions pgs() solves) to tol (m/s). */
+static int contact_laws_hold(int k, const casadi_real *P, const casadi_real *U, const casadi_real *Um,
+                             casadi_real tol) {
+  const casadi_real pn = P[k * DC], e = restitution[k];
+  casadi_real vn = U[k * DC] + e * fmin(Um[k * DC], 0), pt = 0, vt = 0, dir = 0;
+  int d;
+  if (pn > 0 ? fabs(vn) > tol : vn < -tol) return 0;
+  for (d = 1; d < DC; ++d) {
+    casadi_real v = U[k * DC + d] + e * Um[k * DC + d];
+    pt += P[k * DC + d] * P[k * DC + d];
+    vt += v * v;
+  }
+  pt = sqrt(pt);
+  vt = sqrt(vt);
+  if (pt < mu[k] * pn * (1 - 1e-9)) return vt <= tol; /* inside the cone: sticking */
+  for (d = 1; d < DC; ++d) { /* on its boundary: slipping against the friction impulse */
+    casadi_real v = U[k * DC + d] + e * Um[k * DC + d] + (pt > 0 ? vt * P[k * DC + d] / pt : 0);
+    dir += v * v;
+  }
+  return sqrt(dir) <= tol;
+}
+
+/* The last step's impulses h F again, with the contact Jacobian at the start of the step:
+ * where the contact forces do not change (bodies at rest, sliding or rolling at constant
+ * forces) they solve this step's contact problem, and contact_step()'s Delassus matrix and
+ * solve are not needed.  contact_step() would close the contacts whose gap is <= 0 at the
+ * end of the free step; that gap is estimated, linearised, as g - h/2 W_N X j (the impulse
+ * j = W^T P moves the midpoint rates by X j / 2, X j = [M A^T; A 0]^-1 [j; 0]: one solve).
+ * The step is kept (*kept = 1) if every contact with an impulse is closed in that sense and
+ * has Jacobian rows that moved by at most REPEAT_TOL (1 + max |W|) over the step (so the
+ * impulses act as contact_step() would apply them), and every closed contact satisfies the
+ * contact laws on the measured end velocities (contact_laws_hold() to REPEAT_TOL
+ * (1 + max |U|)); else the caller takes contact_step()'s way from the Newton start saved
+ * here.  Tried only while it pays (ws->repeat): after a step it kept, or whose contact
+ * solve found its warm start (the last forces) already converged. */
+static int repeat_step(const casadi_real *q, const casadi_real *v, casadi_real t, const casadi_real *u,
+                       const casadi_real *p, casadi_real h, casadi_real *q_next, casadi_real *v_next,
+                       casadi_real *lam, int *iterations, const step_options *o, int warm,
+                       workspace *ws, int *kept) {
+  casadi_real *W0 = ws->Xc, *P = ws->P, scale = 1;
+  int i, k, r, status, any = 0;
+  *kept = 0;
+  if (iterations) *iterations = 0;
+  for (r = 0; r < ND; ++r) {
+    P[r] = h * ws->F[r];
+    any = any || P[r] != 0;
+  }
+  if (!any || !ws->repeat) return STEP_OK;
+  memcpy(ws->rhs + 2 * NX, ws->x, NX * sizeof(casadi_real));
+  ws->arg[0] = q;
+  ws->arg[1] = v;
+  ws->arg[2] = p;
+  ws->res[0] = 0;
+  ws->res[1] = W0;
+  ws->res[2] = ws->Um;
+  if (KERNEL_CONTACT(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+  for (i = 0; i < NQ; ++i) ws->j[i] = 0;
+  for (r = 0; r < ND; ++r)
+    if (P[r] != 0)
+      for (i = wt_colind[r]; i < wt_colind[r + 1]; ++i) ws->j[wt_row[i]] += W0[i] * P[r];
+  status = step(q, v, t, u, p, h, q_next, v_next, lam, iterations, o, warm, ws);
+  if (status == STEP_OK) {
+    ws->arg[0] = q_next;
+    ws->arg[1] = v_next;
+    ws->arg[2] = p;
+    ws->res[0] = ws->g;
+    ws->res[1] = ws->W;
+    ws->res[2] = ws->U;
+    if (KERNEL_CONTACT(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+    memcpy(ws->rhs, ws->j, NQ * sizeof(casadi_real)); /* X j, with ws->K = [M A^T; A 0] at q_next */
+    for (i = NQ; i < NX; ++i) ws->rhs[i] = 0;
+    if (solve(ws, ws->K, ws->rhs, ws->rhs + NX)) return STEP_KERNEL;
+    scale += norm_inf(ws->U, ND);
+    *kept = all_finite(ws->rhs + NX, NQ);
+    for (k = 0; k < NK && *kept; ++k) {
+      casadi_real g_free = ws->g[k];
+      int loaded = 0, d;
+      for (i = wt_colind[k * DC]; i < wt_colind[k * DC + 1]; ++i) g_free -= h / 2 * ws->W[i] * ws->rhs[NX + wt_row[i]];
+      for (d = 0; d < DC; ++d) loaded = loaded || P[k * DC + d] != 0;
+      if (g_free > 0) {
+        if (loaded) *kept = 0; /* contact_step() would leave it open */
+        continue;
+      }
+      if (loaded) {
+        casadi_real wmax = 0, dw = 0;
+        for (i = wt_colind[k * DC]; i < wt_colind[(k + 1) * DC]; ++i) { /* the contact's rows */
+          casadi_real w = fabs(W0[i]), e = fabs(ws->W[i] - W0[i]);
+          if (w > wmax) wmax = w;
+          dw = nan_max(dw, e);
+        }
+        if (dw > REPEAT_TOL * (1 + wmax)) *kept = 0;
+      }
+      if (*kept && !contact_laws_hold(k, P, ws->U, ws->Um, REPEAT_TOL * scale)) *kept = 0;
+    }
+  }
+  if (*kept) {
+    for (r = 0; r < ND; ++r) ws->Pacc[r] += P[r];
+    return STEP_OK;
+  }
+  ws->repeat = 0;
+  memcpy(ws->x, ws->rhs + 2 * NX, NX * sizeof(casadi_real));
+  return status == STEP_OK || recoverable(status) ? STEP_OK : status;
+}
+
+/* Contacts that end the step inside are put back on their surface (push_out(), repeated
+ * while its linearisation leaves a gap below -PENETRATION_TOL, at most PUSH_OUT_MAX times).
+ * The deepest penetration left goes into ws->penetration (the largest since cleared). */
+static int push_out_all(const casadi_real *p, casadi_real t1, casadi_real *q_next, casadi_real *v_next,
+                        const step_options *o, workspace *ws) {
+  int status = STEP_OK, n, pushed = 1, k;
+  for (n = 0; n < PUSH_OUT_MAX && pushed; ++n)
+    if ((status = push_out(p, t1, q_next, v_next, o, ws, &pushed)) != STEP_OK) return status;
+  if (pushed) { /* the last pass pushed: the gaps it left */
+    ws->arg[0] = q_next;
+    ws->arg[1] = p;
+    ws->res[0] = ws->g;
+    if (KERNEL_GAP(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+  }
+  for (k = 0; k < NK; ++k) /* ws->g: the gaps at q_next */
+    if (-ws->g[k] > ws->penetration) ws->penetration = -ws->g[k];
+  return status;
+}
+
+/* One step with contacts: the free step, the contacts closed at its end (gap <= 0), their
+ * impulses by pgs() on the Delassus matrix G = W [M A^T; A 0]^-1 W^T there, then the step
+ * again with the generalised impulse j = W^T P, half of it in each half-step.  Adds the
+ * impulses to ws->Pacc. */
+static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real t, const casadi_real *u,
+                        const casadi_real *p, casadi_real h, casadi_real *q_next, casadi_real *v_next,
+                        casadi_real *lam, int *iterations, const step_options *o, int warm,
+                        workspace *ws) {
+  int i, a, k, na = 0, nr, it = 0, status, refine, impact = 0, converged = 1, kept, rows[ND], first[NK + 1];
+  int near = 0; /* whether contacts about to close take part */
+  casadi_real change = 0, residual = 0, bias[NK];
+  status = repeat_step(q, v, t, u, p, h, q_next, v_next, lam, &it, o, warm, ws, &kept);
+  if (status != STEP_OK) return status;
+  if (kept) {
+    if (iterations) *iterations = it;
+    return push_out_all(p, t + h, q_next, v_next, o, ws);
+  }
+  for (i = 0; i < NQ; ++i) ws->j[i] = 0;
+  status = step(q, v, t, u, p, h, q_next, v_next, lam, iterations, o, warm, ws);
+  if (iterations) *iterations += it;
+  if (status != STEP_OK) return status;
+  ws->arg[0] = q_next;
+  ws->arg[1] = p;
+  ws->res[0] = ws->g;
+  if (KERNEL_GAP(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+  for (k = 0; k < NK; ++k)
+    if (ws->g[k] <= 0) ws->act[na++] = k;
+  for (k = 0; k < ND; ++k) if (ws->g[k / DC] > 0) ws->F[k] = 0;
+  if (!na) return STEP_OK; /* no contact closed: the free step stands */
+  ws->arg[0] = q_next;
+  ws->arg[1] = v_next;
+  ws->arg[2] = p;
+  ws->res[0] = 0;
+  ws->res[1] = ws->W;
+  ws->res[2] = ws->U;
+  if (KERNEL_CONTACT(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+#ifdef ANY_RESTITUTION
+  /* contact velocities at the start of the step (Newton's impact law) */
+  ws->arg[0] = q;
+  ws->arg[1] = v;
+  ws->arg[2] = p;
+  ws->res[0] = 0;
+  ws->res[1] = 0;
+  ws->res[2] = ws->Um;
+  if (KERNEL_CONTACT(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+#else
+  /* every restitution coefficient is 0: the start-of-step velocities are not needed */
+  memset(ws->Um, 0, ND * sizeof(casadi_real));
+#endif
+  /* Contacts about to close take part too.  The impulses move the end-of-step gaps by
+   * h/2 (U - U_free), U_free the free step's contact velocities: the push of a closed
+   * contact can close an open neighbour within the step (a pile, a column), and push_out()
+   * would have to put it back after it.  A frictionless contact open at the end of the free
+   * step (gap g > 0) with e = 0 and g < GAP_REACH h/2 max(-U_free,N of the closed contacts)
+   * gets
+   *   U_N >= min(0, U_free,N - 2 g / h),  i.e. bias b = max(0, 2 g / h - U_free,N) >= 0:
+   * it may close within the step but does not pass its surface; as b >= 0, the impulses
+   * still take kinetic energy out (1/2 P^T G P + P^T b >= 0 of it, linearised).  (With
+   * friction its tangent rows would slow the sweeps more than the push-out costs: the
+   * falling chain of benchmarks/contact.py.)  Closed contacts: b = e min(U-_N, 0). */
+  {
+    casadi_real reach = 0;
+    for (a = 0; a < na; ++a) reach = fmax(reach, -ws->U[ws->act[a] * DC]);
+    reach *= GAP_REACH * h / 2;
+    for (na = k = 0; k < NK; ++k) {
+      const casadi_real g = ws->g[k];
+      if (g <= 0) bias[na] = restitution[k] * fmin(ws->Um[k * DC], 0);
+      else if (restitution[k] == 0 && mu[k] == 0 && g < reach) {
+        bias[na] = fmax(0, 2 * g / h - ws->U[k * DC]);
+        near = 1;
+      } else continue;
+      ws->act[na++] = k;
+    }
+  }
+  /* the rows of the active contacts: each its normal row, then its tangent rows if it has
+   * friction (contact c's rows start at first[c]) */
+  for (nr = a = 0; a < na; ++a) {
+    k = (int) ws->act[a];
+    first[a] = nr;
+    rows[nr++] = k * DC;
+    if (mu[k] > 0)
+      for (i = 1; i < DC; ++i) rows[nr++] = k * DC + i;
+  }
+  first[na] = nr;
+  for (a = 0; a < nr; ++a) ws->U[a] = ws->U[rows[a]]; /* compacted: row `a` <- contact row rows[a] >= a */
+  /* ws->K holds [M A^T; A 0] at q_next (the free step's second half). */
+  ws->fm = -1;
+  if ((status = delassus(ws, rows, nr)) != STEP_OK) return status;
+  g_pattern(ws, nr);
+  for (a = 0; a < nr; ++a) {
+    ws->P[a] = ws->Pold[a] = 0;
+    ws->Um[ND + a] = ws->U[a]; /* the free step's contact velocities */
+  }
+  for (a = 0; a < nr; ++a) /* warm start: last step's forces */
+    pgs_update(ws, nr, a, h * ws->F[rows[a]], &change);
+  /* The step responds to the impulses only approximately as U_0 + G P (G is taken at the free
+   * step's end, and a large impulse turns the members within the step).  After an impact (the
+   * impulses change a contact velocity by more than CONTACT_IMPACT_STEPS steps of gravity):
+   * solve, take the step, measure the contact velocities it ends with, correct U by the
+   * difference, solve again. */
+  for (refine = 0;; ++refine) {
+    int solved = pgs(ws, na, first, bias);
+    if (!solved && near) {
+      /* rare: the biases of contacts about to close can make a redundant set inconsistent
+       * (lcp_newton() then fights the sweeps); solve again without them (b = inf keeps their
+       * impulse at 0), and push_out() puts them back if they end inside */
+      for (a = 0; a < na; ++a)
+        if (ws->g[ws->act[a]] > 0) bias[a] = INFINITY;
+      near = 0;
+      solved = pgs(ws, na, first, bias);
+    }
+    if (!solved && refine > 0) {
+      /* the corrected problem has no solution (redundant contacts whose measured velocities
+       * leave the range of G): keep the last step, taken with the previous impulses */
+      memcpy(ws->P, ws->Pold, nr * sizeof(casadi_real));
+      break;
+    }
+    converged = solved;
+    residual = ws->pgs_last;
+    if (refine == 0) ws->repeat = solved && ws->pgs_sweeps == 0; /* the warm start solved it */
+    if (refine == 0) {
+      casadi_real jump = 0;
+      for (a = 0; a < nr; ++a) jump = fmax(jump, fabs(ws->U[a] - ws->Um[ND + a]));
+      impact = jump > CONTACT_IMPACT_STEPS * GRAVITY_NORM * h;
+    }
+    for (i = 0; i < NQ; ++i) ws->j[i] = 0;
+    for (a = 0; a < nr; ++a) {
+      for (i = wt_colind[rows[a]]; i < wt_colind[rows[a] + 1]; ++i) ws->j[wt_row[i]] += ws->W[i] * ws->P[a];
+      ws->Pold[ND + a] = ws->P[a] - ws->Pold[a];
+    }
+    x_add(ws, nr, ws->Pold + ND, 0.5, ws->x); /* warm start: w moves by half the impulses' change */
+    status = step(q, v, t, u, p, h, q_next, v_next, lam, &it, o, 1, ws);
+    if (iterations) *iterations += it;
+    if (status != STEP_OK) return status;
+    if (refine == CONTACT_REFINE_MAX || !impact) break;
+    ws->arg[0] = q_next;
+    ws->arg[1] = v_next;
+    ws->arg[2] = p;
+    ws->res[0] = 0;
+    ws->res[1] = 0;
+    ws->res[2] = ws->Um + ND; /* the contact velocities the step ends with */
+    if (KERNEL_CONTACT(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+    {
+      casadi_real off = 0, scale = 1;
+      for (a = 0; a < nr; ++a) {
+        off = fmax(off, fabs(ws->Um[ND + rows[a]] - ws->U[a]));
+        scale = fmax(scale, fabs(ws->U[a]));
+      }
+      if (off <= CONTACT_REFINE_TOL * scale) break;
+    }
+    for (a = 0; a < nr; ++a) {
+      ws->U[a] = ws->Um[ND + rows[a]];
+      ws->Pold[a] = ws->P[a];
+    }
+  }
+  for (a = 0; a < nr; ++a) {
+    ws->Pacc[rows[a]] += ws->P[a];
+    ws->F[rows[a]] = ws->P[a] / h;
+  }
+  if (!converged) {
+    ++ws->pgs_unconverged;
+    ws->pgs_residual = fmax(ws->pgs_residual, residual);
+  }
+  return push_out_all(p, t + h, q_next, v_next, o, ws);
+}

@@ -1,0 +1,366 @@
+/* RATTLE for constant mass matrices: one step by Newton's method, its checks, the
+ * projection onto the constraint manifold and the power of the forces, around the generated
+ * kernels of one model.  Plain C99, model-independent: the model's stepper glue
+ * (<model>_stepper.c, from templates/c/stepper.c.j2) defines the data below, then includes
+ * ncgen_rattle.h, ncgen_contact.h (models with nonsmooth contacts), ncgen_fixed.h and
+ * ncgen_adaptive.h, in this order, into one translation unit; every function here is static.
+ * See <model>_stepper.h for the scheme, the convergence tests and the status codes.
+ *
+ * What the including file defines first:
+ *   casadi_real, casadi_int    the kernels' types (the model's header)
+ *   NQ, NC, NU                 coordinates, constraints, inputs
+ *   NNZ_K                      nonzeros of the KKT matrix (output K of KERNEL_NEWTON)
+ *   MASS_SCALE                 max |M_ij| (kg), the scale of the momentum residual
+ *   MAX_HALVINGS               deepest step splitting the workspace allows
+ *   NSTATS                     columns of a row of statistics (ncgen_fixed.h)
+ *   STEP_OK .. STEP_TOO_SMALL  the status codes 0 .. 7 of <model>_stepper.h
+ *   step_options               a struct with casadi_real tol, int max_iter, int max_halvings
+ *   DEFAULT_OPTIONS()          an expression giving the default step_options
+ *   KERNEL_NEWTON, KERNEL_VELOCITY, KERNEL_CHECK, KERNEL_SOLVE, KERNEL_PROJECT, KERNEL_POWER,
+ *   KERNEL_OUTPUTS             the generated kernels (CasADi's calling convention
+ *                              f(arg, res, iw, w, mem)); ncgen.assembly.stepper_equations
+ *                              documents their inputs and outputs
+ *   KERNEL_WORKS               the list of every kernel's _work function, comma-separated
+ *   NCGEN_CONTACTS             defined for nonsmooth contacts, then also what
+ *                              ncgen_contact.h lists
+ */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define NX (NQ + NC)
+#ifdef NCGEN_CONTACTS
+#define ND (NK * DC)
+#endif
+#define ALIGN 16
+
+typedef int (*kernel_work)(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+
+static const kernel_work kernel_works[] = {KERNEL_WORKS};
+#define N_KERNELS (sizeof kernel_works / sizeof kernel_works[0])
+
+/* Pointers into one workspace block. */
+typedef struct {
+  const casadi_real **arg;
+  casadi_real **res;
+  casadi_real *x;   /* Newton unknowns [w; h/2 lambda], then [v+; h/2 mu] */
+  casadi_real *r;   /* residual, then right-hand side */
+  casadi_real *dx;  /* Newton update */
+  casadi_real *K;   /* KKT matrix nonzeros */
+  casadi_real *chk; /* max |Phi|, max |A v + Phi_t|, power P */
+  casadi_real *mid; /* states at the middle of split steps: [q; v] per splitting depth */
+  casadi_real *w;   /* kernel work */
+  casadi_int *iw;
+#ifdef NCGEN_CONTACTS
+  casadi_real *j;    /* generalised contact impulse W^T P of the step */
+  casadi_real *g;    /* gaps at the end of the free step */
+  casadi_real *W;    /* contact Jacobian there: its NNZ_W nonzeros, by rows (wt_colind, wt_row) */
+  casadi_real *U;    /* contact velocities: at the end of the free step, then with the impulses */
+  casadi_real *Um;   /* contact velocities at the start of the step (then ND more, scratch) */
+  casadi_real *Pold; /* impulses of the previous refinement */
+  casadi_real *Xc;   /* [M A^T; A 0]^-1 [W_r^T; 0], first NQ rows, per active row r */
+  casadi_real *G;    /* Delassus matrix of the active rows */
+  casadi_real *S;    /* Cholesky factor of lcp_newton()'s submatrix of G (ND x ND room) */
+  casadi_real *P;    /* impulses of the active rows */
+  casadi_real *rhs;  /* right-hand side and solution of one solve, then a saved Newton start */
+  casadi_real *Pacc; /* impulses per contact summed over the steps since last cleared */
+  casadi_real *F;    /* mean contact forces P / h of the last step (warm start of the next) */
+  casadi_real *fac;  /* QR factors V, R, beta of the KKT matrix */
+  casadi_int *act;   /* active contacts */
+  casadi_int *fset;  /* the rows of G whose Cholesky factor ws->S holds (fm of them), in its
+                        order; at fset + NK the first nonzero column of each of its rows */
+  int fm;            /* their number; -1 after delassus() changed G */
+  casadi_int *gp, *gi; /* the nonzeros of G by columns: column r has rows gi[gp[r] .. gp[r + 1] - 1] */
+#ifdef CONTACT_SCHUR
+  casadi_real *T;    /* A M^-1, NC x NQ, row-major */
+  casadi_real *L;    /* Cholesky factor of A M^-1 A^T, NC x NC, column-major */
+  casadi_real *Z;    /* L^-1 A M^-1 W_r^T, NC per active row r */
+  casadi_real *Y;    /* L^-T Z, NC per active row r */
+  int schur;         /* whether the last delassus() took the Schur complement (Xc holds M^-1 W_r^T) */
+#endif
+  long pgs_unconverged; /* contact solves that used impulses from pgs() at PGS_MAX_ITER, since cleared */
+  casadi_real pgs_last; /* relative change of the last sweep of the last pgs() */
+  casadi_real pgs_residual; /* the largest pgs_last of those solves */
+  casadi_real penetration; /* the deepest gap below 0 at the end of a step, since cleared (m) */
+  int pgs_sweeps;       /* sweeps of the last pgs() before it converged */
+  int repeat;           /* whether repeat_step() is worth trying: the last step's impulses were
+                           its own warm start's, or repeated */
+#endif
+} workspace;
+
+/* Blocks of the workspace (layout()). */
+#ifdef NCGEN_CONTACTS
+#define N_BLOCKS 24
+#else
+#define N_BLOCKS 10
+#endif
+
+static size_t align_up(size_t n) {
+  return (n + ALIGN - 1) / ALIGN * ALIGN;
+}
+
+/* Kernel work sizes: the maximum over all kernels. */
+static void kernel_sizes(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  size_t k;
+  *sz_arg = *sz_res = *sz_iw = *sz_w = 0;
+  for (k = 0; k < N_KERNELS; ++k) {
+    casadi_int a, r, i, w;
+    kernel_works[k](&a, &r, &i, &w);
+    if (a > *sz_arg) *sz_arg = a;
+    if (r > *sz_res) *sz_res = r;
+    if (i > *sz_iw) *sz_iw = i;
+    if (w > *sz_w) *sz_w = w;
+  }
+}
+
+/* Lays out the workspace in `block` (if not NULL) and returns its size in bytes. */
+static size_t layout(workspace *ws, char *block) {
+  casadi_int sz_arg, sz_res, sz_iw, sz_w;
+  size_t off[N_BLOCKS + 1], sizes[N_BLOCKS], k;
+  kernel_sizes(&sz_arg, &sz_res, &sz_iw, &sz_w);
+  sizes[0] = (size_t) sz_arg * sizeof(const casadi_real *);
+  sizes[1] = (size_t) sz_res * sizeof(casadi_real *);
+  sizes[2] = sizes[3] = sizes[4] = NX * sizeof(casadi_real);
+  sizes[5] = NNZ_K * sizeof(casadi_real);
+  sizes[6] = 3 * sizeof(casadi_real);
+  sizes[7] = (size_t) sz_w * sizeof(casadi_real);
+  sizes[8] = (size_t) sz_iw * sizeof(casadi_int);
+  sizes[9] = 2 * NQ * MAX_HALVINGS * sizeof(casadi_real);
+#ifdef NCGEN_CONTACTS
+  sizes[10] = NQ * sizeof(casadi_real);
+  sizes[11] = NK * sizeof(casadi_real);
+  sizes[12] = NNZ_W * sizeof(casadi_real);
+  sizes[15] = (ND * NQ > NNZ_W ? ND * NQ : NNZ_W) * sizeof(casadi_real);
+  sizes[13] = sizes[17] = sizes[19] = ND * sizeof(casadi_real);
+  sizes[14] = 4 * ND * sizeof(casadi_real); /* Um, the end-of-step velocities, Pold, its change */
+  sizes[16] = 2 * ND * ND * sizeof(casadi_real); /* G, then S */
+  sizes[18] = 3 * NX * sizeof(casadi_real); /* rhs, solution, saved Newton start */
+  sizes[20] = (NK + ND + NK + ND + 1 + (size_t) ND * ND) * sizeof(casadi_int); /* act, fset (and the factor's row starts), gp, gi */
+  sizes[21] = ND * sizeof(casadi_real);
+#ifdef CONTACT_FACTORED
+  sizes[22] = (NNZ_V + NNZ_R + N_BETA) * sizeof(casadi_real);
+#else
+  sizes[22] = 0;
+#endif
+#ifdef CONTACT_SCHUR
+  sizes[23] = (NC * NQ + NC * NC + 2 * NC * ND) * sizeof(casadi_real);
+#else
+  sizes[23] = 0;
+#endif
+#endif
+  off[0] = 0;
+  for (k = 0; k < N_BLOCKS; ++k) off[k + 1] = off[k] + align_up(sizes[k]);
+  if (ws) {
+    ws->arg = (const casadi_real **) (void *) (block + off[0]);
+    ws->res = (casadi_real **) (void *) (block + off[1]);
+    ws->x = (casadi_real *) (void *) (block + off[2]);
+    ws->r = (casadi_real *) (void *) (block + off[3]);
+    ws->dx = (casadi_real *) (void *) (block + off[4]);
+    ws->K = (casadi_real *) (void *) (block + off[5]);
+    ws->chk = (casadi_real *) (void *) (block + off[6]);
+    ws->w = (casadi_real *) (void *) (block + off[7]);
+    ws->iw = (casadi_int *) (void *) (block + off[8]);
+    ws->mid = (casadi_real *) (void *) (block + off[9]);
+#ifdef NCGEN_CONTACTS
+    ws->j = (casadi_real *) (void *) (block + off[10]);
+    ws->g = (casadi_real *) (void *) (block + off[11]);
+    ws->W = (casadi_real *) (void *) (block + off[12]);
+    ws->U = (casadi_real *) (void *) (block + off[13]);
+    ws->Um = (casadi_real *) (void *) (block + off[14]);
+    ws->Pold = ws->Um + 2 * ND;
+    ws->Xc = (casadi_real *) (void *) (block + off[15]);
+    ws->G = (casadi_real *) (void *) (block + off[16]);
+    ws->S = ws->G + ND * ND;
+    ws->P = (casadi_real *) (void *) (block + off[17]);
+    ws->rhs = (casadi_real *) (void *) (block + off[18]);
+    ws->Pacc = (casadi_real *) (void *) (block + off[19]);
+    ws->act = (casadi_int *) (void *) (block + off[20]);
+    ws->fset = ws->act + NK;
+    ws->gp = ws->fset + ND + NK;
+    ws->gi = ws->gp + ND + 1;
+    ws->fm = -1;
+    ws->F = (casadi_real *) (void *) (block + off[21]);
+    ws->fac = (casadi_real *) (void *) (block + off[22]);
+#ifdef CONTACT_SCHUR
+    ws->T = (casadi_real *) (void *) (block + off[23]);
+    ws->L = ws->T + NC * NQ;
+    ws->Z = ws->L + NC * NC;
+    ws->Y = ws->Z + NC * ND;
+#endif
+#endif
+  }
+  return off[N_BLOCKS];
+}
+
+/* Bytes of workspace one step needs. */
+static size_t step_work_bytes(void) {
+  return layout(0, 0);
+}
+
+/* The larger of m and a, NaN if either is: a maximum taken over components with it is NaN
+ * if any of them is. */
+static casadi_real nan_max(casadi_real m, casadi_real a) {
+  return isnan(m) || a <= m ? m : a;
+}
+
+/* max |x_i| (NaN if some x_i is). */
+static casadi_real norm_inf(const casadi_real *x, int n) {
+  casadi_real m = 0;
+  int i;
+  for (i = 0; i < n; ++i) m = nan_max(m, fabs(x[i]));
+  return m;
+}
+
+static int all_finite(const casadi_real *x, int n) {
+  int i;
+  for (i = 0; i < n; ++i)
+    if (!isfinite(x[i])) return 0;
+  return 1;
+}
+
+/* x = K^-1 r by the generated sparse QR. */
+static int solve(workspace *ws, const casadi_real *K, const casadi_real *r, casadi_real *x) {
+  ws->arg[0] = K;
+  ws->arg[1] = r;
+  ws->res[0] = x;
+  return KERNEL_SOLVE(ws->arg, ws->res, ws->iw, ws->w, 0);
+}
+
+/* The step on a laid-out workspace (see <model>_step).  Newton starts from ws->x if
+ * `warm`, else from [v; 0].  On success ws->x holds [w; h/2 lambda], ws->dx [v+; h/2 mu]. */
+static int step(const casadi_real *q, const casadi_real *v, casadi_real t, const casadi_real *u,
+                const casadi_real *p, casadi_real h, casadi_real *q_next, casadi_real *v_next,
+                casadi_real *lam, int *iterations, const step_options *o, int warm,
+                workspace *ws) {
+  casadi_real t1 = t + h, tol = o->tol;
+  int i, it;
+  if (iterations) *iterations = 0;
+  if (!(h > 0) || !isfinite(t1) || !(tol > 0) || o->max_iter < 1 || o->max_halvings < 0 ||
+      o->max_halvings > MAX_HALVINGS)
+    return STEP_BAD_INPUT;
+
+  /* First half-step: Newton on x = [w; h/2 lambda]. */
+  if (!warm) {
+    memcpy(ws->x, v, NQ * sizeof *v);
+    for (i = NQ; i < NX; ++i) ws->x[i] = 0;
+  }
+  for (it = 0;; ++it) {
+    ws->arg[0] = &t;
+    ws->arg[1] = q;
+    ws->arg[2] = v;
+    ws->arg[3] = u;
+    ws->arg[4] = p;
+    ws->arg[5] = &h;
+    ws->arg[6] = ws->x;
+    ws->arg[7] = ws->x + NQ;
+#ifdef NCGEN_CONTACTS
+    ws->arg[8] = ws->j;
+#endif
+    ws->res[0] = ws->r;
+    ws->res[1] = ws->K;
+    if (KERNEL_NEWTON(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+    {
+      casadi_real e_mom = norm_inf(ws->r, NQ), e_pos = h * norm_inf(ws->r + NQ, NC);
+      if (!isfinite(e_mom) || !isfinite(e_pos)) return STEP_NOT_FINITE;
+      if (e_pos <= tol && e_mom <= tol * MASS_SCALE * (1 + norm_inf(ws->x, NQ))) break;
+    }
+    if (it == o->max_iter) {
+      if (iterations) *iterations = it;
+      return STEP_NO_CONVERGENCE;
+    }
+    if (solve(ws, ws->K, ws->r, ws->dx)) return STEP_KERNEL;
+    if (!all_finite(ws->dx, NX)) return STEP_NOT_FINITE;
+    for (i = 0; i < NX; ++i) ws->x[i] -= ws->dx[i];
+  }
+  if (iterations) *iterations = it;
+  for (i = 0; i < NQ; ++i) q_next[i] = q[i] + h * ws->x[i];
+
+  /* Second half-step: [[M, A^T], [A, 0]] [v+; h/2 mu] = [M w + h/2 F; -Phi_t]. */
+  ws->arg[0] = &t1;
+  ws->arg[1] = q_next;
+  ws->arg[2] = ws->x;
+  ws->arg[3] = u;
+  ws->arg[4] = p;
+  ws->arg[5] = &h;
+#ifdef NCGEN_CONTACTS
+  ws->arg[6] = ws->j;
+#endif
+  ws->res[0] = ws->r;
+  ws->res[1] = ws->K;
+  if (KERNEL_VELOCITY(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+  if (solve(ws, ws->K, ws->r, ws->dx)) return STEP_KERNEL;
+  if (!all_finite(ws->dx, NX)) return STEP_NOT_FINITE;
+  memcpy(v_next, ws->dx, NQ * sizeof *v_next);
+  if (lam)
+    for (i = 0; i < NC; ++i) lam[i] = 2 * ws->dx[NQ + i] / h;
+
+  /* Both constraint levels at t + h. */
+  ws->arg[0] = &t1;
+  ws->arg[1] = q_next;
+  ws->arg[2] = v_next;
+  ws->arg[3] = p;
+  ws->res[0] = ws->chk;
+  ws->res[1] = ws->chk + 1;
+  if (KERNEL_CHECK(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+  if (!(ws->chk[0] <= tol)) return STEP_NO_CONVERGENCE;
+  if (!(ws->chk[1] <= tol * (1 + norm_inf(v_next, NQ)))) return STEP_VELOCITY;
+  return STEP_OK;
+}
+
+/* Warm start of the step after a successful one: w' = 2 v+ - w, h/2 lambda' = h/2 mu
+ * (exact for forces independent of v when the multipliers do not change). */
+static void predict(workspace *ws) {
+  int i;
+  for (i = 0; i < NQ; ++i) ws->x[i] = 2 * ws->dx[i] - ws->x[i];
+  for (i = NQ; i < NX; ++i) ws->x[i] = ws->dx[i];
+}
+
+static int recoverable(int status) {
+  return status == STEP_NO_CONVERGENCE || status == STEP_NOT_FINITE ||
+         status == STEP_VELOCITY;
+}
+
+
+/* P = dE/dt at (t, q, v, lam, u) (KERNEL_POWER) into *P. */
+static int power(workspace *ws, casadi_real t, const casadi_real *q, const casadi_real *v, const casadi_real *lam,
+                 const casadi_real *u, const casadi_real *p, casadi_real *P) {
+  ws->arg[0] = &t;
+  ws->arg[1] = q;
+  ws->arg[2] = v;
+  ws->arg[3] = lam;
+  ws->arg[4] = u;
+  ws->arg[5] = p;
+  ws->res[0] = P;
+  return KERNEL_POWER(ws->arg, ws->res, ws->iw, ws->w, 0) ? STEP_KERNEL : STEP_OK;
+}
+
+
+/* Projection of (q, v) onto both constraint levels at t in the mass metric:
+ * [[M, A^T], [A, 0]] [dq; mu] = [0; Phi], q -= dq until |Phi|_inf <= tol, then the same
+ * with A v + Phi_t for v (exact: the velocity constraints are linear in v). */
+static int project(workspace *ws, casadi_real t, casadi_real *q, casadi_real *v, const casadi_real *p,
+                   const step_options *o, casadi_real *phidot) {
+  int i, it;
+  for (it = 0;; ++it) {
+    ws->arg[0] = &t;
+    ws->arg[1] = q;
+    ws->arg[2] = v;
+    ws->arg[3] = p;
+    ws->res[0] = ws->K;
+    ws->res[1] = ws->r + NQ;
+    ws->res[2] = phidot;
+    if (KERNEL_PROJECT(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+    for (i = 0; i < NQ; ++i) ws->r[i] = 0;
+    if (!all_finite(ws->r + NQ, NC)) return STEP_NOT_FINITE;
+    if (norm_inf(ws->r + NQ, NC) <= o->tol) break;
+    if (it == o->max_iter) return STEP_NO_CONVERGENCE;
+    if (solve(ws, ws->K, ws->r, ws->dx)) return STEP_KERNEL;
+    if (!all_finite(ws->dx, NX)) return STEP_NOT_FINITE;
+    for (i = 0; i < NQ; ++i) q[i] -= ws->dx[i];
+  }
+  memcpy(ws->r + NQ, phidot, NC * sizeof *phidot);
+  if (solve(ws, ws->K, ws->r, ws->dx)) return STEP_KERNEL;
+  if (!all_finite(ws->dx, NX)) return STEP_NOT_FINITE;
+  for (i = 0; i < NQ; ++i) v[i] -= ws->dx[i];
+  return STEP_OK;
+}

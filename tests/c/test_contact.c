@@ -1,0 +1,312 @@
+/* Unit tests of the stepper's contact solver (ncgen_contact.h) on a hand-written model: two
+ * point masses in the plane (q = (x1, y1, x2, y2), no bilateral constraint), gravity -G_P
+ * along y, each with a contact against the floor y = 0 (a sphere of radius R_P: the gap is
+ * y_k - R_P, the normal row of the contact Jacobian is dy_k, the tangent row dx_k).
+ *
+ * Projected Gauss-Seidel is tested on hand-made Delassus matrices with known solutions
+ * (friction: sliding and sticking; frictionless and redundant: the Newton steps), the
+ * contact step on closed forms: a mass sliding with Coulomb friction decelerates by mu g
+ * and stops, a mass dropped with restitution e rebounds to e^2 its height.  Compiled twice
+ * by tests/test_stepper_runtime_c.py: as is (the Delassus matrix by KKT solves, one per
+ * row) and with -DSCHUR_FACTORED (from the constant M^-1, and the KKT matrix factored once). */
+#include "harness.h"
+
+#define M_P 0.5
+#define G_P 9.81
+#define R_P 0.05
+
+#define NQ 4
+#define NC 0
+#define NU 0
+#define NNZ_K 4
+#define MASS_SCALE M_P
+#define MAX_HALVINGS 10
+#define NSTATS 9
+#define NOUT 5
+
+#define NCGEN_CONTACTS
+#define NK 2
+#define DC 2
+#define PGS_MAX_ITER 300
+#define PGS_TOL 1e-12
+#define CONTACT_REFINE_MAX 10
+#define CONTACT_REFINE_TOL 1e-8
+#define GRAVITY_NORM G_P
+#define PENETRATION_TOL 1e-8
+#define GAP_REACH 2.0
+#define REPEAT_TOL 1e-12
+#define ANY_RESTITUTION
+/* the tests set them per case */
+static casadi_real mu[NK] = {0.5, 0.0};
+static casadi_real restitution[NK] = {0.0, 0.5};
+/* W by rows: normal 1 (dy1), tangent 1 (dx1), normal 2 (dy2), tangent 2 (dx2) */
+#define NNZ_W 4
+static const int wt_colind[NK * DC + 1] = {0, 1, 2, 3, 4};
+static const int wt_row[NNZ_W] = {1, 0, 3, 2};
+
+#ifdef SCHUR_FACTORED
+#define CONTACT_FACTORED
+#define NNZ_V 0
+#define NNZ_R 4
+#define N_BETA 0
+#define CONTACT_SCHUR
+static const casadi_real minv[NQ * NQ] = {1 / M_P, 0, 0, 0, 0, 1 / M_P, 0, 0, 0, 0, 1 / M_P, 0, 0, 0, 0, 1 / M_P};
+static const int minv_colind[NQ + 1] = {0, 1, 2, 3, 4};
+static const int minv_row[NQ] = {0, 1, 2, 3};
+#define NNZ_A 0
+#endif
+
+/* r = m (w - v) - h/2 F - j/2 (F = gravity), K = m I (its diagonal). */
+static int k_newton(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  const casadi_real h = *arg[5];
+  int i;
+  (void) iw, (void) w, (void) mem;
+  for (i = 0; i < NQ; ++i) {
+    res[0][i] = M_P * (at(arg[6], i) - at(arg[2], i)) + (i % 2 ? h / 2 * M_P * G_P : 0) - at(arg[8], i) / 2;
+    res[1][i] = M_P;
+  }
+  return 0;
+}
+
+/* b = m w + h/2 F + j/2, K = m I. */
+static int k_velocity(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  const casadi_real h = *arg[5];
+  int i;
+  (void) iw, (void) w, (void) mem;
+  for (i = 0; i < NQ; ++i) {
+    res[0][i] = M_P * at(arg[2], i) - (i % 2 ? h / 2 * M_P * G_P : 0) + at(arg[6], i) / 2;
+    res[1][i] = M_P;
+  }
+  return 0;
+}
+
+static int k_check(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  (void) arg, (void) iw, (void) w, (void) mem;
+  *res[0] = 0;
+  *res[1] = 0;
+  return 0;
+}
+
+/* x = K^-1 r for the diagonal K. */
+static int k_solve(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  int i;
+  (void) iw, (void) w, (void) mem;
+  for (i = 0; i < NQ; ++i) res[0][i] = arg[1][i] / arg[0][i];
+  return 0;
+}
+
+static int k_project(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  int i;
+  (void) arg, (void) iw, (void) w, (void) mem;
+  if (res[0])
+    for (i = 0; i < NQ; ++i) res[0][i] = M_P;
+  return 0;
+}
+
+static int k_power(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  (void) arg, (void) iw, (void) w, (void) mem;
+  *res[0] = 0;
+  return 0;
+}
+
+static int k_outputs(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  const casadi_real *q = arg[1], *v = arg[2];
+  int i;
+  (void) iw, (void) w, (void) mem;
+  for (i = 0; i < NOUT; ++i) res[0][i] = 0;
+  for (i = 0; i < NQ; ++i) res[0][0] += M_P * v[i] * v[i] / 2;
+  res[0][1] = M_P * G_P * (q[1] + q[3]);
+  return 0;
+}
+
+static int k_gap(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  (void) iw, (void) w, (void) mem;
+  res[0][0] = arg[0][1] - R_P;
+  res[0][1] = arg[0][3] - R_P;
+  return 0;
+}
+
+/* gaps, W's nonzeros (all 1), contact velocities W v = (y1', x1', y2', x2'). */
+static int k_contact(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  const casadi_real *q = arg[0];
+  int r;
+  (void) iw, (void) w, (void) mem;
+  if (res[0]) {
+    res[0][0] = q[1] - R_P;
+    res[0][1] = q[3] - R_P;
+  }
+  if (res[1])
+    for (r = 0; r < NNZ_W; ++r) res[1][r] = 1;
+  if (res[2])
+    for (r = 0; r < NK * DC; ++r) res[2][r] = at(arg[1], wt_row[r]);
+  return 0;
+}
+
+#ifdef SCHUR_FACTORED
+/* The "factors" of the diagonal K: R = its diagonal. */
+static int k_factor(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  int i;
+  (void) iw, (void) w, (void) mem;
+  for (i = 0; i < NQ; ++i) res[1][i] = arg[0][i];
+  return 0;
+}
+
+static int k_backsolve(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  int i;
+  (void) iw, (void) w, (void) mem;
+  for (i = 0; i < NQ; ++i) res[0][i] = arg[3][i] / arg[1][i];
+  return 0;
+}
+#define KERNEL_FACTOR k_factor
+#define KERNEL_BACKSOLVE k_backsolve
+#endif
+
+#define KERNEL_NEWTON k_newton
+#define KERNEL_VELOCITY k_velocity
+#define KERNEL_CHECK k_check
+#define KERNEL_SOLVE k_solve
+#define KERNEL_PROJECT k_project
+#define KERNEL_POWER k_power
+#define KERNEL_OUTPUTS k_outputs
+#define KERNEL_GAP k_gap
+#define KERNEL_CONTACT k_contact
+
+#include "ncgen_rattle.h"
+#include "ncgen_contact.h"
+#include "ncgen_fixed.h"
+
+/* ---------------------------------------------------------------- tests */
+
+/* Sets up ws for pgs() on the na = 2 contacts (rows in first[]) with the nr x nr Delassus
+ * matrix G (column-major) and the free contact velocities U0. */
+static void pgs_problem(workspace *ws, int nr, const casadi_real *G, const casadi_real *U0) {
+  int a;
+  memcpy(ws->G, G, (size_t) (nr * nr) * sizeof(casadi_real));
+  memcpy(ws->U, U0, (size_t) nr * sizeof(casadi_real));
+  memset(ws->Um, 0, ND * sizeof(casadi_real));
+  for (a = 0; a < nr; ++a) ws->P[a] = 0;
+  ws->act[0] = 0;
+  ws->act[1] = 1;
+  ws->fm = -1;
+  g_pattern(ws, nr);
+}
+
+/* Two contacts with friction, normal rows coupled: contact 1 slides (its tangential impulse
+ * on the cone's edge, against the slip), contact 2 sticks.  Solution by hand:
+ *   P_N = G_NN^-1 (-U0_N) = (4/3, 4/3), P_T1 = -mu P_N1 = -2/3, P_T2 = -U0_T2 = -0.1. */
+static void test_pgs_friction(void) {
+  const casadi_real G[16] = {1, 0, 0.5, 0, 0, 1, 0, 0, 0.5, 0, 1, 0, 0, 0, 0, 1};
+  const casadi_real U0[4] = {-2, 2, -2, 0.1}, P[4] = {4.0 / 3, -2.0 / 3, 4.0 / 3, -0.1};
+  const casadi_real U[4] = {0, 4.0 / 3, 0, 0}, bias[2] = {0, 0};
+  const int first[3] = {0, 2, 4};
+  workspace ws;
+  char *block = malloc(step_work_bytes());
+  int a, converged;
+  layout(&ws, block);
+  mu[0] = mu[1] = 0.5;
+  restitution[0] = restitution[1] = 0;
+  pgs_problem(&ws, 4, G, U0);
+  converged = pgs(&ws, 2, first, bias);
+  CHECK(converged, "%d sweeps, last change %g", ws.pgs_sweeps, ws.pgs_last);
+  for (a = 0; a < 4; ++a) {
+    CHECK(fabs(ws.P[a] - P[a]) < 1e-10, "P[%d] = %.15g, expected %.15g", a, ws.P[a], P[a]);
+    CHECK(fabs(ws.U[a] - U[a]) < 1e-10, "U[%d] = %.15g, expected %.15g", a, ws.U[a], U[a]);
+  }
+  free(block);
+}
+
+/* Two frictionless contacts on the same direction (redundant: G singular): any P >= 0 with
+ * P_1 + P_2 = 1 solves it; the Newton steps of lcp_newton() finish what the sweeps crawl on.
+ * With a separating velocity on one, only the other takes an impulse. */
+static void test_pgs_frictionless_redundant(void) {
+  const casadi_real G[4] = {1, 1, 1, 1}, U0[2] = {-1, -1}, bias[2] = {0, 0};
+  const casadi_real G2[4] = {2, 1, 1, 2}, U2[2] = {-1, 3};
+  const int first[3] = {0, 1, 2};
+  workspace ws;
+  char *block = malloc(step_work_bytes());
+  layout(&ws, block);
+  mu[0] = mu[1] = 0;
+  pgs_problem(&ws, 2, G, U0);
+  CHECK(pgs(&ws, 2, first, bias), "%d sweeps, last change %g", ws.pgs_sweeps, ws.pgs_last);
+  CHECK(ws.P[0] >= 0 && ws.P[1] >= 0 && fabs(ws.P[0] + ws.P[1] - 1) < 1e-12, "P = (%g, %g)", ws.P[0], ws.P[1]);
+  CHECK(fabs(ws.U[0]) < 1e-12 && fabs(ws.U[1]) < 1e-12, "U = (%g, %g)", ws.U[0], ws.U[1]);
+  pgs_problem(&ws, 2, G2, U2);
+  CHECK(pgs(&ws, 2, first, bias), "%d sweeps", ws.pgs_sweeps);
+  CHECK(fabs(ws.P[0] - 0.5) < 1e-12 && ws.P[1] == 0, "P = (%g, %g)", ws.P[0], ws.P[1]);
+  CHECK(fabs(ws.U[0]) < 1e-12 && fabs(ws.U[1] - 3.5) < 1e-12, "U = (%g, %g)", ws.U[0], ws.U[1]);
+  free(block);
+}
+
+/* Mass 1 slides on the floor (mu = 0.5) from 1 m/s: x' = v0 - mu g t until it stops at
+ * v0 / (mu g), x = v0 t - mu g t^2 / 2 (RATTLE is exact for a constant acceleration), resting
+ * on the floor with the normal impulse m g per second.  Mass 2 (frictionless, e = 0.5)
+ * dropped from 0.1 m above the floor rebounds to e^2 0.1 m. */
+static void test_contact_steps(void) {
+  enum { N = 6000 };
+  const casadi_real h = 1e-4, v0 = 1.0, drop = 0.1, t_slide = 0.1;
+  const casadi_real q0[NQ] = {0, R_P, 0, R_P + drop}, vel0[NQ] = {v0, 0, 0, 0};
+  casadi_real *q = malloc(N * NQ * sizeof(casadi_real)), *v = malloc(N * NQ * sizeof(casadi_real));
+  casadi_real *imp = malloc(N * ND * sizeof(casadi_real)), *stats = malloc(N * NSTATS * sizeof(casadi_real));
+  casadi_real apex = 0, pn = 0, pt = 0, deepest = 0;
+  long done = 0, splits = 0, k, unconverged = 0, bounced = 0;
+  step_options o = test_default_options();
+  int status;
+  mu[0] = 0.5, mu[1] = 0;
+  restitution[0] = 0, restitution[1] = 0.5;
+  status = run_fixed(q0, vel0, 0, 0, h, N, 1, 0, 0, 0, q, v, 0, 0, stats, &o, 0, 0, &done, &splits, imp);
+  CHECK(status == STEP_OK && done == N && splits == 0, "status %d, %ld steps, %ld splits", status, done, splits);
+  k = (long) (t_slide / h + 0.5) - 1; /* row k: the state at (k + 1) h */
+  CHECK(fabs(v[k * NQ] - (v0 - mu[0] * G_P * t_slide)) < 1e-9, "x' = %.12g at t = %g", v[k * NQ], t_slide);
+  CHECK(fabs(q[k * NQ] - (v0 * t_slide - mu[0] * G_P * t_slide * t_slide / 2)) < 1e-9, "x = %.12g", q[k * NQ]);
+  CHECK(fabs(v[(N - 1) * NQ]) < 1e-12, "still sliding at the end: x' = %g", v[(N - 1) * NQ]);
+  CHECK(fabs(q[(N - 1) * NQ] - v0 * v0 / (2 * mu[0] * G_P)) < 1e-4, "stopped at x = %g, expected %g",
+        q[(N - 1) * NQ], v0 * v0 / (2 * mu[0] * G_P));
+  for (k = 0; k < N; ++k) {
+    deepest = fmax(deepest, fmax(R_P - q[k * NQ + 1], R_P - q[k * NQ + 3]));
+    if (k * h < t_slide) {
+      pn += imp[k * ND];
+      pt += imp[k * ND + 1];
+    }
+    bounced = bounced || v[k * NQ + 3] > 0;
+    if (bounced) apex = fmax(apex, q[k * NQ + 3] - R_P);
+    unconverged += (long) stats[k * NSTATS + 6];
+    CHECK(stats[k * NSTATS + 8] <= 2 * PENETRATION_TOL, "penetration %g at row %ld", stats[k * NSTATS + 8], k);
+  }
+  CHECK(fabs(pn - M_P * G_P * t_slide) < 1e-3 * M_P * G_P * t_slide, "normal impulse %g", pn);
+  CHECK(fabs(pt + mu[0] * pn) < 1e-9, "friction impulse %g, normal %g", pt, pn);
+  CHECK(deepest < 2 * PENETRATION_TOL, "deepest penetration %g m", deepest);
+  CHECK(unconverged == 0, "%ld contact solves did not converge", unconverged);
+  CHECK(bounced && fabs(apex - 0.25 * drop) < 0.02 * 0.25 * drop, "rebound apex %g m, expected %g", apex,
+        0.25 * drop);
+  free(q), free(v), free(imp), free(stats);
+}
+
+/* The single step API: at rest on the floor, a step keeps the mass there with the normal
+ * impulse m g h (the free step would sink it). */
+static void test_step_at_rest(void) {
+  const casadi_real q[NQ] = {0, R_P, 1, R_P}, v[NQ] = {0, 0, 0, 0}, h = 1e-3;
+  casadi_real q1[NQ], v1[NQ], impulse[ND], y[NOUT], t = 0;
+  int status, i;
+  mu[0] = mu[1] = 0.5;
+  status = stepper_step(q, v, 0, 0, 0, h, q1, v1, 0, 0, 0, 0, impulse);
+  CHECK(status == STEP_OK, "status %d", status);
+  for (i = 0; i < NQ; ++i) CHECK(fabs(q1[i] - q[i]) < 1e-12 && fabs(v1[i]) < 1e-12, "moved: q[%d]", i);
+  CHECK(fabs(impulse[0] - M_P * G_P * h) < 1e-12 && fabs(impulse[2] - M_P * G_P * h) < 1e-12,
+        "impulses %g, %g", impulse[0], impulse[2]);
+  CHECK(impulse[1] == 0 && impulse[3] == 0, "no friction at rest");
+  CHECK(stepper_outputs(1, &t, q1, v1, 0, 0, 0, 0, y) == STEP_OK && fabs(y[1] - 2 * M_P * G_P * R_P) < 1e-12,
+        "potential energy %g", y[1]);
+}
+
+int main(void) {
+  (void) project; /* used by ncgen_adaptive.h, which this test does not include */
+  test_pgs_friction();
+  test_pgs_frictionless_redundant();
+  test_contact_steps();
+  test_step_at_rest();
+#ifdef SCHUR_FACTORED
+  return report("test_contact (Schur complement, factored KKT matrix)");
+#else
+  return report("test_contact (KKT solves)");
+#endif
+}
