@@ -8,6 +8,7 @@ from ncgen import viz  # nc.viz.plot, nc.viz.animate (cheap: matplotlib loads on
 from ncgen import robots  # nc.robots.urdf_path("panda"): example-robot-data's URDFs
 from ncgen.assembly.kinematics import assemble, dof_report, project_velocity, solve_kinematics
 from ncgen.codegen.model_package import generate
+from ncgen.control import MPC, StepDidNotConverge, StepFunction, export_mpc, ilqr, step_function
 from ncgen.errors import NcgenError
 from ncgen.model.contacts import Contact, SpherePlane, SphereSphere
 from ncgen.model.controllers import PD, ComputedTorque, Controller
@@ -39,13 +40,13 @@ from ncgen.version import __version__
 
 __all__ = [
     "BatchResult", "Box", "Capsule", "ComputedTorque", "Contact", "Controller", "CoordinateDriver", "Cylinder", "Ellipsoid", "Mesh", "Shape", "Sphere", "Cylindrical", "Distance", "Equilibrium", "Fixed", "Force", "Free", "GeneralizedForce",
-    "Joint", "JointReaction", "LinearModel", "Mimic", "Model", "ModelError", "Modes", "NcgenError", "OptimalControl",
+    "Joint", "JointReaction", "LinearModel", "MPC", "Mimic", "Model", "ModelError", "Modes", "NcgenError", "OptimalControl",
     "OptimalTrajectory", "PD", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic", "Revolute", "Samples", "SimulationOptions", "SpherePlane", "SphereSphere", "Spherical",
-    "Spring", "SweepResult", "System", "Tensegrity", "Torque", "TorsionalSpring", "Trajectory", "Universal",
-    "assemble", "coordinate_type", "dof_report", "equilibrium", "form_find", "forward_dynamics",
-    "forward_dynamics_kernel", "generate", "inverse_dynamics", "joint_forward_dynamics",
+    "Spring", "StepDidNotConverge", "StepFunction", "SweepResult", "System", "Tensegrity", "Torque", "TorsionalSpring", "Trajectory", "Universal",
+    "assemble", "coordinate_type", "dof_report", "equilibrium", "export_mpc", "form_find", "forward_dynamics",
+    "forward_dynamics_kernel", "generate", "ilqr", "inverse_dynamics", "joint_forward_dynamics",
     "joint_forward_dynamics_kernel", "joint_reactions", "linearize", "modes", "open_sweep",
     "aba", "aba_derivatives", "algorithm_kernel", "crba", "rnea", "rnea_derivatives",
-    "project_velocity", "simulate", "simulate_batch", "solve_kinematics", "sweep",
+    "project_velocity", "simulate", "simulate_batch", "solve_kinematics", "step_function", "sweep",
     "__version__", "robots", "viz",
 ]

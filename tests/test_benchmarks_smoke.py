@@ -48,6 +48,8 @@ pytestmark = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc
     ("optimal_control.py", [re.compile(r"cartpole +8 \|"), re.compile(r"acrobot +8 \|"), re.compile(r"arm3d +8 \|"),
                             "RATIO ncgen / minimal, iterations", "RATIO ncgen / minimal, solve time",
                             "converged: ncgen 3/3, minimal 3/3"]),
+    ("control.py", ["=== step Jacobians: chain of N = 3 bars", "RATIO ncgen / mujoco mjd_transitionFD forward",
+                    "=== cart-pole MPC", "RATIO IPOPT re-solve / MPC step"]),
 ])
 def test_smoke(tmp_path, script, expected):
     if script in ("joint_space.py", "joint_simulation.py", "tree_algorithms.py"):

@@ -5,7 +5,7 @@ Every ``import``/``from … import`` of an ``ncgen`` module is an edge, wherever
 docs/architecture.md)::
 
     base (errors, validation, reproducible, files, interrupts, version, robots, progress)
-    ← symbolic ← model ← rigid_motion ← assembly ← codegen ← runtime ← analysis ← viz ← optim ← cli
+    ← symbolic ← model ← rigid_motion ← assembly ← codegen ← runtime ← analysis ← viz ← optim ← control ← cli
     ← ncgen (the package root)
 
 A module may import modules of its own layer and of lower ones.  The exceptions, all
@@ -23,7 +23,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1] / "ncgen"
 
 LAYERS = ["base", "symbolic", "model", "rigid_motion", "assembly", "codegen", "runtime", "analysis", "viz", "optim",
-          "cli", "root"]
+          "control", "cli", "root"]
 BASE = {"errors", "validation", "reproducible", "files", "interrupts", "version", "robots", "progress"}
 #: (importing module, imported module): the documented exceptions.
 EXCEPTIONS = {("ncgen.model.system", "ncgen.assembly.build"),

@@ -21,7 +21,7 @@ from ncgen.interrupts import sticky_interrupt
 from ncgen.version import __version__
 
 #: The subcommand modules, in the order ``ncgen --help`` lists them.
-SUBCOMMAND_MODULES = ("derive", "generate", "check", "simulate", "sweep", "optimize", "statics", "demo")
+SUBCOMMAND_MODULES = ("derive", "generate", "check", "simulate", "sweep", "optimize", "mpc", "statics", "demo")
 
 __all__ = ["SUBCOMMANDS", "build_parser", "load_model", "load_system", "main", "subcommand", "write_output"]
 
