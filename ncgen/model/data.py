@@ -40,6 +40,8 @@ class ModelData:
     #: Whether the forces are conservative and the constraints scleronomic, or None
     #: (:func:`ncgen.runtime.stepper_checks.is_conservative`).
     conservative: bool | None = None
+    #: The same with the inputs at zero (``is_conservative(model, inputs=False)``).
+    conservative_idle: bool | None = None
     #: ``{joint_space: DirectFunction}``: the compiled forward dynamics
     #: (:func:`ncgen.runtime.joint_dynamics.forward_dynamics_kernel`).
     forward_dynamics_kernels: dict = field(default_factory=dict)

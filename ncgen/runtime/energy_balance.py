@@ -18,48 +18,16 @@ its report is the energy drift instead.
 """
 from __future__ import annotations
 
-import weakref
-
-import casadi as ca
 import numpy as np
 
+from ncgen.assembly.derived import power_parts_function
+
 PARTS = ("contacts", "dampers", "inputs", "drives")
-
-_functions: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-
-
-def power_function(model) -> ca.Function:
-    """``(t, q, v, lam, u, p) -> [P, P_contacts, P_inputs, P_drives]`` (W), kept per model."""
-    if model in _functions:
-        return _functions[model]
-    f = model.functions
-    t, q, v = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq)
-    lam, u, p = ca.SX.sym("lam", model.nc), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
-    V = ca.sum1(model.potential_terms(t, q, p))
-    F = f["F"](t, q, v, u, p)
-    F0 = f["F"](t, q, v, ca.DM.zeros(model.nu), p)
-    drives = ca.dot(lam, ca.densify(f["phi_t"](t, q, p))) + ca.jacobian(V, t)
-    total = ca.dot(v, F + ca.gradient(V, q)) + drives
-    contacts = ca.SX(0)
-    if getattr(model, "nk", 0) and getattr(model, "contact_model", "smooth") == "smooth":
-        g = f["gap"](q, p)
-        WN, WT = f["contact_jacobian"](q, p)
-        fN, fT = f["contact_force"](t, q, v, p)
-        rate = -ca.mtimes(WN, v)
-        for k, c in enumerate(model.contacts):
-            delta = ca.fmax(0, -g[k])
-            spring = ca.if_else(delta > 0, c["stiffness"] * delta ** c["exponent"], 0)
-            contacts += -rate[k] * (fN[k] - spring)
-        contacts += ca.dot(fT, ca.mtimes(WT, v))
-    out = ca.Function("power_parts", [t, q, v, lam, u, p], [total, contacts, ca.dot(v, F - F0), drives])
-    _functions[model] = out
-    return out
-
 
 def works(model, t, q, v, lam, u, p) -> dict[str, np.ndarray]:
     """Work (J) of each of :data:`PARTS` and in all (``"total"``) from ``t[0]`` to each output time."""
     n = len(t)
-    P = power_function(model).map(n)(np.asarray(t, float)[None, :], q.T, v.T, lam.T,
+    P = power_parts_function(model).map(n)(np.asarray(t, float)[None, :], q.T, v.T, lam.T,
                                       np.asarray(u, float).reshape(n, model.nu).T, np.asarray(p, float))
     total, contacts, inputs, drives = (np.array(x).reshape(-1) for x in P)
     powers = {"total": total, "contacts": contacts, "inputs": inputs, "drives": drives,

@@ -44,7 +44,6 @@ from __future__ import annotations
 
 import math
 import warnings
-import weakref
 
 import numpy as np
 
@@ -134,21 +133,16 @@ def warn_unconverged(model, report: dict) -> None:
                       f"a body or a chain lying flat or in a pile, make it crawl, and friction can make it cycle)", stacklevel=5)
 
 
-#: ``is_conservative(model, inputs=False)`` per model.
-_conservative_idle: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-
-
 def is_conservative(model, inputs: bool = True) -> bool:
     """True if the model's forces are conservative and its constraints scleronomic:
     ``Φ_t`` and ``∂V/∂t`` are structurally zero and ``F = −∇V`` at random states with random
     rates and inputs (so that dampers, drives and input forces all count; ``inputs=False``:
-    with the inputs at zero, as in a run that does not drive them).  Kept in the model's data
-    (``inputs=False``: per model here)."""
-    if not inputs:
-        if model not in _conservative_idle:
-            _conservative_idle[model] = _is_conservative(model, inputs=False)
-        return _conservative_idle[model]
+    with the inputs at zero, as in a run that does not drive them).  Kept in the model's data."""
     data = model_data(model)
+    if not inputs:
+        if data.conservative_idle is None:
+            data.conservative_idle = _is_conservative(model, inputs=False)
+        return data.conservative_idle
     if data.conservative is None:
         data.conservative = _is_conservative(model)
     return data.conservative
