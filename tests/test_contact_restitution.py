@@ -1,7 +1,6 @@
 """restitution= on a smooth (compliant) contact is honoured: the Hunt–Crossley damping is
 fitted so that a normal impact at RESTITUTION_SPEED rebounds with e (checked here by IDAS
 on the full model, against Newton's definition e = −v⁺/v⁻)."""
-import numpy as np
 import pytest
 
 import ncgen as nc

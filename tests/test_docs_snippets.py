@@ -4,7 +4,6 @@ section runs in a fresh namespace, in a scratch directory where ``examples/`` is
 repository's."""
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
 import pytest

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 from ncgen.cli.common import check_files, file_arguments, load_model, model_arguments
 from ncgen.cli.registry import subcommand

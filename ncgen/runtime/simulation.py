@@ -26,7 +26,6 @@ from ncgen.assembly.joint_ode import dae_with_inputs
 from ncgen.model.controllers import Controller
 from ncgen.runtime.inputs import feedback_kind, hold_columns, input_samples, parameter_values, time_grid
 from ncgen.runtime.joint_simulation import joint_space_applies, simulate_joint
-from ncgen.assembly.manifold import NEAR_SINGULAR, ManifoldProjector, robust_algebraic
 from ncgen.runtime.progress import Progress
 from ncgen.runtime.rattle_bridge import RattleFailure, compiled_interval, rattle_interval
 from ncgen.runtime.options import SimulationOptions

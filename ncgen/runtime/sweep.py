@@ -361,7 +361,7 @@ class _Store:
 
     def __init__(self, path, model, samples, t, method, outputs, options, chunk, per_run):
         try:
-            import pyarrow  # noqa: F401
+            import pyarrow  # noqa: F401  (the summary's Parquet writer, checked here)
             import zarr
         except ImportError as e:
             raise NcgenError(f"sweep(path=...): writing results needs zarr and pyarrow ({e.name} is missing): "
