@@ -18,7 +18,7 @@ def pendulum():
 
 def test_defaults_are_those_of_simulate():
     o = nc.SimulationOptions()
-    assert (o.method, o.rtol, o.atol, o.hold, o.max_steps, o.project) == ("idas", None, None, "zoh", 50_000, "auto")
+    assert (o.method, o.rtol, o.atol, o.hold, o.max_steps, o.project) == ("auto", None, None, "zoh", 50_000, "auto")
     assert (o.substeps, o.order, o.check, o.estimate) == (1, 4, True, True)
 
 
@@ -28,7 +28,7 @@ def test_frozen():
 
 
 @pytest.mark.parametrize("kwargs, match", [
-    ({"method": "euler"}, "method: expected one of idas, stepper"),
+    ({"method": "euler"}, "method: expected one of auto, joint, idas, stepper"),
     ({"rtol": -1.0}, "rtol: expected a positive tolerance"),
     ({"atol": float("nan")}, "atol: expected a positive tolerance"),
     ({"hold": "cubic"}, "hold: expected one of"),
@@ -42,6 +42,8 @@ def test_frozen():
     ({"order": 3}, "order: expected 2"),
     ({"max_steps": 0}, "max_steps: expected a positive number"),
     ({"check": "no"}, "check: expected True or False"),
+    ({"integrator": "euler"}, "integrator: expected one of dopri5, rk4"),
+    ({"joint_dynamics": "yes"}, "joint_dynamics: expected True or False"),
 ])
 def test_bad_values_name_the_option(kwargs, match):
     with pytest.raises(NcgenError, match=match):
@@ -74,3 +76,10 @@ def test_options_object_and_shortcuts_give_the_same_run():
     assert opts.rtol == 1e-9                                            # which is left as it was
     E = a.energy                                   # a conservative run: energy kept to the tolerance
     assert np.max(np.abs(E - E[0])) < 1e-6 * max(1.0, abs(E[0]))
+
+
+def test_simulate_signature_lists_every_option():
+    import inspect
+    params = inspect.signature(nc.simulate).parameters
+    for f in dataclasses.fields(nc.SimulationOptions):
+        assert params[f.name].default == f.default and params[f.name].kind is inspect.Parameter.KEYWORD_ONLY

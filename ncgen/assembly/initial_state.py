@@ -16,8 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ncgen.assembly.kinematics import TOL, newton, system_size
-from ncgen.assembly.manifold import project
+from ncgen.assembly.manifold import NEWTON_TOL as TOL, kkt_least_squares, newton, project, system_size
 from ncgen.errors import ModelError
 
 @dataclass
@@ -102,9 +101,10 @@ def _multipliers(f, M, q, v, p, t0):
     except RuntimeError:
         pass
     A = np.array(f["A"](t0, q, p), dtype=float)
-    nc = A.shape[0]
-    K = np.block([[M, A.T], [A, np.zeros((nc, nc))]])
     rhs = np.concatenate([np.array(f["F"](t0, q, v, u, p), dtype=float).reshape(-1),
                           np.array(f["gamma"](t0, q, v, p), dtype=float).reshape(-1)])
-    sol = np.linalg.lstsq(K, rhs, rcond=None)[0]
+    sol = kkt_least_squares(M, A, rhs)
+    if not np.all(np.isfinite(sol)):
+        raise ModelError(f"the accelerations and multipliers at the initial state (t0 = {t0:g} s) are not "
+                         "finite: a force or a constraint is not finite there (e.g. a spring of zero length)")
     return sol[:M.shape[0]], sol[M.shape[0]:]

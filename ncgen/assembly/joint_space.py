@@ -28,7 +28,7 @@ from ncgen.assembly.joint_coordinates import JointCoordinates, joint_coordinates
 from ncgen.assembly.joint_tree import (
     Edge, carry, edge_of, quaternion_matrix, quaternion_rate, relative_pose, rotation_2d,
 )
-from ncgen.assembly.kinematics import TOL, newton, system_size
+from ncgen.assembly.manifold import NEWTON_TOL as TOL, newton, system_size
 from ncgen.assembly.mass import sparse_dm
 from ncgen.model.data import model_data
 from ncgen.model.sym2casadi import to_casadi

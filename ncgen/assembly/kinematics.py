@@ -23,15 +23,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ncgen.assembly.manifold import project
+from ncgen.assembly.manifold import NEWTON_ITER as MAX_ITER, NEWTON_TOL as TOL, newton, project, system_size
 from ncgen.assembly.rank import dependent_rows
 from ncgen.errors import ModelError
 from ncgen.model.expressions import did_you_mean
-
-#: Newton stops when max |Φ| ≤ TOL · (size of the system)² (Φ is in m²).
-TOL = 1e-13
-MAX_ITER = 50
-
 
 # ------------------------------------------------------------ coordinate names
 def resolve_fix(layout, members: dict, fix) -> list[int]:
@@ -68,28 +63,6 @@ def resolve_fix(layout, members: dict, fix) -> list[int]:
             chosen = [s * d + axes.index(parts[2])] if len(parts) == 3 else range(s * d, s * d + d)
         out.update(idx[k] for k in chosen if idx[k] is not None)
     return sorted(out)
-
-
-# ------------------------------------------------------------------ numerics
-def newton(phi, jac, q, free, *, tol: float, max_iter: int = MAX_ITER):
-    """Minimum-norm Newton on the ``free`` entries of ``q``; returns ``(q, iterations,
-    max |Φ|)`` (the residual is above ``tol`` when it did not converge)."""
-    q = np.array(q, dtype=float)
-    free = np.asarray(free, dtype=int)
-    r = phi(q)
-    for it in range(max_iter + 1):
-        res = float(np.max(np.abs(r))) if r.size else 0.0
-        if res <= tol or it == max_iter or not np.all(np.isfinite(r)):
-            return q, it, res
-        step = np.linalg.lstsq(jac(q)[:, free], r, rcond=None)[0]
-        q[free] -= step
-        r = phi(q)
-    return q, max_iter, res
-
-
-def system_size(q: np.ndarray) -> float:
-    """Length scale of a configuration (m): the largest |coordinate|, at least 1."""
-    return max(1.0, float(np.max(np.abs(q))) if q.size else 1.0)
 
 
 # ------------------------------------------------------------------ model API

@@ -5,12 +5,15 @@
   basis :func:`null_basis` (and :func:`coordinate_basis`, :func:`tangent_basis`), in the
   truncated pseudo-inverse of the mass-metric projections (:func:`mass_step`,
   :class:`ManifoldProjector`, the RATTLE bridge) and in :func:`check_tangent_inertia`.
+* **Positions**: :func:`newton`, minimum-norm Newton steps onto ``Φ = 0`` on chosen
+  coordinates (assembly, initial states, joint space, optimal-control conditions).
 * **Projections in the mass metric**: :func:`mass_step` ``δ = M⁻¹Aᵀ (A M⁻¹ Aᵀ)⁺ r``, the
   smallest step in kinetic energy with ``A δ = r``; :func:`consistent_velocity`,
   :class:`ManifoldProjector` (positions by Gauss–Newton, then velocities) and
   :func:`project` (with coordinates held fixed, by the sparse KKT system).
 * **KKT solves**: :func:`project`'s ``[[M, Aᵀ], [A, 0]]`` step by sparse QR, and
-  :func:`robust_algebraic` for ``z = [a; λ]`` where ``A`` loses rank.
+  :func:`kkt_least_squares` (:func:`robust_algebraic`, the initial multipliers) for
+  ``z = [a; λ]`` where ``A`` loses rank.
 * **Charts**: :func:`manifold_point` and :func:`tangent_velocity` (independent coordinates
   ``z = G (q − q*)`` and rates ``w = G v``).
 
@@ -65,6 +68,32 @@ WELL_CONDITIONED = 0.4
 MAX_ITER = 8
 
 
+#: Newton onto ``Φ = 0`` (:func:`newton`) stops when max |Φ| ≤ NEWTON_TOL · (size of the
+#: system)² (Φ is in m²), after NEWTON_ITER iterations at most.
+NEWTON_TOL = 1e-13
+NEWTON_ITER = 50
+
+
+# ------------------------------------------------------------ positions: Newton onto Φ = 0
+def newton(phi, jac, q, free, *, tol: float, max_iter: int = NEWTON_ITER):
+    """Minimum-norm Newton on the ``free`` entries of ``q``; returns ``(q, iterations,
+    max |Φ|)`` (the residual is above ``tol`` when it did not converge)."""
+    q = np.array(q, dtype=float)
+    free = np.asarray(free, dtype=int)
+    r = phi(q)
+    for it in range(max_iter + 1):
+        res = float(np.max(np.abs(r))) if r.size else 0.0
+        if res <= tol or it == max_iter or not np.all(np.isfinite(r)):
+            return q, it, res
+        step = np.linalg.lstsq(jac(q)[:, free], r, rcond=None)[0]
+        q[free] -= step
+        r = phi(q)
+    return q, max_iter, res
+
+
+def system_size(q: np.ndarray) -> float:
+    """Length scale of a configuration (m): the largest |coordinate|, at least 1."""
+    return max(1.0, float(np.max(np.abs(q))) if q.size else 1.0)
 
 
 # ------------------------------------------------------------ null space and charts
@@ -285,14 +314,20 @@ def robust_algebraic(model, t: float, q, v, u, p) -> np.ndarray:
     rhs = np.concatenate([np.array(f["F"](t, q, v, u, p), dtype=float).reshape(-1),
                           np.array(f["gamma"](t, q, v, p), dtype=float).reshape(-1)
                           - 2 * alpha * phidot - beta**2 * phi])
+    return kkt_least_squares(model.M, A, rhs)
+
+
+def kkt_least_squares(M: np.ndarray, A: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """``z`` of ``[[M, Aᵀ], [A, 0]] z = rhs``, the minimum-norm least-squares solution (so a
+    rank-deficient ``A`` is fine); NaN where the system is not finite or the solve fails."""
     nc = A.shape[0]
-    K = np.block([[model.M, A.T], [A, np.zeros((nc, nc))]])
+    K = np.block([[M, A.T], [A, np.zeros((nc, nc))]])
     if not np.all(np.isfinite(K)) or not np.all(np.isfinite(rhs)):
-        return np.full(model.nq + nc, np.nan)
+        return np.full(K.shape[0], np.nan)
     try:
         return np.linalg.lstsq(K, rhs, rcond=None)[0]
     except np.linalg.LinAlgError:
-        return np.full(model.nq + nc, np.nan)
+        return np.full(K.shape[0], np.nan)
 
 
 # ------------------------------------------------------------ inertia on the tangent space

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ncgen.assembly.kinematics import TOL, newton, system_size
+from ncgen.assembly.manifold import NEWTON_TOL as TOL, newton, system_size
 
 #: Random tangent samples per check.
 SAMPLES = 4

@@ -39,9 +39,22 @@ class Joint:
         self.name = name
         self.options = options
         self.system = None
-        #: Limits kept as data (``lower``, ``upper``, ``velocity``, ``effort``; SI units), e.g.
-        #: from a URDF ``<limit>``; ncgen does not enforce them.
+        #: Limits (``lower``, ``upper``, ``velocity``, ``effort``; SI units), e.g. from a URDF
+        #: ``<limit>``: bounds in optimal control; ``lower``/``upper`` act in simulation when
+        #: asked (``simulate(joint_dynamics=True)``, :mod:`ncgen.model.joint_dynamics`).
         self.limits: dict[str, float] = {}
+        #: Joint dynamics (``damping``, ``friction``, ``armature``, limit law ``limit_stiffness``,
+        #: ``limit_damping``, ``friction_velocity``), e.g. from a URDF ``<dynamics>``; set with
+        #: :meth:`set_dynamics` (checked), see :mod:`ncgen.model.joint_dynamics`.
+        self.dynamics: dict[str, float] = {}
+
+    def set_dynamics(self, **values) -> "Joint":
+        """Set joint dynamics and limits: ``damping`` (N·m·s/rad or N·s/m), ``friction``
+        (N·m or N), ``armature`` (kg·m² or kg), ``lower``/``upper`` (rad or m), ``limit_stiffness``, ``limit_damping``,
+        ``friction_velocity`` (see :mod:`ncgen.model.joint_dynamics`).  Returns the joint."""
+        from ncgen.model.joint_dynamics import set_joint_dynamics
+        set_joint_dynamics(self, values)
+        return self
 
     # -------------------------------------------------------------- identity
     def members(self) -> list:

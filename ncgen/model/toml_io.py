@@ -44,7 +44,7 @@ from ncgen.model.shapes import shape_from_table
 from ncgen.validation import MAX_NAME, as_scalar
 
 TOP_KEYS = ("system", "parameters", "inputs", "members", "joints", "forces", "contacts", "initial",
-            "initial_rates")
+            "initial_rates", "controller")
 #: Material keys every contact table may have (:class:`~ncgen.model.contacts.Contact`).
 CONTACT_MATERIAL = ("mu", "restitution", "stiffness", "damping", "exponent", "slip_velocity")
 
@@ -270,6 +270,9 @@ class _Loader:
             self._contact(_Table(c, f"contacts[{i}]"))
         for key in ("initial", "initial_rates"):
             self._initial(top.get(key, {}), key)
+        if "controller" in data:
+            from ncgen.model.controllers import controller_from_dict
+            self.s.controller = controller_from_dict(data["controller"], "controller")
         self.system = self.s
 
     def _initial(self, table, key):
@@ -557,6 +560,10 @@ def system_to_toml(system) -> str:
     for key, values in (("initial", system.initial_joints), ("initial_rates", system.initial_joint_rates)):
         if values:
             parts.append(toml_write.table(key, {n: _plain(v) for n, v in values.items()}))
+    ctrl = getattr(system, "controller", None)
+    if ctrl is not None:
+        from ncgen.model.controllers import controller_to_dict
+        parts.append(toml_write.table("controller", controller_to_dict(ctrl)))
     return "\n".join(parts)
 
 

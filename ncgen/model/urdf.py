@@ -16,7 +16,9 @@ Parsing is yourdfpy's (meshes are not loaded); this module maps the parsed tree:
   actuated).  ``floating``/``planar`` joints inside the tree are refused.
 * Every other movable joint is actuated by one component of the input ``tau`` (N·m or N),
   in ``model.joint_names`` order; limits (``lower``, ``upper``, ``velocity``, ``effort``)
-  are kept as data (``model.joint_limits``).
+  are kept as data (``model.joint_limits``), ``<dynamics damping friction>`` too
+  (``joint.dynamics``); both act in simulation with ``simulate(joint_dynamics=True)``
+  (:mod:`ncgen.model.joint_dynamics`).
 * ``floating_base=True``: the root is a body with a :class:`~ncgen.model.joints.Free`
   joint named ``root`` (Pinocchio's free flyer at the root link's frame).
 * Link frames (``model.frames``, ``model.frame_pose``) and visual geometry
@@ -192,6 +194,9 @@ def system_from_urdf(source, system_class, *, floating_base: bool = False, gravi
         joint.limits = {} if lim is None else {
             key: float(getattr(lim, key)) for key in ("lower", "upper", "velocity", "effort")
             if getattr(lim, key) is not None and not (j.type == "continuous" and key in ("lower", "upper"))}
+        dyn = j.dynamics
+        if dyn is not None:
+            joint.set_dynamics(**{k: getattr(dyn, k) for k in ("damping", "friction") if getattr(dyn, k)})
         made[j.name] = joint
     for j in movable:
         if j.mimic is not None:

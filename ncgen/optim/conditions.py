@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ncgen.assembly.manifold import consistent_velocity
+from ncgen.assembly.manifold import consistent_velocity, newton, system_size
 from ncgen.errors import OptimizationError
 
 #: Half-width of the box that selects the branch of a configuration condition, as a
@@ -27,17 +27,16 @@ BRANCH_RADIUS = 0.25
 
 def consistent_configuration(model, q, *, t=None, p=None, what: str = "q", tolerance: float = 1e-3,
                              max_iter: int = 50) -> np.ndarray:
-    """``q`` moved onto ``Φ = 0`` by minimum-norm Gauss–Newton steps; an
+    """``q`` moved onto ``Φ = 0`` by minimum-norm Gauss–Newton steps
+    (:func:`ncgen.assembly.manifold.newton`); an
     :class:`OptimizationError` if that needs more than ``tolerance`` × the model's size (m)."""
-    q = np.asarray(q, dtype=float).copy()
-    q_in = q.copy()
-    size = max(1.0, float(np.max(np.abs(q))) if q.size else 1.0)
-    for _ in range(max_iter):
-        r = np.atleast_1d(model.phi(q, t=t, p=p))
-        if r.size == 0 or np.max(np.abs(r)) <= 1e-12 * size ** 2:      # round-off (Panda: |Φ| stalls at 7e-14)
-            break
-        q = q - np.linalg.lstsq(np.atleast_2d(model.A(q, t=t, p=p)), r, rcond=None)[0]
-    else:
+    q_in = np.asarray(q, dtype=float).copy()
+    size = system_size(q_in)
+    tol = 1e-12 * size ** 2                   # round-off (Panda: |Φ| stalls at 7e-14)
+    q, _, res = newton(lambda x: np.atleast_1d(model.phi(x, t=t, p=p)),
+                       lambda x: np.atleast_2d(model.A(x, t=t, p=p)), q_in, np.arange(q_in.size), tol=tol,
+                       max_iter=max_iter)
+    if not res <= tol:
         r = np.atleast_1d(model.phi(q, t=t, p=p))
         k = int(np.argmax(np.abs(r)))
         raise OptimizationError(f"{what}: the constraints cannot be satisfied near the given configuration "

@@ -3,7 +3,8 @@
 Grid: ``t_k = t0 + k·h``, ``k = 0..N``, with ``N = ⌈(t_end − t0)/dt⌉`` and ``h = (t_end − t0)/N``
 (``dt`` is shortened, if needed, so that ``t_end`` lies on the grid).
 
-Inputs (``model.nu`` values) are sampled on the grid, ``U[k] = u(t_k)``, and held between
+Inputs (``model.nu`` values: a constant vector, ``u(t)`` or samples) are sampled on the grid,
+``U[k] = u(t_k)``, and held between
 samples: ``"zoh"`` (zero-order hold) applies ``U[k]`` on ``[t_k, t_{k+1})``, as piecewise
 constant controls from an optimiser expect; ``"linear"`` interpolates between ``U[k]`` and
 ``U[k+1]`` (first-order hold), closer to a smooth ``u(t)``.  Each grid interval is
@@ -12,6 +13,7 @@ cost no accuracy.
 """
 from __future__ import annotations
 
+import inspect
 import math
 
 import numpy as np
@@ -44,15 +46,50 @@ def time_grid(t0: float, t_end: float, dt: float, bytes_per_point: float = 8.0) 
     return t0 + (t_end - t0) * np.arange(n + 1) / n
 
 
+def feedback_kind(u) -> str | None:
+    """How a callable ``u`` is called: ``"time"`` (``u(t)``), ``"natural"`` (``u(t, q, v)``,
+    natural coordinates) or ``"joint"`` (``u(t, qj, vj)``, joint space); None for data.
+
+    Detection: the number of positional parameters without defaults (``*args`` counts as
+    one more), 1 → ``u(t)``, 3 → feedback; a feedback whose second and third parameters are
+    named ``qj`` and ``vj`` gets joint space, any other names natural coordinates.  A
+    callable whose signature cannot be read is taken as ``u(t)``."""
+    if u is None or not callable(u):
+        return None
+    try:
+        params = list(inspect.signature(u).parameters.values())
+    except (TypeError, ValueError):
+        return "time"
+    positional = [x for x in params if x.kind in (x.POSITIONAL_ONLY, x.POSITIONAL_OR_KEYWORD)
+                  and x.default is x.empty]
+    star = any(x.kind == x.VAR_POSITIONAL for x in params)
+    if len(positional) == 3 or (star and 1 < len(positional) < 3):
+        names = [x.name for x in positional[1:3]]
+        return "joint" if names == ["qj", "vj"] else "natural"
+    if len(positional) in (0, 1):
+        return "time"
+    raise NcgenError(f"u: a callable must take (t), (t, q, v) or (t, qj, vj); "
+                     f"{getattr(u, '__name__', 'it')} takes {len(positional)} positional argument(s)")
+
+
 def input_samples(u, model, t: np.ndarray) -> np.ndarray:
-    """``U``, shape ``(len(t), nu)``: ``u`` (None, a callable ``u(t)`` or samples on the grid)
-    evaluated on the grid ``t``."""
+    """``U``, shape ``(len(t), nu)``: ``u`` (None, a constant vector of ``nu`` values — a
+    scalar when ``nu = 1`` —, a callable ``u(t)`` or samples on the grid) evaluated on the
+    grid ``t``.  Feedback ``u(t, q, v)`` is the caller's (:func:`feedback_kind`): zeros here."""
     nu, n = model.nu, len(t)
     if u is None:
         return np.zeros((n, nu))
     if nu == 0:
         raise NcgenError(f"u: model {model.name!r} has no inputs, but u was given")
     names = ", ".join(f"{k}[{s}]" for k, s in zip(model.input_names, model.input_sizes))
+    if feedback_kind(u) in ("natural", "joint"):
+        return np.zeros((n, nu))
+    if not callable(u):
+        arr = np.asarray(u, dtype=float) if not isinstance(u, (str, bytes)) else None
+        if arr is not None and (arr.ndim == 0 or (arr.ndim == 1 and arr.size == nu)):
+            u = np.broadcast_to(arr.reshape(-1), (n, nu)).copy() if arr.size == nu else None
+            if u is None:
+                raise ShapeError(f"u: a constant input needs {nu} values (inputs {names}); got a scalar")
     if callable(u):
         U = np.empty((n, nu))
         for k, tk in enumerate(t):

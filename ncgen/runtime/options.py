@@ -27,7 +27,8 @@ from ncgen.model.expressions import did_you_mean
 from ncgen.runtime.dae import BACKENDS
 from ncgen.runtime.inputs import HOLDS
 
-METHODS = ("idas", "stepper")
+METHODS = ("auto", "joint", "idas", "stepper")
+INTEGRATORS = ("dopri5", "rk4")
 PROJECTS = (True, False, "auto")
 
 
@@ -37,8 +38,12 @@ class SimulationOptions:
 
     Both methods:
 
-    * ``method``: ``"idas"`` (SUNDIALS IDAS, variable-order BDF) or ``"stepper"`` (the
-      compiled RATTLE stepper).
+    * ``method``: ``"auto"`` (default: ``"joint"`` for trees, else ``"idas"``), ``"joint"``
+      (joint coordinates in a compiled C loop, :mod:`ncgen.runtime.joint_simulation`),
+      ``"idas"`` (SUNDIALS IDAS, variable-order BDF) or ``"stepper"`` (the compiled RATTLE
+      stepper).
+    * ``joint_dynamics``: honour the joints' damping, friction, limits and armature
+      (:mod:`ncgen.model.joint_dynamics`; joint method, IDAS without armature).
     * ``rtol``, ``atol``: local error tolerances (relative; absolute in the units of q and v).
       IDAS: default 1e-8 and 1e-10.  Stepper: None = fixed steps; ``rtol`` given = error
       control (``atol`` default ``rtol``).
@@ -54,6 +59,9 @@ class SimulationOptions:
     False, None = on a terminal for runs longer than a second), ``project`` (``"auto"``,
     True, False: crossing singular configurations).
 
+    Joint method only: ``integrator`` (``"dopri5"``, default, error-controlled; ``"rk4"``,
+    ``substeps`` fixed steps per output interval).
+
     Stepper only: ``substeps`` (fixed steps per output interval), ``newton_tol`` (Newton
     tolerance on both constraint levels), ``max_newton`` (Newton iterations per step),
     ``max_halvings`` (splits of a step whose Newton fails, 0 to 10), ``order`` (2 or 4, error
@@ -61,13 +69,13 @@ class SimulationOptions:
     of the global error estimate).
     """
 
-    method: str = "idas"
+    method: str = "auto"
     rtol: float | None = None
     atol: float | None = None
     hold: str = "zoh"
     max_steps: int = 50_000
     ic_tolerance: float | None = 1e-6
-    backend: str = "vm"
+    backend: str = "auto"
     linear_solver: str = "csparse"
     progress: bool | None = None
     project: bool | str = "auto"
@@ -78,6 +86,8 @@ class SimulationOptions:
     order: int = 4
     check: bool = True
     estimate: bool = True
+    integrator: str | None = None
+    joint_dynamics: bool = False
 
     def __post_init__(self):
         for name in ("max_steps", "substeps", "max_newton", "max_halvings", "order"):
@@ -88,7 +98,7 @@ class SimulationOptions:
             value = getattr(self, name)
             if _real(value):
                 object.__setattr__(self, name, float(value))
-        for name in ("check", "estimate"):
+        for name in ("check", "estimate", "joint_dynamics"):
             value = getattr(self, name)
             if isinstance(value, (bool, np.bool_)) or value in (0, 1):
                 object.__setattr__(self, name, bool(value))
@@ -121,7 +131,10 @@ class SimulationOptions:
             raise NcgenError(f"max_halvings: expected 0 to {HALVINGS_LIMIT} step halvings, got {self.max_halvings!r}")
         if self.order not in (2, 4) or isinstance(self.order, bool):
             raise NcgenError(f"order: expected 2 (RATTLE) or 4 (Richardson-extrapolated RATTLE), got {self.order!r}")
-        for name in ("check", "estimate"):
+        if self.integrator is not None and self.integrator not in INTEGRATORS:
+            raise NcgenError(f"integrator: expected one of {', '.join(INTEGRATORS)} (method='joint'), "
+                             f"got {self.integrator!r}")
+        for name in ("check", "estimate", "joint_dynamics"):
             if not isinstance(getattr(self, name), bool):
                 raise NcgenError(f"{name}: expected True or False, got {getattr(self, name)!r}")
 

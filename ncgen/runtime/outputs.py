@@ -9,6 +9,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.assembly.derived import residual_function
+from ncgen.model.data import model_data
 
 
 def _mapped(f: ca.Function, n: int, *columns):
@@ -25,7 +26,11 @@ def energies(model, t, q, v, p) -> tuple[np.ndarray, np.ndarray]:
 
 def residuals(model, t, q, v, p) -> tuple[np.ndarray, np.ndarray]:
     """``|Φ(t, q)|∞`` (m²) and ``|A v + Φ_t|∞`` (m²/s) per step."""
-    r, rd = _mapped(residual_function(model), len(t), np.asarray(t)[None, :], q.T, v.T, p)
+    functions = model_data(model).functions
+    f = functions.get("residuals")
+    if f is None:
+        f = functions["residuals"] = residual_function(model)
+    r, rd = _mapped(f, len(t), np.asarray(t)[None, :], q.T, v.T, p)
     return np.array(r).reshape(-1), np.array(rd).reshape(-1)
 
 
@@ -60,11 +65,17 @@ def member_coordinates(model, member: str, q: np.ndarray) -> np.ndarray:
 
 
 def joint_states(model, q, v) -> tuple[np.ndarray, np.ndarray]:
-    """Joint positions and rates ``(n_t, Σ n_j)`` per step (``model.joint_names`` order)."""
+    """Joint positions and rates ``(n_t, Σ n_j)`` per step (``model.joint_names`` order).
+    Angles are continuous in time (unwrapped: a joint turning past ±π keeps counting, never
+    jumps by 2π between samples); the first sample is in (−π, π]."""
     js = getattr(model, "joint_space", None)
     n = len(q)
     if js is None or not js.joint_names or n == 0:
         return np.zeros((n, 0)), np.zeros((n, 0))
     qj, = _mapped(js.positions, n, q.T)
     vj, = _mapped(js.rates, n, q.T, v.T)
-    return np.array(qj).T.reshape(n, -1), np.array(vj).T.reshape(n, -1)
+    qj = np.array(qj).T.reshape(n, -1)
+    angles = getattr(js, "angles", np.zeros(qj.shape[1], bool))
+    if angles.any():
+        qj[:, angles] = np.unwrap(qj[:, angles], axis=0)
+    return qj, np.array(vj).T.reshape(n, -1)

@@ -2,6 +2,8 @@
 stepper (:mod:`ncgen.runtime.stepper`)."""
 from __future__ import annotations
 
+import dataclasses
+import inspect
 import math
 import time
 import warnings
@@ -9,15 +11,21 @@ import warnings
 import numpy as np
 
 from ncgen.assembly.initial_state import consistent_state
+from ncgen.assembly.manifold import NEAR_SINGULAR, ManifoldProjector, robust_algebraic
 from ncgen.codegen.load import NoCompilerWarning
 from ncgen.errors import CompilerNotFound, NcgenError, SimulationError, SimulationInterrupted
 from ncgen.interrupts import raise_if_interrupted, sticky_interrupt
-from ncgen.errors import ModelError
+from ncgen.errors import ModelError, option
+from ncgen.runtime.backend_policy import choose_backend
 from ncgen.runtime.dae import load_dae
+from ncgen.runtime.energy_balance import idas_report
+from ncgen.runtime.stepper_checks import is_conservative
 from ncgen.runtime.diagnose import explain, shift_time
 from ncgen.runtime.idas import ChunkedIDAS, ChunkFailure
-from ncgen.runtime.inputs import hold_columns, input_samples, parameter_values, time_grid
-from ncgen.assembly.manifold import NEAR_SINGULAR, ManifoldProjector, robust_algebraic
+from ncgen.assembly.joint_ode import dae_with_inputs
+from ncgen.model.controllers import Controller
+from ncgen.runtime.inputs import feedback_kind, hold_columns, input_samples, parameter_values, time_grid
+from ncgen.runtime.joint_simulation import joint_space_applies, simulate_joint
 from ncgen.runtime.progress import Progress
 from ncgen.runtime.rattle_bridge import RattleFailure, compiled_interval, rattle_interval
 from ncgen.runtime.options import SimulationOptions
@@ -53,16 +61,24 @@ BRIDGE_MIN_TOL = 1e-12
 BRIDGE_MAX_STEPS = 20_000
 
 
+def _show_shortcuts(f):
+    """``f`` with a signature that lists the option shortcuts (``help``, editors): each field of
+    :class:`~ncgen.runtime.options.SimulationOptions` as a keyword with its default, in place of
+    ``**shortcuts``."""
+    sig = inspect.signature(f)
+    params = [q for q in sig.parameters.values() if q.kind is not inspect.Parameter.VAR_KEYWORD]
+    params += [inspect.Parameter(fl.name, inspect.Parameter.KEYWORD_ONLY, default=fl.default, annotation=fl.type)
+               for fl in dataclasses.fields(SimulationOptions)]
+    f.__signature__ = sig.replace(parameters=params)
+    return f
+
+
+@_show_shortcuts
 def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None, t0: float | None = None,
              options: SimulationOptions | None = None, **shortcuts) -> Trajectory:
     """Integrate ``model`` from ``t0`` (default ``model.t0``) to ``t_end`` and return the
     :class:`~ncgen.runtime.trajectory.Trajectory` on the grid ``t0, t0 + dt, ..., t_end``
     (``dt`` shortened if needed so that ``t_end`` is on the grid).  Times in s.
-
-    How to integrate is ``options`` (:class:`~ncgen.runtime.options.SimulationOptions`,
-    ``nc.SimulationOptions``: defaults, validated once); every field of it can also be given
-    as a keyword argument (``method=``, ``rtol=``, ``substeps=``, ...), which overrides
-    ``options`` for this call.  The options:
 
     Equations: the semi-explicit index-1 DAE ``q̇ = v``, ``v̇ = M⁻¹ (F − Aᵀ λ)``,
     ``0 = A v̇ − γ + 2α Φ̇ + β² Φ`` with the model's Baumgarte coefficients
@@ -70,15 +86,41 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
     constraint drift decays like a critically damped oscillator with time constant 0.2 s;
     IDAS keeps the drift small anyway, the terms stop it from growing over long runs).
 
-    * ``method``: ``"idas"`` (SUNDIALS IDAS through CasADi, variable-order BDF with error
+    How to integrate is ``options`` (:class:`~ncgen.runtime.options.SimulationOptions`,
+    ``nc.SimulationOptions``: defaults, validated once); every field of it can also be given
+    as a keyword argument (``method=``, ``rtol=``, ``substeps=``, ...), which overrides
+    ``options`` for this call.  The run's data and the options:
+
+    * ``method``: ``"auto"`` (default): ``"joint"`` for a tree without contacts when a C
+      compiler is available (:func:`~ncgen.runtime.joint_simulation.joint_space_applies`)
+      and ``backend`` is not ``"vm"``, else ``"idas"``; ``info["method"]`` says which ran (``info["auto"]`` why not joint).
+      ``"joint"``: the joint coordinates ``q_j``, ``v_j`` integrated by a compiled C loop
+      around the joint-space forward dynamics (:mod:`ncgen.runtime.joint_simulation`):
+      ``integrator="dopri5"`` (default; Dormand–Prince 5(4), error control ``rtol``/``atol``
+      on q_j and v_j, defaults 1e-8 and 1e-10) or ``"rk4"`` (``substeps`` RK4 steps per
+      output interval); quaternions renormalised after each step; the natural coordinates,
+      markers, energies and multipliers are derived from the joint states.
+      ``"idas"``: SUNDIALS IDAS through CasADi, variable-order BDF with error
       control ``rtol`` (relative, default 1e-8) and ``atol`` (absolute, in the units of q and
       v, default 1e-10) on q and v).  For both methods ``rtol``/``atol`` bound the **local**
       error, the error each step makes; the global error at the end is a small multiple of
       the tolerance on regular motions and grows without such a bound on chaotic ones
       (``docs/python-guide.md``, "What rtol means").
-    * ``u``: inputs (``model.nu`` values): ``None`` (zeros), a callable ``u(t)``, or samples on
+    * ``u``: inputs (``model.nu`` values): ``None`` (zeros), a constant vector (a scalar when
+      ``nu = 1``), a callable ``u(t)``, or samples on
       the grid, shape ``(len(t), nu)`` or ``(len(t) − 1, nu)``; held between grid times by
       ``hold`` = ``"zoh"`` (sample k on ``[t_k, t_k+1)``) or ``"linear"`` (interpolated).
+      Feedback: a callable ``u(t, q, v)`` (natural coordinates) or ``u(t, qj, vj)`` (joint
+      space: its 2nd and 3rd parameters named ``qj``, ``vj``; see
+      :func:`~ncgen.runtime.inputs.feedback_kind`), called once per output interval at its
+      start and held over it (every method).  A compiled controller
+      (:class:`~ncgen.model.controllers.PD`, ``ComputedTorque``, ``Controller``): generated
+      into the C loop with ``method="joint"`` (no Python per step), into IDAS's DAE with
+      ``"idas"``; the stepper does not take it.
+    * ``joint_dynamics``: honour the joints' damping, friction and position limits
+      (``joint.dynamics``, ``joint.limits``; from a URDF ``<dynamics>`` and ``<limit>``) by
+      the stiff law of :mod:`ncgen.model.joint_dynamics` (joint and IDAS methods; the stepper
+      refuses it).
     * ``p``: parameter values: ``None`` (the model's), an array, or a dict by name.
     * ``q0``, ``v0``: initial coordinates and rates (default the model's, consistent at
       ``model.t0``).  Whenever they are given, or ``p`` or ``t0`` differ from the model's,
@@ -88,8 +130,10 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
       starting a driven mechanism at another ``t0``).  ``λ0`` then solves the KKT system
       with ``u(t0)``.
     * ``backend``: ``"vm"`` (CasADi's virtual machine), ``"compiled"`` (the DAE and its
-      Jacobian as generated C, compiled once and cached) or ``"auto"`` (compiled when a C
-      compiler is available).
+      Jacobian as generated C, compiled once and cached) or ``"auto"`` (default: start on the
+      VM, compile only when the run is long enough to pay for it; the rule is
+      :func:`ncgen.runtime.backend_policy.choose_backend`, the same as the CLI's;
+      ``info["backend_reason"]`` says why).
     * ``progress``: a progress bar on stderr: ``True``, ``False``, or ``None`` = when stderr is a
       terminal and the run takes more than a second.
     * ``max_steps``: IDAS steps allowed per output interval; ``linear_solver``: CasADi's
@@ -136,34 +180,81 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
     and the likely cause, and carries the trajectory up to that time (``.trajectory``).
     """
     opts = SimulationOptions.resolve(options, **shortcuts)
-    if opts.method == "idas" and getattr(model, "contact_model", "smooth") == "nonsmooth" and model.nk:
-        raise NcgenError(f"simulate: model {model.name!r} was built with contacts='nonsmooth', which only "
-                         "the compiled stepper handles: use method='stepper', or build the model with "
-                         "contacts='smooth' (compliant contacts) for IDAS")
+    if opts.method in ("idas", "auto") and getattr(model, "contact_model", "smooth") == "nonsmooth" and model.nk:
+        built = option("contacts='nonsmooth'", "--contacts nonsmooth")
+        stepper = option("method='stepper'", "--method stepper")
+        smooth = option("build the model with contacts='smooth'", "--contacts smooth")
+        raise NcgenError(f"simulate: model {model.name!r} was built with {built}, which only the compiled "
+                         f"stepper handles: use {stepper}, or {smooth} (compliant contacts) for IDAS")
     t0 = model.t0 if t0 is None else as_scalar(t0, "t0")
     t = time_grid(t0, t_end, dt, bytes_per_point=point_bytes(model))
     pv = parameter_values(p, model)
-    U = input_samples(u, model, t)
+    controller = u if isinstance(u, Controller) else None
+    kind = feedback_kind(u) if controller is None else None
+    feedback = (kind, u) if kind in ("natural", "joint") else None
+    U = input_samples(None if controller is not None else u, model, t)
     columns = hold_columns(U, t, opts.hold)
     q, v = initial_state(model, q0, v0, t0, pv, opts.ic_tolerance)
     with sticky_interrupt():               # a Ctrl-C that CasADi swallows is raised again between chunks
         raise_if_interrupted()
-        if opts.method == "stepper":
+        method, why_not = opts.method, None
+        if method == "auto":               # the joint loop is compiled: backend="vm" asks for no compiling
+            why_not = "backend='vm' compiles nothing" if opts.backend == "vm" else joint_space_applies(model)
+            method = "joint" if why_not is None else "idas"
+        if method == "joint":
+            return simulate_joint(model, t, U, opts.hold, pv, q, v, integrator=opts.integrator,
+                                  rtol=opts.rtol, atol=opts.atol, substeps=opts.substeps,
+                                  max_steps=opts.max_steps, feedback=feedback, controller=controller,
+                                  joint_dynamics=opts.joint_dynamics, progress=opts.progress)
+        if opts.integrator is not None:
+            raise NcgenError(f"integrator: only method='joint' takes an integrator (got {opts.integrator!r} "
+                             f"with method={method!r})")
+        if method == "stepper" and (controller is not None or opts.joint_dynamics):
+            raise NcgenError("method='stepper' does not take a compiled controller or joint_dynamics=True; "
+                             "use method='joint' (trees) or 'idas', or give u as a Python callable u(t, q, v)")
+        if method == "stepper" and feedback is not None:
+            return _stepwise_stepper(model, t, U, pv, q, v, feedback, opts)
+        if method == "stepper":
             lam = initial_multipliers(model, t0, q, v, U[0], pv, load_dae(model, "vm")[0])
+            try:
+                load_stepper(model)
+            except CompilerNotFound as e:
+                stepper, idas = option("method='stepper'", "--method stepper"), option("method='idas'", "--method idas")
+                raise CompilerNotFound(f"{e}: the stepper ({stepper}) is generated C and needs one; install gcc, "
+                                       f"or use IDAS ({idas}), which runs on CasADi's virtual machine") from None
             return simulate_stepper(model, t, U, pv, q, v, lam, opts)
-        return _simulate_idas(model, t, U, columns, pv, q, v, opts)
+        return _simulate_idas(model, t, U, columns, pv, q, v, opts, controller=controller, feedback=feedback,
+                              why_not=why_not)
 
 
-def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions) -> Trajectory:
-    """IDAS over the grid ``t`` from the consistent state ``(q, v)`` (see :func:`simulate`)."""
+def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions, *, controller=None, feedback=None,
+                   why_not=None) -> Trajectory:
+    """IDAS over the grid ``t`` from the consistent state ``(q, v)`` (see :func:`simulate`);
+    a compiled ``controller`` and the joint dynamics enter its DAE, a Python ``feedback`` is
+    called at the start of every output interval."""
     t0, hold, project = float(t[0]), opts.hold, opts.project
     rtol, atol = 1e-8 if opts.rtol is None else opts.rtol, 1e-10 if opts.atol is None else opts.atol
-    dae, used = load_dae(model, opts.backend)
-    lam = initial_multipliers(model, t0, q, v, U[0], pv, dae)
-    a = np.array(model.functions["ode"](t0, q, v, lam, U[0], pv)[1]).reshape(-1)
+    choice = choose_backend(model, len(t) - 1, opts.backend)
+    dae, used = load_dae(model, "auto" if opts.backend == "auto" and choice.backend == "compiled" else choice.backend)
+    extra = _natural_inputs(model, controller, opts.joint_dynamics)
+    if extra is not None:
+        dae = dae_with_inputs(model, dae, extra)
+    if feedback is not None:
+        U[0] = _natural_feedback(model, feedback, t0, q, v, pv)
+        columns = hold_columns(U, t, hold)
+    u0 = U[0] + _extra_value(model, extra, t0, q, v, pv)
+    lam = initial_multipliers(model, t0, q, v, u0, pv, dae)
+    a = np.array(model.functions["ode"](t0, q, v, lam, u0, pv)[1]).reshape(-1)
     runner = ChunkedIDAS(dae, h=float(t[1] - t[0]), nu=model.nu, hold=hold, rtol=rtol, atol=atol,
                          max_steps=opts.max_steps, linear_solver=opts.linear_solver, expand=(used == "vm"),
-                         algebraic=lambda tk, x, uk: _algebraic(model, tk, x, uk, pv))
+                         algebraic=lambda tk, x, uk: _algebraic(
+                             model, tk, x, uk + _extra_value(model, extra, tk, x[:model.nq], x[model.nq:], pv), pv))
+    if feedback is not None:
+        if hold != "zoh":
+            raise NcgenError("hold='linear' with a feedback u(t, q, v): the feedback is held over each output "
+                             "interval (zoh); use hold='zoh'")
+        return _idas_feedback(model, runner, t, q, v, a, lam, U, pv, feedback, opts.progress, "idas", used, rtol,
+                              atol, opts.linear_solver, dae)
     watch = project == "auto" and model.nq * model.nc <= AUTO_MAX_SIZE and model.nc > 0
     projector = ManifoldProjector(model, pv, atol) if project is True or watch else None
     if projector is not None:
@@ -180,7 +271,10 @@ def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions) -> T
     stats = dict(runner.stats)
     if projector is not None:
         stats.update(projector.counts, rattle_intervals=bridge.count)
-    info = {"method": opts.method, "backend": used, "rtol": rtol, "atol": atol, "hold": hold,
+    info = {"method": "idas", "backend": used, "backend_reason": choice.reason if used == choice.backend
+            else "no C compiler", "rtol": rtol, "atol": atol, "hold": hold,
+            "auto": why_not, "joint_dynamics": bool(opts.joint_dynamics),
+            "controller": None if controller is None else controller.describe(),
             "linear_solver": opts.linear_solver, "stats": stats, "project": project,
             "projected_from": None if projected_from is None else float(t[projected_from]),
             "wall_time": time.perf_counter() - start, "complete": failure is None}
@@ -190,12 +284,87 @@ def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions) -> T
     elif failure is not None:
         message = _failure_message(model, failure, t, k, X[k], Z[k, nq:], U[k], pv, dae)
         info["message"] = message
-    traj = Trajectory.from_states(model, t[:k + 1], X[:, :nq], X[:, nq:], Z[:, nq:], U[:k + 1], pv, info)
+    U_applied = U[:k + 1] + np.array([_extra_value(model, extra, t[i], X[i, :nq], X[i, nq:], pv)
+                                       for i in range(k + 1)]) if extra is not None else U[:k + 1]
+    traj = Trajectory.from_states(model, t[:k + 1], X[:, :nq], X[:, nq:], Z[:, nq:], U_applied, pv, info)
+    traj.info["energy"] = idas_report(model, traj, is_conservative(model, inputs=bool(np.any(U_applied != 0))))
     if failure is INTERRUPTED:
         raise SimulationInterrupted(message, time=float(t[k]), trajectory=traj)
     if failure is not None:
         raise SimulationError(message, time=float(t[k]), trajectory=traj)
     return traj
+
+
+def _natural_inputs(model, controller, joint_dynamics: bool):
+    """``(t, q, v, p) -> u_extra`` of a compiled controller and the joint dynamics, or None."""
+    if controller is None and not joint_dynamics:
+        return None
+    from ncgen.assembly.joint_ode import armature_vector, natural_inputs_function
+
+    if joint_dynamics and np.any(armature_vector(model)):
+        raise NcgenError("joint_dynamics: armature (joint.dynamics['armature']) is honoured by method='joint' only "
+                         "(the natural-coordinate mass matrix is constant); use method='joint' or drop it")
+    from ncgen.model.controllers import ComputedTorque
+
+    inverse = None
+    if isinstance(controller, ComputedTorque):
+        from ncgen.assembly.tree_dynamics import recursive_inverse_dynamics_function
+        inverse = recursive_inverse_dynamics_function(model)
+    return natural_inputs_function(model, inverse, controller=controller, joint_dynamics=joint_dynamics)
+
+
+def _extra_value(model, extra, t: float, q, v, p) -> np.ndarray:
+    if extra is None:
+        return np.zeros(model.nu)
+    return np.array(extra(t, q, v, p)).reshape(-1)
+
+
+def _natural_feedback(model, feedback, t: float, q, v, p) -> np.ndarray:
+    """The feedback's inputs at the natural state ``(q, v)`` at ``t``."""
+    from ncgen.runtime.joint_simulation import call_feedback
+
+    kind, u = feedback
+    if kind == "joint":
+        qj, vj = model.to_joint_space(q, v)
+        return call_feedback(u, t, qj, vj, nu=model.nu, what="joint")
+    return call_feedback(u, t, np.array(q, float), np.array(v, float), nu=model.nu, what="natural")
+
+
+def _idas_feedback(model, runner, t, q, v, a, lam, U, p, feedback, progress, method, used, rtol, atol,
+                   linear_solver, dae) -> Trajectory:
+    """IDAS one output interval at a time, the feedback evaluated at the start of each."""
+    nq = model.nq
+    X = np.empty((len(t), 2 * nq))
+    Z = np.empty((len(t), nq + model.nc))
+    X[0], Z[0] = np.concatenate([q, v]), np.concatenate([a, lam])
+    bar = Progress(t[0], t[-1], progress, label=f"simulating {model.name}: ")
+    start, failure, k = time.perf_counter(), None, 0
+    try:
+        while k < len(t) - 1:
+            if k:
+                U[k] = _natural_feedback(model, feedback, float(t[k]), X[k, :nq], X[k, nq:], p)
+            try:
+                X[k + 1:k + 2], Z[k + 1:k + 2] = runner.advance(t[k], X[k], Z[k], U[k][:, None], p)
+            except ChunkFailure as e:
+                failure = e
+                break
+            k += 1
+            bar.update(t[k])
+    finally:
+        bar.close()
+    U[k] = U[k - 1] if k else U[0]
+    info = {"method": method, "backend": used, "rtol": rtol, "atol": atol, "hold": "zoh",
+            "feedback": feedback[0], "linear_solver": linear_solver, "stats": dict(runner.stats),
+            "wall_time": time.perf_counter() - start, "complete": failure is None}
+    traj = Trajectory.from_states(model, t[:k + 1], X[:k + 1, :nq], X[:k + 1, nq:], Z[:k + 1, nq:], U[:k + 1], p,
+                                  info)
+    if failure is not None:
+        message = _failure_message(model, failure, t, k, X[k], Z[k, nq:], U[k], p, dae)
+        traj.info["message"] = message
+        raise SimulationError(message, time=float(t[k]), trajectory=traj)
+    return traj
+
+
 
 
 def point_bytes(model) -> float:
@@ -211,6 +380,8 @@ def initial_state(model, q0, v0, t0: float, p: np.ndarray, tolerance: float | No
         return model.q0.copy(), model.v0.copy()
     q = model.q0 if q0 is None else as_vector(q0, model.nq, "q0")
     v = model.v0 if v0 is None else as_vector(v0, model.nq, "v0")
+    if t0 == model.t0 and np.array_equal(p, model.p0) and model.joint_space._holds(model, q, v, t0, p):
+        return q.copy(), v.copy()          # consistent to round-off already (e.g. from from_joint_space)
     try:
         state = consistent_state(model.functions, model.layout, model.constraint_names, q.copy(), v.copy(),
                                  p, t0, 1.0 if tolerance is None else tolerance, model.M,
@@ -420,3 +591,35 @@ def _failure_message(model, failure: ChunkFailure, t, k, x, lam, u, p, dae) -> s
     return (f"simulation of {model.name!r} failed between t = {t[k]:.6g} s and the next output time "
             f"{t[k + 1]:.6g} s{where}: {cause}.{detail} The trajectory up to t = {t[k]:.6g} s is "
             f"attached to this error as .trajectory.")
+def _stepwise_stepper(model, t, U, p, q, v, feedback, opts: SimulationOptions) -> Trajectory:
+    """The compiled stepper one output interval at a time, the feedback evaluated at the
+    start of each (checks and the shadow error estimate off: they need the whole run)."""
+    import dataclasses
+
+    if opts.hold != "zoh":
+        raise NcgenError("hold='linear' with a feedback u(t, q, v): the feedback is held over each output "
+                         "interval (zoh); use hold='zoh'")
+    step_opts = dataclasses.replace(opts, method="stepper", check=False, estimate=False)
+    dae = load_dae(model, "vm")[0]
+    Q, V, LAM, UU = [q], [v], [], []
+    start = time.perf_counter()
+    for k in range(len(t) - 1):
+        uk = _natural_feedback(model, feedback, float(t[k]), Q[-1], V[-1], p)
+        lam = initial_multipliers(model, float(t[k]), Q[-1], V[-1], uk, p, dae)
+        LAM.append(lam)
+        UU.append(uk)
+        try:
+            part = simulate_stepper(model, t[k:k + 2], np.vstack([uk, uk]), p, Q[-1], V[-1], lam, step_opts)
+        except SimulationError as e:
+            info = {"method": "stepper", "feedback": feedback[0], "complete": False, "message": str(e)}
+            traj = Trajectory.from_states(model, t[:k + 1], np.array(Q), np.array(V), np.array(LAM),
+                                          np.array(UU), p, info)
+            raise SimulationError(str(e), time=float(t[k]), trajectory=traj) from None
+        Q.append(part.q[-1])
+        V.append(part.v[-1])
+    LAM.append(part.lam[-1])
+    UU.append(UU[-1])
+    info = {"method": "stepper", "backend": "compiled", "feedback": feedback[0], "hold": "zoh",
+            "wall_time": time.perf_counter() - start, "complete": True, "substeps": opts.substeps,
+            **({"rtol": opts.rtol, "atol": opts.rtol if opts.atol is None else opts.atol} if opts.rtol else {})}
+    return Trajectory.from_states(model, t, np.array(Q), np.array(V), np.array(LAM), np.array(UU), p, info)

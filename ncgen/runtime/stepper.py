@@ -41,7 +41,9 @@ import time
 import numpy as np
 
 from ncgen.codegen.stepper_package import STATS, STATUS, TOL
-from ncgen.errors import NcgenError, SimulationError
+from ncgen.errors import NcgenError, SimulationError, option
+from ncgen.progress import Ticker
+from ncgen.runtime.energy_balance import balance_parts
 from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.stepper_checks import (SHADOW_FACTOR, check_fixed, check_global, contact_report, energy_report,
                                           error_estimate, is_conservative, shadow_estimates, shadow_report,
@@ -71,10 +73,11 @@ def simulate_stepper(model, t: np.ndarray, U: np.ndarray, p: np.ndarray, q0: np.
     trajectory up to the last output time before it."""
     opts = SimulationOptions.resolve(options, **shortcuts)
     stepper = load_stepper(model, cflags)
-    conservative = is_conservative(model)
+    conservative = is_conservative(model, inputs=bool(np.any(np.asarray(U) != 0)))
     if opts.rtol is not None and stepper.nd:
         raise NcgenError(f"rtol: model {model.name!r} has nonsmooth contacts, whose impacts the error control "
-                         f"cannot follow; use fixed steps (substeps=N) or build it with contacts='smooth'")
+                         f"cannot follow; use fixed steps ({option('substeps=N', '--substeps N')}) or "
+                         + option("build it with contacts='smooth'", "--contacts smooth"))
     run = _fixed if opts.rtol is None else _adaptive
     return run(model, stepper, t, U, p, q0, v0, lam0, opts, conservative)
 
@@ -89,9 +92,10 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, conse
     contacts = stepper.nd > 0          # nonsmooth contacts: no shadow run, one-sided energy check
     IMP = np.zeros((n_out, stepper.nd)) if contacts else None      # contact impulses per output interval
     start = time.perf_counter()
-    Q, V, LAM, S, status, done, splits = stepper.simulate_stats(
-        q0, v0, lam0, float(t[0]), h, n_out * substeps, substeps, step_inputs(U, t, hold, substeps), p, tol,
-        max_iter, max_halvings, estimate and not contacts, not conservative, impulse_out=IMP)
+    with Ticker(f"stepper: {model.name}, {n_out * substeps:,} steps"):
+        Q, V, LAM, S, status, done, splits = stepper.simulate_stats(
+            q0, v0, lam0, float(t[0]), h, n_out * substeps, substeps, step_inputs(U, t, hold, substeps), p, tol,
+            max_iter, max_halvings, estimate and not contacts, not conservative, impulse_out=IMP)
     stepping = time.perf_counter() - start
     rows = done // substeps
     info = {"method": "stepper", "backend": "compiled", "scheme": "RATTLE, nonsmooth contacts" if contacts else
@@ -131,8 +135,9 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, co
                                          hold == "linear", p, rtol, atol, 0.0, order == 4, max_steps,
                                          not conservative, newton_tolerance(rtol, atol, tol), max_iter)
 
-    Q, V, LAM, S, status, rows, h_next = run(rtol, atol)
-    shadow = run(SHADOW_FACTOR * rtol, SHADOW_FACTOR * atol) if estimate and status == 0 else None
+    with Ticker(f"stepper: {model.name}, rtol {rtol:g}"):
+        Q, V, LAM, S, status, rows, h_next = run(rtol, atol)
+        shadow = run(SHADOW_FACTOR * rtol, SHADOW_FACTOR * atol) if estimate and status == 0 else None
     stepping = time.perf_counter() - start
     info = {"method": "stepper", "backend": "compiled", "scheme": "RATTLE" if order == 2 else
             "RATTLE, Richardson-extrapolated and projected", "order": order, "rtol": rtol, "atol": atol,
@@ -188,6 +193,8 @@ def _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info,
                       velocity_residual=Y[:, 3], markers=markers, **extra)
     traj.info["error_estimate"] = error_estimate(S[:rows], info.get("substeps"))
     traj.info["energy"] = energy_report(traj, work, conservative)
+    if not conservative and len(traj):
+        traj.info["energy"]["parts"] = balance_parts(model, traj)
     traj.info["wall_time"] = time.perf_counter() - start
     return traj
 

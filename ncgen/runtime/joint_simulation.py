@@ -1,0 +1,267 @@
+"""Simulation of trees in joint space: ``x = [q_j; v_j]`` integrated by a compiled C loop
+around the joint-space forward dynamics (``simulate(method="joint")``, chosen by
+``method="auto"`` for every model it applies to, :func:`joint_space_applies`).
+
+* Equations: :mod:`ncgen.assembly.joint_ode` (``q̇_j = Q(q_j) v_j``, ``v̇_j = a_j`` from the
+  recursive kernel of :mod:`ncgen.runtime.tree_kernel`, a compiled controller and the joint
+  dynamics law inlined); loop: ``templates/c/joint_loop.c.j2``, generated and compiled once
+  per model, controller and options (:mod:`ncgen.codegen.joint_loop`, cached by content).
+* Integrators (``integrator=``): ``"dopri5"`` (default) — Dormand–Prince 5(4), error
+  controlled by ``rtol``/``atol`` on ``q_j`` and ``v_j`` (Hairer's step control), outputs by
+  its 4th-order dense output when the inputs do not jump, else restarted at every output
+  time; ``"rk4"`` — classical RK4, ``substeps`` equal steps per output interval.
+* Rotations: a spherical or free joint's unit quaternion is integrated by its rate
+  ``½ q ⊗ [ω; 0]`` (the dynamics see ``q / |q|``) and renormalised after every step (and
+  at every dense output), so it stays on the unit sphere to round-off.
+* Inputs: held samples ``w`` (``hold`` zoh/linear, the integrator restarts at each output
+  time), a Python callable called once per output interval at its start (state feedback,
+  held over the interval), or a compiled controller (``u=nc.PD(...)``, no Python per step).
+* Outputs: the trajectory's natural coordinates, markers, energies and multipliers (the KKT
+  system at each output time) are derived from the joint states; ``traj.qj``/``traj.vj``
+  are the integrated joint states (angles not wrapped).
+"""
+from __future__ import annotations
+
+import ctypes
+import math
+import time
+
+import casadi as ca
+import numpy as np
+
+from ncgen.errors import CompilerNotFound, ModelError, NcgenError, SimulationError
+from ncgen.runtime.progress import Progress
+from ncgen.runtime.trajectory import Trajectory
+
+INTEGRATORS = ("dopri5", "rk4")
+#: The run is cut into at most this many calls of the C loop (progress updates).
+CHUNKS = 20
+_STATUS = {1: "the joint-space mass matrix is singular or the accelerations are not finite",
+           2: "the integrator needed more than max_steps steps for one output interval (a stiff motion: "
+              "a stiff joint limit or friction law; raise max_steps, loosen rtol, or use method='idas')",
+           3: "the step size fell to round-off (a discontinuity or a stiff law)",
+           4: "out of memory"}
+
+
+
+def joint_space_applies(model) -> str | None:
+    """Why ``model`` cannot be simulated in joint space, or None when it can: a tree of joints
+    with coordinates and no other constraints (:func:`~ncgen.runtime.tree_kernel.check_tree`),
+    no contacts, and a C compiler."""
+    from ncgen.model.data import model_data
+
+    data = model_data(model)
+    if data.joint_simulation_reason is not None:
+        return data.joint_simulation_reason[0]
+    from ncgen.codegen.compiler import find_compiler
+    from ncgen.runtime.tree_kernel import check_tree
+
+    reason = ""
+    if getattr(model, "nk", 0):
+        reason = "the model has contacts"
+    else:
+        try:
+            check_tree(model)
+        except ModelError as e:
+            reason = str(e)
+        if not reason:
+            try:
+                find_compiler()
+            except CompilerNotFound as e:
+                reason = str(e)
+    data.joint_simulation_reason = (reason or None,)
+    return reason or None
+
+
+class JointLoop:
+    """The compiled loop of one model, controller and joint-dynamics choice."""
+
+    def __init__(self, model, library, ode: ca.Function, name: str):
+        from ncgen.assembly.joint_ode import quaternion_offsets
+
+        self.model, self.ode, self.library = model, ode, library
+        self._lib = ctypes.CDLL(str(library))
+        fn = getattr(self._lib, f"{name}_joint_run")
+        D = ctypes.POINTER(ctypes.c_double)
+        fn.argtypes = [ctypes.c_int, ctypes.c_int, D, D, D, D, D, ctypes.c_int, ctypes.POINTER(ctypes.c_int),
+                       ctypes.c_double, ctypes.c_double, ctypes.c_int, ctypes.c_long, ctypes.c_int, D,
+                       ctypes.POINTER(ctypes.c_int)]
+        fn.restype = ctypes.c_int
+        self._fn = fn
+        self.quat = np.array(quaternion_offsets(model.joint_space), dtype=np.int32)
+        self.tree = model.joint_space.tree_function(model.layout)
+        self._maps: dict = {}
+
+    def mapped(self, what: str, n: int) -> ca.Function:
+        """``what`` (``"tree"``, ``"ode"``, ``"accel"``) evaluated at ``n`` points in one call."""
+        key = (what, n)
+        if key not in self._maps:
+            f = {"tree": self.tree, "ode": self.ode, "accel": self.model.functions["accel"]}[what]
+            self._maps[key] = f.map(n)
+        return self._maps[key]
+
+    def run(self, method: int, t: np.ndarray, X: np.ndarray, W: np.ndarray, S, p: np.ndarray, rtol: float,
+            atol: float, substeps: int, max_steps: int, stop: bool, stats: np.ndarray) -> tuple[int, int]:
+        """Integrate over the grid ``t`` (``X[0]`` given, the rest written); ``(status, k_done)``."""
+        D = ctypes.POINTER(ctypes.c_double)
+        done = ctypes.c_int(0)
+        ptr = (lambda a: None if a is None or a.size == 0 else a.ctypes.data_as(D))
+        status = self._fn(int(method), len(t) - 1, ptr(t), ptr(X), ptr(W), ptr(S), ptr(p), len(self.quat),
+                          self.quat.ctypes.data_as(ctypes.POINTER(ctypes.c_int)) if len(self.quat) else None,
+                          float(rtol), float(atol), int(substeps), int(max_steps), int(stop), ptr(stats),
+                          ctypes.byref(done))
+        return int(status), int(done.value)
+
+
+def dynamics_function(model) -> ca.Function:
+    """The kernel's SX function ``(t, qj, vj, u, p) -> (aj, check)``: recursive in 3D (rigid
+    bodies), else the projected form (as :func:`~ncgen.runtime.tree_kernel.joint_forward_dynamics_kernel`
+    with ``method="auto"``)."""
+    from ncgen.assembly.tree_dynamics import recursive_dynamics_function, tree_dynamics_function
+
+    if model.joint_space.dim == 3:
+        try:
+            return recursive_dynamics_function(model)
+        except ModelError:
+            pass
+    return tree_dynamics_function(model)
+
+
+def joint_loop(model, controller=None, joint_dynamics: bool = False, cflags=None) -> JointLoop:
+    """The compiled loop (built on first use per model, controller object and option)."""
+    from ncgen.assembly.joint_ode import joint_ode_function
+    from ncgen.codegen.joint_loop import build_joint_loop
+    from ncgen.model.controllers import ComputedTorque
+    from ncgen.runtime.tree_kernel import PIVOT_TOL
+
+    from ncgen.model.data import model_data
+
+    loops = model_data(model).joint_loops
+    key = (id(controller), bool(joint_dynamics), cflags)
+    hit = loops.get(key)
+    if hit is not None and hit[0] is controller:
+        return hit[1]
+    why = joint_space_applies(model)
+    if why is not None:
+        raise ModelError(f"simulate(method='joint'): model {model.name!r} cannot be simulated in joint space: {why}")
+    from ncgen.assembly.joint_ode import armature_dynamics_function, armature_vector
+
+    arm = armature_vector(model) if joint_dynamics else np.zeros(0)
+    inverse = None
+    if isinstance(controller, ComputedTorque) or np.any(arm):
+        from ncgen.assembly.tree_dynamics import recursive_inverse_dynamics_function
+        inverse = recursive_inverse_dynamics_function(model)
+    dynamics = armature_dynamics_function(model, inverse, arm) if np.any(arm) else dynamics_function(model)
+    ode = joint_ode_function(model, dynamics, inverse, controller=controller, joint_dynamics=joint_dynamics)
+    name = f"{model.name}_jsim"
+    loop = JointLoop(model, build_joint_loop(name, ode, PIVOT_TOL, cflags), ode, name)
+    loops[key] = (controller, loop)
+    return loop
+
+
+def simulate_joint(model, t: np.ndarray, U: np.ndarray, hold: str, p: np.ndarray, q0, v0, *,
+                   integrator: str | None, rtol: float | None, atol: float | None, substeps: int,
+                   max_steps: int, feedback=None, controller=None, joint_dynamics: bool = False,
+                   progress: bool | None = None) -> Trajectory:
+    """Integrate in joint space on the grid ``t`` from the natural state ``(q0, v0)``
+    (module docstring).  ``U``: input samples on the grid (the open-loop part);
+    ``feedback``: ``(kind, u)`` with ``kind`` ``"natural"`` (``u(t, q, v)``) or ``"joint"``
+    (``u(t, qj, vj)``), called at the start of every output interval."""
+    integrator = "dopri5" if integrator is None else integrator
+    if integrator not in INTEGRATORS:
+        raise NcgenError(f"integrator: expected one of {', '.join(INTEGRATORS)}, got {integrator!r}")
+    if hold == "linear" and feedback is not None:
+        raise NcgenError("hold='linear' with a feedback u(t, q, v): the feedback is held over each output "
+                         "interval (zoh); use hold='zoh'")
+    substeps = int(substeps)
+    if substeps < 1:
+        raise NcgenError(f"substeps: expected a positive integer, got {substeps}")
+    rtol, atol = 1e-8 if rtol is None else rtol, 1e-10 if atol is None else atol
+    js = model.joint_space
+    build_start = time.perf_counter()
+    loop = joint_loop(model, controller, joint_dynamics)
+    build_time = time.perf_counter() - build_start
+    qj0, vj0 = model.to_joint_space(q0, v0)
+    n = len(t)
+    X = np.zeros((n, js.nq + js.nv))
+    X[0] = np.concatenate([qj0, vj0])
+    U = np.ascontiguousarray(U, dtype=float)
+    W = U.copy()
+    S = None
+    if hold == "linear" and model.nu:
+        S = np.zeros_like(U)
+        S[:-1] = np.diff(U, axis=0) / np.diff(t)[:, None]
+    varying = model.nu > 0 and (feedback is not None or bool(np.any(U != U[:1])))
+    stats = np.zeros(5)
+    method = 1 if integrator == "dopri5" else 0
+    bar = Progress(float(t[0]), float(t[-1]), progress, label=f"simulating {model.name} (joint space): ")
+    start = time.perf_counter()
+    status, k = 0, 0
+    chunk = 1 if feedback is not None else max(1, math.ceil((n - 1) / CHUNKS))
+    try:
+        while k < n - 1 and status == 0:
+            m = min(chunk, n - 1 - k)
+            if feedback is not None:
+                W[k] = _feedback(model, feedback, float(t[k]), X[k], p)
+            sl = slice(k, k + m + 1)
+            Xs = X[sl]
+            status, done = loop.run(method, np.ascontiguousarray(t[sl]), Xs, np.ascontiguousarray(W[k:k + m]),
+                                    None if S is None else np.ascontiguousarray(S[k:k + m]), p, rtol, atol,
+                                    substeps, max_steps, varying, stats)
+            k += done
+            bar.update(float(t[k]))
+    finally:
+        bar.close()
+    steps = {"rtol": rtol, "atol": atol} if integrator == "dopri5" else \
+        {"h": float(t[1] - t[0]) / substeps, "substeps": substeps}
+    info = {"method": "joint", "integrator": integrator, **steps, "hold": hold,
+            "controller": None if controller is None else controller.describe(),
+            "feedback": None if feedback is None else feedback[0], "joint_dynamics": bool(joint_dynamics),
+            "stats": {"nsteps": int(stats[0]), "rejected_steps": int(stats[1]), "evaluations": int(stats[2])},
+            "build_time": build_time, "wall_time": time.perf_counter() - start, "complete": status == 0}
+    traj = _trajectory(model, loop, t[:k + 1], X[:k + 1], W[:k + 1], p, info)
+    if status:
+        what = _STATUS.get(status, f"status {status}")
+        message = (f"joint-space simulation of {model.name!r} failed between t = {t[k]:.6g} s and the next output "
+                   f"time (at t = {stats[4]:.6g} s): {what}. The trajectory up to t = {t[k]:.6g} s is attached "
+                   "to this error as .trajectory.")
+        traj.info["message"] = message
+        raise SimulationError(message, time=float(t[k]), trajectory=traj)
+    return traj
+
+
+def _feedback(model, feedback, t: float, x: np.ndarray, p) -> np.ndarray:
+    kind, u = feedback
+    js = model.joint_space
+    qj, vj = x[:js.nq].copy(), x[js.nq:].copy()
+    if kind == "joint":
+        args = (qj, vj)
+    else:
+        args = model.from_joint_space(qj, vj, t=t, p=p)
+    return call_feedback(u, t, *args, nu=model.nu, what=kind)
+
+
+def call_feedback(u, t: float, a, b, *, nu: int, what: str) -> np.ndarray:
+    """``u(t, a, b)`` as ``nu`` finite floats, or a named error."""
+    names = "qj, vj" if what == "joint" else "q, v"
+    try:
+        val = np.asarray(u(t, a, b), dtype=float).reshape(-1)
+    except (TypeError, ValueError) as e:
+        raise NcgenError(f"u(t, {names}) failed at t = {t:g} s: {e}") from None
+    if val.size != nu or not np.all(np.isfinite(val)):
+        raise NcgenError(f"u(t, {names}) at t = {t:g} s: expected {nu} finite input value(s), got {val.tolist()}")
+    return val
+
+
+def _trajectory(model, loop: JointLoop, t, X, W, p, info) -> Trajectory:
+    """The natural-coordinate trajectory of the joint states ``X`` (module docstring)."""
+    js = model.joint_space
+    n = len(t)
+    Q, V = (np.array(y).T for y in loop.mapped("tree", n)(X[:, :js.nq].T, X[:, js.nq:].T))
+    P = np.repeat(np.asarray(p, float)[:, None], n, axis=1)
+    Wt = W[:n].T if model.nu else np.zeros((0, n))
+    Ua = np.array(loop.mapped("ode", n)(t[None, :], X.T, Wt, P)[2]).T.reshape(n, model.nu)
+    lam = np.array(loop.mapped("accel", n)(t[None, :], Q.T, V.T, Ua.T, P)[1]).T.reshape(n, model.nc)
+    traj = Trajectory.from_states(model, t, Q, V, lam, Ua, p, info)
+    traj.qj, traj.vj = X[:, :js.nq].copy(), X[:, js.nq:].copy()
+    return traj
