@@ -10,7 +10,7 @@ from ncgen.assembly.kinematics import assemble, dof_report, project_velocity, so
 from ncgen.codegen.model_package import generate
 from ncgen.control import MPC, StepDidNotConverge, StepFunction, export_mpc, ilqr, step_function
 from ncgen.errors import NcgenError
-from ncgen.model.contacts import Contact, SpherePlane, SphereSphere
+from ncgen.model.contacts import BoxPlane, CapsulePlane, Contact, CylinderPlane, SpherePlane, SphereSphere
 from ncgen.model.controllers import PD, ComputedTorque, Controller
 from ncgen.model.forces import Force, GeneralizedForce, PointForce, Spring, Torque, TorsionalSpring
 from ncgen.model.joints import (
@@ -39,7 +39,7 @@ from ncgen.version import __version__
 
 
 __all__ = [
-    "BatchResult", "Box", "Capsule", "ComputedTorque", "Contact", "Controller", "CoordinateDriver", "Cylinder", "Ellipsoid", "Mesh", "Shape", "Sphere", "Cylindrical", "Distance", "Equilibrium", "Fixed", "Force", "Free", "GeneralizedForce",
+    "BatchResult", "Box", "BoxPlane", "Capsule", "CapsulePlane", "ComputedTorque", "Contact", "Controller", "CoordinateDriver", "Cylinder", "CylinderPlane", "Ellipsoid", "Mesh", "Shape", "Sphere", "Cylindrical", "Distance", "Equilibrium", "Fixed", "Force", "Free", "GeneralizedForce",
     "Joint", "JointReaction", "LinearModel", "MPC", "Mimic", "Model", "ModelError", "Modes", "NcgenError", "OptimalControl",
     "OptimalTrajectory", "PD", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic", "Revolute", "Samples", "SimulationOptions", "SpherePlane", "SphereSphere", "Spherical",
     "Spring", "StepDidNotConverge", "StepFunction", "SweepResult", "System", "Tensegrity", "Torque", "TorsionalSpring", "Trajectory", "Universal",

@@ -92,7 +92,7 @@ def _clean(out) -> None:
 
 def test_every_example_is_shipped(built):
     names = set(built)
-    assert {"chain", "fourbar_planar", "heavy_top", "tensegrity", "falling_chain"} <= names
+    assert {"chain", "fourbar_planar", "heavy_top", "tensegrity", "falling_chain", "boxes"} <= names
 
 
 def test_contact_scene_lands_clean(built):

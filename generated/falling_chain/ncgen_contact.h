@@ -545,6 +545,7 @@ static int repeat_step(const casadi_real *q, const casadi_real *v, casadi_real t
   for (r = 0; r < ND; ++r)
     if (P[r] != 0)
       for (i = wt_colind[r]; i < wt_colind[r + 1]; ++i) ws->j[wt_row[i]] += W0[i] * P[r];
+  memcpy(ws->j0, ws->j, NQ * sizeof(casadi_real)); /* the rows hardly move: kept only if so */
   status = step(q, v, t, u, p, h, q_next, v_next, lam, iterations, o, warm, ws);
   if (status == STEP_OK) {
     ws->arg[0] = q_next;
@@ -610,7 +611,8 @@ static int push_out_all(const casadi_real *p, casadi_real t1, casadi_real *q_nex
 
 /* One step with contacts: the free step, the contacts closed at its end (gap <= 0), their
  * impulses by pgs() on the Delassus matrix G = W [M A^T; A 0]^-1 W^T there, then the step
- * again with the generalised impulse j = W^T P, half of it in each half-step.  Adds the
+ * again with the generalised impulse W^T P, half of it in each half-step (W at the start of
+ * the step in the first half, at the free step's end in the second).  Adds the
  * impulses to ws->Pacc. */
 static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real t, const casadi_real *u,
                         const casadi_real *p, casadi_real h, casadi_real *q_next, casadi_real *v_next,
@@ -625,7 +627,7 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
     if (iterations) *iterations = it;
     return push_out_all(p, t + h, q_next, v_next, o, ws);
   }
-  for (i = 0; i < NQ; ++i) ws->j[i] = 0;
+  for (i = 0; i < 2 * NQ; ++i) ws->j[i] = 0; /* j and j0 */
   status = step(q, v, t, u, p, h, q_next, v_next, lam, iterations, o, warm, ws);
   if (iterations) *iterations += it;
   if (status != STEP_OK) return status;
@@ -644,19 +646,21 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
   ws->res[1] = ws->W;
   ws->res[2] = ws->U;
   if (KERNEL_CONTACT(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
-#ifdef ANY_RESTITUTION
-  /* contact velocities at the start of the step (Newton's impact law) */
+  /* the contact Jacobian at the start of the step (the impulse of the first half-step), and
+   * the contact velocities there (Newton's impact law) */
   ws->arg[0] = q;
   ws->arg[1] = v;
   ws->arg[2] = p;
   ws->res[0] = 0;
-  ws->res[1] = 0;
+  ws->res[1] = ws->W0;
+#ifdef ANY_RESTITUTION
   ws->res[2] = ws->Um;
-  if (KERNEL_CONTACT(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
 #else
+  ws->res[2] = 0;
   /* every restitution coefficient is 0: the start-of-step velocities are not needed */
   memset(ws->Um, 0, ND * sizeof(casadi_real));
 #endif
+  if (KERNEL_CONTACT(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
   /* Contacts about to close take part too.  The impulses move the end-of-step gaps by
    * h/2 (U - U_free), U_free the free step's contact velocities: the push of a closed
    * contact can close an open neighbour within the step (a pile, a column), and push_out()
@@ -733,9 +737,15 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
       for (a = 0; a < nr; ++a) jump = fmax(jump, fabs(ws->U[a] - ws->Um[ND + a]));
       impact = jump > CONTACT_IMPACT_STEPS * GRAVITY_NORM * h;
     }
-    for (i = 0; i < NQ; ++i) ws->j[i] = 0;
+    /* j = W(q_free)^T P in the second half-step, j0 = W(q)^T P in the first: each half's
+     * impulse along the rows where it acts, as RATTLE does with A^T (rows taken at the free
+     * step's end in both halves leave a first-order error in sliding with spin) */
+    for (i = 0; i < 2 * NQ; ++i) ws->j[i] = 0;
     for (a = 0; a < nr; ++a) {
-      for (i = wt_colind[rows[a]]; i < wt_colind[rows[a] + 1]; ++i) ws->j[wt_row[i]] += ws->W[i] * ws->P[a];
+      for (i = wt_colind[rows[a]]; i < wt_colind[rows[a] + 1]; ++i) {
+        ws->j[wt_row[i]] += ws->W[i] * ws->P[a];
+        ws->j0[wt_row[i]] += ws->W0[i] * ws->P[a];
+      }
       ws->Pold[ND + a] = ws->P[a] - ws->Pold[a];
     }
     x_add(ws, nr, ws->Pold + ND, 0.5, ws->x); /* warm start: w moves by half the impulses' change */

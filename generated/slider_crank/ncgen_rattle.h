@@ -55,9 +55,11 @@ typedef struct {
   casadi_real *w;   /* kernel work */
   casadi_int *iw;
 #ifdef NCGEN_CONTACTS
-  casadi_real *j;    /* generalised contact impulse W^T P of the step */
+  casadi_real *j;    /* generalised contact impulse of the step's second half, W(q_free)^T P */
+  casadi_real *j0;   /* ... and of its first half, W(q)^T P (the rows at the start of the step) */
   casadi_real *g;    /* gaps at the end of the free step */
   casadi_real *W;    /* contact Jacobian there: its NNZ_W nonzeros, by rows (wt_colind, wt_row) */
+  casadi_real *W0;   /* the same at the start of the step */
   casadi_real *U;    /* contact velocities: at the end of the free step, then with the impulses */
   casadi_real *Um;   /* contact velocities at the start of the step (then ND more, scratch) */
   casadi_real *Pold; /* impulses of the previous refinement */
@@ -130,9 +132,9 @@ static size_t layout(workspace *ws, char *block) {
   sizes[8] = (size_t) sz_iw * sizeof(casadi_int);
   sizes[9] = 2 * NQ * MAX_HALVINGS * sizeof(casadi_real);
 #ifdef NCGEN_CONTACTS
-  sizes[10] = NQ * sizeof(casadi_real);
+  sizes[10] = 2 * NQ * sizeof(casadi_real);
   sizes[11] = NK * sizeof(casadi_real);
-  sizes[12] = NNZ_W * sizeof(casadi_real);
+  sizes[12] = 2 * NNZ_W * sizeof(casadi_real);
   sizes[15] = (ND * NQ > NNZ_W ? ND * NQ : NNZ_W) * sizeof(casadi_real);
   sizes[13] = sizes[17] = sizes[19] = ND * sizeof(casadi_real);
   sizes[14] = 4 * ND * sizeof(casadi_real); /* Um, the end-of-step velocities, Pold, its change */
@@ -166,8 +168,10 @@ static size_t layout(workspace *ws, char *block) {
     ws->mid = (casadi_real *) (void *) (block + off[9]);
 #ifdef NCGEN_CONTACTS
     ws->j = (casadi_real *) (void *) (block + off[10]);
+    ws->j0 = ws->j + NQ;
     ws->g = (casadi_real *) (void *) (block + off[11]);
     ws->W = (casadi_real *) (void *) (block + off[12]);
+    ws->W0 = ws->W + NNZ_W;
     ws->U = (casadi_real *) (void *) (block + off[13]);
     ws->Um = (casadi_real *) (void *) (block + off[14]);
     ws->Pold = ws->Um + 2 * ND;
@@ -257,7 +261,7 @@ static int step(const casadi_real *q, const casadi_real *v, casadi_real t, const
     ws->arg[6] = ws->x;
     ws->arg[7] = ws->x + NQ;
 #ifdef NCGEN_CONTACTS
-    ws->arg[8] = ws->j;
+    ws->arg[8] = ws->j0;
 #endif
     ws->res[0] = ws->r;
     ws->res[1] = ws->K;

@@ -4,7 +4,11 @@ For contact k (:mod:`ncgen.model.contacts`) with unit normal ``n`` and tangent b
 ``t₁, t₂`` (one tangent in planar systems):
 
 * gap ``g_k(q)`` (m): sphere–plane ``nᵀ (r_s − x_p) − R``, sphere–sphere
-  ``|r_b − r_a| − R_a − R_b``.  A body-fixed point is ``r = C(c) q``, so against a
+  ``|r_b − r_a| − R_a − R_b``; a shape against a plane is several sphere–plane points
+  (:func:`ncgen.model.contacts.point_contacts`), a cylinder's rim point of radius ``ρ``
+  about the body axis ``a`` through ``r_s`` being the lowest: ``x = r_s − ρ u`` with
+  ``w = n − (n·a) a``, ``u = w / sqrt(|w|² + ε²)`` (:data:`RIM_EPS`), so
+  ``g = nᵀ (r_s − x_p) − ρ |w|² / sqrt(|w|² + ε²)``.  A body-fixed point is ``r = C(c) q``, so against a
   plane fixed to the ground the gap is linear in q and its Jacobian constant.
 * contact Jacobians ``W_N`` (1 × nq) and ``W_T`` ((dim − 1) × nq): the normal and
   tangential components of the relative velocity of the two material points at the contact
@@ -28,8 +32,15 @@ import numpy as np
 
 from ncgen.errors import ModelError
 from ncgen.model.context import Context, perpendicular_basis
-from ncgen.model.contacts import SpherePlane, SphereSphere
+from ncgen.model.contacts import SphereSphere, point_contacts
 from ncgen.rigid_motion import casadi_forms as crm
+
+#: Regularisation of a cylinder rim's lowest point (dimensionless): within ~ε rad of standing
+#: on that end the point slides to the face centre.  The gap exceeds the true one by
+#: ``ρ s (1 − s / sqrt(s² + ε²))`` at a tilt s = sin β: at most ~0.3 ρ ε (near s = ε; 2.4e-6 m
+#: for ρ = 8 cm), ``ρ ε² / 2`` lying.  A smaller ε makes the rows of a nearly upright rim
+#: change faster than a step resolves (the two half-steps' impulses then tilt it).
+RIM_EPS = 1e-4
 
 
 class ContactTerms:
@@ -40,8 +51,9 @@ class ContactTerms:
 
 
 def contact_terms(ctx: Context, contacts) -> list[ContactTerms]:
-    """The :class:`ContactTerms` of every contact, in order."""
-    return [_sphere_plane(ctx, c) if isinstance(c, SpherePlane) else _sphere_sphere(ctx, c) for c in contacts]
+    """The :class:`ContactTerms` of every point contact of ``contacts``, in order."""
+    return [_sphere_sphere(ctx, c) if isinstance(c, SphereSphere) else _sphere_plane(ctx, c)
+            for c in point_contacts(contacts)]
 
 
 def _omega_cross(ctx: Context, member, d):
@@ -68,7 +80,7 @@ def _jacobians(ctx: Context, n, tangents, rel):
     return W[0, :], W[1:, :]
 
 
-def _sphere_plane(ctx: Context, c: SpherePlane) -> ContactTerms:
+def _sphere_plane(ctx: Context, c) -> ContactTerms:
     r_s, rd_s = ctx.local_point(c.sphere, c.at)
     P = c.plane
     what = c.label
@@ -81,8 +93,15 @@ def _sphere_plane(ctx: Context, c: SpherePlane) -> ContactTerms:
         x_p, xd_p = ctx.point(P, c.point, what)
         tangents = ctx.perpendiculars(P, c.normal, what)
         vel_plane = lambda x: _material_velocity(ctx, P, x_p, xd_p, x)  # noqa: E731
-    g = ca.dot(n, r_s - x_p) - c.radius
-    x = r_s - c.radius * n
+    rho = getattr(c, "rim_radius", 0.0)
+    if rho > 0:
+        axis = ctx.local_point(c.sphere, np.asarray(c.at) + c.axis)[0] - r_s
+        w = n - ca.dot(n, axis) * axis
+        centre = r_s - rho * w / ca.sqrt(ca.sumsqr(w) + RIM_EPS ** 2)
+    else:
+        centre = r_s
+    g = ca.dot(n, centre - x_p) - c.radius
+    x = centre - c.radius * n
     rel = _material_velocity(ctx, c.sphere, r_s, rd_s, x) - vel_plane(x)
     WN, WT = _jacobians(ctx, n, tangents, rel)
     return ContactTerms(c, g, WN, WT)
@@ -165,8 +184,8 @@ def check_initial_gaps(system_name: str, contacts, gap, q, p, contact_model: str
       weight ``W`` (N) — a start that launches the members.
     """
     g = np.array(gap(q, p), float).reshape(-1)
-    for c, gk in zip(contacts, g):
-        radius = c.radius if c.kind == "SpherePlane" else c.radius_a + c.radius_b
+    for c, gk in zip(point_contacts(contacts), g):
+        radius = c.radius_a + c.radius_b if c.kind == "SphereSphere" else c.radius
         if c.kind == "SphereSphere" and gk + radius <= 1e-12 * max(radius, 1.0):
             raise ModelError(f"system {system_name!r}: {c.label}: the centres of the spheres on {c.a.name!r} "
                              f"and {c.b.name!r} coincide in the initial configuration (the contact normal is "
@@ -189,6 +208,6 @@ def check_initial_gaps(system_name: str, contacts, gap, q, p, contact_model: str
 
 
 def contact_specs(contacts) -> list[dict]:
-    """Plain-data description of the contacts (``model.contacts``)."""
-    return [c.spec() for c in contacts]
+    """Plain-data description of the point contacts (``model.contacts``, one per point)."""
+    return [c.spec() for c in point_contacts(contacts)]
 

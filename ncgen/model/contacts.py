@@ -1,4 +1,6 @@
-"""Unilateral contact elements: a body-fixed sphere against a plane, or two spheres.
+"""Unilateral contact elements: a body-fixed sphere against a plane, two spheres, and
+body-fixed shapes against a plane as several contact points (:class:`BoxPlane`,
+:class:`CapsulePlane`, :class:`CylinderPlane`).
 
 Geometry is given like a joint's: body-fixed points in the member's local frame (``at``,
 as for forces), the plane by a world point and a world normal in the initial
@@ -34,7 +36,7 @@ import numpy as np
 from ncgen.errors import BasisError
 from ncgen.model.joint_base import attach_element, check_members
 from ncgen.errors import ModelError
-from ncgen.validation import as_vector
+from ncgen.validation import as_vector, rotation as as_rotation
 
 #: Defaults of the smooth law (steel-like ball of a few kg: a 1 kg ball rests ~0.1 mm deep).
 STIFFNESS, DAMPING, EXPONENT, SLIP_VELOCITY = 1e6, 1e5, 1.5, 1e-3
@@ -156,6 +158,10 @@ class Contact:
             raise ModelError(f"{self.label}: {what} radius: expected a finite number >= 0 (m), got {radius!r}")
         return x, r
 
+    def point_contacts(self) -> list:
+        """The point contacts this element stands for (itself for a sphere pair)."""
+        return [self]
+
     def spec(self) -> dict:
         """Plain data describing the contact (``model.contacts``, TOML)."""
         return {"name": self.name, "type": self.kind, "mu": self.mu, "restitution": self.restitution,
@@ -246,4 +252,201 @@ class SphereSphere(Contact):
                 "b": self.b.name, "at_b": np.asarray(self.at_b).tolist(), "radius_b": self.radius_b}
 
 
-CONTACT_TYPES: dict[str, type[Contact]] = {cls.kind: cls for cls in (SpherePlane, SphereSphere)}
+class ShapePoint(SpherePlane):
+    """One point contact of a :class:`ShapePlane` ``element`` (built by it, never attached):
+    a sphere of ``radius`` at ``offset`` from the shape's centre; with ``rim_radius`` > 0, the
+    lowest point of the circle of that radius about the body's z through the point (a
+    cylinder's rim)."""
+
+    def __init__(self, element, suffix: str, offset, radius: float, rim_radius: float = 0.0):
+        super().__init__(element.body, element.at + element.rotation @ offset, radius, plane=element.plane,
+                         point=element.point,
+                         normal=element.normal, mu=element.mu, restitution=element.restitution,
+                         stiffness=element.stiffness, damping=element.damping, exponent=element.exponent,
+                         slip_velocity=element.slip_velocity, name=f"{element.name}.{suffix}")
+        self.kind, self.element, self.rim_radius = element.kind, element.name, rim_radius
+        self.axis = element.rotation[:, -1]               # the shape's z in the body's frame
+
+    def spec(self):
+        return {**super().spec(), "element": self.element, "rim_radius": self.rim_radius, "axis": self.axis.tolist()}
+
+
+class ShapePlane(Contact):
+    """Base of a body-fixed shape against a plane, given as point contacts: spheres of the
+    shape's body (radius ≥ 0) against the plane, each a :class:`SpherePlane` named
+    ``<name>.<point>`` (``model.contact_names``, trajectories).  The shape is centred at the
+    local point ``at`` of ``body`` (default its origin) with its axes along the columns of
+    ``rotation`` (in the body's frame; default the body's axes); the plane keywords are those
+    of :class:`SpherePlane`."""
+
+    def __init__(self, body, *, at=None, rotation=None, plane=None, point=None, normal=None, **material):
+        super().__init__(**material)
+        self.body, self.at, self.rotation = body, at, rotation
+        self.plane, self.point, self.normal = plane, point, normal
+        self._points: list = []
+
+    def members(self):
+        return [self.body] + ([] if self.plane is None else [self.plane])
+
+    def attach(self, system, index: int):
+        given = self.plane
+        if self.plane is None:
+            self.plane = system.ground
+        try:
+            super().attach(system, index)
+        except BaseException:
+            self.plane = given
+            raise
+
+    def local_spheres(self) -> list:
+        """``[(suffix, local centre offset from at, radius[, rim radius])]`` (subclasses)."""
+        raise NotImplementedError
+
+    def check(self, system):
+        d = system.dim
+        if self.body.is_ground or self.body.kind != "body":
+            raise ModelError(f"{self.label}: body: a {self.kind} needs a rigid body, got the "
+                             f"{'ground' if self.body.is_ground else self.body.kind} {self.body.name!r}")
+        self._check_shape(d)
+        self.at = as_vector(np.zeros(d) if self.at is None else self.at, d, f"{self.label}: at")
+        self.rotation = np.eye(d) if self.rotation is None else as_rotation(self.rotation, d, f"{self.label}: rotation")
+        self._points = []
+        for suffix, offset, radius, *rim in self.local_spheres():
+            sp = ShapePoint(self, suffix, offset, radius, *rim)
+            sp.check(system)
+            sp.system = system
+            self._points.append(sp)
+        self.point, self.normal = self._points[0].point, self._points[0].normal
+
+    def _check_shape(self, dim: int):
+        """Argument checks of the shape's dimensions (subclasses)."""
+
+    def _length(self, value, what: str, positive: bool = True) -> float:
+        try:
+            x = float(value)
+        except (TypeError, ValueError):
+            raise ModelError(f"{self.label}: {what}: expected a number (m), got {value!r}") from None
+        if not math.isfinite(x) or x < 0 or (positive and x == 0):
+            raise ModelError(f"{self.label}: {what}: expected a finite number {'> 0' if positive else '>= 0'} (m), "
+                             f"got {value!r}")
+        return x
+
+    def _need_3d(self, dim: int):
+        if dim != 3:
+            raise ModelError(f"{self.label}: a {self.kind} needs a 3D system (its axis is the body's z), "
+                             f"got a planar one")
+
+    def point_contacts(self) -> list:
+        return list(self._points)
+
+    def spec(self):
+        return {**super().spec(), "body": self.body.name, "at": np.asarray(self.at).tolist(),
+                "rotation": self.rotation.tolist(), "plane": self.plane.name,
+                "point": self.point.tolist(), "normal": self.normal.tolist()}
+
+
+class BoxPlane(ShapePlane):
+    """A box of full edge lengths ``size = (a, b, c)`` (m; ``(a, b)`` in planar systems) along
+    the body's axes against a plane: its 8 corners (4 in 2D) as point contacts
+    ``<name>.corner0 …``, corner ``i`` at ``at + (±a/2, ±b/2, ±c/2)`` with the signs of the
+    bits of ``i`` (bit 0 for x: ``−`` when clear).  Exact for a box meeting the plane with a
+    face, an edge or a corner (a face's force is carried by its corners)."""
+
+    kind = "BoxPlane"
+
+    def __init__(self, body, size=None, **kw):
+        super().__init__(body, **kw)
+        self.size = size
+
+    def _check_shape(self, dim):
+        if self.size is None:
+            raise ModelError(f"{self.label}: size: expected the box's {dim} full edge lengths (m), got None")
+        size = as_vector(self.size, dim, f"{self.label}: size")
+        self.size = np.array([self._length(x, f"size[{i}]") for i, x in enumerate(size)])
+
+    def local_spheres(self):
+        d = len(self.size)
+        return [(f"corner{i}", np.array([(1 if i >> j & 1 else -1) * self.size[j] / 2 for j in range(d)]), 0.0)
+                for i in range(2 ** d)]
+
+    def spec(self):
+        return {**super().spec(), "size": self.size.tolist()}
+
+
+class CapsulePlane(ShapePlane):
+    """A capsule of ``radius`` r (m) whose hemisphere centres are ``length`` L (m) apart along
+    the body's z, centred at ``at``, against a plane: two spheres of radius r at
+    ``at ± (0, 0, L/2)`` (points ``<name>.end0``, ``<name>.end1``).  Exact: a capsule meets a
+    plane where its lower sphere does (both, lying flat)."""
+
+    kind = "CapsulePlane"
+
+    def __init__(self, body, radius=None, length=None, **kw):
+        super().__init__(body, **kw)
+        self.radius, self.length = radius, length
+
+    def _check_shape(self, dim):
+        self._need_3d(dim)
+        self.radius = self._length(self.radius, "radius")
+        self.length = self._length(self.length, "length", positive=False)
+
+    def local_spheres(self):
+        return [(f"end{i}", np.array([0.0, 0.0, s * self.length / 2]), self.radius) for i, s in enumerate((-1, 1))]
+
+    def spec(self):
+        return {**super().spec(), "radius": self.radius, "length": self.length}
+
+
+class CylinderPlane(ShapePlane):
+    """A cylinder of ``radius`` r (m) and ``length`` L (m) along the body's z (as in URDF),
+    centred at ``at``, against a plane.  Each end face contributes its exact lowest rim point
+    (``<name>.end0``, ``<name>.end1``: the lowest point of the rim circle, smooth except within
+    ~1e-4 rad of standing upright, where it moves to the face centre;
+    :mod:`ncgen.assembly.contacts`), so a cylinder rolls, lies and pivots on a rim exactly; and
+    ``face_points`` (default 3) fixed points equally spaced on each end face at half the
+    radius (``<name>.face0 …``, face 0 at z = −L/2), so it stands on an end.  Inside the rim,
+    they never touch while the cylinder lies or rolls (a point on the rim itself would strike
+    the plane each time it passed the bottom), and once it tilts the exact rim point is lower.
+    """
+
+    kind = "CylinderPlane"
+
+    def __init__(self, body, radius=None, length=None, *, face_points=3, **kw):
+        super().__init__(body, **kw)
+        self.radius, self.length, self.face_points = radius, length, face_points
+
+    def _check_shape(self, dim):
+        self._need_3d(dim)
+        self.radius = self._length(self.radius, "radius")
+        self.length = self._length(self.length, "length")
+        n = self.face_points
+        if isinstance(n, float) and n.is_integer():
+            n = int(n)
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0 or n in (1, 2):
+            raise ModelError(f"{self.label}: face_points: expected 0 or an integer >= 3 (points per end face), "
+                             f"got {self.face_points!r}")
+        self.face_points = int(n)
+
+    def local_spheres(self):
+        out = [(f"end{i}", np.array([0.0, 0.0, s * self.length / 2]), 0.0, self.radius)
+               for i, s in enumerate((-1, 1))]
+        n = self.face_points
+        for i, s in enumerate((-1, 1)):
+            for j in range(n):
+                phi = 2 * math.pi * j / n
+                rho = self.radius / 2
+                out.append((f"face{i * n + j}", np.array([rho * math.cos(phi), rho * math.sin(phi), s * self.length / 2]),
+                            0.0))
+        return out
+
+    def spec(self):
+        return {**super().spec(), "radius": self.radius, "length": self.length, "face_points": self.face_points}
+
+
+def point_contacts(contacts) -> list:
+    """The point contacts of ``contacts`` (elements expanded), in order."""
+    return [p for c in contacts for p in c.point_contacts()]
+
+
+CONTACT_TYPES: dict[str, type[Contact]] = {cls.kind: cls for cls in (SpherePlane, SphereSphere, BoxPlane,
+                                                                     CapsulePlane, CylinderPlane)}

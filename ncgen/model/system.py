@@ -268,13 +268,17 @@ class System:
         return system_from_toml(source, cls)
 
     @classmethod
-    def from_urdf(cls, source, floating_base: bool = False, gravity=DEFAULT_GRAVITY, name=None) -> "System":
+    def from_urdf(cls, source, floating_base: bool = False, gravity=DEFAULT_GRAVITY, name=None,
+                  collisions=False) -> "System":
         """A robot from a URDF file (a path) or URDF text: links become bodies (fixed joints
         merge them), movable joints are actuated by the input ``tau`` (one component per
         joint, ``model.joint_names`` order); ``floating_base=True`` adds a free joint
-        ``root``.  See :mod:`ncgen.model.urdf`."""
+        ``root``; ``collisions=True`` (or a dict of contact keywords) turns the moving links'
+        ``<collision>`` boxes, cylinders and spheres into contacts with the ground plane z = 0.
+        See :mod:`ncgen.model.urdf`."""
         from ncgen.model.urdf import system_from_urdf
-        return system_from_urdf(source, cls, floating_base=floating_base, gravity=gravity, name=name)
+        return system_from_urdf(source, cls, floating_base=floating_base, gravity=gravity, name=name,
+                                collisions=collisions)
 
     def to_toml(self) -> str:
         """The system as TOML text that :meth:`from_toml` reads back."""

@@ -12,7 +12,9 @@ Layout of a file (every table optional except ``members``)::
     [[forces]]    type = "Spring", ..., name, and the force's arguments
     [[contacts]]  type = "SpherePlane" (sphere, at, radius, plane = "ground", point, normal)
                   or "SphereSphere" (between = ["a", "b"], at_a, radius_a, at_b, radius_b),
-                  with mu, restitution, stiffness, damping, exponent, slip_velocity, name
+                  or "BoxPlane" (body, size) / "CapsulePlane" (body, radius, length) /
+                  "CylinderPlane" (body, radius, length, face_points), each with at, rotation, plane,
+                  point, normal; all with mu, restitution, stiffness, damping, exponent, slip_velocity, name
 
 Shared basic points are written ``"crank.r_j"`` (slot ``r_j`` of member ``crank``) or
 ``{ground = [x, y, z]}``.  Values that may vary are numbers or expression strings
@@ -86,12 +88,18 @@ FORCE_FIELDS = {
     "GeneralizedForce": (Field("value", "generalized force", True),),
 }
 
+_SHAPE_PLANE = (Field("at", "vector"), Field("rotation", "rotation"), Field("plane", "member"), Field("point", "vector"), Field("normal", "vector"))
 #: Keys of each contact type besides the material (:data:`CONTACT_MATERIAL`).
 CONTACT_FIELDS = {
     "SpherePlane": (Field("sphere", "member", True), Field("at", "vector"), Field("radius", "number"),
                     Field("plane", "member"), Field("point", "vector"), Field("normal", "vector")),
     "SphereSphere": (Field("between", "two members", True, ("a", "b")), Field("at_a", "vector"),
                      Field("radius_a", "number"), Field("at_b", "vector"), Field("radius_b", "number")),
+    "BoxPlane": (Field("body", "member", True), Field("size", "vector", True), *_SHAPE_PLANE),
+    "CapsulePlane": (Field("body", "member", True), Field("radius", "number", True), Field("length", "number", True),
+                     *_SHAPE_PLANE),
+    "CylinderPlane": (Field("body", "member", True), Field("radius", "number", True), Field("length", "number", True),
+                      Field("face_points", "number"), *_SHAPE_PLANE),
 }
 
 #: Joints whose keys are not ``between`` and their keyword arguments.

@@ -23,6 +23,12 @@ Parsing is yourdfpy's (meshes are not loaded); this module maps the parsed tree:
   joint named ``root`` (Pinocchio's free flyer at the root link's frame).
 * Link frames (``model.frames``, ``model.frame_pose``) and visual geometry
   (``system.visuals``: boxes, cylinders, spheres; meshes by file name) are kept as data.
+* ``collisions=True`` (or a dict of contact keywords, e.g. ``{"mu": 0.8}``): each moving
+  link's ``<collision>`` box, cylinder and sphere becomes a contact against the ground plane
+  z = 0 (:class:`~ncgen.model.contacts.BoxPlane`, ``CylinderPlane``, ``SpherePlane``) named
+  ``<link>_collision<i>`` (``i`` counts the link's collision elements); meshes, and the
+  geometry of links fixed to the ground, are skipped (``system.skipped_collisions`` names
+  them).  Collisions between links are not modelled.
 
 Names: link and joint names become identifiers (characters other than letters, digits and
 ``_`` replaced by ``_``).
@@ -94,7 +100,8 @@ def _origin(T) -> np.ndarray:
     return np.eye(4) if T is None else np.asarray(T, float)
 
 
-def system_from_urdf(source, system_class, *, floating_base: bool = False, gravity=(0.0, 0.0, -9.81), name=None):
+def system_from_urdf(source, system_class, *, floating_base: bool = False, gravity=(0.0, 0.0, -9.81), name=None,
+                     collisions=False):
     """A system (an instance of ``system_class``, :class:`~ncgen.model.system.System`) from a
     URDF file or text; see the module docstring."""
     from ncgen.model.joints import Free, Mimic, Prismatic, Revolute
@@ -199,7 +206,43 @@ def system_from_urdf(source, system_class, *, floating_base: bool = False, gravi
                                  "movable joint of this robot")
             s.add_joint(Mimic(leader, made[j.name], multiplier=j.mimic.multiplier or 1.0,
                               offset=j.mimic.offset or 0.0, name=identifier(f"{j.name}_mimic")))
+    s.skipped_collisions = []
+    if collisions is not False and collisions is not None:
+        _add_collisions(s, collisions, order, links, member_of, group_of, pose, where)
     return s
+
+
+def _add_collisions(s, collisions, order, links, member_of, group_of, pose, where) -> None:
+    """Contacts against the ground plane z = 0 for the links' collision geometry (see the
+    module docstring)."""
+    from ncgen.model.contacts import BoxPlane, CylinderPlane, SpherePlane
+    if collisions is True:
+        material = {}
+    elif isinstance(collisions, dict):
+        material = dict(collisions)
+    else:
+        raise ModelError(f"URDF {where}: collisions: expected True, False or a dict of contact keywords "
+                         f"(mu, restitution, ...), got {collisions!r}")
+    for ln in order:
+        m = member_of[group_of[ln]]
+        for i, col in enumerate(links[ln].collisions or []):
+            g, name = col.geometry, identifier(f"{ln}_collision{i}")
+            if m.is_ground or g is None or (g.box is None and g.cylinder is None and g.sphere is None):
+                s.skipped_collisions.append(name)
+                continue
+            R, p = _local(m, pose[ln] @ _origin(col.origin))
+            kw = dict(material, name=name)
+            try:
+                if g.box is not None:
+                    contact = BoxPlane(m, size=np.asarray(g.box.size, float), at=p, rotation=R, **kw)
+                elif g.cylinder is not None:
+                    contact = CylinderPlane(m, radius=g.cylinder.radius, length=g.cylinder.length, at=p, rotation=R,
+                                            **kw)
+                else:
+                    contact = SpherePlane(m, p, g.sphere.radius, **kw)
+            except TypeError as e:
+                raise ModelError(f"URDF {where}: collisions: {e}") from None
+            s.add_contact(contact)
 
 
 def _lump(g: Group, links, pose) -> None:

@@ -199,7 +199,7 @@ def contact_scene(traj, model) -> dict:
     n, d = len(traj), traj.dim
     centres, radii, planes, points, forces = [], [], [], [], []
     for k, c in enumerate(model.contacts):
-        if c["type"] == "SpherePlane":
+        if "plane" in c:                                       # a sphere (or a shape's point) on a plane
             centre = traj.point(c["sphere"], c["at"])
             centres.append(centre)
             radii.append(c["radius"])
@@ -211,6 +211,10 @@ def contact_scene(traj, model) -> dict:
                 R = traj.poses()[0][:, model.member_names.index(c["plane"])]
                 normal = np.einsum("tij,j->ti", R, model.member(c["plane"]).direction_to_local(c["normal"]))
             push = np.broadcast_to(normal, (n, d))             # the plane pushes the sphere along its normal
+            if c.get("rim_radius", 0) > 0:                     # a cylinder rim's lowest point
+                axis = traj.point(c["sphere"], np.add(c["at"], c["axis"])) - centre
+                w = push - np.sum(push * axis, axis=1, keepdims=True) * axis
+                centre = centre - c["rim_radius"] * w / np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-12)
             contact = centre - c["radius"] * push
         else:
             ca_, cb = traj.point(c["a"], c["at_a"]), traj.point(c["b"], c["at_b"])
