@@ -25,6 +25,7 @@
 #define STEP_BAD_INPUT CHAIN_STEP_BAD_INPUT
 #define STEP_TOO_MANY_STEPS CHAIN_STEP_TOO_MANY_STEPS
 #define STEP_TOO_SMALL CHAIN_STEP_TOO_SMALL
+#define STEP_INTERRUPTED CHAIN_STEP_INTERRUPTED
 typedef chain_step_options step_options;
 #define DEFAULT_OPTIONS chain_step_default_options
 #define KERNEL_NEWTON chain_step_newton
@@ -49,6 +50,7 @@ chain_step_options chain_step_default_options(void) {
   o.tol = 1e-10;
   o.max_iter = 12;
   o.max_halvings = 4;
+  o.stop = 0;
   return o;
 }
 

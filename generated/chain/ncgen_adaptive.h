@@ -123,6 +123,10 @@ static int simulate_adaptive(const casadi_real *q0, const casadi_real *v0, const
       const casadi_real *uk = u_row;
       int land = 0, iters = 0;
       long unused = 0;
+      if (stop_requested(&single)) {
+        status = STEP_INTERRUPTED;
+        goto done;
+      }
       if (++attempts > max_steps) {
         status = STEP_TOO_MANY_STEPS;
         goto done;

@@ -25,6 +25,7 @@
 #define STEP_BAD_INPUT DOUBLE_PENDULUM_STEP_BAD_INPUT
 #define STEP_TOO_MANY_STEPS DOUBLE_PENDULUM_STEP_TOO_MANY_STEPS
 #define STEP_TOO_SMALL DOUBLE_PENDULUM_STEP_TOO_SMALL
+#define STEP_INTERRUPTED DOUBLE_PENDULUM_STEP_INTERRUPTED
 typedef double_pendulum_step_options step_options;
 #define DEFAULT_OPTIONS double_pendulum_step_default_options
 #define KERNEL_NEWTON double_pendulum_step_newton
@@ -49,6 +50,7 @@ double_pendulum_step_options double_pendulum_step_default_options(void) {
   o.tol = 1e-10;
   o.max_iter = 12;
   o.max_halvings = 4;
+  o.stop = 0;
   return o;
 }
 

@@ -135,6 +135,10 @@ static int run_fixed(const casadi_real *q0, const casadi_real *v0, const casadi_
   for (k = 0; k < n_steps; ++k) {
     const casadi_real *uk = u ? u + k * u_stride : 0;
     casadi_real tk = t0 + k * h;
+    if (stop_requested(o)) {
+      status = STEP_INTERRUPTED;
+      break;
+    }
     /* Work: trapezoidal rule over the step, both ends with the step's inputs. */
     if (track_work && (status = power(&ws, tk, q, v, lam, uk, p, &p_old)) != STEP_OK) break;
     iters = 0;

@@ -25,6 +25,7 @@
 #define STEP_BAD_INPUT HEAVY_TOP_STEP_BAD_INPUT
 #define STEP_TOO_MANY_STEPS HEAVY_TOP_STEP_TOO_MANY_STEPS
 #define STEP_TOO_SMALL HEAVY_TOP_STEP_TOO_SMALL
+#define STEP_INTERRUPTED HEAVY_TOP_STEP_INTERRUPTED
 typedef heavy_top_step_options step_options;
 #define DEFAULT_OPTIONS heavy_top_step_default_options
 #define KERNEL_NEWTON heavy_top_step_newton
@@ -49,6 +50,7 @@ heavy_top_step_options heavy_top_step_default_options(void) {
   o.tol = 1e-10;
   o.max_iter = 12;
   o.max_halvings = 4;
+  o.stop = 0;
   return o;
 }
 

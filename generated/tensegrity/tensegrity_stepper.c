@@ -25,6 +25,7 @@
 #define STEP_BAD_INPUT TENSEGRITY_STEP_BAD_INPUT
 #define STEP_TOO_MANY_STEPS TENSEGRITY_STEP_TOO_MANY_STEPS
 #define STEP_TOO_SMALL TENSEGRITY_STEP_TOO_SMALL
+#define STEP_INTERRUPTED TENSEGRITY_STEP_INTERRUPTED
 typedef tensegrity_step_options step_options;
 #define DEFAULT_OPTIONS tensegrity_step_default_options
 #define KERNEL_NEWTON tensegrity_step_newton
@@ -49,6 +50,7 @@ tensegrity_step_options tensegrity_step_default_options(void) {
   o.tol = 1e-10;
   o.max_iter = 12;
   o.max_halvings = 4;
+  o.stop = 0;
   return o;
 }
 

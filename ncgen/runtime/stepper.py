@@ -40,8 +40,8 @@ import time
 
 import numpy as np
 
-from ncgen.codegen.stepper_package import STATS, STATUS, TOL
-from ncgen.errors import NcgenError, SimulationError
+from ncgen.codegen.stepper_package import STATS, STATUS, STEP_INTERRUPTED, TOL
+from ncgen.errors import NcgenError, SimulationError, SimulationInterrupted
 from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.stepper_checks import (SHADOW_FACTOR, check_fixed, check_global, contact_report, energy_report,
                                           error_estimate, is_conservative, shadow_estimates, shadow_report,
@@ -103,6 +103,8 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, conse
     if contacts:
         traj.info["contacts"] = contact_report(S[:rows])
         warn_unconverged(model, traj.info["contacts"])
+    if status == STEP_INTERRUPTED:
+        _interrupted(model, traj, float(t[rows]))
     if status != 0:
         t_fail = float(t[0]) + done * h
         message = (f"simulation of {model.name!r} with the stepper failed in the step from "
@@ -133,6 +135,8 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, co
 
     Q, V, LAM, S, status, rows, h_next = run(rtol, atol)
     shadow = run(SHADOW_FACTOR * rtol, SHADOW_FACTOR * atol) if estimate and status == 0 else None
+    if shadow is not None and shadow[4] == STEP_INTERRUPTED:   # stopped in the shadow run: no estimate
+        status, shadow = STEP_INTERRUPTED, None
     stepping = time.perf_counter() - start
     info = {"method": "stepper", "backend": "compiled", "scheme": "RATTLE" if order == 2 else
             "RATTLE, Richardson-extrapolated and projected", "order": order, "rtol": rtol, "atol": atol,
@@ -141,6 +145,8 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, co
             "stats": _stats(S[:rows], int(S[:rows, 2].sum()))}
     info["stats"]["rejected_steps"] = info["stats"].pop("step_splits")
     traj = _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info, conservative, start)
+    if status == STEP_INTERRUPTED:
+        _interrupted(model, traj, float(t[rows]))
     if status != 0:
         message = (f"simulation of {model.name!r} with the error-controlled stepper (rtol {rtol:g}, atol "
                    f"{atol:g}) failed between t = {t[rows]:.6g} s and {t[rows + 1]:.6g} s (last step tried "
@@ -154,6 +160,14 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, co
         if check:
             check_global(model, traj, eq, rtol, atol)
     return traj
+
+
+def _interrupted(model, traj: Trajectory, t_stop: float):
+    """Raises :class:`~ncgen.errors.SimulationInterrupted` with ``traj``, the run up to
+    ``t_stop`` (s) when Ctrl-C stopped it, marked incomplete."""
+    message = f"simulation of {model.name!r} with the stepper interrupted (Ctrl-C) at t = {t_stop:.6g} s"
+    traj.info.update(complete=False, message=message)
+    raise SimulationInterrupted(message, time=t_stop, trajectory=traj)
 
 
 def newton_tolerance(rtol: float, atol: float, tol: float = TOL) -> float:

@@ -329,6 +329,24 @@ static void test_project_and_outputs(void) {
   CHECK(fabs(y[0] - M_P * vt * vt / 2) < 1e-9 && fabs(y[1] + M_P * G_P * 0.8) < 1e-9, "T = %g, V = %g", y[0], y[1]);
 }
 
+/* A stop request (options->stop set) ends both loops before their next step with
+ * STEP_INTERRUPTED and the rows done so far. */
+static void test_stop_request(void) {
+  casadi_real q0[2] = {0.6, -0.8}, v0[2] = {0.8, 0.6}, q[4], v[4];
+  volatile int stop = 1;
+  step_options o = test_default_options();
+  long done = -1, rows = -1;
+  int status;
+  o.stop = &stop;
+  status = run_fixed(q0, v0, 0, 0, 1e-3, 4, 2, 0, 0, 0, q, v, 0, 0, 0, &o, 1, 0, &done, 0, 0);
+  CHECK(status == STEP_INTERRUPTED && done == 0, "fixed: status %d, %ld steps", status, done);
+  status = simulate_adaptive(q0, v0, 0, 0, 0.1, 2, 0, 0, 0, 0, 1e-6, 1e-6, 0, 1, 100, 0, q, v, 0, 0, &o, &rows, 0);
+  CHECK(status == STEP_INTERRUPTED && rows == 0, "adaptive: status %d, %ld rows", status, rows);
+  stop = 0;
+  status = run_fixed(q0, v0, 0, 0, 1e-3, 4, 2, 0, 0, 0, q, v, 0, 0, 0, &o, 1, 0, &done, 0, 0);
+  CHECK(status == STEP_OK && done == 4, "fixed, not stopped: status %d, %ld steps", status, done);
+}
+
 int main(void) {
   test_newton_step();
   test_fixed_order_work_estimate();
@@ -336,5 +354,6 @@ int main(void) {
   test_error_controller();
   test_adaptive();
   test_project_and_outputs();
+  test_stop_request();
   return report("test_rattle");
 }

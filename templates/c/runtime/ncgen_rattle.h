@@ -13,8 +13,9 @@
  *   MASS_SCALE                 max |M_ij| (kg), the scale of the momentum residual
  *   MAX_HALVINGS               deepest step splitting the workspace allows
  *   NSTATS                     columns of a row of statistics (ncgen_fixed.h)
- *   STEP_OK .. STEP_TOO_SMALL  the status codes 0 .. 7 of <model>_stepper.h
- *   step_options               a struct with casadi_real tol, int max_iter, int max_halvings
+ *   STEP_OK .. STEP_INTERRUPTED  the status codes 0 .. 8 of <model>_stepper.h
+ *   step_options               a struct with casadi_real tol, int max_iter, int max_halvings,
+ *                              volatile int *stop
  *   DEFAULT_OPTIONS()          an expression giving the default step_options
  *   KERNEL_NEWTON, KERNEL_VELOCITY, KERNEL_CHECK, KERNEL_SOLVE, KERNEL_PROJECT, KERNEL_POWER,
  *   KERNEL_OUTPUTS             the generated kernels (CasADi's calling convention
@@ -313,6 +314,12 @@ static void predict(workspace *ws) {
   int i;
   for (i = 0; i < NQ; ++i) ws->x[i] = 2 * ws->dx[i] - ws->x[i];
   for (i = NQ; i < NX; ++i) ws->x[i] = ws->dx[i];
+}
+
+/* Whether the caller asked the run to stop (o->stop set and nonzero): read by the loops
+ * before every step. */
+static int stop_requested(const step_options *o) {
+  return o->stop && *o->stop;
 }
 
 static int recoverable(int status) {
