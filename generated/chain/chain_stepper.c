@@ -26,6 +26,7 @@
 #define STEP_TOO_MANY_STEPS CHAIN_STEP_TOO_MANY_STEPS
 #define STEP_TOO_SMALL CHAIN_STEP_TOO_SMALL
 #define STEP_INTERRUPTED CHAIN_STEP_INTERRUPTED
+#define SCHEME_RATTLE4 CHAIN_STEP_RATTLE4
 typedef chain_step_options step_options;
 #define DEFAULT_OPTIONS chain_step_default_options
 #define KERNEL_NEWTON chain_step_newton
@@ -50,6 +51,7 @@ chain_step_options chain_step_default_options(void) {
   o.tol = 1e-10;
   o.max_iter = 12;
   o.max_halvings = 4;
+  o.scheme = CHAIN_STEP_RATTLE;
   o.stop = 0;
   return o;
 }

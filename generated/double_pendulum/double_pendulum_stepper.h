@@ -73,12 +73,20 @@ extern "C" {
 /* Deepest step splitting the workspace allows. */
 #define DOUBLE_PENDULUM_STEP_MAX_HALVINGS 10
 
+/* Schemes (options->scheme): RATTLE (order 2), or its symmetric triple-jump composition
+ * (Yoshida, Suzuki: RATTLE steps of h1, -2^(1/3) h1, h1, h1 = h / (2 - 2^(1/3)); order 4,
+ * symplectic, both constraint levels kept; three RATTLE steps per step).  Fixed steps only
+ * (double_pendulum_step, double_pendulum_simulate, double_pendulum_simulate_stats). */
+#define DOUBLE_PENDULUM_STEP_RATTLE 0
+#define DOUBLE_PENDULUM_STEP_RATTLE4 1
+
 /* Newton options; double_pendulum_step_default_options() gives tol = 1e-10, max_iter = 12,
- * max_halvings = 4, stop = NULL. */
+ * max_halvings = 4, scheme = DOUBLE_PENDULUM_STEP_RATTLE, stop = NULL. */
 typedef struct {
   casadi_real tol;  /* tolerance of the convergence tests above */
   int max_iter;     /* Newton iterations allowed per step (>= 1) */
   int max_halvings; /* times a failing step may be halved (0 .. DOUBLE_PENDULUM_STEP_MAX_HALVINGS) */
+  int scheme;       /* DOUBLE_PENDULUM_STEP_RATTLE or DOUBLE_PENDULUM_STEP_RATTLE4 (above) */
   volatile int *stop; /* NULL, or a flag the loops read before every step: nonzero stops the
                          run with DOUBLE_PENDULUM_STEP_INTERRUPTED */
 } double_pendulum_step_options;

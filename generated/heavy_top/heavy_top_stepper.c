@@ -26,6 +26,7 @@
 #define STEP_TOO_MANY_STEPS HEAVY_TOP_STEP_TOO_MANY_STEPS
 #define STEP_TOO_SMALL HEAVY_TOP_STEP_TOO_SMALL
 #define STEP_INTERRUPTED HEAVY_TOP_STEP_INTERRUPTED
+#define SCHEME_RATTLE4 HEAVY_TOP_STEP_RATTLE4
 typedef heavy_top_step_options step_options;
 #define DEFAULT_OPTIONS heavy_top_step_default_options
 #define KERNEL_NEWTON heavy_top_step_newton
@@ -50,6 +51,7 @@ heavy_top_step_options heavy_top_step_default_options(void) {
   o.tol = 1e-10;
   o.max_iter = 12;
   o.max_halvings = 4;
+  o.scheme = HEAVY_TOP_STEP_RATTLE;
   o.stop = 0;
   return o;
 }

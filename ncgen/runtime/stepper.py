@@ -12,10 +12,13 @@ Two modes:
 
 * **Fixed steps** (``rtol=None``): ``substeps`` steps of ``h = dt / substeps`` per output
   interval; a step whose Newton iteration fails is split into halves (at most
-  ``max_halvings`` times, recursively), so the output grid stays fixed.  A shadow run with
-  steps of ``2h`` from the same start gives the global error estimate ``|y_h − y_2h| / 3``
-  (Richardson; ``info["error_estimate"]``, about half the work again; ``estimate=False``
-  skips it).  The run is checked (see :mod:`ncgen.runtime.stepper_checks`) and an
+  ``max_halvings`` times, recursively), so the output grid stays fixed.  The step is
+  RATTLE's (order 2), or with ``scheme="rattle4"`` the symmetric triple jump of RATTLE
+  steps ``h1, −2^(1/3) h1, h1`` with ``h1 = h / (2 − 2^(1/3))`` (Yoshida, Suzuki; order 4,
+  symplectic, on both constraint levels; three RATTLE steps each).  A shadow run with
+  steps of ``2h`` from the same start gives the global error estimate
+  ``|y_h − y_2h| / (2^p − 1)``, ``p`` the order (Richardson; ``info["error_estimate"]``,
+  about half the work again; ``estimate=False`` skips it).  The run is checked (see :mod:`ncgen.runtime.stepper_checks`) and an
   untrustworthy one raises :class:`~ncgen.errors.SimulationError`.
 * **Error control** (``rtol`` given): each step is taken whole and as two halves, the
   difference estimates the local error (Richardson; where the whole difference fails the
@@ -75,6 +78,13 @@ def simulate_stepper(model, t: np.ndarray, U: np.ndarray, p: np.ndarray, q0: np.
     if opts.rtol is not None and stepper.nd:
         raise NcgenError(f"rtol: model {model.name!r} has nonsmooth contacts, whose impacts the error control "
                          f"cannot follow; use fixed steps (substeps=N) or build it with contacts='smooth'")
+    if opts.scheme == "rattle4" and stepper.nd:
+        raise NcgenError(f"scheme: 'rattle4' needs a smooth model; {model.name!r} has nonsmooth contacts, which "
+                         f"keep their own scheme (first order at impacts): use scheme='rattle' or build it with "
+                         f"contacts='smooth'")
+    if opts.scheme == "rattle4" and opts.rtol is not None:
+        raise NcgenError("scheme: 'rattle4' is a fixed-step scheme (substeps=N); with rtol the error control "
+                         "runs RATTLE, Richardson-extrapolated to order 4 (order=4, the default)")
     run = _fixed if opts.rtol is None else _adaptive
     return run(model, stepper, t, U, p, q0, v0, lam0, opts, conservative)
 
@@ -89,13 +99,14 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, conse
     contacts = stepper.nd > 0          # nonsmooth contacts: no shadow run, one-sided energy check
     IMP = np.zeros((n_out, stepper.nd)) if contacts else None      # contact impulses per output interval
     start = time.perf_counter()
+    rattle4 = opts.scheme == "rattle4"
     Q, V, LAM, S, status, done, splits = stepper.simulate_stats(
         q0, v0, lam0, float(t[0]), h, n_out * substeps, substeps, step_inputs(U, t, hold, substeps), p, tol,
-        max_iter, max_halvings, estimate and not contacts, not conservative, impulse_out=IMP)
+        max_iter, max_halvings, estimate and not contacts, not conservative, impulse_out=IMP, scheme=int(rattle4))
     stepping = time.perf_counter() - start
     rows = done // substeps
     info = {"method": "stepper", "backend": "compiled", "scheme": "RATTLE, nonsmooth contacts" if contacts else
-            "RATTLE", "h": h, "substeps": substeps, "hold": hold, "tol": tol, "max_iter": max_iter,
+            "RATTLE, triple-jump composition" if rattle4 else "RATTLE", "order": 4 if rattle4 else 2, "h": h, "substeps": substeps, "hold": hold, "tol": tol, "max_iter": max_iter,
             "max_halvings": max_halvings, "estimate": estimate and not contacts, "stepping_time": stepping, "complete": status == 0,
             "stats": _stats(S[:rows], splits)}
     traj = _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info, conservative, start,

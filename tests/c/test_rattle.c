@@ -228,6 +228,30 @@ static void test_fixed_order_work_estimate(void) {
   CHECK(err[0] / err[1] > 3.5 && err[0] / err[1] < 4.5, "errors %g, %g: not second order", err[0], err[1]);
 }
 
+/* The triple jump (scheme SCHEME_RATTLE4): fourth order (the error falls 16 times with
+ * h / 2), both constraint levels held, the shadow run's estimate (now / 15) of the size of
+ * the true error. */
+static void test_rattle4_order_estimate(void) {
+  const casadi_real theta0 = 0.8, u = 0.7, T = 1.0;
+  casadi_real q0[2], v0[2], q[2 * 50], v[2 * 50], stats[NSTATS * 50], err[2];
+  step_options o = test_default_options();
+  long done = -1;
+  int k, status;
+  o.scheme = SCHEME_RATTLE4;
+  cartesian(theta0, 0, q0, v0);
+  for (k = 0; k < 2; ++k) {
+    long n = k ? 50 : 25;
+    casadi_real h = T / n, *qe = q + 2 * (n - 1), *ve = v + 2 * (n - 1), est;
+    status = run_fixed(q0, v0, 0, 0, h, n, 1, &u, 0, 0, q, v, 0, 0, stats, &o, 1, 0, &done, 0, 0);
+    CHECK(status == STEP_OK && done == n, "status %d, %ld steps", status, done);
+    err[k] = position_error(qe, theta0, u, T);
+    est = stats[NSTATS * (n - 1) + 3];
+    CHECK(fabs(phi(qe)) <= 1e-10 && fabs(qe[0] * ve[0] + qe[1] * ve[1]) <= 1e-10, "constraints");
+    CHECK(est > 0.3 * err[k] && est < 3 * err[k], "estimate %g for an error %g", est, err[k]);
+  }
+  CHECK(err[0] / err[1] > 14 && err[0] / err[1] < 18, "errors %g, %g: not fourth order", err[0], err[1]);
+}
+
 /* A step too long for Newton within max_iter is split into halves (counted), and fails
  * with max_halvings = 0; bad inputs are refused. */
 static void test_split_and_bad_input(void) {
@@ -350,6 +374,7 @@ static void test_stop_request(void) {
 int main(void) {
   test_newton_step();
   test_fixed_order_work_estimate();
+  test_rattle4_order_estimate();
   test_split_and_bad_input();
   test_error_controller();
   test_adaptive();
