@@ -4,7 +4,7 @@ deriving an n-link pendulum, side by side.
 ncgen, per N (chain of benchmarks/common.py), in a fresh child process with a fresh compile
 cache: ``System`` construction and ``build()`` (SymPy per coordinate type, CasADi assembly,
 consistent initial state), ``nc.generate`` (the model's C package: system functions, DAE
-Jacobian, stepper), ``compile_package`` (gcc; ncgen's default flags, -O2 and -O0 for the
+Jacobian, stepper), ``compile_package`` (gcc; ncgen's default flags, -O2 and -O1 for the
 files holding very long functions, unless ``--cflags``; files in parallel on all cores) and
 ``load_functions`` (casadi.external).  Wall time per phase and peak resident memory: of
 the Python process (``RUSAGE_SELF``) and of the largest compiler process
@@ -128,7 +128,8 @@ def main(argv=None) -> int:
     parser.add_argument("--smoke", action="store_true", help="tiny: runs in seconds (CI)")
     parser.add_argument("--sizes", type=int, nargs="+", help="numbers of bars (default 10 100 1000)")
     parser.add_argument("--cflags", default=None,
-                        help="compiler flags for every file (default: ncgen's, -O2 and -O0 for files with very long functions)")
+                        help="compiler flags for every file (default: ncgen's, -O2 and -O1 for files with very long functions)")
+    parser.add_argument("--no-kane", action="store_true", help="skip the SymPy KanesMethod comparison")
     parser.add_argument("--timeout", type=float, default=1800.0, help="seconds allowed per N")
     parser.add_argument("--kane-cap", type=float, default=60.0, help="stop KanesMethod after a run this long (s)")
     parser.add_argument("--child", nargs=2, metavar=("KIND", "N"), help=argparse.SUPPRESS)
@@ -140,7 +141,7 @@ def main(argv=None) -> int:
     sizes = args.sizes or ([2, 4] if args.smoke else [10, 100, 1000])
     kane_cap, kane_max = (5.0, 3) if args.smoke else (args.kane_cap, 40)
     print(machine())
-    flags = args.cflags or "ncgen default: -O2, -O0 for very long functions"
+    flags = args.cflags or "ncgen default: -O2, -O1 for very long functions"
     print(f"\n=== ncgen: chain of N bars, model -> C -> loaded library (cflags: {flags}) ===")
     print(f"  {'N':>5} {'nq':>5} {'build':>8} {'generate':>9} {'compile':>8} {'load':>7} {'total':>8} "
           f"{'C source':>9} {'RSS python':>11} {'RSS cc':>8}")
@@ -160,6 +161,12 @@ def main(argv=None) -> int:
         (n1, t1, _), (n2, t2, _) = rows[-2], rows[-1]
         print(f"  growth from N = {n1} to {n2}: time x{t2 / t1:.1f} for N x{n2 / n1:.0f} "
               f"(exponent {np.log(t2 / t1) / np.log(n2 / n1):.2f}; 1 = linear)")
+        totals = [r[1] for r in rows]
+        steps = [f"{a[0]}->{b[0]}" for a, b in zip(rows, rows[1:]) if b[1] < a[1]]
+        print(f"  monotonic in N: {'yes' if not steps else 'NO, falls at ' + ', '.join(steps)}; "
+              f"largest total {max(totals):.2f} s")
+    if args.no_kane:
+        return 0
     print("\n=== sympy.physics.mechanics KanesMethod: planar n-link pendulum, derivation only ===")
     print(f"  {'n':>3} {'time':>9} {'ops (M, f)':>11} {'RSS':>8}")
     ns, ts = [], []

@@ -288,7 +288,7 @@ def bench(name: str, targets, repeat: int, n_steps: int) -> None:
             h = mj[tgt][0]
             opts = {"rtol": best[tgt]["dopri5"][0], "atol": best[tgt]["dopri5"][0]}
             opts_rk4 = {"integrator": "rk4", "substeps": best[tgt]["rk4"][0]} if best[tgt]["rk4"] else None
-            e2e_n, e2e_r, e2e_m, sim_n, sim_r, sim_m = [], [], [], [], [], []
+            e2e_n, e2e_r, e2e_m, sim_n, sim_m = [], [], [], [], []
             mjm = robot.mujoco_model(h)
             q0, v0 = robot.ncgen_state(model)
             for _ in range(repeat):

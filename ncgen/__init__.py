@@ -5,8 +5,10 @@ bodies, bars and points with joints and forces is assembled into CasADi function
 (``System.build()``), turned into C, simulated and optimised.
 """
 from ncgen import viz  # nc.viz.plot, nc.viz.animate (cheap: matplotlib loads on use)
+from ncgen import robots  # nc.robots.urdf_path("panda"): example-robot-data's URDFs
 from ncgen.assembly.kinematics import assemble, dof_report, project_velocity, solve_kinematics
 from ncgen.codegen.model_package import generate
+from ncgen.control import MPC, StepDidNotConverge, StepFunction, export_mpc, ilqr, step_function
 from ncgen.errors import NcgenError
 from ncgen.model.contacts import Contact, SpherePlane, SphereSphere
 from ncgen.model.controllers import PD, ComputedTorque, Controller
@@ -21,11 +23,15 @@ from ncgen.model.shapes import Box, Capsule, Cylinder, Ellipsoid, Mesh, Shape, S
 from ncgen.model.system import System
 from ncgen.optim import OptimalControl, OptimalTrajectory
 from ncgen.runtime import SimulationOptions, Trajectory, simulate
+from ncgen.runtime.batch import BatchResult, simulate_batch
+from ncgen.runtime.samples import Samples
+from ncgen.runtime.sweep import SweepResult, open_sweep, sweep
 from ncgen.analysis.formfinding import Tensegrity, form_find
 from ncgen.analysis.linearization import LinearModel, linearize
 from ncgen.analysis.modes import Modes, modes
 from ncgen.analysis.statics import Equilibrium, equilibrium
 from ncgen.runtime.joint_dynamics import forward_dynamics, forward_dynamics_kernel, inverse_dynamics
+from ncgen.runtime.tree_algorithms import aba, aba_derivatives, algorithm_kernel, crba, rnea, rnea_derivatives
 from ncgen.runtime.tree_kernel import joint_forward_dynamics, joint_forward_dynamics_kernel
 from ncgen.analysis.reactions import JointReaction, joint_reactions
 from ncgen.symbolic.coordinates import coordinate_type
@@ -33,13 +39,14 @@ from ncgen.version import __version__
 
 
 __all__ = [
-    "Box", "Capsule", "ComputedTorque", "Contact", "Controller", "CoordinateDriver", "Cylinder", "Ellipsoid", "Mesh", "Shape", "Sphere", "Cylindrical", "Distance", "Equilibrium", "Fixed", "Force", "Free", "GeneralizedForce",
-    "Joint", "JointReaction", "LinearModel", "Mimic", "Model", "ModelError", "Modes", "NcgenError", "OptimalControl",
-    "OptimalTrajectory", "PD", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic", "Revolute", "SimulationOptions", "SpherePlane", "SphereSphere", "Spherical",
-    "Spring", "System", "Tensegrity", "Torque", "TorsionalSpring", "Trajectory", "Universal",
-    "assemble", "coordinate_type", "dof_report", "equilibrium", "form_find", "forward_dynamics",
-    "forward_dynamics_kernel", "generate", "inverse_dynamics", "joint_forward_dynamics",
-    "joint_forward_dynamics_kernel", "joint_reactions", "linearize", "modes",
-    "project_velocity", "simulate", "solve_kinematics",
-    "__version__", "viz",
+    "BatchResult", "Box", "Capsule", "ComputedTorque", "Contact", "Controller", "CoordinateDriver", "Cylinder", "Ellipsoid", "Mesh", "Shape", "Sphere", "Cylindrical", "Distance", "Equilibrium", "Fixed", "Force", "Free", "GeneralizedForce",
+    "Joint", "JointReaction", "LinearModel", "MPC", "Mimic", "Model", "ModelError", "Modes", "NcgenError", "OptimalControl",
+    "OptimalTrajectory", "PD", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic", "Revolute", "Samples", "SimulationOptions", "SpherePlane", "SphereSphere", "Spherical",
+    "Spring", "StepDidNotConverge", "StepFunction", "SweepResult", "System", "Tensegrity", "Torque", "TorsionalSpring", "Trajectory", "Universal",
+    "assemble", "coordinate_type", "dof_report", "equilibrium", "export_mpc", "form_find", "forward_dynamics",
+    "forward_dynamics_kernel", "generate", "ilqr", "inverse_dynamics", "joint_forward_dynamics",
+    "joint_forward_dynamics_kernel", "joint_reactions", "linearize", "modes", "open_sweep",
+    "aba", "aba_derivatives", "algorithm_kernel", "crba", "rnea", "rnea_derivatives",
+    "project_velocity", "simulate", "simulate_batch", "solve_kinematics", "step_function", "sweep",
+    "__version__", "robots", "viz",
 ]

@@ -10,6 +10,22 @@ argument), *what was expected* and *what was found*.
 REPORT_TO = "the ncgen issue tracker (the repository named in the README), with the command and this message"
 
 
+#: The door the user came through, ``"python"`` or ``"cli"`` (set by :func:`ncgen.cli.main`),
+#: so that messages name options as the user spells them (:func:`option`).
+_door = ["python"]
+
+
+def use_cli_names(on: bool = True) -> None:
+    """Make :func:`option` name command-line flags (``True``) or Python arguments."""
+    _door[0] = "cli" if on else "python"
+
+
+def option(python: str, cli: str) -> str:
+    """``python`` (e.g. ``"method='stepper'"``) or ``cli`` (e.g. ``"--method stepper"``),
+    as the user calls ncgen."""
+    return cli if _door[0] == "cli" else python
+
+
 class NcgenError(ValueError):
     """Base class of the errors ncgen raises for bad input."""
 

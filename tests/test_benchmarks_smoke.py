@@ -27,24 +27,33 @@ pytestmark = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc
     ("kernel.py --looped", ["=== looped vs straight-line C: chain of N = 3 bars", "max |difference| = 0.0e+00",
                             re.compile(r"loops in the looped C: [1-9]"),
                             "RATIO looped -O2 / flat -O2, jacobian", "RATIO VM / looped -O2, residual"]),
+    ("first_run.py", ["=== first ncgen simulate, cold cache", "vm backend", "=== model -> loaded library",
+                      "monotonic in N"]),
     ("build_scaling.py", ["=== ncgen: chain of N bars", "KanesMethod", "EXTRAPOLATED"]),
     ("long_run.py", ["=== heavy top", "=== chain of 5 bars", "RATIO ncgen / MuJoCo RK4"]),
     ("contact.py", ["=== chain of N = 3 bars falling on the ground", "RATIO ncgen / MuJoCo wall time",
                     "RATIO ncgen / MuJoCo penetration"]),
     ("joint_space.py", ["=== call overhead", "RATIO casadi.external / direct", "=== Panda",
                         "RATIO ncgen joint kernel / pinocchio.aba", "RATIO ncgen joint kernel C loop"]),
+    ("tree_algorithms.py", ["=== ur5", "RATIO ur5 ncgen forward dynamics / pinocchio.aba",
+                            "RATIO ur5 ncgen RNEA / pinocchio.rnea",
+                            "RATIO ur5 ncgen ABA derivatives / pinocchio.computeABADerivatives"]),
     ("animation.py", ["=== slider_crank", "RATIO PillowWriter / ncgen animate", "to_html:"]),
     ("joint_simulation.py", ["=== panda: 1 s fall", "RATIO ncgen / MuJoCo RK4, end to end, DOPRI5",
                              "RATIO ncgen / MuJoCo RK4, simulate only, DOPRI5", "agrees with Pinocchio"]),
+    ("batch.py", ["=== scaling: 8 runs", "RATIO one thread / two threads", "per-run cost of one-step runs",
+                  "RATIO ncgen / mujoco.rollout, 1 thread(s)", "RATIO ncgen / mujoco.rollout, 2 thread(s)"]),
     ("sharing_chain.py", ["=== chain of N = 3 bars", "RATIO explicit (shared by build) / shared-point chain"]),
     ("reactions_shared.py", ["=== explicit-joint chain of N = 3 bars", "unshared form built on first use",
                              "RATIO shared / share=False, joint_reactions per state"]),
     ("optimal_control.py", [re.compile(r"cartpole +8 \|"), re.compile(r"acrobot +8 \|"), re.compile(r"arm3d +8 \|"),
                             "RATIO ncgen / minimal, iterations", "RATIO ncgen / minimal, solve time",
                             "converged: ncgen 3/3, minimal 3/3"]),
+    ("control.py", ["=== step Jacobians: chain of N = 3 bars", "RATIO ncgen / mujoco mjd_transitionFD forward",
+                    "=== cart-pole MPC", "RATIO IPOPT re-solve / MPC step"]),
 ])
 def test_smoke(tmp_path, script, expected):
-    if script in ("joint_space.py", "joint_simulation.py"):
+    if script in ("joint_space.py", "joint_simulation.py", "tree_algorithms.py"):
         pytest.importorskip("pinocchio")
         pytest.importorskip("yourdfpy")
     root = str(BENCHMARKS.parent)        # the checkout under test, whatever ncgen is installed

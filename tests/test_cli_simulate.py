@@ -50,7 +50,7 @@ def test_npz_csv_and_plot(tmp_path, capsys):
     run(capsys, ["simulate", str(EXAMPLES / "chain.toml"), "--t-end", "0.1", "-o", str(tmp_path / "c.csv"),
                  "--backend", "vm"])
     header = (tmp_path / "c.csv").read_text().splitlines()[0].split(",")
-    assert header[:2] == ["t", "bar1.r_j.x"] and "energy" in header
+    assert header[:2] == ["t [s]", "bar1.r_j.x [m]"] and "energy [J]" in header and "v.bar1.r_j.x [m/s]" in header
     assert sorted(p.name for p in tmp_path.iterdir()) == ["c.csv", "c.npz", "c.png"]
 
 

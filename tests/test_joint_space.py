@@ -276,7 +276,7 @@ def test_toml_initial_state_in_joint_space_and_trajectory_outputs(tmp_path):
     np.testing.assert_allclose(E, traj.energy, atol=1e-6)
     traj.save(tmp_path / "p.csv")
     header = (tmp_path / "p.csv").read_text().splitlines()[0].split(",")
-    assert "qj.pivot" in header and "vj.pivot" in header
+    assert "qj.pivot [rad]" in header and "vj.pivot [rad/s or m/s]" in header
     traj.save(tmp_path / "p.npz")
     back = nc.Trajectory.load(tmp_path / "p.npz")
     np.testing.assert_allclose(back.joint("pivot")[0], th)

@@ -4,8 +4,8 @@ Every ``import``/``from … import`` of an ``ncgen`` module is an edge, wherever
 (module level or inside a function).  The layer order, lowest first (also in
 docs/architecture.md)::
 
-    base (errors, validation, reproducible, files, interrupts, version)
-    ← symbolic ← model ← assembly ← codegen ← rigid_motion ← runtime ← analysis ← viz ← optim ← cli
+    base (errors, validation, reproducible, files, interrupts, version, robots, progress)
+    ← symbolic ← model ← rigid_motion ← assembly ← codegen ← runtime ← analysis ← viz ← optim ← control ← cli
     ← ncgen (the package root)
 
 A module may import modules of its own layer and of lower ones.  The exceptions, all
@@ -22,9 +22,9 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1] / "ncgen"
 
-LAYERS = ["base", "symbolic", "model", "assembly", "codegen", "rigid_motion", "runtime", "analysis", "viz", "optim",
-          "cli", "root"]
-BASE = {"errors", "validation", "reproducible", "files", "interrupts", "version"}
+LAYERS = ["base", "symbolic", "model", "rigid_motion", "assembly", "codegen", "runtime", "analysis", "viz", "optim",
+          "control", "cli", "root"]
+BASE = {"errors", "validation", "reproducible", "files", "interrupts", "version", "robots", "progress"}
 #: (importing module, imported module): the documented exceptions.
 EXCEPTIONS = {("ncgen.model.system", "ncgen.assembly.build"),
               ("ncgen.runtime.trajectory", "ncgen.analysis.reactions"),

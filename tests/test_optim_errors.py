@@ -200,7 +200,8 @@ def pendulum_files(tmp_path):
 
 
 def test_cli_optimize_writes_trajectory_and_plot(pendulum_files, capsys, monkeypatch):
-    status, out, err = _ncgen("optimize", "swing.toml", cwd=pendulum_files, capsys=capsys, monkeypatch=monkeypatch)
+    status, out, err = _ncgen("optimize", "swing.toml", "-o", "swing.npz", "--plot", "swing.png", cwd=pendulum_files,
+                              capsys=capsys, monkeypatch=monkeypatch)
     assert status == 0, err
     assert "Solve_Succeeded" in out
     traj = nc.Trajectory.load(pendulum_files / "swing.npz")
@@ -214,7 +215,7 @@ def test_cli_optimize_failures(pendulum_files, capsys, monkeypatch):
 
     (pendulum_files / "bad.toml").write_text(
         'model = "pendulum.toml"\n[bounds.inputs]\ntau = [-1, 1]\n[final]\nq = [0.0, 1.0]\n')
-    status, _, err = ncgen("optimize", "bad.toml")
+    status, _, err = ncgen("optimize", "bad.toml", "-o", "bad.npz", "--plot", "bad.png")
     assert status == 1 and "Likely culprit: final q" in err
     assert not (pendulum_files / "bad.npz").exists() and not (pendulum_files / "bad.png").exists()
     (pendulum_files / "typo.toml").write_text('model = "pendulum.toml"\n[bounds.input]\ntau = [-1, 1]\n')

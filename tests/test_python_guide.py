@@ -5,15 +5,17 @@ heading) run in order in one shared namespace, each section in a fresh namespace
 fresh temporary working directory (files the snippets write land there).  A failing
 snippet fails the test with the section, the snippet's number, its text and the error.
 The snippets carry their own ``assert``s on facts (closed-form periods, DOF counts, energy
-conservation, ...); this file also checks that every section has some.
+conservation, ...); this file also checks that every section has some.  What a snippet
+prints is compared with the ```text block after it (tests/doc_snippets.py).
 """
 from __future__ import annotations
 
 import re
-import traceback
 from pathlib import Path
 
 import pytest
+
+from doc_snippets import run_section, sections
 
 GUIDE = Path(__file__).resolve().parents[1] / "docs" / "python-guide.md"
 BLOCK = re.compile(r"^```python[ \t]*\n(.*?)^```[ \t]*$", re.S | re.M)
@@ -44,25 +46,8 @@ def test_no_python_block_outside_sections():
 
 @pytest.mark.parametrize("title, blocks", SECTIONS, ids=[re.sub(r"\W+", "_", t).strip("_") for t, _ in SECTIONS])
 def test_section_runs(title, blocks, tmp_path, monkeypatch):
+    """The section's snippets run in order in one namespace and print what the guide shows
+    (tests/doc_snippets.py)."""
     monkeypatch.chdir(tmp_path)
-    namespace: dict = {"__name__": f"python_guide_{len(title)}"}
-    for number, code in enumerate(blocks, start=1):
-        where = f"{GUIDE.name}, section {title!r}, snippet {number}"
-        failure = None
-        try:
-            exec(compile(code, where, "exec"), namespace)
-        except Exception as error:  # noqa: BLE001 - any failure is reported with its snippet
-            failure = error
-        if failure is not None:
-            pytest.fail(_report(where, code, failure), pytrace=False)
-
-
-def _report(where: str, code: str, error: BaseException) -> str:
-    """The snippet, numbered, with its failing line marked, then the last frames."""
-    frames = [f for f in traceback.extract_tb(error.__traceback__) if f.filename == where]
-    bad = frames[-1].lineno if frames else None
-    numbered = "\n".join(f"{'>>' if i == bad else '  '}{i:4d}  {line}"
-                         for i, line in enumerate(code.splitlines(), start=1))
-    trace = "".join(traceback.format_exception(type(error), error, error.__traceback__)[-6:])
-    return (f"{where} raised {type(error).__name__}: {error}\n\n--- snippet ---\n{numbered}\n"
-            f"--- traceback (last frames) ---\n{trace}")
+    snippets = dict(sections(GUIDE))[title]
+    run_section(f"{GUIDE.name}, section {title!r}", snippets, {"__name__": f"python_guide_{len(title)}"})

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import ncgen.rigid_motion as rm
+from ncgen.codegen.rigid_motion_package import write_c_package
 from ncgen.rigid_motion import casadi_forms as crm
 from ncgen.codegen import compile_package, load_functions
 from ncgen.errors import CompilerNotFound
@@ -127,7 +128,7 @@ def test_log_jacobian_finite_and_correct(angle):
 @pytest.fixture(scope="module")
 def compiled(tmp_path_factory):
     out = tmp_path_factory.mktemp("rigid_motion_c")
-    pkg = rm.write_c_package(out / "pkg")
+    pkg = write_c_package(out / "pkg")
     mp = pytest.MonkeyPatch()
     mp.setenv("NCGEN_CACHE_DIR", str(out / "cache"))
     try:
@@ -162,8 +163,8 @@ def test_numpy_casadi_and_c_agree(compiled, name):
 
 def test_c_package_is_deterministic(tmp_path):
     """Same package bytes from separate processes with different hash seeds."""
-    script = ("import sys, ncgen.rigid_motion as rm; "
-              "print(rm.write_c_package(sys.argv[1]).content_hash)")
+    script = ("import sys; from ncgen.codegen.rigid_motion_package import write_c_package; "
+              "print(write_c_package(sys.argv[1]).content_hash)")
     hashes = set()
     for seed in ("1", "2"):
         run = subprocess.run([sys.executable, "-c", script, str(tmp_path / seed)], capture_output=True,

@@ -1,5 +1,5 @@
 """The rotation formulas of the joint coordinates (SymPy source in ncgen.symbolic.rigid_motion,
-CasADi by translation in ncgen.assembly.rotation_forms) against scipy's independent
+CasADi by translation in ncgen.rigid_motion.casadi_forms) against scipy's independent
 conversions: quaternions at random rotations and near 180° (every Shepperd branch), swings
 and their small-angle series."""
 import casadi as ca
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from ncgen.assembly import rotation_forms
+from ncgen.rigid_motion import casadi_forms as rotation_forms
 
 
 def canonical(quat):

@@ -110,12 +110,15 @@ def test_csv(tmp_path, traj):
     path = traj.save(tmp_path / "run.csv")
     with open(path) as fh:
         rows = list(csv.reader(fh))
-    assert rows[0] == ["t", *traj.coordinate_names, "energy", "kinetic", "potential",
-                       "constraint_residual", "velocity_residual"]
+    nq = traj.q.shape[1]
+    assert rows[0][0] == "t [s]" and [h.split(" [")[0] for h in rows[0][1:1 + nq]] == traj.coordinate_names
+    assert rows[0][-5:] == ["energy [J]", "kinetic [J]", "potential [J]", "constraint_residual [m^2]",
+                            "velocity_residual [m^2/s]"]
     table = np.array(rows[1:], dtype=float)
     assert table.shape == (len(traj), len(rows[0]))
     np.testing.assert_array_equal(table[:, 0], traj.t)
-    np.testing.assert_array_equal(table[:, 1:1 + traj.q.shape[1]], traj.q)
+    np.testing.assert_array_equal(table[:, 1:1 + nq], traj.q)
+    np.testing.assert_array_equal(table[:, 1 + nq:1 + 2 * nq], traj.v)
     np.testing.assert_array_equal(table[:, -1], traj.velocity_residual)
 
 

@@ -99,7 +99,7 @@ def test_planar_pendulum_compiled_closed_form():
         nc.joint_forward_dynamics_kernel(model, method="aba")
 
 
-def test_models_that_are_not_trees_fall_back_to_the_kkt_solve():
+def test_models_that_are_not_trees_fall_back_to_the_kkt_solve_and_mimic_joints_get_the_kernel():
     s = nc.System("loop", gravity=(0, -G))
     crank = s.add_bar("crank", mass=1.0, ends=[(0, 0), (0, 1)])
     coupler = s.add_bar("coupler", mass=1.0, ends=[(0, 1), (2, 1)])
@@ -121,11 +121,14 @@ def test_models_that_are_not_trees_fall_back_to_the_kkt_solve():
     j2 = s.add_joint(nc.Prismatic(s.ground, b2, at=(0.5, 1, 0), axis=(0, 0, 1), name="f2"))
     s.add_joint(nc.Mimic(j1, j2, multiplier=-2.0, name="link"))
     mimic = s.build()
-    with pytest.raises(nc.ModelError, match="constraints besides its tree"):
-        nc.joint_forward_dynamics_kernel(mimic)
+    # a mimic joint is not a loop: the kernel takes it (the follower set from its leader);
     # f1 + f2 masses move together: z̈1 (m + 4m) = −m g + 2 m g
+    k = nc.joint_forward_dynamics_kernel(mimic)
+    np.testing.assert_allclose(k([0.1, -0.2], [0.0, 0.0]), [G / 5, -2 * G / 5], atol=1e-12)
     np.testing.assert_allclose(nc.joint_forward_dynamics(mimic, [0.1, -0.2], [0.0, 0.0]), [G / 5, -2 * G / 5],
                                atol=1e-12)
+    np.testing.assert_allclose(nc.joint_forward_dynamics(mimic, [0.1, -0.2], [0.3, -0.6], backend="numpy"),
+                               k([0.1, -0.2], [0.3, -0.6]), atol=1e-12)
 
 
 def test_written_out_cholesky():
@@ -235,3 +238,30 @@ def test_thin_disc_and_bar_swing_in_the_compiled_kernel(share):
         a_c = kernel(qj, vj).copy()
         a_n = nc.joint_forward_dynamics(model, qj, vj, backend="numpy")
         np.testing.assert_allclose(a_c, a_n, rtol=0, atol=1e-9 * np.max(np.abs(a_n)))
+
+
+def test_mimic_chains_resolve_to_their_leader_and_match_the_kkt_solve():
+    """f3 mimics f2 (×3, +0.1), which mimics f1 (×−2): f3 = −6 f1 + 0.1.  The kernel sets the
+    followers from the leader and agrees with the constrained (KKT) solve; the independent
+    rate is f1's alone."""
+    from ncgen.assembly.tree_dynamics import MimicMap
+
+    s = nc.System("chain_of_mimics", gravity=(0, 0, -G))
+    bodies = [s.add_body(f"b{k}", mass=1.0 + k, inertia=np.diag([0.1, 0.2, 0.25]), position=(0.5, k, 0))
+              for k in range(3)]
+    js = [s.add_joint(nc.Prismatic(s.ground, b, at=(0.5, k, 0), axis=(0, 0, 1), name=f"f{k + 1}"))
+          for k, b in enumerate(bodies)]
+    s.add_joint(nc.Mimic(js[0], js[1], multiplier=-2.0, name="m2"))
+    s.add_joint(nc.Mimic(js[1], js[2], multiplier=3.0, offset=0.1, name="m3"))
+    model = s.build(assemble=True)
+    mimic = MimicMap(model)
+    np.testing.assert_array_equal(mimic.G, [[1.0], [-2.0], [-6.0]])
+    assert mimic.position[2] == (0, -6.0, 0.1)
+    k = nc.joint_forward_dynamics_kernel(model)
+    qj, vj = np.array([0.2, -0.4, -1.1]), np.array([0.5, -1.0, -3.0])
+    # m1 z̈ + (−2) m2 (−2 z̈) + (−6) m3 (−6 z̈) = −g (m1 − 2 m2 − 6 m3)
+    m = np.array([1.0, 2.0, 3.0])
+    z = -G * (m[0] - 2 * m[1] - 6 * m[2]) / (m[0] + 4 * m[1] + 36 * m[2])
+    np.testing.assert_allclose(k(qj, vj), [z, -2 * z, -6 * z], atol=1e-12)
+    np.testing.assert_allclose(nc.joint_forward_dynamics(model, qj, vj, backend="numpy"), [z, -2 * z, -6 * z],
+                               atol=1e-10)

@@ -92,14 +92,25 @@ def linearization(model):
                                                                        model.dof))
 
 
-def linearize(model, q, v=None, u=None, p=None, *, t: float | None = None, coordinates=None) -> LinearModel:
+def linearize(model, q, v=None, u=None, p=None, *, t: float | None = None, coordinates=None,
+              space: str = "natural"):
     """Linearise ``model`` about ``(q, v)`` (consistent: ``Φ = 0``, ``A v + Φ_t = 0``; ``v``
     default zeros) with inputs ``u`` (default zeros), parameters ``p`` (default the model's;
     array or dict by name) at time ``t`` (default ``model.t0``).  ``coordinates``: the
     matrix ``G`` (dof × nq) of independent coordinates (default ``Nᵀ``, ``N`` orthonormal).
     ``q`` may also be an :class:`~ncgen.analysis.statics.Equilibrium` (its ``q``, ``u``, ``p``, ``t``).
     See the module docstring; redundant constraints must have been dropped (the default
-    of ``System.build``)."""
+    of ``System.build``).  ``space="joint"`` (3D trees): ``q``, ``v`` are joint positions and
+    rates and the result is the joint-space model of
+    :func:`~ncgen.analysis.joint_linearization.joint_linearization` (Pinocchio's
+    ``computeABADerivatives``, at any state)."""
+    if space not in ("natural", "joint"):
+        raise NcgenError(f"linearize: space: expected 'natural' or 'joint', got {space!r}")
+    if space == "joint":
+        from ncgen.analysis.joint_linearization import joint_linearization
+        if coordinates is not None:
+            raise NcgenError("linearize: coordinates= is for space='natural' (space='joint' uses the joint angles)")
+        return joint_linearization(model, q, v, u, p, t)
     from ncgen.analysis.statics import Equilibrium
     if isinstance(q, Equilibrium):
         eq = q

@@ -128,11 +128,14 @@ class Equilibrium:
                  f"stability: {self.stability} (reduced tangent stiffness: {len(self.stiffness_eigenvalues)} "
                  f"eigenvalues, {self.n_negative} negative, {self.n_zero} zero; smallest "
                  + (f"{self.stiffness_eigenvalues[0]:.6g})" if len(self.stiffness_eigenvalues) else "none)"),
-                 "", f"{'coordinate':<28}{'q':>14}"]
-        lines += [f"{n:<28}{x:>14.6g}" for n, x in zip(self.model.coordinate_names, self.q)]
+                 ""]
+        wq = max(map(len, ["coordinate", *self.model.coordinate_names])) + 2     # columns never run together
+        lines += [f"{'coordinate':<{wq}}{'q':>14}"]
+        lines += [f"{n:<{wq}}{x:>14.6g}" for n, x in zip(self.model.coordinate_names, self.q)]
         if self.lam.size:
-            lines += ["", f"{'constraint':<34}{'lambda':>14}"]
-            lines += [f"{n:<34}{x:>14.6g}" for n, x in zip(self.model.constraint_names, self.lam)]
+            wc = max(map(len, ["constraint", *self.model.constraint_names])) + 2
+            lines += ["", f"{'constraint':<{wc}}{'lambda':>14}"]
+            lines += [f"{n:<{wc}}{x:>14.6g}" for n, x in zip(self.model.constraint_names, self.lam)]
         try:
             reactions, missing = self.joint_reactions(), None
         except ModelError as e:          # the unshared form of a shared model could not be made
@@ -141,9 +144,11 @@ class Equilibrium:
             lines += ["", f"reactions of the joints eliminated by coordinate sharing are not shown: {missing}"]
         if reactions:
             d = self.model.dim
-            lines += ["", f"{'joint':<16}{'on member':<16}{'force (N)':<{12 * d}}    moment about COM (N m)"]
-            lines += [f"{j:<16}{m:<16}" + "".join(f"{x:<12.5g}" for x in f) + "    "
-                      + "".join(f"{x:<12.5g}" for x in np.atleast_1d(mo)) for j, m, f, mo in reactions]
+            wj = max(len(j) for j, *_ in [("joint",), *reactions]) + 2
+            wm = max(len(m) for _, m, *_ in [("", "on member"), *reactions]) + 2
+            lines += ["", f"{'joint':<{wj}}{'on member':<{wm}}{'force (N)':>{13 * d}}   moment about COM (N m)"]
+            lines += [f"{j:<{wj}}{m:<{wm}}" + "".join(f"{x:>13.5g}" for x in f) + "   "
+                      + "".join(f"{x:>13.5g}" for x in np.atleast_1d(mo)) for j, m, f, mo in reactions]
         if self.springs:
             lines += ["", f"{'spring':<20}{'tension (N)':>14}{'length (m)':>14}  state"]
             lines += [f"{n:<20}{T:>14.6g}{length:>14.6g}  {'SLACK' if s else 'taut'}"

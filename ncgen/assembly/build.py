@@ -74,6 +74,8 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     if redundant not in REDUNDANT_MODES:
         raise ModelError(f"redundant: expected one of {', '.join(REDUNDANT_MODES)}, got {redundant!r}")
     alpha, beta = (float(x) for x in baumgarte)
+    recipe = (system, dict(baumgarte=(alpha, beta), redundant=redundant, tolerance=tolerance, t0=t0,
+                           assemble=assemble, fix=tuple(fix), contacts=contacts, share=share))
     plan = unshared = None
     if share and not fix:          # fix names coordinates as written: no sharing then
         nq_before = make_layout(system.dim, list(system.members.values())).nq
@@ -149,7 +151,7 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
                      redundant=redundant_labels, dropped=(redundant == "drop"), t0=t0,
                      springs=spring_table(system, ctx), limits=limits, joint_space=joint_space,
                      contacts=contact_specs(system.contacts), contact_model=contacts, sharing=plan,
-                     unshared=unshared)
+                     unshared=unshared, recipe=recipe)
 
     model = model_with(state)
     if system.initial_joints or system.initial_joint_rates:

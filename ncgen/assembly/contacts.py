@@ -29,6 +29,7 @@ import numpy as np
 from ncgen.errors import ModelError
 from ncgen.model.context import Context, perpendicular_basis
 from ncgen.model.contacts import SpherePlane, SphereSphere
+from ncgen.rigid_motion import casadi_forms as crm
 
 
 class ContactTerms:
@@ -44,14 +45,14 @@ def contact_terms(ctx: Context, contacts) -> list[ContactTerms]:
 
 
 def _omega_cross(ctx: Context, member, d):
-    """``ω × d`` for member ``member`` (zero for points); ``ω`` linear in q̇."""
+    """``ω × d = ω̂ d`` for member ``member`` (zero for points; ``crm.so3_hat`` in 3D); ``ω`` linear in q̇."""
     D = member.ctype.derivation
     if getattr(D, "omega", None) is None:
         return ca.SX.zeros(ctx.dim)
     w = ctx.instantiate(member, D.omega)
     if ctx.dim == 2:
         return w[0] * ca.vertcat(-d[1], d[0])
-    return ca.cross(w, d)
+    return ca.mtimes(crm.so3_hat(w), d)
 
 
 def _material_velocity(ctx: Context, member, r_ref, rdot_ref, x):

@@ -59,10 +59,10 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from ncgen.assembly import rotation_forms
-from ncgen.reproducible import perpendicular_basis
-from ncgen.model.joint_equations import angle_gauge, bar_axis, is_along, is_full, kind_of, name_of
 from ncgen.errors import ModelError
+from ncgen.model.joint_equations import angle_gauge, bar_axis, is_along, is_full, kind_of, name_of
+from ncgen.reproducible import perpendicular_basis
+from ncgen.rigid_motion import casadi_forms as crm
 
 
 @dataclass
@@ -206,7 +206,7 @@ def swing(u0, u) -> ca.SX:
     (:func:`ncgen.symbolic.rigid_motion.swing`: ``φ = (θ / sin θ)(u0 × u)``, a series near
     θ = 0 so that it and its derivatives stay smooth there)."""
     e1, e2 = perpendicular_basis(u0)
-    phi = rotation_forms.swing(ca.DM(u0), u)
+    phi = crm.swing(ca.DM(u0), u)
     return ca.vertcat(ca.dot(phi, ca.DM(e1)), ca.dot(phi, ca.DM(e2)))
 
 
@@ -287,4 +287,4 @@ def _body_rate(ctx, R) -> ca.SX:
 def quaternion(R) -> ca.SX:
     """Unit quaternion ``[qx, qy, qz, qw]`` (``qw ≥ 0``) of the rotation matrix ``R``
     (Shepperd's method, :func:`ncgen.symbolic.rigid_motion.quaternion`)."""
-    return rotation_forms.quaternion(R)
+    return crm.quaternion(R)

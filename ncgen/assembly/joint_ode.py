@@ -105,7 +105,7 @@ def joint_ode_function(model, dynamics: ca.Function, inverse_dynamics: ca.Functi
     js = model.joint_space
     t, p = ca.SX.sym("t"), ca.SX.sym("p", model.np)
     x, w = ca.SX.sym("x", js.nq + js.nv), ca.SX.sym("w", model.nu)
-    qj, vj = x[:js.nq], x[js.nq:]
+    vj = x[js.nq:]
     parts = []
     k = 0
     quats = set(quaternion_offsets(js))

@@ -14,10 +14,10 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ncgen.reproducible import perpendicular_basis
-from ncgen.assembly.rotation_forms import exp_so3
 from ncgen.errors import ModelError
 from ncgen.model.joint_equations import bar_axis, is_along, is_full
+from ncgen.reproducible import perpendicular_basis
+from ncgen.rigid_motion import casadi_forms as crm
 
 
 @dataclass
@@ -80,21 +80,23 @@ def _bar_edge(j, at) -> Edge:
     return Edge(j.name, kind, *names, (eye, at), (eye, near), axes, one_way=True)
 
 
+def _numeric(x) -> np.ndarray:
+    return np.array(ca.DM(x), float)
+
+
 def rotation_about(axis, angle, sym: bool = False):
-    """Rodrigues: rotation by ``angle`` (rad) about the unit ``axis`` (SX when ``sym``)."""
-    k = np.asarray(axis, float)
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    if sym:
-        return ca.DM.eye(3) + ca.sin(angle) * ca.DM(K) + (1 - ca.cos(angle)) * ca.DM(K @ K)
-    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * (K @ K)
+    """Rotation by ``angle`` (rad) about the unit ``axis`` (SX when ``sym``;
+    :func:`ncgen.symbolic.rigid_motion.rotation_about`)."""
+    R = crm.rotation_about(ca.DM(np.asarray(axis, float)), angle)
+    return R if sym else _numeric(R)
 
 
 def rotation_vector(phi, sym: bool = False):
     """``exp(φ̂)``: rotation by ``|φ|`` about ``φ`` (SX when ``sym``;
     :func:`ncgen.symbolic.rigid_motion.exp_so3`)."""
     if sym:
-        return exp_so3(phi)
-    return np.array(exp_so3(np.asarray(phi, float).reshape(3, 1)), float)
+        return crm.exp_so3(phi)
+    return _numeric(crm.exp_so3(np.asarray(phi, float).reshape(3, 1)))
 
 
 def rotation_2d(angle, sym: bool = False):
@@ -106,23 +108,17 @@ def rotation_2d(angle, sym: bool = False):
 
 
 def quaternion_matrix(quat, sym: bool = False):
-    """Rotation matrix of the unit quaternion ``[qx, qy, qz, qw]`` (normalised first)."""
+    """Rotation matrix of the unit quaternion ``[qx, qy, qz, qw]`` (normalised first; SX when
+    ``sym``; :func:`ncgen.symbolic.rigid_motion.quaternion_matrix`)."""
     if sym:
-        x, y, z, w = (quat[i] / ca.norm_2(quat) for i in range(4))
-        rows = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
-        return ca.vertcat(*[ca.horzcat(*r) for r in rows])
-    x, y, z, w = np.asarray(quat, float) / np.linalg.norm(quat)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+        return crm.quaternion_matrix(quat)
+    return _numeric(crm.quaternion_matrix(np.asarray(quat, float).reshape(4, 1)))
 
 
 def quaternion_rate(quat, omega):
-    """``q̇ = ½ q ⊗ [ω; 0]`` for ω in the rotated frame's axes ([qx, qy, qz, qw] order)."""
-    qv, qw = quat[:3], quat[3]
-    return 0.5 * ca.vertcat(qw * omega + ca.cross(qv, omega), -ca.dot(qv, omega))
+    """``q̇ = ½ q ⊗ [ω; 0]`` for ω in the rotated frame's axes ([qx, qy, qz, qw] order;
+    :func:`ncgen.symbolic.rigid_motion.quaternion_rate`)."""
+    return crm.quaternion_rate(quat, omega)
 
 
 def relative_pose(e: Edge, x, dim: int, sym: bool = False):

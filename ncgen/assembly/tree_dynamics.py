@@ -27,12 +27,14 @@ from ncgen.assembly.joint_tree import carry, relative_pose
 from ncgen.assembly.mass import sparse_dm
 from ncgen.errors import ModelError
 from ncgen.model.sym2casadi import to_casadi
+from ncgen.rigid_motion import casadi_forms as crm
 
 
 def cholesky_solve(K: ca.SX, b: ca.SX) -> tuple[ca.SX, ca.SX]:
     """``(x, r)``: ``x = K⁻¹ b`` for a symmetric positive definite ``K`` (only its lower
-    triangle is read) by ``K = L Lᵀ``, and ``r = min_k d_k / K_kk`` over the pivots ``d_k``
-    (before their square roots).  Structural zeros of ``K`` are kept as zeros."""
+    triangle is read) by ``K = L Lᵀ`` (factored once for every column of ``b``), and
+    ``r = min_k d_k / K_kk`` over the pivots ``d_k`` (before their square roots).  Structural
+    zeros of ``K`` are kept as zeros."""
     n = K.size1()
     L = [[None] * n for _ in range(n)]
     ratios = []
@@ -43,16 +45,19 @@ def cholesky_solve(K: ca.SX, b: ca.SX) -> tuple[ca.SX, ca.SX]:
         for i in range(k + 1, n):
             s = K[i, k] - sum((L[i][j] * L[k][j] for j in range(k)), ca.SX(0))
             L[i][k] = s / L[k][k]
-    y = [None] * n
-    for i in range(n):
-        y[i] = (b[i] - sum((L[i][j] * y[j] for j in range(i)), ca.SX(0))) / L[i][i]
-    x = [None] * n
-    for i in reversed(range(n)):
-        x[i] = (y[i] - sum((L[j][i] * x[j] for j in range(i + 1, n)), ca.SX(0))) / L[i][i]
+    cols = []
+    for c in range(b.size2()):
+        y = [None] * n
+        for i in range(n):
+            y[i] = (b[i, c] - sum((L[i][j] * y[j] for j in range(i)), ca.SX(0))) / L[i][i]
+        x = [None] * n
+        for i in reversed(range(n)):
+            x[i] = (y[i] - sum((L[j][i] * x[j] for j in range(i + 1, n)), ca.SX(0))) / L[i][i]
+        cols.append(ca.vertcat(*x) if n else ca.SX(0, 1))
     r = ratios[0] if ratios else ca.SX(1)
     for z in ratios[1:]:
         r = ca.fmin(r, z)
-    return ca.vertcat(*x) if n else ca.SX(0, 1), r
+    return ca.horzcat(*cols) if cols else ca.SX(n, 0), r
 
 
 def joint_efforts(js, tau: ca.SX) -> ca.SX:
@@ -81,6 +86,9 @@ def tree_dynamics_function(model) -> ca.Function:
     :class:`~ncgen.errors.ModelError` (from ``tree_map``) for a model that is not a tree;
     whether the tree's constraints are all the model's is for the caller to check."""
     js = model.joint_space
+    if mimic_relations(model):
+        raise ModelError("joint forward dynamics: the projected form does not take mimic joints "
+                         "(the recursive form does: 3D models of rigid bodies)")
     qj, vj, q, qj_dot = js.tree_map(model.layout)
     t, u, p = ca.SX.sym("t"), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
     v = ca.jtimes(q, qj, qj_dot)
@@ -102,93 +110,64 @@ def tree_dynamics_function(model) -> ca.Function:
 
 
 # --------------------------------------------------------------------------- recursive form
-def _skew(w) -> ca.SX:
-    return ca.vertcat(ca.horzcat(0, -w[2], w[1]), ca.horzcat(w[2], 0, -w[0]), ca.horzcat(-w[1], w[0], 0))
+# Arboris notation (docs/notation.md, "Rigid motion"): g the ground frame, H_gm = [[R, p], [0, 1]]
+# the pose of member m's frame, twists [ω; v] and wrenches [τ; f] expressed in g (v: velocity of
+# the point at g's origin, τ: moment about it), M_g a member's mass matrix at g.  Every formula
+# comes from ncgen.rigid_motion.casadi_forms (crm): Ad, ad, adᵀ (newton_euler_bias), se3_vee, ...
 
 
-def _world_inertia(mass: float, cw, R, Ibar: np.ndarray) -> tuple:
-    """A rigid body's spatial inertia about the world origin, world axes, as ``(m, h, J)``:
-    ``h = m c`` (c the centre of mass), ``J = R Ī Rᵀ + m (|c|² 1 − c cᵀ)`` (symmetric, built
-    from its lower triangle).  The matrix is ``[[J, [h]×], [−[h]×, m 1]]``."""
-    RI = ca.mtimes(R, ca.DM(Ibar))
-    J = ca.SX(3, 3)
-    cc = ca.dot(cw, cw)
+def _rotated_inertia(R, I_c: np.ndarray) -> ca.SX:
+    """``R I_c Rᵀ``, exactly symmetric (built from its lower triangle)."""
+    RI = ca.mtimes(R, ca.DM(I_c))
+    out = ca.SX(3, 3)
     for i in range(3):
         for j in range(i + 1):
-            e = ca.dot(RI[i, :].T, R[j, :].T) - mass * cw[i] * cw[j] + (mass * cc if i == j else 0)
-            J[i, j] = e
-            J[j, i] = e
-    return mass, mass * cw, J
+            out[i, j] = out[j, i] = ca.dot(RI[i, :].T, R[j, :].T)
+    return out
 
 
-def _apply(I: tuple, s) -> ca.SX:
-    """``I s`` for ``I = (m, h, J)`` (:func:`_world_inertia`) and motion vectors ``s``
-    (6 × k): ``[J α + h × a; m a − h × α]`` column by column."""
-    m, h, J = I
-    cols = []
-    for k in range(s.size2()):
-        w, a = s[:3, k], s[3:, k]
-        cols.append(ca.vertcat(ca.mtimes(J, w) + ca.cross(h, a), m * a - ca.cross(h, w)))
-    return ca.horzcat(*cols) if cols else ca.SX(6, 0)
-
-
-def _cross_force(v, f) -> ca.SX:
-    """``v ×* f`` for a spatial velocity ``v = [ω; v_O]`` and force ``f = [n_O; f]``."""
-    return ca.vertcat(ca.cross(v[:3], f[:3]) + ca.cross(v[3:], f[3:]), ca.cross(v[:3], f[3:]))
+def _mass_matrix_g(mass: float, c_g, R_gm, I_c: np.ndarray) -> ca.SX:
+    """``M_g = [[I_o, m ĉ], [m ĉᵀ, m 1]]``: a member's mass matrix at g (``crm.mass_matrix``)
+    with centre of mass ``c_g`` and ``I_o = R I_c Rᵀ + m ĉᵀĉ`` (``crm.inertia_about_point``)."""
+    return crm.mass_matrix(mass, c_g, crm.inertia_about_point(mass, c_g, _rotated_inertia(R_gm, I_c)))
 
 
 def member_twist_map(js, name: str) -> ca.Function:
-    """``Q(R, p)``: ``q̇_m = Q [ω; v_O]``, the rates of member ``name``'s natural
-    coordinates moved rigidly with the world twist ``[ω; v_O]`` (``v_O``: velocity of the
-    point at the world origin) at the pose ``(R, p)`` of its frame."""
+    """``Q(R, p)``: ``q̇_m = Q T_g``, the rates of member ``name``'s natural coordinates
+    moved rigidly with the twist ``T_g = [ω; v]`` (expressed in g) at the pose ``(R, p)`` of
+    its frame: the member's ``q̇(R, p, ω, v_p)`` with ``[ω; v_p] = Ad(H_pg) T_g``, p the
+    frame at the member's origin with g's axes."""
     m = js.members[name]
     D = m.ctype.derivation
     R, p = ca.SX.sym("R", 3, 3), ca.SX.sym("p", 3)
-    w, vO = ca.SX.sym("w", 3), ca.SX.sym("vO", 3)
+    T_g = ca.SX.sym("T_g", 6)
     vals = dict(m.rigid.constants())
     vals.update({D.R_sym[a, b]: R[a, b] for a in range(3) for b in range(3)})
     vals.update({D.p_sym[a]: p[a] for a in range(3)})
-    vp = vO + ca.cross(w, p)
-    vals.update({D.omega_sym[a]: w[a] for a in range(3)})
-    vals.update({D.v_sym[a]: vp[a] for a in range(3)})
+    T_p = crm.transport_twist(crm.translation(-p), T_g)
+    vals.update({D.omega_sym[a]: T_p[a] for a in range(3)})
+    vals.update({D.v_sym[a]: T_p[3 + a] for a in range(3)})
     qd = to_casadi(D.qd_of_twist, vals)
-    return ca.Function("twist_map", [R, p], [ca.jacobian(qd, ca.vertcat(w, vO))])
+    return ca.Function("twist_map", [R, p], [ca.jacobian(qd, T_g)])
 
 
 def member_inertia(js, name: str, Q: ca.Function) -> tuple[float, np.ndarray, np.ndarray]:
-    """``(m, c, Ī)``: mass, centre of mass and inertia about it (member axes) from the
-    member's natural-coordinate mass matrix (``Qᵀ M_m Q`` at the identity pose, the spatial
-    inertia about the member's origin).  Raises :class:`ModelError` if that matrix is not a
-    rigid body's."""
+    """``(m, c, I_c)``: mass, centre of mass and inertia about it (member axes) from the
+    member's natural-coordinate mass matrix: ``M_m = Q₀ᵀ M Q₀`` at the identity pose is its
+    mass matrix at its frame, split by ``mass_matrix_parts``.  Raises :class:`ModelError` if
+    that matrix is not a rigid body's."""
     M = np.asarray(js.members[name].rigid.M, float)
     Q0 = np.array(Q(np.eye(3), np.zeros(3)))
-    I = Q0.T @ M @ Q0
-    mass = I[3, 3]
-    B = I[:3, 3:]
-    c = np.array([B[2, 1], B[0, 2], B[1, 0]]) / mass if mass > 0 else np.zeros(3)
-    C = np.array([[0, -c[2], c[1]], [c[2], 0, -c[0]], [-c[1], c[0], 0]])
-    Ibar = I[:3, :3] + mass * C @ C
-    scale = max(1.0, np.max(np.abs(I)))
-    if (np.max(np.abs(I[3:, 3:] - mass * np.eye(3))) > 1e-12 * scale or np.max(np.abs(B - mass * C)) > 1e-12 * scale
-            or np.max(np.abs(I - I.T)) > 1e-12 * scale):
+    M_m = Q0.T @ M @ Q0
+    mass = M_m[3, 3]
+    if mass > 0:
+        _, c, I_c = (np.array(x, float).reshape(s) for x, s in zip(crm.mass_matrix_parts(ca.DM(M_m)), [(), (3,), (3, 3)]))
+    else:
+        c, I_c = np.zeros(3), M_m[:3, :3]
+    rebuilt = np.array(crm.mass_matrix(mass, c, crm.inertia_about_point(mass, c, I_c)), float)
+    if np.max(np.abs(rebuilt - M_m)) > 1e-12 * max(1.0, np.max(np.abs(M_m))):
         raise ModelError(f"member {name!r}: its mass matrix is not a rigid body's spatial inertia")
-    return mass, c, Ibar
-
-
-def _to_world(R, p, m) -> ca.SX:
-    """Motion vectors ``m`` (6 × k, ``[ω; v]`` in a frame at ``(R, p)``, about its origin)
-    in world coordinates about the world origin."""
-    w = ca.mtimes(R, m[:3, :])
-    return ca.vertcat(w, ca.mtimes(R, m[3:, :]) + ca.mtimes(_skew(p), w))
-
-
-def _cross_motion(v, m) -> ca.SX:
-    """``v ×m m`` for spatial velocities ``v``, ``m`` (``[ω; v_O]``)."""
-    return ca.vertcat(ca.cross(v[:3], m[:3]), ca.cross(v[:3], m[3:]) + ca.cross(v[3:], m[:3]))
-
-
-def _vee(W) -> ca.SX:
-    return 0.5 * ca.vertcat(W[2, 1] - W[1, 2], W[0, 2] - W[2, 0], W[1, 0] - W[0, 1])
+    return mass, c, I_c
 
 
 def _constant_or(S: ca.SX, x: ca.SX) -> ca.SX:
@@ -205,12 +184,13 @@ def _constant_or(S: ca.SX, x: ca.SX) -> ca.SX:
 
 
 def _edge_function(js, e, forward: bool) -> ca.Function:
-    """``(R_p, p_p, ω_p, v_p, x, w) -> (R_c, p_c, S, c)``: across joint ``e`` from the member
-    on this side (pose, world twist) to the other, with joint positions ``x`` and rates ``w``:
-    the other's pose, the joint's motion subspace ``S`` in world coordinates (its twist is
-    ``[ω_p; v_p] + S w``) and ``c = Ṡ w`` (``w`` held).  ``S = X_p S_p(x)`` with ``S_p`` the
-    relative twist per unit rate in this side's frame (AD of the joint's relative pose) and
-    ``X_p`` this side's motion transform, so ``Ṡ w = v_p ×m (S w) + X_p (∂(S_p w)/∂x) ẋ``."""
+    """``(R_p, p_p, ω_p, v_p, x, w) -> (R_c, p_c, S_g, c_g)``: across joint ``e`` from the
+    member p on this side (pose ``H_gp``, twist ``T_p = [ω_p; v_p]`` in g) to the member c on
+    the other, with joint positions ``x`` and rates ``w``: c's pose, the joint's motion
+    subspace in g (``T_c = T_p + S_g w``) and ``c_g = Ṡ_g w`` (``w`` held).
+    ``S_g = Ad(H_gp) S_p(x)``, ``S_p`` the twist of c relative to p per unit rate, in p
+    (``(Ḣ_pc H_pc⁻¹)^∨``, by AD of the joint's relative pose), so
+    ``Ṡ_g w = ad(T_p) S_g w + Ad(H_gp) (∂(S_p w)/∂x) ẋ``."""
     Rp, pp = ca.SX.sym("Rp", 3, 3), ca.SX.sym("pp", 3)
     wp, vp = ca.SX.sym("wp", 3), ca.SX.sym("vp", 3)
     has = e.name in js.nq_joint
@@ -220,16 +200,16 @@ def _edge_function(js, e, forward: bool) -> ca.Function:
     Rc, pc = carry((Rp, pp), e, T, forward, js.members, sym=True)
     if not has:
         return ca.Function("edge", [Rp, pp, wp, vp, x, w], [Rc, pc, ca.SX(6, 0), ca.SX.zeros(6)])
-    Rl, pl = carry((ca.SX.eye(3), ca.SX.zeros(3)), e, T, forward, js.members, sym=True)
+    H_pc = crm.homogeneous(*carry((ca.SX.eye(3), ca.SX.zeros(3)), e, T, forward, js.members, sym=True))
     xd = js.position_rates(e.name, x, w)
-    wl = _vee(ca.mtimes(ca.reshape(ca.jtimes(ca.vec(Rl), x, xd), 3, 3), Rl.T))
-    Sp = ca.jacobian(ca.vertcat(wl, ca.jtimes(pl, x, xd) - ca.cross(wl, pl)), w)
-    Sp = _constant_or(Sp, x)
-    S = _to_world(Rp, pp, Sp)
-    c = _cross_motion(ca.vertcat(wp, vp), ca.mtimes(S, w))
-    if not Sp.is_constant():
-        c = c + _to_world(Rp, pp, ca.jtimes(ca.mtimes(Sp, w), x, xd))
-    return ca.Function("edge", [Rp, pp, wp, vp, x, w], [Rc, pc, S, c])
+    H_pc_dot = ca.reshape(ca.jtimes(ca.vec(H_pc), x, xd), 4, 4)
+    S_p = _constant_or(ca.jacobian(crm.se3_vee(ca.mtimes(H_pc_dot, crm.inverse(H_pc))), w), x)
+    Ad_gp = crm.Ad(crm.homogeneous(Rp, pp))
+    S_g = ca.mtimes(Ad_gp, S_p)
+    c_g = ca.mtimes(crm.ad(ca.vertcat(wp, vp)), ca.mtimes(S_g, w))
+    if not S_p.is_constant():
+        c_g = c_g + ca.mtimes(Ad_gp, ca.jtimes(ca.mtimes(S_p, w), x, xd))
+    return ca.Function("edge", [Rp, pp, wp, vp, x, w], [Rc, pc, S_g, c_g])
 
 
 def _owned(model, tree) -> dict[str, list[tuple[int, int]]]:
@@ -268,14 +248,80 @@ def uniform_gravity(model, owned) -> np.ndarray | None:
     return g if np.max(np.abs(B @ g - F0), initial=0.0) <= 1e-12 * max(1.0, np.max(np.abs(F0), initial=0.0)) else None
 
 
+def mimic_relations(model) -> list[tuple[str, str, float, float]]:
+    """``(follower, leader, k, offset)`` of every :class:`~ncgen.model.joints.Mimic` joint of
+    ``model`` (``θ_follower = k θ_leader + offset``), leaders resolved through chains of
+    mimics.  Raises :class:`ModelError` when a joint mimics itself (a cycle) or a joint
+    without exactly one coordinate."""
+    js = model.joint_space
+    direct = {}
+    for j in model.joints:
+        if j.kind == "Mimic":
+            o = j.options
+            f, lead = o["follower"].name, o["leader"].name
+            for role, n in (("follower", f), ("leader", lead)):
+                if js.nv_joint.get(n) != 1:
+                    raise ModelError(f"joint {j.name!r}: the {role} {n!r} is not a joint with one coordinate")
+            if f in direct:
+                raise ModelError(f"joint {j.name!r}: joint {f!r} already mimics {direct[f][0]!r}")
+            direct[f] = (lead, o["multiplier"], o["offset"])
+    out = []
+    for f, (lead, k, off) in direct.items():
+        seen = {f}
+        while lead in direct:
+            if lead in seen:
+                raise ModelError(f"mimic joints: {f!r} mimics itself through {' -> '.join(sorted(seen))}")
+            seen.add(lead)
+            lead2, k2, off2 = direct[lead]
+            lead, k, off = lead2, k * k2, k * off2 + off
+        out.append((f, lead, float(k), float(off)))
+    return out
+
+
+class MimicMap:
+    """The joint rates of a tree with mimic joints: ``v_j = G v_i`` (``G``: nv × nv_i, an
+    identity column per independent rate, ``k`` at a follower's row in its leader's column),
+    ``q_j`` the same map plus the offsets.  ``independent``: the indices of the independent
+    rates in ``v_j`` (``model.joint_names`` order); without mimic joints ``G = 1``."""
+
+    def __init__(self, model):
+        js = model.joint_space
+        sq, sv = js.slices(), js.slices(rates=True)
+        self.relations = mimic_relations(model)
+        self.follows = {sv[f].start: (sv[lead].start, k) for f, lead, k, _ in self.relations}
+        self.position = {sq[f].start: (sq[lead].start, k, off) for f, lead, k, off in self.relations}
+        self.independent = [i for i in range(js.nv) if i not in self.follows]
+        G = np.zeros((js.nv, len(self.independent)))
+        col = {i: c for c, i in enumerate(self.independent)}
+        for i in range(js.nv):
+            lead, k = self.follows.get(i, (i, 1.0))
+            G[i, col[lead]] = k
+        self.G = G
+
+    def positions(self, qj):
+        """``q_j`` with every follower's position set from its leader's (SX)."""
+        rows = [self.position[i][1] * qj[self.position[i][0]] + self.position[i][2] if i in self.position else qj[i]
+                for i in range(qj.numel())]
+        return ca.vertcat(*rows) if rows else qj
+
+    def rates(self, vj):
+        """``v_j`` with every follower's rate set from its leader's (SX): ``G v_j[independent]``."""
+        rows = [self.follows[i][1] * vj[self.follows[i][0]] if i in self.follows else vj[i] for i in range(vj.numel())]
+        return ca.vertcat(*rows) if rows else vj
+
+
 class _Recursion:
     """The Newton–Euler recursion shared by :func:`recursive_dynamics_function` and
-    :func:`recursive_inverse_dynamics_function` (3D trees, world frame, spatial vectors
-    ``[ω; v_O]`` about the world origin): poses, twists ``v_c = v_p + S w`` and accelerations
-    ``a_c = a_p + Ṡ w (+ S a_j)`` outwards (a uniform gravity as the ground's ``[0; −g]``),
-    then body forces ``f = I a + v ×* I v − f_ext`` (``f_ext = Qᵀ F``, the passive
-    natural-coordinate forces of the member as a wrench) summed inwards into ``force``.
-    ``aj=None``: without joint accelerations (the bias forces of forward dynamics)."""
+    :func:`recursive_inverse_dynamics_function` (3D trees; twists, accelerations and wrenches
+    expressed in g): poses, twists ``T_c = T_p + S_g w`` and accelerations
+    ``dT_c = dT_p + Ṡ_g w (+ S_g a_j)`` outwards (a uniform gravity as the ground's
+    ``[0; −g]``), then member wrenches ``W_g = M_g dT − ad(T)ᵀ M_g T − W_ext``
+    (``W_ext = Qᵀ F``, the member's passive natural-coordinate
+    forces as a wrench) summed inwards into ``wrench``.  Mimic joints: the followers'
+    positions, rates and accelerations are set from their leaders' (:class:`MimicMap`) before
+    the recursion; the bias ``−ad(T)ᵀ (M_g T)`` is
+    ``crm.newton_euler_bias`` evaluated as two products (its SymPy form is expanded).  ``aj=None``: without joint
+    accelerations (the bias forces of forward dynamics)."""
 
     def __init__(self, model, aj: ca.SX | None = None):
         js = self.js = model.joint_space
@@ -283,83 +329,85 @@ class _Recursion:
             raise ModelError("recursive joint-space dynamics: 3D models only")
         self.tree = tree = js.spanning_tree()
         self.t, self.u, self.p = t, u, p = ca.SX.sym("t"), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
-        self.qj, self.vj = qj, vj = ca.SX.sym("qj", js.nq), ca.SX.sym("vj", js.nv)
+        self.qj, self.vj = ca.SX.sym("qj", js.nq), ca.SX.sym("vj", js.nv)
+        self.mimic = mimic = MimicMap(model)
+        qj, vj = mimic.positions(self.qj), mimic.rates(self.vj)
+        aj = None if aj is None else mimic.rates(aj)
         sq = js.slices()
         self.sv = sv = js.slices(rates=True)
         owned = _owned(model, tree)
         g = uniform_gravity(model, owned)
         pose = {"ground": (ca.SX.eye(3), ca.SX.zeros(3))}
-        twist = {"ground": ca.SX.zeros(6)}
-        acc = {"ground": ca.SX.zeros(6) if g is None else ca.vertcat(ca.SX.zeros(3), -ca.DM(g))}
+        T_g = {"ground": ca.SX.zeros(6)}
+        dT_g = {"ground": ca.SX.zeros(6) if g is None else ca.vertcat(ca.SX.zeros(3), -ca.DM(g))}
         self.motion, self.parent = {}, {}
         for here, there, e, forward in tree:
             x = qj[sq[e.name]] if e.name in sq else ca.SX(0, 1)
             w = vj[sv[e.name]] if e.name in sv else ca.SX(0, 1)
-            Rc, pc, S, c = _edge_function(js, e, forward)(*pose[here], twist[here][:3], twist[here][3:], x, w)
+            Rc, pc, S_g, c_g = _edge_function(js, e, forward)(*pose[here], T_g[here][:3], T_g[here][3:], x, w)
             pose[there] = (Rc, pc)
-            twist[there] = twist[here] + ca.mtimes(S, w)
-            acc[there] = acc[here] + c
+            T_g[there] = T_g[here] + ca.mtimes(S_g, w)
+            dT_g[there] = dT_g[here] + c_g
             if aj is not None and e.name in sv:
-                acc[there] = acc[there] + ca.mtimes(S, aj[sv[e.name]])
-            self.motion[there], self.parent[there] = (e.name, S), here
+                dT_g[there] = dT_g[there] + ca.mtimes(S_g, aj[sv[e.name]])
+            self.motion[there], self.parent[there] = (e.name, S_g), here
         q, v, Qs = [None] * model.nq, [None] * model.nq, {}
         for _, name, _, _ in tree:
             Qs[name] = member_twist_map(js, name)(*pose[name])
             local_q = js.member_coordinates(name, *pose[name])
-            local_v = ca.mtimes(Qs[name], twist[name])
+            local_v = ca.mtimes(Qs[name], T_g[name])
             for k, i in owned[name]:
                 q[i], v[i] = local_q[k], local_v[k]
         self.q = q = ca.vertcat(*[ca.SX(0) if x is None else x for x in q])
         v = ca.vertcat(*[ca.SX(0) if x is None else x for x in v])
         F = js.passive_force(t, q, v, u, p)
-        self.inertia, force = {}, {}
+        self.inertia, wrench = {}, {}
         for _, name, _, _ in tree:
-            mass, c, Ibar = member_inertia(js, name, member_twist_map(js, name))
+            mass, c, I_c = member_inertia(js, name, member_twist_map(js, name))
             R, pos = pose[name]
-            I = _world_inertia(mass, pos + ca.mtimes(R, ca.DM(c)), R, Ibar)
-            fext = ca.SX.zeros(6)
+            M_g = _mass_matrix_g(mass, pos + ca.mtimes(R, ca.DM(c)), R, I_c)
+            W_ext = ca.SX.zeros(6)
             if owned[name] and g is None:
                 ks, idx = [k for k, _ in owned[name]], [i for _, i in owned[name]]
-                fext = ca.mtimes(Qs[name][ks, :].T, F[idx])
-            self.inertia[name] = I
-            force[name] = _apply(I, acc[name]) + _cross_force(twist[name], _apply(I, twist[name])) - fext
+                W_ext = ca.mtimes(Qs[name][ks, :].T, F[idx])
+            self.inertia[name] = M_g
+            h_g = ca.mtimes(M_g, T_g[name])                 # momentum; −ad(T)ᵀ h is the velocity bias
+            wrench[name] = ca.mtimes(M_g, dT_g[name]) - ca.mtimes(crm.ad(T_g[name]).T, h_g) - W_ext
         for here, there, _, _ in reversed(tree):
             if here != "ground":
-                force[here] = force[here] + force[there]
-        self.force = force
+                wrench[here] = wrench[here] + wrench[there]
+        self.wrench = wrench
 
     def efforts(self) -> ca.SX:
         """``τ`` of the actuated joints placed at their joint rates (:func:`joint_efforts`)."""
         return joint_efforts(self.js, self.js.actuation(self.t, self.q, self.u, self.p)[1])
 
     def projected_forces(self) -> ca.SX:
-        """``Sᵀ f`` per joint rate (the summed body force beyond each joint)."""
+        """``S_gᵀ W_g`` per joint rate (the summed member wrench beyond each joint)."""
         out = ca.SX.zeros(self.js.nv)
         for _, there, _, _ in self.tree:
-            name, S = self.motion[there]
-            if S.size2():
-                out[self.sv[name]] = ca.mtimes(S.T, self.force[there])
+            name, S_g = self.motion[there]
+            if S_g.size2():
+                out[self.sv[name]] = ca.mtimes(S_g.T, self.wrench[there])
         return out
 
 
-def recursive_dynamics_function(model) -> ca.Function:
-    """``(t, qj, vj, u, p) -> (aj, check)`` like :func:`tree_dynamics_function`, computed
-    recursively over the tree (:class:`_Recursion`, without joint accelerations), giving the
-    bias ``C = Sᵀ f``; ``M_j`` by composite inertias (CRBA).  ``M_j a_j = τ − C``, solved by
-    the same written-out Cholesky, leaves first (no fill-in)."""
-    rec = _Recursion(model)
+def composite_mass_matrix(rec: _Recursion) -> ca.SX:
+    """``M_j`` (nv × nv, both triangles) by composite inertias (CRBA): ``(M_j)_ik = S_iᵀ M^c_k S_k``
+    for ``i`` an ancestor of (or equal to) ``k``, ``M^c_k`` the summed mass matrices of the
+    subtree beyond joint ``k`` (in g)."""
     tree, motion, sv = rec.tree, rec.motion, rec.sv
     n = rec.js.nv
     Mj = ca.SX(n, n)
     composite = dict(rec.inertia)
     for here, there, _, _ in reversed(tree):
         if here != "ground":
-            composite[here] = tuple(a + b for a, b in zip(composite[here], composite[there]))
+            composite[here] = composite[here] + composite[there]
     for _, there, e, _ in tree:
         name, S = motion[there]
         if S.size2() == 0:
             continue
-        Fm = _apply(composite[there], S)
+        Fm = ca.mtimes(composite[there], S)
         Mj[sv[name], sv[name]] = ca.mtimes(S.T, Fm)
         node = rec.parent[there]
         while node != "ground":
@@ -369,25 +417,54 @@ def recursive_dynamics_function(model) -> ca.Function:
                 Mj[sv[up], sv[name]] = block
                 Mj[sv[name], sv[up]] = block.T
             node = rec.parent[node]
-    order = [i for _, there, _, _ in reversed(tree) if motion[there][1].size2()
-             for i in range(sv[motion[there][0]].start, sv[motion[there][0]].stop)]
-    rhs = rec.efforts() - rec.projected_forces()
-    y, pivot = cholesky_solve(Mj[order, order], rhs[order])
-    aj = ca.SX.zeros(n)
-    aj[order] = y
-    return _function(rec.t, rec.qj, rec.vj, rec.u, rec.p, aj, pivot)
+    return Mj
+
+
+def leaves_first(rec: _Recursion) -> list[int]:
+    """The positions in ``rec.mimic.independent`` of the independent joint rates, joints of
+    the deepest members first (a Cholesky factor of ``M_j`` in this order has no fill-in)."""
+    col = {i: c for c, i in enumerate(rec.mimic.independent)}
+    return [col[i] for _, there, _, _ in reversed(rec.tree) if rec.motion[there][1].size2()
+            for i in range(rec.sv[rec.motion[there][0]].start, rec.sv[rec.motion[there][0]].stop) if i in col]
+
+
+def independent_solve(rec: _Recursion, M_i: ca.SX, b: ca.SX) -> tuple[ca.SX, ca.SX]:
+    """``(M_i⁻¹ b, pivot)`` by :func:`cholesky_solve` in the :func:`leaves_first` order (``b``
+    a vector or a matrix of columns)."""
+    order = leaves_first(rec)
+    x = ca.SX.zeros(b.size1(), b.size2())
+    y, pivot = cholesky_solve(M_i[order, order], b[order, :])
+    if order:
+        x[order, :] = y
+    return x, pivot
+
+
+def recursive_dynamics_function(model) -> ca.Function:
+    """``(t, qj, vj, u, p) -> (aj, check)`` like :func:`tree_dynamics_function`, computed
+    recursively over the tree (:class:`_Recursion`, without joint accelerations), giving the
+    bias ``C = S_gᵀ W_g``; ``M_j`` by composite inertias (:func:`composite_mass_matrix`).
+    ``M_i a_i = Gᵀ (τ − C)`` with ``M_i = Gᵀ M_j G`` (:class:`MimicMap`; ``G = 1`` without
+    mimic joints), solved by the written-out Cholesky, leaves first (no fill-in); ``aj = G a_i``
+    (a follower's entries of ``qj``, ``vj`` are ignored: set from its leader's)."""
+    rec = _Recursion(model)
+    G = ca.DM(rec.mimic.G)
+    M_i = ca.mtimes([G.T, composite_mass_matrix(rec), G])
+    rhs = ca.mtimes(G.T, rec.efforts() - rec.projected_forces())
+    a_i, pivot = independent_solve(rec, M_i, rhs)
+    return _function(rec.t, rec.qj, rec.vj, rec.u, rec.p, ca.mtimes(G, a_i), pivot)
 
 
 def recursive_inverse_dynamics_function(model) -> ca.Function:
     """``(t, qj, vj, aj, u, p) -> r``: the joint-space equations of motion as a residual,
     ``r = M_j a_j + C − τ`` (N·m or N per joint rate; ``τ`` the actuated joints' efforts,
     :func:`joint_efforts`), by recursive Newton–Euler (:class:`_Recursion` with the joint
-    accelerations): ``r = Sᵀ f − τ``.  The same quantities as
+    accelerations): ``r = Gᵀ (S_gᵀ W_g − τ)`` (one row per independent rate,
+    :class:`MimicMap`).  The same quantities as
     :func:`recursive_dynamics_function` without ``M_j``: linear in ``a_j`` and O(number of
     members) operations, so its derivatives stay cheap (the joint-space collocation's rows,
     :mod:`ncgen.optim.joint_radau`)."""
     aj = ca.SX.sym("aj", model.joint_space.nv)
     rec = _Recursion(model, aj)
-    r = rec.projected_forces() - rec.efforts()
+    r = ca.mtimes(ca.DM(rec.mimic.G).T, rec.projected_forces() - rec.efforts())
     return ca.Function("joint_inverse_dynamics", [rec.t, rec.qj, rec.vj, aj, rec.u, rec.p], [r],
                        ["t", "qj", "vj", "aj", "u", "p"], ["r"])

@@ -16,12 +16,12 @@ import warnings
 
 from ncgen.cli.common import load_model, load_system, write_output
 from ncgen.cli.registry import SUBCOMMANDS, subcommand
-from ncgen.errors import NcgenError
+from ncgen.errors import NcgenError, use_cli_names
 from ncgen.interrupts import sticky_interrupt
 from ncgen.version import __version__
 
 #: The subcommand modules, in the order ``ncgen --help`` lists them.
-SUBCOMMAND_MODULES = ("derive", "generate", "check", "simulate", "optimize", "statics", "demo")
+SUBCOMMAND_MODULES = ("derive", "generate", "check", "simulate", "sweep", "optimize", "mpc", "statics", "demo")
 
 __all__ = ["SUBCOMMANDS", "build_parser", "load_model", "load_system", "main", "subcommand", "write_output"]
 
@@ -61,10 +61,14 @@ def main(argv: list[str] | None = None) -> int:
     debug = "--debug" in argv or os.environ.get("NCGEN_DEBUG", "") not in ("", "0")
     argv = [a for a in argv if a != "--debug"]
     parser = build_parser()
+    use_cli_names(True)
     with warnings.catch_warnings():
         if not debug:                    # "ncgen: warning: ...", not a source line of ncgen
             warnings.showwarning = _show_warning
-        return _run_main(parser, argv, debug)
+        try:
+            return _run_main(parser, argv, debug)
+        finally:
+            use_cli_names(False)
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:

@@ -3,4 +3,5 @@ import sys
 
 from ncgen.cli import main
 
-sys.exit(main())
+if __name__ == "__main__":          # not again in the processes a sweep spawns
+    sys.exit(main())

@@ -4,17 +4,15 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ncgen.cli.common import load_system
+from ncgen.cli.common import load_system, model_arguments
 from ncgen.cli.registry import subcommand
 
 
 def _check_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", metavar="MODEL.toml", help="model file: TOML, or a URDF robot (.urdf)")
+    model_arguments(p)
     p.add_argument("--tolerance", type=float, default=1e-6, metavar="TOL",
                    help="largest correction of the initial state, relative to the model's size, "
                         "that still counts as consistent (default 1e-6, as System.build)")
-    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
-                   help="replace a parameter's default value (repeatable; a vector as NAME=1,2,3)")
     p.add_argument("--no-share", action="store_true",
                    help="keep every joint's equations (System.build(share=False)) instead of eliminating "
                         "the joints that shared coordinates express")
@@ -24,7 +22,7 @@ def _check_arguments(p: argparse.ArgumentParser) -> None:
     "check",
     help="DOF, constraint rank and initial-state check of a model",
     description=(
-        "Build the model in MODEL.toml and print its members, joints and forces, its coordinates "
+        "Build the model in MODEL (TOML or URDF) and print its members, joints and forces, its coordinates "
         "and constraints, the rank of the constraint Jacobian A, the degrees of freedom "
         "(nq - rank A), the redundant constraints by name, and the residuals of the initial state "
         "as given (max |Phi| and max |A v + Phi_t|) with the corrections that make it consistent, "
@@ -45,7 +43,7 @@ def check(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
 
     if not args.tolerance > 0:
         parser.error(f"--tolerance: expected a positive number, got {args.tolerance}")
-    system = load_system(args.model, args.param)
+    system = load_system(args.model, args.param, args.floating_base)
     report = check_system(system, tolerance=args.tolerance, share=not args.no_share)
     sys.stdout.write(report.render(args.model))
     return 0 if report.ok else 1

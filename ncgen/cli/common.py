@@ -19,19 +19,70 @@ def write_output(text: str, path: str | None) -> None:
     print(f"wrote {path}", file=sys.stderr)
 
 
-def load_model(path: str, params: list[str] | None = None, contacts: str = "smooth", share: bool = True):
+#: What every subcommand's MODEL argument accepts (its help text).
+MODEL_HELP = "model file: TOML (.toml, see docs/model-format.md) or a URDF robot (.urdf)"
+#: Suffixes of --plot and --animate, the same in every subcommand.
+PLOT_SUFFIXES = (".png", ".pdf", ".svg")
+ANIMATE_SUFFIXES = (".gif", ".mp4")
+
+
+def model_arguments(p) -> None:
+    """MODEL, --param and --floating-base: the model options of every subcommand that loads one."""
+    p.add_argument("model", metavar="MODEL", help=MODEL_HELP)
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                   help="replace a parameter's default value (repeatable; a vector as NAME=1,2,3)")
+    p.add_argument("--floating-base", action="store_true",
+                   help="URDF only: the robot's base is free (a 6-DOF free joint to the ground) instead of "
+                        "fixed to it")
+
+
+def file_arguments(p, output: tuple[str, ...] | None, what: str, plot: str | None = None,
+                   animate: str | None = None, html: str | None = None) -> None:
+    """-o/--output, --plot and --animate with the same rules in every subcommand: each is
+    optional, a file is written only when named (atomically, after the work succeeded), and
+    the help names every accepted suffix."""
+    if output is not None:
+        p.add_argument("-o", "--output", metavar="FILE", default=None,
+                       help=f"write {what} ({', '.join(output)})")
+    if plot is not None:
+        p.add_argument("--plot", metavar="FILE", default=None, help=f"also plot {plot} ({', '.join(PLOT_SUFFIXES)})")
+    if animate is not None:
+        p.add_argument("--animate", metavar="FILE", default=None,
+                       help=f"also animate {animate} (.gif, or .mp4 with ffmpeg)")
+    if html is not None:
+        p.add_argument("--html", metavar="FILE", default=None, help=f"also write {html} (.html)")
+
+
+def check_files(args, parser, output: tuple[str, ...] | None) -> None:
+    """Usage errors in -o/--plot/--animate, found before any work: suffix and directory."""
+    from pathlib import Path
+
+    kinds = {"output": ("-o/--output", output), "plot": ("--plot", PLOT_SUFFIXES),
+             "animate": ("--animate", ANIMATE_SUFFIXES), "html": ("--html", (".html",))}
+    for kind, (option, suffixes) in kinds.items():
+        name = getattr(args, kind, None)
+        if name is None or suffixes is None:
+            continue
+        if Path(name).suffix.lower() not in suffixes:
+            parser.error(f"{option} {name!r}: expected a file name ending in {' or '.join(suffixes)}")
+        if not Path(name).resolve().parent.is_dir():
+            parser.error(f"{option} {name!r}: directory {str(Path(name).parent)!r} does not exist")
+
+
+def load_model(path: str, params: list[str] | None = None, contacts: str = "smooth", share: bool = True,
+               floating_base: bool = False):
     """Build the model in TOML file ``path``; ``params`` (``name=value`` strings, a vector as
     ``name=1,2,3``) replace default parameter values.  Raises NcgenError with a message
     naming the file (and the key path, for invalid models).  ``contacts``, ``share``: as in
-    ``System.build``."""
-    system = load_system(path, params)
+    ``System.build``; ``floating_base``: for URDF files (``--floating-base``)."""
+    system = load_system(path, params, floating_base)
     try:
         return system.build(contacts=contacts, share=share)
     except NcgenError as e:
         raise type(e)(f"{path}: model {system.name!r} cannot be built: {e}") from None
 
 
-def load_system(path: str, params: list[str] | None = None):
+def load_system(path: str, params: list[str] | None = None, floating_base: bool = False):
     """The :class:`~ncgen.model.system.System` in model file ``path`` — a URDF robot
     (``.urdf``: fixed base, joint torques as the input ``tau``) or TOML (anything else) — with
     ``params`` as in :func:`load_model`; errors name the file."""
@@ -41,9 +92,14 @@ def load_system(path: str, params: list[str] | None = None):
     file = Path(path)
     if not file.is_file():
         what = "is a directory, not" if file.is_dir() else "does not exist; expected"
-        raise ModelError(f"model file {path!r} {what} a TOML model file (see the examples/ directory)")
+        raise ModelError(f"model file {path!r} {what} a model file: TOML (.toml) or URDF (.urdf); "
+                         "see the examples/ directory")
+    urdf = file.suffix.lower() == ".urdf"
+    if floating_base and not urdf:
+        raise ModelError(f"--floating-base applies to URDF robots (.urdf); {path} is a TOML model, whose "
+                         "members say themselves how they are held")
     try:
-        system = System.from_urdf(file) if file.suffix.lower() == ".urdf" else System.from_toml(file)
+        system = System.from_urdf(file, floating_base=floating_base) if urdf else System.from_toml(file)
     except NcgenError as e:
         text = str(e)
         raise type(e)(text if text.startswith(str(file)) else f"{path}: {text}") from None

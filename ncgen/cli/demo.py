@@ -14,8 +14,9 @@ def _demo_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--animate", action="store_true", help="also write an animation (GIF)")
     p.add_argument("--t-end", type=float, default=1.4, metavar="T",
                    help="simulated time (s, default 1.4: one turn of precession)")
-    p.add_argument("--backend", default="compiled", choices=("compiled", "vm"),
-                   help="compiled (generated C, default) or vm (CasADi's virtual machine, no compiler)")
+    p.add_argument("--backend", default="auto", choices=("auto", "compiled", "vm"),
+                   help="auto (default: compiled, or the VM with a one-line note when there is no C "
+                        "compiler), compiled (generated C) or vm (CasADi's virtual machine)")
 
 
 @subcommand(
@@ -33,7 +34,7 @@ def _demo_arguments(p: argparse.ArgumentParser) -> None:
     examples=(
         "ncgen demo                          # writes ./ncgen-demo/heavy_top.png and more\n"
         "ncgen demo -o /tmp/demo --animate   # also heavy_top.gif\n"
-        "ncgen demo --backend vm             # without a C compiler"),
+        "ncgen demo --backend vm             # skip the C compiler"),
     arguments=_demo_arguments,
 )
 def demo(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:

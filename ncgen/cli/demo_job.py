@@ -161,11 +161,15 @@ def _cache_text(cached: bool | None) -> str:
 
 
 def run_demo(out_dir, *, animate: bool = False, t_end: float = 1.4, dt: float = 0.002,
-             top: Top = Top(), backend: str = "compiled", cflags=None) -> DemoResult:
+             top: Top = Top(), backend: str = "auto", cflags=None) -> DemoResult:
     """Build, generate, compile, simulate, check and plot the top released without
     precession (it nutates: the crown traces cusps; 1.4 s is about one turn of precession);
-    files go to ``out_dir``."""
+    files go to ``out_dir``.  ``backend``: ``"compiled"``, ``"vm"`` or ``"auto"`` (compiled,
+    or the VM with a one-line warning when there is no C compiler: the demo shows the whole
+    pipeline, compiling included)."""
     from ncgen.codegen.compile_cache import compile_package
+    from ncgen.codegen.load import warn_no_compiler
+    from ncgen.errors import CompilerNotFound
     from ncgen.codegen.model_package import generate
     from ncgen.runtime import simulate
 
@@ -183,7 +187,14 @@ def run_demo(out_dir, *, animate: bool = False, t_end: float = 1.4, dt: float = 
     cached = None
     start = time.perf_counter()
     if backend != "vm":
-        cached = compile_package(pkg, cflags=cflags).cached
+        try:
+            cached = compile_package(pkg, cflags=cflags).cached
+            backend = "compiled"
+        except CompilerNotFound as e:
+            if backend == "compiled":
+                raise
+            warn_no_compiler(e)
+            backend = "vm"
     timings["compile"] = time.perf_counter() - start
 
     start = time.perf_counter()

@@ -4,12 +4,12 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ncgen.cli.common import load_model
+from ncgen.cli.common import load_model, model_arguments
 from ncgen.cli.registry import subcommand
 
 
 def _generate_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", metavar="MODEL.toml", help="model file: TOML, or a URDF robot (.urdf)")
+    model_arguments(p)
     p.add_argument("-o", "--output", metavar="DIR", required=True,
                    help="package directory to write; over an existing ncgen package only the files "
                         "ncgen wrote (and their build products) are replaced, other files are kept; "
@@ -19,7 +19,7 @@ def _generate_arguments(p: argparse.ArgumentParser) -> None:
                         "written only if compiling succeeds")
     p.add_argument("--cflags", metavar="FLAGS", default=None,
                    help="C compiler flags for --compile, for every file (default: $NCGEN_CFLAGS, "
-                        "else -O2, and -O0 for files holding functions too long for gcc's optimiser)")
+                        "else -O2, and -O1 for files holding functions so long that -O2 takes several times longer)")
     p.add_argument("--reroll", metavar="N", default=None, type=_reroll_limit,
                    help="generate functions longer than N SX instructions as loops over short "
                         "kernels found in them (compiles in seconds for any number of members, "
@@ -45,7 +45,7 @@ def _reroll_limit(text: str) -> int | str:
     "generate",
     help="write a model's self-contained C package",
     description=(
-        "Build the model in MODEL.toml and write its C package to DIR: the system functions "
+        "Build the model in MODEL (TOML or URDF) and write its C package to DIR: the system functions "
         "(constraints, Jacobian, forces, M^-1, the DAE with its sparse Jacobian, accelerations, "
         "energies, markers, poses) as CasADi-generated C, a header documenting every function "
         "(argument sizes, units, meaning) and the model (dimensions, names, initial state, mass "
@@ -62,7 +62,7 @@ def generate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from ncgen.codegen.model_package import generate as generate_package
     from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
 
-    model = load_model(args.model)
+    model = load_model(args.model, args.param, floating_base=args.floating_base)
     limit = {None: REROLL_INSTRUCTIONS, "none": None}.get(args.reroll, args.reroll)
     pkg = generate_package(model, args.output, cflags=args.cflags, compile=args.compile,
                            reroll_instructions=limit)

@@ -3,33 +3,27 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
-from ncgen.cli.common import load_model
+from ncgen.cli.common import check_files, file_arguments, load_model, model_arguments
 from ncgen.cli.registry import subcommand
+from ncgen.runtime.backend_policy import RULE
 
 
-#: Output kinds of 'ncgen simulate' and the file suffixes each accepts.
-SUFFIXES = {"output": (".npz", ".csv"), "plot": (".png", ".pdf", ".svg"), "animate": (".gif", ".mp4"),
-            "html": (".html",)}
+#: What -o/--output accepts.
+OUTPUTS = (".npz", ".csv")
 
 
 def _simulate_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", metavar="MODEL.toml", help="model file: TOML, or a URDF robot (.urdf)")
+    model_arguments(p)
     p.add_argument("--t-end", type=float, default=2.0, metavar="T", help="final time (s, default 2)")
     p.add_argument("--dt", type=float, default=0.01, metavar="DT",
                    help="output step (s, default 0.01); IDAS chooses its own internal steps")
-    p.add_argument("-o", "--output", metavar="FILE", default=None,
-                   help="trajectory file: .npz (everything, nc.Trajectory.load reads it) or .csv "
-                        "(t, coordinates, energies, constraint residuals); needed unless --plot, "
-                        "--animate or --html is given")
-    p.add_argument("--plot", metavar="FILE", default=None,
-                   help="also plot energy drift, constraint drift and the markers (.png, .pdf, .svg)")
-    p.add_argument("--animate", metavar="FILE", default=None,
-                   help="also animate the motion (.gif, or .mp4 with ffmpeg)")
-    p.add_argument("--html", metavar="FILE.html", default=None,
-                   help="also write an interactive 3D page of the run (opens offline in any browser: "
-                        "orbit, play, time slider, plots; FILE.html?t=1.5 opens paused at t = 1.5 s)")
+    file_arguments(p, OUTPUTS, "the trajectory: .npz (everything, nc.Trajectory.load reads it) or .csv (t, q, v, "
+                   "joint angles and rates, markers, energies, residuals, contact gaps and forces; units in the "
+                   "header)", plot="the energy (drift, or the balance of a dissipative run), constraint drift "
+                   "and markers", animate="the motion",
+                   html="an interactive 3D page of the run (opens offline in any browser: orbit, play, time "
+                        "slider, plots; FILE.html?t=1.5 opens paused at t = 1.5 s)")
     p.add_argument("--method", default="auto", metavar="METHOD",
                    help="integrator: auto (default: joint for a tree without contacts, else idas), joint "
                         "(joint coordinates in a compiled C loop: Dormand-Prince 5(4) with error control, or "
@@ -53,10 +47,8 @@ def _simulate_arguments(p: argparse.ArgumentParser) -> None:
                         "(default 1); a stepper run whose own checks find it untrustworthy stops with an "
                         "error naming the N to use")
     p.add_argument("--backend", default="auto", choices=("auto", "compiled", "vm"),
-                   help="where the equations run: compiled (generated C, built once and cached), vm "
-                        "(CasADi's virtual machine) or auto (compiled if a C compiler is found; default)")
-    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
-                   help="replace a parameter's default value (repeatable; a vector as NAME=1,2,3)")
+                   help="where IDAS evaluates the equations: compiled (generated C, built once and "
+                        "cached by content), vm (CasADi's virtual machine) or " + RULE)
     p.add_argument("--rtol", type=float, default=None,
                    help="relative tolerance: IDAS's and the joint loop's (default 1e-8); with --method stepper, the stepper "
                         "chooses its steps to meet it (default: fixed steps of DT, checked)")
@@ -80,31 +72,18 @@ def _controller(text: str):
     return controller_from_dict(data, "--controller")
 
 
-def _check_outputs(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
-    """Usage errors in the output file names, found before any work is done."""
-    if not any(getattr(args, kind) for kind in SUFFIXES):
-        parser.error("nothing to write: give -o/--output FILE.npz (or .csv), --plot, --animate or --html")
-    for kind, suffixes in SUFFIXES.items():
-        name = getattr(args, kind)
-        if name is None:
-            continue
-        option = "-o/--output" if kind == "output" else f"--{kind}"
-        if Path(name).suffix.lower() not in suffixes:
-            parser.error(f"{option} {name!r}: expected a file name ending in {' or '.join(suffixes)}")
-        if not Path(name).resolve().parent.is_dir():
-            parser.error(f"{option} {name!r}: directory {str(Path(name).parent)!r} does not exist")
-
-
 @subcommand(
     "simulate",
     help="simulate a model: trajectory, plot, animation",
     description=(
-        "Build the model in MODEL.toml, integrate it from its consistent initial state to --t-end "
-        "(inputs held at zero, or driven by a compiled controller: --controller or the file's [controller] table; use the Python API, nc.simulate(..., u=...), for other inputs) and write "
-        "the trajectory on the grid 0, dt, 2 dt, ... A summary (integrator work, energy and "
+        "Build the model in MODEL (TOML or URDF), integrate it from its consistent initial state to --t-end "
+        "(inputs held at zero, or driven by a compiled controller: --controller or the file's [controller] "
+        "table; use the Python API, nc.simulate(..., u=...), for other inputs) on the grid 0, dt, 2 dt, ..., "
+        "writing the trajectory to -o FILE if given. A summary (integrator work, energy drift or, for "
+        "dissipative runs, the energy balance: work of contacts, dampers, inputs and its residual; "
         "constraint drift) goes to standard output. Files are written only when the whole run "
         "succeeds: a failed integration says where and why it failed, and writes the trajectory up "
-        "to that time to OUTPUT with '.incomplete' before the suffix (e.g. run.incomplete.npz, "
+        "to that time to OUTPUT (default MODEL.npz) with '.incomplete' before the suffix (e.g. run.incomplete.npz, "
         "whose info says complete = false)."),
     examples=(
         "ncgen simulate examples/chain.toml --t-end 2 --dt 0.01 -o chain.npz --plot chain.png\n"
@@ -115,6 +94,7 @@ def _check_outputs(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
         "ncgen simulate examples/tensegrity.toml --t-end 2 -o t.npz --method stepper --rtol 1e-6\n"
         "ncgen simulate balls.toml --t-end 2 --dt 1e-4 -o balls.npz --method stepper --contacts nonsmooth\n"
         "ncgen simulate robot.urdf --t-end 1 -o robot.csv   # URDF: falls under gravity, zero torque\n"
+        "ncgen simulate solo12.urdf --floating-base --t-end 0.5   # a free-floating base; summary only\n"
         "ncgen simulate robot.urdf --t-end 2 -o hold.npz --controller 'kind = \"pd\", kp = 200, kd = 20' "
         "--joint-dynamics   # PD to the zero pose, damping and limits from the URDF"),
     arguments=_simulate_arguments,
@@ -126,8 +106,8 @@ def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from ncgen.files import atomic_path, incomplete_path
     from ncgen.runtime import simulate as run
 
-    _check_outputs(args, parser)
-    model = load_model(args.model, args.param, args.contacts)
+    check_files(args, parser, OUTPUTS)
+    model = load_model(args.model, args.param, args.contacts, floating_base=args.floating_base)
     try:
         stepper = {"substeps": args.substeps} if args.method in ("stepper", "joint", "auto") else {}
         controller = _controller(args.controller) if args.controller else model.controller

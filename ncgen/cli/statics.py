@@ -1,19 +1,19 @@
-"""``ncgen equilibrium`` and ``ncgen modes``: statics of a TOML model from the command line
+"""``ncgen equilibrium`` and ``ncgen modes``: statics of a model (TOML or URDF) from the command line
 (:func:`ncgen.equilibrium`, :func:`ncgen.modes`)."""
 from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
-from ncgen.cli.common import load_model
+from ncgen.cli.common import check_files, file_arguments, load_model, model_arguments
 from ncgen.cli.registry import subcommand
+
+#: What -o/--output accepts.
+EQUILIBRIUM_OUTPUTS = MODES_OUTPUTS = (".csv", ".npz")
 
 
 def _common_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", metavar="MODEL.toml", help="model file (TOML)")
-    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
-                   help="replace a parameter's default value (repeatable; a vector as NAME=1,2,3)")
+    model_arguments(p)
     p.add_argument("--input", action="append", default=[], metavar="NAME=VALUE",
                    help="hold an input at a constant value (repeatable; default zero)")
     p.add_argument("--method", default="descent", choices=("descent", "newton"),
@@ -28,22 +28,16 @@ def _common_arguments(p: argparse.ArgumentParser) -> None:
 
 def _equilibrium_arguments(p: argparse.ArgumentParser) -> None:
     _common_arguments(p)
-    p.add_argument("-o", "--output", metavar="FILE", default=None,
-                   help="write the equilibrium: .csv (name,value rows of q and lambda) or .npz")
-    p.add_argument("--plot", metavar="FILE.png", default=None, help="draw the equilibrium configuration")
-    p.add_argument("--html", metavar="FILE.html", default=None,
-                   help="an interactive 3D page of the equilibrium configuration (opens offline)")
+    file_arguments(p, EQUILIBRIUM_OUTPUTS, "the equilibrium: .csv (name,value rows of q and lambda) or .npz",
+                   plot="the equilibrium configuration",
+                   html="an interactive 3D page of the equilibrium configuration (opens offline)")
 
 
 def _modes_arguments(p: argparse.ArgumentParser) -> None:
     _common_arguments(p)
-    p.add_argument("-o", "--output", metavar="FILE", default=None,
-                   help="write the modes: .csv (mode, frequency_hz, omega2, kind) or .npz (with the shapes)")
-    p.add_argument("--plot", metavar="FILE.png", default=None, help="draw the first vibration mode shapes")
-    p.add_argument("--animate", metavar="FILE", default=None,
-                   help="animate one mode shape (.gif, or .mp4 with ffmpeg); see --mode")
-    p.add_argument("--html", metavar="FILE.html", default=None,
-                   help="an interactive 3D page of one mode shape in motion (opens offline); see --mode")
+    file_arguments(p, MODES_OUTPUTS, "the modes: .csv (mode, frequency_hz, omega2, kind) or .npz (with the "
+                   "shapes)", plot="the first vibration mode shapes", animate="one mode shape (see --mode)",
+                   html="an interactive 3D page of one mode shape in motion (opens offline; see --mode)")
     p.add_argument("--mode", type=int, default=None, metavar="K",
                    help="mode to animate (--animate, --html), 1-based as in the table (default: the first "
                         "vibration mode)")
@@ -71,14 +65,9 @@ def _inputs(model, items: list[str]):
     return u
 
 
-def _check_suffix(parser, option: str, name: str | None, suffixes: tuple[str, ...]) -> None:
-    if name is not None and Path(name).suffix.lower() not in suffixes:
-        parser.error(f"{option} {name!r}: expected a file name ending in {' or '.join(suffixes)}")
-
-
 def _solve(args):
     from ncgen.analysis.statics import equilibrium
-    model = load_model(args.model, args.param, share=not args.no_share)
+    model = load_model(args.model, args.param, share=not args.no_share, floating_base=args.floating_base)
     return equilibrium(model, u=_inputs(model, args.input), method=args.method, tol=args.tol)
 
 
@@ -86,7 +75,7 @@ def _solve(args):
     "equilibrium",
     help="static equilibrium: configuration, reactions, stability",
     description=(
-        "Build the model in MODEL.toml and solve F(q) - A(q)^T lambda = 0, Phi(q) = 0 by Newton's method "
+        "Build the model in MODEL (TOML or URDF) and solve F(q) - A(q)^T lambda = 0, Phi(q) = 0 by Newton's method "
         "on the constraints, from the model's initial configuration, with inputs held constant "
         "(--input) and without velocities. Prints the configuration, the multipliers (reactions, N per "
         "unit of each constraint), the spring and cable tensions (slack cables marked) and the "
@@ -100,9 +89,7 @@ def _solve(args):
     arguments=_equilibrium_arguments,
 )
 def equilibrium_command(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
-    _check_suffix(parser, "-o/--output", args.output, (".csv", ".npz"))
-    _check_suffix(parser, "--plot", args.plot, (".png",))
-    _check_suffix(parser, "--html", args.html, (".html",))
+    check_files(args, parser, EQUILIBRIUM_OUTPUTS)
     eq = _solve(args)
     print(eq.table(), end="")
     model = eq.model
@@ -143,10 +130,7 @@ def equilibrium_command(args: argparse.Namespace, parser: argparse.ArgumentParse
 )
 def modes_command(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from ncgen.analysis.modes import modes
-    _check_suffix(parser, "-o/--output", args.output, (".csv", ".npz"))
-    _check_suffix(parser, "--plot", args.plot, (".png",))
-    _check_suffix(parser, "--animate", args.animate, (".gif", ".mp4"))
-    _check_suffix(parser, "--html", args.html, (".html",))
+    check_files(args, parser, MODES_OUTPUTS)
     eq = _solve(args)
     result = modes(eq.model, eq)
     print(result.table(), end="")

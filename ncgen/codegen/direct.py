@@ -75,6 +75,14 @@ class DirectFunction:
             raise CodegenError(f"{self.name}: the compiled kernel returned an error")
         return self.outputs
 
+    def status_call(self, *args) -> int:
+        """As :meth:`__call__`, but return the kernel's status (0: success) instead of raising:
+        for solvers whose outputs are meaningful after a non-zero status (a QP solver's last
+        iterate); the outputs are in :attr:`outputs`."""
+        for buf, x in zip(self.inputs, args):
+            buf[:] = x
+        return int(self._fn(*self._args))
+
     def __call__(self, *args) -> list[np.ndarray]:
         """Copy ``args`` (one array per input, its nonzeros) into the buffers and evaluate.
         Raises :class:`~ncgen.errors.ShapeError` naming the input for a wrong number of

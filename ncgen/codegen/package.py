@@ -40,16 +40,16 @@ MAX_FILE_INSTRUCTIONS = 20_000
 #: A kernel file holding a function longer than this (SX instructions; functions that an MX
 #: function calls included, :func:`~ncgen.codegen.kernels.max_function_size`), or any kernel file
 #: of a package longer than LARGE_PACKAGE_INSTRUCTIONS, is listed in the manifest's
-#: ``build.large_sources``: gcc's optimising passes grow faster than linearly
-#: with the length of one function (the 32 k-instruction DAE residual of a 300-bar chain
-#: compiles in 4 s at -O0, 32 s at -O2, 9 min and 4 GB at -O1), so the builds compile those
-#: files with ``-O0`` unless the user chooses the flags (:func:`ncgen.codegen.compile_cache.
+#: ``build.large_sources``: gcc's -O2 passes grow faster than linearly with the length of
+#: one function and give no faster code than -O1 there (the 31 k-instruction KKT solve of
+#: the 40-bar chain's stepper: 4.6 s CPU at -O1, ~9 s at -O2, same speed), so the builds
+#: compile those files with ``-O1`` (never ``-O0``, ~3x slower code) unless the user chooses the flags (:func:`ncgen.codegen.compile_cache.
 #: compile_package`, the Makefile's ``LARGE_CFLAGS``, CMake).  Long functions are rerolled
 #: first (``reroll_instructions``), so this only concerns those with nothing that repeats
 #: (or a package written with ``reroll_instructions=None``).
 LARGE_FUNCTION_INSTRUCTIONS = 20_000
 #: Above this many SX instructions in all, every kernel file is a large source: -O2 costs
-#: ~0.5 ms per instruction even for short functions (0.1 ms at -O0).
+#: ~0.5 ms per instruction even for short functions.
 LARGE_PACKAGE_INSTRUCTIONS = 200_000
 #: Files rendered from the template of the same name plus ".j2".
 _FIXED_FILES = ("main.c", "Makefile", "CMakeLists.txt")

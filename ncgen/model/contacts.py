@@ -14,7 +14,11 @@ Every contact has, besides its geometry (SI units):
   (:mod:`ncgen.assembly.contacts`): ``stiffness`` k (N/m^n), ``damping`` d
   (N·s/m^(n+1)), ``exponent`` n (Hunt–Crossley: ``f_N = max(0, δⁿ (k + d δ̇))`` with the
   penetration ``δ = max(0, −g)``) and ``slip_velocity`` v_s (m/s, friction regularised as
-  ``f_T = −μ f_N v_T / sqrt(|v_T|² + v_s²)``).
+  ``f_T = −μ f_N v_T / sqrt(|v_T|² + v_s²)``).  A contact given ``restitution`` and no
+  ``damping`` gets the damping with which the law restores ``e`` at an impact speed of
+  :data:`RESTITUTION_SPEED` (:func:`damping_for_restitution`; faster impacts lose more,
+  slower ones less, as the law says); given ``damping``, the smooth law uses it and
+  ``restitution`` is the nonsmooth stepper's only.
 
 Sign conventions: the gap ``g`` (m) is positive when apart; the normal ``n`` points from the
 plane (or sphere ``a``) towards the sphere (or sphere ``b``); contact forces are those on the
@@ -23,6 +27,7 @@ second element (the sphere, or ``b``), and ``−`` that on the first.
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numpy as np
 
@@ -33,6 +38,47 @@ from ncgen.validation import as_vector
 
 #: Defaults of the smooth law (steel-like ball of a few kg: a 1 kg ball rests ~0.1 mm deep).
 STIFFNESS, DAMPING, EXPONENT, SLIP_VELOCITY = 1e6, 1e5, 1.5, 1e-3
+#: Impact speed (m/s) at which the smooth law restores a contact's ``restitution``.
+RESTITUTION_SPEED = 1.0
+
+
+#: Smallest restitution the smooth law is fitted to (e → 0 needs infinite damping).
+MIN_RESTITUTION = 0.01
+
+
+def damping_for_restitution(stiffness: float, restitution: float, exponent: float = EXPONENT) -> float:
+    """The damping d (N·s/m^(n+1)) with which ``f_N = δⁿ (k + d δ̇)`` returns a normal impact
+    at :data:`RESTITUTION_SPEED` with restitution ``e`` (at least :data:`MIN_RESTITUTION`).
+    Scaled by ``δ = L y``, ``L^(n+1) = m v²/k``, the impact is ``y'' = −yⁿ (1 + ζ y')⁺`` with
+    ``ζ = d v / k`` alone, so ``ζ(e, n)`` is solved once (bisection) and ``d = ζ k / v``."""
+    return _zeta(round(max(float(restitution), MIN_RESTITUTION), 6), float(exponent)) * stiffness / RESTITUTION_SPEED
+
+
+@lru_cache(maxsize=64)
+def _zeta(e: float, n: float) -> float:
+    if e >= 1.0:
+        return 0.0
+    lo, hi = 0.0, 1.0
+    while _rebound(hi, n) > e:
+        hi *= 2.0
+    while hi - lo > 1e-7 * hi:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if _rebound(mid, n) > e else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
+def _rebound(zeta: float, n: float) -> float:
+    """Rebound speed of the scaled impact ``y'' = −yⁿ (1 + ζ y')⁺``, ``y(0) = 0, y'(0) = 1``."""
+    from scipy.integrate import solve_ivp
+
+    def rhs(_, x):
+        return [x[1], -max(x[0], 0.0) ** n * max(1.0 + zeta * x[1], 0.0)]
+
+    def apart(_, x):          # the force has vanished while moving out, or the sphere left
+        return min(x[0], 1.0 + zeta * x[1]) if x[1] < 0 else 1.0
+    apart.terminal, apart.direction = True, -1
+    sol = solve_ivp(rhs, (0.0, 100.0), [0.0, 1.0], events=apart, method="LSODA", rtol=1e-9, atol=1e-12)
+    return float(-sol.y[1, -1])
 
 
 def _check_name(name) -> None:
@@ -45,10 +91,14 @@ class Contact:
 
     kind = "Contact"
 
-    def __init__(self, *, mu=0.0, restitution=0.0, stiffness=STIFFNESS, damping=DAMPING, exponent=EXPONENT,
+    def __init__(self, *, mu=0.0, restitution=None, stiffness=STIFFNESS, damping=None, exponent=EXPONENT,
                  slip_velocity=SLIP_VELOCITY, name: str | None = None):
         self.name = name
-        self.mu, self.restitution = mu, restitution
+        if damping is None:
+            numbers = all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in (stiffness, restitution))
+            damping = damping_for_restitution(stiffness, restitution, exponent) \
+                if restitution is not None and numbers and isinstance(exponent, (int, float)) else DAMPING
+        self.mu, self.restitution = mu, 0.0 if restitution is None else restitution
         self.stiffness, self.damping, self.exponent, self.slip_velocity = stiffness, damping, exponent, slip_velocity
         self.system = None
 

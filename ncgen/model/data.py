@@ -15,7 +15,9 @@ A model can have these compiled libraries (docs/architecture.md):
 * the **forward-dynamics kernel** (``forward_dynamics_kernels``): ``kkt_function`` (or its
   joint-space form) alone;
 * the **tree kernel** (``tree_kernels``): the joint-space forward dynamics of a tree alone;
-* the **joint-space loops** (``joint_loops``): the joint-space ODE and its integration loop.
+* the **joint-space loops** (``joint_loops``): the joint-space ODE and its integration loop;
+* the **tree algorithms** (``algorithm_kernels``): RNEA, CRBA, ABA and their derivatives,
+  one library each.
 """
 from __future__ import annotations
 
@@ -38,6 +40,8 @@ class ModelData:
     #: Whether the forces are conservative and the constraints scleronomic, or None
     #: (:func:`ncgen.runtime.stepper_checks.is_conservative`).
     conservative: bool | None = None
+    #: The same with the inputs at zero (``is_conservative(model, inputs=False)``).
+    conservative_idle: bool | None = None
     #: ``{joint_space: DirectFunction}``: the compiled forward dynamics
     #: (:func:`ncgen.runtime.joint_dynamics.forward_dynamics_kernel`).
     forward_dynamics_kernels: dict = field(default_factory=dict)
@@ -46,6 +50,12 @@ class ModelData:
     tree_kernels: dict = field(default_factory=dict)
     #: ``nc.joint_forward_dynamics``' own copy of the default tree kernel (False: none).
     tree_kernel: object = None
+    #: ``{(name, cflags): AlgorithmKernel or the ModelError of a non-tree}``: RNEA, CRBA, ABA
+    #: and the derivatives, each its own library (:func:`ncgen.runtime.tree_algorithms.algorithm_kernel`).
+    algorithm_kernels: dict = field(default_factory=dict)
+    #: ``(indices,)``: the independent joint rates when the compiled algorithms take the model,
+    #: indices None when not (:func:`ncgen.runtime.tree_algorithms.rnea_applies`).
+    algorithm_rates: tuple | None = None
     #: ``(f,)``: the joint-space tree map ``(q_j, v_j) -> (q, v)``, f None for a model that is
     #: not a tree (``JointSpace._tree`` in :mod:`ncgen.assembly.joint_space`).
     joint_tree_function: tuple | None = None
@@ -69,6 +79,14 @@ class ModelData:
     #: (:class:`ncgen.assembly.unshared.UnsharedForm`).
     unshared_model: object = None
     unshared_map: tuple | None = None
+    #: :attr:`Model.content_hash <ncgen.model.model.Model.content_hash>`, and the system's
+    #: description a pickle sends (``System.description()``), computed on first use.
+    content_hash: str | None = None
+    description: tuple | None = None
+    #: ``{library: loops}``: the stepper's loops bound for addresses, and the compiled
+    #: ``accel`` of the initial multipliers (:mod:`ncgen.runtime.batch`).
+    batch_loops: dict = field(default_factory=dict)
+    batch_accel: object = None
 
 
 _DATA: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()

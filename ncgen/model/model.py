@@ -12,6 +12,9 @@ the default parameters and zero inputs unless told otherwise and return NumPy ar
 """
 from __future__ import annotations
 
+import hashlib
+import weakref
+from collections import OrderedDict
 from types import MappingProxyType
 
 import numpy as np
@@ -53,7 +56,7 @@ class Model:
 
     def __init__(self, *, description, layout, labels, functions, M, factor, potential, state, p0, baumgarte,
                  redundant, dropped, t0, springs=None, limits=None, joint_space=None,
-                 contacts=(), contact_model="smooth", sharing=None, unshared=None):
+                 contacts=(), contact_model="smooth", sharing=None, unshared=None, recipe=None):
         system = description
         self.members = MappingProxyType(dict(system.members))
         self.joints = tuple(system.joints)
@@ -102,6 +105,9 @@ class Model:
         #: how to build the same system with ``share=False`` (reactions of the eliminated joints;
         #: :class:`ncgen.assembly.unshared.UnsharedForm`; the built model is kept in ``data``), or None
         self.unshared = unshared
+        #: ``(system, build options)`` it was built from: what a pickled model sends (see
+        #: :meth:`__reduce__`); None for a model made otherwise, which cannot be pickled
+        self.recipe = recipe
         for key, value in vars(self).items():
             object.__setattr__(self, key, _frozen(value))
         object.__setattr__(self, "_frozen", True)
@@ -114,6 +120,37 @@ class Model:
 
     def __delattr__(self, key):
         raise AttributeError(f"Model {self.name!r} is constant (cannot delete {key!r})")
+
+    # ------------------------------------------------------------ identity and pickling
+    @property
+    def content_hash(self) -> str:
+        """sha256 of what the model computes: every CasADi function (serialised), the mass
+        matrix, the initial state, the parameters and the names; equal for two builds of the
+        same description."""
+        data = self.data
+        if data.content_hash is None:
+            data.content_hash = content_hash(self)
+        return data.content_hash
+
+    def __copy__(self) -> "Model":
+        return self              # constant: copies share it (pickling goes by description instead)
+
+    def __deepcopy__(self, memo) -> "Model":
+        return self
+
+    def __reduce__(self):
+        """Pickled by description: the system's TOML text (with frames and visuals), the
+        build options and :attr:`content_hash`; unpickling rebuilds the model once per
+        process (:meth:`ncgen.model.system.System.rebuilt_model`) and checks the hash.  Run-time caches (loaded
+        libraries, work arrays) never travel: a worker loads the compiled library from the
+        compile cache (``ncgen.codegen.compile_cache``), which the same content hits."""
+        if self.recipe is None:
+            raise TypeError(f"model {self.name!r} cannot be pickled: it was not made by System.build()")
+        data = self.data
+        if data.description is None:
+            data.description = self.recipe[0].description()
+        _known[self.content_hash] = self
+        return type(self.recipe[0]).rebuilt_model, (data.description, self.recipe[1], self.content_hash)
 
     @property
     def data(self) -> ModelData:
@@ -316,3 +353,49 @@ class Model:
     def __repr__(self) -> str:
         return (f"<Model {self.name!r}: dim={self.dim}, nq={self.nq}, nc={self.nc}, dof={self.dof}, "
                 f"nu={self.nu}, np={self.np}>")
+
+
+#: Models of this process by content hash: those pickled here (weakly) and those rebuilt
+#: from a description (the last :data:`KEEP_REBUILT`, strongly, so that a worker keeps its
+#: models between tasks).
+_known: "weakref.WeakValueDictionary[str, Model]" = weakref.WeakValueDictionary()
+_rebuilt: "OrderedDict[str, Model]" = OrderedDict()
+KEEP_REBUILT = 8
+
+
+def content_hash(model: Model) -> str:
+    """See :attr:`Model.content_hash`."""
+    h = hashlib.sha256()
+    for name in sorted(model.functions):
+        h.update(name.encode())
+        h.update(model.functions[name].serialize().encode())
+    for a in (model.M, model.q0, model.v0, model.p0, model.gravity):
+        h.update(np.ascontiguousarray(a, dtype=float).tobytes())
+    names = [model.name, model.coordinate_names, model.constraint_names, model.input_names, model.input_sizes,
+             model.parameter_names, model.parameter_sizes, model.marker_names, model.contact_model, model.t0,
+             list(model.baumgarte), model.member_names, sorted(model.frames), model.joint_names,
+             model.joint_limits]
+    h.update(repr(names).encode())
+    return h.hexdigest()
+
+
+def known_model(expected_hash: str) -> "Model | None":
+    """The model of this process with that content hash (pickled or rebuilt here), or None."""
+    model = _known.get(expected_hash) or _rebuilt.get(expected_hash)
+    if model is not None and expected_hash in _rebuilt:
+        _rebuilt.move_to_end(expected_hash)
+    return model
+
+
+def keep_rebuilt(model: Model, expected_hash: str) -> Model:
+    """Check a model rebuilt from its description against the pickled ``expected_hash`` and
+    keep it for the next unpickling (see :meth:`ncgen.model.system.System.rebuilt_model`)."""
+    if model.content_hash != expected_hash:
+        raise ModelError(f"model {model.name!r} rebuilt from its description differs from the pickled one "
+                         f"(content hash {model.content_hash[:12]}... instead of {expected_hash[:12]}...): "
+                         "its TOML form does not hold everything the model used (a force given as a Python "
+                         "function?), or another ncgen version unpickles it; build the model in the worker")
+    _rebuilt[expected_hash] = model
+    while len(_rebuilt) > KEEP_REBUILT:
+        _rebuilt.popitem(last=False)
+    return model

@@ -42,8 +42,12 @@ from ncgen.symbolic.member import RigidMember
 
 #: Two points (m) or unit vectors closer than this, relative to the system's size, are the same.
 SAME = 1e-9
-#: Smallest normalised volume of a body's base vectors accepted when choosing them.
-INDEPENDENT = 1e-6
+#: Smallest singular value of a body's normalised spans and base vectors accepted when choosing
+#: them: a nearly coplanar choice (the SO-101's wrist: its roll and flex axes and the line
+#: between its two joint points are coplanar within 2e-6 rad, singular value 1.9e-6) makes the
+#: body's rigidity equations numerically dependent at the initial configuration, so below
+#: this its own axes complete the basis (the joint keeps its axis equations).
+INDEPENDENT = 5e-3
 
 
 @dataclass

@@ -10,6 +10,9 @@ given in world coordinates in the initial configuration; SI units throughout.
 """
 from __future__ import annotations
 
+import copy
+import warnings
+
 import numpy as np
 import casadi as ca
 
@@ -278,10 +281,57 @@ class System:
         from ncgen.model.toml_io import system_to_toml
         return system_to_toml(self)
 
+    def description(self) -> tuple:
+        """``(toml, frames, visuals, joint_limits)``: what the system is, as plain data (its
+        TOML text, and the named frames, visual geometry and joint limits, e.g. of a URDF, that
+        TOML does not hold); :func:`from_description` makes the same system again.  Pickling a
+        system sends this."""
+        try:
+            text = self.to_toml()
+        except (NcgenError, TypeError, ValueError) as e:
+            raise TypeError(f"system {self.name!r} cannot be pickled: its description is written as TOML, "
+                            f"and that failed: {e}") from None
+        frames = {k: (mem, np.array(R), np.array(p)) for k, (mem, R, p) in self.frames.items()}
+        limits = {j.name: dict(j.limits) for j in self.joints if j.limits}
+        return text, frames, [dict(v) for v in self.visuals], limits
+
+    def __reduce__(self):
+        return from_description, self.description()
+
+    def __deepcopy__(self, memo) -> "System":
+        """A member-by-member copy (as without :meth:`__reduce__`, which pickling uses)."""
+        new = object.__new__(type(self))
+        memo[id(self)] = new
+        new.__dict__.update(copy.deepcopy(self.__dict__, memo))
+        return new
+
+    @classmethod
+    def rebuilt_model(cls, description: tuple, options: dict, expected_hash: str):
+        """The model of a pickle (:meth:`ncgen.model.model.Model.__reduce__`): the one of this
+        process with that content hash, else built from ``description`` with the build
+        ``options`` and checked against ``expected_hash``."""
+        from ncgen.model.model import keep_rebuilt, known_model
+        model = known_model(expected_hash)
+        if model is None:
+            with warnings.catch_warnings():   # said when it was first built (e.g. dropped constraints)
+                warnings.simplefilter("ignore")
+                model = keep_rebuilt(from_description(*description).build(**options), expected_hash)
+        return model
+
     def __repr__(self) -> str:
         return (f"System({self.name!r}, dim={self.dim}, members={len(self.members)}, "
                 f"joints={len(self.joints)}, forces={len(self.forces)}"
                 + (f", contacts={len(self.contacts)})" if self.contacts else ")"))
+
+
+def from_description(toml: str, frames: dict, visuals: list, joint_limits: dict) -> System:
+    """The system of :meth:`System.description` (how a pickled system is read back)."""
+    system = System.from_toml(toml)
+    system.frames = {k: (mem, np.array(R), np.array(p)) for k, (mem, R, p) in frames.items()}
+    system.visuals = [dict(v) for v in visuals]
+    for joint in system.joints:
+        joint.limits = dict(joint_limits.get(joint.name, {}))
+    return system
 
 
 def _rotation(R, d, name):

@@ -58,8 +58,8 @@ def check_urdf_document(text: str, where: str) -> None:
         axis = joint.find("axis")
         if axis is not None:
             xyz = _floats(axis.get("xyz", "1 0 0"), 3, f"{what}: <axis xyz>")
-            if not np.linalg.norm(xyz) > 0:
-                raise ModelError(f"{what}: <axis xyz> is the zero vector")
+            if not np.linalg.norm(xyz) > 0 and joint.get("type") not in ("fixed", "floating"):
+                raise ModelError(f"{what}: <axis xyz> is the zero vector")     # a fixed joint's axis is unused
     _check_no_loop(joints, where)
 
 

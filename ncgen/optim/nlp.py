@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from ncgen.progress import bar, enabled
 from ncgen.errors import OptimizationError
 from ncgen.interrupts import deferred_interrupt
 from ncgen.model.model import component_names
@@ -392,8 +393,13 @@ class NLP:
         opti.solver("ipopt", {"expand": self.disc.expandable, "detect_simple_bounds": True,
                               "print_time": False, "ipopt": options})
         start = time.perf_counter()
-        with deferred_interrupt() as interrupt:          # Ctrl-C stops IPOPT at its next iteration
-            opti.callback(interrupt.check)
+        shown = enabled(None) and not verbose          # IPOPT's own log replaces the bar
+        with deferred_interrupt() as interrupt, \
+                bar(max_iter, "IPOPT", unit="iter", mode=None if shown else False) as progress:
+            def each_iteration(i):                       # Ctrl-C stops IPOPT at its next iteration
+                interrupt.check(i)
+                progress.update(1)
+            opti.callback(each_iteration)
             try:
                 self.value = opti.solve_limited().value
             except RuntimeError:               # IPOPT failed (infeasible, NaN, ...): the last iterate

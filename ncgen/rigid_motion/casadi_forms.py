@@ -1,4 +1,4 @@
-"""CasADi forms of the rigid-motion algebra, and its C package.
+"""CasADi forms of the rigid-motion algebra.
 
 Each function is the CasADi translation (:func:`ncgen.model.sym2casadi.to_casadi`) of the
 SymPy formula of the same name in :mod:`ncgen.symbolic.rigid_motion` or
@@ -7,7 +7,10 @@ held as one SX :class:`casadi.Function` per formula.  Calling it with SX argumen
 (the expressions are inlined), with MX arguments MX, with numbers DM.  Conventions as in the
 SymPy modules: ``H_ab`` pose of b in a, twists ``[ω; v]``, wrenches ``[τ; f]``.
 
-These functions are also what :func:`ncgen.rigid_motion.write_c_package` generates C from.
+These functions are also what :func:`ncgen.codegen.rigid_motion_package.write_c_package`
+generates C from.  Besides the table, the rotations of the joint coordinates
+(:data:`ROTATIONS`: ``rotation_about``, ``quaternion``, ``quaternion_matrix``,
+``quaternion_rate``, ``swing``) have CasADi forms here, translated the same way.
 The exponential and logarithm are ``if_else`` on the small-angle branch; both branches are
 finite everywhere (see :mod:`ncgen.symbolic.rigid_motion`), so values and derivatives are
 finite at the zero twist and at the identity.
@@ -17,9 +20,20 @@ from __future__ import annotations
 from functools import lru_cache
 
 import casadi as ca
+import sympy as sp
 
 from ncgen.model.sym2casadi import to_casadi
-from ncgen.symbolic.rigid_motion_forms import form
+from ncgen.symbolic import rigid_motion as srm
+from ncgen.symbolic.rigid_motion_forms import NAMES, form
+
+#: Rotations of the joint coordinates with a CasADi form only: ``name: ((argument, rows, cols)...), output``.
+ROTATIONS = {
+    "rotation_about": ((("axis", 3, 1), ("angle", 1, 1)), "R"),
+    "quaternion": ((("R_ab", 3, 3),), "quat"),
+    "quaternion_matrix": ((("quat", 4, 1),), "R"),
+    "quaternion_rate": ((("quat", 4, 1), ("omega", 3, 1)), "quat_dot"),
+    "swing": ((("u0", 3, 1), ("u", 3, 1)), "phi"),
+}
 
 
 def _bind(values: dict, placeholder, x) -> None:
@@ -32,9 +46,24 @@ def _bind(values: dict, placeholder, x) -> None:
             values[placeholder[i, j]] = x[i, j]
 
 
+def _rotation_function(name: str) -> ca.Function:
+    shapes, out = ROTATIONS[name]
+    inputs = [ca.SX.sym(a, r, c) for a, r, c in shapes]
+    placeholders = [sp.Matrix(r, c, lambda i, j, a=a: sp.Symbol(f"{a}_{i}{j}", real=True)) for a, r, c in shapes]
+    values: dict = {}
+    for placeholder, x in zip(placeholders, inputs):
+        _bind(values, placeholder, x)
+    args = [p[0] if p.shape == (1, 1) else p for p in placeholders]
+    return ca.Function(name, inputs, [ca.SX(to_casadi(getattr(srm, name)(*args), values))],
+                       [a for a, _, _ in shapes], [out])
+
+
 @lru_cache(maxsize=None)
 def function(name: str) -> ca.Function:
-    """The SX function ``name`` (one of ``rigid_motion_forms.NAMES``), inputs and outputs named as in the table."""
+    """The SX function ``name`` (one of ``rigid_motion_forms.NAMES`` or :data:`ROTATIONS`),
+    inputs and outputs named as in the table."""
+    if name not in NAMES:
+        return _rotation_function(name)
     f = form(name)
     inputs = [ca.SX.sym(a.name, *(a.shape + (1,) * (2 - len(a.shape)))) for a in f.args]
     values: dict = {}
@@ -49,6 +78,31 @@ def function(name: str) -> ca.Function:
 def _call(name: str, *args):
     out = function(name).call(list(args))
     return out[0] if len(out) == 1 else tuple(out)
+
+
+def rotation_about(axis, angle):
+    """``1 + sin θ û + (1 − cos θ) û²``: rotation by ``angle`` (rad) about the unit ``axis``."""
+    return _call("rotation_about", axis, angle)
+
+
+def quaternion(R_ab):
+    """Unit quaternion ``[qx, qy, qz, qw]`` (``qw ≥ 0``, Shepperd) of the rotation ``R_ab``."""
+    return _call("quaternion", R_ab)
+
+
+def quaternion_matrix(quat):
+    """Rotation matrix of the quaternion ``[qx, qy, qz, qw]`` (normalised first)."""
+    return _call("quaternion_matrix", quat)
+
+
+def quaternion_rate(quat, omega):
+    """``q̇ = ½ q ⊗ [ω; 0]``, ``ω`` in body axes."""
+    return _call("quaternion_rate", quat, omega)
+
+
+def swing(u0, u):
+    """``φ = (θ / sin θ)(u0 × u)``: the rotation vector taking the unit ``u0`` to ``u``."""
+    return _call("swing", u0, u)
 
 
 def rotx(angle):

@@ -79,16 +79,41 @@ def forward_dynamics(model, q, v, u=None, p=None, t: float = 0.0, *, backend: st
     return x[:nq], x[nq:]
 
 
+def _rnea_kernel(model, qj, vj, aj, p, t, joints):
+    """The compiled RNEA's efforts when it applies (a 3D tree whose asked-for efforts are
+    those of its independent joint rates; the given accelerations keep the mimic relations),
+    else None."""
+    from ncgen.runtime.tree_algorithms import rnea, rnea_applies
+
+    js = model.joint_space
+    independent = rnea_applies(model)
+    if independent is None:
+        return None
+    sv = js.slices(rates=True)
+    actuated = [i for n in js.joint_names if n in model.actuated_joints for i in range(sv[n].start, sv[n].stop)]
+    if joints == "actuated" and independent != actuated:
+        return None
+    if joints == "all" and len(independent) != js.nv:
+        return None
+    return rnea(model, qj, vj, aj, p=p, t=t)
+
+
 def inverse_dynamics(model, qj, vj, aj, p=None, t: float = 0.0, joints: str = "actuated") -> np.ndarray:
     """Efforts of ``model.actuated_joints`` (concatenated, ``joint_names`` order) that give
     the joint accelerations ``aj`` at joint positions ``qj`` and rates ``vj`` (vectors in
     ``joint_names`` order).  ``joints="all"``: efforts conjugate to every joint rate, as if
-    every joint were actuated (a floating base's wrench included; Pinocchio's ``rnea``)."""
+    every joint were actuated (a floating base's wrench included; Pinocchio's ``rnea``).
+    Trees (3D, mimic joints included) use the compiled RNEA
+    (:func:`~ncgen.runtime.tree_algorithms.rnea`) when the efforts asked for are those of the
+    independent joint rates; other models solve the constrained equations of motion."""
     if joints not in ("actuated", "all"):
         raise ModelError(f"inverse_dynamics: joints: expected 'actuated' or 'all', got {joints!r}")
     js = model.joint_space
     p = model.p0 if p is None else as_vector(p, model.np, "p")
     t = float(t)
+    tau = _rnea_kernel(model, qj, vj, aj, p, t, joints)
+    if tau is not None:
+        return tau
     q, v = model.from_joint_space(qj, vj, t=t, p=p)
     aj = as_vector(aj, js.nv, "aj (one value per joint rate, joint_names order)")
     f = model.functions

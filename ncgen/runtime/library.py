@@ -46,6 +46,11 @@ def compiled_model(model, cflags=None) -> CompiledModel:
     return cache[key]
 
 
+def is_loaded(model) -> bool:
+    """Whether this process has already compiled (or found in the cache) ``model``'s package."""
+    return bool(model_data(model).libraries)
+
+
 def compiled_functions(model, names, cflags=None) -> dict[str, ca.Function]:
     """Functions ``names`` of ``model``'s compiled package (see :func:`compiled_model`)."""
     return compiled_model(model, cflags).functions(names)

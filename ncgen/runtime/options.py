@@ -79,7 +79,7 @@ class SimulationOptions:
     hold: str = "zoh"
     max_steps: int = 50_000
     ic_tolerance: float | None = 1e-6
-    backend: str = "vm"
+    backend: str = "auto"
     linear_solver: str = "csparse"
     progress: bool | None = None
     project: bool | str = "auto"

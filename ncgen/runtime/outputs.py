@@ -65,11 +65,17 @@ def member_coordinates(model, member: str, q: np.ndarray) -> np.ndarray:
 
 
 def joint_states(model, q, v) -> tuple[np.ndarray, np.ndarray]:
-    """Joint positions and rates ``(n_t, Σ n_j)`` per step (``model.joint_names`` order)."""
+    """Joint positions and rates ``(n_t, Σ n_j)`` per step (``model.joint_names`` order).
+    Angles are continuous in time (unwrapped: a joint turning past ±π keeps counting, never
+    jumps by 2π between samples); the first sample is in (−π, π]."""
     js = getattr(model, "joint_space", None)
     n = len(q)
     if js is None or not js.joint_names or n == 0:
         return np.zeros((n, 0)), np.zeros((n, 0))
     qj, = _mapped(js.positions, n, q.T)
     vj, = _mapped(js.rates, n, q.T, v.T)
-    return np.array(qj).T.reshape(n, -1), np.array(vj).T.reshape(n, -1)
+    qj = np.array(qj).T.reshape(n, -1)
+    angles = getattr(js, "angles", np.zeros(qj.shape[1], bool))
+    if angles.any():
+        qj[:, angles] = np.unwrap(qj[:, angles], axis=0)
+    return qj, np.array(vj).T.reshape(n, -1)

@@ -15,15 +15,17 @@ from ncgen.assembly.manifold import NEAR_SINGULAR, ManifoldProjector, robust_alg
 from ncgen.codegen.load import NoCompilerWarning
 from ncgen.errors import CompilerNotFound, NcgenError, SimulationError, SimulationInterrupted
 from ncgen.interrupts import raise_if_interrupted, sticky_interrupt
-from ncgen.errors import ModelError
+from ncgen.errors import ModelError, option
+from ncgen.runtime.backend_policy import choose_backend
 from ncgen.runtime.dae import load_dae
+from ncgen.runtime.energy_balance import idas_report
+from ncgen.runtime.stepper_checks import is_conservative
 from ncgen.runtime.diagnose import explain, shift_time
 from ncgen.runtime.idas import ChunkedIDAS, ChunkFailure
 from ncgen.assembly.joint_ode import dae_with_inputs
 from ncgen.model.controllers import Controller
 from ncgen.runtime.inputs import feedback_kind, hold_columns, input_samples, parameter_values, time_grid
 from ncgen.runtime.joint_simulation import joint_space_applies, simulate_joint
-from ncgen.assembly.manifold import NEAR_SINGULAR, ManifoldProjector, robust_algebraic
 from ncgen.runtime.progress import Progress
 from ncgen.runtime.rattle_bridge import RattleFailure, compiled_interval, rattle_interval
 from ncgen.runtime.options import SimulationOptions
@@ -90,8 +92,8 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
     ``options`` for this call.  The run's data and the options:
 
     * ``method``: ``"auto"`` (default): ``"joint"`` for a tree without contacts when a C
-      compiler is available (:func:`~ncgen.runtime.joint_simulation.joint_space_applies`),
-      else ``"idas"``; ``info["method"]`` says which ran (``info["auto"]`` why not joint).
+      compiler is available (:func:`~ncgen.runtime.joint_simulation.joint_space_applies`)
+      and ``backend`` is not ``"vm"``, else ``"idas"``; ``info["method"]`` says which ran (``info["auto"]`` why not joint).
       ``"joint"``: the joint coordinates ``q_j``, ``v_j`` integrated by a compiled C loop
       around the joint-space forward dynamics (:mod:`ncgen.runtime.joint_simulation`):
       ``integrator="dopri5"`` (default; Dormand–Prince 5(4), error control ``rtol``/``atol``
@@ -128,8 +130,10 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
       starting a driven mechanism at another ``t0``).  ``λ0`` then solves the KKT system
       with ``u(t0)``.
     * ``backend``: ``"vm"`` (CasADi's virtual machine), ``"compiled"`` (the DAE and its
-      Jacobian as generated C, compiled once and cached) or ``"auto"`` (compiled when a C
-      compiler is available).
+      Jacobian as generated C, compiled once and cached) or ``"auto"`` (default: start on the
+      VM, compile only when the run is long enough to pay for it; the rule is
+      :func:`ncgen.runtime.backend_policy.choose_backend`, the same as the CLI's;
+      ``info["backend_reason"]`` says why).
     * ``progress``: a progress bar on stderr: ``True``, ``False``, or ``None`` = when stderr is a
       terminal and the run takes more than a second.
     * ``max_steps``: IDAS steps allowed per output interval; ``linear_solver``: CasADi's
@@ -177,9 +181,11 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
     """
     opts = SimulationOptions.resolve(options, **shortcuts)
     if opts.method in ("idas", "auto") and getattr(model, "contact_model", "smooth") == "nonsmooth" and model.nk:
-        raise NcgenError(f"simulate: model {model.name!r} was built with contacts='nonsmooth', which only "
-                         "the compiled stepper handles: use method='stepper', or build the model with "
-                         "contacts='smooth' (compliant contacts) for IDAS")
+        built = option("contacts='nonsmooth'", "--contacts nonsmooth")
+        stepper = option("method='stepper'", "--method stepper")
+        smooth = option("build the model with contacts='smooth'", "--contacts smooth")
+        raise NcgenError(f"simulate: model {model.name!r} was built with {built}, which only the compiled "
+                         f"stepper handles: use {stepper}, or {smooth} (compliant contacts) for IDAS")
     t0 = model.t0 if t0 is None else as_scalar(t0, "t0")
     t = time_grid(t0, t_end, dt, bytes_per_point=point_bytes(model))
     pv = parameter_values(p, model)
@@ -192,8 +198,8 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
     with sticky_interrupt():               # a Ctrl-C that CasADi swallows is raised again between chunks
         raise_if_interrupted()
         method, why_not = opts.method, None
-        if method == "auto":
-            why_not = joint_space_applies(model)
+        if method == "auto":               # the joint loop is compiled: backend="vm" asks for no compiling
+            why_not = "backend='vm' compiles nothing" if opts.backend == "vm" else joint_space_applies(model)
             method = "joint" if why_not is None else "idas"
         if method == "joint":
             return simulate_joint(model, t, U, opts.hold, pv, q, v, integrator=opts.integrator,
@@ -210,6 +216,12 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
             return _stepwise_stepper(model, t, U, pv, q, v, feedback, opts)
         if method == "stepper":
             lam = initial_multipliers(model, t0, q, v, U[0], pv, load_dae(model, "vm")[0])
+            try:
+                load_stepper(model)
+            except CompilerNotFound as e:
+                stepper, idas = option("method='stepper'", "--method stepper"), option("method='idas'", "--method idas")
+                raise CompilerNotFound(f"{e}: the stepper ({stepper}) is generated C and needs one; install gcc, "
+                                       f"or use IDAS ({idas}), which runs on CasADi's virtual machine") from None
             return simulate_stepper(model, t, U, pv, q, v, lam, opts)
         return _simulate_idas(model, t, U, columns, pv, q, v, opts, controller=controller, feedback=feedback,
                               why_not=why_not)
@@ -222,7 +234,8 @@ def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions, *, c
     called at the start of every output interval."""
     t0, hold, project = float(t[0]), opts.hold, opts.project
     rtol, atol = 1e-8 if opts.rtol is None else opts.rtol, 1e-10 if opts.atol is None else opts.atol
-    dae, used = load_dae(model, opts.backend)
+    choice = choose_backend(model, len(t) - 1, opts.backend)
+    dae, used = load_dae(model, "auto" if opts.backend == "auto" and choice.backend == "compiled" else choice.backend)
     extra = _natural_inputs(model, controller, opts.joint_dynamics)
     if extra is not None:
         dae = dae_with_inputs(model, dae, extra)
@@ -258,7 +271,8 @@ def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions, *, c
     stats = dict(runner.stats)
     if projector is not None:
         stats.update(projector.counts, rattle_intervals=bridge.count)
-    info = {"method": "idas", "backend": used, "rtol": rtol, "atol": atol, "hold": hold,
+    info = {"method": "idas", "backend": used, "backend_reason": choice.reason if used == choice.backend
+            else "no C compiler", "rtol": rtol, "atol": atol, "hold": hold,
             "auto": why_not, "joint_dynamics": bool(opts.joint_dynamics),
             "controller": None if controller is None else controller.describe(),
             "linear_solver": opts.linear_solver, "stats": stats, "project": project,
@@ -273,6 +287,7 @@ def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions, *, c
     U_applied = U[:k + 1] + np.array([_extra_value(model, extra, t[i], X[i, :nq], X[i, nq:], pv)
                                        for i in range(k + 1)]) if extra is not None else U[:k + 1]
     traj = Trajectory.from_states(model, t[:k + 1], X[:, :nq], X[:, nq:], Z[:, nq:], U_applied, pv, info)
+    traj.info["energy"] = idas_report(model, traj, is_conservative(model, inputs=bool(np.any(U_applied != 0))))
     if failure is INTERRUPTED:
         raise SimulationInterrupted(message, time=float(t[k]), trajectory=traj)
     if failure is not None:

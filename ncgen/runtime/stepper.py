@@ -44,7 +44,9 @@ import time
 import numpy as np
 
 from ncgen.codegen.stepper_package import STATS, STATUS, STEP_INTERRUPTED, TOL
-from ncgen.errors import NcgenError, SimulationError, SimulationInterrupted
+from ncgen.errors import NcgenError, SimulationError, SimulationInterrupted, option
+from ncgen.progress import Ticker
+from ncgen.runtime.energy_balance import balance_parts
 from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.stepper_checks import (SHADOW_FACTOR, check_fixed, check_global, contact_report, energy_report,
                                           error_estimate, is_conservative, shadow_estimates, shadow_report,
@@ -74,10 +76,11 @@ def simulate_stepper(model, t: np.ndarray, U: np.ndarray, p: np.ndarray, q0: np.
     trajectory up to the last output time before it."""
     opts = SimulationOptions.resolve(options, **shortcuts)
     stepper = load_stepper(model, cflags)
-    conservative = is_conservative(model)
+    conservative = is_conservative(model, inputs=bool(np.any(np.asarray(U) != 0)))
     if opts.rtol is not None and stepper.nd:
         raise NcgenError(f"rtol: model {model.name!r} has nonsmooth contacts, whose impacts the error control "
-                         f"cannot follow; use fixed steps (substeps=N) or build it with contacts='smooth'")
+                         f"cannot follow; use fixed steps ({option('substeps=N', '--substeps N')}) or "
+                         + option("build it with contacts='smooth'", "--contacts smooth"))
     if opts.scheme == "rattle4" and stepper.nd:
         raise NcgenError(f"scheme: 'rattle4' needs a smooth model; {model.name!r} has nonsmooth contacts, which "
                          f"keep their own scheme (first order at impacts): use scheme='rattle' or build it with "
@@ -100,13 +103,16 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, conse
     IMP = np.zeros((n_out, stepper.nd)) if contacts else None      # contact impulses per output interval
     start = time.perf_counter()
     rattle4 = opts.scheme == "rattle4"
-    Q, V, LAM, S, status, done, splits = stepper.simulate_stats(
-        q0, v0, lam0, float(t[0]), h, n_out * substeps, substeps, step_inputs(U, t, hold, substeps), p, tol,
-        max_iter, max_halvings, estimate and not contacts, not conservative, impulse_out=IMP, scheme=int(rattle4))
+    with Ticker(f"stepper: {model.name}, {n_out * substeps:,} steps"):
+        Q, V, LAM, S, status, done, splits = stepper.simulate_stats(
+            q0, v0, lam0, float(t[0]), h, n_out * substeps, substeps, step_inputs(U, t, hold, substeps), p, tol,
+            max_iter, max_halvings, estimate and not contacts, not conservative, impulse_out=IMP,
+            scheme=int(rattle4))
     stepping = time.perf_counter() - start
     rows = done // substeps
     info = {"method": "stepper", "backend": "compiled", "scheme": "RATTLE, nonsmooth contacts" if contacts else
-            "RATTLE, triple-jump composition" if rattle4 else "RATTLE", "order": 4 if rattle4 else 2, "h": h, "substeps": substeps, "hold": hold, "tol": tol, "max_iter": max_iter,
+            "RATTLE, triple-jump composition" if rattle4 else "RATTLE", "order": 4 if rattle4 else 2, "h": h,
+            "substeps": substeps, "hold": hold, "tol": tol, "max_iter": max_iter,
             "max_halvings": max_halvings, "estimate": estimate and not contacts, "stepping_time": stepping, "complete": status == 0,
             "stats": _stats(S[:rows], splits)}
     traj = _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info, conservative, start,
@@ -144,8 +150,9 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, co
                                          hold == "linear", p, rtol, atol, 0.0, order == 4, max_steps,
                                          not conservative, newton_tolerance(rtol, atol, tol), max_iter)
 
-    Q, V, LAM, S, status, rows, h_next = run(rtol, atol)
-    shadow = run(SHADOW_FACTOR * rtol, SHADOW_FACTOR * atol) if estimate and status == 0 else None
+    with Ticker(f"stepper: {model.name}, rtol {rtol:g}"):
+        Q, V, LAM, S, status, rows, h_next = run(rtol, atol)
+        shadow = run(SHADOW_FACTOR * rtol, SHADOW_FACTOR * atol) if estimate and status == 0 else None
     if shadow is not None and shadow[4] == STEP_INTERRUPTED:   # stopped in the shadow run: no estimate
         status, shadow = STEP_INTERRUPTED, None
     stepping = time.perf_counter() - start
@@ -213,6 +220,8 @@ def _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info,
                       velocity_residual=Y[:, 3], markers=markers, **extra)
     traj.info["error_estimate"] = error_estimate(S[:rows], info.get("substeps"))
     traj.info["energy"] = energy_report(traj, work, conservative)
+    if not conservative and len(traj):
+        traj.info["energy"]["parts"] = balance_parts(model, traj)
     traj.info["wall_time"] = time.perf_counter() - start
     return traj
 

@@ -49,7 +49,7 @@ import numpy as np
 
 from ncgen.assembly.derived import depends_on_time, potential_force_residual_function
 from ncgen.codegen.stepper_package import CONTACT_STATS, PENETRATION_TOL, PGS_MAX_ITER, PGS_TOL, STATS
-from ncgen.errors import AccuracyWarning, SimulationError
+from ncgen.errors import AccuracyWarning, SimulationError, option
 from ncgen.model.data import model_data
 
 #: Largest allowed change of a conservative model's energy, and error of the energy balance
@@ -133,18 +133,23 @@ def warn_unconverged(model, report: dict) -> None:
                       f"a body or a chain lying flat or in a pile, make it crawl, and friction can make it cycle)", stacklevel=5)
 
 
-def is_conservative(model) -> bool:
+def is_conservative(model, inputs: bool = True) -> bool:
     """True if the model's forces are conservative and its constraints scleronomic:
     ``Φ_t`` and ``∂V/∂t`` are structurally zero and ``F = −∇V`` at random states with random
-    rates and inputs (so that dampers, drives and input forces all count).  Kept in the model's data."""
+    rates and inputs (so that dampers, drives and input forces all count; ``inputs=False``:
+    with the inputs at zero, as in a run that does not drive them).  Kept in the model's data."""
     data = model_data(model)
+    if not inputs:
+        if data.conservative_idle is None:
+            data.conservative_idle = _is_conservative(model, inputs=False)
+        return data.conservative_idle
     if data.conservative is None:
         data.conservative = _is_conservative(model)
     return data.conservative
 
 
-def _is_conservative(model, samples: int = 3, seed: int = 0) -> bool:
-    if depends_on_time(model):
+def _is_conservative(model, samples: int = 3, seed: int = 0, inputs: bool = True) -> bool:
+    if _dissipative_contacts(model) or depends_on_time(model):
         return False
     if np.any(np.asarray(model.functions["phi_t"](model.t0, model.q0, model.p0)) != 0):
         return False
@@ -153,10 +158,18 @@ def _is_conservative(model, samples: int = 3, seed: int = 0) -> bool:
     for _ in range(samples):
         qs = model.q0 + 0.1 * rng.standard_normal(model.nq)
         r, F_value = residual(model.t0 + rng.random(), qs, rng.standard_normal(model.nq),
-                              rng.standard_normal(model.nu), model.p0)
+                              rng.standard_normal(model.nu) if inputs else np.zeros(model.nu), model.p0)
         if np.max(np.abs(np.asarray(r)), initial=0.0) > 1e-9 * (1 + np.max(np.abs(np.asarray(F_value)), initial=0.0)):
             return False
     return True
+
+
+def _dissipative_contacts(model) -> bool:
+    """Whether a contact can dissipate: friction, smooth damping, or an impact with e < 1
+    (random states near q0 rarely touch, so contacts are judged by their parameters)."""
+    smooth = getattr(model, "contact_model", "smooth") == "smooth"
+    return any(c["mu"] > 0 or (c["damping"] > 0 if smooth else c["restitution"] < 1)
+               for c in getattr(model, "contacts", ()) or ())
 
 
 def global_estimates(S: np.ndarray, substeps: int | None) -> tuple[np.ndarray, np.ndarray]:
@@ -335,5 +348,6 @@ def _step_suggestion(h: float, dt: float, err: float, size: float, kind: str) ->
     if err > 0 and math.isfinite(err):
         h_new = min(h_new, h * math.sqrt(0.1 * ERROR_FRACTION * size / err))
     substeps = max(1, math.ceil(dt / h_new - 1e-9))
-    return (f"Use a step of at most {dt / substeps:.3g} s (substeps={substeps} with dt = {dt:.3g} s), or "
-            f"rtol=... to let the stepper choose its steps")
+    return (f"Use a step of at most {dt / substeps:.3g} s ({option('substeps=', '--substeps ')}{substeps} with "
+            f"{option('dt = ', '--dt ')}{dt:.3g} s), or {option('rtol=...', '--rtol RTOL')} to let the stepper "
+            f"choose its steps")

@@ -215,20 +215,23 @@ class Trajectory:
             lines.append(f"  integrator: {info['method']} ({_settings(info)}): {_work(info)}")
         if "error_estimate" in info:
             est = info["error_estimate"]
-            lines.append(f"  estimated error at the end: {est['q']:.3g} in q, {est['v']:.3g} in v "
-                         f"({est.get('how', '')})")
+            if np.isfinite(est["q"]) and np.isfinite(est["v"]):
+                lines.append(f"  estimated error at the end: {est['q']:.3g} in q, {est['v']:.3g} in v "
+                             f"({est.get('how', '')})")
+            else:
+                lines.append(f"  estimated error at the end: not estimated ({_no_estimate(est, self.model)})")
         energy = info.get("energy", {})
         if len(self) and energy.get("conservative") is False:
-            lines.append(f"  energy balance (non-conservative forces or drives): E(t0) = {self.energy[0]:.6g} J, "
-                         f"work W = {energy['work']:.6g} J, max |E - E(t0) - W| = {energy['balance_error']:.3g} J "
-                         f"({energy['relative']:.2g} relative)")
+            lines.append(_balance_line(self, energy))
         elif len(self):
             scale = self.energy_scale
             rel = f" ({self.energy_drift / scale:.2g} relative)" if scale > 0 else ""
-            what = "energy" if energy.get("conservative", self._conservative()) else \
-                "energy (not conserved: non-conservative forces or drives)"
+            known = energy.get("conservative", None if self.model is None else self._conservative())
+            what = {True: "energy (conservative: constant up to the integration error)",
+                    False: "energy (not conservative: forces that do work)", None: "energy"}[known]
             lines.append(f"  {what}: E(t0) = {self.energy[0]:.6g} J, max |E - E(t0)| = "
                          f"{self.energy_drift:.3g} J{rel}")
+        if len(self):
             lines.append(f"  constraint drift: max |phi| = {np.max(self.constraint_residual):.3g}, "
                          f"max |A v + phi_t| = {np.max(self.velocity_residual):.3g}")
         if not self.complete:
@@ -236,10 +239,12 @@ class Trajectory:
         return "\n".join(lines)
 
     def _conservative(self) -> bool:
-        """Whether the model conserves energy (True if unknown: loaded without the model)."""
+        """Whether the model conserves energy with this run's inputs (True if unknown: loaded
+        without the model)."""
         from ncgen.runtime.stepper_checks import is_conservative
 
-        return True if self.model is None else is_conservative(self.model)
+        driven = self.u is not None and bool(np.any(np.asarray(self.u) != 0))
+        return True if self.model is None else is_conservative(self.model, inputs=driven)
 
     def __repr__(self) -> str:
         span = f"t = {self.t[0]:g} ... {self.t[-1]:g} s" if len(self) else "empty"
@@ -248,7 +253,8 @@ class Trajectory:
 
     # ---------------------------------------------------------------- files
     def save(self, path) -> Path:
-        """Write ``.npz`` (everything) or ``.csv`` (t, q, energies, residuals); returns the path."""
+        """Write ``.npz`` (everything) or ``.csv`` (:func:`csv_columns`: t, q, v, joint positions and
+        rates, markers, energies, residuals, contacts; units in the header); returns the path."""
         path = Path(path)
         suffix = path.suffix.lower()
         if suffix not in (".npz", ".csv"):
@@ -272,11 +278,8 @@ class Trajectory:
         np.savez_compressed(fh, **data)
 
     def _write_csv(self, fh) -> None:
-        header = ["t", *self.coordinate_names, *(f"qj.{n}" for n in self.joint_position_names),
-                  *(f"vj.{n}" for n in self.joint_rate_names), "energy", "kinetic", "potential",
-                  "constraint_residual", "velocity_residual"]
-        table = np.column_stack([self.t, self.q, self.qj, self.vj, self.energy, self.kinetic, self.potential,
-                                 self.constraint_residual, self.velocity_residual])
+        header, columns = csv_columns(self)
+        table = np.column_stack(columns)
         fh.write((",".join(header) + "\n").encode())
         np.savetxt(fh, table, delimiter=",", fmt="%.17g")
 
@@ -323,3 +326,69 @@ def _json_default(x):
     if isinstance(x, np.generic):
         return x.item()
     raise TypeError(f"not JSON serialisable: {x!r}")
+
+
+#: How the summary names the parts of an energy balance (ncgen.runtime.energy_balance).
+_PART_NAMES = {"contacts": "contacts", "dampers": "dampers and other forces", "inputs": "inputs",
+               "drives": "drives"}
+
+
+def _balance_line(traj, energy: dict) -> str:
+    """The summary's energy balance: change of E, the work of each part, the residual."""
+    from ncgen.runtime.energy_balance import by_remainder
+
+    change = float(traj.energy[-1] - traj.energy[0])
+    parts = energy.get("parts") or {}
+    tiny = 1e-9 * (abs(float(traj.energy[0])) + abs(energy["work"]) + abs(change))
+    shown = ", ".join(f"{_PART_NAMES[k]} {w:.4g} J" for k, w in parts.items() if abs(w) > tiny)
+    head = f"  energy balance (dissipative or driven run): E(t0) = {traj.energy[0]:.6g} J, E(end) - E(t0) = {change:.4g} J"
+    if traj.model is not None and by_remainder(traj.model):
+        return (f"{head} = work of {shown or 'nothing'} (the contacts' part, impacts and friction, is the "
+                f"balance's remainder: no residual to check)")
+    split = f" ({shown}; parts by the trapezoidal rule at the output times)" if shown else ""
+    return (f"{head}; work W = {energy['work']:.4g} J{split}; residual max |E - E(t0) - W| = "
+            f"{energy['balance_error']:.3g} J ({energy['relative']:.2g} relative)")
+
+
+def _no_estimate(est: dict, model) -> str:
+    """Why a run has no error estimate, in words."""
+    if model is not None and getattr(model, "contact_model", "smooth") == "nonsmooth" and getattr(model, "nk", 0):
+        return "nonsmooth contacts: impacts make the step-doubling estimate meaningless"
+    how = est.get("how", "")
+    return how.removeprefix("none: ").removeprefix("none ").strip("()") or "no shadow run"
+
+
+def _coordinate_unit(name: str) -> str:
+    """``m`` for a basic point's coordinate (slot ``r``, ``r_i``, ...), ``1`` for a base vector's."""
+    parts = name.split(".")
+    return "m" if len(parts) >= 3 and parts[-2].startswith("r") else "1"
+
+
+def csv_columns(traj) -> tuple[list[str], list[np.ndarray]]:
+    """Header (``name [unit]``) and columns of a trajectory's CSV file: ``t``, q, v, joint
+    positions and rates, markers, energies, residuals and, with contacts, gaps, forces and
+    states (0 open, 1 stick, 2 slip)."""
+    units = [_coordinate_unit(n) for n in traj.coordinate_names]
+    angles = getattr(getattr(traj.model, "joint_space", None), "angles", None)
+    if angles is None or len(angles) != len(traj.joint_position_names):
+        jq, jv = ["rad or m"] * len(traj.joint_position_names), ["rad/s or m/s"] * len(traj.joint_rate_names)
+    else:
+        jq = ["rad" if a else "m" for a in angles]
+        jv = ["rad/s or m/s"] * len(traj.joint_rate_names)
+    header = ["t [s]", *(f"{n} [{u}]" for n, u in zip(traj.coordinate_names, units)),
+              *(f"v.{n} [{u}/s]" if u == "m" else f"v.{n} [1/s]" for n, u in zip(traj.coordinate_names, units)),
+              *(f"qj.{n} [{u}]" for n, u in zip(traj.joint_position_names, jq)),
+              *(f"vj.{n} [{u}]" for n, u in zip(traj.joint_rate_names, jv)),
+              *(f"{m}.{a} [m]" for m in traj.marker_names for a in "xyz"[:traj.dim]),
+              "energy [J]", "kinetic [J]", "potential [J]", "constraint_residual [m^2]", "velocity_residual [m^2/s]"]
+    n = len(traj.t)
+    columns = [traj.t, traj.q, traj.v, traj.qj, traj.vj, traj.markers.reshape(n, -1), traj.energy, traj.kinetic,
+               traj.potential, traj.constraint_residual, traj.velocity_residual]
+    if traj.contact_names:
+        header += [f"gap.{c} [m]" for c in traj.contact_names]
+        header += [f"contact_normal.{c} [N]" for c in traj.contact_names]
+        header += [f"contact_tangent.{c}.{k + 1} [N]" for c in traj.contact_names for k in range(traj.dim - 1)]
+        header += [f"contact_state.{c} [0 open; 1 stick; 2 slip]" for c in traj.contact_names]
+        columns += [traj.gap, traj.contact_normal, traj.contact_tangent.reshape(n, -1), traj.contact_state]
+    return header, columns
+

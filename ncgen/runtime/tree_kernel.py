@@ -2,7 +2,7 @@
 
 * :func:`joint_forward_dynamics` — ``a_j`` from joint positions, rates and inputs (joint
   space in and out, ``model.joint_names`` order); by default the compiled kernel below for
-  trees, else (closed loops, drives, mimic joints) ``from_joint_space`` → the exact KKT
+  trees (mimic joints included), else (closed loops, drives) ``from_joint_space`` → the exact KKT
   solve (:func:`~ncgen.runtime.joint_dynamics.forward_dynamics`) → ``to_joint_space``.
 * :func:`joint_forward_dynamics_kernel` — the compiled kernel as a callable
   ``k(qj, vj, u) -> a_j`` (:class:`JointDynamicsKernel`): the recursive form of
@@ -12,9 +12,11 @@
   once per model and cached on disk by content.
 
 A model is a tree for this purpose when its members hang from the ground through joints
-with coordinates (and Fixed joints) and it has no other constraints: checked when the
-kernel is built, at a random state (the tree map satisfies every constraint, and the model
-has exactly as many degrees of freedom as joint rates).
+with coordinates (and Fixed joints) and it has no other constraints than mimic joints
+(:class:`~ncgen.assembly.tree_dynamics.MimicMap`: a follower's entries of ``qj``, ``vj`` are
+set from its leader's, and its acceleration follows): checked when the kernel is built, at a
+random state (the tree map satisfies every constraint, and the model has exactly as many
+degrees of freedom as independent joint rates).
 """
 from __future__ import annotations
 
@@ -22,21 +24,14 @@ import ctypes
 
 import numpy as np
 
+from ncgen.codegen.fast_call import fast_caller
 from ncgen.errors import ModelError
 from ncgen.model.data import model_data
 from ncgen.runtime.joint_dynamics import forward_dynamics
+from ncgen.runtime.tree_check import PIVOT_TOL, check_tree, compile_tree_function, unit_quaternions
 from ncgen.validation import as_vector
 
-#: Smallest accepted relative Cholesky pivot of the joint-space mass matrix ``M_j``
-#: (``d_k / (M_j)_kk ≥ 1 / cond``): below it the dynamics are refused as singular.
-PIVOT_TOL = 1e-12
 METHODS = ("auto", "recursive", "projection")
-#: Kernels longer than the package's LARGE_FUNCTION_INSTRUCTIONS (compiled at -O0 by default)
-#: but at most this long are compiled at -O1: the Talos humanoid's (38 joint rates, 29 k
-#: instructions) compiles in 4.2–4.5 s at -O1 and runs in 9–17 µs, against 50 µs at -O0; gcc's
-#: -O1 time grows faster than linearly (a 40-hinge chain, 55 k instructions: 20 s).
-O1_INSTRUCTIONS = 40_000
-
 
 
 class JointDynamicsKernel:
@@ -57,6 +52,8 @@ class JointDynamicsKernel:
         self._check = (ctypes.c_double * 2).from_address(check.ctypes.data)    # Python floats on indexing
         self._keep = check
         self._fn, self._args = direct._fn, direct._args
+        self._zero_u = np.zeros(self.nu)
+        self._fast = fast_caller(direct, 3, first=1, check=check, tol=PIVOT_TOL, result=self._aj)
         self.set(t=model.t0, p=model.p0)
 
     def copy(self) -> "JointDynamicsKernel":
@@ -73,6 +70,15 @@ class JointDynamicsKernel:
             self._p[...] = as_vector(p, self.model.np, "p")
 
     def __call__(self, qj, vj, u=None) -> np.ndarray:
+        fast = self._fast
+        if fast is not None:
+            try:
+                out = fast(qj, vj, self._zero_u if u is None else u)
+            except (TypeError, ValueError):
+                self._bad_sizes(qj, vj, u)
+            if out is None:
+                self._singular()
+            return out
         if len(qj) != self.nq or len(vj) != self.nv or (u is not None and len(u) != self.nu):
             self._bad_sizes(qj, vj, u)
         self._qj[...] = qj
@@ -84,6 +90,9 @@ class JointDynamicsKernel:
         return self._aj
 
     def _bad_sizes(self, qj, vj, u):
+        sizes = [np.size(qj), np.size(vj), self.nu if u is None else np.size(u)]
+        if sizes == [self.nq, self.nv, self.nu]:
+            raise ModelError("joint forward dynamics: qj, vj and u must be sequences of numbers")
         raise ModelError(f"joint forward dynamics: expected qj of {self.nq}, vj of {self.nv} and u of "
                          f"{self.nu} values; got {len(qj)}, {len(vj)} and {'None' if u is None else len(u)}")
 
@@ -94,38 +103,15 @@ class JointDynamicsKernel:
         raise ModelError("joint forward dynamics: the accelerations are not finite (non-finite qj, vj or u?)")
 
 
-def check_tree(model) -> None:
-    """Raise :class:`ModelError` unless ``model`` is a tree of joints with coordinates with
-    no other constraints (module docstring)."""
-    js = model.joint_space
-    js.spanning_tree()
-    if js.nv == 0:
-        raise ModelError("joint forward dynamics: the model has no joints with coordinates")
-    rng = np.random.default_rng(1)
-    qj = np.array(js.positions(model.q0)).reshape(-1) + 0.1 * rng.standard_normal(js.nq)
-    for name, s in js.slices().items():
-        if js.dim == 3 and js.nq_joint[name] in (4, 7):
-            qj[s.stop - 4:s.stop] /= np.linalg.norm(qj[s.stop - 4:s.stop])
-    vj = rng.standard_normal(js.nv)
-    q, v = (np.array(x).reshape(-1) for x in js.tree_function(model.layout)(qj, vj))
-    if not js._holds(model, q, v, model.t0, model.p0):
-        raise ModelError("joint forward dynamics: the model has constraints besides its tree of joints "
-                         "(drives, mimic joints or loop-closing joints)")
-    A = np.array(model.functions["A"](model.t0, q, model.p0))
-    dof = model.nq - (np.linalg.matrix_rank(A) if A.size else 0)
-    if dof != js.nv:
-        raise ModelError(f"joint forward dynamics: the model has {dof} degrees of freedom but {js.nv} joint rates")
-
-
 def joint_forward_dynamics_kernel(model, *, method: str = "auto", cflags=None) -> JointDynamicsKernel:
     """The compiled joint-space forward dynamics of the tree ``model`` (built once per model
     and method; the library is cached by content; ``cflags`` as for
     :func:`~ncgen.codegen.compile_cache.compile_package`, by default -O2, or -O1 up to
-    :data:`O1_INSTRUCTIONS` and -O0 beyond for long kernels).  ``method``: ``"recursive"`` (3D),
+    :data:`~ncgen.runtime.tree_check.O1_INSTRUCTIONS` and the package's large-source flags (-O1) beyond for long kernels).  ``method``: ``"recursive"`` (3D),
     ``"projection"`` (``M_j = Gᵀ M G`` by AD of the tree map) or ``"auto"`` (recursive in
     3D when every member is a rigid body, else projection).  Raises :class:`ModelError` for
     a model that is not a tree (:func:`check_tree`)."""
-    from ncgen.assembly.tree_dynamics import recursive_dynamics_function, tree_dynamics_function
+    from ncgen.assembly.tree_dynamics import mimic_relations, recursive_dynamics_function, tree_dynamics_function
 
     if method not in METHODS:
         raise ModelError(f"joint_forward_dynamics_kernel: method: expected one of {', '.join(METHODS)}, got {method!r}")
@@ -137,6 +123,9 @@ def joint_forward_dynamics_kernel(model, *, method: str = "auto", cflags=None) -
         return hit
     try:
         check_tree(model)
+        if mimic_relations(model) and (method == "projection" or model.joint_space.dim != 3):
+            raise ModelError("joint_forward_dynamics_kernel: mimic joints need the recursive form "
+                             "(method='recursive' or 'auto', 3D models)")
     except ModelError as e:
         kernels[(method, cflags)] = e
         raise
@@ -146,46 +135,19 @@ def joint_forward_dynamics_kernel(model, *, method: str = "auto", cflags=None) -
         try:
             f, used = recursive_dynamics_function(model), "recursive"
         except ModelError:
-            if method == "recursive":
+            if method == "recursive" or mimic_relations(model):
                 raise
             f, used = tree_dynamics_function(model), "projection"
-    hit = kernels[(method, cflags)] = JointDynamicsKernel(model, _compile(model, f, cflags), used)
+    hit = kernels[(method, cflags)] = JointDynamicsKernel(model, compile_tree_function(model, f, cflags, "jfd_tree"), used)
     return hit
-
-
-def _compile(model, f, cflags):
-    import os
-
-    from ncgen.codegen.direct import compile_direct
-    from ncgen.codegen.package import LARGE_FUNCTION_INSTRUCTIONS
-
-    if cflags is None and "NCGEN_CFLAGS" not in os.environ and \
-            LARGE_FUNCTION_INSTRUCTIONS < f.n_instructions() <= O1_INSTRUCTIONS:
-        cflags = "-O1"
-    return compile_direct(f"{model.name}_jfd_tree", f, cflags)
-
-
-def _unit_quaternions(js, qj: np.ndarray) -> np.ndarray:
-    """``qj`` with the quaternions of spherical and free joints normalised (qw ≥ 0)."""
-    if js.dim != 3:
-        return qj
-    qj = qj.copy()
-    for name, s in js.slices().items():
-        if js.nq_joint[name] in (4, 7):
-            x = qj[s.stop - 4:s.stop]
-            n = np.linalg.norm(x)
-            if not n > 0:
-                raise ModelError(f"qj[{name!r}]: the quaternion [qx, qy, qz, qw] is zero")
-            qj[s.stop - 4:s.stop] = x / n * (1.0 if x[3] >= 0 else -1.0)
-    return qj
 
 
 def joint_forward_dynamics(model, qj, vj, u=None, p=None, t: float = 0.0, *, backend: str = "compiled") -> np.ndarray:
     """Joint accelerations ``a_j`` (``model.joint_names`` order; a free base: ``[a, α]`` in
     its frame) at joint positions ``qj`` and rates ``vj`` with inputs ``u`` (default zero)
     and parameters ``p`` (default ``model.p0``).  ``backend="compiled"``: the kernel of
-    :func:`joint_forward_dynamics_kernel` for trees (built on first use), else the
-    ``"numpy"`` path: ``from_joint_space``, the KKT solve of
+    :func:`joint_forward_dynamics_kernel` for trees, mimic joints included (built on first
+    use), else the ``"numpy"`` path: ``from_joint_space``, the KKT solve of
     :func:`~ncgen.runtime.joint_dynamics.forward_dynamics`, ``to_joint_space``."""
     if backend not in ("compiled", "numpy"):
         raise ModelError(f"joint_forward_dynamics: backend: expected 'compiled' or 'numpy', got {backend!r}")
@@ -194,7 +156,7 @@ def joint_forward_dynamics(model, qj, vj, u=None, p=None, t: float = 0.0, *, bac
     vj = as_vector(vj, js.nv, "vj (joint rates, joint_names order)")
     u = np.zeros(model.nu) if u is None else as_vector(u, model.nu, "u (model.input_names order)")
     p = model.p0 if p is None else as_vector(p, model.np, "p")
-    qj = _unit_quaternions(js, qj)
+    qj = unit_quaternions(js, qj)
     if backend == "compiled":
         data = model_data(model)
         if data.tree_kernel is None:

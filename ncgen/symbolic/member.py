@@ -66,6 +66,10 @@ class RigidMember:
     def __deepcopy__(self, memo) -> "RigidMember":
         return self              # constant: copies of a model share it
 
+    def __getstate__(self) -> dict:
+        """The description only: the memo of compiled NumPy functions is rebuilt on use."""
+        return {k: v for k, v in self.__dict__.items() if k != "_fn_memo"}
+
     def __init__(self, ctype: CoordinateType, mass: float, rbar_i, Xbar, Jbar):
         self.ctype = ctype
         d, k = ctype.dim, ctype.k

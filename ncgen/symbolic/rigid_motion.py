@@ -88,6 +88,13 @@ def rotz(angle) -> sp.Matrix:
     return sp.Matrix([[c, -s, 0], [s, c, 0], [0, 0, 1]])
 
 
+def rotation_about(axis, angle) -> sp.Matrix:
+    """Rodrigues for a unit ``axis`` ``u``: ``R = 1 + sin θ û + (1 − cos θ) û²`` (θ = ``angle``, rad).
+    Unlike :func:`exp_so3` it has no small-angle branch: ``u`` is a unit vector, not ``θ u``."""
+    U = so3_hat(axis)
+    return sp.eye(3) + sp.sin(angle) * U + (1 - sp.cos(angle)) * U * U
+
+
 def rotzyx(az, ay, ax) -> sp.Matrix:
     """``R = Rz(az) Ry(ay) Rx(ax)``: yaw, pitch, roll about the moving axes z, y', x''."""
     return rotz(az) * roty(ay) * rotx(ax)
@@ -374,6 +381,24 @@ def quaternion(R_ab) -> sp.Matrix:
                   ge(R[1, 1], R[2, 2]), sp.true]
     return sp.Matrix([sp.Piecewise(*[(sign * comps[i], cond) for (comps, sign), cond in zip(branches, conditions)],
                                    evaluate=False) for i in range(4)])
+
+
+def quaternion_matrix(quat) -> sp.Matrix:
+    """Rotation matrix of the quaternion ``[qx, qy, qz, qw]`` (Hamilton), normalised first."""
+    x, y, z, w = as_vector(quat, 4)
+    n = sp.sqrt(x * x + y * y + z * z + w * w)
+    x, y, z, w = x / n, y / n, z / n, w / n
+    return sp.Matrix([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                      [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def quaternion_rate(quat, omega) -> sp.Matrix:
+    """``q̇ = ½ q ⊗ [ω; 0]`` for the angular velocity ``ω`` in the rotated frame's axes
+    (body axes), ``[qx, qy, qz, qw]`` order: ``q̇_v = ½ (q_w ω + q_v × ω)``, ``q̇_w = −½ q_v·ω``."""
+    quat, omega = as_vector(quat, 4), as_vector(omega, 3)
+    qv, qw = quat[:3, :], quat[3]
+    return sp.Matrix.vstack((qw * omega + so3_hat(qv) * omega) / 2, sp.Matrix([-qv.dot(omega) / 2]))
 
 
 def swing(u0, u) -> sp.Matrix:

@@ -1,6 +1,7 @@
-"""``plot(traj, path)``: a PNG (PDF, SVG) summary of a simulation: energy drift, constraint drift and
-the motion of chosen points (or, without any, the joint positions and the path of the last
-member's centre of mass); contact runs add contact forces and gaps.
+"""``plot(traj, path)``: a PNG (PDF, SVG) summary of a simulation: energy (its drift, or the
+balance of a dissipative run: work of contacts, dampers, inputs and the residual), constraint
+drift and the motion of chosen points (or, without any, the joint positions and the path of
+the last member's centre of mass); contact runs add contact forces and gaps.
 
 Small numbers are shown as such: a panel whose values are all tiny or huge is drawn in a
 stated unit (``E − E(t0) (1e-07 J)``), never with matplotlib's offset text, and paths are
@@ -51,9 +52,19 @@ def summary_figure(traj, points=None):
     scale = traj.energy_scale
     drift = traj.energy - traj.energy[0]
     factor, unit = unit_scale(drift, "J")
-    ax.plot(t, drift / factor, color="tab:red")
-    ax.set_title(f"energy drift (E(t0) = {traj.energy[0]:.4g} J"
-                 + (f", max relative {traj.energy_drift / scale:.2g})" if scale > 0 else ")"))
+    ax.plot(t, drift / factor, color="tab:red", label="E - E(t0)")
+    if traj.info.get("energy", {}).get("conservative") is False and traj.model is not None:
+        from ncgen.runtime.energy_balance import works
+        w = works(traj.model, t, traj.q, traj.v, traj.lam, traj.u, traj.p)
+        for key, style in (("contacts", ":"), ("dampers", "--"), ("inputs", "-."), ("drives", "-.")):
+            if np.any(w[key] != 0):
+                ax.plot(t, w[key] / factor, style, lw=0.9, label=f"work of {key}")
+        ax.plot(t, (drift - w["total"]) / factor, color="k", lw=0.8, label="residual E - E(t0) - W")
+        ax.legend(fontsize=7)
+        ax.set_title(f"energy balance (E(t0) = {traj.energy[0]:.4g} J)")
+    else:
+        ax.set_title(f"energy, conservative (E(t0) = {traj.energy[0]:.4g} J"
+                     + (f", max relative change {traj.energy_drift / scale:.2g})" if scale > 0 else ")"))
     ax.set_xlabel("t (s)")
     ax.set_ylabel(f"E - E(t0) ({unit})")
     ax.ticklabel_format(axis="y", useOffset=False)

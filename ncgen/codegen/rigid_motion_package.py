@@ -1,10 +1,12 @@
 """The rigid-motion algebra as a C package (CasADi's C for the SX functions of
-:mod:`ncgen.rigid_motion.casadi_forms`)."""
+:mod:`ncgen.rigid_motion.casadi_forms`); here, not in :mod:`ncgen.rigid_motion`, so that the
+algebra stays below assembly and codegen."""
 from __future__ import annotations
 
 import os
 
-from ncgen.codegen import FunctionDoc, Package, PackageDoc, write_package
+from ncgen.codegen.doc import FunctionDoc, PackageDoc
+from ncgen.codegen.package import Package, write_package
 from ncgen.errors import NcgenError
 from ncgen.rigid_motion import casadi_forms
 from ncgen.rigid_motion.numeric import C_CORE

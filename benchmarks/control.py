@@ -1,0 +1,144 @@
+"""Control: exact step Jacobians against MuJoCo's finite-differenced ones, and the cart-pole
+MPC step against re-solving the same horizon problem with IPOPT.
+
+1. Step Jacobians of the 20-bar chain (benchmarks/common.py: 20 'rr' bars sharing their ends,
+   60 natural coordinates; its MuJoCo twin: 20 bodies on ball joints).  ncgen:
+   ``st.jacobians(x, u)`` of ``nc.step_function(model, h)`` — the RATTLE step solved by a
+   Newton rootfinder and ``A = ∂x⁺/∂x`` (120 × 120) by the implicit function theorem, generated
+   C called through ctypes (the call from Python included).  MuJoCo:
+   ``mujoco.mjd_transitionFD(m, d, eps=1e-6, flg_centered)`` on the twin (Euler, its default
+   integrator, same step), forward and centred differences (``A``: 2nv × 2nv = 120 × 120, nv = 60
+   ball-joint rates), also called from Python.  Not the same step nor the same coordinates:
+   the same job (the linearisation of one step of the same chain).  Interleaved, min and
+   median over ``--repeat`` batches of ``--calls`` calls.
+2. Cart-pole MPC (examples/cartpole_mpc.toml: N = 20, h = 0.05 s): one control step of
+   ``nc.MPC`` (one real-time SQP iteration, generated C, from Python) at the states of a
+   closed loop from a 0.2 rad tilt with a push, against re-solving the same discrete horizon
+   problem with IPOPT at the same states (``ncgen.control.reference.DiscreteOCP``: built once,
+   warm-started from the MPC's converged solution at that state, the most favourable start;
+   solve time only).  The C demo's own step time is not measured here (the same code without
+   the Python calls).
+
+    python benchmarks/control.py [--calls 200] [--repeat 7] [--smoke]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import chain_mjcf, chain_system, machine  # noqa: E402
+
+import ncgen as nc  # noqa: E402
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+H = 1e-3
+
+
+def batches(fns: dict, calls: int, repeat: int) -> dict[str, list[float]]:
+    """Seconds per call of each function, ``repeat`` interleaved batches of ``calls`` calls."""
+    out = {k: [] for k in fns}
+    for _ in range(repeat):
+        for name, fn in fns.items():
+            start = time.perf_counter()
+            for _ in range(calls):
+                fn()
+            out[name].append((time.perf_counter() - start) / calls)
+    return out
+
+
+def step_jacobians(n: int, calls: int, repeat: int) -> None:
+    import mujoco
+    model = chain_system(n).build()
+    st = nc.step_function(model, H)
+    x = np.concatenate([model.q0, model.v0])
+    x = st.rollout(x, np.zeros((50, 0)))[-1]          # moving, on both constraint levels
+    m = mujoco.MjModel.from_xml_string(chain_mjcf(n, integrator="Euler", timestep=H))
+    d = mujoco.MjData(m)
+    mujoco.mj_step(m, d, nstep=50)
+    nxm = 2 * m.nv + m.na
+    A = np.zeros((nxm, nxm))
+    B = np.zeros((nxm, m.nu))
+    # accuracy of ncgen's A against its own central differences (a check, not timed)
+    _, Aj, _ = st.jacobians(x, np.zeros(0))
+    eps = 1e-6
+    cols = [(st(x + e, np.zeros(0)) - st(x - e, np.zeros(0))) / (2 * eps) for e in np.eye(x.size) * eps]
+    err = np.max(np.abs(Aj - np.column_stack(cols))) / np.max(np.abs(Aj))
+    fns = {
+        "ncgen st.jacobians (exact, IFT)": lambda: st.jacobians(x, np.zeros(0)),
+        "mujoco mjd_transitionFD forward": lambda: mujoco.mjd_transitionFD(m, d, 1e-6, False, A, B, None, None),
+        "mujoco mjd_transitionFD centred": lambda: mujoco.mjd_transitionFD(m, d, 1e-6, True, A, B, None, None),
+    }
+    t = batches(fns, calls, repeat)
+    print(f"\n=== step Jacobians: chain of N = {n} bars, h = {H} s: A is {2 * model.nq}×{2 * model.nq} "
+          f"(ncgen, natural coordinates), {nxm}×{nxm} (MuJoCo, ball joints); ncgen's A vs its central "
+          f"differences: rel. {err:.1e}")
+    ref = t["ncgen st.jacobians (exact, IFT)"]
+    for name, ts in t.items():
+        print(f"  {name:36s} min {1e6 * min(ts):9.1f} µs   median {1e6 * np.median(ts):9.1f} µs")
+    for name in list(t)[1:]:
+        r = np.array(ref) / np.array(t[name])
+        print(f"  RATIO ncgen / {name}: min {min(ref) / min(t[name]):.2f}, median of pairs {np.median(r):.2f}"
+              " (target ≤ 0.5)")
+
+
+def cartpole_mpc(steps: int, repeat: int) -> None:
+    from ncgen.control.export import closed_loop
+    from ncgen.control.reference import DiscreteOCP
+    from ncgen.optim.problem_file import load_problem
+    model = nc.System.from_toml(EXAMPLES / "cartpole.toml").build()
+    ocp = load_problem(EXAMPLES / "cartpole_mpc.toml", model)[0]
+    mpc = nc.MPC(ocp, terminal_weight=100.0)
+    th = 0.2
+    x0 = np.concatenate([[0, 0, 1, 0, 0, 1, 0.5 * np.sin(th), 0.5 * np.cos(th)], np.zeros(8)])
+    _, _, X = closed_loop(mpc, x0, steps * mpc.h, disturbance=[(1.0, 1.1, [8.0])])
+    st = nc.step_function(model, mpc.h)
+    ipopt = DiscreteOCP(st, mpc.N, (mpc.problem.stage, mpc.problem.terminal), tol=1e-8)
+    t_mpc, t_ip = [], []
+    for x in X[::max(1, len(X) // 10)]:
+        mpc.reset(x, iterations=10)
+        guess = mpc.U.copy()
+        runs = []
+        for _ in range(repeat):
+            mpc.X, mpc.U = mpc.initial_guess(x)
+            mpc.reset(x, iterations=10)
+            start = time.perf_counter()
+            mpc(x, 0.0)
+            runs.append(time.perf_counter() - start)
+        t_mpc.append(min(runs))
+        start = time.perf_counter()
+        ipopt.solve(x, guess)
+        t_ip.append(time.perf_counter() - start)
+    t_mpc, t_ip = np.array(t_mpc), np.array(t_ip)
+    print(f"\n=== cart-pole MPC (N = {mpc.N}, h = {mpc.h} s, 1 SQP iteration, qrqp), {len(t_mpc)} states "
+          "of a closed loop:")
+    print(f"  nc.MPC control step       min {1e3 * t_mpc.min():.3f} ms   median {1e3 * np.median(t_mpc):.3f} ms "
+          f"(target ≤ 1 ms)")
+    print(f"  IPOPT re-solve (warm)     min {1e3 * t_ip.min():.1f} ms   median {1e3 * np.median(t_ip):.1f} ms")
+    r = t_ip / t_mpc
+    print(f"  RATIO IPOPT re-solve / MPC step: min {r.min():.0f}, median {np.median(r):.0f} (target ≥ 50)")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--calls", type=int, default=200)
+    ap.add_argument("--repeat", type=int, default=7)
+    ap.add_argument("--bars", type=int, default=20)
+    ap.add_argument("--smoke", action="store_true", help="tiny sizes: check that the script runs")
+    args = ap.parse_args(argv)
+    if args.smoke:
+        args.calls, args.repeat, args.bars = 5, 2, 3
+    print(machine())
+    step_jacobians(args.bars, args.calls, args.repeat)
+    cartpole_mpc(20 if args.smoke else 80, args.repeat)
+    print(f"load average at end: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,142 @@
+"""One RATTLE step as an implicit function, its exact derivatives, rollouts and their adjoints
+(CasADi; compiled by :mod:`ncgen.control.step`).
+
+The step of the compiled stepper (:mod:`ncgen.assembly.stepper_equations`, whose kernels
+``step_newton`` and ``step_velocity`` are reused here) from ``x = [q; v]`` with step ``h``
+(s) and inputs ``u`` held over the step, written as one residual in the unknowns
+``z = [w; ν; v⁺; μ']`` (``w = v_{n+½}``, ``ν = h/2 λ``, ``μ' = h/2 μ``)::
+
+    G(z; x, u, p, t) = [ M (w − v) − h/2 F(t, q, w) + A(t, q)ᵀ ν                  ]
+                       [ Φ(t + h, q⁺) / h                                          ]   q⁺ = q + h w
+                       [ M v⁺ + A(t + h, q⁺)ᵀ μ' − M w − h/2 F(t + h, q⁺, w)       ]
+                       [ A(t + h, q⁺) v⁺ + Φ_t(t + h, q⁺)                          ]
+    x⁺ = [q + h w; v⁺]
+
+``z`` is found by CasADi's ``fast_newton`` rootfinder (sparse QR of ``G_z``, at most
+``max_iter`` iterations, stopping when ``‖G‖∞ ≤ abstol`` or the Newton step is below
+``abstol_step``; it generates self-contained C), started from ``z₀ = [v; 0; v; 0]``.
+The derivatives come from the implicit function theorem,
+``∂z/∂(x, u, p) = −G_z⁻¹ G_(x, u, p)`` at the solution — one sparse QR factorisation of
+``G_z`` for all columns (``step_jac``; no finite differences, no differentiation through the
+iterations; CasADi's own derivative of the rootfinder, the same formula, serves the reverse
+mode of rollouts), so
+
+    A = ∂x⁺/∂x,   B = ∂x⁺/∂u,   C = ∂x⁺/∂p
+
+are exact to the rootfinder's tolerance.  Every function also returns the residual
+``‖G(z)‖∞`` of the solution it used, so that callers can refuse a step that did not converge.
+
+Rollouts ``X = [x₁ … x_N]`` are a ``mapaccum`` of the step (a loop in C, its size
+independent of ``N``); their adjoint ``(x̄₀, Ū) = (∂X/∂(x₀, U))ᵀ X̄`` is CasADi's reverse
+mode of that ``mapaccum`` (one backward sweep of transposed IFT solves, also generated C).
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ncgen.assembly.stepper_equations import stepper_functions
+
+#: Rootfinder defaults: absolute residual and step tolerances, iteration limit.
+ABSTOL, ABSTOL_STEP, MAX_ITER = 1e-12, 1e-14, 20
+
+
+def step_residual(model, h: float) -> ca.Function:
+    """``G: (z, x, u, p, t) -> G`` (SX; see the module docstring)."""
+    newton, velocity = stepper_functions(model)[:2]
+    nq, nc = model.nq, model.nc
+    z = ca.SX.sym("z", 2 * (nq + nc))
+    x, u, p, t = ca.SX.sym("x", 2 * nq), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np), ca.SX.sym("t")
+    q, v = x[:nq], x[nq:]
+    w, nu_h, vmu = z[:nq], z[nq:nq + nc], z[nq + nc:]
+    r, _ = newton(t, q, v, u, p, h, w, nu_h)
+    b, K2 = velocity(t + h, q + h * w, w, u, p, h)
+    G = ca.vertcat(r, ca.mtimes(K2, vmu) - b)
+    return ca.Function("step_residual", [z, x, u, p, t], [ca.densify(G)], ["z", "x", "u", "p", "t"], ["G"])
+
+
+def step_functions(model, h: float, *, abstol: float = ABSTOL, abstol_step: float = ABSTOL_STEP,
+                   max_iter: int = MAX_ITER) -> dict[str, ca.Function]:
+    """``{"step": (x, u, p, t) -> (x1, res), "step_jac": (x, u, p, t) -> (x1, A, B, C, res)}``
+    (MX calling the rootfinder; ``A``, ``B``, ``C`` dense)."""
+    nq, nc = model.nq, model.nc
+    G = step_residual(model, h)
+    zs, xs, us, ps, ts = (G.sx_in(i) for i in range(5))
+    residual = ca.Function("G", [zs, ca.vertcat(xs, us, ps, ts)], [G(zs, xs, us, ps, ts)])
+    solve = ca.rootfinder("rattle_step", "fast_newton", residual,
+                          {"abstol": abstol, "abstolStep": abstol_step, "max_iter": max_iter})
+    x, u = ca.MX.sym("x", 2 * nq), ca.MX.sym("u", model.nu)
+    p, t = ca.MX.sym("p", model.np), ca.MX.sym("t")
+    v = x[nq:]
+    z = solve(ca.vertcat(v, ca.MX(nc, 1), v, ca.MX(nc, 1)), ca.vertcat(x, u, p, t))
+    x1 = ca.vertcat(x[:nq] + h * z[:nq], z[nq + nc:2 * nq + nc])
+    res = ca.norm_inf(G(z, x, u, p, t))
+    names = ["x", "u", "p", "t"]
+    step = ca.Function("step", [x, u, p, t], [x1, res], names, ["x1", "res"])
+    # implicit function theorem, written out: one sparse QR of G_z for all 2nq + nu + np columns
+    y = ca.vertcat(xs, us, ps)
+    Gs = G(zs, xs, us, ps, ts)
+    sensitivities = ca.Function("step_sensitivities", [zs, xs, us, ps, ts],
+                                [ca.jacobian(Gs, zs), ca.densify(ca.jacobian(Gs, y))])
+    G_z, G_y = sensitivities(z, x, u, p, t)
+    ny = y.numel()
+    Z_y = -qr_solve_columns(G_z, G_y, ca.jacobian(Gs, zs).sparsity(), ny)
+    X1_y = ca.vertcat(ca.horzcat(ca.DM.eye(nq), ca.DM(nq, ny - nq)) + h * Z_y[:nq, :],
+                      Z_y[nq + nc:2 * nq + nc, :])             # x⁺ = [q + h w; v⁺]
+    nu_ = model.nu
+    jac = ca.Function("step_jac", [x, u, p, t],
+                      [x1] + [ca.densify(X1_y[:, c]) for c in (slice(0, 2 * nq), slice(2 * nq, 2 * nq + nu_),
+                                                               slice(2 * nq + nu_, ny))] + [res],
+                      names, ["x1", "A", "B", "C", "res"])
+    return {"step": step, "step_jac": jac}
+
+
+#: Largest nnz(V) + nnz(R) of the QR factors of ``G_z`` unrolled into SX (beyond: CasADi's
+#: ``qr`` linear solver, generated as loops, several times slower per solve).
+SX_QR_MAX_NNZ = 20_000
+
+
+def qr_solve_columns(K: ca.MX, B: ca.MX, pattern: ca.Sparsity, ncol: int) -> ca.MX:
+    """``K⁻¹ B`` for the ``ncol`` columns of ``B`` with one factorisation: the sparse
+    Householder QR of ``K`` (pattern ``pattern``) unrolled into an SX function, then an SX
+    back-substitution mapped over the columns (a loop in C)."""
+    V, R, *_ = ca.qr_sparse(ca.DM(pattern, 1.0), True)
+    if V.nnz() + R.nnz() > SX_QR_MAX_NNZ:
+        return ca.solve(K, B, "qr")
+    Ks = ca.SX.sym("K", pattern)
+    V, R, beta, prinv, pc = ca.qr_sparse(Ks, True)
+    factor = ca.Function("qr_factor", [Ks], [V, R, beta])
+    Vs, Rs, bs = ca.SX.sym("V", V.sparsity()), ca.SX.sym("R", R.sparsity()), ca.SX.sym("beta", beta.shape[0])
+    b = ca.SX.sym("b", pattern.size1())
+    back = ca.Function("qr_backsolve", [Vs, Rs, bs, b], [ca.qr_solve(b, Vs, Rs, bs, prinv, pc)])
+    Vn, Rn, bn = factor(K)
+    return back.map("qr_backsolve_columns", "serial", ncol, [0, 1, 2], [])(Vn, Rn, bn, B)
+
+
+def rollout_functions(step: ca.Function, N: int, h: float) -> dict[str, ca.Function]:
+    """``{"rollout": (x0, U, p, t0) -> (X, res), "rollout_adjoint": (x0, U, p, t0, dX) -> (dx0, dU, dp)}``
+    over ``N`` steps: ``U`` is nu × N, ``X`` nx × N (the states after each step), ``res``
+    1 × N (each step's residual); ``dX`` = ∂J/∂X, ``dx0, dU, dp`` the gradient of ``J``."""
+    nx, nu, npar = step.size1_in(0), step.size1_in(1), step.size1_in(2)
+    x0, U, p, t0 = ca.MX.sym("x0", nx), ca.MX.sym("U", nu, N), ca.MX.sym("p", npar), ca.MX.sym("t0")
+    times = t0 + h * ca.DM(np.arange(N)).T
+    X, res = step.mapaccum("step_acc", N, [0], [0])(x0, U, ca.repmat(p, 1, N), times)
+    rollout = ca.Function("rollout", [x0, U, p, t0], [X, res], ["x0", "U", "p", "t0"], ["X", "res"])
+    dX = ca.MX.sym("dX", nx, N)
+    adj = rollout.reverse(1)
+    bar = adj(x0, U, p, t0, X, res, dX, ca.MX(1, N))
+    adjoint = ca.Function("rollout_adjoint", [x0, U, p, t0, dX], bar[:3], ["x0", "U", "p", "t0", "dX"],
+                          ["dx0", "dU", "dp"])
+    return {"rollout": rollout, "rollout_adjoint": adjoint}
+
+
+def state_constraint_jacobian(model) -> ca.Function:
+    """``J: (x, p, t) -> ∂[Φ(t, q); A(t, q) v + Φ_t(t, q)]/∂x`` (2nc × 2nq, dense): the states
+    the step maps to satisfy both constraint levels, so their tangent space is ``null J``."""
+    f = model.functions
+    nq = model.nq
+    x, p, t = ca.SX.sym("x", 2 * nq), ca.SX.sym("p", model.np), ca.SX.sym("t")
+    q, v = x[:nq], x[nq:]
+    c = ca.vertcat(f["phi"](t, q, p), ca.mtimes(f["A"](t, q, p), v) + f["phi_t"](t, q, p))
+    return ca.Function("state_constraint_jacobian", [x, p, t], [ca.densify(ca.jacobian(c, x))],
+                       ["x", "p", "t"], ["J"])

@@ -1,0 +1,155 @@
+"""``nc.export_mpc(ocp, path)``: the model-predictive controller of an ``OptimalControl``
+problem as a standalone C package that builds with ``make`` and runs without Python.
+
+The package (written by :func:`ncgen.codegen.package.write_package`, so it is reproducible,
+written in a temporary sibling and renamed into place, with a manifest) holds:
+
+* ``<name>_mpc_qp_data``, ``<name>_mpc_qp``, ``<name>_mpc_update``: one SQP iteration of
+  :mod:`ncgen.control.mpc` (the condensed QP, CasADi's ``qrqp``, the new iterate), generated
+  C, self-contained;
+* ``<name>_plant_step``: one RATTLE step of ``h / substeps`` (:mod:`ncgen.control.discrete`),
+  the plant of the demo;
+* ``<name>_mpc.h``/``.c``: the API ``<name>_mpc_init``, ``<name>_mpc_step(m, x, t, u_out)``,
+  ``<name>_mpc_free``, ``<name>_plant`` (documented in the header; no dynamic memory);
+* ``demo.c``: the closed loop — controller every ``h`` seconds, plant with ``substeps``
+  substeps, input disturbances — printing ``t u x`` per control step;
+* ``Makefile`` (``make``; ``CFLAGS``, ``LDFLAGS`` as usual), ``CMakeLists.txt``, ``main.c``.
+
+:func:`closed_loop` runs the same loop in Python (``nc.MPC`` and ``nc.step_function``: the
+same generated code), for checking the package against Python.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from ncgen.control.discrete import step_functions
+from ncgen.control.mpc import REGULARIZATION, mpc_functions
+from ncgen.control.mpc_problem import mpc_problem
+from ncgen.control.step import RESIDUAL_TOL
+from ncgen.errors import NcgenError
+
+
+@dataclass(frozen=True)
+class Pulse:
+    """Input disturbance ``values`` (one per input) added to the controller's input for
+    ``t_on ≤ t < t_off`` (s)."""
+
+    t_on: float
+    t_off: float
+    values: tuple
+
+
+def pulses(disturbance, nu: int) -> list[Pulse]:
+    """``disturbance``: a sequence of ``(t_on, t_off, values)``; checked."""
+    out = []
+    for i, item in enumerate(disturbance or ()):
+        try:
+            t_on, t_off, values = item
+            values = np.atleast_1d(np.asarray(values, dtype=float)).reshape(-1)
+            t_on, t_off = float(t_on), float(t_off)
+        except (TypeError, ValueError):
+            raise NcgenError(f"disturbance[{i}]: expected (t_on, t_off, values), got {item!r}") from None
+        if values.size != nu or not np.all(np.isfinite(values)) or not t_on < t_off:
+            raise NcgenError(f"disturbance[{i}]: expected t_on < t_off and {nu} finite input value(s), got {item!r}")
+        out.append(Pulse(t_on, t_off, tuple(values.tolist())))
+    return out
+
+
+def plant_function(model, h: float) -> ca.Function:
+    """``plant_step: (x, u, p, t) -> (x1, res)``: the RATTLE step of ``h`` seconds."""
+    step = step_functions(model, h)["step"]
+    args = [ca.MX.sym(n, step.size1_in(i)) for i, n in enumerate(step.name_in())]
+    return ca.Function("plant_step", args, step(*args), step.name_in(), step.name_out())
+
+
+def export_mpc(ocp, path, *, name: str | None = None, iterations: int = 1, terminal_weight: float = 1e3,
+               x0=None, t_end: float = 5.0, substeps: int = 5, disturbance=(), warmup: int = 10):
+    """Write the controller of ``ocp`` (options as in :class:`ncgen.control.mpc.MPC`) as the C
+    package ``name`` (default: the model's name) in directory ``path``; returns the
+    :class:`~ncgen.codegen.package.Package`.  ``x0`` (default: the model's initial state),
+    ``t_end`` (s), ``substeps``, ``disturbance`` (:func:`pulses`) and ``warmup`` (solves at
+    the first state before the loop starts) are the demo program's defaults."""
+    from ncgen.codegen.package import ExtraSource, write_package
+
+    model = ocp.model
+    name = name or model.name
+    if not isinstance(substeps, int) or substeps < 1:
+        raise NcgenError(f"export_mpc: substeps: expected a positive integer, got {substeps!r}")
+    if not isinstance(warmup, int) or warmup < 0:
+        raise NcgenError(f"export_mpc: warmup: expected an integer ≥ 0, got {warmup!r}")
+    if not isinstance(iterations, int) or iterations < 1:
+        raise NcgenError(f"export_mpc: iterations: expected a positive integer, got {iterations!r}")
+    problem = mpc_problem(ocp, terminal_weight)
+    nx, nu = 2 * model.nq, model.nu
+    x0 = np.concatenate([model.q0, model.v0]) if x0 is None else np.asarray(x0, dtype=float).reshape(-1)
+    if x0.size != nx or not np.all(np.isfinite(x0)):
+        raise NcgenError(f"export_mpc: x0: expected {nx} finite numbers (the state [q; v]), got {x0.size}")
+    fns = mpc_functions(model, problem, regularization=REGULARIZATION)
+    plant = plant_function(model, problem.h / substeps)
+    data, qp, update = fns
+    u_rest = np.clip(np.zeros(nu), *problem.u_bounds)
+    pl = pulses(disturbance, nu)
+    context = {
+        "model_name": model.name, "N": problem.N, "h": f"{problem.h:g}", "h_c": _c(problem.h),
+        "iterations": iterations, "nx": nx, "nu": nu, "np": model.np, "substeps": substeps,
+        "sz_arg": max(f.sz_arg() for f in fns), "sz_res": max(f.sz_res() for f in fns),
+        "sz_iw": max(f.sz_iw() for f in fns), "sz_w": max(f.sz_w() for f in fns),
+        "nnz": {f"{f.name()}_{io}{i}": (f.nnz_in(i) if io == "in" else f.nnz_out(i))
+                for f in fns for io in ("in", "out") for i in range(f.n_in() if io == "in" else f.n_out())},
+        "plant_sz_arg": plant.sz_arg(), "plant_sz_res": plant.sz_res(), "plant_sz_iw": plant.sz_iw(),
+        "plant_sz_w": plant.sz_w(), "plant_tol": _c(plant_tolerance(model)),
+        "u_rest": ", ".join(_c(v) for v in u_rest) or "0", "params": ", ".join(_c(v) for v in problem.p) or "0",
+        "x0": ", ".join(_c(v) for v in x0), "t_end": _c(float(t_end)), "warmup": warmup,
+        "disturbance": [{"t_on": _c(p.t_on), "t_off": _c(p.t_off), "amounts": [_c(v) for v in p.values]}
+                        for p in pl],
+        "disturbance_text": "; ".join(f"{list(p.values)} for {p.t_on:g} <= t < {p.t_off:g} s" for p in pl)
+                            or "none",
+    }
+    extra = [ExtraSource("mpc/mpc.h.j2", f"{name}_mpc.h", context),
+             ExtraSource("mpc/mpc.c.j2", f"{name}_mpc.c", context),
+             ExtraSource("mpc/demo.c.j2", "demo.c", context, program=True)]
+    return write_package(name, [data, qp, update, plant], Path(path), extra_sources=extra, reroll_instructions=None)
+
+
+def plant_tolerance(model) -> float:
+    """The residual above which a plant step is refused (as :class:`ncgen.control.step.StepFunction`)."""
+    return RESIDUAL_TOL * (1.0 + float(np.max(np.abs(model.M))) if model.nq else 1.0)
+
+
+def closed_loop(mpc, x0, t_end: float, *, substeps: int = 5, disturbance=(), warmup: int = 10, plant=None):
+    """The demo program's loop in Python: ``(t, U, X)`` per control step (the state before
+    the step).  ``plant``: a :class:`~ncgen.control.step.StepFunction` of ``mpc.h / substeps``
+    (built when not given)."""
+    from ncgen.control.step import step_function
+    model, h = mpc.model, mpc.h
+    hs = h / substeps
+    plant = plant or step_function(model, hs)
+    pl = pulses(disturbance, mpc.nu)
+    x = np.asarray(x0, dtype=float).copy()
+    mpc.reset(x, 0.0, iterations=warmup)
+    steps = int(t_end / h + 0.5)
+    T, U, X = [], [], []
+    for k in range(steps):
+        t = k * h
+        u = mpc(x, t)
+        T.append(t), U.append(u), X.append(x.copy())
+        for s in range(substeps):
+            ts = t + s * hs
+            up = u.copy()
+            for p in pl:
+                if p.t_on <= ts < p.t_off:
+                    up += np.asarray(p.values)
+            x = plant(x, up, mpc.problem.p, ts)
+    return np.array(T), np.array(U), np.array(X)
+
+
+def _c(v: float) -> str:
+    """A double as a C literal that reads back exactly."""
+    v = float(v)
+    if not np.isfinite(v):
+        raise NcgenError(f"export_mpc: cannot write the non-finite number {v} into C")
+    return repr(v) if ("." in repr(v) or "e" in repr(v)) else repr(v) + ".0"

@@ -1,0 +1,157 @@
+"""iLQR on a compiled step (:class:`ncgen.control.step.StepFunction`).
+
+Problem: minimise ``J = Σ_{k<N} ℓ(x_k, u_k) + ℓ_N(x_N)`` subject to ``x_{k+1} = st(x_k, u_k)``
+from a given ``x_0`` (costs: :mod:`ncgen.control.costs`).  Each iteration: the step's exact
+Jacobians ``A_k, B_k`` and the costs' derivatives along the current trajectory; a backward
+Riccati pass giving feed-forward ``k_k`` and feedback ``K_k``; a forward pass through the
+nonlinear step, ``u_k = ū_k + α k_k + K_k (x_k − x̄_k)``, with a backtracking line search on
+``α`` (accepted when the cost falls by at least a tenth of the predicted reduction).
+Gauss–Newton variant (iLQR): the step's second derivatives are not used.
+Levenberg–Marquardt regularisation ``Q_uu + μ I`` (μ raised on a failed pass or a
+non-positive ``Q_uu``, lowered after a success; Tassa, Erez & Todorov 2012).
+
+The constraint manifold.  The iterations run in natural coordinates ``x = [q; v]``: every
+trajectory is a rollout of the step, so it satisfies both constraint levels exactly, and
+``A_k`` maps every perturbation into the tangent space at ``x_{k+1}``.  The value
+function's Hessian ``V_xx`` is therefore only ever applied to tangent directions, and the
+feedback ``K_k (x − x̄_k)`` is evaluated on differences of states of the manifold (tangent to
+first order); directions normal to the manifold carry no cost curvature and no dynamics, so
+nothing needs regularising there beyond ``Q_uu``.  (:meth:`StepFunction.reduced_jacobians`
+gives the same recursion in a minimal tangent basis.)  Inputs are unconstrained.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ncgen.control.costs import cost_functions
+from ncgen.errors import NcgenError
+
+MU_MIN, MU_MAX, MU_FACTOR = 1e-9, 1e10, 10.0
+ALPHAS = tuple(0.5 ** i for i in range(12))
+
+
+@dataclass
+class ILQRResult:
+    """``X`` (N+1, nx) states from ``x0``; ``U`` (N, nu) inputs; ``K`` (N, nu, nx) feedback
+    gains of the last backward pass (``u = U_k + K_k (x − X_k)``); ``cost``; ``iterations``;
+    ``converged`` (relative cost change below ``tol``); ``history`` of costs."""
+
+    X: np.ndarray
+    U: np.ndarray
+    K: np.ndarray
+    cost: float
+    iterations: int
+    converged: bool
+    history: list = field(default_factory=list)
+    message: str = ""
+
+
+def ilqr(st, x0, U0, costs, *, p=None, t0=None, max_iter: int = 200, tol: float = 1e-9,
+         mu: float = 1e-6, verbose: bool = False) -> ILQRResult:
+    """iLQR from the initial guess ``U0`` (N × nu); ``costs = (stage, terminal)`` as in
+    :mod:`ncgen.control.costs`; ``tol`` on the relative cost decrease of an iteration."""
+    stage_d, terminal_d = cost_functions(costs, st.nx, st.nu)
+    U = st._inputs(U0).copy()
+    N = U.shape[0]
+    x0 = st._args(x0, U[0], p, t0)[0]
+    t0 = st.model.t0 if t0 is None else float(t0)
+    stage_map = stage_d.map(N)
+
+    def total(X, U):
+        return float(np.sum(np.array(stage_map(X[:-1].T, U.T)[0]))) + float(terminal_d(X[-1])[0])
+
+    def roll(U):
+        return np.vstack([x0, st.rollout(x0, U, p, t0)])
+
+    X = roll(U)
+    J = total(X, U)
+    history, converged, message = [J], False, f"stopped after {max_iter} iterations"
+    K = np.zeros((N, st.nu, st.nx))
+    it = 0
+    for it in range(1, max_iter + 1):
+        A = np.empty((N, st.nx, st.nx))
+        B = np.empty((N, st.nx, st.nu))
+        for k in range(N):
+            _, A[k], B[k] = st.jacobians(X[k], U[k], p, t0 + k * st.h)
+        _, lx, lu, lxx, luu, lux = (np.array(a) for a in stage_map(X[:-1].T, U.T))
+        _, Vx_N, Vxx_N = (np.array(a) for a in terminal_d(X[-1]))
+        while True:
+            ok, kff, K, dV = _backward(A, B, lx, lu, lxx, luu, lux, Vx_N.ravel(), Vxx_N, mu)
+            if ok:
+                break
+            mu = max(mu * MU_FACTOR, MU_MIN)
+            if mu > MU_MAX:
+                return ILQRResult(X, U, K, J, it, False, history, "Q_uu stayed indefinite (μ above its limit)")
+        accepted = False
+        for alpha in ALPHAS:
+            Xn, Un = _forward(st, x0, X, U, kff, K, alpha, p, t0)
+            if Xn is None:
+                continue
+            Jn = total(Xn, Un)
+            expected = -(alpha * dV[0] + alpha ** 2 * dV[1])
+            if Jn < J and (expected <= 0 or (J - Jn) >= 0.1 * expected):
+                accepted = True
+                break
+        if not accepted:
+            mu = max(mu * MU_FACTOR, MU_MIN)
+            if mu > MU_MAX:
+                message = "no descent: the line search failed with μ at its limit"
+                break
+            continue
+        mu = max(mu / MU_FACTOR, MU_MIN)
+        change = (J - Jn) / max(abs(J), 1e-300)
+        X, U, J = Xn, Un, Jn
+        history.append(J)
+        if verbose:
+            print(f"iLQR {it:3d}: cost {J:.10g}, α {alpha:.3g}, μ {mu:.1e}")
+        if change < tol:
+            converged, message = True, f"converged: relative cost change {change:.2e} < {tol:g}"
+            break
+    return ILQRResult(X, U, K, J, it, converged, history, message)
+
+
+def _backward(A, B, lx, lu, lxx, luu, lux, Vx, Vxx, mu):
+    """Riccati sweep: ``(ok, k, K, (Σ kᵀQ_u, ½ Σ kᵀQ_uu k))``; ``ok`` false when a ``Q_uu``
+    is not positive definite."""
+    N, nx, nu = B.shape[0], A.shape[1], B.shape[2]
+    kff, K = np.zeros((N, nu)), np.zeros((N, nu, nx))
+    d1 = d2 = 0.0
+    for k in range(N - 1, -1, -1):
+        Ak, Bk = A[k], B[k]
+        Qx = lx[:, k] + Ak.T @ Vx
+        Qu = lu[:, k] + Bk.T @ Vx
+        VA, VB = Vxx @ Ak, Vxx @ Bk
+        Qxx = lxx[:, k * nx:(k + 1) * nx] + Ak.T @ VA
+        Quu = luu[:, k * nu:(k + 1) * nu] + Bk.T @ VB
+        Qux = lux[:, k * nx:(k + 1) * nx] + Bk.T @ VA
+        try:
+            L = np.linalg.cholesky(0.5 * (Quu + Quu.T) + mu * np.eye(nu))
+        except np.linalg.LinAlgError:
+            return False, kff, K, (0.0, 0.0)
+        sol = np.linalg.solve(L.T, np.linalg.solve(L, np.column_stack([Qu, Qux])))
+        kff[k], K[k] = -sol[:, 0], -sol[:, 1:]
+        Vx = Qx + K[k].T @ Quu @ kff[k] + K[k].T @ Qu + Qux.T @ kff[k]
+        Vxx = Qxx + K[k].T @ Quu @ K[k] + K[k].T @ Qux + Qux.T @ K[k]
+        Vxx = 0.5 * (Vxx + Vxx.T)
+        d1 += kff[k] @ Qu
+        d2 += 0.5 * kff[k] @ Quu @ kff[k]
+    return True, kff, K, (d1, d2)
+
+
+def _forward(st, x0, X, U, kff, K, alpha, p, t0):
+    """Closed-loop rollout through the nonlinear step; ``(None, None)`` if a step fails."""
+    from ncgen.control.step import StepDidNotConverge
+    N = U.shape[0]
+    Xn, Un = np.empty_like(X), np.empty_like(U)
+    Xn[0] = x0
+    try:
+        for k in range(N):
+            Un[k] = U[k] + alpha * kff[k] + K[k] @ (Xn[k] - X[k])
+            Xn[k + 1] = st(Xn[k], Un[k], p, t0 + k * st.h)
+    except (StepDidNotConverge, NcgenError):
+        return None, None
+    if not np.all(np.isfinite(Xn)):
+        return None, None
+    return Xn, Un

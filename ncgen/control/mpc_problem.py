@@ -1,0 +1,107 @@
+"""The receding-horizon problem of an ``OptimalControl`` (:mod:`ncgen.optim.problem`) on the
+discrete RATTLE step: what :class:`ncgen.control.mpc.MPC` solves at every control step.
+
+From the OCP: the horizon (``N`` steps of ``h = t_final / N``, fixed final time), the
+parameters, the costs and the bounds::
+
+    min  Σ_{k<N} ℓ(x_k, u_k) + ℓ_N(x_N)   s.t.  x_0 = x (measured),  x_{k+1} = step(x_k, u_k),
+         u_lo ≤ u_k ≤ u_hi,  q_lo ≤ q_k ≤ q_hi,  v_lo ≤ v_k ≤ v_hi  (k ≥ 1)
+
+    ℓ(x, u)  = h [uᵀ R u + Σ_markers w |r(q) − r_ref|²]          (effort, track_marker)
+    ℓ_N(x)   = Σ terminal costs (minimize_terminal)
+               + W (|q − q_f|² + |v − v_f|²)                     (final(q=…, v=…), soft)
+
+Integrals become sums over the ``N`` intervals' first nodes (rectangle rule, as the inputs
+are held).  The final conditions of the OCP are *soft* in MPC (weight ``W``,
+``terminal_weight``): a hard terminal equality can be infeasible from a disturbed state,
+and a controller must always return an input.  Not supported in MPC (a clear error):
+free final time, free parameters, periodic conditions, marker and joint path constraints,
+final poses/joints/markers, time-varying references.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ncgen.errors import OptimizationError
+
+
+@dataclass
+class MPCProblem:
+    """``stage(x, u)`` and ``terminal(x)`` (SX callables), bounds as ``(lower, upper)``
+    arrays (``u``: nu, ``x``: nx = 2 nq), ``h`` (s), ``N``, ``p`` and the final target."""
+
+    h: float
+    N: int
+    p: np.ndarray
+    stage: object
+    terminal: object
+    u_bounds: np.ndarray
+    x_bounds: np.ndarray
+    x_final: np.ndarray | None
+
+
+def mpc_problem(ocp, terminal_weight: float) -> MPCProblem:
+    """The :class:`MPCProblem` of ``ocp`` (see the module docstring)."""
+    model = ocp.model
+    unsupported = [what for what, bad in (
+        ("a free final time", ocp.t_final_bounds is not None),
+        ("free parameters", bool(ocp.p_free)),
+        ("periodic conditions", any(ocp.periodic_spec.values())),
+        ("marker path constraints (bound_marker)", bool(ocp.marker_bounds)),
+        ("joint path constraints (bound_joint, joint_limits)", bool(ocp.joint_bounds)),
+        ("final markers, poses or joints", bool(ocp.final_spec["markers"] or ocp.final_spec.get("pose")
+                                                 or ocp.final_spec.get("joints"))),
+        ("minimize_time", ocp.time_weight > 0),
+        ("a time-varying track_marker reference", any(callable(ref) for _, ref, _ in ocp.tracking)),
+    ) if bad]
+    if unsupported:
+        raise OptimizationError(f"MPC of {model.name!r}: the problem has {', '.join(unsupported)}, which the "
+                                "receding-horizon controller does not support; see ncgen.control.mpc_problem")
+    W = float(terminal_weight)
+    if not np.isfinite(W) or W < 0:
+        raise OptimizationError(f"MPC: terminal_weight: expected a non-negative number, got {terminal_weight!r}")
+    h, N, p = ocp.t_final / ocp.N, ocp.N, ocp.p_values.copy()
+    nq = model.nq
+    R = np.zeros((model.nu, model.nu)) if ocp.effort_R is None else ocp.effort_R
+    markers = model.functions["markers"] if model.marker_names else None
+
+    def marker(q, name):
+        return markers(q, ca.SX.zeros(nq))[0][:, ocp.marker_index(name)]
+
+    def stage(x, u):
+        out = ca.mtimes([u.T, ca.DM(R), u])
+        for name, ref, w in ocp.tracking:
+            out += w * ca.sumsqr(marker(x[:nq], name) - ca.DM(ref))
+        return h * out
+
+    t_end = ocp.t0 + ocp.t_final
+    q_f = v_f = None
+    if ocp.final_spec["q"] is not None:
+        from ncgen.optim.conditions import resolve_configuration
+        q_f = resolve_configuration(model, ocp.final_spec["q"], model.q0, t=t_end, p=p, what="final q")
+    if ocp.final_spec["v"] is not None:
+        from ncgen.optim.conditions import resolve_velocity
+        v_f = resolve_velocity(model, ocp.final_spec["v"], model.q0 if q_f is None else q_f, t=t_end, p=p)
+
+    def terminal(x):
+        q, v = x[:nq], x[nq:]
+        out = ca.SX(0)
+        for _, spec in ocp.terminal:
+            if spec[0] == "fn":
+                out += spec[2] * spec[1](q, v, ca.DM(p))
+            else:
+                _, name, target, w = spec
+                given = ~np.isnan(target)
+                out += w * ca.sumsqr((marker(q, name) - ca.DM(np.nan_to_num(target)))[np.flatnonzero(given).tolist()])
+        if q_f is not None:
+            out += W * ca.sumsqr(q - q_f)
+        if v_f is not None:
+            out += W * ca.sumsqr(v - v_f)
+        return out
+
+    x_bounds = np.hstack([ocp.q_bounds, ocp.v_bounds])
+    x_final = None if q_f is None else np.concatenate([q_f, np.zeros(nq) if v_f is None else v_f])
+    return MPCProblem(h, N, p, stage, terminal, ocp.u_bounds.copy(), x_bounds, x_final)

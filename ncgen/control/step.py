@@ -1,0 +1,184 @@
+"""``step_function(model, h)``: one RATTLE step of a model as compiled C with exact
+derivatives, rollouts and their adjoints (equations: :mod:`ncgen.control.discrete`).
+
+State ``x = [q; v]`` (natural coordinates, m, and their rates, m/s; ``2 nq`` entries), inputs
+``u`` held over the step, parameters ``p`` (default ``model.p0``), time ``t`` at the start of
+the step (s, default ``model.t0``).  ``A = ∂x⁺/∂x`` is 2nq × 2nq, ``B = ∂x⁺/∂u`` 2nq × nu,
+``C = ∂x⁺/∂p`` 2nq × np.
+
+Minimal parametrisation.  A step maps every state, on the constraint manifold or not, to
+one that satisfies ``Φ = 0`` and ``A v + Φ_t = 0``; the states of a motion therefore live
+on a manifold of dimension ``2 dof``, and ``A`` maps every perturbation into its tangent
+space at ``x⁺``.  :meth:`StepFunction.tangent_basis` gives an orthonormal basis ``T(x)``
+(2nq × 2dof, ``null`` of the Jacobian of both constraint levels, from its SVD, columns
+signed reproducibly) and :meth:`StepFunction.reduced_jacobians` the step's Jacobians in
+those coordinates, ``A_T = T(x⁺)ᵀ A T(x)``, ``B_T = T(x⁺)ᵀ B``, with ``δx = T(x) ξ``: what an
+LQR or an observer that needs a minimal state uses.
+
+The compiled library is cached by content (:mod:`ncgen.codegen.compile_cache`); a call
+goes through :class:`ncgen.codegen.direct.DirectFunction` (about a microsecond of overhead).
+Not thread-safe: one object per thread.
+"""
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from ncgen.control.discrete import ABSTOL, MAX_ITER, rollout_functions, state_constraint_jacobian, step_functions
+from ncgen.errors import NcgenError
+
+METHODS = ("rattle",)
+#: A step whose residual ‖G‖∞ exceeds this (relative to the largest mass-matrix entry plus
+#: one) did not converge and is refused.
+RESIDUAL_TOL = 1e-8
+
+
+class StepDidNotConverge(NcgenError):
+    """The Newton iterations of a step ended with a residual above :data:`RESIDUAL_TOL`."""
+
+
+def step_function(model, h: float, method: str = "rattle", *, max_iter: int = MAX_ITER,
+                  abstol: float = ABSTOL) -> "StepFunction":
+    """One step of ``h`` seconds of ``model`` (``method="rattle"``: the compiled stepper's
+    scheme, in natural coordinates, also for trees) as a :class:`StepFunction`."""
+    if method not in METHODS:
+        raise NcgenError(f"step_function: method: expected one of {', '.join(METHODS)}, got {method!r}")
+    h = float(h)
+    if not np.isfinite(h) or h <= 0:
+        raise NcgenError(f"step_function: h: expected a positive step in seconds, got {h!r}")
+    if getattr(model, "contact_model", "smooth") == "nonsmooth" and getattr(model, "nk", 0) > 0:
+        raise NcgenError(f"step_function: model {model.name!r} has nonsmooth contacts; their step is not "
+                         "differentiable at impacts and is not supported (use contacts='smooth')")
+    if not isinstance(max_iter, int) or max_iter < 1:
+        raise NcgenError(f"step_function: max_iter: expected a positive integer, got {max_iter!r}")
+    return StepFunction(model, h, max_iter=max_iter, abstol=float(abstol))
+
+
+class StepFunction:
+    """``x1 = st(x, u, p=None, t=None)``; ``x1, A, B = st.jacobians(x, u)``; rollouts and
+    their adjoints; the tangent parametrisation (see the module docstring)."""
+
+    def __init__(self, model, h: float, *, max_iter: int, abstol: float):
+        self.model, self.h = model, h
+        self.nx, self.nu, self.np = 2 * model.nq, model.nu, model.np
+        self.functions = step_functions(model, h, abstol=abstol, max_iter=max_iter)
+        self.residual_tol = RESIDUAL_TOL * (1.0 + float(np.max(np.abs(model.M))) if model.nq else 1.0)
+        self._lib = _compile(f"{model.name}_step", list(self.functions.values()))
+        self._step, self._jac = self._lib["step"], self._lib["step_jac"]
+        self._rollouts: dict[int, dict] = {}
+        self._J = state_constraint_jacobian(model)
+
+    def __repr__(self) -> str:
+        return f"<StepFunction of {self.model.name!r}: RATTLE, h={self.h} s, nx={self.nx}, nu={self.nu}>"
+
+    # ----------------------------------------------------------------- arguments
+    def _args(self, x, u, p, t) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        x = _vector(x, self.nx, "x", "the state [q; v]")
+        u = np.zeros(0) if u is None and self.nu == 0 else _vector(u, self.nu, "u", "the inputs")
+        p = self.model.p0 if p is None else _vector(p, self.np, "p", "the parameters")
+        t = self.model.t0 if t is None else float(t)
+        return x, u, p, t
+
+    def _check(self, res: float, where: str) -> None:
+        if not res <= self.residual_tol:
+            raise StepDidNotConverge(f"step of {self.model.name!r}{where}: the Newton iterations ended with "
+                                     f"residual {res:.3g} > {self.residual_tol:.3g}; take a smaller h, raise "
+                                     "max_iter, or start from a state closer to the constraints")
+
+    # ---------------------------------------------------------------------- step
+    def __call__(self, x, u=None, p=None, t=None) -> np.ndarray:
+        """The state after one step."""
+        x1, res = self._step(*self._args(x, u, p, t))
+        self._check(float(res[0]), "")
+        return x1.copy()
+
+    def jacobians(self, x, u=None, p=None, t=None, *, parameters: bool = False):
+        """``(x1, A, B)``, or ``(x1, A, B, C)`` with ``parameters=True``."""
+        x1, A, B, C, res = self._jac(*self._args(x, u, p, t))
+        self._check(float(res[0]), "")
+        out = (x1.copy(), A.reshape(self.nx, self.nx, order="F").copy(), B.reshape(self.nx, self.nu, order="F").copy())
+        return out + (C.reshape(self.nx, self.np, order="F").copy(),) if parameters else out
+
+    # ------------------------------------------------------------------ rollouts
+    def _rollout_lib(self, N: int) -> dict:
+        if N not in self._rollouts:
+            fs = rollout_functions(self.functions["step"], N, self.h)
+            self._rollouts[N] = _compile(f"{self.model.name}_rollout{N}", list(fs.values()))
+        return self._rollouts[N]
+
+    def _inputs(self, U) -> np.ndarray:
+        U = np.asarray(U, dtype=float)
+        if U.ndim == 1 and self.nu == 1:
+            U = U[:, None]
+        if U.ndim != 2 or U.shape[1] != self.nu or U.shape[0] < 1 or not np.all(np.isfinite(U)):
+            raise NcgenError(f"U: expected finite inputs of shape (N, {self.nu}) (one row per step), got shape "
+                             f"{U.shape}")
+        return U
+
+    def rollout(self, x0, U, p=None, t0=None) -> np.ndarray:
+        """States after each of the ``N = len(U)`` steps, shape ``(N, nx)`` (``U``: ``(N, nu)``)."""
+        U = self._inputs(U)
+        x0, _, p, t0 = self._args(x0, U[0], p, t0)
+        X, res = self._rollout_lib(U.shape[0])["rollout"](x0, U.T.ravel(order="F"), p, t0)
+        bad = np.flatnonzero(~(res <= self.residual_tol))
+        if bad.size:
+            self._check(float(res[bad[0]]), f" {bad[0]} of the rollout")
+        return X.reshape(self.nx, -1, order="F").T.copy()
+
+    def rollout_gradient(self, x0, U, dX, p=None, t0=None, *, parameters: bool = False):
+        """``(dx0, dU)`` (and ``dp`` with ``parameters=True``): the gradient of a cost ``J(X)``
+        with respect to ``x0`` and ``U`` given ``dX = ∂J/∂X`` (shape of :meth:`rollout`'s
+        result); one reverse sweep in C."""
+        U = self._inputs(U)
+        x0, _, p, t0 = self._args(x0, U[0], p, t0)
+        N = U.shape[0]
+        dX = np.asarray(dX, dtype=float)
+        if dX.shape != (N, self.nx) or not np.all(np.isfinite(dX)):
+            raise NcgenError(f"dX: expected finite ∂J/∂X of shape ({N}, {self.nx}), got shape {dX.shape}")
+        self.rollout(x0, U, p, t0)                     # refuses a rollout that did not converge
+        dx0, dU, dp = self._rollout_lib(N)["rollout_adjoint"](x0, U.T.ravel(order="F"), p, t0, dX.ravel())
+        out = (dx0.copy(), dU.reshape(self.nu, N, order="F").T.copy())
+        return out + (dp.copy(),) if parameters else out
+
+    # ------------------------------------------------------- tangent coordinates
+    def tangent_basis(self, x, p=None, t=None) -> np.ndarray:
+        """``T(x)``: orthonormal basis (nx × 2 dof) of the tangent space of the state
+        manifold ``{Φ = 0, A v + Φ_t = 0}`` at ``x``."""
+        from ncgen.assembly.manifold import null_basis
+        x, _, p, t = self._args(x, np.zeros(self.nu), p, t)
+        return null_basis(np.array(self._J(x, p, t)), self.nx)
+
+    def reduced_jacobians(self, x, u=None, p=None, t=None):
+        """``(x1, A_T, B_T)`` with ``A_T = T(x1)ᵀ A T(x)``, ``B_T = T(x1)ᵀ B`` (tangent coordinates)."""
+        x1, A, B = self.jacobians(x, u, p, t)
+        t1 = (self.model.t0 if t is None else float(t)) + self.h
+        T0, T1 = self.tangent_basis(x, p, t), self.tangent_basis(x1, p, t1)
+        return x1, T1.T @ A @ T0, T1.T @ B
+
+
+def _vector(a, n: int, name: str, what: str) -> np.ndarray:
+    a = np.asarray(a, dtype=float).reshape(-1) if a is not None else np.zeros(0)
+    if a.size == 1 and n > 1 and name == "u":
+        a = np.full(n, a[0])
+    if a.size != n or not np.all(np.isfinite(a)):
+        raise NcgenError(f"{name}: expected {n} finite number(s) ({what}), got {a.size} value(s)"
+                         + ("" if np.all(np.isfinite(a)) else " with NaN or inf"))
+    return a
+
+
+def _compile(name: str, functions: list) -> dict:
+    """``functions`` generated as the C package ``name``, compiled (cached by content) and
+    loaded for direct calls: ``{function name: DirectFunction}``."""
+    from ncgen.codegen.compile_cache import compile_package
+    from ncgen.codegen.direct import DirectFunction
+    from ncgen.codegen.package import write_package
+
+    with tempfile.TemporaryDirectory() as tmp:
+        # not rerolled: the exported MPC package is written the same way, so that Python and
+        # C run the same arithmetic in the same order
+        pkg = write_package(name, functions, Path(tmp) / "pkg", reroll_instructions=None)
+        built = compile_package(pkg)
+        names = {f.name(): pkg.c_name(f.name()) for f in functions}
+    return {f.name(): DirectFunction(built.path, names[f.name()], f) for f in functions}

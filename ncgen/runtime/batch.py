@@ -1,0 +1,389 @@
+"""``simulate_batch``: many runs of one model through its compiled stepper in one call.
+
+Each run is what ``nc.simulate(model, t_end, dt, method="stepper", ...)`` computes with the
+same initial state, parameters and inputs, bit for bit (the same consistent initial state,
+multipliers and compiled loop, ``<model>_simulate``), without the per-run checks of a single
+run (no shadow run for an error estimate, no energy check: choose ``dt`` with one checked
+``nc.simulate`` first).  Runs are spread over ``workers`` threads: the compiled loop releases
+the GIL (ctypes), so the threads integrate in parallel; Python only prepares each run (a few
+µs unless its initial state must be made consistent, see :func:`simulate_batch`).
+
+A run that fails (Newton fails on a step even when halved, an initial state that cannot be
+made consistent, parameters out of their limits) does not stop the batch: ``status[i]`` is
+nonzero, ``message[i]`` says why, and its rows after the failure are NaN.
+"""
+from __future__ import annotations
+
+import ctypes
+import os
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from types import SimpleNamespace
+
+import numpy as np
+
+from ncgen.codegen.stepper_package import MAX_HALVINGS, MAX_ITER, STATUS, TOL, n_stats
+from ncgen.errors import NcgenError
+from ncgen.runtime.dae import load_dae
+from ncgen.runtime.inputs import input_samples, parameter_values, time_grid
+from ncgen.runtime.library import compiled_functions
+from ncgen.runtime.simulation import initial_multipliers, initial_state, point_bytes
+from ncgen.runtime.options import SimulationOptions
+from ncgen.runtime.stepper import _trajectory, step_inputs
+from ncgen.runtime.stepper_checks import is_conservative, untrusted_row
+from ncgen.runtime.stepper_library import _Options, load_stepper
+from ncgen.validation import as_scalar
+
+#: ``status`` of a run that could not start (its initial state, parameters or inputs).
+STATUS_SETUP = -1
+#: ``status`` of a run that completed but failed its checks (``check=True``).
+STATUS_UNTRUSTED = -2
+#: Runs handed to a thread at a time.
+CHUNK = 8
+
+
+@dataclass
+class BatchResult:
+    """Runs of :func:`simulate_batch`; arrays are shaped ``(batch, time, ...)``.
+
+    ``t`` (s, shared by all runs); ``q``, ``v`` (batch, time, nq); ``lam`` (batch, time, nc);
+    ``p`` (batch, np) the parameters of each run; ``status`` (0: complete; ``STATUS_SETUP``:
+    not started; else the stepper's code, :data:`ncgen.codegen.stepper_package.STATUS`);
+    ``message`` (empty for a complete run); ``newton_iterations`` per run; ``kinetic``,
+    ``potential`` (J), ``constraint_residual`` (max |Φ|, m²) (batch, time), ``markers``
+    (batch, time, n_markers, dim, m) when computed (``outputs=True``).  Rows of a failed
+    run after its last completed output time are NaN."""
+
+    t: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    lam: np.ndarray
+    p: np.ndarray
+    status: np.ndarray
+    message: list
+    newton_iterations: np.ndarray
+    kinetic: np.ndarray | None = None
+    potential: np.ndarray | None = None
+    constraint_residual: np.ndarray | None = None
+    markers: np.ndarray | None = None
+    info: dict = field(default_factory=dict)
+
+    @property
+    def ok(self) -> np.ndarray:
+        """Which runs completed (``status == 0``)."""
+        return self.status == 0
+
+    def __len__(self) -> int:
+        return len(self.status)
+
+    def __repr__(self) -> str:
+        return (f"<BatchResult: {len(self)} runs of {self.info.get('model')!r}, {len(self.t)} times, "
+                f"{int(np.sum(~self.ok))} failed, {self.info.get('wall_time', 0):.3g} s>")
+
+
+def simulate_batch(model, t_end: float, dt: float, *, q0=None, v0=None, p=None, u=None, t0: float | None = None,
+                   hold: str = "zoh", substeps: int = 1, newton_tol: float = TOL, max_newton: int = MAX_ITER,
+                   max_halvings: int = MAX_HALVINGS, ic_tolerance: float | None = 1e-6, project: bool = True,
+                   check: bool = True,
+                   outputs: bool = True, workers: int | None = None) -> BatchResult:
+    """Integrate ``model`` with its compiled stepper once per run, on ``workers`` threads
+    (default: all cores), over the grid ``t0, t0 + dt, ..., t_end`` (s).
+
+    Per run, as in :func:`ncgen.simulate` (``method="stepper"``, fixed steps):
+
+    * ``q0``, ``v0``: ``None`` (the model's), one vector of ``nq`` values for every run, or
+      one per run, shape ``(batch, nq)``;
+    * ``p``: ``None`` (the model's), one parameter vector, one per run ``(batch, np)``, or a
+      dict by name of scalars (all runs) or arrays of ``batch`` values (vector parameters:
+      ``(batch, size)``);
+    * ``u``: ``None`` (zeros), samples on the grid for every run ``(len(t), nu)`` or one set
+      per run ``(batch, len(t), nu)`` (also ``len(t) − 1`` rows), held by ``hold``.
+
+    The batch size is that of the per-run arguments (they must agree).  Where a run's
+    ``q0``/``v0`` are given or its ``p`` differs from the model's, its initial state is
+    projected onto the constraints as :func:`ncgen.simulate` does (``ic_tolerance``), in
+    Python, a few milliseconds per run; ``project=False`` trusts the given states as
+    consistent (only the multipliers ``λ0`` are computed, for all runs in one compiled
+    call): then preparing a run costs about 20 µs, its KKT solve included.
+    ``check`` (default): each run is checked as a single run is (a shadow run with steps of
+    2h estimates its error, about half the work again; split steps, exploding Newton
+    iterations, energy drift or an estimated error above 1 % of the model's size: see
+    :mod:`ncgen.runtime.stepper_checks`); an untrustworthy run gets ``STATUS_UNTRUSTED``, its
+    rows from the problem on NaN, and the reason.  ``check=False``: the bare compiled loop
+    (fastest; choose ``dt`` with a checked run first).  ``outputs``: also the energies,
+    constraint residuals and markers (one compiled call per run; always with ``check``).
+    Returns a :class:`BatchResult`; failed runs are reported there, never raised.
+    """
+    start = time.perf_counter()
+    SimulationOptions(method="stepper", hold=hold, substeps=substeps, newton_tol=newton_tol, max_newton=max_newton,
+                      max_halvings=max_halvings, ic_tolerance=ic_tolerance)      # checked as for a single run
+    t0 = model.t0 if t0 is None else as_scalar(t0, "t0")
+    t = time_grid(t0, t_end, dt, bytes_per_point=point_bytes(model))
+    n = _batch_size(model, q0, v0, p, u, len(t))
+    stepper = load_stepper(model)
+    runs = _Runs(model, stepper, t, n, hold, int(substeps), newton_tol, max_newton, max_halvings, ic_tolerance,
+                 outputs or check, check)
+    workers = runs.workers = _workers(workers, n)
+    runs.prepare(q0, v0, p, u, project)
+    chunks = [range(i, min(i + CHUNK, n)) for i in range(0, n, CHUNK)]
+    stepping = time.perf_counter()
+    if workers == 1:
+        for c in chunks:
+            runs.integrate(c)
+    else:
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            list(pool.map(runs.integrate, chunks))
+    end = time.perf_counter()
+    result = runs.result()
+    result.info.update(model=model.name, method="stepper", h=runs.h, substeps=runs.substeps, hold=hold, check=check,
+                       workers=workers, runs=n, stepping_time=end - stepping, wall_time=end - start)
+    return result
+
+
+def _workers(workers, n: int) -> int:
+    if workers is None:
+        workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if int(workers) < 1:
+        raise NcgenError(f"workers: expected a positive number of threads, got {workers!r}")
+    return max(1, min(int(workers), n))
+
+
+def _batch_size(model, q0, v0, p, u, n_t: int) -> int:
+    """The number of runs the per-run arguments say (1 when none is per run)."""
+    sizes = {}
+    for name, value, single in (("q0", q0, 1), ("v0", v0, 1), ("u", u, 2)):
+        if value is not None and not callable(value) and np.ndim(value) == single + 1:
+            sizes[name] = len(value)
+    if isinstance(p, dict):
+        for key, value in p.items():
+            size = model.parameter_sizes[model.parameter_names.index(key)] if key in model.parameter_names else 1
+            if np.ndim(value) >= (1 if size == 1 else 2):
+                sizes[f"p[{key!r}]"] = len(value)
+    elif p is not None and np.ndim(p) == 2:
+        sizes["p"] = len(p)
+    if len(set(sizes.values())) > 1:
+        said = ", ".join(f"{k}: {v}" for k, v in sizes.items())
+        raise NcgenError(f"simulate_batch: the per-run arguments disagree on the number of runs ({said})")
+    n = next(iter(sizes.values()), 1)
+    if n < 1:
+        raise NcgenError("simulate_batch: no runs (the per-run arguments are empty)")
+    return n
+
+
+class _Runs:
+    """Inputs and result buffers of the runs, and the loop over a chunk of them."""
+
+    def __init__(self, model, stepper, t, n, hold, substeps, tol, max_iter, max_halvings, ic_tolerance, outputs,
+                 check):
+        self.model, self.stepper, self.t, self.n, self.check = model, stepper, t, n, check
+        self.conservative = is_conservative(model) if check else True
+        self.hold, self.substeps, self.ic_tolerance, self.outputs = hold, substeps, ic_tolerance, outputs
+        self.h = float(t[1] - t[0]) / substeps
+        self.n_out = len(t) - 1
+        self._options = _Options(float(tol), int(max_iter), int(max_halvings))
+        self.options = ctypes.byref(self._options)
+        nq, nc, T = model.nq, model.nc, len(t)
+        self.Q, self.V = np.full((n, T, nq), np.nan), np.full((n, T, nq), np.nan)
+        self.LAM = np.full((n, T, nc), np.nan)
+        self.ITER = np.zeros((n, self.n_out), dtype=np.dtype(ctypes.c_long))
+        self.P = np.zeros((n, model.np))
+        self.U = [None] * n          # inputs on the grid (len(t), nu) per run
+        self.US = [None] * n         # inputs per step, or None
+        self.status = np.zeros(n, dtype=int)
+        self.message = [""] * n
+        self.Y = np.full((n, T, stepper.nout), np.nan) if outputs else None
+
+    def prepare(self, q0, v0, p, u, project: bool) -> None:
+        """Parameters, consistent initial state, multipliers and inputs of every run (a run
+        whose setup fails gets ``STATUS_SETUP`` and the reason)."""
+        model, t, t0 = self.model, self.t, float(self.t[0])
+        dae = load_dae(model, "vm")[0] if project else None    # names the cause of a singular KKT system
+        per_run_u = u is not None and not callable(u) and np.ndim(u) == 3
+        if not per_run_u:
+            U = input_samples(u, model, t)
+            shared_u = (U, step_inputs(U, t, self.hold, self.substeps))
+        if not project:            # states as given: checked once for all runs
+            self.Q[:, 0] = _states(q0, model.q0, self.n, model.nq, "q0")
+            self.V[:, 0] = _states(v0, model.v0, self.n, model.nq, "v0")
+        for i in range(self.n):
+            try:
+                self.P[i] = pv = model.p0 if p is None else parameter_values(_pick_p(p, i, model), model)
+                if project:
+                    q, v = initial_state(model, _pick(q0, i, 1), _pick(v0, i, 1), t0, pv, self.ic_tolerance)
+                    self.Q[i, 0], self.V[i, 0] = q, v
+                if per_run_u:
+                    U = input_samples(u[i], model, t)
+                    self.U[i], self.US[i] = U, step_inputs(U, t, self.hold, self.substeps)
+                else:
+                    self.U[i], self.US[i] = shared_u
+                if project:
+                    self.LAM[i, 0] = initial_multipliers(model, t0, q, v, self.U[i][0], pv, dae)
+            except NcgenError as e:
+                self.status[i], self.message[i] = STATUS_SETUP, f"could not start: {e}"
+                self.Q[i, 0] = self.V[i, 0] = np.nan
+        if not project:
+            self._multipliers(t0)
+
+    def _multipliers(self, t0: float) -> None:
+        """``λ0`` of every run from the KKT system, in one call: the compiled ``accel`` (the same
+        operations as the model's CasADi function, so the same bits) mapped over the runs."""
+        model, n = self.model, self.n
+        if not model.nc:
+            return
+        U0 = np.array([self.U[i][0] for i in range(n)]).reshape(n, model.nu)
+        accel = _compiled_accel(model).map(n, "thread", self.workers)
+        lam = np.array(accel(t0, self.Q[:, 0].T, self.V[:, 0].T, U0.T, self.P.T)[1]).T
+        ok = self.status == 0
+        self.LAM[ok, 0] = lam[ok]
+        for i in np.flatnonzero(ok & ~np.all(np.isfinite(lam), axis=1)):
+            self.status[i] = STATUS_SETUP
+            self.message[i] = (f"could not start: the KKT system [[M, A^T], [A, 0]] is singular at "
+                               f"t0 = {t0:g} s (a singular configuration, or the state is not consistent: "
+                               f"project=True makes it so)")
+
+    def integrate(self, chunk: range) -> None:
+        """The compiled loop over the runs of ``chunk`` (GIL released while it runs)."""
+        st, raw = self.stepper, _raw_loops(self.model, self.stepper)
+        done, splits = ctypes.c_long(0), ctypes.c_long(0)
+        n_steps = self.n_out * self.substeps
+        extra = [None] if st.nd else []
+        S = np.zeros((self.n_out, n_stats(st.nd))) if self.check else None
+        Q, V, L = (_Address(a) for a in (self.Q, self.V, self.LAM))
+        p_at, iter_at = _Address(self.P), _Address(self.ITER)
+        for i in chunk:
+            if self.status[i] != 0:
+                continue
+            US = self.US[i]
+            common = (float(self.t[0]), self.h, n_steps, self.substeps, _ptr(US), st.nu if US is not None else 0,
+                      p_at(i), Q(i, 1), V(i, 1), L(i, 1))
+            if self.check:
+                status = raw.simulate_stats(Q(i, 0), V(i, 0), L(i, 0), *common, S.ctypes.data, self.options,
+                                            int(not st.nd), int(not self.conservative), ctypes.byref(done),
+                                            ctypes.byref(splits), *extra)
+                self.ITER[i] = S[:, 1]
+            else:
+                status = raw.simulate(Q(i, 0), V(i, 0), *common, iter_at(i), self.options, ctypes.byref(done),
+                                      ctypes.byref(splits), *extra)
+            rows = done.value // self.substeps
+            if status != 0:
+                self.status[i] = status
+                t_fail = float(self.t[0]) + done.value * self.h
+                self.message[i] = (f"the stepper failed in the step from t = {t_fail:.6g} s to "
+                                   f"{t_fail + self.h:.6g} s: {STATUS.get(status, f'status {status}')}")
+                self._blank(i, rows + 1)
+            if self.check:
+                self._checked(i, rows, S)
+            elif self.Y is not None:
+                k = rows + 1
+                U = self.U[i][:k] if self.model.nu else None
+                self.Y[i, :k] = st.outputs(self.t[:k], self.Q[i, :k], self.V[i, :k], self.LAM[i, :k], U, self.P[i])
+
+    def _checked(self, i: int, rows: int, S: np.ndarray) -> None:
+        """Outputs of run ``i`` and the checks of a single run (:func:`untrusted_row`)."""
+        model, Q, V, LAM = self.model, self.Q[i], self.V[i], self.LAM[i]
+        info = {"method": "stepper", "h": self.h, "substeps": self.substeps, "stats": {}}
+        traj = _trajectory(model, self.stepper, self.t, Q[0], V[0], LAM[0], Q[1:], V[1:], LAM[1:], S, rows,
+                           self.U[i], self.P[i], info, self.conservative, time.perf_counter())
+        self.Y[i, :rows + 1, 0], self.Y[i, :rows + 1, 1] = traj.kinetic, traj.potential
+        self.Y[i, :rows + 1, 2] = traj.constraint_residual
+        self.Y[i, :rows + 1, 5:] = traj.markers.reshape(rows + 1, -1)
+        bad = untrusted_row(model, traj, S[:rows], self.h, contacts=self.stepper.nd > 0)
+        if bad is not None and self.status[i] == 0:
+            row, reason = bad
+            self.status[i] = STATUS_UNTRUSTED
+            self.message[i] = f"not trustworthy: {reason}"
+            self._blank(i, row + 1)
+
+    def _blank(self, i: int, k: int) -> None:
+        """Rows ``k`` on of run ``i`` set to NaN (after a failure)."""
+        self.Q[i, k:] = self.V[i, k:] = self.LAM[i, k:] = np.nan
+        if self.Y is not None:
+            self.Y[i, k:] = np.nan
+
+    def result(self) -> BatchResult:
+        model, Y = self.model, self.Y
+        out = {}
+        if Y is not None:
+            n_m = len(model.marker_names)
+            out = dict(kinetic=Y[:, :, 0], potential=Y[:, :, 1], constraint_residual=Y[:, :, 2],
+                       markers=Y[:, :, 5:].reshape(self.n, len(self.t), n_m, model.dim))
+        return BatchResult(t=self.t, q=self.Q, v=self.V, lam=self.LAM, p=self.P, status=self.status,
+                           message=self.message, newton_iterations=self.ITER.sum(axis=1), **out)
+
+
+def _pick(value, i: int, single_ndim: int):
+    """Run ``i``'s value of a per-run argument (or the shared one)."""
+    if value is None or np.ndim(value) == single_ndim:
+        return value
+    return value[i]
+
+
+def _pick_p(p, i: int, model):
+    if isinstance(p, dict):
+        out = {}
+        for key, value in p.items():
+            size = model.parameter_sizes[model.parameter_names.index(key)] if key in model.parameter_names else 1
+            out[key] = value[i] if np.ndim(value) >= (1 if size == 1 else 2) else value
+        return out
+    return _pick(p, i, 1)
+
+
+def _states(given, default, n: int, nq: int, name: str) -> np.ndarray:
+    """``(n, nq)`` states from ``None`` (``default``), one vector, or one per run."""
+    if given is None:
+        return np.broadcast_to(default, (n, nq))
+    a = np.asarray(given, dtype=float)
+    if a.shape not in ((nq,), (n, nq)):
+        raise NcgenError(f"{name}: expected {nq} values or an array of shape ({n}, {nq}), got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        bad = np.argwhere(~np.isfinite(a.reshape(-1, nq)))[0]
+        raise NcgenError(f"{name}: run {bad[0]} has a non-finite value at coordinate {bad[1]}")
+    return np.broadcast_to(a, (n, nq))
+
+
+def _ptr(a):
+    return None if a is None or a.size == 0 else a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+
+
+class _Address:
+    """``addr(i, k)``: address of ``A[i, k]`` (of ``A[i]`` with one index) as an integer, or
+    None for an empty array (the raw loops take addresses: the per-run cost stays at µs)."""
+
+    def __init__(self, A: np.ndarray):
+        self.base = A.ctypes.data if A.size else None
+        self.strides = A.strides
+
+    def __call__(self, i: int, k: int = 0):
+        if self.base is None:
+            return None
+        return self.base + i * self.strides[0] + (k * self.strides[1] if k else 0)
+
+
+def _compiled_accel(model):
+    """The model's compiled ``accel`` (loaded once per model, kept in its data)."""
+    data = model.data
+    if data.batch_accel is None:
+        data.batch_accel = compiled_functions(model, ["accel"])["accel"]
+    return data.batch_accel
+
+
+def _raw_loops(model, stepper):
+    """``<model>_simulate`` and ``_simulate_stats`` of ``stepper``'s library bound with
+    address arguments (``c_void_p``: plain integers pass without conversion objects; kept in
+    the model's data by library); the signatures are those of
+    :class:`~ncgen.runtime.stepper_library.CompiledStepper`."""
+    loops = model.data.batch_loops
+    if stepper.library not in loops:
+        lib = ctypes.CDLL(stepper.library)
+        name = stepper._simulate.__name__[:-len("_simulate")]
+        vp, lp, d, lg, i = ctypes.c_void_p, ctypes.c_void_p, ctypes.c_double, ctypes.c_long, ctypes.c_int
+        extra = [vp] if stepper.nd else []
+        simulate = getattr(lib, f"{name}_simulate")
+        simulate.restype = i
+        simulate.argtypes = [vp, vp, d, d, lg, lg, vp, lg, vp, vp, vp, vp, lp, vp, lp, lp] + extra
+        stats = getattr(lib, f"{name}_simulate_stats")
+        stats.restype = i
+        stats.argtypes = [vp, vp, vp, d, d, lg, lg, vp, lg, vp, vp, vp, vp, vp, vp, i, i, lp, lp] + extra
+        loops[stepper.library] = SimpleNamespace(simulate=simulate, simulate_stats=stats, lib=lib)
+    return loops[stepper.library]

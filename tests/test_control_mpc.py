@@ -1,0 +1,117 @@
+"""Model-predictive control of the cart-pole (examples/cartpole_mpc.toml): the Python
+controller stabilises it from disturbed states and its converged SQP solution is IPOPT's
+on the same discrete problem; the exported C package builds with -Wall -Wextra -Werror
+under AddressSanitizer and UndefinedBehaviorSanitizer, its closed loop (controller and
+plant in C, no Python) stabilises the cart-pole, and matches the Python loop to 1e-9."""
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import ncgen as nc
+from ncgen.cli import main
+from ncgen.control.export import closed_loop
+from ncgen.control.reference import solve_discrete
+from ncgen.errors import OptimizationError
+from ncgen.optim.problem_file import load_problem
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+CC = os.environ.get("CC") or shutil.which("gcc") or shutil.which("cc")
+SAN = "-fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer"
+ENV = {**os.environ, "ASAN_OPTIONS": "detect_leaks=0", "UBSAN_OPTIONS": "halt_on_error=1"}
+PUSH = [(1.0, 1.1, [8.0])]                # an 8 N push on the cart for 0.1 s
+
+
+def tilted(model, angle, cart=0.0):
+    """The cart-pole at rest with the pole ``angle`` rad off the upright (cart at ``cart`` m)."""
+    q = np.array([cart, 0, 1, 0, 0, 1, cart + 0.5 * np.sin(angle), 0.5 * np.cos(angle)])
+    assert np.max(np.abs(np.array(model.functions["phi"](model.t0, q, model.p0)))) < 1e-12
+    return np.concatenate([q, np.zeros(model.nq)])
+
+
+@pytest.fixture(scope="module")
+def setup():
+    model = nc.System.from_toml(EXAMPLES / "cartpole.toml").build()
+    ocp = load_problem(EXAMPLES / "cartpole_mpc.toml", model)[0]
+    return ocp, nc.MPC(ocp, terminal_weight=100.0)
+
+
+def upright(x, tol):
+    return abs(x[0]) < tol and np.linalg.norm(x[6:8] - [0.0, 0.5]) < tol and np.max(np.abs(x[8:])) < 10 * tol
+
+
+@pytest.mark.parametrize("angle, cart", [(0.2, 0.0), (-0.3, 0.5)])
+def test_python_mpc_stabilises_the_cartpole(setup, angle, cart):
+    ocp, mpc = setup
+    T, U, X = closed_loop(mpc, tilted(ocp.model, angle, cart), 4.0, disturbance=PUSH)
+    assert np.all(np.abs(U) <= 20.0 + 1e-9) and np.max(np.abs(U)) > 1.0
+    assert np.all(np.abs(X[:, 0]) <= 1.5 + 1e-6)
+    assert upright(X[-1], 2e-3), X[-1]
+
+
+def test_converged_sqp_is_the_ipopt_solution_of_the_horizon_problem(setup):
+    """Thirty SQP iterations at one state against IPOPT on the same discrete problem (the
+    step equations as constraints: :func:`ncgen.control.reference.solve_discrete`)."""
+    ocp, mpc = setup
+    x = tilted(ocp.model, 0.1)
+    mpc.reset(x, iterations=30)
+    X, U = mpc.X, mpc.U
+    st = nc.step_function(ocp.model, mpc.h)
+    assert np.allclose(X[1:], st.rollout(x, U), atol=1e-9)              # converged: the states are a rollout
+    assert np.max(np.abs(U)) < 19.0                                     # bounds inactive: IPOPT needs none
+    _, U_ip, J_ip = solve_discrete(st, x, U, (mpc.problem.stage, mpc.problem.terminal))
+    assert np.max(np.abs(U - U_ip)) < 1e-6 * np.max(np.abs(U_ip))
+
+
+def test_unsupported_problems_and_solvers_are_named(setup):
+    ocp, _ = setup
+    model = ocp.model
+    free = nc.OptimalControl(model, N=10, t_final=(0.5, 2.0))
+    with pytest.raises(OptimizationError, match="a free final time"):
+        nc.MPC(free)
+    with pytest.raises(OptimizationError, match="solver: expected one of sqp, got 'fatrop'"):
+        nc.MPC(ocp, solver="fatrop")
+    with pytest.raises(OptimizationError, match="iterations: expected a positive integer"):
+        nc.MPC(ocp, iterations=0)
+
+
+@pytest.mark.skipif(CC is None, reason="no C compiler")
+def test_exported_package_builds_under_sanitizers_and_matches_python(setup, tmp_path):
+    ocp, mpc = setup
+    out = tmp_path / "cartpole_mpc"
+    x0 = tilted(ocp.model, 0.2)
+    assert main(["mpc", str(EXAMPLES / "cartpole_mpc.toml"), "-o", str(out), "--terminal-weight", "100",
+                 "--x0", f"pole.r_j.x={float(x0[6])!r},pole.r_j.y={float(x0[7])!r}", "--t-end", "3",
+                 "--disturbance", "1.0:1.1:8"]) == 0
+    header = (out / "cartpole_mpc.h").read_text()
+    assert "int cartpole_mpc_step(cartpole_mpc* m, const casadi_real* x, casadi_real t, casadi_real* u_out);" in header
+    # -O0: gcc's -Wmaybe-uninitialized misfires at -O1 and above on CasADi's qrqp runtime code
+    flags = f"-O0 -g -Werror {SAN}"
+    build = subprocess.run(["make", f"CC={CC}", f"CFLAGS={flags}", f"LDFLAGS={SAN}", "demo"], cwd=out,
+                           capture_output=True, text=True, timeout=600)
+    assert build.returncode == 0, build.stdout[-3000:] + build.stderr[-3000:]
+    assert "-Wall -Wextra" in build.stdout
+    runs = {}
+    for angle in (0.2, -0.25):
+        x = tilted(ocp.model, angle)
+        run = subprocess.run(["./demo", "3"] + [repr(float(v)) for v in x], cwd=out, capture_output=True, text=True,
+                             env=ENV, timeout=300)
+        assert run.returncode == 0 and not run.stderr, run.stderr[-3000:]
+        C = np.array([[float(v) for v in line.split()] for line in run.stdout.splitlines()])
+        T, U, X = closed_loop(mpc, x, 3.0, disturbance=PUSH)
+        assert C.shape == (60, 1 + 1 + 16)
+        assert np.max(np.abs(C[:, 1] - U[:, 0])) <= 1e-9
+        assert np.max(np.abs(C[:, 2:] - X)) <= 1e-9
+        runs[angle] = C
+        assert upright(C[-1, 2:], 1e-2)
+    default = subprocess.run(["./demo"], cwd=out, capture_output=True, text=True, env=ENV, timeout=300)
+    assert default.returncode == 0 and np.allclose(
+        [float(v) for v in default.stdout.splitlines()[-1].split()], runs[0.2][-1], rtol=0, atol=1e-12)
+    for args, named in ((["-1"], "T"), (["abc"], "T"), (["1", "0"], "give all 16"), (["1"] + ["x"] * 16, "x_1")):
+        bad = subprocess.run(["./demo"] + args, cwd=out, capture_output=True, text=True, env=ENV, timeout=60)
+        assert bad.returncode == 2 and named in bad.stderr, (args, bad.stderr)
