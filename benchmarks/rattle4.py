@@ -3,7 +3,8 @@ wall time to reach a tip error of 1e-3 and 1e-6 m after 2 s on the chain of 20 b
 with explicit ``nc.Spherical`` joints (the ``joints`` case of benchmarks/work_precision.py).
 
 Each method's step is searched finely (a geometric scan by factors of 2^(1/8) from a
-prediction of its order) for the largest step whose tip error is within the target; the
+prediction of its order; steps that divide the output interval, or T_END for MuJoCo) for
+the largest step whose tip error is within the target (every step scanned is printed); the
 error is against IDAS at rtol 1e-12 (cross-checked as in work_precision.py).  Then the three
 runs at those steps are timed interleaved (``--repeat`` rounds, rattle, rattle4, MuJoCo in
 turn), and the min and median times and their ratios printed with the CPU model and the
@@ -39,10 +40,11 @@ def mujoco_error(case: Case, reference, dt: float) -> float:
     return _err(case.mujoco("RK4", dt)[1], reference)
 
 
-def search(error, h0: float, order: int, target: float, quantize) -> tuple[float, float]:
-    """``(h, error)``: the largest step of the scan (quantized by ``quantize``) whose error
-    is within ``target``: from the error at ``h0``, the step predicted by ``order``, then
-    scanned up while within the target and down while not."""
+def search(error, h0: float, order: int, target: float, quantize) -> tuple[float, float, dict]:
+    """``(h, error, scanned)``: the largest step of the scan (quantized by ``quantize``) whose
+    error is within ``target``: from the error at ``h0``, the step predicted by ``order``,
+    then scanned up while within the target and down while not; ``scanned``: every step
+    tried and its error."""
     h = quantize(h0)
     e = error(h)
     if np.isfinite(e) and e > 0:
@@ -59,7 +61,7 @@ def search(error, h0: float, order: int, target: float, quantize) -> tuple[float
     while True:                                  # up while within
         up = quantize(h * SCAN)
         if up == h or not at(up) <= target:
-            return h, seen[h]
+            return h, seen[h], seen
         h = up
 
 
@@ -81,8 +83,8 @@ def main(argv=None) -> int:
     def substeps(h):
         return OUTPUT_DT / max(1, round(OUTPUT_DT / h))
 
-    def mj_step(h):
-        return float(f"{h:.3g}")
+    def mj_step(h):                              # a whole number of steps to T_END
+        return T_END / max(1, round(T_END / h))
 
     for target in targets:
         found = {
@@ -95,7 +97,7 @@ def main(argv=None) -> int:
         times = {name: [] for name in found}
         stepping = {name: [] for name in found if name != "mujoco RK4"}
         for _ in range(args.repeat):
-            for name, (h, _) in found.items():
+            for name, (h, *_) in found.items():
                 if name == "mujoco RK4":
                     times[name].append(case.mujoco("RK4", h)[0])
                     continue
@@ -104,13 +106,14 @@ def main(argv=None) -> int:
                 times[name].append(wall)
                 stepping[name].append(traj.info["stepping_time"])
         print(f"\n  target tip error {target:.0e} m (load average {os.getloadavg()[0]:.2f}):")
-        for name, (h, e) in found.items():
+        for name, (h, e, scanned) in found.items():
             t = np.array(times[name])
             line = (f"    {name:<11} step {h:.3e} s  error {e:.2e} m  min {t.min() * 1e3:9.2f} ms  "
                     f"median {np.median(t) * 1e3:9.2f} ms")
             if name in stepping:
                 line += f"  (stepping min {min(stepping[name]) * 1e3:8.2f} ms)"
             print(line)
+            print("      scanned: " + ", ".join(f"{k:.3e} s: {v:.1e} m" for k, v in sorted(scanned.items())))
         mj = np.array(times["mujoco RK4"])
         for name in ("rattle", "rattle4"):
             t = np.array(times[name])
