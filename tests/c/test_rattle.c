@@ -250,6 +250,11 @@ static void test_rattle4_order_estimate(void) {
     CHECK(est > 0.3 * err[k] && est < 3 * err[k], "estimate %g for an error %g", est, err[k]);
   }
   CHECK(err[0] / err[1] > 14 && err[0] / err[1] < 18, "errors %g, %g: not fourth order", err[0], err[1]);
+  /* the error control is RATTLE's: it refuses the scheme; a backward step is internal only */
+  status = simulate_adaptive(q0, v0, 0, 0, 0.1, 1, 0, 0, 0, 0, 1e-6, 1e-6, 0, 1, 100, 0, q, v, 0, 0, &o, 0, 0);
+  CHECK(status == STEP_BAD_INPUT, "adaptive with the triple jump: status %d", status);
+  status = stepper_step(q0, v0, 0, &u, 0, -1e-3, q, v, 0, 0, &o, 0, 0);
+  CHECK(status == STEP_BAD_INPUT, "h < 0: status %d", status);
 }
 
 /* A step too long for Newton within max_iter is split into halves (counted), and fails
