@@ -12,6 +12,10 @@ remedies, both active only in the main thread while SIGINT has Python's default 
 * :func:`deferred_interrupt`: SIGINT only sets a flag that the caller polls where it can
   stop cleanly (IPOPT's iteration callback); leaving the block with the flag set raises
   ``KeyboardInterrupt``.
+
+A long call into our own C loops (ctypes, which releases the GIL) runs in a worker thread
+instead (:func:`call_interruptibly`): Ctrl-C in the waiting main thread sets the loop's stop
+flag, which the loop reads before every step.
 """
 from __future__ import annotations
 
@@ -92,3 +96,42 @@ def deferred_interrupt():
         signal.signal(signal.SIGINT, previous)
     if flag.hit:
         raise KeyboardInterrupt
+
+
+#: Seconds the main thread waits at a time in :func:`call_interruptibly` (the delay before
+#: Ctrl-C is seen).
+WAIT_SLICE = 0.05
+
+
+def call_interruptibly(fn, *args, stop):
+    """``(fn(*args), interrupted)``: ``fn`` (a C loop called through ctypes, which releases
+    the GIL) run in a worker thread while the main thread waits; a ``KeyboardInterrupt``
+    meanwhile sets ``stop.value = 1`` (``stop``: the ``ctypes.c_int`` the loop reads before
+    every step) and the wait goes on until the loop returns.  ``interrupted``: whether that
+    happened (also when the loop had just finished).  Off the main thread, where no
+    ``KeyboardInterrupt`` arrives, a direct call.  Exceptions of ``fn`` are raised here."""
+    if threading.current_thread() is not threading.main_thread():
+        return fn(*args), False
+    result, finished = [], threading.Event()
+
+    def work():
+        try:
+            result.append(fn(*args))
+        except BaseException as e:          # re-raised in the caller's thread
+            result.append(e)
+        finally:
+            finished.set()
+
+    # An Event, not Thread.join: a join interrupted by KeyboardInterrupt may report the
+    # thread ended while it still runs.
+    threading.Thread(target=work, name="ncgen-c-loop", daemon=True).start()
+    interrupted = False
+    while not finished.is_set():
+        try:
+            finished.wait(WAIT_SLICE)
+        except KeyboardInterrupt:
+            stop.value = 1
+            interrupted = True
+    if isinstance(result[0], BaseException):
+        raise result[0]
+    return result[0], interrupted

@@ -22,6 +22,7 @@ pytestmark = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc
     ("work_precision.py", ["=== chain of N = 2 bars", "RATIO ncgen stepper (end to end) / MuJoCo RK4",
                            "reference check", "explicit nc.Spherical joints", "RATIO explicit joints / shared points",
                            "end-to-end / stepping time"]),
+    ("rattle4.py", ["=== chain of N = 2 bars", "RATIO rattle4 / MuJoCo RK4 at 1e-03", "RATIO rattle4 / rattle"]),
     ("kernel.py", ["=== chain of N = 3 bars", "RATIO VM / generated C"]),
     ("kernel.py --looped", ["=== looped vs straight-line C: chain of N = 3 bars", "max |difference| = 0.0e+00",
                             re.compile(r"loops in the looped C: [1-9]"),

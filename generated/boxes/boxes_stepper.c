@@ -25,6 +25,8 @@
 #define STEP_BAD_INPUT BOXES_STEP_BAD_INPUT
 #define STEP_TOO_MANY_STEPS BOXES_STEP_TOO_MANY_STEPS
 #define STEP_TOO_SMALL BOXES_STEP_TOO_SMALL
+#define STEP_INTERRUPTED BOXES_STEP_INTERRUPTED
+#define SCHEME_RATTLE4 BOXES_STEP_RATTLE4
 typedef boxes_step_options step_options;
 #define DEFAULT_OPTIONS boxes_step_default_options
 #define KERNEL_NEWTON boxes_step_newton
@@ -86,6 +88,8 @@ boxes_step_options boxes_step_default_options(void) {
   o.tol = 1e-10;
   o.max_iter = 12;
   o.max_halvings = 4;
+  o.scheme = BOXES_STEP_RATTLE;
+  o.stop = 0;
   return o;
 }
 

@@ -25,6 +25,8 @@
 #define STEP_BAD_INPUT CARTPOLE_STEP_BAD_INPUT
 #define STEP_TOO_MANY_STEPS CARTPOLE_STEP_TOO_MANY_STEPS
 #define STEP_TOO_SMALL CARTPOLE_STEP_TOO_SMALL
+#define STEP_INTERRUPTED CARTPOLE_STEP_INTERRUPTED
+#define SCHEME_RATTLE4 CARTPOLE_STEP_RATTLE4
 typedef cartpole_step_options step_options;
 #define DEFAULT_OPTIONS cartpole_step_default_options
 #define KERNEL_NEWTON cartpole_step_newton
@@ -49,6 +51,8 @@ cartpole_step_options cartpole_step_default_options(void) {
   o.tol = 1e-10;
   o.max_iter = 12;
   o.max_halvings = 4;
+  o.scheme = CARTPOLE_STEP_RATTLE;
+  o.stop = 0;
   return o;
 }
 

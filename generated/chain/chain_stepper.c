@@ -25,6 +25,8 @@
 #define STEP_BAD_INPUT CHAIN_STEP_BAD_INPUT
 #define STEP_TOO_MANY_STEPS CHAIN_STEP_TOO_MANY_STEPS
 #define STEP_TOO_SMALL CHAIN_STEP_TOO_SMALL
+#define STEP_INTERRUPTED CHAIN_STEP_INTERRUPTED
+#define SCHEME_RATTLE4 CHAIN_STEP_RATTLE4
 typedef chain_step_options step_options;
 #define DEFAULT_OPTIONS chain_step_default_options
 #define KERNEL_NEWTON chain_step_newton
@@ -49,6 +51,8 @@ chain_step_options chain_step_default_options(void) {
   o.tol = 1e-10;
   o.max_iter = 12;
   o.max_halvings = 4;
+  o.scheme = CHAIN_STEP_RATTLE;
+  o.stop = 0;
   return o;
 }
 

@@ -25,6 +25,8 @@
 #define STEP_BAD_INPUT DOUBLE_PENDULUM_STEP_BAD_INPUT
 #define STEP_TOO_MANY_STEPS DOUBLE_PENDULUM_STEP_TOO_MANY_STEPS
 #define STEP_TOO_SMALL DOUBLE_PENDULUM_STEP_TOO_SMALL
+#define STEP_INTERRUPTED DOUBLE_PENDULUM_STEP_INTERRUPTED
+#define SCHEME_RATTLE4 DOUBLE_PENDULUM_STEP_RATTLE4
 typedef double_pendulum_step_options step_options;
 #define DEFAULT_OPTIONS double_pendulum_step_default_options
 #define KERNEL_NEWTON double_pendulum_step_newton
@@ -49,6 +51,8 @@ double_pendulum_step_options double_pendulum_step_default_options(void) {
   o.tol = 1e-10;
   o.max_iter = 12;
   o.max_halvings = 4;
+  o.scheme = DOUBLE_PENDULUM_STEP_RATTLE;
+  o.stop = 0;
   return o;
 }
 

@@ -25,6 +25,8 @@
 #define STEP_BAD_INPUT FALLING_CHAIN_STEP_BAD_INPUT
 #define STEP_TOO_MANY_STEPS FALLING_CHAIN_STEP_TOO_MANY_STEPS
 #define STEP_TOO_SMALL FALLING_CHAIN_STEP_TOO_SMALL
+#define STEP_INTERRUPTED FALLING_CHAIN_STEP_INTERRUPTED
+#define SCHEME_RATTLE4 FALLING_CHAIN_STEP_RATTLE4
 typedef falling_chain_step_options step_options;
 #define DEFAULT_OPTIONS falling_chain_step_default_options
 #define KERNEL_NEWTON falling_chain_step_newton
@@ -87,6 +89,8 @@ falling_chain_step_options falling_chain_step_default_options(void) {
   o.tol = 1e-10;
   o.max_iter = 12;
   o.max_halvings = 4;
+  o.scheme = FALLING_CHAIN_STEP_RATTLE;
+  o.stop = 0;
   return o;
 }
 

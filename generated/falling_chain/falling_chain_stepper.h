@@ -57,6 +57,9 @@ extern "C" {
 #define FALLING_CHAIN_STEP_TOO_MANY_STEPS 6  /* adaptive: more than max_steps step attempts in
                                              one output interval */
 #define FALLING_CHAIN_STEP_TOO_SMALL 7       /* adaptive: the step fell below 1e-13 (|t| + dt) */
+#define FALLING_CHAIN_STEP_INTERRUPTED 8     /* the loops: *options->stop was set (another thread or a
+                                             signal handler asked the run to stop); the rows
+                                             before it are written */
 
 /* Columns of a row of stats_out (falling_chain_simulate_stats, falling_chain_simulate_adaptive):
  * steps, Newton iterations, step splits (fixed) or rejected steps (adaptive), local error
@@ -74,12 +77,23 @@ extern "C" {
 /* Deepest step splitting the workspace allows. */
 #define FALLING_CHAIN_STEP_MAX_HALVINGS 10
 
+/* Schemes (options->scheme): RATTLE (order 2), or its symmetric triple-jump composition
+ * (Yoshida, Suzuki: RATTLE steps of h1, -2^(1/3) h1, h1, h1 = h / (2 - 2^(1/3)); order 4,
+ * symplectic, both constraint levels kept; three RATTLE steps per step).  Fixed steps only
+ * (falling_chain_step, falling_chain_simulate, falling_chain_simulate_stats);
+ * with nonsmooth contacts RATTLE only. */
+#define FALLING_CHAIN_STEP_RATTLE 0
+#define FALLING_CHAIN_STEP_RATTLE4 1
+
 /* Newton options; falling_chain_step_default_options() gives tol = 1e-10, max_iter = 12,
- * max_halvings = 4. */
+ * max_halvings = 4, scheme = FALLING_CHAIN_STEP_RATTLE, stop = NULL. */
 typedef struct {
   casadi_real tol;  /* tolerance of the convergence tests above */
   int max_iter;     /* Newton iterations allowed per step (>= 1) */
   int max_halvings; /* times a failing step may be halved (0 .. FALLING_CHAIN_STEP_MAX_HALVINGS) */
+  int scheme;       /* FALLING_CHAIN_STEP_RATTLE or FALLING_CHAIN_STEP_RATTLE4 (above) */
+  volatile int *stop; /* NULL, or a flag the loops read before every step: nonzero stops the
+                         run with FALLING_CHAIN_STEP_INTERRUPTED */
 } falling_chain_step_options;
 
 falling_chain_step_options falling_chain_step_default_options(void);

@@ -25,6 +25,8 @@
 #define STEP_BAD_INPUT FOURBAR_PLANAR_STEP_BAD_INPUT
 #define STEP_TOO_MANY_STEPS FOURBAR_PLANAR_STEP_TOO_MANY_STEPS
 #define STEP_TOO_SMALL FOURBAR_PLANAR_STEP_TOO_SMALL
+#define STEP_INTERRUPTED FOURBAR_PLANAR_STEP_INTERRUPTED
+#define SCHEME_RATTLE4 FOURBAR_PLANAR_STEP_RATTLE4
 typedef fourbar_planar_step_options step_options;
 #define DEFAULT_OPTIONS fourbar_planar_step_default_options
 #define KERNEL_NEWTON fourbar_planar_step_newton
@@ -49,6 +51,8 @@ fourbar_planar_step_options fourbar_planar_step_default_options(void) {
   o.tol = 1e-10;
   o.max_iter = 12;
   o.max_halvings = 4;
+  o.scheme = FOURBAR_PLANAR_STEP_RATTLE;
+  o.stop = 0;
   return o;
 }
 

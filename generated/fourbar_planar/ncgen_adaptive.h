@@ -7,16 +7,6 @@
  * model's glue as <model>_simulate_adaptive, documented in <model>_stepper.h).  Plain C99,
  * model-independent; included after ncgen_fixed.h. */
 
-/* Newton start for a step of size h_new from rates v, after a step of size h_old that ended
- * with [w; h_old/2 lambda] in x and [v+; h_old/2 mu] in dx: w' = v + h_new/h_old (v+ - w)
- * (v+ - w = h_old/2 a), h_new/2 lambda' = h_new/h_old (h_old/2 mu). */
-static void predict_scaled(casadi_real *x_new, const casadi_real *x, const casadi_real *dx, const casadi_real *v,
-                           casadi_real ratio) {
-  int i;
-  for (i = 0; i < NQ; ++i) x_new[i] = v[i] + ratio * (dx[i] - x[i]);
-  for (i = NQ; i < NX; ++i) x_new[i] = ratio * dx[i];
-}
-
 /* The tangent part of fine - big at the end t of a step: d = fine - big (its q part, then
  * its v part), each less its component normal to the constraints at (t, q_fine) in the mass
  * metric, K^-1 [0; A d] (the projection of project(), with A d from KERNEL_PROJECT's
@@ -95,7 +85,8 @@ static int simulate_adaptive(const casadi_real *q0, const casadi_real *v0, const
   single = *options_or_default(options, &defaults);
   single.max_halvings = 0;
   if (rows_done) *rows_done = 0;
-  if (!(dt > 0) || n_out < 0 || !(rtol > 0) || !(atol > 0) || max_steps < 1 || !isfinite(t0 + dt * n_out))
+  if (!(dt > 0) || n_out < 0 || !(rtol > 0) || !(atol > 0) || max_steps < 1 || !isfinite(t0 + dt * n_out) ||
+      single.scheme != 0) /* the error control is RATTLE's */
     return STEP_BAD_INPUT;
   block = malloc(step_work_bytes() + (10 * NQ + 3 * NC + 3 * NX + NU + 1) * sizeof(casadi_real));
   if (!block) return STEP_BAD_INPUT;
@@ -123,6 +114,10 @@ static int simulate_adaptive(const casadi_real *q0, const casadi_real *v0, const
       const casadi_real *uk = u_row;
       int land = 0, iters = 0;
       long unused = 0;
+      if (stop_requested(&single)) {
+        status = STEP_INTERRUPTED;
+        goto done;
+      }
       if (++attempts > max_steps) {
         status = STEP_TOO_MANY_STEPS;
         goto done;

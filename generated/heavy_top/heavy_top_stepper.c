@@ -25,6 +25,8 @@
 #define STEP_BAD_INPUT HEAVY_TOP_STEP_BAD_INPUT
 #define STEP_TOO_MANY_STEPS HEAVY_TOP_STEP_TOO_MANY_STEPS
 #define STEP_TOO_SMALL HEAVY_TOP_STEP_TOO_SMALL
+#define STEP_INTERRUPTED HEAVY_TOP_STEP_INTERRUPTED
+#define SCHEME_RATTLE4 HEAVY_TOP_STEP_RATTLE4
 typedef heavy_top_step_options step_options;
 #define DEFAULT_OPTIONS heavy_top_step_default_options
 #define KERNEL_NEWTON heavy_top_step_newton
@@ -49,6 +51,8 @@ heavy_top_step_options heavy_top_step_default_options(void) {
   o.tol = 1e-10;
   o.max_iter = 12;
   o.max_halvings = 4;
+  o.scheme = HEAVY_TOP_STEP_RATTLE;
+  o.stop = 0;
   return o;
 }
 

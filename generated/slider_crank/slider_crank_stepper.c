@@ -25,6 +25,8 @@
 #define STEP_BAD_INPUT SLIDER_CRANK_STEP_BAD_INPUT
 #define STEP_TOO_MANY_STEPS SLIDER_CRANK_STEP_TOO_MANY_STEPS
 #define STEP_TOO_SMALL SLIDER_CRANK_STEP_TOO_SMALL
+#define STEP_INTERRUPTED SLIDER_CRANK_STEP_INTERRUPTED
+#define SCHEME_RATTLE4 SLIDER_CRANK_STEP_RATTLE4
 typedef slider_crank_step_options step_options;
 #define DEFAULT_OPTIONS slider_crank_step_default_options
 #define KERNEL_NEWTON slider_crank_step_newton
@@ -49,6 +51,8 @@ slider_crank_step_options slider_crank_step_default_options(void) {
   o.tol = 1e-10;
   o.max_iter = 12;
   o.max_halvings = 4;
+  o.scheme = SLIDER_CRANK_STEP_RATTLE;
+  o.stop = 0;
   return o;
 }
 

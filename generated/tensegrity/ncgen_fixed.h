@@ -9,11 +9,46 @@
  * values per sample of KERNEL_OUTPUTS.  The model's stepper glue wraps these functions as
  * <model>_step, <model>_simulate, <model>_simulate_stats and <model>_outputs. */
 
+/* The fourth-order triple jump (Yoshida 1990, Suzuki 1990): RATTLE steps of h1, h2, h1 with
+ * h1 = h / (2 - 2^(1/3)), h2 = -2^(1/3) h1 (a backward step).  RATTLE is symmetric, so the
+ * symmetric composition is of order 4; it stays symplectic and on both constraint levels.
+ * Each step is warm-started from the one before (predict_scaled()); ws->x, ws->dx end as
+ * after the last step (of h1), so predict() warm-starts the next composed step. */
+static int step_rattle4(const casadi_real *q, const casadi_real *v, casadi_real t, const casadi_real *u,
+                        const casadi_real *p, casadi_real h, casadi_real *q_next, casadi_real *v_next,
+                        casadi_real *lam, int *iterations, const step_options *o, int warm, workspace *ws) {
+  const casadi_real cbrt2 = 1.25992104989487316476721060727822835;
+  casadi_real h1 = h / (2 - cbrt2), h2 = -cbrt2 * h1;
+  casadi_real *qa = ws->sub, *va = qa + NQ, *qb = va + NQ, *vb = qb + NQ;
+  int it = 0, sum = 0, status = step(q, v, t, u, p, h1, qa, va, 0, &it, o, warm, ws);
+  sum += it;
+  if (status == STEP_OK) {
+    predict_scaled(ws->x, ws->x, ws->dx, va, h2 / h1);
+    status = step(qa, va, t + h1, u, p, h2, qb, vb, 0, &it, o, 1, ws);
+    sum += it;
+  }
+  if (status == STEP_OK) {
+    predict_scaled(ws->x, ws->x, ws->dx, vb, h1 / h2);
+    status = step(qb, vb, t + h1 + h2, u, p, h1, q_next, v_next, lam, &it, o, 1, ws);
+    sum += it;
+  }
+  if (iterations) *iterations = sum;
+  return status;
+}
+
+/* One step of the scheme o->scheme (RATTLE, or SCHEME_RATTLE4: step_rattle4()). */
+static int scheme_step(const casadi_real *q, const casadi_real *v, casadi_real t, const casadi_real *u,
+                       const casadi_real *p, casadi_real h, casadi_real *q_next, casadi_real *v_next,
+                       casadi_real *lam, int *iterations, const step_options *o, int warm, workspace *ws) {
+  if (o->scheme == SCHEME_RATTLE4) return step_rattle4(q, v, t, u, p, h, q_next, v_next, lam, iterations, o, warm, ws);
+  return step(q, v, t, u, p, h, q_next, v_next, lam, iterations, o, warm, ws);
+}
+
 /* One attempt at a step: with contacts, the contact step around the RATTLE step. */
 #ifdef NCGEN_CONTACTS
 #define STEP_ATTEMPT contact_step
 #else
-#define STEP_ATTEMPT step
+#define STEP_ATTEMPT scheme_step
 #endif
 
 /* step(), retried from the cold start if a warm start fails, then split into two steps of
@@ -24,7 +59,9 @@ static int step_split(const casadi_real *q, const casadi_real *v, casadi_real t,
                       casadi_real *lam, int *iterations, long *splits, const step_options *o,
                       int warm, workspace *ws, int depth) {
   casadi_real *q_mid = ws->mid + 2 * NQ * depth, *v_mid = q_mid + NQ;
-  int it, status = STEP_ATTEMPT(q, v, t, u, p, h, q_next, v_next, lam, &it, o, warm, ws);
+  int it, status;
+  if (!(h > 0)) return STEP_BAD_INPUT;
+  status = STEP_ATTEMPT(q, v, t, u, p, h, q_next, v_next, lam, &it, o, warm, ws);
   *iterations += it;
   if (status != STEP_OK && warm && recoverable(status)) {
     status = STEP_ATTEMPT(q, v, t, u, p, h, q_next, v_next, lam, &it, o, 0, ws);
@@ -85,7 +122,8 @@ static void put_stats(casadi_real *row, long steps, long iterations, long splits
 
 /* Fixed steps (see <model>_simulate_stats; impulse_out: contacts only).  With `estimate`, a shadow run with steps of
  * 2h from the same start (one every second step) gives the global error estimate
- * (y_h - y_2h) / 3 of RATTLE's order 2 after every even step. */
+ * (y_h - y_2h) / (2^p - 1) after every even step, p the order of the scheme (RATTLE 2, its
+ * triple jump 4). */
 static int run_fixed(const casadi_real *q0, const casadi_real *v0, const casadi_real *lam0, casadi_real t0,
                      casadi_real h, long n_steps, long every, const casadi_real *u, long u_stride,
                      const casadi_real *p, casadi_real *q_out, casadi_real *v_out, casadi_real *lam_out,
@@ -95,7 +133,7 @@ static int run_fixed(const casadi_real *q0, const casadi_real *v0, const casadi_
   workspace ws;
   char *block;
   casadi_real *state, *q, *v, *q1, *v1, *lam, *swap, *q_s, *v_s, *q2, *v2, *x_save, *dx_save, *x_s, *dx_s, *u_bar;
-  casadi_real work = 0, p_old = 0, p_new, err_q = -1, err_v = -1;
+  casadi_real work = 0, p_old = 0, p_new, err_q = -1, err_v = -1, richardson = o->scheme == SCHEME_RATTLE4 ? 15 : 3;
   long k = 0, i, row = 0, iter_sum = 0, n_splits = 0, row_splits = 0;
 #ifdef NCGEN_CONTACTS
   int status = STEP_OK, iters, shadow = 0; /* contacts: no shadow run (its steps would miss them) */
@@ -135,6 +173,10 @@ static int run_fixed(const casadi_real *q0, const casadi_real *v0, const casadi_
   for (k = 0; k < n_steps; ++k) {
     const casadi_real *uk = u ? u + k * u_stride : 0;
     casadi_real tk = t0 + k * h;
+    if (stop_requested(o)) {
+      status = STEP_INTERRUPTED;
+      break;
+    }
     /* Work: trapezoidal rule over the step, both ends with the step's inputs. */
     if (track_work && (status = power(&ws, tk, q, v, lam, uk, p, &p_old)) != STEP_OK) break;
     iters = 0;
@@ -155,8 +197,8 @@ static int run_fixed(const casadi_real *q0, const casadi_real *v0, const casadi_
         for (i = 0; i < NQ; ++i) ws.x[i] = 2 * dx_s[i] - x_s[i];
         for (i = NQ; i < NX; ++i) ws.x[i] = dx_s[i];
       }
-      ok = step(q_s, v_s, tk - h, u2, p, 2 * h, q2, v2, 0, &iters2, o, shadow == 2, &ws) == STEP_OK ||
-           (shadow == 2 && step(q_s, v_s, tk - h, u2, p, 2 * h, q2, v2, 0, &iters2, o, 0, &ws) == STEP_OK);
+      ok = scheme_step(q_s, v_s, tk - h, u2, p, 2 * h, q2, v2, 0, &iters2, o, shadow == 2, &ws) == STEP_OK ||
+           (shadow == 2 && scheme_step(q_s, v_s, tk - h, u2, p, 2 * h, q2, v2, 0, &iters2, o, 0, &ws) == STEP_OK);
       if (ok) {
         memcpy(x_s, ws.x, NX * sizeof *x_s);
         memcpy(dx_s, ws.dx, NX * sizeof *dx_s);
@@ -165,7 +207,7 @@ static int run_fixed(const casadi_real *q0, const casadi_real *v0, const casadi_
         shadow = 2;
         err_q = err_v = 0;
         for (i = 0; i < NQ; ++i) {
-          casadi_real dq = fabs(q1[i] - q2[i]) / 3, dv = fabs(v1[i] - v2[i]) / 3;
+          casadi_real dq = fabs(q1[i] - q2[i]) / richardson, dv = fabs(v1[i] - v2[i]) / richardson;
           err_q = nan_max(err_q, dq);
           err_v = nan_max(err_v, dv);
         }

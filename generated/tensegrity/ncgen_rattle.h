@@ -16,8 +16,11 @@
  *   MASS_SCALE                 max |M_ij| (kg), the scale of the momentum residual
  *   MAX_HALVINGS               deepest step splitting the workspace allows
  *   NSTATS                     columns of a row of statistics (ncgen_fixed.h)
- *   STEP_OK .. STEP_TOO_SMALL  the status codes 0 .. 7 of <model>_stepper.h
- *   step_options               a struct with casadi_real tol, int max_iter, int max_halvings
+ *   STEP_OK .. STEP_INTERRUPTED  the status codes 0 .. 8 of <model>_stepper.h
+ *   step_options               a struct with casadi_real tol, int max_iter, int max_halvings,
+ *                              int scheme, volatile int *stop
+ *   SCHEME_RATTLE4             the value of scheme that selects the triple-jump
+ *                              composition (ncgen_fixed.h; 0: RATTLE)
  *   DEFAULT_OPTIONS()          an expression giving the default step_options
  *   KERNEL_NEWTON, KERNEL_VELOCITY, KERNEL_CHECK, KERNEL_SOLVE, KERNEL_PROJECT, KERNEL_POWER,
  *   KERNEL_OUTPUTS             the generated kernels (CasADi's calling convention
@@ -52,6 +55,7 @@ typedef struct {
   casadi_real *K;   /* KKT matrix nonzeros */
   casadi_real *chk; /* max |Phi|, max |A v + Phi_t|, power P */
   casadi_real *mid; /* states at the middle of split steps: [q; v] per splitting depth */
+  casadi_real *sub; /* the two intermediate states [q; v] of a composed step */
   casadi_real *w;   /* kernel work */
   casadi_int *iw;
 #ifdef NCGEN_CONTACTS
@@ -130,7 +134,7 @@ static size_t layout(workspace *ws, char *block) {
   sizes[6] = 3 * sizeof(casadi_real);
   sizes[7] = (size_t) sz_w * sizeof(casadi_real);
   sizes[8] = (size_t) sz_iw * sizeof(casadi_int);
-  sizes[9] = 2 * NQ * MAX_HALVINGS * sizeof(casadi_real);
+  sizes[9] = (2 * NQ * MAX_HALVINGS + 4 * NQ) * sizeof(casadi_real);
 #ifdef NCGEN_CONTACTS
   sizes[10] = 2 * NQ * sizeof(casadi_real);
   sizes[11] = NK * sizeof(casadi_real);
@@ -166,6 +170,7 @@ static size_t layout(workspace *ws, char *block) {
     ws->w = (casadi_real *) (void *) (block + off[7]);
     ws->iw = (casadi_int *) (void *) (block + off[8]);
     ws->mid = (casadi_real *) (void *) (block + off[9]);
+    ws->sub = ws->mid + 2 * NQ * MAX_HALVINGS;
 #ifdef NCGEN_CONTACTS
     ws->j = (casadi_real *) (void *) (block + off[10]);
     ws->j0 = ws->j + NQ;
@@ -233,8 +238,9 @@ static int solve(workspace *ws, const casadi_real *K, const casadi_real *r, casa
   return KERNEL_SOLVE(ws->arg, ws->res, ws->iw, ws->w, 0);
 }
 
-/* The step on a laid-out workspace (see <model>_step).  Newton starts from ws->x if
- * `warm`, else from [v; 0].  On success ws->x holds [w; h/2 lambda], ws->dx [v+; h/2 mu]. */
+/* The step on a laid-out workspace (see <model>_step; h may be negative here, a backward
+ * step of a composition).  Newton starts from ws->x if `warm`, else from [v; 0].  On
+ * success ws->x holds [w; h/2 lambda], ws->dx [v+; h/2 mu]. */
 static int step(const casadi_real *q, const casadi_real *v, casadi_real t, const casadi_real *u,
                 const casadi_real *p, casadi_real h, casadi_real *q_next, casadi_real *v_next,
                 casadi_real *lam, int *iterations, const step_options *o, int warm,
@@ -242,9 +248,12 @@ static int step(const casadi_real *q, const casadi_real *v, casadi_real t, const
   casadi_real t1 = t + h, tol = o->tol;
   int i, it;
   if (iterations) *iterations = 0;
-  if (!(h > 0) || !isfinite(t1) || !(tol > 0) || o->max_iter < 1 || o->max_halvings < 0 ||
-      o->max_halvings > MAX_HALVINGS)
+  if (!(h != 0) || !isfinite(t1) || !(tol > 0) || o->max_iter < 1 || o->max_halvings < 0 ||
+      o->max_halvings > MAX_HALVINGS || o->scheme < 0 || o->scheme > SCHEME_RATTLE4)
     return STEP_BAD_INPUT;
+#ifdef NCGEN_CONTACTS
+  if (o->scheme != 0) return STEP_BAD_INPUT; /* contacts keep their own scheme */
+#endif
 
   /* First half-step: Newton on x = [w; h/2 lambda]. */
   if (!warm) {
@@ -267,7 +276,7 @@ static int step(const casadi_real *q, const casadi_real *v, casadi_real t, const
     ws->res[1] = ws->K;
     if (KERNEL_NEWTON(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
     {
-      casadi_real e_mom = norm_inf(ws->r, NQ), e_pos = h * norm_inf(ws->r + NQ, NC);
+      casadi_real e_mom = norm_inf(ws->r, NQ), e_pos = fabs(h) * norm_inf(ws->r + NQ, NC);
       if (!isfinite(e_mom) || !isfinite(e_pos)) return STEP_NOT_FINITE;
       if (e_pos <= tol && e_mom <= tol * MASS_SCALE * (1 + norm_inf(ws->x, NQ))) break;
     }
@@ -320,6 +329,22 @@ static void predict(workspace *ws) {
   int i;
   for (i = 0; i < NQ; ++i) ws->x[i] = 2 * ws->dx[i] - ws->x[i];
   for (i = NQ; i < NX; ++i) ws->x[i] = ws->dx[i];
+}
+
+/* Whether the caller asked the run to stop (o->stop set and nonzero): read by the loops
+ * before every step. */
+static int stop_requested(const step_options *o) {
+  return o->stop && *o->stop;
+}
+
+/* Newton start for a step of size h_new from rates v, after a step of size h_old that ended
+ * with [w; h_old/2 lambda] in x and [v+; h_old/2 mu] in dx: w' = v + h_new/h_old (v+ - w)
+ * (v+ - w = h_old/2 a), h_new/2 lambda' = h_new/h_old (h_old/2 mu).  x_new may be x. */
+static void predict_scaled(casadi_real *x_new, const casadi_real *x, const casadi_real *dx, const casadi_real *v,
+                           casadi_real ratio) {
+  int i;
+  for (i = 0; i < NQ; ++i) x_new[i] = v[i] + ratio * (dx[i] - x[i]);
+  for (i = NQ; i < NX; ++i) x_new[i] = ratio * dx[i];
 }
 
 static int recoverable(int status) {

@@ -25,6 +25,8 @@
 #define STEP_BAD_INPUT TENSEGRITY_STEP_BAD_INPUT
 #define STEP_TOO_MANY_STEPS TENSEGRITY_STEP_TOO_MANY_STEPS
 #define STEP_TOO_SMALL TENSEGRITY_STEP_TOO_SMALL
+#define STEP_INTERRUPTED TENSEGRITY_STEP_INTERRUPTED
+#define SCHEME_RATTLE4 TENSEGRITY_STEP_RATTLE4
 typedef tensegrity_step_options step_options;
 #define DEFAULT_OPTIONS tensegrity_step_default_options
 #define KERNEL_NEWTON tensegrity_step_newton
@@ -49,6 +51,8 @@ tensegrity_step_options tensegrity_step_default_options(void) {
   o.tol = 1e-10;
   o.max_iter = 12;
   o.max_halvings = 4;
+  o.scheme = TENSEGRITY_STEP_RATTLE;
+  o.stop = 0;
   return o;
 }
 

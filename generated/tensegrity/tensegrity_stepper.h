@@ -57,6 +57,9 @@ extern "C" {
 #define TENSEGRITY_STEP_TOO_MANY_STEPS 6  /* adaptive: more than max_steps step attempts in
                                              one output interval */
 #define TENSEGRITY_STEP_TOO_SMALL 7       /* adaptive: the step fell below 1e-13 (|t| + dt) */
+#define TENSEGRITY_STEP_INTERRUPTED 8     /* the loops: *options->stop was set (another thread or a
+                                             signal handler asked the run to stop); the rows
+                                             before it are written */
 
 /* Columns of a row of stats_out (tensegrity_simulate_stats, tensegrity_simulate_adaptive):
  * steps, Newton iterations, step splits (fixed) or rejected steps (adaptive), local error
@@ -70,12 +73,22 @@ extern "C" {
 /* Deepest step splitting the workspace allows. */
 #define TENSEGRITY_STEP_MAX_HALVINGS 10
 
+/* Schemes (options->scheme): RATTLE (order 2), or its symmetric triple-jump composition
+ * (Yoshida, Suzuki: RATTLE steps of h1, -2^(1/3) h1, h1, h1 = h / (2 - 2^(1/3)); order 4,
+ * symplectic, both constraint levels kept; three RATTLE steps per step).  Fixed steps only
+ * (tensegrity_step, tensegrity_simulate, tensegrity_simulate_stats). */
+#define TENSEGRITY_STEP_RATTLE 0
+#define TENSEGRITY_STEP_RATTLE4 1
+
 /* Newton options; tensegrity_step_default_options() gives tol = 1e-10, max_iter = 12,
- * max_halvings = 4. */
+ * max_halvings = 4, scheme = TENSEGRITY_STEP_RATTLE, stop = NULL. */
 typedef struct {
   casadi_real tol;  /* tolerance of the convergence tests above */
   int max_iter;     /* Newton iterations allowed per step (>= 1) */
   int max_halvings; /* times a failing step may be halved (0 .. TENSEGRITY_STEP_MAX_HALVINGS) */
+  int scheme;       /* TENSEGRITY_STEP_RATTLE or TENSEGRITY_STEP_RATTLE4 (above) */
+  volatile int *stop; /* NULL, or a flag the loops read before every step: nonzero stops the
+                         run with TENSEGRITY_STEP_INTERRUPTED */
 } tensegrity_step_options;
 
 tensegrity_step_options tensegrity_step_default_options(void);

@@ -37,7 +37,10 @@ STATUS = {
        "rejecting steps: a singular or very stiff motion, or a tolerance below round-off)",
     7: "the error-controlled step fell below 1e-13 (|t| + dt): the motion is singular there or "
        "the tolerance is below round-off",
+    8: "interrupted (Ctrl-C)",
 }
+#: Status of a loop stopped through ``options->stop`` (``<MODEL>_STEP_INTERRUPTED``).
+STEP_INTERRUPTED = 8
 #: Columns of the per-output-row statistics of the C loops (``<MODEL>_STEP_NSTATS``).
 STATS = ("steps", "newton_iterations", "splits", "error_q", "error_v", "work")
 #: Columns the nonsmooth contact stepper appends to :data:`STATS` (fixed steps): contact

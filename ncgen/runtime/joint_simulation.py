@@ -29,7 +29,8 @@ import time
 import casadi as ca
 import numpy as np
 
-from ncgen.errors import CompilerNotFound, ModelError, NcgenError, SimulationError
+from ncgen.errors import CompilerNotFound, ModelError, NcgenError, SimulationError, SimulationInterrupted
+from ncgen.interrupts import call_interruptibly
 from ncgen.runtime.progress import Progress
 from ncgen.runtime.trajectory import Trajectory
 
@@ -41,6 +42,8 @@ _STATUS = {1: "the joint-space mass matrix is singular or the accelerations are 
               "a stiff joint limit or friction law; raise max_steps, loosen rtol, or use method='idas')",
            3: "the step size fell to round-off (a discontinuity or a stiff law)",
            4: "out of memory"}
+#: Status of a loop stopped by Ctrl-C.
+INTERRUPTED = 5
 
 
 
@@ -85,7 +88,7 @@ class JointLoop:
         D = ctypes.POINTER(ctypes.c_double)
         fn.argtypes = [ctypes.c_int, ctypes.c_int, D, D, D, D, D, ctypes.c_int, ctypes.POINTER(ctypes.c_int),
                        ctypes.c_double, ctypes.c_double, ctypes.c_int, ctypes.c_long, ctypes.c_int, D,
-                       ctypes.POINTER(ctypes.c_int)]
+                       ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_int)]
         fn.restype = ctypes.c_int
         self._fn = fn
         self.quat = np.array(quaternion_offsets(model.joint_space), dtype=np.int32)
@@ -102,15 +105,18 @@ class JointLoop:
 
     def run(self, method: int, t: np.ndarray, X: np.ndarray, W: np.ndarray, S, p: np.ndarray, rtol: float,
             atol: float, substeps: int, max_steps: int, stop: bool, stats: np.ndarray) -> tuple[int, int]:
-        """Integrate over the grid ``t`` (``X[0]`` given, the rest written); ``(status, k_done)``."""
+        """Integrate over the grid ``t`` (``X[0]`` given, the rest written); ``(status, k_done)``,
+        status :data:`INTERRUPTED` after Ctrl-C (:func:`~ncgen.interrupts.call_interruptibly`)."""
         D = ctypes.POINTER(ctypes.c_double)
         done = ctypes.c_int(0)
         ptr = (lambda a: None if a is None or a.size == 0 else a.ctypes.data_as(D))
-        status = self._fn(int(method), len(t) - 1, ptr(t), ptr(X), ptr(W), ptr(S), ptr(p), len(self.quat),
-                          self.quat.ctypes.data_as(ctypes.POINTER(ctypes.c_int)) if len(self.quat) else None,
-                          float(rtol), float(atol), int(substeps), int(max_steps), int(stop), ptr(stats),
-                          ctypes.byref(done))
-        return int(status), int(done.value)
+        flag = ctypes.c_int(0)
+        status, interrupted = call_interruptibly(
+            self._fn, int(method), len(t) - 1, ptr(t), ptr(X), ptr(W), ptr(S), ptr(p), len(self.quat),
+            self.quat.ctypes.data_as(ctypes.POINTER(ctypes.c_int)) if len(self.quat) else None, float(rtol),
+            float(atol), int(substeps), int(max_steps), int(stop), ptr(stats), ctypes.byref(done),
+            ctypes.byref(flag), stop=flag)
+        return INTERRUPTED if interrupted else int(status), int(done.value)
 
 
 def dynamics_function(model) -> ca.Function:
@@ -210,6 +216,8 @@ def simulate_joint(model, t: np.ndarray, U: np.ndarray, hold: str, p: np.ndarray
                                     substeps, max_steps, varying, stats)
             k += done
             bar.update(float(t[k]))
+    except KeyboardInterrupt:             # between chunks (in a feedback u(t, q, v))
+        status = INTERRUPTED
     finally:
         bar.close()
     steps = {"rtol": rtol, "atol": atol} if integrator == "dopri5" else \
@@ -220,6 +228,10 @@ def simulate_joint(model, t: np.ndarray, U: np.ndarray, hold: str, p: np.ndarray
             "stats": {"nsteps": int(stats[0]), "rejected_steps": int(stats[1]), "evaluations": int(stats[2])},
             "build_time": build_time, "wall_time": time.perf_counter() - start, "complete": status == 0}
     traj = _trajectory(model, loop, t[:k + 1], X[:k + 1], W[:k + 1], p, info)
+    if status == INTERRUPTED:
+        message = f"joint-space simulation of {model.name!r} interrupted (Ctrl-C) at t = {t[k]:.6g} s"
+        traj.info["message"] = message
+        raise SimulationInterrupted(message, time=float(t[k]), trajectory=traj)
     if status:
         what = _STATUS.get(status, f"status {status}")
         message = (f"joint-space simulation of {model.name!r} failed between t = {t[k]:.6g} s and the next output "

@@ -29,6 +29,8 @@ from ncgen.runtime.inputs import HOLDS
 
 METHODS = ("auto", "joint", "idas", "stepper")
 INTEGRATORS = ("dopri5", "rk4")
+#: Fixed-step schemes of the stepper: RATTLE (order 2) and its triple-jump composition (order 4).
+SCHEMES = ("rattle", "rattle4")
 PROJECTS = (True, False, "auto")
 
 
@@ -65,7 +67,9 @@ class SimulationOptions:
     Stepper only: ``substeps`` (fixed steps per output interval), ``newton_tol`` (Newton
     tolerance on both constraint levels), ``max_newton`` (Newton iterations per step),
     ``max_halvings`` (splits of a step whose Newton fails, 0 to 10), ``order`` (2 or 4, error
-    control), ``check`` (make an untrustworthy run an error), ``estimate`` (the shadow run
+    control), ``scheme`` (fixed steps: ``"rattle"``, default, order 2, or ``"rattle4"``, the
+    symmetric triple-jump composition of RATTLE steps: order 4, symplectic, both constraint
+    levels kept, three RATTLE steps per step; not with nonsmooth contacts), ``check`` (make an untrustworthy run an error), ``estimate`` (the shadow run
     of the global error estimate).
     """
 
@@ -84,6 +88,7 @@ class SimulationOptions:
     max_newton: int = MAX_ITER
     max_halvings: int = MAX_HALVINGS
     order: int = 4
+    scheme: str = "rattle"
     check: bool = True
     estimate: bool = True
     integrator: str | None = None
@@ -131,6 +136,9 @@ class SimulationOptions:
             raise NcgenError(f"max_halvings: expected 0 to {HALVINGS_LIMIT} step halvings, got {self.max_halvings!r}")
         if self.order not in (2, 4) or isinstance(self.order, bool):
             raise NcgenError(f"order: expected 2 (RATTLE) or 4 (Richardson-extrapolated RATTLE), got {self.order!r}")
+        if not isinstance(self.scheme, str) or self.scheme not in SCHEMES:
+            raise NcgenError(f"scheme: expected one of {', '.join(SCHEMES)} (the stepper's fixed-step scheme), "
+                             f"got {self.scheme!r}")
         if self.integrator is not None and self.integrator not in INTEGRATORS:
             raise NcgenError(f"integrator: expected one of {', '.join(INTEGRATORS)} (method='joint'), "
                              f"got {self.integrator!r}")

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ncgen.codegen.stepper_package import MAX_ITER as STEPPER_MAX_ITER, STATUS
+from ncgen.codegen.stepper_package import MAX_ITER as STEPPER_MAX_ITER, STATUS, STEP_INTERRUPTED
 from ncgen.assembly.manifold import RANK_TOL
 from ncgen.runtime.stepper import MAX_STEPS, newton_tolerance
 
@@ -50,12 +50,14 @@ def compiled_interval(stepper, x: np.ndarray, lam: np.ndarray, t0: float, dt: fl
     (:class:`~ncgen.runtime.stepper_library.CompiledStepper`) with tolerances ``rtol``,
     ``atol``; ``U``: the inputs at ``t0`` and ``t0 + dt`` (rows), held or interpolated
     (``hold_linear``); ``h0``: first step to try (0: the stepper's choice), ``h_next`` the
-    step it would take next.  Raises :class:`RattleFailure`."""
+    step it would take next.  Raises :class:`RattleFailure`, or KeyboardInterrupt on Ctrl-C."""
     nq = len(x) // 2
     tol = newton_tolerance(rtol, atol)
     Q, V, _, _, status, rows, h_next = stepper.simulate_adaptive(
         x[:nq], x[nq:], lam, t0, dt, 1, U, hold_linear, p, rtol, atol, h0, True, MAX_STEPS, False, tol,
         STEPPER_MAX_ITER)
+    if status == STEP_INTERRUPTED:
+        raise KeyboardInterrupt
     if status != 0 or rows != 1:
         raise RattleFailure(f"the compiled stepper failed on [{t0:.6g}, {t0 + dt:.6g}] s: "
                             f"{STATUS.get(status, f'status {status}')}")

@@ -12,10 +12,13 @@ Two modes:
 
 * **Fixed steps** (``rtol=None``): ``substeps`` steps of ``h = dt / substeps`` per output
   interval; a step whose Newton iteration fails is split into halves (at most
-  ``max_halvings`` times, recursively), so the output grid stays fixed.  A shadow run with
-  steps of ``2h`` from the same start gives the global error estimate ``|y_h − y_2h| / 3``
-  (Richardson; ``info["error_estimate"]``, about half the work again; ``estimate=False``
-  skips it).  The run is checked (see :mod:`ncgen.runtime.stepper_checks`) and an
+  ``max_halvings`` times, recursively), so the output grid stays fixed.  The step is
+  RATTLE's (order 2), or with ``scheme="rattle4"`` the symmetric triple jump of RATTLE
+  steps ``h1, −2^(1/3) h1, h1`` with ``h1 = h / (2 − 2^(1/3))`` (Yoshida, Suzuki; order 4,
+  symplectic, on both constraint levels; three RATTLE steps each).  A shadow run with
+  steps of ``2h`` from the same start gives the global error estimate
+  ``|y_h − y_2h| / (2^p − 1)``, ``p`` the order (Richardson; ``info["error_estimate"]``,
+  about half the work again; ``estimate=False`` skips it).  The run is checked (see :mod:`ncgen.runtime.stepper_checks`) and an
   untrustworthy one raises :class:`~ncgen.errors.SimulationError`.
 * **Error control** (``rtol`` given): each step is taken whole and as two halves, the
   difference estimates the local error (Richardson; where the whole difference fails the
@@ -40,8 +43,8 @@ import time
 
 import numpy as np
 
-from ncgen.codegen.stepper_package import STATS, STATUS, TOL
-from ncgen.errors import NcgenError, SimulationError, option
+from ncgen.codegen.stepper_package import STATS, STATUS, STEP_INTERRUPTED, TOL
+from ncgen.errors import NcgenError, SimulationError, SimulationInterrupted, option
 from ncgen.progress import Ticker
 from ncgen.runtime.energy_balance import balance_parts
 from ncgen.runtime.options import SimulationOptions
@@ -78,6 +81,13 @@ def simulate_stepper(model, t: np.ndarray, U: np.ndarray, p: np.ndarray, q0: np.
         raise NcgenError(f"rtol: model {model.name!r} has nonsmooth contacts, whose impacts the error control "
                          f"cannot follow; use fixed steps ({option('substeps=N', '--substeps N')}) or "
                          + option("build it with contacts='smooth'", "--contacts smooth"))
+    if opts.scheme == "rattle4" and stepper.nd:
+        raise NcgenError(f"scheme: 'rattle4' needs a smooth model; {model.name!r} has nonsmooth contacts, which "
+                         f"keep their own scheme (first order at impacts): use scheme='rattle' or build it with "
+                         f"contacts='smooth'")
+    if opts.scheme == "rattle4" and opts.rtol is not None:
+        raise NcgenError("scheme: 'rattle4' is a fixed-step scheme (substeps=N); with rtol the error control "
+                         "runs RATTLE, Richardson-extrapolated to order 4 (order=4, the default)")
     run = _fixed if opts.rtol is None else _adaptive
     return run(model, stepper, t, U, p, q0, v0, lam0, opts, conservative)
 
@@ -92,14 +102,17 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, conse
     contacts = stepper.nd > 0          # nonsmooth contacts: no shadow run, one-sided energy check
     IMP = np.zeros((n_out, stepper.nd)) if contacts else None      # contact impulses per output interval
     start = time.perf_counter()
+    rattle4 = opts.scheme == "rattle4"
     with Ticker(f"stepper: {model.name}, {n_out * substeps:,} steps"):
         Q, V, LAM, S, status, done, splits = stepper.simulate_stats(
             q0, v0, lam0, float(t[0]), h, n_out * substeps, substeps, step_inputs(U, t, hold, substeps), p, tol,
-            max_iter, max_halvings, estimate and not contacts, not conservative, impulse_out=IMP)
+            max_iter, max_halvings, estimate and not contacts, not conservative, impulse_out=IMP,
+            scheme=int(rattle4))
     stepping = time.perf_counter() - start
     rows = done // substeps
     info = {"method": "stepper", "backend": "compiled", "scheme": "RATTLE, nonsmooth contacts" if contacts else
-            "RATTLE", "h": h, "substeps": substeps, "hold": hold, "tol": tol, "max_iter": max_iter,
+            "RATTLE, triple-jump composition" if rattle4 else "RATTLE", "order": 4 if rattle4 else 2, "h": h,
+            "substeps": substeps, "hold": hold, "tol": tol, "max_iter": max_iter,
             "max_halvings": max_halvings, "estimate": estimate and not contacts, "stepping_time": stepping, "complete": status == 0,
             "stats": _stats(S[:rows], splits)}
     traj = _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info, conservative, start,
@@ -107,6 +120,8 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, conse
     if contacts:
         traj.info["contacts"] = contact_report(S[:rows])
         warn_unconverged(model, traj.info["contacts"])
+    if status == STEP_INTERRUPTED:
+        _interrupted(model, traj, float(t[rows]))
     if status != 0:
         t_fail = float(t[0]) + done * h
         message = (f"simulation of {model.name!r} with the stepper failed in the step from "
@@ -138,6 +153,8 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, co
     with Ticker(f"stepper: {model.name}, rtol {rtol:g}"):
         Q, V, LAM, S, status, rows, h_next = run(rtol, atol)
         shadow = run(SHADOW_FACTOR * rtol, SHADOW_FACTOR * atol) if estimate and status == 0 else None
+    if shadow is not None and shadow[4] == STEP_INTERRUPTED:   # stopped in the shadow run: no estimate
+        status, shadow = STEP_INTERRUPTED, None
     stepping = time.perf_counter() - start
     info = {"method": "stepper", "backend": "compiled", "scheme": "RATTLE" if order == 2 else
             "RATTLE, Richardson-extrapolated and projected", "order": order, "rtol": rtol, "atol": atol,
@@ -146,6 +163,8 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, co
             "stats": _stats(S[:rows], int(S[:rows, 2].sum()))}
     info["stats"]["rejected_steps"] = info["stats"].pop("step_splits")
     traj = _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info, conservative, start)
+    if status == STEP_INTERRUPTED:
+        _interrupted(model, traj, float(t[rows]))
     if status != 0:
         message = (f"simulation of {model.name!r} with the error-controlled stepper (rtol {rtol:g}, atol "
                    f"{atol:g}) failed between t = {t[rows]:.6g} s and {t[rows + 1]:.6g} s (last step tried "
@@ -159,6 +178,14 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, co
         if check:
             check_global(model, traj, eq, rtol, atol)
     return traj
+
+
+def _interrupted(model, traj: Trajectory, t_stop: float):
+    """Raises :class:`~ncgen.errors.SimulationInterrupted` with ``traj``, the run up to
+    ``t_stop`` (s) when Ctrl-C stopped it, marked incomplete."""
+    message = f"simulation of {model.name!r} with the stepper interrupted (Ctrl-C) at t = {t_stop:.6g} s"
+    traj.info.update(complete=False, message=message)
+    raise SimulationInterrupted(message, time=t_stop, trajectory=traj)
 
 
 def newton_tolerance(rtol: float, atol: float, tol: float = TOL) -> float:

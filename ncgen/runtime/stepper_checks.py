@@ -31,7 +31,7 @@ exceeds :data:`ERROR_FRACTION` of the model's size, and warns
 
 Error estimates (``info["error_estimate"]``, in m for q and m/s for v), both **global**
 (they follow the growth of errors along the motion, e.g. on chaotic or fast-spinning
-motion): fixed steps, ``|y_h − y_2h| / 3`` against a shadow run with steps of 2h
+motion): fixed steps, ``|y_h − y_2h| / (2^p − 1)`` (p: the scheme's order, 2 or 4) against a shadow run with steps of 2h
 (Richardson, valid while both runs are in the asymptotic regime); error control,
 ``|y(rtol) − y(10 rtol)| / 10`` against a shadow run at 10× looser tolerances (about half
 the work again), the error taken as proportional to the tolerance: measured within 0.3–4×
@@ -230,7 +230,7 @@ def error_estimate(S: np.ndarray, substeps: int | None) -> dict:
     elif np.isnan(gq[-1]):
         how = "none (estimate=False, or a single step)"
     else:
-        how = "Richardson: |y_h - y_2h| / 3 against a shadow run with steps of 2h"
+        how = "Richardson: |y_h - y_2h| / (2^p - 1) against a shadow run with steps of 2h (p: the scheme's order)"
     return {"q": float(gq[-1]), "v": float(gv[-1]), "how": how}
 
 

@@ -1,12 +1,18 @@
 """The compiled stepper loaded with ctypes: the loops of the model's compiled package (its C:
-:mod:`ncgen.codegen.stepper_package`) called on NumPy arrays."""
+:mod:`ncgen.codegen.stepper_package`) called on NumPy arrays.
+
+Ctrl-C: a loop runs in a worker thread (:func:`~ncgen.interrupts.call_interruptibly`); a
+KeyboardInterrupt in the waiting main thread sets the loop's stop flag (``options->stop``),
+the loop ends before its next step with status
+:data:`~ncgen.codegen.stepper_package.STEP_INTERRUPTED` and the rows done so far."""
 from __future__ import annotations
 
 import ctypes
 
 import numpy as np
 
-from ncgen.codegen.stepper_package import n_impulses, n_outputs, n_stats
+from ncgen.codegen.stepper_package import STEP_INTERRUPTED, n_impulses, n_outputs, n_stats
+from ncgen.interrupts import call_interruptibly
 from ncgen.model.data import model_data
 from ncgen.runtime.library import compiled_model
 
@@ -43,12 +49,13 @@ class CompiledStepper:
         self._outputs = f
 
     def simulate(self, q0, v0, t0: float, h: float, n_steps: int, every: int, U: np.ndarray | None,
-                 p: np.ndarray, tol: float, max_iter: int, max_halvings: int, impulse_out=None):
+                 p: np.ndarray, tol: float, max_iter: int, max_halvings: int, impulse_out=None, scheme: int = 0):
         """``(Q, V, LAM, ITER, status, steps_done, splits)``: states after every ``every``-th of
         ``n_steps`` steps (see ``<model>_simulate`` in ``<model>_stepper.h``).  ``U``: inputs
         per step, shape ``(n_steps, nu)``, or None for zeros.  ``impulse_out`` (nonsmooth
         contact stepper): an array of shape ``(n_steps // every, nd)`` that receives the
-        contact impulses summed over those steps (N·s), or None."""
+        contact impulses summed over those steps (N·s), or None.  ``scheme``: 0 RATTLE, 1 its
+        triple jump (``<MODEL>_STEP_RATTLE4``)."""
         rows = n_steps // every
         Q, V = np.zeros((rows, self.nq)), np.zeros((rows, self.nq))
         LAM, ITER = np.zeros((rows, self.nc)), np.zeros(rows, dtype=np.dtype(ctypes.c_long))
@@ -56,10 +63,10 @@ class CompiledStepper:
         p = np.ascontiguousarray(p, float)
         U = None if U is None or self.nu == 0 else np.ascontiguousarray(U, float)
         done, splits = ctypes.c_long(0), ctypes.c_long(0)
-        status = self._simulate(_ptr(q0), _ptr(v0), float(t0), float(h), int(n_steps), int(every),
+        status = _interruptible(self._simulate, _ptr(q0), _ptr(v0), float(t0), float(h), int(n_steps), int(every),
                                 _ptr(U), self.nu if U is not None else 0, _ptr(p), _ptr(Q), _ptr(V), _ptr(LAM),
                                 ITER.ctypes.data_as(ctypes.POINTER(ctypes.c_long)),
-                                ctypes.byref(_Options(float(tol), int(max_iter), int(max_halvings))),
+                                _Options(float(tol), int(max_iter), int(max_halvings), scheme),
                                 ctypes.byref(done), ctypes.byref(splits), *self._impulses(impulse_out, rows))
         return Q, V, LAM, ITER, int(status), int(done.value), int(splits.value)
 
@@ -76,19 +83,19 @@ class CompiledStepper:
 
     def simulate_stats(self, q0, v0, lam0, t0: float, h: float, n_steps: int, every: int, U: np.ndarray | None,
                        p: np.ndarray, tol: float, max_iter: int, max_halvings: int, estimate: bool,
-                       track_work: bool, impulse_out=None):
+                       track_work: bool, impulse_out=None, scheme: int = 0):
         """``(Q, V, LAM, STATS, status, steps_done, splits)``: fixed steps with per-row
         statistics (columns :data:`~ncgen.codegen.stepper_package.STATS`, then for the
         nonsmooth contact stepper :data:`~ncgen.codegen.stepper_package.CONTACT_STATS`; see
         ``<model>_simulate_stats``).  ``U``: inputs per step, shape ``(n_steps, nu)``, or None
-        for zeros."""
+        for zeros; ``scheme`` as for :meth:`simulate`."""
         Q, V, LAM, S = self._buffers(n_steps // every)
         U = None if U is None or self.nu == 0 else np.ascontiguousarray(U, float)
         done, splits = ctypes.c_long(0), ctypes.c_long(0)
-        status = self._simulate_stats(_ptr(_vec(q0)), _ptr(_vec(v0)), _ptr(_vec(lam0)), float(t0), float(h),
+        status = _interruptible(self._simulate_stats, _ptr(_vec(q0)), _ptr(_vec(v0)), _ptr(_vec(lam0)), float(t0), float(h),
                                       int(n_steps), int(every), _ptr(U), self.nu if U is not None else 0,
                                       _ptr(_vec(p)), _ptr(Q), _ptr(V), _ptr(LAM), _ptr(S),
-                                      ctypes.byref(_Options(float(tol), int(max_iter), int(max_halvings))),
+                                      _Options(float(tol), int(max_iter), int(max_halvings), scheme),
                                       int(bool(estimate)), int(bool(track_work)), ctypes.byref(done),
                                       ctypes.byref(splits), *self._impulses(impulse_out, n_steps // every))
         return Q, V, LAM, S, int(status), int(done.value), int(splits.value)
@@ -102,11 +109,11 @@ class CompiledStepper:
         Q, V, LAM, S = self._buffers(n_out)
         U = None if U is None or self.nu == 0 else np.ascontiguousarray(U, float)
         rows, h_next = ctypes.c_long(0), ctypes.c_double(0.0)
-        status = self._simulate_adaptive(_ptr(_vec(q0)), _ptr(_vec(v0)), _ptr(_vec(lam0)), float(t0), float(dt),
+        status = _interruptible(self._simulate_adaptive, _ptr(_vec(q0)), _ptr(_vec(v0)), _ptr(_vec(lam0)), float(t0), float(dt),
                                          int(n_out), _ptr(U), self.nu if U is not None else 0, int(bool(hold_linear)),
                                          _ptr(_vec(p)), float(rtol), float(atol), float(h0), int(bool(extrapolate)),
                                          int(max_steps), int(bool(track_work)), _ptr(Q), _ptr(V), _ptr(LAM),
-                                         _ptr(S), ctypes.byref(_Options(float(tol), int(max_iter), 0)),
+                                         _ptr(S), _Options(float(tol), int(max_iter), 0),
                                          ctypes.byref(rows), ctypes.byref(h_next))
         return Q, V, LAM, S, int(status), int(rows.value), float(h_next.value)
 
@@ -129,9 +136,24 @@ def _vec(a):
 
 
 class _Options(ctypes.Structure):
-    """``<model>_step_options``."""
+    """``<model>_step_options``, its stop flag pointing at ``self.flag``."""
 
-    _fields_ = [("tol", ctypes.c_double), ("max_iter", ctypes.c_int), ("max_halvings", ctypes.c_int)]
+    _fields_ = [("tol", ctypes.c_double), ("max_iter", ctypes.c_int), ("max_halvings", ctypes.c_int),
+                ("scheme", ctypes.c_int), ("stop", ctypes.POINTER(ctypes.c_int))]
+
+    def __init__(self, tol: float, max_iter: int, max_halvings: int, scheme: int = 0):
+        self.flag = ctypes.c_int(0)
+        super().__init__(tol, max_iter, max_halvings, int(scheme), ctypes.pointer(self.flag))
+
+
+def _interruptible(fn, *args) -> int:
+    """The status of ``fn(*args)``, a compiled loop whose arguments include one
+    :class:`_Options`, by :func:`~ncgen.interrupts.call_interruptibly` on its stop flag:
+    :data:`~ncgen.codegen.stepper_package.STEP_INTERRUPTED` after Ctrl-C."""
+    options = next(a for a in args if isinstance(a, _Options))
+    status, interrupted = call_interruptibly(fn, *(ctypes.byref(a) if a is options else a for a in args),
+                                             stop=options.flag)
+    return STEP_INTERRUPTED if interrupted else status
 
 
 def _ptr(a: np.ndarray | None):

@@ -18,11 +18,15 @@ typedef long long casadi_int;
 #define STEP_BAD_INPUT 5
 #define STEP_TOO_MANY_STEPS 6
 #define STEP_TOO_SMALL 7
+#define STEP_INTERRUPTED 8
+#define SCHEME_RATTLE4 1
 
 typedef struct {
   casadi_real tol;
   int max_iter;
   int max_halvings;
+  int scheme;
+  volatile int *stop;
 } step_options;
 
 static step_options test_default_options(void) {
@@ -30,6 +34,8 @@ static step_options test_default_options(void) {
   o.tol = 1e-10;
   o.max_iter = 12;
   o.max_halvings = 4;
+  o.scheme = 0;
+  o.stop = 0;
   return o;
 }
 #define DEFAULT_OPTIONS test_default_options

@@ -228,6 +228,35 @@ static void test_fixed_order_work_estimate(void) {
   CHECK(err[0] / err[1] > 3.5 && err[0] / err[1] < 4.5, "errors %g, %g: not second order", err[0], err[1]);
 }
 
+/* The triple jump (scheme SCHEME_RATTLE4): fourth order (the error falls 16 times with
+ * h / 2), both constraint levels held, the shadow run's estimate (now / 15) of the size of
+ * the true error. */
+static void test_rattle4_order_estimate(void) {
+  const casadi_real theta0 = 0.8, u = 0.7, T = 1.0;
+  casadi_real q0[2], v0[2], q[2 * 50], v[2 * 50], stats[NSTATS * 50], err[2];
+  step_options o = test_default_options();
+  long done = -1;
+  int k, status;
+  o.scheme = SCHEME_RATTLE4;
+  cartesian(theta0, 0, q0, v0);
+  for (k = 0; k < 2; ++k) {
+    long n = k ? 50 : 25;
+    casadi_real h = T / n, *qe = q + 2 * (n - 1), *ve = v + 2 * (n - 1), est;
+    status = run_fixed(q0, v0, 0, 0, h, n, 1, &u, 0, 0, q, v, 0, 0, stats, &o, 1, 0, &done, 0, 0);
+    CHECK(status == STEP_OK && done == n, "status %d, %ld steps", status, done);
+    err[k] = position_error(qe, theta0, u, T);
+    est = stats[NSTATS * (n - 1) + 3];
+    CHECK(fabs(phi(qe)) <= 1e-10 && fabs(qe[0] * ve[0] + qe[1] * ve[1]) <= 1e-10, "constraints");
+    CHECK(est > 0.3 * err[k] && est < 3 * err[k], "estimate %g for an error %g", est, err[k]);
+  }
+  CHECK(err[0] / err[1] > 14 && err[0] / err[1] < 18, "errors %g, %g: not fourth order", err[0], err[1]);
+  /* the error control is RATTLE's: it refuses the scheme; a backward step is internal only */
+  status = simulate_adaptive(q0, v0, 0, 0, 0.1, 1, 0, 0, 0, 0, 1e-6, 1e-6, 0, 1, 100, 0, q, v, 0, 0, &o, 0, 0);
+  CHECK(status == STEP_BAD_INPUT, "adaptive with the triple jump: status %d", status);
+  status = stepper_step(q0, v0, 0, &u, 0, -1e-3, q, v, 0, 0, &o, 0, 0);
+  CHECK(status == STEP_BAD_INPUT, "h < 0: status %d", status);
+}
+
 /* A step too long for Newton within max_iter is split into halves (counted), and fails
  * with max_halvings = 0; bad inputs are refused. */
 static void test_split_and_bad_input(void) {
@@ -329,12 +358,32 @@ static void test_project_and_outputs(void) {
   CHECK(fabs(y[0] - M_P * vt * vt / 2) < 1e-9 && fabs(y[1] + M_P * G_P * 0.8) < 1e-9, "T = %g, V = %g", y[0], y[1]);
 }
 
+/* A stop request (options->stop set) ends both loops before their next step with
+ * STEP_INTERRUPTED and the rows done so far. */
+static void test_stop_request(void) {
+  casadi_real q0[2] = {0.6, -0.8}, v0[2] = {0.8, 0.6}, q[4], v[4];
+  volatile int stop = 1;
+  step_options o = test_default_options();
+  long done = -1, rows = -1;
+  int status;
+  o.stop = &stop;
+  status = run_fixed(q0, v0, 0, 0, 1e-3, 4, 2, 0, 0, 0, q, v, 0, 0, 0, &o, 1, 0, &done, 0, 0);
+  CHECK(status == STEP_INTERRUPTED && done == 0, "fixed: status %d, %ld steps", status, done);
+  status = simulate_adaptive(q0, v0, 0, 0, 0.1, 2, 0, 0, 0, 0, 1e-6, 1e-6, 0, 1, 100, 0, q, v, 0, 0, &o, &rows, 0);
+  CHECK(status == STEP_INTERRUPTED && rows == 0, "adaptive: status %d, %ld rows", status, rows);
+  stop = 0;
+  status = run_fixed(q0, v0, 0, 0, 1e-3, 4, 2, 0, 0, 0, q, v, 0, 0, 0, &o, 1, 0, &done, 0, 0);
+  CHECK(status == STEP_OK && done == 4, "fixed, not stopped: status %d, %ld steps", status, done);
+}
+
 int main(void) {
   test_newton_step();
   test_fixed_order_work_estimate();
+  test_rattle4_order_estimate();
   test_split_and_bad_input();
   test_error_controller();
   test_adaptive();
   test_project_and_outputs();
+  test_stop_request();
   return report("test_rattle");
 }
