@@ -20,7 +20,7 @@ def test_idas_and_stepper_share_one_library(model, monkeypatch):
     built = []
     real = library.compile_package
     monkeypatch.setattr(library, "compile_package", lambda *a, **k: built.append(1) or real(*a, **k))
-    idas = nc.simulate(model, t_end=0.05, dt=0.01, backend="compiled")
+    idas = nc.simulate(model, t_end=0.05, dt=0.01, method="idas", backend="compiled")
     step = nc.simulate(model, t_end=0.05, dt=0.01, method="stepper")
     assert idas.info["backend"] == "compiled" and step.info["backend"] == "compiled"
     assert len(built) == 1                                 # one package, compiled (or found in the disk cache) once

@@ -137,8 +137,10 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
         A0 = np.array(ca.Function("A", [ctx.t, ctx.q, ctx.p], [ca.jacobian(phi, ctx.q)])(t0, q_init, p0))
         check_tangent_inertia(M, A0, layout, members, f"system {system.name!r}")
     functions, potential = system_functions(ctx, phi, F, V, M, factor, alpha, beta, system)
-    if terms:
+    weight = sum(m.rigid.mass for m in members) * float(np.linalg.norm(system.gravity))
+    if terms:                      # before the consistent state, whose contact forces need a defined normal
         functions.update(contact_functions(ctx, terms))
+        check_initial_gaps(system.name, system.contacts, functions["gap"], q_init, p0, contacts, weight)
     state = consistent_state(functions, layout, labels, q_init, v_init, p0, t0, tolerance, M,
                              fixed=fixed, assemble=assemble)
     if not assemble:
@@ -156,11 +158,10 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     model = model_with(state)
     if system.initial_joints or system.initial_joint_rates:
         q, v = joint_space.initial_state(model, system.initial_joints, system.initial_joint_rates)
+        if terms:
+            check_initial_gaps(system.name, system.contacts, functions["gap"], q, p0, contacts, weight)
         model = model_with(consistent_state(functions, layout, labels, q, v, p0, t0, tolerance, M, fixed=fixed))
     raise_if_interrupted()               # a Ctrl-C that CasADi swallowed while the functions were built
-    if terms:
-        weight = sum(m.rigid.mass for m in members) * float(np.linalg.norm(system.gravity))
-        check_initial_gaps(system.name, system.contacts, functions["gap"], model.q0, p0, contacts, weight)
     return model
 
 
