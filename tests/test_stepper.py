@@ -111,6 +111,9 @@ STEP = {"heavy_top": 1e-4}
 
 @pytest.mark.parametrize("path", example_models(), ids=lambda p: p.stem)
 def test_agrees_with_idas_on_shipped_examples(path):
+    if "[[contacts]]" in path.read_text():
+        pytest.skip("a contact scene: its smooth law (what IDAS integrates) is stiff at impact; the contact "
+                    "examples are checked against closed forms in test_contact*.py and run by the sanitizer test")
     model = example(path)
     t_end, dt = model.t0 + 0.3, 0.01
     u = (lambda t: [0.5 * np.sin(3 * t)] * model.nu) if model.nu else None

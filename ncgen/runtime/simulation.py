@@ -575,6 +575,12 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
             return X[:k + 1], Z[:k + 1], last, since
         except KeyboardInterrupt:
             return X[:k + 1], Z[:k + 1], INTERRUPTED, since
+        except SystemError:                  # Ctrl-C inside a C call that then returned a value
+            try:
+                raise_if_interrupted()
+            except KeyboardInterrupt:
+                return X[:k + 1], Z[:k + 1], INTERRUPTED, since
+            raise
         if watching and not auto:
             X[k] = projector(t[k], X[k])
             R[k] = np.nan
