@@ -107,7 +107,8 @@ def joint_forward_dynamics_kernel(model, *, method: str = "auto", cflags=None) -
     """The compiled joint-space forward dynamics of the tree ``model`` (built once per model
     and method; the library is cached by content; ``cflags`` as for
     :func:`~ncgen.codegen.compile_cache.compile_package`, by default -O2, or -O1 up to
-    :data:`~ncgen.runtime.tree_check.O1_INSTRUCTIONS` and the package's large-source flags (-O1) beyond for long kernels).  ``method``: ``"recursive"`` (3D),
+    :data:`~ncgen.runtime.tree_check.O1_INSTRUCTIONS` and the package's large-source flags (-O1)
+    beyond for long kernels).  ``method``: ``"recursive"`` (3D),
     ``"projection"`` (``M_j = Gᵀ M G`` by AD of the tree map) or ``"auto"`` (recursive in
     3D when every member is a rigid body, else projection).  Raises :class:`ModelError` for
     a model that is not a tree (:func:`check_tree`)."""
