@@ -5,33 +5,19 @@ from __future__ import annotations
 
 import os
 import signal
-import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
 
 import ncgen as nc
 from ncgen.errors import SimulationInterrupted
 
-ROOT = Path(__file__).resolve().parents[1]
+from interrupt_helpers import ROOT, interrupt, start
 
 
 def interrupt_after(cmd, seconds, cwd):
-    p = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                         start_new_session=True, env={**os.environ, "PYTHONPATH": str(ROOT)},
-                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    time.sleep(seconds)
-    sent = time.monotonic()
-    os.killpg(p.pid, signal.SIGINT)
-    try:
-        out, err = p.communicate(timeout=60)
-    except subprocess.TimeoutExpired:
-        p.kill()
-        out, err = p.communicate()
-        pytest.fail(f"still running 60 s after SIGINT: {err[-500:]}")
-    return p.returncode, out, err, time.monotonic() - sent
+    return interrupt(start(cmd, cwd), seconds)
 
 
 def test_ctrl_c_stops_an_idas_run_keeps_the_old_result_and_writes_the_partial_one(tmp_path):
@@ -72,10 +58,8 @@ def test_ctrl_c_stops_ipopt_at_its_next_iteration(tmp_path):
         (tmp_path / name).write_text(text.replace("N = 50 ", "N = 300 ").replace("tol = 1e-8", "tol = 1e-8\nverbose = true"))
     old = tmp_path / "sw.npz"
     old.write_bytes(b"the previous result")
-    p = subprocess.Popen([sys.executable, "-m", "ncgen.cli", "optimize", str(tmp_path / "cartpole_swingup.toml"),
-                          "-o", str(old)], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                         start_new_session=True, env={**os.environ, "PYTHONPATH": str(ROOT)},
-                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    p = start([sys.executable, "-m", "ncgen.cli", "optimize", str(tmp_path / "cartpole_swingup.toml"), "-o", str(old)],
+              tmp_path)
     printed = ""
     while not any(line.split()[:1] == ["1"] for line in printed.splitlines()):   # IPOPT's first iteration
         line = p.stdout.readline()

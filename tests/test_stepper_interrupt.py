@@ -4,44 +4,17 @@ result file untouched, the partial trajectory written as ``*.incomplete.*``; fro
 :class:`~ncgen.errors.SimulationInterrupted` carrying the trajectory so far."""
 from __future__ import annotations
 
-import os
-import signal
-import subprocess
 import sys
-import time
-from pathlib import Path
 
 import pytest
 
 import ncgen as nc
 from ncgen.runtime.stepper_library import load_stepper
 
-ROOT = Path(__file__).resolve().parents[1]
+from interrupt_helpers import ROOT, interrupt, start
+
 CHAIN = str(ROOT / "examples" / "chain.toml")
 PENDULUM = str(ROOT / "examples" / "double_pendulum.toml")        # a tree, for the joint-space loop
-ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
-
-
-def start(cmd, cwd):
-    return subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True, env=ENV,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-
-
-def interrupt(p, wait: float):
-    """SIGINT to ``p``'s process group after ``wait`` s; ``(returncode, out, err, seconds to exit)``."""
-    time.sleep(wait)
-    sent = time.monotonic()
-    os.killpg(p.pid, signal.SIGINT)
-    try:
-        out, err = p.communicate(timeout=60)
-    except subprocess.TimeoutExpired:
-        p.kill()
-        out, err = p.communicate()
-        pytest.fail(f"still running 60 s after SIGINT: {err[-500:]}")
-    return p.returncode, out, err, time.monotonic() - sent
-
-
 # Runs of ~10^7 steps: many minutes uninterrupted on this machine.
 RUNS = {"fixed": "method='stepper', substeps=1000", "adaptive": "method='stepper', rtol=1e-11, atol=1e-11",
         "joint": "method='joint', integrator='rk4', substeps=100000"}
