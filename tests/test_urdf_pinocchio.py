@@ -26,6 +26,7 @@ pin = pytest.importorskip("pinocchio")
 pytest.importorskip("yourdfpy")
 
 import ncgen as nc  # noqa: E402
+from pinocchio_robots import random_configuration  # noqa: E402
 
 ROBOTS = {
     "panda": ("panda_description/urdf/panda.urdf", False),
@@ -90,9 +91,9 @@ def rates_to_pin(model, pm, xj):
 
 
 def states(pm, seed):
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(seed)                     # the states depend on ``seed`` alone
     for _ in range(N_STATES):
-        qp = pin.randomConfiguration(pm, -np.full(pm.nq, 1.5), np.full(pm.nq, 1.5))
+        qp = random_configuration(pm, rng)
         yield qp, rng.normal(size=pm.nv), 5 * rng.normal(size=pm.nv), rng.normal(size=pm.nv)
 
 

@@ -32,9 +32,12 @@ def _symbols(model):
 def kkt_function(model) -> ca.Function:
     """``fd: (t, q, v, u, p) -> (a, lam)`` by the Schur complement of the constant mass
     matrix: ``(A M⁻¹ Aᵀ) λ = A M⁻¹ F − γ`` (sparse LDLᵀ; M⁻¹ is block-diagonal per member),
-    ``a = M⁻¹ (F − Aᵀ λ)``; no stabilisation terms.  Needs a non-singular M and
-    independent constraints (as the model's other paths do); a singular M (a flat body,
-    :func:`~ncgen.assembly.mass.mass_is_regular` false) takes :func:`kkt_qr_function`."""
+    ``a = M⁻¹ (F − Aᵀ λ)``, then one step of iterative refinement on the KKT residual (forming
+    ``S`` squares the conditioning of ``M``: a 15 g finger of the Panda leaves ``cond S ≈ 1e14``
+    and 1e-8 relative errors in ``a_j``; the step brings them to ~1e-13); no stabilisation
+    terms.  Needs a non-singular M and independent constraints (as the model's other paths
+    do); a singular M (a flat body, :func:`~ncgen.assembly.mass.mass_is_regular` false) takes
+    :func:`kkt_qr_function`."""
     if not mass_is_regular(model):
         return kkt_qr_function(model)
     f = model.functions
@@ -44,10 +47,15 @@ def kkt_function(model) -> ca.Function:
     Minv[np.abs(Minv) < 1e-300] = 0.0
     Mi = ca.MX(sparse_dm(Minv))
     F = f["F"](t, q, v, u, p)
-    MiF = ca.mtimes(Mi, F)
+    gamma = f["gamma"](t, q, v, p)
+    M = ca.MX(sparse_dm(model.M))
     S = ca.mtimes(ca.mtimes(A, Mi), A.T)
-    lam = ca.solve(S, ca.mtimes(A, MiF) - f["gamma"](t, q, v, p), "ldl")
-    a = MiF - ca.mtimes(Mi, ca.mtimes(A.T, lam))
+    a, lam = ca.MX.zeros(model.nq), ca.MX.zeros(model.nc)
+    for _ in range(2):
+        r_F = F - ca.mtimes(M, a) - ca.mtimes(A.T, lam)
+        Mi_r = ca.mtimes(Mi, r_F)
+        d_lam = ca.solve(S, ca.mtimes(A, Mi_r) - (gamma - ca.mtimes(A, a)), "ldl")
+        a, lam = a + Mi_r - ca.mtimes(Mi, ca.mtimes(A.T, d_lam)), lam + d_lam
     return ca.Function("forward_dynamics", [t, q, v, u, p], [a, lam], ["t", "q", "v", "u", "p"], ["a", "lam"])
 
 
