@@ -32,12 +32,21 @@ What is compared, in one run:
   energy; the fall turns potential energy into kinetic and the contacts dissipate it);
 * ncgen only: the bilateral constraint drift max |Φ| (MuJoCo's joints cannot drift).
 
-    python benchmarks/contact.py [--sizes 5 20] [--pile 20] [--t-end 2] [--h 1e-3] [--repeat 3]
+Heap (``--heap N``, default 20): N spheres with friction (radius 0.03 m, 0.2 kg, μ = 0.5
+on the ground and between spheres, e = 0) dropped in the pile's loose column onto the ground
+plane (no walls), 1 s.  Twice: with non-rotating spheres (ncgen point members; MuJoCo bodies
+with three slide joints, an exact twin) and with rotating spheres (ncgen 'ruvw' bodies with
+the solid sphere's inertia; MuJoCo free joints).  MuJoCo: condim 3, elliptic cones, default
+solref/solimp.  The heap's times are taken interleaved (ncgen, MuJoCo, ncgen, ...,
+``--repeat`` rounds), and the ratio is printed as the min and the median over the rounds.
+
+    python benchmarks/contact.py [--sizes 5 20] [--pile 20] [--heap 20] [--t-end 2] [--h 1e-3] [--repeat 3]
     python benchmarks/contact.py --smoke
 """
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
 import numpy as np
@@ -100,6 +109,41 @@ def pile(n: int):
     return s.build(contacts="nonsmooth")
 
 
+#: The heap: sphere radius (m), mass (kg), friction coefficient, simulated time (s).
+HEAP_R, HEAP_M, HEAP_MU, HEAP_T = 0.03, 0.2, 0.5, 1.0
+
+
+def heap(n: int, rotating: bool):
+    """The ncgen heap (contacts="nonsmooth"), see the module docstring."""
+    import ncgen as nc
+
+    s = nc.System(f"heap{n}{'r' if rotating else 'p'}", gravity=GRAVITY)
+    inertia = 0.4 * HEAP_M * HEAP_R**2 * np.eye(3)
+    balls = [s.add_body(f"ball{k}", mass=HEAP_M, inertia=inertia, position=tuple(c)) if rotating
+             else s.add_point(f"ball{k}", mass=HEAP_M, position=tuple(c)) for k, c in enumerate(ball_centres(n))]
+    for k, b in enumerate(balls):
+        s.add_contact(nc.SpherePlane(b, None, HEAP_R, mu=HEAP_MU, name=f"floor_{k}"))
+    for i in range(n):
+        for j in range(i + 1, n):
+            s.add_contact(nc.SphereSphere(balls[i], None, HEAP_R, balls[j], None, HEAP_R, mu=HEAP_MU,
+                                          name=f"pair{i}_{j}"))
+    return s.build(contacts="nonsmooth")
+
+
+def heap_mjcf(n: int, h: float, rotating: bool) -> str:
+    """The MuJoCo twin of :func:`heap`: free joints, or three slide joints (no rotation)."""
+    inertia = 0.4 * HEAP_M * HEAP_R**2
+    joints = ("<freejoint/>" if rotating else
+              "".join(f'<joint type="slide" axis="{a}" damping="0" armature="0"/>' for a in ("1 0 0", "0 1 0", "0 0 1")))
+    balls = "".join(f'<body name="ball{k}" pos="{_nums(c)}">{joints}'
+                    f'<inertial pos="0 0 0" mass="{HEAP_M}" diaginertia="{inertia} {inertia} {inertia}"/>'
+                    f'<geom type="sphere" size="{HEAP_R}"/></body>' for k, c in enumerate(ball_centres(n)))
+    return (f'<mujoco model="heap{n}"><compiler inertiafromgeom="false"/>'
+            f'<option timestep="{h!r}" gravity="{_nums(GRAVITY)}" cone="elliptic"><flag energy="enable"/></option>'
+            f'<default><geom condim="3" friction="{HEAP_MU} 0 0" contype="1" conaffinity="1"/></default>'
+            f'<worldbody><geom type="plane" size="5 5 0.1"/>{balls}</worldbody></mujoco>')
+
+
 def pile_mjcf(n: int, h: float) -> str:
     """The MuJoCo twin of :func:`pile`."""
     inertia = 0.4 * BALL_M * BALL_R**2
@@ -145,7 +189,7 @@ def _nums(x) -> str:
     return " ".join(repr(float(v)) for v in x)
 
 
-def run_ncgen(model, t_end: float, h: float, repeat: int):
+def run_ncgen(model, t_end: float, h: float, repeat: int, centres: list[str] | None = None):
     import warnings
 
     import ncgen as nc
@@ -163,7 +207,9 @@ def run_ncgen(model, t_end: float, h: float, repeat: int):
     return {"wall": wall, "stepper": stepper, "penetration": max(0.0, -float(traj.gap.min())),
             "energy_gain": float(np.max(traj.energy - traj.energy[0])), "E0": float(traj.energy[0]),
             "E_end": float(traj.energy[-1]), "drift": float(traj.constraint_residual.max()),
-            "rest_height": float(traj.q[-1, 2::3].mean()), "contacts": traj.info["contacts"]}
+            "rest_height": float(np.mean([traj.point(c, (0, 0, 0))[-1, 2] for c in centres]) if centres
+                                 else traj.q[-1, 2::3].mean()),
+            "contacts": traj.info["contacts"]}
 
 
 def run_mujoco(xml: str, t_end: float, h: float, repeat: int):
@@ -205,13 +251,14 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--sizes", type=int, nargs="*", default=[5, 20], help="numbers of bars (default 5 20; none: no chain)")
     parser.add_argument("--pile", type=int, default=20, help="spheres in the pile (default 20; 0: no pile)")
+    parser.add_argument("--heap", type=int, default=20, help="spheres in the heap with friction (default 20; 0: none)")
     parser.add_argument("--t-end", type=float, default=2.0, help="simulated time, s (default 2)")
     parser.add_argument("--h", type=float, default=1e-3, help="fixed step of both, s (default 1e-3)")
     parser.add_argument("--repeat", type=int, default=3, help="runs per timing, the best kept (default 3)")
     parser.add_argument("--smoke", action="store_true", help="N = 3, 0.3 s, one run (CI)")
     args = parser.parse_args(argv)
     if args.smoke:
-        args.sizes, args.pile, args.t_end, args.repeat = [3], 4, 0.3, 1
+        args.sizes, args.pile, args.heap, args.t_end, args.repeat = [3], 4, 4, 0.3, 1
     print(machine())
     for n in args.sizes:
         print(f"\n=== chain of N = {n} bars falling on the ground, {args.t_end:g} s, h = {args.h:g} s")
@@ -220,13 +267,22 @@ def main(argv=None) -> int:
         t_end = min(args.t_end, PILE_T)
         print(f"\n=== pile of {args.pile} frictionless spheres in a box, {t_end:g} s, h = {args.h:g} s")
         compare(f"pile of {args.pile}", pile(args.pile), pile_mjcf(args.pile, args.h), t_end, args.h, args.repeat)
+    for rotating in (False, True) if args.heap else ():
+        t_end = min(args.t_end, HEAP_T)
+        kind = "rotating" if rotating else "non-rotating"
+        print(f"\n=== heap of {args.heap} {kind} spheres with friction (mu = {HEAP_MU}) on the ground, {t_end:g} s, "
+              f"h = {args.h:g} s")
+        compare(f"heap of {args.heap}, {kind}", heap(args.heap, rotating), heap_mjcf(args.heap, args.h, rotating),
+                t_end, args.h, args.repeat, centres=[f"ball{k}" for k in range(args.heap)])
     return 0
 
 
-def compare(label: str, model, xml: str, t_end: float, h: float, repeat: int) -> None:
-    """Runs both and prints the figures and the RATIO lines."""
-    ours = run_ncgen(model, t_end, h, repeat)
+def compare(label: str, model, xml: str, t_end: float, h: float, repeat: int, centres: list[str] | None = None) -> None:
+    """Runs both and prints the figures and the RATIO lines; the pure stepping times are then
+    taken again interleaved (ncgen, MuJoCo, ... ``repeat`` rounds) for the min / median ratio."""
+    ours = run_ncgen(model, t_end, h, repeat, centres)
     theirs = run_mujoco(xml, t_end, h, repeat)
+    ratios = interleaved_ratios(model, xml, t_end, h, repeat)
     for name, r in (("ncgen stepper", ours), ("MuJoCo (Euler, soft contacts)", theirs)):
         print(f"{name:<30} wall per simulated s {r['stepper'] / t_end * 1e3:8.2f} ms "
               f"(with sampling {r['wall'] / t_end * 1e3:.2f} ms), penetration {r['penetration']:.2e} m, "
@@ -237,8 +293,32 @@ def compare(label: str, model, xml: str, t_end: float, h: float, repeat: int) ->
           f"deepest penetration at the end of any step {ours['contacts']['penetration']:.2e} m")
     print(f"RATIO ncgen / MuJoCo wall time per simulated second ({label}, equal step): "
           f"{ours['stepper'] / theirs['stepper']:.2f}")
+    print(f"RATIO ncgen / MuJoCo interleaved ({label}, {len(ratios)} rounds): min {min(ratios):.2f}, "
+          f"median {float(np.median(ratios)):.2f}; load average {os.getloadavg()[0]:.2f}")
     ratio = ours["penetration"] / theirs["penetration"] if theirs["penetration"] > 0 else float("nan")
     print(f"RATIO ncgen / MuJoCo penetration ({label}): {ratio:.3g}")
+
+
+def interleaved_ratios(model, xml: str, t_end: float, h: float, rounds: int) -> list[float]:
+    """ncgen's stepping time over MuJoCo's, one pair of runs per round, alternating."""
+    import warnings
+
+    import mujoco
+
+    import ncgen as nc
+
+    mj = mujoco.MjModel.from_xml_string(xml)
+    steps, substeps = int(round(t_end / h)), int(round(SAMPLE / h))
+    out = []
+    for _ in range(rounds):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ours = nc.simulate(model, t_end, SAMPLE, method="stepper", substeps=substeps).info["stepping_time"]
+        data = mujoco.MjData(mj)
+        start = time.perf_counter()
+        mujoco.mj_step(mj, data, nstep=steps)
+        out.append(ours / (time.perf_counter() - start))
+    return out
 
 
 if __name__ == "__main__":

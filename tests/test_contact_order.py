@@ -1,8 +1,9 @@
-"""Second order on persistent sliding contact (nonsmooth stepper): a ball sliding while it
-spins about the vertical goes straight, and a sliding ball's centre converges to the closed
-form at order ≥ 2 in h.  Closed form (sphere sliding on a plane, μ, any spin): the slip
-velocity of the contact point keeps its direction û and the centre decelerates at μ g û
-until it rolls, ``x(t) = x0 + v0 t − μ g t² û / 2``."""
+"""Second order on persistent sliding and rolling contact (nonsmooth stepper): a ball sliding
+while it spins about the vertical goes straight, a sliding ball's centre and a rolling ball's
+centre converge to the closed form at order ≥ 2 in h.  Closed form (sphere sliding on a
+plane, μ, any spin): the slip velocity of the contact point keeps its direction û and the
+centre decelerates at μ g û until it rolls, ``x(t) = x0 + v0 t − μ g t² û / 2``; rolling: see
+:func:`test_persistent_rolling_converges_at_second_order`."""
 import numpy as np
 import pytest
 
@@ -49,3 +50,35 @@ def test_persistent_sliding_converges_at_second_order(sliders):
     rates = np.log2(np.array(errors[:-1]) / errors[1:])
     assert np.all(rates > 1.9), (errors, rates)
     assert errors[1] < 1e-9, errors                    # h = 1 ms
+
+
+TH = 0.3                                               # incline (rad), rolling needs μ ≥ 2/7 tan θ
+N_INCLINE = np.array([-np.sin(TH), 0.0, np.cos(TH)])
+V_SIDE = np.array([0.0, 1.0, 0.0])                     # across the slope, rolling from the start
+
+
+@pytest.fixture(scope="module")
+def roller():
+    """A ball rolling down a 0.3 rad incline (μ = 1) while it crosses the slope at 1 m/s and
+    spins at 20 rad/s about the normal: its rows of the contact Jacobian turn with it."""
+    s = nc.System("roller")
+    w0 = np.cross(N_INCLINE, V_SIDE) / R + 20.0 * N_INCLINE
+    b = s.add_body("ball", mass=M, inertia=0.4 * M * R ** 2 * np.eye(3), position=tuple(R * N_INCLINE),
+                   velocity=tuple(V_SIDE), angular_velocity=tuple(w0))
+    s.add_contact(nc.SpherePlane(b, radius=R, mu=1.0, point=(0, 0, 0), normal=tuple(N_INCLINE), name="roller"))
+    model = s.build(contacts="nonsmooth")
+    return {sub: nc.simulate(model, T_END, 0.01, method="stepper", substeps=sub) for sub in (5, 10, 20)}
+
+
+def test_persistent_rolling_converges_at_second_order(roller):
+    """Closed form: a rolling sphere's centre accelerates at 5/7 of gravity's component in the
+    plane, whatever its spin, x(t) = x0 + v0 t + 5/14 g_t t² (g_t = −g sin θ (cos θ, 0, sin θ))."""
+    g_t = -G * np.sin(TH) * np.array([np.cos(TH), 0.0, np.sin(TH)])
+    errors = []
+    for tr in roller.values():
+        exact = R * N_INCLINE + V_SIDE * tr.t[:, None] + 5 / 14 * g_t * tr.t[:, None] ** 2
+        errors.append(np.abs(tr.point("ball", (0, 0, 0)) - exact).max())
+        assert tr.info["contacts"]["pgs_unconverged"] == 0
+    rates = np.log2(np.array(errors[:-1]) / errors[1:])
+    assert np.all(rates > 1.9), (errors, rates)
+    assert errors[1] < 1e-6, errors                    # h = 1 ms

@@ -25,7 +25,8 @@ FLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O0", "-g",
          "-fsanitize=address,undefined", "-fno-sanitize-recover=all", "-fno-omit-frame-pointer"]
 ENV = {**os.environ, "ASAN_OPTIONS": "detect_leaks=0:abort_on_error=0",
        "UBSAN_OPTIONS": "print_stacktrace=1:halt_on_error=1"}
-PROGRAMS = [("test_rattle.c", []), ("test_contact.c", []), ("test_contact.c", ["-DSCHUR_FACTORED"])]
+PROGRAMS = [("test_rattle.c", []), ("test_contact.c", []), ("test_contact.c", ["-DSCHUR_FACTORED"]),
+            ("test_cone_newton.c", [])]
 
 pytestmark = pytest.mark.skipif(CC is None, reason="no C compiler (gcc, clang or cc) on PATH")
 
@@ -40,7 +41,7 @@ def sanitizers(tmp_path_factory) -> Path:
     return tmp
 
 
-@pytest.mark.parametrize("source, defines", PROGRAMS, ids=["rattle", "contact-kkt", "contact-schur"])
+@pytest.mark.parametrize("source, defines", PROGRAMS, ids=["rattle", "contact-kkt", "contact-schur", "cone-newton"])
 def test_runtime_c_unit_tests_pass_under_sanitizers(sanitizers, source, defines):
     exe = sanitizers / (Path(source).stem + "".join(d.lower().replace("-d", "_") for d in defines))
     built = subprocess.run([CC, *FLAGS, *defines, f"-I{RUNTIME}", f"-I{TESTS}", str(TESTS / source),
@@ -72,7 +73,8 @@ def test_packages_carry_the_runtime_verbatim(tmp_path):
     b = s.add_point("ball", mass=1.0, position=(0.0, 0.0, 0.5))
     s.add_contact(nc.SpherePlane(b, None, 0.1))
     for contacts, files in [("smooth", ["ncgen_rattle.h", "ncgen_fixed.h", "ncgen_adaptive.h"]),
-                            ("nonsmooth", ["ncgen_rattle.h", "ncgen_contact.h", "ncgen_fixed.h", "ncgen_adaptive.h"])]:
+                            ("nonsmooth", ["ncgen_rattle.h", "ncgen_cone_newton.h", "ncgen_contact.h", "ncgen_fixed.h",
+                                          "ncgen_adaptive.h"])]:
         pkg = nc.generate(s.build(contacts=contacts), tmp_path / contacts)
         stepper = (pkg.path / "ball_stepper.c").read_text()
         assert sorted(p.name for p in pkg.path.glob("ncgen_*.h")) == sorted(files)

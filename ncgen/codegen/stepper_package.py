@@ -46,8 +46,10 @@ STATS = ("steps", "newton_iterations", "splits", "error_q", "error_v", "work")
 #: Columns the nonsmooth contact stepper appends to :data:`STATS` (fixed steps): contact
 #: solves whose projected Gauss–Seidel stopped at PGS_MAX_ITER sweeps, the largest
 #: last-sweep change of a contact velocity among them, relative to 1 + max |U|, and the
-#: deepest penetration (m) left at the end of a step (after the push-out).
-CONTACT_STATS = ("pgs_unconverged", "pgs_residual", "penetration")
+#: deepest penetration (m) left at the end of a step (after the push-out), and the largest
+#: residual of the contact laws at a step's impulses (m/s, relative to 1 + max |U|:
+#: ``cone_residual`` in ``runtime/ncgen_cone_newton.h``).
+CONTACT_STATS = ("pgs_unconverged", "pgs_residual", "penetration", "cone_residual")
 #: Default Newton tolerance: |Φ|∞ ≤ tol (m²), momentum residual ≤ tol·max|M|·(1 + |w|∞),
 #: |A v + Φ_t|∞ ≤ tol·(1 + |v|∞) (see ``<model>_stepper.h``).
 TOL = 1e-10
@@ -139,8 +141,8 @@ def extra_sources(model, functions) -> list[ExtraSource]:
 def runtime_files(model) -> list[str]:
     """The model-independent C of the stepper that ``<model>_stepper.c`` includes, in order
     (``templates/c/runtime/``, copied into the package): the RATTLE step, the contact
-    solver (nonsmooth contacts only), fixed-step runs, error-controlled runs."""
-    contact = ["ncgen_contact.h"] if nonsmooth(model) else []
+    solvers (nonsmooth contacts only), fixed-step runs, error-controlled runs."""
+    contact = ["ncgen_cone_newton.h", "ncgen_contact.h"] if nonsmooth(model) else []
     return ["ncgen_rattle.h", *contact, "ncgen_fixed.h", "ncgen_adaptive.h"]
 
 

@@ -265,11 +265,13 @@ def contact_report(S: np.ndarray) -> dict:
     largest last-sweep change of a contact velocity among them, relative to 1 + max |U|
     (``pgs_residual``), beside the limit and the tolerance it did not reach; the deepest
     penetration left at the end of any step, after the push-out (``penetration``, m; the
-    push-out aims at ``penetration_tol``)."""
-    unconverged, residual, depth = (S[:, len(STATS) + CONTACT_STATS.index(k)] for k in CONTACT_STATS)
+    push-out aims at ``penetration_tol``); the largest residual of the contact laws at the
+    impulses of any solved step (``cone_residual``: by how much a contact velocity misses
+    Signorini's or Coulomb's law, m/s relative to 1 + max |U|; the solves aim at ``pgs_tol``)."""
+    unconverged, residual, depth, law = (S[:, len(STATS) + CONTACT_STATS.index(k)] for k in CONTACT_STATS)
     return {"pgs_unconverged": int(unconverged.sum()), "pgs_residual": float(residual.max(initial=0.0)),
             "pgs_max_sweeps": PGS_MAX_ITER, "pgs_tol": PGS_TOL, "penetration": float(depth.max(initial=0.0)),
-            "penetration_tol": PENETRATION_TOL}
+            "penetration_tol": PENETRATION_TOL, "cone_residual": float(law.max(initial=0.0))}
 
 
 def untrusted_row(model, traj, S: np.ndarray, h: float, contacts: bool = False) -> tuple[int, str] | None:

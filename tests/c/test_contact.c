@@ -21,7 +21,7 @@
 #define NNZ_K 4
 #define MASS_SCALE M_P
 #define MAX_HALVINGS 10
-#define NSTATS 9
+#define NSTATS 10
 #define NOUT 5
 
 #define NCGEN_CONTACTS
@@ -172,6 +172,7 @@ static int k_backsolve(const casadi_real **arg, casadi_real **res, casadi_int *i
 #define KERNEL_CONTACT k_contact
 
 #include "ncgen_rattle.h"
+#include "ncgen_cone_newton.h"
 #include "ncgen_contact.h"
 #include "ncgen_fixed.h"
 

@@ -1,0 +1,150 @@
+/* Unit tests of the semismooth Newton contact solver (ncgen_cone_newton.h) on hand-made
+ * Delassus matrices of three contacts in 3D (DC = 3: a normal and two tangents each): its
+ * generalised Jacobian against central differences of the Alart-Curnier function in the
+ * sticking, slipping and open regimes, and its solutions against ones worked by hand
+ * (one contact slipping, one sticking, one opening; a redundant pair), from zero and from a
+ * warm start.  Only the workspace fields the solver reads are defined here: it needs no
+ * model.  Compiled by tests/test_stepper_runtime_c.py under the sanitizers. */
+#include "harness.h"
+
+#define NK 3
+#define DC 3
+#define ND (NK * DC)
+
+typedef struct {
+  casadi_real *G, *U, *P, *Um, *S, *cn;
+  casadi_int *act, *gp, *gi, *cni;
+  int fm;
+} workspace;
+
+static casadi_real mu[NK] = {0.5, 0.5, 0.5};
+static const casadi_real restitution[NK] = {0, 0, 0};
+
+static casadi_real nan_max(casadi_real m, casadi_real a) {
+  return isnan(m) || a <= m ? m : a;
+}
+
+#include "ncgen_cone_newton.h"
+
+static casadi_real G_[ND * ND], U_[ND], P_[ND], Um_[2 * ND], S_[ND * ND], cn_[6 * ND];
+static casadi_int act_[NK], gp_[ND + 1], gi_[ND * ND], cni_[2 * ND];
+static const int first[NK + 1] = {0, 3, 6, 9};
+static const casadi_real bias[NK] = {0, 0, 0};
+
+static workspace make(const casadi_real *G, const casadi_real *U0) {
+  workspace ws;
+  int a, r, k = 0;
+  ws.G = G_, ws.U = U_, ws.P = P_, ws.Um = Um_, ws.S = S_, ws.cn = cn_;
+  ws.act = act_, ws.gp = gp_, ws.gi = gi_, ws.cni = cni_, ws.fm = 0;
+  memcpy(G_, G, sizeof G_);
+  memcpy(U_, U0, sizeof U_);
+  memset(P_, 0, sizeof P_);
+  memset(Um_, 0, sizeof Um_);
+  for (a = 0; a < NK; ++a) act_[a] = a;
+  for (r = 0; r < ND; ++r) { /* the pattern of G by columns, as g_pattern() gives it */
+    gp_[r] = k;
+    for (a = 0; a < ND; ++a)
+      if (G[a + r * ND] != 0) gi_[k++] = a;
+  }
+  gp_[ND] = k;
+  return ws;
+}
+
+/* G = I with the normal rows of contacts 0 and 1 coupled by 1/2. */
+static void coupled(casadi_real *G) {
+  int i;
+  memset(G, 0, ND * ND * sizeof(casadi_real));
+  for (i = 0; i < ND; ++i) G[i + i * ND] = 1;
+  G[0 + 3 * ND] = G[3 + 0 * ND] = 0.5;
+}
+
+/* dphi/dP against central differences at points of each regime (away from the kinks). */
+static void test_jacobian(void) {
+  casadi_real G[ND * ND], J[ND * ND], rho[ND], phi_p[ND], phi_m[ND], Pp[ND], Up[ND], Pm[ND], Um[ND];
+  const casadi_real U0[ND] = {-1.0, 0.3, -0.2, -0.5, 0.01, 0.02, 0.4, 0.1, 0.0};
+  const casadi_real P0[ND] = {1.0, 0.2, -0.1, 0.7, 0.05, -0.02, 0.1, 0.0, 0.0};
+  const casadi_real eps = 1e-7;
+  workspace ws;
+  int i, j, k;
+  coupled(G);
+  for (i = 0; i < ND; ++i) /* a full symmetric coupling, diagonally dominant */
+    for (j = 0; j < i; ++j) G[i + j * ND] = G[j + i * ND] += 0.05 * sin(1.0 + i + 2.0 * j);
+  ws = make(G, U0);
+  memcpy(ws.P, P0, sizeof P0);
+  for (i = 0; i < ND; ++i)
+    for (j = 0; j < ND; ++j) ws.U[i] += G[i + j * ND] * P0[j];
+  cone_scales(&ws, NK, first, rho);
+  cone_phi(&ws, NK, first, bias, rho, ws.P, ws.U, phi_p, J);
+  for (j = 0; j < ND; ++j) {
+    for (i = 0; i < ND; ++i) {
+      Pp[i] = ws.P[i] + eps * (i == j);
+      Pm[i] = ws.P[i] - eps * (i == j);
+      Up[i] = ws.U[i] + eps * G[i + j * ND];
+      Um[i] = ws.U[i] - eps * G[i + j * ND];
+    }
+    cone_phi(&ws, NK, first, bias, rho, Pp, Up, phi_p, 0);
+    cone_phi(&ws, NK, first, bias, rho, Pm, Um, phi_m, 0);
+    for (k = 0; k < ND; ++k) {
+      const casadi_real fd = (phi_p[k] - phi_m[k]) / (2 * eps);
+      CHECK(fabs(J[k * ND + j] - fd) < 1e-7, "dphi_%d/dP_%d = %.12g, differences %.12g", k, j, J[k * ND + j], fd);
+    }
+  }
+}
+
+/* Contact 0 slips, contact 1 sticks, contact 2 opens (G of coupled()):
+ * P_N = (4/3, 4/3, 0) from the coupled normal rows, P_T0 = -mu P_N0 u with u the direction
+ * of U0_T0 (G_TT = I: the slip keeps its direction), P_T1 = -U0_T1, P_2 = 0. */
+static void test_solution(void) {
+  casadi_real G[ND * ND], res, slip = sqrt(5.0), P[ND];
+  const casadi_real U0[ND] = {-2, 2, 1, -2, 0.1, -0.05, 1, 0.3, 0.3};
+  workspace ws;
+  int i, start;
+  coupled(G);
+  for (i = 0; i < ND; ++i) P[i] = 0;
+  P[0] = P[3] = 4.0 / 3;
+  P[1] = -0.5 * P[0] * 2 / slip, P[2] = -0.5 * P[0] / slip;
+  P[4] = -0.1, P[5] = 0.05;
+  for (start = 0; start < 2; ++start) { /* from zero, then warm from a nearby point */
+    ws = make(G, U0);
+    if (start)
+      for (i = 0; i < ND; ++i) {
+        int j;
+        ws.P[i] = P[i] * 1.1 + 0.01;
+        for (j = 0; j < ND; ++j) ws.U[j] += G[j + i * ND] * ws.P[i];
+      }
+    CHECK(cone_newton(&ws, NK, first, bias, 1e-13, &res), "not converged from start %d: residual %g", start, res);
+    CHECK(ws.fm == -1, "lcp_newton's factor not marked stale");
+    for (i = 0; i < ND; ++i) CHECK(fabs(ws.P[i] - P[i]) < 1e-12, "P[%d] = %.15g, expected %.15g", i, ws.P[i], P[i]);
+    CHECK(cone_residual(&ws, NK, first, bias) < 1e-13, "residual %g", cone_residual(&ws, NK, first, bias));
+    CHECK(fabs(ws.U[0]) < 1e-12 && fabs(ws.U[3]) < 1e-12 && fabs(ws.U[6] - 1) < 1e-12, "normal velocities");
+    CHECK(fabs(ws.U[1] - 2 * (1 - 0.5 * P[0] / slip)) < 1e-12, "slip velocity %.15g", ws.U[1]);
+  }
+}
+
+/* Contacts 0 and 1 on the same rows (G's blocks all equal, singular): any split of the
+ * impulse that stops the shared velocity; the dropped pivots leave a consistent solution. */
+static void test_redundant(void) {
+  casadi_real G[ND * ND], res;
+  const casadi_real U0[ND] = {-1, 0.2, 0.1, -1, 0.2, 0.1, 1, 0, 0};
+  workspace ws;
+  int i, a, b;
+  memset(G, 0, sizeof G);
+  for (a = 0; a < 2; ++a)
+    for (b = 0; b < 2; ++b)
+      for (i = 0; i < 3; ++i) G[(3 * a + i) + (3 * b + i) * ND] = 1;
+  for (i = 6; i < ND; ++i) G[i + i * ND] = 1;
+  ws = make(G, U0);
+  CHECK(cone_newton(&ws, NK, first, bias, 1e-13, &res), "redundant pair: residual %g", res);
+  for (i = 0; i < 6; ++i) CHECK(fabs(ws.U[i]) < 1e-12, "U[%d] = %g", i, ws.U[i]);
+  CHECK(fabs(ws.P[0] + ws.P[3] - 1) < 1e-12 && ws.P[0] >= -1e-15 && ws.P[3] >= -1e-15, "P_N = %g, %g", ws.P[0], ws.P[3]);
+  CHECK(hypot(ws.P[1], ws.P[2]) <= 0.5 * ws.P[0] + 1e-12 && hypot(ws.P[4], ws.P[5]) <= 0.5 * ws.P[3] + 1e-12,
+        "outside the cone");
+}
+
+int main(void) {
+  (void) at, (void) test_work, (void) test_default_options; /* harness.h's, for the stepper's tests */
+  test_jacobian();
+  test_solution();
+  test_redundant();
+  return report("test_cone_newton");
+}
