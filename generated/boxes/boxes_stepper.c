@@ -75,6 +75,7 @@ static const int a_row[NNZ_A] = {0, 4, 5, 0, 4, 5, 0, 4, 5, 1, 3, 5, 1, 3, 5, 1,
 static const int a_col[NNZ_A] = {3, 3, 3, 4, 4, 4, 5, 5, 5, 6, 6, 6, 7, 7, 7, 8, 8, 8, 9, 9, 9, 10, 10, 10, 11, 11, 11, 15, 15, 15, 16, 16, 16, 17, 17, 17, 18, 18, 18, 19, 19, 19, 20, 20, 20, 21, 21, 21, 22, 22, 22, 23, 23, 23};
 
 #include "ncgen_rattle.h"
+#include "ncgen_cone_newton.h"
 #include "ncgen_contact.h"
 #include "ncgen_fixed.h"
 #include "ncgen_adaptive.h"

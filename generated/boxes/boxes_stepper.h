@@ -69,7 +69,7 @@ extern "C" {
  * Gauss-Seidel stopped at its sweep limit (their impulses did not converge), the largest
  * last-sweep change of a contact velocity among them, relative to 1 + max |U| (m/s per m/s),
  * and the deepest penetration left at the end of a step, after the push-out (m). */
-#define BOXES_STEP_NSTATS 9
+#define BOXES_STEP_NSTATS 10
 /* Values per sample of boxes_outputs: T, V (J), max |Phi| (m^2), max |A v + Phi_t|
  * (m^2/s), P (W), then the marker positions (m), 3 per marker. */
 #define BOXES_STEP_NOUT 5

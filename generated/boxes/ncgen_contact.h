@@ -3,10 +3,11 @@
  * ncgen templates or the generator instead. */
 /* Nonsmooth contacts for the RATTLE stepper of ncgen_rattle.h: the contact impulses of a
  * step by projected Gauss-Seidel (pgs(), with Newton steps on frictionless sets,
- * lcp_newton()) on the Delassus matrix (delassus()), the repeat of the last step's
+ * lcp_newton(), and the semismooth Newton method of ncgen_cone_newton.h, cone_newton(), on
+ * sets with friction) on the Delassus matrix (delassus()), the repeat of the last step's
  * impulses (repeat_step()), the push-out of penetrating contacts (push_out()) and the
  * contact step around them (contact_step()).  Plain C99, model-independent; included after
- * ncgen_rattle.h when NCGEN_CONTACTS is defined (see ncgen_rattle.h).  The scheme is
+ * ncgen_rattle.h and ncgen_cone_newton.h when NCGEN_CONTACTS is defined (see ncgen_rattle.h).  The scheme is
  * documented in docs/contact.md and <model>_stepper.h.
  *
  * What the including file defines first (besides ncgen_rattle.h's list):
@@ -51,12 +52,13 @@ static void contact_clear(workspace *ws) {
   memset(ws->F, 0, ND * sizeof(casadi_real));
   ws->pgs_unconverged = 0;
   ws->pgs_residual = 0;
+  ws->cone_residual = 0;
   ws->penetration = 0;
   ws->repeat = 1;
 }
 
 /* Ends an output row: the impulses summed since the last row into impulse (ND values) and
- * the contact statistics into columns 6, 7, 8 of stats (each may be NULL), then clears them. */
+ * the contact statistics into columns 6 .. 9 of stats (each may be NULL), then clears them. */
 static void contact_row(workspace *ws, casadi_real *impulse, casadi_real *stats) {
   if (impulse) memcpy(impulse, ws->Pacc, ND * sizeof(casadi_real));
   memset(ws->Pacc, 0, ND * sizeof(casadi_real));
@@ -64,9 +66,11 @@ static void contact_row(workspace *ws, casadi_real *impulse, casadi_real *stats)
     stats[6] = (casadi_real) ws->pgs_unconverged;
     stats[7] = ws->pgs_residual;
     stats[8] = ws->penetration;
+    stats[9] = ws->cone_residual;
   }
   ws->pgs_unconverged = 0;
   ws->pgs_residual = 0;
+  ws->cone_residual = 0;
   ws->penetration = 0;
 }
 
@@ -199,7 +203,10 @@ static void lcp_newton(workspace *ws, int n, const casadi_real *b) {
  * it converged within PGS_MAX_ITER sweeps; ws->pgs_last gets the last sweep's largest change
  * of a contact velocity relative to 1 + max |U| (m/s per m/s).  When every active contact
  * is frictionless, lcp_newton() steps after NEWTON_FIRST, 2 NEWTON_FIRST, ... sweeps finish
- * what the sweeps crawl on (redundant contacts). */
+ * what the sweeps crawl on (redundant contacts); with friction, cone_newton() does (the
+ * sweeps converge linearly, slowly where contacts are coupled: a heap), and it has
+ * converged when every contact law holds to PGS_TOL (1 + max |U|) m/s; if it stops short
+ * (no descent), the sweeps carry on from its last impulses. */
 static int pgs(workspace *ws, int na, const int *first, const casadi_real *bias) {
   int nr = first[na], c, d, sweep, newton_at = NEWTON_FIRST;
   ws->pgs_last = 0;
@@ -233,9 +240,14 @@ static int pgs(workspace *ws, int na, const int *first, const casadi_real *bias)
       ws->pgs_sweeps = sweep;
       return 1;
     }
-    if (nr == na && sweep + 1 == newton_at) { /* frictionless: Newton steps after 4, 8, 16, ... sweeps */
-      lcp_newton(ws, nr, bias);
+    if (sweep + 1 == newton_at) { /* Newton steps after 4, 8, 16, ... sweeps */
       newton_at *= 2;
+      if (nr == na) lcp_newton(ws, nr, bias); /* frictionless */
+      else if (cone_newton(ws, na, first, bias, PGS_TOL, &ws->cone_last)) {
+        ws->pgs_last = 0;
+        ws->pgs_sweeps = sweep + 1;
+        return 1;
+      }
     }
   }
   return 0;
@@ -284,75 +296,146 @@ static int delassus_kkt(workspace *ws, const int *rows, int n) {
  *   X = B - T^T Y   and   G = W_r X = W_r B - Z^T Z,
  * X kept as (B, Y, T) and applied by x_add().  A is read from the KKT matrix in ws->K.  Falls
  * back to delassus_kkt() where S is not numerically positive definite (redundant or
- * singular constraints). */
+ * singular constraints).  Everything walks nonzeros: M^-1 by columns, S's envelope (row i of
+ * L is zero left of its first nonzero in S: block diagonal for free bodies, banded for a
+ * chain), B's nonzeros against W's columns (G_ab = 0 where rows a and b share no member),
+ * and each Z_a between its first and last nonzero. */
 static int delassus(workspace *ws, const int *rows, int n) {
   casadi_real *T = ws->T, *L = ws->L, *Z = ws->Z, *Y = ws->Y, *B = ws->Xc;
+  /* scratch in ws->cni after cone_newton()'s 2 ND: envelope starts of L (NC), the first and
+   * last nonzero of each Z_a (2 ND), W's active nonzeros by columns (NQ + 1 starts, then
+   * row and position per nonzero), the first and last nonzero of each row of T (2 NC, read
+   * by x_add()), A's nonzeros by columns (NQ + 1 starts, NNZ_A positions) */
+  casadi_int *env = ws->cni + 2 * ND, *zlo = env + NC, *zhi = zlo + ND, *cp = zhi + ND, *cr = cp + NQ + 1,
+             *ck = cr + NNZ_W, *tlo = ck + NNZ_W, *thi = tlo + NC, *acp = thi + NC, *ak = acp + NQ + 1;
   int a, b, i, j, k;
-  memset(T, 0, NC * NQ * sizeof(casadi_real));
-  memset(L, 0, NC * NC * sizeof(casadi_real));
+  if (ws->tl_zero) /* the rows of T and L the last call wrote (A's pattern does not change) */
+    for (i = 0; i < NC; ++i) {
+      for (j = (int) tlo[i]; j <= thi[i]; ++j) T[i * NQ + j] = 0;
+      for (j = (int) env[i]; j <= i; ++j) L[i + j * NC] = 0;
+    }
+  else {
+    memset(T, 0, NC * NQ * sizeof(casadi_real));
+    memset(L, 0, NC * NC * sizeof(casadi_real));
+  }
+  ws->tl_zero = 0;
+  for (i = 0; i < NC; ++i) tlo[i] = NQ, thi[i] = -1;
+  memset(acp, 0, (NQ + 1) * sizeof(casadi_int));
 #if NNZ_A > 0
   for (k = 0; k < NNZ_A; ++k) { /* T = A M^-1 (row a_row[k] += A_k * row a_col[k] of M^-1) */
     const casadi_real aij = ws->K[a_nz[k]], *m = minv + a_col[k] * NQ;
     casadi_real *t = T + a_row[k] * NQ;
-    for (j = 0; j < NQ; ++j) t[j] += aij * m[j];
+    for (j = minv_colind[a_col[k]]; j < minv_colind[a_col[k] + 1]; ++j) {
+      const int c = minv_row[j];
+      t[c] += aij * m[c];
+      if (c < tlo[a_row[k]]) tlo[a_row[k]] = c;
+      if (c > thi[a_row[k]]) thi[a_row[k]] = c;
+    }
   }
-  for (k = 0; k < NNZ_A; ++k) { /* S = T A^T */
-    const casadi_real aij = ws->K[a_nz[k]];
-    for (i = 0; i < NC; ++i) L[i + a_row[k] * NC] += T[i * NQ + a_col[k]] * aij;
-  }
+  for (k = 0; k < NNZ_A; ++k) ++acp[a_col[k] + 1]; /* A's nonzeros by columns: ak[acp[c] ..] */
+  for (i = 0; i < NQ; ++i) acp[i + 1] += acp[i];
+  for (k = 0; k < NNZ_A; ++k) ak[acp[a_col[k]]++] = k;
+  for (i = NQ; i > 0; --i) acp[i] = acp[i - 1];
+  acp[0] = 0;
+  for (i = 0; i < NC; ++i) /* S = T A^T: S_ij += T_ic A_jc along row i of T */
+    for (j = (int) tlo[i]; j <= thi[i]; ++j) {
+      const casadi_real tij = T[i * NQ + j];
+      if (tij != 0)
+        for (k = (int) acp[j]; k < acp[j + 1]; ++k)
+          if (a_row[ak[k]] <= i) L[i + a_row[ak[k]] * NC] += tij * ws->K[a_nz[ak[k]]]; /* lower triangle */
+    }
 #endif
-  for (j = 0; j < NC; ++j) { /* Cholesky, lower triangle of L in place */
-    casadi_real d = L[j + j * NC], s0 = d;
-    for (k = 0; k < j; ++k) d -= L[j + k * NC] * L[j + k * NC];
-    if (!(d > 1e-12 * s0)) {
+  for (i = 0; i < NC; ++i) { /* Cholesky by rows, lower triangle of L in place, in S's envelope */
+    casadi_real d, s0 = L[i + i * NC];
+    int f = 0;
+    while (f < i && L[i + f * NC] == 0) ++f;
+    env[i] = f;
+    for (j = f; j < i; ++j) {
+      casadi_real v = L[i + j * NC];
+      for (k = f > env[j] ? f : (int) env[j]; k < j; ++k) v -= L[i + k * NC] * L[j + k * NC];
+      L[i + j * NC] = v / L[j + j * NC];
+    }
+    d = s0;
+    for (k = f; k < i; ++k) d -= L[i + k * NC] * L[i + k * NC];
+    if (!(d > 1e-12 * s0)) { /* T and L not cleared by ranges next time */
       ws->schur = 0;
       return delassus_kkt(ws, rows, n);
     }
-    d = sqrt(d);
-    L[j + j * NC] = d;
-    for (i = j + 1; i < NC; ++i) {
-      casadi_real v = L[i + j * NC];
-      for (k = 0; k < j; ++k) v -= L[i + k * NC] * L[j + k * NC];
-      L[i + j * NC] = v / d;
-    }
+    L[i + i * NC] = sqrt(d);
   }
   ws->schur = 1;
+  ws->tl_zero = 1;
   for (a = 0; a < n; ++a) {
     casadi_real *ba = B + a * NQ, *za = Z + a * NC, *ya = Y + a * NC;
+    int blo = NQ, bhi = -1;
     memset(ba, 0, NQ * sizeof(casadi_real));
     for (k = wt_colind[rows[a]]; k < wt_colind[rows[a] + 1]; ++k) { /* B_a = M^-1 W_r^T */
       const casadi_real w = ws->W[k], *m = minv + wt_row[k] * NQ;
-      for (j = minv_colind[wt_row[k]]; j < minv_colind[wt_row[k] + 1]; ++j) ba[minv_row[j]] += w * m[minv_row[j]];
+      for (j = minv_colind[wt_row[k]]; j < minv_colind[wt_row[k] + 1]; ++j) {
+        ba[minv_row[j]] += w * m[minv_row[j]];
+        if (minv_row[j] < blo) blo = minv_row[j];
+        if (minv_row[j] > bhi) bhi = minv_row[j];
+      }
     }
     memset(za, 0, NC * sizeof(casadi_real));
 #if NNZ_A > 0
-    for (k = 0; k < NNZ_A; ++k) za[a_row[k]] += ws->K[a_nz[k]] * ba[a_col[k]]; /* A B_a */
+    for (j = blo; j <= bhi; ++j) /* A B_a, by A's columns */
+      if (ba[j] != 0)
+        for (k = (int) acp[j]; k < acp[j + 1]; ++k) za[a_row[ak[k]]] += ws->K[a_nz[ak[k]]] * ba[j];
+#else
+    (void) blo, (void) bhi, (void) acp, (void) ak;
 #endif
     for (i = 0; i < NC; ++i) { /* Z_a = L^-1 A B_a */
-      for (k = 0; k < i; ++k) za[i] -= L[i + k * NC] * za[k];
+      for (k = (int) env[i]; k < i; ++k) za[i] -= L[i + k * NC] * za[k];
       za[i] /= L[i + i * NC];
     }
-    for (i = NC - 1; i >= 0; --i) { /* Y_a = L^-T Z_a */
-      casadi_real v = za[i];
-      for (k = i + 1; k < NC; ++k) v -= L[k + i * NC] * ya[k];
-      ya[i] = v / L[i + i * NC];
+    memcpy(ya, za, NC * sizeof(casadi_real));
+    for (i = NC - 1; i >= 0; --i) { /* Y_a = L^-T Z_a, by columns of L^T */
+      ya[i] /= L[i + i * NC];
+      for (k = (int) env[i]; k < i; ++k) ya[k] -= L[i + k * NC] * ya[i];
     }
+    zlo[a] = NC, zhi[a] = -1;
+    for (i = 0; i < NC; ++i)
+      if (za[i] != 0) {
+        if (zlo[a] == NC) zlo[a] = i;
+        zhi[a] = i;
+      }
   }
-  for (a = 0; a < n; ++a) {
-    const int k0 = wt_colind[rows[a]], k1 = wt_colind[rows[a] + 1];
+  /* W's nonzeros of the active rows by columns: column i has rows cr[cp[i] .. cp[i + 1] - 1],
+   * at positions ck[...] of ws->W */
+  memset(cp, 0, (NQ + 1) * sizeof(casadi_int));
+  for (a = 0; a < n; ++a)
+    for (k = wt_colind[rows[a]]; k < wt_colind[rows[a] + 1]; ++k) ++cp[wt_row[k] + 1];
+  for (i = 0; i < NQ; ++i) cp[i + 1] += cp[i];
+  for (a = 0; a < n; ++a)
+    for (k = wt_colind[rows[a]]; k < wt_colind[rows[a] + 1]; ++k) {
+      const casadi_int at = cp[wt_row[k]]++;
+      cr[at] = a, ck[at] = k;
+    }
+  for (i = NQ; i > 0; --i) cp[i] = cp[i - 1];
+  cp[0] = 0;
+  memset(ws->G, 0, (size_t) n * n * sizeof(casadi_real));
+  for (b = 0; b < n; ++b) { /* G_ab = W_a B_b for a <= b, by B_b's nonzeros */
+    const casadi_real *bb = B + b * NQ;
+    casadi_real *gb = ws->G + b * n;
+    for (i = 0; i < NQ; ++i)
+      if (bb[i] != 0)
+        for (k = (int) cp[i]; k < cp[i + 1] && cr[k] <= b; ++k) gb[cr[k]] += ws->W[ck[k]] * bb[i];
+  }
+  for (a = 0; a < n; ++a) /* - Z_a . Z_b where they overlap; G symmetric */
     for (b = a; b < n; ++b) {
-      casadi_real s = 0;
-      const casadi_real *bb = B + b * NQ, *za = Z + a * NC, *zb = Z + b * NC;
-      for (k = k0; k < k1; ++k) s += ws->W[k] * bb[wt_row[k]];
-      for (i = 0; i < NC; ++i) s -= za[i] * zb[i];
+      const int lo = zlo[a] > zlo[b] ? (int) zlo[a] : (int) zlo[b], hi = zhi[a] < zhi[b] ? (int) zhi[a] : (int) zhi[b];
+      const casadi_real *za = Z + a * NC, *zb = Z + b * NC;
+      casadi_real s = ws->G[a + b * n];
+      for (i = lo; i <= hi; ++i) s -= za[i] * zb[i];
       ws->G[a + b * n] = ws->G[b + a * n] = s;
     }
-  }
   return all_finite(ws->G, n * n) ? STEP_OK : STEP_NOT_FINITE;
 }
 
 /* out += s X c for the columns X_a (a < n) of the last delassus(): X c = B c - T^T (Y c). */
 static void x_add(workspace *ws, int n, const casadi_real *c, casadi_real s, casadi_real *out) {
+  const casadi_int *tlo = ws->cni + 2 * ND + NC + 2 * ND + NQ + 1 + 2 * NNZ_W, *thi = tlo + NC; /* delassus()'s */
   casadi_real y[NC + 1];
   int a, i, j;
   if (!ws->schur) {
@@ -368,9 +451,10 @@ static void x_add(workspace *ws, int n, const casadi_real *c, casadi_real s, cas
     for (i = 0; i < NQ; ++i) out[i] += ca * ba[i];
     for (j = 0; j < NC; ++j) y[j] += ca * ya[j];
   }
-  for (j = 0; j < NC; ++j) {
+  for (j = 0; j < NC; ++j) { /* along row j of T between its first and last nonzero */
     const casadi_real *t = ws->T + j * NQ;
-    for (i = 0; i < NQ; ++i) out[i] -= y[j] * t[i];
+    if (y[j] != 0)
+      for (i = (int) tlo[j]; i <= thi[j]; ++i) out[i] -= y[j] * t[i];
   }
 }
 #else
@@ -620,7 +704,7 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
                         workspace *ws) {
   int i, a, k, na = 0, nr, it = 0, status, refine, impact = 0, converged = 1, kept, rows[ND], first[NK + 1];
   int near = 0; /* whether contacts about to close take part */
-  casadi_real change = 0, residual = 0, bias[NK];
+  casadi_real change = 0, residual = 0, law = 0, bias[NK];
   status = repeat_step(q, v, t, u, p, h, q_next, v_next, lam, &it, o, warm, ws, &kept);
   if (status != STEP_OK) return status;
   if (kept) {
@@ -679,7 +763,7 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
     for (na = k = 0; k < NK; ++k) {
       const casadi_real g = ws->g[k];
       if (g <= 0) bias[na] = restitution[k] * fmin(ws->Um[k * DC], 0);
-      else if (restitution[k] == 0 && mu[k] == 0 && g < reach) {
+      else if (restitution[k] == 0 && g < reach) {
         bias[na] = fmax(0, 2 * g / h - ws->U[k * DC]);
         near = 1;
       } else continue;
@@ -731,6 +815,7 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
     }
     converged = solved;
     residual = ws->pgs_last;
+    law = cone_residual(ws, na, first, bias);
     if (refine == 0) ws->repeat = solved && ws->pgs_sweeps == 0; /* the warm start solved it */
     if (refine == 0) {
       casadi_real jump = 0;
@@ -781,5 +866,6 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
     ++ws->pgs_unconverged;
     ws->pgs_residual = fmax(ws->pgs_residual, residual);
   }
+  ws->cone_residual = nan_max(ws->cone_residual, law);
   return push_out_all(p, t + h, q_next, v_next, o, ws);
 }

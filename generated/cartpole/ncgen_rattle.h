@@ -78,7 +78,10 @@ typedef struct {
   casadi_int *act;   /* active contacts */
   casadi_int *fset;  /* the rows of G whose Cholesky factor ws->S holds (fm of them), in its
                         order; at fset + NK the first nonzero column of each of its rows */
-  int fm;            /* their number; -1 after delassus() changed G */
+  int fm;            /* their number; -1 after delassus() changed G or cone_newton() used S */
+  casadi_real *cn;   /* cone_newton(): rho, phi, dP, G dP, trial P and U (ND each) */
+  casadi_int *cni;   /* cone_newton(): the elimination's column list and dropped columns (ND
+                        each); then delassus()'s scratch (Schur complement form) */
   casadi_int *gp, *gi; /* the nonzeros of G by columns: column r has rows gi[gp[r] .. gp[r + 1] - 1] */
 #ifdef CONTACT_SCHUR
   casadi_real *T;    /* A M^-1, NC x NQ, row-major */
@@ -86,10 +89,13 @@ typedef struct {
   casadi_real *Z;    /* L^-1 A M^-1 W_r^T, NC per active row r */
   casadi_real *Y;    /* L^-T Z, NC per active row r */
   int schur;         /* whether the last delassus() took the Schur complement (Xc holds M^-1 W_r^T) */
+  int tl_zero;       /* whether T and L are zero but in the ranges the last delassus() recorded */
 #endif
   long pgs_unconverged; /* contact solves that used impulses from pgs() at PGS_MAX_ITER, since cleared */
   casadi_real pgs_last; /* relative change of the last sweep of the last pgs() */
   casadi_real pgs_residual; /* the largest pgs_last of those solves */
+  casadi_real cone_residual; /* the largest contact-law residual of a step's impulses, since cleared */
+  casadi_real cone_last; /* cone_newton()'s last residual */
   casadi_real penetration; /* the deepest gap below 0 at the end of a step, since cleared (m) */
   int pgs_sweeps;       /* sweeps of the last pgs() before it converged */
   int repeat;           /* whether repeat_step() is worth trying: the last step's impulses were
@@ -99,7 +105,7 @@ typedef struct {
 
 /* Blocks of the workspace (layout()). */
 #ifdef NCGEN_CONTACTS
-#define N_BLOCKS 24
+#define N_BLOCKS 26
 #else
 #define N_BLOCKS 10
 #endif
@@ -156,6 +162,12 @@ static size_t layout(workspace *ws, char *block) {
 #else
   sizes[23] = 0;
 #endif
+  sizes[24] = 6 * ND * sizeof(casadi_real);
+#ifdef CONTACT_SCHUR
+  sizes[25] = (2 * ND + NC + 2 * ND + NQ + 1 + 2 * NNZ_W + 2 * NC + NQ + 1 + NNZ_A) * sizeof(casadi_int);
+#else
+  sizes[25] = 2 * ND * sizeof(casadi_int);
+#endif
 #endif
   off[0] = 0;
   for (k = 0; k < N_BLOCKS; ++k) off[k + 1] = off[k] + align_up(sizes[k]);
@@ -193,11 +205,14 @@ static size_t layout(workspace *ws, char *block) {
     ws->fm = -1;
     ws->F = (casadi_real *) (void *) (block + off[21]);
     ws->fac = (casadi_real *) (void *) (block + off[22]);
+    ws->cn = (casadi_real *) (void *) (block + off[24]);
+    ws->cni = (casadi_int *) (void *) (block + off[25]);
 #ifdef CONTACT_SCHUR
     ws->T = (casadi_real *) (void *) (block + off[23]);
     ws->L = ws->T + NC * NQ;
     ws->Z = ws->L + NC * NC;
     ws->Y = ws->Z + NC * ND;
+    ws->tl_zero = 0;
 #endif
 #endif
   }

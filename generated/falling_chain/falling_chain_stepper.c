@@ -76,6 +76,7 @@ static const int a_row[NNZ_A] = {0, 0, 0, 0, 1, 0, 1, 0, 1, 1, 2, 1, 2, 1, 2, 2,
 static const int a_col[NNZ_A] = {0, 1, 2, 3, 3, 4, 4, 5, 5, 6, 6, 7, 7, 8, 8, 9, 10, 11};
 
 #include "ncgen_rattle.h"
+#include "ncgen_cone_newton.h"
 #include "ncgen_contact.h"
 #include "ncgen_fixed.h"
 #include "ncgen_adaptive.h"
