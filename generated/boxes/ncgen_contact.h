@@ -208,7 +208,7 @@ static void lcp_newton(workspace *ws, int n, const casadi_real *b) {
  * converged when every contact law holds to PGS_TOL (1 + max |U|) m/s; if it stops short
  * (no descent), the sweeps carry on from its last impulses. */
 static int pgs(workspace *ws, int na, const int *first, const casadi_real *bias) {
-  int nr = first[na], c, d, sweep, newton_at = NEWTON_FIRST;
+  int nr = first[na], c, d, sweep, newton_at = NEWTON_FIRST, cone = 1;
   ws->pgs_last = 0;
   ws->pgs_sweeps = PGS_MAX_ITER;
   for (sweep = 0; sweep < PGS_MAX_ITER; ++sweep) {
@@ -243,11 +243,12 @@ static int pgs(workspace *ws, int na, const int *first, const casadi_real *bias)
     if (sweep + 1 == newton_at) { /* Newton steps after 4, 8, 16, ... sweeps */
       newton_at *= 2;
       if (nr == na) lcp_newton(ws, nr, bias); /* frictionless */
-      else if (cone_newton(ws, na, first, bias, PGS_TOL, &ws->cone_last)) {
+      else if (cone && cone_newton(ws, na, first, bias, PGS_TOL, &ws->cone_last)) {
         ws->pgs_last = 0;
         ws->pgs_sweeps = sweep + 1;
         return 1;
-      }
+      } else
+        cone = 0; /* no descent from there: the sweeps finish alone */
     }
   }
   return 0;
