@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ncgen.cli.common import load_model
+from ncgen.cli.common import check_files, load_model
 from ncgen.cli.registry import subcommand
 from ncgen.errors import ProblemFileError
 
@@ -52,6 +52,7 @@ def mpc(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from ncgen.control.export import export_mpc
     from ncgen.optim.problem_file import model_path, problem_from_data, read_problem_file
 
+    check_files(args, parser, None, directories=("output",))
     data, origin = read_problem_file(Path(args.problem))
     model_file = model_path(data, origin)
     if model_file is None:
