@@ -347,8 +347,6 @@ def spring_states(model, q, v, t, u, p) -> list[tuple[str, float, float, bool]]:
 
 
 def _parameters(model, p) -> np.ndarray:
-    if p is None:
-        return model.p0
-    if isinstance(p, dict):
-        return model.parameters(**p)
-    return as_vector(p, model.np, "p")
+    """The parameter vector from ``p`` (None, an array, a dict by name): the rule of ``nc.simulate``."""
+    from ncgen.runtime.inputs import parameter_values
+    return model.p0 if p is None else parameter_values(p, model)

@@ -21,6 +21,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.errors import CodegenError, ShapeError
+from ncgen.validation import as_numbers
 
 _INT = ctypes.c_longlong          # casadi_int of the generated code (long long by default)
 _REAL_P = ctypes.POINTER(ctypes.c_double)
@@ -94,6 +95,8 @@ class DirectFunction:
                              f"({', '.join(self.input_names)}), got {len(args)}")
         try:
             for buf, x in zip(self.inputs, args):
+                if type(x) is np.ndarray and x.dtype.kind not in "fiu":   # complex, bool: refused below
+                    raise ValueError
                 buf[:] = x
                 if len(x) != buf.size:       # a length-1 argument would broadcast
                     raise ValueError
@@ -115,11 +118,7 @@ class DirectFunction:
         """Copy ``args`` into the buffers, raising for the first of a wrong size or with a
         non-finite value."""
         for name, buf, x in zip(self.input_names, self.inputs, args):
-            try:
-                a = np.asarray(x, dtype=float).ravel()
-            except (TypeError, ValueError):
-                raise ShapeError(f"{self.name}: argument {name!r}: expected {buf.size} numbers, got "
-                                 f"{type(x).__name__}") from None
+            a = as_numbers(x, f"{self.name}: argument {name!r}", f"{buf.size} numbers").ravel()
             if a.size != buf.size:
                 raise ShapeError(f"{self.name}: argument {name!r}: expected {buf.size} values, got {a.size} "
                                  f"(shape {np.shape(x)})")

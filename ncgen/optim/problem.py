@@ -30,7 +30,7 @@ import re
 import numpy as np
 
 from ncgen.errors import NcgenError, OptimizationError
-from ncgen.validation import as_scalar
+from ncgen.validation import as_numbers, as_scalar
 from ncgen.optim.transcription import MODEL_STATE
 
 METHODS = ("collocation", "shooting")
@@ -297,12 +297,16 @@ class OptimalControl:
             return out
         if isinstance(x, str):
             raise OptimizationError(f"{what}: expected numbers or None, got {x!r}")
-        a = np.asarray(x, dtype=float)
+        a = _numbers(x, what, f"{self.model.nq} numbers")
         if a.ndim == 0:
             a = np.full(self.model.nq, float(a))
-        if a.shape != (self.model.nq,) or not np.all(np.isfinite(a)):
+        names = self.model.coordinate_names
+        if a.shape != (self.model.nq,):
             raise OptimizationError(f"{what}: expected {self.model.nq} finite numbers "
-                                    f"({', '.join(self.model.coordinate_names)}), got shape {a.shape}")
+                                    f"({', '.join(names)}), got shape {a.shape}")
+        if not np.all(np.isfinite(a)):
+            k = int(np.flatnonzero(~np.isfinite(a))[0])
+            raise OptimizationError(f"{what}: expected {self.model.nq} finite numbers, got {a[k]} for {names[k]}")
         return a
 
     def _markers(self, spec, what: str) -> list[tuple[str, np.ndarray]]:
@@ -481,8 +485,16 @@ def _indices(name: str, names: list[str], sizes: list[int], what: str) -> list[i
     return [start + k]
 
 
+def _numbers(x, what: str, expected: str) -> np.ndarray:
+    """``x`` as real numbers (:func:`ncgen.validation.as_numbers`), any shape."""
+    try:
+        return as_numbers(x, what, expected)
+    except NcgenError as exc:
+        raise OptimizationError(str(exc)) from None
+
+
 def _values(x, n: int, what: str) -> np.ndarray:
-    a = np.asarray(x, dtype=float).reshape(-1)
+    a = _numbers(x, what, f"{n} finite number(s)").reshape(-1)
     if a.size == 1:
         a = np.full(n, a[0])
     if a.size != n or not np.all(np.isfinite(a)):
@@ -493,8 +505,8 @@ def _values(x, n: int, what: str) -> np.ndarray:
 def _bound_pair(lower, upper, n: int, what: str) -> np.ndarray:
     out = []
     for b, name in ((lower, "lower"), (upper, "upper")):
-        a = np.asarray(-np.inf if b is None and name == "lower" else np.inf if b is None else b,
-                       dtype=float).reshape(-1)
+        a = _numbers(-np.inf if b is None and name == "lower" else np.inf if b is None else b,
+                     f"{what}: {name} bound", f"{n} number(s)").reshape(-1)
         if a.size == 1:
             a = np.full(n, a[0])
         if a.size != n or np.any(np.isnan(a)):
