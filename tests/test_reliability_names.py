@@ -151,6 +151,11 @@ def test_toml_initial_on_rebased_names_gives_the_share_false_state():
     x, xd = shared.coordinate("link.r_i.x"), shared.coordinate("link.r_i.y")
     assert x[0] @ shared.q0 + x[1] == pytest.approx(0.5 * np.cos(theta), abs=1e-12)
     assert xd[0] @ shared.v0 == pytest.approx(0.5 * np.cos(theta) * rate, abs=1e-12)
+    # a result read by the names as written: the equilibrium hangs straight down
+    eq_s, eq_u = nc.equilibrium(shared), nc.equilibrium(written)
+    for name in ("link.r_i.x", "link.r_i.y", "link.u.y"):
+        assert eq_s.coordinate(name) == pytest.approx(eq_u.q[written.coordinate_names.index(name)], abs=1e-9)
+    assert eq_s.coordinate("link.r_i.y") == pytest.approx(-0.5, abs=1e-9)
     again = nc.System.from_toml(nc.System.from_toml(text).to_toml()).build()
     np.testing.assert_allclose(again.q0, shared.q0, atol=1e-14)
 
@@ -165,3 +170,34 @@ def test_toml_initial_coordinates_are_checked(table, message):
     text = PENDULUM_TOML.format(y=0, xd=0).replace('initial = {"link.r_i.y" = 0}', "initial = " + table)
     with pytest.raises(nc.ModelError, match=message):
         nc.System.from_toml(text).build()
+
+
+def welded():
+    s = nc.System("weld")
+    a = s.add_body("a", mass=1.0, inertia=np.diag([0.01, 0.02, 0.02]), position=(0.5, 0, 0))
+    b = s.add_body("b", mass=0.5, inertia=np.diag([0.01, 0.02, 0.02]), position=(1.2, 0, 0.1))
+    b.add_marker("tip", (0.2, 0, 0))
+    s.add_joint(nc.Revolute(s.ground, a, at=(0, 0, 0), axis=(0, 1, 0), name="hinge"))
+    s.add_joint(nc.Fixed(a, b, at=(1.0, 0, 0), name="weld"))
+    return s
+
+
+def test_members_markers_and_coordinates_of_merged_bodies_keep_their_names():
+    """A weld merges two bodies into one set of coordinates (24 -> 6): both members, their
+    markers and their coordinates as written still read as in the share=False run."""
+    shared, written = welded().build(), welded().build(share=False)
+    assert shared.sharing.eliminated["weld"] == "merged" and (shared.nq, written.nq) == (6, 24)
+    assert shared.member_names == written.member_names and shared.marker_names == ["b.tip"]
+    a = nc.simulate(shared, 0.5, 0.1, method="idas", rtol=1e-10, atol=1e-12)
+    b = nc.simulate(written, 0.5, 0.1, method="idas", rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(a.marker("b.tip"), b.marker("b.tip"), atol=1e-8)
+    np.testing.assert_allclose(a.point("b", (0.1, 0, 0)), b.point("b", (0.1, 0, 0)), atol=1e-8)
+    for name in ("b.r_i.x", "b.u.z", "a.w.y", "a.r_i.z"):
+        x, xd = a.coordinate(name)
+        i = written.coordinate_names.index(name)
+        np.testing.assert_allclose(x, b.q[:, i], atol=1e-8)
+        np.testing.assert_allclose(xd, b.v[:, i], atol=1e-7)
+    # the tip swings on a circle about the hinge axis (y) through the origin
+    tip = a.marker("b.tip")
+    radius = np.hypot(tip[:, 0], tip[:, 2])
+    np.testing.assert_allclose(radius, radius[0], atol=1e-8)

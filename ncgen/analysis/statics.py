@@ -74,6 +74,12 @@ class Equilibrium:
         """Names of the slack cables."""
         return [name for name, _, _, slack in self.springs if slack]
 
+    def coordinate(self, name: str) -> float:
+        """The value (m) of coordinate ``name`` at the equilibrium: one of the model's or one
+        as written before coordinate sharing re-based its member (``model.coordinate``)."""
+        s, c = self.model.coordinate(name)
+        return float(s @ self.q + c)
+
     def save(self, path) -> None:
         """Write the equilibrium: ``.npz`` (q, λ, u, p, K_reduced, stiffness eigenvalues and
         the coordinate and constraint names) or ``.csv`` (``name,value`` rows: ``q:<coordinate>``,
