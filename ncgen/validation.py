@@ -80,8 +80,8 @@ def _float_array(x, what: str = "value") -> np.ndarray:
 
 def _wrong_kind(x) -> str | None:
     """What makes ``x`` not an array of real numbers although NumPy converts it, or None."""
-    if isinstance(x, (str, bytes)):
-        return None                              # NumPy refuses these itself: the caller says so
+    if type(x) in (str, bytes, float, int) or (type(x) is np.ndarray and x.dtype.kind in "fiu"):
+        return None                              # the common cases; NumPy refuses strings itself
     try:
         a = np.asarray(x)
     except Exception:                            # ragged: NumPy's conversion error says it
