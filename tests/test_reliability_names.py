@@ -201,3 +201,20 @@ def test_members_markers_and_coordinates_of_merged_bodies_keep_their_names():
     tip = a.marker("b.tip")
     radius = np.hypot(tip[:, 0], tip[:, 2])
     np.testing.assert_allclose(radius, radius[0], atol=1e-8)
+
+
+def test_problem_files_take_rebased_names_and_mpc_says_what_it_cannot_take():
+    from ncgen.control.mpc_problem import mpc_problem
+    from ncgen.optim.problem_file import problem_from_data
+    model = pendulum().build()
+    data = {"horizon": {"N": 4, "t_final": 1.0},
+            "bounds": {"coordinates": {"link.r_i.y": [-0.6, 0.26]}, "velocities": {"link.r_i.x": [-1, 1]}},
+            "final": {"q": {"link.r_i.y": 0.25}}}
+    ocp, _ = problem_from_data(data, model, "p.toml")
+    kinds = [(kind, name) for kind, name, *_ in ocp.row_bounds]
+    assert kinds == [("coordinate", "link.r_i.y"), ("velocity of", "link.r_i.x")]
+    s, c = model.coordinate("link.r_i.y")
+    assert np.allclose(ocp.row_bounds[0][2], s) and ocp.row_bounds[0][3:] == (c, -0.6, 0.26)
+    with pytest.raises(OptimizationError, match=r"bounds on coordinates as written that coordinate sharing "
+                                                r"re-based \(not a box on the state\)"):
+        mpc_problem(ocp, 1e3)
