@@ -143,7 +143,8 @@ class OptimalControl:
         else:
             s, c = self.coordinate_row(name)
             self.row_bounds = [b for b in self.row_bounds if b[:2] != (kind, name)]
-            self.row_bounds.append((kind, name, s, c if kind == "coordinate" else 0.0, *pair[:, 0]))
+            if np.any(np.isfinite(pair)):
+                self.row_bounds.append((kind, name, s, c if kind == "coordinate" else 0.0, *pair[:, 0]))
         return self
 
     def bound_velocity(self, name: str, lower=-np.inf, upper=np.inf) -> "OptimalControl":
