@@ -35,9 +35,11 @@ def test_kernel_arguments_are_checked(arm):
     with pytest.raises(ShapeError, match=r"argument 'u': expected 2 values, got 3"):
         k(0.0, q, v, np.ones(3), p)
     with pytest.raises(ShapeError, match=r"argument 'q': expected real numbers, got complex numbers"):
-        k(0.0, q + 0j, v, u, p)                  # NumPy would drop the imaginary part
+        k.checked(0.0, q + 0j, v, u, p)          # NumPy would drop the imaginary part
     with pytest.raises(ShapeError, match=r"argument 'u': expected real numbers, got booleans"):
-        k(0.0, q, v, np.array([True, False]), p)
+        k.checked(0.0, q, v, np.array([True, False]), p)
+    with pytest.raises(ShapeError, match=r"argument 'v': expected real numbers, got NoneType None at index 0"):
+        k(0.0, q, [None] * arm.nq, u, p)         # not a number: the careful path names it
     with pytest.raises(ShapeError, match=r"argument 'v': expected finite numbers, found nan at index 4"):
         k.checked(0.0, q, np.where(np.arange(arm.nq) == 4, np.nan, v), u, p)
     a = np.array(k(0.0, list(q), v, u, p)[0]).reshape(-1)        # a list, after the refusals

@@ -88,15 +88,14 @@ class DirectFunction:
         """Copy ``args`` (one array per input, its nonzeros) into the buffers and evaluate.
         Raises :class:`~ncgen.errors.ShapeError` naming the input for a wrong number of
         arguments or a wrong size (no broadcasting).  Values are not tested for finiteness
-        on this path (the test would cost as much as the call: a NaN in gives NaN out);
-        :meth:`checked` does it."""
+        nor for being real on this path (the tests would cost as much as the call: a NaN in
+        gives NaN out, a complex array loses its imaginary part as NumPy casts it);
+        :meth:`checked` does both."""
         if len(args) != len(self.inputs):
             raise ShapeError(f"{self.name}: expected {len(self.inputs)} arguments "
                              f"({', '.join(self.input_names)}), got {len(args)}")
         try:
             for buf, x in zip(self.inputs, args):
-                if type(x) is np.ndarray and x.dtype.kind not in "fiu":   # complex, bool: refused below
-                    raise ValueError
                 buf[:] = x
                 if len(x) != buf.size:       # a length-1 argument would broadcast
                     raise ValueError
