@@ -1,7 +1,7 @@
 """Every public array argument is checked for shape, kind and finiteness, with a message
 naming the argument, what was expected and what was found (issue 24, class 2): strings,
 complex numbers (NumPy would drop the imaginary part), booleans (read as 0 and 1), ``None``
-entries (read as NaN), NaN, infinity and wrong shapes, for ``nc.simulate``,
+entries (read as NaN), NaN, infinity and wrong shapes, for ``nc.simulate``, ``nc.simulate_batch``,
 ``nc.equilibrium``, ``nc.linearize``, the joint-space entry points, the compiled kernels
 and the optimal-control conditions, bounds and warm starts."""
 from __future__ import annotations
@@ -43,6 +43,14 @@ def bad_values(n: int) -> dict:
     }
 
 
+def batch(model, **given):
+    """``nc.simulate_batch`` records a run that cannot start instead of raising: its message."""
+    result = nc.simulate_batch(model, 0.1, 0.05, **given)
+    if result.status[0] != 0:
+        raise NcgenError(str(result.message[0]))
+    return result
+
+
 #: a parameter vector's values are checked by name once its shape is right
 P_NAME = r"p \(parameter values\)|parameter 'k'"
 
@@ -56,6 +64,7 @@ ENTRIES = {
     "simulate u (callable)": ("u", "nu", lambda m, x: nc.simulate(m, 0.1, 0.05, u=lambda t: x,
                                                                              method="idas")),
     "simulate p": (P_NAME, "np", lambda m, x: nc.simulate(m, 0.1, 0.05, p=x, method="idas")),
+    "simulate_batch q0": ("q0", "nq", lambda m, x: batch(m, q0=x)),
     "equilibrium q_guess": ("q_guess", "nq", lambda m, x: nc.equilibrium(m, x)),
     "equilibrium u": ("u", "nu", lambda m, x: nc.equilibrium(m, u=x)),
     "equilibrium p": (P_NAME, "np", lambda m, x: nc.equilibrium(m, p=x)),
