@@ -277,21 +277,38 @@ class _Loader:
 
     def _initial(self, table, key):
         """``initial = {elbow = 0.3}``: joint positions (rad, m; a list for multi-coordinate
-        joints) of the initial state; ``initial_rates`` likewise for rates."""
+        joints) of the initial state, or coordinates as written (``"link.r_i.x" = 0.3``, m);
+        ``initial_rates`` likewise for rates."""
         if not isinstance(table, dict):
             raise ModelError(f"{key}: expected a table {{joint = value}}, got {_describe(table)}")
         names = [j.name for j in self.s.joints]
-        out = {}
+        joints, coords = {}, {}
         for name, v in table.items():
             path = f"{key}.{name}"
-            if name not in names:
-                raise ModelError(f"{path}: no joint named {name!r}{did_you_mean(name, names)}")
-            if isinstance(v, list):
-                out[name] = [_number(x, f"{path}[{i}]") for i, x in enumerate(v)]
+            if "." in name:
+                coords[name] = _number(v, path)
+                self._coordinate_name(name, path)
+            elif name not in names:
+                raise ModelError(f"{path}: no joint named {name!r}{did_you_mean(name, names)} (a coordinate "
+                                 "is named member.slot.axis, e.g. \"link.r_i.x\")")
+            elif isinstance(v, list):
+                joints[name] = [_number(x, f"{path}[{i}]") for i, x in enumerate(v)]
             else:
-                out[name] = _number(v, path)
-        target = self.s.initial_joints if key == "initial" else self.s.initial_joint_rates
-        target.update(out)
+                joints[name] = _number(v, path)
+        rates = key != "initial"
+        (self.s.initial_joint_rates if rates else self.s.initial_joints).update(joints)
+        (self.s.initial_coordinate_rates if rates else self.s.initial_coordinates).update(coords)
+
+    def _coordinate_name(self, name: str, path: str) -> None:
+        """Check ``member.slot.axis`` against the members as written."""
+        parts = name.split(".")
+        m = self.s.members.get(parts[0])
+        if m is None:
+            raise ModelError(f"{path}: no member named {parts[0]!r}{did_you_mean(parts[0], list(self.s.members))}")
+        slots, axes = m.ctype.slots, "xyz"[:self.s.dim]
+        if len(parts) != 3 or parts[1] not in slots or parts[2] not in axes:
+            raise ModelError(f"{path}: expected a coordinate {m.name}.SLOT.AXIS with SLOT one of "
+                             f"{', '.join(slots)} and AXIS one of {', '.join(axes)}, got {name!r}")
 
     @staticmethod
     def _array(v, path):
@@ -557,7 +574,8 @@ def system_to_toml(system) -> str:
         parts.append(toml_write.table("forces", _force_entries(f, sc, system), array=True))
     for c in system.contacts:
         parts.append(toml_write.table("contacts", _contact_entries(c), array=True))
-    for key, values in (("initial", system.initial_joints), ("initial_rates", system.initial_joint_rates)):
+    for key, values in (("initial", {**system.initial_joints, **system.initial_coordinates}),
+                        ("initial_rates", {**system.initial_joint_rates, **system.initial_coordinate_rates})):
         if values:
             parts.append(toml_write.table(key, {n: _plain(v) for n, v in values.items()}))
     ctrl = getattr(system, "controller", None)
