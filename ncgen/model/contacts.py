@@ -1,6 +1,8 @@
 """Unilateral contact elements: a body-fixed sphere against a plane, two spheres, and
 body-fixed shapes against a plane as several contact points (:class:`BoxPlane`,
-:class:`CapsulePlane`, :class:`CylinderPlane`).
+:class:`CapsulePlane`, :class:`CylinderPlane`); a sphere against a box (:class:`SphereBox`)
+and two boxes as the corners of each against the other (:class:`BoxBox`), a box carried by
+a body or the ground.
 
 Geometry is given like a joint's: body-fixed points in the member's local frame (``at``,
 as for forces), the plane by a world point and a world normal in the initial
@@ -23,8 +25,9 @@ Every contact has, besides its geometry (SI units):
   ``restitution`` is the nonsmooth stepper's only.
 
 Sign conventions: the gap ``g`` (m) is positive when apart; the normal ``n`` points from the
-plane (or sphere ``a``) towards the sphere (or sphere ``b``); contact forces are those on the
-second element (the sphere, or ``b``), and ``−`` that on the first.
+plane (or sphere ``a``, or the box) towards the sphere (or sphere ``b``, or the box corner);
+contact forces are those on the second element (the sphere, ``b``, or the corner's box), and
+``−`` that on the first.
 """
 from __future__ import annotations
 
