@@ -149,6 +149,30 @@ def test_corners_of_equal_stacked_boxes_press_on_the_top_face():
     np.testing.assert_allclose(g[[12, 14]], 0.01, atol=1e-15)             # at −x: off upper's edge
 
 
+def test_planar_disc_and_rectangles():
+    """dim = 2: a disc over a rectangle's corner region is at its distance from the corner
+    less the radius; a tilted rectangle's corners over a ground rectangle at their height
+    above its top; W_N against finite differences."""
+    s = nc.System("flat", gravity=(0, -G))
+    beta = 0.1
+    slab = s.add_body("slab", coords="ruv", mass=1.0, inertia=0.01, position=(0, 0.15), rotation=beta,
+                      velocity=(0.2, -0.1), angular_velocity=0.5)
+    disc = s.add_body("disc", coords="ruv", mass=1.0, inertia=0.01, position=(0.3, 0.35))
+    s.add_contact(nc.BoxBox(slab, (0.4, 0.1), s.ground, (1.0, 0.1), name="bb"))
+    s.add_contact(nc.SphereBox(disc, radius=0.1, box=slab, size=(0.4, 0.1), name="sb"))
+    model = s.build(contacts="nonsmooth")
+    assert model.contact_names == [f"bb.a_corner{i}" for i in range(4)] + [f"bb.b_corner{i}" for i in range(4)] + ["sb"]
+    g = model.gap(model.q0)
+    R = np.array([[np.cos(beta), -np.sin(beta)], [np.sin(beta), np.cos(beta)]])
+    for i in range(4):
+        corner = np.array([0, 0.15]) + R @ (np.array([1 if i & 1 else -1, 1 if i & 2 else -1]) * (0.2, 0.05))
+        np.testing.assert_allclose(g[i], corner[1] - 0.05, atol=1e-14)
+    top_right = np.array([0, 0.15]) + R @ np.array([0.2, 0.05])
+    np.testing.assert_allclose(g[-1], np.linalg.norm(np.array([0.3, 0.35]) - top_right) - 0.1, atol=1e-14)
+    WN_T, dg = tangent_fd(model, model.q0)
+    np.testing.assert_allclose(WN_T, dg, atol=1e-7)
+
+
 def test_bad_pairs_are_named():
     s = nc.System("bad")
     b = s.add_body("b", mass=1.0, inertia=np.eye(3) * 0.01, position=(0, 0, 1))
