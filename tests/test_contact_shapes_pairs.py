@@ -404,3 +404,16 @@ def test_stack_of_five_boxes_with_friction_rests_without_drift():
     tr = simulate(stack(0.5), 2.0, dt=0.05)
     _check_stack(tr)
     assert tr.info["contacts"]["pgs_unconverged"] == 0
+
+
+def test_smooth_ball_rests_on_a_box_at_the_static_penetration():
+    """Compliant law (IDAS): a ball on a fixed box sinks ``δ = (m g / k)^(1/n)``."""
+    k, n_exp = 1e5, 1.5
+    s = nc.System("soft_ball_box")
+    ball = s.add_body("ball", mass=M_BALL, inertia=ball_inertia(M_BALL, R_BALL), position=(0.1, 0.05, 0.4 + R_BALL))
+    s.add_contact(nc.SphereBox(ball, radius=R_BALL, size=TABLE, box_at=(0, 0, 0.2), box_rotation=R_y(0.0), mu=0.5,
+                               stiffness=k, damping=2e6, exponent=n_exp, name="soft"))
+    tr = nc.simulate(s.build(), 1.0, 0.01, rtol=1e-9, atol=1e-11)
+    delta = (M_BALL * G / k) ** (1 / n_exp)
+    np.testing.assert_allclose(-tr.gap[-20:, 0], delta, rtol=1e-4)
+    np.testing.assert_allclose(tr.contact_normal[-20:, 0], M_BALL * G, rtol=1e-4)

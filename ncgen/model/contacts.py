@@ -161,6 +161,16 @@ class Contact:
             raise ModelError(f"{self.label}: {what} radius: expected a finite number >= 0 (m), got {radius!r}")
         return x, r
 
+    def _length(self, value, what: str, positive: bool = True) -> float:
+        try:
+            x = float(value)
+        except (TypeError, ValueError):
+            raise ModelError(f"{self.label}: {what}: expected a number (m), got {value!r}") from None
+        if not math.isfinite(x) or x < 0 or (positive and x == 0):
+            raise ModelError(f"{self.label}: {what}: expected a finite number {'> 0' if positive else '>= 0'} (m), "
+                             f"got {value!r}")
+        return x
+
     def point_contacts(self) -> list:
         """The point contacts this element stands for (itself for a sphere pair)."""
         return [self]
@@ -324,16 +334,6 @@ class ShapePlane(Contact):
     def _check_shape(self, dim: int):
         """Argument checks of the shape's dimensions (subclasses)."""
 
-    def _length(self, value, what: str, positive: bool = True) -> float:
-        try:
-            x = float(value)
-        except (TypeError, ValueError):
-            raise ModelError(f"{self.label}: {what}: expected a number (m), got {value!r}") from None
-        if not math.isfinite(x) or x < 0 or (positive and x == 0):
-            raise ModelError(f"{self.label}: {what}: expected a finite number {'> 0' if positive else '>= 0'} (m), "
-                             f"got {value!r}")
-        return x
-
     def _need_3d(self, dim: int):
         if dim != 3:
             raise ModelError(f"{self.label}: a {self.kind} needs a 3D system (its axis is the body's z), "
@@ -494,8 +494,6 @@ class SphereBox(Contact):
             self.box = given
             raise
 
-    _length = ShapePlane._length
-
     def check(self, system):
         d = system.dim
         if self.box is self.sphere:
@@ -517,9 +515,11 @@ class SphereBox(Contact):
 class BoxCorner(SphereBox):
     """One point contact of a :class:`BoxBox` ``element`` (built by it, never attached):
     corner ``signs`` (±1 per axis) of the box ``(size, at, rotation)`` on ``member`` against
-    the other box.  Its gap is the largest face-plane distance of the corner to the other
-    box (:mod:`ncgen.assembly.contacts`); ``corner_rotation`` and ``corner_signs`` say which
-    faces of its own box meet at the corner (they break near ties between faces)."""
+    the other box.  Its gap is the corner's distance to the plane of one face of the other
+    box, the face chosen among those the corner is over (``_sphere_box`` in
+    :mod:`ncgen.assembly.contacts`); ``corner_rotation``, ``corner_signs`` and
+    ``corner_size`` say which faces of its own box meet at the corner and how large it is
+    (they settle near ties between faces)."""
 
     def __init__(self, element, suffix: str, member, size, at, rotation, signs, box, box_size, box_at,
                  box_rotation):
@@ -548,9 +548,10 @@ class BoxBox(Contact):
     the sign of axis j ``+`` when bit j of i is set.  This holds a box resting on a face,
     an edge or a corner of the other wherever a corner of one of them is in contact: a box
     on a larger, a smaller or an equal box, shifted or turned in the plane of contact so
-    long as a corner of one lies over the other.  Not covered: two edges crossing with no
-    corner in contact (e.g. equal squares stacked at 45°, or two beams crossed edge on
-    edge): the boxes then pass through each other."""
+    long as a corner of one lies over the other's face (docs/contact.md gives the method and
+    its tolerances).  Not covered: two edges crossing with no corner in contact (e.g. equal
+    squares stacked at 45°, or two beams crossed edge on edge): the boxes then pass through
+    each other."""
 
     kind = "BoxBox"
 
@@ -563,8 +564,6 @@ class BoxBox(Contact):
 
     def members(self):
         return [self.a, self.b]
-
-    _length = ShapePlane._length
 
     def check(self, system):
         d = system.dim
