@@ -254,6 +254,8 @@ TABLE = np.array([1.0, 1.0, 0.4])
 RAMP = np.array([3.0, 1.0, 0.4])
 THETA = 0.25                                          # tilt of the ramp box (rad)
 MU_SLIDE, V0 = 0.4, 1.2
+TALL = np.array([0.1, 0.2, 0.3])                     # base b = 0.1 m along the slope, height h = 0.3 m
+ALPHA_STAND, ALPHA_TIP = np.arctan(0.9 * TALL[0] / TALL[2]), np.arctan(1.1 * TALL[0] / TALL[2])
 
 
 def _crate(s, name, y):
@@ -268,7 +270,8 @@ def scenes():
     on the floor; a ball on a fixed table box; a small box resting on a crate on the floor;
     a ball released on a fixed 3 m long box tilted by θ (rolls, μ = 1); a box sliding on a
     fixed table box to rest (v0 = 1.2 m/s, μ = 0.4) and one on the tilted box (μ = 0.2 <
-    tan θ: slides)."""
+    tan θ: slides); tall boxes (μ = 1) on box ramps tilted below and above their tipping
+    angle tan α = b/h; a crate dropped from 1 cm flat onto an equal crate on the floor."""
     s = nc.System("pairs")
     crate = _crate(s, "crate", 0.0)
     ball = s.add_body("ball", mass=M_BALL, inertia=ball_inertia(M_BALL, R_BALL),
@@ -291,6 +294,14 @@ def scenes():
     skid = s.add_body("skid", mass=M_TOP, inertia=box_inertia(M_TOP, TOP), rotation=ramp,
                       position=np.array([0, 10.0, 0.2]) + ramp[:, 0] + n * (RAMP[2] + TOP[2]) / 2)
     s.add_contact(nc.BoxBox(skid, TOP, s.ground, RAMP, at_b=(0, 10.0, 0.2), rotation_b=ramp, mu=0.2, name="skid_ramp"))
+    for name, alpha, y in (("stand", ALPHA_STAND, 12.0), ("tip", ALPHA_TIP, 14.0)):
+        tilt, at = R_y(-alpha), np.array([0, y, 0.2])
+        b = s.add_body(name, mass=M_TOP, inertia=box_inertia(M_TOP, TALL), rotation=tilt,
+                       position=at + tilt[:, 2] * (RAMP[2] + TALL[2]) / 2)
+        s.add_contact(nc.BoxBox(b, TALL, s.ground, RAMP, at_b=at, rotation_b=tilt, mu=1.0, name=name))
+    under = _crate(s, "under", 16.0)
+    over = s.add_body("over", mass=M_CRATE, inertia=box_inertia(M_CRATE, CRATE), position=(0, 16.0, 1.5 * CRATE[2] + 0.01))
+    s.add_contact(nc.BoxBox(over, CRATE, under, CRATE, mu=0.5, name="over_under"))
     model = s.build(contacts="nonsmooth")
     return model, simulate(model, 1.0)
 
@@ -319,8 +330,9 @@ def test_box_rests_on_a_box_on_its_four_corners(scenes):
     rest = tr.t > 0.1
     np.testing.assert_allclose(f[rest][:, a_bottom].sum(axis=1), M_TOP * G, rtol=1e-8)   # 1.4e-9 measured
     corners = np.array([[(1 if i >> j & 1 else -1) * TOP[j] / 2 for j in range(2)] for i in range(4)])
-    np.testing.assert_allclose(f[rest][:, a_bottom] @ corners, 0, atol=1e-9)     # no moment about the centre
-    np.testing.assert_allclose(f[rest][:, a_bottom], M_TOP * G / 4, rtol=5e-3)
+    # four coplanar supports: the weight and the two moments about the centre fix three
+    # combinations; the fourth (f0 − f1 − f2 + f3) is the solver's choice
+    np.testing.assert_allclose(f[rest][:, a_bottom] @ corners, 0, atol=1e-9)
     assert np.all(np.delete(f, a_bottom, axis=1) == 0)                            # the rest carry nothing
     np.testing.assert_allclose(_forces(tr, "base_floor")[rest].sum(axis=1), (M_CRATE + M_TOP) * G, rtol=1e-8)
     x = tr.point("top", (0, 0, 0))
@@ -353,6 +365,30 @@ def model_rows(model, member):
     layout = model.layout
     i = layout.nodes[layout.slots[member][0]].index
     return list(range(i, i + 3))
+
+
+def test_box_on_a_tilted_box_tips_iff_tan_alpha_exceeds_base_over_height(scenes):
+    _, tr = scenes
+    for name, alpha, tips in (("stand", ALPHA_STAND, False), ("tip", ALPHA_TIP, True)):
+        n = R_y(-alpha)[:, 2]
+        up = tr.point(name, (0, 0, 1)) - tr.point(name, (0, 0, 0))
+        tilt = np.arccos(np.clip(up @ n, -1, 1))
+        if tips:
+            assert tilt[-1] > 1.0, tilt[-1]                 # fallen onto its downhill face
+        else:
+            assert tilt.max() < 1e-9, tilt.max()
+            assert np.ptp(tr.point(name, (0, 0, 0)) @ R_y(-alpha)[:, 0]) < 1e-9
+
+
+def test_box_dropped_flat_on_an_equal_box_rests_on_its_face(scenes):
+    """The upper crate's bottom corners and the lower crate's top corners coincide: the
+    weight is shared among the eight (indeterminate), the total and the rest height exact."""
+    _, tr = scenes
+    rest = tr.t > 0.2
+    np.testing.assert_allclose(_forces(tr, "over_under")[rest].sum(axis=1), M_CRATE * G, rtol=1e-8)
+    x = tr.point("over", (0, 0, 0))
+    np.testing.assert_allclose(x[rest], [[0, 16.0, 1.5 * CRATE[2]]] * rest.sum(), atol=1e-6)
+    assert tr.gap[rest][:, [i for i, c in enumerate(tr.contact_names) if c.startswith("over_under.")]].min() > -1e-8
 
 
 def test_contact_points_against_boxes_are_drawn_where_they_touch(scenes):

@@ -17020,7 +17020,7 @@ static int casadi_f59(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a0008=(a0006*a0007);
   a0003=(a0003+a0008);
   a0008=casadi_fabs(a0003);
-  a0009=4.0000010000000003e-01;
+  a0009=4.0100000000000002e-01;
   a0008=(a0008<=a0009);
   a0010=arg[0]? arg[0][2] : 0;
   a0011=arg[0]? arg[0][5] : 0;
@@ -17035,7 +17035,7 @@ static int casadi_f59(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a0015=2.0000000000000001e-01;
   a0012=(a0012-a0015);
   a0016=casadi_fabs(a0012);
-  a0017=2.0000010000000001e-01;
+  a0017=2.0100000000000001e-01;
   a0016=(a0016<=a0017);
   a0008=(a0008&&a0016);
   a0016=0.;
@@ -18580,7 +18580,7 @@ static int casadi_f59(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a0020=(a0013*a0010);
   a0042=(a0042-a0020);
   a0020=casadi_fabs(a0042);
-  a0043=1.0000010000000001e-01;
+  a0043=1.0100000000000001e-01;
   a0020=(a0020<=a0043);
   a0032=(a0039-a0018);
   a0032=(a0022*a0032);
@@ -18590,7 +18590,7 @@ static int casadi_f59(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a0023=(a0014*a0010);
   a0032=(a0032-a0023);
   a0023=casadi_fabs(a0032);
-  a0003=5.0000100000000006e-02;
+  a0003=5.1000000000000004e-02;
   a0023=(a0023<=a0003);
   a0020=(a0020&&a0023);
   a0023=(a0039-a0018);
@@ -18620,7 +18620,7 @@ static int casadi_f59(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a0020=(a0020?a0041:0);
   a0040=(a0040+a0020);
   a0020=casadi_fabs(a0023);
-  a0035=1.5000010000000000e-01;
+  a0035=1.5100000000000000e-01;
   a0020=(a0020<=a0035);
   a0008=casadi_fabs(a0032);
   a0008=(a0008<=a0003);
@@ -19528,7 +19528,7 @@ static int casadi_f59(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a0055=(a0013*a0055);
   a0044=(a0044+a0055);
   a0055=casadi_fabs(a0044);
-  a0056=1.0000008000000001e-01;
+  a0056=1.0080000000000000e-01;
   a0055=(a0055<=a0056);
   a0057=(a0023-a0018);
   a0057=(a0022*a0057);
@@ -19539,7 +19539,7 @@ static int casadi_f59(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a0058=(a0014*a0058);
   a0057=(a0057+a0058);
   a0058=casadi_fabs(a0057);
-  a0059=5.0000080000000002e-02;
+  a0059=5.0800000000000005e-02;
   a0058=(a0058<=a0059);
   a0055=(a0055&&a0058);
   a0023=(a0023-a0018);
@@ -19670,7 +19670,7 @@ static int casadi_f59(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a0055=(a0055?a0052:0);
   a0063=(a0063+a0055);
   a0055=casadi_fabs(a0023);
-  a0062=1.5000008000000001e-01;
+  a0062=1.5079999999999999e-01;
   a0055=(a0055<=a0062);
   a0067=casadi_fabs(a0057);
   a0067=(a0067<=a0059);
@@ -21625,7 +21625,7 @@ static int casadi_f59(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a0075=(a0054*a0075);
   a0065=(a0065+a0075);
   a0075=casadi_fabs(a0065);
-  a0064=4.0000080000000000e-02;
+  a0064=4.0800000000000003e-02;
   a0075=(a0075<=a0064);
   a0023=(a0023&&a0075);
   a0069=(a0069-a0008);
@@ -21752,7 +21752,7 @@ static int casadi_f59(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a0023=(a0023?a0052:0);
   a0077=(a0077+a0023);
   a0023=casadi_fabs(a0069);
-  a0061=6.0000079999999997e-02;
+  a0061=6.0800000000000000e-02;
   a0023=(a0023<=a0061);
   a0076=casadi_fabs(a0065);
   a0076=(a0076<=a0064);
@@ -42051,7 +42051,7 @@ static int casadi_f62(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a08=(a06*a07);
   a03=(a03+a08);
   a08=casadi_fabs(a03);
-  a09=4.0000010000000003e-01;
+  a09=4.0100000000000002e-01;
   a08=(a08<=a09);
   a10=arg[0]? arg[0][2] : 0;
   a11=arg[0]? arg[0][5] : 0;
@@ -42066,7 +42066,7 @@ static int casadi_f62(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a15=2.0000000000000001e-01;
   a12=(a12-a15);
   a16=casadi_fabs(a12);
-  a17=2.0000010000000001e-01;
+  a17=2.0100000000000001e-01;
   a16=(a16<=a17);
   a08=(a08&&a16);
   a16=0.;
@@ -43611,7 +43611,7 @@ static int casadi_f62(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a20=(a13*a10);
   a41=(a41-a20);
   a20=casadi_fabs(a41);
-  a43=1.0000010000000001e-01;
+  a43=1.0100000000000001e-01;
   a20=(a20<=a43);
   a32=(a39-a18);
   a32=(a22*a32);
@@ -43621,7 +43621,7 @@ static int casadi_f62(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a23=(a14*a10);
   a32=(a32-a23);
   a23=casadi_fabs(a32);
-  a03=5.0000100000000006e-02;
+  a03=5.1000000000000004e-02;
   a23=(a23<=a03);
   a20=(a20&&a23);
   a23=(a39-a18);
@@ -43651,7 +43651,7 @@ static int casadi_f62(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a20=(a20?a09:0);
   a17=(a17+a20);
   a20=casadi_fabs(a23);
-  a40=1.5000010000000000e-01;
+  a40=1.5100000000000000e-01;
   a20=(a20<=a40);
   a08=casadi_fabs(a32);
   a08=(a08<=a03);
@@ -44559,7 +44559,7 @@ static int casadi_f62(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a48=(a13*a48);
   a25=(a25+a48);
   a48=casadi_fabs(a25);
-  a49=1.0000008000000001e-01;
+  a49=1.0080000000000000e-01;
   a48=(a48<=a49);
   a50=(a23-a18);
   a50=(a22*a50);
@@ -44570,7 +44570,7 @@ static int casadi_f62(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a51=(a14*a51);
   a50=(a50+a51);
   a51=casadi_fabs(a50);
-  a52=5.0000080000000002e-02;
+  a52=5.0800000000000005e-02;
   a51=(a51<=a52);
   a48=(a48&&a51);
   a23=(a23-a18);
@@ -44701,7 +44701,7 @@ static int casadi_f62(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a48=(a48?a45:0);
   a56=(a56+a48);
   a48=casadi_fabs(a23);
-  a55=1.5000008000000001e-01;
+  a55=1.5079999999999999e-01;
   a48=(a48<=a55);
   a60=casadi_fabs(a50);
   a60=(a60<=a52);
@@ -46656,7 +46656,7 @@ static int casadi_f62(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a68=(a47*a68);
   a58=(a58+a68);
   a68=casadi_fabs(a58);
-  a49=4.0000080000000000e-02;
+  a49=4.0800000000000003e-02;
   a68=(a68<=a49);
   a23=(a23&&a68);
   a62=(a62-a08);
@@ -46783,7 +46783,7 @@ static int casadi_f62(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a23=(a23?a45:0);
   a64=(a64+a23);
   a23=casadi_fabs(a62);
-  a54=6.0000079999999997e-02;
+  a54=6.0800000000000000e-02;
   a23=(a23<=a54);
   a56=casadi_fabs(a58);
   a56=(a56<=a49);

@@ -43,14 +43,18 @@ from ncgen.rigid_motion import casadi_forms as crm
 RIM_EPS = 1e-4
 #: Box corners against a box, relative to the smallest edge of the two boxes (see
 #: :func:`_sphere_box`).  ``EDGE_TOL``: a corner counts as over a face while it is off the
-#: face's edges by at most this (round-off and the drift of a resting stack).  ``FACE_TIE``:
+#: face's edges by at most this: equal boxes stacked flush have every corner on an edge of
+#: the other, and a yaw of ψ moves them off by ~ψ × half the diagonal, so a smaller tolerance
+#: lets a yaw of 1e-6 rad (a friction solve's drift) drop the upper box through (no corner is
+#: then over a face); the price: the support reaches that far past an edge (1 mm for 10 cm
+#: boxes).  ``FACE_TIE``:
 #: among the faces a corner is over, one lying flatter against the corner's own box wins
 #: while its face-plane distance is within this of the largest.  A corner of a box resting on
 #: an equal box lies on the lower box's side planes too (distance 0 from them however deep it
 #: goes), so the tie must exceed the depth a corner reaches within a step (about v h, 1 mm at
 #: 1 m/s and h = 1 ms); where the faces' flatness differs and a corner is within the tie of a
 #: side plane, a penetration up to the tie can be attributed to the wrong face.
-EDGE_TOL, FACE_TIE = 1e-6, 1e-2
+EDGE_TOL, FACE_TIE = 1e-2, 1e-2
 
 
 class ContactTerms:
