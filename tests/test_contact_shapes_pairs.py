@@ -453,3 +453,15 @@ def test_smooth_ball_rests_on_a_box_at_the_static_penetration():
     delta = (M_BALL * G / k) ** (1 / n_exp)
     np.testing.assert_allclose(-tr.gap[-20:, 0], delta, rtol=1e-4)
     np.testing.assert_allclose(tr.contact_normal[-20:, 0], M_BALL * G, rtol=1e-4)
+
+
+def test_boxes_fixed_to_the_ground_are_drawn_once(scenes):
+    from ncgen.viz.geometry import member_primitives
+    model, _ = scenes
+    ground = member_primitives(model, 1.0)["ground"]
+    boxes = sorted((tuple(p.size), tuple(np.round(p.p, 12))) for p in ground if p.kind == "box")
+    # the table boxes at y = 2 and 8, the ramps at y = 6, 10, 12, 14 (each once, not per corner)
+    assert boxes == sorted([(tuple(TABLE), (0, 2.0, 0.2)), (tuple(TABLE), (0, 8.0, 0.2))]
+                           + [(tuple(RAMP), (0, y, 0.2)) for y in (6.0, 10.0, 12.0, 14.0)])
+    tilted = next(p for p in ground if np.isclose(p.p[1], 10.0))
+    np.testing.assert_allclose(tilted.R, R_y(-THETA), atol=1e-15)
