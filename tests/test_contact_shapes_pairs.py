@@ -173,6 +173,20 @@ def test_planar_disc_and_rectangles():
     np.testing.assert_allclose(WN_T, dg, atol=1e-7)
 
 
+def test_box_on_a_ground_box_given_first():
+    """``BoxBox(s.ground, ..., body, ...)``: the ground box's corners are the a-corners (their
+    forces on the ground), the body's the b-corners, resting on the ground box's top face."""
+    s = nc.System("ground_first")
+    b = s.add_body("b", mass=1.0, inertia=box_inertia(1.0, (0.2, 0.2, 0.1)), position=(0.1, 0, 0.55))
+    s.add_contact(nc.BoxBox(s.ground, (1, 1, 1), b, (0.2, 0.2, 0.1), name="bb"))
+    model = s.build(contacts="nonsmooth")
+    # the ground box's top corners off the body's box: their largest face-plane distance, along
+    # x (0.6 − 0.1 at −x) or y (0.5 − 0.1 at +x, where x gives 0.4 − 0.1)
+    np.testing.assert_allclose(model.gap(model.q0), [1.0] * 4 + [0.5, 0.4] * 2 + [0] * 4 + [0.1] * 4, atol=1e-14)
+    WN = model.contact_jacobian(model.q0)[0]
+    np.testing.assert_allclose(WN[8:12, :3], [[0, 0, 1]] * 4, atol=1e-15)      # b's bottom corners pushed up
+
+
 def test_bad_pairs_are_named():
     s = nc.System("bad")
     b = s.add_body("b", mass=1.0, inertia=np.eye(3) * 0.01, position=(0, 0, 1))
