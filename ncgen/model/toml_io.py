@@ -14,7 +14,9 @@ Layout of a file (every table optional except ``members``)::
                   or "SphereSphere" (between = ["a", "b"], at_a, radius_a, at_b, radius_b),
                   or "BoxPlane" (body, size) / "CapsulePlane" (body, radius, length) /
                   "CylinderPlane" (body, radius, length, face_points), each with at, rotation, plane,
-                  point, normal; all with mu, restitution, stiffness, damping, exponent, slip_velocity, name
+                  point, normal; or "SphereBox" (sphere, at, radius, box = "ground", size, box_at,
+                  box_rotation) or "BoxBox" (between = ["a", "b"], size_a, size_b, at_a, rotation_a,
+                  at_b, rotation_b); all with mu, restitution, stiffness, damping, exponent, slip_velocity, name
 
 Shared basic points are written ``"crank.r_j"`` (slot ``r_j`` of member ``crank``) or
 ``{ground = [x, y, z]}``.  Values that may vary are numbers or expression strings
@@ -36,7 +38,7 @@ from ncgen.errors import ModelError
 from ncgen.files import decode_text
 from ncgen.model import toml_write
 from ncgen.model.expressions import did_you_mean, parse, scope, value_to_toml
-from ncgen.model.contacts import CONTACT_TYPES, SphereSphere
+from ncgen.model.contacts import CONTACT_TYPES, BoxBox, SphereSphere
 from ncgen.model.forces import FORCE_TYPES
 from ncgen.model.joints import JOINT_TYPES, CoordinateDriver
 from ncgen.model.members import NodeRef
@@ -100,6 +102,12 @@ CONTACT_FIELDS = {
                      *_SHAPE_PLANE),
     "CylinderPlane": (Field("body", "member", True), Field("radius", "number", True), Field("length", "number", True),
                       Field("face_points", "number"), *_SHAPE_PLANE),
+    "SphereBox": (Field("sphere", "member", True), Field("at", "vector"), Field("radius", "number"),
+                  Field("box", "member"), Field("size", "vector", True), Field("box_at", "vector"),
+                  Field("box_rotation", "rotation")),
+    "BoxBox": (Field("between", "two members", True, ("a", "b")), Field("size_a", "vector", True),
+               Field("size_b", "vector", True), Field("at_a", "vector"), Field("rotation_a", "rotation"),
+               Field("at_b", "vector"), Field("rotation_b", "rotation")),
 }
 
 #: Joints whose keys are not ``between`` and their keyword arguments.
@@ -540,7 +548,7 @@ class _Loader:
 def _contact_entries(c) -> dict:
     spec = c.spec()
     out = {"type": spec.pop("type"), "name": spec.pop("name")}
-    if isinstance(c, SphereSphere):
+    if isinstance(c, (SphereSphere, BoxBox)):
         out["between"] = [spec.pop("a"), spec.pop("b")]
     out.update({k: _plain(v) for k, v in spec.items()})
     return out
