@@ -13,25 +13,30 @@
  * h1 = h / (2 - 2^(1/3)), h2 = -2^(1/3) h1 (a backward step).  RATTLE is symmetric, so the
  * symmetric composition is of order 4; it stays symplectic and on both constraint levels.
  * Each step is warm-started from the one before (predict_scaled()); ws->x, ws->dx end as
- * after the last step (of h1), so predict() warm-starts the next composed step. */
+ * after the last step (of h1), so predict() warm-starts the next composed step; ws->step_work
+ * is the three steps' work. */
 static int step_rattle4(const casadi_real *q, const casadi_real *v, casadi_real t, const casadi_real *u,
                         const casadi_real *p, casadi_real h, casadi_real *q_next, casadi_real *v_next,
                         casadi_real *lam, int *iterations, const step_options *o, int warm, workspace *ws) {
   const casadi_real cbrt2 = 1.25992104989487316476721060727822835;
   casadi_real h1 = h / (2 - cbrt2), h2 = -cbrt2 * h1;
   casadi_real *qa = ws->sub, *va = qa + NQ, *qb = va + NQ, *vb = qb + NQ;
+  casadi_real work = 0;
   int it = 0, sum = 0, status = step(q, v, t, u, p, h1, qa, va, 0, &it, o, warm, ws);
   sum += it;
   if (status == STEP_OK) {
+    work += ws->step_work;
     predict_scaled(ws->x, ws->x, ws->dx, va, h2 / h1);
     status = step(qa, va, t + h1, u, p, h2, qb, vb, 0, &it, o, 1, ws);
     sum += it;
   }
   if (status == STEP_OK) {
+    work += ws->step_work;
     predict_scaled(ws->x, ws->x, ws->dx, vb, h1 / h2);
     status = step(qb, vb, t + h1 + h2, u, p, h1, q_next, v_next, lam, &it, o, 1, ws);
     sum += it;
   }
+  if (status == STEP_OK) ws->step_work += work;
   if (iterations) *iterations = sum;
   return status;
 }
@@ -53,7 +58,7 @@ static int scheme_step(const casadi_real *q, const casadi_real *v, casadi_real t
 
 /* step(), retried from the cold start if a warm start fails, then split into two steps of
  * h/2 (recursively, `depth` splits deep so far) if that fails too.  Adds the Newton
- * iterations to *iterations and the splits to *splits. */
+ * iterations to *iterations and the splits to *splits; ws->step_work ends as the work over h. */
 static int step_split(const casadi_real *q, const casadi_real *v, casadi_real t, const casadi_real *u,
                       const casadi_real *p, casadi_real h, casadi_real *q_next, casadi_real *v_next,
                       casadi_real *lam, int *iterations, long *splits, const step_options *o,
@@ -72,8 +77,13 @@ static int step_split(const casadi_real *q, const casadi_real *v, casadi_real t,
   status = step_split(q, v, t, u, p, h / 2, q_mid, v_mid, lam, iterations, splits, o, 0, ws, depth + 1);
   if (status != STEP_OK) return status;
   predict(ws);
-  return step_split(q_mid, v_mid, t + h / 2, u, p, h / 2, q_next, v_next, lam, iterations, splits, o, 1, ws,
-                    depth + 1);
+  {
+    casadi_real work = ws->step_work;
+    status = step_split(q_mid, v_mid, t + h / 2, u, p, h / 2, q_next, v_next, lam, iterations, splits, o, 1, ws,
+                        depth + 1);
+    ws->step_work += work;
+  }
+  return status;
 }
 
 static const step_options *options_or_default(const step_options *options, step_options *storage) {
@@ -133,7 +143,7 @@ static int run_fixed(const casadi_real *q0, const casadi_real *v0, const casadi_
   workspace ws;
   char *block;
   casadi_real *state, *q, *v, *q1, *v1, *lam, *swap, *q_s, *v_s, *q2, *v2, *x_save, *dx_save, *x_s, *dx_s, *u_bar;
-  casadi_real work = 0, p_old = 0, p_new, err_q = -1, err_v = -1, richardson = o->scheme == SCHEME_RATTLE4 ? 15 : 3;
+  casadi_real work = 0, err_q = -1, err_v = -1, richardson = o->scheme == SCHEME_RATTLE4 ? 15 : 3;
   long k = 0, i, row = 0, iter_sum = 0, n_splits = 0, row_splits = 0;
 #ifdef NCGEN_CONTACTS
   int status = STEP_OK, iters, shadow = 0; /* contacts: no shadow run (its steps would miss them) */
@@ -177,11 +187,12 @@ static int run_fixed(const casadi_real *q0, const casadi_real *v0, const casadi_
       status = STEP_INTERRUPTED;
       break;
     }
-    /* Work: trapezoidal rule over the step, both ends with the step's inputs. */
-    if (track_work && (status = power(&ws, tk, q, v, lam, uk, p, &p_old)) != STEP_OK) break;
     iters = 0;
+    ws.track_work = track_work;
     status = step_split(q, v, tk, uk, p, h, q1, v1, lam, &iters, &n_splits, o, k > 0, &ws, 0);
     if (status != STEP_OK) break;
+    if (track_work) work += ws.step_work; /* both ends with the step's inputs */
+    ws.track_work = 0;                     /* not for the shadow */
     iter_sum += iters;
     if (shadow && k % 2 == 1) {
       /* The shadow's step of 2h over the last two steps, inputs averaged. */
@@ -221,13 +232,6 @@ static int run_fixed(const casadi_real *q0, const casadi_real *v0, const casadi_
     predict(&ws);
     swap = q, q = q1, q1 = swap;
     swap = v, v = v1, v1 = swap;
-    if (track_work) {
-      if ((status = power(&ws, tk + h, q, v, lam, uk, p, &p_new)) != STEP_OK) {
-        ++k;
-        break;
-      }
-      work += h / 2 * (p_old + p_new);
-    }
     if ((k + 1) % every == 0) {
       if (q_out) memcpy(q_out + row * NQ, q, NQ * sizeof *q);
       if (v_out) memcpy(v_out + row * NQ, v, NQ * sizeof *v);

@@ -122,13 +122,14 @@ int tensegrity_simulate(const casadi_real *q0, const casadi_real *v0, casadi_rea
                         long *steps_done, long *splits);
 
 /* As tensegrity_simulate, with per-row statistics and error estimates.  lam0: multipliers at
- * t0 (nc values, NULL for zeros; used for the work only).  stats_out (TENSEGRITY_STEP_NSTATS
+ * t0 (nc values, NULL for zeros; no longer read: kept for the signature).  stats_out (TENSEGRITY_STEP_NSTATS
  * values per row, may be NULL): see above.  estimate != 0: a shadow run with steps of 2h
  * from the same start (about half the work again) gives the global error estimate
  * |y_h - y_2h| / 3 (RATTLE is of order 2) after every second step; the error columns hold
  * the latest one (-1 before the first, -2 once a step of 2h failed: no estimate from
  * there on; models with contacts have no shadow run).  track_work != 0: W accumulates the
- * trapezoidal rule of P over the steps (contact impulses not included).  impulse_out
+ * trapezoidal rule of P over each step, its start with the step's multiplier lambda and its
+ * end with mu (second order; contact impulses not included).  impulse_out
  * (contacts only): as in tensegrity_simulate. */
 int tensegrity_simulate_stats(const casadi_real *q0, const casadi_real *v0, const casadi_real *lam0,
                               casadi_real t0, casadi_real h, long n_steps, long every,

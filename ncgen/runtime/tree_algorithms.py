@@ -26,9 +26,9 @@ import numpy as np
 
 from ncgen.codegen.fast_call import fast_caller
 from ncgen.errors import ModelError
-from ncgen.model.data import model_data
+from ncgen.model.data import cached, model_data
 from ncgen.runtime.tree_check import PIVOT_TOL, check_tree, compile_tree_function, unit_quaternions
-from ncgen.validation import as_vector
+from ncgen.validation import as_numbers, as_vector
 
 #: ``name: (inputs after t before p, outputs)`` of every algorithm.
 ALGORITHMS = {
@@ -104,6 +104,8 @@ class AlgorithmKernel:
         return self._outputs
 
     def _bad_arguments(self, args):
+        for name, x in zip(self.input_names, args):
+            as_numbers(x, f"{self.name}: {name}", "a sequence of numbers")
         if [np.size(x) for x in args] == self._sizes:
             raise ModelError(f"{self.name}: {', '.join(self.input_names)} must be sequences of numbers")
         raise ModelError(f"{self.name}: expected {len(self._inputs)} arguments ({', '.join(self.input_names)}) "
@@ -126,22 +128,15 @@ def algorithm_kernel(model, name: str, *, cflags=None) -> AlgorithmKernel:
 
     if name not in ALGORITHMS:
         raise ModelError(f"algorithm_kernel: name: expected one of {', '.join(ALGORITHMS)}, got {name!r}")
-    kernels = model_data(model).algorithm_kernels
-    hit = kernels.get((name, cflags))
-    if isinstance(hit, ModelError):
-        raise hit
-    if hit is not None:
-        return hit
-    try:
+
+    def build() -> AlgorithmKernel:
         check_tree(model)
         if model.joint_space.dim != 3:
             raise ModelError(f"{name}: compiled rigid-body algorithms take 3D models only")
         f = getattr(tree_algorithms, f"{name}_function")(model)
-    except ModelError as e:
-        kernels[(name, cflags)] = e
-        raise
-    hit = kernels[(name, cflags)] = AlgorithmKernel(model, name, compile_tree_function(model, f, cflags, name))
-    return hit
+        return AlgorithmKernel(model, name, compile_tree_function(model, f, cflags, name))
+
+    return cached(model_data(model).algorithm_kernels, (name, cflags), build)
 
 
 def rnea_applies(model) -> list[int] | None:
