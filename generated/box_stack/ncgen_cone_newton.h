@@ -201,18 +201,21 @@ static int cone_solve(casadi_real *J, casadi_real *b, casadi_real *x, int m, cas
 /* Semismooth Newton on the Alart-Curnier function from the impulses in ws->P (velocities
  * ws->U; the last step's impulses, after a few sweeps of pgs()), until every contact law
  * holds to tol (1 + max |U|) m/s (cone_residual()), or it stalls below CONE_FLOOR.  ws->P
- * and ws->U are updated by each accepted step.  Returns whether it converged (else pgs()
- * carries on from the last accepted impulses); *residual gets the last residual.  Overwrites ws->S (lcp_newton()'s factor:
+ * and ws->U are updated by each accepted step.  Returns whether it converged; if not, ws->P
+ * and ws->U are put back as they were (pgs() carries on as without it); *residual gets the
+ * last residual.  Overwrites ws->S (lcp_newton()'s factor:
  * ws->fm = -1). */
 static int cone_newton(workspace *ws, int na, const int *first, const casadi_real *bias, casadi_real tol,
                        casadi_real *residual) {
   const int nr = first[na];
   casadi_real *rho = ws->cn, *phi = ws->cn + ND, *dP = ws->cn + 2 * ND, *gdp = ws->cn + 3 * ND;
-  casadi_real *Pt = ws->cn + 4 * ND, *Ut = ws->cn + 5 * ND, *J = ws->S;
+  casadi_real *Pt = ws->cn + 4 * ND, *Ut = ws->cn + 5 * ND, *P0 = ws->cn + 6 * ND, *U0 = ws->cn + 7 * ND, *J = ws->S;
   casadi_int *cols = ws->cni, *dropped = ws->cni + ND;
   int it, r, a, k, i;
   casadi_real theta;
   ws->fm = -1;
+  memcpy(P0, ws->P, (size_t) nr * sizeof(casadi_real));
+  memcpy(U0, ws->U, (size_t) nr * sizeof(casadi_real));
   cone_scales(ws, na, first, rho);
   theta = cone_phi(ws, na, first, bias, rho, ws->P, ws->U, phi, J);
   for (it = 0;; ++it) {
@@ -223,7 +226,7 @@ static int cone_newton(workspace *ws, int na, const int *first, const casadi_rea
     }
     *residual = res / (1 + size);
     if (*residual <= tol) return 1;
-    if (it == CONE_NEWTON_MAX || !isfinite(*residual)) return *residual <= CONE_FLOOR;
+    if (it == CONE_NEWTON_MAX || !isfinite(*residual)) break;
     for (r = 0; r < nr; ++r) phi[r] = -phi[r];
     if (!cone_solve(J, phi, dP, nr, cols, dropped)) return 0;
     for (r = 0; r < nr; ++r) gdp[r] = 0; /* G dP, by G's column nonzeros */
@@ -238,10 +241,13 @@ static int cone_newton(workspace *ws, int na, const int *first, const casadi_rea
       theta_t = cone_phi(ws, na, first, bias, rho, Pt, Ut, phi, 0);
       if (theta_t <= (1 - 2 * CONE_ARMIJO * step) * theta) break;
     }
-    if (i == CONE_BACKTRACK) /* no descent: stalled at round-off, or lost */
-      return *residual <= CONE_FLOOR;
+    if (i == CONE_BACKTRACK) break; /* no descent: stalled at round-off, or lost */
     memcpy(ws->P, Pt, (size_t) nr * sizeof(casadi_real));
     memcpy(ws->U, Ut, (size_t) nr * sizeof(casadi_real));
     theta = cone_phi(ws, na, first, bias, rho, ws->P, ws->U, phi, J);
   }
+  if (*residual <= CONE_FLOOR) return 1;
+  memcpy(ws->P, P0, (size_t) nr * sizeof(casadi_real)); /* failed: the impulses it started from */
+  memcpy(ws->U, U0, (size_t) nr * sizeof(casadi_real));
+  return 0;
 }

@@ -45,6 +45,10 @@
 #define NEWTON_FIRST 4
 #define NEWTON_PIVOT 1e-10
 #define NEWTON_SOLVES 4
+/* pgs(): cone_newton() once, after CONE_FIRST sweeps (a power of 2 times NEWTON_FIRST) that
+ * have not converged: the sweeps solve the easy problems, Newton finishes those they crawl
+ * on. */
+#define CONE_FIRST 32
 
 /* Clears what the contact steps accumulate and their warm start (before a run). */
 static void contact_clear(workspace *ws) {
@@ -243,12 +247,12 @@ static int pgs(workspace *ws, int na, const int *first, const casadi_real *bias)
     if (sweep + 1 == newton_at) { /* Newton steps after 4, 8, 16, ... sweeps */
       newton_at *= 2;
       if (nr == na) lcp_newton(ws, nr, bias); /* frictionless */
-      else if (cone && cone_newton(ws, na, first, bias, PGS_TOL, &ws->cone_last)) {
+      else if (cone && sweep + 1 >= CONE_FIRST && cone_newton(ws, na, first, bias, PGS_TOL, &ws->cone_last)) {
         ws->pgs_last = 0;
         ws->pgs_sweeps = sweep + 1;
         return 1;
       } else
-        cone = 0; /* no descent from there: the sweeps finish alone */
+        cone = 0; /* no descent from there: the sweeps finish alone, from where they were */
     }
   }
   return 0;
@@ -764,7 +768,7 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
     for (na = k = 0; k < NK; ++k) {
       const casadi_real g = ws->g[k];
       if (g <= 0) bias[na] = restitution[k] * fmin(ws->Um[k * DC], 0);
-      else if (restitution[k] == 0 && g < reach) {
+      else if (restitution[k] == 0 && mu[k] == 0 && g < reach) {
         bias[na] = fmax(0, 2 * g / h - ws->U[k * DC]);
         near = 1;
       } else continue;

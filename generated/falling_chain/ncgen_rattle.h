@@ -84,7 +84,7 @@ typedef struct {
   casadi_int *fset;  /* the rows of G whose Cholesky factor ws->S holds (fm of them), in its
                         order; at fset + NK the first nonzero column of each of its rows */
   int fm;            /* their number; -1 after delassus() changed G or cone_newton() used S */
-  casadi_real *cn;   /* cone_newton(): rho, phi, dP, G dP, trial P and U (ND each) */
+  casadi_real *cn;   /* cone_newton(): rho, phi, dP, G dP, trial P and U, P and U it started from (ND each) */
   casadi_int *cni;   /* cone_newton(): the elimination's column list and dropped columns (ND
                         each); then delassus()'s scratch (Schur complement form) */
   casadi_int *gp, *gi; /* the nonzeros of G by columns: column r has rows gi[gp[r] .. gp[r + 1] - 1] */
@@ -167,7 +167,7 @@ static size_t layout(workspace *ws, char *block) {
 #else
   sizes[23] = 0;
 #endif
-  sizes[24] = 6 * ND * sizeof(casadi_real);
+  sizes[24] = 8 * ND * sizeof(casadi_real);
 #ifdef CONTACT_SCHUR
   sizes[25] = (2 * ND + NC + 2 * ND + NQ + 1 + 2 * NNZ_W + 2 * NC + NQ + 1 + NNZ_A) * sizeof(casadi_int);
 #else

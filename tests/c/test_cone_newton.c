@@ -26,7 +26,7 @@ static casadi_real nan_max(casadi_real m, casadi_real a) {
 
 #include "ncgen_cone_newton.h"
 
-static casadi_real G_[ND * ND], U_[ND], P_[ND], Um_[2 * ND], S_[ND * ND], cn_[6 * ND];
+static casadi_real G_[ND * ND], U_[ND], P_[ND], Um_[2 * ND], S_[ND * ND], cn_[8 * ND];
 static casadi_int act_[NK], gp_[ND + 1], gi_[ND * ND], cni_[2 * ND];
 static const int first[NK + 1] = {0, 3, 6, 9};
 static const casadi_real bias[NK] = {0, 0, 0};
