@@ -88,9 +88,9 @@ def test_idas_through_sixteen_flat_positions_is_as_accurate_as_a_regular_run(for
     positions (N = 40: 10 s, eight, to keep the suite fast): IDAS away from them, the
     compiled error-controlled stepper at a tenth of the tolerance over the intervals next to
     them; the tip stays within 1e-6 m of the exact motion, as a regular run's does
-    (measured: 4.4e-7, 4.3e-8, 1.8e-7 m for 2D N = 1, 10 and 3D N = 1; before, 2.1e-5,
-    1.9e-5, 2.8e-5 m: IDAS restarted about 800 times, each restart's first steps of order 1
-    losing ~1e-8 J)."""
+    (measured: 4.4e-7, 4.3e-8, 1.8e-7 m for 2D N = 1, 10 and 3D N = 1 over 20 s, 2.1e-7 m
+    for N = 40 over 10 s; before, 2.1e-5, 1.9e-5, 2.8e-5 and 4.2e-6 m: IDAS restarted about
+    800 times in 20 s, each restart's first steps of order 1 losing ~1e-8 J)."""
     model = n_fourbar(N) if form == "2d" else n_fourbar_3d(N)
     traj = nc.simulate(model, t_end, 0.01, rtol=1e-10, atol=1e-10)
     assert traj.complete
@@ -99,6 +99,29 @@ def test_idas_through_sixteen_flat_positions_is_as_accurate_as_a_regular_run(for
     flat = int(round(16 * t_end / 20.0))
     assert stats["nsteps"] > 1000 and flat <= stats["rattle_intervals"] < 20 * flat    # IDAS does most of the run
     assert np.max(np.abs([model.phi(q) for q in traj.q])) < 3e-8      # IDAS's drift at atol 1e-10: 7e-9 m² measured
+
+
+def test_hand_over_and_return_hold_both_constraint_levels(monkeypatch):
+    """Every bridged interval starts from a state projected onto Φ = 0 and A v = 0 and ends
+    on both (the stepper's Newton tolerance), to the run's atol (1e-10), and the bridge runs
+    at a tenth of the run's tolerances."""
+    model = n_fourbar(1)
+    ends, tols = [], []
+    real = simulation._bridge.__call__
+
+    def recorded(self, t0, t1, x, column):
+        x1, z1 = real(self, t0, t1, x, column)
+        ends.extend([x, x1])
+        tols.append(self.tols)
+        return x1, z1
+
+    monkeypatch.setattr(simulation._bridge, "__call__", recorded)
+    nc.simulate(model, 2.0, 0.01, rtol=1e-10, atol=1e-10)
+    assert len(ends) >= 8 and np.allclose(tols, 1e-11, rtol=1e-12, atol=0)
+    nq = model.nq
+    for x in ends:
+        q, v = x[:nq], x[nq:]
+        assert np.max(np.abs(model.phi(q))) <= 1e-10 and np.max(np.abs(model.A(q) @ v)) <= 1e-10
 
 
 def test_idas_restarted_at_every_output_keeps_its_accuracy(monkeypatch):

@@ -48,7 +48,7 @@ WATCHED_CHUNK = 10
 CLOSE_CROSSING = 16
 #: IDAS steps per output interval at most while watching (``project="auto"`` or ``True``):
 #: IDAS can spend its whole ``max_steps`` creeping up to a singular configuration.  A chunk
-#: that fails is retried interval by interval; an interval that needs more steps away from
+#: that fails is retried half as long, down to one interval; an interval that needs more steps away from
 #: a singular configuration gets the full ``max_steps`` and lifts the limit for the run.
 WATCHED_MAX_STEPS = 1_000
 #: ``σ_min/σ_max`` of A at the start of an interval that IDAS fails on (projecting), below
@@ -154,19 +154,21 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
       drifts onto the other branch).  ``"auto"`` (default): the run watches ``σ_min/σ_max``
       of ``A`` at every output time (an SVD each; only models with ``nq · nc ≤``
       :data:`AUTO_MAX_SIZE`), in IDAS chunks that end where the ratio's trend says it
-      reaches the limit (few calls: IDAS restarts at order 1 with each, and its first step
-      is ``min(√rtol, 10⁻³) dt``, see :class:`~ncgen.runtime.idas.ChunkedIDAS`); every output interval that starts or ends near-singular
+      reaches the limit (few calls: IDAS restarts at order 1 with each, its first step
+      ``min(√rtol, 10⁻³) dt``, see :class:`~ncgen.runtime.idas.ChunkedIDAS`); every output
+      interval that starts or ends near-singular
       (ratio below :data:`~ncgen.assembly.manifold.NEAR_SINGULAR`, scaled by the starting
       ratio, see :mod:`ncgen.assembly.manifold`), or that IDAS fails on close to one, is
       crossed instead by the model's compiled error-controlled RATTLE stepper (order 4,
       tolerances a tenth of ``rtol`` and ``atol``, at least 1e-12, from the state projected
       onto both constraint levels, multipliers recomputed at both ends; compiled on first
-      use; :mod:`ncgen.runtime.rattle_bridge`), which stays on the branch.  ``info["projected_from"]`` is the first such output time,
+      use; :mod:`ncgen.runtime.rattle_bridge`), which stays on the branch.
+      ``info["projected_from"]`` is the first such output time,
       ``info["stats"]["rattle_intervals"]`` their number.  The N four-bar of the IFToMM
       benchmark A02 over 20 s (sixteen flat positions) then stays within 1e-6 m of the exact
       motion at ``rtol = atol = 1e-10``, as a regular run does, for N = 1, 10, 40 and its 3D
-      form with revolute joints (``tests/test_singular_positions.py``).  ``True``: the same, with one IDAS call per
-      output interval and the state projected after each.  ``False``: IDAS alone.
+      form with revolute joints (``tests/test_singular_positions.py``).  ``True``: the same,
+      with one IDAS call per output interval and the state projected after each.  ``False``: IDAS alone.
     * ``method="stepper"``: the compiled fixed-step RATTLE stepper (generated C, Newton loop
       included; :mod:`ncgen.runtime.stepper`), ``substeps`` steps of ``dt / substeps`` per
       output interval, Newton tolerance ``newton_tol`` (both constraint levels hold to it at
