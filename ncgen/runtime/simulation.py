@@ -48,7 +48,7 @@ WATCHED_CHUNK = 10
 CLOSE_CROSSING = 16
 #: IDAS steps per output interval at most while watching (``project="auto"`` or ``True``):
 #: IDAS can spend its whole ``max_steps`` creeping up to a singular configuration.  A chunk
-#: that fails is retried half as long, down to one interval; an interval that needs more steps away from
+#: that fails is retried up to just before where IDAS gave up; an interval that needs more steps away from
 #: a singular configuration gets the full ``max_steps`` and lifts the limit for the run.
 WATCHED_MAX_STEPS = 1_000
 #: ``σ_min/σ_max`` of A at the start of an interval that IDAS fails on (projecting), below
@@ -165,9 +165,10 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
       use; :mod:`ncgen.runtime.rattle_bridge`), which stays on the branch.
       ``info["projected_from"]`` is the first such output time,
       ``info["stats"]["rattle_intervals"]`` their number.  The N four-bar of the IFToMM
-      benchmark A02 over 20 s (sixteen flat positions) then stays within 1e-6 m of the exact
-      motion at ``rtol = atol = 1e-10``, as a regular run does, for N = 1, 10, 40 and its 3D
-      form with revolute joints (``tests/test_singular_positions.py``).  ``True``: the same,
+      benchmark A02 over 20 s (sixteen flat positions) then stays within 2e-7 m of the exact
+      motion at ``rtol = atol = 1e-10`` for N = 1, 10, 40 (2.3e-6 m in its 3D form with
+      revolute joints for N = 1, IDAS's own error on the regular part of that motion;
+      ``tests/test_singular_positions.py``).  ``True``: the same,
       with one IDAS call per output interval and the state projected after each.  ``False``: IDAS alone.
     * ``method="stepper"``: the compiled fixed-step RATTLE stepper (generated C, Newton loop
       included; :mod:`ncgen.runtime.stepper`), ``substeps`` steps of ``dt / substeps`` per
@@ -491,12 +492,15 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
 
     IDAS over chunks of several output intervals (one with ``project=True``); a failed
     chunk is retried one interval at a time, to keep every state before the failure
-    (watching: half as long, down to one interval, then chunks again).
+    (watching: shorter, ending before where IDAS gave up, then chunks again).
     With a ``projector`` (``project`` True or ``"auto"``, see :func:`simulate`) every output
     configuration is watched (``σ_min/σ_max`` of A): the first chunk is at most
     :data:`WATCHED_CHUNK` intervals, later ones end at the first output past where that
     ratio would reach the near-singular limit by its slope and bend at the last outputs
-    (:func:`_chunk_to_limit`); a chunk that fails is tried again half as long; a chunk that
+    (:func:`_chunk_to_limit`), the first after a bridge no longer than the shorter of the last
+    two IDAS stretches between bridges (a periodic motion meets its next flat position about
+    as far on); a chunk that fails is tried again up to just before where IDAS gave up
+    (:func:`_retry_length`); a chunk that
     reaches the limit is cut at the last output before it; every interval that
     starts or ends at a near-singular configuration, or that IDAS fails on not far from one
     (:data:`FAILING_NEAR_SINGULAR`), is crossed by ``bridge`` instead, from the projected
@@ -524,6 +528,7 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
         return ratio(i) < limit * projector.scale
 
     bend = [np.nan]                       # the last second difference of that ratio seen by IDAS
+    resumed, stretches = [None], []       # where IDAS resumed after the last bridge; its stretches between
 
     def chunk(k) -> int:
         """Intervals of the next IDAS call from output k (see above)."""
@@ -531,7 +536,10 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
             return full
         if not np.isfinite(bend[0]) or k == 0:
             return min(full, WATCHED_CHUNK)
-        return _chunk_to_limit(ratio(k) - NEAR_SINGULAR * projector.scale, ratio(k) - ratio(k - 1), bend[0], full)
+        n = _chunk_to_limit(ratio(k) - NEAR_SINGULAR * projector.scale, ratio(k) - ratio(k - 1), bend[0], full)
+        if k == resumed[0] and stretches:    # just after a bridge: no longer than the last stretches
+            n = min(n, max(1, min(stretches[-2:]) - 1))
+        return n
 
     def observe(k0, k):
         """Update ``bend`` from the ratios at outputs k0 − 1 ... k (IDAS's, away from the flat
@@ -543,6 +551,9 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
     def bridged(k) -> int:
         nonlocal since
         since = k if since is None else since
+        if resumed[0] is not None and k > resumed[0]:
+            stretches.append(k - resumed[0])
+        resumed[0] = k + 1
         X[k] = projector(t[k], X[k])
         X[k + 1], Z[k + 1] = bridge(t[k], t[k + 1], X[k], columns[:, k])
         R[k:k + 2] = np.nan
@@ -575,9 +586,9 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
                 try:
                     advance(k, n, steps[0])
                     k, cap = k + n, n_int
-                except ChunkFailure:
-                    if watching and n > 1:           # again from k, half as far
-                        cap = n // 2
+                except ChunkFailure as e:
+                    if watching and n > 1:           # again from k, ending before where IDAS gave up
+                        cap = _retry_length(e, float(t[k]), float(t[1] - t[0]), n)
                         continue
                     k = single(k)
                     while not watching and k < k0 + n:
@@ -602,6 +613,17 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
             R[k] = np.nan
         bar.update(t[k])
     return X, Z, None, since
+
+
+def _retry_length(failure: ChunkFailure, t_k: float, h: float, n: int) -> int:
+    """Output intervals of the next try of a watched chunk of ``n`` from ``t_k`` that failed:
+    up to the second-last output before the time IDAS gave up (a flat position ahead: the
+    try then reaches the near-singular limit and is cut there), half as many if IDAS named
+    no time; at least 1, fewer than ``n``."""
+    t_fail = shift_time(failure.message, t_k)[1]
+    if t_fail is None or not math.isfinite(t_fail):
+        return max(1, n // 2)
+    return max(1, min(n - 1, int((t_fail - t_k) / h) - 1))
 
 
 def _chunk_to_limit(room: float, slope: float, bend: float, full: int) -> int:
