@@ -26,9 +26,12 @@ mode of rollouts), so
 are exact to the rootfinder's tolerance.  Every function also returns the residual
 ``‖G(z)‖∞`` of the solution it used, so that callers can refuse a step that did not converge.
 
-Rollouts ``X = [x₁ … x_N]`` are a ``mapaccum`` of the step (a loop in C, its size
-independent of ``N``); their adjoint ``(x̄₀, Ū) = (∂X/∂(x₀, U))ᵀ X̄`` is CasADi's reverse
-mode of that ``mapaccum`` (one backward sweep of transposed IFT solves, also generated C).
+Rollouts ``X = [x₁ … x_N]`` run in pieces of :data:`ROLLOUT_CHUNK` steps (and single
+steps for the rest), each a ``mapaccum`` of the step: CasADi writes a ``mapaccum`` as one call
+per step, so a piece's C grows with its length (a 1000-step ``mapaccum`` was 10 MB of C and
+minutes of compiling); the pieces are compiled once per step function.  Their adjoint
+``(x̄₀, Ū) = (∂X/∂(x₀, U))ᵀ X̄`` is CasADi's reverse mode of the piece (a backward sweep of
+transposed IFT solves, also generated C), chained from the last piece to the first.
 """
 from __future__ import annotations
 
@@ -39,6 +42,8 @@ from ncgen.assembly.stepper_equations import stepper_functions
 
 #: Rootfinder defaults: absolute residual and step tolerances, iteration limit.
 ABSTOL, ABSTOL_STEP, MAX_ITER = 1e-12, 1e-14, 20
+#: Steps per compiled piece of a rollout.
+ROLLOUT_CHUNK = 25
 
 
 def step_residual(model, h: float) -> ca.Function:

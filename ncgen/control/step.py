@@ -26,7 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ncgen.control.discrete import ABSTOL, MAX_ITER, rollout_functions, state_constraint_jacobian, step_functions
+from ncgen.control.discrete import (ABSTOL, MAX_ITER, ROLLOUT_CHUNK, rollout_functions, state_constraint_jacobian,
+                                    step_functions)
 from ncgen.errors import NcgenError
 
 METHODS = ("rattle",)
@@ -102,11 +103,18 @@ class StepFunction:
         return out + (C.reshape(self.nx, self.np, order="F").copy(),) if parameters else out
 
     # ------------------------------------------------------------------ rollouts
-    def _rollout_lib(self, N: int) -> dict:
-        if N not in self._rollouts:
-            fs = rollout_functions(self.functions["step"], N, self.h)
-            self._rollouts[N] = _compile(f"{self.model.name}_rollout{N}", list(fs.values()))
-        return self._rollouts[N]
+    def _rollout_lib(self, n: int) -> dict:
+        """The compiled rollout of ``n`` steps (``n`` is ``ROLLOUT_CHUNK`` or 1: built once per
+        step function, whatever the rollouts' lengths)."""
+        if n not in self._rollouts:
+            fs = rollout_functions(self.functions["step"], n, self.h)
+            self._rollouts[n] = _compile(f"{self.model.name}_rollout{n}", list(fs.values()))
+        return self._rollouts[n]
+
+    def _chunks(self, N: int) -> list[tuple[int, int]]:
+        """``(first step, steps)`` of the pieces a rollout of ``N`` steps is run in."""
+        full = N // ROLLOUT_CHUNK * ROLLOUT_CHUNK
+        return [(k, ROLLOUT_CHUNK) for k in range(0, full, ROLLOUT_CHUNK)] + [(k, 1) for k in range(full, N)]
 
     def _inputs(self, U) -> np.ndarray:
         U = np.asarray(U, dtype=float)
@@ -121,26 +129,41 @@ class StepFunction:
         """States after each of the ``N = len(U)`` steps, shape ``(N, nx)`` (``U``: ``(N, nu)``)."""
         U = self._inputs(U)
         x0, _, p, t0 = self._args(x0, U[0], p, t0)
-        X, res = self._rollout_lib(U.shape[0])["rollout"](x0, U.T.ravel(order="F"), p, t0)
-        bad = np.flatnonzero(~(res <= self.residual_tol))
-        if bad.size:
-            self._check(float(res[bad[0]]), f" {bad[0]} of the rollout")
-        return X.reshape(self.nx, -1, order="F").T.copy()
+        X = np.empty((U.shape[0], self.nx))
+        x = x0
+        for k, n in self._chunks(U.shape[0]):
+            Xc, res = self._rollout_lib(n)["rollout"](x, U[k:k + n].T.ravel(order="F"), p, t0 + k * self.h)
+            bad = np.flatnonzero(~(res <= self.residual_tol))
+            if bad.size:
+                self._check(float(res[bad[0]]), f" {k + bad[0]} of the rollout")
+            X[k:k + n] = Xc.reshape(self.nx, n, order="F").T
+            x = X[k + n - 1]
+        return X
 
     def rollout_gradient(self, x0, U, dX, p=None, t0=None, *, parameters: bool = False):
         """``(dx0, dU)`` (and ``dp`` with ``parameters=True``): the gradient of a cost ``J(X)``
         with respect to ``x0`` and ``U`` given ``dX = ∂J/∂X`` (shape of :meth:`rollout`'s
-        result); one reverse sweep in C."""
+        result); one reverse sweep in C per piece, the pieces from the last to the first (each
+        piece's ``∂J/∂x0`` added to the ``∂J/∂X`` of the state it starts from)."""
         U = self._inputs(U)
         x0, _, p, t0 = self._args(x0, U[0], p, t0)
         N = U.shape[0]
         dX = np.asarray(dX, dtype=float)
         if dX.shape != (N, self.nx) or not np.all(np.isfinite(dX)):
             raise NcgenError(f"dX: expected finite ∂J/∂X of shape ({N}, {self.nx}), got shape {dX.shape}")
-        self.rollout(x0, U, p, t0)                     # refuses a rollout that did not converge
-        dx0, dU, dp = self._rollout_lib(N)["rollout_adjoint"](x0, U.T.ravel(order="F"), p, t0, dX.ravel())
-        out = (dx0.copy(), dU.reshape(self.nu, N, order="F").T.copy())
-        return out + (dp.copy(),) if parameters else out
+        X = self.rollout(x0, U, p, t0)                 # refuses a rollout that did not converge
+        dU, dp, carry = np.empty((N, self.nu)), np.zeros(self.np), np.zeros(self.nx)
+        for k, n in reversed(self._chunks(N)):
+            seed = dX[k:k + n].copy()
+            seed[-1] += carry
+            dx0, dUc, dpc = self._rollout_lib(n)["rollout_adjoint"](x0 if k == 0 else X[k - 1],
+                                                                    U[k:k + n].T.ravel(order="F"), p,
+                                                                    t0 + k * self.h, seed.ravel())
+            carry = dx0.copy()
+            dU[k:k + n] = dUc.reshape(self.nu, n, order="F").T
+            dp += dpc
+        out = (carry, dU)
+        return out + (dp,) if parameters else out
 
     # ------------------------------------------------------- tangent coordinates
     def tangent_basis(self, x, p=None, t=None) -> np.ndarray:
