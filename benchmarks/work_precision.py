@@ -47,6 +47,7 @@ include their shadow run (the global error estimate, about half the work again),
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 import warnings
@@ -244,13 +245,19 @@ def report(case: Case, curves, checks) -> dict[str, float]:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--smoke", action="store_true", help="tiny and coarse: runs in seconds (CI)")
-    parser.add_argument("--cases", nargs="+", choices=FULL["cases"], help="cases to run (default all)")
-    parser.add_argument("--repeat", type=int, default=3, help="runs per point; the fastest counts")
+    parser.add_argument("--curves", action="store_true",
+                        help="the whole curves (IDAS, stepper, MuJoCo RK4 and Euler) instead of the targets")
+    parser.add_argument("--cases", nargs="+", choices=FULL["cases"], help="cases of --curves (default all)")
+    parser.add_argument("--repeat", type=int, default=None,
+                        help="runs per point, the fastest counts (--curves, default 3); interleaved timing "
+                             "rounds (targets, default 7)")
     args = parser.parse_args(argv)
+    if not args.curves:
+        return targets_main(args)
     config = dict(SMOKE if args.smoke else FULL)
     if args.cases:
         config["cases"] = args.cases
-    repeat = 1 if args.smoke else args.repeat
+    repeat = 1 if args.smoke else (args.repeat or 3)
     print(machine())
     warnings.simplefilter("ignore")
     times, cases = {}, {}
@@ -282,6 +289,180 @@ def paired(joints: Case, shared: Case, config, repeat: int) -> None:
                 best[name] = min(best[name], case.simulate(T_END, OUTPUT_DT, method="stepper", **kw)[1])
         print(f"RATIO explicit joints / shared points, {label}, run alternately (best of {repeat}): "
               f"{best['joints'] / best['shared']:.2f} ({best['joints'] * 1e3:.2f} ms vs {best['shared'] * 1e3:.2f} ms)")
+
+
+#: The targets of issue 26: (case, N, tip error after T_END (m), ratio ncgen / MuJoCo RK4 to reach).
+GOALS = [("joints", 20, 1e-3, 0.5), ("joints", 20, 1e-6, 0.3), ("spinning", 5, 1e-3, 0.5)]
+SMOKE_GOALS = [("joints", 2, 1e-3, 0.5)]
+#: ncgen's fixed-step settings, each at its own searched step: (label, order, keywords of simulate).
+SETTINGS = [("ncgen rattle", 2, {"scheme": "rattle", "estimate": False}),
+            ("ncgen rattle4", 4, {"scheme": "rattle4", "estimate": False})]
+ESTIMATED = "ncgen rattle4 + error estimate"
+
+
+def smallest_count(error, n0: int, order: int, target: float, n_max: int = 10**6):
+    """``(n, error(n), scanned)``: the smallest step count ``n`` (step = span / n) whose
+    error is within ``target``: from the error at ``n0`` the count predicted by ``order``,
+    a bracket [failing, passing] widened by factors of 1.25, then bisection on the integer
+    count down to neighbours (the error is taken monotone near the boundary; a run that
+    fails counts as failing); ``scanned``: every count tried and its error.  None if
+    ``n_max`` steps do not reach the target."""
+    seen = {}
+
+    def passes(n):
+        if n not in seen:
+            seen[n] = error(n)
+        return seen[n] <= target
+
+    n, e0 = n0, error(n0)
+    seen[n0] = e0
+    if np.isfinite(e0) and e0 > 0:
+        n = int(min(n_max, max(1, np.ceil(n0 * (e0 / target) ** (1 / order)))))
+    if passes(n):
+        hi, lo = n, None
+        while lo is None:
+            if hi == 1:
+                lo = 0
+                break
+            down = min(hi - 1, int(hi / 1.25))
+            if passes(down):
+                hi = down
+            else:
+                lo = down
+    else:
+        lo, hi = n, None
+        while hi is None:
+            up = max(lo + 1, int(np.ceil(lo * 1.25)))
+            if up > n_max:
+                return None
+            if passes(up):
+                hi = up
+            else:
+                lo = up
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if passes(mid):
+            hi = mid
+        else:
+            lo = mid
+    return hi, seen[hi], seen
+
+
+def ncgen_error(case: Case, reference, substeps: int, **kw) -> float:
+    from ncgen.errors import SimulationError
+
+    try:
+        traj, _ = case.simulate(T_END, OUTPUT_DT, method="stepper", substeps=substeps, check=False, **kw)
+    except SimulationError:
+        return float("inf")
+    return _err(ncgen_tip(traj.q[-1]), reference)
+
+
+def first_runs(kind: str, n: int) -> tuple[Case, dict]:
+    """The case built and run once from a cold compile cache (the process's, set by
+    :func:`targets_main`), and MuJoCo's model compile and first run: the first-run costs."""
+    import mujoco
+
+    from common import chain_mjcf
+
+    start = time.perf_counter()
+    case = Case(kind, n)
+    built = time.perf_counter() - start
+    case.simulate(OUTPUT_DT, OUTPUT_DT, method="stepper", substeps=10, check=False)
+    ncgen_first = time.perf_counter() - start
+    start = time.perf_counter()
+    mujoco.MjModel.from_xml_string(chain_mjcf(n, length=LENGTH, mass=MASS))
+    mj_compile = time.perf_counter() - start
+    return case, {"ncgen build": built, "ncgen build + C compile + first run (0.1 s)": ncgen_first,
+                  "MuJoCo MJCF compile": mj_compile}
+
+
+def targets_main(args) -> int:
+    """Each goal: MuJoCo RK4 and ncgen's settings at their own largest step reaching the tip
+    error (:func:`smallest_count`), timed interleaved, min and median ratios."""
+    import tempfile
+
+    os.environ["NCGEN_CACHE_DIR"] = tempfile.mkdtemp(prefix="ncgen-wp-")    # first runs compile
+    rounds = 1 if args.smoke else (args.repeat or 7)
+    print(machine())
+    warnings.simplefilter("ignore")
+    cases = {}
+    for kind, n, target, goal in SMOKE_GOALS if args.smoke else GOALS:
+        if (kind, n) not in cases:
+            case, first = cases[(kind, n)] = first_runs(kind, n)
+            reference, checks = reference_tip(case, {"reference_step": 1e-3 if args.smoke else 2e-5})
+            cases[(kind, n)] = case, first, reference
+            print(f"\n=== {case.title}: nq = {case.model.nq}, nc = {case.model.nc}; tip error after {T_END:g} s ===")
+            for what, dist in checks.items():
+                print(f"  reference check: |tip({what}) - tip(IDAS rtol 1e-12)| = {dist:.2e} m")
+            print("  first run (cold compile cache): " + ", ".join(f"{k} {v:.2f} s" for k, v in first.items()))
+        case, first, reference = cases[(kind, n)]
+        goal_run(case, first, reference, target, goal, rounds)
+    return 0
+
+
+def goal_run(case: Case, first: dict, reference, target: float, goal: float, rounds: int) -> None:
+    found = {"mujoco RK4": smallest_count(lambda k: _err(case.mujoco("RK4", T_END / k)[1], reference),
+                                          int(T_END / 2e-3), 4, target)}
+    for label, order, kw in SETTINGS:
+        found[label] = smallest_count(lambda k, kw=kw: ncgen_error(case, reference, k, **kw), 20, order, target)
+    found[ESTIMATED] = found["ncgen rattle4"]
+    steps = {"mujoco RK4": lambda k: T_END / k}
+    runs = {label: (lambda k, kw=kw: case.simulate(T_END, OUTPUT_DT, method="stepper", substeps=k, check=False,
+                                                   **kw)) for label, _, kw in SETTINGS}
+    runs[ESTIMATED] = lambda k: case.simulate(T_END, OUTPUT_DT, method="stepper", substeps=k, scheme="rattle4",
+                                              check=False)
+    times = {name: [] for name, f in found.items() if f is not None}
+    estimates = []
+    load = os.getloadavg()[0]
+    for _ in range(rounds):
+        for name in times:
+            k = found[name][0]
+            if name == "mujoco RK4":
+                times[name].append(case.mujoco("RK4", T_END / k)[0])
+                continue
+            traj, wall = runs[name](k)
+            times[name].append(wall)
+            if name == ESTIMATED:
+                estimates.append(traj.info["error_estimate"]["q"])
+    load = max(load, os.getloadavg()[0])
+    print(f"\n  target tip error {target:.0e} m; {rounds} interleaved rounds; load average "
+          f"{load:.2f} (1 min, max of start and end)")
+    for name, f in found.items():
+        if f is None:
+            print(f"    {name:<32} does not reach the target")
+            continue
+        k, e, scanned = f
+        h = T_END / k if name == "mujoco RK4" else OUTPUT_DT / k
+        t = np.array(times[name])
+        print(f"    {name:<32} step {h:.4e} s  error {e:.2e} m  min {t.min() * 1e3:9.2f} ms  "
+              f"median {np.median(t) * 1e3:9.2f} ms")
+        if name != ESTIMATED:
+            what = "steps to 2 s" if name == "mujoco RK4" else f"substeps per {OUTPUT_DT:g} s"
+            print(f"      bisection on the {what}: " + ", ".join(f"{c}: {v:.2e}" for c, v in sorted(scanned.items())))
+    if "mujoco RK4" not in times:
+        return
+    mj = np.array(times["mujoco RK4"])
+    for name in times:
+        if name != "mujoco RK4":
+            t = np.array(times[name])
+            print(f"  RATIO {name} / MuJoCo RK4 at {target:.0e}: min {t.min() / mj.min():.2f}, "
+                  f"median {np.median(t) / np.median(mj):.2f}")
+    best = min((n for n in times if n.startswith("ncgen")), key=lambda n: np.median(times[n]), default=None)
+    if best is not None:
+        ratio = np.median(times[best]) / np.median(mj)
+        print(f"  BEST ncgen setting at {target:.0e}: {best}, median ratio {ratio:.2f} (goal <= {goal:g}: "
+              f"{'met' if ratio <= goal else 'NOT met'})")
+    if ESTIMATED in times:
+        e = found[ESTIMATED][1]
+        plain = np.median(times["ncgen rattle4"])
+        print(f"  error estimate: {np.median(estimates):.2e} m against a true tip error of {e:.2e} m "
+              f"(ratio {np.median(estimates) / e:.2f}); overhead {np.median(times[ESTIMATED]) / plain - 1:+.0%} "
+              f"(median end to end)")
+    once = first["ncgen build + C compile + first run (0.1 s)"]
+    if best is not None:
+        print(f"  with the first-run cost (one run from a cold cache): ncgen {once + np.median(times[best]):.2f} s, "
+              f"MuJoCo {first['MuJoCo MJCF compile'] + np.median(mj):.2f} s")
 
 
 if __name__ == "__main__":
