@@ -73,9 +73,9 @@ extern "C" {
 /* Deepest step splitting the workspace allows. */
 #define CARTPOLE_STEP_MAX_HALVINGS 10
 
-/* Schemes (options->scheme): RATTLE (order 2), or its symmetric triple-jump composition
- * (Yoshida, Suzuki: RATTLE steps of h1, -2^(1/3) h1, h1, h1 = h / (2 - 2^(1/3)); order 4,
- * symplectic, both constraint levels kept; three RATTLE steps per step).  Fixed steps only
+/* Schemes (options->scheme): RATTLE (order 2), or Suzuki's symmetric five-stage
+ * composition of RATTLE steps (g h, g h, (1 - 4g) h, g h, g h, g = 1 / (4 - 4^(1/3)); order 4,
+ * symplectic, both constraint levels kept; five RATTLE steps per step).  Fixed steps only
  * (cartpole_step, cartpole_simulate, cartpole_simulate_stats). */
 #define CARTPOLE_STEP_RATTLE 0
 #define CARTPOLE_STEP_RATTLE4 1
@@ -123,11 +123,15 @@ int cartpole_simulate(const casadi_real *q0, const casadi_real *v0, casadi_real 
 
 /* As cartpole_simulate, with per-row statistics and error estimates.  lam0: multipliers at
  * t0 (nc values, NULL for zeros; used for the work only).  stats_out (CARTPOLE_STEP_NSTATS
- * values per row, may be NULL): see above.  estimate != 0: a shadow run with steps of 2h
- * from the same start (about half the work again) gives the global error estimate
- * |y_h - y_2h| / 3 (RATTLE is of order 2) after every second step; the error columns hold
- * the latest one (-1 before the first, -2 once a step of 2h failed: no estimate from
- * there on; models with contacts have no shadow run).  track_work != 0: W accumulates the
+ * values per row, may be NULL): see above.  estimate: 0 none; 1 (local) one pair of steps
+ * in three (and the last) is retaken as one step of 2h, whose difference gives the pair's
+ * local error (y_2h - y_pair) / (2^p - 1) (p the scheme's order), and the estimate is the
+ * largest component of their sum, each weighted by the pairs it stands for (about a sixth
+ * more work; errors added without their growth along the motion); 2 (shadow) a shadow run
+ * with steps of 2h from the same start (about half the work again) gives the global error
+ * estimate |y_h - y_2h| / (2^p - 1) after every second step.  The error columns hold the
+ * latest estimate (-1 before the first, -2 once a shadow step of 2h failed: no estimate
+ * from there on; models with contacts have none).  track_work != 0: W accumulates the
  * trapezoidal rule of P over the steps (contact impulses not included).  impulse_out
  * (contacts only): as in cartpole_simulate. */
 int cartpole_simulate_stats(const casadi_real *q0, const casadi_real *v0, const casadi_real *lam0,
