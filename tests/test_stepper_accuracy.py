@@ -141,13 +141,14 @@ def test_rtol_on_a_chaotic_motion_warns_or_fails_loudly():
 # ------------------------------------------------------------ fixed-step estimate
 @pytest.mark.parametrize("case, h", [("chain", 5e-3), ("chain", 2.5e-3), ("spinning", 2e-3), ("stiff", 1e-3)])
 def test_fixed_step_error_estimate_against_the_true_error(case, h):
-    """The Richardson estimate of a fixed-step run (against its shadow run with steps of 2h)
+    """The Richardson estimate of a RATTLE fixed-step run (against its shadow run with steps of 2h)
     against the true error in q at the end (IDAS at 1e-10), on a chain, a fast-spinning
     chain (errors grow fast) and the stiff-spring pendulum: within a factor 2."""
     model = stiff_pendulum() if case == "stiff" else chain(2 if case == "chain" else 3)
     kw = {"v0": spinning_state(model)} if case == "spinning" else {}
     ref = reference(model, 1.0, 0.1, **kw)
-    traj = nc.simulate(model, 1.0, 0.1, method="stepper", substeps=round(0.1 / h), check=False, **kw)
+    traj = nc.simulate(model, 1.0, 0.1, method="stepper", substeps=round(0.1 / h), check=False, scheme="rattle",
+                       **kw)
     true = np.max(np.abs(traj.q[-1] - ref.q[-1]))
     estimate = traj.info["error_estimate"]["q"]
     assert 0.5 * true <= estimate <= 2 * true
@@ -155,17 +156,17 @@ def test_fixed_step_error_estimate_against_the_true_error(case, h):
 
 
 def test_a_chaotic_run_with_a_large_error_fails_loudly():
-    """The spinning chain at h = 2 ms: the estimate sees the error grow and the run stops
+    """The spinning chain with RATTLE at h = 2 ms: the estimate sees the error grow and the run stops
     with the step to use; at that step the error is within the stated 1 % of the size."""
     model = chain(3)
     v0 = spinning_state(model)
     with pytest.raises(SimulationError, match="estimated error in q") as failure:
-        nc.simulate(model, 1.0, 0.1, method="stepper", substeps=50, v0=v0)
+        nc.simulate(model, 1.0, 0.1, method="stepper", substeps=50, v0=v0, scheme="rattle")
     kept = failure.value.trajectory
     assert not kept.complete and 0 < kept.t[-1] < 1.0
     assert kept.info["error_estimate"]["q"] <= ERROR_FRACTION * np.max(np.abs(model.q0))   # the part kept
     substeps = int(str(failure.value).split("substeps=")[1].split(" ")[0])
-    traj = nc.simulate(model, 1.0, 0.1, method="stepper", substeps=substeps, v0=v0)
+    traj = nc.simulate(model, 1.0, 0.1, method="stepper", substeps=substeps, v0=v0, scheme="rattle")
     ref = reference(model, 1.0, 0.1, v0=v0)
     assert np.max(np.abs(traj.q - ref.q)) <= ERROR_FRACTION * np.max(np.abs(model.q0))
 

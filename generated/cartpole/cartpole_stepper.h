@@ -81,7 +81,8 @@ extern "C" {
 #define CARTPOLE_STEP_RATTLE4 1
 
 /* Newton options; cartpole_step_default_options() gives tol = 1e-10, max_iter = 12,
- * max_halvings = 4, scheme = CARTPOLE_STEP_RATTLE, stop = NULL. */
+ * max_halvings = 4, scheme = CARTPOLE_STEP_RATTLE4 (as nc.simulate's default),
+ * stop = NULL. */
 typedef struct {
   casadi_real tol;  /* tolerance of the convergence tests above */
   int max_iter;     /* Newton iterations allowed per step (>= 1) */
