@@ -100,7 +100,7 @@ def test_bad_batch_arguments_are_named(slider_crank):
 
 def test_batch_of_oscillators_matches_the_closed_form():
     """A sled on a spring pushed by a constant force: x(t) = F₀/k (1 − cos ωt), ω = √(k/m),
-    one run per stiffness; RATTLE's error is O(h²)."""
+    one run per stiffness; RATTLE's error is O(h²), the default composition's O(h⁴)."""
     s = nc.System("osc", gravity=(0, 0))
     sled = s.add_point("sled", mass=2.0, position=(1.0, 0))
     k = s.add_parameter("k", 50.0)
@@ -110,10 +110,14 @@ def test_batch_of_oscillators_matches_the_closed_form():
     s.add_force(nc.PointForce(sled, (0, 0), force=[push, 0.0]))
     osc = s.build()
     ks = np.array([20.0, 50.0, 80.0])
-    errors = []
-    for substeps in (1, 2):
-        batch = nc.simulate_batch(osc, 1.0, 0.01, p={"k": ks}, u=np.full((101, 1), 5.0), substeps=substeps)
-        assert batch.ok.all()
-        exact = 5.0 / ks[:, None] * (1 - np.cos(np.sqrt(ks[:, None] / 2.0) * batch.t[None]))
-        errors.append(np.abs(batch.q[:, :, 0] - 1.0 - exact).max())
-    assert errors[0] < 1e-4 and 3.5 < errors[0] / errors[1] < 4.5       # second order
+    errors = {"rattle": [], "auto": []}
+    for scheme, runs in errors.items():
+        for substeps in (1, 2):
+            batch = nc.simulate_batch(osc, 1.0, 0.01, p={"k": ks}, u=np.full((101, 1), 5.0), substeps=substeps,
+                                      scheme=scheme)
+            assert batch.ok.all()
+            exact = 5.0 / ks[:, None] * (1 - np.cos(np.sqrt(ks[:, None] / 2.0) * batch.t[None]))
+            runs.append(np.abs(batch.q[:, :, 0] - 1.0 - exact).max())
+    rattle, auto = errors["rattle"], errors["auto"]
+    assert rattle[0] < 1e-4 and 3.5 < rattle[0] / rattle[1] < 4.5       # second order
+    assert auto[0] < 1e-8 and 14 < auto[0] / auto[1] < 18                # the default: fourth order
