@@ -23,6 +23,9 @@ from __future__ import annotations
 
 import weakref
 from dataclasses import dataclass, field
+from typing import Any, Callable
+
+from ncgen.errors import ModelError
 
 
 @dataclass(eq=False)
@@ -98,3 +101,19 @@ def model_data(model) -> ModelData:
     if data is None:
         data = _DATA[model] = ModelData()
     return data
+
+
+def cached(slot: dict, key, build: Callable[[], Any]):
+    """``slot[key]``, built by ``build()`` on first use; a :class:`ModelError` raised by
+    ``build`` is kept in the slot and raised again on every later call (a model that cannot
+    have a kernel is told so at once, without rebuilding)."""
+    hit = slot.get(key)
+    if isinstance(hit, ModelError):
+        raise hit
+    if hit is None:
+        try:
+            hit = slot[key] = build()
+        except ModelError as e:
+            slot[key] = e
+            raise
+    return hit

@@ -23,7 +23,7 @@ import numpy as np
 from ncgen.assembly.derived import joint_kkt_function, kkt_function
 from ncgen.assembly.joint_space import solve_linear
 from ncgen.errors import ModelError
-from ncgen.model.data import model_data
+from ncgen.model.data import cached, model_data
 from ncgen.validation import as_vector
 
 
@@ -43,14 +43,13 @@ def forward_dynamics_kernel(model, *, joint_space: bool = False, cflags=None):
     built once per model (the library is cached by content).  Call ``k(t, q, v, u, p)`` →
     ``[a, lam]``, or ``k(t, qj, vj, u, p)`` → ``[aj, a, lam]`` (buffers reused by the next
     call)."""
-    kernels = model_data(model).forward_dynamics_kernels
-    hit = kernels.get(joint_space)
-    if hit is None:
-        from ncgen.codegen.direct import compile_direct
+    from ncgen.codegen.direct import compile_direct
 
+    def build():
         f = joint_kkt_function(model) if joint_space else kkt_function(model)
-        hit = kernels[joint_space] = compile_direct(f"{model.name}_{'jfd' if joint_space else 'fd'}", f, cflags)
-    return hit
+        return compile_direct(f"{model.name}_{'jfd' if joint_space else 'fd'}", f, cflags)
+
+    return cached(model_data(model).forward_dynamics_kernels, joint_space, build)
 
 
 def forward_dynamics(model, q, v, u=None, p=None, t: float = 0.0, *, backend: str = "numpy"):

@@ -26,7 +26,7 @@ import numpy as np
 
 from ncgen.codegen.fast_call import fast_caller
 from ncgen.errors import ModelError
-from ncgen.model.data import model_data
+from ncgen.model.data import cached, model_data
 from ncgen.runtime.tree_check import PIVOT_TOL, check_tree, compile_tree_function, unit_quaternions
 from ncgen.validation import as_vector
 
@@ -126,22 +126,15 @@ def algorithm_kernel(model, name: str, *, cflags=None) -> AlgorithmKernel:
 
     if name not in ALGORITHMS:
         raise ModelError(f"algorithm_kernel: name: expected one of {', '.join(ALGORITHMS)}, got {name!r}")
-    kernels = model_data(model).algorithm_kernels
-    hit = kernels.get((name, cflags))
-    if isinstance(hit, ModelError):
-        raise hit
-    if hit is not None:
-        return hit
-    try:
+
+    def build() -> AlgorithmKernel:
         check_tree(model)
         if model.joint_space.dim != 3:
             raise ModelError(f"{name}: compiled rigid-body algorithms take 3D models only")
         f = getattr(tree_algorithms, f"{name}_function")(model)
-    except ModelError as e:
-        kernels[(name, cflags)] = e
-        raise
-    hit = kernels[(name, cflags)] = AlgorithmKernel(model, name, compile_tree_function(model, f, cflags, name))
-    return hit
+        return AlgorithmKernel(model, name, compile_tree_function(model, f, cflags, name))
+
+    return cached(model_data(model).algorithm_kernels, (name, cflags), build)
 
 
 def rnea_applies(model) -> list[int] | None:

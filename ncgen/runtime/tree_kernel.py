@@ -26,7 +26,7 @@ import numpy as np
 
 from ncgen.codegen.fast_call import fast_caller
 from ncgen.errors import ModelError
-from ncgen.model.data import model_data
+from ncgen.model.data import cached, model_data
 from ncgen.runtime.joint_dynamics import forward_dynamics
 from ncgen.runtime.tree_check import PIVOT_TOL, check_tree, compile_tree_function, unit_quaternions
 from ncgen.validation import as_vector
@@ -116,31 +116,24 @@ def joint_forward_dynamics_kernel(model, *, method: str = "auto", cflags=None) -
 
     if method not in METHODS:
         raise ModelError(f"joint_forward_dynamics_kernel: method: expected one of {', '.join(METHODS)}, got {method!r}")
-    kernels = model_data(model).tree_kernels
-    hit = kernels.get((method, cflags))
-    if isinstance(hit, ModelError):
-        raise hit
-    if hit is not None:
-        return hit
-    try:
+
+    def build() -> JointDynamicsKernel:
         check_tree(model)
         if mimic_relations(model) and (method == "projection" or model.joint_space.dim != 3):
             raise ModelError("joint_forward_dynamics_kernel: mimic joints need the recursive form "
                              "(method='recursive' or 'auto', 3D models)")
-    except ModelError as e:
-        kernels[(method, cflags)] = e
-        raise
-    if method == "projection" or (method == "auto" and model.joint_space.dim != 3):
-        f, used = tree_dynamics_function(model), "projection"
-    else:
-        try:
-            f, used = recursive_dynamics_function(model), "recursive"
-        except ModelError:
-            if method == "recursive" or mimic_relations(model):
-                raise
+        if method == "projection" or (method == "auto" and model.joint_space.dim != 3):
             f, used = tree_dynamics_function(model), "projection"
-    hit = kernels[(method, cflags)] = JointDynamicsKernel(model, compile_tree_function(model, f, cflags, "jfd_tree"), used)
-    return hit
+        else:
+            try:
+                f, used = recursive_dynamics_function(model), "recursive"
+            except ModelError:
+                if method == "recursive" or mimic_relations(model):
+                    raise
+                f, used = tree_dynamics_function(model), "projection"
+        return JointDynamicsKernel(model, compile_tree_function(model, f, cflags, "jfd_tree"), used)
+
+    return cached(model_data(model).tree_kernels, (method, cflags), build)
 
 
 def joint_forward_dynamics(model, qj, vj, u=None, p=None, t: float = 0.0, *, backend: str = "compiled") -> np.ndarray:

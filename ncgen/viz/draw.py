@@ -6,6 +6,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from ncgen.reproducible import perpendicular_basis
 from ncgen.viz.scene import Scene
 
 SPRING_COLOR = "tab:green"
@@ -99,10 +100,7 @@ class SceneArtists:
             t = np.array([-normal[1], normal[0]])
             pts = [centre + s * half * t for s in (-1, 1)]
         else:
-            helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
-            t1 = np.cross(normal, helper)
-            t1 /= np.linalg.norm(t1)
-            t2 = np.cross(normal, t1)
+            t1, t2 = perpendicular_basis(normal)
             pts = [centre + half * (a * t1 + b * t2) for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1), (-1, -1))]
         self.ax.plot(*np.asarray(pts).T, color=PLANE_COLOR, lw=1, ls="--")
 
@@ -146,9 +144,7 @@ class SceneArtists:
             side = np.array([-u[1], u[0]])
             body = a + np.outer(s, d) + r * np.outer(np.sin(theta), side)
         else:
-            e1 = np.cross(u, np.eye(3)[int(np.argmin(np.abs(u)))])
-            e1 /= np.linalg.norm(e1)
-            e2 = np.cross(u, e1)
+            e1, e2 = perpendicular_basis(u)
             body = a + np.outer(s, d) + r * (np.outer(np.cos(theta) - 1, e1) + np.outer(np.sin(theta), e2))
         return np.vstack([a, body, b])
 

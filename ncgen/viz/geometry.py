@@ -23,6 +23,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ncgen.reproducible import perpendicular_basis
+
 #: Colours of members, in member order (tab10).
 PALETTE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
            "#bcbd22", "#17becf")
@@ -72,10 +74,7 @@ def z_to(direction) -> np.ndarray:
     """A rotation taking the z axis to the unit vector along ``direction``."""
     z = np.asarray(direction, float)
     z = z / np.linalg.norm(z)
-    helper = np.eye(3)[int(np.argmin(np.abs(z)))]
-    x = np.cross(helper, z)
-    x /= np.linalg.norm(x)
-    return np.column_stack([x, np.cross(z, x), z])
+    return np.column_stack([*perpendicular_basis(z, unit=True), z])
 
 
 def member_primitives(model, size: float, colors: dict | None = None) -> dict[str, list[Primitive]]:
