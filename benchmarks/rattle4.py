@@ -57,8 +57,12 @@ def search(error, h0: float, order: int, target: float, quantize) -> tuple[float
             seen[h] = error(h)
         return seen[h]
 
-    while not at(h) <= target:                   # down until within
-        h = quantize(h / SCAN)
+    while not at(h) <= target:                   # down until within (past the quantization)
+        down, factor = quantize(h / SCAN), SCAN
+        while down >= h:
+            factor *= SCAN
+            down = quantize(h / factor)
+        h = down
     while True:                                  # up while within
         up = quantize(h * SCAN)
         if up == h or not at(up) <= target:
