@@ -261,7 +261,8 @@ def main(argv=None) -> int:
     parser.add_argument("--smoke", action="store_true", help="tiny and coarse: runs in seconds (CI)")
     parser.add_argument("--curves", action="store_true",
                         help="the whole curves (IDAS, stepper, MuJoCo RK4 and Euler) instead of the targets")
-    parser.add_argument("--cases", nargs="+", choices=FULL["cases"], help="cases of --curves (default all)")
+    parser.add_argument("--cases", nargs="+", choices=FULL["cases"],
+                        help="cases to run (default all; the targets have joints and spinning)")
     parser.add_argument("--repeat", type=int, default=None,
                         help="runs per point, the fastest counts (--curves, default 3); interleaved timing "
                              "rounds (targets, default 7)")
@@ -402,7 +403,8 @@ def targets_main(args) -> int:
     print(machine())
     warnings.simplefilter("ignore")
     cases = {}
-    for kind, n, target, goal in SMOKE_GOALS if args.smoke else GOALS:
+    goals = SMOKE_GOALS if args.smoke else GOALS
+    for kind, n, target, goal in [g for g in goals if not args.cases or g[0] in args.cases]:
         if (kind, n) not in cases:
             case, first = cases[(kind, n)] = first_runs(kind, n)
             reference, checks = reference_tip(case, {"reference_step": 1e-3 if args.smoke else 2e-5})
