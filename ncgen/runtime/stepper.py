@@ -187,7 +187,8 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, co
         raise SimulationError(message, time=float(t[rows]), trajectory=traj)
     if shadow is not None:
         eq, ev = shadow_estimates(Q, V, shadow, rows)
-        traj.info["error_estimate"] = shadow_report(traj, eq, ev, rtol, atol, S[:rows])
+        same_steps = np.array_equal(S[:rows, 0], shadow[3][:rows, 0])
+        traj.info["error_estimate"] = shadow_report(traj, eq, ev, rtol, atol, S[:rows], same_steps)
         if check:
             check_global(model, traj, eq, rtol, atol)
     return traj

@@ -216,23 +216,22 @@ def roundoff_floor(steps: int, y: np.ndarray) -> float:
     return float(np.finfo(float).eps * math.sqrt(max(steps, 1)) * max(1.0, float(np.max(np.abs(y), initial=0.0))))
 
 
-def shadow_report(traj, eq: np.ndarray, ev: np.ndarray, rtol: float, atol: float, S: np.ndarray) -> dict:
-    """``info["error_estimate"]`` of an error-controlled run (see :func:`shadow_estimates`; where
-    the shadow run took the same steps and so differs by no more than the round-off floor of
-    the steps, the sum of the local estimates from the per-row statistics ``S``, at least that
-    floor), with
+def shadow_report(traj, eq: np.ndarray, ev: np.ndarray, rtol: float, atol: float, S: np.ndarray,
+                  same_steps: bool = False) -> dict:
+    """``info["error_estimate"]`` of an error-controlled run (see :func:`shadow_estimates`; at
+    least the round-off floor of the steps counted in the per-row statistics ``S``, and, where
+    the shadow run took the same steps (``same_steps``: its difference then says nothing), at
+    least the sum of the local estimates), with
     ``exceeds_tolerance``: the end estimate above
     :data:`GLOBAL_FACTOR` × ``atol + rtol · max |y|`` (q and v separately, ``max |y|`` over
     the run)."""
     if not len(eq):
         return {"q": 0.0, "v": 0.0, "exceeds_tolerance": False}
     steps = int(S[:len(eq), STATS.index("steps")].sum())
-    floor_q, floor_v = roundoff_floor(steps, traj.q), roundoff_floor(steps, traj.v)
-    lq, lv = global_estimates(S[:len(eq)], None)
-    # a shadow run that took the very same steps (both limited by the output grid) says nothing:
-    # there, the sum of the local estimates of the accepted steps
-    eq = np.where(eq <= floor_q, np.fmax(lq, floor_q), eq)
-    ev = np.where(ev <= floor_v, np.fmax(lv, floor_v), ev)
+    eq, ev = np.fmax(eq, roundoff_floor(steps, traj.q)), np.fmax(ev, roundoff_floor(steps, traj.v))
+    if same_steps:      # the shadow run took the very same steps (both limited by the output grid)
+        lq, lv = global_estimates(S[:len(eq)], None)
+        eq, ev = np.fmax(eq, lq), np.fmax(ev, lv)
     tol_q = atol + rtol * float(np.max(np.abs(traj.q)))
     tol_v = atol + rtol * float(np.max(np.abs(traj.v)))
     exceeds = bool(eq[-1] > GLOBAL_FACTOR * tol_q or ev[-1] > GLOBAL_FACTOR * tol_v)
