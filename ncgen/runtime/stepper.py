@@ -248,7 +248,8 @@ def _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info,
     traj = Trajectory(model_name=model.name, names={**names, **extra_names}, info=info, model=model, t=tt, q=q,
                       v=v, lam=lam, u=u, p=p, kinetic=Y[:, 0], potential=Y[:, 1], constraint_residual=Y[:, 2],
                       velocity_residual=Y[:, 3], markers=markers, **extra)
-    traj.info["error_estimate"] = error_estimate(S[:rows], info.get("substeps"), info.get("estimate"), q, v)
+    traj.info["error_estimate"] = error_estimate(S[:rows], info.get("substeps"), info.get("estimate"), q, v,
+                                                 info.get("order") == 4)
     traj.info["energy"] = energy_report(traj, work, conservative)
     if not conservative and len(traj):
         traj.info["energy"]["parts"] = balance_parts(model, traj)

@@ -247,11 +247,13 @@ def untrusted_global_row(model, eq: np.ndarray) -> int | None:
     return int(np.argmax(bad)) if bad.any() else None
 
 
-def error_estimate(S: np.ndarray, substeps: int | None, mode: str | bool = "shadow", q=None, v=None) -> dict:
+def error_estimate(S: np.ndarray, substeps: int | None, mode: str | bool = "shadow", q=None, v=None,
+                   grown: bool = True) -> dict:
     """``info["error_estimate"]``: the estimated error at the end (m, m/s; NaN when there
     is none, else at least :func:`roundoff_floor` of the run's ``q`` and ``v``) and how it
     was obtained; ``mode``: the fixed-step run's estimate (``"local"``, ``"shadow"`` or
-    False)."""
+    False); ``grown``: a local estimate scaled by the growth of RATTLE's errors (the
+    fourth-order scheme's; RATTLE's own local estimate is not)."""
     if not len(S):
         return {"q": 0.0, "v": 0.0}
     gq, gv = global_estimates(S, substeps)
@@ -263,8 +265,9 @@ def error_estimate(S: np.ndarray, substeps: int | None, mode: str | bool = "shad
         how = "none (estimate=False, or a single step)"
     elif mode == "local":
         how = ("local errors of one pair of steps in six against a step of 2h, |y_2h - y_pair| / (2^p - 1) "
-               "(p: the scheme's order), summed and grown as a RATTLE shadow run's errors grow (cheap; too low "
-               "where errors grow fast: estimate='shadow')")
+               "(p: the scheme's order), summed" + (" and grown as a RATTLE shadow run's errors grow" if grown else
+                                                    " without their growth") +
+               " (cheap; too low where errors grow fast: estimate='shadow')")
     else:
         how = "Richardson: |y_h - y_2h| / (2^p - 1) against a shadow run with steps of 2h (p: the scheme's order)"
     eq, ev = float(gq[-1]), float(gv[-1])
