@@ -10,7 +10,8 @@ from ncgen.assembly.kinematics import assemble, dof_report, project_velocity, so
 from ncgen.codegen.model_package import generate
 from ncgen.control import MPC, StepDidNotConverge, StepFunction, export_mpc, ilqr, step_function
 from ncgen.errors import NcgenError
-from ncgen.model.contacts import BoxPlane, CapsulePlane, Contact, CylinderPlane, SpherePlane, SphereSphere
+from ncgen.model.contacts import (BoxBox, BoxPlane, CapsulePlane, Contact, CylinderPlane, SphereBox, SpherePlane,
+                                  SphereSphere)
 from ncgen.model.controllers import PD, ComputedTorque, Controller
 from ncgen.model.forces import Force, GeneralizedForce, PointForce, Spring, Torque, TorsionalSpring
 from ncgen.model.joints import (
@@ -39,9 +40,9 @@ from ncgen.version import __version__
 
 
 __all__ = [
-    "BatchResult", "Box", "BoxPlane", "Capsule", "CapsulePlane", "ComputedTorque", "Contact", "Controller", "CoordinateDriver", "Cylinder", "CylinderPlane", "Ellipsoid", "Mesh", "Shape", "Sphere", "Cylindrical", "Distance", "Equilibrium", "Fixed", "Force", "Free", "GeneralizedForce",
+    "BatchResult", "Box", "BoxBox", "BoxPlane", "Capsule", "CapsulePlane", "ComputedTorque", "Contact", "Controller", "CoordinateDriver", "Cylinder", "CylinderPlane", "Ellipsoid", "Mesh", "Shape", "Sphere", "Cylindrical", "Distance", "Equilibrium", "Fixed", "Force", "Free", "GeneralizedForce",
     "Joint", "JointReaction", "LinearModel", "MPC", "Mimic", "Model", "ModelError", "Modes", "NcgenError", "OptimalControl",
-    "OptimalTrajectory", "PD", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic", "Revolute", "Samples", "SimulationOptions", "SpherePlane", "SphereSphere", "Spherical",
+    "OptimalTrajectory", "PD", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic", "Revolute", "Samples", "SimulationOptions", "SphereBox", "SpherePlane", "SphereSphere", "Spherical",
     "Spring", "StepDidNotConverge", "StepFunction", "SweepResult", "System", "Tensegrity", "Torque", "TorsionalSpring", "Trajectory", "Universal",
     "assemble", "coordinate_type", "dof_report", "equilibrium", "export_mpc", "form_find", "forward_dynamics",
     "forward_dynamics_kernel", "generate", "ilqr", "inverse_dynamics", "joint_forward_dynamics",

@@ -123,14 +123,23 @@ def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
     """A temporary sibling of ``target`` to write to; renamed onto ``target`` on success."""
     target = Path(target)
     parent = target.parent.resolve()
-    sweep_stale(parent, target.stem)
-    fd, tmp = tempfile.mkstemp(prefix=temporary_name(target.stem), suffix=target.suffix, dir=parent)
+    if target.is_dir():
+        raise NcgenError(f"cannot write {str(target)!r}: it is a directory")
+    try:
+        sweep_stale(parent, target.stem)
+        fd, tmp = tempfile.mkstemp(prefix=temporary_name(target.stem), suffix=target.suffix, dir=parent)
+    except OSError as exc:                # name the user's path, not the temporary one
+        raise NcgenError(f"cannot write {str(target)!r}: {exc.strerror or exc} "
+                         f"(directory {str(target.parent)!r})") from None
     os.close(fd)
     tmp = Path(tmp)
     try:
         yield tmp
         os.chmod(tmp, _new_file_mode(target))
-        os.replace(tmp, target)
+        try:
+            os.replace(tmp, target)
+        except OSError as exc:
+            raise NcgenError(f"cannot write {str(target)!r}: {exc.strerror or exc}") from None
     finally:
         tmp.unlink(missing_ok=True)
 

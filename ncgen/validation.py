@@ -7,9 +7,9 @@ TOML loader and the command line all go through these, so one input is judged by
 * names (:func:`name`): ASCII identifiers ``[A-Za-z_][A-Za-z0-9_]*`` of at most
   :data:`MAX_NAME` characters, because every name becomes part of C identifiers, file
   names and CSV headers;
-* numbers (:func:`as_array`, :func:`as_scalar`): finite, of magnitude at most
-  :data:`MAX_MAGNITUDE` (so that products of two stay finite in double precision), integers
-  too long for a double included;
+* numbers (:func:`as_array`, :func:`as_scalar`): real (not complex, not booleans, not
+  strings or ``None``), finite, of magnitude at most :data:`MAX_MAGNITUDE` (so that
+  products of two stay finite in double precision), integers too long for a double included;
 * run sizes (:func:`allocation`): an output that would need more than
   :data:`MAX_ALLOCATION` bytes is refused with the size it would need.
 """
@@ -68,9 +68,35 @@ def _bytes(n: float) -> str:
     return f"{n:.3g} EiB"
 
 
-def _float_array(x) -> np.ndarray:
-    """``np.asarray(x, float)``; integers too long for a double raise OverflowError."""
+def _float_array(x, what: str = "value") -> np.ndarray:
+    """``np.asarray(x, float)``; integers too long for a double raise OverflowError; complex
+    numbers, booleans and ``None`` entries raise :class:`ShapeError` (NumPy would drop the
+    imaginary part, read ``True`` as 1 and ``None`` as NaN)."""
+    kind = _wrong_kind(x)
+    if kind:
+        raise ShapeError(f"{what}: expected real numbers, got {kind}")
     return np.asarray(x, dtype=float)
+
+
+def _wrong_kind(x) -> str | None:
+    """What makes ``x`` not an array of real numbers although NumPy converts it, or None."""
+    if type(x) in (str, bytes, float, int) or (type(x) is np.ndarray and x.dtype.kind in "fiu"):
+        return None                              # the common cases; NumPy refuses strings itself
+    try:
+        a = np.asarray(x)
+    except Exception:                            # ragged: NumPy's conversion error says it
+        return None
+    if a.dtype.kind == "c":
+        return "complex numbers" + (f" ({complex(a.reshape(-1)[0])}, ...)" if a.size else "")
+    if a.dtype.kind == "b":
+        return "booleans"
+    if a.dtype.kind == "O":
+        for i, e in enumerate(a.reshape(-1)):
+            if e is None or isinstance(e, (bool, np.bool_, complex, np.complexfloating)):
+                index = tuple(int(k) for k in np.unravel_index(i, a.shape))
+                where = f" at index {index[0] if a.ndim == 1 else index}" if a.ndim else ""
+                return f"{type(e).__name__} {e!r}{where}"
+    return None
 
 
 def _check_magnitude(a: np.ndarray, what: str) -> None:
@@ -93,7 +119,8 @@ class RotationProjected(UserWarning):
 
 def _shape_of(x) -> str:
     """What ``x`` is, for a message: its shape if it is numeric, else (a prefix of) its repr."""
-    text = repr(x) if len(repr(x)) <= 60 else repr(x)[:57] + "..."
+    text = " ".join(repr(x).split())
+    text = text if len(text) <= 60 else text[:57] + "..."
     try:
         np.asarray(x, dtype=object).astype(float)
     except (TypeError, ValueError, OverflowError):
@@ -107,7 +134,9 @@ def _shape_of(x) -> str:
 def as_array(x, shape: tuple, what: str) -> np.ndarray:
     """``x`` as a finite float array of exactly ``shape``."""
     try:
-        a = _float_array(x)
+        a = _float_array(x, what)
+    except ShapeError:
+        raise
     except OverflowError:
         raise ShapeError(f"{what}: a number is too large (more than {MAX_MAGNITUDE:g})") from None
     except (TypeError, ValueError):
@@ -118,6 +147,19 @@ def as_array(x, shape: tuple, what: str) -> np.ndarray:
         raise ShapeError(f"{what}: expected shape {tuple(shape)}, got {_describe(a)}")
     _check_magnitude(a, what)
     return a
+
+
+def as_numbers(x, what: str, expected: str = "numbers") -> np.ndarray:
+    """``x`` as a float array of whatever shape it has (the caller checks the shape, saying
+    ``expected``): real numbers only (see :func:`_float_array`); finiteness is not checked."""
+    try:
+        return _float_array(x, what)
+    except ShapeError:
+        raise
+    except OverflowError:
+        raise ShapeError(f"{what}: a number is too large (more than {MAX_MAGNITUDE:g})") from None
+    except (TypeError, ValueError):
+        raise ShapeError(f"{what}: expected {expected}, got {_shape_of(x)}") from None
 
 
 def _describe(a: np.ndarray) -> str:
@@ -134,7 +176,9 @@ def as_vector(x, n: int, what: str) -> np.ndarray:
 
 def as_scalar(x, what: str) -> float:
     try:
-        v = float(_float_array(x).reshape(()))
+        v = float(_float_array(x, what).reshape(()))
+    except ShapeError:
+        raise
     except OverflowError:
         raise ShapeError(f"{what}: the number is too large (more than {MAX_MAGNITUDE:g})") from None
     except (TypeError, ValueError):

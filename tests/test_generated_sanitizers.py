@@ -92,7 +92,7 @@ def _clean(out) -> None:
 
 def test_every_example_is_shipped(built):
     names = set(built)
-    assert {"chain", "fourbar_planar", "heavy_top", "tensegrity", "falling_chain", "boxes"} <= names
+    assert {"chain", "fourbar_planar", "heavy_top", "tensegrity", "falling_chain", "boxes", "box_stack"} <= names
 
 
 def test_contact_scene_lands_clean(built):
@@ -110,6 +110,19 @@ def test_contact_scene_lands_clean(built):
     values = dict(line.split(" = ") for line in out.stdout.splitlines())
     z = [float(values[f"q[{3 * k + 2}]"]) for k in range(4)]            # nodes r_i, r_j of bar1, bar2, bar3
     assert min(z) > radius - 1e-6 and max(z) < radius + 1e-3, z
+
+
+def test_box_stack_lands_clean(built):
+    """``examples/box_stack.toml`` (boxes on boxes: ``BoxBox`` corners, the ball's ``SphereBox``)
+    run past the boxes' landing under the sanitizers: the crate rests on the table (its
+    centre at 0.45 m) and the small box on the crate (0.54 m)."""
+    d, _ = built["box_stack"]
+    out = _run(["./box_stack_simulate", "0.3"], d)
+    _clean(out)
+    assert out.returncode == 0, out.stderr
+    values = dict(line.split(" = ") for line in out.stdout.splitlines())
+    z_crate, z_top = float(values["q[2]"]), float(values["q[14]"])       # r_i of crate, of top
+    assert abs(z_crate - 0.45) < 1e-6 and abs(z_top - 0.54) < 1e-6, (z_crate, z_top)
 
 
 def test_main_evaluates_every_function_clean(built):

@@ -10,7 +10,7 @@ README = (ROOT / "README.md").read_text(encoding="utf-8")
 
 def test_readme_starts_with_the_two_commands_and_ci_runs_the_test_one():
     first_block = re.match(r"```\n(.*?)```", README, re.S).group(1).strip().splitlines()
-    assert first_block == ["pip install . && ncgen demo", "pip install '.[test]' && pytest -q"]
+    assert first_block == ["pip install . && ncgen demo", "pip install '.[test]' && pytest -q -n auto"]
     assert first_block[1] in (ROOT / ".ci" / "run").read_text(encoding="utf-8")
 
 

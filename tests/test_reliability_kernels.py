@@ -34,9 +34,28 @@ def test_kernel_arguments_are_checked(arm):
         k(0.0, q[:1], v, u, p)
     with pytest.raises(ShapeError, match=r"argument 'u': expected 2 values, got 3"):
         k(0.0, q, v, np.ones(3), p)
+    with pytest.raises(ShapeError, match=r"argument 'q': expected real numbers, got complex numbers"):
+        k.checked(0.0, q + 0j, v, u, p)          # NumPy would drop the imaginary part
+    with pytest.raises(ShapeError, match=r"argument 'u': expected real numbers, got booleans"):
+        k.checked(0.0, q, v, np.array([True, False]), p)
+    with pytest.raises(ShapeError, match=r"argument 'v': expected real numbers, got NoneType None at index 0"):
+        k(0.0, q, [None] * arm.nq, u, p)         # not a number: the careful path names it
     with pytest.raises(ShapeError, match=r"argument 'v': expected finite numbers, found nan at index 4"):
         k.checked(0.0, q, np.where(np.arange(arm.nq) == 4, np.nan, v), u, p)
     a = np.array(k(0.0, list(q), v, u, p)[0]).reshape(-1)        # a list, after the refusals
     np.testing.assert_allclose(a, np.asarray(a_ref).reshape(-1), rtol=1e-10, atol=1e-10)
     a2 = np.array(k(np.array([0.0]), q.reshape(-1, 1), v, u, p)[0]).reshape(-1)   # a column is fine
     np.testing.assert_allclose(a2, a, rtol=0, atol=0)
+
+
+def test_tree_kernel_refuses_what_is_not_real(arm):
+    """The joint-space kernel's C fast path copies float64 arrays as they are and reads other
+    sequences number by number: complex and boolean arrays are refused, not cast."""
+    k = nc.joint_forward_dynamics_kernel(arm)
+    qj, vj = np.array([0.3, -0.2]), np.array([0.1, 0.0])
+    expected = np.array(k(qj, vj)).copy()
+    for bad, found in ((qj + 1j, "complex numbers"), (np.array([True, False]), "booleans"),
+                       ([None, 0.1], "NoneType None at index 0")):
+        with pytest.raises(ShapeError, match=rf"qj: expected real numbers, got {found}"):
+            k(bad, vj)
+    np.testing.assert_array_equal(k(list(qj), vj), expected)      # not contaminated by the refusals

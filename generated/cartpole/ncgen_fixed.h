@@ -16,14 +16,15 @@
  * jump's is 1.70 h, backwards) and its error constant is far smaller, so at equal accuracy
  * it takes steps about 2.5 times the triple jump's, for 5/3 the RATTLE steps per step.
  * Each RATTLE step is warm-started from the one before (predict_scaled()); ws->x, ws->dx end
- * as after the last (of g h), so predict() warm-starts the next composed step. */
+ * as after the last (of g h), so predict() warm-starts the next composed step; ws->step_work
+ * is the five steps' work. */
 #define COMPOSITION_STAGES 5
 #define COMPOSITION_G 0.41449077179437573714
 static int step_rattle4(const casadi_real *q, const casadi_real *v, casadi_real t, const casadi_real *u,
                         const casadi_real *p, casadi_real h, casadi_real *q_next, casadi_real *v_next,
                         casadi_real *lam, int *iterations, const step_options *o, int warm, workspace *ws) {
   const casadi_real g = COMPOSITION_G, gamma[COMPOSITION_STAGES] = {g, g, 1 - 4 * g, g, g};
-  casadi_real *buffer[2] = {ws->sub, ws->sub + 2 * NQ}, t_i = t, h_prev = 0;
+  casadi_real *buffer[2] = {ws->sub, ws->sub + 2 * NQ}, t_i = t, h_prev = 0, work = 0;
   const casadi_real *q_i = q, *v_i = v;
   int s, it = 0, sum = 0, status = STEP_OK;
   for (s = 0; s < COMPOSITION_STAGES && status == STEP_OK; ++s) {
@@ -31,9 +32,11 @@ static int step_rattle4(const casadi_real *q, const casadi_real *v, casadi_real 
     casadi_real h_s = gamma[s] * h, *q_o = last ? q_next : buffer[s % 2], *v_o = last ? v_next : buffer[s % 2] + NQ;
     if (s > 0) predict_scaled(ws->x, ws->x, ws->dx, v_i, h_s / h_prev);
     status = step(q_i, v_i, t_i, u, p, h_s, q_o, v_o, last ? lam : 0, &it, o, s > 0 ? 1 : warm, ws);
+    if (status == STEP_OK && !last) work += ws->step_work;
     sum += it;
     q_i = q_o, v_i = v_o, t_i += h_s, h_prev = h_s;
   }
+  if (status == STEP_OK) ws->step_work += work;
   if (iterations) *iterations = sum;
   return status;
 }
@@ -55,7 +58,7 @@ static int scheme_step(const casadi_real *q, const casadi_real *v, casadi_real t
 
 /* step(), retried from the cold start if a warm start fails, then split into two steps of
  * h/2 (recursively, `depth` splits deep so far) if that fails too.  Adds the Newton
- * iterations to *iterations and the splits to *splits. */
+ * iterations to *iterations and the splits to *splits; ws->step_work ends as the work over h. */
 static int step_split(const casadi_real *q, const casadi_real *v, casadi_real t, const casadi_real *u,
                       const casadi_real *p, casadi_real h, casadi_real *q_next, casadi_real *v_next,
                       casadi_real *lam, int *iterations, long *splits, const step_options *o,
@@ -74,8 +77,13 @@ static int step_split(const casadi_real *q, const casadi_real *v, casadi_real t,
   status = step_split(q, v, t, u, p, h / 2, q_mid, v_mid, lam, iterations, splits, o, 0, ws, depth + 1);
   if (status != STEP_OK) return status;
   predict(ws);
-  return step_split(q_mid, v_mid, t + h / 2, u, p, h / 2, q_next, v_next, lam, iterations, splits, o, 1, ws,
-                    depth + 1);
+  {
+    casadi_real work = ws->step_work;
+    status = step_split(q_mid, v_mid, t + h / 2, u, p, h / 2, q_next, v_next, lam, iterations, splits, o, 1, ws,
+                        depth + 1);
+    ws->step_work += work;
+  }
+  return status;
 }
 
 static const step_options *options_or_default(const step_options *options, step_options *storage) {
@@ -189,7 +197,7 @@ static int run_fixed(const casadi_real *q0, const casadi_real *v0, const casadi_
   char *block;
   casadi_real *state, *q, *v, *q1, *v1, *lam, *swap, *q_s, *v_s, *q2, *v2, *x_save, *dx_save, *x_s, *dx_s, *u_bar;
   casadi_real *sum, *sum_r, *d_r, *q_r, *v_r, *x_r, *dx_r;
-  casadi_real work = 0, p_old = 0, p_new, err_q = -1, err_v = -1, richardson = o->scheme == SCHEME_RATTLE4 ? 15 : 3;
+  casadi_real work = 0, err_q = -1, err_v = -1, richardson = o->scheme == SCHEME_RATTLE4 ? 15 : 3;
   casadi_real growth_q = 1, growth_v = 1, first = o->scheme == SCHEME_RATTLE4 ? COMPOSITION_G : 1;
   long k = 0, i, row = 0, iter_sum = 0, n_splits = 0, row_splits = 0, last_sample = -1;
   step_options o_r = *o; /* RATTLE, for the growth */
@@ -256,11 +264,12 @@ static int run_fixed(const casadi_real *q0, const casadi_real *v0, const casadi_
       memcpy(v_s, v, NQ * sizeof *v);
       memcpy(x_s, ws.x, NX * sizeof *x_s);
     }
-    /* Work: trapezoidal rule over the step, both ends with the step's inputs. */
-    if (track_work && (status = power(&ws, tk, q, v, lam, uk, p, &p_old)) != STEP_OK) break;
     iters = 0;
+    ws.track_work = track_work;
     status = step_split(q, v, tk, uk, p, h, q1, v1, lam, &iters, &n_splits, o, k > 0, &ws, 0);
     if (status != STEP_OK) break;
+    if (track_work) work += ws.step_work; /* both ends with the step's inputs */
+    ws.track_work = 0;                     /* not for the shadow */
     iter_sum += iters;
     if ((shadow || local) && k % 2 == 1) {
       /* Steps of 2h over the last two steps, inputs averaged. */
@@ -345,13 +354,6 @@ static int run_fixed(const casadi_real *q0, const casadi_real *v0, const casadi_
     predict(&ws);
     swap = q, q = q1, q1 = swap;
     swap = v, v = v1, v1 = swap;
-    if (track_work) {
-      if ((status = power(&ws, tk + h, q, v, lam, uk, p, &p_new)) != STEP_OK) {
-        ++k;
-        break;
-      }
-      work += h / 2 * (p_old + p_new);
-    }
     if ((k + 1) % every == 0) {
       if (q_out) memcpy(q_out + row * NQ, q, NQ * sizeof *q);
       if (v_out) memcpy(v_out + row * NQ, v, NQ * sizeof *v);

@@ -54,10 +54,15 @@ typedef struct {
   casadi_real *dx;  /* Newton update */
   casadi_real *K;   /* KKT matrix nonzeros */
   casadi_real *chk; /* max |Phi|, max |A v + Phi_t|, power P */
+  casadi_real *lam2; /* the last step's multipliers lambda (start) and mu (end), NC each */
   casadi_real *mid; /* states at the middle of split steps: [q; v] per splitting depth */
   casadi_real *sub; /* the two intermediate states [q; v] of a composed step */
   casadi_real *w;   /* kernel work */
   casadi_int *iw;
+  int track_work;    /* whether step() sets step_work */
+  casadi_real step_work; /* work of all forces over the last step (h/2 (P(t, q, v, lambda) +
+                            P(t + h, q+, v+, mu)): each end with the multiplier that acts
+                            there, second order), or over the last composed or split step */
 #ifdef NCGEN_CONTACTS
   casadi_real *j;    /* generalised contact impulse of the step's second half, W(q_free)^T P */
   casadi_real *j0;   /* ... and of its first half, W(q)^T P (the rows at the start of the step) */
@@ -131,7 +136,7 @@ static size_t layout(workspace *ws, char *block) {
   sizes[1] = (size_t) sz_res * sizeof(casadi_real *);
   sizes[2] = sizes[3] = sizes[4] = NX * sizeof(casadi_real);
   sizes[5] = NNZ_K * sizeof(casadi_real);
-  sizes[6] = 3 * sizeof(casadi_real);
+  sizes[6] = (3 + 2 * NC) * sizeof(casadi_real);
   sizes[7] = (size_t) sz_w * sizeof(casadi_real);
   sizes[8] = (size_t) sz_iw * sizeof(casadi_int);
   sizes[9] = (2 * NQ * MAX_HALVINGS + 4 * NQ) * sizeof(casadi_real);
@@ -167,6 +172,9 @@ static size_t layout(workspace *ws, char *block) {
     ws->dx = (casadi_real *) (void *) (block + off[4]);
     ws->K = (casadi_real *) (void *) (block + off[5]);
     ws->chk = (casadi_real *) (void *) (block + off[6]);
+    ws->lam2 = ws->chk + 3;
+    ws->track_work = 0;
+    ws->step_work = 0;
     ws->w = (casadi_real *) (void *) (block + off[7]);
     ws->iw = (casadi_int *) (void *) (block + off[8]);
     ws->mid = (casadi_real *) (void *) (block + off[9]);
@@ -238,9 +246,23 @@ static int solve(workspace *ws, const casadi_real *K, const casadi_real *r, casa
   return KERNEL_SOLVE(ws->arg, ws->res, ws->iw, ws->w, 0);
 }
 
+/* P = dE/dt at (t, q, v, lam, u) (KERNEL_POWER) into *P. */
+static int power(workspace *ws, casadi_real t, const casadi_real *q, const casadi_real *v, const casadi_real *lam,
+                 const casadi_real *u, const casadi_real *p, casadi_real *P) {
+  ws->arg[0] = &t;
+  ws->arg[1] = q;
+  ws->arg[2] = v;
+  ws->arg[3] = lam;
+  ws->arg[4] = u;
+  ws->arg[5] = p;
+  ws->res[0] = P;
+  return KERNEL_POWER(ws->arg, ws->res, ws->iw, ws->w, 0) ? STEP_KERNEL : STEP_OK;
+}
+
 /* The step on a laid-out workspace (see <model>_step; h may be negative here, a backward
  * step of a composition).  Newton starts from ws->x if `warm`, else from [v; 0].  On
- * success ws->x holds [w; h/2 lambda], ws->dx [v+; h/2 mu]. */
+ * success ws->x holds [w; h/2 lambda], ws->dx [v+; h/2 mu], and with ws->track_work
+ * ws->step_work the step's work. */
 static int step(const casadi_real *q, const casadi_real *v, casadi_real t, const casadi_real *u,
                 const casadi_real *p, casadi_real h, casadi_real *q_next, casadi_real *v_next,
                 casadi_real *lam, int *iterations, const step_options *o, int warm,
@@ -320,6 +342,19 @@ static int step(const casadi_real *q, const casadi_real *v, casadi_real t, const
   if (KERNEL_CHECK(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
   if (!(ws->chk[0] <= tol)) return STEP_NO_CONVERGENCE;
   if (!(ws->chk[1] <= tol * (1 + norm_inf(v_next, NQ)))) return STEP_VELOCITY;
+  if (ws->track_work) {
+    /* lambda and mu are each within O(h) of the exact multiplier, with errors of opposite
+     * sign: the trapezoidal rule pairing each end with its own keeps the work second order */
+    casadi_real P0, P1;
+    for (i = 0; i < NC; ++i) {
+      ws->lam2[i] = 2 * ws->x[NQ + i] / h;
+      ws->lam2[NC + i] = 2 * ws->dx[NQ + i] / h;
+    }
+    if (power(ws, t, q, v, ws->lam2, u, p, &P0) != STEP_OK ||
+        power(ws, t1, q_next, v_next, ws->lam2 + NC, u, p, &P1) != STEP_OK)
+      return STEP_KERNEL;
+    ws->step_work = h / 2 * (P0 + P1);
+  }
   return STEP_OK;
 }
 
@@ -353,18 +388,6 @@ static int recoverable(int status) {
 }
 
 
-/* P = dE/dt at (t, q, v, lam, u) (KERNEL_POWER) into *P. */
-static int power(workspace *ws, casadi_real t, const casadi_real *q, const casadi_real *v, const casadi_real *lam,
-                 const casadi_real *u, const casadi_real *p, casadi_real *P) {
-  ws->arg[0] = &t;
-  ws->arg[1] = q;
-  ws->arg[2] = v;
-  ws->arg[3] = lam;
-  ws->arg[4] = u;
-  ws->arg[5] = p;
-  ws->res[0] = P;
-  return KERNEL_POWER(ws->arg, ws->res, ws->iw, ws->w, 0) ? STEP_KERNEL : STEP_OK;
-}
 
 
 /* Projection of (q, v) onto both constraint levels at t in the mass metric:

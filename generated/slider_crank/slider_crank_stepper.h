@@ -123,17 +123,19 @@ int slider_crank_simulate(const casadi_real *q0, const casadi_real *v0, casadi_r
                           long *steps_done, long *splits);
 
 /* As slider_crank_simulate, with per-row statistics and error estimates.  lam0: multipliers at
- * t0 (nc values, NULL for zeros; used for the work only).  stats_out (SLIDER_CRANK_STEP_NSTATS
+ * t0 (nc values, NULL for zeros; no longer read: kept for the signature).  stats_out (SLIDER_CRANK_STEP_NSTATS
  * values per row, may be NULL): see above.  estimate: 0 none; 1 (local) one pair of steps
- * in three (and the last) is retaken as one step of 2h, whose difference gives the pair's
- * local error (y_2h - y_pair) / (2^p - 1) (p the scheme's order), and the estimate is the
- * largest component of their sum, each weighted by the pairs it stands for (about a sixth
- * more work; errors added without their growth along the motion); 2 (shadow) a shadow run
- * with steps of 2h from the same start (about half the work again) gives the global error
- * estimate |y_h - y_2h| / (2^p - 1) after every second step.  The error columns hold the
- * latest estimate (-1 before the first, -2 once a shadow step of 2h failed: no estimate
- * from there on; models with contacts have none).  track_work != 0: W accumulates the
- * trapezoidal rule of P over the steps (contact impulses not included).  impulse_out
+ * in six (and the last) is retaken as one step of 2h, whose difference gives the pair's
+ * local error (y_2h - y_pair) / (2^p - 1) (p the scheme's order); the estimate is the
+ * largest component of their sum, each weighted by the pairs it stands for, for the
+ * fourth-order scheme grown as RATTLE's errors grow (a RATTLE shadow run with steps of 2h
+ * against RATTLE's local errors at the samples; about a fifth more work); 2 (shadow) a
+ * shadow run with steps of 2h from the same start (about half the work again) gives the
+ * global error estimate |y_h - y_2h| / (2^p - 1) after every second step.  The error
+ * columns hold the latest estimate (-1 before the first, -2 once a shadow step of 2h
+ * failed: no estimate from there on; models with contacts have none).  track_work != 0:
+ * W accumulates the trapezoidal rule of P over each step, its start with the step's
+ * multiplier lambda and its end with mu (second order; contact impulses not included).  impulse_out
  * (contacts only): as in slider_crank_simulate. */
 int slider_crank_simulate_stats(const casadi_real *q0, const casadi_real *v0, const casadi_real *lam0,
                                 casadi_real t0, casadi_real h, long n_steps, long every,

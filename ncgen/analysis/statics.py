@@ -74,6 +74,12 @@ class Equilibrium:
         """Names of the slack cables."""
         return [name for name, _, _, slack in self.springs if slack]
 
+    def coordinate(self, name: str) -> float:
+        """The value (m) of coordinate ``name`` at the equilibrium: one of the model's or one
+        as written before coordinate sharing re-based its member (``model.coordinate``)."""
+        s, c = self.model.coordinate(name)
+        return float(s @ self.q + c)
+
     def save(self, path) -> None:
         """Write the equilibrium: ``.npz`` (q, λ, u, p, K_reduced, stiffness eigenvalues and
         the coordinate and constraint names) or ``.csv`` (``name,value`` rows: ``q:<coordinate>``,
@@ -347,8 +353,6 @@ def spring_states(model, q, v, t, u, p) -> list[tuple[str, float, float, bool]]:
 
 
 def _parameters(model, p) -> np.ndarray:
-    if p is None:
-        return model.p0
-    if isinstance(p, dict):
-        return model.parameters(**p)
-    return as_vector(p, model.np, "p")
+    """The parameter vector from ``p`` (None, an array, a dict by name): the rule of ``nc.simulate``."""
+    from ncgen.runtime.inputs import parameter_values
+    return model.p0 if p is None else parameter_values(p, model)

@@ -14,6 +14,7 @@ from ncgen.assembly.contacts import (check_initial_gaps, contact_functions, cont
 from ncgen.assembly.functions import system_functions
 from ncgen.assembly.initial_state import consistent_state
 from ncgen.assembly.joint_space import JointSpace, actuator_forces, build_joint_coordinates
+from ncgen.assembly import kinematics
 from ncgen.assembly.kinematics import resolve_fix
 from ncgen.assembly.manifold import system_size
 from ncgen.assembly.limits import model_limits
@@ -161,8 +162,26 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
         if terms:
             check_initial_gaps(system.name, system.contacts, functions["gap"], q, p0, contacts, weight)
         model = model_with(consistent_state(functions, layout, labels, q, v, p0, t0, tolerance, M, fixed=fixed))
+    if system.initial_coordinates or system.initial_coordinate_rates:
+        q, v = _initial_coordinates(model, system)
+        if terms:
+            check_initial_gaps(system.name, system.contacts, functions["gap"], q, p0, contacts, weight)
+        model = model_with(consistent_state(functions, layout, labels, q, v, p0, t0, tolerance, M, fixed=fixed))
     raise_if_interrupted()               # a Ctrl-C that CasADi swallowed while the functions were built
     return model
+
+
+def _initial_coordinates(model, system) -> tuple[np.ndarray, np.ndarray]:
+    """``(q, v)`` with ``system.initial_coordinates`` / ``initial_coordinate_rates`` set (names
+    as written resolve through ``model.coordinate``), the others assembled from the model's."""
+    try:
+        q = kinematics.assemble(model, model.q0, values=system.initial_coordinates)
+        v = kinematics.project_velocity(model, q, model.v0, values=system.initial_coordinate_rates)
+    except ModelError as exc:
+        given = {**system.initial_coordinates, **system.initial_coordinate_rates}
+        raise ModelError(f"system {system.name!r}: initial coordinates "
+                         f"{', '.join(f'{k} = {x:g}' for k, x in given.items())}: {exc}") from None
+    return q, v
 
 
 def _check_droppable(name, labels, dependent, phi_fn, A_fn, q, p, t0) -> None:

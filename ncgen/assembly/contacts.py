@@ -32,7 +32,7 @@ import numpy as np
 
 from ncgen.errors import ModelError
 from ncgen.model.context import Context, perpendicular_basis
-from ncgen.model.contacts import SphereSphere, point_contacts
+from ncgen.model.contacts import BoxCorner, SphereBox, SphereSphere, point_contacts
 from ncgen.rigid_motion import casadi_forms as crm
 
 #: Regularisation of a cylinder rim's lowest point (dimensionless): within ~ε rad of standing
@@ -41,6 +41,20 @@ from ncgen.rigid_motion import casadi_forms as crm
 #: for ρ = 8 cm), ``ρ ε² / 2`` lying.  A smaller ε makes the rows of a nearly upright rim
 #: change faster than a step resolves (the two half-steps' impulses then tilt it).
 RIM_EPS = 1e-4
+#: Box corners against a box, relative to the smallest edge of the two boxes (see
+#: :func:`_sphere_box`).  ``EDGE_TOL``: a corner counts as over a face while it is off the
+#: face's edges by at most this: equal boxes stacked flush have every corner on an edge of
+#: the other, and a yaw of ψ moves them off by ~ψ × half the diagonal, so a smaller tolerance
+#: lets a yaw of 1e-6 rad (a friction solve's drift) drop the upper box through (no corner is
+#: then over a face); the price: the support reaches that far past an edge (1 mm for 10 cm
+#: boxes).  ``FACE_TIE``:
+#: among the faces a corner is over, one lying flatter against the corner's own box wins
+#: while its face-plane distance is within this of the largest.  A corner of a box resting on
+#: an equal box lies on the lower box's side planes too (distance 0 from them however deep it
+#: goes), so the tie must exceed the depth a corner reaches within a step (about v h, 1 mm at
+#: 1 m/s and h = 1 ms); where the faces' flatness differs and a corner is within the tie of a
+#: side plane, a penetration up to the tie can be attributed to the wrong face.
+EDGE_TOL, FACE_TIE = 1e-2, 1e-2
 
 
 class ContactTerms:
@@ -52,8 +66,13 @@ class ContactTerms:
 
 def contact_terms(ctx: Context, contacts) -> list[ContactTerms]:
     """The :class:`ContactTerms` of every point contact of ``contacts``, in order."""
-    return [_sphere_sphere(ctx, c) if isinstance(c, SphereSphere) else _sphere_plane(ctx, c)
-            for c in point_contacts(contacts)]
+    def terms(c):
+        if isinstance(c, SphereSphere):
+            return _sphere_sphere(ctx, c)
+        if isinstance(c, SphereBox):
+            return _sphere_box(ctx, c)
+        return _sphere_plane(ctx, c)
+    return [terms(c) for c in point_contacts(contacts)]
 
 
 def _omega_cross(ctx: Context, member, d):
@@ -118,6 +137,96 @@ def _sphere_sphere(ctx: Context, c: SphereSphere) -> ContactTerms:
            - _material_velocity(ctx, c.a, r_a, rd_a, r_a + c.radius_a * n))
     WN, WT = _jacobians(ctx, n, tangent_basis(n), rel)
     return ContactTerms(c, g, WN, WT)
+
+
+def _fixed_point(ctx: Context, member, at):
+    """World position and velocity of the point at local ``at`` of ``member`` (world for the ground)."""
+    if member.is_ground:
+        return ca.DM(np.asarray(at, float)), ca.SX.zeros(ctx.dim)
+    return ctx.local_point(member, at)
+
+
+def _axes(ctx: Context, member, at, rotation) -> list:
+    """World directions of the columns of ``rotation`` (in ``member``'s frame) at ``at``."""
+    if member.is_ground:
+        return [ca.DM(rotation[:, k]) for k in range(ctx.dim)]
+    r = ctx.local_point(member, at)[0]
+    return [ctx.local_point(member, np.asarray(at) + rotation[:, k])[0] - r for k in range(ctx.dim)]
+
+
+def _sphere_box(ctx: Context, c) -> ContactTerms:
+    """Sphere (or a :class:`BoxCorner`, radius 0) against a box.  With ``p`` the centre in the
+    box's axes ``b_k`` and ``h = size/2``:
+
+    * outside (some ``|p_k| > h_k``; spheres only): ``g = |p − clamp(p, −h, h)| − R``,
+      normal along ``p − clamp(p)`` (the nearest face, edge or corner);
+    * inside: ``g = max_k (|p_k| − h_k) − R`` over the face planes, normal ``sign(p_k) b_k``
+      of the face chosen (the signed distance to the surface).
+    * a box corner (R = 0), always: the face-plane distance ``|p_k| − h_k`` of one face k,
+      chosen among the faces the corner is over (``|p_l| ≤ h_l + EDGE_TOL·e`` for l ≠ k, e the
+      smallest edge of the two boxes; inside the box, all) by the largest
+      ``|p_k| − h_k + FACE_TIE·e·f_k``, with ``f_k = max_l −sign(p_k) b_k·σ_l a_l`` how flat
+      the face lies against a face of the corner's own box (σ the corner's signs, a its box's
+      axes); over no face (off an edge or a corner), the largest face-plane distance.  The
+      gap is the signed distance inside and over a face, a lower bound (still > 0) off an
+      edge or a corner, so a corner touches exactly when it reaches the surface, and a box
+      resting on an equal one (its corners on the lower box's side planes too) presses on
+      the top face.
+
+    The gap is piecewise smooth: its derivative (``W_N``) holds within the face or region
+    chosen."""
+    r_s, rd_s = _fixed_point(ctx, c.sphere, c.at)
+    centre_b, rd_b = _fixed_point(ctx, c.box, c.box_at)
+    b = _axes(ctx, c.box, c.box_at, c.box_rotation)
+    h = c.size / 2
+    p = [ca.dot(bk, r_s - centre_b) for bk in b]
+    corner = isinstance(c, BoxCorner)
+    if corner:
+        a = _axes(ctx, c.sphere, c.at, c.corner_rotation)
+        scale = min(np.min(c.size), np.min(c.corner_size))
+        band = 10 * (float(np.sum(c.size)) + float(np.sum(c.corner_size)))    # above any distance
+    best_key = best_g = best_n = None
+    for k in range(ctx.dim):
+        s = ca.if_else(p[k] >= 0, 1, -1)
+        gk = s * p[k] - h[k]
+        key = gk
+        if corner:
+            over = _all([ca.fabs(p[l]) <= h[l] + EDGE_TOL * scale for l in range(ctx.dim) if l != k])
+            flat = _max([-s * sig * ca.dot(b[k], al) for sig, al in zip(c.corner_signs, a)])
+            key = ca.if_else(over, gk + FACE_TIE * scale * flat + band, gk)
+        nk = s * b[k]
+        if best_key is None:
+            best_key, best_g, best_n = key, gk, nk
+        else:
+            better = key > best_key
+            best_key, best_g = ca.if_else(better, key, best_key), ca.if_else(better, gk, best_g)
+            best_n = ca.if_else(better, nk, best_n)
+    g, n = best_g - c.radius, best_n
+    if not corner:
+        d = [p[k] - ca.fmin(ca.fmax(p[k], -h[k]), h[k]) for k in range(ctx.dim)]
+        dist2 = sum(dk * dk for dk in d)
+        dist = ca.sqrt(ca.fmax(dist2, 1e-300))
+        outside = dist2 > 0
+        g = ca.if_else(outside, dist - c.radius, g)
+        n = ca.if_else(outside, sum((dk / dist) * bk for dk, bk in zip(d, b)), n)
+    x = r_s - c.radius * n
+    rel = _material_velocity(ctx, c.sphere, r_s, rd_s, x) - _material_velocity(ctx, c.box, centre_b, rd_b, x)
+    WN, WT = _jacobians(ctx, n, tangent_basis(n), rel)
+    return ContactTerms(c, g, WN, WT)
+
+
+def _all(conditions):
+    out = conditions[0]
+    for x in conditions[1:]:
+        out = ca.logic_and(out, x)
+    return out
+
+
+def _max(xs):
+    out = xs[0]
+    for x in xs[1:]:
+        out = ca.fmax(out, x)
+    return out
 
 
 def tangent_basis(n) -> list:

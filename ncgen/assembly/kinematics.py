@@ -15,6 +15,9 @@
 Coordinates to keep fixed (``fix=``) are named like ``"crank.r_j.x"`` (one coordinate),
 ``"crank.r_j"`` (a basic point or base vector), ``"crank"`` (every coordinate of a member)
 or given by index in q.  Driven joints need no fixing: their drives are constraints.
+Coordinates to set (``values={name: value}``) may also be coordinates as written that
+coordinate sharing re-based (``model.coordinate(name)``: ``s · q + c``); those become the
+extra equations ``s · q + c = value`` of the Newton step (all coordinates free).
 Units: q in m, v in m/s, a in m/s², t in s.
 """
 from __future__ import annotations
@@ -85,32 +88,74 @@ def _free(model, fix) -> np.ndarray:
     return np.array([i for i in range(model.nq) if i not in fixed], dtype=int)
 
 
-def assemble(model, q=None, *, t=None, p=None, fix=(), tol: float = TOL, max_iter: int = MAX_ITER) -> np.ndarray:
+def _values(model, values: dict | None, what: str) -> tuple[dict, np.ndarray, np.ndarray, np.ndarray, list[str]]:
+    """``values`` split into ``{index: value}`` for the model's own coordinates and, for the
+    coordinates as written (``written``), the rows ``S q + c = x`` of ``model.coordinate``."""
+    from ncgen.validation import as_scalar
+    if values is not None and not isinstance(values, dict):
+        raise ModelError(f"{what}: expected {{coordinate name: value}}, got {type(values).__name__} {values!r}")
+    direct, rows, offsets, given, written = {}, [], [], [], []
+    for name, value in (values or {}).items():
+        x = as_scalar(value, f"{what} {name!r}")
+        if name in model.coordinate_names:
+            direct[model.coordinate_names.index(name)] = x
+            continue
+        s, c = model.coordinate(name)
+        rows.append(s)
+        offsets.append(c)
+        given.append(x)
+        written.append(name)
+    return direct, np.array(rows).reshape(-1, model.nq), np.array(offsets), np.array(given), written
+
+
+def assemble(model, q=None, *, t=None, p=None, fix=(), values: dict | None = None, tol: float = TOL,
+             max_iter: int = MAX_ITER) -> np.ndarray:
     """``q`` (default ``model.q0``) moved onto ``Φ(t, q) = 0`` by Newton, the coordinates in
-    ``fix`` kept; raises :class:`ModelError` naming the worst constraint if it fails."""
-    q = model.q0 if q is None else np.asarray(q, float)
+    ``fix`` kept and those in ``values`` (``{name: value}``, m; names as written resolve,
+    see the module docstring) set; raises :class:`ModelError` naming the worst constraint
+    if it fails."""
+    q = np.array(model.q0 if q is None else q, dtype=float)
     t, p, phi, jac = _numeric(model, t, p)
-    free = _free(model, fix)
+    direct, S, c, x_w, written = _values(model, values, "values")
+    for i, value in direct.items():
+        q[i] = value
+    fix = [fix] if isinstance(fix, (str, int, np.integer)) else list(fix)
+    free = _free(model, fix + list(direct))
+    if written:
+        phi0, jac0 = phi, jac
+        phi = lambda x: np.concatenate([phi0(x), S @ x + c - x_w])  # noqa: E731
+        jac = lambda x: np.vstack([jac0(x), S])                     # noqa: E731
     size = system_size(q)
     q_new, it, res = newton(phi, jac, q, free, tol=tol * size**2, max_iter=max_iter)
     if res > tol * size**2 or not np.isfinite(res):
         r = phi(q_new)
         worst = int(np.nanargmax(np.abs(r)))
-        hint = f" with {model.nq - free.size} coordinate(s) fixed" if free.size < model.nq else ""
+        label = (model.constraint_names + [f"{n} = {x:g}" for n, x in zip(written, x_w)])[worst]
+        kept = model.nq - free.size + len(written)
+        hint = f" with {kept} coordinate(s) fixed" if kept else ""
         raise ModelError(f"assembly failed{hint}: after {it} Newton iterations "
-                         f"{model.constraint_names[worst]} still has the residual {abs(r[worst]):.3g} "
+                         f"{label} still has the residual {abs(r[worst]):.3g} "
                          "(check the geometry, the drives and the fixed coordinates)")
     return q_new
 
 
-def project_velocity(model, q, v=None, *, t=None, p=None, fix=()) -> np.ndarray:
+def project_velocity(model, q, v=None, *, t=None, p=None, fix=(), values: dict | None = None) -> np.ndarray:
     """The velocity nearest to ``v`` (default ``model.v0``) in the kinetic-energy metric that
-    satisfies ``A v = −Φ_t`` at ``(t, q)``; the components in ``fix`` are kept."""
+    satisfies ``A v = −Φ_t`` at ``(t, q)``; the components in ``fix`` are kept and the
+    rates in ``values`` (``{coordinate name: rate}``, m/s; names as written resolve, their
+    rate ``s · v``) set."""
     q = np.asarray(q, float)
-    v = model.v0 if v is None else np.asarray(v, float)
+    v = np.array(model.v0 if v is None else v, dtype=float)
     t, p, _, jac = _numeric(model, t, p)
+    direct, S, _, x_w, written = _values(model, values, "rates")
+    for i, value in direct.items():
+        v[i] = value
+    fix = [fix] if isinstance(fix, (str, int, np.integer)) else list(fix)
     phi_t = np.asarray(model.functions["phi_t"](t, q, p), dtype=float).reshape(-1)
-    return project(jac(q), -phi_t, v, model.M, _free(model, fix))
+    A, b = jac(q), -phi_t
+    if written:                        # s · v = value
+        A, b = np.vstack([A, S]), np.concatenate([b, x_w])
+    return project(A, b, v, model.M, _free(model, fix + list(direct)))
 
 
 @dataclass

@@ -37,8 +37,13 @@ class UnsharedForm:
         self.builder = builder
 
     def build(self):
-        """The ``share=False`` model of the same system (same build options)."""
-        return self.builder(self.source, share=False, **self.options)
+        """The ``share=False`` model of the same system (same build options), without the
+        system's initial coordinates (``System.initial_coordinates``: the shared build sets
+        them through this model's map, which does not depend on the state)."""
+        import copy
+        source = copy.copy(self.source)
+        source.initial_coordinates, source.initial_coordinate_rates = {}, {}
+        return self.builder(source, share=False, **self.options)
 
     def model(self, shared):
         """The ``share=False`` model of ``shared`` (built on first use)."""

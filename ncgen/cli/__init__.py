@@ -1,8 +1,9 @@
 """The ``ncgen`` command line: one module per subcommand (see :mod:`ncgen.cli.registry` for
 how to add one).
 
-Exit codes: 0 success, 1 failure while running, 2 bad usage (argparse's convention), 70
-internal error (a bug), 130 interrupted.  Bad input raised as
+Exit codes: 0 success, 1 failure while running, 2 bad usage (argparse's convention; an
+output path that cannot be written is one, found before any work), 70 internal error (a
+bug), 130 interrupted.  Bad input raised as
 :class:`ncgen.errors.NcgenError` is reported without a traceback; so is anything else (see
 :func:`main`).
 """

@@ -1,6 +1,7 @@
 """What several subcommands share: writing text output, loading a model file."""
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -53,20 +54,67 @@ def file_arguments(p, output: tuple[str, ...] | None, what: str, plot: str | Non
         p.add_argument("--html", metavar="FILE", default=None, help=f"also write {html} (.html)")
 
 
-def check_files(args, parser, output: tuple[str, ...] | None) -> None:
-    """Usage errors in -o/--plot/--animate, found before any work: suffix and directory."""
-    from pathlib import Path
-
+def check_files(args, parser, output: tuple[str, ...] | None, directories: tuple[str, ...] = ()) -> None:
+    """Usage errors in the output paths, found before any work: -o/--output (a file with one
+    of the suffixes ``output``, ``()`` for any; or, when ``"output"`` is in ``directories``,
+    a directory), --plot, --animate, --html (files with their suffixes).  A file's directory
+    must exist and take a new file, and the path must not be a directory; a directory
+    output may be new (its parents are made) but its nearest existing ancestor must be a
+    directory that takes new entries, and it must not be an existing file.  Each message
+    names the path as given."""
     kinds = {"output": ("-o/--output", output), "plot": ("--plot", PLOT_SUFFIXES),
              "animate": ("--animate", ANIMATE_SUFFIXES), "html": ("--html", (".html",))}
     for kind, (option, suffixes) in kinds.items():
         name = getattr(args, kind, None)
-        if name is None or suffixes is None:
+        if not isinstance(name, str) or (suffixes is None and kind not in directories):
             continue
-        if Path(name).suffix.lower() not in suffixes:
-            parser.error(f"{option} {name!r}: expected a file name ending in {' or '.join(suffixes)}")
-        if not Path(name).resolve().parent.is_dir():
-            parser.error(f"{option} {name!r}: directory {str(Path(name).parent)!r} does not exist")
+        if kind in directories:
+            problem = directory_problem(name)
+        else:
+            if suffixes and Path(name).suffix.lower() not in suffixes:
+                parser.error(f"{option} {name!r}: expected a file name ending in {' or '.join(suffixes)}")
+            problem = file_problem(name)
+        if problem:
+            parser.error(f"{option} {name!r}: {problem}")
+
+
+def file_problem(name: str) -> str | None:
+    """Why a file cannot be written at ``name`` (a temporary sibling then renamed), or None."""
+    path = Path(name)
+    if path.is_dir():
+        return "is a directory; give a file name"
+    parent = path.parent
+    if not parent.exists():
+        return f"directory {str(parent)!r} does not exist"
+    if not parent.is_dir():
+        return f"{str(parent)!r} is not a directory"
+    return _cannot_create_in(parent)
+
+
+def directory_problem(name: str) -> str | None:
+    """Why a directory cannot be written at ``name`` (made complete in a temporary sibling,
+    its parents created), or None."""
+    path = Path(name)
+    if path.exists() and not path.is_dir():
+        return "exists and is not a directory"
+    ancestor = Path(os.path.abspath(path)).parent
+    while not ancestor.exists():
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        return f"{str(ancestor)!r} is not a directory"
+    return _cannot_create_in(ancestor)
+
+
+def _cannot_create_in(directory: Path) -> str | None:
+    """Whether a new entry can be made in ``directory``: tried (and removed) rather than
+    judged from the permission bits, which a superuser, ACLs or a read-only mount override."""
+    import tempfile
+    try:
+        with tempfile.TemporaryFile(dir=directory):
+            pass
+    except OSError as exc:
+        return f"directory {str(directory)!r} is not writable ({exc.strerror or exc})"
+    return None
 
 
 def load_model(path: str, params: list[str] | None = None, contacts: str = "smooth", share: bool = True,

@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ncgen.cli.common import check_files
 from ncgen.cli.registry import subcommand
 
 
@@ -40,9 +41,8 @@ def _demo_arguments(p: argparse.ArgumentParser) -> None:
 def demo(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from ncgen.cli.demo_job import run_demo
 
+    check_files(args, parser, None, directories=("output",))
     out = Path(args.output)
-    if out.exists() and not out.is_dir():
-        parser.error(f"-o/--output {args.output!r} exists and is not a directory")
     if not args.t_end > 0:
         parser.error(f"--t-end: expected a positive time, got {args.t_end}")
     print(run_demo(out, animate=args.animate, t_end=args.t_end, backend=args.backend).summary())

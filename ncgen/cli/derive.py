@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from ncgen.cli.common import write_output
+from ncgen.cli.common import check_files, write_output
 from ncgen.cli.registry import subcommand
 
 
@@ -44,6 +44,7 @@ def _derive_arguments(p: argparse.ArgumentParser) -> None:
     arguments=_derive_arguments,
 )
 def derive(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    check_files(args, parser, ())
     if args.type == "se3":
         if args.dim == 2:
             parser.error("se3 is three-dimensional; drop --dim 2")

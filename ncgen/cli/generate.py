@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ncgen.cli.common import load_model, model_arguments
+from ncgen.cli.common import check_files, load_model, model_arguments
 from ncgen.cli.registry import subcommand
 
 
@@ -62,6 +62,7 @@ def generate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from ncgen.codegen.model_package import generate as generate_package
     from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
 
+    check_files(args, parser, None, directories=("output",))
     model = load_model(args.model, args.param, floating_base=args.floating_base)
     limit = {None: REROLL_INSTRUCTIONS, "none": None}.get(args.reroll, args.reroll)
     pkg = generate_package(model, args.output, cflags=args.cflags, compile=args.compile,

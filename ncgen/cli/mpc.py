@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ncgen.cli.common import load_model
+from ncgen.cli.common import check_files, load_model
 from ncgen.cli.registry import subcommand
 from ncgen.errors import ProblemFileError
 
@@ -21,7 +21,8 @@ def _arguments(p: argparse.ArgumentParser) -> None:
                    help="weight of the problem's final conditions, soft in MPC (default 1000)")
     p.add_argument("--x0", default=None, metavar="Q=V,...",
                    help="the demo's initial state as coordinate=value pairs (the others assembled, at rest), "
-                        "e.g. pole.r_j.x=0.1; default: the model's initial state")
+                        "e.g. pole.r_j.x=0.1 (coordinates as written before coordinate sharing too); "
+                        "default: the model's initial state")
     p.add_argument("--t-end", type=float, default=5.0, help="the demo's duration, s (default 5)")
     p.add_argument("--substeps", type=int, default=5, help="plant steps per control step in the demo (default 5)")
     p.add_argument("--disturbance", action="append", default=[], metavar="T_ON:T_OFF:U1,U2,...",
@@ -51,6 +52,7 @@ def mpc(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from ncgen.control.export import export_mpc
     from ncgen.optim.problem_file import model_path, problem_from_data, read_problem_file
 
+    check_files(args, parser, None, directories=("output",))
     data, origin = read_problem_file(Path(args.problem))
     model_file = model_path(data, origin)
     if model_file is None:
@@ -60,18 +62,19 @@ def mpc(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     x0 = None
     if args.x0:
         from ncgen.assembly.kinematics import assemble
-        q = model.q0.copy()
-        fixed = []
+        from ncgen.errors import NcgenError
+        values = {}
         for item in args.x0.split(","):
             key, _, value = item.partition("=")
-            if key not in model.coordinate_names:
-                parser.error(f"--x0: no coordinate named {key!r}; coordinates: {', '.join(model.coordinate_names)}")
             try:
-                q[model.coordinate_names.index(key)] = float(value)
+                model.coordinate(key)
+            except NcgenError as exc:
+                parser.error(f"--x0: {exc}")
+            try:
+                values[key] = float(value)
             except ValueError:
                 parser.error(f"--x0: {item!r}: expected coordinate=number")
-            fixed.append(key)
-        x0 = np.concatenate([assemble(model, q, fix=fixed), np.zeros(model.nq)])
+        x0 = np.concatenate([assemble(model, model.q0, values=values), np.zeros(model.nq)])
     pulses = []
     for item in args.disturbance:
         parts = item.split(":")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ncgen.cli.common import load_model
+from ncgen.cli.common import check_files, load_model
 from ncgen.cli.registry import subcommand
 
 SAMPLERS = ("lhs", "sobol", "random")
@@ -68,6 +68,7 @@ def sweep(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from ncgen.runtime.samples import Samples
     from ncgen.runtime.sweep import sweep as run
 
+    check_files(args, parser, None, directories=("output",))
     params = _params(args, parser)
     model = load_model(args.model)
     options = {}

@@ -21,6 +21,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.errors import CodegenError, ShapeError
+from ncgen.validation import as_numbers
 
 _INT = ctypes.c_longlong          # casadi_int of the generated code (long long by default)
 _REAL_P = ctypes.POINTER(ctypes.c_double)
@@ -87,8 +88,9 @@ class DirectFunction:
         """Copy ``args`` (one array per input, its nonzeros) into the buffers and evaluate.
         Raises :class:`~ncgen.errors.ShapeError` naming the input for a wrong number of
         arguments or a wrong size (no broadcasting).  Values are not tested for finiteness
-        on this path (the test would cost as much as the call: a NaN in gives NaN out);
-        :meth:`checked` does it."""
+        nor for being real on this path (the tests would cost as much as the call: a NaN in
+        gives NaN out, a complex array loses its imaginary part as NumPy casts it);
+        :meth:`checked` does both."""
         if len(args) != len(self.inputs):
             raise ShapeError(f"{self.name}: expected {len(self.inputs)} arguments "
                              f"({', '.join(self.input_names)}), got {len(args)}")
@@ -115,11 +117,7 @@ class DirectFunction:
         """Copy ``args`` into the buffers, raising for the first of a wrong size or with a
         non-finite value."""
         for name, buf, x in zip(self.input_names, self.inputs, args):
-            try:
-                a = np.asarray(x, dtype=float).ravel()
-            except (TypeError, ValueError):
-                raise ShapeError(f"{self.name}: argument {name!r}: expected {buf.size} numbers, got "
-                                 f"{type(x).__name__}") from None
+            a = as_numbers(x, f"{self.name}: argument {name!r}", f"{buf.size} numbers").ravel()
             if a.size != buf.size:
                 raise ShapeError(f"{self.name}: argument {name!r}: expected {buf.size} values, got {a.size} "
                                  f"(shape {np.shape(x)})")

@@ -49,8 +49,12 @@ static int copy_in(double *dst, Py_ssize_t n, PyObject *x, int k) {
     if (PyObject_GetBuffer(x, &view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) == 0) {
         int ok = view.itemsize == 8 && view.format && view.format[0] == 'd' && view.format[1] == 0;
         if (ok && view.len == n * 8) { memcpy(dst, view.buf, (size_t)view.len); PyBuffer_Release(&view); return 0; }
+        const char *f = view.format ? view.format : "";
+        while (*f && strchr("@=<>!", *f)) f++;
+        int not_real = *f == 'Z' || *f == '?';          /* complex, bool: not read as real numbers */
         PyBuffer_Release(&view);
         if (ok) { PyErr_Format(PyExc_ValueError, "argument %d: expected %zd values, got %zd", k, n, view.len / 8); return -1; }
+        if (not_real) { PyErr_Format(PyExc_ValueError, "argument %d: expected real numbers", k); return -1; }
     } else PyErr_Clear();
     PyObject *seq = PySequence_Fast(x, "expected a sequence of numbers");
     if (!seq) return -1;

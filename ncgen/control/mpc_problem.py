@@ -52,6 +52,8 @@ def mpc_problem(ocp, terminal_weight: float) -> MPCProblem:
         ("periodic conditions", any(ocp.periodic_spec.values())),
         ("marker path constraints (bound_marker)", bool(ocp.marker_bounds)),
         ("joint path constraints (bound_joint, joint_limits)", bool(ocp.joint_bounds)),
+        ("bounds on coordinates as written that coordinate sharing re-based (not a box on the state)",
+         bool(ocp.row_bounds)),
         ("final markers, poses or joints", bool(ocp.final_spec["markers"] or ocp.final_spec.get("pose")
                                                  or ocp.final_spec.get("joints"))),
         ("minimize_time", ocp.time_weight > 0),

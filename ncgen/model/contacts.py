@@ -1,6 +1,8 @@
 """Unilateral contact elements: a body-fixed sphere against a plane, two spheres, and
 body-fixed shapes against a plane as several contact points (:class:`BoxPlane`,
-:class:`CapsulePlane`, :class:`CylinderPlane`).
+:class:`CapsulePlane`, :class:`CylinderPlane`); a sphere against a box (:class:`SphereBox`)
+and two boxes as the corners of each against the other (:class:`BoxBox`), a box carried by
+a body or the ground.
 
 Geometry is given like a joint's: body-fixed points in the member's local frame (``at``,
 as for forces), the plane by a world point and a world normal in the initial
@@ -23,8 +25,9 @@ Every contact has, besides its geometry (SI units):
   ``restitution`` is the nonsmooth stepper's only.
 
 Sign conventions: the gap ``g`` (m) is positive when apart; the normal ``n`` points from the
-plane (or sphere ``a``) towards the sphere (or sphere ``b``); contact forces are those on the
-second element (the sphere, or ``b``), and ``−`` that on the first.
+plane (or sphere ``a``, or the box) towards the sphere (or sphere ``b``, or the box corner);
+contact forces are those on the second element (the sphere, ``b``, or the corner's box), and
+``−`` that on the first.
 """
 from __future__ import annotations
 
@@ -157,6 +160,16 @@ class Contact:
         if not math.isfinite(r) or r < 0:
             raise ModelError(f"{self.label}: {what} radius: expected a finite number >= 0 (m), got {radius!r}")
         return x, r
+
+    def _length(self, value, what: str, positive: bool = True) -> float:
+        try:
+            x = float(value)
+        except (TypeError, ValueError):
+            raise ModelError(f"{self.label}: {what}: expected a number (m), got {value!r}") from None
+        if not math.isfinite(x) or x < 0 or (positive and x == 0):
+            raise ModelError(f"{self.label}: {what}: expected a finite number {'> 0' if positive else '>= 0'} (m), "
+                             f"got {value!r}")
+        return x
 
     def point_contacts(self) -> list:
         """The point contacts this element stands for (itself for a sphere pair)."""
@@ -321,16 +334,6 @@ class ShapePlane(Contact):
     def _check_shape(self, dim: int):
         """Argument checks of the shape's dimensions (subclasses)."""
 
-    def _length(self, value, what: str, positive: bool = True) -> float:
-        try:
-            x = float(value)
-        except (TypeError, ValueError):
-            raise ModelError(f"{self.label}: {what}: expected a number (m), got {value!r}") from None
-        if not math.isfinite(x) or x < 0 or (positive and x == 0):
-            raise ModelError(f"{self.label}: {what}: expected a finite number {'> 0' if positive else '>= 0'} (m), "
-                             f"got {value!r}")
-        return x
-
     def _need_3d(self, dim: int):
         if dim != 3:
             raise ModelError(f"{self.label}: a {self.kind} needs a 3D system (its axis is the body's z), "
@@ -443,10 +446,157 @@ class CylinderPlane(ShapePlane):
         return {**super().spec(), "radius": self.radius, "length": self.length, "face_points": self.face_points}
 
 
+def _box_frame(contact, member, size, at, rotation, what: str, dim: int):
+    """Check a box carried by ``member`` (the ground or a body): full edge lengths ``size``
+    (m), centre ``at`` and axes ``rotation`` (columns) in the member's frame (the world frame
+    for the ground).  Returns ``(size, at, rotation)`` as arrays."""
+    if not member.is_ground and member.kind != "body":
+        raise ModelError(f"{contact.label}: {what}: a box needs the ground or a rigid body to carry it, got the "
+                         f"{member.kind} {member.name!r}")
+    if size is None:
+        raise ModelError(f"{contact.label}: {what} size: expected the box's {dim} full edge lengths (m), got None")
+    size = as_vector(size, dim, f"{contact.label}: {what} size")
+    size = np.array([contact._length(x, f"{what} size[{i}]") for i, x in enumerate(size)])
+    at = as_vector(np.zeros(dim) if at is None else at, dim, f"{contact.label}: {what} at")
+    rotation = np.eye(dim) if rotation is None else as_rotation(rotation, dim, f"{contact.label}: {what} rotation")
+    return size, at, rotation
+
+
+class SphereBox(Contact):
+    """A sphere of ``radius`` (m, ≥ 0; 0 is a point) centred at the local point ``at`` of
+    ``sphere`` against a box of full edge lengths ``size`` (m; a rectangle in planar
+    systems) carried by ``box`` (the ground by default, or a body), centred at ``box_at`` with
+    its axes along the columns of ``box_rotation``, both in ``box``'s frame (the world frame
+    for the ground).  The gap is the signed distance from the sphere to the box
+    (:mod:`ncgen.assembly.contacts`): the distance to the box's nearest point less the
+    radius while the centre is outside, and the largest face-plane distance less the radius
+    inside.  The normal points from the box towards the sphere; forces are those on the
+    sphere."""
+
+    kind = "SphereBox"
+
+    def __init__(self, sphere, at=None, radius=0.0, *, box=None, size=None, box_at=None, box_rotation=None,
+                 **material):
+        super().__init__(**material)
+        self.sphere, self.at, self.radius = sphere, at, radius
+        self.box, self.size, self.box_at, self.box_rotation = box, size, box_at, box_rotation
+
+    def members(self):
+        return [self.sphere] + ([] if self.box is None else [self.box])
+
+    def attach(self, system, index: int):
+        given = self.box
+        if self.box is None:
+            self.box = system.ground
+        try:
+            super().attach(system, index)
+        except BaseException:
+            self.box = given
+            raise
+
+    def check(self, system):
+        d = system.dim
+        if self.box is self.sphere:
+            raise ModelError(f"{self.label}: the sphere and the box are on the same member {self.sphere.name!r}")
+        self._check_point(d)
+        self.size, self.box_at, self.box_rotation = _box_frame(self, self.box, self.size, self.box_at,
+                                                               self.box_rotation, "box", d)
+
+    def _check_point(self, dim: int):
+        self.at, self.radius = self._sphere(self.sphere, np.zeros(dim) if self.at is None else self.at,
+                                            self.radius, "sphere")
+
+    def spec(self):
+        return {**super().spec(), "sphere": self.sphere.name, "at": np.asarray(self.at).tolist(),
+                "radius": self.radius, "box": self.box.name, "size": self.size.tolist(),
+                "box_at": self.box_at.tolist(), "box_rotation": self.box_rotation.tolist()}
+
+
+class BoxCorner(SphereBox):
+    """One point contact of a :class:`BoxBox` ``element`` (built by it, never attached):
+    corner ``signs`` (±1 per axis) of the box ``(size, at, rotation)`` on ``member`` against
+    the other box.  Its gap is the corner's distance to the plane of one face of the other
+    box, the face chosen among those the corner is over (``_sphere_box`` in
+    :mod:`ncgen.assembly.contacts`); ``corner_rotation``, ``corner_signs`` and
+    ``corner_size`` say which faces of its own box meet at the corner and how large it is
+    (they settle near ties between faces)."""
+
+    def __init__(self, element, suffix: str, member, size, at, rotation, signs, box, box_size, box_at,
+                 box_rotation):
+        super().__init__(member, at + rotation @ (signs * size / 2), 0.0, box=box, size=box_size, box_at=box_at,
+                         box_rotation=box_rotation, mu=element.mu, restitution=element.restitution,
+                         stiffness=element.stiffness, damping=element.damping, exponent=element.exponent,
+                         slip_velocity=element.slip_velocity, name=f"{element.name}.{suffix}")
+        self.kind, self.element = element.kind, element.name
+        self.corner_rotation, self.corner_signs, self.corner_size = rotation, np.asarray(signs, float), size
+
+    def _check_point(self, dim: int):
+        self.at = np.asarray(self.at, float)
+
+    def spec(self):
+        return {**super().spec(), "element": self.element, "corner_rotation": self.corner_rotation.tolist(),
+                "corner_signs": self.corner_signs.tolist(), "corner_size": self.corner_size.tolist()}
+
+
+class BoxBox(Contact):
+    """Two boxes: full edge lengths ``size_a`` (m) centred at ``at_a`` with axes along the
+    columns of ``rotation_a`` in ``a``'s frame, and likewise ``size_b``, ``at_b``,
+    ``rotation_b`` on ``b`` (a body, or the ground for a fixed box: a table, a step).  As
+    point contacts (:class:`BoxCorner`): each corner of ``a`` against box ``b``
+    (``<name>.a_corner0 …``, forces on ``a``) and each corner of ``b`` against box ``a``
+    (``<name>.b_corner0 …``, forces on ``b``), corner ``i`` at ``(±x/2, ±y/2, ±z/2)`` with
+    the sign of axis j ``+`` when bit j of i is set.  This holds a box resting on a face,
+    an edge or a corner of the other wherever a corner of one of them is in contact: a box
+    on a larger, a smaller or an equal box, shifted or turned in the plane of contact so
+    long as a corner of one lies over the other's face (docs/contact.md gives the method and
+    its tolerances).  Not covered: two edges crossing with no corner in contact (e.g. equal
+    squares stacked at 45°, or two beams crossed edge on edge): the boxes then pass through
+    each other."""
+
+    kind = "BoxBox"
+
+    def __init__(self, a, size_a=None, b=None, size_b=None, *, at_a=None, rotation_a=None, at_b=None,
+                 rotation_b=None, **material):
+        super().__init__(**material)
+        self.a, self.size_a, self.at_a, self.rotation_a = a, size_a, at_a, rotation_a
+        self.b, self.size_b, self.at_b, self.rotation_b = b, size_b, at_b, rotation_b
+        self._points: list = []
+
+    def members(self):
+        return [self.a, self.b]
+
+    def check(self, system):
+        d = system.dim
+        if self.a is self.b:
+            raise ModelError(f"{self.label}: both boxes are on the same member {self.a.name!r}")
+        self.size_a, self.at_a, self.rotation_a = _box_frame(self, self.a, self.size_a, self.at_a,
+                                                             self.rotation_a, "a", d)
+        self.size_b, self.at_b, self.rotation_b = _box_frame(self, self.b, self.size_b, self.at_b,
+                                                             self.rotation_b, "b", d)
+        boxes = {"a": (self.a, self.size_a, self.at_a, self.rotation_a),
+                 "b": (self.b, self.size_b, self.at_b, self.rotation_b)}
+        self._points = []
+        for mine, other in (("a", "b"), ("b", "a")):
+            member, size, at, rot = boxes[mine]
+            for i in range(2 ** d):
+                signs = np.array([1.0 if i >> j & 1 else -1.0 for j in range(d)])
+                bc = BoxCorner(self, f"{mine}_corner{i}", member, size, at, rot, signs, *boxes[other])
+                bc.system = system
+                self._points.append(bc)
+
+    def point_contacts(self) -> list:
+        return list(self._points)
+
+    def spec(self):
+        return {**super().spec(), "a": self.a.name, "size_a": self.size_a.tolist(), "at_a": self.at_a.tolist(),
+                "rotation_a": self.rotation_a.tolist(), "b": self.b.name, "size_b": self.size_b.tolist(),
+                "at_b": self.at_b.tolist(), "rotation_b": self.rotation_b.tolist()}
+
+
 def point_contacts(contacts) -> list:
     """The point contacts of ``contacts`` (elements expanded), in order."""
     return [p for c in contacts for p in c.point_contacts()]
 
 
 CONTACT_TYPES: dict[str, type[Contact]] = {cls.kind: cls for cls in (SpherePlane, SphereSphere, BoxPlane,
-                                                                     CapsulePlane, CylinderPlane)}
+                                                                     CapsulePlane, CylinderPlane, SphereBox, BoxBox)}

@@ -23,6 +23,17 @@ their coordinates: a joint can share only their existing basic points.  A joint 
 be expressed by sharing (another joint type, a drive's own equation, a point that no side
 can carry) keeps its equations; a driven Revolute shares its geometry and keeps its drive.
 
+Names as written keep working.  A re-based body's coordinates as written (``"upper.r_i.x"``)
+are no longer in ``model.coordinate_names``, but each is an affine function ``s · q + c`` of
+the shared coordinates (the identity for the kept members, a row of the map
+``q_u = S q_s + c`` of :mod:`ncgen.assembly.unshared` for the re-based ones):
+``model.coordinate(name)`` returns ``(s, c)``, and every place a coordinate is named goes
+through it — ``traj.coordinate(name)`` (results), ``nc.assemble(values=...)`` and
+``nc.project_velocity(values=...)`` (extra equations ``s · q + c = value``), optimal-control
+bounds (linear path constraints) and targets (:mod:`ncgen.optim.problem`), and the TOML
+``initial`` / ``initial_rates`` tables.  Markers and member names never change (a body keeps
+its frame).
+
 The joints stay in the system (``TorsionalSpring`` and drives still measure them); the pass
 only marks which of their equations are implied by the sharing (:attr:`SharingPlan.dropped`),
 and :func:`intrinsic_key` lets the build skip rigidity constraints that two members now

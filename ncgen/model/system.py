@@ -57,6 +57,11 @@ class System:
         #: named keep the coordinates and rates of the members' given poses and twists.
         self.initial_joints: dict = {}
         self.initial_joint_rates: dict = {}
+        #: Initial coordinates ``{"link.r_i.x": value}`` / rates (m, m/s) applied by :meth:`build`
+        #: after the joint-space state, the others assembled (``nc.assemble(values=...)``); a
+        #: coordinate as written resolves also when coordinate sharing re-based its member.
+        self.initial_coordinates: dict = {}
+        self.initial_coordinate_rates: dict = {}
 
     # ------------------------------------------------------------- members
     def _new_name(self, name: str, what: str) -> str:

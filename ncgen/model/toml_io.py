@@ -14,7 +14,9 @@ Layout of a file (every table optional except ``members``)::
                   or "SphereSphere" (between = ["a", "b"], at_a, radius_a, at_b, radius_b),
                   or "BoxPlane" (body, size) / "CapsulePlane" (body, radius, length) /
                   "CylinderPlane" (body, radius, length, face_points), each with at, rotation, plane,
-                  point, normal; all with mu, restitution, stiffness, damping, exponent, slip_velocity, name
+                  point, normal; or "SphereBox" (sphere, at, radius, box = "ground", size, box_at,
+                  box_rotation) or "BoxBox" (between = ["a", "b"], size_a, size_b, at_a, rotation_a,
+                  at_b, rotation_b); all with mu, restitution, stiffness, damping, exponent, slip_velocity, name
 
 Shared basic points are written ``"crank.r_j"`` (slot ``r_j`` of member ``crank``) or
 ``{ground = [x, y, z]}``.  Values that may vary are numbers or expression strings
@@ -36,7 +38,7 @@ from ncgen.errors import ModelError
 from ncgen.files import decode_text
 from ncgen.model import toml_write
 from ncgen.model.expressions import did_you_mean, parse, scope, value_to_toml
-from ncgen.model.contacts import CONTACT_TYPES, SphereSphere
+from ncgen.model.contacts import CONTACT_TYPES, BoxBox, SphereSphere
 from ncgen.model.forces import FORCE_TYPES
 from ncgen.model.joints import JOINT_TYPES, CoordinateDriver
 from ncgen.model.members import NodeRef
@@ -100,6 +102,12 @@ CONTACT_FIELDS = {
                      *_SHAPE_PLANE),
     "CylinderPlane": (Field("body", "member", True), Field("radius", "number", True), Field("length", "number", True),
                       Field("face_points", "number"), *_SHAPE_PLANE),
+    "SphereBox": (Field("sphere", "member", True), Field("at", "vector"), Field("radius", "number"),
+                  Field("box", "member"), Field("size", "vector", True), Field("box_at", "vector"),
+                  Field("box_rotation", "rotation")),
+    "BoxBox": (Field("between", "two members", True, ("a", "b")), Field("size_a", "vector", True),
+               Field("size_b", "vector", True), Field("at_a", "vector"), Field("rotation_a", "rotation"),
+               Field("at_b", "vector"), Field("rotation_b", "rotation")),
 }
 
 #: Joints whose keys are not ``between`` and their keyword arguments.
@@ -277,21 +285,38 @@ class _Loader:
 
     def _initial(self, table, key):
         """``initial = {elbow = 0.3}``: joint positions (rad, m; a list for multi-coordinate
-        joints) of the initial state; ``initial_rates`` likewise for rates."""
+        joints) of the initial state, or coordinates as written (``"link.r_i.x" = 0.3``, m);
+        ``initial_rates`` likewise for rates."""
         if not isinstance(table, dict):
             raise ModelError(f"{key}: expected a table {{joint = value}}, got {_describe(table)}")
         names = [j.name for j in self.s.joints]
-        out = {}
+        joints, coords = {}, {}
         for name, v in table.items():
             path = f"{key}.{name}"
-            if name not in names:
-                raise ModelError(f"{path}: no joint named {name!r}{did_you_mean(name, names)}")
-            if isinstance(v, list):
-                out[name] = [_number(x, f"{path}[{i}]") for i, x in enumerate(v)]
+            if "." in name:
+                coords[name] = _number(v, path)
+                self._coordinate_name(name, path)
+            elif name not in names:
+                raise ModelError(f"{path}: no joint named {name!r}{did_you_mean(name, names)} (a coordinate "
+                                 "is named member.slot.axis, e.g. \"link.r_i.x\")")
+            elif isinstance(v, list):
+                joints[name] = [_number(x, f"{path}[{i}]") for i, x in enumerate(v)]
             else:
-                out[name] = _number(v, path)
-        target = self.s.initial_joints if key == "initial" else self.s.initial_joint_rates
-        target.update(out)
+                joints[name] = _number(v, path)
+        rates = key != "initial"
+        (self.s.initial_joint_rates if rates else self.s.initial_joints).update(joints)
+        (self.s.initial_coordinate_rates if rates else self.s.initial_coordinates).update(coords)
+
+    def _coordinate_name(self, name: str, path: str) -> None:
+        """Check ``member.slot.axis`` against the members as written."""
+        parts = name.split(".")
+        m = self.s.members.get(parts[0])
+        if m is None:
+            raise ModelError(f"{path}: no member named {parts[0]!r}{did_you_mean(parts[0], list(self.s.members))}")
+        slots, axes = m.ctype.slots, "xyz"[:self.s.dim]
+        if len(parts) != 3 or parts[1] not in slots or parts[2] not in axes:
+            raise ModelError(f"{path}: expected a coordinate {m.name}.SLOT.AXIS with SLOT one of "
+                             f"{', '.join(slots)} and AXIS one of {', '.join(axes)}, got {name!r}")
 
     @staticmethod
     def _array(v, path):
@@ -523,7 +548,7 @@ class _Loader:
 def _contact_entries(c) -> dict:
     spec = c.spec()
     out = {"type": spec.pop("type"), "name": spec.pop("name")}
-    if isinstance(c, SphereSphere):
+    if isinstance(c, (SphereSphere, BoxBox)):
         out["between"] = [spec.pop("a"), spec.pop("b")]
     out.update({k: _plain(v) for k, v in spec.items()})
     return out
@@ -557,7 +582,8 @@ def system_to_toml(system) -> str:
         parts.append(toml_write.table("forces", _force_entries(f, sc, system), array=True))
     for c in system.contacts:
         parts.append(toml_write.table("contacts", _contact_entries(c), array=True))
-    for key, values in (("initial", system.initial_joints), ("initial_rates", system.initial_joint_rates)):
+    for key, values in (("initial", {**system.initial_joints, **system.initial_coordinates}),
+                        ("initial_rates", {**system.initial_joint_rates, **system.initial_coordinate_rates})):
         if values:
             parts.append(toml_write.table(key, {n: _plain(v) for n, v in values.items()}))
     ctrl = getattr(system, "controller", None)

@@ -63,17 +63,15 @@ def length_scale(model) -> float:
 
 def resolve_configuration(model, spec, reference, *, t=None, p=None, what: str = "q") -> np.ndarray:
     """A consistent configuration from a condition: a full ``q`` (projected), or a dict
-    ``{coordinate name: value}`` — those coordinates set in ``reference`` and kept while the
-    others are assembled onto ``Φ = 0`` (``ncgen.assemble``)."""
+    ``{coordinate name: value}`` — those coordinates (names as written included, see
+    ``model.coordinate``) set from ``reference`` and kept while the others are assembled
+    onto ``Φ = 0`` (``ncgen.assemble``)."""
     if not isinstance(spec, dict):
         return consistent_configuration(model, spec, t=t, p=p, what=what)
     from ncgen.assembly.kinematics import assemble
     from ncgen.errors import NcgenError
-    q = np.asarray(reference, dtype=float).copy()
-    for name, value in spec.items():
-        q[model.coordinate_names.index(name)] = value
     try:
-        return assemble(model, q, t=t, p=p, fix=list(spec))
+        return assemble(model, reference, t=t, p=p, values=spec)
     except NcgenError as exc:
         raise OptimizationError(f"{what}: no configuration satisfies the joints with "
                                 f"{', '.join(f'{k} = {v:g}' for k, v in spec.items())}: {exc}") from None
@@ -81,12 +79,9 @@ def resolve_configuration(model, spec, reference, *, t=None, p=None, what: str =
 
 def resolve_velocity(model, spec, q, *, t=None, p=None) -> np.ndarray:
     """A velocity tangent to the constraints at ``q``: a full ``v`` (M-orthogonal
-    projection), or a dict ``{coordinate name: rate}`` — those rates kept, the others
-    nearest to zero in the kinetic-energy metric (``ncgen.project_velocity``)."""
+    projection), or a dict ``{coordinate name: rate}`` — those rates kept (names as written
+    included), the others nearest to zero in the kinetic-energy metric (``ncgen.project_velocity``)."""
     if not isinstance(spec, dict):
         return consistent_velocity(model, q, spec, t=t, p=p)
     from ncgen.assembly.kinematics import project_velocity
-    v = np.zeros(model.nq)
-    for name, value in spec.items():
-        v[model.coordinate_names.index(name)] = value
-    return project_velocity(model, q, v, t=t, p=p, fix=list(spec))
+    return project_velocity(model, q, np.zeros(model.nq), t=t, p=p, values=spec)

@@ -152,20 +152,29 @@ def _constant(x: np.ndarray):
     return f
 
 
-def _from_motion(m, model, t0: float, T: float, u_rest: np.ndarray):
+def _numbers(x, what: str) -> np.ndarray:
+    """Real numbers (:func:`ncgen.validation.as_numbers`) or an :class:`OptimizationError`."""
+    from ncgen.errors import NcgenError
+    from ncgen.validation import as_numbers
     try:
-        tw = np.asarray(m.t, dtype=float).reshape(-1)
-        qw = np.asarray(m.q, dtype=float)
-        vw = np.asarray(m.v, dtype=float)
-    except AttributeError:
+        return as_numbers(x, what)
+    except NcgenError as exc:
+        raise OptimizationError(str(exc)) from None
+
+
+def _from_motion(m, model, t0: float, T: float, u_rest: np.ndarray):
+    if not all(hasattr(m, k) for k in ("t", "q", "v")):
         raise OptimizationError(f"warm_start: expected an object with t, q and v (a Trajectory or a previous "
-                                f"solution), got {type(m).__name__}") from None
+                                f"solution), got {type(m).__name__}")
+    tw, qw, vw = (_numbers(getattr(m, k), f"warm_start.{k}") for k in ("t", "q", "v"))
+    tw = tw.reshape(-1)
     n = tw.size
     if n < 2 or qw.shape != (n, model.nq) or vw.shape != (n, model.nq):
         raise OptimizationError(f"warm_start: expected t (n ≥ 2), q and v of shape (n, {model.nq}); got "
                                 f"t {tw.shape}, q {qw.shape}, v {vw.shape}")
     for what, X in (("t", tw), ("q", qw), ("v", vw), ("u", getattr(m, "u", None)), ("lam", getattr(m, "lam", None))):
-        bad = None if X is None else np.argwhere(~np.isfinite(np.asarray(X, dtype=float)))
+        X = None if X is None else _numbers(X, f"warm_start.{what}")
+        bad = None if X is None else np.argwhere(~np.isfinite(X))
         if bad is not None and bad.size:
             raise OptimizationError(f"warm_start.{what}: expected finite numbers, found "
                                     f"{np.asarray(X, dtype=float)[tuple(bad[0])]} at index {tuple(bad[0].tolist())} "

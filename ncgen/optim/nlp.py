@@ -318,6 +318,15 @@ class NLP:
                 elif not lo - 1e-12 <= fixed[i] <= hi + 1e-12:
                     raise OptimizationError(f"the initial state violates the bound on {what} {name}: "
                                             f"{fixed[i]:.6g} is outside [{lo:.6g}, {hi:.6g}]")
+        for what, name, s, c, lo, hi in ocp.row_bounds:      # coordinates as written: s · x + c
+            x, x0, fixed = (disc.path_q, self.q0, q_init) if what == "coordinate" else (disc.path_v, self.v0, v_init)
+            row = ca.DM(s).T
+            self.constrain(f"bound on {what} {name}", "bound", ca.mtimes(row, x) + c, lo, hi)
+            if fixed is None:
+                self.constrain(f"bound on {what} {name} (initial node)", "bound", ca.mtimes(row, x0) + c, lo, hi)
+            elif not lo - 1e-12 <= s @ fixed + c <= hi + 1e-12:
+                raise OptimizationError(f"the initial state violates the bound on {what} {name}: "
+                                        f"{s @ fixed + c:.6g} is outside [{lo:.6g}, {hi:.6g}]")
 
     def _path(self):
         ocp, model, disc = self.ocp, self.model, self.disc

@@ -10,7 +10,9 @@
 Conventions: time in s; ``q`` natural coordinates (m), ``v = q̇`` (m/s); inputs ``u`` and
 parameters ``p`` in the model's units; names as in ``model.input_names``,
 ``model.parameter_names`` (``"k"`` or one component ``"k[1]"``), ``model.coordinate_names``
-(``"cart.r_i.x"``) and ``model.marker_names`` (``"pole.tip"``).  Inputs are piecewise
+(``"cart.r_i.x"``) or a coordinate as written that coordinate sharing re-based (its value
+``s · q + c`` from ``model.coordinate(name)``: bounds on it are linear path constraints,
+targets on it extra equations of the assembly) and ``model.marker_names`` (``"pole.tip"``).  Inputs are piecewise
 constant over the ``N`` equal intervals.  Bounds and marker path constraints hold at every
 state point of the transcription (collocation points, or shooting nodes).
 
@@ -28,7 +30,7 @@ import re
 import numpy as np
 
 from ncgen.errors import NcgenError, OptimizationError
-from ncgen.validation import as_scalar
+from ncgen.validation import as_numbers, as_scalar
 from ncgen.optim.transcription import MODEL_STATE
 
 METHODS = ("collocation", "shooting")
@@ -70,6 +72,9 @@ class OptimalControl:
         self.u_bounds = np.array([[-inf] * nu, [inf] * nu]).reshape(2, nu)
         self.q_bounds = np.array([[-inf] * nq, [inf] * nq]).reshape(2, nq)
         self.v_bounds = self.q_bounds.copy()
+        #: Bounds on coordinates as written that sharing re-based: ``(kind, name, s, c, lower,
+        #: upper)``, ``kind`` "coordinate" (``s · q + c``) or "velocity of" (``s · v``).
+        self.row_bounds: list[tuple[str, str, np.ndarray, float, float, float]] = []
         self.p_values = model.p0.copy()
         self.p_free: dict[int, tuple[float, float]] = {}
         self.marker_bounds: list[tuple[str, np.ndarray, np.ndarray]] = []
@@ -94,18 +99,23 @@ class OptimalControl:
     def parameter_indices(self, name: str) -> list[int]:
         return _indices(name, self.model.parameter_names, self.model.parameter_sizes, "parameter")
 
-    def coordinate_index(self, name: str) -> int:
+    def coordinate_index(self, name: str) -> int | None:
+        """Index in ``q`` of coordinate ``name``, None for a coordinate as written that
+        coordinate sharing re-based (:meth:`coordinate_row` gives its row)."""
         names = self.model.coordinate_names
         if name in names:
             return names.index(name)
+        self.coordinate_row(name)
+        return None
+
+    def coordinate_row(self, name: str) -> tuple[np.ndarray, float]:
+        """``(s, c)`` with coordinate ``name`` equal to ``s · q + c`` (``model.coordinate``)."""
         try:
-            self.model.coordinate(name)
+            return self.model.coordinate(name)
         except NcgenError:
-            raise OptimizationError(f"no coordinate named {name!r}; coordinates: {', '.join(names)}") from None
-        raise OptimizationError(f"coordinate {name!r} is one as written that coordinate sharing re-based (see "
-                                f"model.sharing); optimal-control bounds and targets take the model's coordinates "
-                                f"({', '.join(names[:8])}{', ...' if len(names) > 8 else ''}), a marker or a pose "
-                                "target, or build the model with share=False")
+            aside = "; coordinates as written before coordinate sharing resolve too" if self.model.unshared else ""
+            raise OptimizationError(f"no coordinate named {name!r}; coordinates: "
+                                    f"{', '.join(self.model.coordinate_names)}{aside}") from None
 
     def marker_index(self, name: str) -> int:
         names = self.model.marker_names
@@ -123,15 +133,23 @@ class OptimalControl:
 
     def bound_coordinate(self, name: str, lower=-np.inf, upper=np.inf) -> "OptimalControl":
         """``lower ≤ q_i ≤ upper`` (m) along the whole motion."""
+        return self._bound_row("coordinate", self.q_bounds, name, lower, upper)
+
+    def _bound_row(self, kind: str, bounds: np.ndarray, name: str, lower, upper) -> "OptimalControl":
         i = self.coordinate_index(name)
-        self.q_bounds[:, [i]] = _bound_pair(lower, upper, 1, f"coordinate {name!r}")
+        pair = _bound_pair(lower, upper, 1, f"{kind} {name!r}")
+        if i is not None:
+            bounds[:, [i]] = pair
+        else:
+            s, c = self.coordinate_row(name)
+            self.row_bounds = [b for b in self.row_bounds if b[:2] != (kind, name)]
+            if np.any(np.isfinite(pair)):
+                self.row_bounds.append((kind, name, s, c if kind == "coordinate" else 0.0, *pair[:, 0]))
         return self
 
     def bound_velocity(self, name: str, lower=-np.inf, upper=np.inf) -> "OptimalControl":
         """``lower ≤ q̇_i ≤ upper`` (m/s) along the whole motion."""
-        i = self.coordinate_index(name)
-        self.v_bounds[:, [i]] = _bound_pair(lower, upper, 1, f"velocity of {name!r}")
-        return self
+        return self._bound_row("velocity of", self.v_bounds, name, lower, upper)
 
     def bound_marker(self, name: str, lower=None, upper=None) -> "OptimalControl":
         """Path constraint ``lower ≤ r ≤ upper`` on a marker's world position (m); each
@@ -280,12 +298,16 @@ class OptimalControl:
             return out
         if isinstance(x, str):
             raise OptimizationError(f"{what}: expected numbers or None, got {x!r}")
-        a = np.asarray(x, dtype=float)
+        a = _numbers(x, what, f"{self.model.nq} numbers")
         if a.ndim == 0:
             a = np.full(self.model.nq, float(a))
-        if a.shape != (self.model.nq,) or not np.all(np.isfinite(a)):
+        names = self.model.coordinate_names
+        if a.shape != (self.model.nq,):
             raise OptimizationError(f"{what}: expected {self.model.nq} finite numbers "
-                                    f"({', '.join(self.model.coordinate_names)}), got shape {a.shape}")
+                                    f"({', '.join(names)}), got shape {a.shape}")
+        if not np.all(np.isfinite(a)):
+            k = int(np.flatnonzero(~np.isfinite(a))[0])
+            raise OptimizationError(f"{what}: expected {self.model.nq} finite numbers, got {a[k]} for {names[k]}")
         return a
 
     def _markers(self, spec, what: str) -> list[tuple[str, np.ndarray]]:
@@ -464,8 +486,16 @@ def _indices(name: str, names: list[str], sizes: list[int], what: str) -> list[i
     return [start + k]
 
 
+def _numbers(x, what: str, expected: str) -> np.ndarray:
+    """``x`` as real numbers (:func:`ncgen.validation.as_numbers`), any shape."""
+    try:
+        return as_numbers(x, what, expected)
+    except NcgenError as exc:
+        raise OptimizationError(str(exc)) from None
+
+
 def _values(x, n: int, what: str) -> np.ndarray:
-    a = np.asarray(x, dtype=float).reshape(-1)
+    a = _numbers(x, what, f"{n} finite number(s)").reshape(-1)
     if a.size == 1:
         a = np.full(n, a[0])
     if a.size != n or not np.all(np.isfinite(a)):
@@ -476,8 +506,8 @@ def _values(x, n: int, what: str) -> np.ndarray:
 def _bound_pair(lower, upper, n: int, what: str) -> np.ndarray:
     out = []
     for b, name in ((lower, "lower"), (upper, "upper")):
-        a = np.asarray(-np.inf if b is None and name == "lower" else np.inf if b is None else b,
-                       dtype=float).reshape(-1)
+        a = _numbers(-np.inf if b is None and name == "lower" else np.inf if b is None else b,
+                     f"{what}: {name} bound", f"{n} number(s)").reshape(-1)
         if a.size == 1:
             a = np.full(n, a[0])
         if a.size != n or np.any(np.isnan(a)):

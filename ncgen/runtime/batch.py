@@ -33,7 +33,7 @@ from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.stepper import COMPOSITION_STAGES, ESTIMATE_MODES, _trajectory, fixed_scheme, step_inputs
 from ncgen.runtime.stepper_checks import is_conservative, untrusted_row
 from ncgen.runtime.stepper_library import _Options, load_stepper
-from ncgen.validation import as_scalar
+from ncgen.validation import as_numbers, as_scalar
 
 #: ``status`` of a run that could not start (its initial state, parameters or inputs).
 STATUS_SETUP = -1
@@ -336,7 +336,7 @@ def _states(given, default, n: int, nq: int, name: str) -> np.ndarray:
     """``(n, nq)`` states from ``None`` (``default``), one vector, or one per run."""
     if given is None:
         return np.broadcast_to(default, (n, nq))
-    a = np.asarray(given, dtype=float)
+    a = as_numbers(given, name, f"{nq} values or an array of shape ({n}, {nq})")
     if a.shape not in ((nq,), (n, nq)):
         raise NcgenError(f"{name}: expected {nq} values or an array of shape ({n}, {nq}), got shape {a.shape}")
     if not np.all(np.isfinite(a)):

@@ -19,7 +19,7 @@ import math
 import numpy as np
 
 from ncgen.errors import NcgenError, ShapeError
-from ncgen.validation import allocation, as_scalar, as_vector
+from ncgen.validation import allocation, as_numbers, as_scalar, as_vector
 
 HOLDS = ("zoh", "linear")
 
@@ -84,9 +84,10 @@ def input_samples(u, model, t: np.ndarray) -> np.ndarray:
     names = ", ".join(f"{k}[{s}]" for k, s in zip(model.input_names, model.input_sizes))
     if feedback_kind(u) in ("natural", "joint"):
         return np.zeros((n, nu))
+    shapes = f"{nu} values, a callable u(t) or samples of shape (len(t), {nu})"
     if not callable(u):
-        arr = np.asarray(u, dtype=float) if not isinstance(u, (str, bytes)) else None
-        if arr is not None and (arr.ndim == 0 or (arr.ndim == 1 and arr.size == nu)):
+        arr = as_numbers(u, "u", shapes)
+        if arr.ndim == 0 or (arr.ndim == 1 and arr.size == nu):
             u = np.broadcast_to(arr.reshape(-1), (n, nu)).copy() if arr.size == nu else None
             if u is None:
                 raise ShapeError(f"u: a constant input needs {nu} values (inputs {names}); got a scalar")
@@ -94,15 +95,16 @@ def input_samples(u, model, t: np.ndarray) -> np.ndarray:
         U = np.empty((n, nu))
         for k, tk in enumerate(t):
             try:
-                val = np.asarray(u(float(tk)), dtype=float).reshape(-1)
+                out = u(float(tk))
             except (TypeError, ValueError) as e:
                 raise NcgenError(f"u({tk:g}) failed: {e}") from None
+            val = as_numbers(out, f"u({tk:g}) returned", f"{nu} numbers").reshape(-1)
             if val.size != nu:
-                raise ShapeError(f"u({tk:g}) returned {val.size} value(s); model {model.name!r} has "
-                                 f"{nu} input value(s): {names}")
+                raise ShapeError(f"u({tk:g}) returned {val.size} value(s); expected {nu}, one per input "
+                                 f"value of model {model.name!r}: {names}")
             U[k] = val
     else:
-        U = np.asarray(u, dtype=float)
+        U = as_numbers(u, "u", shapes)
         if U.ndim == 1 and nu == 1:
             U = U[:, None]
         if U.shape not in ((n, nu), (n - 1, nu)):
@@ -141,8 +143,8 @@ def parameter_values(p, model) -> np.ndarray:
         except KeyError as e:
             raise NcgenError(str(e.args[0])) from None
     try:
-        values = np.asarray(p, dtype=float)
-    except (TypeError, ValueError, OverflowError):
+        values = as_numbers(p, "p (parameter values)")
+    except ShapeError:
         values = None
     if values is not None and values.shape == (model.np,):
         offsets = np.cumsum([0] + model.parameter_sizes)

@@ -53,7 +53,8 @@ import numpy as np
 from ncgen.codegen.stepper_package import STATS, STATUS, STEP_INTERRUPTED, TOL
 from ncgen.errors import NcgenError, SimulationError, SimulationInterrupted, option
 from ncgen.progress import Ticker
-from ncgen.runtime.energy_balance import balance_parts
+from ncgen.runtime.energy_balance import balance_parts, by_remainder
+from ncgen.runtime.joint_dynamics import multipliers_at_samples
 from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.stepper_checks import (SHADOW_FACTOR, check_fixed, check_global, contact_report, energy_report,
                                           error_estimate, is_conservative, shadow_estimates, shadow_report,
@@ -237,8 +238,11 @@ def _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info,
     time (from ``start``) in ``info``."""
     q = np.vstack([q0, Q[:rows]])
     v = np.vstack([v0, V[:rows]])
-    lam = np.vstack([lam0, LAM[:rows]])
     tt, u = t[:rows + 1], U[:rows + 1]
+    if by_remainder(model):       # nonsmooth contacts: the step's own multipliers (μ)
+        lam = np.vstack([lam0, LAM[:rows]])
+    else:                         # the states' own multipliers: second order, as the states
+        lam = multipliers_at_samples(model, tt, q, v, u, p)
     Y = stepper.outputs(tt, q, v, lam, u, p)
     dim, n_markers = model.dim, len(model.marker_names)
     markers = Y[:, 5:].reshape(len(tt), n_markers, dim)

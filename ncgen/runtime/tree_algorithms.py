@@ -28,7 +28,7 @@ from ncgen.codegen.fast_call import fast_caller
 from ncgen.errors import ModelError
 from ncgen.model.data import cached, model_data
 from ncgen.runtime.tree_check import PIVOT_TOL, check_tree, compile_tree_function, unit_quaternions
-from ncgen.validation import as_vector
+from ncgen.validation import as_numbers, as_vector
 
 #: ``name: (inputs after t before p, outputs)`` of every algorithm.
 ALGORITHMS = {
@@ -104,6 +104,8 @@ class AlgorithmKernel:
         return self._outputs
 
     def _bad_arguments(self, args):
+        for name, x in zip(self.input_names, args):
+            as_numbers(x, f"{self.name}: {name}", "a sequence of numbers")
         if [np.size(x) for x in args] == self._sizes:
             raise ModelError(f"{self.name}: {', '.join(self.input_names)} must be sequences of numbers")
         raise ModelError(f"{self.name}: expected {len(self._inputs)} arguments ({', '.join(self.input_names)}) "

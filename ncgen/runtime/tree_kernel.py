@@ -29,7 +29,7 @@ from ncgen.errors import ModelError
 from ncgen.model.data import cached, model_data
 from ncgen.runtime.joint_dynamics import forward_dynamics
 from ncgen.runtime.tree_check import PIVOT_TOL, check_tree, compile_tree_function, unit_quaternions
-from ncgen.validation import as_vector
+from ncgen.validation import as_numbers, as_vector
 
 METHODS = ("auto", "recursive", "projection")
 
@@ -90,6 +90,9 @@ class JointDynamicsKernel:
         return self._aj
 
     def _bad_sizes(self, qj, vj, u):
+        for name, x in (("qj", qj), ("vj", vj), ("u", u)):
+            if x is not None:
+                as_numbers(x, f"joint forward dynamics: {name}", "a sequence of numbers")
         sizes = [np.size(qj), np.size(vj), self.nu if u is None else np.size(u)]
         if sizes == [self.nq, self.nv, self.nu]:
             raise ModelError("joint forward dynamics: qj, vj and u must be sequences of numbers")

@@ -1,7 +1,7 @@
 """ncgen.viz: pictures of trajectories (matplotlib, Agg canvas; imported only when used).
 
 * :func:`plot` — PNG with energy drift, constraint drift and chosen points;
-* :func:`animate` — GIF (or MP4 with ffmpeg) of the moving system;
+* :func:`animate` — GIF (or MP4 through ffmpeg or imageio-ffmpeg) of the moving system;
 * :func:`to_html` — one self-contained, offline HTML page with an interactive 3D view and
   plots (also ``traj.to_html(path)``).
 """

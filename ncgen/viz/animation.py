@@ -51,8 +51,7 @@ def animate(traj, path, *, max_frames: int = 150, fps: float | None = None, size
     suffix = path.suffix.lower()
     if suffix not in (".gif", ".mp4"):
         raise NcgenError(f"animate: {path}: expected a .gif or .mp4 file name")
-    if suffix == ".mp4" and not FFMpegWriter.isAvailable():
-        raise NcgenError(f"animate: {path}: writing MP4 needs ffmpeg on PATH; install it or write a .gif")
+    ffmpeg = ffmpeg_executable(path) if suffix == ".mp4" else None
     began = time.monotonic()
     sc = scene(traj)
     n = len(traj)
@@ -95,8 +94,23 @@ def animate(traj, path, *, max_frames: int = 150, fps: float | None = None, size
         if suffix == ".gif":
             _write_gif(images, tmp, fps)
         else:
-            _write_mp4(images, tmp, fps)
+            _write_mp4(images, tmp, fps, ffmpeg)
     return path
+
+
+def ffmpeg_executable(path) -> str:
+    """The ffmpeg binary for an MP4: matplotlib's (``animation.ffmpeg_path``, on PATH by
+    default), else the one the ``imageio-ffmpeg`` wheel ships (``pip install 'ncgen[viz]'``)."""
+    from matplotlib import rcParams
+
+    if FFMpegWriter.isAvailable():
+        return rcParams["animation.ffmpeg_path"]
+    try:
+        import imageio_ffmpeg
+    except ImportError:
+        raise NcgenError(f"animate: {path}: writing MP4 needs ffmpeg: pip install 'ncgen[viz]' "
+                         "(imageio-ffmpeg ships one), put ffmpeg on PATH, or write a .gif") from None
+    return imageio_ffmpeg.get_ffmpeg_exe()
 
 
 def _write_gif(images: list[np.ndarray], path: Path, fps: float) -> None:
@@ -110,14 +124,12 @@ def _write_gif(images: list[np.ndarray], path: Path, fps: float) -> None:
                    duration=max(20, int(round(1000 / fps))), disposal=1)
 
 
-def _write_mp4(images: list[np.ndarray], path: Path, fps: float) -> None:
-    """Frames as an H.264 MP4 through ffmpeg (the binary matplotlib is configured with)."""
+def _write_mp4(images: list[np.ndarray], path: Path, fps: float, ffmpeg: str) -> None:
+    """Frames as an H.264 MP4 through the binary ``ffmpeg`` (:func:`ffmpeg_executable`)."""
     import subprocess
 
-    from matplotlib import rcParams
-
     h, w = images[0].shape[:2]
-    cmd = [rcParams["animation.ffmpeg_path"], "-y", "-loglevel", "error", "-f", "rawvideo", "-pix_fmt", "rgb24",
+    cmd = [ffmpeg, "-y", "-loglevel", "error", "-f", "rawvideo", "-pix_fmt", "rgb24",
            "-s", f"{w}x{h}", "-r", f"{fps:g}", "-i", "-", "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2",
            "-pix_fmt", "yuv420p", "-vcodec", "libx264", "-f", "mp4", str(path)]
     run = subprocess.run(cmd, input=b"".join(np.ascontiguousarray(im).tobytes() for im in images),

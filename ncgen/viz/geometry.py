@@ -7,6 +7,8 @@ Rules, in order, per member:
   a bar's cylinder or capsule lies along the bar (x̄) through the middle of its ends;
 * the URDF ``<visual>`` elements of the member (``model.visuals``: boxes, cylinders,
   spheres, meshes, placed by their origins);
+* the ground: its URDF visuals, and the boxes fixed to it that contacts touch
+  (``SphereBox``, ``BoxBox``);
 * a bar: a cylinder between its ends; a body: the box of the same inertia (edges
   ``a_k = √(6 (I_i + I_j − I_k) / m)`` along the principal axes, a flat or line-like body
   thickened to 4 % of its largest edge) plus thin sticks from the centre of mass to its
@@ -98,10 +100,30 @@ def member_primitives(model, size: float, colors: dict | None = None) -> dict[st
         out[name] = prims
     if "ground" in visuals:
         out["ground"] = [p for v in visuals["ground"] if (p := _visual(v, GROUND_COLOR)) is not None]
+    if boxes := _ground_boxes(model):
+        out.setdefault("ground", []).extend(boxes)
     for joint in model.joints:
         placed = _joint(model, joint, size)
         if placed is not None:
             out.setdefault(placed[0], []).append(placed[1])
+    return out
+
+
+def _ground_boxes(model) -> list[Primitive]:
+    """The boxes fixed to the ground that contacts touch (``SphereBox``, ``BoxBox``: a table, a
+    step, a ramp), each once; a planar box as a thin slab in the plane z = 0."""
+    out, seen = [], set()
+    for c in getattr(model, "contacts", ()):
+        if c.get("box") != "ground":
+            continue
+        size, at, R = (np.asarray(c[k], float) for k in ("size", "box_at", "box_rotation"))
+        key = tuple(np.round(np.concatenate([size, at, R.ravel()]), 12))
+        if key in seen:
+            continue
+        seen.add(key)
+        dim = len(size)
+        edges = size if dim == 3 else np.append(size, MIN_EDGE * float(np.max(size)))
+        out.append(Primitive("box", edges, embed_rotation(R), embed(at, dim), GROUND_COLOR))
     return out
 
 

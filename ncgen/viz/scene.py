@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ncgen.errors import NcgenError
+from ncgen.runtime.contact_outputs import gaps as gaps_of
 from ncgen.viz import geometry
 
 
@@ -198,6 +199,7 @@ def contact_scene(traj, model) -> dict:
         return {}
     n, d = len(traj), traj.dim
     centres, radii, planes, points, forces = [], [], [], [], []
+    translated: dict = {}
     for k, c in enumerate(model.contacts):
         if "plane" in c:                                       # a sphere (or a shape's point) on a plane
             centre = traj.point(c["sphere"], c["at"])
@@ -216,6 +218,13 @@ def contact_scene(traj, model) -> dict:
                 w = push - np.sum(push * axis, axis=1, keepdims=True) * axis
                 centre = centre - c["rim_radius"] * w / np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-12)
             contact = centre - c["radius"] * push
+        elif "box" in c:                                       # a sphere or a box corner against a box
+            centre = traj.point(c["sphere"], c["at"]) if c["sphere"] != "ground" else \
+                np.broadcast_to(np.asarray(c["at"], float), (n, d))
+            centres.append(centre)
+            radii.append(c["radius"])
+            push = _box_normals(model, traj, k, c, translated)  # the box pushes the sphere along it
+            contact = centre - c["radius"] * push
         else:
             ca_, cb = traj.point(c["a"], c["at_a"]), traj.point(c["b"], c["at_b"])
             centres += [ca_, cb]
@@ -231,6 +240,27 @@ def contact_scene(traj, model) -> dict:
     return {"sphere_centres": np.stack(centres, axis=1), "sphere_radii": np.asarray(radii, float),
             "planes": np.asarray(list(unique.values()), float).reshape(-1, 2, d),
             "contact_points": np.stack(points, axis=1), "contact_forces": np.stack(forces, axis=1)}
+
+
+def _box_normals(model, traj, k: int, c: dict, cache: dict, eps: float = 1e-7) -> np.ndarray:
+    """``(n_t, dim)`` unit normals of contact ``k`` against a box, from the model's own gap:
+    its central differences when the sphere's member (or, on the ground, the box's) is
+    translated along each world axis (exact within a face or region: the gap is then linear
+    in a translation).  ``cache`` keeps every contact's differences per translated member."""
+    moved, sign = (c["sphere"], 1.0) if c["sphere"] != "ground" else (c["box"], -1.0)
+    if moved not in cache:
+        layout = model.layout
+        rows = [layout.nodes[i].index for i in layout.slots[moved] if layout.nodes[i].is_point]
+        q = np.asarray(traj.q, float)
+        p = np.asarray(traj.p if getattr(traj, "p", None) is not None else model.p0, float).reshape(-1, 1)
+        diff = np.zeros((len(q), model.nk, model.dim))
+        for axis in range(model.dim):
+            step = np.zeros(model.nq)
+            step[[r + axis for r in rows]] = eps
+            diff[:, :, axis] = (gaps_of(model, q + step, p) - gaps_of(model, q - step, p)) / (2 * eps)
+        cache[moved] = diff
+    out = sign * cache[moved][:, k]
+    return out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-300)
 
 
 def _basic_points(member) -> list[np.ndarray]:

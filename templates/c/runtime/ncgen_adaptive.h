@@ -76,7 +76,7 @@ static int simulate_adaptive(const casadi_real *q0, const casadi_real *v0, const
   workspace ws;
   char *block;
   casadi_real *y, *big, *mid, *fine, *y_new, *lam, *lam_fine, *x_prev, *dx_prev, *x_big, *u_buf, *phidot;
-  casadi_real t = t0, H = h0 > 0 ? h0 : dt, h_prev = 0, work = 0, p_old = 0, p_new;
+  casadi_real t = t0, H = h0 > 0 ? h0 : dt, h_prev = 0, work = 0, work_mid = 0;
   long row = 0, i;
   int status = STEP_OK, have_prev = 0;
   single = *options_or_default(options, &defaults);
@@ -136,14 +136,17 @@ static int simulate_adaptive(const casadi_real *q0, const casadi_real *v0, const
       }
       /* One step of Hs, then two of Hs/2 (each warm-started from the one before). */
       if (have_prev) predict_scaled(ws.x, x_prev, dx_prev, y + NQ, Hs / h_prev);
+      ws.track_work = 0; /* the work of the two half steps only */
       status = step_split(y, y + NQ, t, uk, p, Hs, big, big + NQ, 0, &iters, &unused, &single, have_prev, &ws, 0);
       if (status == STEP_OK) {
+        ws.track_work = track_work;
         memcpy(x_big, ws.x, NX * sizeof *x_big);
         for (i = 0; i < NQ; ++i) ws.x[i] = (y[NQ + i] + x_big[i]) / 2;
         for (i = NQ; i < NX; ++i) ws.x[i] = x_big[i] / 2;
         status = step_split(y, y + NQ, t, uk, p, Hs / 2, mid, mid + NQ, 0, &iters, &unused, &single, 1, &ws, 0);
       }
       if (status == STEP_OK) {
+        work_mid = ws.step_work;
         predict(&ws);
         status = step_split(mid, mid + NQ, t + Hs / 2, uk, p, Hs / 2, fine, fine + NQ, lam_fine, &iters, &unused,
                             &single, 1, &ws, 0);
@@ -175,7 +178,6 @@ static int simulate_adaptive(const casadi_real *q0, const casadi_real *v0, const
         continue;
       }
       /* Accepted: Richardson extrapolation fine + (fine - big)/3 (order 4), projected. */
-      if (track_work && (status = power(&ws, t, y, y + NQ, lam, uk, p, &p_old)) != STEP_OK) goto done;
       memcpy(y_new, fine, 2 * NQ * sizeof *y_new);
       if (extrapolate) {
         for (i = 0; i < 2 * NQ; ++i) y_new[i] += (fine[i] - big[i]) / 3;
@@ -188,10 +190,7 @@ static int simulate_adaptive(const casadi_real *q0, const casadi_real *v0, const
       ++steps;
       sum_q += err_q;
       sum_v += err_v;
-      if (track_work) {
-        if ((status = power(&ws, t, y, y + NQ, lam, uk, p, &p_new)) != STEP_OK) goto done;
-        work += Hs / 2 * (p_old + p_new);
-      }
+      if (track_work) work += work_mid + ws.step_work; /* the two steps of Hs/2 */
       H = (land && Hs < H) ? fmax(H, Hs * factor) : Hs * factor;
     }
     if (q_out) memcpy(q_out + row * NQ, y, NQ * sizeof *y);
