@@ -233,14 +233,14 @@ def test_energy_balance_of_a_damped_model_closes():
 
 
 def test_energy_balance_of_a_driven_model_closes_at_order_two():
-    """A driven crank (rheonomic constraint ``θ = ω t``) does work ``λᵀΦ_t``: each step's
+    """A driven crank (rheonomic constraint ``θ = ω t``) does work ``λᵀΦ_t``: each RATTLE step's
     work pairs its start with the first half-step's multiplier and its end with the second's,
     so the balance closes at order 2 (a first-order multiplier once made it fail at ω = 14
     rad/s for every step size); the drive's work from the reported multipliers (those of
     the output states) is IDAS's."""
     model = nc.System.from_toml(ROOT / "examples" / "slider_crank.toml").build()
     p = {"omega": 14.0}
-    runs = [nc.simulate(model, 1.0, 0.01, method="stepper", substeps=s, p=p) for s in (1, 2, 4)]
+    runs = [nc.simulate(model, 1.0, 0.01, method="stepper", substeps=s, p=p, scheme="rattle") for s in (1, 2, 4)]
     errors = [r.info["energy"]["balance_error"] for r in runs]
     assert errors[0] < 5e-3 * abs(runs[0].info["energy"]["work"])
     for coarse, fine in zip(errors, errors[1:]):
@@ -248,6 +248,11 @@ def test_energy_balance_of_a_driven_model_closes_at_order_two():
     drives = reference(model, 1.0, 0.01, p=p).info["energy"]["parts"]["drives"]
     for r in runs:
         assert abs(r.info["energy"]["parts"]["drives"] - drives) < 1e-5 * abs(drives)
+    # the default fourth-order composition: its five steps' work summed, the balance at order 4
+    errors = [nc.simulate(model, 1.0, 0.01, method="stepper", substeps=s, p=p).info["energy"]["balance_error"]
+              for s in (1, 2, 4)]
+    for coarse, fine in zip(errors, errors[1:]):
+        assert 1 / 20 < fine / coarse < 1 / 12                                        # h⁴: 1/16
 
 
 def test_stepper_multipliers_converge_at_order_two():
@@ -255,8 +260,8 @@ def test_stepper_multipliers_converge_at_order_two():
     like h² against IDAS's, as the states do (RATTLE's own μ is first order)."""
     model = chain(3)
     ref = reference(model, 1.0, 0.05)
-    errors = [np.max(np.abs(nc.simulate(model, 1.0, 0.05, method="stepper", substeps=s).lam - ref.lam))
-              for s in (8, 16, 32)]
+    errors = [np.max(np.abs(nc.simulate(model, 1.0, 0.05, method="stepper", substeps=s, scheme="rattle").lam
+                            - ref.lam)) for s in (8, 16, 32)]
     assert errors[0] < 1e-2 * np.max(np.abs(ref.lam))
     for coarse, fine in zip(errors, errors[1:]):
         assert 0.2 < fine / coarse < 0.3
