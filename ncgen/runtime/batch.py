@@ -26,7 +26,9 @@ import numpy as np
 from ncgen.codegen.stepper_package import MAX_HALVINGS, MAX_ITER, STATUS, TOL, n_stats
 from ncgen.errors import NcgenError
 from ncgen.runtime.dae import load_dae
+from ncgen.runtime.energy_balance import by_remainder
 from ncgen.runtime.inputs import input_samples, parameter_values, time_grid
+from ncgen.runtime.joint_dynamics import multipliers_at_samples
 from ncgen.runtime.library import compiled_functions
 from ncgen.runtime.simulation import initial_multipliers, initial_state, point_bytes
 from ncgen.runtime.options import SimulationOptions
@@ -279,6 +281,10 @@ class _Runs:
             elif self.Y is not None:
                 k = rows + 1
                 U = self.U[i][:k] if self.model.nu else None
+                if not by_remainder(self.model) and k > 1:      # as _trajectory: the states' multipliers
+                    self.LAM[i, 1:k] = multipliers_at_samples(self.model, self.t[1:k], self.Q[i, 1:k], self.V[i, 1:k],
+                                                              np.zeros((k - 1, 0)) if U is None else U[1:k],
+                                                              self.P[i], _compiled_accel(self.model))
                 self.Y[i, :k] = st.outputs(self.t[:k], self.Q[i, :k], self.V[i, :k], self.LAM[i, :k], U, self.P[i])
 
     def _checked(self, i: int, rows: int, S: np.ndarray) -> None:
@@ -287,7 +293,9 @@ class _Runs:
         info = {"method": "stepper", "h": self.h, "substeps": self.substeps, "stats": {},
                 "stages": COMPOSITION_STAGES if self.rattle4 else 1, "estimate": "shadow"}
         traj = _trajectory(model, self.stepper, self.t, Q[0], V[0], LAM[0], Q[1:], V[1:], LAM[1:], S, rows,
-                           self.U[i], self.P[i], info, self.conservative, time.perf_counter())
+                           self.U[i], self.P[i], info, self.conservative, time.perf_counter(),
+                           accel=_compiled_accel(model))
+        LAM[:rows + 1] = traj.lam
         self.Y[i, :rows + 1, 0], self.Y[i, :rows + 1, 1] = traj.kinetic, traj.potential
         self.Y[i, :rows + 1, 2] = traj.constraint_residual
         self.Y[i, :rows + 1, 5:] = traj.markers.reshape(rows + 1, -1)

@@ -54,12 +54,13 @@ def forward_dynamics_kernel(model, *, joint_space: bool = False, cflags=None):
     return cached(model_data(model).forward_dynamics_kernels, joint_space, build)
 
 
-def multipliers_at_samples(model, t, q, v, u, p) -> np.ndarray:
-    """``λ`` at each sample ``(t_k, q_k, v_k, u_k)`` (rows) from the KKT system of
-    :func:`~ncgen.assembly.derived.kkt_function` (CasADi's VM, mapped over the rows; ~20 µs
-    a row for small models): the exact multipliers of the state, where a fixed-step method's
-    own multipliers are first-order approximations (RATTLE's ``μ`` of the step ending there)."""
-    f = cached(model_data(model).functions, "kkt", lambda: kkt_function(model))
+def multipliers_at_samples(model, t, q, v, u, p, accel=None) -> np.ndarray:
+    """``λ`` at each sample ``(t_k, q_k, v_k, u_k)`` (rows) from the KKT system (the model's
+    ``accel``, as the initial multipliers of a run; ``accel``: another evaluation of it, e.g.
+    the compiled one), mapped over the rows: the exact multipliers of each state, where a
+    fixed-step method's own are first-order approximations (RATTLE's ``μ`` of the step ending
+    there)."""
+    f = model.functions["accel"] if accel is None else accel
     n = len(t)
     _, lam = f.map(n)(np.asarray(t, float)[None, :], np.asarray(q, float).T, np.asarray(v, float).T,
                       np.asarray(u, float).reshape(n, model.nu).T, np.asarray(p, float))

@@ -230,19 +230,21 @@ def _stats(S: np.ndarray, splits: int) -> dict:
 
 
 def _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info, conservative, start,
-                impulses=None):
+                impulses=None, accel=None):
     """The trajectory of the first ``rows`` output rows, derived quantities from the
     compiled ``<model>_outputs`` (joint states and contact outputs from
     :func:`~ncgen.runtime.trajectory.derived_outputs`; ``impulses``: the nonsmooth contact
-    impulses per output interval); sets the error estimate, the energy report and the wall
-    time (from ``start``) in ``info``."""
+    impulses per output interval); the multipliers of the output states
+    (:func:`~ncgen.runtime.joint_dynamics.multipliers_at_samples` with ``accel``), or with
+    nonsmooth contacts the stepper's ``LAM``; sets the error estimate, the energy report and
+    the wall time (from ``start``) in ``info``."""
     q = np.vstack([q0, Q[:rows]])
     v = np.vstack([v0, V[:rows]])
     tt, u = t[:rows + 1], U[:rows + 1]
     if by_remainder(model):       # nonsmooth contacts: the step's own multipliers (μ)
         lam = np.vstack([lam0, LAM[:rows]])
     else:                         # the states' own multipliers: second order, as the states
-        lam = multipliers_at_samples(model, tt, q, v, u, p)
+        lam = multipliers_at_samples(model, tt, q, v, u, p, accel)
     Y = stepper.outputs(tt, q, v, lam, u, p)
     dim, n_markers = model.dim, len(model.marker_names)
     markers = Y[:, 5:].reshape(len(tt), n_markers, dim)
