@@ -116,3 +116,24 @@ def test_urdf_model_keeps_its_frames_and_joint_limits():
         R, p = model.frame_pose(name, q)
         R2, p2 = again.frame_pose(name, q)
         assert np.array_equal(R, R2) and np.array_equal(p, p2)
+
+
+def test_urdf_system_with_mimic_joints_pickles_and_round_trips_through_toml():
+    """The Panda's second finger mimics the first (a Mimic joint names its leader and
+    follower): its system pickles (by its TOML text) and rebuilds the same model, whose
+    mimic equation holds the fingers together."""
+    pytest.importorskip("yourdfpy")
+    system = nc.System.from_urdf(nc.robots.urdf_path("panda"))
+    text = system.to_toml()
+    assert 'type = "Mimic"' in text
+    again = pickle.loads(pickle.dumps(system))
+    a, b = system.build(), again.build()
+    assert a.constraint_names == b.constraint_names and "panda_finger_joint2_mimic.mimic" in a.constraint_names
+    assert np.array_equal(a.M, b.M) and np.array_equal(a.q0, b.q0)
+    qj = np.linspace(-0.5, 0.5, a.joint_space.nq)
+    qj[-2:] = 0.02, 0.02
+    q, _ = b.from_joint_space(qj)
+    assert np.max(np.abs(b.phi(q))) < 1e-10
+    qj[-1] = 0.0                                           # the follower is held to the leader
+    with pytest.raises(ModelError, match="mimic"):
+        b.from_joint_space(qj)

@@ -40,8 +40,8 @@ class UnsharedForm:
         """The ``share=False`` model of the same system (same build options), without the
         system's initial coordinates (``System.initial_coordinates``: the shared build sets
         them through this model's map, which does not depend on the state)."""
-        import copy
-        source = copy.copy(self.source)
+        source = object.__new__(type(self.source))            # a shallow copy (not through pickling)
+        source.__dict__.update(self.source.__dict__)
         source.initial_coordinates, source.initial_coordinate_rates = {}, {}
         return self.builder(source, share=False, **self.options)
 

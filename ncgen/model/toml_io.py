@@ -40,7 +40,8 @@ from ncgen.model import toml_write
 from ncgen.model.expressions import did_you_mean, parse, scope, value_to_toml
 from ncgen.model.contacts import CONTACT_TYPES, BoxBox, SphereSphere
 from ncgen.model.forces import FORCE_TYPES
-from ncgen.model.joints import JOINT_TYPES, CoordinateDriver
+from ncgen.model.joint_base import Joint
+from ncgen.model.joints import JOINT_TYPES, CoordinateDriver, Mimic
 from ncgen.model.members import NodeRef
 from ncgen.model.shapes import shape_from_table
 from ncgen.validation import MAX_NAME, as_scalar
@@ -624,7 +625,7 @@ def _joint_entries(j, sc) -> dict:
     out = {"type": j.kind, "name": j.name}
     if isinstance(j, CoordinateDriver):
         out["member"] = j.A.name
-    else:
+    elif not isinstance(j, Mimic):                   # a Mimic joins its follower's members
         out["between"] = [_member_name(m) for m in j.members()]
     for k, v in j.options.items():
         if v is None:
@@ -633,6 +634,8 @@ def _joint_entries(j, sc) -> dict:
             out[k] = value_to_toml(v, sc, f"{j.label}: {k}")
         elif k in ("slot", "axis") and isinstance(j, CoordinateDriver):
             out[k] = v if isinstance(v, str) else int(v)
+        elif isinstance(v, Joint):                   # a Mimic's leader and follower
+            out[k] = v.name
         else:
             out[k] = _plain(v)
     return out

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import math
 import sys
 from dataclasses import dataclass, field
 from typing import Callable
@@ -96,7 +97,7 @@ class ChunkedIDAS:
         ``self.max_steps``) steps per interval (built on first use)."""
         max_steps = self.max_steps if max_steps is None else min(max_steps, self.max_steps)
         if (n, max_steps) not in self._integrators:
-            opts = {"calc_ic": False, "reltol": self.rtol, "abstol": self.atol,
+            opts = {"calc_ic": False, "reltol": self.rtol, "abstol": self.atol, "step0": self.first_step(),
                     "max_num_steps": max_steps, "suppress_algebraic": True,
                     "linear_solver": self.linear_solver}
             if self.expand:
@@ -104,6 +105,16 @@ class ChunkedIDAS:
             self._integrators[n, max_steps] = ca.integrator(f"ncgen_idas_{n}", "idas", self.oracle, 0.0,
                                                             [self.h * k for k in range(1, n + 1)], opts)
         return self._integrators[n, max_steps]
+
+    def first_step(self) -> float:
+        """IDAS's first step after each (re)start, ``min(√rtol, 10⁻³) h``: its own choice,
+        ``10⁻³ h``, is taken at order 1 from the zero derivative of the shifted variables and
+        leaves a local error far above ``rtol`` at tight tolerances (an order-1 step of
+        ``h0`` errs by about ``(ω h0)²/2`` for motions of frequency ``ω ≲ 1/h``).  Measured on
+        a regular swing of the four-bar of IFToMM A02 at rtol 10⁻¹⁰ with one call per output
+        interval (2000 restarts): the error to the exact motion after 20 s falls from 5.4e-6 m
+        to 3.3e-7 m, 2.5e-7 m with 20 calls (``tests/test_singular_positions.py``)."""
+        return min(math.sqrt(self.rtol), 1e-3) * self.h
 
     def xdot(self, t: float, x, z, column, p) -> np.ndarray:
         """``ẋ = f(t, x, z, u(t), p)``."""

@@ -43,9 +43,12 @@ AUTO_MAX_SIZE = 100_000
 #: Output intervals of the first IDAS call while watching for singular configurations
 #: (``project="auto"``; later chunks are sized from how fast ``σ_min/σ_max`` of A changes).
 WATCHED_CHUNK = 10
+#: A predicted crossing of the near-singular limit closer than this many output intervals is
+#: run to (one IDAS call); a farther one is approached by a power of 2 below it.
+CLOSE_CROSSING = 16
 #: IDAS steps per output interval at most while watching (``project="auto"`` or ``True``):
 #: IDAS can spend its whole ``max_steps`` creeping up to a singular configuration.  A chunk
-#: that fails is retried interval by interval; an interval that needs more steps away from
+#: that fails is retried up to just before where IDAS gave up; an interval that needs more steps away from
 #: a singular configuration gets the full ``max_steps`` and lifts the limit for the run.
 WATCHED_MAX_STEPS = 1_000
 #: ``σ_min/σ_max`` of A at the start of an interval that IDAS fails on (projecting), below
@@ -56,6 +59,13 @@ FAILING_NEAR_SINGULAR = 0.25
 #: N four-bar of IFToMM A02 (N = 1, 10; rtol 1e-10 to 1e-12 cross all eight in 10 s, its
 #: error estimate being taken on the tangent part of the step, see ``templates/c/runtime/ncgen_adaptive.h``).
 BRIDGE_MIN_TOL = 1e-12
+#: The bridge's tolerances are the run's divided by this (at least :data:`BRIDGE_MIN_TOL`):
+#: at the run's own, the few bridged intervals (8 % of the time in the N four-bar) made about
+#: half of the error to the exact motion after 20 s in its 3D form (1.3e-6 m at rtol 1e-10;
+#: 2.2e-7 m with a tenth), the adaptive stepper's error per unit time at a given tolerance
+#: being larger than IDAS's next to a singular configuration; the bridge is compiled and short,
+#: so the tighter tolerance costs little.
+BRIDGE_TIGHTER = 10.0
 #: Largest number of NumPy RATTLE steps across one output interval (``_bridge`` without a
 #: C compiler).
 BRIDGE_MAX_STEPS = 20_000
@@ -143,19 +153,23 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
       flat; there the KKT matrix of the index-1 DAE is singular and IDAS either fails or
       drifts onto the other branch).  ``"auto"`` (default): the run watches ``σ_min/σ_max``
       of ``A`` at every output time (an SVD each; only models with ``nq · nc ≤``
-      :data:`AUTO_MAX_SIZE`), in IDAS chunks of at most :data:`WATCHED_CHUNK` intervals,
-      shorter as the ratio falls; every output interval that starts or ends near-singular
+      :data:`AUTO_MAX_SIZE`), in IDAS chunks that end where the ratio's trend says it
+      reaches the limit (few calls: IDAS restarts at order 1 with each, its first step
+      ``min(√rtol, 10⁻³) dt``, see :class:`~ncgen.runtime.idas.ChunkedIDAS`); every output
+      interval that starts or ends near-singular
       (ratio below :data:`~ncgen.assembly.manifold.NEAR_SINGULAR`, scaled by the starting
       ratio, see :mod:`ncgen.assembly.manifold`), or that IDAS fails on close to one, is
       crossed instead by the model's compiled error-controlled RATTLE stepper (order 4,
-      tolerance ``max(rtol, atol, 1e-9)``, from the state projected onto both constraint
-      levels; compiled on first use; :mod:`ncgen.runtime.rattle_bridge`), which stays on
-      the branch.  ``info["projected_from"]`` is the first such output time,
+      tolerances a tenth of ``rtol`` and ``atol``, at least 1e-12, from the state projected
+      onto both constraint levels, multipliers recomputed at both ends; compiled on first
+      use; :mod:`ncgen.runtime.rattle_bridge`), which stays on the branch.
+      ``info["projected_from"]`` is the first such output time,
       ``info["stats"]["rattle_intervals"]`` their number.  The N four-bar of the IFToMM
-      benchmark A02 over 10 s (eight flat positions) then stays within 2e-7 m of the exact
-      motion at ``rtol=1e-11`` (2e-6 m at ``1e-10``) in 1–5 s for N = 1, 2, 10
-      (``tests/test_singular_positions.py``).  ``True``: the same, with one IDAS call per
-      output interval and the state projected after each.  ``False``: IDAS alone.
+      benchmark A02 over 20 s (sixteen flat positions) then stays within 2e-7 m of the exact
+      motion at ``rtol = atol = 1e-10`` for N = 1, 10, 40 (2.3e-6 m in its 3D form with
+      revolute joints for N = 1, IDAS's own error on the regular part of that motion;
+      ``tests/test_singular_positions.py``).  ``True``: the same,
+      with one IDAS call per output interval and the state projected after each.  ``False``: IDAS alone.
     * ``method="stepper"``: the compiled fixed-step stepper (generated C, Newton loop
       included; :mod:`ncgen.runtime.stepper`): ``scheme="auto"`` (default) Suzuki's
       fourth-order composition of five RATTLE steps per step (``"rattle4"``), RATTLE alone
@@ -426,14 +440,14 @@ def _algebraic(model, t: float, x, u, p) -> np.ndarray:
 class _bridge:
     """IDAS's stand-in over one output interval next to a singular configuration
     (:mod:`ncgen.runtime.rattle_bridge`): the model's compiled error-controlled stepper
-    (compiled on first use) with tolerances ``max(rtol, BRIDGE_MIN_TOL)`` and
-    ``max(atol, BRIDGE_MIN_TOL)``, or,
+    (compiled on first use) with tolerances ``max(rtol / BRIDGE_TIGHTER, BRIDGE_MIN_TOL)`` and
+    ``max(atol / BRIDGE_TIGHTER, BRIDGE_MIN_TOL)``, or,
     without a C compiler, NumPy RATTLE steps of about ``sqrt(rtol)`` s (at most
     :data:`BRIDGE_MAX_STEPS`); ``count`` of uses."""
 
     def __init__(self, model, runner: ChunkedIDAS, p, rtol: float, atol: float):
         self.model, self.runner, self.p, self.rtol, self.atol = model, runner, p, rtol, atol
-        self.tols = max(rtol, BRIDGE_MIN_TOL), max(atol, BRIDGE_MIN_TOL)
+        self.tols = max(rtol / BRIDGE_TIGHTER, BRIDGE_MIN_TOL), max(atol / BRIDGE_TIGHTER, BRIDGE_MIN_TOL)
         self.count = 0
         self.stepper = None            # the compiled stepper; False: no C compiler
         self.h_next, self.t_next = 0.0, None
@@ -482,12 +496,16 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
 
     IDAS over chunks of several output intervals (one with ``project=True``); a failed
     chunk is retried one interval at a time, to keep every state before the failure
-    (watching: only its first interval, then chunks again).
+    (watching: shorter, ending before where IDAS gave up, then chunks again).
     With a ``projector`` (``project`` True or ``"auto"``, see :func:`simulate`) every output
     configuration is watched (``σ_min/σ_max`` of A): the first chunk is at most
-    :data:`WATCHED_CHUNK` intervals, later ones end about halfway to where that ratio would
-    reach the near-singular limit if it fell at the fastest rate seen so far;
-    a chunk that reaches it anyway is cut at the last output before; every interval that
+    :data:`WATCHED_CHUNK` intervals, later ones end at the first output past where that
+    ratio would reach the near-singular limit by its slope and bend at the last outputs
+    (:func:`_chunk_to_limit`), the first after a bridge no longer than the shorter of the last
+    two IDAS stretches between bridges (a periodic motion meets its next flat position about
+    as far on); a chunk that fails is tried again up to just before where IDAS gave up
+    (:func:`_retry_length`); a chunk that
+    reaches the limit is cut at the last output before it; every interval that
     starts or ends at a near-singular configuration, or that IDAS fails on not far from one
     (:data:`FAILING_NEAR_SINGULAR`), is crossed by ``bridge`` instead, from the projected
     state.  ``auto=False``: the state is also projected after every interval."""
@@ -513,27 +531,33 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
     def near(i, limit=NEAR_SINGULAR) -> bool:
         return ratio(i) < limit * projector.scale
 
-    speed = [np.nan]                      # the fastest change of that ratio seen, per output interval
+    bend = [np.nan]                       # the last second difference of that ratio seen by IDAS
+    resumed, stretches = [None], []       # where IDAS resumed after the last bridge; its stretches between
 
     def chunk(k) -> int:
         """Intervals of the next IDAS call from output k (see above)."""
         if not watching:
             return full
-        if not np.isfinite(speed[0]):
+        if not np.isfinite(bend[0]) or k == 0:
             return min(full, WATCHED_CHUNK)
-        room = ratio(k) - NEAR_SINGULAR * projector.scale
-        n = min(full, max(1.0, 0.5 * room / max(speed[0], 1e-300)))
-        return full if n == full else 2 ** int(math.log2(n))     # few lengths: one integrator each
+        n = _chunk_to_limit(ratio(k) - NEAR_SINGULAR * projector.scale, ratio(k) - ratio(k - 1), bend[0], full)
+        if k == resumed[0] and stretches:    # just after a bridge: no longer than the last stretches
+            n = min(n, max(1, min(stretches[-2:]) - 1))
+        return n
 
     def observe(k0, k):
-        """Update ``speed`` from the ratios at outputs k0 ... k."""
-        r = np.array([ratio(i) for i in range(k0, k + 1)])
-        if len(r) > 1:
-            speed[0] = np.nanmax([np.max(np.abs(np.diff(r))), 0.0 if np.isnan(speed[0]) else speed[0]])
+        """Update ``bend`` from the ratios at outputs k0 − 1 ... k (IDAS's, away from the flat
+        position, where the ratio is smooth)."""
+        r = np.array([ratio(i) for i in range(max(0, k0 - 1), k + 1)])
+        if len(r) > 2:
+            bend[0] = float(np.diff(r, 2)[-1])
 
     def bridged(k) -> int:
         nonlocal since
         since = k if since is None else since
+        if resumed[0] is not None and k > resumed[0]:
+            stretches.append(k - resumed[0])
+        resumed[0] = k + 1
         X[k] = projector(t[k], X[k])
         X[k + 1], Z[k + 1] = bridge(t[k], t[k + 1], X[k], columns[:, k])
         R[k:k + 2] = np.nan
@@ -555,18 +579,21 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
         steps[0] = None
         return k + 1
 
-    k = 0
+    k, cap = 0, n_int
     while k < n_int:
         try:
             raise_if_interrupted()
             if watching and near(k):
                 k = bridged(k)
             else:
-                k0, n = k, min(chunk(k), n_int - k)
+                k0, n = k, min(chunk(k), n_int - k, cap)
                 try:
                     advance(k, n, steps[0])
-                    k += n
-                except ChunkFailure:
+                    k, cap = k + n, n_int
+                except ChunkFailure as e:
+                    if watching and n > 1:           # again from k, ending before where IDAS gave up
+                        cap = _retry_length(e, float(t[k]), float(t[1] - t[0]), n)
+                        continue
                     k = single(k)
                     while not watching and k < k0 + n:
                         k = single(k)
@@ -590,6 +617,42 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
             R[k] = np.nan
         bar.update(t[k])
     return X, Z, None, since
+
+
+def _retry_length(failure: ChunkFailure, t_k: float, h: float, n: int) -> int:
+    """Output intervals of the next try of a watched chunk of ``n`` from ``t_k`` that failed:
+    up to the second-last output before the time IDAS gave up (a flat position ahead: the
+    try then reaches the near-singular limit and is cut there), half as many if IDAS named
+    no time; at least 1, fewer than ``n``."""
+    t_fail = shift_time(failure.message, t_k)[1]
+    if t_fail is None or not math.isfinite(t_fail):
+        return max(1, n // 2)
+    return max(1, min(n - 1, int((t_fail - t_k) / h) - 1))
+
+
+def _chunk_to_limit(room: float, slope: float, bend: float, full: int) -> int:
+    """Output intervals of the next IDAS call while watching a ratio now ``room`` above its
+    limit, changing by ``slope`` per interval and that change by ``bend`` per interval: up to
+    the first output past the predicted crossing ``room + n slope + n (n+1)/2 bend = 0``
+    (the call is then cut at the last output above the limit), at most ``full``; a far
+    crossing is approached by a power of 2 below it (few lengths: one integrator each).
+    IDAS loses accuracy at each restart (its first steps are of order 1), so the calls are
+    as long as the prediction allows."""
+    if room <= 0.0:
+        return 1
+    a, b = 0.5 * bend, slope + 0.5 * bend
+    disc = b * b - 4.0 * a * room
+    if abs(a) < 1e-300:
+        n = -room / b if b < 0.0 else math.inf
+    elif disc < 0.0 or (a > 0.0 and b >= 0.0):
+        n = math.inf
+    else:
+        n = (-b - math.sqrt(disc)) / (2.0 * a)
+    if n >= full:
+        return full
+    if n < CLOSE_CROSSING:
+        return int(n) + 1
+    return 2 ** int(math.log2(n))
 
 
 def _failure_message(model, failure: ChunkFailure, t, k, x, lam, u, p, dae) -> str:
