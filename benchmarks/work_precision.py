@@ -1,6 +1,19 @@
 """Work–precision: tip error after 2 s versus wall time, ncgen against MuJoCo, on models as
 users write them.
 
+Default (the targets of issue 26): the 20-bar explicit-joint chain at tip errors 1e-3 and
+1e-6 m and the spinning 5-bar chain at 1e-3 m.  For each, MuJoCo RK4 and ncgen's fixed-step
+stepper (``scheme="rattle"`` and ``"rattle4"``, without error estimate; then ``"rattle4"``
+with each of its error estimates, the default shadow run and ``estimate="local"``) are each
+run at their own largest step reaching the target: bisection on the number of steps (to 2 s
+for MuJoCo, per 0.1 s output interval for ncgen) between a failing and a passing count, down
+to neighbours (every count tried is printed).  Then all are timed interleaved in one process
+(``--repeat`` rounds), min and median, with the ratios to MuJoCo RK4, the CPU model and the
+load average.  ncgen times are end to end (``nc.simulate``: consistent start, stepping,
+derived quantities, ``Trajectory``); the first-run costs (ncgen: build, generate and compile
+its C from a cold compile cache, then a first short run; MuJoCo: the MJCF compile) are
+printed beside them.  ``--curves`` gives the whole curves described below instead.
+
 Cases (bars of 1 m and 1 kg, released from rest as the horizontal staircase of
 benchmarks/common.py unless said otherwise):
 
@@ -40,13 +53,15 @@ two curves, and measured directly with the two forms run alternately at the same
 include their shadow run (the global error estimate, about half the work again), as
 ``nc.simulate`` does by default.
 
-    python benchmarks/work_precision.py                     all cases (several minutes)
-    python benchmarks/work_precision.py --smoke             N = 2, coarse (seconds; CI)
-    python benchmarks/work_precision.py --cases shared joints --repeat 5
+    python benchmarks/work_precision.py                     the targets (about 10 minutes)
+    python benchmarks/work_precision.py --smoke             N = 2, 1e-3 only (seconds; CI)
+    python benchmarks/work_precision.py --curves            all curves (several minutes)
+    python benchmarks/work_precision.py --curves --cases shared joints --repeat 5
 """
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 import warnings
@@ -244,13 +259,20 @@ def report(case: Case, curves, checks) -> dict[str, float]:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--smoke", action="store_true", help="tiny and coarse: runs in seconds (CI)")
-    parser.add_argument("--cases", nargs="+", choices=FULL["cases"], help="cases to run (default all)")
-    parser.add_argument("--repeat", type=int, default=3, help="runs per point; the fastest counts")
+    parser.add_argument("--curves", action="store_true",
+                        help="the whole curves (IDAS, stepper, MuJoCo RK4 and Euler) instead of the targets")
+    parser.add_argument("--cases", nargs="+", choices=FULL["cases"],
+                        help="cases to run (default all; the targets have joints and spinning)")
+    parser.add_argument("--repeat", type=int, default=None,
+                        help="runs per point, the fastest counts (--curves, default 3); interleaved timing "
+                             "rounds (targets, default 7)")
     args = parser.parse_args(argv)
+    if not args.curves:
+        return targets_main(args)
     config = dict(SMOKE if args.smoke else FULL)
     if args.cases:
         config["cases"] = args.cases
-    repeat = 1 if args.smoke else args.repeat
+    repeat = 1 if args.smoke else (args.repeat or 3)
     print(machine())
     warnings.simplefilter("ignore")
     times, cases = {}, {}
@@ -282,6 +304,190 @@ def paired(joints: Case, shared: Case, config, repeat: int) -> None:
                 best[name] = min(best[name], case.simulate(T_END, OUTPUT_DT, method="stepper", **kw)[1])
         print(f"RATIO explicit joints / shared points, {label}, run alternately (best of {repeat}): "
               f"{best['joints'] / best['shared']:.2f} ({best['joints'] * 1e3:.2f} ms vs {best['shared'] * 1e3:.2f} ms)")
+
+
+#: The targets of issue 26: (case, N, tip error after T_END (m), ratio ncgen / MuJoCo RK4 to reach).
+GOALS = [("joints", 20, 1e-3, 0.5), ("joints", 20, 1e-6, 0.3), ("spinning", 5, 1e-3, 0.5)]
+SMOKE_GOALS = [("joints", 2, 1e-3, 0.5)]
+#: ncgen's fixed-step settings, each at its own searched step: (label, order, keywords of simulate).
+SETTINGS = [("ncgen rattle", 2, {"scheme": "rattle", "estimate": False}),
+            ("ncgen rattle4", 4, {"scheme": "rattle4", "estimate": False})]
+#: rattle4 at its step with each error estimate: label -> ``estimate``.
+ESTIMATES = {"ncgen rattle4 + shadow estimate": "shadow", "ncgen rattle4 + local estimate": "local"}
+
+
+def smallest_count(error, n0: int, order: int, target: float, n_max: int = 10**6):
+    """``(n, error(n), scanned)``: the smallest step count ``n`` (step = span / n) whose
+    error is within ``target``: from the error at ``n0`` the count predicted by ``order``,
+    a bracket [failing, passing] widened by factors of 1.25, then bisection on the integer
+    count down to neighbours (the error is taken monotone near the boundary; a run that
+    fails counts as failing); ``scanned``: every count tried and its error.  None if
+    ``n_max`` steps do not reach the target."""
+    seen = {}
+
+    def passes(n):
+        if n not in seen:
+            seen[n] = error(n)
+        return seen[n] <= target
+
+    n, e0 = n0, error(n0)
+    seen[n0] = e0
+    if np.isfinite(e0) and e0 > 0:
+        n = int(min(n_max, max(1, np.ceil(n0 * (e0 / target) ** (1 / order)))))
+    if passes(n):
+        hi, lo = n, None
+        while lo is None:
+            if hi == 1:
+                lo = 0
+                break
+            down = min(hi - 1, int(hi / 1.25))
+            if passes(down):
+                hi = down
+            else:
+                lo = down
+    else:
+        lo, hi = n, None
+        while hi is None:
+            up = max(lo + 1, int(np.ceil(lo * 1.25)))
+            if up > n_max:
+                return None
+            if passes(up):
+                hi = up
+            else:
+                lo = up
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if passes(mid):
+            hi = mid
+        else:
+            lo = mid
+    return hi, seen[hi], seen
+
+
+def ncgen_error(case: Case, reference, substeps: int, **kw) -> float:
+    from ncgen.errors import SimulationError
+
+    try:
+        traj, _ = case.simulate(T_END, OUTPUT_DT, method="stepper", substeps=substeps, check=False, **kw)
+    except SimulationError:
+        return float("inf")
+    return _err(ncgen_tip(traj.q[-1]), reference)
+
+
+def first_runs(kind: str, n: int) -> tuple[Case, dict]:
+    """The case built and run once from a cold compile cache (the process's, set by
+    :func:`targets_main`), and MuJoCo's model compile and first run: the first-run costs."""
+    import mujoco
+
+    from common import chain_mjcf
+
+    start = time.perf_counter()
+    case = Case(kind, n)
+    built = time.perf_counter() - start
+    case.simulate(OUTPUT_DT, OUTPUT_DT, method="stepper", substeps=10, check=False)
+    ncgen_first = time.perf_counter() - start
+    start = time.perf_counter()
+    mujoco.MjModel.from_xml_string(chain_mjcf(n, length=LENGTH, mass=MASS))
+    mj_compile = time.perf_counter() - start
+    return case, {"ncgen build": built, "ncgen build + C compile + first run (0.1 s)": ncgen_first,
+                  "MuJoCo MJCF compile": mj_compile}
+
+
+def targets_main(args) -> int:
+    """Each goal: MuJoCo RK4 and ncgen's settings at their own largest step reaching the tip
+    error (:func:`smallest_count`), timed interleaved, min and median ratios."""
+    import tempfile
+
+    os.environ["NCGEN_CACHE_DIR"] = tempfile.mkdtemp(prefix="ncgen-wp-")    # first runs compile
+    rounds = 1 if args.smoke else (args.repeat or 7)
+    print(machine())
+    warnings.simplefilter("ignore")
+    cases = {}
+    goals = SMOKE_GOALS if args.smoke else GOALS
+    for kind, n, target, goal in [g for g in goals if not args.cases or g[0] in args.cases]:
+        if (kind, n) not in cases:
+            case, first = cases[(kind, n)] = first_runs(kind, n)
+            reference, checks = reference_tip(case, {"reference_step": 1e-3 if args.smoke else 2e-5})
+            cases[(kind, n)] = case, first, reference
+            print(f"\n=== {case.title}: nq = {case.model.nq}, nc = {case.model.nc}; tip error after {T_END:g} s ===")
+            for what, dist in checks.items():
+                print(f"  reference check: |tip({what}) - tip(IDAS rtol 1e-12)| = {dist:.2e} m")
+            print("  first run (cold compile cache): " + ", ".join(f"{k} {v:.2f} s" for k, v in first.items()))
+        case, first, reference = cases[(kind, n)]
+        goal_run(case, first, reference, target, goal, rounds)
+    return 0
+
+
+def goal_run(case: Case, first: dict, reference, target: float, goal: float, rounds: int) -> None:
+    found = {"mujoco RK4": smallest_count(lambda k: _err(case.mujoco("RK4", T_END / k)[1], reference),
+                                          int(T_END / 2e-3), 4, target)}
+    for label, order, kw in SETTINGS:
+        found[label] = smallest_count(lambda k, kw=kw: ncgen_error(case, reference, k, **kw), 20, order, target)
+    runs = {label: (lambda k, kw=kw: case.simulate(T_END, OUTPUT_DT, method="stepper", substeps=k, check=False,
+                                                   **kw)) for label, _, kw in SETTINGS}
+    for label, how in ESTIMATES.items():
+        found[label] = found["ncgen rattle4"]
+        runs[label] = (lambda k, how=how: case.simulate(T_END, OUTPUT_DT, method="stepper", substeps=k,
+                                                        scheme="rattle4", check=False, estimate=how))
+    times = {name: [] for name, f in found.items() if f is not None}
+    estimates = {label: [] for label in ESTIMATES}
+    load = os.getloadavg()[0]
+    for _ in range(rounds):
+        for name in times:
+            k = found[name][0]
+            if name == "mujoco RK4":
+                times[name].append(case.mujoco("RK4", T_END / k)[0])
+                continue
+            traj, wall = runs[name](k)
+            times[name].append(wall)
+            if name in estimates:
+                estimates[name].append(traj.info["error_estimate"]["q"])
+    load = max(load, os.getloadavg()[0])
+    print(f"\n  target tip error {target:.0e} m; {rounds} interleaved rounds; load average "
+          f"{load:.2f} (1 min, max of start and end)")
+    for name, f in found.items():
+        if f is None:
+            print(f"    {name:<32} does not reach the target")
+            continue
+        k, e, scanned = f
+        h = T_END / k if name == "mujoco RK4" else OUTPUT_DT / k
+        t = np.array(times[name])
+        print(f"    {name:<32} step {h:.4e} s  error {e:.2e} m  min {t.min() * 1e3:9.2f} ms  "
+              f"median {np.median(t) * 1e3:9.2f} ms")
+        if name not in ESTIMATES:
+            what = "steps to 2 s" if name == "mujoco RK4" else f"substeps per {OUTPUT_DT:g} s"
+            print(f"      bisection on the {what}: " + ", ".join(f"{c}: {v:.2e}" for c, v in sorted(scanned.items())))
+    if "mujoco RK4" not in times:
+        return
+    mj = np.array(times["mujoco RK4"])
+    for name in times:
+        if name != "mujoco RK4":
+            t = np.array(times[name])
+            print(f"  RATIO {name} / MuJoCo RK4 at {target:.0e}: min {t.min() / mj.min():.2f}, "
+                  f"median {np.median(t) / np.median(mj):.2f}")
+    best = min((n for n in times if n.startswith("ncgen") and n not in ESTIMATES), key=lambda n: np.median(times[n]),
+               default=None)
+    if best is not None:
+        ratio = np.median(times[best]) / np.median(mj)
+        print(f"  BEST ncgen setting at {target:.0e}: {best}, median ratio {ratio:.2f} (goal <= {goal:g}: "
+              f"{'met' if ratio <= goal else 'NOT met'})")
+    with_estimate = [n for n in ESTIMATES if n in times]
+    if with_estimate:
+        best_e = min(with_estimate, key=lambda n: np.median(times[n]))
+        ratio = np.median(times[best_e]) / np.median(mj)
+        print(f"  BEST ncgen with an error estimate at {target:.0e}: {best_e}, median ratio {ratio:.2f} "
+              f"(goal <= {goal:g}: {'met' if ratio <= goal else 'NOT met'})")
+    plain = np.median(times["ncgen rattle4"]) if "ncgen rattle4" in times else np.nan
+    for label in ESTIMATES:
+        if label in times:
+            est, tip = np.median(estimates[label]), found[label][1]
+            print(f"  {label[len('ncgen rattle4 + '):]}: {est:.2e} (largest component of q) against a true tip "
+                  f"error of {tip:.2e} m (ratio {est / tip:.2f}); overhead "
+                  f"{np.median(times[label]) / plain - 1:+.0%} (median end to end)")
+    once = first["ncgen build + C compile + first run (0.1 s)"]
+    if best is not None:
+        print(f"  with the first-run cost (one run from a cold cache): ncgen {once + np.median(times[best]):.2f} s, "
+              f"MuJoCo {first['MuJoCo MJCF compile'] + np.median(mj):.2f} s")
 
 
 if __name__ == "__main__":

@@ -66,18 +66,19 @@ def test_trusted_states_skip_the_projection_and_keep_the_bits(cartpole):
 
 
 def test_a_failing_run_is_reported_and_the_others_complete(slider_crank):
-    omega = np.array([4.0, 60.0, 5.0])           # 60 rad/s is too fast for h = 10 ms
+    omega = np.array([4.0, 60.0, 5.0])           # 60 rad/s is too fast for RATTLE at h = 10 ms
     q0 = np.repeat(slider_crank.q0[None], 3, axis=0)
     q0[2, 0] += 0.3                              # far off the constraints: cannot start
-    batch = nc.simulate_batch(slider_crank, 0.5, 0.01, p={"omega": omega}, q0=q0)
+    batch = nc.simulate_batch(slider_crank, 0.5, 0.01, p={"omega": omega}, q0=q0, scheme="rattle")
     assert list(batch.status[:2]) == [0, STATUS_UNTRUSTED] and batch.status[2] == STATUS_SETUP
     assert batch.message[1].startswith("not trustworthy: ") and "Use a step of at most" in batch.message[1]
     assert batch.message[2].startswith("could not start: ") and "inconsistent initial configuration" in batch.message[2]
     with pytest.raises(SimulationError) as single:
-        nc.simulate(slider_crank, 0.5, 0.01, method="stepper", p={"omega": 60.0})
+        nc.simulate(slider_crank, 0.5, 0.01, method="stepper", p={"omega": 60.0}, scheme="rattle")
     bad_from = len(single.value.trajectory.t)    # the single run keeps the states before the problem
     assert np.isnan(batch.q[1, bad_from:]).all() and np.array_equal(batch.q[1, :bad_from], single.value.trajectory.q)
-    assert_same_run(batch, 0, nc.simulate(slider_crank, 0.5, 0.01, method="stepper", p={"omega": 4.0}))
+    assert_same_run(batch, 0, nc.simulate(slider_crank, 0.5, 0.01, method="stepper", p={"omega": 4.0},
+                                          scheme="rattle"))
 
 
 def test_newton_failure_status_without_checks(slider_crank):
@@ -100,7 +101,7 @@ def test_bad_batch_arguments_are_named(slider_crank):
 
 def test_batch_of_oscillators_matches_the_closed_form():
     """A sled on a spring pushed by a constant force: x(t) = F₀/k (1 − cos ωt), ω = √(k/m),
-    one run per stiffness; RATTLE's error is O(h²)."""
+    one run per stiffness; RATTLE's error is O(h²), the default composition's O(h⁴)."""
     s = nc.System("osc", gravity=(0, 0))
     sled = s.add_point("sled", mass=2.0, position=(1.0, 0))
     k = s.add_parameter("k", 50.0)
@@ -110,10 +111,14 @@ def test_batch_of_oscillators_matches_the_closed_form():
     s.add_force(nc.PointForce(sled, (0, 0), force=[push, 0.0]))
     osc = s.build()
     ks = np.array([20.0, 50.0, 80.0])
-    errors = []
-    for substeps in (1, 2):
-        batch = nc.simulate_batch(osc, 1.0, 0.01, p={"k": ks}, u=np.full((101, 1), 5.0), substeps=substeps)
-        assert batch.ok.all()
-        exact = 5.0 / ks[:, None] * (1 - np.cos(np.sqrt(ks[:, None] / 2.0) * batch.t[None]))
-        errors.append(np.abs(batch.q[:, :, 0] - 1.0 - exact).max())
-    assert errors[0] < 1e-4 and 3.5 < errors[0] / errors[1] < 4.5       # second order
+    errors = {"rattle": [], "auto": []}
+    for scheme, runs in errors.items():
+        for substeps in (1, 2):
+            batch = nc.simulate_batch(osc, 1.0, 0.01, p={"k": ks}, u=np.full((101, 1), 5.0), substeps=substeps,
+                                      scheme=scheme)
+            assert batch.ok.all()
+            exact = 5.0 / ks[:, None] * (1 - np.cos(np.sqrt(ks[:, None] / 2.0) * batch.t[None]))
+            runs.append(np.abs(batch.q[:, :, 0] - 1.0 - exact).max())
+    rattle, auto = errors["rattle"], errors["auto"]
+    assert rattle[0] < 1e-4 and 3.5 < rattle[0] / rattle[1] < 4.5       # second order
+    assert auto[0] < 1e-8 and 14 < auto[0] / auto[1] < 18                # the default: fourth order

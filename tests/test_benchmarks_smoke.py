@@ -19,9 +19,13 @@ pytestmark = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc
 
 
 @pytest.mark.parametrize("script, expected", [
-    ("work_precision.py", ["=== chain of N = 2 bars", "RATIO ncgen stepper (end to end) / MuJoCo RK4",
-                           "reference check", "explicit nc.Spherical joints", "RATIO explicit joints / shared points",
-                           "end-to-end / stepping time"]),
+    ("work_precision.py", ["=== chain of N = 2 bars", "explicit nc.Spherical joints", "reference check",
+                           "first run (cold compile cache)", "bisection on the steps to 2 s",
+                           "RATIO ncgen rattle4 / MuJoCo RK4 at 1e-03", "BEST ncgen setting at 1e-03",
+                           "BEST ncgen with an error estimate", "local estimate:", "load average"]),
+    ("work_precision.py --curves", ["=== chain of N = 2 bars", "RATIO ncgen stepper (end to end) / MuJoCo RK4",
+                                    "reference check", "explicit nc.Spherical joints",
+                                    "RATIO explicit joints / shared points", "end-to-end / stepping time"]),
     ("rattle4.py", ["=== chain of N = 2 bars", "RATIO rattle4 / MuJoCo RK4 at 1e-03", "RATIO rattle4 / rattle"]),
     ("kernel.py", ["=== chain of N = 3 bars", "RATIO VM / generated C"]),
     ("kernel.py --looped", ["=== looped vs straight-line C: chain of N = 3 bars", "max |difference| = 0.0e+00",

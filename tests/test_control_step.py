@@ -100,10 +100,10 @@ def test_step_jacobians_match_central_differences(cases, name):
 
 
 def test_step_matches_the_compiled_stepper(cases):
-    """Same scheme as ``nc.simulate(method="stepper")`` (independent code: its Newton loop is
-    the template's C): 200 steps of the spring-damper with a held input."""
+    """Same scheme as ``nc.simulate(method="stepper", scheme="rattle")`` (independent code:
+    its Newton loop is the template's C): 200 steps of the spring-damper with a held input."""
     model, st = cases["spring_damper"]
-    traj = nc.simulate(model, 2.0, 0.01, method="stepper", u=lambda t: [0.3], check=False)
+    traj = nc.simulate(model, 2.0, 0.01, method="stepper", u=lambda t: [0.3], check=False, scheme="rattle")
     x = np.concatenate([model.q0, model.v0])
     X = st.rollout(x, np.full((200, 1), 0.3))
     assert np.max(np.abs(X[-1, :model.nq] - traj.q[-1])) < 1e-9

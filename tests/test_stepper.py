@@ -79,7 +79,7 @@ def test_both_constraint_levels_hold_at_every_step():
 def test_second_order_convergence_against_idas():
     model = chain(3)
     ref = nc.simulate(model, 0.5, 0.05, rtol=1e-12, atol=1e-12)
-    errors = [np.max(np.abs(nc.simulate(model, 0.5, 0.05, method="stepper", substeps=s).q - ref.q))
+    errors = [np.max(np.abs(nc.simulate(model, 0.5, 0.05, method="stepper", substeps=s, scheme="rattle").q - ref.q))
               for s in (10, 20, 40)]
     ratios = np.array(errors[:-1]) / np.array(errors[1:])
     assert np.all((3.6 < ratios) & (ratios < 4.4)), (errors, ratios)
@@ -90,7 +90,8 @@ def test_second_order_with_dampers_parameters_and_linear_inputs():
     u = lambda t: [np.sin(4 * t)]  # noqa: E731
     opts = dict(u=u, hold="linear", p={"k": 60.0})
     ref = nc.simulate(model, 0.6, 0.05, rtol=1e-12, atol=1e-12, **opts)
-    errors = [np.max(np.abs(nc.simulate(model, 0.6, 0.05, method="stepper", substeps=s, **opts).q - ref.q))
+    errors = [np.max(np.abs(nc.simulate(model, 0.6, 0.05, method="stepper", substeps=s, scheme="rattle", **opts).q
+                            - ref.q))
               for s in (10, 20, 40)]
     ratios = np.array(errors[:-1]) / np.array(errors[1:])
     assert np.all((3.5 < ratios) & (ratios < 4.5)), (errors, ratios)
@@ -119,8 +120,8 @@ def test_agrees_with_idas_on_shipped_examples(path):
     u = (lambda t: [0.5 * np.sin(3 * t)] * model.nu) if model.nu else None
     ref = nc.simulate(model, t_end, dt, rtol=1e-10, atol=1e-10, u=u)
     sub = round(dt / STEP.get(model.name, 1e-3))
-    fine = nc.simulate(model, t_end, dt, method="stepper", substeps=sub, u=u)
-    coarse = nc.simulate(model, t_end, dt, method="stepper", substeps=sub // 2, u=u)
+    fine = nc.simulate(model, t_end, dt, method="stepper", substeps=sub, u=u, scheme="rattle")
+    coarse = nc.simulate(model, t_end, dt, method="stepper", substeps=sub // 2, u=u, scheme="rattle")
     err_fine, err_coarse = (np.max(np.abs(tr.q - ref.q)) for tr in (fine, coarse))
     size = 1.0 + np.max(np.abs(ref.q))
     assert err_fine <= 2e-3 * size, (model.name, err_fine)
@@ -187,11 +188,11 @@ def test_split_steps_keep_the_grid_and_the_constraints():
     it is within the error such a coarse step makes (5 % of the motion) of IDAS."""
     model = example(EXAMPLES / "double_pendulum.toml")
     with pytest.raises(SimulationError, match="did not converge"):
-        nc.simulate(model, 1.2, 0.2, method="stepper", max_halvings=0)
+        nc.simulate(model, 1.2, 0.2, method="stepper", max_halvings=0, scheme="rattle")
     with pytest.raises(SimulationError, match=r"not trustworthy: .*substeps=") as failure:
-        nc.simulate(model, 1.2, 0.2, method="stepper")
+        nc.simulate(model, 1.2, 0.2, method="stepper", scheme="rattle")
     assert failure.value.trajectory.t[-1] == 0.0
-    traj = nc.simulate(model, 1.2, 0.2, method="stepper", check=False)
+    traj = nc.simulate(model, 1.2, 0.2, method="stepper", check=False, scheme="rattle")
     assert traj.info["stats"]["step_splits"] > 0
     np.testing.assert_allclose(traj.t, np.linspace(0.0, 1.2, 7), atol=1e-12)
     assert np.all(traj.constraint_residual <= TOL)

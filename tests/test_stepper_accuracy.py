@@ -141,13 +141,14 @@ def test_rtol_on_a_chaotic_motion_warns_or_fails_loudly():
 # ------------------------------------------------------------ fixed-step estimate
 @pytest.mark.parametrize("case, h", [("chain", 5e-3), ("chain", 2.5e-3), ("spinning", 2e-3), ("stiff", 1e-3)])
 def test_fixed_step_error_estimate_against_the_true_error(case, h):
-    """The Richardson estimate of a fixed-step run (against its shadow run with steps of 2h)
+    """The Richardson estimate of a RATTLE fixed-step run (against its shadow run with steps of 2h)
     against the true error in q at the end (IDAS at 1e-10), on a chain, a fast-spinning
     chain (errors grow fast) and the stiff-spring pendulum: within a factor 2."""
     model = stiff_pendulum() if case == "stiff" else chain(2 if case == "chain" else 3)
     kw = {"v0": spinning_state(model)} if case == "spinning" else {}
     ref = reference(model, 1.0, 0.1, **kw)
-    traj = nc.simulate(model, 1.0, 0.1, method="stepper", substeps=round(0.1 / h), check=False, **kw)
+    traj = nc.simulate(model, 1.0, 0.1, method="stepper", substeps=round(0.1 / h), check=False, scheme="rattle",
+                       **kw)
     true = np.max(np.abs(traj.q[-1] - ref.q[-1]))
     estimate = traj.info["error_estimate"]["q"]
     assert 0.5 * true <= estimate <= 2 * true
@@ -155,17 +156,17 @@ def test_fixed_step_error_estimate_against_the_true_error(case, h):
 
 
 def test_a_chaotic_run_with_a_large_error_fails_loudly():
-    """The spinning chain at h = 2 ms: the estimate sees the error grow and the run stops
+    """The spinning chain with RATTLE at h = 2 ms: the estimate sees the error grow and the run stops
     with the step to use; at that step the error is within the stated 1 % of the size."""
     model = chain(3)
     v0 = spinning_state(model)
     with pytest.raises(SimulationError, match="estimated error in q") as failure:
-        nc.simulate(model, 1.0, 0.1, method="stepper", substeps=50, v0=v0)
+        nc.simulate(model, 1.0, 0.1, method="stepper", substeps=50, v0=v0, scheme="rattle")
     kept = failure.value.trajectory
     assert not kept.complete and 0 < kept.t[-1] < 1.0
     assert kept.info["error_estimate"]["q"] <= ERROR_FRACTION * np.max(np.abs(model.q0))   # the part kept
     substeps = int(str(failure.value).split("substeps=")[1].split(" ")[0])
-    traj = nc.simulate(model, 1.0, 0.1, method="stepper", substeps=substeps, v0=v0)
+    traj = nc.simulate(model, 1.0, 0.1, method="stepper", substeps=substeps, v0=v0, scheme="rattle")
     ref = reference(model, 1.0, 0.1, v0=v0)
     assert np.max(np.abs(traj.q - ref.q)) <= ERROR_FRACTION * np.max(np.abs(model.q0))
 
@@ -220,26 +221,29 @@ def test_conservative_models_are_recognised():
     assert not is_conservative(spring_damper())
 
 
-def test_energy_balance_of_a_damped_model_closes():
+@pytest.mark.parametrize("scheme, low, high", [("rattle", 0.2, 0.3), ("auto", 1 / 20, 1 / 12)])
+def test_energy_balance_of_a_damped_model_closes(scheme, low, high):
     """Dampers remove energy: E(t) − E(t0) equals the work W of the damper forces (the
-    integral of P = vᵀ(F + ∇V), generated C) up to the scheme's error, which falls like h²."""
+    integral of P = vᵀ(F + ∇V), generated C) up to the scheme's error, which falls like h²
+    with RATTLE and h⁴ with the default composition."""
     model = spring_damper()
-    reports = [nc.simulate(model, 1.0, 0.01, method="stepper", substeps=s).info["energy"] for s in (2, 4)]
+    reports = [nc.simulate(model, 1.0, 0.01, method="stepper", substeps=s, scheme=scheme).info["energy"]
+               for s in (2, 4)]
     for r in reports:
         assert r["conservative"] is False and r["work"] < -0.1      # the dampers dissipate
     assert reports[0]["balance_error"] < 5e-3 * abs(reports[0]["work"])
-    assert 0.2 < reports[1]["balance_error"] / reports[0]["balance_error"] < 0.3     # h²: 1/4
+    assert low < reports[1]["balance_error"] / reports[0]["balance_error"] < high     # 1/4, 1/16
 
 
 def test_energy_balance_of_a_driven_model_closes_at_order_two():
-    """A driven crank (rheonomic constraint ``θ = ω t``) does work ``λᵀΦ_t``: each step's
+    """A driven crank (rheonomic constraint ``θ = ω t``) does work ``λᵀΦ_t``: each RATTLE step's
     work pairs its start with the first half-step's multiplier and its end with the second's,
     so the balance closes at order 2 (a first-order multiplier once made it fail at ω = 14
     rad/s for every step size); the drive's work from the reported multipliers (those of
     the output states) is IDAS's."""
     model = nc.System.from_toml(ROOT / "examples" / "slider_crank.toml").build()
     p = {"omega": 14.0}
-    runs = [nc.simulate(model, 1.0, 0.01, method="stepper", substeps=s, p=p) for s in (1, 2, 4)]
+    runs = [nc.simulate(model, 1.0, 0.01, method="stepper", substeps=s, p=p, scheme="rattle") for s in (1, 2, 4)]
     errors = [r.info["energy"]["balance_error"] for r in runs]
     assert errors[0] < 5e-3 * abs(runs[0].info["energy"]["work"])
     for coarse, fine in zip(errors, errors[1:]):
@@ -247,6 +251,11 @@ def test_energy_balance_of_a_driven_model_closes_at_order_two():
     drives = reference(model, 1.0, 0.01, p=p).info["energy"]["parts"]["drives"]
     for r in runs:
         assert abs(r.info["energy"]["parts"]["drives"] - drives) < 1e-5 * abs(drives)
+    # the default fourth-order composition: its five steps' work summed, the balance at order 4
+    errors = [nc.simulate(model, 1.0, 0.01, method="stepper", substeps=s, p=p).info["energy"]["balance_error"]
+              for s in (1, 2, 4)]
+    for coarse, fine in zip(errors, errors[1:]):
+        assert 1 / 20 < fine / coarse < 1 / 12                                        # h⁴: 1/16
 
 
 def test_stepper_multipliers_converge_at_order_two():
@@ -254,8 +263,8 @@ def test_stepper_multipliers_converge_at_order_two():
     like h² against IDAS's, as the states do (RATTLE's own μ is first order)."""
     model = chain(3)
     ref = reference(model, 1.0, 0.05)
-    errors = [np.max(np.abs(nc.simulate(model, 1.0, 0.05, method="stepper", substeps=s).lam - ref.lam))
-              for s in (8, 16, 32)]
+    errors = [np.max(np.abs(nc.simulate(model, 1.0, 0.05, method="stepper", substeps=s, scheme="rattle").lam
+                            - ref.lam)) for s in (8, 16, 32)]
     assert errors[0] < 1e-2 * np.max(np.abs(ref.lam))
     for coarse, fine in zip(errors, errors[1:]):
         assert 0.2 < fine / coarse < 0.3

@@ -53,7 +53,7 @@ def test_single_step_agrees_with_simulate(tmp_path):
                   ctypes.byref(iters), None, work)
     assert status == 0 and iters.value >= 1
     Q, V, LAM, ITER, status, done, splits = stepper.simulate(model.q0, model.v0, 0.0, h, 1, 1, None, model.p0,
-                                                             1e-10, 12, 4)
+                                                             1e-10, 12, 4, scheme=1)   # the C default: rattle4
     assert status == 0 and done == 1 and splits == 0 and ITER[0] == iters.value
     np.testing.assert_array_equal(Q[0], q1)
     np.testing.assert_array_equal(V[0], v1)

@@ -19,7 +19,7 @@
  *   STEP_OK .. STEP_INTERRUPTED  the status codes 0 .. 8 of <model>_stepper.h
  *   step_options               a struct with casadi_real tol, int max_iter, int max_halvings,
  *                              int scheme, volatile int *stop
- *   SCHEME_RATTLE4             the value of scheme that selects the triple-jump
+ *   SCHEME_RATTLE4             the value of scheme that selects the fourth-order
  *                              composition (ncgen_fixed.h; 0: RATTLE)
  *   DEFAULT_OPTIONS()          an expression giving the default step_options
  *   KERNEL_NEWTON, KERNEL_VELOCITY, KERNEL_CHECK, KERNEL_SOLVE, KERNEL_PROJECT, KERNEL_POWER,

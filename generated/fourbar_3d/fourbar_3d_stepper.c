@@ -51,7 +51,7 @@ fourbar_3d_step_options fourbar_3d_step_default_options(void) {
   o.tol = 1e-10;
   o.max_iter = 12;
   o.max_halvings = 4;
-  o.scheme = FOURBAR_3D_STEP_RATTLE;
+  o.scheme = FOURBAR_3D_STEP_RATTLE4;
   o.stop = 0;
   return o;
 }

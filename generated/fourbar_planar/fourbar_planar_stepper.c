@@ -51,7 +51,7 @@ fourbar_planar_step_options fourbar_planar_step_default_options(void) {
   o.tol = 1e-10;
   o.max_iter = 12;
   o.max_halvings = 4;
-  o.scheme = FOURBAR_PLANAR_STEP_RATTLE;
+  o.scheme = FOURBAR_PLANAR_STEP_RATTLE4;
   o.stop = 0;
   return o;
 }

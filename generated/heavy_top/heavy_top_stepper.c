@@ -51,7 +51,7 @@ heavy_top_step_options heavy_top_step_default_options(void) {
   o.tol = 1e-10;
   o.max_iter = 12;
   o.max_halvings = 4;
-  o.scheme = HEAVY_TOP_STEP_RATTLE;
+  o.scheme = HEAVY_TOP_STEP_RATTLE4;
   o.stop = 0;
   return o;
 }

@@ -51,7 +51,7 @@ slider_crank_step_options slider_crank_step_default_options(void) {
   o.tol = 1e-10;
   o.max_iter = 12;
   o.max_halvings = 4;
-  o.scheme = SLIDER_CRANK_STEP_RATTLE;
+  o.scheme = SLIDER_CRANK_STEP_RATTLE4;
   o.stop = 0;
   return o;
 }

@@ -73,15 +73,16 @@ extern "C" {
 /* Deepest step splitting the workspace allows. */
 #define SLIDER_CRANK_STEP_MAX_HALVINGS 10
 
-/* Schemes (options->scheme): RATTLE (order 2), or its symmetric triple-jump composition
- * (Yoshida, Suzuki: RATTLE steps of h1, -2^(1/3) h1, h1, h1 = h / (2 - 2^(1/3)); order 4,
- * symplectic, both constraint levels kept; three RATTLE steps per step).  Fixed steps only
+/* Schemes (options->scheme): RATTLE (order 2), or Suzuki's symmetric five-stage
+ * composition of RATTLE steps (g h, g h, (1 - 4g) h, g h, g h, g = 1 / (4 - 4^(1/3)); order 4,
+ * symplectic, both constraint levels kept; five RATTLE steps per step).  Fixed steps only
  * (slider_crank_step, slider_crank_simulate, slider_crank_simulate_stats). */
 #define SLIDER_CRANK_STEP_RATTLE 0
 #define SLIDER_CRANK_STEP_RATTLE4 1
 
 /* Newton options; slider_crank_step_default_options() gives tol = 1e-10, max_iter = 12,
- * max_halvings = 4, scheme = SLIDER_CRANK_STEP_RATTLE, stop = NULL. */
+ * max_halvings = 4, scheme = SLIDER_CRANK_STEP_RATTLE4 (as nc.simulate's default),
+ * stop = NULL. */
 typedef struct {
   casadi_real tol;  /* tolerance of the convergence tests above */
   int max_iter;     /* Newton iterations allowed per step (>= 1) */
@@ -123,13 +124,18 @@ int slider_crank_simulate(const casadi_real *q0, const casadi_real *v0, casadi_r
 
 /* As slider_crank_simulate, with per-row statistics and error estimates.  lam0: multipliers at
  * t0 (nc values, NULL for zeros; no longer read: kept for the signature).  stats_out (SLIDER_CRANK_STEP_NSTATS
- * values per row, may be NULL): see above.  estimate != 0: a shadow run with steps of 2h
- * from the same start (about half the work again) gives the global error estimate
- * |y_h - y_2h| / 3 (RATTLE is of order 2) after every second step; the error columns hold
- * the latest one (-1 before the first, -2 once a step of 2h failed: no estimate from
- * there on; models with contacts have no shadow run).  track_work != 0: W accumulates the
- * trapezoidal rule of P over each step, its start with the step's multiplier lambda and its
- * end with mu (second order; contact impulses not included).  impulse_out
+ * values per row, may be NULL): see above.  estimate: 0 none; 1 (local) one pair of steps
+ * in six (and the last) is retaken as one step of 2h, whose difference gives the pair's
+ * local error (y_2h - y_pair) / (2^p - 1) (p the scheme's order); the estimate is the
+ * largest component of their sum, each weighted by the pairs it stands for, for the
+ * fourth-order scheme grown as RATTLE's errors grow (a RATTLE shadow run with steps of 2h
+ * against RATTLE's local errors at the samples; about a fifth more work); 2 (shadow) a
+ * shadow run with steps of 2h from the same start (about half the work again) gives the
+ * global error estimate |y_h - y_2h| / (2^p - 1) after every second step.  The error
+ * columns hold the latest estimate (-1 before the first, -2 once a shadow step of 2h
+ * failed: no estimate from there on; models with contacts have none).  track_work != 0:
+ * W accumulates the trapezoidal rule of P over each step, its start with the step's
+ * multiplier lambda and its end with mu (second order; contact impulses not included).  impulse_out
  * (contacts only): as in slider_crank_simulate. */
 int slider_crank_simulate_stats(const casadi_real *q0, const casadi_real *v0, const casadi_real *lam0,
                                 casadi_real t0, casadi_real h, long n_steps, long every,

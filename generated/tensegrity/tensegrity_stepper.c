@@ -51,7 +51,7 @@ tensegrity_step_options tensegrity_step_default_options(void) {
   o.tol = 1e-10;
   o.max_iter = 12;
   o.max_halvings = 4;
-  o.scheme = TENSEGRITY_STEP_RATTLE;
+  o.scheme = TENSEGRITY_STEP_RATTLE4;
   o.stop = 0;
   return o;
 }

@@ -113,7 +113,9 @@ def extra_sources(model, functions) -> list[ExtraSource]:
                "mass_scale": c_real(mass_scale(model)), "tol": c_real(TOL), "max_iter": MAX_ITER,
                "max_halvings": MAX_HALVINGS, "halvings_limit": HALVINGS_LIMIT, "dim": model.dim,
                "nout": n_outputs(model), "nstats": len(STATS) + (len(CONTACT_STATS) if nonsmooth(model) else 0),
-               "kernels": [f"{name}_{f.name()}" for f in functions]}
+               "kernels": [f"{name}_{f.name()}" for f in functions],
+               # the default fixed-step scheme, as nc.simulate's scheme="auto": RATTLE with contacts
+               "default_scheme": "RATTLE" if getattr(model, "contacts", None) else "RATTLE4"}
     if nonsmooth(model):
         factor = next((f for f in functions if f.name() == "step_factor"), None)
         if factor is not None:

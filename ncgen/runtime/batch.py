@@ -32,7 +32,7 @@ from ncgen.runtime.joint_dynamics import multipliers_at_samples
 from ncgen.runtime.library import compiled_functions
 from ncgen.runtime.simulation import initial_multipliers, initial_state, point_bytes
 from ncgen.runtime.options import SimulationOptions
-from ncgen.runtime.stepper import _trajectory, step_inputs
+from ncgen.runtime.stepper import COMPOSITION_STAGES, ESTIMATE_MODES, _trajectory, fixed_scheme, step_inputs
 from ncgen.runtime.stepper_checks import is_conservative, untrusted_row
 from ncgen.runtime.stepper_library import _Options, load_stepper
 from ncgen.validation import as_numbers, as_scalar
@@ -87,7 +87,7 @@ class BatchResult:
 def simulate_batch(model, t_end: float, dt: float, *, q0=None, v0=None, p=None, u=None, t0: float | None = None,
                    hold: str = "zoh", substeps: int = 1, newton_tol: float = TOL, max_newton: int = MAX_ITER,
                    max_halvings: int = MAX_HALVINGS, ic_tolerance: float | None = 1e-6, project: bool = True,
-                   check: bool = True,
+                   check: bool = True, scheme: str = "auto",
                    outputs: bool = True, workers: int | None = None) -> BatchResult:
     """Integrate ``model`` with its compiled stepper once per run, on ``workers`` threads
     (default: all cores), over the grid ``t0, t0 + dt, ..., t_end`` (s).
@@ -119,13 +119,13 @@ def simulate_batch(model, t_end: float, dt: float, *, q0=None, v0=None, p=None, 
     """
     start = time.perf_counter()
     SimulationOptions(method="stepper", hold=hold, substeps=substeps, newton_tol=newton_tol, max_newton=max_newton,
-                      max_halvings=max_halvings, ic_tolerance=ic_tolerance)      # checked as for a single run
+                      max_halvings=max_halvings, ic_tolerance=ic_tolerance, scheme=scheme)  # checked as for one run
     t0 = model.t0 if t0 is None else as_scalar(t0, "t0")
     t = time_grid(t0, t_end, dt, bytes_per_point=point_bytes(model))
     n = _batch_size(model, q0, v0, p, u, len(t))
     stepper = load_stepper(model)
     runs = _Runs(model, stepper, t, n, hold, int(substeps), newton_tol, max_newton, max_halvings, ic_tolerance,
-                 outputs or check, check)
+                 outputs or check, check, fixed_scheme(model, scheme))
     workers = runs.workers = _workers(workers, n)
     runs.prepare(q0, v0, p, u, project)
     chunks = [range(i, min(i + CHUNK, n)) for i in range(0, n, CHUNK)]
@@ -177,13 +177,14 @@ class _Runs:
     """Inputs and result buffers of the runs, and the loop over a chunk of them."""
 
     def __init__(self, model, stepper, t, n, hold, substeps, tol, max_iter, max_halvings, ic_tolerance, outputs,
-                 check):
+                 check, scheme: str = "rattle"):
         self.model, self.stepper, self.t, self.n, self.check = model, stepper, t, n, check
         self.conservative = is_conservative(model) if check else True
         self.hold, self.substeps, self.ic_tolerance, self.outputs = hold, substeps, ic_tolerance, outputs
         self.h = float(t[1] - t[0]) / substeps
         self.n_out = len(t) - 1
-        self._options = _Options(float(tol), int(max_iter), int(max_halvings))
+        self.rattle4 = scheme == "rattle4"
+        self._options = _Options(float(tol), int(max_iter), int(max_halvings), int(self.rattle4))
         self.options = ctypes.byref(self._options)
         nq, nc, T = model.nq, model.nc, len(t)
         self.Q, self.V = np.full((n, T, nq), np.nan), np.full((n, T, nq), np.nan)
@@ -261,7 +262,8 @@ class _Runs:
                       p_at(i), Q(i, 1), V(i, 1), L(i, 1))
             if self.check:
                 status = raw.simulate_stats(Q(i, 0), V(i, 0), L(i, 0), *common, S.ctypes.data, self.options,
-                                            int(not st.nd), int(not self.conservative), ctypes.byref(done),
+                                            0 if st.nd else ESTIMATE_MODES["shadow"], int(not self.conservative),
+                                            ctypes.byref(done),
                                             ctypes.byref(splits), *extra)
                 self.ITER[i] = S[:, 1]
             else:
@@ -288,7 +290,8 @@ class _Runs:
     def _checked(self, i: int, rows: int, S: np.ndarray) -> None:
         """Outputs of run ``i`` and the checks of a single run (:func:`untrusted_row`)."""
         model, Q, V, LAM = self.model, self.Q[i], self.V[i], self.LAM[i]
-        info = {"method": "stepper", "h": self.h, "substeps": self.substeps, "stats": {}}
+        info = {"method": "stepper", "h": self.h, "substeps": self.substeps, "stats": {},
+                "stages": COMPOSITION_STAGES if self.rattle4 else 1, "estimate": "shadow"}
         traj = _trajectory(model, self.stepper, self.t, Q[0], V[0], LAM[0], Q[1:], V[1:], LAM[1:], S, rows,
                            self.U[i], self.P[i], info, self.conservative, time.perf_counter(),
                            accel=_compiled_accel(model))

@@ -170,12 +170,16 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
       revolute joints for N = 1, IDAS's own error on the regular part of that motion;
       ``tests/test_singular_positions.py``).  ``True``: the same,
       with one IDAS call per output interval and the state projected after each.  ``False``: IDAS alone.
-    * ``method="stepper"``: the compiled fixed-step RATTLE stepper (generated C, Newton loop
-      included; :mod:`ncgen.runtime.stepper`), ``substeps`` steps of ``dt / substeps`` per
+    * ``method="stepper"``: the compiled fixed-step stepper (generated C, Newton loop
+      included; :mod:`ncgen.runtime.stepper`): ``scheme="auto"`` (default) Suzuki's
+      fourth-order composition of five RATTLE steps per step (``"rattle4"``), RATTLE alone
+      (``"rattle"``, second order) for models with contacts,
+      ``substeps`` steps of ``dt / substeps`` per
       output interval, Newton tolerance ``newton_tol`` (both constraint levels hold to it at
-      every step) and at most ``max_newton`` iterations per step; a step whose Newton fails is
+      every step) and at most ``max_newton`` iterations per RATTLE step; a step whose Newton fails is
       split in halves, at most ``max_halvings`` times (counted in ``info["stats"]``).  The
-      run estimates its error (a shadow run with steps of 2h, ``info["error_estimate"]``)
+      run estimates its error (a shadow run with steps of 2h, ``info["error_estimate"]``;
+      ``estimate="local"``: sampled local errors, a fifth of the work)
       and is checked: split steps, exploding Newton iterations, an energy change
       (conservative models) or energy balance error (others) above 1 % or an estimated error
       above 1 % of the model's size raise :class:`~ncgen.errors.SimulationError` naming the

@@ -12,13 +12,20 @@ Two modes:
 
 * **Fixed steps** (``rtol=None``): ``substeps`` steps of ``h = dt / substeps`` per output
   interval; a step whose Newton iteration fails is split into halves (at most
-  ``max_halvings`` times, recursively), so the output grid stays fixed.  The step is
-  RATTLE's (order 2), or with ``scheme="rattle4"`` the symmetric triple jump of RATTLE
-  steps ``h1, −2^(1/3) h1, h1`` with ``h1 = h / (2 − 2^(1/3))`` (Yoshida, Suzuki; order 4,
-  symplectic, on both constraint levels; three RATTLE steps each).  A shadow run with
-  steps of ``2h`` from the same start gives the global error estimate
-  ``|y_h − y_2h| / (2^p − 1)``, ``p`` the order (Richardson; ``info["error_estimate"]``,
-  about half the work again; ``estimate=False`` skips it).  The run is checked (see :mod:`ncgen.runtime.stepper_checks`) and an
+  ``max_halvings`` times, recursively), so the output grid stays fixed.  The step is, by
+  default (``scheme="auto"``) and with ``scheme="rattle4"``, Suzuki's symmetric five-stage
+  composition of RATTLE steps ``g h, g h, (1 − 4g) h, g h, g h`` with
+  ``g = 1 / (4 − 4^(1/3))`` (order 4, symplectic, on both constraint levels; five RATTLE
+  steps each), or with ``scheme="rattle"`` (and for models with contacts, which keep their
+  own scheme) RATTLE's (order 2).  The error estimate (``info["error_estimate"]``, see
+  :mod:`ncgen.runtime.stepper_checks`): by default (``estimate=True`` or ``"shadow"``) a
+  shadow run with steps of ``2h`` from the same start, ``|y_h − y_2h| / (2^p − 1)``, ``p``
+  the order (Richardson; global: it follows the growth of errors along the motion; half the
+  work again); ``estimate="local"``: the local errors of one pair of steps in six, from a
+  step of 2h over the pair, summed along the run and grown as a RATTLE shadow run's errors
+  grow (a fifth more work; far too low where errors grow fast and RATTLE at 2h cannot follow
+  the motion);
+  ``estimate=False`` skips it.  The run is checked (see :mod:`ncgen.runtime.stepper_checks`) and an
   untrustworthy one raises :class:`~ncgen.errors.SimulationError`.
 * **Error control** (``rtol`` given): each step is taken whole and as two halves, the
   difference estimates the local error (Richardson; where the whole difference fails the
@@ -89,6 +96,9 @@ def simulate_stepper(model, t: np.ndarray, U: np.ndarray, p: np.ndarray, q0: np.
     if opts.scheme == "rattle4" and opts.rtol is not None:
         raise NcgenError("scheme: 'rattle4' is a fixed-step scheme (substeps=N); with rtol the error control "
                          "runs RATTLE, Richardson-extrapolated to order 4 (order=4, the default)")
+    if opts.estimate == "shadow" and opts.rtol is not None:
+        raise NcgenError("estimate: 'shadow' is the fixed-step run's shadow run with steps of 2h; with rtol the "
+                         "error control runs its own shadow run at 10x looser tolerances (estimate=True)")
     run = _fixed if opts.rtol is None else _adaptive
     return run(model, stepper, t, U, p, q0, v0, lam0, opts, conservative)
 
@@ -103,18 +113,21 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, conse
     contacts = stepper.nd > 0          # nonsmooth contacts: no shadow run, one-sided energy check
     IMP = np.zeros((n_out, stepper.nd)) if contacts else None      # contact impulses per output interval
     start = time.perf_counter()
-    rattle4 = opts.scheme == "rattle4"
+    rattle4 = fixed_scheme(model, opts.scheme) == "rattle4"
+    mode = ESTIMATE_MODES[opts.estimate] if estimate and not contacts else 0
     with Ticker(f"stepper: {model.name}, {n_out * substeps:,} steps"):
         Q, V, LAM, S, status, done, splits = stepper.simulate_stats(
             q0, v0, lam0, float(t[0]), h, n_out * substeps, substeps, step_inputs(U, t, hold, substeps), p, tol,
-            max_iter, max_halvings, estimate and not contacts, not conservative, impulse_out=IMP,
+            max_iter, max_halvings, mode, not conservative, impulse_out=IMP,
             scheme=int(rattle4))
     stepping = time.perf_counter() - start
     rows = done // substeps
     info = {"method": "stepper", "backend": "compiled", "scheme": "RATTLE, nonsmooth contacts" if contacts else
-            "RATTLE, triple-jump composition" if rattle4 else "RATTLE", "order": 4 if rattle4 else 2, "h": h,
+            "RATTLE, Suzuki's fourth-order composition" if rattle4 else "RATTLE", "order": 4 if rattle4 else 2,
+            "stages": COMPOSITION_STAGES if rattle4 else 1, "h": h,
             "substeps": substeps, "hold": hold, "tol": tol, "max_iter": max_iter,
-            "max_halvings": max_halvings, "estimate": estimate and not contacts, "stepping_time": stepping, "complete": status == 0,
+            "max_halvings": max_halvings, "estimate": ESTIMATE_NAMES[mode], "stepping_time": stepping,
+            "complete": status == 0,
             "stats": _stats(S[:rows], splits)}
     traj = _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info, conservative, start,
                        None if IMP is None else IMP[:rows])
@@ -160,7 +173,7 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, co
     info = {"method": "stepper", "backend": "compiled", "scheme": "RATTLE" if order == 2 else
             "RATTLE, Richardson-extrapolated and projected", "order": order, "rtol": rtol, "atol": atol,
             "hold": hold, "tol": newton_tolerance(rtol, atol, tol), "max_iter": max_iter, "max_steps": max_steps,
-            "estimate": estimate, "stepping_time": stepping, "complete": status == 0,
+            "estimate": bool(estimate), "stepping_time": stepping, "complete": status == 0,
             "stats": _stats(S[:rows], int(S[:rows, 2].sum()))}
     info["stats"]["rejected_steps"] = info["stats"].pop("step_splits")
     traj = _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info, conservative, start)
@@ -175,10 +188,27 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, co
         raise SimulationError(message, time=float(t[rows]), trajectory=traj)
     if shadow is not None:
         eq, ev = shadow_estimates(Q, V, shadow, rows)
-        traj.info["error_estimate"] = shadow_report(traj, eq, ev, rtol, atol)
+        same_steps = np.array_equal(S[:rows, 0], shadow[3][:rows, 0])
+        traj.info["error_estimate"] = shadow_report(traj, eq, ev, rtol, atol, S[:rows], same_steps)
         if check:
             check_global(model, traj, eq, rtol, atol)
     return traj
+
+
+#: ``estimate`` of a fixed-step run → the C loop's mode (``ESTIMATE_*`` of ncgen_fixed.h).
+ESTIMATE_MODES = {True: 2, "shadow": 2, "local": 1}
+ESTIMATE_NAMES = {0: False, 1: "local", 2: "shadow"}
+#: RATTLE steps per step of ``scheme="rattle4"`` (COMPOSITION_STAGES of ncgen_fixed.h).
+COMPOSITION_STAGES = 5
+
+
+def fixed_scheme(model, scheme: str) -> str:
+    """The fixed-step scheme a run uses: ``scheme``, with ``"auto"`` read as ``"rattle4"``
+    for models without contacts and ``"rattle"`` for those with contacts (smooth or not:
+    stiff contact forces and impacts keep RATTLE)."""
+    if scheme != "auto":
+        return scheme
+    return "rattle" if getattr(model, "contacts", None) else "rattle4"
 
 
 def _interrupted(model, traj: Trajectory, t_stop: float):
@@ -224,7 +254,8 @@ def _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info,
     traj = Trajectory(model_name=model.name, names={**names, **extra_names}, info=info, model=model, t=tt, q=q,
                       v=v, lam=lam, u=u, p=p, kinetic=Y[:, 0], potential=Y[:, 1], constraint_residual=Y[:, 2],
                       velocity_residual=Y[:, 3], markers=markers, **extra)
-    traj.info["error_estimate"] = error_estimate(S[:rows], info.get("substeps"))
+    traj.info["error_estimate"] = error_estimate(S[:rows], info.get("substeps"), info.get("estimate"), q, v,
+                                                 info.get("order") == 4)
     traj.info["energy"] = energy_report(traj, work, conservative)
     if not conservative and len(traj):
         traj.info["energy"]["parts"] = balance_parts(model, traj)
