@@ -114,15 +114,29 @@ class Contact:
     def members(self) -> list:
         raise NotImplementedError
 
+    #: The attribute naming a member that is the ground where it was not given (None: none).
+    ground_default: str | None = None
+
     def attach(self, system, index: int):
-        """Called by ``System.add_contact``: name, membership and argument checks."""
+        """Called by ``System.add_contact``: name, membership and argument checks (the member
+        :attr:`ground_default` is the ground where it was not given, and is given back on a
+        failure)."""
+        given = getattr(self, self.ground_default) if self.ground_default else None
+        if self.ground_default and given is None:
+            setattr(self, self.ground_default, system.ground)
+
         def validate():
             check_members(self.members(), system, self.label)
             self._check_material()
             self.check(system)
             self.system = system
 
-        attach_element(self, system, index, system.contacts, "contact", _check_name, validate)
+        try:
+            attach_element(self, system, index, system.contacts, "contact", _check_name, validate)
+        except BaseException:
+            if self.ground_default:
+                setattr(self, self.ground_default, given)
+            raise
 
     def _check_material(self):
         checks = (("mu", self.mu, 0.0, math.inf), ("restitution", self.restitution, 0.0, 1.0),
@@ -192,6 +206,7 @@ class SpherePlane(Contact):
     The plane is one-sided: the sphere is kept on the side ``normal`` points to."""
 
     kind = "SpherePlane"
+    ground_default = "plane"
 
     def __init__(self, sphere, at=None, radius=0.0, *, plane=None, point=None, normal=None, **material):
         super().__init__(**material)
@@ -200,16 +215,6 @@ class SpherePlane(Contact):
 
     def members(self):
         return [self.sphere] + ([] if self.plane is None else [self.plane])
-
-    def attach(self, system, index: int):
-        given = self.plane
-        if self.plane is None:
-            self.plane = system.ground
-        try:
-            super().attach(system, index)
-        except BaseException:
-            self.plane = given
-            raise
 
     def check(self, system):
         d = system.dim
@@ -292,6 +297,8 @@ class ShapePlane(Contact):
     ``rotation`` (in the body's frame; default the body's axes); the plane keywords are those
     of :class:`SpherePlane`."""
 
+    ground_default = "plane"
+
     def __init__(self, body, *, at=None, rotation=None, plane=None, point=None, normal=None, **material):
         super().__init__(**material)
         self.body, self.at, self.rotation = body, at, rotation
@@ -300,16 +307,6 @@ class ShapePlane(Contact):
 
     def members(self):
         return [self.body] + ([] if self.plane is None else [self.plane])
-
-    def attach(self, system, index: int):
-        given = self.plane
-        if self.plane is None:
-            self.plane = system.ground
-        try:
-            super().attach(system, index)
-        except BaseException:
-            self.plane = given
-            raise
 
     def local_spheres(self) -> list:
         """``[(suffix, local centre offset from at, radius[, rim radius])]`` (subclasses)."""
@@ -474,6 +471,7 @@ class SphereBox(Contact):
     sphere."""
 
     kind = "SphereBox"
+    ground_default = "box"
 
     def __init__(self, sphere, at=None, radius=0.0, *, box=None, size=None, box_at=None, box_rotation=None,
                  **material):
@@ -483,16 +481,6 @@ class SphereBox(Contact):
 
     def members(self):
         return [self.sphere] + ([] if self.box is None else [self.box])
-
-    def attach(self, system, index: int):
-        given = self.box
-        if self.box is None:
-            self.box = system.ground
-        try:
-            super().attach(system, index)
-        except BaseException:
-            self.box = given
-            raise
 
     def check(self, system):
         d = system.dim
