@@ -133,14 +133,7 @@ def _shape_of(x) -> str:
 
 def as_array(x, shape: tuple, what: str) -> np.ndarray:
     """``x`` as a finite float array of exactly ``shape``."""
-    try:
-        a = _float_array(x, what)
-    except ShapeError:
-        raise
-    except OverflowError:
-        raise ShapeError(f"{what}: a number is too large (more than {MAX_MAGNITUDE:g})") from None
-    except (TypeError, ValueError):
-        raise ShapeError(f"{what}: expected numbers of shape {shape}, got {_shape_of(x)}") from None
+    a = as_numbers(x, what, f"numbers of shape {shape}")
     if a.shape != tuple(shape):
         if len(shape) == 1:
             raise ShapeError(f"{what}: expected {shape[0]} numbers, got {_describe(a)}")
