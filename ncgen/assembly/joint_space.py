@@ -341,6 +341,19 @@ class JointSpace:
                     q[i] = local[k]
         return q
 
+    def _conflict(self, model, r, rows) -> str:
+        """The equations left off by a least-squares compromise, in row order (constraints,
+        then given joint coordinates): every row within half of the worst. Equations that
+        contradict each other share the residual almost equally, so naming only the largest
+        would pick one of them by rounding."""
+        names = model.constraint_names + [self.position_names[i] for i in rows]
+        off = np.abs(r)
+        if not np.all(np.isfinite(off)):
+            return "the residual is not finite at " + ", ".join(
+                n for n, x in zip(names, off) if not np.isfinite(x))
+        worst = off.max()
+        return "still off: " + ", ".join(f"{n} by {x:.3g}" for n, x in zip(names, off) if x >= 0.5 * worst)
+
     def _settle(self, model, q, given, t, p) -> np.ndarray:
         rows = np.concatenate([np.arange(s.start, s.stop) for n, s in self.slices().items() if n in given]
                               ).astype(int) if given else np.zeros(0, int)
@@ -360,12 +373,9 @@ class JointSpace:
         tol = TOL * size**2
         q_new, it, res = newton(residual, jac, q, np.arange(model.nq), tol=tol)
         if not res <= tol:
-            r = residual(q_new)
-            worst = int(np.nanargmax(np.abs(r)))
-            names = model.constraint_names + [self.position_names[i] for i in rows]
             raise ModelError(
                 f"from_joint_space: no configuration has these joint coordinates: after {it} Newton "
-                f"iterations {names[worst]} is still off by {abs(r[worst]):.3g}; in a closed loop give "
+                f"iterations {self._conflict(model, residual(q_new), rows)}; in a closed loop give "
                 f"only independent joint coordinates as a dict {{joint: value}} (the others are assembled)")
         return q_new
 
