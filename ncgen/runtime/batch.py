@@ -23,6 +23,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from ncgen.codegen.c_binding import open_library
+from ncgen.codegen.stepper_abi import bind_stepper
 from ncgen.codegen.stepper_package import MAX_HALVINGS, MAX_ITER, STATUS, TOL, n_stats
 from ncgen.errors import NcgenError
 from ncgen.runtime.dae import load_dae
@@ -382,19 +384,11 @@ def _compiled_accel(model):
 def _raw_loops(model, stepper):
     """``<model>_simulate`` and ``_simulate_stats`` of ``stepper``'s library bound with
     address arguments (``c_void_p``: plain integers pass without conversion objects; kept in
-    the model's data by library); the signatures are those of
-    :class:`~ncgen.runtime.stepper_library.CompiledStepper`."""
+    the model's data by library), from the one table of
+    :mod:`ncgen.codegen.stepper_abi`."""
     loops = model.data.batch_loops
     if stepper.library not in loops:
-        lib = ctypes.CDLL(stepper.library)
-        name = stepper._simulate.__name__[:-len("_simulate")]
-        vp, lp, d, lg, i = ctypes.c_void_p, ctypes.c_void_p, ctypes.c_double, ctypes.c_long, ctypes.c_int
-        extra = [vp] if stepper.nd else []
-        simulate = getattr(lib, f"{name}_simulate")
-        simulate.restype = i
-        simulate.argtypes = [vp, vp, d, d, lg, lg, vp, lg, vp, vp, vp, vp, lp, vp, lp, lp] + extra
-        stats = getattr(lib, f"{name}_simulate_stats")
-        stats.restype = i
-        stats.argtypes = [vp, vp, vp, d, d, lg, lg, vp, lg, vp, vp, vp, vp, vp, vp, i, i, lp, lp] + extra
-        loops[stepper.library] = SimpleNamespace(simulate=simulate, simulate_stats=stats, lib=lib)
+        lib = open_library(stepper.library)
+        raw = bind_stepper(lib, stepper.name, bool(stepper.nd), ("simulate", "simulate_stats"), addresses=True)
+        loops[stepper.library] = SimpleNamespace(simulate=raw.simulate, simulate_stats=raw.simulate_stats, lib=lib)
     return loops[stepper.library]

@@ -11,6 +11,8 @@ import ctypes
 
 import numpy as np
 
+from ncgen.codegen.c_binding import open_library
+from ncgen.codegen.stepper_abi import StepOptions, bind_stepper
 from ncgen.codegen.stepper_package import STEP_INTERRUPTED, n_impulses, n_outputs, n_stats
 from ncgen.interrupts import call_interruptibly
 from ncgen.model.data import model_data
@@ -25,28 +27,11 @@ class CompiledStepper:
         self.library = library
         self.nq, self.nc, self.nu, self.np, self.nout = nq, nc, nu, npar, nout
         self.nd = nd   # contact impulse components per step (nonsmooth contact stepper), else 0
-        self._lib = ctypes.CDLL(library)
-        dp, lp = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_long)
-        f = getattr(self._lib, f"{name}_simulate")
-        f.restype = ctypes.c_int
-        f.argtypes = [dp, dp, ctypes.c_double, ctypes.c_double, ctypes.c_long, ctypes.c_long, dp, ctypes.c_long,
-                      dp, dp, dp, dp, lp, ctypes.POINTER(_Options), lp, lp] + ([dp] if nd else [])
-        self._simulate = f
-        c_double, c_long, c_int = ctypes.c_double, ctypes.c_long, ctypes.c_int
-        f = getattr(self._lib, f"{name}_simulate_stats")
-        f.restype = c_int
-        f.argtypes = [dp, dp, dp, c_double, c_double, c_long, c_long, dp, c_long, dp, dp, dp, dp, dp,
-                      ctypes.POINTER(_Options), c_int, c_int, lp, lp] + ([dp] if nd else [])
-        self._simulate_stats = f
-        f = getattr(self._lib, f"{name}_simulate_adaptive")
-        f.restype = c_int
-        f.argtypes = [dp, dp, dp, c_double, c_double, c_long, dp, c_long, c_int, dp, c_double, c_double, c_double,
-                      c_int, c_long, c_int, dp, dp, dp, dp, ctypes.POINTER(_Options), lp, dp]
-        self._simulate_adaptive = f
-        f = getattr(self._lib, f"{name}_outputs")
-        f.restype = c_int
-        f.argtypes = [c_long, dp, dp, dp, dp, dp, c_long, dp, dp]
-        self._outputs = f
+        self._lib = open_library(library)
+        self.name = name
+        loops = bind_stepper(self._lib, name, bool(nd))
+        self._simulate, self._simulate_stats = loops.simulate, loops.simulate_stats
+        self._simulate_adaptive, self._outputs = loops.simulate_adaptive, loops.outputs
 
     def simulate(self, q0, v0, t0: float, h: float, n_steps: int, every: int, U: np.ndarray | None,
                  p: np.ndarray, tol: float, max_iter: int, max_halvings: int, impulse_out=None, scheme: int = 0):
@@ -136,11 +121,8 @@ def _vec(a):
     return None if a is None else np.ascontiguousarray(a, float)
 
 
-class _Options(ctypes.Structure):
+class _Options(StepOptions):
     """``<model>_step_options``, its stop flag pointing at ``self.flag``."""
-
-    _fields_ = [("tol", ctypes.c_double), ("max_iter", ctypes.c_int), ("max_halvings", ctypes.c_int),
-                ("scheme", ctypes.c_int), ("stop", ctypes.POINTER(ctypes.c_int))]
 
     def __init__(self, tol: float, max_iter: int, max_halvings: int, scheme: int = 0):
         self.flag = ctypes.c_int(0)

@@ -1,0 +1,77 @@
+"""The stepper's C interface is written once (ncgen/codegen/stepper_abi.py) and every loader
+binds from it: the table is checked here against the prototypes and the options struct of
+the committed packages' headers (generated from templates/c/stepper.h.j2; the packages with
+contacts, which ship ncgen_contact.h, have the trailing impulse arguments)."""
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import re
+from pathlib import Path
+
+import pytest
+
+from ncgen.codegen.c_binding import Signature, bind, c_type, ctypes_of, open_library
+from ncgen.codegen.stepper_abi import FUNCTIONS, STEP_OPTIONS, StepOptions, signature
+from ncgen.errors import CodegenError
+
+ROOT = Path(__file__).resolve().parents[1]
+HEADERS = sorted((ROOT / "generated").glob("*/*_stepper.h"))
+
+
+def prototypes(text: str, name: str) -> dict[str, tuple[str, list[str]]]:
+    """``{suffix: (return type, [argument types])}`` of the functions ``name_<suffix>``
+    declared in ``text``."""
+    code = re.sub(r"/\*.*?\*/", " ", text, flags=re.S)
+    found = {}
+    for returns, suffix, args in re.findall(rf"^(\w[\w ]*?)\s+{name}_(\w+)\(([^)]*)\);", code, flags=re.M | re.S):
+        args = [] if args.strip() == "void" else [a for a in args.split(",")]
+        found[suffix] = (returns.strip(), [c_type(re.sub(r"\w+\s*$", "", a)) for a in args])
+    return found
+
+
+def options_struct(text: str, name: str) -> list[tuple[str, str]]:
+    body = re.search(r"typedef struct \{(.*?)\}\s*" + name + r"_step_options;", text, flags=re.S).group(1)
+    body = re.sub(r"/\*.*?\*/", " ", body, flags=re.S)
+    return [(c_type(m.group(1)), m.group(2)) for m in re.finditer(r"([\w ]+?\s*\*?)\s*(\w+);", body)]
+
+
+def test_the_committed_packages_have_stepper_headers_with_and_without_contacts():
+    kinds = {(h.parent / "ncgen_contact.h").exists() for h in HEADERS}
+    assert len(HEADERS) >= 2 and kinds == {True, False}
+
+
+@pytest.mark.parametrize("header", HEADERS, ids=lambda h: h.parent.name)
+def test_table_matches_the_generated_header(header):
+    name = header.name[:-len("_stepper.h")]
+    contacts = (header.parent / "ncgen_contact.h").exists()
+    declared = prototypes(header.read_text(), name)
+    assert set(declared) == set(FUNCTIONS), "the header's functions and the table's differ"
+    for suffix, (returns, types) in declared.items():
+        sig = signature(suffix, contacts)
+        assert c_type(sig.returns.format(name=name)) == returns, suffix
+        assert sig.types(name) == types, suffix
+    assert options_struct(header.read_text(), name) == [(c_type(t), f) for t, f in STEP_OPTIONS]
+
+
+def test_ctypes_of_binds_typed_pointers_or_addresses():
+    structs = {"m_step_options": StepOptions}
+    assert ctypes_of("const casadi_real *", structs, False) is ctypes.POINTER(ctypes.c_double)
+    assert ctypes_of("long *", structs, False) is ctypes.POINTER(ctypes.c_long)
+    assert ctypes_of("const m_step_options *", structs, False) is ctypes.POINTER(StepOptions)
+    assert ctypes_of("const m_step_options *", structs, True) is ctypes.c_void_p
+    assert ctypes_of("volatile int *", structs, False) is ctypes.POINTER(ctypes.c_int)
+    assert ctypes_of("size_t", structs, True) is ctypes.c_size_t
+    assert [f for f, _ in StepOptions._fields_] == [f for _, f in STEP_OPTIONS]
+    with pytest.raises(CodegenError, match=r"C type 'float \*': expected one of"):
+        ctypes_of("float *", structs, False)
+
+
+def test_a_library_or_symbol_that_is_not_there_is_named(tmp_path):
+    with pytest.raises(CodegenError, match=r"cannot load the compiled library .*nothing\.so"):
+        open_library(tmp_path / "nothing.so")
+    libc = open_library(ctypes.util.find_library("c") or "libc.so.6")
+    with pytest.raises(CodegenError, match=r"no function 'm_simulate'"):
+        bind(libc, "m_simulate", FUNCTIONS["simulate"], name="m")
+    strlen = bind(libc, "strlen", Signature("size_t", (("const void *", "s"),)))
+    assert strlen(b"natural") == 7
