@@ -14,8 +14,9 @@ import pytest
 pytest.importorskip("mujoco")
 
 BENCHMARKS = Path(__file__).resolve().parent.parent / "benchmarks"
-pytestmark = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc") is None,
-                                reason="no C compiler")
+pytestmark = [pytest.mark.slow,                   # each benchmark script end to end: minutes
+              pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc") is None,
+                                 reason="no C compiler")]
 
 
 @pytest.mark.parametrize("script, expected", [

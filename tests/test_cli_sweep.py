@@ -2,6 +2,7 @@
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 import ncgen as nc
 from ncgen.cli import main
@@ -55,8 +56,8 @@ def test_sweep_help_teaches(capsys):
         assert needed in text
 
 
+@pytest.mark.slow                                  # a Dask cluster of two processes
 def test_sweep_on_a_dask_scheduler(tmp_path, capsys):
-    import pytest
     distributed = pytest.importorskip("distributed")
     out = str(tmp_path / "dask.zarr")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:

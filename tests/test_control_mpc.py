@@ -80,6 +80,7 @@ def test_unsupported_problems_and_solvers_are_named(setup):
         nc.MPC(ocp, iterations=0)
 
 
+@pytest.mark.slow                                  # the MPC package built under the sanitizers
 @pytest.mark.skipif(CC is None, reason="no C compiler")
 def test_exported_package_builds_under_sanitizers_and_matches_python(setup, tmp_path):
     ocp, mpc = setup

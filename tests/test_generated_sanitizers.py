@@ -29,8 +29,9 @@ import pytest
 from test_generated_up_to_date import EXAMPLES, regenerate
 
 CC = os.environ.get("CC") or shutil.which("gcc") or shutil.which("clang") or shutil.which("cc")
-pytestmark = pytest.mark.skipif(CC is None, reason="no C compiler (gcc, clang or cc) on PATH: "
-                                                    "the generated C cannot be built")
+pytestmark = [pytest.mark.slow,                   # every shipped package built under the sanitizers: minutes
+              pytest.mark.skipif(CC is None, reason="no C compiler (gcc, clang or cc) on PATH: "
+                                                    "the generated C cannot be built")]
 WARNINGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"]
 SANITIZE = ["-fsanitize=address,undefined", "-fno-sanitize-recover=all", "-fno-omit-frame-pointer"]
 KERNEL_SANITIZE = ["-fsanitize=address", "-fno-omit-frame-pointer"]

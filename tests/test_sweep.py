@@ -38,6 +38,7 @@ def test_local_sweep_equals_the_serial_loop(slider_crank):
     assert np.all(result.summary["max_constraint_residual"] < 1e-9)
 
 
+@pytest.mark.slow                                  # a Dask cluster of two processes
 def test_dask_cluster_sweep_to_zarr_equals_the_serial_loop(slider_crank, tmp_path):
     distributed = pytest.importorskip("distributed")
     omegas = np.array([3.0, 4.0, 5.0, 6.0])

@@ -1,0 +1,28 @@
+"""The suite's two tiers.
+
+The default run (``pytest -q -n auto``, the README's command) deselects the tests marked
+``slow`` (pyproject's ``addopts``): robot-scale models, Dask clusters, sanitizer builds,
+benchmark smokes and long tight-tolerance runs. ``pytest -q -n auto -m slow`` runs them; CI
+runs both. Every test has a time limit (pyproject's ``timeout``, pytest-timeout), generous
+enough for a loaded machine; a test that needs more says so with ``pytest.mark.timeout``.
+"""
+import pytest
+
+SLOW = ("slow: robot-scale models, Dask clusters, sanitizer builds, benchmark smokes, long "
+        "tight-tolerance runs; deselected by default, run with `pytest -m slow`")
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", SLOW)
+
+
+def pytest_report_header(config):
+    return f"tier: -m {config.option.markexpr!r}" if config.option.markexpr else "tier: every test"
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_terminal_summary(terminalreporter):
+    deselected = terminalreporter.stats.get("deselected", [])
+    slow = sum(1 for item in deselected if item.get_closest_marker("slow") is not None)
+    if slow:
+        terminalreporter.write_line(f"{slow} slow tests deselected: run them with `pytest -q -n auto -m slow`")
