@@ -25,11 +25,13 @@ from ncgen.runtime.idas import ChunkedIDAS, ChunkFailure
 from ncgen.assembly.joint_ode import dae_with_inputs
 from ncgen.model.controllers import Controller
 from ncgen.runtime.inputs import feedback_kind, hold_columns, input_samples, parameter_values, time_grid
-from ncgen.runtime.joint_simulation import joint_space_applies, simulate_joint
+from ncgen.runtime.integrator import Run, refuse_integrator
+from ncgen.runtime.joint_integrator import JointIntegrator
+from ncgen.runtime.joint_simulation import joint_space_applies
 from ncgen.runtime.progress import Progress
 from ncgen.runtime.rattle_bridge import RattleFailure, compiled_interval, rattle_interval
 from ncgen.runtime.options import SimulationOptions
-from ncgen.runtime.stepper import simulate_stepper
+from ncgen.runtime.stepper_integrator import StepperIntegrator
 from ncgen.runtime.stepper_library import load_stepper
 from ncgen.runtime.trajectory import Trajectory
 from ncgen.validation import as_scalar, as_vector
@@ -198,12 +200,11 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
     and the likely cause, and carries the trajectory up to that time (``.trajectory``).
     """
     opts = SimulationOptions.resolve(options, **shortcuts)
-    if opts.method in ("idas", "auto") and getattr(model, "contact_model", "smooth") == "nonsmooth" and model.nk:
-        built = option("contacts='nonsmooth'", "--contacts nonsmooth")
-        stepper = option("method='stepper'", "--method stepper")
-        smooth = option("build the model with contacts='smooth'", "--contacts smooth")
-        raise NcgenError(f"simulate: model {model.name!r} was built with {built}, which only the compiled "
-                         f"stepper handles: use {stepper}, or {smooth} (compliant contacts) for IDAS")
+    method, why_not = opts.method, None
+    if method == "auto":                   # the joint loop is compiled: backend="vm" asks for no compiling
+        why_not = "backend='vm' compiles nothing" if opts.backend == "vm" else joint_space_applies(model)
+        method = "joint" if why_not is None else "idas"
+    integrator = INTEGRATORS[method](model, opts)
     t0 = model.t0 if t0 is None else as_scalar(t0, "t0")
     t = time_grid(t0, t_end, dt, bytes_per_point=point_bytes(model))
     pv = parameter_values(p, model)
@@ -211,38 +212,41 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
     kind = feedback_kind(u) if controller is None else None
     feedback = (kind, u) if kind in ("natural", "joint") else None
     U = input_samples(None if controller is not None else u, model, t)
-    columns = hold_columns(U, t, opts.hold)
     q, v = initial_state(model, q0, v0, t0, pv, opts.ic_tolerance)
+    run = Run(t, U, hold_columns(U, t, opts.hold), pv, q, v, controller, feedback, why_not,
+              multipliers=lambda tk, qk, vk, uk: initial_multipliers(model, tk, qk, vk, uk, pv,
+                                                                     load_dae(model, "vm")[0]),
+              feedback_input=lambda tk, qk, vk: _natural_feedback(model, feedback, tk, qk, vk, pv))
     with sticky_interrupt():               # a Ctrl-C that CasADi swallows is raised again between chunks
         raise_if_interrupted()
-        method, why_not = opts.method, None
-        if method == "auto":               # the joint loop is compiled: backend="vm" asks for no compiling
-            why_not = "backend='vm' compiles nothing" if opts.backend == "vm" else joint_space_applies(model)
-            method = "joint" if why_not is None else "idas"
-        if method == "joint":
-            return simulate_joint(model, t, U, opts.hold, pv, q, v, integrator=opts.integrator,
-                                  rtol=opts.rtol, atol=opts.atol, substeps=opts.substeps,
-                                  max_steps=opts.max_steps, feedback=feedback, controller=controller,
-                                  joint_dynamics=opts.joint_dynamics, progress=opts.progress)
-        if opts.integrator is not None:
-            raise NcgenError(f"integrator: only method='joint' takes an integrator (got {opts.integrator!r} "
-                             f"with method={method!r})")
-        if method == "stepper" and (controller is not None or opts.joint_dynamics):
-            raise NcgenError("method='stepper' does not take a compiled controller or joint_dynamics=True; "
-                             "use method='joint' (trees) or 'idas', or give u as a Python callable u(t, q, v)")
-        if method == "stepper" and feedback is not None:
-            return _stepwise_stepper(model, t, U, pv, q, v, feedback, opts)
-        if method == "stepper":
-            lam = initial_multipliers(model, t0, q, v, U[0], pv, load_dae(model, "vm")[0])
-            try:
-                load_stepper(model)
-            except CompilerNotFound as e:
-                stepper, idas = option("method='stepper'", "--method stepper"), option("method='idas'", "--method idas")
-                raise CompilerNotFound(f"{e}: the stepper ({stepper}) is generated C and needs one; install gcc, "
-                                       f"or use IDAS ({idas}), which runs on CasADi's virtual machine") from None
-            return simulate_stepper(model, t, U, pv, q, v, lam, opts)
-        return _simulate_idas(model, t, U, columns, pv, q, v, opts, controller=controller, feedback=feedback,
-                              why_not=why_not)
+        return integrator.run(run)
+
+
+class IdasIntegrator:
+    """``method="idas"``: IDAS on the index-1 DAE (:func:`_simulate_idas`) behind the
+    integrator seam (:mod:`ncgen.runtime.integrator`)."""
+
+    METHOD = "idas"
+    OPTIONS = ("rtol", "atol", "hold", "max_steps", "backend", "linear_solver", "progress", "project",
+               "joint_dynamics")
+
+    def __init__(self, model, opts: SimulationOptions):
+        if getattr(model, "contact_model", "smooth") == "nonsmooth" and model.nk:
+            built = option("contacts='nonsmooth'", "--contacts nonsmooth")
+            stepper = option("method='stepper'", "--method stepper")
+            smooth = option("build the model with contacts='smooth'", "--contacts smooth")
+            raise NcgenError(f"simulate: model {model.name!r} was built with {built}, which only the compiled "
+                             f"stepper handles: use {stepper}, or {smooth} (compliant contacts) for IDAS")
+        refuse_integrator(opts, self.METHOD)
+        self.model, self.opts = model, opts
+
+    def run(self, run: Run) -> Trajectory:
+        return _simulate_idas(self.model, run.t, run.U, run.columns, run.p, run.q, run.v, self.opts,
+                              controller=run.controller, feedback=run.feedback, why_not=run.why_not)
+
+
+#: The integrators by ``SimulationOptions.method`` (:mod:`ncgen.runtime.integrator`).
+INTEGRATORS = {c.METHOD: c for c in (JointIntegrator, IdasIntegrator, StepperIntegrator)}
 
 
 def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions, *, controller=None, feedback=None,
@@ -664,35 +668,3 @@ def _failure_message(model, failure: ChunkFailure, t, k, x, lam, u, p, dae) -> s
     return (f"simulation of {model.name!r} failed between t = {t[k]:.6g} s and the next output time "
             f"{t[k + 1]:.6g} s{where}: {cause}.{detail} The trajectory up to t = {t[k]:.6g} s is "
             f"attached to this error as .trajectory.")
-def _stepwise_stepper(model, t, U, p, q, v, feedback, opts: SimulationOptions) -> Trajectory:
-    """The compiled stepper one output interval at a time, the feedback evaluated at the
-    start of each (checks and the shadow error estimate off: they need the whole run)."""
-    import dataclasses
-
-    if opts.hold != "zoh":
-        raise NcgenError("hold='linear' with a feedback u(t, q, v): the feedback is held over each output "
-                         "interval (zoh); use hold='zoh'")
-    step_opts = dataclasses.replace(opts, method="stepper", check=False, estimate=False)
-    dae = load_dae(model, "vm")[0]
-    Q, V, LAM, UU = [q], [v], [], []
-    start = time.perf_counter()
-    for k in range(len(t) - 1):
-        uk = _natural_feedback(model, feedback, float(t[k]), Q[-1], V[-1], p)
-        lam = initial_multipliers(model, float(t[k]), Q[-1], V[-1], uk, p, dae)
-        LAM.append(lam)
-        UU.append(uk)
-        try:
-            part = simulate_stepper(model, t[k:k + 2], np.vstack([uk, uk]), p, Q[-1], V[-1], lam, step_opts)
-        except SimulationError as e:
-            info = {"method": "stepper", "feedback": feedback[0], "complete": False, "message": str(e)}
-            traj = Trajectory.from_states(model, t[:k + 1], np.array(Q), np.array(V), np.array(LAM),
-                                          np.array(UU), p, info)
-            raise SimulationError(str(e), time=float(t[k]), trajectory=traj) from None
-        Q.append(part.q[-1])
-        V.append(part.v[-1])
-    LAM.append(part.lam[-1])
-    UU.append(UU[-1])
-    info = {"method": "stepper", "backend": "compiled", "feedback": feedback[0], "hold": "zoh",
-            "wall_time": time.perf_counter() - start, "complete": True, "substeps": opts.substeps,
-            **({"rtol": opts.rtol, "atol": opts.rtol if opts.atol is None else opts.atol} if opts.rtol else {})}
-    return Trajectory.from_states(model, t, np.array(Q), np.array(V), np.array(LAM), np.array(UU), p, info)

@@ -1,0 +1,74 @@
+"""The integrator seam of :func:`ncgen.simulate` (as Drake's ``IntegratorBase``): one class
+per integration method, prepared once for a model and its options, then run over a grid.
+
+An integrator class has
+
+* ``METHOD``: its name in ``SimulationOptions.method`` (and ``info["method"]``);
+* ``OPTIONS``: the fields of :class:`~ncgen.runtime.options.SimulationOptions` it reads, its
+  option group (the others are ignored by it);
+* ``__init__(model, opts)``: prepares: checks the options against the model (a bad
+  combination raises :class:`~ncgen.errors.NcgenError` naming the option) and loads or
+  compiles what it runs;
+* ``run(run)``: integrates the :class:`Run` and returns a
+  :class:`~ncgen.runtime.trajectory.Trajectory`.
+
+``simulate`` (:mod:`ncgen.runtime.simulation`) resolves ``method="auto"``, prepares the
+integrator, makes the :class:`Run` and calls it.  The implementations: the joint-space loop
+(:mod:`ncgen.runtime.joint_integrator`), the compiled stepper
+(:mod:`ncgen.runtime.stepper_integrator`) and IDAS (``IdasIntegrator`` in
+:mod:`ncgen.runtime.simulation`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, ClassVar, Protocol
+
+import numpy as np
+
+from ncgen.errors import NcgenError
+from ncgen.runtime.options import SimulationOptions
+from ncgen.runtime.trajectory import Trajectory
+
+
+@dataclass(frozen=True)
+class Run:
+    """One run's data, checked and consistent.
+
+    ``t``: the output grid (s); ``U``: open-loop input samples on it, ``(len(t), nu)``;
+    ``columns``: ``U`` held as ``SimulationOptions.hold`` says (IDAS's form); ``p``: parameter
+    values; ``q``, ``v``: the consistent initial state at ``t[0]``; ``controller``: a compiled
+    :class:`~ncgen.model.controllers.Controller` or None; ``feedback``: ``(kind, u)`` of a
+    Python feedback (``kind`` ``"natural"`` or ``"joint"``) or None; ``why_not``: why
+    ``method="auto"`` did not choose the joint loop (None otherwise); ``multipliers(t, q, v,
+    u)``: ``λ`` solving the KKT system there; ``feedback_input(t, q, v)``: the feedback's
+    inputs at a natural state."""
+
+    t: np.ndarray
+    U: np.ndarray
+    columns: np.ndarray
+    p: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    controller: object
+    feedback: tuple | None
+    why_not: str | None
+    multipliers: Callable[..., np.ndarray]
+    feedback_input: Callable[..., np.ndarray]
+
+
+class Integrator(Protocol):
+    """What ``simulate`` needs of an integration method (module docstring)."""
+
+    METHOD: ClassVar[str]
+    OPTIONS: ClassVar[tuple[str, ...]]
+
+    def __init__(self, model, opts: SimulationOptions) -> None: ...
+
+    def run(self, run: Run) -> Trajectory: ...
+
+
+def refuse_integrator(opts: SimulationOptions, method: str) -> None:
+    """``integrator`` belongs to the joint loop's options: an error with any other method."""
+    if opts.integrator is not None:
+        raise NcgenError(f"integrator: only method='joint' takes an integrator (got {opts.integrator!r} "
+                         f"with method={method!r})")

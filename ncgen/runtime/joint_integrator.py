@@ -1,0 +1,27 @@
+"""The joint-space loop behind the integrator seam (:mod:`ncgen.runtime.integrator`): the
+joint coordinates integrated by a compiled RK4 or Dormand–Prince loop
+(:func:`ncgen.runtime.joint_simulation.simulate_joint`, which checks its options)."""
+from __future__ import annotations
+
+from ncgen.runtime.integrator import Run
+from ncgen.runtime.joint_simulation import simulate_joint
+from ncgen.runtime.options import SimulationOptions
+from ncgen.runtime.trajectory import Trajectory
+
+
+class JointIntegrator:
+    """``method="joint"``: trees without contacts, a compiled controller and the joints'
+    dynamics in the C loop, a Python feedback once per output interval."""
+
+    METHOD = "joint"
+    OPTIONS = ("integrator", "rtol", "atol", "substeps", "max_steps", "hold", "joint_dynamics", "progress")
+
+    def __init__(self, model, opts: SimulationOptions):
+        self.model, self.opts = model, opts
+
+    def run(self, run: Run) -> Trajectory:
+        o = self.opts
+        return simulate_joint(self.model, run.t, run.U, o.hold, run.p, run.q, run.v, integrator=o.integrator,
+                              rtol=o.rtol, atol=o.atol, substeps=o.substeps, max_steps=o.max_steps,
+                              feedback=run.feedback, controller=run.controller, joint_dynamics=o.joint_dynamics,
+                              progress=o.progress)
