@@ -20,13 +20,14 @@ HEADERS = sorted((ROOT / "generated").glob("*/*_stepper.h"))
 
 
 def prototypes(text: str, name: str) -> dict[str, tuple[str, list[str]]]:
-    """``{suffix: (return type, [argument types])}`` of the functions ``name_<suffix>``
+    """``{suffix: (return type, [(argument type, name)])}`` of the functions ``name_<suffix>``
     declared in ``text``."""
     code = re.sub(r"/\*.*?\*/", " ", text, flags=re.S)
     found = {}
     for returns, suffix, args in re.findall(rf"^(\w[\w ]*?)\s+{name}_(\w+)\(([^)]*)\);", code, flags=re.M | re.S):
         args = [] if args.strip() == "void" else [a for a in args.split(",")]
-        found[suffix] = (returns.strip(), [c_type(re.sub(r"\w+\s*$", "", a)) for a in args])
+        found[suffix] = (returns.strip(), [(c_type(re.sub(r"\w+\s*$", "", a)), a.split()[-1].lstrip("*"))
+                                           for a in args])
     return found
 
 
@@ -47,10 +48,10 @@ def test_table_matches_the_generated_header(header):
     contacts = (header.parent / "ncgen_contact.h").exists()
     declared = prototypes(header.read_text(), name)
     assert set(declared) == set(FUNCTIONS), "the header's functions and the table's differ"
-    for suffix, (returns, types) in declared.items():
+    for suffix, (returns, args) in declared.items():
         sig = signature(suffix, contacts)
         assert c_type(sig.returns.format(name=name)) == returns, suffix
-        assert sig.types(name) == types, suffix
+        assert list(zip(sig.types(name), [n for _, n in sig.args])) == args, suffix
     assert options_struct(header.read_text(), name) == [(c_type(t), f) for t, f in STEP_OPTIONS]
 
 
@@ -75,3 +76,14 @@ def test_a_library_or_symbol_that_is_not_there_is_named(tmp_path):
         bind(libc, "m_simulate", FUNCTIONS["simulate"], name="m")
     strlen = bind(libc, "strlen", Signature("size_t", (("const void *", "s"),)))
     assert strlen(b"natural") == 7
+
+
+def test_joint_run_matches_the_joint_loop_template():
+    """``<name>_joint_run`` as templates/c/joint_loop.c.j2 defines it is JOINT_RUN."""
+    from ncgen.codegen.joint_loop import JOINT_RUN
+
+    text = (ROOT / "templates" / "c" / "joint_loop.c.j2").read_text().replace("{{ name }}", "m")
+    returns, args = re.search(r"^(\w+) m_joint_run\(([^)]*)\)\s*\{", text, flags=re.M).groups()
+    assert returns == JOINT_RUN.returns
+    assert [c_type(re.sub(r"\w+\s*$", "", a)) for a in args.split(",")] == JOINT_RUN.types("m")
+    assert [re.search(r"(\w+)\s*$", a).group(1) for a in args.split(",")] == [n for _, n in JOINT_RUN.args]

@@ -3,7 +3,8 @@
 ``templates/c/joint_loop.c.j2`` (classical RK4 and Dormand–Prince 5(4) with dense output)
 compiled into one library, cached by content (:mod:`ncgen.codegen.compile_cache`).
 
-The library exports ``<name>_joint_run`` (signature and status codes in the template)."""
+The library exports ``<name>_joint_run`` (:data:`JOINT_RUN`, documented with its status
+codes in the template; ``tests/test_c_binding.py`` checks the two agree)."""
 from __future__ import annotations
 
 import os
@@ -12,12 +13,20 @@ from pathlib import Path
 
 import casadi as ca
 
+from ncgen.codegen.c_binding import Signature
 from ncgen.codegen.compile_cache import compile_package
 from ncgen.codegen.package import LARGE_FUNCTION_INSTRUCTIONS, ExtraSource, write_package
 
 #: ODE functions longer than the package's LARGE_FUNCTION_INSTRUCTIONS but at most this long
 #: are compiled at -O1 (as the tree kernel: gcc's -O2 time grows faster than linearly).
 O1_INSTRUCTIONS = 40_000
+
+#: ``{name}_joint_run`` as the template defines it.
+JOINT_RUN = Signature("int", (
+    ("int", "method"), ("int", "n_out"), ("const double *", "t_out"), ("double *", "X"), ("const double *", "W"),
+    ("const double *", "S"), ("const double *", "p"), ("int", "nquat"), ("const int *", "quat"),
+    ("double", "rtol"), ("double", "atol"), ("int", "substeps"), ("long", "max_steps"),
+    ("int", "stop_at_outputs"), ("double *", "stats"), ("int *", "k_done"), ("volatile int *", "stop")))
 
 
 def build_joint_loop(name: str, ode: ca.Function, pivot_tol: float, cflags=None) -> Path:

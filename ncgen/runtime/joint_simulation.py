@@ -81,16 +81,12 @@ class JointLoop:
 
     def __init__(self, model, library, ode: ca.Function, name: str):
         from ncgen.assembly.joint_ode import quaternion_offsets
+        from ncgen.codegen.c_binding import bind, open_library
+        from ncgen.codegen.joint_loop import JOINT_RUN
 
         self.model, self.ode, self.library = model, ode, library
-        self._lib = ctypes.CDLL(str(library))
-        fn = getattr(self._lib, f"{name}_joint_run")
-        D = ctypes.POINTER(ctypes.c_double)
-        fn.argtypes = [ctypes.c_int, ctypes.c_int, D, D, D, D, D, ctypes.c_int, ctypes.POINTER(ctypes.c_int),
-                       ctypes.c_double, ctypes.c_double, ctypes.c_int, ctypes.c_long, ctypes.c_int, D,
-                       ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_int)]
-        fn.restype = ctypes.c_int
-        self._fn = fn
+        self._lib = open_library(library)
+        self._fn = bind(self._lib, f"{name}_joint_run", JOINT_RUN)
         self.quat = np.array(quaternion_offsets(model.joint_space), dtype=np.int32)
         self.tree = model.joint_space.tree_function(model.layout)
         self._maps: dict = {}
