@@ -25,6 +25,9 @@ CC = os.environ.get("CC") or shutil.which("gcc") or shutil.which("cc")
 SAN = "-fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer"
 ENV = {**os.environ, "ASAN_OPTIONS": "detect_leaks=0", "UBSAN_OPTIONS": "halt_on_error=1"}
 PUSH = [(1.0, 1.1, [8.0])]                # an 8 N push on the cart for 0.1 s
+# nc.MPC compiles the horizon's step derivatives (400 s at load 10 on 2 cores, cold cache),
+# the exported package is built under the sanitizers
+pytestmark = pytest.mark.slow
 
 
 def tilted(model, angle, cart=0.0):
@@ -80,7 +83,6 @@ def test_unsupported_problems_and_solvers_are_named(setup):
         nc.MPC(ocp, iterations=0)
 
 
-@pytest.mark.slow                                  # the MPC package built under the sanitizers
 @pytest.mark.skipif(CC is None, reason="no C compiler")
 def test_exported_package_builds_under_sanitizers_and_matches_python(setup, tmp_path):
     ocp, mpc = setup
