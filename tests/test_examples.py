@@ -102,6 +102,7 @@ def test_pretension_stiffens_the_tensegrity():
 
 
 # ----------------------------------------------------------- energy over long runs
+@pytest.mark.slow                                  # 20 s of IDAS at 1e-10
 @pytest.mark.parametrize("name", ["chain", "double_pendulum"])
 def test_energy_is_conserved_over_a_long_run(name):
     """Conservative systems, 20 s at rtol 1e-10: |E − E₀| stays below 2e-6 of the energy

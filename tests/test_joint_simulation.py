@@ -67,6 +67,7 @@ def _pin_reference(pm, qp0, vp0, floating: bool, t_end=1.0):
     return q, v
 
 
+@pytest.mark.slow                                  # robot scale: the Panda's loop compiled, DOP853 on ABA
 def test_panda_fall_matches_pinocchio_aba_under_dop853():
     """The Panda falls for 1 s under gravity, zero torque, from a bent pose with some speed:
     the joint angles at the end agree with scipy's DOP853 on ``pinocchio.aba`` to 1e-8 rad."""
@@ -87,6 +88,7 @@ def test_panda_fall_matches_pinocchio_aba_under_dop853():
     assert abs(traj.energy[-1] - traj.energy[0]) < 1e-8 * max(1.0, abs(traj.energy[0]))
 
 
+@pytest.mark.slow                                  # robot scale: the Panda at three step sizes
 def test_panda_rk4_fixed_step_converges_at_fourth_order():
     model, pm = robot("panda")
     qp0 = np.array([0.3, -0.5, 0.2, -1.8, 0.1, 1.2, 0.4, 0.01, 0.02])
@@ -102,6 +104,7 @@ def test_panda_rk4_fixed_step_converges_at_fourth_order():
     assert 10 < errors[0] / errors[1] < 24                     # 2⁴ = 16
 
 
+@pytest.mark.slow                                  # robot scale: Solo12's loop compiled, DOP853 on ABA
 def test_solo12_floating_base_matches_pinocchio():
     """Solo12 (free flyer, unit quaternion) falling and tumbling for 1 s, no contact: base
     position, quaternion and joint angles against scipy's DOP853 on ``pinocchio.aba``."""

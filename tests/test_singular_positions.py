@@ -82,6 +82,7 @@ def test_model_is_singular_when_flat():
     assert s[-1] < 1e-12 * s[0]
 
 
+@pytest.mark.slow                                  # 10-20 s of IDAS at 1e-10 through sixteen flat positions
 @pytest.mark.parametrize("form, N, t_end, bound", [("2d", 1, 20.0, 1e-6), ("2d", 10, 20.0, 1e-6), ("2d", 40, 10.0, 1e-6),
                                                     ("3d", 1, 20.0, 3e-6)])
 def test_idas_through_sixteen_flat_positions_is_as_accurate_as_a_regular_run(form, N, t_end, bound):

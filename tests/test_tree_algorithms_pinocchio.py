@@ -135,6 +135,7 @@ def test_algorithms_and_derivatives_match_pinocchio(name):
     check_robot(name)
 
 
+@pytest.mark.slow                                  # robot scale: Talos's kernels compiled
 def test_talos_algorithms_match_pinocchio():
     """Talos (38 joint rates): RNEA, CRBA and ABA.  Its derivative kernels are long C
     functions (see benchmarks/joint_space.py for their build times), so they are tested on
@@ -265,6 +266,7 @@ def test_the_fast_call_and_the_ctypes_path_agree(monkeypatch):
             k(np.zeros(6), np.full(6, np.inf), np.zeros(6))
 
 
+@pytest.mark.slow                                  # robot scale: the Panda under IDAS at tight tolerance
 def test_panda_as_shipped_simulates_in_joint_space_with_its_mimic_finger():
     """The stock Panda (mimic finger) now gets the joint-space simulation: the fingers stay
     equal and the arm agrees with IDAS on the natural coordinates (the constrained DAE,
