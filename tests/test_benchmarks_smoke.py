@@ -14,7 +14,7 @@ import pytest
 pytest.importorskip("mujoco")
 
 BENCHMARKS = Path(__file__).resolve().parent.parent / "benchmarks"
-pytestmark = [pytest.mark.slow,                   # each benchmark script end to end: minutes
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800),   # each benchmark script end to end: minutes
               pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc") is None,
                                  reason="no C compiler")]
 

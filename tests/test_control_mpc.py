@@ -27,7 +27,7 @@ ENV = {**os.environ, "ASAN_OPTIONS": "detect_leaks=0", "UBSAN_OPTIONS": "halt_on
 PUSH = [(1.0, 1.1, [8.0])]                # an 8 N push on the cart for 0.1 s
 # nc.MPC compiles the horizon's step derivatives (400 s at load 10 on 2 cores, cold cache),
 # the exported package is built under the sanitizers
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800)]
 
 
 def tilted(model, angle, cart=0.0):

@@ -29,7 +29,7 @@ import pytest
 from test_generated_up_to_date import EXAMPLES, regenerate
 
 CC = os.environ.get("CC") or shutil.which("gcc") or shutil.which("clang") or shutil.which("cc")
-pytestmark = [pytest.mark.slow,                   # every shipped package built under the sanitizers: minutes
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800),   # every shipped package built under the sanitizers
               pytest.mark.skipif(CC is None, reason="no C compiler (gcc, clang or cc) on PATH: "
                                                     "the generated C cannot be built")]
 WARNINGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"]
