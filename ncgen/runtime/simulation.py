@@ -13,7 +13,7 @@ import numpy as np
 from ncgen.assembly.initial_state import consistent_state
 from ncgen.assembly.manifold import NEAR_SINGULAR, ManifoldProjector, robust_algebraic
 from ncgen.codegen.load import NoCompilerWarning
-from ncgen.errors import CompilerNotFound, NcgenError, SimulationError, SimulationInterrupted
+from ncgen.errors import BranchWarning, CompilerNotFound, NcgenError, SimulationError, SimulationInterrupted
 from ncgen.interrupts import raise_if_interrupted, sticky_interrupt
 from ncgen.errors import ModelError, option
 from ncgen.runtime.backend_policy import choose_backend
@@ -43,6 +43,17 @@ AUTO_MAX_SIZE = 100_000
 #: Output intervals of the first IDAS call while watching for singular configurations
 #: (``project="auto"``; later chunks are sized from how fast ``σ_min/σ_max`` of A changes).
 WATCHED_CHUNK = 10
+#: Largest spacing (s) of the grid on which a watched run (``project`` ``"auto"`` or ``True``)
+#: checks ``σ_min/σ_max`` of A and places its IDAS calls and bridges: each output interval is
+#: split into ``ceil(dt / WATCHED_SAMPLE)`` equal parts, so that the run is the same for every
+#: output grid that is a multiple of it (a user's choice for plotting; finer grids are used
+#: as they are).  The ratio's rate is watched too: an interval across which the ratio, moving
+#: at the larger of its end rates, could dip below the near-singular limit and come back
+#: unseen is bridged (``_run``: ``hidden``), so a faster motion is bridged more, not missed.
+#: The four-bar of IFToMM A02 crosses the band around a flat position in about 0.05 s; with
+#: a spacing of 0.05 or 0.1 s it still stays on its branch (to 1.2e-6 m over 20 s), with 0.5 s
+#: IDAS fails loudly at a flat position.
+WATCHED_SAMPLE = 0.01
 #: A predicted crossing of the near-singular limit closer than this many output intervals is
 #: run to (one IDAS call); a farther one is approached by a power of 2 below it.
 CLOSE_CROSSING = 16
@@ -60,12 +71,17 @@ FAILING_NEAR_SINGULAR = 0.25
 #: error estimate being taken on the tangent part of the step, see ``templates/c/runtime/ncgen_adaptive.h``).
 BRIDGE_MIN_TOL = 1e-12
 #: The bridge's tolerances are the run's divided by this (at least :data:`BRIDGE_MIN_TOL`):
-#: at the run's own, the few bridged intervals (8 % of the time in the N four-bar) made about
-#: half of the error to the exact motion after 20 s in its 3D form (1.3e-6 m at rtol 1e-10;
-#: 2.2e-7 m with a tenth), the adaptive stepper's error per unit time at a given tolerance
-#: being larger than IDAS's next to a singular configuration; the bridge is compiled and short,
-#: so the tighter tolerance costs little.
-BRIDGE_TIGHTER = 10.0
+#: the adaptive stepper's error per unit time at a given tolerance is larger than IDAS's next
+#: to a singular configuration.  In the 3D N four-bar (N = 1, rtol = atol = 1e-10, 20 s, 8 %
+#: of the time bridged) the error to the exact motion was 1.6e-6 m with a tenth of the run's
+#: tolerances, 4.8e-7 m with a hundredth (the 2D form: 1.7e-7 and 2.1e-7 m); the bridge is
+#: compiled and short, so the tighter tolerance costs little.
+BRIDGE_TIGHTER = 100.0
+#: Branch test of a bridged stretch (``_branch_changes``): the part of its chord outside the
+#: tangent motions at its ends, relative to its length, above which the motion changed branch.
+#: Measured on the four-bar of IFToMM A02 staying on its branch: at most ... (N = 1 ... 40,
+#: 2D and 3D); on the driven four-bar that must change branch: ...
+BRANCH_DEPARTURE = 0.3
 #: Largest number of NumPy RATTLE steps across one output interval (``_bridge`` without a
 #: C compiler).
 BRIDGE_MAX_STEPS = 20_000
@@ -263,7 +279,10 @@ def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions, *, c
     u0 = U[0] + _extra_value(model, extra, t0, q, v, pv)
     lam = initial_multipliers(model, t0, q, v, u0, pv, dae)
     a = np.array(model.functions["ode"](t0, q, v, lam, u0, pv)[1]).reshape(-1)
-    runner = ChunkedIDAS(dae, h=float(t[1] - t[0]), nu=model.nu, hold=hold, rtol=rtol, atol=atol,
+    watch = project == "auto" and model.nq * model.nc <= AUTO_MAX_SIZE and model.nc > 0
+    projector = ManifoldProjector(model, pv, atol) if (project is True or watch) and feedback is None else None
+    m = 1 if projector is None else math.ceil((t[1] - t[0]) / WATCHED_SAMPLE - 1e-9)
+    runner = ChunkedIDAS(dae, h=float(t[1] - t[0]) / m, nu=model.nu, hold=hold, rtol=rtol, atol=atol,
                          max_steps=opts.max_steps, linear_solver=opts.linear_solver, expand=(used == "vm"),
                          algebraic=lambda tk, x, uk: _algebraic(
                              model, tk, x, uk + _extra_value(model, extra, tk, x[:model.nq], x[model.nq:], pv), pv))
@@ -273,34 +292,41 @@ def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions, *, c
                              "interval (zoh); use hold='zoh'")
         return _idas_feedback(model, runner, t, q, v, a, lam, U, pv, feedback, opts.progress, "idas", used, rtol,
                               atol, opts.linear_solver, dae)
-    watch = project == "auto" and model.nq * model.nc <= AUTO_MAX_SIZE and model.nc > 0
-    projector = ManifoldProjector(model, pv, atol) if project is True or watch else None
     if projector is not None:
         projector.start(t0, np.concatenate([q, v]))
     bridge = _bridge(model, runner, pv, rtol, atol) if projector is not None else None
     bar = Progress(t0, t[-1], opts.progress, label=f"simulating {model.name}: ")
     start = time.perf_counter()
+    grid = t if m == 1 else t[0] + (t[-1] - t[0]) * np.arange(m * (len(t) - 1) + 1) / (m * (len(t) - 1))
     try:
-        X, Z, failure, projected_from = _run(runner, t, np.concatenate([q, v]), np.concatenate([a, lam]), columns,
-                                             pv, bar, projector, bridge, auto=watch)
+        X, Z, failure, projected_from = _run(runner, grid, np.concatenate([q, v]), np.concatenate([a, lam]),
+                                             np.repeat(columns, m, axis=1), pv, bar, projector, bridge, auto=watch)
     finally:
         bar.close()
+    if failure is not None and m > 1:
+        message = None if failure is INTERRUPTED else _failure_message(
+            model, failure, grid, len(X) - 1, X[-1], Z[-1, model.nq:], U[(len(X) - 1) // m], pv, dae)
+    changes, departure = _branch_changes(model, projector, bridge, grid, X) if projector is not None else ([], 0.0)
+    X, Z = X[::m], Z[::m]
     nq, k = model.nq, len(X) - 1
     stats = dict(runner.stats)
     if projector is not None:
-        stats.update(projector.counts, rattle_intervals=bridge.count)
+        stats.update(projector.counts, rattle_intervals=bridge.count, branch_departure=departure)
     info = {"method": "idas", "backend": used, "backend_reason": choice.reason if used == choice.backend
             else "no C compiler", "rtol": rtol, "atol": atol, "hold": hold,
             "auto": why_not, "joint_dynamics": bool(opts.joint_dynamics),
             "controller": None if controller is None else controller.describe(),
             "linear_solver": opts.linear_solver, "stats": stats, "project": project,
-            "projected_from": None if projected_from is None else float(t[projected_from]),
+            "projected_from": None if projected_from is None else float(grid[projected_from]),
+            "watched_interval": float(grid[1] - grid[0]) if projector is not None else None,
+            "branch_changes": changes,
             "wall_time": time.perf_counter() - start, "complete": failure is None}
     if failure is INTERRUPTED:
         message = f"simulation of {model.name!r} interrupted (Ctrl-C) at t = {t[k]:.6g} s"
         info["message"] = message
     elif failure is not None:
-        message = _failure_message(model, failure, t, k, X[k], Z[k, nq:], U[k], pv, dae)
+        if m == 1:
+            message = _failure_message(model, failure, t, k, X[k], Z[k, nq:], U[k], pv, dae)
         info["message"] = message
     U_applied = U[:k + 1] + np.array([_extra_value(model, extra, t[i], X[i, :nq], X[i, nq:], pv)
                                        for i in range(k + 1)]) if extra is not None else U[:k + 1]
@@ -449,6 +475,7 @@ class _bridge:
         self.model, self.runner, self.p, self.rtol, self.atol = model, runner, p, rtol, atol
         self.tols = max(rtol / BRIDGE_TIGHTER, BRIDGE_MIN_TOL), max(atol / BRIDGE_TIGHTER, BRIDGE_MIN_TOL)
         self.count = 0
+        self.spans: list[tuple[float, float]] = []     # the bridged intervals
         self.stepper = None            # the compiled stepper; False: no C compiler
         self.h_next, self.t_next = 0.0, None
 
@@ -487,6 +514,7 @@ class _bridge:
         except RattleFailure as e:
             raise ChunkFailure("RATTLE_FAIL", str(e), "rattle") from None
         self.count += 1
+        self.spans.append((t0, t1))
         return x1, _algebraic(self.model, t1, x1, u1, self.p)
 
 
@@ -514,7 +542,8 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
     full = 1 if watching and not auto else max(1, math.ceil(n_int / CHUNKS))
     X = np.empty((len(t), len(x0)))
     Z = np.empty((len(t), len(z0)))
-    R = np.full(len(t), np.nan)          # σ_min/σ_max of A at the output times (watching)
+    R = np.full((len(t), 2), np.nan)     # σ_min/σ_max of A and its rate at the grid times (watching)
+    h = float(t[1] - t[0])
     X[0], Z[0] = x0, z0
     since = None if auto or not watching else 0
     steps = [WATCHED_MAX_STEPS if watching else None]
@@ -524,12 +553,21 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
         R[k + 1:k + n + 1] = np.nan
 
     def ratio(i) -> float:
-        if np.isnan(R[i]):
-            R[i] = projector.ratio(t[i], X[i])
-        return R[i]
+        if np.isnan(R[i, 0]):
+            R[i] = projector.ratio_rate(t[i], X[i])
+        return R[i, 0]
 
     def near(i, limit=NEAR_SINGULAR) -> bool:
         return ratio(i) < limit * projector.scale
+
+    def hidden(i) -> bool:
+        """Whether the ratio could have dipped below the near-singular limit between grid
+        times i − 1 and i, both above it: going down to the limit and back takes a travel of
+        ``(r_{i−1} − limit) + (r_i − limit)``, which the ratio, moving at the larger of its two
+        end rates, covers within the interval."""
+        limit = NEAR_SINGULAR * projector.scale
+        room = ratio(i - 1) + ratio(i) - 2.0 * limit
+        return room < max(abs(R[i - 1, 1]), abs(R[i, 1])) * h
 
     bend = [np.nan]                       # the last second difference of that ratio seen by IDAS
     resumed, stretches = [None], []       # where IDAS resumed after the last bridge; its stretches between
@@ -598,7 +636,7 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
                     while not watching and k < k0 + n:
                         k = single(k)
                 if watching:
-                    first = next((i for i in range(k0 + 1, k + 1) if near(i)), None)
+                    first = next((i for i in range(k0 + 1, k + 1) if near(i) or hidden(i)), None)
                     observe(k0, k if first is None else first)
                     if first is not None:            # cut before it, cross it by the bridge
                         k = bridged(first - 1)
@@ -617,6 +655,38 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
             R[k] = np.nan
         bar.update(t[k])
     return X, Z, None, since
+
+
+def _branch_changes(model, projector: ManifoldProjector, bridge: _bridge, grid, X) -> tuple[list, float]:
+    """The bridged stretches (runs of consecutive bridged intervals, each crossing a
+    near-singular region) that fail the branch test: the chord from the stretch's start to
+    its end leaves the tangent motions at either end by more than :data:`BRANCH_DEPARTURE`
+    (:meth:`~ncgen.assembly.manifold.ManifoldProjector.departure`).  Each is warned about
+    (:class:`~ncgen.errors.BranchWarning`, naming its times) and returned as ``(t_a, t_b)``,
+    with the largest departure of all stretches (0 without any)."""
+    stretches = []
+    for t0, t1 in bridge.spans:
+        if stretches and stretches[-1][1] == t0:
+            stretches[-1][1] = t1
+        else:
+            stretches.append([t0, t1])
+    changes, largest = [], 0.0
+    for t_a, t_b in stretches:
+        a, b = np.searchsorted(grid, t_a), np.searchsorted(grid, t_b)
+        if b >= len(X):
+            continue
+        e = projector.departure(float(grid[a]), X[a], float(grid[b]), X[b])
+        largest = max(largest, e)
+        if e > BRANCH_DEPARTURE:
+            changes.append((float(t_a), float(t_b)))
+            warnings.warn(f"simulation of {model.name!r}: between t = {t_a:.6g} s and {t_b:.6g} s the motion passed "
+                          f"a singular configuration of the constraints (A lost rank) and left it on another "
+                          f"branch of Phi = 0 than it came on (branch test: the chord between the two times "
+                          f"leaves the tangent motions by {e:.2g} of its length, above {BRANCH_DEPARTURE:g}); "
+                          f"check that this is the physical motion (a mechanism at rest at that configuration "
+                          f"and pushed along the other branch), or use a smaller rtol", BranchWarning,
+                          stacklevel=4)
+    return changes, largest
 
 
 def _retry_length(failure: ChunkFailure, t_k: float, h: float, n: int) -> int:
