@@ -269,21 +269,28 @@ class ManifoldProjector:
 
     def departure(self, t_a: float, x_a: np.ndarray, t_b: float, x_b: np.ndarray) -> float:
         """How far the chord from ``(t_a, q_a)`` to ``(t_b, q_b)`` leaves the motions tangent to
-        ``Φ = 0`` at its two ends: the largest over both ends of ``|A⁺ (A d + Φ_t Δt)| / |d|``
-        with ``d = q_b − q_a``, ``Δt = t_b − t_a`` (``A⁺`` truncated at
-        :data:`RANK_TOL`).  On one smooth branch of ``Φ = 0`` this is about half the branch's
-        curvature times ``|d|``; a chord that leaves one branch at a singular configuration
-        for the other makes it of the order of the sine of the angle between their tangents."""
+        ``Φ(t, q) = 0`` at its two ends, relative to its length: the largest over both ends of
+        ``|J⁺ r| / |d|`` with ``d = q_b − q_a``, ``Δt = t_b − t_a``, ``r = A d + Φ_t Δt`` and
+        ``J = [A, Φ_t / c]`` acting on ``(δq, c δt)``, ``c = |d| / Δt`` (time measured as the
+        chord's own speed, so that a driven motion may also shift in time; ``J⁺`` truncated at
+        :data:`RANK_TOL`).  For a constraint without time, ``|A⁺ A d| / |d|``, the part of ``d``
+        normal to the tangent space.  On one smooth branch of ``Φ = 0`` this is about half the
+        angle the tangent turns along the chord; a chord that leaves one branch at a singular
+        configuration for another makes it of the order of the sine of the angle between
+        their tangents."""
         nq = self.nq
         d = x_b[:nq] - x_a[:nq]
         size = float(np.linalg.norm(d))
-        if not self.active or not size > 0:
+        if not self.active or not size > 0 or not t_b > t_a:
             return 0.0
+        c = size / (t_b - t_a)
         worst = 0.0
         for t, q in ((t_a, x_a[:nq]), (t_b, x_b[:nq])):
             A = self._A(t, q)
-            r = A @ d + np.array(self.f["phi_t"](t, q, self.p), dtype=float).reshape(-1) * (t_b - t_a)
-            worst = max(worst, float(np.linalg.norm(np.linalg.lstsq(A, r, rcond=RANK_TOL)[0])) / size)
+            phi_t = np.array(self.f["phi_t"](t, q, self.p), dtype=float).reshape(-1)
+            J = np.column_stack([A, phi_t / c])
+            r = A @ d + phi_t * (t_b - t_a)
+            worst = max(worst, float(np.linalg.norm(np.linalg.lstsq(J, r, rcond=RANK_TOL)[0])) / size)
         return worst
 
     def start(self, t: float, x: np.ndarray):

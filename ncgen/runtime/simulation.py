@@ -77,10 +77,13 @@ BRIDGE_MIN_TOL = 1e-12
 #: tolerances, 4.8e-7 m with a hundredth (the 2D form: 1.7e-7 and 2.1e-7 m); the bridge is
 #: compiled and short, so the tighter tolerance costs little.
 BRIDGE_TIGHTER = 100.0
-#: Branch test of a bridged stretch (``_branch_changes``): the part of its chord outside the
+#: Branch test of a bridged interval (``_branch_changes``): the part of its chord outside the
 #: tangent motions at its ends, relative to its length, above which the motion changed branch.
-#: Measured on the four-bar of IFToMM A02 staying on its branch: at most ... (N = 1 ... 40,
-#: 2D and 3D); on the driven four-bar that must change branch: ...
+#: On one branch it is about half the angle the tangent turns over the interval; across to
+#: another, about the sine of the angle between the branches' tangents.  Measured on the
+#: four-bar of IFToMM A02 staying on its branch: at most 0.14 (N = 1 ... 40, 2D and 3D,
+#: intervals of 0.01 s; 0.2 with 0.1 s); from its parallelogram branch at 6° to the other
+#: branch at the flat position's other side: 0.46.
 BRANCH_DEPARTURE = 0.3
 #: Largest number of NumPy RATTLE steps across one output interval (``_bridge`` without a
 #: C compiler).
@@ -303,9 +306,12 @@ def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions, *, c
                                              np.repeat(columns, m, axis=1), pv, bar, projector, bridge, auto=watch)
     finally:
         bar.close()
-    if failure is not None and m > 1:
-        message = None if failure is INTERRUPTED else _failure_message(
-            model, failure, grid, len(X) - 1, X[-1], Z[-1, model.nq:], U[(len(X) - 1) // m], pv, dae)
+    reached = float(grid[len(X) - 1])        # the last good time, on the watched grid
+    if failure is INTERRUPTED:
+        message = f"simulation of {model.name!r} interrupted (Ctrl-C) at t = {reached:.6g} s"
+    elif failure is not None:
+        message = _failure_message(model, failure, grid, len(X) - 1, X[-1], Z[-1, model.nq:], U[(len(X) - 1) // m],
+                                   pv, dae)
     changes, departure = _branch_changes(model, projector, bridge, grid, X) if projector is not None else ([], 0.0)
     X, Z = X[::m], Z[::m]
     nq, k = model.nq, len(X) - 1
@@ -321,21 +327,18 @@ def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions, *, c
             "watched_interval": float(grid[1] - grid[0]) if projector is not None else None,
             "branch_changes": changes,
             "wall_time": time.perf_counter() - start, "complete": failure is None}
-    if failure is INTERRUPTED:
-        message = f"simulation of {model.name!r} interrupted (Ctrl-C) at t = {t[k]:.6g} s"
-        info["message"] = message
-    elif failure is not None:
-        if m == 1:
-            message = _failure_message(model, failure, t, k, X[k], Z[k, nq:], U[k], pv, dae)
+    if failure is not None:
+        if t[k] < reached:
+            message += f" (Its outputs end at the last output time before, t = {t[k]:.6g} s.)"
         info["message"] = message
     U_applied = U[:k + 1] + np.array([_extra_value(model, extra, t[i], X[i, :nq], X[i, nq:], pv)
                                        for i in range(k + 1)]) if extra is not None else U[:k + 1]
     traj = Trajectory.from_states(model, t[:k + 1], X[:, :nq], X[:, nq:], Z[:, nq:], U_applied, pv, info)
     traj.info["energy"] = idas_report(model, traj, is_conservative(model, inputs=bool(np.any(U_applied != 0))))
     if failure is INTERRUPTED:
-        raise SimulationInterrupted(message, time=float(t[k]), trajectory=traj)
+        raise SimulationInterrupted(message, time=reached, trajectory=traj)
     if failure is not None:
-        raise SimulationError(message, time=float(t[k]), trajectory=traj)
+        raise SimulationError(message, time=reached, trajectory=traj)
     return traj
 
 
@@ -658,20 +661,14 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
 
 
 def _branch_changes(model, projector: ManifoldProjector, bridge: _bridge, grid, X) -> tuple[list, float]:
-    """The bridged stretches (runs of consecutive bridged intervals, each crossing a
-    near-singular region) that fail the branch test: the chord from the stretch's start to
-    its end leaves the tangent motions at either end by more than :data:`BRANCH_DEPARTURE`
+    """The bridged intervals (each next to a singular configuration) that fail the branch
+    test: the chord from the interval's start to its end leaves the tangent motions at either
+    end by more than :data:`BRANCH_DEPARTURE` of its length
     (:meth:`~ncgen.assembly.manifold.ManifoldProjector.departure`).  Each is warned about
     (:class:`~ncgen.errors.BranchWarning`, naming its times) and returned as ``(t_a, t_b)``,
-    with the largest departure of all stretches (0 without any)."""
-    stretches = []
-    for t0, t1 in bridge.spans:
-        if stretches and stretches[-1][1] == t0:
-            stretches[-1][1] = t1
-        else:
-            stretches.append([t0, t1])
+    with the largest departure of all bridged intervals (0 without any)."""
     changes, largest = [], 0.0
-    for t_a, t_b in stretches:
+    for t_a, t_b in bridge.spans:
         a, b = np.searchsorted(grid, t_a), np.searchsorted(grid, t_b)
         if b >= len(X):
             continue
