@@ -165,30 +165,39 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
       ``info["backend_reason"]`` says why).
     * ``progress``: a progress bar on stderr: ``True``, ``False``, or ``None`` = when stderr is a
       terminal and the run takes more than a second.
-    * ``max_steps``: IDAS steps allowed per output interval; ``linear_solver``: CasADi's
+    * ``max_steps``: IDAS steps allowed per output interval (per interval of the watched grid
+      below when watching); ``linear_solver``: CasADi's
       sparse solver for the Newton systems (``"csparse"``, ``"qr"``, ...).
     * ``project`` (IDAS), for linkages that pass singular positions (where ``A`` loses rank
       and another branch of ``Φ = 0`` meets the physical one, e.g. a parallelogram passing
       flat; there the KKT matrix of the index-1 DAE is singular and IDAS either fails or
       drifts onto the other branch).  ``"auto"`` (default): the run watches ``σ_min/σ_max``
-      of ``A`` at every output time (an SVD each; only models with ``nq · nc ≤``
-      :data:`AUTO_MAX_SIZE`), in IDAS chunks that end where the ratio's trend says it
-      reaches the limit (few calls: IDAS restarts at order 1 with each, its first step
-      ``min(√rtol, 10⁻³) dt``, see :class:`~ncgen.runtime.idas.ChunkedIDAS`); every output
-      interval that starts or ends near-singular
-      (ratio below :data:`~ncgen.assembly.manifold.NEAR_SINGULAR`, scaled by the starting
-      ratio, see :mod:`ncgen.assembly.manifold`), or that IDAS fails on close to one, is
-      crossed instead by the model's compiled error-controlled RATTLE stepper (order 4,
-      tolerances a tenth of ``rtol`` and ``atol``, at least 1e-12, from the state projected
-      onto both constraint levels, multipliers recomputed at both ends; compiled on first
-      use; :mod:`ncgen.runtime.rattle_bridge`), which stays on the branch.
-      ``info["projected_from"]`` is the first such output time,
-      ``info["stats"]["rattle_intervals"]`` their number.  The N four-bar of the IFToMM
-      benchmark A02 over 20 s (sixteen flat positions) then stays within 2e-7 m of the exact
-      motion at ``rtol = atol = 1e-10`` for N = 1, 10, 40 (2.3e-6 m in its 3D form with
-      revolute joints for N = 1, IDAS's own error on the regular part of that motion;
-      ``tests/test_singular_positions.py``).  ``True``: the same,
-      with one IDAS call per output interval and the state projected after each.  ``False``: IDAS alone.
+      of ``A`` and its rate (an SVD each; only models with ``nq · nc ≤``
+      :data:`AUTO_MAX_SIZE`) on a grid of its own, each output interval split into parts of
+      at most :data:`WATCHED_SAMPLE` (0.01 s), so that where the singular positions are
+      looked for does not depend on the output grid; IDAS runs in chunks of that grid that
+      end where the ratio's trend says it reaches the limit (few calls: IDAS restarts at
+      order 1 with each, its first step ``min(√rtol, 10⁻³)`` times the grid's interval, see
+      :class:`~ncgen.runtime.idas.ChunkedIDAS`); every grid interval that starts or ends
+      near-singular (ratio below :data:`~ncgen.assembly.manifold.NEAR_SINGULAR`, scaled by
+      the starting ratio, see :mod:`ncgen.assembly.manifold`), across which the ratio could
+      dip below that limit unseen (its rate at the two ends), or that IDAS fails on close
+      to one, is crossed instead by the model's compiled error-controlled RATTLE stepper
+      (order 4, tolerances a hundredth of ``rtol`` and ``atol``, at least 1e-12, from the
+      state projected onto both constraint levels, multipliers recomputed at both ends;
+      compiled on first use; :mod:`ncgen.runtime.rattle_bridge`), which stays on the branch.
+      Each bridged interval is then checked to end on the branch it started on (the chord
+      between its ends tangent to the constraints, :data:`BRANCH_DEPARTURE`); one that does
+      not is a :class:`~ncgen.errors.BranchWarning` naming its times
+      (``info["branch_changes"]``).  ``info["projected_from"]`` is the first bridged time,
+      ``info["watched_interval"]`` the grid's interval, ``info["stats"]["rattle_intervals"]``
+      the number of bridged intervals and ``info["stats"]["branch_departure"]`` the largest
+      departure of the branch test.  The N four-bar of the IFToMM benchmark A02 over 20 s
+      (sixteen flat positions) at ``rtol = atol = 1e-10`` then stays within 5e-7 m of the
+      exact motion for N = 1, 10, 40, planar and 3D, for every output interval from 1 ms to
+      0.5 s and both backends (``tests/test_singular_output_grid.py``).  ``True``: the same,
+      with one IDAS call per grid interval and the state projected after each.  ``False``:
+      IDAS alone.
     * ``method="stepper"``: the compiled fixed-step stepper (generated C, Newton loop
       included; :mod:`ncgen.runtime.stepper`): ``scheme="auto"`` (default) Suzuki's
       fourth-order composition of five RATTLE steps per step (``"rattle4"``), RATTLE alone
@@ -536,10 +545,11 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
     two IDAS stretches between bridges (a periodic motion meets its next flat position about
     as far on); a chunk that fails is tried again up to just before where IDAS gave up
     (:func:`_retry_length`); a chunk that
-    reaches the limit is cut at the last output before it; every interval that
-    starts or ends at a near-singular configuration, or that IDAS fails on not far from one
-    (:data:`FAILING_NEAR_SINGULAR`), is crossed by ``bridge`` instead, from the projected
-    state.  ``auto=False``: the state is also projected after every interval."""
+    reaches the limit, or has an interval across which the ratio could dip below it unseen
+    (``hidden``: its rate at both ends), is cut at the last output before it; every interval
+    that starts or ends at a near-singular configuration, that could hide one, or that IDAS
+    fails on not far from one (:data:`FAILING_NEAR_SINGULAR`), is crossed by ``bridge``
+    instead, from the projected state.  ``t`` is the watched grid (see :data:`WATCHED_SAMPLE`).  ``auto=False``: the state is also projected after every interval."""
     n_int = len(t) - 1
     watching = projector is not None
     full = 1 if watching and not auto else max(1, math.ceil(n_int / CHUNKS))
