@@ -106,6 +106,12 @@ class SimulationInterrupted(KeyboardInterrupt):
         self.trajectory = trajectory
 
 
+class BranchWarning(UserWarning):
+    """A run that passed close to a singular configuration of its constraints (where ``A``
+    loses rank and two branches of ``Φ = 0`` meet) and left it on another branch than the one
+    it came on: the time and the branch test in the message."""
+
+
 class AccuracyWarning(UserWarning):
     """A run that completed but whose own error estimate says it is less accurate than its
     tolerances ask (e.g. the stepper with ``rtol`` on a motion along which errors grow)."""

@@ -244,6 +244,55 @@ class ManifoldProjector:
         s = np.linalg.svd(A, compute_uv=False)
         return float(s[-1] / s[0]) if np.all(np.isfinite(s)) and s[0] > 0 else 1.0
 
+    def ratio_rate(self, t: float, x: np.ndarray) -> tuple[float, float]:
+        """``(r, ṙ)``: ``r = σ_min/σ_max`` of ``A`` at ``x = [q; v]`` and its rate along the
+        motion (1/s), ``ṙ = (σ̇_min σ_max − σ_min σ̇_max)/σ_max²`` with ``σ̇_k = u_kᵀ Ȧ w_k``
+        (singular vectors ``u_k``, ``w_k``) and ``Ȧ = dA/dt + ∂A/∂q v`` by a central difference
+        along ``(1, v)`` (exact where ``A`` is affine in ``(t, q)``, as for quadratic
+        constraints).  ``(1, 0)`` where ``A`` is empty or not finite."""
+        if not self.active:
+            return 1.0, 0.0
+        q, v = x[:self.nq], x[self.nq:]
+        A = self._A(t, q)
+        eps = 1e-6 / max(1.0, float(np.max(np.abs(v), initial=0.0)))
+        A_dot = (self._A(t + eps, q + eps * v) - self._A(t - eps, q - eps * v)) / (2.0 * eps)
+        if not (np.all(np.isfinite(A)) and np.all(np.isfinite(A_dot))):
+            return 1.0, 0.0
+        try:
+            U, s, Wt = np.linalg.svd(A, full_matrices=False)
+        except np.linalg.LinAlgError:
+            return 1.0, 0.0
+        if not s[0] > 0:
+            return 1.0, 0.0
+        rate_min, rate_max = U[:, -1] @ A_dot @ Wt[-1], U[:, 0] @ A_dot @ Wt[0]
+        return float(s[-1] / s[0]), float((rate_min * s[0] - s[-1] * rate_max) / s[0] ** 2)
+
+    def departure(self, t_a: float, x_a: np.ndarray, t_b: float, x_b: np.ndarray) -> float:
+        """How far the chord from ``(t_a, q_a)`` to ``(t_b, q_b)`` leaves the motions tangent to
+        ``Φ(t, q) = 0`` at its two ends, relative to its length: the largest over both ends of
+        ``|J⁺ r| / |d|`` with ``d = q_b − q_a``, ``Δt = t_b − t_a``, ``r = A d + Φ_t Δt`` and
+        ``J = [A, Φ_t / c]`` acting on ``(δq, c δt)``, ``c = |d| / Δt`` (time measured as the
+        chord's own speed, so that a driven motion may also shift in time; ``J⁺`` truncated at
+        :data:`RANK_TOL`).  For a constraint without time, ``|A⁺ A d| / |d|``, the part of ``d``
+        normal to the tangent space.  On one smooth branch of ``Φ = 0`` this is about half the
+        angle the tangent turns along the chord; a chord that leaves one branch at a singular
+        configuration for another makes it of the order of the sine of the angle between
+        their tangents."""
+        nq = self.nq
+        d = x_b[:nq] - x_a[:nq]
+        size = float(np.linalg.norm(d))
+        if not self.active or not size > 0 or not t_b > t_a:
+            return 0.0
+        c = size / (t_b - t_a)
+        worst = 0.0
+        for t, q in ((t_a, x_a[:nq]), (t_b, x_b[:nq])):
+            A = self._A(t, q)
+            phi_t = np.array(self.f["phi_t"](t, q, self.p), dtype=float).reshape(-1)
+            J = np.column_stack([A, phi_t / c])
+            r = A @ d + phi_t * (t_b - t_a)
+            worst = max(worst, float(np.linalg.norm(np.linalg.lstsq(J, r, rcond=RANK_TOL)[0])) / size)
+        return worst
+
     def start(self, t: float, x: np.ndarray):
         """Scale the near-singular limits by this starting configuration's ``σ_min/σ_max``
         over :data:`WELL_CONDITIONED`, where below 1."""

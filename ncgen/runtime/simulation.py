@@ -13,7 +13,7 @@ import numpy as np
 from ncgen.assembly.initial_state import consistent_state
 from ncgen.assembly.manifold import NEAR_SINGULAR, ManifoldProjector, robust_algebraic
 from ncgen.codegen.load import NoCompilerWarning
-from ncgen.errors import CompilerNotFound, NcgenError, SimulationError, SimulationInterrupted
+from ncgen.errors import BranchWarning, CompilerNotFound, NcgenError, SimulationError, SimulationInterrupted
 from ncgen.interrupts import raise_if_interrupted, sticky_interrupt
 from ncgen.errors import ModelError, option
 from ncgen.runtime.backend_policy import choose_backend
@@ -45,6 +45,17 @@ AUTO_MAX_SIZE = 100_000
 #: Output intervals of the first IDAS call while watching for singular configurations
 #: (``project="auto"``; later chunks are sized from how fast ``σ_min/σ_max`` of A changes).
 WATCHED_CHUNK = 10
+#: Largest spacing (s) of the grid on which a watched run (``project`` ``"auto"`` or ``True``)
+#: checks ``σ_min/σ_max`` of A and places its IDAS calls and bridges: each output interval is
+#: split into ``ceil(dt / WATCHED_SAMPLE)`` equal parts, so that the run is the same for every
+#: output grid that is a multiple of it (a user's choice for plotting; finer grids are used
+#: as they are).  The ratio's rate is watched too: an interval across which the ratio, moving
+#: at the larger of its end rates, could dip below the near-singular limit and come back
+#: unseen is bridged (``_run``: ``hidden``), so a faster motion is bridged more, not missed.
+#: The four-bar of IFToMM A02 crosses the band around a flat position in about 0.05 s; with
+#: a spacing of 0.05 or 0.1 s it still stays on its branch (to 1.2e-6 m over 20 s), with 0.5 s
+#: IDAS fails loudly at a flat position.
+WATCHED_SAMPLE = 0.01
 #: A predicted crossing of the near-singular limit closer than this many output intervals is
 #: run to (one IDAS call); a farther one is approached by a power of 2 below it.
 CLOSE_CROSSING = 16
@@ -62,12 +73,20 @@ FAILING_NEAR_SINGULAR = 0.25
 #: error estimate being taken on the tangent part of the step, see ``templates/c/runtime/ncgen_adaptive.h``).
 BRIDGE_MIN_TOL = 1e-12
 #: The bridge's tolerances are the run's divided by this (at least :data:`BRIDGE_MIN_TOL`):
-#: at the run's own, the few bridged intervals (8 % of the time in the N four-bar) made about
-#: half of the error to the exact motion after 20 s in its 3D form (1.3e-6 m at rtol 1e-10;
-#: 2.2e-7 m with a tenth), the adaptive stepper's error per unit time at a given tolerance
-#: being larger than IDAS's next to a singular configuration; the bridge is compiled and short,
-#: so the tighter tolerance costs little.
-BRIDGE_TIGHTER = 10.0
+#: the adaptive stepper's error per unit time at a given tolerance is larger than IDAS's next
+#: to a singular configuration.  In the 3D N four-bar (N = 1, rtol = atol = 1e-10, 20 s, 8 %
+#: of the time bridged) the error to the exact motion was 1.6e-6 m with a tenth of the run's
+#: tolerances, 4.8e-7 m with a hundredth (the 2D form: 1.7e-7 and 2.1e-7 m); the bridge is
+#: compiled and short, so the tighter tolerance costs little.
+BRIDGE_TIGHTER = 100.0
+#: Branch test of a bridged interval (``_branch_changes``): the part of its chord outside the
+#: tangent motions at its ends, relative to its length, above which the motion changed branch.
+#: On one branch it is about half the angle the tangent turns over the interval; across to
+#: another, about the sine of the angle between the branches' tangents.  Measured on the
+#: four-bar of IFToMM A02 staying on its branch: at most 0.14 (N = 1 ... 40, 2D and 3D,
+#: intervals of 0.01 s; 0.2 with 0.1 s); from its parallelogram branch at 6° to the other
+#: branch at the flat position's other side: 0.46.
+BRANCH_DEPARTURE = 0.3
 #: Largest number of NumPy RATTLE steps across one output interval (``_bridge`` without a
 #: C compiler).
 BRIDGE_MAX_STEPS = 20_000
@@ -148,30 +167,39 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
       ``info["backend_reason"]`` says why).
     * ``progress``: a progress bar on stderr: ``True``, ``False``, or ``None`` = when stderr is a
       terminal and the run takes more than a second.
-    * ``max_steps``: IDAS steps allowed per output interval; ``linear_solver``: CasADi's
+    * ``max_steps``: IDAS steps allowed per output interval (per interval of the watched grid
+      below when watching); ``linear_solver``: CasADi's
       sparse solver for the Newton systems (``"csparse"``, ``"qr"``, ...).
     * ``project`` (IDAS), for linkages that pass singular positions (where ``A`` loses rank
       and another branch of ``Φ = 0`` meets the physical one, e.g. a parallelogram passing
       flat; there the KKT matrix of the index-1 DAE is singular and IDAS either fails or
       drifts onto the other branch).  ``"auto"`` (default): the run watches ``σ_min/σ_max``
-      of ``A`` at every output time (an SVD each; only models with ``nq · nc ≤``
-      :data:`AUTO_MAX_SIZE`), in IDAS chunks that end where the ratio's trend says it
-      reaches the limit (few calls: IDAS restarts at order 1 with each, its first step
-      ``min(√rtol, 10⁻³) dt``, see :class:`~ncgen.runtime.idas.ChunkedIDAS`); every output
-      interval that starts or ends near-singular
-      (ratio below :data:`~ncgen.assembly.manifold.NEAR_SINGULAR`, scaled by the starting
-      ratio, see :mod:`ncgen.assembly.manifold`), or that IDAS fails on close to one, is
-      crossed instead by the model's compiled error-controlled RATTLE stepper (order 4,
-      tolerances a tenth of ``rtol`` and ``atol``, at least 1e-12, from the state projected
-      onto both constraint levels, multipliers recomputed at both ends; compiled on first
-      use; :mod:`ncgen.runtime.rattle_bridge`), which stays on the branch.
-      ``info["projected_from"]`` is the first such output time,
-      ``info["stats"]["rattle_intervals"]`` their number.  The N four-bar of the IFToMM
-      benchmark A02 over 20 s (sixteen flat positions) then stays within 2e-7 m of the exact
-      motion at ``rtol = atol = 1e-10`` for N = 1, 10, 40 (2.3e-6 m in its 3D form with
-      revolute joints for N = 1, IDAS's own error on the regular part of that motion;
-      ``tests/test_singular_positions.py``).  ``True``: the same,
-      with one IDAS call per output interval and the state projected after each.  ``False``: IDAS alone.
+      of ``A`` and its rate (an SVD each; only models with ``nq · nc ≤``
+      :data:`AUTO_MAX_SIZE`) on a grid of its own, each output interval split into parts of
+      at most :data:`WATCHED_SAMPLE` (0.01 s), so that where the singular positions are
+      looked for does not depend on the output grid; IDAS runs in chunks of that grid that
+      end where the ratio's trend says it reaches the limit (few calls: IDAS restarts at
+      order 1 with each, its first step ``min(√rtol, 10⁻³)`` times the grid's interval, see
+      :class:`~ncgen.runtime.idas.ChunkedIDAS`); every grid interval that starts or ends
+      near-singular (ratio below :data:`~ncgen.assembly.manifold.NEAR_SINGULAR`, scaled by
+      the starting ratio, see :mod:`ncgen.assembly.manifold`), across which the ratio could
+      dip below that limit unseen (its rate at the two ends), or that IDAS fails on close
+      to one, is crossed instead by the model's compiled error-controlled RATTLE stepper
+      (order 4, tolerances a hundredth of ``rtol`` and ``atol``, at least 1e-12, from the
+      state projected onto both constraint levels, multipliers recomputed at both ends;
+      compiled on first use; :mod:`ncgen.runtime.rattle_bridge`), which stays on the branch.
+      Each bridged interval is then checked to end on the branch it started on (the chord
+      between its ends tangent to the constraints, :data:`BRANCH_DEPARTURE`); one that does
+      not is a :class:`~ncgen.errors.BranchWarning` naming its times
+      (``info["branch_changes"]``).  ``info["projected_from"]`` is the first bridged time,
+      ``info["watched_interval"]`` the grid's interval, ``info["stats"]["rattle_intervals"]``
+      the number of bridged intervals and ``info["stats"]["branch_departure"]`` the largest
+      departure of the branch test.  The N four-bar of the IFToMM benchmark A02 over 20 s
+      (sixteen flat positions) at ``rtol = atol = 1e-10`` then stays within 5e-7 m of the
+      exact motion for N = 1, 10, 40, planar and 3D, for every output interval from 1 ms to
+      0.5 s and both backends (``tests/test_singular_output_grid.py``).  ``True``: the same,
+      with one IDAS call per grid interval and the state projected after each.  ``False``:
+      IDAS alone.
     * ``method="stepper"``: the compiled fixed-step stepper (generated C, Newton loop
       included; :mod:`ncgen.runtime.stepper`): ``scheme="auto"`` (default) Suzuki's
       fourth-order composition of five RATTLE steps per step (``"rattle4"``), RATTLE alone
@@ -267,7 +295,10 @@ def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions, *, c
     u0 = U[0] + _extra_value(model, extra, t0, q, v, pv)
     lam = initial_multipliers(model, t0, q, v, u0, pv, dae)
     a = np.array(model.functions["ode"](t0, q, v, lam, u0, pv)[1]).reshape(-1)
-    runner = ChunkedIDAS(dae, h=float(t[1] - t[0]), nu=model.nu, hold=hold, rtol=rtol, atol=atol,
+    watch = project == "auto" and model.nq * model.nc <= AUTO_MAX_SIZE and model.nc > 0
+    projector = ManifoldProjector(model, pv, atol) if (project is True or watch) and feedback is None else None
+    m = 1 if projector is None else math.ceil((t[1] - t[0]) / WATCHED_SAMPLE - 1e-9)
+    runner = ChunkedIDAS(dae, h=float(t[1] - t[0]) / m, nu=model.nu, hold=hold, rtol=rtol, atol=atol,
                          max_steps=opts.max_steps, linear_solver=opts.linear_solver, expand=(used == "vm"),
                          algebraic=lambda tk, x, uk: _algebraic(
                              model, tk, x, uk + _extra_value(model, extra, tk, x[:model.nq], x[model.nq:], pv), pv))
@@ -277,43 +308,50 @@ def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions, *, c
                              "interval (zoh); use hold='zoh'")
         return _idas_feedback(model, runner, t, q, v, a, lam, U, pv, feedback, opts.progress, "idas", used, rtol,
                               atol, opts.linear_solver, dae)
-    watch = project == "auto" and model.nq * model.nc <= AUTO_MAX_SIZE and model.nc > 0
-    projector = ManifoldProjector(model, pv, atol) if project is True or watch else None
     if projector is not None:
         projector.start(t0, np.concatenate([q, v]))
     bridge = _bridge(model, runner, pv, rtol, atol) if projector is not None else None
     bar = Progress(t0, t[-1], opts.progress, label=f"simulating {model.name}: ")
     start = time.perf_counter()
+    grid = t if m == 1 else t[0] + (t[-1] - t[0]) * np.arange(m * (len(t) - 1) + 1) / (m * (len(t) - 1))
     try:
-        X, Z, failure, projected_from = _run(runner, t, np.concatenate([q, v]), np.concatenate([a, lam]), columns,
-                                             pv, bar, projector, bridge, auto=watch)
+        X, Z, failure, projected_from = _run(runner, grid, np.concatenate([q, v]), np.concatenate([a, lam]),
+                                             np.repeat(columns, m, axis=1), pv, bar, projector, bridge, auto=watch)
     finally:
         bar.close()
+    reached = float(grid[len(X) - 1])        # the last good time, on the watched grid
+    if failure is INTERRUPTED:
+        message = f"simulation of {model.name!r} interrupted (Ctrl-C) at t = {reached:.6g} s"
+    elif failure is not None:
+        message = _failure_message(model, failure, grid, len(X) - 1, X[-1], Z[-1, model.nq:], U[(len(X) - 1) // m],
+                                   pv, dae)
+    changes, departure = _branch_changes(model, projector, bridge, grid, X) if projector is not None else ([], 0.0)
+    X, Z = X[::m], Z[::m]
     nq, k = model.nq, len(X) - 1
     stats = dict(runner.stats)
     if projector is not None:
-        stats.update(projector.counts, rattle_intervals=bridge.count)
+        stats.update(projector.counts, rattle_intervals=bridge.count, branch_departure=departure)
     info = {"method": "idas", "backend": used, "backend_reason": choice.reason if used == choice.backend
             else "no C compiler", "rtol": rtol, "atol": atol, "hold": hold,
             "auto": why_not, "joint_dynamics": bool(opts.joint_dynamics),
             "controller": None if controller is None else controller.describe(),
             "linear_solver": opts.linear_solver, "stats": stats, "project": project,
-            "projected_from": None if projected_from is None else float(t[projected_from]),
+            "projected_from": None if projected_from is None else float(grid[projected_from]),
+            "watched_interval": float(grid[1] - grid[0]) if projector is not None else None,
+            "branch_changes": changes,
             "wall_time": time.perf_counter() - start, "complete": failure is None}
-    if failure is INTERRUPTED:
-        message = f"simulation of {model.name!r} interrupted (Ctrl-C) at t = {t[k]:.6g} s"
-        info["message"] = message
-    elif failure is not None:
-        message = _failure_message(model, failure, t, k, X[k], Z[k, nq:], U[k], pv, dae)
+    if failure is not None:
+        if t[k] < reached:
+            message += f" (Its outputs end at the last output time before, t = {t[k]:.6g} s.)"
         info["message"] = message
     U_applied = U[:k + 1] + np.array([_extra_value(model, extra, t[i], X[i, :nq], X[i, nq:], pv)
                                        for i in range(k + 1)]) if extra is not None else U[:k + 1]
     traj = Trajectory.from_states(model, t[:k + 1], X[:, :nq], X[:, nq:], Z[:, nq:], U_applied, pv, info)
     traj.info["energy"] = idas_report(model, traj, is_conservative(model, inputs=bool(np.any(U_applied != 0))))
     if failure is INTERRUPTED:
-        raise SimulationInterrupted(message, time=float(t[k]), trajectory=traj)
+        raise SimulationInterrupted(message, time=reached, trajectory=traj)
     if failure is not None:
-        raise SimulationError(message, time=float(t[k]), trajectory=traj)
+        raise SimulationError(message, time=reached, trajectory=traj)
     return traj
 
 
@@ -453,6 +491,7 @@ class _bridge:
         self.model, self.runner, self.p, self.rtol, self.atol = model, runner, p, rtol, atol
         self.tols = max(rtol / BRIDGE_TIGHTER, BRIDGE_MIN_TOL), max(atol / BRIDGE_TIGHTER, BRIDGE_MIN_TOL)
         self.count = 0
+        self.spans: list[tuple[float, float]] = []     # the bridged intervals
         self.stepper = None            # the compiled stepper; False: no C compiler
         self.h_next, self.t_next = 0.0, None
 
@@ -491,6 +530,7 @@ class _bridge:
         except RattleFailure as e:
             raise ChunkFailure("RATTLE_FAIL", str(e), "rattle") from None
         self.count += 1
+        self.spans.append((t0, t1))
         return x1, _algebraic(self.model, t1, x1, u1, self.p)
 
 
@@ -509,16 +549,18 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
     two IDAS stretches between bridges (a periodic motion meets its next flat position about
     as far on); a chunk that fails is tried again up to just before where IDAS gave up
     (:func:`_retry_length`); a chunk that
-    reaches the limit is cut at the last output before it; every interval that
-    starts or ends at a near-singular configuration, or that IDAS fails on not far from one
-    (:data:`FAILING_NEAR_SINGULAR`), is crossed by ``bridge`` instead, from the projected
-    state.  ``auto=False``: the state is also projected after every interval."""
+    reaches the limit, or has an interval across which the ratio could dip below it unseen
+    (``hidden``: its rate at both ends), is cut at the last output before it; every interval
+    that starts or ends at a near-singular configuration, that could hide one, or that IDAS
+    fails on not far from one (:data:`FAILING_NEAR_SINGULAR`), is crossed by ``bridge``
+    instead, from the projected state.  ``t`` is the watched grid (see :data:`WATCHED_SAMPLE`).  ``auto=False``: the state is also projected after every interval."""
     n_int = len(t) - 1
     watching = projector is not None
     full = 1 if watching and not auto else max(1, math.ceil(n_int / CHUNKS))
     X = np.empty((len(t), len(x0)))
     Z = np.empty((len(t), len(z0)))
-    R = np.full(len(t), np.nan)          # σ_min/σ_max of A at the output times (watching)
+    R = np.full((len(t), 2), np.nan)     # σ_min/σ_max of A and its rate at the grid times (watching)
+    h = float(t[1] - t[0])
     X[0], Z[0] = x0, z0
     since = None if auto or not watching else 0
     steps = [WATCHED_MAX_STEPS if watching else None]
@@ -528,12 +570,21 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
         R[k + 1:k + n + 1] = np.nan
 
     def ratio(i) -> float:
-        if np.isnan(R[i]):
-            R[i] = projector.ratio(t[i], X[i])
-        return R[i]
+        if np.isnan(R[i, 0]):
+            R[i] = projector.ratio_rate(t[i], X[i])
+        return R[i, 0]
 
     def near(i, limit=NEAR_SINGULAR) -> bool:
         return ratio(i) < limit * projector.scale
+
+    def hidden(i) -> bool:
+        """Whether the ratio could have dipped below the near-singular limit between grid
+        times i − 1 and i, both above it: going down to the limit and back takes a travel of
+        ``(r_{i−1} − limit) + (r_i − limit)``, which the ratio, moving at the larger of its two
+        end rates, covers within the interval."""
+        limit = NEAR_SINGULAR * projector.scale
+        room = ratio(i - 1) + ratio(i) - 2.0 * limit
+        return room < max(abs(R[i - 1, 1]), abs(R[i, 1])) * h
 
     bend = [np.nan]                       # the last second difference of that ratio seen by IDAS
     resumed, stretches = [None], []       # where IDAS resumed after the last bridge; its stretches between
@@ -602,7 +653,7 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
                     while not watching and k < k0 + n:
                         k = single(k)
                 if watching:
-                    first = next((i for i in range(k0 + 1, k + 1) if near(i)), None)
+                    first = next((i for i in range(k0 + 1, k + 1) if near(i) or hidden(i)), None)
                     observe(k0, k if first is None else first)
                     if first is not None:            # cut before it, cross it by the bridge
                         k = bridged(first - 1)
@@ -621,6 +672,32 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
             R[k] = np.nan
         bar.update(t[k])
     return X, Z, None, since
+
+
+def _branch_changes(model, projector: ManifoldProjector, bridge: _bridge, grid, X) -> tuple[list, float]:
+    """The bridged intervals (each next to a singular configuration) that fail the branch
+    test: the chord from the interval's start to its end leaves the tangent motions at either
+    end by more than :data:`BRANCH_DEPARTURE` of its length
+    (:meth:`~ncgen.assembly.manifold.ManifoldProjector.departure`).  Each is warned about
+    (:class:`~ncgen.errors.BranchWarning`, naming its times) and returned as ``(t_a, t_b)``,
+    with the largest departure of all bridged intervals (0 without any)."""
+    changes, largest = [], 0.0
+    for t_a, t_b in bridge.spans:
+        a, b = np.searchsorted(grid, t_a), np.searchsorted(grid, t_b)
+        if b >= len(X):
+            continue
+        e = projector.departure(float(grid[a]), X[a], float(grid[b]), X[b])
+        largest = max(largest, e)
+        if e > BRANCH_DEPARTURE:
+            changes.append((float(t_a), float(t_b)))
+            warnings.warn(f"simulation of {model.name!r}: between t = {t_a:.6g} s and {t_b:.6g} s the motion passed "
+                          f"a singular configuration of the constraints (A lost rank) and left it on another "
+                          f"branch of Phi = 0 than it came on (branch test: the chord between the two times "
+                          f"leaves the tangent motions by {e:.2g} of its length, above {BRANCH_DEPARTURE:g}); "
+                          f"check that this is the physical motion (a mechanism at rest at that configuration "
+                          f"and pushed along the other branch), or use a smaller rtol", BranchWarning,
+                          stacklevel=4)
+    return changes, largest
 
 
 def _retry_length(failure: ChunkFailure, t_k: float, h: float, n: int) -> int:
