@@ -652,7 +652,12 @@ def sweep_case(kind: str, n: int, config: str, models: dict, settings: dict, rou
               + (", R: rejected by its checks" if label != "mujoco RK4" else "") + ")")
         print("    " + ", ".join(f"{k}: {p['error']:.1e}/{p['time'] * 1e3:.1f}{' R' if p['rejected'] else ''}"
                                for k, p in sorted(curves[label].items())))
+    spread = max(checks.values())
     for target in settings["targets"]:
+        if spread > target / 10:
+            print(f"  target {target:.0e} m: skipped, the reference checks differ by {spread:.1e} m (more than a "
+                  f"tenth of it)")
+            continue
         found = {label: fine_search(run, curves[label], target) for label, run in runs.items()}
         times = {label: [] for label, k in found.items() if k is not None}
         load = os.getloadavg()[0]
