@@ -152,18 +152,45 @@ def mujoco_tip(n: int, data, length: float = L) -> np.ndarray:
     return data.xpos[n] + data.xmat[n].reshape(3, 3) @ d
 
 
+def chain_quaternions(points) -> np.ndarray:
+    """MuJoCo ``qpos`` (a unit quaternion w, x, y, z per ball joint, relative to the parent
+    body) that puts the twin's bars along ``points[k] - points[k - 1]`` (``points``: the
+    n + 1 joint positions from the fixed origin, the bars of equal length): bar k's world
+    rotation is the smallest turning its rest direction (+x for odd k, +y for even k) onto
+    its direction (the turn about the bar's own axis is free: it starts without spin)."""
+    def product(a, b):
+        return np.concatenate([[a[0] * b[0] - a[1:] @ b[1:]], a[0] * b[1:] + b[0] * a[1:] + np.cross(a[1:], b[1:])])
+
+    pts = np.asarray(points, float)
+    previous, out = np.array([1.0, 0.0, 0.0, 0.0]), []
+    for k in range(1, len(pts)):
+        rest = np.array([1.0, 0.0, 0.0]) if k % 2 else np.array([0.0, 1.0, 0.0])
+        u = (pts[k] - pts[k - 1]) / np.linalg.norm(pts[k] - pts[k - 1])
+        if rest @ u < -1 + 1e-12:                 # half a turn, about any axis normal to both
+            world = np.concatenate([[0.0], np.cross(rest, [0.0, 0.0, 1.0])])
+        else:
+            world = np.concatenate([[1.0 + rest @ u], np.cross(rest, u)])
+        world /= np.linalg.norm(world)
+        out.append(product(previous * [1, -1, -1, -1], world))
+        previous = world
+    return np.concatenate(out)
+
+
 def mujoco_run(n: int, integrator: str, timestep: float, t_end: float, axial: float = AXIAL_INERTIA,
-               length: float = L, mass: float = MASS, spin: float = 0.0):
+               length: float = L, mass: float = MASS, spin: float = 0.0, qpos=None):
     """``(seconds, tip)``: a fresh MuJoCo chain stepped to ``t_end`` by ``mj_step`` in one
     call (``nstep``, no Python in the loop); the model is compiled outside the timing.
     ``spin``: initial rigid rotation about the vertical (rad/s; the first ball joint's
-    rate, body frames being parallel to the world at rest)."""
+    rate, body frames being parallel to the world at rest); ``qpos``: the initial joint
+    quaternions (default the staircase; :func:`chain_quaternions`)."""
     import mujoco
 
     mujoco.set_mju_user_warning(_diverged)
     model = mujoco.MjModel.from_xml_string(chain_mjcf(n, integrator=integrator, timestep=timestep, axial=axial,
                                                       length=length, mass=mass))
     data = mujoco.MjData(model)
+    if qpos is not None:
+        data.qpos[:] = qpos
     data.qvel[2] = spin
     steps = int(round(t_end / timestep))
     start = time.perf_counter()

@@ -14,6 +14,21 @@ derived quantities, ``Trajectory``); the first-run costs (ncgen: build, generate
 its C from a cold compile cache, then a first short run; MuJoCo: the MJCF compile) are
 printed beside them.  ``--curves`` gives the whole curves described below instead.
 
+``--sweep`` (issue 38): error against cost over at least 20 step sizes per method, spaced
+geometrically (SWEEP), for the 20-bar explicit-joint chain released from rest from each
+configuration of CONFIGS (the staircase and a straight horizontal chain: violent; straight
+and tilted; a spiral hanging off the vertical: gentle; MuJoCo's twin starts from the same
+configuration, ``chain_quaternions``), the spinning 5-bar chain and the stiff-spring
+pendulum.  ncgen runs as users run it: ``nc.simulate(..., method="stepper",
+substeps=k)`` with its checks and its default error estimate on (and with
+``estimate="local"``); a run its checks reject counts as not reaching any target (its
+unchecked error is plotted, marked x).  At each target each method's step is taken on its
+envelope: the largest swept step from which every smaller swept step reaches the target,
+then bisection on the step count between it and the next larger swept step (MuJoCo RK4's
+and ncgen's alike).  The methods are then timed there in interleaved rounds (``--repeat``,
+default 5), min and median ratios to MuJoCo RK4 printed with the load average, and the
+curves plotted (``--plot``, PNG).
+
 Cases (bars of 1 m and 1 kg, released from rest as the horizontal staircase of
 benchmarks/common.py unless said otherwise):
 
@@ -57,6 +72,8 @@ include their shadow run (the global error estimate, about half the work again),
     python benchmarks/work_precision.py --smoke             N = 2, 1e-3 only (seconds; CI)
     python benchmarks/work_precision.py --curves            all curves (several minutes)
     python benchmarks/work_precision.py --curves --cases shared joints --repeat 5
+    python benchmarks/work_precision.py --sweep --plot wp.png   sweeps and envelope ratios (about an hour loaded)
+    python benchmarks/work_precision.py --sweep --cases joints --configs hanging
 """
 from __future__ import annotations
 
@@ -68,7 +85,7 @@ import warnings
 
 import numpy as np
 
-from common import AXIAL_INERTIA, chain_system, machine, mujoco_run, ncgen_tip, time_at
+from common import AXIAL_INERTIA, chain_quaternions, chain_system, ends, machine, mujoco_run, ncgen_tip, time_at
 
 T_END = 2.0
 OUTPUT_DT = 0.1
@@ -96,13 +113,37 @@ SMOKE = {
 }
 
 
+#: Initial configurations of the chains (released from rest): name -> (what, direction of bar
+#: k = 1..n as a function of k; bars of LENGTH).  "staircase" is benchmarks/common.py's.
+CONFIGS = {
+    "staircase": ("as the horizontal staircase", None),
+    "horizontal": ("straight and horizontal along x", lambda k: (1.0, 0.0, 0.0)),
+    "tilted": ("straight, 30 degrees below the horizontal", lambda k: (np.cos(np.pi / 6), 0.0, -np.sin(np.pi / 6))),
+    "hanging": ("as a spiral hanging 25 degrees off the vertical",
+                lambda k: (np.sin(np.radians(25)) * np.cos(2 * np.pi * k / 7),
+                           np.sin(np.radians(25)) * np.sin(2 * np.pi * k / 7), -np.cos(np.radians(25)))),
+}
+
+
+def chain_points(config: str, n: int) -> list[np.ndarray]:
+    """The n + 1 joint positions of a chain of n bars of LENGTH in configuration ``config``."""
+    direction = CONFIGS[config][1]
+    if direction is None:
+        return ends(n, LENGTH)
+    pts = [np.zeros(3)]
+    for k in range(1, n + 1):
+        d = np.asarray(direction(k), float)
+        pts.append(pts[-1] + LENGTH * d / np.linalg.norm(d))
+    return pts
+
+
 class Case:
     """A benchmark model: its ncgen form, initial rates, tip and MuJoCo twin (or None)."""
 
-    def __init__(self, kind: str, n: int):
+    def __init__(self, kind: str, n: int, config: str = "staircase", model=None):
         import ncgen as nc
 
-        self.kind, self.n = kind, n
+        self.kind, self.n, self.config = kind, n, config
         if kind == "stiff":
             s = nc.System("stiff_pendulum", gravity=(0.0, 0.0, -9.81))
             bar = s.add_bar("bar", "rr", mass=1.0, ends=[s.ground.point((0.0, 0.0, 0.0)), (1.0, 0.0, 0.0)])
@@ -113,10 +154,15 @@ class Case:
             s = chain_system(n, LENGTH, MASS, joints="explicit" if kind == "joints" else "shared")
             how = "explicit nc.Spherical joints" if kind == "joints" else "shared points"
             spin = f", spinning at {SPIN:g} rad/s about the vertical" if kind == "spinning" else ""
-            self.title = f"chain of N = {n} bars of {LENGTH:g} m, {MASS:g} kg, {how}{spin}"
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            self.model = s.build()
+            start = "" if config == "staircase" else f", released from rest {CONFIGS[config][0]}"
+            self.title = f"chain of N = {n} bars of {LENGTH:g} m, {MASS:g} kg, {how}{spin}{start}"
+        if model is None:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                model = s.build()
+        self.model = model
+        self.points = chain_points(config, n) if kind != "stiff" else None
+        self.q0 = None if config == "staircase" else np.concatenate(self.points[1:])
         self.v0 = None
         if kind == "spinning":
             self.v0 = np.cross([0.0, 0.0, SPIN], self.model.q0.reshape(-1, 3)).reshape(-1)
@@ -129,12 +175,13 @@ class Case:
         import ncgen as nc
 
         start = time.perf_counter()
-        traj = nc.simulate(self.model, t_end, dt, v0=self.v0, **kw)
+        traj = nc.simulate(self.model, t_end, dt, q0=self.q0, v0=self.v0, **kw)
         return traj, time.perf_counter() - start
 
     def mujoco(self, integrator, dt, axial=AXIAL_INERTIA):
         return mujoco_run(self.n, integrator, dt, T_END, axial=axial, length=LENGTH, mass=MASS,
-                          spin=SPIN if self.kind == "spinning" else 0.0)
+                          spin=SPIN if self.kind == "spinning" else 0.0,
+                          qpos=None if self.q0 is None else chain_quaternions(self.points))
 
 
 def ncgen_runs(case: Case, reference, config, repeat):
@@ -266,7 +313,15 @@ def main(argv=None) -> int:
     parser.add_argument("--repeat", type=int, default=None,
                         help="runs per point, the fastest counts (--curves, default 3); interleaved timing "
                              "rounds (targets, default 7)")
+    parser.add_argument("--sweep", action="store_true",
+                        help="work-precision sweeps over >= 20 step sizes per method, chains from several "
+                             "configurations, ratios at the envelope steps, plotted (issue 38)")
+    parser.add_argument("--configs", nargs="+", choices=list(CONFIGS),
+                        help="--sweep: the 20-bar chain's configurations (default all)")
+    parser.add_argument("--plot", help="--sweep: the PNG to write (default work_precision.png)")
     args = parser.parse_args(argv)
+    if args.sweep:
+        return sweep_main(args)
     if not args.curves:
         return targets_main(args)
     config = dict(SMOKE if args.smoke else FULL)
@@ -488,6 +543,211 @@ def goal_run(case: Case, first: dict, reference, target: float, goal: float, rou
     if best is not None:
         print(f"  with the first-run cost (one run from a cold cache): ncgen {once + np.median(times[best]):.2f} s, "
               f"MuJoCo {first['MuJoCo MJCF compile'] + np.median(mj):.2f} s")
+
+
+#: The sweep (``--sweep``, issue 38): cases (kind, N, configuration), step counts per method
+#: (substeps per OUTPUT_DT for ncgen, steps to T_END for MuJoCo: ``points`` counts spaced
+#: geometrically between the two), tip-error targets, and the goals (kind, target) -> ratio.
+SWEEP = {
+    "cases": [("joints", 20, c) for c in CONFIGS] + [("spinning", 5, "staircase"), ("stiff", 1, "staircase")],
+    "points": 24, "ncgen_counts": (2, 400), "mujoco_counts": (100, 40000), "targets": (1e-3, 1e-6),
+    "reference_step": 2e-5,
+}
+SWEEP_SMOKE = {
+    "cases": [("joints", 2, "staircase"), ("joints", 2, "hanging"), ("stiff", 1, "staircase")],
+    "points": 20, "ncgen_counts": (1, 60), "mujoco_counts": (20, 6000), "targets": (1e-3,),
+    "reference_step": 1e-3,
+}
+SWEEP_GOALS = {("joints", 1e-3): 0.5, ("joints", 1e-6): 0.3, ("spinning", 1e-3): 0.5}
+#: ncgen as users run it (``method="stepper"``, checks on): label -> keywords of simulate.
+USER_SETTINGS = {"ncgen default (rattle4, shadow estimate)": {},
+                 "ncgen rattle4, local estimate": {"estimate": "local"}}
+
+
+def step_counts(lo: int, hi: int, points: int) -> list[int]:
+    """At least ``points`` distinct integers from lo to hi, spaced about geometrically."""
+    m = points
+    while True:
+        counts = sorted({int(round(c)) for c in np.geomspace(lo, hi, m)})
+        if len(counts) >= min(points, hi - lo + 1):
+            return counts
+        m += 1
+
+
+def user_run(case: Case, reference, count: int, kw: dict) -> dict:
+    """One ncgen run as users run it (checks on) at ``count`` substeps per OUTPUT_DT:
+    error, wall time, the run's error estimate, and whether its checks rejected it (then the
+    error is that of the same run unchecked)."""
+    from ncgen.errors import SimulationError
+
+    try:
+        traj, wall = case.simulate(T_END, OUTPUT_DT, method="stepper", substeps=count, **kw)
+        rejected = ""
+    except SimulationError as e:
+        rejected = str(e).split(". ")[0][-90:]
+        try:
+            traj, wall = case.simulate(T_END, OUTPUT_DT, method="stepper", substeps=count, check=False, **kw)
+        except SimulationError:
+            return {"error": float("inf"), "time": float("nan"), "estimate": float("nan"), "rejected": rejected}
+    return {"error": _err(ncgen_tip(traj.q[-1]), reference), "time": wall,
+            "estimate": traj.info["error_estimate"]["q"], "rejected": rejected}
+
+
+def mujoco_point(case: Case, reference, count: int) -> dict:
+    wall, tip = case.mujoco("RK4", T_END / count)
+    return {"error": _err(tip, reference), "time": wall, "estimate": float("nan"), "rejected": ""}
+
+
+def envelope(points: dict[int, dict], target: float):
+    """The smallest swept count from which every finer one (larger count) reaches ``target``
+    (a run its checks reject does not), and the largest count below it; (None, None) if the
+    finest misses it."""
+    counts = sorted(points)
+    ok = [points[c]["error"] <= target and not points[c]["rejected"] for c in counts]
+    if not ok[-1]:
+        return None, None
+    i = len(counts) - 1
+    while i > 0 and ok[i - 1]:
+        i -= 1
+    return counts[i], (counts[i - 1] if i > 0 else None)
+
+
+def fine_search(run, points: dict[int, dict], target: float):
+    """Bisection on the count between the envelope's count and the failing count below it
+    (runs added to ``points``): the smallest count found reaching the target."""
+    hi, lo = envelope(points, target)
+    if hi is None:
+        return None
+    lo = lo or 0
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if mid not in points:
+            points[mid] = run(mid)
+        if points[mid]["error"] <= target and not points[mid]["rejected"]:
+            hi = mid
+        else:
+            lo = mid
+    return hi
+
+
+def sweep_case(kind: str, n: int, config: str, models: dict, settings: dict, rounds: int) -> dict:
+    """One case: the swept curves, each method's envelope count per target (finely searched),
+    interleaved timing there, ratios to MuJoCo RK4; returns the curves for the plot."""
+    case = Case(kind, n, config, model=models.get((kind, n)))
+    models[(kind, n)] = case.model
+    case.simulate(OUTPUT_DT, OUTPUT_DT, method="stepper", substeps=10, check=False)      # compiled outside timings
+    reference, checks = reference_tip(case, settings)
+    print(f"\n=== {case.title}: nq = {case.model.nq}, nc = {case.model.nc}; tip error after {T_END:g} s ===")
+    for what, dist in checks.items():
+        print(f"  reference check: |tip({what}) - tip(IDAS rtol 1e-12)| = {dist:.2e} m")
+    runs = {label: (lambda k, kw=kw: user_run(case, reference, k, kw)) for label, kw in USER_SETTINGS.items()}
+    if case.has_mujoco:
+        runs["mujoco RK4"] = lambda k: mujoco_point(case, reference, k)
+    curves = {}
+    for label, run in runs.items():
+        lo, hi = settings["mujoco_counts"] if label == "mujoco RK4" else settings["ncgen_counts"]
+        curves[label] = {k: run(k) for k in step_counts(lo, hi, settings["points"])}
+        what = "steps to 2 s" if label == "mujoco RK4" else f"substeps per {OUTPUT_DT:g} s"
+        print(f"  {label}: {len(curves[label])} step sizes ({what}: error m / wall ms"
+              + (", R: rejected by its checks" if label != "mujoco RK4" else "") + ")")
+        print("    " + ", ".join(f"{k}: {p['error']:.1e}/{p['time'] * 1e3:.1f}{' R' if p['rejected'] else ''}"
+                               for k, p in sorted(curves[label].items())))
+    spread = max(checks.values())
+    for target in settings["targets"]:
+        if spread > target / 10:
+            print(f"  target {target:.0e} m: skipped, the reference checks differ by {spread:.1e} m (more than a "
+                  f"tenth of it)")
+            continue
+        found = {label: fine_search(run, curves[label], target) for label, run in runs.items()}
+        times = {label: [] for label, k in found.items() if k is not None}
+        load = os.getloadavg()[0]
+        for _ in range(rounds):
+            for label in times:
+                times[label].append(runs[label](found[label])["time"])
+        load = max(load, os.getloadavg()[0])
+        print(f"  target {target:.0e} m: each method at its envelope step (every smaller swept step reaches the "
+              f"target, then bisection), {rounds} interleaved rounds, load average {load:.2f}")
+        for label, k in found.items():
+            if k is None:
+                print(f"    {label:<42} does not reach the target at the steps swept")
+                continue
+            p, t = curves[label][k], np.array(times[label])
+            h = T_END / k if label == "mujoco RK4" else OUTPUT_DT / k
+            est = f"  estimate {p['estimate']:.1e} ({p['estimate'] / p['error']:.2g}x the error)" \
+                if np.isfinite(p["estimate"]) else ""
+            print(f"    {label:<42} step {h:.3e} s  error {p['error']:.2e} m  min {t.min() * 1e3:8.2f} ms  "
+                  f"median {np.median(t) * 1e3:8.2f} ms{est}")
+        if "mujoco RK4" not in times:
+            continue
+        mj = np.array(times["mujoco RK4"])
+        for label in times:
+            if label == "mujoco RK4":
+                continue
+            t = np.array(times[label])
+            lo_, med = t.min() / mj.min(), np.median(t) / np.median(mj)
+            goal = SWEEP_GOALS.get((kind, target))
+            verdict = "" if goal is None else f"  (goal <= {goal:g}: {'met' if max(lo_, med) <= goal else 'NOT met'})"
+            print(f"  RATIO {label} / MuJoCo RK4 at {target:.0e}, {config}: min {lo_:.2f}, median {med:.2f}{verdict}")
+    return {"title": case.title, "curves": curves, "targets": settings["targets"]}
+
+
+def plot(results: list[dict], path: str) -> None:
+    """Error against wall time, one panel per case (PNG)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    cols = min(3, len(results))
+    rows = (len(results) + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(5.5 * cols, 4.2 * rows), squeeze=False)
+    for ax, res in zip(axes.flat, results):
+        for label, points in res["curves"].items():
+            pts = [(p["time"], p["error"], bool(p["rejected"])) for _, p in sorted(points.items())
+                   if np.isfinite(p["error"]) and p["error"] > 0 and np.isfinite(p["time"])]    # by step
+            line, = ax.loglog([p[0] for p in pts], [p[1] for p in pts], ".-", label=label, lw=1)
+            bad = [p for p in pts if p[2]]
+            if bad:
+                ax.loglog([p[0] for p in bad], [p[1] for p in bad], "x", color=line.get_color(), ms=7)
+        for target in res["targets"]:
+            ax.axhline(target, color="grey", lw=0.6, ls="--")
+        ax.set_title(res["title"].replace(", explicit nc.Spherical joints", "").replace(" of 1 m, 1 kg", ""),
+                     fontsize=7)
+        ax.set_xlabel("wall time (s)")
+        ax.set_ylabel("tip error after 2 s (m)")
+        ax.legend(fontsize=6)
+    for ax in list(axes.flat)[len(results):]:
+        ax.axis("off")
+    fig.suptitle("work-precision (x: rejected by the stepper's checks, error of the unchecked run)", fontsize=9)
+    fig.tight_layout()
+    tmp = path + ".tmp.png"
+    fig.savefig(tmp, dpi=110)
+    os.replace(tmp, path)
+    plt.close(fig)
+
+
+def sweep_main(args) -> int:
+    """``--sweep``: the cases of SWEEP, plotted to ``--plot``."""
+    import tempfile
+
+    settings = SWEEP_SMOKE if args.smoke else SWEEP
+    rounds = 1 if args.smoke else (args.repeat or 5)
+    path = args.plot or (os.path.join(tempfile.mkdtemp(prefix="ncgen-wp-"), "work_precision.png") if args.smoke
+                         else "work_precision.png")
+    print(machine())
+    warnings.simplefilter("ignore")
+    models, results = {}, []
+    for kind, n, config in settings["cases"]:
+        if args.cases and kind not in args.cases:
+            continue
+        if args.configs and kind == "joints" and config not in args.configs:
+            continue
+        results.append(sweep_case(kind, n, config, models, settings, rounds))
+    if results:
+        plot(results, path)
+        print(f"\nplot written to {path}")
+    print(f"load average at the end: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    return 0
 
 
 if __name__ == "__main__":
