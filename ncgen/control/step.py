@@ -1,5 +1,6 @@
 """``step_function(model, h)``: one RATTLE step of a model as compiled C with exact
-derivatives, rollouts and their adjoints (equations: :mod:`ncgen.control.discrete`).
+derivatives, rollouts and their adjoints (equations: :mod:`ncgen.control.discrete`;
+derivatives by the implicit function theorem at the converged step: :mod:`ncgen.control.ift`).
 
 State ``x = [q; v]`` (natural coordinates, m, and their rates, m/s; ``2 nq`` entries), inputs
 ``u`` held over the step, parameters ``p`` (default ``model.p0``), time ``t`` at the start of
@@ -26,18 +27,20 @@ from pathlib import Path
 
 import numpy as np
 
-from ncgen.control.discrete import (ABSTOL, MAX_ITER, ROLLOUT_CHUNK, rollout_functions, state_constraint_jacobian,
+from ncgen.control.discrete import (ABSTOL, MAX_ITER, ROLLOUT_CHUNK, rollout_function, state_constraint_jacobian,
                                     step_functions)
+from ncgen.control.ift import StepSensitivities
 from ncgen.errors import NcgenError
 
 METHODS = ("rattle",)
 #: A step whose residual ‖G‖∞ exceeds this (relative to the largest mass-matrix entry plus
-#: one) did not converge and is refused.
+#: one), or whose state or unknowns are not finite, did not converge and is refused.
 RESIDUAL_TOL = 1e-8
 
 
 class StepDidNotConverge(NcgenError):
-    """The Newton iterations of a step ended with a residual above :data:`RESIDUAL_TOL`."""
+    """The Newton iterations of a step ended with a residual above :data:`RESIDUAL_TOL` or
+    with NaN or inf in the state."""
 
 
 def step_function(model, h: float, method: str = "rattle", *, max_iter: int = MAX_ITER,
@@ -66,9 +69,10 @@ class StepFunction:
         self.nx, self.nu, self.np = 2 * model.nq, model.nu, model.np
         self.functions = step_functions(model, h, abstol=abstol, max_iter=max_iter)
         self.residual_tol = RESIDUAL_TOL * (1.0 + float(np.max(np.abs(model.M))) if model.nq else 1.0)
-        self._lib = _compile(f"{model.name}_step", list(self.functions.values()))
-        self._step, self._jac = self._lib["step"], self._lib["step_jac"]
-        self._rollouts: dict[int, dict] = {}
+        lib = _compile(f"{model.name}_step", [self.functions["step_solution"], self.functions["step_sensitivities"]])
+        self._solution = lib["step_solution"]
+        self._ift = StepSensitivities(lib["step_sensitivities"], model.nq, model.nc, h)
+        self._rollouts: dict = {}
         self._J = state_constraint_jacobian(model)
 
     def __repr__(self) -> str:
@@ -82,33 +86,44 @@ class StepFunction:
         t = self.model.t0 if t is None else float(t)
         return x, u, p, t
 
-    def _check(self, res: float, where: str) -> None:
-        if not res <= self.residual_tol:
-            raise StepDidNotConverge(f"step of {self.model.name!r}{where}: the Newton iterations ended with "
-                                     f"residual {res:.3g} > {self.residual_tol:.3g}; take a smaller h, raise "
-                                     "max_iter, or start from a state closer to the constraints")
+    def _check(self, res: float, z: np.ndarray, where: str) -> None:
+        """Refuse a step whose residual is above the tolerance or whose unknowns ``z`` (hence
+        state) are not finite."""
+        finite = bool(np.all(np.isfinite(z)))
+        if not (res <= self.residual_tol and finite):
+            found = f"residual {res:.3g} > {self.residual_tol:.3g}" if finite else "NaN or inf in the state"
+            raise StepDidNotConverge(f"step of {self.model.name!r} (h = {self.h:g} s){where}: the Newton "
+                                     f"iterations ended with {found}; take a smaller h, raise max_iter, or start "
+                                     "from a state closer to the constraints")
+
+    def _solve(self, x, u, p, t) -> tuple[np.ndarray, np.ndarray]:
+        """``(x1, z)``: the converged step (refused if it did not converge)."""
+        x1, z, res = self._solution(x, u, p, t)
+        self._check(float(res[0]), z, "")
+        return x1.copy(), z.copy()
 
     # ---------------------------------------------------------------------- step
     def __call__(self, x, u=None, p=None, t=None) -> np.ndarray:
         """The state after one step."""
-        x1, res = self._step(*self._args(x, u, p, t))
-        self._check(float(res[0]), "")
-        return x1.copy()
+        return self._solve(*self._args(x, u, p, t))[0]
 
     def jacobians(self, x, u=None, p=None, t=None, *, parameters: bool = False):
-        """``(x1, A, B)``, or ``(x1, A, B, C)`` with ``parameters=True``."""
-        x1, A, B, C, res = self._jac(*self._args(x, u, p, t))
-        self._check(float(res[0]), "")
-        out = (x1.copy(), A.reshape(self.nx, self.nx, order="F").copy(), B.reshape(self.nx, self.nu, order="F").copy())
-        return out + (C.reshape(self.nx, self.np, order="F").copy(),) if parameters else out
+        """``(x1, A, B)``, or ``(x1, A, B, C)`` with ``parameters=True`` (IFT at the
+        converged step: :mod:`ncgen.control.ift`)."""
+        args = self._args(x, u, p, t)
+        x1, z = self._solve(*args)
+        J = self._ift.jacobian(z, *args)
+        nx, nu = self.nx, self.nu
+        out = (x1, J[:, :nx], J[:, nx:nx + nu])
+        return out + (J[:, nx + nu:],) if parameters else out
 
     # ------------------------------------------------------------------ rollouts
-    def _rollout_lib(self, n: int) -> dict:
+    def _rollout_piece(self, n: int):
         """The compiled rollout of ``n`` steps (``n`` is ``ROLLOUT_CHUNK`` or 1: built once per
         step function, whatever the rollouts' lengths)."""
         if n not in self._rollouts:
-            fs = rollout_functions(self.functions["step"], n, self.h)
-            self._rollouts[n] = _compile(f"{self.model.name}_rollout{n}", list(fs.values()))
+            f = rollout_function(self.functions["step_solution"], n, self.h)
+            self._rollouts[n] = _compile(f"{self.model.name}_rollout{n}", [f])["rollout"]
         return self._rollouts[n]
 
     def _chunks(self, N: int) -> list[tuple[int, int]]:
@@ -129,39 +144,41 @@ class StepFunction:
         """States after each of the ``N = len(U)`` steps, shape ``(N, nx)`` (``U``: ``(N, nu)``)."""
         U = self._inputs(U)
         x0, _, p, t0 = self._args(x0, U[0], p, t0)
-        X = np.empty((U.shape[0], self.nx))
+        return self._rollout(x0, U, p, t0)[0]
+
+    def _rollout(self, x0, U, p, t0) -> tuple[np.ndarray, np.ndarray]:
+        """``(X, Z)``: the states after each step and each step's unknowns (rows)."""
+        N, nz = U.shape[0], self._ift.nz
+        X, Z = np.empty((N, self.nx)), np.empty((N, nz))
         x = x0
-        for k, n in self._chunks(U.shape[0]):
-            Xc, res = self._rollout_lib(n)["rollout"](x, U[k:k + n].T.ravel(order="F"), p, t0 + k * self.h)
-            bad = np.flatnonzero(~(res <= self.residual_tol))
-            if bad.size:
-                self._check(float(res[bad[0]]), f" {k + bad[0]} of the rollout")
-            X[k:k + n] = Xc.reshape(self.nx, n, order="F").T
+        for k, n in self._chunks(N):
+            Xc, Zc, res = self._rollout_piece(n)(x, U[k:k + n].T.ravel(order="F"), p, t0 + k * self.h)
+            Zc = Zc.reshape(nz, n, order="F").T
+            for i in range(n):
+                self._check(float(res[i]), Zc[i], f" {k + i} of the rollout")
+            X[k:k + n], Z[k:k + n] = Xc.reshape(self.nx, n, order="F").T, Zc
             x = X[k + n - 1]
-        return X
+        return X, Z
 
     def rollout_gradient(self, x0, U, dX, p=None, t0=None, *, parameters: bool = False):
         """``(dx0, dU)`` (and ``dp`` with ``parameters=True``): the gradient of a cost ``J(X)``
         with respect to ``x0`` and ``U`` given ``dX = ∂J/∂X`` (shape of :meth:`rollout`'s
-        result); one reverse sweep in C per piece, the pieces from the last to the first (each
-        piece's ``∂J/∂x0`` added to the ``∂J/∂X`` of the state it starts from)."""
+        result); one transposed IFT solve per step (:meth:`StepSensitivities.adjoint`), from
+        the last step to the first (each step's ``x̄`` added to the ``∂J/∂X`` of the state it
+        starts from)."""
         U = self._inputs(U)
         x0, _, p, t0 = self._args(x0, U[0], p, t0)
         N = U.shape[0]
         dX = np.asarray(dX, dtype=float)
         if dX.shape != (N, self.nx) or not np.all(np.isfinite(dX)):
             raise NcgenError(f"dX: expected finite ∂J/∂X of shape ({N}, {self.nx}), got shape {dX.shape}")
-        X = self.rollout(x0, U, p, t0)                 # refuses a rollout that did not converge
-        dU, dp, carry = np.empty((N, self.nu)), np.zeros(self.np), np.zeros(self.nx)
-        for k, n in reversed(self._chunks(N)):
-            seed = dX[k:k + n].copy()
-            seed[-1] += carry
-            dx0, dUc, dpc = self._rollout_lib(n)["rollout_adjoint"](x0 if k == 0 else X[k - 1],
-                                                                    U[k:k + n].T.ravel(order="F"), p,
-                                                                    t0 + k * self.h, seed.ravel())
-            carry = dx0.copy()
-            dU[k:k + n] = dUc.reshape(self.nu, n, order="F").T
-            dp += dpc
+        X, Z = self._rollout(x0, U, p, t0)            # refuses a rollout that did not converge
+        nx, nu = self.nx, self.nu
+        dU, dp, carry = np.empty((N, nu)), np.zeros(self.np), np.zeros(nx)
+        for k in range(N - 1, -1, -1):
+            y_bar = self._ift.adjoint(Z[k], x0 if k == 0 else X[k - 1], U[k], p, t0 + k * self.h, dX[k] + carry)
+            carry, dU[k] = y_bar[:nx], y_bar[nx:nx + nu]
+            dp += y_bar[nx + nu:]
         out = (carry, dU)
         return out + (dp,) if parameters else out
 
