@@ -21,14 +21,17 @@ differentiating the iterations: with ``y = [x; u; p]``,
 
     ∂z/∂y = −G_z⁻¹ G_y,      ∂x⁺/∂y = [I_q 0] + E ∂z/∂y,   E z = [h w; v⁺]
 
-so that ``A = ∂x⁺/∂x``, ``B = ∂x⁺/∂u``, ``C = ∂x⁺/∂p``.  :func:`step_functions` generates
-only the step (the rootfinder, returning ``z``) and the sparse ``G_z``, ``G_y``
-(``step_sensitivities``): the C grows with the model's functions, not with a factorisation
-unrolled into code; the solves are numerical (:mod:`ncgen.control.step`).  The adjoint of a
-step is the transposed solve, ``ȳ = −G_yᵀ G_z⁻ᵀ Eᵀ x̄⁺ + [x̄⁺_q; 0]``.  Every function also
-returns the residual ``‖G(z)‖∞`` of the solution it used, so that callers can refuse a step
-that did not converge.  :func:`step_jacobian_function` writes the same IFT solve in CasADi
-(one QR of ``G_z``) for the MPC, whose generated C must be self-contained.
+so that ``A = ∂x⁺/∂x``, ``B = ∂x⁺/∂u``, ``C = ∂x⁺/∂p``; the adjoint of a step is one
+transposed solve, ``ȳ = (∂x⁺/∂y)ᵀ x̄⁺ = [x̄⁺_q; 0] − G_yᵀ G_z⁻ᵀ Eᵀ x̄⁺``.
+:func:`step_functions` generates the step (the rootfinder, also returning ``z``) and these
+two solves at a given ``z`` (``step_jacobian``, ``step_adjoint``): the sparse ``G_z``,
+``G_y`` (SX) and CasADi's sparse QR linear solver (``"qr"``, generated as loops over the
+factor's pattern), so the C grows with the model's functions, not with a factorisation
+unrolled into code (unrolled, the z1 arm's was 55 MB of C that gcc could not compile).
+Every step function also returns the residual ``‖G(z)‖∞`` of the solution it used, so that
+callers can refuse a step that did not converge.  :func:`step_jacobian_function` writes the
+whole step with its Jacobians as one function for the MPC (its QR unrolled into SX when the
+factors are small, :data:`SX_QR_MAX_NNZ`).
 
 Rollouts ``X = [x₁ … x_N]`` run in pieces of :data:`ROLLOUT_CHUNK` steps (and single
 steps for the rest), each a ``mapaccum`` of the step returning the states and the steps'
@@ -88,37 +91,52 @@ def _solved_step(model, h: float, abstol: float, abstol_step: float, max_iter: i
 def step_functions(model, h: float, *, abstol: float = ABSTOL, abstol_step: float = ABSTOL_STEP,
                    max_iter: int = MAX_ITER) -> dict[str, ca.Function]:
     """``{"step": (x, u, p, t) -> (x1, res), "step_solution": (x, u, p, t) -> (x1, z, res),
-    "step_sensitivities": (z, x, u, p, t) -> (G_z, G_y)}`` (MX calling the rootfinder;
-    ``G_z``, ``G_y = ∂G/∂[x; u; p]`` sparse, SX)."""
+    "step_jacobian": (z, x, u, p, t) -> J, "step_adjoint": (z, x, u, p, t, x1_bar) -> y_bar}``
+    with ``J = ∂x⁺/∂[x; u; p]`` (nx × (nx + nu + np), dense) and ``y_bar = Jᵀ x1_bar`` at the
+    converged ``z`` (see the module docstring)."""
+    nq, nc = model.nq, model.nc
     G, args, z, x1, res = _solved_step(model, h, abstol, abstol_step, max_iter)
     names = ["x", "u", "p", "t"]
     step = ca.Function("step", list(args), [x1, res], names, ["x1", "res"])
     solution = ca.Function("step_solution", list(args), [x1, z, res], names, ["x1", "z", "res"])
+    zk = ca.MX.sym("z", z.size1())                     # a converged step's unknowns
+    G_z, G_y = _sensitivities(G)(zk, *args)
+    ny = G_y.size2()
+    jacobian = _state_jacobian(-ca.solve(G_z, ca.densify(G_y), "qr"), nq, nc, h)
+    x1_bar = ca.MX.sym("x1_bar", 2 * nq)
+    z_bar = ca.vertcat(h * x1_bar[:nq], ca.MX(nc, 1), x1_bar[nq:], ca.MX(nc, 1))       # Eᵀ x̄⁺
+    y_bar = ca.vertcat(x1_bar[:nq], ca.MX(ny - nq, 1)) - ca.mtimes(G_y.T, ca.solve(G_z.T, z_bar, "qr"))
+    return {"step": step, "step_solution": solution,
+            "step_jacobian": ca.Function("step_jacobian", [zk, *args], [ca.densify(jacobian)], ["z", *names], ["J"]),
+            "step_adjoint": ca.Function("step_adjoint", [zk, *args, x1_bar], [y_bar], ["z", *names, "x1_bar"],
+                                        ["y_bar"])}
+
+
+def _sensitivities(G: ca.Function) -> ca.Function:
+    """``(z, x, u, p, t) -> (G_z, G_y)``, ``y = [x; u; p]`` (sparse, SX)."""
     zs, xs, us, ps, ts = (G.sx_in(i) for i in range(5))
     Gs = G(zs, xs, us, ps, ts)
-    sensitivities = ca.Function("step_sensitivities", [zs, xs, us, ps, ts],
-                                [ca.jacobian(Gs, zs), ca.jacobian(Gs, ca.vertcat(xs, us, ps))],
-                                ["z", "x", "u", "p", "t"], ["G_z", "G_y"])
-    return {"step": step, "step_solution": solution, "step_sensitivities": sensitivities}
+    return ca.Function("step_sensitivities", [zs, xs, us, ps, ts],
+                       [ca.jacobian(Gs, zs), ca.jacobian(Gs, ca.vertcat(xs, us, ps))])
+
+
+def _state_jacobian(Z_y, nq: int, nc: int, h: float):
+    """``∂x⁺/∂y = [I_q 0] + E ∂z/∂y`` from ``Z_y = ∂z/∂y`` (x⁺ = [q + h w; v⁺])."""
+    ny = Z_y.size2()
+    return ca.vertcat(ca.horzcat(ca.DM.eye(nq), ca.DM(nq, ny - nq)) + h * Z_y[:nq, :], Z_y[nq + nc:2 * nq + nc, :])
 
 
 def step_jacobian_function(model, h: float, *, abstol: float = ABSTOL, abstol_step: float = ABSTOL_STEP,
                            max_iter: int = MAX_ITER) -> ca.Function:
     """``step_jac: (x, u, p, t) -> (x1, A, B, C, res)`` (``A``, ``B``, ``C`` dense): the IFT
-    solve written in CasADi, one QR of ``G_z`` for all columns, for self-contained C (the
-    MPC); :class:`ncgen.control.step.StepFunction` solves numerically instead."""
+    solve with one QR of ``G_z`` for all columns (:func:`qr_solve_columns`), in one function
+    with the step: what the MPC's generated C calls at every node of its horizon."""
     nq, nc = model.nq, model.nc
     G, (x, u, p, t), z, x1, res = _solved_step(model, h, abstol, abstol_step, max_iter)
-    zs, xs, us, ps, ts = (G.sx_in(i) for i in range(5))
-    y = ca.vertcat(xs, us, ps)
-    Gs = G(zs, xs, us, ps, ts)
-    sensitivities = ca.Function("step_sensitivities", [zs, xs, us, ps, ts],
-                                [ca.jacobian(Gs, zs), ca.densify(ca.jacobian(Gs, y))])
+    sensitivities = _sensitivities(G)
     G_z, G_y = sensitivities(z, x, u, p, t)
-    ny = y.numel()
-    Z_y = -qr_solve_columns(G_z, G_y, ca.jacobian(Gs, zs).sparsity(), ny)
-    X1_y = ca.vertcat(ca.horzcat(ca.DM.eye(nq), ca.DM(nq, ny - nq)) + h * Z_y[:nq, :],
-                      Z_y[nq + nc:2 * nq + nc, :])             # x⁺ = [q + h w; v⁺]
+    ny = G_y.size2()
+    X1_y = _state_jacobian(-qr_solve_columns(G_z, ca.densify(G_y), sensitivities.sparsity_out(0), ny), nq, nc, h)
     nu_ = model.nu
     return ca.Function("step_jac", [x, u, p, t],
                        [x1] + [ca.densify(X1_y[:, c]) for c in (slice(0, 2 * nq), slice(2 * nq, 2 * nq + nu_),

@@ -1,6 +1,6 @@
 """``step_function(model, h)``: one RATTLE step of a model as compiled C with exact
 derivatives, rollouts and their adjoints (equations: :mod:`ncgen.control.discrete`;
-derivatives by the implicit function theorem at the converged step: :mod:`ncgen.control.ift`).
+derivatives by the implicit function theorem at the converged step).
 
 State ``x = [q; v]`` (natural coordinates, m, and their rates, m/s; ``2 nq`` entries), inputs
 ``u`` held over the step, parameters ``p`` (default ``model.p0``), time ``t`` at the start of
@@ -29,7 +29,6 @@ import numpy as np
 
 from ncgen.control.discrete import (ABSTOL, MAX_ITER, ROLLOUT_CHUNK, rollout_function, state_constraint_jacobian,
                                     step_functions)
-from ncgen.control.ift import StepSensitivities
 from ncgen.errors import NcgenError
 
 METHODS = ("rattle",)
@@ -69,9 +68,10 @@ class StepFunction:
         self.nx, self.nu, self.np = 2 * model.nq, model.nu, model.np
         self.functions = step_functions(model, h, abstol=abstol, max_iter=max_iter)
         self.residual_tol = RESIDUAL_TOL * (1.0 + float(np.max(np.abs(model.M))) if model.nq else 1.0)
-        lib = _compile(f"{model.name}_step", [self.functions["step_solution"], self.functions["step_sensitivities"]])
-        self._solution = lib["step_solution"]
-        self._ift = StepSensitivities(lib["step_sensitivities"], model.nq, model.nc, h)
+        lib = _compile(f"{model.name}_step", [self.functions[k] for k in ("step_solution", "step_jacobian",
+                                                                           "step_adjoint")])
+        self._solution, self._jacobian, self._adjoint = lib["step_solution"], lib["step_jacobian"], lib["step_adjoint"]
+        self.nz = 2 * (model.nq + model.nc)
         self._rollouts: dict = {}
         self._J = state_constraint_jacobian(model)
 
@@ -86,10 +86,10 @@ class StepFunction:
         t = self.model.t0 if t is None else float(t)
         return x, u, p, t
 
-    def _check(self, res: float, z: np.ndarray, where: str) -> None:
-        """Refuse a step whose residual is above the tolerance or whose unknowns ``z`` (hence
-        state) are not finite."""
-        finite = bool(np.all(np.isfinite(z)))
+    def _check(self, res: float, x1: np.ndarray, z: np.ndarray, where: str) -> None:
+        """Refuse a step whose residual is above the tolerance or whose state ``x1`` or
+        unknowns ``z`` are not finite."""
+        finite = bool(np.all(np.isfinite(z)) and np.all(np.isfinite(x1)))
         if not (res <= self.residual_tol and finite):
             found = f"residual {res:.3g} > {self.residual_tol:.3g}" if finite else "NaN or inf in the state"
             raise StepDidNotConverge(f"step of {self.model.name!r} (h = {self.h:g} s){where}: the Newton "
@@ -99,7 +99,7 @@ class StepFunction:
     def _solve(self, x, u, p, t) -> tuple[np.ndarray, np.ndarray]:
         """``(x1, z)``: the converged step (refused if it did not converge)."""
         x1, z, res = self._solution(x, u, p, t)
-        self._check(float(res[0]), z, "")
+        self._check(float(res[0]), x1, z, "")
         return x1.copy(), z.copy()
 
     # ---------------------------------------------------------------------- step
@@ -108,11 +108,15 @@ class StepFunction:
         return self._solve(*self._args(x, u, p, t))[0]
 
     def jacobians(self, x, u=None, p=None, t=None, *, parameters: bool = False):
-        """``(x1, A, B)``, or ``(x1, A, B, C)`` with ``parameters=True`` (IFT at the
-        converged step: :mod:`ncgen.control.ift`)."""
+        """``(x1, A, B)``, or ``(x1, A, B, C)`` with ``parameters=True`` (the implicit function
+        theorem at the converged step: :mod:`ncgen.control.discrete`)."""
         args = self._args(x, u, p, t)
         x1, z = self._solve(*args)
-        J = self._ift.jacobian(z, *args)
+        J = self._jacobian(z, *args)[0].reshape(self.nx, -1, order="F").copy()
+        if not np.all(np.isfinite(J)):
+            raise StepDidNotConverge(f"step of {self.model.name!r} (h = {self.h:g} s): its Jacobians are not "
+                                     "finite: the Newton matrix G_z is singular there (redundant constraints "
+                                     "or a singular configuration)")
         nx, nu = self.nx, self.nu
         out = (x1, J[:, :nx], J[:, nx:nx + nu])
         return out + (J[:, nx + nu:],) if parameters else out
@@ -148,23 +152,23 @@ class StepFunction:
 
     def _rollout(self, x0, U, p, t0) -> tuple[np.ndarray, np.ndarray]:
         """``(X, Z)``: the states after each step and each step's unknowns (rows)."""
-        N, nz = U.shape[0], self._ift.nz
+        N, nz = U.shape[0], self.nz
         X, Z = np.empty((N, self.nx)), np.empty((N, nz))
         x = x0
         for k, n in self._chunks(N):
             Xc, Zc, res = self._rollout_piece(n)(x, U[k:k + n].T.ravel(order="F"), p, t0 + k * self.h)
-            Zc = Zc.reshape(nz, n, order="F").T
+            Xc, Zc = Xc.reshape(self.nx, n, order="F").T, Zc.reshape(nz, n, order="F").T
             for i in range(n):
-                self._check(float(res[i]), Zc[i], f" {k + i} of the rollout")
-            X[k:k + n], Z[k:k + n] = Xc.reshape(self.nx, n, order="F").T, Zc
+                self._check(float(res[i]), Xc[i], Zc[i], f" {k + i} of the rollout")
+            X[k:k + n], Z[k:k + n] = Xc, Zc
             x = X[k + n - 1]
         return X, Z
 
     def rollout_gradient(self, x0, U, dX, p=None, t0=None, *, parameters: bool = False):
         """``(dx0, dU)`` (and ``dp`` with ``parameters=True``): the gradient of a cost ``J(X)``
         with respect to ``x0`` and ``U`` given ``dX = ∂J/∂X`` (shape of :meth:`rollout`'s
-        result); one transposed IFT solve per step (:meth:`StepSensitivities.adjoint`), from
-        the last step to the first (each step's ``x̄`` added to the ``∂J/∂X`` of the state it
+        result); one transposed IFT solve per step (``step_adjoint``, generated C), from the
+        last step to the first (each step's ``x̄`` added to the ``∂J/∂X`` of the state it
         starts from)."""
         U = self._inputs(U)
         x0, _, p, t0 = self._args(x0, U[0], p, t0)
@@ -176,9 +180,13 @@ class StepFunction:
         nx, nu = self.nx, self.nu
         dU, dp, carry = np.empty((N, nu)), np.zeros(self.np), np.zeros(nx)
         for k in range(N - 1, -1, -1):
-            y_bar = self._ift.adjoint(Z[k], x0 if k == 0 else X[k - 1], U[k], p, t0 + k * self.h, dX[k] + carry)
-            carry, dU[k] = y_bar[:nx], y_bar[nx:nx + nu]
+            y_bar = self._adjoint(Z[k], x0 if k == 0 else X[k - 1], U[k], p, t0 + k * self.h, dX[k] + carry)[0]
+            carry, dU[k] = y_bar[:nx].copy(), y_bar[nx:nx + nu]
             dp += y_bar[nx + nu:]
+        if not (np.all(np.isfinite(carry)) and np.all(np.isfinite(dU)) and np.all(np.isfinite(dp))):
+            raise StepDidNotConverge(f"rollout of {self.model.name!r}: its gradient is not finite: the Newton "
+                                     "matrix G_z of a step is singular (redundant constraints or a singular "
+                                     "configuration)")
         out = (carry, dU)
         return out + (dp,) if parameters else out
 
