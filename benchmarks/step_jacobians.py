@@ -3,9 +3,9 @@ central differences (issue 34's target: at most 2 MB of C, compiled in at most 1
 30 s — with at most 1 GB of compiler memory; equal to central differences to 1e-6).
 
 ``nc.step_function(model, h)`` generates the RATTLE step (CasADi's ``fast_newton``
-rootfinder, returning the step's unknowns ``z``) and the sparse ``G_z``, ``G_y`` of the step
-residual; ``st.jacobians(x, u)`` solves ``∂z/∂y = −G_z⁻¹ G_y`` numerically
-(:mod:`ncgen.control.ift`).  Per robot, in a fresh process with an empty compile cache:
+rootfinder, returning the step's unknowns ``z``) and, at a converged ``z``, the implicit
+function theorem's ``∂z/∂y = −G_z⁻¹ G_y`` (sparse ``G_z``, ``G_y`` and CasADi's looped sparse
+QR) and its transposed solve (:mod:`ncgen.control.discrete`).  Per robot, in a fresh process with an empty compile cache:
 
 * C: bytes of the package's ``.c`` and ``.h`` files (written as ``step_function`` writes them);
 * compile: ncgen's own build of that package (its flags and parallel jobs), wall time, CPU
@@ -14,7 +14,7 @@ residual; ``st.jacobians(x, u)`` solves ``∂z/∂y = −G_z⁻¹ G_y`` numerica
   reports);
 * calls: ``st(x, u)`` and ``st.jacobians(x, u)`` from Python (best of ``--repeat`` batches);
 * check: ``A = ∂x⁺/∂x``, ``B = ∂x⁺/∂u`` against central differences of the compiled step
-  (steps 1e-5 relative), as ``max |J − J_fd| / max |J_fd|``; at a moving state (random rates
+  (steps 1e-6 relative), as ``max |J − J_fd| / max |J_fd|``; at a moving state (random rates
   projected on the constraints, then three steps with random torques).
 
 Robots (example-robot-data): z1, panda, ur10 (fixed base), talos_reduced (floating base,
@@ -79,6 +79,7 @@ def measure(robot: str, h: float, repeat: int) -> dict:
     from ncgen.codegen.compile_cache import compile_package
     from ncgen.codegen.package import write_package
     from ncgen.control.discrete import step_functions
+    from ncgen.control.step import COMPILED
 
     urdf, floating = ROBOTS[robot]
     start = time.process_time()
@@ -87,7 +88,7 @@ def measure(robot: str, h: float, repeat: int) -> dict:
     fs = step_functions(model, h)
     with tempfile.TemporaryDirectory() as tmp:
         # as ncgen.control.step._compile writes it, so that step_function below finds it cached
-        pkg = write_package(f"{model.name}_step", [fs["step_solution"], fs["step_sensitivities"]], Path(tmp) / "pkg",
+        pkg = write_package(f"{model.name}_step", [fs[k] for k in COMPILED], Path(tmp) / "pkg",
                             reroll_instructions=None)
         out["c_mb"] = sum(f.stat().st_size for f in pkg.path.iterdir() if f.suffix in (".c", ".h")) / 1e6
         cpu0, _ = children_usage()
@@ -106,8 +107,8 @@ def measure(robot: str, h: float, repeat: int) -> dict:
         x = st(x, rng.normal(size=model.nu))
     u = rng.normal(size=model.nu)
     _, A, B = st.jacobians(x, u)
-    out["err_A"] = rel_err(A, central(lambda y: st(y, u), x, 1e-5))
-    out["err_B"] = rel_err(B, central(lambda y: st(x, y), u, 1e-5))
+    out["err_A"] = rel_err(A, central(lambda y: st(y, u), x, 1e-6))
+    out["err_B"] = rel_err(B, central(lambda y: st(x, y), u, 1e-6))
     out["step_us"] = 1e6 * best(lambda: st(x, u), 20, repeat)
     out["jacobians_us"] = 1e6 * best(lambda: st.jacobians(x, u), 5, repeat)
     return out

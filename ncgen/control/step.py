@@ -32,6 +32,8 @@ from ncgen.control.discrete import (ABSTOL, MAX_ITER, ROLLOUT_CHUNK, rollout_fun
 from ncgen.errors import NcgenError
 
 METHODS = ("rattle",)
+#: The functions of :func:`ncgen.control.discrete.step_functions` a step function compiles.
+COMPILED = ("step_solution", "step_jacobian", "step_adjoint")
 #: A step whose residual ‖G‖∞ exceeds this (relative to the largest mass-matrix entry plus
 #: one), or whose state or unknowns are not finite, did not converge and is refused.
 RESIDUAL_TOL = 1e-8
@@ -48,15 +50,14 @@ def step_function(model, h: float, method: str = "rattle", *, max_iter: int = MA
     scheme, in natural coordinates, also for trees) as a :class:`StepFunction`."""
     if method not in METHODS:
         raise NcgenError(f"step_function: method: expected one of {', '.join(METHODS)}, got {method!r}")
-    h = float(h)
-    if not np.isfinite(h) or h <= 0:
-        raise NcgenError(f"step_function: h: expected a positive step in seconds, got {h!r}")
+    h = _positive(h, "h", "a positive, finite step in seconds")
+    abstol = _positive(abstol, "abstol", "a positive, finite tolerance")
     if getattr(model, "contact_model", "smooth") == "nonsmooth" and getattr(model, "nk", 0) > 0:
         raise NcgenError(f"step_function: model {model.name!r} has nonsmooth contacts; their step is not "
                          "differentiable at impacts and is not supported (use contacts='smooth')")
     if not isinstance(max_iter, int) or max_iter < 1:
         raise NcgenError(f"step_function: max_iter: expected a positive integer, got {max_iter!r}")
-    return StepFunction(model, h, max_iter=max_iter, abstol=float(abstol))
+    return StepFunction(model, h, max_iter=max_iter, abstol=abstol)
 
 
 class StepFunction:
@@ -68,8 +69,7 @@ class StepFunction:
         self.nx, self.nu, self.np = 2 * model.nq, model.nu, model.np
         self.functions = step_functions(model, h, abstol=abstol, max_iter=max_iter)
         self.residual_tol = RESIDUAL_TOL * (1.0 + float(np.max(np.abs(model.M))) if model.nq else 1.0)
-        lib = _compile(f"{model.name}_step", [self.functions[k] for k in ("step_solution", "step_jacobian",
-                                                                           "step_adjoint")])
+        lib = _compile(f"{model.name}_step", [self.functions[k] for k in COMPILED])
         self._solution, self._jacobian, self._adjoint = lib["step_solution"], lib["step_jacobian"], lib["step_adjoint"]
         self.nz = 2 * (model.nq + model.nc)
         self._rollouts: dict = {}
@@ -204,6 +204,17 @@ class StepFunction:
         t1 = (self.model.t0 if t is None else float(t)) + self.h
         T0, T1 = self.tangent_basis(x, p, t), self.tangent_basis(x1, p, t1)
         return x1, T1.T @ A @ T0, T1.T @ B
+
+
+def _positive(value, name: str, what: str) -> float:
+    """``value`` as a float if it is a finite number above zero, else a clear error."""
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        out = None
+    if isinstance(value, bool) or out is None or not np.isfinite(out) or out <= 0:
+        raise NcgenError(f"step_function: {name}: expected {what}, got {value!r}")
+    return out
 
 
 def _vector(a, n: int, name: str, what: str) -> np.ndarray:
