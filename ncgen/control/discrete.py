@@ -73,8 +73,9 @@ def step_state(x, z, nq: int, nc: int, h: float):
 
 
 def _solved_step(model, h: float, abstol: float, abstol_step: float, max_iter: int):
-    """``(G, (x, u, p, t), z, x1, res)``: the residual, MX arguments, the rootfinder's solution
-    ``z`` from ``z₀ = [v; 0; v; 0]``, the state after the step and ``‖G(z)‖∞``."""
+    """``(G, (x, u, p, t), z, x1, res, solve)``: the residual, MX arguments, the rootfinder's
+    solution ``z`` from ``z₀ = [v; 0; v; 0]``, the state after the step, ``‖G(z)‖∞`` and the
+    rootfinder."""
     nq, nc = model.nq, model.nc
     G = step_residual(model, h)
     zs, xs, us, ps, ts = (G.sx_in(i) for i in range(5))
@@ -85,7 +86,7 @@ def _solved_step(model, h: float, abstol: float, abstol_step: float, max_iter: i
     p, t = ca.MX.sym("p", model.np), ca.MX.sym("t")
     v = x[nq:]
     z = solve(ca.vertcat(v, ca.MX(nc, 1), v, ca.MX(nc, 1)), ca.vertcat(x, u, p, t))
-    return G, (x, u, p, t), z, step_state(x, z, nq, nc, h), ca.norm_inf(G(z, x, u, p, t))
+    return G, (x, u, p, t), z, step_state(x, z, nq, nc, h), ca.norm_inf(G(z, x, u, p, t)), solve
 
 
 def step_functions(model, h: float, *, abstol: float = ABSTOL, abstol_step: float = ABSTOL_STEP,
@@ -95,12 +96,14 @@ def step_functions(model, h: float, *, abstol: float = ABSTOL, abstol_step: floa
     with ``J = ∂x⁺/∂[x; u; p]`` (nx × (nx + nu + np), dense) and ``y_bar = Jᵀ x1_bar`` at the
     converged ``z`` (see the module docstring)."""
     nq, nc = model.nq, model.nc
-    G, args, z, x1, res = _solved_step(model, h, abstol, abstol_step, max_iter)
+    G, args, z, x1, res, solve = _solved_step(model, h, abstol, abstol_step, max_iter)
     names = ["x", "u", "p", "t"]
     step = ca.Function("step", list(args), [x1, res], names, ["x1", "res"])
     solution = ca.Function("step_solution", list(args), [x1, z, res], names, ["x1", "z", "res"])
     zk = ca.MX.sym("z", z.size1())                     # a converged step's unknowns
-    G_z, G_y = _sensitivities(G)(zk, *args)
+    # G_z: the rootfinder's own Jacobian function, so that the C holds it once
+    G_z = solve.get_function("jac_g_x")(zk, ca.vertcat(*args))[0]
+    G_y = _input_jacobian(G)(zk, *args)
     ny = G_y.size2()
     jacobian = _state_jacobian(-ca.solve(G_z, ca.densify(G_y), "qr"), nq, nc, h)
     x1_bar = ca.MX.sym("x1_bar", 2 * nq)
@@ -120,6 +123,13 @@ def _sensitivities(G: ca.Function) -> ca.Function:
                        [ca.jacobian(Gs, zs), ca.jacobian(Gs, ca.vertcat(xs, us, ps))])
 
 
+def _input_jacobian(G: ca.Function) -> ca.Function:
+    """``(z, x, u, p, t) -> G_y``, ``y = [x; u; p]`` (sparse, SX)."""
+    zs, xs, us, ps, ts = (G.sx_in(i) for i in range(5))
+    return ca.Function("step_input_jacobian", [zs, xs, us, ps, ts],
+                       [ca.jacobian(G(zs, xs, us, ps, ts), ca.vertcat(xs, us, ps))])
+
+
 def _state_jacobian(Z_y, nq: int, nc: int, h: float):
     """``∂x⁺/∂y = [I_q 0] + E ∂z/∂y`` from ``Z_y = ∂z/∂y`` (x⁺ = [q + h w; v⁺])."""
     ny = Z_y.size2()
@@ -132,7 +142,7 @@ def step_jacobian_function(model, h: float, *, abstol: float = ABSTOL, abstol_st
     solve with one QR of ``G_z`` for all columns (:func:`qr_solve_columns`), in one function
     with the step: what the MPC's generated C calls at every node of its horizon."""
     nq, nc = model.nq, model.nc
-    G, (x, u, p, t), z, x1, res = _solved_step(model, h, abstol, abstol_step, max_iter)
+    G, (x, u, p, t), z, x1, res, _ = _solved_step(model, h, abstol, abstol_step, max_iter)
     sensitivities = _sensitivities(G)
     G_z, G_y = sensitivities(z, x, u, p, t)
     ny = G_y.size2()
