@@ -67,7 +67,7 @@ def step_residual(model, h: float) -> ca.Function:
     return ca.Function("step_residual", [z, x, u, p, t], [ca.densify(G)], ["z", "x", "u", "p", "t"], ["G"])
 
 
-def step_state(x, z, nq: int, nc: int, h: float):
+def _step_state(x, z, nq: int, nc: int, h: float):
     """``x⁺ = [q + h w; v⁺]`` from the state ``x = [q; v]`` and the step's unknowns ``z``."""
     return ca.vertcat(x[:nq] + h * z[:nq], z[nq + nc:2 * nq + nc])
 
@@ -86,7 +86,7 @@ def _solved_step(model, h: float, abstol: float, abstol_step: float, max_iter: i
     p, t = ca.MX.sym("p", model.np), ca.MX.sym("t")
     v = x[nq:]
     z = solve(ca.vertcat(v, ca.MX(nc, 1), v, ca.MX(nc, 1)), ca.vertcat(x, u, p, t))
-    return G, (x, u, p, t), z, step_state(x, z, nq, nc, h), ca.norm_inf(G(z, x, u, p, t)), solve
+    return G, (x, u, p, t), z, _step_state(x, z, nq, nc, h), ca.norm_inf(G(z, x, u, p, t)), solve
 
 
 def step_functions(model, h: float, *, abstol: float = ABSTOL, abstol_step: float = ABSTOL_STEP,
