@@ -61,10 +61,14 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800),   # each benchmark sc
                             "converged: ncgen 3/3, minimal 3/3"]),
     ("control.py", ["=== step Jacobians: chain of N = 3 bars", "RATIO ncgen / mujoco mjd_transitionFD forward",
                     "=== cart-pole MPC", "RATIO IPOPT re-solve / MPC step"]),
+    ("step_jacobians.py", ["=== twodofs: nq = ", "C: ", "compiler peak RSS", "st.jacobians(x, u)",
+                           "central differences: A", "TARGET twodofs"]),
 ])
 def test_smoke(tmp_path, script, expected):
     if script in ("joint_space.py", "joint_simulation.py", "tree_algorithms.py"):
         pytest.importorskip("pinocchio")
+        pytest.importorskip("yourdfpy")
+    if script == "step_jacobians.py":
         pytest.importorskip("yourdfpy")
     root = str(BENCHMARKS.parent)        # the checkout under test, whatever ncgen is installed
     env = {**os.environ, "NCGEN_CACHE_DIR": str(tmp_path / "cache"),

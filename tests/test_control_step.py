@@ -165,7 +165,7 @@ def test_bad_arguments_are_named(cases):
         st(np.concatenate([model.q0, model.v0]), np.nan)
     with pytest.raises(NcgenError, match=r"U: expected finite inputs of shape \(N, 1\)"):
         st.rollout(np.concatenate([model.q0, model.v0]), np.zeros((4, 2)))
-    with pytest.raises(NcgenError, match=r"h: expected a positive step"):
+    with pytest.raises(NcgenError, match=r"h: expected a positive, finite step"):
         nc.step_function(model, -1.0)
     with pytest.raises(NcgenError, match=r"method: expected one of rattle"):
         nc.step_function(model, 0.01, method="euler")

@@ -15,23 +15,30 @@ The step of the compiled stepper (:mod:`ncgen.assembly.stepper_equations`, whose
 ``z`` is found by CasADi's ``fast_newton`` rootfinder (sparse QR of ``G_z``, at most
 ``max_iter`` iterations, stopping when ``‖G‖∞ ≤ abstol`` or the Newton step is below
 ``abstol_step``; it generates self-contained C), started from ``z₀ = [v; 0; v; 0]``.
-The derivatives come from the implicit function theorem,
-``∂z/∂(x, u, p) = −G_z⁻¹ G_(x, u, p)`` at the solution — one sparse QR factorisation of
-``G_z`` for all columns (``step_jac``; no finite differences, no differentiation through the
-iterations; CasADi's own derivative of the rootfinder, the same formula, serves the reverse
-mode of rollouts), so
 
-    A = ∂x⁺/∂x,   B = ∂x⁺/∂u,   C = ∂x⁺/∂p
+Derivatives come from the implicit function theorem at the converged ``z``, never from
+differentiating the iterations: with ``y = [x; u; p]``,
 
-are exact to the rootfinder's tolerance.  Every function also returns the residual
-``‖G(z)‖∞`` of the solution it used, so that callers can refuse a step that did not converge.
+    ∂z/∂y = −G_z⁻¹ G_y,      ∂x⁺/∂y = [I_q 0] + E ∂z/∂y,   E z = [h w; v⁺]
+
+so that ``A = ∂x⁺/∂x``, ``B = ∂x⁺/∂u``, ``C = ∂x⁺/∂p``; the adjoint of a step is one
+transposed solve, ``ȳ = (∂x⁺/∂y)ᵀ x̄⁺ = [x̄⁺_q; 0] − G_yᵀ G_z⁻ᵀ Eᵀ x̄⁺``.
+:func:`step_functions` generates the step (the rootfinder, also returning ``z``) and these
+two solves at a given ``z`` (``step_jacobian``, ``step_adjoint``): the sparse ``G_z``,
+``G_y`` (SX) and CasADi's sparse QR linear solver (``"qr"``, generated as loops over the
+factor's pattern), so the C grows with the model's functions, not with a factorisation
+unrolled into code (unrolled, the z1 arm's was 55 MB of C that gcc could not compile).
+Every step function also returns the residual ``‖G(z)‖∞`` of the solution it used, so that
+callers can refuse a step that did not converge.  :func:`step_jacobian_function` writes the
+whole step with its Jacobians as one function for the MPC (its QR unrolled into SX when the
+factors are small, :data:`SX_QR_MAX_NNZ`).
 
 Rollouts ``X = [x₁ … x_N]`` run in pieces of :data:`ROLLOUT_CHUNK` steps (and single
-steps for the rest), each a ``mapaccum`` of the step: CasADi writes a ``mapaccum`` as one call
-per step, so a piece's C grows with its length (a 1000-step ``mapaccum`` was 10 MB of C and
-minutes of compiling); the pieces are compiled once per step function.  Their adjoint
-``(x̄₀, Ū) = (∂X/∂(x₀, U))ᵀ X̄`` is CasADi's reverse mode of the piece (a backward sweep of
-transposed IFT solves, also generated C), chained from the last piece to the first.
+steps for the rest), each a ``mapaccum`` of the step returning the states and the steps'
+unknowns ``Z``: CasADi writes a ``mapaccum`` as one call per step, so a piece's C grows with
+its length (a 1000-step ``mapaccum`` was 10 MB of C and minutes of compiling); the pieces
+are compiled once per step function.  Their adjoint chains the steps' transposed IFT solves
+from the last step to the first.
 """
 from __future__ import annotations
 
@@ -60,10 +67,15 @@ def step_residual(model, h: float) -> ca.Function:
     return ca.Function("step_residual", [z, x, u, p, t], [ca.densify(G)], ["z", "x", "u", "p", "t"], ["G"])
 
 
-def step_functions(model, h: float, *, abstol: float = ABSTOL, abstol_step: float = ABSTOL_STEP,
-                   max_iter: int = MAX_ITER) -> dict[str, ca.Function]:
-    """``{"step": (x, u, p, t) -> (x1, res), "step_jac": (x, u, p, t) -> (x1, A, B, C, res)}``
-    (MX calling the rootfinder; ``A``, ``B``, ``C`` dense)."""
+def _step_state(x, z, nq: int, nc: int, h: float):
+    """``x⁺ = [q + h w; v⁺]`` from the state ``x = [q; v]`` and the step's unknowns ``z``."""
+    return ca.vertcat(x[:nq] + h * z[:nq], z[nq + nc:2 * nq + nc])
+
+
+def _solved_step(model, h: float, abstol: float, abstol_step: float, max_iter: int):
+    """``(G, (x, u, p, t), z, x1, res, solve)``: the residual, MX arguments, the rootfinder's
+    solution ``z`` from ``z₀ = [v; 0; v; 0]``, the state after the step, ``‖G(z)‖∞`` and the
+    rootfinder."""
     nq, nc = model.nq, model.nc
     G = step_residual(model, h)
     zs, xs, us, ps, ts = (G.sx_in(i) for i in range(5))
@@ -74,26 +86,72 @@ def step_functions(model, h: float, *, abstol: float = ABSTOL, abstol_step: floa
     p, t = ca.MX.sym("p", model.np), ca.MX.sym("t")
     v = x[nq:]
     z = solve(ca.vertcat(v, ca.MX(nc, 1), v, ca.MX(nc, 1)), ca.vertcat(x, u, p, t))
-    x1 = ca.vertcat(x[:nq] + h * z[:nq], z[nq + nc:2 * nq + nc])
-    res = ca.norm_inf(G(z, x, u, p, t))
+    return G, (x, u, p, t), z, _step_state(x, z, nq, nc, h), ca.norm_inf(G(z, x, u, p, t)), solve
+
+
+def step_functions(model, h: float, *, abstol: float = ABSTOL, abstol_step: float = ABSTOL_STEP,
+                   max_iter: int = MAX_ITER) -> dict[str, ca.Function]:
+    """``{"step": (x, u, p, t) -> (x1, res), "step_solution": (x, u, p, t) -> (x1, z, res),
+    "step_jacobian": (z, x, u, p, t) -> J, "step_adjoint": (z, x, u, p, t, x1_bar) -> y_bar}``
+    with ``J = ∂x⁺/∂[x; u; p]`` (nx × (nx + nu + np), dense) and ``y_bar = Jᵀ x1_bar`` at the
+    converged ``z`` (see the module docstring)."""
+    nq, nc = model.nq, model.nc
+    G, args, z, x1, res, solve = _solved_step(model, h, abstol, abstol_step, max_iter)
     names = ["x", "u", "p", "t"]
-    step = ca.Function("step", [x, u, p, t], [x1, res], names, ["x1", "res"])
-    # implicit function theorem, written out: one sparse QR of G_z for all 2nq + nu + np columns
-    y = ca.vertcat(xs, us, ps)
+    step = ca.Function("step", list(args), [x1, res], names, ["x1", "res"])
+    solution = ca.Function("step_solution", list(args), [x1, z, res], names, ["x1", "z", "res"])
+    zk = ca.MX.sym("z", z.size1())                     # a converged step's unknowns
+    # G_z: the rootfinder's own Jacobian function, so that the C holds it once
+    G_z = solve.get_function("jac_g_x")(zk, ca.vertcat(*args))[0]
+    G_y = _input_jacobian(G)(zk, *args)
+    ny = G_y.size2()
+    jacobian = _state_jacobian(-ca.solve(G_z, ca.densify(G_y), "qr"), nq, nc, h)
+    x1_bar = ca.MX.sym("x1_bar", 2 * nq)
+    z_bar = ca.vertcat(h * x1_bar[:nq], ca.MX(nc, 1), x1_bar[nq:], ca.MX(nc, 1))       # Eᵀ x̄⁺
+    y_bar = ca.vertcat(x1_bar[:nq], ca.MX(ny - nq, 1)) - ca.mtimes(G_y.T, ca.solve(G_z.T, z_bar, "qr"))
+    return {"step": step, "step_solution": solution,
+            "step_jacobian": ca.Function("step_jacobian", [zk, *args], [ca.densify(jacobian)], ["z", *names], ["J"]),
+            "step_adjoint": ca.Function("step_adjoint", [zk, *args, x1_bar], [y_bar], ["z", *names, "x1_bar"],
+                                        ["y_bar"])}
+
+
+def _sensitivities(G: ca.Function) -> ca.Function:
+    """``(z, x, u, p, t) -> (G_z, G_y)``, ``y = [x; u; p]`` (sparse, SX)."""
+    zs, xs, us, ps, ts = (G.sx_in(i) for i in range(5))
     Gs = G(zs, xs, us, ps, ts)
-    sensitivities = ca.Function("step_sensitivities", [zs, xs, us, ps, ts],
-                                [ca.jacobian(Gs, zs), ca.densify(ca.jacobian(Gs, y))])
+    return ca.Function("step_sensitivities", [zs, xs, us, ps, ts],
+                       [ca.jacobian(Gs, zs), ca.jacobian(Gs, ca.vertcat(xs, us, ps))])
+
+
+def _input_jacobian(G: ca.Function) -> ca.Function:
+    """``(z, x, u, p, t) -> G_y``, ``y = [x; u; p]`` (sparse, SX)."""
+    zs, xs, us, ps, ts = (G.sx_in(i) for i in range(5))
+    return ca.Function("step_input_jacobian", [zs, xs, us, ps, ts],
+                       [ca.jacobian(G(zs, xs, us, ps, ts), ca.vertcat(xs, us, ps))])
+
+
+def _state_jacobian(Z_y, nq: int, nc: int, h: float):
+    """``∂x⁺/∂y = [I_q 0] + E ∂z/∂y`` from ``Z_y = ∂z/∂y`` (x⁺ = [q + h w; v⁺])."""
+    ny = Z_y.size2()
+    return ca.vertcat(ca.horzcat(ca.DM.eye(nq), ca.DM(nq, ny - nq)) + h * Z_y[:nq, :], Z_y[nq + nc:2 * nq + nc, :])
+
+
+def step_jacobian_function(model, h: float, *, abstol: float = ABSTOL, abstol_step: float = ABSTOL_STEP,
+                           max_iter: int = MAX_ITER) -> ca.Function:
+    """``step_jac: (x, u, p, t) -> (x1, A, B, C, res)`` (``A``, ``B``, ``C`` dense): the IFT
+    solve with one QR of ``G_z`` for all columns (:func:`qr_solve_columns`), in one function
+    with the step: what the MPC's generated C calls at every node of its horizon."""
+    nq, nc = model.nq, model.nc
+    G, (x, u, p, t), z, x1, res, _ = _solved_step(model, h, abstol, abstol_step, max_iter)
+    sensitivities = _sensitivities(G)
     G_z, G_y = sensitivities(z, x, u, p, t)
-    ny = y.numel()
-    Z_y = -qr_solve_columns(G_z, G_y, ca.jacobian(Gs, zs).sparsity(), ny)
-    X1_y = ca.vertcat(ca.horzcat(ca.DM.eye(nq), ca.DM(nq, ny - nq)) + h * Z_y[:nq, :],
-                      Z_y[nq + nc:2 * nq + nc, :])             # x⁺ = [q + h w; v⁺]
+    ny = G_y.size2()
+    X1_y = _state_jacobian(-qr_solve_columns(G_z, ca.densify(G_y), sensitivities.sparsity_out(0), ny), nq, nc, h)
     nu_ = model.nu
-    jac = ca.Function("step_jac", [x, u, p, t],
-                      [x1] + [ca.densify(X1_y[:, c]) for c in (slice(0, 2 * nq), slice(2 * nq, 2 * nq + nu_),
-                                                               slice(2 * nq + nu_, ny))] + [res],
-                      names, ["x1", "A", "B", "C", "res"])
-    return {"step": step, "step_jac": jac}
+    return ca.Function("step_jac", [x, u, p, t],
+                       [x1] + [ca.densify(X1_y[:, c]) for c in (slice(0, 2 * nq), slice(2 * nq, 2 * nq + nu_),
+                                                                slice(2 * nq + nu_, ny))] + [res],
+                       ["x", "u", "p", "t"], ["x1", "A", "B", "C", "res"])
 
 
 #: Largest nnz(V) + nnz(R) of the QR factors of ``G_z`` unrolled into SX (beyond: CasADi's
@@ -118,21 +176,15 @@ def qr_solve_columns(K: ca.MX, B: ca.MX, pattern: ca.Sparsity, ncol: int) -> ca.
     return back.map("qr_backsolve_columns", "serial", ncol, [0, 1, 2], [])(Vn, Rn, bn, B)
 
 
-def rollout_functions(step: ca.Function, N: int, h: float) -> dict[str, ca.Function]:
-    """``{"rollout": (x0, U, p, t0) -> (X, res), "rollout_adjoint": (x0, U, p, t0, dX) -> (dx0, dU, dp)}``
-    over ``N`` steps: ``U`` is nu × N, ``X`` nx × N (the states after each step), ``res``
-    1 × N (each step's residual); ``dX`` = ∂J/∂X, ``dx0, dU, dp`` the gradient of ``J``."""
-    nx, nu, npar = step.size1_in(0), step.size1_in(1), step.size1_in(2)
+def rollout_function(solution: ca.Function, N: int, h: float) -> ca.Function:
+    """``rollout: (x0, U, p, t0) -> (X, Z, res)`` over ``N`` steps of ``solution`` (the
+    ``step_solution`` of :func:`step_functions`): ``U`` is nu × N, ``X`` nx × N (the states
+    after each step), ``Z`` the steps' unknowns (nz × N), ``res`` 1 × N (each step's residual)."""
+    nx, nu, npar = solution.size1_in(0), solution.size1_in(1), solution.size1_in(2)
     x0, U, p, t0 = ca.MX.sym("x0", nx), ca.MX.sym("U", nu, N), ca.MX.sym("p", npar), ca.MX.sym("t0")
     times = t0 + h * ca.DM(np.arange(N)).T
-    X, res = step.mapaccum("step_acc", N, [0], [0])(x0, U, ca.repmat(p, 1, N), times)
-    rollout = ca.Function("rollout", [x0, U, p, t0], [X, res], ["x0", "U", "p", "t0"], ["X", "res"])
-    dX = ca.MX.sym("dX", nx, N)
-    adj = rollout.reverse(1)
-    bar = adj(x0, U, p, t0, X, res, dX, ca.MX(1, N))
-    adjoint = ca.Function("rollout_adjoint", [x0, U, p, t0, dX], bar[:3], ["x0", "U", "p", "t0", "dX"],
-                          ["dx0", "dU", "dp"])
-    return {"rollout": rollout, "rollout_adjoint": adjoint}
+    X, Z, res = solution.mapaccum("step_acc", N, [0], [0])(x0, U, ca.repmat(p, 1, N), times)
+    return ca.Function("rollout", [x0, U, p, t0], [X, Z, res], ["x0", "U", "p", "t0"], ["X", "Z", "res"])
 
 
 def state_constraint_jacobian(model) -> ca.Function:

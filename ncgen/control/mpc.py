@@ -35,7 +35,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ncgen.control.discrete import step_functions
+from ncgen.control.discrete import step_jacobian_function
 from ncgen.control.mpc_problem import mpc_problem
 from ncgen.errors import OptimizationError
 
@@ -56,7 +56,7 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
     """
     h, N, p = problem.h, problem.N, problem.p
     nx, nu = 2 * model.nq, model.nu
-    jac = step_functions(model, h)["step_jac"].map(N)
+    jac = step_jacobian_function(model, h).map(N)
 
     # cost, its gradient and (Gauss–Newton) Hessian in y = [vec X; vec U] (SX)
     Xs, Us = ca.SX.sym("X", nx, N + 1), ca.SX.sym("U", nu, N)

@@ -1,5 +1,6 @@
 """``step_function(model, h)``: one RATTLE step of a model as compiled C with exact
-derivatives, rollouts and their adjoints (equations: :mod:`ncgen.control.discrete`).
+derivatives, rollouts and their adjoints (equations: :mod:`ncgen.control.discrete`;
+derivatives by the implicit function theorem at the converged step).
 
 State ``x = [q; v]`` (natural coordinates, m, and their rates, m/s; ``2 nq`` entries), inputs
 ``u`` held over the step, parameters ``p`` (default ``model.p0``), time ``t`` at the start of
@@ -26,18 +27,21 @@ from pathlib import Path
 
 import numpy as np
 
-from ncgen.control.discrete import (ABSTOL, MAX_ITER, ROLLOUT_CHUNK, rollout_functions, state_constraint_jacobian,
+from ncgen.control.discrete import (ABSTOL, MAX_ITER, ROLLOUT_CHUNK, rollout_function, state_constraint_jacobian,
                                     step_functions)
 from ncgen.errors import NcgenError
 
 METHODS = ("rattle",)
+#: The functions of :func:`ncgen.control.discrete.step_functions` a step function compiles.
+COMPILED = ("step_solution", "step_jacobian", "step_adjoint")
 #: A step whose residual ‖G‖∞ exceeds this (relative to the largest mass-matrix entry plus
-#: one) did not converge and is refused.
+#: one), or whose state or unknowns are not finite, did not converge and is refused.
 RESIDUAL_TOL = 1e-8
 
 
 class StepDidNotConverge(NcgenError):
-    """The Newton iterations of a step ended with a residual above :data:`RESIDUAL_TOL`."""
+    """The Newton iterations of a step ended with a residual above :data:`RESIDUAL_TOL` or
+    with NaN or inf in the state."""
 
 
 def step_function(model, h: float, method: str = "rattle", *, max_iter: int = MAX_ITER,
@@ -46,15 +50,14 @@ def step_function(model, h: float, method: str = "rattle", *, max_iter: int = MA
     scheme, in natural coordinates, also for trees) as a :class:`StepFunction`."""
     if method not in METHODS:
         raise NcgenError(f"step_function: method: expected one of {', '.join(METHODS)}, got {method!r}")
-    h = float(h)
-    if not np.isfinite(h) or h <= 0:
-        raise NcgenError(f"step_function: h: expected a positive step in seconds, got {h!r}")
+    h = _positive(h, "h", "a positive, finite step in seconds")
+    abstol = _positive(abstol, "abstol", "a positive, finite tolerance")
     if getattr(model, "contact_model", "smooth") == "nonsmooth" and getattr(model, "nk", 0) > 0:
         raise NcgenError(f"step_function: model {model.name!r} has nonsmooth contacts; their step is not "
                          "differentiable at impacts and is not supported (use contacts='smooth')")
     if not isinstance(max_iter, int) or max_iter < 1:
         raise NcgenError(f"step_function: max_iter: expected a positive integer, got {max_iter!r}")
-    return StepFunction(model, h, max_iter=max_iter, abstol=float(abstol))
+    return StepFunction(model, h, max_iter=max_iter, abstol=abstol)
 
 
 class StepFunction:
@@ -66,9 +69,10 @@ class StepFunction:
         self.nx, self.nu, self.np = 2 * model.nq, model.nu, model.np
         self.functions = step_functions(model, h, abstol=abstol, max_iter=max_iter)
         self.residual_tol = RESIDUAL_TOL * (1.0 + float(np.max(np.abs(model.M))) if model.nq else 1.0)
-        self._lib = _compile(f"{model.name}_step", list(self.functions.values()))
-        self._step, self._jac = self._lib["step"], self._lib["step_jac"]
-        self._rollouts: dict[int, dict] = {}
+        lib = _compile(f"{model.name}_step", [self.functions[k] for k in COMPILED])
+        self._solution, self._jacobian, self._adjoint = lib["step_solution"], lib["step_jacobian"], lib["step_adjoint"]
+        self.nz = 2 * (model.nq + model.nc)
+        self._rollouts: dict = {}
         self._J = state_constraint_jacobian(model)
 
     def __repr__(self) -> str:
@@ -82,33 +86,48 @@ class StepFunction:
         t = self.model.t0 if t is None else float(t)
         return x, u, p, t
 
-    def _check(self, res: float, where: str) -> None:
-        if not res <= self.residual_tol:
-            raise StepDidNotConverge(f"step of {self.model.name!r}{where}: the Newton iterations ended with "
-                                     f"residual {res:.3g} > {self.residual_tol:.3g}; take a smaller h, raise "
-                                     "max_iter, or start from a state closer to the constraints")
+    def _check(self, res: float, x1: np.ndarray, z: np.ndarray, where: str) -> None:
+        """Refuse a step whose residual is above the tolerance or whose state ``x1`` or
+        unknowns ``z`` are not finite."""
+        finite = bool(np.all(np.isfinite(z)) and np.all(np.isfinite(x1)))
+        if not (res <= self.residual_tol and finite):
+            found = f"residual {res:.3g} > {self.residual_tol:.3g}" if finite else "NaN or inf in the state"
+            raise StepDidNotConverge(f"step of {self.model.name!r} (h = {self.h:g} s){where}: the Newton "
+                                     f"iterations ended with {found}; take a smaller h, raise max_iter, or start "
+                                     "from a state closer to the constraints")
+
+    def _solve(self, x, u, p, t) -> tuple[np.ndarray, np.ndarray]:
+        """``(x1, z)``: the converged step (refused if it did not converge)."""
+        x1, z, res = self._solution(x, u, p, t)
+        self._check(float(res[0]), x1, z, "")
+        return x1.copy(), z.copy()
 
     # ---------------------------------------------------------------------- step
     def __call__(self, x, u=None, p=None, t=None) -> np.ndarray:
         """The state after one step."""
-        x1, res = self._step(*self._args(x, u, p, t))
-        self._check(float(res[0]), "")
-        return x1.copy()
+        return self._solve(*self._args(x, u, p, t))[0]
 
     def jacobians(self, x, u=None, p=None, t=None, *, parameters: bool = False):
-        """``(x1, A, B)``, or ``(x1, A, B, C)`` with ``parameters=True``."""
-        x1, A, B, C, res = self._jac(*self._args(x, u, p, t))
-        self._check(float(res[0]), "")
-        out = (x1.copy(), A.reshape(self.nx, self.nx, order="F").copy(), B.reshape(self.nx, self.nu, order="F").copy())
-        return out + (C.reshape(self.nx, self.np, order="F").copy(),) if parameters else out
+        """``(x1, A, B)``, or ``(x1, A, B, C)`` with ``parameters=True`` (the implicit function
+        theorem at the converged step: :mod:`ncgen.control.discrete`)."""
+        args = self._args(x, u, p, t)
+        x1, z = self._solve(*args)
+        J = self._jacobian(z, *args)[0].reshape(self.nx, -1, order="F").copy()
+        if not np.all(np.isfinite(J)):
+            raise StepDidNotConverge(f"step of {self.model.name!r} (h = {self.h:g} s): its Jacobians are not "
+                                     "finite: the Newton matrix G_z is singular there (redundant constraints "
+                                     "or a singular configuration)")
+        nx, nu = self.nx, self.nu
+        out = (x1, J[:, :nx], J[:, nx:nx + nu])
+        return out + (J[:, nx + nu:],) if parameters else out
 
     # ------------------------------------------------------------------ rollouts
-    def _rollout_lib(self, n: int) -> dict:
+    def _rollout_piece(self, n: int):
         """The compiled rollout of ``n`` steps (``n`` is ``ROLLOUT_CHUNK`` or 1: built once per
         step function, whatever the rollouts' lengths)."""
         if n not in self._rollouts:
-            fs = rollout_functions(self.functions["step"], n, self.h)
-            self._rollouts[n] = _compile(f"{self.model.name}_rollout{n}", list(fs.values()))
+            f = rollout_function(self.functions["step_solution"], n, self.h)
+            self._rollouts[n] = _compile(f"{self.model.name}_rollout{n}", [f])["rollout"]
         return self._rollouts[n]
 
     def _chunks(self, N: int) -> list[tuple[int, int]]:
@@ -129,39 +148,45 @@ class StepFunction:
         """States after each of the ``N = len(U)`` steps, shape ``(N, nx)`` (``U``: ``(N, nu)``)."""
         U = self._inputs(U)
         x0, _, p, t0 = self._args(x0, U[0], p, t0)
-        X = np.empty((U.shape[0], self.nx))
+        return self._rollout(x0, U, p, t0)[0]
+
+    def _rollout(self, x0, U, p, t0) -> tuple[np.ndarray, np.ndarray]:
+        """``(X, Z)``: the states after each step and each step's unknowns (rows)."""
+        N, nz = U.shape[0], self.nz
+        X, Z = np.empty((N, self.nx)), np.empty((N, nz))
         x = x0
-        for k, n in self._chunks(U.shape[0]):
-            Xc, res = self._rollout_lib(n)["rollout"](x, U[k:k + n].T.ravel(order="F"), p, t0 + k * self.h)
-            bad = np.flatnonzero(~(res <= self.residual_tol))
-            if bad.size:
-                self._check(float(res[bad[0]]), f" {k + bad[0]} of the rollout")
-            X[k:k + n] = Xc.reshape(self.nx, n, order="F").T
+        for k, n in self._chunks(N):
+            Xc, Zc, res = self._rollout_piece(n)(x, U[k:k + n].T.ravel(order="F"), p, t0 + k * self.h)
+            Xc, Zc = Xc.reshape(self.nx, n, order="F").T, Zc.reshape(nz, n, order="F").T
+            for i in range(n):
+                self._check(float(res[i]), Xc[i], Zc[i], f" {k + i} of the rollout")
+            X[k:k + n], Z[k:k + n] = Xc, Zc
             x = X[k + n - 1]
-        return X
+        return X, Z
 
     def rollout_gradient(self, x0, U, dX, p=None, t0=None, *, parameters: bool = False):
         """``(dx0, dU)`` (and ``dp`` with ``parameters=True``): the gradient of a cost ``J(X)``
         with respect to ``x0`` and ``U`` given ``dX = ∂J/∂X`` (shape of :meth:`rollout`'s
-        result); one reverse sweep in C per piece, the pieces from the last to the first (each
-        piece's ``∂J/∂x0`` added to the ``∂J/∂X`` of the state it starts from)."""
+        result); one transposed IFT solve per step (``step_adjoint``, generated C), from the
+        last step to the first (each step's ``x̄`` added to the ``∂J/∂X`` of the state it
+        starts from)."""
         U = self._inputs(U)
         x0, _, p, t0 = self._args(x0, U[0], p, t0)
         N = U.shape[0]
         dX = np.asarray(dX, dtype=float)
         if dX.shape != (N, self.nx) or not np.all(np.isfinite(dX)):
             raise NcgenError(f"dX: expected finite ∂J/∂X of shape ({N}, {self.nx}), got shape {dX.shape}")
-        X = self.rollout(x0, U, p, t0)                 # refuses a rollout that did not converge
-        dU, dp, carry = np.empty((N, self.nu)), np.zeros(self.np), np.zeros(self.nx)
-        for k, n in reversed(self._chunks(N)):
-            seed = dX[k:k + n].copy()
-            seed[-1] += carry
-            dx0, dUc, dpc = self._rollout_lib(n)["rollout_adjoint"](x0 if k == 0 else X[k - 1],
-                                                                    U[k:k + n].T.ravel(order="F"), p,
-                                                                    t0 + k * self.h, seed.ravel())
-            carry = dx0.copy()
-            dU[k:k + n] = dUc.reshape(self.nu, n, order="F").T
-            dp += dpc
+        X, Z = self._rollout(x0, U, p, t0)            # refuses a rollout that did not converge
+        nx, nu = self.nx, self.nu
+        dU, dp, carry = np.empty((N, nu)), np.zeros(self.np), np.zeros(nx)
+        for k in range(N - 1, -1, -1):
+            y_bar = self._adjoint(Z[k], x0 if k == 0 else X[k - 1], U[k], p, t0 + k * self.h, dX[k] + carry)[0]
+            carry, dU[k] = y_bar[:nx].copy(), y_bar[nx:nx + nu]
+            dp += y_bar[nx + nu:]
+        if not (np.all(np.isfinite(carry)) and np.all(np.isfinite(dU)) and np.all(np.isfinite(dp))):
+            raise StepDidNotConverge(f"rollout of {self.model.name!r}: its gradient is not finite: the Newton "
+                                     "matrix G_z of a step is singular (redundant constraints or a singular "
+                                     "configuration)")
         out = (carry, dU)
         return out + (dp,) if parameters else out
 
@@ -179,6 +204,17 @@ class StepFunction:
         t1 = (self.model.t0 if t is None else float(t)) + self.h
         T0, T1 = self.tangent_basis(x, p, t), self.tangent_basis(x1, p, t1)
         return x1, T1.T @ A @ T0, T1.T @ B
+
+
+def _positive(value, name: str, what: str) -> float:
+    """``value`` as a float if it is a finite number above zero, else a clear error."""
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        out = None
+    if isinstance(value, bool) or out is None or not np.isfinite(out) or out <= 0:
+        raise NcgenError(f"step_function: {name}: expected {what}, got {value!r}")
+    return out
 
 
 def _vector(a, n: int, name: str, what: str) -> np.ndarray:
