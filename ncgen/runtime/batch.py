@@ -300,10 +300,11 @@ class _Runs:
         self.Y[i, :rows + 1, 2] = traj.constraint_residual
         self.Y[i, :rows + 1, 5:] = traj.markers.reshape(rows + 1, -1)
         bad = untrusted_row(model, traj, S[:rows], self.h, contacts=self.stepper.nd > 0)
-        if bad is not None and self.status[i] == 0:
+        if bad is not None:            # also before a failed step: only trusted rows are kept
             row, reason = bad
-            self.status[i] = STATUS_UNTRUSTED
-            self.message[i] = f"not trustworthy: {reason}"
+            later = f". Later, {self.message[i]}" if self.status[i] != 0 else ""
+            self.status[i] = STATUS_UNTRUSTED if self.status[i] == 0 else self.status[i]
+            self.message[i] = f"not trustworthy: {reason}{later}"
             self._blank(i, row + 1)
 
     def _blank(self, i: int, k: int) -> None:
