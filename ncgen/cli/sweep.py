@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from pathlib import Path
 
 from ncgen.cli.common import check_files, load_model
 from ncgen.cli.registry import subcommand
@@ -67,10 +68,12 @@ def _arguments(p: argparse.ArgumentParser) -> None:
 )
 def sweep(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from ncgen.runtime.samples import Samples
+    from ncgen.runtime.sweep import check_store_path
     from ncgen.runtime.sweep import sweep as run
 
     check_files(args, parser, None, directories=("output",))
     params = _params(args, parser)
+    check_store_path(Path(args.output))          # the extras and the user's files, before any work
     model = load_model(args.model)
     options = {}
     if args.substeps is not None:

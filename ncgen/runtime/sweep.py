@@ -138,7 +138,7 @@ def sweep(model, params, *, t_end: float, dt: float, method: str = "stepper", ou
     _check_options(method, options)
     where, n_workers = _where(client, workers, method)
     if path is not None:
-        _check_store_path(Path(path))      # before any compile or run: the extras, the user's files
+        check_store_path(Path(path))      # before any compile or run: the extras, the user's files
     if method == "stepper":
         load_stepper(model)        # compiled (or found in the cache) once, before the workers start
     chunk = _chunk(chunk if chunk is not None or path is None else _stored_chunk(path), n, n_workers)
@@ -362,7 +362,7 @@ def _summary_columns(parts: list[dict], samples: Samples) -> dict:
     return {k: out[k] for k in ["run", *samples.names, *SUMMARY[1:]]}
 
 
-def _check_store_path(path: Path) -> None:
+def check_store_path(path: Path) -> None:
     """Refuse ``path`` unless zarr and pyarrow are installed and it is new, an empty folder or
     an ncgen sweep's store: a user's other files or Zarr stores are never written into."""
     try:
@@ -391,7 +391,7 @@ class _Store:
 
     def __init__(self, path, model, samples, t, method, outputs, options, chunk, per_run):
         import zarr
-        _check_store_path(Path(path))
+        check_store_path(Path(path))
         self.path, self.samples = Path(path), samples
         spec = {"model": model.name, "content_hash": model.content_hash, "runs": len(samples),
                 "parameters": samples.names, "samples_sha256": _sha(samples.values), "t0": float(t[0]),
