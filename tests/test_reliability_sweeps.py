@@ -111,7 +111,7 @@ def test_non_finite_grids_are_refused(slider_crank, values, said):
 
 def test_oversized_grids_and_samples_are_refused_at_once(slider_crank):
     start = time.perf_counter()
-    with pytest.raises(NcgenError, match=r"grid: 1000000 \(omega\) × 1000000 \(k\) = 1e\+12 runs, more than the limit"):
+    with pytest.raises(NcgenError, match=r"grid: 1000000 \(omega\) × 1000000 \(k\) = 1e\+12 runs, more than"):
         nc.Samples.grid({"omega": np.arange(1e6), "k": np.arange(1e6)})
     for n in (1e12, MAX_RUNS + 1):
         with pytest.raises(NcgenError, match="n: .* runs, more than the limit"):
@@ -189,7 +189,8 @@ def test_a_pickle_of_another_ncgen_version_says_to_rebuild(slider_crank, monkeyp
     monkeypatch.setattr(model_module, "_rebuilt", type(model_module._rebuilt)())
     monkeypatch.setattr("ncgen.version.__version__", "0.0.1-other")
     for data, what in ((model_bytes, "model"), (system_bytes, "system")):
-        with pytest.raises(ModelError, match=rf"this {what} was pickled by another ncgen version \(version {re.escape(current)}; "
+        with pytest.raises(ModelError, match=rf"this {what} was pickled by another ncgen version "
+                                             rf"\(version {re.escape(current)}; "
                                              rf"this is 0.0.1-other\): rebuild the {what}"):
             pickle.loads(data)
     old_layout = nc.System.rebuilt_model                     # a pickle of the older three-field layout

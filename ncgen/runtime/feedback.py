@@ -45,8 +45,8 @@ def call_feedback(u, t: float, a, b, *, nu: int, what: str) -> np.ndarray:
 def with_partial(error: FeedbackFailed, trajectory) -> FeedbackFailed:
     """``error`` with ``trajectory`` (the run up to the last state reached) attached and
     marked incomplete; its message says so."""
-    message = (f"{error} The trajectory up to t = {trajectory.t[-1]:.6g} s is attached to this error as "
-               ".trajectory.")
+    message = (f"{str(error).rstrip('.')}. The trajectory up to t = {trajectory.t[-1]:.6g} s is attached to "
+               "this error as .trajectory.")
     trajectory.info.update(complete=False, message=message)
     out = FeedbackFailed(message, time=float(trajectory.t[-1]))
     out.trajectory = trajectory
