@@ -10,7 +10,9 @@ written in a temporary sibling and renamed into place, with a manifest) holds:
 * ``<name>_plant_step``: one RATTLE step of ``h / substeps`` (:mod:`ncgen.control.discrete`),
   the plant of the demo;
 * ``<name>_mpc.h``/``.c``: the API ``<name>_mpc_init``, ``<name>_mpc_step(m, x, t, u_out)``,
-  ``<name>_mpc_free``, ``<name>_plant`` (documented in the header; no dynamic memory);
+  ``<name>_mpc_free``, ``<name>_plant`` (documented in the header; no dynamic memory), around
+  the model-independent driver ``ncgen_mpc.h`` (``templates/c/runtime/``: input checks, the
+  iterations, the shift of the guess; unit-tested alone by ``tests/c/test_mpc.c``);
 * ``demo.c``: the closed loop — controller every ``h`` seconds, plant with ``substeps``
   substeps, input disturbances — printing ``t u x`` per control step;
 * ``Makefile`` (``make``; ``CFLAGS``, ``LDFLAGS`` as usual), ``CMakeLists.txt``, ``main.c``.
@@ -123,7 +125,8 @@ def export_mpc(ocp, path, *, name: str | None = None, iterations: int = 1, termi
         "disturbance_text": "; ".join(f"{list(p.values)} for {p.t_on:g} <= t < {p.t_off:g} s" for p in pl)
                             or "none",
     }
-    extra = [ExtraSource("mpc/mpc.h.j2", f"{name}_mpc.h", context),
+    extra = [ExtraSource("runtime/ncgen_mpc.h", "ncgen_mpc.h", included=True),
+             ExtraSource("mpc/mpc.h.j2", f"{name}_mpc.h", context),
              ExtraSource("mpc/mpc.c.j2", f"{name}_mpc.c", context),
              ExtraSource("mpc/demo.c.j2", "demo.c", context, program=True)]
     return write_package(name, [data, qp, update, plant], Path(path), extra_sources=extra, reroll_instructions=None)
