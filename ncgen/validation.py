@@ -80,7 +80,9 @@ def _float_array(x, what: str = "value") -> np.ndarray:
 
 def _wrong_kind(x) -> str | None:
     """What makes ``x`` not an array of real numbers although NumPy converts it, or None."""
-    if type(x) in (str, bytes, float, int) or (type(x) is np.ndarray and x.dtype.kind in "fiu"):
+    if isinstance(x, (bytes, bytearray, memoryview)):
+        return f"{type(x).__name__} (raw bytes are not read as numbers)"
+    if type(x) in (str, float, int) or (type(x) is np.ndarray and x.dtype.kind in "fiu"):
         return None                              # the common cases; NumPy refuses strings itself
     try:
         a = np.asarray(x)

@@ -339,7 +339,8 @@ def test_joint_dynamics_need_an_input_of_their_own():
 
 def test_bad_feedback_output_is_named():
     s, _, _ = link()
-    with pytest.raises(NcgenError, match=r"u\(t, qj, vj\) at t = 0 s: expected 1 finite"):
+    with pytest.raises(NcgenError, match=r"u\(t, qj, vj\) called at t = 0 s returned an array of shape \(2,\): "
+                                         r"expected 1 input value"):
         nc.simulate(s.build(), 0.1, 0.05, u=lambda t, qj, vj: [1.0, 2.0])
 
 

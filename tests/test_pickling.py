@@ -71,10 +71,10 @@ def test_system_pickles_by_its_toml_text():
 
 def test_unpickling_checks_the_content_hash():
     model = nc.System.from_toml(EXAMPLES / "slider_crank.toml").build()
-    _, (description, options, _) = model.__reduce__()
+    _, (description, options, _, version) = model.__reduce__()
     forget_models()
     with pytest.raises(ModelError, match="slider_crank.*differs from the pickled one"):
-        nc.System.rebuilt_model(description, options, "0" * 64)
+        nc.System.rebuilt_model(description, options, "0" * 64, version)
 
 
 def test_content_hash_tells_models_apart():

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import ncgen as nc
-from ncgen.errors import ShapeError
+from ncgen.errors import NcgenError, ShapeError
 
 
 @pytest.fixture(scope="module")
@@ -59,3 +59,26 @@ def test_tree_kernel_refuses_what_is_not_real(arm):
         with pytest.raises(ShapeError, match=rf"qj: expected real numbers, got {found}"):
             k(bad, vj)
     np.testing.assert_array_equal(k(list(qj), vj), expected)      # not contaminated by the refusals
+
+
+@pytest.mark.parametrize("raw", [bytes, bytearray, memoryview], ids=["bytes", "bytearray", "memoryview"])
+def test_fast_calls_refuse_raw_bytes(arm, raw):
+    """Two doubles' worth of bytes has the length of qj, but is not two numbers: the C fast
+    path (joint forward dynamics, the tree algorithms) refuses it (issue 35), and a valid call
+    after it is not contaminated."""
+    k = nc.joint_forward_dynamics_kernel(arm)
+    rnea = nc.algorithm_kernel(arm, "rnea")
+    direct = nc.forward_dynamics_kernel(arm)                 # the ctypes path
+    qj, vj = np.array([0.3, -0.2]), np.array([0.1, 0.0])
+    expected, torques = np.array(k(qj, vj)).copy(), np.array(rnea(qj, vj, vj)).copy()
+    for length in (2, 16):                                   # as many bytes as values, or as the doubles
+        data = raw(np.arange(length, dtype=np.uint8).tobytes())
+        said = rf"expected real numbers, got {raw.__name__} \(raw bytes are not read as numbers\)"
+        with pytest.raises(ShapeError, match=r"joint forward dynamics: qj: " + said):
+            k(data, vj)
+        with pytest.raises(NcgenError, match=said):
+            rnea(data, vj, vj)
+        with pytest.raises(ShapeError, match=r"argument 'q': " + said):
+            direct(0.0, raw(np.zeros(arm.nq).tobytes()[:arm.nq]), arm.v0, np.zeros(2), np.zeros(0))
+    np.testing.assert_array_equal(k(qj, vj), expected)
+    np.testing.assert_array_equal(rnea(qj, vj, vj), torques)

@@ -5,7 +5,8 @@ and check it against closed forms and an independent Runge–Kutta reference —
 step, step splitting, second order, the work and error estimates, the error controller's
 step-size rule and local error, the projection; projected Gauss–Seidel on two contacts with
 known solutions (sliding, sticking, redundant), the contact step (Coulomb sliding to rest,
-a bounce with restitution), for both ways of building the Delassus matrix.  Each program is
+a bounce with restitution), for both ways of building the Delassus matrix; the MPC driver
+(``ncgen_mpc.h``) on a hand-written iteration (input checks, the guess kept on failure).  Each program is
 built with ``-Wall -Wextra -Werror -pedantic`` under AddressSanitizer and
 UndefinedBehaviorSanitizer and must print that all its checks passed."""
 from __future__ import annotations
@@ -26,7 +27,7 @@ FLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O0", "-g",
 ENV = {**os.environ, "ASAN_OPTIONS": "detect_leaks=0:abort_on_error=0",
        "UBSAN_OPTIONS": "print_stacktrace=1:halt_on_error=1"}
 PROGRAMS = [("test_rattle.c", []), ("test_contact.c", []), ("test_contact.c", ["-DSCHUR_FACTORED"]),
-            ("test_cone_newton.c", [])]
+            ("test_cone_newton.c", []), ("test_mpc.c", [])]
 
 pytestmark = pytest.mark.skipif(CC is None, reason="no C compiler (gcc, clang or cc) on PATH")
 
@@ -41,7 +42,7 @@ def sanitizers(tmp_path_factory) -> Path:
     return tmp
 
 
-@pytest.mark.parametrize("source, defines", PROGRAMS, ids=["rattle", "contact-kkt", "contact-schur", "cone-newton"])
+@pytest.mark.parametrize("source, defines", PROGRAMS, ids=["rattle", "contact-kkt", "contact-schur", "cone-newton", "mpc"])
 def test_runtime_c_unit_tests_pass_under_sanitizers(sanitizers, source, defines):
     exe = sanitizers / (Path(source).stem + "".join(d.lower().replace("-d", "_") for d in defines))
     built = subprocess.run([CC, *FLAGS, *defines, f"-I{RUNTIME}", f"-I{TESTS}", str(TESTS / source),

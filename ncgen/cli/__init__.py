@@ -72,6 +72,16 @@ def main(argv: list[str] | None = None) -> int:
             use_cli_names(False)
 
 
+def _unrecognized(parser: argparse.ArgumentParser, unknown: list[str]) -> None:
+    """argparse's usage error for arguments ``parser`` does not take, with the option it
+    has closest to the first unknown one (``--tend``: did you mean '--t-end'?)."""
+    from ncgen.model.expressions import did_you_mean
+
+    flags = [o for action in parser._actions for o in action.option_strings]
+    first = next((a.partition("=")[0] for a in unknown if a.startswith("-")), "")
+    parser.error(f"unrecognized arguments: {' '.join(unknown)}{did_you_mean(first, flags) if first else ''}")
+
+
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
     print(f"ncgen: warning: {message}", file=sys.stderr if file is None else file)
 
@@ -82,7 +92,9 @@ def _run_main(parser: argparse.ArgumentParser, argv: list[str], debug: bool) -> 
 
     where = "ncgen"
     try:
-        args = parser.parse_args(argv)
+        args, unknown = parser.parse_known_args(argv)
+        if unknown:
+            _unrecognized(getattr(args, "_parser", parser), unknown)
         if args.command is None:
             parser.print_help(sys.stderr)
             return 2

@@ -58,8 +58,8 @@ def check_files(args, parser, output: tuple[str, ...] | None, directories: tuple
     """Usage errors in the output paths, found before any work: -o/--output (a file with one
     of the suffixes ``output``, ``()`` for any; or, when ``"output"`` is in ``directories``,
     a directory), --plot, --animate, --html (files with their suffixes).  A file's directory
-    must exist and take a new file, and the path must not be a directory; a directory
-    output may be new (its parents are made) but its nearest existing ancestor must be a
+    must exist and take a new file, and the path must not be a directory (an MP4 needs ffmpeg,
+    checked here too); a directory output may be new (its parents are made) but its nearest existing ancestor must be a
     directory that takes new entries, and it must not be an existing file.  Each message
     names the path as given."""
     kinds = {"output": ("-o/--output", output), "plot": ("--plot", PLOT_SUFFIXES),
@@ -76,6 +76,12 @@ def check_files(args, parser, output: tuple[str, ...] | None, directories: tuple
             problem = file_problem(name)
         if problem:
             parser.error(f"{option} {name!r}: {problem}")
+        if kind == "animate" and Path(name).suffix.lower() == ".mp4":
+            from ncgen.viz.animation import ffmpeg_executable
+            try:
+                ffmpeg_executable(name)          # before the run, not after it
+            except NcgenError as e:
+                parser.error(f"--animate: {e}")
 
 
 def file_problem(name: str) -> str | None:

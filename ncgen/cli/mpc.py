@@ -49,10 +49,12 @@ def _arguments(p: argparse.ArgumentParser) -> None:
 def mpc(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     import numpy as np
 
-    from ncgen.control.export import export_mpc
+    from ncgen.control.export import MAX_T_END, export_mpc
     from ncgen.optim.problem_file import model_path, problem_from_data, read_problem_file
 
     check_files(args, parser, None, directories=("output",))
+    if not 0 < args.t_end <= MAX_T_END:
+        parser.error(f"--t-end: expected the demo's duration in seconds, 0 < T <= {MAX_T_END:g}, got {args.t_end:g}")
     data, origin = read_problem_file(Path(args.problem))
     model_file = model_path(data, origin)
     if model_file is None:
@@ -73,8 +75,13 @@ def mpc(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
             try:
                 values[key] = float(value)
             except ValueError:
-                parser.error(f"--x0: {item!r}: expected coordinate=number")
-        x0 = np.concatenate([assemble(model, model.q0, values=values), np.zeros(model.nq)])
+                values[key] = np.nan
+            if not np.isfinite(values[key]):
+                parser.error(f"--x0: {item!r}: expected coordinate=number (a finite number)")
+        try:
+            x0 = np.concatenate([assemble(model, model.q0, values=values), np.zeros(model.nq)])
+        except NcgenError as exc:
+            parser.error(f"--x0 {args.x0}: no consistent state has these coordinates: {exc}")
     pulses = []
     for item in args.disturbance:
         parts = item.split(":")

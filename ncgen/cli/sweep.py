@@ -3,7 +3,9 @@ cores or a Dask cluster, into a resumable Zarr store with a Parquet summary."""
 from __future__ import annotations
 
 import argparse
+import math
 import sys
+from pathlib import Path
 
 from ncgen.cli.common import check_files, load_model
 from ncgen.cli.registry import subcommand
@@ -66,10 +68,12 @@ def _arguments(p: argparse.ArgumentParser) -> None:
 )
 def sweep(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from ncgen.runtime.samples import Samples
+    from ncgen.runtime.sweep import check_store_path
     from ncgen.runtime.sweep import sweep as run
 
     check_files(args, parser, None, directories=("output",))
     params = _params(args, parser)
+    check_store_path(Path(args.output))          # the extras and the user's files, before any work
     model = load_model(args.model)
     options = {}
     if args.substeps is not None:
@@ -107,7 +111,9 @@ def sweep(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
 
 
 def _params(args, parser) -> dict:
-    """``{name: values}`` (grid) or ``{name: (low, high)}`` (with --samples) from --param."""
+    """``{name: values}`` (grid) or ``{name: (low, high)}`` (with --samples) from --param;
+    finite numbers, at most ``MAX_RUNS`` runs in all."""
+    from ncgen.runtime.samples import MAX_RUNS
     if args.samples is not None:
         kind, _, n = args.samples.partition(":")
         if kind not in SAMPLERS or not n.isdigit() or int(n) < 1:
@@ -126,6 +132,8 @@ def _params(args, parser) -> dict:
             fields = [float(x) for x in text.replace(":", ",").split(",")]
         except ValueError:
             parser.error(f"--param {item!r}: {text!r} is not a list of numbers")
+        if not all(math.isfinite(x) for x in fields):
+            parser.error(f"--param {item!r}: expected finite numbers, got {text!r}")
         if args.samples is not None:
             if ":" not in text or len(fields) != 2 or not fields[0] < fields[1]:
                 parser.error(f"--param {item!r}: with --samples, expected the bounds NAME=LOW:HIGH with LOW < HIGH")
@@ -135,9 +143,17 @@ def _params(args, parser) -> dict:
                 parser.error(f"--param {item!r}: expected NAME=START:STOP:STEP with STEP > 0 and START <= STOP")
             start, stop, step = fields
             count = int((stop - start) / step * (1 + 1e-12)) + 1
+            if count > MAX_RUNS:
+                parser.error(f"--param {item!r}: {count:.3g} values, more than the limit of {MAX_RUNS:.0e} runs")
             out[name] = [start + k * step for k in range(count)]
         else:
             out[name] = fields
+    if args.samples is None and math.prod(len(v) for v in out.values()) > MAX_RUNS:
+        sizes = " × ".join(f"{len(v)} ({k})" for k, v in out.items())
+        parser.error(f"--param: the grid has {sizes} = {math.prod(len(v) for v in out.values()):.3g} runs, more "
+                     f"than the limit of {MAX_RUNS:.0e}; use fewer values or --samples")
+    if args.samples is not None and args.samples[1] > MAX_RUNS:
+        parser.error(f"--samples {args.samples[0]}:{args.samples[1]}: more than the limit of {MAX_RUNS:.0e} runs")
     return out
 
 

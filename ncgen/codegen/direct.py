@@ -25,6 +25,8 @@ from ncgen.validation import as_numbers
 
 _INT = ctypes.c_longlong          # casadi_int of the generated code (long long by default)
 _REAL_P = ctypes.POINTER(ctypes.c_double)
+#: Arguments that hold raw bytes, never read as numbers (NumPy would read a bytearray's bytes).
+RAW_BYTES = (bytes, bytearray, memoryview)
 
 
 class DirectFunction:
@@ -96,6 +98,8 @@ class DirectFunction:
                              f"({', '.join(self.input_names)}), got {len(args)}")
         try:
             for buf, x in zip(self.inputs, args):
+                if isinstance(x, RAW_BYTES):  # NumPy would read a bytearray's bytes as numbers
+                    raise ValueError
                 buf[:] = x
                 if len(x) != buf.size:       # a length-1 argument would broadcast
                     raise ValueError

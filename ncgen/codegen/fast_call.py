@@ -3,7 +3,8 @@
 
 :func:`fast_caller` returns ``caller(*arrays)``: copies each array's values into the
 kernel's input buffer (checked length; float64 contiguous arrays by ``memcpy``, other
-sequences element by element), calls the kernel's C entry point with the work arrays of a
+sequences element by element; ``bytes``, ``bytearray`` and byte memoryviews refused, not
+read as numbers), calls the kernel's C entry point with the work arrays of a
 :class:`~ncgen.codegen.direct.DirectFunction` and returns the object given at construction
 (its output buffers), or None when an optional check fails: ``check[0] > tol`` and
 ``check[1]`` finite (the tree kernels' pivot and sum).  It is an accelerator only: when the
@@ -44,8 +45,20 @@ typedef struct {
     PyObject *result; PyObject *keep;
 } Caller;
 
+static int raw_bytes(PyObject *x) {
+    if (PyBytes_Check(x) || PyByteArray_Check(x)) return 1;
+    if (!PyMemoryView_Check(x)) return 0;
+    const char *f = PyMemoryView_GET_BUFFER(x)->format;
+    return !f || ((f[0] == 'B' || f[0] == 'b' || f[0] == 'c') && f[1] == 0);
+}
+
 static int copy_in(double *dst, Py_ssize_t n, PyObject *x, int k) {
     Py_buffer view;
+    if (raw_bytes(x)) {
+        PyErr_Format(PyExc_TypeError, "argument %d: expected numbers, got %s (raw bytes are not read as numbers)",
+                     k, Py_TYPE(x)->tp_name);
+        return -1;
+    }
     if (PyObject_GetBuffer(x, &view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) == 0) {
         int ok = view.itemsize == 8 && view.format && view.format[0] == 'd' && view.format[1] == 0;
         if (ok && view.len == n * 8) { memcpy(dst, view.buf, (size_t)view.len); PyBuffer_Release(&view); return 0; }

@@ -10,7 +10,9 @@ written in a temporary sibling and renamed into place, with a manifest) holds:
 * ``<name>_plant_step``: one RATTLE step of ``h / substeps`` (:mod:`ncgen.control.discrete`),
   the plant of the demo;
 * ``<name>_mpc.h``/``.c``: the API ``<name>_mpc_init``, ``<name>_mpc_step(m, x, t, u_out)``,
-  ``<name>_mpc_free``, ``<name>_plant`` (documented in the header; no dynamic memory);
+  ``<name>_mpc_free``, ``<name>_plant`` (documented in the header; no dynamic memory), around
+  the model-independent driver ``ncgen_mpc.h`` (``templates/c/runtime/``: input checks, the
+  iterations, the shift of the guess; unit-tested alone by ``tests/c/test_mpc.c``);
 * ``demo.c``: the closed loop — controller every ``h`` seconds, plant with ``substeps``
   substeps, input disturbances — printing ``t u x`` per control step;
 * ``Makefile`` (``make``; ``CFLAGS``, ``LDFLAGS`` as usual), ``CMakeLists.txt``, ``main.c``.
@@ -30,7 +32,12 @@ from ncgen.control.discrete import step_functions
 from ncgen.control.mpc import REGULARIZATION, mpc_functions
 from ncgen.control.mpc_problem import mpc_problem
 from ncgen.control.step import RESIDUAL_TOL
+from ncgen.control.initial import check_consistent
 from ncgen.errors import NcgenError
+from ncgen.validation import as_scalar, as_vector
+
+#: Longest demo run (s) the demo program accepts (its command-line check).
+MAX_T_END = 1e6
 
 
 @dataclass(frozen=True)
@@ -85,9 +92,18 @@ def export_mpc(ocp, path, *, name: str | None = None, iterations: int = 1, termi
         raise NcgenError(f"export_mpc: iterations: expected a positive integer, got {iterations!r}")
     problem = mpc_problem(ocp, terminal_weight)
     nx, nu = 2 * model.nq, model.nu
-    x0 = np.concatenate([model.q0, model.v0]) if x0 is None else np.asarray(x0, dtype=float).reshape(-1)
-    if x0.size != nx or not np.all(np.isfinite(x0)):
-        raise NcgenError(f"export_mpc: x0: expected {nx} finite numbers (the state [q; v]), got {x0.size}")
+    t_end = as_scalar(t_end, "export_mpc: t_end")
+    if not 0 < t_end <= MAX_T_END:
+        raise NcgenError(f"export_mpc: t_end: expected the demo's duration in seconds, 0 < t_end <= {MAX_T_END:g}, "
+                         f"got {t_end:g}")
+    for pname, value in zip(model.parameter_names, problem.p):
+        if not np.isfinite(value):
+            raise NcgenError(f"export_mpc: parameter {pname!r}: expected a finite value, got {value}")
+    if x0 is None:
+        x0 = np.concatenate([model.q0, model.v0])
+    else:
+        x0 = as_vector(x0, nx, "export_mpc: x0 (the state [q; v])")
+        check_consistent(model, x0, problem.p, 0.0, "export_mpc: x0")             # the demo starts at t = 0
     fns = mpc_functions(model, problem, regularization=REGULARIZATION)
     plant = plant_function(model, problem.h / substeps)
     data, qp, update = fns
@@ -103,13 +119,14 @@ def export_mpc(ocp, path, *, name: str | None = None, iterations: int = 1, termi
         "plant_sz_arg": plant.sz_arg(), "plant_sz_res": plant.sz_res(), "plant_sz_iw": plant.sz_iw(),
         "plant_sz_w": plant.sz_w(), "plant_tol": _c(plant_tolerance(model)),
         "u_rest": ", ".join(_c(v) for v in u_rest) or "0", "params": ", ".join(_c(v) for v in problem.p) or "0",
-        "x0": ", ".join(_c(v) for v in x0), "t_end": _c(float(t_end)), "warmup": warmup,
+        "x0": ", ".join(_c(v) for v in x0), "t_end": _c(t_end), "warmup": warmup,
         "disturbance": [{"t_on": _c(p.t_on), "t_off": _c(p.t_off), "amounts": [_c(v) for v in p.values]}
                         for p in pl],
         "disturbance_text": "; ".join(f"{list(p.values)} for {p.t_on:g} <= t < {p.t_off:g} s" for p in pl)
                             or "none",
     }
-    extra = [ExtraSource("mpc/mpc.h.j2", f"{name}_mpc.h", context),
+    extra = [ExtraSource("runtime/ncgen_mpc.h", "ncgen_mpc.h", included=True),
+             ExtraSource("mpc/mpc.h.j2", f"{name}_mpc.h", context),
              ExtraSource("mpc/mpc.c.j2", f"{name}_mpc.c", context),
              ExtraSource("mpc/demo.c.j2", "demo.c", context, program=True)]
     return write_package(name, [data, qp, update, plant], Path(path), extra_sources=extra, reroll_instructions=None)

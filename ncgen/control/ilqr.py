@@ -26,7 +26,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ncgen.control.costs import cost_functions
-from ncgen.errors import NcgenError
+from ncgen.control.initial import check_consistent
+from ncgen.errors import NcgenError, OptimizationError
+from ncgen.validation import nonnegative
 
 MU_MIN, MU_MAX, MU_FACTOR = 1e-9, 1e10, 10.0
 ALPHAS = tuple(0.5 ** i for i in range(12))
@@ -51,12 +53,19 @@ class ILQRResult:
 def ilqr(st, x0, U0, costs, *, p=None, t0=None, max_iter: int = 200, tol: float = 1e-9,
          mu: float = 1e-6, verbose: bool = False) -> ILQRResult:
     """iLQR from the initial guess ``U0`` (N × nu); ``costs = (stage, terminal)`` as in
-    :mod:`ncgen.control.costs`; ``tol`` on the relative cost decrease of an iteration."""
+    :mod:`ncgen.control.costs`; ``tol`` on the relative cost decrease of an iteration.
+    ``x0`` must satisfy the constraints by ``nc.simulate``'s rule (:mod:`ncgen.control.initial`);
+    a cost that is NaN at the initial guess is an :class:`OptimizationError`, at trial steps it
+    is said in the result's message."""
+    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
+        raise NcgenError(f"ilqr: max_iter: expected a positive integer, got {max_iter!r}")
+    tol = nonnegative(tol, "ilqr: tol")
+    mu = nonnegative(mu, "ilqr: mu")
     stage_d, terminal_d = cost_functions(costs, st.nx, st.nu)
     U = st._inputs(U0).copy()
     N = U.shape[0]
-    x0 = st._args(x0, U[0], p, t0)[0]
-    t0 = st.model.t0 if t0 is None else float(t0)
+    x0, _, pv, t0 = st._args(x0, U[0], p, t0)
+    check_consistent(st.model, x0, pv, t0, "ilqr: x0")
     stage_map = stage_d.map(N)
 
     def total(X, U):
@@ -67,6 +76,10 @@ def ilqr(st, x0, U0, costs, *, p=None, t0=None, max_iter: int = 200, tol: float 
 
     X = roll(U)
     J = total(X, U)
+    if not np.isfinite(J):
+        raise OptimizationError(f"ilqr: the cost of the initial guess is {J} (states finite): the stage or "
+                                "terminal cost is not defined along it (e.g. a square root or logarithm of a "
+                                "negative number, or a division by zero)")
     history, converged, message = [J], False, f"stopped after {max_iter} iterations"
     K = np.zeros((N, st.nu, st.nx))
     it = 0
@@ -84,12 +97,15 @@ def ilqr(st, x0, U0, costs, *, p=None, t0=None, max_iter: int = 200, tol: float 
             mu = max(mu * MU_FACTOR, MU_MIN)
             if mu > MU_MAX:
                 return ILQRResult(X, U, K, J, it, False, history, "Q_uu stayed indefinite (μ above its limit)")
-        accepted = False
+        accepted, undefined = False, None
         for alpha in ALPHAS:
             Xn, Un = _forward(st, x0, X, U, kff, K, alpha, p, t0)
             if Xn is None:
                 continue
             Jn = total(Xn, Un)
+            if np.isnan(Jn):
+                undefined = alpha
+                continue
             expected = -(alpha * dV[0] + alpha ** 2 * dV[1])
             if Jn < J and (expected <= 0 or (J - Jn) >= 0.1 * expected):
                 accepted = True
@@ -98,6 +114,9 @@ def ilqr(st, x0, U0, costs, *, p=None, t0=None, max_iter: int = 200, tol: float 
             mu = max(mu * MU_FACTOR, MU_MIN)
             if mu > MU_MAX:
                 message = "no descent: the line search failed with μ at its limit"
+                if undefined is not None:
+                    message += (f"; the cost was NaN at trial steps (α = {undefined:g}): the stage or terminal "
+                                "cost is not defined there")
                 break
             continue
         mu = max(mu / MU_FACTOR, MU_MIN)

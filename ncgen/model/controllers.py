@@ -27,8 +27,11 @@ import casadi as ca
 import numpy as np
 
 from ncgen.errors import ModelError
+from ncgen.validation import as_numbers
 
 KINDS = ("pd", "computed_torque", "expression")
+#: The arguments of PD and computed torque that are gains (finite and >= 0).
+GAINS = ("kp", "kd")
 
 
 class Controller:
@@ -67,8 +70,10 @@ class PD(Controller):
     kind = "pd"
 
     def __init__(self, kp, kd, target=0.0, rate=0.0, *, name: str | None = None):
-        self.kp, self.kd, self.target, self.rate = kp, kd, target, rate
         self.name = name or self.kind
+        self.kp, self.kd, self.target, self.rate = (
+            checked_value(v, f"{self.name}: {k}", gain=k in GAINS)
+            for k, v in (("kp", kp), ("kd", kd), ("target", target), ("rate", rate)))
 
     def _vector(self, model, value, what: str, t) -> ca.SX:
         js, n = model.joint_space, _actuated_rates(model)
@@ -125,7 +130,7 @@ class ComputedTorque(PD):
 
     def __init__(self, kp, kd, target=0.0, rate=0.0, acceleration=0.0, *, name: str | None = None):
         super().__init__(kp, kd, target, rate, name=name)
-        self.acceleration = acceleration
+        self.acceleration = checked_value(acceleration, f"{self.name}: acceleration", gain=False)
 
     def efforts(self, model, t, qj, vj, p, inverse_dynamics) -> ca.SX:
         js = model.joint_space
@@ -140,6 +145,26 @@ class ComputedTorque(PD):
         aj = ca.SX.zeros(js.nv)
         aj[rows_v] = a
         return inverse_dynamics(aj)[rows_v]
+
+
+def checked_value(value, what: str, *, gain: bool):
+    """``value`` (a gain, a target, ...) if it is a callable of ``t``, or finite numbers (a
+    scalar, a vector, or a dict of them by joint), and for a gain (``kp``, ``kd``) none negative:
+    a negative gain drives the joint away from its target."""
+    if callable(value):
+        return value
+    for key, x in (value.items() if isinstance(value, dict) else [(None, value)]):
+        label = what if key is None else f"{what}[{key!r}]"
+        expected = "a number, one per actuated joint rate, a dict by joint or a function of t"
+        if isinstance(x, (str, bytes)):
+            raise ModelError(f"{label}: expected {expected}, got the text {x!r}")
+        a = as_numbers(x, label, expected)
+        if a.size == 0 or not np.all(np.isfinite(a)):
+            raise ModelError(f"{label}: expected finite numbers, got {a.tolist()}")
+        if gain and np.any(a < 0):
+            raise ModelError(f"{label}: expected gains >= 0 (a negative gain drives the joint away from its "
+                             f"target), got {a.tolist()}")
+    return value
 
 
 def _actuated_rates(model) -> int:
@@ -181,7 +206,7 @@ def controller_from_dict(data: dict, where: str = "controller") -> Controller:
     for key in ("kp", "kd"):
         if key not in data:
             raise ModelError(f"{where}.{key}: missing (a number or one per actuated joint rate)")
-    args = {k: data[k] for k in allowed[kind][1:] if k in data}
+    args = {k: checked_value(data[k], f"{where}.{k}", gain=k in GAINS) for k in allowed[kind][1:] if k in data}
     return PD(**args) if kind == "pd" else ComputedTorque(**args)
 
 

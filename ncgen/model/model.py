@@ -150,7 +150,8 @@ class Model:
         if data.description is None:
             data.description = self.recipe[0].description()
         _known[self.content_hash] = self
-        return type(self.recipe[0]).rebuilt_model, (data.description, self.recipe[1], self.content_hash)
+        from ncgen.version import __version__
+        return type(self.recipe[0]).rebuilt_model, (data.description, self.recipe[1], self.content_hash, __version__)
 
     @property
     def data(self) -> ModelData:

@@ -305,7 +305,8 @@ class System:
         return text, frames, [dict(v) for v in self.visuals], limits
 
     def __reduce__(self):
-        return from_description, self.description()
+        from ncgen.version import __version__
+        return rebuilt_system, (__version__, self.description())
 
     def __deepcopy__(self, memo) -> "System":
         """A member-by-member copy (as without :meth:`__reduce__`, which pickling uses)."""
@@ -315,22 +316,52 @@ class System:
         return new
 
     @classmethod
-    def rebuilt_model(cls, description: tuple, options: dict, expected_hash: str):
-        """The model of a pickle (:meth:`ncgen.model.model.Model.__reduce__`): the one of this
-        process with that content hash, else built from ``description`` with the build
-        ``options`` and checked against ``expected_hash``."""
+    def rebuilt_model(cls, *pickled):
+        """The model of a pickle (:meth:`ncgen.model.model.Model.__reduce__`: ``description``,
+        build ``options``, ``expected_hash``, the ncgen version that pickled it): the one of this
+        process with that content hash, else built from ``description`` with ``options`` and
+        checked against ``expected_hash``; a pickle of another ncgen version is refused."""
         from ncgen.model.model import keep_rebuilt, known_model
+        description, options, expected_hash = _same_version(pickled, 3, "model")
         model = known_model(expected_hash)
         if model is None:
             with warnings.catch_warnings():   # said when it was first built (e.g. dropped constraints)
                 warnings.simplefilter("ignore")
-                model = keep_rebuilt(from_description(*description).build(**options), expected_hash)
+                model = keep_rebuilt(_read_pickled(description).build(**options), expected_hash)
         return model
 
     def __repr__(self) -> str:
         return (f"System({self.name!r}, dim={self.dim}, members={len(self.members)}, "
                 f"joints={len(self.joints)}, forces={len(self.forces)}"
                 + (f", contacts={len(self.contacts)})" if self.contacts else ")"))
+
+
+def _same_version(pickled: tuple, n: int, what: str) -> tuple:
+    """The ``n`` fields of a pickle written as ``(*fields, version)``, if ``version`` is this
+    ncgen's; else a :class:`ModelError` saying to rebuild."""
+    from ncgen.version import __version__
+    version = pickled[-1] if len(pickled) == n + 1 else None
+    if version != __version__:
+        said = f"version {version}" if isinstance(version, str) else "an older version"
+        raise ModelError(f"this {what} was pickled by another ncgen version ({said}; this is {__version__}): "
+                         f"rebuild the {what} (System.from_toml / System.build) in this process instead")
+    return pickled[:n]
+
+
+def _read_pickled(description) -> System:
+    """``from_description(*description)``, a description it cannot read named as a pickle of
+    another ncgen version."""
+    try:
+        return from_description(*description)
+    except (TypeError, KeyError, AttributeError, IndexError) as e:
+        raise ModelError(f"the pickled system cannot be read ({type(e).__name__}: {e}): pickled by another ncgen "
+                         "version? Rebuild the model in this process") from None
+
+
+def rebuilt_system(version: str, description: tuple) -> System:
+    """The system of a pickle (:meth:`System.__reduce__`), if this ncgen version wrote it."""
+    (description,) = _same_version((description, version), 1, "system")
+    return _read_pickled(description)
 
 
 def from_description(toml: str, frames: dict, visuals: list, joint_limits: dict) -> System:

@@ -254,6 +254,10 @@ def _matrix(v, n, path) -> list[list[float]]:
 class _Loader:
     def __init__(self, data: dict, origin: str, system_class):
         top = _Table(data, "")
+        if "model" in data and not {"system", "members"} & set(data):
+            raise ModelError(f"{origin}: this is an optimal-control problem file (it names the model "
+                             f"{data['model']!r}), not a model: use `ncgen optimize` or `ncgen mpc` "
+                             "(in Python: ncgen.optim.load_problem(path, model))")
         for k in data:
             if k not in TOP_KEYS:
                 raise ModelError(f"{k}: unknown top-level key{did_you_mean(k, TOP_KEYS)}; "

@@ -157,14 +157,14 @@ def _batch_size(model, q0, v0, p, u, n_t: int) -> int:
     """The number of runs the per-run arguments say (1 when none is per run)."""
     sizes = {}
     for name, value, single in (("q0", q0, 1), ("v0", v0, 1), ("u", u, 2)):
-        if value is not None and not callable(value) and np.ndim(value) == single + 1:
+        if value is not None and not callable(value) and _ndim(value, name) == single + 1:
             sizes[name] = len(value)
     if isinstance(p, dict):
         for key, value in p.items():
             size = model.parameter_sizes[model.parameter_names.index(key)] if key in model.parameter_names else 1
-            if np.ndim(value) >= (1 if size == 1 else 2):
+            if _ndim(value, f"p[{key!r}]") >= (1 if size == 1 else 2):
                 sizes[f"p[{key!r}]"] = len(value)
-    elif p is not None and np.ndim(p) == 2:
+    elif p is not None and _ndim(p, "p") == 2:
         sizes["p"] = len(p)
     if len(set(sizes.values())) > 1:
         said = ", ".join(f"{k}: {v}" for k, v in sizes.items())
@@ -173,6 +173,15 @@ def _batch_size(model, q0, v0, p, u, n_t: int) -> int:
     if n < 1:
         raise NcgenError("simulate_batch: no runs (the per-run arguments are empty)")
     return n
+
+
+def _ndim(value, what: str) -> int:
+    """``np.ndim(value)``, or an error naming ``what`` when its rows differ in length."""
+    try:
+        return np.ndim(value)
+    except ValueError:
+        raise NcgenError(f"simulate_batch: {what}: the runs' values are ragged (rows of different lengths); "
+                         "expected one row per run, all of one shape") from None
 
 
 class _Runs:
@@ -302,10 +311,11 @@ class _Runs:
         self.Y[i, :rows + 1, 2] = traj.constraint_residual
         self.Y[i, :rows + 1, 5:] = traj.markers.reshape(rows + 1, -1)
         bad = untrusted_row(model, traj, S[:rows], self.h, contacts=self.stepper.nd > 0)
-        if bad is not None and self.status[i] == 0:
+        if bad is not None:            # also before a failed step: only trusted rows are kept
             row, reason = bad
-            self.status[i] = STATUS_UNTRUSTED
-            self.message[i] = f"not trustworthy: {reason}"
+            later = f". Later, {self.message[i]}" if self.status[i] != 0 else ""
+            self.status[i] = STATUS_UNTRUSTED if self.status[i] == 0 else self.status[i]
+            self.message[i] = f"not trustworthy: {reason}{later}"
             self._blank(i, row + 1)
 
     def _blank(self, i: int, k: int) -> None:

@@ -30,6 +30,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.errors import CompilerNotFound, ModelError, NcgenError, SimulationError, SimulationInterrupted
+from ncgen.runtime.feedback import FeedbackFailed, call_feedback, with_partial
 from ncgen.interrupts import call_interruptibly
 from ncgen.runtime.progress import Progress
 from ncgen.runtime.trajectory import Trajectory
@@ -200,11 +201,16 @@ def simulate_joint(model, t: np.ndarray, U: np.ndarray, hold: str, p: np.ndarray
     start = time.perf_counter()
     status, k = 0, 0
     chunk = 1 if feedback is not None else max(1, math.ceil((n - 1) / CHUNKS))
+    failed = None
     try:
         while k < n - 1 and status == 0:
             m = min(chunk, n - 1 - k)
             if feedback is not None:
-                W[k] = _feedback(model, feedback, float(t[k]), X[k], p)
+                try:
+                    W[k] = _feedback(model, feedback, float(t[k]), X[k], p)
+                except FeedbackFailed as e:
+                    failed, W[k] = e, W[k - 1] if k else W[k]
+                    break
             sl = slice(k, k + m + 1)
             Xs = X[sl]
             status, done = loop.run(method, np.ascontiguousarray(t[sl]), Xs, np.ascontiguousarray(W[k:k + m]),
@@ -224,6 +230,8 @@ def simulate_joint(model, t: np.ndarray, U: np.ndarray, hold: str, p: np.ndarray
             "stats": {"nsteps": int(stats[0]), "rejected_steps": int(stats[1]), "evaluations": int(stats[2])},
             "build_time": build_time, "wall_time": time.perf_counter() - start, "complete": status == 0}
     traj = _trajectory(model, loop, t[:k + 1], X[:k + 1], W[:k + 1], p, info)
+    if failed is not None:
+        raise with_partial(failed, traj) from failed.__cause__
     if status == INTERRUPTED:
         message = f"joint-space simulation of {model.name!r} interrupted (Ctrl-C) at t = {t[k]:.6g} s"
         traj.info["message"] = message
@@ -247,18 +255,6 @@ def _feedback(model, feedback, t: float, x: np.ndarray, p) -> np.ndarray:
     else:
         args = model.from_joint_space(qj, vj, t=t, p=p)
     return call_feedback(u, t, *args, nu=model.nu, what=kind)
-
-
-def call_feedback(u, t: float, a, b, *, nu: int, what: str) -> np.ndarray:
-    """``u(t, a, b)`` as ``nu`` finite floats, or a named error."""
-    names = "qj, vj" if what == "joint" else "q, v"
-    try:
-        val = np.asarray(u(t, a, b), dtype=float).reshape(-1)
-    except (TypeError, ValueError) as e:
-        raise NcgenError(f"u(t, {names}) failed at t = {t:g} s: {e}") from None
-    if val.size != nu or not np.all(np.isfinite(val)):
-        raise NcgenError(f"u(t, {names}) at t = {t:g} s: expected {nu} finite input value(s), got {val.tolist()}")
-    return val
 
 
 def _trajectory(model, loop: JointLoop, t, X, W, p, info) -> Trajectory:

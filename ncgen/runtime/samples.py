@@ -2,14 +2,20 @@
 hypercube, Sobol, uniform random; ``scipy.stats.qmc``, seeded) within bounds.
 
 A :class:`Samples` is a table: ``names`` (the parameters) and ``values``, one row per run.
+A sweep has at most :data:`MAX_RUNS` runs: a larger grid or sample is refused before it is
+built (its table alone would take gigabytes, its summary more).
 """
 from __future__ import annotations
 
 import itertools
+import math
 
 import numpy as np
 
 from ncgen.errors import NcgenError
+
+#: Most runs of one sweep (a grid's or sampler's size is checked against it before building).
+MAX_RUNS = 10**7
 
 
 class Samples:
@@ -43,10 +49,20 @@ class Samples:
         names = list(axes)
         levels = []
         for name in names:
-            v = np.atleast_1d(np.asarray(axes[name], dtype=float))
+            try:
+                v = np.atleast_1d(np.asarray(axes[name], dtype=float))
+            except (TypeError, ValueError):
+                v = np.zeros((0, 0))
             if v.ndim != 1 or not len(v):
                 raise NcgenError(f"grid: parameter {name!r}: expected a non-empty list of numbers, got {axes[name]!r}")
+            if not np.all(np.isfinite(v)):
+                raise NcgenError(f"grid: parameter {name!r}: expected finite numbers, got {v[~np.isfinite(v)][0]}")
             levels.append(v)
+        size = math.prod(len(v) for v in levels)
+        if size > MAX_RUNS:
+            counts = " × ".join(f"{len(v)} ({n})" for n, v in zip(names, levels))
+            raise NcgenError(f"grid: {counts} = {size:.3g} runs, more than the limit of {MAX_RUNS:.0e}; "
+                             "use fewer values or a sampler (nc.Samples.latin_hypercube)")
         return cls(names, np.array(list(itertools.product(*levels))).reshape(-1, len(names)))
 
     @classmethod
@@ -117,6 +133,9 @@ def _bounds(bounds: dict):
 
 
 def _count(n) -> int:
-    if int(n) != n or n < 1:
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer, float)) or not math.isfinite(n) \
+            or int(n) != n or n < 1:
         raise NcgenError(f"n: expected a positive number of runs, got {n!r}")
+    if n > MAX_RUNS:
+        raise NcgenError(f"n: {int(n):.3g} runs, more than the limit of {MAX_RUNS:.0e} runs of one sweep")
     return int(n)

@@ -19,6 +19,7 @@ from ncgen.errors import ModelError, option
 from ncgen.runtime.backend_policy import choose_backend
 from ncgen.runtime.dae import load_dae
 from ncgen.runtime.energy_balance import idas_report
+from ncgen.runtime.feedback import FeedbackFailed, call_feedback, with_partial
 from ncgen.runtime.stepper_checks import is_conservative
 from ncgen.runtime.diagnose import explain, shift_time
 from ncgen.runtime.idas import ChunkedIDAS, ChunkFailure
@@ -381,8 +382,6 @@ def _extra_value(model, extra, t: float, q, v, p) -> np.ndarray:
 
 def _natural_feedback(model, feedback, t: float, q, v, p) -> np.ndarray:
     """The feedback's inputs at the natural state ``(q, v)`` at ``t``."""
-    from ncgen.runtime.joint_simulation import call_feedback
-
     kind, u = feedback
     if kind == "joint":
         qj, vj = model.to_joint_space(q, v)
@@ -402,7 +401,11 @@ def _idas_feedback(model, runner, t, q, v, a, lam, U, p, feedback, progress, met
     try:
         while k < len(t) - 1:
             if k:
-                U[k] = _natural_feedback(model, feedback, float(t[k]), X[k, :nq], X[k, nq:], p)
+                try:
+                    U[k] = _natural_feedback(model, feedback, float(t[k]), X[k, :nq], X[k, nq:], p)
+                except FeedbackFailed as e:
+                    failure = e
+                    break
             try:
                 X[k + 1:k + 2], Z[k + 1:k + 2] = runner.advance(t[k], X[k], Z[k], U[k][:, None], p)
             except ChunkFailure as e:
@@ -418,6 +421,8 @@ def _idas_feedback(model, runner, t, q, v, a, lam, U, p, feedback, progress, met
             "wall_time": time.perf_counter() - start, "complete": failure is None}
     traj = Trajectory.from_states(model, t[:k + 1], X[:k + 1, :nq], X[:k + 1, nq:], Z[:k + 1, nq:], U[:k + 1], p,
                                   info)
+    if isinstance(failure, FeedbackFailed):
+        raise with_partial(failure, traj) from failure.__cause__
     if failure is not None:
         message = _failure_message(model, failure, t, k, X[k], Z[k, nq:], U[k], p, dae)
         traj.info["message"] = message

@@ -142,6 +142,10 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, conse
                    f"t = {t_fail:.6g} s to {t_fail + h:.6g} s (h = {h:.3g} s, halved up to "
                    f"{max_halvings} times): {STATUS.get(status, f'status {status}')}. The trajectory up to "
                    f"t = {t[rows]:.6g} s is attached to this error as .trajectory.")
+        if check:                      # rows before the failure kept only as far as they are trusted
+            failed = STATUS.get(status, f"status {status}")
+            check_fixed(model, traj, S[:rows], h, substeps, contacts, conservative,
+                        after=f" The stepper then failed at t = {t_fail:.6g} s: {failed}.")
         traj.info["message"] = message
         raise SimulationError(message, time=float(t[rows]), trajectory=traj)
     if check:

@@ -87,16 +87,18 @@ GLOBAL_FACTOR = 100.0
 
 
 
-def check_fixed(model, traj, S: np.ndarray, h: float, substeps: int, contacts: bool, conservative: bool) -> None:
+def check_fixed(model, traj, S: np.ndarray, h: float, substeps: int, contacts: bool, conservative: bool,
+                after: str = "") -> None:
     """Raise :class:`~ncgen.errors.SimulationError` from the first output interval where a
-    fixed-step run is untrustworthy (module docstring), with the trajectory before it."""
+    fixed-step run is untrustworthy (module docstring), with the trajectory before it;
+    ``after``: what happened later (a failed step), added to the message."""
     bad = untrusted_row(model, traj, S, h, contacts=contacts)
     if bad is None:
         return
     row, reason = bad
     kept = traj.head(row + 1)          # the states before C row `row`
     message = (f"simulation of {model.name!r} with the stepper (fixed step h = {h:.3g} s) is not "
-               f"trustworthy: {reason}. The trajectory up to t = {kept.t[-1]:.6g} s, before the "
+               f"trustworthy: {reason}.{after} The trajectory up to t = {kept.t[-1]:.6g} s, before the "
                f"problem showed, is attached to this error as .trajectory "
                f"(check=False returns the whole run unchecked).")
     work = np.concatenate([[0.0], S[:row, STATS.index("work")]])
@@ -337,6 +339,7 @@ def untrusted_row(model, traj, S: np.ndarray, h: float, contacts: bool = False) 
     else:
         e_rel = energy_error(traj, work, conservative)[1:] / scale
         residual = np.zeros(len(S))
+    e_rel = np.where(np.isnan(e_rel), np.inf, e_rel)    # overflowed or NaN states: diverged
     dt = h * traj.info.get("substeps", 1)
     flags = {
         "splits": splits > 0,
@@ -368,7 +371,8 @@ def untrusted_row(model, traj, S: np.ndarray, h: float, contacts: bool = False) 
             what = ("energy of this conservative model changed" if conservative else
                     "energy balance E - E0 - W (W: work of its non-conservative forces and drives) is off")
         reason = (f"the {what} by {e_rel[row]:.3g} of its energy scale by t = {t_row:.6g} s (more than "
-                  f"{ENERGY_FRACTION:g})")
+                  f"{ENERGY_FRACTION:g})" if np.isfinite(e_rel[row]) else
+                  f"the motion diverged: the energy is no longer finite by t = {t_row:.6g} s")
     elif kind == "contacts":
         reason = (f"the contact impulses did not converge by t = {t_row:.6g} s: projected Gauss-Seidel stopped "
                   f"at {PGS_MAX_ITER} sweeps with a last sweep still changing a contact velocity by "

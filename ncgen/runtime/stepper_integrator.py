@@ -9,6 +9,7 @@ import time
 import numpy as np
 
 from ncgen.errors import CompilerNotFound, NcgenError, SimulationError, option
+from ncgen.runtime.feedback import FeedbackFailed, with_partial
 from ncgen.runtime.integrator import Run, refuse_integrator
 from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.stepper import simulate_stepper
@@ -62,7 +63,16 @@ def _stepwise(model, run: Run, opts: SimulationOptions) -> Trajectory:
     Q, V, LAM, UU = [run.q], [run.v], [], []
     start = time.perf_counter()
     for k in range(len(t) - 1):
-        uk = run.feedback_input(float(t[k]), Q[-1], V[-1])
+        try:
+            uk = run.feedback_input(float(t[k]), Q[-1], V[-1])
+        except FeedbackFailed as e:
+            if not k:
+                raise
+            LAM.append(run.multipliers(float(t[k]), Q[-1], V[-1], UU[-1]))
+            UU.append(UU[-1])
+            info = {"method": "stepper", "feedback": feedback[0]}
+            raise with_partial(e, Trajectory.from_states(model, t[:k + 1], np.array(Q), np.array(V), np.array(LAM),
+                                                          np.array(UU), p, info)) from e.__cause__
         lam = run.multipliers(float(t[k]), Q[-1], V[-1], uk)
         LAM.append(lam)
         UU.append(uk)

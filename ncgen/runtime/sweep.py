@@ -137,6 +137,8 @@ def sweep(model, params, *, t_end: float, dt: float, method: str = "stepper", ou
     per_run = _per_run(model, n, u=u, q0=q0, v0=v0)
     _check_options(method, options)
     where, n_workers = _where(client, workers, method)
+    if path is not None:
+        check_store_path(Path(path))      # before any compile or run: the extras, the user's files
     if method == "stepper":
         load_stepper(model)        # compiled (or found in the cache) once, before the workers start
     chunk = _chunk(chunk if chunk is not None or path is None else _stored_chunk(path), n, n_workers)
@@ -247,6 +249,10 @@ def _check_options(method: str, options: dict) -> None:
 # ---------------------------------------------------------------- where tasks run
 def _where(client, workers, method) -> tuple[str, int]:
     if client is not None:
+        status = str(getattr(client, "status", "running"))
+        if status not in ("running", "connecting", "newly-created"):
+            raise NcgenError(f"client: the Dask client is {status!r}, not connected; give an open "
+                             "dask.distributed.Client (or client=None to run on the local cores)")
         n = sum(client.nthreads().values()) if hasattr(client, "nthreads") else 1
         return "dask", max(1, n)
     if workers is None:
@@ -356,16 +362,36 @@ def _summary_columns(parts: list[dict], samples: Samples) -> dict:
     return {k: out[k] for k in ["run", *samples.names, *SUMMARY[1:]]}
 
 
+def check_store_path(path: Path) -> None:
+    """Refuse ``path`` unless zarr and pyarrow are installed and it is new, an empty folder or
+    an ncgen sweep's store: a user's other files or Zarr stores are never written into."""
+    try:
+        import pyarrow  # noqa: F401  (the summary's Parquet writer, checked here)
+        import zarr
+    except ImportError as e:
+        raise NcgenError(f"sweep(path={str(path)!r}): writing results needs zarr and pyarrow ({e.name} is "
+                         f"missing): pip install 'ncgen[sweep]'") from None
+    if not path.exists():
+        return
+    if not path.is_dir():
+        raise NcgenError(f"sweep: path {str(path)!r} is a file, not a sweep's folder; give a new folder")
+    if not any(path.iterdir()):
+        return
+    try:
+        known = zarr.open_group(str(path), mode="r").attrs.get(SPEC_KEY)
+    except Exception:          # not a Zarr group at all (any error of zarr's readers)
+        known = None
+    if known is None:
+        raise NcgenError(f"sweep: {str(path)!r} exists and is not an ncgen sweep's store (no sweep description "
+                         "in its attributes); it is left as it is: give a new or empty folder")
+
+
 class _Store:
     """A sweep's Zarr store and Parquet summary parts (module docstring)."""
 
     def __init__(self, path, model, samples, t, method, outputs, options, chunk, per_run):
-        try:
-            import pyarrow  # noqa: F401  (the summary's Parquet writer, checked here)
-            import zarr
-        except ImportError as e:
-            raise NcgenError(f"sweep(path=...): writing results needs zarr and pyarrow ({e.name} is missing): "
-                             f"pip install 'ncgen[sweep]'") from None
+        import zarr
+        check_store_path(Path(path))
         self.path, self.samples = Path(path), samples
         spec = {"model": model.name, "content_hash": model.content_hash, "runs": len(samples),
                 "parameters": samples.names, "samples_sha256": _sha(samples.values), "t0": float(t[0]),

@@ -24,6 +24,7 @@ from matplotlib.animation import FFMpegWriter
 from ncgen.errors import NcgenError
 from ncgen.files import atomic_path
 from ncgen.runtime.progress import Progress
+from ncgen.validation import as_scalar
 from ncgen.viz.draw import SceneArtists, figure, scene_axes
 from ncgen.viz.scene import scene
 
@@ -51,6 +52,10 @@ def animate(traj, path, *, max_frames: int = 150, fps: float | None = None, size
     suffix = path.suffix.lower()
     if suffix not in (".gif", ".mp4"):
         raise NcgenError(f"animate: {path}: expected a .gif or .mp4 file name")
+    if fps is not None and not (as_scalar(fps, "animate: fps") > 0):
+        raise NcgenError(f"animate: fps: expected a positive number of frames per second, got {fps!r}")
+    if not len(traj.t):
+        raise NcgenError(f"animate: {path}: the trajectory is empty (no samples): nothing to show")
     ffmpeg = ffmpeg_executable(path) if suffix == ".mp4" else None
     began = time.monotonic()
     sc = scene(traj)

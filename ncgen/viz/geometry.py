@@ -25,6 +25,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ncgen.errors import NcgenError
+from ncgen.model.expressions import did_you_mean
 from ncgen.reproducible import perpendicular_basis
 
 #: Colours of members, in member order (tab10).
@@ -79,10 +81,26 @@ def z_to(direction) -> np.ndarray:
     return np.column_stack([*perpendicular_basis(z, unit=True), z])
 
 
+def checked_colors(model, colors) -> dict:
+    """``colors`` as a dict ``{member name: colour}``, every name a member of ``model`` and
+    every colour a non-empty string."""
+    if colors is None:
+        return {}
+    if not isinstance(colors, dict):
+        raise NcgenError(f"colors: expected a dict {{member name: colour}}, got {type(colors).__name__}")
+    for name, color in colors.items():
+        if name not in model.member_names:
+            raise NcgenError(f"colors: {name!r} is not a member of {model.name!r}"
+                             f"{did_you_mean(name, model.member_names)}; members: {', '.join(model.member_names)}")
+        if not isinstance(color, str) or not color.strip():
+            raise NcgenError(f"colors[{name!r}]: expected a CSS colour (a name or '#rrggbb'), got {color!r}")
+    return dict(colors)
+
+
 def member_primitives(model, size: float, colors: dict | None = None) -> dict[str, list[Primitive]]:
     """``{member name or "ground": [Primitive, ...]}`` for ``model`` (see the module docstring);
-    ``colors`` overrides the colour of named members."""
-    colors = dict(colors or {})
+    ``colors`` overrides the colour of named members (CSS colours: names or ``#rrggbb``)."""
+    colors = checked_colors(model, colors)
     out: dict[str, list[Primitive]] = {}
     visuals: dict[str, list[dict]] = {}
     for v in model.visuals:

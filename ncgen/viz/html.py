@@ -20,6 +20,7 @@ import numpy as np
 
 from ncgen.errors import NcgenError
 from ncgen.files import atomic_path
+from ncgen.validation import as_scalar
 from ncgen.version import __version__
 from ncgen.viz import geometry, meshes
 from ncgen.viz.scene import scene as make_scene
@@ -42,6 +43,11 @@ def to_html(traj, path, *, fps: float = FPS, colors: dict | None = None, mesh_pa
     path = Path(path)
     if path.suffix.lower() not in (".html", ".htm"):
         raise NcgenError(f"to_html: {path}: expected a file name ending in .html")
+    if not len(traj.t):
+        raise NcgenError(f"to_html: {path}: the trajectory is empty (no samples): nothing to show")
+    fps = as_scalar(fps, "to_html: fps")
+    if fps <= 0:
+        raise NcgenError(f"to_html: fps: expected a positive number of frames per second, got {fps:g}")
     data = page_data(traj, fps=fps, colors=colors, mesh_paths=mesh_paths, trails=trails, with_plots=plots)
     text = render_page(data, title or f"{traj.model_name} — ncgen")
     path.parent.mkdir(parents=True, exist_ok=True)
