@@ -192,3 +192,13 @@ def test_derived_function_is_stored_beside_the_model(store, monkeypatch):
     shutil.rmtree(store)
     model_cache.derived_function(model, "half-phi", build)    # the store gone: derived again
     assert calls == [1, 1]
+
+
+def test_warnings_of_the_build_are_given_again_when_read_back(store):
+    from test_reliability_redundancy import distance_drive
+    with pytest.warns(UserWarning, match=r"dropping redundant constraints d\.drive"):
+        first = model_cache.build_system(distance_drive(1.0))
+    with pytest.warns(UserWarning, match=r"dropping redundant constraints d\.drive"):
+        again = model_cache.build_system(distance_drive(1.0))
+    assert again is not first and again.data.store_key == first.data.store_key
+    assert again.redundant == first.redundant == ["d.drive"] and again.dof == 1

@@ -3,12 +3,13 @@ parsing and ``build()`` (SymPy derivations, CasADi assembly, the consistent init
 
 An entry is ``<cache_dir>/models/<key>.model`` (:func:`ncgen.codegen.compile_cache.cache_dir`):
 one line of JSON (the format, ncgen's version, the key, the sha256 and size of the payload),
-then the payload, a pickle of the model's attributes
-(:func:`ncgen.model.model.model_state`; CasADi expressions and functions through CasADi's own
-serialisation).  The key hashes what the model is made from — a model file's bytes and the
-path it was read from, or a :class:`~ncgen.model.system.System`'s description — the build
-options, and ncgen itself: its version and the bytes of its Python sources (so an edited
-checkout never loads a model built by other code), CasADi's, NumPy's and Python's versions.
+then the payload, a pickle of the model's attributes (:func:`ncgen.model.model.model_state`;
+CasADi expressions and functions through CasADi's own serialisation) and of the warnings its
+build gave, which a read gives again.  The key hashes what the model is made from — a model
+file's bytes and the path it was read from, or a :class:`~ncgen.model.system.System`'s
+description — the build options, and ncgen itself: its version and the bytes of its Python
+sources (so an edited checkout never loads a model built by other code), CasADi's, NumPy's
+and Python's versions.
 
 Entries are written to a temporary sibling and renamed into place
 (:func:`ncgen.files.atomic_path`).  An entry is loaded only if its header names this format,
@@ -28,6 +29,7 @@ import pickle
 import shutil
 import sys
 import types
+import warnings
 from functools import lru_cache
 from pathlib import Path
 from typing import Callable
@@ -104,13 +106,22 @@ def system_key(system, **options) -> str | None:
 
 def cached(key: str | None, build: Callable[[], object]):
     """The model stored under ``key``, else ``build()`` stored under it (nothing is stored
-    or read with ``key`` None or the store off)."""
+    or read with ``key`` None or the store off).  The warnings the build gave (e.g. redundant
+    constraints dropped) are stored with the model and given again when it is read back."""
     if key is None or not enabled():
         return build()
-    model = load(key)
-    if model is None:
+    hit = load(key)
+    if hit is not None:
+        model, said = hit
+        for category, message in said:
+            warnings.warn(message, category, stacklevel=2)
+        return model
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
         model = build()
-        save(key, model)
+    for w in caught:                      # given as the build gave them, under the caller's filters
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    save(key, model, [(w.category, str(w.message)) for w in caught])
     return model
 
 
@@ -123,23 +134,29 @@ def _path(key: str, what: str = "") -> Path:
     return store_dir() / f"{key}{'-' + what if what else ''}{SUFFIX}"
 
 
-def load(key: str):
-    """The model stored under ``key``, or None (absent; a damaged or foreign entry is removed)."""
+def load(key: str) -> tuple | None:
+    """``(model, warnings)`` stored under ``key`` (``warnings``: ``[(category, message)]`` of
+    its build), or None (absent; a damaged or foreign entry is removed)."""
     from ncgen.model.model import restored_model
 
-    model = _read(_path(key), key, lambda payload: restored_model(_unpickle(payload)))
-    if model is not None:
-        model.data.store_key = key
-    return model
+    def decode(payload):
+        stored = _unpickle(payload)
+        return restored_model(stored["state"]), list(stored["warnings"])
+
+    hit = _read(_path(key), key, decode)
+    if hit is not None:
+        hit[0].data.store_key = key
+    return hit
 
 
-def save(key: str, model) -> bool:
-    """Store ``model`` under ``key``; False (and nothing written) if its state cannot be pickled
-    or the store cannot be written."""
+def save(key: str, model, said=()) -> bool:
+    """Store ``model`` under ``key`` with the warnings ``said`` by its build (``[(category,
+    message)]``); False (and nothing written) if its state cannot be pickled or the store
+    cannot be written."""
     from ncgen.model.model import model_state
 
     try:
-        payload = _pickle(model_state(model))
+        payload = _pickle({"state": model_state(model), "warnings": list(said)})
     except Exception:                      # noqa: BLE001 — e.g. a Python function inside a force
         return False
     if not _write(_path(key), key, payload):
@@ -229,12 +246,12 @@ class _Pickler(pickle.Pickler):
         return NotImplemented
 
 
-def _pickle(state: dict) -> bytes:
+def _pickle(stored: dict) -> bytes:
     import casadi
 
     buffer = io.BytesIO()
     with casadi.global_pickle_context():
-        _Pickler(buffer, protocol=5).dump(state)
+        _Pickler(buffer, protocol=5).dump(stored)
     return buffer.getvalue()
 
 
@@ -242,7 +259,8 @@ def _unpickle(payload: bytes) -> dict:
     import casadi
 
     with casadi.global_unpickle_context():
-        state = pickle.loads(payload)
-    if not isinstance(state, dict):
-        raise TypeError(f"expected the dict of a model's attributes, found {type(state).__name__}")
-    return state
+        stored = pickle.loads(payload)
+    if not (isinstance(stored, dict) and isinstance(stored.get("state"), dict)
+            and isinstance(stored.get("warnings"), list)):
+        raise TypeError(f"expected a model's attributes and warnings, found {type(stored).__name__}")
+    return stored
