@@ -202,3 +202,20 @@ def test_warnings_of_the_build_are_given_again_when_read_back(store):
         again = model_cache.build_system(distance_drive(1.0))
     assert again is not first and again.data.store_key == first.data.store_key
     assert again.redundant == first.redundant == ["d.drive"] and again.dof == 1
+
+
+def test_cli_run_of_a_stored_urdf_model_equals_a_fresh_run(store, tmp_path, monkeypatch):
+    """``ncgen simulate robot.urdf`` (joint space): the second run reads the model and its
+    joint-space ODE from the store and gives the trajectory of a run with the store off."""
+    from ncgen.cli import main
+    urdf = str(nc.robots.urdf_path("ur5"))
+    runs = {}
+    for label, env in (("first", "1"), ("stored", "1"), ("off", "0")):
+        monkeypatch.setenv(model_cache.ENV, env)
+        out = tmp_path / f"{label}.npz"
+        assert main(["simulate", urdf, "--t-end", "0.05", "-o", str(out)]) in (0, None)
+        runs[label] = np.load(out)
+    assert sorted(p.name.endswith("-joint-ode.model") for p in entries(store)) == [False, True]
+    for key in ("t", "q", "v"):
+        assert np.array_equal(runs["stored"][key], runs["first"][key]), key
+        assert np.allclose(runs["stored"][key], runs["off"][key], rtol=0, atol=1e-12), key
