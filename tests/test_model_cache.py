@@ -219,3 +219,24 @@ def test_cli_run_of_a_stored_urdf_model_equals_a_fresh_run(store, tmp_path, monk
     for key in ("t", "q", "v"):
         assert np.array_equal(runs["stored"][key], runs["first"][key]), key
         assert np.allclose(runs["stored"][key], runs["off"][key], rtol=0, atol=1e-12), key
+
+
+def test_least_recently_used_entries_go_beyond_the_size_limit(store, monkeypatch):
+    import os
+    import time
+    paths = [EXAMPLES / f"{name}.toml" for name in ("slider_crank", "double_pendulum", "cartpole")]
+    for path in paths:
+        load_model(str(path))
+    used = [model_cache._path(model_cache.file_key(str(p), params=[], contacts="smooth", share=True,
+                                                   floating_base=False)) for p in paths]
+    now = time.time()
+    for entry, age in zip(used, (100, 50, 10)):
+        os.utime(entry, (now - age, now - age))
+    load_model(str(paths[0]))                    # read: now the most recently used
+    sizes = [entry.stat().st_size for entry in used]
+    monkeypatch.setattr(model_cache, "MAX_BYTES", sizes[0] + sizes[2] + 1)
+    model_cache._prune(store, keep=used[2])      # as after writing the third
+    assert [entry.is_file() for entry in used] == [True, False, True]
+    monkeypatch.setattr(model_cache, "MAX_BYTES", 0)
+    model_cache._prune(store, keep=used[2])      # never the entry just written
+    assert [entry.is_file() for entry in used] == [False, False, True]

@@ -16,6 +16,7 @@ Entries are written to a temporary sibling and renamed into place
 version and key and its payload has the recorded sha256; anything else (truncated, garbage,
 another version) is ignored, removed and rebuilt, with a note on stderr.
 
+Beyond :data:`MAX_BYTES` the least recently used entries are removed after a write.
 ``NCGEN_MODEL_CACHE=0`` (or ``off``, ``no``, ``false``) bypasses the store (nothing is read or
 written); :func:`clear` empties it, as ``rm -r <cache_dir>/models`` does.
 """
@@ -42,6 +43,9 @@ FORMAT = 1
 #: The environment variable that turns the store off.
 ENV = "NCGEN_MODEL_CACHE"
 SUFFIX = ".model"
+#: Size of the store (bytes) beyond which the least recently used entries are removed after a
+#: write (every edit of ncgen's sources makes new keys; old entries would pile up).
+MAX_BYTES = 512 * 2**20
 
 
 def enabled() -> bool:
@@ -199,7 +203,9 @@ def _read(path: Path, key: str, decode: Callable[[bytes], object]):
         ok = False
     if ok:
         try:
-            return decode(payload)
+            hit = decode(payload)
+            os.utime(path)                 # most recently used: kept longest (:func:`_prune`)
+            return hit
         except Exception as exc:          # noqa: BLE001 — any failure of a stored entry means: rebuild
             why = f"cannot be read back ({type(exc).__name__}: {exc})"
     else:
@@ -221,7 +227,27 @@ def _write(path: Path, key: str, payload: bytes) -> bool:
             tmp.write_bytes(header + b"\n" + payload)
     except (OSError, NcgenError):
         return False
+    _prune(path.parent, keep=path)
     return True
+
+
+def _prune(directory: Path, keep: Path) -> None:
+    """Remove the least recently used entries of ``directory`` (never ``keep``) until they
+    total at most :data:`MAX_BYTES`."""
+    found = []
+    for entry in directory.glob(f"*{SUFFIX}"):
+        try:
+            info = entry.stat()
+        except OSError:
+            continue
+        found.append((info.st_mtime, info.st_size, entry))
+    total = sum(size for _, size, _ in found)
+    for _, size, entry in sorted(found, key=lambda x: x[0]):
+        if total <= MAX_BYTES:
+            break
+        if entry != keep:
+            entry.unlink(missing_ok=True)
+            total -= size
 
 
 def _mapping_proxy(items: dict) -> types.MappingProxyType:
