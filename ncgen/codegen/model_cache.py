@@ -130,7 +130,9 @@ def cached(key: str | None, build: Callable[[], object]):
 
 
 def build_system(system, **options):
-    """``system.build(**options)``, through the store (keyed by :func:`system_key`)."""
+    """``system.build(**options)``, through the store (keyed by :func:`system_key`).  The key
+    is the system's description, as a pickled model's is: what that TOML form does not hold
+    (which pickling finds by a content-hash check after rebuilding) would not be told apart."""
     return cached(system_key(system, **options), lambda: system.build(**options))
 
 
