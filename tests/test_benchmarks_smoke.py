@@ -39,6 +39,9 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800),   # each benchmark sc
                             "RATIO looped -O2 / flat -O2, jacobian", "RATIO VM / looped -O2, residual"]),
     ("first_run.py", ["=== first ncgen simulate, cold cache", "vm backend", "=== model -> loaded library",
                       "monotonic in N"]),
+    ("load_time.py", ["=== slider_crank: ncgen simulate", "later runs (model stored)", "later runs, store off",
+                      "RATIO later run, store off / stored, CPU", "=== panda: MuJoCo and Pinocchio",
+                      "RATIO ncgen later run / MuJoCo load process", "load average at the end"]),
     ("build_scaling.py", ["=== ncgen: chain of N bars", "KanesMethod", "EXTRAPOLATED"]),
     ("long_run.py", ["=== heavy top", "=== chain of 5 bars", "RATIO ncgen / MuJoCo RK4"]),
     ("contact.py", ["=== chain of N = 3 bars falling on the ground", "RATIO ncgen / MuJoCo wall time",
@@ -65,7 +68,7 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800),   # each benchmark sc
                            "central differences: A", "TARGET twodofs"]),
 ])
 def test_smoke(tmp_path, script, expected):
-    if script in ("joint_space.py", "joint_simulation.py", "tree_algorithms.py"):
+    if script in ("joint_space.py", "joint_simulation.py", "tree_algorithms.py", "load_time.py"):
         pytest.importorskip("pinocchio")
         pytest.importorskip("yourdfpy")
     if script == "step_jacobians.py":

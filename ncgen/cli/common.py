@@ -128,12 +128,23 @@ def load_model(path: str, params: list[str] | None = None, contacts: str = "smoo
     """Build the model in TOML file ``path``; ``params`` (``name=value`` strings, a vector as
     ``name=1,2,3``) replace default parameter values.  Raises NcgenError with a message
     naming the file (and the key path, for invalid models).  ``contacts``, ``share``: as in
-    ``System.build``; ``floating_base``: for URDF files (``--floating-base``)."""
-    system = load_system(path, params, floating_base)
-    try:
-        return system.build(contacts=contacts, share=share)
-    except NcgenError as e:
-        raise type(e)(f"{path}: model {system.name!r} cannot be built: {e}") from None
+    ``System.build``; ``floating_base``: for URDF files (``--floating-base``).  A model built
+    before from the same file and options is read from the store of built models
+    (:mod:`ncgen.codegen.model_cache`; ``NCGEN_MODEL_CACHE=0`` turns it off)."""
+    from ncgen.codegen import model_cache
+
+    def build():
+        system = load_system(path, params, floating_base)
+        try:
+            return system.build(contacts=contacts, share=share)
+        except NcgenError as e:
+            raise type(e)(f"{path}: model {system.name!r} cannot be built: {e}") from None
+
+    key = None
+    if Path(path).is_file() and model_cache.enabled():
+        key = model_cache.file_key(path, params=list(params or []), contacts=contacts, share=share,
+                                   floating_base=floating_base)
+    return model_cache.cached(key, build)
 
 
 def load_system(path: str, params: list[str] | None = None, floating_base: bool = False):

@@ -90,6 +90,9 @@ class ModelData:
     #: ``accel`` of the initial multipliers (:mod:`ncgen.runtime.batch`).
     batch_loops: dict = field(default_factory=dict)
     batch_accel: object = None
+    #: The model's key in the store of built models (:mod:`ncgen.codegen.model_cache`) when it
+    #: was read from or written to it; functions derived from it are stored under it too.
+    store_key: str | None = None
 
 
 _DATA: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()

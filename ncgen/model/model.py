@@ -380,6 +380,22 @@ def content_hash(model: Model) -> str:
     return h.hexdigest()
 
 
+def model_state(model: Model) -> dict:
+    """The attributes of ``model`` (what :func:`restored_model` makes it from again), for a
+    store of built models (:mod:`ncgen.codegen.model_cache`); pickling goes by description."""
+    return {k: v for k, v in vars(model).items() if k != "_frozen"}
+
+
+def restored_model(state: dict) -> Model:
+    """The model whose attributes are ``state`` (from :func:`model_state`), constant again
+    (arrays read-only, lists refusing changes) without building anything."""
+    model = object.__new__(Model)
+    for key, value in state.items():
+        object.__setattr__(model, key, _frozen(value))
+    object.__setattr__(model, "_frozen", True)
+    return model
+
+
 def known_model(expected_hash: str) -> "Model | None":
     """The model of this process with that content hash (pickled or rebuilt here), or None."""
     model = _known.get(expected_hash) or _rebuilt.get(expected_hash)

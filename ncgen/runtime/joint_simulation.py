@@ -148,14 +148,20 @@ def joint_loop(model, controller=None, joint_dynamics: bool = False, cflags=None
     if why is not None:
         raise ModelError(f"simulate(method='joint'): model {model.name!r} cannot be simulated in joint space: {why}")
     from ncgen.assembly.joint_ode import armature_dynamics_function, armature_vector
+    from ncgen.codegen.model_cache import derived_function
 
-    arm = armature_vector(model) if joint_dynamics else np.zeros(0)
-    inverse = None
-    if isinstance(controller, ComputedTorque) or np.any(arm):
-        from ncgen.assembly.tree_dynamics import recursive_inverse_dynamics_function
-        inverse = recursive_inverse_dynamics_function(model)
-    dynamics = armature_dynamics_function(model, inverse, arm) if np.any(arm) else dynamics_function(model)
-    ode = joint_ode_function(model, dynamics, inverse, controller=controller, joint_dynamics=joint_dynamics)
+    def derive_ode():
+        arm = armature_vector(model) if joint_dynamics else np.zeros(0)
+        inverse = None
+        if isinstance(controller, ComputedTorque) or np.any(arm):
+            from ncgen.assembly.tree_dynamics import recursive_inverse_dynamics_function
+            inverse = recursive_inverse_dynamics_function(model)
+        dynamics = armature_dynamics_function(model, inverse, arm) if np.any(arm) else dynamics_function(model)
+        return joint_ode_function(model, dynamics, inverse, controller=controller, joint_dynamics=joint_dynamics)
+
+    # without a controller the ODE is the model's alone: stored beside a stored model
+    ode = derive_ode() if controller is not None else \
+        derived_function(model, "joint-ode-armature" if joint_dynamics else "joint-ode", derive_ode)
     name = f"{model.name}_jsim"
     loop = JointLoop(model, build_joint_loop(name, ode, PIVOT_TOL, cflags), ode, name)
     loops[key] = (controller, loop)

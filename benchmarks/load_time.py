@@ -1,0 +1,171 @@
+"""Load time: the first and later runs of ``ncgen simulate`` on the Panda URDF and on
+``examples/box_stack.toml``, beside MuJoCo and Pinocchio loading a comparable model.
+
+Each ncgen run is a fresh process (``python -m ncgen.cli simulate MODEL --t-end T``), so
+Python start-up, imports, the model (built, or read from the store of built models,
+``ncgen/codegen/model_cache.py``), the compiled code (compiled, or found in the compile cache)
+and the integration all count.  Per model:
+
+* **first run**: an empty ``NCGEN_CACHE_DIR`` (nothing stored, nothing compiled);
+* **later runs**: the same cache directory again (model read back, library found);
+* **store off**: later runs with ``NCGEN_MODEL_CACHE=0`` (the model built every time, as
+  before the store; the compiled library still found), interleaved with the later runs.
+
+Python's bytecode is written to a private ``PYTHONPYCACHEPREFIX`` warmed before timing (a
+user's installation has its ``.pyc`` files; ``PYTHONDONTWRITEBYTECODE`` would recompile
+ncgen's sources in every process).  MuJoCo loads the same URDF with its visual and
+collision meshes removed (``mujoco.MjModel.from_xml_string``; kinematics and inertias as
+ncgen reads them), Pinocchio with ``pinocchio.buildModelFromUrdf``; each in a fresh process
+(start-up and import included) and in process (the load call alone).  Wall and CPU time
+(user + system of the child), min and median over the rounds, the CPU model and the load
+average are printed: on a shared machine wall time is CPU time times the queue.
+
+    python benchmarks/load_time.py                 Panda and box_stack, 5 rounds
+    python benchmarks/load_time.py --rounds 3
+    python benchmarks/load_time.py --smoke         slider_crank, 1 round (CI)
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from common import machine
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+EXAMPLES = ROOT / "examples"
+#: Targets of issue 34 (seconds, wall, end to end).
+TARGET_FIRST, TARGET_LATER = 3.0, 1.0
+
+
+def panda_urdf() -> Path:
+    sys.path.insert(0, str(ROOT))
+    import ncgen as nc
+    return Path(nc.robots.urdf_path("panda"))
+
+
+def run(cmd: list[str], env: dict, cwd: str) -> tuple[float, float, str]:
+    """``(wall s, child CPU s, stdout+stderr)`` of one process; raises if it fails."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    out = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=cwd)
+    wall = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    if out.returncode != 0:
+        raise SystemExit(f"{' '.join(cmd)} failed ({out.returncode}):\n{out.stderr[-2000:]}")
+    return wall, cpu, out.stdout + out.stderr
+
+
+def summary(name: str, samples: list[tuple[float, float]]) -> str:
+    walls, cpus = [s[0] for s in samples], [s[1] for s in samples]
+    return (f"  {name:<38} wall min {min(walls):7.3f} s, median {statistics.median(walls):7.3f} s | "
+            f"CPU min {min(cpus):7.3f} s, median {statistics.median(cpus):7.3f} s  ({len(samples)} runs)")
+
+
+def ncgen_runs(model: Path, t_end: float, rounds: int, base_env: dict) -> dict[str, list[tuple[float, float]]]:
+    """First, later and store-off runs of ``ncgen simulate model`` (see the module docstring)."""
+    cmd = [sys.executable, "-m", "ncgen.cli", "simulate", str(model), "--t-end", str(t_end)]
+    out: dict[str, list[tuple[float, float]]] = {"first run (empty cache)": [], "later runs (model stored)": [],
+                                                 "later runs, store off": []}
+    with tempfile.TemporaryDirectory(prefix="ncgen-load-") as tmp:
+        for r in range(rounds):
+            cache = f"{tmp}/cache{r}"
+            env = {**base_env, "NCGEN_CACHE_DIR": cache}
+            out["first run (empty cache)"].append(run(cmd, env, tmp)[:2])
+            for label, extra in (("later runs (model stored)", {}), ("later runs, store off", {"NCGEN_MODEL_CACHE": "0"})):
+                wall, cpu, text = run(cmd, {**env, **extra}, tmp)
+                out[label].append((wall, cpu))
+            stored = list(Path(cache, "models").glob("*.model"))
+            assert stored, f"{model.name}: nothing stored in {cache}/models"
+    return out
+
+
+def mesh_free_urdf(path: Path) -> str:
+    """The URDF's text without ``<visual>`` and ``<collision>`` elements (MuJoCo's importer
+    would load their meshes; ncgen does not read them either)."""
+    text = path.read_text()
+    return re.sub(r"<(visual|collision)\b.*?</\1>", "", text, flags=re.S)
+
+
+def mujoco_load(urdf_text_file: str) -> None:
+    import mujoco
+    mujoco.MjModel.from_xml_string(Path(urdf_text_file).read_text())
+
+
+def pinocchio_load(urdf: str) -> None:
+    import pinocchio
+    pinocchio.buildModelFromUrdf(urdf)
+
+
+def reference_runs(urdf: Path, rounds: int, base_env: dict, tmp: str) -> dict[str, list[tuple[float, float]]]:
+    """MuJoCo's and Pinocchio's loads of ``urdf``: fresh processes and in-process calls."""
+    stripped = Path(tmp) / "model.urdf"
+    stripped.write_text(mesh_free_urdf(urdf))
+    out: dict[str, list[tuple[float, float]]] = {}
+    for name, module, fn, arg in (("MuJoCo from_xml_string", "mujoco", "mujoco_load", stripped),
+                                  ("Pinocchio buildModelFromUrdf", "pinocchio", "pinocchio_load", urdf)):
+        code = (f"import sys; sys.path.insert(0, {str(HERE)!r}); import load_time; "
+                f"load_time.{fn}({str(arg)!r})")
+        try:
+            __import__(module)
+        except ImportError:
+            print(f"  {name}: {module} not installed, skipped")
+            continue
+        out[f"{name} (process)"] = [run([sys.executable, "-c", code], base_env, tmp)[:2] for _ in range(rounds)]
+        calls = []
+        for _ in range(max(rounds, 5)):
+            c0, t0 = time.process_time(), time.perf_counter()
+            globals()[fn](str(arg))
+            calls.append((time.perf_counter() - t0, time.process_time() - c0))
+        out[f"{name} (call)"] = calls
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--t-end", type=float, default=0.1, help="simulated time of each run (s)")
+    ap.add_argument("--smoke", action="store_true", help="slider_crank only, 1 round")
+    args = ap.parse_args()
+    print(machine())
+    rounds = 1 if args.smoke else args.rounds
+    urdf = panda_urdf()
+    models = [EXAMPLES / "slider_crank.toml"] if args.smoke else [urdf, EXAMPLES / "box_stack.toml"]
+    with tempfile.TemporaryDirectory(prefix="ncgen-pyc-") as pyc:
+        env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+        env.update(PYTHONPATH=str(ROOT), PYTHONPYCACHEPREFIX=pyc)
+        run([sys.executable, "-c", "import ncgen, ncgen.cli, ncgen.codegen.model_cache, mujoco, pinocchio"], env, pyc)
+        for model in models:
+            print(f"\n=== {model.stem}: ncgen simulate {model.name} --t-end {args.t_end:g}")
+            results = ncgen_runs(model, args.t_end, rounds, env)
+            for label, samples in results.items():
+                print(summary(label, samples))
+            first = statistics.median(s[0] for s in results["first run (empty cache)"])
+            later = statistics.median(s[0] for s in results["later runs (model stored)"])
+            off = statistics.median(s[1] for s in results["later runs, store off"])
+            on = statistics.median(s[1] for s in results["later runs (model stored)"])
+            print(f"  target: first run <= {TARGET_FIRST:g} s wall ({'met' if first <= TARGET_FIRST else 'NOT met'}), "
+                  f"later runs <= {TARGET_LATER:g} s wall ({'met' if later <= TARGET_LATER else 'NOT met'})")
+            print(f"RATIO later run, store off / stored, CPU: {off / on:.2f}")
+            print(f"  load average now: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
+        print(f"\n=== {urdf.stem}: MuJoCo and Pinocchio load the same robot")
+        refs = reference_runs(urdf, rounds, env, pyc)
+        for label, samples in refs.items():
+            print(summary(label, samples))
+        if "MuJoCo from_xml_string (process)" in refs:
+            mj = statistics.median(s[0] for s in refs["MuJoCo from_xml_string (process)"])
+            print(f"RATIO ncgen later run / MuJoCo load process, wall: {later / mj:.2f}")
+        print(f"  load average at the end: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,294 @@
+"""Built models kept on disk by content, so that loading the same model again skips URDF
+parsing and ``build()`` (SymPy derivations, CasADi assembly, the consistent initial state).
+
+An entry is ``<cache_dir>/models/<key>.model`` (:func:`ncgen.codegen.compile_cache.cache_dir`):
+one line of JSON (the format, ncgen's version, the key, the sha256 and size of the payload),
+then the payload, a pickle of the model's attributes (:func:`ncgen.model.model.model_state`;
+CasADi expressions and functions through CasADi's own serialisation) and of the warnings its
+build gave, which a read gives again.  The key hashes what the model is made from — a model
+file's bytes and the path it was read from, or a :class:`~ncgen.model.system.System`'s
+description — the build options, and ncgen itself: its version and the bytes of its Python
+sources (so an edited checkout never loads a model built by other code), CasADi's, NumPy's
+and Python's versions.
+
+Entries are written to a temporary sibling and renamed into place
+(:func:`ncgen.files.atomic_path`).  An entry is loaded only if its header names this format,
+version and key and its payload has the recorded sha256; anything else (truncated, garbage,
+another version) is ignored, removed and rebuilt, with a note on stderr.
+
+Beyond :data:`MAX_BYTES` the least recently used entries are removed after a write.
+``NCGEN_MODEL_CACHE=0`` (or ``off``, ``no``, ``false``) bypasses the store (nothing is read or
+written); :func:`clear` empties it, as ``rm -r <cache_dir>/models`` does.
+"""
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import os
+import pickle
+import shutil
+import sys
+import types
+import warnings
+from functools import lru_cache
+from pathlib import Path
+from typing import Callable
+
+from ncgen.files import atomic_path
+from ncgen.version import __version__
+
+#: Bump when the layout of an entry or of the pickled state changes.
+FORMAT = 1
+#: The environment variable that turns the store off.
+ENV = "NCGEN_MODEL_CACHE"
+SUFFIX = ".model"
+#: Size of the store (bytes) beyond which the least recently used entries are removed after a
+#: write (every edit of ncgen's sources makes new keys; old entries would pile up).
+MAX_BYTES = 512 * 2**20
+
+
+def enabled() -> bool:
+    """Whether built models are read from and written to the store (``$NCGEN_MODEL_CACHE``)."""
+    return os.environ.get(ENV, "1").strip().lower() not in ("0", "off", "no", "false")
+
+
+def store_dir() -> Path:
+    """``<cache_dir>/models``, beside the compiled libraries."""
+    from ncgen.codegen.compile_cache import cache_dir
+    return cache_dir() / "models"
+
+
+def clear() -> int:
+    """Remove every stored model (and what is stored beside them); returns how many entries
+    there were."""
+    directory = store_dir()
+    count = len(list(directory.glob(f"*{SUFFIX}"))) if directory.is_dir() else 0
+    shutil.rmtree(directory, ignore_errors=True)
+    return count
+
+
+@lru_cache(maxsize=1)
+def code_identity() -> str:
+    """sha256 of ncgen's version, its Python sources and the versions of what the pickled
+    state depends on (CasADi, NumPy, Python)."""
+    import casadi
+    import numpy
+
+    h = hashlib.sha256(f"{FORMAT} {__version__} {casadi.__version__} {numpy.__version__} "
+                       f"{sys.version_info[:3]}".encode())
+    root = Path(__file__).resolve().parent.parent
+    for path in sorted(root.rglob("*.py")):
+        h.update(str(path.relative_to(root)).encode())
+        h.update(hashlib.sha256(path.read_bytes()).digest())
+    return h.hexdigest()
+
+
+def key_of(parts: dict) -> str:
+    """The entry's key: sha256 of ``parts`` (JSON-able) and :func:`code_identity`."""
+    text = json.dumps(parts, sort_keys=True, default=repr)
+    return hashlib.sha256(f"{code_identity()}\n{text}".encode()).hexdigest()
+
+
+def file_key(path: str | os.PathLike, **options) -> str:
+    """The key of the model in file ``path`` (its bytes and the path as given) built with
+    ``options`` (the loader's and the build's)."""
+    data = Path(path).read_bytes()
+    return key_of({"file": str(path), "sha256": hashlib.sha256(data).hexdigest(), "options": options})
+
+
+def system_key(system, **options) -> str | None:
+    """The key of ``system`` built with ``options``: its description (TOML, frames, visuals,
+    limits); None when it has none (a force given as a Python function), so it is not stored."""
+    try:
+        description = system.description()
+    except TypeError:
+        return None
+    digest = hashlib.sha256(pickle.dumps(description, protocol=5)).hexdigest()
+    return key_of({"system": digest, "options": options})
+
+
+def cached(key: str | None, build: Callable[[], object]):
+    """The model stored under ``key``, else ``build()`` stored under it (nothing is stored
+    or read with ``key`` None or the store off).  The warnings the build gave (e.g. redundant
+    constraints dropped) are stored with the model and given again when it is read back."""
+    if key is None or not enabled():
+        return build()
+    hit = load(key)
+    if hit is not None:
+        model, said = hit
+        for category, message in said:
+            warnings.warn(message, category, stacklevel=2)
+        return model
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model = build()
+    for w in caught:                      # given as the build gave them, under the caller's filters
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    save(key, model, [(w.category, str(w.message)) for w in caught])
+    return model
+
+
+def build_system(system, **options):
+    """``system.build(**options)``, through the store (keyed by :func:`system_key`).  The key
+    is the system's description, as a pickled model's is: what that TOML form does not hold
+    (which pickling finds by a content-hash check after rebuilding) would not be told apart."""
+    return cached(system_key(system, **options), lambda: system.build(**options))
+
+
+def _path(key: str, what: str = "") -> Path:
+    return store_dir() / f"{key}{'-' + what if what else ''}{SUFFIX}"
+
+
+def load(key: str) -> tuple | None:
+    """``(model, warnings)`` stored under ``key`` (``warnings``: ``[(category, message)]`` of
+    its build), or None (absent; a damaged or foreign entry is removed)."""
+    from ncgen.model.model import restored_model
+
+    def decode(payload):
+        stored = _unpickle(payload)
+        return restored_model(stored["state"]), list(stored["warnings"])
+
+    hit = _read(_path(key), key, decode)
+    if hit is not None:
+        hit[0].data.store_key = key
+    return hit
+
+
+def save(key: str, model, said=()) -> bool:
+    """Store ``model`` under ``key`` with the warnings ``said`` by its build (``[(category,
+    message)]``); False (and nothing written) if its state cannot be pickled or the store
+    cannot be written."""
+    from ncgen.model.model import model_state
+
+    try:
+        payload = _pickle({"state": model_state(model), "warnings": list(said)})
+    except Exception:                      # noqa: BLE001 — e.g. a Python function inside a force
+        return False
+    if not _write(_path(key), key, payload):
+        return False
+    model.data.store_key = key
+    return True
+
+
+def derived_function(model, what: str, build: Callable[[], object]):
+    """The CasADi function ``build()`` derives from ``model`` (named ``what``, a file-name
+    word), stored beside the model when the model came through the store (its
+    ``data.store_key``), so that a later process reads it instead of deriving it again."""
+    import casadi
+
+    key = model.data.store_key
+    if key is None or not enabled():
+        return build()
+    path = _path(key, what)
+    f = _read(path, key, lambda payload: casadi.Function.deserialize(payload.decode()))
+    if f is None:
+        f = build()
+        _write(path, key, f.serialize().encode())
+    return f
+
+
+def _read(path: Path, key: str, decode: Callable[[bytes], object]):
+    """``decode(payload)`` of the entry at ``path``, or None: absent, or damaged (the header's
+    format, version, key, size or sha256 not matching, or ``decode`` failing), then removed."""
+    try:
+        raw = path.read_bytes()
+    except OSError:
+        return None
+    head, _, payload = raw.partition(b"\n")
+    try:
+        header = json.loads(head)
+        ok = (isinstance(header, dict) and header.get("format") == FORMAT and header.get("ncgen") == __version__
+              and header.get("key") == key and header.get("size") == len(payload)
+              and header.get("sha256") == hashlib.sha256(payload).hexdigest())
+    except ValueError:
+        ok = False
+    if ok:
+        try:
+            hit = decode(payload)
+            os.utime(path)                 # most recently used: kept longest (:func:`_prune`)
+            return hit
+        except Exception as exc:          # noqa: BLE001 — any failure of a stored entry means: rebuild
+            why = f"cannot be read back ({type(exc).__name__}: {exc})"
+    else:
+        why = "is damaged or from another version of ncgen"
+    print(f"ncgen: the stored model entry {path} {why}; building it again", file=sys.stderr)
+    path.unlink(missing_ok=True)
+    return None
+
+
+def _write(path: Path, key: str, payload: bytes) -> bool:
+    """Write an entry (header line, then ``payload``) atomically; False if it cannot be written."""
+    from ncgen.errors import NcgenError
+
+    header = json.dumps({"format": FORMAT, "ncgen": __version__, "key": key, "size": len(payload),
+                         "sha256": hashlib.sha256(payload).hexdigest()}).encode()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(path) as tmp:
+            tmp.write_bytes(header + b"\n" + payload)
+    except (OSError, NcgenError):
+        return False
+    _prune(path.parent, keep=path)
+    return True
+
+
+def _prune(directory: Path, keep: Path) -> None:
+    """Remove the least recently used entries of ``directory`` (never ``keep``) until they
+    total at most :data:`MAX_BYTES`."""
+    found = []
+    for entry in directory.glob(f"*{SUFFIX}"):
+        try:
+            info = entry.stat()
+        except OSError:
+            continue
+        found.append((info.st_mtime, info.st_size, entry))
+    total = sum(size for _, size, _ in found)
+    for _, size, entry in sorted(found, key=lambda x: x[0]):
+        if total <= MAX_BYTES:
+            break
+        if entry != keep:
+            entry.unlink(missing_ok=True)
+            total -= size
+
+
+def _mapping_proxy(items: dict) -> types.MappingProxyType:
+    return types.MappingProxyType(items)
+
+
+class _Pickler(pickle.Pickler):
+    """Pickles a model's state as it is: read-only views by their contents, and a
+    :class:`~ncgen.model.system.System` by its attributes (its own pickling goes by description,
+    which would rebuild it through SymPy when read)."""
+
+    def reducer_override(self, obj):
+        from ncgen.model.model import ReadOnlyList
+        from ncgen.model.system import System
+
+        if type(obj) is types.MappingProxyType:
+            return _mapping_proxy, (dict(obj),)
+        if type(obj) is ReadOnlyList:
+            return ReadOnlyList, (list(obj),)
+        if isinstance(obj, System):
+            return object.__new__, (type(obj),), dict(vars(obj))
+        return NotImplemented
+
+
+def _pickle(stored: dict) -> bytes:
+    import casadi
+
+    buffer = io.BytesIO()
+    with casadi.global_pickle_context():
+        _Pickler(buffer, protocol=5).dump(stored)
+    return buffer.getvalue()
+
+
+def _unpickle(payload: bytes) -> dict:
+    import casadi
+
+    with casadi.global_unpickle_context():
+        stored = pickle.loads(payload)
+    if not (isinstance(stored, dict) and isinstance(stored.get("state"), dict)
+            and isinstance(stored.get("warnings"), list)):
+        raise TypeError(f"expected a model's attributes and warnings, found {type(stored).__name__}")
+    return stored

@@ -1,0 +1,242 @@
+"""The store of built models (ncgen.codegen.model_cache): a model read back equals a fresh
+build of the same file, a changed file or option misses, a damaged or foreign entry is
+rebuilt, and the store can be turned off."""
+from __future__ import annotations
+
+import json
+import pickle
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import ncgen as nc
+from ncgen.cli.common import load_model
+from ncgen.codegen import model_cache
+from ncgen.model.model import ReadOnlyList
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+@pytest.fixture
+def store(tmp_path, monkeypatch):
+    """An empty store of its own (``$NCGEN_CACHE_DIR`` in the test's directory)."""
+    monkeypatch.setenv("NCGEN_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.delenv(model_cache.ENV, raising=False)
+    return tmp_path / "cache" / "models"
+
+
+def entries(store: Path) -> list[Path]:
+    return sorted(store.glob("*.model")) if store.is_dir() else []
+
+
+def fresh(path, monkeypatch, **options):
+    """The model built from ``path`` without the store."""
+    with monkeypatch.context() as m:
+        m.setenv(model_cache.ENV, "0")
+        return load_model(str(path), **options)
+
+
+def assert_same_model(a, b):
+    """Same metadata, and every function of ``model.functions`` gives the same values at
+    random arguments (1e-12)."""
+    for name in ("name", "coordinate_names", "constraint_names", "input_names", "parameter_names",
+                 "member_names", "marker_names", "contact_names", "joint_names", "redundant", "contact_model"):
+        assert getattr(a, name) == getattr(b, name), name
+    for name in ("q0", "v0", "lam0", "a0", "p0", "gravity", "M"):
+        assert np.array_equal(np.asarray(getattr(a, name)), np.asarray(getattr(b, name))), name
+    assert (a.t0, a.baumgarte, a.nq, a.nc, a.dof) == (b.t0, b.baumgarte, b.nq, b.nc, b.dof)
+    assert sorted(a.functions) == sorted(b.functions) and a.functions
+    rng = np.random.default_rng(7)
+    for name, f in a.functions.items():
+        g = b.functions[name]
+        for _ in range(3):
+            args = [rng.standard_normal(f.size_in(i)) for i in range(f.n_in())]
+            for x, y in zip(f.call(args), g.call(args), strict=True):
+                x, y = np.array(x), np.array(y)
+                assert x.shape == y.shape
+                scale = max(1.0, float(np.max(np.abs(y), initial=0.0)))
+                assert np.allclose(x, y, rtol=0, atol=1e-12 * scale, equal_nan=True), name
+    assert a.content_hash == b.content_hash
+
+
+@pytest.mark.parametrize("name", ["slider_crank", "heavy_top"])
+def test_stored_model_equals_a_fresh_build(store, monkeypatch, name):
+    path = EXAMPLES / f"{name}.toml"
+    first = load_model(str(path))
+    assert len(entries(store)) == 1 and first.data.store_key is not None
+    again = load_model(str(path))               # read back: a new object, nothing built
+    assert again is not first and again.data.store_key == first.data.store_key
+    assert_same_model(again, fresh(path, monkeypatch))
+    with pytest.raises(AttributeError):          # as constant as a built model
+        again.q0 = again.q0
+    with pytest.raises(ValueError):
+        again.q0[0] = 1.0
+    assert isinstance(again.coordinate_names, ReadOnlyList)
+    with pytest.raises(TypeError):
+        again.coordinate_names.append("x")
+    traj = nc.simulate(again, 0.05, 0.01)        # runs, and pickles by description as a built model does
+    assert np.all(np.isfinite(traj.q))
+    assert pickle.loads(pickle.dumps(again)).content_hash == again.content_hash
+
+
+def test_stored_urdf_model_equals_a_fresh_build(store, monkeypatch):
+    path = nc.robots.urdf_path("ur5")
+    load_model(str(path))
+    again = load_model(str(path))
+    assert again.data.store_key is not None
+    assert_same_model(again, fresh(path, monkeypatch))
+    qj = np.linspace(-0.4, 0.5, len(again.joint_names))
+    assert np.allclose(again.from_joint_space(qj)[0], fresh(path, monkeypatch).from_joint_space(qj)[0], atol=1e-12)
+
+
+def test_changed_file_or_options_miss(store, tmp_path, monkeypatch):
+    path = tmp_path / "model.toml"
+    text = (EXAMPLES / "slider_crank.toml").read_text()
+    path.write_text(text)
+    first = load_model(str(path))
+    masses = [line for line in text.splitlines() if line.strip().startswith("mass")]
+    assert masses, "the example has a mass to change"
+    path.write_text(text.replace(masses[0], masses[0].split("=")[0] + "= 7.25", 1))
+    second = load_model(str(path))
+    assert len(entries(store)) == 2
+    assert not np.array_equal(np.asarray(second.M), np.asarray(first.M))
+    assert_same_model(second, fresh(path, monkeypatch))
+    third = load_model(str(path), share=False)   # another build option: another entry
+    assert len(entries(store)) == 3 and third.nq >= second.nq
+
+
+def damage(entry: Path, how: str) -> None:
+    raw = entry.read_bytes()
+    head, _, payload = raw.partition(b"\n")
+    if how == "truncated":
+        entry.write_bytes(raw[: len(raw) // 2])
+    elif how == "garbage":
+        entry.write_bytes(head + b"\n" + bytes(len(payload)))
+    elif how == "empty":
+        entry.write_bytes(b"")
+    elif how == "foreign version":
+        header = json.loads(head)
+        header["ncgen"] = "0.0.0-other"
+        entry.write_bytes(json.dumps(header).encode() + b"\n" + payload)
+    elif how == "valid hash, bad pickle":
+        import hashlib
+        junk = b"\x80\x05not a pickle"
+        header = json.loads(head)
+        header.update(size=len(junk), sha256=hashlib.sha256(junk).hexdigest())
+        entry.write_bytes(json.dumps(header).encode() + b"\n" + junk)
+
+
+@pytest.mark.parametrize("how", ["truncated", "garbage", "empty", "foreign version", "valid hash, bad pickle"])
+def test_damaged_or_foreign_entry_is_rebuilt(store, monkeypatch, capsys, how):
+    path = EXAMPLES / "slider_crank.toml"
+    load_model(str(path))
+    [entry] = entries(store)
+    good = entry.read_bytes()
+    damage(entry, how)
+    capsys.readouterr()
+    again = load_model(str(path))
+    assert "building it again" in capsys.readouterr().err
+    assert_same_model(again, fresh(path, monkeypatch))
+    assert entry.read_bytes() == good            # rebuilt and stored again, whole
+
+
+def test_store_off_and_clear(store, monkeypatch):
+    path = EXAMPLES / "slider_crank.toml"
+    monkeypatch.setenv(model_cache.ENV, "0")
+    model = load_model(str(path))
+    assert entries(store) == [] and model.data.store_key is None
+    monkeypatch.setenv(model_cache.ENV, "1")
+    load_model(str(path))
+    assert len(entries(store)) == 1
+    assert model_cache.clear() == 1 and entries(store) == []
+
+
+def test_system_keyed_by_description(store, monkeypatch):
+    system = nc.System.from_toml(EXAMPLES / "slider_crank.toml")
+    first = model_cache.build_system(system)
+    again = model_cache.build_system(nc.System.from_toml(EXAMPLES / "slider_crank.toml"))
+    assert again is not first and len(entries(store)) == 1
+    assert_same_model(again, system.build())
+    model_cache.build_system(system, share=False)
+    assert len(entries(store)) == 2
+
+
+def test_unwritable_store_still_builds(store, monkeypatch, tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    monkeypatch.setenv("NCGEN_CACHE_DIR", str(blocker))
+    model = load_model(str(EXAMPLES / "slider_crank.toml"))
+    assert model.data.store_key is None and model.nq > 0
+
+
+def test_derived_function_is_stored_beside_the_model(store, monkeypatch):
+    import casadi as ca
+    path = EXAMPLES / "slider_crank.toml"
+    load_model(str(path))
+    model = load_model(str(path))
+    calls = []
+
+    def build():
+        calls.append(1)
+        q = ca.SX.sym("q", model.nq)
+        return ca.Function("half_phi", [q], [0.5 * model.functions["phi"](0, q, model.p0)])
+
+    f = model_cache.derived_function(model, "half-phi", build)
+    g = model_cache.derived_function(load_model(str(path)), "half-phi", build)
+    assert calls == [1]
+    q = model.q0 + 0.1
+    assert np.allclose(np.array(g(q)).ravel(), 0.5 * model.phi(q), rtol=0, atol=1e-15)
+    assert np.array_equal(np.array(f(q)), np.array(g(q)))
+    shutil.rmtree(store)
+    model_cache.derived_function(model, "half-phi", build)    # the store gone: derived again
+    assert calls == [1, 1]
+
+
+def test_warnings_of_the_build_are_given_again_when_read_back(store):
+    from test_reliability_redundancy import distance_drive
+    with pytest.warns(UserWarning, match=r"dropping redundant constraints d\.drive"):
+        first = model_cache.build_system(distance_drive(1.0))
+    with pytest.warns(UserWarning, match=r"dropping redundant constraints d\.drive"):
+        again = model_cache.build_system(distance_drive(1.0))
+    assert again is not first and again.data.store_key == first.data.store_key
+    assert again.redundant == first.redundant == ["d.drive"] and again.dof == 1
+
+
+def test_cli_run_of_a_stored_urdf_model_equals_a_fresh_run(store, tmp_path, monkeypatch):
+    """``ncgen simulate robot.urdf`` (joint space): the second run reads the model and its
+    joint-space ODE from the store and gives the trajectory of a run with the store off."""
+    from ncgen.cli import main
+    urdf = str(nc.robots.urdf_path("ur5"))
+    runs = {}
+    for label, env in (("first", "1"), ("stored", "1"), ("off", "0")):
+        monkeypatch.setenv(model_cache.ENV, env)
+        out = tmp_path / f"{label}.npz"
+        assert main(["simulate", urdf, "--t-end", "0.05", "-o", str(out)]) in (0, None)
+        runs[label] = np.load(out)
+    assert sorted(p.name.endswith("-joint-ode.model") for p in entries(store)) == [False, True]
+    for key in ("t", "q", "v"):
+        assert np.array_equal(runs["stored"][key], runs["first"][key]), key
+        assert np.allclose(runs["stored"][key], runs["off"][key], rtol=0, atol=1e-12), key
+
+
+def test_least_recently_used_entries_go_beyond_the_size_limit(store, monkeypatch):
+    import os
+    import time
+    paths = [EXAMPLES / f"{name}.toml" for name in ("slider_crank", "double_pendulum", "cartpole")]
+    for path in paths:
+        load_model(str(path))
+    used = [model_cache._path(model_cache.file_key(str(p), params=[], contacts="smooth", share=True,
+                                                   floating_base=False)) for p in paths]
+    now = time.time()
+    for entry, age in zip(used, (100, 50, 10)):
+        os.utime(entry, (now - age, now - age))
+    load_model(str(paths[0]))                    # read: now the most recently used
+    sizes = [entry.stat().st_size for entry in used]
+    monkeypatch.setattr(model_cache, "MAX_BYTES", sizes[0] + sizes[2] + 1)
+    model_cache._prune(store, keep=used[2])      # as after writing the third
+    assert [entry.is_file() for entry in used] == [True, False, True]
+    monkeypatch.setattr(model_cache, "MAX_BYTES", 0)
+    model_cache._prune(store, keep=used[2])      # never the entry just written
+    assert [entry.is_file() for entry in used] == [False, False, True]
