@@ -7,8 +7,9 @@ doctest-style: whitespace runs compare as one space, ``...`` matches any text (w
 paths), and numbers compare with a relative tolerance (``1e-3`` unless the block's info
 string says ``text tol=0.05``) and an absolute one of ``1e-9``.  A python block that calls
 ``print`` without such a text block after it is an error (except under ``if __name__ ==
-"__main__":``, which does not run here): every printed result on a page
-is one the test compares.
+"__main__":``, which does not run here, and whose text block is compared only when the
+namespace's ``__name__`` is ``"__main__"``, as tests/test_docs_sweeps.py runs docs/sweeps.md):
+every printed result on a page is one a test compares.
 """
 from __future__ import annotations
 
@@ -78,7 +79,8 @@ def run_section(where: str, snippets: list[Snippet], namespace: dict | None = No
                 exec(compile(s.code, here, "exec"), namespace)
         except Exception as error:  # noqa: BLE001 - reported with the snippet
             raise AssertionError(f"{here} failed: {type(error).__name__}: {error}\n{s.code}") from error
-        if s.expected is not None:
+        guarded = "__main__" in s.code and namespace.get("__name__") != "__main__"   # did not run here
+        if s.expected is not None and not guarded:
             problem = compare(buffer.getvalue(), s.expected, s.rtol)
             if problem:
                 raise AssertionError(f"{here}: printed output differs from the page ({problem})\n"

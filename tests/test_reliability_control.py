@@ -91,6 +91,11 @@ def test_export_mpc_refuses_a_bad_demo_duration_and_an_inconsistent_x0(cartpole,
     (["--t-end", "nan"], "--t-end: expected .* got nan"),
     (["--x0", "pole.r_j.y=5"], "--x0 pole.r_j.y=5: no consistent state has these coordinates: assembly failed"),
     (["--x0", "pole.r_j.x=inf"], "--x0: 'pole.r_j.x=inf': expected coordinate=number"),
+    (["--substeps", "0"], "--substeps: expected a positive integer, got 0"),
+    (["--iterations", "-1"], "--iterations: expected a positive integer, got -1"),
+    (["--terminal-weight", "nan"], "--terminal-weight: expected a finite number >= 0, got nan"),
+    (["--disturbance", "1:0.5:8"], "--disturbance '1:0.5:8': expected finite numbers with T_ON < T_OFF"),
+    (["--disturbance", "1:2:nan"], "--disturbance '1:2:nan': expected finite numbers"),
 ])
 def test_ncgen_mpc_names_the_flag(tmp_path, capsys, args, said):
     assert main(["mpc", str(EXAMPLES / "cartpole_mpc.toml"), "-o", str(tmp_path / "x"), *args]) == 2

@@ -55,6 +55,11 @@ def mpc(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     check_files(args, parser, None, directories=("output",))
     if not 0 < args.t_end <= MAX_T_END:
         parser.error(f"--t-end: expected the demo's duration in seconds, 0 < T <= {MAX_T_END:g}, got {args.t_end:g}")
+    for flag, value in (("--iterations", args.iterations), ("--substeps", args.substeps)):
+        if value < 1:
+            parser.error(f"{flag}: expected a positive integer, got {value}")
+    if not 0 <= args.terminal_weight < float("inf"):
+        parser.error(f"--terminal-weight: expected a finite number >= 0, got {args.terminal_weight:g}")
     data, origin = read_problem_file(Path(args.problem))
     model_file = model_path(data, origin)
     if model_file is None:
@@ -89,6 +94,8 @@ def mpc(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
             t_on, t_off, values = float(parts[0]), float(parts[1]), [float(v) for v in parts[2].split(",")]
         except (ValueError, IndexError):
             parser.error(f"--disturbance {item!r}: expected T_ON:T_OFF:U1,U2,... (numbers)")
+        if not (np.isfinite(t_on) and np.isfinite(t_off) and t_on < t_off and np.all(np.isfinite(values))):
+            parser.error(f"--disturbance {item!r}: expected finite numbers with T_ON < T_OFF")
         pulses.append((t_on, t_off, values))
     pkg = export_mpc(ocp, args.output, name=args.name, iterations=args.iterations,
                      terminal_weight=args.terminal_weight, x0=x0, t_end=args.t_end, substeps=args.substeps,
