@@ -10,6 +10,7 @@ ROOT = Path(__file__).resolve().parents[1]
 DOC = (ROOT / "docs" / "sweeps.md").read_text(encoding="utf-8")
 
 
+@pytest.mark.slow                                  # a spawn pool and a Dask cluster (90 s at load 12)
 def test_snippets_run(tmp_path, monkeypatch, capsys):
     pytest.importorskip("distributed")
     code = "\n".join(re.findall(r"```python\n(.*?)```", DOC, re.S))
