@@ -4,7 +4,8 @@ Every error a user can trigger is a subclass of :class:`NcgenError`, itself a
 ``ValueError``, and its message says *what* was wrong (which member, joint, key or
 argument), *what was expected* and *what was found*.
 """
-
+import os
+import sys
 
 #: Where to report an unexpected internal error (printed by the command line).
 REPORT_TO = "the ncgen issue tracker (the repository named in the README), with the command and this message"
@@ -24,6 +25,17 @@ def option(python: str, cli: str) -> str:
     """``python`` (e.g. ``"method='stepper'"``) or ``cli`` (e.g. ``"--method stepper"``),
     as the user calls ncgen."""
     return cli if _door[0] == "cli" else python
+
+
+def user_stacklevel() -> int:
+    """The ``stacklevel`` of :func:`warnings.warn`, called by the function that warns, at
+    which the warning names the first caller outside the ncgen package (the user's line,
+    however deep inside ncgen the warning was raised)."""
+    inside = os.path.dirname(os.path.abspath(__file__)) + os.sep
+    frame, level = sys._getframe(1), 1
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(inside):
+        frame, level = frame.f_back, level + 1
+    return level
 
 
 class NcgenError(ValueError):

@@ -10,6 +10,7 @@ from doc_snippets import run_section, sections
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.slow                                  # a spawn pool and a Dask cluster (90 s at load 12)
 def test_snippets_run(tmp_path, monkeypatch):
     """As one script run as ``__main__`` (the page guards its work for spawn): every snippet
     runs and prints what the page shows (tests/doc_snippets.py compares each text block)."""

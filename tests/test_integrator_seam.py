@@ -132,3 +132,19 @@ def test_each_integrator_runs_the_pendulum_like_its_closed_form_energy():
         assert traj.info["method"] == method
         e = traj.energy
         assert np.ptp(e) < 1e-5 * (1 + np.abs(e).max()), (method, np.ptp(e))
+
+
+def test_a_stepper_warning_names_the_callers_line(monkeypatch):
+    """Warnings raised deep in the stepper's checks name the line that called simulate,
+    whatever the depth of the integrator seam (errors.user_stacklevel)."""
+    import ncgen.codegen.stepper_package as package
+
+    s = nc.System("one_sweep")
+    p = s.add_point("p", mass=1.0, position=(0, 0, 0.05))
+    s.add_contact(nc.SpherePlane(p, radius=0.0, name="floor"))
+    s.add_contact(nc.SpherePlane(p, radius=0.0, point=(0, 0, 0), normal=(0, 0.6, 0.8), name="slope"))
+    monkeypatch.setattr(package, "PGS_MAX_ITER", 1)            # solves that stop early: warned
+    model = s.build(contacts="nonsmooth")
+    with pytest.warns(UserWarning, match="stopped at") as caught:
+        nc.simulate(model, 0.2, 0.01, method="stepper", substeps=10, check=False)
+    assert {w.filename for w in caught if "stopped at" in str(w.message)} == {__file__}

@@ -62,7 +62,7 @@ import numpy as np
 
 from ncgen.assembly.derived import depends_on_time, potential_force_residual_function
 from ncgen.codegen.stepper_package import CONTACT_STATS, PENETRATION_TOL, PGS_MAX_ITER, PGS_TOL, STATS
-from ncgen.errors import AccuracyWarning, SimulationError, option
+from ncgen.errors import AccuracyWarning, SimulationError, option, user_stacklevel
 from ncgen.model.data import model_data
 
 #: Largest allowed change of a conservative model's energy, and error of the energy balance
@@ -130,7 +130,8 @@ def check_global(model, traj, eq, rtol, atol):
                       f"error at the end ({report['q']:.3g} in q, {report['v']:.3g} in v) is more than "
                       f"{GLOBAL_FACTOR:g} times the tolerance (rtol {rtol:g}, atol {atol:g}): rtol bounds the "
                       f"error of each step, and errors grow along this motion; use a smaller rtol if the end "
-                      f"state matters (traj.info['error_estimate'])", AccuracyWarning, stacklevel=4)
+                      f"state matters (traj.info['error_estimate'])", AccuracyWarning,
+                      stacklevel=user_stacklevel())
 
 
 def warn_unconverged(model, report: dict) -> None:
@@ -140,13 +141,14 @@ def warn_unconverged(model, report: dict) -> None:
     if report["penetration"] > 10 * report["penetration_tol"]:
         warnings.warn(f"simulate: contacts of {model.name!r} ended a step up to {report['penetration']:.3g} m inside "
                       f"(the push-out aims at {report['penetration_tol']:g} m and is repeated at most 4 times "
-                      f"per step; info['contacts'])", stacklevel=5)
+                      f"per step; info['contacts'])", stacklevel=user_stacklevel())
     if report["pgs_unconverged"]:
         warnings.warn(f"simulate: {report['pgs_unconverged']} contact solve(s) of {model.name!r} stopped at "
                       f"{report['pgs_max_sweeps']} projected Gauss-Seidel sweeps before the contact velocities "
                       f"settled to {report['pgs_tol']:g} (1 + max|U|) m/s; the last sweep still changed one by up to "
                       f"{report['pgs_residual']:.3g} (1 + max|U|) m/s (info['contacts']; redundant contacts, as under "
-                      f"a body or a chain lying flat or in a pile, make it crawl, and friction can make it cycle)", stacklevel=5)
+                      f"a body or a chain lying flat or in a pile, make it crawl, and friction can make it cycle)",
+                      stacklevel=user_stacklevel())
 
 
 def is_conservative(model, inputs: bool = True) -> bool:
