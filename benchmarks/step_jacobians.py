@@ -5,7 +5,8 @@ central differences (issue 34's target: at most 2 MB of C, compiled in at most 1
 ``nc.step_function(model, h)`` generates the RATTLE step (CasADi's ``fast_newton``
 rootfinder, returning the step's unknowns ``z``) and, at a converged ``z``, the implicit
 function theorem's ``∂z/∂y = −G_z⁻¹ G_y`` (sparse ``G_z``, ``G_y`` and CasADi's looped sparse
-QR) and its transposed solve (:mod:`ncgen.control.discrete`).  Per robot, in a fresh process with an empty compile cache:
+QR) and its transposed solve (:mod:`ncgen.control.discrete`).  Per robot, in a fresh
+process with an empty compile cache:
 
 * C: bytes of the package's ``.c`` and ``.h`` files (written as ``step_function`` writes them);
 * compile: ncgen's own build of that package (its flags and parallel jobs), wall time, CPU
