@@ -4,7 +4,7 @@
 /* Error-controlled steps of RATTLE (ncgen_rattle.h) or of its fourth-order composition
  * (options->scheme SCHEME_RATTLE4, ncgen_fixed.h): the local error of a step from the step
  * and its two halves (local_error(), tangent_difference()), the next step size
- * (step_factor()), and the run over output intervals (simulate_adaptive(), wrapped by the
+ * (step_factor_order()), and the run over output intervals (simulate_adaptive(), wrapped by the
  * model's glue as <model>_simulate_adaptive, documented in <model>_stepper.h).  Plain C99,
  * model-independent; included after ncgen_fixed.h. */
 
@@ -68,11 +68,6 @@ static casadi_real local_error(const casadi_real *y, const casadi_real *diff, co
 static casadi_real step_factor_order(casadi_real e, int p) {
   casadi_real factor = e > 0 ? 0.9 * pow(e, -1.0 / (p + 1)) : 4;
   return fmin(4, fmax(0.2, factor));
-}
-
-/* step_factor_order() for RATTLE (p = 2). */
-static casadi_real step_factor(casadi_real e) {
-  return step_factor_order(e, 2);
 }
 
 /* Error-controlled steps over n_out output intervals (see <model>_simulate_adaptive). */

@@ -305,12 +305,12 @@ static void test_error_controller(void) {
   const casadi_real y[4] = {1, -2, 0, 0.5}, fine[4] = {1, -2.5, 0, 0.5};
   const casadi_real diff[4] = {3e-6, 0, -6e-9, 3e-7};
   casadi_real eq, ev, e;
-  CHECK(step_factor(1) == 0.9, "factor(1) = %g", step_factor(1));
-  CHECK(fabs(step_factor(8) - 0.45) < 1e-15, "factor(8) = %g", step_factor(8));
-  CHECK(fabs(step_factor(0.125) - 1.8) < 1e-15, "factor(1/8) = %g", step_factor(0.125));
-  CHECK(step_factor(0) == 4 && step_factor(1e-12) == 4, "largest growth 4");
-  CHECK(step_factor(1e6) == 0.2 && step_factor(INFINITY) == 0.2, "largest cut 0.2");
-  CHECK(step_factor(NAN) == 4, "factor(NaN) = %g (the caller rejects the step)", step_factor(NAN));
+  CHECK(step_factor_order(1, 2) == 0.9, "factor(1) = %g", step_factor_order(1, 2));
+  CHECK(fabs(step_factor_order(8, 2) - 0.45) < 1e-15, "factor(8) = %g", step_factor_order(8, 2));
+  CHECK(fabs(step_factor_order(0.125, 2) - 1.8) < 1e-15, "factor(1/8) = %g", step_factor_order(0.125, 2));
+  CHECK(step_factor_order(0, 2) == 4 && step_factor_order(1e-12, 2) == 4, "largest growth 4");
+  CHECK(step_factor_order(1e6, 2) == 0.2 && step_factor_order(INFINITY, 2) == 0.2, "largest cut 0.2");
+  CHECK(step_factor_order(NAN, 2) == 4, "factor(NaN) = %g (the caller rejects the step)", step_factor_order(NAN, 2));
   CHECK(fabs(step_factor_order(32, 4) - 0.45) < 1e-15, "order 4: factor(32) = %g", step_factor_order(32, 4));
   /* |diff| / 3 against atol + rtol max(|y_i|, |fine_i|), rtol = 1e-3, atol = 1e-6: the
    * third component (2e-9 against 1e-6) is the largest relative one */
