@@ -550,18 +550,26 @@ def goal_run(case: Case, first: dict, reference, target: float, goal: float, rou
 #: geometrically between the two), tip-error targets, and the goals (kind, target) -> ratio.
 SWEEP = {
     "cases": [("joints", 20, c) for c in CONFIGS] + [("spinning", 5, "staircase"), ("stiff", 1, "staircase")],
-    "points": 24, "ncgen_counts": (2, 400), "mujoco_counts": (100, 40000), "targets": (1e-3, 1e-6),
-    "reference_step": 2e-5,
+    "points": 24, "ncgen_counts": (2, 400), "mujoco_counts": (100, 40000), "rtol_counts": (24, 240),
+    "targets": (1e-3, 1e-6), "reference_step": 2e-5,
 }
 SWEEP_SMOKE = {
     "cases": [("joints", 2, "staircase"), ("joints", 2, "hanging"), ("stiff", 1, "staircase")],
-    "points": 20, "ncgen_counts": (1, 60), "mujoco_counts": (20, 6000), "targets": (1e-3,),
-    "reference_step": 1e-3,
+    "points": 20, "ncgen_counts": (1, 60), "mujoco_counts": (20, 6000), "rtol_counts": (24, 200),
+    "targets": (1e-3,), "reference_step": 1e-3,
 }
 SWEEP_GOALS = {("joints", 1e-3): 0.5, ("joints", 1e-6): 0.3, ("spinning", 1e-3): 0.5}
 #: ncgen as users run it (``method="stepper"``, checks on): label -> keywords of simulate.
 USER_SETTINGS = {"ncgen default (rattle4, shadow estimate)": {},
-                 "ncgen rattle4, local estimate": {"estimate": "local"}}
+                 "ncgen rattle4, local estimate": {"estimate": "local"},
+                 "ncgen rattle4 rtol (error control)": {"scheme": "rattle4", "rtol": None}}
+#: Tolerances of the error-controlled runs: count k -> rtol = atol = 10^(-k / RTOL_STEPS) (a
+#: larger count is finer, as for steps).
+RTOL_STEPS = 24
+
+
+def rtol_of(count: int) -> float:
+    return 10.0 ** (-count / RTOL_STEPS)
 
 
 def step_counts(lo: int, hi: int, points: int) -> list[int]:
@@ -575,18 +583,20 @@ def step_counts(lo: int, hi: int, points: int) -> list[int]:
 
 
 def user_run(case: Case, reference, count: int, kw: dict) -> dict:
-    """One ncgen run as users run it (checks on) at ``count`` substeps per OUTPUT_DT:
-    error, wall time, the run's error estimate, and whether its checks rejected it (then the
-    error is that of the same run unchecked)."""
+    """One ncgen run as users run it (checks on) at ``count`` substeps per OUTPUT_DT (with
+    ``rtol`` in ``kw``: at rtol = atol = :func:`rtol_of` (count)): error, wall time, the run's
+    error estimate, and whether its checks rejected it (then the error is that of the same
+    run unchecked; an error-controlled run's warnings count as passing, as for users)."""
     from ncgen.errors import SimulationError
 
+    kw = dict(kw, rtol=rtol_of(count), atol=rtol_of(count)) if "rtol" in kw else dict(kw, substeps=count)
     try:
-        traj, wall = case.simulate(T_END, OUTPUT_DT, method="stepper", substeps=count, **kw)
+        traj, wall = case.simulate(T_END, OUTPUT_DT, method="stepper", **kw)
         rejected = ""
     except SimulationError as e:
         rejected = str(e).split(". ")[0][-90:]
         try:
-            traj, wall = case.simulate(T_END, OUTPUT_DT, method="stepper", substeps=count, check=False, **kw)
+            traj, wall = case.simulate(T_END, OUTPUT_DT, method="stepper", check=False, **kw)
         except SimulationError:
             return {"error": float("inf"), "time": float("nan"), "estimate": float("nan"), "rejected": rejected}
     return {"error": _err(ncgen_tip(traj.q[-1]), reference), "time": wall,
@@ -645,9 +655,11 @@ def sweep_case(kind: str, n: int, config: str, models: dict, settings: dict, rou
         runs["mujoco RK4"] = lambda k: mujoco_point(case, reference, k)
     curves = {}
     for label, run in runs.items():
-        lo, hi = settings["mujoco_counts"] if label == "mujoco RK4" else settings["ncgen_counts"]
+        key = "mujoco_counts" if label == "mujoco RK4" else "rtol_counts" if "rtol" in label else "ncgen_counts"
+        lo, hi = settings[key]
         curves[label] = {k: run(k) for k in step_counts(lo, hi, settings["points"])}
-        what = "steps to 2 s" if label == "mujoco RK4" else f"substeps per {OUTPUT_DT:g} s"
+        what = "steps to 2 s" if label == "mujoco RK4" else (f"k, rtol = atol = 10^(-k/{RTOL_STEPS})" if "rtol"
+                                                            in label else f"substeps per {OUTPUT_DT:g} s")
         print(f"  {label}: {len(curves[label])} step sizes ({what}: error m / wall ms"
               + (", R: rejected by its checks" if label != "mujoco RK4" else "") + ")")
         print("    " + ", ".join(f"{k}: {p['error']:.1e}/{p['time'] * 1e3:.1f}{' R' if p['rejected'] else ''}"
@@ -672,10 +684,11 @@ def sweep_case(kind: str, n: int, config: str, models: dict, settings: dict, rou
                 print(f"    {label:<42} does not reach the target at the steps swept")
                 continue
             p, t = curves[label][k], np.array(times[label])
-            h = T_END / k if label == "mujoco RK4" else OUTPUT_DT / k
+            h = f"rtol {rtol_of(k):.2e}" if "rtol" in label else \
+                f"step {T_END / k if label == 'mujoco RK4' else OUTPUT_DT / k:.3e} s"
             est = f"  estimate {p['estimate']:.1e} ({p['estimate'] / p['error']:.2g}x the error)" \
                 if np.isfinite(p["estimate"]) else ""
-            print(f"    {label:<42} step {h:.3e} s  error {p['error']:.2e} m  min {t.min() * 1e3:8.2f} ms  "
+            print(f"    {label:<42} {h}  error {p['error']:.2e} m  min {t.min() * 1e3:8.2f} ms  "
                   f"median {np.median(t) * 1e3:8.2f} ms{est}")
         if "mujoco RK4" not in times:
             continue

@@ -163,17 +163,19 @@ int box_stack_simulate_stats(const casadi_real *q0, const casadi_real *v0, const
                              int estimate, int track_work, long *steps_done, long *splits,
                              casadi_real *impulse_out);
 
-/* Error-controlled steps over n_out output intervals of dt from (q0, v0, lam0) at t0.  Each
- * step of size H is taken once whole and once as two halves; (halves - whole) / 3 estimates
+/* Error-controlled steps over n_out output intervals of dt from (q0, v0, lam0) at t0, of
+ * RATTLE (options->scheme 0, order p = 2) or of its fourth-order composition (the scheme of
+ * box_stack_simulate_stats, p = 4; R below is 2^p - 1: 3, 15).  Each
+ * step of size H is taken once whole and once as two halves; (halves - whole) / R estimates
  * the local error of the halves, and the step is accepted if every component of q and v
  * is within atol + rtol max(|y_i|, |y_i+|).  Where the whole difference fails that test,
  * its part tangent to the constraints at the end of the step is tested instead (less its component
  * normal to them in the mass metric, a constraint residual that Newton's tolerance
  * controls): next to a singular configuration that normal part carries the round-off of
  * the ill-conditioned KKT solves and would make the step collapse.  An accepted step continues from the halves, or
- * with extrapolate != 0 from the Richardson extrapolation halves + (halves - whole) / 3
- * (order 4: RATTLE is symmetric) projected onto both constraint levels in the mass metric.
- * Next step H (0.2 .. 4) * 0.9 e^(-1/3) for the relative error e; steps end on every output
+ * with extrapolate != 0 from the Richardson extrapolation halves + (halves - whole) / R
+ * (order p + 2: both schemes are symmetric) projected onto both constraint levels in the
+ * mass metric.  Next step H (0.2 .. 4) * 0.9 e^(-1/(p + 1)) for the relative error e; steps end on every output
  * time.  Newton failures reject the step (H / 4) instead of splitting it.  u: samples at
  * the output times (row k at u + k * u_stride; n_out + 1 rows if hold_linear, then the
  * input of a step is interpolated at its midpoint, else row k is held over interval k).

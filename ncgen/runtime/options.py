@@ -74,7 +74,8 @@ class SimulationOptions:
     for a model with contacts, which keep their own scheme; ``"rattle"``: RATTLE, order 2, one
     implicit step per step; ``"rattle4"``: Suzuki's symmetric five-stage composition of
     RATTLE steps, order 4, symplectic, both constraint levels kept, five RATTLE steps per
-    step, not with nonsmooth contacts), ``check`` (make an untrustworthy run an error),
+    step, not with nonsmooth contacts; with ``rtol``, ``"rattle4"`` selects the composition's
+    error control, ``"auto"`` RATTLE's), ``check`` (make an untrustworthy run an error),
     ``estimate`` (fixed steps: ``True`` or ``"shadow"``, default: a shadow run with steps of
     2h, half the work again, a global estimate that follows the growth of errors along the
     motion; ``"local"``: the local errors of one pair of steps in six, summed and grown as a

@@ -34,8 +34,13 @@ Two modes:
   solves), the step is accepted when every
   component of q and v is within ``atol + rtol |y|`` and continues from the Richardson
   extrapolation (order 4, RATTLE being symmetric) projected onto both constraint levels
-  (``order=2``: from the two halves, keeping RATTLE's symplecticity).  Steps end on every
-  output time.  ``rtol`` bounds this local error; a shadow run at 10× looser tolerances
+  (``order=2``: from the two halves, keeping RATTLE's symplecticity).  With
+  ``scheme="rattle4"`` the steps are the fourth-order composition's (three composed steps
+  per step tried), the local error ``|halves − whole| / 15`` and the extrapolation
+  ``halves + (halves − whole) / 15`` (``order=2``: from the halves); at tight tolerances
+  this takes several times fewer RATTLE steps than RATTLE's error control for the same
+  error (double pendulum, 1e-9: 2300 against 10400).  ``scheme="auto"`` keeps RATTLE's.  Steps
+  end on every output time.  ``rtol`` bounds this local error; a shadow run at 10× looser tolerances
   estimates the global error (:mod:`ncgen.runtime.stepper_checks`), and the run warns or
   raises where that estimate says the tolerance was not met.
 
@@ -93,9 +98,6 @@ def simulate_stepper(model, t: np.ndarray, U: np.ndarray, p: np.ndarray, q0: np.
         raise NcgenError(f"scheme: 'rattle4' needs a smooth model; {model.name!r} has nonsmooth contacts, which "
                          f"keep their own scheme (first order at impacts): use scheme='rattle' or build it with "
                          f"contacts='smooth'")
-    if opts.scheme == "rattle4" and opts.rtol is not None:
-        raise NcgenError("scheme: 'rattle4' is a fixed-step scheme (substeps=N); with rtol the error control "
-                         "runs RATTLE, Richardson-extrapolated to order 4 (order=4, the default)")
     if opts.estimate == "shadow" and opts.rtol is not None:
         raise NcgenError("estimate: 'shadow' is the fixed-step run's shadow run with steps of 2h; with rtol the "
                          "error control runs its own shadow run at 10x looser tolerances (estimate=True)")
@@ -157,6 +159,7 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, co
     """Error control (module docstring)."""
     hold, tol, max_iter, order, max_steps = opts.hold, opts.newton_tol, opts.max_newton, opts.order, opts.max_steps
     check, estimate = opts.check, opts.estimate
+    rattle4 = opts.scheme == "rattle4"            # "auto" keeps RATTLE's error control
     rtol = opts.rtol
     atol = rtol if opts.atol is None else opts.atol
     n_out = len(t) - 1
@@ -165,8 +168,9 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, co
 
     def run(rtol, atol):
         return stepper.simulate_adaptive(q0, v0, lam0, float(t[0]), dt, n_out, U if model.nu else None,
-                                         hold == "linear", p, rtol, atol, 0.0, order == 4, max_steps,
-                                         not conservative, newton_tolerance(rtol, atol, tol), max_iter)
+                                         hold == "linear", p, rtol, atol, 0.0, order == 4,
+                                         max_steps, not conservative, newton_tolerance(rtol, atol, tol), max_iter,
+                                         scheme=int(rattle4))
 
     with Ticker(f"stepper: {model.name}, rtol {rtol:g}"):
         Q, V, LAM, S, status, rows, h_next = run(rtol, atol)
@@ -174,8 +178,9 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, co
     if shadow is not None and shadow[4] == STEP_INTERRUPTED:   # stopped in the shadow run: no estimate
         status, shadow = STEP_INTERRUPTED, None
     stepping = time.perf_counter() - start
-    info = {"method": "stepper", "backend": "compiled", "scheme": "RATTLE" if order == 2 else
-            "RATTLE, Richardson-extrapolated and projected", "order": order, "rtol": rtol, "atol": atol,
+    info = {"method": "stepper", "backend": "compiled", "scheme": "RATTLE, Suzuki's fourth-order composition"
+            if rattle4 else "RATTLE" if order == 2 else "RATTLE, Richardson-extrapolated and projected",
+            "order": 4 if rattle4 else order, "rtol": rtol, "atol": atol,
             "hold": hold, "tol": newton_tolerance(rtol, atol, tol), "max_iter": max_iter, "max_steps": max_steps,
             "estimate": bool(estimate), "stepping_time": stepping, "complete": status == 0,
             "stats": _stats(S[:rows], int(S[:rows, 2].sum()))}

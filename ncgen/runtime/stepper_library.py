@@ -88,10 +88,11 @@ class CompiledStepper:
 
     def simulate_adaptive(self, q0, v0, lam0, t0: float, dt: float, n_out: int, U: np.ndarray | None,
                           hold_linear: bool, p: np.ndarray, rtol: float, atol: float, h0: float, extrapolate: bool,
-                          max_steps: int, track_work: bool, tol: float, max_iter: int):
+                          max_steps: int, track_work: bool, tol: float, max_iter: int, scheme: int = 0):
         """``(Q, V, LAM, STATS, status, rows_done, h_next)``: error-controlled steps (see
-        ``<model>_simulate_adaptive``).  ``U``: input samples at the output times,
-        ``(n_out + 1, nu)``, or None for zeros."""
+        ``<model>_simulate_adaptive``) of RATTLE (``scheme`` 0) or its fourth-order
+        composition (1).  ``U``: input samples at the output times, ``(n_out + 1, nu)``, or
+        None for zeros."""
         Q, V, LAM, S = self._buffers(n_out)
         U = None if U is None or self.nu == 0 else np.ascontiguousarray(U, float)
         rows, h_next = ctypes.c_long(0), ctypes.c_double(0.0)
@@ -99,7 +100,7 @@ class CompiledStepper:
                                          int(n_out), _ptr(U), self.nu if U is not None else 0, int(bool(hold_linear)),
                                          _ptr(_vec(p)), float(rtol), float(atol), float(h0), int(bool(extrapolate)),
                                          int(max_steps), int(bool(track_work)), _ptr(Q), _ptr(V), _ptr(LAM),
-                                         _ptr(S), _Options(float(tol), int(max_iter), 0),
+                                         _ptr(S), _Options(float(tol), int(max_iter), 0, int(scheme)),
                                          ctypes.byref(rows), ctypes.byref(h_next))
         return Q, V, LAM, S, int(status), int(rows.value), float(h_next.value)
 

@@ -256,9 +256,11 @@ static void test_rattle4_order_estimate(void) {
           err[k]);
   }
   CHECK(err[0] / err[1] > 14 && err[0] / err[1] < 18, "errors %g, %g: not fourth order", err[0], err[1]);
-  /* the error control is RATTLE's: it refuses the scheme; a backward step is internal only */
+  /* a scheme beyond the composition is refused; a backward step is internal only */
+  o.scheme = SCHEME_RATTLE4 + 1;
   status = simulate_adaptive(q0, v0, 0, 0, 0.1, 1, 0, 0, 0, 0, 1e-6, 1e-6, 0, 1, 100, 0, q, v, 0, 0, &o, 0, 0);
-  CHECK(status == STEP_BAD_INPUT, "adaptive with the triple jump: status %d", status);
+  CHECK(status == STEP_BAD_INPUT, "adaptive with scheme %d: status %d", o.scheme, status);
+  o.scheme = SCHEME_RATTLE4;
   status = stepper_step(q0, v0, 0, &u, 0, -1e-3, q, v, 0, 0, &o, 0, 0);
   CHECK(status == STEP_BAD_INPUT, "h < 0: status %d", status);
 }
@@ -303,18 +305,19 @@ static void test_error_controller(void) {
   const casadi_real y[4] = {1, -2, 0, 0.5}, fine[4] = {1, -2.5, 0, 0.5};
   const casadi_real diff[4] = {3e-6, 0, -6e-9, 3e-7};
   casadi_real eq, ev, e;
-  CHECK(step_factor(1) == 0.9, "factor(1) = %g", step_factor(1));
-  CHECK(fabs(step_factor(8) - 0.45) < 1e-15, "factor(8) = %g", step_factor(8));
-  CHECK(fabs(step_factor(0.125) - 1.8) < 1e-15, "factor(1/8) = %g", step_factor(0.125));
-  CHECK(step_factor(0) == 4 && step_factor(1e-12) == 4, "largest growth 4");
-  CHECK(step_factor(1e6) == 0.2 && step_factor(INFINITY) == 0.2, "largest cut 0.2");
-  CHECK(step_factor(NAN) == 4, "factor(NaN) = %g (the caller rejects the step)", step_factor(NAN));
+  CHECK(step_factor_order(1, 2) == 0.9, "factor(1) = %g", step_factor_order(1, 2));
+  CHECK(fabs(step_factor_order(8, 2) - 0.45) < 1e-15, "factor(8) = %g", step_factor_order(8, 2));
+  CHECK(fabs(step_factor_order(0.125, 2) - 1.8) < 1e-15, "factor(1/8) = %g", step_factor_order(0.125, 2));
+  CHECK(step_factor_order(0, 2) == 4 && step_factor_order(1e-12, 2) == 4, "largest growth 4");
+  CHECK(step_factor_order(1e6, 2) == 0.2 && step_factor_order(INFINITY, 2) == 0.2, "largest cut 0.2");
+  CHECK(step_factor_order(NAN, 2) == 4, "factor(NaN) = %g (the caller rejects the step)", step_factor_order(NAN, 2));
+  CHECK(fabs(step_factor_order(32, 4) - 0.45) < 1e-15, "order 4: factor(32) = %g", step_factor_order(32, 4));
   /* |diff| / 3 against atol + rtol max(|y_i|, |fine_i|), rtol = 1e-3, atol = 1e-6: the
    * third component (2e-9 against 1e-6) is the largest relative one */
-  e = local_error(y, diff, fine, 1e-3, 1e-6, &eq, &ev);
+  e = local_error(y, diff, fine, 1e-3, 1e-6, 3, &eq, &ev);
   CHECK(fabs(eq - 1e-6) < 1e-21 && fabs(ev - 1e-7) < 1e-22, "errors %g in q, %g in v", eq, ev);
   CHECK(fabs(e - 2e-3) < 1e-15, "relative error %g", e);
-  e = local_error(y, (const casadi_real[4]) {0, NAN, 0, 1}, fine, 1e-3, 1e-6, &eq, &ev);
+  e = local_error(y, (const casadi_real[4]) {0, NAN, 0, 1}, fine, 1e-3, 1e-6, 3, &eq, &ev);
   CHECK(isnan(e) && isnan(eq) && ev > 0, "NaN propagates past later components: %g, %g, %g", e, eq, ev);
   CHECK(isnan(norm_inf((const casadi_real[3]) {1, NAN, 2}, 3)), "norm_inf of a NaN");
   CHECK(norm_inf((const casadi_real[3]) {1, -3, 2}, 3) == 3, "norm_inf");
@@ -345,6 +348,38 @@ static void test_adaptive(void) {
   CHECK(status == STEP_TOO_MANY_STEPS && rows == 0, "status %d, %ld rows", status, rows);
   status = simulate_adaptive(q0, v0, 0, 0, T, 1, 0, 0, 0, 0, 0, 1e-8, 0, 0, 10, 0, q, v, 0, 0, 0, &rows, 0);
   CHECK(status == STEP_BAD_INPUT, "rtol = 0: status %d", status);
+}
+
+/* Error control of the fourth-order composition (scheme SCHEME_RATTLE4): every row reached,
+ * both constraint levels held, the error near the tolerance and falling with it, the step
+ * count growing as rtol^(-1/5) (order 4: 10^(3/5) ~ 4 for rtol / 1000) and far below
+ * RATTLE's at the tight tolerance; the local error columns sum to about the true error. */
+static void test_adaptive_rattle4(void) {
+  const casadi_real theta0 = 1.0, T = 1.0, uu[11] = {0};
+  casadi_real q0[2], v0[2], q[2 * 10], v[2 * 10], stats[NSTATS * 10], err[2];
+  step_options o = test_default_options();
+  long rows = -1, steps[2] = {0, 0}, steps_rattle = 0;
+  int k, r, status;
+  cartesian(theta0, 0, q0, v0);
+  o.scheme = SCHEME_RATTLE4;
+  for (k = 0; k < 2; ++k) {
+    casadi_real rtol = k ? 1e-9 : 1e-6;
+    status = simulate_adaptive(q0, v0, 0, 0, T / 10, 10, uu, 1, 0, 0, rtol, rtol, 0, 0, 1000, 0, q, v, 0,
+                               stats, &o, &rows, 0);
+    CHECK(status == STEP_OK && rows == 10, "status %d, %ld rows", status, rows);
+    for (r = 0; r < 10; ++r) steps[k] += (long) stats[NSTATS * r];
+    err[k] = position_error(q + 18, theta0, 0, T);
+    CHECK(err[k] < 100 * rtol && err[k] > 1e-3 * rtol, "error %g for rtol %g", err[k], rtol);
+    CHECK(fabs(phi(q + 18)) <= 1e-10 && fabs(q[18] * v[18] + q[19] * v[19]) <= 1e-9, "constraints");
+  }
+  CHECK(err[1] < err[0] / 30, "errors %g, %g", err[0], err[1]);
+  CHECK(steps[1] > 2.5 * steps[0] && steps[1] < 7 * steps[0], "steps %ld, %ld: not order 4", steps[0], steps[1]);
+  o.scheme = 0;
+  status = simulate_adaptive(q0, v0, 0, 0, T / 10, 10, uu, 1, 0, 0, 1e-9, 1e-9, 0, 0, 100000, 0, q, v, 0, stats,
+                             &o, &rows, 0);
+  for (r = 0; r < 10; ++r) steps_rattle += (long) stats[NSTATS * r];
+  CHECK(status == STEP_OK && steps_rattle > 5 * steps[1], "RATTLE %ld steps, the composition %ld", steps_rattle,
+        steps[1]);
 }
 
 /* The projection of a state off both constraint levels: radially back onto the circle (the
@@ -389,6 +424,7 @@ int main(void) {
   test_split_and_bad_input();
   test_error_controller();
   test_adaptive();
+  test_adaptive_rattle4();
   test_project_and_outputs();
   test_stop_request();
   return report("test_rattle");

@@ -1,6 +1,7 @@
-/* Error-controlled RATTLE steps (ncgen_rattle.h): the local error of a step from the step
+/* Error-controlled steps of RATTLE (ncgen_rattle.h) or of its fourth-order composition
+ * (options->scheme SCHEME_RATTLE4, ncgen_fixed.h): the local error of a step from the step
  * and its two halves (local_error(), tangent_difference()), the next step size
- * (step_factor()), and the run over output intervals (simulate_adaptive(), wrapped by the
+ * (step_factor_order()), and the run over output intervals (simulate_adaptive(), wrapped by the
  * model's glue as <model>_simulate_adaptive, documented in <model>_stepper.h).  Plain C99,
  * model-independent; included after ncgen_fixed.h. */
 
@@ -38,17 +39,19 @@ static int tangent_difference(workspace *ws, casadi_real t, const casadi_real *f
 }
 
 /* Local error of the two half-steps `fine` against the whole step `big` from y = [q; v]:
- * diff / 3, diff the tangent part of fine - big (tangent_difference; the local error C h^3
- * of RATTLE gives big - fine = 3/4 C h^3).  Sets *err_q, *err_v to its largest component in
- * q (m) and v (m/s); returns its largest component relative to atol + rtol max(|y_i|,
- * |fine_i|) (NaN propagates). */
+ * diff / R, diff the tangent part of fine - big (tangent_difference), R = 2^p - 1 for a
+ * scheme of order p (RATTLE: 3, its local error C h^3 gives big - fine = 3/4 C h^3; the
+ * composition: 15).  Sets *err_q, *err_v to its largest component in q (m) and v (m/s);
+ * returns its largest component relative to atol + rtol max(|y_i|, |fine_i|) (NaN
+ * propagates). */
 static casadi_real local_error(const casadi_real *y, const casadi_real *diff, const casadi_real *fine,
-                               casadi_real rtol, casadi_real atol, casadi_real *err_q, casadi_real *err_v) {
+                               casadi_real rtol, casadi_real atol, casadi_real richardson, casadi_real *err_q,
+                               casadi_real *err_v) {
   casadi_real e = 0, d;
   int i;
   *err_q = *err_v = 0;
   for (i = 0; i < 2 * NQ; ++i) {
-    d = fabs(diff[i]) / 3;
+    d = fabs(diff[i]) / richardson;
     if (i < NQ) *err_q = nan_max(*err_q, d);
     else *err_v = nan_max(*err_v, d);
     e = nan_max(e, d / (atol + rtol * fmax(fabs(y[i]), fabs(fine[i]))));
@@ -56,11 +59,11 @@ static casadi_real local_error(const casadi_real *y, const casadi_real *diff, co
   return e;
 }
 
-/* Next step size over this one for the relative local error e (<= 1: accepted):
- * 0.9 e^(-1/3) (RATTLE's local error is O(h^3)), within 0.2 .. 4; 4 for e = 0 (and for NaN: the
- * caller rejects the step, !(e <= 1)). */
-static casadi_real step_factor(casadi_real e) {
-  casadi_real factor = e > 0 ? 0.9 * pow(e, -1.0 / 3) : 4;
+/* Next step size over this one for the relative local error e (<= 1: accepted) of a scheme
+ * whose local error is O(h^(p + 1)): 0.9 e^(-1/(p + 1)), within 0.2 .. 4; 4 for e = 0 (and
+ * for NaN: the caller rejects the step, !(e <= 1)). */
+static casadi_real step_factor_order(casadi_real e, int p) {
+  casadi_real factor = e > 0 ? 0.9 * pow(e, -1.0 / (p + 1)) : 4;
   return fmin(4, fmax(0.2, factor));
 }
 
@@ -78,12 +81,15 @@ static int simulate_adaptive(const casadi_real *q0, const casadi_real *v0, const
   casadi_real *y, *big, *mid, *fine, *y_new, *lam, *lam_fine, *x_prev, *dx_prev, *x_big, *u_buf, *phidot;
   casadi_real t = t0, H = h0 > 0 ? h0 : dt, h_prev = 0, work = 0, work_mid = 0;
   long row = 0, i;
-  int status = STEP_OK, have_prev = 0;
+  int status = STEP_OK, have_prev = 0, order;
+  casadi_real richardson;
   single = *options_or_default(options, &defaults);
   single.max_halvings = 0;
+  order = single.scheme == SCHEME_RATTLE4 ? 4 : 2;
+  richardson = (1 << order) - 1;
   if (rows_done) *rows_done = 0;
   if (!(dt > 0) || n_out < 0 || !(rtol > 0) || !(atol > 0) || max_steps < 1 || !isfinite(t0 + dt * n_out) ||
-      single.scheme != 0) /* the error control is RATTLE's */
+      single.scheme < 0 || single.scheme > SCHEME_RATTLE4)
     return STEP_BAD_INPUT;
   block = malloc(step_work_bytes() + (10 * NQ + 3 * NC + 3 * NX + NU + 1) * sizeof(casadi_real));
   if (!block) return STEP_BAD_INPUT;
@@ -139,11 +145,18 @@ static int simulate_adaptive(const casadi_real *q0, const casadi_real *v0, const
       ws.track_work = 0; /* the work of the two half steps only */
       status = step_split(y, y + NQ, t, uk, p, Hs, big, big + NQ, 0, &iters, &unused, &single, have_prev, &ws, 0);
       if (status == STEP_OK) {
+        int warm = 1;
         ws.track_work = track_work;
-        memcpy(x_big, ws.x, NX * sizeof *x_big);
-        for (i = 0; i < NQ; ++i) ws.x[i] = (y[NQ + i] + x_big[i]) / 2;
-        for (i = NQ; i < NX; ++i) ws.x[i] = x_big[i] / 2;
-        status = step_split(y, y + NQ, t, uk, p, Hs / 2, mid, mid + NQ, 0, &iters, &unused, &single, 1, &ws, 0);
+        if (order == 2) { /* RATTLE: the whole step's solution halved */
+          memcpy(x_big, ws.x, NX * sizeof *x_big);
+          for (i = 0; i < NQ; ++i) ws.x[i] = (y[NQ + i] + x_big[i]) / 2;
+          for (i = NQ; i < NX; ++i) ws.x[i] = x_big[i] / 2;
+        } else if (have_prev) { /* the composition: its first stage from the last one before */
+          predict_scaled(ws.x, x_prev, dx_prev, y + NQ, Hs / 2 / h_prev);
+        } else {
+          warm = 0;
+        }
+        status = step_split(y, y + NQ, t, uk, p, Hs / 2, mid, mid + NQ, 0, &iters, &unused, &single, warm, &ws, 0);
       }
       if (status == STEP_OK) {
         work_mid = ws.step_work;
@@ -168,19 +181,20 @@ static int simulate_adaptive(const casadi_real *q0, const casadi_real *v0, const
        * of its tangent part (never larger in the mass norm; the same away from singular
        * configurations, so it costs nothing on regular motions). */
       for (i = 0; i < 2 * NQ; ++i) mid[i] = fine[i] - big[i];
-      e = local_error(y, mid, fine, rtol, atol, &err_q, &err_v);
+      e = local_error(y, mid, fine, rtol, atol, richardson, &err_q, &err_v);
       if (!(e <= 1) && tangent_difference(&ws, t + Hs, fine, big, p, mid) == STEP_OK)
-        e = local_error(y, mid, fine, rtol, atol, &err_q, &err_v);
-      factor = step_factor(e);
+        e = local_error(y, mid, fine, rtol, atol, richardson, &err_q, &err_v);
+      factor = step_factor_order(e, order);
       if (!(e <= 1)) {
         ++rejected;
         H = Hs * factor;
         continue;
       }
-      /* Accepted: Richardson extrapolation fine + (fine - big)/3 (order 4), projected. */
+      /* Accepted: Richardson extrapolation fine + (fine - big)/R (order p + 1; RATTLE: 4),
+       * projected. */
       memcpy(y_new, fine, 2 * NQ * sizeof *y_new);
       if (extrapolate) {
-        for (i = 0; i < 2 * NQ; ++i) y_new[i] += (fine[i] - big[i]) / 3;
+        for (i = 0; i < 2 * NQ; ++i) y_new[i] += (fine[i] - big[i]) / richardson;
         if (project(&ws, t + Hs, y_new, y_new + NQ, p, &single, phidot) != STEP_OK)
           memcpy(y_new, fine, 2 * NQ * sizeof *y_new);
       }
