@@ -81,6 +81,7 @@ class JointLoop:
 
     def __init__(self, model, library, ode: ca.Function, name: str):
         from ncgen.assembly.joint_ode import quaternion_offsets
+        from ncgen.runtime.tree_check import tree_function
 
         self.model, self.ode, self.library = model, ode, library
         self._lib = ctypes.CDLL(str(library))
@@ -92,7 +93,7 @@ class JointLoop:
         fn.restype = ctypes.c_int
         self._fn = fn
         self.quat = np.array(quaternion_offsets(model.joint_space), dtype=np.int32)
-        self.tree = model.joint_space.tree_function(model.layout)
+        self.tree = tree_function(model)
         self._maps: dict = {}
 
     def mapped(self, what: str, n: int) -> ca.Function:
