@@ -3,51 +3,65 @@
 SymPy derives every coordinate type's matrices (``ncgen.symbolic``); a ``System`` of
 bodies, bars and points with joints and forces is assembled into CasADi functions
 (``System.build()``), turned into C, simulated and optimised.
+
+``import ncgen`` is cheap: every public name is imported from its module on first use
+(PEP 562), so that a command or script loads only the layers it needs (no SymPy, SciPy or
+matplotlib until something asks for them).
 """
-from ncgen import viz  # nc.viz.plot, nc.viz.animate (cheap: matplotlib loads on use)
-from ncgen import robots  # nc.robots.urdf_path("panda"): example-robot-data's URDFs
-from ncgen.assembly.kinematics import assemble, dof_report, project_velocity, solve_kinematics
-from ncgen.codegen.model_package import generate
-from ncgen.control import MPC, StepDidNotConverge, StepFunction, export_mpc, ilqr, step_function
-from ncgen.errors import NcgenError
-from ncgen.model.contacts import (BoxBox, BoxPlane, CapsulePlane, Contact, CylinderPlane, SphereBox, SpherePlane,
-                                  SphereSphere)
-from ncgen.model.controllers import PD, ComputedTorque, Controller
-from ncgen.model.forces import Force, GeneralizedForce, PointForce, Spring, Torque, TorsionalSpring
-from ncgen.model.joints import (
-    CoordinateDriver, Cylindrical, Distance, Fixed, Free, Joint, Mimic, Planar, PointOnLine, PointOnPlane, Prismatic,
-    Revolute, Spherical, Universal,
-)
-from ncgen.errors import ModelError
-from ncgen.model.model import Model
-from ncgen.model.shapes import Box, Capsule, Cylinder, Ellipsoid, Mesh, Shape, Sphere
-from ncgen.model.system import System
-from ncgen.optim import OptimalControl, OptimalTrajectory
-from ncgen.runtime import SimulationOptions, Trajectory, simulate
-from ncgen.runtime.batch import BatchResult, simulate_batch
-from ncgen.runtime.samples import Samples
-from ncgen.runtime.sweep import SweepResult, open_sweep, sweep
-from ncgen.analysis.formfinding import Tensegrity, form_find
-from ncgen.analysis.linearization import LinearModel, linearize
-from ncgen.analysis.modes import Modes, modes
-from ncgen.analysis.statics import Equilibrium, equilibrium
-from ncgen.runtime.joint_dynamics import forward_dynamics, forward_dynamics_kernel, inverse_dynamics
-from ncgen.runtime.tree_algorithms import aba, aba_derivatives, algorithm_kernel, crba, rnea, rnea_derivatives
-from ncgen.runtime.tree_kernel import joint_forward_dynamics, joint_forward_dynamics_kernel
-from ncgen.analysis.reactions import JointReaction, joint_reactions
-from ncgen.symbolic.coordinates import coordinate_type
+from __future__ import annotations
+
+import importlib
+
+from ncgen.errors import ModelError, NcgenError
 from ncgen.version import __version__
 
+#: Where each public name lives: module -> names (``nc.robots`` and ``nc.viz`` are modules).
+_HOMES: dict[str, tuple[str, ...]] = {
+    "ncgen.analysis.formfinding": ("Tensegrity", "form_find"),
+    "ncgen.analysis.linearization": ("LinearModel", "linearize"),
+    "ncgen.analysis.modes": ("Modes", "modes"),
+    "ncgen.analysis.reactions": ("JointReaction", "joint_reactions"),
+    "ncgen.analysis.statics": ("Equilibrium", "equilibrium"),
+    "ncgen.assembly.kinematics": ("assemble", "dof_report", "project_velocity", "solve_kinematics"),
+    "ncgen.codegen.model_package": ("generate",),
+    "ncgen.control": ("MPC", "StepDidNotConverge", "StepFunction", "export_mpc", "ilqr", "step_function"),
+    "ncgen.model.contacts": ("BoxBox", "BoxPlane", "CapsulePlane", "Contact", "CylinderPlane", "SphereBox",
+                             "SpherePlane", "SphereSphere"),
+    "ncgen.model.controllers": ("ComputedTorque", "Controller", "PD"),
+    "ncgen.model.forces": ("Force", "GeneralizedForce", "PointForce", "Spring", "Torque", "TorsionalSpring"),
+    "ncgen.model.joints": ("CoordinateDriver", "Cylindrical", "Distance", "Fixed", "Free", "Joint", "Mimic", "Planar",
+                           "PointOnLine", "PointOnPlane", "Prismatic", "Revolute", "Spherical", "Universal"),
+    "ncgen.model.model": ("Model",),
+    "ncgen.model.shapes": ("Box", "Capsule", "Cylinder", "Ellipsoid", "Mesh", "Shape", "Sphere"),
+    "ncgen.model.system": ("System",),
+    "ncgen.optim": ("OptimalControl", "OptimalTrajectory"),
+    "ncgen.runtime": ("SimulationOptions", "Trajectory", "simulate"),
+    "ncgen.runtime.batch": ("BatchResult", "simulate_batch"),
+    "ncgen.runtime.joint_dynamics": ("forward_dynamics", "forward_dynamics_kernel", "inverse_dynamics"),
+    "ncgen.runtime.samples": ("Samples",),
+    "ncgen.runtime.sweep": ("SweepResult", "open_sweep", "sweep"),
+    "ncgen.runtime.tree_algorithms": ("aba", "aba_derivatives", "algorithm_kernel", "crba", "rnea",
+                                      "rnea_derivatives"),
+    "ncgen.runtime.tree_kernel": ("joint_forward_dynamics", "joint_forward_dynamics_kernel"),
+    "ncgen.symbolic.coordinates": ("coordinate_type",),
+}
+_MODULES = ("robots", "viz")
+_HOME = {name: module for module, names in _HOMES.items() for name in names}
 
-__all__ = [
-    "BatchResult", "Box", "BoxBox", "BoxPlane", "Capsule", "CapsulePlane", "ComputedTorque", "Contact", "Controller", "CoordinateDriver", "Cylinder", "CylinderPlane", "Ellipsoid", "Mesh", "Shape", "Sphere", "Cylindrical", "Distance", "Equilibrium", "Fixed", "Force", "Free", "GeneralizedForce",
-    "Joint", "JointReaction", "LinearModel", "MPC", "Mimic", "Model", "ModelError", "Modes", "NcgenError", "OptimalControl",
-    "OptimalTrajectory", "PD", "Planar", "PointForce", "PointOnLine", "PointOnPlane", "Prismatic", "Revolute", "Samples", "SimulationOptions", "SphereBox", "SpherePlane", "SphereSphere", "Spherical",
-    "Spring", "StepDidNotConverge", "StepFunction", "SweepResult", "System", "Tensegrity", "Torque", "TorsionalSpring", "Trajectory", "Universal",
-    "assemble", "coordinate_type", "dof_report", "equilibrium", "export_mpc", "form_find", "forward_dynamics",
-    "forward_dynamics_kernel", "generate", "ilqr", "inverse_dynamics", "joint_forward_dynamics",
-    "joint_forward_dynamics_kernel", "joint_reactions", "linearize", "modes", "open_sweep",
-    "aba", "aba_derivatives", "algorithm_kernel", "crba", "rnea", "rnea_derivatives",
-    "project_velocity", "simulate", "simulate_batch", "solve_kinematics", "step_function", "sweep",
-    "__version__", "robots", "viz",
-]
+__all__ = sorted([*_HOME, *_MODULES, "ModelError", "NcgenError", "__version__"])
+
+
+def __getattr__(name: str):
+    """A public name, imported from its module on first use and kept (PEP 562)."""
+    if name in _MODULES:
+        value = importlib.import_module(f"ncgen.{name}")
+    elif name in _HOME:
+        value = getattr(importlib.import_module(_HOME[name]), name)
+    else:
+        raise AttributeError(f"module 'ncgen' has no attribute {name!r}")
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -91,6 +91,26 @@ def test_stored_urdf_model_equals_a_fresh_build(store, monkeypatch):
     assert np.allclose(again.from_joint_space(qj)[0], fresh(path, monkeypatch).from_joint_space(qj)[0], atol=1e-12)
 
 
+def test_stored_urdf_model_holds_no_sympy_and_its_tree_map_is_stored(store, monkeypatch):
+    """Coordinate types are stored by name (their SymPy derivation is not in the entry) and the
+    tree map, whose derivation needs them, is stored beside the model; it equals a fresh one."""
+    from ncgen.runtime.tree_check import tree_function
+    path = str(nc.robots.urdf_path("ur5"))
+    load_model(path)
+    model = load_model(path)
+    key = model.data.store_key
+    assert b"sympy" not in (store / f"{key}.model").read_bytes()
+    f = tree_function(model)
+    assert (store / f"{key}-joint-tree.model").is_file() and tree_function(model) is f
+    built = fresh(path, monkeypatch)
+    g = built.joint_space.tree_function(built.layout)
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        qj, vj = rng.standard_normal(f.size1_in(0)), rng.standard_normal(f.size1_in(1))
+        for x, y in zip(f(qj, vj), g(qj, vj), strict=True):
+            assert np.allclose(np.array(x), np.array(y), rtol=0, atol=1e-12)
+
+
 def test_changed_file_or_options_miss(store, tmp_path, monkeypatch):
     path = tmp_path / "model.toml"
     text = (EXAMPLES / "slider_crank.toml").read_text()
@@ -215,7 +235,9 @@ def test_cli_run_of_a_stored_urdf_model_equals_a_fresh_run(store, tmp_path, monk
         out = tmp_path / f"{label}.npz"
         assert main(["simulate", urdf, "--t-end", "0.05", "-o", str(out)]) in (0, None)
         runs[label] = np.load(out)
-    assert sorted(p.name.endswith("-joint-ode.model") for p in entries(store)) == [False, True]
+    monkeypatch.setenv(model_cache.ENV, "1")
+    key = load_model(urdf).data.store_key
+    assert {p.name for p in entries(store)} == {f"{key}{what}.model" for what in ("", "-joint-ode", "-joint-tree")}
     for key in ("t", "q", "v"):
         assert np.array_equal(runs["stored"][key], runs["first"][key]), key
         assert np.allclose(runs["stored"][key], runs["off"][key], rtol=0, atol=1e-12), key

@@ -21,27 +21,33 @@ from ncgen.errors import NcgenError, use_cli_names
 from ncgen.interrupts import sticky_interrupt
 from ncgen.version import __version__
 
-#: The subcommand modules, in the order ``ncgen --help`` lists them.
-SUBCOMMAND_MODULES = ("derive", "generate", "check", "simulate", "sweep", "optimize", "mpc", "statics", "demo")
+#: The module of :mod:`ncgen.cli` that registers each subcommand, in the order ``ncgen --help`` lists them.
+SUBCOMMAND_MODULES = {"derive": "derive", "generate": "generate", "check": "check", "simulate": "simulate",
+                      "sweep": "sweep", "optimize": "optimize", "mpc": "mpc", "equilibrium": "statics",
+                      "modes": "statics", "demo": "demo"}
 
 __all__ = ["SUBCOMMANDS", "build_parser", "load_model", "load_system", "main", "subcommand", "write_output"]
 
 
-def build_parser() -> argparse.ArgumentParser:
-    for name in SUBCOMMAND_MODULES:
-        importlib.import_module(f"ncgen.cli.{name}")
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The ``ncgen`` parser with every subcommand, or with ``command`` alone (its module is the only
+    one imported, so that a run starts fast); the top-level help lists them all."""
+    names = [command] if command in SUBCOMMAND_MODULES else list(SUBCOMMAND_MODULES)
+    for name in names:
+        importlib.import_module(f"ncgen.cli.{SUBCOMMAND_MODULES[name]}")
+    commands = [SUBCOMMANDS[name] for name in names]
     parser = argparse.ArgumentParser(
         prog="ncgen",
         description="Rigid multibody dynamics in natural coordinates: SymPy derivations, "
                     "CasADi functions, generated C, simulation and optimisation.",
-        epilog="examples:\n" + "".join(f"  {cmd.examples.splitlines()[0]}\n" for cmd in SUBCOMMANDS.values())
+        epilog="examples:\n" + "".join(f"  {cmd.examples.splitlines()[0]}\n" for cmd in commands)
                + "\nRun 'ncgen SUBCOMMAND --help' for a subcommand's options and more examples.",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"ncgen {__version__}")
     parser.add_argument("--debug", action="store_true",
                         help="print the Python traceback of an internal error (also NCGEN_DEBUG=1)")
     sub = parser.add_subparsers(dest="command", metavar="SUBCOMMAND", title="subcommands")
-    for cmd in SUBCOMMANDS.values():
+    for cmd in commands:
         p = sub.add_parser(cmd.name, help=cmd.help, description=cmd.description,
                            epilog="examples:\n" + "\n".join("  " + line for line in cmd.examples.splitlines()),
                            formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -61,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv or os.environ.get("NCGEN_DEBUG", "") not in ("", "0")
     argv = [a for a in argv if a != "--debug"]
-    parser = build_parser()
+    parser = build_parser(_command(argv))
     use_cli_names(True)
     with warnings.catch_warnings():
         if not debug:                    # "ncgen: warning: ...", not a source line of ncgen
@@ -80,6 +86,16 @@ def _unrecognized(parser: argparse.ArgumentParser, unknown: list[str]) -> None:
     flags = [o for action in parser._actions for o in action.option_strings]
     first = next((a.partition("=")[0] for a in unknown if a.startswith("-")), "")
     parser.error(f"unrecognized arguments: {' '.join(unknown)}{did_you_mean(first, flags) if first else ''}")
+
+
+def _command(argv: list[str]) -> str | None:
+    """The subcommand ``argv`` names (its first argument that is not a top-level option), if any."""
+    for arg in argv:
+        if not arg.startswith("-"):
+            return arg
+        if arg not in ("--debug", "--version", "-h", "--help"):
+            return None
+    return None
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:

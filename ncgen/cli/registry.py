@@ -15,8 +15,9 @@ code.  To add a subcommand, write ``ncgen/cli/frob.py``::
         ...
         return 0
 
-and add ``"frob"`` to :data:`ncgen.cli.SUBCOMMAND_MODULES`.  Import heavy modules (CasADi,
-the runtime, compilers) inside the function so that ``ncgen --help`` stays fast.  A
+and add ``"frob": "frob"`` (subcommand: module) to :data:`ncgen.cli.SUBCOMMAND_MODULES`; a run
+imports only its subcommand's module.  Import heavy modules (CasADi, the runtime, SymPy,
+compilers) inside the function so that ``ncgen --help`` and every start stay fast.  A
 subcommand that writes files calls :func:`ncgen.cli.common.check_files` first, before any
 work, so that an unwritable output path is a usage error naming the path (exit 2).
 """

@@ -6,26 +6,32 @@ expression (SX/MX/DM) or a number; a symbol without a value is an error.
 """
 from __future__ import annotations
 
-from functools import reduce
+from functools import lru_cache, reduce
 
 import casadi as ca
-import sympy as sp
 
 from ncgen.errors import NcgenError
 
-_UNARY = {
-    sp.sin: ca.sin, sp.cos: ca.cos, sp.tan: ca.tan,
-    sp.asin: ca.asin, sp.acos: ca.acos, sp.atan: ca.atan,
-    sp.sinh: ca.sinh, sp.cosh: ca.cosh, sp.tanh: ca.tanh,
-    sp.exp: ca.exp, sp.log: ca.log, sp.Abs: ca.fabs, sp.sign: ca.sign,
-    sp.floor: ca.floor, sp.ceiling: ca.ceil,
-}
 
-_RELATIONS = {
-    sp.StrictLessThan: lambda a, b: a < b, sp.LessThan: lambda a, b: a <= b,
-    sp.StrictGreaterThan: lambda a, b: a > b, sp.GreaterThan: lambda a, b: a >= b,
-    sp.Equality: lambda a, b: a == b, sp.Unequality: lambda a, b: a != b,
-}
+@lru_cache(maxsize=None)
+def _tables() -> tuple[dict, dict]:
+    """The unary functions and the relations, SymPy class -> CasADi form (SymPy is imported on
+    first use, so that importing this module stays cheap)."""
+    import sympy as sp
+
+    unary = {
+        sp.sin: ca.sin, sp.cos: ca.cos, sp.tan: ca.tan,
+        sp.asin: ca.asin, sp.acos: ca.acos, sp.atan: ca.atan,
+        sp.sinh: ca.sinh, sp.cosh: ca.cosh, sp.tanh: ca.tanh,
+        sp.exp: ca.exp, sp.log: ca.log, sp.Abs: ca.fabs, sp.sign: ca.sign,
+        sp.floor: ca.floor, sp.ceiling: ca.ceil,
+    }
+    relations = {
+        sp.StrictLessThan: lambda a, b: a < b, sp.LessThan: lambda a, b: a <= b,
+        sp.StrictGreaterThan: lambda a, b: a > b, sp.GreaterThan: lambda a, b: a >= b,
+        sp.Equality: lambda a, b: a == b, sp.Unequality: lambda a, b: a != b,
+    }
+    return unary, relations
 
 
 def to_casadi(expr, values: dict):
@@ -34,6 +40,8 @@ def to_casadi(expr, values: dict):
     ``values`` maps each free symbol of ``expr`` to a CasADi expression or a float.
     Matrices become a CasADi matrix of the same shape (type follows the values given).
     """
+    import sympy as sp
+
     memo: dict = {}
     if isinstance(expr, sp.MatrixBase):
         rows = [[_walk(expr[i, j], values, memo) for j in range(expr.shape[1])]
@@ -52,6 +60,8 @@ def _walk(e, values, memo):
 
 
 def _convert(e, values, memo):
+    import sympy as sp
+
     if e.is_Symbol:
         if e not in values:
             raise NcgenError(f"to_casadi: no value given for symbol {e}")
@@ -84,7 +94,8 @@ def _convert(e, values, memo):
         if e.exp.is_Integer and e.exp > 0:
             return ca.constpow(base, int(e.exp))
         return base ** expo
-    f = _UNARY.get(type(e))
+    unary, relations = _tables()
+    f = unary.get(type(e))
     if f is not None:
         return f(args[0])
     if isinstance(e, sp.atan2):
@@ -93,8 +104,8 @@ def _convert(e, values, memo):
         return reduce(ca.fmax, args)
     if isinstance(e, sp.Min):
         return reduce(ca.fmin, args)
-    if type(e) in _RELATIONS:
-        return _RELATIONS[type(e)](args[0], args[1])
+    if type(e) in relations:
+        return relations[type(e)](args[0], args[1])
     if isinstance(e, sp.And):
         return reduce(ca.logic_and, args)
     if isinstance(e, sp.Or):
@@ -106,6 +117,8 @@ def _convert(e, values, memo):
 
 def _piecewise(e, values, memo):
     """``Piecewise((v1, c1), (v2, c2), ..., (vn, True))`` as nested ``if_else``."""
+    import sympy as sp
+
     *branches, (default, last_cond) = e.args
     if last_cond is not sp.true:
         raise NcgenError(f"to_casadi: Piecewise without a default branch: {e}")

@@ -20,11 +20,8 @@ from __future__ import annotations
 from functools import lru_cache
 
 import casadi as ca
-import sympy as sp
 
 from ncgen.model.sym2casadi import to_casadi
-from ncgen.symbolic import rigid_motion as srm
-from ncgen.symbolic.rigid_motion_forms import NAMES, form
 
 #: Rotations of the joint coordinates with a CasADi form only: ``name: ((argument, rows, cols)...), output``.
 ROTATIONS = {
@@ -47,6 +44,10 @@ def _bind(values: dict, placeholder, x) -> None:
 
 
 def _rotation_function(name: str) -> ca.Function:
+    import sympy as sp
+
+    from ncgen.symbolic import rigid_motion as srm
+
     shapes, out = ROTATIONS[name]
     inputs = [ca.SX.sym(a, r, c) for a, r, c in shapes]
     placeholders = [sp.Matrix(r, c, lambda i, j, a=a: sp.Symbol(f"{a}_{i}{j}", real=True)) for a, r, c in shapes]
@@ -61,7 +62,9 @@ def _rotation_function(name: str) -> ca.Function:
 @lru_cache(maxsize=None)
 def function(name: str) -> ca.Function:
     """The SX function ``name`` (one of ``rigid_motion_forms.NAMES`` or :data:`ROTATIONS`),
-    inputs and outputs named as in the table."""
+    inputs and outputs named as in the table (derived through SymPy on first use)."""
+    from ncgen.symbolic.rigid_motion_forms import NAMES, form
+
     if name not in NAMES:
         return _rotation_function(name)
     f = form(name)

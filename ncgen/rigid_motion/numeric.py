@@ -21,7 +21,6 @@ import numpy as np
 
 from ncgen.errors import InertiaError, RotationError, ShapeError
 from ncgen.symbolic.numeric import numpy_function
-from ncgen.symbolic.rigid_motion_forms import form
 from ncgen.validation import ROTATION_TOL, nearest_rotation
 
 ROTATION_TOLERANCE = ROTATION_TOL
@@ -38,6 +37,8 @@ C_CORE = ("inverse", "Ad", "Ad_inv", "exp_se3", "log_se3", "transport_twist", "t
 # --- evaluation of the SymPy forms -----------------------------------------------------------
 
 def _numpy_forms(name: str):
+    from ncgen.symbolic.rigid_motion_forms import form    # SymPy: only when a form is first evaluated
+
     f = form(name)
     known = list(f.placeholders)
     stages = []
@@ -60,6 +61,8 @@ def _evaluate_one(name: str, values):
 
 def _evaluate(name: str, *values):
     """Evaluate form ``name`` on validated arrays, looping over broadcast batch dimensions."""
+    from ncgen.symbolic.rigid_motion_forms import form
+
     f = form(name)
     batch = np.broadcast_shapes(*(v.shape[:v.ndim - len(a.shape)] for v, a in zip(values, f.args)))
     if batch == ():

@@ -84,12 +84,13 @@ class JointLoop:
         from ncgen.assembly.joint_ode import quaternion_offsets
         from ncgen.codegen.c_binding import bind, open_library
         from ncgen.codegen.joint_loop import JOINT_RUN
+        from ncgen.runtime.tree_check import tree_function
 
         self.model, self.ode, self.library = model, ode, library
         self._lib = open_library(library)
         self._fn = bind(self._lib, f"{name}_joint_run", JOINT_RUN)
         self.quat = np.array(quaternion_offsets(model.joint_space), dtype=np.int32)
-        self.tree = model.joint_space.tree_function(model.layout)
+        self.tree = tree_function(model)
         self._maps: dict = {}
 
     def mapped(self, what: str, n: int) -> ca.Function:

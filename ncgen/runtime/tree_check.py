@@ -43,7 +43,7 @@ def check_tree(model) -> None:
     for i, (lead, k, offset) in mimic.position.items():
         qj[i] = k * qj[lead] + offset
     vj = mimic.G @ rng.standard_normal(mimic.G.shape[1])
-    q, v = (np.array(x).reshape(-1) for x in js.tree_function(model.layout)(qj, vj))
+    q, v = (np.array(x).reshape(-1) for x in tree_function(model)(qj, vj))
     f = model.functions
     A = np.array(f["A"](model.t0, q, model.p0))
     size = max(1.0, float(np.max(np.abs(q), initial=0.0)))
@@ -57,6 +57,21 @@ def check_tree(model) -> None:
     if dof != mimic.G.shape[1]:
         raise ModelError(f"joint forward dynamics: the model has {dof} degrees of freedom but "
                          f"{mimic.G.shape[1]} independent joint rates")
+
+
+def tree_function(model):
+    """The tree map ``(qj, vj) -> (q, v)`` of ``model``
+    (:meth:`~ncgen.assembly.joint_space.JointSpace.tree_function`), derived once per process and
+    kept in ``model.data``; for a model read from the store of built models, read from the store
+    (deriving it takes the coordinate types' SymPy derivations, seconds for a URDF robot)."""
+    from ncgen.codegen.model_cache import derived_function
+    from ncgen.model.data import model_data
+
+    data = model_data(model)
+    if data.joint_tree_function is None or data.joint_tree_function[0] is None:
+        f = derived_function(model, "joint-tree", lambda: model.joint_space.tree_function(model.layout))
+        data.joint_tree_function = (f,)
+    return data.joint_tree_function[0]
 
 
 def compile_tree_function(model, f, cflags, suffix: str):

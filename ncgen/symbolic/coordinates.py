@@ -26,11 +26,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property, lru_cache
-
-import sympy as sp
+from typing import TYPE_CHECKING
 
 from ncgen.errors import CoordinateTypeError
 from ncgen.symbolic.notation import AXES, POINT_NAMES, VECTOR_NAMES
+
+if TYPE_CHECKING:
+    import sympy as sp
 
 #: Known types per dimension, with their kind.
 TYPES: dict[int, dict[str, str]] = {
@@ -68,23 +70,27 @@ def _coordinate_type(name: str, dim: int) -> "CoordinateType":
 def _vec(prefix: str, dim: int) -> sp.Matrix:
     """Component symbols: ``u`` -> u_x, u_y, ...; ``r_i`` -> r_ix, r_iy, ... (SymPy renders
     ``ubar_x`` as ū_x and ``rdot_ix`` as ṙ_ix)."""
+    import sympy as sp
     sep = "" if "_" in prefix else "_"
     return sp.Matrix([sp.Symbol(f"{prefix}{sep}{a}", real=True) for a in AXES[:dim]])
 
 
 def _sym_matrix(name: str, n: int) -> sp.Matrix:
     """Symmetric n×n matrix of symbols ``name_ab`` (a ≤ b)."""
+    import sympy as sp
     return sp.Matrix(n, n, lambda a, b: sp.Symbol(f"{name}_{min(a, b) + 1}{max(a, b) + 1}", real=True))
 
 
 def _skew_vee(S: sp.Matrix, dim: int):
     """vee of the skew-symmetric part of ``S``: a 3-vector in 3D, a scalar in 2D."""
+    import sympy as sp
     if dim == 3:
         return sp.Matrix([S[2, 1] - S[1, 2], S[0, 2] - S[2, 0], S[1, 0] - S[0, 1]]) / 2
     return sp.Matrix([(S[1, 0] - S[0, 1]) / 2])
 
 
 def _cross(a: sp.Matrix, b: sp.Matrix, dim: int) -> sp.Matrix:
+    import sympy as sp
     if dim == 3:
         return a.cross(b)
     return sp.Matrix([a[0] * b[1] - a[1] * b[0]])
@@ -152,6 +158,10 @@ class CoordinateType:
     def __deepcopy__(self, memo) -> "CoordinateType":
         return self              # immutable, and its derivation is cached per (name, dim)
 
+    def __reduce__(self):
+        """Pickled by name: a stored model reads back without its SymPy derivation (derived again on use)."""
+        return coordinate_type, (self.name, self.dim)
+
     # ------------------------------------------------------------- derivation
     @cached_property
     def derivation(self) -> "Derivation":
@@ -191,6 +201,7 @@ class Derivation:
         return self.ctype._repr_latex_()
 
     def __init__(self, ctype: CoordinateType):
+        import sympy as sp
         self.ctype = ct = ctype
         d, k = ct.dim, ct.k
         # coordinates and their rates, slot by slot
@@ -239,6 +250,7 @@ class Derivation:
 
     # -- inertia: c_g, B, J̄ as matrix expressions (shown in reports, evaluated numerically)
     def _derive_inertia_formulas(self):
+        import sympy as sp
         ct, d, k = self.ctype, self.ctype.dim, self.ctype.k
         self.Xbar_sym = sp.MatrixSymbol("Xbar", d, k) if k else None
         self.rbar_i_sym = sp.MatrixSymbol("rbar_i", d, 1)
@@ -268,6 +280,7 @@ class Derivation:
 
     # -- pose (R, p) and twist (ω, v) of the member's local frame (origin at the COM)
     def _derive_pose_and_twist(self):
+        import sympy as sp
         ct, d, k = self.ctype, self.ctype.dim, self.ctype.k
         self.p = self.r_i + (self.X * self.c_g if k else sp.zeros(d, 1))   # centre of mass
         self.v_com = self.p.jacobian(self.q) * self.qd
@@ -310,6 +323,7 @@ class Derivation:
 
     def _derive_inverse_maps(self):
         """(R, p, ω, v) ↦ (q, q̇): slots from the pose and the twist of the COM frame."""
+        import sympy as sp
         ct, d, k = self.ctype, self.ctype.dim, self.ctype.k
         self.R_sym = sp.Matrix(d, d, lambda a, b: sp.Symbol(f"R_{a + 1}{b + 1}", real=True))
         self.p_sym = _vec("p", d)

@@ -13,8 +13,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import TYPE_CHECKING
 
-import sympy as sp
+if TYPE_CHECKING:
+    import sympy as sp
 
 
 @dataclass(frozen=True)
@@ -28,6 +30,7 @@ class Primitive:
 
 
 def _v(name: str, dim: int) -> sp.Matrix:
+    import sympy as sp
     return sp.Matrix([sp.Symbol(f"{name}_{a}", real=True) for a in "xyz"[:dim]])
 
 
@@ -42,6 +45,7 @@ def _cross2(a: sp.Matrix, b: sp.Matrix):
 @lru_cache(maxsize=None)
 def primitive(name: str, dim: int) -> Primitive:
     """The primitive ``name`` in dimension ``dim`` (see :data:`PRIMITIVES`)."""
+    import sympy as sp
     rA, rB, a, b, m1, m2 = (_v(n, dim) for n in ("r_A", "r_B", "a", "b", "m_1", "m_2"))
     d, L, theta = sp.Symbol("d", real=True), sp.Symbol("L", positive=True), sp.Symbol("theta", real=True)
     if name == "coincidence":

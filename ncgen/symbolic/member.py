@@ -67,8 +67,9 @@ class RigidMember:
         return self              # constant: copies of a model share it
 
     def __getstate__(self) -> dict:
-        """The description only: the memo of compiled NumPy functions is rebuilt on use."""
-        return {k: v for k, v in self.__dict__.items() if k != "_fn_memo"}
+        """The description only: the memo of compiled NumPy functions and the SymPy-keyed
+        constants are rebuilt on use (a stored model reads back without SymPy)."""
+        return {k: v for k, v in self.__dict__.items() if k not in ("_fn_memo", "_constants")}
 
     def __init__(self, ctype: CoordinateType, mass: float, rbar_i, Xbar, Jbar):
         self.ctype = ctype

@@ -8,12 +8,12 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 
 import numpy as np
-import sympy as sp
 
 _CACHE: dict[tuple, Callable] = {}
 
 
 def _flat_args(args: Sequence) -> list:
+    import sympy as sp
     flat = []
     for a in args:
         if isinstance(a, (sp.MatrixBase, list, tuple)):
@@ -30,6 +30,7 @@ def numpy_function(expr, args: Sequence, key: tuple | None = None) -> Callable:
     pass the value with the same number of entries) or MatrixSymbols.  ``key`` names the
     formula for the per-process cache; without it the cache key is the expression itself.
     """
+    import sympy as sp
     cache_key = key if key is not None else (sp.srepr(expr), tuple(sp.srepr(a) for a in args))
     fn = _CACHE.get(cache_key)
     if fn is None:
