@@ -5,6 +5,7 @@ and IDAS in natural coordinates."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -477,7 +478,9 @@ def test_generated_loop_compiles_warning_free(tmp_path, with_input):
     ode = joint_ode_function(model, dynamics_function(model))
     ctx = {"ode": "w_joint_ode", "nx": ode.nnz_in(1), "nw": ode.nnz_in(2), "pivot_tol": "1e-12"}
     pkg = write_package("w", [ode], tmp_path / "pkg", extra_sources=joint_loop_sources("w", ctx))
+    runtime = Path(__file__).resolve().parent.parent / "templates" / "c" / "runtime" / "ncgen_joint_loop.h"
     assert "ncgen_joint_loop.h" in pkg.manifest["build"]["headers"]
+    assert (pkg.path / "ncgen_joint_loop.h").read_text().endswith(runtime.read_text())
     for src in pkg.manifest["build"]["sources"]:
         r = subprocess.run([cc, "-Wall", "-Wextra", "-Werror", "-c", src, "-o", str(tmp_path / "x.o")],
                            cwd=pkg.path, capture_output=True, text=True)
