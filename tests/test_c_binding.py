@@ -79,7 +79,8 @@ def test_a_library_or_symbol_that_is_not_there_is_named(tmp_path):
 
 
 def test_joint_run_matches_the_joint_loop_template():
-    """``<name>_joint_run`` as templates/c/joint_loop.c.j2 defines it is JOINT_RUN."""
+    """``<name>_joint_run`` as templates/c/joint_loop.c.j2 (the model's glue around
+    runtime/ncgen_joint_loop.h) defines it is JOINT_RUN."""
     from ncgen.codegen.joint_loop import JOINT_RUN
 
     text = (ROOT / "templates" / "c" / "joint_loop.c.j2").read_text().replace("{{ name }}", "m")

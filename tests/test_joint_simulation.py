@@ -5,6 +5,7 @@ and IDAS in natural coordinates."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -460,12 +461,14 @@ def test_input_samples_with_linear_hold_match_idas():
 
 @pytest.mark.parametrize("with_input", [True, False])
 def test_generated_loop_compiles_warning_free(tmp_path, with_input):
-    """The loop's C (templates/c/joint_loop.c.j2 with the generated ODE) under -Wall -Wextra -Werror."""
+    """The loop's C (templates/c/joint_loop.c.j2 and runtime/ncgen_joint_loop.h with the
+    generated ODE) under -Wall -Wextra -Werror."""
     import shutil
     import subprocess
 
     from ncgen.assembly.joint_ode import joint_ode_function
-    from ncgen.codegen.package import ExtraSource, write_package
+    from ncgen.codegen.joint_loop import joint_loop_sources
+    from ncgen.codegen.package import write_package
     from ncgen.runtime.joint_simulation import dynamics_function
 
     cc = shutil.which("gcc") or shutil.which("cc")
@@ -474,8 +477,11 @@ def test_generated_loop_compiles_warning_free(tmp_path, with_input):
     s, _, _ = link(with_input=with_input)
     model = s.build()
     ode = joint_ode_function(model, dynamics_function(model))
-    ctx = {"ode": "w_joint_ode", "nx": ode.nnz_in(1), "nw": ode.nnz_in(2), "np": ode.nnz_in(3), "pivot_tol": "1e-12"}
-    pkg = write_package("w", [ode], tmp_path / "pkg", extra_sources=[ExtraSource("joint_loop.c.j2", "w_loop.c", ctx)])
+    ctx = {"ode": "w_joint_ode", "nx": ode.nnz_in(1), "nw": ode.nnz_in(2), "pivot_tol": "1e-12"}
+    pkg = write_package("w", [ode], tmp_path / "pkg", extra_sources=joint_loop_sources("w", ctx))
+    runtime = Path(__file__).resolve().parent.parent / "templates" / "c" / "runtime" / "ncgen_joint_loop.h"
+    assert "ncgen_joint_loop.h" in pkg.manifest["build"]["headers"]
+    assert (pkg.path / "ncgen_joint_loop.h").read_text().endswith(runtime.read_text())
     for src in pkg.manifest["build"]["sources"]:
         r = subprocess.run([cc, "-Wall", "-Wextra", "-Werror", "-c", src, "-o", str(tmp_path / "x.o")],
                            cwd=pkg.path, capture_output=True, text=True)

@@ -6,7 +6,8 @@ step, step splitting, second order, the work and error estimates, the error cont
 step-size rule and local error, the projection; projected Gauss–Seidel on two contacts with
 known solutions (sliding, sticking, redundant), the contact step (Coulomb sliding to rest,
 a bounce with restitution), for both ways of building the Delassus matrix; the MPC driver
-(``ncgen_mpc.h``) on a hand-written iteration (input checks, the guess kept on failure).  Each program is
+(``ncgen_mpc.h``) on a hand-written iteration (input checks, the guess kept on failure); the
+joint-space loop (RK4 and Dormand–Prince) on ODEs with closed-form solutions.  Each program is
 built with ``-Wall -Wextra -Werror -pedantic`` under AddressSanitizer and
 UndefinedBehaviorSanitizer and must print that all its checks passed."""
 from __future__ import annotations
@@ -27,7 +28,7 @@ FLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O0", "-g",
 ENV = {**os.environ, "ASAN_OPTIONS": "detect_leaks=0:abort_on_error=0",
        "UBSAN_OPTIONS": "print_stacktrace=1:halt_on_error=1"}
 PROGRAMS = [("test_rattle.c", []), ("test_contact.c", []), ("test_contact.c", ["-DSCHUR_FACTORED"]),
-            ("test_cone_newton.c", []), ("test_mpc.c", [])]
+            ("test_cone_newton.c", []), ("test_mpc.c", []), ("test_joint_loop.c", [])]
 
 pytestmark = pytest.mark.skipif(CC is None, reason="no C compiler (gcc, clang or cc) on PATH")
 
@@ -42,7 +43,8 @@ def sanitizers(tmp_path_factory) -> Path:
     return tmp
 
 
-@pytest.mark.parametrize("source, defines", PROGRAMS, ids=["rattle", "contact-kkt", "contact-schur", "cone-newton", "mpc"])
+@pytest.mark.parametrize("source, defines", PROGRAMS, ids=["rattle", "contact-kkt", "contact-schur", "cone-newton", "mpc",
+                                                          "joint-loop"])
 def test_runtime_c_unit_tests_pass_under_sanitizers(sanitizers, source, defines):
     exe = sanitizers / (Path(source).stem + "".join(d.lower().replace("-d", "_") for d in defines))
     built = subprocess.run([CC, *FLAGS, *defines, f"-I{RUNTIME}", f"-I{TESTS}", str(TESTS / source),
@@ -55,8 +57,9 @@ def test_runtime_c_unit_tests_pass_under_sanitizers(sanitizers, source, defines)
 
 
 def test_every_runtime_file_is_unit_tested():
-    """Every C file of the stepper's runtime is included by one of the unit-test programs
-    (ncgen_adaptive.h by test_rattle.c; ncgen_contact.h by test_contact.c)."""
+    """Every C file of the runtime is included by one of the unit-test programs
+    (ncgen_adaptive.h by test_rattle.c; ncgen_contact.h by test_contact.c;
+    ncgen_joint_loop.h by test_joint_loop.c)."""
     included = "".join((TESTS / s).read_text() for s, _ in PROGRAMS)
     for path in sorted(RUNTIME.glob("*.h")):
         assert f'#include "{path.name}"' in included, path.name

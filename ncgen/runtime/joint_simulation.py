@@ -4,7 +4,8 @@ around the joint-space forward dynamics (``simulate(method="joint")``, chosen by
 
 * Equations: :mod:`ncgen.assembly.joint_ode` (``q̇_j = Q(q_j) v_j``, ``v̇_j = a_j`` from the
   recursive kernel of :mod:`ncgen.runtime.tree_kernel`, a compiled controller and the joint
-  dynamics law inlined); loop: ``templates/c/joint_loop.c.j2``, generated and compiled once
+  dynamics law inlined); loop: ``templates/c/runtime/ncgen_joint_loop.h`` with the glue
+  ``templates/c/joint_loop.c.j2``, generated and compiled once
   per model, controller and options (:mod:`ncgen.codegen.joint_loop`, cached by content).
 * Integrators (``integrator=``): ``"dopri5"`` (default) — Dormand–Prince 5(4), error
   controlled by ``rtol``/``atol`` on ``q_j`` and ``v_j`` (Hairer's step control), outputs by

@@ -1,11 +1,8 @@
 /* Shared pieces of the unit tests of the stepper's plain C (templates/c/runtime/): the
- * CasADi types and calling convention the runtime expects, a check that counts failures,
- * and the contract macros every test model shares.  Each test program defines its model's
- * sizes and hand-written kernels (no CasADi), then includes the runtime files. */
-#include <math.h>
-#include <stdio.h>
-#include <stdlib.h>
-#include <string.h>
+ * CasADi types and calling convention the runtime expects, the checks of check.h, and the
+ * contract macros every test model shares.  Each test program defines its model's sizes
+ * and hand-written kernels (no CasADi), then includes the runtime files. */
+#include "check.h"
 
 typedef double casadi_real;
 typedef long long casadi_int;
@@ -40,20 +37,6 @@ static step_options test_default_options(void) {
 }
 #define DEFAULT_OPTIONS test_default_options
 
-static int failures = 0, checks = 0;
-
-/* Counts a check; prints the failing condition with a message. */
-#define CHECK(cond, ...)                                                    \
-  do {                                                                      \
-    ++checks;                                                               \
-    if (!(cond)) {                                                          \
-      ++failures;                                                           \
-      fprintf(stderr, "%s:%d: FAILED %s: ", __FILE__, __LINE__, #cond);     \
-      fprintf(stderr, __VA_ARGS__);                                         \
-      fputc('\n', stderr);                                                  \
-    }                                                                       \
-  } while (0)
-
 /* NULL inputs read as zeros (CasADi's convention). */
 static casadi_real at(const casadi_real *x, int i) {
   return x ? x[i] : 0;
@@ -68,12 +51,3 @@ static int test_work(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz_iw, 
   return 0;
 }
 #define KERNEL_WORKS test_work
-
-static int report(const char *name) {
-  if (failures) {
-    fprintf(stderr, "%s: %d of %d checks failed\n", name, failures, checks);
-    return 1;
-  }
-  printf("%s: all %d checks passed\n", name, checks);
-  return 0;
-}
