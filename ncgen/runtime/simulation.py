@@ -51,8 +51,8 @@ WATCHED_CHUNK = 10
 #: at the larger of its end rates, could dip below the near-singular limit and come back
 #: unseen is bridged (``_run``: ``hidden``), so a faster motion is bridged more, not missed.
 #: The four-bar of IFToMM A02 crosses the band around a flat position in about 0.05 s; with
-#: a spacing of 0.05 or 0.1 s it still stays on its branch (to 1.2e-6 m over 20 s), with 0.5 s
-#: IDAS fails loudly at a flat position.
+#: a spacing of 0.1 s it still stays on its branch over 20 s (to 3e-6 m,
+#: ``tests/test_singular_output_grid.py``); with 0.5 s IDAS failed loudly at a flat position.
 WATCHED_SAMPLE = 0.01
 #: A predicted crossing of the near-singular limit closer than this many output intervals is
 #: run to (one IDAS call); a farther one is approached by a power of 2 below it.
