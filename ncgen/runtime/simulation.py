@@ -338,7 +338,7 @@ def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions, *, c
             "wall_time": time.perf_counter() - start, "complete": failure is None}
     if failure is not None:
         if t[k] < reached:
-            message += f" (Its outputs end at the last output time before, t = {t[k]:.6g} s.)"
+            message += f" On the output grid it ends at t = {t[k]:.6g} s."
         info["message"] = message
     U_applied = U[:k + 1] + np.array([_extra_value(model, extra, t[i], X[i, :nq], X[i, nq:], pv)
                                        for i in range(k + 1)]) if extra is not None else U[:k + 1]
@@ -549,7 +549,8 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
     (``hidden``: its rate at both ends), is cut at the last output before it; every interval
     that starts or ends at a near-singular configuration, that could hide one, or that IDAS
     fails on not far from one (:data:`FAILING_NEAR_SINGULAR`), is crossed by ``bridge``
-    instead, from the projected state.  ``t`` is the watched grid (see :data:`WATCHED_SAMPLE`).  ``auto=False``: the state is also projected after every interval."""
+    instead, from the projected state.  ``t`` is the watched grid (see :data:`WATCHED_SAMPLE`).
+    ``auto=False``: the state is also projected after every interval."""
     n_int = len(t) - 1
     watching = projector is not None
     full = 1 if watching and not auto else max(1, math.ceil(n_int / CHUNKS))
