@@ -159,3 +159,34 @@ def test_the_a02_family_stays_on_its_branch_for_every_output_grid(form, N, backe
         traj = run(model, 20.0, dt, backend=backend)
         assert traj.complete and traj.info["branch_changes"] == []
         assert tip_error(traj, N) < 1e-6, (dt, tip_error(traj, N))
+
+
+@pytest.mark.parametrize("degrees", [40.0, 10.0, 3.0, -2.0])
+def test_the_rate_of_the_conditioning_matches_finite_differences(degrees):
+    """``ratio_rate``'s ṙ (from the singular vectors and Ȧ) against a central difference of
+    σ_min/σ_max along the motion, on the four-bar moving on its branch at 1 rad/s."""
+    model = n_fourbar(1)
+    projector = ManifoldProjector(model, model.p0, 1e-12)
+    th = np.radians(degrees)
+    x = crank_tips(th, th)
+    x[4:] = [-np.sin(th), np.cos(th), -np.sin(th), np.cos(th)]
+    r, rate = projector.ratio_rate(0.0, x)
+    eps = 1e-6
+    ahead, behind = x[:4] + eps * x[4:], x[:4] - eps * x[4:]
+    fd = (projector.ratio(0.0, np.r_[ahead, x[4:]]) - projector.ratio(0.0, np.r_[behind, x[4:]])) / (2 * eps)
+    assert r == pytest.approx(projector.ratio(0.0, x), rel=1e-12)
+    assert rate == pytest.approx(fd, rel=1e-6, abs=1e-9) and abs(rate) > 1e-3
+
+
+def test_the_rate_of_the_conditioning_of_a_driven_mechanism_matches_finite_differences():
+    """The same on the driven four-bar (Φ_t ≠ 0) at t = 0.2 s, moving with its drive."""
+    eps = 1e-6
+    driven = driven_to_flat(0.5)
+    projector = ManifoldProjector(driven, driven.p0, 1e-12)
+    t = 0.2
+    traj = nc.simulate(driven, t, t / 20, method="idas", backend="vm", **TOL)
+    xt = np.r_[traj.q[-1], traj.v[-1]]
+    nq = driven.nq
+    fd = (projector.ratio(t + eps, np.r_[xt[:nq] + eps * xt[nq:], xt[nq:]])
+          - projector.ratio(t - eps, np.r_[xt[:nq] - eps * xt[nq:], xt[nq:]])) / (2 * eps)
+    assert projector.ratio_rate(t, xt)[1] == pytest.approx(fd, rel=1e-5, abs=1e-9)
