@@ -82,7 +82,7 @@ BRIDGE_TIGHTER = 100.0
 #: On one branch it is about half the angle the tangent turns over the interval; across to
 #: another, about the sine of the angle between the branches' tangents.  Measured on the
 #: four-bar of IFToMM A02 staying on its branch: at most 0.14 (N = 1 ... 40, 2D and 3D,
-#: intervals of 0.01 s; 0.2 with 0.1 s); from its parallelogram branch at 6° to the other
+#: intervals of 0.01 s; below 0.3 with 0.1 s); from its parallelogram branch at 6° to the other
 #: branch at the flat position's other side: 0.46.
 BRANCH_DEPARTURE = 0.3
 #: Largest number of NumPy RATTLE steps across one output interval (``_bridge`` without a
