@@ -54,8 +54,8 @@ WATCHED_CHUNK = 10
 #: at the larger of its end rates, could dip below the near-singular limit and come back
 #: unseen is bridged (``_run``: ``hidden``), so a faster motion is bridged more, not missed.
 #: The four-bar of IFToMM A02 crosses the band around a flat position in about 0.05 s; with
-#: a spacing of 0.05 or 0.1 s it still stays on its branch (to 1.2e-6 m over 20 s), with 0.5 s
-#: IDAS fails loudly at a flat position.
+#: a spacing of 0.1 s it still stays on its branch over 20 s (to 3e-6 m,
+#: ``tests/test_singular_output_grid.py``); with 0.5 s IDAS failed loudly at a flat position.
 WATCHED_SAMPLE = 0.01
 #: A predicted crossing of the near-singular limit closer than this many output intervals is
 #: run to (one IDAS call); a farther one is approached by a power of 2 below it.
@@ -85,7 +85,7 @@ BRIDGE_TIGHTER = 100.0
 #: On one branch it is about half the angle the tangent turns over the interval; across to
 #: another, about the sine of the angle between the branches' tangents.  Measured on the
 #: four-bar of IFToMM A02 staying on its branch: at most 0.14 (N = 1 ... 40, 2D and 3D,
-#: intervals of 0.01 s; 0.2 with 0.1 s); from its parallelogram branch at 6° to the other
+#: intervals of 0.01 s; below 0.3 with 0.1 s); from its parallelogram branch at 6° to the other
 #: branch at the flat position's other side: 0.46.
 BRANCH_DEPARTURE = 0.3
 #: Largest number of NumPy RATTLE steps across one output interval (``_bridge`` without a
@@ -343,7 +343,7 @@ def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions, *, c
             "wall_time": time.perf_counter() - start, "complete": failure is None}
     if failure is not None:
         if t[k] < reached:
-            message += f" (Its outputs end at the last output time before, t = {t[k]:.6g} s.)"
+            message += f" On the output grid it ends at t = {t[k]:.6g} s."
         info["message"] = message
     U_applied = U[:k + 1] + np.array([_extra_value(model, extra, t[i], X[i, :nq], X[i, nq:], pv)
                                        for i in range(k + 1)]) if extra is not None else U[:k + 1]
@@ -558,7 +558,8 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
     (``hidden``: its rate at both ends), is cut at the last output before it; every interval
     that starts or ends at a near-singular configuration, that could hide one, or that IDAS
     fails on not far from one (:data:`FAILING_NEAR_SINGULAR`), is crossed by ``bridge``
-    instead, from the projected state.  ``t`` is the watched grid (see :data:`WATCHED_SAMPLE`).  ``auto=False``: the state is also projected after every interval."""
+    instead, from the projected state.  ``t`` is the watched grid (see :data:`WATCHED_SAMPLE`).
+    ``auto=False``: the state is also projected after every interval."""
     n_int = len(t) - 1
     watching = projector is not None
     full = 1 if watching and not auto else max(1, math.ceil(n_int / CHUNKS))
