@@ -1,5 +1,6 @@
 """The Python doors of the compiled tree algorithms (``nc.rnea``, ``nc.aba``, ``nc.crba``,
-``nc.inverse_dynamics`` and the kernels of ``nc.algorithm_kernel``; issue 37): the arguments
+``nc.inverse_dynamics``, ``nc.joint_forward_dynamics`` and the kernels of ``nc.algorithm_kernel``;
+issue 37): the arguments
 go straight to C, whose copy checks their kinds, sizes and magnitudes, and every bad value
 still gets the message naming the argument, what was expected and what was found; time and
 parameters reach the kernel whichever path set them last; results are copies.
@@ -48,6 +49,10 @@ def test_time_and_parameters_reach_the_kernel_whatever_set_them_last(hinge):
         for f in (nc.rnea, nc.inverse_dynamics):
             got = f(hinge, [th], [v], [a], t=t, p=p)
             assert got == pytest.approx([want], abs=1e-12), (f.__name__, t, p)
+        tau = 1.7                                            # and back: the forward dynamics
+        want_a = (tau + M * G * L * np.cos(th) - L * np.cos(th) * (k + np.sin(t))) / (IYY + M * L**2)
+        assert nc.aba(hinge, [th], [v], [tau], t=t, p=p) == pytest.approx([want_a], abs=1e-12)
+        assert nc.joint_forward_dynamics(hinge, [th], [v], [tau], t=t, p=p) == pytest.approx([want_a], abs=1e-12)
     kernel = nc.algorithm_kernel(hinge, "rnea")              # the kernel's own set() changes what it uses,
     kernel.set(t=2.0, p=[7.0])                               # and the functions put back their own
     assert kernel([th], [v], [a]) == pytest.approx([closed_form(th, a, 2.0, 7.0)], abs=1e-12)
@@ -83,7 +88,16 @@ ENTRIES = {
     "crba qj": ("qj", lambda m, x: nc.crba(m, x)),
     "rnea_derivatives vj": ("vj", lambda m, x: nc.rnea_derivatives(m, [0.1], x, [0.0])),
     "kernel aj": ("rnea: aj", lambda m, x: nc.algorithm_kernel(m, "rnea")([0.1], [0.0], x)),
+    "joint_forward_dynamics qj": ("qj", lambda m, x: forward_twice(m, x, [0.0], [0.0])),
+    "joint_forward_dynamics vj": ("vj", lambda m, x: forward_twice(m, [0.1], x, [0.0])),
+    "joint_forward_dynamics u": ("u", lambda m, x: forward_twice(m, [0.1], [0.0], x)),
 }
+
+
+def forward_twice(m, qj, vj, u):
+    """``nc.joint_forward_dynamics`` once with good arguments (its kernel built), then with these."""
+    nc.joint_forward_dynamics(m, [0.1], [0.0], [0.0])
+    return nc.joint_forward_dynamics(m, qj, vj, u)
 EXTRA = {"too large": (np.array([1e101]), r"magnitude at most"),
          "bools in a list": ([True], r"expected real numbers, got (booleans|bool True)"),
          "huge int": ([10**400], r"too large"),

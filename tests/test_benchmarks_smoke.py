@@ -42,6 +42,9 @@ pytestmark = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc
     ("tree_algorithms.py", ["=== ur5", "RATIO ur5 ncgen forward dynamics / pinocchio.aba",
                             "RATIO ur5 ncgen RNEA / pinocchio.rnea",
                             "RATIO ur5 ncgen ABA derivatives / pinocchio.computeABADerivatives"]),
+    ("call_overhead.py", ["=== ur10", "RATIO ur10 nc.inverse_dynamics / pinocchio.rnea",
+                          "RATIO ur10 nc.aba / pinocchio.aba", "RATIO ur10 nc.joint_forward_dynamics / pinocchio.aba",
+                          "rnea_agreement", "load average"]),
     ("animation.py", ["=== slider_crank", "RATIO PillowWriter / ncgen animate", "to_html:"]),
     ("joint_simulation.py", ["=== panda: 1 s fall", "RATIO ncgen / MuJoCo RK4, end to end, DOPRI5",
                              "RATIO ncgen / MuJoCo RK4, simulate only, DOPRI5", "agrees with Pinocchio"]),
@@ -57,7 +60,7 @@ pytestmark = pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc
                     "=== cart-pole MPC", "RATIO IPOPT re-solve / MPC step"]),
 ])
 def test_smoke(tmp_path, script, expected):
-    if script in ("joint_space.py", "joint_simulation.py", "tree_algorithms.py"):
+    if script in ("joint_space.py", "joint_simulation.py", "tree_algorithms.py", "call_overhead.py"):
         pytest.importorskip("pinocchio")
         pytest.importorskip("yourdfpy")
     root = str(BENCHMARKS.parent)        # the checkout under test, whatever ncgen is installed
