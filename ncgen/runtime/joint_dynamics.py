@@ -26,7 +26,7 @@ from ncgen.assembly.derived import joint_kkt_function, kkt_function
 from ncgen.assembly.joint_space import solve_linear
 from ncgen.errors import ModelError
 from ncgen.model.data import cached, model_data
-from ncgen.runtime.tree_algorithms import rnea, rnea_applies
+from ncgen.runtime.tree_algorithms import algorithm_kernel, call, rnea_applies
 from ncgen.validation import as_vector
 
 
@@ -94,18 +94,19 @@ def forward_dynamics(model, q, v, u=None, p=None, t: float = 0.0, *, backend: st
     return x[:nq], x[nq:]
 
 
-def _rnea_takes(model, joints: str) -> bool:
-    """Whether the compiled RNEA gives the efforts ``joints`` asks for: a 3D tree whose asked-for
-    efforts are those of its independent joint rates (decided once per model)."""
+def _rnea_kernel(model, joints: str):
+    """The compiled RNEA when it gives the efforts ``joints`` asks for (a 3D tree whose asked-for
+    efforts are those of its independent joint rates), else False (decided once per model)."""
     data = model_data(model)
-    takes = data.rnea_efforts.get(joints)
-    if takes is None:
+    k = data.rnea_efforts.get(joints)
+    if k is None:
         js, independent = model.joint_space, rnea_applies(model)
         sv = js.slices(rates=True)
         actuated = [i for n in js.joint_names if n in model.actuated_joints for i in range(sv[n].start, sv[n].stop)]
-        takes = data.rnea_efforts[joints] = independent is not None and (
+        takes = independent is not None and (
             independent == actuated if joints == "actuated" else len(independent) == js.nv)
-    return takes
+        k = data.rnea_efforts[joints] = algorithm_kernel(model, "rnea") if takes else False
+    return k
 
 
 def inverse_dynamics(model, qj, vj, aj, p=None, t: float = 0.0, joints: str = "actuated") -> np.ndarray:
@@ -119,8 +120,9 @@ def inverse_dynamics(model, qj, vj, aj, p=None, t: float = 0.0, joints: str = "a
     if joints not in ("actuated", "all"):
         raise ModelError(f"inverse_dynamics: joints: expected 'actuated' or 'all', got {joints!r}")
     t = float(t)
-    if _rnea_takes(model, joints):
-        return rnea(model, qj, vj, aj, p=p, t=t)
+    k = _rnea_kernel(model, joints)
+    if k:
+        return call(model, k, (qj, vj, aj), p, t)
     js = model.joint_space
     p = model.p0 if p is None else as_vector(p, model.np, "p")
     q, v = model.from_joint_space(qj, vj, t=t, p=p)

@@ -185,6 +185,11 @@ def _run(model, name: str, args: tuple, p, t: float):
     k = model_data(model).algorithm_kernels.get((name, None))
     if not isinstance(k, AlgorithmKernel):
         k = algorithm_kernel(model, name)
+    return call(model, k, args, p, t)
+
+
+def call(model, k: AlgorithmKernel, args: tuple, p, t: float):
+    """:func:`_run` with the kernel ``k`` of ``model`` at hand."""
     k._at(t, p)
     fast = k._fast
     if fast is not None and not k._quaternions:
