@@ -9,9 +9,9 @@ sequences element by element), calls the kernel's C entry point with the work ar
 ``check[1]`` finite (the tree kernels' pivot and sum).  With ``bound > 0`` every input value
 must be finite and of magnitude at most ``bound`` (checked while copying, a few ns a value),
 an array one-dimensional and a sequence's items Python floats or ints (not booleans); a
-TypeError or ValueError otherwise, so that the caller builds its detailed message only then.  It is an accelerator only: when the
-Python headers or a compiler are missing, :func:`fast_caller` returns None and callers keep
-the ctypes path.
+TypeError or ValueError otherwise, so that the caller builds its detailed message only then.
+It is an accelerator only: when the Python headers or a compiler are missing, :func:`fast_caller`
+returns None and callers keep the ctypes path.
 """
 from __future__ import annotations
 

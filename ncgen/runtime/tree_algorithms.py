@@ -47,8 +47,9 @@ class AlgorithmKernel:
     overwritten by the next call: copy them to keep them; matrices are column-major views,
     shape ``(n, n)``).  Each argument must be ``n`` finite real numbers of magnitude at most
     :data:`~ncgen.validation.MAX_MAGNITUDE` (checked in C while copying; the
-    :class:`~ncgen.errors.ShapeError` names the argument).  ABA and its derivatives raise :class:`ModelError` for a singular mass
-    matrix or a non-finite result.  Not thread-safe: one kernel per thread (:meth:`copy`)."""
+    :class:`~ncgen.errors.ShapeError` names the argument).  ABA and its derivatives raise
+    :class:`ModelError` for a singular mass matrix or a non-finite result.  Not thread-safe:
+    one kernel per thread (:meth:`copy`)."""
 
     def __init__(self, model, name: str, direct):
         self.model, self.name, self.direct = model, name, direct
