@@ -51,6 +51,9 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800),   # each benchmark sc
     ("tree_algorithms.py", ["=== ur5", "RATIO ur5 ncgen forward dynamics / pinocchio.aba",
                             "RATIO ur5 ncgen RNEA / pinocchio.rnea",
                             "RATIO ur5 ncgen ABA derivatives / pinocchio.computeABADerivatives"]),
+    ("call_overhead.py", ["=== ur10", "RATIO ur10 nc.inverse_dynamics / pinocchio.rnea",
+                          "RATIO ur10 nc.aba / pinocchio.aba", "RATIO ur10 nc.joint_forward_dynamics / pinocchio.aba",
+                          "rnea_agreement", "load average"]),
     ("animation.py", ["=== slider_crank", "RATIO PillowWriter / ncgen animate", "to_html:"]),
     ("joint_simulation.py", ["=== panda: 1 s fall", "RATIO ncgen / MuJoCo RK4, end to end, DOPRI5",
                              "RATIO ncgen / MuJoCo RK4, simulate only, DOPRI5", "agrees with Pinocchio"]),
@@ -68,7 +71,7 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800),   # each benchmark sc
                            "central differences: A", "TARGET twodofs"]),
 ])
 def test_smoke(tmp_path, script, expected):
-    if script in ("joint_space.py", "joint_simulation.py", "tree_algorithms.py", "load_time.py"):
+    if script in ("joint_space.py", "joint_simulation.py", "tree_algorithms.py", "load_time.py", "call_overhead.py"):
         pytest.importorskip("pinocchio")
         pytest.importorskip("yourdfpy")
     if script == "step_jacobians.py":

@@ -7,9 +7,12 @@ sequences element by element; ``bytes``, ``bytearray`` and byte memoryviews refu
 read as numbers), calls the kernel's C entry point with the work arrays of a
 :class:`~ncgen.codegen.direct.DirectFunction` and returns the object given at construction
 (its output buffers), or None when an optional check fails: ``check[0] > tol`` and
-``check[1]`` finite (the tree kernels' pivot and sum).  It is an accelerator only: when the
-Python headers or a compiler are missing, :func:`fast_caller` returns None and callers keep
-the ctypes path.
+``check[1]`` finite (the tree kernels' pivot and sum).  With ``bound > 0`` every input value
+must be finite and of magnitude at most ``bound`` (checked while copying, a few ns a value),
+an array one-dimensional and a sequence's items Python floats or ints (not booleans); a
+TypeError or ValueError otherwise, so that the caller builds its detailed message only then.
+It is an accelerator only: when the Python headers or a compiler are missing, :func:`fast_caller`
+returns None and callers keep the ctypes path.
 """
 from __future__ import annotations
 
@@ -41,7 +44,7 @@ typedef struct {
     int n_in;
     double *buf[MAX_IN];
     Py_ssize_t size[MAX_IN];
-    const double *check; double tol;
+    const double *check; double tol; double bound;
     PyObject *result; PyObject *keep;
 } Caller;
 
@@ -52,7 +55,16 @@ static int raw_bytes(PyObject *x) {
     return !f || ((f[0] == 'B' || f[0] == 'b' || f[0] == 'c') && f[1] == 0);
 }
 
-static int copy_in(double *dst, Py_ssize_t n, PyObject *x, int k) {
+static int check_bound(const double *x, Py_ssize_t n, double bound, int k) {
+    for (Py_ssize_t i = 0; i < n; i++)
+        if (!(fabs(x[i]) <= bound)) {
+            PyErr_Format(PyExc_ValueError, "argument %d: value %zd is not finite or too large", k, i);
+            return -1;
+        }
+    return 0;
+}
+
+static int copy_in(double *dst, Py_ssize_t n, PyObject *x, int k, double bound) {
     Py_buffer view;
     if (raw_bytes(x)) {
         PyErr_Format(PyExc_TypeError, "argument %d: expected numbers, got %s (raw bytes are not read as numbers)",
@@ -61,7 +73,10 @@ static int copy_in(double *dst, Py_ssize_t n, PyObject *x, int k) {
     }
     if (PyObject_GetBuffer(x, &view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) == 0) {
         int ok = view.itemsize == 8 && view.format && view.format[0] == 'd' && view.format[1] == 0;
-        if (ok && view.len == n * 8) { memcpy(dst, view.buf, (size_t)view.len); PyBuffer_Release(&view); return 0; }
+        if (ok && view.len == n * 8 && (bound <= 0 || view.ndim == 1)) {
+            memcpy(dst, view.buf, (size_t)view.len); PyBuffer_Release(&view);
+            return bound > 0 ? check_bound(dst, n, bound, k) : 0;
+        }
         const char *f = view.format ? view.format : "";
         while (*f && strchr("@=<>!", *f)) f++;
         int not_real = *f == 'Z' || *f == '?';          /* complex, bool: not read as real numbers */
@@ -76,12 +91,17 @@ static int copy_in(double *dst, Py_ssize_t n, PyObject *x, int k) {
         Py_DECREF(seq); return -1;
     }
     for (Py_ssize_t i = 0; i < n; i++) {
-        double v = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(seq, i));
+        PyObject *item = PySequence_Fast_GET_ITEM(seq, i);
+        if (bound > 0 && !(PyFloat_Check(item) || (PyLong_Check(item) && !PyBool_Check(item)))) {
+            PyErr_Format(PyExc_TypeError, "argument %d: value %zd is not a float or an int", k, i);
+            Py_DECREF(seq); return -1;
+        }
+        double v = PyFloat_AsDouble(item);
         if (v == -1.0 && PyErr_Occurred()) { Py_DECREF(seq); return -1; }
         dst[i] = v;
     }
     Py_DECREF(seq);
-    return 0;
+    return bound > 0 ? check_bound(dst, n, bound, k) : 0;
 }
 
 static PyObject *caller_call(PyObject *self_, PyObject *const *args, size_t nargsf, PyObject *kwnames) {
@@ -92,7 +112,7 @@ static PyObject *caller_call(PyObject *self_, PyObject *const *args, size_t narg
         return NULL;
     }
     for (int k = 0; k < self->n_in; k++)
-        if (copy_in(self->buf[k], self->size[k], args[k], k)) return NULL;
+        if (copy_in(self->buf[k], self->size[k], args[k], k, self->bound)) return NULL;
     if (self->fn(self->arg, self->res, self->iw, self->w, self->mem)) {
         PyErr_SetString(PyExc_RuntimeError, "the compiled kernel returned an error");
         return NULL;
@@ -103,10 +123,11 @@ static PyObject *caller_call(PyObject *self_, PyObject *const *args, size_t narg
 }
 
 static PyObject *caller_new(PyTypeObject *type, PyObject *a, PyObject *kw) {
-    unsigned long long fn, arg, res, iw, w, check; int mem; double tol;
+    unsigned long long fn, arg, res, iw, w, check; int mem; double tol, bound;
     (void)kw;
     PyObject *bufs, *sizes, *result, *keep;
-    if (!PyArg_ParseTuple(a, "KKKKKiOOKdOO", &fn, &arg, &res, &iw, &w, &mem, &bufs, &sizes, &check, &tol, &result, &keep))
+    if (!PyArg_ParseTuple(a, "KKKKKiOOKddOO", &fn, &arg, &res, &iw, &w, &mem, &bufs, &sizes, &check, &tol, &bound,
+                          &result, &keep))
         return NULL;
     Py_ssize_t n = PySequence_Size(bufs);
     if (n < 0 || n > MAX_IN || PySequence_Size(sizes) != n) {
@@ -123,7 +144,7 @@ static PyObject *caller_new(PyTypeObject *type, PyObject *a, PyObject *kw) {
         self->size[i] = PyLong_AsSsize_t(s);
         Py_XDECREF(b); Py_XDECREF(s);
     }
-    self->check = (const double *)(uintptr_t)check; self->tol = tol;
+    self->check = (const double *)(uintptr_t)check; self->tol = tol; self->bound = bound;
     Py_INCREF(result); self->result = result; Py_INCREF(keep); self->keep = keep;
     if (PyErr_Occurred()) { Py_DECREF(self); return NULL; }
     return (PyObject *)self;
@@ -200,10 +221,12 @@ def _module():
     return _MODULE[0]
 
 
-def fast_caller(direct, n_inputs: int, first: int = 0, check=None, tol: float = 0.0, result=None):
+def fast_caller(direct, n_inputs: int, first: int = 0, check=None, tol: float = 0.0, result=None,
+                bound: float = 0.0):
     """``caller(*arrays)`` for the inputs ``first .. first + n_inputs − 1`` of the
     :class:`~ncgen.codegen.direct.DirectFunction` ``direct`` (module docstring; ``check``: a
-    2-entry output buffer, ``result``: what a call returns), or None without the extension."""
+    2-entry output buffer, ``result``: what a call returns, ``bound``: the largest magnitude of
+    an input value, 0 for no check), or None without the extension."""
     mod = _module()
     if mod is None:
         return None
@@ -212,4 +235,5 @@ def fast_caller(direct, n_inputs: int, first: int = 0, check=None, tol: float = 
     import ctypes
     address = ctypes.cast(fn, ctypes.c_void_p).value
     return mod.Caller(address, arg, res, iw, w, mem, [b.ctypes.data for b in bufs], [b.size for b in bufs],
-                      0 if check is None else check.ctypes.data, float(tol), result, (direct, bufs, check))
+                      0 if check is None else check.ctypes.data, float(tol), float(bound), result,
+                      (direct, bufs, check))

@@ -59,6 +59,9 @@ class ModelData:
     #: ``(indices,)``: the independent joint rates when the compiled algorithms take the model,
     #: indices None when not (:func:`ncgen.runtime.tree_algorithms.rnea_applies`).
     algorithm_rates: tuple | None = None
+    #: ``{joints: AlgorithmKernel or False}``: the compiled RNEA when it gives
+    #: ``nc.inverse_dynamics(..., joints=joints)`` (:func:`ncgen.runtime.joint_dynamics._rnea_kernel`).
+    rnea_efforts: dict = field(default_factory=dict)
     #: ``(f,)``: the joint-space tree map ``(q_j, v_j) -> (q, v)``, f None for a model that is
     #: not a tree (``JointSpace._tree`` in :mod:`ncgen.assembly.joint_space`).
     joint_tree_function: tuple | None = None

@@ -26,6 +26,7 @@ from ncgen.assembly.derived import joint_kkt_function, kkt_function
 from ncgen.assembly.joint_space import solve_linear
 from ncgen.errors import ModelError
 from ncgen.model.data import cached, model_data
+from ncgen.runtime.tree_algorithms import algorithm_kernel, call, rnea_applies
 from ncgen.validation import as_vector
 
 
@@ -93,23 +94,19 @@ def forward_dynamics(model, q, v, u=None, p=None, t: float = 0.0, *, backend: st
     return x[:nq], x[nq:]
 
 
-def _rnea_kernel(model, qj, vj, aj, p, t, joints):
-    """The compiled RNEA's efforts when it applies (a 3D tree whose asked-for efforts are
-    those of its independent joint rates; the given accelerations keep the mimic relations),
-    else None."""
-    from ncgen.runtime.tree_algorithms import rnea, rnea_applies
-
-    js = model.joint_space
-    independent = rnea_applies(model)
-    if independent is None:
-        return None
-    sv = js.slices(rates=True)
-    actuated = [i for n in js.joint_names if n in model.actuated_joints for i in range(sv[n].start, sv[n].stop)]
-    if joints == "actuated" and independent != actuated:
-        return None
-    if joints == "all" and len(independent) != js.nv:
-        return None
-    return rnea(model, qj, vj, aj, p=p, t=t)
+def _rnea_kernel(model, joints: str):
+    """The compiled RNEA when it gives the efforts ``joints`` asks for (a 3D tree whose asked-for
+    efforts are those of its independent joint rates), else False (decided once per model)."""
+    data = model_data(model)
+    k = data.rnea_efforts.get(joints)
+    if k is None:
+        js, independent = model.joint_space, rnea_applies(model)
+        sv = js.slices(rates=True)
+        actuated = [i for n in js.joint_names if n in model.actuated_joints for i in range(sv[n].start, sv[n].stop)]
+        takes = independent is not None and (
+            independent == actuated if joints == "actuated" else len(independent) == js.nv)
+        k = data.rnea_efforts[joints] = algorithm_kernel(model, "rnea") if takes else False
+    return k
 
 
 def inverse_dynamics(model, qj, vj, aj, p=None, t: float = 0.0, joints: str = "actuated") -> np.ndarray:
@@ -122,12 +119,12 @@ def inverse_dynamics(model, qj, vj, aj, p=None, t: float = 0.0, joints: str = "a
     independent joint rates; other models solve the constrained equations of motion."""
     if joints not in ("actuated", "all"):
         raise ModelError(f"inverse_dynamics: joints: expected 'actuated' or 'all', got {joints!r}")
+    t = float(t)
+    k = _rnea_kernel(model, joints)
+    if k:
+        return call(model, k, (qj, vj, aj), p, t)
     js = model.joint_space
     p = model.p0 if p is None else as_vector(p, model.np, "p")
-    t = float(t)
-    tau = _rnea_kernel(model, qj, vj, aj, p, t, joints)
-    if tau is not None:
-        return tau
     q, v = model.from_joint_space(qj, vj, t=t, p=p)
     aj = as_vector(aj, js.nv, "aj (one value per joint rate, joint_names order)")
     f = model.functions

@@ -28,7 +28,7 @@ from ncgen.codegen.fast_call import fast_caller
 from ncgen.errors import ModelError
 from ncgen.model.data import cached, model_data
 from ncgen.runtime.tree_check import PIVOT_TOL, check_tree, compile_tree_function, unit_quaternions
-from ncgen.validation import as_numbers, as_vector
+from ncgen.validation import MAX_MAGNITUDE, as_numbers, as_vector
 
 #: ``name: (inputs after t before p, outputs)`` of every algorithm.
 ALGORITHMS = {
@@ -45,8 +45,11 @@ class AlgorithmKernel:
     are its inputs, ``qj`` with unit quaternions).  Time and parameters are ``model.t0``,
     ``model.p0`` until :meth:`set`.  Returns the output buffers (one array, or a tuple;
     overwritten by the next call: copy them to keep them; matrices are column-major views,
-    shape ``(n, n)``).  ABA and its derivatives raise :class:`ModelError` for a singular mass
-    matrix or a non-finite result.  Not thread-safe: one kernel per thread (:meth:`copy`)."""
+    shape ``(n, n)``).  Each argument must be ``n`` finite real numbers of magnitude at most
+    :data:`~ncgen.validation.MAX_MAGNITUDE` (checked in C while copying; the
+    :class:`~ncgen.errors.ShapeError` names the argument).  ABA and its derivatives raise
+    :class:`ModelError` for a singular mass matrix or a non-finite result.  Not thread-safe:
+    one kernel per thread (:meth:`copy`)."""
 
     def __init__(self, model, name: str, direct):
         self.model, self.name, self.direct = model, name, direct
@@ -55,17 +58,20 @@ class AlgorithmKernel:
         self._p = direct.inputs[-1]
         self._sizes = [b.size for b in self._inputs]
         outs = []
-        for o, f_out in zip(direct.outputs, range(len(out_names))):
+        for o, f_out, out_name in zip(direct.outputs, range(len(out_names)), out_names):
             shape = direct.function.size_out(f_out)
-            outs.append(o.reshape(shape[::-1]).T if shape[1] > 1 else o)
+            outs.append(o if out_name in ("tau", "aj") else o.reshape(shape[::-1]).T)   # matrices even 1 x 1
         self._outputs = outs[0] if len(outs) == 1 else tuple(outs)
         self._check = None
         if direct.function.n_out() > len(out_names):
             check = direct.outputs[-1]
             self._check = (ctypes.c_double * 2).from_address(check.ctypes.data)
         self._fn, self._args = direct._fn, direct._args
+        js = model.joint_space
+        self._quaternions = js.dim == 3 and any(n in (4, 7) for n in js.nq_joint.values())
         self._fast = fast_caller(direct, len(self._inputs), first=1, result=self._outputs,
-                                 check=None if self._check is None else direct.outputs[-1], tol=PIVOT_TOL)
+                                 check=None if self._check is None else direct.outputs[-1], tol=PIVOT_TOL,
+                                 bound=MAX_MAGNITUDE)
         self.set(t=model.t0, p=model.p0)
 
     def copy(self) -> "AlgorithmKernel":
@@ -77,24 +83,29 @@ class AlgorithmKernel:
     def set(self, *, t=None, p=None) -> None:
         """Time ``t`` (s) and parameters ``p`` (``model.parameter_names`` order) of later calls."""
         if t is not None:
-            self.direct.inputs[0][...] = float(t)
+            self.direct.inputs[0][...] = self._t = float(t)
         if p is not None:
             self._p[...] = as_vector(p, self.model.np, "p")
+            self._default_p = p is self.model.p0
+
+    def _at(self, t: float, p) -> None:
+        """:meth:`set`, skipped when ``t`` and the default parameters (``p`` None) are those of the last call."""
+        if p is not None or not self._default_p:
+            self.set(t=t, p=self.model.p0 if p is None else p)
+        elif t != self._t:
+            self.set(t=t)
 
     def __call__(self, *args):
         fast = self._fast
         if fast is not None:
             try:
                 out = fast(*args)
-            except (TypeError, ValueError):
-                self._bad_arguments(args)
+            except (TypeError, ValueError, OverflowError):
+                out = fast(*self._checked(args))
             if out is None:
                 self._singular()
             return out
-        inputs = self._inputs
-        if len(args) != len(inputs) or [np.size(x) for x in args] != self._sizes:
-            self._bad_arguments(args)
-        for buf, x in zip(inputs, args):
+        for buf, x in zip(self._inputs, self._checked(args)):
             buf[...] = x
         if self._fn(*self._args):
             raise ModelError(f"{self.name}: the compiled kernel returned an error")
@@ -103,11 +114,18 @@ class AlgorithmKernel:
             self._singular()
         return self._outputs
 
-    def _bad_arguments(self, args):
-        for name, x in zip(self.input_names, args):
-            as_numbers(x, f"{self.name}: {name}", "a sequence of numbers")
-        if [np.size(x) for x in args] == self._sizes:
-            raise ModelError(f"{self.name}: {', '.join(self.input_names)} must be sequences of numbers")
+    def _checked(self, args) -> list:
+        """``args`` as finite float vectors of the kernel's sizes, or the error naming the first bad one."""
+        if len(args) != len(self._inputs):
+            self._wrong_sizes(args)
+        numbers = [as_numbers(x, f"{self.name}: {name}", "a sequence of numbers")
+                   for name, x in zip(self.input_names, args)]
+        if [x.size for x in numbers] != self._sizes:
+            self._wrong_sizes(args)
+        return [as_vector(x.reshape(-1), n, f"{self.name}: {name}")
+                for name, x, n in zip(self.input_names, numbers, self._sizes)]
+
+    def _wrong_sizes(self, args):
         raise ModelError(f"{self.name}: expected {len(self._inputs)} arguments ({', '.join(self.input_names)}) "
                          f"of {', '.join(map(str, self._sizes))} values, got {len(args)} of "
                          f"{', '.join(str(np.size(x)) for x in args)}")
@@ -154,43 +172,72 @@ def rnea_applies(model) -> list[int] | None:
     return data.algorithm_rates[0]
 
 
-def _run(model, name: str, args: dict, p, t: float):
+#: What each input is, for messages.
+_WHAT = {"qj": "qj (joint positions, joint_names order)", "vj": "vj (joint rates, joint_names order)",
+         "aj": "aj (joint accelerations, joint_names order)",
+         "tau": "tau (efforts of the independent joint rates, joint_names order)"}
+
+
+def _run(model, name: str, args: tuple, p, t: float):
+    """The outputs (copies) of the algorithm ``name`` at ``args`` (in ``ALGORITHMS`` order).
+    Without quaternion joints the arguments go straight to the kernel, whose caller checks
+    their lengths, kinds and magnitudes in C (:func:`~ncgen.codegen.fast_call.fast_caller`'s
+    ``bound``); the detailed message is built only when that fails (:func:`_checked`)."""
+    k = model_data(model).algorithm_kernels.get((name, None))
+    if not isinstance(k, AlgorithmKernel):
+        k = algorithm_kernel(model, name)
+    return call(model, k, args, p, t)
+
+
+def call(model, k: AlgorithmKernel, args: tuple, p, t: float):
+    """:func:`_run` with the kernel ``k`` of ``model`` at hand."""
+    k._at(t, p)
+    fast = k._fast
+    if fast is not None and not k._quaternions:
+        try:
+            out = fast(*args)
+        except (TypeError, ValueError, OverflowError):
+            out = k(*_checked(model, k, args))
+        if out is None:
+            k._singular()
+    else:
+        out = k(*_checked(model, k, args))
+    return tuple(o.copy() for o in out) if type(out) is tuple else out.copy()
+
+
+def _checked(model, k: AlgorithmKernel, args: tuple) -> list:
+    """``args`` as finite vectors of the kernel's sizes (quaternions normalised), or the
+    :class:`~ncgen.errors.ShapeError` naming the first bad one."""
     js = model.joint_space
-    k = algorithm_kernel(model, name)
     sizes = {"qj": js.nq, "vj": js.nv, "aj": js.nv, "tau": k._sizes[-1]}
-    values = []
-    for a in k.input_names:
-        what = {"qj": "joint positions", "vj": "joint rates", "aj": "joint accelerations",
-                "tau": "efforts of the independent joint rates"}[a]
-        x = as_vector(args[a], sizes[a], f"{a} ({what}, joint_names order)")
-        values.append(unit_quaternions(js, x) if a == "qj" else x)
-    k.set(t=t, p=model.p0 if p is None else p)
-    out = k(*values)
-    return tuple(np.array(o) for o in out) if isinstance(out, tuple) else np.array(out)
+    values = [as_vector(x, sizes[a], _WHAT[a]) for a, x in zip(k.input_names, args)]
+    if k.input_names[0] == "qj":
+        values[0] = unit_quaternions(js, values[0])
+    return values
 
 
 def rnea(model, qj, vj, aj, *, p=None, t: float = 0.0) -> np.ndarray:
     """``τ``: the efforts of the independent joint rates giving accelerations ``aj`` at
     ``(qj, vj)`` (module docstring; Pinocchio's ``rnea``)."""
-    return _run(model, "rnea", {"qj": qj, "vj": vj, "aj": aj}, p, t)
+    return _run(model, "rnea", (qj, vj, aj,), p, t)
 
 
 def crba(model, qj, *, p=None, t: float = 0.0) -> np.ndarray:
     """``M``: the joint-space mass matrix of the independent rates (Pinocchio's ``crba``, both triangles)."""
-    return _run(model, "crba", {"qj": qj}, p, t)
+    return _run(model, "crba", (qj,), p, t)
 
 
 def aba(model, qj, vj, tau, *, p=None, t: float = 0.0) -> np.ndarray:
     """``aj``: joint accelerations under the efforts ``tau`` of the independent rates (Pinocchio's ``aba``)."""
-    return _run(model, "aba", {"qj": qj, "vj": vj, "tau": tau}, p, t)
+    return _run(model, "aba", (qj, vj, tau,), p, t)
 
 
 def rnea_derivatives(model, qj, vj, aj, *, p=None, t: float = 0.0) -> tuple[np.ndarray, ...]:
     """``(τ, ∂τ/∂q, ∂τ/∂v, ∂τ/∂a)`` (Pinocchio's ``computeRNEADerivatives``; ∂τ/∂a = M)."""
-    return _run(model, "rnea_derivatives", {"qj": qj, "vj": vj, "aj": aj}, p, t)
+    return _run(model, "rnea_derivatives", (qj, vj, aj,), p, t)
 
 
 def aba_derivatives(model, qj, vj, tau, *, p=None, t: float = 0.0) -> tuple[np.ndarray, ...]:
     """``(aj, ∂a/∂q, ∂a/∂v, ∂a/∂τ)`` (Pinocchio's ``computeABADerivatives``; ∂a/∂τ = M⁻¹;
     rows per independent rate)."""
-    return _run(model, "aba_derivatives", {"qj": qj, "vj": vj, "tau": tau}, p, t)
+    return _run(model, "aba_derivatives", (qj, vj, tau,), p, t)

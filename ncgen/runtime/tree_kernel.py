@@ -29,7 +29,7 @@ from ncgen.errors import ModelError
 from ncgen.model.data import cached, model_data
 from ncgen.runtime.joint_dynamics import forward_dynamics
 from ncgen.runtime.tree_check import PIVOT_TOL, check_tree, compile_tree_function, unit_quaternions
-from ncgen.validation import as_numbers, as_vector
+from ncgen.validation import MAX_MAGNITUDE, as_numbers, as_vector
 
 METHODS = ("auto", "recursive", "projection")
 
@@ -54,6 +54,11 @@ class JointDynamicsKernel:
         self._fn, self._args = direct._fn, direct._args
         self._zero_u = np.zeros(self.nu)
         self._fast = fast_caller(direct, 3, first=1, check=check, tol=PIVOT_TOL, result=self._aj)
+        #: the same caller refusing non-finite or too large inputs (``nc.joint_forward_dynamics``'s checks)
+        self._checked = fast_caller(direct, 3, first=1, check=check, tol=PIVOT_TOL, result=self._aj,
+                                    bound=MAX_MAGNITUDE)
+        js = model.joint_space
+        self._quaternions = js.dim == 3 and any(n in (4, 7) for n in js.nq_joint.values())
         self.set(t=model.t0, p=model.p0)
 
     def copy(self) -> "JointDynamicsKernel":
@@ -65,9 +70,17 @@ class JointDynamicsKernel:
     def set(self, *, t=None, p=None) -> None:
         """Time ``t`` (s) and parameters ``p`` (``model.parameter_names`` order) of later calls."""
         if t is not None:
-            self.direct.inputs[0][...] = float(t)
+            self.direct.inputs[0][...] = self._t = float(t)
         if p is not None:
             self._p[...] = as_vector(p, self.model.np, "p")
+            self._default_p = p is self.model.p0
+
+    def _at(self, t: float, p) -> None:
+        """:meth:`set`, skipped when ``t`` and the default parameters (``p`` None) are those of the last call."""
+        if p is not None or not self._default_p:
+            self.set(t=t, p=self.model.p0 if p is None else p)
+        elif t != self._t:
+            self.set(t=t)
 
     def __call__(self, qj, vj, u=None) -> np.ndarray:
         fast = self._fast
@@ -148,6 +161,17 @@ def joint_forward_dynamics(model, qj, vj, u=None, p=None, t: float = 0.0, *, bac
     :func:`~ncgen.runtime.joint_dynamics.forward_dynamics`, ``to_joint_space``."""
     if backend not in ("compiled", "numpy"):
         raise ModelError(f"joint_forward_dynamics: backend: expected 'compiled' or 'numpy', got {backend!r}")
+    k = model_data(model).tree_kernel
+    if backend == "compiled" and k and k._checked is not None and not k._quaternions:
+        k._at(t, p)                 # arguments straight to C, checked there; the messages below only on failure
+        try:
+            out = k._checked(qj, vj, k._zero_u if u is None else u)
+        except (TypeError, ValueError, OverflowError):
+            out = False
+        if out is None:
+            k._singular()
+        if out is not False:
+            return out.copy()
     js = model.joint_space
     qj = as_vector(qj, js.nq, "qj (joint positions, joint_names order)")
     vj = as_vector(vj, js.nv, "vj (joint rates, joint_names order)")

@@ -1,0 +1,127 @@
+"""The Python doors of the compiled tree algorithms vs Pinocchio's, per call, in one process
+(issue 37: a call from Python should cost what calling Pinocchio costs).
+
+Robots of example-robot-data as shipped: the Panda (7 arm joints and a finger mimicked by a
+second one: 8 independent rates), the UR10 (6) and the xArm7 (7), fixed base.  One random state
+per robot, the same in both engines.  Pairs, each a ratio ncgen / Pinocchio of the time per
+call, through the public functions with their argument checks:
+
+* ``nc.inverse_dynamics(model, qj, vj, aj)`` and ``nc.rnea(model, qj, vj, aj)`` vs
+  ``pinocchio.rnea`` (with the mimic joint for the Panda; target ≤ 1.5×);
+* ``nc.aba(model, qj, vj, tau)`` and ``nc.joint_forward_dynamics(model, qj, vj, u)`` vs
+  ``pinocchio.aba`` (Pinocchio's model without the mimic joint for the Panda: its ABA refuses
+  them; target ≤ 1.0×).
+
+Interleaved rounds (``interleaved`` of ``tree_algorithms.py``): the min and median of the
+per-round ratios of the best batches, and each side's best µs per call.  The CPU model and the
+load average are printed before and after: on a shared machine the medians move with the load.
+Agreement with Pinocchio (max |difference|) is printed for each pair that has the same rates.
+
+    python benchmarks/call_overhead.py [--robots panda ur10 xarm7] [--calls 2000] [--rounds 9] [--smoke]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent))
+sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(HERE.parent / "tests"))
+
+from common import machine  # noqa: E402
+from tree_algorithms import interleaved  # noqa: E402
+
+ROBOTS = {"panda": "panda_description/urdf/panda.urdf", "ur10": "ur_description/urdf/ur10_robot.urdf",
+          "xarm7": "xarm_description/urdf/xarm7.urdf"}
+
+
+def robot_pairs(name: str, calls: int, rounds: int) -> dict:
+    import pinocchio as pin
+
+    import ncgen as nc
+    from ncgen.assembly.tree_dynamics import MimicMap
+    from pinocchio_robots import JointMap, random_configuration, robot_file
+    from test_tree_algorithms_pinocchio import _mimic_q, _mimic_rates
+
+    text = robot_file(ROBOTS[name]).read_text()
+    model = nc.System.from_urdf(text).build()
+    pm_mimic, pm = pin.buildModelFromXML(text, mimic=True), pin.buildModelFromXML(text)
+    jm, mimic = JointMap(model, pm), MimicMap(model)
+    G = mimic.G
+    rng = np.random.default_rng(0)
+    qj = jm.q_to_ncgen(random_configuration(pm, rng))
+    for i, (lead, k, off) in mimic.position.items():
+        qj[i] = k * qj[lead] + off
+    qp = jm.q_to_pin(qj, pm.nq)
+    n_i = G.shape[1]
+    v_i, a_i, tau_i = rng.normal(size=n_i), rng.normal(size=n_i), rng.normal(size=n_i)
+    vj, aj = G @ v_i, G @ a_i
+    P = jm.P @ G                                     # Pinocchio's rates (no mimic) from the independent ones
+    d, out = pm.createData(), {"nv": int(n_i)}
+
+    if mimic.relations:
+        Pm = _mimic_rates(pm_mimic, model, mimic)
+        dm, qm, vm, am = pm_mimic.createData(), _mimic_q(pm_mimic, pm, qp), Pm @ v_i, Pm @ a_i
+        pin_rnea = lambda: pin.rnea(pm_mimic, dm, qm, vm, am)               # noqa: E731
+        out["rnea_agreement"] = float(np.max(np.abs(Pm @ nc.inverse_dynamics(model, qj, vj, aj) - pin_rnea())))
+    else:
+        vp, ap = P @ v_i, P @ a_i
+        pin_rnea = lambda: pin.rnea(pm, d, qp, vp, ap)                        # noqa: E731
+        out["rnea_agreement"] = float(np.max(np.abs(P @ nc.inverse_dynamics(model, qj, vj, aj) - pin_rnea())))
+    out["inverse_dynamics"] = interleaved(lambda: nc.inverse_dynamics(model, qj, vj, aj), pin_rnea, calls, rounds)
+    out["rnea"] = interleaved(lambda: nc.rnea(model, qj, vj, aj), pin_rnea, calls, rounds)
+
+    act = [model.joint_space.slices(rates=True)[n].start for n in model.actuated_joints]
+    u = tau_i[[mimic.independent.index(i) for i in act]]
+    full = jm.P @ (jm.P.T @ P @ tau_i)              # the efforts on Pinocchio's rates (a follower: none)
+    vp = P @ v_i
+    pin_aba = lambda: pin.aba(pm, d, qp, vp, full)                            # noqa: E731
+    if not mimic.relations:
+        out["aba_agreement"] = float(np.max(np.abs(P @ nc.aba(model, qj, vj, tau_i) - pin_aba())))
+        out["fd_agreement"] = float(np.max(np.abs(P @ nc.joint_forward_dynamics(model, qj, vj, u) - pin_aba())))
+    else:
+        out["aba_note"] = out["fd_note"] = "Pinocchio's ABA refuses mimic joints: its model without them"
+    out["aba"] = interleaved(lambda: nc.aba(model, qj, vj, tau_i), pin_aba, calls, rounds)
+    out["fd"] = interleaved(lambda: nc.joint_forward_dynamics(model, qj, vj, u), pin_aba, calls, rounds)
+    return out
+
+
+LABELS = (("inverse_dynamics", "nc.inverse_dynamics / pinocchio.rnea"), ("rnea", "nc.rnea / pinocchio.rnea"),
+          ("aba", "nc.aba / pinocchio.aba"), ("fd", "nc.joint_forward_dynamics / pinocchio.aba"))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--robots", nargs="+", default=list(ROBOTS), choices=list(ROBOTS))
+    ap.add_argument("--calls", type=int, default=2000, help="calls per timed batch (default 2000)")
+    ap.add_argument("--rounds", type=int, default=9, help="interleaved rounds (default 9, 3 batch pairs each)")
+    ap.add_argument("--smoke", action="store_true", help="tiny run (UR10, few calls) to check the script works")
+    args = ap.parse_args(argv)
+    if args.smoke:
+        args.robots, args.calls, args.rounds = ["ur10"], 50, 2
+    print(machine())
+    print(f"load average: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    for name in args.robots:
+        res = robot_pairs(name, args.calls, args.rounds)
+        print(f"\n=== {name} ({res['nv']} independent rates)")
+        for key, label in LABELS:
+            r = res[key]
+            print(f"  {label}: ncgen {r['ncgen_us']:.2f} µs, pinocchio {r['pinocchio_us']:.2f} µs per call"
+                  + (f" ({res[key + '_note']})" if key + "_note" in res else ""))
+            print(f"RATIO {name} {label}: min {r['ratio_min']:.2f}  median {r['ratio_median']:.2f}  "
+                  f"best/best {r['ncgen_us'] / r['pinocchio_us']:.2f}")
+        for key in ("rnea_agreement", "aba_agreement", "fd_agreement"):
+            if key in res:
+                print(f"  {key} (max |ncgen - pinocchio|): {res[key]:.2e}")
+    print(f"\nload average: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
