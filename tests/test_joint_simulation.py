@@ -180,7 +180,9 @@ def test_constant_input_vector(method):
     traj = nc.simulate(model, 1.0, 0.1, method=method, u=[tau], **kw)
     theta = traj.joint("hinge")[0].reshape(-1)
     exact = tau * traj.t**2 / (2 * I)
-    assert np.max(np.abs(theta - exact)) < (1e-8 if method != "stepper" else 1e-5)
+    # IDAS at rtol 1e-10 on the watched 0.01 s grid (issue 38): 1.04e-8 rad measured, the
+    # same as an output every 0.01 s gave before; the joint loop's DOPRI5: below 1e-9
+    assert np.max(np.abs(theta - exact)) < (3e-8 if method != "stepper" else 1e-5)
 
 
 @pytest.mark.parametrize("method", ["idas", "stepper"])
