@@ -148,6 +148,7 @@ FORMS = [("2d", 1), ("2d", 10), ("2d", 40), ("3d", 1), ("3d", 10)]
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1800)                  # outputs every 1 ms on the VM: minutes each under load
 @pytest.mark.parametrize("dt", INTERVALS)
 @pytest.mark.parametrize("backend", ["compiled", "vm"])
 @pytest.mark.parametrize("form, N", FORMS)
