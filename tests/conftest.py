@@ -2,8 +2,9 @@
 
 The default run (``pytest -q -n auto``, the README's command) deselects the tests marked
 ``slow`` (pyproject's ``addopts``): robot-scale models, Dask clusters, sanitizer builds,
-benchmark smokes and long tight-tolerance runs. ``pytest -q -n auto -m slow`` runs them; CI
-runs both. Every test has a time limit (pyproject's ``timeout``, pytest-timeout), generous
+benchmark smokes and long tight-tolerance runs. ``pytest -q -n auto -m "slow and not
+exhaustive"`` runs them; CI runs both. The slow tests also marked ``exhaustive`` (the largest
+models of a full matrix, hours of CPU) are run by hand: ``pytest -q -n auto -m exhaustive``. Every test has a time limit (pyproject's ``timeout``, pytest-timeout), generous
 enough for a loaded machine; a test that needs more says so with ``pytest.mark.timeout``.
 """
 import pytest
@@ -12,8 +13,13 @@ SLOW = ("slow: robot-scale models, Dask clusters, sanitizer builds, benchmark sm
         "tight-tolerance runs; deselected by default, run with `pytest -m slow`")
 
 
+EXHAUSTIVE = ("exhaustive: slow tests too long for CI (hours of CPU in all: the largest models of a "
+              "full matrix); run by hand with `pytest -q -n auto -m exhaustive`")
+
+
 def pytest_configure(config):
     config.addinivalue_line("markers", SLOW)
+    config.addinivalue_line("markers", EXHAUSTIVE)
 
 
 def pytest_report_header(config):
@@ -25,4 +31,5 @@ def pytest_terminal_summary(terminalreporter):
     deselected = terminalreporter.stats.get("deselected", [])
     slow = sum(1 for item in deselected if item.get_closest_marker("slow") is not None)
     if slow:
-        terminalreporter.write_line(f"{slow} slow tests deselected: run them with `pytest -q -n auto -m slow`")
+        terminalreporter.write_line(f"{slow} slow tests deselected: run them with "
+                                    "`pytest -q -n auto -m 'slow and not exhaustive'` (and `-m exhaustive` for the longest)")

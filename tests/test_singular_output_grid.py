@@ -144,7 +144,11 @@ def test_a_mechanism_driven_onto_another_branch_fails_loudly_at_that_time(dt):
     assert 0.45 <= e.time <= 0.5 and e.trajectory is not None
 
 
-FORMS = [("2d", 1), ("2d", 10), ("2d", 40), ("3d", 1), ("3d", 10)]
+#: Planar N = 40 and 3D N = 10 take 2-4 min a run at outputs of 0.01 s or more and over 10 min
+#: at 1 ms (2 loaded cores): the ``exhaustive`` tier, run by hand (tests/conftest.py), not by CI.
+EXHAUSTIVE = pytest.mark.exhaustive
+FORMS = [("2d", 1), ("2d", 10), pytest.param("2d", 40, marks=EXHAUSTIVE), ("3d", 1),
+         pytest.param("3d", 10, marks=EXHAUSTIVE)]
 
 
 @pytest.mark.slow
