@@ -11,7 +11,7 @@ import warnings
 import numpy as np
 
 from ncgen.assembly.initial_state import consistent_state
-from ncgen.assembly.manifold import NEAR_SINGULAR, ManifoldProjector, robust_algebraic
+from ncgen.assembly.manifold import NEAR_SINGULAR, RATE_BLOCK, ManifoldProjector, robust_algebraic
 from ncgen.codegen.load import NoCompilerWarning
 from ncgen.errors import BranchWarning, CompilerNotFound, NcgenError, SimulationError, SimulationInterrupted
 from ncgen.interrupts import raise_if_interrupted, sticky_interrupt
@@ -571,13 +571,20 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
     since = None if auto or not watching else 0
     steps = [WATCHED_MAX_STEPS if watching else None]
 
+    top = [0]                             # the last output with a state
+
     def advance(k, n, max_steps=None):
         X[k + 1:k + n + 1], Z[k + 1:k + n + 1] = runner.advance(t[k], X[k], Z[k], columns[:, k:k + n], p, max_steps)
         R[k + 1:k + n + 1] = np.nan
+        top[0] = k + n
 
     def ratio(i) -> float:
+        """``σ_min/σ_max`` of A at output i, with those of the outputs after it up to
+        :data:`~ncgen.assembly.manifold.RATE_BLOCK` (evaluated together)."""
         if np.isnan(R[i, 0]):
-            R[i] = projector.ratio_rate(t[i], X[i])
+            j = max(i + 1, min(top[0] + 1, i + RATE_BLOCK))
+            R[i:j] = projector.ratio_rates(t[i:j], X[i:j])
+            raise_if_interrupted()
         return R[i, 0]
 
     def near(i, limit=NEAR_SINGULAR) -> bool:
@@ -622,6 +629,7 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
         X[k] = projector(t[k], X[k])
         X[k + 1], Z[k + 1] = bridge(t[k], t[k + 1], X[k], columns[:, k])
         R[k:k + 2] = np.nan
+        top[0] = k + 1
         return k + 1
 
     def single(k) -> int:
