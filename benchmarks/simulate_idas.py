@@ -17,7 +17,7 @@ import time
 os.environ["NCGEN_CACHE_DIR"] = tempfile.mkdtemp(prefix="ncgen-bench-")
 
 import ncgen as nc  # noqa: E402  (the cache directory must be set first)
-import ncgen.runtime.simulation as simulation  # noqa: E402
+import ncgen.runtime.idas_integrator as idas_integrator  # noqa: E402
 from ncgen.runtime.dae import load_dae  # noqa: E402
 from ncgen.runtime.idas import ChunkedIDAS  # noqa: E402
 
@@ -63,14 +63,14 @@ def main(sizes: list[int]) -> None:
                 continue
             elapsed, stats = run(model, **kw)
             print(f"{head} {name:<28} {elapsed:9.2f} {stats['nsteps']:6d} {stats['nlinsetups']:5d}")
-        chunks = simulation.CHUNKS
+        chunks = idas_integrator.CHUNKS
         try:
-            simulation.CHUNKS = 1
+            idas_integrator.CHUNKS = 1
             elapsed, stats = run(model, backend="compiled")
             print(f"{head} {'compiled, csparse, 1 chunk':<28} {elapsed:9.2f} {stats['nsteps']:6d} "
                   f"{stats['nlinsetups']:5d}")
         finally:
-            simulation.CHUNKS = chunks
+            idas_integrator.CHUNKS = chunks
 
 
 if __name__ == "__main__":

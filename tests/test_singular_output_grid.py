@@ -4,7 +4,7 @@ The N four-bar of IFToMM A02 (:mod:`test_singular_positions`: N + 1 cranks and N
 chain of parallelograms released at 45°, sixteen flat positions in 20 s, exact motion that of
 one pendulum).  A watched run (``project="auto"``, the default) checks ``σ_min/σ_max`` of A and
 places its IDAS calls and RATTLE bridges on an internal grid of at most
-``simulation.WATCHED_SAMPLE`` s, so the output grid (1 ms to 0.5 s) no longer decides where
+``idas_integrator.WATCHED_SAMPLE`` s, so the output grid (1 ms to 0.5 s) no longer decides where
 the near-singular band is looked for.  Before, an output every 0.05 s or more let IDAS cross a
 flat position between two outputs and end on the other branch, up to 2 m from the exact
 motion, without a word.
@@ -18,7 +18,7 @@ import pytest
 import ncgen as nc
 from ncgen.assembly.manifold import ManifoldProjector
 from ncgen.errors import BranchWarning, SimulationError
-from ncgen.runtime import simulation
+from ncgen.runtime import idas_integrator
 from test_singular_positions import G, THETA0, n_fourbar, n_fourbar_3d, tip_error
 
 TOL = {"rtol": 1e-10, "atol": 1e-10}
@@ -73,12 +73,12 @@ def test_a_coarse_watched_grid_is_caught_by_the_rate_of_the_conditioning():
     the rate of σ_min/σ_max at both ends says it could, and the interval is bridged.  The
     run stays on its branch over the eight flat positions of 10 s."""
     model = n_fourbar(1)
-    real = simulation.WATCHED_SAMPLE
+    real = idas_integrator.WATCHED_SAMPLE
     try:
-        simulation.WATCHED_SAMPLE = 0.1
+        idas_integrator.WATCHED_SAMPLE = 0.1
         traj = run(model, 10.0, 0.5)
     finally:
-        simulation.WATCHED_SAMPLE = real
+        idas_integrator.WATCHED_SAMPLE = real
     assert traj.info["watched_interval"] == pytest.approx(0.1)
     assert traj.complete and tip_error(traj, 1) < 3e-6
 
@@ -98,8 +98,8 @@ def test_the_branch_test_tells_a_passage_from_a_change_of_branch():
     a = np.radians(6.0)
     same = projector.departure(0.0, crank_tips(a, a), 0.05, crank_tips(-a, -a))
     other = projector.departure(0.0, crank_tips(a, a), 0.05, crank_tips(0.0, -a))
-    assert same == pytest.approx(np.sin(a), rel=1e-6) and same < simulation.BRANCH_DEPARTURE
-    assert other > 0.4 > simulation.BRANCH_DEPARTURE
+    assert same == pytest.approx(np.sin(a), rel=1e-6) and same < idas_integrator.BRANCH_DEPARTURE
+    assert other > 0.4 > idas_integrator.BRANCH_DEPARTURE
 
 
 def test_a_bridged_interval_that_changes_branch_is_a_loud_warning():
@@ -115,7 +115,7 @@ def test_a_bridged_interval_that_changes_branch_is_a_loud_warning():
     grid = np.round(np.arange(0.0, 0.5001, 0.01), 12)
     X = np.array([crank_tips(a, a) if t <= 0.31 else crank_tips(0.0, -a) for t in grid])
     with pytest.warns(BranchWarning, match=r"between t = 0\.31 s and 0\.32 s .*branch test"):
-        changes, largest = simulation._branch_changes(model, projector, Bridged(), grid, X)
+        changes, largest = idas_integrator._branch_changes(model, projector, Bridged(), grid, X)
     assert changes == [(0.31, 0.32)] and largest > 0.4
 
 

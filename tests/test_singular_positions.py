@@ -22,7 +22,7 @@ from scipy.integrate import solve_ivp
 import ncgen as nc
 from ncgen.codegen.load import NoCompilerWarning
 from ncgen.errors import CompilerNotFound, SimulationError
-from ncgen.runtime import simulation
+from ncgen.runtime import idas_integrator
 from ncgen.assembly.manifold import ManifoldProjector
 from ncgen.runtime.rattle_bridge import rattle_interval
 
@@ -109,7 +109,7 @@ def test_hand_over_and_return_hold_both_constraint_levels(monkeypatch):
     at a hundredth of the run's tolerances (at least 1e-12)."""
     model = n_fourbar(1)
     ends, tols = [], []
-    real = simulation._bridge.__call__
+    real = idas_integrator._bridge.__call__
 
     def recorded(self, t0, t1, x, column):
         x1, z1 = real(self, t0, t1, x, column)
@@ -117,7 +117,7 @@ def test_hand_over_and_return_hold_both_constraint_levels(monkeypatch):
         tols.append(self.tols)
         return x1, z1
 
-    monkeypatch.setattr(simulation._bridge, "__call__", recorded)
+    monkeypatch.setattr(idas_integrator._bridge, "__call__", recorded)
     nc.simulate(model, 2.0, 0.01, rtol=1e-10, atol=1e-10)
     assert len(ends) >= 8 and np.allclose(tols, 1e-12, rtol=1e-12, atol=0)
     nq = model.nq
@@ -132,9 +132,9 @@ def test_a_failed_watched_chunk_is_retried_up_to_just_before_where_idas_gave_up(
     from ncgen.runtime.idas import ChunkFailure
 
     at = ChunkFailure("IDA_ERR_FAIL", "At t = 0.253 and h = 1e-12, the error test failed repeatedly", "")
-    assert simulation._retry_length(at, 1.0, 0.01, 64) == 24
-    assert simulation._retry_length(at, 1.0, 0.01, 10) == 9
-    assert simulation._retry_length(ChunkFailure("X", "no time here", ""), 1.0, 0.01, 64) == 32
+    assert idas_integrator._retry_length(at, 1.0, 0.01, 64) == 24
+    assert idas_integrator._retry_length(at, 1.0, 0.01, 10) == 9
+    assert idas_integrator._retry_length(ChunkFailure("X", "no time here", ""), 1.0, 0.01, 64) == 32
 
 
 def test_idas_restarted_at_every_output_keeps_its_accuracy(monkeypatch):
@@ -142,7 +142,7 @@ def test_idas_restarted_at_every_output_keeps_its_accuracy(monkeypatch):
     alone): one IDAS call per output interval (2000 restarts in 20 s) stays within 1e-6 m of
     the exact motion (measured 3.3e-7 m; 5.4e-6 m with IDAS's own first step, 10⁻³ dt, whose
     order-1 error is far above rtol) — ``ChunkedIDAS.first_step``."""
-    monkeypatch.setattr(simulation, "CHUNKS", 10**6)
+    monkeypatch.setattr(idas_integrator, "CHUNKS", 10**6)
     monkeypatch.setattr(sys.modules[__name__], "THETA0", np.radians(-8.0))
     model = n_fourbar(1)
     traj = nc.simulate(model, 20.0, 0.01, rtol=1e-10, atol=1e-10, project=False)
@@ -160,7 +160,7 @@ def test_idas_restarted_at_every_output_keeps_its_accuracy(monkeypatch):
 def test_the_next_watched_call_ends_at_the_predicted_crossing(room, slope, bend, full, expected):
     """``room + n slope + n (n + 1)/2 bend = 0``: the call ends at the first output past the
     crossing when it is near, at a power of 2 below it when far, never beyond ``full``."""
-    assert simulation._chunk_to_limit(room, slope, bend, full) == expected
+    assert idas_integrator._chunk_to_limit(room, slope, bend, full) == expected
 
 
 @pytest.mark.parametrize("N", [1, 10])
@@ -214,7 +214,7 @@ def test_without_a_compiler_numpy_rattle_crosses_the_flat_positions(monkeypatch)
     def no_compiler(model, cflags=None):
         raise CompilerNotFound("no C compiler found (test)")
 
-    monkeypatch.setattr(simulation, "load_stepper", no_compiler)
+    monkeypatch.setattr(idas_integrator, "load_stepper", no_compiler)
     model = n_fourbar(1)
     with pytest.warns(NoCompilerWarning, match="NumPy RATTLE"):
         traj = nc.simulate(model, 0.6, 0.01, rtol=1e-8)
@@ -290,13 +290,13 @@ def test_a_failing_kkt_start_is_a_simulation_error(monkeypatch):
         return np.full(model.nq + model.nc, np.nan)
 
     calls = {"n": 0}
-    real = simulation.robust_algebraic
+    real = idas_integrator.robust_algebraic
 
     def fails_later(m, t, q, v, u, p):
         calls["n"] += 1
         return broken() if t > 0.25 else real(m, t, q, v, u, p)
 
-    monkeypatch.setattr(simulation, "robust_algebraic", fails_later)
+    monkeypatch.setattr(idas_integrator, "robust_algebraic", fails_later)
     with pytest.raises(SimulationError, match="not finite") as info:
         nc.simulate(model, 1.0, 0.01, rtol=1e-8)
     e = info.value

@@ -32,7 +32,7 @@ from ncgen.runtime.energy_balance import by_remainder
 from ncgen.runtime.inputs import input_samples, parameter_values, time_grid
 from ncgen.runtime.joint_dynamics import multipliers_at_samples
 from ncgen.runtime.library import compiled_functions
-from ncgen.runtime.simulation import initial_multipliers, initial_state, point_bytes
+from ncgen.runtime.run_start import initial_multipliers, initial_state, point_bytes
 from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.stepper import COMPOSITION_STAGES, ESTIMATE_MODES, _trajectory, fixed_scheme, step_inputs
 from ncgen.runtime.stepper_checks import is_conservative, untrusted_row

@@ -10,7 +10,7 @@ branch.  Two forms:
 * :func:`compiled_interval`: the model's compiled error-controlled stepper
   (``<model>_simulate_adaptive``, Richardson-extrapolated RATTLE of order 4, projected; see
   :mod:`ncgen.runtime.stepper`) over one interval at a tenth of IDAS's ``rtol``/``atol``
-  (:data:`ncgen.runtime.simulation.BRIDGE_TIGHTER`): accurate and cheap (generated C).
+  (:data:`ncgen.runtime.idas_integrator.BRIDGE_TIGHTER`): accurate and cheap (generated C).
   Used whenever a C compiler is available.
 * :func:`rattle_interval` (the fallback without a compiler): ``n`` NumPy RATTLE steps of
   ``h`` (second order), each solved with the truncated pseudo-inverse of ``A M⁻¹ Aᵀ``
