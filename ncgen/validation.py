@@ -6,7 +6,9 @@ TOML loader and the command line all go through these, so one input is judged by
 
 * names (:func:`name`): ASCII identifiers ``[A-Za-z_][A-Za-z0-9_]*`` of at most
   :data:`MAX_NAME` characters, because every name becomes part of C identifiers, file
-  names and CSV headers;
+  names and CSV headers; a system's name (:func:`system_name`) also starts with a letter
+  and has no ``__`` and no final ``_``, because it prefixes CasADi's function names
+  (``<system>_step``), which must;
 * numbers (:func:`as_array`, :func:`as_scalar`): real (not complex, not booleans, not
   strings or ``None``), finite, of magnitude at most :data:`MAX_MAGNITUDE` (so that
   products of two stay finite in double precision), integers too long for a double included;
@@ -31,6 +33,7 @@ MAX_MAGNITUDE = 1e100
 #: Largest array a run may allocate for its results (bytes); ``$NCGEN_MAX_BYTES`` overrides.
 MAX_ALLOCATION = 8 * 2**30
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+_SYSTEM_NAME = re.compile(r"[A-Za-z](?:_?[A-Za-z0-9])*")
 
 
 def name(value, what: str) -> str:
@@ -48,6 +51,28 @@ def name(value, what: str) -> str:
                "it starts with a digit" if value else "it is empty")
         raise InvalidName(f"{what}: expected {rule}, got {shown!r}: {why}")
     return value
+
+
+def system_name(value, what: str) -> str:
+    """``value`` if it is a :func:`name` that starts with a letter, has no ``__`` and does
+    not end with ``_`` (it prefixes CasADi function names, e.g. ``<system>_step``)."""
+    name(value, what)
+    if not _SYSTEM_NAME.fullmatch(value):
+        why = ("it does not start with a letter" if not value[0].isalpha() else
+               "it has two underscores in a row" if "__" in value else "it ends with '_'")
+        raise InvalidName(f"{what}: expected an identifier that starts with a letter, without '__' and not "
+                          f"ending with '_' (it prefixes C function names), got {value!r}: {why}")
+    return value
+
+
+def as_system_name(text: str, fallback: str) -> str:
+    """A :func:`system_name` made from ``text`` (a file stem, a robot's name): other characters
+    become ``_``, runs of ``_`` one, ``_`` at the ends dropped, ``fallback`` + ``_`` put before
+    a leading digit; ``fallback`` if nothing is left."""
+    s = re.sub(r"_+", "_", re.sub(r"[^A-Za-z0-9]", "_", text)).strip("_")[:MAX_NAME].rstrip("_")
+    if not s:
+        return fallback
+    return s if s[0].isalpha() else f"{fallback}_{s}"[:MAX_NAME].rstrip("_")
 
 
 def allocation(n_bytes: float, what: str, hint: str) -> None:

@@ -18,7 +18,7 @@ import ncgen as nc
 from ncgen import files
 from ncgen.cli import main
 from ncgen.errors import NcgenError
-from ncgen.validation import MAX_NAME, as_scalar, name
+from ncgen.validation import MAX_NAME, as_scalar, as_system_name, name
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
@@ -120,6 +120,25 @@ def test_names_one_rule():
                 lambda: nc.System("ß"), lambda: s.add_point("p", mass=1, position=(0, 0)).add_marker("é", (0, 0))):
         with pytest.raises(nc.ModelError, match="expected an identifier"):
             add()
+
+
+def test_system_names_prefix_casadi_functions():
+    """A system's name prefixes CasADi function names (``<system>_step``), which must start with
+    a letter and have no ``__``: such names are refused when written, and names made from a file
+    or a robot (``2dof_planar``) are made valid."""
+    for bad, why in (("_x", "does not start with a letter"), ("a__b", "two underscores"), ("b_", "ends with '_'")):
+        with pytest.raises(nc.ModelError, match=f"system name: .*{why}"):
+            nc.System(bad)
+    assert [as_system_name(s, "robot") for s in ("2dof_planar", "__a--b__", "", "ur5")] == \
+        ["robot_2dof_planar", "a_b", "robot", "ur5"]
+    urdf = ('<robot name="2dof-planar"><link name="base"/><link name="arm"><inertial><mass value="1"/>'
+            '<inertia ixx="0.1" iyy="0.1" izz="0.1" ixy="0" ixz="0" iyz="0"/></inertial></link>'
+            '<joint name="j" type="revolute"><parent link="base"/><child link="arm"/><axis xyz="0 0 1"/>'
+            '<limit effort="1" velocity="1" lower="-1" upper="1"/></joint></robot>')
+    model = nc.System.from_urdf(urdf).build()
+    assert model.name == "robot_2dof_planar"
+    x1 = nc.step_function(model, 0.01)(np.concatenate([model.q0, model.v0]), np.zeros(model.nu))
+    assert np.all(np.isfinite(x1)) and np.max(np.abs(x1[:model.nq] - model.q0)) < 0.01
 
 
 def test_numbers_one_rule():

@@ -22,7 +22,7 @@ from ncgen.model.members import Ground, Member, NodeRef, model_name
 from ncgen.reproducible import frame_along, norm
 from ncgen.symbolic.coordinates import coordinate_type
 from ncgen.symbolic.member import RigidMember
-from ncgen.validation import as_scalar, as_vector, rotation
+from ncgen.validation import as_scalar, as_vector, rotation, system_name
 
 DEFAULT_GRAVITY = (0.0, 0.0, -9.81)
 
@@ -31,7 +31,10 @@ class System:
     """A multibody system under construction; :meth:`build` turns it into a :class:`Model`."""
 
     def __init__(self, name: str, gravity=DEFAULT_GRAVITY):
-        model_name(name, "system name")
+        try:
+            system_name(name, "system name")
+        except NcgenError as e:
+            raise ModelError(str(e)) from None
         g = np.asarray(gravity, dtype=float).reshape(-1) if np.ndim(gravity) == 1 else None
         if g is None or g.size not in (2, 3):
             raise ModelError(f"gravity: expected 2 (planar) or 3 numbers, got {gravity!r}")

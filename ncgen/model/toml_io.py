@@ -44,7 +44,7 @@ from ncgen.model.joint_base import Joint
 from ncgen.model.joints import JOINT_TYPES, CoordinateDriver, Mimic
 from ncgen.model.members import NodeRef
 from ncgen.model.shapes import shape_from_table
-from ncgen.validation import MAX_NAME, as_scalar
+from ncgen.validation import as_scalar, as_system_name
 
 TOP_KEYS = ("system", "parameters", "inputs", "members", "joints", "forces", "contacts", "initial",
             "initial_rates", "controller")
@@ -560,9 +560,7 @@ def _contact_entries(c) -> dict:
 
 
 def _default_name(origin: str) -> str:
-    stem = Path(origin).stem if origin != "<toml text>" else "model"
-    name = "".join(c if c.isascii() and (c.isalnum() or c == "_") else "_" for c in stem)[:MAX_NAME]
-    return name if name.isidentifier() and not name[0].isdigit() else "model"
+    return as_system_name(Path(origin).stem if origin != "<toml text>" else "model", "model")
 
 
 # ======================================================================= writing

@@ -44,6 +44,7 @@ import numpy as np
 
 from ncgen.errors import ModelError
 from ncgen.model.urdf_checks import check_urdf_document
+from ncgen.validation import as_system_name
 
 MOVABLE = ("revolute", "continuous", "prismatic")
 
@@ -148,7 +149,7 @@ def system_from_urdf(source, system_class, *, floating_base: bool = False, gravi
     for g in groups.values():
         _lump(g, links, pose)
 
-    s = system_class(identifier(name or robot.name or "robot"), gravity=gravity)
+    s = system_class(name if name is not None else as_system_name(robot.name or "", "robot"), gravity=gravity)
     member_of: dict[str, object] = {}
     grounded = not floating_base
     for gname, g in groups.items():
