@@ -169,6 +169,24 @@ def test_a_blown_up_batch_run_keeps_only_its_trusted_rows(repelled):
     assert np.array_equal(single.q, run.q[0, :len(single.t)]) and len(single.t) == kept
 
 
+def test_a_failed_error_controlled_run_keeps_only_its_trusted_rows(repelled):
+    """The error control accepts the run-away step by step until its steps shrink to nothing;
+    checked, only the rows before the shadow run's global estimate passes 1 % of the size are
+    attached, and they follow the closed form ``c_x = 1.5 cosh(20 t)``."""
+    with pytest.raises(SimulationError, match="failed between t = ") as bare:
+        nc.simulate(repelled, 40.0, 0.01, method="stepper", p={"k": K}, rtol=1e-8, check=False)
+    with pytest.raises(SimulationError, match=r"Before that, its estimated global error in q \(against a shadow "
+                                              r"run at 10x looser tolerances\) reached .* so only the rows before "
+                                              r"it are kept") as checked:
+        nc.simulate(repelled, 40.0, 0.01, method="stepper", p={"k": K}, rtol=1e-8)
+    kept, whole = checked.value.trajectory, bare.value.trajectory
+    assert 10 < len(kept.t) < len(whole.t) and checked.value.time == kept.t[-1] and not kept.complete
+    assert np.array_equal(kept.q, whole.q[:len(kept.t)])
+    cx = 0.5 * (kept.q[:, 0] + kept.q[:, 2])
+    scale = 1.5 * np.cosh(np.sqrt(K) * kept.t)
+    assert np.max(np.abs(cx - scale) / scale) < 1e-6
+
+
 # ------------------------------------------------------------------ batches and pickles
 @pytest.mark.parametrize("kw, said", [
     ({"p": {"omega": [1.0, [2.0, 3.0]]}}, r"simulate_batch: p\['omega'\]: the runs' values are ragged"),

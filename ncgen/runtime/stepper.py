@@ -62,8 +62,8 @@ from ncgen.runtime.energy_balance import balance_parts, by_remainder
 from ncgen.runtime.joint_dynamics import multipliers_at_samples
 from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.stepper_checks import (SHADOW_FACTOR, check_fixed, check_global, contact_report, energy_report,
-                                          error_estimate, is_conservative, shadow_estimates, shadow_report,
-                                          warn_unconverged)
+                                          error_estimate, is_conservative, shadow_estimates,
+                                          shadow_report, trusted_before_failure, warn_unconverged)
 from ncgen.runtime.stepper_library import load_stepper
 from ncgen.runtime.trajectory import NAME_KEYS, Trajectory, derived_outputs
 
@@ -191,10 +191,16 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, co
     if status != 0:
         message = (f"simulation of {model.name!r} with the error-controlled stepper (rtol {rtol:g}, atol "
                    f"{atol:g}) failed between t = {t[rows]:.6g} s and {t[rows + 1]:.6g} s (last step tried "
-                   f"{h_next:.3g} s): {STATUS.get(status, f'status {status}')}. The trajectory up to "
-                   f"t = {t[rows]:.6g} s is attached to this error as .trajectory.")
-        traj.info["message"] = message
-        raise SimulationError(message, time=float(t[rows]), trajectory=traj)
+                   f"{h_next:.3g} s): {STATUS.get(status, f'status {status}')}.")
+        kept, why = traj, ""
+        if check:
+            with Ticker(f"stepper: {model.name}, shadow run at rtol {SHADOW_FACTOR * rtol:g}"):
+                eq = shadow_estimates(Q, V, run(SHADOW_FACTOR * rtol, SHADOW_FACTOR * atol), rows)[0] \
+                    if estimate and rows else None
+            kept, why = trusted_before_failure(model, traj, S[:rows], eq)
+        message += f"{why} The trajectory up to t = {kept.t[-1]:.6g} s is attached to this error as .trajectory."
+        kept.info.update(complete=False, message=message)
+        raise SimulationError(message, time=float(kept.t[-1]), trajectory=kept)
     if shadow is not None:
         eq, ev = shadow_estimates(Q, V, shadow, rows)
         same_steps = np.array_equal(S[:rows, 0], shadow[3][:rows, 0])

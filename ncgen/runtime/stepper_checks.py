@@ -108,6 +108,41 @@ def check_fixed(model, traj, S: np.ndarray, h: float, substeps: int, contacts: b
     raise SimulationError(message, time=float(kept.t[-1]), trajectory=kept)
 
 
+def trusted_before_failure(model, traj, S: np.ndarray, eq: np.ndarray | None):
+    """``(traj, reason)`` for the rows an error-controlled run accepted before it failed: each
+    step met the tolerance, but a run away can be accepted step by step.  The head of
+    ``traj`` before the first row whose energy error (change of a conservative model,
+    balance ``E − E0 − W`` otherwise) passes :data:`ENERGY_FRACTION` of its scale or is not
+    finite, or whose global estimate in q ``eq`` (from a shadow run, or None) passes
+    :data:`ERROR_FRACTION` of the model's size, whichever comes first, and why (``(traj, "")``
+    when none does)."""
+    if not len(S):
+        return traj, ""
+    work = np.concatenate([[0.0], S[:, STATS.index("work")]])
+    conservative = traj.info["energy"]["conservative"]
+    scale = np.maximum(_energy_scale(traj, work)[1:], 1e-300)
+    e_rel = energy_error(traj, work, conservative)[1:] / scale
+    bad_energy = ~(e_rel <= ENERGY_FRACTION)                       # NaN counts as bad
+    row_energy = int(np.argmax(bad_energy)) if bad_energy.any() else len(S)
+    row_error = len(S) if eq is None else untrusted_global_row(model, eq[:len(S)])
+    row_error = len(S) if row_error is None else row_error
+    row = min(row_energy, row_error)
+    if row == len(S):
+        return traj, ""
+    t_row = float(traj.t[row + 1])
+    if row_error < row_energy:
+        why = (f"its estimated global error in q (against a shadow run at {SHADOW_FACTOR:g}x looser tolerances) "
+               f"reached {eq[row]:.3g} m by t = {t_row:.6g} s, more than {ERROR_FRACTION:g} of the model's size")
+    elif np.isfinite(e_rel[row]):
+        why = (f"its energy error grew by {e_rel[row]:.3g} of its energy scale by t = {t_row:.6g} s "
+               f"(more than {ENERGY_FRACTION:g})")
+    else:
+        why = f"its energy is no longer finite by t = {t_row:.6g} s"
+    kept = traj.head(row + 1)
+    kept.info["energy"] = energy_report(kept, work[:row + 1], conservative)
+    return kept, f" Before that, {why}, so only the rows before it are kept."
+
+
 def check_global(model, traj, eq, rtol, atol):
     """Raise where the global estimate in q passes 1 % of the model's size (as for fixed
     steps), warn (:class:`~ncgen.errors.AccuracyWarning`) where it passes
