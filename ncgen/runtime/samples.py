@@ -82,19 +82,20 @@ class Samples:
     @classmethod
     def latin_hypercube(cls, n: int, bounds: dict, seed=None) -> "Samples":
         """``n`` runs, a Latin hypercube in the box ``bounds`` = ``{name: (low, high)}``."""
-        from scipy.stats import qmc
         names, low, high = _bounds(bounds)
-        return cls(names, qmc.scale(qmc.LatinHypercube(d=len(names), seed=seed).random(_count(n)), low, high))
+        n = _count(n)                           # refused before SciPy's seconds of importing
+        from scipy.stats import qmc
+        return cls(names, qmc.scale(qmc.LatinHypercube(d=len(names), seed=seed).random(n), low, high))
 
     @classmethod
     def sobol(cls, n: int, bounds: dict, seed=None) -> "Samples":
         """``n`` runs (a power of two keeps the sequence balanced), scrambled Sobol points in ``bounds``."""
-        from scipy.stats import qmc
         names, low, high = _bounds(bounds)
         n = _count(n)
         if n & (n - 1):
             raise NcgenError(f"sobol: n = {n}: expected a power of two (Sobol points are balanced only then); "
                              f"e.g. {1 << (n - 1).bit_length()}")
+        from scipy.stats import qmc
         return cls(names, qmc.scale(qmc.Sobol(d=len(names), seed=seed).random(n), low, high))
 
     @classmethod
