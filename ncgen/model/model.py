@@ -351,6 +351,11 @@ class Model:
             known = ", ".join(self.members) or "none"
             raise ModelError(f"no member named {name!r} in model {self.name!r} (members: {known})") from None
 
+    def _repr_html_(self) -> str:
+        """Jupyter's display: a table of the model's sizes (:mod:`ncgen.viz.notebook`)."""
+        from ncgen.viz.notebook import model_table
+        return model_table(self)
+
     def __repr__(self) -> str:
         return (f"<Model {self.name!r}: dim={self.dim}, nq={self.nq}, nc={self.nc}, dof={self.dof}, "
                 f"nu={self.nu}, np={self.np}>")

@@ -246,6 +246,11 @@ class Trajectory:
         driven = self.u is not None and bool(np.any(np.asarray(self.u) != 0))
         return True if self.model is None else is_conservative(self.model, inputs=driven)
 
+    def _repr_html_(self) -> str | None:
+        """Jupyter's display: the interactive 3D page in the cell (:mod:`ncgen.viz.notebook`)."""
+        from ncgen.viz.notebook import trajectory_cell
+        return trajectory_cell(self)
+
     def __repr__(self) -> str:
         span = f"t = {self.t[0]:g} ... {self.t[-1]:g} s" if len(self) else "empty"
         return (f"<Trajectory {self.model_name!r}: {len(self)} steps, {span}"
