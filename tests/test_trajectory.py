@@ -1,5 +1,6 @@
 """Trajectory: derived quantities, points and poses, summary, npz/csv files."""
 import csv
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -131,3 +132,25 @@ def test_save_rejects_other_formats_and_leaves_nothing(tmp_path, traj, monkeypat
         traj.save(tmp_path / "old.npz")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["old.npz"]
     assert (tmp_path / "old.npz").read_bytes() == b"previous"
+
+
+def test_derived_outputs_are_computed_on_first_access_and_equal_the_eager_ones():
+    """A joint-space run returns before its natural coordinates, multipliers, energies and
+    residuals are evaluated; read, they equal the model's functions at the states, the
+    energy is conserved (a passive pendulum) and a pickle carries them computed."""
+    import pickle
+
+    from ncgen.runtime import outputs
+
+    model = nc.System.from_toml(Path(__file__).resolve().parents[1] / "examples" / "double_pendulum.toml").build()
+    traj = simulate(model, 1.0, 0.01, method="joint", rtol=1e-10, atol=1e-12)
+    lazy = ("q", "v", "lam", "kinetic", "potential", "constraint_residual", "markers")
+    assert all(callable(traj._arrays[key]) for key in lazy)
+    copy = pickle.loads(pickle.dumps(traj))
+    assert not any(callable(value) for value in copy._arrays.values())
+    T, V = outputs.energies(model, traj.t, traj.q, traj.v, model.p0)
+    assert np.array_equal(traj.kinetic, T) and np.array_equal(traj.potential, V)
+    assert np.array_equal(copy.q, traj.q) and np.array_equal(copy.lam, traj.lam)
+    assert traj.energy_drift < 1e-7 * traj.energy_scale and np.max(traj.constraint_residual) < 1e-9
+    lam = np.array(model.functions["accel"](traj.t[5], traj.q[5], traj.v[5], traj.u[5], model.p0)[1]).reshape(-1)
+    assert np.allclose(traj.lam[5], lam, rtol=1e-9, atol=1e-9)

@@ -34,7 +34,7 @@ from ncgen.errors import CompilerNotFound, ModelError, NcgenError, SimulationErr
 from ncgen.runtime.feedback import FeedbackFailed, call_feedback, with_partial
 from ncgen.interrupts import call_interruptibly
 from ncgen.runtime.progress import Progress
-from ncgen.runtime.trajectory import Trajectory
+from ncgen.runtime.trajectory import Trajectory, once
 
 INTEGRATORS = ("dopri5", "rk4")
 #: The run is cut into at most this many calls of the C loop (progress updates).
@@ -269,11 +269,15 @@ def _trajectory(model, loop: JointLoop, t, X, W, p, info) -> Trajectory:
     """The natural-coordinate trajectory of the joint states ``X`` (module docstring)."""
     js = model.joint_space
     n = len(t)
-    Q, V = (np.array(y).T for y in loop.mapped("tree", n)(X[:, :js.nq].T, X[:, js.nq:].T))
+    X, W = X.copy(), W[:n].copy()
     P = np.repeat(np.asarray(p, float)[:, None], n, axis=1)
-    Wt = W[:n].T if model.nu else np.zeros((0, n))
-    Ua = np.array(loop.mapped("ode", n)(t[None, :], X.T, Wt, P)[2]).T.reshape(n, model.nu)
-    lam = np.array(loop.mapped("accel", n)(t[None, :], Q.T, V.T, Ua.T, P)[1]).T.reshape(n, model.nc)
-    traj = Trajectory.from_states(model, t, Q, V, lam, Ua, p, info)
+    natural = once(lambda: [np.array(y).T for y in loop.mapped("tree", n)(X[:, :js.nq].T, X[:, js.nq:].T)])
+    applied = once(lambda: np.array(loop.mapped("ode", n)(t[None, :], X.T, W.T if model.nu else np.zeros((0, n)),
+                                                            P)[2]).T.reshape(n, model.nu))
+    traj = Trajectory.from_states(
+        model, t, lambda: natural()[0], lambda: natural()[1],
+        lambda: np.array(loop.mapped("accel", n)(t[None, :], natural()[0].T, natural()[1].T, applied().T,
+                                                 P)[1]).T.reshape(n, model.nc),
+        applied, p, info)
     traj.qj, traj.vj = X[:, :js.nq].copy(), X[:, js.nq:].copy()
     return traj

@@ -46,56 +46,111 @@ JOINT_ARRAY_KEYS = ("qj", "vj")
 def derived_outputs(model, t, q, v, p, impulses=None) -> tuple[dict, dict]:
     """``(names, arrays)`` of the outputs beyond the states, energies and markers: the joint
     states (``model.joint_names``) and, for a model with contacts, the contact outputs —
-    from the nonsmooth stepper's ``impulses`` per output interval, or from the compliant law."""
+    from the nonsmooth stepper's ``impulses`` per output interval, or from the compliant law.
+    ``q`` and ``v``: the states, or functions giving them; the arrays are functions computing
+    them (see :class:`Trajectory`)."""
+    q, v = (x if callable(x) else (lambda x=x: x) for x in (q, v))
     js = model.joint_space
     names = dict(joint_names=js.joint_names, joint_position_names=js.position_names,
                  joint_rate_names=js.rate_names)
-    qj, vj = outputs.joint_states(model, q, v)
-    arrays = {"qj": qj, "vj": vj}
+    joint = once(lambda: outputs.joint_states(model, q(), v()))
+    arrays = {"qj": lambda: joint()[0], "vj": lambda: joint()[1]}
     if getattr(model, "nk", 0):
         names["contact_names"] = model.contact_names
-        arrays.update(contact_outputs.impulse_outputs(model, t, q, p, impulses) if impulses is not None
-                      else contact_outputs.smooth_outputs(model, t, q, v, p))
+        contact = once(lambda: contact_outputs.impulse_outputs(model, t, q(), p, impulses) if impulses is not None
+                       else contact_outputs.smooth_outputs(model, t, q(), v(), p))
+        arrays.update({key: (lambda key=key: contact()[key]) for key in contact_outputs.KEYS})
     return names, arrays
 
 
+class _Array:
+    """An array attribute of :class:`Trajectory`, given either as an array or as a function of
+    no arguments that computes it, called on first access (the derived outputs of a run cost
+    nothing until read); the result is kept."""
+
+    def __set_name__(self, owner, name: str):
+        self.name = name
+
+    def __get__(self, obj, owner=None):
+        if obj is None:
+            return self
+        value = obj._arrays[self.name]
+        if callable(value):
+            value = obj._arrays[self.name] = value()
+        return value
+
+    def __set__(self, obj, value):
+        obj._arrays[self.name] = value
+
+
+def once(f):
+    """``f()`` computed at the first call and kept (several arrays from one evaluation)."""
+    kept = []
+
+    def value():
+        if not kept:
+            kept.append(f())
+        return kept[0]
+    return value
+
+
+def _float(value, shape=None):
+    """``value`` (an array or a function computing one) as floats (of ``shape``), lazily."""
+    if callable(value):
+        return lambda: _float(value(), shape)
+    a = np.asarray(value, dtype=float)
+    return a if shape is None else a.reshape(shape)
+
+
 class Trajectory:
-    """Simulated states and derived quantities (see the module docstring)."""
+    """Simulated states and derived quantities (see the module docstring).  Any array may be
+    given as a function computing it (evaluated on first access)."""
 
     def __init__(self, *, model_name: str, names: dict, info: dict, model=None, **arrays):
+        self._arrays = {}
         self.model = model
         self.model_name = model_name
         for key in NAME_KEYS:
             setattr(self, key, list(names[key]))
         for key in ARRAY_KEYS:
-            setattr(self, key, np.asarray(arrays[key], dtype=float))
+            setattr(self, key, _float(arrays[key]))
         for key in JOINT_NAME_KEYS:
             setattr(self, key, list(names.get(key, [])))
         for key in JOINT_ARRAY_KEYS:
             x = arrays.get(key)
-            setattr(self, key, np.zeros((len(self.t), 0)) if x is None else np.asarray(x, dtype=float))
+            setattr(self, key, np.zeros((len(self.t), 0)) if x is None else _float(x))
         self.contact_names = list(names.get("contact_names", []))
         n, nk = len(self.t), len(self.contact_names)
-        shapes = {"gap": (n, nk), "contact_normal": (n, nk), "contact_tangent": (n, nk, self.dim - 1),
-                  "contact_state": (n, nk)}
         for key in contact_outputs.KEYS:
             value = arrays.get(key)
-            setattr(self, key, np.zeros(shapes[key]) if value is None else np.asarray(value, dtype=float))
-        self.contact_state = self.contact_state.astype(int)
+            shape = (n, nk, self.dim - 1) if key == "contact_tangent" else (n, nk)
+            setattr(self, key, np.zeros(shape) if value is None else _float(value))
+        state = self._arrays["contact_state"]
+        self.contact_state = (lambda: _float(state)().astype(int)) if callable(state) else state.astype(int)
         self.info = dict(info)
+
+    def __getstate__(self) -> dict:
+        """Pickled with every array computed (functions do not pickle)."""
+        state = dict(self.__dict__)
+        state["_arrays"] = {key: getattr(self, key) for key in self._arrays}
+        return state
 
     @classmethod
     def from_states(cls, model, t, q, v, lam, u, p, info: dict, impulses=None) -> "Trajectory":
-        """Evaluate the derived quantities of the states ``(t, q, v, lam)`` of ``model``;
+        """The trajectory of the states ``(t, q, v, lam)`` of ``model`` (each an array or a
+        function computing it), its derived quantities computed on first access;
         ``impulses``: the nonsmooth stepper's contact impulse sums per output interval."""
-        t, q, v = np.asarray(t, float), np.asarray(q, float), np.asarray(v, float)
-        T, V = outputs.energies(model, t, q, v, p)
-        r, rd = outputs.residuals(model, t, q, v, p)
+        t = np.asarray(t, float)
+        q, v = (once(_float(x)) if callable(x) else _float(x) for x in (q, v))
+        Q, V = (x if callable(x) else (lambda x=x: x) for x in (q, v))
+        energy = once(lambda: outputs.energies(model, t, Q(), V(), p))
+        residual = once(lambda: outputs.residuals(model, t, Q(), V(), p))
         names = {key: getattr(model, key) for key in NAME_KEYS}
-        extra_names, extra = derived_outputs(model, t, q, v, p, impulses)
+        extra_names, extra = derived_outputs(model, t, Q, V, p, impulses)
         return cls(model_name=model.name, names={**names, **extra_names}, info=info, model=model, t=t, q=q, v=v,
-                   lam=lam, u=u, p=p, kinetic=T, potential=V, constraint_residual=r, velocity_residual=rd,
-                   markers=outputs.markers(model, q, v), **extra)
+                   lam=lam, u=u, p=p, kinetic=lambda: energy()[0], potential=lambda: energy()[1],
+                   constraint_residual=lambda: residual()[0], velocity_residual=lambda: residual()[1],
+                   markers=lambda: outputs.markers(model, Q(), V()), **extra)
 
     def head(self, n: int) -> "Trajectory":
         """The first ``n`` samples (every per-sample array cut, names and ``info`` copied)."""
@@ -110,9 +165,13 @@ class Trajectory:
     def __len__(self) -> int:
         return len(self.t)
 
+    t, q, v, lam, u, p, kinetic, potential = (_Array() for _ in range(8))
+    constraint_residual, velocity_residual, markers, qj, vj = (_Array() for _ in range(5))
+    gap, contact_normal, contact_tangent, contact_state = (_Array() for _ in contact_outputs.KEYS)
+
     @property
     def dim(self) -> int:
-        return self.markers.shape[2]
+        return self.model.dim if self.model is not None else self.markers.shape[2]
 
     @property
     def energy(self) -> np.ndarray:
