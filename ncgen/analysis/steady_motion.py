@@ -1,0 +1,99 @@
+"""Linearisation of a rolling system about a steady motion, in chosen coordinates.
+
+A steady motion (relative equilibrium) moves the system along its symmetries: rigid
+translations along the plane and spins of axisymmetric wheels about their axles, both
+linear maps of the natural coordinates.  With ``x = [q; v]``, the reference is
+``x(t) = (G(t) q₀ + t T, G(t) v₀)``, ``G(t) = exp(t K)`` (``K``: the spins' generator,
+``T``: the translation velocity), so ``v₀ = T + K q₀`` and ``a(q₀, v₀) = K² q₀``.  Writing a
+perturbation as ``δx = diag(G, G) ξ`` gives the time-invariant ``ξ̇ = (J − diag(K, K)) ξ``,
+``J = ∂[v; a]/∂x`` at ``x₀``, on the tangent space of the constraint manifold.
+
+Chosen coordinates ``y(q)`` invariant under the symmetries (a lean, a steer angle) obey
+on that space closed equations ``M ÿ + C ẏ + K y = f``, where ``f`` is the generalised
+force conjugate to ``y`` (the natural-coordinate force ``(∂y/∂q)ᵀ f``).  They are found
+from the state matrix of ``[y; ẏ]`` (``ẏ = y_q v``) restricted to the tangent space, and
+``M⁻¹ = ∂ÿ/∂f``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+from scipy.linalg import null_space
+
+from ncgen.assembly.manifold import RANK_TOL
+from ncgen.errors import NcgenError
+
+
+@dataclass(frozen=True)
+class SecondOrder:
+    """``M ÿ + C ẏ + K y = f`` about a steady motion, and how well its premises held:
+    ``closure`` (largest residual of the closed equations of ``[y; ẏ]`` on the tangent
+    space, relative), ``reference`` (``|a(q₀, v₀) − K_g² q₀|∞``, m/s²) and
+    ``constraints`` (``|Φ̂(q₀)|∞``, ``|Â(q₀) v₀|∞``)."""
+    M: np.ndarray
+    C: np.ndarray
+    K: np.ndarray
+    closure: float
+    reference: float
+    constraints: tuple[float, float]
+
+    def state_matrix(self) -> np.ndarray:
+        """``d/dt [y; ẏ] = S [y; ẏ]`` with ``f = 0``."""
+        m = self.M.shape[0]
+        Mi = np.linalg.inv(self.M)
+        return np.block([[np.zeros((m, m)), np.eye(m)], [-Mi @ self.K, -Mi @ self.C]])
+
+    def eigenvalues(self) -> np.ndarray:
+        """Eigenvalues of :meth:`state_matrix` (1/s), sorted by real part then imaginary part."""
+        lam = np.linalg.eigvals(self.state_matrix())
+        return lam[np.lexsort((lam.imag, lam.real))]
+
+
+def _tangent_basis(G: np.ndarray, n_holonomic: int, nq: int) -> np.ndarray:
+    """A basis of the null space of ``G = [[Φ̂_q, 0], [D, Â]]`` (the Jacobian of ``[Φ̂; Â v]``
+    by ``[q; v]``): ``δq`` in the null space of ``Φ̂_q``, ``δv = −Â⁺ D δq`` plus the null
+    space of ``Â`` (two small decompositions instead of one of twice the size)."""
+    Nq = null_space(G[:n_holonomic, :nq], rcond=RANK_TOL)
+    D, A = G[n_holonomic:, :nq], G[n_holonomic:, nq:]
+    Nv = null_space(A, rcond=RANK_TOL)
+    dv = -np.linalg.lstsq(A, D @ Nq, rcond=None)[0]
+    return np.block([[Nq, np.zeros((nq, Nv.shape[1]))], [dv, Nv]])
+
+
+def coordinate_function(y, nq: int) -> ca.Function:
+    """``y`` as a CasADi function ``q -> (y, y_q, ∂(y_q v)/∂[q; v])`` (``y``: a function of the
+    natural coordinates, SX in and out)."""
+    q, v = ca.SX.sym("q", nq), ca.SX.sym("v", nq)
+    yq = y(q)
+    Y = ca.jacobian(yq, q)
+    yd = ca.mtimes(Y, v)
+    return ca.Function("y", [q, v], [yq, Y, ca.jacobian(ca.vertcat(yq, yd), ca.vertcat(q, v))])
+
+
+def linearize_steady(system, q0, v0, K_spin, coordinates: ca.Function) -> SecondOrder:
+    """:class:`SecondOrder` equations of ``coordinates`` (from :func:`coordinate_function`)
+    about the steady motion of ``system`` (:class:`ncgen.assembly.nonholonomic.RollingSystem`)
+    through ``(q0, v0)``, whose spins have the generator ``K_spin`` (nq × nq)."""
+    nq = system.nq
+    q0, v0 = np.asarray(q0, float), np.asarray(v0, float)
+    K_spin = np.asarray(K_spin, float)
+    zero = np.zeros(nq)
+    J, a_f = (np.asarray(x) for x in system.jacobians(q0, v0, zero))
+    a0 = np.asarray(system.accel(q0, v0, zero)[0]).ravel()
+    reference = float(np.max(np.abs(a0 - K_spin @ (K_spin @ q0))))
+    Jc = J - np.kron(np.eye(2), K_spin)
+    N = _tangent_basis(np.asarray(system.tangent(q0, v0)), system.n_holonomic, nq)
+    _, Yq, Y = (np.asarray(x) for x in coordinates(q0, v0))
+    m = Yq.shape[0]
+    YN = Y @ N
+    if np.linalg.matrix_rank(YN, tol=RANK_TOL * np.linalg.norm(YN)) < 2 * m:
+        raise NcgenError(f"linearize_steady: the {m} coordinates and their rates are not independent "
+                         "on the constraint manifold at this state; choose other coordinates")
+    rates = Y @ Jc @ N
+    S = rates @ np.linalg.pinv(YN)
+    closure = float(np.max(np.abs(rates - S @ YN)) / max(1.0, np.max(np.abs(rates))))
+    M = np.linalg.inv(Yq @ a_f @ Yq.T)
+    return SecondOrder(M=M, C=-M @ S[m:, m:], K=-M @ S[m:, :m], closure=closure, reference=reference,
+                       constraints=system.residuals(q0, v0))
