@@ -23,7 +23,8 @@ import casadi as ca
 import numpy as np
 from scipy.optimize import brentq
 
-from ncgen.analysis.steady_motion import SecondOrder, coordinate_function, linearize_steady
+from ncgen.analysis.steady_motion import (SecondOrder, coordinate_function, linearize_steady, spin_generator,
+                                          translation_rate)
 from ncgen.assembly.nonholonomic import RollingSystem
 from ncgen.errors import ModelError, NcgenError
 from ncgen.model.joints import Revolute
@@ -93,46 +94,6 @@ def whipple_system(par: WhippleParameters) -> tuple[System, list[RollingDisc]]:
     s.add_joint(Revolute(H, F, at=(par.w, 0.0, par.r_F), axis=(0.0, 1.0, 0.0), name="front_axle"))
     discs = [RollingDisc(R, radius=par.r_R), RollingDisc(F, radius=par.r_F)]
     return s, discs
-
-
-def spin_generator(model, body: str, axle) -> np.ndarray:
-    """``K`` (nq × nq): the rate of the natural coordinates when ``body`` (coordinates
-    ``ruvw``) spins at 1 rad/s about ``axle`` (body axes) through its centre of mass,
-    everything else still; linear in q, so ``K q`` is that velocity at any q."""
-    idx = model.layout.member_indices(body)
-    if len(idx) != 12 or any(i is None for i in idx):
-        raise ModelError(f"spin_generator: body {body!r}: expected a body with its own 12 "
-                         "coordinates (ruvw)")
-    R0, p0 = (np.asarray(x) for x in model.functions["poses"](model.q0))
-    k = model.member_names.index(body)
-    R0, p0 = R0[:, 3 * k:3 * k + 3], p0[:, k]
-    q = model.q0[idx]
-    Xbar = R0.T @ q[3:].reshape(3, 3, order="F")
-    rbar = R0.T @ (q[:3] - p0)
-    a = np.asarray(axle, float) / np.linalg.norm(axle)
-    hat = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-    Xi = np.linalg.inv(Xbar)
-    G, g_r = Xi @ hat @ Xbar, Xi @ hat @ rbar
-    K = np.zeros((model.nq, model.nq))
-    I3 = np.eye(3)
-    for j in range(3):
-        cols = idx[3 + 3 * j:6 + 3 * j]
-        K[np.ix_(idx[:3], cols)] = g_r[j] * I3
-        for m in range(3):
-            K[np.ix_(idx[3 + 3 * m:6 + 3 * m], cols)] = G[j, m] * I3
-    return K
-
-
-def translation_rate(model, direction) -> np.ndarray:
-    """The natural coordinates' rate when every member translates at unit velocity along
-    ``direction`` (points move, vectors do not)."""
-    d = np.asarray(direction, float)
-    rate = np.zeros(model.nq)
-    for i, name in enumerate(model.coordinate_names):
-        _, slot, axis = name.rsplit(".", 2)
-        if slot.startswith("r"):
-            rate[i] = d["xyz".index(axis)]
-    return rate
 
 
 class WhippleBicycle:

@@ -1,7 +1,8 @@
 """Nonholonomic constraints ``B(q) v = 0`` beside a model's holonomic ones.
 
-:class:`RollingSystem` joins a built model and its rolling discs
-(:class:`ncgen.model.rolling.RollingDisc`).  Per disc of radius ρ on a body with pose
+:class:`RollingSystem` joins a built model and its nonholonomic elements
+(:class:`ncgen.model.rolling.RollingDisc`, :class:`~ncgen.model.rolling.KnifeEdge`, whose
+``equations`` give their rows).  Per disc of radius ρ on a body with pose
 ``(R, p)`` and world axle ``a = R ā`` (ā the axle in body axes), with ``n = e_z`` the
 plane's normal and ``d = n − (n·â) â`` the direction from the centre to the top of the rim
 in the disc's plane:
@@ -24,22 +25,7 @@ import numpy as np
 
 from ncgen.assembly.manifold import RANK_TOL
 from ncgen.errors import ModelError
-from ncgen.model.rolling import RollingDisc
-
-
-def _disc_equations(disc: RollingDisc, R: ca.SX, p: ca.SX, q: ca.SX) -> tuple[ca.SX, ca.SX]:
-    """The disc's height constraint (1) and its velocity-constraint rows ``B`` (2 × nq)."""
-    n = ca.DM([0.0, 0.0, 1.0])
-    a = ca.mtimes(R, ca.DM(disc.axle))
-    a_hat = a / ca.norm_2(a)
-    d = n - ca.dot(n, a_hat) * a_hat
-    d_norm = ca.norm_2(d)
-    height = ca.dot(n, p) - disc.radius * d_norm
-    ell = ca.mtimes(R.T, -disc.radius * d / d_norm)
-    ell_frozen = ca.SX.sym("ell", 3)
-    material = p + ca.mtimes(R, ell_frozen)
-    B = ca.jacobian(material[:2], q)
-    return height, ca.substitute(B, ell_frozen, ell)
+from ncgen.model.rolling import KnifeEdge, RollingDisc
 
 
 class RollingSystem:
@@ -58,8 +44,9 @@ class RollingSystem:
                              f"found dim = {model.dim}")
         discs = list(discs)
         for disc in discs:
-            if not isinstance(disc, RollingDisc):
-                raise ModelError(f"RollingSystem: discs: expected RollingDisc elements, found {disc!r}")
+            if not isinstance(disc, (RollingDisc, KnifeEdge)):
+                raise ModelError(f"RollingSystem: discs: expected RollingDisc or KnifeEdge elements, "
+                                 f"found {disc!r}")
             if disc.body not in model.member_names:
                 raise ModelError(f"RollingSystem: {disc!r}: body {disc.body!r} is not a member of "
                                  f"model {model.name!r} (members: {', '.join(model.member_names)})")
@@ -76,7 +63,7 @@ class RollingSystem:
         heights, rows = [], []
         for disc in discs:
             k = model.member_names.index(disc.body)
-            h, B = _disc_equations(disc, R_all[:, 3 * k:3 * k + 3], p_all[:, k], q)
+            h, B = disc.equations(R_all[:, 3 * k:3 * k + 3], p_all[:, k], q)
             heights.append(h)
             rows.append(B)
         phi = ca.vertcat(model.functions["phi"](t0, q, p0), *heights)
