@@ -7,8 +7,8 @@ import pytest
 from scipy.optimize import brentq
 
 import ncgen as nc
-from ncgen.analysis.steady_motion import coordinate_function, linearize_steady, spin_generator, translation_rate
-from ncgen.assembly.nonholonomic import RollingSystem
+from ncgen.analysis.steady_motion import linearize_steady, spin_generator, translation_rate
+from ncgen.assembly.nonholonomic import RollingSystem, coordinate_function
 from ncgen.errors import ModelError, NcgenError
 from ncgen.model.rolling import KnifeEdge, RollingDisc
 from ncgen.runtime.rolling_integrator import simulate_rolling

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import casadi as ca
 import numpy as np
 from scipy.linalg import null_space
 
@@ -62,18 +61,9 @@ def _tangent_basis(G: np.ndarray, n_holonomic: int, nq: int) -> np.ndarray:
     return np.block([[Nq, np.zeros((nq, Nv.shape[1]))], [dv, Nv]])
 
 
-def coordinate_function(y, nq: int) -> ca.Function:
-    """``y`` as a CasADi function ``q -> (y, y_q, ∂(y_q v)/∂[q; v])`` (``y``: a function of the
-    natural coordinates, SX in and out)."""
-    q, v = ca.SX.sym("q", nq), ca.SX.sym("v", nq)
-    yq = y(q)
-    Y = ca.jacobian(yq, q)
-    yd = ca.mtimes(Y, v)
-    return ca.Function("y", [q, v], [yq, Y, ca.jacobian(ca.vertcat(yq, yd), ca.vertcat(q, v))])
-
-
-def linearize_steady(system, q0, v0, K_spin, coordinates: ca.Function) -> SecondOrder:
-    """:class:`SecondOrder` equations of ``coordinates`` (from :func:`coordinate_function`)
+def linearize_steady(system, q0, v0, K_spin, coordinates) -> SecondOrder:
+    """:class:`SecondOrder` equations of ``coordinates`` (from
+    :func:`ncgen.assembly.nonholonomic.coordinate_function`)
     about the steady motion of ``system`` (:class:`ncgen.assembly.nonholonomic.RollingSystem`)
     through ``(q0, v0)``, whose spins have the generator ``K_spin`` (nq × nq)."""
     nq = system.nq

@@ -23,9 +23,8 @@ import casadi as ca
 import numpy as np
 from scipy.optimize import brentq
 
-from ncgen.analysis.steady_motion import (SecondOrder, coordinate_function, linearize_steady, spin_generator,
-                                          translation_rate)
-from ncgen.assembly.nonholonomic import RollingSystem
+from ncgen.analysis.steady_motion import SecondOrder, linearize_steady, spin_generator, translation_rate
+from ncgen.assembly.nonholonomic import RollingSystem, coordinate_function
 from ncgen.errors import ModelError, NcgenError
 from ncgen.model.joints import Revolute
 from ncgen.model.rolling import RollingDisc

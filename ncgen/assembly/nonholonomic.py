@@ -28,6 +28,16 @@ from ncgen.errors import ModelError
 from ncgen.model.rolling import KnifeEdge, RollingDisc
 
 
+def coordinate_function(y, nq: int) -> ca.Function:
+    """``y`` as a CasADi function ``q -> (y, y_q, ∂(y_q v)/∂[q; v])`` (``y``: a function of the
+    natural coordinates, SX in and out)."""
+    q, v = ca.SX.sym("q", nq), ca.SX.sym("v", nq)
+    yq = y(q)
+    Y = ca.jacobian(yq, q)
+    yd = ca.mtimes(Y, v)
+    return ca.Function("y", [q, v], [yq, Y, ca.jacobian(ca.vertcat(yq, yd), ca.vertcat(q, v))])
+
+
 class RollingSystem:
     """A model with rolling discs: the CasADi functions of all its constraints and its
     accelerations.
