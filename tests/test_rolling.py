@@ -10,7 +10,7 @@ import ncgen as nc
 from ncgen.analysis.steady_motion import linearize_steady, spin_generator, translation_rate
 from ncgen.assembly.nonholonomic import RollingSystem, coordinate_function
 from ncgen.errors import ModelError, NcgenError
-from ncgen.model.rolling import KnifeEdge, RollingDisc
+from ncgen.model.rolling import KnifeEdge, RollingDisc, RollingSphere
 from ncgen.runtime.rolling_integrator import simulate_rolling
 
 #: A thick disc: mass (kg), radius (m), moments about a diameter and the axle (kg m²), g.
@@ -168,13 +168,34 @@ def test_chaplygin_sleigh_velocity_decay():
     assert np.ptp(tr.energy) < 1e-9                      # the blade does no work
 
 
+def test_ball_rolls_down_a_slope_at_five_sevenths_of_g_sin_alpha():
+    """A solid ball (I = 2/5 m r²) on a slope (gravity tilted by α): its centre accelerates at
+    g sin α / (1 + I/(m r²)) = 5/7 g sin α down the slope, spinning at v / r; no energy lost."""
+    mb, r, alpha = 0.5, 0.05, 0.2
+    s = nc.System("ball", gravity=(g * np.sin(alpha), 0.0, -g * np.cos(alpha)))
+    spin = np.array([0.3, -0.7, 0.9])       # about the vertical too, and sideways: rolls along y
+    body = s.add_body("ball", mass=mb, inertia=0.4 * mb * r * r * np.eye(3), position=(0.0, 0.0, r),
+                      velocity=np.cross(spin, (0.0, 0.0, r)), angular_velocity=spin)
+    rs = RollingSystem(s.build(), [RollingSphere(body, radius=r)])
+    tr = simulate_rolling(rs, 1.0, 0.1, rtol=1e-10, atol=1e-12)
+    idx = rs.model.layout.member_indices("ball")
+    centre, v0 = tr.q[:, idx[0:3]], np.cross(spin, (0.0, 0.0, r))
+    a = 5.0 / 7.0 * g * np.sin(alpha)
+    want = np.outer(tr.t, v0) + np.outer(0.5 * tr.t ** 2, [a, 0.0, 0.0])
+    want[:, 2] = r
+    np.testing.assert_allclose(centre, want, atol=1e-9)
+    assert np.max(tr.residual) < 1e-10 and np.ptp(tr.energy) < 1e-9
+
+
 def test_bad_input_is_named():
     rs = disc()
     with pytest.raises(NcgenError, match="method: expected one of"):
         simulate_rolling(rs, 1.0, 0.1, method="euler")
     with pytest.raises(NcgenError, match="h: expected dt / h to be a whole number"):
         simulate_rolling(rs, 1.0, 0.1, method="rk4", h=0.03)
+    with pytest.raises(ModelError, match="radius: expected a positive number"):
+        RollingSphere("ball", radius=0.0)
     with pytest.raises(ModelError, match="blade: expected a nonzero direction"):
         KnifeEdge("disc", blade=(0, 0, 0))
-    with pytest.raises(ModelError, match="expected RollingDisc or KnifeEdge"):
+    with pytest.raises(ModelError, match="expected RollingDisc, RollingSphere or KnifeEdge"):
         RollingSystem(rs.model, ["disc"])

@@ -1,7 +1,8 @@
 """Nonholonomic constraints ``B(q) v = 0`` beside a model's holonomic ones.
 
 :class:`RollingSystem` joins a built model and its nonholonomic elements
-(:class:`ncgen.model.rolling.RollingDisc`, :class:`~ncgen.model.rolling.KnifeEdge`, whose
+(:class:`ncgen.model.rolling.RollingDisc`, :class:`~ncgen.model.rolling.RollingSphere`,
+:class:`~ncgen.model.rolling.KnifeEdge`, whose
 ``equations`` give their rows).  Per disc of radius ρ on a body with pose
 ``(R, p)`` and world axle ``a = R ā`` (ā the axle in body axes), with ``n = e_z`` the
 plane's normal and ``d = n − (n·â) â`` the direction from the centre to the top of the rim
@@ -25,7 +26,7 @@ import numpy as np
 
 from ncgen.assembly.manifold import RANK_TOL
 from ncgen.errors import ModelError
-from ncgen.model.rolling import KnifeEdge, RollingDisc
+from ncgen.model.rolling import KnifeEdge, RollingDisc, RollingSphere
 
 
 def coordinate_function(y, nq: int) -> ca.Function:
@@ -54,8 +55,8 @@ class RollingSystem:
                              f"found dim = {model.dim}")
         discs = list(discs)
         for disc in discs:
-            if not isinstance(disc, (RollingDisc, KnifeEdge)):
-                raise ModelError(f"RollingSystem: discs: expected RollingDisc or KnifeEdge elements, "
+            if not isinstance(disc, (RollingDisc, RollingSphere, KnifeEdge)):
+                raise ModelError(f"RollingSystem: discs: expected RollingDisc, RollingSphere or KnifeEdge elements, "
                                  f"found {disc!r}")
             if disc.body not in model.member_names:
                 raise ModelError(f"RollingSystem: {disc!r}: body {disc.body!r} is not a member of "

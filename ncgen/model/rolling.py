@@ -7,7 +7,7 @@ mass), touching the plane ``z = 0`` (normal ``+z``).  It imposes one holonomic c
 point of the rim at the contact has no velocity along the plane): velocity constraints
 ``B(q) v = 0`` that are not the derivative of any position constraint.  A
 :class:`KnifeEdge` (the Chaplygin sleigh's blade, a skate) lets a body-fixed point move only
-along a body-fixed blade direction in the plane (one nonholonomic constraint).
+along a body-fixed blade direction in the plane (one nonholonomic constraint).  A :class:`RollingSphere` is a ball rolling without slipping.
 
 Each element gives its equations from its body's pose ``(R, p)`` (CasADi, functions of the
 natural coordinates ``q``): ``equations(R, p, q) -> (holonomic residuals, rows of B)``;
@@ -58,6 +58,34 @@ class RollingDisc:
 
     def __repr__(self) -> str:
         return f"RollingDisc({self.body!r}, radius={self.radius}, axle={tuple(self.axle)})"
+
+
+class RollingSphere:
+    """A ball of ``radius`` (m) centred at ``body``'s centre of mass (a body or its name),
+    rolling without slipping on the plane ``z = 0``."""
+
+    kind = "RollingSphere"
+
+    def __init__(self, body, *, radius: float, name: str | None = None):
+        self.body = body if isinstance(body, str) else getattr(body, "name", None)
+        if not isinstance(self.body, str):
+            raise ModelError(f"RollingSphere: body: expected a body or its name, found {body!r}")
+        if not (isinstance(radius, (int, float)) and np.isfinite(radius) and radius > 0):
+            raise ModelError(f"RollingSphere on {self.body}: radius: expected a positive number (m), "
+                             f"found {radius!r}")
+        self.radius = float(radius)
+        self.name = name or f"{self.body}.rolling"
+
+    def equations(self, R, p, q) -> tuple[ca.SX, ca.SX]:
+        """Height ``p_z − ρ`` (1) and the material velocity along the plane of the point at
+        ``ℓ = Rᵀ(−ρ e_z)`` (held fixed) as rows of ``B`` (2 × nq)."""
+        ell = ca.mtimes(R.T, ca.DM([0.0, 0.0, -self.radius]))
+        ell_frozen = ca.SX.sym("ell", 3)
+        B = ca.jacobian((p + ca.mtimes(R, ell_frozen))[:2], q)
+        return p[2] - self.radius, ca.substitute(B, ell_frozen, ell)
+
+    def __repr__(self) -> str:
+        return f"RollingSphere({self.body!r}, radius={self.radius})"
 
 
 class KnifeEdge:
