@@ -19,6 +19,7 @@ def test_verification_ladder_smoke(tmp_path):
     assert run.returncode == 0, run.stdout + run.stderr
     text = out.read_text()
     for case in ("Whipple bicycle", "rolling disc, steady precession", "rolling disc, upright",
-                 "Chaplygin sleigh", "heavy top, steady precession"):
+                 "Chaplygin sleigh", "heavy top, steady precession",
+                 "IFToMM A02 four-bar (N = 1), through flat positions"):
         assert f"| {case} |" in text
     assert "**NO**" not in text and "0 outside their tolerance" in run.stdout
