@@ -40,28 +40,28 @@ def coordinate_function(y, nq: int) -> ca.Function:
 
 
 class RollingSystem:
-    """A model with rolling discs: the CasADi functions of all its constraints and its
-    accelerations.
+    """A model with nonholonomic elements: the CasADi functions of all its constraints and
+    its accelerations.
 
-    ``phi(q)``: holonomic residuals (model's, then one height per disc); ``B(q)``: the
-    nonholonomic rows (2 per disc); ``A(q)``: ``[∂phi/∂q; B]``; ``gamma(q, v)``;
+    ``phi(q)``: holonomic residuals (model's, then the elements' heights); ``B(q)``:
+    the nonholonomic rows (2 per disc or ball, 1 per knife edge); ``A(q)``: ``[∂phi/∂q; B]``; ``gamma(q, v)``;
     ``accel(q, v, f) -> (a, lam)``; ``tangent(q, v)``: the Jacobian of the state constraints
     ``[phi; A v]`` with respect to ``[q; v]`` (its null space is the tangent space of the
     motion's manifold)."""
 
-    def __init__(self, model, discs):
+    def __init__(self, model, elements):
         if model.dim != 3:
-            raise ModelError(f"RollingSystem: model {model.name!r}: rolling discs need a 3D model, "
+            raise ModelError(f"RollingSystem: model {model.name!r}: nonholonomic elements need a 3D model, "
                              f"found dim = {model.dim}")
-        discs = list(discs)
-        for disc in discs:
-            if not isinstance(disc, (RollingDisc, RollingSphere, KnifeEdge)):
-                raise ModelError(f"RollingSystem: discs: expected RollingDisc, RollingSphere or KnifeEdge elements, "
-                                 f"found {disc!r}")
-            if disc.body not in model.member_names:
-                raise ModelError(f"RollingSystem: {disc!r}: body {disc.body!r} is not a member of "
+        elements = list(elements)
+        for element in elements:
+            if not isinstance(element, (RollingDisc, RollingSphere, KnifeEdge)):
+                raise ModelError(f"RollingSystem: elements: expected RollingDisc, RollingSphere or KnifeEdge "
+                                 f"elements, found {element!r}")
+            if element.body not in model.member_names:
+                raise ModelError(f"RollingSystem: {element!r}: body {element.body!r} is not a member of "
                                  f"model {model.name!r} (members: {', '.join(model.member_names)})")
-        self.model, self.discs = model, discs
+        self.model, self.elements = model, elements
         nq = model.nq
         self.nq = nq
         q, v = ca.SX.sym("q", nq), ca.SX.sym("v", nq)
@@ -69,12 +69,12 @@ class RollingSystem:
         t = ca.SX.sym("t")
         if ca.depends_on(model.functions["phi"](t, q, p0), t):
             raise ModelError(f"RollingSystem: model {model.name!r} has time-dependent constraints "
-                             "(drives); rolling discs take scleronomic models only")
+                             "(drives); nonholonomic elements take scleronomic models only")
         R_all, p_all = model.functions["poses"](q)
         heights, rows = [], []
-        for disc in discs:
-            k = model.member_names.index(disc.body)
-            h, B = disc.equations(R_all[:, 3 * k:3 * k + 3], p_all[:, k], q)
+        for element in elements:
+            k = model.member_names.index(element.body)
+            h, B = element.equations(R_all[:, 3 * k:3 * k + 3], p_all[:, k], q)
             heights.append(h)
             rows.append(B)
         phi = ca.vertcat(model.functions["phi"](t0, q, p0), *heights)
