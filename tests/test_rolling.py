@@ -187,6 +187,22 @@ def test_ball_rolls_down_a_slope_at_five_sevenths_of_g_sin_alpha():
     assert np.max(tr.residual) < 1e-10 and np.ptp(tr.energy) < 1e-9
 
 
+def test_linearisation_refuses_what_is_not_a_closed_steady_motion():
+    rs = disc()
+    model = rs.model
+    K = spin_generator(model, "disc", (0.0, 1.0, 0.0))
+    T = translation_rate(model, (1.0, 0.0, 0.0))
+    idx = model.layout.member_indices("disc")
+    lean = coordinate_function(lambda q: ca.asin(q[idx[8]]), model.nq)
+    with pytest.raises(NcgenError, match="off the constraints"):
+        linearize_steady(rs, model.q0, T, K, lean)           # sliding, not rolling
+    rate = 1.0 / a                                            # rolling at 1 m/s
+    with pytest.raises(NcgenError, match="not a steady motion"):
+        linearize_steady(rs, model.q0, T + rate * K @ model.q0, 0.0 * K, lean)
+    with pytest.raises(NcgenError, match="do not obey closed equations"):
+        linearize_steady(rs, model.q0, T + rate * K @ model.q0, rate * K, lean)   # lean alone
+
+
 def test_bad_input_is_named():
     rs = disc()
     with pytest.raises(NcgenError, match="method: expected one of"):

@@ -1,8 +1,8 @@
 """Linearisation of a rolling system about a steady motion, in chosen coordinates.
 
 A steady motion (relative equilibrium) moves the system along its symmetries: rigid
-translations along the plane and spins of axisymmetric wheels about their axles, both
-linear maps of the natural coordinates.  With ``x = [q; v]``, the reference is
+translations along the plane (shifts of the points' coordinates) and spins of axisymmetric
+wheels about their axles (linear maps of the natural coordinates).  With ``x = [q; v]``, the reference is
 ``x(t) = (G(t) q₀ + t T, G(t) v₀)``, ``G(t) = exp(t K)`` (``K``: the spins' generator,
 ``T``: the translation velocity), so ``v₀ = T + K q₀`` and ``a(q₀, v₀) = K² q₀``.  Writing a
 perturbation as ``δx = diag(G, G) ξ`` gives the time-invariant ``ξ̇ = (J − diag(K, K)) ξ``,
@@ -29,7 +29,7 @@ from ncgen.errors import ModelError, NcgenError
 class SecondOrder:
     """``M ÿ + C ẏ + K y = f`` about a steady motion, and how well its premises held:
     ``closure`` (largest residual of the closed equations of ``[y; ẏ]`` on the tangent
-    space, relative), ``reference`` (``|a(q₀, v₀) − K_g² q₀|∞``, m/s²) and
+    space, relative), ``reference`` (``|a(q₀, v₀) − K_spin² q₀|∞``, m/s²) and
     ``constraints`` (``|Φ̂(q₀)|∞``, ``|Â(q₀) v₀|∞``)."""
     M: np.ndarray
     C: np.ndarray
@@ -61,11 +61,13 @@ def _tangent_basis(G: np.ndarray, n_holonomic: int, nq: int) -> np.ndarray:
     return np.block([[Nq, np.zeros((nq, Nv.shape[1]))], [dv, Nv]])
 
 
-def linearize_steady(system, q0, v0, K_spin, coordinates) -> SecondOrder:
+def linearize_steady(system, q0, v0, K_spin, coordinates, tol: float = 1e-8) -> SecondOrder:
     """:class:`SecondOrder` equations of ``coordinates`` (from
     :func:`ncgen.assembly.nonholonomic.coordinate_function`)
     about the steady motion of ``system`` (:class:`ncgen.assembly.nonholonomic.RollingSystem`)
-    through ``(q0, v0)``, whose spins have the generator ``K_spin`` (nq × nq)."""
+    through ``(q0, v0)``, whose spins have the generator ``K_spin`` (nq × nq).  Raises when
+    the state is off the constraints or not a steady motion (beyond ``tol``, relative) or the
+    coordinates' equations are not closed."""
     nq = system.nq
     q0, v0 = np.asarray(q0, float), np.asarray(v0, float)
     K_spin = np.asarray(K_spin, float)
@@ -73,6 +75,13 @@ def linearize_steady(system, q0, v0, K_spin, coordinates) -> SecondOrder:
     J, a_f = (np.asarray(x) for x in system.jacobians(q0, v0, zero))
     a0 = np.asarray(system.accel(q0, v0, zero)[0]).ravel()
     reference = float(np.max(np.abs(a0 - K_spin @ (K_spin @ q0))))
+    constraints = system.residuals(q0, v0)
+    if max(constraints) > tol * max(1.0, np.max(np.abs(q0)), np.max(np.abs(v0))):
+        raise NcgenError(f"linearize_steady: the reference state is off the constraints (|Φ̂| = "
+                         f"{constraints[0]:.3g}, |Â v| = {constraints[1]:.3g}); give a consistent (q0, v0)")
+    if reference > tol * max(1.0, np.max(np.abs(a0))):
+        raise NcgenError(f"linearize_steady: (q0, v0) is not a steady motion of these spins: "
+                         f"|a(q0, v0) − K_spin² q0| = {reference:.3g} m/s²")
     Jc = J - np.kron(np.eye(2), K_spin)
     N = _tangent_basis(np.asarray(system.tangent(q0, v0)), system.n_holonomic, nq)
     _, Yq, Y = (np.asarray(x) for x in coordinates(q0, v0))
@@ -84,9 +93,12 @@ def linearize_steady(system, q0, v0, K_spin, coordinates) -> SecondOrder:
     rates = Y @ Jc @ N
     S = rates @ np.linalg.pinv(YN)
     closure = float(np.max(np.abs(rates - S @ YN)) / max(1.0, np.max(np.abs(rates))))
+    if closure > tol:
+        raise NcgenError(f"linearize_steady: the {m} coordinates do not obey closed equations about "
+                         f"this motion (residual {closure:.3g}); add the coordinates they couple to")
     M = np.linalg.inv(Yq @ a_f @ Yq.T)
     return SecondOrder(M=M, C=-M @ S[m:, m:], K=-M @ S[m:, :m], closure=closure, reference=reference,
-                       constraints=system.residuals(q0, v0))
+                       constraints=constraints)
 
 
 def spin_generator(model, body: str, axle) -> np.ndarray:
