@@ -13,7 +13,7 @@ from scipy.linalg import expm, null_space
 
 from ncgen.analysis.whipple import WhippleBicycle, WhippleParameters
 from ncgen.assembly.nonholonomic import RollingSystem
-from ncgen.errors import ModelError
+from ncgen.errors import ModelError, NcgenError
 from ncgen.model.rolling import RollingDisc
 from ncgen.runtime.rolling_integrator import simulate_rolling
 
@@ -169,6 +169,8 @@ def test_bad_input_is_named(bike):
         RollingDisc("rear_wheel", radius=0.3, axle=(0, 0, 0))
     with pytest.raises(ModelError, match="body 'wheel' is not a member"):
         RollingSystem(bike.model, [RollingDisc("wheel", radius=0.3)])
+    with pytest.raises(NcgenError, match="speed: expected a positive speed"):
+        bike.matrices(0.0)
     with pytest.raises(ModelError, match="m_B: expected a positive number"):
         WhippleParameters(**{**BENCHMARK.__dict__, "m_B": 0.0})
     with pytest.raises(ModelError, match="I_B: expected shape"):

@@ -141,6 +141,8 @@ class WhippleBicycle:
     def matrices(self, speed: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(M, C1, K0, K2)`` of the paper's form, from the linearisations at rest and at
         ``speed`` (m/s)."""
+        if not speed > 0:
+            raise NcgenError(f"WhippleBicycle.matrices: speed: expected a positive speed (m/s), found {speed!r}")
         g = self.parameters.g
         still, moving = self.linearize(0.0), self.linearize(speed)
         K0 = still.K / g
