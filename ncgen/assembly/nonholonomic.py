@@ -1,0 +1,118 @@
+"""Nonholonomic constraints ``B(q) v = 0`` beside a model's holonomic ones.
+
+:class:`RollingSystem` joins a built model and its nonholonomic elements
+(:class:`ncgen.model.rolling.RollingDisc`, :class:`~ncgen.model.rolling.RollingSphere`,
+:class:`~ncgen.model.rolling.KnifeEdge`, whose
+``equations`` give their rows).  Per disc of radius ρ on a body with pose
+``(R, p)`` and world axle ``a = R ā`` (ā the axle in body axes), with ``n = e_z`` the
+plane's normal and ``d = n − (n·â) â`` the direction from the centre to the top of the rim
+in the disc's plane:
+
+* holonomic: ``n·p − ρ |d| = 0``, the lowest point ``P = p − ρ d/|d|`` on ``z = 0``;
+* nonholonomic: ``e_x·v_P = e_y·v_P = 0`` with ``v_P = ṗ + Ṙ ℓ``, ``ℓ = Rᵀ(P − p)`` the
+  contact point in body axes held fixed: the velocity of the material point at the contact.
+
+All constraints together, ``Φ̂(q) = 0`` (the model's Φ and the discs' heights) and
+``Â(q) v = 0`` (``Â = [∂Φ̂/∂q; B]``), give the accelerations from the KKT system
+``[[M, Âᵀ], [Â, 0]] [a; λ] = [F + f; γ̂]``, ``γ̂ = −∂(Â v)/∂q v`` (no stabilisation
+terms: exact on the constraint manifold).  ``f`` is an extra generalised force (N in the
+natural coordinates' sense: its power is ``fᵀ v``).  The model's constraints must not
+depend on time (no drives).
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ncgen.assembly.manifold import RANK_TOL
+from ncgen.errors import ModelError
+from ncgen.model.rolling import KnifeEdge, RollingDisc, RollingSphere
+
+
+def coordinate_function(y, nq: int) -> ca.Function:
+    """``y`` as a CasADi function ``q -> (y, y_q, ∂(y_q v)/∂[q; v])`` (``y``: a function of the
+    natural coordinates, SX in and out)."""
+    q, v = ca.SX.sym("q", nq), ca.SX.sym("v", nq)
+    yq = y(q)
+    Y = ca.jacobian(yq, q)
+    yd = ca.mtimes(Y, v)
+    return ca.Function("y", [q, v], [yq, Y, ca.jacobian(ca.vertcat(yq, yd), ca.vertcat(q, v))])
+
+
+class RollingSystem:
+    """A model with nonholonomic elements: the CasADi functions of all its constraints and
+    its accelerations.
+
+    ``phi(q)``: holonomic residuals (model's, then the elements' heights); ``B(q)``:
+    the nonholonomic rows (2 per disc or ball, 1 per knife edge); ``A(q)``: ``[∂phi/∂q; B]``; ``gamma(q, v)``;
+    ``accel(q, v, f) -> (a, lam)``; ``tangent(q, v)``: the Jacobian of the state constraints
+    ``[phi; A v]`` with respect to ``[q; v]`` (its null space is the tangent space of the
+    motion's manifold)."""
+
+    def __init__(self, model, elements):
+        if model.dim != 3:
+            raise ModelError(f"RollingSystem: model {model.name!r}: nonholonomic elements need a 3D model, "
+                             f"found dim = {model.dim}")
+        elements = list(elements)
+        for element in elements:
+            if not isinstance(element, (RollingDisc, RollingSphere, KnifeEdge)):
+                raise ModelError(f"RollingSystem: elements: expected RollingDisc, RollingSphere or KnifeEdge "
+                                 f"elements, found {element!r}")
+            if element.body not in model.member_names:
+                raise ModelError(f"RollingSystem: {element!r}: body {element.body!r} is not a member of "
+                                 f"model {model.name!r} (members: {', '.join(model.member_names)})")
+        self.model, self.elements = model, elements
+        nq = model.nq
+        self.nq = nq
+        q, v = ca.SX.sym("q", nq), ca.SX.sym("v", nq)
+        t0, u0, p0 = 0.0, ca.DM.zeros(model.nu), ca.DM(model.p0)
+        t = ca.SX.sym("t")
+        if ca.depends_on(model.functions["phi"](t, q, p0), t):
+            raise ModelError(f"RollingSystem: model {model.name!r} has time-dependent constraints "
+                             "(drives); nonholonomic elements take scleronomic models only")
+        R_all, p_all = model.functions["poses"](q)
+        heights, rows = [], []
+        for element in elements:
+            k = model.member_names.index(element.body)
+            h, B = element.equations(R_all[:, 3 * k:3 * k + 3], p_all[:, k], q)
+            heights.append(h)
+            rows.append(B)
+        phi = ca.vertcat(model.functions["phi"](t0, q, p0), *heights)
+        B = ca.vertcat(*rows) if rows else ca.SX(0, nq)
+        A = ca.vertcat(ca.jacobian(phi, q), B)
+        Av = ca.mtimes(A, v)
+        gamma = -ca.jtimes(Av, q, v)
+        F = model.functions["F"](t0, q, v, u0, p0)
+        self.n_holonomic, self.n_nonholonomic = int(phi.shape[0]), int(B.shape[0])
+        self.phi = ca.Function("phi", [q], [phi], ["q"], ["phi"])
+        self.B = ca.Function("B", [q], [B], ["q"], ["B"])
+        self.A = ca.Function("A", [q], [A], ["q"], ["A"])
+        self.gamma = ca.Function("gamma", [q, v], [gamma], ["q", "v"], ["gamma"])
+        self.F = ca.Function("F", [q, v], [F], ["q", "v"], ["F"])
+        self.tangent = ca.Function("tangent", [q, v], [ca.jacobian(ca.vertcat(phi, Av), ca.vertcat(q, v))],
+                                   ["q", "v"], ["G"])
+        qm, vm, fm = ca.MX.sym("q", nq), ca.MX.sym("v", nq), ca.MX.sym("f", nq)
+        Am = self.A(qm)
+        m = Am.shape[0]
+        K = ca.blockcat([[ca.MX(ca.DM(model.M)), Am.T], [Am, ca.MX(m, m)]])
+        z = ca.solve(K, ca.vertcat(self.F(qm, vm) + fm, self.gamma(qm, vm)))
+        self.accel = ca.Function("accel", [qm, vm, fm], [z[:nq], z[nq:]], ["q", "v", "f"], ["a", "lam"])
+        x = ca.vertcat(qm, vm)
+        rhs = ca.vertcat(vm, z[:nq])
+        self.jacobians = ca.Function("jacobians", [qm, vm, fm],
+                                     [ca.jacobian(rhs, x), ca.jacobian(z[:nq], fm)],
+                                     ["q", "v", "f"], ["J", "a_f"])
+
+    def check_rank(self, q) -> None:
+        """Raise if the constraint rows ``Â(q)`` are dependent (no unique multipliers)."""
+        A = np.asarray(self.A(q))
+        s = np.linalg.svd(A, compute_uv=False)
+        if s[-1] < RANK_TOL * s[0]:
+            raise ModelError(f"RollingSystem: model {self.model.name!r}: the {A.shape[0]} constraint rows "
+                             f"(holonomic and rolling) are dependent at this configuration "
+                             f"(smallest singular value {s[-1]:.3g} of {s[0]:.3g})")
+
+    def residuals(self, q, v) -> tuple[float, float]:
+        """``(|phi(q)|∞, |A(q) v|∞)``: holonomic and velocity-level constraint residuals."""
+        return (float(np.max(np.abs(np.asarray(self.phi(q))), initial=0.0)),
+                float(np.max(np.abs(np.asarray(self.A(q)) @ np.asarray(v, float)), initial=0.0)))

@@ -1,0 +1,133 @@
+"""Simulation of a model with nonholonomic elements
+(:class:`ncgen.assembly.nonholonomic.RollingSystem`): explicit Runge–Kutta steps of
+``q̇ = v``, ``v̇ = a(q, v)`` (the KKT accelerations, exact on the constraints) each followed
+by a projection onto both constraint levels, ``Φ̂(q) = 0`` (Newton, least-norm corrections)
+and ``Â(q) v = 0`` (orthogonal projection).
+
+Methods: ``"rk4"`` — the classical fourth-order scheme at the fixed step ``h``;
+``"dopri5"`` — Dormand–Prince 5(4) with error control (``rtol``, ``atol`` on ``[q; v]``),
+fifth order.  A projection after a step keeps the order of the step (its correction is of
+the size of the step's local error).  Outputs on the grid ``0, dt, 2 dt, …, t_end`` (s).
+Not yet a method of :func:`ncgen.simulate` (models do not carry nonholonomic elements).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ncgen.errors import NcgenError
+
+#: Dormand–Prince 5(4): nodes, stage coefficients, fifth-order weights, error weights (5th − 4th).
+_C = np.array([0.0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1.0, 1.0])
+_A = [[], [1 / 5], [3 / 40, 9 / 40], [44 / 45, -56 / 15, 32 / 9],
+      [19372 / 6561, -25360 / 2187, 64448 / 6561, -212 / 729],
+      [9017 / 3168, -355 / 33, 46732 / 5247, 49 / 176, -5103 / 18656],
+      [35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84]]
+_B5 = np.array([35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84, 0.0])
+_E = _B5 - np.array([5179 / 57600, 0.0, 7571 / 16695, 393 / 640, -92097 / 339200, 187 / 2100, 1 / 40])
+METHODS = ("rk4", "dopri5")
+
+
+@dataclass(frozen=True)
+class RollingTrajectory:
+    """``t`` (s), ``q``, ``v`` (one row per output), ``energy`` (J, kinetic + potential),
+    ``residual`` (``max(|Φ̂|∞, |Â v|∞)`` per output), ``steps`` taken, ``rejected`` steps."""
+    t: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    energy: np.ndarray
+    residual: np.ndarray
+    steps: int
+    rejected: int
+    method: str
+
+
+def project(system, q, v, tol: float = 1e-14, max_iter: int = 20) -> tuple[np.ndarray, np.ndarray]:
+    """``(q, v)`` moved to ``Φ̂(q) = 0`` by least-norm Newton steps, then ``v`` to
+    ``Â(q) v = 0`` orthogonally."""
+    q = np.array(q, float)
+    nh = system.n_holonomic
+    for _ in range(max_iter):
+        phi = np.asarray(system.phi(q)).ravel()
+        if np.max(np.abs(phi), initial=0.0) <= tol * max(1.0, np.max(np.abs(q))):
+            break
+        q -= np.linalg.lstsq(np.asarray(system.A(q))[:nh], phi, rcond=None)[0]
+    else:
+        raise NcgenError(f"project: Newton's method did not bring |Φ| below {tol:g} in {max_iter} "
+                         f"iterations (|Φ| = {np.max(np.abs(phi)):.3g}); the state is far from the constraints")
+    A = np.asarray(system.A(q))
+    v = np.asarray(v, float) - np.linalg.lstsq(A, A @ v, rcond=None)[0]
+    return q, v
+
+
+def simulate_rolling(system, t_end: float, dt: float, q0=None, v0=None, *, method: str = "dopri5",
+                     h: float | None = None, rtol: float = 1e-8, atol: float = 1e-10) -> RollingTrajectory:
+    """Integrate ``system`` from ``(q0, v0)`` (default: the model's initial state, projected)
+    to ``t_end`` (s), outputs every ``dt`` (s).  ``method``: ``"rk4"`` with step ``h`` (s,
+    default ``dt``; ``dt`` must be a whole number of steps) or ``"dopri5"`` with
+    ``rtol``/``atol``."""
+    if method not in METHODS:
+        raise NcgenError(f"simulate_rolling: method: expected one of {METHODS}, found {method!r}")
+    if not (t_end > 0 and dt > 0):
+        raise NcgenError(f"simulate_rolling: t_end and dt: expected positive times, found {t_end!r}, {dt!r}")
+    model = system.model
+    q, v = project(system, model.q0 if q0 is None else q0, model.v0 if v0 is None else v0)
+    n_out = int(round(t_end / dt))
+    grid = dt * np.arange(n_out + 1)
+    zero = np.zeros(system.nq)
+
+    def rhs(y):
+        a = np.asarray(system.accel(y[:system.nq], y[system.nq:], zero)[0]).ravel()
+        return np.concatenate([y[system.nq:], a])
+
+    energy = model.functions["energy"]
+    rows = []
+
+    def record(q, v):
+        T, V = energy(0.0, q, v, model.p0)
+        rows.append((q, v, float(T) + float(V), max(system.residuals(q, v))))
+
+    record(q, v)
+    y, steps, rejected = np.concatenate([q, v]), 0, 0
+    if method == "rk4":
+        h = dt if h is None else h
+        per = int(round(dt / h))
+        if per < 1 or abs(per * h - dt) > 1e-12 * dt:
+            raise NcgenError(f"simulate_rolling: h: expected dt / h to be a whole number, found dt = {dt}, h = {h}")
+        for _ in range(n_out):
+            for _ in range(per):
+                k1 = rhs(y)
+                k2 = rhs(y + h / 2 * k1)
+                k3 = rhs(y + h / 2 * k2)
+                k4 = rhs(y + h * k3)
+                y = np.concatenate(project(system, *np.split(y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4), 2)))
+                steps += 1
+            record(*np.split(y, 2))
+    else:
+        t, step = 0.0, min(dt, 1e-3)
+        for target in grid[1:]:
+            while t < target - 1e-14 * max(1.0, target):
+                step_now = min(step, target - t)
+                k = [rhs(y)]
+                for i in range(1, 7):
+                    k.append(rhs(y + step_now * sum(c * kj for c, kj in zip(_A[i], k))))
+                y5 = y + step_now * sum(b * kj for b, kj in zip(_B5, k))
+                err = step_now * sum(e * kj for e, kj in zip(_E, k))
+                scale = atol + rtol * np.maximum(np.abs(y), np.abs(y5))
+                ratio = float(np.sqrt(np.mean((err / scale) ** 2)))
+                if ratio <= 1.0:
+                    y = np.concatenate(project(system, *np.split(y5, 2)))
+                    t += step_now
+                    steps += 1
+                else:
+                    rejected += 1
+                proposed = step_now * min(5.0, max(0.2, 0.9 * ratio ** -0.2 if ratio > 0 else 5.0))
+                # a step cut short to land on an output does not shrink the next one
+                step = max(step, proposed) if ratio <= 1.0 and step_now < step else proposed
+                if step < 1e-12 * max(1.0, target):
+                    raise NcgenError(f"simulate_rolling: the step fell below {step:.3g} s at t = {t:.6g} s")
+            record(*np.split(y, 2))
+    q_out, v_out, e_out, r_out = (np.array(x) for x in zip(*rows))
+    return RollingTrajectory(t=grid, q=q_out, v=v_out, energy=e_out, residual=r_out, steps=steps,
+                             rejected=rejected, method=method)
