@@ -4,9 +4,8 @@ arguments (the structured code generation of issue 34, docs/architecture.md, "El
 Two families of kinds, both from :mod:`ncgen.symbolic`:
 
 * **joint kinds** ``(primitive, dim)``: a joint primitive of :mod:`ncgen.symbolic.joints`
-  (``coincidence``, ``dot``, ``offset_dot``, ``distance``, ``angle``) applied to points and
-  directions ``f`` (each a dim-vector) and scalars ``s`` (a dot product, an offset, a length,
-  an angle).  Kernel ``jk_<primitive>_<dim>d``: input ``x = [f_1; …; f_n; s_1; …]``, outputs
+  (``coincidence``, ``dot``, ``offset_dot``, ``distance``) applied to points and directions
+  ``f`` (each a dim-vector) and constant scalars ``s`` (a dot product, an offset, a length).  Kernel ``jk_<primitive>_<dim>d``: input ``x = [f_1; …; f_n; s_1; …]``, outputs
   ``phi`` (the primitive's rows) and ``J = ∂phi/∂[f_1; …; f_n]`` (dense, column-major);
 * **member kinds** ``(dim, coordinate type)``: kernel ``mk_<type>_<dim>d_phi`` (a type with
   intrinsic constraints): inputs the member's coordinates ``q_I`` and its constants ``c``,
@@ -31,8 +30,9 @@ from ncgen.model.sym2casadi import to_casadi
 from ncgen.symbolic.coordinates import available_types, coordinate_type
 from ncgen.symbolic.joints import PRIMITIVES, primitive
 
-#: Joint kinds ``(primitive, dim)``, in table order.
-JOINT_KINDS: tuple[tuple[str, int], ...] = tuple((p, d) for d in (3, 2) for p in PRIMITIVES)
+#: Joint kinds ``(primitive, dim)``, in table order: every primitive but ``angle``, which only
+#: drives use (a drive is a function of t and the parameters, not a kind the tables cover).
+JOINT_KINDS: tuple[tuple[str, int], ...] = tuple((p, d) for d in (3, 2) for p in PRIMITIVES if p != "angle")
 #: Member kinds ``(dim, coordinate type)``, in table order.
 MEMBER_KINDS: tuple[tuple[int, str], ...] = tuple(available_types())
 

@@ -169,6 +169,9 @@ def _joint_elements(ctx: _Recorder, joint, unsupported) -> list[_Joint]:
     elements = []
     for c, labels in sorted(outputs.items()):
         name, args, out = calls[c]
+        if (name, ctx.dim) not in JOINT_KINDS:
+            unsupported.setdefault(f"{joint.kind} through the {name} primitive", []).append(f"joint {joint.name!r}")
+            continue
         vectors = [a for a in args if _is_vector(a, ctx.dim)]
         scalars = [a for a in args if not _is_vector(a, ctx.dim)]
         values = []
