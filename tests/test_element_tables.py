@@ -1,7 +1,8 @@
-"""The element tables (issue 34): Φ, A, Φ_t and M of a model evaluated by the element library
+"""The element tables (issue 34): Φ, A, Φ_t, γ and M of a model evaluated by the element library
 (one kernel per kind of element, hand-written loops over the model's tables) equal the flat
 CasADi functions of the model to 1e-12 on every shipped example whose kinds are covered and
-on systems using every covered joint kind; A equals central differences of the tables' Φ;
+on systems using every covered joint kind (γ too); A equals central differences of the tables'
+Φ and γ those of A v;
 models with uncovered kinds are refused by name; a new model of covered kinds is evaluated
 with no compiler on PATH once the library is cached."""
 from __future__ import annotations
@@ -36,20 +37,22 @@ def library():
     return load_element_library()
 
 
-def flat_values(model, q):
+def flat_values(model, q, v):
     f = model.functions
     return (np.array(f["phi"](0.0, q, model.p0)).reshape(-1), np.array(ca.densify(f["A"](0.0, q, model.p0))),
-            np.array(f["phi_t"](0.0, q, model.p0)).reshape(-1), model.M)
+            np.array(f["phi_t"](0.0, q, model.p0)).reshape(-1), np.array(f["gamma"](0.0, q, v, model.p0)).reshape(-1),
+            model.M)
 
 
 def assert_equal_to_flat(model, library, seed=0):
     tf = table_functions(model, library)
     rng = np.random.default_rng(seed)
-    for q in (model.q0, model.q0 + 0.3 * rng.standard_normal(model.nq)):
-        phi, A, phi_t, M = flat_values(model, q)
+    for q, v in ((model.q0, model.v0), (model.q0 + 0.3 * rng.standard_normal(model.nq), rng.standard_normal(model.nq))):
+        phi, A, phi_t, gamma, M = flat_values(model, q, v)
         np.testing.assert_allclose(tf.phi(q), phi, rtol=0, atol=1e-12)
         np.testing.assert_allclose(tf.tables.dense_A(tf.A(q)), A, rtol=0, atol=1e-12)
         np.testing.assert_allclose(tf.phi_t(), phi_t, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(tf.gamma(q, v), gamma, rtol=0, atol=1e-12)
         np.testing.assert_allclose(tf.tables.dense_M(tf.M()), M, rtol=0, atol=1e-12)
     return tf
 
@@ -149,7 +152,7 @@ def test_every_covered_joint_kind_equals_the_flat_functions(share, library):
         assert {joint_kind(p, d).name for p, d in JOINT_KINDS} <= used
 
 
-def test_jacobian_against_central_differences_of_phi(library):
+def test_jacobian_and_gamma_against_central_differences(library):
     for system in (_systems_3d()["Revolute"], _systems_3d()["Cylindrical"], _systems_2d()["planar"]):
         model = system.build(share=False)
         tf = table_functions(model, library)
@@ -158,6 +161,10 @@ def test_jacobian_against_central_differences_of_phi(library):
         h = 1e-6
         fd = np.column_stack([(tf.phi(q + h * e) - tf.phi(q - h * e)) / (2 * h) for e in np.eye(model.nq)])
         np.testing.assert_allclose(A, fd, rtol=0, atol=1e-7 * max(1.0, np.abs(A).max()))
+        v = np.random.default_rng(4).standard_normal(model.nq)        # γ = −(∂(A v)/∂q) v
+        Av = lambda x: tf.tables.dense_A(tf.A(x)) @ v  # noqa: E731
+        np.testing.assert_allclose(tf.gamma(q, v), -(Av(q + h * v) - Av(q - h * v)) / (2 * h), rtol=0,
+                                   atol=1e-7 * max(1.0, np.abs(tf.gamma(q, v)).max()))
 
 
 def test_member_kernels_equal_the_members_own_formulas():
@@ -180,6 +187,7 @@ def test_member_kernels_equal_the_members_own_formulas():
             phi, J = k.phi(q, c)
             np.testing.assert_allclose(np.array(phi).reshape(-1), m.rigid.phi(q), rtol=0, atol=1e-13)
             np.testing.assert_allclose(np.array(J), m.rigid.phi_q(q), rtol=0, atol=1e-13)
+            np.testing.assert_allclose(-np.array(k.hvv(q, c)).reshape(-1), m.rigid.gamma(q), rtol=0, atol=1e-13)
     assert {(3, m.ctype.name) for m in members} == {k for k in MEMBER_KINDS if k[0] == 3}
 
 
@@ -200,8 +208,10 @@ def test_uncovered_kinds_are_refused_by_name():
 def test_bad_q_is_refused(library):
     model = _systems_3d()["Spherical"].build()
     tf = TableFunctions(model_tables(model), library)
-    with pytest.raises(nc.errors.ShapeError, match=f"q: expected {model.nq} natural coordinates"):
+    with pytest.raises(nc.errors.ShapeError, match=f"q: expected {model.nq} values"):
         tf.phi(np.zeros(model.nq + 1))
+    with pytest.raises(nc.errors.ShapeError, match=f"v: expected {model.nq} values"):
+        tf.gamma(model.q0, np.zeros(model.nq - 1))
 
 
 def test_inconsistent_tables_are_refused(library):

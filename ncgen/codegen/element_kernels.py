@@ -5,12 +5,17 @@ Two families of kinds, both from :mod:`ncgen.symbolic`:
 
 * **joint kinds** ``(primitive, dim)``: a joint primitive of :mod:`ncgen.symbolic.joints`
   (``coincidence``, ``dot``, ``offset_dot``, ``distance``) applied to points and directions
-  ``f`` (each a dim-vector) and constant scalars ``s`` (a dot product, an offset, a length).  Kernel ``jk_<primitive>_<dim>d``: input ``x = [f_1; …; f_n; s_1; …]``, outputs
-  ``phi`` (the primitive's rows) and ``J = ∂phi/∂[f_1; …; f_n]`` (dense, column-major);
+  ``f`` (each a dim-vector) and constant scalars ``s`` (a dot product, an offset, a length).
+  Kernel ``jk_<primitive>_<dim>d``: input ``x = [f_1; …; f_n; s_1; …]``, outputs ``phi`` (the
+  primitive's rows) and ``J = ∂phi/∂[f_1; …; f_n]`` (dense, column-major); kernel
+  ``jk_<primitive>_<dim>d_hvv``: inputs ``x`` and the features' rates ``ḟ``, output
+  ``[ḟᵀ ∇²_f phi_r ḟ]_r`` (the Hessian-vector products of ``γ``);
 * **member kinds** ``(dim, coordinate type)``: kernel ``mk_<type>_<dim>d_phi`` (a type with
   intrinsic constraints): inputs the member's coordinates ``q_I`` and its constants ``c``,
-  outputs ``phi`` (``Φ_I``) and ``J = ∂Φ_I/∂q_I``; kernel ``mk_<type>_<dim>d_mass``: input
-  ``c``, output the member's constant mass matrix ``M_I`` (dense).
+  outputs ``phi`` (``Φ_I``) and ``J = ∂Φ_I/∂q_I``; kernel ``mk_<type>_<dim>d_hvv``: inputs
+  ``q̇_I`` and ``c``, output ``[q̇_Iᵀ H_k q̇_I]_k`` (constant Hessians); kernel
+  ``mk_<type>_<dim>d_mass``: input ``c``, output the member's constant mass matrix ``M_I``
+  (dense).
 
 The constants ``c`` of a member kind are the free symbols of its derivation's ``Φ`` and ``M``
 other than the coordinates, sorted by name (:func:`member_constants`); a member's values are
@@ -48,6 +53,7 @@ class JointKind:
     n_scalar: int
     n_out: int
     function: ca.Function
+    hvv: ca.Function
 
 
 @dataclass(frozen=True)
@@ -63,6 +69,7 @@ class MemberKind:
     constants: tuple[str, ...]
     phi: ca.Function | None
     mass: ca.Function
+    hvv: ca.Function | None
 
 
 def joint_kind_name(prim: str, dim: int) -> str:
@@ -90,7 +97,11 @@ def joint_kind(prim: str, dim: int) -> JointKind:
     J = ca.jacobian(phi, x[:dim * len(vectors)])
     name = joint_kind_name(prim, dim)
     f = ca.Function(name, [x], [ca.densify(phi), ca.densify(J)], ["x"], ["phi", "J"])
-    return JointKind(name, dim, len(vectors), len(scalars), int(phi.numel()), f)
+    xd = ca.SX.sym("xd", dim * len(vectors))
+    Jxd = ca.mtimes(J, xd)
+    hvv = ca.Function(f"{name}_hvv", [x, xd], [ca.densify(ca.jtimes(Jxd, x[:dim * len(vectors)], xd))],
+                      ["x", "xd"], ["hvv"])
+    return JointKind(name, dim, len(vectors), len(scalars), int(phi.numel()), f, hvv)
 
 
 def member_constants(dim: int, ctype: str) -> tuple:
@@ -111,23 +122,26 @@ def member_kind(dim: int, ctype: str) -> MemberKind:
     values = {s: c[k] for k, s in enumerate(consts)}
     values.update({s: q[k] for k, s in enumerate(D.q)})
     name = member_kind_name(dim, ctype)
-    phi = None
+    phi = hvv = None
     if ct.pairs:
         e = to_casadi(D.Phi, values)
-        phi = ca.Function(f"{name}_phi", [q, c], [ca.densify(e), ca.densify(ca.jacobian(e, q))],
-                          ["q", "c"], ["phi", "J"])
+        J = ca.jacobian(e, q)
+        phi = ca.Function(f"{name}_phi", [q, c], [ca.densify(e), ca.densify(J)], ["q", "c"], ["phi", "J"])
+        v = ca.SX.sym("v", ct.nq)
+        Hvv = ca.jtimes(ca.mtimes(J, v), q, v)     # the Hessians are constant: no q is left in it
+        hvv = ca.Function(f"{name}_hvv", [v, c], [ca.densify(Hvv)], ["v", "c"], ["hvv"])
     M = ca.densify(to_casadi(D.M, values))
     mass = ca.Function(f"{name}_mass", [c], [M], ["c"], ["M"])
-    return MemberKind(name, ct.nq, len(consts), len(ct.pairs), tuple(map(str, consts)), phi, mass)
+    return MemberKind(name, ct.nq, len(consts), len(ct.pairs), tuple(map(str, consts)), phi, mass, hvv)
 
 
 def kernels() -> list[ca.Function]:
     """Every kernel of the shipped kinds, in a fixed order (joint kinds, then member kinds'
     ``phi`` and ``mass``)."""
-    out = [joint_kind(p, d).function for p, d in JOINT_KINDS]
+    out = [f for p, d in JOINT_KINDS for f in (joint_kind(p, d).function, joint_kind(p, d).hvv)]
     for d, t in MEMBER_KINDS:
         k = member_kind(d, t)
-        out += ([k.phi] if k.phi is not None else []) + [k.mass]
+        out += ([k.phi, k.hvv] if k.phi is not None else []) + [k.mass]
     return out
 
 

@@ -67,6 +67,8 @@ SIGNATURES = {
     "jacobian": c_binding.Signature("int", (("const ncgen_tables *", "T"), ("const double *", "q"),
                                             ("double *", "A"), ("double *", "work"))),
     "phi_t": c_binding.Signature("int", (("const ncgen_tables *", "T"), ("double *", "phi_t"))),
+    "gamma": c_binding.Signature("int", (("const ncgen_tables *", "T"), ("const double *", "q"),
+                                         ("const double *", "v"), ("double *", "gamma"), ("double *", "work"))),
     "mass": c_binding.Signature("int", (("const ncgen_tables *", "T"), ("double *", "M"), ("double *", "work"))),
 }
 INDEX_PREFIX = "element-tables"
@@ -174,7 +176,7 @@ def load_element_library(cflags: str | None = None) -> ElementLibrary:
 
 
 class TableFunctions:
-    """``Φ``, ``A``, ``Φ_t`` and ``M`` of one model from its tables, through the element
+    """``Φ``, ``A``, ``Φ_t``, ``γ`` and ``M`` of one model from its tables, through the element
     library.  ``A(q)`` and ``M()`` return CSC nonzeros in the pattern of ``tables``
     (``tables.dense_A`` / ``dense_M`` expand them); outputs are fresh arrays."""
 
@@ -191,11 +193,11 @@ class TableFunctions:
             raise CodegenError(f"model {tables.name!r}: its element tables are inconsistent (ncgen_tables_check)")
         self._work = np.zeros(max(1, int(self.library.fn["work_size"](self._ref))))
 
-    def _q(self, q) -> np.ndarray:
+    def _q(self, q, what: str = "q") -> np.ndarray:
         q = np.ascontiguousarray(q, dtype=float).reshape(-1)
         if q.size != self.tables.nq:
-            raise ShapeError(f"q: expected {self.tables.nq} natural coordinates of model {self.tables.name!r}, "
-                             f"got {q.size}")
+            raise ShapeError(f"{what}: expected {self.tables.nq} values (one per natural coordinate) of model "
+                             f"{self.tables.name!r}, got {q.size}")
         return q
 
     def _call(self, name: str, *args) -> None:
@@ -216,6 +218,12 @@ class TableFunctions:
     def phi_t(self) -> np.ndarray:
         out = np.zeros(self.tables.nc)
         self._call("phi_t", out.ctypes.data)
+        return out
+
+    def gamma(self, q, v) -> np.ndarray:
+        """``γ = −[vᵀ H_r v]_r`` (``A q̈ = γ``; every covered element is scleronomic)."""
+        q, v, out = self._q(q), self._q(v, "v"), np.zeros(self.tables.nc)
+        self._call("gamma", q.ctypes.data, v.ctypes.data, out.ctypes.data, self._work.ctypes.data)
         return out
 
     def M(self) -> np.ndarray:

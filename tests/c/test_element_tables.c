@@ -10,7 +10,7 @@
  *
  * A and M are stored dense in column-major order as their "CSC" pattern (every entry), so the
  * expected positions are (column · rows + row).  Checked: Φ, A and M against the closed forms,
- * A against central differences of Φ, Φ_t = 0, the checks of inconsistent tables, a failing
+ * A against central differences of Φ, γ against those of A v, Φ_t = 0, the checks of inconsistent tables, a failing
  * kernel.  Built and run by tests/test_stepper_runtime_c.py under AddressSanitizer and
  * UndefinedBehaviorSanitizer. */
 #include "check.h"
@@ -34,6 +34,14 @@ static int k_distance(const double **arg, double **res, long long *iw, double *w
   return 0;
 }
 
+/* Its Hessian-vector products: (x, fdot) -> 2 |fdot1 - fdot0|². */
+static int k_distance_hvv(const double **arg, double **res, long long *iw, double *w, int mem) {
+  const double *fd = arg[1];
+  (void)iw; (void)w; (void)mem;
+  res[0][0] = 2 * ((fd[2] - fd[0]) * (fd[2] - fd[0]) + (fd[3] - fd[1]) * (fd[3] - fd[1]));
+  return 0;
+}
+
 /* Joint kind 1: coincidence (2D): x = (f0, f1) -> phi = f0 - f1 (2), J (2 x 4, column-major). */
 static int k_coincidence(const double **arg, double **res, long long *iw, double *w, int mem) {
   const double *x = arg[0];
@@ -46,7 +54,21 @@ static int k_coincidence(const double **arg, double **res, long long *iw, double
   return 0;
 }
 
-/* Member kind 0: bar (rr, 2D): (q_I, c = (L, m)) -> phi, J (1 x 4); c -> M_I (4 x 4). */
+static int k_coincidence_hvv(const double **arg, double **res, long long *iw, double *w, int mem) {
+  (void)arg; (void)iw; (void)w; (void)mem;
+  res[0][0] = res[0][1] = 0;
+  return 0;
+}
+
+/* Member kind 0: bar (rr, 2D): (q_I, c = (L, m)) -> phi, J (1 x 4); (q̇_I, c) -> 2 |ṙ2 − ṙ1|²;
+ * c -> M_I (4 x 4). */
+static int k_bar_hvv(const double **arg, double **res, long long *iw, double *w, int mem) {
+  const double *v = arg[0];
+  (void)iw; (void)w; (void)mem;
+  res[0][0] = 2 * ((v[2] - v[0]) * (v[2] - v[0]) + (v[3] - v[1]) * (v[3] - v[1]));
+  return 0;
+}
+
 static int k_bar_phi(const double **arg, double **res, long long *iw, double *w, int mem) {
   const double *q = arg[0], *c = arg[1];
   double dx = q[2] - q[0], dy = q[3] - q[1];
@@ -74,8 +96,10 @@ static int k_point_mass(const double **arg, double **res, long long *iw, double 
   return 0;
 }
 
-static const ncgen_joint_kind JOINTS[2] = {{k_distance, 2, 2, 1, 1}, {k_coincidence, 2, 2, 0, 2}};
-static const ncgen_member_kind MEMBERS[2] = {{k_bar_phi, k_bar_mass, 4, 2, 1}, {0, k_point_mass, 2, 1, 0}};
+static const ncgen_joint_kind JOINTS[2] = {{k_distance, k_distance_hvv, 2, 2, 1, 1},
+                                           {k_coincidence, k_coincidence_hvv, 2, 2, 0, 2}};
+static const ncgen_member_kind MEMBERS[2] = {{k_bar_phi, k_bar_hvv, k_bar_mass, 4, 2, 1},
+                                             {0, 0, k_point_mass, 2, 1, 0}};
 static const ncgen_kinds KINDS = {JOINTS, 2, MEMBERS, 2, 1};
 
 #define NQ 4
@@ -144,6 +168,19 @@ static void test_values(void) {
       fd[i] = (p1[i] - p2[i]) / (2 * h);
       CHECK(fabs(fd[i] - A[j * NC + i]) < 1e-8, "dphi_%d/dq_%d = %g by differences, A: %g", i, j, fd[i], A[j * NC + i]);
     }
+  }
+  {                                /* γ = −(∂(A v)/∂q) v by central differences of A v */
+    double v[NQ] = {0.7, -0.2, 0.5, 1.1}, g[NC], h = 1e-6, qp[NQ], qm[NQ], Ap[NC * NQ], Am[NC * NQ];
+    CHECK(ncgen_tables_gamma(&KINDS, &T, q, v, g, work) == 0, "gamma");
+    for (j = 0; j < NQ; ++j) { qp[j] = q[j] + h * v[j]; qm[j] = q[j] - h * v[j]; }
+    ncgen_tables_jacobian(&KINDS, &T, qp, Ap, work);
+    ncgen_tables_jacobian(&KINDS, &T, qm, Am, work);
+    for (i = 0; i < NC; ++i) {
+      double d = 0;
+      for (j = 0; j < NQ; ++j) d += (Ap[j * NC + i] - Am[j * NC + i]) / (2 * h) * v[j];
+      CHECK(fabs(g[i] + d) < 1e-8, "gamma[%d] = %g, -(dA/dq v) v = %g", i, g[i], -d);
+    }
+    CHECK(fabs(g[0] + 2 * (v[0] * v[0] + v[1] * v[1])) < 1e-14, "the bar's gamma in closed form: %g", g[0]);
   }
   CHECK(ncgen_tables_phi_t(&T, phi_t) == 0, "phi_t");
   for (i = 0; i < NC; ++i) CHECK(phi_t[i] == 0, "phi_t[%d] = %g", i, phi_t[i]);

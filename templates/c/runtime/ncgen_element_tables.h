@@ -1,4 +1,4 @@
-/* Table-driven system functions: Φ(q), A = ∂Φ/∂q, Φ_t and the constant mass matrix M of a
+/* Table-driven system functions: Φ(q), A = ∂Φ/∂q, Φ_t, γ and the constant mass matrix M of a
  * whole model, as loops over index tables that call one small kernel per kind of element
  * (ncgen/codegen/element_kernels.py generates the kernels, ncgen/codegen/model_tables.py
  * packs the tables).  The same C for every model: a model is data.
@@ -31,16 +31,17 @@
 
 typedef int (*ncgen_kernel)(const double **arg, double **res, long long *iw, double *w, int mem);
 
-/* A joint kind: x = [f_1; ...; f_n_vec; s_1; ...] -> phi (n_out), J = dphi/df (n_out x n_vec*dim). */
+/* A joint kind: x = [f_1; ...; f_n_vec; s_1; ...] -> phi (n_out), J = dphi/df (n_out x n_vec*dim)
+ * by eval; (x, fdot) -> [fdotᵀ ∇²_f phi_r fdot]_r (n_out) by hvv. */
 typedef struct {
-  ncgen_kernel eval;
+  ncgen_kernel eval, hvv;
   int dim, n_vec, n_scalar, n_out;
 } ncgen_joint_kind;
 
-/* A member kind: (q_I, c) -> phi (n_out), J (n_out x n_q) by phi (NULL when n_out = 0);
- * c -> M_I (n_q x n_q) by mass. */
+/* A member kind: (q_I, c) -> phi (n_out), J (n_out x n_q) by phi; (q̇_I, c) -> [q̇_Iᵀ H_k q̇_I]_k
+ * (n_out) by hvv (both NULL when n_out = 0); c -> M_I (n_q x n_q) by mass. */
 typedef struct {
-  ncgen_kernel phi, mass;
+  ncgen_kernel phi, hvv, mass;
   int n_q, n_c, n_out;
 } ncgen_member_kind;
 
@@ -73,7 +74,7 @@ static int ncgen_tables_max_in(const ncgen_kinds *K) {
   int i, n = 1;
   for (i = 0; i < K->n_joint; ++i) {
     const ncgen_joint_kind *k = &K->joint[i];
-    int m = k->n_vec * k->dim + k->n_scalar;
+    int m = 2 * k->n_vec * k->dim + k->n_scalar;     /* x and fdot */
     if (m > n) n = m;
   }
   for (i = 0; i < K->n_member; ++i)
@@ -99,7 +100,7 @@ static int ncgen_tables_max_out(const ncgen_kinds *K) {
 
 /* Doubles of work the functions below need for the tables T. */
 static long ncgen_tables_work_size(const ncgen_kinds *K, const ncgen_tables *T) {
-  return (long)T->nf * T->dim + ncgen_tables_max_in(K) + ncgen_tables_max_out(K) + K->max_w;
+  return 2L * T->nf * T->dim + ncgen_tables_max_in(K) + ncgen_tables_max_out(K) + K->max_w;
 }
 
 static int ncgen_in_range(int x, int lo, int hi) { return x >= lo && x < hi; }
@@ -170,10 +171,12 @@ static int ncgen_tables_check(const ncgen_kinds *K, const ncgen_tables *T) {
   return 0;
 }
 
-/* Every feature's value f = G q + g into F (nf x dim, row-major). */
-static void ncgen_tables_features(const ncgen_tables *T, const double *q, double *F) {
+/* Every feature's value f = G q + g into F (nf x dim, row-major); with g = NULL, G q (the
+ * features' rates for q = q̇). */
+static void ncgen_tables_features(const ncgen_tables *T, const double *q, double *F, const double *g) {
   int i, e;
-  memcpy(F, T->feat_const, sizeof(double) * (size_t)T->nf * (size_t)T->dim);
+  if (g) memcpy(F, g, sizeof(double) * (size_t)T->nf * (size_t)T->dim);
+  else memset(F, 0, sizeof(double) * (size_t)T->nf * (size_t)T->dim);
   for (i = 0; i < T->nf; ++i)
     for (e = T->feat_ptr[i]; e < T->feat_ptr[i + 1]; ++e)
       F[i * T->dim + T->feat_row[e]] += T->feat_coef[e] * q[T->feat_col[e]];
@@ -215,7 +218,7 @@ static int ncgen_tables_member(const ncgen_kinds *K, const ncgen_tables *T, int 
 /* Φ(q) into phi (nc); work: ncgen_tables_work_size doubles. */
 static int ncgen_tables_phi(const ncgen_kinds *K, const ncgen_tables *T, const double *q, double *phi,
                             double *work) {
-  double *F = work, *x = F + (size_t)T->nf * T->dim, *out = x + ncgen_tables_max_in(K);
+  double *F = work, *x = F + 2 * (size_t)T->nf * T->dim, *out = x + ncgen_tables_max_in(K);
   double *w = out + ncgen_tables_max_out(K);
   int i, r;
   memset(phi, 0, sizeof(double) * (size_t)T->nc);
@@ -225,7 +228,7 @@ static int ncgen_tables_phi(const ncgen_kinds *K, const ncgen_tables *T, const d
     for (r = 0; r < K->member[T->mem_kind[i]].n_out; ++r)
       if (T->mem_row[T->mem_row_ptr[i] + r] >= 0) phi[T->mem_row[T->mem_row_ptr[i] + r]] = out[r];
   }
-  ncgen_tables_features(T, q, F);
+  ncgen_tables_features(T, q, F, T->feat_const);
   for (i = 0; i < T->ne; ++i) {
     if (ncgen_tables_joint(K, T, i, F, x, out, w)) return NCGEN_TABLES_KERNEL;
     for (r = 0; r < K->joint[T->el_kind[i]].n_out; ++r)
@@ -237,7 +240,7 @@ static int ncgen_tables_phi(const ncgen_kinds *K, const ncgen_tables *T, const d
 /* The nonzeros of A(q) = ∂Φ/∂q (a_nnz, the pattern of the tables) into A. */
 static int ncgen_tables_jacobian(const ncgen_kinds *K, const ncgen_tables *T, const double *q, double *A,
                                  double *work) {
-  double *F = work, *x = F + (size_t)T->nf * T->dim, *out = x + ncgen_tables_max_in(K);
+  double *F = work, *x = F + 2 * (size_t)T->nf * T->dim, *out = x + ncgen_tables_max_in(K);
   double *w = out + ncgen_tables_max_out(K);
   int i, r, j, a, e;
   memset(A, 0, sizeof(double) * (size_t)T->a_nnz);
@@ -252,7 +255,7 @@ static int ncgen_tables_jacobian(const ncgen_kinds *K, const ncgen_tables *T, co
         if (T->mem_q_col[T->mem_q_ptr[i] + j] >= 0) A[*pos++] += out[k->n_out + j * k->n_out + r];
     }
   }
-  ncgen_tables_features(T, q, F);
+  ncgen_tables_features(T, q, F, T->feat_const);
   for (i = 0; i < T->ne; ++i) {
     const ncgen_joint_kind *k = &K->joint[T->el_kind[i]];
     const int *pos = T->el_apos + T->el_apos_ptr[i];
@@ -269,6 +272,48 @@ static int ncgen_tables_jacobian(const ncgen_kinds *K, const ncgen_tables *T, co
   return 0;
 }
 
+/* γ(q, v) = −[vᵀ H_r v]_r (nc): the acceleration right-hand side of A q̈ = γ for scleronomic
+ * constraints (Φ quadratic in q: constant Hessians H_r); work as ncgen_tables_phi. */
+static int ncgen_tables_gamma(const ncgen_kinds *K, const ncgen_tables *T, const double *q, const double *v,
+                              double *gamma, double *work) {
+  double *F = work, *Fd = F + (size_t)T->nf * T->dim, *x = Fd + (size_t)T->nf * T->dim;
+  double *out = x + ncgen_tables_max_in(K), *w = out + ncgen_tables_max_out(K);
+  const double *arg[2];
+  double *res[1];
+  int i, j, r, a, s, n;
+  memset(gamma, 0, sizeof(double) * (size_t)T->nc);
+  for (i = 0; i < T->nm; ++i) {
+    const ncgen_member_kind *k = &K->member[T->mem_kind[i]];
+    int b = T->mem_q_ptr[i];
+    if (k->n_out == 0) continue;
+    for (j = 0; j < k->n_q; ++j) x[j] = T->mem_q_col[b + j] >= 0 ? v[T->mem_q_col[b + j]] : 0.0;
+    arg[0] = x;
+    arg[1] = T->mem_c + T->mem_c_ptr[i];
+    res[0] = out;
+    if (k->hvv(arg, res, 0, w, 0)) return NCGEN_TABLES_KERNEL;
+    for (r = 0; r < k->n_out; ++r)
+      if (T->mem_row[T->mem_row_ptr[i] + r] >= 0) gamma[T->mem_row[T->mem_row_ptr[i] + r]] = -out[r];
+  }
+  ncgen_tables_features(T, q, F, T->feat_const);
+  ncgen_tables_features(T, v, Fd, 0);
+  for (i = 0; i < T->ne; ++i) {
+    const ncgen_joint_kind *k = &K->joint[T->el_kind[i]];
+    double *xd = x + k->n_vec * T->dim + k->n_scalar;
+    for (a = T->el_arg_ptr[i], n = 0; a < T->el_arg_ptr[i + 1]; ++a, n += T->dim) {
+      memcpy(x + n, F + T->el_arg[a] * T->dim, sizeof(double) * (size_t)T->dim);
+      memcpy(xd + n, Fd + T->el_arg[a] * T->dim, sizeof(double) * (size_t)T->dim);
+    }
+    for (s = T->el_sc_ptr[i]; s < T->el_sc_ptr[i + 1]; ++s) x[n++] = T->el_sc[s];
+    arg[0] = x;
+    arg[1] = xd;
+    res[0] = out;
+    if (k->hvv(arg, res, 0, w, 0)) return NCGEN_TABLES_KERNEL;
+    for (r = 0; r < k->n_out; ++r)
+      if (T->el_row[T->el_row_ptr[i] + r] >= 0) gamma[T->el_row[T->el_row_ptr[i] + r]] = -out[r];
+  }
+  return 0;
+}
+
 /* ∂Φ/∂t (nc): every element of the tables is scleronomic (ncgen/codegen/model_tables.py
  * refuses geometry or scalars that depend on t), so it is zero. */
 static int ncgen_tables_phi_t(const ncgen_tables *T, double *phi_t) {
@@ -278,7 +323,7 @@ static int ncgen_tables_phi_t(const ncgen_tables *T, double *phi_t) {
 
 /* The nonzeros of the constant mass matrix M (m_nnz) into M. */
 static int ncgen_tables_mass(const ncgen_kinds *K, const ncgen_tables *T, double *M, double *work) {
-  double *x = work + (size_t)T->nf * T->dim, *out = x + ncgen_tables_max_in(K);
+  double *x = work + 2 * (size_t)T->nf * T->dim, *out = x + ncgen_tables_max_in(K);
   double *w = out + ncgen_tables_max_out(K);
   int i, j, l;
   memset(M, 0, sizeof(double) * (size_t)T->m_nnz);
