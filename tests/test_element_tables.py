@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -28,7 +29,7 @@ EXAMPLES = sorted(p for p in (ROOT / "examples").glob("*.toml") if "[system]" in
 #: Shipped examples with an element kind the tables do not cover, and the kinds named.
 REFUSED = {"slider_crank": {"driven Revolute": ["joint 'motor'"]}}
 
-pytestmark = pytest.mark.skipif(not any(__import__("shutil").which(c) for c in CANDIDATES) and not os.environ.get("CC"),
+pytestmark = pytest.mark.skipif(not any(shutil.which(c) for c in CANDIDATES) and not os.environ.get("CC"),
                                 reason="no C compiler to build the element library")
 
 
@@ -170,7 +171,6 @@ def test_jacobian_and_gamma_against_central_differences(library):
 def test_member_kernels_equal_the_members_own_formulas():
     """Each member kind's kernels against RigidMember's NumPy forms of the same derivation."""
     from ncgen.codegen.element_kernels import member_constants
-    from ncgen.model.members import Member  # noqa: F401  (the member types below are built by System)
 
     s3 = nc.System("kinds3")
     members = [_body(s3, f"b_{t}", (0.1 * k, 0.2, 0.3), coords=t) for k, t in enumerate(("ruvw", "rrvw", "rrrw", "rrrr"))]
@@ -223,7 +223,7 @@ def test_inconsistent_tables_are_refused(library):
 
 
 CHILD = r"""
-import json, shutil, sys
+import json, shutil
 import numpy as np, casadi as ca
 import ncgen as nc
 import ncgen.codegen.compile_cache as cc
@@ -279,3 +279,18 @@ def test_a_new_model_needs_no_compiler(library, tmp_path):
     assert set(errors) == {"new_chain13", "new_fourbar"}
     for name, (e_phi, e_A, e_M) in errors.items():
         assert max(e_phi, e_A, e_M) <= 1e-12, (name, e_phi, e_A, e_M)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(1800)
+def test_benchmark_smoke(tmp_path):
+    """benchmarks/element_tables.py --smoke runs and prints its comparisons (nothing timed)."""
+    env = {**os.environ, "NCGEN_CACHE_DIR": str(tmp_path / "cache"),
+           "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    out = subprocess.run([sys.executable, "element_tables.py", "--smoke"], cwd=ROOT / "benchmarks", env=env,
+                         capture_output=True, text=True, timeout=1800)
+    assert out.returncode == 0, out.stderr[-3000:]
+    for line in ("CPU:", "=== chain of N = 6 bars", "max |A_tables - A_flat| = 0.0e+00",
+                 "RATIO flat / tables, cached cache, N = 6", "RATIO tables / flat, one A(q) evaluation, N = 6",
+                 "load average at the end"):
+        assert line in out.stdout, (line, out.stdout[-3000:])
