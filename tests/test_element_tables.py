@@ -294,3 +294,20 @@ def test_benchmark_smoke(tmp_path):
                  "RATIO flat / tables, cached cache, N = 6", "RATIO tables / flat, one A(q) evaluation, N = 6",
                  "load average at the end"):
         assert line in out.stdout, (line, out.stdout[-3000:])
+
+
+def test_element_package_is_deterministic_and_warning_free(tmp_path):
+    """The element library's package: the same bytes when written twice, and its C compiles
+    with -Wall -Wextra -Werror."""
+    from ncgen.codegen.element_kernels import write_element_package
+
+    a, b = write_element_package(tmp_path / "a"), write_element_package(tmp_path / "b")
+    files = sorted(p.name for p in a.path.iterdir())
+    assert files == sorted(p.name for p in b.path.iterdir())
+    for name in files:
+        assert (a.path / name).read_bytes() == (b.path / name).read_bytes(), name
+    cc = os.environ.get("CC") or next(shutil.which(c) for c in CANDIDATES if shutil.which(c))
+    for src in a.manifest["build"]["sources"]:
+        out = subprocess.run([*cc.split(), "-std=c99", "-Wall", "-Wextra", "-Werror", "-O1", "-I.", "-c", src, "-o",
+                              str(tmp_path / f"{src}.o")], cwd=a.path, capture_output=True, text=True, timeout=600)
+        assert out.returncode == 0, out.stderr[-3000:]
