@@ -311,3 +311,36 @@ def test_element_package_is_deterministic_and_warning_free(tmp_path):
         out = subprocess.run([*cc.split(), "-std=c99", "-Wall", "-Wextra", "-Werror", "-O1", "-I.", "-c", src, "-o",
                               str(tmp_path / f"{src}.o")], cwd=a.path, capture_output=True, text=True, timeout=600)
         assert out.returncode == 0, out.stderr[-3000:]
+
+
+#: URDFs of the test extras (example-robot-data): floating base, and the kinds refused.
+URDFS = {"ur_description/urdf/ur5_robot.urdf": (False, None), "so_arm_description/urdf/so101.urdf": (False, None),
+         "solo_description/robots/solo12.urdf": (True, None),
+         "panda_description/urdf/panda.urdf": (False, {"Mimic": ["joint 'panda_finger_joint2_mimic'"]})}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("rel", list(URDFS), ids=[Path(r).stem for r in URDFS])
+def test_urdf_robots_equal_the_flat_functions_or_are_refused(rel, library):
+    import importlib.metadata as md
+
+    try:
+        found = [f for f in md.files("example-robot-data") or [] if str(f).endswith(rel)]
+    except md.PackageNotFoundError:
+        pytest.skip("example-robot-data is not installed")
+    if not found:
+        pytest.skip(f"example-robot-data has no {rel}")
+    floating, refused = URDFS[rel]
+    model = nc.System.from_urdf(str(found[0].locate()), floating_base=floating).build()
+    if refused is not None:
+        with pytest.raises(UnsupportedElements) as info:
+            model_tables(model)
+        assert info.value.kinds == refused
+        return
+    tf = table_functions(model, library)
+    rng = np.random.default_rng(2)
+    q, v = model.q0 + 0.1 * rng.standard_normal(model.nq), rng.standard_normal(model.nq)
+    phi, A, phi_t, gamma, M = flat_values(model, q, v)
+    for got, want in ((tf.phi(q), phi), (tf.tables.dense_A(tf.A(q)), A), (tf.phi_t(), phi_t),
+                      (tf.gamma(q, v), gamma), (tf.tables.dense_M(tf.M()), M)):
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * max(1.0, np.abs(want).max(initial=0.0)))
