@@ -178,12 +178,17 @@ def load_element_library(cflags: str | None = None) -> ElementLibrary:
 class TableFunctions:
     """``Φ``, ``A``, ``Φ_t``, ``γ`` and ``M`` of one model from its tables, through the element
     library.  ``A(q)`` and ``M()`` return CSC nonzeros in the pattern of ``tables``
-    (``tables.dense_A`` / ``dense_M`` expand them); outputs are fresh arrays."""
+    (``tables.dense_A`` / ``dense_M`` expand them); outputs are fresh arrays.  Not thread-safe
+    (one work array): one object per thread."""
 
     def __init__(self, tables: ModelTables, library: ElementLibrary | None = None):
         self.tables = tables
         self.library = library or load_element_library()
-        self._arrays = {k: np.ascontiguousarray(v) for k, v in tables.arrays.items()}
+        missing = [f for t, f in TABLE_FIELDS if "*" in t and f not in tables.arrays]
+        if missing:
+            raise CodegenError(f"model {tables.name!r}: its element tables lack {', '.join(missing)}")
+        self._arrays = {f: np.ascontiguousarray(tables.arrays[f], dtype=np.int32 if "int" in t else np.float64)
+                        for t, f in TABLE_FIELDS if "*" in t}
         sizes = {"nq": tables.nq, "nc": tables.nc, "dim": tables.dim, "a_nnz": tables.a_nnz,
                  "m_nnz": tables.m_nnz, "nf": len(self._arrays["feat_ptr"]) - 1,
                  "ne": len(self._arrays["el_kind"]), "nm": len(self._arrays["mem_kind"])}
