@@ -104,6 +104,7 @@ def joint_kind(prim: str, dim: int) -> JointKind:
     return JointKind(name, dim, len(vectors), len(scalars), int(phi.numel()), f, hvv)
 
 
+@lru_cache(maxsize=None)
 def member_constants(dim: int, ctype: str) -> tuple:
     """The constant symbols of a member kind's ``Φ`` and ``M``, sorted by name."""
     D = coordinate_type(ctype, dim).derivation

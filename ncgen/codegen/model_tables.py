@@ -123,7 +123,7 @@ def model_tables(model) -> ModelTables:
     """The tables of ``model`` (see module docstring); raises :class:`UnsupportedElements`."""
     unsupported: dict[str, list[str]] = {}
     view = SimpleNamespace(members=model.members, inputs={}, parameters={}, dim=model.dim, name=model.name)
-    ctx = _Recorder(view, model.layout)
+    ctx = _Recorder(view, model.layout) if model.joints else None     # its symbols cost O(nq): only for joints
     joints = []
     for j in model.joints:
         kind = _uncovered_kind(j)
@@ -276,9 +276,9 @@ def _reals(values) -> np.ndarray:
     return np.asarray(values, dtype=np.float64).reshape(-1)
 
 
-def _pack(model, ctx: _Recorder, members: list[dict], joints: list[_Joint], rows: dict[str, int]) -> ModelTables:
+def _pack(model, ctx: _Recorder | None, members: list[dict], joints: list[_Joint], rows: dict[str, int]) -> ModelTables:
     dim, nq, nc = model.dim, model.layout.nq, len(model.constraint_names)
-    ids, features = _features(ctx, joints)
+    ids, features = _features(ctx, joints) if joints else ([], [])
     a_rows, a_cols, m_rows, m_cols = [], [], [], []
     for m in members:                       # the loop order of ncgen_tables_jacobian / _mass
         free = [c for c in m["cols"] if c >= 0]
