@@ -1,0 +1,184 @@
+"""Element kernels: one small CasADi function per *kind* of element, the model's numbers as
+arguments (the structured code generation of issue 34, docs/architecture.md, "Element tables").
+
+Two families of kinds, both from :mod:`ncgen.symbolic`:
+
+* **joint kinds** ``(primitive, dim)``: a joint primitive of :mod:`ncgen.symbolic.joints`
+  (``coincidence``, ``dot``, ``offset_dot``, ``distance``) applied to points and directions
+  ``f`` (each a dim-vector) and constant scalars ``s`` (a dot product, an offset, a length).
+  Kernel ``jk_<primitive>_<dim>d``: input ``x = [f_1; …; f_n; s_1; …]``, outputs ``phi`` (the
+  primitive's rows) and ``J = ∂phi/∂[f_1; …; f_n]`` (dense, column-major); kernel
+  ``jk_<primitive>_<dim>d_hvv``: inputs ``x`` and the features' rates ``ḟ``, output
+  ``[ḟᵀ ∇²_f phi_r ḟ]_r`` (the Hessian-vector products of ``γ``);
+* **member kinds** ``(dim, coordinate type)``: kernel ``mk_<type>_<dim>d_phi`` (a type with
+  intrinsic constraints): inputs the member's coordinates ``q_I`` and its constants ``c``,
+  outputs ``phi`` (``Φ_I``) and ``J = ∂Φ_I/∂q_I``; kernel ``mk_<type>_<dim>d_hvv``: inputs
+  ``q̇_I`` and ``c``, output ``[q̇_Iᵀ H_k q̇_I]_k`` (constant Hessians); kernel
+  ``mk_<type>_<dim>d_mass``: input ``c``, output the member's constant mass matrix ``M_I``
+  (dense).
+
+The constants ``c`` of a member kind are the free symbols of its derivation's ``Φ`` and ``M``
+other than the coordinates, sorted by name (:func:`member_constants`); a member's values are
+``member.rigid.constants()`` at those symbols.  The order of the kinds (:data:`JOINT_KINDS`,
+:data:`MEMBER_KINDS`) is their index in the tables (:mod:`ncgen.codegen.model_tables`) and in
+the compiled library's kind arrays (``templates/c/element_tables.c.j2``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import casadi as ca
+
+from ncgen.errors import CodegenError
+from ncgen.model.sym2casadi import to_casadi
+from ncgen.symbolic.coordinates import available_types, coordinate_type
+from ncgen.symbolic.joints import PRIMITIVES, primitive
+
+#: Joint kinds ``(primitive, dim)``, in table order: every primitive but ``angle``, which only
+#: drives use (a drive is a function of t and the parameters, not a kind the tables cover).
+JOINT_KINDS: tuple[tuple[str, int], ...] = tuple((p, d) for d in (3, 2) for p in PRIMITIVES if p != "angle")
+#: Member kinds ``(dim, coordinate type)``, in table order.
+MEMBER_KINDS: tuple[tuple[int, str], ...] = tuple(available_types())
+
+
+@dataclass(frozen=True)
+class JointKind:
+    """A joint kind's sizes: ``n_vec`` vector arguments of ``dim`` components, ``n_scalar``
+    scalars, ``n_out`` rows; ``function`` its kernel."""
+
+    name: str
+    dim: int
+    n_vec: int
+    n_scalar: int
+    n_out: int
+    function: ca.Function
+    hvv: ca.Function
+
+
+@dataclass(frozen=True)
+class MemberKind:
+    """A member kind's sizes: ``n_q`` coordinates, ``n_c`` constants (``constants`` their
+    symbols' names), ``n_out`` intrinsic constraints; its kernels ``phi`` (None without
+    intrinsic constraints) and ``mass``."""
+
+    name: str
+    n_q: int
+    n_c: int
+    n_out: int
+    constants: tuple[str, ...]
+    phi: ca.Function | None
+    mass: ca.Function
+    hvv: ca.Function | None
+
+
+def joint_kind_name(prim: str, dim: int) -> str:
+    return f"jk_{prim}_{dim}d"
+
+
+def member_kind_name(dim: int, ctype: str) -> str:
+    return f"mk_{ctype}_{dim}d"
+
+
+@lru_cache(maxsize=None)
+def joint_kind(prim: str, dim: int) -> JointKind:
+    """The kernel of joint kind ``(prim, dim)`` from :func:`ncgen.symbolic.joints.primitive`."""
+    P = primitive(prim, dim)
+    vectors = [a for a in P.args if hasattr(a, "shape")]
+    scalars = [a for a in P.args if not hasattr(a, "shape")]
+    x = ca.SX.sym("x", dim * len(vectors) + len(scalars))
+    values, k = {}, 0
+    for a in vectors:
+        values.update({s: x[k + i] for i, s in enumerate(a)})
+        k += dim
+    for i, s in enumerate(scalars):
+        values[s] = x[k + i]
+    phi = to_casadi(P.expr, values)
+    J = ca.jacobian(phi, x[:dim * len(vectors)])
+    name = joint_kind_name(prim, dim)
+    f = ca.Function(name, [x], [ca.densify(phi), ca.densify(J)], ["x"], ["phi", "J"])
+    xd = ca.SX.sym("xd", dim * len(vectors))
+    Jxd = ca.mtimes(J, xd)
+    hvv = ca.Function(f"{name}_hvv", [x, xd], [ca.densify(ca.jtimes(Jxd, x[:dim * len(vectors)], xd))],
+                      ["x", "xd"], ["hvv"])
+    return JointKind(name, dim, len(vectors), len(scalars), int(phi.numel()), f, hvv)
+
+
+@lru_cache(maxsize=None)
+def member_constants(dim: int, ctype: str) -> tuple:
+    """The constant symbols of a member kind's ``Φ`` and ``M``, sorted by name."""
+    D = coordinate_type(ctype, dim).derivation
+    coords = set(D.q)
+    free = set(D.Phi.free_symbols) | set(D.M.free_symbols)
+    return tuple(sorted(free - coords, key=str))
+
+
+@lru_cache(maxsize=None)
+def member_kind(dim: int, ctype: str) -> MemberKind:
+    """The kernels of member kind ``(dim, ctype)`` from its derivation."""
+    ct = coordinate_type(ctype, dim)
+    D = ct.derivation
+    consts = member_constants(dim, ctype)
+    q, c = ca.SX.sym("q", ct.nq), ca.SX.sym("c", len(consts))
+    values = {s: c[k] for k, s in enumerate(consts)}
+    values.update({s: q[k] for k, s in enumerate(D.q)})
+    name = member_kind_name(dim, ctype)
+    phi = hvv = None
+    if ct.pairs:
+        e = to_casadi(D.Phi, values)
+        J = ca.jacobian(e, q)
+        phi = ca.Function(f"{name}_phi", [q, c], [ca.densify(e), ca.densify(J)], ["q", "c"], ["phi", "J"])
+        v = ca.SX.sym("v", ct.nq)
+        Hvv = ca.jtimes(ca.mtimes(J, v), q, v)     # the Hessians are constant: no q is left in it
+        hvv = ca.Function(f"{name}_hvv", [v, c], [ca.densify(Hvv)], ["v", "c"], ["hvv"])
+    M = ca.densify(to_casadi(D.M, values))
+    mass = ca.Function(f"{name}_mass", [c], [M], ["c"], ["M"])
+    return MemberKind(name, ct.nq, len(consts), len(ct.pairs), tuple(map(str, consts)), phi, mass, hvv)
+
+
+def kernels() -> list[ca.Function]:
+    """Every kernel of the shipped kinds, in a fixed order (joint kinds, then member kinds'
+    ``phi`` and ``mass``)."""
+    out = [f for p, d in JOINT_KINDS for f in (joint_kind(p, d).function, joint_kind(p, d).hvv)]
+    for d, t in MEMBER_KINDS:
+        k = member_kind(d, t)
+        out += ([k.phi, k.hvv] if k.phi is not None else []) + [k.mass]
+    return out
+
+
+#: Name of the package (and prefix of every C symbol) of the element kernels' library.
+PACKAGE = "ncgen_elements"
+#: The files the library is made of besides this module: the key of its cache entry hashes them.
+SOURCES = ("runtime/ncgen_element_tables.h", "element_tables.c.j2")
+
+
+def write_element_package(out_dir):
+    """The C package of every shipped kind's kernels and the table loops (``PACKAGE``) in
+    ``out_dir``: the kernels, ``ncgen_element_tables.h`` and ``element_tables.c``, whose
+    functions are documented in ``templates/c/element_tables.c.j2``."""
+    from ncgen.codegen.package import ExtraSource, PackageDoc, write_package
+
+    joints = [joint_kind(p, d) for p, d in JOINT_KINDS]
+    members = [member_kind(d, t) for d, t in MEMBER_KINDS]
+    fns = kernels()
+    if any(f.sz_iw() for f in fns) or any(f.sz_arg() > 2 or f.sz_res() > 2 for f in fns):
+        raise CodegenError("element kernels: the table loops expect kernels with no integer work and at most "
+                           "two arguments and results")
+    names = [k.name for k in joints] + [k.name for k in members]
+    context = {"joint_kinds": [{"name": k.name, "dim": k.dim, "n_vec": k.n_vec, "n_scalar": k.n_scalar,
+                                "n_out": k.n_out} for k in joints],
+               "member_kinds": [{"name": k.name, "phi": k.phi is not None, "n_q": k.n_q, "n_c": k.n_c,
+                                 "n_out": k.n_out} for k in members],
+               "max_w": max(f.sz_w() for f in fns), "kind_names": ",".join(names)}
+    doc = PackageDoc(summary="Element kernels of the shipped kinds and the table-driven loops (ncgen "
+                             "element tables): Φ, A, Φ_t and M of any model of these kinds from its tables")
+    return write_package(PACKAGE, fns, out_dir, doc=doc, max_file_instructions=None, reroll_instructions=None,
+                         extra_sources=[ExtraSource("runtime/ncgen_element_tables.h", "ncgen_element_tables.h",
+                                                    included=True),
+                                        ExtraSource("element_tables.c.j2", "element_tables.c", context)])
+
+
+def kind_names() -> str:
+    """The kinds in table order, comma-separated, as the library's ``kind_names()`` gives them."""
+    return ",".join([joint_kind_name(p, d) for p, d in JOINT_KINDS]
+                    + [member_kind_name(d, t) for d, t in MEMBER_KINDS])
