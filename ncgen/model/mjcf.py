@@ -1,0 +1,382 @@
+"""MJCF import: a MuJoCo model file as a :class:`~ncgen.model.system.System`.
+
+The file is read by :mod:`ncgen.model.mjcf_xml` (line numbers, ``<include>``, ``<default>``
+classes and ``childclass``), frames by :mod:`ncgen.model.mjcf_frames` and mass properties
+by :mod:`ncgen.model.mjcf_inertia`; the ncgen model comes from the XML alone.
+
+* Bodies without joints are merged into their parent (into the ground under
+  ``<worldbody>``); masses, centres of mass and inertia tensors are lumped exactly.  Each
+  merged group that moves becomes a body (``ruvw``) with the axes of its first MJCF body and
+  its origin at its centre of mass.  Mass comes from ``<inertial>`` (``diaginertia`` or
+  ``fullinertia``) or from the geoms (``<compiler inertiafromgeom>``, ``auto`` by default;
+  spheres, capsules, cylinders, boxes, ellipsoids of ``density`` or ``mass``).  A moving
+  group without mass is refused.
+* Joints (MuJoCo's zero configuration is the file's, so joint coordinates match ``qpos``
+  with ``ref = 0``): ``hinge`` → :class:`~ncgen.model.joints.Revolute`, ``slide`` →
+  :class:`~ncgen.model.joints.Prismatic`, ``ball`` → :class:`~ncgen.model.joints.Spherical`,
+  ``free``/``<freejoint>`` → :class:`~ncgen.model.joints.Free` (at the body's frame); a body
+  with ``slide, slide, hinge`` (perpendicular slides, hinge along their normal, as the planar
+  roots of hopper, cheetah, walker, swimmer) → :class:`~ncgen.model.joints.Planar` about the
+  hinge's anchor.  Other joint combinations in one body are refused, naming the body.
+* Every hinge and slide is actuated by one component of the input ``tau`` (N·m or N, in
+  ``model.joint_names`` order).  ``damping``, ``armature``, ``frictionloss`` (as
+  ``friction``) and ``range`` (when limited) are the joint's dynamics
+  (``simulate(joint_dynamics=True)``, :mod:`ncgen.model.joint_dynamics`); a hinge's
+  ``stiffness`` is a :class:`~ncgen.model.forces.TorsionalSpring` towards ``springref``.
+* Actuators: ``motor`` and ``general`` (fixed gain, no bias, no dynamics) on a hinge or
+  slide, as ``system.actuators`` (name, joint, ``gear`` × gain, ``ctrlrange``) and the matrix
+  ``system.actuator_gear`` (``tau = actuator_gear @ ctrl``).
+* Sites are markers of their member (``<body>_<site>`` frames for those on the ground);
+  every body and site is a named frame (``system.frames``).
+* ``<option gravity>`` (and ``<flag gravity="disable"/>``) sets gravity.
+
+Not part of the imported model, by design: contacts (geom collisions, ``<contact>``),
+sensors, cameras, lights, visual and asset data, keyframes (``system.mjcf_ignored`` lists
+what the file had).  Everything else the import cannot represent — equality constraints,
+tendons, other actuators, fluid forces, joint ``ref``, a slide's ``stiffness``, dynamics on
+ball and free joints, ... — is named, element and line, in ONE :class:`MjcfWarning`, and
+listed in ``system.mjcf_unsupported``.
+"""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from ncgen.errors import ModelError
+from ncgen.model.mjcf_frames import direction, pose, read_compiler
+from ncgen.model.mjcf_inertia import SOLIDS, geom_part, inertial_part, lump
+from ncgen.model.mjcf_xml import Defaults, choice, number, numbers, read_document, where
+from ncgen.model.urdf import FLAT_TOL, identifier
+
+#: Sections that carry no dynamics of the imported model (listed, never warned about).
+IGNORED = ("visual", "asset", "statistic", "sensor", "keyframe", "custom", "contact", "size", "extension")
+#: Body children the import reads.
+BODY_TAGS = ("body", "joint", "freejoint", "geom", "site", "inertial", "camera", "light", "frame", "plugin")
+
+
+class MjcfWarning(UserWarning):
+    """Parts of an MJCF file that the imported model does not represent."""
+
+
+class _Unsupported(list):
+    def add(self, el, what: str) -> None:
+        self.append(f"{where(el)} <{el.tag}>: {what}")
+
+
+class _Group:
+    """MJCF bodies merged by missing joints: the first body, its joints, the parts."""
+
+    def __init__(self, body, T, joints, parent):
+        self.body, self.T, self.joints, self.parent = body, T, joints, parent
+        self.bodies, self.parts = [], []
+
+
+def system_from_mjcf(source, system_class, *, name=None):
+    """A system (an instance of ``system_class``) from an MJCF file or text; see the module
+    docstring."""
+    root, _, fname = read_document(source)
+    compiler, bound = read_compiler(root)
+    defaults = Defaults(root)
+    unsupported = _Unsupported()
+    for el, key in bound:
+        unsupported.add(el, f"{key} (mass and inertia bounds are not applied)")
+    gravity = _option(root, unsupported)
+    s = system_class(identifier(name or root.get("model") or "mjcf"), gravity=gravity)
+    worldbody = root.findall("worldbody")
+    groups: list[_Group] = []
+    ground = _Group(None, np.eye(4), [], None)
+    sites: list = []
+    for wb in worldbody:
+        for child in wb:
+            if child.tag == "site":
+                sites.append((child, np.eye(4), ground, None))
+            _walk(child, np.eye(4), ground, None, groups, sites, compiler, defaults, unsupported)
+    s.mjcf_ignored = sorted({el.tag for el in root if el.tag in IGNORED})
+    member_of, joints = _members(s, ground, groups, compiler, defaults, unsupported)
+    _actuators(s, root, joints, defaults, unsupported)
+    _frames(s, ground, groups, member_of, sites, defaults, compiler)
+    for el in root:
+        if el.tag in ("equality", "tendon"):
+            for item in el:
+                unsupported.add(item, f"{el.tag} {item.tag} {item.get('name', '')!r} is not imported".replace(" ''", ""))
+    s.mjcf_unsupported = list(unsupported)
+    if unsupported:
+        warnings.warn(f"MJCF {fname}: {len(unsupported)} element(s) not imported (the model differs from "
+                      "MuJoCo's there): " + "; ".join(unsupported), MjcfWarning, stacklevel=3)
+    return s
+
+
+def _option(root, unsupported) -> tuple:
+    gravity = np.array([0.0, 0.0, -9.81])
+    for el in root.findall("option"):
+        g = numbers(el, el.attrib, "gravity", 3)
+        if g is not None:
+            gravity = g
+        for key in ("density", "viscosity"):
+            if number(el, el.attrib, key, 0.0) != 0:
+                unsupported.add(el, f"{key} (fluid forces are not modelled)")
+        for key in ("wind", "magnetic"):
+            if key == "wind" and np.any(numbers(el, el.attrib, key, 3, default=(0, 0, 0)) != 0):
+                unsupported.add(el, "wind (fluid forces are not modelled)")
+        for flag in el.findall("flag"):
+            if flag.get("gravity") == "disable":
+                gravity = np.zeros(3)
+    return tuple(float(x) for x in gravity)
+
+
+def _walk(el, T_parent, group, childclass, groups, sites, compiler, defaults, unsupported) -> None:
+    """Collect the bodies under ``el`` (a child of a body or of the world) into groups."""
+    tag = el.tag
+    if tag in ("geom", "site", "inertial", "joint", "freejoint", "camera", "light"):
+        return                                       # read with their body
+    if tag == "frame":
+        T = T_parent @ pose(el, el.attrib, compiler)
+        cls = el.get("childclass") or childclass
+        for child in el:
+            _walk(child, T, group, cls, groups, sites, compiler, defaults, unsupported)
+        return
+    if tag == "plugin":
+        unsupported.add(el, "plugins are not imported")
+        return
+    if tag in ("replicate", "composite", "flexcomp", "attach"):
+        raise ModelError(f"MJCF {where(el)}: <{tag}> makes bodies that the import cannot read; expand it "
+                         "first (e.g. save the model from MuJoCo: mujoco.mj_saveLastXML)")
+    if tag != "body":
+        raise ModelError(f"MJCF {where(el)}: <{tag}> cannot be inside a body (expected one of "
+                         f"{', '.join(BODY_TAGS)})")
+    cls = el.get("childclass") or childclass
+    T = T_parent @ pose(el, el.attrib, compiler)
+    joints = [(j, _joint_attrs(j, defaults, cls)) for j in el if j.tag in ("joint", "freejoint")]
+    if el.get("mocap") == "true":
+        unsupported.add(el, "mocap body (held fixed)")
+    if number(el, el.attrib, "gravcomp", 0.0) != 0:
+        unsupported.add(el, "gravcomp (gravity compensation is not modelled)")
+    if joints:
+        group = _Group(el, T, joints, group)
+        groups.append(group)
+    group.bodies.append((el, T))
+    group.parts += _parts(el, T, cls, compiler, defaults, unsupported)
+    for child in el:
+        if child.tag == "site":
+            sites.append((child, T, group, cls))
+    for child in el:
+        _walk(child, T, group, cls, groups, sites, compiler, defaults, unsupported)
+
+
+def _joint_attrs(j, defaults, cls) -> dict:
+    attrs = defaults.attributes(j, cls)
+    if j.tag == "freejoint":
+        attrs = dict(j.attrib, type="free")
+    return attrs
+
+
+def _parts(body, T, cls, compiler, defaults, unsupported) -> list:
+    """The body's mass parts in world axes (zero configuration)."""
+    parts = []
+    inertial = body.find("inertial")
+    use_geoms = compiler.inertiafromgeom == "true" or (compiler.inertiafromgeom == "auto" and inertial is None)
+    if inertial is not None and compiler.inertiafromgeom != "true":
+        parts.append(inertial_part(inertial, inertial.attrib, compiler))
+    if use_geoms:
+        lo, hi = compiler.group_range
+        for g in body.findall("geom"):
+            attrs = defaults.attributes(g, cls)
+            kind = choice(g, attrs, "type", ("plane", "hfield", "sphere", "capsule", "ellipsoid", "cylinder",
+                                             "box", "mesh", "sdf"), "sphere")
+            if not lo <= int(number(g, attrs, "group", 0)) <= hi:
+                continue
+            if kind not in SOLIDS:
+                if kind == "plane" or ("mass" in attrs and number(g, attrs, "mass", 0.0) == 0):
+                    continue
+                raise ModelError(f"MJCF {where(g)}: <geom type={kind!r}> gives its body's mass, which the import "
+                                 "cannot compute; give the body an <inertial> (or the geom mass=\"0\")")
+            if attrs.get("shellinertia") == "true":
+                unsupported.add(g, "shellinertia (computed as a solid)")
+            part = geom_part(g, attrs, compiler)
+            if part is not None:
+                parts.append(part)
+    R, p = T[:3, :3], T[:3, 3]
+    return [(m, R @ c + p, R @ I @ R.T) for m, c, I in parts]
+
+
+def _members(s, ground, groups, compiler, defaults, unsupported):
+    """Bodies and joints of the groups; returns ``(member of group, {joint name: (joint, kind)})``."""
+    from ncgen.model.forces import TorsionalSpring
+    from ncgen.model.joints import Free, Planar, Prismatic, Revolute, Spherical
+
+    member_of = {id(ground): s.ground}
+    for g in groups:
+        mass, com, inertia = lump(g.parts)
+        bname = identifier(g.body.get("name") or f"body{len(member_of)}")
+        if mass <= 0:
+            names = ", ".join(repr(b.get("name", "?")) for b, _ in g.bodies)
+            raise ModelError(f"MJCF {where(g.body)}: body {names} moves (joints) but has no mass; ncgen needs mass "
+                             "on every moving body: give it an <inertial> or a geom with mass")
+        R = g.T[:3, :3]
+        I_body = R.T @ inertia @ R
+        _check_inertia(I_body, g.body)
+        member_of[id(g)] = s.add_body(bname, mass=mass, inertia=I_body, position=com, rotation=R)
+    hinged = [(g, j, a) for g in groups for j, a in g.joints if a.get("type", "hinge") in ("hinge", "slide")]
+    planar = {id(g) for g in groups if _is_planar(g, compiler)}
+    actuated = [(g, j, a) for g, j, a in hinged if id(g) not in planar]
+    tau = s.add_input("tau", len(actuated)) if actuated else None
+    effort = {id(j): tau[k] for k, (_, j, _) in enumerate(actuated)}
+    joints = {}
+    for g in groups:
+        A, B = member_of[id(g.parent)], member_of[id(g)]
+        kinds = [a.get("type", "hinge") for _, a in g.joints]
+        R, p = g.T[:3, :3], g.T[:3, 3]
+        if id(g) in planar:
+            j, a = g.joints[2]
+            at = R @ numbers(j, a, "pos", 3, default=(0, 0, 0)) + p
+            normal = R @ direction(j, a, "axis", (0, 0, 1))
+            name = identifier("_".join(jj.get("name") or "j" for jj, _ in g.joints))
+            joint = s.add_joint(Planar(A, B, at=at, normal=normal, name=name))
+            for jj, aa in g.joints:
+                joints[jj.get("name")] = (joint, "planar")
+                _passive_unsupported(jj, aa, unsupported, "a planar root's joint")
+            continue
+        if len(kinds) > 1:
+            raise ModelError(f"MJCF {where(g.body)}: body {g.body.get('name')!r} has joints of types "
+                             f"{', '.join(kinds)}: several joints in one body are supported only as slide, slide, "
+                             "hinge (a planar root, perpendicular slides and the hinge along their normal)")
+        j, a = g.joints[0]
+        kind = kinds[0]
+        jname = identifier(j.get("name") or f"{B.name}_{kind}")
+        at = R @ numbers(j, a, "pos", 3, default=(0, 0, 0)) + p
+        if kind == "free":
+            if not A.is_ground:
+                raise ModelError(f"MJCF {where(j)}: a free joint must be in a body that is a child of the world")
+            joint = s.add_joint(Free(A, B, at=p, rotation=R, name=jname))
+            _passive_unsupported(j, a, unsupported, "a free joint")
+        elif kind == "ball":
+            joint = s.add_joint(Spherical(A, B, at=at, name=jname))
+            _passive_unsupported(j, a, unsupported, "a ball joint")
+        elif kind in ("hinge", "slide"):
+            axis = R @ direction(j, a, "axis", (0, 0, 1))
+            cls = Revolute if kind == "hinge" else Prismatic
+            joint = s.add_joint(cls(A, B, at=at, axis=axis, name=jname, effort=effort[id(j)]))
+            _joint_dynamics(s, joint, j, a, kind, compiler, unsupported, TorsionalSpring)
+        else:
+            choice(j, a, "type", ("free", "ball", "slide", "hinge"), "hinge")
+        joints[j.get("name")] = (joint, kind)
+    return member_of, joints
+
+
+def _is_planar(g, compiler) -> bool:
+    """slide, slide, hinge at one body: perpendicular slides, the hinge along their normal."""
+    kinds = [a.get("type", "hinge") for _, a in g.joints]
+    if kinds != ["slide", "slide", "hinge"]:
+        return False
+    (j1, a1), (j2, a2), (j3, a3) = g.joints
+    u, v = direction(j1, a1, "axis", (0, 0, 1)), direction(j2, a2, "axis", (0, 0, 1))
+    n = direction(j3, a3, "axis", (0, 0, 1))
+    return abs(u @ v) < 1e-12 and np.linalg.norm(np.cross(np.cross(u, v), n)) < 1e-12
+
+
+def _passive_unsupported(j, a, unsupported, what: str) -> None:
+    for key in ("damping", "armature", "stiffness", "frictionloss"):
+        if number(j, a, key, 0.0) != 0:
+            unsupported.add(j, f"{key} on {what}")
+    if _limited(j, a):
+        unsupported.add(j, f"range on {what}")
+
+
+def _limited(j, a) -> bool:
+    lim = a.get("limited", "auto")
+    return lim == "true" or (lim == "auto" and "range" in a)
+
+
+def _joint_dynamics(s, joint, j, a, kind, compiler, unsupported, TorsionalSpring) -> None:
+    angle = compiler.angle if kind == "hinge" else float
+    if number(j, a, "ref", 0.0) != 0:
+        unsupported.add(j, "ref (the joint coordinate is zero in the file's configuration)")
+    dyn = {}
+    for key, ours in (("damping", "damping"), ("armature", "armature"), ("frictionloss", "friction")):
+        value = number(j, a, key, 0.0)
+        if value < 0:
+            raise ModelError(f"MJCF {where(j)}: <joint {key}={a[key]!r}>: expected a number ≥ 0")
+        if value:
+            dyn[ours] = value
+    if _limited(j, a):
+        lo, hi = numbers(j, a, "range", 2, default=(0, 0))
+        if lo > hi:
+            raise ModelError(f"MJCF {where(j)}: <joint range={a.get('range')!r}>: the lower bound is above the upper")
+        dyn.update(lower=angle(lo), upper=angle(hi))
+    joint.set_dynamics(**dyn)
+    k = number(j, a, "stiffness", 0.0)
+    if "springdamper" in a:
+        unsupported.add(j, "springdamper")
+    if k:
+        if kind == "slide":
+            unsupported.add(j, "stiffness on a slide joint")
+        else:
+            s.add_force(TorsionalSpring(joint, k=k, rest_angle=angle(number(j, a, "springref", 0.0)),
+                                        name=f"{joint.name}_spring"))
+
+
+def _actuators(s, root, joints, defaults, unsupported) -> None:
+    hinges = [n for n, (_, kind) in joints.items() if kind in ("hinge", "slide")]
+    index = {n: k for k, n in enumerate(hinges)}
+    s.actuators = []
+    columns = []
+    for section in root.findall("actuator"):
+        for el in section:
+            a = defaults.attributes(el, None)
+            target = [key for key in ("joint", "tendon", "site", "body", "jointinparent") if key in a]
+            name = a.get("name") or f"actuator{len(s.actuators) + len(unsupported)}"
+            if len(target) != 1:
+                raise ModelError(f"MJCF {where(el)}: <{el.tag}> needs exactly one transmission (joint, tendon, site, "
+                                 f"body), found {target or 'none'}")
+            if target[0] in ("joint", "jointinparent") and a[target[0]] not in joints:
+                raise ModelError(f"MJCF {where(el)}: <{el.tag} {target[0]}={a[target[0]]!r}>: no joint of that name")
+            plain = el.tag == "motor" or (el.tag == "general" and a.get("gaintype", "fixed") == "fixed"
+                                          and a.get("biastype", "none") == "none"
+                                          and a.get("dyntype", "none") == "none")
+            if not plain or target[0] != "joint" or a["joint"] not in index:
+                unsupported.add(el, f"actuator {name!r} (only motor/general with fixed gain on a hinge or slide)")
+                continue
+            gear = numbers(el, a, "gear", None, default=(1.0,))[0]
+            gain = numbers(el, a, "gainprm", None, default=(1.0,))[0] if el.tag == "general" else 1.0
+            ctrl = numbers(el, a, "ctrlrange", 2)
+            limited = a.get("ctrllimited", "auto")
+            limited = limited == "true" or (limited == "auto" and ctrl is not None)
+            column = np.zeros(len(hinges))
+            column[index[a["joint"]]] = gear * gain
+            columns.append(column)
+            s.actuators.append({"name": name, "joint": joints[a["joint"]][0].name, "gear": gear * gain,
+                                "ctrlrange": tuple(ctrl) if limited and ctrl is not None else None})
+    s.actuator_gear = np.column_stack(columns) if columns else np.zeros((len(hinges), 0))
+
+
+def _frames(s, ground, groups, member_of, sites, defaults, compiler) -> None:
+    s.frames = {}
+    for g in [ground] + groups:
+        m = member_of[id(g)]
+        for body, T in g.bodies:
+            if body.get("name"):
+                s.frames[identifier(body.get("name"))] = ("ground" if m.is_ground else m.name, *_local(m, T))
+    for el, T_body, g, cls in sites:
+        attrs = defaults.attributes(el, cls)
+        T = T_body @ pose(el, attrs, compiler)
+        m = member_of[id(g)]
+        R, p = _local(m, T)
+        name = identifier(el.get("name") or f"site{len(s.frames)}")
+        s.frames[name] = ("ground" if m.is_ground else m.name, R, p)
+        if not m.is_ground and name not in m.markers:
+            m.add_marker(name, p)
+
+
+def _local(m, T) -> tuple[np.ndarray, np.ndarray]:
+    if m.is_ground:
+        return T[:3, :3].copy(), T[:3, 3].copy()
+    return m.R0.T @ T[:3, :3], m.R0.T @ (T[:3, 3] - m.p0)
+
+
+def _check_inertia(I, body) -> None:
+    e = np.linalg.eigvalsh(0.5 * (I + I.T))
+    scale = max(float(e.max()), 1e-300)
+    if e.min() < -FLAT_TOL * scale or min(e[1] + e[2] - e[0], e[0] + e[2] - e[1], e[0] + e[1] - e[2]) < -FLAT_TOL * scale:
+        raise ModelError(f"MJCF {where(body)}: body {body.get('name')!r}: the lumped inertia tensor is not physical "
+                         f"(principal moments {e.tolist()})")
