@@ -73,7 +73,7 @@ class JointMap:
         qj, vj = np.zeros(self.model.joint_space.nq), np.zeros(self.model.joint_space.nv)
         for kind, sq, sv, ia, da, P in self.items:
             if kind == "one":
-                qj[sq], vj[sv] = qpos[ia:ia + 1], qvel[da:da + 1]
+                qj[sq], vj[sv] = qpos[ia:ia + 1] - self.mj.qpos0[ia], qvel[da:da + 1]   # ncgen: qpos − ref
             elif kind == "planar":
                 qj[sq] = np.r_[P @ qpos[ia:ia + 2], qpos[ia + 2]]
                 vj[sv] = np.r_[P @ qvel[da:da + 2], qvel[da + 2]]
@@ -128,8 +128,9 @@ def mujoco_free_dynamics(path):
 
 
 def random_state(mj, rng):
-    """A random qpos (hinges and slides inside their ranges when limited, unit quaternions)
-    and qvel."""
+    """A random qpos (hinges and slides inside their ranges when limited, hinges within 3 rad
+    of zero: an imported hinge spring is a TorsionalSpring, periodic beyond π; unit
+    quaternions) and qvel."""
     import mujoco
     qpos = mj.qpos0.copy()
     for j in range(mj.njnt):
@@ -144,5 +145,7 @@ def random_state(mj, rng):
             qpos[a:a + 4] = q / np.linalg.norm(q)
         else:
             lo, hi = mj.jnt_range[j] if mj.jnt_limited[j] else (-1.0, 1.0)
+            if t == mujoco.mjtJoint.mjJNT_HINGE:
+                lo, hi = max(lo, -3.0), min(hi, 3.0)
             qpos[a] = rng.uniform(lo, hi)
     return qpos, rng.normal(0, 1.0, mj.nv)

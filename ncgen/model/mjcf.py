@@ -11,8 +11,8 @@ by :mod:`ncgen.model.mjcf_inertia`; the ncgen model comes from the XML alone.
   ``fullinertia``) or from the geoms (``<compiler inertiafromgeom>``, ``auto`` by default;
   spheres, capsules, cylinders, boxes, ellipsoids of ``density`` or ``mass``).  A moving
   group without mass is refused.
-* Joints (MuJoCo's zero configuration is the file's, so joint coordinates match ``qpos``
-  with ``ref = 0``): ``hinge`` → :class:`~ncgen.model.joints.Revolute`, ``slide`` →
+* Joints (the file's configuration is ncgen's initial one, where MuJoCo's ``qpos`` is the
+  joint's ``ref``: a hinge's or slide's coordinate is ``qpos − ref``, ``joint.mjcf_ref``): ``hinge`` → :class:`~ncgen.model.joints.Revolute`, ``slide`` →
   :class:`~ncgen.model.joints.Prismatic`, ``ball`` → :class:`~ncgen.model.joints.Spherical`,
   ``free``/``<freejoint>`` → :class:`~ncgen.model.joints.Free` (at the body's frame); a body
   with ``slide, slide, hinge`` (perpendicular slides, hinge along their normal, as the planar
@@ -20,7 +20,7 @@ by :mod:`ncgen.model.mjcf_inertia`; the ncgen model comes from the XML alone.
   hinge's anchor.  Other joint combinations in one body are refused, naming the body.
 * Every hinge and slide is actuated by one component of the input ``tau`` (N·m or N, in
   ``model.joint_names`` order).  ``damping``, ``armature``, ``frictionloss`` (as
-  ``friction``) and ``range`` (when limited) are the joint's dynamics
+  ``friction``) and ``range`` (when limited; less ``ref``) are the joint's dynamics
   (``simulate(joint_dynamics=True)``, :mod:`ncgen.model.joint_dynamics`); a hinge's
   ``stiffness`` is a :class:`~ncgen.model.forces.TorsionalSpring` towards ``springref``.
 * Actuators: ``motor`` and ``general`` (fixed gain, no bias, no dynamics) on a hinge or
@@ -33,7 +33,7 @@ by :mod:`ncgen.model.mjcf_inertia`; the ncgen model comes from the XML alone.
 Not part of the imported model, by design: contacts (geom collisions, ``<contact>``),
 sensors, cameras, lights, visual and asset data, keyframes (``system.mjcf_ignored`` lists
 what the file had).  Everything else the import cannot represent — equality constraints,
-tendons, other actuators, fluid forces, joint ``ref``, a slide's ``stiffness``, dynamics on
+tendons, other actuators, fluid forces, a slide's ``stiffness``, dynamics on
 ball and free joints, ... — is named, element and line, in ONE :class:`MjcfWarning`, and
 listed in ``system.mjcf_unsupported``.
 """
@@ -92,6 +92,8 @@ def system_from_mjcf(source, system_class, *, name=None):
             if child.tag == "site":
                 sites.append((child, np.eye(4), ground, None))
             _walk(child, np.eye(4), ground, None, groups, sites, compiler, defaults, unsupported)
+    if compiler.totalmass > 0:
+        _scale_mass(compiler.totalmass, [ground] + groups)
     s.mjcf_ignored = sorted({el.tag for el in root if el.tag in IGNORED})
     member_of, joints = _members(s, ground, groups, compiler, defaults, unsupported)
     _actuators(s, root, joints, defaults, unsupported)
@@ -162,6 +164,16 @@ def _walk(el, T_parent, group, childclass, groups, sites, compiler, defaults, un
             sites.append((child, T, group, cls))
     for child in el:
         _walk(child, T, group, cls, groups, sites, compiler, defaults, unsupported)
+
+
+def _scale_mass(total: float, groups) -> None:
+    """``<compiler settotalmass>``: every mass and inertia scaled so that the bodies' masses
+    add up to ``total`` (kg), as MuJoCo does."""
+    now = sum(m for g in groups for m, _, _ in g.parts)
+    if now > 0:
+        f = total / now
+        for g in groups:
+            g.parts = [(f * m, c, f * I) for m, c, I in g.parts]
 
 
 def _joint_attrs(j, defaults, cls) -> dict:
@@ -290,8 +302,8 @@ def _limited(j, a) -> bool:
 
 def _joint_dynamics(s, joint, j, a, kind, compiler, unsupported, TorsionalSpring) -> None:
     angle = compiler.angle if kind == "hinge" else float
-    if number(j, a, "ref", 0.0) != 0:
-        unsupported.add(j, "ref (the joint coordinate is zero in the file's configuration)")
+    ref = angle(number(j, a, "ref", 0.0))
+    joint.mjcf_ref = ref
     dyn = {}
     for key, ours in (("damping", "damping"), ("armature", "armature"), ("frictionloss", "friction")):
         value = number(j, a, key, 0.0)
@@ -303,7 +315,7 @@ def _joint_dynamics(s, joint, j, a, kind, compiler, unsupported, TorsionalSpring
         lo, hi = numbers(j, a, "range", 2, default=(0, 0))
         if lo > hi:
             raise ModelError(f"MJCF {where(j)}: <joint range={a.get('range')!r}>: the lower bound is above the upper")
-        dyn.update(lower=angle(lo), upper=angle(hi))
+        dyn.update(lower=angle(lo) - ref, upper=angle(hi) - ref)
     joint.set_dynamics(**dyn)
     k = number(j, a, "stiffness", 0.0)
     if "springdamper" in a:
@@ -312,7 +324,7 @@ def _joint_dynamics(s, joint, j, a, kind, compiler, unsupported, TorsionalSpring
         if kind == "slide":
             unsupported.add(j, "stiffness on a slide joint")
         else:
-            s.add_force(TorsionalSpring(joint, k=k, rest_angle=angle(number(j, a, "springref", 0.0)),
+            s.add_force(TorsionalSpring(joint, k=k, rest_angle=angle(number(j, a, "springref", 0.0)) - ref,
                                         name=f"{joint.name}_spring"))
 
 

@@ -30,6 +30,7 @@ class Compiler:
     autolimits: bool = True
     meshdir: str = ""
     group_range: tuple = (0, 5)
+    totalmass: float = -1.0
 
     def angle(self, value: float) -> float:
         """An angle of the file in radians."""
@@ -62,7 +63,9 @@ def read_compiler(root) -> tuple[Compiler, list]:
         if a.get("coordinate", "local") != "local":
             raise ModelError(f"MJCF {where(el)}: <compiler coordinate={a['coordinate']!r}>: only local "
                              "coordinates are supported (as in MuJoCo since 2.3.3)")
-        for key in ("boundmass", "boundinertia", "settotalmass"):
+        if "settotalmass" in a:
+            settings["totalmass"] = float(numbers(el, a, "settotalmass", 1)[0])
+        for key in ("boundmass", "boundinertia"):
             if key in a and float(a[key]) > 0:
                 unsupported.append((el, key))
         if a.get("balanceinertia") == "true":

@@ -145,7 +145,7 @@ class Defaults:
         if name in self.classes and name != "main":
             raise ModelError(f"MJCF {where(el)}: <default class={name!r}> is defined twice "
                              f"(first at {self.where[name]})")
-        own = {tag: dict(attrs) for tag, attrs in inherited.items()}
+        own = {tag: dict(attrs) for tag, attrs in {**inherited, **self.classes.get(name, {})}.items()}
         for child in el:
             if child.tag != "default":
                 own.setdefault(child.tag, {}).update(child.attrib)

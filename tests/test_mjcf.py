@@ -1,0 +1,229 @@
+"""MJCF import (ncgen.model.mjcf) against MuJoCo: the joint-space accelerations of the shipped
+gymnasium and dm_control models at random states equal mj_forward's qacc (contacts, limits,
+equality constraints and friction loss off in MuJoCo, the same passive forces), a passive
+run equals MuJoCo's RK4 at a fine step, and malformed or unsupported MJCF is named with its
+element and line."""
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import ncgen as nc
+from ncgen.errors import ModelError
+from ncgen.model.mjcf import MjcfWarning
+
+mujoco = pytest.importorskip("mujoco")
+
+from mjcf_reference import (JointMap, joint_ode, mujoco_free_dynamics, random_state,  # noqa: E402
+                            shipped_files)
+
+FILES = shipped_files()
+#: Shipped models that import without an unsupported-feature warning (checked by the test).
+SUPPORTED = ["gymnasium/inverted_pendulum.xml", "gymnasium/hopper.xml", "dm_control/cheetah.xml",
+             "gymnasium/inverted_double_pendulum.xml", "gymnasium/half_cheetah.xml", "gymnasium/walker2d.xml",
+             "gymnasium/ant.xml", "dm_control/acrobot.xml", "dm_control/cartpole.xml", "dm_control/finger.xml",
+             "dm_control/hopper.xml", "dm_control/pendulum.xml", "dm_control/reacher.xml", "dm_control/walker.xml"]
+FAST = SUPPORTED[:3]
+
+
+def import_quietly(source):
+    """The system, failing on any MjcfWarning."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", MjcfWarning)
+        return nc.System.from_mjcf(source)
+
+
+def without_friction_and_limits(system):
+    """MuJoCo's frictionloss and limits are constraints (off in the reference); ncgen's are a
+    regularised friction law and a penalty: compare without them."""
+    for j in system.joints:
+        j.dynamics = {k: v for k, v in j.dynamics.items() if k != "friction"}
+        j.limits = {}
+    return system
+
+
+def qacc_error(path, trials: int = 5, seed: int = 0) -> float:
+    """Largest |qacc_ncgen − qacc_mujoco| / max(1, |qacc_mujoco|) over random states and controls."""
+    system = without_friction_and_limits(import_quietly(path))
+    model = system.build()
+    mj = mujoco_free_dynamics(path)
+    jmap = JointMap(model, system, mj)
+    ode = joint_ode(model)
+    d = mujoco.MjData(mj)
+    rng = np.random.default_rng(seed)
+    worst = 0.0
+    for _ in range(trials):
+        qpos, qvel = random_state(mj, rng)
+        ctrl = rng.normal(size=mj.nu)
+        d.qpos[:], d.qvel[:], d.ctrl[:] = qpos, qvel, ctrl
+        mujoco.mj_forward(mj, d)
+        assert np.max(np.abs(d.qacc)) > 1e-3           # a state that moves
+        qj, vj = jmap.to_ncgen(qpos, qvel)
+        xdot = np.asarray(ode(0.0, np.r_[qj, vj], system.actuator_gear @ ctrl, np.zeros(model.np))[0]).ravel()
+        qacc = jmap.acceleration_to_mujoco(qpos, qvel, xdot[len(qj):])
+        worst = max(worst, np.max(np.abs(qacc - d.qacc)) / max(1.0, np.max(np.abs(d.qacc))))
+    return worst
+
+
+@pytest.mark.parametrize("key", [k if k in FAST else pytest.param(k, marks=pytest.mark.slow) for k in SUPPORTED])
+def test_forward_dynamics_equals_mujoco(key):
+    """Relative to 1e-8 (measured 1e-16 ... 6e-14)."""
+    if key not in FILES:
+        pytest.skip(f"{key.split('/')[0]} is not installed (a test extra)")
+    assert qacc_error(FILES[key]) < 1e-8
+
+
+CHAIN = """
+<mujoco model="chain">
+  <compiler angle="radian" eulerseq="zyx"/>
+  <option gravity="0.3 -0.2 -9.81"/>
+  <default>
+    <joint damping="0.05" armature="0.01"/>
+    <default class="soft"><joint stiffness="2" springref="0.3" damping="0.2"/></default>
+    <geom density="500"/>
+  </default>
+  <worldbody>
+    <body name="a" pos="0.1 0 1" euler="0.3 0.2 0.1" childclass="soft">
+      <joint name="j1" type="hinge" axis="0 1 1" pos="0 0 0.05"/>
+      <geom type="capsule" fromto="0 0 0 0.3 0.1 -0.2" size="0.04"/>
+      <geom type="box" size="0.05 0.06 0.07" pos="0.1 0 0" axisangle="1 1 0 0.4"/>
+      <body name="b" pos="0.3 0.1 -0.2" xyaxes="0 1 0 -1 0 0.2">
+        <joint name="j2" type="slide" axis="1 0 0" stiffness="0" class="main"/>
+        <geom type="cylinder" size="0.03 0.1" zaxis="1 0.2 0"/>
+        <geom type="ellipsoid" size="0.05 0.04 0.03" quat="0.9 0.1 0.3 0.2" mass="0.7"/>
+        <body name="c" pos="0 0.2 0">
+          <joint name="j3" axis="0.2 0.1 1"/>
+          <inertial pos="0.02 0.1 0" mass="0.4" fullinertia="0.004 0.003 0.005 0.0002 -0.0001 0.0003"/>
+          <geom type="sphere" size="0.05"/>
+          <site name="tip" pos="0 0.2 0"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+  <actuator>
+    <motor joint="j1" gear="3"/>
+    <general joint="j3" gear="2" gainprm="1.5"/>
+  </actuator>
+</mujoco>
+"""
+
+
+def test_frames_geoms_defaults_against_mujoco(tmp_path):
+    """Every orientation form, every solid geom, fromto, fullinertia, defaults with childclass,
+    stiffness with springref, armature and damping, motor and general actuators: qacc as
+    MuJoCo's at random states, to 1e-8 relative."""
+    path = tmp_path / "chain.xml"
+    path.write_text(CHAIN)
+    assert qacc_error(path, trials=4) < 1e-8
+
+
+def test_include_and_tip_marker(tmp_path):
+    """<include> pastes the included file's children; a site is a marker at MuJoCo's place."""
+    (tmp_path / "parts.xml").write_text("<mujoco><default><joint damping='0.1'/></default></mujoco>")
+    main = CHAIN.replace('<compiler angle="radian" eulerseq="zyx"/>',
+                         '<compiler angle="radian" eulerseq="zyx"/><include file="parts.xml"/>')
+    main = main.replace('<joint damping="0.05" armature="0.01"/>', '<joint armature="0.01"/>')
+    path = tmp_path / "main.xml"
+    path.write_text(main)
+    system = import_quietly(path)
+    assert {j.name: j.dynamics.get("damping") for j in system.joints} == {"j1": 0.2, "j2": 0.1, "j3": 0.2}
+    mj = mujoco.MjModel.from_xml_path(str(path))
+    d = mujoco.MjData(mj)
+    mujoco.mj_forward(mj, d)
+    c = system.member("c")
+    np.testing.assert_allclose(c.p0 + c.R0 @ c.markers["tip"], d.site("tip").xpos, atol=1e-12)
+
+
+def test_passive_run_equals_mujoco_rk4():
+    """1 s of a passive hopper (planar root, armature, damping, gravity; ground contact and
+    limits off) in ncgen's joint space against MuJoCo's RK4 at 1e-4 s: joints within 1e-6."""
+    key = "dm_control/hopper.xml"
+    if key not in FILES:
+        pytest.skip("dm_control is not installed (a test extra)")
+    system = without_friction_and_limits(import_quietly(FILES[key]))
+    model = system.build()
+    mj = mujoco_free_dynamics(FILES[key])
+    mj.opt.integrator, mj.opt.timestep = mujoco.mjtIntegrator.mjINT_RK4, 1e-4
+    d = mujoco.MjData(mj)
+    rng = np.random.default_rng(3)
+    d.qvel[:] = rng.normal(0, 0.5, mj.nv)
+    jmap = JointMap(model, system, mj)
+    qj0, vj0 = jmap.to_ncgen(d.qpos.copy(), d.qvel.copy())
+    q0, v0 = model.from_joint_space(qj0, vj0)
+    traj = nc.simulate(model, 1.0, 0.1, q0=q0, v0=v0, method="joint", joint_dynamics=True, rtol=1e-11, atol=1e-12)
+    ours = [model.to_joint_space(traj.q[k], traj.v[k])[0] for k in range(len(traj.t))]
+    ref = [jmap.to_ncgen(d.qpos.copy(), d.qvel.copy())[0]]
+    for _ in range(10):
+        for _ in range(1000):
+            mujoco.mj_step(mj, d)
+        ref.append(jmap.to_ncgen(d.qpos.copy(), d.qvel.copy())[0])
+    ours, ref = np.array(ours), np.array(ref)
+    assert np.ptp(ref[:, 1]) > 0.5                          # it falls
+    assert np.max(np.abs(ours - ref)) < 1e-6
+
+
+def test_unsupported_named_in_one_warning():
+    text = """<mujoco><option viscosity="0.1"/><worldbody>
+      <body name="a"><joint name="j" type="hinge"/><geom size="0.1"/>
+        <body name="b" pos="0 0 -0.5"><joint name="k" type="hinge"/><geom size="0.1"/></body></body>
+      </worldbody>
+      <tendon><fixed name="t"><joint joint="j" coef="1"/></fixed></tendon>
+      <actuator><position joint="j" kp="10"/></actuator>
+      <equality><joint joint1="j" joint2="k"/></equality></mujoco>"""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        system = nc.System.from_mjcf(text)
+    ours = [w for w in caught if issubclass(w.category, MjcfWarning)]
+    assert len(ours) == 1
+    message = str(ours[0].message)
+    for part in ("MJCF text:1 <option>: viscosity", "MJCF text:5 <fixed>: tendon fixed 't'",
+                 "MJCF text:6 <position>", "MJCF text:7 <joint>: equality joint"):
+        assert part.replace("MJCF text", "text") in message or part in message, (part, message)
+    assert len(system.mjcf_unsupported) == 4
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("<mujoco><worldbody><bogus/></worldbody></mujoco>", "MJCF text:1: unknown element <bogus>"),
+    ("<mujoco><worldbody><body><joint/>\n<geom size='0.1 x'/></body></worldbody></mujoco>",
+     "MJCF text:2: <geom size='0.1 x'>: expected numbers"),
+    ("<mujoco><worldbody><body pos='0 0'><joint/><geom size='1'/></body></worldbody></mujoco>",
+     "MJCF text:1: <body pos='0 0'>: expected 3 number(s), found 2"),
+    ("<mujoco><worldbody><body><joint/><geom size='1'/></body></worldbody>\n"
+     "<actuator><motor joint='nope'/></actuator></mujoco>", "MJCF text:2: <motor joint='nope'>: no joint of that name"),
+    ("<mujoco><worldbody><body><joint/></body></worldbody></mujoco>", "moves (joints) but has no mass"),
+    ("<mujoco><worldbody><body><joint class='x'/><geom size='1'/></body></worldbody></mujoco>",
+     "uses class 'x', which no <default> defines"),
+    ("<mujoco><worldbody><body><joint/><geom size='1'/></worldbody></mujoco>", "not well-formed XML"),
+    ("<mujoco><include file='missing.xml'/></mujoco>", "<include file='missing.xml'>: no file"),
+    ("<robot/>", "expected a <mujoco> root element, found <robot>"),
+    ("<mujoco><worldbody><body><joint type='hinge'/><joint type='hinge'/><geom size='1'/></body></worldbody>"
+     "</mujoco>", "has joints of types hinge, hinge"),
+    ("<mujoco><worldbody><body><joint/><inertial mass='1' diaginertia='1 1 3'/></body></worldbody></mujoco>",
+     "the inertia tensor is not physical"),
+])
+def test_malformed_mjcf_is_named(text, expected):
+    with pytest.raises(ModelError) as e:
+        nc.System.from_mjcf(text)
+    assert expected in str(e.value)
+
+
+def test_cli_loads_mjcf(tmp_path):
+    from ncgen.cli.common import load_system
+    path = tmp_path / "chain.xml"
+    path.write_text(CHAIN)
+    system = load_system(str(path))
+    assert [j.name for j in system.joints] == ["j1", "j2", "j3"]
+    assert [f.name for f in system.forces] == ["j1_spring", "j3_spring"]      # j3 inherits the childclass
+    with pytest.raises(ModelError, match="an MJCF model"):
+        load_system(str(path), floating_base=True)
+
+
+def test_coverage_script_runs():
+    import subprocess
+    import sys
+    script = Path(__file__).resolve().parents[1] / "benchmarks" / "mjcf_coverage.py"
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=600, check=True).stdout
+    assert "import without an unsupported-feature warning" in out
