@@ -85,7 +85,7 @@ def read_document(source):
     includes expanded and tags checked (module docstring)."""
     text = str(source)
     if "<" in text:
-        directory, name = Path.cwd(), "MJCF text"
+        directory, name = Path.cwd(), "text"
     else:
         path = Path(source)
         if not path.is_file():
