@@ -28,12 +28,15 @@ by :mod:`ncgen.model.mjcf_inertia`; the ncgen model comes from the XML alone.
   ``system.actuator_gear`` (``tau = actuator_gear @ ctrl``).
 * Sites are markers of their member (``<body>_<site>`` frames for those on the ground);
   every body and site is a named frame (``system.frames``).
+* ``<equality><connect body1 body2 anchor>`` closes a loop exactly: a
+  :class:`~ncgen.model.joints.Spherical` joint at the anchor (body1's frame), the two
+  bodies sharing the point (MuJoCo's constraint is soft; ncgen's holds to round-off).
 * ``<option gravity>`` (and ``<flag gravity="disable"/>``) sets gravity.
 
 Not part of the imported model, by design: contacts (geom collisions, ``<contact>``),
 sensors, cameras, lights, visual and asset data, keyframes (``system.mjcf_ignored`` lists
-what the file had).  Everything else the import cannot represent — equality constraints,
-tendons, other actuators, fluid forces, a slide's ``stiffness``, dynamics on
+what the file had).  Everything else the import cannot represent — other equality
+constraints, tendons, other actuators, fluid forces, a slide's ``stiffness``, dynamics on
 ball and free joints, ... — is named, element and line, in ONE :class:`MjcfWarning`, and
 listed in ``system.mjcf_unsupported``.
 """
@@ -99,14 +102,48 @@ def system_from_mjcf(source, system_class, *, name=None):
     _actuators(s, root, joints, defaults, unsupported)
     _frames(s, ground, groups, member_of, sites, defaults, compiler)
     for el in root:
-        if el.tag in ("equality", "tendon"):
+        if el.tag == "equality":
+            _equality(s, el, ground, groups, member_of, defaults, unsupported)
+        elif el.tag == "tendon":
             for item in el:
-                unsupported.add(item, f"{el.tag} {item.tag} {item.get('name', '')!r} is not imported".replace(" ''", ""))
+                unsupported.add(item, f"tendon {item.tag} {item.get('name', '')!r} is not imported".replace(" ''", ""))
     s.mjcf_unsupported = list(unsupported)
     if unsupported:
         warnings.warn(f"MJCF {fname}: {len(unsupported)} element(s) not imported (the model differs from "
                       "MuJoCo's there): " + "; ".join(unsupported), MjcfWarning, stacklevel=3)
     return s
+
+
+def _equality(s, section, ground, groups, member_of, defaults, unsupported) -> None:
+    """``<connect body1 body2 anchor>`` as an exact :class:`~ncgen.model.joints.Spherical`
+    joint (the bodies share the anchor point); other equality constraints are unsupported."""
+    from ncgen.model.joints import Spherical
+    where_body = {b.get("name"): (g, T) for g in [ground] + groups for b, T in g.bodies if b.get("name")}
+    for k, el in enumerate(section):
+        a = defaults.attributes(el, None)
+        name = a.get("name")
+        if el.tag != "connect" or "body1" not in a:
+            unsupported.add(el, f"equality {el.tag} {name!r} is not imported".replace(" None", ""))
+            continue
+        if a.get("active", "true") == "false":
+            unsupported.add(el, f"inactive connect {name!r} is not imported".replace(" None", ""))
+            continue
+        ends = []
+        for key, default in (("body1", None), ("body2", "world")):
+            body = a.get(key, default)
+            if body == "world":
+                ends.append((ground, np.eye(4)))
+            elif body in where_body:
+                ends.append(where_body[body])
+            else:
+                raise ModelError(f"MJCF {where(el)}: <connect {key}={body!r}>: no body of that name")
+        (g1, T1), (g2, _) = ends
+        if g1 is g2:
+            raise ModelError(f"MJCF {where(el)}: <connect>: body1 and body2 move together (one rigid group); "
+                             "the constraint would join a body to itself")
+        anchor = T1[:3, :3] @ numbers(el, a, "anchor", 3, default=(0, 0, 0)) + T1[:3, 3]
+        s.add_joint(Spherical(member_of[id(g1)], member_of[id(g2)], at=anchor,
+                              name=identifier(name or f"connect{k}")))
 
 
 def _option(root, unsupported) -> tuple:
