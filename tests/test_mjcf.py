@@ -266,6 +266,9 @@ def test_unsupported_named_in_one_warning():
     ("<mujoco><worldbody><body><joint/><geom size='1'/></worldbody></mujoco>", "not well-formed XML"),
     ("<mujoco><include file='missing.xml'/></mujoco>", "<include file='missing.xml'>: no file"),
     ("<robot/>", "expected a <mujoco> root element, found <robot>"),
+    ("<mujoco><worldbody><body name='a'><joint/><geom size='1'/></body></worldbody>\n"
+     "<equality><connect body1='a' body2='nope' anchor='0 0 0'/></equality></mujoco>",
+     "MJCF text:2: <connect body2='nope'>: no body of that name"),
     ("<mujoco><worldbody><body><joint type='hinge'/><joint type='hinge'/><geom size='1'/></body></worldbody>"
      "</mujoco>", "has joints of types hinge, hinge"),
     ("<mujoco><worldbody><body><joint/><inertial mass='1' diaginertia='1 1 3'/></body></worldbody></mujoco>",
@@ -277,6 +280,16 @@ def test_malformed_mjcf_is_named(text, expected):
     assert expected in str(e.value)
 
 
+def test_actuator_gear_rows_follow_tau():
+    """Unnamed joints take tau components too; a motor's gear lands in its joint's row."""
+    s = import_quietly("""<mujoco><worldbody><body><joint axis="0 1 0"/><geom size="0.1"/>
+      <body pos="0 0 -0.5" name="b"><joint name="k" axis="1 0 0"/><geom size="0.1"/></body></body></worldbody>
+      <actuator><motor joint="k" gear="7" ctrlrange="-1 1"/></actuator></mujoco>""")
+    assert s.actuator_gear.tolist() == [[0.0], [7.0]]
+    assert s.actuators == [{"name": "actuator0", "joint": "k", "gear": 7.0, "ctrlrange": (-1.0, 1.0)}]
+    assert s.build().nu == 2
+
+
 def test_cli_loads_mjcf(tmp_path):
     from ncgen.cli.common import load_system
     path = tmp_path / "chain.xml"
@@ -286,6 +299,23 @@ def test_cli_loads_mjcf(tmp_path):
     assert [f.name for f in system.forces] == ["j1_spring", "j3_spring"]      # j3 inherits the childclass
     with pytest.raises(ModelError, match="an MJCF model"):
         load_system(str(path), floating_base=True)
+
+
+def test_cli_simulates_an_mjcf_file_twice(tmp_path, monkeypatch):
+    """``ncgen simulate model.xml``: the second run (model read from the store of built
+    models) gives the first run's trajectory."""
+    from ncgen.cli import main
+    monkeypatch.setenv("NCGEN_CACHE_DIR", str(tmp_path / "cache"))
+    path = tmp_path / "chain.xml"
+    path.write_text(CHAIN)
+    runs = []
+    for k in range(2):
+        out = tmp_path / f"run{k}.npz"
+        assert main(["simulate", str(path), "--t-end", "0.05", "-o", str(out)]) in (0, None)
+        runs.append(np.load(out))
+    assert np.ptp(runs[0]["q"]) > 0
+    for key in ("t", "q", "v"):
+        assert np.array_equal(runs[0][key], runs[1][key]), key
 
 
 def test_coverage_script_runs():

@@ -98,8 +98,8 @@ def system_from_mjcf(source, system_class, *, name=None):
     if compiler.totalmass > 0:
         _scale_mass(compiler.totalmass, [ground] + groups)
     s.mjcf_ignored = sorted({el.tag for el in root if el.tag in IGNORED})
-    member_of, joints = _members(s, ground, groups, compiler, defaults, unsupported)
-    _actuators(s, root, joints, defaults, unsupported)
+    member_of, joints, driven = _members(s, ground, groups, compiler, defaults, unsupported)
+    _actuators(s, root, joints, driven, defaults, unsupported)
     _frames(s, ground, groups, member_of, sites, defaults, compiler)
     for el in root:
         if el.tag == "equality":
@@ -155,9 +155,8 @@ def _option(root, unsupported) -> tuple:
         for key in ("density", "viscosity"):
             if number(el, el.attrib, key, 0.0) != 0:
                 unsupported.add(el, f"{key} (fluid forces are not modelled)")
-        for key in ("wind", "magnetic"):
-            if key == "wind" and np.any(numbers(el, el.attrib, key, 3, default=(0, 0, 0)) != 0):
-                unsupported.add(el, "wind (fluid forces are not modelled)")
+        if np.any(numbers(el, el.attrib, "wind", 3, default=(0, 0, 0)) != 0):
+            unsupported.add(el, "wind (fluid forces are not modelled)")
         for flag in el.findall("flag"):
             if flag.get("gravity") == "disable":
                 gravity = np.zeros(3)
@@ -250,7 +249,8 @@ def _parts(body, T, cls, compiler, defaults, unsupported) -> list:
 
 
 def _members(s, ground, groups, compiler, defaults, unsupported):
-    """Bodies and joints of the groups; returns ``(member of group, {joint name: (joint, kind)})``."""
+    """Bodies and joints of the groups; returns ``(member of group, {MJCF joint name: (joint,
+    kind)}, the joints driven by tau in its order)``."""
     from ncgen.model.forces import TorsionalSpring
     from ncgen.model.joints import Free, Planar, Prismatic, Revolute, Spherical
 
@@ -271,7 +271,7 @@ def _members(s, ground, groups, compiler, defaults, unsupported):
     actuated = [(g, j, a) for g, j, a in hinged if id(g) not in planar]
     tau = s.add_input("tau", len(actuated)) if actuated else None
     effort = {id(j): tau[k] for k, (_, j, _) in enumerate(actuated)}
-    joints = {}
+    joints, driven = {}, []
     for g in groups:
         A, B = member_of[id(g.parent)], member_of[id(g)]
         kinds = [a.get("type", "hinge") for _, a in g.joints]
@@ -283,7 +283,8 @@ def _members(s, ground, groups, compiler, defaults, unsupported):
             name = identifier("_".join(jj.get("name") or "j" for jj, _ in g.joints))
             joint = s.add_joint(Planar(A, B, at=at, normal=normal, name=name))
             for jj, aa in g.joints:
-                joints[jj.get("name")] = (joint, "planar")
+                if jj.get("name"):
+                    joints[jj.get("name")] = (joint, "planar")
                 _passive_unsupported(jj, aa, unsupported, "a planar root's joint")
             continue
         if len(kinds) > 1:
@@ -306,11 +307,13 @@ def _members(s, ground, groups, compiler, defaults, unsupported):
             axis = R @ direction(j, a, "axis", (0, 0, 1))
             cls = Revolute if kind == "hinge" else Prismatic
             joint = s.add_joint(cls(A, B, at=at, axis=axis, name=jname, effort=effort[id(j)]))
+            driven.append(joint)
             _joint_dynamics(s, joint, j, a, kind, compiler, unsupported, TorsionalSpring)
         else:
             choice(j, a, "type", ("free", "ball", "slide", "hinge"), "hinge")
-        joints[j.get("name")] = (joint, kind)
-    return member_of, joints
+        if j.get("name"):
+            joints[j.get("name")] = (joint, kind)
+    return member_of, joints, driven
 
 
 def _is_planar(g, compiler) -> bool:
@@ -365,38 +368,38 @@ def _joint_dynamics(s, joint, j, a, kind, compiler, unsupported, TorsionalSpring
                                         name=f"{joint.name}_spring"))
 
 
-def _actuators(s, root, joints, defaults, unsupported) -> None:
-    hinges = [n for n, (_, kind) in joints.items() if kind in ("hinge", "slide")]
-    index = {n: k for k, n in enumerate(hinges)}
+def _actuators(s, root, joints, driven, defaults, unsupported) -> None:
+    """Motors as ``s.actuators`` and the map ``s.actuator_gear`` from ``ctrl`` to ``tau``."""
+    index = {n: driven.index(j) for n, (j, kind) in joints.items() if kind in ("hinge", "slide")}
     s.actuators = []
     columns = []
-    for section in root.findall("actuator"):
-        for el in section:
-            a = defaults.attributes(el, None)
-            target = [key for key in ("joint", "tendon", "site", "body", "jointinparent") if key in a]
-            name = a.get("name") or f"actuator{len(s.actuators) + len(unsupported)}"
-            if len(target) != 1:
-                raise ModelError(f"MJCF {where(el)}: <{el.tag}> needs exactly one transmission (joint, tendon, site, "
-                                 f"body), found {target or 'none'}")
-            if target[0] in ("joint", "jointinparent") and a[target[0]] not in joints:
-                raise ModelError(f"MJCF {where(el)}: <{el.tag} {target[0]}={a[target[0]]!r}>: no joint of that name")
-            plain = el.tag == "motor" or (el.tag == "general" and a.get("gaintype", "fixed") == "fixed"
-                                          and a.get("biastype", "none") == "none"
-                                          and a.get("dyntype", "none") == "none")
-            if not plain or target[0] != "joint" or a["joint"] not in index:
-                unsupported.add(el, f"actuator {name!r} (only motor/general with fixed gain on a hinge or slide)")
-                continue
-            gear = numbers(el, a, "gear", None, default=(1.0,))[0]
-            gain = numbers(el, a, "gainprm", None, default=(1.0,))[0] if el.tag == "general" else 1.0
-            ctrl = numbers(el, a, "ctrlrange", 2)
-            limited = a.get("ctrllimited", "auto")
-            limited = limited == "true" or (limited == "auto" and ctrl is not None)
-            column = np.zeros(len(hinges))
-            column[index[a["joint"]]] = gear * gain
-            columns.append(column)
-            s.actuators.append({"name": name, "joint": joints[a["joint"]][0].name, "gear": gear * gain,
-                                "ctrlrange": tuple(ctrl) if limited and ctrl is not None else None})
-    s.actuator_gear = np.column_stack(columns) if columns else np.zeros((len(hinges), 0))
+    elements = [el for section in root.findall("actuator") for el in section]
+    for k, el in enumerate(elements):
+        a = defaults.attributes(el, None)
+        target = [key for key in ("joint", "tendon", "site", "body", "jointinparent") if key in a]
+        name = a.get("name") or f"actuator{k}"
+        if len(target) != 1:
+            raise ModelError(f"MJCF {where(el)}: <{el.tag}> needs exactly one transmission (joint, tendon, site, "
+                             f"body), found {target or 'none'}")
+        if target[0] in ("joint", "jointinparent") and a[target[0]] not in joints:
+            raise ModelError(f"MJCF {where(el)}: <{el.tag} {target[0]}={a[target[0]]!r}>: no joint of that name")
+        plain = el.tag == "motor" or (el.tag == "general" and a.get("gaintype", "fixed") == "fixed"
+                                      and a.get("biastype", "none") == "none"
+                                      and a.get("dyntype", "none") == "none")
+        if not plain or target[0] != "joint" or a["joint"] not in index:
+            unsupported.add(el, f"actuator {name!r} (only motor/general with fixed gain on a hinge or slide)")
+            continue
+        gear = numbers(el, a, "gear", None, default=(1.0,))[0]
+        gain = numbers(el, a, "gainprm", None, default=(1.0,))[0] if el.tag == "general" else 1.0
+        ctrl = numbers(el, a, "ctrlrange", 2)
+        limited = a.get("ctrllimited", "auto")
+        limited = limited == "true" or (limited == "auto" and ctrl is not None)
+        column = np.zeros(len(driven))
+        column[index[a["joint"]]] = gear * gain
+        columns.append(column)
+        s.actuators.append({"name": name, "joint": joints[a["joint"]][0].name, "gear": gear * gain,
+                            "ctrlrange": tuple(ctrl) if limited and ctrl is not None else None})
+    s.actuator_gear = np.column_stack(columns) if columns else np.zeros((len(driven), 0))
 
 
 def _frames(s, ground, groups, member_of, sites, defaults, compiler) -> None:
