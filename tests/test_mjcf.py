@@ -95,12 +95,14 @@ CHAIN = """
       <body name="b" pos="0.3 0.1 -0.2" xyaxes="0 1 0 -1 0 0.2">
         <joint name="j2" type="slide" axis="1 0 0" stiffness="0" class="main"/>
         <geom type="cylinder" size="0.03 0.1" zaxis="1 0.2 0"/>
-        <geom type="ellipsoid" size="0.05 0.04 0.03" quat="0.9 0.1 0.3 0.2" mass="0.7"/>
+        <frame pos="0.01 0.02 0" euler="0.1 0 0.2">
+          <geom type="ellipsoid" size="0.05 0.04 0.03" quat="0.9 0.1 0.3 0.2" mass="0.7"/>
+        </frame>
         <body name="c" pos="0 0.2 0">
           <joint name="j3" axis="0.2 0.1 1"/>
           <inertial pos="0.02 0.1 0" mass="0.4" fullinertia="0.004 0.003 0.005 0.0002 -0.0001 0.0003"/>
           <geom type="sphere" size="0.05"/>
-          <site name="tip" pos="0 0.2 0"/>
+          <frame euler="0 0.3 0"><site name="tip" pos="0 0.2 0.1"/></frame>
         </body>
       </body>
     </body>
@@ -114,7 +116,7 @@ CHAIN = """
 
 
 def test_frames_geoms_defaults_against_mujoco(tmp_path):
-    """Every orientation form, every solid geom, fromto, fullinertia, defaults with childclass,
+    """Every orientation form, every solid geom, fromto, frames, fullinertia, defaults with childclass,
     stiffness with springref, armature and damping, motor and general actuators: qacc as
     MuJoCo's at random states, to 1e-8 relative."""
     path = tmp_path / "chain.xml"
@@ -266,6 +268,8 @@ def test_unsupported_named_in_one_warning():
     ("<mujoco><worldbody><body><joint/><geom size='1'/></worldbody></mujoco>", "not well-formed XML"),
     ("<mujoco><include file='missing.xml'/></mujoco>", "<include file='missing.xml'>: no file"),
     ("<robot/>", "expected a <mujoco> root element, found <robot>"),
+    ("<mujoco><worldbody><body><frame><joint/></frame><geom size='1'/></body></worldbody></mujoco>",
+     "MJCF text:1: <joint> inside a <frame>"),
     ("<mujoco><worldbody><body name='a'><joint/><geom size='1'/></body></worldbody>\n"
      "<equality><connect body1='a' body2='nope' anchor='0 0 0'/></equality></mujoco>",
      "MJCF text:2: <connect body2='nope'>: no body of that name"),

@@ -24,8 +24,8 @@ by :mod:`ncgen.model.mjcf_inertia`; the ncgen model comes from the XML alone.
   (``simulate(joint_dynamics=True)``, :mod:`ncgen.model.joint_dynamics`); a hinge's
   ``stiffness`` is a :class:`~ncgen.model.forces.TorsionalSpring` towards ``springref``.
 * Actuators: ``motor`` and ``general`` (fixed gain, no bias, no dynamics) on a hinge or
-  slide, as ``system.actuators`` (name, joint, ``gear`` × gain, ``ctrlrange``) and the matrix
-  ``system.actuator_gear`` (``tau = actuator_gear @ ctrl``).
+  slide, as ``system.actuators`` (name, joint, ``gear`` × gain, ``ctrlrange``: data, not
+  enforced) and the matrix ``system.actuator_gear`` (``tau = actuator_gear @ ctrl``).
 * Sites are markers of their member (``<body>_<site>`` frames for those on the ground);
   every body and site is a named frame (``system.frames``).
 * ``<equality><connect body1 body2 anchor>`` closes a loop exactly: a
@@ -91,10 +91,10 @@ def system_from_mjcf(source, system_class, *, name=None):
     ground = _Group(None, np.eye(4), [], None)
     sites: list = []
     for wb in worldbody:
-        for child in wb:
+        for child, T, cls in _flatten(wb, np.eye(4), None, compiler):
             if child.tag == "site":
-                sites.append((child, np.eye(4), ground, None))
-            _walk(child, np.eye(4), ground, None, groups, sites, compiler, defaults, unsupported)
+                sites.append((child, T, ground, cls))
+            _walk(child, T, ground, cls, groups, sites, compiler, defaults, unsupported)
     if compiler.totalmass > 0:
         _scale_mass(compiler.totalmass, [ground] + groups)
     s.mjcf_ignored = sorted({el.tag for el in root if el.tag in IGNORED})
@@ -160,20 +160,27 @@ def _option(root, unsupported) -> tuple:
         for flag in el.findall("flag"):
             if flag.get("gravity") == "disable":
                 gravity = np.zeros(3)
+            for key in ("passive", "spring", "damper", "actuation"):
+                if flag.get(key) == "disable":
+                    unsupported.add(flag, f"{key}=\"disable\" (the imported forces act)")
     return tuple(float(x) for x in gravity)
 
 
+def _flatten(el, T, cls, compiler):
+    """``(child, pose in el's frame, class)`` of ``el``'s children, ``<frame>``s opened."""
+    for child in el:
+        if child.tag == "frame":
+            yield from _flatten(child, T @ pose(child, child.attrib, compiler), child.get("childclass") or cls,
+                                compiler)
+        else:
+            yield child, T, cls
+
+
 def _walk(el, T_parent, group, childclass, groups, sites, compiler, defaults, unsupported) -> None:
-    """Collect the bodies under ``el`` (a child of a body or of the world) into groups."""
+    """Collect the body ``el`` (at ``T_parent`` @ its pose) and the bodies under it into groups."""
     tag = el.tag
-    if tag in ("geom", "site", "inertial", "joint", "freejoint", "camera", "light"):
-        return                                       # read with their body
-    if tag == "frame":
-        T = T_parent @ pose(el, el.attrib, compiler)
-        cls = el.get("childclass") or childclass
-        for child in el:
-            _walk(child, T, group, cls, groups, sites, compiler, defaults, unsupported)
-        return
+    if tag in ("geom", "site", "camera", "light"):
+        return                                       # read with their body (or the world)
     if tag == "plugin":
         unsupported.add(el, "plugins are not imported")
         return
@@ -181,8 +188,8 @@ def _walk(el, T_parent, group, childclass, groups, sites, compiler, defaults, un
         raise ModelError(f"MJCF {where(el)}: <{tag}> makes bodies that the import cannot read; expand it "
                          "first (e.g. save the model from MuJoCo: mujoco.mj_saveLastXML)")
     if tag != "body":
-        raise ModelError(f"MJCF {where(el)}: <{tag}> cannot be inside a body (expected one of "
-                         f"{', '.join(BODY_TAGS)})")
+        raise ModelError(f"MJCF {where(el)}: <{tag}> cannot be here (expected one of {', '.join(BODY_TAGS)}; "
+                         "joints and inertials directly in a body)")
     cls = el.get("childclass") or childclass
     T = T_parent @ pose(el, el.attrib, compiler)
     joints = [(j, _joint_attrs(j, defaults, cls)) for j in el if j.tag in ("joint", "freejoint")]
@@ -194,12 +201,21 @@ def _walk(el, T_parent, group, childclass, groups, sites, compiler, defaults, un
         group = _Group(el, T, joints, group)
         groups.append(group)
     group.bodies.append((el, T))
-    group.parts += _parts(el, T, cls, compiler, defaults, unsupported)
-    for child in el:
+    contents = []
+    for c, Tc, ccls in _flatten(el, np.eye(4), cls, compiler):
+        if c.tag in ("joint", "freejoint", "inertial"):
+            if not any(c is d for d in el):
+                raise ModelError(f"MJCF {where(c)}: <{c.tag}> inside a <frame>: the import reads joints and "
+                                 "inertials given directly in their body")
+            continue
+        contents.append((c, Tc, ccls))
+    group.parts += _parts(el, [(c, Tc, ccls) for c, Tc, ccls in contents if c.tag == "geom"], T, cls, compiler,
+                          defaults, unsupported)
+    for child, Tc, ccls in contents:
         if child.tag == "site":
-            sites.append((child, T, group, cls))
-    for child in el:
-        _walk(child, T, group, cls, groups, sites, compiler, defaults, unsupported)
+            sites.append((child, T @ Tc, group, ccls))
+    for child, Tc, ccls in contents:
+        _walk(child, T @ Tc, group, ccls, groups, sites, compiler, defaults, unsupported)
 
 
 def _scale_mass(total: float, groups) -> None:
@@ -219,31 +235,32 @@ def _joint_attrs(j, defaults, cls) -> dict:
     return attrs
 
 
-def _parts(body, T, cls, compiler, defaults, unsupported) -> list:
-    """The body's mass parts in world axes (zero configuration)."""
+def _parts(body, geoms, T, cls, compiler, defaults, unsupported) -> list:
+    """The body's mass parts in world axes (zero configuration); ``geoms``: its geoms with
+    their poses in the body's frame and classes."""
     parts = []
     inertial = body.find("inertial")
     use_geoms = compiler.inertiafromgeom == "true" or (compiler.inertiafromgeom == "auto" and inertial is None)
     if inertial is not None and compiler.inertiafromgeom != "true":
         parts.append(inertial_part(inertial, inertial.attrib, compiler))
-    if use_geoms:
-        lo, hi = compiler.group_range
-        for g in body.findall("geom"):
-            attrs = defaults.attributes(g, cls)
-            kind = choice(g, attrs, "type", ("plane", "hfield", "sphere", "capsule", "ellipsoid", "cylinder",
-                                             "box", "mesh", "sdf"), "sphere")
-            if not lo <= int(number(g, attrs, "group", 0)) <= hi:
+    lo, hi = compiler.group_range
+    for g, Tg, gcls in geoms if use_geoms else []:
+        attrs = defaults.attributes(g, gcls)
+        kind = choice(g, attrs, "type", ("plane", "hfield", "sphere", "capsule", "ellipsoid", "cylinder",
+                                         "box", "mesh", "sdf"), "sphere")
+        if not lo <= int(number(g, attrs, "group", 0)) <= hi:
+            continue
+        if kind not in SOLIDS:
+            if kind == "plane" or ("mass" in attrs and number(g, attrs, "mass", 0.0) == 0):
                 continue
-            if kind not in SOLIDS:
-                if kind == "plane" or ("mass" in attrs and number(g, attrs, "mass", 0.0) == 0):
-                    continue
-                raise ModelError(f"MJCF {where(g)}: <geom type={kind!r}> gives its body's mass, which the import "
-                                 "cannot compute; give the body an <inertial> (or the geom mass=\"0\")")
-            if attrs.get("shellinertia") == "true":
-                unsupported.add(g, "shellinertia (computed as a solid)")
-            part = geom_part(g, attrs, compiler)
-            if part is not None:
-                parts.append(part)
+            raise ModelError(f"MJCF {where(g)}: <geom type={kind!r}> gives its body's mass, which the import "
+                             "cannot compute; give the body an <inertial> (or the geom mass=\"0\")")
+        if attrs.get("shellinertia") == "true":
+            unsupported.add(g, "shellinertia (computed as a solid)")
+        part = geom_part(g, attrs, compiler)
+        if part is not None:
+            m, c, I = part
+            parts.append((m, Tg[:3, :3] @ c + Tg[:3, 3], Tg[:3, :3] @ I @ Tg[:3, :3].T))
     R, p = T[:3, :3], T[:3, 3]
     return [(m, R @ c + p, R @ I @ R.T) for m, c, I in parts]
 
@@ -357,6 +374,9 @@ def _joint_dynamics(s, joint, j, a, kind, compiler, unsupported, TorsionalSpring
             raise ModelError(f"MJCF {where(j)}: <joint range={a.get('range')!r}>: the lower bound is above the upper")
         dyn.update(lower=angle(lo) - ref, upper=angle(hi) - ref)
     joint.set_dynamics(**dyn)
+    if a.get("actuatorfrclimited") == "true" or (a.get("actuatorfrclimited", "auto") == "auto"
+                                                  and "actuatorfrcrange" in a):
+        unsupported.add(j, "actuatorfrcrange (the actuator force on the joint is not clamped)")
     k = number(j, a, "stiffness", 0.0)
     if "springdamper" in a:
         unsupported.add(j, "springdamper")
@@ -391,6 +411,8 @@ def _actuators(s, root, joints, driven, defaults, unsupported) -> None:
             continue
         gear = numbers(el, a, "gear", None, default=(1.0,))[0]
         gain = numbers(el, a, "gainprm", None, default=(1.0,))[0] if el.tag == "general" else 1.0
+        if a.get("forcelimited") == "true" or (a.get("forcelimited", "auto") == "auto" and "forcerange" in a):
+            unsupported.add(el, f"forcerange of actuator {name!r} (the force is not clamped)")
         ctrl = numbers(el, a, "ctrlrange", 2)
         limited = a.get("ctrllimited", "auto")
         limited = limited == "true" or (limited == "auto" and ctrl is not None)
