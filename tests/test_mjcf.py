@@ -234,6 +234,33 @@ def test_connect_closes_the_loop_exactly():
     assert differences[1] < 5e-3 and differences[1] < differences[0] / 10
 
 
+WELDED = """<mujoco><option gravity="0 0 -9.81"/><worldbody>
+  <body name="a" pos="0 0 1"><joint name="h" axis="0 1 0.2"/><geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03"/>
+    <body name="b" pos="0.3 0 0" euler="10 20 30">{joint}<geom type="box" size="0.05 0.1 0.02" pos="0.1 0 0"/></body>
+  </body></worldbody>{equality}</mujoco>"""
+
+
+def test_weld_is_exact():
+    """<weld> between two bodies joined by a hinge: the pair is one rigid body, whose
+    hinge acceleration MuJoCo gives exactly for the file with b merged into a (1e-10
+    relative, random states)."""
+    system = import_quietly(WELDED.format(joint='<joint name="k" axis="1 0 0"/>',
+                                          equality='<equality><weld body1="a" body2="b"/></equality>'))
+    with pytest.warns(UserWarning, match="dropping redundant constraints k.coincide"):   # the hinge k, welded
+        model = system.build()
+    assert model.dof == 1
+    mj = mujoco.MjModel.from_xml_string(WELDED.format(joint="", equality=""))
+    d = mujoco.MjData(mj)
+    rng = np.random.default_rng(5)
+    for _ in range(3):
+        d.qpos[:], d.qvel[:] = rng.uniform(-2, 2, 1), rng.normal(size=1)
+        mujoco.mj_forward(mj, d)
+        q, v = model.from_joint_space({"h": d.qpos.copy()}, {"h": d.qvel.copy()})
+        a, _ = nc.forward_dynamics(model, q, v, u=np.zeros(model.nu))
+        aj = model.to_joint_space(q, v, a)[2]
+        assert abs(aj[0] - d.qacc[0]) < 1e-10 * max(1.0, abs(d.qacc[0]))
+
+
 def test_unsupported_named_in_one_warning():
     text = """<mujoco><option viscosity="0.1"/><worldbody>
       <body name="a"><joint name="j" type="hinge"/><geom size="0.1"/>

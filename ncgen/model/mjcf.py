@@ -30,7 +30,8 @@ by :mod:`ncgen.model.mjcf_inertia`; the ncgen model comes from the XML alone.
   every body and site is a named frame (``system.frames``).
 * ``<equality><connect body1 body2 anchor>`` closes a loop exactly: a
   :class:`~ncgen.model.joints.Spherical` joint at the anchor (body1's frame), the two
-  bodies sharing the point (MuJoCo's constraint is soft; ncgen's holds to round-off).
+  bodies sharing the point (MuJoCo's constraint is soft; ncgen's holds to round-off);
+  ``<weld body1 body2>`` (without ``relpose``) is a :class:`~ncgen.model.joints.Fixed` joint.
 * ``<option gravity>`` (and ``<flag gravity="disable"/>``) sets gravity.
 
 Not part of the imported model, by design: contacts (geom collisions, ``<contact>``),
@@ -116,17 +117,24 @@ def system_from_mjcf(source, system_class, *, name=None):
 
 def _equality(s, section, ground, groups, member_of, defaults, unsupported) -> None:
     """``<connect body1 body2 anchor>`` as an exact :class:`~ncgen.model.joints.Spherical`
-    joint (the bodies share the anchor point); other equality constraints are unsupported."""
-    from ncgen.model.joints import Spherical
+    joint (the bodies share the anchor point), ``<weld body1 body2>`` (the file's relative
+    pose) as a :class:`~ncgen.model.joints.Fixed` one; other equality constraints are
+    unsupported."""
+    from ncgen.model.joints import Fixed, Spherical
     where_body = {b.get("name"): (g, T) for g in [ground] + groups for b, T in g.bodies if b.get("name")}
     for k, el in enumerate(section):
         a = defaults.attributes(el, None)
         name = a.get("name")
-        if el.tag != "connect" or "body1" not in a:
+        if el.tag not in ("connect", "weld") or "body1" not in a:
             unsupported.add(el, f"equality {el.tag} {name!r} is not imported".replace(" None", ""))
             continue
         if a.get("active", "true") == "false":
-            unsupported.add(el, f"inactive connect {name!r} is not imported".replace(" None", ""))
+            unsupported.add(el, f"inactive {el.tag} {name!r} is not imported".replace(" None", ""))
+            continue
+        relpose = numbers(el, a, "relpose", 7, default=(0, 1, 0, 0, 0, 0, 0))
+        if el.tag == "weld" and np.any(relpose[3:] != 0):
+            unsupported.add(el, f"weld {name!r} with a relpose (only the file's relative pose is held)"
+                            .replace(" None", ""))
             continue
         ends = []
         for key, default in (("body1", None), ("body2", "world")):
@@ -139,11 +147,11 @@ def _equality(s, section, ground, groups, member_of, defaults, unsupported) -> N
                 raise ModelError(f"MJCF {where(el)}: <connect {key}={body!r}>: no body of that name")
         (g1, T1), (g2, _) = ends
         if g1 is g2:
-            raise ModelError(f"MJCF {where(el)}: <connect>: body1 and body2 move together (one rigid group); "
+            raise ModelError(f"MJCF {where(el)}: <{el.tag}>: body1 and body2 move together (one rigid group); "
                              "the constraint would join a body to itself")
+        cls = Spherical if el.tag == "connect" else Fixed
         anchor = T1[:3, :3] @ numbers(el, a, "anchor", 3, default=(0, 0, 0)) + T1[:3, 3]
-        s.add_joint(Spherical(member_of[id(g1)], member_of[id(g2)], at=anchor,
-                              name=identifier(name or f"connect{k}")))
+        s.add_joint(cls(member_of[id(g1)], member_of[id(g2)], at=anchor, name=identifier(name or f"{el.tag}{k}")))
 
 
 def _option(root, unsupported) -> tuple:
