@@ -261,6 +261,40 @@ def test_weld_is_exact():
         assert abs(aj[0] - d.qacc[0]) < 1e-10 * max(1.0, abs(d.qacc[0]))
 
 
+COUPLED = """<mujoco><worldbody>
+  <body name="p1" pos="0 0 1"><joint name="j1" axis="0 1 0"/><geom type="capsule" fromto="0 0 0 0.4 0 0" size="0.03"/></body>
+  <body name="p2" pos="0 0.5 1"><joint name="j2" axis="0 1 0"/><geom type="capsule" fromto="0 0 0 0 0 -0.5" size="0.03"/>
+  </body></worldbody><equality><joint joint1="j1" joint2="j2" polycoef="0 0.5 0 0 0"/></equality></mujoco>"""
+
+
+def test_joint_equality_is_exact():
+    """<equality><joint polycoef="0 0.5 ...">: ncgen holds x1 = 0.5 x2 to round-off over 1 s;
+    MuJoCo's soft coupling converges to ncgen's run as it stiffens (x2 apart by 2.3e-4 rad at
+    the default solref, 4.9e-6 at 0.002, 3.1e-7 at 0.0005)."""
+    model = import_quietly(COUPLED).build()
+    assert model.dof == 1
+    v0 = model.from_joint_space({"j2": np.zeros(1)}, {"j2": np.array([1.0])})[1]
+    traj = nc.simulate(model, 1.0, 0.01, v0=v0, rtol=1e-10, atol=1e-12)
+    qj = np.array([model.to_joint_space(q) for q in traj.q])
+    names = model.joint_names
+    x1, x2 = qj[:, names.index("j1")], qj[:, names.index("j2")]
+    assert np.max(np.abs(x1 - 0.5 * x2)) < 1e-10 and np.ptp(x2) > 0.5
+    diffs = []
+    for tc in (0.002, 0.0005):
+        mj = mujoco.MjModel.from_xml_string(COUPLED)
+        mj.eq_solref[0] = [tc, 1.0]
+        mj.opt.integrator, mj.opt.timestep = mujoco.mjtIntegrator.mjINT_RK4, 1e-4
+        d = mujoco.MjData(mj)
+        d.qvel[:] = [0.5, 1.0]
+        ref = [d.qpos[1]]
+        for _ in range(100):
+            for _ in range(100):
+                mujoco.mj_step(mj, d)
+            ref.append(d.qpos[1])
+        diffs.append(np.max(np.abs(np.array(ref) - x2)))
+    assert diffs[1] < 1e-6 and diffs[1] < diffs[0] / 3
+
+
 def test_unsupported_named_in_one_warning():
     text = """<mujoco><option viscosity="0.1"/><worldbody>
       <body name="a"><joint name="j" type="hinge"/><geom size="0.1"/>
@@ -268,7 +302,7 @@ def test_unsupported_named_in_one_warning():
       </worldbody>
       <tendon><fixed name="t"><joint joint="j" coef="1"/></fixed></tendon>
       <actuator><position joint="j" kp="10"/></actuator>
-      <equality><joint joint1="j" joint2="k"/></equality></mujoco>"""
+      <equality><joint joint1="j" joint2="k" polycoef="0 1 0.5 0 0"/></equality></mujoco>"""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         system = nc.System.from_mjcf(text)

@@ -31,7 +31,8 @@ by :mod:`ncgen.model.mjcf_inertia`; the ncgen model comes from the XML alone.
 * ``<equality><connect body1 body2 anchor>`` closes a loop exactly: a
   :class:`~ncgen.model.joints.Spherical` joint at the anchor (body1's frame), the two
   bodies sharing the point (MuJoCo's constraint is soft; ncgen's holds to round-off);
-  ``<weld body1 body2>`` (without ``relpose``) is a :class:`~ncgen.model.joints.Fixed` joint.
+  ``<weld body1 body2>`` (without ``relpose``) is a :class:`~ncgen.model.joints.Fixed` joint;
+  ``<joint joint1 joint2 polycoef="0 c1 0 0 0">`` a :class:`~ncgen.model.joints.Mimic`.
 * ``<option gravity>`` (and ``<flag gravity="disable"/>``) sets gravity.
 
 Not part of the imported model, by design: contacts (geom collisions, ``<contact>``),
@@ -104,7 +105,7 @@ def system_from_mjcf(source, system_class, *, name=None):
     _frames(s, ground, groups, member_of, sites, defaults, compiler)
     for el in root:
         if el.tag == "equality":
-            _equality(s, el, ground, groups, member_of, defaults, unsupported)
+            _equality(s, el, ground, groups, member_of, joints, defaults, unsupported)
         elif el.tag == "tendon":
             for item in el:
                 unsupported.add(item, f"tendon {item.tag} {item.get('name', '')!r} is not imported".replace(" ''", ""))
@@ -115,7 +116,7 @@ def system_from_mjcf(source, system_class, *, name=None):
     return s
 
 
-def _equality(s, section, ground, groups, member_of, defaults, unsupported) -> None:
+def _equality(s, section, ground, groups, member_of, joints, defaults, unsupported) -> None:
     """``<connect body1 body2 anchor>`` as an exact :class:`~ncgen.model.joints.Spherical`
     joint (the bodies share the anchor point), ``<weld body1 body2>`` (the file's relative
     pose) as a :class:`~ncgen.model.joints.Fixed` one; other equality constraints are
@@ -125,6 +126,8 @@ def _equality(s, section, ground, groups, member_of, defaults, unsupported) -> N
     for k, el in enumerate(section):
         a = defaults.attributes(el, None)
         name = a.get("name")
+        if el.tag == "joint" and a.get("active", "true") != "false" and _joint_coupling(s, el, a, joints, k):
+            continue
         if el.tag not in ("connect", "weld") or "body1" not in a:
             unsupported.add(el, f"equality {el.tag} {name!r} is not imported".replace(" None", ""))
             continue
@@ -152,6 +155,28 @@ def _equality(s, section, ground, groups, member_of, defaults, unsupported) -> N
         cls = Spherical if el.tag == "connect" else Fixed
         anchor = T1[:3, :3] @ numbers(el, a, "anchor", 3, default=(0, 0, 0)) + T1[:3, 3]
         s.add_joint(cls(member_of[id(g1)], member_of[id(g2)], at=anchor, name=identifier(name or f"{el.tag}{k}")))
+
+
+def _joint_coupling(s, el, a, joints, k) -> bool:
+    """``<joint joint1 joint2 polycoef="c0 c1 0 0 0">``, ``x1 = c0 + c1 x2`` between two
+    hinges or slides, as a :class:`~ncgen.model.joints.Mimic` (exact); False when it is not
+    of that form (then unsupported): a polynomial of higher degree, one joint only, or an
+    offset the file's configuration does not satisfy."""
+    from ncgen.model.joints import Mimic
+    c = numbers(el, a, "polycoef", 5, default=(0, 1, 0, 0, 0))
+    found = [joints.get(a.get(key)) for key in ("joint1", "joint2")]
+    if a.get("joint1") not in joints:
+        raise ModelError(f"MJCF {where(el)}: <joint joint1={a.get('joint1')!r}>: no joint of that name")
+    if a.get("joint2") is not None and found[1] is None:
+        raise ModelError(f"MJCF {where(el)}: <joint joint2={a.get('joint2')!r}>: no joint of that name")
+    if found[1] is None or np.any(c[2:] != 0) or any(kind not in ("hinge", "slide") for _, kind in found):
+        return False
+    (j1, _), (j2, _) = found
+    offset = c[0] + c[1] * getattr(j2, "mjcf_ref", 0.0) - getattr(j1, "mjcf_ref", 0.0)
+    if offset != 0:
+        return False
+    s.add_joint(Mimic(j2, j1, multiplier=c[1], name=identifier(a.get("name") or f"joint{k}")))
+    return True
 
 
 def _option(root, unsupported) -> tuple:
