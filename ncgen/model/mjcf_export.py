@@ -11,8 +11,14 @@ hinge becomes its ``stiffness``, ``springref`` and extra ``damping``.  Every act
 or slide gets a ``<motor gear="1">`` (``ctrl`` = the joint efforts in ``model.joint_names``
 order).  Angles are in radians (``<compiler angle="radian"/>``), contacts are disabled.
 
-Refused, naming what: planar models, bars and points, joints of other kinds, a member with
-two parents (a closed loop) and forces other than torsional springs on hinges.
+Loops: a Spherical, Fixed or Mimic joint that closes a loop (its member already hangs from
+a tree joint) is written as ``<equality>`` ``connect`` (anchor in body1's frame), ``weld``
+(the initial relative pose) or ``joint`` (``polycoef = offset multiplier``): MuJoCo then
+holds them softly.  Markers become sites named ``<member>_<marker>``.
+
+Refused, naming what: planar models, bars and points, joints of other kinds, members not
+reached from the ground through tree joints and forces other than torsional springs on
+hinges.
 """
 from __future__ import annotations
 
@@ -23,6 +29,8 @@ from ncgen.files import atomic_path
 from ncgen.reproducible import perpendicular_basis
 
 KINDS = ("Revolute", "Prismatic", "Spherical", "Free", "Planar")
+#: Joints written as equality constraints when they close a loop.
+CLOSURES = ("Spherical", "Fixed", "Mimic")
 
 
 def _fmt(values) -> str:
@@ -61,39 +69,61 @@ def mjcf_text(model) -> str:
         if m.spec.get("kind") != "body" or m.spec.get("basis") is not None:
             raise ModelError(f"to_mjcf: member {m.name!r} is a {m.kind} ({m.ctype.name}); export writes bodies "
                              "given by position, rotation and inertia")
-    parent_joint = {}
+    parent_joint, closures = {}, []
     for j in model.joints:
-        if j.kind not in KINDS:
-            raise ModelError(f"to_mjcf: {j.label}: joints of kind {j.kind} are not exported (supported: "
-                             f"{', '.join(KINDS)})")
-        if j.B.is_ground or j.B.name in parent_joint:
-            raise ModelError(f"to_mjcf: {j.label}: member {getattr(j.B, 'name', 'ground')!r} already hangs from "
-                             "another joint (a closed loop) or is the ground; export writes trees, parent first")
-        parent_joint[j.B.name] = j
+        if j.kind in KINDS and not j.B.is_ground and j.B.name not in parent_joint:
+            parent_joint[j.B.name] = j
+        elif j.kind in CLOSURES:
+            closures.append(j)
+        else:
+            raise ModelError(f"to_mjcf: {j.label}: a {j.kind} joint is exported as a tree joint ({', '.join(KINDS)}, "
+                             f"to a member without one) or as an equality constraint ({', '.join(CLOSURES)})")
+    children: dict = {}
+    for j in parent_joint.values():
+        children.setdefault("ground" if j.A.is_ground else j.A.name, []).append(j)
+    reached, todo = set(), ["ground"]
+    while todo:
+        here = todo.pop()
+        for j in children.get(here, []):
+            reached.add(j.B.name)
+            todo.append(j.B.name)
     for name in model.members:
-        if name not in parent_joint:
-            raise ModelError(f"to_mjcf: member {name!r} has no joint to its parent; export writes trees rooted at "
-                             "the ground")
+        if name not in reached:
+            raise ModelError(f"to_mjcf: member {name!r} is not reached from the ground through tree joints")
     springs = {}
     for f in model.forces:
         joint = getattr(f, "joint", None)
         if f.kind != "TorsionalSpring" or joint is None:
             raise ModelError(f"to_mjcf: {f.label}: only torsional springs on hinges are exported")
         springs[joint.name] = f
-    children: dict = {}
-    for j in model.joints:
-        children.setdefault("ground" if j.A.is_ground else j.A.name, []).append(j)
     lines = [f'<mujoco model="{model.name}">', '  <compiler angle="radian"/>',
              f'  <option gravity="{_fmt(model.gravity)}"><flag contact="disable"/></option>', "  <worldbody>"]
     motors = []
     _bodies(lines, "ground", (np.eye(3), np.zeros(3)), children, springs, motors, "    ")
     lines.append("  </worldbody>")
+    if closures:
+        frames = {n: _body_frame(j) for n, j in parent_joint.items()}
+        lines += ["  <equality>"] + ["    " + _closure(j, frames) for j in closures] + ["  </equality>"]
     if motors:
         lines.append("  <actuator>")
         lines += [f'    <motor name="{n}" joint="{n}" gear="1"/>' for n in motors]
         lines.append("  </actuator>")
     lines.append("</mujoco>")
     return "\n".join(lines) + "\n"
+
+
+def _closure(j, frames) -> str:
+    """A loop-closing joint as an equality constraint (body1 a body, its anchor in its frame)."""
+    if j.kind == "Mimic":
+        o = j.options
+        return (f'<joint name="{j.name}" joint1="{o["follower"].name}" joint2="{o["leader"].name}" '
+                f'polycoef="{_fmt([o["offset"], o["multiplier"], 0, 0, 0])}"/>')
+    one, two = (j.B, j.A) if j.A.is_ground else (j.A, j.B)
+    R, p = frames[one.name]
+    tag = "connect" if j.kind == "Spherical" else "weld"
+    anchor = R.T @ (np.asarray(j.options["at"], float) - p)
+    return (f'<{tag} name="{j.name}" body1="{one.name}" body2="{"world" if two.is_ground else two.name}" '
+            f'anchor="{_fmt(anchor)}"/>')
 
 
 def _body_frame(j):
@@ -119,6 +149,8 @@ def _bodies(lines, parent_name, frame, children, springs, motors, indent) -> Non
         lines.append(f'{indent}  <inertial pos="{_fmt(R.T @ (pm - p))}" mass="{float(m.spec["mass"])!r}" fullinertia="'
                      f'{_fmt([I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]])}"/>')
         lines += [indent + "  " + x for x in _joint(j, R, p, springs, motors)]
+        for marker, local in m.markers.items():
+            lines.append(f'{indent}  <site name="{m.name}_{marker}" pos="{_fmt(R.T @ (Rm @ local + pm - p))}"/>')
         _bodies(lines, m.name, (R, p), children, springs, motors, indent + "  ")
         lines.append(f"{indent}</body>")
 
