@@ -385,9 +385,11 @@ def _passive_unsupported(j, a, unsupported, what: str) -> None:
         unsupported.add(j, f"range on {what}")
 
 
-def _limited(j, a) -> bool:
+def _limited(j, a, autolimits: bool = True) -> bool:
+    """Whether the joint's ``range`` applies (``limited``, or ``auto`` with
+    ``<compiler autolimits>`` and a range given)."""
     lim = a.get("limited", "auto")
-    return lim == "true" or (lim == "auto" and "range" in a)
+    return lim == "true" or (lim == "auto" and autolimits and "range" in a)
 
 
 def _joint_dynamics(s, joint, j, a, kind, compiler, unsupported, TorsionalSpring) -> None:
@@ -401,7 +403,7 @@ def _joint_dynamics(s, joint, j, a, kind, compiler, unsupported, TorsionalSpring
             raise ModelError(f"MJCF {where(j)}: <joint {key}={a[key]!r}>: expected a number ≥ 0")
         if value:
             dyn[ours] = value
-    if _limited(j, a):
+    if _limited(j, a, compiler.autolimits):
         lo, hi = numbers(j, a, "range", 2, default=(0, 0))
         if lo > hi:
             raise ModelError(f"MJCF {where(j)}: <joint range={a.get('range')!r}>: the lower bound is above the upper")

@@ -22,13 +22,13 @@ ORIENTATIONS = ("quat", "axisangle", "euler", "xyaxes", "zaxis")
 
 @dataclass(frozen=True)
 class Compiler:
-    """The ``<compiler>`` settings the import reads (MuJoCo's defaults)."""
+    """The ``<compiler>`` settings the import reads (MuJoCo's defaults); ``meshdir`` and
+    ``texturedir`` are accepted and unused (meshes are not read)."""
 
     degrees: bool = True
     eulerseq: str = "xyz"
     inertiafromgeom: str = "auto"
     autolimits: bool = True
-    meshdir: str = ""
     group_range: tuple = (0, 5)
     totalmass: float = -1.0
 
@@ -56,8 +56,6 @@ def read_compiler(root) -> tuple[Compiler, list]:
             settings["inertiafromgeom"] = choice(el, a, "inertiafromgeom", ("auto", "true", "false"), "auto")
         if "autolimits" in a:
             settings["autolimits"] = choice(el, a, "autolimits", ("true", "false"), "true") == "true"
-        if "meshdir" in a:
-            settings["meshdir"] = a["meshdir"]
         if "inertiagrouprange" in a:
             settings["group_range"] = tuple(int(x) for x in numbers(el, a, "inertiagrouprange", 2))
         if a.get("coordinate", "local") != "local":
