@@ -21,7 +21,7 @@ def write_output(text: str, path: str | None) -> None:
 
 
 #: What every subcommand's MODEL argument accepts (its help text).
-MODEL_HELP = "model file: TOML (.toml, see docs/model-format.md) or a URDF robot (.urdf)"
+MODEL_HELP = "model file: TOML (.toml, see docs/model-format.md), a URDF robot (.urdf) or a MuJoCo MJCF model (.xml)"
 #: Suffixes of --plot and --animate, the same in every subcommand.
 PLOT_SUFFIXES = (".png", ".pdf", ".svg")
 ANIMATE_SUFFIXES = (".gif", ".mp4")
@@ -149,7 +149,8 @@ def load_model(path: str, params: list[str] | None = None, contacts: str = "smoo
 
 def load_system(path: str, params: list[str] | None = None, floating_base: bool = False):
     """The :class:`~ncgen.model.system.System` in model file ``path`` — a URDF robot
-    (``.urdf``: fixed base, joint torques as the input ``tau``) or TOML (anything else) — with
+    (``.urdf``: fixed base, joint torques as the input ``tau``), an MJCF model (``.xml``,
+    :meth:`~ncgen.model.system.System.from_mjcf`) or TOML (anything else) — with
     ``params`` as in :func:`load_model`; errors name the file."""
     from ncgen.errors import ModelError
     from ncgen.model.system import System
@@ -157,14 +158,21 @@ def load_system(path: str, params: list[str] | None = None, floating_base: bool 
     file = Path(path)
     if not file.is_file():
         what = "is a directory, not" if file.is_dir() else "does not exist; expected"
-        raise ModelError(f"model file {path!r} {what} a model file: TOML (.toml) or URDF (.urdf); "
+        raise ModelError(f"model file {path!r} {what} a model file: TOML (.toml), URDF (.urdf) or MJCF (.xml); "
                          "see the examples/ directory")
-    urdf = file.suffix.lower() == ".urdf"
+    suffix = file.suffix.lower()
+    urdf = suffix == ".urdf"
     if floating_base and not urdf:
-        raise ModelError(f"--floating-base applies to URDF robots (.urdf); {path} is a TOML model, whose "
+        raise ModelError(f"--floating-base applies to URDF robots (.urdf); {path} is "
+                         f"{'an MJCF' if suffix == '.xml' else 'a TOML'} model, whose "
                          "members say themselves how they are held")
     try:
-        system = System.from_urdf(file, floating_base=floating_base) if urdf else System.from_toml(file)
+        if urdf:
+            system = System.from_urdf(file, floating_base=floating_base)
+        elif suffix == ".xml":
+            system = System.from_mjcf(file)
+        else:
+            system = System.from_toml(file)
     except NcgenError as e:
         text = str(e)
         raise type(e)(text if text.startswith(str(file)) else f"{path}: {text}") from None

@@ -356,6 +356,12 @@ class Model:
         from ncgen.viz.notebook import model_table
         return model_table(self)
 
+    def to_mjcf(self, path) -> None:
+        """Write this tree model as a MuJoCo MJCF file (atomically); see
+        :mod:`ncgen.model.mjcf_export`."""
+        from ncgen.model.mjcf_export import write_mjcf
+        write_mjcf(self, path)
+
     def __repr__(self) -> str:
         return (f"<Model {self.name!r}: dim={self.dim}, nq={self.nq}, nc={self.nc}, dof={self.dof}, "
                 f"nu={self.nu}, np={self.np}>")

@@ -288,6 +288,17 @@ class System:
         return system_from_urdf(source, cls, floating_base=floating_base, gravity=gravity, name=name,
                                 collisions=collisions)
 
+    @classmethod
+    def from_mjcf(cls, source, name=None) -> "System":
+        """A MuJoCo model from an MJCF file (a path) or MJCF text: bodies, inertials,
+        hinge/slide/ball/free joints (hinges and slides actuated by the input ``tau``, one
+        component each, ``model.joint_names`` order), joint damping, armature, friction,
+        range and stiffness, motor actuators as ``system.actuator_gear``; what cannot be
+        represented is named in one :class:`~ncgen.model.mjcf.MjcfWarning`.  See
+        :mod:`ncgen.model.mjcf`."""
+        from ncgen.model.mjcf import system_from_mjcf
+        return system_from_mjcf(source, cls, name=name)
+
     def to_toml(self) -> str:
         """The system as TOML text that :meth:`from_toml` reads back."""
         from ncgen.model.toml_io import system_to_toml

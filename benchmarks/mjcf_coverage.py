@@ -1,0 +1,64 @@
+"""Coverage of the MJCF import: the share of the MJCF files shipped by gymnasium
+(``envs/mujoco/assets``) and dm_control (``suite``) that ``nc.System.from_mjcf`` imports
+without an unsupported-feature warning (issue 40's target: ≥ 80 %).
+
+Each file is one of: ``ok`` (imported, nothing left out), ``warned`` (imported; the
+MjcfWarning's items counted), ``refused`` (a ModelError: what the import cannot represent
+at all, e.g. several hinges in one body, a mesh giving mass).  Only the import is run (no
+build).  ``python benchmarks/mjcf_coverage.py [--verbose]``."""
+from __future__ import annotations
+
+import importlib.util
+import platform
+import sys
+import warnings
+from pathlib import Path
+
+import ncgen as nc
+from ncgen.errors import NcgenError
+from ncgen.model.mjcf import MjcfWarning
+
+
+def shipped() -> dict[str, Path]:
+    out = {}
+    for pkg, sub in (("gymnasium", "envs/mujoco/assets"), ("dm_control", "suite")):
+        spec = importlib.util.find_spec(pkg)
+        if spec is None or spec.origin is None:
+            print(f"{pkg}: not installed (pip install {pkg.replace('_', '-')})")
+            continue
+        for f in sorted((Path(spec.origin).parent / sub).glob("*.xml")):
+            out[f"{pkg}/{f.name}"] = f
+    return out
+
+
+def classify(path: Path) -> tuple[str, str]:
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            system = nc.System.from_mjcf(path)
+        except NcgenError as e:
+            return "refused", str(e).splitlines()[0]
+    if any(issubclass(w.category, MjcfWarning) for w in caught):
+        return "warned", f"{len(system.mjcf_unsupported)} item(s): " + "; ".join(system.mjcf_unsupported[:3])
+    return "ok", f"{len(system.members)} bodies, {len(system.joints)} joints"
+
+
+def main(argv: list[str]) -> None:
+    verbose = "--verbose" in argv
+    print(f"python {platform.python_version()}, ncgen MJCF import, {platform.machine()}")
+    files = shipped()
+    if not files:
+        print("no MJCF files found: install gymnasium and dm_control (the test extras)")
+        return
+    counts = {"ok": 0, "warned": 0, "refused": 0}
+    for key, path in files.items():
+        status, detail = classify(path)
+        counts[status] += 1
+        print(f"{status:8s} {key:42s} {detail if verbose or status != 'ok' else ''}"[:240])
+    n = len(files)
+    print(f"{counts['ok']}/{n} files ({100 * counts['ok'] / n:.0f} %) import without an unsupported-feature warning; "
+          f"{counts['warned']} with a warning, {counts['refused']} refused")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

@@ -1,0 +1,151 @@
+"""MuJoCo as the reference for MJCF imports: the shipped MJCF files, and the map between
+MuJoCo's joint space (qpos, qvel, qacc) and ncgen's (model.joint_names order).
+
+MuJoCo's compiled model is used only here, as the independent reference; the ncgen model
+comes from the XML (ncgen.model.mjcf)."""
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+
+from ncgen.reproducible import perpendicular_basis
+
+
+def package_dir(name: str) -> Path | None:
+    spec = importlib.util.find_spec(name)
+    return None if spec is None or spec.origin is None else Path(spec.origin).parent
+
+
+def shipped_files() -> dict[str, Path]:
+    """``{"gymnasium/hopper.xml": path, "dm_control/cheetah.xml": path, ...}`` of the
+    installed packages (either may be missing)."""
+    out = {}
+    for pkg, sub in (("gymnasium", "envs/mujoco/assets"), ("dm_control", "suite")):
+        d = package_dir(pkg)
+        if d is not None and (d / sub).is_dir():
+            for f in sorted((d / sub).glob("*.xml")):
+                out[f"{pkg}/{f.name}"] = f
+    return out
+
+
+def quat_wxyz_to_matrix(q):
+    w, x, y, z = np.asarray(q, float) / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+class JointMap:
+    """MuJoCo (qpos, qvel, qacc) ↔ ncgen (qj, vj, aj) for hinge, slide, free joints and the
+    planar slide-slide-hinge roots, joint by joint."""
+
+    def __init__(self, model, system, mj):
+        import mujoco
+        self.model, self.mj = model, mj
+        self.items = []
+        names = model.joint_names
+        js = model.joint_space
+        sq, sv = js.slices(), js.slices(rates=True)
+        for n in names:
+            joint = js.joints[n]
+            if joint.kind in ("Revolute", "Prismatic"):
+                jid = mujoco.mj_name2id(mj, mujoco.mjtObj.mjOBJ_JOINT, n)
+                assert jid >= 0, n
+                self.items.append(("one", sq[n], sv[n], mj.jnt_qposadr[jid], mj.jnt_dofadr[jid], None))
+            elif joint.kind == "Free":
+                body = joint.B.name
+                jid = mj.body_jntadr[mujoco.mj_name2id(mj, mujoco.mjtObj.mjOBJ_BODY, body)]
+                self.items.append(("free", sq[n], sv[n], mj.jnt_qposadr[jid], mj.jnt_dofadr[jid], None))
+            elif joint.kind == "Planar":
+                bid = mujoco.mj_name2id(mj, mujoco.mjtObj.mjOBJ_BODY, joint.B.name)
+                j0 = mj.body_jntadr[bid]
+                R = quat_wxyz_to_matrix(mj.body_quat[bid])   # child of the world: its world rotation
+                a = [R @ mj.jnt_axis[j0 + k] for k in range(3)]
+                e1, e2 = perpendicular_basis(a[2])
+                P = np.array([[e1 @ a[0], e1 @ a[1]], [e2 @ a[0], e2 @ a[1]]])
+                self.items.append(("planar", sq[n], sv[n], mj.jnt_qposadr[j0], mj.jnt_dofadr[j0], P))
+            else:
+                raise AssertionError(f"no map for {joint.kind}")
+
+    def to_ncgen(self, qpos, qvel):
+        qj, vj = np.zeros(self.model.joint_space.nq), np.zeros(self.model.joint_space.nv)
+        for kind, sq, sv, ia, da, P in self.items:
+            if kind == "one":
+                qj[sq], vj[sv] = qpos[ia:ia + 1] - self.mj.qpos0[ia], qvel[da:da + 1]   # ncgen: qpos − ref
+            elif kind == "planar":
+                qj[sq] = np.r_[P @ qpos[ia:ia + 2], qpos[ia + 2]]
+                vj[sv] = np.r_[P @ qvel[da:da + 2], qvel[da + 2]]
+            else:
+                w, x, y, z = qpos[ia + 3:ia + 7]
+                qj[sq] = np.r_[qpos[ia:ia + 3], x, y, z, w]
+                R = quat_wxyz_to_matrix(qpos[ia + 3:ia + 7])
+                vj[sv] = np.r_[R.T @ qvel[da:da + 3], qvel[da + 3:da + 6]]
+        return qj, vj
+
+    def acceleration_to_mujoco(self, qpos, qvel, aj):
+        """ncgen's joint accelerations in MuJoCo's dof order."""
+        qacc = np.zeros(self.mj.nv)
+        for kind, sq, sv, ia, da, P in self.items:
+            if kind == "one":
+                qacc[da] = aj[sv][0]
+            elif kind == "planar":
+                qacc[da:da + 2] = np.linalg.solve(P, aj[sv][:2])
+                qacc[da + 2] = aj[sv][2]
+            else:
+                R = quat_wxyz_to_matrix(qpos[ia + 3:ia + 7])
+                w = qvel[da + 3:da + 6]
+                v_local = R.T @ qvel[da:da + 3]
+                qacc[da:da + 3] = R @ (aj[sv][:3] + np.cross(w, v_local))
+                qacc[da + 3:da + 6] = aj[sv][3:]
+        return qacc
+
+
+def joint_ode(model):
+    """The joint-space ODE the joint simulation integrates, with the joint dynamics (damping,
+    armature, friction, limits): ``(t, x, tau, p) -> xdot``."""
+    from ncgen.assembly.joint_ode import armature_dynamics_function, armature_vector, joint_ode_function
+    from ncgen.assembly.tree_dynamics import recursive_inverse_dynamics_function
+    from ncgen.runtime.joint_simulation import dynamics_function
+    arm = armature_vector(model)
+    if np.any(arm):
+        dyn = armature_dynamics_function(model, recursive_inverse_dynamics_function(model), arm)
+    else:
+        dyn = dynamics_function(model)
+    return joint_ode_function(model, dyn, None, joint_dynamics=True)
+
+
+def mujoco_free_dynamics(path):
+    """MuJoCo's model of ``path`` with contacts, limits, equality constraints, friction loss
+    and control clamping off (the dynamics the import represents)."""
+    import mujoco
+    mj = mujoco.MjModel.from_xml_path(str(path))
+    D = mujoco.mjtDisableBit
+    mj.opt.disableflags |= (D.mjDSBL_CONTACT | D.mjDSBL_LIMIT | D.mjDSBL_EQUALITY | D.mjDSBL_FRICTIONLOSS
+                            | D.mjDSBL_CLAMPCTRL)
+    return mj
+
+
+def random_state(mj, rng):
+    """A random qpos (hinges and slides inside their ranges when limited, hinges within 3 rad
+    of zero: an imported hinge spring is a TorsionalSpring, periodic beyond π; unit
+    quaternions) and qvel."""
+    import mujoco
+    qpos = mj.qpos0.copy()
+    for j in range(mj.njnt):
+        a = mj.jnt_qposadr[j]
+        t = mj.jnt_type[j]
+        if t == mujoco.mjtJoint.mjJNT_FREE:
+            qpos[a:a + 3] += rng.normal(0, 0.3, 3)
+            q = rng.normal(size=4)
+            qpos[a + 3:a + 7] = q / np.linalg.norm(q)
+        elif t == mujoco.mjtJoint.mjJNT_BALL:
+            q = rng.normal(size=4)
+            qpos[a:a + 4] = q / np.linalg.norm(q)
+        else:
+            lo, hi = mj.jnt_range[j] if mj.jnt_limited[j] else (-1.0, 1.0)
+            if t == mujoco.mjtJoint.mjJNT_HINGE:
+                lo, hi = max(lo, -3.0), min(hi, 3.0)
+            qpos[a] = rng.uniform(lo, hi)
+    return qpos, rng.normal(0, 1.0, mj.nv)
