@@ -21,7 +21,8 @@ supports allow, Calladine's extended Maxwell rule counts
 so that ``s − m = n_t − (n_free − k)``.  The *geometric stiffness* of a prestress is
 ``K_G = D ⊗ I_dim`` (``D = Cᵀ diag(q) C``, ``C`` the member–node incidence), the material
 stiffness ``K_E = A_c diag(k_t) A_cᵀ`` (``k_t`` N/m per tension), the tangent stiffness
-``K_T = K_E + K_G``.  On the mechanisms ``K_E`` vanishes: the structure is *prestress-stable*
+``K_T = K_E + K_G − A diag(q) Aᵀ`` (Guest 2006: at fixed tension a member's stiffness across
+itself is ``q (I − u uᵀ)``).  On the mechanisms the terms in ``A`` vanish: the structure is *prestress-stable*
 under ``t`` when ``Q = Mᵀ K_G M`` (``M`` an orthonormal basis of the mechanisms, N/m) is
 positive definite.  The counterpart in natural coordinates: an ``rr`` bar's length
 constraint has the gradient ``l`` × its strut's column of ``A``.
@@ -238,8 +239,12 @@ class SelfStress:
         return self.A_c @ np.diag(k) @ self.A_c.T
 
     def tangent_stiffness(self, t, k) -> np.ndarray:
-        """``K_T = K_E + K_G`` (N/m) under member forces ``t`` with tension stiffnesses ``k``."""
-        return self.material_stiffness(k) + self.geometric_stiffness(t)
+        """``K_T = K_E + K_G − A diag(q) Aᵀ`` (N/m) under member forces ``t`` (``q = t / l``)
+        with tension stiffnesses ``k``: the Jacobian of ``A t`` when each tension follows its
+        stretch (:meth:`Framework.internal_forces`)."""
+        t = self.framework.member_forces(t, "tangent_stiffness: t")
+        q = t / self.framework.lengths()
+        return self.material_stiffness(k) + self.geometric_stiffness(t) - self.A @ np.diag(q) @ self.A.T
 
     def prestress_stiffness(self, t) -> np.ndarray:
         """``Q = Mᵀ K_G M`` (N/m): the stiffness of the mechanisms under member forces ``t``."""

@@ -5,8 +5,8 @@ prisms stacked ring on ring.  Each returns ``(nodes, struts, cables)`` in the co
 The regular n-prism: a bottom ring of n nodes at radius ``r`` in ``z = 0``, a top ring at
 ``z = h`` turned by the twist ``φ``; strut i joins bottom i to top i, cables: the bottom ring,
 the top ring, and bottom i to top i − 1.  It has a state of self-stress only at
-``φ = 90° + 180°/n`` (the top polygon turned by ``90° − 180°/n`` modulo ``360°/n`` against the
-bottom one), with force densities ring : vertical cable : strut = ``1 : 2 sin(π/n) : −2 sin(π/n)``.
+``φ = 90° + 180°/n`` (each vertical cable turns by ``φ − 360°/n = 90° − 180°/n`` about the
+axis), with force densities ring : vertical cable : strut = ``1 : 2 sin(π/n) : −2 sin(π/n)``.
 """
 from __future__ import annotations
 
