@@ -28,7 +28,7 @@ def test_prisms_example(tmp_path):
     assert "1 : 1.414214 : -1.414214 (closed form 2 sin(pi/n) = 1.414214)" in out
     for shape, tension in re.findall(r"within ([\d.e+-]+) m, tensions within ([\d.e+-]+) N", out):
         assert float(shape) < 1e-10 and float(tension) < 1e-9
-    assert out.count("; stable") == 2
+    assert out.count("of the design; stable") == 2
 
 
 @pytest.mark.timeout(900)
