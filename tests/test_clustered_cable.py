@@ -115,3 +115,20 @@ def test_compiled_stepper_moves_the_atwood_machine_as_the_closed_form(tmp_path, 
     traj = nc.simulate(atwood(m1, m2).build(), t_end=0.5, dt=0.01, method="stepper")
     acc = G * (m1 - m2) / (m1 + m2)
     np.testing.assert_allclose(traj.point("a", (0, 0, 0))[:, 2], -0.5 * acc * traj.t**2, atol=1e-12)
+
+
+def test_rest_length_as_an_input_and_as_a_parameter():
+    """A weight m on a cable over a pulley at z = 1, anchored 1 m away: L = (1 − z) + 1 and
+    k (L − l₀) = m g put the weight at z = 2 − l₀ − m g / k, for the actuated rest length
+    (an input) and for a design rest length (a parameter)."""
+    m, k = 2.0, 500.0
+    for kind in ("input", "parameter"):
+        s = nc.System("winch", gravity=(0, 0, -G))
+        w = vertical_point(s, "w", m, 0.0)
+        l0 = s.add_input("l0") if kind == "input" else s.add_parameter("l0", 1.5)
+        s.add_force(ClusteredCable([(s.ground, (1, 0, 1)), (s.ground, (0, 0, 1)), (w, (0, 0, 0))], k=k,
+                                   rest_length=l0))
+        model = s.build()
+        for value in (1.5, 1.2):
+            eq = nc.equilibrium(model, u=[value]) if kind == "input" else nc.equilibrium(model, p=[value])
+            assert eq.coordinate("w.r_i.z") == pytest.approx(2 - value - m * G / k, abs=1e-10)

@@ -9,7 +9,8 @@ as :class:`~ncgen.model.forces.Spring` with ``cable=True`` does, and its general
 the two unit vectors (a frictionless pulley).  ``k`` (N/m), ``rest_length`` (m, the whole
 cable's: an input makes it an actuated cable, a parameter a design value) and ``damping``
 (N·s/m) take numbers, expressions, inputs or parameters as other forces do.  Potential
-``½ k (L − l₀)²`` while taut.
+``½ k (L − l₀)²`` while taut, unless ``k`` or ``l₀`` depend on inputs (then the cable's work is
+not in the potential energy).
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.errors import ModelError
+from ncgen.model.expressions import ExpressionError
 from ncgen.model.forces import Force
 
 
@@ -88,8 +90,13 @@ class ClusteredCable(Force):
         return Q
 
     def potential(self, ctx):
+        """``½ k (L − l₀)²`` while taut; 0 when ``k`` or ``l₀`` depend on inputs (an actuated
+        cable does work on the system: its force is then not counted as conservative)."""
         L, _ = self.length(ctx)
-        k = self._value(ctx, self.k, 1, "k (in the potential energy)", inputs=False)
-        l0 = self._value(ctx, self.rest_length, 1, "rest_length (in the potential energy)", inputs=False)
+        try:
+            k = self._value(ctx, self.k, 1, "k (in the potential energy)", inputs=False)
+            l0 = self._value(ctx, self.rest_length, 1, "rest_length (in the potential energy)", inputs=False)
+        except ExpressionError:          # generalized() has accepted them with the inputs
+            return ca.SX(0)
         stretch = L - l0
         return ca.if_else(stretch > 0, 0.5 * k * stretch**2, 0)
