@@ -165,6 +165,7 @@ def test_tower_of_100_members_in_half_a_second():
     (dict(friction=[0.1]), r"friction: expected 0 coefficient"),
     (dict(clusters=[[0, 1]], turns=[[1, 2]]), r"turns\[0\]: expected 1 integer"),
     (dict(cable_max=-1.0), "cable_max: expected a finite number >= 0"),
+    (dict(cable_min=-1.0), r"cable_min: expected a finite number >= 0 \(N; cables only pull\)"),
     (dict(cable_min=5.0, cable_max=1.0), "cable_max: expected at least cable_min"),
 ])
 def test_bad_arguments_are_named(kwargs, match):

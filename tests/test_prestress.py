@@ -62,6 +62,18 @@ def test_min_max_cable_against_highs():
     assert d.tensions.min() >= 2.0 - 1e-9
 
 
+def test_loaded_tower_keeps_its_loads_balanced():
+    from test_inverse_statics import loaded_tower
+
+    nodes, struts, cables, loads, sup = loaded_tower()
+    for objective in ("stiffness", "max_cable"):
+        d = optimize_prestress(nodes, struts, cables, loads, sup, objective=objective, cable_min=5.0,
+                               cable_max=80.0)
+        assert d.residual < 1e-10 * np.abs(d.forces).max()
+        assert d.tensions.min() >= 5.0 - 1e-8 and d.max_cable <= 80.0 + 1e-8
+        assert d.min_stiffness > 0
+
+
 def test_hundred_member_tower_within_five_seconds():
     nodes, struts, cables = stacked_prisms(10, 3)
     c0 = time.process_time()

@@ -158,14 +158,19 @@ def inverse_statics(nodes, struts, cables, loads=None, supports=None, *, cable_m
     pr = problem(nodes, struts, cables, loads, supports, cable_min=cable_min, cable_max=cable_max,
                  strut_max=strut_max, clusters=clusters, friction=friction, turns=turns, tol=tol,
                  who="inverse_statics")
-    alpha = np.zeros(pr.S.shape[1])
-    if np.any(pr.b_alpha < -ACTIVE_TOL * pr.scale):
-        if pr.S.shape[1] == 0:
+    return pr.result(least_norm(pr, "inverse_statics"))
+
+
+def least_norm(pr: "Problem", who: str) -> np.ndarray:
+    """The amplitudes ``α`` of the least-norm forces ``t_p + T α`` within the bounds."""
+    alpha = np.linalg.solve(pr.H, -pr.g) if pr.T.shape[1] else np.zeros(0)     # unbounded least norm
+    if np.any(pr.B_alpha @ alpha - pr.b_alpha > ACTIVE_TOL * pr.scale):
+        if pr.T.shape[1] == 0:
             worst = int(np.argmin(pr.b_alpha))
-            raise NcgenError(f"inverse_statics: no member forces satisfy the bounds: the forces are unique (no "
-                             f"state of self-stress) and violate {pr.names[worst]} by {-pr.b_alpha[worst]:.6g} N")
-        alpha = _qp(pr.H, pr.g, pr.B_alpha, pr.b_alpha, pr.scale, pr.names, "inverse_statics")
-    return pr.result(alpha)
+            raise NcgenError(f"{who}: no member forces satisfy the bounds: the forces are unique (no state of "
+                             f"self-stress) and violate {pr.names[worst]} by {-pr.b_alpha[worst]:.6g} N")
+        alpha = _qp(pr.H, pr.g, pr.B_alpha, pr.b_alpha, pr.scale, pr.names, who)
+    return alpha
 
 
 @dataclass
@@ -184,10 +189,6 @@ class Problem:
     names: list
     pulleys: list
     scale: float
-
-    @property
-    def S(self) -> np.ndarray:
-        return self.T
 
     @property
     def H(self) -> np.ndarray:
@@ -308,9 +309,8 @@ def _inequalities(fw: Framework, pulleys, cable_min, cable_max, strut_max, who: 
     rows, rhs, names = [], [], []
     eye = np.eye(m)
     for name, value in (("cable_min", cable_min), ("cable_max", cable_max), ("strut_max", strut_max)):
-        if value is not None and not (np.isfinite(value) and (value >= 0 or name == "cable_min")):
-            raise NcgenError(f"{who}: {name}: expected a finite number{' >= 0' if name != 'cable_min' else ''}, "
-                             f"got {value!r}")
+        if value is not None and not (np.isfinite(value) and value >= 0):
+            raise NcgenError(f"{who}: {name}: expected a finite number >= 0 (N; cables only pull), got {value!r}")
     if cable_max is not None and cable_max < cable_min:
         raise NcgenError(f"{who}: cable_max: expected at least cable_min = {cable_min:g} N, got {cable_max:g}")
     for e in range(nc):

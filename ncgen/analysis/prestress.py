@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ncgen.errors import NcgenError
-from ncgen.analysis.inverse_statics import InverseStatics, problem
+from ncgen.analysis.inverse_statics import InverseStatics, least_norm, problem
 from ncgen.analysis.self_stress import RANK_TOL
 
 OBJECTIVES = ("stiffness", "max_cable")
@@ -71,7 +71,7 @@ def optimize_prestress(nodes, struts, cables, loads=None, supports=None, *, obje
     t = ca.DM(pr.t_p) + ca.mtimes(ca.DM(pr.T), alpha)
     g = [ca.mtimes(ca.DM(pr.B), t) - ca.DM(pr.b)]
     lbg, ubg = [-np.inf] * len(pr.b), [0.0] * len(pr.b)
-    start = _feasible_start(pr)
+    start = least_norm(pr, who)                    # inside the bounds
     if objective == "stiffness":
         nm = M.shape[1]
         Qs = [an.prestress_stiffness(pr.t_p)] + [an.prestress_stiffness(pr.T[:, i]) for i in range(n_s)]
@@ -113,13 +113,3 @@ def optimize_prestress(nodes, struts, cables, loads=None, supports=None, *, obje
                      min_stiffness=float(ev[0]) if ev.size else float("nan"),
                      max_cable=float(forces[:nc].max()) if nc else float("nan"), iterations=int(stats["iter_count"]),
                      solve_time=time.perf_counter() - t0)
-
-
-def _feasible_start(pr) -> np.ndarray:
-    """Amplitudes of a point inside the bounds: the least-norm forces of
-    :func:`inverse_statics`, or zero when no bound is violated there."""
-    from ncgen.analysis.inverse_statics import ACTIVE_TOL, _qp
-
-    if not np.any(pr.b_alpha < -ACTIVE_TOL * pr.scale):
-        return np.zeros(pr.T.shape[1])
-    return _qp(pr.H, pr.g, pr.B_alpha, pr.b_alpha, pr.scale, pr.names, "optimize_prestress")
