@@ -18,7 +18,7 @@ def _arguments(p: argparse.ArgumentParser) -> None:
                    help="write the member forces (.csv: member,i,j,length_m,force_N,density_N_per_m)")
 
 
-@subcommand("tensegrity", help="self-stress, mechanisms and member forces of a tensegrity design",
+@subcommand("tensegrity", help="self-stress, mechanisms, forces of a tensegrity",
             description="Read a tensegrity design (a shape, supports, loads, bounds on the prestress), print its "
                         "states of self-stress and infinitesimal mechanisms (Calladine's rule), the member "
                         "forces (least norm within the bounds, or the stiffest / most even prestress by IPOPT), "
