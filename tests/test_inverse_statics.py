@@ -179,3 +179,23 @@ def test_loads_on_a_mechanism_are_refused():
     loads[3:, 2] = -1.0                   # axial load twists the prism: not carried at first order
     with pytest.raises(NcgenError, match="loads: this shape cannot carry them"):
         inverse_statics(nodes, struts, cables, loads, supports=[0, 1, 2])
+
+
+def test_clustered_prism_realised_with_a_clustered_cable():
+    """The prism with one cable round its top ring over three frictionless pulleys: inverse
+    statics gives the ring one tension; realised as a ClusteredCable, ncgen's own statics
+    holds the shape with that tension."""
+    nodes, struts, cables = prism(3)
+    sup = {0: "xyz", 1: "xyz", 2: "z"}
+    inv = inverse_statics(nodes, struts, cables, supports=sup, clusters=[[3, 4, 5]], cable_min=10.0)
+    np.testing.assert_allclose(inv.tensions[3:6], inv.tensions[3], rtol=1e-12)
+    k = 3000.0
+    model = tensegrity_system(nodes, struts, cables, inv.rest_lengths(k)[:9], k, supports=sup,
+                              clusters=[[3, 4, 5]]).build()
+    guess = model.q0 + 1e-4 * np.random.default_rng(2).normal(size=model.nq)
+    eq = nc.equilibrium(model, guess)
+    X = np.array([[eq.coordinate(f"n{i}.r_i.{c}") for c in "xyz"] for i in range(3, 6)])
+    np.testing.assert_allclose(X, nodes[3:], atol=1e-9)
+    assert eq.stability == "stable"
+    T = {name: T for name, T, _, _ in eq.springs}
+    np.testing.assert_allclose([T["c6"], T["c7"], T["c8"]], inv.tensions[6:], rtol=1e-8)

@@ -19,16 +19,22 @@ from ncgen.analysis.self_stress import AXES, framework
 
 
 def tensegrity_system(nodes, struts, cables, rest_lengths, stiffness, loads=None, supports=None, *,
-                      node_mass: float = 0.1, damping: float = 0.0, name: str = "tensegrity"):
+                      clusters=None, node_mass: float = 0.1, damping: float = 0.0, name: str = "tensegrity"):
     """The :class:`~ncgen.model.system.System` of the tensegrity (module docstring);
     ``rest_lengths`` and ``stiffness``: one per cable (or a number); nodes named ``n<i>``,
-    struts ``s<i>``, cables ``c<i>``.  Build it with ``.build()``."""
+    struts ``s<i>``, cables ``c<i>``.  ``clusters`` (lists of cable indices, as in
+    :func:`~ncgen.analysis.inverse_statics.inverse_statics`): each becomes one
+    :class:`~ncgen.model.cables.ClusteredCable` ``k<j>`` over frictionless pulleys at the
+    nodes its segments share, with the sum of its segments' rest lengths and their stiffness
+    in series ``1 / Σ 1/k`` (so that segment values from ``InverseStatics.rest_lengths`` give
+    the same tension).  Build it with ``.build()``."""
+    from ncgen.model.cables import ClusteredCable
     from ncgen.model.forces import PointForce, Spring
     from ncgen.model.joints import Distance, PointOnLine, PointOnPlane
     from ncgen.model.system import System
 
     who = "tensegrity_system"
-    fw = framework(nodes, struts, cables, supports, who=who)
+    fw = framework(nodes, struts, cables, supports, clusters, who=who)
     n, d = fw.nodes.shape
     l0 = _per_cable(rest_lengths, len(fw.cables), "rest_lengths", who)
     k = _per_cable(stiffness, len(fw.cables), "stiffness", who)
@@ -57,13 +63,29 @@ def tensegrity_system(nodes, struts, cables, rest_lengths, stiffness, loads=None
         if ma.is_ground and mb.is_ground:
             raise NcgenError(f"{who}: struts[{e}]: both nodes {a} and {b} are fully supported")
         s.add_joint(Distance(ma, mb, at=[fw.nodes[a], fw.nodes[b]], name=f"s{e}"))
+    for j, cl in enumerate(fw.clusters):
+        order = _path(fw.cables, cl)
+        s.add_force(ClusteredCable([end[i] for i in order], k=float(1 / np.sum(1 / k[cl])),
+                                   rest_length=float(l0[cl].sum()), damping=damping, name=f"k{j}"))
+    clustered = {e for cl in fw.clusters for e in cl}
     for e, (a, b) in enumerate(fw.cables):
         (ma, pa), (mb, pb) = end[a], end[b]
-        if ma.is_ground and mb.is_ground:
+        if (ma.is_ground and mb.is_ground) or e in clustered:
             continue
         s.add_force(Spring(ma, pa, mb, pb, k=float(k[e]), rest_length=float(l0[e]), damping=damping, cable=True,
                            name=f"c{e}"))
     return s
+
+
+def _path(cables, cluster) -> list[int]:
+    """The nodes a clustered cable passes, in order (its consecutive segments share one)."""
+    first, second = cables[cluster[0]], cables[cluster[1]]
+    start = first[0] if first[1] in second else first[1]
+    order = [start]
+    for e in cluster:
+        a, b = cables[e]
+        order.append(b if a == order[-1] else a)
+    return order
 
 
 def _per_cable(x, m: int, what: str, who: str) -> np.ndarray:
