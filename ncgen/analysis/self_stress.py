@@ -103,7 +103,7 @@ class Framework:
 
     def geometric_stiffness(self, t) -> np.ndarray:
         """``K_G = (Cᵀ diag(t / l) C) ⊗ I_dim`` on the free coordinates (N/m)."""
-        t = self.member_forces(t, "t")
+        t = self.member_forces(t, "geometric_stiffness: t")
         C = self.incidence()
         D = C.T @ np.diag(t / self.lengths()) @ C
         return np.kron(D, np.eye(self.dim))[np.ix_(self.free, self.free)]
@@ -125,7 +125,10 @@ class Framework:
 
 def framework(nodes, struts, cables, supports=None, clusters=None, *, who: str) -> Framework:
     """A checked :class:`Framework`; errors name ``who`` and the argument."""
-    nodes = np.array(nodes, float)
+    try:
+        nodes = np.array(nodes, float)
+    except (TypeError, ValueError):
+        raise NcgenError(f"{who}: nodes: expected an n × 2 or n × 3 array of numbers, got {nodes!r}") from None
     if nodes.ndim != 2 or nodes.shape[1] not in (2, 3) or len(nodes) < 2:
         raise NcgenError(f"{who}: nodes: expected an n × 2 or n × 3 array (n ≥ 2), got shape {nodes.shape}")
     if not np.all(np.isfinite(nodes)):
@@ -274,7 +277,8 @@ class SelfStress:
 def self_stress(nodes, struts, cables, supports=None, clusters=None, *, tol: float = RANK_TOL) -> SelfStress:
     """States of self-stress and infinitesimal mechanisms of the configuration ``nodes``
     (SVD of ``A_c``; singular values ≤ ``tol`` × the largest count as zero); see the module
-    docstring for the arguments and conventions."""
+    docstring for the arguments and conventions.  ``nodes`` may be a checked
+    :class:`Framework` (the other arguments are then ignored)."""
     fw = nodes if isinstance(nodes, Framework) else framework(nodes, struts, cables, supports, clusters,
                                                             who="self_stress")
     return analyse(fw, tol)
