@@ -132,3 +132,19 @@ def test_rest_length_as_an_input_and_as_a_parameter():
         for value in (1.5, 1.2):
             eq = nc.equilibrium(model, u=[value]) if kind == "input" else nc.equilibrium(model, p=[value])
             assert eq.coordinate("w.r_i.z") == pytest.approx(2 - value - m * G / k, abs=1e-10)
+
+
+def test_toml_round_trip_and_errors():
+    s = atwood(2.0, 1.0, damping=0.5)
+    text = s.to_toml()
+    assert 'type = "ClusteredCable"' in text
+    back = nc.System.from_toml(text)
+    assert back.to_toml() == text
+    m1, m2 = s.build(), back.build()
+    rng = np.random.default_rng(4)
+    q, v = m1.q0 + 0.01 * rng.normal(size=m1.nq), rng.normal(size=m1.nq)
+    F1 = np.array(m1.functions["F"](0, q, v, np.zeros(0), np.zeros(0)))
+    np.testing.assert_allclose(np.array(m2.functions["F"](0, q, v, np.zeros(0), np.zeros(0))), F1, rtol=1e-14)
+    bad = text.replace('path = [["a"', 'path = [["nobody"')
+    with pytest.raises(ModelError, match=r"forces\[0\]\.path\[0\]\[0\]"):
+        nc.System.from_toml(bad)
