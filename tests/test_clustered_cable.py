@@ -148,3 +148,21 @@ def test_toml_round_trip_and_errors():
     bad = text.replace('path = [["a"', 'path = [["nobody"')
     with pytest.raises(ModelError, match=r"forces\[0\]\.path\[0\]\[0\]"):
         nc.System.from_toml(bad)
+
+
+def test_actuated_rest_length_step_oscillates_as_the_closed_form():
+    """Winch of the test above, rest length stepped from 1.5 m to 1.48 m at t = 0: the weight
+    oscillates about its new equilibrium, z(t) = z₁ + (z₀ − z₁) cos(√(k/m) t) (the swing,
+    0.02 m, is below the static stretch m g / k = 0.039 m: the cable stays taut)."""
+    m, k = 2.0, 500.0
+    s = nc.System("winch", gravity=(0, 0, -G))
+    w = vertical_point(s, "w", m, 0.0)
+    s.add_force(ClusteredCable([(s.ground, (1, 0, 1)), (s.ground, (0, 0, 1)), (w, (0, 0, 0))], k=k,
+                               rest_length=s.add_input("l0")))
+    z0, z1 = 2 - 1.5 - m * G / k, 2 - 1.48 - m * G / k
+    model = s.build()
+    q0 = model.q0.copy()
+    q0[model.coordinate_names.index("w.r_i.z")] = z0
+    traj = nc.simulate(model, 1.0, 0.01, u=[1.48], q0=q0, backend="vm", rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(traj.point("w", (0, 0, 0))[:, 2], z1 + (z0 - z1) * np.cos(np.sqrt(k / m) * traj.t),
+                               atol=1e-7)
