@@ -166,3 +166,26 @@ def test_actuated_rest_length_step_oscillates_as_the_closed_form():
     traj = nc.simulate(model, 1.0, 0.01, u=[1.48], q0=q0, backend="vm", rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(traj.point("w", (0, 0, 0))[:, 2], z1 + (z0 - z1) * np.cos(np.sqrt(k / m) * traj.t),
                                atol=1e-7)
+
+
+def test_optimal_control_lifts_a_weight_by_the_rest_length():
+    """The winch's rest length as the control of an optimal-control problem (feasibility:
+    lift the weight 0.2 m in 2 s, at rest at both ends); the simulation of the solution's
+    inputs (IDAS) ends where the collocation says."""
+    m, k = 1.0, 200.0
+    s = nc.System("winch", gravity=(0, 0, -G))
+    w = vertical_point(s, "w", m, 0.0)
+    s.add_force(ClusteredCable([(s.ground, (1, 0, 1)), (s.ground, (0, 0, 1)), (w, (0, 0, 0))], k=k,
+                               rest_length=s.add_input("l0"), damping=5.0))
+    model = s.build()
+    z0 = 2 - 1.5 - m * G / k
+    ocp = nc.OptimalControl(model, N=40, t_final=2.0)
+    ocp.bound_input("l0", 1.2, 1.6)
+    ocp.initial(q={"w.r_i.z": z0}, v=0)
+    ocp.final(q={"w.r_i.z": z0 + 0.2}, v=0)
+    sol = ocp.solve()
+    sim = nc.simulate(model, sol.t[-1], sol.t[1], u=sol.u, q0=sol.q[0], v0=sol.v[0], backend="vm")
+    z = model.coordinate_names.index("w.r_i.z")
+    assert sim.q[-1, z] == pytest.approx(z0 + 0.2, abs=1e-5)
+    assert abs(sim.v[-1, z]) < 1e-4
+    assert np.all((sol.u >= 1.2 - 1e-8) & (sol.u <= 1.6 + 1e-8))
