@@ -189,3 +189,29 @@ def test_optimal_control_lifts_a_weight_by_the_rest_length():
     assert sim.q[-1, z] == pytest.approx(z0 + 0.2, abs=1e-5)
     assert abs(sim.v[-1, z]) < 1e-4
     assert np.all((sol.u >= 1.2 - 1e-8) & (sol.u <= 1.6 + 1e-8))
+
+
+def test_actuated_cable_energy_balance():
+    """Rest length l₀(t) = 1.5 − 0.01 sin 3t (the cable stays taut): the change of
+    ½ m ż² + m g z + ½ k (L − l₀)² equals the work −∫ T l̇₀ dt the winch does."""
+    m, k = 2.0, 500.0
+    s = nc.System("winch", gravity=(0, 0, -G))
+    w = vertical_point(s, "w", m, 0.0)
+    s.add_force(ClusteredCable([(s.ground, (1, 0, 1)), (s.ground, (0, 0, 1)), (w, (0, 0, 0))], k=k,
+                               rest_length=s.add_input("l0")))
+    model = s.build()
+    q0 = model.q0.copy()
+    q0[model.coordinate_names.index("w.r_i.z")] = 2 - 1.5 - m * G / k
+    l0 = lambda t: 1.5 - 0.01 * np.sin(3 * t)                               # noqa: E731
+    traj = nc.simulate(model, 2.0, 1e-3, u=lambda t: [l0(t)], q0=q0, hold="linear", backend="vm", rtol=1e-10,
+                       atol=1e-12)
+    z = traj.point("w", (0, 0, 0))[:, 2]
+    zdot = traj.v[:, model.coordinate_names.index("w.r_i.z")]
+    stretch = (2 - z) - l0(traj.t)
+    assert stretch.min() > 0
+    E = 0.5 * m * zdot**2 + m * G * z + 0.5 * k * stretch**2
+    T = k * stretch
+    # l₀ is interpolated linearly between the samples: −∫ T l̇₀ dt by the trapezoid rule per interval
+    work = np.concatenate([[0], np.cumsum(-0.5 * (T[1:] + T[:-1]) * np.diff(l0(traj.t)))])
+    np.testing.assert_allclose(E - E[0], work, atol=1e-6 * np.abs(work).max())
+    assert np.abs(work).max() > 0.01
