@@ -18,13 +18,18 @@ from ncgen.version import __version__
 #: Where each public name lives: module -> names (``nc.robots`` and ``nc.viz`` are modules).
 _HOMES: dict[str, tuple[str, ...]] = {
     "ncgen.analysis.formfinding": ("Tensegrity", "form_find"),
+    "ncgen.analysis.inverse_statics": ("InverseStatics", "inverse_statics"),
     "ncgen.analysis.linearization": ("LinearModel", "linearize"),
     "ncgen.analysis.modes": ("Modes", "modes"),
+    "ncgen.analysis.prestress": ("PrestressDesign", "optimize_prestress"),
     "ncgen.analysis.reactions": ("JointReaction", "joint_reactions"),
+    "ncgen.analysis.self_stress": ("SelfStress", "self_stress"),
     "ncgen.analysis.statics": ("Equilibrium", "equilibrium"),
+    "ncgen.analysis.tensegrity_model": ("tensegrity_system",),
     "ncgen.assembly.kinematics": ("assemble", "dof_report", "project_velocity", "solve_kinematics"),
     "ncgen.codegen.model_package": ("generate",),
     "ncgen.control": ("MPC", "StepDidNotConverge", "StepFunction", "export_mpc", "ilqr", "step_function"),
+    "ncgen.model.cables": ("ClusteredCable",),
     "ncgen.model.contacts": ("BoxBox", "BoxPlane", "CapsulePlane", "Contact", "CylinderPlane", "SphereBox",
                              "SpherePlane", "SphereSphere"),
     "ncgen.model.controllers": ("ComputedTorque", "Controller", "PD"),

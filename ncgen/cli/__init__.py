@@ -24,7 +24,7 @@ from ncgen.version import __version__
 #: The module of :mod:`ncgen.cli` that registers each subcommand, in the order ``ncgen --help`` lists them.
 SUBCOMMAND_MODULES = {"derive": "derive", "generate": "generate", "check": "check", "simulate": "simulate",
                       "sweep": "sweep", "optimize": "optimize", "mpc": "mpc", "equilibrium": "statics",
-                      "modes": "statics", "demo": "demo"}
+                      "modes": "statics", "demo": "demo", "tensegrity": "tensegrity"}
 
 __all__ = ["SUBCOMMANDS", "build_parser", "load_model", "load_system", "main", "subcommand", "write_output"]
 

@@ -39,12 +39,16 @@ from ncgen.files import decode_text
 from ncgen.model import toml_write
 from ncgen.model.expressions import did_you_mean, parse, scope, value_to_toml
 from ncgen.model.contacts import CONTACT_TYPES, BoxBox, SphereSphere
-from ncgen.model.forces import FORCE_TYPES
+from ncgen.model.cables import ClusteredCable
+from ncgen.model.forces import FORCE_TYPES as _BASIC_FORCES
 from ncgen.model.joint_base import Joint
 from ncgen.model.joints import JOINT_TYPES, CoordinateDriver, Mimic
 from ncgen.model.members import NodeRef
 from ncgen.model.shapes import shape_from_table
 from ncgen.validation import as_scalar, as_system_name
+
+#: Force types by their TOML name.
+FORCE_TYPES = {**_BASIC_FORCES, ClusteredCable.kind: ClusteredCable}
 
 TOP_KEYS = ("system", "parameters", "inputs", "members", "joints", "forces", "contacts", "initial",
             "initial_rates", "controller")
@@ -89,6 +93,8 @@ FORCE_FIELDS = {
     "TorsionalSpring": (Field("joint", "joint", True), Field("k", "value", True), Field("damping", "value"),
                         Field("rest_angle", "value of t and parameters")),
     "GeneralizedForce": (Field("value", "generalized force", True),),
+    "ClusteredCable": (Field("path", "cable path", True), Field("k", "value", True),
+                       Field("rest_length", "value", True), Field("damping", "value")),
 }
 
 _SHAPE_PLANE = (Field("at", "vector"), Field("rotation", "rotation"), Field("plane", "member"), Field("point", "vector"), Field("normal", "vector"))
@@ -434,6 +440,16 @@ class _Loader:
             return [self._member_ref(m, f"{path}[{i}]") for i, m in enumerate(v)]
         if kind == "joint":
             return self._joint_ref(v, path)
+        if kind == "cable path":
+            if not isinstance(v, list) or len(v) < 2:
+                raise ModelError(f"{path}: expected a list of [member, [local point]] pairs (two or more), "
+                                 f"got {_describe(v)}")
+            out = []
+            for i, item in enumerate(v):
+                if not isinstance(item, list) or len(item) != 2:
+                    raise ModelError(f"{path}[{i}]: expected [member, [local point]], got {_describe(item)}")
+                out.append((self._member_ref(item[0], f"{path}[{i}][0]"), _vector(item[1], d, f"{path}[{i}][1]")))
+            return out
         if kind == "slot or axis":
             if not isinstance(v, (str, int)) or isinstance(v, bool):
                 raise ModelError(f"{path}: expected a name or an index, got {_describe(v)}")
@@ -654,6 +670,8 @@ def _force_entries(f, sc, system) -> dict:
             out[field.key] = [_member_name(m) for m in value] if isinstance(value, tuple) else _member_name(value)
         elif field.kind == "joint":
             out[field.key] = value.name
+        elif field.kind == "cable path":
+            out[field.key] = [[_member_name(m), _plain(at)] for m, at in value]
         elif field.kind == "bool":
             out[field.key] = bool(value)
         elif field.kind == "vector":

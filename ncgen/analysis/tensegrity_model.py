@@ -1,0 +1,118 @@
+"""``tensegrity_system``: a simulation model of a tensegrity of any class (nodes shared by
+several struts included), to realise and check the forces of inverse statics.
+
+Every free node is a point mass (``node_mass``, kg); a strut is a :class:`~ncgen.model.joints.Distance`
+constraint between its nodes (rigid, massless; its force is the constraint's reaction); a
+cable is a :class:`~ncgen.model.forces.Spring` with ``cable=True`` (stiffness ``k`` N/m, rest
+length ``l₀`` m: tension ``k (l − l₀)`` while positive).  Supports as in
+:mod:`ncgen.analysis.self_stress`: a node held along every axis is a point of the ground, along
+one axis it slides on a plane (:class:`~ncgen.model.joints.PointOnPlane`), along two on a
+line (:class:`~ncgen.model.joints.PointOnLine`).  Loads (n × dim, N) are constant
+:class:`~ncgen.model.forces.PointForce` on the nodes; no gravity (put the weights in the loads).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ncgen.errors import NcgenError
+from ncgen.analysis.self_stress import AXES, framework
+
+
+def tensegrity_system(nodes, struts, cables, rest_lengths, stiffness, loads=None, supports=None, *,
+                      clusters=None, node_mass: float = 0.1, damping: float = 0.0, name: str = "tensegrity"):
+    """The :class:`~ncgen.model.system.System` of the tensegrity (module docstring);
+    ``rest_lengths`` and ``stiffness``: one per cable (or a number); nodes named ``n<i>``,
+    struts ``s<i>``, cables ``c<i>``.  ``clusters`` (lists of cable indices, as in
+    :func:`~ncgen.analysis.inverse_statics.inverse_statics`): each becomes one
+    :class:`~ncgen.model.cables.ClusteredCable` ``k<j>`` over frictionless pulleys at the
+    nodes its segments share, with the sum of its segments' rest lengths and their stiffness
+    in series ``1 / Σ 1/k`` (so that segment values from ``InverseStatics.rest_lengths`` give
+    the same tension).  Build it with ``.build()``."""
+    from ncgen.model.cables import ClusteredCable
+    from ncgen.model.forces import PointForce, Spring
+    from ncgen.model.joints import Distance, PointOnLine, PointOnPlane
+    from ncgen.model.system import System
+
+    who = "tensegrity_system"
+    fw = framework(nodes, struts, cables, supports, clusters, who=who)
+    n, d = fw.nodes.shape
+    l0 = _per_cable(rest_lengths, len(fw.cables), "rest_lengths", who)
+    k = _per_cable(stiffness, len(fw.cables), "stiffness", who)
+    f = np.zeros((n, d)) if loads is None else np.asarray(loads, float)
+    if f.shape != (n, d) or not np.all(np.isfinite(f)):
+        raise NcgenError(f"{who}: loads: expected finite nodal forces of shape ({n}, {d}), got shape {f.shape}")
+    s = System(name, gravity=tuple([0.0] * d))
+    end = {}
+    for i in range(n):
+        held = [a for a in range(d) if fw.fixed[i, a]]
+        if len(held) == d:
+            end[i] = (s.ground, fw.nodes[i])
+            continue
+        p = s.add_point(f"n{i}", mass=node_mass, position=fw.nodes[i])
+        end[i] = (p, np.zeros(d))
+        if len(held) == 1 and d == 3:
+            s.add_joint(PointOnPlane(s.ground, p, at=fw.nodes[i], normal=np.eye(3)[held[0]],
+                                     name=f"support{i}"))
+        elif held:
+            axis = np.eye(d)[[a for a in range(d) if a not in held][0]]
+            s.add_joint(PointOnLine(s.ground, p, at=fw.nodes[i], axis=axis, name=f"support{i}"))
+        if np.any(f[i] != 0):
+            s.add_force(PointForce(p, np.zeros(d), force=tuple(f[i]), name=f"load{i}"))
+    for e, (a, b) in enumerate(fw.struts):
+        (ma, _), (mb, _) = end[a], end[b]
+        if ma.is_ground and mb.is_ground:
+            raise NcgenError(f"{who}: struts[{e}]: both nodes {a} and {b} are fully supported")
+        s.add_joint(Distance(ma, mb, at=[fw.nodes[a], fw.nodes[b]], name=f"s{e}"))
+    for j, cl in enumerate(fw.clusters):
+        order = _path(fw.cables, cl)
+        s.add_force(ClusteredCable([end[i] for i in order], k=float(1 / np.sum(1 / k[cl])),
+                                   rest_length=float(l0[cl].sum()), damping=damping, name=f"k{j}"))
+    clustered = {e for cl in fw.clusters for e in cl}
+    for e, (a, b) in enumerate(fw.cables):
+        (ma, pa), (mb, pb) = end[a], end[b]
+        if (ma.is_ground and mb.is_ground) or e in clustered:
+            continue
+        s.add_force(Spring(ma, pa, mb, pb, k=float(k[e]), rest_length=float(l0[e]), damping=damping, cable=True,
+                           name=f"c{e}"))
+    return s
+
+
+def _path(cables, cluster) -> list[int]:
+    """The nodes a clustered cable passes, in order (its consecutive segments share one)."""
+    first, second = cables[cluster[0]], cables[cluster[1]]
+    start = first[0] if first[1] in second else first[1]
+    order = [start]
+    for e in cluster:
+        a, b = cables[e]
+        order.append(b if a == order[-1] else a)
+    return order
+
+
+def _per_cable(x, m: int, what: str, who: str) -> np.ndarray:
+    a = np.asarray(x, float).reshape(-1)
+    if a.size not in (1, m) or not np.all(np.isfinite(a)) or np.any(a <= 0):
+        raise NcgenError(f"{who}: {what}: expected a positive number or {m} positive numbers (one per cable), "
+                         f"got {x!r}")
+    return np.broadcast_to(a, (m,)).astype(float)
+
+
+def strut_forces(model, eq, nodes, struts, supports=None) -> np.ndarray:
+    """Axial forces (N, tension positive) of the struts of a :func:`tensegrity_system`
+    model at its equilibrium ``eq``: from the reaction ``−λ ∂Φ/∂r`` of strut ``s<e>``'s
+    constraint on one of its free nodes, along the strut."""
+    fw = framework(nodes, struts, [], supports, who="strut_forces")
+    d = fw.dim
+    A = np.asarray(model.A(eq.q, t=eq.t, p=eq.p)).reshape(model.nc, model.nq)
+    names = model.coordinate_names
+    X = {i: np.array([eq.coordinate(f"n{i}.r_i.{c}") for c in AXES[:d]]) for i in range(len(fw.nodes))
+         if not fw.fixed[i].all()}
+    out = []
+    for e, (a, b) in enumerate(fw.struts):
+        row = model.constraint_names.index(next(c for c in model.constraint_names if c.startswith(f"s{e}.")))
+        node, other = (b, a) if b in X else (a, b)
+        cols = [names.index(f"n{node}.r_i.{c}") for c in AXES[:d]]
+        f_node = -eq.lam[row] * A[row, cols]
+        xo = X.get(other, fw.nodes[other])
+        u = (X[node] - xo) / np.linalg.norm(X[node] - xo)
+        out.append(-(f_node @ u))
+    return np.array(out)

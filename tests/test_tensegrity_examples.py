@@ -1,0 +1,40 @@
+"""The tensegrity example scripts run as written and print what they claim: the closed-form
+force densities, the realised structures back at their design, every loaded equilibrium
+balanced by its own equilibrium matrix, the stiffest prestress sagging less."""
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+
+
+def run(name, tmp_path):
+    env = {**os.environ, "MPLBACKEND": "Agg", "NCGEN_CACHE_DIR": str(tmp_path / "cache")}
+    out = subprocess.run([sys.executable, str(EXAMPLES / name)], cwd=tmp_path, env=env, capture_output=True,
+                         text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    return out.stdout
+
+
+@pytest.mark.timeout(900)
+def test_prisms_example(tmp_path):
+    out = run("tensegrity_prisms.py", tmp_path)
+    assert "1 - 1 = 12 - (18 - 6)" in out and "1 - 3 = 16 - (24 - 6)" in out
+    assert "1 : 1.732051 : -1.732051 (closed form 2 sin(pi/n) = 1.732051)" in out
+    assert "1 : 1.414214 : -1.414214 (closed form 2 sin(pi/n) = 1.414214)" in out
+    for shape, tension in re.findall(r"within ([\d.e+-]+) m, tensions within ([\d.e+-]+) N", out):
+        assert float(shape) < 1e-10 and float(tension) < 1e-9
+    assert out.count("of the design; stable") == 2
+
+
+@pytest.mark.timeout(900)
+def test_tower_example(tmp_path):
+    out = run("tensegrity_tower.py", tmp_path)
+    assert "5 - 2 = 21 - (18 - 0)" in out
+    sags = [float(s) for s in re.findall(r"top sags ([\d.]+) mm", out)]
+    assert len(sags) == 2 and sags[1] < sags[0]
+    assert all(float(r) < 1e-9 for r in re.findall(r"\|A t - f\| = ([\d.e+-]+) N", out))
