@@ -1,0 +1,381 @@
+"""Contact-implicit transcription: optimal control through nonsmooth contacts.
+
+For a model built with ``contacts="nonsmooth"`` (:mod:`ncgen.model.contacts`), the motion
+over ``N`` intervals of lengths ``h_k`` (equal, or decision variables summing to ``T``) is:
+
+* in each interval, the compiled stepper's RATTLE step (docs/contact.md) from the node
+  ``(q_k, w_k)`` with a contact force ``f_k`` (N) constant over the interval, half of it in
+  each half-step along the contact Jacobian where it acts::
+
+      M (m − w_k)     = h/2 F(t_k, q_k, w_k, u_k)         − A(q_k)ᵀ ν₁ + h/2 W(q_k)ᵀ f_k
+      q_{k+1}         = q_k + h m,                         Φ(q_{k+1}) = 0
+      M (v_{k+1} − m) = h/2 F(t_{k+1}, q_{k+1}, v_{k+1}, u_k) − A(q_{k+1})ᵀ ν₂ + h/2 W(q_{k+1})ᵀ f_k
+      A(q_{k+1}) v_{k+1} + Φ_t = 0
+
+  (exact for constant accelerations: free flight under gravity, a block sliding under a
+  piecewise-constant push);
+* at the inner nodes k = 1..N−1, an impact impulse ``P_k`` (N·s) takes the velocity before
+  the node ``v_k`` to the velocity after it ``w_k``: ``M (w_k − v_k) = W(q_k)ᵀ P_k − A(q_k)ᵀ ν₃``,
+  ``A(q_k) w_k + Φ_t = 0`` (``w_0 = v_0``).  With free step lengths a node lands on each
+  impact, which is then resolved exactly.
+
+Contact laws, per point contact (``W = [W_N; W_T]``, ``U = W v``; the polyhedral Coulomb
+cone with ``n_d`` unit directions ``d_j`` in the tangent plane, ``f_T = Σ β_j d_j``):
+
+* force over interval k: ``g(q_k) ≥ 0 ⊥ f_N ≥ 0`` and ``g(q_{k+1}) ≥ 0 ⊥ f_N`` (a force only
+  while in contact at both ends); friction with maximum dissipation on the interval's mean
+  velocity ``m``: ``γ + d_jᵀ W_T m ≥ 0 ⊥ β_j ≥ 0``, ``μ f_N − Σ β_j ≥ 0 ⊥ γ ≥ 0``;
+* impulse at node k: ``g(q_k) ≥ 0 ⊥ P_N ≥ 0``; Newton's law as the nonsmooth stepper has it,
+  ``r = U⁺_N + e U⁻_N``, ``P_N r = 0``, ``r + b ≥ 0`` with a slack ``b ≥ 0`` (an approach
+  without impulse, allowed only while apart: ``b ⊥ f_N`` of the interval after the node);
+  friction on ``U⁺_T + e U⁻_T`` (the stepper's law) as above with ``P_N``.
+
+Each complementarity pair ``a ≥ 0, c ≥ 0, a c = 0`` is relaxed to ``a c ≤ σ`` (Scholtes) and
+IPOPT solves the sequence ``σ = σ₀, σ₀ κ, …, σ_final``, each from the last; the optimum is
+returned when its complementarity residual ``max_i min(a_i, c_i)`` (in the pairs' units: m,
+N, N·s, m/s) is below ``tol``.  The relaxed problems of large ``σ`` are the smoothed-contact
+variant: contact forces act a little before contact, friction a little before sliding.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ncgen.errors import OptimizationError
+from ncgen.optim.transcription import Discretisation, Horizon, Transcription, guess_times
+
+#: Point-contact kinds whose gap is smooth in q (ncgen.assembly.contacts): transcribed here.
+SUPPORTED_KINDS = ("SpherePlane", "SphereSphere", "BoxPlane", "CapsulePlane", "CylinderPlane")
+
+#: Default homotopy and discretisation settings (``OptimalControl(contacts={...})``).
+DEFAULTS = {
+    "sigma0": 1e-1,              # first relaxation σ (units of the pairs' products)
+    "sigma_final": 1e-10,        # last relaxation σ
+    "sigma_factor": 0.1,         # σ ← κ σ between solves
+    "tol": 1e-6,                 # complementarity residual the optimum must reach
+    "step_lengths": "equal",     # "equal" (h = T/N) or "free" (h_k decision variables, Σ h_k = T)
+    "step_bounds": (0.25, 4.0),  # free steps: h_k / (T/N) within these
+    "step_weight": 1e-4,         # free steps: weight (s⁻¹) of Σ (h_k − T/N)² / (T/N) in the cost
+    "directions": None,          # friction cone directions per contact (None: 2 planar, 4 in 3D)
+}
+
+
+def nonsmooth_contacts(model) -> list[dict]:
+    """The point contacts of ``model`` that act as unilateral constraints (nonsmooth model)."""
+    return list(model.contacts) if model.contact_model == "nonsmooth" else []
+
+
+def _label(spec: dict) -> str:
+    element = spec.get("element")
+    return f"{spec['name']!r} ({spec['type']}{'' if element is None else f' of element {element!r}'})"
+
+
+def refuse_unsupported(model, method: str) -> None:
+    """Refuse an optimal-control problem on a model whose nonsmooth contacts ``method``
+    would ignore, naming them."""
+    contacts = nonsmooth_contacts(model)
+    if not contacts:
+        return
+    if method != "contact_implicit":
+        names = ", ".join(_label(c) for c in contacts)
+        raise OptimizationError(
+            f"model {model.name!r} has nonsmooth contacts ({names}); method={method!r} would solve the problem as if "
+            "they were absent. Use method='contact_implicit' (the default for such a model) or build the model with "
+            "contacts='smooth'")
+    bad = [c for c in contacts if c["type"] not in SUPPORTED_KINDS]
+    if bad:
+        raise OptimizationError(
+            f"model {model.name!r}: no optimal-control transcription handles the contact(s) "
+            f"{', '.join(_label(c) for c in bad)}: their gap is piecewise (faces, edges, corners of a box); "
+            f"the contact-implicit transcription handles {', '.join(SUPPORTED_KINDS)}. Build the model with "
+            "contacts='smooth' to optimise with the compliant law")
+
+
+def check_settings(settings, dim: int) -> dict:
+    """``contacts`` settings merged into :data:`DEFAULTS`, each checked (errors name the key)."""
+    if settings is None:
+        settings = {}
+    if not isinstance(settings, dict):
+        raise OptimizationError(f"contacts: expected a table of settings ({', '.join(DEFAULTS)}), got {settings!r}")
+    unknown = sorted(set(settings) - set(DEFAULTS))
+    if unknown:
+        raise OptimizationError(f"contacts: unknown setting(s) {', '.join(unknown)}; known: {', '.join(DEFAULTS)}")
+    out = {**DEFAULTS, **settings}
+    for key in ("sigma0", "sigma_final", "tol", "step_weight"):
+        x = out[key]
+        if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) or x < 0 or (
+                key != "step_weight" and x == 0):
+            raise OptimizationError(f"contacts.{key}: expected a finite number {'>= 0' if key == 'step_weight' else '> 0'}"
+                                    f", got {x!r}")
+        out[key] = float(x)
+    if out["sigma_final"] > out["sigma0"]:
+        raise OptimizationError(f"contacts.sigma_final: expected at most sigma0 = {out['sigma0']:g}, "
+                                f"got {out['sigma_final']:g}")
+    k = out["sigma_factor"]
+    if isinstance(k, bool) or not isinstance(k, (int, float)) or not 0 < k < 1:
+        raise OptimizationError(f"contacts.sigma_factor: expected a number in (0, 1), got {k!r}")
+    if out["step_lengths"] not in ("equal", "free"):
+        raise OptimizationError(f"contacts.step_lengths: expected \"equal\" or \"free\", got {out['step_lengths']!r}")
+    b = out["step_bounds"]
+    if not (isinstance(b, (list, tuple)) and len(b) == 2 and all(isinstance(x, (int, float)) for x in b)
+            and 0 < b[0] <= 1 <= b[1] and math.isfinite(b[1])):
+        raise OptimizationError(f"contacts.step_bounds: expected (lower, upper) with 0 < lower <= 1 <= upper "
+                                f"(fractions of T/N), got {b!r}")
+    out["step_bounds"] = (float(b[0]), float(b[1]))
+    nd = out["directions"]
+    if nd is None:
+        nd = 2 if dim == 2 else 4
+    if isinstance(nd, bool) or not isinstance(nd, int) or nd < 2 or (dim == 2 and nd != 2) or nd % 2:
+        raise OptimizationError(f"contacts.directions: expected an even integer >= 2 (2 in planar systems), got {nd!r}")
+    out["directions"] = nd
+    return out
+
+
+@dataclass
+class Pair:
+    """A complementarity pair ``a ≥ 0, c ≥ 0, a c ≤ σ`` (``label`` names it in reports)."""
+
+    label: str
+    a: object
+    c: object
+    a_imposed: bool = False      # ``a ≥ 0`` is imposed elsewhere (gaps)
+
+
+def _directions(nt: int, nd: int) -> np.ndarray:
+    """``nt × nd`` unit directions in the tangent plane: ``±t`` (planar) or ``nd`` equally spaced."""
+    if nt == 1:
+        return np.array([[1.0, -1.0]])
+    ang = 2 * np.pi * np.arange(nd) / nd
+    return np.vstack([np.cos(ang), np.sin(ang)])
+
+
+class ContactImplicit(Transcription):
+    """The contact-implicit transcription (module docstring); ``settings`` as in :data:`DEFAULTS`."""
+
+    hessian = "exact"
+
+    def __init__(self, model, settings=None):
+        refuse_unsupported(model, "contact_implicit")
+        self.settings = check_settings(settings, model.dim)
+        self.contacts = nonsmooth_contacts(model)
+
+    def describe(self) -> str:
+        s = self.settings
+        return (f"contact-implicit time stepping (RATTLE, {s['step_lengths']} steps, Scholtes σ "
+                f"{s['sigma0']:g} → {s['sigma_final']:g})")
+
+    # ------------------------------------------------------------------ build
+    def build(self, opti: ca.Opti, model, hz: Horizon) -> Discretisation:
+        s = self.settings
+        N, nq, nu, nc, dim = hz.N, model.nq, model.nu, model.nc, model.dim
+        f = model.functions
+        nk = len(self.contacts)
+        nt = dim - 1
+        D = _directions(nt, s["directions"])
+        nd = D.shape[1]
+        mu = np.array([c["mu"] for c in self.contacts])
+        e = np.array([c["restitution"] for c in self.contacts])
+        M = ca.DM(f["mass"]()["M"])
+        p = hz.p
+        self.sigma = opti.parameter()
+        opti.set_value(self.sigma, s["sigma0"])
+        Q, V, W, U = opti.variable(nq, N), opti.variable(nq, N), opti.variable(nq, N - 1), opti.variable(nu, N)
+        Mid = opti.variable(nq, N)
+        q = ca.horzcat(hz.q0, Q)
+        v = ca.horzcat(hz.v0, V)                       # velocities before each node's impulse
+        w = ca.horzcat(hz.v0, W)                       # after it (w_0 = v_0)
+        fN = opti.variable(nk, N)                      # interval contact forces (N)
+        beta = opti.variable(nk * nd, N)
+        gam = opti.variable(nk, N)
+        PN = opti.variable(nk, N - 1)                  # node impulses (N·s), nodes 1..N−1
+        Pbeta = opti.variable(nk * nd, N - 1)
+        Pgam = opti.variable(nk, N - 1)
+        slack = opti.variable(nk, N - 1)
+        if s["step_lengths"] == "free":
+            scale = opti.variable(N)
+            opti.subject_to(opti.bounded(*s["step_bounds"][:1], scale, s["step_bounds"][1]))
+            opti.subject_to(ca.sum1(scale) == N)
+        else:
+            scale = ca.DM.ones(N)
+        h = hz.T / N * scale.T                         # 1 × N step lengths (s)
+        t = hz.t0 + ca.horzcat(ca.DM(0), ca.cumsum(h.T).T)
+        for x in (fN, beta, gam, PN, Pbeta, Pgam, slack):
+            if x.numel():
+                opti.subject_to(ca.vec(x) >= 0)
+        pairs: list[Pair] = []
+        defects = []
+        D_dm = ca.DM(D)
+
+        def contact_rows(qk):
+            g = f["gap"](qk, p)
+            WN, WT = f["contact_jacobian"](qk, p)
+            return g, WN, WT
+
+        def tangential(WT, beta_k):
+            """Generalised force of the friction components ``β`` (nk·nd) along W_T."""
+            if nt == 0 or nk == 0:
+                return ca.MX.zeros(nq, 1)
+            fT = ca.vertcat(*[ca.mtimes(D_dm, beta_k[i * nd:(i + 1) * nd]) for i in range(nk)])
+            return ca.mtimes(WT.T, fT)
+
+        def friction(label, normal, UT, beta_k, gam_k):
+            for i in range(nk):
+                if mu[i] == 0:
+                    defects.append((f"{label} (frictionless contact {self.contacts[i]['name']!r})",
+                                    ca.vertcat(beta_k[i * nd:(i + 1) * nd], gam_k[i])))
+                    continue
+                ut = UT[i * nt:(i + 1) * nt]
+                for j in range(nd):
+                    pairs.append(Pair(f"{label}: maximum dissipation, contact {self.contacts[i]['name']!r}",
+                                      gam_k[i] + ca.dot(D_dm[:, j], ut), beta_k[i * nd + j]))
+                pairs.append(Pair(f"{label}: Coulomb cone, contact {self.contacts[i]['name']!r}",
+                                  mu[i] * normal[i] - ca.sum1(beta_k[i * nd:(i + 1) * nd]), gam_k[i]))
+
+        rows = [contact_rows(q[:, k]) for k in range(N + 1)] if nk else None
+        for k in range(N):
+            tk, tk1, hk = t[k], t[k + 1], h[k]
+            qk, wk, qk1, vk1, mk = q[:, k], w[:, k], q[:, k + 1], v[:, k + 1], Mid[:, k]
+            uk = U[:, k]
+            force = ca.MX.zeros(nq, 1)
+            force1 = ca.MX.zeros(nq, 1)
+            if nk:
+                g0, WN0, WT0 = rows[k]
+                g1, WN1, WT1 = rows[k + 1]
+                force = ca.mtimes(WN0.T, fN[:, k]) + tangential(WT0, beta[:, k])
+                force1 = ca.mtimes(WN1.T, fN[:, k]) + tangential(WT1, beta[:, k])
+            r1 = ca.mtimes(M, mk - wk) - hk / 2 * (f["F"](tk, qk, wk, uk, p) + force)
+            r2 = ca.mtimes(M, vk1 - mk) - hk / 2 * (f["F"](tk1, qk1, vk1, uk, p) + force1)
+            if nc:
+                nu1, nu2 = opti.variable(nc), opti.variable(nc)
+                r1 += ca.mtimes(f["A"](tk, qk, p).T, nu1)
+                r2 += ca.mtimes(f["A"](tk1, qk1, p).T, nu2)
+                defects.append((f"position constraints Φ at node {k + 1}", f["phi"](tk1, qk1, p)))
+                defects.append((f"velocity constraints at node {k + 1}",
+                                ca.mtimes(f["A"](tk1, qk1, p), vk1) + f["phi_t"](tk1, qk1, p)))
+            defects.append((f"dynamics (first half-step, interval {k})", r1))
+            defects.append((f"dynamics (positions, interval {k})", qk1 - qk - hk * mk))
+            defects.append((f"dynamics (second half-step, interval {k})", r2))
+            if nk:
+                opti.subject_to(g1 >= 0)
+                if k == 0 and ca.symvar(g0):
+                    opti.subject_to(g0 >= 0)
+                pairs += [Pair(f"interval {k}: gap at its start ⊥ contact force", g0, fN[:, k], True),
+                          Pair(f"interval {k}: gap at its end ⊥ contact force", g1, fN[:, k], True)]
+                friction(f"interval {k}", fN[:, k], ca.mtimes(WT1, mk), beta[:, k], gam[:, k])
+        for k in range(1, N):
+            qk, vk, wk = q[:, k], v[:, k], w[:, k]
+            jump = ca.mtimes(M, wk - vk)
+            if nk:
+                g, WN, WT = rows[k]
+                jump -= ca.mtimes(WN.T, PN[:, k - 1]) + tangential(WT, Pbeta[:, k - 1])
+            if nc:
+                nu3 = opti.variable(nc)
+                jump += ca.mtimes(f["A"](t[k], qk, p).T, nu3)
+                defects.append((f"velocity constraints after the impulse at node {k}",
+                                ca.mtimes(f["A"](t[k], qk, p), wk) + f["phi_t"](t[k], qk, p)))
+            defects.append((f"impact at node {k}", jump))
+            if nk:
+                r = ca.mtimes(WN, wk) + e * ca.mtimes(WN, vk)
+                pairs += [Pair(f"node {k}: gap ⊥ impulse", g, PN[:, k - 1], True),
+                          Pair(f"node {k}: Newton's impact law (U⁺ + e U⁻) ⊥ impulse", r + slack[:, k - 1],
+                               PN[:, k - 1]),
+                          Pair(f"node {k}: approach without impulse ⊥ contact force after the node",
+                               slack[:, k - 1], fN[:, k])]
+                friction(f"node {k}", PN[:, k - 1], ca.mtimes(WT, wk) + np.repeat(e, nt) * ca.mtimes(WT, vk),
+                         Pbeta[:, k - 1], Pgam[:, k - 1])
+        for pair in pairs:                             # every ``c`` is a variable bounded below by 0
+            opti.subject_to(pair.a * pair.c <= self.sigma)
+            if not pair.a_imposed:
+                opti.subject_to(pair.a >= 0)
+        self.pairs = pairs
+        self.vars = dict(fN=fN, beta=beta, PN=PN, Pbeta=Pbeta, t=t, h=h, D=D)
+        extra = None
+        if s["step_lengths"] == "free":
+            extra = s["step_weight"] * hz.T / N * ca.sumsqr(scale - 1)
+        quad_w = ca.horzcat(h[0] / 2, (h[:, :-1] + h[:, 1:]) / 2, h[-1] / 2) if N > 1 else ca.horzcat(h / 2, h / 2)
+
+        def set_guess(o: ca.Opti, g):
+            tg = guess_times(hz, g.T, np.array([1.0]))
+            qg, vg = g.q(tg).T, g.v(tg).T
+            o.set_initial(Q, qg)
+            o.set_initial(V, vg)
+            if N > 1:
+                o.set_initial(W, vg[:, :-1])
+            q_all = np.hstack([g.q(np.array([hz.t0])).T, qg])
+            o.set_initial(Mid, np.diff(q_all, axis=1) / (g.T / N))
+            if nu:
+                o.set_initial(U, g.u(guess_times(hz, g.T, [0.0])).T)
+            if s["step_lengths"] == "free":
+                o.set_initial(scale, np.ones(N))
+
+        return Discretisation(q=q, v=v, lam=None, U=U, path_t=t[:, 1:], path_q=Q, path_v=V, quad_t=t, quad_q=q,
+                              quad_v=v, quad_w=quad_w, defects=defects, set_guess=set_guess, t_nodes=t,
+                              interval_w=h, extra_cost=extra)
+
+    # ------------------------------------------------------------------ solve
+    def solve(self, nlp, solve_once, tol_ipopt: float):
+        """The Scholtes homotopy: ``solve_once()`` at each σ, warm started from the last."""
+        s, opti = self.settings, nlp.opti
+        sigma = s["sigma0"]
+        self.history = []
+        elapsed = 0.0
+        while True:
+            opti.set_value(self.sigma, sigma)
+            value = solve_once()
+            elapsed += nlp.solve_time
+            residual = complementarity_residual(self.pairs, value)
+            stats = nlp.opti.stats()
+            self.history.append({"sigma": sigma, "status": stats.get("return_status", ""),
+                                 "iterations": int(stats.get("iter_count", 0)), "residual": residual})
+            if sigma <= s["sigma_final"] or not stats.get("success", False):
+                break
+            opti.set_initial(opti.x, value(opti.x))
+            opti.set_initial(opti.lam_g, value(opti.lam_g))
+            sigma = sigma * s["sigma_factor"]
+            if sigma < s["sigma_final"] * (1 + 1e-9):
+                sigma = s["sigma_final"]
+        self.residual = residual
+        nlp.solve_time = elapsed
+        return value
+
+    def finish(self, value, result) -> None:
+        """Attach the contact forces (``result.contact_force``: N × nk normal, N), impulses
+        (``result.contact_impulse``: (N+1) × nk, N·s), the complementarity residual and the
+        homotopy's history to ``result``; refuse a residual above ``tol``."""
+        v = self.vars
+        result.contact_force = np.array(value(v["fN"])).reshape(len(self.contacts), -1).T
+        PN = np.array(value(v["PN"])).reshape(len(self.contacts), -1).T
+        z = np.zeros((1, len(self.contacts)))
+        result.contact_impulse = np.vstack([z, PN, z])
+        result.complementarity_residual = self.residual
+        result.homotopy = list(self.history)
+        result.stats.iterations = sum(h["iterations"] for h in self.history)
+        if self.residual > self.settings["tol"]:
+            worst = worst_pair(self.pairs, value)
+            raise OptimizationError(
+                f"contact-implicit solve: the complementarity residual {self.residual:.3g} exceeds contacts.tol = "
+                f"{self.settings['tol']:g} (worst: {worst}); lower contacts.sigma_final or raise N", result=result)
+
+
+def complementarity_residual(pairs, value) -> float:
+    """``max_i min(a_i, c_i)`` over every pair (0 when every pair is complementary)."""
+    worst = 0.0
+    for pair in pairs:
+        a = np.array(value(pair.a), float).reshape(-1)
+        c = np.array(value(pair.c), float).reshape(-1)
+        worst = max(worst, float(np.max(np.abs(np.minimum(a, c)), initial=0.0)))
+    return worst
+
+
+def worst_pair(pairs, value) -> str:
+    best, label = -1.0, ""
+    for pair in pairs:
+        a = np.array(value(pair.a), float).reshape(-1)
+        c = np.array(value(pair.c), float).reshape(-1)
+        r = float(np.max(np.abs(np.minimum(a, c)), initial=0.0))
+        if r > best:
+            best, label = r, pair.label
+    return f"{label}: {best:.3g}"
