@@ -65,3 +65,79 @@ def test_problem_file_contacts_table(tmp_path):
     assert ocp.transcription.settings["step_lengths"] == "free"
     with pytest.raises(ProblemFileError, match=r"contacts\.tol"):
         problem_from_data({"contacts": {"tol": -1.0}}, _ball(), "p.toml")
+
+
+# ------------------------------------------------------------------ solved problems
+def _example(name):
+    import importlib.util
+    from pathlib import Path
+    path = Path(__file__).resolve().parent.parent / "examples" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="module")
+def ball():
+    ex = _example("ball_bounce_target")
+    model = ex.build()
+    sol = ex.problem(model).solve(ex.guess(model))
+    return ex, model, sol
+
+
+def test_ball_thrown_to_a_target_after_one_bounce_matches_the_closed_form(ball):
+    ex, model, sol = ball
+    vx, vz, t1 = ex.closed_form()
+    assert np.max(np.abs(sol.v[0] - [vx, vz])) < 1e-6
+    impacts = np.flatnonzero(sol.contact_impulse[:, 0] > 1e-6)
+    assert impacts.size == 1                                  # one bounce
+    k = int(impacts[0])
+    assert abs(sol.t[k] - t1) < 1e-6
+    assert sol.q[k, 1] == pytest.approx(ex.RADIUS, abs=1e-8)   # a node on the floor at the impact
+    # Newton's law at the impact node: the rebound is -e times the approach
+    assert sol.contact_impulse[k, 0] == pytest.approx((1 + ex.RESTITUTION) * (ex.G * t1 - vz), rel=1e-6)
+    assert np.max(sol.q[:, 1]) <= ex.CEILING + 1e-8
+    assert np.linalg.norm(sol.marker("ball.centre")[-1] - ex.TARGET) < 1e-8
+
+
+def test_ball_optimum_is_complementary_and_replays_in_the_nonsmooth_stepper(ball):
+    ex, model, sol = ball
+    assert sol.complementarity_residual < 1e-6
+    sim = ex.replay(model, sol)                               # steps of 0.1 ms, impact inside a step
+    assert np.linalg.norm(sim.marker("ball.centre")[-1] - sol.marker("ball.centre")[-1]) < 1e-4
+
+
+@pytest.fixture(scope="module")
+def block():
+    ex = _example("block_push")
+    return ex, ex.build()
+
+
+def test_block_push_sliding_throughout_matches_the_closed_form(block):
+    ex, model = block
+    T = 0.6                                                   # shorter than sqrt(6D/(μg)) = 0.78 s
+    sol = ex.problem(model, T).solve("rest")
+    push, cost = ex.closed_form(T)
+    assert np.max(np.abs(sol.u[:ex.N, 0] - push)) < 1e-6 * np.max(np.abs(push))
+    h = T / ex.N
+    assert h * np.sum(sol.u[:ex.N, 0] ** 2) == pytest.approx(cost, rel=1e-6)
+    assert cost == pytest.approx(ex.continuous_cost(T), rel=5e-3)   # the continuous optimum, O(h²) away
+    assert np.allclose(sol.contact_force[:, 0], ex.MASS * ex.G, rtol=1e-6)
+    assert sol.complementarity_residual < 1e-6
+    sim = ex.replay(model, sol)
+    assert abs(sim.q[-1, 0] - sol.q[-1, 0]) < 1e-6 and abs(sim.q[-1, 0] - ex.DISTANCE) < 1e-6
+
+
+def test_block_push_over_a_long_horizon_rests_part_of_the_time(block):
+    ex, model = block
+    T = 1.0                                                   # longer than 0.78 s: sticking is cheaper
+    sol = ex.problem(model, T).solve("rest")
+    effort = T / ex.N * np.sum(sol.u[:ex.N, 0] ** 2)
+    best = min(ex.closed_form(T, n)[1] for n in range(2, ex.N + 1))
+    assert effort == pytest.approx(best, rel=1e-6)
+    assert effort < ex.closed_form(T)[1]                      # cheaper than sliding throughout
+    assert np.any(np.abs(sol.v[1:-1, 0]) < 1e-9)              # it sticks somewhere
+    assert sol.complementarity_residual < 1e-6
+    sim = ex.replay(model, sol)
+    assert abs(sim.q[-1, 0] - sol.q[-1, 0]) < 1e-6

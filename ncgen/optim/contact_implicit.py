@@ -26,8 +26,10 @@ cone with ``n_d`` unit directions ``d_j`` in the tangent plane, ``f_T = Σ β_j 
   while in contact at both ends); friction with maximum dissipation on the interval's mean
   velocity ``m``: ``γ + d_jᵀ W_T m ≥ 0 ⊥ β_j ≥ 0``, ``μ f_N − Σ β_j ≥ 0 ⊥ γ ≥ 0``;
 * impulse at node k: ``g(q_k) ≥ 0 ⊥ P_N ≥ 0``; Newton's law as the nonsmooth stepper has it,
-  ``r = U⁺_N + e U⁻_N``, ``P_N r = 0``, ``r + b ≥ 0`` with a slack ``b ≥ 0`` (an approach
-  without impulse, allowed only while apart: ``b ⊥ f_N`` of the interval after the node);
+  ``r = U⁺_N + e U⁻_N``, ``r + b ≥ 0 ⊥ P_N`` with a slack ``b ≥ 0`` (an approach without
+  impulse, allowed only while apart: ``b ⊥ P_N`` and ``b ⊥ f_N`` of the interval after the
+  node, so that an impulse restores exactly ``U⁺_N = −e U⁻_N``), and no impulse where the
+  interval before the node had a contact force (a lasting contact is carried by forces);
   friction on ``U⁺_T + e U⁻_T`` (the stepper's law) as above with ``P_N``.
 
 Each complementarity pair ``a ≥ 0, c ≥ 0, a c = 0`` is relaxed to ``a c ≤ σ`` (Scholtes) and
@@ -45,6 +47,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.errors import OptimizationError
+from ncgen.optim.diagnostics import SUCCESS
 from ncgen.optim.transcription import Discretisation, Horizon, Transcription, guess_times
 
 #: Point-contact kinds whose gap is smooth in q (ncgen.assembly.contacts): transcribed here.
@@ -53,13 +56,15 @@ SUPPORTED_KINDS = ("SpherePlane", "SphereSphere", "BoxPlane", "CapsulePlane", "C
 #: Default homotopy and discretisation settings (``OptimalControl(contacts={...})``).
 DEFAULTS = {
     "sigma0": 1e-1,              # first relaxation σ (units of the pairs' products)
-    "sigma_final": 1e-10,        # last relaxation σ
+    "sigma_final": 1e-6,         # last relaxation σ (the polish then removes its bias)
     "sigma_factor": 0.1,         # σ ← κ σ between solves
     "tol": 1e-6,                 # complementarity residual the optimum must reach
     "step_lengths": "equal",     # "equal" (h = T/N) or "free" (h_k decision variables, Σ h_k = T)
     "step_bounds": (0.25, 4.0),  # free steps: h_k / (T/N) within these
     "step_weight": 1e-4,         # free steps: weight (s⁻¹) of Σ (h_k − T/N)² / (T/N) in the cost
     "directions": None,          # friction cone directions per contact (None: 2 planar, 4 in 3D)
+    "penalty": 1.0,              # weight ρ of Σ a·c over the pairs in the cost (0: none)
+    "polish": True,              # a last solve with the active set fixed (module docstring)
 }
 
 
@@ -104,11 +109,14 @@ def check_settings(settings, dim: int) -> dict:
     if unknown:
         raise OptimizationError(f"contacts: unknown setting(s) {', '.join(unknown)}; known: {', '.join(DEFAULTS)}")
     out = {**DEFAULTS, **settings}
-    for key in ("sigma0", "sigma_final", "tol", "step_weight"):
+    if not isinstance(out["polish"], bool):
+        raise OptimizationError(f"contacts.polish: expected true or false, got {out['polish']!r}")
+    for key in ("sigma0", "sigma_final", "tol", "step_weight", "penalty"):
         x = out[key]
         if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) or x < 0 or (
-                key != "step_weight" and x == 0):
-            raise OptimizationError(f"contacts.{key}: expected a finite number {'>= 0' if key == 'step_weight' else '> 0'}"
+                key not in ("step_weight", "penalty") and x == 0):
+            raise OptimizationError(f"contacts.{key}: expected a finite number "
+                                    f"{'>= 0' if key in ('step_weight', 'penalty') else '> 0'}"
                                     f", got {x!r}")
         out[key] = float(x)
     if out["sigma_final"] > out["sigma0"]:
@@ -142,6 +150,7 @@ class Pair:
     a: object
     c: object
     a_imposed: bool = False      # ``a ≥ 0`` is imposed elsewhere (gaps)
+    penalised: bool = True       # in the cost's ρ Σ a·c (not the cone's: γ is unbounded where μ f_N = 0)
 
 
 def _directions(nt: int, nd: int) -> np.ndarray:
@@ -156,6 +165,9 @@ class ContactImplicit(Transcription):
     """The contact-implicit transcription (module docstring); ``settings`` as in :data:`DEFAULTS`."""
 
     hessian = "exact"
+    #: IPOPT keeps the bounds ``≥ 0`` of forces and impulses exactly (no relaxation): a
+    #: product ``a·c`` then never turns negative by more than the constraint tolerance.
+    ipopt_options = {"bound_relax_factor": 0.0}
 
     def __init__(self, model, settings=None):
         refuse_unsupported(model, "contact_implicit")
@@ -180,6 +192,7 @@ class ContactImplicit(Transcription):
         e = np.array([c["restitution"] for c in self.contacts])
         M = ca.DM(f["mass"]()["M"])
         p = hz.p
+        p_num = np.array(p, float).reshape(-1) if isinstance(p, ca.DM) else np.array(model.p0, float)
         self.sigma = opti.parameter()
         opti.set_value(self.sigma, s["sigma0"])
         Q, V, W, U = opti.variable(nq, N), opti.variable(nq, N), opti.variable(nq, N - 1), opti.variable(nu, N)
@@ -232,7 +245,7 @@ class ContactImplicit(Transcription):
                     pairs.append(Pair(f"{label}: maximum dissipation, contact {self.contacts[i]['name']!r}",
                                       gam_k[i] + ca.dot(D_dm[:, j], ut), beta_k[i * nd + j]))
                 pairs.append(Pair(f"{label}: Coulomb cone, contact {self.contacts[i]['name']!r}",
-                                  mu[i] * normal[i] - ca.sum1(beta_k[i * nd:(i + 1) * nd]), gam_k[i]))
+                                  mu[i] * normal[i] - ca.sum1(beta_k[i * nd:(i + 1) * nd]), gam_k[i], penalised=False))
 
         rows = [contact_rows(q[:, k]) for k in range(N + 1)] if nk else None
         for k in range(N):
@@ -282,19 +295,27 @@ class ContactImplicit(Transcription):
                 pairs += [Pair(f"node {k}: gap ⊥ impulse", g, PN[:, k - 1], True),
                           Pair(f"node {k}: Newton's impact law (U⁺ + e U⁻) ⊥ impulse", r + slack[:, k - 1],
                                PN[:, k - 1]),
+                          Pair(f"node {k}: approach without impulse ⊥ impulse", slack[:, k - 1], PN[:, k - 1], True),
+                          Pair(f"node {k}: contact force before the node ⊥ impulse", fN[:, k - 1], PN[:, k - 1],
+                               True),
                           Pair(f"node {k}: approach without impulse ⊥ contact force after the node",
-                               slack[:, k - 1], fN[:, k])]
+                               slack[:, k - 1], fN[:, k], True)]
                 friction(f"node {k}", PN[:, k - 1], ca.mtimes(WT, wk) + np.repeat(e, nt) * ca.mtimes(WT, vk),
                          Pbeta[:, k - 1], Pgam[:, k - 1])
         for pair in pairs:                             # every ``c`` is a variable bounded below by 0
-            opti.subject_to(pair.a * pair.c <= self.sigma)
+            product = pair.a * pair.c
+            if ca.symvar(product):                     # (a gap fixed at 0 by the initial state leaves c free)
+                opti.subject_to(product <= self.sigma)
             if not pair.a_imposed:
                 opti.subject_to(pair.a >= 0)
         self.pairs = pairs
-        self.vars = dict(fN=fN, beta=beta, PN=PN, Pbeta=Pbeta, t=t, h=h, D=D)
-        extra = None
+        self.vars = dict(Q=Q, V=V, W=W, Mid=Mid, scale=scale, slack=slack, fN=fN, beta=beta, PN=PN, Pbeta=Pbeta,
+                         t=t, h=h, D=D)
+        extra = ca.MX(0)
         if s["step_lengths"] == "free":
-            extra = s["step_weight"] * hz.T / N * ca.sumsqr(scale - 1)
+            extra += s["step_weight"] * hz.T / N * ca.sumsqr(scale - 1)
+        if s["penalty"] and pairs:
+            extra += s["penalty"] * sum(ca.dot(pair.a, pair.c) for pair in pairs if pair.penalised)
         quad_w = ca.horzcat(h[0] / 2, (h[:, :-1] + h[:, 1:]) / 2, h[-1] / 2) if N > 1 else ca.horzcat(h / 2, h / 2)
 
         def set_guess(o: ca.Opti, g):
@@ -310,10 +331,54 @@ class ContactImplicit(Transcription):
                 o.set_initial(U, g.u(guess_times(hz, g.T, [0.0])).T)
             if s["step_lengths"] == "free":
                 o.set_initial(scale, np.ones(N))
+            if nk and N > 1:
+                v_all = np.hstack([g.v(np.array([hz.t0])).T, vg])
+                u_all = g.u(guess_times(hz, g.T, [0.0])).T if nu else np.zeros((0, N))
+                PN0, fN0, W0, slack0 = self._guess_impulses(model, q_all, v_all, u_all, g.T / N, hz.t0, p_num)
+                o.set_initial(PN, PN0)
+                o.set_initial(fN, fN0)
+                o.set_initial(W, W0)
+                o.set_initial(slack, slack0)
 
         return Discretisation(q=q, v=v, lam=None, U=U, path_t=t[:, 1:], path_q=Q, path_v=V, quad_t=t, quad_q=q,
                               quad_v=v, quad_w=quad_w, defects=defects, set_guess=set_guess, t_nodes=t,
                               interval_w=h, extra_cost=extra)
+
+    def _guess_impulses(self, model, q, v, u, h, t0, p):
+        """Node impulses (nk × N−1), interval forces (nk × N), velocities after the impulses
+        and approach slacks that a guess sampled at equal steps implies: the normal impulse
+        each interval's velocity change needs beyond the applied forces, put on the inner
+        node with the smaller gap where the contact approaches (an impact), else spread over
+        the interval as a force (a lasting contact)."""
+        f = model.functions
+        N = q.shape[1] - 1
+        nk = len(self.contacts)
+        e = np.array([c["restitution"] for c in self.contacts])
+        M = np.array(f["mass"]()["M"], float)
+        Minv = np.linalg.pinv(M)
+        gaps = np.column_stack([np.array(f["gap"](q[:, k], p), float).reshape(-1) for k in range(N + 1)])
+        PN, fN = np.zeros((nk, N - 1)), np.zeros((nk, N))
+        for k in range(N):
+            uk = u[:, k] if u.size else np.zeros(0)
+            jump = M @ (v[:, k + 1] - v[:, k]) - h * np.array(f["F"](t0 + k * h, q[:, k], v[:, k], uk, p)).reshape(-1)
+            WN = np.array(f["contact_jacobian"](q[:, k], p)[0], float).reshape(nk, -1)
+            for i in range(nk):
+                P = WN[i] @ Minv @ jump / (WN[i] @ Minv @ WN[i])
+                inner = [j for j in (k, k + 1) if 1 <= j <= N - 1]
+                if P <= 0:
+                    continue
+                if WN[i] @ v[:, k] < 0 and inner:         # an impact: an impulse at a node
+                    j = min(inner, key=lambda j: gaps[i, j])
+                    PN[i, j - 1] += P
+                else:                                   # a lasting contact: a force
+                    fN[i, k] = P / h
+        W = np.zeros((model.nq, N - 1))
+        slack = np.zeros((nk, N - 1))
+        for j in range(1, N):
+            WN = np.array(f["contact_jacobian"](q[:, j], p)[0], float).reshape(nk, -1)
+            W[:, j - 1] = v[:, j] + Minv @ WN.T @ PN[:, j - 1]
+            slack[:, j - 1] = np.maximum(0.0, -(WN @ W[:, j - 1] + e * (WN @ v[:, j])))
+        return PN, fN, W, slack
 
     # ------------------------------------------------------------------ solve
     def solve(self, nlp, solve_once, tol_ipopt: float):
@@ -330,21 +395,57 @@ class ContactImplicit(Transcription):
             stats = nlp.opti.stats()
             self.history.append({"sigma": sigma, "status": stats.get("return_status", ""),
                                  "iterations": int(stats.get("iter_count", 0)), "residual": residual})
-            if sigma <= s["sigma_final"] or not stats.get("success", False):
+            self.status = stats.get("return_status", "")
+            if sigma <= s["sigma_final"] or self.status not in SUCCESS:
                 break
             opti.set_initial(opti.x, value(opti.x))
             opti.set_initial(opti.lam_g, value(opti.lam_g))
             sigma = sigma * s["sigma_factor"]
             if sigma < s["sigma_final"] * (1 + 1e-9):
                 sigma = s["sigma_final"]
+        if s["polish"] and self.status in SUCCESS:
+            polished = self._polish(nlp, solve_once, value)
+            elapsed += nlp.solve_time
+            if polished is not None:
+                value = polished
+                residual = complementarity_residual(self.pairs, value)
         self.residual = residual
         nlp.solve_time = elapsed
         return value
 
+    def _polish(self, nlp, solve_once, value):
+        """One more solve with the active set of ``value`` fixed: in each pair the smaller
+        side is set to 0 (an equality), which removes the relaxation's bias.  Returns the
+        new solution, or ``None`` (the homotopy's kept) where IPOPT fails on it."""
+        opti = nlp.opti
+        fixed: dict[str, object] = {}
+        for pair in self.pairs:
+            a, c = _numbers(value, pair.a), _numbers(value, pair.c)
+            for i in range(a.size):
+                side = pair.a[i] if a[i] <= c[i] else pair.c[i]
+                if ca.symvar(side):
+                    fixed.setdefault(str(side), side)
+        if len(fixed) + sum(e.numel() for _, e in nlp.disc.defects) >= opti.nx:
+            return None
+        opti.subject_to(ca.vertcat(*fixed.values()) == 0)
+        opti.set_initial(opti.x, value(opti.x))
+        polished = solve_once()
+        stats = opti.stats()
+        self.history.append({"sigma": "polish", "status": stats.get("return_status", ""),
+                             "iterations": int(stats.get("iter_count", 0)),
+                             "residual": complementarity_residual(self.pairs, polished)})
+        if stats.get("return_status", "") not in SUCCESS:
+            return None
+        self.status = stats["return_status"]
+        return polished
+
     def finish(self, value, result) -> None:
         """Attach the contact forces (``result.contact_force``: N × nk normal, N), impulses
         (``result.contact_impulse``: (N+1) × nk, N·s), the complementarity residual and the
-        homotopy's history to ``result``; refuse a residual above ``tol``."""
+        homotopy's history to ``result``, with the status of the solve it returns (the
+        homotopy's last where the polish failed); refuse a residual above ``tol``."""
+        result.stats.status = self.status
+        result.stats.success = self.status in SUCCESS
         v = self.vars
         result.contact_force = np.array(value(v["fN"])).reshape(len(self.contacts), -1).T
         PN = np.array(value(v["PN"])).reshape(len(self.contacts), -1).T
@@ -353,19 +454,23 @@ class ContactImplicit(Transcription):
         result.complementarity_residual = self.residual
         result.homotopy = list(self.history)
         result.stats.iterations = sum(h["iterations"] for h in self.history)
-        if self.residual > self.settings["tol"]:
+        if result.stats.success and self.residual > self.settings["tol"]:
             worst = worst_pair(self.pairs, value)
             raise OptimizationError(
                 f"contact-implicit solve: the complementarity residual {self.residual:.3g} exceeds contacts.tol = "
                 f"{self.settings['tol']:g} (worst: {worst}); lower contacts.sigma_final or raise N", result=result)
 
 
+def _numbers(value, x) -> np.ndarray:
+    """``x`` (MX, or a constant) at the solution ``value`` as a flat array."""
+    return np.array(ca.DM(x) if not isinstance(x, ca.MX) else ca.DM(value(x)), float).reshape(-1)
+
+
 def complementarity_residual(pairs, value) -> float:
     """``max_i min(a_i, c_i)`` over every pair (0 when every pair is complementary)."""
     worst = 0.0
     for pair in pairs:
-        a = np.array(value(pair.a), float).reshape(-1)
-        c = np.array(value(pair.c), float).reshape(-1)
+        a, c = _numbers(value, pair.a), _numbers(value, pair.c)
         worst = max(worst, float(np.max(np.abs(np.minimum(a, c)), initial=0.0)))
     return worst
 
@@ -373,8 +478,7 @@ def complementarity_residual(pairs, value) -> float:
 def worst_pair(pairs, value) -> str:
     best, label = -1.0, ""
     for pair in pairs:
-        a = np.array(value(pair.a), float).reshape(-1)
-        c = np.array(value(pair.c), float).reshape(-1)
+        a, c = _numbers(value, pair.a), _numbers(value, pair.c)
         r = float(np.max(np.abs(np.minimum(a, c)), initial=0.0))
         if r > best:
             best, label = r, pair.label

@@ -399,7 +399,7 @@ class NLP:
         ocp, opti = self.ocp, self.opti
         options = {**IPOPT_DEFAULTS, "tol": tol, "constr_viol_tol": tol, "max_iter": max_iter,
                    "print_level": 5 if verbose else 0, "hessian_approximation": ocp.transcription.hessian,
-                   "linear_solver": linear_solver, **ipopt}
+                   "linear_solver": linear_solver, **ocp.transcription.ipopt_options, **ipopt}
         if max_wall_time is not None:
             options["max_wall_time"] = float(max_wall_time)
         opti.solver("ipopt", {"expand": self.disc.expandable, "detect_simple_bounds": True,
@@ -435,8 +435,7 @@ def build_and_solve(ocp, warm_start, *, max_iter: int, tol: float, verbose: bool
     value = ocp.transcription.solve(nlp, lambda: nlp.solve(max_iter=max_iter, tol=tol, verbose=verbose, ipopt=ipopt,
                                                            linear_solver=linear_solver), tol)
     result = extract(nlp, value, build_time)
-    if result.stats.success:
-        ocp.transcription.finish(value, result)
+    ocp.transcription.finish(value, result)
     if not result.stats.success:
         message = diagnose(nlp, value, result, tol=tol, ipopt=ipopt, budget=diagnose_budget,
                            linear_solver=linear_solver)

@@ -96,6 +96,8 @@ class Transcription:
     sequence such as a homotopy) and :meth:`finish` (checks and additions to the result)."""
 
     hessian = "exact"
+    #: IPOPT options the transcription needs (the user's ``ipopt={...}`` override them).
+    ipopt_options: dict = {}
 
     def solve(self, nlp, solve_once, tol_ipopt: float):
         return solve_once()
