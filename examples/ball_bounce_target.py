@@ -48,7 +48,7 @@ def closed_form():
 
 
 def problem(model):
-    ocp = nc.OptimalControl(model, N=N, t_final=T, contacts={"step_lengths": "free"})
+    ocp = nc.OptimalControl(model, N=N, t_final=T)       # restitution: free step lengths
     ocp.initial(q=model.q0, v=None)                    # the throw is free
     ocp.final(marker=("ball.centre", TARGET))
     ocp.bound_coordinate("ball.r_i.y", upper=CEILING)

@@ -52,6 +52,7 @@ def test_nonsmooth_model_defaults_to_contact_implicit_and_smooth_to_collocation(
     ({"step_bounds": (2.0, 3.0)}, r"contacts\.step_bounds"),
     ({"directions": 3}, r"contacts\.directions"),
     ({"sigma": 1.0}, r"contacts: unknown setting\(s\) sigma"),
+    ({"step_lengths": "equal"}, r"contact\(s\) 'floor' have restitution > 0; use \"free\""),
 ])
 def test_contact_settings_are_checked(settings, match):
     with pytest.raises(OptimizationError, match=match):

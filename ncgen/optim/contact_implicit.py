@@ -22,8 +22,11 @@ over ``N`` intervals of lengths ``h_k`` (equal, or decision variables summing to
 Contact laws, per point contact (``W = [W_N; W_T]``, ``U = W v``; the polyhedral Coulomb
 cone with ``n_d`` unit directions ``d_j`` in the tangent plane, ``f_T = Σ β_j d_j``):
 
-* force over interval k: ``g(q_k) ≥ 0 ⊥ f_N ≥ 0`` and ``g(q_{k+1}) ≥ 0 ⊥ f_N`` (a force only
-  while in contact at both ends); friction with maximum dissipation on the interval's mean
+* force over interval k: ``g(q_{k+1}) ≥ 0 ⊥ f_N ≥ 0``, and with free step lengths also
+  ``g(q_k) ⊥ f_N`` (a force only while in contact at both ends: an impact must then fall on a
+  node; with equal steps an impact inside a step is absorbed by its force, without
+  restitution, as in Stewart–Trinkle time stepping, so contacts with restitution > 0 need
+  free steps, the default for them); friction with maximum dissipation on the interval's mean
   velocity ``m``: ``γ + d_jᵀ W_T m ≥ 0 ⊥ β_j ≥ 0``, ``μ f_N − Σ β_j ≥ 0 ⊥ γ ≥ 0``;
 * impulse at node k: ``g(q_k) ≥ 0 ⊥ P_N ≥ 0``; Newton's law as the nonsmooth stepper has it,
   ``r = U⁺_N + e U⁻_N``, ``r + b ≥ 0 ⊥ P_N`` with a slack ``b ≥ 0`` (an approach without
@@ -59,7 +62,8 @@ DEFAULTS = {
     "sigma_final": 1e-6,         # last relaxation σ (the polish then removes its bias)
     "sigma_factor": 0.1,         # σ ← κ σ between solves
     "tol": 1e-6,                 # complementarity residual the optimum must reach
-    "step_lengths": "equal",     # "equal" (h = T/N) or "free" (h_k decision variables, Σ h_k = T)
+    "step_lengths": None,        # "equal" (h = T/N) or "free" (h_k variables, Σ h_k = T); None: free
+                                 # where a contact has restitution > 0, else equal
     "step_bounds": (0.25, 4.0),  # free steps: h_k / (T/N) within these
     "step_weight": 1e-4,         # free steps: weight (s⁻¹) of Σ (h_k − T/N)² / (T/N) in the cost
     "directions": None,          # friction cone directions per contact (None: 2 planar, 4 in 3D)
@@ -99,8 +103,9 @@ def refuse_unsupported(model, method: str) -> None:
             "contacts='smooth' to optimise with the compliant law")
 
 
-def check_settings(settings, dim: int) -> dict:
-    """``contacts`` settings merged into :data:`DEFAULTS`, each checked (errors name the key)."""
+def check_settings(settings, dim: int, contacts=()) -> dict:
+    """``contacts`` settings merged into :data:`DEFAULTS`, each checked (errors name the key);
+    ``contacts``: the model's point contacts (restitution decides the step lengths)."""
     if settings is None:
         settings = {}
     if not isinstance(settings, dict):
@@ -125,8 +130,15 @@ def check_settings(settings, dim: int) -> dict:
     k = out["sigma_factor"]
     if isinstance(k, bool) or not isinstance(k, (int, float)) or not 0 < k < 1:
         raise OptimizationError(f"contacts.sigma_factor: expected a number in (0, 1), got {k!r}")
+    bouncing = [c["name"] for c in contacts if c["restitution"] > 0]
+    if out["step_lengths"] is None:
+        out["step_lengths"] = "free" if bouncing else "equal"
     if out["step_lengths"] not in ("equal", "free"):
         raise OptimizationError(f"contacts.step_lengths: expected \"equal\" or \"free\", got {out['step_lengths']!r}")
+    if out["step_lengths"] == "equal" and bouncing:
+        raise OptimizationError(f"contacts.step_lengths: \"equal\" steps resolve an impact inside a step without "
+                                f"restitution, and contact(s) {', '.join(map(repr, bouncing))} have restitution > 0; "
+                                "use \"free\" (a node on each impact)")
     b = out["step_bounds"]
     if not (isinstance(b, (list, tuple)) and len(b) == 2 and all(isinstance(x, (int, float)) for x in b)
             and 0 < b[0] <= 1 <= b[1] and math.isfinite(b[1])):
@@ -171,8 +183,8 @@ class ContactImplicit(Transcription):
 
     def __init__(self, model, settings=None):
         refuse_unsupported(model, "contact_implicit")
-        self.settings = check_settings(settings, model.dim)
         self.contacts = nonsmooth_contacts(model)
+        self.settings = check_settings(settings, model.dim, self.contacts)
 
     def describe(self) -> str:
         s = self.settings
@@ -275,8 +287,9 @@ class ContactImplicit(Transcription):
                 opti.subject_to(g1 >= 0)
                 if k == 0 and ca.symvar(g0):
                     opti.subject_to(g0 >= 0)
-                pairs += [Pair(f"interval {k}: gap at its start ⊥ contact force", g0, fN[:, k], True),
-                          Pair(f"interval {k}: gap at its end ⊥ contact force", g1, fN[:, k], True)]
+                if s["step_lengths"] == "free":
+                    pairs.append(Pair(f"interval {k}: gap at its start ⊥ contact force", g0, fN[:, k], True))
+                pairs.append(Pair(f"interval {k}: gap at its end ⊥ contact force", g1, fN[:, k], True))
                 friction(f"interval {k}", fN[:, k], ca.mtimes(WT1, mk), beta[:, k], gam[:, k])
         for k in range(1, N):
             qk, vk, wk = q[:, k], v[:, k], w[:, k]
