@@ -142,3 +142,16 @@ def test_block_push_over_a_long_horizon_rests_part_of_the_time(block):
     assert sol.complementarity_residual < 1e-6
     sim = ex.replay(model, sol)
     assert abs(sim.q[-1, 0] - sol.q[-1, 0]) < 1e-6
+
+
+def test_block_push_cost_agrees_with_nosnoc(block):
+    """The same push solved by nosnoc (a test-only dependency: pip install nosnoc) as a
+    Filippov system with FESD: both schemes are exact for piecewise-constant accelerations."""
+    pytest.importorskip("nosnoc")
+    import sys
+    from pathlib import Path
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
+    from contact_implicit import contact_implicit, nosnoc_push
+    ex, _ = block
+    ours, theirs = contact_implicit(ex, 0.6)[0], nosnoc_push(ex, 0.6)[0]
+    assert abs(ours - theirs) < 1e-4
