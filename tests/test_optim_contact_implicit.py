@@ -155,3 +155,26 @@ def test_block_push_cost_agrees_with_nosnoc(block):
     ex, _ = block
     ours, theirs = contact_implicit(ex, 0.6)[0], nosnoc_push(ex, 0.6)[0]
     assert abs(ours - theirs) < 1e-4
+
+
+def test_push_in_3d_on_the_polyhedral_cone_matches_the_planar_closed_form(block):
+    """The push along x of a 3D block: friction on 4 cone directions (±t₁, ±t₂ of the floor),
+    the same closed form as in the plane."""
+    import casadi as ca
+    ex, _ = block
+    s = nc.System("block3d", gravity=(0, 0, -ex.G))
+    b = s.add_point("block", mass=ex.MASS, position=(0, 0, 0))
+    b.add_marker("centre", (0, 0, 0))
+    s.add_force(nc.PointForce(b, (0, 0, 0), force=ca.vertcat(s.add_input("push"), 0, 0)))
+    s.add_contact(nc.SpherePlane(b, radius=0.0, mu=ex.MU, name="floor"))
+    model = s.build(contacts="nonsmooth")
+    T = 0.6
+    ocp = nc.OptimalControl(model, N=ex.N, t_final=T)
+    assert ocp.transcription.settings["directions"] == 4
+    ocp.final(marker=("block.centre", (ex.DISTANCE, 0.0, 0.0)), v=0)
+    ocp.minimize_effort()
+    sol = ocp.solve("rest")
+    push, cost = ex.closed_form(T)
+    assert np.max(np.abs(sol.u[:ex.N, 0] - push)) < 1e-6 * np.max(np.abs(push))
+    assert np.max(np.abs(sol.q[:, 1:])) < 1e-8                 # no sideways drift, no lift
+    assert sol.complementarity_residual < 1e-6
