@@ -178,3 +178,12 @@ def test_push_in_3d_on_the_polyhedral_cone_matches_the_planar_closed_form(block)
     assert np.max(np.abs(sol.u[:ex.N, 0] - push)) < 1e-6 * np.max(np.abs(push))
     assert np.max(np.abs(sol.q[:, 1:])) < 1e-8                 # no sideways drift, no lift
     assert sol.complementarity_residual < 1e-6
+
+
+def test_an_optimum_above_the_complementarity_tolerance_is_refused(block):
+    ex, model = block
+    ocp = nc.OptimalControl(model, N=4, t_final=0.6, contacts={"sigma_final": 1e-2, "polish": False, "tol": 1e-5})
+    ocp.final(marker=("block.centre", (ex.DISTANCE, 0.0)), v=0)
+    ocp.minimize_effort()
+    with pytest.raises(OptimizationError, match=r"complementarity residual .* exceeds contacts\.tol = 1e-05 \(worst: "):
+        ocp.solve("rest")

@@ -36,10 +36,15 @@ cone with ``n_d`` unit directions ``d_j`` in the tangent plane, ``f_T = Σ β_j 
   friction on ``U⁺_T + e U⁻_T`` (the stepper's law) as above with ``P_N``.
 
 Each complementarity pair ``a ≥ 0, c ≥ 0, a c = 0`` is relaxed to ``a c ≤ σ`` (Scholtes) and
-IPOPT solves the sequence ``σ = σ₀, σ₀ κ, …, σ_final``, each from the last; the optimum is
-returned when its complementarity residual ``max_i min(a_i, c_i)`` (in the pairs' units: m,
-N, N·s, m/s) is below ``tol``.  The relaxed problems of large ``σ`` are the smoothed-contact
-variant: contact forces act a little before contact, friction a little before sliding.
+IPOPT solves the sequence ``σ = σ₀, σ₀ κ, …, σ_final``, each from the last, with
+``ρ Σ a·c`` in the cost (every pair but the friction cone's ``(μ f_N − Σ β) γ``: ``γ`` is
+unbounded where ``μ f_N = 0``, and the tolerance on the cone would pay for it).  The polish
+then solves once more with the active set fixed (the smaller side of every pair set to 0),
+which removes the relaxation's bias; where IPOPT fails on it the homotopy's last solution is
+kept.  The optimum is returned when its complementarity residual ``max_i min(a_i, c_i)`` (in
+the pairs' units: m, N, N·s, m/s) is below ``tol``.  The relaxed problems of large ``σ`` are
+the smoothed-contact variant: contact forces act a little before contact, friction a little
+before sliding.
 """
 from __future__ import annotations
 
