@@ -187,3 +187,25 @@ def test_an_optimum_above_the_complementarity_tolerance_is_refused(block):
     ocp.minimize_effort()
     with pytest.raises(OptimizationError, match=r"complementarity residual .* exceeds contacts\.tol = 1e-05 \(worst: "):
         ocp.solve("rest")
+
+
+def test_ncgen_optimize_with_nonsmooth_contacts(tmp_path, block, capsys):
+    """The command line: a model file, a problem file with a [contacts] table, --contacts nonsmooth."""
+    import casadi as ca
+    from ncgen.cli import main
+    ex, _ = block
+    s = nc.System("block_push", gravity=(0, -ex.G))
+    b = s.add_point("block", mass=ex.MASS, position=(0, 0))
+    b.add_marker("centre", (0, 0))
+    s.add_force(nc.PointForce(b, (0, 0), force=ca.vertcat(s.add_input("push"), 0)))
+    s.add_contact(nc.SpherePlane(b, radius=0.0, mu=ex.MU, name="floor"))
+    (tmp_path / "push.toml").write_text(s.to_toml())
+    (tmp_path / "problem.toml").write_text(
+        'model = "push.toml"\n[horizon]\nN = 20\nt_final = 0.6\n[final]\nv = 0\nmarkers = { "block.centre" = [0.5, 0.0] }\n'
+        '[cost]\neffort = 1.0\n[contacts]\nsigma_final = 1e-6\n[solver]\nwarm_start = "rest"\n')
+    out = tmp_path / "push.npz"
+    assert main(["optimize", str(tmp_path / "problem.toml"), "--contacts", "nonsmooth", "-o", str(out)]) == 0
+    assert "contact-implicit" in capsys.readouterr().out
+    traj = nc.Trajectory.load(out)
+    push, _ = ex.closed_form(0.6)
+    assert np.max(np.abs(traj.u[:ex.N, 0] - push)) < 1e-6 * np.max(np.abs(push))
