@@ -209,3 +209,28 @@ def test_ncgen_optimize_with_nonsmooth_contacts(tmp_path, block, capsys):
     traj = nc.Trajectory.load(out)
     push, _ = ex.closed_form(0.6)
     assert np.max(np.abs(traj.u[:ex.N, 0] - push)) < 1e-6 * np.max(np.abs(push))
+
+
+def test_bilateral_multipliers_of_a_bar_pushed_on_frictionless_ends():
+    """A planar 'rr' bar of length L lying on the floor on its two ends (frictionless), pushed
+    along its axis at its first end by u: rigid translation, m a = u, and the length
+    constraint |r_j − r_i|² = L² carries λ = −u / (4 L) (from M a + Aᵀλ = F with
+    M = m/6 [[2, 1], [1, 2]] ⊗ I)."""
+    import casadi as ca
+    L, m = 0.4, 1.5
+    s = nc.System("bar_push", gravity=(0, -9.81))
+    bar = s.add_bar("bar", coords="rr", mass=m, ends=[(0, 0), (L, 0)])
+    bar.add_marker("mid", (0, 0))
+    s.add_force(nc.PointForce(bar, (-L / 2, 0), force=ca.vertcat(s.add_input("push"), 0)))
+    for name, x in (("left", -L / 2), ("right", L / 2)):
+        s.add_contact(nc.SpherePlane(bar, (x, 0), radius=0.0, name=name))
+    model = s.build(contacts="nonsmooth")
+    assert model.nc == 1
+    ocp = nc.OptimalControl(model, N=10, t_final=0.5)
+    ocp.final(marker=("bar.mid", (L / 2 + 0.3, 0.0)), v=0)
+    ocp.minimize_effort()
+    sol = ocp.solve("rest")
+    u = sol.u[:10, 0]
+    assert np.max(np.abs(u)) > 1.0
+    assert np.max(np.abs(sol.lam[1:, 0] + u / (4 * L))) < 1e-6 * np.max(np.abs(u))
+    assert np.allclose(sol.contact_force.sum(axis=1), m * 9.81, rtol=1e-6)

@@ -268,6 +268,7 @@ class ContactImplicit(Transcription):
                                   mu[i] * normal[i] - ca.sum1(beta_k[i * nd:(i + 1) * nd]), gam_k[i], penalised=False))
 
         rows = [contact_rows(q[:, k]) for k in range(N + 1)] if nk else None
+        lam_nodes = []
         for k in range(N):
             tk, tk1, hk = t[k], t[k + 1], h[k]
             qk, wk, qk1, vk1, mk = q[:, k], w[:, k], q[:, k + 1], v[:, k + 1], Mid[:, k]
@@ -283,6 +284,7 @@ class ContactImplicit(Transcription):
             r2 = ca.mtimes(M, vk1 - mk) - hk / 2 * (f["F"](tk1, qk1, vk1, uk, p) + force1)
             if nc:
                 nu1, nu2 = opti.variable(nc), opti.variable(nc)
+                lam_nodes.append(2 * nu2 / hk)          # λ at node k+1 (the second half-step's ν₂ = h/2 λ)
                 r1 += ca.mtimes(f["A"](tk, qk, p).T, nu1)
                 r2 += ca.mtimes(f["A"](tk1, qk1, p).T, nu2)
                 defects.append((f"position constraints Φ at node {k + 1}", f["phi"](tk1, qk1, p)))
@@ -361,7 +363,7 @@ class ContactImplicit(Transcription):
                 o.set_initial(W, W0)
                 o.set_initial(slack, slack0)
 
-        return Discretisation(q=q, v=v, lam=None, U=U, path_t=t[:, 1:], path_q=Q, path_v=V, quad_t=t, quad_q=q,
+        return Discretisation(q=q, v=v, lam=ca.horzcat(*lam_nodes) if nc else None, U=U, path_t=t[:, 1:], path_q=Q, path_v=V, quad_t=t, quad_q=q,
                               quad_v=v, quad_w=quad_w, defects=defects, set_guess=set_guess, t_nodes=t,
                               interval_w=h, extra_cost=extra)
 
