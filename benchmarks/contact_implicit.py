@@ -86,7 +86,7 @@ def nosnoc_push(ex, T):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--smoke", action="store_true", help="the same single case (it takes seconds)")
-    args = parser.parse_args()
+    parser.parse_args()
     print(machine())
     ex = _block_push()
     T = 0.6
