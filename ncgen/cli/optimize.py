@@ -29,6 +29,10 @@ def _arguments(p: argparse.ArgumentParser) -> None:
                    help="replace a model parameter's default value (repeatable)")
     p.add_argument("--floating-base", action="store_true",
                    help="URDF models only: the robot's base is free instead of fixed to the ground")
+    p.add_argument("--contacts", default="smooth", choices=("smooth", "nonsmooth"),
+                   help="contacts of the model: smooth (compliant law in the dynamics; default) or nonsmooth "
+                        "(rigid impacts and Coulomb friction: the contact-implicit transcription, settings in "
+                        "the problem's [contacts] table)")
     p.add_argument("-v", "--verbose", action="store_true", help="show IPOPT's iterations")
 
 
@@ -64,7 +68,7 @@ def optimize(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         if model_file is None:
             raise ProblemFileError(f"{origin}: model: missing; name the model file in the problem file "
                                    f"(model = \"cartpole.toml\") or give it first and the problem with --problem")
-    model = load_model(str(model_file), args.param, floating_base=args.floating_base)
+    model = load_model(str(model_file), args.param, contacts=args.contacts, floating_base=args.floating_base)
     ocp, options = problem_from_data(data, model, origin)
     kwargs = options.kwargs()
     kwargs["verbose"] = kwargs["verbose"] or args.verbose

@@ -361,7 +361,10 @@ class NLP:
         J = ca.MX(0)
         h = self.T / ocp.N
         if ocp.effort_R is not None and model.nu:
-            J += h * ca.sum1(ca.sum2(disc.U * ca.mtimes(ca.DM(ocp.effort_R), disc.U)))
+            w = h if disc.interval_w is None else disc.interval_w
+            J += ca.sum2(w * ca.sum1(disc.U * ca.mtimes(ca.DM(ocp.effort_R), disc.U)))
+        if disc.extra_cost is not None:
+            J += disc.extra_cost
         if ocp.tracking:
             nm = len(model.marker_names)
             npts = disc.quad_q.shape[1]
@@ -396,7 +399,7 @@ class NLP:
         ocp, opti = self.ocp, self.opti
         options = {**IPOPT_DEFAULTS, "tol": tol, "constr_viol_tol": tol, "max_iter": max_iter,
                    "print_level": 5 if verbose else 0, "hessian_approximation": ocp.transcription.hessian,
-                   "linear_solver": linear_solver, **ipopt}
+                   "linear_solver": linear_solver, **ocp.transcription.ipopt_options, **ipopt}
         if max_wall_time is not None:
             options["max_wall_time"] = float(max_wall_time)
         opti.solver("ipopt", {"expand": self.disc.expandable, "detect_simple_bounds": True,
@@ -429,8 +432,10 @@ def build_and_solve(ocp, warm_start, *, max_iter: int, tol: float, verbose: bool
     nlp = NLP(ocp)
     nlp.build(warm_start)
     build_time = time.perf_counter() - start
-    value = nlp.solve(max_iter=max_iter, tol=tol, verbose=verbose, ipopt=ipopt, linear_solver=linear_solver)
+    value = ocp.transcription.solve(nlp, lambda: nlp.solve(max_iter=max_iter, tol=tol, verbose=verbose, ipopt=ipopt,
+                                                           linear_solver=linear_solver), tol)
     result = extract(nlp, value, build_time)
+    ocp.transcription.finish(value, result)
     if not result.stats.success:
         message = diagnose(nlp, value, result, tol=tol, ipopt=ipopt, budget=diagnose_budget,
                            linear_solver=linear_solver)
@@ -453,7 +458,7 @@ def extract(nlp: NLP, val, build_time: float) -> OptimalTrajectory:
     ocp, model, disc = nlp.ocp, nlp.model, nlp.disc
     T = float(val(nlp.T)) if isinstance(nlp.T, ca.MX) else float(nlp.T)
     p = np.array(val(nlp.p)).reshape(-1) if isinstance(nlp.p, ca.MX) else np.array(nlp.p).reshape(-1)
-    t = ocp.t0 + T * np.arange(ocp.N + 1) / ocp.N
+    t = ocp.t0 + T * np.arange(ocp.N + 1) / ocp.N if disc.t_nodes is None else np.array(val(disc.t_nodes)).reshape(-1)
     q = np.array(val(disc.q)).reshape(model.nq, -1).T
     v = np.array(val(disc.v)).reshape(model.nq, -1).T
     u = np.array(val(disc.U)).reshape(model.nu, -1).T if model.nu else np.zeros((ocp.N, 0))

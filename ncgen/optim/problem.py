@@ -33,7 +33,7 @@ from ncgen.errors import NcgenError, OptimizationError
 from ncgen.validation import as_numbers, as_scalar
 from ncgen.optim.transcription import MODEL_STATE
 
-METHODS = ("collocation", "shooting")
+METHODS = ("collocation", "shooting", "contact_implicit")
 LINEAR_SOLVERS = ("mumps", "spral", "ma27", "ma57", "ma77", "ma86", "ma97", "pardiso", "pardisomkl")
 
 
@@ -45,18 +45,31 @@ class OptimalControl:
     default 3, in the ``form`` ``"joint"`` (joint coordinates as states, trees only:
     :mod:`ncgen.optim.joint_radau`), ``"ggl"``, ``"index3"`` or ``"index1"`` (natural
     coordinates: :mod:`ncgen.optim.radau`); ``"auto"`` (default): ``"joint"`` when the model
-    allows it, else ``"ggl"``) or ``"shooting"`` (multiple shooting with ``integrator``, default IDAS;
-    ``integrator_options`` go to its factory); ``parameters``: values replacing the
-    model's defaults (``{"k": 50.0}``).
+    allows it, else ``"ggl"``), ``"shooting"`` (multiple shooting with ``integrator``, default IDAS;
+    ``integrator_options`` go to its factory) or ``"contact_implicit"`` (time stepping through
+    nonsmooth contacts, :mod:`ncgen.optim.contact_implicit`, with the ``contacts`` settings;
+    the default, and the only method accepted, for a model built with
+    ``contacts="nonsmooth"``: the others would ignore its contacts); ``parameters``: values
+    replacing the model's defaults (``{"k": 50.0}``).
     """
 
-    def __init__(self, model, N: int = 50, t_final=1.0, method: str = "collocation", *, degree: int = 3,
+    def __init__(self, model, N: int = 50, t_final=1.0, method: str | None = None, *, degree: int = 3,
                  form: str = "auto", integrator: str = "idas", integrator_options: dict | None = None,
-                 parameters: dict | None = None):
+                 parameters: dict | None = None, contacts: dict | None = None):
+        from ncgen.optim.contact_implicit import ContactImplicit, nonsmooth_contacts, refuse_unsupported
         if not isinstance(N, (int, np.integer)) or isinstance(N, bool) or N < 1:
             raise OptimizationError(f"N: expected a positive integer number of intervals, got {N!r}")
+        if method is None:
+            method = "contact_implicit" if nonsmooth_contacts(model) else "collocation"
         if method not in METHODS:
             raise OptimizationError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+        refuse_unsupported(model, method)
+        if method == "contact_implicit" and not nonsmooth_contacts(model):
+            raise OptimizationError(f"method='contact_implicit': model {model.name!r} has no nonsmooth contacts "
+                                    "(build it with contacts='nonsmooth'); use method='collocation'")
+        if contacts is not None and method != "contact_implicit":
+            raise OptimizationError("contacts: settings of the contact-implicit transcription, given with "
+                                    f"method={method!r}; the model has no nonsmooth contacts")
         self.model = model
         self.N = int(N)
         self.method = method
@@ -64,6 +77,8 @@ class OptimalControl:
         self.t_final, self.t_final_bounds = _horizon(t_final)
         if method == "collocation":
             self.transcription = _collocation(model, degree, form)
+        elif method == "contact_implicit":
+            self.transcription = ContactImplicit(model, contacts)
         else:
             from ncgen.optim.shooting import MultipleShooting
             self.transcription = MultipleShooting(integrator, **(integrator_options or {}))

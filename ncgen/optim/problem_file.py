@@ -14,6 +14,9 @@ The format is documented in docs/optimal-control.md.  Every table is optional::
     [periodic]       q = true, v = true
     [cost]           effort, time, [[cost.track]], [[cost.terminal]]
     [solver]         max_iter, tol, warm_start, ipopt = {...}
+    [contacts]       the contact-implicit transcription's settings (models with nonsmooth contacts):
+                     sigma0, sigma_final, sigma_factor, tol, step_lengths, step_bounds, step_weight,
+                     directions
 
 Errors are :class:`~ncgen.errors.ProblemFileError` naming the key path (``final.v``) and
 what was expected.
@@ -32,7 +35,7 @@ from ncgen.files import decode_text
 from ncgen.optim.problem import FORMS, METHODS, OptimalControl
 
 TOP_KEYS = ("model", "horizon", "parameters", "free_parameters", "bounds", "initial", "final", "periodic",
-            "cost", "solver")
+            "cost", "solver", "contacts")
 FREE = "free"
 
 
@@ -130,7 +133,7 @@ class _Reader:
 
     def build(self, model):
         d = self.table(self.data, "(top level)", TOP_KEYS)
-        ocp = self._horizon(model, d.get("horizon", {}))
+        ocp = self._horizon(model, d.get("horizon", {}), d.get("contacts"))
         for name, value in self.table(d.get("parameters", {}), "parameters", None).items():
             self.where = f"parameters.{name}"
             ocp.set_parameter(name, value if isinstance(value, list) else self.number(value, self.where))
@@ -146,7 +149,7 @@ class _Reader:
         self._cost(ocp, d.get("cost", {}))
         return ocp, self._solver(d.get("solver", {}))
 
-    def _horizon(self, model, h):
+    def _horizon(self, model, h, contacts):
         h = self.table(h, "horizon", ("N", "t_final", "method", "degree", "form", "integrator",
                                            "integrator_options"))
         N = h.get("N", 50)
@@ -155,8 +158,8 @@ class _Reader:
         T = h.get("t_final", 1.0)
         T = self.numbers(T, "horizon.t_final", 2) if isinstance(T, list) else self.number(T, "horizon.t_final",
                                                                                           positive=True)
-        method = h.get("method", "collocation")
-        if method not in METHODS:
+        method = h.get("method")
+        if method is not None and method not in METHODS:
             self.fail("horizon.method", " or ".join(f'"{m}"' for m in METHODS), method)
         degree = h.get("degree", 3)
         if isinstance(degree, bool) or not isinstance(degree, int):
@@ -168,9 +171,11 @@ class _Reader:
         if not isinstance(integrator, str):
             self.fail("horizon.integrator", "an integrator name", integrator)
         options = dict(self.table(h.get("integrator_options", {}), "horizon.integrator_options", None))
+        if contacts is not None:
+            contacts = dict(self.table(contacts, "contacts", None))
         self.where = "horizon"
         return OptimalControl(model, N=N, t_final=T, method=method, degree=degree, form=form,
-                              integrator=integrator, integrator_options=options)
+                              integrator=integrator, integrator_options=options, contacts=contacts)
 
     def _bounds(self, ocp, b):
         b = self.table(b, "bounds", ("inputs", "coordinates", "velocities", "markers"))

@@ -59,6 +59,9 @@ class Discretisation:
     ``defects``: labelled dynamics equations ``e == 0``;
     ``set_guess(opti, guess)``: initial values for the transcription's own variables;
     ``expandable``: the NLP may be expanded to SX (no integrator or rootfinder calls);
+    ``t_nodes``: node times (1 × (N+1)) where the intervals are not equal (else ``None``),
+    ``interval_w``: the lengths (s, 1 × N) weighting the inputs' effort (``None``: ``T/N``),
+    ``extra_cost``: a term the transcription adds to the objective (``None``: none);
     joint-space transcriptions (:mod:`ncgen.optim.joint_radau`) also give ``qj``, ``vj``
     (joint coordinates and rates at the nodes) and ``path_qj``, ``path_vj`` (at the state
     points), and ``lam = None`` (no multipliers: they are computed at the nodes afterwards).
@@ -82,13 +85,25 @@ class Discretisation:
     vj: object = None
     path_qj: object = None
     path_vj: object = None
+    t_nodes: object = None
+    interval_w: object = None
+    extra_cost: object = None
 
 
 class Transcription:
     """Base class: ``hessian`` (IPOPT's ``hessian_approximation``), :meth:`build` and
-    :meth:`describe`."""
+    :meth:`describe`; :meth:`solve` (how the built NLP is solved: one IPOPT call, or a
+    sequence such as a homotopy) and :meth:`finish` (checks and additions to the result)."""
 
     hessian = "exact"
+    #: IPOPT options the transcription needs (the user's ``ipopt={...}`` override them).
+    ipopt_options: dict = {}
+
+    def solve(self, nlp, solve_once, tol_ipopt: float):
+        return solve_once()
+
+    def finish(self, value, result) -> None:
+        """Nothing to add."""
 
     def build(self, opti: ca.Opti, model, horizon: Horizon) -> Discretisation:
         raise NotImplementedError

@@ -1,0 +1,508 @@
+"""Contact-implicit transcription: optimal control through nonsmooth contacts.
+
+For a model built with ``contacts="nonsmooth"`` (:mod:`ncgen.model.contacts`), the motion
+over ``N`` intervals of lengths ``h_k`` (equal, or decision variables summing to ``T``) is:
+
+* in each interval, the compiled stepper's RATTLE step (docs/contact.md) from the node
+  ``(q_k, w_k)`` with a contact force ``f_k`` (N) constant over the interval, half of it in
+  each half-step along the contact Jacobian where it acts::
+
+      M (m − w_k)     = h/2 F(t_k, q_k, w_k, u_k)         − A(q_k)ᵀ ν₁ + h/2 W(q_k)ᵀ f_k
+      q_{k+1}         = q_k + h m,                         Φ(q_{k+1}) = 0
+      M (v_{k+1} − m) = h/2 F(t_{k+1}, q_{k+1}, v_{k+1}, u_k) − A(q_{k+1})ᵀ ν₂ + h/2 W(q_{k+1})ᵀ f_k
+      A(q_{k+1}) v_{k+1} + Φ_t = 0
+
+  (exact for constant accelerations: free flight under gravity, a block sliding under a
+  piecewise-constant push);
+* at the inner nodes k = 1..N−1, an impact impulse ``P_k`` (N·s) takes the velocity before
+  the node ``v_k`` to the velocity after it ``w_k``: ``M (w_k − v_k) = W(q_k)ᵀ P_k − A(q_k)ᵀ ν₃``,
+  ``A(q_k) w_k + Φ_t = 0`` (``w_0 = v_0``).  With free step lengths a node lands on each
+  impact, which is then resolved exactly.
+
+Contact laws, per point contact (``W = [W_N; W_T]``, ``U = W v``; the polyhedral Coulomb
+cone with ``n_d`` unit directions ``d_j`` in the tangent plane, ``f_T = Σ β_j d_j``):
+
+* force over interval k: ``g(q_{k+1}) ≥ 0 ⊥ f_N ≥ 0``, and with free step lengths also
+  ``g(q_k) ⊥ f_N`` (a force only while in contact at both ends: an impact must then fall on a
+  node; with equal steps an impact inside a step is absorbed by its force, without
+  restitution, as in Stewart–Trinkle time stepping, so contacts with restitution > 0 need
+  free steps, the default for them); friction with maximum dissipation on the interval's mean
+  velocity ``m``: ``γ + d_jᵀ W_T m ≥ 0 ⊥ β_j ≥ 0``, ``μ f_N − Σ β_j ≥ 0 ⊥ γ ≥ 0``;
+* impulse at node k: ``g(q_k) ≥ 0 ⊥ P_N ≥ 0``; Newton's law as the nonsmooth stepper has it,
+  ``r = U⁺_N + e U⁻_N``, ``r + b ≥ 0 ⊥ P_N`` with a slack ``b ≥ 0`` (an approach without
+  impulse, allowed only while apart: ``b ⊥ P_N`` and ``b ⊥ f_N`` of the interval after the
+  node, so that an impulse restores exactly ``U⁺_N = −e U⁻_N``), and no impulse where the
+  interval before the node had a contact force (a lasting contact is carried by forces);
+  friction on ``U⁺_T + e U⁻_T`` (the stepper's law) as above with ``P_N``.
+
+Each complementarity pair ``a ≥ 0, c ≥ 0, a c = 0`` is relaxed to ``a c ≤ σ`` (Scholtes) and
+IPOPT solves the sequence ``σ = σ₀, σ₀ κ, …, σ_final``, each from the last, with
+``ρ Σ a·c`` in the cost (every pair but the friction cone's ``(μ f_N − Σ β) γ``: ``γ`` is
+unbounded where ``μ f_N = 0``, and the tolerance on the cone would pay for it).  The polish
+then solves once more with the active set fixed (the smaller side of every pair set to 0),
+which removes the relaxation's bias; where IPOPT fails on it the homotopy's last solution is
+kept.  The optimum is returned when its complementarity residual ``max_i min(a_i, c_i)`` (in
+the pairs' units: m, N, N·s, m/s) is below ``tol``.  The relaxed problems of large ``σ`` are
+the smoothed-contact variant: contact forces act a little before contact, friction a little
+before sliding.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ncgen.errors import OptimizationError
+from ncgen.optim.diagnostics import SUCCESS
+from ncgen.optim.transcription import Discretisation, Horizon, Transcription, guess_times
+
+#: Point-contact kinds whose gap is smooth in q (ncgen.assembly.contacts): transcribed here.
+SUPPORTED_KINDS = ("SpherePlane", "SphereSphere", "BoxPlane", "CapsulePlane", "CylinderPlane")
+
+#: Default homotopy and discretisation settings (``OptimalControl(contacts={...})``).
+DEFAULTS = {
+    "sigma0": 1e-1,              # first relaxation σ (units of the pairs' products)
+    "sigma_final": 1e-6,         # last relaxation σ (the polish then removes its bias)
+    "sigma_factor": 0.1,         # σ ← κ σ between solves
+    "tol": 1e-6,                 # complementarity residual the optimum must reach
+    "step_lengths": None,        # "equal" (h = T/N) or "free" (h_k variables, Σ h_k = T); None: free
+                                 # where a contact has restitution > 0, else equal
+    "step_bounds": (0.25, 4.0),  # free steps: h_k / (T/N) within these
+    "step_weight": 1e-4,         # free steps: weight (s⁻¹) of Σ (h_k − T/N)² / (T/N) in the cost
+    "directions": None,          # friction cone directions per contact (None: 2 planar, 4 in 3D)
+    "penalty": 1.0,              # weight ρ of Σ a·c over the pairs in the cost (0: none)
+    "polish": True,              # a last solve with the active set fixed (module docstring)
+}
+
+
+def nonsmooth_contacts(model) -> list[dict]:
+    """The point contacts of ``model`` that act as unilateral constraints (nonsmooth model)."""
+    return list(model.contacts) if model.contact_model == "nonsmooth" else []
+
+
+def _label(spec: dict) -> str:
+    element = spec.get("element")
+    return f"{spec['name']!r} ({spec['type']}{'' if element is None else f' of element {element!r}'})"
+
+
+def refuse_unsupported(model, method: str) -> None:
+    """Refuse an optimal-control problem on a model whose nonsmooth contacts ``method``
+    would ignore, naming them."""
+    contacts = nonsmooth_contacts(model)
+    if not contacts:
+        return
+    if method != "contact_implicit":
+        names = ", ".join(_label(c) for c in contacts)
+        raise OptimizationError(
+            f"model {model.name!r} has nonsmooth contacts ({names}); method={method!r} would solve the problem as if "
+            "they were absent. Use method='contact_implicit' (the default for such a model) or build the model with "
+            "contacts='smooth'")
+    bad = [c for c in contacts if c["type"] not in SUPPORTED_KINDS]
+    if bad:
+        raise OptimizationError(
+            f"model {model.name!r}: no optimal-control transcription handles the contact(s) "
+            f"{', '.join(_label(c) for c in bad)}: their gap is piecewise (faces, edges, corners of a box); "
+            f"the contact-implicit transcription handles {', '.join(SUPPORTED_KINDS)}. Build the model with "
+            "contacts='smooth' to optimise with the compliant law")
+
+
+def check_settings(settings, dim: int, contacts=()) -> dict:
+    """``contacts`` settings merged into :data:`DEFAULTS`, each checked (errors name the key);
+    ``contacts``: the model's point contacts (restitution decides the step lengths)."""
+    if settings is None:
+        settings = {}
+    if not isinstance(settings, dict):
+        raise OptimizationError(f"contacts: expected a table of settings ({', '.join(DEFAULTS)}), got {settings!r}")
+    unknown = sorted(set(settings) - set(DEFAULTS))
+    if unknown:
+        raise OptimizationError(f"contacts: unknown setting(s) {', '.join(unknown)}; known: {', '.join(DEFAULTS)}")
+    out = {**DEFAULTS, **settings}
+    if not isinstance(out["polish"], bool):
+        raise OptimizationError(f"contacts.polish: expected true or false, got {out['polish']!r}")
+    for key in ("sigma0", "sigma_final", "tol", "step_weight", "penalty"):
+        x = out[key]
+        if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) or x < 0 or (
+                key not in ("step_weight", "penalty") and x == 0):
+            raise OptimizationError(f"contacts.{key}: expected a finite number "
+                                    f"{'>= 0' if key in ('step_weight', 'penalty') else '> 0'}"
+                                    f", got {x!r}")
+        out[key] = float(x)
+    if out["sigma_final"] > out["sigma0"]:
+        raise OptimizationError(f"contacts.sigma_final: expected at most sigma0 = {out['sigma0']:g}, "
+                                f"got {out['sigma_final']:g}")
+    k = out["sigma_factor"]
+    if isinstance(k, bool) or not isinstance(k, (int, float)) or not 0 < k < 1:
+        raise OptimizationError(f"contacts.sigma_factor: expected a number in (0, 1), got {k!r}")
+    bouncing = [c["name"] for c in contacts if c["restitution"] > 0]
+    if out["step_lengths"] is None:
+        out["step_lengths"] = "free" if bouncing else "equal"
+    if out["step_lengths"] not in ("equal", "free"):
+        raise OptimizationError(f"contacts.step_lengths: expected \"equal\" or \"free\", got {out['step_lengths']!r}")
+    if out["step_lengths"] == "equal" and bouncing:
+        raise OptimizationError(f"contacts.step_lengths: \"equal\" steps resolve an impact inside a step without "
+                                f"restitution, and contact(s) {', '.join(map(repr, bouncing))} have restitution > 0; "
+                                "use \"free\" (a node on each impact)")
+    b = out["step_bounds"]
+    if not (isinstance(b, (list, tuple)) and len(b) == 2 and all(isinstance(x, (int, float)) for x in b)
+            and 0 < b[0] <= 1 <= b[1] and math.isfinite(b[1])):
+        raise OptimizationError(f"contacts.step_bounds: expected (lower, upper) with 0 < lower <= 1 <= upper "
+                                f"(fractions of T/N), got {b!r}")
+    out["step_bounds"] = (float(b[0]), float(b[1]))
+    nd = out["directions"]
+    if nd is None:
+        nd = 2 if dim == 2 else 4
+    if isinstance(nd, bool) or not isinstance(nd, int) or nd < 2 or (dim == 2 and nd != 2) or nd % 2:
+        raise OptimizationError(f"contacts.directions: expected an even integer >= 2 (2 in planar systems), got {nd!r}")
+    out["directions"] = nd
+    return out
+
+
+@dataclass
+class Pair:
+    """A complementarity pair ``a ≥ 0, c ≥ 0, a c ≤ σ`` (``label`` names it in reports)."""
+
+    label: str
+    a: object
+    c: object
+    a_imposed: bool = False      # ``a ≥ 0`` is imposed elsewhere (gaps)
+    penalised: bool = True       # in the cost's ρ Σ a·c (not the cone's: γ is unbounded where μ f_N = 0)
+
+
+def _directions(nt: int, nd: int) -> np.ndarray:
+    """``nt × nd`` unit directions in the tangent plane: ``±t`` (planar) or ``nd`` equally spaced."""
+    if nt == 1:
+        return np.array([[1.0, -1.0]])
+    ang = 2 * np.pi * np.arange(nd) / nd
+    return np.vstack([np.cos(ang), np.sin(ang)])
+
+
+class ContactImplicit(Transcription):
+    """The contact-implicit transcription (module docstring); ``settings`` as in :data:`DEFAULTS`."""
+
+    hessian = "exact"
+    #: IPOPT keeps the bounds ``≥ 0`` of forces and impulses exactly (no relaxation): a
+    #: product ``a·c`` then never turns negative by more than the constraint tolerance.
+    #: (``mu_strategy="adaptive"`` took 119 instead of 386 iterations on the ball of
+    #: examples/ball_bounce_target.py and 362 instead of 814 on the planar push of
+    #: examples/block_push.py, but left the 3D push stuck for its first step: not the default.)
+    ipopt_options = {"bound_relax_factor": 0.0}
+
+    def __init__(self, model, settings=None):
+        refuse_unsupported(model, "contact_implicit")
+        self.contacts = nonsmooth_contacts(model)
+        self.settings = check_settings(settings, model.dim, self.contacts)
+
+    def describe(self) -> str:
+        s = self.settings
+        return (f"contact-implicit time stepping (RATTLE, {s['step_lengths']} steps, Scholtes σ "
+                f"{s['sigma0']:g} → {s['sigma_final']:g})")
+
+    # ------------------------------------------------------------------ build
+    def build(self, opti: ca.Opti, model, hz: Horizon) -> Discretisation:
+        s = self.settings
+        N, nq, nu, nc, dim = hz.N, model.nq, model.nu, model.nc, model.dim
+        f = model.functions
+        nk = len(self.contacts)
+        nt = dim - 1
+        D = _directions(nt, s["directions"])
+        nd = D.shape[1]
+        mu = np.array([c["mu"] for c in self.contacts])
+        e = np.array([c["restitution"] for c in self.contacts])
+        M = ca.DM(f["mass"]()["M"])
+        p = hz.p
+        p_num = np.array(p, float).reshape(-1) if isinstance(p, ca.DM) else np.array(model.p0, float)
+        self.sigma = opti.parameter()
+        opti.set_value(self.sigma, s["sigma0"])
+        Q, V, W, U = opti.variable(nq, N), opti.variable(nq, N), opti.variable(nq, N - 1), opti.variable(nu, N)
+        Mid = opti.variable(nq, N)
+        q = ca.horzcat(hz.q0, Q)
+        v = ca.horzcat(hz.v0, V)                       # velocities before each node's impulse
+        w = ca.horzcat(hz.v0, W)                       # after it (w_0 = v_0)
+        fN = opti.variable(nk, N)                      # interval contact forces (N)
+        beta = opti.variable(nk * nd, N)
+        gam = opti.variable(nk, N)
+        PN = opti.variable(nk, N - 1)                  # node impulses (N·s), nodes 1..N−1
+        Pbeta = opti.variable(nk * nd, N - 1)
+        Pgam = opti.variable(nk, N - 1)
+        slack = opti.variable(nk, N - 1)
+        if s["step_lengths"] == "free":
+            scale = opti.variable(N)
+            opti.subject_to(opti.bounded(*s["step_bounds"][:1], scale, s["step_bounds"][1]))
+            opti.subject_to(ca.sum1(scale) == N)
+        else:
+            scale = ca.DM.ones(N)
+        h = hz.T / N * scale.T                         # 1 × N step lengths (s)
+        t = hz.t0 + ca.horzcat(ca.DM(0), ca.cumsum(h.T).T)
+        for x in (fN, beta, gam, PN, Pbeta, Pgam, slack):
+            if x.numel():
+                opti.subject_to(ca.vec(x) >= 0)
+        pairs: list[Pair] = []
+        defects = []
+        D_dm = ca.DM(D)
+
+        def contact_rows(qk):
+            g = f["gap"](qk, p)
+            WN, WT = f["contact_jacobian"](qk, p)
+            return g, WN, WT
+
+        def tangential(WT, beta_k):
+            """Generalised force of the friction components ``β`` (nk·nd) along W_T."""
+            if nt == 0 or nk == 0:
+                return ca.MX.zeros(nq, 1)
+            fT = ca.vertcat(*[ca.mtimes(D_dm, beta_k[i * nd:(i + 1) * nd]) for i in range(nk)])
+            return ca.mtimes(WT.T, fT)
+
+        def friction(label, normal, UT, beta_k, gam_k):
+            for i in range(nk):
+                if mu[i] == 0:
+                    defects.append((f"{label} (frictionless contact {self.contacts[i]['name']!r})",
+                                    ca.vertcat(beta_k[i * nd:(i + 1) * nd], gam_k[i])))
+                    continue
+                ut = UT[i * nt:(i + 1) * nt]
+                for j in range(nd):
+                    pairs.append(Pair(f"{label}: maximum dissipation, contact {self.contacts[i]['name']!r}",
+                                      gam_k[i] + ca.dot(D_dm[:, j], ut), beta_k[i * nd + j]))
+                pairs.append(Pair(f"{label}: Coulomb cone, contact {self.contacts[i]['name']!r}",
+                                  mu[i] * normal[i] - ca.sum1(beta_k[i * nd:(i + 1) * nd]), gam_k[i], penalised=False))
+
+        rows = [contact_rows(q[:, k]) for k in range(N + 1)] if nk else None
+        lam_nodes = []
+        for k in range(N):
+            tk, tk1, hk = t[k], t[k + 1], h[k]
+            qk, wk, qk1, vk1, mk = q[:, k], w[:, k], q[:, k + 1], v[:, k + 1], Mid[:, k]
+            uk = U[:, k]
+            force = ca.MX.zeros(nq, 1)
+            force1 = ca.MX.zeros(nq, 1)
+            if nk:
+                g0, WN0, WT0 = rows[k]
+                g1, WN1, WT1 = rows[k + 1]
+                force = ca.mtimes(WN0.T, fN[:, k]) + tangential(WT0, beta[:, k])
+                force1 = ca.mtimes(WN1.T, fN[:, k]) + tangential(WT1, beta[:, k])
+            r1 = ca.mtimes(M, mk - wk) - hk / 2 * (f["F"](tk, qk, wk, uk, p) + force)
+            r2 = ca.mtimes(M, vk1 - mk) - hk / 2 * (f["F"](tk1, qk1, vk1, uk, p) + force1)
+            if nc:
+                nu1, nu2 = opti.variable(nc), opti.variable(nc)
+                lam_nodes.append(2 * nu2 / hk)          # λ at node k+1 (the second half-step's ν₂ = h/2 λ)
+                r1 += ca.mtimes(f["A"](tk, qk, p).T, nu1)
+                r2 += ca.mtimes(f["A"](tk1, qk1, p).T, nu2)
+                defects.append((f"position constraints Φ at node {k + 1}", f["phi"](tk1, qk1, p)))
+                defects.append((f"velocity constraints at node {k + 1}",
+                                ca.mtimes(f["A"](tk1, qk1, p), vk1) + f["phi_t"](tk1, qk1, p)))
+            defects.append((f"dynamics (first half-step, interval {k})", r1))
+            defects.append((f"dynamics (positions, interval {k})", qk1 - qk - hk * mk))
+            defects.append((f"dynamics (second half-step, interval {k})", r2))
+            if nk:
+                opti.subject_to(g1 >= 0)
+                if k == 0 and ca.symvar(g0):
+                    opti.subject_to(g0 >= 0)
+                if s["step_lengths"] == "free":
+                    pairs.append(Pair(f"interval {k}: gap at its start ⊥ contact force", g0, fN[:, k], True))
+                pairs.append(Pair(f"interval {k}: gap at its end ⊥ contact force", g1, fN[:, k], True))
+                friction(f"interval {k}", fN[:, k], ca.mtimes(WT1, mk), beta[:, k], gam[:, k])
+        for k in range(1, N):
+            qk, vk, wk = q[:, k], v[:, k], w[:, k]
+            jump = ca.mtimes(M, wk - vk)
+            if nk:
+                g, WN, WT = rows[k]
+                jump -= ca.mtimes(WN.T, PN[:, k - 1]) + tangential(WT, Pbeta[:, k - 1])
+            if nc:
+                nu3 = opti.variable(nc)
+                jump += ca.mtimes(f["A"](t[k], qk, p).T, nu3)
+                defects.append((f"velocity constraints after the impulse at node {k}",
+                                ca.mtimes(f["A"](t[k], qk, p), wk) + f["phi_t"](t[k], qk, p)))
+            defects.append((f"impact at node {k}", jump))
+            if nk:
+                r = ca.mtimes(WN, wk) + e * ca.mtimes(WN, vk)
+                pairs += [Pair(f"node {k}: gap ⊥ impulse", g, PN[:, k - 1], True),
+                          Pair(f"node {k}: Newton's impact law (U⁺ + e U⁻) ⊥ impulse", r + slack[:, k - 1],
+                               PN[:, k - 1]),
+                          Pair(f"node {k}: approach without impulse ⊥ impulse", slack[:, k - 1], PN[:, k - 1], True),
+                          Pair(f"node {k}: contact force before the node ⊥ impulse", fN[:, k - 1], PN[:, k - 1],
+                               True),
+                          Pair(f"node {k}: approach without impulse ⊥ contact force after the node",
+                               slack[:, k - 1], fN[:, k], True)]
+                friction(f"node {k}", PN[:, k - 1], ca.mtimes(WT, wk) + np.repeat(e, nt) * ca.mtimes(WT, vk),
+                         Pbeta[:, k - 1], Pgam[:, k - 1])
+        for pair in pairs:                             # every ``c`` is a variable bounded below by 0
+            product = pair.a * pair.c
+            if ca.symvar(product):                     # (a gap fixed at 0 by the initial state leaves c free)
+                opti.subject_to(product <= self.sigma)
+            if not pair.a_imposed:
+                opti.subject_to(pair.a >= 0)
+        self.pairs = pairs
+        self.vars = dict(Q=Q, V=V, W=W, Mid=Mid, scale=scale, slack=slack, fN=fN, beta=beta, PN=PN, Pbeta=Pbeta,
+                         t=t, h=h, D=D)
+        extra = ca.MX(0)
+        if s["step_lengths"] == "free":
+            extra += s["step_weight"] * hz.T / N * ca.sumsqr(scale - 1)
+        if s["penalty"] and pairs:
+            extra += s["penalty"] * sum(ca.dot(pair.a, pair.c) for pair in pairs if pair.penalised)
+        quad_w = ca.horzcat(h[0] / 2, (h[:, :-1] + h[:, 1:]) / 2, h[-1] / 2) if N > 1 else ca.horzcat(h / 2, h / 2)
+
+        def set_guess(o: ca.Opti, g):
+            tg = guess_times(hz, g.T, np.array([1.0]))
+            qg, vg = g.q(tg).T, g.v(tg).T
+            o.set_initial(Q, qg)
+            o.set_initial(V, vg)
+            if N > 1:
+                o.set_initial(W, vg[:, :-1])
+            q_all = np.hstack([g.q(np.array([hz.t0])).T, qg])
+            o.set_initial(Mid, np.diff(q_all, axis=1) / (g.T / N))
+            if nu:
+                o.set_initial(U, g.u(guess_times(hz, g.T, [0.0])).T)
+            if s["step_lengths"] == "free":
+                o.set_initial(scale, np.ones(N))
+            if nk and N > 1:
+                v_all = np.hstack([g.v(np.array([hz.t0])).T, vg])
+                u_all = g.u(guess_times(hz, g.T, [0.0])).T if nu else np.zeros((0, N))
+                PN0, fN0, W0, slack0 = self._guess_impulses(model, q_all, v_all, u_all, g.T / N, hz.t0, p_num)
+                o.set_initial(PN, PN0)
+                o.set_initial(fN, fN0)
+                o.set_initial(W, W0)
+                o.set_initial(slack, slack0)
+
+        return Discretisation(q=q, v=v, lam=ca.horzcat(*lam_nodes) if nc else None, U=U, path_t=t[:, 1:], path_q=Q, path_v=V, quad_t=t, quad_q=q,
+                              quad_v=v, quad_w=quad_w, defects=defects, set_guess=set_guess, t_nodes=t,
+                              interval_w=h, extra_cost=extra)
+
+    def _guess_impulses(self, model, q, v, u, h, t0, p):
+        """Node impulses (nk × N−1), interval forces (nk × N), velocities after the impulses
+        and approach slacks that a guess sampled at equal steps implies: the normal impulse
+        each interval's velocity change needs beyond the applied forces, put on the inner
+        node with the smaller gap where the contact approaches (an impact), else spread over
+        the interval as a force (a lasting contact)."""
+        f = model.functions
+        N = q.shape[1] - 1
+        nk = len(self.contacts)
+        e = np.array([c["restitution"] for c in self.contacts])
+        M = np.array(f["mass"]()["M"], float)
+        Minv = np.linalg.pinv(M)
+        gaps = np.column_stack([np.array(f["gap"](q[:, k], p), float).reshape(-1) for k in range(N + 1)])
+        PN, fN = np.zeros((nk, N - 1)), np.zeros((nk, N))
+        for k in range(N):
+            uk = u[:, k] if u.size else np.zeros(0)
+            jump = M @ (v[:, k + 1] - v[:, k]) - h * np.array(f["F"](t0 + k * h, q[:, k], v[:, k], uk, p)).reshape(-1)
+            WN = np.array(f["contact_jacobian"](q[:, k], p)[0], float).reshape(nk, -1)
+            for i in range(nk):
+                P = WN[i] @ Minv @ jump / (WN[i] @ Minv @ WN[i])
+                inner = [j for j in (k, k + 1) if 1 <= j <= N - 1]
+                if P <= 0:
+                    continue
+                if WN[i] @ v[:, k] < 0 and inner:         # an impact: an impulse at a node
+                    j = min(inner, key=lambda j: gaps[i, j])
+                    PN[i, j - 1] += P
+                else:                                   # a lasting contact: a force
+                    fN[i, k] = P / h
+        W = np.zeros((model.nq, N - 1))
+        slack = np.zeros((nk, N - 1))
+        for j in range(1, N):
+            WN = np.array(f["contact_jacobian"](q[:, j], p)[0], float).reshape(nk, -1)
+            W[:, j - 1] = v[:, j] + Minv @ WN.T @ PN[:, j - 1]
+            slack[:, j - 1] = np.maximum(0.0, -(WN @ W[:, j - 1] + e * (WN @ v[:, j])))
+        return PN, fN, W, slack
+
+    # ------------------------------------------------------------------ solve
+    def solve(self, nlp, solve_once, tol_ipopt: float):
+        """The Scholtes homotopy: ``solve_once()`` at each σ, warm started from the last."""
+        s, opti = self.settings, nlp.opti
+        sigma = s["sigma0"]
+        self.history = []
+        elapsed = 0.0
+        while True:
+            opti.set_value(self.sigma, sigma)
+            value = solve_once()
+            elapsed += nlp.solve_time
+            residual = complementarity_residual(self.pairs, value)
+            stats = nlp.opti.stats()
+            self.history.append({"sigma": sigma, "status": stats.get("return_status", ""),
+                                 "iterations": int(stats.get("iter_count", 0)), "residual": residual})
+            self.status = stats.get("return_status", "")
+            if sigma <= s["sigma_final"] or self.status not in SUCCESS:
+                break
+            opti.set_initial(opti.x, value(opti.x))
+            opti.set_initial(opti.lam_g, value(opti.lam_g))
+            sigma = sigma * s["sigma_factor"]
+            if sigma < s["sigma_final"] * (1 + 1e-9):
+                sigma = s["sigma_final"]
+        if s["polish"] and self.status in SUCCESS:
+            polished = self._polish(nlp, solve_once, value)
+            elapsed += nlp.solve_time
+            if polished is not None:
+                value = polished
+                residual = complementarity_residual(self.pairs, value)
+        self.residual = residual
+        nlp.solve_time = elapsed
+        return value
+
+    def _polish(self, nlp, solve_once, value):
+        """One more solve with the active set of ``value`` fixed: in each pair the smaller
+        side is set to 0 (an equality), which removes the relaxation's bias.  Returns the
+        new solution, or ``None`` (the homotopy's kept) where IPOPT fails on it."""
+        opti = nlp.opti
+        fixed: dict[str, object] = {}
+        for pair in self.pairs:
+            a, c = _numbers(value, pair.a), _numbers(value, pair.c)
+            for i in range(a.size):
+                side = pair.a[i] if a[i] <= c[i] else pair.c[i]
+                if ca.symvar(side):
+                    fixed.setdefault(str(side), side)
+        if len(fixed) + sum(e.numel() for _, e in nlp.disc.defects) >= opti.nx:
+            return None
+        opti.subject_to(ca.vertcat(*fixed.values()) == 0)
+        opti.set_initial(opti.x, value(opti.x))
+        polished = solve_once()
+        stats = opti.stats()
+        self.history.append({"sigma": "polish", "status": stats.get("return_status", ""),
+                             "iterations": int(stats.get("iter_count", 0)),
+                             "residual": complementarity_residual(self.pairs, polished)})
+        if stats.get("return_status", "") not in SUCCESS:
+            return None
+        self.status = stats["return_status"]
+        return polished
+
+    def finish(self, value, result) -> None:
+        """Attach the contact forces (``result.contact_force``: N × nk normal, N), impulses
+        (``result.contact_impulse``: (N+1) × nk, N·s), the complementarity residual and the
+        homotopy's history to ``result``, with the status of the solve it returns (the
+        homotopy's last where the polish failed); refuse a residual above ``tol``."""
+        result.stats.status = self.status
+        result.stats.success = self.status in SUCCESS
+        v = self.vars
+        result.contact_force = np.array(value(v["fN"])).reshape(len(self.contacts), -1).T
+        PN = np.array(value(v["PN"])).reshape(len(self.contacts), -1).T
+        z = np.zeros((1, len(self.contacts)))
+        result.contact_impulse = np.vstack([z, PN, z])
+        result.complementarity_residual = self.residual
+        result.homotopy = list(self.history)
+        result.stats.iterations = sum(h["iterations"] for h in self.history)
+        if result.stats.success and self.residual > self.settings["tol"]:
+            worst = worst_pair(self.pairs, value)
+            raise OptimizationError(
+                f"contact-implicit solve: the complementarity residual {self.residual:.3g} exceeds contacts.tol = "
+                f"{self.settings['tol']:g} (worst: {worst}); lower contacts.sigma_final or raise N", result=result)
+
+
+def _numbers(value, x) -> np.ndarray:
+    """``x`` (MX, or a constant) at the solution ``value`` as a flat array."""
+    return np.array(ca.DM(x) if not isinstance(x, ca.MX) else ca.DM(value(x)), float).reshape(-1)
+
+
+def complementarity_residual(pairs, value) -> float:
+    """``max_i min(a_i, c_i)`` over every pair (0 when every pair is complementary)."""
+    worst = 0.0
+    for pair in pairs:
+        a, c = _numbers(value, pair.a), _numbers(value, pair.c)
+        worst = max(worst, float(np.max(np.abs(np.minimum(a, c)), initial=0.0)))
+    return worst
+
+
+def worst_pair(pairs, value) -> str:
+    best, label = -1.0, ""
+    for pair in pairs:
+        a, c = _numbers(value, pair.a), _numbers(value, pair.c)
+        r = float(np.max(np.abs(np.minimum(a, c)), initial=0.0))
+        if r > best:
+            best, label = r, pair.label
+    return f"{label}: {best:.3g}"
