@@ -526,6 +526,75 @@ class BoxCorner(SphereBox):
                 "corner_signs": self.corner_signs.tolist(), "corner_size": self.corner_size.tolist()}
 
 
+#: Edges whose directions are within this sine of parallel have no edge contact (their
+#: common normal is ill-defined); the corners of the boxes carry such contacts.
+PARALLEL_SIN = 1e-2
+#: Edge contacts and box corners: the margin, relative to the smallest edge of the two
+#: shapes, by which a crossing must lie inside both edges (the corners cover the rest, with
+#: the same tolerance: ``EDGE_TOL`` of :mod:`ncgen.assembly.contacts`).
+EDGE_MARGIN = 1e-2
+
+
+class EdgeContact(Contact):
+    """One point contact of an element (built by it, never attached): an edge of a box, or a
+    capsule's segment, against an edge or a segment of another shape, where the two cross.
+
+    Each side ``(member, size, at, rotation, axis, choice, radius)`` is a box of full edge
+    lengths ``size`` centred at ``at`` with axes ``rotation`` (columns) in the member's frame
+    (the world frame for the ground): its edges parallel to axis ``axis``, of which the one
+    facing the other shape (:mod:`ncgen.assembly.contacts`, ``choice`` ∈ {0, 1} picking the
+    side where the facing direction is ambiguous), swollen by ``radius`` (m).  A capsule's
+    segment is the box ``(0, 0, L)`` with ``axis = 2`` and its radius.  The gap is the
+    distance between the two edges' lines along their common normal ``n`` (from ``a``'s
+    towards ``b``'s, forces on ``b``) less the radii, while their closest points lie inside
+    both edges by ``margin`` (m), the edges are not parallel (:data:`PARALLEL_SIN`) and the
+    gap is above ``−margin``, and that plus ``band`` (m, larger than any such distance, so
+    never a contact) otherwise."""
+
+    def __init__(self, element, suffix: str, side_a: tuple, side_b: tuple, margin: float, band: float):
+        super().__init__(mu=element.mu, restitution=element.restitution, stiffness=element.stiffness,
+                         damping=element.damping, exponent=element.exponent, slip_velocity=element.slip_velocity,
+                         name=f"{element.name}.{suffix}")
+        self.kind, self.element = element.kind, element.name
+        self.a, self.b = side_a[0], side_b[0]
+        self.edge_a, self.edge_b = (self._side(side) for side in (side_a, side_b))
+        self.radius = self.edge_a["radius"] + self.edge_b["radius"]
+        self.margin, self.band = float(margin), float(band)
+
+    @staticmethod
+    def _side(side) -> dict:
+        _, size, at, rotation, axis, choice, radius = side
+        return {"size": np.asarray(size, float).tolist(), "at": np.asarray(at, float).tolist(),
+                "rotation": np.asarray(rotation, float).tolist(), "axis": int(axis), "choice": int(choice),
+                "radius": float(radius)}
+
+    def members(self):
+        return [self.a, self.b]
+
+    def spec(self):
+        return {**super().spec(), "element": self.element, "a": self.a.name, "b": self.b.name,
+                "edge_a": self.edge_a, "edge_b": self.edge_b, "margin": self.margin, "band": self.band}
+
+
+def edge_contacts(element, side_a: tuple, side_b: tuple, choices_a: int, choices_b: int) -> list:
+    """The :class:`EdgeContact` s between the edges of two shapes, each side ``(member, size,
+    at, rotation, axes, radius)`` with ``axes`` the axes whose edges take part; ``choices``
+    is 2 for a box (the facing edge may be either of two), 1 for a segment.  Named
+    ``edge<i><j><p><r>``: axis i of ``a``, axis j of ``b``, choices p and r."""
+    (ma, size_a, at_a, rot_a, axes_a, r_a), (mb, size_b, at_b, rot_b, axes_b, r_b) = side_a, side_b
+    dims = [x for x in (*size_a, *size_b) if x > 0] + [2 * r for r in (r_a, r_b) if r > 0]
+    margin = EDGE_MARGIN * min(dims)
+    band = 10 * (float(np.sum(size_a) + np.sum(size_b)) + 2 * (r_a + r_b))
+    out = []
+    for i in axes_a:
+        for j in axes_b:
+            for p in range(choices_a):
+                for r in range(choices_b):
+                    out.append(EdgeContact(element, f"edge{i}{j}{p}{r}", (ma, size_a, at_a, rot_a, i, p, r_a),
+                                           (mb, size_b, at_b, rot_b, j, r, r_b), margin, band))
+    return out
+
+
 class BoxBox(Contact):
     """Two boxes: full edge lengths ``size_a`` (m) centred at ``at_a`` with axes along the
     columns of ``rotation_a`` in ``a``'s frame, and likewise ``size_b``, ``at_b``,
@@ -537,9 +606,10 @@ class BoxBox(Contact):
     an edge or a corner of the other wherever a corner of one of them is in contact: a box
     on a larger, a smaller or an equal box, shifted or turned in the plane of contact so
     long as a corner of one lies over the other's face (docs/contact.md gives the method and
-    its tolerances).  Not covered: two edges crossing with no corner in contact (e.g. equal
-    squares stacked at 45°, or two beams crossed edge on edge): the boxes then pass through
-    each other."""
+    its tolerances).  In 3D, edges crossing edges are point contacts too (:class:`EdgeContact`,
+    ``<name>.edge<i><j><p><r>``: the edges along axis i of ``a`` and axis j of ``b``, 36 in
+    all, forces on ``b``): equal boxes stacked at 45°, or two beams crossed edge on edge,
+    rest on the crossings."""
 
     kind = "BoxBox"
 
@@ -571,6 +641,10 @@ class BoxBox(Contact):
                 bc = BoxCorner(self, f"{mine}_corner{i}", member, size, at, rot, signs, *boxes[other])
                 bc.system = system
                 self._points.append(bc)
+        if d == 3:
+            for e in edge_contacts(self, (*boxes["a"], range(3), 0.0), (*boxes["b"], range(3), 0.0), 2, 2):
+                e.system = system
+                self._points.append(e)
 
     def point_contacts(self) -> list:
         return list(self._points)
@@ -585,6 +659,3 @@ def point_contacts(contacts) -> list:
     """The point contacts of ``contacts`` (elements expanded), in order."""
     return [p for c in contacts for p in c.point_contacts()]
 
-
-CONTACT_TYPES: dict[str, type[Contact]] = {cls.kind: cls for cls in (SpherePlane, SphereSphere, BoxPlane,
-                                                                     CapsulePlane, CylinderPlane, SphereBox, BoxBox)}

@@ -16,7 +16,11 @@ Layout of a file (every table optional except ``members``)::
                   "CylinderPlane" (body, radius, length, face_points), each with at, rotation, plane,
                   point, normal; or "SphereBox" (sphere, at, radius, box = "ground", size, box_at,
                   box_rotation) or "BoxBox" (between = ["a", "b"], size_a, size_b, at_a, rotation_a,
-                  at_b, rotation_b); all with mu, restitution, stiffness, damping, exponent, slip_velocity, name
+                  at_b, rotation_b); "CapsuleSphere" (sphere, sphere_at, sphere_radius, capsule = "ground",
+                  radius, length, at, rotation), "CapsuleCapsule" (between = ["a", "b"], radius_a, length_a,
+                  radius_b, length_b, at_a, rotation_a, at_b, rotation_b) or "CapsuleBox" (capsule, radius,
+                  length, at, rotation, box = "ground", size, box_at, box_rotation); all with mu,
+                  restitution, stiffness, damping, exponent, slip_velocity, name
 
 Shared basic points are written ``"crank.r_j"`` (slot ``r_j`` of member ``crank``) or
 ``{ground = [x, y, z]}``.  Values that may vary are numbers or expression strings
@@ -38,7 +42,9 @@ from ncgen.errors import ModelError
 from ncgen.files import decode_text
 from ncgen.model import toml_write
 from ncgen.model.expressions import did_you_mean, parse, scope, value_to_toml
-from ncgen.model.contacts import CONTACT_TYPES, BoxBox, SphereSphere
+from ncgen.model.capsule_contacts import CapsuleCapsule
+from ncgen.model.contact_pairs import CONTACT_TYPES
+from ncgen.model.contacts import BoxBox, SphereSphere
 from ncgen.model.forces import FORCE_TYPES
 from ncgen.model.joint_base import Joint
 from ncgen.model.joints import JOINT_TYPES, CoordinateDriver, Mimic
@@ -109,6 +115,16 @@ CONTACT_FIELDS = {
     "BoxBox": (Field("between", "two members", True, ("a", "b")), Field("size_a", "vector", True),
                Field("size_b", "vector", True), Field("at_a", "vector"), Field("rotation_a", "rotation"),
                Field("at_b", "vector"), Field("rotation_b", "rotation")),
+    "CapsuleSphere": (Field("sphere", "member", True), Field("sphere_at", "vector"), Field("sphere_radius", "number"),
+                      Field("capsule", "member"), Field("radius", "number", True), Field("length", "number", True),
+                      Field("at", "vector"), Field("rotation", "rotation")),
+    "CapsuleCapsule": (Field("between", "two members", True, ("a", "b")), Field("radius_a", "number", True),
+                       Field("length_a", "number", True), Field("radius_b", "number", True),
+                       Field("length_b", "number", True), Field("at_a", "vector"), Field("rotation_a", "rotation"),
+                       Field("at_b", "vector"), Field("rotation_b", "rotation")),
+    "CapsuleBox": (Field("capsule", "member", True), Field("radius", "number", True), Field("length", "number", True),
+                   Field("at", "vector"), Field("rotation", "rotation"), Field("box", "member"),
+                   Field("size", "vector", True), Field("box_at", "vector"), Field("box_rotation", "rotation")),
 }
 
 #: Joints whose keys are not ``between`` and their keyword arguments.
@@ -553,7 +569,7 @@ class _Loader:
 def _contact_entries(c) -> dict:
     spec = c.spec()
     out = {"type": spec.pop("type"), "name": spec.pop("name")}
-    if isinstance(c, (SphereSphere, BoxBox)):
+    if isinstance(c, (SphereSphere, BoxBox, CapsuleCapsule)):
         out["between"] = [spec.pop("a"), spec.pop("b")]
     out.update({k: _plain(v) for k, v in spec.items()})
     return out
