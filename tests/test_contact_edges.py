@@ -65,7 +65,7 @@ def crossed_beams(angle, lift):
     top_rot = R_z(angle) @ R_x(0.9)
     top = s.add_body("top", mass=1.0, inertia=box_inertia(1.0, BEAM), rotation=top_rot,
                      position=(0.05, -0.03, sum(reach) + lift), velocity=(0.2, -0.1, 0.3), angular_velocity=(1, 2, -1))
-    s.add_contact(nc.BoxBox(s.ground, BEAM, top, BEAM, at_a=(0.05, -0.03, 0), rotation_a=R_x(0.6), name="cross"))
+    s.add_contact(nc.BoxBox(s.ground, BEAM, top, BEAM, at_a=(0.05, -0.03, 0), rotation_a=R_x(0.6), name="cross", edges=True))
     return s.build(contacts="smooth"), top_rot, sum(reach)     # smooth: starts inside allowed
 
 
@@ -113,7 +113,7 @@ def test_edge_gaps_never_report_contact_between_boxes_apart():
         s = nc.System("apart")
         a = s.add_body("a", mass=1.0, inertia=box_inertia(1.0, size_a), rotation=Ra, position=(0, 0, 0))
         b = s.add_body("b", mass=1.0, inertia=box_inertia(1.0, size_b), rotation=Rb, position=cb)
-        s.add_contact(nc.BoxBox(a, size_a, b, size_b, name="ab"))
+        s.add_contact(nc.BoxBox(a, size_a, b, size_b, name="ab", edges=True))
         model = s.build(contacts="nonsmooth")        # refuses any gap below 0: none while apart
         g = model.gap(model.q0)[edge_rows(model, "ab")]
         assert g.min() >= d - 1e-9, (g.min(), d)
@@ -131,7 +131,7 @@ def cubes_at_45(drop, mu):
     upper = s.add_body("upper", mass=1.0, inertia=box_inertia(1.0, CUBE), rotation=R_z(np.pi / 4),
                        position=(0, 0, 1.5 * CUBE[2] + drop))
     s.add_contact(nc.BoxPlane(lower, size=CUBE, mu=mu, name="floor"))
-    s.add_contact(nc.BoxBox(upper, CUBE, lower, CUBE, mu=mu, name="stack"))
+    s.add_contact(nc.BoxBox(upper, CUBE, lower, CUBE, mu=mu, name="stack", edges=True))
     return s.build(contacts="nonsmooth")
 
 
@@ -169,3 +169,23 @@ def test_equal_cubes_crossed_at_45_degrees_rest_on_their_edges(drop, mu):
     floor = [i for i, n in enumerate(tr.contact_names) if n.startswith("floor.")]
     np.testing.assert_allclose(f[rest][:, floor].sum(axis=1), 3.0 * G, rtol=rtol)
     assert tr.gap[:, edges].min() > -1e-8
+
+
+def test_edges_are_off_by_default_and_round_trip_through_toml():
+    s = nc.System("flags")
+    a = s.add_body("a", mass=1.0, inertia=box_inertia(1.0, CUBE), position=(0, 0, 0.1))
+    b = s.add_body("b", mass=1.0, inertia=box_inertia(1.0, CUBE), position=(0, 0, 0.4), rotation=R_z(0.3))
+    s.add_contact(nc.BoxBox(b, CUBE, a, CUBE, name="plain"))
+    s.add_contact(nc.BoxBox(b, CUBE, a, CUBE, name="full", edges=True))
+    model = s.build(contacts="smooth")
+    assert sum(n.startswith("plain.") for n in model.contact_names) == 16
+    assert sum(n.startswith("full.edge") for n in model.contact_names) == 36
+    text = s.to_toml()
+    assert text.count("edges = true") == 1
+    assert nc.System.from_toml(text).build(contacts="smooth").contacts == model.contacts
+    with pytest.raises(nc.ModelError, match=r"'bad' \(BoxBox\): edges: expected true or false, got 1"):
+        s.add_contact(nc.BoxBox(b, CUBE, a, CUBE, name="bad", edges=1))
+    flat = nc.System("flat", gravity=(0, -G))
+    p = flat.add_body("p", coords="ruv", mass=1.0, inertia=0.01, position=(0, 1))
+    with pytest.raises(nc.ModelError, match=r"edge crossings need a 3D system"):
+        flat.add_contact(nc.BoxBox(p, (1, 1), flat.ground, (1, 1), name="bb", edges=True))

@@ -606,18 +606,21 @@ class BoxBox(Contact):
     an edge or a corner of the other wherever a corner of one of them is in contact: a box
     on a larger, a smaller or an equal box, shifted or turned in the plane of contact so
     long as a corner of one lies over the other's face (docs/contact.md gives the method and
-    its tolerances).  In 3D, edges crossing edges are point contacts too (:class:`EdgeContact`,
-    ``<name>.edge<i><j><p><r>``: the edges along axis i of ``a`` and axis j of ``b``, 36 in
-    all, forces on ``b``): equal boxes stacked at 45°, or two beams crossed edge on edge,
-    rest on the crossings."""
+    its tolerances).  With ``edges=True`` (3D), edges crossing edges are point contacts too
+    (:class:`EdgeContact`, ``<name>.edge<i><j><p><r>``: the edges along axis i of ``a`` and
+    axis j of ``b``, 36 in all, forces on ``b``): equal boxes stacked at 45°, or two beams
+    crossed edge on edge, rest on the crossings; without them such boxes pass through each
+    other.  They are off by default: they triple the pair's kernels (the package of
+    ``examples/box_stack.toml`` from 1.6 to 3.3 MB, its generation from ~5 to ~100 s)."""
 
     kind = "BoxBox"
 
     def __init__(self, a, size_a=None, b=None, size_b=None, *, at_a=None, rotation_a=None, at_b=None,
-                 rotation_b=None, **material):
+                 rotation_b=None, edges=False, **material):
         super().__init__(**material)
         self.a, self.size_a, self.at_a, self.rotation_a = a, size_a, at_a, rotation_a
         self.b, self.size_b, self.at_b, self.rotation_b = b, size_b, at_b, rotation_b
+        self.edges = edges
         self._points: list = []
 
     def members(self):
@@ -641,7 +644,12 @@ class BoxBox(Contact):
                 bc = BoxCorner(self, f"{mine}_corner{i}", member, size, at, rot, signs, *boxes[other])
                 bc.system = system
                 self._points.append(bc)
-        if d == 3:
+        if not isinstance(self.edges, bool):
+            raise ModelError(f"{self.label}: edges: expected true or false, got {self.edges!r}")
+        if self.edges and d != 3:
+            raise ModelError(f"{self.label}: edges: edge crossings need a 3D system (in a plane the corners "
+                             "cover every contact), got a planar one")
+        if self.edges:
             for e in edge_contacts(self, (*boxes["a"], range(3), 0.0), (*boxes["b"], range(3), 0.0), 2, 2):
                 e.system = system
                 self._points.append(e)
@@ -652,7 +660,8 @@ class BoxBox(Contact):
     def spec(self):
         return {**super().spec(), "a": self.a.name, "size_a": self.size_a.tolist(), "at_a": self.at_a.tolist(),
                 "rotation_a": self.rotation_a.tolist(), "b": self.b.name, "size_b": self.size_b.tolist(),
-                "at_b": self.at_b.tolist(), "rotation_b": self.rotation_b.tolist()}
+                "at_b": self.at_b.tolist(), "rotation_b": self.rotation_b.tolist(),
+                **({"edges": True} if self.edges else {})}
 
 
 def point_contacts(contacts) -> list:

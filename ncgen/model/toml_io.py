@@ -16,7 +16,7 @@ Layout of a file (every table optional except ``members``)::
                   "CylinderPlane" (body, radius, length, face_points), each with at, rotation, plane,
                   point, normal; or "SphereBox" (sphere, at, radius, box = "ground", size, box_at,
                   box_rotation) or "BoxBox" (between = ["a", "b"], size_a, size_b, at_a, rotation_a,
-                  at_b, rotation_b); "CapsuleSphere" (sphere, sphere_at, sphere_radius, capsule = "ground",
+                  at_b, rotation_b, edges); "CapsuleSphere" (sphere, sphere_at, sphere_radius, capsule = "ground",
                   radius, length, at, rotation), "CapsuleCapsule" (between = ["a", "b"], radius_a, length_a,
                   radius_b, length_b, at_a, rotation_a, at_b, rotation_b) or "CapsuleBox" (capsule, radius,
                   length, at, rotation, box = "ground", size, box_at, box_rotation); all with mu,
@@ -114,7 +114,7 @@ CONTACT_FIELDS = {
                   Field("box_rotation", "rotation")),
     "BoxBox": (Field("between", "two members", True, ("a", "b")), Field("size_a", "vector", True),
                Field("size_b", "vector", True), Field("at_a", "vector"), Field("rotation_a", "rotation"),
-               Field("at_b", "vector"), Field("rotation_b", "rotation")),
+               Field("at_b", "vector"), Field("rotation_b", "rotation"), Field("edges", "bool")),
     "CapsuleSphere": (Field("sphere", "member", True), Field("sphere_at", "vector"), Field("sphere_radius", "number"),
                       Field("capsule", "member"), Field("radius", "number", True), Field("length", "number", True),
                       Field("at", "vector"), Field("rotation", "rotation")),
@@ -620,7 +620,7 @@ def _plain(v):
         if v.member.is_ground:
             return {"ground": [float(x) for x in v.position]}
         return f"{v.member.name}.{v.member.ctype.slots[v.slot]}"
-    if isinstance(v, str):
+    if isinstance(v, (str, bool)):
         return v
     if isinstance(v, dict):
         return {k: _plain(x) for k, x in v.items()}
