@@ -25,7 +25,7 @@ _HOMES: dict[str, tuple[str, ...]] = {
     "ncgen.assembly.kinematics": ("assemble", "dof_report", "project_velocity", "solve_kinematics"),
     "ncgen.codegen.model_package": ("generate",),
     "ncgen.control": ("MPC", "StepDidNotConverge", "StepFunction", "export_mpc", "ilqr", "step_function"),
-    "ncgen.model.capsule_contacts": ("CapsuleBox", "CapsuleCapsule", "CapsuleSphere"),
+    "ncgen.model.capsule_contacts": ("CapsuleBox", "CapsuleCapsule", "CapsuleSphere", "CylinderSphere"),
     "ncgen.model.contact_pairs": ("contact_between",),
     "ncgen.model.contacts": ("BoxBox", "BoxPlane", "CapsulePlane", "Contact", "CylinderPlane", "SphereBox",
                              "SpherePlane", "SphereSphere"),

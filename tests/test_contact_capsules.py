@@ -176,6 +176,8 @@ def test_contact_between_follows_the_pair_table():
     assert made == {("ball", "crate"): "SphereBox", ("ball", "pill"): "CapsuleSphere",
                     ("crate", "ball"): "SphereBox", ("crate", "pill"): "CapsuleBox",
                     ("pill", "ball"): "CapsuleSphere", ("pill", "crate"): "CapsuleBox"}
+    assert type(nc.contact_between(members["can"], members["ball"])).__name__ == "CylinderSphere"
+    assert type(nc.contact_between(members["ball"], members["can"])).__name__ == "CylinderSphere"
     for k, kind in (("ball", "SpherePlane"), ("crate", "BoxPlane"), ("pill", "CapsulePlane"), ("can", "CylinderPlane")):
         assert type(nc.contact_between(members[k], s.ground)).__name__ == kind
         assert type(nc.contact_between(s.ground, members[k])).__name__ == kind
@@ -333,3 +335,75 @@ def test_capsule_rolls_down_a_tilted_box(scenes):
     s = tr.point("roll", (0, 0, 0)) @ down
     a = np.diff(s, 2) / 0.01 ** 2
     np.testing.assert_allclose(a[1:], G * np.sin(THETA) / (1 + I_AX / (M_CAP * R_CAP ** 2)), rtol=1e-4)
+
+
+def cylinder_distance(m, R3, radius, length, x):
+    """Distance (m) from x to a solid cylinder (axis the z of R3), by an independent search
+    over cylindrical coordinates of its points, from several starts."""
+    e1, e2, u = R3[:, 0], R3[:, 1], R3[:, 2]
+
+    def f(y):
+        return np.sum((m + y[0] * (np.cos(y[1]) * e1 + np.sin(y[1]) * e2) + y[2] * u - x) ** 2)
+    starts = [(radius / 2, th, 0.0) for th in np.linspace(0, 2 * np.pi, 8, endpoint=False)]
+    res = min((minimize(f, y0, method="L-BFGS-B", bounds=[(0, radius), (None, None), (-length / 2, length / 2)],
+                        options={"ftol": 1e-16, "gtol": 1e-13}) for y0 in starts), key=lambda r: r.fun)
+    return np.sqrt(res.fun)
+
+
+def test_cylinder_sphere_gap_is_the_signed_distance():
+    """Balls beside the side, over an end face, off the rim and inside a tilted moving can:
+    gaps against an independent search (outside) and the depth below the nearest surface
+    (inside); W_N = ∂g/∂q."""
+    s = nc.System("can")
+    rot, c0 = R_y(0.4) @ R_x(0.3), np.array([0.1, -0.2, 1.0])
+    radius, length = 0.1, 0.3
+    can = s.add_body("can", mass=1.0, inertia=np.diag([0.1, 0.1, 0.05]), position=c0, rotation=rot,
+                     velocity=(0.3, -0.2, 0.5), angular_velocity=(1.0, -2.0, 0.7))
+    targets = {"side": (0.13, 0.05, 0.02), "face": (0.02, -0.03, 0.2), "rim": (0.1, 0.08, -0.19),
+               "inside_side": (0.07, 0.05, 0.0), "inside_face": (0.01, 0.0, 0.14)}
+    r_ball = 0.02
+    for k, name in enumerate(targets):
+        ball = s.add_body(name, mass=0.5, inertia=1e-4 * np.eye(3), position=(0, 0, 10.0 + k),
+                          velocity=(0.1, 0.2, -0.3))
+        s.add_contact(nc.CylinderSphere(ball, sphere_radius=r_ball, cylinder=can, radius=radius, length=length,
+                                        mu=0.3, name=name))
+    model = s.build(contacts="smooth")
+    q = model.q0.copy()
+    for name, local in targets.items():
+        i = model.layout.nodes[model.layout.slots[name][0]].index
+        q[i:i + 3] = c0 + rot @ np.array(local)
+    g = model.gap(q)
+    for k, (name, local) in enumerate(targets.items()):
+        rho, z = np.hypot(local[0], local[1]), abs(local[2])
+        if rho < radius and z < length / 2:
+            expected = -min(radius - rho, length / 2 - z) - r_ball
+        else:
+            expected = cylinder_distance(c0, rot, radius, length, c0 + rot @ np.array(local)) - r_ball
+        np.testing.assert_allclose(g[k], expected, atol=1e-8, err_msg=name)
+    WN_T, dg = tangent_fd(model, q)
+    np.testing.assert_allclose(WN_T, dg, atol=1e-7)
+
+
+def test_ball_rests_on_the_end_face_of_a_standing_can():
+    """A ball dropped 1 cm onto the top face of a can fixed to the ground, off its axis, and
+    a ball lying in the angle between a can's side and the floor: at rest they carry m g on
+    the face, and m g split by the two normals (frictionless: floor m g, side none)."""
+    s = nc.System("can_rest")
+    rb = 0.03
+    top = s.add_body("top", mass=0.4, inertia=0.4 * 0.4 * rb * rb * np.eye(3), position=(0.05, 0.02, 0.3 + rb + 0.01))
+    s.add_contact(nc.CylinderSphere(top, sphere_radius=rb, radius=0.1, length=0.3, at=(0, 0, 0.15), mu=0.5,
+                                    name="face"))
+    side = s.add_body("side", mass=0.4, inertia=0.4 * 0.4 * rb * rb * np.eye(3), position=(1.0 + 0.1 + rb, 0, rb))
+    s.add_contact(nc.CylinderSphere(side, sphere_radius=rb, radius=0.1, length=0.3, at=(1.0, 0, 0.15), name="beside"))
+    s.add_contact(nc.SpherePlane(side, radius=rb, name="floor"))
+    model = s.build(contacts="nonsmooth")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tr = nc.simulate(model, 0.5, 0.01, method="stepper", substeps=10)
+    rest = tr.t > 0.1
+    f = tr.contact_normal
+    np.testing.assert_allclose(f[rest, tr.contact_names.index("face")], 0.4 * G, rtol=1e-9)
+    np.testing.assert_allclose(tr.point("top", (0, 0, 0))[rest], [[0.05, 0.02, 0.3 + rb]] * rest.sum(), atol=1e-8)
+    np.testing.assert_allclose(f[1:, tr.contact_names.index("floor")], 0.4 * G, rtol=1e-9)
+    assert np.all(f[:, tr.contact_names.index("beside")] == 0)
+    np.testing.assert_allclose(tr.gap[:, tr.contact_names.index("beside")], 0, atol=1e-12)

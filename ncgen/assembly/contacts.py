@@ -33,7 +33,7 @@ import numpy as np
 from ncgen.errors import ModelError
 from ncgen.model.context import Context, perpendicular_basis
 from ncgen.model.contacts import PARALLEL_SIN, BoxCorner, EdgeContact, SphereBox, SphereSphere, point_contacts
-from ncgen.model.capsule_contacts import CapsuleSphere
+from ncgen.model.capsule_contacts import CapsuleSphere, CylinderSphere
 from ncgen.rigid_motion import casadi_forms as crm
 
 #: Regularisation of a cylinder rim's lowest point (dimensionless): within ~ε rad of standing
@@ -74,6 +74,8 @@ def contact_terms(ctx: Context, contacts) -> list[ContactTerms]:
             return _sphere_box(ctx, c)
         if isinstance(c, EdgeContact):
             return _edge_edge(ctx, c)
+        if isinstance(c, CylinderSphere):
+            return _cylinder_sphere(ctx, c)
         if isinstance(c, CapsuleSphere):
             return _capsule_sphere(ctx, c)
         return _sphere_plane(ctx, c)
@@ -297,6 +299,33 @@ def _capsule_sphere(ctx: Context, c: CapsuleSphere) -> ContactTerms:
     rel = _material_velocity(ctx, c.sphere, x, xd, point) - _material_velocity(ctx, c.capsule, m, md, point)
     WN, WT = _jacobians(ctx, n, tangent_basis(n), rel)
     return ContactTerms(c, dist - c.total_radius, WN, WT)
+
+
+def _cylinder_sphere(ctx: Context, c: CylinderSphere) -> ContactTerms:
+    """A sphere (centre x, radius r_s) against a solid cylinder (centre m, unit axis u,
+    radius R, length L).  With ``z = u·(x − m)``, the radial vector ``ρ = x − m − z u``
+    (``ρ̂ = ρ/|ρ|``), ``a = |ρ| − R`` and ``b = |z| − L/2``: outside (a > 0 or b > 0),
+    ``g = sqrt(a⁺² + b⁺²) − r_s`` with ``n = (a⁺ ρ̂ + b⁺ sign(z) u)/sqrt(a⁺² + b⁺²)``
+    (side, end face or rim); inside, ``g = max(a, b) − r_s`` with ``n = ρ̂`` or
+    ``sign(z) u`` (the signed distance).  ``W_N = ∂g/∂q`` within each region."""
+    x, xd = _fixed_point(ctx, c.sphere, c.sphere_at)
+    m, md = _fixed_point(ctx, c.capsule, c.at)
+    u = _axes(ctx, c.capsule, c.at, c.rotation)[2]
+    z = ca.dot(u, x - m)
+    rho = x - m - z * u
+    rlen = ca.sqrt(ca.fmax(ca.sumsqr(rho), 1e-300))
+    radial = ca.if_else(rlen > 1e-12, rho / rlen, tangent_basis(u)[0])
+    axial = ca.if_else(z >= 0, 1, -1) * u
+    a, b = rlen - c.radius, ca.fabs(z) - c.length / 2
+    ap, bp = ca.fmax(a, 0), ca.fmax(b, 0)
+    dist = ca.sqrt(ca.fmax(ap * ap + bp * bp, 1e-300))
+    outside = ca.logic_or(a > 0, b > 0)
+    g = ca.if_else(outside, dist, ca.fmax(a, b)) - c.sphere_radius
+    n = ca.if_else(outside, (ap * radial + bp * axial) / dist, ca.if_else(a > b, radial, axial))
+    point = x - c.sphere_radius * n
+    rel = _material_velocity(ctx, c.sphere, x, xd, point) - _material_velocity(ctx, c.capsule, m, md, point)
+    WN, WT = _jacobians(ctx, n, tangent_basis(n), rel)
+    return ContactTerms(c, g, WN, WT)
 
 
 def _all(conditions):

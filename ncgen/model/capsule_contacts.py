@@ -10,6 +10,8 @@ along the local z of its axes ``rotation`` (columns, in its member's frame), cen
   (``<name>.a_end0``, ``a_end1``, ``b_end0``, ``b_end1``) and the two segments where they
   cross (``<name>.segments``, an :class:`~ncgen.model.contacts.EdgeContact`): parallel,
   crossed or end on side;
+* :class:`CylinderSphere`: a sphere against a solid cylinder, one point (the signed
+  distance);
 * :class:`CapsuleBox`: the capsule's end spheres against the box (``<name>.end0``,
   ``end1``, :class:`~ncgen.model.contacts.SphereBox` points), the box's corners against
   the capsule (``<name>.corner0 …``) and the segment against the box's edges where they
@@ -29,13 +31,14 @@ from ncgen.validation import as_vector, rotation as as_rotation
 
 
 def _capsule(contact, member, radius, length, at, rotation, what: str):
-    """Check a capsule carried by ``member`` (the ground or a body): returns ``(radius,
-    length, at, rotation)`` as numbers and arrays."""
+    """Check a capsule (or a cylinder: ``what``) carried by ``member`` (the ground or a
+    body): returns ``(radius, length, at, rotation)`` as numbers and arrays."""
+    shape = "cylinder" if what == "cylinder" else "capsule"
     if not member.is_ground and member.kind != "body":
-        raise ModelError(f"{contact.label}: {what}: a capsule needs the ground or a rigid body to carry it, got the "
+        raise ModelError(f"{contact.label}: {what}: a {shape} needs the ground or a rigid body to carry it, got the "
                          f"{member.kind} {member.name!r}")
     if member.dim != 3:
-        raise ModelError(f"{contact.label}: a capsule needs a 3D system, got a planar one")
+        raise ModelError(f"{contact.label}: a {shape} needs a 3D system, got a planar one")
     radius = contact._length(radius, f"{what} radius")
     length = contact._length(length, f"{what} length", positive=False)
     at = as_vector(np.zeros(3) if at is None else at, 3, f"{contact.label}: {what} at")
@@ -222,3 +225,46 @@ class CapsuleBox(Contact):
         return {**super().spec(), "capsule": self.capsule.name, "radius": self.radius, "length": self.length,
                 "at": self.at.tolist(), "rotation": self.rotation.tolist(), "box": self.box.name,
                 "size": self.size.tolist(), "box_at": self.box_at.tolist(), "box_rotation": self.box_rotation.tolist()}
+
+
+class CylinderSphere(CapsuleSphere):
+    """A sphere of ``sphere_radius`` (m, ≥ 0) centred at ``sphere_at`` of ``sphere`` against
+    the solid cylinder of ``radius`` and ``length`` (m) along the local z of ``rotation``,
+    centred at ``at`` of ``cylinder`` (the ground by default, or a body).  One point: the
+    signed distance from the sphere's centre to the cylinder less ``sphere_radius`` —
+    outside, the distance to its nearest point (side, end face or rim); inside, the largest
+    of the side's and the end planes' distances (:mod:`ncgen.assembly.contacts`).  The
+    normal points from the cylinder towards the sphere; forces are those on the sphere."""
+
+    kind = "CylinderSphere"
+    ground_default = "cylinder"
+
+    def __init__(self, sphere, sphere_at=None, sphere_radius=0.0, *, cylinder=None, radius=None, length=None,
+                 at=None, rotation=None, **material):
+        super().__init__(sphere, sphere_at, sphere_radius, capsule=cylinder, radius=radius, length=length, at=at,
+                         rotation=rotation, **material)
+
+    @property
+    def cylinder(self):
+        return self.capsule
+
+    @cylinder.setter
+    def cylinder(self, member):
+        self.capsule = member
+
+    def check(self, system):
+        if self.capsule is self.sphere:
+            raise ModelError(f"{self.label}: the sphere and the cylinder are on the same member {self.sphere.name!r}")
+        self.radius, self.length, self.at, self.rotation = _capsule(self, self.capsule, self.radius, self.length,
+                                                                    self.at, self.rotation, "cylinder")
+        self.length = self._length(self.length, "cylinder length")
+        self._check_sphere(system.dim)
+
+    @property
+    def total_radius(self) -> float:
+        return self.sphere_radius
+
+    def spec(self):
+        out = super().spec()
+        out["cylinder"] = out.pop("capsule")
+        return out

@@ -18,16 +18,17 @@ box–box            :class:`~ncgen.model.contacts.BoxBox` (corners, edge crossi
 capsule–sphere     :class:`~ncgen.model.capsule_contacts.CapsuleSphere`
 capsule–capsule    :class:`~ncgen.model.capsule_contacts.CapsuleCapsule` (ends, segments)
 capsule–box        :class:`~ncgen.model.capsule_contacts.CapsuleBox` (ends, corners, edges)
+cylinder–sphere    :class:`~ncgen.model.capsule_contacts.CylinderSphere`
 =================  =========================================================================
 
-Any other pair (a cylinder against a sphere, a box, a capsule or a cylinder; an ellipsoid
-or a mesh against anything) is refused by :func:`contact_between` with a message naming
+Any other pair (a cylinder against a box, a capsule or a cylinder; an ellipsoid or a mesh
+against anything) is refused by :func:`contact_between` with a message naming
 both shapes.  :data:`CONTACT_TYPES` lists every element by its TOML ``type``.
 """
 from __future__ import annotations
 
 from ncgen.errors import ModelError
-from ncgen.model.capsule_contacts import CapsuleBox, CapsuleCapsule, CapsuleSphere
+from ncgen.model.capsule_contacts import CapsuleBox, CapsuleCapsule, CapsuleSphere, CylinderSphere
 from ncgen.model.contacts import (BoxBox, BoxPlane, CapsulePlane, Contact, CylinderPlane, SphereBox, SpherePlane,
                                   SphereSphere)
 
@@ -36,13 +37,13 @@ PAIRS: dict[tuple[str, str], type[Contact]] = {
     ("sphere", "plane"): SpherePlane, ("box", "plane"): BoxPlane, ("capsule", "plane"): CapsulePlane,
     ("cylinder", "plane"): CylinderPlane, ("sphere", "sphere"): SphereSphere, ("sphere", "box"): SphereBox,
     ("box", "box"): BoxBox, ("capsule", "sphere"): CapsuleSphere, ("capsule", "capsule"): CapsuleCapsule,
-    ("capsule", "box"): CapsuleBox,
+    ("capsule", "box"): CapsuleBox, ("cylinder", "sphere"): CylinderSphere,
 }
 
 #: Every contact element by its ``kind`` (TOML ``type``).
 CONTACT_TYPES: dict[str, type[Contact]] = {cls.kind: cls for cls in (
     SpherePlane, SphereSphere, BoxPlane, CapsulePlane, CylinderPlane, SphereBox, BoxBox, CapsuleSphere,
-    CapsuleCapsule, CapsuleBox)}
+    CapsuleCapsule, CapsuleBox, CylinderSphere)}
 
 
 def pair_element(kind_a: str, kind_b: str) -> tuple[type[Contact], bool]:
@@ -99,6 +100,8 @@ def contact_between(a, b, **material) -> Contact:
     capsule = dict(radius=sa.size[0], length=sa.size[1], at=sa.position, rotation=sa.rotation)
     if cls is CapsuleSphere:
         return CapsuleSphere(b, sb.position, sb.size[0], capsule=a, **capsule, **material)
+    if cls is CylinderSphere:
+        return CylinderSphere(b, sb.position, sb.size[0], cylinder=a, **capsule, **material)
     if cls is CapsuleCapsule:
         return CapsuleCapsule(a, sa.size[0], sa.size[1], b, sb.size[0], sb.size[1], at_a=sa.position,
                               rotation_a=sa.rotation, at_b=sb.position, rotation_b=sb.rotation, **material)

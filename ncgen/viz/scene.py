@@ -218,9 +218,9 @@ def contact_scene(traj, model) -> dict:
                 w = push - np.sum(push * axis, axis=1, keepdims=True) * axis
                 centre = centre - c["rim_radius"] * w / np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-12)
             contact = centre - c["radius"] * push
-        elif "box" in c or "capsule" in c:                    # a sphere or a box corner against a box or a capsule
-            at, radius, other = (c["at"], c["radius"], c.get("box")) if "box" in c else \
-                (c["sphere_at"], c["sphere_radius"], c["capsule"])
+        elif "box" in c or "capsule" in c or "cylinder" in c:  # a sphere or a corner against a box, capsule, cylinder
+            at, radius, other = (c["at"], c["radius"], c["box"]) if "box" in c else \
+                (c["sphere_at"], c["sphere_radius"], c.get("capsule", c.get("cylinder")))
             centre = traj.point(c["sphere"], at) if c["sphere"] != "ground" else \
                 np.broadcast_to(np.asarray(at, float), (n, d))
             centres.append(centre)
