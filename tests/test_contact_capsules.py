@@ -407,3 +407,60 @@ def test_ball_rests_on_the_end_face_of_a_standing_can():
     np.testing.assert_allclose(f[1:, tr.contact_names.index("floor")], 0.4 * G, rtol=1e-9)
     assert np.all(f[:, tr.contact_names.index("beside")] == 0)
     np.testing.assert_allclose(tr.gap[:, tr.contact_names.index("beside")], 0, atol=1e-12)
+
+
+# ------------------------------------------------------------------------ convex meshes
+def _tetra(tmp_path, side):
+    """An OBJ file (written by hand, full precision) of a tetrahedron, centroid at the origin."""
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]]) * side - side / 4
+    path = tmp_path / "tetra.obj"
+    path.write_text("".join(f"v {x:.17g} {y:.17g} {z:.17g}\n" for x, y, z in v)
+                    + "f 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
+    return path, v
+
+
+def test_mesh_plane_takes_the_convex_hull_vertices(tmp_path):
+    """A tetrahedron with an extra vertex inside (non-convex as given): the hull's 4
+    vertices are the contact points, at their heights above a tilted plane."""
+    import trimesh
+    path, v = _tetra(tmp_path, 0.2)
+    dented = tmp_path / "dented.obj"
+    inner = np.vstack([v, [0.0, 0.0, 0.0]])
+    trimesh.Trimesh(vertices=inner, faces=[[0, 2, 1], [0, 1, 4], [4, 1, 3], [0, 3, 2], [1, 2, 3], [0, 4, 3]],
+                    process=False).export(dented)
+    s = nc.System("mesh")
+    rot, c0 = R_y(0.3), np.array([0.1, 0.0, 0.5])
+    body = s.add_body("t", mass=1.0, inertia=0.01 * np.eye(3), position=c0, rotation=rot, shape=nc.Mesh(str(dented)))
+    n = np.array([0.1, 0.0, 1.0]) / np.hypot(0.1, 1.0)
+    s.add_contact(nc.MeshPlane(body, dented, scale=2.0, normal=n, name="floor"))
+    model = s.build(contacts="nonsmooth")
+    assert model.contact_names == [f"floor.vertex{i}" for i in range(4)]
+    heights = sorted(n @ (c0 + rot @ (2.0 * x)) for x in v)
+    np.testing.assert_allclose(sorted(model.gap(model.q0)), heights, atol=1e-12)
+    assert type(nc.contact_between(body, s.ground)).__name__ == "MeshPlane"
+    again = nc.System.from_toml(s.to_toml()).build(contacts="nonsmooth")
+    assert again.contacts == model.contacts
+    with pytest.raises(ModelError, match=r"'m' \(MeshPlane\): mesh: no such file"):
+        s.add_contact(nc.MeshPlane(body, tmp_path / "none.stl", name="m"))
+
+
+def test_tetrahedron_rests_on_a_face_with_the_closed_form_vertex_forces(tmp_path):
+    """A uniform tetrahedron (vertices 0, s e_x, s e_y, s e_z) on its face z = 0: the centre
+    of mass projects at barycentric (1/2, 1/4, 1/4) of the base, so its vertices carry
+    m g (1/2, 1/4, 1/4), the apex nothing."""
+    path, v = _tetra(tmp_path, 0.2)
+    s = nc.System("tetra")
+    m = 1.5
+    t = s.add_body("t", mass=m, inertia=0.002 * np.eye(3), position=(0, 0, 0.05))       # base on z = 0
+    s.add_contact(nc.MeshPlane(t, path, mu=0.5, name="floor"))
+    model = s.build(contacts="nonsmooth")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tr = nc.simulate(model, 0.3, 0.01, method="stepper", substeps=10)
+    g = model.gap(model.q0)
+    base = np.flatnonzero(np.abs(g) < 1e-12)
+    assert len(base) == 3
+    share = {0: 0.5, 1: 0.25, 2: 0.25}                 # by the mesh's vertex index (the hull reorders them)
+    want = [m * G * share[int(np.argmin(np.linalg.norm(v - model.contacts[k]["at"], axis=1)))] for k in base]
+    np.testing.assert_allclose(tr.contact_normal[1:][:, base], [want] * (len(tr) - 1), rtol=1e-9)
+    np.testing.assert_allclose(tr.point("t", (0, 0, 0))[:, 2], 0.05, atol=1e-12)

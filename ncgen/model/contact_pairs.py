@@ -19,31 +19,32 @@ capsule–sphere     :class:`~ncgen.model.capsule_contacts.CapsuleSphere`
 capsule–capsule    :class:`~ncgen.model.capsule_contacts.CapsuleCapsule` (ends, segments)
 capsule–box        :class:`~ncgen.model.capsule_contacts.CapsuleBox` (ends, corners, edges)
 cylinder–sphere    :class:`~ncgen.model.capsule_contacts.CylinderSphere`
+mesh–plane         :class:`~ncgen.model.contacts.MeshPlane` (its convex hull's vertices)
 =================  =========================================================================
 
-Any other pair (a cylinder against a box, a capsule or a cylinder; an ellipsoid or a mesh
-against anything) is refused by :func:`contact_between` with a message naming
+Any other pair (a cylinder against a box, a capsule or a cylinder; a mesh against
+anything but a plane; an ellipsoid against anything) is refused by :func:`contact_between` with a message naming
 both shapes.  :data:`CONTACT_TYPES` lists every element by its TOML ``type``.
 """
 from __future__ import annotations
 
 from ncgen.errors import ModelError
 from ncgen.model.capsule_contacts import CapsuleBox, CapsuleCapsule, CapsuleSphere, CylinderSphere
-from ncgen.model.contacts import (BoxBox, BoxPlane, CapsulePlane, Contact, CylinderPlane, SphereBox, SpherePlane,
-                                  SphereSphere)
+from ncgen.model.contacts import (BoxBox, BoxPlane, CapsulePlane, Contact, CylinderPlane, MeshPlane, SphereBox,
+                                  SpherePlane, SphereSphere)
 
 #: Shape kinds (sorted as in the table) -> contact element.
 PAIRS: dict[tuple[str, str], type[Contact]] = {
     ("sphere", "plane"): SpherePlane, ("box", "plane"): BoxPlane, ("capsule", "plane"): CapsulePlane,
     ("cylinder", "plane"): CylinderPlane, ("sphere", "sphere"): SphereSphere, ("sphere", "box"): SphereBox,
     ("box", "box"): BoxBox, ("capsule", "sphere"): CapsuleSphere, ("capsule", "capsule"): CapsuleCapsule,
-    ("capsule", "box"): CapsuleBox, ("cylinder", "sphere"): CylinderSphere,
+    ("capsule", "box"): CapsuleBox, ("cylinder", "sphere"): CylinderSphere, ("mesh", "plane"): MeshPlane,
 }
 
 #: Every contact element by its ``kind`` (TOML ``type``).
 CONTACT_TYPES: dict[str, type[Contact]] = {cls.kind: cls for cls in (
     SpherePlane, SphereSphere, BoxPlane, CapsulePlane, CylinderPlane, SphereBox, BoxBox, CapsuleSphere,
-    CapsuleCapsule, CapsuleBox, CylinderSphere)}
+    CapsuleCapsule, CapsuleBox, CylinderSphere, MeshPlane)}
 
 
 def pair_element(kind_a: str, kind_b: str) -> tuple[type[Contact], bool]:
@@ -88,6 +89,8 @@ def contact_between(a, b, **material) -> Contact:
             return SpherePlane(a, sa.position, sa.size[0], plane=b, **material)
         if ka == "box":
             return BoxPlane(a, size=sa.size, **place, **material)
+        if ka == "mesh":
+            return MeshPlane(a, sa.filename, sa.scale, **place, **material)
         return cls(a, radius=sa.size[0], length=sa.size[1], **place, **material)
     if cls is SphereSphere:
         return SphereSphere(a, sa.position, sa.size[0], b, sb.position, sb.size[0], **material)

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 
@@ -441,6 +442,59 @@ class CylinderPlane(ShapePlane):
 
     def spec(self):
         return {**super().spec(), "radius": self.radius, "length": self.length, "face_points": self.face_points}
+
+
+class MeshPlane(ShapePlane):
+    """A convex mesh against a plane: the vertices of the convex hull of the mesh file
+    ``mesh`` (anything ``trimesh`` reads: STL, OBJ, ...; the optional dependency of the
+    ``meshes`` extra), scaled by ``scale`` (a number or three) in the shape's axes, as
+    point contacts ``<name>.vertex0 …`` (in the hull's vertex order).  Exact for the hull:
+    a convex polytope meets a plane at a vertex, an edge or a face, whose force its
+    vertices carry; a non-convex mesh touches as its hull does."""
+
+    kind = "MeshPlane"
+
+    def __init__(self, body, mesh=None, scale=1.0, **kw):
+        super().__init__(body, **kw)
+        self.mesh, self.scale = mesh, scale
+        self._vertices = None
+
+    def _check_shape(self, dim):
+        self._need_3d(dim)
+        if not isinstance(self.mesh, (str, Path)) or not str(self.mesh):
+            raise ModelError(f"{self.label}: mesh: expected a mesh file name, got {self.mesh!r}")
+        s = np.atleast_1d(np.asarray(self.scale, dtype=float)).reshape(-1)
+        if s.size not in (1, 3) or not np.all(np.isfinite(s)) or np.any(s <= 0):
+            raise ModelError(f"{self.label}: scale: expected a positive number or three, got {self.scale!r}")
+        self.mesh = str(self.mesh)
+        self.scale = float(s[0]) if s.size == 1 else s.tolist()
+        self._vertices = hull_vertices(self.mesh, np.broadcast_to(s, 3), self.label)
+
+    def local_spheres(self):
+        return [(f"vertex{i}", v, 0.0) for i, v in enumerate(self._vertices)]
+
+    def spec(self):
+        return {**super().spec(), "mesh": self.mesh, "scale": self.scale}
+
+
+def hull_vertices(filename: str, scale, what: str) -> np.ndarray:
+    """``(n, 3)`` vertices (m) of the convex hull of the mesh in ``filename`` scaled by
+    ``scale`` (three factors), by ``trimesh``; errors name ``what`` and the file."""
+    try:
+        import trimesh
+    except ImportError:
+        raise ModelError(f"{what}: mesh: reading {filename!r} needs trimesh (pip install ncgen[meshes])") from None
+    if not Path(filename).is_file():
+        raise ModelError(f"{what}: mesh: no such file {filename!r}")
+    try:
+        mesh = trimesh.load(filename, force="mesh")
+        hull = trimesh.Trimesh(vertices=np.asarray(mesh.vertices, float) * scale).convex_hull
+    except Exception as e:                                      # trimesh raises many kinds
+        raise ModelError(f"{what}: mesh: could not read a mesh from {filename!r}: {e}") from None
+    vertices = np.asarray(hull.vertices, float)
+    if len(vertices) < 4:
+        raise ModelError(f"{what}: mesh: {filename!r} has no volume (its convex hull has {len(vertices)} vertices)")
+    return vertices
 
 
 def _box_frame(contact, member, size, at, rotation, what: str, dim: int):

@@ -13,7 +13,8 @@ Layout of a file (every table optional except ``members``)::
     [[contacts]]  type = "SpherePlane" (sphere, at, radius, plane = "ground", point, normal)
                   or "SphereSphere" (between = ["a", "b"], at_a, radius_a, at_b, radius_b),
                   or "BoxPlane" (body, size) / "CapsulePlane" (body, radius, length) /
-                  "CylinderPlane" (body, radius, length, face_points), each with at, rotation, plane,
+                  "CylinderPlane" (body, radius, length, face_points) / "MeshPlane" (body, mesh, scale),
+                  each with at, rotation, plane,
                   point, normal; or "SphereBox" (sphere, at, radius, box = "ground", size, box_at,
                   box_rotation) or "BoxBox" (between = ["a", "b"], size_a, size_b, at_a, rotation_a,
                   at_b, rotation_b, edges); "CapsuleSphere" (sphere, sphere_at, sphere_radius, capsule = "ground",
@@ -119,6 +120,8 @@ CONTACT_FIELDS = {
     "CapsuleSphere": (Field("sphere", "member", True), Field("sphere_at", "vector"), Field("sphere_radius", "number"),
                       Field("capsule", "member"), Field("radius", "number", True), Field("length", "number", True),
                       Field("at", "vector"), Field("rotation", "rotation")),
+    "MeshPlane": (Field("body", "member", True), Field("mesh", "string", True), Field("scale", "number or vector"),
+                  *_SHAPE_PLANE),
     "CylinderSphere": (Field("sphere", "member", True), Field("sphere_at", "vector"), Field("sphere_radius", "number"),
                        Field("cylinder", "member"), Field("radius", "number", True), Field("length", "number", True),
                        Field("at", "vector"), Field("rotation", "rotation")),
@@ -418,6 +421,8 @@ class _Loader:
             return _bool(v, path)
         if kind == "vector":
             return _vector(v, d, path)
+        if kind == "number or vector":
+            return _vector(v, d, path) if isinstance(v, list) else _number(v, path)
         if kind == "two points":
             if not isinstance(v, list) or len(v) != 2:
                 raise ModelError(f"{path}: expected two points (one on each member), got {_describe(v)}")
