@@ -146,7 +146,8 @@ def test_bad_capsule_contacts_and_unsupported_pairs_are_named():
     n = s.add_body("n", mass=1.0, inertia=np.eye(3) * 0.01, position=(0, 0, 4))
     with pytest.raises(ModelError, match=r"contact_between\('b', 'c'\): no contact between a cylinder and a box"):
         nc.contact_between(b, c)
-    with pytest.raises(ModelError, match=r"contact_between\('e', 'ground'\): no contact between a ellipsoid and a plane"):
+    with pytest.raises(ModelError, match=r"contact_between\('e', 'ground'\): no contact between an ellipsoid and "
+                                         r"a plane"):
         nc.contact_between(e, s.ground)
     with pytest.raises(ModelError, match=r"member 'n' has no shape"):
         nc.contact_between(n, c)

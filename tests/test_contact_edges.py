@@ -65,7 +65,8 @@ def crossed_beams(angle, lift):
     top_rot = R_z(angle) @ R_x(0.9)
     top = s.add_body("top", mass=1.0, inertia=box_inertia(1.0, BEAM), rotation=top_rot,
                      position=(0.05, -0.03, sum(reach) + lift), velocity=(0.2, -0.1, 0.3), angular_velocity=(1, 2, -1))
-    s.add_contact(nc.BoxBox(s.ground, BEAM, top, BEAM, at_a=(0.05, -0.03, 0), rotation_a=R_x(0.6), name="cross", edges=True))
+    s.add_contact(nc.BoxBox(s.ground, BEAM, top, BEAM, at_a=(0.05, -0.03, 0), rotation_a=R_x(0.6), name="cross",
+                            edges=True))
     return s.build(contacts="smooth"), top_rot, sum(reach)     # smooth: starts inside allowed
 
 

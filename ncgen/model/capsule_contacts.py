@@ -166,9 +166,9 @@ class CapsuleCapsule(Contact):
 
 
 class CapsuleBox(Contact):
-    """A capsule ``(radius, length, at, rotation)`` on ``capsule`` (a rigid body) against a box of full edge lengths ``size`` centred at ``box_at`` with axes
-    ``box_rotation`` on ``box`` (the ground by default, or a body).  Point contacts: the
-    capsule's end spheres against the box (``<name>.end0``, ``end1``: the exact signed
+    """A capsule ``(radius, length, at, rotation)`` on ``capsule`` (a rigid body) against a
+    box of full edge lengths ``size`` centred at ``box_at`` with axes ``box_rotation`` on
+    ``box`` (the ground by default, or a body).  Point contacts: the capsule's end spheres against the box (``<name>.end0``, ``end1``: the exact signed
     distance, :class:`~ncgen.model.contacts.SphereBox`, forces on the capsule), the box's
     corners against the capsule (``<name>.corner0 …``, numbered as ``BoxPlane``'s, forces on
     the box) and the segment against the box's edges where they cross (``<name>.edge2j0r``,

@@ -54,8 +54,10 @@ def pair_element(kind_a: str, kind_b: str) -> tuple[type[Contact], bool]:
         return PAIRS[kind_a, kind_b], False
     if (kind_b, kind_a) in PAIRS:
         return PAIRS[kind_b, kind_a], True
-    raise ModelError(f"no contact between a {kind_a} and a {kind_b}: that pair is not in the collision-pair table "
-                     f"(supported: {', '.join(f'{a}–{b}' for a, b in PAIRS)})")
+    def article(kind):
+        return "an" if kind[0] in "aeiou" else "a"
+    raise ModelError(f"no contact between {article(kind_a)} {kind_a} and {article(kind_b)} {kind_b}: that pair is not "
+                     f"in the collision-pair table (supported: {', '.join(f'{a}–{b}' for a, b in PAIRS)})")
 
 
 def _shape(member):
