@@ -168,13 +168,14 @@ class CapsuleCapsule(Contact):
 class CapsuleBox(Contact):
     """A capsule ``(radius, length, at, rotation)`` on ``capsule`` (a rigid body) against a
     box of full edge lengths ``size`` centred at ``box_at`` with axes ``box_rotation`` on
-    ``box`` (the ground by default, or a body).  Point contacts: the capsule's end spheres against the box (``<name>.end0``, ``end1``: the exact signed
-    distance, :class:`~ncgen.model.contacts.SphereBox`, forces on the capsule), the box's
-    corners against the capsule (``<name>.corner0 …``, numbered as ``BoxPlane``'s, forces on
-    the box) and the segment against the box's edges where they cross (``<name>.edge2j0r``,
-    j the box's axis, forces on the box).  A capsule meets a box at an end sphere, at a box
+    ``box`` (the ground by default, or a body).  Point contacts: the capsule's end spheres
+    against the box (``<name>.end0``, ``end1``: the exact signed distance,
+    :class:`~ncgen.model.contacts.SphereBox`, forces on the capsule), the box's corners
+    against the capsule (``<name>.corner0 …``, numbered as ``BoxPlane``'s, forces on the
+    box) and the segment against the box's edges where they cross (``<name>.edge2j0r``, j
+    the box's axis, forces on the box).  A capsule meets a box at an end sphere, at a box
     corner, or where its segment crosses an edge: lying on a face (its ends), across a
-    face wider than the box (the crossings of that face's edges), over an edge or a corner."""
+    face narrower than it (the crossings of that face's edges), over an edge or a corner."""
 
     kind = "CapsuleBox"
     ground_default = "box"
