@@ -465,3 +465,20 @@ def test_tetrahedron_rests_on_a_face_with_the_closed_form_vertex_forces(tmp_path
     want = [m * G * share[int(np.argmin(np.linalg.norm(v - model.contacts[k]["at"], axis=1)))] for k in base]
     np.testing.assert_allclose(tr.contact_normal[1:][:, base], [want] * (len(tr) - 1), rtol=1e-9)
     np.testing.assert_allclose(tr.point("t", (0, 0, 0))[:, 2], 0.05, atol=1e-12)
+
+
+def test_capsule_contacts_and_edge_crossings_are_drawn(scenes):
+    """The scene's contact forces: an edge crossing's along its normal (on the box: down),
+    without a point; a ball against a rail at the ball's surface, along the rail's normal."""
+    from ncgen.viz.scene import scene
+    _, tr = scenes
+    sc = scene(tr)
+    k = tr.contact_names.index("across_box.edge2100")
+    np.testing.assert_allclose(sc.contact_forces[-1, k], [0, 0, -tr.contact_normal[-1, k]], atol=1e-8)
+    assert np.all(np.isnan(sc.contact_points[:, k]))
+    k = tr.contact_names.index("groove0")
+    centre = tr.point("ball", (0, 0, 0))[-1]
+    axis_point = np.array([centre[0], 4.0 - R_CAP, R_CAP])          # the rail's axis, along x
+    n = (centre - axis_point) / np.linalg.norm(centre - axis_point)
+    np.testing.assert_allclose(sc.contact_points[-1, k], centre - 0.05 * n, atol=1e-8)
+    np.testing.assert_allclose(sc.contact_forces[-1, k], tr.contact_normal[-1, k] * n, atol=1e-6)
