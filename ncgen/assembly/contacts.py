@@ -32,7 +32,8 @@ import numpy as np
 
 from ncgen.errors import ModelError
 from ncgen.model.context import Context, perpendicular_basis
-from ncgen.model.contacts import BoxCorner, SphereBox, SphereSphere, point_contacts
+from ncgen.model.contacts import PARALLEL_SIN, BoxCorner, EdgeContact, SphereBox, SphereSphere, point_contacts
+from ncgen.model.capsule_contacts import CapsuleSphere, CylinderSphere
 from ncgen.rigid_motion import casadi_forms as crm
 
 #: Regularisation of a cylinder rim's lowest point (dimensionless): within ~ε rad of standing
@@ -71,6 +72,12 @@ def contact_terms(ctx: Context, contacts) -> list[ContactTerms]:
             return _sphere_sphere(ctx, c)
         if isinstance(c, SphereBox):
             return _sphere_box(ctx, c)
+        if isinstance(c, EdgeContact):
+            return _edge_edge(ctx, c)
+        if isinstance(c, CylinderSphere):
+            return _cylinder_sphere(ctx, c)
+        if isinstance(c, CapsuleSphere):
+            return _capsule_sphere(ctx, c)
         return _sphere_plane(ctx, c)
     return [terms(c) for c in point_contacts(contacts)]
 
@@ -215,6 +222,112 @@ def _sphere_box(ctx: Context, c) -> ContactTerms:
     return ContactTerms(c, g, WN, WT)
 
 
+def _facing_edge(ctx: Context, member, side: dict, n):
+    """Centre (world) of the edge of ``side``'s box (:class:`EdgeContact`) along its axis
+    that faces the direction ``n``: ``c + Σ σ_k h_k a_k`` over the other axes k, with
+    ``σ_k = sign(n·a_k)`` for the one more aligned with n and ``2·choice − 1`` for the other
+    (where n lies along a face normal both edges of the face face it).  Returns the box's
+    centre, the edge's centre and its unit direction."""
+    rotation = np.asarray(side["rotation"], float)
+    centre = _fixed_point(ctx, member, side["at"])[0]
+    axes = _axes(ctx, member, side["at"], rotation)
+    i, h = side["axis"], np.asarray(side["size"]) / 2
+    k1, k2 = [k for k in range(3) if k != i]
+    d1, d2 = ca.dot(n, axes[k1]), ca.dot(n, axes[k2])
+    first = ca.fabs(d1) >= ca.fabs(d2)
+    free = 2.0 * side["choice"] - 1.0
+    s1 = ca.if_else(first, ca.if_else(d1 >= 0, 1, -1), free)
+    s2 = ca.if_else(first, free, ca.if_else(d2 >= 0, 1, -1))
+    return centre, centre + s1 * h[k1] * axes[k1] + s2 * h[k2] * axes[k2], axes[i]
+
+
+def _edge_edge(ctx: Context, c: EdgeContact) -> ContactTerms:
+    """An edge (or segment) of ``a`` against one of ``b`` (:class:`EdgeContact`).  With
+    ``u``, ``w`` the edges' unit directions, ``n = ±(u × w)/|u × w|`` oriented along the
+    centres' difference ``d = c_b − c_a``, the edge of each box facing the other (``a``'s
+    facing n, ``b``'s −n; :func:`_facing_edge`) centred at ``e_a``, ``e_b``, and
+    ``δ = e_b − e_a``, the closest points of the two lines are ``e_a + s u`` and
+    ``e_b + t w`` with
+
+        s = (u·δ − β w·δ)/(1 − β²),   t = (β u·δ − w·δ)/(1 − β²),   β = u·w,
+
+    and the gap is ``g = n·δ − r_a − r_b`` (the lines' distance along n, less the radii):
+    the separation of the two boxes along n, hence their distance while the closest points
+    lie on both edges.  It holds while ``|s|``, ``|t|`` are within the edges' half lengths
+    less ``margin``, ``|u × w| > PARALLEL_SIN`` and ``g > −margin`` (only near the edges is a
+    negative g a penetration: where the boxes overlap along n, two edges far behind each
+    other's faces also cross); elsewhere it is ``g + band`` (> 0: no contact).
+    ``W_N = ∂g/∂q`` (n ⊥ u, w and the closest points differ along n)."""
+    ea, eb = c.edge_a, c.edge_b
+    axis_a = _axes(ctx, c.a, ea["at"], np.asarray(ea["rotation"], float))[ea["axis"]]
+    axis_b = _axes(ctx, c.b, eb["at"], np.asarray(eb["rotation"], float))[eb["axis"]]
+    d = _fixed_point(ctx, c.b, eb["at"])[0] - _fixed_point(ctx, c.a, ea["at"])[0]
+    n0 = ca.cross(axis_a, axis_b)
+    sine = ca.sqrt(ca.sumsqr(n0))
+    n0 = ca.if_else(sine > 1e-9, n0 / sine, tangent_basis(axis_a)[0])  # parallel: any normal (no contact)
+    n = ca.if_else(ca.dot(n0, d) >= 0, 1, -1) * n0
+    ca_, e_a, u = _facing_edge(ctx, c.a, ea, n)
+    cb_, e_b, w = _facing_edge(ctx, c.b, eb, -n)
+    delta = e_b - e_a
+    beta = ca.dot(u, w)
+    det = ca.fmax(1 - beta * beta, 1e-24)
+    s = (ca.dot(u, delta) - beta * ca.dot(w, delta)) / det
+    t = (beta * ca.dot(u, delta) - ca.dot(w, delta)) / det
+    g = ca.dot(n, delta) - c.radius
+    inside = _all([sine > PARALLEL_SIN, g > -c.margin, ca.fabs(s) <= ea["size"][ea["axis"]] / 2 - c.margin,
+                   ca.fabs(t) <= eb["size"][eb["axis"]] / 2 - c.margin])
+    x = 0.5 * (e_a + s * u + ea["radius"] * n + e_b + t * w - eb["radius"] * n)
+    rel = (_material_velocity(ctx, c.b, cb_, _fixed_point(ctx, c.b, eb["at"])[1], x)
+           - _material_velocity(ctx, c.a, ca_, _fixed_point(ctx, c.a, ea["at"])[1], x))
+    WN, WT = _jacobians(ctx, n, tangent_basis(n), rel)
+    return ContactTerms(c, ca.if_else(inside, g, g + c.band), WN, WT)
+
+
+def _capsule_sphere(ctx: Context, c: CapsuleSphere) -> ContactTerms:
+    """A sphere (centre x, radius r_s) against a capsule (centre m, unit axis u, length L,
+    radius r): the nearest point of the segment ``p = m + τ u``,
+    ``τ = clamp(u·(x − m), −L/2, L/2)``; ``g = |x − p| − r_s − r``, ``n = (x − p)/|x − p|``.
+    ``W_N = ∂g/∂q`` (n ⊥ u where τ is inside, τ constant where clamped)."""
+    x, xd = _fixed_point(ctx, c.sphere, c.sphere_at)
+    m, md = _fixed_point(ctx, c.capsule, c.at)
+    u = _axes(ctx, c.capsule, c.at, c.rotation)[2]
+    tau = ca.fmin(ca.fmax(ca.dot(u, x - m), -c.length / 2), c.length / 2)
+    d = x - (m + tau * u)
+    dist = ca.sqrt(ca.fmax(ca.sumsqr(d), 1e-300))
+    n = d / dist
+    point = x - c.sphere_radius * n
+    rel = _material_velocity(ctx, c.sphere, x, xd, point) - _material_velocity(ctx, c.capsule, m, md, point)
+    WN, WT = _jacobians(ctx, n, tangent_basis(n), rel)
+    return ContactTerms(c, dist - c.total_radius, WN, WT)
+
+
+def _cylinder_sphere(ctx: Context, c: CylinderSphere) -> ContactTerms:
+    """A sphere (centre x, radius r_s) against a solid cylinder (centre m, unit axis u,
+    radius R, length L).  With ``z = u·(x − m)``, the radial vector ``ρ = x − m − z u``
+    (``ρ̂ = ρ/|ρ|``), ``a = |ρ| − R`` and ``b = |z| − L/2``: outside (a > 0 or b > 0),
+    ``g = sqrt(a⁺² + b⁺²) − r_s`` with ``n = (a⁺ ρ̂ + b⁺ sign(z) u)/sqrt(a⁺² + b⁺²)``
+    (side, end face or rim); inside, ``g = max(a, b) − r_s`` with ``n = ρ̂`` or
+    ``sign(z) u`` (the signed distance).  ``W_N = ∂g/∂q`` within each region."""
+    x, xd = _fixed_point(ctx, c.sphere, c.sphere_at)
+    m, md = _fixed_point(ctx, c.capsule, c.at)
+    u = _axes(ctx, c.capsule, c.at, c.rotation)[2]
+    z = ca.dot(u, x - m)
+    rho = x - m - z * u
+    rlen = ca.sqrt(ca.fmax(ca.sumsqr(rho), 1e-300))
+    radial = ca.if_else(rlen > 1e-12, rho / rlen, tangent_basis(u)[0])
+    axial = ca.if_else(z >= 0, 1, -1) * u
+    a, b = rlen - c.radius, ca.fabs(z) - c.length / 2
+    ap, bp = ca.fmax(a, 0), ca.fmax(b, 0)
+    dist = ca.sqrt(ca.fmax(ap * ap + bp * bp, 1e-300))
+    outside = ca.logic_or(a > 0, b > 0)
+    g = ca.if_else(outside, dist, ca.fmax(a, b)) - c.sphere_radius
+    n = ca.if_else(outside, (ap * radial + bp * axial) / dist, ca.if_else(a > b, radial, axial))
+    point = x - c.sphere_radius * n
+    rel = _material_velocity(ctx, c.sphere, x, xd, point) - _material_velocity(ctx, c.capsule, m, md, point)
+    WN, WT = _jacobians(ctx, n, tangent_basis(n), rel)
+    return ContactTerms(c, g, WN, WT)
+
+
 def _all(conditions):
     out = conditions[0]
     for x in conditions[1:]:
@@ -294,7 +407,7 @@ def check_initial_gaps(system_name: str, contacts, gap, q, p, contact_model: str
     """
     g = np.array(gap(q, p), float).reshape(-1)
     for c, gk in zip(point_contacts(contacts), g):
-        radius = c.radius_a + c.radius_b if c.kind == "SphereSphere" else c.radius
+        radius = c.radius_a + c.radius_b if c.kind == "SphereSphere" else getattr(c, "total_radius", c.radius)
         if c.kind == "SphereSphere" and gk + radius <= 1e-12 * max(radius, 1.0):
             raise ModelError(f"system {system_name!r}: {c.label}: the centres of the spheres on {c.a.name!r} "
                              f"and {c.b.name!r} coincide in the initial configuration (the contact normal is "

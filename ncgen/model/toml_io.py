@@ -13,10 +13,16 @@ Layout of a file (every table optional except ``members``)::
     [[contacts]]  type = "SpherePlane" (sphere, at, radius, plane = "ground", point, normal)
                   or "SphereSphere" (between = ["a", "b"], at_a, radius_a, at_b, radius_b),
                   or "BoxPlane" (body, size) / "CapsulePlane" (body, radius, length) /
-                  "CylinderPlane" (body, radius, length, face_points), each with at, rotation, plane,
+                  "CylinderPlane" (body, radius, length, face_points) / "MeshPlane" (body, mesh, scale),
+                  each with at, rotation, plane,
                   point, normal; or "SphereBox" (sphere, at, radius, box = "ground", size, box_at,
                   box_rotation) or "BoxBox" (between = ["a", "b"], size_a, size_b, at_a, rotation_a,
-                  at_b, rotation_b); all with mu, restitution, stiffness, damping, exponent, slip_velocity, name
+                  at_b, rotation_b, edges); "CapsuleSphere" (sphere, sphere_at, sphere_radius, capsule = "ground",
+                  radius, length, at, rotation), "CylinderSphere" (the same with cylinder = "ground"),
+                  "CapsuleCapsule" (between = ["a", "b"], radius_a, length_a,
+                  radius_b, length_b, at_a, rotation_a, at_b, rotation_b) or "CapsuleBox" (capsule, radius,
+                  length, at, rotation, box = "ground", size, box_at, box_rotation); all with mu,
+                  restitution, stiffness, damping, exponent, slip_velocity, name
 
 Shared basic points are written ``"crank.r_j"`` (slot ``r_j`` of member ``crank``) or
 ``{ground = [x, y, z]}``.  Values that may vary are numbers or expression strings
@@ -38,7 +44,9 @@ from ncgen.errors import ModelError
 from ncgen.files import decode_text
 from ncgen.model import toml_write
 from ncgen.model.expressions import did_you_mean, parse, scope, value_to_toml
-from ncgen.model.contacts import CONTACT_TYPES, BoxBox, SphereSphere
+from ncgen.model.capsule_contacts import CapsuleCapsule
+from ncgen.model.contact_pairs import CONTACT_TYPES
+from ncgen.model.contacts import BoxBox, SphereSphere
 from ncgen.model.cables import ClusteredCable
 from ncgen.model.forces import FORCE_TYPES as _BASIC_FORCES
 from ncgen.model.joint_base import Joint
@@ -114,7 +122,22 @@ CONTACT_FIELDS = {
                   Field("box_rotation", "rotation")),
     "BoxBox": (Field("between", "two members", True, ("a", "b")), Field("size_a", "vector", True),
                Field("size_b", "vector", True), Field("at_a", "vector"), Field("rotation_a", "rotation"),
-               Field("at_b", "vector"), Field("rotation_b", "rotation")),
+               Field("at_b", "vector"), Field("rotation_b", "rotation"), Field("edges", "bool")),
+    "CapsuleSphere": (Field("sphere", "member", True), Field("sphere_at", "vector"), Field("sphere_radius", "number"),
+                      Field("capsule", "member"), Field("radius", "number", True), Field("length", "number", True),
+                      Field("at", "vector"), Field("rotation", "rotation")),
+    "MeshPlane": (Field("body", "member", True), Field("mesh", "string", True), Field("scale", "number or vector"),
+                  *_SHAPE_PLANE),
+    "CylinderSphere": (Field("sphere", "member", True), Field("sphere_at", "vector"), Field("sphere_radius", "number"),
+                       Field("cylinder", "member"), Field("radius", "number", True), Field("length", "number", True),
+                       Field("at", "vector"), Field("rotation", "rotation")),
+    "CapsuleCapsule": (Field("between", "two members", True, ("a", "b")), Field("radius_a", "number", True),
+                       Field("length_a", "number", True), Field("radius_b", "number", True),
+                       Field("length_b", "number", True), Field("at_a", "vector"), Field("rotation_a", "rotation"),
+                       Field("at_b", "vector"), Field("rotation_b", "rotation")),
+    "CapsuleBox": (Field("capsule", "member", True), Field("radius", "number", True), Field("length", "number", True),
+                   Field("at", "vector"), Field("rotation", "rotation"), Field("box", "member"),
+                   Field("size", "vector", True), Field("box_at", "vector"), Field("box_rotation", "rotation")),
 }
 
 #: Joints whose keys are not ``between`` and their keyword arguments.
@@ -404,6 +427,8 @@ class _Loader:
             return _bool(v, path)
         if kind == "vector":
             return _vector(v, d, path)
+        if kind == "number or vector":
+            return _vector(v, d, path) if isinstance(v, list) else _number(v, path)
         if kind == "two points":
             if not isinstance(v, list) or len(v) != 2:
                 raise ModelError(f"{path}: expected two points (one on each member), got {_describe(v)}")
@@ -569,7 +594,7 @@ class _Loader:
 def _contact_entries(c) -> dict:
     spec = c.spec()
     out = {"type": spec.pop("type"), "name": spec.pop("name")}
-    if isinstance(c, (SphereSphere, BoxBox)):
+    if isinstance(c, (SphereSphere, BoxBox, CapsuleCapsule)):
         out["between"] = [spec.pop("a"), spec.pop("b")]
     out.update({k: _plain(v) for k, v in spec.items()})
     return out
@@ -618,7 +643,7 @@ def _plain(v):
         if v.member.is_ground:
             return {"ground": [float(x) for x in v.position]}
         return f"{v.member.name}.{v.member.ctype.slots[v.slot]}"
-    if isinstance(v, str):
+    if isinstance(v, (str, bool)):
         return v
     if isinstance(v, dict):
         return {k: _plain(x) for k, x in v.items()}

@@ -218,13 +218,18 @@ def contact_scene(traj, model) -> dict:
                 w = push - np.sum(push * axis, axis=1, keepdims=True) * axis
                 centre = centre - c["rim_radius"] * w / np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-12)
             contact = centre - c["radius"] * push
-        elif "box" in c:                                       # a sphere or a box corner against a box
-            centre = traj.point(c["sphere"], c["at"]) if c["sphere"] != "ground" else \
-                np.broadcast_to(np.asarray(c["at"], float), (n, d))
+        elif "box" in c or "capsule" in c or "cylinder" in c:  # a sphere or a corner against a box, capsule, cylinder
+            at, radius, other = (c["at"], c["radius"], c["box"]) if "box" in c else \
+                (c["sphere_at"], c["sphere_radius"], c.get("capsule", c.get("cylinder")))
+            centre = traj.point(c["sphere"], at) if c["sphere"] != "ground" else \
+                np.broadcast_to(np.asarray(at, float), (n, d))
             centres.append(centre)
-            radii.append(c["radius"])
-            push = _box_normals(model, traj, k, c, translated)  # the box pushes the sphere along it
-            contact = centre - c["radius"] * push
+            radii.append(radius)
+            push = _gap_normals(model, traj, k, c["sphere"], other, translated)  # the other pushes the sphere
+            contact = centre - radius * push
+        elif "edge_a" in c:                                    # edges crossing: forces on b, not drawn as points
+            push = _gap_normals(model, traj, k, c["b"], c["a"], translated)
+            contact = np.full((n, d), np.nan)
         else:
             ca_, cb = traj.point(c["a"], c["at_a"]), traj.point(c["b"], c["at_b"])
             centres += [ca_, cb]
@@ -242,12 +247,13 @@ def contact_scene(traj, model) -> dict:
             "contact_points": np.stack(points, axis=1), "contact_forces": np.stack(forces, axis=1)}
 
 
-def _box_normals(model, traj, k: int, c: dict, cache: dict, eps: float = 1e-7) -> np.ndarray:
-    """``(n_t, dim)`` unit normals of contact ``k`` against a box, from the model's own gap:
-    its central differences when the sphere's member (or, on the ground, the box's) is
-    translated along each world axis (exact within a face or region: the gap is then linear
-    in a translation).  ``cache`` keeps every contact's differences per translated member."""
-    moved, sign = (c["sphere"], 1.0) if c["sphere"] != "ground" else (c["box"], -1.0)
+def _gap_normals(model, traj, k: int, member: str, other: str, cache: dict, eps: float = 1e-7) -> np.ndarray:
+    """``(n_t, dim)`` unit normals of contact ``k`` (against a box, a capsule, or edges
+    crossing), pointing towards ``member`` from ``other``, from the model's own gap: its
+    central differences when ``member`` (or, on the ground, ``other``) is translated along
+    each world axis (exact within a face or region: the gap is then linear in a
+    translation).  ``cache`` keeps every contact's differences per translated member."""
+    moved, sign = (member, 1.0) if member != "ground" else (other, -1.0)
     if moved not in cache:
         layout = model.layout
         rows = [layout.nodes[i].index for i in layout.slots[moved] if layout.nodes[i].is_point]
