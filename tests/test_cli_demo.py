@@ -1,9 +1,9 @@
 """``ncgen demo``: the whole pipeline from a clean compile cache in under a minute, its
 summary, its files, and a cache hit the second time."""
 import os
+import resource
 import subprocess
 import sys
-import time
 
 import numpy as np
 
@@ -11,19 +11,21 @@ from ncgen.cli import main
 from ncgen.cli.demo_job import Top, heavy_top, invariants
 from ncgen.runtime import Trajectory
 
-#: The demo must finish within this on the 2-core reference machine, compile included.
+#: The demo must finish within this much CPU time (s; the process and the compilers it runs),
+#: compile included: CPU, not wall time, so that a machine shared with other work passes too.
 BUDGET = 60.0
 
 
 def test_demo_from_a_clean_cache(tmp_path):
     env = {**os.environ, "NCGEN_CACHE_DIR": str(tmp_path / "cache"), "MPLBACKEND": "Agg"}
     env.pop("NCGEN_CFLAGS", None)
-    start = time.perf_counter()
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     first = subprocess.run([sys.executable, "-m", "ncgen.cli", "demo", "-o", str(tmp_path / "out")],
                            env=env, capture_output=True, text=True)
-    elapsed = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     assert first.returncode == 0, first.stderr
-    assert elapsed < BUDGET, f"ncgen demo took {elapsed:.0f} s"
+    assert cpu < BUDGET, f"ncgen demo took {cpu:.0f} s of CPU"
     out = first.stdout
     for stage in ("build", "generate", "compile", "simulate"):
         assert f"\n  {stage} " in out

@@ -11,7 +11,8 @@ docs/architecture.md)::
 A module may import modules of its own layer and of lower ones.  The exceptions, all
 conveniences: ``System.build()`` (model) calls :func:`ncgen.assembly.build.build_model`,
 ``Trajectory.reaction()`` (runtime) calls :func:`ncgen.analysis.reactions.joint_reactions`, and
-``Trajectory.to_html()`` (runtime) calls :func:`ncgen.viz.html.to_html`.
+``Trajectory.to_html()`` (runtime) calls :func:`ncgen.viz.html.to_html`, and Jupyter's display
+of a model (model) and of a trajectory (runtime), ``_repr_html_``, calls :mod:`ncgen.viz.notebook`.
 """
 from __future__ import annotations
 
@@ -28,7 +29,8 @@ BASE = {"errors", "validation", "reproducible", "files", "interrupts", "version"
 #: (importing module, imported module): the documented exceptions.
 EXCEPTIONS = {("ncgen.model.system", "ncgen.assembly.build"),
               ("ncgen.runtime.trajectory", "ncgen.analysis.reactions"),
-              ("ncgen.runtime.trajectory", "ncgen.viz.html")}
+              ("ncgen.runtime.trajectory", "ncgen.viz.html"),
+              ("ncgen.model.model", "ncgen.viz.notebook"), ("ncgen.runtime.trajectory", "ncgen.viz.notebook")}
 
 
 def module_name(path: Path) -> str:
