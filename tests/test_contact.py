@@ -400,11 +400,15 @@ def test_contact_doc_snippets_run(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     text = (Path(__file__).resolve().parents[1] / "docs" / "contact.md").read_text(encoding="utf-8")
     blocks = re.findall(r"```python\n(.*?)```", text, re.S)
-    assert len(blocks) == 2
+    assert len(blocks) == 3
+    runs = 0
     for code in blocks:
         scope: dict = {}
         exec(compile(code, "docs/contact.md", "exec"), scope)
-        assert scope["traj"].complete
+        if "traj" in scope:                       # the snippets that simulate
+            assert scope["traj"].complete
+            runs += 1
+    assert runs == 2
 
 
 def test_planar_disc_rolls_and_block_slides():

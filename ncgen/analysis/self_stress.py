@@ -36,10 +36,7 @@ import numpy as np
 from ncgen.errors import NcgenError
 from ncgen.analysis.formfinding import rigid_motions
 from ncgen.analysis.stability import classify
-
-#: Singular values of ``A_c`` below this times the largest count as zero (its entries are
-#: direction cosines, so the tolerance is absolute in effect).
-RANK_TOL = 1e-8
+from ncgen.assembly.manifold import RANK_TOL       # the one rank rule: singular values below it × the largest are zero
 AXES = "xyz"
 
 
