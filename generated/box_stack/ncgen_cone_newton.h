@@ -269,7 +269,7 @@ static int cone_newton(workspace *ws, int na, const int *first, const casadi_rea
   casadi_real *rho = ws->cn, *phi = ws->cn + ND, *dP = ws->cn + 2 * ND, *gdp = ws->cn + 3 * ND;
   casadi_real *Pt = ws->cn + 4 * ND, *Ut = ws->cn + 5 * ND, *P0 = ws->cn + 6 * ND, *U0 = ws->cn + 7 * ND, *J = ws->S;
   casadi_int *cols = ws->cni, *dropped = ws->cni + ND;
-  int it, r, a, k, i, lm, damped = 0;
+  int it, r, a, k, i = 0, lm, damped = 0;
   casadi_real theta;
   ws->fm = -1;
   memcpy(P0, ws->P, (size_t) nr * sizeof(casadi_real));
@@ -294,7 +294,10 @@ static int cone_newton(workspace *ws, int na, const int *first, const casadi_rea
         if (!cone_solve(J, phi, dP, nr, cols, dropped)) continue;
       } else {
         theta = cone_phi(ws, na, first, bias, rho, ws->P, ws->U, phi, J);
-        if (!cone_lm(J, phi, J + (size_t) ND * ND, gdp, dP, nr)) break;
+        if (!cone_lm(J, phi, J + (size_t) ND * ND, gdp, dP, nr)) {
+          lm = 2;
+          break;
+        }
         for (slope = 0, r = 0; r < nr; ++r) slope += gdp[r] * dP[r];
       }
       for (r = 0; r < nr; ++r) gdp[r] = 0; /* G dP, by G's column nonzeros */
