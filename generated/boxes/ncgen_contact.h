@@ -764,11 +764,10 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
    *   U_N >= min(0, U_free,N - 2 g / h),  i.e. bias b = max(0, 2 g / h - U_free,N) >= 0:
    * it may close within the step but does not pass its surface; as b >= 0, the impulses
    * still take kinetic energy out (1/2 P^T G P + P^T b >= 0 of it, linearised).  With
-   * friction only if touching (g <= PENETRATION_TOL; farther, their tangent rows slowed the
-   * falling chain's sweeps more than the push-out costs): a ball resting on a crate resting
-   * on the floor falls with the crate in the free step, their gap stays 0 to round-off, and
-   * left out at +1e-17 m while the floor stopped the crate, the ball sank and got twice its
-   * weight the next step (0, 2 m g, 0, ... per step).  Closed contacts: b = e min(U-_N, 0). */
+   * friction too: a ball resting on a crate resting on the floor falls with the crate in
+   * the free step, their gap stays 0 to round-off, and left out at +1e-17 m while the floor
+   * stopped the crate, the ball sank and got twice its weight the next step (0, 2 m g, 0,
+   * ... per step).  Closed contacts: b = e min(U-_N, 0). */
   {
     casadi_real reach = 0;
     for (a = 0; a < na; ++a) reach = fmax(reach, -ws->U[ws->act[a] * DC]);
@@ -776,7 +775,7 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
     for (na = k = 0; k < NK; ++k) {
       const casadi_real g = ws->g[k];
       if (g <= 0) bias[na] = restitution[k] * fmin(ws->Um[k * DC], 0);
-      else if (restitution[k] == 0 && g < reach && (mu[k] == 0 || g <= PENETRATION_TOL)) {
+      else if (restitution[k] == 0 && g < reach) {
         bias[na] = fmax(0, 2 * g / h - ws->U[k * DC]);
         near = 1;
       } else continue;
