@@ -2,8 +2,9 @@
  * Changes are lost when the package is regenerated: change the model, the
  * ncgen templates or the generator instead. */
 /* The frictional contact problem of a step by a semismooth Newton method on the
- * Alart-Curnier function (cone_newton()), for the contact solve of ncgen_contact.h, and the
- * residual of the contact laws (cone_residual()).  Plain C99, model-independent; included
+ * Alart-Curnier function (cone_newton()), for the contact solve of ncgen_contact.h, its
+ * least-norm solution (cone_min_norm()), and the residual of the contact laws
+ * (cone_residual()).  Plain C99, model-independent; included
  * after ncgen_rattle.h and before ncgen_contact.h when NCGEN_CONTACTS is defined (the
  * defines it reads are listed at the top of ncgen_contact.h: NK, DC, mu, restitution).
  *
@@ -24,7 +25,11 @@
  * the zeros), and a backtracking line search on |phi|^2 / 2.  Redundant contacts (a sphere
  * on three others) make J singular; an elimination column whose pivot falls below
  * CONE_PIVOT is dropped (its impulse change is 0) as lcp_newton() drops dependent rows: the
- * equations are consistent at a solution, and the others solve them. */
+ * equations are consistent at a solution, and the others solve them.  Where that step gives
+ * no descent, or had to be halved CONE_LM_AFTER times (a stack of boxes: eight coincident
+ * corners per face),
+ * the next is Levenberg-Marquardt's (cone_lm()).  A solution is then moved to the least-norm
+ * member of its family where the support is statically indeterminate (cone_min_norm()). */
 
 /* cone_newton(): Newton steps at most; line-search halvings at most per step; the pivot
  * (rows scaled by rho, so O(1) entries) below which an elimination column is dropped;
@@ -39,6 +44,9 @@
 #define CONE_PIVOT 1e-9
 #define CONE_ARMIJO 1e-4
 #define CONE_FLOOR 1e-9
+/* cone_newton(): halvings of a step after which the next is Levenberg-Marquardt's (Newton's
+ * direction then makes little progress: a stack of boxes crawled at 1/256 steps). */
+#define CONE_LM_AFTER 4
 
 /* rho_N and rho_T of each active contact into rho (row r0 = first[c]: rho_N, r0 + 1: rho_T,
  * if the contact has friction).  A zero diagonal (a contact the step cannot move) gives 0. */
@@ -198,6 +206,56 @@ static int cone_solve(casadi_real *J, casadi_real *b, casadi_real *x, int m, cas
   return 1;
 }
 
+/* The Levenberg-Marquardt step (J^T J + lambda I) dP = -J^T phi, lambda = |phi| (Yamashita and
+ * Fukushima: quadratic convergence also where the solutions are not isolated, as with
+ * redundant contacts), with J in J (m x m, row-major) and its Gram matrix formed in H (m x m,
+ * destroyed) and factored by Cholesky; g gets J^T phi.  A descent direction of |phi|^2 / 2
+ * wherever Newton's step J^-1 is not one (J singular or nearly so).  Returns 0 if a result
+ * is not finite. */
+static int cone_lm(const casadi_real *J, const casadi_real *phi, casadi_real *H, casadi_real *g, casadi_real *dP, int m) {
+  casadi_real lambda = 0;
+  int i, j, k;
+  for (i = 0; i < m; ++i) lambda += phi[i] * phi[i];
+  lambda = sqrt(lambda);
+  for (i = 0; i < m * m; ++i) H[i] = 0;
+  for (i = 0; i < m; ++i) g[i] = 0;
+  for (k = 0; k < m; ++k) { /* H += J_k^T J_k row by row, lower triangle, skipping zeros */
+    const casadi_real *jk = J + (size_t) k * m;
+    for (i = 0; i < m; ++i)
+      if (jk[i] != 0) {
+        g[i] += jk[i] * phi[k];
+        for (j = 0; j <= i; ++j) H[(size_t) i * m + j] += jk[i] * jk[j];
+      }
+  }
+  for (i = 0; i < m; ++i) { /* Cholesky, lower triangle in place */
+    casadi_real *hi = H + (size_t) i * m, d;
+    hi[i] += lambda;
+    for (j = 0; j < i; ++j) {
+      const casadi_real *hj = H + (size_t) j * m;
+      casadi_real v = hi[j];
+      for (k = 0; k < j; ++k) v -= hi[k] * hj[k];
+      hi[j] = v / hj[j];
+    }
+    d = hi[i];
+    for (k = 0; k < i; ++k) d -= hi[k] * hi[k];
+    if (!(d > 0)) return 0;
+    hi[i] = sqrt(d);
+  }
+  for (i = 0; i < m; ++i) { /* L y = -g */
+    const casadi_real *hi = H + (size_t) i * m;
+    casadi_real v = -g[i];
+    for (k = 0; k < i; ++k) v -= hi[k] * dP[k];
+    dP[i] = v / hi[i];
+  }
+  for (i = m - 1; i >= 0; --i) { /* L^T dP = y */
+    const casadi_real *hi = H + (size_t) i * m;
+    dP[i] /= hi[i];
+    if (!isfinite(dP[i])) return 0;
+    for (k = 0; k < i; ++k) dP[k] -= hi[k] * dP[i];
+  }
+  return 1;
+}
+
 /* Semismooth Newton on the Alart-Curnier function from the impulses in ws->P (velocities
  * ws->U; the last step's impulses, after a few sweeps of pgs()), until every contact law
  * holds to tol (1 + max |U|) m/s (cone_residual()), or it stalls below CONE_FLOOR.  ws->P
@@ -211,7 +269,7 @@ static int cone_newton(workspace *ws, int na, const int *first, const casadi_rea
   casadi_real *rho = ws->cn, *phi = ws->cn + ND, *dP = ws->cn + 2 * ND, *gdp = ws->cn + 3 * ND;
   casadi_real *Pt = ws->cn + 4 * ND, *Ut = ws->cn + 5 * ND, *P0 = ws->cn + 6 * ND, *U0 = ws->cn + 7 * ND, *J = ws->S;
   casadi_int *cols = ws->cni, *dropped = ws->cni + ND;
-  int it, r, a, k, i;
+  int it, r, a, k, i = 0, lm, damped = 0;
   casadi_real theta;
   ws->fm = -1;
   memcpy(P0, ws->P, (size_t) nr * sizeof(casadi_real));
@@ -227,21 +285,37 @@ static int cone_newton(workspace *ws, int na, const int *first, const casadi_rea
     *residual = res / (1 + size);
     if (*residual <= tol) return 1;
     if (it == CONE_NEWTON_MAX || !isfinite(*residual)) break;
-    for (r = 0; r < nr; ++r) phi[r] = -phi[r];
-    if (!cone_solve(J, phi, dP, nr, cols, dropped)) return 0;
-    for (r = 0; r < nr; ++r) gdp[r] = 0; /* G dP, by G's column nonzeros */
-    for (a = 0; a < nr; ++a)
-      if (dP[a] != 0)
-        for (k = (int) ws->gp[a]; k < ws->gp[a + 1]; ++k) gdp[ws->gi[k]] += ws->G[ws->gi[k] + a * nr] * dP[a];
-    for (i = 0; i < CONE_BACKTRACK; ++i, step /= 2) {
-      for (r = 0; r < nr; ++r) {
-        Pt[r] = ws->P[r] + step * dP[r];
-        Ut[r] = ws->U[r] + step * gdp[r];
+    for (lm = damped; lm < 2; ++lm) { /* Newton's step, then Levenberg-Marquardt's if it gives no
+                                         descent; Levenberg-Marquardt's alone after a step
+                                         halved CONE_LM_AFTER times or more */
+      casadi_real slope = -2 * theta; /* d theta / d step at 0 */
+      if (!lm) {
+        for (r = 0; r < nr; ++r) phi[r] = -phi[r];
+        if (!cone_solve(J, phi, dP, nr, cols, dropped)) continue;
+      } else {
+        theta = cone_phi(ws, na, first, bias, rho, ws->P, ws->U, phi, J);
+        if (!cone_lm(J, phi, J + (size_t) ND * ND, gdp, dP, nr)) {
+          lm = 2;
+          break;
+        }
+        for (slope = 0, r = 0; r < nr; ++r) slope += gdp[r] * dP[r];
       }
-      theta_t = cone_phi(ws, na, first, bias, rho, Pt, Ut, phi, 0);
-      if (theta_t <= (1 - 2 * CONE_ARMIJO * step) * theta) break;
+      for (r = 0; r < nr; ++r) gdp[r] = 0; /* G dP, by G's column nonzeros */
+      for (a = 0; a < nr; ++a)
+        if (dP[a] != 0)
+          for (k = (int) ws->gp[a]; k < ws->gp[a + 1]; ++k) gdp[ws->gi[k]] += ws->G[ws->gi[k] + a * nr] * dP[a];
+      for (i = 0, step = 1; i < CONE_BACKTRACK; ++i, step /= 2) {
+        for (r = 0; r < nr; ++r) {
+          Pt[r] = ws->P[r] + step * dP[r];
+          Ut[r] = ws->U[r] + step * gdp[r];
+        }
+        theta_t = cone_phi(ws, na, first, bias, rho, Pt, Ut, phi, 0);
+        if (theta_t <= theta + CONE_ARMIJO * step * slope) break;
+      }
+      if (i < CONE_BACKTRACK) break;
     }
-    if (i == CONE_BACKTRACK) break; /* no descent: stalled at round-off, or lost */
+    if (lm == 2) break; /* no descent: stalled at round-off, or lost */
+    damped = i >= CONE_LM_AFTER;
     memcpy(ws->P, Pt, (size_t) nr * sizeof(casadi_real));
     memcpy(ws->U, Ut, (size_t) nr * sizeof(casadi_real));
     theta = cone_phi(ws, na, first, bias, rho, ws->P, ws->U, phi, J);
@@ -250,4 +324,139 @@ static int cone_newton(workspace *ws, int na, const int *first, const casadi_rea
   memcpy(ws->P, P0, (size_t) nr * sizeof(casadi_real)); /* failed: the impulses it started from */
   memcpy(ws->U, U0, (size_t) nr * sizeof(casadi_real));
   return 0;
+}
+
+/* Whether the impulses P + t dP of the contacts with an impulse are all in their cones. */
+static int cone_inside(const workspace *ws, int na, const int *first, const casadi_real *dP, casadi_real t) {
+  int c, d;
+  for (c = 0; c < na; ++c) {
+    const int r0 = first[c], nt = first[c + 1] - r0 - 1;
+    const casadi_real pn = ws->P[r0] + t * dP[r0];
+    casadi_real pt = 0;
+    if (ws->P[r0] <= 0) continue;
+    for (d = 1; d <= nt; ++d) pt += (ws->P[r0 + d] + t * dP[r0 + d]) * (ws->P[r0 + d] + t * dP[r0 + d]);
+    if (!(pn > 0) || sqrt(pt) > mu[ws->act[c]] * pn) return 0;
+  }
+  return 1;
+}
+
+/* Where the support is statically indeterminate (a box's four coplanar corners, a stack's
+ * faces) the contact laws hold on a whole family P + null(G_AA) of impulses: this picks its
+ * member of least Euclidean norm |P|, so that symmetric loads get symmetric forces.  A = the
+ * rows of the contacts with an impulse, if each sticks (tangent velocity below CONE_FLOOR
+ * (1 + max |U|)) or has no friction (a slipping contact's tangent impulse is fixed by its
+ * normal one: then nothing is done).  G_AA = L L^T by Cholesky with the rows whose pivot falls below CONE_PIVOT of their
+ * diagonal dropped; each dropped row j gives the null vector n_j = (-L_I^-T l_j, 1, 0, ...)
+ * (L_I the kept rows before j, l_j row j of the factor), orthonormalised (Gram-Schmidt, twice)
+ * in place of row j of the factor; then dP_A = -sum_j n_j (n_j . P_A), and P += t dP with
+ * t = 1 or, if that leaves a cone (a contact on its cone's edge), the first of t = 1/2,
+ * 1/4, ... that does not (the cones are convex: a step towards the least norm).  Kept only
+ * if the contact laws hold as well as before (G dP is not exactly 0 where the rows are only
+ * nearly dependent).  Uses ws->S (ws->fm = -1), ws->cni + ND and
+ * ws->cn after its first 2 ND. */
+static void cone_min_norm(workspace *ws, int na, const int *first, const casadi_real *bias, casadi_real tol) {
+  const int nr = first[na];
+  casadi_real *L = ws->S, *dP = ws->cn + 2 * ND, *gdp = ws->cn + 3 * ND, *P0 = ws->cn + 6 * ND, *U0 = ws->cn + 7 * ND;
+  casadi_int *dropped = ws->cni + ND, *start = ws->cni;
+  casadi_real before, after;
+  casadi_real size = 0, t = 1;
+  int idx[ND], m = 0, nd = 0, c, d, i, j, k, pass;
+  for (i = 0; i < nr; ++i) size = fmax(size, fabs(ws->U[i]));
+  for (c = 0; c < na; ++c) {
+    const int r0 = first[c], nt = first[c + 1] - r0 - 1, kc = (int) ws->act[c];
+    casadi_real pt = 0, vt = 0;
+    for (d = 1; d <= nt; ++d) {
+      const casadi_real v = ws->U[r0 + d] + restitution[kc] * ws->Um[kc * DC + d];
+      pt += ws->P[r0 + d] * ws->P[r0 + d];
+      vt += v * v;
+    }
+    if (ws->P[r0] <= 0) {
+      if (pt > 0) return;
+      continue;
+    }
+    if (sqrt(vt) > CONE_FLOOR * (1 + size)) return; /* slipping */
+    for (d = 0; d <= nt; ++d) idx[m++] = r0 + d;
+  }
+  if (m < 2) return;
+  ws->fm = -1;
+  for (i = 0; i < m; ++i) {
+    casadi_real *li = L + (size_t) i * m, s, d0;
+    int f = 0;
+    for (j = 0; j <= i; ++j) li[j] = ws->G[idx[i] + idx[j] * nr];
+    while (f < i && li[f] == 0) ++f;
+    start[i] = f;
+    for (j = f; j < i; ++j) {
+      const casadi_real *lj = L + (size_t) j * m;
+      if (dropped[j]) {
+        li[j] = 0;
+        continue;
+      }
+      s = li[j];
+      for (k = f > start[j] ? f : (int) start[j]; k < j; ++k) s -= li[k] * lj[k];
+      li[j] = s / lj[j];
+    }
+    d0 = li[i];
+    s = d0;
+    for (k = f; k < i; ++k) s -= li[k] * li[k];
+    dropped[i] = !(s > CONE_PIVOT * d0);
+    if (!dropped[i]) {
+      li[i] = sqrt(s);
+      continue;
+    }
+    /* n_i: L_I^T x = -l_i over the kept rows before i (by columns of L^T), n_i(i) = 1 */
+    for (k = 0; k < f; ++k) li[k] = 0;
+    for (k = f; k < i; ++k) li[k] = -li[k];
+    li[i] = 1;
+    for (k = i - 1; k >= 0; --k) {
+      const casadi_real *lk = L + (size_t) k * m;
+      if (dropped[k]) {
+        li[k] = 0;
+        continue;
+      }
+      li[k] /= lk[k];
+      for (j = (int) start[k]; j < k; ++j) li[j] -= lk[j] * li[k];
+    }
+    start[i] = 0;
+    for (pass = 0; pass < 2; ++pass) /* against the earlier null vectors (zero beyond their row) */
+      for (j = 0; j < i; ++j)
+        if (dropped[j]) {
+          const casadi_real *nj = L + (size_t) j * m;
+          s = 0;
+          for (k = 0; k <= j; ++k) s += nj[k] * li[k];
+          for (k = 0; k <= j; ++k) li[k] -= s * nj[k];
+        }
+    s = 0;
+    for (k = 0; k <= i; ++k) s += li[k] * li[k];
+    s = sqrt(s);
+    for (k = 0; k <= i; ++k) li[k] /= s;
+    ++nd;
+  }
+  if (!nd) return;
+  for (i = 0; i < nr; ++i) dP[i] = 0;
+  for (i = 0; i < m; ++i)
+    if (dropped[i]) {
+      const casadi_real *ni = L + (size_t) i * m;
+      casadi_real s = 0;
+      for (k = 0; k <= i; ++k) s += ni[k] * ws->P[idx[k]];
+      for (k = 0; k <= i; ++k) dP[idx[k]] -= s * ni[k];
+    }
+  for (pass = 0; pass < CONE_BACKTRACK && !cone_inside(ws, na, first, dP, t); ++pass) t /= 2;
+  if (pass == CONE_BACKTRACK) return;
+  for (i = 0; i < nr; ++i) dP[i] *= t;
+  for (i = 0; i < nr; ++i) gdp[i] = 0; /* G dP, by G's column nonzeros */
+  for (j = 0; j < nr; ++j)
+    if (dP[j] != 0)
+      for (k = (int) ws->gp[j]; k < ws->gp[j + 1]; ++k) gdp[ws->gi[k]] += ws->G[ws->gi[k] + j * nr] * dP[j];
+  before = cone_residual(ws, na, first, bias);
+  memcpy(P0, ws->P, (size_t) nr * sizeof(casadi_real));
+  memcpy(U0, ws->U, (size_t) nr * sizeof(casadi_real));
+  for (i = 0; i < nr; ++i) {
+    ws->P[i] += dP[i];
+    ws->U[i] += gdp[i];
+  }
+  after = cone_residual(ws, na, first, bias);
+  if (!(after <= fmax(2 * before, tol))) {
+    memcpy(ws->P, P0, (size_t) nr * sizeof(casadi_real));
+    memcpy(ws->U, U0, (size_t) nr * sizeof(casadi_real));
+  }
 }

@@ -74,7 +74,8 @@ typedef struct {
   casadi_real *Pold; /* impulses of the previous refinement */
   casadi_real *Xc;   /* [M A^T; A 0]^-1 [W_r^T; 0], first NQ rows, per active row r */
   casadi_real *G;    /* Delassus matrix of the active rows */
-  casadi_real *S;    /* Cholesky factor of lcp_newton()'s submatrix of G (ND x ND room) */
+  casadi_real *S;    /* Cholesky factor of lcp_newton()'s submatrix of G (2 ND x ND room:
+                        cone_newton()'s Jacobian and its Levenberg-Marquardt matrix) */
   casadi_real *P;    /* impulses of the active rows */
   casadi_real *rhs;  /* right-hand side and solution of one solve, then a saved Newton start */
   casadi_real *Pacc; /* impulses per contact summed over the steps since last cleared */
@@ -105,6 +106,8 @@ typedef struct {
   int pgs_sweeps;       /* sweeps of the last pgs() before it converged */
   int repeat;           /* whether repeat_step() is worth trying: the last step's impulses were
                            its own warm start's, or repeated */
+  int newton_once;      /* whether step() takes one Newton iteration even from a warm start
+                           that passes its test (contact_step()'s steps with impulses) */
 #endif
 } workspace;
 
@@ -153,7 +156,7 @@ static size_t layout(workspace *ws, char *block) {
   sizes[15] = (ND * NQ > NNZ_W ? ND * NQ : NNZ_W) * sizeof(casadi_real);
   sizes[13] = sizes[17] = sizes[19] = ND * sizeof(casadi_real);
   sizes[14] = 4 * ND * sizeof(casadi_real); /* Um, the end-of-step velocities, Pold, its change */
-  sizes[16] = 2 * ND * ND * sizeof(casadi_real); /* G, then S */
+  sizes[16] = 3 * ND * ND * sizeof(casadi_real); /* G, then S (2 ND x ND) */
   sizes[18] = 3 * NX * sizeof(casadi_real); /* rhs, solution, saved Newton start */
   sizes[20] = (NK + ND + NK + ND + 1 + (size_t) ND * ND) * sizeof(casadi_int); /* act, fset (and the factor's row starts), gp, gi */
   sizes[21] = ND * sizeof(casadi_real);
@@ -211,6 +214,7 @@ static size_t layout(workspace *ws, char *block) {
     ws->gp = ws->fset + ND + NK;
     ws->gi = ws->gp + ND + 1;
     ws->fm = -1;
+    ws->newton_once = 0;
     ws->F = (casadi_real *) (void *) (block + off[21]);
     ws->fac = (casadi_real *) (void *) (block + off[22]);
     ws->cn = (casadi_real *) (void *) (block + off[24]);
@@ -315,7 +319,12 @@ static int step(const casadi_real *q, const casadi_real *v, casadi_real t, const
     {
       casadi_real e_mom = norm_inf(ws->r, NQ), e_pos = fabs(h) * norm_inf(ws->r + NQ, NC);
       if (!isfinite(e_mom) || !isfinite(e_pos)) return STEP_NOT_FINITE;
-      if (e_pos <= tol && e_mom <= tol * MASS_SCALE * (1 + norm_inf(ws->x, NQ))) break;
+      if (e_pos <= tol && e_mom <= tol * MASS_SCALE * (1 + norm_inf(ws->x, NQ))
+#ifdef NCGEN_CONTACTS
+          && (it > 0 || !ws->newton_once)
+#endif
+      )
+        break;
     }
     if (it == o->max_iter) {
       if (iterations) *iterations = it;

@@ -45,10 +45,10 @@
 #define NEWTON_FIRST 4
 #define NEWTON_PIVOT 1e-10
 #define NEWTON_SOLVES 4
-/* pgs(): cone_newton() once, after CONE_FIRST sweeps (a power of 2 times NEWTON_FIRST) that
- * have not converged: the sweeps solve the easy problems, Newton finishes those they crawl
- * on. */
-#define CONE_FIRST 32
+/* pgs(): cone_newton() after CONE_FIRST sweeps (a power of 2 times NEWTON_FIRST) that have
+ * not converged, and again after twice as many while it fails: the sweeps solve the easy
+ * problems, Newton finishes those they crawl on. */
+#define CONE_FIRST 4
 
 /* Clears what the contact steps accumulate and their warm start (before a run). */
 static void contact_clear(workspace *ws) {
@@ -210,9 +210,11 @@ static void lcp_newton(workspace *ws, int n, const casadi_real *b) {
  * what the sweeps crawl on (redundant contacts); with friction, cone_newton() does (the
  * sweeps converge linearly, slowly where contacts are coupled: a heap), and it has
  * converged when every contact law holds to PGS_TOL (1 + max |U|) m/s; if it stops short
- * (no descent), the sweeps carry on from its last impulses. */
+ * (no descent), the sweeps carry on from where they were.  A converged solve ends with the
+ * least-norm impulses of its family where the support is statically indeterminate
+ * (cone_min_norm()). */
 static int pgs(workspace *ws, int na, const int *first, const casadi_real *bias) {
-  int nr = first[na], c, d, sweep, newton_at = NEWTON_FIRST, cone = 1;
+  int nr = first[na], c, d, sweep, newton_at = NEWTON_FIRST;
   ws->pgs_last = 0;
   ws->pgs_sweeps = PGS_MAX_ITER;
   for (sweep = 0; sweep < PGS_MAX_ITER; ++sweep) {
@@ -242,17 +244,19 @@ static int pgs(workspace *ws, int na, const int *first, const casadi_real *bias)
     ws->pgs_last = change / (1 + size);
     if (change <= PGS_TOL * (1 + size)) { /* a sweep changes no velocity by more than that */
       ws->pgs_sweeps = sweep;
+      cone_min_norm(ws, na, first, bias, PGS_TOL);
       return 1;
     }
     if (sweep + 1 == newton_at) { /* Newton steps after 4, 8, 16, ... sweeps */
       newton_at *= 2;
       if (nr == na) lcp_newton(ws, nr, bias); /* frictionless */
-      else if (cone && sweep + 1 >= CONE_FIRST && cone_newton(ws, na, first, bias, PGS_TOL, &ws->cone_last)) {
+      else if (sweep + 1 >= CONE_FIRST && cone_newton(ws, na, first, bias, PGS_TOL, &ws->cone_last)) {
         ws->pgs_last = 0;
         ws->pgs_sweeps = sweep + 1;
+        cone_min_norm(ws, na, first, bias, PGS_TOL);
         return 1;
-      } else
-        cone = 0; /* no descent from there: the sweeps finish alone, from where they were */
+      } /* else no descent from there: the sweeps carry on, and Newton starts again from
+           where they are after twice as many */
     }
   }
   return 0;
@@ -754,14 +758,16 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
   /* Contacts about to close take part too.  The impulses move the end-of-step gaps by
    * h/2 (U - U_free), U_free the free step's contact velocities: the push of a closed
    * contact can close an open neighbour within the step (a pile, a column), and push_out()
-   * would have to put it back after it.  A frictionless contact open at the end of the free
+   * would have to put it back after it.  A contact open at the end of the free
    * step (gap g > 0) with e = 0 and g < GAP_REACH h/2 max(-U_free,N of the closed contacts)
    * gets
    *   U_N >= min(0, U_free,N - 2 g / h),  i.e. bias b = max(0, 2 g / h - U_free,N) >= 0:
    * it may close within the step but does not pass its surface; as b >= 0, the impulses
-   * still take kinetic energy out (1/2 P^T G P + P^T b >= 0 of it, linearised).  (With
-   * friction its tangent rows would slow the sweeps more than the push-out costs: the
-   * falling chain of benchmarks/contact.py.)  Closed contacts: b = e min(U-_N, 0). */
+   * still take kinetic energy out (1/2 P^T G P + P^T b >= 0 of it, linearised).  With
+   * friction too: a ball resting on a crate resting on the floor falls with the crate in
+   * the free step, their gap stays 0 to round-off, and left out at +1e-17 m while the floor
+   * stopped the crate, the ball sank and got twice its weight the next step (0, 2 m g, 0,
+   * ... per step).  Closed contacts: b = e min(U-_N, 0). */
   {
     casadi_real reach = 0;
     for (a = 0; a < na; ++a) reach = fmax(reach, -ws->U[ws->act[a] * DC]);
@@ -769,7 +775,7 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
     for (na = k = 0; k < NK; ++k) {
       const casadi_real g = ws->g[k];
       if (g <= 0) bias[na] = restitution[k] * fmin(ws->Um[k * DC], 0);
-      else if (restitution[k] == 0 && mu[k] == 0 && g < reach) {
+      else if (restitution[k] == 0 && g < reach) {
         bias[na] = fmax(0, 2 * g / h - ws->U[k * DC]);
         near = 1;
       } else continue;
@@ -840,7 +846,13 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
       ws->Pold[ND + a] = ws->P[a] - ws->Pold[a];
     }
     x_add(ws, nr, ws->Pold + ND, 0.5, ws->x); /* warm start: w moves by half the impulses' change */
+    /* at least one Newton iteration: the warm start is linear in the impulses along the rows
+     * at the free step's end, and misses the first half's rows W(q) by O(|W(q) - W| |P|),
+     * O(omega h^2 mu g) when sliding with spin: below the step's tolerance at small h, that
+     * would be accepted at every step (a drift of first order, growing as h falls) */
+    ws->newton_once = 1;
     status = step(q, v, t, u, p, h, q_next, v_next, lam, &it, o, 1, ws);
+    ws->newton_once = 0;
     if (iterations) *iterations += it;
     if (status != STEP_OK) return status;
     if (refine == CONTACT_REFINE_MAX || !impact) break;

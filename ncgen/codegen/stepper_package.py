@@ -72,7 +72,7 @@ PGS_MAX_ITER, PGS_TOL = 300, 1e-12
 #: second order (~1e-8 m when the falling chain of benchmarks/contact.py lands), so a smaller
 #: tolerance would only repeat push-outs.
 PENETRATION_TOL = 1e-8
-#: Nonsmooth contact stepper: a frictionless contact still open at the end of the free step,
+#: Nonsmooth contact stepper: a contact still open at the end of the free step,
 #: with e = 0 and a gap below GAP_REACH h/2 × the fastest approach speed of a closed contact,
 #: takes part in the step's contact problem with U_N ≥ min(0, U_free,N − 2 g/h): the impulses
 #: on its neighbours may close it within the step but not push it through its surface, so the

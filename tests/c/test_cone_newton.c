@@ -26,7 +26,7 @@ static casadi_real nan_max(casadi_real m, casadi_real a) {
 
 #include "ncgen_cone_newton.h"
 
-static casadi_real G_[ND * ND], U_[ND], P_[ND], Um_[2 * ND], S_[ND * ND], cn_[8 * ND];
+static casadi_real G_[ND * ND], U_[ND], P_[ND], Um_[2 * ND], S_[2 * ND * ND], cn_[8 * ND];
 static casadi_int act_[NK], gp_[ND + 1], gi_[ND * ND], cni_[2 * ND];
 static const int first[NK + 1] = {0, 3, 6, 9};
 static const casadi_real bias[NK] = {0, 0, 0};
@@ -141,10 +141,42 @@ static void test_redundant(void) {
         "outside the cone");
 }
 
+/* The redundant pair of test_redundant() sticking, solved from an uneven warm start: its
+ * solutions are P_0 + P_1 = the impulse that stops the shared velocity, and the one of least
+ * norm splits it evenly (each contact P_N = 1/2, P_T = -U0_T / 2). */
+static void test_min_norm(void) {
+  casadi_real G[ND * ND], res;
+  const casadi_real U0[ND] = {-1, 0.2, 0.1, -1, 0.2, 0.1, 1, 0, 0};
+  const casadi_real warm[6] = {0.9, -0.3, 0.05, 0.1, 0.02, -0.03};
+  workspace ws;
+  int i, j, a, b;
+  memset(G, 0, sizeof G);
+  for (a = 0; a < 2; ++a)
+    for (b = 0; b < 2; ++b)
+      for (i = 0; i < 3; ++i) G[(3 * a + i) + (3 * b + i) * ND] = 1;
+  for (i = 6; i < ND; ++i) G[i + i * ND] = 1;
+  ws = make(G, U0);
+  for (i = 0; i < 6; ++i) {
+    ws.P[i] = warm[i];
+    for (j = 0; j < ND; ++j) ws.U[j] += G[j + i * ND] * warm[i];
+  }
+  CHECK(cone_newton(&ws, NK, first, bias, 1e-13, &res), "redundant pair: residual %g", res);
+  cone_min_norm(&ws, NK, first, bias, 1e-13);
+  CHECK(ws.fm == -1, "lcp_newton's factor not marked stale");
+  for (a = 0; a < 2; ++a) {
+    CHECK(fabs(ws.P[3 * a] - 0.5) < 1e-14, "P_N%d = %.17g, expected 1/2", a, ws.P[3 * a]);
+    CHECK(fabs(ws.P[3 * a + 1] + 0.1) < 1e-14 && fabs(ws.P[3 * a + 2] + 0.05) < 1e-14, "P_T%d = (%.17g, %.17g)", a,
+          ws.P[3 * a + 1], ws.P[3 * a + 2]);
+  }
+  for (i = 0; i < 6; ++i) CHECK(fabs(ws.U[i]) < 1e-13, "U[%d] = %g", i, ws.U[i]);
+  CHECK(cone_residual(&ws, NK, first, bias) < 1e-13, "residual %g", cone_residual(&ws, NK, first, bias));
+}
+
 int main(void) {
   (void) at, (void) test_work, (void) test_default_options; /* harness.h's, for the stepper's tests */
   test_jacobian();
   test_solution();
   test_redundant();
+  test_min_norm();
   return report("test_cone_newton");
 }
