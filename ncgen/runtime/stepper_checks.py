@@ -120,8 +120,7 @@ def trusted_before_failure(model, traj, S: np.ndarray, eq: np.ndarray | None):
         return traj, ""
     work = np.concatenate([[0.0], S[:, STATS.index("work")]])
     conservative = traj.info["energy"]["conservative"]
-    scale = np.maximum(_energy_scale(traj, work)[1:], 1e-300)
-    e_rel = energy_error(traj, work, conservative)[1:] / scale
+    e_rel = relative_energy_error(traj, work, conservative)
     bad_energy = ~(e_rel <= ENERGY_FRACTION)                       # NaN counts as bad
     row_energy = int(np.argmax(bad_energy)) if bad_energy.any() else len(S)
     row_error = len(S) if eq is None else untrusted_global_row(model, eq[:len(S)])
@@ -328,6 +327,11 @@ def energy_error(traj, work: np.ndarray, conservative: bool) -> np.ndarray:
     return np.abs(E - E[0] - (0.0 if conservative else work))
 
 
+def relative_energy_error(traj, work: np.ndarray, conservative: bool) -> np.ndarray:
+    """:func:`energy_error` at the end of each output row over the run's energy scale."""
+    return energy_error(traj, work, conservative)[1:] / np.maximum(_energy_scale(traj, work)[1:], 1e-300)
+
+
 def energy_report(traj, work: np.ndarray, conservative: bool) -> dict:
     """``info["energy"]``: energy drift of a conservative model, or the energy balance
     (work ``W`` of the non-conservative forces and drives, and ``max |E − E0 − W|``)."""
@@ -374,7 +378,7 @@ def untrusted_row(model, traj, S: np.ndarray, h: float, contacts: bool = False) 
         e_rel = (E - E[0] - work)[1:] / scale           # a gain only: contacts dissipate
         residual = S[:, len(STATS) + CONTACT_STATS.index("pgs_residual")]
     else:
-        e_rel = energy_error(traj, work, conservative)[1:] / scale
+        e_rel = relative_energy_error(traj, work, conservative)
         residual = np.zeros(len(S))
     e_rel = np.where(np.isnan(e_rel), np.inf, e_rel)    # overflowed or NaN states: diverged
     dt = h * traj.info.get("substeps", 1)
