@@ -10,7 +10,9 @@ call, through the public functions with their argument checks:
   ``pinocchio.rnea`` (with the mimic joint for the Panda; target ≤ 1.5×);
 * ``nc.aba(model, qj, vj, tau)`` and ``nc.joint_forward_dynamics(model, qj, vj, u)`` vs
   ``pinocchio.aba`` (Pinocchio's model without the mimic joint for the Panda: its ABA refuses
-  them; target ≤ 1.0×).
+  them; target ≤ 1.0×);
+* ``nc.rnea(model, QJ, VJ, AJ)`` with one row per state (1000 rows, one C loop) vs a Python
+  loop of ``pinocchio.rnea`` over them (target ≤ 0.5×).
 
 Interleaved rounds (``interleaved`` of ``tree_algorithms.py``): the min and median of the
 per-round ratios of the best batches, and each side's best µs per call.  The CPU model and the
@@ -75,6 +77,9 @@ def robot_pairs(name: str, calls: int, rounds: int) -> dict:
         out["rnea_agreement"] = float(np.max(np.abs(P @ nc.inverse_dynamics(model, qj, vj, aj) - pin_rnea())))
     out["inverse_dynamics"] = interleaved(lambda: nc.inverse_dynamics(model, qj, vj, aj), pin_rnea, calls, rounds)
     out["rnea"] = interleaved(lambda: nc.rnea(model, qj, vj, aj), pin_rnea, calls, rounds)
+    QJ, VJ, AJ = (np.tile(x, (BATCH, 1)) for x in (qj, vj, aj))
+    out["rnea_batch"] = interleaved(lambda: nc.rnea(model, QJ, VJ, AJ), lambda: [pin_rnea() for _ in range(BATCH)],
+                                    max(1, calls // BATCH), rounds)
 
     act = [model.joint_space.slices(rates=True)[n].start for n in model.actuated_joints]
     u = tau_i[[mimic.independent.index(i) for i in act]]
@@ -91,7 +96,10 @@ def robot_pairs(name: str, calls: int, rounds: int) -> dict:
     return out
 
 
+#: States of the batched call (``nc.rnea`` with one row per state against a Python loop of ``pinocchio.rnea``).
+BATCH = 1000
 LABELS = (("inverse_dynamics", "nc.inverse_dynamics / pinocchio.rnea"), ("rnea", "nc.rnea / pinocchio.rnea"),
+          ("rnea_batch", f"nc.rnea over {BATCH} states in one call / a Python loop of pinocchio.rnea"),
           ("aba", "nc.aba / pinocchio.aba"), ("fd", "nc.joint_forward_dynamics / pinocchio.aba"))
 
 

@@ -105,7 +105,8 @@ EXTRA = {"too large": (np.array([1e101]), r"magnitude at most"),
          "0-d": (np.array(0.1), r"expected 1 numbers, got a scalar|expected .*1.*got")}
 KINDS = {**bad_values(1), **EXTRA}
 CASES = [(e, k) for e in ENTRIES for k in KINDS
-         if not (e.startswith("kernel") and k in ("nested", "0-d", "wrong shape"))]
+         if not (e.startswith("kernel") and k in ("nested", "0-d", "wrong shape"))
+         and (e, k) != ("crba qj", "nested")]        # crba's only argument (1, nq): one row per state, a batch of one
 
 
 @pytest.mark.parametrize("entry, kind", CASES, ids=[f"{e}-{k}" for e, k in CASES])
@@ -132,3 +133,55 @@ def test_the_kernel_without_the_accelerator_checks_the_same(hinge, monkeypatch):
             with pytest.raises(NcgenError, match=found):
                 k([0.1], value, [0.0])
         assert k([0.3], [0.2], [0.7]) == pytest.approx([closed_form(0.3, 0.7, 0.0, K0)], abs=1e-12)
+
+
+# ------------------------------------------------------------------ many states in one call
+def test_one_row_per_state_equals_pinocchio_state_by_state():
+    """``nc.rnea``/``crba``/``aba`` and the derivatives with one row per state: one C loop,
+    equal to Pinocchio's state by state (a floating-base robot: quaternions normalised per
+    row), and to the single-state call."""
+    pin = pytest.importorskip("pinocchio")
+    from pinocchio_robots import JointMap, pinocchio_models, random_configuration, urdf_text
+
+    model = nc.System.from_urdf(urdf_text("solo12"), floating_base=True).build()
+    pm = pinocchio_models("solo12")[1]
+    data, jm, rng = pm.createData(), JointMap(model, pm), np.random.default_rng(1)
+    n = 20
+    QP = np.array([random_configuration(pm, rng) for _ in range(n)])
+    QJ = np.array([jm.q_to_ncgen(q) for q in QP])
+    QJ[:, 3:7] *= 1.0 + rng.random((n, 1))                       # the base quaternion not of unit norm
+    VJ, AJ = rng.normal(size=(n, jm.nv)), rng.normal(size=(n, jm.nv))
+    tau, M = nc.rnea(model, QJ, VJ, AJ), nc.crba(model, QJ)
+    acc = nc.aba(model, QJ, VJ, tau)
+    d_tau = nc.rnea_derivatives(model, QJ, VJ, AJ)
+    assert tau.shape == (n, jm.nv) and M.shape == (n, jm.nv, jm.nv) and d_tau[1].shape == (n, jm.nv, jm.nv)
+    for i in range(n):
+        vp, ap = jm.P @ VJ[i], jm.P @ AJ[i]
+        assert np.allclose(jm.P @ tau[i], pin.rnea(pm, data, QP[i], vp, ap), atol=1e-9)
+        assert np.allclose(jm.P @ M[i] @ jm.P.T, pin.crba(pm, data, QP[i]), atol=1e-9)
+        assert np.allclose(acc[i], AJ[i], atol=1e-8)                # ABA inverts RNEA
+        single = nc.rnea_derivatives(model, QJ[i], VJ[i], AJ[i])
+        assert all(np.array_equal(b[i], s) for b, s in zip(d_tau, single))
+
+
+def test_a_bad_row_is_named(hinge):
+    Q, V, A = np.zeros((5, 1)), np.zeros((5, 1)), np.zeros((5, 1))
+    Q[3, 0] = np.nan
+    with pytest.raises(NcgenError, match=r"rnea: qj \(joint positions, joint_names order\): row 3: expected finite"):
+        nc.rnea(hinge, Q, V, A)
+    with pytest.raises(NcgenError, match=r"rnea: vj .*: expected 5 rows \(the rows of qj\) of 1 values, got shape "
+                                         r"\(4, 1\)"):
+        nc.rnea(hinge, np.zeros((5, 1)), np.zeros((4, 1)), A)
+    theta = np.linspace(-1.0, 1.0, 5)[:, None]
+    assert np.allclose(nc.rnea(hinge, theta, V, np.ones((5, 1)))[:, 0],
+                       closed_form(theta[:, 0], 1.0, 0.0, K0), rtol=1e-12)
+
+
+def test_rows_without_the_accelerator_give_the_same(hinge, monkeypatch):
+    theta = np.linspace(-1.0, 1.0, 4)[:, None]
+    with_c = nc.rnea_derivatives(hinge, theta, np.ones((4, 1)), np.ones((4, 1)))
+    from ncgen.runtime import tree_algorithms
+    k = tree_algorithms.algorithm_kernel(hinge, "rnea_derivatives")
+    monkeypatch.setattr(k, "_fast", None)
+    without = tree_algorithms.batch(hinge, k, (theta, np.ones((4, 1)), np.ones((4, 1))), None, 0.0)
+    assert all(np.array_equal(a, b) for a, b in zip(with_c, without))

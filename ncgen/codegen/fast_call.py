@@ -7,7 +7,10 @@ sequences element by element; ``bytes``, ``bytearray`` and byte memoryviews refu
 read as numbers), calls the kernel's C entry point with the work arrays of a
 :class:`~ncgen.codegen.direct.DirectFunction` and returns the object given at construction
 (its output buffers), or None when an optional check fails: ``check[0] > tol`` and
-``check[1]`` finite (the tree kernels' pivot and sum).  With ``bound > 0`` every input value
+``check[1]`` finite (the tree kernels' pivot and sum).  ``caller.batch(n, outs, *arrays)``
+calls it on ``n`` rows of C-contiguous float64 arrays in one C loop, writing the first
+``len(outs)`` outputs to the rows of ``outs`` (the first row whose check fails returned, or
+None).  With ``bound > 0`` every input value
 must be finite and of magnitude at most ``bound`` (checked while copying, a few ns a value),
 an array one-dimensional and a sequence's items Python floats or ints (not booleans); a
 TypeError or ValueError otherwise, so that the caller builds its detailed message only then.
@@ -122,6 +125,81 @@ static PyObject *caller_call(PyObject *self_, PyObject *const *args, size_t narg
     return self->result;
 }
 
+/* batch(n, outs, in_0, ..., in_{n_in - 1}): the kernel on n rows: row i of in_k (C-contiguous
+   float64, n x size_k) copied in (checked against the bound), the first len(outs) outputs
+   copied to row i of outs[j] (C-contiguous float64, n x m_j, m_j the output's size).  Returns
+   None, or the first row whose check fails (nothing written from it on). */
+static PyObject *caller_batch(PyObject *self_, PyObject *args) {
+    Caller *self = (Caller *)self_;
+    Py_ssize_t nargs = PyTuple_GET_SIZE(args), n, n_out, i;
+    Py_buffer in[MAX_IN], out[MAX_IN];
+    int n_in_got = 0, n_out_got = 0, k, j;
+    PyObject *ret = NULL;
+    if (nargs != 2 + self->n_in) {
+        PyErr_Format(PyExc_TypeError, "batch: expected n, outs and %d arrays, got %zd arguments", self->n_in, nargs);
+        return NULL;
+    }
+    n = PyLong_AsSsize_t(PyTuple_GET_ITEM(args, 0));
+    if (n < 0) { if (!PyErr_Occurred()) PyErr_SetString(PyExc_ValueError, "batch: n < 0"); return NULL; }
+    PyObject *outs = PySequence_Fast(PyTuple_GET_ITEM(args, 1), "batch: outs must be a sequence of arrays");
+    if (!outs) return NULL;
+    n_out = PySequence_Fast_GET_SIZE(outs);
+    if (n_out > MAX_IN) { PyErr_SetString(PyExc_ValueError, "batch: too many outputs"); goto done; }
+    for (k = 0; k < self->n_in; k++, n_in_got++) {
+        if (PyObject_GetBuffer(PyTuple_GET_ITEM(args, 2 + k), &in[k], PyBUF_C_CONTIGUOUS | PyBUF_FORMAT)) goto done;
+        if (!(in[k].itemsize == 8 && in[k].format && in[k].format[0] == 'd' && in[k].format[1] == 0
+              && in[k].len == n * self->size[k] * 8)) {
+            PyErr_Format(PyExc_ValueError, "batch: argument %d: expected %zd x %zd float64 values", k, n, self->size[k]);
+            n_in_got++; goto done;
+        }
+    }
+    for (j = 0; j < n_out; j++, n_out_got++) {
+        if (PyObject_GetBuffer(PySequence_Fast_GET_ITEM(outs, j), &out[j],
+                               PyBUF_C_CONTIGUOUS | PyBUF_WRITABLE | PyBUF_FORMAT)) goto done;
+        if (!(out[j].itemsize == 8 && out[j].format && out[j].format[0] == 'd' && out[j].format[1] == 0
+              && (n == 0 || out[j].len % (n * 8) == 0))) {
+            PyErr_Format(PyExc_ValueError, "batch: output %d: expected n rows of float64 values", j);
+            n_out_got++; goto done;
+        }
+    }
+    for (i = 0; i < n; i++) {
+        for (k = 0; k < self->n_in; k++) {
+            memcpy(self->buf[k], (const double *)in[k].buf + i * self->size[k], (size_t)self->size[k] * 8);
+            if (self->bound > 0 && check_bound(self->buf[k], self->size[k], self->bound, k)) {
+                PyObject *type, *value, *tb;
+                PyErr_Fetch(&type, &value, &tb);
+                PyErr_Format(PyExc_ValueError, "row %zd, argument %d: a value is not finite or too large", i, k);
+                Py_XDECREF(type); Py_XDECREF(value); Py_XDECREF(tb);
+                goto done;
+            }
+        }
+        if (self->fn(self->arg, self->res, self->iw, self->w, self->mem)) {
+            PyErr_Format(PyExc_RuntimeError, "the compiled kernel returned an error at row %zd", i);
+            goto done;
+        }
+        if (self->check && !(self->check[0] > self->tol && isfinite(self->check[1]))) {
+            ret = PyLong_FromSsize_t(i);
+            goto done;
+        }
+        for (j = 0; j < n_out; j++) {
+            Py_ssize_t m = n ? out[j].len / (n * 8) : 0;
+            memcpy((double *)out[j].buf + i * m, self->res[j], (size_t)m * 8);
+        }
+    }
+    Py_INCREF(Py_None);
+    ret = Py_None;
+done:
+    for (k = 0; k < n_in_got; k++) PyBuffer_Release(&in[k]);
+    for (j = 0; j < n_out_got; j++) PyBuffer_Release(&out[j]);
+    Py_DECREF(outs);
+    return ret;
+}
+
+static PyMethodDef caller_methods[] = {
+    {"batch", caller_batch, METH_VARARGS, "batch(n, outs, *arrays): the kernel on n rows (see fast_call.py)"},
+    {NULL, NULL, 0, NULL}
+};
+
 static PyObject *caller_new(PyTypeObject *type, PyObject *a, PyObject *kw) {
     unsigned long long fn, arg, res, iw, w, check; int mem; double tol, bound;
     (void)kw;
@@ -163,6 +241,7 @@ static PyTypeObject CallerType = {
     .tp_vectorcall_offset = offsetof(Caller, vectorcall),
     .tp_call = PyVectorcall_Call,
     .tp_new = caller_new,
+    .tp_methods = caller_methods,
     .tp_dealloc = (destructor)caller_dealloc,
 };
 

@@ -21,11 +21,12 @@ coordinates, mimic joints allowed (:func:`~ncgen.runtime.tree_check.check_tree`)
 from __future__ import annotations
 
 import ctypes
+import re
 
 import numpy as np
 
 from ncgen.codegen.fast_call import fast_caller
-from ncgen.errors import ModelError
+from ncgen.errors import ModelError, ShapeError
 from ncgen.model.data import cached, model_data
 from ncgen.runtime.tree_check import PIVOT_TOL, check_tree, compile_tree_function, unit_quaternions
 from ncgen.validation import MAX_MAGNITUDE, as_numbers, as_vector
@@ -182,11 +183,64 @@ def _run(model, name: str, args: tuple, p, t: float):
     """The outputs (copies) of the algorithm ``name`` at ``args`` (in ``ALGORITHMS`` order).
     Without quaternion joints the arguments go straight to the kernel, whose caller checks
     their lengths, kinds and magnitudes in C (:func:`~ncgen.codegen.fast_call.fast_caller`'s
-    ``bound``); the detailed message is built only when that fails (:func:`_checked`)."""
+    ``bound``); the detailed message is built only when that fails (:func:`_checked`).
+    Arguments of one row per state (2-D, ``n`` rows each) give outputs with a first axis of
+    ``n`` (:func:`batch`)."""
     k = model_data(model).algorithm_kernels.get((name, None))
     if not isinstance(k, AlgorithmKernel):
         k = algorithm_kernel(model, name)
+    if np.ndim(args[0]) == 2:
+        return batch(model, k, args, p, t)
     return call(model, k, args, p, t)
+
+
+def batch(model, k: AlgorithmKernel, args: tuple, p, t: float):
+    """The algorithm of ``k`` at ``n`` states at once: each argument ``(n, size)``, outputs
+    with a first axis of ``n`` (vectors ``(n, size)``, matrices ``(n, rows, columns)``), in
+    one C loop (:func:`~ncgen.codegen.fast_call.fast_caller`'s ``batch``; a Python loop
+    without the extension).  A bad row is named in the error."""
+    js = model.joint_space
+    sizes = {"qj": js.nq, "vj": js.nv, "aj": js.nv, "tau": k._sizes[-1]}
+    if len(args) != len(k.input_names):
+        k._wrong_sizes(args)
+    arrays = [np.ascontiguousarray(as_numbers(x, f"{k.name}: {a}", "an array of one row per state"), dtype=float)
+              for a, x in zip(k.input_names, args)]
+    n = len(arrays[0])
+    for a, x in zip(k.input_names, arrays):
+        if x.shape != (n, sizes[a]):
+            raise ShapeError(f"{k.name}: {_WHAT[a]}: expected {n} rows (the rows of qj) of {sizes[a]} values, "
+                             f"got shape {x.shape}")
+    if k.input_names[0] == "qj":
+        arrays[0] = unit_quaternions(js, arrays[0])
+    k._at(t, p)
+    shapes = [np.shape(o) for o in (k._outputs if type(k._outputs) is tuple else (k._outputs,))]
+    outs = [np.empty((n, int(np.prod(s)))) for s in shapes]
+    fast = k._fast
+    if fast is not None:
+        try:
+            bad = fast.batch(n, outs, *arrays)
+        except ValueError as e:
+            numbers = [int(x) for x in re.findall(r"\d+", str(e))]
+            if not str(e).startswith("row ") or len(numbers) < 2:
+                raise ShapeError(f"{k.name}: {e}") from None
+            row, arg = numbers[:2]
+            raise ShapeError(f"{k.name}: {_WHAT[k.input_names[arg]]}: row {row}: expected finite numbers of "
+                             f"magnitude at most {MAX_MAGNITUDE:g}") from None
+        if bad is not None:
+            try:
+                k._singular()
+            except ModelError as e:
+                raise ModelError(f"{e} (row {bad})") from None
+    else:
+        for i in range(n):
+            try:
+                out = k(*(x[i] for x in arrays))
+            except ModelError as e:
+                raise ModelError(f"{e} (row {i})") from None
+            for o, r in zip(outs, out if type(out) is tuple else (out,)):
+                o[i] = np.asarray(r).reshape(-1, order="F")
+    result = [o if len(s) == 1 else o.reshape(n, s[1], s[0]).transpose(0, 2, 1) for o, s in zip(outs, shapes)]
+    return tuple(result) if len(result) > 1 else result[0]
 
 
 def call(model, k: AlgorithmKernel, args: tuple, p, t: float):

@@ -89,17 +89,19 @@ def compile_tree_function(model, f, cflags, suffix: str):
 
 
 def unit_quaternions(js, qj: np.ndarray) -> np.ndarray:
-    """``qj`` with the quaternions of spherical and free joints normalised (qw ≥ 0)."""
+    """``qj`` (one state, or one per row) with the quaternions of spherical and free joints
+    normalised (qw ≥ 0)."""
     if js.dim != 3:
         return qj
     qj = qj.copy()
     for name, s in js.slices().items():
         if js.nq_joint[name] in (4, 7):
-            x = qj[s.stop - 4:s.stop]
-            n = np.linalg.norm(x)
-            if not n > 0:
-                raise ModelError(f"qj[{name!r}]: the quaternion [qx, qy, qz, qw] is zero")
-            qj[s.stop - 4:s.stop] = x / n * (1.0 if x[3] >= 0 else -1.0)
+            x = qj[..., s.stop - 4:s.stop]
+            n = np.linalg.norm(x, axis=-1, keepdims=True)
+            if not np.all(n > 0):
+                row = "" if qj.ndim == 1 else f" in row {int(np.argmin(n.reshape(-1) > 0))}"
+                raise ModelError(f"qj[{name!r}]: the quaternion [qx, qy, qz, qw] is zero{row}")
+            qj[..., s.stop - 4:s.stop] = x / n * np.where(x[..., 3:] >= 0, 1.0, -1.0)
     return qj
 
 
