@@ -21,7 +21,6 @@ coordinates, mimic joints allowed (:func:`~ncgen.runtime.tree_check.check_tree`)
 from __future__ import annotations
 
 import ctypes
-import re
 
 import numpy as np
 
@@ -219,11 +218,9 @@ def batch(model, k: AlgorithmKernel, args: tuple, p, t: float):
     if fast is not None:
         try:
             bad = fast.batch(n, outs, *arrays)
-        except ValueError as e:
-            numbers = [int(x) for x in re.findall(r"\d+", str(e))]
-            if not str(e).startswith("row ") or len(numbers) < 2:
-                raise ShapeError(f"{k.name}: {e}") from None
-            row, arg = numbers[:2]
+        except ValueError:                  # a value out of bound: name the first one
+            arg = next(i for i, x in enumerate(arrays) if not np.all(np.abs(x) <= MAX_MAGNITUDE))
+            row = int(np.argmin(np.all(np.abs(arrays[arg]) <= MAX_MAGNITUDE, axis=1)))
             raise ShapeError(f"{k.name}: {_WHAT[k.input_names[arg]]}: row {row}: expected finite numbers of "
                              f"magnitude at most {MAX_MAGNITUDE:g}") from None
         if bad is not None:
