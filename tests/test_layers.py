@@ -10,6 +10,7 @@ docs/architecture.md)::
 
 A module may import modules of its own layer and of lower ones.  The exceptions, all
 conveniences: ``System.build()`` (model) calls :func:`ncgen.assembly.build.build_model`,
+``Model.rank`` (model) calls :func:`ncgen.assembly.manifold.numerical_rank` (the one rank rule),
 ``Trajectory.reaction()`` (runtime) calls :func:`ncgen.analysis.reactions.joint_reactions`, and
 ``Trajectory.to_html()`` (runtime) calls :func:`ncgen.viz.html.to_html`, and Jupyter's display
 of a model (model) and of a trajectory (runtime), ``_repr_html_``, calls :mod:`ncgen.viz.notebook`.
@@ -27,7 +28,7 @@ LAYERS = ["base", "symbolic", "model", "rigid_motion", "assembly", "codegen", "r
           "control", "cli", "root"]
 BASE = {"errors", "validation", "reproducible", "files", "interrupts", "version", "robots", "progress"}
 #: (importing module, imported module): the documented exceptions.
-EXCEPTIONS = {("ncgen.model.system", "ncgen.assembly.build"),
+EXCEPTIONS = {("ncgen.model.system", "ncgen.assembly.build"), ("ncgen.model.model", "ncgen.assembly.manifold"),
               ("ncgen.runtime.trajectory", "ncgen.analysis.reactions"),
               ("ncgen.runtime.trajectory", "ncgen.viz.html"),
               ("ncgen.model.model", "ncgen.viz.notebook"), ("ncgen.runtime.trajectory", "ncgen.viz.notebook")}

@@ -1,6 +1,7 @@
 """Where things live (docs/architecture.md): whole-system CasADi functions are built in
 ncgen/assembly, a model's run-time data is kept in one place (ncgen/model/data.py), and the
-rank tolerance of the manifold's numerics is defined once (ncgen/assembly/manifold.py)."""
+rank tolerance of the manifold's numerics is defined once (ncgen/assembly/manifold.py) and
+the rank of a constraint Jacobian is taken by its rule."""
 from __future__ import annotations
 
 import ast
@@ -41,3 +42,13 @@ def test_one_rank_tolerance_for_the_manifold():
                                                  for t in n.targets):
                 owners.append(str(p.relative_to(ROOT)))
     assert owners == ["assembly/manifold.py"], owners
+
+
+def test_ranks_of_the_constraint_jacobian_by_the_manifold_rule():
+    """``np.linalg.matrix_rank`` (NumPy's own tolerance) only for matrices other than ``A``: the
+    modal matrix of a steady motion and the centred points of form-finding; ranks of ``A`` go
+    through ``manifold.numerical_rank`` (tests/test_rank_rule.py)."""
+    allowed = {ROOT / "analysis" / "steady_motion.py", ROOT / "analysis" / "formfinding.py"}
+    found = [f"{p.relative_to(ROOT.parent)}:{line}" for p in sorted(ROOT.rglob("*.py")) if p not in allowed
+             for line in calls(p, "matrix_rank")]
+    assert not found, "a rank outside ncgen.assembly.manifold.numerical_rank:\n" + "\n".join(found)

@@ -18,7 +18,7 @@ from ncgen.assembly.linearization import linearization_function
 from ncgen.errors import NcgenError
 from ncgen.analysis.statics import _parameters
 from ncgen.analysis.stability import cached
-from ncgen.assembly.manifold import coordinate_basis, manifold_point, tangent_velocity
+from ncgen.assembly.manifold import coordinate_basis, manifold_point, numerical_rank, tangent_velocity
 from ncgen.validation import as_vector
 
 #: A state is consistent when |Φ| and |A v + Φ_t| are below this times the system's size².
@@ -133,7 +133,7 @@ def linearize(model, q, v=None, u=None, p=None, *, t: float | None = None, coord
         k = int(np.argmax(np.abs(rate)))
         raise NcgenError(f"linearize: v violates the velocity constraint of {model.constraint_names[k]} "
                          f"(A v + Phi_t = {rate[k]:.3g}); use nc.project_velocity")
-    if A.shape[0] and np.linalg.matrix_rank(A) < A.shape[0]:
+    if numerical_rank(A) < A.shape[0]:
         raise NcgenError("linearize: the constraint Jacobian is rank-deficient at q (redundant constraints "
                          "or a singular configuration); build the model with redundant='drop'")
     N, G = coordinate_basis(A, nq, coordinates)

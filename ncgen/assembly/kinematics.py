@@ -26,7 +26,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ncgen.assembly.manifold import NEWTON_ITER as MAX_ITER, NEWTON_TOL as TOL, newton, project, system_size
+from ncgen.assembly.manifold import NEWTON_ITER as MAX_ITER, NEWTON_TOL as TOL, newton, numerical_rank, project,\
+    system_size
 from ncgen.assembly.rank import dependent_rows
 from ncgen.errors import ModelError
 from ncgen.model.expressions import did_you_mean
@@ -189,7 +190,7 @@ def dof_report(model, q=None, *, t=None, p=None) -> DofReport:
     q = model.q0 if q is None else np.asarray(q, float)
     _, _, _, jac = _numeric(model, t, p)
     A = jac(q)
-    rank = int(np.linalg.matrix_rank(A)) if A.size else 0
+    rank = numerical_rank(A)
     dep = [model.constraint_names[i] for i in dependent_rows(A)]
     return DofReport(model.nq, model.nc, rank, dep, list(model.redundant) if model.redundant_dropped else [])
 
@@ -237,9 +238,10 @@ def solve_kinematics(model, times, *, q=None, p=None, tol: float = TOL) -> Kinem
             raise ModelError(f"solve_kinematics: no configuration found at t = {t:g} s (residual "
                              f"{res:.3g} after {it} iterations): the drives may leave the reachable range")
         A = jac(q)
-        if np.linalg.matrix_rank(A) < model.nq:
+        rank = numerical_rank(A)
+        if rank < model.nq:
             raise ModelError(f"solve_kinematics: singular configuration at t = {t:g} s "
-                             f"(rank A = {np.linalg.matrix_rank(A)} < nq = {model.nq})")
+                             f"(rank A = {rank} < nq = {model.nq})")
         phi_t = np.asarray(f["phi_t"](t, q, p), dtype=float).reshape(-1)
         v = np.linalg.lstsq(A, -phi_t, rcond=None)[0]
         gamma = np.asarray(f["gamma"](t, q, v, p), dtype=float).reshape(-1)

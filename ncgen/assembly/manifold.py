@@ -1,9 +1,11 @@
 """The constraint manifold ``Φ(t, q) = 0``, ``A(q) v + Φ_t = 0``: its numerics in one place.
 
 * **Rank and null space**: :data:`RANK_TOL` is the one tolerance: a singular value of ``A``
-  (or of ``A M⁻¹ Aᵀ``) below ``RANK_TOL`` × the largest counts as zero, in the null-space
-  basis :func:`null_basis` (and :func:`coordinate_basis`, :func:`tangent_basis`), in the
-  truncated pseudo-inverse of the mass-metric projections (:func:`mass_step`,
+  (or of ``A M⁻¹ Aᵀ``) below ``RANK_TOL`` × the largest counts as zero, in the rank
+  :func:`numerical_rank` (``Model.rank``, ``dof_report``, the tree check, the check of
+  redundant constraints), in the null-space basis :func:`null_basis` (and
+  :func:`coordinate_basis`, :func:`tangent_basis`), so that a rank and a null space at one
+  position never disagree, in the truncated pseudo-inverse of the mass-metric projections (:func:`mass_step`,
   :class:`ManifoldProjector`, the RATTLE bridge) and in :func:`check_tangent_inertia`.
 * **Positions**: :func:`newton`, minimum-norm Newton steps onto ``Φ = 0`` on chosen
   coordinates (assembly, initial states, joint space, optimal-control conditions).
@@ -98,16 +100,29 @@ def system_size(q: np.ndarray) -> float:
     return max(1.0, float(np.max(np.abs(q))) if q.size else 1.0)
 
 
-# ------------------------------------------------------------ null space and charts
+# ------------------------------------------------------------ rank, null space and charts
+def _rank_of(s: np.ndarray, tol: float) -> int:
+    """How many of the singular values ``s`` exceed ``tol`` × the largest."""
+    return int(np.sum(s > tol * max(float(s.max()), 1e-300))) if s.size else 0
+
+
+def numerical_rank(A: np.ndarray, tol: float = RANK_TOL) -> int:
+    """Rank of ``A``: its singular values above ``tol`` × the largest (0 for an empty
+    ``A``); the rank :func:`null_basis` uses, so ``nq − numerical_rank(A)`` is its width."""
+    A = np.atleast_2d(np.asarray(A, float))
+    if A.size == 0:
+        return 0
+    return _rank_of(np.linalg.svd(A, compute_uv=False), tol)
+
+
 def null_basis(A: np.ndarray, nq: int, tol: float = RANK_TOL) -> np.ndarray:
-    """Orthonormal basis of ``null A`` (nq × dof), columns signed reproducibly; singular
-    values below ``tol`` × the largest count as zero."""
+    """Orthonormal basis of ``null A`` (nq × (nq − :func:`numerical_rank`)), columns signed
+    reproducibly; singular values below ``tol`` × the largest count as zero."""
     A = np.asarray(A, float).reshape(-1, nq)
     if A.shape[0] == 0:
         return np.eye(nq)
     _, s, Vt = np.linalg.svd(A)
-    rank = int(np.sum(s > tol * max(s.max(), 1e-300))) if s.size else 0
-    N = Vt[rank:].T.copy()
+    N = Vt[_rank_of(s, tol):].T.copy()
     for j in range(N.shape[1]):
         i = int(np.argmax(np.abs(N[:, j])))
         if N[i, j] < 0:
@@ -131,7 +146,7 @@ def coordinate_basis(A: np.ndarray, nq: int, G=None) -> tuple[np.ndarray, np.nda
         raise NcgenError(f"coordinates: expected a {N.shape[1]} × {nq} matrix (one row per degree of "
                          f"freedom, one column per natural coordinate), got shape {G.shape}")
     GN = G @ N
-    if np.linalg.matrix_rank(GN) < N.shape[1]:
+    if numerical_rank(GN) < N.shape[1]:
         raise NcgenError("coordinates: the rows of G do not determine the configuration "
                          "(G N is singular: some motion allowed by the constraints leaves them unchanged)")
     return N @ np.linalg.inv(GN), G

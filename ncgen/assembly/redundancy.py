@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ncgen.assembly.manifold import NEWTON_TOL as TOL, newton, system_size
+from ncgen.assembly.manifold import NEWTON_TOL as TOL, newton, null_basis, system_size
 
 #: Random tangent samples per check.
 SAMPLES = 4
@@ -76,9 +76,7 @@ def classify(phi, jac, q0: np.ndarray, t0: float, dependent: list[int], *,
         out.unverified = sorted(dep)
         return out
     rng = np.random.default_rng(seed)
-    _, s, vt = np.linalg.svd(jac(t0, base)[keep] if keep.size else np.zeros((0, q0.size)))
-    rank = int(np.sum(s > 1e-9 * (s[0] if s.size else 1.0))) if s.size else 0
-    tangent = vt[rank:]
+    tangent = null_basis(jac(t0, base)[keep] if keep.size else np.zeros((0, q0.size)), q0.size).T
     points = [(t0, base)]
     for k in range(samples):
         if tangent.shape[0] == 0:

@@ -248,9 +248,10 @@ class Model:
 
     @property
     def rank(self) -> int:
-        """Rank of A at the initial configuration."""
-        A = self.A(self.q0)
-        return int(np.linalg.matrix_rank(A)) if A.size else 0
+        """Rank of A at the initial configuration, by the manifold's one rank rule
+        (:func:`ncgen.assembly.manifold.numerical_rank`)."""
+        from ncgen.assembly.manifold import numerical_rank
+        return numerical_rank(self.A(self.q0))
 
     @property
     def dof(self) -> int:

@@ -26,6 +26,7 @@ def check_tree(model) -> None:
     joints (:class:`~ncgen.assembly.tree_dynamics.MimicMap`).  Checked at a random state: the
     tree map satisfies every constraint and the model has exactly as many degrees of freedom
     as independent joint rates."""
+    from ncgen.assembly.manifold import numerical_rank
     from ncgen.assembly.tree_dynamics import MimicMap
 
     js = model.joint_space
@@ -53,7 +54,7 @@ def check_tree(model) -> None:
             np.max(np.abs(rate), initial=0.0) > TREE_TOL * size * max(1.0, float(np.max(np.abs(v)))):
         raise ModelError("joint forward dynamics: the model has constraints besides its tree of joints "
                          "and mimic joints (drives or loop-closing joints)")
-    dof = model.nq - (np.linalg.matrix_rank(A) if A.size else 0)
+    dof = model.nq - numerical_rank(A)
     if dof != mimic.G.shape[1]:
         raise ModelError(f"joint forward dynamics: the model has {dof} degrees of freedom but "
                          f"{mimic.G.shape[1]} independent joint rates")
