@@ -12,8 +12,9 @@ drive value
 
     θ_s = (1 − s) θ_given + s θ_drive(t0),        s = 0 → 1,
 
-in steps (halved where Newton fails), each solved by Gauss–Newton with minimum-norm
-least-squares steps on the coordinates not fixed.  At ``s = 0`` the given poses hold it; the
+in steps (halved where Newton fails), each solved by the manifold's Newton
+(:func:`ncgen.assembly.manifold.newton`: minimum-norm least-squares steps on the coordinates
+not fixed).  At ``s = 0`` the given poses hold it; the
 motion then follows the drive continuously to the branch it prescribes.  Other drives
 (``Distance``, coordinate drivers) keep their value throughout.
 """
@@ -23,6 +24,8 @@ from typing import Callable
 
 import casadi as ca
 import numpy as np
+
+from ncgen.assembly.manifold import newton
 
 #: Continuation steps in s at first (halved where Newton fails, at most HALVINGS times).
 STEPS = 16
@@ -56,7 +59,8 @@ def assemble_drives(system, ctx, rows_of: Callable, q: np.ndarray, p: np.ndarray
         phi = ca.vertcat(*rows_of(ctx))
     finally:
         ctx.drive_blend = {}
-    f = ca.Function("phi_s", [ctx.t, ctx.q, ctx.p, s], [phi, ca.jacobian(phi, ctx.q)])
+    f = (ca.Function("phi_s", [ctx.t, ctx.q, ctx.p, s], [phi]),
+         ca.Function("A_s", [ctx.t, ctx.q, ctx.p, s], [ca.jacobian(phi, ctx.q)]))
     free = np.setdiff1d(np.arange(len(q)), np.asarray(list(fixed), dtype=int))
     at, step, halvings = 0.0, 1.0 / STEPS, 0
     while at < 1.0:
@@ -73,13 +77,14 @@ def assemble_drives(system, ctx, rows_of: Callable, q: np.ndarray, p: np.ndarray
 
 
 def _newton(f, q, p, t0, s, free, tol) -> np.ndarray | None:
-    q = q.copy()
-    for _ in range(MAX_ITER):
-        r, J = (np.array(x, dtype=float) for x in f(t0, q, p, s))
-        r = r.reshape(-1)
-        if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
-            return None
-        if np.max(np.abs(r), initial=0.0) <= tol * (1.0 + np.max(np.abs(q))):
-            return q
-        q[free] -= np.linalg.lstsq(J[:, free], r, rcond=None)[0]
-    return None
+    """``q`` moved onto the blended constraints at ``s`` (residual ≤ ``tol`` × (1 + max |q|)),
+    or None where Newton does not get there in :data:`MAX_ITER` iterations."""
+    phi, jac = f
+    bound = tol * (1.0 + float(np.max(np.abs(q), initial=0.0)))
+    try:
+        q_new, _, res = newton(lambda x: np.array(phi(t0, x, p, s), dtype=float).reshape(-1),
+                               lambda x: np.array(jac(t0, x, p, s), dtype=float), q, free,
+                               tol=bound, max_iter=MAX_ITER)
+    except np.linalg.LinAlgError:                   # a Jacobian that is not finite
+        return None
+    return q_new if res <= bound else None

@@ -5,17 +5,20 @@
   :func:`numerical_rank` (``Model.rank``, ``dof_report``, the tree check, the check of
   redundant constraints), in the null-space basis :func:`null_basis` (and
   :func:`coordinate_basis`, :func:`tangent_basis`), so that a rank and a null space at one
-  position never disagree, in the truncated pseudo-inverse of the mass-metric projections (:func:`mass_step`,
-  :class:`ManifoldProjector`, the RATTLE bridge) and in :func:`check_tangent_inertia`.
+  position never disagree, in the truncated pseudo-inverse of the mass-metric projections
+  (:func:`mass_step`, :class:`ManifoldProjector`, the RATTLE bridge) and in
+  :func:`check_tangent_inertia`.
 * **Positions**: :func:`newton`, minimum-norm Newton steps onto ``Φ = 0`` on chosen
-  coordinates (assembly, initial states, joint space, optimal-control conditions).
+  coordinates (assembly, the continuation of drives, initial states, joint space,
+  optimal-control conditions).
 * **Projections in the mass metric**: :func:`mass_step` ``δ = M⁻¹Aᵀ (A M⁻¹ Aᵀ)⁺ r``, the
   smallest step in kinetic energy with ``A δ = r``; :func:`consistent_velocity`,
   :class:`ManifoldProjector` (positions by Gauss–Newton, then velocities) and
   :func:`project` (with coordinates held fixed, by the sparse KKT system).
-* **KKT solves**: :func:`project`'s ``[[M, Aᵀ], [A, 0]]`` step by sparse QR, and
+* **KKT solves**: :func:`project`'s ``[[M, Aᵀ], [A, 0]]`` step by sparse QR,
   :func:`kkt_least_squares` (:func:`robust_algebraic`, the initial multipliers) for
-  ``z = [a; λ]`` where ``A`` loses rank.
+  ``z = [a; λ]`` where ``A`` loses rank, and :func:`kkt_solve` (LU, else least squares; the
+  interpolation of optimal-control guesses).
 * **Charts**: :func:`manifold_point` and :func:`tangent_velocity` (independent coordinates
   ``z = G (q − q*)`` and rates ``w = G v``).
 
@@ -428,6 +431,20 @@ def robust_algebraic(model, t: float, q, v, u, p) -> np.ndarray:
                           np.array(f["gamma"](t, q, v, p), dtype=float).reshape(-1)
                           - 2 * alpha * phidot - beta**2 * phi])
     return kkt_least_squares(model.M, A, rhs)
+
+
+def kkt_solve(M: np.ndarray, A: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """``z`` of ``[[M, Aᵀ], [A, 0]] z = rhs`` by LU (regular where ``A`` has full rank and
+    ``M`` is positive definite on its null space), else :func:`kkt_least_squares`."""
+    nc = A.shape[0]
+    K = np.block([[M, A.T], [A, np.zeros((nc, nc))]])
+    try:
+        z = np.linalg.solve(K, rhs)
+        if np.all(np.isfinite(z)):
+            return z
+    except np.linalg.LinAlgError:
+        pass
+    return kkt_least_squares(M, A, rhs)
 
 
 def kkt_least_squares(M: np.ndarray, A: np.ndarray, rhs: np.ndarray) -> np.ndarray:

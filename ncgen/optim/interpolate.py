@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ncgen import rigid_motion as rm
+from ncgen.assembly.manifold import kkt_solve
 
 
 def rotation_log(R: np.ndarray) -> np.ndarray:
@@ -102,8 +103,7 @@ def pose_path(model, q_a: np.ndarray, q_b: np.ndarray, s: np.ndarray, *, t=None,
             grad = G.T @ (G @ q + c - target) + anchor * (q - q_lin)
             A = np.atleast_2d(model.A(q, t=t, p=p)).reshape(-1, model.nq)
             phi = np.atleast_1d(model.phi(q, t=t, p=p))
-            K = np.block([[H, A.T], [A, np.zeros((A.shape[0], A.shape[0]))]])
-            dq = _kkt_step(K, -np.concatenate([grad, phi]))[:model.nq]
+            dq = kkt_solve(H, A, -np.concatenate([grad, phi]))[:model.nq]
             q = q + dq
             step = np.max(np.abs(dq), initial=0.0)
             if step < 1e-12 * max(1.0, np.max(np.abs(q))) or step >= last:   # converged, or stalled at round-off
@@ -111,16 +111,3 @@ def pose_path(model, q_a: np.ndarray, q_b: np.ndarray, s: np.ndarray, *, t=None,
             last = step
         out.append(q.copy())
     return np.array(out)
-
-
-
-def _kkt_step(K: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``K⁻¹ b`` by LU (the KKT matrix is nonsingular when the constraint Jacobian has full
-    rank), least squares when it is singular or the LU result is not finite."""
-    try:
-        x = np.linalg.solve(K, b)
-        if np.all(np.isfinite(x)):
-            return x
-    except np.linalg.LinAlgError:
-        pass
-    return np.linalg.lstsq(K, b, rcond=None)[0]
