@@ -24,7 +24,7 @@ from ncgen.assembly.statics import statics_function
 from ncgen.errors import ModelError, NcgenError
 from ncgen.analysis.reactions import unshared_state
 from ncgen.analysis.stability import cached, classify
-from ncgen.assembly.manifold import null_basis
+from ncgen.assembly.manifold import newton, null_basis
 from ncgen.validation import as_scalar, as_vector
 
 #: Largest step of ``method="descent"``, relative to the system's extent ``|q|∞``.
@@ -267,15 +267,13 @@ def equilibrium(model, q_guess=None, u=None, p=None, *, t: float | None = None, 
 
 
 def _project(model, q, t, u, p, tol: float, max_iter: int = 50) -> np.ndarray:
-    """``q`` moved onto ``Φ = 0`` by Gauss–Newton with minimum-norm steps ``Δq = −A⁺Φ``."""
-    lam0 = np.zeros(model.nc)
-    for _ in range(max_iter):
-        _, phi, _, A = evaluate(model, q, lam0, t, u, p)
-        if np.abs(phi).max(initial=0) <= tol:
-            return q
-        q = q - np.linalg.lstsq(A, phi, rcond=None)[0]
-    raise NcgenError(f"equilibrium of {model.name!r}: the constraints cannot be satisfied near the guess "
-                     f"(|Phi| = {np.abs(phi).max():.3g} after {max_iter} Gauss-Newton steps)")
+    """``q`` moved onto ``Φ = 0`` by the manifold's Newton (minimum-norm steps ``Δq = −A⁺Φ``)."""
+    q, _, res = newton(lambda x: model.phi(x, t=t, p=p), lambda x: model.A(x, t=t, p=p), q,
+                       np.arange(model.nq), tol=tol, max_iter=max_iter)
+    if not res <= tol:
+        raise NcgenError(f"equilibrium of {model.name!r}: the constraints cannot be satisfied near the guess "
+                         f"(|Phi| = {res:.3g} after {max_iter} Gauss-Newton steps)")
+    return q
 
 
 def _result(model, q, lam, t, u, p, G, phi, K, A, it) -> Equilibrium:

@@ -28,8 +28,7 @@ from ncgen.assembly.joint_coordinates import JointCoordinates, joint_coordinates
 from ncgen.assembly.joint_tree import (
     Edge, carry, edge_of, quaternion_matrix, quaternion_rate, relative_pose, rotation_2d,
 )
-from ncgen.assembly.manifold import NEWTON_TOL as TOL, newton, system_size
-from ncgen.assembly.mass import sparse_dm
+from ncgen.assembly.manifold import NEWTON_TOL as TOL, newton, solve_linear, system_size
 from ncgen.model.data import model_data
 from ncgen.model.sym2casadi import to_casadi
 from ncgen.errors import ModelError
@@ -431,21 +430,3 @@ def _passable(e: Edge, forward: bool, here: str, spinless: set) -> bool:
     if e.one_way:
         spinless.add(e.B)
     return True
-
-
-def solve_linear(K: np.ndarray, b: np.ndarray, tol: float = 1e-8) -> np.ndarray | None:
-    """``x`` with ``K x = b``: CasADi's sparse QR for a square ``K`` (dense LAPACK is slow
-    and thread-hungry at these sizes), least squares otherwise; None when no ``x`` fits to
-    ``tol`` relative to ``|b|`` (a singular or inconsistent system)."""
-    K, b = np.asarray(K, float), np.asarray(b, float)
-    if K.shape[0] == K.shape[1]:
-        try:
-            x = np.array(ca.solve(sparse_dm(K), ca.DM(b), "qr")).reshape(-1)
-        except RuntimeError:
-            return None
-    else:
-        x = np.linalg.lstsq(K, b, rcond=None)[0]
-    if not np.all(np.isfinite(x)):
-        return None
-    err = np.max(np.abs(K @ x - b), initial=0.0)
-    return x if err <= tol * max(1.0, np.max(np.abs(b), initial=0.0)) else None

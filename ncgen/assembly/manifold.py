@@ -17,8 +17,9 @@
   :func:`project` (with coordinates held fixed, by the sparse KKT system).
 * **KKT solves**: :func:`project`'s ``[[M, Aᵀ], [A, 0]]`` step by sparse QR,
   :func:`kkt_least_squares` (:func:`robust_algebraic`, the initial multipliers) for
-  ``z = [a; λ]`` where ``A`` loses rank, and :func:`kkt_solve` (LU, else least squares; the
-  interpolation of optimal-control guesses).
+  ``z = [a; λ]`` where ``A`` loses rank, :func:`kkt_solve` (LU, else least squares; the
+  interpolation of optimal-control guesses) and :func:`solve_linear` (sparse QR, checked;
+  the joint-space maps and the NumPy forward dynamics).
 * **Charts**: :func:`manifold_point` and :func:`tangent_velocity` (independent coordinates
   ``z = G (q − q*)`` and rates ``w = G v``).
 
@@ -431,6 +432,24 @@ def robust_algebraic(model, t: float, q, v, u, p) -> np.ndarray:
                           np.array(f["gamma"](t, q, v, p), dtype=float).reshape(-1)
                           - 2 * alpha * phidot - beta**2 * phi])
     return kkt_least_squares(model.M, A, rhs)
+
+
+def solve_linear(K: np.ndarray, b: np.ndarray, tol: float = 1e-8) -> np.ndarray | None:
+    """``x`` with ``K x = b``: CasADi's sparse QR for a square ``K`` (dense LAPACK is slow
+    and thread-hungry at these sizes), least squares otherwise; None when no ``x`` fits to
+    ``tol`` relative to ``|b|`` (a singular or inconsistent system)."""
+    K, b = np.asarray(K, float), np.asarray(b, float)
+    if K.shape[0] == K.shape[1]:
+        try:
+            x = np.array(ca.solve(sparse_dm(K), ca.DM(b), "qr")).reshape(-1)
+        except RuntimeError:
+            return None
+    else:
+        x = np.linalg.lstsq(K, b, rcond=None)[0]
+    if not np.all(np.isfinite(x)):
+        return None
+    err = np.max(np.abs(K @ x - b), initial=0.0)
+    return x if err <= tol * max(1.0, np.max(np.abs(b), initial=0.0)) else None
 
 
 def kkt_solve(M: np.ndarray, A: np.ndarray, rhs: np.ndarray) -> np.ndarray:

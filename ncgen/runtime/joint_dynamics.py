@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from ncgen.assembly.derived import joint_kkt_function, kkt_function
-from ncgen.assembly.joint_space import solve_linear
+from ncgen.assembly.manifold import solve_linear
 from ncgen.errors import ModelError
 from ncgen.model.data import cached, model_data
 from ncgen.runtime.tree_algorithms import algorithm_kernel, call, rnea_applies

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ncgen.assembly.manifold import newton, system_size
 from ncgen.errors import NcgenError
 
 #: Dormand–Prince 5(4): nodes, stage coefficients, fifth-order weights, error weights (5th − 4th).
@@ -48,14 +49,13 @@ def project(system, q, v, tol: float = 1e-14, max_iter: int = 20) -> tuple[np.nd
     ``Â(q) v = 0`` orthogonally."""
     q = np.array(q, float)
     nh = system.n_holonomic
-    for _ in range(max_iter):
-        phi = np.asarray(system.phi(q)).ravel()
-        if np.max(np.abs(phi), initial=0.0) <= tol * max(1.0, np.max(np.abs(q))):
-            break
-        q -= np.linalg.lstsq(np.asarray(system.A(q))[:nh], phi, rcond=None)[0]
-    else:
+    bound = tol * system_size(q)
+    q, _, res = newton(lambda x: np.asarray(system.phi(x), float).ravel(),
+                       lambda x: np.asarray(system.A(x), float)[:nh], q, np.arange(q.size),
+                       tol=bound, max_iter=max_iter)
+    if not res <= bound:
         raise NcgenError(f"project: Newton's method did not bring |Φ| below {tol:g} in {max_iter} "
-                         f"iterations (|Φ| = {np.max(np.abs(phi)):.3g}); the state is far from the constraints")
+                         f"iterations (|Φ| = {res:.3g}); the state is far from the constraints")
     A = np.asarray(system.A(q))
     v = np.asarray(v, float) - np.linalg.lstsq(A, A @ v, rcond=None)[0]
     return q, v
