@@ -18,6 +18,7 @@ of a model (model) and of a trajectory (runtime), ``_repr_html_``, calls :mod:`n
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -143,3 +144,15 @@ def test_the_parser_sees_every_kind_of_import(tmp_path, source, expected):
     path = tmp_path / "probe.py"
     path.write_text(source)
     assert imports("ncgen.probe", path, set(modules())) == expected
+
+
+def test_the_architecture_page_lists_these_layers():
+    """docs/architecture.md's block of layers names the same layers in the same order, and
+    the same base modules, as this test."""
+    page = (ROOT.parent / "docs" / "architecture.md").read_text(encoding="utf-8")
+    block = page.split("```")[1]
+    rows = [re.match(r"\s*(?:← )?(\w+)\s+(.*?)\s{2,}", line) for line in block.strip().splitlines()]
+    assert all(rows), "a row of the layers' block is not `name  modules   description`"
+    names = [r[1] for r in rows]
+    assert names == [("ncgen" if n == "root" else n) for n in LAYERS]
+    assert {m.strip() for m in rows[0][2].split(",")} == BASE

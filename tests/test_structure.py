@@ -5,6 +5,7 @@ the rank of a constraint Jacobian is taken by its rule."""
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1] / "ncgen"
@@ -52,3 +53,74 @@ def test_ranks_of_the_constraint_jacobian_by_the_manifold_rule():
     found = [f"{p.relative_to(ROOT.parent)}:{line}" for p in sorted(ROOT.rglob("*.py")) if p not in allowed
              for line in calls(p, "matrix_rank")]
     assert not found, "a rank outside ncgen.assembly.manifold.numerical_rank:\n" + "\n".join(found)
+
+
+def test_libraries_are_opened_in_one_place():
+    """Every library ncgen compiles is opened by ``c_binding.open_library`` (docs/architecture.md:
+    one loader idiom); ``ctypes.CDLL(None)`` of the IPOPT options is the C library's own ``fflush``."""
+    allowed = {ROOT / "codegen" / "c_binding.py", ROOT / "optim" / "ipopt_options.py"}
+    found = [f"{p.relative_to(ROOT.parent)}:{line}" for p in sorted(ROOT.rglob("*.py")) if p not in allowed
+             for line in calls(p, "CDLL")]
+    assert not found, "a library opened outside ncgen.codegen.c_binding.open_library:\n" + "\n".join(found)
+
+
+DOC = ROOT.parent / "docs" / "architecture.md"
+SOURCE_DIRS = (ROOT.parent, ROOT, ROOT.parent / "templates" / "c", ROOT.parent / "templates" / "c" / "runtime")
+
+
+def _defines(path: Path, name: str) -> bool:
+    """Whether ``path`` defines ``name`` at its top level or in a class (def, class, assignment)."""
+    for n in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(n, (ast.FunctionDef, ast.ClassDef)) and n.name == name:
+            return True
+        if isinstance(n, (ast.Assign, ast.AnnAssign)):
+            targets = n.targets if isinstance(n, ast.Assign) else [n.target]
+            if any(isinstance(t, ast.Name) and t.id == name for t in targets):
+                return True
+    return False
+
+
+def _source(ref: str) -> Path | None:
+    """The file a page's ``path`` names: relative to the repository, ncgen/ or templates/c/, or
+    a bare file name found once under ncgen/ or templates/."""
+    for d in SOURCE_DIRS:
+        if (d / ref).is_file():
+            return d / ref
+    if "/" not in ref:
+        found = [p for top in (ROOT, ROOT.parent / "templates") for p in top.rglob(ref)]
+        return found[0] if len(found) == 1 else None
+    return None
+
+
+def test_the_architecture_page_names_files_and_definitions_that_exist():
+    """Each ``file.py``, ``file.h`` or ``template.j2`` the page names exists, and each
+    ``file.py: name`` defines ``name``; each dotted ``ncgen.module.name`` imports (package
+    files written per model, ``main.c``, ``<name>_mpc.c``, are not sources)."""
+    import importlib
+
+    wrong = []
+    text = re.sub(r"```.*?```", "", DOC.read_text(encoding="utf-8"), flags=re.S)     # the layers' block
+    refs = sorted(set(re.findall(r"`([^`]+)`", text)))
+    assert len(refs) > 100, "the page's references were not found"
+    for ref in refs:
+        path = re.fullmatch(r"([\w./]+\.(?:py|h|j2))(?::\s*(\w+))?", ref)
+        dotted = re.fullmatch(r"ncgen(?:\.\w+)+", ref)
+        if path:
+            source = _source(path[1])
+            if source is None:
+                wrong.append(f"{ref}: no such file")
+            elif path[2] and not _defines(source, path[2]):
+                wrong.append(f"{ref}: {path[2]} is not defined in {source.relative_to(ROOT.parent)}")
+        elif dotted:
+            parts = ref.split(".")
+            for k in range(len(parts), 0, -1):
+                try:
+                    obj = importlib.import_module(".".join(parts[:k]))
+                except ModuleNotFoundError:
+                    continue
+                for attr in parts[k:]:
+                    obj = getattr(obj, attr, None)
+                if obj is None:
+                    wrong.append(f"{ref}: not found")
+                break
+    assert not wrong, "docs/architecture.md names what is not there:\n" + "\n".join(wrong)

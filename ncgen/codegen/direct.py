@@ -20,6 +20,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from ncgen.codegen.c_binding import open_library
 from ncgen.errors import CodegenError, ShapeError
 from ncgen.validation import as_numbers
 
@@ -36,11 +37,11 @@ class DirectFunction:
     def __init__(self, library, c_name: str, f: ca.Function):
         self.library = Path(library)
         self.name, self.c_name, self.function = f.name(), c_name, f
+        self._lib = open_library(self.library)
         try:
-            self._lib = ctypes.CDLL(str(self.library))
             fn = getattr(self._lib, c_name)
             work = getattr(self._lib, f"{c_name}_work")
-        except (OSError, AttributeError) as e:
+        except AttributeError as e:
             raise CodegenError(f"cannot load {c_name!r} from {self.library}: {e}") from None
         fn.restype = ctypes.c_int
         fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int]
