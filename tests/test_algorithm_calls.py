@@ -136,6 +136,7 @@ def test_the_kernel_without_the_accelerator_checks_the_same(hinge, monkeypatch):
 
 
 # ------------------------------------------------------------------ many states in one call
+@pytest.mark.slow      # robot scale (Solo-12's derivative kernels at -O1); fast: the hinge's rows below
 def test_one_row_per_state_equals_pinocchio_state_by_state():
     """``nc.rnea``/``crba``/``aba`` and the derivatives with one row per state: one C loop,
     equal to Pinocchio's state by state (a floating-base robot: quaternions normalised per

@@ -72,13 +72,15 @@ def test_full_parser_lists_every_subcommand_and_a_run_names_one():
     assert set(only._subparsers._group_actions[0].choices) == {"modes"}
 
 
-def test_later_cli_run_of_a_stored_urdf_model_needs_no_sympy(tmp_path):
-    """``ncgen simulate robot.urdf`` a second time: the model, its joint-space ODE and tree map
-    come from the store, so SymPy (and SciPy, matplotlib) is never imported; the first run
-    builds through SymPy."""
+@pytest.mark.parametrize("source", [pytest.param("ur5", marks=pytest.mark.slow), "double_pendulum.toml"])
+def test_later_cli_run_of_a_stored_tree_needs_no_sympy(tmp_path, source):
+    """``ncgen simulate robot.urdf`` (the UR5, slow tier) or ``model.toml`` (a double pendulum,
+    the same path at a tenth of the cost) a second time: the model, its joint-space ODE and
+    tree map come from the store, so SymPy (and SciPy, matplotlib) is never imported; the
+    first run builds through SymPy."""
     import ncgen as nc
 
-    urdf = str(nc.robots.urdf_path("ur5"))
+    urdf = str(ROOT / "examples" / source) if source.endswith(".toml") else str(nc.robots.urdf_path(source))
     run = (f"import os\nos.environ['NCGEN_CACHE_DIR'] = {str(tmp_path / 'cache')!r}\n"
            "os.environ.pop('NCGEN_MODEL_CACHE', None)\n"
            f"from ncgen.cli import main\nassert main(['simulate', {urdf!r}, '--t-end', '0.05']) == 0")

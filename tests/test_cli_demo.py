@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from ncgen.cli import main
 from ncgen.cli.demo_job import Top, heavy_top, invariants
@@ -16,6 +17,7 @@ from ncgen.runtime import Trajectory
 BUDGET = 60.0
 
 
+@pytest.mark.slow      # compiles the heavy top from an empty cache; fast: test_demo_motion_matches_the_top_theory
 def test_demo_from_a_clean_cache(tmp_path):
     env = {**os.environ, "NCGEN_CACHE_DIR": str(tmp_path / "cache"), "MPLBACKEND": "Agg"}
     env.pop("NCGEN_CFLAGS", None)

@@ -71,6 +71,7 @@ def test_sweep_on_a_dask_scheduler(tmp_path, capsys):
     assert np.array_equal(arrays["q"][1], nc.simulate(model, 0.2, 0.005, method="stepper", p={"omega": 5.0}).q)
 
 
+@pytest.mark.slow                                  # Dask: its import and the connection attempt
 def test_unreachable_scheduler_is_a_clear_error(tmp_path, capsys):
     argv = ["sweep", EXAMPLE, "--param", "omega=3", "--t-end", "0.1", "-o", str(tmp_path / "x.zarr"),
             "--scheduler", "tcp://127.0.0.1:9"]

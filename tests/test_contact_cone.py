@@ -88,6 +88,7 @@ def test_pyramid_with_friction_rests_on_its_closed_form_geometry(scenes):
     np.testing.assert_allclose(f[tr.t > 0.1].sum(axis=1).mean(), 5 * M * G, rtol=1e-3)
 
 
+@pytest.mark.slow      # 8 spheres, 36 pairs; fast: the box landing and the pyramid with friction above
 def test_dropped_heap_with_friction_converges_every_solve():
     """Eight spheres with friction dropped in a loose column onto the floor: no solve stops
     at the sweep limit, the contact laws hold to 1e-9 of the velocities at every step's

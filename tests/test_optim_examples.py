@@ -18,8 +18,14 @@ SCRIPTS = {
     "spring_design.py": ["spring_design.png"],
 }
 
+#: Run in the slow tier (a solve and a GIF each, 30 s on a loaded 2-core machine); their problems
+#: are solved in the fast tier by tests/test_optim_cartpole.py (free final time) and
+#: tests/test_optim_targets.py (the double pendulum).
+SLOW_SCRIPTS = {"arm_min_time.py", "double_pendulum_swingup.py"}
 
-@pytest.mark.parametrize("script", sorted(SCRIPTS))
+
+@pytest.mark.parametrize("script", [pytest.param(s, marks=pytest.mark.slow) if s in SLOW_SCRIPTS else s
+                                    for s in sorted(SCRIPTS)])
 def test_example_runs_as_written(tmp_path, script):
     run = subprocess.run([sys.executable, str(EXAMPLES / script)], cwd=tmp_path, capture_output=True, text=True,
                          timeout=300)

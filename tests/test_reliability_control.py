@@ -40,6 +40,7 @@ def cartpole():
     return model, ocp
 
 
+@pytest.mark.slow      # a sanitizer build of the exported cart-pole MPC; fast: tests/c/test_mpc.c (the driver's checks)
 @pytest.mark.skipif(CC is None, reason="no C compiler")
 def test_exported_mpc_c_api_refuses_non_finite_input_from_c(tmp_path):
     """<name>_mpc_init/_mpc_step/_plant called from C with NaN, ±inf and null pointers answer

@@ -173,7 +173,7 @@ def test_bad_input_is_named():
         rta.algorithm_kernel(model, "featherstone")
 
 
-@pytest.mark.parametrize("name", ["ur5", "solo12"])
+@pytest.mark.parametrize("name", ["ur5", pytest.param("solo12", marks=pytest.mark.slow)])   # UR5: the same code
 def test_joint_space_linearization_matches_pinocchio_away_from_equilibrium(name):
     """``nc.linearize(..., space="joint")`` at a moving, non-equilibrium state: the dynamic
     rows are ``computeABADerivatives``' (B: ``M⁻¹`` on the actuated rates); the kinematic rows

@@ -247,6 +247,7 @@ def test_html_refuses_a_bad_file_name_and_a_trajectory_without_its_model(tmp_pat
         nc.Trajectory.load(tmp_path / "x.npz").to_html(tmp_path / "x.html")
 
 
+@pytest.mark.slow      # robot scale (the Panda); fast: test_a_missing_mesh_file_warns_and_draws_the_inertia_box
 def test_a_urdf_robot_page_has_its_meshes(tmp_path):
     """The Panda's visual meshes (example-robot-data) load and are drawn where the links are;
     a 10 s motion at 60 frames per second makes a page under 5 MB."""
