@@ -10,7 +10,13 @@ from natural_helpers import ALL_TYPES, IDS
 from ncgen.cli import SUBCOMMANDS, main
 
 
-@pytest.mark.parametrize("dim,name", ALL_TYPES, ids=IDS)
+#: The slowest derivations (3D bodies of three and four points, 10–25 s each on a loaded 2-core
+#: machine) run in the slow tier; the other 3D bodies (ruvw, rrvw) take the same path in the fast one.
+SLOW_TYPES = {(3, "rrrr"), (3, "rrrw")}
+
+
+@pytest.mark.parametrize("dim,name", [pytest.param(*t, marks=pytest.mark.slow) if t in SLOW_TYPES else t
+                                      for t in ALL_TYPES], ids=IDS)
 def test_derive_every_type_and_format(capsys, dim, name):
     for fmt in ("text", "markdown", "latex"):
         assert main(["derive", name, "--dim", str(dim), "--format", fmt]) == 0

@@ -31,6 +31,7 @@ def test_names_and_unknown_robot():
         nc.robots.urdf_path("pandaa")
 
 
+@pytest.mark.slow      # robot scale (examples/panda.py); fast: the helper's tests above, URDF robots in test_urdf*.py
 def test_panda_example_runs_and_is_conservative(tmp_path, tmp_path_factory):
     pytest.importorskip("yourdfpy")
     pytest.importorskip("cmeel", reason="example-robot-data is not installed")
