@@ -81,6 +81,7 @@ def test_hundred_member_tower_within_five_seconds():
     cpu = time.process_time() - c0
     assert d.analysis.n_mechanisms == 17 and d.min_stiffness > 0
     assert d.max_cable == pytest.approx(100.0, rel=1e-7)
+    # CPU time: 1.1 s measured (AMD EPYC, load 13 on 2 cores); 5 s leaves 4× for a slower CPU or BLAS
     assert cpu <= 5.0, f"prestress optimisation of the 100-member tower took {cpu:.2f} s of CPU"
 
 

@@ -28,6 +28,9 @@ def test_ctrl_c_stops_an_idas_run_keeps_the_old_result_and_writes_the_partial_on
     rc, out, err, after = interrupt_after(cmd, 12.0, tmp_path)
     assert rc == 130, err
     assert "interrupted" in err and "internal error" not in err and "Traceback" not in err
+    # wall time by nature (how soon Ctrl-C is obeyed): IDAS returns within one of its steps
+    # and the partial trajectory is written in well under 1 s unloaded; 10 s leaves 10× for a
+    # machine at load 8 on 2 cores (each process then gets a quarter of a core)
     assert after < 10.0
     assert old.read_bytes() == b"the previous result"
     partial = tmp_path / "chain.incomplete.npz"
@@ -70,7 +73,7 @@ def test_ctrl_c_stops_ipopt_at_its_next_iteration(tmp_path):
     out, err = p.communicate(timeout=60)
     assert "EXIT: Optimal" not in out, "the solve ended before the interrupt could stop it"
     assert p.returncode == 130, printed[-1000:] + out[-1000:] + err
-    assert time.monotonic() - sent < 10.0
+    assert time.monotonic() - sent < 10.0      # wall by nature: IPOPT's next iteration, < 1 s unloaded; 10× margin
     assert "interrupted" in err and "Traceback" not in err
     assert old.read_bytes() == b"the previous result"
 

@@ -67,6 +67,8 @@ def test_ctrl_c_stops_a_stepper_run_keeps_the_old_result_and_writes_the_partial_
     rc, out, err, after = interrupt(p, 5.0 + 2 * ready)
     assert rc == 130, err
     assert "interrupted" in err and "internal error" not in err and "Traceback" not in err, err
+    # wall time by nature: the C loop checks the flag every step (microseconds) and the partial
+    # trajectory is written in ~0.3 s unloaded; 5 s leaves > 10× for load 8 on 2 cores
     assert after < 5.0, f"{after:.1f} s after SIGINT"
     assert old.read_bytes() == b"the previous result"
     traj = nc.runtime.Trajectory.load(tmp_path / "chain.incomplete.npz")

@@ -158,6 +158,8 @@ def test_hundred_speeds_within_two_seconds_of_cpu(bike):
     bike.linearize(1.0)
     start = time.process_time()
     lam = bike.eigenvalues(np.linspace(0.0, 10.0, 100))
+    # CPU time: 0.78 s measured (AMD EPYC, load 15 on 2 cores: 4×4 eigenproblems through CasADi
+    # calls); 2 s leaves 2.5× for a slower CPU
     assert time.process_time() - start <= 2.0
     assert lam.shape == (100, 4) and np.all(np.isfinite(lam))
 
