@@ -394,6 +394,7 @@ def test_contacts_are_drawn(drops, tmp_path):
     np.testing.assert_array_equal(back.contact_state, tr.contact_state)
 
 
+@pytest.mark.slow      # runs docs/contact.md again; fast: tests/test_docs_snippets.py runs the page and checks its output
 def test_contact_doc_snippets_run(tmp_path, monkeypatch):
     import re
     from pathlib import Path
@@ -463,6 +464,7 @@ def test_optimal_control_through_smooth_friction():
     np.testing.assert_allclose(sol.stats.objective, 12 + (mu * G) ** 2, rtol=1e-2)
 
 
+@pytest.mark.slow      # three compiles of one scene; fast: tests/c/test_contact.c runs the Delassus paths alone
 def test_delassus_paths_give_the_same_motion(monkeypatch):
     """The three ways the C forms the Delassus matrix give the same motion: from the constant
     M⁻¹ and the Schur complement A M⁻¹ Aᵀ (regular M, the default here), from the unrolled
@@ -485,6 +487,7 @@ def test_delassus_paths_give_the_same_motion(monkeypatch):
     np.testing.assert_allclose(factored.q, schur.q, atol=1e-9)
     np.testing.assert_allclose(plain.q, schur.q, atol=1e-9)
 
+@pytest.mark.slow      # a CLI subprocess compiling a contact scene; fast: the Python runs of this file, tests/test_cli_simulate.py
 def test_cli_simulates_nonsmooth_contacts(tmp_path):
     import sys
     model = tmp_path / "pair.toml"

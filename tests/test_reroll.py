@@ -165,6 +165,7 @@ def test_package_of_a_long_model_is_looped_compiles_at_o2_and_is_exact(tmp_path)
     assert_same(J, compiled["dae"].jacobian(), rtol=1e-10)
 
 
+@pytest.mark.slow      # fast: the looped package's kernels, step_newton and step_velocity included, equal the flat ones above
 @needs_cc
 def test_looped_stepper_and_idas_agree_on_a_long_model(monkeypatch):
     """The compiled stepper built from looped kernels against IDAS on the flat functions,

@@ -49,6 +49,7 @@ def test_interrupt_in_python_stops_within_seconds_with_the_trajectory_so_far(mod
     assert ran < 30
 
 
+@pytest.mark.slow      # fast: Ctrl-C in the C loop (test above, stepper and joint) and the CLI's partial result (IDAS, test_reliability_interrupt.py)
 def test_ctrl_c_stops_a_stepper_run_keeps_the_old_result_and_writes_the_partial_one(tmp_path):
     # what the command does before its run (imports, build, the compiled stepper: compiled by
     # the first call, found in the cache by the second), timed, so that SIGINT comes during the

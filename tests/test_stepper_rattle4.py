@@ -117,6 +117,7 @@ def chain_case(n: int, explicit: bool, spin: float = 0.0):
     return model, np.cross([0.0, 0.0, spin], model.q0.reshape(-1, 3)).reshape(-1)
 
 
+@pytest.mark.slow      # fast: the pendulum's error estimate and the fast-growth test below take the same path
 def test_the_local_error_estimate_tracks_the_true_error_on_the_20_bar_chain():
     """The cheap estimate (``estimate="local"``) against the true error in q after 2 s (IDAS
     at 1e-12) on the work–precision chain (20 bars, explicit joints), loose to tight steps:
