@@ -6,6 +6,7 @@ benchmark smokes and long tight-tolerance runs. ``pytest -q -n auto -m "slow and
 exhaustive"`` runs them; CI runs both. The slow tests also marked ``exhaustive`` (the largest
 models of a full matrix, hours of CPU) are run by hand: ``pytest -q -n auto -m exhaustive``. Every test has a time limit (pyproject's ``timeout``, pytest-timeout), generous
 enough for a loaded machine; a test that needs more says so with ``pytest.mark.timeout``.
+A test moved to the slow tier names at its mark the fast test that takes the same code path.
 """
 import pytest
 
