@@ -81,6 +81,9 @@ def test_initial_state_from_q0_and_parameters_of_the_model():
     big = pendulum(3, np.deg2rad(30.0), L, m)
     q0 = small.q0 * (1 + 1e-9)                     # slightly off the constraint: projected
     traj = simulate(big, 3.0, 1e-3, q0=q0, v0=np.zeros(3), rtol=1e-10, atol=1e-12)
+    # Newton from 1e-9 off converges quadratically to round-off (|Φ| ~ 1e-16 for unit-size
+    # bars, whatever the CPU); 1e-14 is 100× that, tighter than Newton's stopping bound
+    # (1e-13 · size², met after one more iteration), so it checks that the projection converged
     assert traj.constraint_residual[0] < 1e-14
     np.testing.assert_allclose(traj.lam[0], small.lam0, rtol=1e-6)
     periods = np.diff(crossing_times(traj.t, traj.marker("b.tip")[:, 0]))

@@ -75,6 +75,8 @@ def test_rtol_final_state_agrees_with_idas(case, rtol):
     assert traj.complete and traj.info["order"] == 4
     assert np.max(np.abs(traj.q[-1] - ref.q[-1])) <= 100 * rtol * size(ref.q[-1])
     assert np.max(np.abs(traj.v[-1] - ref.v[-1])) <= 100 * rtol * size(ref.v[-1])
+    # the guarantee itself: the C step is accepted only with max |Φ| ≤ newton_tol = 1e-10 (its
+    # check after each step, templates/c/runtime/ncgen_rattle.h), computed the same way here
     assert np.all(traj.constraint_residual <= 1e-10)
     assert np.all(traj.velocity_residual <= 1e-9 * size(traj.v))
 
