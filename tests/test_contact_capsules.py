@@ -259,6 +259,13 @@ I_AX, I_TR = 0.4 * M_CAP * R_CAP ** 2, 0.02           # about the axis, across i
 THETA = 0.2
 
 
+#: The tests of the capsule scenes below run in the slow tier (one model of several scenes,
+#: compiled and run for 1 s); the same paths in the fast tier: the capsule pairs' gaps against
+#: brute-force distances and at known configurations above, capsules and cylinders rolling on a
+#: plane against the closed form (tests/test_contact_shapes.py), the ball on a can's end face.
+SCENES = pytest.mark.slow
+
+
 @pytest.fixture(scope="module")
 def scenes():
     """One model, independent scenes (h = 1 ms, 0.6 s): a capsule lying across a narrower
@@ -301,6 +308,7 @@ def _f(tr, element):
                                  or n == element]]
 
 
+@SCENES
 def test_capsule_rests_across_a_narrower_box_on_its_two_edge_crossings(scenes):
     _, tr = scenes
     f = _f(tr, "across_box")
@@ -314,6 +322,7 @@ def test_capsule_rests_across_a_narrower_box_on_its_two_edge_crossings(scenes):
     np.testing.assert_allclose(tr.point("across", (0, 0, 0))[:, 2], 0.2 + R_CAP, atol=1e-9)
 
 
+@SCENES
 def test_capsule_rests_across_two_rails_and_a_ball_in_their_groove(scenes):
     _, tr = scenes
     for i in range(2):
@@ -329,6 +338,7 @@ def test_capsule_rests_across_two_rails_and_a_ball_in_their_groove(scenes):
     assert np.ptp(tr.point("ball", (0, 0, 0)), axis=0).max() < 1e-6
 
 
+@SCENES
 def test_capsule_rolls_down_a_tilted_box(scenes):
     """Rolling on its side without slipping: a = g sin θ / (1 + I_axis / (m r²))."""
     _, tr = scenes
@@ -467,6 +477,7 @@ def test_tetrahedron_rests_on_a_face_with_the_closed_form_vertex_forces(tmp_path
     np.testing.assert_allclose(tr.point("t", (0, 0, 0))[:, 2], 0.05, atol=1e-12)
 
 
+@SCENES
 def test_capsule_contacts_and_edge_crossings_are_drawn(scenes):
     """The scene's contact forces: an edge crossing's along its normal (on the box: down),
     without a point; a ball against a rail at the ball's surface, along the rail's normal."""

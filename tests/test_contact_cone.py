@@ -25,6 +25,13 @@ def _run(model, t_end, strict=True):
         return nc.simulate(model, t_end, 0.01, method="stepper", substeps=10)
 
 
+#: The tests of the landing scenes below run in the slow tier (a compile and a 1 s run of two
+#: frictional scenes); the same solver in the fast tier: the five-box frictional stack
+#: (tests/test_contact_shapes_pairs.py), the dropped cubes with friction
+#: (tests/test_contact_edges.py), the ball on a crate below and tests/c/test_cone_newton.c.
+SCENES = pytest.mark.slow
+
+
 @pytest.fixture(scope="module")
 def scenes():
     s = nc.System("cone_scenes")
@@ -46,6 +53,7 @@ def scenes():
     return model, _run(model, 1.0, strict=False)
 
 
+@SCENES
 def test_box_landing_flat_and_pyramid_with_friction_converge_every_solve(scenes):
     _, tr = scenes
     assert tr.info["contacts"]["pgs_unconverged"] == 0
@@ -54,6 +62,7 @@ def test_box_landing_flat_and_pyramid_with_friction_converge_every_solve(scenes)
     np.testing.assert_allclose(top, [[3, 0, R + np.sqrt(2) * R]] * len(top), atol=1e-9)
 
 
+@SCENES
 def test_box_landing_flat_with_friction_rests_on_a_quarter_of_its_weight_per_corner(scenes):
     model, tr = scenes
     rest = tr.t > 0.5
@@ -73,6 +82,7 @@ def test_box_landing_flat_with_friction_rests_on_a_quarter_of_its_weight_per_cor
     assert np.abs(tr.v[tr.t > 0.6, :3]).max() < 1e-9
 
 
+@SCENES
 def test_pyramid_with_friction_rests_on_its_closed_form_geometry(scenes):
     """The top sphere stays on the four below near height R + √2 R (to 1e-3 m: the solves
     that stop at the sweep limit let it creep by tens of µm, see the expected failure

@@ -30,7 +30,8 @@ def double_pendulum(motors: int = 2):
     return s.build()
 
 
-@pytest.mark.parametrize("form, share", [("joint", True), ("ggl", True), ("ggl", False)])
+@pytest.mark.parametrize("form, share", [("joint", True), ("ggl", True),
+                                         pytest.param("ggl", False, marks=pytest.mark.slow)])   # ggl: same path
 def test_final_pose_of_a_3d_member_places_the_rest_by_the_joints(form, share):
     """The forearm's pose (rotation and centre) as the target; the upper rod must end where
     the hinges put it (shoulder +90° about y), at rest.  With coordinate sharing (the
