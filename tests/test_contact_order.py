@@ -84,6 +84,7 @@ def test_persistent_rolling_converges_at_second_order(roller):
     assert errors[1] < 1e-6, errors                    # h = 1 ms
 
 
+@pytest.mark.slow      # 1000 steps per output; fast: the second-order tests above (h = 2 to 0.5 ms) take the same path
 def test_sliding_with_spin_is_second_order_down_to_ten_microseconds():
     """h = 1e-3 to 1e-5 s: the error against the closed form stays within the second-order
     bound e(h) ≤ e(1 ms) (h / 1 ms)^1.8 (plus 1e-12 m of round-off), and the spinner never
