@@ -34,7 +34,13 @@ def test_model_builds_and_simulates(path):
     assert np.max(traj.constraint_residual) < 1e-5
 
 
-@pytest.mark.parametrize("path", SCRIPTS, ids=[p.stem for p in SCRIPTS])
+#: Scripts run in the slow tier (a subprocess, a compile and a plot each); their models build and
+#: simulate in the fast tier above, and the other scripts take the same path there.
+SLOW_SCRIPTS = {"cartpole", "double_pendulum", "heavy_top"}
+
+
+@pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.slow) if p.stem in SLOW_SCRIPTS else p
+                                  for p in SCRIPTS], ids=[p.stem for p in SCRIPTS])
 def test_script_runs_as_written(tmp_path_factory, tmp_path, path):
     """Run from a scratch directory (the scripts write their plot to the current directory);
     generated C is compiled at -O0 to keep the test quick."""
