@@ -50,13 +50,16 @@ static double ncgen_qr_house(double *v, int m, double *beta) {
   return mu;
 }
 
-/* y -= beta_c v_c (v_cᵀ y): reflector c applied to y (n). */
+/* y -= beta_c v_c (v_cᵀ y): reflector c applied to y (n); nothing when beta_c = 0 (a column
+ * with nothing below its diagonal). */
 static void ncgen_qr_reflect(const ncgen_qr_pattern *P, const double *V, const double *beta, int c, double *y) {
+  const int lo = P->v_colind[c], hi = P->v_colind[c + 1], *row = P->v_row;
   double s = 0;
   int k;
-  for (k = P->v_colind[c]; k < P->v_colind[c + 1]; ++k) s += V[k] * y[P->v_row[k]];
+  if (beta[c] == 0) return;
+  for (k = lo; k < hi; ++k) s += V[k] * y[row[k]];
   s *= beta[c];
-  for (k = P->v_colind[c]; k < P->v_colind[c + 1]; ++k) y[P->v_row[k]] -= s * V[k];
+  for (k = lo; k < hi; ++k) y[row[k]] -= s * V[k];
 }
 
 /* The factors V, R (their patterns' nonzeros) and beta (n) of K (nonzeros in its pattern). */

@@ -55,6 +55,31 @@ typedef struct {
 #endif
 /* The tables of the run in progress in this thread. */
 static TAB_THREAD const ncgen_stepper_tables *tab_cur;
+/* The run's element work size and its cache of Φ and A at the last two q (a step evaluates
+ * them at q, then at q + h w in each Newton iteration, and the step's end q⁺ is the last
+ * of those): slot k holds q, Φ(q), A(q) at tab_cache[k] (nq + nc + a_nnz doubles). */
+static TAB_THREAD long tab_ew_size;
+static TAB_THREAD double *tab_cache[2];
+static TAB_THREAD int tab_valid[2], tab_recent;
+
+/* Starts a run on the tables S in this thread: 0, or 1 when out of memory. */
+static int tab_begin(const ncgen_stepper_tables *S) {
+  size_t n = (size_t)S->T->nq + (size_t)S->T->nc + (size_t)S->T->a_nnz;
+  tab_cur = S;
+  tab_ew_size = ncgen_tables_work_size(TAB_KINDS, S->T);
+  tab_cache[0] = malloc(2 * n * sizeof(double) + 1);
+  tab_cache[1] = tab_cache[0] ? tab_cache[0] + n : 0;
+  tab_valid[0] = tab_valid[1] = 0;
+  tab_recent = 0;
+  return tab_cache[0] == 0;
+}
+
+/* Ends the run of tab_begin. */
+static void tab_end(void) {
+  free(tab_cache[0]);
+  tab_cache[0] = tab_cache[1] = 0;
+  tab_valid[0] = tab_valid[1] = 0;
+}
 
 #define TAB_DIM (tab_cur->T->dim)
 #define TAB_NF (tab_cur->T->nf)
@@ -66,12 +91,12 @@ static TAB_THREAD const ncgen_stepper_tables *tab_cur;
 static long tab_work_size(const ncgen_stepper_tables *S) {
   const ncgen_tables *T = S->T;
   long n = T->nq + T->nc;
-  return ncgen_tables_work_size(TAB_KINDS, T) + 2L * T->a_nnz + T->nc + 2L * T->nq + 2L * T->nf * T->dim +
+  return tab_ew_size + 2L * T->nq + 2L * T->nf * T->dim +
          TAB_SPRING_IN + TAB_SPRING_OUT + S->nnz_v + S->nnz_r + 3 * n;
 }
 
 typedef struct {
-  double *ew, *A, *A2, *phi, *qh, *F, *fq, *fv, *sx, *sy, *V, *R, *beta, *x, *y;
+  double *ew, *qh, *F, *fq, *fv, *sx, *sy, *V, *R, *beta, *x, *y;
 } tab_work;
 
 static tab_work tab_layout(double *w) {
@@ -79,10 +104,7 @@ static tab_work tab_layout(double *w) {
   const ncgen_tables *T = S->T;
   tab_work b;
   b.ew = w;
-  b.A = b.ew + ncgen_tables_work_size(TAB_KINDS, T);
-  b.A2 = b.A + T->a_nnz;
-  b.phi = b.A2 + T->a_nnz;
-  b.qh = b.phi + T->nc;
+  b.qh = b.ew + tab_ew_size;
   b.F = b.qh + T->nq;
   b.fq = b.F + T->nq;
   b.fv = b.fq + (size_t)T->nf * T->dim;
@@ -94,6 +116,26 @@ static tab_work tab_layout(double *w) {
   b.x = b.beta + T->nq + T->nc;
   b.y = b.x + T->nq + T->nc;
   return b;
+}
+
+/* Φ(q) and A(q): pointers into the cache (valid until the next call but one). */
+static int tab_phi_jacobian(const double *q, const double **phi, const double **A, double *ew) {
+  const ncgen_tables *T = tab_cur->T;
+  size_t nq = (size_t)T->nq;
+  int k;
+  for (k = 0; k < 2; ++k)
+    if (tab_valid[k] && !memcmp(q, tab_cache[k], nq * sizeof(double))) break;
+  if (k == 2) {
+    k = 1 - tab_recent;
+    tab_valid[k] = 0;
+    memcpy(tab_cache[k], q, nq * sizeof(double));
+    if (ncgen_tables_phi_jacobian(TAB_KINDS, T, q, tab_cache[k] + nq, tab_cache[k] + nq + T->nc, ew)) return 1;
+    tab_valid[k] = 1;
+  }
+  tab_recent = k;
+  *phi = tab_cache[k] + nq;
+  *A = tab_cache[k] + nq + T->nc;
+  return 0;
 }
 
 /* F(q, v) into F (nq, if not NULL): gravity and the springs; kscale ∂F/∂v added into K (if
@@ -149,7 +191,7 @@ static void tab_mass_times(const double *x, double *y) {
     for (k = tab_cur->m_colind[j]; k < tab_cur->m_colind[j + 1]; ++k) y[tab_cur->m_row[k]] += tab_cur->m_val[k] * x[j];
 }
 
-/* K = [[M, Aᵀ], [A, 0]] with A = b->A, plus the A of the lower block from lower (NULL: A). */
+/* K = [[M, Aᵀ], [A, 0]]: the A of the lower block from lower, of the upper from upper. */
 static void tab_kkt(double *K, const double *lower, const double *upper) {
   const ncgen_stepper_tables *S = tab_cur;
   int k;
@@ -185,25 +227,24 @@ static double tab_norm_inf(const double *x, int n) {
 static int tab_newton(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
   const ncgen_tables *T = tab_cur->T;
   const double *q = arg[1], *v = arg[2], *wm = arg[6], *nu = arg[7], h = *arg[5];
-  double *r = res[0], *K = res[1], *Aq;
+  double *r = res[0], *K = res[1];
+  const double *phi, *Ah, *Aq, *phi_q;
   tab_work b = tab_layout(w);
   int i, nq = T->nq;
   (void)iw; (void)mem;
-  Aq = b.A2;
-  if (ncgen_tables_phi_jacobian(TAB_KINDS, T, q, 0, Aq, b.ew)) return 1;
   for (i = 0; i < nq; ++i) {
     b.qh[i] = q[i] + h * wm[i];
     b.x[i] = wm[i] - v[i];
   }
-  if (ncgen_tables_phi_jacobian(TAB_KINDS, T, b.qh, b.phi, b.A, b.ew)) return 1;
-  if (K) tab_kkt(K, b.A, Aq);
+  if (tab_phi_jacobian(q, &phi_q, &Aq, b.ew) || tab_phi_jacobian(b.qh, &phi, &Ah, b.ew)) return 1;
+  if (K) tab_kkt(K, Ah, Aq);
   if (tab_forces(q, wm, b.F, K, -h / 2, 0, 0, &b)) return 1;
   if (r) {
     memset(r, 0, sizeof(double) * (size_t)nq);
     tab_mass_times(b.x, r);
     for (i = 0; i < nq; ++i) r[i] -= h / 2 * b.F[i];
     tab_a_times(Aq, nu, r, 1);
-    for (i = 0; i < T->nc; ++i) r[nq + i] = b.phi[i] / h;
+    for (i = 0; i < T->nc; ++i) r[nq + i] = phi[i] / h;
   }
   return 0;
 }
@@ -212,11 +253,12 @@ static int tab_newton(const casadi_real **arg, casadi_real **res, casadi_int *iw
 static int tab_velocity(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
   const ncgen_tables *T = tab_cur->T;
   const double *q = arg[1], *wm = arg[2], h = *arg[5];
+  const double *phi, *A;
   tab_work b = tab_layout(w);
   int i;
   (void)iw; (void)mem;
-  if (ncgen_tables_phi_jacobian(TAB_KINDS, T, q, 0, b.A, b.ew)) return 1;
-  if (res[1]) tab_kkt(res[1], b.A, b.A);
+  if (tab_phi_jacobian(q, &phi, &A, b.ew)) return 1;
+  if (res[1]) tab_kkt(res[1], A, A);
   if (tab_forces(q, wm, b.F, 0, 0, 0, 0, &b)) return 1;
   if (res[0]) {
     memset(res[0], 0, sizeof(double) * (size_t)(T->nq + T->nc));
@@ -226,30 +268,33 @@ static int tab_velocity(const casadi_real **arg, casadi_real **res, casadi_int *
   return 0;
 }
 
-/* Φ(q) into b.phi, A(q) into b.A, A v (Φ_t = 0) into phidot (if not NULL). */
-static int tab_constraints(const double *q, const double *v, double *phidot, tab_work *b) {
-  if (ncgen_tables_phi_jacobian(TAB_KINDS, tab_cur->T, q, b->phi, b->A, b->ew)) return 1;
-  if (phidot) tab_a_times(b->A, v, phidot, 0);
+/* Φ(q) and A(q) (cached, tab_phi_jacobian), A v (Φ_t = 0) into phidot (if not NULL). */
+static int tab_constraints(const double *q, const double *v, double *phidot, const double **phi,
+                           const double **A, tab_work *b) {
+  if (tab_phi_jacobian(q, phi, A, b->ew)) return 1;
+  if (phidot) tab_a_times(*A, v, phidot, 0);
   return 0;
 }
 
 /* step_check: t, q, v, p -> max |Φ|, max |A v + Φ_t|. */
 static int tab_check(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  const double *phi, *A;
   tab_work b = tab_layout(w);
   (void)iw; (void)mem;
-  if (tab_constraints(arg[1], arg[2], b.x, &b)) return 1;
-  if (res[0]) *res[0] = tab_norm_inf(b.phi, tab_cur->T->nc);
+  if (tab_constraints(arg[1], arg[2], b.x, &phi, &A, &b)) return 1;
+  if (res[0]) *res[0] = tab_norm_inf(phi, tab_cur->T->nc);
   if (res[1]) *res[1] = tab_norm_inf(b.x, tab_cur->T->nc);
   return 0;
 }
 
 /* step_project: t, q, v, p -> K = [[M, Aᵀ], [A, 0]], Φ, A v + Φ_t. */
 static int tab_project(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  const double *phi, *A;
   tab_work b = tab_layout(w);
   (void)iw; (void)mem;
-  if (tab_constraints(arg[1], arg[2], res[2], &b)) return 1;
-  if (res[0]) tab_kkt(res[0], b.A, b.A);
-  if (res[1]) memcpy(res[1], b.phi, sizeof(double) * (size_t)tab_cur->T->nc);
+  if (tab_constraints(arg[1], arg[2], res[2], &phi, &A, &b)) return 1;
+  if (res[0]) tab_kkt(res[0], A, A);
+  if (res[1]) memcpy(res[1], phi, sizeof(double) * (size_t)tab_cur->T->nc);
   return 0;
 }
 
@@ -282,6 +327,7 @@ static int tab_outputs(const casadi_real **arg, casadi_real **res, casadi_int *i
   const ncgen_tables *T = S->T;
   const double *q = arg[1], *v = arg[2];
   double *y = res[0], Tk = 0, V = S->v_gravity, P = 0;
+  const double *phi, *A;
   tab_work b = tab_layout(w);
   int i, k;
   (void)iw; (void)mem;
@@ -293,10 +339,10 @@ static int tab_outputs(const casadi_real **arg, casadi_real **res, casadi_int *i
     V -= S->f_gravity[i] * q[i];
   }
   if (tab_forces(q, v, 0, 0, 0, &V, &P, &b)) return 1;
-  if (tab_constraints(q, v, b.x, &b)) return 1;
+  if (tab_constraints(q, v, b.x, &phi, &A, &b)) return 1;
   y[0] = Tk / 2;
   y[1] = V;
-  y[2] = tab_norm_inf(b.phi, T->nc);
+  y[2] = tab_norm_inf(phi, T->nc);
   y[3] = tab_norm_inf(b.x, T->nc);
   y[4] = P;
   if (S->n_markers) {
