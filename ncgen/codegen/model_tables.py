@@ -29,7 +29,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.codegen.element_kernels import (
-    JOINT_KINDS, MEMBER_KINDS, joint_kind_name, member_constants, member_kind_name,
+    JOINT_KINDS, MEMBER_KINDS, joint_kind, joint_kind_name, member_constants, member_kind_name,
 )
 from ncgen.errors import CodegenError
 from ncgen.model.context import Context
@@ -98,14 +98,22 @@ def _dense(rows: int, cols: int, indptr, indices, values) -> np.ndarray:
 
 
 class _Recorder(Context):
-    """A context that records every joint primitive it instantiates: ``(name, args, out)``."""
+    """A context that records every joint primitive it instantiates: ``(name, args, out)``.
+
+    The output of a covered primitive is a fresh symbol per row, not the primitive's formula
+    (whose SymPy-to-CasADi translation cost most of the packing): the tables only need to
+    know which output each equation of a joint is (the same node), and the element kernels
+    compute its value."""
 
     def __init__(self, system, layout):
         super().__init__(system, layout)
         self.calls: list[tuple[str, tuple, ca.SX]] = []
 
     def apply(self, name: str, *args):
-        out = super().apply(name, *args)
+        if (name, self.dim) in JOINT_KINDS:
+            out = ca.SX.sym(f"{name}{len(self.calls)}", joint_kind(name, self.dim).n_out)
+        else:
+            out = super().apply(name, *args)
         self.calls.append((name, args, out))
         return out
 
