@@ -25,6 +25,8 @@
 #ifndef NCGEN_TABLE_STEPPER_H
 #define NCGEN_TABLE_STEPPER_H
 
+#include <math.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "ncgen_element_tables.h"
