@@ -237,6 +237,18 @@ def test_covered_examples_equal_the_flat_stepper(name, options, library):
 
 
 @pytest.mark.slow
+def test_auto_runs_a_small_loaded_model_flat(library):
+    """A small covered model whose flat package this process has loaded runs flat under
+    "auto" (faster per step, nothing to compile); a fresh one of the same kinds, tables."""
+    model = chain_system(3, name="loaded3").build()
+    assert nc.simulate(model, 0.05, 0.01, method="stepper").info["kernels"] == "tables"
+    assert nc.simulate(model, 0.05, 0.01, method="stepper", kernels="flat").info["kernels"] == "flat"
+    assert nc.simulate(model, 0.05, 0.01, method="stepper").info["kernels"] == "flat"
+    assert nc.simulate(chain_system(3, name="fresh3").build(), 0.05, 0.01,
+                       method="stepper").info["kernels"] == "tables"
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("options", [{"scheme": "rattle", "substeps": 4}, {"rtol": 1e-6}], ids=["rattle", "rtol"])
 def test_spring_damper_chain_equals_the_flat_stepper(options, library):
     _compare(chain_system(5, springs=True).build(), **options)

@@ -179,9 +179,13 @@ def _joint_elements(ctx: _Recorder, joint, unsupported) -> list[_Joint]:
     equations = joint.equations(ctx)
     calls = ctx.calls[start:]
     outputs = {}
+    symbols = {out[k].name(): (c, k) for c, (_, _, out) in enumerate(calls) if out.is_valid_input()
+               for k in range(out.numel())}          # the covered primitives' outputs (fresh symbols)
     for label, e in equations:
-        hit = next(((c, k) for c, (_, _, out) in enumerate(calls) for k in range(out.numel())
-                    if ca.is_equal(e, out[k], 0)), None)
+        hit = symbols.get(e.name()) if isinstance(e, ca.SX) and e.is_symbolic() else None
+        if hit is None or not ca.is_equal(e, calls[hit[0]][2][hit[1]], 0):
+            hit = next(((c, k) for c, (_, _, out) in enumerate(calls) for k in range(out.numel())
+                        if ca.is_equal(e, out[k], 0)), None)
         if hit is None:
             unsupported.setdefault(f"{joint.kind} equation not a joint primitive", []).append(label)
             continue
