@@ -160,7 +160,7 @@ def spring_kind(dim: int) -> ca.Function:
     length = ca.sqrt(ca.sumsqr(d))
     rate = ca.dot(d, vb - va) / length
     f = -spring_tension(length, rate, k, l0, c) * d / length
-    y = ca.vertcat(f, spring_energy(length, k, l0), -c * rate ** 2)
+    y = ca.vertcat(f, spring_energy(length - l0, k), -c * rate ** 2)
     J = ca.jacobian(f, x[:4 * dim])
     return ca.Function(force_kind_name("spring", dim), [x], [ca.densify(y), ca.densify(J)], ["x"], ["y", "J"])
 

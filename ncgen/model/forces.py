@@ -26,9 +26,9 @@ def spring_tension(length, rate, k, rest_length, damping):
     return k * (length - rest_length) + damping * rate
 
 
-def spring_energy(length, k, rest_length):
-    """Potential energy ``½ k (l − l₀)²`` (J) of a linear spring of length ``l``."""
-    return 0.5 * k * (length - rest_length) ** 2
+def spring_energy(stretch, k):
+    """Potential energy ``½ k s²`` (J) of a linear spring stretched by ``s = l − l₀`` (m)."""
+    return 0.5 * k * stretch**2
 
 
 class Force:
@@ -208,8 +208,9 @@ class Spring(Force):
         _, _, _, length, _ = self._geometry(ctx)
         k = self._value(ctx, self.k, 1, "k (in the potential energy)", inputs=False)
         l0 = self._value(ctx, self.rest_length, 1, "rest_length (in the potential energy)", inputs=False)
-        V = spring_energy(length, k, l0)
-        return ca.if_else(length - l0 > 0, V, 0) if self.cable else V
+        stretch = length - l0
+        V = spring_energy(stretch, k)
+        return ca.if_else(stretch > 0, V, 0) if self.cable else V
 
 
 class TorsionalSpring(Force):
