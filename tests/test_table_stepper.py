@@ -252,3 +252,18 @@ def test_auto_runs_a_small_loaded_model_flat(library):
 @pytest.mark.parametrize("options", [{"scheme": "rattle", "substeps": 4}, {"rtol": 1e-6}], ids=["rattle", "rtol"])
 def test_spring_damper_chain_equals_the_flat_stepper(options, library):
     _compare(chain_system(5, springs=True).build(), **options)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(1800)
+def test_benchmark_smoke(tmp_path):
+    """benchmarks/table_stepper.py --smoke runs and prints its comparisons."""
+    env = {**os.environ, "NCGEN_CACHE_DIR": str(tmp_path / "cache"),
+           "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    out = subprocess.run([sys.executable, "table_stepper.py", "--smoke"], cwd=ROOT / "benchmarks", env=env,
+                         capture_output=True, text=True, timeout=1800)
+    assert out.returncode == 0, out.stderr[-3000:]
+    for line in ("CPU:", "=== chain of N = 6 bars", "tables, empty cache: library + pack + step",
+                 "flat, cached: generate + find + step", "RATIO tables / flat, time per step, N = 6",
+                 "load average at the end"):
+        assert line in out.stdout, (line, out.stdout[-3000:])

@@ -12,8 +12,9 @@ model's own package, compiled per model) or ``"auto"``: the tables when every el
 model is covered (:func:`~ncgen.codegen.stepper_tables.uncovered_elements` and
 :mod:`~ncgen.codegen.model_tables`), else flat — except that a small model (``nq + nc`` below
 :data:`AUTO_FLAT_BELOW`) whose flat package this process has already compiled or loaded runs
-flat: there the flat step is faster (measured, benchmarks/table_stepper.py: 2.2–2.9 times
-fewer CPU seconds per step for a 10-bar chain, about equal at 40 bars) and costs no compile.
+flat: there the flat step is faster (benchmarks/table_stepper.py, CPU seconds per step of the
+tables over the flat package's: 2.2–2.9 for a 10-bar chain, nq + nc = 40; 1.2 at 40 bars,
+nq + nc = 160; 1.0 at 160 bars) and costs no compile.
 "auto" never compiles a covered model: the first compiled step of a new model of the shipped
 kinds needs no C compiler.
 """
