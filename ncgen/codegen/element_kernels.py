@@ -17,6 +17,13 @@ Two families of kinds, both from :mod:`ncgen.symbolic`:
   ``mk_<type>_<dim>d_mass``: input ``c``, output the member's constant mass matrix ``M_I``
   (dense).
 
+* **force kinds** ``spring_<dim>d`` (:data:`FORCE_KINDS`): kernel ``fk_spring_<dim>d`` of a
+  linear spring-damper (:func:`ncgen.model.forces.spring_tension`): input
+  ``x = [r_a; r_b; ṙ_a; ṙ_b; k; l₀; c]``, outputs ``y = [f; V; P]`` (the force on ``b``, N,
+  ``−f`` acting on ``a``; its energy, J; its damper's power ``−c l̇²``, W) and
+  ``J = ∂f/∂[r_a; r_b; ṙ_a; ṙ_b]`` (dense, column-major).  Gravity needs no kernel: its
+  generalised force is constant.
+
 The constants ``c`` of a member kind are the free symbols of its derivation's ``Φ`` and ``M``
 other than the coordinates, sorted by name (:func:`member_constants`); a member's values are
 ``member.rigid.constants()`` at those symbols.  The order of the kinds (:data:`JOINT_KINDS`,
@@ -31,6 +38,7 @@ from functools import lru_cache
 import casadi as ca
 
 from ncgen.errors import CodegenError
+from ncgen.model.forces import spring_energy, spring_tension
 from ncgen.model.sym2casadi import to_casadi
 from ncgen.symbolic.coordinates import available_types, coordinate_type
 from ncgen.symbolic.joints import PRIMITIVES, primitive
@@ -40,6 +48,8 @@ from ncgen.symbolic.joints import PRIMITIVES, primitive
 JOINT_KINDS: tuple[tuple[str, int], ...] = tuple((p, d) for d in (3, 2) for p in PRIMITIVES if p != "angle")
 #: Member kinds ``(dim, coordinate type)``, in table order.
 MEMBER_KINDS: tuple[tuple[int, str], ...] = tuple(available_types())
+#: Force kinds with a kernel ``(force, dim)``, in the order of the library's kernels.
+FORCE_KINDS: tuple[tuple[str, int], ...] = (("spring", 3), ("spring", 2))
 
 
 @dataclass(frozen=True)
@@ -136,20 +146,43 @@ def member_kind(dim: int, ctype: str) -> MemberKind:
     return MemberKind(name, ct.nq, len(consts), len(ct.pairs), tuple(map(str, consts)), phi, mass, hvv)
 
 
+def force_kind_name(force: str, dim: int) -> str:
+    return f"fk_{force}_{dim}d"
+
+
+@lru_cache(maxsize=None)
+def spring_kind(dim: int) -> ca.Function:
+    """The spring-damper kernel ``fk_spring_<dim>d`` (module docstring)."""
+    x = ca.SX.sym("x", 4 * dim + 3)
+    ra, rb, va, vb = (x[i * dim:(i + 1) * dim] for i in range(4))
+    k, l0, c = x[4 * dim], x[4 * dim + 1], x[4 * dim + 2]
+    d = rb - ra
+    length = ca.sqrt(ca.sumsqr(d))
+    rate = ca.dot(d, vb - va) / length
+    f = -spring_tension(length, rate, k, l0, c) * d / length
+    y = ca.vertcat(f, spring_energy(length - l0, k), -c * rate ** 2)
+    J = ca.jacobian(f, x[:4 * dim])
+    return ca.Function(force_kind_name("spring", dim), [x], [ca.densify(y), ca.densify(J)], ["x"], ["y", "J"])
+
+
 def kernels() -> list[ca.Function]:
     """Every kernel of the shipped kinds, in a fixed order (joint kinds, then member kinds'
-    ``phi`` and ``mass``)."""
+    ``phi`` and ``mass``, then the force kinds)."""
     out = [f for p, d in JOINT_KINDS for f in (joint_kind(p, d).function, joint_kind(p, d).hvv)]
     for d, t in MEMBER_KINDS:
         k = member_kind(d, t)
         out += ([k.phi, k.hvv] if k.phi is not None else []) + [k.mass]
-    return out
+    return out + [spring_kind(d) for _, d in FORCE_KINDS]
 
 
 #: Name of the package (and prefix of every C symbol) of the element kernels' library.
 PACKAGE = "ncgen_elements"
 #: The files the library is made of besides this module: the key of its cache entry hashes them.
-SOURCES = ("runtime/ncgen_element_tables.h", "element_tables.c.j2")
+SOURCES = ("runtime/ncgen_element_tables.h", "element_tables.c.j2", "runtime/ncgen_sparse_qr.h",
+           "runtime/ncgen_table_stepper.h", "runtime/ncgen_rattle.h", "runtime/ncgen_fixed.h",
+           "runtime/ncgen_adaptive.h")
+#: The runtime headers the library's C includes (copied into its package as they are).
+HEADERS = SOURCES[2:]
 
 
 def write_element_package(out_dir):
@@ -165,16 +198,22 @@ def write_element_package(out_dir):
         raise CodegenError("element kernels: the table loops expect kernels with no integer work and at most "
                            "two arguments and results")
     names = [k.name for k in joints] + [k.name for k in members]
-    context = {"joint_kinds": [{"name": k.name, "dim": k.dim, "n_vec": k.n_vec, "n_scalar": k.n_scalar,
+    from ncgen.codegen.stepper_package import HALVINGS_LIMIT, MAX_HALVINGS, MAX_ITER, STATS, TOL
+
+    context = {"stepper": {"tol": TOL, "max_iter": MAX_ITER, "max_halvings": MAX_HALVINGS,
+                           "halvings_limit": HALVINGS_LIMIT, "nstats": len(STATS)},
+               "joint_kinds": [{"name": k.name, "dim": k.dim, "n_vec": k.n_vec, "n_scalar": k.n_scalar,
                                 "n_out": k.n_out} for k in joints],
                "member_kinds": [{"name": k.name, "phi": k.phi is not None, "n_q": k.n_q, "n_c": k.n_c,
                                  "n_out": k.n_out} for k in members],
                "max_w": max(f.sz_w() for f in fns), "kind_names": ",".join(names)}
     doc = PackageDoc(summary="Element kernels of the shipped kinds and the table-driven loops (ncgen "
-                             "element tables): Φ, A, Φ_t and M of any model of these kinds from its tables")
+                             "element tables): Φ, A, Φ_t and M of any model of these kinds from its tables, "
+                             "and its compiled RATTLE stepper")
     return write_package(PACKAGE, fns, out_dir, doc=doc, max_file_instructions=None, reroll_instructions=None,
                          extra_sources=[ExtraSource("runtime/ncgen_element_tables.h", "ncgen_element_tables.h",
                                                     included=True),
+                                        *(ExtraSource(h, h.split("/")[-1], included=True) for h in HEADERS),
                                         ExtraSource("element_tables.c.j2", "element_tables.c", context)])
 
 

@@ -29,7 +29,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.codegen.element_kernels import (
-    JOINT_KINDS, MEMBER_KINDS, joint_kind_name, member_constants, member_kind_name,
+    JOINT_KINDS, MEMBER_KINDS, joint_kind, joint_kind_name, member_constants, member_kind_name,
 )
 from ncgen.errors import CodegenError
 from ncgen.model.context import Context
@@ -70,6 +70,8 @@ class ModelTables:
     m_indptr: np.ndarray
     m_indices: np.ndarray
     kinds: dict[str, int] = field(default_factory=dict)
+    #: The feature of each point given to :func:`model_tables` (``points``), in their order.
+    point_features: list[int] = field(default_factory=list)
 
     @property
     def a_nnz(self) -> int:
@@ -96,14 +98,22 @@ def _dense(rows: int, cols: int, indptr, indices, values) -> np.ndarray:
 
 
 class _Recorder(Context):
-    """A context that records every joint primitive it instantiates: ``(name, args, out)``."""
+    """A context that records every joint primitive it instantiates: ``(name, args, out)``.
+
+    The output of a covered primitive is a fresh symbol per row, not the primitive's formula
+    (whose SymPy-to-CasADi translation cost most of the packing): the tables only need to
+    know which output each equation of a joint is (the same node), and the element kernels
+    compute its value."""
 
     def __init__(self, system, layout):
         super().__init__(system, layout)
         self.calls: list[tuple[str, tuple, ca.SX]] = []
 
     def apply(self, name: str, *args):
-        out = super().apply(name, *args)
+        if (name, self.dim) in JOINT_KINDS:
+            out = ca.SX.sym(f"{name}{len(self.calls)}", joint_kind(name, self.dim).n_out)
+        else:
+            out = super().apply(name, *args)
         self.calls.append((name, args, out))
         return out
 
@@ -119,11 +129,14 @@ class _Joint:
     where: str
 
 
-def model_tables(model) -> ModelTables:
-    """The tables of ``model`` (see module docstring); raises :class:`UnsupportedElements`."""
+def model_tables(model, points=()) -> ModelTables:
+    """The tables of ``model`` (see module docstring); raises :class:`UnsupportedElements`.
+    ``points``: ``(member, local point)`` pairs (a ground point in world coordinates) made
+    features too (``point_features``: the stepper's spring ends and markers)."""
     unsupported: dict[str, list[str]] = {}
     view = SimpleNamespace(members=model.members, inputs={}, parameters={}, dim=model.dim, name=model.name)
-    ctx = _Recorder(view, model.layout) if model.joints else None     # its symbols cost O(nq): only for joints
+    # its symbols cost O(nq): only for joints and points
+    ctx = _Recorder(view, model.layout) if model.joints or points else None
     joints = []
     for j in model.joints:
         kind = _uncovered_kind(j)
@@ -140,7 +153,14 @@ def model_tables(model) -> ModelTables:
     missing = [label for label in model.constraint_names if label not in produced]
     if missing:
         raise UnsupportedElements(model.name, {"constraint rows of no element kind": missing})
-    return _pack(model, ctx, members, joints, rows)
+    extra = [_Joint(-1, [_point(ctx, m, at)], [], [], "point") for m, at in points]
+    return _pack(model, ctx, members, joints, rows, extra)
+
+
+def _point(ctx: _Recorder, member, at):
+    """The world position of the local point ``at`` of ``member`` (affine in q)."""
+    at = np.asarray(at, float)
+    return ca.DM(at) if member.is_ground else ctx.local_point(member, at)[0]
 
 
 def _uncovered_kind(joint) -> str | None:
@@ -159,9 +179,13 @@ def _joint_elements(ctx: _Recorder, joint, unsupported) -> list[_Joint]:
     equations = joint.equations(ctx)
     calls = ctx.calls[start:]
     outputs = {}
+    symbols = {out[k].name(): (c, k) for c, (_, _, out) in enumerate(calls) if out.is_valid_input()
+               for k in range(out.numel())}          # the covered primitives' outputs (fresh symbols)
     for label, e in equations:
-        hit = next(((c, k) for c, (_, _, out) in enumerate(calls) for k in range(out.numel())
-                    if ca.is_equal(e, out[k], 0)), None)
+        hit = symbols.get(e.name()) if isinstance(e, ca.SX) and e.is_symbolic() else None
+        if hit is None or not ca.is_equal(e, calls[hit[0]][2][hit[1]], 0):
+            hit = next(((c, k) for c, (_, _, out) in enumerate(calls) for k in range(out.numel())
+                        if ca.is_equal(e, out[k], 0)), None)
         if hit is None:
             unsupported.setdefault(f"{joint.kind} equation not a joint primitive", []).append(label)
             continue
@@ -276,9 +300,11 @@ def _reals(values) -> np.ndarray:
     return np.asarray(values, dtype=np.float64).reshape(-1)
 
 
-def _pack(model, ctx: _Recorder | None, members: list[dict], joints: list[_Joint], rows: dict[str, int]) -> ModelTables:
+def _pack(model, ctx: _Recorder | None, members: list[dict], joints: list[_Joint], rows: dict[str, int],
+          extra: list[_Joint]) -> ModelTables:
     dim, nq, nc = model.dim, model.layout.nq, len(model.constraint_names)
-    ids, features = _features(ctx, joints) if joints else ([], [])
+    ids, features = _features(ctx, joints + extra) if joints or extra else ([], [])
+    ids, point_ids = ids[:len(joints)], ids[len(joints):]
     a_rows, a_cols, m_rows, m_cols = [], [], [], []
     for m in members:                       # the loop order of ncgen_tables_jacobian / _mass
         free = [c for c in m["cols"] if c >= 0]
@@ -331,4 +357,5 @@ def _pack(model, ctx: _Recorder | None, members: list[dict], joints: list[_Joint
     for m in members:
         name = member_kind_name(*MEMBER_KINDS[m["kind"]])
         used[name] = used.get(name, 0) + 1
-    return ModelTables(model.name, dim, nq, nc, arrays, a_indptr, a_indices, m_indptr, m_indices, used)
+    return ModelTables(model.name, dim, nq, nc, arrays, a_indptr, a_indices, m_indptr, m_indices, used,
+                       [i[0] for i in point_ids])

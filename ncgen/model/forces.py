@@ -19,6 +19,18 @@ from ncgen.model.members import model_name
 from ncgen.validation import as_scalar, as_vector
 
 
+def spring_tension(length, rate, k, rest_length, damping):
+    """Tension ``T = k (l − l₀) + c l̇`` (N) of a linear spring-damper of length ``l`` (m)
+    stretching at ``l̇`` (m/s): the one formula of :class:`Spring` (and of the spring kernel
+    of the element tables, :mod:`ncgen.codegen.element_kernels`)."""
+    return k * (length - rest_length) + damping * rate
+
+
+def spring_energy(stretch, k):
+    """Potential energy ``½ k s²`` (J) of a linear spring stretched by ``s = l − l₀`` (m)."""
+    return 0.5 * k * stretch**2
+
+
 class Force:
     """Base class of force elements."""
 
@@ -179,7 +191,7 @@ class Spring(Force):
         k = self._value(ctx, self.k, 1, "k")
         l0 = self._value(ctx, self.rest_length, 1, "rest_length")
         c = self._value(ctx, self.damping, 1, "damping")
-        T = k * (length - l0) + c * rate
+        T = spring_tension(length, rate, k, l0, c)
         return ca.fmax(T, 0) if self.cable else T
 
     def generalized(self, ctx):
@@ -197,7 +209,7 @@ class Spring(Force):
         k = self._value(ctx, self.k, 1, "k (in the potential energy)", inputs=False)
         l0 = self._value(ctx, self.rest_length, 1, "rest_length (in the potential energy)", inputs=False)
         stretch = length - l0
-        V = 0.5 * k * stretch**2
+        V = spring_energy(stretch, k)
         return ca.if_else(stretch > 0, V, 0) if self.cable else V
 
 

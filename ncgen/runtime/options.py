@@ -35,6 +35,8 @@ SCHEMES = ("auto", "rattle", "rattle4")
 #: The fixed-step stepper's error estimates (``estimate``; True is ``"shadow"``).
 ESTIMATES = (True, False, "local", "shadow")
 PROJECTS = (True, False, "auto")
+#: The stepper's kernels (``kernels``): chosen, from the element tables, or the model's own.
+KERNELS = ("auto", "tables", "flat")
 
 
 @dataclass(frozen=True)
@@ -81,7 +83,12 @@ class SimulationOptions:
     motion; ``"local"``: the local errors of one pair of steps in six, summed and grown as a
     RATTLE shadow run's errors grow, about a fifth more work, reliable where errors do not
     grow fast (see :mod:`ncgen.runtime.stepper_checks`); ``False``: none; error control: any
-    true value runs its shadow run at 10x looser tolerances).
+    true value runs its shadow run at 10x looser tolerances), ``kernels`` (``"tables"``: the
+    stepper of the element library, compiled once per ncgen version, run on the model's
+    tables, with no compile per model, for models whose every element is of a covered kind;
+    ``"flat"``: the model's own generated package, compiled per model; ``"auto"``, default:
+    the tables when the model is covered, else flat; ``traj.info["kernels"]`` says which ran;
+    see :mod:`ncgen.runtime.table_stepper`).
     """
 
     method: str = "auto"
@@ -104,6 +111,7 @@ class SimulationOptions:
     estimate: bool | str = True
     integrator: str | None = None
     joint_dynamics: bool = False
+    kernels: str = "auto"
 
     def __post_init__(self):
         for name in ("max_steps", "substeps", "max_newton", "max_halvings", "order"):
@@ -153,6 +161,9 @@ class SimulationOptions:
         if self.integrator is not None and self.integrator not in INTEGRATORS:
             raise NcgenError(f"integrator: expected one of {', '.join(INTEGRATORS)} (method='joint'), "
                              f"got {self.integrator!r}")
+        if not isinstance(self.kernels, str) or self.kernels not in KERNELS:
+            raise NcgenError(f"kernels: expected one of {', '.join(map(repr, KERNELS))} (the stepper's kernels: "
+                             f"from the element tables or the model's own package), got {self.kernels!r}")
         if not any(self.estimate is e or (isinstance(e, str) and self.estimate == e) for e in ESTIMATES):
             raise NcgenError(f"estimate: expected True, False, 'local' or 'shadow', got {self.estimate!r}")
         for name in ("check", "joint_dynamics"):

@@ -64,7 +64,7 @@ from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.stepper_checks import (SHADOW_FACTOR, check_fixed, check_global, contact_report, energy_report,
                                           error_estimate, is_conservative, shadow_estimates,
                                           shadow_report, trusted_before_failure, warn_unconverged)
-from ncgen.runtime.stepper_library import load_stepper
+from ncgen.runtime.table_stepper import load_any_stepper
 from ncgen.runtime.trajectory import NAME_KEYS, Trajectory, derived_outputs
 
 #: With error control, the Newton tolerance is at most this fraction of min(rtol, atol)
@@ -88,7 +88,7 @@ def simulate_stepper(model, t: np.ndarray, U: np.ndarray, p: np.ndarray, q0: np.
     :class:`~ncgen.errors.SimulationError` naming the time and the cause, with the
     trajectory up to the last output time before it."""
     opts = SimulationOptions.resolve(options, **shortcuts)
-    stepper = load_stepper(model, cflags)
+    stepper = load_any_stepper(model, cflags, opts.kernels)
     conservative = is_conservative(model, inputs=bool(np.any(np.asarray(U) != 0)))
     if opts.rtol is not None and stepper.nd:
         raise NcgenError(f"rtol: model {model.name!r} has nonsmooth contacts, whose impacts the error control "
@@ -124,7 +124,8 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, conse
             scheme=int(rattle4))
     stepping = time.perf_counter() - start
     rows = done // substeps
-    info = {"method": "stepper", "backend": "compiled", "scheme": "RATTLE, nonsmooth contacts" if contacts else
+    info = {"method": "stepper", "backend": "compiled", "kernels": stepper.kernels,
+            "scheme": "RATTLE, nonsmooth contacts" if contacts else
             "RATTLE, Suzuki's fourth-order composition" if rattle4 else "RATTLE", "order": 4 if rattle4 else 2,
             "stages": COMPOSITION_STAGES if rattle4 else 1, "h": h,
             "substeps": substeps, "hold": hold, "tol": tol, "max_iter": max_iter,
@@ -178,8 +179,8 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, co
     if shadow is not None and shadow[4] == STEP_INTERRUPTED:   # stopped in the shadow run: no estimate
         status, shadow = STEP_INTERRUPTED, None
     stepping = time.perf_counter() - start
-    info = {"method": "stepper", "backend": "compiled", "scheme": "RATTLE, Suzuki's fourth-order composition"
-            if rattle4 else "RATTLE" if order == 2 else "RATTLE, Richardson-extrapolated and projected",
+    info = {"method": "stepper", "backend": "compiled", "kernels": stepper.kernels,
+            "scheme": "RATTLE, Suzuki's fourth-order composition" if rattle4 else "RATTLE" if order == 2 else "RATTLE, Richardson-extrapolated and projected",
             "order": 4 if rattle4 else order, "rtol": rtol, "atol": atol,
             "hold": hold, "tol": newton_tolerance(rtol, atol, tol), "max_iter": max_iter, "max_steps": max_steps,
             "estimate": bool(estimate), "stepping_time": stepping, "complete": status == 0,

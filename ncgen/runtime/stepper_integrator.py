@@ -13,7 +13,7 @@ from ncgen.runtime.feedback import FeedbackFailed, with_partial
 from ncgen.runtime.integrator import Run, refuse_integrator
 from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.stepper import simulate_stepper
-from ncgen.runtime.stepper_library import load_stepper
+from ncgen.runtime.table_stepper import load_any_stepper
 from ncgen.runtime.trajectory import Trajectory
 
 NO_CONTROLLER = ("method='stepper' does not take a compiled controller or joint_dynamics=True; use method='joint' "
@@ -26,7 +26,7 @@ class StepperIntegrator:
 
     METHOD = "stepper"
     OPTIONS = ("rtol", "atol", "hold", "max_steps", "substeps", "newton_tol", "max_newton", "max_halvings",
-               "order", "scheme", "check", "estimate")
+               "order", "scheme", "check", "estimate", "kernels")
 
     def __init__(self, model, opts: SimulationOptions):
         refuse_integrator(opts, self.METHOD)
@@ -36,7 +36,7 @@ class StepperIntegrator:
 
     def _load(self) -> None:
         try:
-            load_stepper(self.model)
+            load_any_stepper(self.model, None, self.opts.kernels)
         except CompilerNotFound as e:
             stepper, idas = option("method='stepper'", "--method stepper"), option("method='idas'", "--method idas")
             raise CompilerNotFound(f"{e}: the stepper ({stepper}) is generated C and needs one; install gcc, "

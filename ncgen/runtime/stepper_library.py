@@ -23,6 +23,9 @@ class CompiledStepper:
     """The loops of a compiled stepper library (``<model>_simulate``, ``_simulate_stats``,
     ``_simulate_adaptive``, ``_outputs``), called on NumPy arrays."""
 
+    #: Which kernels it runs: the model's own package (``"flat"``) or the element tables'.
+    kernels = "flat"
+
     def __init__(self, library: str, name: str, nq: int, nc: int, nu: int, npar: int, nout: int, nd: int = 0):
         self.library = library
         self.nq, self.nc, self.nu, self.np, self.nout = nq, nc, nu, npar, nout

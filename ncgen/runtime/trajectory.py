@@ -374,6 +374,7 @@ class Trajectory:
 
 def _settings(info: dict) -> str:
     parts = [f"{info['backend']} backend"] if "backend" in info else []
+    parts += [f"{info['kernels']} kernels"] if "kernels" in info else []
     parts += [info["scheme"]] if "scheme" in info else []
     parts += [f"{key} {info[key]:g}" for key in ("rtol", "atol", "h", "order", "tol") if key in info]
     return ", ".join(parts)

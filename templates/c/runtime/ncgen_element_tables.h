@@ -237,20 +237,24 @@ static int ncgen_tables_phi(const ncgen_kinds *K, const ncgen_tables *T, const d
   return 0;
 }
 
-/* The nonzeros of A(q) = ∂Φ/∂q (a_nnz, the pattern of the tables) into A. */
-static int ncgen_tables_jacobian(const ncgen_kinds *K, const ncgen_tables *T, const double *q, double *A,
-                                 double *work) {
+/* Φ(q) into phi (nc, if not NULL) and the nonzeros of A(q) = ∂Φ/∂q (a_nnz, the pattern of
+ * the tables) into A, from one evaluation of each kernel. */
+static int ncgen_tables_phi_jacobian(const ncgen_kinds *K, const ncgen_tables *T, const double *q, double *phi,
+                                     double *A, double *work) {
   double *F = work, *x = F + 2 * (size_t)T->nf * T->dim, *out = x + ncgen_tables_max_in(K);
   double *w = out + ncgen_tables_max_out(K);
   int i, r, j, a, e;
   memset(A, 0, sizeof(double) * (size_t)T->a_nnz);
+  if (phi) memset(phi, 0, sizeof(double) * (size_t)T->nc);
   for (i = 0; i < T->nm; ++i) {
     const ncgen_member_kind *k = &K->member[T->mem_kind[i]];
     const int *pos = T->mem_apos + T->mem_apos_ptr[i];
     if (k->n_out == 0) continue;
     if (ncgen_tables_member(K, T, i, q, x, out, w)) return NCGEN_TABLES_KERNEL;
     for (r = 0; r < k->n_out; ++r) {
-      if (T->mem_row[T->mem_row_ptr[i] + r] < 0) continue;
+      int row = T->mem_row[T->mem_row_ptr[i] + r];
+      if (row < 0) continue;
+      if (phi) phi[row] = out[r];
       for (j = 0; j < k->n_q; ++j)       /* J is column-major, n_out x n_q */
         if (T->mem_q_col[T->mem_q_ptr[i] + j] >= 0) A[*pos++] += out[k->n_out + j * k->n_out + r];
     }
@@ -261,7 +265,9 @@ static int ncgen_tables_jacobian(const ncgen_kinds *K, const ncgen_tables *T, co
     const int *pos = T->el_apos + T->el_apos_ptr[i];
     if (ncgen_tables_joint(K, T, i, F, x, out, w)) return NCGEN_TABLES_KERNEL;
     for (r = 0; r < k->n_out; ++r) {
-      if (T->el_row[T->el_row_ptr[i] + r] < 0) continue;
+      int row = T->el_row[T->el_row_ptr[i] + r];
+      if (row < 0) continue;
+      if (phi) phi[row] = out[r];
       for (a = 0; a < k->n_vec; ++a) {
         int f = T->el_arg[T->el_arg_ptr[i] + a];
         for (e = T->feat_ptr[f]; e < T->feat_ptr[f + 1]; ++e)   /* dΦ_r/df · ∂f/∂q_col */
@@ -270,6 +276,12 @@ static int ncgen_tables_jacobian(const ncgen_kinds *K, const ncgen_tables *T, co
     }
   }
   return 0;
+}
+
+/* The nonzeros of A(q) = ∂Φ/∂q (a_nnz, the pattern of the tables) into A. */
+static int ncgen_tables_jacobian(const ncgen_kinds *K, const ncgen_tables *T, const double *q, double *A,
+                                 double *work) {
+  return ncgen_tables_phi_jacobian(K, T, q, 0, A, work);
 }
 
 /* γ(q, v) = −[vᵀ H_r v]_r (nc): the acceleration right-hand side of A q̈ = γ for scleronomic

@@ -1,0 +1,150 @@
+"""A model's compiled stepper as data: the tables of ``ncgen_stepper_tables``
+(``templates/c/runtime/ncgen_table_stepper.h``), which the element library's stepper
+(compiled once per ncgen version, :mod:`ncgen.runtime.table_library`) runs with no compiler.
+
+:func:`stepper_tables` packs the element tables of the constraints and the mass
+(:func:`~ncgen.codegen.model_tables.model_tables`), then the forces: gravity as a constant
+generalised force ``f_gravity = Σ_I S_Iᵀ C(c_G)ᵀ m_I g`` (its energy
+``V = v_gravity − f_gravityᵀ q``), each :class:`~ncgen.model.forces.Spring` with constant
+``k``, rest length and damping as a spring element between two point features; the markers
+as point features; and the KKT matrix ``K = [[M − h/2 ∂F/∂w, Aᵀ], [A, 0]]``: its pattern,
+the nonzero of ``K`` every product of the loops adds to, and the symbolic analysis of its
+sparse QR (CasADi's ``Sparsity.qr_sparse``, approximate minimum degree column order).
+
+A model is *table-covered* when every element is: joints as :mod:`ncgen.codegen.model_tables`
+says, forces as above, no contacts, inputs or parameters.  :class:`UnsupportedElements`
+names every element that is not.  Nothing here reads ``model.functions``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ncgen.codegen.model_tables import ModelTables, UnsupportedElements, _csc, _ints, _ptr, _reals, model_tables
+from ncgen.errors import CodegenError
+from ncgen.model.forces import Spring
+
+
+@dataclass
+class StepperTables:
+    """The stepper tables of one model (names as the fields of ``ncgen_stepper_tables``)."""
+
+    name: str
+    tables: ModelTables
+    nu: int
+    np: int
+    n_markers: int
+    n_spring: int
+    mass_scale: float
+    v_gravity: float
+    nnz_k: int
+    nnz_v: int
+    nnz_r: int
+    arrays: dict[str, np.ndarray]
+
+
+def _number(value) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+
+
+def uncovered_elements(model) -> dict[str, list[str]]:
+    """The elements of ``model`` outside the stepper tables' kinds (other than joints), by kind."""
+    out: dict[str, list[str]] = {}
+    for f in model.forces:
+        if type(f) is not Spring:
+            out.setdefault(f.kind, []).append(f"force {f.name!r}")
+        elif f.cable or not all(_number(x) for x in (f.k, f.rest_length, f.damping)):
+            what = "cable" if f.cable else "with an expression for k, rest_length or damping"
+            out.setdefault(f"Spring {what}", []).append(f"force {f.name!r}")
+    if model.contacts:
+        out.setdefault("contact", []).extend(f"contact {n!r}" for n in model.contact_names)
+    if model.nu:
+        out.setdefault("input", []).extend(f"input {n!r}" for n in model.input_names)
+    if model.np:
+        out.setdefault("parameter", []).extend(f"parameter {n!r}" for n in model.parameter_names)
+    return out
+
+
+def stepper_tables(model) -> StepperTables:
+    """The stepper tables of ``model`` (module docstring); raises :class:`UnsupportedElements`."""
+    missing = uncovered_elements(model)
+    if missing:
+        raise UnsupportedElements(model.name, missing)
+    springs = list(model.forces)
+    points = [(s.a, s.at_a) for s in springs] + [(s.b, s.at_b) for s in springs]
+    points += [(m, local) for m in model.members.values() for local in m.markers.values()]
+    T = model_tables(model, points)
+    ns = len(springs)
+    ends, markers = T.point_features[:2 * ns], T.point_features[2 * ns:]
+    spr_feat = [f for s in range(ns) for f in (ends[s], ends[ns + s])]
+    f_gravity, v_gravity = _gravity(model)
+    nq, nc = T.nq, T.nc
+    n = nq + nc
+    a = T.arrays
+    # the entries of K, in the loops' order: M, A (lower block), Aᵀ (upper block), dampers
+    m_cols = np.repeat(np.arange(nq), np.diff(T.m_indptr))
+    a_cols = np.repeat(np.arange(nq), np.diff(T.a_indptr))
+    rows = [T.m_indices, nq + T.a_indices, a_cols]
+    cols = [m_cols, a_cols, nq + T.a_indices]
+    counts = []
+    for s in range(ns):
+        fa = [(a["feat_ptr"][f], a["feat_ptr"][f + 1]) for f in (spr_feat[2 * s], spr_feat[2 * s + 1])]
+        r_s, c_s = [], []
+        for lo, hi in fa:
+            for e in range(lo, hi):
+                for lo2, hi2 in fa:
+                    r_s += [a["feat_col"][e]] * (hi2 - lo2)
+                    c_s += list(a["feat_col"][lo2:hi2])
+        rows.append(_ints(r_s))
+        cols.append(_ints(c_s))
+        counts.append(len(r_s))
+    k_indptr, k_indices, pos = _csc(n, n, np.concatenate(rows), np.concatenate(cols))
+    m_nnz, a_nnz = T.m_nnz, T.a_nnz
+    qr = _qr_analysis(model.name, n, k_indptr, k_indices)
+    M = np.asarray(model.M, dtype=float)
+    arrays = {
+        "a_colind": T.a_indptr, "a_row": T.a_indices, "m_colind": T.m_indptr, "m_row": T.m_indices,
+        "m_val": _reals(M[T.m_indices, m_cols]),
+        "f_gravity": _reals(f_gravity),
+        "spr_feat": _ints(spr_feat),
+        "spr_par": _reals([x for s in springs for x in (s.k, s.rest_length, s.damping)]),
+        "spr_kpos_ptr": _ptr(counts), "spr_kpos": pos[m_nnz + 2 * a_nnz:],
+        "marker_feat": _ints(markers),
+        "k_mpos": pos[:m_nnz], "k_apos": pos[m_nnz:m_nnz + a_nnz], "k_atpos": pos[m_nnz + a_nnz:m_nnz + 2 * a_nnz],
+        "k_colind": k_indptr, "k_row": k_indices, **qr,
+    }
+    return StepperTables(model.name, T, model.nu, model.np, len(markers), ns,
+                         float(np.max(np.abs(M))) if nq else 1.0, v_gravity, int(k_indices.size),
+                         int(qr["v_row"].size), int(qr["r_row"].size), arrays)
+
+
+def _gravity(model) -> tuple[np.ndarray, float]:
+    """``(f_gravity, v_gravity)``: gravity's generalised force ``Σ S_Iᵀ C(c_G)ᵀ m_I g`` (as
+    :func:`ncgen.assembly.build.force_terms` assembles it) and the constant of its energy
+    ``V = −Σ m_I g·C(c_G) q_I = v_gravity − f_gravityᵀ q`` (the ground points' share)."""
+    g = np.asarray(model.gravity, float)
+    f = np.zeros(model.nq)
+    v0 = 0.0
+    for m in model.members.values():
+        C = np.asarray(m.rigid.C(m.rigid.c_g), float)
+        force = C.T @ (m.rigid.mass * g)
+        b = np.asarray(model.layout.member_constant(m.name), float)
+        for k, i in enumerate(model.layout.member_indices(m.name)):
+            if i is None:
+                v0 -= force[k] * b[k]
+            else:
+                f[i] += force[k]
+    return f, v0
+
+
+def _qr_analysis(name: str, n: int, indptr: np.ndarray, indices: np.ndarray) -> dict[str, np.ndarray]:
+    """The sparse QR's analysis of the pattern (``ncgen_qr_pattern``): V, R, prinv, pc."""
+    pattern = ca.Sparsity(n, n, indptr.astype(np.int64).tolist(), indices.astype(np.int64).tolist())
+    vs, rs, prinv, pc = pattern.qr_sparse(True)
+    if vs.size1() != n:
+        raise CodegenError(f"model {name!r}: its KKT matrix [[M, Aᵀ], [A, 0]] is structurally singular "
+                           f"(redundant constraints?); the stepper tables need a structurally regular one")
+    return {"v_colind": _ints(vs.colind()), "v_row": _ints(vs.row()), "r_colind": _ints(rs.colind()),
+            "r_row": _ints(rs.row()), "prinv": _ints(prinv), "pc": _ints(pc)}

@@ -1,0 +1,156 @@
+"""The compiled stepper driven by element tables: the element library's RATTLE stepper
+(``templates/c/runtime/ncgen_table_stepper.h``, compiled once per ncgen version,
+:func:`~ncgen.runtime.table_library.load_element_library`) run on one model's
+:class:`~ncgen.codegen.stepper_tables.StepperTables`: a model of the shipped kinds reaches
+its first compiled step with no call of the C compiler.
+
+:class:`TableStepper` has the interface of
+:class:`~ncgen.runtime.stepper_library.CompiledStepper` (the stepper's driver,
+:mod:`ncgen.runtime.stepper`, does not tell them apart).  :func:`stepper_kernels` is the
+choice between the two (``SimulationOptions(kernels=...)``): ``"tables"``, ``"flat"`` (the
+model's own package, compiled per model) or ``"auto"``: the tables when every element of the
+model is covered (:func:`~ncgen.codegen.stepper_tables.uncovered_elements` and
+:mod:`~ncgen.codegen.model_tables`), else flat — except that a small model (``nq + nc`` below
+:data:`AUTO_FLAT_BELOW`) whose flat package this process has already compiled or loaded runs
+flat: there the flat step is faster (benchmarks/table_stepper.py, CPU seconds per step of the
+tables over the flat package's: 2.2–2.9 for a 10-bar chain, nq + nc = 40; 1.2 at 40 bars,
+nq + nc = 160; 1.0 at 160 bars) and costs no compile.
+"auto" never compiles a covered model: the first compiled step of a new model of the shipped
+kinds needs no C compiler.
+"""
+from __future__ import annotations
+
+import ctypes
+from functools import partial
+
+import numpy as np
+
+from ncgen.codegen import c_binding
+from ncgen.codegen.element_kernels import PACKAGE
+from ncgen.codegen.model_tables import UnsupportedElements
+from ncgen.codegen.stepper_abi import LOOPS, StepOptions, signature
+from ncgen.codegen.stepper_tables import StepperTables, stepper_tables
+from ncgen.errors import CodegenError, NcgenError
+from ncgen.model.data import model_data
+from ncgen.runtime.options import KERNELS
+from ncgen.runtime.stepper_library import CompiledStepper, load_stepper
+from ncgen.runtime.table_library import TABLE_FIELDS, ElementLibrary, _Tables, load_element_library
+
+
+_QR_FIELDS = (("int", "n"), *(("const int *", f) for f in ("k_colind", "k_row", "v_colind", "v_row", "r_colind",
+                                                             "r_row", "prinv", "pc")))
+
+
+#: Size ``nq + nc`` below which "auto" runs a covered model flat when its package is loaded.
+AUTO_FLAT_BELOW = 160
+
+
+class _QrPattern(ctypes.Structure):
+    _fields_ = [(f, ctypes.c_void_p if "*" in t else ctypes.c_int) for t, f in _QR_FIELDS]
+
+
+#: Fields of ``ncgen_stepper_tables``, in order (the struct ``qr`` last).
+STEPPER_FIELDS = (
+    ("const ncgen_tables *", "T"), ("int", "nu"), ("int", "np"), ("int", "n_markers"), ("int", "n_spring"),
+    ("double", "mass_scale"),
+    *(("const int *", f) for f in ("a_colind", "a_row", "m_colind", "m_row")),
+    ("const double *", "m_val"), ("const double *", "f_gravity"), ("double", "v_gravity"),
+    ("const int *", "spr_feat"), ("const double *", "spr_par"), ("const int *", "spr_kpos_ptr"),
+    ("const int *", "spr_kpos"), ("const int *", "marker_feat"),
+    ("int", "nnz_k"), ("int", "nnz_v"), ("int", "nnz_r"),
+    *(("const int *", f) for f in ("k_mpos", "k_apos", "k_atpos")),
+)
+
+
+class _StepperTables(ctypes.Structure):
+    _fields_ = [(f, ctypes.c_void_p if "*" in t else ctypes.c_double if t == "double" else ctypes.c_int)
+                for t, f in STEPPER_FIELDS] + [("qr", _QrPattern)]
+
+
+def _array(values, t: str) -> np.ndarray:
+    return np.ascontiguousarray(values, dtype=np.int32 if "int" in t else np.float64)
+
+
+class TableStepper(CompiledStepper):
+    """The element library's stepper bound to one model's tables (the interface of
+    :class:`~ncgen.runtime.stepper_library.CompiledStepper`).  Loops may run in several
+    threads at once (the C keeps the tables of a run per thread)."""
+
+    kernels = "tables"
+
+    def __init__(self, st: StepperTables, library: ElementLibrary | None = None):
+        lib = library or load_element_library()
+        T = st.tables
+        self.library, self.name = str(lib.path), st.name
+        self.nq, self.nc, self.nu, self.np = T.nq, T.nc, st.nu, st.np
+        self.nout, self.nd = 5 + T.dim * st.n_markers, 0
+        self.tables = st
+        self._keep = {f: _array(T.arrays[f], t) for t, f in TABLE_FIELDS if "*" in t}
+        sizes = {"nq": T.nq, "nc": T.nc, "dim": T.dim, "a_nnz": T.a_nnz, "m_nnz": T.m_nnz,
+                 "nf": len(self._keep["feat_ptr"]) - 1, "ne": len(self._keep["el_kind"]),
+                 "nm": len(self._keep["mem_kind"])}
+        self._T = _Tables(**sizes, **{k: v.ctypes.data for k, v in self._keep.items()})
+        fields = {f: t for t, f in STEPPER_FIELDS} | {f: t for t, f in _QR_FIELDS}
+        for f, t in fields.items():
+            if "*" in t and f != "T":
+                self._keep[f"s.{f}"] = _array(st.arrays[f], t)
+        ptr = {f: self._keep[f"s.{f}"].ctypes.data for f in fields if f"s.{f}" in self._keep}
+        qr = _QrPattern(n=T.nq + T.nc, **{f: ptr[f] for _, f in _QR_FIELDS[1:]})
+        self._S = _StepperTables(T=ctypes.addressof(self._T), nu=st.nu, np=st.np, n_markers=st.n_markers,
+                                 n_spring=st.n_spring, mass_scale=st.mass_scale, v_gravity=st.v_gravity,
+                                 nnz_k=st.nnz_k, nnz_v=st.nnz_v, nnz_r=st.nnz_r,
+                                 **{f: ptr[f] for t, f in STEPPER_FIELDS if "*" in t and f != "T"}, qr=qr)
+        self._lib = lib._lib
+        check = c_binding.bind(self._lib, f"{PACKAGE}_stepper_check",
+                               c_binding.Signature("int", (("const void *", "S"),)))
+        if check(ctypes.byref(self._S)):
+            raise CodegenError(f"model {st.name!r}: its stepper tables are inconsistent (ncgen_elements_stepper_check)")
+        structs = {f"{PACKAGE}_step_options": StepOptions}
+        for loop in LOOPS:
+            sig = signature(loop, False)
+            sig = c_binding.Signature(sig.returns, (("const void *", "S"), *sig.args))
+            fn = c_binding.bind(self._lib, f"{PACKAGE}_{loop}", sig, name=PACKAGE, structs=structs)
+            setattr(self, f"_{loop}", partial(fn, ctypes.byref(self._S)))
+
+
+def table_stepper(model, library: ElementLibrary | None = None) -> TableStepper:
+    """The table-driven stepper of ``model`` (raises
+    :class:`~ncgen.codegen.model_tables.UnsupportedElements` naming the elements not covered)."""
+    return TableStepper(stepper_tables(model), library)
+
+
+def stepper_kernels(model, kernels: str, cflags=None) -> str:
+    """``"tables"`` or ``"flat"``: the stepper kernels a run of ``model`` uses for the option
+    ``kernels`` (module docstring; ``cflags``: those of the flat package).  ``"tables"`` on a
+    model that is not covered raises :class:`~ncgen.codegen.model_tables.UnsupportedElements`
+    naming its elements."""
+    if kernels not in KERNELS:
+        raise NcgenError(f"kernels: expected one of {', '.join(map(repr, KERNELS))}, got {kernels!r}")
+    if kernels == "flat":
+        return "flat"
+    key = tuple(cflags) if isinstance(cflags, (list, tuple)) else cflags
+    if kernels == "auto" and model.nq + model.nc < AUTO_FLAT_BELOW and key in model_data(model).libraries:
+        return "flat"
+    cache = model_data(model).steppers
+    if ("tables", None) not in cache:
+        try:
+            cache[("tables", None)] = table_stepper(model)
+        except UnsupportedElements as e:
+            if kernels == "tables":
+                raise UnsupportedElements(model.name, e.kinds) from None
+            cache[("tables", None)] = e
+    hit = cache[("tables", None)]
+    if isinstance(hit, UnsupportedElements):
+        if kernels == "tables":
+            raise UnsupportedElements(model.name, hit.kinds)
+        return "flat"
+    return "tables"
+
+
+def load_any_stepper(model, cflags=None, kernels: str = "auto") -> CompiledStepper:
+    """The stepper of ``model`` with the kernels :func:`stepper_kernels` chooses: the tables'
+    (no compiler; ``cflags`` do not apply) or the model's compiled package
+    (:func:`~ncgen.runtime.stepper_library.load_stepper`)."""
+    if stepper_kernels(model, kernels, cflags) == "tables":
+        return model_data(model).steppers[("tables", None)]
+    return load_stepper(model, cflags)

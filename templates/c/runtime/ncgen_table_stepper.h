@@ -1,0 +1,386 @@
+/* The compiled stepper of any model made of the element kinds ncgen ships, driven by tables:
+ * the stepper's kernels (ncgen/assembly/stepper_equations.py documents them: step_newton,
+ * step_velocity, step_check, step_solve, step_project, step_power, step_outputs) written once
+ * as loops over a model's tables, and the model-independent RATTLE runtime (ncgen_rattle.h,
+ * ncgen_fixed.h, ncgen_adaptive.h) included around them.  A model is data
+ * (ncgen_stepper_tables, packed by ncgen/codegen/stepper_tables.py); the runtime's sizes
+ * (NQ, NC, ...) read the tables of the run in progress, which the entry points set
+ * (tab_cur, one per thread).
+ *
+ * Forces covered (F(t, q, v) without inputs or parameters):
+ *   gravity         a constant generalised force f_gravity (nq); V = v_gravity − f_gravityᵀ q;
+ *   springs         linear spring-dampers between two features a, b (points, f = G q + g):
+ *                   the kernel TAB_SPRING (x = [r_a; r_b; ṙ_a; ṙ_b; k; l0; c]) gives the
+ *                   force f on b (−f on a), its energy V and the power P = −c l̇² of its
+ *                   damper, and J = ∂f/∂[r_a; r_b; ṙ_a; ṙ_b] (dim x 4 dim, column-major);
+ *                   Q = G_bᵀ f − G_aᵀ f.
+ * The Newton matrix K = [[M − h/2 ∂F/∂w, A(q)ᵀ], [A(q + h w), 0]] (nq + nc square) is kept in
+ * one CSC pattern: k_mpos, k_apos, k_atpos give the nonzero of K of each nonzero of M, of
+ * A (lower block) and of Aᵀ (upper block), spr_kpos those of the dampers' products in the
+ * loop order of tab_springs; it is solved by the sparse QR of ncgen_sparse_qr.h.
+ *
+ * What the including file defines first: casadi_real, casadi_int; TAB_KINDS (a const
+ * ncgen_kinds *), TAB_SPRING_2D and TAB_SPRING_3D (kernels); the status codes and
+ * step_options of the stepper (as templates/c/stepper.c.j2 does); MAX_HALVINGS, NSTATS. */
+#ifndef NCGEN_TABLE_STEPPER_H
+#define NCGEN_TABLE_STEPPER_H
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "ncgen_element_tables.h"
+#include "ncgen_sparse_qr.h"
+
+typedef struct {
+  const ncgen_tables *T;            /* Φ, A and M: the element tables */
+  int nu, np, n_markers, n_spring;
+  double mass_scale;                /* max |M_ij| (kg) */
+  const int *a_colind, *a_row;      /* the CSC pattern of A (nc x nq) of T */
+  const int *m_colind, *m_row;      /* the CSC pattern of M (nq x nq) of T */
+  const double *m_val;              /* the nonzeros of M */
+  const double *f_gravity;          /* nq */
+  double v_gravity;                 /* J */
+  const int *spr_feat;              /* 2 per spring: the features of its ends a, b */
+  const double *spr_par;            /* 3 per spring: k (N/m), rest length (m), damping (N s/m) */
+  const int *spr_kpos_ptr, *spr_kpos;
+  const int *marker_feat;           /* n_markers features */
+  int nnz_k, nnz_v, nnz_r;
+  const int *k_mpos, *k_apos, *k_atpos;
+  ncgen_qr_pattern qr;              /* n = nq + nc, the pattern of K and its analysis */
+} ncgen_stepper_tables;
+
+#if defined(__STDC_VERSION__) && __STDC_VERSION__ >= 201112L
+#define TAB_THREAD _Thread_local
+#else
+#define TAB_THREAD __thread
+#endif
+/* The tables of the run in progress in this thread. */
+static TAB_THREAD const ncgen_stepper_tables *tab_cur;
+/* The run's element work size and its cache of Φ and A at the last two q (a step evaluates
+ * them at q, then at q + h w in each Newton iteration, and the step's end q⁺ is the last
+ * of those): slot k holds q, Φ(q), A(q) at tab_cache[k] (nq + nc + a_nnz doubles). */
+static TAB_THREAD long tab_ew_size;
+static TAB_THREAD double *tab_cache[2];
+static TAB_THREAD int tab_valid[2], tab_recent;
+
+/* Starts a run on the tables S in this thread: 0, or 1 when out of memory. */
+static int tab_begin(const ncgen_stepper_tables *S) {
+  size_t n = (size_t)S->T->nq + (size_t)S->T->nc + (size_t)S->T->a_nnz;
+  tab_cur = S;
+  tab_ew_size = ncgen_tables_work_size(TAB_KINDS, S->T);
+  tab_cache[0] = malloc(2 * n * sizeof(double) + 1);
+  tab_cache[1] = tab_cache[0] ? tab_cache[0] + n : 0;
+  tab_valid[0] = tab_valid[1] = 0;
+  tab_recent = 0;
+  return tab_cache[0] == 0;
+}
+
+/* Ends the run of tab_begin. */
+static void tab_end(void) {
+  free(tab_cache[0]);
+  tab_cache[0] = tab_cache[1] = 0;
+  tab_valid[0] = tab_valid[1] = 0;
+}
+
+#define TAB_DIM (tab_cur->T->dim)
+#define TAB_NF (tab_cur->T->nf)
+#define TAB_SPRING_IN (4 * 3 + 3)
+#define TAB_SPRING_OUT (3 + 2 + 3 * 12)
+
+/* The kernel work (doubles) of the tables S: element work, A, Φ, q + h w, F, the features
+ * at q and their rates, the spring kernel's input and outputs, the QR factors and scratch. */
+static long tab_work_size(const ncgen_stepper_tables *S) {
+  const ncgen_tables *T = S->T;
+  long n = T->nq + T->nc;
+  return tab_ew_size + 2L * T->nq + 2L * T->nf * T->dim +
+         TAB_SPRING_IN + TAB_SPRING_OUT + S->nnz_v + S->nnz_r + 3 * n;
+}
+
+typedef struct {
+  double *ew, *qh, *F, *fq, *fv, *sx, *sy, *V, *R, *beta, *x, *y;
+} tab_work;
+
+static tab_work tab_layout(double *w) {
+  const ncgen_stepper_tables *S = tab_cur;
+  const ncgen_tables *T = S->T;
+  tab_work b;
+  b.ew = w;
+  b.qh = b.ew + tab_ew_size;
+  b.F = b.qh + T->nq;
+  b.fq = b.F + T->nq;
+  b.fv = b.fq + (size_t)T->nf * T->dim;
+  b.sx = b.fv + (size_t)T->nf * T->dim;
+  b.sy = b.sx + TAB_SPRING_IN;
+  b.V = b.sy + TAB_SPRING_OUT;
+  b.R = b.V + S->nnz_v;
+  b.beta = b.R + S->nnz_r;
+  b.x = b.beta + T->nq + T->nc;
+  b.y = b.x + T->nq + T->nc;
+  return b;
+}
+
+/* Φ(q) and A(q): pointers into the cache (valid until the next call but one). */
+static int tab_phi_jacobian(const double *q, const double **phi, const double **A, double *ew) {
+  const ncgen_tables *T = tab_cur->T;
+  size_t nq = (size_t)T->nq;
+  int k;
+  for (k = 0; k < 2; ++k)
+    if (tab_valid[k] && !memcmp(q, tab_cache[k], nq * sizeof(double))) break;
+  if (k == 2) {
+    k = 1 - tab_recent;
+    tab_valid[k] = 0;
+    memcpy(tab_cache[k], q, nq * sizeof(double));
+    if (ncgen_tables_phi_jacobian(TAB_KINDS, T, q, tab_cache[k] + nq, tab_cache[k] + nq + T->nc, ew)) return 1;
+    tab_valid[k] = 1;
+  }
+  tab_recent = k;
+  *phi = tab_cache[k] + nq;
+  *A = tab_cache[k] + nq + T->nc;
+  return 0;
+}
+
+/* F(q, v) into F (nq, if not NULL): gravity and the springs; kscale ∂F/∂v added into K (if
+ * not NULL) at spr_kpos; the springs' energy added to *V and their power to *P (if not NULL).
+ * v NULL: at rest. */
+static int tab_forces(const double *q, const double *v, double *F, double *K, double kscale, double *V, double *P,
+                      tab_work *b) {
+  const ncgen_stepper_tables *S = tab_cur;
+  const ncgen_tables *T = S->T;
+  int dim = T->dim, s, i, X, Y, e, e2;
+  ncgen_kernel spring = dim == 3 ? TAB_SPRING_3D : TAB_SPRING_2D;
+  if (F) memcpy(F, S->f_gravity, sizeof(double) * (size_t)T->nq);
+  if (!S->n_spring) return 0;
+  ncgen_tables_features(T, q, b->fq, T->feat_const);
+  if (v) ncgen_tables_features(T, v, b->fv, 0);
+  else memset(b->fv, 0, sizeof(double) * (size_t)T->nf * (size_t)dim);
+  for (s = 0; s < S->n_spring; ++s) {
+    const int *f = S->spr_feat + 2 * s, *pos = S->spr_kpos + S->spr_kpos_ptr[s];
+    const double *arg[1];
+    double *res[2], *J = b->sy + dim + 2;
+    for (X = 0; X < 2; ++X) {
+      memcpy(b->sx + X * dim, b->fq + f[X] * dim, sizeof(double) * (size_t)dim);
+      memcpy(b->sx + (2 + X) * dim, b->fv + f[X] * dim, sizeof(double) * (size_t)dim);
+    }
+    memcpy(b->sx + 4 * dim, S->spr_par + 3 * s, 3 * sizeof(double));
+    arg[0] = b->sx;
+    res[0] = b->sy;
+    res[1] = J;
+    if (spring(arg, res, 0, b->ew, 0)) return 1;
+    if (V) *V += b->sy[dim];
+    if (P) *P += b->sy[dim + 1];
+    for (X = 0; X < 2; ++X) {
+      double sign = X ? 1.0 : -1.0;
+      for (e = T->feat_ptr[f[X]]; e < T->feat_ptr[f[X] + 1]; ++e) {
+        i = T->feat_row[e];
+        if (F) F[T->feat_col[e]] += sign * T->feat_coef[e] * b->sy[i];
+        if (!K) continue;
+        for (Y = 0; Y < 2; ++Y)      /* ∂Q_col(e)/∂v_col(e2) = sign G_e (∂f_i/∂ṙ_Y,j) G_e2 */
+          for (e2 = T->feat_ptr[f[Y]]; e2 < T->feat_ptr[f[Y] + 1]; ++e2)
+            K[*pos++] += kscale * sign * T->feat_coef[e] * T->feat_coef[e2] *
+                         J[i + dim * ((2 + Y) * dim + T->feat_row[e2])];
+      }
+    }
+  }
+  return 0;
+}
+
+/* M x added to y (nq). */
+static void tab_mass_times(const double *x, double *y) {
+  const ncgen_tables *T = tab_cur->T;
+  int j, k;
+  for (j = 0; j < T->nq; ++j)
+    for (k = tab_cur->m_colind[j]; k < tab_cur->m_colind[j + 1]; ++k) y[tab_cur->m_row[k]] += tab_cur->m_val[k] * x[j];
+}
+
+/* K = [[M, Aᵀ], [A, 0]]: the A of the lower block from lower, of the upper from upper. */
+static void tab_kkt(double *K, const double *lower, const double *upper) {
+  const ncgen_stepper_tables *S = tab_cur;
+  int k;
+  memset(K, 0, sizeof(double) * (size_t)S->nnz_k);
+  for (k = 0; k < S->T->m_nnz; ++k) K[S->k_mpos[k]] = S->m_val[k];
+  for (k = 0; k < S->T->a_nnz; ++k) {
+    K[S->k_atpos[k]] = upper[k];
+    K[S->k_apos[k]] = lower[k];
+  }
+}
+
+/* y = A x (nc) or y += Aᵀ x (nq, transpose) for A's nonzeros a. */
+static void tab_a_times(const double *a, const double *x, double *y, int transpose) {
+  const ncgen_tables *T = tab_cur->T;
+  int j, k;
+  if (!transpose) memset(y, 0, sizeof(double) * (size_t)T->nc);
+  if (!x) return;
+  for (j = 0; j < T->nq; ++j)
+    for (k = tab_cur->a_colind[j]; k < tab_cur->a_colind[j + 1]; ++k) {
+      if (transpose) y[j] += a[k] * x[tab_cur->a_row[k]];
+      else y[tab_cur->a_row[k]] += a[k] * x[j];
+    }
+}
+
+static double tab_norm_inf(const double *x, int n) {
+  double m = 0;
+  int i;
+  for (i = 0; i < n; ++i) m = isnan(m) || fabs(x[i]) <= m ? m : fabs(x[i]);
+  return m;
+}
+
+/* step_newton: t, q, v, u, p, h, w, lam_h -> r, K. */
+static int tab_newton(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  const ncgen_tables *T = tab_cur->T;
+  const double *q = arg[1], *v = arg[2], *wm = arg[6], *nu = arg[7], h = *arg[5];
+  double *r = res[0], *K = res[1];
+  const double *phi, *Ah, *Aq, *phi_q;
+  tab_work b = tab_layout(w);
+  int i, nq = T->nq;
+  (void)iw; (void)mem;
+  for (i = 0; i < nq; ++i) {
+    b.qh[i] = q[i] + h * wm[i];
+    b.x[i] = wm[i] - v[i];
+  }
+  if (tab_phi_jacobian(q, &phi_q, &Aq, b.ew) || tab_phi_jacobian(b.qh, &phi, &Ah, b.ew)) return 1;
+  if (K) tab_kkt(K, Ah, Aq);
+  if (tab_forces(q, wm, b.F, K, -h / 2, 0, 0, &b)) return 1;
+  if (r) {
+    memset(r, 0, sizeof(double) * (size_t)nq);
+    tab_mass_times(b.x, r);
+    for (i = 0; i < nq; ++i) r[i] -= h / 2 * b.F[i];
+    tab_a_times(Aq, nu, r, 1);
+    for (i = 0; i < T->nc; ++i) r[nq + i] = phi[i] / h;
+  }
+  return 0;
+}
+
+/* step_velocity: t, q, w, u, p, h -> b = [M w + h/2 F(q, w); −Φ_t = 0], K = [[M, Aᵀ], [A, 0]]. */
+static int tab_velocity(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  const ncgen_tables *T = tab_cur->T;
+  const double *q = arg[1], *wm = arg[2], h = *arg[5];
+  const double *phi, *A;
+  tab_work b = tab_layout(w);
+  int i;
+  (void)iw; (void)mem;
+  if (tab_phi_jacobian(q, &phi, &A, b.ew)) return 1;
+  if (res[1]) tab_kkt(res[1], A, A);
+  if (tab_forces(q, wm, b.F, 0, 0, 0, 0, &b)) return 1;
+  if (res[0]) {
+    memset(res[0], 0, sizeof(double) * (size_t)(T->nq + T->nc));
+    tab_mass_times(wm, res[0]);
+    for (i = 0; i < T->nq; ++i) res[0][i] += h / 2 * b.F[i];
+  }
+  return 0;
+}
+
+/* Φ(q) and A(q) (cached, tab_phi_jacobian), A v (Φ_t = 0) into phidot (if not NULL). */
+static int tab_constraints(const double *q, const double *v, double *phidot, const double **phi,
+                           const double **A, tab_work *b) {
+  if (tab_phi_jacobian(q, phi, A, b->ew)) return 1;
+  if (phidot) tab_a_times(*A, v, phidot, 0);
+  return 0;
+}
+
+/* step_check: t, q, v, p -> max |Φ|, max |A v + Φ_t|. */
+static int tab_check(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  const double *phi, *A;
+  tab_work b = tab_layout(w);
+  (void)iw; (void)mem;
+  if (tab_constraints(arg[1], arg[2], b.x, &phi, &A, &b)) return 1;
+  if (res[0]) *res[0] = tab_norm_inf(phi, tab_cur->T->nc);
+  if (res[1]) *res[1] = tab_norm_inf(b.x, tab_cur->T->nc);
+  return 0;
+}
+
+/* step_project: t, q, v, p -> K = [[M, Aᵀ], [A, 0]], Φ, A v + Φ_t. */
+static int tab_project(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  const double *phi, *A;
+  tab_work b = tab_layout(w);
+  (void)iw; (void)mem;
+  if (tab_constraints(arg[1], arg[2], res[2], &phi, &A, &b)) return 1;
+  if (res[0]) tab_kkt(res[0], A, A);
+  if (res[1]) memcpy(res[1], phi, sizeof(double) * (size_t)tab_cur->T->nc);
+  return 0;
+}
+
+/* step_solve: K, r -> K⁻¹ r. */
+static int tab_solve(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  tab_work b = tab_layout(w);
+  (void)iw; (void)mem;
+  if (ncgen_qr_factor(&tab_cur->qr, arg[0], b.V, b.R, b.beta, b.x)) {
+    int i;                           /* singular: NaN, which the stepper reports as not finite */
+    for (i = 0; i < tab_cur->qr.n; ++i) res[0][i] = NAN;
+    return 0;
+  }
+  ncgen_qr_solve(&tab_cur->qr, b.V, b.R, b.beta, arg[1], res[0], b.y);
+  return 0;
+}
+
+/* step_power: t, q, v, lam, u, p -> P = vᵀ(F + ∇V) + ∂V/∂t + λᵀΦ_t: the dampers' power. */
+static int tab_power(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  tab_work b = tab_layout(w);
+  double P = 0;
+  (void)iw; (void)mem;
+  if (tab_forces(arg[1], arg[2], 0, 0, 0, 0, &P, &b)) return 1;
+  if (res[0]) *res[0] = P;
+  return 0;
+}
+
+/* step_outputs: t, q, v, lam, u, p -> [T; V; max |Φ|; max |A v + Φ_t|; P; markers]. */
+static int tab_outputs(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  const ncgen_stepper_tables *S = tab_cur;
+  const ncgen_tables *T = S->T;
+  const double *q = arg[1], *v = arg[2];
+  double *y = res[0], Tk = 0, V = S->v_gravity, P = 0;
+  const double *phi, *A;
+  tab_work b = tab_layout(w);
+  int i, k;
+  (void)iw; (void)mem;
+  if (!y) return 0;
+  memset(b.x, 0, sizeof(double) * (size_t)T->nq);
+  if (v) tab_mass_times(v, b.x);
+  for (i = 0; i < T->nq; ++i) {
+    Tk += (v ? v[i] : 0) * b.x[i];
+    V -= S->f_gravity[i] * q[i];
+  }
+  if (tab_forces(q, v, 0, 0, 0, &V, &P, &b)) return 1;
+  if (tab_constraints(q, v, b.x, &phi, &A, &b)) return 1;
+  y[0] = Tk / 2;
+  y[1] = V;
+  y[2] = tab_norm_inf(phi, T->nc);
+  y[3] = tab_norm_inf(b.x, T->nc);
+  y[4] = P;
+  if (S->n_markers) {
+    ncgen_tables_features(T, q, b.fq, T->feat_const);
+    for (k = 0; k < S->n_markers; ++k)
+      memcpy(y + 5 + k * T->dim, b.fq + S->marker_feat[k] * T->dim, sizeof(double) * (size_t)T->dim);
+  }
+  return 0;
+}
+
+/* The kernels' sizes, as CasADi's <f>_work gives them. */
+static int tab_work_sizes(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  *sz_arg = 8;
+  *sz_res = 3;
+  *sz_iw = 0;
+  *sz_w = tab_work_size(tab_cur);
+  return 0;
+}
+
+#define NQ (tab_cur->T->nq)
+#define NC (tab_cur->T->nc)
+#define NU (tab_cur->nu)
+#define NNZ_K (tab_cur->nnz_k)
+#define MASS_SCALE (tab_cur->mass_scale)
+#define NOUT (5 + tab_cur->T->dim * tab_cur->n_markers)
+#define KERNEL_NEWTON tab_newton
+#define KERNEL_VELOCITY tab_velocity
+#define KERNEL_CHECK tab_check
+#define KERNEL_SOLVE tab_solve
+#define KERNEL_PROJECT tab_project
+#define KERNEL_POWER tab_power
+#define KERNEL_OUTPUTS tab_outputs
+#define KERNEL_WORKS tab_work_sizes
+
+#include "ncgen_rattle.h"
+#include "ncgen_fixed.h"
+#include "ncgen_adaptive.h"
+
+#endif
