@@ -92,21 +92,20 @@ def measure(robot: str, h: float, repeat: int) -> dict:
     from ncgen.codegen.compile_cache import compile_package
     from ncgen.codegen.package import write_package
     from ncgen.control.discrete import step_functions
-    from ncgen.control.step import COMPILED
+    from ncgen.control.step import COMPILED, PACKAGE_OPTIONS, compile_flags, default_abstol
 
     urdf, floating = ROBOTS[robot]
     start = time.process_time()
     model = nc.System.from_urdf(nc.robots.urdf_path(urdf), floating_base=floating).build()
     out = {"robot": robot, "nq": model.nq, "nc": model.nc, "nu": model.nu, "build_cpu": time.process_time() - start}
-    fs = step_functions(model, h)
+    fs = step_functions(model, h, abstol=default_abstol(model))
     with tempfile.TemporaryDirectory() as tmp:
         # as ncgen.control.step._compile writes it, so that step_function below finds it cached
-        pkg = write_package(f"{model.name}_step", [fs[k] for k in COMPILED], Path(tmp) / "pkg",
-                            reroll_instructions=None)
+        pkg = write_package(f"{model.name}_step", [fs[k] for k in COMPILED], Path(tmp) / "pkg", **PACKAGE_OPTIONS)
         out["c_mb"] = sum(f.stat().st_size for f in pkg.path.iterdir() if f.suffix in (".c", ".h")) / 1e6
         cpu0, _ = children_usage()
         start = time.perf_counter()
-        built = compile_package(pkg)
+        built = compile_package(pkg, cflags=compile_flags())
         out["compile_wall"] = time.perf_counter() - start
         cpu1, peak = children_usage()
         out["compile_cpu"], out["compiler_peak_mb"], out["compiled"] = cpu1 - cpu0, peak, not built.cached
