@@ -114,8 +114,9 @@ def step_functions(model, h: float, *, abstol: float = ABSTOL, abstol_step: floa
     "step_G_z": (z, x, u, p, t) -> G_z, "step_G_y": (z, x, u, p, t) -> G'_y,
     "step_jacobian": (G_z, G_y) -> J, "step_adjoint": (G_z, G_y, x1_bar) -> y_bar}`` with
     ``J = ∂x⁺/∂[x; u; p]`` (nx × (nx + nu + np), dense) and ``y_bar = Jᵀ x1_bar`` from the
-    sparse ``G_z``, ``G'_y`` at a converged ``z`` (see the module docstring): four functions,
-    so that the C of the solve and of each sensitivity is a translation unit of its own."""
+    sparse ``G_z``, ``G'_y`` at a converged ``z`` (see the module docstring): separate
+    functions, so that the C of the solve and of each sensitivity is a translation unit of its
+    own."""
     nq, nc = model.nq, model.nc
     args, z, x1, res = _solved_step(model, h, abstol, abstol_step, max_iter)
     names = ["x", "u", "p", "t"]
