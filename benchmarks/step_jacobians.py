@@ -97,8 +97,8 @@ def measure(robot: str, h: float, repeat: int, stepper: bool) -> dict:
     import ncgen as nc
     from ncgen.codegen.compile_cache import compile_package
     from ncgen.codegen.package import write_package
-    from ncgen.control.discrete import step_functions
-    from ncgen.control.step import COMPILED, PACKAGE_OPTIONS, compile_flags, default_abstol
+    from ncgen.control.discrete import default_abstol, step_functions
+    from ncgen.control.step import COMPILED, PACKAGE_OPTIONS, compile_flags
 
     urdf, floating = ROBOTS[robot]
     start = time.process_time()

@@ -51,12 +51,26 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ncgen.assembly.stepper_equations import stepper_functions
+from ncgen.assembly.stepper_equations import mass_scale, stepper_functions
 
-#: Rootfinder defaults: absolute residual and step tolerances, iteration limit.
+#: Rootfinder defaults: residual tolerance (relative: :func:`default_abstol`), absolute step
+#: tolerance, iteration limit.
 ABSTOL, ABSTOL_STEP, MAX_ITER = 1e-12, 1e-14, 20
 #: Steps per compiled piece of a rollout.
 ROLLOUT_CHUNK = 25
+
+
+def residual_scale(model) -> float:
+    """``1 + max |M_ij|``: the scale of the step residual's rows (the momentum rows grow with the
+    mass matrix)."""
+    return 1.0 + mass_scale(model) if model.nq else 1.0
+
+
+def default_abstol(model) -> float:
+    """The Newton tolerance of a model's step, ``ABSTOL (1 + max |M_ij|)``: an absolute 1e-12
+    is below the rounding floor of a heavy robot's residual (the Panda's stalls near 1e-11),
+    whose iterations then all ran to ``max_iter``."""
+    return ABSTOL * residual_scale(model)
 
 
 def step_residual(model, h: float) -> ca.Function:

@@ -28,8 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ncgen.control.discrete import (ABSTOL, MAX_ITER, ROLLOUT_CHUNK, rollout_function, state_constraint_jacobian,
-                                    step_functions)
+from ncgen.control.discrete import (MAX_ITER, ROLLOUT_CHUNK, default_abstol, residual_scale, rollout_function,
+                                    state_constraint_jacobian, step_functions)
 from ncgen.errors import NcgenError
 
 METHODS = ("rattle",)
@@ -54,9 +54,8 @@ def step_function(model, h: float, method: str = "rattle", *, max_iter: int = MA
                   abstol: float | None = None) -> "StepFunction":
     """One step of ``h`` seconds of ``model`` (``method="rattle"``: the compiled stepper's
     scheme, in natural coordinates, also for trees) as a :class:`StepFunction`.  ``abstol``:
-    the Newton iterations' residual tolerance, default ``ABSTOL (1 + max |M|)`` (the residual's
-    rows scale with the mass matrix; an absolute 1e-12 is below the rounding floor of a heavy
-    robot's residual, whose iterations then all ran to ``max_iter``)."""
+    the Newton iterations' residual tolerance, default
+    :func:`~ncgen.control.discrete.default_abstol` (``1e-12 (1 + max |M_ij|)``)."""
     if method not in METHODS:
         raise NcgenError(f"step_function: method: expected one of {', '.join(METHODS)}, got {method!r}")
     h = _positive(h, "h", "a positive, finite step in seconds")
@@ -77,7 +76,7 @@ class StepFunction:
         self.model, self.h = model, h
         self.nx, self.nu, self.np = 2 * model.nq, model.nu, model.np
         self.functions = step_functions(model, h, abstol=abstol, max_iter=max_iter)
-        self.residual_tol = RESIDUAL_TOL * _mass_scale(model)
+        self.residual_tol = RESIDUAL_TOL * residual_scale(model)
         lib = _compile(f"{model.name}_step", [self.functions[k] for k in COMPILED])
         self._solution, self._G_z, self._G_y = lib["step_solution"], lib["step_G_z"], lib["step_G_y"]
         self._jacobian, self._adjoint = lib["step_jacobian"], lib["step_adjoint"]
@@ -219,16 +218,6 @@ class StepFunction:
         t1 = (self.model.t0 if t is None else float(t)) + self.h
         T0, T1 = self.tangent_basis(x, p, t), self.tangent_basis(x1, p, t1)
         return x1, T1.T @ A @ T0, T1.T @ B
-
-
-def default_abstol(model) -> float:
-    """The default Newton tolerance of :func:`step_function`: ``ABSTOL (1 + max |M|)``."""
-    return ABSTOL * _mass_scale(model)
-
-
-def _mass_scale(model) -> float:
-    """``1 + max |M|``: the scale of the step residual's rows."""
-    return 1.0 + float(np.max(np.abs(model.M))) if model.nq else 1.0
 
 
 def _positive(value, name: str, what: str) -> float:
