@@ -177,3 +177,34 @@ def test_a_step_that_cannot_converge_is_refused(cases):
     x[:model.nq] += 5.0                      # far off the constraints: one Newton solve cannot reach them
     with pytest.raises(nc.StepDidNotConverge, match="residual"):
         nc.step_function(model, 0.02, max_iter=1)(x, 0.0)
+
+
+@pytest.mark.parametrize("name", ["spring_damper", "arm"])
+def test_step_sensitivities_match_central_differences_of_the_residual(name):
+    """``G_z`` and ``G'_y`` (``∂G/∂[x; u; p]`` at fixed ``q⁺ = q + h w``, the form the step's
+    Jacobians use) against central differences of the residual ``G`` itself, at a random
+    point off the solution: the spring-damper has dampers (``F`` depends on ``w``) and a
+    parameter, the arm's joint torques depend on ``q``."""
+    from ncgen.control.discrete import step_functions, step_residual
+
+    model, h = next((m, h) for n, m, h in models() if n == name)
+    fs, G = step_functions(model, h), step_residual(model, h)
+    nq, nu = model.nq, model.nu
+    rng = np.random.default_rng(7)
+    z = rng.normal(size=2 * (nq + model.nc))
+    y = np.concatenate([model.q0 + 0.01 * rng.normal(size=nq), rng.normal(size=nq), rng.normal(size=nu), model.p0])
+    t = model.t0 + 0.1
+
+    def residual(z_, y_):
+        return np.array(G(z_, y_[:2 * nq], y_[2 * nq:2 * nq + nu], y_[2 * nq + nu:], t)).ravel()
+
+    def at_fixed_q1(y_):                     # w = (q⁺ − q)/h with q⁺ = q + h w held
+        z_ = z.copy()
+        z_[:nq] = z[:nq] - (y_[:nq] - y[:nq]) / h
+        return residual(z_, y_)
+
+    args = (z, y[:2 * nq], y[2 * nq:2 * nq + nu], y[2 * nq + nu:], t)
+    G_z = np.array(ca.densify(fs["step_G_z"](*args)))
+    G_y = np.array(ca.densify(fs["step_G_y"](*args)))
+    assert rel_err(G_z, central(lambda z_: residual(z_, y), z, 1e-6)) < REL, name
+    assert rel_err(G_y, central(at_fixed_q1, y, 1e-6)) < REL, name

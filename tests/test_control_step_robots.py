@@ -88,3 +88,19 @@ def test_arm_rollout_gradient_matches_central_differences(arm):
     assert rel_err(dx0, g_x0) < REL
     g_U = central4(lambda y: J(x0, y.reshape(N, model.nu)), U.ravel(), 1e-3).reshape(N, model.nu)
     assert rel_err(dU, g_U) < REL
+
+
+def test_arm_step_package_is_small_and_split(arm, tmp_path):
+    """Issue 34's bound on the generated C of a step function (at most 2 MB), written as
+    ``nc.step_function`` writes it: one translation unit per function, so that the solve and
+    the two sensitivities compile in parallel."""
+    from ncgen.codegen.package import write_package
+    from ncgen.control.step import COMPILED, PACKAGE_OPTIONS
+
+    name, model, st = arm
+    pkg = write_package(f"{model.name}_step", [st.functions[k] for k in COMPILED], tmp_path / "pkg",
+                        **PACKAGE_OPTIONS)
+    sources = [f for f in pkg.path.iterdir() if f.suffix in (".c", ".h")]
+    assert sum(f.stat().st_size for f in sources) <= 2e6, name
+    kernels = [f for f in sources if f.suffix == ".c" and "_kernels_" in f.name]
+    assert len(kernels) == len(COMPILED), name

@@ -12,26 +12,32 @@ The step of the compiled stepper (:mod:`ncgen.assembly.stepper_equations`, whose
                        [ A(t + h, q⁺) v⁺ + Φ_t(t + h, q⁺)                          ]
     x⁺ = [q + h w; v⁺]
 
-``z`` is found by CasADi's ``fast_newton`` rootfinder (sparse QR of ``G_z``, at most
-``max_iter`` iterations, stopping when ``‖G‖∞ ≤ abstol`` or the Newton step is below
-``abstol_step``; it generates self-contained C), started from ``z₀ = [v; 0; v; 0]``.
+``z`` is found as the compiled stepper finds it: CasADi's ``fast_newton`` rootfinder on the
+first half-step's residual ``r(w, ν)`` (the first two rows; its Jacobian is the stepper's
+``K``; sparse QR, at most ``max_iter`` iterations, stopping when ``‖r‖∞ ≤ abstol`` or the
+Newton step is below ``abstol_step``) from ``[v; 0]``, then the second half-step, linear in
+``(v⁺, μ')``, by one sparse QR solve; it generates self-contained C.
 
 Derivatives come from the implicit function theorem at the converged ``z``, never from
-differentiating the iterations: with ``y = [x; u; p]``,
+differentiating the iterations.  With ``y = [x; u; p]`` and ``G'_y = ∂G/∂y`` taken at fixed
+``q⁺ = q + h w`` (the unknowns ``z' = [q⁺; ν; v⁺; μ']``, ``∂z'/∂z = diag(h I, I, I, I)``, so
+that the derivatives of the forces and constraints at ``q⁺``, the costly half of ``G_y``,
+drop out of it),
 
-    ∂z/∂y = −G_z⁻¹ G_y,      ∂x⁺/∂y = [I_q 0] + E ∂z/∂y,   E z = [h w; v⁺]
+    ∂x⁺/∂y = E (−G_z⁻¹ G'_y),      E z = [h w; v⁺]
 
 so that ``A = ∂x⁺/∂x``, ``B = ∂x⁺/∂u``, ``C = ∂x⁺/∂p``; the adjoint of a step is one
-transposed solve, ``ȳ = (∂x⁺/∂y)ᵀ x̄⁺ = [x̄⁺_q; 0] − G_yᵀ G_z⁻ᵀ Eᵀ x̄⁺``.
-:func:`step_functions` generates the step (the rootfinder, also returning ``z``) and these
-two solves at a given ``z`` (``step_jacobian``, ``step_adjoint``): the sparse ``G_z``,
-``G_y`` (SX) and CasADi's sparse QR linear solver (``"qr"``, generated as loops over the
-factor's pattern), so the C grows with the model's functions, not with a factorisation
-unrolled into code (unrolled, the z1 arm's was 55 MB of C that gcc could not compile).
-Every step function also returns the residual ``‖G(z)‖∞`` of the solution it used, so that
-callers can refuse a step that did not converge.  :func:`step_jacobian_function` writes the
-whole step with its Jacobians as one function for the MPC (its QR unrolled into SX when the
-factors are small, :data:`SX_QR_MAX_NNZ`).
+transposed solve, ``ȳ = (∂x⁺/∂y)ᵀ x̄⁺ = −G'_yᵀ G_z⁻ᵀ Eᵀ x̄⁺``.  :func:`step_functions`
+generates the step (returning ``z``), the sparse ``G_z`` and ``G'_y`` at a given ``z`` (SX,
+one function each) and the two solves given them (``step_jacobian``, ``step_adjoint``:
+CasADi's sparse QR linear solver ``"qr"``, generated as loops over the factor's pattern), so
+that each is a translation unit of its own, compiled in parallel, and the C grows with the
+model's functions, not with a factorisation unrolled into code (unrolled, the z1 arm's was
+55 MB of C that gcc could not compile).  Every step function also returns the residual
+``‖G(z)‖∞`` of the solution it used, so that callers can refuse a step that did not
+converge.  :func:`step_jacobian_function` writes the whole step with its Jacobians as one
+function for the MPC (its QR unrolled into SX when the factors are small,
+:data:`SX_QR_MAX_NNZ`).
 
 Rollouts ``X = [x₁ … x_N]`` run in pieces of :data:`ROLLOUT_CHUNK` steps (and single
 steps for the rest), each a ``mapaccum`` of the step returning the states and the steps'
@@ -45,12 +51,26 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ncgen.assembly.stepper_equations import stepper_functions
+from ncgen.assembly.stepper_equations import mass_scale, stepper_functions
 
-#: Rootfinder defaults: absolute residual and step tolerances, iteration limit.
+#: Rootfinder defaults: residual tolerance (relative: :func:`default_abstol`), absolute step
+#: tolerance, iteration limit.
 ABSTOL, ABSTOL_STEP, MAX_ITER = 1e-12, 1e-14, 20
 #: Steps per compiled piece of a rollout.
 ROLLOUT_CHUNK = 25
+
+
+def residual_scale(model) -> float:
+    """``1 + max |M_ij|``: the scale of the step residual's rows (the momentum rows grow with the
+    mass matrix)."""
+    return 1.0 + mass_scale(model) if model.nq else 1.0
+
+
+def default_abstol(model) -> float:
+    """The Newton tolerance of a model's step, ``ABSTOL (1 + max |M_ij|)``: an absolute 1e-12
+    is below the rounding floor of a heavy robot's residual (the Panda's stalls near 1e-11),
+    whose iterations then all ran to ``max_iter``."""
+    return ABSTOL * residual_scale(model)
 
 
 def step_residual(model, h: float) -> ca.Function:
@@ -73,67 +93,82 @@ def _step_state(x, z, nq: int, nc: int, h: float):
 
 
 def _solved_step(model, h: float, abstol: float, abstol_step: float, max_iter: int):
-    """``(G, (x, u, p, t), z, x1, res, solve)``: the residual, MX arguments, the rootfinder's
-    solution ``z`` from ``z₀ = [v; 0; v; 0]``, the state after the step, ``‖G(z)‖∞`` and the
-    rootfinder."""
+    """``((x, u, p, t), z, x1, res)``: MX arguments, the step's unknowns ``z``, the state after
+    the step and ``‖G(z)‖∞``, solved as the compiled stepper solves it: the rootfinder on the
+    first half-step's ``r(w, ν) = 0`` (its Jacobian is the stepper's ``K``, a quarter of
+    ``G_z``) from ``[v; 0]``, then the second half-step, linear in ``(v⁺, μ')``, by one sparse
+    QR solve.  ``res`` is the larger of ``‖r‖∞`` (from the rootfinder's Jacobian function, so
+    that the C holds ``r`` once) and the second solve's ``‖K₂ [v⁺; μ'] − b‖∞``: the rows of
+    ``G``."""
+    newton, velocity = stepper_functions(model)[:2]
     nq, nc = model.nq, model.nc
-    G = step_residual(model, h)
-    zs, xs, us, ps, ts = (G.sx_in(i) for i in range(5))
-    residual = ca.Function("G", [zs, ca.vertcat(xs, us, ps, ts)], [G(zs, xs, us, ps, ts)])
-    solve = ca.rootfinder("rattle_step", "fast_newton", residual,
+    wn, xs = ca.SX.sym("w_nu", nq + nc), ca.SX.sym("x", 2 * nq)
+    us, ps, ts = ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np), ca.SX.sym("t")
+    r = newton(ts, xs[:nq], xs[nq:], us, ps, h, wn[:nq], wn[nq:])[0]
+    first = ca.Function("r", [wn, ca.vertcat(xs, us, ps, ts)], [r])
+    solve = ca.rootfinder("rattle_step", "fast_newton", first,
                           {"abstol": abstol, "abstolStep": abstol_step, "max_iter": max_iter})
     x, u = ca.MX.sym("x", 2 * nq), ca.MX.sym("u", model.nu)
     p, t = ca.MX.sym("p", model.np), ca.MX.sym("t")
-    v = x[nq:]
-    z = solve(ca.vertcat(v, ca.MX(nc, 1), v, ca.MX(nc, 1)), ca.vertcat(x, u, p, t))
-    return G, (x, u, p, t), z, _step_state(x, z, nq, nc, h), ca.norm_inf(G(z, x, u, p, t)), solve
+    q, v = x[:nq], x[nq:]
+    y = ca.vertcat(x, u, p, t)
+    w_nu = solve(ca.vertcat(v, ca.MX(nc, 1)), y)
+    r_end = solve.get_function("jac_g_x")(w_nu, y)[1]
+    w = w_nu[:nq]
+    b, K2 = velocity(t + h, q + h * w, w, u, p, h)
+    v_mu = ca.solve(K2, b, "qr")
+    z = ca.vertcat(w_nu, v_mu)
+    res = ca.fmax(ca.norm_inf(r_end), ca.norm_inf(ca.mtimes(K2, v_mu) - b))
+    return (x, u, p, t), z, _step_state(x, z, nq, nc, h), res
 
 
 def step_functions(model, h: float, *, abstol: float = ABSTOL, abstol_step: float = ABSTOL_STEP,
                    max_iter: int = MAX_ITER) -> dict[str, ca.Function]:
     """``{"step": (x, u, p, t) -> (x1, res), "step_solution": (x, u, p, t) -> (x1, z, res),
-    "step_jacobian": (z, x, u, p, t) -> J, "step_adjoint": (z, x, u, p, t, x1_bar) -> y_bar}``
-    with ``J = ∂x⁺/∂[x; u; p]`` (nx × (nx + nu + np), dense) and ``y_bar = Jᵀ x1_bar`` at the
-    converged ``z`` (see the module docstring)."""
+    "step_G_z": (z, x, u, p, t) -> G_z, "step_G_y": (z, x, u, p, t) -> G'_y,
+    "step_jacobian": (G_z, G_y) -> J, "step_adjoint": (G_z, G_y, x1_bar) -> y_bar}`` with
+    ``J = ∂x⁺/∂[x; u; p]`` (nx × (nx + nu + np), dense) and ``y_bar = Jᵀ x1_bar`` from the
+    sparse ``G_z``, ``G'_y`` at a converged ``z`` (see the module docstring): separate
+    functions, so that the C of the solve and of each sensitivity is a translation unit of its
+    own."""
     nq, nc = model.nq, model.nc
-    G, args, z, x1, res, solve = _solved_step(model, h, abstol, abstol_step, max_iter)
+    args, z, x1, res = _solved_step(model, h, abstol, abstol_step, max_iter)
     names = ["x", "u", "p", "t"]
     step = ca.Function("step", list(args), [x1, res], names, ["x1", "res"])
     solution = ca.Function("step_solution", list(args), [x1, z, res], names, ["x1", "z", "res"])
-    zk = ca.MX.sym("z", z.size1())                     # a converged step's unknowns
-    # G_z: the rootfinder's own Jacobian function, so that the C holds it once
-    G_z = solve.get_function("jac_g_x")(zk, ca.vertcat(*args))[0]
-    G_y = _input_jacobian(G)(zk, *args)
-    ny = G_y.size2()
-    jacobian = _state_jacobian(-ca.solve(G_z, ca.densify(G_y), "qr"), nq, nc, h)
+    G_z, G_y = _sensitivities(step_residual(model, h), h)
+    Gz, Gy = ca.MX.sym("G_z", G_z.sparsity_out(0)), ca.MX.sym("G_y", G_y.sparsity_out(0))
+    jacobian = _state_jacobian(-ca.solve(Gz, ca.densify(Gy), "qr"), nq, nc, h)
     x1_bar = ca.MX.sym("x1_bar", 2 * nq)
     z_bar = ca.vertcat(h * x1_bar[:nq], ca.MX(nc, 1), x1_bar[nq:], ca.MX(nc, 1))       # Eᵀ x̄⁺
-    y_bar = ca.vertcat(x1_bar[:nq], ca.MX(ny - nq, 1)) - ca.mtimes(G_y.T, ca.solve(G_z.T, z_bar, "qr"))
-    return {"step": step, "step_solution": solution,
-            "step_jacobian": ca.Function("step_jacobian", [zk, *args], [ca.densify(jacobian)], ["z", *names], ["J"]),
-            "step_adjoint": ca.Function("step_adjoint", [zk, *args, x1_bar], [y_bar], ["z", *names, "x1_bar"],
-                                        ["y_bar"])}
+    y_bar = -ca.mtimes(Gy.T, ca.solve(Gz.T, z_bar, "qr"))
+    return {"step": step, "step_solution": solution, "step_G_z": G_z, "step_G_y": G_y,
+            "step_jacobian": ca.Function("step_jacobian", [Gz, Gy], [ca.densify(jacobian)], ["G_z", "G_y"], ["J"]),
+            "step_adjoint": ca.Function("step_adjoint", [Gz, Gy, x1_bar], [ca.densify(y_bar)],
+                                        ["G_z", "G_y", "x1_bar"], ["y_bar"])}
 
 
-def _sensitivities(G: ca.Function) -> ca.Function:
-    """``(z, x, u, p, t) -> (G_z, G_y)``, ``y = [x; u; p]`` (sparse, SX)."""
+def _sensitivities(G: ca.Function, h: float) -> tuple[ca.Function, ca.Function]:
+    """``step_G_z: (z, x, u, p, t) -> G_z`` and ``step_G_y: (z, x, u, p, t) -> G'_y`` (sparse,
+    SX), ``G'_y = ∂G/∂y`` at fixed ``q⁺ = q + h w``: its ``q`` columns are the derivative along
+    ``δq = h s``, ``δw = −s`` (which leaves ``q⁺`` unchanged, so the derivatives of the forces
+    and constraints at ``q⁺`` drop out), divided by ``h``."""
     zs, xs, us, ps, ts = (G.sx_in(i) for i in range(5))
+    nq = xs.numel() // 2
     Gs = G(zs, xs, us, ps, ts)
-    return ca.Function("step_sensitivities", [zs, xs, us, ps, ts],
-                       [ca.jacobian(Gs, zs), ca.jacobian(Gs, ca.vertcat(xs, us, ps))])
-
-
-def _input_jacobian(G: ca.Function) -> ca.Function:
-    """``(z, x, u, p, t) -> G_y``, ``y = [x; u; p]`` (sparse, SX)."""
-    zs, xs, us, ps, ts = (G.sx_in(i) for i in range(5))
-    return ca.Function("step_input_jacobian", [zs, xs, us, ps, ts],
-                       [ca.jacobian(G(zs, xs, us, ps, ts), ca.vertcat(xs, us, ps))])
+    s = ca.SX.sym("s", nq)
+    G_s = ca.jacobian(G(ca.vertcat(zs[:nq] - s, zs[nq:]), ca.vertcat(xs[:nq] + h * s, xs[nq:]), us, ps, ts), s)
+    G_q = ca.substitute(G_s, s, ca.DM.zeros(nq)) / h
+    G_y = ca.horzcat(G_q, ca.jacobian(Gs, ca.vertcat(xs[nq:], us, ps)))
+    names = ["z", "x", "u", "p", "t"]
+    return (ca.Function("step_G_z", [zs, xs, us, ps, ts], [ca.jacobian(Gs, zs)], names, ["G_z"]),
+            ca.Function("step_G_y", [zs, xs, us, ps, ts], [G_y], names, ["G_y"]))
 
 
 def _state_jacobian(Z_y, nq: int, nc: int, h: float):
-    """``∂x⁺/∂y = [I_q 0] + E ∂z/∂y`` from ``Z_y = ∂z/∂y`` (x⁺ = [q + h w; v⁺])."""
-    ny = Z_y.size2()
-    return ca.vertcat(ca.horzcat(ca.DM.eye(nq), ca.DM(nq, ny - nq)) + h * Z_y[:nq, :], Z_y[nq + nc:2 * nq + nc, :])
+    """``∂x⁺/∂y = E Z_y`` (``E z = [h w; v⁺]``) from ``Z_y = −G_z⁻¹ G'_y`` (``G'_y`` at fixed
+    ``q⁺``, :func:`_sensitivities`)."""
+    return ca.vertcat(h * Z_y[:nq, :], Z_y[nq + nc:2 * nq + nc, :])
 
 
 def step_jacobian_function(model, h: float, *, abstol: float = ABSTOL, abstol_step: float = ABSTOL_STEP,
@@ -142,11 +177,11 @@ def step_jacobian_function(model, h: float, *, abstol: float = ABSTOL, abstol_st
     solve with one QR of ``G_z`` for all columns (:func:`qr_solve_columns`), in one function
     with the step: what the MPC's generated C calls at every node of its horizon."""
     nq, nc = model.nq, model.nc
-    G, (x, u, p, t), z, x1, res, _ = _solved_step(model, h, abstol, abstol_step, max_iter)
-    sensitivities = _sensitivities(G)
-    G_z, G_y = sensitivities(z, x, u, p, t)
+    (x, u, p, t), z, x1, res = _solved_step(model, h, abstol, abstol_step, max_iter)
+    G_z_f, G_y_f = _sensitivities(step_residual(model, h), h)
+    G_z, G_y = G_z_f(z, x, u, p, t), G_y_f(z, x, u, p, t)
     ny = G_y.size2()
-    X1_y = _state_jacobian(-qr_solve_columns(G_z, ca.densify(G_y), sensitivities.sparsity_out(0), ny), nq, nc, h)
+    X1_y = _state_jacobian(-qr_solve_columns(G_z, ca.densify(G_y), G_z_f.sparsity_out(0), ny), nq, nc, h)
     nu_ = model.nu
     return ca.Function("step_jac", [x, u, p, t],
                        [x1] + [ca.densify(X1_y[:, c]) for c in (slice(0, 2 * nq), slice(2 * nq, 2 * nq + nu_),

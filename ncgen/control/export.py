@@ -28,7 +28,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ncgen.control.discrete import step_functions
+from ncgen.control.discrete import default_abstol, step_functions
 from ncgen.control.mpc import REGULARIZATION, mpc_functions
 from ncgen.control.mpc_problem import mpc_problem
 from ncgen.control.step import RESIDUAL_TOL
@@ -67,8 +67,10 @@ def pulses(disturbance, nu: int) -> list[Pulse]:
 
 
 def plant_function(model, h: float) -> ca.Function:
-    """``plant_step: (x, u, p, t) -> (x1, res)``: the RATTLE step of ``h`` seconds."""
-    step = step_functions(model, h)["step"]
+    """``plant_step: (x, u, p, t) -> (x1, res)``: the RATTLE step of ``h`` seconds (the
+    Newton tolerance of :func:`~ncgen.control.step.step_function`, so that the Python plant
+    of :func:`closed_loop` takes the same iterations)."""
+    step = step_functions(model, h, abstol=default_abstol(model))["step"]
     args = [ca.MX.sym(n, step.size1_in(i)) for i, n in enumerate(step.name_in())]
     return ca.Function("plant_step", args, step(*args), step.name_in(), step.name_out())
 

@@ -22,18 +22,24 @@ Not thread-safe: one object per thread.
 """
 from __future__ import annotations
 
+import os
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from ncgen.control.discrete import (ABSTOL, MAX_ITER, ROLLOUT_CHUNK, rollout_function, state_constraint_jacobian,
-                                    step_functions)
+from ncgen.control.discrete import (MAX_ITER, ROLLOUT_CHUNK, default_abstol, residual_scale, rollout_function,
+                                    state_constraint_jacobian, step_functions)
 from ncgen.errors import NcgenError
 
 METHODS = ("rattle",)
-#: The functions of :func:`ncgen.control.discrete.step_functions` a step function compiles.
-COMPILED = ("step_solution", "step_jacobian", "step_adjoint")
+#: The functions of :func:`ncgen.control.discrete.step_functions` a step function compiles
+#: (one translation unit each, compiled in parallel).
+COMPILED = ("step_solution", "step_G_z", "step_G_y", "step_jacobian", "step_adjoint")
+#: How a step function's package is written: not rerolled (the exported MPC package is
+#: written the same way, so that Python and C run the same arithmetic in the same order), one
+#: function per file, so that the solve and the two sensitivities compile in parallel.
+PACKAGE_OPTIONS = {"reroll_instructions": None, "max_file_instructions": 0}
 #: A step whose residual ‖G‖∞ exceeds this (relative to the largest mass-matrix entry plus
 #: one), or whose state or unknowns are not finite, did not converge and is refused.
 RESIDUAL_TOL = 1e-8
@@ -45,13 +51,15 @@ class StepDidNotConverge(NcgenError):
 
 
 def step_function(model, h: float, method: str = "rattle", *, max_iter: int = MAX_ITER,
-                  abstol: float = ABSTOL) -> "StepFunction":
+                  abstol: float | None = None) -> "StepFunction":
     """One step of ``h`` seconds of ``model`` (``method="rattle"``: the compiled stepper's
-    scheme, in natural coordinates, also for trees) as a :class:`StepFunction`."""
+    scheme, in natural coordinates, also for trees) as a :class:`StepFunction`.  ``abstol``:
+    the Newton iterations' residual tolerance, default
+    :func:`~ncgen.control.discrete.default_abstol` (``1e-12 (1 + max |M_ij|)``)."""
     if method not in METHODS:
         raise NcgenError(f"step_function: method: expected one of {', '.join(METHODS)}, got {method!r}")
     h = _positive(h, "h", "a positive, finite step in seconds")
-    abstol = _positive(abstol, "abstol", "a positive, finite tolerance")
+    abstol = default_abstol(model) if abstol is None else _positive(abstol, "abstol", "a positive, finite tolerance")
     if getattr(model, "contact_model", "smooth") == "nonsmooth" and getattr(model, "nk", 0) > 0:
         raise NcgenError(f"step_function: model {model.name!r} has nonsmooth contacts; their step is not "
                          "differentiable at impacts and is not supported (use contacts='smooth')")
@@ -68,9 +76,10 @@ class StepFunction:
         self.model, self.h = model, h
         self.nx, self.nu, self.np = 2 * model.nq, model.nu, model.np
         self.functions = step_functions(model, h, abstol=abstol, max_iter=max_iter)
-        self.residual_tol = RESIDUAL_TOL * (1.0 + float(np.max(np.abs(model.M))) if model.nq else 1.0)
+        self.residual_tol = RESIDUAL_TOL * residual_scale(model)
         lib = _compile(f"{model.name}_step", [self.functions[k] for k in COMPILED])
-        self._solution, self._jacobian, self._adjoint = lib["step_solution"], lib["step_jacobian"], lib["step_adjoint"]
+        self._solution, self._G_z, self._G_y = lib["step_solution"], lib["step_G_z"], lib["step_G_y"]
+        self._jacobian, self._adjoint = lib["step_jacobian"], lib["step_adjoint"]
         self.nz = 2 * (model.nq + model.nc)
         self._rollouts: dict = {}
         self._J = state_constraint_jacobian(model)
@@ -112,7 +121,7 @@ class StepFunction:
         theorem at the converged step: :mod:`ncgen.control.discrete`)."""
         args = self._args(x, u, p, t)
         x1, z = self._solve(*args)
-        J = self._jacobian(z, *args)[0].reshape(self.nx, -1, order="F").copy()
+        J = self._jacobian(*self._sensitivities(z, *args))[0].reshape(self.nx, -1, order="F").copy()
         if not np.all(np.isfinite(J)):
             raise StepDidNotConverge(f"step of {self.model.name!r} (h = {self.h:g} s): its Jacobians are not "
                                      "finite: the Newton matrix G_z is singular there (redundant constraints "
@@ -120,6 +129,10 @@ class StepFunction:
         nx, nu = self.nx, self.nu
         out = (x1, J[:, :nx], J[:, nx:nx + nu])
         return out + (J[:, nx + nu:],) if parameters else out
+
+    def _sensitivities(self, z, x, u, p, t) -> tuple[np.ndarray, np.ndarray]:
+        """The nonzeros of ``G_z`` and ``G'_y`` at the converged ``z`` (:mod:`ncgen.control.discrete`)."""
+        return self._G_z(z, x, u, p, t)[0], self._G_y(z, x, u, p, t)[0]
 
     # ------------------------------------------------------------------ rollouts
     def _rollout_piece(self, n: int):
@@ -180,7 +193,8 @@ class StepFunction:
         nx, nu = self.nx, self.nu
         dU, dp, carry = np.empty((N, nu)), np.zeros(self.np), np.zeros(nx)
         for k in range(N - 1, -1, -1):
-            y_bar = self._adjoint(Z[k], x0 if k == 0 else X[k - 1], U[k], p, t0 + k * self.h, dX[k] + carry)[0]
+            G_z, G_y = self._sensitivities(Z[k], x0 if k == 0 else X[k - 1], U[k], p, t0 + k * self.h)
+            y_bar = self._adjoint(G_z, G_y, dX[k] + carry)[0]
             carry, dU[k] = y_bar[:nx].copy(), y_bar[nx:nx + nu]
             dp += y_bar[nx + nu:]
         if not (np.all(np.isfinite(carry)) and np.all(np.isfinite(dU)) and np.all(np.isfinite(dp))):
@@ -227,6 +241,15 @@ def _vector(a, n: int, name: str, what: str) -> np.ndarray:
     return a
 
 
+def compile_flags() -> tuple[str, ...] | None:
+    """The flags of a step function's package: ``$NCGEN_CFLAGS`` if set, else ``-O1``
+    (:data:`ncgen.codegen.compile_cache.LARGE_CFLAGS`: its files are long straight-line
+    functions, which gcc compiles about 1.5x faster at -O1 than at -O2, and which run no
+    slower)."""
+    from ncgen.codegen.compile_cache import LARGE_CFLAGS
+    return None if os.environ.get("NCGEN_CFLAGS") is not None else LARGE_CFLAGS
+
+
 def _compile(name: str, functions: list) -> dict:
     """``functions`` generated as the C package ``name``, compiled (cached by content) and
     loaded for direct calls: ``{function name: DirectFunction}``."""
@@ -235,9 +258,7 @@ def _compile(name: str, functions: list) -> dict:
     from ncgen.codegen.package import write_package
 
     with tempfile.TemporaryDirectory() as tmp:
-        # not rerolled: the exported MPC package is written the same way, so that Python and
-        # C run the same arithmetic in the same order
-        pkg = write_package(name, functions, Path(tmp) / "pkg", reroll_instructions=None)
-        built = compile_package(pkg)
+        pkg = write_package(name, functions, Path(tmp) / "pkg", **PACKAGE_OPTIONS)
+        built = compile_package(pkg, cflags=compile_flags())
         names = {f.name(): pkg.c_name(f.name()) for f in functions}
     return {f.name(): DirectFunction(built.path, names[f.name()], f) for f in functions}
