@@ -38,8 +38,9 @@ def quat_wxyz_to_matrix(q):
 
 
 class JointMap:
-    """MuJoCo (qpos, qvel, qacc) ↔ ncgen (qj, vj, aj) for hinge, slide, free joints and the
-    planar slide-slide-hinge roots, joint by joint."""
+    """MuJoCo (qpos, qvel, qacc) ↔ ncgen (qj, vj, aj) for hinge, slide, free joints, the
+    planar slide-slide-hinge roots and joint sequences (several hinges or slides in one body:
+    coordinate k is the body's k-th joint), joint by joint."""
 
     def __init__(self, model, system, mj):
         import mujoco
@@ -54,6 +55,13 @@ class JointMap:
                 jid = mujoco.mj_name2id(mj, mujoco.mjtObj.mjOBJ_JOINT, n)
                 assert jid >= 0, n
                 self.items.append(("one", sq[n], sv[n], mj.jnt_qposadr[jid], mj.jnt_dofadr[jid], None))
+            elif joint.kind == "JointSequence":
+                j0 = mj.body_jntadr[mujoco.mj_name2id(mj, mujoco.mjtObj.mjOBJ_BODY, joint.B.name)]
+                assert mj.body_jntnum[mj.jnt_bodyid[j0]] == len(joint.laws), n
+                for k in range(len(joint.laws)):
+                    self.items.append(("one", slice(sq[n].start + k, sq[n].start + k + 1),
+                                       slice(sv[n].start + k, sv[n].start + k + 1), mj.jnt_qposadr[j0 + k],
+                                       mj.jnt_dofadr[j0 + k], None))
             elif joint.kind == "Free":
                 body = joint.B.name
                 jid = mj.body_jntadr[mujoco.mj_name2id(mj, mujoco.mjtObj.mjOBJ_BODY, body)]

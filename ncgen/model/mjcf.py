@@ -320,7 +320,7 @@ def _members(s, ground, groups, compiler, defaults, unsupported):
     planar = {id(g) for g in groups if _is_planar(g, compiler)}
     actuated = [(g, j, a) for g, j, a in hinged if id(g) not in planar]
     tau = s.add_input("tau", len(actuated)) if actuated else None
-    effort = {id(j): tau[k] for k, (_, j, _) in enumerate(actuated)}
+    effort = {id(j): k for k, (_, j, _) in enumerate(actuated)}
     joints, driven = {}, []
     for g in groups:
         A, B = member_of[id(g.parent)], member_of[id(g)]
@@ -338,9 +338,8 @@ def _members(s, ground, groups, compiler, defaults, unsupported):
                 _passive_unsupported(jj, aa, unsupported, "a planar root's joint")
             continue
         if len(kinds) > 1:
-            raise ModelError(f"MJCF {where(g.body)}: body {g.body.get('name')!r} has joints of types "
-                             f"{', '.join(kinds)}: several joints in one body are supported only as slide, slide, "
-                             "hinge (a planar root, perpendicular slides and the hinge along their normal)")
+            _sequence(s, g, A, B, tau, effort, joints, driven, compiler, unsupported, TorsionalSpring)
+            continue
         j, a = g.joints[0]
         kind = kinds[0]
         jname = identifier(j.get("name") or f"{B.name}_{kind}")
@@ -356,14 +355,49 @@ def _members(s, ground, groups, compiler, defaults, unsupported):
         elif kind in ("hinge", "slide"):
             axis = R @ direction(j, a, "axis", (0, 0, 1))
             cls = Revolute if kind == "hinge" else Prismatic
-            joint = s.add_joint(cls(A, B, at=at, axis=axis, name=jname, effort=effort[id(j)]))
-            driven.append(joint)
-            _joint_dynamics(s, joint, j, a, kind, compiler, unsupported, TorsionalSpring)
+            joint = s.add_joint(cls(A, B, at=at, axis=axis, name=jname, effort=tau[effort[id(j)]]))
+            driven.append(joint.name)
+            _joint_dynamics(joint, j, a, kind, compiler, unsupported,
+                            lambda k, rest, joint=joint: s.add_force(TorsionalSpring(
+                                joint, k=k, rest_angle=rest, name=f"{joint.name}_spring")))
         else:
             choice(j, a, "type", ("free", "ball", "slide", "hinge"), "hinge")
         if j.get("name"):
             joints[j.get("name")] = (joint, kind)
     return member_of, joints, driven
+
+
+def _sequence(s, g, A, B, tau, effort, joints, driven, compiler, unsupported, TorsionalSpring) -> None:
+    """Several hinges or slides in one body as one :class:`~ncgen.model.joints.JointSequence`
+    (applied in the file's order, as MuJoCo does), each coordinate with its own dynamics and
+    spring."""
+    from ncgen.model.joints import JointSequence
+    R, p = g.T[:3, :3], g.T[:3, 3]
+    steps, names = [], []
+    for k, (j, a) in enumerate(g.joints):
+        kind = a.get("type", "hinge")
+        if kind not in ("hinge", "slide"):
+            raise ModelError(f"MJCF {where(j)}: a {kind} joint in body {B.name!r} with other joints; "
+                             "several joints in one body are taken as hinges or slides applied in order")
+        steps.append((kind, R @ numbers(j, a, "pos", 3, default=(0, 0, 0)) + p,
+                       R @ direction(j, a, "axis", (0, 0, 1))))
+        names.append(identifier(j.get("name") or f"{kind}{k}"))
+    name = identifier("_".join(names))
+    k0 = effort[id(g.joints[0][0])]
+    try:
+        joint = s.add_joint(JointSequence(A, B, steps=steps, names=names, name=name,
+                                          effort=tau[k0:k0 + len(steps)]))
+    except ModelError as e:
+        raise ModelError(f"MJCF {where(g.body)}: body {B.name!r}, joints "
+                         f"{', '.join(names)}: {e}") from None
+    for k, ((j, a), law) in enumerate(zip(g.joints, joint.laws)):
+        kind = a.get("type", "hinge")
+        driven.append(f"{joint.name}.{law.name}")
+        if j.get("name"):
+            joints[j.get("name")] = (joint, "sequence")
+        _joint_dynamics(law, j, a, kind, compiler, unsupported,
+                        lambda stiff, rest, k=k, law=law: s.add_force(TorsionalSpring(
+                            joint, k=stiff, rest_angle=rest, coordinate=k, name=f"{joint.name}_{law.name}_spring")))
 
 
 def _is_planar(g, compiler) -> bool:
@@ -392,7 +426,9 @@ def _limited(j, a, autolimits: bool = True) -> bool:
     return lim == "true" or (lim == "auto" and autolimits and "range" in a)
 
 
-def _joint_dynamics(s, joint, j, a, kind, compiler, unsupported, TorsionalSpring) -> None:
+def _joint_dynamics(joint, j, a, kind, compiler, unsupported, spring) -> None:
+    """``joint``'s (or a sequence coordinate's law's) ``mjcf_ref``, dynamics and limits from
+    the MJCF joint ``j``; a hinge's ``stiffness`` through ``spring(k, rest angle)``."""
     angle = compiler.angle if kind == "hinge" else float
     ref = angle(number(j, a, "ref", 0.0))
     joint.mjcf_ref = ref
@@ -419,13 +455,13 @@ def _joint_dynamics(s, joint, j, a, kind, compiler, unsupported, TorsionalSpring
         if kind == "slide":
             unsupported.add(j, "stiffness on a slide joint")
         else:
-            s.add_force(TorsionalSpring(joint, k=k, rest_angle=angle(number(j, a, "springref", 0.0)) - ref,
-                                        name=f"{joint.name}_spring"))
+            spring(k, angle(number(j, a, "springref", 0.0)) - ref)
 
 
 def _actuators(s, root, joints, driven, defaults, unsupported) -> None:
     """Motors as ``s.actuators`` and the map ``s.actuator_gear`` from ``ctrl`` to ``tau``."""
-    index = {n: driven.index(j) for n, (j, kind) in joints.items() if kind in ("hinge", "slide")}
+    index = {n: driven.index(j.name if kind in ("hinge", "slide") else f"{j.name}.{identifier(n)}")
+             for n, (j, kind) in joints.items() if kind in ("hinge", "slide", "sequence")}
     s.actuators = []
     columns = []
     elements = [el for section in root.findall("actuator") for el in section]
@@ -454,7 +490,7 @@ def _actuators(s, root, joints, driven, defaults, unsupported) -> None:
         column = np.zeros(len(driven))
         column[index[a["joint"]]] = gear * gain
         columns.append(column)
-        s.actuators.append({"name": name, "joint": joints[a["joint"]][0].name, "gear": gear * gain,
+        s.actuators.append({"name": name, "joint": driven[index[a["joint"]]], "gear": gear * gain,
                             "ctrlrange": tuple(ctrl) if limited and ctrl is not None else None})
     s.actuator_gear = np.column_stack(columns) if columns else np.zeros((len(driven), 0))
 
