@@ -371,6 +371,8 @@ class JointSequence(Joint):
 
     * 2 or 3 slides (independent axes): no relative rotation (3) and, for 2, B's point stays
       on A's plane spanned by the axes (1);
+    * slide, slide, hinge along the slides' normal (MuJoCo's planar roots): a common normal (2)
+      and the hinge's point stays on A's plane (1);
     * 2 hinges through one point (non-parallel axes): the points coincide (3) and
       ``a_A · b_B = a · b`` (1): a Universal joint with any angle between the axes;
     * 2 hinges on skew lines (non-parallel): with ``c_1, c_2`` the lines' closest points,
@@ -413,7 +415,7 @@ class JointSequence(Joint):
         return out
 
     def shape(self) -> str:
-        """``"slides"``, ``"hinges2"`` (one point), ``"skew2"`` or ``"hinges3"``; raises
+        """``"slides"``, ``"planar"``, ``"hinges2"`` (one point), ``"skew2"`` or ``"hinges3"``; raises
         :class:`ModelError` for a sequence the joint does not take."""
         steps = self.steps()
         kinds = [k for k, _, _ in steps]
@@ -422,9 +424,15 @@ class JointSequence(Joint):
             if len(steps) > 3 or np.linalg.matrix_rank(axes, tol=1e-9) < len(steps):
                 raise ModelError(f"{self.label}: slides along dependent axes {np.round(axes, 12).tolist()}")
             return "slides"
+        if kinds == ["slide", "slide", "hinge"]:
+            n = np.cross(axes[0], axes[1])
+            if norm(n) < 1e-9 or norm(np.cross(n / norm(n), axes[2])) > PERPENDICULAR_TOL:
+                raise ModelError(f"{self.label}: slide, slide, hinge is taken as planar motion: independent "
+                                 f"slides and the hinge along their normal; got axes {np.round(axes, 12).tolist()}")
+            return "planar"
         if not all(k == "hinge" for k in kinds):
-            raise ModelError(f"{self.label}: a sequence of {', '.join(kinds)}: only hinges or only slides "
-                             "are taken (a planar root, slide, slide, hinge, is a Planar joint)")
+            raise ModelError(f"{self.label}: a sequence of {', '.join(kinds)}: only hinges, only slides, or "
+                             "slide, slide, hinge (planar motion) are taken")
         if len(steps) == 2:
             if norm(np.cross(axes[0], axes[1])) < 1e-9:
                 raise ModelError(f"{self.label}: two hinges about parallel axes: the body between them would "
@@ -452,9 +460,11 @@ class JointSequence(Joint):
 
     def at(self) -> np.ndarray:
         """The origin of the joint frames: the first hinge's closest point (the common point of
-        concurrent hinges), or the first slide's point."""
+        concurrent hinges), the hinge's point of planar motion, or the first slide's point."""
         shape = self.shape()
-        return self.steps()[0][1] if shape == "slides" else self.closest_points()[0]
+        if shape in ("slides", "planar"):
+            return self.steps()[-1 if shape == "planar" else 0][1]
+        return self.closest_points()[0]
 
     # ------------------------------------------------------------ equations
     def geometry(self, ctx):
@@ -471,6 +481,10 @@ class JointSequence(Joint):
                 n = np.cross(steps[0][2], steps[1][2])
                 eqs += point_on_plane(ctx, self.A, self.B, at, at, n / norm(n), self.label, f"{self.name}.plane")
             return eqs
+        if shape == "planar":
+            n = steps[2][2]
+            return (align_axis(ctx, self.A, self.B, n, self.label, f"{self.name}.align")
+                    + point_on_plane(ctx, self.A, self.B, at, at, n, self.label, f"{self.name}.plane"))
         if shape == "hinges3":
             return coincidence(ctx, self.A, self.B, at, self.label, f"{self.name}.coincide")
         a, b = steps[0][2], steps[1][2]
@@ -492,13 +506,14 @@ class JointSequence(Joint):
         displacement (SX)."""
         shape, steps = self.shape(), self.steps()
         A, B, lab = self.A, self.B, self.label
-        if shape == "slides":
+        if shape in ("slides", "planar"):           # B's point at `at` moves by the slides only
             at = self.at()
             d = ctx.point(B, at, lab)[0] - ctx.point(A, at, lab)[0]
-            axes = np.array([a for _, _, a in steps])
+            axes = np.array([a for kind, _, a in steps if kind == "slide"])
             proj = ca.vertcat(*[ca.dot(d, ctx.direction(A, a, lab)[0]) for a in axes])
             s = ca.mtimes(ca.DM(np.linalg.inv(axes @ axes.T)), proj)
-            return [s[k] for k in range(len(steps))]
+            out = [s[k] for k in range(len(axes))]
+            return out if shape == "slides" else out + [angle_gauge(ctx, A, B, steps[2][2], lab).terms(ctx)]
         if shape == "hinges3":
             e = [steps[0][2], steps[1][2], np.cross(steps[0][2], steps[1][2])]
             sigma = float(np.sign(steps[2][2] @ e[2]))
