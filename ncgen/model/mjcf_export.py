@@ -159,6 +159,10 @@ def _joint(j, R, p, springs, motors) -> list[str]:
     o = j.options
     if j.kind == "Free":
         return [f'<freejoint name="{j.name}"/>']
+    if j.kind == "JointSequence":
+        return [_one(f"{j.name}_{law.name}", kind, R.T @ (c - p), R.T @ a, law, springs.get((j.name, k)),
+                     o.get("effort") is not None, motors)
+                for k, ((kind, c, a), law) in enumerate(zip(j.steps(), j.laws))]
     at = R.T @ (np.asarray(o["at"], float) - p)
     if j.kind == "Spherical":
         return [f'<joint name="{j.name}" type="ball" pos="{_fmt(at)}"/>']
@@ -168,10 +172,6 @@ def _joint(j, R, p, springs, motors) -> list[str]:
         e1, e2 = perpendicular_basis(n)
         return [f'<joint name="{j.name}_{k}" type="{t}" pos="{_fmt(at)}" axis="{_fmt(R.T @ a)}"/>'
                 for k, (t, a) in enumerate((("slide", e1), ("slide", e2), ("hinge", n)))]
-    if j.kind == "JointSequence":
-        return [_one(f"{j.name}_{law.name}", kind, R.T @ (c - p), R.T @ a, law, springs.get((j.name, k)),
-                     o.get("effort") is not None, motors)
-                for k, ((kind, c, a), law) in enumerate(zip(j.steps(), j.laws))]
     axis = np.asarray(o["axis"], float)
     return [_one(j.name, "hinge" if j.kind == "Revolute" else "slide", at, R.T @ axis / np.linalg.norm(axis), j,
                  springs.get(j.name), o.get("effort") is not None, motors)]
