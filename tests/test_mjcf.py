@@ -13,6 +13,7 @@ import pytest
 
 import ncgen as nc
 from ncgen.errors import ModelError
+from ncgen.model.joint_dynamics import coordinate_laws
 from ncgen.model.mjcf import MjcfWarning
 
 mujoco = pytest.importorskip("mujoco")
@@ -47,8 +48,9 @@ def without_friction_and_limits(system):
     """MuJoCo's frictionloss and limits are constraints (off in the reference); ncgen's are a
     regularised friction law and a penalty: compare without them."""
     for j in system.joints:
-        j.dynamics = {k: v for k, v in j.dynamics.items() if k != "friction"}
-        j.limits = {}
+        for law in coordinate_laws(j):            # a joint sequence: one law per coordinate
+            law.dynamics = {k: v for k, v in law.dynamics.items() if k != "friction"}
+            law.limits = {}
     return system
 
 
@@ -153,6 +155,19 @@ def test_joint_sequences_run_as_mujoco_rk4_idas():
     errors, ranges = passive_runs(SEQUENCES, ["idas"])
     assert np.all(ranges > 0.1)
     assert errors["idas"] < 1e-8
+
+
+@pytest.mark.slow
+def test_humanoid_runs_as_mujoco_rk4():
+    """1 s of dm_control's humanoid tumbling from random joint rates (free root, three-hinge
+    hips, skew ankles, springs, armature, damping; contacts and limits off) in joint space
+    against MuJoCo's RK4 at 1e-4 s: every coordinate within 1e-8 (measured 4.6e-13)."""
+    key = "dm_control/humanoid.xml"
+    if key not in FILES:
+        pytest.skip("dm_control is not installed (a test extra)")
+    errors, ranges = passive_runs(FILES[key], ["joint"])
+    assert ranges.min() > 0.01
+    assert errors["joint"] < 1e-8
 
 
 @pytest.mark.slow
