@@ -89,7 +89,7 @@ def test_element_tables_equal_the_flat_functions():
 @pytest.mark.parametrize("steps, expected", [
     ([("hinge", C, A)], "expected at least two (kind, at, axis) steps"),
     ([("hinge", C, A), ("hinge", C + B, A)], "two hinges about parallel axes"),
-    ([("hinge", C, A), ("slide", C, B)], "a sequence of hinge, slide: only hinges, only slides, or slide, slide, hinge"),
+    ([("hinge", C, A), ("slide", C, B)], "a sequence of hinge, slide: only hinges, only slides, or slide, slide"),
     ([("slide", C, A), ("slide", C, 2 * A)], "slides along dependent axes"),
     ([("hinge", C, A), ("hinge", C, B), ("hinge", C, (0, 0.3, 1))], "three hinges are taken through one point"),
     ([("hinge", C, A), ("hinge", C, B), ("hinge", C + N, N)], "three hinges are taken through one point"),

@@ -456,8 +456,8 @@ def test_unsupported_named_in_one_warning():
      "<equality><connect body1='a' body2='nope' anchor='0 0 0'/></equality></mujoco>",
      "MJCF text:2: <connect body2='nope'>: no body of that name"),
     ("<mujoco><worldbody><body><joint type='hinge'/><joint type='hinge'/><geom size='1'/></body></worldbody>"
-     "</mujoco>", "MJCF text:1: body 'body1', joints hinge0, hinge1: joint 'hinge0_hinge1' (JointSequence ground–body1): "
-     "two hinges about parallel axes"),
+     "</mujoco>", "MJCF text:1: body 'body1', joints hinge0, hinge1: joint 'hinge0_hinge1' "
+     "(JointSequence ground–body1): two hinges about parallel axes"),
     ("<mujoco><worldbody><body><joint type='hinge'/><joint type='ball'/><geom size='1'/></body></worldbody>"
      "</mujoco>", "MJCF text:1: a ball joint in body 'body1' with other joints"),
     ("<mujoco><worldbody><body><joint/><inertial mass='1' diaginertia='1 1 3'/></body></worldbody></mujoco>",

@@ -515,7 +515,7 @@ class JointSequence(Joint):
             s = ca.mtimes(ca.DM(np.linalg.inv(axes @ axes.T)), proj)
             out = [s[k] for k in range(len(axes))]
             return out if shape == "slides" else out + [angle_gauge(ctx, A, B, steps[2][2], lab).terms(ctx)]
-        if shape == "hinges3":
+        if shape == "hinges3":           # R_ij = e_iᵀ R e_j = Rx(x_1) Ry(x_2) Rz(σ x_3), e = (a_1, a_2, a_1 × a_2)
             e = [steps[0][2], steps[1][2], np.cross(steps[0][2], steps[1][2])]
             sigma = float(np.sign(steps[2][2] @ e[2]))
             eA = [ctx.direction(A, v, lab)[0] for v in e]
@@ -523,12 +523,11 @@ class JointSequence(Joint):
             R = [[ca.dot(eA[i], eB[j]) for j in range(3)] for i in range(3)]
             return [(R[2][2], -R[1][2]), (ca.sqrt(R[0][0] ** 2 + R[0][1] ** 2), R[0][2]),
                     (R[0][0], -sigma * R[0][1])]
-        a, b = steps[0][2], steps[1][2]
+        a, b = steps[0][2], steps[1][2]           # b = Rot(a, x_1) b₀ seen from A, a = Rot(b, −x_2) a₀ from B
         c2 = float(a @ b) ** 2
-        dA = lambda v: ctx.direction(A, v, lab)[0]      # noqa: E731
-        dB = lambda v: ctx.direction(B, v, lab)[0]      # noqa: E731
-        return [(ca.dot(dB(b), dA(b)) - c2, ca.dot(dB(b), dA(np.cross(a, b)))),
-                (ca.dot(dA(a), dB(a)) - c2, -ca.dot(dA(a), dB(np.cross(b, a))))]
+        (aA, bA, abA), (aB, bB, baB) = ([ctx.direction(m, v, lab)[0] for v in vs] for m, vs in
+                                        ((A, (a, b, np.cross(a, b))), (B, (a, b, np.cross(b, a)))))
+        return [(ca.dot(bB, bA) - c2, ca.dot(bB, abA)), (ca.dot(aA, aB) - c2, -ca.dot(aA, baB))]
 
     def coordinates(self, ctx) -> ca.SX:
         """``[x_1, ..., x_n]`` (rad or m), zero initially."""
