@@ -4,8 +4,9 @@ without an unsupported-feature warning (issue 40's target: ≥ 80 %).
 
 Each file is one of: ``ok`` (imported, nothing left out), ``warned`` (imported; the
 MjcfWarning's items counted), ``refused`` (a ModelError: what the import cannot represent
-at all, e.g. several hinges in one body, a mesh giving mass).  Only the import is run (no
-build).  ``python benchmarks/mjcf_coverage.py [--verbose]``."""
+at all, e.g. a mesh giving mass).  Only the import is run (no build).  With gymnasium 1.4.0
+and dm_control 1.0.50: 27 of 33 files (82 %) ok, 5 warned, 1 refused (docs/mjcf.md).
+``python benchmarks/mjcf_coverage.py [--verbose]``."""
 from __future__ import annotations
 
 import importlib.util

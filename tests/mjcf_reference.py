@@ -10,7 +10,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ncgen.reproducible import perpendicular_basis
 
 
 def package_dir(name: str) -> Path | None:
@@ -38,8 +37,9 @@ def quat_wxyz_to_matrix(q):
 
 
 class JointMap:
-    """MuJoCo (qpos, qvel, qacc) ↔ ncgen (qj, vj, aj) for hinge, slide, free joints and the
-    planar slide-slide-hinge roots, joint by joint."""
+    """MuJoCo (qpos, qvel, qacc) ↔ ncgen (qj, vj, aj) for hinge, slide, free joints and joint
+    sequences (several hinges or slides in one body: coordinate k is the body's k-th joint),
+    joint by joint."""
 
     def __init__(self, model, system, mj):
         import mujoco
@@ -53,30 +53,26 @@ class JointMap:
             if joint.kind in ("Revolute", "Prismatic"):
                 jid = mujoco.mj_name2id(mj, mujoco.mjtObj.mjOBJ_JOINT, n)
                 assert jid >= 0, n
-                self.items.append(("one", sq[n], sv[n], mj.jnt_qposadr[jid], mj.jnt_dofadr[jid], None))
+                self.items.append(("one", sq[n], sv[n], mj.jnt_qposadr[jid], mj.jnt_dofadr[jid]))
+            elif joint.kind == "JointSequence":
+                j0 = mj.body_jntadr[mujoco.mj_name2id(mj, mujoco.mjtObj.mjOBJ_BODY, joint.B.name)]
+                assert mj.body_jntnum[mj.jnt_bodyid[j0]] == len(joint.laws), n
+                for k in range(len(joint.laws)):
+                    self.items.append(("one", slice(sq[n].start + k, sq[n].start + k + 1),
+                                       slice(sv[n].start + k, sv[n].start + k + 1), mj.jnt_qposadr[j0 + k],
+                                       mj.jnt_dofadr[j0 + k]))
             elif joint.kind == "Free":
                 body = joint.B.name
                 jid = mj.body_jntadr[mujoco.mj_name2id(mj, mujoco.mjtObj.mjOBJ_BODY, body)]
-                self.items.append(("free", sq[n], sv[n], mj.jnt_qposadr[jid], mj.jnt_dofadr[jid], None))
-            elif joint.kind == "Planar":
-                bid = mujoco.mj_name2id(mj, mujoco.mjtObj.mjOBJ_BODY, joint.B.name)
-                j0 = mj.body_jntadr[bid]
-                R = quat_wxyz_to_matrix(mj.body_quat[bid])   # child of the world: its world rotation
-                a = [R @ mj.jnt_axis[j0 + k] for k in range(3)]
-                e1, e2 = perpendicular_basis(a[2])
-                P = np.array([[e1 @ a[0], e1 @ a[1]], [e2 @ a[0], e2 @ a[1]]])
-                self.items.append(("planar", sq[n], sv[n], mj.jnt_qposadr[j0], mj.jnt_dofadr[j0], P))
+                self.items.append(("free", sq[n], sv[n], mj.jnt_qposadr[jid], mj.jnt_dofadr[jid]))
             else:
                 raise AssertionError(f"no map for {joint.kind}")
 
     def to_ncgen(self, qpos, qvel):
         qj, vj = np.zeros(self.model.joint_space.nq), np.zeros(self.model.joint_space.nv)
-        for kind, sq, sv, ia, da, P in self.items:
+        for kind, sq, sv, ia, da in self.items:
             if kind == "one":
                 qj[sq], vj[sv] = qpos[ia:ia + 1] - self.mj.qpos0[ia], qvel[da:da + 1]   # ncgen: qpos − ref
-            elif kind == "planar":
-                qj[sq] = np.r_[P @ qpos[ia:ia + 2], qpos[ia + 2]]
-                vj[sv] = np.r_[P @ qvel[da:da + 2], qvel[da + 2]]
             else:
                 w, x, y, z = qpos[ia + 3:ia + 7]
                 qj[sq] = np.r_[qpos[ia:ia + 3], x, y, z, w]
@@ -87,12 +83,9 @@ class JointMap:
     def acceleration_to_mujoco(self, qpos, qvel, aj):
         """ncgen's joint accelerations in MuJoCo's dof order."""
         qacc = np.zeros(self.mj.nv)
-        for kind, sq, sv, ia, da, P in self.items:
+        for kind, sq, sv, ia, da in self.items:
             if kind == "one":
                 qacc[da] = aj[sv][0]
-            elif kind == "planar":
-                qacc[da:da + 2] = np.linalg.solve(P, aj[sv][:2])
-                qacc[da + 2] = aj[sv][2]
             else:
                 R = quat_wxyz_to_matrix(qpos[ia + 3:ia + 7])
                 w = qvel[da + 3:da + 6]
@@ -149,3 +142,57 @@ def random_state(mj, rng):
                 lo, hi = max(lo, -3.0), min(hi, 3.0)
             qpos[a] = rng.uniform(lo, hi)
     return qpos, rng.normal(0, 1.0, mj.nv)
+
+
+def coupling_rows(mj) -> np.ndarray:
+    """Rows ``J`` (one per active joint or tendon equality; nv columns) of MuJoCo's linear
+    couplings ``J qvel = 0``: ``<joint>`` with ``polycoef = 0 c1 0 0 0`` (``e_1 − c1 e_2``),
+    ``<tendon tendon1>`` (the fixed tendon's coefficients)."""
+    import mujoco
+    rows = []
+    for e in range(mj.neq):
+        if not mj.eq_active0[e]:
+            continue
+        row = np.zeros(mj.nv)
+        if mj.eq_type[e] == mujoco.mjtEq.mjEQ_JOINT:
+            row[mj.jnt_dofadr[mj.eq_obj1id[e]]] = 1.0
+            row[mj.jnt_dofadr[mj.eq_obj2id[e]]] -= mj.eq_data[e][1]
+        elif mj.eq_type[e] == mujoco.mjtEq.mjEQ_TENDON:
+            t = mj.eq_obj1id[e]
+            for w in range(mj.tendon_adr[t], mj.tendon_adr[t] + mj.tendon_num[t]):
+                assert mj.wrap_type[w] == mujoco.mjtWrap.mjWRAP_JOINT      # a fixed tendon
+                row[mj.jnt_dofadr[mj.wrap_objid[w]]] += mj.wrap_prm[w]
+        else:
+            continue
+        rows.append(row)
+    return np.array(rows).reshape(-1, mj.nv)
+
+
+def on_couplings(mj, J, qpos, qvel):
+    """``(qpos, qvel)`` moved onto the couplings ``J (qpos − qpos0) = 0``, ``J qvel = 0``
+    (hinge and slide dofs, whose qpos and qvel entries are one to one)."""
+    if len(J) == 0:
+        return qpos, qvel
+    P = np.eye(mj.nv) - np.linalg.pinv(J) @ J
+    dof_q = np.zeros(mj.nv, int)
+    for j in range(mj.njnt):
+        dof_q[mj.jnt_dofadr[j]] = mj.jnt_qposadr[j]
+    cols = np.flatnonzero(np.any(J != 0, axis=0))
+    x = np.zeros(mj.nv)
+    x[cols] = qpos[dof_q[cols]] - mj.qpos0[dof_q[cols]]
+    qpos = qpos.copy()
+    qpos[dof_q[cols]] = mj.qpos0[dof_q[cols]] + (P @ x)[cols]
+    return qpos, P @ qvel
+
+
+def constrained_qacc(mj, d, J) -> np.ndarray:
+    """MuJoCo's acceleration with the linear couplings ``J qacc = 0`` held exactly, from its
+    unconstrained one (``d.qacc`` with equality constraints disabled) and mass matrix:
+    ``a = a₀ − M⁻¹Jᵀ (J M⁻¹ Jᵀ)⁻¹ J a₀``."""
+    import mujoco
+    if len(J) == 0:
+        return d.qacc.copy()
+    M = np.zeros((mj.nv, mj.nv))
+    mujoco.mj_fullM(mj, d, M)
+    MJ = np.linalg.solve(M, J.T)
+    return d.qacc - MJ @ np.linalg.solve(J @ MJ, J @ d.qacc)

@@ -16,6 +16,8 @@ Planar          [x, y, θ]: offsets along the two         [ẋ, ẏ, θ̇]
 Spherical       [qx, qy, qz, qw] of B relative to A      ω of B relative to A, B's axes
 Free (3D)       [x, y, z, qx, qy, qz, qw]                [v, ω] of B's frame in its own axes
 Free (planar)   [x, y, θ]                                [v_x, v_y, ω] in B's frame axes
+JointSequence   [x_1, ..., x_n]: each hinge's angle or   their time derivatives
+                slide's displacement, in order
 ==============  =======================================  ======================================
 
 Joints to a 3D bar (which has no spin about its own axis) have the coordinates of what is
@@ -231,7 +233,13 @@ def _free(ctx, j):
     return JointCoordinates(j, q, v, names, rates, [False] * 7)
 
 
-_BUILDERS = {"Revolute": _revolute, "Prismatic": _prismatic, "Cylindrical": _cylindrical,
+def _sequence(ctx, j):
+    q = j.coordinates(ctx)
+    names = [f"{j.name}.{law.name}" for law in j.laws]
+    return JointCoordinates(j, q, _scalar_rates(ctx, q), names, names, [law.kind == "Revolute" for law in j.laws])
+
+
+_BUILDERS = {"Revolute": _revolute, "Prismatic": _prismatic, "Cylindrical": _cylindrical, "JointSequence": _sequence,
              "Universal": _universal, "Planar": _planar, "Spherical": _spherical, "Free": _free}
 
 

@@ -24,7 +24,7 @@ import numpy as np
 
 from ncgen.assembly.tree_dynamics import cholesky_solve
 from ncgen.errors import ModelError
-from ncgen.model.joint_dynamics import armature, has_dynamics, joint_effort
+from ncgen.model.joint_dynamics import armature, coordinate_laws, has_dynamics, joint_effort
 
 
 def quaternion_offsets(js) -> list[int]:
@@ -80,15 +80,15 @@ def joint_dynamics_inputs(model, qj: ca.SX, vj: ca.SX) -> ca.SX | None:
     """``E⁺ τ_jd``: the joint dynamics efforts as inputs (None when no joint has any)."""
     js = model.joint_space
     sq, sv = js.slices(), js.slices(rates=True)
-    joints = [n for n in js.joint_names if has_dynamics(js.joints[n])]
-    if not joints:
+    laws = [(n, k, law) for n in js.joint_names for k, law in enumerate(coordinate_laws(js.joints[n]))
+            if has_dynamics(law)]
+    if not laws:
         return None
     mapping = effort_inputs(model)
     u = ca.SX.zeros(model.nu)
-    for n in joints:
-        j = js.joints[n]
-        tau = joint_effort(j, qj[sq[n].start], vj[sv[n].start])
-        r = sv[n].start
+    for n, k, law in laws:
+        tau = joint_effort(law, qj[sq[n].start + k], vj[sv[n].start + k])
+        r = sv[n].start + k
         if r not in mapping:
             raise ModelError(f"joint {n!r}: has damping, friction or limits but its effort is not one input "
                              "component of its own (effort=u[k], as URDF joints have), so they cannot act in "
@@ -166,14 +166,17 @@ def natural_inputs_function(model, inverse_dynamics: ca.Function | None = None, 
 
 
 def armature_vector(model) -> np.ndarray:
-    """Armature per joint rate (``joint.dynamics["armature"]``; Revolute and Prismatic joints)."""
+    """Armature per joint rate (``joint.dynamics["armature"]``; Revolute and Prismatic joints,
+    and each coordinate of a joint sequence)."""
     js = model.joint_space
     out = np.zeros(js.nv)
     for n, s in js.slices(rates=True).items():
-        a = armature(js.joints[n])
-        if a and js.nv_joint[n] != 1:
-            raise ModelError(f"joint {n!r}: armature applies to one-coordinate joints (Revolute, Prismatic)")
-        out[s] = a
+        laws = coordinate_laws(js.joints[n])
+        a = np.array([armature(law) for law in laws])
+        if np.any(a) and js.nv_joint[n] != len(laws):
+            raise ModelError(f"joint {n!r}: armature applies to one-coordinate joints (Revolute, Prismatic) "
+                             "and joint sequences")
+        out[s] = a if len(laws) == js.nv_joint[n] else a[0]
     return out
 
 

@@ -50,6 +50,8 @@ def edge_of(j) -> Edge:
     if j.kind in ("Spherical", "Universal", "Planar") and not (is_full(j.A) and is_full(j.B)):
         return _bar_edge(j, at)
     axes = ()
+    if j.kind == "JointSequence":                    # (kind, point − at, axis) per step
+        axes = tuple((k, p - at, a) for k, p, a in j.steps())
     if j.kind in ("Revolute",) and d == 3:
         axes = (j.axis(),)
     elif j.kind in ("Prismatic", "Cylindrical"):
@@ -153,11 +155,28 @@ def relative_pose(e: Edge, x, dim: int, sym: bool = False):
         n, e1, e2, p0, turns = e.axes
         p = _const(p0, sym) + x[0] * _const(e1, sym) + x[1] * _const(e2, sym)
         return (rotation_about(n, x[2], sym) if turns else eye), p
+    if k == "JointSequence":
+        return _sequence_pose(e, x, sym)
     if k == "Free":
         if dim == 2:
             return rotation_2d(x[2], sym), x[:2]
         return qm(x[3:]), x[:3]
     raise ModelError(f"joint {e.name!r}: no relative pose for a {k} joint")
+
+
+def _sequence_pose(e: Edge, x, sym: bool):
+    """``H_1(x_1) ⋯ H_n(x_n)``: each step a rotation by ``x_k`` about the line through its
+    point along its axis, or a translation by ``x_k`` along its axis."""
+    mul = ca.mtimes if sym else np.matmul
+    R, p = (ca.DM.eye(3), ca.DM.zeros(3, 1)) if sym else (np.eye(3), np.zeros(3))
+    for k, (kind, c, a) in enumerate(e.axes):
+        if kind == "hinge":
+            Rk = rotation_about(a, x[k], sym)
+            pk = _const(c, sym) - mul(Rk, _const(c, sym))
+        else:
+            Rk, pk = (ca.DM.eye(3) if sym else np.eye(3)), x[k] * _const(a, sym)
+        R, p = mul(R, Rk), mul(R, pk) + p
+    return R, p
 
 
 def _const(x, sym: bool):

@@ -36,7 +36,7 @@ from ncgen.model.context import Context
 
 #: Joint classes whose equations (without a drive) are joint primitives of constant scalars.
 COVERED_JOINTS = ("Spherical", "Revolute", "Prismatic", "Cylindrical", "Universal", "Planar", "Fixed",
-                  "Distance", "PointOnLine", "PointOnPlane", "Free")
+                  "Distance", "PointOnLine", "PointOnPlane", "Free", "JointSequence")
 #: Names of the intrinsic constraints' base vectors (``<member>.rigid.uv``).
 VECTOR_NAMES = "uvw"
 

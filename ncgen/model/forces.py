@@ -222,18 +222,29 @@ class TorsionalSpring(Force):
     The angle is measured from body-fixed directions, ``θ = atan2(y, x)``
     (:class:`~ncgen.model.joint_equations.AngleGauge`), and the generalised force is the
     virtual work of the torque pair, ``Q = −(k δ + c θ̇) ∂θ/∂q`` with ``θ̇ = (∂θ/∂q) v``:
-    exact for bars across the axis too, and internal (no net torque on the system)."""
+    exact for bars across the axis too, and internal (no net torque on the system).
+    ``coordinate``: on a :class:`~ncgen.model.joints.JointSequence`, the index of the hinge
+    whose angle θ is (its ``atan2`` terms, :meth:`~ncgen.model.joints.JointSequence.terms`)."""
 
     kind = "TorsionalSpring"
 
-    def __init__(self, joint, *, k, damping=0.0, rest_angle=0.0, name: str | None = None):
+    def __init__(self, joint, *, k, damping=0.0, rest_angle=0.0, coordinate=None, name: str | None = None):
         super().__init__(name)
         self.joint, self.k, self.damping, self.rest_angle = joint, k, damping, rest_angle
+        self.coordinate = coordinate
 
     def members(self):
-        from ncgen.model.joints import Revolute
-        if not isinstance(self.joint, Revolute):
-            raise ModelError(f"{self.label}: joint: expected a Revolute joint, got {self.joint!r}")
+        from ncgen.model.joints import JointSequence, Revolute
+        if self.coordinate is None and not isinstance(self.joint, Revolute):
+            raise ModelError(f"{self.label}: joint: expected a Revolute joint (or a JointSequence with "
+                             f"coordinate=), got {self.joint!r}")
+        if self.coordinate is not None:
+            laws = getattr(self.joint, "laws", [])
+            k = self.coordinate
+            if not isinstance(self.joint, JointSequence) or not isinstance(k, int) or not 0 <= k < len(laws) \
+                    or laws[k].kind != "Revolute":
+                raise ModelError(f"{self.label}: coordinate={k!r}: expected the index of a hinge of a "
+                                 f"JointSequence, got joint {self.joint!r}")
         return self.joint.members()
 
     def check(self, system):
@@ -242,14 +253,20 @@ class TorsionalSpring(Force):
                              "add it with add_joint first")
         from ncgen.model.context import Context
         from ncgen.model.layout import make_layout
-        self.joint.gauge(Context(system, make_layout(system.dim, list(system.members.values()))))
+        self._terms(Context(system, make_layout(system.dim, list(system.members.values()))))
 
     def nonnegative(self) -> dict:
         return {"k": self.k, "damping": self.damping}
 
+    def _terms(self, ctx):
+        """``(x, y)`` with ``θ = atan2(y, x)``."""
+        if self.coordinate is None:
+            return self.joint.gauge(ctx).terms(ctx)
+        return self.joint.terms(ctx)[self.coordinate]
+
     def deflection(self, ctx) -> ca.SX:
         """``δ = θ − rest_angle`` in (−π, π] (rad)."""
-        x, y = self.joint.gauge(ctx).terms(ctx)
+        x, y = self._terms(ctx)
         r = self._value(ctx, self.rest_angle, 1, "rest_angle", inputs=False)
         return ca.atan2(y * ca.cos(r) - x * ca.sin(r), x * ca.cos(r) + y * ca.sin(r))
 

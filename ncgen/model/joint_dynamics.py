@@ -1,7 +1,9 @@
 """Joint dynamics: damping, friction and position limits of one-coordinate joints
 (Revolute, Prismatic), as data on the joint (``joint.dynamics``, ``joint.limits``; URDF
 ``<dynamics damping friction>`` and ``<limit lower upper>``) and as the joint effort they
-produce in simulation (``simulate(..., joint_dynamics=True)``).
+produce in simulation (``simulate(..., joint_dynamics=True)``).  A
+:class:`~ncgen.model.joints.JointSequence` has one such law per coordinate
+(``joint.laws``, :func:`coordinate_laws`).
 
 The law, per joint coordinate ``x`` (rad or m) and rate ``w`` (rad/s or m/s), an effort
 ``τ_jd`` (N·m or N) added to the joint's own effort:
@@ -68,6 +70,12 @@ def set_joint_dynamics(joint, values: dict) -> None:
         raise ModelError(f"{joint.label}: lower = {merged['lower']:g} is above upper = {merged['upper']:g}")
     joint.limits = merged
     joint.dynamics = {**joint.dynamics, **{k: float(v) for k, v in values.items() if k in DYNAMICS_KEYS}}
+
+
+def coordinate_laws(joint) -> list:
+    """The objects holding the law of each of ``joint``'s coordinates, in order: the joint
+    itself for a one-coordinate joint, ``joint.laws`` for a joint sequence."""
+    return list(getattr(joint, "laws", [joint]))
 
 
 def has_dynamics(joint) -> bool:

@@ -16,6 +16,8 @@ Fixed            6   coincide + no relative rotation  [3]
 Distance         1   the two points ``at = (p_A, p_B)`` keep their distance  [1]
 PointOnLine      2   B's point at ``at`` stays on A's line through ``at`` along ``axis``  [1]
 PointOnPlane     1   B's point at ``at`` stays on A's plane through ``at`` with ``normal``
+JointSequence  3–4   hinges or slides applied in order (MuJoCo's joints of one body), see the class;
+                     made by the MJCF import, no TOML form (not in JOINT_TYPES)
 =============  ====  ====================================================================
 
 With a bar the count drops by the bar's missing spin: e.g. a bar sliding along its own
@@ -336,6 +338,206 @@ class Free(Joint):
         return np.zeros(self.system.dim) if at is None else self.at()
 
 
+class CoordinateLaw:
+    """The joint dynamics of one coordinate of a :class:`JointSequence` (``dynamics``,
+    ``limits``, :meth:`set_dynamics`: as a Revolute's or Prismatic's, :mod:`ncgen.model.joint_dynamics`)."""
+
+    def __init__(self, joint, name: str, kind: str):
+        self.joint, self.name, self.kind = joint, name, kind
+        self.limits: dict[str, float] = {}
+        self.dynamics: dict[str, float] = {}
+
+    @property
+    def label(self) -> str:
+        return f"{self.joint.label} coordinate {self.name!r}"
+
+    def set_dynamics(self, **values) -> "CoordinateLaw":
+        from ncgen.model.joint_dynamics import set_joint_dynamics
+        set_joint_dynamics(self, values)
+        return self
+
+
+class JointSequence(Joint):
+    """Hinges and slides applied in order, as MuJoCo composes the joints of one body: B's
+    motion relative to A is ``H = H_1(x_1) H_2(x_2) ⋯ H_n(x_n)`` (product of exponentials),
+    each ``H_k`` a rotation by ``x_k`` (rad, right-handed) about the line through ``at_k``
+    along ``axis_k`` or a translation by ``x_k`` (m) along ``axis_k``, lines and axes given in
+    the world in the initial configuration (where every ``x_k`` is 0).  ``steps``: a sequence
+    of ``(kind, at, axis)`` with kind ``"hinge"`` or ``"slide"``; ``names``: one per step
+    (default ``x1, x2, ...``).  Coordinates ``[x_1, ..., x_n]``, rates their derivatives,
+    ``effort``: n values (N·m or N); each coordinate has its own joint dynamics
+    (``joint.laws[k].set_dynamics``).
+
+    The members carry the equations (no intermediate member, so no massless body):
+
+    * 2 or 3 slides (independent axes): no relative rotation (3) and, for 2, B's point stays
+      on A's plane spanned by the axes (1);
+    * slide, slide, hinge along the slides' normal (MuJoCo's planar roots): a common normal (2)
+      and the hinge's point stays on A's plane (1);
+    * 2 hinges through one point (non-parallel axes): the points coincide (3) and
+      ``a_A · b_B = a · b`` (1): a Universal joint with any angle between the axes;
+    * 2 hinges on skew lines (non-parallel): with ``c_1, c_2`` the lines' closest points,
+      ``(r_B(c_2) − r_A(c_1)) · a_A``, ``(r_A(c_1) − r_B(c_2)) · b_B``, ``|r_B(c_2) − r_A(c_1)|``
+      and ``a_A · b_B`` keep their initial values (4);
+    * 3 hinges through one point with mutually perpendicular axes: the points coincide (3);
+      coordinates are the angles of ``R = Rot(a_1, x_1) Rot(a_2, x_2) Rot(a_3, x_3)``, defined
+      while ``|x_2| < π/2`` (gimbal lock at ``±π/2``, as for any such angles).
+
+    Other sequences are refused by name (3D only; A and B the ground or bodies)."""
+
+    kind = "JointSequence"
+
+    def __init__(self, A, B, *, steps, names=None, name=None, effort=None):
+        super().__init__(A, B, name=name, steps=steps, names=names, effort=effort)
+        n = len(steps) if isinstance(steps, (list, tuple)) else 0
+        given = list(names) if names is not None else [f"x{k + 1}" for k in range(n)]
+        self.laws = [CoordinateLaw(self, given[k] if k < len(given) else f"x{k + 1}",
+                                   "Revolute" if _step_kind(steps[k]) == "hinge" else "Prismatic")
+                     for k in range(n)]
+
+    # ------------------------------------------------------------ arguments
+    def steps(self) -> list[tuple[str, np.ndarray, np.ndarray]]:
+        """``[(kind, at, unit axis)]``, checked."""
+        steps, names = self.options.get("steps"), self.options.get("names")
+        if not isinstance(steps, (list, tuple)) or len(steps) < 2:
+            raise ModelError(f"{self.label}: steps: expected at least two (kind, at, axis) steps, got {steps!r}")
+        if names is not None and (len(names) != len(steps) or len(set(names)) != len(names)):
+            raise ModelError(f"{self.label}: names: expected {len(steps)} distinct names, got {names!r}")
+        out = []
+        for k, step in enumerate(steps):
+            kind = _step_kind(step)
+            if kind not in ("hinge", "slide") or len(step) != 3:
+                raise ModelError(f"{self.label}: steps[{k}]: expected (\"hinge\" or \"slide\", at, axis), got {step!r}")
+            at = as_vector(step[1], 3, f"{self.label}: steps[{k}] at")
+            a = as_vector(step[2], 3, f"{self.label}: steps[{k}] axis")
+            if norm(a) < 1e-12:
+                raise ModelError(f"{self.label}: steps[{k}] axis: expected a non-zero direction, got {a.tolist()}")
+            out.append((kind, at, a / norm(a)))
+        return out
+
+    def shape(self) -> str:
+        """``"slides"``, ``"planar"``, ``"hinges2"`` (one point), ``"skew2"`` or ``"hinges3"``; raises
+        :class:`ModelError` for a sequence the joint does not take."""
+        steps = self.steps()
+        kinds = [k for k, _, _ in steps]
+        axes = np.array([a for _, _, a in steps])
+        if all(k == "slide" for k in kinds):
+            if len(steps) > 3 or np.linalg.matrix_rank(axes, tol=1e-9) < len(steps):
+                raise ModelError(f"{self.label}: slides along dependent axes {np.round(axes, 12).tolist()}")
+            return "slides"
+        if kinds == ["slide", "slide", "hinge"]:
+            n = np.cross(axes[0], axes[1])
+            if norm(n) < 1e-9 or norm(np.cross(n / norm(n), axes[2])) > PERPENDICULAR_TOL:
+                raise ModelError(f"{self.label}: slide, slide, hinge is taken as planar motion: independent "
+                                 f"slides and the hinge along their normal; got axes {np.round(axes, 12).tolist()}")
+            return "planar"
+        if not all(k == "hinge" for k in kinds):
+            raise ModelError(f"{self.label}: a sequence of {', '.join(kinds)}: only hinges, only slides, or "
+                             "slide, slide, hinge (planar motion) are taken")
+        if len(steps) == 2:
+            if norm(np.cross(axes[0], axes[1])) < 1e-9:
+                raise ModelError(f"{self.label}: two hinges about parallel axes: the body between them would "
+                                 "need its own mass (make it a member)")
+            c1, c2 = self.closest_points()
+            return "hinges2" if norm(c2 - c1) <= 1e-12 * max(1.0, norm(c1)) else "skew2"
+        if len(steps) == 3:
+            gram = axes @ axes.T - np.eye(3)
+            off = max(norm(step[1] - steps[0][1]) for step in steps)
+            if np.abs(gram).max() > PERPENDICULAR_TOL or off > 1e-12 * max(1.0, norm(steps[0][1])):
+                raise ModelError(f"{self.label}: three hinges are taken through one point with mutually "
+                                 "perpendicular axes (a ball joint in angles); got axes "
+                                 f"{np.round(axes, 12).tolist()} at {[np.round(s[1], 12).tolist() for s in steps]}")
+            return "hinges3"
+        raise ModelError(f"{self.label}: {len(steps)} hinges: at most three are taken")
+
+    def closest_points(self) -> tuple[np.ndarray, np.ndarray]:
+        """The points of the first two steps' lines nearest each other (world, initial)."""
+        (_, p1, a), (_, p2, b) = self.steps()[:2]
+        w, ab = p1 - p2, a @ b
+        den = 1.0 - ab * ab
+        s = (ab * (b @ w) - (a @ w)) / den
+        t = ((b @ w) - ab * (a @ w)) / den
+        return p1 + s * a, p2 + t * b
+
+    def at(self) -> np.ndarray:
+        """The origin of the joint frames: the first hinge's closest point (the common point of
+        concurrent hinges), the hinge's point of planar motion, or the first slide's point."""
+        shape = self.shape()
+        if shape in ("slides", "planar"):
+            return self.steps()[-1 if shape == "planar" else 0][1]
+        return self.closest_points()[0]
+
+    # ------------------------------------------------------------ equations
+    def geometry(self, ctx):
+        self.require_dim(3, "use Planar or Revolute")
+        require_orientation(self.label, self.A, self.B)
+        for m in (self.A, self.B):
+            if not is_full(m):
+                raise ModelError(f"{self.label}: {m.name} is a {kind_of(m)}; a joint sequence joins the ground "
+                                 "or bodies")
+        shape, steps, at = self.shape(), self.steps(), self.at()
+        if shape == "slides":
+            eqs = lock_orientation(ctx, self.A, self.B, self.label, f"{self.name}.lock")
+            if len(steps) == 2:
+                n = np.cross(steps[0][2], steps[1][2])
+                eqs += point_on_plane(ctx, self.A, self.B, at, at, n / norm(n), self.label, f"{self.name}.plane")
+            return eqs
+        if shape == "planar":
+            n = steps[2][2]
+            return (align_axis(ctx, self.A, self.B, n, self.label, f"{self.name}.align")
+                    + point_on_plane(ctx, self.A, self.B, at, at, n, self.label, f"{self.name}.plane"))
+        if shape == "hinges3":
+            return coincidence(ctx, self.A, self.B, at, self.label, f"{self.name}.coincide")
+        a, b = steps[0][2], steps[1][2]
+        aA, _ = ctx.direction(self.A, a, self.label)
+        bB, _ = ctx.direction(self.B, b, self.label)
+        cross = [(f"{self.name}.angle", ctx.apply("dot", aA, bB, float(a @ b))[0])]
+        if shape == "hinges2":
+            return coincidence(ctx, self.A, self.B, at, self.label, f"{self.name}.coincide") + cross
+        c1, c2 = self.closest_points()
+        r1, _ = ctx.point(self.A, c1, self.label)
+        r2, _ = ctx.point(self.B, c2, self.label)
+        return [(f"{self.name}.along_a", ctx.apply("offset_dot", r1, r2, aA, float(a @ (c2 - c1)))[0]),
+                (f"{self.name}.along_b", ctx.apply("offset_dot", r2, r1, bB, float(b @ (c1 - c2)))[0]),
+                (f"{self.name}.offset", ctx.apply("distance", r1, r2, norm(c2 - c1))[0])] + cross
+
+    # ------------------------------------------------------------ coordinates
+    def terms(self, ctx) -> list:
+        """Per step: ``(x, y)`` with the hinge angle ``atan2(y, x)``, or the slide's
+        displacement (SX)."""
+        shape, steps = self.shape(), self.steps()
+        A, B, lab = self.A, self.B, self.label
+        if shape in ("slides", "planar"):           # B's point at `at` moves by the slides only
+            at = self.at()
+            d = ctx.point(B, at, lab)[0] - ctx.point(A, at, lab)[0]
+            axes = np.array([a for kind, _, a in steps if kind == "slide"])
+            proj = ca.vertcat(*[ca.dot(d, ctx.direction(A, a, lab)[0]) for a in axes])
+            s = ca.mtimes(ca.DM(np.linalg.inv(axes @ axes.T)), proj)
+            out = [s[k] for k in range(len(axes))]
+            return out if shape == "slides" else out + [angle_gauge(ctx, A, B, steps[2][2], lab).terms(ctx)]
+        if shape == "hinges3":           # R_ij = e_iᵀ R e_j = Rx(x_1) Ry(x_2) Rz(σ x_3), e = (a_1, a_2, a_1 × a_2)
+            e = [steps[0][2], steps[1][2], np.cross(steps[0][2], steps[1][2])]
+            sigma = float(np.sign(steps[2][2] @ e[2]))
+            eA = [ctx.direction(A, v, lab)[0] for v in e]
+            eB = [ctx.direction(B, v, lab)[0] for v in e]
+            R = [[ca.dot(eA[i], eB[j]) for j in range(3)] for i in range(3)]
+            return [(R[2][2], -R[1][2]), (ca.sqrt(R[0][0] ** 2 + R[0][1] ** 2), R[0][2]),
+                    (R[0][0], -sigma * R[0][1])]
+        a, b = steps[0][2], steps[1][2]           # b = Rot(a, x_1) b₀ seen from A, a = Rot(b, −x_2) a₀ from B
+        c2 = float(a @ b) ** 2
+        (aA, bA, abA), (aB, bB, baB) = ([ctx.direction(m, v, lab)[0] for v in vs] for m, vs in
+                                        ((A, (a, b, np.cross(a, b))), (B, (a, b, np.cross(b, a)))))
+        return [(ca.dot(bB, bA) - c2, ca.dot(bB, abA)), (ca.dot(aA, aB) - c2, -ca.dot(aA, baB))]
+
+    def coordinates(self, ctx) -> ca.SX:
+        """``[x_1, ..., x_n]`` (rad or m), zero initially."""
+        return ca.vertcat(*[t if not isinstance(t, tuple) else ca.atan2(t[1], t[0]) for t in self.terms(ctx)])
+
+
+def _step_kind(step):
+    return step[0] if isinstance(step, (list, tuple)) and step else None
+
+
 class Mimic(Joint):
     """URDF ``<mimic>``: the coordinate of the ``follower`` joint (Revolute or Prismatic)
     equals ``multiplier`` × the ``leader``'s + ``offset`` (rad or m; 1 equation).  Both
@@ -420,4 +622,4 @@ JOINT_TYPES: dict[str, type[Joint]] = {cls.kind: cls for cls in (
     Spherical, Revolute, Prismatic, Cylindrical, Universal, Planar, Fixed, Distance, PointOnLine,
     PointOnPlane, Free, Mimic, CoordinateDriver)}
 
-__all__ = ["JOINT_TYPES", "Joint", *JOINT_TYPES]
+__all__ = ["JOINT_TYPES", "Joint", "JointSequence", *JOINT_TYPES]

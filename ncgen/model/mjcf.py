@@ -12,34 +12,45 @@ by :mod:`ncgen.model.mjcf_inertia`; the ncgen model comes from the XML alone.
   spheres, capsules, cylinders, boxes, ellipsoids of ``density`` or ``mass``).  A moving
   group without mass is refused.
 * Joints (the file's configuration is ncgen's initial one, where MuJoCo's ``qpos`` is the
-  joint's ``ref``: a hinge's or slide's coordinate is ``qpos − ref``, ``joint.mjcf_ref``): ``hinge`` → :class:`~ncgen.model.joints.Revolute`, ``slide`` →
+  joint's ``ref``: a hinge's or slide's coordinate is ``qpos − ref``, ``joint.mjcf_ref``):
+  ``hinge`` → :class:`~ncgen.model.joints.Revolute`, ``slide`` →
   :class:`~ncgen.model.joints.Prismatic`, ``ball`` → :class:`~ncgen.model.joints.Spherical`,
-  ``free``/``<freejoint>`` → :class:`~ncgen.model.joints.Free` (at the body's frame); a body
-  with ``slide, slide, hinge`` (perpendicular slides, hinge along their normal, as the planar
-  roots of hopper, cheetah, walker, swimmer) → :class:`~ncgen.model.joints.Planar` about the
-  hinge's anchor.  Other joint combinations in one body are refused, naming the body.
-* Every hinge and slide is actuated by one component of the input ``tau`` (N·m or N, in
-  ``model.joint_names`` order).  ``damping``, ``armature``, ``frictionloss`` (as
-  ``friction``) and ``range`` (when limited; less ``ref``) are the joint's dynamics
-  (``simulate(joint_dynamics=True)``, :mod:`ncgen.model.joint_dynamics`); a hinge's
-  ``stiffness`` is a :class:`~ncgen.model.forces.TorsionalSpring` towards ``springref``.
-* Actuators: ``motor`` and ``general`` (fixed gain, no bias, no dynamics) on a hinge or
-  slide, as ``system.actuators`` (name, joint, ``gear`` × gain, ``ctrlrange``: data, not
-  enforced) and the matrix ``system.actuator_gear`` (``tau = actuator_gear @ ctrl``).
+  ``free``/``<freejoint>`` → :class:`~ncgen.model.joints.Free` (at the body's frame).  Several
+  hinges or slides in one body (humanoid hips, ankles on skew axes, planar roots ``slide,
+  slide, hinge``, ``slide, slide`` of a point mass) → one
+  :class:`~ncgen.model.joints.JointSequence`, applied in the file's order as MuJoCo does,
+  whose coordinates are MuJoCo's joints (named ``<sequence>.<MJCF joint>``, the sequence
+  named by its joints' names joined by ``_``); the members carry its equations, so no
+  massless intermediate body makes the mass matrix singular.  Sequences it does not take (a
+  ball with other joints, hinges on parallel axes, three hinges not at one point with
+  perpendicular axes, mixed orders) are refused, naming the body.
+* Every hinge and slide (sequences' too) is actuated by one component of the input ``tau``
+  (N·m or N, in ``model.joint_names`` order).  ``damping``, ``armature``, ``frictionloss``
+  (as ``friction``) and ``range`` (when limited; less ``ref``) are the joint's (or the
+  sequence coordinate's, ``joint.laws[k]``) dynamics (``simulate(joint_dynamics=True)``,
+  :mod:`ncgen.model.joint_dynamics`); a hinge's ``stiffness`` is a
+  :class:`~ncgen.model.forces.TorsionalSpring` towards ``springref``.
+* Fixed tendons without a force of their own (stiffness, damping, friction loss, range) are
+  ``system.tendons`` (``{name: {joint coordinate: coef}}``): transmissions of actuators and
+  of equalities.  Actuators: ``motor`` and ``general`` (fixed gain, no bias, no dynamics) on
+  a hinge, slide or such a tendon, as ``system.actuators`` (name, joint or tendon, ``gear`` ×
+  gain, ``ctrlrange``: data, not enforced) and the matrix ``system.actuator_gear`` (``tau =
+  actuator_gear @ ctrl``; a tendon's column holds ``gear × coef``).
 * Sites are markers of their member (``<body>_<site>`` frames for those on the ground);
   every body and site is a named frame (``system.frames``).
 * ``<equality><connect body1 body2 anchor>`` closes a loop exactly: a
   :class:`~ncgen.model.joints.Spherical` joint at the anchor (body1's frame), the two
   bodies sharing the point (MuJoCo's constraint is soft; ncgen's holds to round-off);
   ``<weld body1 body2>`` (without ``relpose``) is a :class:`~ncgen.model.joints.Fixed` joint;
-  ``<joint joint1 joint2 polycoef="0 c1 0 0 0">`` a :class:`~ncgen.model.joints.Mimic`.
+  ``<joint joint1 joint2 polycoef="0 c1 0 0 0">`` a :class:`~ncgen.model.joints.Mimic`, and
+  so is ``<tendon tendon1>`` on a fixed tendon of two hinges or slides (``c_1 x_1 + c_2 x_2 = 0``).
 * ``<option gravity>`` (and ``<flag gravity="disable"/>``) sets gravity.
 
 Not part of the imported model, by design: contacts (geom collisions, ``<contact>``),
 sensors, cameras, lights, visual and asset data, keyframes (``system.mjcf_ignored`` lists
 what the file had).  Everything else the import cannot represent — other equality
-constraints, tendons, other actuators, fluid forces, a slide's ``stiffness``, dynamics on
-ball and free joints, ... — is named, element and line, in ONE :class:`MjcfWarning`, and
+constraints, spatial tendons and tendon forces, other actuators, fluid forces, a slide's
+``stiffness``, dynamics on ball and free joints, ... — is named, element and line, in ONE :class:`MjcfWarning`, and
 listed in ``system.mjcf_unsupported``.
 """
 from __future__ import annotations
@@ -101,14 +112,12 @@ def system_from_mjcf(source, system_class, *, name=None):
         _scale_mass(compiler.totalmass, [ground] + groups)
     s.mjcf_ignored = sorted({el.tag for el in root if el.tag in IGNORED})
     member_of, joints, driven = _members(s, ground, groups, compiler, defaults, unsupported)
-    _actuators(s, root, joints, driven, defaults, unsupported)
+    tendons = _tendons(s, root, joints, driven, defaults, compiler, unsupported)
+    _actuators(s, root, joints, driven, tendons, defaults, unsupported)
     _frames(s, ground, groups, member_of, sites, defaults, compiler)
     for el in root:
         if el.tag == "equality":
-            _equality(s, el, ground, groups, member_of, joints, defaults, unsupported)
-        elif el.tag == "tendon":
-            for item in el:
-                unsupported.add(item, f"tendon {item.tag} {item.get('name', '')!r} is not imported".replace(" ''", ""))
+            _equality(s, el, ground, groups, member_of, joints, tendons, defaults, unsupported)
     s.mjcf_unsupported = list(unsupported)
     if unsupported:
         warnings.warn(f"MJCF {fname}: {len(unsupported)} element(s) not imported (the model differs from "
@@ -116,7 +125,7 @@ def system_from_mjcf(source, system_class, *, name=None):
     return s
 
 
-def _equality(s, section, ground, groups, member_of, joints, defaults, unsupported) -> None:
+def _equality(s, section, ground, groups, member_of, joints, tendons, defaults, unsupported) -> None:
     """``<connect body1 body2 anchor>`` as an exact :class:`~ncgen.model.joints.Spherical`
     joint (the bodies share the anchor point), ``<weld body1 body2>`` (the file's relative
     pose) as a :class:`~ncgen.model.joints.Fixed` one; other equality constraints are
@@ -127,6 +136,9 @@ def _equality(s, section, ground, groups, member_of, joints, defaults, unsupport
         a = defaults.attributes(el, None)
         name = a.get("name")
         if el.tag == "joint" and a.get("active", "true") != "false" and _joint_coupling(s, el, a, joints, k):
+            continue
+        if el.tag == "tendon" and a.get("active", "true") != "false" and _tendon_coupling(s, el, a, joints,
+                                                                                          tendons, k):
             continue
         if el.tag not in ("connect", "weld") or "body1" not in a:
             unsupported.add(el, f"equality {el.tag} {name!r} is not imported".replace(" None", ""))
@@ -176,6 +188,25 @@ def _joint_coupling(s, el, a, joints, k) -> bool:
     if offset != 0:
         return False
     s.add_joint(Mimic(j2, j1, multiplier=c[1], name=identifier(a.get("name") or f"joint{k}")))
+    return True
+
+
+def _tendon_coupling(s, el, a, joints, tendons, k) -> bool:
+    """``<tendon tendon1>`` (no ``tendon2``) on a fixed tendon of two hinges or slides with
+    ``polycoef[0] = 0``: ``c_1 x_1 + c_2 x_2 = 0`` held exactly as a
+    :class:`~ncgen.model.joints.Mimic` (``x_1 = −(c_2/c_1) x_2``); False otherwise (then
+    unsupported)."""
+    from ncgen.model.joints import Mimic
+    name = a.get("tendon1")
+    if name not in tendons:
+        raise ModelError(f"MJCF {where(el)}: <tendon tendon1={name!r}>: no tendon of that name")
+    c = numbers(el, a, "polycoef", 5, default=(0, 1, 0, 0, 0))
+    pairs = [(j, coef) for j, coef in tendons[name] or [] if coef != 0]
+    if "tendon2" in a or c[0] != 0 or len(pairs) != 2 or any(joints[j][1] not in ("hinge", "slide") for j, _ in pairs):
+        return False
+    (follower, c1), (leader, c2) = pairs
+    s.add_joint(Mimic(joints[leader][0], joints[follower][0], multiplier=-c2 / c1,
+                      name=identifier(a.get("name") or f"tendon{k}")))
     return True
 
 
@@ -302,7 +333,7 @@ def _members(s, ground, groups, compiler, defaults, unsupported):
     """Bodies and joints of the groups; returns ``(member of group, {MJCF joint name: (joint,
     kind)}, the joints driven by tau in its order)``."""
     from ncgen.model.forces import TorsionalSpring
-    from ncgen.model.joints import Free, Planar, Prismatic, Revolute, Spherical
+    from ncgen.model.joints import Free, Prismatic, Revolute, Spherical
 
     member_of = {id(ground): s.ground}
     for g in groups:
@@ -316,31 +347,17 @@ def _members(s, ground, groups, compiler, defaults, unsupported):
         I_body = R.T @ inertia @ R
         _check_inertia(I_body, g.body)
         member_of[id(g)] = s.add_body(bname, mass=mass, inertia=I_body, position=com, rotation=R)
-    hinged = [(g, j, a) for g in groups for j, a in g.joints if a.get("type", "hinge") in ("hinge", "slide")]
-    planar = {id(g) for g in groups if _is_planar(g, compiler)}
-    actuated = [(g, j, a) for g, j, a in hinged if id(g) not in planar]
+    actuated = [j for g in groups for j, a in g.joints if a.get("type", "hinge") in ("hinge", "slide")]
     tau = s.add_input("tau", len(actuated)) if actuated else None
-    effort = {id(j): tau[k] for k, (_, j, _) in enumerate(actuated)}
+    effort = {id(j): k for k, j in enumerate(actuated)}
     joints, driven = {}, []
     for g in groups:
         A, B = member_of[id(g.parent)], member_of[id(g)]
         kinds = [a.get("type", "hinge") for _, a in g.joints]
         R, p = g.T[:3, :3], g.T[:3, 3]
-        if id(g) in planar:
-            j, a = g.joints[2]
-            at = R @ numbers(j, a, "pos", 3, default=(0, 0, 0)) + p
-            normal = R @ direction(j, a, "axis", (0, 0, 1))
-            name = identifier("_".join(jj.get("name") or "j" for jj, _ in g.joints))
-            joint = s.add_joint(Planar(A, B, at=at, normal=normal, name=name))
-            for jj, aa in g.joints:
-                if jj.get("name"):
-                    joints[jj.get("name")] = (joint, "planar")
-                _passive_unsupported(jj, aa, unsupported, "a planar root's joint")
-            continue
         if len(kinds) > 1:
-            raise ModelError(f"MJCF {where(g.body)}: body {g.body.get('name')!r} has joints of types "
-                             f"{', '.join(kinds)}: several joints in one body are supported only as slide, slide, "
-                             "hinge (a planar root, perpendicular slides and the hinge along their normal)")
+            _sequence(s, g, A, B, tau, effort, joints, driven, compiler, unsupported, TorsionalSpring)
+            continue
         j, a = g.joints[0]
         kind = kinds[0]
         jname = identifier(j.get("name") or f"{B.name}_{kind}")
@@ -356,9 +373,11 @@ def _members(s, ground, groups, compiler, defaults, unsupported):
         elif kind in ("hinge", "slide"):
             axis = R @ direction(j, a, "axis", (0, 0, 1))
             cls = Revolute if kind == "hinge" else Prismatic
-            joint = s.add_joint(cls(A, B, at=at, axis=axis, name=jname, effort=effort[id(j)]))
-            driven.append(joint)
-            _joint_dynamics(s, joint, j, a, kind, compiler, unsupported, TorsionalSpring)
+            joint = s.add_joint(cls(A, B, at=at, axis=axis, name=jname, effort=tau[effort[id(j)]]))
+            driven.append(joint.name)
+            _joint_dynamics(joint, j, a, kind, compiler, unsupported,
+                            lambda k, rest, joint=joint: s.add_force(TorsionalSpring(
+                                joint, k=k, rest_angle=rest, name=f"{joint.name}_spring")))
         else:
             choice(j, a, "type", ("free", "ball", "slide", "hinge"), "hinge")
         if j.get("name"):
@@ -366,15 +385,37 @@ def _members(s, ground, groups, compiler, defaults, unsupported):
     return member_of, joints, driven
 
 
-def _is_planar(g, compiler) -> bool:
-    """slide, slide, hinge at one body: perpendicular slides, the hinge along their normal."""
-    kinds = [a.get("type", "hinge") for _, a in g.joints]
-    if kinds != ["slide", "slide", "hinge"]:
-        return False
-    (j1, a1), (j2, a2), (j3, a3) = g.joints
-    u, v = direction(j1, a1, "axis", (0, 0, 1)), direction(j2, a2, "axis", (0, 0, 1))
-    n = direction(j3, a3, "axis", (0, 0, 1))
-    return abs(u @ v) < 1e-12 and np.linalg.norm(np.cross(np.cross(u, v), n)) < 1e-12
+def _sequence(s, g, A, B, tau, effort, joints, driven, compiler, unsupported, TorsionalSpring) -> None:
+    """Several hinges or slides in one body as one :class:`~ncgen.model.joints.JointSequence`
+    (applied in the file's order, as MuJoCo does), each coordinate with its own dynamics and
+    spring."""
+    from ncgen.model.joints import JointSequence
+    R, p = g.T[:3, :3], g.T[:3, 3]
+    steps, names = [], []
+    for k, (j, a) in enumerate(g.joints):
+        kind = a.get("type", "hinge")
+        if kind not in ("hinge", "slide"):
+            raise ModelError(f"MJCF {where(j)}: a {kind} joint in body {B.name!r} with other joints; "
+                             "several joints in one body are taken as hinges or slides applied in order")
+        steps.append((kind, R @ numbers(j, a, "pos", 3, default=(0, 0, 0)) + p,
+                       R @ direction(j, a, "axis", (0, 0, 1))))
+        names.append(identifier(j.get("name") or f"{kind}{k}"))
+    name = identifier("_".join(names))
+    k0 = effort[id(g.joints[0][0])]
+    try:
+        joint = s.add_joint(JointSequence(A, B, steps=steps, names=names, name=name,
+                                          effort=tau[k0:k0 + len(steps)]))
+    except ModelError as e:
+        raise ModelError(f"MJCF {where(g.body)}: body {B.name!r}, joints "
+                         f"{', '.join(names)}: {e}") from None
+    for k, ((j, a), law) in enumerate(zip(g.joints, joint.laws)):
+        kind = a.get("type", "hinge")
+        driven.append(f"{joint.name}.{law.name}")
+        if j.get("name"):
+            joints[j.get("name")] = (joint, "sequence")
+        _joint_dynamics(law, j, a, kind, compiler, unsupported,
+                        lambda stiff, rest, k=k, law=law: s.add_force(TorsionalSpring(
+                            joint, k=stiff, rest_angle=rest, coordinate=k, name=f"{joint.name}_{law.name}_spring")))
 
 
 def _passive_unsupported(j, a, unsupported, what: str) -> None:
@@ -392,7 +433,9 @@ def _limited(j, a, autolimits: bool = True) -> bool:
     return lim == "true" or (lim == "auto" and autolimits and "range" in a)
 
 
-def _joint_dynamics(s, joint, j, a, kind, compiler, unsupported, TorsionalSpring) -> None:
+def _joint_dynamics(joint, j, a, kind, compiler, unsupported, spring) -> None:
+    """``joint``'s (or a sequence coordinate's law's) ``mjcf_ref``, dynamics and limits from
+    the MJCF joint ``j``; a hinge's ``stiffness`` through ``spring(k, rest angle)``."""
     angle = compiler.angle if kind == "hinge" else float
     ref = angle(number(j, a, "ref", 0.0))
     joint.mjcf_ref = ref
@@ -419,13 +462,63 @@ def _joint_dynamics(s, joint, j, a, kind, compiler, unsupported, TorsionalSpring
         if kind == "slide":
             unsupported.add(j, "stiffness on a slide joint")
         else:
-            s.add_force(TorsionalSpring(joint, k=k, rest_angle=angle(number(j, a, "springref", 0.0)) - ref,
-                                        name=f"{joint.name}_spring"))
+            spring(k, angle(number(j, a, "springref", 0.0)) - ref)
 
 
-def _actuators(s, root, joints, driven, defaults, unsupported) -> None:
-    """Motors as ``s.actuators`` and the map ``s.actuator_gear`` from ``ctrl`` to ``tau``."""
-    index = {n: driven.index(j) for n, (j, kind) in joints.items() if kind in ("hinge", "slide")}
+def _rate_index(joints, driven) -> dict:
+    """``{MJCF joint name: its component of tau}`` for the hinges and slides."""
+    return {n: driven.index(j.name if kind in ("hinge", "slide") else f"{j.name}.{identifier(n)}")
+            for n, (j, kind) in joints.items() if kind in ("hinge", "slide", "sequence")}
+
+
+#: Attributes of a tendon that make it act (the import takes fixed tendons without them).
+TENDON_FORCES = ("stiffness", "damping", "frictionloss", "armature")
+
+
+def _tendons(s, root, joints, driven, defaults, compiler, unsupported) -> dict:
+    """Fixed tendons as ``s.tendons`` (``{name: {joint coordinate: coef}}``, the length
+    ``L = Σ coef x_k`` of hinge and slide coordinates): they carry an actuator's transmission
+    (a motor's force ``f`` acts as ``coef_k f`` on joint k) or an equality.  A tendon with a
+    force of its own (stiffness, damping, friction loss, armature, a range), on a ball or free
+    joint, or spatial, is unsupported.  Returns ``{name: [(MJCF joint, coef)]}`` (None for
+    the unsupported ones)."""
+    index = _rate_index(joints, driven)
+    s.tendons, out = {}, {}
+    for section in root.findall("tendon"):
+        for k, el in enumerate(section):
+            a = {**defaults.classes.get(el.get("class") or "main", {}).get("tendon", {}),
+                 **defaults.attributes(el, None)}
+            name = a.get("name") or f"tendon{k}"
+            out[name] = None
+            if el.tag != "fixed":
+                unsupported.add(el, f"tendon {el.tag} {name!r} is not imported")
+                continue
+            acting = [key for key in TENDON_FORCES if number(el, a, key, 0.0) != 0]
+            if _limited(el, a, compiler.autolimits):
+                acting.append("range")
+            coefs, pairs = {}, []
+            for item in el:
+                target = item.get("joint")
+                if item.tag != "joint" or target not in joints:
+                    raise ModelError(f"MJCF {where(item)}: <{item.tag} joint={target!r}> in tendon {name!r}: "
+                                     "expected <joint joint=...> naming a joint")
+                if target not in index:
+                    acting.append(f"ball or free joint {target!r}")
+                    continue
+                c = number(item, item.attrib, "coef", 1.0)
+                coefs[driven[index[target]]] = coefs.get(driven[index[target]], 0.0) + c
+                pairs.append((target, c))
+            if acting:
+                unsupported.add(el, f"tendon fixed {name!r} ({', '.join(acting)} not modelled)")
+                continue
+            s.tendons[name], out[name] = coefs, pairs
+    return out
+
+
+def _actuators(s, root, joints, driven, tendons, defaults, unsupported) -> None:
+    """Motors as ``s.actuators`` and the map ``s.actuator_gear`` from ``ctrl`` to ``tau``;
+    a motor on a fixed tendon acts on its joints with the tendon's coefficients."""
+    index = _rate_index(joints, driven)
     s.actuators = []
     columns = []
     elements = [el for section in root.findall("actuator") for el in section]
@@ -441,8 +534,15 @@ def _actuators(s, root, joints, driven, defaults, unsupported) -> None:
         plain = el.tag == "motor" or (el.tag == "general" and a.get("gaintype", "fixed") == "fixed"
                                       and a.get("biastype", "none") == "none"
                                       and a.get("dyntype", "none") == "none")
-        if not plain or target[0] != "joint" or a["joint"] not in index:
-            unsupported.add(el, f"actuator {name!r} (only motor/general with fixed gain on a hinge or slide)")
+        if target[0] == "tendon" and a["tendon"] not in tendons:
+            raise ModelError(f"MJCF {where(el)}: <{el.tag} tendon={a['tendon']!r}>: no tendon of that name")
+        if target[0] == "tendon" and tendons[a["tendon"]] is None and plain:
+            unsupported.add(el, f"actuator {name!r} on tendon {a['tendon']!r}, which is not imported")
+            continue
+        on_tendon = target[0] == "tendon" and tendons[a["tendon"]] is not None
+        if not plain or not (on_tendon or (target[0] == "joint" and a["joint"] in index)):
+            unsupported.add(el, f"actuator {name!r} (only motor/general with fixed gain on a hinge, slide or "
+                            "fixed tendon)")
             continue
         gear = numbers(el, a, "gear", None, default=(1.0,))[0]
         gain = numbers(el, a, "gainprm", None, default=(1.0,))[0] if el.tag == "general" else 1.0
@@ -452,9 +552,11 @@ def _actuators(s, root, joints, driven, defaults, unsupported) -> None:
         limited = a.get("ctrllimited", "auto")
         limited = limited == "true" or (limited == "auto" and ctrl is not None)
         column = np.zeros(len(driven))
-        column[index[a["joint"]]] = gear * gain
+        for joint, c in (tendons[a["tendon"]] if on_tendon else [(a["joint"], 1.0)]):
+            column[index[joint]] += gear * gain * c
         columns.append(column)
-        s.actuators.append({"name": name, "joint": joints[a["joint"]][0].name, "gear": gear * gain,
+        s.actuators.append({"name": name, ("tendon" if on_tendon else "joint"):
+                            a["tendon"] if on_tendon else driven[index[a["joint"]]], "gear": gear * gain,
                             "ctrlrange": tuple(ctrl) if limited and ctrl is not None else None})
     s.actuator_gear = np.column_stack(columns) if columns else np.zeros((len(driven), 0))
 

@@ -5,7 +5,7 @@ mass, its axes; a free joint's frame for a member on a free joint), nested under
 its joint hangs from, with an ``<inertial>`` of its mass, centre and ``fullinertia``.  Joints, written in the child body's frame: Revolute → ``hinge``,
 Prismatic → ``slide``, Spherical → ``ball``, Free → ``<freejoint>``, Planar → ``slide``,
 ``slide``, ``hinge`` (along two perpendicular directions in the plane, then about the
-normal).  A hinge's or slide's ``damping``, ``armature``, ``friction`` (as ``frictionloss``)
+normal), JointSequence → its hinges and slides in order (named ``<joint>_<coordinate>``).  A hinge's or slide's ``damping``, ``armature``, ``friction`` (as ``frictionloss``)
 and limits (as ``range``) are written; a :class:`~ncgen.model.forces.TorsionalSpring` on a
 hinge becomes its ``stiffness``, ``springref`` and extra ``damping``.  Every actuated hinge
 or slide gets a ``<motor gear="1">`` (``ctrl`` = the joint efforts in ``model.joint_names``
@@ -28,7 +28,7 @@ from ncgen.errors import ModelError
 from ncgen.files import atomic_path
 from ncgen.reproducible import perpendicular_basis
 
-KINDS = ("Revolute", "Prismatic", "Spherical", "Free", "Planar")
+KINDS = ("Revolute", "Prismatic", "Spherical", "Free", "Planar", "JointSequence")
 #: Joints written as equality constraints when they close a loop.
 CLOSURES = ("Spherical", "Fixed", "Mimic")
 
@@ -95,7 +95,7 @@ def mjcf_text(model) -> str:
         joint = getattr(f, "joint", None)
         if f.kind != "TorsionalSpring" or joint is None:
             raise ModelError(f"to_mjcf: {f.label}: only torsional springs on hinges are exported")
-        springs[joint.name] = f
+        springs[joint.name if f.coordinate is None else (joint.name, f.coordinate)] = f
     lines = [f'<mujoco model="{model.name}">', '  <compiler angle="radian"/>',
              f'  <option gravity="{_fmt(model.gravity)}"><flag contact="disable"/></option>', "  <worldbody>"]
     motors = []
@@ -159,6 +159,10 @@ def _joint(j, R, p, springs, motors) -> list[str]:
     o = j.options
     if j.kind == "Free":
         return [f'<freejoint name="{j.name}"/>']
+    if j.kind == "JointSequence":
+        return [_one(f"{j.name}_{law.name}", kind, R.T @ (c - p), R.T @ a, law, springs.get((j.name, k)),
+                     o.get("effort") is not None, motors)
+                for k, ((kind, c, a), law) in enumerate(zip(j.steps(), j.laws))]
     at = R.T @ (np.asarray(o["at"], float) - p)
     if j.kind == "Spherical":
         return [f'<joint name="{j.name}" type="ball" pos="{_fmt(at)}"/>']
@@ -169,11 +173,15 @@ def _joint(j, R, p, springs, motors) -> list[str]:
         return [f'<joint name="{j.name}_{k}" type="{t}" pos="{_fmt(at)}" axis="{_fmt(R.T @ a)}"/>'
                 for k, (t, a) in enumerate((("slide", e1), ("slide", e2), ("hinge", n)))]
     axis = np.asarray(o["axis"], float)
-    attrs = {"name": j.name, "type": "hinge" if j.kind == "Revolute" else "slide", "pos": _fmt(at),
-             "axis": _fmt(R.T @ axis / np.linalg.norm(axis))}
-    dyn = dict(getattr(j, "dynamics", {}) or {})
+    return [_one(j.name, "hinge" if j.kind == "Revolute" else "slide", at, R.T @ axis / np.linalg.norm(axis), j,
+                 springs.get(j.name), o.get("effort") is not None, motors)]
+
+
+def _one(name, kind, at, axis, law, spring, actuated: bool, motors) -> str:
+    """One hinge or slide: ``law`` holds its dynamics and limits."""
+    attrs = {"name": name, "type": kind, "pos": _fmt(at), "axis": _fmt(axis)}
+    dyn = dict(getattr(law, "dynamics", {}) or {})
     damping = dyn.get("damping", 0.0)
-    spring = springs.get(j.name)
     if spring is not None:
         attrs["stiffness"] = repr(float(spring.k))
         attrs["springref"] = repr(float(spring.rest_angle))
@@ -183,13 +191,13 @@ def _joint(j, R, p, springs, motors) -> list[str]:
     for ours, theirs in (("armature", "armature"), ("friction", "frictionloss")):
         if dyn.get(ours):
             attrs[theirs] = repr(float(dyn[ours]))
-    lim = j.limits
+    lim = law.limits
     if "lower" in lim or "upper" in lim:
         attrs["range"] = _fmt([lim.get("lower", -1e10), lim.get("upper", 1e10)])
         attrs["limited"] = "true"
-    if o.get("effort") is not None:
-        motors.append(j.name)
-    return ["<joint " + " ".join(f'{k}="{v}"' for k, v in attrs.items()) + "/>"]
+    if actuated:
+        motors.append(name)
+    return "<joint " + " ".join(f'{k}="{v}"' for k, v in attrs.items()) + "/>"
 
 
 def write_mjcf(model, path) -> None:

@@ -665,6 +665,9 @@ def _member_entries(m) -> dict:
 
 
 def _joint_entries(j, sc) -> dict:
+    if j.kind not in JOINT_TYPES:
+        raise ModelError(f"to_toml: {j.label}: a {j.kind} joint has no TOML form (joint types: "
+                         f"{', '.join(JOINT_TYPES)})")
     out = {"type": j.kind, "name": j.name}
     if isinstance(j, CoordinateDriver):
         out["member"] = j.A.name
