@@ -27,6 +27,7 @@ from ncgen.assembly.unshared import UnsharedForm
 from ncgen.errors import ModelError
 from ncgen.interrupts import raise_if_interrupted
 from ncgen.model.context import Context
+from ncgen.model.function_set import FunctionSet
 from ncgen.model.layout import Layout, make_layout
 from ncgen.model.sharing import SharingPlan, intrinsic_key, share_coordinates
 
@@ -137,10 +138,10 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     if not factor.regular:        # a flat body: M must be positive definite on null(A)
         A0 = np.array(ca.Function("A", [ctx.t, ctx.q, ctx.p], [ca.jacobian(phi, ctx.q)])(t0, q_init, p0))
         check_tangent_inertia(M, A0, layout, members, f"system {system.name!r}")
-    functions, potential = system_functions(ctx, phi, F, V, M, factor, alpha, beta, system)
+    makers, potential = system_functions(ctx, phi, F, V, M, factor, alpha, beta, system)
+    functions = FunctionSet(makers, contact_functions(ctx, terms) if terms else None)   # each made on first use
     weight = sum(m.rigid.mass for m in members) * float(np.linalg.norm(system.gravity))
     if terms:                      # before the consistent state, whose contact forces need a defined normal
-        functions.update(contact_functions(ctx, terms))
         check_initial_gaps(system.name, system.contacts, functions["gap"], q_init, p0, contacts, weight)
     state = consistent_state(functions, layout, labels, q_init, v_init, p0, t0, tolerance, M,
                              fixed=fixed, assemble=assemble)

@@ -264,9 +264,14 @@ class System:
         ``assemble=True`` with ``fix=[...]`` (the initial poses are a guess to assemble by
         Newton, keeping the named coordinates), ``baumgarte``, ``t0``, ``share`` (default
         True: joints that shared coordinates express are eliminated, see
-        :mod:`ncgen.model.sharing`; ``model.sharing`` reports it)."""
-        from ncgen.assembly.build import build_model
-        return build_model(self, **options)
+        :mod:`ncgen.model.sharing`; ``model.sharing`` reports it).
+
+        A system built before with the same content and options (in this or an earlier
+        process) is read from the store of built models instead (:mod:`ncgen.codegen.model_cache`;
+        ``NCGEN_MODEL_CACHE=0`` turns it off); a system holding a Python function or a SymPy
+        expression is always built."""
+        from ncgen.codegen.model_cache import build_system
+        return build_system(self, **options)
 
     # ----------------------------------------------------------------- TOML
     @classmethod
