@@ -1,7 +1,7 @@
 """Built models kept on disk by content, so that loading the same model again skips URDF
 parsing and ``build()`` (SymPy derivations, CasADi assembly, the consistent initial state).
 
-An entry is ``<cache_dir>/models/<key>.model`` (:func:`ncgen.codegen.compile_cache.cache_dir`):
+An entry is ``<cache_dir>/models/<key>.model`` (:func:`ncgen.codegen.fsutil.cache_dir`):
 one line of JSON (the format, ncgen's version, the key, the sha256 and size of the payload),
 then the payload, a pickle of the model's attributes (:func:`ncgen.model.model.model_state`;
 CasADi expressions and functions through CasADi's own serialisation) and of the warnings its
@@ -56,7 +56,7 @@ def enabled() -> bool:
 
 def store_dir() -> Path:
     """``<cache_dir>/models``, beside the compiled libraries."""
-    from ncgen.codegen.compile_cache import cache_dir
+    from ncgen.codegen.fsutil import cache_dir
     return cache_dir() / "models"
 
 
@@ -133,9 +133,55 @@ def cached(key: str | None, build: Callable[[], object]):
 def build_system(system, **options):
     """``system`` built with ``options`` (:func:`ncgen.assembly.build.build_model`), through
     the store (keyed by :func:`system_key`); what ``System.build()`` does."""
-    from ncgen.assembly.build import build_model
+    def build():
+        from ncgen.assembly.build import build_model
+        return build_model(system, **options)
 
-    return cached(system_key(system, **options) if enabled() else None, lambda: build_model(system, **options))
+    return cached(system_key(system, **options) if enabled() else None, build)
+
+
+def source_key(kind: str, path: str | os.PathLike, **options) -> str:
+    """The key of the system that the reader ``kind`` (``"urdf"``, ``"toml"``) makes from the
+    file ``path`` with ``options``: the file's bytes and resolved path."""
+    data = Path(path).read_bytes()
+    return key_of({"reader": kind, "file": str(Path(path).resolve()), "sha256": hashlib.sha256(data).hexdigest(),
+                   "options": options})
+
+
+def cached_system(key: str | None, load: Callable[[], object]):
+    """The :class:`~ncgen.model.system.System` stored under ``key`` (a model file read before:
+    no parsing, no SymPy), else ``load()`` stored under it; the warnings of the read are kept
+    and given again, as :func:`cached` does for models."""
+    if key is None or not enabled():
+        return load()
+    path = _path(key, "system")
+    hit = _read(path, key, _decode_system)
+    if hit is not None:
+        system, said = hit
+        for category, message in said:
+            warnings.warn(message, category, stacklevel=3)
+        return system
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        system = load()
+    for w in caught:
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    try:
+        payload = _pickle({"system": system, "warnings": [(w.category, str(w.message)) for w in caught]})
+    except Exception:                      # noqa: BLE001 — something in it does not pickle: not stored
+        return system
+    _write(path, key, payload)
+    return system
+
+
+def _decode_system(payload: bytes) -> tuple:
+    import casadi
+
+    with casadi.global_unpickle_context():
+        stored = pickle.loads(payload)
+    if not (isinstance(stored, dict) and _is_system(stored.get("system")) and isinstance(stored.get("warnings"), list)):
+        raise TypeError(f"expected a system and its warnings, found {type(stored).__name__}")
+    return stored["system"], stored["warnings"]
 
 
 def _path(key: str, what: str = "") -> Path:

@@ -13,7 +13,8 @@ A maker is ``maker(functions) -> casadi.Function`` (it may ask the set for other
 functions).  Pickling (the store of built models, :mod:`ncgen.codegen.model_cache`) keeps a
 maker lazy only when it is a :class:`functools.partial` of a module-level function (its
 arguments numbers, arrays, CasADi matrices or functions, which pickle); any other maker (a
-closure over the assembly's expressions) is run first and its function pickled.
+closure over the assembly's expressions) is run first, and every function made travels as
+its CasADi serialisation, deserialised on its first access after reading.
 """
 from __future__ import annotations
 
@@ -71,12 +72,19 @@ class FunctionSet(Mapping):
         return f"FunctionSet({', '.join(self._names)}; made: {', '.join(self.made()) or 'none'})"
 
     def __reduce__(self):
-        portable = {k: m for k, m in self._makers.items() if _portable(m) and k not in self._made}
+        """Pickled as makers: portable ones as they are, the others run first; a function
+        already made travels as its CasADi serialisation, read back on its first access."""
+        makers = {k: m for k, m in self._makers.items() if _portable(m) and k not in self._made}
         for name in self._names:
-            if name not in portable:
-                self[name]
-        made = {k: self._made[k] for k in self._names if k in self._made}
-        return FunctionSet, (portable, made, self._names)
+            if name not in makers:
+                makers[name] = functools.partial(deserialized, self[name].serialize())
+        return FunctionSet, ({k: makers[k] for k in self._names}, None, self._names)
+
+
+def deserialized(text: str, _functions):
+    """The CasADi function whose serialisation is ``text`` (a maker of a pickled set)."""
+    import casadi
+    return casadi.Function.deserialize(text)
 
 
 def _portable(maker) -> bool:
