@@ -251,12 +251,16 @@ def force_terms(system, ctx: Context) -> tuple[ca.SX, ca.SX]:
     """Generalised force ``F`` (gravity and force elements) and the terms of the potential
     energy ``V``: one per member (gravity), then one per force element."""
     g = ca.DM(system.gravity)
-    F = ca.SX.zeros(ctx.layout.nq)
+    weights = np.zeros(ctx.layout.nq)              # gravity's part of F: constant, gathered numerically
     V = []
     for m in system.members.values():
-        C = ca.DM(m.rigid.C(m.rigid.c_g))            # centre of mass r_G = C(c_g) q
-        F += ctx.scatter(m, ca.mtimes(C.T, m.rigid.mass * g))
-        V.append(-m.rigid.mass * ca.dot(g, ca.mtimes(C, ctx.q_of(m))))
+        C = m.rigid.C(m.rigid.c_g)                  # centre of mass r_G = C(c_g) q
+        mg = m.rigid.mass * system.gravity
+        for k, i in enumerate(ctx.layout.member_indices(m.name)):
+            if i is not None:                       # (Cᵀ m g)_k, summed in CasADi's order
+                weights[i] += sum((C[j, k] * mg[j] for j in range(len(mg))), 0.0)
+        V.append(-m.rigid.mass * ca.dot(g, ca.mtimes(ca.DM(C), ctx.q_of(m))))
+    F = ca.SX(ca.DM(weights))
     for f in system.forces:
         F += f.generalized(ctx)
         V.append(f.potential(ctx))
