@@ -19,6 +19,15 @@ Each n runs in a child process too (time and peak memory).
     python benchmarks/build_scaling.py                 N = 10, 100, 1000
     python benchmarks/build_scaling.py --smoke         N = 2, 4 and n <= 3 (CI)
     python benchmarks/build_scaling.py --sizes 10 100 --cflags=-O2   -O2 on every file
+
+``--build-cpu ROOT...``: only ``System`` -> ``build()``, in CPU seconds, for each ncgen checkout
+``ROOT`` (e.g. ``/work/main`` before a change and ``.`` after it), interleaved, each in fresh
+child processes (imports excluded): the system's construction; ``build()`` with the store of
+built models off; then every function of ``model.functions`` made (what a lazy build left for
+later; ~0 where they are made eagerly); ``build()`` with an empty store (it writes the entry);
+and in another process the same ``System`` -> ``build()`` on that warm store.
+
+    python benchmarks/build_scaling.py --build-cpu /work/main . --sizes 10 40 160 1000
 """
 from __future__ import annotations
 
@@ -66,6 +75,66 @@ def child_ncgen(n: int, cflags: str | None) -> dict:
     return {"n": n, "phi_q0": residual, "nq": model.nq, "times": times, "source_bytes": size,
             "rss_self_kb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
             "rss_children_kb": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss}
+
+
+def child_build(n: int) -> dict:
+    """Runs in the child process (the ncgen of ``$PYTHONPATH``): CPU seconds of the chain's
+    ``System``, its ``build()`` and then of every remaining function of ``model.functions``."""
+    import ncgen  # noqa: F401  (imports are not timed)
+    from common import chain_system
+    from ncgen.model import system as _  # noqa: F401
+
+    start = time.process_time()
+    system = chain_system(n)
+    built = time.process_time()
+    model = system.build()
+    done = time.process_time()
+    made = getattr(model.functions, "made", None)
+    made = list(made()) if made else None
+    dict(model.functions)
+    rest = time.process_time()
+    return {"n": n, "nq": model.nq, "system": built - start, "build": done - built, "rest": rest - done,
+            "made": made, "store_key": getattr(model.data, "store_key", None) is not None}
+
+
+def build_cpu(roots: list[str], sizes: list[int], rounds: int, timeout: float) -> None:
+    """The ``--build-cpu`` table (see the module docstring)."""
+    base = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    with tempfile.TemporaryDirectory(prefix="ncgen-build-cpu-") as tmp:
+        def child(root: str, n: int, extra: dict) -> dict | None:
+            env = {**base, "PYTHONPATH": str(Path(root).resolve()), "PYTHONPYCACHEPREFIX": f"{tmp}/pyc", **extra}
+            cmd = [sys.executable, str(Path(__file__).resolve()), "--child", "build", str(n)]
+            try:
+                out = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=HERE, env=env)
+            except subprocess.TimeoutExpired:
+                return None
+            if out.returncode != 0:
+                raise RuntimeError(f"build N = {n} ({root}) failed:\n{out.stderr[-2000:]}")
+            return json.loads(out.stdout.strip().splitlines()[-1])
+
+        for root in roots:                  # bytecode written once per checkout, not timed
+            child(root, 2, {"NCGEN_MODEL_CACHE": "0"})
+        print(f"\n=== System -> build() of the chain of N bars, CPU s (fresh processes, imports excluded; "
+              f"min of {rounds}) ===")
+        print(f"  {'N':>5} {'checkout':<28} {'System':>8} {'build, store off':>17} {'then all functions':>19} "
+              f"{'build, empty store':>19} {'System+build, stored':>21}")
+        for n in sizes:
+            for r in range(rounds):
+                order = roots if r % 2 == 0 else roots[::-1]
+                for root in order:
+                    off = child(root, n, {"NCGEN_MODEL_CACHE": "0"})
+                    cache = {"NCGEN_MODEL_CACHE": "1", "NCGEN_CACHE_DIR": f"{tmp}/cache-{abs(hash(root))}-{n}-{r}"}
+                    first = child(root, n, cache)
+                    warm = child(root, n, cache)
+                    if None in (off, first, warm):
+                        print(f"  {n:>5} {root:<28} did not finish within {timeout:g} s")
+                        continue
+                    stored = "" if warm["store_key"] else " (no store)"
+                    print(f"  {n:>5} {root[-28:]:<28} {off['system']:>8.2f} {off['build']:>17.2f} {off['rest']:>19.2f} "
+                          f"{first['build']:>19.2f} {warm['system'] + warm['build']:>21.2f}{stored}", flush=True)
+                    if off["made"] is not None and r == 0:
+                        print(f"  {'':>5} made by build(): {', '.join(off['made'])}")
+        print(f"  load average at the end: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
 
 def child_kane(n: int) -> dict:
@@ -132,11 +201,20 @@ def main(argv=None) -> int:
     parser.add_argument("--no-kane", action="store_true", help="skip the SymPy KanesMethod comparison")
     parser.add_argument("--timeout", type=float, default=1800.0, help="seconds allowed per N")
     parser.add_argument("--kane-cap", type=float, default=60.0, help="stop KanesMethod after a run this long (s)")
+    parser.add_argument("--build-cpu", nargs="+", metavar="ROOT",
+                        help="only System -> build() CPU, for each ncgen checkout ROOT (see the docstring)")
+    parser.add_argument("--rounds", type=int, default=1, help="rounds of --build-cpu (min shown)")
     parser.add_argument("--child", nargs=2, metavar=("KIND", "N"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.child:
         kind, n = args.child[0], int(args.child[1])
-        print(json.dumps(child_ncgen(n, args.cflags) if kind == "ncgen" else child_kane(n)))
+        child = {"ncgen": lambda: child_ncgen(n, args.cflags), "build": lambda: child_build(n)}.get(kind)
+        print(json.dumps(child() if child else child_kane(n)))
+        return 0
+    if args.build_cpu:
+        print(machine())
+        build_cpu(args.build_cpu, args.sizes or ([2, 4] if args.smoke else [10, 40, 160, 1000]), args.rounds,
+                  args.timeout)
         return 0
     sizes = args.sizes or ([2, 4] if args.smoke else [10, 100, 1000])
     kane_cap, kane_max = (5.0, 3) if args.smoke else (args.kane_cap, 40)

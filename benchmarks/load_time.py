@@ -20,6 +20,12 @@ ncgen reads them), Pinocchio with ``pinocchio.buildModelFromUrdf``; each in a fr
 (user + system of the child), min and median over the rounds, the CPU model and the load
 average are printed: on a shared machine wall time is CPU time times the queue.
 
+The same from Python: ``nc.System.from_urdf(panda).build()`` in a fresh process, first with an
+empty cache, then on the warm store (``System.from_urdf`` of a file read before, ``build()`` of a
+system built before), then with the store off; the child reports the CPU and wall time of the
+imports (``numpy``, ``casadi``, ``ncgen``) and of the call itself, apart.  Each round is
+followed by a MuJoCo and a Pinocchio load of the same robot in fresh processes (interleaved).
+
     python benchmarks/load_time.py                 Panda and box_stack, 5 rounds
     python benchmarks/load_time.py --rounds 3
     python benchmarks/load_time.py --smoke         slider_crank, 1 round (CI)
@@ -86,6 +92,48 @@ def ncgen_runs(model: Path, t_end: float, rounds: int, base_env: dict) -> dict[s
                 out[label].append((wall, cpu))
             stored = list(Path(cache, "models").glob("*.model"))
             assert stored, f"{model.name}: nothing stored in {cache}/models"
+    return out
+
+
+PYTHON_CHILD = """
+import json, sys, time
+c0, w0 = time.process_time(), time.perf_counter()
+import numpy, casadi, ncgen as nc
+from ncgen.model import system
+c1, w1 = time.process_time(), time.perf_counter()
+model = nc.System.from_urdf(sys.argv[1]).build()
+c2, w2 = time.process_time(), time.perf_counter()
+print(json.dumps({"import": [w1 - w0, c1 - c0], "load": [w2 - w1, c2 - c1], "sympy": "sympy" in sys.modules,
+                  "stored": model.data.store_key is not None}))
+"""
+
+
+def python_runs(urdf: Path, rounds: int, base_env: dict, tmp: str) -> dict[str, list[tuple[float, float]]]:
+    """``nc.System.from_urdf(urdf).build()`` in fresh processes: first, stored and store-off
+    loads (the call alone, and the imports before it), each round followed by a MuJoCo and a
+    Pinocchio load in fresh processes."""
+    import json
+    stripped = Path(tmp) / "model.urdf"
+    stripped.write_text(mesh_free_urdf(urdf))
+    out: dict[str, list[tuple[float, float]]] = {}
+    refs = (("MuJoCo from_xml_string (process)", "mujoco_load", stripped),
+            ("Pinocchio buildModelFromUrdf (process)", "pinocchio_load", urdf))
+    for r in range(rounds):
+        env = {**base_env, "NCGEN_CACHE_DIR": f"{tmp}/python-cache{r}"}
+        for label, extra in (("first (empty cache)", {}), ("stored", {}), ("store off", {"NCGEN_MODEL_CACHE": "0"})):
+            _, _, text = run([sys.executable, "-c", PYTHON_CHILD, str(urdf)], {**env, **extra}, tmp)
+            got = json.loads(text.strip().splitlines()[-1])
+            out.setdefault(f"from_urdf().build(), {label}", []).append(tuple(got["load"]))
+            out.setdefault(f"  imports before it, {label}", []).append(tuple(got["import"]))
+            if label == "stored":
+                assert got["stored"] and not got["sympy"], f"the stored load built or imported SymPy: {got}"
+        for name, fn, arg in refs:
+            code = (f"import sys; sys.path.insert(0, {str(HERE)!r}); import load_time; "
+                    f"load_time.{fn}({str(arg)!r})")
+            try:
+                out.setdefault(name, []).append(run([sys.executable, "-c", code], base_env, tmp)[:2])
+            except SystemExit as exc:
+                print(f"  {name}: {str(exc)[:200]}")
     return out
 
 
@@ -157,6 +205,11 @@ def main() -> None:
                   f"later runs <= {TARGET_LATER:g} s wall ({'met' if later <= TARGET_LATER else 'NOT met'})")
             print(f"RATIO later run, store off / stored, CPU: {off / on:.2f}")
             print(f"  load average now: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
+        print(f"\n=== {urdf.stem} from Python: nc.System.from_urdf(path).build() in a fresh process "
+              f"(the call; imports apart), interleaved with MuJoCo and Pinocchio loads")
+        for label, samples in python_runs(urdf, rounds, env, pyc).items():
+            print(summary(label, samples))
+        print(f"  load average now: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
         print(f"\n=== {urdf.stem}: MuJoCo and Pinocchio load the same robot")
         refs = reference_runs(urdf, rounds, env, pyc)
         for label, samples in refs.items():

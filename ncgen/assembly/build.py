@@ -27,6 +27,7 @@ from ncgen.assembly.unshared import UnsharedForm
 from ncgen.errors import ModelError
 from ncgen.interrupts import raise_if_interrupted
 from ncgen.model.context import Context
+from ncgen.model.function_set import FunctionSet
 from ncgen.model.layout import Layout, make_layout
 from ncgen.model.sharing import SharingPlan, intrinsic_key, share_coordinates
 
@@ -137,10 +138,10 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     if not factor.regular:        # a flat body: M must be positive definite on null(A)
         A0 = np.array(ca.Function("A", [ctx.t, ctx.q, ctx.p], [ca.jacobian(phi, ctx.q)])(t0, q_init, p0))
         check_tangent_inertia(M, A0, layout, members, f"system {system.name!r}")
-    functions, potential = system_functions(ctx, phi, F, V, M, factor, alpha, beta, system)
+    makers, potential = system_functions(ctx, phi, F, V, M, factor, alpha, beta, system)
+    functions = FunctionSet(makers, contact_functions(ctx, terms) if terms else None)   # each made on first use
     weight = sum(m.rigid.mass for m in members) * float(np.linalg.norm(system.gravity))
     if terms:                      # before the consistent state, whose contact forces need a defined normal
-        functions.update(contact_functions(ctx, terms))
         check_initial_gaps(system.name, system.contacts, functions["gap"], q_init, p0, contacts, weight)
     state = consistent_state(functions, layout, labels, q_init, v_init, p0, t0, tolerance, M,
                              fixed=fixed, assemble=assemble)
@@ -250,12 +251,16 @@ def force_terms(system, ctx: Context) -> tuple[ca.SX, ca.SX]:
     """Generalised force ``F`` (gravity and force elements) and the terms of the potential
     energy ``V``: one per member (gravity), then one per force element."""
     g = ca.DM(system.gravity)
-    F = ca.SX.zeros(ctx.layout.nq)
+    weights = np.zeros(ctx.layout.nq)              # gravity's part of F: constant, gathered numerically
     V = []
     for m in system.members.values():
-        C = ca.DM(m.rigid.C(m.rigid.c_g))            # centre of mass r_G = C(c_g) q
-        F += ctx.scatter(m, ca.mtimes(C.T, m.rigid.mass * g))
-        V.append(-m.rigid.mass * ca.dot(g, ca.mtimes(C, ctx.q_of(m))))
+        C = m.rigid.C(m.rigid.c_g)                  # centre of mass r_G = C(c_g) q
+        mg = m.rigid.mass * system.gravity
+        for k, i in enumerate(ctx.layout.member_indices(m.name)):
+            if i is not None:                       # (Cᵀ m g)_k, summed in CasADi's order
+                weights[i] += sum((C[j, k] * mg[j] for j in range(len(mg))), 0.0)
+        V.append(-m.rigid.mass * ca.dot(g, ca.mtimes(ca.DM(C), ctx.q_of(m))))
+    F = ca.SX(ca.DM(weights))
     for f in system.forces:
         F += f.generalized(ctx)
         V.append(f.potential(ctx))

@@ -104,37 +104,64 @@ DOCS = {
 
 
 def system_functions(ctx: Context, phi, F, V, M: np.ndarray, factor: CholeskyFactor | SingularMass, alpha: float,
-                     beta: float, system) -> tuple[dict[str, ca.Function], ca.Function]:
-    """The functions of :data:`DOCS` by name, and ``V: t, q, p -> V`` (the terms of the
-    potential energy, column ``V`` of :func:`~ncgen.assembly.build.force_terms`)."""
+                     beta: float, system) -> tuple[dict, ca.Function]:
+    """The makers of the functions of :data:`DOCS` by name (each ``maker(functions) ->
+    ca.Function``, run on first access by :class:`~ncgen.model.function_set.FunctionSet`), and
+    ``V: t, q, p -> V`` (the terms of the potential energy, column ``V`` of
+    :func:`~ncgen.assembly.build.force_terms`).  ``Minv``, ``mass`` and the composites are
+    partials of module-level functions (they stay lazy in a stored model); the others close
+    over the assembly's expressions."""
     t, q, v, u, p = ctx.t, ctx.q, ctx.v, ctx.u, ctx.p
-    A = ca.jacobian(phi, q)
-    Av = ca.mtimes(A, v)
-    phi_t = ca.jacobian(phi, t)
-    gamma = -(ca.jtimes(Av, q, v) + 2 * ca.jacobian(Av, t) + ca.jacobian(phi_t, t))
-    b = ca.SX.sym("b", ctx.layout.nq)
+    symbols = {"t": t, "q": q, "v": v, "u": u, "p": p}
+
+    @functools.cache
+    def jacobian():
+        return ca.jacobian(phi, q)
+
+    @functools.cache
+    def phi_t():
+        return ca.jacobian(phi, t)
+
+    def gamma():
+        Av = ca.mtimes(jacobian(), v)
+        return -(ca.jtimes(Av, q, v) + 2 * ca.jacobian(Av, t) + ca.jacobian(phi_t(), t))
+
+    def function(name, ins, outs, out_names):
+        return lambda _: ca.Function(name, [symbols[i] for i in ins], outs(), list(ins), out_names)
+
     Msp = sparse_dm(M)
-
-    f = {}
-
-    def add(name, ins, outs, out_names):
-        f[name] = ca.Function(name, [{"t": t, "q": q, "v": v, "u": u, "p": p, "b": b}[i] for i in ins],
-                              outs, list(ins), out_names)
-
-    add("phi", ("t", "q", "p"), [phi], ["phi"])
-    add("A", ("t", "q", "p"), [A], ["A"])
-    add("phi_t", ("t", "q", "p"), [phi_t], ["phi_t"])
-    add("gamma", ("t", "q", "v", "p"), [gamma], ["gamma"])
-    add("F", ("t", "q", "v", "u", "p"), [F], ["F"])
-    add("mass", (), [Msp], ["M"])
-    add("Minv", ("b",), [factor.solve(b) if factor.regular else factor.pseudo_solve(b)], ["x"])
-    r, rd = _markers(ctx, system)
-    add("markers", ("q", "v"), [r, rd], ["r", "rdot"])
-    R, pos = _poses(ctx, system)
-    add("poses", ("q",), [R, pos], ["R", "p"])
+    makers = {
+        "phi": function("phi", ("t", "q", "p"), lambda: [phi], ["phi"]),
+        "A": function("A", ("t", "q", "p"), lambda: [jacobian()], ["A"]),
+        "phi_t": function("phi_t", ("t", "q", "p"), lambda: [phi_t()], ["phi_t"]),
+        "gamma": function("gamma", ("t", "q", "v", "p"), lambda: [gamma()], ["gamma"]),
+        "F": function("F", ("t", "q", "v", "u", "p"), lambda: [F], ["F"]),
+        "mass": functools.partial(_mass, Msp),
+        "Minv": functools.partial(_minv, factor, ctx.layout.nq),
+        "markers": function("markers", ("q", "v"), lambda: list(_markers(ctx, system)), ["r", "rdot"]),
+        "poses": function("poses", ("q",), lambda: list(_poses(ctx, system)), ["R", "p"]),
+    }
     potential = ca.Function("V", [t, q, p], [V], ["t", "q", "p"], ["V"])
-    f.update(composite_functions(f, potential, Msp, alpha, beta, ca.SX, regular=factor.regular))
-    return {name: f[name] for name in FUNCTIONS}, potential
+    for name in COMPOSITES:
+        makers[name] = functools.partial(_composite, name, potential, Msp, alpha, beta, factor.regular)
+    return {name: makers[name] for name in FUNCTIONS}, potential
+
+
+def _mass(M: ca.DM, _functions) -> ca.Function:
+    """``mass: () -> M``, the constant sparse mass matrix."""
+    return ca.Function("mass", [], [M], [], ["M"])
+
+
+def _minv(factor: CholeskyFactor | SingularMass, nq: int, _functions) -> ca.Function:
+    """``Minv: b -> M⁻¹ b`` (``M⁺ b`` for a singular ``M``) by the constant factor."""
+    b = ca.SX.sym("b", nq)
+    return ca.Function("Minv", [b], [factor.solve(b) if factor.regular else factor.pseudo_solve(b)], ["b"], ["x"])
+
+
+def _composite(name: str, potential: ca.Function, M: ca.DM, alpha: float, beta: float, regular: bool,
+               functions) -> ca.Function:
+    """The composite ``name`` of :func:`composite_functions` from the model's primitives."""
+    return composite_functions(functions, potential, M, alpha, beta, ca.SX, (name,), regular=regular)[name]
 
 
 #: The system functions, in the order of :data:`DOCS`.

@@ -131,19 +131,22 @@ def load_model(path: str, params: list[str] | None = None, contacts: str = "smoo
     ``System.build``; ``floating_base``: for URDF files (``--floating-base``).  A model built
     before from the same file and options is read from the store of built models
     (:mod:`ncgen.codegen.model_cache`; ``NCGEN_MODEL_CACHE=0`` turns it off)."""
+    from ncgen.assembly.build import build_model
     from ncgen.codegen import model_cache
-
-    def build():
-        system = load_system(path, params, floating_base)
-        try:
-            return system.build(contacts=contacts, share=share)
-        except NcgenError as e:
-            raise type(e)(f"{path}: model {system.name!r} cannot be built: {e}") from None
 
     key = None
     if Path(path).is_file() and model_cache.enabled():
         key = model_cache.file_key(path, params=list(params or []), contacts=contacts, share=share,
                                    floating_base=floating_base)
+
+    def build():
+        system = load_system(path, params, floating_base)
+        try:             # stored under the file's key (or, without one, under the system's by System.build)
+            return (build_model(system, contacts=contacts, share=share) if key is not None
+                    else system.build(contacts=contacts, share=share))
+        except NcgenError as e:
+            raise type(e)(f"{path}: model {system.name!r} cannot be built: {e}") from None
+
     return model_cache.cached(key, build)
 
 

@@ -9,10 +9,20 @@ For models: :func:`~ncgen.codegen.model_package.generate` assembles a model's pa
 sections — its system functions and the compiled stepper
 (:mod:`~ncgen.codegen.stepper_package`).
 """
-from ncgen.codegen.compile_cache import BuildResult, compile_package
-from ncgen.codegen.doc import ArgDoc, FunctionDoc, PackageDoc
-from ncgen.codegen.load import NoCompilerWarning, load_functions
-from ncgen.codegen.package import ExtraSource, Package, write_package
+from importlib import import_module
 
-__all__ = ["ArgDoc", "FunctionDoc", "PackageDoc", "ExtraSource", "Package", "write_package",
-           "BuildResult", "compile_package", "NoCompilerWarning", "load_functions"]
+#: public name -> module defining it (imported on first use, so that reading a stored model
+#: through :mod:`~ncgen.codegen.model_cache` does not import the generator and Jinja2)
+_NAMES = {"ArgDoc": "doc", "FunctionDoc": "doc", "PackageDoc": "doc", "ExtraSource": "package",
+          "Package": "package", "write_package": "package", "BuildResult": "compile_cache",
+          "compile_package": "compile_cache", "NoCompilerWarning": "load", "load_functions": "load"}
+
+__all__ = list(_NAMES)
+
+
+def __getattr__(name: str):
+    if name not in _NAMES:
+        raise AttributeError(f"module 'ncgen.codegen' has no attribute {name!r}")
+    value = getattr(import_module(f"ncgen.codegen.{_NAMES[name]}"), name)
+    globals()[name] = value
+    return value

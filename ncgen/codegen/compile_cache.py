@@ -41,6 +41,7 @@ from typing import Sequence
 
 from ncgen.codegen import fsutil, manifest
 from ncgen.codegen.compiler import Compiler, find_compiler
+from ncgen.codegen.fsutil import cache_dir
 from ncgen.codegen.package import Package
 from ncgen.errors import CodegenError
 
@@ -69,12 +70,6 @@ class BuildResult:
 
     def __fspath__(self) -> str:
         return str(self.path)
-
-
-def cache_dir() -> Path:
-    """``$NCGEN_CACHE_DIR``, else ``~/.cache/ncgen``."""
-    env = os.environ.get("NCGEN_CACHE_DIR")
-    return Path(env) if env else Path.home() / ".cache" / "ncgen"
 
 
 def resolve_cflags(cflags: str | Sequence[str] | None) -> tuple[str, ...]:

@@ -20,6 +20,12 @@ from typing import Callable, Iterator
 from ncgen.files import sweep_stale, temporary_name
 
 
+def cache_dir() -> Path:
+    """``$NCGEN_CACHE_DIR``, else ``~/.cache/ncgen``: the compile cache and the store of built models."""
+    env = os.environ.get("NCGEN_CACHE_DIR")
+    return Path(env) if env else Path.home() / ".cache" / "ncgen"
+
+
 def sha256_bytes(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 

@@ -1,13 +1,14 @@
 """Built models kept on disk by content, so that loading the same model again skips URDF
 parsing and ``build()`` (SymPy derivations, CasADi assembly, the consistent initial state).
 
-An entry is ``<cache_dir>/models/<key>.model`` (:func:`ncgen.codegen.compile_cache.cache_dir`):
+An entry is ``<cache_dir>/models/<key>.model`` (:func:`ncgen.codegen.fsutil.cache_dir`):
 one line of JSON (the format, ncgen's version, the key, the sha256 and size of the payload),
 then the payload, a pickle of the model's attributes (:func:`ncgen.model.model.model_state`;
 CasADi expressions and functions through CasADi's own serialisation) and of the warnings its
 build gave, which a read gives again.  The key hashes what the model is made from — a model
-file's bytes and the path it was read from, or a :class:`~ncgen.model.system.System`'s
-description — the build options, and ncgen itself: its version and the bytes of its Python
+file's bytes and the path it was read from, or the content digest of a
+:class:`~ncgen.model.system.System` (every value it holds, :mod:`ncgen.model.digest`) — the
+build options, and ncgen itself: its version and the bytes of its Python
 sources (so an edited checkout never loads a model built by other code), CasADi's, NumPy's
 and Python's versions.
 
@@ -55,7 +56,7 @@ def enabled() -> bool:
 
 def store_dir() -> Path:
     """``<cache_dir>/models``, beside the compiled libraries."""
-    from ncgen.codegen.compile_cache import cache_dir
+    from ncgen.codegen.fsutil import cache_dir
     return cache_dir() / "models"
 
 
@@ -98,14 +99,14 @@ def file_key(path: str | os.PathLike, **options) -> str:
 
 
 def system_key(system, **options) -> str | None:
-    """The key of ``system`` built with ``options``: its description (TOML, frames, visuals,
-    limits); None when it has none (a force given as a Python function), so it is not stored."""
-    try:
-        description = system.description()
-    except TypeError:
-        return None
-    digest = hashlib.sha256(pickle.dumps(description, protocol=5)).hexdigest()
-    return key_of({"system": digest, "options": options})
+    """The key of ``system`` built with ``options``: the content digest of everything the
+    system holds and of the options (:func:`ncgen.model.digest.system_digest`); None when it
+    holds something that cannot be keyed reliably (a force given as a Python function, a
+    SymPy expression, a class defined outside ncgen), so it is neither stored nor read."""
+    from ncgen.model.digest import system_digest
+
+    digest = system_digest(system, dict(sorted(options.items())))
+    return None if digest is None else key_of({"system": digest})
 
 
 def cached(key: str | None, build: Callable[[], object]):
@@ -130,10 +131,57 @@ def cached(key: str | None, build: Callable[[], object]):
 
 
 def build_system(system, **options):
-    """``system.build(**options)``, through the store (keyed by :func:`system_key`).  The key
-    is the system's description, as a pickled model's is: what that TOML form does not hold
-    (which pickling finds by a content-hash check after rebuilding) would not be told apart."""
-    return cached(system_key(system, **options), lambda: system.build(**options))
+    """``system`` built with ``options`` (:func:`ncgen.assembly.build.build_model`), through
+    the store (keyed by :func:`system_key`); what ``System.build()`` does."""
+    def build():
+        from ncgen.assembly.build import build_model
+        return build_model(system, **options)
+
+    return cached(system_key(system, **options) if enabled() else None, build)
+
+
+def source_key(kind: str, path: str | os.PathLike, **options) -> str:
+    """The key of the system that the reader ``kind`` (``"urdf"``, ``"toml"``) makes from the
+    file ``path`` with ``options``: the file's bytes and resolved path."""
+    data = Path(path).read_bytes()
+    return key_of({"reader": kind, "file": str(Path(path).resolve()), "sha256": hashlib.sha256(data).hexdigest(),
+                   "options": options})
+
+
+def cached_system(key: str | None, load: Callable[[], object]):
+    """The :class:`~ncgen.model.system.System` stored under ``key`` (a model file read before:
+    no parsing, no SymPy), else ``load()`` stored under it; the warnings of the read are kept
+    and given again, as :func:`cached` does for models."""
+    if key is None or not enabled():
+        return load()
+    path = _path(key, "system")
+    hit = _read(path, key, _decode_system)
+    if hit is not None:
+        system, said = hit
+        for category, message in said:
+            warnings.warn(message, category, stacklevel=3)
+        return system
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        system = load()
+    for w in caught:
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    try:
+        payload = _pickle({"system": system, "warnings": [(w.category, str(w.message)) for w in caught]})
+    except Exception:                      # noqa: BLE001 — something in it does not pickle: not stored
+        return system
+    _write(path, key, payload)
+    return system
+
+
+def _decode_system(payload: bytes) -> tuple:
+    import casadi
+
+    with casadi.global_unpickle_context():
+        stored = pickle.loads(payload)
+    if not (isinstance(stored, dict) and _is_system(stored.get("system")) and isinstance(stored.get("warnings"), list)):
+        raise TypeError(f"expected a system and its warnings, found {type(stored).__name__}")
+    return stored["system"], stored["warnings"]
 
 
 def _path(key: str, what: str = "") -> Path:
@@ -263,15 +311,20 @@ class _Pickler(pickle.Pickler):
 
     def reducer_override(self, obj):
         from ncgen.model.model import ReadOnlyList
-        from ncgen.model.system import System
 
         if type(obj) is types.MappingProxyType:
             return _mapping_proxy, (dict(obj),)
         if type(obj) is ReadOnlyList:
             return ReadOnlyList, (list(obj),)
-        if isinstance(obj, System):
+        if _is_system(obj):
             return object.__new__, (type(obj),), dict(vars(obj))
         return NotImplemented
+
+
+def _is_system(obj) -> bool:
+    """Whether ``obj`` is a :class:`~ncgen.model.system.System` (by its classes' names:
+    ``System.build`` imports this module, which must not import it back)."""
+    return any(c.__name__ == "System" and c.__module__ == "ncgen.model.system" for c in type(obj).__mro__)
 
 
 def _pickle(stored: dict) -> bytes:

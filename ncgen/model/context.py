@@ -57,7 +57,7 @@ class Context:
         Without ``extra`` values the formula is translated once per coordinate type into an
         SX function of (q_I, q̇_I, the member's constants) and then called per member: the
         SymPy tree walk costs far more than the call, which adds the same operations."""
-        constants = member.rigid.constants()
+        constants = member.rigid._constants          # computed once per member
         qI, vI = self.q_of(member), self.v_of(member)
         if extra:
             D = member.ctype.derivation

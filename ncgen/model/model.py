@@ -21,6 +21,7 @@ import numpy as np
 
 from ncgen.errors import ModelError
 from ncgen.model.data import ModelData, model_data
+from ncgen.model.function_set import FunctionSet
 from ncgen.validation import as_vector
 
 
@@ -64,7 +65,8 @@ class Model:
         self.name = system.name
         self.dim = system.dim
         self.layout = layout
-        self.functions = MappingProxyType(dict(functions))
+        #: name -> CasADi function, each made on first access (:class:`~ncgen.model.function_set.FunctionSet`)
+        self.functions = functions if isinstance(functions, FunctionSet) else MappingProxyType(dict(functions))
         self.M = M
         self.mass_factor = factor
         self.potential_terms = potential

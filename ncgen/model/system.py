@@ -11,7 +11,9 @@ given in world coordinates in the initial configuration; SI units throughout.
 from __future__ import annotations
 
 import copy
+import os
 import warnings
+from pathlib import Path
 
 import numpy as np
 import casadi as ca
@@ -264,16 +266,21 @@ class System:
         ``assemble=True`` with ``fix=[...]`` (the initial poses are a guess to assemble by
         Newton, keeping the named coordinates), ``baumgarte``, ``t0``, ``share`` (default
         True: joints that shared coordinates express are eliminated, see
-        :mod:`ncgen.model.sharing`; ``model.sharing`` reports it)."""
-        from ncgen.assembly.build import build_model
-        return build_model(self, **options)
+        :mod:`ncgen.model.sharing`; ``model.sharing`` reports it).
+
+        A system built before with the same content and options (in this or an earlier
+        process) is read from the store of built models instead (:mod:`ncgen.codegen.model_cache`;
+        ``NCGEN_MODEL_CACHE=0`` turns it off); a system holding a Python function or a SymPy
+        expression is always built."""
+        from ncgen.codegen.model_cache import build_system
+        return build_system(self, **options)
 
     # ----------------------------------------------------------------- TOML
     @classmethod
     def from_toml(cls, source) -> "System":
         """A system from a TOML model file (a path) or TOML text; see docs/model-format.md."""
         from ncgen.model.toml_io import system_from_toml
-        return system_from_toml(source, cls)
+        return _read_through_store(cls, "toml", source, lambda: system_from_toml(source, cls))
 
     @classmethod
     def from_urdf(cls, source, floating_base: bool = False, gravity=DEFAULT_GRAVITY, name=None,
@@ -285,8 +292,8 @@ class System:
         ``<collision>`` boxes, cylinders and spheres into contacts with the ground plane z = 0.
         See :mod:`ncgen.model.urdf`."""
         from ncgen.model.urdf import system_from_urdf
-        return system_from_urdf(source, cls, floating_base=floating_base, gravity=gravity, name=name,
-                                collisions=collisions)
+        options = dict(floating_base=floating_base, gravity=gravity, name=name, collisions=collisions)
+        return _read_through_store(cls, "urdf", source, lambda: system_from_urdf(source, cls, **options), **options)
 
     @classmethod
     def from_mjcf(cls, source, name=None) -> "System":
@@ -386,6 +393,31 @@ def from_description(toml: str, frames: dict, visuals: list, joint_limits: dict)
     for joint in system.joints:
         joint.limits = dict(joint_limits.get(joint.name, {}))
     return system
+
+
+def _read_through_store(cls, kind: str, source, load, **options) -> System:
+    """``load()``, or the system the store of built models keeps for the same file and
+    ``options`` (:func:`ncgen.codegen.model_cache.cached_system`: a file read before is not
+    parsed again, and its members need no SymPy); text, and subclasses of System, are read."""
+    from ncgen.codegen import model_cache
+
+    path = _file(source)
+    if cls is not System or path is None or not model_cache.enabled():
+        return load()
+    return model_cache.cached_system(model_cache.source_key(kind, path, **options), load)
+
+
+def _file(source) -> Path | None:
+    """``source`` as the path of an existing file, or None (model text, or no such file)."""
+    if not isinstance(source, (str, os.PathLike)):
+        return None
+    text = os.fspath(source)
+    if not isinstance(text, str) or "\n" in text or "<" in text:
+        return None
+    try:
+        return Path(text) if Path(text).is_file() else None
+    except (OSError, ValueError):
+        return None
 
 
 def _rotation(R, d, name):

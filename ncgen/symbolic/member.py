@@ -60,6 +60,18 @@ def inertia_J(ctype: CoordinateType, inertia, length: float | None = None) -> np
     return J_of(Ib)
 
 
+#: ``id(expr) -> (expr, its free symbols)`` of the derivations' formulas (walking a SymPy tree
+#: for them costs more than evaluating the formula; every member of a type asks for the same).
+_FREE_SYMBOLS: dict[int, tuple] = {}
+
+
+def _free_symbols(expr) -> frozenset:
+    hit = _FREE_SYMBOLS.get(id(expr))
+    if hit is None or hit[0] is not expr:
+        hit = _FREE_SYMBOLS[id(expr)] = (expr, frozenset(getattr(expr, "free_symbols", ())))
+    return hit[1]
+
+
 class RigidMember:
     """Numeric local description of one member (see module docstring); constant once made."""
 
@@ -202,7 +214,7 @@ class RigidMember:
         if hit is None or hit[0] is not expr:
             key = ("member", name, self.ctype.name, self.ctype.dim)
             consts = self._constants
-            csyms = sorted((s for s in getattr(expr, "free_symbols", ()) if s in consts), key=str)
+            csyms = sorted((s for s in _free_symbols(expr) if s in consts), key=str)
             f = numpy_function(expr, [*groups, list(csyms)], key=key + (tuple(map(str, csyms)),))
             cvals = [consts[s] for s in csyms]
             hit = memo[name] = (expr, lambda *vals: f(*vals, cvals))
