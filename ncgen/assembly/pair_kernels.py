@@ -6,7 +6,7 @@ The nonsmooth stepper's contact rows (gaps ``g``, Jacobian rows ``W``; see
 by a C loop over the element table (``templates/c/runtime/ncgen_contact_pairs.h``) instead
 of one flat function of every contact.  The formulas are those of
 :mod:`ncgen.assembly.contacts` (one source): an element's rows are built there over the whole
-system's symbols and made a function of its members' local coordinates ``q_a``, ``q_b``
+system's symbols (the expressions of the model's ``gap`` and ``contact_jacobian``) and made a function of its members' local coordinates ``q_a``, ``q_b``
 (the coordinates each member uses are index tables in the C).  Elements whose kernels are
 equal (the same kinds, shapes, coordinate types and numbers: equal spheres of a heap, equal
 boxes of a stack) share one kernel, so the C grows with the kinds and sizes of elements, not
@@ -39,7 +39,7 @@ diagonals), and ``s = 10⁻⁶ (R_a + R_b)`` against round-off and the constrain
 Velocity bound: the normal (or tangent) velocity ``W_r v`` of any contact row of the
 element is at most ``S(v) = Σ_sides |ẋ₀| + Σ_j e_j |Ẋ_j| + |ω| ℓ`` with
 ``|ω| ≤ ‖Ḡ‖₂ |Ẋ|_F |X|_F`` (``ω̂ = Ẋ Ḡ Xᵀ``, ``Ḡ = (X̄ᵀX̄)⁻¹``; a bar's ``1/|ū|²``) and the
-lever ``ℓ = D + 2 (R_a + R_b)`` (``2 R`` against a half-space): the contact point lies within
+lever ``ℓ = D + 3 (R_a + R_b)`` (``2 R`` against a half-space): the contact point lies within
 the bounding volumes and the reference points of the material velocities within their own.
 Edge crossings that are no contact compute their rows at points off the edges, so the
 bound holds there only for crossings (``rate_bounded`` is false).  The C uses these to skip
@@ -55,9 +55,8 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from ncgen.assembly.contacts import EDGE_TOL, contact_terms
+from ncgen.assembly.contacts import EDGE_TOL
 from ncgen.model.capsule_contacts import CapsuleSphere
-from ncgen.model.context import Context
 from ncgen.model.contacts import BoxCorner, EdgeContact, SphereBox, SpherePlane, SphereSphere
 
 #: Relative slack of the lower bounds (see the module docstring).
@@ -227,15 +226,16 @@ def pair_kernels(model) -> PairKernels:
     """The element kernels and table of ``model`` (nonsmooth contacts; module docstring);
     ``model`` must have a :func:`pair_system`."""
     system, layout, dim = pair_system(model), model.layout, model.dim
-    ctx = Context(system, layout)
-    terms = contact_terms(ctx, system.contacts)
+    jac = model.functions["contact_jacobian"]
+    q, p = jac.sx_in(0), jac.sx_in(1)
+    WN, WT = jac(q, p)                        # the flat rows' expressions (not derived again)
+    gaps = model.functions["gap"](q, p)
     nt = dim - 1
     kernels: dict[str, int] = {}
     functions, elements = [], []
     first = 0
     for element in system.contacts:
         pcs = element.point_contacts()
-        mine = terms[first:first + len(pcs)]
         members = element.members()
         (idx_a, const_a), (idx_b, const_b) = (_local(m, layout, model.nq) for m in members)
         qa, qb = ca.SX.sym("q_a", len(idx_a)), ca.SX.sym("q_b", len(idx_b))
@@ -246,15 +246,15 @@ def pair_kernels(model) -> PairKernels:
                     qfull[i] = sym[k]
         cols = [i for i in idx_a + idx_b]
         rows = []
-        for term in mine:
-            rows += [term.WN, term.WT if term.contact.mu > 0 else ca.SX(nt, model.nq)]
+        for k, pc in enumerate(pcs, start=first):
+            rows += [WN[k, :], WT[k * nt:(k + 1) * nt, :] if pc.mu > 0 else ca.SX(nt, model.nq)]
         W = ca.vertcat(*rows)
         Wloc = ca.horzcat(*[W[:, i] if i >= 0 else ca.SX(W.shape[0], 1) for i in cols])
-        g = ca.vertcat(*[term.g for term in mine])
-        full = ca.Function("pair", [ctx.q, ctx.p], [g, Wloc])
-        g_loc, W_loc = full(qfull, ctx.p)
-        gap = ca.Function("gap", [qa, qb, ctx.p], [ca.densify(g_loc)], ["q_a", "q_b", "p"], ["g"])
-        rowf = ca.Function("rows", [qa, qb, ctx.p], [ca.densify(g_loc), ca.densify(W_loc)],
+        g = gaps[first:first + len(pcs)]
+        full = ca.Function("pair", [q, p], [g, Wloc])
+        g_loc, W_loc = full(qfull, p)
+        gap = ca.Function("gap", [qa, qb, p], [ca.densify(g_loc)], ["q_a", "q_b", "p"], ["g"])
+        rowf = ca.Function("rows", [qa, qb, p], [ca.densify(g_loc), ca.densify(W_loc)],
                            ["q_a", "q_b", "p"], ["g", "W"])
         key = hashlib.sha256(rowf.serialize().encode()).hexdigest()
         if key not in kernels:
@@ -269,3 +269,47 @@ def pair_kernels(model) -> PairKernels:
                                 tuple(sides), kappa, dmin, cap, rate_bounded, [pc.mu > 0 for pc in pcs]))
         first += len(pcs)
     return PairKernels(functions, elements)
+
+
+def _side_numbers(side: Side, ql, vl):
+    """``(x₀, R, speed terms lin, rot)`` of ``side`` at local coordinates ``ql`` (rates ``vl``)."""
+    if side.kind == "fixed":
+        return side.fixed, side.radius, 0.0, 0.0
+    x0, X = side.centre @ ql, [a @ ql for a in side.axes]
+    V = [a @ vl for a in side.axes] if vl is not None else [np.zeros_like(x0) for _ in side.axes]
+    R = side.radius + sum(e * np.linalg.norm(x) for e, x in zip(side.extents, X))
+    if vl is None:
+        return x0, R, 0.0, 0.0
+    lin = np.linalg.norm(side.centre @ vl) + sum(e * np.linalg.norm(v) for e, v in zip(side.extents, V))
+    rot = side.gnorm * math.sqrt(sum(float(v @ v) for v in V)) * math.sqrt(sum(float(x @ x) for x in X))
+    return x0, R, lin, rot
+
+
+def element_bounds(element: Element, q, v=None) -> tuple[float, float]:
+    """``(b, S)``: the lower bound of ``element``'s gaps at ``q`` (−inf where none) and the
+    bound of its rows' velocities ``|W_r v|`` (module docstring); the formulas of
+    ``pair_lower`` in ``templates/c/runtime/ncgen_contact_pairs.h``, for tests."""
+    def local(idx, const, x, rates):
+        return np.array([x[i] if i >= 0 else (0.0 if rates else c) for i, c in zip(idx, const)])
+    q = np.asarray(q, float)
+    parts = []
+    for side, idx, const in zip(element.sides, (element.idx_a, element.idx_b), (element.const_a, element.const_b)):
+        if side.kind == "unbounded":
+            return -math.inf, 0.0
+        ql = local(idx, const, q, False)
+        vl = local(idx, const, np.asarray(v, float), True) if v is not None else None
+        parts.append((side, ql, vl))
+    half = [k for k, (side, _, _) in enumerate(parts) if side.kind == "halfspace"]
+    if half:
+        side, _, _ = parts[half[0]]
+        x0, R, lin, rot = _side_numbers(*parts[1 - half[0]])
+        D = float(side.normal @ (x0 - side.fixed)) - R
+        lb, speed = D - BOUND_SLACK * R, lin + 2 * R * rot
+    else:
+        (xa, Ra, la, ra), (xb, Rb, lb_, rb) = (_side_numbers(*p) for p in parts)
+        D = float(np.linalg.norm(xb - xa)) - Ra - Rb
+        lb = element.kappa * D - BOUND_SLACK * (Ra + Rb)
+        speed = la + lb_ + (ra + rb) * (D + 3 * (Ra + Rb))
+    if not D >= element.dmin:
+        return -math.inf, speed
+    return min(lb, element.cap), speed

@@ -23,7 +23,8 @@
  *                              speed take part in a step's contact problem
  *   REPEAT_TOL                 tolerance of repeat_step()
  *   CONTACT_PAIRS              defined if the contact rows come from the element kernels
- *                              of ncgen_contact_pairs.h (with what it lists); else
+ *                              of ncgen_contact_pairs.h (included before this file, with
+ *                              what it lists); else
  *   KERNEL_GAP, KERNEL_CONTACT the gap and contact kernels of all contacts at once
  *   CONTACT_FACTORED           defined if the KKT matrix is factored once per contact
  *                              solve: then NNZ_V, NNZ_R, N_BETA (sizes of its QR factors),
@@ -49,10 +50,9 @@
  * problems, Newton finishes those they crawl on. */
 #define CONE_FIRST 4
 
-#ifdef CONTACT_PAIRS
-#include "ncgen_contact_pairs.h"
-#else
-/* Without element kernels every contact is evaluated, by the flat kernels. */
+#ifndef CONTACT_PAIRS
+/* Without element kernels (ncgen_contact_pairs.h) every contact is evaluated, by the flat
+ * kernels. */
 #define pairs_bounds(ws, q, rates) ((void) 0)
 #define pairs_select(ws, limit, hs, loaded) ((void) 0)
 #define pairs_extend(ws, limit) 0
@@ -533,7 +533,7 @@ static int push_out(const casadi_real *p, casadi_real t1, casadi_real *q_next, c
   /* every contact within reach of the push (gap below twice the deepest penetration) takes
    * part, so that pushing one out pushes no other in (a column of spheres: else one pass
    * per sphere) */
-  pairs_extend(ws, PENETRATION_TOL + 2 * deepest);
+  (void) pairs_extend(ws, PENETRATION_TOL + 2 * deepest);
   if (contact_rows(ws, q_next, v_next, p, ws->g, ws->W, 0, 1)) return STEP_KERNEL;
   for (n = k = 0; k < NK; ++k)
     if (ws->g[k] < PENETRATION_TOL + 2 * deepest) rows[n++] = k * DC;

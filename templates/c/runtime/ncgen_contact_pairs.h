@@ -2,8 +2,8 @@
  * loop over the model's contact elements, each through its kernel (one kernel per kind of
  * element and its numbers: ncgen/assembly/pair_kernels.py), with a broad phase: an element
  * whose bounding volumes are far enough apart is not evaluated, and its gaps read as a
- * lower bound of them.  Plain C99, model-independent; included by ncgen_contact.h when
- * CONTACT_PAIRS is defined.
+ * lower bound of them.  Plain C99, model-independent; included after ncgen_rattle.h and
+ * before ncgen_contact.h, and empty unless CONTACT_PAIRS is defined.
  *
  * What the including file defines first:
  *   NE                         contact elements
@@ -34,6 +34,7 @@
  * element is skipped only where b_e exceeds the threshold, so its flat gaps (>= b_e) would
  * have taken the same decision, and its rows would not have entered any solve. */
 
+#ifdef CONTACT_PAIRS
 #define PAIR_UNBOUNDED 0
 #define PAIR_MEMBER 1
 #define PAIR_FIXED 2
@@ -246,3 +247,4 @@ static int contact_rows(workspace *ws, const casadi_real *q, const casadi_real *
   }
   return STEP_OK;
 }
+#endif
