@@ -15,8 +15,8 @@ in a loose column (four per layer, seeded offsets of a few mm) into a square box
 four walls, inner half-width 0.08 m), restitution 0, 1 s.  In ncgen each sphere is a point
 member (3 coordinates: without friction its rotation never changes, so the point is the
 whole sphere), with a SpherePlane contact per wall and floor and a SphereSphere contact
-per pair (5 N + N (N − 1) / 2 contacts, all of them checked every step: ncgen has no broad
-phase).  The MuJoCo twin: free bodies with sphere geoms (solid-sphere inertia), condim 1
+per pair (5 N + N (N − 1) / 2 contacts; the stepper's broad phase evaluates only the
+elements whose bounding volumes are near, ncgen/assembly/pair_kernels.py).  The MuJoCo twin: free bodies with sphere geoms (solid-sphere inertia), condim 1
 (frictionless), the box as five planes, default solref/solimp, the same step.
 
 What is compared, in one run:
@@ -40,7 +40,12 @@ the solid sphere's inertia; MuJoCo free joints).  MuJoCo: condim 3, elliptic con
 solref/solimp.  The heap's times are taken interleaved (ncgen, MuJoCo, ncgen, ...,
 ``--repeat`` rounds), and the ratio is printed as the min and the median over the rounds.
 
-    python benchmarks/contact.py [--sizes 5 20] [--pile 20] [--heap 20] [--t-end 2] [--h 1e-3] [--repeat 3]
+Sparse scene (``--sparse N``, default 0: none): N frictional spheres of the heap resting on the
+ground on a square grid 0.2 m apart (no two touch), with a SphereSphere contact per pair as in the
+heap, 1 s: the time per step with N (N − 1) / 2 far pairs, against the heap's (the broad
+phase makes it grow with the close pairs, not with all pairs); ncgen only.
+
+    python benchmarks/contact.py [--sizes 5 20] [--pile 20] [--heap 20] [--sparse 100] [--t-end 2] [--h 1e-3] [--repeat 3]
     python benchmarks/contact.py --smoke
 """
 from __future__ import annotations
@@ -121,6 +126,23 @@ def heap(n: int, rotating: bool):
     inertia = 0.4 * HEAP_M * HEAP_R**2 * np.eye(3)
     balls = [s.add_body(f"ball{k}", mass=HEAP_M, inertia=inertia, position=tuple(c)) if rotating
              else s.add_point(f"ball{k}", mass=HEAP_M, position=tuple(c)) for k, c in enumerate(ball_centres(n))]
+    for k, b in enumerate(balls):
+        s.add_contact(nc.SpherePlane(b, None, HEAP_R, mu=HEAP_MU, name=f"floor_{k}"))
+    for i in range(n):
+        for j in range(i + 1, n):
+            s.add_contact(nc.SphereSphere(balls[i], None, HEAP_R, balls[j], None, HEAP_R, mu=HEAP_MU,
+                                          name=f"pair{i}_{j}"))
+    return s.build(contacts="nonsmooth")
+
+
+def sparse(n: int):
+    """The sparse scene (module docstring): the heap's spheres on a grid 0.2 m apart, at rest."""
+    import ncgen as nc
+
+    s = nc.System(f"sparse{n}", gravity=GRAVITY)
+    side = int(np.ceil(np.sqrt(n)))
+    balls = [s.add_point(f"ball{k}", mass=HEAP_M, position=(0.2 * (k % side), 0.2 * (k // side), HEAP_R))
+             for k in range(n)]
     for k, b in enumerate(balls):
         s.add_contact(nc.SpherePlane(b, None, HEAP_R, mu=HEAP_MU, name=f"floor_{k}"))
     for i in range(n):
@@ -252,6 +274,7 @@ def main(argv=None) -> int:
     parser.add_argument("--sizes", type=int, nargs="*", default=[5, 20], help="numbers of bars (default 5 20; none: no chain)")
     parser.add_argument("--pile", type=int, default=20, help="spheres in the pile (default 20; 0: no pile)")
     parser.add_argument("--heap", type=int, default=20, help="spheres in the heap with friction (default 20; 0: none)")
+    parser.add_argument("--sparse", type=int, default=0, help="spheres of the sparse scene (default 0: none)")
     parser.add_argument("--t-end", type=float, default=2.0, help="simulated time, s (default 2)")
     parser.add_argument("--h", type=float, default=1e-3, help="fixed step of both, s (default 1e-3)")
     parser.add_argument("--repeat", type=int, default=3, help="runs per timing, the best kept (default 3)")
@@ -274,6 +297,14 @@ def main(argv=None) -> int:
               f"h = {args.h:g} s")
         compare(f"heap of {args.heap}, {kind}", heap(args.heap, rotating), heap_mjcf(args.heap, args.h, rotating),
                 t_end, args.h, args.repeat, centres=[f"ball{k}" for k in range(args.heap)])
+    if args.sparse:
+        t_end = min(args.t_end, HEAP_T)
+        model = sparse(args.sparse)
+        ours = run_ncgen(model, t_end, args.h, args.repeat)
+        print(f"\n=== sparse scene: {args.sparse} spheres apart on the ground ({args.sparse * (args.sparse - 1) // 2} "
+              f"sphere pairs, none close), {t_end:g} s, h = {args.h:g} s")
+        print(f"ncgen stepper wall per simulated s {ours['stepper'] / t_end * 1e3:8.2f} ms, per step "
+              f"{ours['stepper'] / t_end * args.h * 1e6:.2f} us; load average {os.getloadavg()[0]:.2f}")
     return 0
 
 

@@ -30,6 +30,7 @@ FLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O0", "-g",
 ENV = {**os.environ, "ASAN_OPTIONS": "detect_leaks=0:abort_on_error=0",
        "UBSAN_OPTIONS": "print_stacktrace=1:halt_on_error=1"}
 PROGRAMS = [("test_rattle.c", []), ("test_contact.c", []), ("test_contact.c", ["-DSCHUR_FACTORED"]),
+            ("test_contact.c", ["-DPAIRS"]),
             ("test_cone_newton.c", []), ("test_mpc.c", []), ("test_joint_loop.c", []),
             ("test_element_tables.c", []), ("test_sparse_qr.c", [])]
 
@@ -46,8 +47,9 @@ def sanitizers(tmp_path_factory) -> Path:
     return tmp
 
 
-@pytest.mark.parametrize("source, defines", PROGRAMS, ids=["rattle", "contact-kkt", "contact-schur", "cone-newton", "mpc",
-                                                          "joint-loop", "element-tables", "sparse-qr"])
+@pytest.mark.parametrize("source, defines", PROGRAMS, ids=["rattle", "contact-kkt", "contact-schur", "contact-pairs",
+                                                          "cone-newton", "mpc", "joint-loop", "element-tables",
+                                                          "sparse-qr"])
 def test_runtime_c_unit_tests_pass_under_sanitizers(sanitizers, source, defines):
     exe = sanitizers / (Path(source).stem + "".join(d.lower().replace("-d", "_") for d in defines))
     built = subprocess.run([CC, *FLAGS, *defines, f"-I{RUNTIME}", f"-I{TESTS}", str(TESTS / source),
@@ -80,8 +82,8 @@ def test_packages_carry_the_runtime_verbatim(tmp_path):
     b = s.add_point("ball", mass=1.0, position=(0.0, 0.0, 0.5))
     s.add_contact(nc.SpherePlane(b, None, 0.1))
     for contacts, files in [("smooth", ["ncgen_rattle.h", "ncgen_fixed.h", "ncgen_adaptive.h"]),
-                            ("nonsmooth", ["ncgen_rattle.h", "ncgen_cone_newton.h", "ncgen_contact.h", "ncgen_fixed.h",
-                                          "ncgen_adaptive.h"])]:
+                            ("nonsmooth", ["ncgen_rattle.h", "ncgen_cone_newton.h", "ncgen_contact_pairs.h", "ncgen_contact.h",
+                                          "ncgen_fixed.h", "ncgen_adaptive.h"])]:
         pkg = nc.generate(s.build(contacts=contacts), tmp_path / contacts)
         stepper = (pkg.path / "ball_stepper.c").read_text()
         assert sorted(p.name for p in pkg.path.glob("ncgen_*.h")) == sorted(files)

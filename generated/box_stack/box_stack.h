@@ -18,6 +18,7 @@
 #define NCGEN_BOX_STACK_H
 
 #include "box_stack_kernels_0.h"
+#include "box_stack_kernels_1.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -471,41 +472,137 @@ extern const casadi_real box_stack_gravity[3];
 #define BOX_STACK_STEP_OUTPUTS_IN_P_NNZ 0
 #define BOX_STACK_STEP_OUTPUTS_OUT_Y_NNZ 5
 
-/* ---- box_stack_step_contact ----------------------------------------------------
- * Stepper: contact gaps, Jacobians (per contact: normal row, tangent rows) and velocities
- * In box_stack_kernels_0.c; 18 instructions.
+/* ---- box_stack_step_pair0_gap ----------------------------------------------------
+ * Stepper: the gaps of one contact element
+ * In box_stack_kernels_0.c; 2481 instructions.
  * Inputs:
- *   arg[0] q: 36x1, nnz 36 [m] coordinates. Default: box_stack_q0.
- *   arg[1] v: 36x1, nnz 36 [m/s] coordinate rates. Default: box_stack_v0.
+ *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
+ *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
  *   arg[2] p: 0x1, nnz 0 parameters. Default: zeros.
  * Outputs:
- *   res[0] g: 34x1, nnz 34 [m] gaps, positive apart.
- *   res[1] Wt: 36x102, nnz 1779 (sparse) [1] transposed contact Jacobian W^T, nq x nk*dim, sparse (column r: row r of W).
- *   res[2] U: 102x1, nnz 102 [m/s] contact velocities W v.
+ *   res[0] g: 16x1, nnz 16 [m] gaps of its point contacts, positive apart.
  */
-#define BOX_STACK_STEP_CONTACT_IN_Q_NNZ 36
-#define BOX_STACK_STEP_CONTACT_IN_V_NNZ 36
-#define BOX_STACK_STEP_CONTACT_IN_P_NNZ 0
-#define BOX_STACK_STEP_CONTACT_OUT_G_NNZ 34
-#define BOX_STACK_STEP_CONTACT_OUT_WT_NNZ 1779
-#define BOX_STACK_STEP_CONTACT_OUT_U_NNZ 102
+#define BOX_STACK_STEP_PAIR0_GAP_IN_Q_A_NNZ 12
+#define BOX_STACK_STEP_PAIR0_GAP_IN_Q_B_NNZ 0
+#define BOX_STACK_STEP_PAIR0_GAP_IN_P_NNZ 0
+#define BOX_STACK_STEP_PAIR0_GAP_OUT_G_NNZ 16
 
-/* ---- box_stack_step_gap ----------------------------------------------------
- * Stepper: contact gaps
- * In box_stack_kernels_0.c; 6727 instructions.
+/* ---- box_stack_step_pair0_rows ----------------------------------------------------
+ * Stepper: gaps and contact Jacobian rows of one contact element
+ * In box_stack_kernels_0.c; 5452 instructions.
  * Inputs:
- *   arg[0] q: 36x1, nnz 36 [m] coordinates. Default: box_stack_q0.
- *   arg[1] p: 0x1, nnz 0 parameters. Default: zeros.
+ *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
+ *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
+ *   arg[2] p: 0x1, nnz 0 parameters. Default: zeros.
  * Outputs:
- *   res[0] g: 34x1, nnz 34 [m] gaps, positive apart.
+ *   res[0] g: 16x1, nnz 16 [m] gaps of its point contacts, positive apart.
+ *   res[1] W: 48x12, nnz 576 [1] per point contact its normal and tangent rows (zero without friction), columns q_a then q_b, dense.
  */
-#define BOX_STACK_STEP_GAP_IN_Q_NNZ 36
-#define BOX_STACK_STEP_GAP_IN_P_NNZ 0
-#define BOX_STACK_STEP_GAP_OUT_G_NNZ 34
+#define BOX_STACK_STEP_PAIR0_ROWS_IN_Q_A_NNZ 12
+#define BOX_STACK_STEP_PAIR0_ROWS_IN_Q_B_NNZ 0
+#define BOX_STACK_STEP_PAIR0_ROWS_IN_P_NNZ 0
+#define BOX_STACK_STEP_PAIR0_ROWS_OUT_G_NNZ 16
+#define BOX_STACK_STEP_PAIR0_ROWS_OUT_W_NNZ 576
+
+/* ---- box_stack_step_pair1_gap ----------------------------------------------------
+ * Stepper: the gaps of one contact element
+ * In box_stack_kernels_0.c; 4206 instructions.
+ * Inputs:
+ *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
+ *   arg[1] q_b: 12x1, nnz 12 [m] local coordinates of its second member. Default: zeros.
+ *   arg[2] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] g: 16x1, nnz 16 [m] gaps of its point contacts, positive apart.
+ */
+#define BOX_STACK_STEP_PAIR1_GAP_IN_Q_A_NNZ 12
+#define BOX_STACK_STEP_PAIR1_GAP_IN_Q_B_NNZ 12
+#define BOX_STACK_STEP_PAIR1_GAP_IN_P_NNZ 0
+#define BOX_STACK_STEP_PAIR1_GAP_OUT_G_NNZ 16
+
+/* ---- box_stack_step_pair1_rows ----------------------------------------------------
+ * Stepper: gaps and contact Jacobian rows of one contact element
+ * In box_stack_kernels_1.c; 9009 instructions.
+ * Inputs:
+ *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
+ *   arg[1] q_b: 12x1, nnz 12 [m] local coordinates of its second member. Default: zeros.
+ *   arg[2] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] g: 16x1, nnz 16 [m] gaps of its point contacts, positive apart.
+ *   res[1] W: 48x24, nnz 1152 [1] per point contact its normal and tangent rows (zero without friction), columns q_a then q_b, dense.
+ */
+#define BOX_STACK_STEP_PAIR1_ROWS_IN_Q_A_NNZ 12
+#define BOX_STACK_STEP_PAIR1_ROWS_IN_Q_B_NNZ 12
+#define BOX_STACK_STEP_PAIR1_ROWS_IN_P_NNZ 0
+#define BOX_STACK_STEP_PAIR1_ROWS_OUT_G_NNZ 16
+#define BOX_STACK_STEP_PAIR1_ROWS_OUT_W_NNZ 1152
+
+/* ---- box_stack_step_pair2_gap ----------------------------------------------------
+ * Stepper: the gaps of one contact element
+ * In box_stack_kernels_1.c; 72 instructions.
+ * Inputs:
+ *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
+ *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
+ *   arg[2] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] g: 1x1, nnz 1 [m] gaps of its point contacts, positive apart.
+ */
+#define BOX_STACK_STEP_PAIR2_GAP_IN_Q_A_NNZ 12
+#define BOX_STACK_STEP_PAIR2_GAP_IN_Q_B_NNZ 0
+#define BOX_STACK_STEP_PAIR2_GAP_IN_P_NNZ 0
+#define BOX_STACK_STEP_PAIR2_GAP_OUT_G_NNZ 1
+
+/* ---- box_stack_step_pair2_rows ----------------------------------------------------
+ * Stepper: gaps and contact Jacobian rows of one contact element
+ * In box_stack_kernels_1.c; 305 instructions.
+ * Inputs:
+ *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
+ *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
+ *   arg[2] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] g: 1x1, nnz 1 [m] gaps of its point contacts, positive apart.
+ *   res[1] W: 3x12, nnz 36 [1] per point contact its normal and tangent rows (zero without friction), columns q_a then q_b, dense.
+ */
+#define BOX_STACK_STEP_PAIR2_ROWS_IN_Q_A_NNZ 12
+#define BOX_STACK_STEP_PAIR2_ROWS_IN_Q_B_NNZ 0
+#define BOX_STACK_STEP_PAIR2_ROWS_IN_P_NNZ 0
+#define BOX_STACK_STEP_PAIR2_ROWS_OUT_G_NNZ 1
+#define BOX_STACK_STEP_PAIR2_ROWS_OUT_W_NNZ 36
+
+/* ---- box_stack_step_pair3_gap ----------------------------------------------------
+ * Stepper: the gaps of one contact element
+ * In box_stack_kernels_1.c; 4 instructions.
+ * Inputs:
+ *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
+ *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
+ *   arg[2] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] g: 1x1, nnz 1 [m] gaps of its point contacts, positive apart.
+ */
+#define BOX_STACK_STEP_PAIR3_GAP_IN_Q_A_NNZ 12
+#define BOX_STACK_STEP_PAIR3_GAP_IN_Q_B_NNZ 0
+#define BOX_STACK_STEP_PAIR3_GAP_IN_P_NNZ 0
+#define BOX_STACK_STEP_PAIR3_GAP_OUT_G_NNZ 1
+
+/* ---- box_stack_step_pair3_rows ----------------------------------------------------
+ * Stepper: gaps and contact Jacobian rows of one contact element
+ * In box_stack_kernels_1.c; 92 instructions.
+ * Inputs:
+ *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
+ *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
+ *   arg[2] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] g: 1x1, nnz 1 [m] gaps of its point contacts, positive apart.
+ *   res[1] W: 3x12, nnz 36 [1] per point contact its normal and tangent rows (zero without friction), columns q_a then q_b, dense.
+ */
+#define BOX_STACK_STEP_PAIR3_ROWS_IN_Q_A_NNZ 12
+#define BOX_STACK_STEP_PAIR3_ROWS_IN_Q_B_NNZ 0
+#define BOX_STACK_STEP_PAIR3_ROWS_IN_P_NNZ 0
+#define BOX_STACK_STEP_PAIR3_ROWS_OUT_G_NNZ 1
+#define BOX_STACK_STEP_PAIR3_ROWS_OUT_W_NNZ 36
 
 /* ---- box_stack_step_factor ----------------------------------------------------
  * Stepper: sparse Householder QR of the KKT matrix (for the contact Delassus matrix)
- * In box_stack_kernels_0.c; 67 instructions.
+ * In box_stack_kernels_1.c; 67 instructions.
  * Inputs:
  *   arg[0] K: 54x54, nnz 198 (sparse) KKT matrix in the stepper's pattern. Default: zeros.
  * Outputs:
@@ -520,7 +617,7 @@ extern const casadi_real box_stack_gravity[3];
 
 /* ---- box_stack_step_backsolve ----------------------------------------------------
  * Stepper: x = K^-1 b from the factors of step_factor
- * In box_stack_kernels_0.c; 16 instructions.
+ * In box_stack_kernels_1.c; 16 instructions.
  * Inputs:
  *   arg[0] V: 54x54, nnz 183 (sparse) Householder vectors. Default: zeros.
  *   arg[1] R: 54x54, nnz 288 (sparse) triangular factor. Default: zeros.

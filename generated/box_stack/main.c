@@ -158,13 +158,44 @@ static const casadi_real *const defaults_step_outputs[] = {
   0,
   0,
   0};
-static const casadi_real *const defaults_step_contact[] = {
-  box_stack_q0,
-  box_stack_v0,
+static const casadi_real *const defaults_step_pair0_gap[] = {
+  0,
+  0,
   0,
   0};
-static const casadi_real *const defaults_step_gap[] = {
-  box_stack_q0,
+static const casadi_real *const defaults_step_pair0_rows[] = {
+  0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_pair1_gap[] = {
+  0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_pair1_rows[] = {
+  0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_pair2_gap[] = {
+  0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_pair2_rows[] = {
+  0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_pair3_gap[] = {
+  0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_pair3_rows[] = {
+  0,
+  0,
   0,
   0};
 static const casadi_real *const defaults_step_factor[] = {
@@ -262,14 +293,38 @@ static const kernel kernels[] = {
    box_stack_step_outputs_name_in, box_stack_step_outputs_name_out, box_stack_step_outputs_sparsity_in, box_stack_step_outputs_sparsity_out,
    box_stack_step_outputs_checkout, box_stack_step_outputs_release, box_stack_step_outputs_incref, box_stack_step_outputs_decref,
    defaults_step_outputs},
-  {"step_contact", box_stack_step_contact, box_stack_step_contact_work, box_stack_step_contact_n_in, box_stack_step_contact_n_out,
-   box_stack_step_contact_name_in, box_stack_step_contact_name_out, box_stack_step_contact_sparsity_in, box_stack_step_contact_sparsity_out,
-   box_stack_step_contact_checkout, box_stack_step_contact_release, box_stack_step_contact_incref, box_stack_step_contact_decref,
-   defaults_step_contact},
-  {"step_gap", box_stack_step_gap, box_stack_step_gap_work, box_stack_step_gap_n_in, box_stack_step_gap_n_out,
-   box_stack_step_gap_name_in, box_stack_step_gap_name_out, box_stack_step_gap_sparsity_in, box_stack_step_gap_sparsity_out,
-   box_stack_step_gap_checkout, box_stack_step_gap_release, box_stack_step_gap_incref, box_stack_step_gap_decref,
-   defaults_step_gap},
+  {"step_pair0_gap", box_stack_step_pair0_gap, box_stack_step_pair0_gap_work, box_stack_step_pair0_gap_n_in, box_stack_step_pair0_gap_n_out,
+   box_stack_step_pair0_gap_name_in, box_stack_step_pair0_gap_name_out, box_stack_step_pair0_gap_sparsity_in, box_stack_step_pair0_gap_sparsity_out,
+   box_stack_step_pair0_gap_checkout, box_stack_step_pair0_gap_release, box_stack_step_pair0_gap_incref, box_stack_step_pair0_gap_decref,
+   defaults_step_pair0_gap},
+  {"step_pair0_rows", box_stack_step_pair0_rows, box_stack_step_pair0_rows_work, box_stack_step_pair0_rows_n_in, box_stack_step_pair0_rows_n_out,
+   box_stack_step_pair0_rows_name_in, box_stack_step_pair0_rows_name_out, box_stack_step_pair0_rows_sparsity_in, box_stack_step_pair0_rows_sparsity_out,
+   box_stack_step_pair0_rows_checkout, box_stack_step_pair0_rows_release, box_stack_step_pair0_rows_incref, box_stack_step_pair0_rows_decref,
+   defaults_step_pair0_rows},
+  {"step_pair1_gap", box_stack_step_pair1_gap, box_stack_step_pair1_gap_work, box_stack_step_pair1_gap_n_in, box_stack_step_pair1_gap_n_out,
+   box_stack_step_pair1_gap_name_in, box_stack_step_pair1_gap_name_out, box_stack_step_pair1_gap_sparsity_in, box_stack_step_pair1_gap_sparsity_out,
+   box_stack_step_pair1_gap_checkout, box_stack_step_pair1_gap_release, box_stack_step_pair1_gap_incref, box_stack_step_pair1_gap_decref,
+   defaults_step_pair1_gap},
+  {"step_pair1_rows", box_stack_step_pair1_rows, box_stack_step_pair1_rows_work, box_stack_step_pair1_rows_n_in, box_stack_step_pair1_rows_n_out,
+   box_stack_step_pair1_rows_name_in, box_stack_step_pair1_rows_name_out, box_stack_step_pair1_rows_sparsity_in, box_stack_step_pair1_rows_sparsity_out,
+   box_stack_step_pair1_rows_checkout, box_stack_step_pair1_rows_release, box_stack_step_pair1_rows_incref, box_stack_step_pair1_rows_decref,
+   defaults_step_pair1_rows},
+  {"step_pair2_gap", box_stack_step_pair2_gap, box_stack_step_pair2_gap_work, box_stack_step_pair2_gap_n_in, box_stack_step_pair2_gap_n_out,
+   box_stack_step_pair2_gap_name_in, box_stack_step_pair2_gap_name_out, box_stack_step_pair2_gap_sparsity_in, box_stack_step_pair2_gap_sparsity_out,
+   box_stack_step_pair2_gap_checkout, box_stack_step_pair2_gap_release, box_stack_step_pair2_gap_incref, box_stack_step_pair2_gap_decref,
+   defaults_step_pair2_gap},
+  {"step_pair2_rows", box_stack_step_pair2_rows, box_stack_step_pair2_rows_work, box_stack_step_pair2_rows_n_in, box_stack_step_pair2_rows_n_out,
+   box_stack_step_pair2_rows_name_in, box_stack_step_pair2_rows_name_out, box_stack_step_pair2_rows_sparsity_in, box_stack_step_pair2_rows_sparsity_out,
+   box_stack_step_pair2_rows_checkout, box_stack_step_pair2_rows_release, box_stack_step_pair2_rows_incref, box_stack_step_pair2_rows_decref,
+   defaults_step_pair2_rows},
+  {"step_pair3_gap", box_stack_step_pair3_gap, box_stack_step_pair3_gap_work, box_stack_step_pair3_gap_n_in, box_stack_step_pair3_gap_n_out,
+   box_stack_step_pair3_gap_name_in, box_stack_step_pair3_gap_name_out, box_stack_step_pair3_gap_sparsity_in, box_stack_step_pair3_gap_sparsity_out,
+   box_stack_step_pair3_gap_checkout, box_stack_step_pair3_gap_release, box_stack_step_pair3_gap_incref, box_stack_step_pair3_gap_decref,
+   defaults_step_pair3_gap},
+  {"step_pair3_rows", box_stack_step_pair3_rows, box_stack_step_pair3_rows_work, box_stack_step_pair3_rows_n_in, box_stack_step_pair3_rows_n_out,
+   box_stack_step_pair3_rows_name_in, box_stack_step_pair3_rows_name_out, box_stack_step_pair3_rows_sparsity_in, box_stack_step_pair3_rows_sparsity_out,
+   box_stack_step_pair3_rows_checkout, box_stack_step_pair3_rows_release, box_stack_step_pair3_rows_incref, box_stack_step_pair3_rows_decref,
+   defaults_step_pair3_rows},
   {"step_factor", box_stack_step_factor, box_stack_step_factor_work, box_stack_step_factor_n_in, box_stack_step_factor_n_out,
    box_stack_step_factor_name_in, box_stack_step_factor_name_out, box_stack_step_factor_sparsity_in, box_stack_step_factor_sparsity_out,
    box_stack_step_factor_checkout, box_stack_step_factor_release, box_stack_step_factor_incref, box_stack_step_factor_decref,

@@ -25,7 +25,10 @@
  *   GAP_REACH                  open contacts within GAP_REACH h/2 of the fastest closing
  *                              speed take part in a step's contact problem
  *   REPEAT_TOL                 tolerance of repeat_step()
- *   KERNEL_GAP, KERNEL_CONTACT the gap and contact kernels
+ *   CONTACT_PAIRS              defined if the contact rows come from the element kernels
+ *                              of ncgen_contact_pairs.h (included before this file, with
+ *                              what it lists); else
+ *   KERNEL_GAP, KERNEL_CONTACT the gap and contact kernels of all contacts at once
  *   CONTACT_FACTORED           defined if the KKT matrix is factored once per contact
  *                              solve: then NNZ_V, NNZ_R, N_BETA (sizes of its QR factors),
  *                              KERNEL_FACTOR, KERNEL_BACKSOLVE
@@ -49,6 +52,33 @@
  * not converged, and again after twice as many while it fails: the sweeps solve the easy
  * problems, Newton finishes those they crawl on. */
 #define CONE_FIRST 4
+
+#ifndef CONTACT_PAIRS
+/* Without element kernels (ncgen_contact_pairs.h) every contact is evaluated, by the flat
+ * kernels. */
+#define pairs_bounds(ws, q, rates) ((void) 0)
+#define pairs_select(ws, limit, hs, loaded) ((void) 0)
+#define pairs_extend(ws, limit) 0
+
+static int contact_gap(workspace *ws, const casadi_real *q, const casadi_real *p, casadi_real *g) {
+  ws->arg[0] = q;
+  ws->arg[1] = p;
+  ws->res[0] = g;
+  return KERNEL_GAP(ws->arg, ws->res, ws->iw, ws->w, 0) ? STEP_KERNEL : STEP_OK;
+}
+
+static int contact_rows(workspace *ws, const casadi_real *q, const casadi_real *v, const casadi_real *p,
+                        casadi_real *g, casadi_real *W, casadi_real *U, int which) {
+  if (which != 1) return STEP_OK; /* every row is evaluated */
+  ws->arg[0] = q;
+  ws->arg[1] = v;
+  ws->arg[2] = p;
+  ws->res[0] = g;
+  ws->res[1] = W;
+  ws->res[2] = U;
+  return KERNEL_CONTACT(ws->arg, ws->res, ws->iw, ws->w, 0) ? STEP_KERNEL : STEP_OK;
+}
+#endif
 
 /* Clears what the contact steps accumulate and their warm start (before a run). */
 static void contact_clear(workspace *ws) {
@@ -493,10 +523,9 @@ static int push_out(const casadi_real *p, casadi_real t1, casadi_real *q_next, c
                     const step_options *o, workspace *ws, int *pushed) {
   int i, a, k, n = 0, it, sweep, newton_at = NEWTON_FIRST, rows[NK];
   casadi_real one = 1, zero = 0, t0 = t1 - 1, deepest = 0;
-  ws->arg[0] = q_next;
-  ws->arg[1] = p;
-  ws->res[0] = ws->g;
-  if (KERNEL_GAP(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+  pairs_bounds(ws, q_next, 0);
+  pairs_select(ws, 0, 0, 0);
+  if (contact_gap(ws, q_next, p, ws->g)) return STEP_KERNEL;
   for (k = 0; k < NK; ++k)
     if (ws->g[k] < -PENETRATION_TOL) {
       ++n;
@@ -507,15 +536,10 @@ static int push_out(const casadi_real *p, casadi_real t1, casadi_real *q_next, c
   /* every contact within reach of the push (gap below twice the deepest penetration) takes
    * part, so that pushing one out pushes no other in (a column of spheres: else one pass
    * per sphere) */
+  (void) pairs_extend(ws, PENETRATION_TOL + 2 * deepest);
+  if (contact_rows(ws, q_next, v_next, p, ws->g, ws->W, 0, 1)) return STEP_KERNEL;
   for (n = k = 0; k < NK; ++k)
     if (ws->g[k] < PENETRATION_TOL + 2 * deepest) rows[n++] = k * DC;
-  ws->arg[0] = q_next;
-  ws->arg[1] = v_next;
-  ws->arg[2] = p;
-  ws->res[0] = ws->g;
-  ws->res[1] = ws->W;
-  ws->res[2] = 0;
-  if (KERNEL_CONTACT(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
   /* ws->K holds [M A^T; A 0] at q_next (the last second half-step). */
   ws->fm = -1;
   if ((k = delassus(ws, rows, n)) != STEP_OK) return k;
@@ -627,13 +651,9 @@ static int repeat_step(const casadi_real *q, const casadi_real *v, casadi_real t
   }
   if (!any || !ws->repeat) return STEP_OK;
   memcpy(ws->rhs + 2 * NX, ws->x, NX * sizeof(casadi_real));
-  ws->arg[0] = q;
-  ws->arg[1] = v;
-  ws->arg[2] = p;
-  ws->res[0] = 0;
-  ws->res[1] = W0;
-  ws->res[2] = ws->Um;
-  if (KERNEL_CONTACT(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+  pairs_bounds(ws, q, 0);
+  pairs_select(ws, -INFINITY, 0, 1); /* the elements with a force */
+  if (contact_rows(ws, q, v, p, 0, W0, ws->Um, 1)) return STEP_KERNEL;
   for (i = 0; i < NQ; ++i) ws->j[i] = 0;
   for (r = 0; r < ND; ++r)
     if (P[r] != 0)
@@ -641,17 +661,18 @@ static int repeat_step(const casadi_real *q, const casadi_real *v, casadi_real t
   memcpy(ws->j0, ws->j, NQ * sizeof(casadi_real)); /* the rows hardly move: kept only if so */
   status = step(q, v, t, u, p, h, q_next, v_next, lam, iterations, o, warm, ws);
   if (status == STEP_OK) {
-    ws->arg[0] = q_next;
-    ws->arg[1] = v_next;
-    ws->arg[2] = p;
-    ws->res[0] = ws->g;
-    ws->res[1] = ws->W;
-    ws->res[2] = ws->U;
-    if (KERNEL_CONTACT(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
     memcpy(ws->rhs, ws->j, NQ * sizeof(casadi_real)); /* X j, with ws->K = [M A^T; A 0] at q_next */
     for (i = NQ; i < NX; ++i) ws->rhs[i] = 0;
     if (solve(ws, ws->K, ws->rhs, ws->rhs + NX)) return STEP_KERNEL;
-    scale += norm_inf(ws->U, ND);
+    /* the elements whose gaps g - h/2 W X j may be <= 0, and those with a force; at q too
+     * (the start-of-step velocities of the contacts that close) */
+    pairs_bounds(ws, q_next, ws->rhs + NX);
+    pairs_select(ws, 0, h / 2, 1);
+    if (contact_rows(ws, q_next, v_next, p, ws->g, ws->W, ws->U, 1)) return STEP_KERNEL;
+#ifdef CONTACT_PAIRS
+    if (contact_rows(ws, q, v, p, 0, W0, ws->Um, 1)) return STEP_KERNEL;
+#endif
+    scale += norm_inf(ws->U, ND); /* the elements evaluated (with CONTACT_PAIRS) */
     *kept = all_finite(ws->rhs + NX, NQ);
     for (k = 0; k < NK && *kept; ++k) {
       casadi_real g_free = ws->g[k];
@@ -692,10 +713,9 @@ static int push_out_all(const casadi_real *p, casadi_real t1, casadi_real *q_nex
   for (n = 0; n < PUSH_OUT_MAX && pushed; ++n)
     if ((status = push_out(p, t1, q_next, v_next, o, ws, &pushed)) != STEP_OK) return status;
   if (pushed) { /* the last pass pushed: the gaps it left */
-    ws->arg[0] = q_next;
-    ws->arg[1] = p;
-    ws->res[0] = ws->g;
-    if (KERNEL_GAP(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+    pairs_bounds(ws, q_next, 0);
+    pairs_select(ws, 0, 0, 0);
+    if (contact_gap(ws, q_next, p, ws->g)) return STEP_KERNEL;
   }
   for (k = 0; k < NK; ++k) /* ws->g: the gaps at q_next */
     if (-ws->g[k] > ws->penetration) ws->penetration = -ws->g[k];
@@ -725,36 +745,14 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
   status = step(q, v, t, u, p, h, q_next, v_next, lam, iterations, o, warm, ws);
   if (iterations) *iterations += it;
   if (status != STEP_OK) return status;
-  ws->arg[0] = q_next;
-  ws->arg[1] = p;
-  ws->res[0] = ws->g;
-  if (KERNEL_GAP(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+  pairs_bounds(ws, q_next, 0);
+  pairs_select(ws, 0, 0, 0);
+  if (contact_gap(ws, q_next, p, ws->g)) return STEP_KERNEL;
   for (k = 0; k < NK; ++k)
     if (ws->g[k] <= 0) ws->act[na++] = k;
   for (k = 0; k < ND; ++k) if (ws->g[k / DC] > 0) ws->F[k] = 0;
   if (!na) return STEP_OK; /* no contact closed: the free step stands */
-  ws->arg[0] = q_next;
-  ws->arg[1] = v_next;
-  ws->arg[2] = p;
-  ws->res[0] = 0;
-  ws->res[1] = ws->W;
-  ws->res[2] = ws->U;
-  if (KERNEL_CONTACT(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
-  /* the contact Jacobian at the start of the step (the impulse of the first half-step), and
-   * the contact velocities there (Newton's impact law) */
-  ws->arg[0] = q;
-  ws->arg[1] = v;
-  ws->arg[2] = p;
-  ws->res[0] = 0;
-  ws->res[1] = ws->W0;
-#ifdef ANY_RESTITUTION
-  ws->res[2] = ws->Um;
-#else
-  ws->res[2] = 0;
-  /* every restitution coefficient is 0: the start-of-step velocities are not needed */
-  memset(ws->Um, 0, ND * sizeof(casadi_real));
-#endif
-  if (KERNEL_CONTACT(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+  if (contact_rows(ws, q_next, v_next, p, 0, ws->W, ws->U, 1)) return STEP_KERNEL;
   /* Contacts about to close take part too.  The impulses move the end-of-step gaps by
    * h/2 (U - U_free), U_free the free step's contact velocities: the push of a closed
    * contact can close an open neighbour within the step (a pile, a column), and push_out()
@@ -772,6 +770,17 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
     casadi_real reach = 0;
     for (a = 0; a < na; ++a) reach = fmax(reach, -ws->U[ws->act[a] * DC]);
     reach *= GAP_REACH * h / 2;
+    /* the elements skipped whose gaps may be below the reach (their gaps, W and U) */
+    if (pairs_extend(ws, reach) && contact_rows(ws, q_next, v_next, p, ws->g, ws->W, ws->U, 2)) return STEP_KERNEL;
+    /* the contact Jacobian at the start of the step (the impulse of the first half-step), and
+     * the contact velocities there (Newton's impact law) */
+#ifdef ANY_RESTITUTION
+    if (contact_rows(ws, q, v, p, 0, ws->W0, ws->Um, 1)) return STEP_KERNEL;
+#else
+    /* every restitution coefficient is 0: the start-of-step velocities are not needed */
+    if (contact_rows(ws, q, v, p, 0, ws->W0, 0, 1)) return STEP_KERNEL;
+    memset(ws->Um, 0, ND * sizeof(casadi_real));
+#endif
     for (na = k = 0; k < NK; ++k) {
       const casadi_real g = ws->g[k];
       if (g <= 0) bias[na] = restitution[k] * fmin(ws->Um[k * DC], 0);
@@ -856,13 +865,8 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
     if (iterations) *iterations += it;
     if (status != STEP_OK) return status;
     if (refine == CONTACT_REFINE_MAX || !impact) break;
-    ws->arg[0] = q_next;
-    ws->arg[1] = v_next;
-    ws->arg[2] = p;
-    ws->res[0] = 0;
-    ws->res[1] = 0;
-    ws->res[2] = ws->Um + ND; /* the contact velocities the step ends with */
-    if (KERNEL_CONTACT(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+    /* the contact velocities the step ends with */
+    if (contact_rows(ws, q_next, v_next, p, 0, 0, ws->Um + ND, 1)) return STEP_KERNEL;
     {
       casadi_real off = 0, scale = 1;
       for (a = 0; a < nr; ++a) {

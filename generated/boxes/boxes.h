@@ -471,37 +471,69 @@ extern const casadi_real boxes_gravity[3];
 #define BOXES_STEP_OUTPUTS_IN_P_NNZ 0
 #define BOXES_STEP_OUTPUTS_OUT_Y_NNZ 5
 
-/* ---- boxes_step_contact ----------------------------------------------------
- * Stepper: contact gaps, Jacobians (per contact: normal row, tangent rows) and velocities
- * In boxes_kernels_0.c; 977 instructions.
+/* ---- boxes_step_pair0_gap ----------------------------------------------------
+ * Stepper: the gaps of one contact element
+ * In boxes_kernels_0.c; 144 instructions.
  * Inputs:
- *   arg[0] q: 24x1, nnz 24 [m] coordinates. Default: boxes_q0.
- *   arg[1] v: 24x1, nnz 24 [m/s] coordinate rates. Default: boxes_v0.
+ *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
+ *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
  *   arg[2] p: 0x1, nnz 0 parameters. Default: zeros.
  * Outputs:
- *   res[0] g: 10x1, nnz 10 [m] gaps, positive apart.
- *   res[1] Wt: 24x30, nnz 212 (sparse) [1] transposed contact Jacobian W^T, nq x nk*dim, sparse (column r: row r of W).
- *   res[2] U: 30x1, nnz 30 [m/s] contact velocities W v.
+ *   res[0] g: 8x1, nnz 8 [m] gaps of its point contacts, positive apart.
  */
-#define BOXES_STEP_CONTACT_IN_Q_NNZ 24
-#define BOXES_STEP_CONTACT_IN_V_NNZ 24
-#define BOXES_STEP_CONTACT_IN_P_NNZ 0
-#define BOXES_STEP_CONTACT_OUT_G_NNZ 10
-#define BOXES_STEP_CONTACT_OUT_WT_NNZ 212
-#define BOXES_STEP_CONTACT_OUT_U_NNZ 30
+#define BOXES_STEP_PAIR0_GAP_IN_Q_A_NNZ 12
+#define BOXES_STEP_PAIR0_GAP_IN_Q_B_NNZ 0
+#define BOXES_STEP_PAIR0_GAP_IN_P_NNZ 0
+#define BOXES_STEP_PAIR0_GAP_OUT_G_NNZ 8
 
-/* ---- boxes_step_gap ----------------------------------------------------
- * Stepper: contact gaps
- * In boxes_kernels_0.c; 167 instructions.
+/* ---- boxes_step_pair0_rows ----------------------------------------------------
+ * Stepper: gaps and contact Jacobian rows of one contact element
+ * In boxes_kernels_0.c; 447 instructions.
  * Inputs:
- *   arg[0] q: 24x1, nnz 24 [m] coordinates. Default: boxes_q0.
- *   arg[1] p: 0x1, nnz 0 parameters. Default: zeros.
+ *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
+ *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
+ *   arg[2] p: 0x1, nnz 0 parameters. Default: zeros.
  * Outputs:
- *   res[0] g: 10x1, nnz 10 [m] gaps, positive apart.
+ *   res[0] g: 8x1, nnz 8 [m] gaps of its point contacts, positive apart.
+ *   res[1] W: 24x12, nnz 288 [1] per point contact its normal and tangent rows (zero without friction), columns q_a then q_b, dense.
  */
-#define BOXES_STEP_GAP_IN_Q_NNZ 24
-#define BOXES_STEP_GAP_IN_P_NNZ 0
-#define BOXES_STEP_GAP_OUT_G_NNZ 10
+#define BOXES_STEP_PAIR0_ROWS_IN_Q_A_NNZ 12
+#define BOXES_STEP_PAIR0_ROWS_IN_Q_B_NNZ 0
+#define BOXES_STEP_PAIR0_ROWS_IN_P_NNZ 0
+#define BOXES_STEP_PAIR0_ROWS_OUT_G_NNZ 8
+#define BOXES_STEP_PAIR0_ROWS_OUT_W_NNZ 288
+
+/* ---- boxes_step_pair1_gap ----------------------------------------------------
+ * Stepper: the gaps of one contact element
+ * In boxes_kernels_0.c; 27 instructions.
+ * Inputs:
+ *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
+ *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
+ *   arg[2] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] g: 2x1, nnz 2 [m] gaps of its point contacts, positive apart.
+ */
+#define BOXES_STEP_PAIR1_GAP_IN_Q_A_NNZ 12
+#define BOXES_STEP_PAIR1_GAP_IN_Q_B_NNZ 0
+#define BOXES_STEP_PAIR1_GAP_IN_P_NNZ 0
+#define BOXES_STEP_PAIR1_GAP_OUT_G_NNZ 2
+
+/* ---- boxes_step_pair1_rows ----------------------------------------------------
+ * Stepper: gaps and contact Jacobian rows of one contact element
+ * In boxes_kernels_0.c; 244 instructions.
+ * Inputs:
+ *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
+ *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
+ *   arg[2] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] g: 2x1, nnz 2 [m] gaps of its point contacts, positive apart.
+ *   res[1] W: 6x12, nnz 72 [1] per point contact its normal and tangent rows (zero without friction), columns q_a then q_b, dense.
+ */
+#define BOXES_STEP_PAIR1_ROWS_IN_Q_A_NNZ 12
+#define BOXES_STEP_PAIR1_ROWS_IN_Q_B_NNZ 0
+#define BOXES_STEP_PAIR1_ROWS_IN_P_NNZ 0
+#define BOXES_STEP_PAIR1_ROWS_OUT_G_NNZ 2
+#define BOXES_STEP_PAIR1_ROWS_OUT_W_NNZ 72
 
 /* ---- boxes_step_factor ----------------------------------------------------
  * Stepper: sparse Householder QR of the KKT matrix (for the contact Delassus matrix)

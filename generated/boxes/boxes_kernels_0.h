@@ -420,42 +420,78 @@ int boxes_step_outputs_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi
 #define boxes_step_outputs_SZ_RES 1
 #define boxes_step_outputs_SZ_IW 0
 #define boxes_step_outputs_SZ_W 0
-int boxes_step_contact(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
-int boxes_step_contact_checkout(void);
-void boxes_step_contact_release(int mem);
-void boxes_step_contact_incref(void);
-void boxes_step_contact_decref(void);
-casadi_int boxes_step_contact_n_in(void);
-casadi_int boxes_step_contact_n_out(void);
-casadi_real boxes_step_contact_default_in(casadi_int i);
-const char* boxes_step_contact_name_in(casadi_int i);
-const char* boxes_step_contact_name_out(casadi_int i);
-const casadi_int* boxes_step_contact_sparsity_in(casadi_int i);
-const casadi_int* boxes_step_contact_sparsity_out(casadi_int i);
-int boxes_step_contact_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-int boxes_step_contact_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define boxes_step_contact_SZ_ARG 3
-#define boxes_step_contact_SZ_RES 3
-#define boxes_step_contact_SZ_IW 0
-#define boxes_step_contact_SZ_W 0
-int boxes_step_gap(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
-int boxes_step_gap_checkout(void);
-void boxes_step_gap_release(int mem);
-void boxes_step_gap_incref(void);
-void boxes_step_gap_decref(void);
-casadi_int boxes_step_gap_n_in(void);
-casadi_int boxes_step_gap_n_out(void);
-casadi_real boxes_step_gap_default_in(casadi_int i);
-const char* boxes_step_gap_name_in(casadi_int i);
-const char* boxes_step_gap_name_out(casadi_int i);
-const casadi_int* boxes_step_gap_sparsity_in(casadi_int i);
-const casadi_int* boxes_step_gap_sparsity_out(casadi_int i);
-int boxes_step_gap_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-int boxes_step_gap_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define boxes_step_gap_SZ_ARG 2
-#define boxes_step_gap_SZ_RES 1
-#define boxes_step_gap_SZ_IW 0
-#define boxes_step_gap_SZ_W 0
+int boxes_step_pair0_gap(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int boxes_step_pair0_gap_checkout(void);
+void boxes_step_pair0_gap_release(int mem);
+void boxes_step_pair0_gap_incref(void);
+void boxes_step_pair0_gap_decref(void);
+casadi_int boxes_step_pair0_gap_n_in(void);
+casadi_int boxes_step_pair0_gap_n_out(void);
+casadi_real boxes_step_pair0_gap_default_in(casadi_int i);
+const char* boxes_step_pair0_gap_name_in(casadi_int i);
+const char* boxes_step_pair0_gap_name_out(casadi_int i);
+const casadi_int* boxes_step_pair0_gap_sparsity_in(casadi_int i);
+const casadi_int* boxes_step_pair0_gap_sparsity_out(casadi_int i);
+int boxes_step_pair0_gap_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int boxes_step_pair0_gap_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define boxes_step_pair0_gap_SZ_ARG 3
+#define boxes_step_pair0_gap_SZ_RES 1
+#define boxes_step_pair0_gap_SZ_IW 0
+#define boxes_step_pair0_gap_SZ_W 0
+int boxes_step_pair0_rows(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int boxes_step_pair0_rows_checkout(void);
+void boxes_step_pair0_rows_release(int mem);
+void boxes_step_pair0_rows_incref(void);
+void boxes_step_pair0_rows_decref(void);
+casadi_int boxes_step_pair0_rows_n_in(void);
+casadi_int boxes_step_pair0_rows_n_out(void);
+casadi_real boxes_step_pair0_rows_default_in(casadi_int i);
+const char* boxes_step_pair0_rows_name_in(casadi_int i);
+const char* boxes_step_pair0_rows_name_out(casadi_int i);
+const casadi_int* boxes_step_pair0_rows_sparsity_in(casadi_int i);
+const casadi_int* boxes_step_pair0_rows_sparsity_out(casadi_int i);
+int boxes_step_pair0_rows_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int boxes_step_pair0_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define boxes_step_pair0_rows_SZ_ARG 3
+#define boxes_step_pair0_rows_SZ_RES 2
+#define boxes_step_pair0_rows_SZ_IW 0
+#define boxes_step_pair0_rows_SZ_W 0
+int boxes_step_pair1_gap(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int boxes_step_pair1_gap_checkout(void);
+void boxes_step_pair1_gap_release(int mem);
+void boxes_step_pair1_gap_incref(void);
+void boxes_step_pair1_gap_decref(void);
+casadi_int boxes_step_pair1_gap_n_in(void);
+casadi_int boxes_step_pair1_gap_n_out(void);
+casadi_real boxes_step_pair1_gap_default_in(casadi_int i);
+const char* boxes_step_pair1_gap_name_in(casadi_int i);
+const char* boxes_step_pair1_gap_name_out(casadi_int i);
+const casadi_int* boxes_step_pair1_gap_sparsity_in(casadi_int i);
+const casadi_int* boxes_step_pair1_gap_sparsity_out(casadi_int i);
+int boxes_step_pair1_gap_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int boxes_step_pair1_gap_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define boxes_step_pair1_gap_SZ_ARG 3
+#define boxes_step_pair1_gap_SZ_RES 1
+#define boxes_step_pair1_gap_SZ_IW 0
+#define boxes_step_pair1_gap_SZ_W 0
+int boxes_step_pair1_rows(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int boxes_step_pair1_rows_checkout(void);
+void boxes_step_pair1_rows_release(int mem);
+void boxes_step_pair1_rows_incref(void);
+void boxes_step_pair1_rows_decref(void);
+casadi_int boxes_step_pair1_rows_n_in(void);
+casadi_int boxes_step_pair1_rows_n_out(void);
+casadi_real boxes_step_pair1_rows_default_in(casadi_int i);
+const char* boxes_step_pair1_rows_name_in(casadi_int i);
+const char* boxes_step_pair1_rows_name_out(casadi_int i);
+const casadi_int* boxes_step_pair1_rows_sparsity_in(casadi_int i);
+const casadi_int* boxes_step_pair1_rows_sparsity_out(casadi_int i);
+int boxes_step_pair1_rows_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int boxes_step_pair1_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define boxes_step_pair1_rows_SZ_ARG 3
+#define boxes_step_pair1_rows_SZ_RES 2
+#define boxes_step_pair1_rows_SZ_IW 0
+#define boxes_step_pair1_rows_SZ_W 0
 int boxes_step_factor(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int boxes_step_factor_checkout(void);
 void boxes_step_factor_release(int mem);

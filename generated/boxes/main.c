@@ -158,13 +158,24 @@ static const casadi_real *const defaults_step_outputs[] = {
   0,
   0,
   0};
-static const casadi_real *const defaults_step_contact[] = {
-  boxes_q0,
-  boxes_v0,
+static const casadi_real *const defaults_step_pair0_gap[] = {
+  0,
+  0,
   0,
   0};
-static const casadi_real *const defaults_step_gap[] = {
-  boxes_q0,
+static const casadi_real *const defaults_step_pair0_rows[] = {
+  0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_pair1_gap[] = {
+  0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_pair1_rows[] = {
+  0,
+  0,
   0,
   0};
 static const casadi_real *const defaults_step_factor[] = {
@@ -262,14 +273,22 @@ static const kernel kernels[] = {
    boxes_step_outputs_name_in, boxes_step_outputs_name_out, boxes_step_outputs_sparsity_in, boxes_step_outputs_sparsity_out,
    boxes_step_outputs_checkout, boxes_step_outputs_release, boxes_step_outputs_incref, boxes_step_outputs_decref,
    defaults_step_outputs},
-  {"step_contact", boxes_step_contact, boxes_step_contact_work, boxes_step_contact_n_in, boxes_step_contact_n_out,
-   boxes_step_contact_name_in, boxes_step_contact_name_out, boxes_step_contact_sparsity_in, boxes_step_contact_sparsity_out,
-   boxes_step_contact_checkout, boxes_step_contact_release, boxes_step_contact_incref, boxes_step_contact_decref,
-   defaults_step_contact},
-  {"step_gap", boxes_step_gap, boxes_step_gap_work, boxes_step_gap_n_in, boxes_step_gap_n_out,
-   boxes_step_gap_name_in, boxes_step_gap_name_out, boxes_step_gap_sparsity_in, boxes_step_gap_sparsity_out,
-   boxes_step_gap_checkout, boxes_step_gap_release, boxes_step_gap_incref, boxes_step_gap_decref,
-   defaults_step_gap},
+  {"step_pair0_gap", boxes_step_pair0_gap, boxes_step_pair0_gap_work, boxes_step_pair0_gap_n_in, boxes_step_pair0_gap_n_out,
+   boxes_step_pair0_gap_name_in, boxes_step_pair0_gap_name_out, boxes_step_pair0_gap_sparsity_in, boxes_step_pair0_gap_sparsity_out,
+   boxes_step_pair0_gap_checkout, boxes_step_pair0_gap_release, boxes_step_pair0_gap_incref, boxes_step_pair0_gap_decref,
+   defaults_step_pair0_gap},
+  {"step_pair0_rows", boxes_step_pair0_rows, boxes_step_pair0_rows_work, boxes_step_pair0_rows_n_in, boxes_step_pair0_rows_n_out,
+   boxes_step_pair0_rows_name_in, boxes_step_pair0_rows_name_out, boxes_step_pair0_rows_sparsity_in, boxes_step_pair0_rows_sparsity_out,
+   boxes_step_pair0_rows_checkout, boxes_step_pair0_rows_release, boxes_step_pair0_rows_incref, boxes_step_pair0_rows_decref,
+   defaults_step_pair0_rows},
+  {"step_pair1_gap", boxes_step_pair1_gap, boxes_step_pair1_gap_work, boxes_step_pair1_gap_n_in, boxes_step_pair1_gap_n_out,
+   boxes_step_pair1_gap_name_in, boxes_step_pair1_gap_name_out, boxes_step_pair1_gap_sparsity_in, boxes_step_pair1_gap_sparsity_out,
+   boxes_step_pair1_gap_checkout, boxes_step_pair1_gap_release, boxes_step_pair1_gap_incref, boxes_step_pair1_gap_decref,
+   defaults_step_pair1_gap},
+  {"step_pair1_rows", boxes_step_pair1_rows, boxes_step_pair1_rows_work, boxes_step_pair1_rows_n_in, boxes_step_pair1_rows_n_out,
+   boxes_step_pair1_rows_name_in, boxes_step_pair1_rows_name_out, boxes_step_pair1_rows_sparsity_in, boxes_step_pair1_rows_sparsity_out,
+   boxes_step_pair1_rows_checkout, boxes_step_pair1_rows_release, boxes_step_pair1_rows_incref, boxes_step_pair1_rows_decref,
+   defaults_step_pair1_rows},
   {"step_factor", boxes_step_factor, boxes_step_factor_work, boxes_step_factor_n_in, boxes_step_factor_n_out,
    boxes_step_factor_name_in, boxes_step_factor_name_out, boxes_step_factor_sparsity_in, boxes_step_factor_sparsity_out,
    boxes_step_factor_checkout, boxes_step_factor_release, boxes_step_factor_incref, boxes_step_factor_decref,

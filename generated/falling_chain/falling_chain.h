@@ -471,37 +471,101 @@ extern const casadi_real falling_chain_gravity[3];
 #define FALLING_CHAIN_STEP_OUTPUTS_IN_P_NNZ 0
 #define FALLING_CHAIN_STEP_OUTPUTS_OUT_Y_NNZ 5
 
-/* ---- falling_chain_step_contact ----------------------------------------------------
- * Stepper: contact gaps, Jacobians (per contact: normal row, tangent rows) and velocities
- * In falling_chain_kernels_0.c; 330 instructions.
+/* ---- falling_chain_step_pair0_gap ----------------------------------------------------
+ * Stepper: the gaps of one contact element
+ * In falling_chain_kernels_0.c; 4 instructions.
  * Inputs:
- *   arg[0] q: 15x1, nnz 15 [m] coordinates. Default: falling_chain_q0.
- *   arg[1] v: 15x1, nnz 15 [m/s] coordinate rates. Default: falling_chain_v0.
+ *   arg[0] q_a: 6x1, nnz 6 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
+ *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
  *   arg[2] p: 0x1, nnz 0 parameters. Default: zeros.
  * Outputs:
- *   res[0] g: 5x1, nnz 5 [m] gaps, positive apart.
- *   res[1] Wt: 15x15, nnz 39 (sparse) [1] transposed contact Jacobian W^T, nq x nk*dim, sparse (column r: row r of W).
- *   res[2] U: 15x1, nnz 15 [m/s] contact velocities W v.
+ *   res[0] g: 1x1, nnz 1 [m] gaps of its point contacts, positive apart.
  */
-#define FALLING_CHAIN_STEP_CONTACT_IN_Q_NNZ 15
-#define FALLING_CHAIN_STEP_CONTACT_IN_V_NNZ 15
-#define FALLING_CHAIN_STEP_CONTACT_IN_P_NNZ 0
-#define FALLING_CHAIN_STEP_CONTACT_OUT_G_NNZ 5
-#define FALLING_CHAIN_STEP_CONTACT_OUT_WT_NNZ 39
-#define FALLING_CHAIN_STEP_CONTACT_OUT_U_NNZ 15
+#define FALLING_CHAIN_STEP_PAIR0_GAP_IN_Q_A_NNZ 6
+#define FALLING_CHAIN_STEP_PAIR0_GAP_IN_Q_B_NNZ 0
+#define FALLING_CHAIN_STEP_PAIR0_GAP_IN_P_NNZ 0
+#define FALLING_CHAIN_STEP_PAIR0_GAP_OUT_G_NNZ 1
 
-/* ---- falling_chain_step_gap ----------------------------------------------------
- * Stepper: contact gaps
- * In falling_chain_kernels_0.c; 17 instructions.
+/* ---- falling_chain_step_pair0_rows ----------------------------------------------------
+ * Stepper: gaps and contact Jacobian rows of one contact element
+ * In falling_chain_kernels_0.c; 73 instructions.
  * Inputs:
- *   arg[0] q: 15x1, nnz 15 [m] coordinates. Default: falling_chain_q0.
- *   arg[1] p: 0x1, nnz 0 parameters. Default: zeros.
+ *   arg[0] q_a: 6x1, nnz 6 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
+ *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
+ *   arg[2] p: 0x1, nnz 0 parameters. Default: zeros.
  * Outputs:
- *   res[0] g: 5x1, nnz 5 [m] gaps, positive apart.
+ *   res[0] g: 1x1, nnz 1 [m] gaps of its point contacts, positive apart.
+ *   res[1] W: 3x6, nnz 18 [1] per point contact its normal and tangent rows (zero without friction), columns q_a then q_b, dense.
  */
-#define FALLING_CHAIN_STEP_GAP_IN_Q_NNZ 15
-#define FALLING_CHAIN_STEP_GAP_IN_P_NNZ 0
-#define FALLING_CHAIN_STEP_GAP_OUT_G_NNZ 5
+#define FALLING_CHAIN_STEP_PAIR0_ROWS_IN_Q_A_NNZ 6
+#define FALLING_CHAIN_STEP_PAIR0_ROWS_IN_Q_B_NNZ 0
+#define FALLING_CHAIN_STEP_PAIR0_ROWS_IN_P_NNZ 0
+#define FALLING_CHAIN_STEP_PAIR0_ROWS_OUT_G_NNZ 1
+#define FALLING_CHAIN_STEP_PAIR0_ROWS_OUT_W_NNZ 18
+
+/* ---- falling_chain_step_pair1_gap ----------------------------------------------------
+ * Stepper: the gaps of one contact element
+ * In falling_chain_kernels_0.c; 4 instructions.
+ * Inputs:
+ *   arg[0] q_a: 6x1, nnz 6 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
+ *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
+ *   arg[2] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] g: 1x1, nnz 1 [m] gaps of its point contacts, positive apart.
+ */
+#define FALLING_CHAIN_STEP_PAIR1_GAP_IN_Q_A_NNZ 6
+#define FALLING_CHAIN_STEP_PAIR1_GAP_IN_Q_B_NNZ 0
+#define FALLING_CHAIN_STEP_PAIR1_GAP_IN_P_NNZ 0
+#define FALLING_CHAIN_STEP_PAIR1_GAP_OUT_G_NNZ 1
+
+/* ---- falling_chain_step_pair1_rows ----------------------------------------------------
+ * Stepper: gaps and contact Jacobian rows of one contact element
+ * In falling_chain_kernels_0.c; 73 instructions.
+ * Inputs:
+ *   arg[0] q_a: 6x1, nnz 6 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
+ *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
+ *   arg[2] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] g: 1x1, nnz 1 [m] gaps of its point contacts, positive apart.
+ *   res[1] W: 3x6, nnz 18 [1] per point contact its normal and tangent rows (zero without friction), columns q_a then q_b, dense.
+ */
+#define FALLING_CHAIN_STEP_PAIR1_ROWS_IN_Q_A_NNZ 6
+#define FALLING_CHAIN_STEP_PAIR1_ROWS_IN_Q_B_NNZ 0
+#define FALLING_CHAIN_STEP_PAIR1_ROWS_IN_P_NNZ 0
+#define FALLING_CHAIN_STEP_PAIR1_ROWS_OUT_G_NNZ 1
+#define FALLING_CHAIN_STEP_PAIR1_ROWS_OUT_W_NNZ 18
+
+/* ---- falling_chain_step_pair2_gap ----------------------------------------------------
+ * Stepper: the gaps of one contact element
+ * In falling_chain_kernels_0.c; 4 instructions.
+ * Inputs:
+ *   arg[0] q_a: 3x1, nnz 3 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
+ *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
+ *   arg[2] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] g: 1x1, nnz 1 [m] gaps of its point contacts, positive apart.
+ */
+#define FALLING_CHAIN_STEP_PAIR2_GAP_IN_Q_A_NNZ 3
+#define FALLING_CHAIN_STEP_PAIR2_GAP_IN_Q_B_NNZ 0
+#define FALLING_CHAIN_STEP_PAIR2_GAP_IN_P_NNZ 0
+#define FALLING_CHAIN_STEP_PAIR2_GAP_OUT_G_NNZ 1
+
+/* ---- falling_chain_step_pair2_rows ----------------------------------------------------
+ * Stepper: gaps and contact Jacobian rows of one contact element
+ * In falling_chain_kernels_0.c; 16 instructions.
+ * Inputs:
+ *   arg[0] q_a: 3x1, nnz 3 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
+ *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
+ *   arg[2] p: 0x1, nnz 0 parameters. Default: zeros.
+ * Outputs:
+ *   res[0] g: 1x1, nnz 1 [m] gaps of its point contacts, positive apart.
+ *   res[1] W: 3x3, nnz 9 [1] per point contact its normal and tangent rows (zero without friction), columns q_a then q_b, dense.
+ */
+#define FALLING_CHAIN_STEP_PAIR2_ROWS_IN_Q_A_NNZ 3
+#define FALLING_CHAIN_STEP_PAIR2_ROWS_IN_Q_B_NNZ 0
+#define FALLING_CHAIN_STEP_PAIR2_ROWS_IN_P_NNZ 0
+#define FALLING_CHAIN_STEP_PAIR2_ROWS_OUT_G_NNZ 1
+#define FALLING_CHAIN_STEP_PAIR2_ROWS_OUT_W_NNZ 9
 
 /* ---- falling_chain_step_factor ----------------------------------------------------
  * Stepper: sparse Householder QR of the KKT matrix (for the contact Delassus matrix)

@@ -420,42 +420,114 @@ int falling_chain_step_outputs_work_bytes(casadi_int *sz_arg, casadi_int* sz_res
 #define falling_chain_step_outputs_SZ_RES 1
 #define falling_chain_step_outputs_SZ_IW 0
 #define falling_chain_step_outputs_SZ_W 0
-int falling_chain_step_contact(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
-int falling_chain_step_contact_checkout(void);
-void falling_chain_step_contact_release(int mem);
-void falling_chain_step_contact_incref(void);
-void falling_chain_step_contact_decref(void);
-casadi_int falling_chain_step_contact_n_in(void);
-casadi_int falling_chain_step_contact_n_out(void);
-casadi_real falling_chain_step_contact_default_in(casadi_int i);
-const char* falling_chain_step_contact_name_in(casadi_int i);
-const char* falling_chain_step_contact_name_out(casadi_int i);
-const casadi_int* falling_chain_step_contact_sparsity_in(casadi_int i);
-const casadi_int* falling_chain_step_contact_sparsity_out(casadi_int i);
-int falling_chain_step_contact_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-int falling_chain_step_contact_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define falling_chain_step_contact_SZ_ARG 3
-#define falling_chain_step_contact_SZ_RES 3
-#define falling_chain_step_contact_SZ_IW 0
-#define falling_chain_step_contact_SZ_W 0
-int falling_chain_step_gap(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
-int falling_chain_step_gap_checkout(void);
-void falling_chain_step_gap_release(int mem);
-void falling_chain_step_gap_incref(void);
-void falling_chain_step_gap_decref(void);
-casadi_int falling_chain_step_gap_n_in(void);
-casadi_int falling_chain_step_gap_n_out(void);
-casadi_real falling_chain_step_gap_default_in(casadi_int i);
-const char* falling_chain_step_gap_name_in(casadi_int i);
-const char* falling_chain_step_gap_name_out(casadi_int i);
-const casadi_int* falling_chain_step_gap_sparsity_in(casadi_int i);
-const casadi_int* falling_chain_step_gap_sparsity_out(casadi_int i);
-int falling_chain_step_gap_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-int falling_chain_step_gap_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define falling_chain_step_gap_SZ_ARG 2
-#define falling_chain_step_gap_SZ_RES 1
-#define falling_chain_step_gap_SZ_IW 0
-#define falling_chain_step_gap_SZ_W 0
+int falling_chain_step_pair0_gap(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int falling_chain_step_pair0_gap_checkout(void);
+void falling_chain_step_pair0_gap_release(int mem);
+void falling_chain_step_pair0_gap_incref(void);
+void falling_chain_step_pair0_gap_decref(void);
+casadi_int falling_chain_step_pair0_gap_n_in(void);
+casadi_int falling_chain_step_pair0_gap_n_out(void);
+casadi_real falling_chain_step_pair0_gap_default_in(casadi_int i);
+const char* falling_chain_step_pair0_gap_name_in(casadi_int i);
+const char* falling_chain_step_pair0_gap_name_out(casadi_int i);
+const casadi_int* falling_chain_step_pair0_gap_sparsity_in(casadi_int i);
+const casadi_int* falling_chain_step_pair0_gap_sparsity_out(casadi_int i);
+int falling_chain_step_pair0_gap_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int falling_chain_step_pair0_gap_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define falling_chain_step_pair0_gap_SZ_ARG 3
+#define falling_chain_step_pair0_gap_SZ_RES 1
+#define falling_chain_step_pair0_gap_SZ_IW 0
+#define falling_chain_step_pair0_gap_SZ_W 0
+int falling_chain_step_pair0_rows(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int falling_chain_step_pair0_rows_checkout(void);
+void falling_chain_step_pair0_rows_release(int mem);
+void falling_chain_step_pair0_rows_incref(void);
+void falling_chain_step_pair0_rows_decref(void);
+casadi_int falling_chain_step_pair0_rows_n_in(void);
+casadi_int falling_chain_step_pair0_rows_n_out(void);
+casadi_real falling_chain_step_pair0_rows_default_in(casadi_int i);
+const char* falling_chain_step_pair0_rows_name_in(casadi_int i);
+const char* falling_chain_step_pair0_rows_name_out(casadi_int i);
+const casadi_int* falling_chain_step_pair0_rows_sparsity_in(casadi_int i);
+const casadi_int* falling_chain_step_pair0_rows_sparsity_out(casadi_int i);
+int falling_chain_step_pair0_rows_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int falling_chain_step_pair0_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define falling_chain_step_pair0_rows_SZ_ARG 3
+#define falling_chain_step_pair0_rows_SZ_RES 2
+#define falling_chain_step_pair0_rows_SZ_IW 0
+#define falling_chain_step_pair0_rows_SZ_W 0
+int falling_chain_step_pair1_gap(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int falling_chain_step_pair1_gap_checkout(void);
+void falling_chain_step_pair1_gap_release(int mem);
+void falling_chain_step_pair1_gap_incref(void);
+void falling_chain_step_pair1_gap_decref(void);
+casadi_int falling_chain_step_pair1_gap_n_in(void);
+casadi_int falling_chain_step_pair1_gap_n_out(void);
+casadi_real falling_chain_step_pair1_gap_default_in(casadi_int i);
+const char* falling_chain_step_pair1_gap_name_in(casadi_int i);
+const char* falling_chain_step_pair1_gap_name_out(casadi_int i);
+const casadi_int* falling_chain_step_pair1_gap_sparsity_in(casadi_int i);
+const casadi_int* falling_chain_step_pair1_gap_sparsity_out(casadi_int i);
+int falling_chain_step_pair1_gap_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int falling_chain_step_pair1_gap_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define falling_chain_step_pair1_gap_SZ_ARG 3
+#define falling_chain_step_pair1_gap_SZ_RES 1
+#define falling_chain_step_pair1_gap_SZ_IW 0
+#define falling_chain_step_pair1_gap_SZ_W 0
+int falling_chain_step_pair1_rows(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int falling_chain_step_pair1_rows_checkout(void);
+void falling_chain_step_pair1_rows_release(int mem);
+void falling_chain_step_pair1_rows_incref(void);
+void falling_chain_step_pair1_rows_decref(void);
+casadi_int falling_chain_step_pair1_rows_n_in(void);
+casadi_int falling_chain_step_pair1_rows_n_out(void);
+casadi_real falling_chain_step_pair1_rows_default_in(casadi_int i);
+const char* falling_chain_step_pair1_rows_name_in(casadi_int i);
+const char* falling_chain_step_pair1_rows_name_out(casadi_int i);
+const casadi_int* falling_chain_step_pair1_rows_sparsity_in(casadi_int i);
+const casadi_int* falling_chain_step_pair1_rows_sparsity_out(casadi_int i);
+int falling_chain_step_pair1_rows_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int falling_chain_step_pair1_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define falling_chain_step_pair1_rows_SZ_ARG 3
+#define falling_chain_step_pair1_rows_SZ_RES 2
+#define falling_chain_step_pair1_rows_SZ_IW 0
+#define falling_chain_step_pair1_rows_SZ_W 0
+int falling_chain_step_pair2_gap(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int falling_chain_step_pair2_gap_checkout(void);
+void falling_chain_step_pair2_gap_release(int mem);
+void falling_chain_step_pair2_gap_incref(void);
+void falling_chain_step_pair2_gap_decref(void);
+casadi_int falling_chain_step_pair2_gap_n_in(void);
+casadi_int falling_chain_step_pair2_gap_n_out(void);
+casadi_real falling_chain_step_pair2_gap_default_in(casadi_int i);
+const char* falling_chain_step_pair2_gap_name_in(casadi_int i);
+const char* falling_chain_step_pair2_gap_name_out(casadi_int i);
+const casadi_int* falling_chain_step_pair2_gap_sparsity_in(casadi_int i);
+const casadi_int* falling_chain_step_pair2_gap_sparsity_out(casadi_int i);
+int falling_chain_step_pair2_gap_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int falling_chain_step_pair2_gap_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define falling_chain_step_pair2_gap_SZ_ARG 3
+#define falling_chain_step_pair2_gap_SZ_RES 1
+#define falling_chain_step_pair2_gap_SZ_IW 0
+#define falling_chain_step_pair2_gap_SZ_W 0
+int falling_chain_step_pair2_rows(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int falling_chain_step_pair2_rows_checkout(void);
+void falling_chain_step_pair2_rows_release(int mem);
+void falling_chain_step_pair2_rows_incref(void);
+void falling_chain_step_pair2_rows_decref(void);
+casadi_int falling_chain_step_pair2_rows_n_in(void);
+casadi_int falling_chain_step_pair2_rows_n_out(void);
+casadi_real falling_chain_step_pair2_rows_default_in(casadi_int i);
+const char* falling_chain_step_pair2_rows_name_in(casadi_int i);
+const char* falling_chain_step_pair2_rows_name_out(casadi_int i);
+const casadi_int* falling_chain_step_pair2_rows_sparsity_in(casadi_int i);
+const casadi_int* falling_chain_step_pair2_rows_sparsity_out(casadi_int i);
+int falling_chain_step_pair2_rows_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int falling_chain_step_pair2_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define falling_chain_step_pair2_rows_SZ_ARG 3
+#define falling_chain_step_pair2_rows_SZ_RES 2
+#define falling_chain_step_pair2_rows_SZ_IW 0
+#define falling_chain_step_pair2_rows_SZ_W 0
 int falling_chain_step_factor(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int falling_chain_step_factor_checkout(void);
 void falling_chain_step_factor_release(int mem);

@@ -36,11 +36,15 @@ typedef falling_chain_step_options step_options;
 #define KERNEL_PROJECT falling_chain_step_project
 #define KERNEL_POWER falling_chain_step_power
 #define KERNEL_OUTPUTS falling_chain_step_outputs
-#define KERNEL_CONTACT falling_chain_step_contact
-#define KERNEL_GAP falling_chain_step_gap
+#define KERNEL_PAIR0_GAP falling_chain_step_pair0_gap
+#define KERNEL_PAIR0_ROWS falling_chain_step_pair0_rows
+#define KERNEL_PAIR1_GAP falling_chain_step_pair1_gap
+#define KERNEL_PAIR1_ROWS falling_chain_step_pair1_rows
+#define KERNEL_PAIR2_GAP falling_chain_step_pair2_gap
+#define KERNEL_PAIR2_ROWS falling_chain_step_pair2_rows
 #define KERNEL_FACTOR falling_chain_step_factor
 #define KERNEL_BACKSOLVE falling_chain_step_backsolve
-#define KERNEL_WORKS falling_chain_step_newton_work, falling_chain_step_velocity_work, falling_chain_step_check_work, falling_chain_step_solve_work, falling_chain_step_project_work, falling_chain_step_power_work, falling_chain_step_outputs_work, falling_chain_step_contact_work, falling_chain_step_gap_work, falling_chain_step_factor_work, falling_chain_step_backsolve_work
+#define KERNEL_WORKS falling_chain_step_newton_work, falling_chain_step_velocity_work, falling_chain_step_check_work, falling_chain_step_solve_work, falling_chain_step_project_work, falling_chain_step_power_work, falling_chain_step_outputs_work, falling_chain_step_pair0_gap_work, falling_chain_step_pair0_rows_work, falling_chain_step_pair1_gap_work, falling_chain_step_pair1_rows_work, falling_chain_step_pair2_gap_work, falling_chain_step_pair2_rows_work, falling_chain_step_factor_work, falling_chain_step_backsolve_work
 
 /* Nonsmooth contacts: NK of them, each with DC impulse components (normal, then the tangents). */
 #define NCGEN_CONTACTS
@@ -57,9 +61,26 @@ typedef falling_chain_step_options step_options;
 static const casadi_real mu[NK] = {0.5, 0.5, 0.5, 0.5, 0.3};
 static const casadi_real restitution[NK] = {0.0, 0.0, 0.0, 0.0, 0.5};
 #define ANY_RESTITUTION
-#define NNZ_W 39
-static const int wt_colind[NK * DC + 1] = {0, 1, 5, 9, 10, 14, 18, 19, 23, 27, 28, 32, 36, 37, 38, 39};
-static const int wt_row[NNZ_W] = {2, 1, 2, 4, 5, 0, 2, 3, 5, 5, 1, 2, 4, 5, 0, 2, 3, 5, 8, 4, 5, 7, 8, 3, 5, 6, 8, 11, 7, 8, 10, 11, 6, 8, 9, 11, 14, 13, 12};
+/* The contact rows by elements (runtime/ncgen_contact_pairs.h lists these tables). */
+#define CONTACT_PAIRS
+#define NE 5
+#define PAIR_MAX_Q 6
+#define PAIR_MAX_G 1
+#define PAIR_MAX_W 18
+static const int pair_int[NE * 8] = {0, 0, 1, 6, 0, 0, 0, 1, 1, 1, 1, 6, 0, 6, 18, 1, 1, 2, 1, 6, 0, 12, 36, 1, 1, 3, 1, 6, 0, 18, 54, 1, 2, 4, 1, 3, 0, 24, 72, 1};
+static const int pair_qidx[27] = {0, 1, 2, 3, 4, 5, 0, 1, 2, 3, 4, 5, 3, 4, 5, 6, 7, 8, 6, 7, 8, 9, 10, 11, 12, 13, 14};
+static const casadi_real pair_qconst[27] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+static const int pair_wpos[81] = {0, 6, 12, 1, 7, 13, 2, 8, 14, 3, 9, 15, 4, 10, 16, 5, 11, 17, 18, 24, 30, 19, 25, 31, 20, 26, 32, 21, 27, 33, 22, 28, 34, 23, 29, 35, 36, 42, 48, 37, 43, 49, 38, 44, 50, 39, 45, 51, 40, 46, 52, 41, 47, 53, 54, 60, 66, 55, 61, 67, 56, 62, 68, 57, 63, 69, 58, 64, 70, 59, 65, 71, 72, 75, 78, 73, 76, 79, 74, 77, 80};
+static const int pair_side[NE * 6] = {1, 1, 0, 3, 0, 39, 1, 1, 45, 3, 0, 84, 1, 1, 90, 3, 0, 129, 1, 1, 135, 3, 0, 174, 1, 0, 180, 3, 0, 191};
+static const casadi_real pair_bdata[197] = {1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.02, 24.93765586034912, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.02, 24.93765586034912, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.02, 24.93765586034912, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.02, 24.93765586034912, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.03, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0};
+static const casadi_real pair_bound[NE * 3] = {1.0, 0.0, 1e+300, 1.0, 0.0, 1e+300, 1.0, 0.0, 1e+300, 1.0, 0.0, 1e+300, 1.0, 0.0, 1e+300};
+static int (*const pair_gap_fn[3])(const casadi_real **, casadi_real **, casadi_int *,
+                                                           casadi_real *, int) = {falling_chain_step_pair0_gap, falling_chain_step_pair1_gap, falling_chain_step_pair2_gap};
+static int (*const pair_rows_fn[3])(const casadi_real **, casadi_real **, casadi_int *,
+                                                             casadi_real *, int) = {falling_chain_step_pair0_rows, falling_chain_step_pair1_rows, falling_chain_step_pair2_rows};
+#define NNZ_W 81
+static const int wt_colind[NK * DC + 1] = {0, 6, 12, 18, 24, 30, 36, 42, 48, 54, 60, 66, 72, 75, 78, 81};
+static const int wt_row[NNZ_W] = {0, 1, 2, 3, 4, 5, 0, 1, 2, 3, 4, 5, 0, 1, 2, 3, 4, 5, 0, 1, 2, 3, 4, 5, 0, 1, 2, 3, 4, 5, 0, 1, 2, 3, 4, 5, 3, 4, 5, 6, 7, 8, 3, 4, 5, 6, 7, 8, 3, 4, 5, 6, 7, 8, 6, 7, 8, 9, 10, 11, 6, 7, 8, 9, 10, 11, 6, 7, 8, 9, 10, 11, 12, 13, 14, 12, 13, 14, 12, 13, 14};
 #define CONTACT_FACTORED
 #define NNZ_V 67
 #define NNZ_R 101
@@ -77,6 +98,7 @@ static const int a_col[NNZ_A] = {0, 1, 2, 3, 3, 4, 4, 5, 5, 6, 6, 7, 7, 8, 8, 9,
 
 #include "ncgen_rattle.h"
 #include "ncgen_cone_newton.h"
+#include "ncgen_contact_pairs.h"
 #include "ncgen_contact.h"
 #include "ncgen_fixed.h"
 #include "ncgen_adaptive.h"

@@ -158,13 +158,34 @@ static const casadi_real *const defaults_step_outputs[] = {
   0,
   0,
   0};
-static const casadi_real *const defaults_step_contact[] = {
-  falling_chain_q0,
-  falling_chain_v0,
+static const casadi_real *const defaults_step_pair0_gap[] = {
+  0,
+  0,
   0,
   0};
-static const casadi_real *const defaults_step_gap[] = {
-  falling_chain_q0,
+static const casadi_real *const defaults_step_pair0_rows[] = {
+  0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_pair1_gap[] = {
+  0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_pair1_rows[] = {
+  0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_pair2_gap[] = {
+  0,
+  0,
+  0,
+  0};
+static const casadi_real *const defaults_step_pair2_rows[] = {
+  0,
+  0,
   0,
   0};
 static const casadi_real *const defaults_step_factor[] = {
@@ -262,14 +283,30 @@ static const kernel kernels[] = {
    falling_chain_step_outputs_name_in, falling_chain_step_outputs_name_out, falling_chain_step_outputs_sparsity_in, falling_chain_step_outputs_sparsity_out,
    falling_chain_step_outputs_checkout, falling_chain_step_outputs_release, falling_chain_step_outputs_incref, falling_chain_step_outputs_decref,
    defaults_step_outputs},
-  {"step_contact", falling_chain_step_contact, falling_chain_step_contact_work, falling_chain_step_contact_n_in, falling_chain_step_contact_n_out,
-   falling_chain_step_contact_name_in, falling_chain_step_contact_name_out, falling_chain_step_contact_sparsity_in, falling_chain_step_contact_sparsity_out,
-   falling_chain_step_contact_checkout, falling_chain_step_contact_release, falling_chain_step_contact_incref, falling_chain_step_contact_decref,
-   defaults_step_contact},
-  {"step_gap", falling_chain_step_gap, falling_chain_step_gap_work, falling_chain_step_gap_n_in, falling_chain_step_gap_n_out,
-   falling_chain_step_gap_name_in, falling_chain_step_gap_name_out, falling_chain_step_gap_sparsity_in, falling_chain_step_gap_sparsity_out,
-   falling_chain_step_gap_checkout, falling_chain_step_gap_release, falling_chain_step_gap_incref, falling_chain_step_gap_decref,
-   defaults_step_gap},
+  {"step_pair0_gap", falling_chain_step_pair0_gap, falling_chain_step_pair0_gap_work, falling_chain_step_pair0_gap_n_in, falling_chain_step_pair0_gap_n_out,
+   falling_chain_step_pair0_gap_name_in, falling_chain_step_pair0_gap_name_out, falling_chain_step_pair0_gap_sparsity_in, falling_chain_step_pair0_gap_sparsity_out,
+   falling_chain_step_pair0_gap_checkout, falling_chain_step_pair0_gap_release, falling_chain_step_pair0_gap_incref, falling_chain_step_pair0_gap_decref,
+   defaults_step_pair0_gap},
+  {"step_pair0_rows", falling_chain_step_pair0_rows, falling_chain_step_pair0_rows_work, falling_chain_step_pair0_rows_n_in, falling_chain_step_pair0_rows_n_out,
+   falling_chain_step_pair0_rows_name_in, falling_chain_step_pair0_rows_name_out, falling_chain_step_pair0_rows_sparsity_in, falling_chain_step_pair0_rows_sparsity_out,
+   falling_chain_step_pair0_rows_checkout, falling_chain_step_pair0_rows_release, falling_chain_step_pair0_rows_incref, falling_chain_step_pair0_rows_decref,
+   defaults_step_pair0_rows},
+  {"step_pair1_gap", falling_chain_step_pair1_gap, falling_chain_step_pair1_gap_work, falling_chain_step_pair1_gap_n_in, falling_chain_step_pair1_gap_n_out,
+   falling_chain_step_pair1_gap_name_in, falling_chain_step_pair1_gap_name_out, falling_chain_step_pair1_gap_sparsity_in, falling_chain_step_pair1_gap_sparsity_out,
+   falling_chain_step_pair1_gap_checkout, falling_chain_step_pair1_gap_release, falling_chain_step_pair1_gap_incref, falling_chain_step_pair1_gap_decref,
+   defaults_step_pair1_gap},
+  {"step_pair1_rows", falling_chain_step_pair1_rows, falling_chain_step_pair1_rows_work, falling_chain_step_pair1_rows_n_in, falling_chain_step_pair1_rows_n_out,
+   falling_chain_step_pair1_rows_name_in, falling_chain_step_pair1_rows_name_out, falling_chain_step_pair1_rows_sparsity_in, falling_chain_step_pair1_rows_sparsity_out,
+   falling_chain_step_pair1_rows_checkout, falling_chain_step_pair1_rows_release, falling_chain_step_pair1_rows_incref, falling_chain_step_pair1_rows_decref,
+   defaults_step_pair1_rows},
+  {"step_pair2_gap", falling_chain_step_pair2_gap, falling_chain_step_pair2_gap_work, falling_chain_step_pair2_gap_n_in, falling_chain_step_pair2_gap_n_out,
+   falling_chain_step_pair2_gap_name_in, falling_chain_step_pair2_gap_name_out, falling_chain_step_pair2_gap_sparsity_in, falling_chain_step_pair2_gap_sparsity_out,
+   falling_chain_step_pair2_gap_checkout, falling_chain_step_pair2_gap_release, falling_chain_step_pair2_gap_incref, falling_chain_step_pair2_gap_decref,
+   defaults_step_pair2_gap},
+  {"step_pair2_rows", falling_chain_step_pair2_rows, falling_chain_step_pair2_rows_work, falling_chain_step_pair2_rows_n_in, falling_chain_step_pair2_rows_n_out,
+   falling_chain_step_pair2_rows_name_in, falling_chain_step_pair2_rows_name_out, falling_chain_step_pair2_rows_sparsity_in, falling_chain_step_pair2_rows_sparsity_out,
+   falling_chain_step_pair2_rows_checkout, falling_chain_step_pair2_rows_release, falling_chain_step_pair2_rows_incref, falling_chain_step_pair2_rows_decref,
+   defaults_step_pair2_rows},
   {"step_factor", falling_chain_step_factor, falling_chain_step_factor_work, falling_chain_step_factor_n_in, falling_chain_step_factor_n_out,
    falling_chain_step_factor_name_in, falling_chain_step_factor_name_out, falling_chain_step_factor_sparsity_in, falling_chain_step_factor_sparsity_out,
    falling_chain_step_factor_checkout, falling_chain_step_factor_release, falling_chain_step_factor_incref, falling_chain_step_factor_decref,

@@ -108,11 +108,21 @@ typedef struct {
                            its own warm start's, or repeated */
   int newton_once;      /* whether step() takes one Newton iteration even from a warm start
                            that passes its test (contact_step()'s steps with impulses) */
+#ifdef CONTACT_PAIRS
+  casadi_real *pq;   /* an element's local coordinates and rates (PAIR_MAX_Q each) */
+  casadi_real *pg;   /* an element kernel's gaps (PAIR_MAX_G) */
+  casadi_real *pw;   /* ... and its dense W (PAIR_MAX_W) */
+  casadi_real *plb;  /* per element: the lower bound of its gaps at the last pairs_bounds() */
+  casadi_real *pspd; /* ... and the bound of its rows' velocities */
+  int *pon;          /* per element: 0 skipped, 1 evaluated, 2 to be evaluated (ncgen_contact_pairs.h) */
+#endif
 #endif
 } workspace;
 
 /* Blocks of the workspace (layout()). */
-#ifdef NCGEN_CONTACTS
+#ifdef CONTACT_PAIRS
+#define N_BLOCKS 27
+#elif defined(NCGEN_CONTACTS)
 #define N_BLOCKS 26
 #else
 #define N_BLOCKS 10
@@ -176,6 +186,9 @@ static size_t layout(workspace *ws, char *block) {
 #else
   sizes[25] = 2 * ND * sizeof(casadi_int);
 #endif
+#ifdef CONTACT_PAIRS
+  sizes[26] = (2 * PAIR_MAX_Q + PAIR_MAX_G + PAIR_MAX_W + 2 * NE) * sizeof(casadi_real) + NE * sizeof(int);
+#endif
 #endif
   off[0] = 0;
   for (k = 0; k < N_BLOCKS; ++k) off[k + 1] = off[k] + align_up(sizes[k]);
@@ -219,6 +232,14 @@ static size_t layout(workspace *ws, char *block) {
     ws->fac = (casadi_real *) (void *) (block + off[22]);
     ws->cn = (casadi_real *) (void *) (block + off[24]);
     ws->cni = (casadi_int *) (void *) (block + off[25]);
+#ifdef CONTACT_PAIRS
+    ws->pq = (casadi_real *) (void *) (block + off[26]);
+    ws->pg = ws->pq + 2 * PAIR_MAX_Q;
+    ws->pw = ws->pg + PAIR_MAX_G;
+    ws->plb = ws->pw + PAIR_MAX_W;
+    ws->pspd = ws->plb + NE;
+    ws->pon = (int *) (void *) (ws->pspd + NE);
+#endif
 #ifdef CONTACT_SCHUR
     ws->T = (casadi_real *) (void *) (block + off[23]);
     ws->L = ws->T + NC * NQ;

@@ -51,7 +51,10 @@ half of which enters each half-step (``− j/2`` in r, ``+ j/2`` in b), and two 
   computed), U = W v (m/s)
 * ``step_gap``: q, p -> g (the gaps alone)
 
-give the gaps and contact Jacobians.  When the constant mass matrix is regular the C forms
+give the gaps and contact Jacobians; or, given the element kernels of
+:mod:`ncgen.assembly.pair_kernels` (``stepper_functions(pairs=...)``, the default of the
+package: :data:`ncgen.codegen.stepper_package.CONTACT_PAIRS`), ``step_pair<k>_gap`` and
+``step_pair<k>_rows`` in their place, which the C calls per element with a broad phase.  When the constant mass matrix is regular the C forms
 the Delassus matrix from ``M⁻¹`` and the Schur complement ``A M⁻¹ Aᵀ`` (no kernel: ``A`` is
 read from ``K``; :func:`ncgen.codegen.stepper_package.schur_context`).  For the other
 cases, and where that complement is singular, when the QR factors are small enough to
@@ -165,9 +168,11 @@ def nonsmooth(model) -> bool:
     return getattr(model, "contact_model", "smooth") == "nonsmooth" and getattr(model, "nk", 0) > 0
 
 
-def stepper_functions(model, primitives: dict[str, ca.Function] | None = None) -> list[ca.Function]:
+def stepper_functions(model, primitives: dict[str, ca.Function] | None = None, pairs=None) -> list[ca.Function]:
     """The kernels of :data:`KERNELS` for ``model`` (see the module docstring), and the contact
-    kernels for the nonsmooth contact stepper; ``primitives`` as in :func:`check_function`."""
+    kernels for the nonsmooth contact stepper: the flat ``step_contact`` and ``step_gap``, or
+    the element kernels of ``pairs`` (:func:`ncgen.assembly.pair_kernels.pair_kernels`);
+    ``primitives`` as in :func:`check_function`."""
     f = model.functions
     nq, nc = model.nq, model.nc
     t, h = ca.SX.sym("t"), ca.SX.sym("h")
@@ -201,7 +206,7 @@ def stepper_functions(model, primitives: dict[str, ca.Function] | None = None) -
     out = [newton, velocity, check, solve_function(K.sparsity()), project, power,
            outputs_function(model, check, power)]
     if contact:
-        out += [contact_function(model), gap_function(model)]
+        out += list(pairs.functions) if pairs is not None else [contact_function(model), gap_function(model)]
         out += factor_functions(K.sparsity())
     return out
 

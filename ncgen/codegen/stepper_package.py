@@ -14,6 +14,7 @@ import numpy as np
 
 
 from ncgen.assembly.mass import mass_is_regular
+from ncgen.assembly.pair_kernels import pair_kernels, pair_system
 from ncgen.assembly.stepper_equations import CONTACT_DOCS, DOCS, mass_scale, nonsmooth, stepper_functions
 from ncgen.codegen import PackageDoc, write_package
 from ncgen.codegen.cnames import c_real
@@ -92,6 +93,10 @@ REPEAT_TOL = 1e-12
 #: flat or nearly flat body; condition number below MINV_MAX_COND) and nq ≤ MINV_MAX_NQ;
 #: else from the sparse QR of the whole KKT matrix.
 MINV_MAX_NQ, MINV_MAX_COND = 400, 1e12
+#: Nonsmooth contact stepper: the contact rows from one kernel per contact element and a
+#: broad phase (:mod:`ncgen.assembly.pair_kernels`, ``runtime/ncgen_contact_pairs.h``), or
+#: (False) from the flat kernels ``step_contact``/``step_gap`` of every contact at once.
+CONTACT_PAIRS = True
 #: The demo program's defaults: simulated time and step (s).
 DEMO_T_END, DEMO_H = 1.0, 1e-3
 
@@ -99,14 +104,86 @@ def stepper_section(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS
     """The stepper's part of ``model``'s C package (a
     :class:`~ncgen.codegen.section.Section`)."""
 
-    functions = stepper_functions(model, primitives(model) if is_large(model, reroll_instructions) else None)
+    pairs = pair_kernels(model) if nonsmooth(model) and CONTACT_PAIRS and pair_system(model) is not None else None
+    functions = stepper_functions(model, primitives(model) if is_large(model, reroll_instructions) else None, pairs)
     names = {f.name() for f in functions}
-    docs = {k: v for k, v in {**DOCS, **CONTACT_DOCS}.items() if k in names} if nonsmooth(model) else DOCS
-    return Section(functions=functions, docs=docs, extra_sources=extra_sources(model, functions))
+    docs = {k: v for k, v in {**DOCS, **CONTACT_DOCS, **pair_docs(functions)}.items() if k in names} \
+        if nonsmooth(model) else DOCS
+    return Section(functions=functions, docs=docs, extra_sources=extra_sources(model, functions, pairs))
 
 
-def extra_sources(model, functions) -> list[ExtraSource]:
-    """The Newton loop, its header and the example program, rendered for ``model``."""
+def pair_docs(functions) -> dict:
+    """Documentation of the element kernels ``step_pair<k>_gap`` / ``_rows`` among ``functions``."""
+    inputs = {"q_a": ("local coordinates of the element's first member (fixed ones as in q)", "m"),
+              "q_b": ("local coordinates of its second member", "m"), "p": ("parameters", "")}
+    out = {}
+    for f in functions:
+        name = f.name()
+        if name.startswith("step_pair") and name.endswith("_gap"):
+            out[name] = {"purpose": "Stepper: the gaps of one contact element", "inputs": inputs,
+                         "outputs": {"g": ("gaps of its point contacts, positive apart", "m")}}
+        elif name.startswith("step_pair") and name.endswith("_rows"):
+            out[name] = {"purpose": "Stepper: gaps and contact Jacobian rows of one contact element",
+                         "inputs": inputs,
+                         "outputs": {"g": ("gaps of its point contacts, positive apart", "m"),
+                                     "W": ("per point contact its normal and tangent rows (zero without "
+                                           "friction), columns q_a then q_b, dense", "1")}}
+    return out
+
+
+def pair_context(model, pairs) -> dict:
+    """The template context of the element table (``runtime/ncgen_contact_pairs.h``): the
+    pattern of W (per contact row the coordinates of its element's members; none for the
+    tangent rows of a frictionless contact) and the tables the header lists."""
+    dim = model.dim
+    kinds = {"unbounded": 0, "member": 1, "fixed": 2, "halfspace": 3}
+    colind, wrow = [0], []
+    ints, qidx, qconst, wpos, sides, bdata, bound = [], [], [], [], [], [], []
+    max_q = max_g = max_w = 1
+    for e in pairs.elements:
+        loc = e.idx_a + e.idx_b
+        cols = sorted({i for i in loc if i >= 0})
+        first_row = len(colind) - 1
+        for k in range(e.count):
+            for d in range(dim):
+                if d == 0 or e.friction[k]:
+                    wrow += cols
+                colind.append(len(wrow))
+        nrow = e.count * dim
+        ints += [e.kernel, e.first, e.count, len(e.idx_a), len(e.idx_b), len(qidx), len(wpos), int(e.rate_bounded)]
+        qidx += loc
+        qconst += [c_real(x) for x in np.concatenate([e.const_a, e.const_b])]
+        for i, c in enumerate(loc):
+            for r in range(nrow):
+                row = first_row + r
+                start, stop = colind[row], colind[row + 1]
+                wpos.append(start + cols.index(c) if c >= 0 and stop > start else -1)
+        for side in e.sides:
+            sides += [kinds[side.kind], len(side.extents), len(bdata)]
+            if side.kind == "member":
+                values = [side.centre.ravel(order="F")] + [a.ravel(order="F") for a in side.axes] + \
+                    [side.extents, [side.radius, side.gnorm]]
+            elif side.kind == "fixed":
+                values = [side.fixed, [side.radius]]
+            elif side.kind == "halfspace":
+                values = [side.fixed, side.normal]
+            else:
+                values = []
+            bdata += [c_real(x) for v in values for x in np.asarray(v, float).ravel()]
+        bound += [c_real(e.kappa), c_real(e.dmin), c_real(min(e.cap, 1e300))]
+        max_q, max_g, max_w = max(max_q, len(loc)), max(max_g, e.count), max(max_w, nrow * len(loc))
+    nkernels = 1 + max(e.kernel for e in pairs.elements)
+    return {"pairs": True, "ne": len(pairs.elements), "pair_int": ints, "pair_qidx": qidx,
+            "pair_qconst": qconst or ["0"], "pair_wpos": wpos, "pair_side": sides, "pair_bdata": bdata or ["0"],
+            "pair_bound": bound, "pair_max_q": max_q, "pair_max_g": max_g, "pair_max_w": max_w,
+            "pair_gap_fn": [f"{model.name}_step_pair{k}_gap" for k in range(nkernels)],
+            "pair_rows_fn": [f"{model.name}_step_pair{k}_rows" for k in range(nkernels)],
+            "wt_colind": colind, "wt_row": wrow}
+
+
+def extra_sources(model, functions, pairs=None) -> list[ExtraSource]:
+    """The Newton loop, its header and the example program, rendered for ``model`` (``pairs``:
+    its contact element kernels, or None for the flat ones)."""
     name = model.name
     context = {"nq": model.nq, "nc": model.nc, "nu": model.nu, "np": model.np,
                "nnz_k": int(functions[0].sparsity_out("K").nnz()),
@@ -129,8 +206,11 @@ def extra_sources(model, functions) -> list[ExtraSource]:
                        restitution=[c_real(c["restitution"]) for c in model.contacts],
                        any_restitution=any(c["restitution"] > 0 for c in model.contacts))
         context.update(schur_context(model, functions[0].sparsity_out("K")))
-        wt = next(f for f in functions if f.name() == "step_contact").sparsity_out("Wt")
-        context.update(wt_colind=list(wt.colind()), wt_row=list(wt.row()))
+        if pairs is not None:
+            context.update(pair_context(model, pairs))
+        else:
+            wt = next(f for f in functions if f.name() == "step_contact").sparsity_out("Wt")
+            context.update(pairs=False, wt_colind=list(wt.colind()), wt_row=list(wt.row()))
     demo = {**context, "program": f"{name}_simulate", "t0": c_real(model.t0), "t_end": c_real(DEMO_T_END),
             "h": c_real(DEMO_H), "q0": [c_real(x) for x in model.q0], "v0": [c_real(x) for x in model.v0],
             "p0": [c_real(x) for x in model.p0]}
@@ -144,7 +224,7 @@ def runtime_files(model) -> list[str]:
     """The model-independent C of the stepper that ``<model>_stepper.c`` includes, in order
     (``templates/c/runtime/``, copied into the package): the RATTLE step, the contact
     solvers (nonsmooth contacts only), fixed-step runs, error-controlled runs."""
-    contact = ["ncgen_cone_newton.h", "ncgen_contact.h"] if nonsmooth(model) else []
+    contact = ["ncgen_cone_newton.h", "ncgen_contact_pairs.h", "ncgen_contact.h"] if nonsmooth(model) else []
     return ["ncgen_rattle.h", *contact, "ncgen_fixed.h", "ncgen_adaptive.h"]
 
 

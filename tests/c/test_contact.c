@@ -8,7 +8,9 @@
  * contact step on closed forms: a mass sliding with Coulomb friction decelerates by mu g
  * and stops, a mass dropped with restitution e rebounds to e^2 its height.  Compiled twice
  * by tests/test_stepper_runtime_c.py: as is (the Delassus matrix by KKT solves, one per
- * row) and with -DSCHUR_FACTORED (from the constant M^-1, and the KKT matrix factored once). */
+ * row) and with -DSCHUR_FACTORED (from the constant M^-1, and the KKT matrix factored once);
+ * and a third time with -DPAIRS: the contact rows by element kernels with the broad phase
+ * of ncgen_contact_pairs.h (each mass and the floor one element, one kernel for both). */
 #include "harness.h"
 
 #define M_P 0.5
@@ -39,10 +41,49 @@
 /* the tests set them per case */
 static casadi_real mu[NK] = {0.5, 0.0};
 static casadi_real restitution[NK] = {0.0, 0.5};
+#ifdef PAIRS
+/* W by rows: each row over its element's coordinates (x_k, y_k) */
+#define NNZ_W 8
+static const int wt_colind[NK * DC + 1] = {0, 2, 4, 6, 8};
+static const int wt_row[NNZ_W] = {0, 1, 0, 1, 2, 3, 2, 3};
+#define CONTACT_PAIRS
+#define NE 2
+#define PAIR_MAX_Q 2
+#define PAIR_MAX_G 1
+#define PAIR_MAX_W 4
+/* kernel, first contact, contacts, na, nb, coordinate offset, W map offset, rates bounded */
+static const int pair_int[NE * 8] = {0, 0, 1, 2, 0, 0, 0, 1, 0, 1, 1, 2, 0, 2, 4, 1};
+static const int pair_qidx[4] = {0, 1, 2, 3};
+static const casadi_real pair_qconst[4] = {0, 0, 0, 0};
+/* the dense W (rows normal, tangent; columns x, y) into W's nonzeros */
+static const int pair_wpos[8] = {0, 2, 1, 3, 4, 6, 5, 7};
+/* side a: a member sphere (data at 0), side b: the floor half-space (data at 6) */
+static const int pair_side[NE * 6] = {1, 0, 0, 3, 0, 6, 1, 0, 0, 3, 0, 6};
+/* centre = the point (2 x 2 identity), radius R_P, |G| = 0; the floor's point and normal */
+static const casadi_real pair_bdata[10] = {1, 0, 0, 1, R_P, 0, 0, 0, 0, 1};
+static const casadi_real pair_bound[NE * 3] = {1, 0, 1e300, 1, 0, 1e300};
+/* gap y - R_P; W rows dy (normal) and dx (tangent), column-major over (x, y) */
+static int k_pair_gap(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  (void) iw, (void) w, (void) mem;
+  res[0][0] = arg[0][1] - R_P;
+  return 0;
+}
+static int k_pair_rows(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  (void) iw, (void) w, (void) mem;
+  res[0][0] = arg[0][1] - R_P;
+  res[1][0] = 0, res[1][1] = 1, res[1][2] = 1, res[1][3] = 0;
+  return 0;
+}
+static int (*const pair_gap_fn[1])(const casadi_real **, casadi_real **, casadi_int *, casadi_real *, int) = {
+    k_pair_gap};
+static int (*const pair_rows_fn[1])(const casadi_real **, casadi_real **, casadi_int *, casadi_real *, int) = {
+    k_pair_rows};
+#else
 /* W by rows: normal 1 (dy1), tangent 1 (dx1), normal 2 (dy2), tangent 2 (dx2) */
 #define NNZ_W 4
 static const int wt_colind[NK * DC + 1] = {0, 1, 2, 3, 4};
 static const int wt_row[NNZ_W] = {1, 0, 3, 2};
+#endif
 
 #ifdef SCHUR_FACTORED
 #define CONTACT_FACTORED
@@ -119,6 +160,7 @@ static int k_outputs(const casadi_real **arg, casadi_real **res, casadi_int *iw,
   return 0;
 }
 
+#ifndef PAIRS
 static int k_gap(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
   (void) iw, (void) w, (void) mem;
   res[0][0] = arg[0][1] - R_P;
@@ -141,6 +183,7 @@ static int k_contact(const casadi_real **arg, casadi_real **res, casadi_int *iw,
     for (r = 0; r < NK * DC; ++r) res[2][r] = at(arg[1], wt_row[r]);
   return 0;
 }
+#endif
 
 #ifdef SCHUR_FACTORED
 /* The "factors" of the diagonal K: R = its diagonal. */
@@ -168,11 +211,14 @@ static int k_backsolve(const casadi_real **arg, casadi_real **res, casadi_int *i
 #define KERNEL_PROJECT k_project
 #define KERNEL_POWER k_power
 #define KERNEL_OUTPUTS k_outputs
+#ifndef PAIRS
 #define KERNEL_GAP k_gap
 #define KERNEL_CONTACT k_contact
+#endif
 
 #include "ncgen_rattle.h"
 #include "ncgen_cone_newton.h"
+#include "ncgen_contact_pairs.h"
 #include "ncgen_contact.h"
 #include "ncgen_fixed.h"
 
@@ -299,13 +345,52 @@ static void test_step_at_rest(void) {
         "potential energy %g", y[1]);
 }
 
+#ifdef PAIRS
+/* The broad phase: mass 1 0.3 m above the floor, mass 2 on it.  Its lower bound is the gap
+ * (less the slack); skipped at a limit below it, evaluated above; the speed bound of a point
+ * is its speed. */
+static void test_broad_phase(void) {
+  const casadi_real q[NQ] = {0, R_P + 0.3, 1, R_P}, v[NQ] = {1, 2, 0, -3};
+  casadi_real g[NK], W[NNZ_W], U[ND];
+  workspace ws;
+  char *block = malloc(step_work_bytes());
+  layout(&ws, block);
+  pairs_bounds(&ws, q, v);
+  CHECK(fabs(ws.plb[0] - (0.3 - PAIR_SLACK * R_P)) < 1e-15 && fabs(ws.plb[1] + PAIR_SLACK * R_P) < 1e-15,
+        "bounds %g %g", ws.plb[0], ws.plb[1]);
+  CHECK(fabs(ws.pspd[0] - sqrt(5.0)) < 1e-15 && fabs(ws.pspd[1] - 3) < 1e-15, "speeds %g %g", ws.pspd[0], ws.pspd[1]);
+  pairs_select(&ws, 0.1, 0, 0);
+  CHECK(ws.pon[0] == 0 && ws.pon[1] == 1, "on: %d %d", ws.pon[0], ws.pon[1]);
+  CHECK(contact_gap(&ws, q, 0, g) == STEP_OK && g[0] == ws.plb[0] && g[1] == 0, "gaps %g %g", g[0], g[1]);
+  CHECK(contact_rows(&ws, q, v, 0, g, W, U, 1) == STEP_OK, "rows");
+  CHECK(W[0] == 0 && W[1] == 0 && W[4] == 0 && W[5] == 1 && W[6] == 1 && W[7] == 0, "W of the contacts");
+  CHECK(U[0] == 0 && U[1] == 0 && U[2] == -3 && U[3] == 0, "U = %g %g %g %g", U[0], U[1], U[2], U[3]);
+  pairs_select(&ws, 0.1, 0.05, 0); /* 0.3 - slack <= 0.1 + 0.05 sqrt(5)? no; within reach at 0.1 s */
+  CHECK(ws.pon[0] == 0, "on at hs = 0.05");
+  pairs_select(&ws, 0.1, 0.1, 0);
+  CHECK(ws.pon[0] == 1, "off at hs = 0.1");
+  pairs_select(&ws, 0, 0, 0);
+  CHECK(pairs_extend(&ws, 0.2) == 0 && pairs_extend(&ws, 0.4) == 1 && ws.pon[0] == 2, "extend");
+  CHECK(contact_rows(&ws, q, v, 0, g, W, U, 2) == STEP_OK && ws.pon[0] == 1, "rows of the extended");
+  CHECK(fabs(g[0] - 0.3) < 1e-15 && W[1] == 1 && W[2] == 1 && U[0] == 2 && U[1] == 1, "g %g U %g %g", g[0], U[0],
+        U[1]);
+  ws.F[1] = 1; /* a force on mass 1's tangent row: turned on whatever its bound */
+  pairs_select(&ws, 0, 0, 1);
+  CHECK(ws.pon[0] == 1, "loaded element off");
+  free(block);
+}
+#endif
+
 int main(void) {
   (void) project; /* used by ncgen_adaptive.h, which this test does not include */
   test_pgs_friction();
   test_pgs_frictionless_redundant();
   test_contact_steps();
   test_step_at_rest();
-#ifdef SCHUR_FACTORED
+#ifdef PAIRS
+  test_broad_phase();
+  return report("test_contact (element kernels, broad phase)");
+#elif defined(SCHUR_FACTORED)
   return report("test_contact (Schur complement, factored KKT matrix)");
 #else
   return report("test_contact (KKT solves)");
