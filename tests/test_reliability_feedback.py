@@ -83,6 +83,27 @@ def test_failing_feedback_is_named_and_the_run_before_it_kept(arm, method, kind)
     assert np.all(np.isfinite(kept.q)) and np.all(np.isfinite(kept.u))
 
 
+@pytest.mark.parametrize("method", list(RUN))
+@pytest.mark.parametrize("kind", list(BROKEN))
+def test_feedback_failing_at_its_first_call_keeps_the_initial_state(arm, method, kind):
+    """The first call fails: the error names it and carries the initial state alone (one
+    row, input zero since none was given), on every path; its multipliers are those of the
+    horizontal rod released with no torque: the hinge carries ``m (g − a)`` with the centre's
+    acceleration ``a = m g l² / (I + m l²)`` (closed form)."""
+    broken, said = BROKEN[kind]
+    for name, u in (("qj, vj", lambda t, qj, vj: broken()), ("q, v", lambda t, q, v: broken())):
+        with pytest.raises(SimulationError, match=r"the feedback u\(t, " + name + r"\) called at t = 0 s " + said +
+                           r".*The initial state \(t = 0 s; no input was applied, its u is zero\) is attached") as err:
+            nc.simulate(arm, 0.5, 0.05, method=method, u=u, **RUN[method])
+        kept = err.value.trajectory
+        assert err.value.time == 0.0 and kept is not None and kept.info["complete"] is False
+        assert len(kept.t) == 1 and np.array_equal(kept.q[0], arm.q0) and np.array_equal(kept.v[0], arm.v0)
+        assert np.array_equal(kept.u, np.zeros((1, 1)))
+        m, g, lc, inertia = 2.0, 9.81, 0.4, 0.1
+        hinge = kept.reaction("hinge")[0][0]              # the hinge's force on the rod
+        assert np.allclose(hinge, [0.0, m * (g - m * g * lc ** 2 / (inertia + m * lc ** 2))], rtol=0, atol=1e-9)
+
+
 def test_natural_feedback_failing_at_the_start_is_named(arm):
     with pytest.raises(SimulationError, match=r"the feedback u\(t, q, v\) called at t = 0 s returned \[inf\]"):
         nc.simulate(arm, 0.5, 0.05, method="idas", u=lambda t, q, v: [np.inf])

@@ -11,6 +11,7 @@ import numpy as np
 from ncgen.errors import CompilerNotFound, NcgenError, SimulationError, option
 from ncgen.runtime.feedback import FeedbackFailed, with_partial
 from ncgen.runtime.integrator import Run, refuse_integrator
+from ncgen.runtime.run_start import failed_at_start
 from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.stepper import simulate_stepper
 from ncgen.runtime.stepper_library import load_stepper
@@ -67,7 +68,10 @@ def _stepwise(model, run: Run, opts: SimulationOptions) -> Trajectory:
             uk = run.feedback_input(float(t[k]), Q[-1], V[-1])
         except FeedbackFailed as e:
             if not k:
-                raise
+                lam = run.multipliers(float(t[0]), run.q, run.v, np.zeros(model.nu))
+                raise failed_at_start(model, e, float(t[0]), run.q, run.v, p, lam,
+                                      {"method": "stepper", "feedback": feedback[0], "complete": False}) \
+                    from e.__cause__
             LAM.append(run.multipliers(float(t[k]), Q[-1], V[-1], UU[-1]))
             UU.append(UU[-1])
             info = {"method": "stepper", "feedback": feedback[0]}
