@@ -139,6 +139,52 @@ def test_ncgen_sweep_names_the_bad_flag_at_once(tmp_path, capsys, args, said):
     assert time.perf_counter() - start < 5.0 and not (tmp_path / "s.zarr").exists()
 
 
+@pytest.mark.parametrize("kw, said", [
+    ({"substeps": 0}, "substeps: expected a positive number of steps per output interval, got 0"),
+    ({"substeps": 2.5}, "substeps: expected a positive number of steps"),
+    ({"newton_tol": float("nan")}, "newton_tol: "),
+    ({"method": "idas", "rtol": float("nan")}, "rtol: expected a positive tolerance, got nan"),
+    ({"method": "idas", "rtol": -1.0}, "rtol: expected a positive tolerance, got -1.0"),
+    ({"method": "idas", "atol": float("inf")}, "atol: expected a positive tolerance, got inf"),
+])
+def test_bad_run_options_are_refused_before_a_store_is_made(slider_crank, tmp_path, kw, said):
+    """An option value each run would refuse is refused once, before the store is created or
+    a worker started (it used to leave an empty store behind, or, with IDAS, record every
+    run as failed and answer success)."""
+    pytest.importorskip("zarr")
+    store = tmp_path / "s.zarr"
+    with pytest.raises(NcgenError, match=re.escape(said)):
+        nc.sweep(slider_crank, {"omega": [3.0, 4.0]}, t_end=0.1, dt=0.01, path=store, progress=False, **kw)
+    assert not store.exists()
+
+
+@pytest.mark.parametrize("args, said", [
+    (["--substeps", "0"], "substeps: expected a positive number of steps per output interval, got 0"),
+    (["--method", "idas", "--rtol", "nan"], "rtol: expected a positive tolerance, got nan"),
+    (["--method", "idas", "--rtol", "-1"], "rtol: expected a positive tolerance, got -1.0"),
+    (["--param", "omega=3:5", "--samples", "lhs:3", "--seed", "-1"],
+     "--seed: expected None or an integer >= 0 (the same seed draws the same runs), got -1"),
+])
+def test_ncgen_sweep_refuses_bad_run_options_leaving_no_store(tmp_path, capsys, args, said):
+    out = tmp_path / "s.zarr"
+    params = [] if "--param" in args else ["--param", "omega=3,4"]
+    code = main(["sweep", str(EXAMPLES / "slider_crank.toml"), "--t-end", "0.1", "-o", str(out), *params, *args])
+    err = capsys.readouterr().err
+    assert code in (1, 2) and said in err and "internal error" not in err, err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("seed", [-1, 1.5, "7", float("nan"), True])
+def test_sampler_seeds_are_checked(seed):
+    for make in (nc.Samples.latin_hypercube, nc.Samples.sobol, nc.Samples.random):
+        with pytest.raises(NcgenError, match=r"seed: expected None or an integer >= 0 .* got " + re.escape(repr(seed))):
+            make(4, {"omega": (1.0, 2.0)}, seed=seed)
+    a = nc.Samples.latin_hypercube(4, {"omega": (1.0, 2.0)}, seed=np.int64(3))   # NumPy integers and generators
+    b = nc.Samples.latin_hypercube(4, {"omega": (1.0, 2.0)}, seed=3)
+    assert np.array_equal(a.values, b.values)
+    nc.Samples.random(4, {"omega": (1.0, 2.0)}, seed=np.random.default_rng(1))
+
+
 # ------------------------------------------------------------------ blown-up runs
 def test_a_blown_up_batch_run_keeps_only_its_trusted_rows(repelled):
     """Unchecked, the run goes on to |q| ~ 1e11 m before Newton fails; checked, only the rows
