@@ -41,6 +41,7 @@ def cartpole():
 
 
 @pytest.mark.skipif(CC is None, reason="no C compiler")
+@pytest.mark.timeout(1800)           # the package's kernels compiled at -O0: 9 min at a load of 11 on 2 cores
 def test_exported_mpc_c_api_refuses_non_finite_input_from_c(tmp_path):
     """<name>_mpc_init/_mpc_step/_plant called from C with NaN, ±inf and null pointers answer
     <NAME>_MPC_BAD_INPUT and change nothing; good calls between them answer bit-identically to

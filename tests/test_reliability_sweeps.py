@@ -233,6 +233,51 @@ def test_a_failed_error_controlled_run_keeps_only_its_trusted_rows(repelled):
     assert np.max(np.abs(cx - scale) / scale) < 1e-6
 
 
+@pytest.fixture(scope="module")
+def repelled_pushed():
+    """``repelled`` (k = 400 1/s²) with a push on ``a`` along x, for a feedback law."""
+    import casadi as ca
+    s = nc.System("repelled_pushed", gravity=(0.0, -9.81))
+    a = s.add_point("a", mass=1.0, position=(1.0, 0.0))
+    b = s.add_point("b", mass=1.0, position=(2.0, 0.0))
+    s.add_joint(nc.Distance(a, b, at=[(1.0, 0.0), (2.0, 0.0)]))
+    push = s.add_input("push")
+    s.add_force(nc.PointForce(a, (0, 0), force=ca.vertcat(push, 0)))
+    s.add_parameter("k", K)
+    s.add_force(nc.GeneralizedForce(lambda t, q, v, u, p: p[0] * q))
+    return s.build()
+
+
+def test_a_blown_up_feedback_run_keeps_only_its_trusted_rows(repelled_pushed):
+    """One output interval at a time (a feedback), the stepper's rows are checked together
+    as an open-loop run's are: the run away is stopped where steps had to be split, not
+    kept up to |q| ~ 1e10 m where Newton finally fails (as it was); the rows kept follow the
+    closed form ``c_x = 1.5 cosh(20 t)`` (the push is zero); a law that fails later attaches
+    the same trusted rows.  ``check=False`` keeps the whole run."""
+    zero = lambda t, q, v: [0.0]                                # noqa: E731
+    with pytest.raises(SimulationError, match=r"failed in the step from") as bare:
+        nc.simulate(repelled_pushed, 40.0, 0.01, method="stepper", u=zero, check=False)
+    with pytest.raises(SimulationError, match=r"is not trustworthy: .*step\(s\) had to be split.* The stepper then "
+                                              r"failed at t = ") as checked:
+        nc.simulate(repelled_pushed, 40.0, 0.01, method="stepper", u=zero)
+    whole, kept = bare.value.trajectory, checked.value.trajectory
+    assert np.abs(whole.q).max() > 1e9 and 10 < len(kept.t) < len(whole.t)
+    assert np.array_equal(kept.q, whole.q[:len(kept.t)]) and not kept.info["complete"]
+    cx = 0.5 * (kept.q[:, 0] + kept.q[:, 2])
+    scale = 1.5 * np.cosh(np.sqrt(K) * kept.t)
+    assert np.max(np.abs(cx - scale) / scale) < 1e-3
+    t_bad = float(whole.t[len(kept.t) + 5])
+
+    def late(t, q, v):
+        if t >= t_bad - 1e-12:
+            raise RuntimeError("sensor lost")
+        return [0.0]
+    with pytest.raises(SimulationError, match=r"not trustworthy: .* Then the feedback u\(t, q, v\) called at "
+                                              r"t = .* s raised RuntimeError: sensor lost\.") as failed:
+        nc.simulate(repelled_pushed, 40.0, 0.01, method="stepper", u=late)
+    assert np.array_equal(failed.value.trajectory.q, kept.q)
+
+
 # ------------------------------------------------------------------ batches and pickles
 @pytest.mark.parametrize("kw, said", [
     ({"p": {"omega": [1.0, [2.0, 3.0]]}}, r"simulate_batch: p\['omega'\]: the runs' values are ragged"),
