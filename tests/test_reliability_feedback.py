@@ -175,3 +175,18 @@ def test_a_failed_rk4_joint_run_keeps_only_its_trusted_rows(arm):
     assert np.all(np.isfinite(kept.qj)) and kept.info["complete"] is False
     idas = nc.simulate(arm, float(kept.t[-1]) + 0.01, 0.01, method="idas", u=pd, rtol=1e-10, atol=1e-12)
     assert np.max(np.abs(kept.q - idas.q[:len(kept.t)])) < 0.01 * np.max(np.abs(arm.q0))
+
+
+def test_a_compiled_controller_giving_nan_is_named(arm):
+    """The joint loop's accelerations are not finite because the controller's law is not
+    (sqrt of a negative number from t = 0.2 s): the message says so, not that the mass
+    matrix is singular, and the rows before are kept (they equal a run of the finite law)."""
+    import casadi as ca
+    law = nc.Controller(lambda t, qj, vj, p: ca.if_else(t < 0.2, -40 * qj[0], ca.sqrt(-1 - qj[0] ** 2)))
+    good = nc.Controller(lambda t, qj, vj, p: -40 * qj[0])
+    with pytest.raises(SimulationError, match=r"the compiled controller's inputs are not finite: at the state reached "
+                                              r"at t = 0.15 s, taken at t = 0.2 s, its law gives \[nan\]") as err:
+        nc.simulate(arm, 0.5, 0.05, method="joint", u=law)
+    kept = err.value.trajectory
+    ref = nc.simulate(arm, 0.5, 0.05, method="joint", u=good)
+    assert len(kept.t) == 4 and np.array_equal(kept.qj, ref.qj[:4])

@@ -253,12 +253,27 @@ def simulate_joint(model, t: np.ndarray, U: np.ndarray, hold: str, p: np.ndarray
         raise SimulationInterrupted(message, time=float(t[k]), trajectory=traj)
     if status:
         what = _STATUS.get(status, f"status {status}")
+        if status == 1 and controller is not None:
+            times = (float(t[k]), float(stats[4])) + ((float(t[k + 1]),) if k + 1 < n else ())
+            what = _controller_cause(model, loop, times, X[k], p) or what
         message = (f"joint-space simulation of {model.name!r} failed between t = {t[k]:.6g} s and the next output "
                    f"time (at t = {stats[4]:.6g} s): {what}.{why} The trajectory up to t = {traj.t[-1]:.6g} s is "
                    "attached to this error as .trajectory.")
         traj.info["message"] = message
         raise SimulationError(message, time=float(traj.t[-1]), trajectory=traj)
     return traj
+
+
+def _controller_cause(model, loop: JointLoop, times: tuple, x: np.ndarray, p) -> str | None:
+    """Why the accelerations are not finite when the compiled controller is: its inputs at
+    the last state reached ``x`` (joint space), at that state's time, the failure's or the
+    end of the failed output interval (``times``), if they are not finite there, else None."""
+    for t in times:
+        applied = np.array(loop.mapped("ode", 1)(t, x, np.zeros(model.nu), np.asarray(p, float))[2]).reshape(-1)
+        if not np.all(np.isfinite(applied)):
+            return (f"the compiled controller's inputs are not finite: at the state reached at t = {times[0]:.6g} s, "
+                    f"taken at t = {t:.6g} s, its law gives {applied.tolist()}")
+    return None
 
 
 def _trusted_rk4_rows(model, loop: JointLoop, t, X, W, S, p, max_steps: int, varying: bool) -> tuple[int, str]:
