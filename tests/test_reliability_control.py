@@ -42,6 +42,7 @@ def cartpole():
 
 @pytest.mark.slow      # a sanitizer build of the exported cart-pole MPC; fast: tests/c/test_mpc.c (the driver's checks)
 @pytest.mark.skipif(CC is None, reason="no C compiler")
+@pytest.mark.timeout(1800)           # the package's kernels compiled at -O0: 9 min at a load of 11 on 2 cores
 def test_exported_mpc_c_api_refuses_non_finite_input_from_c(tmp_path):
     """<name>_mpc_init/_mpc_step/_plant called from C with NaN, ±inf and null pointers answer
     <NAME>_MPC_BAD_INPUT and change nothing; good calls between them answer bit-identically to
@@ -155,3 +156,43 @@ def test_ilqr_reports_a_nan_cost_as_such(swingup):
                                                                                    1.0, np.nan)), max_iter=50)
     assert not res.converged and res.cost == res.history[0] and np.isfinite(res.cost)
     assert "the cost was NaN at trial steps" in res.message, res.message
+
+
+def test_python_mpc_and_step_refuse_bad_input_and_stay_unpoisoned(cartpole):
+    """The Python side of class 1 on every entry point: ``nc.MPC`` (call, reset) and the
+    step function (step, Jacobians, rollouts) refuse a non-finite state, time or input, raw
+    bytes and ragged nestings by name, and a refused call leaves the controller answering
+    bit-identically to one that never saw it."""
+    model, ocp = cartpole
+    x = upright_at_rest(0.2)
+    nan_x = x.copy()
+    nan_x[3] = np.nan
+    mpc, reference = nc.MPC(ocp), nc.MPC(ocp)
+    bad_calls = [
+        (lambda: mpc(nan_x, 0.0), r"x: expected 16 finite number\(s\) \(the state \[q; v\]\), got 16 value\(s\) with NaN"),
+        (lambda: mpc(x, float("nan")), r"MPC: t: expected a finite number, got nan"),
+        (lambda: mpc(x, float("inf")), r"MPC: t: expected a finite number, got inf"),
+        (lambda: mpc(bytes(128), 0.0), r"x: expected real numbers, got bytes \(raw bytes are not read as numbers\)"),
+        (lambda: mpc(x[:3], 0.0), r"x: expected 16 finite number\(s\) .* got 3 value\(s\)"),
+        (lambda: mpc.reset(nan_x, 0.0), r"x: expected 16 finite number\(s\)"),
+        (lambda: mpc.reset(x, float("nan")), r"MPC.reset: t: expected a finite number, got nan"),
+        (lambda: mpc.reset(x, 0.0, iterations=-1), r"MPC.reset: iterations: expected an integer >= 0, got -1"),
+        (lambda: mpc.reset(x, 0.0, iterations=2.5), r"MPC.reset: iterations: expected an integer >= 0, got 2.5"),
+    ]
+    for k in range(3):
+        for call, said in bad_calls:
+            with pytest.raises(NcgenError, match=said):
+                call()
+        assert np.array_equal(mpc(x, k * H), reference(x, k * H))
+    st = nc.step_function(model, H)
+    for call, said in [
+        (lambda: st(x, float("nan")), r"u: expected 1 finite number\(s\) \(the inputs\), got 1 value\(s\) with NaN"),
+        (lambda: st(bytes(128), 0.0), r"x: expected real numbers, got bytes"),
+        (lambda: st(x, 0.0, t=float("inf")), r"^t: expected a finite number, got inf"),
+        (lambda: st.jacobians(nan_x, 0.0), r"x: expected 16 finite number\(s\)"),
+        (lambda: st.rollout(x, [[1.0], [1.0, 2.0]]), r"U: expected finite inputs of shape \(N, 1\) \(one row per step\), "
+                                                     r"got list"),
+        (lambda: st.rollout(x, np.full((3, 1), np.inf)), r"U: expected finite inputs of shape \(N, 1\)"),
+    ]:
+        with pytest.raises(NcgenError, match=said):
+            call()

@@ -83,6 +83,27 @@ def test_failing_feedback_is_named_and_the_run_before_it_kept(arm, method, kind)
     assert np.all(np.isfinite(kept.q)) and np.all(np.isfinite(kept.u))
 
 
+@pytest.mark.parametrize("method", list(RUN))
+@pytest.mark.parametrize("kind", list(BROKEN))
+def test_feedback_failing_at_its_first_call_keeps_the_initial_state(arm, method, kind):
+    """The first call fails: the error names it and carries the initial state alone (one
+    row, input zero since none was given), on every path; its multipliers are those of the
+    horizontal rod released with no torque: the hinge carries ``m (g − a)`` with the centre's
+    acceleration ``a = m g l² / (I + m l²)`` (closed form)."""
+    broken, said = BROKEN[kind]
+    for name, u in (("qj, vj", lambda t, qj, vj: broken()), ("q, v", lambda t, q, v: broken())):
+        with pytest.raises(SimulationError, match=r"the feedback u\(t, " + name + r"\) called at t = 0 s " + said +
+                           r".*The initial state \(t = 0 s; no input was applied, its u is zero\) is attached") as err:
+            nc.simulate(arm, 0.5, 0.05, method=method, u=u, **RUN[method])
+        kept = err.value.trajectory
+        assert err.value.time == 0.0 and kept is not None and kept.info["complete"] is False
+        assert len(kept.t) == 1 and np.array_equal(kept.q[0], arm.q0) and np.array_equal(kept.v[0], arm.v0)
+        assert np.array_equal(kept.u, np.zeros((1, 1)))
+        m, g, lc, inertia = 2.0, 9.81, 0.4, 0.1
+        hinge = kept.reaction("hinge")[0][0]              # the hinge's force on the rod
+        assert np.allclose(hinge, [0.0, m * (g - m * g * lc ** 2 / (inertia + m * lc ** 2))], rtol=0, atol=1e-9)
+
+
 def test_natural_feedback_failing_at_the_start_is_named(arm):
     with pytest.raises(SimulationError, match=r"the feedback u\(t, q, v\) called at t = 0 s returned \[inf\]"):
         nc.simulate(arm, 0.5, 0.05, method="idas", u=lambda t, q, v: [np.inf])
@@ -136,3 +157,36 @@ def test_bad_toml_controller_gains_are_refused_by_key(tmp_path, capsys, table, s
     import re
     assert re.search(said.replace(r"controller\.", r"--controller\."), capsys.readouterr().err)
     assert not (tmp_path / "run.npz").exists()
+
+
+def test_a_failed_rk4_joint_run_keeps_only_its_trusted_rows(arm):
+    """A stiff PD (kp = 4e4: ω ≈ 310 rad/s, h ω ≈ 3.1 past RK4's limit 2.83) makes the joint
+    loop's fixed RK4 steps grow until the accelerations overflow; only the rows before the
+    run departs from an error-controlled one by 1 % of the model's size are attached (they
+    used to run to |qj| ~ 1e47 rad), and they agree with IDAS under the same law to that."""
+    import re
+    pd = nc.PD(kp=4e4, kd=0.0)
+    with pytest.raises(SimulationError, match=r"accelerations are not finite\. Before that, the RK4 run departed from "
+                                              r"an error-controlled run .* so only the rows before it are kept") as err:
+        nc.simulate(arm, 10.0, 0.01, method="joint", integrator="rk4", u=pd)
+    kept = err.value.trajectory
+    failed_at = float(re.search(r"failed between t = ([0-9.]+) s", str(err.value)).group(1))
+    assert 3 <= len(kept.t) and kept.t[-1] < failed_at and err.value.time == kept.t[-1]
+    assert np.all(np.isfinite(kept.qj)) and kept.info["complete"] is False
+    idas = nc.simulate(arm, float(kept.t[-1]) + 0.01, 0.01, method="idas", u=pd, rtol=1e-10, atol=1e-12)
+    assert np.max(np.abs(kept.q - idas.q[:len(kept.t)])) < 0.01 * np.max(np.abs(arm.q0))
+
+
+def test_a_compiled_controller_giving_nan_is_named(arm):
+    """The joint loop's accelerations are not finite because the controller's law is not
+    (sqrt of a negative number from t = 0.2 s): the message says so, not that the mass
+    matrix is singular, and the rows before are kept (they equal a run of the finite law)."""
+    import casadi as ca
+    law = nc.Controller(lambda t, qj, vj, p: ca.if_else(t < 0.2, -40 * qj[0], ca.sqrt(-1 - qj[0] ** 2)))
+    good = nc.Controller(lambda t, qj, vj, p: -40 * qj[0])
+    with pytest.raises(SimulationError, match=r"the compiled controller's inputs are not finite: at the state reached "
+                                              r"at t = 0.15 s, taken at t = 0.2 s, its law gives \[nan\]") as err:
+        nc.simulate(arm, 0.5, 0.05, method="joint", u=law)
+    kept = err.value.trajectory
+    ref = nc.simulate(arm, 0.5, 0.05, method="joint", u=good)
+    assert len(kept.t) == 4 and np.array_equal(kept.qj, ref.qj[:4])

@@ -143,6 +143,52 @@ def test_ncgen_sweep_names_the_bad_flag_at_once(tmp_path, capsys, args, said):
     assert time.process_time() - start < 5.0 and not (tmp_path / "s.zarr").exists()
 
 
+@pytest.mark.parametrize("kw, said", [
+    ({"substeps": 0}, "substeps: expected a positive number of steps per output interval, got 0"),
+    ({"substeps": 2.5}, "substeps: expected a positive number of steps"),
+    ({"newton_tol": float("nan")}, "newton_tol: "),
+    ({"method": "idas", "rtol": float("nan")}, "rtol: expected a positive tolerance, got nan"),
+    ({"method": "idas", "rtol": -1.0}, "rtol: expected a positive tolerance, got -1.0"),
+    ({"method": "idas", "atol": float("inf")}, "atol: expected a positive tolerance, got inf"),
+])
+def test_bad_run_options_are_refused_before_a_store_is_made(slider_crank, tmp_path, kw, said):
+    """An option value each run would refuse is refused once, before the store is created or
+    a worker started (it used to leave an empty store behind, or, with IDAS, record every
+    run as failed and answer success)."""
+    pytest.importorskip("zarr")
+    store = tmp_path / "s.zarr"
+    with pytest.raises(NcgenError, match=re.escape(said)):
+        nc.sweep(slider_crank, {"omega": [3.0, 4.0]}, t_end=0.1, dt=0.01, path=store, progress=False, **kw)
+    assert not store.exists()
+
+
+@pytest.mark.parametrize("args, said", [
+    (["--substeps", "0"], "substeps: expected a positive number of steps per output interval, got 0"),
+    (["--method", "idas", "--rtol", "nan"], "rtol: expected a positive tolerance, got nan"),
+    (["--method", "idas", "--rtol", "-1"], "rtol: expected a positive tolerance, got -1.0"),
+    (["--param", "omega=3:5", "--samples", "lhs:3", "--seed", "-1"],
+     "--seed: expected None or an integer >= 0 (the same seed draws the same runs), got -1"),
+])
+def test_ncgen_sweep_refuses_bad_run_options_leaving_no_store(tmp_path, capsys, args, said):
+    out = tmp_path / "s.zarr"
+    params = [] if "--param" in args else ["--param", "omega=3,4"]
+    code = main(["sweep", str(EXAMPLES / "slider_crank.toml"), "--t-end", "0.1", "-o", str(out), *params, *args])
+    err = capsys.readouterr().err
+    assert code in (1, 2) and said in err and "internal error" not in err, err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("seed", [-1, 1.5, "7", float("nan"), True])
+def test_sampler_seeds_are_checked(seed):
+    for make in (nc.Samples.latin_hypercube, nc.Samples.sobol, nc.Samples.random):
+        with pytest.raises(NcgenError, match=r"seed: expected None or an integer >= 0 .* got " + re.escape(repr(seed))):
+            make(4, {"omega": (1.0, 2.0)}, seed=seed)
+    a = nc.Samples.latin_hypercube(4, {"omega": (1.0, 2.0)}, seed=np.int64(3))   # NumPy integers and generators
+    b = nc.Samples.latin_hypercube(4, {"omega": (1.0, 2.0)}, seed=3)
+    assert np.array_equal(a.values, b.values)
+    nc.Samples.random(4, {"omega": (1.0, 2.0)}, seed=np.random.default_rng(1))
+
+
 # ------------------------------------------------------------------ blown-up runs
 def test_a_blown_up_batch_run_keeps_only_its_trusted_rows(repelled):
     """Unchecked, the run goes on to |q| ~ 1e11 m before Newton fails; checked, only the rows
@@ -189,6 +235,51 @@ def test_a_failed_error_controlled_run_keeps_only_its_trusted_rows(repelled):
     cx = 0.5 * (kept.q[:, 0] + kept.q[:, 2])
     scale = 1.5 * np.cosh(np.sqrt(K) * kept.t)
     assert np.max(np.abs(cx - scale) / scale) < 1e-6
+
+
+@pytest.fixture(scope="module")
+def repelled_pushed():
+    """``repelled`` (k = 400 1/s²) with a push on ``a`` along x, for a feedback law."""
+    import casadi as ca
+    s = nc.System("repelled_pushed", gravity=(0.0, -9.81))
+    a = s.add_point("a", mass=1.0, position=(1.0, 0.0))
+    b = s.add_point("b", mass=1.0, position=(2.0, 0.0))
+    s.add_joint(nc.Distance(a, b, at=[(1.0, 0.0), (2.0, 0.0)]))
+    push = s.add_input("push")
+    s.add_force(nc.PointForce(a, (0, 0), force=ca.vertcat(push, 0)))
+    s.add_parameter("k", K)
+    s.add_force(nc.GeneralizedForce(lambda t, q, v, u, p: p[0] * q))
+    return s.build()
+
+
+def test_a_blown_up_feedback_run_keeps_only_its_trusted_rows(repelled_pushed):
+    """One output interval at a time (a feedback), the stepper's rows are checked together
+    as an open-loop run's are: the run away is stopped where steps had to be split, not
+    kept up to |q| ~ 1e10 m where Newton finally fails (as it was); the rows kept follow the
+    closed form ``c_x = 1.5 cosh(20 t)`` (the push is zero); a law that fails later attaches
+    the same trusted rows.  ``check=False`` keeps the whole run."""
+    zero = lambda t, q, v: [0.0]                                # noqa: E731
+    with pytest.raises(SimulationError, match=r"failed in the step from") as bare:
+        nc.simulate(repelled_pushed, 40.0, 0.01, method="stepper", u=zero, check=False)
+    with pytest.raises(SimulationError, match=r"is not trustworthy: .*step\(s\) had to be split.* The stepper then "
+                                              r"failed at t = ") as checked:
+        nc.simulate(repelled_pushed, 40.0, 0.01, method="stepper", u=zero)
+    whole, kept = bare.value.trajectory, checked.value.trajectory
+    assert np.abs(whole.q).max() > 1e9 and 10 < len(kept.t) < len(whole.t)
+    assert np.array_equal(kept.q, whole.q[:len(kept.t)]) and not kept.info["complete"]
+    cx = 0.5 * (kept.q[:, 0] + kept.q[:, 2])
+    scale = 1.5 * np.cosh(np.sqrt(K) * kept.t)
+    assert np.max(np.abs(cx - scale) / scale) < 1e-3
+    t_bad = float(whole.t[len(kept.t) + 5])
+
+    def late(t, q, v):
+        if t >= t_bad - 1e-12:
+            raise RuntimeError("sensor lost")
+        return [0.0]
+    with pytest.raises(SimulationError, match=r"not trustworthy: .* Then the feedback u\(t, q, v\) called at "
+                                              r"t = .* s raised RuntimeError: sensor lost\.") as failed:
+        nc.simulate(repelled_pushed, 40.0, 0.01, method="stepper", u=late)
+    assert np.array_equal(failed.value.trajectory.q, kept.q)
 
 
 # ------------------------------------------------------------------ batches and pickles

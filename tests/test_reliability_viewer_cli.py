@@ -43,6 +43,38 @@ def test_to_html_checks_its_options(crank, tmp_path, kw, said):
     assert crank.to_html(tmp_path / "ok.html", fps=12.5, colors={"crank": "#ff0000"}).is_file()
 
 
+@pytest.mark.parametrize("kw, said", [
+    ({"title": 3}, "to_html: title: expected text or None, got int 3"),
+    ({"mesh_paths": 3}, "to_html: mesh_paths: expected a folder or a list of folders, got int 3"),
+    ({"mesh_paths": [None]}, r"to_html: mesh_paths\[0\]: expected a folder \(text or a path\), got NoneType"),
+])
+def test_to_html_checks_its_other_options(crank, tmp_path, kw, said):
+    with pytest.raises(NcgenError, match=said):
+        crank.to_html(tmp_path / "page.html", **kw)
+    assert not (tmp_path / "page.html").exists()
+    assert crank.to_html(tmp_path / "ok.html", mesh_paths=str(tmp_path), title="crank").is_file()   # one folder
+
+
+@pytest.mark.parametrize("kw, said", [
+    ({"max_frames": 0}, r"animate: max_frames: expected an integer >= 2 \(frames of the animation\), got 0"),
+    ({"max_frames": 1.5}, r"animate: max_frames: expected an integer >= 2"),
+    ({"max_frames": float("nan")}, r"animate: max_frames: expected an integer >= 2 .* got nan"),
+    ({"size": -1.0}, r"animate: size: expected a positive number \(the figure's width in inches\), got -1.0"),
+    ({"size": float("nan")}, "animate: size: expected a finite number, got nan"),
+    ({"dpi": 0}, r"animate: dpi: expected a positive number \(dots per inch\), got 0"),
+    ({"dpi": float("inf")}, "animate: dpi: expected a finite number, got inf"),
+    ({"budget": -1.0}, r"animate: budget: expected a positive number \(seconds of drawing, or None\)"),
+    ({"budget": float("nan")}, "animate: budget: expected a finite number, got nan"),
+])
+def test_animate_checks_its_options(crank, tmp_path, kw, said):
+    """They ended in a ZeroDivisionError, matplotlib's ValueError, or were taken (a negative
+    or NaN time budget)."""
+    from ncgen.viz import animate
+    with pytest.raises(NcgenError, match=said):
+        animate(crank, tmp_path / "a.gif", **kw)
+    assert not list(tmp_path.iterdir())
+
+
 def test_viewers_refuse_an_empty_trajectory(crank, tmp_path):
     from ncgen.viz import animate
     empty = crank.head(0)

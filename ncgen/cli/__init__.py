@@ -88,6 +88,16 @@ def _unrecognized(parser: argparse.ArgumentParser, unknown: list[str]) -> None:
     parser.error(f"unrecognized arguments: {' '.join(unknown)}{did_you_mean(first, flags) if first else ''}")
 
 
+def _flag_named(message: str, parser: argparse.ArgumentParser) -> str:
+    """``message`` with a leading Python argument name (``t_end: ...``) replaced by the
+    subcommand's flag for it (``--t-end: ...``), where it has one."""
+    name, sep, rest = message.partition(": ")
+    flag = "--" + name.replace("_", "-")
+    if sep and name.isidentifier() and any(flag in a.option_strings for a in parser._actions):
+        return f"{flag}: {rest}"
+    return message
+
+
 def _command(argv: list[str]) -> str | None:
     """The subcommand ``argv`` names (its first argument that is not a top-level option), if any."""
     for arg in argv:
@@ -106,9 +116,10 @@ def _run_main(parser: argparse.ArgumentParser, argv: list[str], debug: bool) -> 
     """:func:`main` inside its warning format: every outcome mapped to a message and an exit code."""
     from ncgen.errors import REPORT_TO
 
-    where = "ncgen"
+    where, command = "ncgen", parser
     try:
         args, unknown = parser.parse_known_args(argv)
+        command = getattr(args, "_parser", parser)
         if unknown:
             _unrecognized(getattr(args, "_parser", parser), unknown)
         if args.command is None:
@@ -120,7 +131,7 @@ def _run_main(parser: argparse.ArgumentParser, argv: list[str], debug: bool) -> 
     except SystemExit as exc:            # argparse: --help, --version and usage errors
         return 0 if exc.code is None else exc.code if isinstance(exc.code, int) else 1
     except NcgenError as exc:
-        print(f"{where}: error: {exc}", file=sys.stderr)
+        print(f"{where}: error: {_flag_named(str(exc), command)}", file=sys.stderr)
         return 1
     except KeyboardInterrupt as exc:
         said = f": {exc}" if str(exc) else ""

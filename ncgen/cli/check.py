@@ -41,8 +41,8 @@ def _check_arguments(p: argparse.ArgumentParser) -> None:
 def check(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from ncgen.assembly.check import check_system
 
-    if not args.tolerance > 0:
-        parser.error(f"--tolerance: expected a positive number, got {args.tolerance}")
+    if not 0 < args.tolerance < float("inf"):
+        parser.error(f"--tolerance: expected a positive finite number, got {args.tolerance}")
     system = load_system(args.model, args.param, args.floating_base)
     report = check_system(system, tolerance=args.tolerance, share=not args.no_share)
     sys.stdout.write(report.render(args.model))

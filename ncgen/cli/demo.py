@@ -43,7 +43,7 @@ def demo(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
 
     check_files(args, parser, None, directories=("output",))
     out = Path(args.output)
-    if not args.t_end > 0:
-        parser.error(f"--t-end: expected a positive time, got {args.t_end}")
+    if not 0 < args.t_end < float("inf"):
+        parser.error(f"--t-end: expected a positive finite time (s), got {args.t_end}")
     print(run_demo(out, animate=args.animate, t_end=args.t_end, backend=args.backend).summary())
     return 0

@@ -72,6 +72,8 @@ def sweep(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from ncgen.runtime.sweep import sweep as run
 
     check_files(args, parser, None, directories=("output",))
+    if args.seed is not None and args.samples is None:
+        parser.error("--seed: only with --samples (a grid draws nothing at random)")
     params = _params(args, parser)
     check_store_path(Path(args.output))          # the extras and the user's files, before any work
     model = load_model(args.model)

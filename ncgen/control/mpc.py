@@ -38,6 +38,7 @@ import numpy as np
 from ncgen.control.discrete import step_jacobian_function
 from ncgen.control.mpc_problem import mpc_problem
 from ncgen.errors import OptimizationError
+from ncgen.validation import as_scalar
 
 SOLVERS = ("sqp",)
 #: Added to the diagonal of the QP Hessian (keeps it positive definite on the inputs).
@@ -172,8 +173,10 @@ class MPC:
         solves at ``x`` without shifting (to converge the first solution)."""
         from ncgen.control.step import _vector
         x = _vector(x, self.nx, "x", "the state [q; v]")
+        t = self.model.t0 if t is None else as_scalar(t, "MPC.reset: t")
+        if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 0:
+            raise OptimizationError(f"MPC.reset: iterations: expected an integer >= 0, got {iterations!r}")
         self.X, self.U = self.initial_guess(x)
-        t = self.model.t0 if t is None else float(t)
         for _ in range(iterations):
             self.X, self.U = self._solve(x, t, self.X, self.U)
 
@@ -183,9 +186,9 @@ class MPC:
         is the next call's guess."""
         from ncgen.control.step import _vector
         x = _vector(x, self.nx, "x", "the state [q; v]")
+        t = self.model.t0 if t is None else as_scalar(t, "MPC: t")
         if self.X is None:
             self.reset(x)
-        t = self.model.t0 if t is None else float(t)
         X, U = self._solve(x, t, self.X, self.U)
         u = U[0].copy()
         if not np.all(np.isfinite(u)):

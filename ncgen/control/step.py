@@ -31,6 +31,7 @@ import numpy as np
 from ncgen.control.discrete import (MAX_ITER, ROLLOUT_CHUNK, default_abstol, residual_scale, rollout_function,
                                     state_constraint_jacobian, step_functions)
 from ncgen.errors import NcgenError
+from ncgen.validation import as_numbers, as_scalar
 
 METHODS = ("rattle",)
 #: The functions of :func:`ncgen.control.discrete.step_functions` a step function compiles
@@ -92,7 +93,7 @@ class StepFunction:
         x = _vector(x, self.nx, "x", "the state [q; v]")
         u = np.zeros(0) if u is None and self.nu == 0 else _vector(u, self.nu, "u", "the inputs")
         p = self.model.p0 if p is None else _vector(p, self.np, "p", "the parameters")
-        t = self.model.t0 if t is None else float(t)
+        t = self.model.t0 if t is None else as_scalar(t, "t")
         return x, u, p, t
 
     def _check(self, res: float, x1: np.ndarray, z: np.ndarray, where: str) -> None:
@@ -149,7 +150,7 @@ class StepFunction:
         return [(k, ROLLOUT_CHUNK) for k in range(0, full, ROLLOUT_CHUNK)] + [(k, 1) for k in range(full, N)]
 
     def _inputs(self, U) -> np.ndarray:
-        U = np.asarray(U, dtype=float)
+        U = as_numbers(U, "U", f"finite inputs of shape (N, {self.nu}) (one row per step)")
         if U.ndim == 1 and self.nu == 1:
             U = U[:, None]
         if U.ndim != 2 or U.shape[1] != self.nu or U.shape[0] < 1 or not np.all(np.isfinite(U)):
@@ -232,7 +233,9 @@ def _positive(value, name: str, what: str) -> float:
 
 
 def _vector(a, n: int, name: str, what: str) -> np.ndarray:
-    a = np.asarray(a, dtype=float).reshape(-1) if a is not None else np.zeros(0)
+    """``a`` as ``n`` finite floats; raw bytes, text, complex numbers and ragged nestings
+    are refused by ``name`` (:func:`~ncgen.validation.as_numbers`)."""
+    a = as_numbers(a, name, f"{n} finite number(s) ({what})").reshape(-1) if a is not None else np.zeros(0)
     if a.size == 1 and n > 1 and name == "u":
         a = np.full(n, a[0])
     if a.size != n or not np.all(np.isfinite(a)):

@@ -44,9 +44,14 @@ def call_feedback(u, t: float, a, b, *, nu: int, what: str) -> np.ndarray:
 
 def with_partial(error: FeedbackFailed, trajectory) -> FeedbackFailed:
     """``error`` with ``trajectory`` (the run up to the last state reached) attached and
-    marked incomplete; its message says so."""
-    message = (f"{str(error).rstrip('.')}. The trajectory up to t = {trajectory.t[-1]:.6g} s is attached to "
-               "this error as .trajectory.")
+    marked incomplete; its message says so.  A feedback that fails at its first call leaves
+    the initial state alone, one row whose input is zero (none was given)."""
+    if len(trajectory.t) == 1:
+        kept = (f"The initial state (t = {trajectory.t[0]:.6g} s; no input was applied, its u is zero) is "
+                "attached to this error as .trajectory.")
+    else:
+        kept = f"The trajectory up to t = {trajectory.t[-1]:.6g} s is attached to this error as .trajectory."
+    message = f"{str(error).rstrip('.')}. {kept}"
     trajectory.info.update(complete=False, message=message)
     out = FeedbackFailed(message, time=float(trajectory.t[-1]))
     out.trajectory = trajectory

@@ -26,7 +26,7 @@ from ncgen.runtime.integrator import Run, refuse_integrator
 from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.progress import Progress
 from ncgen.runtime.rattle_bridge import RattleFailure, compiled_interval, rattle_interval
-from ncgen.runtime.run_start import initial_multipliers, natural_feedback
+from ncgen.runtime.run_start import failed_at_start, initial_multipliers, natural_feedback
 from ncgen.runtime.stepper_checks import is_conservative
 from ncgen.runtime.stepper_library import load_stepper
 from ncgen.runtime.trajectory import Trajectory
@@ -123,7 +123,13 @@ def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions, *, c
     if extra is not None:
         dae = dae_with_inputs(model, dae, extra)
     if feedback is not None:
-        U[0] = natural_feedback(model, feedback, t0, q, v, pv)
+        try:
+            U[0] = natural_feedback(model, feedback, t0, q, v, pv)
+        except FeedbackFailed as e:
+            lam = initial_multipliers(model, t0, q, v, np.zeros(model.nu), pv, dae)
+            raise failed_at_start(model, e, t0, q, v, pv, lam, {"method": "idas", "backend": used,
+                                                                "feedback": feedback[0], "complete": False}) \
+                from e.__cause__
         columns = hold_columns(U, t, hold)
     u0 = U[0] + _extra_value(model, extra, t0, q, v, pv)
     lam = initial_multipliers(model, t0, q, v, u0, pv, dae)

@@ -30,7 +30,7 @@ import time
 import casadi as ca
 import numpy as np
 
-from ncgen.errors import CompilerNotFound, ModelError, NcgenError, SimulationError, SimulationInterrupted
+from ncgen.errors import CompilerNotFound, ModelError, NcgenError, SimulationError, SimulationInterrupted, option
 from ncgen.runtime.feedback import FeedbackFailed, call_feedback, with_partial
 from ncgen.interrupts import call_interruptibly
 from ncgen.runtime.progress import Progress
@@ -237,21 +237,79 @@ def simulate_joint(model, t: np.ndarray, U: np.ndarray, hold: str, p: np.ndarray
             "feedback": None if feedback is None else feedback[0], "joint_dynamics": bool(joint_dynamics),
             "stats": {"nsteps": int(stats[0]), "rejected_steps": int(stats[1]), "evaluations": int(stats[2])},
             "build_time": build_time, "wall_time": time.perf_counter() - start, "complete": status == 0}
-    traj = _trajectory(model, loop, t[:k + 1], X[:k + 1], W[:k + 1], p, info)
+    trusted, why = k + 1, ""
+    if integrator == "rk4" and (failed is not None or status not in (0, INTERRUPTED)):
+        trusted, why = _trusted_rk4_rows(model, loop, t[:k + 1], X[:k + 1], W, S, p, max_steps, varying)
+        info["complete"] = False
+    traj = _trajectory(model, loop, t[:trusted], X[:trusted], W[:trusted], p, info)
     if failed is not None:
-        raise with_partial(failed, traj) from failed.__cause__
+        cause = failed.__cause__
+        if why:
+            failed = FeedbackFailed(f"{str(failed).rstrip('.')}.{why}", time=failed.time)
+        raise with_partial(failed, traj) from cause
     if status == INTERRUPTED:
         message = f"joint-space simulation of {model.name!r} interrupted (Ctrl-C) at t = {t[k]:.6g} s"
         traj.info["message"] = message
         raise SimulationInterrupted(message, time=float(t[k]), trajectory=traj)
     if status:
         what = _STATUS.get(status, f"status {status}")
+        if status == 1 and controller is not None:
+            times = (float(t[k]), float(stats[4])) + ((float(t[k + 1]),) if k + 1 < n else ())
+            what = _controller_cause(model, loop, times, X[k], p) or what
         message = (f"joint-space simulation of {model.name!r} failed between t = {t[k]:.6g} s and the next output "
-                   f"time (at t = {stats[4]:.6g} s): {what}. The trajectory up to t = {t[k]:.6g} s is attached "
-                   "to this error as .trajectory.")
+                   f"time (at t = {stats[4]:.6g} s): {what}.{why} The trajectory up to t = {traj.t[-1]:.6g} s is "
+                   "attached to this error as .trajectory.")
         traj.info["message"] = message
-        raise SimulationError(message, time=float(t[k]), trajectory=traj)
+        raise SimulationError(message, time=float(traj.t[-1]), trajectory=traj)
     return traj
+
+
+def _controller_cause(model, loop: JointLoop, times: tuple, x: np.ndarray, p) -> str | None:
+    """Why the accelerations are not finite when the compiled controller is: its inputs at
+    the last state reached ``x`` (joint space), at that state's time, the failure's or the
+    end of the failed output interval (``times``), if they are not finite there, else None."""
+    for t in times:
+        applied = np.array(loop.mapped("ode", 1)(t, x, np.zeros(model.nu), np.asarray(p, float))[2]).reshape(-1)
+        if not np.all(np.isfinite(applied)):
+            return (f"the compiled controller's inputs are not finite: at the state reached at t = {times[0]:.6g} s, "
+                    f"taken at t = {t:.6g} s, its law gives {applied.tolist()}")
+    return None
+
+
+def _trusted_rk4_rows(model, loop: JointLoop, t, X, W, S, p, max_steps: int, varying: bool) -> tuple[int, str]:
+    """How many rows of a failed fixed-step RK4 run ``X`` (on the grid ``t``, with the
+    inputs ``W`` it applied) to keep, and why (``""``: all of them).  RK4 past its stability
+    limit grows until the accelerations overflow; the rows kept are those before the first
+    where its natural coordinates depart from an error-controlled run with the same inputs
+    (Dormand–Prince, rtol 1e-8, atol 1e-10) by more than
+    :data:`~ncgen.runtime.stepper_checks.ERROR_FRACTION` of the model's size ``max |q0|``
+    (the stepper's rule), and not past where that reference run stops."""
+    from ncgen.runtime.stepper_checks import ERROR_FRACTION
+
+    n = len(t)
+    R = np.zeros_like(X)
+    R[0] = X[0]
+    status, done = loop.run(1, np.ascontiguousarray(t), R, np.ascontiguousarray(W[:n - 1]),
+                            None if S is None else np.ascontiguousarray(S[:n - 1]), p, 1e-8, 1e-10, 1, max_steps,
+                            varying, np.zeros(5))
+    m = (n - 1 if status == 0 else done) + 1
+    tree = loop.mapped("tree", m)
+    nqj = model.joint_space.nq
+    q_rk4 = np.array(tree(X[:m, :nqj].T, X[:m, nqj:].T)[0]).T
+    q_ref = np.array(tree(R[:m, :nqj].T, R[:m, nqj:].T)[0]).T
+    size = max(float(np.max(np.abs(model.q0), initial=0.0)), 1e-9)
+    gap = np.max(np.abs(q_rk4 - q_ref), axis=1)
+    bad = ~(gap <= ERROR_FRACTION * size)                       # NaN counts as bad
+    first = int(np.argmax(bad)) if bad.any() else m
+    if first == n:
+        return n, ""
+    if first < m:
+        return first, (f" Before that, the RK4 run departed from an error-controlled run (Dormand-Prince, rtol 1e-8) "
+                       f"by {gap[first]:.3g} m at t = {t[first]:.6g} s, more than {ERROR_FRACTION:g} of the model's "
+                       f"size {size:.3g} m (RK4's step is past its stability limit: use more substeps, or "
+                       f"{option('integrator=', '--integrator ')}dopri5), so only the rows before it are kept.")
+    return m, (f" The error-controlled run that checks the RK4 run stopped at t = {t[m - 1]:.6g} s, so only the rows "
+               f"up to there are kept.")
 
 
 def _feedback(model, feedback, t: float, x: np.ndarray, p) -> np.ndarray:

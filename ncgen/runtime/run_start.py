@@ -7,7 +7,7 @@ import numpy as np
 from ncgen.assembly.initial_state import consistent_state
 from ncgen.errors import ModelError, SimulationError
 from ncgen.runtime.diagnose import explain
-from ncgen.runtime.feedback import call_feedback
+from ncgen.runtime.feedback import FeedbackFailed, call_feedback, with_partial
 from ncgen.validation import as_vector
 
 
@@ -18,6 +18,16 @@ def natural_feedback(model, feedback, t: float, q, v, p) -> np.ndarray:
         qj, vj = model.to_joint_space(q, v)
         return call_feedback(u, t, qj, vj, nu=model.nu, what="joint")
     return call_feedback(u, t, np.array(q, float), np.array(v, float), nu=model.nu, what="natural")
+
+
+def failed_at_start(model, error: FeedbackFailed, t0: float, q, v, p, lam, info: dict) -> FeedbackFailed:
+    """``error`` (the feedback failed at its first call) with the initial state attached as
+    a one-row trajectory: input zero, ``lam`` the multipliers with that input."""
+    from ncgen.runtime.trajectory import Trajectory
+
+    row = Trajectory.from_states(model, np.array([t0]), np.array(q, float)[None], np.array(v, float)[None],
+                                 np.asarray(lam, float)[None], np.zeros((1, model.nu)), p, info)
+    return with_partial(error, row)
 
 
 def point_bytes(model) -> float:

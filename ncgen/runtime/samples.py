@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from ncgen.errors import NcgenError
+from ncgen.errors import NcgenError, option
 
 #: Most runs of one sweep (a grid's or sampler's size is checked against it before building).
 MAX_RUNS = 10**7
@@ -85,7 +85,7 @@ class Samples:
         names, low, high = _bounds(bounds)
         n = _count(n)                           # refused before SciPy's seconds of importing
         from scipy.stats import qmc
-        return cls(names, qmc.scale(qmc.LatinHypercube(d=len(names), seed=seed).random(n), low, high))
+        return cls(names, qmc.scale(qmc.LatinHypercube(d=len(names), seed=_seed(seed)).random(n), low, high))
 
     @classmethod
     def sobol(cls, n: int, bounds: dict, seed=None) -> "Samples":
@@ -96,13 +96,13 @@ class Samples:
             raise NcgenError(f"sobol: n = {n}: expected a power of two (Sobol points are balanced only then); "
                              f"e.g. {1 << (n - 1).bit_length()}")
         from scipy.stats import qmc
-        return cls(names, qmc.scale(qmc.Sobol(d=len(names), seed=seed).random(n), low, high))
+        return cls(names, qmc.scale(qmc.Sobol(d=len(names), seed=_seed(seed)).random(n), low, high))
 
     @classmethod
     def random(cls, n: int, bounds: dict, seed=None) -> "Samples":
         """``n`` runs drawn uniformly in ``bounds`` (NumPy's default generator, ``seed``)."""
         names, low, high = _bounds(bounds)
-        return cls(names, np.random.default_rng(seed).uniform(low, high, size=(_count(n), len(names))))
+        return cls(names, np.random.default_rng(_seed(seed)).uniform(low, high, size=(_count(n), len(names))))
 
 
 def as_samples(params) -> Samples:
@@ -131,6 +131,17 @@ def _bounds(bounds: dict):
             raise NcgenError(f"bounds of {name!r}: expected finite low < high, got ({lo}, {hi})")
         names.append(name), low.append(lo), high.append(hi)
     return names, np.array(low), np.array(high)
+
+
+def _seed(seed):
+    """``seed`` as the samplers take it: None, an integer >= 0, or a NumPy ``Generator`` or
+    ``SeedSequence`` as it is."""
+    if seed is None or isinstance(seed, (np.random.Generator, np.random.SeedSequence)):
+        return seed
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise NcgenError(f"{option('seed', '--seed')}: expected None or an integer >= 0 (the same seed draws the "
+                         f"same runs), got {seed!r}")
+    return int(seed)
 
 
 def _count(n) -> int:

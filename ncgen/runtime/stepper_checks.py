@@ -11,7 +11,9 @@ A fixed-step run (:func:`ncgen.runtime.stepper.simulate_stepper` without ``rtol`
   (five per step of the fourth-order composition);
 * the energy of a conservative model changed by more than :data:`ENERGY_FRACTION` of the
   energy scale, or, for a model with non-conservative forces or drives, the energy balance
-  ``E(t) − E(t0) − W(t)`` (``W``: work of those forces and drives) is off by that much;
+  ``E(t) − E(t0) − W(t)`` (``W``: work of those forces and drives) is off by that much (the
+  scale is at least :func:`roundoff_energy`, the error that rounding the positions can
+  make, so that a motion of round-off energy, a block resting under 1e-15 N, is no alarm);
 * the estimated global error in q exceeds :data:`ERROR_FRACTION` of the model's size
   ``max |q0|`` (m);
 * nonsmooth contacts: a contact solve stopped at its sweep limit with a last sweep that
@@ -120,7 +122,7 @@ def trusted_before_failure(model, traj, S: np.ndarray, eq: np.ndarray | None):
         return traj, ""
     work = np.concatenate([[0.0], S[:, STATS.index("work")]])
     conservative = traj.info["energy"]["conservative"]
-    e_rel = relative_energy_error(traj, work, conservative)
+    e_rel = relative_energy_error(model, traj, work, conservative, S)
     bad_energy = ~(e_rel <= ENERGY_FRACTION)                       # NaN counts as bad
     row_energy = int(np.argmax(bad_energy)) if bad_energy.any() else len(S)
     row_error = len(S) if eq is None else untrusted_global_row(model, eq[:len(S)])
@@ -327,9 +329,45 @@ def energy_error(traj, work: np.ndarray, conservative: bool) -> np.ndarray:
     return np.abs(E - E[0] - (0.0 if conservative else work))
 
 
-def relative_energy_error(traj, work: np.ndarray, conservative: bool) -> np.ndarray:
-    """:func:`energy_error` at the end of each output row over the run's energy scale."""
-    return energy_error(traj, work, conservative)[1:] / np.maximum(_energy_scale(traj, work)[1:], 1e-300)
+def roundoff_energy(model, traj, S: np.ndarray) -> np.ndarray:
+    """Per output row (at its end): the energy error that round-off of the positions alone
+    can make, ``ε N max|q| max‖F‖₁`` (J), where ``N`` is the number of RATTLE steps so far
+    and ``F(t, q, v, u, p)`` the applied generalised forces at the output samples so far.
+
+    Each step rounds ``q`` to within ``ε max|q|`` per coordinate, and ``E − E0 − W`` changes
+    by the work ``F · δq`` of the applied forces over that rounding (the kinetic energy comes
+    from ``v``, which is not rounded with ``q``): a motion whose energy is of this size (a
+    block resting under 1e-15 N, a spring at rest pushed by 1e-10 N) is below what the
+    energy can tell.  Zero where it is not finite (an overflowed state is judged by the
+    energy error alone)."""
+    if not len(S):
+        return np.zeros(0)
+    n = len(S) + 1
+    F = np.asarray(model.functions["F"].map(n)(traj.t[:n], traj.q[:n].T, traj.v[:n].T, traj.u[:n].T,
+                                               np.asarray(traj.p, float)))
+    force = np.maximum.accumulate(np.abs(F).sum(axis=0))[1:]
+    size = np.maximum.accumulate(np.max(np.abs(traj.q[:n]), axis=1, initial=0.0))[1:]
+    steps = np.cumsum(S[:, STATS.index("steps")]) * traj.info.get("stages", 1)
+    with np.errstate(invalid="ignore", over="ignore"):
+        floor = np.finfo(float).eps * steps * size * force
+    return np.where(np.isfinite(floor), floor, 0.0)
+
+
+def energy_denominator(model, traj, work: np.ndarray, S: np.ndarray, error: np.ndarray) -> np.ndarray:
+    """Per output row: what its energy error ``error`` (J, one per row) is measured against,
+    the run's energy scale ``max(|E|, T, |V − V0|, |W|)`` so far, or, for rows where the
+    error passes :data:`ENERGY_FRACTION` of it, at least :func:`roundoff_energy` (computed
+    only then)."""
+    scale = np.maximum(_energy_scale(traj, work)[1:len(S) + 1], 1e-300)
+    if np.any(~(np.abs(error) <= ENERGY_FRACTION * scale)):
+        scale = np.maximum(scale, roundoff_energy(model, traj, S))
+    return scale
+
+
+def relative_energy_error(model, traj, work: np.ndarray, conservative: bool, S: np.ndarray) -> np.ndarray:
+    """:func:`energy_error` at the end of each output row over :func:`energy_denominator`."""
+    error = energy_error(traj, work, conservative)[1:len(S) + 1]
+    return error / energy_denominator(model, traj, work, S, error)
 
 
 def energy_report(traj, work: np.ndarray, conservative: bool) -> dict:
@@ -372,13 +410,13 @@ def untrusted_row(model, traj, S: np.ndarray, h: float, contacts: bool = False) 
     stages = traj.info.get("stages", 1)                 # RATTLE steps per step
     gq, _ = global_estimates(S, traj.info.get("substeps"))
     size = max(float(np.max(np.abs(model.q0), initial=0.0)), 1e-9)
-    scale = np.maximum(_energy_scale(traj, work)[1:], 1e-300)
     if contacts:
         E = traj.energy
-        e_rel = (E - E[0] - work)[1:] / scale           # a gain only: contacts dissipate
+        gain = (E - E[0] - work)[1:]                    # a gain only: contacts dissipate
+        e_rel = gain / energy_denominator(model, traj, work, S, np.maximum(gain, 0.0))
         residual = S[:, len(STATS) + CONTACT_STATS.index("pgs_residual")]
     else:
-        e_rel = relative_energy_error(traj, work, conservative)
+        e_rel = relative_energy_error(model, traj, work, conservative, S)
         residual = np.zeros(len(S))
     e_rel = np.where(np.isnan(e_rel), np.inf, e_rel)    # overflowed or NaN states: diverged
     dt = h * traj.info.get("substeps", 1)

@@ -11,9 +11,12 @@ import numpy as np
 from ncgen.errors import CompilerNotFound, NcgenError, SimulationError, option
 from ncgen.runtime.feedback import FeedbackFailed, with_partial
 from ncgen.runtime.integrator import Run, refuse_integrator
+from ncgen.runtime.run_start import failed_at_start
 from ncgen.runtime.options import SimulationOptions
+from ncgen.codegen.stepper_package import CONTACT_STATS, STATS
 from ncgen.runtime.stepper import simulate_stepper
 from ncgen.runtime.table_stepper import load_any_stepper
+from ncgen.runtime.stepper_checks import check_fixed, energy_report, is_conservative, trusted_before_failure
 from ncgen.runtime.trajectory import Trajectory
 
 NO_CONTROLLER = ("method='stepper' does not take a compiled controller or joint_dynamics=True; use method='joint' "
@@ -54,40 +57,102 @@ class StepperIntegrator:
 
 def _stepwise(model, run: Run, opts: SimulationOptions) -> Trajectory:
     """The compiled stepper one output interval at a time, the feedback evaluated at the
-    start of each (checks and the shadow error estimate off: they need the whole run)."""
+    start of each (no shadow run: it needs the whole run).  The intervals' statistics (steps,
+    Newton iterations, split steps, work of the non-conservative forces, contact solves) are
+    checked over the whole run as a fixed-step run's are (:func:`_checked`, unless
+    ``check=False``): a run that stops being trustworthy raises, and a failure (of the stepper
+    or the feedback) attaches only the rows before that."""
     if opts.hold != "zoh":
         raise NcgenError("hold='linear' with a feedback u(t, q, v): the feedback is held over each output "
                          "interval (zoh); use hold='zoh'")
     t, p, feedback = run.t, run.p, run.feedback
     step_opts = dataclasses.replace(opts, method="stepper", check=False, estimate=False)
-    Q, V, LAM, UU = [run.q], [run.v], [], []
+    Q, V, LAM, UU, S = [run.q], [run.v], [], [], []
+    info = {"method": "stepper", "backend": "compiled", "feedback": feedback[0], "hold": "zoh",
+            "substeps": opts.substeps, "estimate": False,
+            **({"rtol": opts.rtol, "atol": opts.rtol if opts.atol is None else opts.atol} if opts.rtol else {})}
     start = time.perf_counter()
+    part = None
     for k in range(len(t) - 1):
         try:
             uk = run.feedback_input(float(t[k]), Q[-1], V[-1])
         except FeedbackFailed as e:
             if not k:
-                raise
+                lam = run.multipliers(float(t[0]), run.q, run.v, np.zeros(model.nu))
+                raise failed_at_start(model, e, float(t[0]), run.q, run.v, p, lam,
+                                      {"method": "stepper", "feedback": feedback[0], "complete": False}) \
+                    from e.__cause__
             LAM.append(run.multipliers(float(t[k]), Q[-1], V[-1], UU[-1]))
             UU.append(UU[-1])
-            info = {"method": "stepper", "feedback": feedback[0]}
-            raise with_partial(e, Trajectory.from_states(model, t[:k + 1], np.array(Q), np.array(V), np.array(LAM),
-                                                          np.array(UU), p, info)) from e.__cause__
+            traj = _checked(model, opts, _states(model, t, Q, V, LAM, UU, p, info, part), np.array(S),
+                            f" Then {str(e).rstrip('.')}.")
+            raise with_partial(e, traj) from e.__cause__
         lam = run.multipliers(float(t[k]), Q[-1], V[-1], uk)
         LAM.append(lam)
         UU.append(uk)
         try:
             part = simulate_stepper(model, t[k:k + 2], np.vstack([uk, uk]), p, Q[-1], V[-1], lam, step_opts)
         except SimulationError as e:
-            info = {"method": "stepper", "feedback": feedback[0], "complete": False, "message": str(e)}
-            traj = Trajectory.from_states(model, t[:k + 1], np.array(Q), np.array(V), np.array(LAM),
-                                          np.array(UU), p, info)
+            traj = _states(model, t, Q, V, LAM, UU, p, {**info, "complete": False}, part)
+            traj = _checked(model, opts, traj, np.array(S), f" The stepper then failed at t = {t[k]:.6g} s: {e}")
+            traj.info["message"] = str(e)
             raise SimulationError(str(e), time=float(t[k]), trajectory=traj) from None
         Q.append(part.q[-1])
         V.append(part.v[-1])
+        S.append(_interval_row(part))
     LAM.append(part.lam[-1])
     UU.append(UU[-1])
-    info = {"method": "stepper", "backend": "compiled", "feedback": feedback[0], "hold": "zoh",
-            "wall_time": time.perf_counter() - start, "complete": True, "substeps": opts.substeps,
-            **({"rtol": opts.rtol, "atol": opts.rtol if opts.atol is None else opts.atol} if opts.rtol else {})}
-    return Trajectory.from_states(model, t, np.array(Q), np.array(V), np.array(LAM), np.array(UU), p, info)
+    info.update(wall_time=time.perf_counter() - start, complete=True)
+    return _checked(model, opts, _states(model, t, Q, V, LAM, UU, p, info, part), np.array(S))
+
+
+def _states(model, t, Q, V, LAM, UU, p, info: dict, part) -> Trajectory:
+    """The rows reached so far, as a trajectory (``part``: the last interval's run, for its
+    scheme's name and stages)."""
+    k = len(Q)
+    if part is not None:
+        info = {**info, **{key: part.info[key] for key in ("scheme", "order", "stages", "h") if key in part.info}}
+    return Trajectory.from_states(model, t[:k], np.array(Q), np.array(V), np.array(LAM[:k]), np.array(UU[:k]),
+                                  p, dict(info))
+
+
+def _interval_row(part: Trajectory) -> list:
+    """One output interval's statistics in the columns of the fixed-step run's (``STATS``
+    and, with nonsmooth contacts, ``CONTACT_STATS``); no error estimate (-1)."""
+    stats, energy = part.info["stats"], part.info["energy"]
+    row = [stats["nsteps"], stats["newton_iterations"], stats.get("step_splits", 0), -1.0, -1.0,
+           energy.get("work", 0.0)]
+    if "contacts" in part.info:
+        row += [part.info["contacts"][key] for key in CONTACT_STATS]
+    return row
+
+
+def _checked(model, opts: SimulationOptions, traj: Trajectory, S: np.ndarray, after: str = "") -> Trajectory:
+    """``traj`` with its energy report, checked unless ``check=False`` from the statistics
+    ``S`` (one row per interval; ``after``: the failure that ended the run, or ""): fixed
+    steps as a fixed-step run (:func:`~ncgen.runtime.stepper_checks.check_fixed`, raising
+    where the run stops being trusted); error control, after a failure, as a failed
+    error-controlled run (the rows before its energy error passes 1 %,
+    :func:`~ncgen.runtime.stepper_checks.trusted_before_failure`)."""
+    if not len(S):
+        return traj
+    conservative = is_conservative(model, inputs=bool(np.any(traj.u != 0)))
+    work = np.concatenate([[0.0], np.cumsum(S[:, STATS.index("work")])])
+    S = S.copy()
+    S[:, STATS.index("work")] = work[1:]
+    traj.info["energy"] = energy_report(traj, work, conservative)
+    if not opts.check:
+        return traj
+    if opts.rtol is None:
+        contacts = S.shape[1] > len(STATS)
+        check_fixed(model, traj, S, float(traj.info.get("h", 0.0)), opts.substeps, contacts, conservative, after)
+        return traj
+    if not after:
+        return traj
+    kept, why = trusted_before_failure(model, traj, S, None)
+    if why:
+        message = (f"simulation of {model.name!r} with the error-controlled stepper is not trustworthy:{after}"
+                   f"{why} The trajectory up to t = {kept.t[-1]:.6g} s is attached to this error as .trajectory.")
+        kept.info.update(complete=False, message=message)
+        raise SimulationError(message, time=float(kept.t[-1]), trajectory=kept)
+    return traj

@@ -244,6 +244,9 @@ def _check_options(method: str, options: dict) -> None:
     if unknown:
         raise NcgenError(f"sweep: method={method!r} takes no option {', '.join(map(repr, unknown))} "
                          f"(options: {', '.join(sorted(taken))})")
+    fields = {f.name for f in dataclasses.fields(SimulationOptions)}
+    SimulationOptions(method=method, **{k: v for k, v in options.items() if k in fields})   # values checked now,
+    # as each run would (substeps=0, rtol=nan), before a store is made or a worker started
 
 
 # ---------------------------------------------------------------- where tasks run

@@ -54,6 +54,12 @@ def animate(traj, path, *, max_frames: int = 150, fps: float | None = None, size
         raise NcgenError(f"animate: {path}: expected a .gif or .mp4 file name")
     if fps is not None and not (as_scalar(fps, "animate: fps") > 0):
         raise NcgenError(f"animate: fps: expected a positive number of frames per second, got {fps!r}")
+    if isinstance(max_frames, bool) or not isinstance(max_frames, (int, np.integer)) or max_frames < 2:
+        raise NcgenError(f"animate: max_frames: expected an integer >= 2 (frames of the animation), got {max_frames!r}")
+    for value, what, unit in ((size, "size", "the figure's width in inches"), (dpi, "dpi", "dots per inch")) + \
+            (() if budget is None else ((budget, "budget", "seconds of drawing, or None"),)):
+        if not as_scalar(value, f"animate: {what}") > 0:
+            raise NcgenError(f"animate: {what}: expected a positive number ({unit}), got {value!r}")
     if not len(traj.t):
         raise NcgenError(f"animate: {path}: the trajectory is empty (no samples): nothing to show")
     ffmpeg = ffmpeg_executable(path) if suffix == ".mp4" else None

@@ -13,6 +13,7 @@ from __future__ import annotations
 import base64
 import json
 import math
+import os
 import warnings
 from pathlib import Path
 
@@ -48,12 +49,31 @@ def to_html(traj, path, *, fps: float = FPS, colors: dict | None = None, mesh_pa
     fps = as_scalar(fps, "to_html: fps")
     if fps <= 0:
         raise NcgenError(f"to_html: fps: expected a positive number of frames per second, got {fps:g}")
+    if title is not None and not isinstance(title, str):
+        raise NcgenError(f"to_html: title: expected text or None, got {type(title).__name__} {title!r}")
+    mesh_paths = _folders(mesh_paths)
     data = page_data(traj, fps=fps, colors=colors, mesh_paths=mesh_paths, trails=trails, with_plots=plots)
     text = render_page(data, title or f"{traj.model_name} — ncgen")
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
         Path(tmp).write_text(text, encoding="utf-8")
     return path
+
+
+def _folders(mesh_paths) -> list:
+    """``mesh_paths`` as a list of folders: one folder (text or a path) or a list of them."""
+    if isinstance(mesh_paths, (str, os.PathLike)):
+        return [mesh_paths]
+    try:
+        folders = list(mesh_paths)
+    except TypeError:
+        raise NcgenError(f"to_html: mesh_paths: expected a folder or a list of folders, got "
+                         f"{type(mesh_paths).__name__} {mesh_paths!r}") from None
+    for i, folder in enumerate(folders):
+        if not isinstance(folder, (str, os.PathLike)):
+            raise NcgenError(f"to_html: mesh_paths[{i}]: expected a folder (text or a path), got "
+                             f"{type(folder).__name__} {folder!r}")
+    return folders
 
 
 # ----------------------------------------------------------------- rendering
