@@ -52,9 +52,61 @@ def upright(x, tol):
 def test_python_mpc_stabilises_the_cartpole(setup, angle, cart):
     ocp, mpc = setup
     T, U, X = closed_loop(mpc, tilted(ocp.model, angle, cart), 4.0, disturbance=PUSH)
-    assert np.all(np.abs(U) <= 20.0 + 1e-9) and np.max(np.abs(U)) > 1.0
+    assert np.all(np.abs(U) <= 20.0) and np.max(np.abs(U)) > 1.0
     assert np.all(np.abs(X[:, 0]) <= 1.5 + 1e-6)
     assert upright(X[-1], 2e-3), X[-1]
+
+
+def test_reset_from_the_documented_start_is_a_finite_rollout_within_the_bounds(setup):
+    """``reset(x, 0, iterations=10)`` from the model's own initial state (the pole hanging 0.3
+    rad off the downward vertical: far from the horizon's target) used to end with NaN in the
+    guess and a good QP status; now every iterate is a rollout, its inputs within ±20 N, and
+    the merit line search reports its step lengths."""
+    from ncgen.control.mpc import ALPHAS
+    ocp, mpc = setup
+    model = ocp.model
+    x = np.concatenate([model.q0, model.v0])
+    mpc.reset(x, 0.0, iterations=10)
+    st = nc.step_function(model, mpc.h)
+    assert np.all(np.isfinite(mpc.X)) and np.all(np.isfinite(mpc.U))
+    assert np.array_equal(mpc.X[0], x) and np.allclose(mpc.X[1:], st.rollout(x, mpc.U), atol=1e-9)
+    assert np.all(np.abs(mpc.U) <= 20.0) and np.max(np.abs(mpc.U)) > 1.0
+    assert len(mpc.step_lengths) == 1 and mpc.step_lengths[0] in ALPHAS + (0.0,)
+
+
+class _FakeQP:
+    """Stands in for the compiled qrqp: answers ``dU`` (and zero multipliers) with ``status``."""
+
+    def __init__(self, dU, n_rows, status):
+        self.outputs = [np.asarray(dU, dtype=float), np.zeros(1), np.zeros(n_rows), np.zeros(len(dU))]
+        self.status = status
+
+    def status_call(self, *args):
+        return self.status
+
+
+def test_a_nan_or_wild_qp_answer_is_never_kept_nor_answered(setup):
+    """A QP that answers NaN (or -70 N steps against a ±20 N bound, as qrqp did when it failed
+    on the exported demo): the NaN step is not taken (the guess's rollout is kept, α = 0), the
+    wild one is clipped into the bounds and taken only if it decreases the merit function."""
+    ocp, mpc = setup
+    x = tilted(ocp.model, 0.2)
+    mpc.reset(x, 0.0, iterations=3)
+    X0, U0 = mpc.X.copy(), mpc.U.copy()
+    qp, n_rows = mpc._qp, mpc._qp.outputs[2].size
+    try:
+        mpc._qp = _FakeQP(np.full(mpc.N, np.nan), n_rows, 0)
+        X, U = mpc._solve(x, 0.0, U0)
+        assert mpc.step_lengths == [0.0] and np.array_equal(U, U0) and np.array_equal(X, X0)
+        mpc._qp = _FakeQP(np.full(mpc.N, -70.0), n_rows, 3)
+        X, U = mpc._solve(x, 0.0, U0)
+        assert np.all(np.abs(U) <= 20.0) and np.all(np.isfinite(X))
+        if mpc.step_lengths == [0.0]:
+            assert np.array_equal(U, U0)
+        u = mpc(x, 0.0)
+        assert -20.0 <= u[0] <= 20.0
+    finally:
+        mpc._qp = qp
 
 
 def test_converged_sqp_is_the_ipopt_solution_of_the_horizon_problem(setup):
@@ -77,7 +129,7 @@ def test_unsupported_problems_and_solvers_are_named(setup):
     free = nc.OptimalControl(model, N=10, t_final=(0.5, 2.0))
     with pytest.raises(OptimizationError, match="a free final time"):
         nc.MPC(free)
-    with pytest.raises(OptimizationError, match="solver: expected one of sqp, got 'fatrop'"):
+    with pytest.raises(OptimizationError, match="solver: expected one of sqp, got 'fatrop'.*libfatrop"):
         nc.MPC(ocp, solver="fatrop")
     with pytest.raises(OptimizationError, match="iterations: expected a positive integer"):
         nc.MPC(ocp, iterations=0)
