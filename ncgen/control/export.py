@@ -4,9 +4,10 @@ problem as a standalone C package that builds with ``make`` and runs without Pyt
 The package (written by :func:`ncgen.codegen.package.write_package`, so it is reproducible,
 written in a temporary sibling and renamed into place, with a manifest) holds:
 
-* ``<name>_mpc_qp_data``, ``<name>_mpc_qp``, ``<name>_mpc_merit``: one SQP iteration of
-  :mod:`ncgen.control.mpc` (the condensed QP, CasADi's ``qrqp``, the rollouts and merit of
-  its line search), generated C, self-contained;
+* ``<name>_mpc_qp_data``, ``<name>_mpc_qp``, ``<name>_mpc_update``, ``<name>_mpc_merit``:
+  one SQP iteration of :mod:`ncgen.control.mpc` (the condensed QP, CasADi's ``qrqp``, the
+  full step, cost and infeasibility of a trial of the line search), generated C,
+  self-contained;
 * ``<name>_plant_step``: one RATTLE step of ``h / substeps`` (:mod:`ncgen.control.discrete`),
   the plant of the demo;
 * ``<name>_mpc.h``/``.c``: the API ``<name>_mpc_init``, ``<name>_mpc_step(m, x, t, u_out)``,
@@ -29,7 +30,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.control.discrete import step_functions
-from ncgen.control.mpc import ALPHAS, ARMIJO, REGULARIZATION, mpc_functions, residual_tolerance
+from ncgen.control.mpc import ALPHAS, ARMIJO, C_MIN, GAMMA, REGULARIZATION, mpc_functions, residual_tolerance
 from ncgen.control.mpc_problem import mpc_problem
 from ncgen.control.initial import check_consistent
 from ncgen.errors import NcgenError
@@ -120,7 +121,8 @@ def export_mpc(ocp, path, *, name: str | None = None, iterations: int = 1, termi
         "u_rest": ", ".join(_c(v) for v in u_rest) or "0",
         "u_lo": ", ".join(_bound(v) for v in problem.u_bounds[0]) or "0",
         "u_hi": ", ".join(_bound(v) for v in problem.u_bounds[1]) or "0",
-        "alphas": len(ALPHAS), "armijo": _c(ARMIJO), "step_tol": _c(residual_tolerance(model)),
+        "alphas": len(ALPHAS), "armijo": _c(ARMIJO), "gamma": _c(GAMMA), "c_min": _c(C_MIN),
+        "step_tol": _c(residual_tolerance(model)),
         "params": ", ".join(_c(v) for v in problem.p) or "0",
         "x0": ", ".join(_c(v) for v in x0), "t_end": _c(t_end), "warmup": warmup,
         "disturbance": [{"t_on": _c(p.t_on), "t_off": _c(p.t_off), "amounts": [_c(v) for v in p.values]}

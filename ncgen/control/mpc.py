@@ -3,32 +3,29 @@ generated C.
 
 Each control step runs a fixed number of sequential-quadratic-programming iterations
 (``iterations=1``: the real-time iteration of Diehl et al., 2005) on the problem of
-:mod:`ncgen.control.mpc_problem`, from the previous step's inputs shifted by one interval
-(warm start).  The iterates are single-shooting ones: the states are always the rollout of
-the inputs from the measured state ``x`` (so every iterate is on the constraint manifold and
-dynamically feasible; a guess that does not roll out is an error, never an answer).  One
-iteration from the inputs ``Ū`` (``N`` intervals) and their rollout ``X̄`` (``N + 1`` nodes):
+:mod:`ncgen.control.mpc_problem`, from the previous step's solution shifted by one interval
+(warm start).  One iteration, with the guess ``(X̄, Ū)`` (states at the ``N + 1`` nodes,
+inputs on the ``N`` intervals; multiple shooting):
 
-1. the step and its exact Jacobians at every node, ``A_k, B_k``
+1. the step and its exact Jacobians at every node, ``x̄⁺_k, A_k, B_k``
    (:mod:`ncgen.control.discrete`, implicit function theorem);
 2. the QP in ``(δX, δU)``: minimise ``½ δᵀ H δ + gᵀ δ`` (``g``, ``H``: gradient and Hessian of
    the cost at the guess — a Gauss–Newton Hessian: the dynamics' curvature is left out),
-   subject to ``δx_0 = 0``, ``δx_{k+1} = A_k δx_k + B_k δu_k`` and the OCP's bounds moved by
-   the guess — condensed onto the inputs (``vec δX = S δU``, :func:`condense`: ``N·nu``
-   variables, the bounded state components as general rows) and solved by CasADi's
-   active-set ``qrqp``;
-3. a backtracking line search (:data:`ALPHAS`) on the ℓ1 merit function
-   ``φ = J + ρ V`` (``J`` the cost of the rollout, ``V`` its violation of the state bounds,
-   ``ρ = 1 + 2 max |λ|`` over the QP's multipliers of those bounds) along
-   ``U(α) = clip(Ū + α δU)`` into the input bounds, each trial a rollout from ``x``: the first
-   ``α`` with ``φ(α) ≤ φ(0) + c α D`` (``D = gᵀδU − ρ V``, ``c`` = :data:`ARMIJO`) is taken.
-   A trial whose steps do not converge or that is not finite is rejected; when no ``α`` is
-   accepted (or the QP's solution is not finite, or not a descent direction) the iterate is
-   kept (``mpc.step_lengths``: 0).  So every input returned is inside its bounds and every
-   iterate kept as a warm start is a converged, finite rollout.
+   subject to ``δx_0 = x − x̄_0``, ``δx_{k+1} = A_k δx_k + B_k δu_k + x̄⁺_k − x̄_{k+1}`` and the
+   OCP's bounds moved by the guess — condensed onto the inputs (``vec δX = S δU + s``,
+   :func:`condense`: ``N·nu`` variables, the bounded state components as general rows) and
+   solved by CasADi's active-set ``qrqp``;
+3. a backtracking line search with a filter on (cost ``J``, infeasibility ``c``: the ℓ1 norm
+   of the shooting gaps and of the state-bound violations, :func:`merit_function`) along
+   ``X̄ + α (X⁺ − X̄)``, ``clip(Ū + α δU)`` into the input bounds (``X⁺``: the QP's full step),
+   ``α`` = 1, ½, … (:data:`ALPHAS`), accepted by :func:`acceptable`.  A trial whose steps do
+   not converge, or that has NaN or inf anywhere, is rejected; a QP answer that is not finite,
+   or no acceptable ``α``, keeps the guess (``mpc.step_lengths``: 0).  So every input
+   returned is inside its bounds (and checked), and nothing NaN or diverging is ever answered
+   or kept as the next guess; a guess along which the steps do not converge is an error.
 
-An iteration is three generated functions (:func:`mpc_functions`): the QP's data, ``qrqp``
-and the merit of trial inputs (:func:`merit_function`).  ``mpc(x, t)`` calls them through
+An iteration is four generated functions (:func:`mpc_functions`): the QP's data, ``qrqp``,
+the full step and the merit of a trial.  ``mpc(x, t)`` calls them through
 :class:`ncgen.codegen.direct.DirectFunction`; :func:`ncgen.control.export.export_mpc` writes
 the same functions and the same loop in C, so Python and C compute the same numbers.
 """
@@ -44,21 +41,23 @@ from ncgen.errors import OptimizationError
 SOLVERS = ("sqp",)
 #: Added to the diagonal of the QP Hessian (keeps it positive definite on the inputs).
 REGULARIZATION = 1e-8
-#: Step lengths tried by the line search, longest first, and its Armijo fraction.
+#: Step lengths tried by the line search, longest first; its Armijo fraction, the filter's
+#: margin γ and the infeasibility (m, m/s: ℓ1 over the horizon) below which an iterate counts
+#: as feasible.
 ALPHAS = tuple(0.5 ** i for i in range(11))
-ARMIJO = 1e-4
+ARMIJO, GAMMA, C_MIN = 1e-4, 1e-5, 1e-6
 
 
 def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
                   qp_max_iter: int = 100) -> list[ca.Function]:
-    """The three CasADi functions of one SQP iteration (see the module docstring):
+    """The four CasADi functions of one SQP iteration (see the module docstring):
 
-    * ``mpc_qp_data: (x, t, X̄, Ū) -> (H, g, A, lba, uba, lbx, ubx)``: the condensed QP in
-      ``δU`` at the guess (``X̄``: the rollout of ``Ū`` from ``x``);
+    * ``mpc_qp_data: (x, t, X̄, Ū) -> (H, g, A, lba, uba, lbx, ubx, Xs, S)``: the condensed QP
+      in ``δU`` (``vec δX = S δU + (Xs − vec X̄)``);
     * ``mpc_qp``: CasADi's ``qrqp`` on it (returns its last iterate also when it reports a
       failure: the caller checks it);
-    * ``mpc_merit`` (:func:`merit_function`): the rollout of trial inputs, its cost and its
-      violation of the state bounds, for the line search.
+    * ``mpc_update: (Xs, S, Ū, δU) -> (X⁺, U⁺)``: the full step;
+    * ``mpc_merit`` (:func:`merit_function`): cost and infeasibility of a trial.
     """
     h, N, p = problem.h, problem.N, problem.p
     nx, nu = 2 * model.nq, model.nu
@@ -95,38 +94,41 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
         "mpc_qp_data", [x, t, X, U],
         [ca.densify(e) for e in (0.5 * (Hc + Hc.T), gc, S[rows, :], ca.DM(np.tile(lo_x[bounded], N)) - Xn[rows],
                                  ca.DM(np.tile(hi_x[bounded], N)) - Xn[rows], ca.vec(ca.repmat(lo_u, 1, N) - U),
-                                 ca.vec(ca.repmat(hi_u, 1, N) - U))],
-        ["x", "t", "X_guess", "U_guess"], ["H", "g", "A", "lba", "uba", "lbx", "ubx"])
-    return [data, qp, merit_function(model, problem)]
+                                 ca.vec(ca.repmat(hi_u, 1, N) - U), Xn, S)],
+        ["x", "t", "X_guess", "U_guess"], ["H", "g", "A", "lba", "uba", "lbx", "ubx", "Xs", "S"])
+    Xs_, S_, U_, dU = ca.MX.sym("Xs", nX), ca.MX.sym("S", nX, nU), ca.MX.sym("U", nu, N), ca.MX.sym("dU", nU)
+    update = ca.Function("mpc_update", [Xs_, S_, U_, dU],
+                         [ca.densify(ca.reshape(Xs_ + ca.mtimes(S_, dU), nx, N + 1)),
+                          ca.densify(U_ + ca.reshape(dU, nu, N))],
+                         ["Xs", "S", "U_guess", "dU"], ["X_sol", "U_sol"])
+    return [data, qp, update, merit_function(model, problem)]
 
 
 def merit_function(model, problem) -> ca.Function:
-    """``mpc_merit: (x, t, U) -> (X, J, V, res)``: the rollout of the inputs ``U`` (nu × N)
-    from the measured state ``x`` (``X``: nx × (N + 1), node 0 is ``x``), its cost ``J``, the
-    violation ``V = Σ_{k≥1} Σ_i max(0, lo_i − x_k,i) + max(0, x_k,i − hi_i)`` of the state
-    bounds and the largest residual ``res`` of the steps' Newton iterations."""
+    """``mpc_merit: (x, t, X, U) -> (J, c, res)``: the cost ``J`` of the iterate ``(X, U)``
+    (``X``: nx × (N + 1), ``U``: nu × N), its infeasibility
+    ``c = ‖x − X_0‖₁ + Σ_k ‖step(X_k, U_k) − X_{k+1}‖₁ + Σ_{k≥1} (state-bound violation)₁``
+    and the largest residual ``res`` of the ``N`` steps' Newton iterations."""
     from ncgen.control.discrete import step_functions
     h, N, p = problem.h, problem.N, problem.p
     nx, nu = 2 * model.nq, model.nu
     step = step_functions(model, h)["step"]
-    x, t, U = ca.MX.sym("x", nx), ca.MX.sym("t"), ca.MX.sym("U", nu, N)
+    x, t, X, U = ca.MX.sym("x", nx), ca.MX.sym("t"), ca.MX.sym("X", nx, N + 1), ca.MX.sym("U", nu, N)
     times = t + h * ca.DM(np.arange(N)).T
-    Xn, res = step.mapaccum("mpc_rollout", N, [0], [0])(x, U, ca.repmat(ca.DM(p), 1, N), times)
-    X = ca.horzcat(x, Xn)
+    X1, res = step.map("mpc_steps", "serial", N, [2], [])(X[:, :N], U, ca.DM(p), times)
+    c = ca.norm_1(x - X[:, 0]) + ca.sum2(ca.sum1(ca.fabs(X1 - X[:, 1:])))
+    lo_x, hi_x = problem.x_bounds
+    for i in np.flatnonzero(np.isfinite(lo_x) | np.isfinite(hi_x)):
+        row = X[int(i), 1:]
+        if np.isfinite(lo_x[i]):
+            c += ca.sum2(ca.fmax(0, float(lo_x[i]) - row))
+        if np.isfinite(hi_x[i]):
+            c += ca.sum2(ca.fmax(0, row - float(hi_x[i])))
     Xs, Us = ca.SX.sym("X", nx, N + 1), ca.SX.sym("U", nu, N)
     cost = ca.Function("mpc_total_cost", [Xs, Us], [sum(problem.stage(Xs[:, k], Us[:, k]) for k in range(N))
                                                     + problem.terminal(Xs[:, N])])
-    lo_x, hi_x = problem.x_bounds
-    bounded = np.flatnonzero(np.isfinite(lo_x) | np.isfinite(hi_x))
-    V = ca.MX(0)
-    for i in bounded:
-        row = Xn[int(i), :]
-        if np.isfinite(lo_x[i]):
-            V += ca.sum2(ca.fmax(0, float(lo_x[i]) - row))
-        if np.isfinite(hi_x[i]):
-            V += ca.sum2(ca.fmax(0, row - float(hi_x[i])))
-    return ca.Function("mpc_merit", [x, t, U], [X, cost(X, U), V, ca.mmax(res)], ["x", "t", "U"],
-                       ["X", "J", "V", "res"])
+    return ca.Function("mpc_merit", [x, t, X, U], [cost(X, U), c, ca.mmax(res)],
+                       ["x", "t", "X_trial", "U_trial"], ["J", "c", "res"])
 
 
 def condense(A, B, d0, defects, N: int):
@@ -146,14 +148,14 @@ class MPC:
     """A receding-horizon controller for ``ocp`` (an :class:`~ncgen.optim.problem.OptimalControl`):
     ``u = mpc(x, t)``.
 
-    ``solver``: ``"sqp"`` (Gauss–Newton SQP with CasADi's ``qrqp`` and a line search on an
-    ℓ1 merit function, generated C; see the module docstring);
+    ``solver``: ``"sqp"`` (Gauss–Newton SQP with CasADi's ``qrqp`` and a filter line search,
+    generated C; see the module docstring);
     ``iterations``: SQP iterations per control step (1: real-time iteration);
     ``terminal_weight``: weight ``W`` of the OCP's final conditions, soft in MPC
     (:mod:`ncgen.control.mpc_problem`).  The horizon is the OCP's: ``N`` intervals of
     ``h = t_final / N`` seconds, and ``mpc`` is meant to be called every ``h`` seconds.
-    ``mpc.reset(x, iterations=...)`` (also done by the first call) sets the guess to the
-    rollout of zero inputs (clipped into their bounds) from ``x`` and iterates on it.
+    ``mpc.reset(x, iterations=...)`` (also done by the first call) sets the guess to ``x``
+    held with zero inputs (clipped into their bounds) and iterates on it.
     ``mpc.qp_status`` and ``mpc.step_lengths`` report each iteration of the last call."""
 
     def __init__(self, ocp, solver: str = "sqp", *, iterations: int = 1, terminal_weight: float = 1e3,
@@ -175,12 +177,12 @@ class MPC:
                                        qp_max_iter=qp_max_iter)
         from ncgen.control.step import _compile
         lib = _compile(f"{self.model.name}_mpc", self.functions)
-        self._data, self._qp, self._merit = (lib[f.name()] for f in self.functions)
+        self._data, self._qp, self._update, self._merit_fn = (lib[f.name()] for f in self.functions)
         self._residual_tol = residual_tolerance(self.model)
         #: qrqp's status of each QP of the last control step (0: converged).
         self.qp_status: list[int] = []
-        #: the step length α taken by each SQP iteration of the last control step (0: the line
-        #: search found no decrease of the merit function, the iterate was kept).
+        #: the step length α taken by each SQP iteration of the last control step (0: no trial
+        #: was acceptable, the iterate was kept).
         self.step_lengths: list[float] = []
         self.u_bounds = self.problem.u_bounds
         self.u_rest = np.clip(np.zeros(self.nu), *self.u_bounds)
@@ -190,75 +192,60 @@ class MPC:
         return (f"<MPC of {self.model.name!r}: N={self.N}, h={self.h} s, {self.iterations} SQP "
                 f"iteration(s) per step, qrqp>")
 
-    def _rollout(self, x, t: float, U: np.ndarray):
-        """``(X, φ-parts)``: the rollout of ``U`` from ``x`` and ``(J, V)``, or ``None`` when a
-        step did not converge or anything is not finite (a diverging trial)."""
-        X, J, V, res = (o.copy() for o in self._merit(x, t, U.ravel()))
-        if not (float(res[0]) <= self._residual_tol and np.all(np.isfinite(X)) and np.isfinite(J[0])
-                and np.isfinite(V[0])):
+    def _merit(self, x, t: float, X: np.ndarray, U: np.ndarray):
+        """``(J, c)`` of the iterate, or ``None`` when a step along it did not converge or
+        anything is not finite."""
+        if not (np.all(np.isfinite(X)) and np.all(np.isfinite(U))):
             return None
-        return X.reshape(self.N + 1, self.nx), float(J[0]), float(V[0])
+        J, c, res = (float(o[0]) for o in self._merit_fn(x, t, X.ravel(), U.ravel()))
+        return (J, c) if res <= self._residual_tol and np.isfinite(J) and np.isfinite(c) else None
 
-    def _solve(self, x, t: float, U: np.ndarray):
-        """``iterations`` globalised SQP iterations from the inputs ``U``: ``(X, U)``, ``X`` the
-        rollout of ``U`` from ``x`` (see :func:`sqp_iteration`)."""
+    def _solve(self, x, t: float, X: np.ndarray, U: np.ndarray):
+        """``iterations`` globalised SQP iterations from the guess ``(X, U)``: ``(X, U)``."""
         self.qp_status, self.step_lengths = [], []
-        start = self._rollout(x, t, U)
-        if start is None:
-            raise OptimizationError(f"MPC of {self.model.name!r}: the guess does not roll out from the state "
-                                    f"{np.asarray(x).tolist()} at t = {t:g} s (a step of the model did not "
-                                    "converge along the horizon); reset() the guess")
-        X, J, V = start
         for _ in range(self.iterations):
-            X, U, J, V = self._iteration(x, t, X, U, J, V)
+            X, U = self._iteration(x, t, X, U)
         return X, U
 
-    def _iteration(self, x, t, X, U, J, V):
-        """One SQP iteration: the QP at the rollout ``(X, U)``, then the backtracking line search
-        on the ℓ1 merit ``φ = J + ρ V`` (``ρ = 1 + 2 max |λ|`` of the QP's state-bound rows)
-        along ``U(α) = clip(U + α δU)`` (each trial a rollout from ``x``), accepted at
-        ``φ(α) ≤ φ(0) + c α D`` (``D = gᵀδU − ρ V``, its predicted derivative, ``c`` =
-        :data:`ARMIJO`); no accepted ``α`` of :data:`ALPHAS`, a non-finite or out-of-bounds
-        QP solution: the iterate is kept (α = 0)."""
-        H, g, A, lba, uba, lbx, ubx = (o.copy() for o in self._data(x, t, X.ravel(), U.ravel()))
+    def _iteration(self, x, t, X, U):
+        """One SQP iteration (see the module docstring): the QP at the guess, then the filter
+        line search along ``X + α (X⁺ − X)``, ``clip(U + α δU)``; the guess itself must be
+        valid (its steps converge), else :class:`OptimizationError`."""
+        current = self._merit(x, t, X, U)
+        if current is None:
+            raise OptimizationError(f"MPC of {self.model.name!r}: a step of the model does not converge along "
+                                    f"the guess at t = {t:g} s (state {np.asarray(x).tolist()}); reset() the guess")
+        J0, c0 = current
+        H, g, A, lba, uba, lbx, ubx, Xs, S = (o.copy() for o in self._data(x, t, X.ravel(), U.ravel()))
         self.qp_status.append(self._qp.status_call(H, g, A, lba, uba, lbx, ubx, 0.0, 0.0, 0.0))
-        dU, lam_a = self._qp.outputs[0].copy(), self._qp.outputs[2].copy()
-        if not (np.all(np.isfinite(dU)) and np.all(np.isfinite(lam_a))):
-            self.step_lengths.append(0.0)
-            return X, U, J, V
-        rho = 1.0 + 2.0 * _max_abs(lam_a)
-        phi0, D = J + rho * V, _dot(g, dU) - rho * V
-        lo, hi = (np.tile(b, self.N) for b in self.u_bounds)
-        if D < 0:
+        dU, model_decrease = self._qp.outputs[0].copy(), float(self._qp.outputs[1][0])
+        if np.all(np.isfinite(dU)) and np.isfinite(model_decrease):
+            Xf, _ = self._update(Xs, S, U.ravel(), dU)
+            Xf = Xf.reshape(self.N + 1, self.nx)
+            lo, hi = (np.tile(b, self.N) for b in self.u_bounds)
             for alpha in ALPHAS:
-                Un = np.minimum(np.maximum(U.ravel() + alpha * dU, lo), hi)
-                trial = self._rollout(x, t, Un)
-                if trial is not None and trial[1] + rho * trial[2] <= phi0 + ARMIJO * alpha * D:
+                Xa = X + alpha * (Xf - X)
+                Ua = np.minimum(np.maximum(U.ravel() + alpha * dU, lo), hi).reshape(self.N, self.nu)
+                trial = self._merit(x, t, Xa, Ua)
+                if trial is not None and acceptable(J0, c0, *trial, alpha, model_decrease):
                     self.step_lengths.append(alpha)
-                    return trial[0], Un.reshape(self.N, self.nu), trial[1], trial[2]
+                    return Xa, Ua
         self.step_lengths.append(0.0)
-        return X, U, J, V
+        return X, U
 
     def initial_guess(self, x) -> tuple[np.ndarray, np.ndarray]:
         """``(X, U)``: ``x`` at every node, inputs zero clipped into their bounds."""
         return np.tile(x, (self.N + 1, 1)), np.tile(self.u_rest, (self.N, 1))
 
     def reset(self, x, t: float | None = None, iterations: int = 0) -> None:
-        """Start again from the inputs of :meth:`initial_guess` (their rollout from ``x``),
-        then run ``iterations`` solves at ``x`` without shifting (to converge the first
-        solution)."""
+        """Start again from the guess of :meth:`initial_guess`, then run ``iterations``
+        solves at ``x`` without shifting (to converge the first solution)."""
         from ncgen.control.step import _vector
         x = _vector(x, self.nx, "x", "the state [q; v]")
+        X, U = self.initial_guess(x)
         t = self.model.t0 if t is None else float(t)
-        _, U = self.initial_guess(x)
-        start = self._rollout(x, t, U)
-        if start is None:
-            raise OptimizationError(f"MPC of {self.model.name!r}: the inputs at rest do not roll out from the "
-                                    f"state {np.asarray(x).tolist()} (a step of the model did not converge "
-                                    "along the horizon)")
-        X = start[0]
         for _ in range(iterations):
-            X, U = self._solve(x, t, U)
+            X, U = self._solve(x, t, X, U)
         self.X, self.U = X, U
 
     def __call__(self, x, t: float | None = None) -> np.ndarray:
@@ -270,7 +257,7 @@ class MPC:
         if self.X is None:
             self.reset(x)
         t = self.model.t0 if t is None else float(t)
-        X, U = self._solve(x, t, self.U)
+        X, U = self._solve(x, t, self.X, self.U)
         u = U[0].copy()
         lo, hi = self.u_bounds
         if not (np.all(np.isfinite(u)) and np.all(lo <= u) and np.all(u <= hi)):
@@ -282,20 +269,20 @@ class MPC:
         return u
 
 
+def acceptable(J0: float, c0: float, J: float, c: float, alpha: float, model_decrease: float) -> bool:
+    """The filter's test of a trial ``(J, c)`` against the iterate ``(J0, c0)`` (cost,
+    infeasibility) at step length ``α``; ``model_decrease``: the QP's optimal value (its
+    model of the cost's change at ``α = 1``).  Nearly feasible (``c0 ≤`` :data:`C_MIN`) with a
+    predicted decrease: Armijo on the cost, ``J ≤ J0 + c α model_decrease``, the trial staying
+    nearly feasible; otherwise a sufficient decrease of the infeasibility or of the cost,
+    ``c ≤ (1 − γ) c0`` or ``J ≤ J0 − γ c0`` with ``c ≤ c0``.  The same expression, in the same
+    order, as the exported package's C."""
+    if c0 <= C_MIN and model_decrease < 0:
+        return c <= C_MIN and J <= J0 + ARMIJO * alpha * model_decrease
+    return c <= (1.0 - GAMMA) * c0 or (J <= J0 - GAMMA * c0 and c <= c0)
+
+
 def residual_tolerance(model) -> float:
     """The Newton residual above which a step is refused (as :class:`ncgen.control.step.StepFunction`)."""
     from ncgen.control.step import RESIDUAL_TOL
     return RESIDUAL_TOL * (1.0 + float(np.max(np.abs(model.M))) if model.nq else 1.0)
-
-
-def _max_abs(a: np.ndarray) -> float:
-    """``max |a_i|`` (0 for an empty array)."""
-    return float(np.max(np.abs(a))) if a.size else 0.0
-
-
-def _dot(a: np.ndarray, b: np.ndarray) -> float:
-    """``aᵀb`` summed left to right, as the generated package's C does (same rounding)."""
-    out = 0.0
-    for ai, bi in zip(a.tolist(), b.tolist()):
-        out += ai * bi
-    return out
