@@ -22,7 +22,7 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--x0", default=None, metavar="Q=V,...",
                    help="the demo's initial state as coordinate=value pairs (the others assembled, at rest), "
                         "e.g. pole.r_j.x=0.1 (coordinates as written before coordinate sharing too); "
-                        "default: the model's initial state")
+                        "default: the problem file's [initial] state, else the model's")
     p.add_argument("--t-end", type=float, default=5.0, help="the demo's duration, s (default 5)")
     p.add_argument("--substeps", type=int, default=5, help="plant steps per control step in the demo (default 5)")
     p.add_argument("--disturbance", action="append", default=[], metavar="T_ON:T_OFF:U1,U2,...",

@@ -187,6 +187,9 @@ def _render_files(name: str, functions: list[ca.Function], doc: PackageDoc, opti
                for k in kernels}
     huge = sum(f.n_instructions() for f in kernel_funcs) > LARGE_PACKAGE_INSTRUCTIONS
     build["large_sources"] = [src for src, n in largest.items() if huge or n > LARGE_FUNCTION_INSTRUCTIONS]
+    qp_sources = sorted({file_of[c.name()] for f, c in zip(functions, c_funcs) if f.class_name() == "Qrqp"})
+    if qp_sources:                  # files holding CasADi's qrqp: a gcc warning off (templates/c/Makefile.j2)
+        build["qp_sources"] = qp_sources
     programs = [s.output for s in extra_sources if s.program]
     if programs:
         build["programs"] = programs

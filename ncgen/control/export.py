@@ -4,9 +4,10 @@ problem as a standalone C package that builds with ``make`` and runs without Pyt
 The package (written by :func:`ncgen.codegen.package.write_package`, so it is reproducible,
 written in a temporary sibling and renamed into place, with a manifest) holds:
 
-* ``<name>_mpc_qp_data``, ``<name>_mpc_qp``, ``<name>_mpc_update``: one SQP iteration of
-  :mod:`ncgen.control.mpc` (the condensed QP, CasADi's ``qrqp``, the new iterate), generated
-  C, self-contained;
+* ``<name>_mpc_qp_data``, ``<name>_mpc_qp``, ``<name>_mpc_update``, ``<name>_mpc_merit``:
+  one SQP iteration of :mod:`ncgen.control.mpc` (the condensed QP, CasADi's ``qrqp``, the
+  full step, cost and infeasibility of a trial of the line search), generated C,
+  self-contained;
 * ``<name>_plant_step``: one RATTLE step of ``h / substeps`` (:mod:`ncgen.control.discrete`),
   the plant of the demo;
 * ``<name>_mpc.h``/``.c``: the API ``<name>_mpc_init``, ``<name>_mpc_step(m, x, t, u_out)``,
@@ -29,9 +30,8 @@ import casadi as ca
 import numpy as np
 
 from ncgen.control.discrete import default_abstol, step_functions
-from ncgen.control.mpc import REGULARIZATION, mpc_functions
+from ncgen.control.mpc import ALPHAS, ARMIJO, C_MIN, GAMMA, REGULARIZATION, mpc_functions, residual_tolerance
 from ncgen.control.mpc_problem import mpc_problem
-from ncgen.control.step import RESIDUAL_TOL
 from ncgen.control.initial import check_consistent
 from ncgen.errors import NcgenError
 from ncgen.validation import as_scalar, as_vector
@@ -79,7 +79,8 @@ def export_mpc(ocp, path, *, name: str | None = None, iterations: int = 1, termi
                x0=None, t_end: float = 5.0, substeps: int = 5, disturbance=(), warmup: int = 10):
     """Write the controller of ``ocp`` (options as in :class:`ncgen.control.mpc.MPC`) as the C
     package ``name`` (default: the model's name) in directory ``path``; returns the
-    :class:`~ncgen.codegen.package.Package`.  ``x0`` (default: the model's initial state),
+    :class:`~ncgen.codegen.package.Package`.  ``x0`` (default: the problem's initial state,
+    ``initial(q=…, v=…)``, else the model's),
     ``t_end`` (s), ``substeps``, ``disturbance`` (:func:`pulses`) and ``warmup`` (solves at
     the first state before the loop starts) are the demo program's defaults."""
     from ncgen.codegen.package import ExtraSource, write_package
@@ -102,13 +103,12 @@ def export_mpc(ocp, path, *, name: str | None = None, iterations: int = 1, termi
         if not np.isfinite(value):
             raise NcgenError(f"export_mpc: parameter {pname!r}: expected a finite value, got {value}")
     if x0 is None:
-        x0 = np.concatenate([model.q0, model.v0])
+        x0 = problem.x_start
     else:
         x0 = as_vector(x0, nx, "export_mpc: x0 (the state [q; v])")
         check_consistent(model, x0, problem.p, 0.0, "export_mpc: x0")             # the demo starts at t = 0
     fns = mpc_functions(model, problem, regularization=REGULARIZATION)
     plant = plant_function(model, problem.h / substeps)
-    data, qp, update = fns
     u_rest = np.clip(np.zeros(nu), *problem.u_bounds)
     pl = pulses(disturbance, nu)
     context = {
@@ -119,8 +119,13 @@ def export_mpc(ocp, path, *, name: str | None = None, iterations: int = 1, termi
         "nnz": {f"{f.name()}_{io}{i}": (f.nnz_in(i) if io == "in" else f.nnz_out(i))
                 for f in fns for io in ("in", "out") for i in range(f.n_in() if io == "in" else f.n_out())},
         "plant_sz_arg": plant.sz_arg(), "plant_sz_res": plant.sz_res(), "plant_sz_iw": plant.sz_iw(),
-        "plant_sz_w": plant.sz_w(), "plant_tol": _c(plant_tolerance(model)),
-        "u_rest": ", ".join(_c(v) for v in u_rest) or "0", "params": ", ".join(_c(v) for v in problem.p) or "0",
+        "plant_sz_w": plant.sz_w(), "plant_tol": _c(residual_tolerance(model)),
+        "u_rest": ", ".join(_c(v) for v in u_rest) or "0",
+        "u_lo": ", ".join(_bound(v) for v in problem.u_bounds[0]) or "0",
+        "u_hi": ", ".join(_bound(v) for v in problem.u_bounds[1]) or "0",
+        "alphas": len(ALPHAS), "armijo": _c(ARMIJO), "gamma": _c(GAMMA), "c_min": _c(C_MIN),
+        "step_tol": _c(residual_tolerance(model)),
+        "params": ", ".join(_c(v) for v in problem.p) or "0",
         "x0": ", ".join(_c(v) for v in x0), "t_end": _c(t_end), "warmup": warmup,
         "disturbance": [{"t_on": _c(p.t_on), "t_off": _c(p.t_off), "amounts": [_c(v) for v in p.values]}
                         for p in pl],
@@ -131,12 +136,7 @@ def export_mpc(ocp, path, *, name: str | None = None, iterations: int = 1, termi
              ExtraSource("mpc/mpc.h.j2", f"{name}_mpc.h", context),
              ExtraSource("mpc/mpc.c.j2", f"{name}_mpc.c", context),
              ExtraSource("mpc/demo.c.j2", "demo.c", context, program=True)]
-    return write_package(name, [data, qp, update, plant], Path(path), extra_sources=extra, reroll_instructions=None)
-
-
-def plant_tolerance(model) -> float:
-    """The residual above which a plant step is refused (as :class:`ncgen.control.step.StepFunction`)."""
-    return RESIDUAL_TOL * (1.0 + float(np.max(np.abs(model.M))) if model.nq else 1.0)
+    return write_package(name, [*fns, plant], Path(path), extra_sources=extra, reroll_instructions=None)
 
 
 def closed_loop(mpc, x0, t_end: float, *, substeps: int = 5, disturbance=(), warmup: int = 10, plant=None):
@@ -164,6 +164,11 @@ def closed_loop(mpc, x0, t_end: float, *, substeps: int = 5, disturbance=(), war
                     up += np.asarray(p.values)
             x = plant(x, up, mpc.problem.p, ts)
     return np.array(T), np.array(U), np.array(X)
+
+
+def _bound(v: float) -> str:
+    """A bound as a C expression: ``INFINITY``/``-INFINITY`` (math.h) for an absent one."""
+    return ("INFINITY" if v > 0 else "-INFINITY") if np.isinf(v) else _c(v)
 
 
 def _c(v: float) -> str:

@@ -27,18 +27,25 @@ import numpy as np
 
 from ncgen.control.costs import cost_functions
 from ncgen.control.initial import check_consistent
+from ncgen.control.step_curvature import StepCurvature
 from ncgen.errors import NcgenError, OptimizationError
 from ncgen.validation import nonnegative
 
 MU_MIN, MU_MAX, MU_FACTOR = 1e-9, 1e10, 10.0
-ALPHAS = tuple(0.5 ** i for i in range(12))
+ALPHAS = tuple(0.5 ** i for i in range(16))
+#: Armijo fraction: a trial step is accepted when the cost falls by at least this fraction of
+#: the decrease the quadratic model predicts for it.
+ARMIJO = 1e-4
 
 
 @dataclass
 class ILQRResult:
     """``X`` (N+1, nx) states from ``x0``; ``U`` (N, nu) inputs; ``K`` (N, nu, nx) feedback
     gains of the last backward pass (``u = U_k + K_k (x − X_k)``); ``cost``; ``iterations``;
-    ``converged`` (relative cost change below ``tol``); ``history`` of costs."""
+    ``gradient_norm``: ``‖∂J/∂U‖∞`` of the discrete problem at ``U`` (the exact gradient through
+    the rollout, by the adjoint recursion); ``converged``: ``gradient_norm ≤ tol``, a
+    stationary point of the discrete problem; ``history`` of costs, ``gradient_history`` of
+    gradient norms (one per accepted iterate, the guess first)."""
 
     X: np.ndarray
     U: np.ndarray
@@ -46,17 +53,23 @@ class ILQRResult:
     cost: float
     iterations: int
     converged: bool
+    gradient_norm: float = np.nan
     history: list = field(default_factory=list)
+    gradient_history: list = field(default_factory=list)
     message: str = ""
 
 
-def ilqr(st, x0, U0, costs, *, p=None, t0=None, max_iter: int = 200, tol: float = 1e-9,
-         mu: float = 1e-6, verbose: bool = False) -> ILQRResult:
+def ilqr(st, x0, U0, costs, *, p=None, t0=None, max_iter: int = 200, tol: float = 1e-8,
+         mu: float = 1e-6, second_order: bool = True, verbose: bool = False) -> ILQRResult:
     """iLQR from the initial guess ``U0`` (N × nu); ``costs = (stage, terminal)`` as in
-    :mod:`ncgen.control.costs`; ``tol`` on the relative cost decrease of an iteration.
+    :mod:`ncgen.control.costs`.  Stops, converged, at the first iterate whose exact gradient
+    ``‖∂J/∂U‖∞`` is at most ``tol`` (the cost's units per input unit); otherwise after
+    ``max_iter`` iterations or when no step decreases the cost with ``μ`` at its limit
+    (not converged; the message says which).
     ``x0`` must satisfy the constraints by ``nc.simulate``'s rule (:mod:`ncgen.control.initial`);
     a cost that is NaN at the initial guess is an :class:`OptimizationError`, at trial steps it
-    is said in the result's message."""
+    is said in the result's message.  ``verbose`` prints cost, gradient norm, step and ``μ``
+    of every iteration."""
     if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
         raise NcgenError(f"ilqr: max_iter: expected a positive integer, got {max_iter!r}")
     tol = nonnegative(tol, "ilqr: tol")
@@ -71,69 +84,110 @@ def ilqr(st, x0, U0, costs, *, p=None, t0=None, max_iter: int = 200, tol: float 
     def total(X, U):
         return float(np.sum(np.array(stage_map(X[:-1].T, U.T)[0]))) + float(terminal_d(X[-1])[0])
 
-    def roll(U):
-        return np.vstack([x0, st.rollout(x0, U, p, t0)])
-
-    X = roll(U)
+    X = np.vstack([x0, st.rollout(x0, U, p, t0)])
     J = total(X, U)
     if not np.isfinite(J):
         raise OptimizationError(f"ilqr: the cost of the initial guess is {J} (states finite): the stage or "
                                 "terminal cost is not defined along it (e.g. a square root or logarithm of a "
                                 "negative number, or a division by zero)")
-    history, converged, message = [J], False, f"stopped after {max_iter} iterations"
+    history, gradients, converged, message = [J], [], False, f"stopped after {max_iter} iterations"
     K = np.zeros((N, st.nu, st.nx))
     it = 0
-    for it in range(1, max_iter + 1):
-        A = np.empty((N, st.nx, st.nx))
-        B = np.empty((N, st.nx, st.nu))
-        for k in range(N):
-            _, A[k], B[k] = st.jacobians(X[k], U[k], p, t0 + k * st.h)
+    curvature = StepCurvature(st.model, st.h) if second_order else None
+    full_step, alpha = False, np.nan
+    while True:
+        A, B = _linearisation(st, X, U, p, t0)
+        second = None
+        if curvature is not None and full_step:
+            Z = st._rollout(x0, U, pv, t0)[1]
+
+            def second(k, lam, X=X, U=U, Z=Z):
+                return curvature(Z[k], X[k], U[k], pv, t0 + k * st.h, lam)
         _, lx, lu, lxx, luu, lux = (np.array(a) for a in stage_map(X[:-1].T, U.T))
         _, Vx_N, Vxx_N = (np.array(a) for a in terminal_d(X[-1]))
-        while True:
-            ok, kff, K, dV = _backward(A, B, lx, lu, lxx, luu, lux, Vx_N.ravel(), Vxx_N, mu)
-            if ok:
-                break
-            mu = max(mu * MU_FACTOR, MU_MIN)
-            if mu > MU_MAX:
-                return ILQRResult(X, U, K, J, it, False, history, "Q_uu stayed indefinite (μ above its limit)")
-        accepted, undefined = False, None
-        for alpha in ALPHAS:
-            Xn, Un = _forward(st, x0, X, U, kff, K, alpha, p, t0)
-            if Xn is None:
-                continue
-            Jn = total(Xn, Un)
-            if np.isnan(Jn):
-                undefined = alpha
-                continue
-            expected = -(alpha * dV[0] + alpha ** 2 * dV[1])
-            if Jn < J and (expected <= 0 or (J - Jn) >= 0.1 * expected):
-                accepted = True
-                break
-        if not accepted:
-            mu = max(mu * MU_FACTOR, MU_MIN)
-            if mu > MU_MAX:
-                message = "no descent: the line search failed with μ at its limit"
-                if undefined is not None:
-                    message += (f"; the cost was NaN at trial steps (α = {undefined:g}): the stage or terminal "
-                                "cost is not defined there")
-                break
-            continue
-        mu = max(mu / MU_FACTOR, MU_MIN)
-        change = (J - Jn) / max(abs(J), 1e-300)
-        X, U, J = Xn, Un, Jn
-        history.append(J)
+        gnorm = float(np.max(np.abs(gradient(A, B, lx, lu, Vx_N.ravel()))))
+        gradients.append(gnorm)
         if verbose:
-            print(f"iLQR {it:3d}: cost {J:.10g}, α {alpha:.3g}, μ {mu:.1e}")
-        if change < tol:
-            converged, message = True, f"converged: relative cost change {change:.2e} < {tol:g}"
+            print(f"iLQR {it:3d}: cost {J:.12g}, |dJ/dU| {gnorm:.3e}, alpha {alpha:.3g}, mu {mu:.1e}, "
+                  f"{'DDP' if second else 'Gauss-Newton'}")
+        if gnorm <= tol:
+            converged, message = True, f"converged: |dJ/dU|_inf = {gnorm:.2e} <= tol = {tol:g}"
             break
-    return ILQRResult(X, U, K, J, it, converged, history, message)
+        if it == max_iter:
+            message = f"stopped after {max_iter} iterations with |dJ/dU|_inf = {gnorm:.2e} > tol = {tol:g}"
+            break
+        it += 1
+        step, undefined = None, None
+        while step is None:
+            ok, kff, K, dV = _backward(A, B, lx, lu, lxx, luu, lux, Vx_N.ravel(), Vxx_N, mu, second)
+            if ok:
+                step = _line_search(st, x0, X, U, kff, K, dV, J, total, p, t0)
+                if step[0] is None:
+                    undefined, step = step[1], None
+            if step is None:
+                mu = max(mu * MU_FACTOR, MU_MIN)
+                if mu > MU_MAX:
+                    break
+        if step is None:
+            message = (f"no descent: the line search failed with mu at its limit; |dJ/dU|_inf = {gnorm:.2e} > "
+                       f"tol = {tol:g}")
+            if ok and undefined is not None:
+                message += (f"; the cost was NaN at trial steps (alpha = {undefined:g}): the stage or terminal "
+                            "cost is not defined there")
+            elif not ok:
+                message = f"Q_uu stayed indefinite (mu above its limit); |dJ/dU|_inf = {gnorm:.2e}"
+            break
+        X, U, J, alpha = step
+        full_step = alpha == 1.0
+        history.append(J)
+        mu = max(mu / MU_FACTOR, MU_MIN)
+    return ILQRResult(X, U, K, J, it, converged, gnorm, history, gradients, message)
 
 
-def _backward(A, B, lx, lu, lxx, luu, lux, Vx, Vxx, mu):
-    """Riccati sweep: ``(ok, k, K, (Σ kᵀQ_u, ½ Σ kᵀQ_uu k))``; ``ok`` false when a ``Q_uu``
-    is not positive definite."""
+def _linearisation(st, X, U, p, t0):
+    """The step's exact Jacobians ``A_k, B_k`` along ``(X, U)``."""
+    N = U.shape[0]
+    A, B = np.empty((N, st.nx, st.nx)), np.empty((N, st.nx, st.nu))
+    for k in range(N):
+        _, A[k], B[k] = st.jacobians(X[k], U[k], p, t0 + k * st.h)
+    return A, B
+
+
+def gradient(A, B, lx, lu, Vx_N):
+    """``∂J/∂U`` (N × nu) of ``J = Σ ℓ(x_k, u_k) + ℓ_N(x_N)`` through ``x_{k+1} = st(x_k, u_k)``
+    by the adjoint recursion ``λ_N = ∂ℓ_N/∂x``, ``∂J/∂u_k = ℓ_u + B_kᵀ λ_{k+1}``,
+    ``λ_k = ℓ_x + A_kᵀ λ_{k+1}`` (``lx``, ``lu``: gradients as columns, one per stage)."""
+    lam, g = Vx_N, np.empty((B.shape[0], B.shape[2]))
+    for k in range(B.shape[0] - 1, -1, -1):
+        g[k] = lu[:, k] + B[k].T @ lam
+        lam = lx[:, k] + A[k].T @ lam
+    return g
+
+
+def _line_search(st, x0, X, U, kff, K, dV, J, total, p, t0):
+    """Backtracking on the true cost along the closed-loop forward pass: ``(X, U, J)`` of the
+    first ``α`` of :data:`ALPHAS` (and ``α``) whose cost falls by at least :data:`ARMIJO` times the
+    predicted decrease, or ``(None, α)`` (``α``: the largest step whose cost was NaN, or
+    None) when none does."""
+    undefined = None
+    for alpha in ALPHAS:
+        Xn, Un = _forward(st, x0, X, U, kff, K, alpha, p, t0)
+        if Xn is None:
+            continue
+        Jn = total(Xn, Un)
+        if np.isnan(Jn):
+            undefined = alpha if undefined is None else undefined
+            continue
+        expected = -(alpha * dV[0] + alpha ** 2 * dV[1])
+        if Jn < J and J - Jn >= ARMIJO * expected:
+            return Xn, Un, Jn, alpha
+    return None, undefined
+
+
+def _backward(A, B, lx, lu, lxx, luu, lux, Vx, Vxx, mu, curvature=None):
+    """Riccati sweep: ``(ok, k, K, (Σ kᵀQ_u, ½ Σ kᵀQ_uu k))``; ``ok`` false when a regularised
+    ``Q_uu + μ I`` is not positive definite.  ``curvature(k, λ)``: the step's second
+    derivatives contracted with ``λ = V_x`` of the next node (DDP), or None (iLQR)."""
     N, nx, nu = B.shape[0], A.shape[1], B.shape[2]
     kff, K = np.zeros((N, nu)), np.zeros((N, nu, nx))
     d1 = d2 = 0.0
@@ -145,6 +199,9 @@ def _backward(A, B, lx, lu, lxx, luu, lux, Vx, Vxx, mu):
         Qxx = lxx[:, k * nx:(k + 1) * nx] + Ak.T @ VA
         Quu = luu[:, k * nu:(k + 1) * nu] + Bk.T @ VB
         Qux = lux[:, k * nx:(k + 1) * nx] + Bk.T @ VA
+        if curvature is not None:
+            Hxx, Huu, Hux = curvature(k, Vx)
+            Qxx, Quu, Qux = Qxx + Hxx, Quu + Huu, Qux + Hux
         try:
             L = np.linalg.cholesky(0.5 * (Quu + Quu.T) + mu * np.eye(nu))
         except np.linalg.LinAlgError:

@@ -5,30 +5,29 @@ Each control step runs a fixed number of sequential-quadratic-programming iterat
 (``iterations=1``: the real-time iteration of Diehl et al., 2005) on the problem of
 :mod:`ncgen.control.mpc_problem`, from the previous step's solution shifted by one interval
 (warm start).  One iteration, with the guess ``(X̄, Ū)`` (states at the ``N + 1`` nodes,
-inputs on the ``N`` intervals):
+inputs on the ``N`` intervals; multiple shooting):
 
 1. the step and its exact Jacobians at every node, ``x̄⁺_k, A_k, B_k``
    (:mod:`ncgen.control.discrete`, implicit function theorem);
 2. the QP in ``(δX, δU)``: minimise ``½ δᵀ H δ + gᵀ δ`` (``g``, ``H``: gradient and Hessian of
-   the cost at the guess — a Gauss–Newton Hessian: the dynamics' curvature is left out, which
-   is exact for the quadratic costs of ``OptimalControl``), subject to
-   ``δx_0 = x − x̄_0``, ``δx_{k+1} = A_k δx_k + B_k δu_k + x̄⁺_k − x̄_{k+1}`` and the OCP's bounds
-   moved by the guess — condensed onto the inputs (``vec δX = S δU + s``, :func:`condense`:
-   ``N·nu`` variables, the bounded state components as general rows) and solved by CasADi's
-   active-set ``qrqp``;
-3. ``X̄ ← X̄ + δX``, ``Ū ← Ū + δU``.
+   the cost at the guess — a Gauss–Newton Hessian: the dynamics' curvature is left out),
+   subject to ``δx_0 = x − x̄_0``, ``δx_{k+1} = A_k δx_k + B_k δu_k + x̄⁺_k − x̄_{k+1}`` and the
+   OCP's bounds moved by the guess — condensed onto the inputs (``vec δX = S δU + s``,
+   :func:`condense`: ``N·nu`` variables, the bounded state components as general rows) and
+   solved by CasADi's active-set ``qrqp``;
+3. a backtracking line search with a filter on (cost ``J``, infeasibility ``c``: the ℓ1 norm
+   of the shooting gaps and of the state-bound violations, :func:`merit_function`) along
+   ``X̄ + α (X⁺ − X̄)``, ``clip(Ū + α δU)`` into the input bounds (``X⁺``: the QP's full step),
+   ``α`` = 1, ½, … (:data:`ALPHAS`), accepted by :func:`acceptable`.  A trial whose steps do
+   not converge, or that has NaN or inf anywhere, is rejected; a QP answer that is not finite,
+   or no acceptable ``α``, keeps the guess (``mpc.step_lengths``: 0).  So every input
+   returned is inside its bounds (and checked), and nothing NaN or diverging is ever answered
+   or kept as the next guess; a guess along which the steps do not converge is an error.
 
-The states are natural coordinates: each ``A_k`` has rank ``2 dof`` (it maps onto the
-tangent space at ``x̄⁺_k``); the dynamics fix every ``δx_k`` from ``δx_0`` and the inputs, so
-the condensed QP needs no minimal parametrisation.
-
-An iteration is three generated functions (:func:`mpc_functions`): the QP's data, ``qrqp``
-and the update.  They are separate so that the caller sees ``qrqp``'s status: it can stall on
-a degenerate QP whose solution is its starting point (at convergence, gradients of 1e-12)
-and then reports a failure although its last iterate is the solution; that iterate is used.
-``mpc(x, t)`` calls the three through :class:`ncgen.codegen.direct.DirectFunction`;
-:func:`ncgen.control.export.export_mpc` writes the same functions and the same loop in C, so
-Python and C compute the same numbers.
+An iteration is four generated functions (:func:`mpc_functions`): the QP's data, ``qrqp``,
+the full step and the merit of a trial.  ``mpc(x, t)`` calls them through
+:class:`ncgen.codegen.direct.DirectFunction`; :func:`ncgen.control.export.export_mpc` writes
+the same functions and the same loop in C, so Python and C compute the same numbers.
 """
 from __future__ import annotations
 
@@ -43,17 +42,23 @@ from ncgen.validation import as_scalar
 SOLVERS = ("sqp",)
 #: Added to the diagonal of the QP Hessian (keeps it positive definite on the inputs).
 REGULARIZATION = 1e-8
+#: Step lengths tried by the line search, longest first; its Armijo fraction, the filter's
+#: margin γ and the infeasibility (m, m/s: ℓ1 over the horizon) below which an iterate counts
+#: as feasible.
+ALPHAS = tuple(0.5 ** i for i in range(11))
+ARMIJO, GAMMA, C_MIN = 1e-4, 1e-5, 1e-6
 
 
 def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
                   qp_max_iter: int = 100) -> list[ca.Function]:
-    """The three CasADi functions of one SQP iteration (see the module docstring):
+    """The four CasADi functions of one SQP iteration (see the module docstring):
 
     * ``mpc_qp_data: (x, t, X̄, Ū) -> (H, g, A, lba, uba, lbx, ubx, Xs, S)``: the condensed QP
       in ``δU`` (``vec δX = S δU + (Xs − vec X̄)``);
     * ``mpc_qp``: CasADi's ``qrqp`` on it (returns its last iterate also when it reports a
-      failure: the caller decides);
-    * ``mpc_update: (Xs, S, Ū, δU) -> (X, U)``: the new iterate.
+      failure: the caller checks it);
+    * ``mpc_update: (Xs, S, Ū, δU) -> (X⁺, U⁺)``: the full step;
+    * ``mpc_merit`` (:func:`merit_function`): cost and infeasibility of a trial.
     """
     h, N, p = problem.h, problem.N, problem.p
     nx, nu = 2 * model.nq, model.nu
@@ -97,7 +102,34 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
                          [ca.densify(ca.reshape(Xs_ + ca.mtimes(S_, dU), nx, N + 1)),
                           ca.densify(U_ + ca.reshape(dU, nu, N))],
                          ["Xs", "S", "U_guess", "dU"], ["X_sol", "U_sol"])
-    return [data, qp, update]
+    return [data, qp, update, merit_function(model, problem)]
+
+
+def merit_function(model, problem) -> ca.Function:
+    """``mpc_merit: (x, t, X, U) -> (J, c, res)``: the cost ``J`` of the iterate ``(X, U)``
+    (``X``: nx × (N + 1), ``U``: nu × N), its infeasibility
+    ``c = ‖x − X_0‖₁ + Σ_k ‖step(X_k, U_k) − X_{k+1}‖₁ + Σ_{k≥1} (state-bound violation)₁``
+    and the largest residual ``res`` of the ``N`` steps' Newton iterations."""
+    from ncgen.control.discrete import step_functions
+    h, N, p = problem.h, problem.N, problem.p
+    nx, nu = 2 * model.nq, model.nu
+    step = step_functions(model, h)["step"]
+    x, t, X, U = ca.MX.sym("x", nx), ca.MX.sym("t"), ca.MX.sym("X", nx, N + 1), ca.MX.sym("U", nu, N)
+    times = t + h * ca.DM(np.arange(N)).T
+    X1, res = step.map("mpc_steps", "serial", N, [2], [])(X[:, :N], U, ca.DM(p), times)
+    c = ca.norm_1(x - X[:, 0]) + ca.sum2(ca.sum1(ca.fabs(X1 - X[:, 1:])))
+    lo_x, hi_x = problem.x_bounds
+    for i in np.flatnonzero(np.isfinite(lo_x) | np.isfinite(hi_x)):
+        row = X[int(i), 1:]
+        if np.isfinite(lo_x[i]):
+            c += ca.sum2(ca.fmax(0, float(lo_x[i]) - row))
+        if np.isfinite(hi_x[i]):
+            c += ca.sum2(ca.fmax(0, row - float(hi_x[i])))
+    Xs, Us = ca.SX.sym("X", nx, N + 1), ca.SX.sym("U", nu, N)
+    cost = ca.Function("mpc_total_cost", [Xs, Us], [sum(problem.stage(Xs[:, k], Us[:, k]) for k in range(N))
+                                                    + problem.terminal(Xs[:, N])])
+    return ca.Function("mpc_merit", [x, t, X, U], [cost(X, U), c, ca.mmax(res)],
+                       ["x", "t", "X_trial", "U_trial"], ["J", "c", "res"])
 
 
 def condense(A, B, d0, defects, N: int):
@@ -117,18 +149,23 @@ class MPC:
     """A receding-horizon controller for ``ocp`` (an :class:`~ncgen.optim.problem.OptimalControl`):
     ``u = mpc(x, t)``.
 
-    ``solver``: ``"sqp"`` (Gauss–Newton SQP with CasADi's ``qrqp``, generated C);
+    ``solver``: ``"sqp"`` (Gauss–Newton SQP with CasADi's ``qrqp`` and a filter line search,
+    generated C; see the module docstring);
     ``iterations``: SQP iterations per control step (1: real-time iteration);
     ``terminal_weight``: weight ``W`` of the OCP's final conditions, soft in MPC
     (:mod:`ncgen.control.mpc_problem`).  The horizon is the OCP's: ``N`` intervals of
     ``h = t_final / N`` seconds, and ``mpc`` is meant to be called every ``h`` seconds.
     ``mpc.reset(x, iterations=...)`` (also done by the first call) sets the guess to ``x``
-    held with zero inputs (clipped into their bounds) and iterates on it."""
+    held with zero inputs (clipped into their bounds) and iterates on it.
+    ``mpc.qp_status`` and ``mpc.step_lengths`` report each iteration of the last call."""
 
     def __init__(self, ocp, solver: str = "sqp", *, iterations: int = 1, terminal_weight: float = 1e3,
                  regularization: float = REGULARIZATION, qp_max_iter: int = 100):
         if solver not in SOLVERS:
-            hint = (" (Fatrop: not wired up yet; see docs/control.md)" if solver == "fatrop" else "")
+            hint = (" (Fatrop is not wired into ncgen's MPC: CasADi's wheel ships libfatrop, its conic and "
+                    "nlpsol plugins and headers, but the MPC does not yet pose its QP in Fatrop's stage-wise form "
+                    "nor link the exported C package against libfatrop (C++); see docs/control.md)"
+                    if solver == "fatrop" else "")
             raise OptimizationError(f"MPC: solver: expected one of {', '.join(SOLVERS)}, got {solver!r}{hint}")
         if not isinstance(iterations, int) or iterations < 1:
             raise OptimizationError(f"MPC: iterations: expected a positive integer, got {iterations!r}")
@@ -141,27 +178,60 @@ class MPC:
                                        qp_max_iter=qp_max_iter)
         from ncgen.control.step import _compile
         lib = _compile(f"{self.model.name}_mpc", self.functions)
-        self._data, self._qp, self._update = (lib[f.name()] for f in self.functions)
+        self._data, self._qp, self._update, self._merit_fn = (lib[f.name()] for f in self.functions)
+        self._residual_tol = residual_tolerance(self.model)
         #: qrqp's status of each QP of the last control step (0: converged).
         self.qp_status: list[int] = []
-        self.u_rest = np.clip(np.zeros(self.nu), *self.problem.u_bounds)
+        #: the step length α taken by each SQP iteration of the last control step (0: no trial
+        #: was acceptable, the iterate was kept).
+        self.step_lengths: list[float] = []
+        self.u_bounds = self.problem.u_bounds
+        self.u_rest = np.clip(np.zeros(self.nu), *self.u_bounds)
         self.X = self.U = self.solution = None
 
     def __repr__(self) -> str:
         return (f"<MPC of {self.model.name!r}: N={self.N}, h={self.h} s, {self.iterations} SQP "
                 f"iteration(s) per step, qrqp>")
 
+    def _merit(self, x, t: float, X: np.ndarray, U: np.ndarray):
+        """``(J, c)`` of the iterate, or ``None`` when a step along it did not converge or
+        anything is not finite."""
+        if not (np.all(np.isfinite(X)) and np.all(np.isfinite(U))):
+            return None
+        J, c, res = (float(o[0]) for o in self._merit_fn(x, t, X.ravel(), U.ravel()))
+        return (J, c) if res <= self._residual_tol and np.isfinite(J) and np.isfinite(c) else None
+
     def _solve(self, x, t: float, X: np.ndarray, U: np.ndarray):
-        """``iterations`` SQP iterations from the guess ``(X, U)``: ``(X, U)`` after them.  A QP
-        that qrqp reports as failed (it stalls on degenerate QPs whose solution is the
-        starting point, at convergence) still gives its last iterate, as in the C package."""
-        self.qp_status = []
+        """``iterations`` globalised SQP iterations from the guess ``(X, U)``: ``(X, U)``."""
+        self.qp_status, self.step_lengths = [], []
         for _ in range(self.iterations):
-            H, g, A, lba, uba, lbx, ubx, Xs, S = (o.copy() for o in self._data(x, t, X.ravel(), U.ravel()))
-            self.qp_status.append(self._qp.status_call(H, g, A, lba, uba, lbx, ubx, 0.0, 0.0, 0.0))
-            dU = self._qp.outputs[0].copy()
-            Xn, Un = self._update(Xs, S, U.ravel(), dU)
-            X, U = Xn.reshape(self.N + 1, self.nx).copy(), Un.reshape(self.N, self.nu).copy()
+            X, U = self._iteration(x, t, X, U)
+        return X, U
+
+    def _iteration(self, x, t, X, U):
+        """One SQP iteration (see the module docstring): the QP at the guess, then the filter
+        line search along ``X + α (X⁺ − X)``, ``clip(U + α δU)``; the guess itself must be
+        valid (its steps converge), else :class:`OptimizationError`."""
+        current = self._merit(x, t, X, U)
+        if current is None:
+            raise OptimizationError(f"MPC of {self.model.name!r}: a step of the model does not converge along "
+                                    f"the guess at t = {t:g} s (state {np.asarray(x).tolist()}); reset() the guess")
+        J0, c0 = current
+        H, g, A, lba, uba, lbx, ubx, Xs, S = (o.copy() for o in self._data(x, t, X.ravel(), U.ravel()))
+        self.qp_status.append(self._qp.status_call(H, g, A, lba, uba, lbx, ubx, 0.0, 0.0, 0.0))
+        dU, model_decrease = self._qp.outputs[0].copy(), float(self._qp.outputs[1][0])
+        if np.all(np.isfinite(dU)) and np.isfinite(model_decrease):
+            Xf, _ = self._update(Xs, S, U.ravel(), dU)
+            Xf = Xf.reshape(self.N + 1, self.nx)
+            lo, hi = (np.tile(b, self.N) for b in self.u_bounds)
+            for alpha in ALPHAS:
+                Xa = X + alpha * (Xf - X)
+                Ua = np.minimum(np.maximum(U.ravel() + alpha * dU, lo), hi).reshape(self.N, self.nu)
+                trial = self._merit(x, t, Xa, Ua)
+                if trial is not None and acceptable(J0, c0, *trial, alpha, model_decrease):
+                    self.step_lengths.append(alpha)
+                    return Xa, Ua
+        self.step_lengths.append(0.0)
         return X, U
 
     def initial_guess(self, x) -> tuple[np.ndarray, np.ndarray]:
@@ -176,14 +246,15 @@ class MPC:
         t = self.model.t0 if t is None else as_scalar(t, "MPC.reset: t")
         if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 0:
             raise OptimizationError(f"MPC.reset: iterations: expected an integer >= 0, got {iterations!r}")
-        self.X, self.U = self.initial_guess(x)
+        X, U = self.initial_guess(x)
         for _ in range(iterations):
-            self.X, self.U = self._solve(x, t, self.X, self.U)
+            X, U = self._solve(x, t, X, U)
+        self.X, self.U = X, U
 
     def __call__(self, x, t: float | None = None) -> np.ndarray:
         """The input to apply now, from the measured state ``x`` at time ``t``; the solution
         (``mpc.solution``: states and inputs along the horizon), shifted by one interval,
-        is the next call's guess."""
+        is the next call's guess.  The input is inside its bounds (checked)."""
         from ncgen.control.step import _vector
         x = _vector(x, self.nx, "x", "the state [q; v]")
         t = self.model.t0 if t is None else as_scalar(t, "MPC: t")
@@ -191,10 +262,30 @@ class MPC:
             self.reset(x)
         X, U = self._solve(x, t, self.X, self.U)
         u = U[0].copy()
-        if not np.all(np.isfinite(u)):
-            raise OptimizationError(f"MPC of {self.model.name!r}: the control step returned {u.tolist()} "
-                                    "(a step of the model failed along the horizon); reset() the guess")
+        lo, hi = self.u_bounds
+        if not (np.all(np.isfinite(u)) and np.all(lo <= u) and np.all(u <= hi)):
+            raise OptimizationError(f"MPC of {self.model.name!r}: the control step returned {u.tolist()}, "
+                                    f"outside the bounds [{lo.tolist()}, {hi.tolist()}]")
         self.solution = (X, U)
         self.X = np.vstack([X[1:], X[-1:]])
         self.U = np.vstack([U[1:], U[-1:]])
-        return u.copy()
+        return u
+
+
+def acceptable(J0: float, c0: float, J: float, c: float, alpha: float, model_decrease: float) -> bool:
+    """The filter's test of a trial ``(J, c)`` against the iterate ``(J0, c0)`` (cost,
+    infeasibility) at step length ``α``; ``model_decrease``: the QP's optimal value (its
+    model of the cost's change at ``α = 1``).  Nearly feasible (``c0 ≤`` :data:`C_MIN`) with a
+    predicted decrease: Armijo on the cost, ``J ≤ J0 + c α model_decrease``, the trial staying
+    nearly feasible; otherwise a sufficient decrease of the infeasibility or of the cost,
+    ``c ≤ (1 − γ) c0`` or ``J ≤ J0 − γ c0`` with ``c ≤ c0``.  The same expression, in the same
+    order, as the exported package's C."""
+    if c0 <= C_MIN and model_decrease < 0:
+        return c <= C_MIN and J <= J0 + ARMIJO * alpha * model_decrease
+    return c <= (1.0 - GAMMA) * c0 or (J <= J0 - GAMMA * c0 and c <= c0)
+
+
+def residual_tolerance(model) -> float:
+    """The Newton residual above which a step is refused (as :class:`ncgen.control.step.StepFunction`)."""
+    from ncgen.control.step import RESIDUAL_TOL
+    return RESIDUAL_TOL * (1.0 + float(np.max(np.abs(model.M))) if model.nq else 1.0)

@@ -31,7 +31,9 @@ from ncgen.errors import OptimizationError
 @dataclass
 class MPCProblem:
     """``stage(x, u)`` and ``terminal(x)`` (SX callables), bounds as ``(lower, upper)``
-    arrays (``u``: nu, ``x``: nx = 2 nq), ``h`` (s), ``N``, ``p`` and the final target."""
+    arrays (``u``: nu, ``x``: nx = 2 nq), ``h`` (s), ``N``, ``p``, the final target and
+    ``x_start``: the OCP's initial state (``initial(q=…, v=…)``, the model's where it gives
+    none), the exported demo's default start."""
 
     h: float
     N: int
@@ -41,6 +43,7 @@ class MPCProblem:
     u_bounds: np.ndarray
     x_bounds: np.ndarray
     x_final: np.ndarray | None
+    x_start: np.ndarray | None = None
 
 
 def mpc_problem(ocp, terminal_weight: float) -> MPCProblem:
@@ -106,4 +109,19 @@ def mpc_problem(ocp, terminal_weight: float) -> MPCProblem:
 
     x_bounds = np.hstack([ocp.q_bounds, ocp.v_bounds])
     x_final = None if q_f is None else np.concatenate([q_f, np.zeros(nq) if v_f is None else v_f])
-    return MPCProblem(h, N, p, stage, terminal, ocp.u_bounds.copy(), x_bounds, x_final)
+    return MPCProblem(h, N, p, stage, terminal, ocp.u_bounds.copy(), x_bounds, x_final, initial_state(ocp, p))
+
+
+def initial_state(ocp, p) -> np.ndarray:
+    """``[q; v]`` of the OCP's ``initial(q=…, v=…)`` (coordinates given by name assembled
+    with the others, velocities made consistent); the model's initial state where a part is
+    the model's or left free."""
+    from ncgen.optim.conditions import resolve_configuration, resolve_velocity
+    from ncgen.optim.transcription import MODEL_STATE
+    model, spec = ocp.model, ocp.initial_spec
+    q = spec["q"]
+    q = model.q0 if q is MODEL_STATE or q is None else resolve_configuration(model, q, model.q0, t=ocp.t0, p=p,
+                                                                              what="initial q")
+    v = spec["v"]
+    v = model.v0 if v is MODEL_STATE or v is None else resolve_velocity(model, v, q, t=ocp.t0, p=p)
+    return np.concatenate([q, v])
