@@ -287,5 +287,6 @@ def acceptable(J0: float, c0: float, J: float, c: float, alpha: float, model_dec
 
 def residual_tolerance(model) -> float:
     """The Newton residual above which a step is refused (as :class:`ncgen.control.step.StepFunction`)."""
+    from ncgen.control.discrete import residual_scale
     from ncgen.control.step import RESIDUAL_TOL
-    return RESIDUAL_TOL * (1.0 + float(np.max(np.abs(model.M))) if model.nq else 1.0)
+    return RESIDUAL_TOL * residual_scale(model)
