@@ -222,7 +222,7 @@ def test_cli_optimize_failures(pendulum_files, capsys, monkeypatch):
     status, _, err = ncgen("optimize", "typo.toml")
     assert status == 1 and "bounds.input: unknown key (did you mean 'inputs'?)" in err
     status, _, err = ncgen("optimize", "pendulum.toml")
-    assert status == 1 and "model: missing" in err
+    assert status == 1 and "pendulum.toml: this is a model file" in err      # a model given as the problem
     status, _, err = ncgen("optimize", "pendulum.toml", "--problem", "swing.toml", "-o", "x.csv")
     assert status == 2 and "expected a file name ending in .npz" in err
 

@@ -293,6 +293,16 @@ def test_ragged_per_run_arguments_are_named(slider_crank, kw, said):
         nc.simulate_batch(slider_crank, 0.1, 0.01, **kw)
 
 
+def test_a_misspelt_batch_parameter_is_refused_at_once(slider_crank):
+    """A parameter name belongs to the call, not to one run: it used to make every run
+    "could not start" and return; now it is refused with the name meant."""
+    with pytest.raises(NcgenError, match=r"simulate_batch: p: model 'slider_crank' has no parameter 'omga' "
+                                         r"\(did you mean 'omega'\?\) \(parameters: omega\)"):
+        nc.simulate_batch(slider_crank, 0.1, 0.01, p={"omga": [1.0, 2.0]})
+    run = nc.simulate_batch(slider_crank, 0.1, 0.01, p={"omega": [1.0, float("nan")]})      # a run's value: its own
+    assert list(run.status) == [0, -1] and "parameter 'omega': expected finite numbers" in run.message[1]
+
+
 def test_a_pickle_of_another_ncgen_version_says_to_rebuild(slider_crank, monkeypatch):
     model_bytes, system_bytes = pickle.dumps(slider_crank), pickle.dumps(nc.System.from_toml(
         EXAMPLES / "slider_crank.toml"))

@@ -150,3 +150,14 @@ def test_sweeps_page_guards_every_snippet_that_runs_work():
         work = [line for line in top if not line.startswith(("import ", "from ", "if __name__ == \"__main__\":"))
                 and not line.startswith("model = nc.System.from_toml(")]
         assert not work, f"unguarded top-level work in docs/sweeps.md: {work}"
+
+
+@pytest.mark.parametrize("command", ["optimize", "mpc"])
+def test_a_model_file_given_for_a_problem_is_named_as_one(command, capsys, tmp_path):
+    """The converse of a problem file given to ``ncgen simulate``: a model file given to
+    ``ncgen optimize`` or ``ncgen mpc`` is said to be a model, with the file to give."""
+    assert main([command, str(EXAMPLES / "cartpole.toml"), *(["-o", str(tmp_path / "m")] if command == "mpc" else [])]) == 1
+    err = capsys.readouterr().err
+    assert "cartpole.toml: this is a model file (it has a [system] or [[members]] table), not an optimal-control " \
+           f"problem: `ncgen {command}` takes a problem file that names its model" in err
+    assert "model: missing" not in err and not list(tmp_path.iterdir())

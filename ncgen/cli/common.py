@@ -123,6 +123,20 @@ def _cannot_create_in(directory: Path) -> str | None:
     return None
 
 
+def missing_model(origin: str, data: dict, command: str, alternative: str = "") -> NcgenError:
+    """The error for a problem file ``data`` (read from ``origin``) that names no model: a
+    model file given where ``ncgen <command>`` takes a problem file is said to be one."""
+    from ncgen.errors import ProblemFileError
+
+    if "system" in data or "members" in data:
+        return ProblemFileError(f"{origin}: this is a model file (it has a [system] or [[members]] table), not an "
+                                f"optimal-control problem: `ncgen {command}` takes a problem file that names its "
+                                f"model (model = \"{Path(origin).name}\"; examples/cartpole_swingup.toml is one)"
+                                f"{alternative}")
+    return ProblemFileError(f"{origin}: model: missing; name the model file in the problem file "
+                            f"(model = \"cartpole.toml\"){alternative}")
+
+
 def load_model(path: str, params: list[str] | None = None, contacts: str = "smooth", share: bool = True,
                floating_base: bool = False):
     """Build the model in TOML file ``path``; ``params`` (``name=value`` strings, a vector as

@@ -5,9 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ncgen.cli.common import check_files, load_model
+from ncgen.cli.common import check_files, load_model, missing_model
 from ncgen.cli.registry import subcommand
-from ncgen.errors import ProblemFileError
 
 
 def _arguments(p: argparse.ArgumentParser) -> None:
@@ -63,7 +62,7 @@ def mpc(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     data, origin = read_problem_file(Path(args.problem))
     model_file = model_path(data, origin)
     if model_file is None:
-        raise ProblemFileError(f"{origin}: model: missing; name the model file (model = \"cartpole.toml\")")
+        raise missing_model(origin, data, "mpc")
     model = load_model(str(model_file), args.param)
     ocp, _ = problem_from_data(data, model, origin)
     x0 = None

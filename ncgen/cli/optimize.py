@@ -11,9 +11,8 @@ import contextlib
 import sys
 from pathlib import Path
 
-from ncgen.cli.common import check_files, file_arguments, load_model
+from ncgen.cli.common import check_files, file_arguments, load_model, missing_model
 from ncgen.cli.registry import subcommand
-from ncgen.errors import ProblemFileError
 
 
 def _arguments(p: argparse.ArgumentParser) -> None:
@@ -66,8 +65,7 @@ def optimize(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     else:
         model_file = model_path(data, origin)
         if model_file is None:
-            raise ProblemFileError(f"{origin}: model: missing; name the model file in the problem file "
-                                   f"(model = \"cartpole.toml\") or give it first and the problem with --problem")
+            raise missing_model(origin, data, "optimize", ", or give the model first and the problem with --problem")
     model = load_model(str(model_file), args.param, contacts=args.contacts, floating_base=args.floating_base)
     ocp, options = problem_from_data(data, model, origin)
     kwargs = options.kwargs()

@@ -160,8 +160,14 @@ def _batch_size(model, q0, v0, p, u, n_t: int) -> int:
         if value is not None and not callable(value) and _ndim(value, name) == single + 1:
             sizes[name] = len(value)
     if isinstance(p, dict):
+        unknown = [key for key in p if key not in model.parameter_names]
+        if unknown:                        # a name is the call's, not one run's: refused at once
+            from ncgen.model.expressions import did_you_mean
+            raise NcgenError(f"simulate_batch: p: model {model.name!r} has no parameter {unknown[0]!r}"
+                             f"{did_you_mean(str(unknown[0]), model.parameter_names)} (parameters: "
+                             f"{', '.join(model.parameter_names) or 'none'})")
         for key, value in p.items():
-            size = model.parameter_sizes[model.parameter_names.index(key)] if key in model.parameter_names else 1
+            size = model.parameter_sizes[model.parameter_names.index(key)]
             if _ndim(value, f"p[{key!r}]") >= (1 if size == 1 else 2):
                 sizes[f"p[{key!r}]"] = len(value)
     elif p is not None and _ndim(p, "p") == 2:

@@ -272,7 +272,7 @@ def _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info,
                       velocity_residual=Y[:, 3], markers=markers, **extra)
     traj.info["error_estimate"] = error_estimate(S[:rows], info.get("substeps"), info.get("estimate"), q, v,
                                                  info.get("order") == 4)
-    traj.info["energy"] = energy_report(traj, work, conservative)
+    traj.info["energy"] = energy_report(traj, work, conservative, S[:rows])
     if not conservative and len(traj):
         traj.info["energy"]["parts"] = balance_parts(model, traj)
     traj.info["wall_time"] = time.perf_counter() - start

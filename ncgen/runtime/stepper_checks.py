@@ -106,7 +106,7 @@ def check_fixed(model, traj, S: np.ndarray, h: float, substeps: int, contacts: b
     work = np.concatenate([[0.0], S[:row, STATS.index("work")]])
     estimate = error_estimate(S[:row], substeps, traj.info.get("estimate"), kept.q, kept.v)
     kept.info.update(complete=False, message=message, error_estimate=estimate,
-                     energy=energy_report(kept, work, conservative))
+                     energy=energy_report(kept, work, conservative, S[:row]))
     raise SimulationError(message, time=float(kept.t[-1]), trajectory=kept)
 
 
@@ -140,7 +140,7 @@ def trusted_before_failure(model, traj, S: np.ndarray, eq: np.ndarray | None):
     else:
         why = f"its energy is no longer finite by t = {t_row:.6g} s"
     kept = traj.head(row + 1)
-    kept.info["energy"] = energy_report(kept, work[:row + 1], conservative)
+    kept.info["energy"] = energy_report(kept, work[:row + 1], conservative, S[:row])
     return kept, f" Before that, {why}, so only the rows before it are kept."
 
 
@@ -370,13 +370,19 @@ def relative_energy_error(model, traj, work: np.ndarray, conservative: bool, S: 
     return error / energy_denominator(model, traj, work, S, error)
 
 
-def energy_report(traj, work: np.ndarray, conservative: bool) -> dict:
+def energy_report(traj, work: np.ndarray, conservative: bool, S: np.ndarray | None = None) -> dict:
     """``info["energy"]``: energy drift of a conservative model, or the energy balance
-    (work ``W`` of the non-conservative forces and drives, and ``max |E − E0 − W|``)."""
+    (work ``W`` of the non-conservative forces and drives, and ``max |E − E0 − W|``);
+    ``relative`` against the energy scale at the end, or, given the run's statistics ``S``
+    and above :data:`ENERGY_FRACTION`, against at least :func:`roundoff_energy` (as the
+    check measures it)."""
     if not len(traj):
         return {"conservative": conservative}
     err = energy_error(traj, work, conservative)
     scale = float(_energy_scale(traj, work)[-1])
+    if S is not None and len(S) and not err.max() <= ENERGY_FRACTION * scale and traj.model is not None:
+        floor = roundoff_energy(traj.model, traj, S)
+        scale = max(scale, float(floor[-1]) if len(floor) else 0.0)
     rel = float(err.max() / scale) if scale > 0 else 0.0
     if conservative:
         return {"conservative": True, "drift": float(err.max()), "relative": rel}

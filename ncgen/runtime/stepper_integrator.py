@@ -140,7 +140,7 @@ def _checked(model, opts: SimulationOptions, traj: Trajectory, S: np.ndarray, af
     work = np.concatenate([[0.0], np.cumsum(S[:, STATS.index("work")])])
     S = S.copy()
     S[:, STATS.index("work")] = work[1:]
-    traj.info["energy"] = energy_report(traj, work, conservative)
+    traj.info["energy"] = energy_report(traj, work, conservative, S)
     if not opts.check:
         return traj
     if opts.rtol is None:
