@@ -9,7 +9,8 @@ a bounce with restitution), for both ways of building the Delassus matrix; the M
 (``ncgen_mpc.h``) on a hand-written iteration (input checks, the guess kept on failure); the
 joint-space loop (RK4 and Dormand–Prince) on ODEs with closed-form solutions; the element tables'
 loops (``ncgen_element_tables.h``) on hand-written kernels of a tiny planar model; the sparse
-QR of the table-driven stepper (``ncgen_sparse_qr.h``) on hand-analysed patterns.  Each program is
+QR of the table-driven stepper (``ncgen_sparse_qr.h``) on hand-analysed patterns, and that
+stepper (``ncgen_table_stepper.h``) on the hand-made tables of a planar pendulum with a spring.  Each program is
 built with ``-Wall -Wextra -Werror -pedantic`` under AddressSanitizer and
 UndefinedBehaviorSanitizer and must print that all its checks passed."""
 from __future__ import annotations
@@ -32,7 +33,8 @@ ENV = {**os.environ, "ASAN_OPTIONS": "detect_leaks=0:abort_on_error=0",
 PROGRAMS = [("test_rattle.c", []), ("test_contact.c", []), ("test_contact.c", ["-DSCHUR_FACTORED"]),
             ("test_contact.c", ["-DPAIRS"]),
             ("test_cone_newton.c", []), ("test_mpc.c", []), ("test_joint_loop.c", []),
-            ("test_element_tables.c", []), ("test_sparse_qr.c", [])]
+            ("test_element_tables.c", []), ("test_sparse_qr.c", []),
+            ("test_table_stepper.c", [])]
 
 pytestmark = pytest.mark.skipif(CC is None, reason="no C compiler (gcc, clang or cc) on PATH")
 
@@ -49,7 +51,7 @@ def sanitizers(tmp_path_factory) -> Path:
 
 @pytest.mark.parametrize("source, defines", PROGRAMS, ids=["rattle", "contact-kkt", "contact-schur", "contact-pairs",
                                                           "cone-newton", "mpc", "joint-loop", "element-tables",
-                                                          "sparse-qr"])
+                                                          "sparse-qr", "table-stepper"])
 def test_runtime_c_unit_tests_pass_under_sanitizers(sanitizers, source, defines):
     exe = sanitizers / (Path(source).stem + "".join(d.lower().replace("-d", "_") for d in defines))
     built = subprocess.run([CC, *FLAGS, *defines, f"-I{RUNTIME}", f"-I{TESTS}", str(TESTS / source),

@@ -59,7 +59,8 @@ def uncovered_elements(model) -> dict[str, list[str]]:
             what = "cable" if f.cable else "with an expression for k, rest_length or damping"
             out.setdefault(f"Spring {what}", []).append(f"force {f.name!r}")
     if model.contacts:
-        out.setdefault("contact", []).extend(f"contact {n!r}" for n in model.contact_names)
+        names = [f"contact {n!r}" for n in model.contact_names]
+        out["contact"] = names[:4] + ([f"{len(names) - 4} more"] if len(names) > 4 else [])
     if model.nu:
         out.setdefault("input", []).extend(f"input {n!r}" for n in model.input_names)
     if model.np:

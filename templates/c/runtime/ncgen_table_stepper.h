@@ -83,12 +83,11 @@ static void tab_end(void) {
   tab_valid[0] = tab_valid[1] = 0;
 }
 
-#define TAB_DIM (tab_cur->T->dim)
-#define TAB_NF (tab_cur->T->nf)
+/* The spring kernel's input and outputs at most (3D): x, then y = [f; V; P] and J. */
 #define TAB_SPRING_IN (4 * 3 + 3)
 #define TAB_SPRING_OUT (3 + 2 + 3 * 12)
 
-/* The kernel work (doubles) of the tables S: element work, A, Φ, q + h w, F, the features
+/* The kernel work (doubles) of the tables S: element work, q + h w, F, the features
  * at q and their rates, the spring kernel's input and outputs, the QR factors and scratch. */
 static long tab_work_size(const ncgen_stepper_tables *S) {
   const ncgen_tables *T = S->T;

@@ -1,0 +1,247 @@
+/* Unit tests of the table-driven stepper (ncgen_table_stepper.h, with the RATTLE runtime it
+ * includes) on hand-written kernels and tables of a tiny planar model, q = p = (q0, q1):
+ *
+ *   member 0, a point of mass MASS (kind POINT): M = MASS I, no constraint;
+ *   joint element 0, DISTANCE(f1 = the origin, f0 = p; L):  Φ = |p|² − L²  (a pendulum);
+ *   gravity: f_gravity = (0, −MASS G);
+ *   one spring-damper from the ground point f2 = ANCHOR to p (k, l0, c), marker p.
+ *
+ * Checked: the element loops on these tables; the Newton matrix K of step_newton against central differences of its
+ * residual r; undamped, 2000 RATTLE steps keep Φ ≤ 1e-9 and the energy to 1e-6; damped, the
+ * energy lost equals the work of the damper the stepper integrates (step_power, to 1e-4), and the
+ * energy decreases; one step, and an error-controlled run on the constraint.  Built and run
+ * by tests/test_stepper_runtime_c.py under AddressSanitizer and UndefinedBehaviorSanitizer. */
+#include "check.h"
+
+typedef double casadi_real;
+typedef long long casadi_int;
+
+#include "ncgen_element_tables.h"
+
+#define L 0.9
+#define MASS 1.7
+#define G 9.81
+
+/* Joint kind 0: distance (2D): x = (f0, f1, L) -> phi = |f1 - f0|² - L², J (1 x 4). */
+static int k_distance(const double **arg, double **res, long long *iw, double *w, int mem) {
+  const double *x = arg[0];
+  double dx = x[2] - x[0], dy = x[3] - x[1];
+  (void)iw; (void)w; (void)mem;
+  res[0][0] = dx * dx + dy * dy - x[4] * x[4];
+  res[1][0] = -2 * dx; res[1][1] = -2 * dy; res[1][2] = 2 * dx; res[1][3] = 2 * dy;
+  return 0;
+}
+
+static int k_distance_hvv(const double **arg, double **res, long long *iw, double *w, int mem) {
+  const double *fd = arg[1];
+  (void)iw; (void)w; (void)mem;
+  res[0][0] = 2 * ((fd[2] - fd[0]) * (fd[2] - fd[0]) + (fd[3] - fd[1]) * (fd[3] - fd[1]));
+  return 0;
+}
+
+/* Member kind 0: a planar point, c = (m,) -> M_I = m I. */
+static int k_point_mass(const double **arg, double **res, long long *iw, double *w, int mem) {
+  (void)iw; (void)w; (void)mem;
+  res[0][0] = res[0][3] = arg[0][0];
+  res[0][1] = res[0][2] = 0;
+  return 0;
+}
+
+/* The spring kernel (2D): x = (r_a, r_b, v_a, v_b, k, l0, c) -> y = (f, V, P), J = df/d(r_a, r_b,
+ * v_a, v_b) (2 x 8, column-major): f = -(k (l - l0) + c l') d / l, d = r_b - r_a. */
+static int k_spring(const double **arg, double **res, long long *iw, double *w, int mem) {
+  const double *x = arg[0];
+  double d[2], dv[2], l, rate, T, k = x[8], l0 = x[9], c = x[10], *J = res[1];
+  int i, j;
+  (void)iw; (void)w; (void)mem;
+  for (i = 0; i < 2; ++i) {
+    d[i] = x[2 + i] - x[i];
+    dv[i] = x[6 + i] - x[4 + i];
+  }
+  l = sqrt(d[0] * d[0] + d[1] * d[1]);
+  rate = (d[0] * dv[0] + d[1] * dv[1]) / l;
+  T = k * (l - l0) + c * rate;
+  for (i = 0; i < 2; ++i) res[0][i] = -T * d[i] / l;
+  res[0][2] = 0.5 * k * (l - l0) * (l - l0);
+  res[0][3] = -c * rate * rate;
+  for (i = 0; i < 2; ++i)          /* f_i = -T d_i / l */
+    for (j = 0; j < 2; ++j) {
+      double dl = d[j] / l, drate = dv[j] / l - rate * d[j] / (l * l);
+      double dT_dd = k * dl + c * drate, dfi_dd = -dT_dd * d[i] / l - T * ((i == j) / l - d[i] * d[j] / (l * l * l));
+      double dfi_ddv = -c * (d[j] / l) * d[i] / l;
+      J[i + 2 * j] = -dfi_dd;           /* d/dr_a = -d/dd */
+      J[i + 2 * (2 + j)] = dfi_dd;
+      J[i + 2 * (4 + j)] = -dfi_ddv;
+      J[i + 2 * (6 + j)] = dfi_ddv;
+    }
+  return 0;
+}
+
+static const ncgen_joint_kind JOINT_KINDS[1] = {{k_distance, k_distance_hvv, 2, 2, 1, 1}};
+static const ncgen_member_kind MEMBER_KINDS[1] = {{0, 0, k_point_mass, 2, 1, 0}};
+static const ncgen_kinds KINDS = {JOINT_KINDS, 1, MEMBER_KINDS, 1, 0};
+
+#define TAB_KINDS (&KINDS)
+#define TAB_SPRING_3D k_spring
+#define TAB_SPRING_2D k_spring
+#define MAX_HALVINGS 10
+#define NSTATS 6
+#define STEP_OK 0
+#define STEP_NO_CONVERGENCE 1
+#define STEP_NOT_FINITE 2
+#define STEP_VELOCITY 3
+#define STEP_KERNEL 4
+#define STEP_BAD_INPUT 5
+#define STEP_TOO_MANY_STEPS 6
+#define STEP_TOO_SMALL 7
+#define STEP_INTERRUPTED 8
+#define SCHEME_RATTLE4 1
+typedef struct {
+  casadi_real tol;
+  int max_iter;
+  int max_halvings;
+  int scheme;
+  volatile int *stop;
+} step_options;
+
+static step_options default_options(void) {
+  step_options o;
+  o.tol = 1e-10;
+  o.max_iter = 12;
+  o.max_halvings = 4;
+  o.scheme = 0;
+  o.stop = 0;
+  return o;
+}
+#define DEFAULT_OPTIONS default_options
+
+#include "ncgen_table_stepper.h"
+
+/* The model's tables (see the top of the file). */
+static const int feat_ptr[] = {0, 2, 2, 2}, feat_row[] = {0, 1}, feat_col[] = {0, 1};
+static const double feat_coef[] = {1, 1}, feat_const[] = {0, 0, 0, 0, 0.5, 0.3};
+static const int el_kind[] = {0}, el_arg_ptr[] = {0, 2}, el_arg[] = {1, 0}, el_sc_ptr[] = {0, 1};
+static const double el_sc[] = {L};
+static const int el_row_ptr[] = {0, 1}, el_row[] = {0}, el_apos_ptr[] = {0, 2}, el_apos[] = {0, 1};
+static const int mem_kind[] = {0}, mem_q_ptr[] = {0, 2}, mem_q_col[] = {0, 1};
+static const double mem_q_const[] = {0, 0};
+static const int mem_c_ptr[] = {0, 1};
+static const double mem_c[] = {MASS};
+static const int mem_row_ptr[] = {0, 0}, mem_row[] = {-1}, mem_apos_ptr[] = {0, 0}, mem_apos[] = {0},
+                 mem_mpos_ptr[] = {0, 4}, mem_mpos[] = {0, 1, 2, 3};
+/* K (3 x 3) dense in CSC: entry (r, c) is nonzero c * 3 + r; V lower and R upper triangles. */
+static const int k_colind[] = {0, 3, 6, 9}, k_row[] = {0, 1, 2, 0, 1, 2, 0, 1, 2};
+static const int v_colind[] = {0, 3, 5, 6}, v_row[] = {0, 1, 2, 1, 2, 2};
+static const int r_colind[] = {0, 1, 3, 6}, r_row[] = {0, 0, 1, 0, 1, 2};
+static const int perm[] = {0, 1, 2};
+static const int a_colind[] = {0, 1, 2}, a_row[] = {0, 0}, m_colind[] = {0, 2, 4}, m_row[] = {0, 1, 0, 1};
+static const double m_val[] = {MASS, 0, 0, MASS}, f_gravity[] = {0, -MASS * G};
+static const int spr_feat[] = {2, 0}, spr_kpos_ptr[] = {0, 4}, spr_kpos[] = {0, 3, 1, 4}, marker_feat[] = {0};
+static const int k_mpos[] = {0, 1, 3, 4}, k_apos[] = {2, 5}, k_atpos[] = {6, 7};
+
+static ncgen_tables T;
+static ncgen_stepper_tables S;
+
+static void make_tables(double k, double l0, double c, double *par) {
+  T.nq = 2; T.nc = 1; T.dim = 2; T.a_nnz = 2; T.m_nnz = 4; T.nf = 3;
+  T.feat_ptr = feat_ptr; T.feat_row = feat_row; T.feat_col = feat_col; T.feat_coef = feat_coef;
+  T.feat_const = feat_const;
+  T.ne = 1; T.el_kind = el_kind; T.el_arg_ptr = el_arg_ptr; T.el_arg = el_arg; T.el_sc_ptr = el_sc_ptr;
+  T.el_sc = el_sc; T.el_row_ptr = el_row_ptr; T.el_row = el_row; T.el_apos_ptr = el_apos_ptr; T.el_apos = el_apos;
+  T.nm = 1; T.mem_kind = mem_kind; T.mem_q_ptr = mem_q_ptr; T.mem_q_col = mem_q_col; T.mem_q_const = mem_q_const;
+  T.mem_c_ptr = mem_c_ptr; T.mem_c = mem_c; T.mem_row_ptr = mem_row_ptr; T.mem_row = mem_row;
+  T.mem_apos_ptr = mem_apos_ptr; T.mem_apos = mem_apos; T.mem_mpos_ptr = mem_mpos_ptr; T.mem_mpos = mem_mpos;
+  par[0] = k; par[1] = l0; par[2] = c;
+  S.T = &T; S.nu = 0; S.np = 0; S.n_markers = 1; S.n_spring = 1; S.mass_scale = MASS;
+  S.a_colind = a_colind; S.a_row = a_row; S.m_colind = m_colind; S.m_row = m_row; S.m_val = m_val;
+  S.f_gravity = f_gravity; S.v_gravity = 0; S.spr_feat = spr_feat; S.spr_par = par;
+  S.spr_kpos_ptr = spr_kpos_ptr; S.spr_kpos = spr_kpos; S.marker_feat = marker_feat;
+  S.nnz_k = 9; S.nnz_v = 6; S.nnz_r = 6; S.k_mpos = k_mpos; S.k_apos = k_apos; S.k_atpos = k_atpos;
+  S.qr.n = 3; S.qr.k_colind = k_colind; S.qr.k_row = k_row; S.qr.v_colind = v_colind; S.qr.v_row = v_row;
+  S.qr.r_colind = r_colind; S.qr.r_row = r_row; S.qr.prinv = perm; S.qr.pc = perm;
+}
+
+/* The element loops on these tables: Φ = |q|² − L², A = 2 qᵀ, γ = −2 |v|², Φ_t = 0, M. */
+static void test_tables(void) {
+  double par[3], w[4096], q[2] = {0.5, -0.72}, v[2] = {0.3, 0.2}, phi, A[2], g, pt, M[4];
+  make_tables(30.0, 0.4, 0.6, par);
+  CHECK(ncgen_tables_work_size(&KINDS, &T) <= 4096, "work fits");
+  CHECK(ncgen_tables_phi(&KINDS, &T, q, &phi, w) == 0 && fabs(phi - (q[0] * q[0] + q[1] * q[1] - L * L)) < 1e-15,
+        "phi %g", phi);
+  CHECK(ncgen_tables_jacobian(&KINDS, &T, q, A, w) == 0 && A[0] == 2 * q[0] && A[1] == 2 * q[1], "A");
+  CHECK(ncgen_tables_gamma(&KINDS, &T, q, v, &g, w) == 0 && fabs(g + 2 * (v[0] * v[0] + v[1] * v[1])) < 1e-15,
+        "gamma %g", g);
+  CHECK(ncgen_tables_phi_t(&T, &pt) == 0 && pt == 0, "phi_t");
+  CHECK(ncgen_tables_mass(&KINDS, &T, M, w) == 0 && M[0] == MASS && M[1] == 0 && M[2] == 0 && M[3] == MASS, "M");
+}
+
+/* K of step_newton against central differences of its r in [w; ν]. */
+static void test_newton_matrix(void) {
+  double par[3], w[4096], K[9], Kp[9], r[3], rp[3], rm[3], x[3] = {0.4, -0.7, 0.05};
+  double q[2] = {0.5, -0.72}, v[2] = {0.3, 0.2}, t = 0, h = 0.01, e = 1e-6;
+  const double *arg[8];
+  double *res[2];
+  int i, j;
+  make_tables(30.0, 0.4, 0.6, par);
+  CHECK(ncgen_tables_check(&KINDS, &T) == 0, "the tables are consistent");
+  CHECK(!tab_begin(&S), "run started");
+  CHECK(tab_work_size(&S) <= 4096, "work fits: %ld", tab_work_size(&S));
+  arg[0] = &t; arg[1] = q; arg[2] = v; arg[3] = 0; arg[4] = 0; arg[5] = &h; arg[6] = x; arg[7] = x + 2;
+  res[0] = r; res[1] = K;
+  CHECK(tab_newton(arg, res, 0, w, 0) == 0, "newton");
+  for (j = 0; j < 3; ++j) {
+    double xs = x[j];
+    res[1] = Kp;
+    x[j] = xs + e; res[0] = rp; tab_newton(arg, res, 0, w, 0);
+    x[j] = xs - e; res[0] = rm; tab_newton(arg, res, 0, w, 0);
+    x[j] = xs;
+    for (i = 0; i < 3; ++i)
+      CHECK(fabs(K[j * 3 + i] - (rp[i] - rm[i]) / (2 * e)) < 1e-6 * (1 + fabs(K[j * 3 + i])),
+            "K[%d, %d] = %g, central differences %g", i, j, K[j * 3 + i], (rp[i] - rm[i]) / (2 * e));
+  }
+  tab_end();
+}
+
+/* 2000 RATTLE steps of 1 ms from rest at 0.5 rad; the energy and its balance. */
+static void run(double c) {
+  double par[3], q0[2] = {L * sin(0.5), -L * cos(0.5)}, v0[2] = {0, 0}, lam0[1] = {0};
+  double q[2 * 10], v[2 * 10], lam[10], stats[NSTATS * 10], y[14], *y0 = y, *y1 = y + 7, tt[2] = {0, 2};
+  double qa[2 * 5], va[2 * 5], la[5], sa[NSTATS * 5], qn[2], vn[2], h_next = 0;
+  long rows = 0;
+  int iters = 0;
+  double qq[4], vv[4], ll[2] = {0, 0};
+  step_options o = default_options();
+  long done = 0, splits = 0;
+  int status;
+  make_tables(30.0, 0.4, c, par);
+  CHECK(!tab_begin(&S), "run started");
+  status = run_fixed(q0, v0, lam0, 0, 1e-3, 2000, 200, 0, 0, 0, q, v, lam, 0, stats, &o, 0, 1, &done, &splits, 0);
+  CHECK(status == STEP_OK && done == 2000, "c = %g: status %d after %ld steps", c, status, done);
+  qq[0] = q0[0]; qq[1] = q0[1]; qq[2] = q[18]; qq[3] = q[19];
+  vv[0] = v0[0]; vv[1] = v0[1]; vv[2] = v[18]; vv[3] = v[19];
+  CHECK(stepper_outputs(2, tt, qq, vv, ll, 0, 0, 0, y) == 0, "outputs");
+  CHECK(y1[2] < 1e-9 && y1[3] < 1e-9, "c = %g: constraints %g, %g", c, y1[2], y1[3]);
+  CHECK(y1[5] == q[18] && y1[6] == q[19], "the marker is p");
+  if (c == 0) {
+    CHECK(fabs(y1[0] + y1[1] - y0[0] - y0[1]) < 1e-6 * fabs(y0[1]), "energy kept: %.12g -> %.12g", y0[0] + y0[1], y1[0] + y1[1]);
+  } else {
+    double work = stats[9 * NSTATS + 5], lost = y1[0] + y1[1] - y0[0] - y0[1];
+    CHECK(lost < -1e-3, "the damper takes energy: %g", lost);
+    CHECK(fabs(lost - work) < 1e-4 * fabs(lost), "energy lost %.9g = damper work %.9g", lost, work);
+  }
+  status = stepper_step(q0, v0, 0, 0, 0, 1e-3, qn, vn, la, &iters, &o, 0, 0);
+  CHECK(status == STEP_OK && iters >= 1, "one step: status %d", status);
+  status = simulate_adaptive(q0, v0, lam0, 0, 0.02, 5, 0, 0, 0, 0, 1e-6, 1e-6, 1e-3, 1, 10000, 1, qa, va, la, sa,
+                             &o, &rows, &h_next);
+  CHECK(status == STEP_OK && rows == 5, "error control: status %d, %ld rows", status, rows);
+  CHECK(fabs(qa[8] * qa[8] + qa[9] * qa[9] - L * L) < 1e-9, "error control keeps the constraint");
+  tab_end();
+}
+
+int main(void) {
+  test_tables();
+  test_newton_matrix();
+  run(0.0);
+  run(0.8);
+  return report("test_table_stepper");
+}
