@@ -186,3 +186,15 @@ def test_lazy_functions_survive_the_store_and_pickling(store):
     assert np.isfinite(T) and np.isfinite(V) and "energy" in again.functions.made()
     round_trip = pickle.loads(pickle.dumps(model))
     assert round_trip.content_hash == model.content_hash
+
+
+def test_the_command_line_stores_complete_models_and_python_lazy_ones(store):
+    from ncgen.cli.common import load_model
+    path = str(EXAMPLES / "slider_crank.toml")
+    load_model(path)
+    cli = load_model(path)                                      # read back
+    python = [nc.System.from_toml(path).build() for _ in range(2)][1]
+    stored = lambda model, name: model.functions._makers[name].func is function_set.deserialized  # noqa: E731
+    assert all(stored(cli, name) for name in cli.functions)    # a later run derives nothing
+    assert stored(python, "poses") and stored(python, "A") and not stored(python, "dae")
+    assert np.array_equal(python.energy(python.q0, python.v0), cli.energy(cli.q0, cli.v0))

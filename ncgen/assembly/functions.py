@@ -108,9 +108,9 @@ def system_functions(ctx: Context, phi, F, V, M: np.ndarray, factor: CholeskyFac
     """The makers of the functions of :data:`DOCS` by name (each ``maker(functions) ->
     ca.Function``, run on first access by :class:`~ncgen.model.function_set.FunctionSet`), and
     ``V: t, q, p -> V`` (the terms of the potential energy, column ``V`` of
-    :func:`~ncgen.assembly.build.force_terms`).  ``Minv``, ``mass`` and the composites are
-    partials of module-level functions (they stay lazy in a stored model); the others close
-    over the assembly's expressions."""
+    :func:`~ncgen.assembly.build.force_terms`).  ``Minv``, ``mass``, ``markers``, ``poses``
+    and the composites are partials of module-level functions (they stay lazy in a stored
+    model); the others close over the assembly's expressions."""
     t, q, v, u, p = ctx.t, ctx.q, ctx.v, ctx.u, ctx.p
     symbols = {"t": t, "q": q, "v": v, "u": u, "p": p}
 
@@ -138,13 +138,22 @@ def system_functions(ctx: Context, phi, F, V, M: np.ndarray, factor: CholeskyFac
         "F": function("F", ("t", "q", "v", "u", "p"), lambda: [F], ["F"]),
         "mass": functools.partial(_mass, Msp),
         "Minv": functools.partial(_minv, factor, ctx.layout.nq),
-        "markers": function("markers", ("q", "v"), lambda: list(_markers(ctx, system)), ["r", "rdot"]),
-        "poses": function("poses", ("q",), lambda: list(_poses(ctx, system)), ["R", "p"]),
+        "markers": functools.partial(_member_function, "markers", system, ctx.layout),
+        "poses": functools.partial(_member_function, "poses", system, ctx.layout),
     }
     potential = ca.Function("V", [t, q, p], [V], ["t", "q", "p"], ["V"])
     for name in COMPOSITES:
         makers[name] = functools.partial(_composite, name, potential, Msp, alpha, beta, factor.regular)
     return {name: makers[name] for name in FUNCTIONS}, potential
+
+
+def _member_function(name: str, system, layout, _functions) -> ca.Function:
+    """``markers: q, v -> r, rdot`` or ``poses: q -> R, p`` of ``system``'s members, in a
+    context of their own (so that a stored model makes them on first use too)."""
+    ctx = Context(system, layout)
+    if name == "markers":
+        return ca.Function("markers", [ctx.q, ctx.v], list(_markers(ctx, system)), ["q", "v"], ["r", "rdot"])
+    return ca.Function("poses", [ctx.q], list(_poses(ctx, system)), ["q"], ["R", "p"])
 
 
 def _mass(M: ca.DM, _functions) -> ca.Function:

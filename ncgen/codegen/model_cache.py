@@ -109,10 +109,13 @@ def system_key(system, **options) -> str | None:
     return None if digest is None else key_of({"system": digest})
 
 
-def cached(key: str | None, build: Callable[[], object]):
+def cached(key: str | None, build: Callable[[], object], complete: bool = False):
     """The model stored under ``key``, else ``build()`` stored under it (nothing is stored
     or read with ``key`` None or the store off).  The warnings the build gave (e.g. redundant
-    constraints dropped) are stored with the model and given again when it is read back."""
+    constraints dropped) are stored with the model and given again when it is read back.
+    ``complete``: every function of ``model.functions`` is made before it is stored (what a
+    run of the command line needs, so that a later run derives nothing); otherwise those the
+    build made and :data:`STORED_FUNCTIONS`, the others staying lazy (see :func:`save`)."""
     if key is None or not enabled():
         return build()
     hit = load(key)
@@ -126,7 +129,7 @@ def cached(key: str | None, build: Callable[[], object]):
         model = build()
     for w in caught:                      # given as the build gave them, under the caller's filters
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    save(key, model, [(w.category, str(w.message)) for w in caught])
+    save(key, model, [(w.category, str(w.message)) for w in caught], complete=complete)
     return model
 
 
@@ -203,13 +206,23 @@ def load(key: str) -> tuple | None:
     return hit
 
 
-def save(key: str, model, said=()) -> bool:
+#: Functions made before a model is stored even when it is not stored complete: their makers
+#: need the members' SymPy derivations, which a later process would otherwise derive again.
+STORED_FUNCTIONS = ("markers", "poses")
+
+
+def save(key: str, model, said=(), complete: bool = False) -> bool:
     """Store ``model`` under ``key`` with the warnings ``said`` by its build (``[(category,
     message)]``); False (and nothing written) if its state cannot be pickled or the store
-    cannot be written."""
+    cannot be written.  The functions already made and :data:`STORED_FUNCTIONS` are stored
+    made (all of them with ``complete``); the others keep their makers, which a later
+    process runs on first use from the stored ones (composites, ``Minv``: no SymPy)."""
     from ncgen.model.model import model_state
 
     try:
+        for name in (model.functions if complete else STORED_FUNCTIONS):
+            if name in model.functions:
+                model.functions[name]
         payload = _pickle({"state": model_state(model), "warnings": list(said)})
     except Exception:                      # noqa: BLE001 — e.g. a Python function inside a force
         return False
