@@ -33,7 +33,7 @@ SUPPORTED = ["gymnasium/inverted_pendulum.xml", "gymnasium/hopper.xml", "dm_cont
              "dm_control/pendulum.xml", "dm_control/reacher.xml", "dm_control/stacker.xml", "dm_control/walker.xml"]
 #: Fast tier: planar roots, two slides (a point mass on a tendon-driven motor) and the humanoid
 #: (three hinges at a hip, two on skew axes at an ankle, springs, armature).
-FAST = SUPPORTED[:5]
+FAST = SUPPORTED[:4]          # the humanoid (17 s) is slow: its joint sequences are covered fast by sequences.xml
 SEQUENCES = Path(__file__).parent / "data" / "sequences.xml"
 
 
@@ -91,6 +91,7 @@ def test_forward_dynamics_equals_mujoco(key):
     assert qacc_error(FILES[key], trials=5 if key not in FAST else 2) < 1e-8
 
 
+@pytest.mark.slow      # imports all 33 files (~30 s); fast: the FAST files and sequences.xml
 def test_every_shipped_file_without_warning_is_compared():
     """The list above is every shipped file that imports without a warning but lqr.xml (no
     moving body); with both packages installed they are at least 80 % of the files."""
@@ -507,6 +508,7 @@ def test_cli_simulates_an_mjcf_file_twice(tmp_path, monkeypatch):
         assert np.array_equal(runs[0][key], runs[1][key]), key
 
 
+@pytest.mark.slow      # a benchmark smoke; fast: test_connect_closes_the_loop_exactly
 def test_loop_closure_script_runs():
     import subprocess
     import sys
@@ -517,6 +519,7 @@ def test_loop_closure_script_runs():
     assert len(gaps) == 2 and all(g > 1e-5 for g in gaps)       # MuJoCo's soft connect opens
 
 
+@pytest.mark.slow      # imports all 33 files again (~35 s); fast: the FAST files
 def test_coverage_script_runs():
     import subprocess
     import sys
