@@ -96,8 +96,10 @@ def _solved_step(model, h: float, abstol: float, abstol_step: float, max_iter: i
     """``((x, u, p, t), z, x1, res)``: MX arguments, the step's unknowns ``z``, the state after
     the step and ``‖G(z)‖∞``, solved as the compiled stepper solves it: the rootfinder on the
     first half-step's ``r(w, ν) = 0`` (its Jacobian is the stepper's ``K``, a quarter of
-    ``G_z``) from ``[v; 0]``, then the second half-step, linear in ``(v⁺, μ')``, by one sparse
-    QR solve.  ``res`` is the larger of ``‖r‖∞`` (from the rootfinder's Jacobian function, so
+    ``G_z``) from ``[v; 0]`` and one more Newton step from where it stopped (its test,
+    relative to the mass matrix, stops a few digits above the rounding floor; the quadratic
+    step reaches the floor, which finite differences of the step need on a large model), then
+    the second half-step, linear in ``(v⁺, μ')``, by one sparse QR solve.  ``res`` is the larger of ``‖r‖∞`` (from the rootfinder's Jacobian function, so
     that the C holds ``r`` once) and the second solve's ``‖K₂ [v⁺; μ'] − b‖∞``: the rows of
     ``G``."""
     newton, velocity = stepper_functions(model)[:2]
@@ -112,8 +114,11 @@ def _solved_step(model, h: float, abstol: float, abstol_step: float, max_iter: i
     p, t = ca.MX.sym("p", model.np), ca.MX.sym("t")
     q, v = x[:nq], x[nq:]
     y = ca.vertcat(x, u, p, t)
-    w_nu = solve(ca.vertcat(v, ca.MX(nc, 1)), y)
-    r_end = solve.get_function("jac_g_x")(w_nu, y)[1]
+    newton_system = solve.get_function("jac_g_x")                     # (K, r)
+    w_nu_stop = solve(ca.vertcat(v, ca.MX(nc, 1)), y)
+    K, r_stop = newton_system(w_nu_stop, y)
+    w_nu = w_nu_stop - ca.solve(K, r_stop, "qr")
+    r_end = newton_system(w_nu, y)[1]
     w = w_nu[:nq]
     b, K2 = velocity(t + h, q + h * w, w, u, p, h)
     v_mu = ca.solve(K2, b, "qr")
