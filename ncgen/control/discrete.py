@@ -19,16 +19,16 @@ Newton step is below ``abstol_step``) from ``[v; 0]``, then the second half-step
 ``(v⁺, μ')``, by one sparse QR solve; it generates self-contained C.
 
 Derivatives come from the implicit function theorem at the converged ``z``, never from
-differentiating the iterations.  With ``y = [x; u; p]`` and ``G'_y = ∂G/∂y`` taken at fixed
-``q⁺ = q + h w`` (the unknowns ``z' = [q⁺; ν; v⁺; μ']``, ``∂z'/∂z = diag(h I, I, I, I)``, so
-that the derivatives of the forces and constraints at ``q⁺``, the costly half of ``G_y``,
-drop out of it),
+differentiating the iterations: with ``y = [x; u; p]``,
 
-    ∂x⁺/∂y = E (−G_z⁻¹ G'_y),      E z = [h w; v⁺]
+    ∂z/∂y = −G_z⁻¹ G_y,      ∂x⁺/∂y = [I_q 0] + E ∂z/∂y,   E z = [h w; v⁺]
 
 so that ``A = ∂x⁺/∂x``, ``B = ∂x⁺/∂u``, ``C = ∂x⁺/∂p``; the adjoint of a step is one
-transposed solve, ``ȳ = (∂x⁺/∂y)ᵀ x̄⁺ = −G'_yᵀ G_z⁻ᵀ Eᵀ x̄⁺``.  :func:`step_functions`
-generates the step (returning ``z``), the sparse ``G_z`` and ``G'_y`` at a given ``z`` (SX,
+transposed solve, ``ȳ = (∂x⁺/∂y)ᵀ x̄⁺ = [x̄⁺_q; 0] − G_yᵀ G_z⁻ᵀ Eᵀ x̄⁺``.  (``G_y`` at fixed
+``q⁺ = q + h w`` is cheaper, but then the whole ``∂q⁺/∂q ≈ I`` comes out of the solve, with
+the solve's relative error ``cond(G_z) ε``: Talos's ``A`` agreed with central differences
+to 1.5e-5 only.)  :func:`step_functions`
+generates the step (returning ``z``), the sparse ``G_z`` and ``G_y`` at a given ``z`` (SX,
 one function each) and the two solves given them (``step_jacobian``, ``step_adjoint``:
 CasADi's sparse QR linear solver ``"qr"``, generated as loops over the factor's pattern), so
 that each is a translation unit of its own, compiled in parallel, and the C grows with the
@@ -96,8 +96,10 @@ def _solved_step(model, h: float, abstol: float, abstol_step: float, max_iter: i
     """``((x, u, p, t), z, x1, res)``: MX arguments, the step's unknowns ``z``, the state after
     the step and ``‖G(z)‖∞``, solved as the compiled stepper solves it: the rootfinder on the
     first half-step's ``r(w, ν) = 0`` (its Jacobian is the stepper's ``K``, a quarter of
-    ``G_z``) from ``[v; 0]``, then the second half-step, linear in ``(v⁺, μ')``, by one sparse
-    QR solve.  ``res`` is the larger of ``‖r‖∞`` (from the rootfinder's Jacobian function, so
+    ``G_z``) from ``[v; 0]`` and one more Newton step from where it stopped (its test,
+    relative to the mass matrix, stops a few digits above the rounding floor; the quadratic
+    step reaches the floor, which finite differences of the step need on a large model), then
+    the second half-step, linear in ``(v⁺, μ')``, by one sparse QR solve.  ``res`` is the larger of ``‖r‖∞`` (from the rootfinder's Jacobian function, so
     that the C holds ``r`` once) and the second solve's ``‖K₂ [v⁺; μ'] − b‖∞``: the rows of
     ``G``."""
     newton, velocity = stepper_functions(model)[:2]
@@ -112,8 +114,11 @@ def _solved_step(model, h: float, abstol: float, abstol_step: float, max_iter: i
     p, t = ca.MX.sym("p", model.np), ca.MX.sym("t")
     q, v = x[:nq], x[nq:]
     y = ca.vertcat(x, u, p, t)
-    w_nu = solve(ca.vertcat(v, ca.MX(nc, 1)), y)
-    r_end = solve.get_function("jac_g_x")(w_nu, y)[1]
+    newton_system = solve.get_function("jac_g_x")                     # (K, r)
+    w_nu_stop = solve(ca.vertcat(v, ca.MX(nc, 1)), y)
+    K, r_stop = newton_system(w_nu_stop, y)
+    w_nu = w_nu_stop - ca.solve(K, r_stop, "qr")
+    r_end = newton_system(w_nu, y)[1]
     w = w_nu[:nq]
     b, K2 = velocity(t + h, q + h * w, w, u, p, h)
     v_mu = ca.solve(K2, b, "qr")
@@ -125,10 +130,10 @@ def _solved_step(model, h: float, abstol: float, abstol_step: float, max_iter: i
 def step_functions(model, h: float, *, abstol: float = ABSTOL, abstol_step: float = ABSTOL_STEP,
                    max_iter: int = MAX_ITER) -> dict[str, ca.Function]:
     """``{"step": (x, u, p, t) -> (x1, res), "step_solution": (x, u, p, t) -> (x1, z, res),
-    "step_G_z": (z, x, u, p, t) -> G_z, "step_G_y": (z, x, u, p, t) -> G'_y,
+    "step_G_z": (z, x, u, p, t) -> G_z, "step_G_y": (z, x, u, p, t) -> G_y,
     "step_jacobian": (G_z, G_y) -> J, "step_adjoint": (G_z, G_y, x1_bar) -> y_bar}`` with
     ``J = ∂x⁺/∂[x; u; p]`` (nx × (nx + nu + np), dense) and ``y_bar = Jᵀ x1_bar`` from the
-    sparse ``G_z``, ``G'_y`` at a converged ``z`` (see the module docstring): separate
+    sparse ``G_z``, ``G_y`` at a converged ``z`` (see the module docstring): separate
     functions, so that the C of the solve and of each sensitivity is a translation unit of its
     own."""
     nq, nc = model.nq, model.nc
@@ -136,39 +141,32 @@ def step_functions(model, h: float, *, abstol: float = ABSTOL, abstol_step: floa
     names = ["x", "u", "p", "t"]
     step = ca.Function("step", list(args), [x1, res], names, ["x1", "res"])
     solution = ca.Function("step_solution", list(args), [x1, z, res], names, ["x1", "z", "res"])
-    G_z, G_y = _sensitivities(step_residual(model, h), h)
+    G_z, G_y = _sensitivities(step_residual(model, h))
     Gz, Gy = ca.MX.sym("G_z", G_z.sparsity_out(0)), ca.MX.sym("G_y", G_y.sparsity_out(0))
     jacobian = _state_jacobian(-ca.solve(Gz, ca.densify(Gy), "qr"), nq, nc, h)
     x1_bar = ca.MX.sym("x1_bar", 2 * nq)
     z_bar = ca.vertcat(h * x1_bar[:nq], ca.MX(nc, 1), x1_bar[nq:], ca.MX(nc, 1))       # Eᵀ x̄⁺
-    y_bar = -ca.mtimes(Gy.T, ca.solve(Gz.T, z_bar, "qr"))
+    y_bar = ca.vertcat(x1_bar[:nq], ca.MX(Gy.size2() - nq, 1)) - ca.mtimes(Gy.T, ca.solve(Gz.T, z_bar, "qr"))
     return {"step": step, "step_solution": solution, "step_G_z": G_z, "step_G_y": G_y,
             "step_jacobian": ca.Function("step_jacobian", [Gz, Gy], [ca.densify(jacobian)], ["G_z", "G_y"], ["J"]),
             "step_adjoint": ca.Function("step_adjoint", [Gz, Gy, x1_bar], [ca.densify(y_bar)],
                                         ["G_z", "G_y", "x1_bar"], ["y_bar"])}
 
 
-def _sensitivities(G: ca.Function, h: float) -> tuple[ca.Function, ca.Function]:
-    """``step_G_z: (z, x, u, p, t) -> G_z`` and ``step_G_y: (z, x, u, p, t) -> G'_y`` (sparse,
-    SX), ``G'_y = ∂G/∂y`` at fixed ``q⁺ = q + h w``: its ``q`` columns are the derivative along
-    ``δq = h s``, ``δw = −s`` (which leaves ``q⁺`` unchanged, so the derivatives of the forces
-    and constraints at ``q⁺`` drop out), divided by ``h``."""
+def _sensitivities(G: ca.Function) -> tuple[ca.Function, ca.Function]:
+    """``step_G_z: (z, x, u, p, t) -> G_z`` and ``step_G_y: (z, x, u, p, t) -> G_y`` (sparse, SX)."""
     zs, xs, us, ps, ts = (G.sx_in(i) for i in range(5))
-    nq = xs.numel() // 2
     Gs = G(zs, xs, us, ps, ts)
-    s = ca.SX.sym("s", nq)
-    G_s = ca.jacobian(G(ca.vertcat(zs[:nq] - s, zs[nq:]), ca.vertcat(xs[:nq] + h * s, xs[nq:]), us, ps, ts), s)
-    G_q = ca.substitute(G_s, s, ca.DM.zeros(nq)) / h
-    G_y = ca.horzcat(G_q, ca.jacobian(Gs, ca.vertcat(xs[nq:], us, ps)))
     names = ["z", "x", "u", "p", "t"]
     return (ca.Function("step_G_z", [zs, xs, us, ps, ts], [ca.jacobian(Gs, zs)], names, ["G_z"]),
-            ca.Function("step_G_y", [zs, xs, us, ps, ts], [G_y], names, ["G_y"]))
+            ca.Function("step_G_y", [zs, xs, us, ps, ts], [ca.jacobian(Gs, ca.vertcat(xs, us, ps))], names,
+                        ["G_y"]))
 
 
 def _state_jacobian(Z_y, nq: int, nc: int, h: float):
-    """``∂x⁺/∂y = E Z_y`` (``E z = [h w; v⁺]``) from ``Z_y = −G_z⁻¹ G'_y`` (``G'_y`` at fixed
-    ``q⁺``, :func:`_sensitivities`)."""
-    return ca.vertcat(h * Z_y[:nq, :], Z_y[nq + nc:2 * nq + nc, :])
+    """``∂x⁺/∂y = [I_q 0] + E Z_y`` (``E z = [h w; v⁺]``) from ``Z_y = −G_z⁻¹ G_y``."""
+    ny = Z_y.size2()
+    return ca.vertcat(ca.horzcat(ca.DM.eye(nq), ca.DM(nq, ny - nq)) + h * Z_y[:nq, :], Z_y[nq + nc:2 * nq + nc, :])
 
 
 def step_jacobian_function(model, h: float, *, abstol: float = ABSTOL, abstol_step: float = ABSTOL_STEP,
@@ -178,7 +176,7 @@ def step_jacobian_function(model, h: float, *, abstol: float = ABSTOL, abstol_st
     with the step: what the MPC's generated C calls at every node of its horizon."""
     nq, nc = model.nq, model.nc
     (x, u, p, t), z, x1, res = _solved_step(model, h, abstol, abstol_step, max_iter)
-    G_z_f, G_y_f = _sensitivities(step_residual(model, h), h)
+    G_z_f, G_y_f = _sensitivities(step_residual(model, h))
     G_z, G_y = G_z_f(z, x, u, p, t), G_y_f(z, x, u, p, t)
     ny = G_y.size2()
     X1_y = _state_jacobian(-qr_solve_columns(G_z, ca.densify(G_y), G_z_f.sparsity_out(0), ny), nq, nc, h)

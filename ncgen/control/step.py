@@ -132,7 +132,7 @@ class StepFunction:
         return out + (J[:, nx + nu:],) if parameters else out
 
     def _sensitivities(self, z, x, u, p, t) -> tuple[np.ndarray, np.ndarray]:
-        """The nonzeros of ``G_z`` and ``G'_y`` at the converged ``z`` (:mod:`ncgen.control.discrete`)."""
+        """The nonzeros of ``G_z`` and ``G_y`` at the converged ``z`` (:mod:`ncgen.control.discrete`)."""
         return self._G_z(z, x, u, p, t)[0], self._G_y(z, x, u, p, t)[0]
 
     # ------------------------------------------------------------------ rollouts
