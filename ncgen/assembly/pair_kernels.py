@@ -204,7 +204,7 @@ def _element_sides(element, pcs, layout, dim):
     return sides, kappa, dmin, cap, rate_bounded
 
 
-def _local(member, layout, nq):
+def _local(member, layout):
     """``(idx, const)`` of ``member``'s local coordinates (empty for the ground)."""
     if member.is_ground:
         return [], np.zeros(0)
@@ -237,7 +237,7 @@ def pair_kernels(model) -> PairKernels:
     for element in system.contacts:
         pcs = element.point_contacts()
         members = element.members()
-        (idx_a, const_a), (idx_b, const_b) = (_local(m, layout, model.nq) for m in members)
+        (idx_a, const_a), (idx_b, const_b) = (_local(m, layout) for m in members)
         qa, qb = ca.SX.sym("q_a", len(idx_a)), ca.SX.sym("q_b", len(idx_b))
         qfull = ca.SX.zeros(model.nq)
         for sym, idx in ((qa, idx_a), (qb, idx_b)):
