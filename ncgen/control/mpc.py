@@ -36,7 +36,7 @@ import numpy as np
 
 from ncgen.control.discrete import step_jacobian_function
 from ncgen.control.mpc_problem import mpc_problem
-from ncgen.errors import OptimizationError
+from ncgen.errors import NcgenError, OptimizationError
 
 SOLVERS = ("sqp",)
 #: Added to the diagonal of the QP Hessian (keeps it positive definite on the inputs).
@@ -197,7 +197,10 @@ class MPC:
         anything is not finite."""
         if not (np.all(np.isfinite(X)) and np.all(np.isfinite(U))):
             return None
-        J, c, res = (float(o[0]) for o in self._merit_fn(x, t, X.ravel(), U.ravel()))
+        try:
+            J, c, res = (float(o[0]) for o in self._merit_fn(x, t, X.ravel(), U.ravel()))
+        except (NcgenError, RuntimeError):         # a kernel (a step's Newton iterations) reported failure
+            return None
         return (J, c) if res <= self._residual_tol and np.isfinite(J) and np.isfinite(c) else None
 
     def _solve(self, x, t: float, X: np.ndarray, U: np.ndarray):
