@@ -45,7 +45,7 @@ REGULARIZATION = 1e-8
 #: margin γ and the infeasibility (m, m/s: ℓ1 over the horizon) below which an iterate counts
 #: as feasible.
 ALPHAS = tuple(0.5 ** i for i in range(11))
-ARMIJO, GAMMA, C_MIN = 1e-4, 1e-5, 1e-6
+ARMIJO, GAMMA, C_MIN = 1e-4, 1e-5, 1e-10
 
 
 def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
