@@ -1,14 +1,18 @@
-"""iLQR on a compiled step (:class:`ncgen.control.step.StepFunction`).
+"""iLQR/DDP on a compiled step (:class:`ncgen.control.step.StepFunction`).
 
 Problem: minimise ``J = Σ_{k<N} ℓ(x_k, u_k) + ℓ_N(x_N)`` subject to ``x_{k+1} = st(x_k, u_k)``
 from a given ``x_0`` (costs: :mod:`ncgen.control.costs`).  Each iteration: the step's exact
-Jacobians ``A_k, B_k`` and the costs' derivatives along the current trajectory; a backward
-Riccati pass giving feed-forward ``k_k`` and feedback ``K_k``; a forward pass through the
-nonlinear step, ``u_k = ū_k + α k_k + K_k (x_k − x̄_k)``, with a backtracking line search on
-``α`` (accepted when the cost falls by at least a tenth of the predicted reduction).
-Gauss–Newton variant (iLQR): the step's second derivatives are not used.
-Levenberg–Marquardt regularisation ``Q_uu + μ I`` (μ raised on a failed pass or a
-non-positive ``Q_uu``, lowered after a success; Tassa, Erez & Todorov 2012).
+Jacobians ``A_k, B_k`` and the costs' derivatives along the current trajectory; the exact
+gradient ``∂J/∂U`` (adjoint recursion, :func:`gradient`), whose ∞-norm is the stopping test
+(``tol``); a backward Riccati pass giving feed-forward ``k_k`` and feedback ``K_k``; a
+forward pass through the nonlinear step, ``u_k = ū_k + α k_k + K_k (x_k − x̄_k)``, with a
+backtracking line search on ``α`` (Armijo on the true cost, :data:`ARMIJO`).
+Levenberg–Marquardt regularisation ``Q_uu + μ I`` (μ raised tenfold on a failed pass or a
+non-positive ``Q_uu``, lowered tenfold after a success; Tassa, Erez & Todorov 2012).  After an
+iteration whose full step (``α = 1``) was accepted, the backward pass is DDP's: it adds the
+step's second derivatives contracted with ``V_x`` (:mod:`ncgen.control.step_curvature`),
+which makes the final convergence quadratic; after a shortened step it is Gauss–Newton
+(iLQR) again, which is more robust far from the optimum (``second_order=False``: always).
 
 The constraint manifold.  The iterations run in natural coordinates ``x = [q; v]``: every
 trajectory is a rollout of the step, so it satisfies both constraint levels exactly, and

@@ -36,7 +36,7 @@ import numpy as np
 
 from ncgen.control.discrete import step_jacobian_function
 from ncgen.control.mpc_problem import mpc_problem
-from ncgen.errors import OptimizationError
+from ncgen.errors import NcgenError, OptimizationError
 from ncgen.validation import as_scalar
 
 SOLVERS = ("sqp",)
@@ -46,7 +46,7 @@ REGULARIZATION = 1e-8
 #: margin γ and the infeasibility (m, m/s: ℓ1 over the horizon) below which an iterate counts
 #: as feasible.
 ALPHAS = tuple(0.5 ** i for i in range(11))
-ARMIJO, GAMMA, C_MIN = 1e-4, 1e-5, 1e-6
+ARMIJO, GAMMA, C_MIN = 1e-4, 1e-5, 1e-10
 
 
 def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
@@ -198,7 +198,10 @@ class MPC:
         anything is not finite."""
         if not (np.all(np.isfinite(X)) and np.all(np.isfinite(U))):
             return None
-        J, c, res = (float(o[0]) for o in self._merit_fn(x, t, X.ravel(), U.ravel()))
+        try:
+            J, c, res = (float(o[0]) for o in self._merit_fn(x, t, X.ravel(), U.ravel()))
+        except (NcgenError, RuntimeError):         # a kernel (a step's Newton iterations) reported failure
+            return None
         return (J, c) if res <= self._residual_tol and np.isfinite(J) and np.isfinite(c) else None
 
     def _solve(self, x, t: float, X: np.ndarray, U: np.ndarray):
