@@ -303,7 +303,11 @@ def _accel(f, M: ca.DM, nc: int, alpha: float, beta: float, nq: int, nu: int, np
         phidot = ca.mtimes(A, v) + f["phi_t"](t, q, p)
         c = c - 2 * alpha * phidot - beta**2 * f["phi"](t, q, p)
     rhs = ca.vertcat(f["F"](t, q, v, u, p), c)
-    K = ca.blockcat([[ca.MX(M), A.T], [A, ca.MX(nc, nc)]])
-    sol = ca.solve(K, rhs, "qr")
+    if nc == 0:
+        # a = M⁻¹ F with M constant: CasADi 3.8 serialises a QR solve whose matrix is structurally
+        # diagonal (point masses) but cannot read it back, and built models are stored serialised
+        sol = ca.mtimes(ca.MX(sparse_dm(np.linalg.inv(np.array(M, dtype=float)))), rhs)
+    else:
+        sol = ca.solve(ca.blockcat([[ca.MX(M), A.T], [A, ca.MX(nc, nc)]]), rhs, "qr")
     return ca.Function(name, [t, q, v, u, p], [sol[:nq], sol[nq:]],
                        ["t", "q", "v", "u", "p"], ["a", "lam"])

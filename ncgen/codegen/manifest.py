@@ -1,8 +1,8 @@
 """``manifest.json``: what a generated package contains and what it was generated from.
 
 Keys: ``format`` (always ``"ncgen-package"``, how a directory is recognised as ours),
-``format_version``, ``name``, ``content_hash`` (sha256 of the functions, documentation
-and generation options: equal hashes mean equal inputs), ``ncgen_version``,
+``format_version``, ``name``, ``content_hash`` (sha256 of the generated files, documentation
+and generation options: equal hashes mean equal packages), ``ncgen_version``,
 ``casadi_version``, ``functions`` (signatures, see :mod:`ncgen.codegen.signature`),
 ``build`` (sources and headers to compile), ``metadata`` and ``files``
 (sha256 of every other file of the package).  Written with sorted keys, so the same
@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Sequence
 
 import casadi as ca
 
@@ -45,9 +44,11 @@ def _dump(data, indent: str) -> str:
     return json.dumps(data, ensure_ascii=True, allow_nan=False)
 
 
-def content_hash(name: str, functions: Sequence[ca.Function], doc_json: dict, options: dict) -> str:
-    """sha256 over everything the package is generated from (not over ncgen's templates)."""
-    source = {"name": name, "functions": [[f.name(), f.serialize()] for f in functions],
+def content_hash(name: str, files: dict[str, bytes], doc_json: dict, options: dict) -> str:
+    """sha256 over the package: its generated files, documentation and options.  The files, not
+    the functions' CasADi serialisations: a model read back from the store of built models has
+    functions equal to a fresh build's but serialised differently, and generates the same C."""
+    source = {"name": name, "files": {rel: sha256_bytes(data) for rel, data in sorted(files.items())},
               "doc": doc_json, "options": options}
     return sha256_bytes(canonical_json(source).encode())
 

@@ -213,16 +213,20 @@ STORED_FUNCTIONS = ("markers", "poses")
 
 def save(key: str, model, said=(), complete: bool = False) -> bool:
     """Store ``model`` under ``key`` with the warnings ``said`` by its build (``[(category,
-    message)]``); False (and nothing written) if its state cannot be pickled or the store
-    cannot be written.  The functions already made and :data:`STORED_FUNCTIONS` are stored
+    message)]``); False (and nothing written) if its state cannot be pickled, a made
+    function cannot be read back from its serialisation, or the store cannot be written.  The functions already made and :data:`STORED_FUNCTIONS` are stored
     made (all of them with ``complete``); the others keep their makers, which a later
     process runs on first use from the stored ones (composites, ``Minv``: no SymPy)."""
+    import casadi
+
     from ncgen.model.model import model_state
 
     try:
         for name in (model.functions if complete else STORED_FUNCTIONS):
             if name in model.functions:
                 model.functions[name]
+        for name in model.functions.made():      # CasADi 3.8 writes some solves it cannot read back
+            casadi.Function.deserialize(model.functions[name].serialize())
         payload = _pickle({"state": model_state(model), "warnings": list(said)})
     except Exception:                      # noqa: BLE001 — e.g. a Python function inside a force
         return False

@@ -219,7 +219,7 @@ def _render_files(name: str, functions: list[ca.Function], doc: PackageDoc, opti
 
     data = {rel: text.encode() for rel, text in files.items()}
     data[manifest.FILENAME] = manifest.manifest_text(
-        name=name, content_hash=manifest.content_hash(name, functions, doc.to_json(), options),
+        name=name, content_hash=manifest.content_hash(name, data, doc.to_json(), options),
         functions=[_manifest_entry(f) for f in fn_info], build=build, metadata=dict(doc.metadata),
         files=data).encode()
     return data

@@ -175,7 +175,7 @@ def step_jacobian_function(model, h: float, *, abstol: float = ABSTOL, abstol_st
     solve with one QR of ``G_z`` for all columns (:func:`qr_solve_columns`), in one function
     with the step: what the MPC's generated C calls at every node of its horizon."""
     nq, nc = model.nq, model.nc
-    (x, u, p, t), z, x1, res = _solved_step(model, h, abstol, abstol_step, max_iter)
+    (x, u, p, t), z, x1, res = _whole_newton_step(model, h, abstol, abstol_step, max_iter)
     G_z_f, G_y_f = _sensitivities(step_residual(model, h))
     G_z, G_y = G_z_f(z, x, u, p, t), G_y_f(z, x, u, p, t)
     ny = G_y.size2()
@@ -185,6 +185,23 @@ def step_jacobian_function(model, h: float, *, abstol: float = ABSTOL, abstol_st
                        [x1] + [ca.densify(X1_y[:, c]) for c in (slice(0, 2 * nq), slice(2 * nq, 2 * nq + nu_),
                                                                 slice(2 * nq + nu_, ny))] + [res],
                        ["x", "u", "p", "t"], ["x1", "A", "B", "C", "res"])
+
+
+def _whole_newton_step(model, h: float, abstol: float, abstol_step: float, max_iter: int):
+    """``((x, u, p, t), z, x1, ‖G(z)‖∞)``: the rootfinder on the whole residual ``G`` from
+    ``z₀ = [v; 0; v; 0]``, for the MPC's step (with the staged solve of :func:`_solved_step`
+    the exported MPC's C held a zero-size ``casadi_copy(0, 0, 0+ i*0)`` that gcc refuses)."""
+    nq, nc = model.nq, model.nc
+    G = step_residual(model, h)
+    zs, xs, us, ps, ts = (G.sx_in(i) for i in range(5))
+    residual = ca.Function("G", [zs, ca.vertcat(xs, us, ps, ts)], [G(zs, xs, us, ps, ts)])
+    solve = ca.rootfinder("rattle_step", "fast_newton", residual,
+                          {"abstol": abstol, "abstolStep": abstol_step, "max_iter": max_iter})
+    x, u = ca.MX.sym("x", 2 * nq), ca.MX.sym("u", model.nu)
+    p, t = ca.MX.sym("p", model.np), ca.MX.sym("t")
+    v = x[nq:]
+    z = solve(ca.vertcat(v, ca.MX(nc, 1), v, ca.MX(nc, 1)), ca.vertcat(x, u, p, t))
+    return (x, u, p, t), z, _step_state(x, z, nq, nc, h), ca.norm_inf(G(z, x, u, p, t))
 
 
 #: Largest nnz(V) + nnz(R) of the QR factors of ``G_z`` unrolled into SX (beyond: CasADi's

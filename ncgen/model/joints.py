@@ -422,7 +422,7 @@ class JointSequence(Joint):
         kinds = [k for k, _, _ in steps]
         axes = np.array([a for _, _, a in steps])
         if all(k == "slide" for k in kinds):
-            if len(steps) > 3 or np.linalg.matrix_rank(axes, tol=1e-9) < len(steps):
+            if len(steps) > 3 or np.linalg.svd(axes, compute_uv=False).min() < 1e-9:     # unit axes: dependent
                 raise ModelError(f"{self.label}: slides along dependent axes {np.round(axes, 12).tolist()}")
             return "slides"
         if kinds == ["slide", "slide", "hinge"]:
