@@ -116,7 +116,11 @@ def merit_function(model, problem) -> ca.Function:
     step = step_functions(model, h)["step"]
     x, t, X, U = ca.MX.sym("x", nx), ca.MX.sym("t"), ca.MX.sym("X", nx, N + 1), ca.MX.sym("U", nu, N)
     times = t + h * ca.DM(np.arange(N)).T
-    X1, res = step.map("mpc_steps", "serial", N, [2], [])(X[:, :N], U, ca.DM(p), times)
+    xs, us, ts = ca.MX.sym("x", nx), ca.MX.sym("u", nu), ca.MX.sym("t")
+    # the parameters closed over, not passed to the map: a map of a zero-size input made CasADi 3.8
+    # generate ``casadi_copy(0, 0, 0+ i*0)``, which gcc refuses
+    step_p = ca.Function("mpc_step", [xs, us, ts], list(step(xs, us, ca.DM(p), ts)))
+    X1, res = step_p.map("mpc_steps", "serial", int(N), [], [])(X[:, :N], U, times)
     c = ca.norm_1(x - X[:, 0]) + ca.sum2(ca.sum1(ca.fabs(X1 - X[:, 1:])))
     lo_x, hi_x = problem.x_bounds
     for i in np.flatnonzero(np.isfinite(lo_x) | np.isfinite(hi_x)):
