@@ -296,7 +296,7 @@ static void test_contact_steps(void) {
   casadi_real *imp = malloc(N * ND * sizeof(casadi_real)), *stats = malloc(N * NSTATS * sizeof(casadi_real));
   casadi_real apex = 0, pn = 0, pt = 0, deepest = 0;
   long done = 0, splits = 0, k, unconverged = 0, bounced = 0;
-  step_options o = test_default_options();
+  step_options o = DEFAULT_OPTIONS();
   int status;
   mu[0] = 0.5, mu[1] = 0;
   restitution[0] = 0, restitution[1] = 0.5;

@@ -208,7 +208,7 @@ static void test_newton_step(void) {
 static void test_fixed_order_work_estimate(void) {
   const casadi_real theta0 = 0.8, u = 0.7, T = 1.0;
   casadi_real q0[2], v0[2], q[2 * 400], v[2 * 400], lam[400], stats[NSTATS * 400], err[2];
-  step_options o = test_default_options();
+  step_options o = DEFAULT_OPTIONS();
   long done = -1, splits = -1;
   int k, status;
   cartesian(theta0, 0, q0, v0);
@@ -236,7 +236,7 @@ static void test_fixed_order_work_estimate(void) {
 static void test_rattle4_order_estimate(void) {
   const casadi_real theta0 = 0.8, u = 0.7, T = 1.0;
   casadi_real q0[2], v0[2], q[2 * 50], v[2 * 50], stats[NSTATS * 50], err[2];
-  step_options o = test_default_options();
+  step_options o = DEFAULT_OPTIONS();
   long done = -1;
   int k, status;
   o.scheme = SCHEME_RATTLE4;
@@ -269,7 +269,7 @@ static void test_rattle4_order_estimate(void) {
  * with max_halvings = 0; bad inputs are refused. */
 static void test_split_and_bad_input(void) {
   casadi_real q[2], v[2], q1[2], v1[2], u = 0;
-  step_options o = test_default_options();
+  step_options o = DEFAULT_OPTIONS();
   long splits = 0;
   int it = 0, status;
   workspace ws;
@@ -286,13 +286,13 @@ static void test_split_and_bad_input(void) {
   splits = 0;
   status = step_split(q, v, 0, &u, 0, 0.3, q1, v1, 0, &it, &splits, &o, 0, &ws, 0);
   CHECK(status == STEP_NO_CONVERGENCE && splits == 0, "status %d, %ld splits", status, splits);
-  o = test_default_options();
+  o = DEFAULT_OPTIONS();
   CHECK(stepper_step(q, v, 0, &u, 0, 0, q1, v1, 0, 0, &o, 0, 0) == STEP_BAD_INPUT, "h = 0");
   CHECK(stepper_step(q, v, 0, &u, 0, NAN, q1, v1, 0, 0, &o, 0, 0) == STEP_BAD_INPUT, "h = NaN");
   CHECK(stepper_step(q, v, INFINITY, &u, 0, 1e-3, q1, v1, 0, 0, &o, 0, 0) == STEP_BAD_INPUT, "t = inf");
   o.max_halvings = MAX_HALVINGS + 1;
   CHECK(stepper_step(q, v, 0, &u, 0, 1e-3, q1, v1, 0, 0, &o, block, 0) == STEP_BAD_INPUT, "max_halvings");
-  o = test_default_options();
+  o = DEFAULT_OPTIONS();
   o.tol = 0;
   CHECK(stepper_step(q, v, 0, &u, 0, 1e-3, q1, v1, 0, 0, &o, block, 0) == STEP_BAD_INPUT, "tol = 0");
   CHECK(run_fixed(q, v, 0, 0, 1e-3, 10, 3, 0, 0, 0, 0, 0, 0, 0, 0, &o, 0, 0, 0, 0, 0) == STEP_BAD_INPUT,
@@ -357,7 +357,7 @@ static void test_adaptive(void) {
 static void test_adaptive_rattle4(void) {
   const casadi_real theta0 = 1.0, T = 1.0, uu[11] = {0};
   casadi_real q0[2], v0[2], q[2 * 10], v[2 * 10], stats[NSTATS * 10], err[2];
-  step_options o = test_default_options();
+  step_options o = DEFAULT_OPTIONS();
   long rows = -1, steps[2] = {0, 0}, steps_rattle = 0;
   int k, r, status;
   cartesian(theta0, 0, q0, v0);
@@ -387,7 +387,7 @@ static void test_adaptive_rattle4(void) {
 static void test_project_and_outputs(void) {
   casadi_real q[2] = {0.6 * 1.01, -0.8 * 1.01}, v[2] = {1.0, 0.5}, phidot[1], y[NOUT], t = 0;
   casadi_real vt = 1.0 * 0.8 + 0.5 * 0.6; /* tangential speed along (0.8, 0.6) */
-  step_options o = test_default_options();
+  step_options o = DEFAULT_OPTIONS();
   workspace ws;
   char *block = malloc(step_work_bytes());
   layout(&ws, block);
@@ -404,7 +404,7 @@ static void test_project_and_outputs(void) {
 static void test_stop_request(void) {
   casadi_real q0[2] = {0.6, -0.8}, v0[2] = {0.8, 0.6}, q[4], v[4];
   volatile int stop = 1;
-  step_options o = test_default_options();
+  step_options o = DEFAULT_OPTIONS();
   long done = -1, rows = -1;
   int status;
   o.stop = &stop;

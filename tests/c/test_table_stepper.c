@@ -12,9 +12,7 @@
  * energy decreases; one step, and an error-controlled run on the constraint.  Built and run
  * by tests/test_stepper_runtime_c.py under AddressSanitizer and UndefinedBehaviorSanitizer. */
 #include "check.h"
-
-typedef double casadi_real;
-typedef long long casadi_int;
+#include "stepper_decls.h"
 
 #include "ncgen_element_tables.h"
 
@@ -86,34 +84,6 @@ static const ncgen_kinds KINDS = {JOINT_KINDS, 1, MEMBER_KINDS, 1, 0};
 #define TAB_SPRING_2D k_spring
 #define MAX_HALVINGS 10
 #define NSTATS 6
-#define STEP_OK 0
-#define STEP_NO_CONVERGENCE 1
-#define STEP_NOT_FINITE 2
-#define STEP_VELOCITY 3
-#define STEP_KERNEL 4
-#define STEP_BAD_INPUT 5
-#define STEP_TOO_MANY_STEPS 6
-#define STEP_TOO_SMALL 7
-#define STEP_INTERRUPTED 8
-#define SCHEME_RATTLE4 1
-typedef struct {
-  casadi_real tol;
-  int max_iter;
-  int max_halvings;
-  int scheme;
-  volatile int *stop;
-} step_options;
-
-static step_options default_options(void) {
-  step_options o;
-  o.tol = 1e-10;
-  o.max_iter = 12;
-  o.max_halvings = 4;
-  o.scheme = 0;
-  o.stop = 0;
-  return o;
-}
-#define DEFAULT_OPTIONS default_options
 
 #include "ncgen_table_stepper.h"
 
@@ -210,7 +180,7 @@ static void run(double c) {
   long rows = 0;
   int iters = 0;
   double qq[4], vv[4], ll[2] = {0, 0};
-  step_options o = default_options();
+  step_options o = DEFAULT_OPTIONS();
   long done = 0, splits = 0;
   int status;
   make_tables(30.0, 0.4, c, par);
