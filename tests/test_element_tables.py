@@ -7,7 +7,6 @@ models with uncovered kinds are refused by name; a new model of covered kinds is
 with no compiler on PATH once the library is cached."""
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import subprocess
@@ -23,6 +22,7 @@ from ncgen.codegen.element_kernels import JOINT_KINDS, MEMBER_KINDS, joint_kind,
 from ncgen.codegen.model_tables import UnsupportedElements, model_tables
 from ncgen.codegen.compiler import CANDIDATES
 from ncgen.runtime.table_library import TableFunctions, load_element_library, table_functions
+from no_compiler import run_without_compiler
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = sorted(p for p in (ROOT / "examples").glob("*.toml") if "[system]" in p.read_text())
@@ -223,36 +223,14 @@ def test_inconsistent_tables_are_refused(library):
 
 
 CHILD = r"""
-import json, shutil
+import json
 import numpy as np, casadi as ca
-import ncgen as nc
-import ncgen.codegen.compile_cache as cc
+from no_compiler import chain, forbid_compiler, fourbar
 from ncgen.runtime.table_library import table_functions
 
-assert not any(shutil.which(c) for c in ("cc", "gcc", "clang")), "a compiler is on PATH"
-def no_compile(*a, **k):
-    raise AssertionError("the compiler was called")
-cc.compile_package = no_compile
-
-def chain(n):
-    s = nc.System(f"new_chain{n}")
-    start = s.ground.point((0.0, 0.0, 0.0))
-    pos = np.zeros(3)
-    for k in range(n):
-        pos = pos + np.array([0.37 + 0.01 * k, 0.11 * (k % 3), -0.05])
-        start = s.add_bar(f"link{k}", coords="rr", mass=0.3 + 0.02 * k, ends=[start, tuple(pos)]).end(1)
-    return s
-
-def fourbar():
-    s = nc.System("new_fourbar", gravity=(0.0, -9.81))
-    crank = s.add_bar("crank", coords="rr", mass=0.4, ends=[(0.0, 0.0), (0.3, 0.7)])
-    coupler = s.add_bar("coupler", coords="rr", mass=1.1, ends=[crank.end(1), (2.2, 1.9)])
-    s.add_bar("rocker", coords="rr", mass=0.9, ends=[coupler.end(1), s.ground.point((2.6, 0.0))])
-    s.add_joint(nc.Revolute(s.ground, crank, at=(0.0, 0.0)))
-    return s
-
+forbid_compiler()
 out = {}
-for system in (chain(13), fourbar()):
+for system in (chain("new_chain13", 13, (0.37, 0.11, -0.05)), fourbar("new_fourbar")):
     model = system.build()
     tf = table_functions(model)
     q = model.q0 + 0.1 * np.random.default_rng(1).standard_normal(model.nq)
@@ -268,14 +246,7 @@ print(json.dumps(out))
 def test_a_new_model_needs_no_compiler(library, tmp_path):
     """Once the library is cached, a new chain and a new four-bar are evaluated in a process
     with no compiler on PATH (and compile_package replaced by a failure)."""
-    empty = tmp_path / "bin"
-    empty.mkdir()
-    env = {k: v for k, v in os.environ.items() if k not in ("CC", "PATH")}
-    env["PATH"] = str(empty)
-    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")])
-    out = subprocess.run([sys.executable, "-c", CHILD], env=env, capture_output=True, text=True, timeout=600)
-    assert out.returncode == 0, out.stderr[-3000:]
-    errors = json.loads(out.stdout.strip().splitlines()[-1])
+    errors = run_without_compiler(CHILD, tmp_path)
     assert set(errors) == {"new_chain13", "new_fourbar"}
     for name, (e_phi, e_A, e_M) in errors.items():
         assert max(e_phi, e_A, e_M) <= 1e-12, (name, e_phi, e_A, e_M)

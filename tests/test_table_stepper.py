@@ -7,7 +7,6 @@ and dampers, and stepped in a process with no compiler on PATH; the automatic ch
 override, and the refusal naming the element that is not covered."""
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import subprocess
@@ -24,6 +23,7 @@ from ncgen.codegen.model_tables import UnsupportedElements
 from ncgen.errors import NcgenError
 from ncgen.runtime.table_library import load_element_library
 from ncgen.runtime.table_stepper import stepper_kernels
+from no_compiler import run_without_compiler
 
 ROOT = Path(__file__).resolve().parent.parent
 #: Shipped examples whose every element is covered, and the agreement of the two forms (relative
@@ -148,37 +148,16 @@ def test_auto_choice_override_and_refusal(library):
 
 
 CHILD = r"""
-import json, shutil, time
+import json, time
 import numpy as np
 import ncgen as nc
-import ncgen.codegen.compile_cache as cc
+from no_compiler import chain, forbid_compiler, fourbar
 from ncgen.runtime.table_library import load_element_library
 
-assert not any(shutil.which(c) for c in ("cc", "gcc", "clang")), "a compiler is on PATH"
-def no_compile(*a, **k):
-    raise AssertionError("the compiler was called")
-cc.compile_package = no_compile
+forbid_compiler()
 load_element_library()              # the library found in the cache, loaded
-
-def chain(n):
-    s = nc.System(f"nocc_chain{n}")
-    start = s.ground.point((0.0, 0.0, 0.0))
-    pos = np.zeros(3)
-    for k in range(n):
-        pos = pos + np.array([0.29 + 0.01 * k, 0.13 * (k % 3), -0.04])
-        start = s.add_bar(f"link{k}", coords="rr", mass=0.3 + 0.02 * k, ends=[start, tuple(pos)]).end(1)
-    return s
-
-def fourbar():
-    s = nc.System("nocc_fourbar", gravity=(0.0, -9.81))
-    crank = s.add_bar("crank", coords="rr", mass=0.4, ends=[(0.0, 0.0), (0.3, 0.7)])
-    coupler = s.add_bar("coupler", coords="rr", mass=1.1, ends=[crank.end(1), (2.2, 1.9)])
-    s.add_bar("rocker", coords="rr", mass=0.9, ends=[coupler.end(1), s.ground.point((2.6, 0.0))])
-    s.add_joint(nc.Revolute(s.ground, crank, at=(0.0, 0.0)))
-    return s
-
 out = {}
-for system in (chain(13), fourbar()):
+for system in (chain("nocc_chain13", 13, (0.29, 0.13, -0.04)), fourbar("nocc_fourbar")):
     t = time.perf_counter()
     model = system.build()
     built = time.perf_counter()
@@ -197,14 +176,7 @@ def test_new_models_step_with_no_compiler(library, tmp_path):
     and stepped in a process with no compiler on PATH (and compile_package replaced by a
     failure): the tables' stepper, energy (relative to the largest kinetic energy) and
     constraints kept."""
-    empty = tmp_path / "bin"
-    empty.mkdir()
-    env = {k: v for k, v in os.environ.items() if k not in ("CC", "PATH")}
-    env["PATH"] = str(empty)
-    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")])
-    out = subprocess.run([sys.executable, "-c", CHILD], env=env, capture_output=True, text=True, timeout=600)
-    assert out.returncode == 0, out.stderr[-3000:]
-    runs = json.loads(out.stdout.strip().splitlines()[-1])
+    runs = run_without_compiler(CHILD, tmp_path)
     assert set(runs) == {"nocc_chain13", "nocc_fourbar"}
     for name, r in runs.items():
         assert r["kernels"] == "tables" and r["complete"], (name, r)

@@ -116,21 +116,31 @@ def cached(key: str | None, build: Callable[[], object], complete: bool = False)
     ``complete``: every function of ``model.functions`` is made before it is stored (what a
     run of the command line needs, so that a later run derives nothing); otherwise those the
     build made and :data:`STORED_FUNCTIONS`, the others staying lazy (see :func:`save`)."""
+    return _through_store(key, build, lambda: load(key),
+                          lambda model, said: save(key, model, said, complete=complete), stacklevel=3)
+
+
+def _through_store(key: str | None, make: Callable[[], object], read: Callable[[], tuple | None],
+                   store: Callable[[object, list], None], stacklevel: int):
+    """What :func:`cached` and :func:`cached_system` share: with ``key`` None or the store off,
+    ``make()``; else ``read()``'s ``(value, warnings)`` with its warnings given again (at
+    ``stacklevel`` from here), or, when it reads nothing, ``make()`` under a record of its
+    warnings, given again as they came and passed to ``store(value, [(category, message)])``."""
     if key is None or not enabled():
-        return build()
-    hit = load(key)
+        return make()
+    hit = read()
     if hit is not None:
-        model, said = hit
+        value, said = hit
         for category, message in said:
-            warnings.warn(message, category, stacklevel=2)
-        return model
+            warnings.warn(message, category, stacklevel=stacklevel)
+        return value
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        model = build()
-    for w in caught:                      # given as the build gave them, under the caller's filters
+        value = make()
+    for w in caught:                      # given as the make gave them, under the caller's filters
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    save(key, model, [(w.category, str(w.message)) for w in caught], complete=complete)
-    return model
+    store(value, [(w.category, str(w.message)) for w in caught])
+    return value
 
 
 def build_system(system, **options):
@@ -155,26 +165,14 @@ def cached_system(key: str | None, load: Callable[[], object]):
     """The :class:`~ncgen.model.system.System` stored under ``key`` (a model file read before:
     no parsing, no SymPy), else ``load()`` stored under it; the warnings of the read are kept
     and given again, as :func:`cached` does for models."""
-    if key is None or not enabled():
-        return load()
-    path = _path(key, "system")
-    hit = _read(path, key, _decode_system)
-    if hit is not None:
-        system, said = hit
-        for category, message in said:
-            warnings.warn(message, category, stacklevel=3)
-        return system
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        system = load()
-    for w in caught:
-        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    try:
-        payload = _pickle({"system": system, "warnings": [(w.category, str(w.message)) for w in caught]})
-    except Exception:                      # noqa: BLE001 — something in it does not pickle: not stored
-        return system
-    _write(path, key, payload)
-    return system
+    def store(system, said):
+        try:
+            payload = _pickle({"system": system, "warnings": said})
+        except Exception:                  # noqa: BLE001 — something in it does not pickle: not stored
+            return
+        _write(_path(key, "system"), key, payload)
+
+    return _through_store(key, load, lambda: _read(_path(key, "system"), key, _decode_system), store, stacklevel=4)
 
 
 def _decode_system(payload: bytes) -> tuple:
