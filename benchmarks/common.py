@@ -23,6 +23,7 @@ from __future__ import annotations
 import os
 import platform
 import re
+import resource
 import shutil
 import subprocess
 import time
@@ -83,6 +84,25 @@ def best_time(fn: Callable[[], object], repeat: int) -> tuple[float, object]:
         result = fn()
         best = min(best, time.perf_counter() - start)
     return best, result
+
+
+def _cpu() -> float:
+    me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def timed(fn: Callable[[], object]) -> tuple[float, float, object]:
+    """``(wall s, CPU s of the process and its children, result)`` of ``fn()``."""
+    w, c = time.perf_counter(), _cpu()
+    out = fn()
+    return time.perf_counter() - w, _cpu() - c, out
+
+
+def in_turn(round_index: int, paths: dict[str, Callable[[], object]]) -> dict[str, object]:
+    """Each path's result in one round of a comparison, the paths run in their order in even
+    rounds and in reverse in odd ones (so that none always goes first on a shared machine)."""
+    names = list(paths) if round_index % 2 == 0 else list(reversed(paths))
+    return {name: paths[name]() for name in names}
 
 
 # ---------------------------------------------------------------- chain

@@ -25,30 +25,16 @@ from __future__ import annotations
 
 import argparse
 import os
-import resource
 import statistics
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
-from common import chain_system, machine
+from common import best_time, chain_system, in_turn, machine, timed
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-
-def _cpu() -> float:
-    me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
-    return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
-
-
-def timed(fn):
-    """``(wall s, CPU s, result)`` of ``fn()``."""
-    w, c = time.perf_counter(), _cpu()
-    out = fn()
-    return time.perf_counter() - w, _cpu() - c, out
 
 
 def tables_path(model, q, fresh_cache: str | None):
@@ -69,15 +55,6 @@ def flat_path(model, q, fresh_cache: str | None):
         os.environ["NCGEN_CACHE_DIR"] = fresh_cache
     f = compile_direct("flat_A", model.functions["A"])
     return f, f(0.0, q, model.p0)[0]
-
-
-def best_call(fn, n: int) -> float:
-    best = float("inf")
-    for _ in range(n):
-        t = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t)
-    return best
 
 
 def fmt(samples) -> str:
@@ -104,20 +81,18 @@ def main() -> None:
                 wall, cpu, model = timed(lambda: chain_system(n).build())
                 results[n]["build"].append((wall, cpu))
                 q = model.q0 + 0.01 * np.random.default_rng(r).standard_normal(model.nq)
-                order = ("tables", "flat") if r % 2 == 0 else ("flat", "tables")
-                for path in order:
-                    run = tables_path if path == "tables" else flat_path
-                    cold = f"{tmp}/{path}-{n}-{r}"
-                    wall, cpu, (fn, A_cold) = timed(lambda: run(model, q, cold))
+                def first_A(path, run):
+                    wall, cpu, _ = timed(lambda: run(model, q, f"{tmp}/{path}-{n}-{r}"))
                     results[n][f"{path} cold"].append((wall, cpu))
                     wall, cpu, (fn, A) = timed(lambda: run(model, q, None))
                     results[n][f"{path} cached"].append((wall, cpu))
-                    if path == "tables":
-                        tf, A_tables = fn, A
-                        calls[n]["tables"] = best_call(lambda: tf.A(q), 200)
-                    else:
-                        flat, A_flat = fn, A
-                        calls[n]["flat"] = best_call(lambda: flat(0.0, q, model.p0), 200)
+                    return fn, A
+
+                done = in_turn(r, {"tables": lambda: first_A("tables", tables_path),
+                                   "flat": lambda: first_A("flat", flat_path)})
+                (tf, A_tables), (flat, A_flat) = done["tables"], done["flat"]
+                calls[n]["tables"] = best_time(lambda: tf.A(q), 200)[0]
+                calls[n]["flat"] = best_time(lambda: flat(0.0, q, model.p0), 200)[0]
                 import casadi as ca
                 dense_flat = np.array(ca.DM(flat.function.sparsity_out(0), A_flat))
                 err = np.abs(tf.tables.dense_A(A_tables) - dense_flat).max()

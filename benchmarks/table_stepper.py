@@ -34,8 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from common import chain_system, machine
-from element_tables import timed
+from common import chain_system, in_turn, machine, timed
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
@@ -113,9 +112,10 @@ def main() -> None:
             steps = 20 if args.smoke else max(50, 200_000 // (model.nq + model.nc))
             times = {"tables": [], "flat": []}
             for r in range(rounds):
-                order = (("tables", tables), ("flat", flat)) if r % 2 == 0 else (("flat", flat), ("tables", tables))
-                for name, stepper in order:
-                    times[name].append(per_step(stepper, model, steps))
+                done = in_turn(r, {"tables": lambda: per_step(tables, model, steps),
+                                   "flat": lambda: per_step(flat, model, steps)})
+                for name, seconds in done.items():
+                    times[name].append(seconds)
             t, f = times["tables"], times["flat"]
             print(f"  time per step, {steps} steps x {rounds} rounds (CPU us): tables min {min(t) * 1e6:.1f} "
                   f"median {statistics.median(t) * 1e6:.1f}; flat min {min(f) * 1e6:.1f} "

@@ -1,7 +1,8 @@
 """Where things live (docs/architecture.md): whole-system CasADi functions are built in
 ncgen/assembly, a model's run-time data is kept in one place (ncgen/model/data.py), and the
-rank tolerance of the manifold's numerics is defined once (ncgen/assembly/manifold.py) and
-the rank of a constraint Jacobian is taken by its rule."""
+rank tolerance of the manifold's numerics is defined once (ncgen/assembly/manifold.py), the
+rank of a constraint Jacobian is taken by its rule, and the manifold's Newton, null basis and
+KKT solves are not written again outside it."""
 from __future__ import annotations
 
 import ast
@@ -53,6 +54,41 @@ def test_ranks_of_the_constraint_jacobian_by_the_manifold_rule():
     found = [f"{p.relative_to(ROOT.parent)}:{line}" for p in sorted(ROOT.rglob("*.py")) if p not in allowed
              for line in calls(p, "matrix_rank")]
     assert not found, "a rank outside ncgen.assembly.manifold.numerical_rank:\n" + "\n".join(found)
+
+
+#: Modules whose numerics on the constraint manifold go through ncgen/assembly/manifold.py (issue 33's
+#: list), and what each takes from it.
+MANIFOLD_USERS = {"assembly/drive_assembly.py": {"newton"},
+                  "assembly/redundancy.py": {"newton", "null_basis"},
+                  "assembly/joint_space.py": {"newton", "solve_linear"},
+                  "assembly/kinematics.py": {"newton", "numerical_rank"},
+                  "optim/interpolate.py": {"kkt_solve"},
+                  "runtime/tree_check.py": {"numerical_rank"},
+                  "model/model.py": {"numerical_rank"}}
+#: Dense solves, ranks and bases that would be manifold numerics written again.
+LINEAR_ALGEBRA = ("solve", "lstsq", "svd", "pinv", "matrix_rank", "null_space", "qr")
+#: The calls left, and why they are not a second copy of the manifold's numerics.
+LINEAR_ALGEBRA_LEFT = {
+    # the rates and accelerations of a fully driven mechanism: A v = −Φ_t, A a = γ with A of
+    # full column rank (numerical_rank checked just before), an exact overdetermined solve
+    "assembly/kinematics.py": 2,
+}
+
+
+def test_manifold_numerics_in_one_place():
+    """The Newton onto Φ = 0, the null basis, the KKT solves and the rank of A are imported
+    from ncgen/assembly/manifold.py by the modules that need them (Model.rank, dof_report and
+    the tree check by its one rank rule, tests/test_rank_rule.py), which call no dense solve,
+    rank or basis of their own but the counted ones of ``LINEAR_ALGEBRA_LEFT``.  (The optimal
+    control guess, optim/guess.py, takes its accelerations and multipliers from the model's
+    ``accel``; its least squares fit inputs to accelerations, not a point to the manifold.)"""
+    for rel, names in MANIFOLD_USERS.items():
+        tree = ast.parse((ROOT / rel).read_text(encoding="utf-8"))
+        imported = {a.name for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)
+                    and n.module == "ncgen.assembly.manifold" for a in n.names}
+        assert names <= imported, (rel, names - imported)
+        found = [line for attribute in LINEAR_ALGEBRA for line in calls(ROOT / rel, attribute)]
+        assert len(found) == LINEAR_ALGEBRA_LEFT.get(rel, 0), (rel, found)
 
 
 def test_libraries_are_opened_in_one_place():
