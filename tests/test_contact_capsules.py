@@ -395,6 +395,7 @@ def test_cylinder_sphere_gap_is_the_signed_distance():
     np.testing.assert_allclose(WN_T, dg, atol=1e-7)
 
 
+@pytest.mark.slow      # fast: test_cylinder_sphere_gap_is_the_signed_distance (the same pair's gap and Jacobian)
 def test_ball_rests_on_the_end_face_of_a_standing_can():
     """A ball dropped 1 cm onto the top face of a can fixed to the ground, off its axis, and
     a ball lying in the angle between a can's side and the floor: at rest they carry m g on
@@ -455,6 +456,7 @@ def test_mesh_plane_takes_the_convex_hull_vertices(tmp_path):
         s.add_contact(nc.MeshPlane(body, tmp_path / "none.stl", name="m"))
 
 
+@pytest.mark.slow      # fast: test_mesh_plane_takes_the_convex_hull_vertices (the mesh's vertex contacts)
 def test_tetrahedron_rests_on_a_face_with_the_closed_form_vertex_forces(tmp_path):
     """A uniform tetrahedron (vertices 0, s e_x, s e_y, s e_z) on its face z = 0: the centre
     of mass projects at barycentric (1/2, 1/4, 1/4) of the base, so its vertices carry

@@ -136,8 +136,10 @@ def cubes_at_45(drop, mu):
     return s.build(contacts="nonsmooth")
 
 
-@pytest.mark.parametrize("drop,mu", [pytest.param(0.0, 0.0, marks=pytest.mark.slow),
-                                     pytest.param(0.01, 0.0, marks=pytest.mark.slow), (0.01, 0.5)])
+# slow: 86 s each on 2 loaded cores; fast: test_crossed_beams_touch_at_their_edges (the edge rows, gaps and W_N,
+# that the step reads) and tests/c/test_contact.c (the contact step on hand-made rows)
+@pytest.mark.slow
+@pytest.mark.parametrize("drop,mu", [(0.0, 0.0), (0.01, 0.0), (0.01, 0.5)])
 def test_equal_cubes_crossed_at_45_degrees_rest_on_their_edges(drop, mu):
     """An equal cube turned 45° about the vertical, set on (or dropped from 1 cm onto) a cube
     on the floor: no corner of either is over the other's face, so only the eight crossings

@@ -164,6 +164,8 @@ def projectile_scene(edges=False):
     return s.build(contacts="nonsmooth")
 
 
+@pytest.mark.slow      # fast: test_bounds_hold_at_random_configurations (the broad phase), every nonsmooth run
+#                         (element kernels by default, e.g. tests/test_contact.py) and tests/c/test_contact.c -DPAIRS
 def test_fast_bodies_and_every_kind_run_as_with_the_flat_kernels():
     """The element kernels with the broad phase give the flat kernels' run (to 1e-12, or as
     close as round-off alone moves it once impacts amplify it): a ball

@@ -484,6 +484,9 @@ def _check_frictional_stack(tr, n):
         np.testing.assert_allclose(f[f != 0], (n - i) * 2.0 * G / 8, rtol=1e-9)
 
 
+@pytest.mark.slow      # fast: test_stack_of_five_frictionless_boxes_rests_without_drift[2.0] (the same stack and
+#                         box–box corner pairs) and, with friction on a box,
+#                         tests/test_contact_cone.py::test_ball_on_a_crate_gets_its_weight_at_every_step
 def test_stack_of_five_boxes_with_friction_rests_without_drift():
     """h = 5 ms, 2 s (10 s in the slow tier)."""
     _check_frictional_stack(simulate(stack(0.5), 2.0, dt=0.05), 5)

@@ -130,6 +130,7 @@ def test_block_push_sliding_throughout_matches_the_closed_form(block):
     assert abs(sim.q[-1, 0] - sol.q[-1, 0]) < 1e-6 and abs(sim.q[-1, 0] - ex.DISTANCE) < 1e-6
 
 
+@pytest.mark.slow      # fast: test_block_push_sliding_throughout_matches_the_closed_form (the same block, a shorter horizon)
 def test_block_push_over_a_long_horizon_rests_part_of_the_time(block):
     ex, model = block
     T = 1.0                                                   # longer than 0.78 s: sticking is cheaper
@@ -157,6 +158,7 @@ def test_block_push_cost_agrees_with_nosnoc(block):
     assert abs(ours - theirs) < 1e-4
 
 
+@pytest.mark.slow      # fast: test_block_push_sliding_throughout_matches_the_closed_form (the same transcription, planar)
 def test_push_in_3d_on_the_polyhedral_cone_matches_the_planar_closed_form(block):
     """The push along x of a 3D block: friction on 4 cone directions (±t₁, ±t₂ of the floor),
     the same closed form as in the plane."""

@@ -58,6 +58,8 @@ def test_recursive_residual_vanishes_on_the_forward_dynamics(arm):
         assert abs(off[0]) > 1e-3          # the yaw joint's inertia about z
 
 
+@pytest.mark.slow      # robot scale; fast: test_recursive_residual_vanishes_on_the_forward_dynamics (the arm's residual the
+#                         transcription uses) and tests/test_optim_cartpole.py (the transcription and the replay)
 def test_point_to_point_reaches_the_joint_angles_and_replays(arm):
     from scipy.integrate import solve_ivp
 

@@ -162,6 +162,8 @@ def test_error_estimates_never_claim_zero():
         assert 0 < traj.info["error_estimate"]["q"] < 1e-12, kw
 
 
+@pytest.mark.slow      # fast: test_rattle4_error_control_against_dopri5 and test_error_estimates_never_claim_zero
+#                         (the same estimates on smaller models)
 def test_loose_error_control_estimates_track_the_true_error_on_the_20_bar_chain():
     """``rtol`` 1e-2 and 1e-3 on the work–precision chain (a 1e-2 run once reported 0.0: its
     shadow run at 1e-1 took the same steps): the global estimate within 0.1–10× of the true
