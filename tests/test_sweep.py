@@ -165,6 +165,8 @@ nc.sweep(model, {"omega": np.linspace(3.0, 6.0, 200)}, t_end=0.4, dt=0.005, path
 """
 
 
+@pytest.mark.slow      # a subprocess killed and run again; fast: test_interrupted_sweep_resumes_without_repeating_runs
+#                         (the same resume from the runs stored)
 def test_sweep_killed_by_sigkill_resumes(slider_crank, tmp_path):
     import signal
     import subprocess
