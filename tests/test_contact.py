@@ -528,6 +528,8 @@ def test_block_tips_over_its_edge_iff_above_the_critical_spin():
         assert np.all(tr.contact_state[1:][pivoting[1:], 1] == STICK)
 
 
+@pytest.mark.slow      # fast: test_block_tips_over_its_edge_iff_above_the_critical_spin (tipping over an edge against
+#                         the rigid pivot's closed-form threshold)
 def test_box_tips_over_its_edge_like_mujoco():
     """A 3D box (0.1 × 0.16 × 0.3 m, 1.5 kg, 8 corner points, μ = 1, e = 0) standing on the
     ground, set pivoting about its bottom edge x = +0.05 m with 0.9 and 1.1 times the critical

@@ -70,7 +70,9 @@ def crossed_beams(angle, lift):
     return s.build(contacts="smooth"), top_rot, sum(reach)     # smooth: starts inside allowed
 
 
-@pytest.mark.parametrize("angle", [np.pi / 2, 0.7, 2.2])
+# one angle in the fast tier (a model built per case, 30 s each on 2 loaded cores), the others slow: the same rows
+@pytest.mark.parametrize("angle", [pytest.param(np.pi / 2, marks=pytest.mark.slow), 0.7,
+                                   pytest.param(2.2, marks=pytest.mark.slow)])
 @pytest.mark.parametrize("lift", [0.01, -5e-4])   # inside: less than the margin, 0.8 mm
 def test_crossed_beams_touch_at_their_edges(angle, lift):
     """The smallest edge gap is the distance between the two edges along their common normal
@@ -96,6 +98,8 @@ def test_crossed_beams_touch_at_their_edges(angle, lift):
     np.testing.assert_allclose(WN[k, 0:3], [0, 0, 1], atol=1e-12)     # the upper beam's centre lifts the gap
 
 
+@pytest.mark.slow      # 16 models built; fast: test_crossed_beams_touch_at_their_edges[0.01-0.7] (the edge gap equals
+#                         the brute-force distance between boxes apart)
 def test_edge_gaps_never_report_contact_between_boxes_apart():
     """Random poses of two boxes: wherever the boxes are apart (brute-force distance > 0),
     every edge gap is at least that distance (no contact while apart), and equals it where

@@ -19,6 +19,7 @@ of a model (model) and of a trajectory (runtime), ``_repr_html_``, calls :mod:`n
 from __future__ import annotations
 
 import ast
+import functools
 import re
 from pathlib import Path
 
@@ -82,7 +83,9 @@ def imports(module: str, path: Path, known: set[str]) -> set[str]:
     return out
 
 
+@functools.lru_cache(maxsize=None)
 def graph() -> dict[str, set[str]]:
+    """Each module's ncgen imports, parsed once per process (the tests only read it)."""
     mods = modules()
     return {m: imports(m, p, set(mods)) for m, p in mods.items()}
 

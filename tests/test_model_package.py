@@ -44,7 +44,9 @@ def random_inputs(f: ca.Function, rng: np.random.Generator) -> list[ca.DM]:
 
 # ----------------------------------------------------------------- compiled vs VM
 @needs_cc
-@pytest.mark.parametrize("name,cflags", [("tensegrity", "-O0"), ("cartpole", None)])
+@pytest.mark.parametrize("name,cflags", [("tensegrity", "-O0"),
+                                         # fast: the tensegrity case, the same comparison
+                                         pytest.param("cartpole", None, marks=pytest.mark.slow)])
 def test_compiled_matches_vm_on_random_inputs(tmp_path, name, cflags):
     """Every function of the package (parameters and cables in the tensegrity, an input in
     the cart-pole) gives the VM's values to 1e-12, and the dae Jacobian IDAS uses too.

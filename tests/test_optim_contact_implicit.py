@@ -191,6 +191,8 @@ def test_an_optimum_above_the_complementarity_tolerance_is_refused(block):
         ocp.solve("rest")
 
 
+@pytest.mark.slow      # fast: test_problem_file_contacts_table (the problem file's contacts) and
+#                         test_block_push_sliding_throughout_matches_the_closed_form (the same solve)
 def test_ncgen_optimize_with_nonsmooth_contacts(tmp_path, block, capsys):
     """The command line: a model file, a problem file with a [contacts] table, --contacts nonsmooth."""
     import casadi as ca
