@@ -10,9 +10,10 @@ from natural_helpers import ALL_TYPES, IDS
 from ncgen.cli import SUBCOMMANDS, main
 
 
-#: The slowest derivations (3D bodies of three and four points, 10–25 s each on a loaded 2-core
-#: machine) run in the slow tier; the other 3D bodies (ruvw, rrvw) take the same path in the fast one.
-SLOW_TYPES = {(3, "rrrr"), (3, "rrrw")}
+#: One body, one bar and the point of each dimension (ruvw, ru, r; ruv, rr, r) in the fast tier; the other
+#: types (7–25 s each on a loaded 2-core machine) take the same path, in the slow tier (their formulas are
+#: checked per type in the fast tier by tests/test_member.py).
+SLOW_TYPES = {(3, "rrrr"), (3, "rrrw"), (3, "rrvw"), (3, "rr"), (2, "rrv"), (2, "rrr"), (2, "ru")}
 
 
 @pytest.mark.parametrize("dim,name", [pytest.param(*t, marks=pytest.mark.slow) if t in SLOW_TYPES else t
