@@ -6,13 +6,17 @@
 (:func:`~ncgen.codegen.model_tables.model_tables`), then the forces: gravity as a constant
 generalised force ``f_gravity = Σ_I S_Iᵀ C(c_G)ᵀ m_I g`` (its energy
 ``V = v_gravity − f_gravityᵀ q``), each :class:`~ncgen.model.forces.Spring` with constant
-``k``, rest length and damping as a spring element between two point features; the markers
+``k``, rest length and damping as a spring element between two point features; each force
+linear in the inputs with a constant map (``Q = B u``: a :class:`~ncgen.model.forces.PointForce`
+or :class:`~ncgen.model.forces.GeneralizedForce` whose value is a constant matrix times the
+inputs, :func:`input_force_map`) summed into ``B_u`` (``bu_*``, CSC); the markers
 as point features; and the KKT matrix ``K = [[M − h/2 ∂F/∂w, Aᵀ], [A, 0]]``: its pattern,
 the nonzero of ``K`` every product of the loops adds to, and the symbolic analysis of its
 sparse QR (CasADi's ``Sparsity.qr_sparse``, approximate minimum degree column order).
 
 A model is *table-covered* when every element is: joints as :mod:`ncgen.codegen.model_tables`
-says, forces as above, no contacts, inputs or parameters.  :class:`UnsupportedElements`
+says (without ``effort=``), forces as above, no contacts, controller or parameters, inputs
+only through input forces.  :class:`UnsupportedElements`
 names every element that is not.  Nothing here reads ``model.functions``.
 """
 from __future__ import annotations
@@ -24,6 +28,7 @@ import numpy as np
 
 from ncgen.codegen.model_tables import ModelTables, UnsupportedElements, _csc, _ints, _ptr, _reals, model_tables
 from ncgen.errors import CodegenError
+from ncgen.model.context import Context
 from ncgen.model.forces import Spring
 
 
@@ -49,20 +54,45 @@ def _number(value) -> bool:
     return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
 
 
+def input_force_map(model, force) -> np.ndarray | None:
+    """``B`` (nq × nu) when the generalised force of ``force`` is ``Q = B u`` with ``B``
+    constant (no dependence on t, q, v or the parameters, nothing at u = 0), else None."""
+    if not model.nu or type(force) is Spring or getattr(force, "system", None) is None:
+        return None
+    ctx = Context(force.system, model.layout)
+    if ctx.u.numel() != model.nu:
+        return None
+    try:
+        Q = ca.densify(force.generalized(ctx))
+        others = ca.vertcat(ctx.t, ctx.q, ctx.v, ctx.p)
+        B = ca.jacobian(Q, ctx.u)
+        if ca.depends_on(Q, others) or ca.depends_on(B, ctx.u):
+            return None
+        Q0, B0 = ca.Function("input_force", [ctx.u], [Q, B])(np.zeros(model.nu))
+    except RuntimeError:            # free symbols other than these: not a constant map
+        return None
+    Q0, B0 = np.asarray(Q0, float).ravel(), np.asarray(ca.densify(B0), float)
+    return B0 if not np.any(Q0) and np.all(np.isfinite(B0)) and B0.shape == (model.nq, model.nu) else None
+
+
 def uncovered_elements(model) -> dict[str, list[str]]:
     """The elements of ``model`` outside the stepper tables' kinds (other than joints), by kind."""
     out: dict[str, list[str]] = {}
     for f in model.forces:
         if type(f) is not Spring:
-            out.setdefault(f.kind, []).append(f"force {f.name!r}")
+            if input_force_map(model, f) is None:
+                out.setdefault(f.kind, []).append(f"force {f.name!r}")
         elif f.cable or not all(_number(x) for x in (f.k, f.rest_length, f.damping)):
             what = "cable" if f.cable else "with an expression for k, rest_length or damping"
             out.setdefault(f"Spring {what}", []).append(f"force {f.name!r}")
     if model.contacts:
         names = [f"contact {n!r}" for n in model.contact_names]
         out["contact"] = names[:4] + ([f"{len(names) - 4} more"] if len(names) > 4 else [])
-    if model.nu:
-        out.setdefault("input", []).extend(f"input {n!r}" for n in model.input_names)
+    actuated = [f"joint {j.name!r}" for j in model.joints if j.options.get("effort") is not None]
+    if actuated:
+        out["actuated joint (effort=)"] = actuated
+    if getattr(model, "controller", None) is not None:
+        out["controller"] = ["the model's controller"]
     if model.np:
         out.setdefault("parameter", []).extend(f"parameter {n!r}" for n in model.parameter_names)
     return out
@@ -73,7 +103,12 @@ def stepper_tables(model) -> StepperTables:
     missing = uncovered_elements(model)
     if missing:
         raise UnsupportedElements(model.name, missing)
-    springs = list(model.forces)
+    springs = [f for f in model.forces if type(f) is Spring]
+    B_u = sum((input_force_map(model, f) for f in model.forces if type(f) is not Spring),
+              np.zeros((model.nq, model.nu)))
+    bu_rows = [np.flatnonzero(B_u[:, j]) for j in range(model.nu)]
+    bu_row = _ints(np.concatenate(bu_rows)) if bu_rows else _ints([])
+    bu_val = _reals(np.concatenate([B_u[r, j] for j, r in enumerate(bu_rows)])) if bu_rows else _reals([])
     points = [(s.a, s.at_a) for s in springs] + [(s.b, s.at_b) for s in springs]
     points += [(m, local) for m in model.members.values() for local in m.markers.values()]
     T = model_tables(model, points)
@@ -114,6 +149,7 @@ def stepper_tables(model) -> StepperTables:
         "spr_kpos_ptr": _ptr(counts), "spr_kpos": pos[m_nnz + 2 * a_nnz:],
         "marker_feat": _ints(markers),
         "k_mpos": pos[:m_nnz], "k_apos": pos[m_nnz:m_nnz + a_nnz], "k_atpos": pos[m_nnz + a_nnz:m_nnz + 2 * a_nnz],
+        "bu_colind": _ptr([len(r) for r in bu_rows]), "bu_row": bu_row, "bu_val": bu_val,
         "k_colind": k_indptr, "k_row": k_indices, **qr,
     }
     return StepperTables(model.name, T, model.nu, model.np, len(markers), ns,

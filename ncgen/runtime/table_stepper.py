@@ -59,6 +59,7 @@ STEPPER_FIELDS = (
     ("const int *", "spr_kpos"), ("const int *", "marker_feat"),
     ("int", "nnz_k"), ("int", "nnz_v"), ("int", "nnz_r"),
     *(("const int *", f) for f in ("k_mpos", "k_apos", "k_atpos")),
+    ("const int *", "bu_colind"), ("const int *", "bu_row"), ("const double *", "bu_val"),
 )
 
 

@@ -13,7 +13,10 @@
  *                   the kernel TAB_SPRING (x = [r_a; r_b; ṙ_a; ṙ_b; k; l0; c]) gives the
  *                   force f on b (−f on a), its energy V and the power P = −c l̇² of its
  *                   damper, and J = ∂f/∂[r_a; r_b; ṙ_a; ṙ_b] (dim x 4 dim, column-major);
- *                   Q = G_bᵀ f − G_aᵀ f.
+ *                   Q = G_bᵀ f − G_aᵀ f;
+ *   inputs          forces linear in the inputs u with a constant map: Q = B_u u, B_u (nq x nu,
+ *                   CSC bu_colind, bu_row, bu_val) summed over the model's input forces
+ *                   (tab_input_forces; they do the power vᵀ B_u u).
  * The Newton matrix K = [[M − h/2 ∂F/∂w, A(q)ᵀ], [A(q + h w), 0]] (nq + nc square) is kept in
  * one CSC pattern: k_mpos, k_apos, k_atpos give the nonzero of K of each nonzero of M, of
  * A (lower block) and of Aᵀ (upper block), spr_kpos those of the dampers' products in the
@@ -47,6 +50,8 @@ typedef struct {
   const int *marker_feat;           /* n_markers features */
   int nnz_k, nnz_v, nnz_r;
   const int *k_mpos, *k_apos, *k_atpos;
+  const int *bu_colind, *bu_row;    /* the CSC pattern of B_u (nq x nu), the input forces' map */
+  const double *bu_val;             /* its nonzeros */
   ncgen_qr_pattern qr;              /* n = nq + nc, the pattern of K and its analysis */
 } ncgen_stepper_tables;
 
@@ -184,6 +189,26 @@ static int tab_forces(const double *q, const double *v, double *F, double *K, do
   return 0;
 }
 
+/* B_u u added to F (nq): the input forces (nothing without inputs). */
+static void tab_input_forces(const double *u, double *F) {
+  const ncgen_stepper_tables *S = tab_cur;
+  int j, k;
+  if (!S->nu || !u) return;
+  for (j = 0; j < S->nu; ++j)
+    for (k = S->bu_colind[j]; k < S->bu_colind[j + 1]; ++k) F[S->bu_row[k]] += S->bu_val[k] * u[j];
+}
+
+/* vᵀ B_u u: the input forces' power (W). */
+static double tab_input_power(const double *v, const double *u) {
+  const ncgen_stepper_tables *S = tab_cur;
+  double P = 0;
+  int j, k;
+  if (!S->nu || !u || !v) return 0;
+  for (j = 0; j < S->nu; ++j)
+    for (k = S->bu_colind[j]; k < S->bu_colind[j + 1]; ++k) P += v[S->bu_row[k]] * S->bu_val[k] * u[j];
+  return P;
+}
+
 /* M x added to y (nq). */
 static void tab_mass_times(const double *x, double *y) {
   const ncgen_tables *T = tab_cur->T;
@@ -240,6 +265,7 @@ static int tab_newton(const casadi_real **arg, casadi_real **res, casadi_int *iw
   if (tab_phi_jacobian(q, &phi_q, &Aq, b.ew) || tab_phi_jacobian(b.qh, &phi, &Ah, b.ew)) return 1;
   if (K) tab_kkt(K, Ah, Aq);
   if (tab_forces(q, wm, b.F, K, -h / 2, 0, 0, &b)) return 1;
+  tab_input_forces(arg[3], b.F);
   if (r) {
     memset(r, 0, sizeof(double) * (size_t)nq);
     tab_mass_times(b.x, r);
@@ -261,6 +287,7 @@ static int tab_velocity(const casadi_real **arg, casadi_real **res, casadi_int *
   if (tab_phi_jacobian(q, &phi, &A, b.ew)) return 1;
   if (res[1]) tab_kkt(res[1], A, A);
   if (tab_forces(q, wm, b.F, 0, 0, 0, 0, &b)) return 1;
+  tab_input_forces(arg[3], b.F);
   if (res[0]) {
     memset(res[0], 0, sizeof(double) * (size_t)(T->nq + T->nc));
     tab_mass_times(wm, res[0]);
@@ -318,6 +345,7 @@ static int tab_power(const casadi_real **arg, casadi_real **res, casadi_int *iw,
   double P = 0;
   (void)iw; (void)mem;
   if (tab_forces(arg[1], arg[2], 0, 0, 0, 0, &P, &b)) return 1;
+  P += tab_input_power(arg[2], arg[4]);
   if (res[0]) *res[0] = P;
   return 0;
 }
@@ -340,6 +368,7 @@ static int tab_outputs(const casadi_real **arg, casadi_real **res, casadi_int *i
     V -= S->f_gravity[i] * q[i];
   }
   if (tab_forces(q, v, 0, 0, 0, &V, &P, &b)) return 1;
+  P += tab_input_power(v, arg[4]);
   if (tab_constraints(q, v, b.x, &phi, &A, &b)) return 1;
   y[0] = Tk / 2;
   y[1] = V;
