@@ -14,15 +14,16 @@
  * factored once (sparse QR, ncgen_sparse_qr.h).  A perturbation (δq, δv, δu) of the step's
  * inputs moves the solution by
  *
- *   δz1 = −K1⁻¹ [−M δv − h/2 (F_q(q, w) δq + B_u δu) + L(δq)ᵀ ν;  A(q⁺) δq / h]
+ *   δz1 = −K1⁻¹ [−M δv − h/2 (F_q(q, w) δq + F_u δu) + L(δq)ᵀ ν;  A(q⁺) δq / h]
  *   δq⁺ = δq + h δw
- *   δz2 = −K2⁻¹ [L(δq⁺)ᵀ μ' − M δw − h/2 (F_q(q⁺, w) δq⁺ + F_w(q⁺, w) δw + B_u δu);  L(δq⁺) v⁺]
+ *   δz2 = −K2⁻¹ [L(δq⁺)ᵀ μ' − M δw − h/2 (F_q(q⁺, w) δq⁺ + F_w(q⁺, w) δw + F_u δu);  L(δq⁺) v⁺]
  *
  * and δx⁺ = [δq⁺; δv⁺].  L(d) = A(q + d) − A(q) is exact for every q: every covered
  * constraint is quadratic in q, so A is affine in q and L linear (L(d)ᵀ ν = Σ_k ν_k H_k d,
  * L(d) v⁺ = [v⁺ᵀ H_k d]_k); it is evaluated at a unit-norm d and scaled, so that its rounding
  * stays that of A.  F_q, F_w of the springs come from their kernel's J (∂f/∂[r_a; r_b; ṙ_a;
- * ṙ_b], evaluated once per stage); gravity is constant; the input forces are B_u u.  The
+ * ṙ_b], evaluated once per stage); gravity is constant; the input forces B_u u and the
+ * actuators' Σ τ_j ∇θ_j (their Hessians exact: ncgen_table_stepper.h).  The
  * columns of ∂x⁺/∂x (2nq x 2nq) and ∂x⁺/∂u (2nq x nu) are these δx⁺ for unit perturbations.
  *
  * Before the solve the converged z1 is polished by one more Newton step (the stepper's
@@ -105,14 +106,23 @@ static int tab_jac_springs(const double *q, const double *w, double *sj, tab_wor
   return 0;
 }
 
-/* dF = F_q dq + F_w dw of the springs (sj: their J at the stage's point, tab_jac_springs) plus
- * B_u du (du may be NULL). */
-static void tab_jac_forces(const double *sj, const double *dq, const double *dw, const double *du, tab_jac_work *b) {
+/* dF = F_q dq + F_w dw + F_u du at (q, w, u) (du may be NULL): the springs' (sj: their J at
+ * the stage's point, tab_jac_springs), B_u du, and the actuators' Σ (δτ_j ∇θ_j + τ_j ∇²θ_j dq). */
+static void tab_jac_forces(const double *q, const double *u, const double *sj, const double *dq, const double *dw,
+                           const double *du, tab_jac_work *b) {
   const ncgen_stepper_tables *S = tab_cur;
   const ncgen_tables *T = S->T;
   int dim = T->dim, s, X, i, j, e, nj = dim * 4 * dim;
+  double grad[TAB_ACT_MAX_K], hd[TAB_ACT_MAX_K];
   memset(b->dF, 0, sizeof(double) * (size_t)T->nq);
-  tab_input_forces(du, b->dF);
+  if (du)
+    for (j = 0; j < S->nu; ++j)
+      for (e = S->bu_colind[j]; e < S->bu_colind[j + 1]; ++e) b->dF[S->bu_row[e]] += S->bu_val[e] * du[j];
+  for (j = 0; j < S->n_act; ++j) {
+    double tau = tab_act_tau(j, u), dtau = tab_act_tau(j, du);
+    int n = tab_act_gradient(j, q, dq, grad, hd);
+    for (i = 0; i < n; ++i) b->dF[S->act_col[S->act_ptr[j] + i]] += dtau * grad[i] + tau * hd[i];
+  }
   if (!S->n_spring) return;
   ncgen_tables_features(T, dq, b->fd, 0);
   ncgen_tables_features(T, dw, b->fdw, 0);
@@ -202,7 +212,7 @@ static int tab_step_jacobians(const double *q, const double *v, double t, const 
     memset(b.dy, 0, sizeof(double) * (size_t)(2 * nq + nu));
     b.dy[j] = 1;
     /* first stage: δz1 = −K1⁻¹ δr1 */
-    tab_jac_forces(b.sj1, dq, b.zero, du, &b);
+    tab_jac_forces(q, u, b.sj1, dq, b.zero, du, &b);
     memset(b.dr, 0, sizeof(double) * (size_t)n);
     tab_mass_times(dv, b.dr);
     for (i = 0; i < nq; ++i) b.dr[i] = -b.dr[i] - h / 2 * b.dF[i];
@@ -217,7 +227,7 @@ static int tab_step_jacobians(const double *q, const double *v, double t, const 
     /* second stage: δq⁺ = δq + h δw, δz2 = −K2⁻¹ δr2 */
     for (i = 0; i < nq; ++i) b.dq1[i] = dq[i] + h * b.dz1[i];
     if (tab_jac_dA(q_next, b.A1, b.dq1, &b)) goto done;
-    tab_jac_forces(b.sj2, b.dq1, b.dz1, du, &b);
+    tab_jac_forces(q_next, u, b.sj2, b.dq1, b.dz1, du, &b);
     memset(b.dr, 0, sizeof(double) * (size_t)n);
     tab_mass_times(b.dz1, b.dr);
     for (i = 0; i < nq; ++i) b.dr[i] = -b.dr[i] - h / 2 * b.dF[i];
