@@ -26,9 +26,36 @@ STATUS = {1: "no convergence within max_iter", 2: "NaN or inf", 3: "the velocity
 SIGNATURE = c_binding.Signature("int", (
     ("const void *", "S"), ("const casadi_real *", "q"), ("const casadi_real *", "v"), ("casadi_real", "t"),
     ("const casadi_real *", "u"), ("const casadi_real *", "p"), ("casadi_real", "h"),
-    ("const ncgen_elements_step_options *", "options"), ("casadi_real *", "q_next"),
+    ("const ncgen_elements_step_options *", "options"), ("const int *", "d_colind"), ("const int *", "d_row"),
+    ("const double *", "d_val"), ("casadi_real *", "q_next"),
     ("casadi_real *", "v_next"), ("casadi_real *", "Jx"), ("casadi_real *", "Ju"), ("casadi_real *", "res"),
     ("int *", "iterations")))
+
+
+def constraint_hessians(stepper: TableStepper) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``D`` (a_nnz × nq, CSC ``(colind, row, val)``, int32/float64): column ``i`` the nonzeros
+    of ``A(e_i) − A(0)``.  Every covered constraint is quadratic in q, so ``A`` is affine and
+    ``A(q + d) − A(q) = D d`` for every q: the constant second derivatives the step's
+    Jacobians need (``Σ_k ν_k H_k d = (D d)ᵀ ν``).  Computed by the element library."""
+    from ncgen.runtime.table_library import TableFunctions
+
+    T = stepper.tables.tables
+    tf = TableFunctions(T, stepper.library_object)
+    nq = T.nq
+    A0 = tf.A(np.zeros(nq))
+    rows, vals, counts = [], [], []
+    for i in range(nq):
+        e = np.zeros(nq)
+        e[i] = 1.0
+        d = tf.A(e) - A0
+        nz = np.flatnonzero(d)
+        rows.append(nz)
+        vals.append(d[nz])
+        counts.append(nz.size)
+    colind = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
+    row = np.concatenate(rows).astype(np.int32) if rows else np.zeros(0, np.int32)
+    val = np.concatenate(vals) if vals else np.zeros(0)
+    return colind, np.ascontiguousarray(row), np.ascontiguousarray(val, dtype=float)
 
 
 class TableStep:
@@ -51,6 +78,7 @@ class TableStep:
         self._Jx, self._Ju = np.zeros((nx, nx), order="F"), np.zeros((nx, self.nu), order="F")
         self._res, self._it = np.zeros(1), np.zeros(1, dtype=np.intc)
         self._p = np.zeros(1)
+        self._D = constraint_hessians(stepper)
 
     def __call__(self, x: np.ndarray, u: np.ndarray, t: float, jacobians: bool):
         """``(status, x1, res, iterations, A, B)`` (``A``, ``B`` None unless ``jacobians``;
@@ -60,7 +88,7 @@ class TableStep:
         u = np.ascontiguousarray(u, dtype=float) if self.nu else self._p
         Jx = self._Jx.ctypes.data if jacobians else None
         status = self._fn(self._S, x.ctypes.data, x[nq:].ctypes.data, float(t), u.ctypes.data, self._p.ctypes.data,
-                          self.h, self._opt, self._q1.ctypes.data, self._v1.ctypes.data, Jx,
+                          self.h, self._opt, *(a.ctypes.data for a in self._D), self._q1.ctypes.data, self._v1.ctypes.data, Jx,
                           self._Ju.ctypes.data if jacobians and self.nu else None, self._res.ctypes.data,
                           self._it.ctypes.data)
         x1 = np.concatenate([self._q1, self._v1])

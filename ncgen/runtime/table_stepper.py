@@ -85,6 +85,7 @@ class TableStepper(CompiledStepper):
         lib = library or load_element_library()
         T = st.tables
         self.library, self.name = str(lib.path), st.name
+        self.library_object = lib
         self.nq, self.nc, self.nu, self.np = T.nq, T.nc, st.nu, st.np
         self.nout, self.nd = 5 + T.dim * st.n_markers, 0
         self.tables = st

@@ -19,12 +19,13 @@
  *   δz2 = −K2⁻¹ [L(δq⁺)ᵀ μ' − M δw − h/2 (F_q(q⁺, w) δq⁺ + F_w(q⁺, w) δw + F_u δu);  L(δq⁺) v⁺]
  *
  * and δx⁺ = [δq⁺; δv⁺].  L(d) = A(q + d) − A(q) is exact for every q: every covered
- * constraint is quadratic in q, so A is affine in q and L linear (L(d)ᵀ ν = Σ_k ν_k H_k d,
- * L(d) v⁺ = [v⁺ᵀ H_k d]_k); it is evaluated at a unit-norm d and scaled, so that its rounding
- * stays that of A.  F_q, F_w of the springs come from their kernel's J (∂f/∂[r_a; r_b; ṙ_a;
+ * constraint is quadratic in q, so A is affine in q and L linear and constant (L(d)ᵀ ν =
+ * Σ_k ν_k H_k d, L(d) v⁺ = [v⁺ᵀ H_k d]_k).  F_q, F_w of the springs come from their kernel's J (∂f/∂[r_a; r_b; ṙ_a;
  * ṙ_b], evaluated once per stage); gravity is constant; the input forces B_u u and the
  * actuators' Σ τ_j ∇θ_j (their Hessians exact: ncgen_table_stepper.h).  The
  * columns of ∂x⁺/∂x (2nq x 2nq) and ∂x⁺/∂u (2nq x nu) are these δx⁺ for unit perturbations.
+ * L is given as the constant matrix D (tab_jac_hessian), computed once per model by the
+ * caller from A(e_i) − A(0).
  *
  * Before the solve the converged z1 is polished by one more Newton step (the stepper's
  * test stops a few digits above the rounding floor; the quadratic step reaches it) and z2 is
@@ -37,7 +38,7 @@
 /* The scratch of tab_step_jacobians: the factors of K1 and K2 and the vectors of the solves. */
 typedef struct {
   double *V1, *R1, *beta1, *V2, *R2, *beta2, *K, *r, *z1, *z2, *dr, *dz1, *dz2, *dq1, *dy, *zero;
-  double *Aq, *A1, *La, *qs, *phis, *ew, *fd, *fdw, *sj1, *sj2, *dF, *x, *y;
+  double *A1, *La, *phis, *ew, *fd, *fdw, *sj1, *sj2, *dF, *x, *y;
 } tab_jac_work;
 
 /* Doubles of tab_jac_work for the tables of the run in progress. */
@@ -45,8 +46,8 @@ static long tab_jac_size(void) {
   const ncgen_stepper_tables *S = tab_cur;
   const ncgen_tables *T = S->T;
   long n = T->nq + T->nc, nf = (long)T->nf * T->dim, nsj = (long)S->n_spring * T->dim * 4 * T->dim;
-  return 2 * ((long)S->nnz_v + S->nnz_r + n) + S->nnz_k + 9 * n + (2L * T->nq + S->nu) + T->nq +
-         3L * T->a_nnz + 2L * T->nq + T->nc + tab_ew_size + 2 * nf + 2 * nsj;
+  return 2 * ((long)S->nnz_v + S->nnz_r + n) + S->nnz_k + 10 * n + (2L * T->nq + S->nu) + T->nq +
+         2L * T->a_nnz + T->nq + T->nc + tab_ew_size + 2 * nf + 2 * nsj;
 }
 
 static tab_jac_work tab_jac_layout(double *p) {
@@ -59,25 +60,27 @@ static tab_jac_work tab_jac_layout(double *p) {
   b.K = b.beta2 + n; b.r = b.K + S->nnz_k; b.z1 = b.r + n; b.z2 = b.z1 + n; b.dr = b.z2 + n;
   b.dz1 = b.dr + n; b.dz2 = b.dz1 + n; b.dq1 = b.dz2 + n; b.x = b.dq1 + n; b.y = b.x + n;
   b.dy = b.y + 2 * n; b.zero = b.dy + 2 * T->nq + S->nu;
-  b.Aq = b.zero + T->nq; b.A1 = b.Aq + T->a_nnz; b.La = b.A1 + T->a_nnz;
-  b.qs = b.La + T->a_nnz; b.phis = b.qs + T->nq; b.dF = b.phis + T->nc; b.ew = b.dF + T->nq;
+  b.A1 = b.zero + T->nq; b.La = b.A1 + T->a_nnz;
+  b.phis = b.La + T->a_nnz; b.dF = b.phis + T->nc; b.ew = b.dF + T->nq;
   b.fd = b.ew + tab_ew_size; b.fdw = b.fd + nf; b.sj1 = b.fdw + nf; b.sj2 = b.sj1 + nsj;
   return b;
 }
 
-/* L(d) = A(q + d) − A(q) (nonzeros of A, into La) given A(q) in Aq: 0 when d = 0. */
-static int tab_jac_dA(const double *q, const double *Aq, const double *d, tab_jac_work *b) {
+/* The constant second derivatives of the constraints: L(d) = D d (the nonzeros of A, a_nnz
+ * x nq, CSC d_colind, d_row, d_val), D's column i the nonzeros of A(e_i) − A(0). */
+typedef struct {
+  const int *colind, *row;
+  const double *val;
+} tab_jac_hessian;
+
+/* La = L(d) = D d (nonzeros of A). */
+static void tab_jac_dA(const tab_jac_hessian *D, const double *d, tab_jac_work *b) {
   const ncgen_tables *T = tab_cur->T;
-  double s = tab_norm_inf(d, T->nq);
-  int i;
-  if (s == 0) {
-    memset(b->La, 0, sizeof(double) * (size_t)T->a_nnz);
-    return 0;
-  }
-  for (i = 0; i < T->nq; ++i) b->qs[i] = q[i] + d[i] / s;
-  if (ncgen_tables_phi_jacobian(TAB_KINDS, T, b->qs, b->phis, b->La, b->ew)) return 1;
-  for (i = 0; i < T->a_nnz; ++i) b->La[i] = s * (b->La[i] - Aq[i]);
-  return 0;
+  int i, k;
+  memset(b->La, 0, sizeof(double) * (size_t)T->a_nnz);
+  for (i = 0; i < T->nq; ++i)
+    if (d[i] != 0)
+      for (k = D->colind[i]; k < D->colind[i + 1]; ++k) b->La[D->row[k]] += D->val[k] * d[i];
 }
 
 /* Every spring's J = ∂f/∂[r_a; r_b; ṙ_a; ṙ_b] at (q, w) into sj (dim x 4 dim each). */
@@ -155,8 +158,8 @@ static void tab_jac_kkt_times(const double *K, const double *x, double *y) {
 /* The step and, when Jx is not NULL, its Jacobians Jx = ∂x⁺/∂x (2nq x 2nq) and Ju = ∂x⁺/∂u
  * (2nq x nu), column-major (see the top of the file); *res: the residual of the solution. */
 static int tab_step_jacobians(const double *q, const double *v, double t, const double *u, const double *p,
-                              double h, const step_options *o, double *q_next, double *v_next, double *Jx,
-                              double *Ju, double *res, int *iterations) {
+                              double h, const step_options *o, const tab_jac_hessian *D, double *q_next,
+                              double *v_next, double *Jx, double *Ju, double *res, int *iterations) {
   const ncgen_stepper_tables *S = tab_cur;
   const ncgen_tables *T = S->T;
   int nq = T->nq, nc = T->nc, n = nq + nc, nu = S->nu, i, j, status = STEP_BAD_INPUT;
@@ -164,7 +167,6 @@ static int tab_step_jacobians(const double *q, const double *v, double t, const 
   double *mem = malloc(sizeof(double) * (size_t)tab_jac_size() + 1), *kw = 0, t1 = t + h, r1, r2;
   const double *arg[8];
   double *out[2];
-  const double *phi, *A;
   workspace ws;
   tab_jac_work b;
   tab_work kb;
@@ -198,12 +200,9 @@ static int tab_step_jacobians(const double *q, const double *v, double t, const 
   *res = isnan(r1) || isnan(r2) ? NAN : (r1 > r2 ? r1 : r2);
   status = STEP_OK;
   if (!Jx) goto done;
-  /* A(q), A(q⁺) and the springs' J at both stages */
+  /* A(q⁺) and the springs' J at both stages */
   status = STEP_KERNEL;
-  if (tab_phi_jacobian(q, &phi, &A, kb.ew)) goto done;
-  memcpy(b.Aq, A, sizeof(double) * (size_t)T->a_nnz);
-  if (tab_phi_jacobian(q_next, &phi, &A, kb.ew)) goto done;
-  memcpy(b.A1, A, sizeof(double) * (size_t)T->a_nnz);
+  if (ncgen_tables_phi_jacobian(TAB_KINDS, T, q_next, b.phis, b.A1, b.ew)) goto done;
   if (tab_jac_springs(q, b.z1, b.sj1, &kb) || tab_jac_springs(q_next, b.z1, b.sj2, &kb)) goto done;
   memset(b.zero, 0, sizeof(double) * (size_t)nq);
   for (j = 0; j < 2 * nq + nu; ++j) {
@@ -217,7 +216,7 @@ static int tab_step_jacobians(const double *q, const double *v, double t, const 
     tab_mass_times(dv, b.dr);
     for (i = 0; i < nq; ++i) b.dr[i] = -b.dr[i] - h / 2 * b.dF[i];
     if (j < nq) {
-      if (tab_jac_dA(q, b.Aq, dq, &b)) goto done;
+      tab_jac_dA(D, dq, &b);
       tab_a_times(b.La, b.z1 + nq, b.dr, 1);
       tab_a_times(b.A1, dq, b.dr + nq, 0);
       for (i = 0; i < nc; ++i) b.dr[nq + i] /= h;
@@ -226,7 +225,7 @@ static int tab_step_jacobians(const double *q, const double *v, double t, const 
     for (i = 0; i < n; ++i) b.dz1[i] = -b.dz1[i];
     /* second stage: δq⁺ = δq + h δw, δz2 = −K2⁻¹ δr2 */
     for (i = 0; i < nq; ++i) b.dq1[i] = dq[i] + h * b.dz1[i];
-    if (tab_jac_dA(q_next, b.A1, b.dq1, &b)) goto done;
+    tab_jac_dA(D, b.dq1, &b);
     tab_jac_forces(q_next, u, b.sj2, b.dq1, b.dz1, du, &b);
     memset(b.dr, 0, sizeof(double) * (size_t)n);
     tab_mass_times(b.dz1, b.dr);
