@@ -23,9 +23,9 @@ systems, compiled once per ncgen version, so a new model needs no C compiler); `
 generates and compiles the model's own step package (:mod:`ncgen.control.discrete`; cached
 by content, called through :class:`ncgen.codegen.direct.DirectFunction`); ``"auto"`` (the
 default) takes the tables when every element of the model is covered
-(:func:`~ncgen.codegen.stepper_tables.uncovered_elements`), else flat.  With the tables, what
-they do not provide — ``parameters=True``, rollouts and their adjoints — compiles the flat
-package at its first use.  Both solve the same equations from the same start to the
+(:func:`~ncgen.codegen.stepper_tables.uncovered_elements`; a covered model has no
+parameters, so ``C`` is empty), else flat.  With the tables, what they do not provide —
+rollouts and their adjoints — compiles the flat package at its first use.  Both solve the same equations from the same start to the
 rounding floor: their steps and Jacobians agree to about 1e-12.
 Not thread-safe: one object per thread.
 """
@@ -201,8 +201,9 @@ class StepFunction:
         theorem at the converged step: :mod:`ncgen.control.discrete`, or with the tables
         :mod:`ncgen.runtime.table_step`)."""
         args = self._args(x, u, p, t)
-        if self._table is not None and not parameters:
-            return self._table_solve(args[0], args[1], args[3], True)
+        if self._table is not None:            # a covered model has no parameters: C is empty
+            out = self._table_solve(args[0], args[1], args[3], True)
+            return out + (np.zeros((self.nx, 0)),) if parameters else out
         x1, z = self._solve(*args)
         J = self._jacobian(*self._sensitivities(z, *args))[0].reshape(self.nx, -1, order="F").copy()
         if not np.all(np.isfinite(J)):
