@@ -158,8 +158,9 @@ def compare_with_flat(model, h, st, x, u):
 
 def test_parameters_and_rollouts(cases):
     """``parameters=True`` gives the same step and an empty ``C`` (a covered model has no
-    parameters); rollouts, which the tables do not provide, compile the flat package at first
-    use and give the same step."""
+    parameters); rollouts run through the tables (nothing compiled); their gradients, which
+    the tables do not provide, compile the flat package at first use and equal central
+    differences of the tables' rollout."""
     model, h = cases["cartpole"]
     st = nc.step_function(model, h)
     x, u = moving_state(model, st)
@@ -167,8 +168,14 @@ def test_parameters_and_rollouts(cases):
     assert C.shape == (st.nx, 0) and st._flat is None
     x1t, At, Bt = st.jacobians(x, u)
     assert np.array_equal(x1t, x1) and np.array_equal(At, A) and np.array_equal(Bt, B)
-    X = st.rollout(x, np.tile(u, (3, 1)))
-    assert st._flat is not None and rel(X[0], x1t) < FLAT
+    U = np.tile(u, (4, 1))
+    X = st.rollout(x, U)
+    assert st._flat is None and np.array_equal(X[0], x1t) and np.array_equal(X[1], st(X[0], u))
+    W = np.random.default_rng(5).normal(size=X.shape)
+    dx0, dU = st.rollout_gradient(x, U, W)
+    assert st._flat is not None
+    g = central(lambda y: np.array([np.sum(W * st.rollout(y, U))]), x, 1e-6).ravel()
+    assert rel(dx0, g) < FD
 
 
 def test_auto_choice_override_and_refusal(cases):

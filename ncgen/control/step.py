@@ -24,8 +24,9 @@ generates and compiles the model's own step package (:mod:`ncgen.control.discret
 by content, called through :class:`ncgen.codegen.direct.DirectFunction`); ``"auto"`` (the
 default) takes the tables when every element of the model is covered
 (:func:`~ncgen.codegen.stepper_tables.uncovered_elements`; a covered model has no
-parameters, so ``C`` is empty), else flat.  With the tables, what they do not provide —
-rollouts and their adjoints — compiles the flat package at its first use.  Both solve the same equations from the same start to the
+parameters, so ``C`` is empty), else flat.  With the tables, rollouts run step by step
+through them; what they do not provide — the rollouts' adjoints (and the unknowns ``Z`` of
+the steps, which iLQR's second-order terms use) — compiles the flat package at its first use.  Both solve the same equations from the same start to the
 rounding floor: their steps and Jacobians agree to about 1e-12.
 Not thread-safe: one object per thread.
 """
@@ -171,17 +172,17 @@ class StepFunction:
         self._check(float(res[0]), x1, z, "")
         return x1.copy(), z.copy()
 
-    def _table_solve(self, x, u, t, jacobians: bool):
+    def _table_solve(self, x, u, t, jacobians: bool, where: str = ""):
         """``(x1, A, B)`` from the table stepper (``A``, ``B`` None unless ``jacobians``)."""
         status, x1, res, iterations, A, B = self._table(x, u, t, jacobians)
         if status:
             from ncgen.runtime.table_step import STATUS
             what = STATUS.get(status, f"status {status}")
-            raise StepDidNotConverge(f"step of {self.model.name!r} (h = {self.h:g} s): the Newton iterations "
+            raise StepDidNotConverge(f"step of {self.model.name!r} (h = {self.h:g} s){where}: the Newton iterations "
                                      f"ended without a residual below the tolerance ({what} after {iterations} "
                                      "iterations); take a smaller h, raise max_iter, or start from a state closer "
                                      "to the constraints")
-        self._check(res, x1, x1, "")
+        self._check(res, x1, x1, where)
         if jacobians and not (np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
             raise StepDidNotConverge(f"step of {self.model.name!r} (h = {self.h:g} s): its Jacobians are not "
                                      "finite: the Newton matrix is singular there (redundant constraints or a "
@@ -247,6 +248,11 @@ class StepFunction:
         """States after each of the ``N = len(U)`` steps, shape ``(N, nx)`` (``U``: ``(N, nu)``)."""
         U = self._inputs(U)
         x0, _, p, t0 = self._args(x0, U[0], p, t0)
+        if self._table is not None:          # step by step through the tables: nothing to compile
+            X, x = np.empty((U.shape[0], self.nx)), x0
+            for k in range(U.shape[0]):
+                x = X[k] = self._table_solve(x, U[k], t0 + k * self.h, False, f" {k} of the rollout")[0]
+            return X
         return self._rollout(x0, U, p, t0)[0]
 
     def _rollout(self, x0, U, p, t0) -> tuple[np.ndarray, np.ndarray]:
