@@ -296,3 +296,22 @@ def test_robot_table_jacobians_equal_the_flat_ones_and_central_differences(robot
     u = rng.normal(size=model.nu)
     check_against_differences(st, x, u, robot)
     compare_with_flat(model, 1e-3, st, x, u)
+
+
+def test_stepper_tables_struct_matches_its_python_mirror():
+    """The fields of ``ncgen_stepper_tables`` (templates/c/runtime/ncgen_table_stepper.h), in
+    order, are those of ``STEPPER_FIELDS`` (ncgen/runtime/table_stepper.py) and then ``qr``:
+    ctypes lays the struct out from that list, so a field added on one side only would shift
+    every field after it."""
+    import re
+
+    from ncgen.runtime.table_stepper import STEPPER_FIELDS
+
+    text = (ROOT / "templates" / "c" / "runtime" / "ncgen_table_stepper.h").read_text()
+    body = re.search(r"typedef struct \{(.*?)\} ncgen_stepper_tables;", text, re.S).group(1)
+    body = re.sub(r"/\*.*?\*/", "", body, flags=re.S)
+    names = []
+    for decl in filter(None, (d.strip() for d in body.split(";"))):
+        words = decl.split(None, 2) if decl.startswith("const") else decl.split(None, 1)
+        names += [n.strip().lstrip("*").strip() for n in words[-1].split(",")]
+    assert names == [f for _, f in STEPPER_FIELDS] + ["qr"]
