@@ -26,8 +26,9 @@ default) takes the tables when every element of the model is covered
 (:func:`~ncgen.codegen.stepper_tables.uncovered_elements`; a covered model has no
 parameters, so ``C`` is empty), else flat.  With the tables, rollouts run step by step
 through them; what they do not provide — the rollouts' adjoints (and the unknowns ``Z`` of
-the steps, which iLQR's second-order terms use) — compiles the flat package at its first use.  Both solve the same equations from the same start to the
-rounding floor: their steps and Jacobians agree to about 1e-12.
+the steps, which iLQR's second-order terms use) — compiles the flat package at its first
+use.  Both solve the same equations from the same start to the rounding floor: their steps
+and Jacobians agree to about 1e-12.
 Not thread-safe: one object per thread.
 """
 from __future__ import annotations

@@ -88,7 +88,8 @@ class TableStep:
         u = np.ascontiguousarray(u, dtype=float) if self.nu else self._p
         Jx = self._Jx.ctypes.data if jacobians else None
         status = self._fn(self._S, x.ctypes.data, x[nq:].ctypes.data, float(t), u.ctypes.data, self._p.ctypes.data,
-                          self.h, self._opt, *(a.ctypes.data for a in self._D), self._q1.ctypes.data, self._v1.ctypes.data, Jx,
+                          self.h, self._opt, *(a.ctypes.data for a in self._D), self._q1.ctypes.data,
+                          self._v1.ctypes.data, Jx,
                           self._Ju.ctypes.data if jacobians and self.nu else None, self._res.ctypes.data,
                           self._it.ctypes.data)
         x1 = np.concatenate([self._q1, self._v1])
