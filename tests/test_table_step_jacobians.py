@@ -3,8 +3,9 @@ issues 34 and 37): the implicit function theorem on the table stepper's own Newt
 with no compiler call.  Checked against the flat step function (the same equations through
 CasADi's generated code: steps and Jacobians equal to 1e-10) and against central differences
 of the step itself (1e-6), on a chain, a spatial four-bar, a controlled cart-pole (an input
-force), a chain of spring-dampers pushed by inputs (the dampers' ∂F/∂w in both stages) and a
-3-joint URDF arm (actuated hinges: their efforts' Hessians); the z1 and the UR10 from their
+force), a chain of spring-dampers pushed by inputs (the dampers' ∂F/∂w in both stages), a
+planar arm on two actuated hinges and a URDF arm of three hinges and a slider (actuated:
+their efforts' Hessians); the z1 and the UR10 from their
 URDFs (slow); a new model's Jacobians in a process with no compiler on PATH; the automatic
 choice, the override and the refusal."""
 from __future__ import annotations
@@ -70,8 +71,20 @@ def pushed_springs(n: int = 3, name: str = "tab_pushed_springs"):
     return s.build()
 
 
+def planar_arm():
+    """A planar body and bar on two actuated hinges (efforts = the inputs ``tau``)."""
+    s = nc.System("tab_planar_arm", gravity=(0.0, -9.81))
+    tau = s.add_input("tau", 2)
+    b1 = s.add_body("b1", coords="rrv", mass=1.0, inertia=0.05, position=(0.3, -0.1), rotation=0.2)
+    b2 = s.add_bar("b2", coords="rr", mass=0.5, ends=[(0.6, -0.2), (1.0, -0.6)])
+    s.add_joint(nc.Revolute(s.ground, b1, at=(0.0, 0.0), effort=tau[0]))
+    s.add_joint(nc.Revolute(b1, b2, at=(0.6, -0.2), effort=tau[1]))
+    return s.build()
+
+
 def models():
     yield "chain", nc.System.from_toml(EXAMPLES / "chain.toml").build(), 0.01
+    yield "planar_arm", planar_arm(), 0.01
     yield "fourbar_3d", nc.System.from_toml(EXAMPLES / "fourbar_3d.toml").build(), 0.01
     yield "cartpole", nc.System.from_toml(EXAMPLES / "cartpole.toml").build(), 0.02
     yield "pushed_springs", pushed_springs(), 0.01
@@ -124,7 +137,7 @@ def check_against_differences(st, x, u, tag):
 FAST_FLAT = ("chain", "cartpole")
 
 
-@pytest.mark.parametrize("name", ["chain", "fourbar_3d", "cartpole", "pushed_springs", "arm"])
+@pytest.mark.parametrize("name", ["chain", "fourbar_3d", "cartpole", "pushed_springs", "planar_arm", "arm"])
 def test_table_jacobians_equal_central_differences(cases, name):
     if name not in cases:
         pytest.skip("yourdfpy not installed")
@@ -138,7 +151,7 @@ def test_table_jacobians_equal_central_differences(cases, name):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["fourbar_3d", "pushed_springs", "arm"])
+@pytest.mark.parametrize("name", ["fourbar_3d", "pushed_springs", "planar_arm", "arm"])
 def test_table_jacobians_equal_the_flat_ones(cases, name):
     if name not in cases:
         pytest.skip("yourdfpy not installed")
