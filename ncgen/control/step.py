@@ -85,6 +85,20 @@ def step_function(model, h: float, method: str = "rattle", *, max_iter: int = MA
     return StepFunction(model, h, max_iter=max_iter, abstol=abstol, kernels=kernels)
 
 
+def _jacobian_uncovered(model) -> dict[str, list[str]]:
+    """Forces the table stepper may cover but whose derivatives its step Jacobians
+    (``templates/c/runtime/ncgen_table_jacobians.h``: gravity, springs, input forces,
+    actuated joints) do not have yet, by kind."""
+    from ncgen.codegen.stepper_tables import input_force_map
+    from ncgen.model.forces import Spring
+
+    out: dict[str, list[str]] = {}
+    for f in model.forces:
+        if type(f) is not Spring and input_force_map(model, f) is None:
+            out.setdefault(f"{f.kind} (no step Jacobian from the tables)", []).append(f"force {f.name!r}")
+    return out
+
+
 def _table_step(model, h: float, kernels: str, abstol: float, max_iter: int):
     """The :class:`~ncgen.runtime.table_step.TableStep` of ``model``, or None when ``kernels``
     is ``"flat"`` or (``"auto"``) the tables do not cover it; ``"tables"`` on a model they do
@@ -96,6 +110,11 @@ def _table_step(model, h: float, kernels: str, abstol: float, max_iter: int):
     from ncgen.runtime.table_stepper import table_stepper
 
     if kernels == "flat":
+        return None
+    missing = _jacobian_uncovered(model)
+    if missing:
+        if kernels == "tables":
+            raise UnsupportedElements(model.name, missing)
         return None
     cache = model_data(model).steppers
     if ("tables", None) not in cache:
