@@ -6,24 +6,33 @@
 (:func:`~ncgen.codegen.model_tables.model_tables`), then the forces: gravity as a constant
 generalised force ``f_gravity = Σ_I S_Iᵀ C(c_G)ᵀ m_I g`` (its energy
 ``V = v_gravity − f_gravityᵀ q``), each :class:`~ncgen.model.forces.Spring` with constant
-``k``, rest length and damping as a spring element between two point features; the markers
+``k``, rest length and damping as a spring element between two point features; each force
+linear in the inputs with a constant map (``Q = B u``: a :class:`~ncgen.model.forces.PointForce`
+or :class:`~ncgen.model.forces.GeneralizedForce` whose value is a constant matrix times the
+inputs, :func:`input_force_map`) summed into ``B_u`` (``bu_*``, CSC); the efforts of actuated
+Revolute and Prismatic joints, linear in the inputs, on their coordinates (each a quadratic
+form of the coordinates it touches, or the angle ``atan2(y, x)`` of two such forms:
+:func:`actuator_element`, ``act_*``); the markers
 as point features; and the KKT matrix ``K = [[M − h/2 ∂F/∂w, Aᵀ], [A, 0]]``: its pattern,
 the nonzero of ``K`` every product of the loops adds to, and the symbolic analysis of its
 sparse QR (CasADi's ``Sparsity.qr_sparse``, approximate minimum degree column order).
 
 A model is *table-covered* when every element is: joints as :mod:`ncgen.codegen.model_tables`
-says, forces as above, no contacts, inputs or parameters.  :class:`UnsupportedElements`
+says, forces and actuated joints as above, no contacts, controller or parameters, inputs
+only through input forces and efforts.  :class:`UnsupportedElements`
 names every element that is not.  Nothing here reads ``model.functions``.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import casadi as ca
 import numpy as np
 
 from ncgen.codegen.model_tables import ModelTables, UnsupportedElements, _csc, _ints, _ptr, _reals, model_tables
-from ncgen.errors import CodegenError
+from ncgen.errors import CodegenError, NcgenError
+from ncgen.model.context import Context
 from ncgen.model.forces import Spring
 
 
@@ -49,20 +58,110 @@ def _number(value) -> bool:
     return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
 
 
+#: Actuated joint kinds the tables cover (``effort=`` on one coordinate).
+ACTUATED_KINDS = ("Revolute", "Prismatic")
+#: Largest number of coordinates an actuated joint's coordinate may touch (``TAB_ACT_MAX_K``).
+ACT_MAX_K = 32
+
+
+@dataclass
+class ActuatorElement:
+    """An actuated joint in the tables: ``kind`` 0 (coordinate a quadratic form of
+    ``q[cols]``) or 1 (``atan2(y, x)`` of two), ``forms`` each ``[c0; g; H (column-major)]``
+    concatenated, ``tau`` the effort's coefficients of the inputs (nu)."""
+
+    kind: int
+    cols: np.ndarray
+    forms: np.ndarray
+    tau: np.ndarray
+
+
+def _context(model, element) -> Context:
+    """A context over the model's members and layout with the symbols of the inputs and
+    parameters of the system ``element`` belongs to."""
+    system = element.system
+    view = SimpleNamespace(members=model.members, inputs=dict(system.inputs), parameters=dict(system.parameters),
+                           dim=model.dim, name=model.name)
+    return Context(view, model.layout)
+
+
+def _linear_in_inputs(ctx, e: ca.SX, n_out: int) -> np.ndarray | None:
+    """``B`` (n_out × nu) when ``e = B u`` with ``B`` constant (nothing else, nothing at u = 0), else None."""
+    B = ca.jacobian(e, ctx.u)
+    if ca.depends_on(e, ca.vertcat(ctx.t, ctx.q, ctx.v, ctx.p)) or ca.depends_on(B, ctx.u):
+        return None
+    try:
+        e0, B0 = ca.Function("linear", [ctx.u], [e, B])(np.zeros(ctx.u.numel()))
+    except RuntimeError:            # free symbols other than these: not a constant map
+        return None
+    e0, B0 = np.asarray(e0, float).ravel(), np.asarray(ca.densify(B0), float)
+    return B0 if not np.any(e0) and np.all(np.isfinite(B0)) and B0.shape == (n_out, ctx.u.numel()) else None
+
+
+def actuator_element(model, joint) -> ActuatorElement | None:
+    """The :class:`ActuatorElement` of an actuated joint (``effort=``), or None when the
+    tables do not cover it (another kind, an effort not linear in the inputs, a coordinate
+    not of that form)."""
+    if (joint.kind not in ACTUATED_KINDS or type(joint).__module__ != "ncgen.model.joints"
+            or getattr(joint, "system", None) is None or not model.nu):
+        return None
+    ctx = _context(model, joint)
+    try:
+        forms = joint.gauge(ctx).terms(ctx) if joint.kind == "Revolute" else (joint.coordinate(ctx),)
+        tau = ctx.expression(joint.options["effort"], 1, f"{joint.label}: effort")
+    except (NcgenError, RuntimeError, TypeError):
+        return None
+    e = ca.densify(ca.vertcat(*forms))
+    coef = _linear_in_inputs(ctx, ca.densify(tau), 1)
+    if coef is None or ca.depends_on(e, ca.vertcat(ctx.t, ctx.v, ctx.u, ctx.p)):
+        return None
+    cols = np.unique(ca.jacobian(e, ctx.q).sparsity().get_col()).astype(int)
+    if not 1 <= cols.size <= ACT_MAX_K:
+        return None
+    out = []
+    for i in range(e.numel()):
+        H = ca.hessian(e[i], ctx.q)[0]
+        if ca.depends_on(H, ctx.q):
+            return None
+        c0, g, H0 = ca.Function("form", [ctx.q], [e[i], ca.jacobian(e[i], ctx.q), H])(np.zeros(model.nq))
+        g, H0 = np.asarray(ca.densify(g), float).ravel()[cols], np.asarray(ca.densify(H0), float)[np.ix_(cols, cols)]
+        out.append(np.concatenate([[float(c0)], g, H0.ravel(order="F")]))
+    return ActuatorElement(len(forms) - 1, cols, np.concatenate(out), coef.ravel())
+
+
+def input_force_map(model, force) -> np.ndarray | None:
+    """``B`` (nq × nu) when the generalised force of ``force`` is ``Q = B u`` with ``B``
+    constant (no dependence on t, q, v or the parameters, nothing at u = 0), else None."""
+    if not model.nu or type(force) is Spring or getattr(force, "system", None) is None:
+        return None
+    ctx = _context(model, force)
+    try:
+        Q = ca.densify(force.generalized(ctx))
+    except (NcgenError, RuntimeError, TypeError):
+        return None
+    return _linear_in_inputs(ctx, Q, model.nq)
+
+
 def uncovered_elements(model) -> dict[str, list[str]]:
     """The elements of ``model`` outside the stepper tables' kinds (other than joints), by kind."""
     out: dict[str, list[str]] = {}
     for f in model.forces:
         if type(f) is not Spring:
-            out.setdefault(f.kind, []).append(f"force {f.name!r}")
+            if input_force_map(model, f) is None:
+                out.setdefault(f.kind, []).append(f"force {f.name!r}")
         elif f.cable or not all(_number(x) for x in (f.k, f.rest_length, f.damping)):
             what = "cable" if f.cable else "with an expression for k, rest_length or damping"
             out.setdefault(f"Spring {what}", []).append(f"force {f.name!r}")
     if model.contacts:
         names = [f"contact {n!r}" for n in model.contact_names]
         out["contact"] = names[:4] + ([f"{len(names) - 4} more"] if len(names) > 4 else [])
-    if model.nu:
-        out.setdefault("input", []).extend(f"input {n!r}" for n in model.input_names)
+    actuated = [f"joint {j.name!r}" for j in model.joints
+                if j.options.get("effort") is not None and actuator_element(model, j) is None]
+    if actuated:
+        out["actuated joint (effort=) other than a Revolute or Prismatic with an effort linear in the inputs"] = \
+            actuated
+    if getattr(model, "controller", None) is not None:
+        out["controller"] = ["the model's controller"]
     if model.np:
         out.setdefault("parameter", []).extend(f"parameter {n!r}" for n in model.parameter_names)
     return out
@@ -73,7 +172,13 @@ def stepper_tables(model) -> StepperTables:
     missing = uncovered_elements(model)
     if missing:
         raise UnsupportedElements(model.name, missing)
-    springs = list(model.forces)
+    springs = [f for f in model.forces if type(f) is Spring]
+    B_u = sum((input_force_map(model, f) for f in model.forces if type(f) is not Spring),
+              np.zeros((model.nq, model.nu)))
+    acts = [actuator_element(model, j) for j in model.joints if j.options.get("effort") is not None]
+    bu_rows = [np.flatnonzero(B_u[:, j]) for j in range(model.nu)]
+    bu_row = _ints(np.concatenate(bu_rows)) if bu_rows else _ints([])
+    bu_val = _reals(np.concatenate([B_u[r, j] for j, r in enumerate(bu_rows)])) if bu_rows else _reals([])
     points = [(s.a, s.at_a) for s in springs] + [(s.b, s.at_b) for s in springs]
     points += [(m, local) for m in model.members.values() for local in m.markers.values()]
     T = model_tables(model, points)
@@ -114,6 +219,12 @@ def stepper_tables(model) -> StepperTables:
         "spr_kpos_ptr": _ptr(counts), "spr_kpos": pos[m_nnz + 2 * a_nnz:],
         "marker_feat": _ints(markers),
         "k_mpos": pos[:m_nnz], "k_apos": pos[m_nnz:m_nnz + a_nnz], "k_atpos": pos[m_nnz + a_nnz:m_nnz + 2 * a_nnz],
+        "bu_colind": _ptr([len(r) for r in bu_rows]), "bu_row": bu_row, "bu_val": bu_val,
+        "act_kind": _ints([a.kind for a in acts]), "act_ptr": _ptr([a.cols.size for a in acts]),
+        "act_col": _ints(np.concatenate([a.cols for a in acts]) if acts else []),
+        "act_form_ptr": _ptr([a.forms.size for a in acts]),
+        "act_form": _reals(np.concatenate([a.forms for a in acts]) if acts else []),
+        "act_tau": _reals(np.concatenate([a.tau for a in acts]) if acts else []),
         "k_colind": k_indptr, "k_row": k_indices, **qr,
     }
     return StepperTables(model.name, T, model.nu, model.np, len(markers), ns,

@@ -16,8 +16,19 @@ signed reproducibly) and :meth:`StepFunction.reduced_jacobians` the step's Jacob
 those coordinates, ``A_T = T(x⁺)ᵀ A T(x)``, ``B_T = T(x⁺)ᵀ B``, with ``δx = T(x) ξ``: what an
 LQR or an observer that needs a minimal state uses.
 
-The compiled library is cached by content (:mod:`ncgen.codegen.compile_cache`); a call
-goes through :class:`ncgen.codegen.direct.DirectFunction` (about a microsecond of overhead).
+Kernels (``kernels=``, :attr:`StepFunction.kernels` says which were chosen): ``"tables"``
+runs the step and its Jacobians ``A``, ``B`` through the element library's table stepper
+(:mod:`ncgen.runtime.table_step`: the implicit function theorem on the stepper's own Newton
+systems, compiled once per ncgen version, so a new model needs no C compiler); ``"flat"``
+generates and compiles the model's own step package (:mod:`ncgen.control.discrete`; cached
+by content, called through :class:`ncgen.codegen.direct.DirectFunction`); ``"auto"`` (the
+default) takes the tables when every element of the model is covered
+(:func:`~ncgen.codegen.stepper_tables.uncovered_elements`; a covered model has no
+parameters, so ``C`` is empty), else flat.  With the tables, rollouts run step by step
+through them; what they do not provide — the rollouts' adjoints (and the unknowns ``Z`` of
+the steps, which iLQR's second-order terms use) — compiles the flat package at its first
+use.  Both solve the same equations from the same start to the rounding floor: their steps
+and Jacobians agree to about 1e-12.
 Not thread-safe: one object per thread.
 """
 from __future__ import annotations
@@ -34,6 +45,8 @@ from ncgen.errors import NcgenError
 from ncgen.validation import as_numbers, as_scalar
 
 METHODS = ("rattle",)
+#: The choices of ``kernels`` (module docstring).
+KERNELS = ("auto", "tables", "flat")
 #: The functions of :func:`ncgen.control.discrete.step_functions` a step function compiles
 #: (one translation unit each, compiled in parallel).
 COMPILED = ("step_solution", "step_G_z", "step_G_y", "step_jacobian", "step_adjoint")
@@ -52,11 +65,12 @@ class StepDidNotConverge(NcgenError):
 
 
 def step_function(model, h: float, method: str = "rattle", *, max_iter: int = MAX_ITER,
-                  abstol: float | None = None) -> "StepFunction":
+                  abstol: float | None = None, kernels: str = "auto") -> "StepFunction":
     """One step of ``h`` seconds of ``model`` (``method="rattle"``: the compiled stepper's
     scheme, in natural coordinates, also for trees) as a :class:`StepFunction`.  ``abstol``:
     the Newton iterations' residual tolerance, default
-    :func:`~ncgen.control.discrete.default_abstol` (``1e-12 (1 + max |M_ij|)``)."""
+    :func:`~ncgen.control.discrete.default_abstol` (``1e-12 (1 + max |M_ij|)``).
+    ``kernels``: ``"auto"``, ``"tables"`` or ``"flat"`` (module docstring)."""
     if method not in METHODS:
         raise NcgenError(f"step_function: method: expected one of {', '.join(METHODS)}, got {method!r}")
     h = _positive(h, "h", "a positive, finite step in seconds")
@@ -66,27 +80,92 @@ def step_function(model, h: float, method: str = "rattle", *, max_iter: int = MA
                          "differentiable at impacts and is not supported (use contacts='smooth')")
     if not isinstance(max_iter, int) or max_iter < 1:
         raise NcgenError(f"step_function: max_iter: expected a positive integer, got {max_iter!r}")
-    return StepFunction(model, h, max_iter=max_iter, abstol=abstol)
+    if not isinstance(kernels, str) or kernels not in KERNELS:
+        raise NcgenError(f"step_function: kernels: expected one of {', '.join(map(repr, KERNELS))}, got {kernels!r}")
+    return StepFunction(model, h, max_iter=max_iter, abstol=abstol, kernels=kernels)
+
+
+def _jacobian_uncovered(model) -> dict[str, list[str]]:
+    """Forces the table stepper may cover but whose derivatives its step Jacobians
+    (``templates/c/runtime/ncgen_table_jacobians.h``: gravity, springs, input forces,
+    actuated joints) do not have yet, by kind."""
+    from ncgen.codegen.stepper_tables import input_force_map
+    from ncgen.model.forces import Spring
+
+    out: dict[str, list[str]] = {}
+    for f in model.forces:
+        if type(f) is not Spring and input_force_map(model, f) is None:
+            out.setdefault(f"{f.kind} (no step Jacobian from the tables)", []).append(f"force {f.name!r}")
+    return out
+
+
+def _table_step(model, h: float, kernels: str, abstol: float, max_iter: int):
+    """The :class:`~ncgen.runtime.table_step.TableStep` of ``model``, or None when ``kernels``
+    is ``"flat"`` or (``"auto"``) the tables do not cover it; ``"tables"`` on a model they do
+    not cover raises :class:`~ncgen.codegen.model_tables.UnsupportedElements` naming its
+    elements."""
+    from ncgen.codegen.model_tables import UnsupportedElements
+    from ncgen.model.data import model_data
+    from ncgen.runtime.table_step import TableStep
+    from ncgen.runtime.table_stepper import table_stepper
+
+    if kernels == "flat":
+        return None
+    missing = _jacobian_uncovered(model)
+    if missing:
+        if kernels == "tables":
+            raise UnsupportedElements(model.name, missing)
+        return None
+    cache = model_data(model).steppers
+    if ("tables", None) not in cache:
+        try:
+            cache[("tables", None)] = table_stepper(model)
+        except UnsupportedElements as e:
+            cache[("tables", None)] = e
+    hit = cache[("tables", None)]
+    if isinstance(hit, UnsupportedElements):
+        if kernels == "tables":
+            raise UnsupportedElements(model.name, hit.kinds)
+        return None
+    return TableStep(hit, h, tol=abstol / residual_scale(model), max_iter=max_iter)
 
 
 class StepFunction:
     """``x1 = st(x, u, p=None, t=None)``; ``x1, A, B = st.jacobians(x, u)``; rollouts and
     their adjoints; the tangent parametrisation (see the module docstring)."""
 
-    def __init__(self, model, h: float, *, max_iter: int, abstol: float):
+    def __init__(self, model, h: float, *, max_iter: int, abstol: float, kernels: str = "auto"):
         self.model, self.h = model, h
         self.nx, self.nu, self.np = 2 * model.nq, model.nu, model.np
-        self.functions = step_functions(model, h, abstol=abstol, max_iter=max_iter)
+        self._max_iter, self._abstol = max_iter, abstol
         self.residual_tol = RESIDUAL_TOL * residual_scale(model)
-        lib = _compile(f"{model.name}_step", [self.functions[k] for k in COMPILED])
-        self._solution, self._G_z, self._G_y = lib["step_solution"], lib["step_G_z"], lib["step_G_y"]
-        self._jacobian, self._adjoint = lib["step_jacobian"], lib["step_adjoint"]
         self.nz = 2 * (model.nq + model.nc)
         self._rollouts: dict = {}
-        self._J = state_constraint_jacobian(model)
+        self._functions = self._flat = self._J = None
+        self._table = _table_step(model, h, kernels, abstol, max_iter)
+        #: The kernels chosen: ``"tables"`` or ``"flat"`` (module docstring).
+        self.kernels = "tables" if self._table is not None else "flat"
+        if self._table is None:
+            self._load_flat()
+
+    @property
+    def functions(self) -> dict:
+        """The step's CasADi functions (:func:`ncgen.control.discrete.step_functions`), built at first use."""
+        if self._functions is None:
+            self._functions = step_functions(self.model, self.h, abstol=self._abstol, max_iter=self._max_iter)
+        return self._functions
+
+    def _load_flat(self) -> None:
+        """The model's own step package, generated and compiled (cached by content)."""
+        if self._flat is None:
+            lib = _compile(f"{self.model.name}_step", [self.functions[k] for k in COMPILED])
+            self._solution, self._G_z, self._G_y = lib["step_solution"], lib["step_G_z"], lib["step_G_y"]
+            self._jacobian, self._adjoint = lib["step_jacobian"], lib["step_adjoint"]
+            self._flat = lib
 
     def __repr__(self) -> str:
-        return f"<StepFunction of {self.model.name!r}: RATTLE, h={self.h} s, nx={self.nx}, nu={self.nu}>"
+        return (f"<StepFunction of {self.model.name!r}: RATTLE, h={self.h} s, nx={self.nx}, nu={self.nu}, "
+                f"kernels={self.kernels!r}>")
 
     # ----------------------------------------------------------------- arguments
     def _args(self, x, u, p, t) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
@@ -108,19 +187,44 @@ class StepFunction:
 
     def _solve(self, x, u, p, t) -> tuple[np.ndarray, np.ndarray]:
         """``(x1, z)``: the converged step (refused if it did not converge)."""
+        self._load_flat()
         x1, z, res = self._solution(x, u, p, t)
         self._check(float(res[0]), x1, z, "")
         return x1.copy(), z.copy()
 
+    def _table_solve(self, x, u, t, jacobians: bool, where: str = ""):
+        """``(x1, A, B)`` from the table stepper (``A``, ``B`` None unless ``jacobians``)."""
+        status, x1, res, iterations, A, B = self._table(x, u, t, jacobians)
+        if status:
+            from ncgen.runtime.table_step import STATUS
+            what = STATUS.get(status, f"status {status}")
+            raise StepDidNotConverge(f"step of {self.model.name!r} (h = {self.h:g} s){where}: the Newton iterations "
+                                     f"ended without a residual below the tolerance ({what} after {iterations} "
+                                     "iterations); take a smaller h, raise max_iter, or start from a state closer "
+                                     "to the constraints")
+        self._check(res, x1, x1, where)
+        if jacobians and not (np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
+            raise StepDidNotConverge(f"step of {self.model.name!r} (h = {self.h:g} s): its Jacobians are not "
+                                     "finite: the Newton matrix is singular there (redundant constraints or a "
+                                     "singular configuration)")
+        return x1, A, B
+
     # ---------------------------------------------------------------------- step
     def __call__(self, x, u=None, p=None, t=None) -> np.ndarray:
         """The state after one step."""
-        return self._solve(*self._args(x, u, p, t))[0]
+        args = self._args(x, u, p, t)
+        if self._table is not None:
+            return self._table_solve(args[0], args[1], args[3], False)[0]
+        return self._solve(*args)[0]
 
     def jacobians(self, x, u=None, p=None, t=None, *, parameters: bool = False):
         """``(x1, A, B)``, or ``(x1, A, B, C)`` with ``parameters=True`` (the implicit function
-        theorem at the converged step: :mod:`ncgen.control.discrete`)."""
+        theorem at the converged step: :mod:`ncgen.control.discrete`, or with the tables
+        :mod:`ncgen.runtime.table_step`)."""
         args = self._args(x, u, p, t)
+        if self._table is not None:            # a covered model has no parameters: C is empty
+            out = self._table_solve(args[0], args[1], args[3], True)
+            return out + (np.zeros((self.nx, 0)),) if parameters else out
         x1, z = self._solve(*args)
         J = self._jacobian(*self._sensitivities(z, *args))[0].reshape(self.nx, -1, order="F").copy()
         if not np.all(np.isfinite(J)):
@@ -133,6 +237,7 @@ class StepFunction:
 
     def _sensitivities(self, z, x, u, p, t) -> tuple[np.ndarray, np.ndarray]:
         """The nonzeros of ``G_z`` and ``G_y`` at the converged ``z`` (:mod:`ncgen.control.discrete`)."""
+        self._load_flat()
         return self._G_z(z, x, u, p, t)[0], self._G_y(z, x, u, p, t)[0]
 
     # ------------------------------------------------------------------ rollouts
@@ -140,6 +245,7 @@ class StepFunction:
         """The compiled rollout of ``n`` steps (``n`` is ``ROLLOUT_CHUNK`` or 1: built once per
         step function, whatever the rollouts' lengths)."""
         if n not in self._rollouts:
+            self._load_flat()
             f = rollout_function(self.functions["step_solution"], n, self.h)
             self._rollouts[n] = _compile(f"{self.model.name}_rollout{n}", [f])["rollout"]
         return self._rollouts[n]
@@ -162,6 +268,11 @@ class StepFunction:
         """States after each of the ``N = len(U)`` steps, shape ``(N, nx)`` (``U``: ``(N, nu)``)."""
         U = self._inputs(U)
         x0, _, p, t0 = self._args(x0, U[0], p, t0)
+        if self._table is not None:          # step by step through the tables: nothing to compile
+            X, x = np.empty((U.shape[0], self.nx)), x0
+            for k in range(U.shape[0]):
+                x = X[k] = self._table_solve(x, U[k], t0 + k * self.h, False, f" {k} of the rollout")[0]
+            return X
         return self._rollout(x0, U, p, t0)[0]
 
     def _rollout(self, x0, U, p, t0) -> tuple[np.ndarray, np.ndarray]:
@@ -211,6 +322,8 @@ class StepFunction:
         manifold ``{Φ = 0, A v + Φ_t = 0}`` at ``x``."""
         from ncgen.assembly.manifold import null_basis
         x, _, p, t = self._args(x, np.zeros(self.nu), p, t)
+        if self._J is None:
+            self._J = state_constraint_jacobian(self.model)
         return null_basis(np.array(self._J(x, p, t)), self.nx)
 
     def reduced_jacobians(self, x, u=None, p=None, t=None):

@@ -59,6 +59,9 @@ STEPPER_FIELDS = (
     ("const int *", "spr_kpos"), ("const int *", "marker_feat"),
     ("int", "nnz_k"), ("int", "nnz_v"), ("int", "nnz_r"),
     *(("const int *", f) for f in ("k_mpos", "k_apos", "k_atpos")),
+    ("const int *", "bu_colind"), ("const int *", "bu_row"), ("const double *", "bu_val"),
+    ("int", "n_act"), *(("const int *", f) for f in ("act_kind", "act_ptr", "act_col", "act_form_ptr")),
+    ("const double *", "act_form"), ("const double *", "act_tau"),
 )
 
 
@@ -82,6 +85,7 @@ class TableStepper(CompiledStepper):
         lib = library or load_element_library()
         T = st.tables
         self.library, self.name = str(lib.path), st.name
+        self.library_object = lib
         self.nq, self.nc, self.nu, self.np = T.nq, T.nc, st.nu, st.np
         self.nout, self.nd = 5 + T.dim * st.n_markers, 0
         self.tables = st
@@ -97,6 +101,7 @@ class TableStepper(CompiledStepper):
         ptr = {f: self._keep[f"s.{f}"].ctypes.data for f in fields if f"s.{f}" in self._keep}
         qr = _QrPattern(n=T.nq + T.nc, **{f: ptr[f] for _, f in _QR_FIELDS[1:]})
         self._S = _StepperTables(T=ctypes.addressof(self._T), nu=st.nu, np=st.np, n_markers=st.n_markers,
+                                 n_act=len(self._keep["s.act_kind"]),
                                  n_spring=st.n_spring, mass_scale=st.mass_scale, v_gravity=st.v_gravity,
                                  nnz_k=st.nnz_k, nnz_v=st.nnz_v, nnz_r=st.nnz_r,
                                  **{f: ptr[f] for t, f in STEPPER_FIELDS if "*" in t and f != "T"}, qr=qr)

@@ -13,7 +13,16 @@
  *                   the kernel TAB_SPRING (x = [r_a; r_b; ṙ_a; ṙ_b; k; l0; c]) gives the
  *                   force f on b (−f on a), its energy V and the power P = −c l̇² of its
  *                   damper, and J = ∂f/∂[r_a; r_b; ṙ_a; ṙ_b] (dim x 4 dim, column-major);
- *                   Q = G_bᵀ f − G_aᵀ f.
+ *                   Q = G_bᵀ f − G_aᵀ f;
+ *   inputs          forces linear in the inputs u with a constant map: Q = B_u u, B_u (nq x nu,
+ *                   CSC bu_colind, bu_row, bu_val) summed over the model's input forces
+ *                   (tab_input_forces; they do the power vᵀ B_u u);
+ *   actuators       the efforts τ_j = act_tau_jᵀ u of actuated joints (Revolute, Prismatic) on
+ *                   their coordinate θ_j(q): Q = Σ_j τ_j ∇θ_j.  θ_j is a quadratic form of the
+ *                   k_j ≤ TAB_ACT_MAX_K coordinates act_col[act_ptr[j] ..] it touches (act_kind 0,
+ *                   a slider's displacement) or atan2(y, x) of two such forms (act_kind 1, a
+ *                   hinge's angle); act_form[act_form_ptr[j] ..] holds each form as
+ *                   [c0; g (k); H (k x k, column-major)], value c0 + gᵀ q_j + ½ q_jᵀ H q_j.
  * The Newton matrix K = [[M − h/2 ∂F/∂w, A(q)ᵀ], [A(q + h w), 0]] (nq + nc square) is kept in
  * one CSC pattern: k_mpos, k_apos, k_atpos give the nonzero of K of each nonzero of M, of
  * A (lower block) and of Aᵀ (upper block), spr_kpos those of the dampers' products in the
@@ -47,6 +56,11 @@ typedef struct {
   const int *marker_feat;           /* n_markers features */
   int nnz_k, nnz_v, nnz_r;
   const int *k_mpos, *k_apos, *k_atpos;
+  const int *bu_colind, *bu_row;    /* the CSC pattern of B_u (nq x nu), the input forces' map */
+  const double *bu_val;             /* its nonzeros */
+  int n_act;                        /* actuated joints (above) */
+  const int *act_kind, *act_ptr, *act_col, *act_form_ptr;
+  const double *act_form, *act_tau; /* act_tau: nu per actuated joint */
   ncgen_qr_pattern qr;              /* n = nq + nc, the pattern of K and its analysis */
 } ncgen_stepper_tables;
 
@@ -184,6 +198,100 @@ static int tab_forces(const double *q, const double *v, double *F, double *K, do
   return 0;
 }
 
+#define TAB_ACT_MAX_K 32
+
+/* The effort act_tau_jᵀ u of actuated joint j (u NULL: 0). */
+static double tab_act_tau(int j, const double *u) {
+  const ncgen_stepper_tables *S = tab_cur;
+  double tau = 0;
+  int i;
+  if (!u) return 0;
+  for (i = 0; i < S->nu; ++i) tau += S->act_tau[(size_t)j * S->nu + i] * u[i];
+  return tau;
+}
+
+/* A quadratic form [c0; g; H] of k local coordinates ql: its value, its gradient into grad
+ * and, if dl is not NULL, H dl into hd. */
+static double tab_act_form(const double *form, int k, const double *ql, const double *dl, double *grad, double *hd) {
+  const double *g = form + 1, *H = form + 1 + k;
+  double val = form[0];
+  int r, c;
+  for (r = 0; r < k; ++r) {
+    grad[r] = g[r];
+    if (dl) hd[r] = 0;
+  }
+  for (c = 0; c < k; ++c)
+    for (r = 0; r < k; ++r) {
+      grad[r] += H[r + k * c] * ql[c];
+      if (dl) hd[r] += H[r + k * c] * dl[c];
+    }
+  for (r = 0; r < k; ++r) val += (g[r] + grad[r]) / 2 * ql[r];
+  return val;
+}
+
+/* The gradient ∇θ_j (k_j, local) of actuated joint j's coordinate at q and, if dq is not
+ * NULL, (∇²θ_j) dq into hd; returns k_j. */
+static int tab_act_gradient(int j, const double *q, const double *dq, double *grad, double *hd) {
+  const ncgen_stepper_tables *S = tab_cur;
+  const int lo = S->act_ptr[j], k = S->act_ptr[j + 1] - lo, *col = S->act_col + lo;
+  const double *form = S->act_form + S->act_form_ptr[j];
+  double ql[TAB_ACT_MAX_K], dl[TAB_ACT_MAX_K], gx[TAB_ACT_MAX_K], gy[TAB_ACT_MAX_K], hx[TAB_ACT_MAX_K],
+      hy[TAB_ACT_MAX_K], x, y, r2, dx = 0, dy = 0;
+  int i;
+  for (i = 0; i < k; ++i) {
+    ql[i] = q[col[i]];
+    dl[i] = dq ? dq[col[i]] : 0;
+  }
+  if (S->act_kind[j] == 0) {
+    tab_act_form(form, k, ql, dq ? dl : 0, grad, hd);
+    return k;
+  }
+  x = tab_act_form(form, k, ql, dl, gx, hx);         /* θ = atan2(y, x) */
+  y = tab_act_form(form + 1 + k + k * k, k, ql, dl, gy, hy);
+  r2 = x * x + y * y;
+  for (i = 0; i < k; ++i) {
+    grad[i] = (x * gy[i] - y * gx[i]) / r2;
+    dx += gx[i] * dl[i];
+    dy += gy[i] * dl[i];
+  }
+  if (dq)
+    for (i = 0; i < k; ++i)
+      hd[i] = (dx * gy[i] + x * hy[i] - dy * gx[i] - y * hx[i]) / r2 - grad[i] * 2 * (x * dx + y * dy) / r2;
+  return k;
+}
+
+/* The input forces at q added to F (nq): B_u u and the actuators' Σ τ_j ∇θ_j (nothing without
+ * inputs). */
+static void tab_input_forces(const double *q, const double *u, double *F) {
+  const ncgen_stepper_tables *S = tab_cur;
+  double grad[TAB_ACT_MAX_K];
+  int j, k;
+  if (!S->nu || !u) return;
+  for (j = 0; j < S->nu; ++j)
+    for (k = S->bu_colind[j]; k < S->bu_colind[j + 1]; ++k) F[S->bu_row[k]] += S->bu_val[k] * u[j];
+  for (j = 0; j < S->n_act; ++j) {
+    double tau = tab_act_tau(j, u);
+    int n = tab_act_gradient(j, q, 0, grad, 0);
+    for (k = 0; k < n; ++k) F[S->act_col[S->act_ptr[j] + k]] += tau * grad[k];
+  }
+}
+
+/* vᵀ Q of the input forces at (q, v): their power (W). */
+static double tab_input_power(const double *q, const double *v, const double *u) {
+  const ncgen_stepper_tables *S = tab_cur;
+  double P = 0, grad[TAB_ACT_MAX_K];
+  int j, k;
+  if (!S->nu || !u || !v) return 0;
+  for (j = 0; j < S->nu; ++j)
+    for (k = S->bu_colind[j]; k < S->bu_colind[j + 1]; ++k) P += v[S->bu_row[k]] * S->bu_val[k] * u[j];
+  for (j = 0; j < S->n_act; ++j) {
+    double tau = tab_act_tau(j, u);
+    int n = tab_act_gradient(j, q, 0, grad, 0);
+    for (k = 0; k < n; ++k) P += tau * grad[k] * v[S->act_col[S->act_ptr[j] + k]];
+  }
+  return P;
+}
+
 /* M x added to y (nq). */
 static void tab_mass_times(const double *x, double *y) {
   const ncgen_tables *T = tab_cur->T;
@@ -240,6 +348,7 @@ static int tab_newton(const casadi_real **arg, casadi_real **res, casadi_int *iw
   if (tab_phi_jacobian(q, &phi_q, &Aq, b.ew) || tab_phi_jacobian(b.qh, &phi, &Ah, b.ew)) return 1;
   if (K) tab_kkt(K, Ah, Aq);
   if (tab_forces(q, wm, b.F, K, -h / 2, 0, 0, &b)) return 1;
+  tab_input_forces(q, arg[3], b.F);
   if (r) {
     memset(r, 0, sizeof(double) * (size_t)nq);
     tab_mass_times(b.x, r);
@@ -261,6 +370,7 @@ static int tab_velocity(const casadi_real **arg, casadi_real **res, casadi_int *
   if (tab_phi_jacobian(q, &phi, &A, b.ew)) return 1;
   if (res[1]) tab_kkt(res[1], A, A);
   if (tab_forces(q, wm, b.F, 0, 0, 0, 0, &b)) return 1;
+  tab_input_forces(q, arg[3], b.F);
   if (res[0]) {
     memset(res[0], 0, sizeof(double) * (size_t)(T->nq + T->nc));
     tab_mass_times(wm, res[0]);
@@ -318,6 +428,7 @@ static int tab_power(const casadi_real **arg, casadi_real **res, casadi_int *iw,
   double P = 0;
   (void)iw; (void)mem;
   if (tab_forces(arg[1], arg[2], 0, 0, 0, 0, &P, &b)) return 1;
+  P += tab_input_power(arg[1], arg[2], arg[4]);
   if (res[0]) *res[0] = P;
   return 0;
 }
@@ -340,6 +451,7 @@ static int tab_outputs(const casadi_real **arg, casadi_real **res, casadi_int *i
     V -= S->f_gravity[i] * q[i];
   }
   if (tab_forces(q, v, 0, 0, 0, &V, &P, &b)) return 1;
+  P += tab_input_power(q, v, arg[4]);
   if (tab_constraints(q, v, b.x, &phi, &A, &b)) return 1;
   y[0] = Tk / 2;
   y[1] = V;
