@@ -1,6 +1,8 @@
 """Coverage of the MJCF import: the share of the MJCF files shipped by gymnasium
-(``envs/mujoco/assets``) and dm_control (``suite``) that ``nc.System.from_mjcf`` imports
-without an unsupported-feature warning (issue 40's target: ≥ 80 %).
+(``envs/mujoco/assets``) and dm_control (``suite``), and of the Menagerie models the tests
+use when ``$NCGEN_MENAGERIE`` names a mujoco_menagerie checkout (:data:`MENAGERIE`), that
+``nc.System.from_mjcf`` imports without an unsupported-feature warning (issue 40's target:
+≥ 80 %).
 
 Each file is one of: ``ok`` (imported, nothing left out), ``warned`` (imported; the
 MjcfWarning's items counted), ``refused`` (a ModelError: what the import cannot represent
@@ -10,6 +12,7 @@ and dm_control 1.0.50: 27 of 33 files (82 %) ok, 5 warned, 1 refused (docs/mjcf.
 from __future__ import annotations
 
 import importlib.util
+import os
 import platform
 import sys
 import warnings
@@ -20,8 +23,16 @@ from ncgen.errors import NcgenError
 from ncgen.model.mjcf import MjcfWarning
 
 
+#: The Menagerie models of tests/test_mjcf_menagerie.py: an arm, a quadruped, a loop robot.
+MENAGERIE = ("universal_robots_ur5e/ur5e.xml", "unitree_go1/go1.xml", "agility_cassie/cassie.xml")
+
+
 def shipped() -> dict[str, Path]:
     out = {}
+    root = os.environ.get("NCGEN_MENAGERIE")
+    for name in MENAGERIE if root else ():
+        if (Path(root) / name).is_file():
+            out[f"menagerie/{name}"] = Path(root) / name
     for pkg, sub in (("gymnasium", "envs/mujoco/assets"), ("dm_control", "suite")):
         spec = importlib.util.find_spec(pkg)
         if spec is None or spec.origin is None:

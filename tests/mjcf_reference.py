@@ -196,3 +196,97 @@ def constrained_qacc(mj, d, J) -> np.ndarray:
     mujoco.mj_fullM(mj, d, M)
     MJ = np.linalg.solve(M, J.T)
     return d.qacc - MJ @ np.linalg.solve(J @ MJ, J @ d.qacc)
+
+
+def mujoco_without_meshes(path):
+    """MuJoCo's compiled model of ``path`` with its mesh geoms, meshes and textures taken out
+    (a Menagerie model whose mesh files are not here; their inertials are explicit, so the
+    dynamics do not change), contacts, limits, equality constraints, friction loss and
+    control clamping off."""
+    import mujoco
+    spec = mujoco.MjSpec.from_file(str(path))
+    for g in list(spec.geoms):
+        if g.type == mujoco.mjtGeom.mjGEOM_MESH:
+            spec.delete(g)
+    for item in list(spec.meshes) + list(spec.textures):
+        spec.delete(item)
+    for mat in spec.materials:
+        mat.textures = [""] * len(mat.textures)
+    mj = spec.compile()
+    D = mujoco.mjtDisableBit
+    mj.opt.disableflags |= (D.mjDSBL_CONTACT | D.mjDSBL_LIMIT | D.mjDSBL_EQUALITY | D.mjDSBL_FRICTIONLOSS
+                            | D.mjDSBL_CLAMPCTRL)
+    return mj
+
+
+def to_mujoco(model, mj, qj, vj, aj):
+    """MuJoCo's ``(qpos, qvel, qacc)`` of ncgen's joint positions, rates and accelerations
+    (``model.to_joint_space``; a Spherical joint's rotation and rates are in world axes as
+    they were at the start, carried by the members, MuJoCo's ball in its body's axes):
+    hinges and slides (``qpos = ref + x``), balls and free joints by name or body; joints
+    that MuJoCo does not have (an ``<equality><connect>`` imported as a Spherical joint) are
+    left out, their rates following from the others."""
+    import mujoco
+    qpos, qvel, qacc = mj.qpos0.copy(), np.zeros(mj.nv), np.zeros(mj.nv)
+    js = model.joint_space
+    sq, sv = js.slices(), js.slices(rates=True)
+    for n in model.joint_names:
+        joint = js.joints[n]
+        jid = mujoco.mj_name2id(mj, mujoco.mjtObj.mjOBJ_JOINT, n.replace("_", "-"))
+        if jid < 0:
+            jid = mujoco.mj_name2id(mj, mujoco.mjtObj.mjOBJ_JOINT, n)
+        if joint.kind == "Free":
+            jid = mj.body_jntadr[mujoco.mj_name2id(mj, mujoco.mjtObj.mjOBJ_BODY, joint.B.name.replace("_", "-"))]
+        if jid < 0:
+            assert joint.kind == "Spherical", n
+            continue
+        ia, da = mj.jnt_qposadr[jid], mj.jnt_dofadr[jid]
+        x, w, a = np.asarray(qj[sq[n]]), np.asarray(vj[sv[n]]), np.asarray(aj[sv[n]])
+        if joint.kind in ("Revolute", "Prismatic"):
+            qpos[ia], qvel[da], qacc[da] = mj.qpos0[ia] + x[0], w[0], a[0]
+        elif joint.kind == "Spherical":        # ncgen: world axes at the start, carried; MuJoCo: B's axes
+            R0 = joint.B.R0
+            qpos[ia:ia + 4], qvel[da:da + 3], qacc[da:da + 3] = np.r_[x[3], R0.T @ x[:3]], R0.T @ w, R0.T @ a
+        elif joint.kind == "Free":             # MuJoCo: world linear velocity, local angular one
+            qpos[ia:ia + 7] = np.r_[x[:3], x[6], x[3:6]]
+            R = quat_wxyz_to_matrix(qpos[ia + 3:ia + 7])
+            qvel[da:da + 3], qvel[da + 3:da + 6] = R @ w[:3], w[3:]
+            qacc[da:da + 3], qacc[da + 3:da + 6] = R @ (a[:3] + np.cross(w[3:], w[:3])), a[3:]
+        else:
+            raise AssertionError(f"no map for {joint.kind}")
+    return qpos, qvel, qacc
+
+
+def connect_rows(mj, d):
+    """``(J, J̇ qvel)`` of MuJoCo's ``<connect>`` equalities at ``d`` (after ``mj_forward``):
+    the anchors' relative position ``x_1 − x_2`` has velocity ``J qvel`` and acceleration
+    ``J qacc + J̇ qvel``."""
+    import mujoco
+    rows, bias = [], []
+    for k in range(mj.neq):
+        if mj.eq_type[k] != mujoco.mjtEq.mjEQ_CONNECT:
+            continue
+        J, Jd = np.zeros((3, mj.nv)), np.zeros((3, mj.nv))
+        for body, anchor, sign in ((mj.eq_obj1id[k], mj.eq_data[k, 0:3], 1.0), (mj.eq_obj2id[k], mj.eq_data[k, 3:6], -1.0)):
+            x = d.xpos[body] + d.xmat[body].reshape(3, 3) @ anchor
+            jp, jpd = np.zeros((3, mj.nv)), np.zeros((3, mj.nv))
+            mujoco.mj_jac(mj, d, jp, None, x, body)
+            mujoco.mj_jacDot(mj, d, jpd, None, x, body)
+            J += sign * jp
+            Jd += sign * jpd
+        rows.append(J)
+        bias.append(Jd @ d.qvel)
+    return np.vstack(rows), np.concatenate(bias)
+
+
+def loop_qacc(mj, d):
+    """MuJoCo's acceleration with its connect equalities held exactly (``J qacc + J̇ qvel =
+    0``), from its unconstrained one and mass matrix: ``a = a₀ − M⁻¹Jᵀ (J M⁻¹ Jᵀ)⁺ (J a₀ +
+    J̇ qvel)`` (the pseudo-inverse: a planar loop's out-of-plane rows are dependent)."""
+    import mujoco
+    J, Jdv = connect_rows(mj, d)
+    M = np.zeros((mj.nv, mj.nv))
+    mujoco.mj_fullM(mj, d, M)
+    MJ = np.linalg.solve(M, J.T)
+    lam = np.linalg.lstsq(J @ MJ, J @ d.qacc + Jdv, rcond=1e-12)[0]
+    return d.qacc - MJ @ lam

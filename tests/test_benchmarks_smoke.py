@@ -71,6 +71,8 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800),   # each benchmark sc
                     "=== cart-pole MPC", "RATIO IPOPT re-solve / MPC step"]),
     ("step_jacobians.py", ["=== twodofs: nq = ", "C: ", "compiler peak RSS", "st.jacobians(x, u)",
                            "central differences: A", "TARGET twodofs"]),
+    ("mjcf_import_time.py", ["first    parse wall", "later 1  parse wall", "n =   10:", "CPU per element",
+                             "load average at the end"]),
 ])
 def test_smoke(tmp_path, script, expected):
     if script in ("joint_space.py", "joint_simulation.py", "tree_algorithms.py", "load_time.py", "call_overhead.py"):

@@ -516,7 +516,8 @@ def test_loop_closure_script_runs():
     out = subprocess.run([sys.executable, str(script), "--t-end", "0.2"], capture_output=True, text=True,
                          timeout=600, check=True).stdout
     gaps = [float(line.split("=")[-1].split()[0]) for line in out.splitlines() if "anchor distance" in line]
-    assert len(gaps) == 2 and all(g > 1e-5 for g in gaps)       # MuJoCo's soft connect opens
+    assert len(gaps) == 3 and gaps[0] < 1e-10                   # ncgen's anchors shared
+    assert all(g > 1e-5 for g in gaps[1:])                      # MuJoCo's soft connect opens
 
 
 @pytest.mark.slow      # imports all 33 files again (~35 s); fast: the FAST files

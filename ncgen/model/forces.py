@@ -252,8 +252,7 @@ class TorsionalSpring(Force):
             raise ModelError(f"{self.label}: {self.joint.label} is not a joint of system {system.name!r}; "
                              "add it with add_joint first")
         from ncgen.model.context import Context
-        from ncgen.model.layout import make_layout
-        self._terms(Context(system, make_layout(system.dim, list(system.members.values()))))
+        self._terms(Context.of_members(system, self.joint.members()))
 
     def nonnegative(self) -> dict:
         return {"k": self.k, "damping": self.damping}

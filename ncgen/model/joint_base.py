@@ -83,11 +83,10 @@ class Joint:
         attach_element(self, system, index, system.joints, "joint", lambda n: model_name(n, "joint name"), validate)
 
     def check(self, system):
-        """Validate the arguments and the geometry by writing the equations once."""
+        """Validate the arguments and the geometry by writing the equations once, in a
+        context of the joint's members (:meth:`~ncgen.model.context.Context.of_members`)."""
         from ncgen.model.context import Context
-        from ncgen.model.layout import make_layout
-        ctx = Context(system, make_layout(system.dim, list(system.members.values())))
-        self.geometry(ctx)
+        self.geometry(Context.of_members(system, self.members()))
 
     # ------------------------------------------------------------- equations
     def equations(self, ctx) -> list[tuple[str, ca.SX]]:

@@ -17,7 +17,7 @@ Distance         1   the two points ``at = (p_A, p_B)`` keep their distance  [1]
 PointOnLine      2   B's point at ``at`` stays on A's line through ``at`` along ``axis``  [1]
 PointOnPlane     1   B's point at ``at`` stays on A's plane through ``at`` with ``normal``
 JointSequence  3–4   hinges or slides applied in order (MuJoCo's joints of one body), see the class;
-                     made by the MJCF import, no TOML form (not in JOINT_TYPES)
+                     made by the MJCF import (TOML: ``steps = [{kind, at, axis}, ...]``)
 =============  ====  ====================================================================
 
 With a bar the count drops by the bar's missing spin: e.g. a bar sliding along its own
@@ -620,6 +620,6 @@ class CoordinateDriver(Joint):
 
 JOINT_TYPES: dict[str, type[Joint]] = {cls.kind: cls for cls in (
     Spherical, Revolute, Prismatic, Cylindrical, Universal, Planar, Fixed, Distance, PointOnLine,
-    PointOnPlane, Free, Mimic, CoordinateDriver)}
+    PointOnPlane, Free, Mimic, CoordinateDriver, JointSequence)}
 
-__all__ = ["JOINT_TYPES", "Joint", "JointSequence", *JOINT_TYPES]
+__all__ = ["JOINT_TYPES", "Joint", *JOINT_TYPES]

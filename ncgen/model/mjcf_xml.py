@@ -15,6 +15,7 @@ classes resolved.
 from __future__ import annotations
 
 import math
+import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 from xml.parsers import expat
@@ -100,6 +101,29 @@ def read_document(source):
         if el.tag not in KNOWN_TAGS:
             raise ModelError(f"MJCF {where(el)}: unknown element <{el.tag}> (not an MJCF element)")
     return root, directory, name
+
+
+def included_files(path) -> list[str]:
+    """The files that ``<include file=...>`` elements of the MJCF file ``path`` name, and
+    theirs, resolved (found by their text, without parsing: what a store keyed by the
+    file's contents must key too); a file that cannot be read is left to the reader."""
+    out, todo = [], [Path(path)]
+    while todo:
+        current = todo.pop()
+        try:
+            text = current.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError):
+            continue
+        for file in INCLUDE.findall(text):
+            found = str((current.parent / file).resolve())
+            if found not in out:
+                out.append(found)
+                todo.append(Path(found))
+    return out
+
+
+#: An ``<include file="...">`` element's file, in the text.
+INCLUDE = re.compile(r"<include\s[^>]*?file\s*=\s*[\"']([^\"']+)[\"']")
 
 
 def _read(path: Path, name: str) -> str:

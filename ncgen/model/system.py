@@ -302,9 +302,14 @@ class System:
         component each, ``model.joint_names`` order), joint damping, armature, friction,
         range and stiffness, motor actuators as ``system.actuator_gear``; what cannot be
         represented is named in one :class:`~ncgen.model.mjcf.MjcfWarning`.  See
-        :mod:`ncgen.model.mjcf`."""
+        :mod:`ncgen.model.mjcf`.  A file read before (its bytes and those of its includes
+        unchanged) comes from the store of built models without parsing."""
         from ncgen.model.mjcf import system_from_mjcf
-        return system_from_mjcf(source, cls, name=name)
+        from ncgen.model.mjcf_xml import included_files
+        path = _file(source)
+        includes = [] if path is None else [(f, _digest(f)) for f in included_files(path)]
+        return _read_through_store(cls, "mjcf", source, lambda: system_from_mjcf(source, cls, name=name),
+                                   name=name, includes=includes)
 
     def to_toml(self) -> str:
         """The system as TOML text that :meth:`from_toml` reads back."""
@@ -312,18 +317,22 @@ class System:
         return system_to_toml(self)
 
     def description(self) -> tuple:
-        """``(toml, frames, visuals, joint_limits)``: what the system is, as plain data (its
-        TOML text, and the named frames, visual geometry and joint limits, e.g. of a URDF, that
-        TOML does not hold); :func:`from_description` makes the same system again.  Pickling a
-        system sends this."""
+        """``(toml, frames, visuals, joint_laws)``: what the system is, as plain data (its
+        TOML text, and the named frames, visual geometry and joint dynamics and limits, e.g.
+        of a URDF or an MJCF file, that TOML does not hold: ``joint_laws = {joint: [(limits,
+        dynamics) of each coordinate]}``, one pair for a one-coordinate joint, one per
+        coordinate of a :class:`~ncgen.model.joints.JointSequence`); :func:`from_description`
+        makes the same system again.  Pickling a system sends this."""
         try:
             text = self.to_toml()
         except (NcgenError, TypeError, ValueError) as e:
             raise TypeError(f"system {self.name!r} cannot be pickled: its description is written as TOML, "
                             f"and that failed: {e}") from None
         frames = {k: (mem, np.array(R), np.array(p)) for k, (mem, R, p) in self.frames.items()}
-        limits = {j.name: dict(j.limits) for j in self.joints if j.limits}
-        return text, frames, [dict(v) for v in self.visuals], limits
+        from ncgen.model.joint_dynamics import coordinate_laws
+        laws = {j.name: [(dict(law.limits), dict(law.dynamics)) for law in coordinate_laws(j)] for j in self.joints
+                if any(law.limits or law.dynamics for law in coordinate_laws(j))}
+        return text, frames, [dict(v) for v in self.visuals], laws
 
     def __reduce__(self):
         from ncgen.version import __version__
@@ -385,13 +394,15 @@ def rebuilt_system(version: str, description: tuple) -> System:
     return _read_pickled(description)
 
 
-def from_description(toml: str, frames: dict, visuals: list, joint_limits: dict) -> System:
+def from_description(toml: str, frames: dict, visuals: list, joint_laws: dict) -> System:
     """The system of :meth:`System.description` (how a pickled system is read back)."""
+    from ncgen.model.joint_dynamics import coordinate_laws
     system = System.from_toml(toml)
     system.frames = {k: (mem, np.array(R), np.array(p)) for k, (mem, R, p) in frames.items()}
     system.visuals = [dict(v) for v in visuals]
     for joint in system.joints:
-        joint.limits = dict(joint_limits.get(joint.name, {}))
+        for law, (limits, dynamics) in zip(coordinate_laws(joint), joint_laws.get(joint.name, ())):
+            law.limits, law.dynamics = dict(limits), dict(dynamics)
     return system
 
 
@@ -405,6 +416,15 @@ def _read_through_store(cls, kind: str, source, load, **options) -> System:
     if cls is not System or path is None or not model_cache.enabled():
         return load()
     return model_cache.cached_system(model_cache.source_key(kind, path, **options), load)
+
+
+def _digest(path: str) -> str | None:
+    """sha256 of a file's bytes, or None when it cannot be read."""
+    import hashlib
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    except OSError:
+        return None
 
 
 def _file(source) -> Path | None:

@@ -9,6 +9,8 @@ Layout of a file (every table optional except ``members``)::
                   System.add_body / add_bar / add_point, plus markers = {name = [x, y, z]}
     [[joints]]    type = "Revolute", ..., name, between = ["ground", "crank"]
                   (CoordinateDriver: member = "crank"), and the joint's keywords
+                  (JointSequence: steps = [{kind = "hinge", at = [...], axis = [...]}, ...],
+                  names, effort = one value per step)
     [[forces]]    type = "Spring", ..., name, and the force's arguments
     [[contacts]]  type = "SpherePlane" (sphere, at, radius, plane = "ground", point, normal)
                   or "SphereSphere" (between = ["a", "b"], at_a, radius_a, at_b, radius_b),
@@ -50,7 +52,7 @@ from ncgen.model.contacts import BoxBox, SphereSphere
 from ncgen.model.cables import ClusteredCable
 from ncgen.model.forces import FORCE_TYPES as _BASIC_FORCES
 from ncgen.model.joint_base import Joint
-from ncgen.model.joints import JOINT_TYPES, CoordinateDriver, Mimic
+from ncgen.model.joints import JOINT_TYPES, CoordinateDriver, JointSequence, Mimic
 from ncgen.model.members import NodeRef
 from ncgen.model.shapes import shape_from_table
 from ncgen.validation import as_scalar, as_system_name
@@ -99,7 +101,7 @@ FORCE_FIELDS = {
                Field("at_b", "vector", True), Field("k", "value", True), Field("rest_length", "value"),
                Field("damping", "value"), Field("cable", "bool")),
     "TorsionalSpring": (Field("joint", "joint", True), Field("k", "value", True), Field("damping", "value"),
-                        Field("rest_angle", "value of t and parameters")),
+                        Field("rest_angle", "value of t and parameters"), Field("coordinate", "index")),
     "GeneralizedForce": (Field("value", "generalized force", True),),
     "ClusteredCable": (Field("path", "cable path", True), Field("k", "value", True),
                        Field("rest_length", "value", True), Field("damping", "value")),
@@ -148,14 +150,18 @@ SPECIAL_JOINT_FIELDS = {
               Field("offset", "number")),
 }
 #: How a joint's keyword argument is read, where it is not a world vector.
-JOINT_ARGUMENT_KINDS = {"drive": "value of t and parameters", "rotation": "rotation", ("Distance", "at"): "two points"}
+JOINT_ARGUMENT_KINDS = {"drive": "value of t and parameters", "rotation": "rotation", ("Distance", "at"): "two points",
+                        "steps": "joint steps", "names": "names"}
+#: Keys of one step of a JointSequence (``steps = [{kind, at, axis}, ...]``).
+STEP_KEYS = ("kind", "at", "axis")
 #: Components of a joint's actuator effort (``effort``), where not one.
 EFFORT_SIZE = {"Cylindrical": 2, "Universal": 2, "Planar": 3, "Spherical": 3}
 
 
-def joint_fields(cls, dim: int) -> tuple[Field, ...]:
+def joint_fields(cls, dim: int, steps: int = 1) -> tuple[Field, ...]:
     """The keys of joint type ``cls``: ``between`` (its two members) and its keyword-only
-    arguments (required when they have no default), or :data:`SPECIAL_JOINT_FIELDS`."""
+    arguments (required when they have no default), or :data:`SPECIAL_JOINT_FIELDS`;
+    ``steps``: a JointSequence's number of steps (the size of its ``effort``)."""
     if cls.kind in SPECIAL_JOINT_FIELDS:
         return SPECIAL_JOINT_FIELDS[cls.kind]
     fields = [Field("between", "two members", True, ("A", "B"))]
@@ -163,7 +169,8 @@ def joint_fields(cls, dim: int) -> tuple[Field, ...]:
         if p.kind != p.KEYWORD_ONLY or k == "name":
             continue
         if k == "effort":
-            n = (6 if dim == 3 else 3) if cls.kind == "Free" else EFFORT_SIZE.get(cls.kind, 1)
+            n = (6 if dim == 3 else 3) if cls.kind == "Free" else steps if cls is JointSequence \
+                else EFFORT_SIZE.get(cls.kind, 1)
             kind = f"value[{n}]"
         else:
             kind = JOINT_ARGUMENT_KINDS.get((cls.kind, k), JOINT_ARGUMENT_KINDS.get(k, "vector"))
@@ -475,6 +482,28 @@ class _Loader:
                     raise ModelError(f"{path}[{i}]: expected [member, [local point]], got {_describe(item)}")
                 out.append((self._member_ref(item[0], f"{path}[{i}][0]"), _vector(item[1], d, f"{path}[{i}][1]")))
             return out
+        if kind == "joint steps":
+            if not isinstance(v, list) or not all(isinstance(x, dict) for x in v):
+                raise ModelError(f"{path}: expected a list of tables {{kind = \"hinge\" or \"slide\", at = [x, y, z], "
+                                 f"axis = [x, y, z]}}, got {_describe(v)}")
+            out = []
+            for i, step in enumerate(v):
+                st = _Table(step, f"{path}[{i}]")
+                kind_ = _string(st.get("kind", required=True), st.at("kind"))
+                if kind_ not in ("hinge", "slide"):
+                    raise ModelError(f"{st.at('kind')}: expected \"hinge\" or \"slide\", got {kind_!r}")
+                out.append((kind_, _vector(st.get("at", required=True), d, st.at("at")),
+                            _vector(st.get("axis", required=True), d, st.at("axis"))))
+                st.finish(STEP_KEYS)
+            return out
+        if kind == "names":
+            if not isinstance(v, list):
+                raise ModelError(f"{path}: expected a list of names, got {_describe(v)}")
+            return [_string(x, f"{path}[{i}]") for i, x in enumerate(v)]
+        if kind == "index":
+            if not isinstance(v, int) or isinstance(v, bool) or v < 0:
+                raise ModelError(f"{path}: expected an index (an integer ≥ 0), got {_describe(v)}")
+            return v
         if kind == "slot or axis":
             if not isinstance(v, (str, int)) or isinstance(v, bool):
                 raise ModelError(f"{path}: expected a name or an index, got {_describe(v)}")
@@ -569,7 +598,9 @@ class _Loader:
         if cls is None:
             raise ModelError(f"{t.at('type')}: unknown joint type {typ!r}{did_you_mean(typ, JOINT_TYPES)}; "
                              f"expected one of {', '.join(JOINT_TYPES)}")
-        kw = self._fields(t, (Field("name", "string"), *joint_fields(cls, self.dim)), ("type",))
+        steps = t.data.get("steps")
+        n = len(steps) if isinstance(steps, list) else 1
+        kw = self._fields(t, (Field("name", "string"), *joint_fields(cls, self.dim, n)), ("type",))
         self._wrap(t.path, self.s.add_joint, cls(**kw))
 
     # ---------------------------------------------------------------- forces
@@ -682,6 +713,8 @@ def _joint_entries(j, sc) -> dict:
             out[k] = v if isinstance(v, str) else int(v)
         elif isinstance(v, Joint):                   # a Mimic's leader and follower
             out[k] = v.name
+        elif k == "steps" and isinstance(j, JointSequence):
+            out[k] = [dict(zip(STEP_KEYS, (kind, _plain(at), _plain(axis)))) for kind, at, axis in v]
         else:
             out[k] = _plain(v)
     return out
@@ -694,6 +727,8 @@ def _force_entries(f, sc, system) -> dict:
     out = {"type": f.kind, "name": f.name}
     for field in FORCE_FIELDS[f.kind]:
         value = tuple(getattr(f, a) for a in field.arg) if isinstance(field.arg, tuple) else getattr(f, field.key)
+        if value is None and not field.required:
+            continue
         if field.kind in ("member", "two members"):
             out[field.key] = [_member_name(m) for m in value] if isinstance(value, tuple) else _member_name(value)
         elif field.kind == "joint":
@@ -702,6 +737,8 @@ def _force_entries(f, sc, system) -> dict:
             out[field.key] = [[_member_name(m), _plain(at)] for m, at in value]
         elif field.kind == "bool":
             out[field.key] = bool(value)
+        elif field.kind == "index":
+            out[field.key] = int(value)
         elif field.kind == "vector":
             out[field.key] = _plain(value)
         elif field.kind == "generalized force":
