@@ -26,6 +26,7 @@ import numpy as np
 
 from ncgen.assembly.manifold import RANK_TOL
 from ncgen.errors import ModelError
+from ncgen.model.data import model_data
 from ncgen.model.rolling import KnifeEdge, RollingDisc, RollingSphere
 
 
@@ -116,3 +117,12 @@ class RollingSystem:
         """``(|phi(q)|∞, |A(q) v|∞)``: holonomic and velocity-level constraint residuals."""
         return (float(np.max(np.abs(np.asarray(self.phi(q))), initial=0.0)),
                 float(np.max(np.abs(np.asarray(self.A(q)) @ np.asarray(v, float)), initial=0.0)))
+
+
+def rolling_system(model) -> RollingSystem:
+    """The :class:`RollingSystem` of ``model`` and its own elements (``model.rolling``),
+    made once and kept in the model's data."""
+    data = model_data(model)
+    if data.rolling_system is None:
+        data.rolling_system = RollingSystem(model, model.rolling)
+    return data.rolling_system

@@ -8,16 +8,25 @@ Methods: ``"rk4"`` — the classical fourth-order scheme at the fixed step ``h``
 ``"dopri5"`` — Dormand–Prince 5(4) with error control (``rtol``, ``atol`` on ``[q; v]``),
 fifth order.  A projection after a step keeps the order of the step (its correction is of
 the size of the step's local error).  Outputs on the grid ``0, dt, 2 dt, …, t_end`` (s).
-Not yet a method of :func:`ncgen.simulate` (models do not carry nonholonomic elements).
+
+:class:`RollingIntegrator` is ``nc.simulate(model, ..., method="rolling")`` (the choice of
+``method="auto"`` for a model with rolling elements, ``model.rolling``) behind the seam of
+:mod:`ncgen.runtime.integrator`: ``integrator`` ``"dopri5"`` (default, ``rtol``/``atol``,
+defaults 1e-8 and 1e-10) or ``"rk4"`` (``substeps`` steps per output interval).
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from ncgen.assembly.manifold import newton, system_size
+from ncgen.assembly.nonholonomic import rolling_system
 from ncgen.errors import NcgenError
+from ncgen.runtime.integrator import Run
+from ncgen.runtime.options import SimulationOptions
+from ncgen.runtime.trajectory import Trajectory
 
 #: Dormand–Prince 5(4): nodes, stage coefficients, fifth-order weights, error weights (5th − 4th).
 _C = np.array([0.0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1.0, 1.0])
@@ -71,10 +80,27 @@ def simulate_rolling(system, t_end: float, dt: float, q0=None, v0=None, *, metho
         raise NcgenError(f"simulate_rolling: method: expected one of {METHODS}, found {method!r}")
     if not (t_end > 0 and dt > 0):
         raise NcgenError(f"simulate_rolling: t_end and dt: expected positive times, found {t_end!r}, {dt!r}")
+    per = 1
+    if method == "rk4":
+        h = dt if h is None else h
+        per = int(round(dt / h))
+        if per < 1 or abs(per * h - dt) > 1e-12 * dt:
+            raise NcgenError(f"simulate_rolling: h: expected dt / h to be a whole number, found dt = {dt}, h = {h}")
     model = system.model
-    q, v = project(system, model.q0 if q0 is None else q0, model.v0 if v0 is None else v0)
-    n_out = int(round(t_end / dt))
-    grid = dt * np.arange(n_out + 1)
+    grid = dt * np.arange(int(round(t_end / dt)) + 1)
+    return integrate(system, grid, model.q0 if q0 is None else q0, model.v0 if v0 is None else v0,
+                     method=method, substeps=per, rtol=rtol, atol=atol)
+
+
+def integrate(system, grid, q0, v0, *, method: str = "dopri5", substeps: int = 1, rtol: float = 1e-8,
+              atol: float = 1e-10) -> RollingTrajectory:
+    """Integrate ``system`` from ``(q0, v0)`` (projected onto both constraint levels) over the
+    output times ``grid`` (s, increasing; the motion does not depend on time, so only the
+    differences count): ``"rk4"`` takes ``substeps`` equal steps per output interval,
+    ``"dopri5"`` controls its steps by ``rtol``/``atol``."""
+    model = system.model
+    q, v = project(system, q0, v0)
+    grid = np.asarray(grid, float)
     zero = np.zeros(system.nq)
 
     def rhs(y):
@@ -91,12 +117,9 @@ def simulate_rolling(system, t_end: float, dt: float, q0=None, v0=None, *, metho
     record(q, v)
     y, steps, rejected = np.concatenate([q, v]), 0, 0
     if method == "rk4":
-        h = dt if h is None else h
-        per = int(round(dt / h))
-        if per < 1 or abs(per * h - dt) > 1e-12 * dt:
-            raise NcgenError(f"simulate_rolling: h: expected dt / h to be a whole number, found dt = {dt}, h = {h}")
-        for _ in range(n_out):
-            for _ in range(per):
+        for t_a, t_b in zip(grid[:-1], grid[1:]):
+            h = (t_b - t_a) / substeps
+            for _ in range(substeps):
                 k1 = rhs(y)
                 k2 = rhs(y + h / 2 * k1)
                 k3 = rhs(y + h / 2 * k2)
@@ -105,9 +128,9 @@ def simulate_rolling(system, t_end: float, dt: float, q0=None, v0=None, *, metho
                 steps += 1
             record(*np.split(y, 2))
     else:
-        t, step = 0.0, min(dt, 1e-3)
+        t, step = grid[0], min(grid[1] - grid[0], 1e-3) if len(grid) > 1 else 1e-3
         for target in grid[1:]:
-            while t < target - 1e-14 * max(1.0, target):
+            while t < target - 1e-14 * max(1.0, abs(target)):
                 step_now = min(step, target - t)
                 k = [rhs(y)]
                 for i in range(1, 7):
@@ -125,9 +148,52 @@ def simulate_rolling(system, t_end: float, dt: float, q0=None, v0=None, *, metho
                 proposed = step_now * min(5.0, max(0.2, 0.9 * ratio ** -0.2 if ratio > 0 else 5.0))
                 # a step cut short to land on an output does not shrink the next one
                 step = max(step, proposed) if ratio <= 1.0 and step_now < step else proposed
-                if step < 1e-12 * max(1.0, target):
+                if step < 1e-12 * max(1.0, abs(target)):
                     raise NcgenError(f"simulate_rolling: the step fell below {step:.3g} s at t = {t:.6g} s")
             record(*np.split(y, 2))
     q_out, v_out, e_out, r_out = (np.array(x) for x in zip(*rows))
     return RollingTrajectory(t=grid, q=q_out, v=v_out, energy=e_out, residual=r_out, steps=steps,
                              rejected=rejected, method=method)
+
+
+class RollingIntegrator:
+    """``method="rolling"``: a model with nonholonomic elements (``model.rolling``), its
+    holonomic and velocity constraints kept by projection after every step (module
+    docstring).  The trajectory's ``constraint_residual`` is ``|Φ̂(q)|∞`` (the model's
+    constraints and the elements' heights), its ``velocity_residual`` ``|Â(q) v|∞`` (both
+    levels, the rolling rows included); ``lam`` holds the model's multipliers,
+    ``info["rolling_names"]`` the elements."""
+
+    METHOD = "rolling"
+    OPTIONS = ("integrator", "rtol", "atol", "substeps")
+
+    def __init__(self, model, opts: SimulationOptions):
+        if opts.joint_dynamics:
+            raise NcgenError("method='rolling' does not take joint_dynamics=True (the joints' damping, friction "
+                             "and limits are not in the rolling equations)")
+        self.model, self.opts = model, opts
+        self.system = rolling_system(model)
+
+    def run(self, run: Run) -> Trajectory:
+        model, o = self.model, self.opts
+        if run.controller is not None or run.feedback is not None or np.any(run.U != 0):
+            raise NcgenError(f"method='rolling': model {model.name!r}: inputs are not taken yet (the rolling "
+                             "equations are built with u = 0); give u=None")
+        if not np.array_equal(run.p, model.p0):
+            raise NcgenError(f"method='rolling': model {model.name!r}: parameters other than the model's "
+                             "are not taken yet (the rolling equations are built with model.p0); give p=None")
+        method = o.integrator or "dopri5"
+        rtol = 1e-8 if o.rtol is None else o.rtol
+        atol = 1e-10 if o.atol is None else o.atol
+        start = time.perf_counter()
+        tr = integrate(self.system, run.t, run.q, run.v, method=method, substeps=o.substeps, rtol=rtol, atol=atol)
+        system, nc_ = self.system, model.nc
+        zero = np.zeros(system.nq)
+        lam = np.array([np.asarray(system.accel(q, v, zero)[1]).ravel()[:nc_] for q, v in zip(tr.q, tr.v)])
+        levels = np.array([system.residuals(q, v) for q, v in zip(tr.q, tr.v)])
+        info = {"method": self.METHOD, "integrator": method, "steps": tr.steps, "rejected": tr.rejected,
+                "rolling_names": [e.name for e in model.rolling], "wall_time": time.perf_counter() - start,
+                **({"rtol": rtol, "atol": atol} if method == "dopri5" else {"substeps": o.substeps})}
+        traj = Trajectory.from_states(model, tr.t, tr.q, tr.v, lam.reshape(len(tr.t), nc_), run.U, run.p, info)
+        traj.constraint_residual, traj.velocity_residual = levels[:, 0], levels[:, 1]
+        return traj

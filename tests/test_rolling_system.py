@@ -1,0 +1,156 @@
+"""Rolling elements as part of a model: written in TOML (``[[rolling]]``) or added by
+``System.add_rolling``, carried by the built model, simulated by ``nc.simulate`` through the
+integrator seam (``method="rolling"``), checked against the steady precession's closed form,
+energy conservation and the constraint residual; bad input named."""
+import numpy as np
+import pytest
+
+import ncgen as nc
+from ncgen.errors import ModelError, NcgenError
+from ncgen.runtime.rolling_integrator import simulate_rolling
+from test_rolling import A_d, C_d, a, g, m, steady_precession
+
+BETA, W3 = 0.2, 30.0
+
+
+def disc_toml(beta=BETA, w3=W3, precession=None, wobble=0.0, rolling=None) -> str:
+    """The disc of :mod:`test_rolling` (tilted by ``beta`` about x, contact at the origin,
+    spin ``w3`` about its axle, precessing at the closed-form rate unless ``precession`` is
+    given, ``wobble`` rad/s about the rolling direction) as a model file."""
+    omega = steady_precession(beta, w3) if precession is None else precession
+    ex, ey, ez = np.eye(3)
+    k = np.cos(beta) * ey + np.sin(beta) * ez
+    d = np.cos(beta) * ez - np.sin(beta) * ey
+    R = np.column_stack([ex, k, d])
+    w = omega * ez + (w3 - omega * np.sin(beta)) * k + wobble * ex
+    vec = lambda x: "[" + ", ".join(repr(float(c)) for c in x) + "]"      # noqa: E731
+    rolling = rolling if rolling is not None else f'type = "RollingDisc"\nbody = "disc"\nradius = {a}\naxle = [0.0, 1.0, 0.0]'
+    return f"""
+[system]
+name = "rolling_disc"
+gravity = [0.0, 0.0, {-g}]
+
+[[members]]
+name = "disc"
+kind = "body"
+mass = {m}
+inertia = [{vec([A_d, 0, 0])}, {vec([0, C_d, 0])}, {vec([0, 0, A_d])}]
+position = {vec(a * d)}
+rotation = [{vec(R[0])}, {vec(R[1])}, {vec(R[2])}]
+velocity = {vec(a * w3 * ex + a * wobble * ey)}
+angular_velocity = {vec(w)}
+
+[[rolling]]
+{rolling}
+"""
+
+
+@pytest.fixture(scope="module")
+def model():
+    return nc.System.from_toml(disc_toml()).build()
+
+
+def axle(model, q):
+    return q[:, model.layout.member_indices("disc")[6:9]]
+
+
+def test_a_disc_written_in_toml_precesses_at_the_closed_form_rate(model):
+    """``nc.simulate`` picks the rolling integrator for a model with rolling elements: the
+    tilt stays, the heading turns at the closed-form rate, energy is conserved and both
+    constraint levels (the disc's height and its two rolling rows) hold at round-off."""
+    assert [e.spec()["type"] for e in model.rolling] == ["RollingDisc"]
+    omega = steady_precession(BETA, W3)
+    tr = nc.simulate(model, 0.3, 0.02, rtol=1e-9, atol=1e-11)
+    assert tr.info["method"] == "rolling" and tr.info["rolling_names"] == ["disc.rolling"]
+    k = axle(model, tr.q)
+    assert np.max(np.abs(np.arcsin(k[:, 2]) - BETA)) < 1e-8
+    heading = np.unwrap(np.arctan2(-k[:, 0], k[:, 1]))
+    assert abs(np.polyfit(tr.t, heading, 1)[0] / omega - 1) < 1e-7
+    assert np.ptp(tr.energy) <= 1e-9 * np.max(np.abs(tr.energy))
+    assert np.max(tr.constraint_residual) <= 1e-12 and np.max(tr.velocity_residual) <= 1e-12
+    # the model's own multipliers (a free body: none) and the contact point on the ground
+    assert tr.lam.shape == (len(tr.t), model.nc)
+    assert np.allclose(tr.point("disc", (0, 0, 0))[:, 2], a * np.cos(BETA), atol=1e-9)
+
+
+def test_simulate_runs_what_simulate_rolling_runs(model):
+    """The seam adds nothing to the numbers: RK4 with two substeps per output equals
+    ``simulate_rolling`` with ``h = dt / 2`` (to round-off: the two grids' times differ in
+    their last bits), both on the constraints to round-off."""
+    from ncgen.assembly.nonholonomic import rolling_system
+    tr = nc.simulate(model, 0.1, 0.02, method="rolling", integrator="rk4", substeps=2)
+    ref = simulate_rolling(rolling_system(model), 0.1, 0.02, method="rk4", h=0.01)
+    np.testing.assert_allclose(tr.q, ref.q, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(tr.v, ref.v, rtol=0, atol=1e-11)
+    assert max(tr.constraint_residual.max(), tr.velocity_residual.max(), ref.residual.max()) < 1e-13
+    assert tr.info["integrator"] == "rk4" and tr.info["substeps"] == 2
+
+
+def test_toml_round_trip_and_the_python_api_give_the_same_model(model):
+    s = nc.System.from_toml(disc_toml())
+    again = nc.System.from_toml(s.to_toml())
+    assert [e.spec() for e in again.rolling] == [e.spec() for e in s.rolling]
+    assert "[[rolling]]" in s.to_toml() and "rolling=1" in repr(s)
+    by_hand = nc.System.from_toml(disc_toml().split("[[rolling]]")[0])
+    by_hand.add_rolling(nc.RollingDisc("disc", radius=a, axle=(0, 1, 0)))
+    built = by_hand.build()
+    assert built.content_hash == model.content_hash
+    plain = nc.System.from_toml(disc_toml().split("[[rolling]]")[0]).build()
+    assert plain.rolling == () and plain.content_hash != model.content_hash
+
+
+def test_a_ball_and_a_knife_edge_from_toml():
+    """A ball rolling straight keeps its speed (no force along the plane); a sleigh blade
+    written in TOML gives one velocity row."""
+    ball = nc.System("ball")
+    ball.add_body("disc", mass=m, inertia=0.4 * m * a * a * np.eye(3), position=(0, 0, a), velocity=(0.5, 0, 0),
+                  angular_velocity=(0, 0.5 / a, 0))
+    ball.add_rolling(nc.RollingSphere("disc", radius=a))
+    back = nc.System.from_toml(ball.to_toml())
+    assert [e.spec() for e in back.rolling] == [{"type": "RollingSphere", "name": "disc.rolling", "body": "disc",
+                                                 "radius": a}]
+    tr = nc.simulate(back.build(), 0.2, 0.1)
+    np.testing.assert_allclose(tr.point("disc", (0, 0, 0))[:, 0], 0.5 * tr.t, rtol=0, atol=1e-10)
+    knife = nc.System.from_toml(disc_toml(rolling='type = "KnifeEdge"\nbody = "disc"\nat = [0.0, 0.0, 0.0]\n'
+                                                   'blade = [1.0, 0.0, 0.0]\nname = "blade"'))
+    assert [e.name for e in knife.rolling] == ["blade"] and knife.rolling[0].kind == "KnifeEdge"
+
+
+@pytest.mark.parametrize("rolling, message", [
+    ('type = "RollingDisk"\nbody = "disc"\nradius = 0.1', r"rolling\[0\]\.type: unknown rolling element 'RollingDisk'"
+                                                          r" \(did you mean 'RollingDisc'\?\)"),
+    ('type = "RollingDisc"\nbody = "disc"', r"rolling\[0\]\.radius: missing \(required\)"),
+    ('type = "RollingDisc"\nbody = "disc"\nradius = -1.0', r"rolling\[0\]: RollingDisc on disc: radius: expected a "
+                                                           r"positive number \(m\), found -1.0"),
+    ('type = "RollingDisc"\nbody = "wheel"\nradius = 0.1', r"rolling\[0\]: add_rolling: .*body: expected a body of "
+                                                           r"system 'rolling_disc' \(bodies: disc\), found no member"),
+    ('type = "RollingDisc"\nbody = "disc"\nradius = 0.1\nspokes = 3', r"rolling\[0\]\.spokes: unknown key"),
+    ('type = "KnifeEdge"\nbody = "disc"\nblade = [1.0, 0.0]', r"rolling\[0\]\.blade: expected 3 numbers"),
+])
+def test_bad_rolling_tables_are_named(rolling, message):
+    with pytest.raises(ModelError, match=message):
+        nc.System.from_toml(disc_toml(rolling=rolling))
+
+
+def test_bad_uses_are_named(model):
+    s = nc.System("planar", gravity=(0, -g))
+    s.add_body("disc", coords="ruv", mass=1.0, inertia=0.1, position=(0, 0))
+    with pytest.raises(ModelError, match="rolling elements need a 3D system; system 'planar' is planar"):
+        s.add_rolling(nc.RollingDisc("disc", radius=0.1))
+    s = nc.System("points")
+    s.add_point("p", mass=1.0, position=(0, 0, 0))
+    with pytest.raises(ModelError, match=r"body: expected a body of system 'points' \(bodies: none\), found a point"):
+        s.add_rolling(nc.RollingSphere("p", radius=0.1))
+    with pytest.raises(ModelError, match="add_rolling: expected a nonholonomic element"):
+        s.add_rolling(nc.SpherePlane(s.member("p"), radius=0.1))
+    two = nc.System.from_toml(disc_toml())
+    with pytest.raises(ModelError, match="name 'disc.rolling' is already used"):
+        two.add_rolling(nc.RollingSphere("disc", radius=a))
+    for method in ("idas", "stepper", "joint"):
+        with pytest.raises(NcgenError, match=rf"method='{method}': model 'rolling_disc' has rolling elements "
+                                             r"\(disc.rolling\), whose velocity constraints only method='rolling'"):
+            nc.simulate(model, 0.1, 0.05, method=method)
+    with pytest.raises(NcgenError, match="method='rolling' does not take joint_dynamics=True"):
+        nc.simulate(model, 0.1, 0.05, joint_dynamics=True)
+    with pytest.raises(NcgenError, match=r"integrator: expected one of dopri5, rk4 \(method='joint' or 'rolling'\)"):
+        nc.simulate(model, 0.1, 0.05, integrator="euler")
