@@ -154,3 +154,15 @@ def test_bad_uses_are_named(model):
         nc.simulate(model, 0.1, 0.05, joint_dynamics=True)
     with pytest.raises(NcgenError, match=r"integrator: expected one of dopri5, rk4 \(method='joint' or 'rolling'\)"):
         nc.simulate(model, 0.1, 0.05, integrator="euler")
+
+
+def test_the_viewer_draws_the_disc_and_the_plane(model):
+    """The page shows the disc as a cylinder of its radius about its axle (in place of the
+    inertia box) and the plane it rolls on."""
+    from ncgen.viz.html import page_data
+    tr = nc.simulate(model, 0.04, 0.02)
+    data = page_data(tr, with_plots=False)
+    (disc,) = data["members"]
+    assert [(p["kind"], p["size"]) for p in disc["parts"]] == [("cylinder", [a, 0.1 * a])]
+    np.testing.assert_allclose(np.array(disc["parts"][0]["R"]) @ [0, 0, 1], [0, 1, 0], atol=1e-15)
+    assert data["contacts"]["planes"] == [[[0.0, 0.0, 0.0], [0.0, 0.0, 1.0]]]
