@@ -70,8 +70,9 @@ class SimulationOptions:
     ``substeps`` fixed steps per output interval).
 
     ``method="rolling"`` (models with rolling elements, ``model.rolling``; the ``"auto"``
-    choice for them): ``integrator`` as the joint method's, ``rtol``, ``atol``, ``substeps``
-    (:mod:`ncgen.runtime.rolling_integrator`).
+    choice for them): ``integrator`` as the joint method's, ``rtol``, ``atol``, ``substeps``,
+    ``backend`` (``"compiled"``: each step compiled C; ``"vm"``: Python-driven CasADi calls;
+    ``"auto"``: compiled when it pays) (:mod:`ncgen.runtime.rolling_integrator`).
 
     Stepper only: ``substeps`` (fixed steps per output interval), ``newton_tol`` (Newton
     tolerance on both constraint levels), ``max_newton`` (Newton iterations per step),
