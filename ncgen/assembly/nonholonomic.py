@@ -63,6 +63,9 @@ class RollingSystem:
                 raise ModelError(f"RollingSystem: {element!r}: body {element.body!r} is not a member of "
                                  f"model {model.name!r} (members: {', '.join(model.member_names)})")
         self.model, self.elements = model, elements
+        #: ``{method: DirectFunction}``: its compiled steps, made on first use by
+        #: :func:`ncgen.runtime.rolling_integrator.compiled_step`.
+        self.compiled_steps: dict = {}
         nq = model.nq
         self.nq = nq
         q, v = ca.SX.sym("q", nq), ca.SX.sym("v", nq)

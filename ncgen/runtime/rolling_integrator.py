@@ -20,7 +20,6 @@ defaults 1e-8 and 1e-10) or ``"rk4"`` (``substeps`` steps per output interval); 
 from __future__ import annotations
 
 import time
-import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,8 +37,7 @@ _A, _B5, _E = DOPRI5
 #: Projected wall time (s) of a run's Python-driven steps beyond which ``compiled=None``
 #: compiles the step (a first compile takes 20–45 s on a loaded 2-core machine; a cached one ~1 s).
 COMPILE_PAYS = 30.0
-#: ``{system: {method: DirectFunction}}``: the compiled steps of the systems of this process.
-_compiled: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
 
 
 @dataclass(frozen=True)
@@ -101,12 +99,11 @@ def simulate_rolling(system, t_end: float, dt: float, q0=None, v0=None, *, metho
 def compiled_step(system, method: str):
     """The step of ``method`` for ``system`` (:func:`ncgen.assembly.rolling_step.step_function`)
     as compiled C (:func:`ncgen.codegen.direct.compile_direct`, cached by content), kept
-    for the system's lifetime; raises :class:`~ncgen.errors.CompilerNotFound`."""
+    in ``system.compiled_steps``; raises :class:`~ncgen.errors.CompilerNotFound`."""
     from ncgen.codegen.direct import compile_direct
-    steps = _compiled.setdefault(system, {})
-    if method not in steps:
-        steps[method] = compile_direct(f"rolling_{method}_step", step_function(system, method))
-    return steps[method]
+    if method not in system.compiled_steps:
+        system.compiled_steps[method] = compile_direct(f"rolling_{method}_step", step_function(system, method))
+    return system.compiled_steps[method]
 
 
 def integrate(system, grid, q0, v0, *, method: str = "dopri5", substeps: int = 1, rtol: float = 1e-8,
@@ -124,7 +121,7 @@ def integrate(system, grid, q0, v0, *, method: str = "dopri5", substeps: int = 1
     model = system.model
     q, v = project(system, q0, v0)
     grid = np.asarray(grid, float)
-    step = _compiled.get(system, {}).get(method) if compiled is None else \
+    step = system.compiled_steps.get(method) if compiled is None else \
         compiled_step(system, method) if compiled else None
     started, span = time.perf_counter(), float(grid[-1] - grid[0])
     zero = np.zeros(system.nq)
