@@ -24,7 +24,8 @@ def disc_toml(beta=BETA, w3=W3, precession=None, wobble=0.0, rolling=None) -> st
     R = np.column_stack([ex, k, d])
     w = omega * ez + (w3 - omega * np.sin(beta)) * k + wobble * ex
     vec = lambda x: "[" + ", ".join(repr(float(c)) for c in x) + "]"      # noqa: E731
-    rolling = rolling if rolling is not None else f'type = "RollingDisc"\nbody = "disc"\nradius = {a}\naxle = [0.0, 1.0, 0.0]'
+    if rolling is None:
+        rolling = f'type = "RollingDisc"\nbody = "disc"\nradius = {a}\naxle = [0.0, 1.0, 0.0]'
     return f"""
 [system]
 name = "rolling_disc"

@@ -241,9 +241,9 @@ class System:
         member = self.members.get(element.body)
         if member is None or member.kind != "body":
             found = "no member of that name" if member is None else f"a {member.kind}"
+            bodies = ", ".join(m.name for m in self.members.values() if m.kind == "body") or "none"
             raise ModelError(f"add_rolling: {element!r}: body: expected a body of system {self.name!r} "
-                             f"(bodies: {', '.join(m.name for m in self.members.values() if m.kind == 'body') or 'none'}), "
-                             f"found {found}")
+                             f"(bodies: {bodies}), found {found}")
         if any(e.name == element.name for e in self.rolling):
             raise ModelError(f"add_rolling: name {element.name!r} is already used by another rolling element; "
                              f"give name=...")

@@ -610,7 +610,8 @@ class _Loader:
         for key, n in ROLLING_FIELDS[typ]:
             v = t.get(key, required=key in ("body", "radius"))
             if v is not None:
-                kw[key] = _string(v, t.at(key)) if n == 0 else _number(v, t.at(key)) if n == 1 else _vector(v, n, t.at(key))
+                where = t.at(key)
+                kw[key] = _string(v, where) if n == 0 else _number(v, where) if n == 1 else _vector(v, n, where)
         name = t.get("name")
         t.finish(("type", "name", *(k for k, _ in ROLLING_FIELDS[typ])))
         name = None if name is None else _string(name, t.at("name"))
