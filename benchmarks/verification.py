@@ -5,12 +5,13 @@ the time, as one Markdown page (docs/verification.md).
 The references are those of the tests (imported from them, so the page and the tests
 cannot drift apart) or computed by the independent engine in the same run: the Whipple
 bicycle's published benchmark (tests/test_whipple.py), rolling discs and the Chaplygin
-sleigh against closed forms (tests/test_rolling.py), the heavy top's steady precession
-(tests/test_heavy_top.py), the IFToMM A02 four-bar through its flat positions
+sleigh against closed forms (tests/test_rolling.py, tests/test_rolling_system.py), the heavy top's steady precession
+(tests/test_heavy_top.py), thin bodies against Euler's and the pendulum equation
+(tests/test_thin_bodies.py), the IFToMM A02 four-bar through its flat positions
 (tests/test_singular_positions.py), arboris' rigid-motion values (tests/test_rigid_motion.py),
 Pinocchio on example-robot-data robots (tests/test_urdf_pinocchio.py), MuJoCo on a falling
 chain, on shipped MJCF files and on a contact twin (tests/test_simulate_mujoco.py,
-tests/test_mjcf.py, tests/test_contact.py), contact closed forms (tests/test_contact.py) and
+tests/test_mjcf.py, tests/test_contact.py), contact closed forms (tests/test_contact.py, tests/test_contact_shapes.py) and
 tensegrity closed forms (tests/test_formfinding.py, tests/test_self_stress.py).  A group whose
 engine (Pinocchio, MuJoCo) or robot data is not installed is left out.
 
@@ -158,6 +159,25 @@ def heavy_top(smoke: bool) -> list[Row]:
                 np.polyfit(traj.t, inv["phi"], 1)[0] / top.steady_precession(), 1.0, 1e-5),
             Row("heavy top, steady precession", ref, "tilt (rad), largest deviation",
                 top.tilt + np.max(np.abs(inv["tilt"] - top.tilt)), top.tilt, 1e-6)]
+
+
+def thin_bodies(smoke: bool) -> list[Row]:
+    import ncgen as nc
+    from test_thin_bodies import axes, euler_reference, free_disc, pendulum_reference, plate_pendulum, rot_x
+    t_end = 0.5 if smoke else 1.0
+    R0, wb = rot_x(0.4), np.array([0.5, -0.3, 10.0])
+    model = free_disc(R0, wb)
+    traj = nc.simulate(model, t_end=t_end, dt=0.01, rtol=1e-10, atol=1e-12)
+    err = float(np.max(np.abs(axes(model, traj, "disc") - euler_reference(R0, wb, traj.t))))
+    plate = plate_pendulum(0.3)
+    run = nc.simulate(plate, t_end=2 * t_end, dt=0.01, rtol=1e-10, atol=1e-12)
+    theta = 0.3 + np.array([np.ravel(plate.to_joint_space(q))[0] for q in run.q])
+    return [Row("free thin disc (singular natural-coordinate M), IDAS",
+                "Euler's equations and Ṙ = R ω̂ by DOP853 at 1e-12", f"attitude R, worst entry over {t_end:g} s",
+                err, 0.0, 1e-7),
+            Row("thin plate pendulum (singular natural-coordinate M), IDAS", "the pendulum equation by DOP853 at 1e-12",
+                f"angle (rad), worst over {2 * t_end:g} s",
+                float(np.max(np.abs(theta - pendulum_reference(0.3, run.t)[0]))), 0.0, 1e-7)]
 
 
 def iftomm_a02(smoke: bool) -> list[Row]:
@@ -380,16 +400,16 @@ def _worst(got, want):
     return float(got[i]), float(want[i])
 
 
-CASES = (whipple, rolling_disc, rolling_disc_model, chaplygin_sleigh, heavy_top, iftomm_a02, iftomm_a02_larger,
+CASES = (whipple, rolling_disc, rolling_disc_model, chaplygin_sleigh, heavy_top, thin_bodies, iftomm_a02,
+         iftomm_a02_larger,
          arboris, pinocchio,
          mujoco_chain, mujoco_mjcf, contacts, tensegrity)
 #: External checks the project's page lacks: the IFToMM problems other than A02 and Hairer's
 #: Andrews squeezer (IFToMM A03) have no test or model in ncgen yet.
 NOT_YET = [
     ("IFToMM A01 (pendulum), A03 (Andrews squeezer, Hairer & Wanner), A04 (Bricard), A05 (flyball governor)",
-     "no test yet"),
+     None),
     ("MuJoCo work-precision comparisons", "benchmarks/work_precision.py (timings, not a reference)"),
-    ("thin bodies (Euler's equations, Newton–Euler)", "tests/test_thin_bodies.py"),
 ]
 
 
@@ -405,9 +425,9 @@ def page(rows: list[Row], smoke: bool) -> str:
              "reference below is recomputed by ncgen, and its error compared with the tolerance the "
              "tests hold it to; the reference values are imported from those tests (`tests/test_whipple.py`, "
              "`tests/test_rolling.py`, `tests/test_rolling_system.py`, `tests/test_heavy_top.py`, "
-             "`tests/test_singular_positions.py`, "
+             "`tests/test_singular_positions.py`, `tests/test_thin_bodies.py`, "
              "`tests/test_rigid_motion.py`, `tests/test_urdf_pinocchio.py`, `tests/test_simulate_mujoco.py`, "
-             "`tests/test_mjcf.py`, `tests/test_contact.py`, `tests/test_formfinding.py`, "
+             "`tests/test_mjcf.py`, `tests/test_contact.py`, `tests/test_contact_shapes.py`, `tests/test_formfinding.py`, "
              "`tests/test_self_stress.py`) or computed by the independent engine (Pinocchio, MuJoCo, SciPy) in "
              "the same run. Times are wall-clock seconds of each case's group, spread over its rows."
              + (" Smoke run: shortened simulations." if smoke else ""), "",
@@ -418,7 +438,7 @@ def page(rows: list[Row], smoke: bool) -> str:
         lines.append(f"| {r.case} | {r.reference} | {r.quantity} | {_number(r.value)} | {_number(r.expected)} "
                      f"| {r.error:.1e} | {r.tolerance:.0e} | {'yes' if r.passed else '**NO**'} | {r.seconds:.2f} |")
     lines += ["", "Not on this page yet:", ""]
-    lines += [f"- {name}: `{where}`" for name, where in NOT_YET]
+    lines += [f"- {name}: " + (f"`{where}`" if where else "no test or model in ncgen yet") for name, where in NOT_YET]
     return "\n".join(lines) + "\n"
 
 
