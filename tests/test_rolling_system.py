@@ -208,3 +208,27 @@ def test_ten_seconds_of_the_toml_disc_at_rtol_1e_8(model):
     k = axle(model, tr.q)
     heading = np.unwrap(np.arctan2(-k[:, 0], k[:, 1]))
     assert abs(np.polyfit(tr.t, heading, 1)[0] / steady_precession(BETA, W3) - 1) < 1e-7
+
+
+def test_the_compiled_steps_function_agrees_with_the_python_step(model):
+    """The function that is compiled (evaluated here on CasADi's virtual machine, no compile):
+    its Schur-complement accelerations equal the KKT solve, its projection the Newton and
+    least-squares projection, and one RK4 step the Python-driven step."""
+    from ncgen.assembly.nonholonomic import rolling_system
+    from ncgen.assembly.rolling_step import accel_function, projection_function, step_function
+    from ncgen.runtime.rolling_integrator import project
+    system = rolling_system(model)
+    q, v = project(system, model.q0, model.v0)
+    a_kkt = np.asarray(system.accel(q, v, np.zeros(system.nq))[0]).ravel()
+    np.testing.assert_allclose(np.asarray(accel_function(system)(q, v)).ravel(), a_kkt, rtol=0,
+                               atol=1e-12 * np.max(np.abs(a_kkt)))
+    rng = np.random.default_rng(3)
+    q_off, v_off = q + 1e-6 * rng.normal(size=q.size), v + 1e-4 * rng.normal(size=v.size)
+    qp, vp = (np.asarray(x).ravel() for x in projection_function(system)(q_off, v_off))
+    q_ref, v_ref = project(system, q_off, v_off)
+    np.testing.assert_allclose(qp, q_ref, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(vp, v_ref, rtol=0, atol=1e-12)
+    y_next, err = step_function(system, "rk4")(np.concatenate([q, v]), 0.01)
+    ref = simulate_rolling(system, 0.01, 0.01, q0=q, v0=v, method="rk4", compiled=False)
+    np.testing.assert_allclose(np.asarray(y_next).ravel(), np.concatenate([ref.q[-1], ref.v[-1]]), rtol=0, atol=1e-12)
+    assert not np.any(np.asarray(err))
