@@ -232,3 +232,15 @@ def test_the_compiled_steps_function_agrees_with_the_python_step(model):
     ref = simulate_rolling(system, 0.01, 0.01, q0=q, v0=v, method="rk4", compiled=False)
     np.testing.assert_allclose(np.asarray(y_next).ravel(), np.concatenate([ref.q[-1], ref.v[-1]]), rtol=0, atol=1e-12)
     assert not np.any(np.asarray(err))
+
+
+def test_the_command_line_simulates_a_rolling_model(tmp_path, capsys):
+    from ncgen.cli import main
+    path = tmp_path / "disc.toml"
+    path.write_text(disc_toml())
+    assert main(["simulate", str(path), "--t-end", "0.04", "--dt", "0.02", "--integrator", "rk4", "--substeps", "2",
+                 "-o", str(tmp_path / "disc.npz")]) == 0
+    out = capsys.readouterr().out
+    assert "integrator: rolling" in out
+    tr = nc.Trajectory.load(tmp_path / "disc.npz")
+    assert tr.info["method"] == "rolling" and tr.info["substeps"] == 2 and len(tr.t) == 3
