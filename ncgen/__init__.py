@@ -40,6 +40,7 @@ _HOMES: dict[str, tuple[str, ...]] = {
                            "Mimic", "Planar", "PointOnLine", "PointOnPlane", "Prismatic", "Revolute", "Spherical",
                            "Universal"),
     "ncgen.model.model": ("Model",),
+    "ncgen.model.rolling": ("KnifeEdge", "RollingDisc", "RollingSphere"),
     "ncgen.model.shapes": ("Box", "Capsule", "Cylinder", "Ellipsoid", "Mesh", "Shape", "Sphere"),
     "ncgen.model.system": ("System",),
     "ncgen.optim": ("OptimalControl", "OptimalTrajectory"),

@@ -125,8 +125,7 @@ def test_bad_contacts_are_named():
 
 
 # ------------------------------------------------------------------ nonsmooth stepper
-@pytest.fixture(scope="module")
-def drops():
+def drops_model():
     """Two point masses dropped from 1 m: e = 0.9 and e = 0."""
     s = nc.System("drops")
     for name, e, y in (("bouncy", 0.9, 0.0), ("dead", 0.0, 1.0)):
@@ -135,12 +134,23 @@ def drops():
     return s.build(contacts="nonsmooth")
 
 
+@pytest.fixture(scope="module")
+def drops():
+    return drops_model()
+
+
+def bounce_apexes(tr):
+    """Heights (m) of the e = 0.9 mass's apexes in a run of :func:`drops_model`; closed form
+    ``0.81^k`` (each bounce keeps e² of the height)."""
+    z = tr.q[:, 2]
+    return z[[i for i in range(1, len(z) - 1) if z[i - 1] < z[i] >= z[i + 1]]]
+
+
 def test_bounce_heights_follow_restitution(drops):
     tr = nc.simulate(drops, 3.0, 1e-4, method="stepper", substeps=10)           # h = 10 µs
-    z = tr.q[:, 2]
-    apex = [i for i in range(1, len(z) - 1) if z[i - 1] < z[i] >= z[i + 1]]
+    apex = bounce_apexes(tr)
     assert len(apex) >= 3
-    np.testing.assert_allclose(z[apex[:3]], 0.81 ** np.arange(1, 4), rtol=1e-3)
+    np.testing.assert_allclose(apex[:3], 0.81 ** np.arange(1, 4), rtol=1e-3)
     # e = 0: at rest after the first impact, no penetration beyond the push-out tolerance
     # (PENETRATION_TOL = 1e-8 m; without the push-out it would be up to h·v_impact/2), no drift
     zd = tr.q[:, 5]
@@ -183,8 +193,7 @@ def test_c_program_simulates_contacts_like_python(drops, tmp_path):
 TH, R_BALL, M_BALL, MU_SPIN, V0_SPIN, W0_SPIN = 0.3, 0.1, 1.5, 0.3, 2.0, -10.0
 
 
-@pytest.fixture(scope="module")
-def slopes():
+def slopes_run():
     """One model (one compilation) of independent members, each with its own contact: on a
     0.3 rad incline, two blocks (point masses, μ = 0.2 < tan θ slides, μ = 0.5 sticks) and two
     balls (μ = 1 rolls, μ = 0.05 slips); on flat ground, a ball launched with backspin.
@@ -203,6 +212,11 @@ def slopes():
     s.add_contact(nc.SpherePlane(b, radius=R_BALL, mu=MU_SPIN, name="spinner"))
     model = s.build(contacts="nonsmooth")
     return model, nc.simulate(model, 1.0, 0.01, method="stepper", substeps=10)
+
+
+@pytest.fixture(scope="module")
+def slopes():
+    return slopes_run()
 
 
 DOWN = np.array([-np.cos(TH), 0, -np.sin(TH)])
@@ -253,6 +267,14 @@ def test_ball_with_backspin_against_closed_form_and_mujoco(slopes):
     np.testing.assert_allclose(v_ncgen[tr.t > t_roll + 0.01], v_roll, rtol=1e-5)
     assert np.all(state[slipping][1:] == SLIP) and state[-1] == STICK
 
+    x, v_end = mujoco_backspin(mujoco)
+    np.testing.assert_allclose(x_ncgen[1:], x, atol=3e-4)
+    np.testing.assert_allclose(v_end, v_ncgen[-1], rtol=3e-4)
+
+
+def mujoco_backspin(mujoco):
+    """MuJoCo's twin of the backspin ball: its x (m) every 0.01 s over 1 s and its final speed."""
+    R, m, mu, v0, w0 = R_BALL, M_BALL, MU_SPIN, V0_SPIN, W0_SPIN
     xml = f"""<mujoco><option timestep="1e-4" gravity="0 0 -{G}" cone="elliptic" impratio="100"/>
       <worldbody><geom type="plane" size="10 10 0.1" friction="{mu} 0 0"/>
       <body pos="0 0 {R}"><freejoint/><geom type="sphere" size="{R}" mass="{m}" friction="{mu} 0 0"
@@ -265,8 +287,7 @@ def test_ball_with_backspin_against_closed_form_and_mujoco(slopes):
         mujoco.mj_step(M, D)
         if (i + 1) % 100 == 0:
             x.append(D.qpos[0])
-    np.testing.assert_allclose(x_ncgen[1:], x, atol=3e-4)
-    np.testing.assert_allclose(D.qvel[0], v_ncgen[-1], rtol=3e-4)
+    return np.array(x), float(D.qvel[0])
 
 
 def box_and_ball(name="box"):
@@ -310,15 +331,27 @@ def test_energy_never_increases_through_impacts():
 
 
 # ------------------------------------------------------------------------- smooth law
-def test_smooth_contact_rests_at_the_static_penetration_and_slides_with_idas():
-    th, m, k, n_exp = 0.2, 2.0, 1e5, 1.5
+SOFT = {"th": 0.2, "m": 2.0, "k": 1e5, "n_exp": 1.5, "mu": 0.1}
+
+
+def soft_block_run():
+    """A point mass on a 0.2 rad incline through a smooth contact (Hunt–Crossley law
+    ``k δ^1.5``, μ = 0.1), 1 s of IDAS at 1e-9; closed forms: the static penetration
+    ``(m g cos θ / k)^(1/1.5)``, the normal force ``m g cos θ`` and the slide's acceleration
+    ``g (sin θ − μ cos θ)``."""
+    th, m, k, n_exp = SOFT["th"], SOFT["m"], SOFT["k"], SOFT["n_exp"]
     normal = np.array([-np.sin(th), 0, np.cos(th)])
     s = nc.System("soft")
     p = s.add_point("block", mass=m, position=(0, 0, 0))
-    s.add_contact(nc.SpherePlane(p, radius=0.0, normal=normal, mu=0.1, stiffness=k, damping=2e6,
+    s.add_contact(nc.SpherePlane(p, radius=0.0, normal=normal, mu=SOFT["mu"], stiffness=k, damping=2e6,
                                  exponent=n_exp, slip_velocity=1e-4))
     model = s.build()                                   # contacts="smooth" by default
-    tr = nc.simulate(model, 1.0, 0.01, rtol=1e-9, atol=1e-11)
+    return nc.simulate(model, 1.0, 0.01, rtol=1e-9, atol=1e-11)
+
+
+def test_smooth_contact_rests_at_the_static_penetration_and_slides_with_idas():
+    th, m, k, n_exp = SOFT["th"], SOFT["m"], SOFT["k"], SOFT["n_exp"]
+    tr = soft_block_run()
     delta = (m * G * np.cos(th) / k) ** (1 / n_exp)     # static penetration under the weight
     np.testing.assert_allclose(-tr.gap[-20:, 0], delta, rtol=1e-4)
     np.testing.assert_allclose(tr.contact_normal[-20:, 0], m * G * np.cos(th), rtol=1e-4)

@@ -165,8 +165,7 @@ BOX = np.array([0.2, 0.3, 0.1])
 M_BOX = 2.0
 
 
-@pytest.fixture(scope="module")
-def blocks():
+def blocks_run():
     """Boxes of 2 kg on their own planes: sliding on the flat to rest (v0 = 1.5 m/s, μ = 0.4),
     dropped flat from 5 cm, resting on inclines below and above tan α = μ, and standing tall
     boxes (μ = 1) on inclines below and above their tipping angle tan α = b/h."""
@@ -186,7 +185,13 @@ def blocks():
     return model, simulate(model, 1.5)
 
 
+@pytest.fixture(scope="module")
+def blocks():
+    return blocks_run()
+
+
 def _corner_forces(tr, name):
+    """Normal forces (N) of the box ``name``'s corner contacts, one column per corner."""
     k = [i for i, c in enumerate(tr.contact_names) if c.startswith(name + ".")]
     return tr.contact_normal[:, k]
 

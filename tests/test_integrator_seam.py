@@ -97,7 +97,7 @@ def test_auto_names_why_the_joint_loop_was_not_used():
 
 @pytest.mark.parametrize("method", ["idas", "stepper"])
 def test_the_joint_loops_integrator_option_is_refused_elsewhere(method):
-    with pytest.raises(NcgenError, match=rf"integrator: only method='joint' takes an integrator \(got 'rk4' "
+    with pytest.raises(NcgenError, match=rf"integrator: only method='joint' or 'rolling' takes an integrator \(got 'rk4' "
                                          rf"with method='{method}'\)"):
         nc.simulate(pendulum().build(), 0.1, 0.05, method=method, integrator="rk4")
 

@@ -26,14 +26,20 @@ def random_mass_matrix(rng=RNG):
 
 
 # --- reference values (arboris) ------------------------------------------------------------------
+#: arboris' exp of the twist (1, 2, 3, 10, 11, 12) (8 decimals published).
+ARBORIS_TWIST = [1, 2, 3, 10, 11, 12]
+ARBORIS_EXP = [[-0.69492056, 0.71352099, 0.08929286, 2.90756949],
+               [-0.19200697, -0.30378504, 0.93319235, 11.86705709],
+               [0.69297817, 0.6313497, 0.34810748, 13.78610544],
+               [0, 0, 0, 1]]
+#: arboris' transport of diag(3, 2, 4, 1, 1, 1) to a frame at (1, 3, 0) from the centre of mass.
+ARBORIS_M_C, ARBORIS_OFFSET = np.diag([3.0, 2, 4, 1, 1, 1]), [1, 3, 0]
+ARBORIS_M_B = [[12, -3, 0, 0, 0, -3], [-3, 3, 0, 0, 0, 1], [0, 0, 14, 3, -1, 0],
+               [0, 0, 3, 1, 0, 0], [0, 0, -1, 0, 1, 0], [-3, 1, 0, 0, 0, 1]]
+
 
 def test_exp_matches_arboris():
-    H = rm.exp_se3([1, 2, 3, 10, 11, 12])
-    expected = [[-0.69492056, 0.71352099, 0.08929286, 2.90756949],
-                [-0.19200697, -0.30378504, 0.93319235, 11.86705709],
-                [0.69297817, 0.6313497, 0.34810748, 13.78610544],
-                [0, 0, 0, 1]]
-    np.testing.assert_allclose(H, expected, atol=1e-8)
+    np.testing.assert_allclose(rm.exp_se3(ARBORIS_TWIST), ARBORIS_EXP, atol=1e-8)
 
 
 def test_exp_matches_matrix_exponential():
@@ -46,10 +52,8 @@ def test_exp_matches_matrix_exponential():
 def test_mass_matrix_transport_matches_arboris():
     """Arboris' value is Ad(H_ab)ᵀ M_a Ad(H_ab) with H_ab the translation by (1, 3, 0): the
     mass matrix at a frame b whose origin is at (1, 3, 0) from the centre of mass."""
-    M_b = rm.transport_mass_matrix(np.diag([3.0, 2, 4, 1, 1, 1]), rm.translation([1, 3, 0]))
-    expected = [[12, -3, 0, 0, 0, -3], [-3, 3, 0, 0, 0, 1], [0, 0, 14, 3, -1, 0],
-                [0, 0, 3, 1, 0, 0], [0, 0, -1, 0, 1, 0], [-3, 1, 0, 0, 0, 1]]
-    np.testing.assert_allclose(M_b, expected, atol=1e-14)
+    M_b = rm.transport_mass_matrix(ARBORIS_M_C, rm.translation(ARBORIS_OFFSET))
+    np.testing.assert_allclose(M_b, ARBORIS_M_B, atol=1e-14)
     m, r, I_c = rm.mass_matrix_parts(M_b)
     assert m == 1 and np.allclose(r, [-1, -3, 0]) and np.allclose(I_c, np.diag([3, 2, 4]))
 

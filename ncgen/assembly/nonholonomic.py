@@ -26,6 +26,7 @@ import numpy as np
 
 from ncgen.assembly.manifold import RANK_TOL
 from ncgen.errors import ModelError
+from ncgen.model.data import model_data
 from ncgen.model.rolling import KnifeEdge, RollingDisc, RollingSphere
 
 
@@ -62,6 +63,9 @@ class RollingSystem:
                 raise ModelError(f"RollingSystem: {element!r}: body {element.body!r} is not a member of "
                                  f"model {model.name!r} (members: {', '.join(model.member_names)})")
         self.model, self.elements = model, elements
+        #: ``{method: DirectFunction}``: its compiled steps, made on first use by
+        #: :func:`ncgen.runtime.rolling_integrator.compiled_step`.
+        self.compiled_steps: dict = {}
         nq = model.nq
         self.nq = nq
         q, v = ca.SX.sym("q", nq), ca.SX.sym("v", nq)
@@ -116,3 +120,12 @@ class RollingSystem:
         """``(|phi(q)|∞, |A(q) v|∞)``: holonomic and velocity-level constraint residuals."""
         return (float(np.max(np.abs(np.asarray(self.phi(q))), initial=0.0)),
                 float(np.max(np.abs(np.asarray(self.A(q)) @ np.asarray(v, float)), initial=0.0)))
+
+
+def rolling_system(model) -> RollingSystem:
+    """The :class:`RollingSystem` of ``model`` and its own elements (``model.rolling``),
+    made once and kept in the model's data."""
+    data = model_data(model)
+    if data.rolling_system is None:
+        data.rolling_system = RollingSystem(model, model.rolling)
+    return data.rolling_system

@@ -29,9 +29,11 @@ def _simulate_arguments(p: argparse.ArgumentParser) -> None:
                         "(joint coordinates in a compiled C loop: Dormand-Prince 5(4) with error control, or "
                         "--integrator rk4 with --substeps), idas (variable-step BDF with error control) or "
                         "stepper (the compiled constraint-preserving stepper: fixed steps DT/N, see "
-                        "--substeps, or error-controlled with --rtol)")
+                        "--substeps, or error-controlled with --rtol) or rolling (models with [[rolling]] "
+                        "elements, their only method and the auto choice: projected Runge-Kutta, --integrator)")
     p.add_argument("--integrator", default=None, choices=("dopri5", "rk4"),
-                   help="joint method: dopri5 (error-controlled, default) or rk4 (--substeps fixed steps per DT)")
+                   help="joint and rolling methods: dopri5 (error-controlled, default) or rk4 (--substeps fixed "
+                        "steps per DT)")
     p.add_argument("--controller", default=None, metavar="TABLE",
                    help="a compiled controller, as the keys of a TOML [controller] table, e.g. "
                         "'kind = \"pd\", kp = 100, kd = 20, target = [0.1, -0.3]' (kind pd or computed_torque; "
@@ -109,7 +111,7 @@ def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     check_files(args, parser, OUTPUTS)
     model = load_model(args.model, args.param, args.contacts, floating_base=args.floating_base)
     try:
-        stepper = {"substeps": args.substeps} if args.method in ("stepper", "joint", "auto") else {}
+        stepper = {"substeps": args.substeps} if args.method in ("stepper", "joint", "rolling", "auto") else {}
         controller = _controller(args.controller) if args.controller else model.controller
         traj = run(model, t_end=args.t_end, dt=args.dt, method=args.method, backend=args.backend,
                    rtol=args.rtol, atol=args.atol, integrator=args.integrator, u=controller,

@@ -78,6 +78,9 @@ class ModelData:
     #: ``{(controller id, joint_dynamics, cflags): (controller, JointLoop)}``: the compiled
     #: joint-space simulation loops (:func:`ncgen.runtime.joint_simulation.joint_loop`).
     joint_loops: dict = field(default_factory=dict)
+    #: The model's constraints and accelerations with its nonholonomic elements
+    #: (:func:`ncgen.assembly.nonholonomic.rolling_system`), or None.
+    rolling_system: object = None
     #: ``(reason,)``: why ``simulate`` cannot run the model in joint space (reason None: it can)
     #: (:func:`ncgen.runtime.joint_simulation.joint_space_applies`).
     joint_simulation_reason: tuple | None = None

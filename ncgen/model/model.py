@@ -102,6 +102,9 @@ class Model:
         self.contact_names = [c["name"] for c in self.contacts]
         #: "smooth" (compliant forces in F) or "nonsmooth" (the compiled stepper's impacts).
         self.contact_model = contact_model
+        #: The nonholonomic elements (:mod:`ncgen.model.rolling`), in order: velocity
+        #: constraints beside ``phi``, kept by ``nc.simulate(method="rolling")``.
+        self.rolling = tuple(getattr(system, "rolling", ()))
         #: :class:`~ncgen.model.sharing.SharingPlan` of ``build(share=True)`` (None with share=False).
         self.sharing = sharing
         #: how to build the same system with ``share=False`` (reactions of the eliminated joints;
@@ -390,6 +393,8 @@ def content_hash(model: Model) -> str:
              model.parameter_names, model.parameter_sizes, model.marker_names, model.contact_model, model.t0,
              list(model.baumgarte), model.member_names, sorted(model.frames), model.joint_names,
              model.joint_limits]
+    if model.rolling:
+        names.append([e.spec() for e in model.rolling])
     h.update(repr(names).encode())
     return h.hexdigest()
 

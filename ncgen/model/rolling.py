@@ -11,7 +11,10 @@ along a body-fixed blade direction in the plane (one nonholonomic constraint).  
 
 Each element gives its equations from its body's pose ``(R, p)`` (CasADi, functions of the
 natural coordinates ``q``): ``equations(R, p, q) -> (holonomic residuals, rows of B)``;
-:mod:`ncgen.assembly.nonholonomic` assembles them.
+:mod:`ncgen.assembly.nonholonomic` assembles them.  An element joins a system by
+``System.add_rolling`` (TOML ``[[rolling]]``, :data:`ROLLING_TYPES`; ``spec()`` is its table)
+and is then part of the built model (``model.rolling``), which ``nc.simulate`` runs with
+``method="rolling"``.
 """
 from __future__ import annotations
 
@@ -56,6 +59,11 @@ class RollingDisc:
         B = ca.jacobian((p + ca.mtimes(R, ell_frozen))[:2], q)
         return ca.dot(n, p) - self.radius * d_norm, ca.substitute(B, ell_frozen, ell)
 
+    def spec(self) -> dict:
+        """The element as plain data (its TOML table)."""
+        return {"type": self.kind, "name": self.name, "body": self.body, "radius": self.radius,
+                "axle": self.axle.tolist()}
+
     def __repr__(self) -> str:
         return f"RollingDisc({self.body!r}, radius={self.radius}, axle={tuple(self.axle)})"
 
@@ -83,6 +91,10 @@ class RollingSphere:
         ell_frozen = ca.SX.sym("ell", 3)
         B = ca.jacobian((p + ca.mtimes(R, ell_frozen))[:2], q)
         return p[2] - self.radius, ca.substitute(B, ell_frozen, ell)
+
+    def spec(self) -> dict:
+        """The element as plain data (its TOML table)."""
+        return {"type": self.kind, "name": self.name, "body": self.body, "radius": self.radius}
 
     def __repr__(self) -> str:
         return f"RollingSphere({self.body!r}, radius={self.radius})"
@@ -112,5 +124,14 @@ class KnifeEdge:
         row = ca.mtimes(across.T, ca.jacobian(p + ca.mtimes(R, ca.DM(self.at)), q))
         return ca.SX(0, 1), row
 
+    def spec(self) -> dict:
+        """The element as plain data (its TOML table)."""
+        return {"type": self.kind, "name": self.name, "body": self.body, "at": self.at.tolist(),
+                "blade": self.blade.tolist()}
+
     def __repr__(self) -> str:
         return f"KnifeEdge({self.body!r}, at={tuple(self.at)}, blade={tuple(self.blade)})"
+
+
+#: The nonholonomic elements by their TOML ``type``.
+ROLLING_TYPES = {cls.kind: cls for cls in (RollingDisc, RollingSphere, KnifeEdge)}

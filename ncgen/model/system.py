@@ -48,6 +48,8 @@ class System:
         self.joints: list = []
         self.forces: list = []
         self.contacts: list = []
+        #: Nonholonomic elements (``add_rolling``: rolling discs and balls, knife edges).
+        self.rolling: list = []
         self.inputs: dict[str, ca.SX] = {}
         self.parameters: dict[str, tuple[ca.SX, np.ndarray]] = {}
         #: Named frames ``{name: (member name or "ground", R_local, p_local)}`` (URDF links).
@@ -224,6 +226,30 @@ class System:
         self.contacts.append(contact)
         return contact
 
+    def add_rolling(self, element):
+        """Add a nonholonomic element (``nc.RollingDisc``, ``nc.RollingSphere``,
+        ``nc.KnifeEdge``; :mod:`ncgen.model.rolling`) on one of the system's bodies; returns
+        it.  The built model carries it (``model.rolling``) and ``nc.simulate`` keeps its
+        velocity constraints (``method="rolling"``, docs/rolling.md)."""
+        from ncgen.model.rolling import ROLLING_TYPES
+        if not isinstance(element, tuple(ROLLING_TYPES.values())):
+            raise ModelError(f"add_rolling: expected a nonholonomic element ({', '.join(ROLLING_TYPES)}), "
+                             f"got {element!r}")
+        if self.dim != 3:
+            raise ModelError(f"add_rolling: {element!r}: rolling elements need a 3D system; "
+                             f"system {self.name!r} is planar")
+        member = self.members.get(element.body)
+        if member is None or member.kind != "body":
+            found = "no member of that name" if member is None else f"a {member.kind}"
+            bodies = ", ".join(m.name for m in self.members.values() if m.kind == "body") or "none"
+            raise ModelError(f"add_rolling: {element!r}: body: expected a body of system {self.name!r} "
+                             f"(bodies: {bodies}), found {found}")
+        if any(e.name == element.name for e in self.rolling):
+            raise ModelError(f"add_rolling: name {element.name!r} is already used by another rolling element; "
+                             f"give name=...")
+        self.rolling.append(element)
+        return element
+
     def add_input(self, name: str, size: int = 1) -> ca.SX:
         """A control input: a symbol that stays symbolic in every assembled function."""
         name = self._new_name(name, "input")
@@ -363,7 +389,8 @@ class System:
     def __repr__(self) -> str:
         return (f"System({self.name!r}, dim={self.dim}, members={len(self.members)}, "
                 f"joints={len(self.joints)}, forces={len(self.forces)}"
-                + (f", contacts={len(self.contacts)})" if self.contacts else ")"))
+                + (f", contacts={len(self.contacts)}" if self.contacts else "")
+                + (f", rolling={len(self.rolling)})" if self.rolling else ")"))
 
 
 def _same_version(pickled: tuple, n: int, what: str) -> tuple:

@@ -25,6 +25,8 @@ Layout of a file (every table optional except ``members``)::
                   radius_b, length_b, at_a, rotation_a, at_b, rotation_b) or "CapsuleBox" (capsule, radius,
                   length, at, rotation, box = "ground", size, box_at, box_rotation); all with mu,
                   restitution, stiffness, damping, exponent, slip_velocity, name
+    [[rolling]]   type = "RollingDisc" (body, radius, axle), "RollingSphere" (body, radius) or
+                  "KnifeEdge" (body, at, blade); all with name (docs/rolling.md)
 
 Shared basic points are written ``"crank.r_j"`` (slot ``r_j`` of member ``crank``) or
 ``{ground = [x, y, z]}``.  Values that may vary are numbers or expression strings
@@ -60,8 +62,13 @@ from ncgen.validation import as_scalar, as_system_name
 #: Force types by their TOML name.
 FORCE_TYPES = {**_BASIC_FORCES, ClusteredCable.kind: ClusteredCable}
 
-TOP_KEYS = ("system", "parameters", "inputs", "members", "joints", "forces", "contacts", "initial",
+TOP_KEYS = ("system", "parameters", "inputs", "members", "joints", "forces", "contacts", "rolling", "initial",
             "initial_rates", "controller")
+#: Keys of each ``[[rolling]]`` type besides ``type`` and ``name``: ``(key, number of values)``
+#: (:mod:`ncgen.model.rolling`; 0: a string, 1: a number, 3: a vector).
+ROLLING_FIELDS = {"RollingDisc": (("body", 0), ("radius", 1), ("axle", 3)),
+                  "RollingSphere": (("body", 0), ("radius", 1)),
+                  "KnifeEdge": (("body", 0), ("at", 3), ("blade", 3))}
 #: Material keys every contact table may have (:class:`~ncgen.model.contacts.Contact`).
 CONTACT_MATERIAL = ("mu", "restitution", "stiffness", "damping", "exponent", "slip_velocity")
 
@@ -317,6 +324,8 @@ class _Loader:
             self._force(_Table(f, f"forces[{i}]"))
         for i, c in enumerate(self._array(top.get("contacts", []), "contacts")):
             self._contact(_Table(c, f"contacts[{i}]"))
+        for i, r in enumerate(self._array(top.get("rolling", []), "rolling")):
+            self._rolling(_Table(r, f"rolling[{i}]"))
         for key in ("initial", "initial_rates"):
             self._initial(top.get(key, {}), key)
         if "controller" in data:
@@ -622,6 +631,24 @@ class _Loader:
         self._wrap(t.path, self.s.add_contact, CONTACT_TYPES[typ](**kw))
 
 
+    def _rolling(self, t: _Table):
+        from ncgen.model.rolling import ROLLING_TYPES
+        typ = _string(t.get("type", required=True), t.at("type"))
+        if typ not in ROLLING_TYPES:
+            raise ModelError(f"{t.at('type')}: unknown rolling element {typ!r}{did_you_mean(typ, ROLLING_TYPES)}; "
+                             f"expected one of {', '.join(ROLLING_TYPES)}")
+        kw = {}
+        for key, n in ROLLING_FIELDS[typ]:
+            v = t.get(key, required=key in ("body", "radius"))
+            if v is not None:
+                where = t.at(key)
+                kw[key] = _string(v, where) if n == 0 else _number(v, where) if n == 1 else _vector(v, n, where)
+        name = t.get("name")
+        t.finish(("type", "name", *(k for k, _ in ROLLING_FIELDS[typ])))
+        name = None if name is None else _string(name, t.at("name"))
+        self._wrap(t.path, lambda: self.s.add_rolling(ROLLING_TYPES[typ](name=name, **kw)))
+
+
 def _contact_entries(c) -> dict:
     spec = c.spec()
     out = {"type": spec.pop("type"), "name": spec.pop("name")}
@@ -657,6 +684,8 @@ def system_to_toml(system) -> str:
         parts.append(toml_write.table("forces", _force_entries(f, sc, system), array=True))
     for c in system.contacts:
         parts.append(toml_write.table("contacts", _contact_entries(c), array=True))
+    for r in getattr(system, "rolling", ()):
+        parts.append(toml_write.table("rolling", r.spec(), array=True))
     for key, values in (("initial", {**system.initial_joints, **system.initial_coordinates}),
                         ("initial_rates", {**system.initial_joint_rates, **system.initial_coordinate_rates})):
         if values:

@@ -15,8 +15,9 @@ An integrator class has
 ``simulate`` (:mod:`ncgen.runtime.simulation`) resolves ``method="auto"``, prepares the
 integrator, makes the :class:`Run` and calls it.  The implementations: the joint-space loop
 (:mod:`ncgen.runtime.joint_integrator`), the compiled stepper
-(:mod:`ncgen.runtime.stepper_integrator`) and IDAS (``IdasIntegrator`` in
-:mod:`ncgen.runtime.simulation`).
+(:mod:`ncgen.runtime.stepper_integrator`), IDAS (``IdasIntegrator`` in
+:mod:`ncgen.runtime.simulation`) and the rolling integrator of models with nonholonomic
+elements (``RollingIntegrator`` in :mod:`ncgen.runtime.rolling_integrator`).
 """
 from __future__ import annotations
 
@@ -68,7 +69,8 @@ class Integrator(Protocol):
 
 
 def refuse_integrator(opts: SimulationOptions, method: str) -> None:
-    """``integrator`` belongs to the joint loop's options: an error with any other method."""
+    """``integrator`` belongs to the joint loop's and the rolling integrator's options: an
+    error with any other method."""
     if opts.integrator is not None:
-        raise NcgenError(f"integrator: only method='joint' takes an integrator (got {opts.integrator!r} "
+        raise NcgenError(f"integrator: only method='joint' or 'rolling' takes an integrator (got {opts.integrator!r} "
                          f"with method={method!r})")

@@ -27,7 +27,7 @@ from ncgen.model.expressions import did_you_mean
 from ncgen.runtime.dae import BACKENDS
 from ncgen.runtime.inputs import HOLDS
 
-METHODS = ("auto", "joint", "idas", "stepper")
+METHODS = ("auto", "joint", "idas", "stepper", "rolling")
 INTEGRATORS = ("dopri5", "rk4")
 #: Fixed-step schemes of the stepper: ``"auto"`` (``"rattle4"``, or ``"rattle"`` for models with
 #: contacts), RATTLE (order 2) and its fourth-order composition.
@@ -68,6 +68,11 @@ class SimulationOptions:
 
     Joint method only: ``integrator`` (``"dopri5"``, default, error-controlled; ``"rk4"``,
     ``substeps`` fixed steps per output interval).
+
+    ``method="rolling"`` (models with rolling elements, ``model.rolling``; the ``"auto"``
+    choice for them): ``integrator`` as the joint method's, ``rtol``, ``atol``, ``substeps``,
+    ``backend`` (``"compiled"``: each step compiled C; ``"vm"``: Python-driven CasADi calls;
+    ``"auto"``: compiled when it pays) (:mod:`ncgen.runtime.rolling_integrator`).
 
     Stepper only: ``substeps`` (fixed steps per output interval), ``newton_tol`` (Newton
     tolerance on both constraint levels), ``max_newton`` (Newton iterations per step),
@@ -159,7 +164,7 @@ class SimulationOptions:
             raise NcgenError(f"scheme: expected one of {', '.join(SCHEMES)} (the stepper's fixed-step scheme), "
                              f"got {self.scheme!r}")
         if self.integrator is not None and self.integrator not in INTEGRATORS:
-            raise NcgenError(f"integrator: expected one of {', '.join(INTEGRATORS)} (method='joint'), "
+            raise NcgenError(f"integrator: expected one of {', '.join(INTEGRATORS)} (method='joint' or 'rolling'), "
                              f"got {self.integrator!r}")
         if not isinstance(self.kernels, str) or self.kernels not in KERNELS:
             raise NcgenError(f"kernels: expected one of {', '.join(map(repr, KERNELS))} (the stepper's kernels: "

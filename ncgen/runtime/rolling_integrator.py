@@ -8,32 +8,43 @@ Methods: ``"rk4"`` — the classical fourth-order scheme at the fixed step ``h``
 ``"dopri5"`` — Dormand–Prince 5(4) with error control (``rtol``, ``atol`` on ``[q; v]``),
 fifth order.  A projection after a step keeps the order of the step (its correction is of
 the size of the step's local error).  Outputs on the grid ``0, dt, 2 dt, …, t_end`` (s).
-Not yet a method of :func:`ncgen.simulate` (models do not carry nonholonomic elements).
+
+:class:`RollingIntegrator` is ``nc.simulate(model, ..., method="rolling")`` (the choice of
+``method="auto"`` for a model with rolling elements, ``model.rolling``) behind the seam of
+:mod:`ncgen.runtime.integrator`: ``integrator`` ``"dopri5"`` (default, ``rtol``/``atol``,
+defaults 1e-8 and 1e-10) or ``"rk4"`` (``substeps`` steps per output interval); ``backend``
+``"compiled"`` (each step one call of compiled C, :mod:`ncgen.assembly.rolling_step`),
+``"vm"`` (Python-driven CasADi calls) or ``"auto"`` (compiled when it pays, see
+:func:`integrate`).
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from ncgen.assembly.manifold import newton, system_size
-from ncgen.errors import NcgenError
+from ncgen.assembly.nonholonomic import rolling_system
+from ncgen.assembly.rolling_step import DOPRI5, step_function
+from ncgen.errors import CompilerNotFound, NcgenError
+from ncgen.runtime.integrator import Run
+from ncgen.runtime.options import SimulationOptions
+from ncgen.runtime.trajectory import Trajectory
 
-#: Dormand–Prince 5(4): nodes, stage coefficients, fifth-order weights, error weights (5th − 4th).
-_C = np.array([0.0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1.0, 1.0])
-_A = [[], [1 / 5], [3 / 40, 9 / 40], [44 / 45, -56 / 15, 32 / 9],
-      [19372 / 6561, -25360 / 2187, 64448 / 6561, -212 / 729],
-      [9017 / 3168, -355 / 33, 46732 / 5247, 49 / 176, -5103 / 18656],
-      [35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84]]
-_B5 = np.array([35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84, 0.0])
-_E = _B5 - np.array([5179 / 57600, 0.0, 7571 / 16695, 393 / 640, -92097 / 339200, 187 / 2100, 1 / 40])
 METHODS = ("rk4", "dopri5")
+_A, _B5, _E = DOPRI5
+#: Projected wall time (s) of a run's Python-driven steps beyond which ``compiled=None``
+#: compiles the step (a first compile takes 20–45 s on a loaded 2-core machine; a cached one ~1 s).
+COMPILE_PAYS = 30.0
+
 
 
 @dataclass(frozen=True)
 class RollingTrajectory:
     """``t`` (s), ``q``, ``v`` (one row per output), ``energy`` (J, kinetic + potential),
-    ``residual`` (``max(|Φ̂|∞, |Â v|∞)`` per output), ``steps`` taken, ``rejected`` steps."""
+    ``residual`` (``max(|Φ̂|∞, |Â v|∞)`` per output), ``steps`` taken, ``rejected`` steps,
+    ``compiled``: whether the run ended on the compiled step."""
     t: np.ndarray
     q: np.ndarray
     v: np.ndarray
@@ -42,6 +53,7 @@ class RollingTrajectory:
     steps: int
     rejected: int
     method: str
+    compiled: bool = False
 
 
 def project(system, q, v, tol: float = 1e-14, max_iter: int = 20) -> tuple[np.ndarray, np.ndarray]:
@@ -62,24 +74,90 @@ def project(system, q, v, tol: float = 1e-14, max_iter: int = 20) -> tuple[np.nd
 
 
 def simulate_rolling(system, t_end: float, dt: float, q0=None, v0=None, *, method: str = "dopri5",
-                     h: float | None = None, rtol: float = 1e-8, atol: float = 1e-10) -> RollingTrajectory:
+                     h: float | None = None, rtol: float = 1e-8, atol: float = 1e-10,
+                     compiled: bool | None = None) -> RollingTrajectory:
     """Integrate ``system`` from ``(q0, v0)`` (default: the model's initial state, projected)
     to ``t_end`` (s), outputs every ``dt`` (s).  ``method``: ``"rk4"`` with step ``h`` (s,
     default ``dt``; ``dt`` must be a whole number of steps) or ``"dopri5"`` with
-    ``rtol``/``atol``."""
+    ``rtol``/``atol``; ``compiled``: see :func:`integrate`."""
     if method not in METHODS:
         raise NcgenError(f"simulate_rolling: method: expected one of {METHODS}, found {method!r}")
     if not (t_end > 0 and dt > 0):
         raise NcgenError(f"simulate_rolling: t_end and dt: expected positive times, found {t_end!r}, {dt!r}")
+    per = 1
+    if method == "rk4":
+        h = dt if h is None else h
+        per = int(round(dt / h))
+        if per < 1 or abs(per * h - dt) > 1e-12 * dt:
+            raise NcgenError(f"simulate_rolling: h: expected dt / h to be a whole number, found dt = {dt}, h = {h}")
     model = system.model
-    q, v = project(system, model.q0 if q0 is None else q0, model.v0 if v0 is None else v0)
-    n_out = int(round(t_end / dt))
-    grid = dt * np.arange(n_out + 1)
+    grid = dt * np.arange(int(round(t_end / dt)) + 1)
+    return integrate(system, grid, model.q0 if q0 is None else q0, model.v0 if v0 is None else v0,
+                     method=method, substeps=per, rtol=rtol, atol=atol, compiled=compiled)
+
+
+def compiled_step(system, method: str):
+    """The step of ``method`` for ``system`` (:func:`ncgen.assembly.rolling_step.step_function`)
+    as compiled C (:func:`ncgen.codegen.direct.compile_direct`, cached by content), kept
+    in ``system.compiled_steps``; raises :class:`~ncgen.errors.CompilerNotFound`."""
+    from ncgen.codegen.direct import compile_direct
+    if method not in system.compiled_steps:
+        system.compiled_steps[method] = compile_direct(f"rolling_{method}_step", step_function(system, method))
+    return system.compiled_steps[method]
+
+
+def integrate(system, grid, q0, v0, *, method: str = "dopri5", substeps: int = 1, rtol: float = 1e-8,
+              atol: float = 1e-10, compiled: bool | None = None) -> RollingTrajectory:
+    """Integrate ``system`` from ``(q0, v0)`` (projected onto both constraint levels) over the
+    output times ``grid`` (s, increasing; the motion does not depend on time, so only the
+    differences count): ``"rk4"`` takes ``substeps`` equal steps per output interval,
+    ``"dopri5"`` controls its steps by ``rtol``/``atol``.  ``compiled``: whether each step
+    (its stages and projection) is one call of compiled C (:func:`compiled_step`) instead of
+    Python-driven CasADi calls (the same steps to round-off, 10–20 times faster): ``True``
+    from the start (an error without a C compiler), ``False`` never, ``None`` (default)
+    when compiled in this process already, else once the Python steps' pace says the run
+    would take longer than :data:`COMPILE_PAYS` (then compiled, or read from the compile
+    cache, and continued; without a compiler, continued in Python)."""
+    model = system.model
+    q, v = project(system, q0, v0)
+    grid = np.asarray(grid, float)
+    step = system.compiled_steps.get(method) if compiled is None else \
+        compiled_step(system, method) if compiled else None
+    started, span = time.perf_counter(), float(grid[-1] - grid[0])
     zero = np.zeros(system.nq)
+
+    def switch(t_now: float) -> None:
+        """Compile the step when the Python pace projects the run beyond COMPILE_PAYS."""
+        nonlocal step, compiled
+        elapsed = time.perf_counter() - started
+        if compiled is None and step is None and elapsed > 0.5 and t_now > grid[0] and \
+                elapsed * span / (t_now - grid[0]) > COMPILE_PAYS:
+            compiled = False                          # decided: asked once per run
+            try:
+                step = compiled_step(system, method)
+            except CompilerNotFound:
+                pass
 
     def rhs(y):
         a = np.asarray(system.accel(y[:system.nq], y[system.nq:], zero)[0]).ravel()
         return np.concatenate([y[system.nq:], a])
+
+    def rk_step(y, h):
+        """``(y⁺ projected, error estimate)`` of one step of ``method``."""
+        if step is not None:
+            y_next, err = step(y, h)
+            return y_next.copy(), err.copy()
+        if method == "rk4":
+            k1 = rhs(y)
+            k2 = rhs(y + h / 2 * k1)
+            k3 = rhs(y + h / 2 * k2)
+            k4 = rhs(y + h * k3)
+            return np.concatenate(project(system, *np.split(y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4), 2))), None
+        k = [rhs(y)]
+        for i in range(1, 7):
+            k.append(rhs(y + h * sum(c * kj for c, kj in zip(_A[i], k))))
+        y5 = y + h * sum(b * kj for b, kj in zip(_B5, k))
+        return np.concatenate(project(system, *np.split(y5, 2))), h * sum(e * kj for e, kj in zip(_E, k))
 
     energy = model.functions["energy"]
     rows = []
@@ -91,43 +169,81 @@ def simulate_rolling(system, t_end: float, dt: float, q0=None, v0=None, *, metho
     record(q, v)
     y, steps, rejected = np.concatenate([q, v]), 0, 0
     if method == "rk4":
-        h = dt if h is None else h
-        per = int(round(dt / h))
-        if per < 1 or abs(per * h - dt) > 1e-12 * dt:
-            raise NcgenError(f"simulate_rolling: h: expected dt / h to be a whole number, found dt = {dt}, h = {h}")
-        for _ in range(n_out):
-            for _ in range(per):
-                k1 = rhs(y)
-                k2 = rhs(y + h / 2 * k1)
-                k3 = rhs(y + h / 2 * k2)
-                k4 = rhs(y + h * k3)
-                y = np.concatenate(project(system, *np.split(y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4), 2)))
+        for t_a, t_b in zip(grid[:-1], grid[1:]):
+            h = (t_b - t_a) / substeps
+            for _ in range(substeps):
+                y = rk_step(y, h)[0]
                 steps += 1
             record(*np.split(y, 2))
+            switch(t_b)
     else:
-        t, step = 0.0, min(dt, 1e-3)
+        t, h = grid[0], min(grid[1] - grid[0], 1e-3) if len(grid) > 1 else 1e-3
         for target in grid[1:]:
-            while t < target - 1e-14 * max(1.0, target):
-                step_now = min(step, target - t)
-                k = [rhs(y)]
-                for i in range(1, 7):
-                    k.append(rhs(y + step_now * sum(c * kj for c, kj in zip(_A[i], k))))
-                y5 = y + step_now * sum(b * kj for b, kj in zip(_B5, k))
-                err = step_now * sum(e * kj for e, kj in zip(_E, k))
-                scale = atol + rtol * np.maximum(np.abs(y), np.abs(y5))
+            while t < target - 1e-14 * max(1.0, abs(target)):
+                h_now = min(h, target - t)
+                y_next, err = rk_step(y, h_now)
+                # the unprojected step's error estimate against the start and the (projected) end
+                scale = atol + rtol * np.maximum(np.abs(y), np.abs(y_next))
                 ratio = float(np.sqrt(np.mean((err / scale) ** 2)))
                 if ratio <= 1.0:
-                    y = np.concatenate(project(system, *np.split(y5, 2)))
-                    t += step_now
+                    y = y_next
+                    t += h_now
                     steps += 1
+                    switch(t)
                 else:
                     rejected += 1
-                proposed = step_now * min(5.0, max(0.2, 0.9 * ratio ** -0.2 if ratio > 0 else 5.0))
+                proposed = h_now * min(5.0, max(0.2, 0.9 * ratio ** -0.2 if ratio > 0 else 5.0))
                 # a step cut short to land on an output does not shrink the next one
-                step = max(step, proposed) if ratio <= 1.0 and step_now < step else proposed
-                if step < 1e-12 * max(1.0, target):
-                    raise NcgenError(f"simulate_rolling: the step fell below {step:.3g} s at t = {t:.6g} s")
+                h = max(h, proposed) if ratio <= 1.0 and h_now < h else proposed
+                if h < 1e-12 * max(1.0, abs(target)):
+                    raise NcgenError(f"simulate_rolling: the step fell below {h:.3g} s at t = {t:.6g} s")
             record(*np.split(y, 2))
     q_out, v_out, e_out, r_out = (np.array(x) for x in zip(*rows))
     return RollingTrajectory(t=grid, q=q_out, v=v_out, energy=e_out, residual=r_out, steps=steps,
-                             rejected=rejected, method=method)
+                             rejected=rejected, method=method, compiled=step is not None)
+
+
+class RollingIntegrator:
+    """``method="rolling"``: a model with nonholonomic elements (``model.rolling``), its
+    holonomic and velocity constraints kept by projection after every step (module
+    docstring).  The trajectory's ``constraint_residual`` is ``|Φ̂(q)|∞`` (the model's
+    constraints and the elements' heights), its ``velocity_residual`` ``|Â(q) v|∞`` (both
+    levels, the rolling rows included); ``lam`` holds the model's multipliers,
+    ``info["rolling_names"]`` the elements."""
+
+    METHOD = "rolling"
+    OPTIONS = ("integrator", "rtol", "atol", "substeps", "backend")
+
+    def __init__(self, model, opts: SimulationOptions):
+        if opts.joint_dynamics:
+            raise NcgenError("method='rolling' does not take joint_dynamics=True (the joints' damping, friction "
+                             "and limits are not in the rolling equations)")
+        self.model, self.opts = model, opts
+        self.system = rolling_system(model)
+
+    def run(self, run: Run) -> Trajectory:
+        model, o = self.model, self.opts
+        if run.controller is not None or run.feedback is not None or np.any(run.U != 0):
+            raise NcgenError(f"method='rolling': model {model.name!r}: inputs are not taken yet (the rolling "
+                             "equations are built with u = 0); give u=None")
+        if not np.array_equal(run.p, model.p0):
+            raise NcgenError(f"method='rolling': model {model.name!r}: parameters other than the model's "
+                             "are not taken yet (the rolling equations are built with model.p0); give p=None")
+        method = o.integrator or "dopri5"
+        rtol = 1e-8 if o.rtol is None else o.rtol
+        atol = 1e-10 if o.atol is None else o.atol
+        start = time.perf_counter()
+        compiled = {"vm": False, "compiled": True}.get(o.backend)
+        tr = integrate(self.system, run.t, run.q, run.v, method=method, substeps=o.substeps, rtol=rtol, atol=atol,
+                       compiled=compiled)
+        system, nc_ = self.system, model.nc
+        zero = np.zeros(system.nq)
+        lam = np.array([np.asarray(system.accel(q, v, zero)[1]).ravel()[:nc_] for q, v in zip(tr.q, tr.v)])
+        levels = np.array([system.residuals(q, v) for q, v in zip(tr.q, tr.v)])
+        info = {"method": self.METHOD, "integrator": method, "steps": tr.steps, "rejected": tr.rejected,
+                "backend": "compiled" if tr.compiled else "vm",
+                "rolling_names": [e.name for e in model.rolling], "wall_time": time.perf_counter() - start,
+                **({"rtol": rtol, "atol": atol} if method == "dopri5" else {"substeps": o.substeps})}
+        traj = Trajectory.from_states(model, tr.t, tr.q, tr.v, lam.reshape(len(tr.t), nc_), run.U, run.p, info)
+        traj.constraint_residual, traj.velocity_residual = levels[:, 0], levels[:, 1]
+        return traj

@@ -1,10 +1,12 @@
 """``simulate``: a model's motion over a time grid, by one of the integrators behind the seam
-of :mod:`ncgen.runtime.integrator`: the joint-space loop, IDAS or the compiled stepper."""
+of :mod:`ncgen.runtime.integrator`: the joint-space loop, IDAS, the compiled stepper or the
+rolling integrator."""
 from __future__ import annotations
 
 import dataclasses
 import inspect
 
+from ncgen.errors import NcgenError
 from ncgen.interrupts import raise_if_interrupted, sticky_interrupt
 from ncgen.model.controllers import Controller
 from ncgen.runtime.dae import load_dae
@@ -14,6 +16,7 @@ from ncgen.runtime.integrator import Run
 from ncgen.runtime.joint_integrator import JointIntegrator
 from ncgen.runtime.joint_simulation import joint_space_applies
 from ncgen.runtime.options import SimulationOptions
+from ncgen.runtime.rolling_integrator import RollingIntegrator
 from ncgen.runtime.run_start import initial_multipliers, initial_state, natural_feedback, point_bytes
 from ncgen.runtime.stepper_integrator import StepperIntegrator
 from ncgen.runtime.trajectory import Trajectory
@@ -128,6 +131,12 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
       0.5 s and both backends (``tests/test_singular_output_grid.py``).  ``True``: the same,
       with one IDAS call per grid interval and the state projected after each.  ``False``:
       IDAS alone.
+    * ``method="rolling"``: the method of a model with rolling elements (``model.rolling``:
+      ``System.add_rolling``, TOML ``[[rolling]]``), chosen by ``"auto"`` and the only one
+      that takes it: explicit Runge–Kutta steps (``integrator="dopri5"``, default, with
+      ``rtol``/``atol``, or ``"rk4"`` with ``substeps``) each projected onto the holonomic
+      and the velocity constraints (:mod:`ncgen.runtime.rolling_integrator`, docs/rolling.md);
+      no inputs or parameter values other than the model's yet.
     * ``method="stepper"``: the compiled fixed-step stepper (generated C, Newton loop
       included; :mod:`ncgen.runtime.stepper`): ``scheme="auto"`` (default) Suzuki's
       fourth-order composition of five RATTLE steps per step (``"rattle4"``), RATTLE alone
@@ -157,7 +166,13 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
     """
     opts = SimulationOptions.resolve(options, **shortcuts)
     method, why_not = opts.method, None
-    if method == "auto":                   # the joint loop is compiled: backend="vm" asks for no compiling
+    if model.rolling and method not in ("auto", "rolling"):
+        raise NcgenError(f"method={method!r}: model {model.name!r} has rolling elements "
+                         f"({', '.join(e.name for e in model.rolling)}), whose velocity constraints only "
+                         "method='rolling' keeps (the default for it)")
+    if model.rolling:
+        method, why_not = "rolling", "the model has rolling elements (method='rolling')"
+    elif method == "auto":                 # the joint loop is compiled: backend="vm" asks for no compiling
         why_not = "backend='vm' compiles nothing" if opts.backend == "vm" else joint_space_applies(model)
         method = "joint" if why_not is None else "idas"
     integrator = INTEGRATORS[method](model, opts)
@@ -179,5 +194,5 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
 
 
 #: The integrators by ``SimulationOptions.method`` (:mod:`ncgen.runtime.integrator`).
-INTEGRATORS = {c.METHOD: c for c in (JointIntegrator, IdasIntegrator, StepperIntegrator)}
+INTEGRATORS = {c.METHOD: c for c in (JointIntegrator, IdasIntegrator, StepperIntegrator, RollingIntegrator)}
 

@@ -14,6 +14,10 @@ Rules, in order, per member:
   thickened to 4 % of its largest edge) plus thin sticks from the centre of mass to its
   basic points and markers; a point member: a small sphere.
 
+A body with a rolling disc or ball (``model.rolling``) is drawn as that disc (a thin
+cylinder of its radius about its axle) or ball unless it has a shape or visuals of its own; a
+knife edge as a thin blade along its direction.
+
 Joints are drawn on their second member (the first when the second is the ground): a
 hinge as a short cylinder along its axis, a ball joint as a sphere, a slider as a long thin
 rod along its axis.  Dimensions in m; the member frame is the one of ``traj.poses()``
@@ -115,6 +119,11 @@ def member_primitives(model, size: float, colors: dict | None = None) -> dict[st
             prims = [p for v in visuals[name] if (p := _visual(v, color)) is not None]
         else:
             prims = _default(m, size, color)
+        wheels = [e for e in getattr(model, "rolling", ()) if e.body == name]
+        if wheels:
+            drawn = [_rolling(e, size, color) for e in wheels]
+            plain = shape is None and name not in visuals and any(e.kind != "KnifeEdge" for e in wheels)
+            prims = drawn if plain else prims + drawn
         out[name] = prims
     if "ground" in visuals:
         out["ground"] = [p for v in visuals["ground"] if (p := _visual(v, GROUND_COLOR)) is not None]
@@ -125,6 +134,19 @@ def member_primitives(model, size: float, colors: dict | None = None) -> dict[st
         if placed is not None:
             out.setdefault(placed[0], []).append(placed[1])
     return out
+
+
+def _rolling(element, size: float, color) -> Primitive:
+    """A rolling disc (thickness a tenth of its radius), ball or knife edge (a blade a fifth
+    of the scene long) in its body's frame."""
+    if element.kind == "RollingDisc":
+        return Primitive("cylinder", np.array([element.radius, 0.1 * element.radius]), z_to(element.axle),
+                         color=color)
+    if element.kind == "RollingSphere":
+        return Primitive("sphere", np.array([element.radius]), color=color)
+    thin = STICK_RADIUS * size
+    return Primitive("box", np.array([thin, 5 * thin, 0.2 * size]), z_to(element.blade), element.at.copy(),
+                     JOINT_COLOR, role="joint")
 
 
 def _ground_boxes(model) -> list[Primitive]:

@@ -194,11 +194,13 @@ def spring_scene(traj, idx=None) -> dict:
 
 
 def contact_scene(traj, model) -> dict:
-    """Spheres, ground planes and loaded contact points of ``traj`` (see :class:`Scene`)."""
-    if not getattr(model, "nk", 0):
-        return {}
+    """Spheres, ground planes and loaded contact points of ``traj`` (see :class:`Scene`); the
+    plane z = 0 of rolling elements (``model.rolling``)."""
     n, d = len(traj), traj.dim
-    centres, radii, planes, points, forces = [], [], [], [], []
+    planes = [[np.zeros(d), np.eye(d)[-1]]] if getattr(model, "rolling", ()) else []
+    if not getattr(model, "nk", 0):
+        return {"planes": np.asarray(planes, float).reshape(-1, 2, d)} if planes else {}
+    centres, radii, points, forces = [], [], [], []
     translated: dict = {}
     for k, c in enumerate(model.contacts):
         if "plane" in c:                                       # a sphere (or a shape's point) on a plane
