@@ -8,24 +8,17 @@ import pytest
 
 import ncgen as nc
 from ncgen.analysis.tensegrity_model import rest_length_inputs
-from ncgen.analysis.tensegrity_shapes import stacked_prisms
+from ncgen.analysis.tensegrity_shapes import stacked_prisms, tower_of_radii
 
 SUPPORTS = [0, 1, 2]
 K = 2000.0
 
 
-def tower(r1: float, r2: float, r0: float = 0.3):
-    """The two-stage tower of 3-prisms with rings of radii ``r0`` (on the floor), ``r1``,
-    ``r2``, each stage at the equilibrium twist 150° and with the struts of the regular
-    tower of radius 0.3 m and stage height 0.5 m (0.7654 m): the stage heights follow."""
-    nodes, struts, cables = stacked_prisms(3, stages=2, radius=0.3, height=0.5)
-    L2, c = np.sum((nodes[struts[0][1]] - nodes[struts[0][0]]) ** 2), np.cos(np.radians(150))
-    h1 = np.sqrt(L2 - r0**2 - r1**2 + 2 * r0 * r1 * c)
-    h2 = np.sqrt(L2 - r1**2 - r2**2 + 2 * r1 * r2 * c)
-    for k, (r, z) in enumerate(((r0, 0.0), (r1, h1), (r2, h1 + h2))):
-        nodes[3 * k:3 * k + 3, :2] *= r / 0.3
-        nodes[3 * k:3 * k + 3, 2] = z
-    return nodes, struts, cables
+def tower(r1: float, r2: float):
+    """The two-stage tower on a floor ring of 0.3 m, rings of radii ``r1``, ``r2`` (m), struts
+    of the regular tower of radius 0.3 m and stage height 0.5 m."""
+    nodes, struts, _ = stacked_prisms(3, stages=2, radius=0.3, height=0.5)
+    return tower_of_radii([0.3, r1, r2], np.linalg.norm(nodes[struts[0][1]] - nodes[struts[0][0]]))
 
 
 @pytest.fixture(scope="module")
@@ -44,6 +37,7 @@ def deployment():
 @pytest.mark.slow
 def test_compact_and_deployed_shapes_are_equilibria_of_one_model(deployment):
     model, shapes, u, eqs = deployment
+    np.testing.assert_allclose(shapes[1], stacked_prisms(3, stages=2, radius=0.3, height=0.5)[0], atol=1e-12)
     for X, eq in zip(shapes, eqs):
         top = [eq.coordinate(f"n{i}.r_i.z") for i in (6, 7, 8)]
         np.testing.assert_allclose(top, X[6:, 2], atol=1e-9)
