@@ -21,6 +21,26 @@ def tower(r1: float, r2: float):
     return tower_of_radii([0.3, r1, r2], np.linalg.norm(nodes[struts[0][1]] - nodes[struts[0][0]]))
 
 
+def test_least_prestress_of_the_compact_tower_is_the_qp_optimum():
+    """The compact tower's least prestress (a QP on which ``qrqp`` stops short: a degenerate
+    active set) satisfies its bounds and balance, and the QP's optimality conditions: the
+    gradient ``H α + g`` of ``½ |t|²`` is ``−B_aᵀ μ`` on the active bounds with ``μ ≥ 0``."""
+    from scipy.optimize import nnls
+
+    from ncgen.analysis.inverse_statics import problem
+
+    A, struts, cables = tower(0.35, 0.35)
+    inv = nc.inverse_statics(A, struts, cables, supports=SUPPORTS, cable_min=10.0)
+    assert inv.tensions.min() >= 10.0 - 1e-9 and inv.residual < 1e-9
+    pr = problem(A, struts, cables, None, SUPPORTS, cable_min=10.0, who="test")
+    alpha = np.linalg.lstsq(pr.T, inv.forces - pr.t_p, rcond=None)[0]
+    np.testing.assert_allclose(pr.forces(alpha), inv.forces, atol=1e-9)
+    active = np.flatnonzero(pr.B_alpha @ alpha - pr.b_alpha > -1e-7 * pr.scale)
+    grad = pr.H @ alpha + pr.g
+    mu, res = nnls(pr.B_alpha[active].T, -grad)
+    assert active.size and res < 1e-8 * max(1.0, np.abs(grad).max())
+
+
 @pytest.fixture(scope="module")
 def deployment():
     """The model (rest lengths as inputs, no damping), the compact (A) and deployed (B)

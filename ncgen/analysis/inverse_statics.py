@@ -15,8 +15,8 @@ node with wrap angle ``θ`` (from the shape: ``π`` minus the angle between the 
 plus ``2π`` per extra turn in ``turns``) obey the capstan (Euler–Eytelwein) law: the cable
 sticks while ``e^{−μθ} ≤ t_b / t_a ≤ e^{μθ}`` and slips at either bound.  Frictionless
 clusters share one tension.  The QP (``α`` only: the number of states of self-stress) is
-solved by CasADi's active-set ``qrqp`` (qpOASES where it fails) and then polished on its active set by an exact
-least-squares solve, so that the forces satisfy ``A t = f`` and their bounds to round-off.
+solved by CasADi's active-set ``qrqp`` (DAQP where it fails) and then polished on its active
+set by an exact least-squares solve, so that the forces satisfy ``A t = f`` and their bounds to round-off.
 """
 from __future__ import annotations
 
@@ -336,9 +336,9 @@ def _qp(H, g, B, b, scale, names, who) -> np.ndarray:
     reg = 1e-14 * max(1.0, np.abs(H).max())
     pattern = {"h": ca.Sparsity.dense(n, n), "a": ca.Sparsity.dense(*B.shape)}
     # qrqp first; on a degenerate active set (several states of self-stress meeting one bound)
-    # it can stop short of a feasible problem's solution: qpOASES then
+    # it can stop short of a feasible problem's solution: DAQP then
     for plugin, opts in (("qrqp", {"print_iter": False, "print_header": False, "print_info": False}),
-                         ("qpoases", {"printLevel": "none"})):
+                         ("daqp", {})):
         solver = ca.conic("inverse_statics", plugin, pattern, {**opts, "error_on_fail": False})
         sol = solver(h=H + reg * np.eye(n), g=g, a=B, lba=-np.inf, uba=b)
         alpha = np.array(sol["x"]).reshape(-1)
