@@ -147,3 +147,20 @@ def test_member_inside_a_body_is_refused():
     nodes, cables, _, anchors = hung_plate()
     with pytest.raises(nc.NcgenError, match=r"struts\[0\]: nodes 0 and 1 are both in bodies\[0\]"):
         nc.self_stress(nodes, [(0, 1)], cables, anchors, bodies=[[0, 1, 2]])
+
+
+def test_design_file_with_bodies(tmp_path, capsys):
+    """``bodies`` in a design file (``ncgen tensegrity``): the two-body table's analysis."""
+    from ncgen.cli import main
+
+    a = 2 * np.pi * np.arange(3) / 3
+    ring = [[float(0.3 * np.cos(x)), float(0.3 * np.sin(x))] for x in a]
+    nodes = [[*p, 0.0] for p in ring] + [[0, 0, 0.6]] + [[*p, 0.8] for p in ring] + [[0, 0, 0.2]]
+    path = tmp_path / "table.tensegrity.toml"
+    path.write_text(f"nodes = {nodes}\nstruts = []\ncables = [[3, 7], [0, 4], [1, 5], [2, 6]]\n"
+                    "bodies = [[0, 1, 2, 3], [4, 5, 6, 7]]\n\n[prestress]\ncable_min = 5.0\n")
+    assert main(["tensegrity", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "2 rigid bodies" in out and "1 - 3 = 4 - (12 - 6)" in out and "prestress stability: stable" in out
+    forces = [float(line.split()[4]) for line in out.splitlines() if line.startswith("cables[")]
+    np.testing.assert_allclose(forces, [15, 5, 5, 5], rtol=1e-12)
