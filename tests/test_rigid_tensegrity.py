@@ -162,5 +162,5 @@ def test_design_file_with_bodies(tmp_path, capsys):
     assert main(["tensegrity", str(path)]) == 0
     out = capsys.readouterr().out
     assert "2 rigid bodies" in out and "1 - 3 = 4 - (12 - 6)" in out and "prestress stability: stable" in out
-    forces = [float(line.split()[4]) for line in out.splitlines() if line.startswith("cables[")]
+    forces = [float(line.split()[3]) for line in out.splitlines() if line.startswith("cables[")]
     np.testing.assert_allclose(forces, [15, 5, 5, 5], rtol=1e-12)
