@@ -9,7 +9,7 @@ of one model.  The deployment is posed as optimal control (rest lengths the cont
 2 cm of both designs; from the compact equilibrium at rest to the deployed one at rest in
 1.5 s; warm-started by a simulated cosine ramp of the rest lengths) and tracked in
 simulation from a disturbed start by cable-space feedback: each cable's rest length set so
-that its tension is the plan's plus ``k_f (l* − l) + c_f (l̇* − l̇)`` about the planned length
+that its tension is the plan's plus ``k_f (l − l*) + c_f (l̇ − l̇*)`` about the planned length
 ``l*`` (the prestressed structure is stiff in its cables' lengths; an MPC on this model is
 not used: building its step functions took longer than 8 min here, see docs/tensegrity.md).
 """
@@ -38,9 +38,11 @@ def designs():
     return model, u, tuple(nc.equilibrium(model, u=ui).q for ui in u)
 
 
-def cable_feedback(model, plan, gain: float = 2000.0, damping: float = 40.0):
+def cable_feedback(model, plan, gain: float = 2 * K, damping: float = 40.0):
     """``u(t, q, v)``: rest lengths giving each cable the plan's tension plus
-    ``gain (l* − l) + damping (l̇* − l̇)`` (N/m, N·s/m) about the plan's length ``l*``."""
+    ``gain (l − l*) + damping (l̇ − l̇*)`` (N/m, N·s/m) about the plan's length ``l*``: a
+    virtual cable stiffer and more damped than the real one about the plan (``gain = k``,
+    ``damping = 0`` would be the plan's rest lengths, open loop)."""
     f = model.springs.function
     eps = 1e-7
 
@@ -49,15 +51,17 @@ def cable_feedback(model, plan, gain: float = 2000.0, damping: float = 40.0):
         rate = (np.asarray(f(t, q + eps * v, v, u, [])[1]).reshape(-1) - length) / eps
         return T, length, rate
 
-    def at(t):
-        k = min(np.searchsorted(plan.t, t, side="right") - 1, len(plan.t) - 1)
-        return plan.q[k], plan.v[k], plan.u[min(k, len(plan.u) - 1)]
+    def at(t):                                        # the plan interpolated linearly in time
+        k = int(np.clip(np.searchsorted(plan.t, t, side="right") - 1, 0, len(plan.t) - 2))
+        w = float(np.clip((t - plan.t[k]) / (plan.t[k + 1] - plan.t[k]), 0.0, 1.0))
+        u = plan.u[min(k, len(plan.u) - 1)]
+        return (1 - w) * plan.q[k] + w * plan.q[k + 1], (1 - w) * plan.v[k] + w * plan.v[k + 1], u
 
     def control(t, q, v):
         q_ref, v_ref, u_ref = at(t)
         T_ref, l_ref, rate_ref = state(t, q_ref, v_ref, u_ref)
         _, length, rate = state(t, q, v, u_ref)
-        T = np.maximum(T_ref + gain * (l_ref - length) + damping * (rate_ref - rate), 0.0)
+        T = np.maximum(T_ref + gain * (length - l_ref) + damping * (rate - rate_ref), 0.0)
         return length - (T - DAMPING * rate) / K          # k (l − l₀) + c l̇ = T
     return control
 
@@ -77,7 +81,8 @@ if __name__ == "__main__":
     ocp.final(q=qB, v=0)
     start = time.perf_counter()
     plan = ocp.solve(warm_start=ramp)
-    print(f"optimal control: {plan.iterations} IPOPT iterations, {time.perf_counter() - start:.1f} s")
+    print(f"optimal control: {plan.stats.iterations} IPOPT iterations, {time.perf_counter() - start:.1f} s wall, "
+          f"largest dynamics defect {plan.stats.max_defect:.1e}")
     opened = nc.simulate(model, t_final, plan.t[1], u=plan.u, q0=qA, backend="vm")
     print(f"its inputs replayed (IDAS, open loop): top at {opened.q[-1, z]:.4f} m, "
           f"|q - qB| {np.abs(opened.q[-1] - qB).max():.2e} m")
@@ -86,6 +91,6 @@ if __name__ == "__main__":
     held = lambda t: plan.u[min(np.searchsorted(plan.t, t, side="right") - 1, len(plan.u) - 1)]  # noqa: E731
     runs = {"open loop": held, "tracked": cable_feedback(model, plan)}
     for name, u in runs.items():
-        traj = nc.simulate(model, t_final + 0.5, 0.005, u=u, q0=qA, v0=v0, backend="vm", ic_tolerance=None)
+        traj = nc.simulate(model, t_final + 0.5, 0.002, u=u, q0=qA, v0=v0, backend="vm", ic_tolerance=None)
         print(f"{name} from a disturbed start: top at {traj.q[-1, z]:.4f} m, "
               f"|q - qB| {np.abs(traj.q[-1] - qB).max():.2e} m, speed {np.abs(traj.v[-1]).max():.2e} m/s")
