@@ -40,6 +40,7 @@ def test_tower_example(tmp_path):
     assert all(float(r) < 1e-9 for r in re.findall(r"\|A t - f\| = ([\d.e+-]+) N", out))
 
 
+@pytest.mark.slow       # a fresh process building a body model: ~20 s; fast: test_rigid_tensegrity.py's table
 @pytest.mark.timeout(900)
 def test_bodies_example(tmp_path):
     out = run("tensegrity_bodies.py", tmp_path)

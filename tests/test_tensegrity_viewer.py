@@ -80,3 +80,14 @@ def test_html_page_carries_segments_tensions_and_a_tension_panel(swinging, tmp_p
     assert panel and [s["label"] for s in panel[0]["series"]] == ["rope", "loose"]
     page = nc.to_html(swinging, tmp_path / "v.html") if hasattr(nc, "to_html") else swinging.to_html(tmp_path / "v.html")
     assert "tension_scale" in page.read_text()
+
+
+@pytest.mark.slow      # headless Chromium: 10-30 s on a loaded machine
+def test_html_page_with_a_clustered_cable_runs_without_console_errors(swinging, tmp_path):
+    from test_viz_html import CHROMIUM, report
+
+    if CHROMIUM is None:
+        pytest.skip("chromium is not installed")
+    page = swinging.to_html(tmp_path / "vcable.html")
+    _, console = report(page, 0.05, tmp_path)
+    assert console == []
