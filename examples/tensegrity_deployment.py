@@ -38,7 +38,7 @@ def designs():
     return model, u, tuple(nc.equilibrium(model, u=ui).q for ui in u)
 
 
-def cable_feedback(model, plan, gain: float = 4 * K, damping: float = 80.0):
+def cable_feedback(model, plan, gain: float = 4 * K, damping: float = 20.0):
     """``u(t, q, v)``: rest lengths giving each cable the plan's tension plus
     ``gain (l − l*) + damping (l̇ − l̇*)`` (N/m, N·s/m) about the plan's length ``l*``: a
     virtual cable stiffer and more damped than the real one about the plan (``gain = k``,
