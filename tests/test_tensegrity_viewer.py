@@ -78,7 +78,7 @@ def test_html_page_carries_segments_tensions_and_a_tension_panel(swinging, tmp_p
     assert all("tension" in s for s in data["springs"]) and data["tension_scale"] > 0
     panel = [p for p in data["plots"] if p["title"] == "spring and cable tensions"]
     assert panel and [s["label"] for s in panel[0]["series"]] == ["rope", "loose"]
-    page = nc.to_html(swinging, tmp_path / "v.html") if hasattr(nc, "to_html") else swinging.to_html(tmp_path / "v.html")
+    page = swinging.to_html(tmp_path / "v.html")
     assert "tension_scale" in page.read_text()
 
 

@@ -28,7 +28,8 @@ from ncgen.analysis.self_stress import AXES, framework
 
 
 def tensegrity_system(nodes, struts, cables, rest_lengths, stiffness, loads=None, supports=None, *,
-                      clusters=None, bodies=None, actuated: bool = False, node_mass: float = 0.1, damping: float = 0.0, name: str = "tensegrity"):
+                      clusters=None, bodies=None, actuated: bool = False, node_mass: float = 0.1,
+                      damping: float = 0.0, name: str = "tensegrity"):
     """The :class:`~ncgen.model.system.System` of the tensegrity (module docstring);
     ``rest_lengths`` and ``stiffness``: one per cable (or a number); nodes named ``n<i>``,
     struts ``s<i>``, cables ``c<i>``.  ``clusters`` (lists of cable indices, as in
