@@ -69,6 +69,8 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800),   # each benchmark sc
                             "converged: ncgen 3/3, minimal 3/3"]),
     ("control.py", ["=== step Jacobians: chain of N = 3 bars", "RATIO ncgen / mujoco mjd_transitionFD forward",
                     "=== cart-pole MPC", "RATIO IPOPT re-solve / MPC step"]),
+    ("tensegrity_clustered.py", ["=== deploying tower", "RATIO clustered / independent, IDAS",
+                                 "RATIO clustered / independent, stepper"]),
     ("step_jacobians.py", ["=== twodofs: nq = ", "C: ", "compiler peak RSS", "st.jacobians(x, u)",
                            "central differences: A", "TARGET twodofs"]),
     ("mjcf_import_time.py", ["first    parse wall", "later 1  parse wall", "n =   10:", "CPU per element",

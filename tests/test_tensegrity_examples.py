@@ -38,3 +38,26 @@ def test_tower_example(tmp_path):
     sags = [float(s) for s in re.findall(r"top sags ([\d.]+) mm", out)]
     assert len(sags) == 2 and sags[1] < sags[0]
     assert all(float(r) < 1e-9 for r in re.findall(r"\|A t - f\| = ([\d.e+-]+) N", out))
+
+
+@pytest.mark.slow       # a fresh process building a body model: ~20 s; fast: test_rigid_tensegrity.py's table
+@pytest.mark.timeout(900)
+def test_bodies_example(tmp_path):
+    out = run("tensegrity_bodies.py", tmp_path)
+    assert "2 rigid bodies" in out and "1 - 3 = 4 - (12 - 6)" in out
+    assert "ratio 3.000000, by hand 3" in out and "prestress stability: stable" in out
+    shape, tension = re.search(r"within ([\d.e+-]+) m, tensions within ([\d.e+-]+) N", out).groups()
+    assert float(shape) < 1e-9 and float(tension) < 1e-9
+
+
+@pytest.mark.slow       # the optimal-control solve: about 4 min at load 16 on 2 cores
+@pytest.mark.timeout(1800)
+def test_deployment_example(tmp_path):
+    """The plan reaches the deployed design (IPOPT's defects), and the cable-space feedback
+    tracks it from a disturbed start better than its inputs replayed open loop."""
+    out = run("tensegrity_deployment.py", tmp_path)
+    assert "compact top 0.7964 m, deployed top 1.0000 m" in out
+    assert float(re.search(r"largest dynamics defect ([\d.e+-]+)", out).group(1)) < 1e-8
+    errors = {name: float(e) for name, e in re.findall(r"(open loop|tracked) from a disturbed start: .*\|q - qB\| "
+                                                       r"([\d.e+-]+) m", out)}
+    assert errors["tracked"] < errors["open loop"] / 3

@@ -15,8 +15,8 @@ node with wrap angle ``θ`` (from the shape: ``π`` minus the angle between the 
 plus ``2π`` per extra turn in ``turns``) obey the capstan (Euler–Eytelwein) law: the cable
 sticks while ``e^{−μθ} ≤ t_b / t_a ≤ e^{μθ}`` and slips at either bound.  Frictionless
 clusters share one tension.  The QP (``α`` only: the number of states of self-stress) is
-solved by CasADi's active-set ``qrqp`` and then polished on its active set by an exact
-least-squares solve, so that the forces satisfy ``A t = f`` and their bounds to round-off.
+solved by CasADi's active-set ``qrqp`` (DAQP where it fails) and then polished on its active
+set by an exact least-squares solve, so that the forces satisfy ``A t = f`` and their bounds to round-off.
 """
 from __future__ import annotations
 
@@ -147,16 +147,17 @@ class InverseStatics:
 
 def inverse_statics(nodes, struts, cables, loads=None, supports=None, *, cable_min: float = 0.0,
                     cable_max: float | None = None, strut_max: float | None = None, clusters=None,
-                    friction=None, turns=None, tol: float = RANK_TOL) -> InverseStatics:
+                    friction=None, turns=None, bodies=None, tol: float = RANK_TOL) -> InverseStatics:
     """Member forces (N) holding ``nodes`` in equilibrium with the ``loads`` (n × dim, N;
     default none) on the ``supports`` (module docstring).  ``cable_min`` / ``cable_max``:
     bounds on every cable's tension (N); ``strut_max``: on every strut's compression (N);
     ``clusters``: lists of cable indices, each a cable running over the nodes its consecutive
     segments share; ``friction``: one coefficient μ per cluster (default 0: frictionless,
     one tension); ``turns``: per cluster, extra full turns at each of its pulleys (a list of
-    integers, one per pulley; default none)."""
+    integers, one per pulley; default none); ``bodies``: lists of node indices, each a rigid
+    body (:mod:`ncgen.analysis.self_stress`; loads at its nodes act on the body)."""
     pr = problem(nodes, struts, cables, loads, supports, cable_min=cable_min, cable_max=cable_max,
-                 strut_max=strut_max, clusters=clusters, friction=friction, turns=turns, tol=tol,
+                 strut_max=strut_max, clusters=clusters, friction=friction, turns=turns, bodies=bodies, tol=tol,
                  who="inverse_statics")
     return pr.result(least_norm(pr, "inverse_statics"))
 
@@ -216,7 +217,7 @@ class Problem:
         t = self.forces(alpha)
         full = fw.full_equilibrium_matrix() @ t
         free = fw.free
-        residual = float(np.abs(full[free] - f.reshape(-1)[free]).max(initial=0.0))
+        residual = float(np.abs(fw.reduce(full - f.reshape(-1))).max(initial=0.0))
         reactions = np.zeros(n * d)
         fixed = np.setdiff1d(np.arange(n * d), free)
         reactions[fixed] = full[fixed] - f.reshape(-1)[fixed]
@@ -235,9 +236,9 @@ class Problem:
 
 def problem(nodes, struts, cables, loads=None, supports=None, *, cable_min: float = 0.0,
             cable_max: float | None = None, strut_max: float | None = None, clusters=None, friction=None,
-            turns=None, tol: float = RANK_TOL, who: str) -> Problem:
+            turns=None, bodies=None, tol: float = RANK_TOL, who: str) -> Problem:
     """The checked :class:`Problem` of :func:`inverse_statics` (same arguments)."""
-    fw = framework(nodes, struts, cables, supports, clusters, who=who)
+    fw = framework(nodes, struts, cables, supports, clusters, who=who, bodies=bodies)
     n, d = fw.nodes.shape
     f = _loads(loads, n, d, who)
     mu = _friction(friction, len(fw.clusters), who)
@@ -245,10 +246,10 @@ def problem(nodes, struts, cables, loads=None, supports=None, *, cable_min: floa
     B, b, names = _inequalities(fw, pulleys, cable_min, cable_max, strut_max, who)
     # frictional clusters keep a tension per segment; frictionless ones share one
     smooth = Framework(nodes=fw.nodes, struts=fw.struts, cables=fw.cables, fixed=fw.fixed,
-                       clusters=[c for c, m in zip(fw.clusters, mu) if m == 0])
+                       clusters=[c for c, m in zip(fw.clusters, mu) if m == 0], bodies=fw.bodies)
     an = analyse(smooth, tol)
     G = smooth.cluster_matrix()
-    A_c, f_free = an.A_c, f[~fw.fixed]
+    A_c, f_free = an.A_c, fw.reduce(f)
     scale = max(1.0, float(np.abs(f_free).max(initial=0.0)), abs(cable_min), cable_max or 0.0)
     U, sv, Vt = an.svd
     r = an.rank
@@ -333,12 +334,19 @@ def _qp(H, g, B, b, scale, names, who) -> np.ndarray:
 
     n = H.shape[0]
     reg = 1e-14 * max(1.0, np.abs(H).max())
-    solver = ca.conic("inverse_statics", "qrqp", {"h": ca.Sparsity.dense(n, n), "a": ca.Sparsity.dense(*B.shape)},
-                      {"print_iter": False, "print_header": False, "print_info": False, "error_on_fail": False})
-    sol = solver(h=H + reg * np.eye(n), g=g, a=B, lba=-np.inf, uba=b)
-    alpha = np.array(sol["x"]).reshape(-1)
-    viol = B @ alpha - b
-    if not solver.stats()["success"] or viol.max(initial=0.0) > 1e-6 * scale:
+    pattern = {"h": ca.Sparsity.dense(n, n), "a": ca.Sparsity.dense(*B.shape)}
+    # qrqp first; on a degenerate active set (several states of self-stress meeting one bound)
+    # it can stop short of a feasible problem's solution: DAQP then
+    for plugin, opts in (("qrqp", {"print_iter": False, "print_header": False, "print_info": False}),
+                         ("daqp", {})):
+        solver = ca.conic("inverse_statics", plugin, pattern, {**opts, "error_on_fail": False})
+        sol = solver(h=H + reg * np.eye(n), g=g, a=B, lba=-np.inf, uba=b)
+        alpha = np.array(sol["x"]).reshape(-1)
+        viol = B @ alpha - b
+        ok = solver.stats()["success"] and viol.max(initial=0.0) <= 1e-6 * scale
+        if ok:
+            break
+    if not ok:
         worst = int(np.argmax(viol))
         raise NcgenError(f"{who}: no member forces satisfy the bounds (cable_min, cable_max, strut_max, "
                          f"friction); the closest violates {names[worst]} by {max(viol[worst], 0):.3g} N: loosen "

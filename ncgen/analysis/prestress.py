@@ -42,7 +42,7 @@ class PrestressDesign(InverseStatics):
 
 def optimize_prestress(nodes, struts, cables, loads=None, supports=None, *, objective: str = "stiffness",
                        cable_min: float = 0.0, cable_max: float | None = None, strut_max: float | None = None,
-                       clusters=None, friction=None, turns=None, tol: float = RANK_TOL,
+                       clusters=None, friction=None, turns=None, bodies=None, tol: float = RANK_TOL,
                        ipopt_options: dict | None = None) -> PrestressDesign:
     """The member forces at the shape ``nodes`` under ``loads`` that are best for
     ``objective`` (module docstring); the other arguments as for
@@ -57,7 +57,8 @@ def optimize_prestress(nodes, struts, cables, loads=None, supports=None, *, obje
                          "or strut_max (N)")
     t0 = time.perf_counter()
     pr = problem(nodes, struts, cables, loads, supports, cable_min=cable_min, cable_max=cable_max,
-                 strut_max=strut_max, clusters=clusters, friction=friction, turns=turns, tol=tol, who=who)
+                 strut_max=strut_max, clusters=clusters, friction=friction, turns=turns, bodies=bodies,
+                 tol=tol, who=who)
     an, fw = pr.analysis, pr.framework
     n_s, nc = pr.T.shape[1], len(fw.cables)
     M = an.mechanisms

@@ -26,6 +26,20 @@ itself is ``q (I − u uᵀ)``).  On the mechanisms the terms in ``A`` vanish: t
 under ``t`` when ``Q = Mᵀ K_G M`` (``M`` an orthonormal basis of the mechanisms, N/m) is
 positive definite.  The counterpart in natural coordinates: an ``rr`` bar's length
 constraint has the gradient ``l`` × its strut's column of ``A``.
+
+*Rigid bodies* (``bodies``: lists of node indices, each a rigid body the cables and struts
+attach to at those nodes) replace their nodes' coordinates by the body's motion
+``z_b = (c, θ)`` (translation of the centroid ``c`` of its nodes and rotation ``θ``: 6 in 3D,
+3 in 2D): a node ``i`` of body ``b`` moves by ``δx_i = δc + δθ × ρ_i`` (``ρ_i = x_i − c``).
+With ``T`` that kinematic map (all node coordinates × *free coordinates*: the free
+coordinates of the nodes outside bodies, then each body's ``(c, θ)``) the equilibrium
+matrix is ``A = Tᵀ A_nodes`` (a body's rows: the force and the moment about ``c`` of its
+members, N and N·m) and loads reduce to ``Tᵀ f``.  Its geometric stiffness adds the
+curvature of the rotation, ``Σ_i ½ (g_i ρ_iᵀ + ρ_i g_iᵀ) − (g_i · ρ_i) I`` on ``θ``
+(``g = A_nodes t``, the members' pull at the body's nodes; loads on the body do not enter it:
+prestress stability is that of the self-stress).  A body's nodes take no supports (hold a
+body by members to supported nodes); a body of two nodes spins freely about its axis (a
+mechanism no member loads).
 """
 from __future__ import annotations
 
@@ -49,6 +63,7 @@ class Framework:
     cables: list
     fixed: np.ndarray                     # n × dim booleans: coordinate held by a support
     clusters: list = field(default_factory=list)
+    bodies: list = field(default_factory=list)     # lists of node indices, each a rigid body
 
     @property
     def dim(self) -> int:
@@ -83,8 +98,31 @@ class Framework:
         return A
 
     def equilibrium_matrix(self) -> np.ndarray:
-        """``A`` on the free coordinates (free coordinates × members)."""
-        return self.full_equilibrium_matrix()[self.free]
+        """``A = Tᵀ A_nodes`` on the free coordinates (free coordinates × members)."""
+        return self.kinematic_map().T @ self.full_equilibrium_matrix()
+
+    def kinematic_map(self) -> np.ndarray:
+        """``T`` (node coordinates × free coordinates): the node velocities of the free
+        coordinates' velocities (module docstring); without bodies the identity's free columns."""
+        n, d = self.nodes.shape
+        inside = {i for b in self.bodies for i in b}
+        free = [k for k in self.free if k // d not in inside]
+        rot = 3 if d == 3 else 1
+        T = np.zeros((n * d, len(free) + len(self.bodies) * (d + rot)))
+        T[free, np.arange(len(free))] = 1.0
+        for b, body in enumerate(self.bodies):
+            col = len(free) + b * (d + rot)
+            c = self.nodes[body].mean(axis=0)
+            for i in body:
+                rho = self.nodes[i] - c
+                T[i * d:(i + 1) * d, col:col + d] = np.eye(d)
+                T[i * d:(i + 1) * d, col + d:col + d + rot] = -_skew(rho) if d == 3 else [[-rho[1]], [rho[0]]]
+        return T
+
+    def reduce(self, f) -> np.ndarray:
+        """``Tᵀ f``: nodal forces ``f`` (n × dim, N) as forces on the free coordinates (a
+        body's: its force and its moment about the centroid of its nodes)."""
+        return self.kinematic_map().T @ np.asarray(f, float).reshape(-1)
 
     def cluster_matrix(self) -> np.ndarray:
         """``G`` (members × tensions): a column per clustered cable (1 on its segments), then
@@ -99,11 +137,28 @@ class Framework:
         return G
 
     def geometric_stiffness(self, t) -> np.ndarray:
-        """``K_G = (Cᵀ diag(t / l) C) ⊗ I_dim`` on the free coordinates (N/m)."""
+        """``K_G = Tᵀ ((Cᵀ diag(t / l) C) ⊗ I_dim) T`` on the free coordinates (N/m; with the
+        rotation's curvature on the bodies' ``θ``, N·m)."""
         t = self.member_forces(t, "geometric_stiffness: t")
         C = self.incidence()
         D = C.T @ np.diag(t / self.lengths()) @ C
-        return np.kron(D, np.eye(self.dim))[np.ix_(self.free, self.free)]
+        T = self.kinematic_map()
+        K = T.T @ np.kron(D, np.eye(self.dim)) @ T
+        if self.bodies:
+            n, d = self.nodes.shape
+            g = (self.full_equilibrium_matrix() @ t).reshape(n, d)
+            first = T.shape[1] - len(self.bodies) * (d + (3 if d == 3 else 1))
+            for b, body in enumerate(self.bodies):
+                rho = self.nodes[body] - self.nodes[body].mean(axis=0)
+                if d == 3:
+                    H = sum(0.5 * (np.outer(gi, ri) + np.outer(ri, gi)) - (gi @ ri) * np.eye(3)
+                            for gi, ri in zip(g[body], rho))
+                    k = first + b * 6 + 3
+                    K[k:k + 3, k:k + 3] += H
+                else:
+                    k = first + b * 3 + 2
+                    K[k, k] -= float(np.sum(g[body] * rho))
+        return K
 
     def member_forces(self, t, what: str) -> np.ndarray:
         t = np.asarray(t, float).reshape(-1)
@@ -120,7 +175,7 @@ class Framework:
         return self.equilibrium_matrix() @ t
 
 
-def framework(nodes, struts, cables, supports=None, clusters=None, *, who: str) -> Framework:
+def framework(nodes, struts, cables, supports=None, clusters=None, *, who: str, bodies=None) -> Framework:
     """A checked :class:`Framework`; errors name ``who`` and the argument."""
     try:
         nodes = np.array(nodes, float)
@@ -162,7 +217,40 @@ def framework(nodes, struts, cables, supports=None, clusters=None, *, who: str) 
                                  f"cables[{b}] = {cables[b]} share no node (a pulley)")
         seen |= set(cl)
         out.append([int(e) for e in cl])
-    return Framework(nodes=nodes, struts=struts, cables=cables, fixed=fixed, clusters=out)
+    return Framework(nodes=nodes, struts=struts, cables=cables, fixed=fixed, clusters=out,
+                     bodies=_bodies(bodies, nodes, fixed, struts, cables, who))
+
+
+def _bodies(bodies, nodes, fixed, struts, cables, who: str) -> list[list[int]]:
+    """The checked ``bodies``: two or more distinct nodes each, in one body only, unsupported,
+    no member between two nodes of one body."""
+    n, out, owner = len(nodes), [], {}
+    for b, body in enumerate(bodies or ()):
+        body = list(body)
+        if len(body) < 2 or len(set(body)) != len(body) or \
+                not all(isinstance(i, (int, np.integer)) and 0 <= i < n for i in body):
+            raise NcgenError(f"{who}: bodies[{b}]: expected two or more different node indices in 0..{n - 1}, "
+                             f"got {body!r}")
+        for i in body:
+            if i in owner:
+                raise NcgenError(f"{who}: bodies[{b}]: node {i} is already in bodies[{owner[i]}]; a node belongs "
+                                 "to one body (join two bodies by a strut or a cable)")
+            if fixed[i].any():
+                raise NcgenError(f"{who}: bodies[{b}]: node {i} is supported; a body's nodes take no supports "
+                                 "(hold the body by members to supported nodes)")
+            owner[i] = b
+        out.append([int(i) for i in body])
+    for what, pairs in (("struts", struts), ("cables", cables)):
+        for e, (i, j) in enumerate(pairs):
+            if i in owner and owner.get(j) == owner[i]:
+                raise NcgenError(f"{who}: {what}[{e}]: nodes {i} and {j} are both in bodies[{owner[i]}]; a member "
+                                 "within a rigid body carries nothing it could be designed for")
+    return out
+
+
+def _skew(v) -> np.ndarray:
+    """``v̂`` with ``v̂ w = v × w``."""
+    return np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
 
 
 def _pairs(pairs, n: int, what: str, who: str) -> list[tuple[int, int]]:
@@ -264,20 +352,22 @@ class SelfStress:
         fw = self.framework
         lines = [f"framework: {len(fw.nodes)} nodes ({fw.dim}D), {len(fw.struts)} struts, {len(fw.cables)} cables"
                  + (f" ({len(fw.clusters)} clustered)" if fw.clusters else "")
-                 + f", {int(fw.fixed.sum())} supported coordinates",
+                 + f", {int(fw.fixed.sum())} supported coordinates"
+                 + (f", {len(fw.bodies)} rigid bodies" if fw.bodies else ""),
                  f"self-stress states: {self.n_self_stress}; infinitesimal mechanisms: {self.n_mechanisms}; "
                  f"rigid motions: {self.n_rigid}",
                  self.maxwell()]
         return "\n".join(lines) + "\n"
 
 
-def self_stress(nodes, struts, cables, supports=None, clusters=None, *, tol: float = RANK_TOL) -> SelfStress:
+def self_stress(nodes, struts, cables, supports=None, clusters=None, *, bodies=None,
+                tol: float = RANK_TOL) -> SelfStress:
     """States of self-stress and infinitesimal mechanisms of the configuration ``nodes``
     (SVD of ``A_c``; singular values ≤ ``tol`` × the largest count as zero); see the module
     docstring for the arguments and conventions.  ``nodes`` may be a checked
     :class:`Framework` (the other arguments are then ignored)."""
     fw = nodes if isinstance(nodes, Framework) else framework(nodes, struts, cables, supports, clusters,
-                                                            who="self_stress")
+                                                            who="self_stress", bodies=bodies)
     return analyse(fw, tol)
 
 
@@ -296,7 +386,7 @@ def analyse(fw: Framework, tol: float = RANK_TOL) -> SelfStress:
     R = rigid_motions(fw.nodes.reshape(-1), fw.dim)
     fixed = ~np.isin(np.arange(R.shape[0]), fw.free)
     allowed = R @ orthonormal_null(R[fixed], tol)[0] if fixed.any() else R
-    W, w, _ = np.linalg.svd(allowed[fw.free], full_matrices=False)
+    W, w, _ = np.linalg.svd(np.linalg.lstsq(fw.kinematic_map(), allowed, rcond=None)[0], full_matrices=False)
     rigid = W[:, w > tol * max(w.max(initial=0.0), 1e-300)]
     left = U[:, r:]
     P = left - rigid @ (rigid.T @ left)

@@ -8,6 +8,7 @@ supports = { 0 = "xyz", 2 = "z" }     # node = held axes (optional)
 loads = [{ node = 3, force = [0.0, 0.0, -1.0] }]      # N (optional)
 clusters = [[0, 1, 2]]                # clustered cables (optional), with
 friction = [0.0]                      # one coefficient per cluster (optional)
+bodies = [[0, 1, 2]]                  # rigid bodies through these nodes (optional)
 
 [prestress]                           # optional
 objective = "least_norm"              # or "stiffness", "max_cable"
@@ -30,14 +31,14 @@ import numpy as np
 
 from ncgen.errors import NcgenError
 
-TOP_KEYS = ("nodes", "struts", "cables", "supports", "loads", "clusters", "friction", "prestress")
+TOP_KEYS = ("nodes", "struts", "cables", "supports", "loads", "clusters", "friction", "bodies", "prestress")
 PRESTRESS_KEYS = ("objective", "cable_min", "cable_max", "strut_max", "stiffness")
 OBJECTIVES = ("least_norm", "stiffness", "max_cable")
 
 
 def read_design(path) -> dict:
     """The design in ``path`` as keyword arguments: ``nodes``, ``struts``, ``cables``,
-    ``supports``, ``loads`` (n × dim), ``clusters``, ``friction`` and ``prestress`` (a dict
+    ``supports``, ``loads`` (n × dim), ``clusters``, ``friction``, ``bodies`` and ``prestress`` (a dict
     with the keys of ``[prestress]``, ``objective`` defaulting to ``"least_norm"``)."""
     path = Path(path)
     try:
@@ -86,7 +87,8 @@ def read_design(path) -> dict:
         if key in prestress and (isinstance(prestress[key], bool) or not isinstance(prestress[key], (int, float))):
             raise NcgenError(f"{where}: prestress.{key}: expected a number, got {prestress[key]!r}")
     return dict(nodes=nodes, struts=data["struts"], cables=data["cables"], supports=supports, loads=loads,
-                clusters=data.get("clusters"), friction=data.get("friction"), prestress=prestress)
+                clusters=data.get("clusters"), friction=data.get("friction"), bodies=data.get("bodies"),
+                prestress=prestress)
 
 
 def _array(x, what: str, expected: str) -> np.ndarray:
@@ -109,7 +111,7 @@ def run_design(design: dict) -> tuple[str, object]:
     objective, stiffness = ps.pop("objective"), ps.pop("stiffness", None)
     shape = (design["nodes"], design["struts"], design["cables"])
     kw = dict(loads=design["loads"], supports=design["supports"], clusters=design["clusters"],
-              friction=design["friction"], **ps)
+              friction=design["friction"], bodies=design.get("bodies"), **ps)
     if objective == "least_norm":
         res = inverse_statics(*shape, **kw)
     else:

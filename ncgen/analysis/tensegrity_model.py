@@ -9,6 +9,15 @@ length ``l₀`` m: tension ``k (l − l₀)`` while positive).  Supports as in
 one axis it slides on a plane (:class:`~ncgen.model.joints.PointOnPlane`), along two on a
 line (:class:`~ncgen.model.joints.PointOnLine`).  Loads (n × dim, N) are constant
 :class:`~ncgen.model.forces.PointForce` on the nodes; no gravity (put the weights in the loads).
+A rigid body (``bodies``: lists of node indices, as in :mod:`ncgen.analysis.self_stress`) is a
+3D (2D) body ``b<j>`` with its centre of mass at the centroid of its nodes, which are its
+body-fixed points; mass ``node_mass`` per node, inertia of those point masses plus a ball's
+``(2/5) m (s/10)²`` (``s`` the body's largest node distance from the centroid, so that a
+two-node body is not singular).
+With ``actuated=True`` every realised cable (clustered ones too) takes its rest length from
+one input vector ``l0`` (m), in the order of ``model.springs.names``;
+:func:`rest_length_inputs` orders per-cable rest lengths so (the work of changing them is
+then not in the model's energy: ``−∫ T l̇₀ dt`` per cable).
 """
 from __future__ import annotations
 
@@ -19,7 +28,8 @@ from ncgen.analysis.self_stress import AXES, framework
 
 
 def tensegrity_system(nodes, struts, cables, rest_lengths, stiffness, loads=None, supports=None, *,
-                      clusters=None, node_mass: float = 0.1, damping: float = 0.0, name: str = "tensegrity"):
+                      clusters=None, bodies=None, actuated: bool = False, node_mass: float = 0.1,
+                      damping: float = 0.0, name: str = "tensegrity"):
     """The :class:`~ncgen.model.system.System` of the tensegrity (module docstring);
     ``rest_lengths`` and ``stiffness``: one per cable (or a number); nodes named ``n<i>``,
     struts ``s<i>``, cables ``c<i>``.  ``clusters`` (lists of cable indices, as in
@@ -34,7 +44,7 @@ def tensegrity_system(nodes, struts, cables, rest_lengths, stiffness, loads=None
     from ncgen.model.system import System
 
     who = "tensegrity_system"
-    fw = framework(nodes, struts, cables, supports, clusters, who=who)
+    fw = framework(nodes, struts, cables, supports, clusters, who=who, bodies=bodies)
     n, d = fw.nodes.shape
     l0 = _per_cable(rest_lengths, len(fw.cables), "rest_lengths", who)
     k = _per_cable(stiffness, len(fw.cables), "stiffness", who)
@@ -43,7 +53,15 @@ def tensegrity_system(nodes, struts, cables, rest_lengths, stiffness, loads=None
         raise NcgenError(f"{who}: loads: expected finite nodal forces of shape ({n}, {d}), got shape {f.shape}")
     s = System(name, gravity=tuple([0.0] * d))
     end = {}
+    for j, body in enumerate(fw.bodies):
+        member, centre = _body(s, f"b{j}", fw.nodes[body], node_mass)
+        for i in body:
+            end[i] = (member, fw.nodes[i] - centre)
+            if np.any(f[i] != 0):
+                s.add_force(PointForce(member, fw.nodes[i] - centre, force=tuple(f[i]), name=f"load{i}"))
     for i in range(n):
+        if i in end:
+            continue
         held = [a for a in range(d) if fw.fixed[i, a]]
         if len(held) == d:
             end[i] = (s.ground, fw.nodes[i])
@@ -63,18 +81,45 @@ def tensegrity_system(nodes, struts, cables, rest_lengths, stiffness, loads=None
         if ma.is_ground and mb.is_ground:
             raise NcgenError(f"{who}: struts[{e}]: both nodes {a} and {b} are fully supported")
         s.add_joint(Distance(ma, mb, at=[fw.nodes[a], fw.nodes[b]], name=f"s{e}"))
+    clustered = {e for cl in fw.clusters for e in cl}
+    alone = [e for e, (a, b) in enumerate(fw.cables)
+             if not (end[a][0].is_ground and end[b][0].is_ground) and e not in clustered]
+    u = s.add_input("l0", len(fw.clusters) + len(alone)) if actuated else None
     for j, cl in enumerate(fw.clusters):
         order = _path(fw.cables, cl)
         s.add_force(ClusteredCable([end[i] for i in order], k=float(1 / np.sum(1 / k[cl])),
-                                   rest_length=float(l0[cl].sum()), damping=damping, name=f"k{j}"))
-    clustered = {e for cl in fw.clusters for e in cl}
-    for e, (a, b) in enumerate(fw.cables):
-        (ma, pa), (mb, pb) = end[a], end[b]
-        if (ma.is_ground and mb.is_ground) or e in clustered:
-            continue
-        s.add_force(Spring(ma, pa, mb, pb, k=float(k[e]), rest_length=float(l0[e]), damping=damping, cable=True,
-                           name=f"c{e}"))
+                                   rest_length=u[j] if actuated else float(l0[cl].sum()), damping=damping,
+                                   name=f"k{j}"))
+    for i, e in enumerate(alone):
+        (ma, pa), (mb, pb) = end[fw.cables[e][0]], end[fw.cables[e][1]]
+        s.add_force(Spring(ma, pa, mb, pb, k=float(k[e]), damping=damping, cable=True, name=f"c{e}",
+                           rest_length=u[len(fw.clusters) + i] if actuated else float(l0[e])))
     return s
+
+
+def rest_length_inputs(model, rest_lengths, clusters=None) -> np.ndarray:
+    """The input ``l0`` (m) of an ``actuated`` :func:`tensegrity_system` model from per-cable
+    rest lengths (m; a cluster's is the sum of its segments'); ``clusters`` as it was built
+    with.  Also the model's input trajectory from an array of them (… × cables)."""
+    l0 = np.asarray(rest_lengths, float)
+    clusters = list(clusters or ())
+    cols = [l0[..., clusters[int(n[1:])]].sum(axis=-1) if n.startswith("k") else l0[..., int(n[1:])]
+            for n in model.springs.names]
+    return np.stack(cols, axis=-1)
+
+
+def _body(s, name: str, x: np.ndarray, node_mass: float):
+    """A body with point masses ``node_mass`` at the nodes ``x`` (module docstring); and its
+    centre (the nodes' centroid)."""
+    c = x.mean(axis=0)
+    rho = x - c
+    m = node_mass * len(x)
+    ball = 0.4 * m * (0.1 * np.linalg.norm(rho, axis=1).max()) ** 2
+    if x.shape[1] == 3:
+        inertia = node_mass * sum(r @ r * np.eye(3) - np.outer(r, r) for r in rho) + ball * np.eye(3)
+    else:
+        inertia = node_mass * float(np.sum(rho**2)) + ball
+    return s.add_body(name, mass=m, inertia=inertia, position=c), c
 
 
 def _path(cables, cluster) -> list[int]:

@@ -49,3 +49,27 @@ def stacked_prisms(n: int = 3, stages: int = 2, radius: float = 0.3, height: flo
     cables += [(k * n + i, (k + 1) * n + (i - 1) % n) for k in range(stages) for i in range(n)]
     struts = [(k * n + i, (k + 1) * n + i) for k in range(stages) for i in range(n)]
     return nodes, struts, cables
+
+
+def tower_of_radii(radii, strut_length: float, n: int = 3):
+    """A tower of ``len(radii) − 1`` regular ``n``-prisms stacked ring on ring (as
+    :func:`stacked_prisms`) whose ring k has radius ``radii[k]`` (m) and whose struts all have
+    the length ``strut_length`` (m): each stage's height follows from its two radii and the
+    equilibrium twist ``φ`` (``h² = s² − r_a² − r_b² + 2 r_a r_b cos φ``; each stage stays in
+    self-stress).  Shapes of one structure: changing the radii deploys or folds it."""
+    radii = np.asarray(radii, float).reshape(-1)
+    if radii.size < 2 or not np.all(np.isfinite(radii)) or np.any(radii <= 0):
+        raise NcgenError(f"tower_of_radii: radii: expected two or more radii > 0 (m), got {radii.tolist()}")
+    nodes, struts, cables = stacked_prisms(n, radii.size - 1, 1.0, 1.0)
+    c = np.cos(prism_twist(n))
+    z = 0.0
+    for k, r in enumerate(radii):
+        if k:
+            h2 = strut_length**2 - radii[k - 1]**2 - r**2 + 2 * radii[k - 1] * r * c
+            if not h2 > 0:
+                raise NcgenError(f"tower_of_radii: strut_length: {strut_length!r} m cannot span rings of radii "
+                                 f"{radii[k - 1]:g} and {r:g} m at the twist {np.degrees(prism_twist(n)):g} deg")
+            z += np.sqrt(h2)
+        nodes[k * n:(k + 1) * n, :2] *= r
+        nodes[k * n:(k + 1) * n, 2] = z
+    return nodes, struts, cables

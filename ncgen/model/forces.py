@@ -14,6 +14,7 @@ import numpy as np
 
 from ncgen.errors import BasisError
 from ncgen.errors import ModelError
+from ncgen.model.expressions import ExpressionError
 from ncgen.model.joint_base import attach_element, check_members
 from ncgen.model.members import model_name
 from ncgen.validation import as_scalar, as_vector
@@ -205,9 +206,14 @@ class Spring(Force):
         return Q
 
     def potential(self, ctx):
+        """``½ k (l − l₀)²`` (a cable's while taut); 0 when ``k`` or ``l₀`` depend on inputs
+        (an actuated spring or cable does work on the system: not a conservative force)."""
         _, _, _, length, _ = self._geometry(ctx)
-        k = self._value(ctx, self.k, 1, "k (in the potential energy)", inputs=False)
-        l0 = self._value(ctx, self.rest_length, 1, "rest_length (in the potential energy)", inputs=False)
+        try:
+            k = self._value(ctx, self.k, 1, "k (in the potential energy)", inputs=False)
+            l0 = self._value(ctx, self.rest_length, 1, "rest_length (in the potential energy)", inputs=False)
+        except ExpressionError:          # tension() has accepted them with the inputs
+            return ca.SX(0)
         stretch = length - l0
         V = spring_energy(stretch, k)
         return ca.if_else(stretch > 0, V, 0) if self.cable else V

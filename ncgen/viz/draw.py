@@ -7,7 +7,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from ncgen.reproducible import perpendicular_basis
-from ncgen.viz.scene import Scene
+from ncgen.viz.scene import Scene, tension_rgb
 
 SPRING_COLOR = "tab:green"
 CABLE_COLOR = "tab:red"
@@ -76,6 +76,11 @@ class SceneArtists:
                 self.outlines.append((k, pts[:, :scene.dim], self._line(color, lw=1.2)))
         self.springs = [self._line(CABLE_COLOR if cable else SPRING_COLOR, lw=1.5 if cable else 1)
                         for cable in scene.spring_cable]
+        self.tension_scale = scene.tension_scale()
+        if scene.spring_cable.any():
+            text = ax.text2D if hasattr(ax, "text2D") else ax.text
+            text(0.01, 0.01, f"cable tension: blue 0 N to red {self.tension_scale:.4g} N", transform=ax.transAxes,
+                 fontsize=7)
         self.trails = [self._line(TRAIL_COLOR, lw=0.8) for _ in range(scene.markers.shape[1])]
         self.body_points = self._dots(BODY_COLOR, "o", 30)
         self.points = self._dots(POINT_COLOR, "o", 50)
@@ -159,7 +164,7 @@ class SceneArtists:
             if s.spring_cable[j]:
                 slack = bool(s.spring_slack[k, j])
                 line.set_linestyle("--" if slack else "-")
-                line.set_color(SLACK_COLOR if slack else CABLE_COLOR)
+                line.set_color(SLACK_COLOR if slack else tension_rgb(s.spring_tension[k, j], self.tension_scale))
                 self._set(line, [a, b])
             else:
                 self._set(line, self._coil(a, b))

@@ -24,6 +24,7 @@ from ncgen.files import atomic_path
 from ncgen.validation import as_scalar
 from ncgen.version import __version__
 from ncgen.viz import geometry, meshes
+from ncgen.viz.scene import TENSION_HIGH, TENSION_LOW
 from ncgen.viz.scene import scene as make_scene
 
 FPS = 60
@@ -221,7 +222,9 @@ def page_data(traj, *, fps: float = FPS, colors=None, mesh_paths=(), trails: boo
         "trails": {"names": trail_names, "positions": _pack(markers), "on": bool(trails)},
         "camera": camera(lo, hi, d, model.gravity), "size": size,
         "bounds": [lo.tolist(), hi.tolist()],
-        "plots": plots(traj, idx) if with_plots and len(idx) > 1 else [],
+        "plots": plots(traj, idx) + _tensions(sc, idx) if with_plots and len(idx) > 1 else [],
+        "tension_scale": sc.tension_scale(),
+        "tension_colors": [_hex(TENSION_LOW), _hex(TENSION_HIGH)],
     }
 
 
@@ -282,14 +285,32 @@ def _part(prim: geometry.Primitive, table: dict, mesh_list: list, mesh_paths) ->
 
 
 def _springs(traj, sc, idx) -> list[dict]:
-    """Ends ``(n, 2, 3)`` of every spring and cable per frame, whether a cable is slack, rest length."""
-    from ncgen.model.forces import Spring
+    """Per spring or cable segment (a clustered cable's segments each): its ends
+    ``(n, 2, 3)`` per frame, whether it is a cable and slack, its element's rest length and
+    tension (N) per frame; ``sc`` holds the frames ``idx``."""
+    from ncgen.assembly.springs import tension_elements
 
-    springs = [f for f in traj.model.forces if isinstance(f, Spring)]
-    return [{"name": s.name, "cable": s.cable,
-             "rest_length": float(s.rest_length) if isinstance(s.rest_length, (int, float)) else None,
-             "ends": _pack(geometry.embed(sc.spring_ends[idx, i], traj.dim)),
-             "slack": _pack(sc.spring_slack[idx, i], np.uint8)} for i, s in enumerate(springs)]
+    elements = tension_elements(traj.model.forces)
+    out = []
+    for i, j in enumerate(sc.spring_owner):
+        s = elements[j]
+        out.append({"name": s.name, "cable": bool(sc.spring_cable[i]),
+                    "rest_length": float(s.rest_length) if isinstance(s.rest_length, (int, float))
+                    and not hasattr(s, "path") else None,
+                    "ends": _pack(geometry.embed(sc.spring_ends[idx, i], traj.dim)),
+                    "slack": _pack(sc.spring_slack[idx, i], np.uint8),
+                    "tension": _pack(sc.spring_tension[idx, i])})
+    return out
+
+
+def _tensions(sc, idx) -> list[dict]:
+    """A panel of the tensions (N) of the springs and cables (at most ``MAX_JOINT_CURVES``)."""
+    if not sc.spring_names:
+        return []
+    first = [int(np.flatnonzero(sc.spring_owner == j)[0]) for j in range(len(sc.spring_names))]
+    return [{"title": "spring and cable tensions", "unit": "N", "log": False,
+             "series": [{"label": name, "y": _pack(sc.spring_tension[idx, first[j]])}
+                        for j, name in enumerate(sc.spring_names[:MAX_JOINT_CURVES])]}]
 
 
 def plots(traj, idx) -> list[dict]:
@@ -322,6 +343,12 @@ def plots(traj, idx) -> list[dict]:
                     "series": [{"label": c, "y": _pack(traj.contact_normal[idx, k])}
                                for k, c in enumerate(traj.contact_names)]})
     return out
+
+
+def _hex(rgb) -> int:
+    """``0xRRGGBB`` of an RGB triple in [0, 1]."""
+    r, g, b = (int(round(255 * c)) for c in rgb)
+    return (r << 16) | (g << 8) | b
 
 
 def _positive(x: np.ndarray) -> np.ndarray:

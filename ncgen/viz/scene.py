@@ -9,7 +9,8 @@
   (a point and a unit normal each) and, per frame, the contact points that carry a force;
 * shapes (:mod:`ncgen.viz.geometry`): every member's pose per frame and the line drawings
   of its primitives in its frame (``outlines``), bars' colours;
-* springs and cables: their ends per frame, which are cables and when a cable is slack.
+* springs and cables (a clustered cable segment by segment): their ends per frame, which are
+  cables, when a cable is slack and its tension.
 Positions in m, world frame.
 """
 from __future__ import annotations
@@ -48,6 +49,9 @@ class Scene:
     spring_ends: np.ndarray = None      # (n_t, n_springs, 2, dim)
     spring_cable: np.ndarray = None     # (n_springs,) True: a cable
     spring_slack: np.ndarray = None     # (n_t, n_springs) True: a cable without tension
+    spring_tension: np.ndarray = None   # (n_t, n_springs) the element's tension (N)
+    spring_owner: np.ndarray = None     # (n_springs,) index of the element in spring_names
+    spring_names: list = None           # names of the springs and clustered cables
     shape_box: np.ndarray = None        # (2, dim): smallest and largest coordinate of the outlines
     size: float = 1.0                   # the scene's size (m) that default shapes are scaled by
 
@@ -60,10 +64,18 @@ class Scene:
                     "bar_colors": [geometry.PALETTE[0]] * len(self.bar_names),
                     "body_outlined": [False] * len(self.body_names),
                     "spring_ends": np.zeros((n, 0, 2, d)), "spring_cable": np.zeros(0, bool),
-                    "spring_slack": np.zeros((n, 0), bool)}
+                    "spring_slack": np.zeros((n, 0), bool), "spring_tension": np.zeros((n, 0)),
+                    "spring_owner": np.zeros(0, int), "spring_names": []}
         for key, value in defaults.items():
             if getattr(self, key) is None:
                 setattr(self, key, value)
+
+    def tension_scale(self) -> float:
+        """The largest cable tension over the frames (N; 1 without a taut cable): the top of
+        the colour scale cables are drawn with."""
+        taut = self.spring_tension[:, self.spring_cable] if self.spring_tension.size else np.zeros(0)
+        top = float(np.max(taut, initial=0.0))
+        return top if top > 0 else 1.0
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Smallest and largest coordinate over all frames and drawn things."""
@@ -169,28 +181,48 @@ def _outline_box(sc: Scene, frames: int = 200) -> np.ndarray | None:
     return np.array([np.min(boxes, axis=0), np.max(boxes, axis=0)])
 
 
+#: Cables are coloured from this RGB at no tension to the next at the largest (linear blend;
+#: the HTML viewer uses the same two colours).
+TENSION_LOW, TENSION_HIGH = (0.17, 0.48, 0.71), (0.84, 0.10, 0.11)
+
+
+def tension_rgb(tension, scale: float) -> np.ndarray:
+    """RGB (… × 3, in [0, 1]) of cable tensions ``tension`` (N) on the scale 0 … ``scale`` N."""
+    s = np.clip(np.asarray(tension, float) / scale, 0.0, 1.0)[..., None]
+    return (1 - s) * np.array(TENSION_LOW) + s * np.array(TENSION_HIGH)
+
+
 def spring_scene(traj, idx=None) -> dict:
-    """Ends of every spring and cable per frame (``idx``: the frames, default all), which are
-    cables and when a cable is slack (its pull ``k (l − l₀) + c l̇`` is not positive)."""
-    from ncgen.model.forces import Spring
+    """Ends of every spring and cable segment per frame (``idx``: the frames, default all),
+    which are cables, when a cable is slack (its pull ``k (l − l₀) + c l̇`` is not positive),
+    the tension (N) and the element of each segment (a clustered cable has one segment per
+    pair of consecutive points of its path, all with its one tension).  From the model's
+    :class:`~ncgen.assembly.springs.SpringTable` and its force elements."""
+    from ncgen.assembly.springs import tension_elements
 
     model = traj.model
-    springs = [f for f in model.forces if isinstance(f, Spring)]
-    if not springs:
+    table = getattr(model, "springs", None)
+    elements = tension_elements(model.forces)
+    if table is None or not elements:
         return {}
     idx = np.arange(len(traj)) if idx is None else np.asarray(idx)
-    d = traj.dim
-    f = model.springs.function
-    n = len(idx)
-    batch = f.map(n)(traj.t[idx][None, :], traj.q[idx].T, traj.v[idx].T, traj.u[idx].T,
-                     np.tile(np.reshape(traj.p, (-1, 1)), (1, n)))
-    pulls = np.asarray(batch[2]).reshape(len(springs), n).T
-    ends = [np.stack([np.broadcast_to(np.asarray(at, float), (len(idx), d)) if m.is_ground
-                      else traj.point(m.name, at)[idx] for m, at in ((s.a, s.at_a), (s.b, s.at_b))], axis=1)
-            for s in springs]
-    cable = np.array([s.cable for s in springs])
-    return {"spring_ends": np.stack(ends, axis=1), "spring_cable": cable,
-            "spring_slack": (pulls <= 0) & cable[None, :]}
+    d, n = traj.dim, len(idx)
+    batch = table.function.map(n)(traj.t[idx][None, :], traj.q[idx].T, traj.v[idx].T, traj.u[idx].T,
+                                  np.tile(np.reshape(traj.p, (-1, 1)), (1, n)))
+    tension, pulls = (np.asarray(batch[i]).reshape(len(elements), n).T for i in (0, 2))
+    ends, owner = [], []
+    for j, element in enumerate(elements):
+        path = element.path if hasattr(element, "path") else [(element.a, element.at_a), (element.b, element.at_b)]
+        pts = [np.broadcast_to(np.asarray(at, float), (n, d)) if m.is_ground else traj.point(m.name, at)[idx]
+               for m, at in path]
+        for a, b in zip(pts, pts[1:]):
+            ends.append(np.stack([a, b], axis=1))
+            owner.append(j)
+    owner = np.array(owner, int)
+    cable = np.array(table.cable, bool)
+    return {"spring_ends": np.stack(ends, axis=1), "spring_cable": cable[owner],
+            "spring_slack": ((pulls <= 0) & cable[None, :])[:, owner],
+            "spring_tension": tension[:, owner], "spring_owner": owner, "spring_names": list(table.names)}
 
 
 def contact_scene(traj, model) -> dict:
