@@ -147,13 +147,34 @@ class TableAlgorithm:
         self._sizes = [self._in_sizes[a] for a in self.input_names]
         self._out_sizes = {"tau": (T.ni,), "aj": (T.nv,), "M": (T.ni, T.ni)}
         self._fn = tree.library.fn[name]
+        self._single = None
 
     def _shape(self, out: str) -> tuple:
         return self._out_sizes.get(out, (self.tree.tables.ni, self.tree.tables.ni))
 
     def __call__(self, *args):
-        outs = self.batch(*(np.asarray(x, float)[None, :] for x in args))
-        return tuple(o[0] for o in outs) if type(outs) is tuple else outs[0]
+        """The algorithm at one state (each argument a float vector of its size, C-contiguous)."""
+        if self._single is None:
+            self._single = [np.empty((1, *self._shape(o))) for o in self.output_names]
+            self._check = np.empty(2) if self.name.startswith("aba") else None
+            tail = [o.ctypes.data for o in self._single] + ([] if self._check is None else [self._check.ctypes.data])
+            self._tail = (*tail, self.tree.work.ctypes.data)
+        if self._fn(self.tree.ref, 1, *(x.ctypes.data for x in args), *self._tail):
+            raise ModelError(f"{self.name}: a kernel of the tree library failed")
+        if self._check is not None:
+            self._checked(self._check[None, :], 1)
+        outs = [o[0].copy() if o.ndim == 2 else o[0].T.copy() for o in self._single]
+        return tuple(outs) if len(outs) > 1 else outs[0]
+
+    def _checked(self, check: np.ndarray, n: int) -> None:
+        ok = (check[:, 0] > PIVOT_TOL) & np.isfinite(check[:, 1])
+        if not ok.all():
+            row = int(np.argmin(ok))
+            where = f" (row {row})" if n > 1 else ""
+            if np.isfinite(check[row, 0]) and not check[row, 0] > PIVOT_TOL:
+                raise ModelError(f"{self.name}: the joint-space mass matrix is singular at this state "
+                                 f"(smallest relative Cholesky pivot {check[row, 0]:.3g}){where}")
+            raise ModelError(f"{self.name}: the result is not finite (non-finite qj, vj or tau?){where}")
 
     def batch(self, *args):
         """The algorithm at ``n`` states: each argument ``(n, size)`` (C-contiguous floats);
@@ -168,14 +189,24 @@ class TableAlgorithm:
         if self._fn(self.tree.ref, n, *ptrs, self.tree.work.ctypes.data):
             raise ModelError(f"{self.name}: a kernel of the tree library failed")
         if check is not None:
-            ok = (check[:, 0] > PIVOT_TOL) & np.isfinite(check[:, 1])
-            if not ok.all():
-                row = int(np.argmin(ok))
-                where = f" (row {row})" if n > 1 else ""
-                if np.isfinite(check[row, 0]) and not check[row, 0] > PIVOT_TOL:
-                    raise ModelError(f"{self.name}: the joint-space mass matrix is singular at this state "
-                                     f"(smallest relative Cholesky pivot {check[row, 0]:.3g}){where}")
-                raise ModelError(f"{self.name}: the result is not finite (non-finite qj, vj or tau?){where}")
+            self._checked(check, n)
         # matrices come column-major: transpose each (n, ni, ni) block
         outs = [o if o.ndim == 2 else o.transpose(0, 2, 1) for o in outs]
         return tuple(outs) if len(outs) > 1 else outs[0]
+
+
+def table_algorithm(model, name: str) -> TableAlgorithm:
+    """The algorithm ``name`` of ``model`` from its tree tables, bound once per model (raises
+    :class:`~ncgen.codegen.tree_tables.UnsupportedTree`, or
+    :class:`~ncgen.errors.CompilerNotFound` with no compiler and no library in the cache)."""
+    from ncgen.codegen.tree_tables import tree_tables
+    from ncgen.model.data import model_data
+
+    data = model_data(model)
+    k = data.table_algorithms.get(name)
+    if k is None:
+        tree = data.table_algorithms.get(None)
+        if tree is None:
+            tree = data.table_algorithms[None] = BoundTree(tree_tables(model))
+        k = data.table_algorithms[name] = TableAlgorithm(tree, name)
+    return k
