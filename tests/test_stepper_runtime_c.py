@@ -10,7 +10,9 @@ a bounce with restitution), for both ways of building the Delassus matrix; the M
 joint-space loop (RK4 and Dormand–Prince) on ODEs with closed-form solutions; the element tables'
 loops (``ncgen_element_tables.h``) on hand-written kernels of a tiny planar model; the sparse
 QR of the table-driven stepper (``ncgen_sparse_qr.h``) on hand-analysed patterns, and that
-stepper (``ncgen_table_stepper.h``) on the hand-made tables of a planar pendulum with a spring.  Each program is
+stepper (``ncgen_table_stepper.h``) on the hand-made tables of a planar pendulum with a spring; the
+tree loops (``ncgen_tree_tables.h``: RNEA, CRBA, forward dynamics, derivatives) on hand-written
+kernels of a tree of sliders with a mimic joint.  Each program is
 built with ``-Wall -Wextra -Werror -pedantic`` under AddressSanitizer and
 UndefinedBehaviorSanitizer and must print that all its checks passed."""
 from __future__ import annotations
@@ -34,7 +36,7 @@ PROGRAMS = [("test_rattle.c", []), ("test_contact.c", []), ("test_contact.c", ["
             ("test_contact.c", ["-DPAIRS"]),
             ("test_cone_newton.c", []), ("test_mpc.c", []), ("test_joint_loop.c", []),
             ("test_element_tables.c", []), ("test_sparse_qr.c", []),
-            ("test_table_stepper.c", [])]
+            ("test_table_stepper.c", []), ("test_tree_tables.c", [])]
 
 pytestmark = pytest.mark.skipif(CC is None, reason="no C compiler (gcc, clang or cc) on PATH")
 
@@ -51,7 +53,7 @@ def sanitizers(tmp_path_factory) -> Path:
 
 @pytest.mark.parametrize("source, defines", PROGRAMS, ids=["rattle", "contact-kkt", "contact-schur", "contact-pairs",
                                                           "cone-newton", "mpc", "joint-loop", "element-tables",
-                                                          "sparse-qr", "table-stepper"])
+                                                          "sparse-qr", "table-stepper", "tree-tables"])
 def test_runtime_c_unit_tests_pass_under_sanitizers(sanitizers, source, defines):
     exe = sanitizers / (Path(source).stem + "".join(d.lower().replace("-d", "_") for d in defines))
     built = subprocess.run([CC, *FLAGS, *defines, f"-I{RUNTIME}", f"-I{TESTS}", str(TESTS / source),

@@ -307,3 +307,49 @@ def test_a_new_urdf_robot_needs_no_compiler(library, tmp_path):
     path = tmp_path / "new_arm.urdf"
     path.write_text(new_urdf(f"new_arm_{os.getpid()}"))
     no_compiler_run(tmp_path, str(path))
+
+
+ROBOTS = ("panda", "ur5", "solo12", "talos")
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(3600)
+@pytest.mark.parametrize("name", ROBOTS)
+def test_urdf_robots_match_pinocchio_and_the_flat_kernels(name, library, monkeypatch):
+    """example-robot-data's URDFs as shipped (the Panda's mimic finger, Solo12's and Talos'
+    free flyers): every algorithm from the tables against Pinocchio to 1e-10 of the largest
+    entry (the checks of tests/test_tree_algorithms_pinocchio.py, which ``kernels="auto"``
+    sends to the tables), and RNEA, CRBA, ABA against the flat compiled kernels to 1e-12."""
+    pytest.importorskip("pinocchio")
+    import test_tree_algorithms_pinocchio as ref
+
+    model = ref.model_of(name)
+    assert rta.algorithm_kernels(model, "rnea") == "tables"
+    monkeypatch.setattr(ref, "TOL", 1e-10)
+    monkeypatch.setattr(ref, "model_of", lambda _: model)
+    ref.check_robot(name)
+    pm_mimic, pm = ref.pinocchio_models(name)
+    jm, mimic = ref.JointMap(model, pm), MimicMap(model)
+    for qj, _, v_i, a_i, tau_i in ref.states(model, pm, jm, mimic, seed=7):
+        vj, aj = mimic.G @ v_i, mimic.G @ a_i
+        for alg, args in (("rnea", (qj, vj, aj)), ("crba", (qj,)), ("aba", (qj, vj, tau_i))):
+            want = getattr(nc, alg)(model, *args, kernels="flat")
+            np.testing.assert_allclose(getattr(nc, alg)(model, *args, kernels="tables"), want, rtol=0,
+                                       atol=1e-12 * max(1.0, np.abs(want).max()), err_msg=f"{name} {alg}")
+
+
+def test_tree_package_is_deterministic_and_warning_free(tmp_path):
+    """The tree library's package: the same bytes when written twice, and its C compiles with
+    -Wall -Wextra -Werror."""
+    from ncgen.codegen.tree_kernels import write_tree_package
+
+    a, b = write_tree_package(tmp_path / "a"), write_tree_package(tmp_path / "b")
+    files = sorted(p.name for p in a.path.iterdir())
+    assert files == sorted(p.name for p in b.path.iterdir())
+    for name in files:
+        assert (a.path / name).read_bytes() == (b.path / name).read_bytes(), name
+    cc = os.environ.get("CC") or next(shutil.which(c) for c in CANDIDATES if shutil.which(c))
+    for src in a.manifest["build"]["sources"]:
+        out = subprocess.run([*cc.split(), "-std=c99", "-Wall", "-Wextra", "-Werror", "-O0", "-I.", "-c", src, "-o",
+                              str(tmp_path / f"{src}.o")], cwd=a.path, capture_output=True, text=True, timeout=600)
+        assert out.returncode == 0, out.stderr[-3000:]

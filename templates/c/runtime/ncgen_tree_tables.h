@@ -278,14 +278,16 @@ static void ncgen_tree_composite(const ncgen_tree_kinds *K, const ncgen_tree *T,
       Mi[T->rate_col[r] + ni * T->rate_col[c]] += T->rate_coef[r] * T->rate_coef[c] * s->M[r + nv * c];
 }
 
-/* L Lᵀ = A (n × n, column-major, lower triangle read) into L; returns min_k d_k / A_kk. */
+/* L Lᵀ = A (n × n, column-major, lower triangle read) into L; returns min_k d_k / A_kk (the
+ * smallest relative pivot, NaN when a pivot is 0/0). */
 static double ncgen_tree_cholesky(int n, const double *A, double *L) {
   int i, j, k;
   double ratio = 1.0;
   for (k = 0; k < n; ++k) {
     double d = A[k + n * k];
     for (j = 0; j < k; ++j) d -= L[k + n * j] * L[k + n * j];
-    if (k == 0 || d / A[k + n * k] < ratio || !(d == d)) ratio = d / A[k + n * k];
+    double r = d / A[k + n * k];
+    if (k == 0 || r < ratio || !(r == r)) ratio = r;          /* NaN (0/0) stays */
     L[k + n * k] = sqrt(d > 0.0 ? d : 0.0);
     for (i = k + 1; i < n; ++i) {
       double t = A[i + n * k];
