@@ -297,7 +297,8 @@ def call(model, k: AlgorithmKernel, args: tuple, p, t: float):
     if not isinstance(k, AlgorithmKernel):
         if p is not None:                   # the tables' algorithms do not depend on p: check it only
             as_vector(p, model.np, "p")
-        return k(*_checked(model, k, args))
+        plain = k.plain(args)
+        return k(*(plain if plain is not None else _checked(model, k, args)))
     k._at(t, p)
     fast = k._fast
     if fast is not None and not k._quaternions:

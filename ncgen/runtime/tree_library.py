@@ -25,14 +25,17 @@ import numpy as np
 from ncgen.codegen import c_binding
 from ncgen.codegen.compile_cache import BUILD_SCHEME
 from ncgen.codegen.render import shipped_templates_dir
-from ncgen.codegen.tree_kernels import PACKAGE, SOURCES, kind_names, write_tree_package
+from ncgen.codegen.tree_kernels import JOINT_KINDS, PACKAGE, SOURCES, kind_names, write_tree_package
 from ncgen.codegen.tree_tables import TreeTables
 from ncgen.errors import CodegenError, ModelError
 from ncgen.runtime.table_library import cached_library
 from ncgen.runtime.tree_check import PIVOT_TOL
+from ncgen.validation import MAX_MAGNITUDE
 from ncgen.version import __version__
 
 INDEX_PREFIX = "tree-tables"
+#: Positions of each joint kind, in table order.
+JOINT_KINDS_NQ = tuple(k.nq for k in JOINT_KINDS)
 #: Fields of ``ncgen_tree``, in order.
 TREE_FIELDS = (("int", "nb"), ("int", "nq"), ("int", "nv"), ("int", "ni"),
                *(("const int *", f) for f in ("parent", "kind", "q_at", "v_at", "num_ptr")),
@@ -148,6 +151,19 @@ class TableAlgorithm:
         self._out_sizes = {"tau": (T.ni,), "aj": (T.nv,), "M": (T.ni, T.ni)}
         self._fn = tree.library.fn[name]
         self._single = None
+        self._quaternions = bool(np.any(np.isin(np.asarray(JOINT_KINDS_NQ)[T.arrays["kind"]], (4, 7))))
+
+    def plain(self, args) -> tuple | None:
+        """``args`` when each is already a C-contiguous float64 vector of its size with finite
+        entries of magnitude at most :data:`~ncgen.validation.MAX_MAGNITUDE` and the model has no
+        quaternions to normalise, else None (the caller checks and converts them)."""
+        if self._quaternions or len(args) != len(self._sizes):
+            return None
+        for x, n in zip(args, self._sizes):
+            if type(x) is not np.ndarray or x.dtype != np.float64 or x.shape != (n,) or \
+                    not x.flags.c_contiguous or not np.abs(x).max(initial=0.0) <= MAX_MAGNITUDE:
+                return None
+        return args
 
     def _shape(self, out: str) -> tuple:
         return self._out_sizes.get(out, (self.tree.tables.ni, self.tree.tables.ni))
