@@ -225,6 +225,32 @@ def test_bad_arguments_are_refused(tree, library):
         nc.rnea(tree, qj, vj, np.full_like(aj, np.nan), kernels="tables")
 
 
+def test_joint_simulation_on_the_tables_conserves_energy(tree, library):
+    """``method="joint"`` on the tree tables (Dormand–Prince, then RK4): the free motion of the
+    every-kind tree under gravity keeps its energy; a model the tables do not cover is refused
+    by name with ``kernels="tables"``."""
+    q0, v0 = tree.from_joint_space(*random_state(tree, np.random.default_rng(5))[:2])
+    for opts in ({"integrator": "dopri5", "rtol": 1e-10, "atol": 1e-12}, {"integrator": "rk4", "substeps": 20}):
+        traj = nc.simulate(tree, 0.5, 0.01, q0=q0, v0=v0, method="joint", kernels="tables", **opts)
+        assert traj.info["kernels"] == "tables"
+        assert traj.energy_drift <= 1e-6 * max(1.0, traj.energy_scale), (opts, traj.energy_drift)
+    s = nc.System("sprung_sim", gravity=(0, 0, -G))
+    b = s.add_body("b", mass=1.0, inertia=np.diag([0.1, 0.2, 0.25]), position=(0.5, 0, 0))
+    s.add_joint(nc.Revolute(s.ground, b, at=(0, 0, 0), axis=(0, 1, 0), name="hinge"))
+    s.add_force(nc.Spring(s.ground, (0.0, 0.0, 1.0), b, (0.5, 0.0, 0.0), k=30.0, rest_length=0.5))
+    with pytest.raises(UnsupportedTree, match="sprung_sim"):
+        nc.simulate(s.build(), 0.1, 0.01, method="joint", kernels="tables")
+
+
+@pytest.mark.slow
+def test_joint_simulation_tables_equal_flat(tree, library):
+    """The joint-space run on the tables equals the flat compiled loop (same integrator steps)."""
+    q0, v0 = tree.from_joint_space(*random_state(tree, np.random.default_rng(6))[:2])
+    a, b = (nc.simulate(tree, 0.3, 0.01, q0=q0, v0=v0, method="joint", kernels=k) for k in ("tables", "flat"))
+    assert (a.info["kernels"], b.info["kernels"]) == ("tables", "flat")
+    np.testing.assert_allclose(a.qj, b.qj, rtol=0, atol=1e-10)
+
+
 def test_auto_uses_the_tables_for_a_covered_tree(tree, library):
     assert rta.algorithm_kernels(tree, "aba") == "tables"
 
@@ -264,7 +290,9 @@ v = np.full(model.joint_space.nv, 0.3)
 tau = nc.rnea(model, qj, v, np.zeros_like(v))
 a = nc.aba(model, qj, v, tau)
 M = nc.crba(model, qj)
-print(json.dumps({"a": np.abs(a).max(), "M": M.tolist(), "tau": tau.tolist()}))
+traj = nc.simulate(model, 0.2, 0.01)
+print(json.dumps({"a": np.abs(a).max(), "M": M.tolist(), "tau": tau.tolist(), "method": traj.info["method"],
+                  "kernels": traj.info["kernels"], "drift": traj.energy_drift / max(1.0, traj.energy_scale)}))
 """
 
 
@@ -290,12 +318,16 @@ def no_compiler_run(tmp_path, arg: str) -> dict:
     M = np.array(got["M"])
     np.testing.assert_allclose(M, M.T, atol=1e-14)
     assert np.all(np.linalg.eigvalsh(M) > 0)
+    # simulated in joint space on the tables (method="auto" picks it with no compiler)
+    assert (got["method"], got["kernels"]) == ("joint", "tables")
+    assert got["drift"] <= 1e-6, got["drift"]
     return got
 
 
 def test_a_new_tree_needs_no_compiler(library, tmp_path):
-    """Once the tree library is cached, a new tree gets RNEA, ABA and CRBA in a process with
-    no compiler on PATH (and compile_package replaced by a failure)."""
+    """Once the tree library is cached, a new tree gets RNEA, ABA and CRBA and is simulated
+    in joint space in a process with no compiler on PATH (and compile_package replaced by a
+    failure); the energy of the free motion is conserved."""
     got = no_compiler_run(tmp_path, f"new_tree_{os.getpid()}")
     assert len(got["tau"]) == 2 and np.all(np.abs(got["tau"]) > 0.1)      # both joints hold weight
 

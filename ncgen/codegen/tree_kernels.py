@@ -20,7 +20,9 @@ poses from :func:`ncgen.assembly.joint_tree.relative_pose` with symbolic axes.
 * ``tk_body``: input ``[R; p; T; dT; m; c; I_c]`` (pose, twist, acceleration, mass (kg),
   centre of mass (member axes, m), inertia about it (member axes, kg·m², column-major)),
   output ``[M_g (6×6); W]``: the mass matrix at g and the wrench ``M_g dT − ad(T)ᵀ M_g T``
-  (N·m, N) the body needs; ``tk_body_fwd``: input ``[x; dR; dp; dT; ddT]``, output ``d[M_g; W]``.
+  (N·m, N) the body needs; ``tk_body_fwd``: input ``[x; dR; dp; dT; ddT]``, output ``d[M_g; W]``;
+* ``tk_<k>_qdot``: ``[q; w] -> q̇`` (position rates: quaternions' ``½ q ⊗ [ω; 0]``, a free
+  joint's ``R v``) for the joint-space ODE.
 """
 from __future__ import annotations
 
@@ -105,6 +107,20 @@ def joint_kernels(name: str) -> tuple[ca.Function, ca.Function]:
 
 
 @lru_cache(maxsize=None)
+def rate_kernel(name: str) -> ca.Function:
+    """``tk_<name>_qdot``: ``[q; w] -> q̇`` (the joint's position rates; a quaternion
+    normalised first, as the joint-space ODE sees it)."""
+    k = next(j for j in JOINT_KINDS if j.name == name)
+    q, w = ca.SX.sym("q", k.nq), ca.SX.sym("w", k.nv)
+    qn = q
+    if k.nq in (4, 7):
+        quat = q[k.nq - 4:]
+        qn = ca.vertcat(q[:k.nq - 4], quat / ca.norm_2(quat))
+    qd = joint_position_rates(k.kind, 3, k.nq, qn, w) if k.nv else ca.SX(0, 1)
+    return ca.Function(f"tk_{name}_qdot", [ca.vertcat(q, w)], [ca.densify(qd)], ["x"], ["qdot"])
+
+
+@lru_cache(maxsize=None)
 def body_kernels() -> tuple[ca.Function, ca.Function]:
     """``(tk_body, tk_body_fwd)`` (module docstring)."""
     R, p, T, dT = ca.SX.sym("R", 3, 3), ca.SX.sym("p", 3), ca.SX.sym("T", 6), ca.SX.sym("dT", 6)
@@ -120,8 +136,8 @@ def body_kernels() -> tuple[ca.Function, ca.Function]:
 
 
 def kernels() -> list[ca.Function]:
-    """Every tree kernel, in the library's order: each joint kind's pair, then the body's."""
-    return [f for k in JOINT_KINDS for f in joint_kernels(k.name)] + list(body_kernels())
+    """Every tree kernel, in the library's order: each joint kind's three, then the body's."""
+    return [f for k in JOINT_KINDS for f in (*joint_kernels(k.name), rate_kernel(k.name))] + list(body_kernels())
 
 
 def kind_names() -> str:
@@ -139,7 +155,7 @@ def joint_numbers(a1, b1, a2, b2, axes) -> np.ndarray:
 #: Name of the package (and prefix of every C symbol) of the tree library.
 PACKAGE = "ncgen_trees"
 #: The template files the library is made of besides this module (its cache key hashes them).
-SOURCES = ("runtime/ncgen_tree_tables.h", "tree_tables.c.j2")
+SOURCES = ("runtime/ncgen_tree_tables.h", "tree_tables.c.j2", "runtime/ncgen_joint_loop.h")
 
 
 def write_tree_package(out_dir):
@@ -150,11 +166,14 @@ def write_tree_package(out_dir):
     fns = kernels()
     if any(f.sz_iw() for f in fns) or any(f.sz_arg() > 1 or f.sz_res() > 1 for f in fns):
         raise CodegenError("tree kernels: the loops expect kernels with no integer work, one argument and one result")
-    context = {"kinds": [{"name": k.name, "nq": k.nq, "nv": k.nv, "n_num": k.n_num} for k in JOINT_KINDS],
+    from ncgen.runtime.tree_check import PIVOT_TOL
+
+    context = {"pivot_tol": repr(float(PIVOT_TOL)), "kinds": [{"name": k.name, "nq": k.nq, "nv": k.nv, "n_num": k.n_num} for k in JOINT_KINDS],
                "max_w": max(f.sz_w() for f in fns), "kind_names": kind_names()}
     doc = PackageDoc(summary="Tree kernels of the shipped joint kinds and the table-driven joint-space "
                              "algorithms (RNEA, CRBA, forward dynamics and their derivatives) of any tree")
     return write_package(PACKAGE, fns, out_dir, doc=doc, max_file_instructions=None, reroll_instructions=None,
                          extra_sources=[ExtraSource("runtime/ncgen_tree_tables.h", "ncgen_tree_tables.h",
                                                     included=True),
+                                        ExtraSource("runtime/ncgen_joint_loop.h", "ncgen_joint_loop.h", included=True),
                                         ExtraSource("tree_tables.c.j2", "tree_tables.c", context)])

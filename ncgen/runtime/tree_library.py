@@ -57,6 +57,11 @@ SIGNATURES = {
     "aba_derivatives": c_binding.Signature("int", ((_T, "T"), ("int", "n"), (_D, "q"), (_D, "v"), (_D, "tau"),
                                                    *(("double *", x) for x in ("a", "dq", "dv", "Minv", "check",
                                                                                "w")))),
+    "joint_run": c_binding.Signature("int", (
+        (_T, "T"), (_D, "E"), ("int", "nu"), ("int", "method"), ("int", "n_out"), (_D, "t_out"), ("double *", "X"),
+        (_D, "W"), (_D, "S"), ("int", "nquat"), ("const int *", "quat"), ("double", "rtol"), ("double", "atol"),
+        ("int", "substeps"), ("long", "max_steps"), ("int", "stop_at_outputs"), ("double *", "stats"),
+        ("int *", "k_done"), ("volatile int *", "stop"))),
 }
 
 
@@ -226,3 +231,65 @@ def table_algorithm(model, name: str) -> TableAlgorithm:
             tree = data.table_algorithms[None] = BoundTree(tree_tables(model))
         k = data.table_algorithms[name] = TableAlgorithm(tree, name)
     return k
+
+
+def input_efforts(model) -> np.ndarray:
+    """``E`` (ni × nu): the efforts of the independent rates from the inputs, ``τ_i = E u``
+    (:func:`~ncgen.assembly.tree_algorithms.efforts_function`); raises
+    :class:`~ncgen.codegen.tree_tables.UnsupportedTree` when they are not a constant linear map."""
+    from ncgen.assembly.tree_algorithms import efforts_function
+    from ncgen.codegen.tree_tables import UnsupportedTree
+
+    f = efforts_function(model)
+    ins = f.sx_in()
+    tau, E = f(*ins)
+    if ca.depends_on(ca.vertcat(ca.vec(E), ca.substitute(tau, ins[2], ca.DM.zeros(model.nu))),
+                     ca.vertcat(*[ca.vec(x) for x in ins])) or np.any(np.array(ca.evalf(ca.substitute(
+                         tau, ins[2], ca.DM.zeros(model.nu))))):
+        raise UnsupportedTree(model.name, ["joint efforts that are not a constant linear map of the inputs"])
+    ni = tau.numel()
+    return np.asfortranarray(np.array(ca.evalf(ca.densify(E)), float).reshape(ni, model.nu))
+
+
+class TableJointLoop:
+    """The joint-space loop of :mod:`ncgen.runtime.joint_simulation` (the interface of its
+    ``JointLoop``: ``run``, ``mapped``) on the tree library: ``ẋ = [q̇_j; a_j(q_j, v_j, E w)]``
+    with no controller and no joint dynamics, nothing compiled for the model."""
+
+    kernels = "tables"
+
+    def __init__(self, model):
+        from ncgen.assembly.joint_ode import quaternion_offsets
+        from ncgen.runtime.tree_check import tree_function
+
+        self.model = model
+        self.tree_bound = table_algorithm(model, "aba").tree
+        self.E = input_efforts(model)
+        self.quat = np.array(quaternion_offsets(model.joint_space), dtype=np.int32)
+        self.tree = tree_function(model)
+        self._fn = self.tree_bound.library.fn["joint_run"]
+        self._maps: dict = {}
+
+    def mapped(self, what: str, n: int):
+        """``what`` (``"tree"``, ``"accel"``: CasADi functions mapped over ``n`` points;
+        ``"ode"``: the applied inputs, which are the samples ``w`` themselves)."""
+        if what == "ode":
+            return lambda t, X, W, P: (None, None, W)
+        key = (what, n)
+        if key not in self._maps:
+            self._maps[key] = {"tree": self.tree, "accel": self.model.functions["accel"]}[what].map(n)
+        return self._maps[key]
+
+    def run(self, method: int, t: np.ndarray, X: np.ndarray, W: np.ndarray, S, p: np.ndarray, rtol: float,
+            atol: float, substeps: int, max_steps: int, stop: bool, stats: np.ndarray) -> tuple[int, int]:
+        """As ``JointLoop.run`` (``p`` does not enter: the tables' dynamics take none)."""
+        from ncgen.interrupts import call_interruptibly
+        from ncgen.runtime.joint_simulation import INTERRUPTED
+
+        ptr = (lambda a: None if a is None or a.size == 0 else a.ctypes.data)
+        done, flag = ctypes.c_int(0), ctypes.c_int(0)
+        status, interrupted = call_interruptibly(
+            self._fn, self.tree_bound.ref, ptr(self.E), self.model.nu, int(method), len(t) - 1, ptr(t), ptr(X),
+            ptr(W), ptr(S), len(self.quat), ptr(self.quat), float(rtol), float(atol), int(substeps),
+            int(max_steps), int(stop), ptr(stats), ctypes.addressof(done), ctypes.addressof(flag), stop=flag)
+        return INTERRUPTED if interrupted else int(status), int(done.value)

@@ -9,7 +9,7 @@
  *   M_i = diag(m0 + m1 + 9 m2, m1 + m2), the bias is (0, (m1 + m2) g) at every (q, v), and
  *   τ_i = M_i a_i + bias, a_i = M_i⁻¹ (τ_i − bias), ∂τ/∂q = ∂τ/∂v = 0, ∂a/∂τ = M_i⁻¹.
  *
- * Checked: RNEA, CRBA, forward dynamics and both derivatives against these closed forms, the
+ * Checked: RNEA, CRBA, forward dynamics, both derivatives and the joint-space ODE against these closed forms, the
  * mimic map, the pivot check, the checks of inconsistent tables, a failing kernel.  Built and
  * run by tests/test_stepper_runtime_c.py under AddressSanitizer and UndefinedBehaviorSanitizer. */
 #include "check.h"
@@ -43,6 +43,13 @@ static int k_slide_fwd(const double **arg, double **res, long long *iw, double *
   for (i = 0; i < 9; ++i) y[i] = dRp[i];
   for (i = 0; i < 3; ++i) y[9 + i] = dpp[i] + delta * e[i];
   for (i = 12; i < 24; ++i) y[i] = 0.0;
+  return 0;
+}
+
+/* Its position rate: [q; w] -> q̇ = w. */
+static int k_slide_qdot(const double **arg, double **res, long long *iw, double *w, int mem) {
+  (void)iw; (void)w; (void)mem;
+  res[0][0] = arg[0][1];
   return 0;
 }
 
@@ -101,7 +108,7 @@ static int k_body_fwd(const double **arg, double **res, long long *iw, double *w
   return 0;
 }
 
-static const ncgen_tree_joint_kind JOINT_KINDS[1] = {{k_slide, k_slide_fwd, 1, 1, 3}};
+static const ncgen_tree_joint_kind JOINT_KINDS[1] = {{k_slide, k_slide_fwd, k_slide_qdot, 1, 1, 3}};
 static const ncgen_tree_kinds KINDS = {JOINT_KINDS, 1, k_body, k_body_fwd, 0};
 
 static const double MASS[3] = {1.5, 0.7, 0.4};
@@ -165,6 +172,15 @@ int main(void) {
   for (i = 0; i < 4; ++i) CHECK(fabs(dq[i]) < 1e-12 && fabs(dv[i]) < 1e-12, "da[%d]: %g, %g", i, dq[i], dv[i]);
   CHECK(close_to(Minv[0], 1 / M0) && close_to(Minv[3], 1 / M1) && fabs(Minv[1]) < 1e-14, "M^-1");
   CHECK(close_to(aj[1], (t_in[1] - bias1) / M1), "a of the derivatives");
+
+  /* the ODE: ẋ = [v; a(q, v, E w)] with E = [[1, 0], [0, 2]] (ni × nu, column-major) */
+  {
+    double x[6] = {0.3, -0.2, 0.7, 0.7, -1.1, 1.4}, xd[6], E[4] = {1.0, 0.0, 0.0, 2.0}, u[2] = {1.2, -0.2};
+    CHECK(ncgen_tree_ode(&KINDS, &T, E, 2, x, u, xd, check, work) == 0, "ode failed");
+    CHECK(close_to(xd[0], 0.7) && close_to(xd[1], -1.1) && close_to(xd[2], 1.4), "q̇ = v");
+    CHECK(close_to(xd[3], 1.2 / M0) && close_to(xd[4], (-0.4 - bias1) / M1) && close_to(xd[5], 2 * xd[3]),
+          "a = (%g, %g, %g)", xd[3], xd[4], xd[5]);
+  }
 
   /* the follower's position and rate are set from its leader: the given q2, v2, a2 do not matter */
   q[2] = -3.0; v[2] = 1.0; a[2] = 100.0;

@@ -18,6 +18,7 @@
  *   edge_fwd  [edge input; dR_p; dp_p; dT_p; δ; dw] -> d(edge output), q moved in the tangent space
  *   body      [R; p; T; dT; m; c; I_c] -> [M_g (6 × 6); W = M_g dT − ad(T)ᵀ M_g T]
  *   body_fwd  [body input; dR; dp; dT; ddT] -> d(body output)
+ *   qdot      [q; w] -> q̇ (the joint's position rates, quaternions normalised first)
  * Call ncgen_tree_check once on new tables: the loops trust them.  Position derivatives are
  * per independent rate in the tangent space (Pinocchio's convention). */
 #ifndef NCGEN_TREE_TABLES_H
@@ -33,7 +34,7 @@
 typedef int (*ncgen_tree_kernel)(const double **arg, double **res, long long *iw, double *w, int mem);
 
 typedef struct {
-  ncgen_tree_kernel edge, edge_fwd;
+  ncgen_tree_kernel edge, edge_fwd, qdot;
   int nq, nv, n_num;
 } ncgen_tree_joint_kind;
 
@@ -58,7 +59,7 @@ typedef struct {
 typedef struct {
   double *q, *v, *a, *R, *p, *T, *dT, *W, *Mg, *S, *tau;
   double *dR, *dp, *dTt, *ddT, *dW, *dS, *dtau;
-  double *M, *Mi, *L, *rhs, *in, *out, *kw;
+  double *M, *Mi, *L, *rhs, *taui, *in, *out, *kw;
 } ncgen_tree_work;
 
 
@@ -107,6 +108,7 @@ static long ncgen_tree_layout(const ncgen_tree_kinds *K, const ncgen_tree *T, do
   NCGEN_TREE_TAKE(Mi, ni * ni);
   NCGEN_TREE_TAKE(L, ni * ni);
   NCGEN_TREE_TAKE(rhs, 3 * ni * ni + ni);
+  NCGEN_TREE_TAKE(taui, ni);
   NCGEN_TREE_TAKE(in, ncgen_tree_max_in(K));
   NCGEN_TREE_TAKE(out, ncgen_tree_max_out(K));
   NCGEN_TREE_TAKE(kw, K->max_w > 0 ? K->max_w : 1);
@@ -482,6 +484,28 @@ static int ncgen_tree_aba_derivatives(const ncgen_tree_kinds *K, const ncgen_tre
   ncgen_tree_solve(ni, s.L, da_dv, ni);
   ncgen_tree_solve(ni, s.L, Minv, ni);
   return 0;
+}
+
+/* The joint-space ODE: x = [q_j; v_j] -> ẋ = [q̇_j(q_j, v_j); a_j(q_j, v_j, τ_i)] with the
+ * efforts τ_i = E w of the inputs w (E: ni × nu, column-major); check as ncgen_tree_aba. */
+static int ncgen_tree_ode(const ncgen_tree_kinds *K, const ncgen_tree *T, const double *E, int nu, const double *x,
+                          const double *w, double *xdot, double *check, double *work) {
+  ncgen_tree_work s;
+  int b, i, j;
+  ncgen_tree_layout(K, T, work, &s);
+  for (b = 0; b < T->nb; ++b) {
+    const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
+    if (!k->nq) continue;
+    for (i = 0; i < k->nq; ++i) s.in[i] = x[T->q_at[b] + i];
+    for (i = 0; i < k->nv; ++i) s.in[k->nq + i] = x[T->nq + T->v_at[b] + i];
+    if (ncgen_tree_call(k->qdot, s.in, xdot + T->q_at[b], s.kw)) return NCGEN_TREE_KERNEL;
+  }
+  for (i = 0; i < T->ni; ++i) {
+    double t = 0.0;
+    for (j = 0; j < nu; ++j) t += E[i + (long)T->ni * j] * w[j];
+    s.taui[i] = t;
+  }
+  return ncgen_tree_aba(K, T, x, x + T->nq, s.taui, xdot + T->nq, check, work);
 }
 
 #endif
