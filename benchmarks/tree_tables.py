@@ -114,7 +114,7 @@ def simulate_runs(runs: int) -> None:
         for r in range(runs):
             before = resource.getrusage(resource.RUSAGE_CHILDREN)
             t = time.perf_counter()
-            out = subprocess.run([sys.executable, "-m", "ncgen", "simulate", str(urdf), "--t-end", "1",
+            out = subprocess.run([sys.executable, "-m", "ncgen.cli", "simulate", str(urdf), "--t-end", "1",
                                   "-o", str(Path(tmp) / "traj.npz")], env=env, capture_output=True, text=True)
             wall = time.perf_counter() - t
             after = resource.getrusage(resource.RUSAGE_CHILDREN)

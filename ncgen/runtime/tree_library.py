@@ -174,18 +174,26 @@ class TableAlgorithm:
         return self._out_sizes.get(out, (self.tree.tables.ni, self.tree.tables.ni))
 
     def __call__(self, *args):
-        """The algorithm at one state (each argument a float vector of its size, C-contiguous)."""
+        """The algorithm at one state (each argument a float vector of its size), through
+        buffers and addresses kept between calls."""
         if self._single is None:
+            self._in = [np.empty(n) for n in self._sizes]
             self._single = [np.empty((1, *self._shape(o))) for o in self.output_names]
             self._check = np.empty(2) if self.name.startswith("aba") else None
             tail = [o.ctypes.data for o in self._single] + ([] if self._check is None else [self._check.ctypes.data])
-            self._tail = (*tail, self.tree.work.ctypes.data)
-        if self._fn(self.tree.ref, 1, *(x.ctypes.data for x in args), *self._tail):
+            self._addresses = (self.tree.ref, 1, *(x.ctypes.data for x in self._in), *tail,
+                               self.tree.work.ctypes.data)
+        for buf, x in zip(self._in, args):
+            buf[...] = x
+        if self._fn(*self._addresses):
             raise ModelError(f"{self.name}: a kernel of the tree library failed")
         if self._check is not None:
             self._checked(self._check[None, :], 1)
-        outs = [o[0].copy() if o.ndim == 2 else o[0].T.copy() for o in self._single]
-        return tuple(outs) if len(outs) > 1 else outs[0]
+        single = self._single
+        if len(single) == 1:
+            o = single[0]
+            return o[0].copy() if o.ndim == 2 else o[0].T.copy()
+        return tuple(o[0].copy() if o.ndim == 2 else o[0].T.copy() for o in single)
 
     def _checked(self, check: np.ndarray, n: int) -> None:
         ok = (check[:, 0] > PIVOT_TOL) & np.isfinite(check[:, 1])
