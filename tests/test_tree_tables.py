@@ -4,8 +4,10 @@ the model's tables, compiled once per ncgen version) equal the model's flat SX f
 1e-12 (evaluated by CasADi, nothing compiled per model), forward dynamics equals the KKT solve
 in natural coordinates and a mimic gripper's closed form, derivatives equal central
 differences (positions moved in the tangent space); models the tables do not cover are
-refused by name and ``kernels="auto"`` falls back to the flat kernels; a URDF robot not seen
-before is evaluated and its RNEA/ABA called in a process with no compiler on PATH.
+refused by name and ``kernels="auto"`` falls back to the flat kernels; the joint-space
+simulation on the tables conserves energy (and, slow, equals the flat loop); a new tree (and,
+slow, a URDF robot not seen before) is evaluated and simulated in a process with no compiler
+on PATH.
 Slow tier: example-robot-data's URDFs against the flat compiled kernels (1e-12) and Pinocchio
 (1e-10)."""
 from __future__ import annotations

@@ -168,7 +168,8 @@ def write_tree_package(out_dir):
         raise CodegenError("tree kernels: the loops expect kernels with no integer work, one argument and one result")
     from ncgen.runtime.tree_check import PIVOT_TOL
 
-    context = {"pivot_tol": repr(float(PIVOT_TOL)), "kinds": [{"name": k.name, "nq": k.nq, "nv": k.nv, "n_num": k.n_num} for k in JOINT_KINDS],
+    context = {"pivot_tol": repr(float(PIVOT_TOL)),
+               "kinds": [{"name": k.name, "nq": k.nq, "nv": k.nv, "n_num": k.n_num} for k in JOINT_KINDS],
                "max_w": max(f.sz_w() for f in fns), "kind_names": kind_names()}
     doc = PackageDoc(summary="Tree kernels of the shipped joint kinds and the table-driven joint-space "
                              "algorithms (RNEA, CRBA, forward dynamics and their derivatives) of any tree")
