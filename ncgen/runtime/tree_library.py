@@ -12,9 +12,9 @@ callers of :class:`~ncgen.runtime.tree_algorithms.AlgorithmKernel` use (``k(*arg
 trees whose passive force is a uniform gravity.  :class:`TableJointLoop` is the joint-space
 simulation loop (``ncgen_joint_loop.h`` in the library) on the same tables.
 
-Speed (benchmarks/tree_tables.py, Panda, 2 shared cores at load 9–16): one state costs
+Speed (benchmarks/tree_tables.py, Panda RNEA, 2 shared cores at load 9–16): one state costs
 8–20 µs in the C loops against 2–6 µs for the flat per-robot kernel (whose numbers are folded
-into the code), and a single call from Python 20–40 µs more; the tables are the default for
+into the code), and a single call through :meth:`TableAlgorithm.__call__` about 15 µs more; the tables are the default for
 their first-call cost (no compile), the flat kernel once this process has built it.
 """
 from __future__ import annotations
