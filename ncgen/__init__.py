@@ -49,8 +49,8 @@ _HOMES: dict[str, tuple[str, ...]] = {
     "ncgen.runtime.joint_dynamics": ("forward_dynamics", "forward_dynamics_kernel", "inverse_dynamics"),
     "ncgen.runtime.samples": ("Samples",),
     "ncgen.runtime.sweep": ("SweepResult", "open_sweep", "sweep"),
-    "ncgen.runtime.tree_algorithms": ("aba", "aba_derivatives", "algorithm_kernel", "crba", "rnea",
-                                      "rnea_derivatives"),
+    "ncgen.runtime.tree_algorithms": ("aba", "aba_derivatives", "algorithm_kernel", "algorithm_kernels", "crba",
+                                      "rnea", "rnea_derivatives"),
     "ncgen.runtime.tree_kernel": ("joint_forward_dynamics", "joint_forward_dynamics_kernel"),
     "ncgen.symbolic.coordinates": ("coordinate_type",),
 }

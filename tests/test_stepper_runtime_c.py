@@ -11,7 +11,9 @@ joint-space loop (RK4 and Dormand–Prince) on ODEs with closed-form solutions; 
 loops (``ncgen_element_tables.h``) on hand-written kernels of a tiny planar model; the sparse
 QR of the table-driven stepper (``ncgen_sparse_qr.h``) on hand-analysed patterns, and that
 stepper (``ncgen_table_stepper.h``) on the hand-made tables of a planar pendulum with a spring, and
-its step Jacobians (``ncgen_table_jacobians.h``) on the same with inputs and actuators.  Each program is
+its step Jacobians (``ncgen_table_jacobians.h``) on the same with inputs and actuators; the
+tree loops (``ncgen_tree_tables.h``: RNEA, CRBA, forward dynamics, derivatives) on hand-written
+kernels of a tree of sliders with a mimic joint.  Each program is
 built with ``-Wall -Wextra -Werror -pedantic`` under AddressSanitizer and
 UndefinedBehaviorSanitizer and must print that all its checks passed."""
 from __future__ import annotations
@@ -35,7 +37,7 @@ PROGRAMS = [("test_rattle.c", []), ("test_contact.c", []), ("test_contact.c", ["
             ("test_contact.c", ["-DPAIRS"]),
             ("test_cone_newton.c", []), ("test_mpc.c", []), ("test_joint_loop.c", []),
             ("test_element_tables.c", []), ("test_sparse_qr.c", []),
-            ("test_table_stepper.c", []), ("test_table_jacobians.c", [])]
+            ("test_table_stepper.c", []), ("test_table_jacobians.c", []), ("test_tree_tables.c", [])]
 
 pytestmark = pytest.mark.skipif(CC is None, reason="no C compiler (gcc, clang or cc) on PATH")
 
@@ -52,7 +54,8 @@ def sanitizers(tmp_path_factory) -> Path:
 
 @pytest.mark.parametrize("source, defines", PROGRAMS, ids=["rattle", "contact-kkt", "contact-schur", "contact-pairs",
                                                           "cone-newton", "mpc", "joint-loop", "element-tables",
-                                                          "sparse-qr", "table-stepper", "table-jacobians"])
+                                                          "sparse-qr", "table-stepper", "table-jacobians",
+                                                          "tree-tables"])
 def test_runtime_c_unit_tests_pass_under_sanitizers(sanitizers, source, defines):
     exe = sanitizers / (Path(source).stem + "".join(d.lower().replace("-d", "_") for d in defines))
     built = subprocess.run([CC, *FLAGS, *defines, f"-I{RUNTIME}", f"-I{TESTS}", str(TESTS / source),

@@ -273,15 +273,7 @@ class JointSpace:
     def position_rates(self, name: str, x, w):
         """``q̇_j`` of joint ``name`` from its positions ``x`` and rates ``w`` (SX):
         quaternion rates ``½ q ⊗ [ω; 0]``, free-joint translation ``R v``, else ``w``."""
-        kind = self.joints[name].kind
-        if kind == "Spherical" and self.nq_joint[name] == 4:      # a quaternion (not a bar's swing)
-            return quaternion_rate(x, w)
-        if kind == "Free" and self.dim == 3:
-            R = quaternion_matrix(x[3:], sym=True)
-            return ca.vertcat(ca.mtimes(R, w[:3]), quaternion_rate(x[3:], w[3:]))
-        if kind == "Free":
-            return ca.vertcat(ca.mtimes(rotation_2d(x[2], sym=True), w[:2]), w[2])
-        return w
+        return joint_position_rates(self.joints[name].kind, self.dim, self.nq_joint[name], x, w)
 
     def tree_map(self, layout) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
         """``(qj, vj, q, q̇_j)``: the symbols of the joint positions and rates, the natural
@@ -430,3 +422,16 @@ def _passable(e: Edge, forward: bool, here: str, spinless: set) -> bool:
     if e.one_way:
         spinless.add(e.B)
     return True
+
+
+def joint_position_rates(kind: str, dim: int, nq: int, x, w):
+    """``q̇_j`` of a joint of ``kind`` with ``nq`` positions ``x`` and rates ``w`` (SX):
+    quaternion rates ``½ q ⊗ [ω; 0]``, free-joint translation ``R v``, else ``w``."""
+    if kind == "Spherical" and nq == 4:      # a quaternion (not a bar's swing)
+        return quaternion_rate(x, w)
+    if kind == "Free" and dim == 3:
+        R = quaternion_matrix(x[3:], sym=True)
+        return ca.vertcat(ca.mtimes(R, w[:3]), quaternion_rate(x[3:], w[3:]))
+    if kind == "Free":
+        return ca.vertcat(ca.mtimes(rotation_2d(x[2], sym=True), w[:2]), w[2])
+    return w

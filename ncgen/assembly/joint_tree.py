@@ -89,7 +89,7 @@ def _numeric(x) -> np.ndarray:
 def rotation_about(axis, angle, sym: bool = False):
     """Rotation by ``angle`` (rad) about the unit ``axis`` (SX when ``sym``;
     :func:`ncgen.symbolic.rigid_motion.rotation_about`)."""
-    R = crm.rotation_about(ca.DM(np.asarray(axis, float)), angle)
+    R = crm.rotation_about(_const(axis, True), angle)
     return R if sym else _numeric(R)
 
 
@@ -180,6 +180,9 @@ def _sequence_pose(e: Edge, x, sym: bool):
 
 
 def _const(x, sym: bool):
+    """``x`` as CasADi when ``sym`` (a symbolic axis or point, SX, passes as it is)."""
+    if isinstance(x, ca.SX):
+        return x
     return ca.DM(np.asarray(x, float)) if sym else x
 
 
@@ -190,22 +193,26 @@ def carry(pose, e: Edge, T, forward: bool, members, sym: bool = False):
     Forward (A → B): ``H_JB = H_JA T``, backward: ``H_JA = H_JB T⁻¹``."""
     mul = ca.mtimes if sym else np.matmul
     R, p = pose
-    d = R.shape[0]
-    here, there = (e.A, e.B) if forward else (e.B, e.A)
-    f_here, f_there = (e.frame_a, e.frame_b) if forward else (e.frame_b, e.frame_a)
     Rt, pt = T if forward else (T[0].T, -mul(T[0].T, T[1]))
-    R0h, p0h = initial_pose(members, here, d)
-    R0t, p0t = initial_pose(members, there, d)
-    a1 = R0h.T @ f_here[0]
-    b1 = R0h.T @ (f_here[1] - p0h)
-    a2 = f_there[0].T @ R0t
-    b2 = f_there[0].T @ (p0t - f_there[1])
+    a1, b1, a2, b2 = edge_placements(e, forward, members, R.shape[0])
     if sym:
         a1, b1, a2, b2 = (ca.DM(x) for x in (a1, b1, a2, b2))
     RJ = mul(R, a1)
     oJ = mul(R, b1) + p
     RJ2, oJ2 = mul(RJ, Rt), mul(RJ, pt) + oJ
     return mul(RJ2, a2), mul(RJ2, b2) + oJ2
+
+
+def edge_placements(e: Edge, forward: bool, members, dim: int):
+    """``(a1, b1, a2, b2)``: the constant poses of the joint frame on this side in this
+    member's frame (``H = [[a1, b1], [0, 1]]``) and of the member beyond in the joint frame on
+    that side (``[[a2, b2], [0, 1]]``), so that ``H_here,there = [a1, b1] T [a2, b2]`` for
+    the joint's relative pose ``T`` (:func:`carry`)."""
+    here, there = (e.A, e.B) if forward else (e.B, e.A)
+    f_here, f_there = (e.frame_a, e.frame_b) if forward else (e.frame_b, e.frame_a)
+    R0h, p0h = initial_pose(members, here, dim)
+    R0t, p0t = initial_pose(members, there, dim)
+    return (R0h.T @ f_here[0], R0h.T @ (f_here[1] - p0h), f_there[0].T @ R0t, f_there[0].T @ (p0t - f_there[1]))
 
 
 def initial_pose(members, name: str, dim: int):

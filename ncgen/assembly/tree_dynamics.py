@@ -118,7 +118,7 @@ def tree_dynamics_function(model) -> ca.Function:
 
 def _rotated_inertia(R, I_c: np.ndarray) -> ca.SX:
     """``R I_c Rᵀ``, exactly symmetric (built from its lower triangle)."""
-    RI = ca.mtimes(R, ca.DM(I_c))
+    RI = ca.mtimes(R, I_c if isinstance(I_c, ca.SX) else ca.DM(I_c))
     out = ca.SX(3, 3)
     for i in range(3):
         for j in range(i + 1):

@@ -56,6 +56,12 @@ class ModelData:
     #: ``{(name, cflags): AlgorithmKernel or the ModelError of a non-tree}``: RNEA, CRBA, ABA
     #: and the derivatives, each its own library (:func:`ncgen.runtime.tree_algorithms.algorithm_kernel`).
     algorithm_kernels: dict = field(default_factory=dict)
+    #: ``(TreeTables or None, UnsupportedTree or None)``: the model's tree tables
+    #: (:func:`ncgen.codegen.tree_tables.tree_tables`).
+    tree_tables: tuple | None = None
+    #: ``{name: TreeTableAlgorithm}``: the tree library's algorithms bound to the model's tables
+    #: (:func:`ncgen.runtime.tree_library.table_algorithm`).
+    table_algorithms: dict = field(default_factory=dict)
     #: ``(indices,)``: the independent joint rates when the compiled algorithms take the model,
     #: indices None when not (:func:`ncgen.runtime.tree_algorithms.rnea_applies`).
     algorithm_rates: tuple | None = None

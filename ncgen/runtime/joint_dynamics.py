@@ -26,7 +26,7 @@ from ncgen.assembly.derived import joint_kkt_function, kkt_function
 from ncgen.assembly.manifold import solve_linear
 from ncgen.errors import ModelError
 from ncgen.model.data import cached, model_data
-from ncgen.runtime.tree_algorithms import algorithm_kernel, call, rnea_applies
+from ncgen.runtime.tree_algorithms import call, kernel_of, rnea_applies
 from ncgen.validation import as_vector
 
 
@@ -105,7 +105,7 @@ def _rnea_kernel(model, joints: str):
         actuated = [i for n in js.joint_names if n in model.actuated_joints for i in range(sv[n].start, sv[n].stop)]
         takes = independent is not None and (
             independent == actuated if joints == "actuated" else len(independent) == js.nv)
-        k = data.rnea_efforts[joints] = algorithm_kernel(model, "rnea") if takes else False
+        k = data.rnea_efforts[joints] = kernel_of(model, "rnea", "auto") if takes else False
     return k
 
 
@@ -115,7 +115,7 @@ def inverse_dynamics(model, qj, vj, aj, p=None, t: float = 0.0, joints: str = "a
     ``joint_names`` order).  ``joints="all"``: efforts conjugate to every joint rate, as if
     every joint were actuated (a floating base's wrench included; Pinocchio's ``rnea``).
     Trees (3D, mimic joints included) use the compiled RNEA
-    (:func:`~ncgen.runtime.tree_algorithms.rnea`) when the efforts asked for are those of the
+    (:func:`~ncgen.runtime.tree_algorithms.rnea`, from the tree tables when they cover the model) when the efforts asked for are those of the
     independent joint rates; other models solve the constrained equations of motion."""
     if joints not in ("actuated", "all"):
         raise ModelError(f"inverse_dynamics: joints: expected 'actuated' or 'all', got {joints!r}")

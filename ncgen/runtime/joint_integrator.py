@@ -14,7 +14,7 @@ class JointIntegrator:
     dynamics in the C loop, a Python feedback once per output interval."""
 
     METHOD = "joint"
-    OPTIONS = ("integrator", "rtol", "atol", "substeps", "max_steps", "hold", "joint_dynamics", "progress")
+    OPTIONS = ("integrator", "rtol", "atol", "substeps", "max_steps", "hold", "joint_dynamics", "progress", "kernels")
 
     def __init__(self, model, opts: SimulationOptions):
         self.model, self.opts = model, opts
@@ -24,4 +24,4 @@ class JointIntegrator:
         return simulate_joint(self.model, run.t, run.U, o.hold, run.p, run.q, run.v, integrator=o.integrator,
                               rtol=o.rtol, atol=o.atol, substeps=o.substeps, max_steps=o.max_steps,
                               feedback=run.feedback, controller=run.controller, joint_dynamics=o.joint_dynamics,
-                              progress=o.progress)
+                              progress=o.progress, kernels=o.kernels)

@@ -73,13 +73,32 @@ def joint_space_applies(model) -> str | None:
             try:
                 find_compiler()
             except CompilerNotFound as e:
-                reason = str(e)
+                reason = "" if _table_loop(model) is not None else str(e)
     data.joint_simulation_reason = (reason or None,)
     return reason or None
 
 
+def _table_loop(model):
+    """The joint-space loop of ``model`` on the tree tables
+    (:class:`~ncgen.runtime.tree_library.TableJointLoop`, built once per model), or None when
+    the tables do not cover it or there is no tree library and no compiler."""
+    from ncgen.codegen.tree_tables import UnsupportedTree
+    from ncgen.model.data import model_data
+    from ncgen.runtime.tree_library import TableJointLoop
+
+    loops = model_data(model).joint_loops
+    if "tables" not in loops:
+        try:
+            loops["tables"] = TableJointLoop(model)
+        except (UnsupportedTree, CompilerNotFound):
+            loops["tables"] = None
+    return loops["tables"]
+
+
 class JointLoop:
     """The compiled loop of one model, controller and joint-dynamics choice."""
+
+    kernels = "flat"
 
     def __init__(self, model, library, ode: ca.Function, name: str):
         from ncgen.assembly.joint_ode import quaternion_offsets
@@ -132,8 +151,27 @@ def dynamics_function(model) -> ca.Function:
     return tree_dynamics_function(model)
 
 
-def joint_loop(model, controller=None, joint_dynamics: bool = False, cflags=None) -> JointLoop:
-    """The compiled loop (built on first use per model, controller object and option)."""
+def joint_loop(model, controller=None, joint_dynamics: bool = False, cflags=None, kernels: str = "auto"):
+    """The compiled loop (built on first use per model, controller object and option).
+    ``kernels`` (``SimulationOptions.kernels``): ``"tables"`` — the tree library's loop on the
+    model's tables (:class:`~ncgen.runtime.tree_library.TableJointLoop`: no controller, no joint
+    dynamics, a tree the tables cover; nothing compiled), ``"flat"`` — the model's own ODE
+    compiled with the loop, ``"auto"`` — the tables where they apply, else flat."""
+    if kernels not in ("auto", "tables", "flat"):
+        raise NcgenError(f"kernels: expected one of 'auto', 'tables', 'flat', got {kernels!r}")
+    if kernels != "flat" and controller is None and not joint_dynamics:
+        table = _table_loop(model)
+        if table is not None:
+            return table
+    if kernels == "tables":
+        from ncgen.codegen.tree_tables import tree_tables
+        from ncgen.runtime.tree_library import TableJointLoop
+
+        if controller is not None or joint_dynamics:
+            raise NcgenError("kernels='tables': the joint-space loop on the tree tables takes no compiled "
+                             "controller and no joint dynamics (use kernels='flat' or 'auto')")
+        tree_tables(model)                  # raises UnsupportedTree naming what is not covered
+        return TableJointLoop(model)        # or the reason it cannot be built
     from ncgen.assembly.joint_ode import joint_ode_function
     from ncgen.codegen.joint_loop import build_joint_loop
     from ncgen.model.controllers import ComputedTorque
@@ -173,7 +211,7 @@ def joint_loop(model, controller=None, joint_dynamics: bool = False, cflags=None
 def simulate_joint(model, t: np.ndarray, U: np.ndarray, hold: str, p: np.ndarray, q0, v0, *,
                    integrator: str | None, rtol: float | None, atol: float | None, substeps: int,
                    max_steps: int, feedback=None, controller=None, joint_dynamics: bool = False,
-                   progress: bool | None = None) -> Trajectory:
+                   progress: bool | None = None, kernels: str = "auto") -> Trajectory:
     """Integrate in joint space on the grid ``t`` from the natural state ``(q0, v0)``
     (module docstring).  ``U``: input samples on the grid (the open-loop part);
     ``feedback``: ``(kind, u)`` with ``kind`` ``"natural"`` (``u(t, q, v)``) or ``"joint"``
@@ -190,7 +228,7 @@ def simulate_joint(model, t: np.ndarray, U: np.ndarray, hold: str, p: np.ndarray
     rtol, atol = 1e-8 if rtol is None else rtol, 1e-10 if atol is None else atol
     js = model.joint_space
     build_start = time.perf_counter()
-    loop = joint_loop(model, controller, joint_dynamics)
+    loop = joint_loop(model, controller, joint_dynamics, kernels=kernels)
     build_time = time.perf_counter() - build_start
     qj0, vj0 = model.to_joint_space(q0, v0)
     n = len(t)
@@ -235,6 +273,7 @@ def simulate_joint(model, t: np.ndarray, U: np.ndarray, hold: str, p: np.ndarray
     info = {"method": "joint", "integrator": integrator, **steps, "hold": hold,
             "controller": None if controller is None else controller.describe(),
             "feedback": None if feedback is None else feedback[0], "joint_dynamics": bool(joint_dynamics),
+            "kernels": loop.kernels,
             "stats": {"nsteps": int(stats[0]), "rejected_steps": int(stats[1]), "evaluations": int(stats[2])},
             "build_time": build_time, "wall_time": time.perf_counter() - start, "complete": status == 0}
     trusted, why = k + 1, ""

@@ -93,7 +93,9 @@ class SimulationOptions:
     tables, with no compile per model, for models whose every element is of a covered kind;
     ``"flat"``: the model's own generated package, compiled per model; ``"auto"``, default:
     the tables when the model is covered, else flat; ``traj.info["kernels"]`` says which ran;
-    see :mod:`ncgen.runtime.table_stepper`).
+    see :mod:`ncgen.runtime.table_stepper`; for ``method="joint"`` the same choice between the
+    tree library's loop on the model's tree tables, for trees without a compiled controller or
+    joint dynamics, and the model's compiled joint-space ODE: :func:`ncgen.runtime.joint_simulation.joint_loop`).
     """
 
     method: str = "auto"

@@ -105,9 +105,9 @@ def compiler_path() -> str | None:
     return next((p for p in (shutil.which(n) for n in CANDIDATES) if p is not None), None)
 
 
-def _index(source: str, compiler: str) -> Path:
+def _index(prefix: str, source: str, compiler: str) -> Path:
     ckey = hashlib.sha256(compiler.encode()).hexdigest()[:12]
-    return cache_dir() / f"{INDEX_PREFIX}-{source[:20]}-{ckey}.json"
+    return cache_dir() / f"{prefix}-{source[:20]}-{ckey}.json"
 
 
 def _indexed(index: Path) -> Path | None:
@@ -121,23 +121,29 @@ def _indexed(index: Path) -> Path | None:
 
 def element_library(cflags: str | None = None) -> tuple[Path, bool]:
     """``(path of the element library, whether it was compiled now)``."""
-    source = sources_key()
+    return cached_library(INDEX_PREFIX, sources_key(), write_element_package, PACKAGE, cflags)
+
+
+def cached_library(prefix: str, source: str, write, package: str, cflags: str | None = None) -> tuple[Path, bool]:
+    """``(path, compiled now)`` of the library ``package`` written by ``write(out_dir)`` and
+    compiled once per ``source`` key and compiler, found through the index files
+    ``<prefix>-<source>-<compiler>.json`` of the compile cache (module docstring)."""
     compiler = compiler_path()
     if compiler is None:            # no compiler: any library of these sources will do
-        for index in sorted(cache_dir().glob(f"{INDEX_PREFIX}-{source[:20]}-*.json")):
+        for index in sorted(cache_dir().glob(f"{prefix}-{source[:20]}-*.json")):
             library = _indexed(index)
             if library is not None:
                 return library, False
         raise CompilerNotFound(f"no C compiler found (looked for $CC, {', '.join(CANDIDATES)} on PATH) and no "
-                               f"element library of ncgen {__version__} in the compile cache {cache_dir()}")
-    index = _index(source, compiler)
+                               f"{package} library of ncgen {__version__} in the compile cache {cache_dir()}")
+    index = _index(prefix, source, compiler)
     library = _indexed(index)
     if library is not None:
         return library, False
     from ncgen.codegen.compile_cache import compile_package
 
-    with tempfile.TemporaryDirectory(prefix="ncgen-elements-") as tmp:
-        built = compile_package(write_element_package(Path(tmp) / PACKAGE), cflags=cflags)
+    with tempfile.TemporaryDirectory(prefix=f"{package}-") as tmp:
+        built = compile_package(write(Path(tmp) / package), cflags=cflags)
     index.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(index) as tmp_index:
         tmp_index.write_text(json.dumps({"library": str(built.path), "compiler": built.compiler.version,

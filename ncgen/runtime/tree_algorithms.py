@@ -10,6 +10,14 @@ cached on disk by content, called through :class:`~ncgen.codegen.direct.DirectFu
   (``nc.linearize(model, qj, vj, u, space="joint")`` uses the ABA derivatives:
   :mod:`ncgen.analysis.joint_linearization`).
 
+Kernels (``kernels=``, as the stepper's ``SimulationOptions(kernels=...)``): ``"tables"`` —
+the tree library's loops over the model's data tables (:mod:`ncgen.runtime.tree_library`,
+compiled once per ncgen version: no compiler call for a new robot), ``"flat"`` — the model's
+own SX functions compiled per model, ``"auto"`` (default) — the tables when they cover the
+model (:func:`~ncgen.codegen.tree_tables.tree_tables`: a uniform gravity the only passive
+force) and the flat kernel has not been built in this process, else flat.
+:func:`algorithm_kernels` says which one a call uses.
+
 Conventions are Pinocchio's (``pinocchio.rnea``, ``crba``, ``aba``,
 ``computeRNEADerivatives``, ``computeABADerivatives``): joint positions ``qj`` and rates
 ``vj``, ``aj`` in ``model.joint_names`` order (a free joint: ``[x, y, z, qx, qy, qz, qw]`` and
@@ -25,7 +33,7 @@ import ctypes
 import numpy as np
 
 from ncgen.codegen.fast_call import fast_caller
-from ncgen.errors import ModelError, ShapeError
+from ncgen.errors import CompilerNotFound, ModelError, NcgenError, ShapeError
 from ncgen.model.data import cached, model_data
 from ncgen.runtime.tree_check import PIVOT_TOL, check_tree, compile_tree_function, unit_quaternions
 from ncgen.validation import MAX_MAGNITUDE, as_numbers, as_vector
@@ -178,16 +186,51 @@ _WHAT = {"qj": "qj (joint positions, joint_names order)", "vj": "vj (joint rates
          "tau": "tau (efforts of the independent joint rates, joint_names order)"}
 
 
-def _run(model, name: str, args: tuple, p, t: float):
-    """The outputs (copies) of the algorithm ``name`` at ``args`` (in ``ALGORITHMS`` order).
-    Without quaternion joints the arguments go straight to the kernel, whose caller checks
+#: The algorithms' kernels (``kernels=``): chosen, from the tree tables, or the model's own.
+KERNELS = ("auto", "tables", "flat")
+
+
+def algorithm_kernels(model, name: str, kernels: str = "auto") -> str:
+    """``"tables"`` or ``"flat"``: the kernels the algorithm ``name`` of ``model`` uses for the
+    option ``kernels`` (module docstring).  ``"tables"`` on a model the tables do not cover
+    raises :class:`~ncgen.codegen.tree_tables.UnsupportedTree` naming why."""
+    from ncgen.codegen.tree_tables import UnsupportedTree
+    from ncgen.runtime.tree_library import table_algorithm
+
+    if kernels not in KERNELS:
+        raise NcgenError(f"kernels: expected one of {', '.join(map(repr, KERNELS))} (the tree algorithms' "
+                         f"kernels: from the tree tables or the model's own), got {kernels!r}")
+    data = model_data(model)
+    if kernels == "flat" or (kernels == "auto" and isinstance(data.algorithm_kernels.get((name, None)),
+                                                             AlgorithmKernel)):
+        return "flat"
+    try:
+        table_algorithm(model, name)
+    except (UnsupportedTree, CompilerNotFound):
+        if kernels == "tables":
+            raise
+        return "flat"
+    return "tables"
+
+
+def kernel_of(model, name: str, kernels: str):
+    """The kernel of :func:`algorithm_kernels`' choice: a :class:`AlgorithmKernel` or a
+    :class:`~ncgen.runtime.tree_library.TableAlgorithm`."""
+    if algorithm_kernels(model, name, kernels) == "tables":
+        return model_data(model).table_algorithms[name]
+    k = model_data(model).algorithm_kernels.get((name, None))
+    return k if isinstance(k, AlgorithmKernel) else algorithm_kernel(model, name)
+
+
+def _run(model, name: str, args: tuple, p, t: float, kernels: str = "auto"):
+    """The outputs (copies) of the algorithm ``name`` at ``args`` (in ``ALGORITHMS`` order)
+    with the kernels :func:`algorithm_kernels` chooses.
+    Without quaternion joints the arguments go straight to a flat kernel, whose caller checks
     their lengths, kinds and magnitudes in C (:func:`~ncgen.codegen.fast_call.fast_caller`'s
     ``bound``); the detailed message is built only when that fails (:func:`_checked`).
     Arguments of one row per state (2-D, ``n`` rows each) give outputs with a first axis of
     ``n`` (:func:`batch`)."""
-    k = model_data(model).algorithm_kernels.get((name, None))
-    if not isinstance(k, AlgorithmKernel):
-        k = algorithm_kernel(model, name)
+    k = kernel_of(model, name, kernels)
     if np.ndim(args[0]) == 2:
         return batch(model, k, args, p, t)
     return call(model, k, args, p, t)
@@ -211,6 +254,15 @@ def batch(model, k: AlgorithmKernel, args: tuple, p, t: float):
                              f"got shape {x.shape}")
     if k.input_names[0] == "qj":
         arrays[0] = unit_quaternions(js, arrays[0])
+    if not isinstance(k, AlgorithmKernel):
+        for a, x in zip(k.input_names, arrays):
+            if not np.all(np.abs(x) <= MAX_MAGNITUDE):
+                row = int(np.argmin(np.all(np.abs(x) <= MAX_MAGNITUDE, axis=1)))
+                raise ShapeError(f"{k.name}: {_WHAT[a]}: row {row}: expected finite numbers of "
+                                 f"magnitude at most {MAX_MAGNITUDE:g}")
+        if p is not None:                   # the tables' algorithms do not depend on p: check it only
+            as_vector(p, model.np, "p")
+        return k.batch(*arrays)
     k._at(t, p)
     shapes = [np.shape(o) for o in (k._outputs if type(k._outputs) is tuple else (k._outputs,))]
     outs = [np.empty((n, int(np.prod(s)))) for s in shapes]
@@ -242,6 +294,11 @@ def batch(model, k: AlgorithmKernel, args: tuple, p, t: float):
 
 def call(model, k: AlgorithmKernel, args: tuple, p, t: float):
     """:func:`_run` with the kernel ``k`` of ``model`` at hand."""
+    if not isinstance(k, AlgorithmKernel):
+        if p is not None:                   # the tables' algorithms do not depend on p: check it only
+            as_vector(p, model.np, "p")
+        plain = k.plain(args)
+        return k(*(plain if plain is not None else _checked(model, k, args)))
     k._at(t, p)
     fast = k._fast
     if fast is not None and not k._quaternions:
@@ -262,33 +319,36 @@ def _checked(model, k: AlgorithmKernel, args: tuple) -> list:
     js = model.joint_space
     sizes = {"qj": js.nq, "vj": js.nv, "aj": js.nv, "tau": k._sizes[-1]}
     values = [as_vector(x, sizes[a], _WHAT[a]) for a, x in zip(k.input_names, args)]
+    for a, x in zip(k.input_names, values):
+        if not np.all(np.abs(x) <= MAX_MAGNITUDE):
+            raise ShapeError(f"{k.name}: {_WHAT[a]}: expected finite numbers of magnitude at most {MAX_MAGNITUDE:g}")
     if k.input_names[0] == "qj":
         values[0] = unit_quaternions(js, values[0])
     return values
 
 
-def rnea(model, qj, vj, aj, *, p=None, t: float = 0.0) -> np.ndarray:
+def rnea(model, qj, vj, aj, *, p=None, t: float = 0.0, kernels: str = "auto") -> np.ndarray:
     """``τ``: the efforts of the independent joint rates giving accelerations ``aj`` at
     ``(qj, vj)`` (module docstring; Pinocchio's ``rnea``)."""
-    return _run(model, "rnea", (qj, vj, aj,), p, t)
+    return _run(model, "rnea", (qj, vj, aj,), p, t, kernels)
 
 
-def crba(model, qj, *, p=None, t: float = 0.0) -> np.ndarray:
+def crba(model, qj, *, p=None, t: float = 0.0, kernels: str = "auto") -> np.ndarray:
     """``M``: the joint-space mass matrix of the independent rates (Pinocchio's ``crba``, both triangles)."""
-    return _run(model, "crba", (qj,), p, t)
+    return _run(model, "crba", (qj,), p, t, kernels)
 
 
-def aba(model, qj, vj, tau, *, p=None, t: float = 0.0) -> np.ndarray:
+def aba(model, qj, vj, tau, *, p=None, t: float = 0.0, kernels: str = "auto") -> np.ndarray:
     """``aj``: joint accelerations under the efforts ``tau`` of the independent rates (Pinocchio's ``aba``)."""
-    return _run(model, "aba", (qj, vj, tau,), p, t)
+    return _run(model, "aba", (qj, vj, tau,), p, t, kernels)
 
 
-def rnea_derivatives(model, qj, vj, aj, *, p=None, t: float = 0.0) -> tuple[np.ndarray, ...]:
+def rnea_derivatives(model, qj, vj, aj, *, p=None, t: float = 0.0, kernels: str = "auto") -> tuple[np.ndarray, ...]:
     """``(τ, ∂τ/∂q, ∂τ/∂v, ∂τ/∂a)`` (Pinocchio's ``computeRNEADerivatives``; ∂τ/∂a = M)."""
-    return _run(model, "rnea_derivatives", (qj, vj, aj,), p, t)
+    return _run(model, "rnea_derivatives", (qj, vj, aj,), p, t, kernels)
 
 
-def aba_derivatives(model, qj, vj, tau, *, p=None, t: float = 0.0) -> tuple[np.ndarray, ...]:
+def aba_derivatives(model, qj, vj, tau, *, p=None, t: float = 0.0, kernels: str = "auto") -> tuple[np.ndarray, ...]:
     """``(aj, ∂a/∂q, ∂a/∂v, ∂a/∂τ)`` (Pinocchio's ``computeABADerivatives``; ∂a/∂τ = M⁻¹;
     rows per independent rate)."""
-    return _run(model, "aba_derivatives", (qj, vj, tau,), p, t)
+    return _run(model, "aba_derivatives", (qj, vj, tau,), p, t, kernels)

@@ -1,0 +1,180 @@
+"""Tree kernels: one small CasADi function per *kind* of joint of a tree, and one for a rigid
+body, the model's numbers as arguments — the pieces the joint-space algorithms over data
+tables call (RNEA, CRBA, forward dynamics and their derivatives:
+``templates/c/runtime/ncgen_tree_tables.h``; docs/architecture.md, "Element tables").
+
+Notation as :mod:`ncgen.assembly.tree_dynamics` (arboris): poses ``H_gm = [[R, p], [0, 1]]``
+of member frames in the ground frame g, twists ``[ω; v]`` and wrenches ``[τ; f]`` expressed
+in g, every formula from :mod:`ncgen.rigid_motion.casadi_forms` and the joints' relative
+poses from :func:`ncgen.assembly.joint_tree.relative_pose` with symbolic axes.
+
+* joint kind ``k`` (:data:`JOINT_KINDS`: ``nq`` positions, ``nv`` rates, ``n_axes`` axes):
+  kernel ``tk_<k>``: input ``x = [R_p (3×3, column-major); p_p; T_p; q; w; a1; b1; a2; b2;
+  axes]`` (the parent's pose and twist, the joint's positions and rates, the placements
+  ``H_pc = [a1, b1] T(q) [a2, b2]`` of :func:`~ncgen.assembly.joint_tree.edge_placements`),
+  output ``y = [R_c; p_c; S_g (6×nv); c_g]``: the child's pose, the joint's motion subspace in
+  g (``T_c = T_p + S_g w``) and ``c_g = Ṡ_g w`` (``dT_c = dT_p + c_g + S_g ẇ``); kernel
+  ``tk_<k>_fwd``: input ``[x; dR_p; dp_p; dT_p; δ; dw]``, output ``dy``, the derivative of
+  ``y`` along those tangents with ``q`` moved in the tangent space (``dq = q̇(q, δ)``:
+  quaternions turn by ``δω`` in their own axes, a free joint's position moves by ``R δv``);
+* ``tk_body``: input ``[R; p; T; dT; m; c; I_c]`` (pose, twist, acceleration, mass (kg),
+  centre of mass (member axes, m), inertia about it (member axes, kg·m², column-major)),
+  output ``[M_g (6×6); W]``: the mass matrix at g and the wrench ``M_g dT − ad(T)ᵀ M_g T``
+  (N·m, N) the body needs; ``tk_body_fwd``: input ``[x; dR; dp; dT; ddT]``, output ``d[M_g; W]``;
+* ``tk_<k>_qdot``: ``[q; w] -> q̇`` (position rates: quaternions' ``½ q ⊗ [ω; 0]``, a free
+  joint's ``R v``) for the joint-space ODE.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+
+from ncgen.assembly.joint_space import joint_position_rates
+from ncgen.assembly.joint_tree import Edge, relative_pose
+from ncgen.assembly.tree_dynamics import _mass_matrix_g
+from ncgen.errors import CodegenError
+from ncgen.rigid_motion import casadi_forms as crm
+
+
+@dataclass(frozen=True)
+class TreeJointKind:
+    """A joint kind of a tree: the ``joint_tree`` kind, positions, rates and axes."""
+
+    name: str
+    kind: str
+    nq: int
+    nv: int
+    n_axes: int
+
+    @property
+    def n_num(self) -> int:
+        """Numbers of a joint of this kind: placements ``a1, b1, a2, b2`` (24) and its axes."""
+        return 24 + 3 * self.n_axes
+
+
+#: The joint kinds, in table order.
+JOINT_KINDS: tuple[TreeJointKind, ...] = (
+    TreeJointKind("fixed", "Fixed", 0, 0, 0), TreeJointKind("revolute", "Revolute", 1, 1, 1),
+    TreeJointKind("prismatic", "Prismatic", 1, 1, 1), TreeJointKind("cylindrical", "Cylindrical", 2, 2, 1),
+    TreeJointKind("universal", "Universal", 2, 2, 2), TreeJointKind("planar", "Planar", 3, 3, 3),
+    TreeJointKind("spherical", "Spherical", 4, 3, 0), TreeJointKind("free", "Free", 7, 6, 0))
+#: Inputs of ``tk_body``: pose (12), twist (6), acceleration (6), mass, centre of mass (3), inertia (9).
+BODY_INPUTS = 37
+#: The body numbers of a member in the tables: ``[m; c; I_c]``.
+BODY_NUMBERS = 13
+
+
+def _homogeneous(R, p):
+    return crm.homogeneous(R, p)
+
+
+@lru_cache(maxsize=None)
+def joint_kernels(name: str) -> tuple[ca.Function, ca.Function]:
+    """``(tk_<name>, tk_<name>_fwd)`` (module docstring)."""
+    k = next(j for j in JOINT_KINDS if j.name == name)
+    Rp, pp, Tp = ca.SX.sym("Rp", 3, 3), ca.SX.sym("pp", 3), ca.SX.sym("Tp", 6)
+    q, w = ca.SX.sym("q", k.nq), ca.SX.sym("w", k.nv)
+    a1, b1, a2, b2 = ca.SX.sym("a1", 3, 3), ca.SX.sym("b1", 3), ca.SX.sym("a2", 3, 3), ca.SX.sym("b2", 3)
+    axes = ca.SX.sym("axes", 3 * k.n_axes)
+    edge = Edge("", k.kind, "p", "c", (None, None), (None, None),
+                tuple(axes[3 * i:3 * i + 3] for i in range(k.n_axes)))
+    R_t, p_t = relative_pose(edge, q, 3, sym=True)
+    H_pc = ca.mtimes([_homogeneous(a1, b1), _homogeneous(R_t, p_t), _homogeneous(a2, b2)])
+    H_gp = _homogeneous(Rp, pp)
+    H_gc = ca.mtimes(H_gp, H_pc)
+    x = ca.vertcat(ca.vec(Rp), pp, Tp, q, w, ca.vec(a1), b1, ca.vec(a2), b2, axes)
+    if k.nv:
+        qd = joint_position_rates(k.kind, 3, k.nq, q, w)
+        H_pc_dot = ca.reshape(ca.jtimes(ca.vec(H_pc), q, qd), 4, 4)
+        S_p = ca.jacobian(crm.se3_vee(ca.mtimes(H_pc_dot, crm.inverse(H_pc))), w)
+        Ad_gp = crm.Ad(H_gp)
+        S_g = ca.mtimes(Ad_gp, S_p)
+        c_g = ca.mtimes(crm.ad(Tp), ca.mtimes(S_g, w)) + ca.mtimes(Ad_gp, ca.jtimes(ca.mtimes(S_p, w), q, qd))
+    else:
+        S_g, c_g = ca.SX(6, 0), ca.SX.zeros(6)
+    y = ca.densify(ca.vertcat(ca.vec(H_gc[:3, :3]), H_gc[:3, 3], ca.vec(S_g), c_g))
+    f = ca.Function(f"tk_{name}", [x], [ca.cse(y)], ["x"], ["y"])
+    dRp, dpp, dTp = ca.SX.sym("dRp", 9), ca.SX.sym("dpp", 3), ca.SX.sym("dTp", 6)
+    delta, dw = ca.SX.sym("delta", k.nv), ca.SX.sym("dw", k.nv)
+    dq = joint_position_rates(k.kind, 3, k.nq, q, delta) if k.nv else ca.SX(0, 1)
+    dx = ca.vertcat(dRp, dpp, dTp, dq, dw, ca.SX.zeros(k.n_num))
+    dy = ca.densify(ca.jtimes(y, x, dx))
+    fwd = ca.Function(f"tk_{name}_fwd", [ca.vertcat(x, dRp, dpp, dTp, delta, dw)], [ca.cse(dy)], ["x"], ["dy"])
+    return f, fwd
+
+
+@lru_cache(maxsize=None)
+def rate_kernel(name: str) -> ca.Function:
+    """``tk_<name>_qdot``: ``[q; w] -> q̇`` (the joint's position rates; a quaternion
+    normalised first, as the joint-space ODE sees it)."""
+    k = next(j for j in JOINT_KINDS if j.name == name)
+    q, w = ca.SX.sym("q", k.nq), ca.SX.sym("w", k.nv)
+    qn = q
+    if k.nq in (4, 7):
+        quat = q[k.nq - 4:]
+        qn = ca.vertcat(q[:k.nq - 4], quat / ca.norm_2(quat))
+    qd = joint_position_rates(k.kind, 3, k.nq, qn, w) if k.nv else ca.SX(0, 1)
+    return ca.Function(f"tk_{name}_qdot", [ca.vertcat(q, w)], [ca.densify(qd)], ["x"], ["qdot"])
+
+
+@lru_cache(maxsize=None)
+def body_kernels() -> tuple[ca.Function, ca.Function]:
+    """``(tk_body, tk_body_fwd)`` (module docstring)."""
+    R, p, T, dT = ca.SX.sym("R", 3, 3), ca.SX.sym("p", 3), ca.SX.sym("T", 6), ca.SX.sym("dT", 6)
+    m, c, I_c = ca.SX.sym("m"), ca.SX.sym("c", 3), ca.SX.sym("I_c", 3, 3)
+    M_g = _mass_matrix_g(m, p + ca.mtimes(R, c), R, I_c)
+    W = ca.mtimes(M_g, dT) - ca.mtimes(crm.ad(T).T, ca.mtimes(M_g, T))
+    x = ca.vertcat(ca.vec(R), p, T, dT, m, c, ca.vec(I_c))
+    y = ca.densify(ca.vertcat(ca.vec(M_g), W))
+    f = ca.Function("tk_body", [x], [ca.cse(y)], ["x"], ["y"])
+    dx = ca.SX.sym("dx", 24)
+    dy = ca.densify(ca.jtimes(y, x, ca.vertcat(dx, ca.SX.zeros(BODY_NUMBERS))))
+    return f, ca.Function("tk_body_fwd", [ca.vertcat(x, dx)], [ca.cse(dy)], ["x"], ["dy"])
+
+
+def kernels() -> list[ca.Function]:
+    """Every tree kernel, in the library's order: each joint kind's three, then the body's."""
+    return [f for k in JOINT_KINDS for f in (*joint_kernels(k.name), rate_kernel(k.name))] + list(body_kernels())
+
+
+def kind_names() -> str:
+    """The joint kinds in table order, comma-separated (the library's ``kind_names()``)."""
+    return ",".join(k.name for k in JOINT_KINDS)
+
+
+def joint_numbers(a1, b1, a2, b2, axes) -> np.ndarray:
+    """A joint's numbers in the order its kernel reads them (matrices column-major)."""
+    return np.concatenate([np.asarray(a1, float).reshape(-1, order="F"), np.asarray(b1, float).reshape(-1),
+                           np.asarray(a2, float).reshape(-1, order="F"), np.asarray(b2, float).reshape(-1),
+                           *(np.asarray(a, float).reshape(-1) for a in axes)])
+
+
+#: Name of the package (and prefix of every C symbol) of the tree library.
+PACKAGE = "ncgen_trees"
+#: The template files the library is made of besides this module (its cache key hashes them).
+SOURCES = ("runtime/ncgen_tree_tables.h", "tree_tables.c.j2", "runtime/ncgen_joint_loop.h")
+
+
+def write_tree_package(out_dir):
+    """The C package of the tree kernels and loops (``PACKAGE``) in ``out_dir``; its
+    functions are documented in ``templates/c/tree_tables.c.j2``."""
+    from ncgen.codegen.package import ExtraSource, PackageDoc, write_package
+
+    fns = kernels()
+    if any(f.sz_iw() for f in fns) or any(f.sz_arg() > 1 or f.sz_res() > 1 for f in fns):
+        raise CodegenError("tree kernels: the loops expect kernels with no integer work, one argument and one result")
+    from ncgen.runtime.tree_check import PIVOT_TOL
+
+    context = {"pivot_tol": repr(float(PIVOT_TOL)),
+               "kinds": [{"name": k.name, "nq": k.nq, "nv": k.nv, "n_num": k.n_num} for k in JOINT_KINDS],
+               "max_w": max(f.sz_w() for f in fns), "kind_names": kind_names()}
+    doc = PackageDoc(summary="Tree kernels of the shipped joint kinds and the table-driven joint-space "
+                             "algorithms (RNEA, CRBA, forward dynamics and their derivatives) of any tree")
+    return write_package(PACKAGE, fns, out_dir, doc=doc, max_file_instructions=None, reroll_instructions=None,
+                         extra_sources=[ExtraSource("runtime/ncgen_tree_tables.h", "ncgen_tree_tables.h",
+                                                    included=True),
+                                        ExtraSource("runtime/ncgen_joint_loop.h", "ncgen_joint_loop.h", included=True),
+                                        ExtraSource("tree_tables.c.j2", "tree_tables.c", context)])

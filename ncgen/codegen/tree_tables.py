@@ -1,0 +1,132 @@
+"""A tree's numbers as data tables for the joint-space algorithms of the tree library
+(``templates/c/runtime/ncgen_tree_tables.h``; kernels :mod:`ncgen.codegen.tree_kernels`).
+
+:func:`tree_tables` packs a 3D tree (:func:`~ncgen.runtime.tree_check.check_tree`) into
+:class:`TreeTables`: one body per member, parents before children (the spanning tree's
+breadth-first order), each with the kind of the joint to its parent, where its positions and
+rates start in ``qj``/``vj``, the joint's numbers (placements and axes) and the member's
+``[m; c; I_c]``; the uniform gravity; the mimic map (``v_j = G v_i``: per rate the index of
+the rate it copies, its factor and its independent column; per position the position it
+copies, factor and offset).  :class:`UnsupportedTree` names what the tables do not cover:
+passive forces other than a uniform gravity (springs, dampers, joint friction), a joint
+traversed from its B side, joint kinds outside :data:`~ncgen.codegen.tree_kernels.JOINT_KINDS`
+(bars' swings), members that are not rigid bodies.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ncgen.assembly.joint_tree import edge_placements
+from ncgen.codegen.tree_kernels import JOINT_KINDS, joint_numbers
+from ncgen.errors import CodegenError, ModelError
+from ncgen.model.data import model_data
+
+
+class UnsupportedTree(CodegenError):
+    """The tree tables do not cover the model; ``reasons`` lists why."""
+
+    def __init__(self, model_name: str, reasons: list[str]):
+        self.reasons = reasons
+        super().__init__(f"model {model_name!r}: the tree tables do not cover it: {'; '.join(reasons)}; "
+                         "use the model's flat tree functions (kernels='flat')")
+
+
+@dataclass
+class TreeTables:
+    """The arrays of ``ncgen_tree`` (``templates/c/runtime/ncgen_tree_tables.h``) of one model."""
+
+    name: str
+    nq: int
+    nv: int
+    ni: int
+    arrays: dict[str, np.ndarray]
+
+    @property
+    def nb(self) -> int:
+        return len(self.arrays["parent"])
+
+
+_KIND = {k.kind: i for i, k in enumerate(JOINT_KINDS)}
+
+
+def tree_tables(model) -> TreeTables:
+    """The :class:`TreeTables` of ``model``, packed once per model (kept in ``model.data``);
+    raises :class:`UnsupportedTree` (module docstring)."""
+    data = model_data(model)
+    if data.tree_tables is None:
+        try:
+            data.tree_tables = (_pack(model), None)
+        except UnsupportedTree as e:
+            data.tree_tables = (None, e)
+    tables, error = data.tree_tables
+    if error is not None:
+        raise error
+    return tables
+
+
+def _pack(model) -> TreeTables:
+    from ncgen.assembly.tree_dynamics import MimicMap, _owned, member_inertia, member_twist_map, uniform_gravity
+    from ncgen.runtime.tree_check import check_tree
+
+    js = model.joint_space
+    if js.dim != 3:
+        raise UnsupportedTree(model.name, ["a 2D model (the tree tables take 3D trees)"])
+    try:
+        check_tree(model)
+    except ModelError as e:
+        raise UnsupportedTree(model.name, [str(e)]) from None
+    tree = js.spanning_tree()
+    reasons = []
+    g = uniform_gravity(model, _owned(model, tree))
+    if g is None:
+        reasons.append("passive forces other than a uniform gravity (springs, dampers, joint friction)")
+    index = {"ground": -1}
+    parent, kind, q_at, v_at, num_ptr, num, body = [], [], [], [], [0], [], []
+    sq, sv = js.slices(), js.slices(rates=True)
+    for here, there, e, forward in tree:
+        index[there] = len(parent)
+        parent.append(index[here])
+        k = _KIND.get(e.kind)
+        if k is None:
+            reasons.append(f"joint {e.name!r}: its kind {e.kind} (tree tables: "
+                           f"{', '.join(j.kind for j in JOINT_KINDS)})")
+            k = 0
+        elif not forward:
+            reasons.append(f"joint {e.name!r}: traversed from its B side")
+        kind.append(k)
+        q_at.append(sq[e.name].start if e.name in sq else 0)
+        v_at.append(sv[e.name].start if e.name in sv else 0)
+        nq = sq[e.name].stop - sq[e.name].start if e.name in sq else 0
+        if nq != JOINT_KINDS[k].nq and not reasons:
+            reasons.append(f"joint {e.name!r}: {nq} positions, expected {JOINT_KINDS[k].nq} for a {e.kind} joint")
+        a1, b1, a2, b2 = edge_placements(e, True, js.members, 3)
+        numbers = joint_numbers(a1, b1, a2, b2, e.axes[:JOINT_KINDS[k].n_axes])
+        if numbers.size != JOINT_KINDS[k].n_num and not reasons:
+            reasons.append(f"joint {e.name!r}: {numbers.size} numbers, expected {JOINT_KINDS[k].n_num}")
+        num.extend(numbers)
+        num_ptr.append(len(num))
+        try:
+            m, c, I_c = member_inertia(js, there, member_twist_map(js, there))
+        except ModelError as err:
+            reasons.append(str(err))
+            m, c, I_c = 0.0, np.zeros(3), np.zeros((3, 3))
+        body.extend([m, *c, *np.asarray(I_c, float).reshape(-1, order="F")])
+    if reasons:
+        raise UnsupportedTree(model.name, reasons)
+    mimic = MimicMap(model)
+    col = {i: c for c, i in enumerate(mimic.independent)}
+    rate_src = [mimic.follows.get(i, (i, 1.0))[0] for i in range(js.nv)]
+    rate_coef = [mimic.follows.get(i, (i, 1.0))[1] for i in range(js.nv)]
+    rate_col = [col[s] for s in rate_src]
+    q_src = [mimic.position[i][0] if i in mimic.position else -1 for i in range(js.nq)]
+    q_coef = [mimic.position[i][1] if i in mimic.position else 1.0 for i in range(js.nq)]
+    q_off = [mimic.position[i][2] if i in mimic.position else 0.0 for i in range(js.nq)]
+    i32 = (lambda x: np.asarray(x, dtype=np.int32))
+    f64 = (lambda x: np.asarray(x, dtype=np.float64))
+    arrays = {"parent": i32(parent), "kind": i32(kind), "q_at": i32(q_at), "v_at": i32(v_at),
+              "num_ptr": i32(num_ptr), "num": f64(num), "body": f64(body), "gravity": f64(g),
+              "rate_src": i32(rate_src), "rate_col": i32(rate_col), "rate_coef": f64(rate_coef),
+              "q_src": i32(q_src), "q_coef": f64(q_coef), "q_off": f64(q_off)}
+    return TreeTables(model.name, js.nq, js.nv, len(mimic.independent), arrays)

@@ -1,0 +1,309 @@
+"""The tree library: the joint-space algorithms of any tree over its data tables (RNEA, CRBA,
+forward dynamics and their derivatives, ``templates/c/runtime/ncgen_tree_tables.h``), compiled
+once per ncgen version and compiler and shared by every model, found through an index file of
+the compile cache like the element library (:func:`~ncgen.runtime.table_library.cached_library`,
+index ``tree-tables-<sources key>-<compiler key>.json``): a tree of the shipped joint kinds
+reaches compiled RNEA/ABA with no call of the C compiler.
+
+:class:`TableAlgorithm` is one algorithm of :data:`~ncgen.runtime.tree_algorithms.ALGORITHMS`
+bound to one model's :class:`~ncgen.codegen.tree_tables.TreeTables`, with the interface the
+callers of :class:`~ncgen.runtime.tree_algorithms.AlgorithmKernel` use (``k(*args)``,
+:meth:`TableAlgorithm.batch`).  Time and parameters do not enter: the tables cover only
+trees whose passive force is a uniform gravity.  :class:`TableJointLoop` is the joint-space
+simulation loop (``ncgen_joint_loop.h`` in the library) on the same tables.
+
+Speed (benchmarks/tree_tables.py, Panda RNEA, 2 shared cores at load 9–16): one state costs
+8–20 µs in the C loops against 2–6 µs for the flat per-robot kernel (whose numbers are folded
+into the code), and a single call through :meth:`TableAlgorithm.__call__` about 15 µs more; the tables are the default for
+their first-call cost (no compile), the flat kernel once this process has built it.
+"""
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import platform
+import sys
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from ncgen.codegen import c_binding
+from ncgen.codegen.compile_cache import BUILD_SCHEME
+from ncgen.codegen.render import shipped_templates_dir
+from ncgen.codegen.tree_kernels import JOINT_KINDS, PACKAGE, SOURCES, kind_names, write_tree_package
+from ncgen.codegen.tree_tables import TreeTables
+from ncgen.errors import CodegenError, ModelError
+from ncgen.runtime.table_library import cached_library
+from ncgen.runtime.tree_check import PIVOT_TOL
+from ncgen.validation import MAX_MAGNITUDE
+from ncgen.version import __version__
+
+INDEX_PREFIX = "tree-tables"
+#: Positions of each joint kind, in table order.
+JOINT_KINDS_NQ = tuple(k.nq for k in JOINT_KINDS)
+#: Fields of ``ncgen_tree``, in order.
+TREE_FIELDS = (("int", "nb"), ("int", "nq"), ("int", "nv"), ("int", "ni"),
+               *(("const int *", f) for f in ("parent", "kind", "q_at", "v_at", "num_ptr")),
+               *(("const double *", f) for f in ("num", "body", "gravity")),
+               *(("const int *", f) for f in ("rate_src", "rate_col")), ("const double *", "rate_coef"),
+               ("const int *", "q_src"), *(("const double *", f) for f in ("q_coef", "q_off")))
+_T, _D = "const ncgen_tree *", "const double *"
+#: The library's entry points (``PACKAGE`` prefix) as tree_tables.c.j2 spells them.
+SIGNATURES = {
+    "work_size": c_binding.Signature("long", ((_T, "T"),)),
+    "check": c_binding.Signature("int", ((_T, "T"),)),
+    "rnea": c_binding.Signature("int", ((_T, "T"), ("int", "n"), (_D, "q"), (_D, "v"), (_D, "a"),
+                                        ("double *", "tau"), ("double *", "w"))),
+    "crba": c_binding.Signature("int", ((_T, "T"), ("int", "n"), (_D, "q"), ("double *", "M"), ("double *", "w"))),
+    "aba": c_binding.Signature("int", ((_T, "T"), ("int", "n"), (_D, "q"), (_D, "v"), (_D, "tau"),
+                                       ("double *", "a"), ("double *", "check"), ("double *", "w"))),
+    "rnea_derivatives": c_binding.Signature("int", ((_T, "T"), ("int", "n"), (_D, "q"), (_D, "v"), (_D, "a"),
+                                                    *(("double *", x) for x in ("tau", "dq", "dv", "M", "w")))),
+    "aba_derivatives": c_binding.Signature("int", ((_T, "T"), ("int", "n"), (_D, "q"), (_D, "v"), (_D, "tau"),
+                                                   *(("double *", x) for x in ("a", "dq", "dv", "Minv", "check",
+                                                                               "w")))),
+    "joint_run": c_binding.Signature("int", (
+        (_T, "T"), (_D, "E"), ("int", "nu"), ("int", "method"), ("int", "n_out"), (_D, "t_out"), ("double *", "X"),
+        (_D, "W"), (_D, "S"), ("int", "nquat"), ("const int *", "quat"), ("double", "rtol"), ("double", "atol"),
+        ("int", "substeps"), ("long", "max_steps"), ("int", "stop_at_outputs"), ("double *", "stats"),
+        ("int *", "k_done"), ("volatile int *", "stop"))),
+}
+
+
+class _Tree(ctypes.Structure):
+    _fields_ = [(name, ctypes.c_void_p if "*" in t else ctypes.c_int) for t, name in TREE_FIELDS]
+
+
+def sources_key() -> str:
+    """sha256 of what the library is made of: ncgen's and CasADi's versions, its templates,
+    the kernel generator and the formulas it reads."""
+    import ncgen.assembly.joint_space as js
+    import ncgen.assembly.joint_tree as jt
+    import ncgen.assembly.tree_dynamics as td
+    import ncgen.codegen.tree_kernels as tk
+    import ncgen.rigid_motion.casadi_forms as crm
+
+    templates = shipped_templates_dir()
+    files = [templates / rel for rel in SOURCES] + [Path(m.__file__) for m in (tk, js, jt, td, crm)]
+    h = hashlib.sha256(f"{__version__}\n{ca.__version__}\n{BUILD_SCHEME}\n{sys.platform}\n"
+                       f"{platform.machine()}\n".encode())
+    for f in files:
+        h.update(f.name.encode() + b"\0" + f.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+def tree_library(cflags: str | None = None) -> tuple[Path, bool]:
+    """``(path of the tree library, whether it was compiled now)``."""
+    return cached_library(INDEX_PREFIX, sources_key(), write_tree_package, PACKAGE, cflags)
+
+
+class TreeLibrary:
+    """The loaded tree library: its entry points bound (:data:`SIGNATURES`)."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self._lib = c_binding.open_library(path)
+        self.fn = {k: c_binding.bind(self._lib, f"{PACKAGE}_{k}", s, structs={"ncgen_tree": _Tree}, addresses=True)
+                   for k, s in SIGNATURES.items()}
+        names = getattr(self._lib, f"{PACKAGE}_kind_names", None)
+        if names is None:
+            raise CodegenError(f"{path}: no function {PACKAGE}_kind_names; delete it to have it rebuilt")
+        names.restype, names.argtypes = ctypes.c_char_p, []
+        if names().decode() != kind_names():
+            raise CodegenError(f"{path}: tree library of other joint kinds ({names().decode()!r}, expected "
+                               f"{kind_names()!r}); delete it to have it rebuilt")
+
+
+_LOADED: dict[Path, TreeLibrary] = {}
+
+
+def load_tree_library(cflags: str | None = None) -> TreeLibrary:
+    """The tree library, compiled at first use (:func:`tree_library`) and loaded once per process."""
+    path, _ = tree_library(cflags)
+    if path not in _LOADED:
+        _LOADED[path] = TreeLibrary(path)
+    return _LOADED[path]
+
+
+class BoundTree:
+    """One model's :class:`TreeTables` as the library's ``ncgen_tree`` (checked once) with a work array."""
+
+    def __init__(self, tables: TreeTables, library: TreeLibrary | None = None):
+        self.tables, self.library = tables, library or load_tree_library()
+        self._arrays = {f: np.ascontiguousarray(tables.arrays[f], dtype=np.int32 if "int" in t else np.float64)
+                        for t, f in TREE_FIELDS if "*" in t}
+        self._struct = _Tree(nb=tables.nb, nq=tables.nq, nv=tables.nv, ni=tables.ni,
+                             **{k: v.ctypes.data for k, v in self._arrays.items()})
+        self.ref = ctypes.addressof(self._struct)
+        if self.library.fn["check"](self.ref):
+            raise CodegenError(f"model {tables.name!r}: its tree tables are inconsistent (ncgen_tree_check)")
+        self.work = np.zeros(max(1, int(self.library.fn["work_size"](self.ref))))
+
+
+class TableAlgorithm:
+    """``k(*args) -> outputs``: the algorithm ``name`` (a key of
+    :data:`~ncgen.runtime.tree_algorithms.ALGORITHMS`) of one tree from its tables; the
+    arguments as :class:`~ncgen.runtime.tree_algorithms.AlgorithmKernel` takes them (``qj``
+    with unit quaternions), checked by the caller.  Outputs are fresh arrays (matrices
+    ``(ni, ni)``).  Raises :class:`ModelError` for a singular mass matrix or a non-finite
+    result.  Not thread-safe (one work array)."""
+
+    kernels = "tables"
+
+    def __init__(self, tree: BoundTree, name: str):
+        from ncgen.runtime.tree_algorithms import ALGORITHMS
+
+        self.tree, self.name = tree, name
+        self.input_names, self.output_names = ALGORITHMS[name]
+        T = tree.tables
+        self._in_sizes = {"qj": T.nq, "vj": T.nv, "aj": T.nv, "tau": T.ni}
+        self._sizes = [self._in_sizes[a] for a in self.input_names]
+        self._out_sizes = {"tau": (T.ni,), "aj": (T.nv,), "M": (T.ni, T.ni)}
+        self._fn = tree.library.fn[name]
+        self._single = None
+        self._quaternions = bool(np.any(np.isin(np.asarray(JOINT_KINDS_NQ)[T.arrays["kind"]], (4, 7))))
+
+    def plain(self, args) -> tuple | None:
+        """``args`` when each is already a C-contiguous float64 vector of its size with finite
+        entries of magnitude at most :data:`~ncgen.validation.MAX_MAGNITUDE` and the model has no
+        quaternions to normalise, else None (the caller checks and converts them)."""
+        if self._quaternions or len(args) != len(self._sizes):
+            return None
+        for x, n in zip(args, self._sizes):
+            if type(x) is not np.ndarray or x.dtype != np.float64 or x.shape != (n,) or \
+                    not x.flags.c_contiguous or not np.abs(x).max(initial=0.0) <= MAX_MAGNITUDE:
+                return None
+        return args
+
+    def _shape(self, out: str) -> tuple:
+        return self._out_sizes.get(out, (self.tree.tables.ni, self.tree.tables.ni))
+
+    def __call__(self, *args):
+        """The algorithm at one state (each argument a float vector of its size), through
+        buffers and addresses kept between calls."""
+        if self._single is None:
+            self._in = [np.empty(n) for n in self._sizes]
+            self._single = [np.empty((1, *self._shape(o))) for o in self.output_names]
+            self._check = np.empty(2) if self.name.startswith("aba") else None
+            tail = [o.ctypes.data for o in self._single] + ([] if self._check is None else [self._check.ctypes.data])
+            self._addresses = (self.tree.ref, 1, *(x.ctypes.data for x in self._in), *tail,
+                               self.tree.work.ctypes.data)
+        for buf, x in zip(self._in, args):
+            buf[...] = x
+        if self._fn(*self._addresses):
+            raise ModelError(f"{self.name}: a kernel of the tree library failed")
+        if self._check is not None:
+            self._checked(self._check[None, :], 1)
+        single = self._single
+        if len(single) == 1:
+            o = single[0]
+            return o[0].copy() if o.ndim == 2 else o[0].T.copy()
+        return tuple(o[0].copy() if o.ndim == 2 else o[0].T.copy() for o in single)
+
+    def _checked(self, check: np.ndarray, n: int) -> None:
+        ok = (check[:, 0] > PIVOT_TOL) & np.isfinite(check[:, 1])
+        if not ok.all():
+            row = int(np.argmin(ok))
+            where = f" (row {row})" if n > 1 else ""
+            if np.isfinite(check[row, 0]) and not check[row, 0] > PIVOT_TOL:
+                raise ModelError(f"{self.name}: the joint-space mass matrix is singular at this state "
+                                 f"(smallest relative Cholesky pivot {check[row, 0]:.3g}){where}")
+            raise ModelError(f"{self.name}: the result is not finite (non-finite qj, vj or tau?){where}")
+
+    def batch(self, *args):
+        """The algorithm at ``n`` states: each argument ``(n, size)`` (C-contiguous floats);
+        outputs with a first axis of ``n``."""
+        n = len(args[0])
+        arrays = [np.ascontiguousarray(x, dtype=float) for x in args]
+        outs = [np.empty((n, *self._shape(o))) for o in self.output_names]
+        check = np.empty((n, 2)) if self.name.startswith("aba") else None
+        ptrs = [a.ctypes.data for a in arrays] + [o.ctypes.data for o in outs]
+        if check is not None:
+            ptrs.append(check.ctypes.data)
+        if self._fn(self.tree.ref, n, *ptrs, self.tree.work.ctypes.data):
+            raise ModelError(f"{self.name}: a kernel of the tree library failed")
+        if check is not None:
+            self._checked(check, n)
+        # matrices come column-major: transpose each (n, ni, ni) block
+        outs = [o if o.ndim == 2 else o.transpose(0, 2, 1) for o in outs]
+        return tuple(outs) if len(outs) > 1 else outs[0]
+
+
+def table_algorithm(model, name: str) -> TableAlgorithm:
+    """The algorithm ``name`` of ``model`` from its tree tables, bound once per model (raises
+    :class:`~ncgen.codegen.tree_tables.UnsupportedTree`, or
+    :class:`~ncgen.errors.CompilerNotFound` with no compiler and no library in the cache)."""
+    from ncgen.codegen.tree_tables import tree_tables
+    from ncgen.model.data import model_data
+
+    data = model_data(model)
+    k = data.table_algorithms.get(name)
+    if k is None:
+        tree = data.table_algorithms.get(None)
+        if tree is None:
+            tree = data.table_algorithms[None] = BoundTree(tree_tables(model))
+        k = data.table_algorithms[name] = TableAlgorithm(tree, name)
+    return k
+
+
+def input_efforts(model) -> np.ndarray:
+    """``E`` (ni × nu): the efforts of the independent rates from the inputs, ``τ_i = E u``
+    (:func:`~ncgen.assembly.tree_algorithms.efforts_function`); raises
+    :class:`~ncgen.codegen.tree_tables.UnsupportedTree` when they are not a constant linear map."""
+    from ncgen.assembly.tree_algorithms import efforts_function
+    from ncgen.codegen.tree_tables import UnsupportedTree
+
+    f = efforts_function(model)
+    ins = f.sx_in()
+    tau, E = f(*ins)
+    if ca.depends_on(ca.vertcat(ca.vec(E), ca.substitute(tau, ins[2], ca.DM.zeros(model.nu))),
+                     ca.vertcat(*[ca.vec(x) for x in ins])) or np.any(np.array(ca.evalf(ca.substitute(
+                         tau, ins[2], ca.DM.zeros(model.nu))))):
+        raise UnsupportedTree(model.name, ["joint efforts that are not a constant linear map of the inputs"])
+    ni = tau.numel()
+    return np.asfortranarray(np.array(ca.evalf(ca.densify(E)), float).reshape(ni, model.nu))
+
+
+class TableJointLoop:
+    """The joint-space loop of :mod:`ncgen.runtime.joint_simulation` (the interface of its
+    ``JointLoop``: ``run``, ``mapped``) on the tree library: ``ẋ = [q̇_j; a_j(q_j, v_j, E w)]``
+    with no controller and no joint dynamics, nothing compiled for the model."""
+
+    kernels = "tables"
+
+    def __init__(self, model):
+        from ncgen.assembly.joint_ode import quaternion_offsets
+        from ncgen.runtime.tree_check import tree_function
+
+        self.model = model
+        self.tree_bound = table_algorithm(model, "aba").tree
+        self.E = input_efforts(model)
+        self.quat = np.array(quaternion_offsets(model.joint_space), dtype=np.int32)
+        self.tree = tree_function(model)
+        self._fn = self.tree_bound.library.fn["joint_run"]
+        self._maps: dict = {}
+
+    def mapped(self, what: str, n: int):
+        """``what`` (``"tree"``, ``"accel"``: CasADi functions mapped over ``n`` points;
+        ``"ode"``: the applied inputs, which are the samples ``w`` themselves)."""
+        if what == "ode":
+            return lambda t, X, W, P: (None, None, W)
+        key = (what, n)
+        if key not in self._maps:
+            self._maps[key] = {"tree": self.tree, "accel": self.model.functions["accel"]}[what].map(n)
+        return self._maps[key]
+
+    def run(self, method: int, t: np.ndarray, X: np.ndarray, W: np.ndarray, S, p: np.ndarray, rtol: float,
+            atol: float, substeps: int, max_steps: int, stop: bool, stats: np.ndarray) -> tuple[int, int]:
+        """As ``JointLoop.run`` (``p`` does not enter: the tables' dynamics take none)."""
+        from ncgen.interrupts import call_interruptibly
+        from ncgen.runtime.joint_simulation import INTERRUPTED
+
+        ptr = (lambda a: None if a is None or a.size == 0 else a.ctypes.data)
+        done, flag = ctypes.c_int(0), ctypes.c_int(0)
+        status, interrupted = call_interruptibly(
+            self._fn, self.tree_bound.ref, ptr(self.E), self.model.nu, int(method), len(t) - 1, ptr(t), ptr(X),
+            ptr(W), ptr(S), len(self.quat), ptr(self.quat), float(rtol), float(atol), int(substeps),
+            int(max_steps), int(stop), ptr(stats), ctypes.addressof(done), ctypes.addressof(flag), stop=flag)
+        return INTERRUPTED if interrupted else int(status), int(done.value)

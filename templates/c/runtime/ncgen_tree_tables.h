@@ -1,0 +1,511 @@
+/* Joint-space algorithms of a tree over data tables: inverse dynamics (RNEA), the joint-space
+ * mass matrix (CRBA), forward dynamics (M_i a_i = τ − bias by Cholesky) and the derivatives of
+ * RNEA and forward dynamics, as plain loops over the bodies that call one small kernel per
+ * kind of joint and one per rigid body (ncgen/codegen/tree_kernels.py generates them,
+ * ncgen/codegen/tree_tables.py packs the tables).  The same C for every tree: a model is data.
+ *
+ * Notation (docs/architecture.md, "Element tables"): poses H = [[R, p], [0, 1]] of member
+ * frames in the ground frame g, twists [ω; v] and wrenches [τ; f] expressed in g; R column-major.
+ *   body b      parent[b] (-1: the ground; parents come before their children), the kind of
+ *               the joint to its parent kind[b], its first position q_at[b] in qj and rate
+ *               v_at[b] in vj, its joint's numbers num[num_ptr[b] ...], its [m; c; I_c]
+ *               body[13 b ...]; gravity: the ground's acceleration is [0; −g].
+ *   mimic map   v_j[i] = rate_coef[i] v_j[rate_src[i]], independent column rate_col[i] (ni
+ *               columns; τ_i = Gᵀ τ, M_i = Gᵀ M G); q_j[i] = q_coef[i] q_j[q_src[i]] + q_off[i]
+ *               where q_src[i] >= 0.
+ * Kernels (CasADi's signature, no integer work, real work at most max_w doubles):
+ *   edge      [R_p; p_p; T_p; q; w; numbers] -> [R_c; p_c; S_g (6 × nv); c_g = Ṡ_g w]
+ *   edge_fwd  [edge input; dR_p; dp_p; dT_p; δ; dw] -> d(edge output), q moved in the tangent space
+ *   body      [R; p; T; dT; m; c; I_c] -> [M_g (6 × 6); W = M_g dT − ad(T)ᵀ M_g T]
+ *   body_fwd  [body input; dR; dp; dT; ddT] -> d(body output)
+ *   qdot      [q; w] -> q̇ (the joint's position rates, quaternions normalised first)
+ * Call ncgen_tree_check once on new tables: the loops trust them.  Position derivatives are
+ * per independent rate in the tangent space (Pinocchio's convention). */
+#ifndef NCGEN_TREE_TABLES_H
+#define NCGEN_TREE_TABLES_H
+
+#include <math.h>
+#include <string.h>
+
+#define NCGEN_TREE_KERNEL 1
+#define NCGEN_TREE_BAD 2
+#define NCGEN_TREE_BODY 13
+
+typedef int (*ncgen_tree_kernel)(const double **arg, double **res, long long *iw, double *w, int mem);
+
+typedef struct {
+  ncgen_tree_kernel edge, edge_fwd, qdot;
+  int nq, nv, n_num;
+} ncgen_tree_joint_kind;
+
+typedef struct {
+  const ncgen_tree_joint_kind *joint;
+  int n_joint;
+  ncgen_tree_kernel body, body_fwd;
+  int max_w;
+} ncgen_tree_kinds;
+
+typedef struct {
+  int nb, nq, nv, ni;
+  const int *parent, *kind, *q_at, *v_at, *num_ptr;
+  const double *num, *body, *gravity;
+  const int *rate_src, *rate_col;
+  const double *rate_coef;
+  const int *q_src;
+  const double *q_coef, *q_off;
+} ncgen_tree;
+
+/* The work array, cut into the pieces the loops use. */
+typedef struct {
+  double *q, *v, *a, *R, *p, *T, *dT, *W, *Mg, *S, *tau;
+  double *dR, *dp, *dTt, *ddT, *dW, *dS, *dtau;
+  double *M, *Mi, *L, *rhs, *taui, *in, *out, *kw;
+} ncgen_tree_work;
+
+
+static long ncgen_tree_max_in(const ncgen_tree_kinds *K) {
+  long n = 37 + 24;
+  int i;
+  for (i = 0; i < K->n_joint; ++i) {
+    const ncgen_tree_joint_kind *k = &K->joint[i];
+    long m = 18 + k->nq + k->nv + k->n_num + 18 + 2L * k->nv;
+    if (m > n) n = m;
+  }
+  return n;
+}
+
+static long ncgen_tree_max_out(const ncgen_tree_kinds *K) {
+  long n = 42;
+  int i;
+  for (i = 0; i < K->n_joint; ++i)
+    if (18 + 6L * K->joint[i].nv > n) n = 18 + 6L * K->joint[i].nv;
+  return n;
+}
+
+/* The pieces of the work array w (w NULL: none); returns the doubles it needs. */
+static long ncgen_tree_layout(const ncgen_tree_kinds *K, const ncgen_tree *T, double *w, ncgen_tree_work *s) {
+  long o = 0, nb = T->nb, nv = T->nv, ni = T->ni;
+#define NCGEN_TREE_TAKE(f, n) (s->f = w ? w + o : 0, o += (n))
+  NCGEN_TREE_TAKE(q, T->nq);
+  NCGEN_TREE_TAKE(v, nv);
+  NCGEN_TREE_TAKE(a, nv);
+  NCGEN_TREE_TAKE(tau, nv);
+  NCGEN_TREE_TAKE(R, 9 * nb);
+  NCGEN_TREE_TAKE(p, 3 * nb);
+  NCGEN_TREE_TAKE(T, 6 * nb);
+  NCGEN_TREE_TAKE(dT, 6 * nb);
+  NCGEN_TREE_TAKE(W, 6 * nb);
+  NCGEN_TREE_TAKE(Mg, 36 * nb);
+  NCGEN_TREE_TAKE(S, 6 * nv);
+  NCGEN_TREE_TAKE(dtau, nv);
+  NCGEN_TREE_TAKE(dR, 9 * nb);
+  NCGEN_TREE_TAKE(dp, 3 * nb);
+  NCGEN_TREE_TAKE(dTt, 6 * nb);
+  NCGEN_TREE_TAKE(ddT, 6 * nb);
+  NCGEN_TREE_TAKE(dW, 6 * nb);
+  NCGEN_TREE_TAKE(dS, 6 * nv);
+  NCGEN_TREE_TAKE(M, nv * nv);
+  NCGEN_TREE_TAKE(Mi, ni * ni);
+  NCGEN_TREE_TAKE(L, ni * ni);
+  NCGEN_TREE_TAKE(rhs, 3 * ni * ni + ni);
+  NCGEN_TREE_TAKE(taui, ni);
+  NCGEN_TREE_TAKE(in, ncgen_tree_max_in(K));
+  NCGEN_TREE_TAKE(out, ncgen_tree_max_out(K));
+  NCGEN_TREE_TAKE(kw, K->max_w > 0 ? K->max_w : 1);
+#undef NCGEN_TREE_TAKE
+  return o;
+}
+
+/* Doubles of work the functions below need for the tables T. */
+static long ncgen_tree_work_size(const ncgen_tree_kinds *K, const ncgen_tree *T) {
+  ncgen_tree_work s;
+  return ncgen_tree_layout(K, T, 0, &s);
+}
+
+static int ncgen_tree_in(int x, int lo, int hi) { return x >= lo && x < hi; }
+
+/* 0 when every index of T is in range and every body's sizes match its kind, else NCGEN_TREE_BAD. */
+static int ncgen_tree_check(const ncgen_tree_kinds *K, const ncgen_tree *T) {
+  int b, i;
+  if (T->nb < 0 || T->nq < 0 || T->nv < 0 || T->ni < 0 || T->ni > T->nv) return NCGEN_TREE_BAD;
+  if (T->num_ptr[0] != 0) return NCGEN_TREE_BAD;
+  for (b = 0; b < T->nb; ++b) {
+    const ncgen_tree_joint_kind *k;
+    if (!ncgen_tree_in(T->parent[b], -1, b) || !ncgen_tree_in(T->kind[b], 0, K->n_joint)) return NCGEN_TREE_BAD;
+    k = &K->joint[T->kind[b]];
+    if (T->num_ptr[b + 1] - T->num_ptr[b] != k->n_num) return NCGEN_TREE_BAD;
+    if (T->q_at[b] < 0 || T->q_at[b] + k->nq > T->nq || T->v_at[b] < 0 || T->v_at[b] + k->nv > T->nv)
+      return NCGEN_TREE_BAD;
+  }
+  for (i = 0; i < T->nv; ++i)
+    if (!ncgen_tree_in(T->rate_src[i], 0, T->nv) || !ncgen_tree_in(T->rate_col[i], 0, T->ni)) return NCGEN_TREE_BAD;
+  for (i = 0; i < T->nq; ++i)
+    if (!ncgen_tree_in(T->q_src[i], -1, T->nq)) return NCGEN_TREE_BAD;
+  return 0;
+}
+
+static int ncgen_tree_call(ncgen_tree_kernel f, const double *in, double *out, double *kw) {
+  const double *arg[1];
+  double *res[1];
+  arg[0] = in;
+  res[0] = out;
+  return f(arg, res, 0, kw, 0) ? NCGEN_TREE_KERNEL : 0;
+}
+
+/* q, v, a of the work with the mimic followers set from their leaders (a: NULL for zero). */
+static void ncgen_tree_expand(const ncgen_tree *T, ncgen_tree_work *s, const double *q, const double *v,
+                              const double *a) {
+  int i;
+  for (i = 0; i < T->nq; ++i) s->q[i] = T->q_src[i] >= 0 ? T->q_coef[i] * q[T->q_src[i]] + T->q_off[i] : q[i];
+  for (i = 0; i < T->nv; ++i) {
+    s->v[i] = T->rate_coef[i] * v[T->rate_src[i]];
+    s->a[i] = a ? T->rate_coef[i] * a[T->rate_src[i]] : 0.0;
+  }
+}
+
+/* The edge kernel's input for body b (the parent's pose, twist; the joint's q, w, numbers). */
+static int ncgen_tree_edge_input(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, int b) {
+  static const double eye[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
+  int par = T->parent[b], i, n = 0;
+  double *in = s->in;
+  for (i = 0; i < 9; ++i) in[n++] = par < 0 ? eye[i] : s->R[9 * par + i];
+  for (i = 0; i < 3; ++i) in[n++] = par < 0 ? 0.0 : s->p[3 * par + i];
+  for (i = 0; i < 6; ++i) in[n++] = par < 0 ? 0.0 : s->T[6 * par + i];
+  for (i = 0; i < k->nq; ++i) in[n++] = s->q[T->q_at[b] + i];
+  for (i = 0; i < k->nv; ++i) in[n++] = s->v[T->v_at[b] + i];
+  for (i = 0; i < k->n_num; ++i) in[n++] = T->num[T->num_ptr[b] + i];
+  return n;
+}
+
+/* The body kernel's input of body b: [R; p; T; dT; m; c; I_c]. */
+static void ncgen_tree_body_input(const ncgen_tree *T, const ncgen_tree_work *s, int b, double *in) {
+  memcpy(in, s->R + 9 * b, 9 * sizeof(double));
+  memcpy(in + 9, s->p + 3 * b, 3 * sizeof(double));
+  memcpy(in + 12, s->T + 6 * b, 6 * sizeof(double));
+  memcpy(in + 18, s->dT + 6 * b, 6 * sizeof(double));
+  memcpy(in + 24, T->body + NCGEN_TREE_BODY * b, NCGEN_TREE_BODY * sizeof(double));
+}
+
+/* Outwards: poses, motion subspaces S, twists, accelerations (with s->a), then each body's
+ * M_g and wrench W.  The ground's acceleration is [0; −g] (gravity as a fictitious acceleration). */
+static int ncgen_tree_forward(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s) {
+  int b, i, j;
+  for (b = 0; b < T->nb; ++b) {
+    const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
+    int par = T->parent[b], va = T->v_at[b];
+    double *out = s->out, *S = s->S + 6 * va;
+    ncgen_tree_edge_input(K, T, s, b);
+    if (ncgen_tree_call(k->edge, s->in, out, s->kw)) return NCGEN_TREE_KERNEL;
+    memcpy(s->R + 9 * b, out, 9 * sizeof(double));
+    memcpy(s->p + 3 * b, out + 9, 3 * sizeof(double));
+    memcpy(S, out + 12, 6 * (size_t)k->nv * sizeof(double));
+    for (i = 0; i < 6; ++i) {
+      double t = par < 0 ? 0.0 : s->T[6 * par + i];
+      double dt = par < 0 ? (i < 3 ? 0.0 : -T->gravity[i - 3]) : s->dT[6 * par + i];
+      dt += out[12 + 6 * k->nv + i];
+      for (j = 0; j < k->nv; ++j) {
+        t += S[6 * j + i] * s->v[va + j];
+        dt += S[6 * j + i] * s->a[va + j];
+      }
+      s->T[6 * b + i] = t;
+      s->dT[6 * b + i] = dt;
+    }
+    ncgen_tree_body_input(T, s, b, s->in);
+    if (ncgen_tree_call(K->body, s->in, out, s->kw)) return NCGEN_TREE_KERNEL;
+    memcpy(s->Mg + 36 * b, out, 36 * sizeof(double));
+    memcpy(s->W + 6 * b, out + 36, 6 * sizeof(double));
+  }
+  return 0;
+}
+
+/* Inwards: W summed over each subtree (in place), τ_j = S_jᵀ W per joint rate (s->tau, nv). */
+static void ncgen_tree_backward(const ncgen_tree_kinds *K, const ncgen_tree *T, double *W, const double *S,
+                                double *tau) {
+  int b, i, j;
+  for (b = T->nb - 1; b >= 0; --b) {
+    const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
+    int va = T->v_at[b];
+    for (j = 0; j < k->nv; ++j) {
+      double t = 0.0;
+      for (i = 0; i < 6; ++i) t += S[6 * (va + j) + i] * W[6 * b + i];
+      tau[va + j] = t;
+    }
+    if (T->parent[b] >= 0)
+      for (i = 0; i < 6; ++i) W[6 * T->parent[b] + i] += W[6 * b + i];
+  }
+}
+
+/* τ_i = Gᵀ τ (ni) from τ per joint rate (nv). */
+static void ncgen_tree_project(const ncgen_tree *T, const double *tau, double *tau_i) {
+  int i;
+  for (i = 0; i < T->ni; ++i) tau_i[i] = 0.0;
+  for (i = 0; i < T->nv; ++i) tau_i[T->rate_col[i]] += T->rate_coef[i] * tau[i];
+}
+
+/* M_i = Gᵀ M G (ni × ni, column-major, both triangles) by composite inertias from the M_g of
+ * the last forward pass (s->Mg is summed over subtrees in place). */
+static void ncgen_tree_composite(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, double *Mi) {
+  int b, i, j, r, c, nv = T->nv, ni = T->ni;
+  double F[6];
+  for (b = T->nb - 1; b >= 0; --b)
+    if (T->parent[b] >= 0)
+      for (i = 0; i < 36; ++i) s->Mg[36 * T->parent[b] + i] += s->Mg[36 * b + i];
+  for (i = 0; i < nv * nv; ++i) s->M[i] = 0.0;
+  for (b = 0; b < T->nb; ++b) {
+    const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
+    for (j = 0; j < k->nv; ++j) {
+      int col = T->v_at[b] + j, up;
+      const double *Sj = s->S + 6 * col, *Mc = s->Mg + 36 * b;
+      for (r = 0; r < 6; ++r) {
+        double t = 0.0;
+        for (c = 0; c < 6; ++c) t += Mc[r + 6 * c] * Sj[c];
+        F[r] = t;
+      }
+      for (up = b; up >= 0; up = T->parent[up]) {
+        const ncgen_tree_joint_kind *ku = &K->joint[T->kind[up]];
+        for (i = 0; i < ku->nv; ++i) {
+          int row = T->v_at[up] + i;
+          double t = 0.0;
+          for (r = 0; r < 6; ++r) t += s->S[6 * row + r] * F[r];
+          s->M[row + nv * col] = t;
+          s->M[col + nv * row] = t;
+        }
+      }
+    }
+  }
+  for (i = 0; i < ni * ni; ++i) Mi[i] = 0.0;
+  for (c = 0; c < nv; ++c)
+    for (r = 0; r < nv; ++r)
+      Mi[T->rate_col[r] + ni * T->rate_col[c]] += T->rate_coef[r] * T->rate_coef[c] * s->M[r + nv * c];
+}
+
+/* L Lᵀ = A (n × n, column-major, lower triangle read) into L; returns min_k d_k / A_kk (the
+ * smallest relative pivot, NaN when a pivot is 0/0). */
+static double ncgen_tree_cholesky(int n, const double *A, double *L) {
+  int i, j, k;
+  double ratio = 1.0;
+  for (k = 0; k < n; ++k) {
+    double d = A[k + n * k];
+    for (j = 0; j < k; ++j) d -= L[k + n * j] * L[k + n * j];
+    double r = d / A[k + n * k];
+    if (k == 0 || r < ratio || !(r == r)) ratio = r;          /* NaN (0/0) stays */
+    L[k + n * k] = sqrt(d > 0.0 ? d : 0.0);
+    for (i = k + 1; i < n; ++i) {
+      double t = A[i + n * k];
+      for (j = 0; j < k; ++j) t -= L[i + n * j] * L[k + n * j];
+      L[i + n * k] = t / L[k + n * k];
+    }
+    for (i = 0; i < k; ++i) L[i + n * k] = 0.0;
+  }
+  return ratio;
+}
+
+/* x = (L Lᵀ)⁻¹ x in place, m columns of n. */
+static void ncgen_tree_solve(int n, const double *L, double *x, int m) {
+  int i, j, c;
+  for (c = 0; c < m; ++c) {
+    double *y = x + (long)n * c;
+    for (i = 0; i < n; ++i) {
+      double t = y[i];
+      for (j = 0; j < i; ++j) t -= L[i + n * j] * y[j];
+      y[i] = t / L[i + n * i];
+    }
+    for (i = n - 1; i >= 0; --i) {
+      double t = y[i];
+      for (j = i + 1; j < n; ++j) t -= L[j + n * i] * y[j];
+      y[i] = t / L[i + n * i];
+    }
+  }
+}
+
+/* τ_i (ni): the efforts of the independent rates giving accelerations a at (q, v). */
+static int ncgen_tree_rnea(const ncgen_tree_kinds *K, const ncgen_tree *T, const double *q, const double *v,
+                           const double *a, double *tau_i, double *work) {
+  ncgen_tree_work s;
+  ncgen_tree_layout(K, T, work, &s);
+  ncgen_tree_expand(T, &s, q, v, a);
+  if (ncgen_tree_forward(K, T, &s)) return NCGEN_TREE_KERNEL;
+  ncgen_tree_backward(K, T, s.W, s.S, s.tau);
+  ncgen_tree_project(T, s.tau, tau_i);
+  return 0;
+}
+
+/* M_i (ni × ni, column-major, both triangles) at q. */
+static int ncgen_tree_crba(const ncgen_tree_kinds *K, const ncgen_tree *T, const double *q, double *Mi,
+                           double *work) {
+  ncgen_tree_work s;
+  int i;
+  ncgen_tree_layout(K, T, work, &s);
+  for (i = 0; i < T->nv; ++i) s.tau[i] = 0.0;
+  ncgen_tree_expand(T, &s, q, s.tau, 0);
+  if (ncgen_tree_forward(K, T, &s)) return NCGEN_TREE_KERNEL;
+  ncgen_tree_composite(K, T, &s, Mi);
+  return 0;
+}
+
+/* M_i and the bias b_i = τ_i(q, v, a = 0) (in s->rhs) of one forward pass; the Cholesky
+ * factor of M_i in s->L; returns the smallest relative pivot in *pivot. */
+static int ncgen_tree_factored(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, const double *q,
+                               const double *v, double *pivot) {
+  ncgen_tree_expand(T, s, q, v, 0);
+  if (ncgen_tree_forward(K, T, s)) return NCGEN_TREE_KERNEL;
+  ncgen_tree_backward(K, T, s->W, s->S, s->tau);
+  ncgen_tree_project(T, s->tau, s->rhs);
+  ncgen_tree_composite(K, T, s, s->Mi);
+  *pivot = ncgen_tree_cholesky(T->ni, s->Mi, s->L);
+  return 0;
+}
+
+/* aj (nv) = G M_i⁻¹ (τ_i − b_i): forward dynamics; check = [smallest relative Cholesky pivot, Σ aj]. */
+static int ncgen_tree_aba(const ncgen_tree_kinds *K, const ncgen_tree *T, const double *q, const double *v,
+                          const double *tau_i, double *aj, double *check, double *work) {
+  ncgen_tree_work s;
+  int i;
+  double sum = 0.0;
+  ncgen_tree_layout(K, T, work, &s);
+  if (ncgen_tree_factored(K, T, &s, q, v, &check[0])) return NCGEN_TREE_KERNEL;
+  for (i = 0; i < T->ni; ++i) s.rhs[i] = tau_i[i] - s.rhs[i];
+  ncgen_tree_solve(T->ni, s.L, s.rhs, 1);
+  for (i = 0; i < T->nv; ++i) {
+    aj[i] = T->rate_coef[i] * s.rhs[T->rate_col[i]];
+    sum += aj[i];
+  }
+  check[1] = sum;
+  return 0;
+}
+
+/* The tangent pass along direction d of the independent rates (d < ni: positions, q moved
+ * in the tangent space; else rates, column d − ni): dτ_i (ni) at the state of the last
+ * forward pass (its a held). */
+static int ncgen_tree_tangent(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, int d,
+                              double *dtau_i) {
+  int b, i, j, col = d < T->ni ? d : d - T->ni, rates = d >= T->ni;
+  for (b = 0; b < T->nb; ++b) {
+    const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
+    int par = T->parent[b], va = T->v_at[b], n = ncgen_tree_edge_input(K, T, s, b);
+    double *in = s->in, *out = s->out, *S = s->S + 6 * va, *dS = s->dS + 6 * va, *dc;
+    for (i = 0; i < 9; ++i) in[n++] = par < 0 ? 0.0 : s->dR[9 * par + i];
+    for (i = 0; i < 3; ++i) in[n++] = par < 0 ? 0.0 : s->dp[3 * par + i];
+    for (i = 0; i < 6; ++i) in[n++] = par < 0 ? 0.0 : s->dTt[6 * par + i];
+    for (i = 0; i < k->nv; ++i)
+      in[n++] = !rates && T->rate_col[va + i] == col ? T->rate_coef[va + i] : 0.0;
+    for (i = 0; i < k->nv; ++i)
+      in[n++] = rates && T->rate_col[va + i] == col ? T->rate_coef[va + i] : 0.0;
+    if (ncgen_tree_call(k->edge_fwd, in, out, s->kw)) return NCGEN_TREE_KERNEL;
+    memcpy(s->dR + 9 * b, out, 9 * sizeof(double));
+    memcpy(s->dp + 3 * b, out + 9, 3 * sizeof(double));
+    memcpy(dS, out + 12, 6 * (size_t)k->nv * sizeof(double));
+    dc = out + 12 + 6 * k->nv;
+    for (i = 0; i < 6; ++i) {
+      double t = par < 0 ? 0.0 : s->dTt[6 * par + i];
+      double dt = (par < 0 ? 0.0 : s->ddT[6 * par + i]) + dc[i];
+      for (j = 0; j < k->nv; ++j) {
+        double dw = in[n - k->nv + j];
+        t += dS[6 * j + i] * s->v[va + j] + S[6 * j + i] * dw;
+        dt += dS[6 * j + i] * s->a[va + j];
+      }
+      s->dTt[6 * b + i] = t;
+      s->ddT[6 * b + i] = dt;
+    }
+    ncgen_tree_body_input(T, s, b, in);
+    memcpy(in + 37, s->dR + 9 * b, 9 * sizeof(double));
+    memcpy(in + 46, s->dp + 3 * b, 3 * sizeof(double));
+    memcpy(in + 49, s->dTt + 6 * b, 6 * sizeof(double));
+    memcpy(in + 55, s->ddT + 6 * b, 6 * sizeof(double));
+    if (ncgen_tree_call(K->body_fwd, in, out, s->kw)) return NCGEN_TREE_KERNEL;
+    memcpy(s->dW + 6 * b, out + 36, 6 * sizeof(double));
+  }
+  /* dτ_j = dS_jᵀ W + S_jᵀ dW, W and dW summed over subtrees (s->W summed by the caller) */
+  ncgen_tree_backward(K, T, s->dW, s->S, s->dtau);
+  for (b = 0; b < T->nb; ++b) {
+    const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
+    int va = T->v_at[b];
+    for (j = 0; j < k->nv; ++j)
+      for (i = 0; i < 6; ++i) s->dtau[va + j] += s->dS[6 * (va + j) + i] * s->W[6 * b + i];
+  }
+  ncgen_tree_project(T, s->dtau, dtau_i);
+  return 0;
+}
+
+/* The derivatives at the state of the last forward pass, with s->W summed: ∂τ_i/∂q and
+ * ∂τ_i/∂v (ni × ni, column-major). */
+static int ncgen_tree_tangents(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, double *dq,
+                               double *dv) {
+  int d, ni = T->ni;
+  for (d = 0; d < 2 * ni; ++d)
+    if (ncgen_tree_tangent(K, T, s, d, d < ni ? dq + (long)ni * d : dv + (long)ni * (d - ni)))
+      return NCGEN_TREE_KERNEL;
+  return 0;
+}
+
+/* (τ_i, ∂τ_i/∂q, ∂τ_i/∂v, ∂τ_i/∂a = M_i): RNEA and its derivatives by tangent recursions. */
+static int ncgen_tree_rnea_derivatives(const ncgen_tree_kinds *K, const ncgen_tree *T, const double *q,
+                                       const double *v, const double *a, double *tau_i, double *dq, double *dv,
+                                       double *Mi, double *work) {
+  ncgen_tree_work s;
+  ncgen_tree_layout(K, T, work, &s);
+  ncgen_tree_expand(T, &s, q, v, a);
+  if (ncgen_tree_forward(K, T, &s)) return NCGEN_TREE_KERNEL;
+  ncgen_tree_backward(K, T, s.W, s.S, s.tau);
+  ncgen_tree_project(T, s.tau, tau_i);
+  if (ncgen_tree_tangents(K, T, &s, dq, dv)) return NCGEN_TREE_KERNEL;
+  ncgen_tree_composite(K, T, &s, Mi);
+  return 0;
+}
+
+/* (aj, ∂a_i/∂q, ∂a_i/∂v, ∂a_i/∂τ = M_i⁻¹, check): ∂a/∂x = −M_i⁻¹ ∂τ_rnea/∂x at a = a(q, v, τ). */
+static int ncgen_tree_aba_derivatives(const ncgen_tree_kinds *K, const ncgen_tree *T, const double *q,
+                                      const double *v, const double *tau_i, double *aj, double *da_dq,
+                                      double *da_dv, double *Minv, double *check, double *work) {
+  ncgen_tree_work s;
+  int i, ni = T->ni;
+  double sum = 0.0, *a_i;
+  ncgen_tree_layout(K, T, work, &s);
+  if (ncgen_tree_factored(K, T, &s, q, v, &check[0])) return NCGEN_TREE_KERNEL;
+  a_i = s.rhs;
+  for (i = 0; i < ni; ++i) a_i[i] = tau_i[i] - a_i[i];
+  ncgen_tree_solve(ni, s.L, a_i, 1);
+  for (i = 0; i < T->nv; ++i) {
+    aj[i] = T->rate_coef[i] * a_i[T->rate_col[i]];
+    sum += aj[i];
+  }
+  check[1] = sum;
+  ncgen_tree_expand(T, &s, q, v, aj);
+  if (ncgen_tree_forward(K, T, &s)) return NCGEN_TREE_KERNEL;
+  ncgen_tree_backward(K, T, s.W, s.S, s.tau);
+  if (ncgen_tree_tangents(K, T, &s, da_dq, da_dv)) return NCGEN_TREE_KERNEL;
+  for (i = 0; i < ni * ni; ++i) {
+    da_dq[i] = -da_dq[i];
+    da_dv[i] = -da_dv[i];
+    Minv[i] = i % (ni + 1) == 0 ? 1.0 : 0.0;
+  }
+  ncgen_tree_solve(ni, s.L, da_dq, ni);
+  ncgen_tree_solve(ni, s.L, da_dv, ni);
+  ncgen_tree_solve(ni, s.L, Minv, ni);
+  return 0;
+}
+
+/* The joint-space ODE: x = [q_j; v_j] -> ẋ = [q̇_j(q_j, v_j); a_j(q_j, v_j, τ_i)] with the
+ * efforts τ_i = E w of the inputs w (E: ni × nu, column-major); check as ncgen_tree_aba. */
+static int ncgen_tree_ode(const ncgen_tree_kinds *K, const ncgen_tree *T, const double *E, int nu, const double *x,
+                          const double *w, double *xdot, double *check, double *work) {
+  ncgen_tree_work s;
+  int b, i, j;
+  ncgen_tree_layout(K, T, work, &s);
+  for (b = 0; b < T->nb; ++b) {
+    const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
+    if (!k->nq) continue;
+    for (i = 0; i < k->nq; ++i) s.in[i] = x[T->q_at[b] + i];
+    for (i = 0; i < k->nv; ++i) s.in[k->nq + i] = x[T->nq + T->v_at[b] + i];
+    if (ncgen_tree_call(k->qdot, s.in, xdot + T->q_at[b], s.kw)) return NCGEN_TREE_KERNEL;
+  }
+  for (i = 0; i < T->ni; ++i) {
+    double t = 0.0;
+    for (j = 0; j < nu; ++j) t += E[i + (long)T->ni * j] * w[j];
+    s.taui[i] = t;
+  }
+  return ncgen_tree_aba(K, T, x, x + T->nq, s.taui, xdot + T->nq, check, work);
+}
+
+#endif

@@ -1,0 +1,389 @@
+"""The joint-space algorithms over tree tables (issue 34): RNEA, CRBA, forward dynamics and
+their derivatives from the tree library (one kernel per joint kind, hand-written loops over
+the model's tables, compiled once per ncgen version) equal the model's flat SX functions to
+1e-12 (evaluated by CasADi, nothing compiled per model), forward dynamics equals the KKT solve
+in natural coordinates and a mimic gripper's closed form, derivatives equal central
+differences (positions moved in the tangent space); models the tables do not cover are
+refused by name and ``kernels="auto"`` falls back to the flat kernels; the joint-space
+simulation on the tables conserves energy (and, slow, equals the flat loop); a new tree (and,
+slow, a URDF robot not seen before) is evaluated and simulated in a process with no compiler
+on PATH.
+Slow tier: example-robot-data's URDFs against the flat compiled kernels (1e-12) and Pinocchio
+(1e-10)."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import ncgen as nc
+from ncgen.assembly import tree_algorithms as flat
+from ncgen.assembly.joint_tree import quaternion_matrix
+from ncgen.assembly.tree_dynamics import MimicMap
+from ncgen.codegen.compiler import CANDIDATES
+from ncgen.codegen.tree_tables import UnsupportedTree, tree_tables
+from ncgen.errors import ShapeError
+from ncgen.runtime import tree_algorithms as rta
+from ncgen.runtime.tree_library import load_tree_library
+
+ROOT = Path(__file__).resolve().parent.parent
+G = 9.81
+
+pytestmark = pytest.mark.skipif(not any(shutil.which(c) for c in CANDIDATES) and not os.environ.get("CC"),
+                                reason="no C compiler to build the tree library")
+
+
+@pytest.fixture(scope="module")
+def library():
+    return load_tree_library()
+
+
+@pytest.fixture(scope="module")
+def tree():
+    """Every joint kind of the tables on rigid bodies, a rotated body, and a mimic pair."""
+    s = nc.System("table_tree", gravity=(0.3, 0, -G))
+    R = quaternion_matrix(np.array([0.2, -0.4, 0.3, 0.8]) / np.linalg.norm([0.2, -0.4, 0.3, 0.8]))
+    b = [s.add_body(f"b{k}", mass=1.0 + 0.2 * k, inertia=np.diag([0.1, 0.2, 0.25]) * (1 + 0.1 * k),
+                    position=(k + 0.5, 0.1 * k, 0), rotation=R if k == 2 else np.eye(3)) for k in range(10)]
+    s.add_joint(nc.Free(s.ground, b[0], at=(0.5, 0, 0), rotation=np.eye(3), name="root"))
+    s.add_joint(nc.Revolute(b[0], b[1], at=(1, 0, 0), axis=(0, 0.6, 0.8), name="hinge"))
+    s.add_joint(nc.Prismatic(b[1], b[2], at=(2, 0.1, 0), axis=(1, 0, 0), name="slider"))
+    s.add_joint(nc.Cylindrical(b[2], b[3], at=(3, 0.2, 0), axis=(1, 0, 0), name="cyl"))
+    s.add_joint(nc.Universal(b[3], b[4], at=(4, 0.3, 0), axis_a=(0, 1, 0), axis_b=(0, 0, 1), name="hooke"))
+    s.add_joint(nc.Spherical(b[4], b[5], at=(5, 0.4, 0), name="ball"))
+    s.add_joint(nc.Planar(b[5], b[6], at=(6, 0.5, 0), normal=(0, 1, 0), name="plane"))
+    s.add_joint(nc.Fixed(b[6], b[7], at=(7, 0.6, 0), name="weld"))
+    j1 = s.add_joint(nc.Revolute(b[7], b[8], at=(8, 0.7, 0), axis=(0, 0, 1), name="f1"))
+    j2 = s.add_joint(nc.Revolute(b[7], b[9], at=(9, 0.8, 0), axis=(1, 0, 0), name="f2"))
+    s.add_joint(nc.Mimic(j1, j2, multiplier=-2.0, offset=0.1, name="link"))
+    return s.build(assemble=True)
+
+
+def random_state(model, rng):
+    js, mimic = model.joint_space, MimicMap(model)
+    qj = rng.uniform(-1, 1, js.nq)
+    for name, sl in js.slices().items():
+        if js.nq_joint[name] in (4, 7):
+            qj[sl.stop - 4:sl.stop] /= np.linalg.norm(qj[sl.stop - 4:sl.stop])
+    for i, (lead, k, off) in mimic.position.items():
+        qj[i] = k * qj[lead] + off
+    n = mimic.G.shape[1]
+    return qj, mimic.G @ rng.normal(size=n), mimic.G @ rng.normal(size=n), rng.normal(size=n)
+
+
+#: Tolerances relative to the largest entry against the flat functions: values to 1e-12; the
+#: derivatives (a 20-rate chain, rotated frames) differ from the flat code's by up to 6e-12 of
+#: the largest entry (round-off of the other order of operations; both equal central differences).
+TOL = {"tau": 1e-12, "M": 1e-12, "aj": 1e-12, "dtau_dq": 2e-11, "dtau_dv": 2e-11, "dtau_da": 1e-12,
+       "da_dq": 2e-11, "da_dv": 2e-11, "da_dtau": 1e-12}
+
+
+def flat_values(model, name, *args):
+    f = getattr(flat, f"{name}_function")(model)
+    out = f(0.0, *args, model.p0)
+    out = out if isinstance(out, (list, tuple)) else [out]
+    return [np.array(o).squeeze(-1) if np.array(o).shape[-1] == 1 and o.size2() == 1 else np.array(o)
+            for o in out][:len(rta.ALGORITHMS[name][1])]
+
+
+def assert_equal_to_flat(model, names, seed=0, states=2):
+    rng = np.random.default_rng(seed)
+    for _ in range(states):
+        qj, vj, aj, tau = random_state(model, rng)
+        for name in names:
+            args = (qj, vj, aj) if "rnea" in name else (qj,) if name == "crba" else (qj, vj, tau)
+            got = getattr(nc, name)(model, *args, kernels="tables")
+            got = got if isinstance(got, tuple) else (got,)
+            for g, w, what in zip(got, flat_values(model, name, *args), rta.ALGORITHMS[name][1]):
+                np.testing.assert_allclose(g, w.reshape(g.shape), rtol=0, atol=TOL[what] * max(1.0, np.abs(w).max()),
+                                           err_msg=f"{name}: {what}")
+
+
+def test_tables_equal_the_flat_functions(tree, library):
+    assert_equal_to_flat(tree, ("rnea", "crba"), states=1)
+
+
+@pytest.mark.slow
+def test_forward_dynamics_equals_the_flat_function(tree, library):
+    assert_equal_to_flat(tree, ("aba",))
+
+
+@pytest.mark.slow
+def test_derivatives_equal_the_flat_functions(tree, library):
+    assert_equal_to_flat(tree, ("rnea_derivatives", "aba_derivatives"))
+
+
+def test_forward_dynamics_equals_the_kkt_solve(tree, library):
+    """ABA from the tables against the constrained equations in natural coordinates (no joint
+    space, no recursion): ``M q̈ + Aᵀλ = F``, ``A q̈ = γ``, mapped to joint accelerations."""
+    rng = np.random.default_rng(1)
+    qj, vj, _, _ = random_state(tree, rng)
+    aj = nc.aba(tree, qj, vj, np.zeros(len(MimicMap(tree).independent)), kernels="tables")
+    q, v = tree.from_joint_space(qj, vj)
+    a, _ = nc.forward_dynamics(tree, q, v)
+    np.testing.assert_allclose(aj, tree.to_joint_space(q, v, a)[2], rtol=0, atol=1e-9)
+
+
+def test_mimic_gripper_closed_form(library):
+    """Two fingers sliding along z, the second mimicking the first with factor −2: under
+    gravity ``z̈1 (m + 4m) = −m g + 2 m g``."""
+    s = nc.System("table_gripper", gravity=(0, 0, -G))
+    b1 = s.add_body("b1", mass=1.0, inertia=np.diag([0.1, 0.2, 0.25]), position=(0.5, 0, 0))
+    b2 = s.add_body("b2", mass=1.0, inertia=np.diag([0.1, 0.2, 0.25]), position=(0.5, 1, 0))
+    j1 = s.add_joint(nc.Prismatic(s.ground, b1, at=(0.5, 0, 0), axis=(0, 0, 1), name="f1"))
+    j2 = s.add_joint(nc.Prismatic(s.ground, b2, at=(0.5, 1, 0), axis=(0, 0, 1), name="f2"))
+    s.add_joint(nc.Mimic(j1, j2, multiplier=-2.0, name="link"))
+    model = s.build()
+    np.testing.assert_allclose(nc.aba(model, [0.1, -0.2], [0.0, 0.0], [0.0], kernels="tables"),
+                               [G / 5, -2 * G / 5], atol=1e-12)
+    np.testing.assert_allclose(nc.crba(model, [0.1, -0.2], kernels="tables"), [[5.0]], atol=1e-12)
+    np.testing.assert_allclose(nc.rnea(model, [0.1, -0.2], [0.0, 0.0], [1.0, -2.0], kernels="tables"),
+                               [5.0 + G - 2 * G], atol=1e-12)
+
+
+def _moved(model, qj, delta, h):
+    """``q_j ⊕ h G δ`` to second order: integrated along the position rates (RK4, 8 steps)."""
+    js, mimic = model.joint_space, MimicMap(model)
+    w = mimic.G @ delta
+    sq, sv = js.slices(), js.slices(rates=True)
+    import casadi as ca
+
+    x = ca.SX.sym("x", js.nq)
+    rates = ca.Function("r", [x], [ca.vertcat(*[js.position_rates(n, x[sq[n]], ca.DM(w[sv[n]]))
+                                                for n in js.joint_names])])
+    q, dt = np.array(qj, float), h / 8
+    for _ in range(8):
+        k1 = np.array(rates(q)).ravel()
+        k2 = np.array(rates(q + dt / 2 * k1)).ravel()
+        k3 = np.array(rates(q + dt / 2 * k2)).ravel()
+        k4 = np.array(rates(q + dt * k3)).ravel()
+        q = q + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return q
+
+
+def test_derivatives_against_central_differences(tree, library):
+    rng = np.random.default_rng(2)
+    qj, vj, aj, tau = random_state(tree, rng)
+    G_ = MimicMap(tree).G
+    n, h = G_.shape[1], 1e-4
+    t0, dq, dv, M = nc.rnea_derivatives(tree, qj, vj, aj, kernels="tables")
+    a0, da_dq, da_dv, Minv = nc.aba_derivatives(tree, qj, vj, tau, kernels="tables")
+    np.testing.assert_allclose(Minv @ M, np.eye(n), atol=1e-10)
+    for c in range(n):
+        e = np.eye(n)[c]
+        qp, qm = _moved(tree, qj, e, h), _moved(tree, qj, e, -h)
+        fd_tq = (nc.rnea(tree, qp, vj, aj, kernels="tables") - nc.rnea(tree, qm, vj, aj, kernels="tables")) / (2 * h)
+        fd_tv = (nc.rnea(tree, qj, vj + h * G_ @ e, aj, kernels="tables")
+                 - nc.rnea(tree, qj, vj - h * G_ @ e, aj, kernels="tables")) / (2 * h)
+        fd_aq = (nc.aba(tree, qp, vj, tau, kernels="tables") - nc.aba(tree, qm, vj, tau, kernels="tables")) / (2 * h)
+        fd_av = (nc.aba(tree, qj, vj + h * G_ @ e, tau, kernels="tables")
+                 - nc.aba(tree, qj, vj - h * G_ @ e, tau, kernels="tables")) / (2 * h)
+        ind = MimicMap(tree).independent
+        for got, want, what in ((dq[:, c], fd_tq, "dtau_dq"), (dv[:, c], fd_tv, "dtau_dv"),
+                                (da_dq[:, c], fd_aq[ind], "da_dq"), (da_dv[:, c], fd_av[ind], "da_dv")):
+            np.testing.assert_allclose(got, want, rtol=0, atol=1e-6 * max(1.0, np.abs(want).max()), err_msg=what)
+
+
+def test_batched_calls(tree, library):
+    rng = np.random.default_rng(3)
+    rows = [random_state(tree, rng) for _ in range(4)]
+    Q, V, A, T = (np.array(x) for x in zip(*rows))
+    tau = nc.rnea(tree, Q, V, A, kernels="tables")
+    M = nc.crba(tree, Q, kernels="tables")
+    a, da_dq, _, _ = nc.aba_derivatives(tree, Q, V, T, kernels="tables")
+    assert tau.shape == (4, T.shape[1]) and M.shape == (4, T.shape[1], T.shape[1]) and a.shape == V.shape
+    for i in range(4):
+        np.testing.assert_array_equal(tau[i], nc.rnea(tree, Q[i], V[i], A[i], kernels="tables"))
+        np.testing.assert_array_equal(M[i], nc.crba(tree, Q[i], kernels="tables"))
+        np.testing.assert_array_equal(da_dq[i], nc.aba_derivatives(tree, Q[i], V[i], T[i], kernels="tables")[1])
+
+
+def test_uncovered_models_are_refused_by_name_and_auto_runs_flat(library):
+    s = nc.System("sprung", gravity=(0, 0, -G))
+    b = s.add_body("b", mass=1.0, inertia=np.diag([0.1, 0.2, 0.25]), position=(0.5, 0, 0))
+    s.add_joint(nc.Revolute(s.ground, b, at=(0, 0, 0), axis=(0, 1, 0), name="hinge"))
+    s.add_force(nc.Spring(s.ground, (0.0, 0.0, 1.0), b, (0.5, 0.0, 0.0), k=30.0, rest_length=0.5))
+    model = s.build()
+    with pytest.raises(UnsupportedTree, match="passive forces other than a uniform gravity"):
+        tree_tables(model)
+    with pytest.raises(UnsupportedTree, match="sprung"):
+        nc.rnea(model, [0.3], [0.0], [0.0], kernels="tables")
+    assert rta.algorithm_kernels(model, "rnea") == "flat"
+    with pytest.raises(nc.NcgenError, match="kernels: expected one of 'auto', 'tables', 'flat'"):
+        nc.rnea(model, [0.3], [0.0], [0.0], kernels="table")
+
+
+def test_bad_arguments_are_refused(tree, library):
+    qj, vj, aj, _ = random_state(tree, np.random.default_rng(4))
+    with pytest.raises(ShapeError, match="vj"):
+        nc.rnea(tree, qj, vj[:-1], aj, kernels="tables")
+    with pytest.raises(ShapeError, match="aj"):
+        nc.rnea(tree, qj, vj, np.full_like(aj, np.nan), kernels="tables")
+
+
+def test_joint_simulation_on_the_tables_conserves_energy(tree, library):
+    """``method="joint"`` on the tree tables (Dormand–Prince, then RK4): the free motion of the
+    every-kind tree under gravity keeps its energy; a model the tables do not cover is refused
+    by name with ``kernels="tables"``."""
+    q0, v0 = tree.from_joint_space(*random_state(tree, np.random.default_rng(5))[:2])
+    for opts in ({"integrator": "dopri5", "rtol": 1e-10, "atol": 1e-12}, {"integrator": "rk4", "substeps": 20}):
+        traj = nc.simulate(tree, 0.5, 0.01, q0=q0, v0=v0, method="joint", kernels="tables", **opts)
+        assert traj.info["kernels"] == "tables"
+        assert traj.energy_drift <= 1e-6 * max(1.0, traj.energy_scale), (opts, traj.energy_drift)
+    s = nc.System("sprung_sim", gravity=(0, 0, -G))
+    b = s.add_body("b", mass=1.0, inertia=np.diag([0.1, 0.2, 0.25]), position=(0.5, 0, 0))
+    s.add_joint(nc.Revolute(s.ground, b, at=(0, 0, 0), axis=(0, 1, 0), name="hinge"))
+    s.add_force(nc.Spring(s.ground, (0.0, 0.0, 1.0), b, (0.5, 0.0, 0.0), k=30.0, rest_length=0.5))
+    with pytest.raises(UnsupportedTree, match="sprung_sim"):
+        nc.simulate(s.build(), 0.1, 0.01, method="joint", kernels="tables")
+
+
+@pytest.mark.slow
+def test_joint_simulation_tables_equal_flat(tree, library):
+    """The joint-space run on the tables equals the flat compiled loop (same integrator steps)."""
+    q0, v0 = tree.from_joint_space(*random_state(tree, np.random.default_rng(6))[:2])
+    a, b = (nc.simulate(tree, 0.3, 0.01, q0=q0, v0=v0, method="joint", kernels=k) for k in ("tables", "flat"))
+    assert (a.info["kernels"], b.info["kernels"]) == ("tables", "flat")
+    np.testing.assert_allclose(a.qj, b.qj, rtol=0, atol=1e-10)
+
+
+def test_auto_uses_the_tables_for_a_covered_tree(tree, library):
+    assert rta.algorithm_kernels(tree, "aba") == "tables"
+
+
+URDF = """<robot name="{name}">
+  <link name="base"><inertial><mass value="2.0"/><origin xyz="0 0 0.05"/>
+    <inertia ixx="0.01" iyy="0.012" izz="0.013" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  {links}
+</robot>"""
+LINK = """<link name="l{k}"><inertial><mass value="{m}"/><origin xyz="0.01 0.02 {c}" rpy="0.1 0.2 0.3"/>
+    <inertia ixx="{i}" iyy="0.011" izz="0.009" ixy="0.001" ixz="0" iyz="0.0005"/></inertial></link>
+  <joint name="j{k}" type="{kind}"><parent link="{parent}"/><child link="l{k}"/>
+    <origin xyz="0.02 0.01 0.3" rpy="0.3 -0.2 0.1"/><axis xyz="{axis}"/>
+    <limit effort="50" velocity="3" lower="-2" upper="2"/></joint>"""
+
+CHILD = r"""
+import json, shutil, sys
+import numpy as np
+import ncgen as nc
+import ncgen.codegen.compile_cache as cc
+
+assert not any(shutil.which(c) for c in ("cc", "gcc", "clang")), "a compiler is on PATH"
+def no_compile(*a, **k):
+    raise AssertionError("the compiler was called")
+cc.compile_package = no_compile
+if sys.argv[1].endswith(".urdf"):
+    model = nc.System.from_urdf(sys.argv[1]).build()
+else:
+    s = nc.System(sys.argv[1], gravity=(0.0, 0.0, -9.81))
+    b1 = s.add_body("b1", mass=1.3, inertia=np.diag([0.1, 0.2, 0.25]), position=(0.4, 0.0, 0.1))
+    b2 = s.add_body("b2", mass=0.8, inertia=np.diag([0.05, 0.06, 0.07]), position=(0.9, 0.1, 0.0))
+    s.add_joint(nc.Revolute(s.ground, b1, at=(0.0, 0.0, 0.0), axis=(0.0, 1.0, 0.0), name="hinge"))
+    s.add_joint(nc.Prismatic(b1, b2, at=(0.8, 0.0, 0.0), axis=(1.0, 0.0, 0.0), name="slide"))
+    model = s.build()
+qj = np.array(model.joint_space.positions(model.q0)).ravel() + 0.2
+v = np.full(model.joint_space.nv, 0.3)
+tau = nc.rnea(model, qj, v, np.zeros_like(v))
+a = nc.aba(model, qj, v, tau)
+M = nc.crba(model, qj)
+traj = nc.simulate(model, 0.2, 0.01)
+print(json.dumps({"a": np.abs(a).max(), "M": M.tolist(), "tau": tau.tolist(), "method": traj.info["method"],
+                  "kernels": traj.info["kernels"], "drift": traj.energy_drift / max(1.0, traj.energy_scale)}))
+"""
+
+
+def new_urdf(name: str) -> str:
+    kinds = ["revolute", "prismatic", "continuous"]
+    axes = ["0 0 1", "1 0 0", "0.6 0 0.8"]
+    links = "\n  ".join(LINK.format(k=k, m=0.5 + 0.1 * k, c=0.1 + 0.01 * k, i=0.01 + 0.001 * k, kind=kinds[k],
+                                    parent="base" if k == 0 else f"l{k - 1}", axis=axes[k]) for k in range(3))
+    return URDF.format(name=name, links=links)
+
+
+def no_compiler_run(tmp_path, arg: str) -> dict:
+    """The CHILD's output for ``arg`` (a URDF path or a System's name), run with no compiler."""
+    empty = tmp_path / "bin"
+    empty.mkdir(exist_ok=True)
+    env = {k: v for k, v in os.environ.items() if k not in ("CC", "PATH")}
+    env["PATH"] = str(empty)
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")])
+    out = subprocess.run([sys.executable, "-c", CHILD, arg], env=env, capture_output=True, text=True, timeout=900)
+    assert out.returncode == 0, out.stderr[-3000:]
+    got = json.loads(out.stdout.strip().splitlines()[-1])
+    assert got["a"] <= 1e-10                     # ABA of the RNEA efforts of a = 0 gives back a = 0
+    M = np.array(got["M"])
+    np.testing.assert_allclose(M, M.T, atol=1e-14)
+    assert np.all(np.linalg.eigvalsh(M) > 0)
+    # simulated in joint space on the tables (method="auto" picks it with no compiler)
+    assert (got["method"], got["kernels"]) == ("joint", "tables")
+    assert got["drift"] <= 1e-6, got["drift"]
+    return got
+
+
+def test_a_new_tree_needs_no_compiler(library, tmp_path):
+    """Once the tree library is cached, a new tree gets RNEA, ABA and CRBA and is simulated
+    in joint space in a process with no compiler on PATH (and compile_package replaced by a
+    failure); the energy of the free motion is conserved."""
+    got = no_compiler_run(tmp_path, f"new_tree_{os.getpid()}")
+    assert len(got["tau"]) == 2 and np.all(np.abs(got["tau"]) > 0.1)      # both joints hold weight
+
+
+@pytest.mark.slow
+def test_a_new_urdf_robot_needs_no_compiler(library, tmp_path):
+    """The same for a URDF robot not seen before (revolute, prismatic, continuous joints,
+    rotated inertias)."""
+    path = tmp_path / "new_arm.urdf"
+    path.write_text(new_urdf(f"new_arm_{os.getpid()}"))
+    no_compiler_run(tmp_path, str(path))
+
+
+ROBOTS = ("panda", "ur5", "solo12", "talos")
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(3600)
+@pytest.mark.parametrize("name", ROBOTS)
+def test_urdf_robots_match_pinocchio_and_the_flat_kernels(name, library, monkeypatch):
+    """example-robot-data's URDFs as shipped (the Panda's mimic finger, Solo12's and Talos'
+    free flyers): every algorithm from the tables against Pinocchio to 1e-10 of the largest
+    entry (the checks of tests/test_tree_algorithms_pinocchio.py, which ``kernels="auto"``
+    sends to the tables), and RNEA, CRBA, ABA against the flat compiled kernels to 1e-12."""
+    pytest.importorskip("pinocchio")
+    import test_tree_algorithms_pinocchio as ref
+
+    model = ref.model_of(name)
+    assert rta.algorithm_kernels(model, "rnea") == "tables"
+    monkeypatch.setattr(ref, "TOL", 1e-10)
+    monkeypatch.setattr(ref, "model_of", lambda _: model)
+    ref.check_robot(name)
+    pm_mimic, pm = ref.pinocchio_models(name)
+    jm, mimic = ref.JointMap(model, pm), MimicMap(model)
+    for qj, _, v_i, a_i, tau_i in ref.states(model, pm, jm, mimic, seed=7):
+        vj, aj = mimic.G @ v_i, mimic.G @ a_i
+        for alg, args in (("rnea", (qj, vj, aj)), ("crba", (qj,)), ("aba", (qj, vj, tau_i))):
+            want = getattr(nc, alg)(model, *args, kernels="flat")
+            np.testing.assert_allclose(getattr(nc, alg)(model, *args, kernels="tables"), want, rtol=0,
+                                       atol=1e-12 * max(1.0, np.abs(want).max()), err_msg=f"{name} {alg}")
+
+
+def test_tree_package_is_deterministic_and_warning_free(tmp_path):
+    """The tree library's package: the same bytes when written twice, and its C compiles with
+    -Wall -Wextra -Werror."""
+    from ncgen.codegen.tree_kernels import write_tree_package
+
+    a, b = write_tree_package(tmp_path / "a"), write_tree_package(tmp_path / "b")
+    files = sorted(p.name for p in a.path.iterdir())
+    assert files == sorted(p.name for p in b.path.iterdir())
+    for name in files:
+        assert (a.path / name).read_bytes() == (b.path / name).read_bytes(), name
+    cc = os.environ.get("CC") or next(shutil.which(c) for c in CANDIDATES if shutil.which(c))
+    for src in a.manifest["build"]["sources"]:
+        out = subprocess.run([*cc.split(), "-std=c99", "-Wall", "-Wextra", "-Werror", "-O0", "-I.", "-c", src, "-o",
+                              str(tmp_path / f"{src}.o")], cwd=a.path, capture_output=True, text=True, timeout=600)
+        assert out.returncode == 0, out.stderr[-3000:]
