@@ -253,7 +253,14 @@ def test_joint_simulation_tables_equal_flat(tree, library):
     np.testing.assert_allclose(a.qj, b.qj, rtol=0, atol=1e-10)
 
 
-def test_auto_uses_the_tables_for_a_covered_tree(tree, library):
+def test_auto_uses_the_tables_for_a_covered_tree_only_without_a_compiler(tree, library, monkeypatch):
+    """``kernels="auto"`` keeps the faster flat kernels where a compiler can build them and
+    takes the tables where none can."""
+    from ncgen.model.data import model_data
+
+    assert rta.algorithm_kernels(tree, "aba") == "flat"
+    monkeypatch.setattr(rta, "compiler_present", lambda cc=None: False)
+    monkeypatch.delitem(model_data(tree).algorithm_kernels, ("aba", None), raising=False)
     assert rta.algorithm_kernels(tree, "aba") == "tables"
 
 
@@ -353,11 +360,12 @@ def test_urdf_robots_match_pinocchio_and_the_flat_kernels(name, library, monkeyp
     """example-robot-data's URDFs as shipped (the Panda's mimic finger, Solo12's and Talos'
     free flyers): every algorithm from the tables against Pinocchio to 1e-10 of the largest
     entry (the checks of tests/test_tree_algorithms_pinocchio.py, which ``kernels="auto"``
-    sends to the tables), and RNEA, CRBA, ABA against the flat compiled kernels to 1e-12."""
+    sends to the tables when no compiler is present), and RNEA, CRBA, ABA against the flat compiled kernels to 1e-12."""
     pytest.importorskip("pinocchio")
     import test_tree_algorithms_pinocchio as ref
 
     model = ref.model_of(name)
+    monkeypatch.setattr(rta, "compiler_present", lambda cc=None: False)
     assert rta.algorithm_kernels(model, "rnea") == "tables"
     monkeypatch.setattr(ref, "TOL", 1e-10)
     monkeypatch.setattr(ref, "model_of", lambda _: model)

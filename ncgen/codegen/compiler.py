@@ -45,6 +45,15 @@ def find_compiler(cc: str | None = None) -> Compiler:
     raise CompilerNotFound(f"no C compiler found (looked for $CC, {', '.join(CANDIDATES)} on PATH)")
 
 
+def compiler_present(cc: str | None = None) -> bool:
+    """Whether :func:`find_compiler` finds a C compiler that runs."""
+    try:
+        find_compiler(cc)
+    except CompilerNotFound:
+        return False
+    return True
+
+
 @lru_cache(maxsize=16)
 def _identify(argv: tuple[str, ...]) -> Compiler:
     try:

@@ -156,10 +156,14 @@ def joint_loop(model, controller=None, joint_dynamics: bool = False, cflags=None
     ``kernels`` (``SimulationOptions.kernels``): ``"tables"`` — the tree library's loop on the
     model's tables (:class:`~ncgen.runtime.tree_library.TableJointLoop`: no controller, no joint
     dynamics, a tree the tables cover; nothing compiled), ``"flat"`` — the model's own ODE
-    compiled with the loop, ``"auto"`` — the tables where they apply, else flat."""
+    compiled with the loop, ``"auto"`` — flat where a C compiler is present (the flat loop is the
+    faster: benchmarks/tree_tables.py), else the tables where they apply."""
+    from ncgen.codegen.compiler import compiler_present
+
     if kernels not in ("auto", "tables", "flat"):
         raise NcgenError(f"kernels: expected one of 'auto', 'tables', 'flat', got {kernels!r}")
-    if kernels != "flat" and controller is None and not joint_dynamics:
+    if (kernels == "tables" or (kernels == "auto" and not compiler_present())) and controller is None \
+            and not joint_dynamics:
         table = _table_loop(model)
         if table is not None:
             return table

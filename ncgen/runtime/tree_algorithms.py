@@ -13,9 +13,10 @@ cached on disk by content, called through :class:`~ncgen.codegen.direct.DirectFu
 Kernels (``kernels=``, as the stepper's ``SimulationOptions(kernels=...)``): ``"tables"`` —
 the tree library's loops over the model's data tables (:mod:`ncgen.runtime.tree_library`,
 compiled once per ncgen version: no compiler call for a new robot), ``"flat"`` — the model's
-own SX functions compiled per model, ``"auto"`` (default) — the tables when they cover the
-model (:func:`~ncgen.codegen.tree_tables.tree_tables`: a uniform gravity the only passive
-force) and the flat kernel has not been built in this process, else flat.
+own SX functions compiled per model, ``"auto"`` (default) — flat wherever a C compiler is
+present or the flat kernel is already built in this process (a call on the tables costs 3–20×
+the flat kernel's: benchmarks/tree_tables.py), else the tables when they cover the model
+(:func:`~ncgen.codegen.tree_tables.tree_tables`: a uniform gravity the only passive force).
 :func:`algorithm_kernels` says which one a call uses.
 
 Conventions are Pinocchio's (``pinocchio.rnea``, ``crba``, ``aba``,
@@ -32,6 +33,7 @@ import ctypes
 
 import numpy as np
 
+from ncgen.codegen.compiler import compiler_present
 from ncgen.codegen.fast_call import fast_caller
 from ncgen.errors import CompilerNotFound, ModelError, NcgenError, ShapeError
 from ncgen.model.data import cached, model_data
@@ -201,8 +203,8 @@ def algorithm_kernels(model, name: str, kernels: str = "auto") -> str:
         raise NcgenError(f"kernels: expected one of {', '.join(map(repr, KERNELS))} (the tree algorithms' "
                          f"kernels: from the tree tables or the model's own), got {kernels!r}")
     data = model_data(model)
-    if kernels == "flat" or (kernels == "auto" and isinstance(data.algorithm_kernels.get((name, None)),
-                                                             AlgorithmKernel)):
+    if kernels == "flat" or (kernels == "auto" and (isinstance(data.algorithm_kernels.get((name, None)),
+                                                               AlgorithmKernel) or compiler_present())):
         return "flat"
     try:
         table_algorithm(model, name)
