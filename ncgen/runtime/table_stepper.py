@@ -59,6 +59,11 @@ STEPPER_FIELDS = (
     ("const int *", "spr_kpos"), ("const int *", "marker_feat"),
     ("int", "nnz_k"), ("int", "nnz_v"), ("int", "nnz_r"),
     *(("const int *", f) for f in ("k_mpos", "k_apos", "k_atpos")),
+    ("const double *", "f_const"), ("int", "n_ff"),
+    *(("const int *", f) for f in ("ff_kind", "ff_feat_ptr", "ff_feat", "ff_par_ptr")),
+    ("const double *", "ff_par"), ("const int *", "ff_kpos_ptr"), ("const int *", "ff_kpos"),
+    ("int", "n_torque"), ("const int *", "tq_member"), ("const int *", "tq_c_ptr"),
+    ("const double *", "tq_c"), ("const double *", "tq_val"),
 )
 
 
@@ -98,7 +103,8 @@ class TableStepper(CompiledStepper):
         qr = _QrPattern(n=T.nq + T.nc, **{f: ptr[f] for _, f in _QR_FIELDS[1:]})
         self._S = _StepperTables(T=ctypes.addressof(self._T), nu=st.nu, np=st.np, n_markers=st.n_markers,
                                  n_spring=st.n_spring, mass_scale=st.mass_scale, v_gravity=st.v_gravity,
-                                 nnz_k=st.nnz_k, nnz_v=st.nnz_v, nnz_r=st.nnz_r,
+                                 nnz_k=st.nnz_k, nnz_v=st.nnz_v, nnz_r=st.nnz_r, n_ff=st.n_ff,
+                                 n_torque=st.n_torque,
                                  **{f: ptr[f] for t, f in STEPPER_FIELDS if "*" in t and f != "T"}, qr=qr)
         self._lib = lib._lib
         check = c_binding.bind(self._lib, f"{PACKAGE}_stepper_check",

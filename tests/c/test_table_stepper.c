@@ -81,9 +81,16 @@ static const ncgen_joint_kind JOINT_KINDS[1] = {{k_distance, k_distance_hvv, 2, 
 static const ncgen_member_kind MEMBER_KINDS[1] = {{0, 0, k_point_mass, 2, 1, 0}};
 static const ncgen_kinds KINDS = {JOINT_KINDS, 1, MEMBER_KINDS, 1, 0};
 
+static const ncgen_feature_force_kind FEATURE_FORCE_KINDS[1] = {{0, 2, 0, 0}};
+static const ncgen_torque_kind TORQUE_KINDS[1] = {{0, 0}};
+
 #define TAB_KINDS (&KINDS)
 #define TAB_SPRING_3D k_spring
 #define TAB_SPRING_2D k_spring
+#define TAB_FEATURE_FORCES FEATURE_FORCE_KINDS
+#define TAB_TORQUES TORQUE_KINDS
+#define TAB_FF_IN 1
+#define TAB_FF_OUT 1
 #define MAX_HALVINGS 10
 #define NSTATS 6
 #define STEP_OK 0
@@ -138,6 +145,8 @@ static const int a_colind[] = {0, 1, 2}, a_row[] = {0, 0}, m_colind[] = {0, 2, 4
 static const double m_val[] = {MASS, 0, 0, MASS}, f_gravity[] = {0, -MASS * G};
 static const int spr_feat[] = {2, 0}, spr_kpos_ptr[] = {0, 4}, spr_kpos[] = {0, 3, 1, 4}, marker_feat[] = {0};
 static const int k_mpos[] = {0, 1, 3, 4}, k_apos[] = {2, 5}, k_atpos[] = {6, 7};
+static const double f_const[] = {0, 0};
+static const int no_ptr[] = {0};
 
 static ncgen_tables T;
 static ncgen_stepper_tables S;
@@ -157,6 +166,8 @@ static void make_tables(double k, double l0, double c, double *par) {
   S.f_gravity = f_gravity; S.v_gravity = 0; S.spr_feat = spr_feat; S.spr_par = par;
   S.spr_kpos_ptr = spr_kpos_ptr; S.spr_kpos = spr_kpos; S.marker_feat = marker_feat;
   S.nnz_k = 9; S.nnz_v = 6; S.nnz_r = 6; S.k_mpos = k_mpos; S.k_apos = k_apos; S.k_atpos = k_atpos;
+  S.f_const = f_const; S.n_ff = 0; S.ff_feat_ptr = S.ff_par_ptr = S.ff_kpos_ptr = no_ptr;
+  S.n_torque = 0; S.tq_c_ptr = no_ptr;
   S.qr.n = 3; S.qr.k_colind = k_colind; S.qr.k_row = k_row; S.qr.v_colind = v_colind; S.qr.v_row = v_row;
   S.qr.r_colind = r_colind; S.qr.r_row = r_row; S.qr.prinv = perm; S.qr.pc = perm;
 }
