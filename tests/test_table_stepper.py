@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from scipy.special import ellipk
+from table_models import chain_system
 
 import ncgen as nc
 from ncgen.codegen.compiler import CANDIDATES
@@ -84,24 +85,6 @@ def test_damped_oscillator_equals_its_closed_form(library):
     np.testing.assert_allclose(traj.q[:, 1:], 0.0, atol=1e-14)
 
 
-def chain_system(n: int, springs: bool = False, name: str | None = None):
-    """A 3D chain of ``n`` bars sharing their ends, the first end a ground point; with
-    ``springs``, a spring-damper from every joint to a ground point above it."""
-    s = nc.System(name or f"tchain{n}{'s' if springs else ''}")
-    start = s.ground.point((0.0, 0.0, 0.0))
-    pos = np.zeros(3)
-    bars = []
-    for k in range(n):
-        pos = pos + np.array([0.31 + 0.02 * k, 0.09 * (k % 3), -0.07])
-        bars.append(s.add_bar(f"b{k}", coords="rr", mass=0.4 + 0.05 * k, ends=[start, tuple(pos)]))
-        start = bars[-1].end(1)
-    if springs:
-        for k, b in enumerate(bars):
-            s.add_force(nc.Spring(b, (0.0, 0.0, 0.0), s.ground, (0.3 * k, 0.2, 0.6), k=30.0 + 5 * k,
-                                  rest_length=0.4, damping=0.8 + 0.1 * k))
-    return s
-
-
 def test_conservative_chain_keeps_its_energy(library):
     """A 6-bar chain under gravity: RATTLE4's energy stays within 1e-7 of its start."""
     model = chain_system(6).build()
@@ -138,10 +121,10 @@ def test_auto_choice_override_and_refusal(library):
     assert stepper_kernels(covered, "auto") == "tables"
     assert stepper_kernels(covered, "flat") == "flat"
     s = chain_system(3, name="pushed")
-    s.add_force(nc.PointForce(s.members["b2"], (0.0, 0.0, 0.0), force=(0.0, 1.0, 0.0), name="push"))
+    s.add_force(nc.PointForce(s.members["b2"], (0.0, 0.0, 0.0), force=(0.0, "sin(t)", 0.0), name="push"))
     pushed = s.build()
     assert stepper_kernels(pushed, "auto") == "flat"
-    with pytest.raises(UnsupportedElements, match=r"PointForce \(force 'push'\)"):
+    with pytest.raises(UnsupportedElements, match=r"PointForce of t, inputs or parameters \(force 'push'\)"):
         nc.simulate(pushed, 0.1, 0.01, method="stepper", kernels="tables")
     with pytest.raises(NcgenError, match="kernels: expected one of 'auto', 'tables', 'flat'"):
         nc.SimulationOptions(kernels="fast")
@@ -153,6 +136,7 @@ import numpy as np
 import ncgen as nc
 import ncgen.codegen.compile_cache as cc
 from ncgen.runtime.table_library import load_element_library
+from table_models import chain_system, every_force, fourbar
 
 assert not any(shutil.which(c) for c in ("cc", "gcc", "clang")), "a compiler is on PATH"
 def no_compile(*a, **k):
@@ -160,31 +144,16 @@ def no_compile(*a, **k):
 cc.compile_package = no_compile
 load_element_library()              # the library found in the cache, loaded
 
-def chain(n):
-    s = nc.System(f"nocc_chain{n}")
-    start = s.ground.point((0.0, 0.0, 0.0))
-    pos = np.zeros(3)
-    for k in range(n):
-        pos = pos + np.array([0.29 + 0.01 * k, 0.13 * (k % 3), -0.04])
-        start = s.add_bar(f"link{k}", coords="rr", mass=0.3 + 0.02 * k, ends=[start, tuple(pos)]).end(1)
-    return s
-
-def fourbar():
-    s = nc.System("nocc_fourbar", gravity=(0.0, -9.81))
-    crank = s.add_bar("crank", coords="rr", mass=0.4, ends=[(0.0, 0.0), (0.3, 0.7)])
-    coupler = s.add_bar("coupler", coords="rr", mass=1.1, ends=[crank.end(1), (2.2, 1.9)])
-    s.add_bar("rocker", coords="rr", mass=0.9, ends=[coupler.end(1), s.ground.point((2.6, 0.0))])
-    s.add_joint(nc.Revolute(s.ground, crank, at=(0.0, 0.0)))
-    return s
-
 out = {}
-for system in (chain(13), fourbar()):
+for system in (chain_system(13, name="nocc_chain13"), fourbar("nocc_fourbar"), every_force(3, "nocc_forces3d"),
+               every_force(2, "nocc_forces2d")):
     t = time.perf_counter()
     model = system.build()
     built = time.perf_counter()
     traj = nc.simulate(model, 0.5, 0.01, method="stepper", substeps=2)
+    work = traj.info["energy"].get("work", 0.0)
     out[model.name] = {"kernels": traj.info["kernels"], "complete": traj.info["complete"],
-                       "drift": float(np.max(np.abs(traj.energy - traj.energy[0]))
+                       "drift": float(abs(traj.energy[-1] - traj.energy[0] - work)
                                       / (1.0 + np.max(np.abs(traj.kinetic)))),
                        "phi": float(np.max(traj.constraint_residual)), "build": built - t,
                        "simulate": time.perf_counter() - built}
@@ -193,19 +162,20 @@ print(json.dumps(out))
 
 
 def test_new_models_step_with_no_compiler(library, tmp_path):
-    """Once the element library is cached, a new 13-bar chain and a new four-bar are built
-    and stepped in a process with no compiler on PATH (and compile_package replaced by a
-    failure): the tables' stepper, energy (relative to the largest kinetic energy) and
-    constraints kept."""
+    """Once the element library is cached, a new 13-bar chain, a new four-bar and a model
+    with every force kind of the tables (3D and planar) are built and stepped in a process
+    with no compiler on PATH (and compile_package replaced by a failure): the tables'
+    stepper, the energy balance (E − E0 − W, the work of the non-conservative forces;
+    relative to the largest kinetic energy) and the constraints kept."""
     empty = tmp_path / "bin"
     empty.mkdir()
     env = {k: v for k, v in os.environ.items() if k not in ("CC", "PATH")}
     env["PATH"] = str(empty)
-    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")])
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), str(ROOT / "tests"), env.get("PYTHONPATH", "")])
     out = subprocess.run([sys.executable, "-c", CHILD], env=env, capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr[-3000:]
     runs = json.loads(out.stdout.strip().splitlines()[-1])
-    assert set(runs) == {"nocc_chain13", "nocc_fourbar"}
+    assert set(runs) == {"nocc_chain13", "nocc_fourbar", "nocc_forces3d", "nocc_forces2d"}
     for name, r in runs.items():
         assert r["kernels"] == "tables" and r["complete"], (name, r)
         assert r["drift"] < 1e-5 and r["phi"] < 1e-9, (name, r)
