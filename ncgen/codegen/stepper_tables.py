@@ -57,6 +57,16 @@ class StepperTables:
     nnz_r: int
     arrays: dict[str, np.ndarray]
 
+    @property
+    def conservative(self) -> bool:
+        """Whether every force is ``−∇V`` (no damping, no constant force or torque outside V);
+        every covered constraint is scleronomic."""
+        a = self.arrays
+        dampers = a["spr_par"][2::3].tolist() + [
+            a["ff_par"][a["ff_par_ptr"][e] + 2 if _ff_is_cable(k) else a["ff_par_ptr"][e] + 1]
+            for e, k in enumerate(a["ff_kind"])]
+        return not any(dampers) and not np.any(a["f_const"]) and not np.any(a["tq_val"])
+
 
 def _number(value) -> bool:
     return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
@@ -174,6 +184,12 @@ def stepper_tables(model) -> StepperTables:
     return StepperTables(model.name, T, model.nu, model.np, len(markers), ns, len(ff), len(tq),
                          float(np.max(np.abs(M))) if nq else 1.0, v_gravity, int(k_indices.size),
                          int(qr["v_row"].size), int(qr["r_row"].size), arrays)
+
+
+def _ff_is_cable(kind: int) -> bool:
+    """Whether force kind ``kind`` over features is a cable (numbers ``k, l₀, c``) rather than a
+    torsional spring (``k, c, rest_angle, sign``)."""
+    return FEATURE_FORCE_KINDS[kind][0] == "cable"
 
 
 def _velocity_entries(a: dict, feats) -> tuple[np.ndarray, np.ndarray]:
