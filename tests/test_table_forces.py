@@ -239,3 +239,32 @@ def test_a_table_run_builds_no_flat_function(options, library, monkeypatch):
     assert traj.info["kernels"] == "tables" and traj.info["complete"] and made == []
     np.testing.assert_allclose(traj.lam[0], lam0, rtol=0, atol=1e-10 * (1 + np.abs(lam0).max()))
     assert traj.info["energy"]["relative"] < 1e-4
+
+
+def test_batch_and_sweep_run_on_the_tables_without_compiling(library, monkeypatch):
+    """simulate_batch and sweep of a covered model run on the element library with the
+    compiler blocked: each run equals the single run of nc.simulate bit for bit (the same
+    loops, the same λ0); a sweep over initial velocities completes every run."""
+    import ncgen.codegen.compile_cache as cc
+
+    def no_compile(*args, **kwargs):
+        raise AssertionError("the compiler was called")
+
+    model = every_force(3, name="batch_forces").build()
+    monkeypatch.setattr(cc, "compile_package", no_compile)
+    single = nc.simulate(model, 0.3, 0.01, method="stepper")
+    for check, project in ((True, True), (False, False)):
+        b = nc.simulate_batch(model, 0.3, 0.01, v0=np.tile(model.v0, (3, 1)), check=check, project=project, workers=2)
+        assert b.info["kernels"] == "tables" and np.all(b.ok), b.message
+        for k in range(3):
+            np.testing.assert_array_equal(b.q[k], single.q)
+            np.testing.assert_array_equal(b.lam[k], single.lam)
+            np.testing.assert_array_equal(b.potential[k], single.potential)
+    rng = np.random.default_rng(4)
+    puck = list(model.layout.member_indices("puck"))
+    v0 = np.tile(model.v0, (4, 1))
+    v0[:, puck] += 0.2 * rng.normal(size=(4, 3))
+    swept = nc.sweep(model, None, t_end=0.2, dt=0.01, v0=v0, workers=1, progress=False)
+    assert np.all(swept.summary["status"] == 0), swept.summary["message"]
+    np.testing.assert_allclose(swept["q"][:, -1, puck[0]] - model.q0[puck[0]],
+                               0.2 * v0[:, puck[0]] + 0.5 * 0.4 / 0.3 * 0.2 ** 2, atol=1e-9)

@@ -21,8 +21,10 @@ kinds needs no C compiler.
 from __future__ import annotations
 
 import ctypes
+import threading
 import warnings
 from functools import partial
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -124,7 +126,23 @@ class TableStepper(CompiledStepper):
         forces = c_binding.Signature("int", (("const void *", "S"), ("const double *", "q"),
                                               ("const double *", "v"), ("double *", "F")))
         self._forces = c_binding.bind(self._lib, f"{PACKAGE}_forces", forces, addresses=True)
-        self._functions = None
+        self._local = threading.local()          # TableFunctions per thread (one work array each)
+        self._raw = None
+
+    def raw_loops(self) -> SimpleNamespace:
+        """``simulate`` and ``simulate_stats`` of the element library bound to these tables with
+        address arguments (as :func:`ncgen.runtime.batch._raw_loops` binds a model's own)."""
+        if self._raw is None:
+            structs = {f"{PACKAGE}_step_options": StepOptions}
+            loops = {}
+            for loop in ("simulate", "simulate_stats"):
+                sig = signature(loop, False)
+                sig = c_binding.Signature(sig.returns, (("const void *", "S"), *sig.args))
+                fn = c_binding.bind(self._lib, f"{PACKAGE}_{loop}", sig, name=PACKAGE, structs=structs,
+                                    addresses=True)
+                loops[loop] = partial(fn, ctypes.addressof(self._S))
+            self._raw = SimpleNamespace(**loops, lib=self._lib)
+        return self._raw
 
     def forces(self, q, v) -> np.ndarray:
         """The applied generalised force ``F(q, v)`` (nq; N or N·m per coordinate's unit) of
@@ -145,9 +163,10 @@ class TableStepper(CompiledStepper):
             return np.array([self.multipliers(qk, vk) for qk, vk in zip(q, v)]).reshape(len(q), self.nc)
         if not self.nc:
             return np.zeros(0)
-        if self._functions is None:
-            self._functions = TableFunctions(self.tables.tables, self.library_object)
-        T, fn, a = self.tables.tables, self._functions, self.tables.arrays
+        fn = getattr(self._local, "functions", None)
+        if fn is None:
+            fn = self._local.functions = TableFunctions(self.tables.tables, self.library_object)
+        T, a = self.tables.tables, self.tables.arrays
         rhs = np.concatenate([self.forces(q, v), fn.gamma(q, v)])
         n = self.nq + self.nc
         if n <= DENSE_KKT:
