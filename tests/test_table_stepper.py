@@ -157,6 +157,9 @@ for system in (chain_system(13, name="nocc_chain13"), fourbar("nocc_fourbar"), e
                                       / (1.0 + np.max(np.abs(traj.kinetic)))),
                        "phi": float(np.max(traj.constraint_residual)), "build": built - t,
                        "simulate": time.perf_counter() - built}
+model = every_force(3, "nocc_batch").build()
+batch = nc.simulate_batch(model, 0.2, 0.01, v0=np.tile(model.v0, (3, 1)), workers=2)
+out["batch"] = {"kernels": batch.info["kernels"], "ok": bool(np.all(batch.ok))}
 print(json.dumps(out))
 """
 
@@ -164,8 +167,8 @@ print(json.dumps(out))
 def test_new_models_step_with_no_compiler(library, tmp_path):
     """Once the element library is cached, a new 13-bar chain, a new four-bar and a model
     with every force kind of the tables (3D and planar) are built and stepped in a process
-    with no compiler on PATH (and compile_package replaced by a failure): the tables'
-    stepper, the energy balance (E − E0 − W, the work of the non-conservative forces;
+    with no compiler on PATH (and compile_package replaced by a failure), and a batch of
+    runs of a new one: the tables' stepper, the energy balance (E − E0 − W, the work of the non-conservative forces;
     relative to the largest kinetic energy) and the constraints kept."""
     empty = tmp_path / "bin"
     empty.mkdir()
@@ -175,7 +178,8 @@ def test_new_models_step_with_no_compiler(library, tmp_path):
     out = subprocess.run([sys.executable, "-c", CHILD], env=env, capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr[-3000:]
     runs = json.loads(out.stdout.strip().splitlines()[-1])
-    assert set(runs) == {"nocc_chain13", "nocc_fourbar", "nocc_forces3d", "nocc_forces2d"}
+    assert set(runs) == {"nocc_chain13", "nocc_fourbar", "nocc_forces3d", "nocc_forces2d", "batch"}
+    assert runs.pop("batch") == {"kernels": "tables", "ok": True}
     for name, r in runs.items():
         assert r["kernels"] == "tables" and r["complete"], (name, r)
         assert r["drift"] < 1e-5 and r["phi"] < 1e-9, (name, r)
