@@ -235,10 +235,11 @@ def feature_force_kind(force: str, dim: int) -> FeatureForceKind:
     return FeatureForceKind(name, dim, n, n_par, fn)
 
 
-#: Member kinds with a torque kernel (those with an angular velocity map W), in the order of
-#: :data:`MEMBER_KINDS`.
+#: Member kinds with a torque kernel, in the order of :data:`MEMBER_KINDS`: bodies and bars
+#: (those whose derivation has an angular velocity map W; points have none).  From the kinds'
+#: names, without the derivations (importing this module loads no SymPy).
 TORQUE_KINDS: tuple[tuple[int, str], ...] = tuple(
-    (d, t) for d, t in MEMBER_KINDS if coordinate_type(t, d).derivation.W is not None)
+    (d, t) for d, t in MEMBER_KINDS if coordinate_type(t, d).kind != "point")
 
 
 @lru_cache(maxsize=None)
@@ -253,6 +254,8 @@ def torque_kind(dim: int, ctype: str) -> ca.Function:
     """The kernel ``tq_<type>_<dim>d``: ``[q_I; c_W; τ] -> W(q_I)ᵀ τ`` (module docstring)."""
     ct = coordinate_type(ctype, dim)
     D = ct.derivation
+    if D.W is None:
+        raise CodegenError(f"torque kind {ctype} ({dim}D): its derivation has no angular velocity map W")
     consts = torque_constants(dim, ctype)
     n_tau = 3 if dim == 3 else 1
     x = ca.SX.sym("x", ct.nq + len(consts) + n_tau)
