@@ -56,16 +56,9 @@ class StepperTables:
     nnz_v: int
     nnz_r: int
     arrays: dict[str, np.ndarray]
-
-    @property
-    def conservative(self) -> bool:
-        """Whether every force is ``−∇V`` (no damping, no constant force or torque outside V);
-        every covered constraint is scleronomic."""
-        a = self.arrays
-        dampers = a["spr_par"][2::3].tolist() + [
-            a["ff_par"][a["ff_par_ptr"][e] + 2 if _ff_is_cable(k) else a["ff_par_ptr"][e] + 1]
-            for e, k in enumerate(a["ff_kind"])]
-        return not any(dampers) and not np.any(a["f_const"]) and not np.any(a["tq_val"])
+    #: Whether every force is ``−∇V`` (no damping, no constant force or torque outside V; every
+    #: covered constraint is scleronomic).
+    conservative: bool = False
 
 
 def _number(value) -> bool:
@@ -181,15 +174,11 @@ def stepper_tables(model) -> StepperTables:
         "tq_c": _reals([x for e in tq for x in e["c"]]), "tq_val": _reals([x for e in tq for x in e["tau"]]),
         "k_colind": k_indptr, "k_row": k_indices, **qr,
     }
+    conservative = not any(s.damping for s in springs) and not any(e["damping"] for e in ff) \
+        and not np.any(elements["f_const"]) and not any(np.any(e["tau"]) for e in tq)
     return StepperTables(model.name, T, model.nu, model.np, len(markers), ns, len(ff), len(tq),
                          float(np.max(np.abs(M))) if nq else 1.0, v_gravity, int(k_indices.size),
-                         int(qr["v_row"].size), int(qr["r_row"].size), arrays)
-
-
-def _ff_is_cable(kind: int) -> bool:
-    """Whether force kind ``kind`` over features is a cable (numbers ``k, l₀, c``) rather than a
-    torsional spring (``k, c, rest_angle, sign``)."""
-    return FEATURE_FORCE_KINDS[kind][0] == "cable"
+                         int(qr["v_row"].size), int(qr["r_row"].size), arrays, conservative)
 
 
 def _velocity_entries(a: dict, feats) -> tuple[np.ndarray, np.ndarray]:
@@ -210,7 +199,8 @@ def force_elements(model) -> dict:
     """The forces of ``model`` other than gravity and spring-dampers, as table elements:
     ``f_const`` (nq; constant point forces and generalised forces), ``ff`` (force elements over
     features: ``kind`` in :data:`~ncgen.codegen.element_kernels.FEATURE_FORCE_KINDS`,
-    ``vectors`` (``(member, point)`` pairs or callables for :func:`model_tables`) and ``par``)
+    ``vectors`` (``(member, point)`` pairs or callables for :func:`model_tables`), ``par`` and
+    ``damping``)
     and ``torque`` (``member`` index, constants ``c`` of ``W``, ``tau``)."""
     dim, layout = model.dim, model.layout
     f_const = np.zeros(model.nq)
@@ -225,12 +215,12 @@ def force_elements(model) -> dict:
             f_const += _numbers(f.value, model.nq)
         elif type(f) is Spring and f.cable:
             ff.append({"kind": FEATURE_FORCE_KINDS.index(("cable", dim)), "vectors": [(f.a, f.at_a), (f.b, f.at_b)],
-                       "par": [f.k, f.rest_length, f.damping]})
+                       "par": [f.k, f.rest_length, f.damping], "damping": f.damping})
         elif type(f) is TorsionalSpring:
             vectors = [lambda ctx, j=f.joint, a=a: getattr(j.gauge(ctx), a) for a in ("b", "m1", "m2")]
             sign = _torsion_sign(model, f.joint)
             ff.append({"kind": FEATURE_FORCE_KINDS.index(("torsion", dim)), "vectors": vectors,
-                       "par": [f.k, f.damping, f.rest_angle, sign]})
+                       "par": [f.k, f.damping, f.rest_angle, sign], "damping": f.damping})
         elif type(f) is Torque:
             m = f.member
             values = m.rigid.constants()
