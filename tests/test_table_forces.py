@@ -97,7 +97,7 @@ def test_free_members_under_constant_loads_follow_the_closed_form(library):
     body = s.add_body("body", coords="ruvw", mass=1.5, inertia=np.diag([0.02, 0.03, Izz]), position=(0.0, 0.0, 0.0))
     L, mb, tb = 0.6, 0.5, 0.02
     bar = s.add_bar("bar", coords="rr", mass=mb, ends=[(1.0, 0.0, 0.0), (1.0 + L, 0.0, 0.0)])
-    point = s.add_point("point", mass=0.25, position=(0.0, 2.0, 0.0))
+    s.add_point("point", mass=0.25, position=(0.0, 2.0, 0.0))
     s.add_force(nc.PointForce(body, (0.0, 0.0, 0.0), force=tuple(F)))
     s.add_force(nc.Torque(body, (0.0, 0.0, tau)))
     s.add_force(nc.Torque(bar, (0.0, tb, 0.0)))
