@@ -13,7 +13,10 @@ Per N:
   (``load_stepper``), one step;  flat, cached: the same model built again, its package found
   in the cache (C generation and hashing remain), one step;
 * time per RATTLE step (h = 1 ms, fixed steps, no estimate), tables and flat alternating over
-  the rounds, CPU seconds per step: min and median, and their ratios tables / flat.
+  the rounds, CPU seconds per step: min and median, and their ratios tables / flat;
+* the same for the chain with the force kinds beyond gravity (``forces_chain``: per bar a
+  cable to a ground point above it, a spring-damper, a constant point force and torque):
+  packing its tables, and the time per step of the two forms.
 
 Wall-clock seconds with CPU seconds (of the process and its children) in brackets.  The
 machine is shared: the load average is printed at start and end.
@@ -21,6 +24,7 @@ machine is shared: the load average is printed at start and end.
     python benchmarks/table_stepper.py                  N = 10, 40, 160, 1000, 5 rounds
     python benchmarks/table_stepper.py --smoke          N = 3, 6, 2 rounds
     python benchmarks/table_stepper.py --sizes 10 40 --rounds 3
+    python benchmarks/table_stepper.py --sizes 10 --no-forces
 """
 from __future__ import annotations
 
@@ -34,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from common import chain_system, in_turn, machine, timed
+from common import GRAVITY, L, MASS, chain_system, ends, in_turn, machine, timed
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
@@ -70,6 +74,43 @@ def flat_first_step(model, fresh_cache: str | None):
     return stepper
 
 
+def forces_chain(n: int):
+    """The benchmark chain of ``n`` bars with, per bar, a cable to a ground point 0.3 m above
+    its far end (slack or taut), a spring-damper to a ground point beside it, a constant point
+    force at its middle and a constant torque."""
+    import ncgen as nc
+
+    pts = ends(n, L)
+    s = nc.System(f"chain{n}_forces", gravity=GRAVITY)
+    start = s.ground.point((0.0, 0.0, 0.0))
+    for k, far in enumerate(pts[1:], start=1):
+        bar = s.add_bar(f"bar{k}", coords="rr", mass=MASS, ends=[start, tuple(far)])
+        start = bar.end(1)
+        s.add_force(nc.Spring(bar, (0.5 * L, 0.0, 0.0), s.ground, tuple(far + (0.0, 0.0, 0.3)), k=50.0,
+                              rest_length=0.35, damping=0.4, cable=True))
+        s.add_force(nc.Spring(bar, (0.0, 0.0, 0.0), s.ground, tuple(far + (0.0, 0.4, 0.0)), k=20.0,
+                              rest_length=0.3, damping=0.2))
+        s.add_force(nc.PointForce(bar, (0.0, 0.0, 0.0), force=(0.0, 0.1 * (k % 3), 0.0)))
+        s.add_force(nc.Torque(bar, (0.0, 0.0, 0.02)))
+    return s
+
+
+def compare_per_step(tables, flat, model, steps: int, rounds: int, label: str) -> None:
+    """Interleaved CPU time per step of the two forms, min and median, and their ratios."""
+    times = {"tables": [], "flat": []}
+    for r in range(rounds):
+        done = in_turn(r, {"tables": lambda: per_step(tables, model, steps),
+                           "flat": lambda: per_step(flat, model, steps)})
+        for name, seconds in done.items():
+            times[name].append(seconds)
+    t, f = times["tables"], times["flat"]
+    print(f"  time per step, {steps} steps x {rounds} rounds (CPU us): tables min {min(t) * 1e6:.1f} "
+          f"median {statistics.median(t) * 1e6:.1f}; flat min {min(f) * 1e6:.1f} "
+          f"median {statistics.median(f) * 1e6:.1f}")
+    print(f"  RATIO tables / flat, time per step, {label}: min {min(t) / min(f):.2f}, "
+          f"median {statistics.median(t) / statistics.median(f):.2f}", flush=True)
+
+
 def per_step(stepper, model, n_steps: int) -> float:
     c = time.process_time()
     one_step(stepper, model, n_steps)
@@ -85,6 +126,7 @@ def main() -> None:
     ap.add_argument("--sizes", type=int, nargs="+", default=[10, 40, 160, 1000])
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--smoke", action="store_true", help="N = 3, 6, 2 rounds, few steps")
+    ap.add_argument("--no-forces", action="store_true", help="skip the chains with forces")
     args = ap.parse_args()
     sizes, rounds = ([3, 6], 2) if args.smoke else (args.sizes, args.rounds)
     print(machine())
@@ -110,18 +152,20 @@ def main() -> None:
             else:
                 os.environ["NCGEN_CACHE_DIR"] = home
             steps = 20 if args.smoke else max(50, 200_000 // (model.nq + model.nc))
-            times = {"tables": [], "flat": []}
-            for r in range(rounds):
-                done = in_turn(r, {"tables": lambda: per_step(tables, model, steps),
-                                   "flat": lambda: per_step(flat, model, steps)})
-                for name, seconds in done.items():
-                    times[name].append(seconds)
-            t, f = times["tables"], times["flat"]
-            print(f"  time per step, {steps} steps x {rounds} rounds (CPU us): tables min {min(t) * 1e6:.1f} "
-                  f"median {statistics.median(t) * 1e6:.1f}; flat min {min(f) * 1e6:.1f} "
-                  f"median {statistics.median(f) * 1e6:.1f}")
-            print(f"  RATIO tables / flat, time per step, N = {n}: min {min(t) / min(f):.2f}, "
-                  f"median {statistics.median(t) / statistics.median(f):.2f}", flush=True)
+            compare_per_step(tables, flat, model, steps, rounds, f"N = {n}")
+            if args.no_forces:
+                continue
+            print(f"--- chain of N = {n} bars with cables, spring-dampers, point forces and torques", flush=True)
+            loaded = forces_chain(n).build()
+            w, c, ftables = timed(lambda: tables_first_step(loaded, None))
+            show("tables, cached: pack + load + step", w, c)
+            w, c, fflat = timed(lambda: flat_first_step(loaded, str(Path(tmp) / f"forces{n}")))
+            show("flat, empty cache: generate + compile + step", w, c)
+            if home is None:
+                os.environ.pop("NCGEN_CACHE_DIR", None)
+            else:
+                os.environ["NCGEN_CACHE_DIR"] = home
+            compare_per_step(ftables, fflat, loaded, steps, rounds, f"forces, N = {n}")
     print(f"load average at the end: {os.getloadavg()}")
 
 

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from scipy.special import ellipk
+from table_models import chain_system
 
 import ncgen as nc
 from ncgen.codegen.compiler import CANDIDATES
@@ -84,24 +85,6 @@ def test_damped_oscillator_equals_its_closed_form(library):
     np.testing.assert_allclose(traj.q[:, 1:], 0.0, atol=1e-14)
 
 
-def chain_system(n: int, springs: bool = False, name: str | None = None):
-    """A 3D chain of ``n`` bars sharing their ends, the first end a ground point; with
-    ``springs``, a spring-damper from every joint to a ground point above it."""
-    s = nc.System(name or f"tchain{n}{'s' if springs else ''}")
-    start = s.ground.point((0.0, 0.0, 0.0))
-    pos = np.zeros(3)
-    bars = []
-    for k in range(n):
-        pos = pos + np.array([0.31 + 0.02 * k, 0.09 * (k % 3), -0.07])
-        bars.append(s.add_bar(f"b{k}", coords="rr", mass=0.4 + 0.05 * k, ends=[start, tuple(pos)]))
-        start = bars[-1].end(1)
-    if springs:
-        for k, b in enumerate(bars):
-            s.add_force(nc.Spring(b, (0.0, 0.0, 0.0), s.ground, (0.3 * k, 0.2, 0.6), k=30.0 + 5 * k,
-                                  rest_length=0.4, damping=0.8 + 0.1 * k))
-    return s
-
-
 def test_conservative_chain_keeps_its_energy(library):
     """A 6-bar chain under gravity: RATTLE4's energy stays within 1e-7 of its start."""
     model = chain_system(6).build()
@@ -138,10 +121,10 @@ def test_auto_choice_override_and_refusal(library):
     assert stepper_kernels(covered, "auto") == "tables"
     assert stepper_kernels(covered, "flat") == "flat"
     s = chain_system(3, name="pushed")
-    s.add_force(nc.PointForce(s.members["b2"], (0.0, 0.0, 0.0), force=(0.0, 1.0, 0.0), name="push"))
+    s.add_force(nc.PointForce(s.members["b2"], (0.0, 0.0, 0.0), force=(0.0, "sin(t)", 0.0), name="push"))
     pushed = s.build()
     assert stepper_kernels(pushed, "auto") == "flat"
-    with pytest.raises(UnsupportedElements, match=r"PointForce \(force 'push'\)"):
+    with pytest.raises(UnsupportedElements, match=r"PointForce of t, inputs or parameters \(force 'push'\)"):
         nc.simulate(pushed, 0.1, 0.01, method="stepper", kernels="tables")
     with pytest.raises(NcgenError, match="kernels: expected one of 'auto', 'tables', 'flat'"):
         nc.SimulationOptions(kernels="fast")
@@ -153,34 +136,44 @@ import numpy as np
 import ncgen as nc
 from no_compiler import chain, forbid_compiler, fourbar
 from ncgen.runtime.table_library import load_element_library
+from table_models import every_force
 
 forbid_compiler()
 load_element_library()              # the library found in the cache, loaded
 out = {}
-for system in (chain("nocc_chain13", 13, (0.29, 0.13, -0.04)), fourbar("nocc_fourbar")):
+for system in (chain("nocc_chain13", 13, (0.29, 0.13, -0.04)), fourbar("nocc_fourbar"), every_force(3, "nocc_forces3d"),
+               every_force(2, "nocc_forces2d")):
     t = time.perf_counter()
     model = system.build()
     built = time.perf_counter()
     traj = nc.simulate(model, 0.5, 0.01, method="stepper", substeps=2)
+    work = traj.info["energy"].get("work", 0.0)
     out[model.name] = {"kernels": traj.info["kernels"], "complete": traj.info["complete"],
-                       "drift": float(np.max(np.abs(traj.energy - traj.energy[0]))
+                       "drift": float(abs(traj.energy[-1] - traj.energy[0] - work)
                                       / (1.0 + np.max(np.abs(traj.kinetic)))),
                        "phi": float(np.max(traj.constraint_residual)), "build": built - t,
                        "simulate": time.perf_counter() - built}
+model = every_force(3, "nocc_batch").build()
+batch = nc.simulate_batch(model, 0.2, 0.01, v0=np.tile(model.v0, (3, 1)), workers=2)
+out["batch"] = {"kernels": batch.info["kernels"], "ok": bool(np.all(batch.ok))}
 print(json.dumps(out))
 """
 
 
 def test_new_models_step_with_no_compiler(library, tmp_path):
-    """Once the element library is cached, a new 13-bar chain and a new four-bar are built
-    and stepped in a process with no compiler on PATH (and compile_package replaced by a
-    failure): the tables' stepper, energy (relative to the largest kinetic energy) and
-    constraints kept."""
+    """Once the element library is cached, a new 13-bar chain, a new four-bar and a model
+    with every force kind of the tables (3D and planar) are built and stepped in a process
+    with no compiler on PATH (and compile_package replaced by a failure), and a batch of
+    runs of a new one: the tables' stepper, the energy balance (E − E0 − W, the work of the non-conservative forces;
+    relative to the largest kinetic energy) and the constraints kept."""
     runs = run_without_compiler(CHILD, tmp_path)
-    assert set(runs) == {"nocc_chain13", "nocc_fourbar"}
+    assert set(runs) == {"nocc_chain13", "nocc_fourbar", "nocc_forces3d", "nocc_forces2d", "batch"}
+    assert runs.pop("batch") == {"kernels": "tables", "ok": True}
     for name, r in runs.items():
         assert r["kernels"] == "tables" and r["complete"], (name, r)
-        assert r["drift"] < 1e-5 and r["phi"] < 1e-9, (name, r)
+        # the models with dampers and loads: W is the trapezoidal integral of their power at the
+        # output times, and the planar one's cable goes slack and taut (its balance: 8e-6)
+        assert r["drift"] < (5e-5 if "forces" in name else 1e-5) and r["phi"] < 1e-9, (name, r)
 
 
 def _compare(model, tol=1e-12, **options):

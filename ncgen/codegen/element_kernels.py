@@ -23,6 +23,21 @@ Two families of kinds, both from :mod:`ncgen.symbolic`:
   ``−f`` acting on ``a``; its energy, J; its damper's power ``−c l̇²``, W) and
   ``J = ∂f/∂[r_a; r_b; ṙ_a; ṙ_b]`` (dense, column-major).  Gravity needs no kernel: its
   generalised force is constant.
+* **force kinds over features** ``cable_<dim>d``, ``torsion_<dim>d``
+  (:data:`FEATURE_FORCE_KINDS`): kernel ``ff_<force>_<dim>d`` of a force acting on
+  ``n`` features (points or directions): input ``x = [f_1; …; f_n; ḟ_1; …; ḟ_n; numbers]``,
+  outputs ``y = [g; V; P]`` (``g``: the generalised force on the stacked features, so that
+  ``Q = Σ_X G_Xᵀ g_X``; the energy V, J; the power ``P = ḟ·(g + ∇_f V)`` of its
+  non-conservative part, W) and ``J = ∂g/∂ḟ`` (n dim × n dim, column-major).  ``cable``:
+  a :class:`~ncgen.model.forces.Spring` with ``cable=True`` between points ``r_a``, ``r_b``
+  (numbers ``k, l₀, c``; :func:`~ncgen.model.forces.cable_tension`); ``torsion``: a
+  :class:`~ncgen.model.forces.TorsionalSpring` on a hinge whose gauge
+  (:class:`~ncgen.model.joint_equations.AngleGauge`) has the directions ``b, m1, m2``
+  (numbers ``k, c, rest_angle, sign``; :func:`~ncgen.model.forces.torsion_deflection`);
+* **torque kinds** ``(dim, coordinate type)`` with an angular velocity map ``W``
+  (:data:`TORQUE_KINDS`): kernel ``tq_<type>_<dim>d``: input ``x = [q_I; c_W; τ]`` (``c_W``
+  the constants of ``W``, :func:`torque_constants`; τ 3 components in 3D, 1 in 2D), output
+  ``Q_I = W(q_I)ᵀ τ`` (:class:`~ncgen.model.forces.Torque`).
 
 The constants ``c`` of a member kind are the free symbols of its derivation's ``Φ`` and ``M``
 other than the coordinates, sorted by name (:func:`member_constants`); a member's values are
@@ -38,7 +53,7 @@ from functools import lru_cache
 import casadi as ca
 
 from ncgen.errors import CodegenError
-from ncgen.model.forces import spring_energy, spring_tension
+from ncgen.model.forces import cable_energy, cable_tension, spring_energy, spring_tension, torsion_deflection
 from ncgen.model.sym2casadi import to_casadi
 from ncgen.symbolic.coordinates import available_types, coordinate_type
 from ncgen.symbolic.joints import PRIMITIVES, primitive
@@ -165,14 +180,102 @@ def spring_kind(dim: int) -> ca.Function:
     return ca.Function(force_kind_name("spring", dim), [x], [ca.densify(y), ca.densify(J)], ["x"], ["y", "J"])
 
 
+#: Force kinds over features ``(force, dim)``, in table order (``ff_kind`` of the stepper tables).
+FEATURE_FORCE_KINDS: tuple[tuple[str, int], ...] = tuple((f, d) for f in ("cable", "torsion") for d in (3, 2))
+
+
+@dataclass(frozen=True)
+class FeatureForceKind:
+    """A force kind over ``n_feat`` features of ``dim`` components and ``n_par`` numbers;
+    ``function`` its kernel (module docstring)."""
+
+    name: str
+    dim: int
+    n_feat: int
+    n_par: int
+    function: ca.Function
+
+
+def _cable_law(dim, f, k, l0, c):
+    """Generalised force on ``[r_a; r_b]`` and energy of a cable (as ``Spring.generalized``)."""
+    (ra, rb), (va, vb) = f
+    d = rb - ra
+    length = ca.sqrt(ca.sumsqr(d))
+    rate = ca.dot(d, vb - va) / length
+    f_b = -cable_tension(length, rate, k, l0, c) * d / length
+    return ca.vertcat(-f_b, f_b), cable_energy(length - l0, k)
+
+
+def _torsion_law(dim, f, k, c, rest, sign):
+    """Generalised force on ``[b; m1; m2]`` and energy of a torsional spring-damper (as
+    ``TorsionalSpring.generalized``): ``−(k δ + c δ̇) ∇δ``, ``½ k δ²``."""
+    (b, m1, m2), rates = f
+    x = ca.vertcat(b, m1, m2)
+    delta = torsion_deflection(ca.dot(m1, b), sign * ca.dot(m2, b), rest)
+    rate = ca.jtimes(delta, x, ca.vertcat(*rates))
+    return -(k * delta + c * rate) * ca.gradient(delta, x), 0.5 * k * delta ** 2
+
+
+_FEATURE_LAWS = {"cable": (2, 3, _cable_law), "torsion": (3, 4, _torsion_law)}
+
+
+@lru_cache(maxsize=None)
+def feature_force_kind(force: str, dim: int) -> FeatureForceKind:
+    """The kernel ``ff_<force>_<dim>d`` of a force kind over features (module docstring)."""
+    n, n_par, law = _FEATURE_LAWS[force]
+    nd = n * dim
+    x = ca.SX.sym("x", 2 * nd + n_par)
+    feats = [x[i * dim:(i + 1) * dim] for i in range(n)]
+    rates = [x[nd + i * dim:nd + (i + 1) * dim] for i in range(n)]
+    g, V = law(dim, (feats, rates), *(x[2 * nd + i] for i in range(n_par)))
+    P = ca.dot(x[nd:2 * nd], g + ca.gradient(V, x[:nd]))
+    J = ca.jacobian(g, x[nd:2 * nd])
+    name = f"ff_{force}_{dim}d"
+    fn = ca.Function(name, [x], [ca.densify(ca.vertcat(g, V, P)), ca.densify(J)], ["x"], ["y", "J"])
+    return FeatureForceKind(name, dim, n, n_par, fn)
+
+
+#: Member kinds with a torque kernel, in the order of :data:`MEMBER_KINDS`: bodies and bars
+#: (those whose derivation has an angular velocity map W; points have none).  From the kinds'
+#: names, without the derivations (importing this module loads no SymPy).
+TORQUE_KINDS: tuple[tuple[int, str], ...] = tuple(
+    (d, t) for d, t in MEMBER_KINDS if coordinate_type(t, d).kind != "point")
+
+
+@lru_cache(maxsize=None)
+def torque_constants(dim: int, ctype: str) -> tuple:
+    """The constant symbols of a member kind's ``W`` (other than its coordinates), sorted by name."""
+    D = coordinate_type(ctype, dim).derivation
+    return tuple(sorted(set(D.W.free_symbols) - set(D.q) - set(D.qd), key=str))
+
+
+@lru_cache(maxsize=None)
+def torque_kind(dim: int, ctype: str) -> ca.Function:
+    """The kernel ``tq_<type>_<dim>d``: ``[q_I; c_W; τ] -> W(q_I)ᵀ τ`` (module docstring)."""
+    ct = coordinate_type(ctype, dim)
+    D = ct.derivation
+    if D.W is None:
+        raise CodegenError(f"torque kind {ctype} ({dim}D): its derivation has no angular velocity map W")
+    consts = torque_constants(dim, ctype)
+    n_tau = 3 if dim == 3 else 1
+    x = ca.SX.sym("x", ct.nq + len(consts) + n_tau)
+    values = {s: x[ct.nq + k] for k, s in enumerate(consts)}
+    values.update({s: x[k] for k, s in enumerate(D.q)})
+    W = to_casadi(D.W, values)
+    Q = ca.mtimes(W.T, x[ct.nq + len(consts):])
+    return ca.Function(f"tq_{ctype}_{dim}d", [x], [ca.densify(Q)], ["x"], ["Q"])
+
+
 def kernels() -> list[ca.Function]:
     """Every kernel of the shipped kinds, in a fixed order (joint kinds, then member kinds'
-    ``phi`` and ``mass``, then the force kinds)."""
+    ``phi`` and ``mass``, then the force kinds: springs, forces over features, torques)."""
     out = [f for p, d in JOINT_KINDS for f in (joint_kind(p, d).function, joint_kind(p, d).hvv)]
     for d, t in MEMBER_KINDS:
         k = member_kind(d, t)
         out += ([k.phi, k.hvv] if k.phi is not None else []) + [k.mass]
-    return out + [spring_kind(d) for _, d in FORCE_KINDS]
+    return (out + [spring_kind(d) for _, d in FORCE_KINDS]
+            + [feature_force_kind(f, d).function for f, d in FEATURE_FORCE_KINDS]
+            + [torque_kind(d, t) for d, t in TORQUE_KINDS])
 
 
 #: Name of the package (and prefix of every C symbol) of the element kernels' library.
@@ -200,12 +303,23 @@ def write_element_package(out_dir):
     names = [k.name for k in joints] + [k.name for k in members]
     from ncgen.codegen.stepper_package import HALVINGS_LIMIT, MAX_HALVINGS, MAX_ITER, STATS, TOL
 
+    ffs = [feature_force_kind(f, d) for f, d in FEATURE_FORCE_KINDS]
+    torques = [torque_kind(d, t) if (d, t) in TORQUE_KINDS else None for d, t in MEMBER_KINDS]
+    ff_in = [f.function.nnz_in(0) for f in ffs] + [f.nnz_in(0) for f in torques if f is not None]
+    ff_out = [f.function.nnz_out(0) + f.function.nnz_out(1) for f in ffs] + [
+        f.nnz_out(0) for f in torques if f is not None]
     context = {"stepper": {"tol": TOL, "max_iter": MAX_ITER, "max_halvings": MAX_HALVINGS,
                            "halvings_limit": HALVINGS_LIMIT, "nstats": len(STATS)},
                "joint_kinds": [{"name": k.name, "dim": k.dim, "n_vec": k.n_vec, "n_scalar": k.n_scalar,
                                 "n_out": k.n_out} for k in joints],
                "member_kinds": [{"name": k.name, "phi": k.phi is not None, "n_q": k.n_q, "n_c": k.n_c,
                                  "n_out": k.n_out} for k in members],
+               "feature_force_kinds": [{"name": k.name, "dim": k.dim, "n_feat": k.n_feat, "n_par": k.n_par}
+                                       for k in ffs],
+               "torque_kinds": [{"name": f.name() if f is not None else None,
+                                 "n_c": len(torque_constants(d, t)) if f is not None else 0}
+                                for f, (d, t) in zip(torques, MEMBER_KINDS)],
+               "ff_in": max(ff_in), "ff_out": max(ff_out),
                "max_w": max(f.sz_w() for f in fns), "kind_names": ",".join(names)}
     doc = PackageDoc(summary="Element kernels of the shipped kinds and the table-driven loops (ncgen "
                              "element tables): Φ, A, Φ_t and M of any model of these kinds from its tables, "

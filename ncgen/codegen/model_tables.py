@@ -132,7 +132,8 @@ class _Joint:
 def model_tables(model, points=()) -> ModelTables:
     """The tables of ``model`` (see module docstring); raises :class:`UnsupportedElements`.
     ``points``: ``(member, local point)`` pairs (a ground point in world coordinates) made
-    features too (``point_features``: the stepper's spring ends and markers)."""
+    features too (``point_features``: the stepper's spring ends and markers), or callables
+    ``ctx -> vector`` giving any point or direction affine in q (a gauge's directions)."""
     unsupported: dict[str, list[str]] = {}
     view = SimpleNamespace(members=model.members, inputs={}, parameters={}, dim=model.dim, name=model.name)
     # its symbols cost O(nq): only for joints and points
@@ -153,7 +154,7 @@ def model_tables(model, points=()) -> ModelTables:
     missing = [label for label in model.constraint_names if label not in produced]
     if missing:
         raise UnsupportedElements(model.name, {"constraint rows of no element kind": missing})
-    extra = [_Joint(-1, [_point(ctx, m, at)], [], [], "point") for m, at in points]
+    extra = [_Joint(-1, [p(ctx) if callable(p) else _point(ctx, *p)], [], [], "point") for p in points]
     return _pack(model, ctx, members, joints, rows, extra)
 
 

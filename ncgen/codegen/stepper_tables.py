@@ -17,6 +17,15 @@ as point features; and the KKT matrix ``K = [[M − h/2 ∂F/∂w, Aᵀ], [A, 0]
 the nonzero of ``K`` every product of the loops adds to, and the symbolic analysis of its
 sparse QR (CasADi's ``Sparsity.qr_sparse``, approximate minimum degree column order).
 
+The other forces of numbers (:func:`force_elements`): constant
+:class:`~ncgen.model.forces.PointForce` and
+:class:`~ncgen.model.forces.GeneralizedForce` as one constant generalised force
+``f_const`` (not part of the potential energy, as the flat functions count them); cables
+(``Spring(cable=True)``) and :class:`~ncgen.model.forces.TorsionalSpring` on a
+:class:`~ncgen.model.joints.Revolute` as force elements over features (``ff_*``: the ends,
+or the gauge's directions ``b, m1, m2``); constant :class:`~ncgen.model.forces.Torque` as
+torque elements on their member (``tq_*``).
+
 A model is *table-covered* when every element is: joints as :mod:`ncgen.codegen.model_tables`
 says, forces and actuated joints as above, no contacts, controller or parameters, inputs
 only through input forces and efforts.  :class:`UnsupportedElements`
@@ -30,10 +39,12 @@ from types import SimpleNamespace
 import casadi as ca
 import numpy as np
 
+from ncgen.codegen.element_kernels import FEATURE_FORCE_KINDS, torque_constants
 from ncgen.codegen.model_tables import ModelTables, UnsupportedElements, _csc, _ints, _ptr, _reals, model_tables
 from ncgen.errors import CodegenError, NcgenError
 from ncgen.model.context import Context
-from ncgen.model.forces import Spring
+from ncgen.model.forces import GeneralizedForce, PointForce, Spring, Torque, TorsionalSpring
+from ncgen.model.joint_equations import is_full
 
 
 @dataclass
@@ -46,12 +57,17 @@ class StepperTables:
     np: int
     n_markers: int
     n_spring: int
+    n_ff: int
+    n_torque: int
     mass_scale: float
     v_gravity: float
     nnz_k: int
     nnz_v: int
     nnz_r: int
     arrays: dict[str, np.ndarray]
+    #: Whether every force is ``−∇V`` (no damping, no constant force or torque outside V; every
+    #: covered constraint is scleronomic).
+    conservative: bool = False
 
 
 def _number(value) -> bool:
@@ -142,16 +158,58 @@ def input_force_map(model, force) -> np.ndarray | None:
     return _linear_in_inputs(ctx, Q, model.nq)
 
 
+def _numbers(value, n: int) -> np.ndarray | None:
+    """``value`` as ``n`` floats when it is a number or a sequence of numbers, else None (an
+    expression, a callable, a CasADi symbol)."""
+    if _number(value):
+        values = [value]
+    elif isinstance(value, (list, tuple, np.ndarray)) and all(_number(x) for x in np.ravel(np.asarray(value, object))):
+        values = np.ravel(np.asarray(value, float))
+    else:
+        return None
+    return np.asarray(values, float) if len(values) == n else None
+
+
+def _uncovered_force(f, dim: int, nq: int) -> str | None:
+    """The uncovered kind of force ``f`` (as :func:`uncovered_elements` names it), or None."""
+    if type(f) is Spring:
+        numbers = all(_number(x) for x in (f.k, f.rest_length, f.damping))
+        return None if numbers else f"Spring{' (cable)' if f.cable else ''} with an expression for k, rest_length " \
+                                    "or damping"
+    if type(f) is TorsionalSpring:
+        if f.coordinate is not None:
+            return "TorsionalSpring on a JointSequence"
+        return None if all(_number(x) for x in (f.k, f.damping, f.rest_angle)) else \
+            "TorsionalSpring with an expression for k, damping or rest_angle"
+    if type(f) is PointForce:
+        return None if _numbers(f.force, dim) is not None else "PointForce of t, inputs or parameters"
+    if type(f) is Torque:
+        return None if _numbers(f.torque, 3 if dim == 3 else 1) is not None else "Torque of t, inputs or parameters"
+    if type(f) is GeneralizedForce:
+        return None if _numbers(f.value, nq) is not None else "GeneralizedForce of t, q, v, inputs or parameters"
+    return f.kind
+
+
+def input_forces(model) -> list[tuple]:
+    """The forces of ``model`` that the tables take as input forces: ``(force, B)`` for each
+    force of the inputs with a constant map ``Q = B u`` (:func:`input_force_map`) that is not
+    one of the kinds of numbers (:func:`force_elements`)."""
+    out = []
+    for f in model.forces:
+        if _uncovered_force(f, model.dim, model.nq) is not None:
+            B = input_force_map(model, f)
+            if B is not None:
+                out.append((f, B))
+    return out
+
+
 def uncovered_elements(model) -> dict[str, list[str]]:
     """The elements of ``model`` outside the stepper tables' kinds (other than joints), by kind."""
     out: dict[str, list[str]] = {}
     for f in model.forces:
-        if type(f) is not Spring:
-            if input_force_map(model, f) is None:
-                out.setdefault(f.kind, []).append(f"force {f.name!r}")
-        elif f.cable or not all(_number(x) for x in (f.k, f.rest_length, f.damping)):
-            what = "cable" if f.cable else "with an expression for k, rest_length or damping"
-            out.setdefault(f"Spring {what}", []).append(f"force {f.name!r}")
+        kind = _uncovered_force(f, model.dim, model.nq)
+        if kind is not None and input_force_map(model, f) is None:
+            out.setdefault(kind, []).append(f"force {f.name!r}")
     if model.contacts:
         names = [f"contact {n!r}" for n in model.contact_names]
         out["contact"] = names[:4] + ([f"{len(names) - 4} more"] if len(names) > 4 else [])
@@ -172,18 +230,21 @@ def stepper_tables(model) -> StepperTables:
     missing = uncovered_elements(model)
     if missing:
         raise UnsupportedElements(model.name, missing)
-    springs = [f for f in model.forces if type(f) is Spring]
-    B_u = sum((input_force_map(model, f) for f in model.forces if type(f) is not Spring),
-              np.zeros((model.nq, model.nu)))
+    springs = [f for f in model.forces if type(f) is Spring and not f.cable]
+    elements = force_elements(model)
+    B_u = sum((B for _, B in input_forces(model)), np.zeros((model.nq, model.nu)))
     acts = [actuator_element(model, j) for j in model.joints if j.options.get("effort") is not None]
     bu_rows = [np.flatnonzero(B_u[:, j]) for j in range(model.nu)]
     bu_row = _ints(np.concatenate(bu_rows)) if bu_rows else _ints([])
     bu_val = _reals(np.concatenate([B_u[r, j] for j, r in enumerate(bu_rows)])) if bu_rows else _reals([])
     points = [(s.a, s.at_a) for s in springs] + [(s.b, s.at_b) for s in springs]
     points += [(m, local) for m in model.members.values() for local in m.markers.values()]
+    n_points = len(points)
+    points += [v for e in elements["ff"] for v in e["vectors"]]
     T = model_tables(model, points)
     ns = len(springs)
-    ends, markers = T.point_features[:2 * ns], T.point_features[2 * ns:]
+    ends, markers = T.point_features[:2 * ns], T.point_features[2 * ns:n_points]
+    ff_feat = T.point_features[n_points:]
     spr_feat = [f for s in range(ns) for f in (ends[s], ends[ns + s])]
     f_gravity, v_gravity = _gravity(model)
     nq, nc = T.nq, T.nc
@@ -196,27 +257,29 @@ def stepper_tables(model) -> StepperTables:
     cols = [m_cols, a_cols, nq + T.a_indices]
     counts = []
     for s in range(ns):
-        fa = [(a["feat_ptr"][f], a["feat_ptr"][f + 1]) for f in (spr_feat[2 * s], spr_feat[2 * s + 1])]
-        r_s, c_s = [], []
-        for lo, hi in fa:
-            for e in range(lo, hi):
-                for lo2, hi2 in fa:
-                    r_s += [a["feat_col"][e]] * (hi2 - lo2)
-                    c_s += list(a["feat_col"][lo2:hi2])
-        rows.append(_ints(r_s))
-        cols.append(_ints(c_s))
+        r_s, c_s = _velocity_entries(a, spr_feat[2 * s:2 * s + 2])
+        rows.append(r_s)
+        cols.append(c_s)
         counts.append(len(r_s))
+    ff_counts, ff_ptr = [], _ptr([len(e["vectors"]) for e in elements["ff"]])
+    for k in range(len(elements["ff"])):
+        r_s, c_s = _velocity_entries(a, ff_feat[ff_ptr[k]:ff_ptr[k + 1]])
+        rows.append(r_s)
+        cols.append(c_s)
+        ff_counts.append(len(r_s))
     k_indptr, k_indices, pos = _csc(n, n, np.concatenate(rows), np.concatenate(cols))
     m_nnz, a_nnz = T.m_nnz, T.a_nnz
+    n_spr = m_nnz + 2 * a_nnz + sum(counts)
     qr = _qr_analysis(model.name, n, k_indptr, k_indices)
     M = np.asarray(model.M, dtype=float)
+    ff, tq = elements["ff"], elements["torque"]
     arrays = {
         "a_colind": T.a_indptr, "a_row": T.a_indices, "m_colind": T.m_indptr, "m_row": T.m_indices,
         "m_val": _reals(M[T.m_indices, m_cols]),
         "f_gravity": _reals(f_gravity),
         "spr_feat": _ints(spr_feat),
         "spr_par": _reals([x for s in springs for x in (s.k, s.rest_length, s.damping)]),
-        "spr_kpos_ptr": _ptr(counts), "spr_kpos": pos[m_nnz + 2 * a_nnz:],
+        "spr_kpos_ptr": _ptr(counts), "spr_kpos": pos[m_nnz + 2 * a_nnz:n_spr],
         "marker_feat": _ints(markers),
         "k_mpos": pos[:m_nnz], "k_apos": pos[m_nnz:m_nnz + a_nnz], "k_atpos": pos[m_nnz + a_nnz:m_nnz + 2 * a_nnz],
         "bu_colind": _ptr([len(r) for r in bu_rows]), "bu_row": bu_row, "bu_val": bu_val,
@@ -225,11 +288,83 @@ def stepper_tables(model) -> StepperTables:
         "act_form_ptr": _ptr([a.forms.size for a in acts]),
         "act_form": _reals(np.concatenate([a.forms for a in acts]) if acts else []),
         "act_tau": _reals(np.concatenate([a.tau for a in acts]) if acts else []),
+        "f_const": _reals(elements["f_const"]),
+        "ff_kind": _ints([e["kind"] for e in ff]), "ff_feat_ptr": ff_ptr, "ff_feat": _ints(ff_feat),
+        "ff_par_ptr": _ptr([len(e["par"]) for e in ff]), "ff_par": _reals([x for e in ff for x in e["par"]]),
+        "ff_kpos_ptr": _ptr(ff_counts), "ff_kpos": pos[n_spr:],
+        "tq_member": _ints([e["member"] for e in tq]), "tq_c_ptr": _ptr([len(e["c"]) for e in tq]),
+        "tq_c": _reals([x for e in tq for x in e["c"]]), "tq_val": _reals([x for e in tq for x in e["tau"]]),
         "k_colind": k_indptr, "k_row": k_indices, **qr,
     }
-    return StepperTables(model.name, T, model.nu, model.np, len(markers), ns,
+    conservative = not any(s.damping for s in springs) and not any(e["damping"] for e in ff) \
+        and not np.any(elements["f_const"]) and not any(np.any(e["tau"]) for e in tq)
+    return StepperTables(model.name, T, model.nu, model.np, len(markers), ns, len(ff), len(tq),
                          float(np.max(np.abs(M))) if nq else 1.0, v_gravity, int(k_indices.size),
-                         int(qr["v_row"].size), int(qr["r_row"].size), arrays)
+                         int(qr["v_row"].size), int(qr["r_row"].size), arrays, conservative)
+
+
+def _velocity_entries(a: dict, feats) -> tuple[np.ndarray, np.ndarray]:
+    """The entries ``(row, column)`` of ``K`` that the velocity derivative of a force on the
+    features ``feats`` adds, in the loops' order (every entry of each feature against every
+    entry of each)."""
+    spans = [(a["feat_ptr"][f], a["feat_ptr"][f + 1]) for f in feats]
+    r_s, c_s = [], []
+    for lo, hi in spans:
+        for e in range(lo, hi):
+            for lo2, hi2 in spans:
+                r_s += [a["feat_col"][e]] * (hi2 - lo2)
+                c_s += list(a["feat_col"][lo2:hi2])
+    return _ints(r_s), _ints(c_s)
+
+
+def force_elements(model) -> dict:
+    """The forces of ``model`` other than gravity and spring-dampers, as table elements:
+    ``f_const`` (nq; constant point forces and generalised forces), ``ff`` (force elements over
+    features: ``kind`` in :data:`~ncgen.codegen.element_kernels.FEATURE_FORCE_KINDS`,
+    ``vectors`` (``(member, point)`` pairs or callables for :func:`model_tables`), ``par`` and
+    ``damping``)
+    and ``torque`` (``member`` index, constants ``c`` of ``W``, ``tau``)."""
+    dim, layout = model.dim, model.layout
+    f_const = np.zeros(model.nq)
+    ff, torques = [], []
+    names = list(model.members)
+    for f in model.forces:
+        if _uncovered_force(f, dim, model.nq) is not None:       # an input force (input_forces)
+            continue
+        if type(f) is PointForce:
+            m = f.member
+            C = np.asarray(m.rigid.C(m.rigid.affine(np.asarray(f.at, float))), float)
+            _scatter(f_const, layout.member_indices(m.name), C.T @ _numbers(f.force, dim))
+        elif type(f) is GeneralizedForce:
+            f_const += _numbers(f.value, model.nq)
+        elif type(f) is Spring and f.cable:
+            ff.append({"kind": FEATURE_FORCE_KINDS.index(("cable", dim)), "vectors": [(f.a, f.at_a), (f.b, f.at_b)],
+                       "par": [f.k, f.rest_length, f.damping], "damping": f.damping})
+        elif type(f) is TorsionalSpring:
+            vectors = [lambda ctx, j=f.joint, a=a: getattr(j.gauge(ctx), a) for a in ("b", "m1", "m2")]
+            sign = _torsion_sign(model, f.joint)
+            ff.append({"kind": FEATURE_FORCE_KINDS.index(("torsion", dim)), "vectors": vectors,
+                       "par": [f.k, f.damping, f.rest_angle, sign], "damping": f.damping})
+        elif type(f) is Torque:
+            m = f.member
+            values = m.rigid.constants()
+            torques.append({"member": names.index(m.name),
+                            "c": [float(values[s]) for s in torque_constants(dim, m.ctype.name)],
+                            "tau": _numbers(f.torque, 3 if dim == 3 else 1)})
+    return {"f_const": f_const, "ff": ff, "torque": torques}
+
+
+def _torsion_sign(model, joint) -> float:
+    """``AngleGauge.sign`` of the hinge ``joint``: +1 when its full side (the ground or a body)
+    is A or the system is planar (:func:`ncgen.model.joint_equations.angle_gauge`)."""
+    return 1.0 if model.dim == 2 or is_full(joint.A) else -1.0
+
+
+def _scatter(out: np.ndarray, indices, values) -> None:
+    """``out[i] += value`` for the free coordinates ``i`` of a member (None: a ground point's)."""
+    for i, x in zip(indices, values):
+        if i is not None:
+            out[i] += x
 
 
 def _gravity(model) -> tuple[np.ndarray, float]:

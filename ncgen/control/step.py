@@ -87,15 +87,18 @@ def step_function(model, h: float, method: str = "rattle", *, max_iter: int = MA
 
 def _jacobian_uncovered(model) -> dict[str, list[str]]:
     """Forces the table stepper may cover but whose derivatives its step Jacobians
-    (``templates/c/runtime/ncgen_table_jacobians.h``: gravity, springs, input forces,
-    actuated joints) do not have yet, by kind."""
-    from ncgen.codegen.stepper_tables import input_force_map
-    from ncgen.model.forces import Spring
+    (``templates/c/runtime/ncgen_table_jacobians.h``: gravity, spring-dampers, input forces,
+    actuated joints, constant point and generalised forces) do not have yet (cables, torsional
+    springs, torques), by kind."""
+    from ncgen.codegen.stepper_tables import input_forces
+    from ncgen.model.forces import GeneralizedForce, PointForce, Spring
 
+    inputs = {id(f) for f, _ in input_forces(model)}
     out: dict[str, list[str]] = {}
     for f in model.forces:
-        if type(f) is not Spring and input_force_map(model, f) is None:
-            out.setdefault(f"{f.kind} (no step Jacobian from the tables)", []).append(f"force {f.name!r}")
+        if (type(f) is Spring and not f.cable) or type(f) in (PointForce, GeneralizedForce) or id(f) in inputs:
+            continue
+        out.setdefault(f"{f.kind} (no step Jacobian from the tables)", []).append(f"force {f.name!r}")
     return out
 
 

@@ -32,6 +32,25 @@ def spring_energy(stretch, k):
     return 0.5 * k * stretch**2
 
 
+def cable_tension(length, rate, k, rest_length, damping):
+    """Tension (N) of a cable (a :class:`Spring` with ``cable=True``): the spring-damper's
+    :func:`spring_tension`, kept ≥ 0 (slack in compression)."""
+    return ca.fmax(spring_tension(length, rate, k, rest_length, damping), 0)
+
+
+def cable_energy(stretch, k):
+    """Potential energy (J) of a cable stretched by ``s = l − l₀`` (m): ``½ k s²`` while taut
+    (``s > 0``), 0 while slack."""
+    return ca.if_else(stretch > 0, spring_energy(stretch, k), 0)
+
+
+def torsion_deflection(x, y, rest_angle):
+    """``δ = atan2(y, x) − rest_angle`` wrapped to (−π, π] (rad), of an angle given by the
+    terms ``(x, y)`` of its gauge (:class:`TorsionalSpring`)."""
+    c, s = ca.cos(rest_angle), ca.sin(rest_angle)
+    return ca.atan2(y * c - x * s, x * c + y * s)
+
+
 class Force:
     """Base class of force elements."""
 
@@ -192,8 +211,7 @@ class Spring(Force):
         k = self._value(ctx, self.k, 1, "k")
         l0 = self._value(ctx, self.rest_length, 1, "rest_length")
         c = self._value(ctx, self.damping, 1, "damping")
-        T = spring_tension(length, rate, k, l0, c)
-        return ca.fmax(T, 0) if self.cable else T
+        return (cable_tension if self.cable else spring_tension)(length, rate, k, l0, c)
 
     def generalized(self, ctx):
         _, _, d, length, _ = self._geometry(ctx)
@@ -214,9 +232,7 @@ class Spring(Force):
             l0 = self._value(ctx, self.rest_length, 1, "rest_length (in the potential energy)", inputs=False)
         except ExpressionError:          # tension() has accepted them with the inputs
             return ca.SX(0)
-        stretch = length - l0
-        V = spring_energy(stretch, k)
-        return ca.if_else(stretch > 0, V, 0) if self.cable else V
+        return (cable_energy if self.cable else spring_energy)(length - l0, k)
 
 
 class TorsionalSpring(Force):
@@ -272,8 +288,7 @@ class TorsionalSpring(Force):
     def deflection(self, ctx) -> ca.SX:
         """``δ = θ − rest_angle`` in (−π, π] (rad)."""
         x, y = self._terms(ctx)
-        r = self._value(ctx, self.rest_angle, 1, "rest_angle", inputs=False)
-        return ca.atan2(y * ca.cos(r) - x * ca.sin(r), x * ca.cos(r) + y * ca.sin(r))
+        return torsion_deflection(x, y, self._value(ctx, self.rest_angle, 1, "rest_angle", inputs=False))
 
     def generalized(self, ctx):
         delta = self.deflection(ctx)

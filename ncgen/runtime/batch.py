@@ -36,7 +36,8 @@ from ncgen.runtime.run_start import initial_multipliers, initial_state, point_by
 from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.stepper import COMPOSITION_STAGES, ESTIMATE_MODES, _trajectory, fixed_scheme, step_inputs
 from ncgen.runtime.stepper_checks import is_conservative, untrusted_row
-from ncgen.runtime.stepper_library import _Options, load_stepper
+from ncgen.runtime.stepper_library import _Options
+from ncgen.runtime.table_stepper import load_any_stepper
 from ncgen.validation import as_numbers, as_scalar
 
 #: ``status`` of a run that could not start (its initial state, parameters or inputs).
@@ -90,7 +91,7 @@ def simulate_batch(model, t_end: float, dt: float, *, q0=None, v0=None, p=None, 
                    hold: str = "zoh", substeps: int = 1, newton_tol: float = TOL, max_newton: int = MAX_ITER,
                    max_halvings: int = MAX_HALVINGS, ic_tolerance: float | None = 1e-6, project: bool = True,
                    check: bool = True, scheme: str = "auto",
-                   outputs: bool = True, workers: int | None = None) -> BatchResult:
+                   outputs: bool = True, workers: int | None = None, kernels: str = "auto") -> BatchResult:
     """Integrate ``model`` with its compiled stepper once per run, on ``workers`` threads
     (default: all cores), over the grid ``t0, t0 + dt, ..., t_end`` (s).
 
@@ -117,15 +118,20 @@ def simulate_batch(model, t_end: float, dt: float, *, q0=None, v0=None, p=None, 
     rows from the problem on NaN, and the reason.  ``check=False``: the bare compiled loop
     (fastest; choose ``dt`` with a checked run first).  ``outputs``: also the energies,
     constraint residuals and markers (one compiled call per run; always with ``check``).
+    ``kernels``: the stepper's kernels, as ``SimulationOptions(kernels=...)`` chooses them
+    (:func:`ncgen.runtime.table_stepper.stepper_kernels`): a model of the kinds the element
+    tables cover runs on the element library (no compile of the model, no flat function for
+    the multipliers; ``info["kernels"]``).
     Returns a :class:`BatchResult`; failed runs are reported there, never raised.
     """
     start = time.perf_counter()
     SimulationOptions(method="stepper", hold=hold, substeps=substeps, newton_tol=newton_tol, max_newton=max_newton,
-                      max_halvings=max_halvings, ic_tolerance=ic_tolerance, scheme=scheme)  # checked as for one run
+                      max_halvings=max_halvings, ic_tolerance=ic_tolerance, scheme=scheme,
+                      kernels=kernels)  # checked as for one run
     t0 = model.t0 if t0 is None else as_scalar(t0, "t0")
     t = time_grid(t0, t_end, dt, bytes_per_point=point_bytes(model))
     n = _batch_size(model, q0, v0, p, u, len(t))
-    stepper = load_stepper(model)
+    stepper = load_any_stepper(model, kernels=kernels)
     runs = _Runs(model, stepper, t, n, hold, int(substeps), newton_tol, max_newton, max_halvings, ic_tolerance,
                  outputs or check, check, fixed_scheme(model, scheme))
     workers = runs.workers = _workers(workers, n)
@@ -140,7 +146,7 @@ def simulate_batch(model, t_end: float, dt: float, *, q0=None, v0=None, p=None, 
             list(pool.map(runs.integrate, chunks))
     end = time.perf_counter()
     result = runs.result()
-    result.info.update(model=model.name, method="stepper", h=runs.h, substeps=runs.substeps, hold=hold, check=check,
+    result.info.update(model=model.name, method="stepper", kernels=stepper.kernels, h=runs.h, substeps=runs.substeps, hold=hold, check=check,
                        workers=workers, runs=n, stepping_time=end - stepping, wall_time=end - start)
     return result
 
@@ -196,6 +202,7 @@ class _Runs:
     def __init__(self, model, stepper, t, n, hold, substeps, tol, max_iter, max_halvings, ic_tolerance, outputs,
                  check, scheme: str = "rattle"):
         self.model, self.stepper, self.t, self.n, self.check = model, stepper, t, n, check
+        self.tables = stepper.kernels == "tables"
         self.conservative = is_conservative(model) if check else True
         self.hold, self.substeps, self.ic_tolerance, self.outputs = hold, substeps, ic_tolerance, outputs
         self.h = float(t[1] - t[0]) / substeps
@@ -218,7 +225,8 @@ class _Runs:
         """Parameters, consistent initial state, multipliers and inputs of every run (a run
         whose setup fails gets ``STATUS_SETUP`` and the reason)."""
         model, t, t0 = self.model, self.t, float(self.t[0])
-        dae = load_dae(model, "vm")[0] if project else None    # names the cause of a singular KKT system
+        # the flat DAE names the cause of a singular KKT system (the tables' runs load it only then)
+        dae = load_dae(model, "vm")[0] if project and not self.tables else None
         per_run_u = u is not None and not callable(u) and np.ndim(u) == 3
         if not per_run_u:
             U = input_samples(u, model, t)
@@ -238,12 +246,26 @@ class _Runs:
                 else:
                     self.U[i], self.US[i] = shared_u
                 if project:
-                    self.LAM[i, 0] = initial_multipliers(model, t0, q, v, self.U[i][0], pv, dae)
+                    self.LAM[i, 0] = self._initial_multipliers(t0, q, v, self.U[i][0], pv, dae)
             except NcgenError as e:
                 self.status[i], self.message[i] = STATUS_SETUP, f"could not start: {e}"
                 self.Q[i, 0] = self.V[i, 0] = np.nan
         if not project:
             self._multipliers(t0)
+
+    def _initial_multipliers(self, t0: float, q, v, u, p, dae) -> np.ndarray:
+        """``λ0`` of one run: from the element tables on their path, else (or to name the cause
+        of a singular KKT system) from the flat functions."""
+        if self.tables:
+            lam = self.stepper.multipliers(q, v, u)
+            if np.all(np.isfinite(lam)):
+                return lam
+            dae = load_dae(self.model, "vm")[0]
+        return initial_multipliers(self.model, t0, q, v, u, p, dae)
+
+    def _accel(self):
+        """The compiled ``accel`` of the flat path; None on the tables' (their multipliers)."""
+        return None if self.tables else _compiled_accel(self.model)
 
     def _multipliers(self, t0: float) -> None:
         """``λ0`` of every run from the KKT system, in one call: the compiled ``accel`` (the same
@@ -252,8 +274,11 @@ class _Runs:
         if not model.nc:
             return
         U0 = np.array([self.U[i][0] for i in range(n)]).reshape(n, model.nu)
-        accel = _compiled_accel(model).map(n, "thread", self.workers)
-        lam = np.array(accel(t0, self.Q[:, 0].T, self.V[:, 0].T, U0.T, self.P.T)[1]).T
+        if self.tables:
+            lam = self.stepper.multipliers(self.Q[:, 0], self.V[:, 0], U0)
+        else:
+            accel = _compiled_accel(model).map(n, "thread", self.workers)
+            lam = np.array(accel(t0, self.Q[:, 0].T, self.V[:, 0].T, U0.T, self.P.T)[1]).T
         ok = self.status == 0
         self.LAM[ok, 0] = lam[ok]
         for i in np.flatnonzero(ok & ~np.all(np.isfinite(lam), axis=1)):
@@ -298,7 +323,9 @@ class _Runs:
             elif self.Y is not None:
                 k = rows + 1
                 U = self.U[i][:k] if self.model.nu else None
-                if not by_remainder(self.model) and k > 1:      # as _trajectory: the states' multipliers
+                if self.tables and k > 1:
+                    self.LAM[i, 1:k] = st.multipliers(self.Q[i, 1:k], self.V[i, 1:k], None if U is None else U[1:k])
+                elif not by_remainder(self.model) and k > 1:      # as _trajectory: the states' multipliers
                     self.LAM[i, 1:k] = multipliers_at_samples(self.model, self.t[1:k], self.Q[i, 1:k], self.V[i, 1:k],
                                                               np.zeros((k - 1, 0)) if U is None else U[1:k],
                                                               self.P[i], _compiled_accel(self.model))
@@ -311,7 +338,7 @@ class _Runs:
                 "stages": COMPOSITION_STAGES if self.rattle4 else 1, "estimate": "shadow"}
         traj = _trajectory(model, self.stepper, self.t, Q[0], V[0], LAM[0], Q[1:], V[1:], LAM[1:], S, rows,
                            self.U[i], self.P[i], info, self.conservative, time.perf_counter(),
-                           accel=_compiled_accel(model))
+                           accel=self._accel())
         LAM[:rows + 1] = traj.lam
         self.Y[i, :rows + 1, 0], self.Y[i, :rows + 1, 1] = traj.kinetic, traj.potential
         self.Y[i, :rows + 1, 2] = traj.constraint_residual
@@ -402,6 +429,8 @@ def _raw_loops(model, stepper):
     address arguments (``c_void_p``: plain integers pass without conversion objects; kept in
     the model's data by library), from the one table of
     :mod:`ncgen.codegen.stepper_abi`."""
+    if stepper.kernels == "tables":
+        return stepper.raw_loops()
     loops = model.data.batch_loops
     if stepper.library not in loops:
         lib = open_library(stepper.library)

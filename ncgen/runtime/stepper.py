@@ -64,7 +64,7 @@ from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.stepper_checks import (SHADOW_FACTOR, check_fixed, check_global, contact_report, energy_report,
                                           error_estimate, is_conservative, shadow_estimates,
                                           shadow_report, trusted_before_failure, warn_unconverged)
-from ncgen.runtime.table_stepper import load_any_stepper
+from ncgen.runtime.table_stepper import load_any_stepper, table_balance_parts
 from ncgen.runtime.trajectory import NAME_KEYS, Trajectory, derived_outputs
 
 #: With error control, the Newton tolerance is at most this fraction of min(rtol, atol)
@@ -257,8 +257,11 @@ def _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info,
     q = np.vstack([q0, Q[:rows]])
     v = np.vstack([v0, V[:rows]])
     tt, u = t[:rows + 1], U[:rows + 1]
+    tables = getattr(stepper, "kernels", "flat") == "tables"      # no flat function on the tables' path
     if by_remainder(model):       # nonsmooth contacts: the step's own multipliers (μ)
         lam = np.vstack([lam0, LAM[:rows]])
+    elif tables:
+        lam = stepper.multipliers(q, v, u)
     else:                         # the states' own multipliers: second order, as the states
         lam = multipliers_at_samples(model, tt, q, v, u, p, accel)
     Y = stepper.outputs(tt, q, v, lam, u, p)
@@ -274,7 +277,7 @@ def _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info,
                                                  info.get("order") == 4)
     traj.info["energy"] = energy_report(traj, work, conservative, S[:rows])
     if not conservative and len(traj):
-        traj.info["energy"]["parts"] = balance_parts(model, traj)
+        traj.info["energy"]["parts"] = table_balance_parts(tt, Y[:, 4]) if tables else balance_parts(model, traj)
     traj.info["wall_time"] = time.perf_counter() - start
     return traj
 

@@ -343,8 +343,12 @@ def roundoff_energy(model, traj, S: np.ndarray) -> np.ndarray:
     if not len(S):
         return np.zeros(0)
     n = len(S) + 1
-    F = np.asarray(model.functions["F"].map(n)(traj.t[:n], traj.q[:n].T, traj.v[:n].T, traj.u[:n].T,
-                                               np.asarray(traj.p, float)))
+    tables = model_data(model).steppers.get(("tables", None)) if traj.info.get("kernels") == "tables" else None
+    if tables is not None:                 # the tables' forces: no flat function on their path
+        F = np.column_stack([tables.forces(traj.q[k], traj.v[k], traj.u[k]) for k in range(n)])
+    else:
+        F = np.asarray(model.functions["F"].map(n)(traj.t[:n], traj.q[:n].T, traj.v[:n].T, traj.u[:n].T,
+                                                   np.asarray(traj.p, float)))
     force = np.maximum.accumulate(np.abs(F).sum(axis=0))[1:]
     size = np.maximum.accumulate(np.max(np.abs(traj.q[:n]), axis=1, initial=0.0))[1:]
     steps = np.cumsum(S[:, STATS.index("steps")]) * traj.info.get("stages", 1)

@@ -9,13 +9,14 @@ import time
 import numpy as np
 
 from ncgen.errors import CompilerNotFound, NcgenError, SimulationError, option
+from ncgen.model.data import model_data
 from ncgen.runtime.feedback import FeedbackFailed, with_partial
 from ncgen.runtime.integrator import Run, refuse_integrator
 from ncgen.runtime.run_start import failed_at_start
 from ncgen.runtime.options import SimulationOptions
 from ncgen.codegen.stepper_package import CONTACT_STATS, STATS
 from ncgen.runtime.stepper import simulate_stepper
-from ncgen.runtime.table_stepper import load_any_stepper
+from ncgen.runtime.table_stepper import load_any_stepper, stepper_kernels
 from ncgen.runtime.stepper_checks import check_fixed, energy_report, is_conservative, trusted_before_failure
 from ncgen.runtime.trajectory import Trajectory
 
@@ -45,12 +46,24 @@ class StepperIntegrator:
             raise CompilerNotFound(f"{e}: the stepper ({stepper}) is generated C and needs one; install gcc, "
                                    f"or use IDAS ({idas}), which runs on CasADi's virtual machine") from None
 
+    def _table_multipliers(self, run: Run):
+        """``λ0`` from the element tables when the run uses them (no flat function on their
+        path), else None."""
+        try:
+            if stepper_kernels(self.model, self.opts.kernels) != "tables":
+                return None
+        except CompilerNotFound:             # _load says what to do
+            return None
+        return model_data(self.model).steppers[("tables", None)].multipliers(run.q, run.v, run.U[0])
+
     def run(self, run: Run) -> Trajectory:
         if run.controller is not None:
             raise NcgenError(NO_CONTROLLER)
         if run.feedback is not None:
             return _stepwise(self.model, run, self.opts)
-        lam = run.multipliers(float(run.t[0]), run.q, run.v, run.U[0])
+        lam = self._table_multipliers(run)
+        if lam is None or not np.all(np.isfinite(lam)):      # singular: the flat path explains why
+            lam = run.multipliers(float(run.t[0]), run.q, run.v, run.U[0])
         self._load()
         return simulate_stepper(self.model, run.t, run.U, run.p, run.q, run.v, lam, self.opts)
 

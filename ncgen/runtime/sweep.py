@@ -38,7 +38,7 @@ import numpy as np
 from ncgen.errors import NcgenError
 from ncgen.runtime.inputs import time_grid
 from ncgen.runtime.samples import Samples, as_samples
-from ncgen.runtime.stepper_library import load_stepper
+from ncgen.runtime.table_stepper import load_any_stepper
 
 METHODS = ("stepper", "idas")
 #: Per-run arrays a sweep can keep, and their trailing shape.
@@ -139,8 +139,8 @@ def sweep(model, params, *, t_end: float, dt: float, method: str = "stepper", ou
     where, n_workers = _where(client, workers, method)
     if path is not None:
         check_store_path(Path(path))      # before any compile or run: the extras, the user's files
-    if method == "stepper":
-        load_stepper(model)        # compiled (or found in the cache) once, before the workers start
+    if method == "stepper":        # compiled (or found in the cache) once, before the workers start; the
+        load_any_stepper(model, kernels=options.get("kernels", "auto"))    # element tables need no compile
     chunk = _chunk(chunk if chunk is not None or path is None else _stored_chunk(path), n, n_workers)
     store = _Store(path, model, samples, t, method, outputs, options, chunk, per_run) if path is not None else None
     done = store.done() if store is not None else set()

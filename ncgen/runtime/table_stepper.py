@@ -21,7 +21,10 @@ kinds needs no C compiler.
 from __future__ import annotations
 
 import ctypes
+import threading
+import warnings
 from functools import partial
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -34,7 +37,7 @@ from ncgen.errors import CodegenError, NcgenError
 from ncgen.model.data import model_data
 from ncgen.runtime.options import KERNELS
 from ncgen.runtime.stepper_library import CompiledStepper, load_stepper
-from ncgen.runtime.table_library import TABLE_FIELDS, ElementLibrary, _Tables, load_element_library
+from ncgen.runtime.table_library import TABLE_FIELDS, ElementLibrary, TableFunctions, _Tables, load_element_library
 
 
 _QR_FIELDS = (("int", "n"), *(("const int *", f) for f in ("k_colind", "k_row", "v_colind", "v_row", "r_colind",
@@ -43,6 +46,8 @@ _QR_FIELDS = (("int", "n"), *(("const int *", f) for f in ("k_colind", "k_row", 
 
 #: Size ``nq + nc`` below which "auto" runs a covered model flat when its package is loaded.
 AUTO_FLAT_BELOW = 160
+#: Size ``nq + nc`` up to which :meth:`TableStepper.multipliers` solves the KKT system dense.
+DENSE_KKT = 400
 
 
 class _QrPattern(ctypes.Structure):
@@ -62,6 +67,11 @@ STEPPER_FIELDS = (
     ("const int *", "bu_colind"), ("const int *", "bu_row"), ("const double *", "bu_val"),
     ("int", "n_act"), *(("const int *", f) for f in ("act_kind", "act_ptr", "act_col", "act_form_ptr")),
     ("const double *", "act_form"), ("const double *", "act_tau"),
+    ("const double *", "f_const"), ("int", "n_ff"),
+    *(("const int *", f) for f in ("ff_kind", "ff_feat_ptr", "ff_feat", "ff_par_ptr")),
+    ("const double *", "ff_par"), ("const int *", "ff_kpos_ptr"), ("const int *", "ff_kpos"),
+    ("int", "n_torque"), ("const int *", "tq_member"), ("const int *", "tq_c_ptr"),
+    ("const double *", "tq_c"), ("const double *", "tq_val"),
 )
 
 
@@ -83,9 +93,9 @@ class TableStepper(CompiledStepper):
 
     def __init__(self, st: StepperTables, library: ElementLibrary | None = None):
         lib = library or load_element_library()
+        self.library_object = lib
         T = st.tables
         self.library, self.name = str(lib.path), st.name
-        self.library_object = lib
         self.nq, self.nc, self.nu, self.np = T.nq, T.nc, st.nu, st.np
         self.nout, self.nd = 5 + T.dim * st.n_markers, 0
         self.tables = st
@@ -103,7 +113,8 @@ class TableStepper(CompiledStepper):
         self._S = _StepperTables(T=ctypes.addressof(self._T), nu=st.nu, np=st.np, n_markers=st.n_markers,
                                  n_act=len(self._keep["s.act_kind"]),
                                  n_spring=st.n_spring, mass_scale=st.mass_scale, v_gravity=st.v_gravity,
-                                 nnz_k=st.nnz_k, nnz_v=st.nnz_v, nnz_r=st.nnz_r,
+                                 nnz_k=st.nnz_k, nnz_v=st.nnz_v, nnz_r=st.nnz_r, n_ff=st.n_ff,
+                                 n_torque=st.n_torque,
                                  **{f: ptr[f] for t, f in STEPPER_FIELDS if "*" in t and f != "T"}, qr=qr)
         self._lib = lib._lib
         check = c_binding.bind(self._lib, f"{PACKAGE}_stepper_check",
@@ -116,12 +127,97 @@ class TableStepper(CompiledStepper):
             sig = c_binding.Signature(sig.returns, (("const void *", "S"), *sig.args))
             fn = c_binding.bind(self._lib, f"{PACKAGE}_{loop}", sig, name=PACKAGE, structs=structs)
             setattr(self, f"_{loop}", partial(fn, ctypes.byref(self._S)))
+        forces = c_binding.Signature("int", (("const void *", "S"), ("const double *", "q"),
+                                              ("const double *", "v"), ("const double *", "u"),
+                                              ("double *", "F")))
+        self._forces = c_binding.bind(self._lib, f"{PACKAGE}_forces", forces, addresses=True)
+        self._local = threading.local()          # TableFunctions per thread (one work array each)
+        self._raw = None
+
+    def raw_loops(self) -> SimpleNamespace:
+        """``simulate`` and ``simulate_stats`` of the element library bound to these tables with
+        address arguments (as :func:`ncgen.runtime.batch._raw_loops` binds a model's own)."""
+        if self._raw is None:
+            structs = {f"{PACKAGE}_step_options": StepOptions}
+            loops = {}
+            for loop in ("simulate", "simulate_stats"):
+                sig = signature(loop, False)
+                sig = c_binding.Signature(sig.returns, (("const void *", "S"), *sig.args))
+                fn = c_binding.bind(self._lib, f"{PACKAGE}_{loop}", sig, name=PACKAGE, structs=structs,
+                                    addresses=True)
+                loops[loop] = partial(fn, ctypes.addressof(self._S))
+            self._raw = SimpleNamespace(**loops, lib=self._lib)
+        return self._raw
+
+    def forces(self, q, v, u=None) -> np.ndarray:
+        """The applied generalised force ``F(q, v, u)`` (nq; N or N·m per coordinate's unit) of
+        the stepper's forces, input forces and efforts included (``u`` None: zero inputs), from
+        the tables."""
+        q, v = (np.ascontiguousarray(x, dtype=float).reshape(self.nq) for x in (q, v))
+        u = np.zeros(self.nu) if u is None else np.ascontiguousarray(u, dtype=float).reshape(self.nu)
+        out = np.zeros(self.nq)
+        status = self._forces(ctypes.byref(self._S), q.ctypes.data, v.ctypes.data, u.ctypes.data, out.ctypes.data)
+        if status:
+            raise CodegenError(f"model {self.name!r}: the element library's forces failed (status {status})")
+        return out
+
+    def multipliers(self, q, v, u=None) -> np.ndarray:
+        """``λ`` of the KKT system ``[[M, Aᵀ], [A, 0]] [q̈; λ] = [F; γ]`` at ``(q, v, u)`` from the
+        tables (one state, or one per row of ``q``, ``v`` and ``u``; ``u`` None: zero inputs); NaN
+        where it is singular.  Dense LU up to :data:`DENSE_KKT` unknowns, sparse LU above."""
+        q, v = np.asarray(q, float), np.asarray(v, float)
+        if q.ndim == 2:
+            U = [None] * len(q) if u is None or not self.nu else np.asarray(u, float).reshape(len(q), self.nu)
+            return np.array([self.multipliers(qk, vk, uk) for qk, vk, uk in zip(q, v, U)]).reshape(len(q), self.nc)
+        if not self.nc:
+            return np.zeros(0)
+        fn = getattr(self._local, "functions", None)
+        if fn is None:
+            fn = self._local.functions = TableFunctions(self.tables.tables, self.library_object)
+        T, a = self.tables.tables, self.tables.arrays
+        rhs = np.concatenate([self.forces(q, v, u), fn.gamma(q, v)])
+        n = self.nq + self.nc
+        if n <= DENSE_KKT:
+            K = np.zeros((n, n))
+            K[:self.nq, :self.nq] = T.dense_M(a["m_val"])
+            A = T.dense_A(fn.A(q))
+            K[self.nq:, :self.nq], K[:self.nq, self.nq:] = A, A.T
+            try:
+                return np.linalg.solve(K, rhs)[self.nq:]
+            except np.linalg.LinAlgError:
+                return np.full(self.nc, np.nan)
+        import scipy.sparse as sp
+        from scipy.sparse.linalg import MatrixRankWarning, spsolve
+
+        A = sp.csc_matrix((fn.A(q), T.a_indices, T.a_indptr), shape=(self.nc, self.nq))
+        M = sp.csc_matrix((a["m_val"], a["m_row"], a["m_colind"]), shape=(self.nq, self.nq))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", MatrixRankWarning)
+            x = spsolve(sp.bmat([[M, A.T], [A, None]], format="csc"), rhs)
+        return np.asarray(x, float)[self.nq:]
+
+
+def table_balance_parts(t: np.ndarray, P: np.ndarray) -> dict[str, float]:
+    """The energy balance's parts (:mod:`ncgen.runtime.energy_balance`) of a run on the tables
+    from the power ``P`` of its outputs (W, at the output times ``t``): every covered force
+    that does work outside V is a damper or a constant load (``"dampers"``, trapezoidal
+    rule); no drives."""
+    W = float(np.sum(0.5 * np.diff(np.asarray(t, float)) * (P[1:] + P[:-1]))) if len(t) > 1 else 0.0
+    return {"dampers": W, "drives": 0.0}
 
 
 def table_stepper(model, library: ElementLibrary | None = None) -> TableStepper:
     """The table-driven stepper of ``model`` (raises
-    :class:`~ncgen.codegen.model_tables.UnsupportedElements` naming the elements not covered)."""
-    return TableStepper(stepper_tables(model), library)
+    :class:`~ncgen.codegen.model_tables.UnsupportedElements` naming the elements not covered).
+    Whether the model is conservative is recorded in its data from the tables (the stepper's
+    checks then need no flat function)."""
+    st = stepper_tables(model)
+    data = model_data(model)
+    if data.conservative_idle is None:
+        data.conservative_idle = st.conservative
+    if data.conservative is None and not model.nu:
+        data.conservative = st.conservative
+    return TableStepper(st, library)
 
 
 def stepper_kernels(model, kernels: str, cflags=None) -> str:

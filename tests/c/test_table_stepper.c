@@ -4,12 +4,14 @@
  *   member 0, a point of mass MASS (kind POINT): M = MASS I, no constraint;
  *   joint element 0, DISTANCE(f1 = the origin, f0 = p; L):  Φ = |p|² − L²  (a pendulum);
  *   gravity: f_gravity = (0, −MASS G);
- *   one spring-damper from the ground point f2 = ANCHOR to p (k, l0, c), marker p.
+ *   one spring-damper from the ground point f2 = ANCHOR to p (k, l0, c), marker p;
+ *   with c > 0 also a drag −(c/2) ṗ (a force element over the feature p), a constant force
+ *   (c/4, 0) and a tangential push (c/8)(−p1, p0) (a torque element on member 0).
  *
  * Checked: the element loops on these tables; the Newton matrix K of step_newton against central differences of its
- * residual r; undamped, 2000 RATTLE steps keep Φ ≤ 1e-9 and the energy to 1e-6; damped, the
- * energy lost equals the work of the damper the stepper integrates (step_power, to 1e-4), and the
- * energy decreases; one step, and an error-controlled run on the constraint.  Built and run
+ * residual r (the damper's and the drag's ∂F/∂v in it); undamped, 2000 RATTLE steps keep Φ ≤ 1e-9
+ * and the energy to 1e-6; damped, the energy lost equals the work of the damper, drag, force and
+ * push that the stepper integrates (step_power, to 1e-4), and the energy decreases; one step, and an error-controlled run on the constraint.  Built and run
  * by tests/test_stepper_runtime_c.py under AddressSanitizer and UndefinedBehaviorSanitizer. */
 #include "check.h"
 #include "stepper_decls.h"
@@ -79,9 +81,40 @@ static const ncgen_joint_kind JOINT_KINDS[1] = {{k_distance, k_distance_hvv, 2, 
 static const ncgen_member_kind MEMBER_KINDS[1] = {{0, 0, k_point_mass, 2, 1, 0}};
 static const ncgen_kinds KINDS = {JOINT_KINDS, 1, MEMBER_KINDS, 1, 0};
 
+/* Force kind over features 0: a viscous drag on one point, x = (r, ṙ, c) -> y = (g = −c ṙ, V = 0,
+ * P = ṙ·g), J = ∂g/∂ṙ = −c I. */
+static int k_drag(const double **arg, double **res, long long *iw, double *w, int mem) {
+  const double *x = arg[0];
+  (void)iw; (void)w; (void)mem;
+  res[0][0] = -x[4] * x[2];
+  res[0][1] = -x[4] * x[3];
+  res[0][2] = 0;
+  res[0][3] = x[2] * res[0][0] + x[3] * res[0][1];
+  res[1][0] = res[1][3] = -x[4];
+  res[1][1] = res[1][2] = 0;
+  return 0;
+}
+
+/* Torque kind of member kind 0 (a stand-in: a point has no W): x = (q_I, τ) -> Q = τ (−q1, q0),
+ * a tangential push about the origin. */
+static int k_twist(const double **arg, double **res, long long *iw, double *w, int mem) {
+  const double *x = arg[0];
+  (void)iw; (void)w; (void)mem;
+  res[0][0] = -x[2] * x[1];
+  res[0][1] = x[2] * x[0];
+  return 0;
+}
+
+static const ncgen_feature_force_kind FEATURE_FORCE_KINDS[1] = {{k_drag, 2, 1, 1}};
+static const ncgen_torque_kind TORQUE_KINDS[1] = {{k_twist, 0}};
+
 #define TAB_KINDS (&KINDS)
 #define TAB_SPRING_3D k_spring
 #define TAB_SPRING_2D k_spring
+#define TAB_FEATURE_FORCES FEATURE_FORCE_KINDS
+#define TAB_TORQUES TORQUE_KINDS
+#define TAB_FF_IN 5
+#define TAB_FF_OUT 8
 #define MAX_HALVINGS 10
 #define NSTATS 6
 
@@ -108,6 +141,9 @@ static const int a_colind[] = {0, 1, 2}, a_row[] = {0, 0}, m_colind[] = {0, 2, 4
 static const double m_val[] = {MASS, 0, 0, MASS}, f_gravity[] = {0, -MASS * G};
 static const int spr_feat[] = {2, 0}, spr_kpos_ptr[] = {0, 4}, spr_kpos[] = {0, 3, 1, 4}, marker_feat[] = {0};
 static const int k_mpos[] = {0, 1, 3, 4}, k_apos[] = {2, 5}, k_atpos[] = {6, 7};
+static double f_const[2], ff_par[1], tq_val[1];
+static const int ff_kind[] = {0}, ff_feat_ptr[] = {0, 1}, ff_feat[] = {0}, ff_par_ptr[] = {0, 1};
+static const int ff_kpos_ptr[] = {0, 4}, ff_kpos[] = {0, 3, 1, 4}, tq_member[] = {0}, tq_c_ptr[] = {0, 0};
 
 static ncgen_tables T;
 static ncgen_stepper_tables S;
@@ -127,6 +163,10 @@ static void make_tables(double k, double l0, double c, double *par) {
   S.f_gravity = f_gravity; S.v_gravity = 0; S.spr_feat = spr_feat; S.spr_par = par;
   S.spr_kpos_ptr = spr_kpos_ptr; S.spr_kpos = spr_kpos; S.marker_feat = marker_feat;
   S.nnz_k = 9; S.nnz_v = 6; S.nnz_r = 6; S.k_mpos = k_mpos; S.k_apos = k_apos; S.k_atpos = k_atpos;
+  f_const[0] = c / 4; f_const[1] = 0; ff_par[0] = c / 2; tq_val[0] = c / 8;   /* c = 0: conservative */
+  S.f_const = f_const; S.n_ff = 1; S.ff_kind = ff_kind; S.ff_feat_ptr = ff_feat_ptr; S.ff_feat = ff_feat;
+  S.ff_par_ptr = ff_par_ptr; S.ff_par = ff_par; S.ff_kpos_ptr = ff_kpos_ptr; S.ff_kpos = ff_kpos;
+  S.n_torque = 1; S.tq_member = tq_member; S.tq_c_ptr = tq_c_ptr; S.tq_c = ff_par; S.tq_val = tq_val;
   S.qr.n = 3; S.qr.k_colind = k_colind; S.qr.k_row = k_row; S.qr.v_colind = v_colind; S.qr.v_row = v_row;
   S.qr.r_colind = r_colind; S.qr.r_row = r_row; S.qr.prinv = perm; S.qr.pc = perm;
 }

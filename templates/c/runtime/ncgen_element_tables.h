@@ -45,6 +45,20 @@ typedef struct {
   int n_q, n_c, n_out;
 } ncgen_member_kind;
 
+/* A force kind over features (the stepper's, ncgen_table_stepper.h): its kernel (y = [g; V; P]
+ * and J = ∂g/∂ḟ from x = [f; ḟ; numbers]), the features' size, their number and the numbers'. */
+typedef struct {
+  ncgen_kernel eval;
+  int dim, n_feat, n_par;
+} ncgen_feature_force_kind;
+
+/* A member kind's torque kernel (the stepper's: Q_I = W(q_I)ᵀ τ from x = [q_I; c_W; τ]; NULL
+ * without W) and the number of constants c_W. */
+typedef struct {
+  ncgen_kernel eval;
+  int n_c;
+} ncgen_torque_kind;
+
 typedef struct {
   const ncgen_joint_kind *joint;
   int n_joint;

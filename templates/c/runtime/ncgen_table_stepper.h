@@ -23,13 +23,26 @@
  *                   a slider's displacement) or atan2(y, x) of two such forms (act_kind 1, a
  *                   hinge's angle); act_form[act_form_ptr[j] ..] holds each form as
  *                   [c0; g (k); H (k x k, column-major)], value c0 + gᵀ q_j + ½ q_jᵀ H q_j.
+ *   f_const         a constant generalised force (nq; constant PointForces, GeneralizedForces
+ *                   of numbers), not part of V: its power vᵀ f_const counts in P;
+ *   force elements over features (ff_*: cables, torsional spring-dampers): element e of kind
+ *                   TAB_FEATURE_FORCES[ff_kind[e]] (kernel x = [f_1..f_n; ḟ_1..ḟ_n; numbers]
+ *                   -> y = [g (n dim); V; P], J = ∂g/∂ḟ) acts on the features
+ *                   ff_feat[ff_feat_ptr[e] ..] with the numbers ff_par[ff_par_ptr[e] ..]:
+ *                   Q = Σ_X G_Xᵀ g_X, its damping's products at ff_kpos in the loop order of
+ *                   tab_feature_forces;
+ *   torques         a constant couple tq_val (3 per torque in 3D, 1 in 2D) on member
+ *                   tq_member[e]: Q_I = W(q_I)ᵀ τ by the kernel TAB_TORQUES[mem_kind] (x =
+ *                   [q_I; c_W; τ], c_W = tq_c[tq_c_ptr[e] ..]); its power v_Iᵀ Q_I counts in P.
  * The Newton matrix K = [[M − h/2 ∂F/∂w, A(q)ᵀ], [A(q + h w), 0]] (nq + nc square) is kept in
  * one CSC pattern: k_mpos, k_apos, k_atpos give the nonzero of K of each nonzero of M, of
  * A (lower block) and of Aᵀ (upper block), spr_kpos those of the dampers' products in the
  * loop order of tab_springs; it is solved by the sparse QR of ncgen_sparse_qr.h.
  *
  * What the including file defines first: casadi_real, casadi_int; TAB_KINDS (a const
- * ncgen_kinds *), TAB_SPRING_2D and TAB_SPRING_3D (kernels); the status codes and
+ * ncgen_kinds *), TAB_SPRING_2D and TAB_SPRING_3D (kernels); TAB_FEATURE_FORCES (a const
+ * ncgen_feature_force_kind *), TAB_TORQUES (a const ncgen_torque_kind * indexed by member kind),
+ * TAB_FF_IN and TAB_FF_OUT (the largest input and outputs of those kernels); the status codes and
  * step_options of the stepper (as templates/c/stepper.c.j2 does); MAX_HALVINGS, NSTATS. */
 #ifndef NCGEN_TABLE_STEPPER_H
 #define NCGEN_TABLE_STEPPER_H
@@ -61,6 +74,14 @@ typedef struct {
   int n_act;                        /* actuated joints (above) */
   const int *act_kind, *act_ptr, *act_col, *act_form_ptr;
   const double *act_form, *act_tau; /* act_tau: nu per actuated joint */
+  const double *f_const;            /* nq: constant applied generalised force, not in V */
+  int n_ff;                         /* force elements over features */
+  const int *ff_kind, *ff_feat_ptr, *ff_feat, *ff_par_ptr;
+  const double *ff_par;
+  const int *ff_kpos_ptr, *ff_kpos;
+  int n_torque;                     /* constant couples */
+  const int *tq_member, *tq_c_ptr;
+  const double *tq_c, *tq_val;
   ncgen_qr_pattern qr;              /* n = nq + nc, the pattern of K and its analysis */
 } ncgen_stepper_tables;
 
@@ -107,11 +128,11 @@ static long tab_work_size(const ncgen_stepper_tables *S) {
   const ncgen_tables *T = S->T;
   long n = T->nq + T->nc;
   return tab_ew_size + 2L * T->nq + 2L * T->nf * T->dim +
-         TAB_SPRING_IN + TAB_SPRING_OUT + S->nnz_v + S->nnz_r + 3 * n;
+         TAB_SPRING_IN + TAB_SPRING_OUT + S->nnz_v + S->nnz_r + 3 * n + TAB_FF_IN + TAB_FF_OUT;
 }
 
 typedef struct {
-  double *ew, *qh, *F, *fq, *fv, *sx, *sy, *V, *R, *beta, *x, *y;
+  double *ew, *qh, *F, *fq, *fv, *sx, *sy, *V, *R, *beta, *x, *y, *fx, *fy;
 } tab_work;
 
 static tab_work tab_layout(double *w) {
@@ -130,6 +151,8 @@ static tab_work tab_layout(double *w) {
   b.beta = b.R + S->nnz_r;
   b.x = b.beta + T->nq + T->nc;
   b.y = b.x + T->nq + T->nc;
+  b.fx = b.y + T->nq + T->nc;
+  b.fy = b.fx + TAB_FF_IN;
   return b;
 }
 
@@ -153,8 +176,71 @@ static int tab_phi_jacobian(const double *q, const double **phi, const double **
   return 0;
 }
 
-/* F(q, v) into F (nq, if not NULL): gravity and the springs; kscale ∂F/∂v added into K (if
- * not NULL) at spr_kpos; the springs' energy added to *V and their power to *P (if not NULL).
+/* The constant forces, the force elements over features and the torques (see the top of
+ * this file), as tab_forces: added into F, kscale ∂F/∂v into K, energies into *V, powers into
+ * *P (each if not NULL); the features at q and v already in b->fq, b->fv; v NULL: at rest. */
+static int tab_feature_forces(const double *q, const double *v, double *F, double *K, double kscale, double *V,
+                              double *P, tab_work *b) {
+  const ncgen_stepper_tables *S = tab_cur;
+  const ncgen_tables *T = S->T;
+  int dim = T->dim, el, i, j, X, Y, e, e2;
+  if (F)
+    for (i = 0; i < T->nq; ++i) F[i] += S->f_const[i];
+  if (P && v)
+    for (i = 0; i < T->nq; ++i) *P += v[i] * S->f_const[i];
+  for (el = 0; el < S->n_ff; ++el) {
+    const ncgen_feature_force_kind *k = &TAB_FEATURE_FORCES[S->ff_kind[el]];
+    const int *f = S->ff_feat + S->ff_feat_ptr[el], *pos = S->ff_kpos + S->ff_kpos_ptr[el];
+    int nd = k->n_feat * dim;
+    const double *arg[1];
+    double *res[2], *J = b->fy + nd + 2;
+    for (X = 0; X < k->n_feat; ++X) {
+      memcpy(b->fx + X * dim, b->fq + f[X] * dim, sizeof(double) * (size_t)dim);
+      memcpy(b->fx + nd + X * dim, b->fv + f[X] * dim, sizeof(double) * (size_t)dim);
+    }
+    memcpy(b->fx + 2 * nd, S->ff_par + S->ff_par_ptr[el], sizeof(double) * (size_t)k->n_par);
+    arg[0] = b->fx;
+    res[0] = b->fy;
+    res[1] = J;
+    if (k->eval(arg, res, 0, b->ew, 0)) return 1;
+    if (V) *V += b->fy[nd];
+    if (P) *P += b->fy[nd + 1];
+    for (X = 0; X < k->n_feat; ++X)
+      for (e = T->feat_ptr[f[X]]; e < T->feat_ptr[f[X] + 1]; ++e) {
+        i = X * dim + T->feat_row[e];
+        if (F) F[T->feat_col[e]] += T->feat_coef[e] * b->fy[i];
+        if (!K) continue;
+        for (Y = 0; Y < k->n_feat; ++Y)   /* ∂Q_col(e)/∂v_col(e2) = G_e (∂g_i/∂ḟ_Y,j) G_e2 */
+          for (e2 = T->feat_ptr[f[Y]]; e2 < T->feat_ptr[f[Y] + 1]; ++e2)
+            K[*pos++] += kscale * T->feat_coef[e] * T->feat_coef[e2] * J[i + nd * (Y * dim + T->feat_row[e2])];
+      }
+  }
+  for (el = 0; el < S->n_torque; ++el) {
+    int m = S->tq_member[el], base = T->mem_q_ptr[m];
+    const ncgen_torque_kind *k = &TAB_TORQUES[T->mem_kind[m]];
+    int nq_i = TAB_KINDS->member[T->mem_kind[m]].n_q, n_tau = dim == 3 ? 3 : 1;
+    const double *arg[1];
+    double *res[1];
+    for (j = 0; j < nq_i; ++j)
+      b->fx[j] = T->mem_q_col[base + j] >= 0 ? q[T->mem_q_col[base + j]] : T->mem_q_const[base + j];
+    memcpy(b->fx + nq_i, S->tq_c + S->tq_c_ptr[el], sizeof(double) * (size_t)k->n_c);
+    memcpy(b->fx + nq_i + k->n_c, S->tq_val + n_tau * el, sizeof(double) * (size_t)n_tau);
+    arg[0] = b->fx;
+    res[0] = b->fy;
+    if (k->eval(arg, res, 0, b->ew, 0)) return 1;
+    for (j = 0; j < nq_i; ++j) {
+      int c = T->mem_q_col[base + j];
+      if (c < 0) continue;
+      if (F) F[c] += b->fy[j];
+      if (P && v) *P += v[c] * b->fy[j];
+    }
+  }
+  return 0;
+}
+
+/* F(q, v) into F (nq, if not NULL): gravity, tab_feature_forces and the springs; kscale ∂F/∂v
+ * added into K (if not NULL) at ff_kpos and spr_kpos; the energies added to *V and the powers
+ * to *P (if not NULL).
  * v NULL: at rest. */
 static int tab_forces(const double *q, const double *v, double *F, double *K, double kscale, double *V, double *P,
                       tab_work *b) {
@@ -163,10 +249,13 @@ static int tab_forces(const double *q, const double *v, double *F, double *K, do
   int dim = T->dim, s, i, X, Y, e, e2;
   ncgen_kernel spring = dim == 3 ? TAB_SPRING_3D : TAB_SPRING_2D;
   if (F) memcpy(F, S->f_gravity, sizeof(double) * (size_t)T->nq);
+  if (S->n_spring || S->n_ff) {
+    ncgen_tables_features(T, q, b->fq, T->feat_const);
+    if (v) ncgen_tables_features(T, v, b->fv, 0);
+    else memset(b->fv, 0, sizeof(double) * (size_t)T->nf * (size_t)dim);
+  }
+  if (tab_feature_forces(q, v, F, K, kscale, V, P, b)) return 1;
   if (!S->n_spring) return 0;
-  ncgen_tables_features(T, q, b->fq, T->feat_const);
-  if (v) ncgen_tables_features(T, v, b->fv, 0);
-  else memset(b->fv, 0, sizeof(double) * (size_t)T->nf * (size_t)dim);
   for (s = 0; s < S->n_spring; ++s) {
     const int *f = S->spr_feat + 2 * s, *pos = S->spr_kpos + S->spr_kpos_ptr[s];
     const double *arg[1];
