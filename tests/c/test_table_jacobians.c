@@ -83,9 +83,17 @@ static const ncgen_joint_kind JOINT_KINDS[1] = {{k_distance, k_distance_hvv, 2, 
 static const ncgen_member_kind MEMBER_KINDS[1] = {{0, 0, k_point_mass, 2, 1, 0}};
 static const ncgen_kinds KINDS = {JOINT_KINDS, 1, MEMBER_KINDS, 1, 0};
 
+/* No force elements over features and no torques here (n_ff = n_torque = 0): empty kinds. */
+static const ncgen_feature_force_kind FEATURE_FORCE_KINDS[1] = {{0, 0, 0, 0}};
+static const ncgen_torque_kind TORQUE_KINDS[1] = {{0, 0}};
+
 #define TAB_KINDS (&KINDS)
 #define TAB_SPRING_3D k_spring
 #define TAB_SPRING_2D k_spring
+#define TAB_FEATURE_FORCES FEATURE_FORCE_KINDS
+#define TAB_TORQUES TORQUE_KINDS
+#define TAB_FF_IN 1
+#define TAB_FF_OUT 1
 #define MAX_HALVINGS 10
 #define NSTATS 6
 #define STEP_OK 0

@@ -74,7 +74,7 @@ typedef struct {
   int n_act;                        /* actuated joints (above) */
   const int *act_kind, *act_ptr, *act_col, *act_form_ptr;
   const double *act_form, *act_tau; /* act_tau: nu per actuated joint */
-  const double *f_const;            /* nq: constant applied generalised force, not in V */
+  const double *f_const;            /* nq (NULL: none): constant generalised force, not in V */
   int n_ff;                         /* force elements over features */
   const int *ff_kind, *ff_feat_ptr, *ff_feat, *ff_par_ptr;
   const double *ff_par;
@@ -184,9 +184,9 @@ static int tab_feature_forces(const double *q, const double *v, double *F, doubl
   const ncgen_stepper_tables *S = tab_cur;
   const ncgen_tables *T = S->T;
   int dim = T->dim, el, i, j, X, Y, e, e2;
-  if (F)
+  if (F && S->f_const)                   /* f_const NULL: no constant load */
     for (i = 0; i < T->nq; ++i) F[i] += S->f_const[i];
-  if (P && v)
+  if (P && v && S->f_const)
     for (i = 0; i < T->nq; ++i) *P += v[i] * S->f_const[i];
   for (el = 0; el < S->n_ff; ++el) {
     const ncgen_feature_force_kind *k = &TAB_FEATURE_FORCES[S->ff_kind[el]];
