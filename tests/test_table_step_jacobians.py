@@ -332,14 +332,23 @@ def test_stepper_tables_struct_matches_its_python_mirror():
 
 def test_forces_without_table_jacobians_take_the_flat_path():
     """A force the step Jacobians of the tables have no derivatives for (here a constant
-    PointForce: not an input force) keeps "auto" on the flat step function and is named by
-    "tables", whether or not the table stepper covers it."""
+    Torque: the table stepper covers it) keeps "auto" on the flat step function and is named
+    by "tables"; a constant PointForce (a constant load: no derivative) is covered, its
+    Jacobians equal central differences."""
     from ncgen.control.step import _jacobian_uncovered
 
+    s = nc.System("tab_const_twist", gravity=(0.0, -9.81))
+    bar = s.add_bar("bar", coords="rr", mass=1.0, ends=[s.ground.point((0.0, 0.0)), (0.6, -0.3)])
+    s.add_force(nc.Torque(bar, (0.4,), name="twist"))
+    model = s.build()
+    assert _jacobian_uncovered(model) == {"Torque (no step Jacobian from the tables)": ["force 'twist'"]}
+    with pytest.raises(UnsupportedElements, match=r"Torque \(no step Jacobian from the tables\)"):
+        nc.step_function(model, 0.01, kernels="tables")
     s = nc.System("tab_const_push", gravity=(0.0, -9.81))
     bar = s.add_bar("bar", coords="rr", mass=1.0, ends=[s.ground.point((0.0, 0.0)), (0.6, -0.3)])
     s.add_force(nc.PointForce(bar, (0.3, 0.0), force=(1.0, 0.0), name="push"))
     model = s.build()
-    assert _jacobian_uncovered(model) == {"PointForce (no step Jacobian from the tables)": ["force 'push'"]}
-    with pytest.raises(UnsupportedElements, match=r"PointForce \(no step Jacobian from the tables\)"):
-        nc.step_function(model, 0.01, kernels="tables")
+    assert _jacobian_uncovered(model) == {}
+    st = nc.step_function(model, 0.01, kernels="tables")
+    x, u = moving_state(model, st)
+    check_against_differences(st, x, u, "constant push")
