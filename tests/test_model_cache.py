@@ -96,7 +96,7 @@ def test_stored_urdf_model_equals_a_fresh_build(store, monkeypatch):
 def test_stored_urdf_model_holds_no_sympy_and_its_tree_map_is_stored(store, monkeypatch):
     """Coordinate types are stored by name (their SymPy derivation is not in the entry) and the
     tree map, whose derivation needs them, is stored beside the model; it equals a fresh one."""
-    from ncgen.runtime.tree_check import tree_function
+    from ncgen.codegen.tree_check import tree_function
     path = str(nc.robots.urdf_path("ur5"))
     load_model(path)
     model = load_model(path)

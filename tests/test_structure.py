@@ -63,7 +63,7 @@ MANIFOLD_USERS = {"assembly/drive_assembly.py": {"newton"},
                   "assembly/joint_space.py": {"newton", "solve_linear"},
                   "assembly/kinematics.py": {"newton", "numerical_rank"},
                   "optim/interpolate.py": {"kkt_solve"},
-                  "runtime/tree_check.py": {"numerical_rank"},
+                  "codegen/tree_check.py": {"numerical_rank"},
                   "model/model.py": {"numerical_rank"}}
 #: Dense solves, ranks and bases that would be manifold numerics written again.
 LINEAR_ALGEBRA = ("solve", "lstsq", "svd", "pinv", "matrix_rank", "null_space", "qr")

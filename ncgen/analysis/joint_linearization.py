@@ -9,7 +9,7 @@ import numpy as np
 
 from ncgen.errors import ModelError
 from ncgen.runtime.tree_algorithms import aba_derivatives, rnea_applies
-from ncgen.runtime.tree_check import check_tree, unit_quaternions
+from ncgen.codegen.tree_check import check_tree, unit_quaternions
 from ncgen.validation import as_vector
 
 

@@ -23,6 +23,8 @@ from ncgen.codegen.package import LARGE_FUNCTION_INSTRUCTIONS, ExtraSource, writ
 #: are compiled at -O1 (as the tree kernel: gcc's -O2 time grows faster than linearly).
 O1_INSTRUCTIONS = 40_000
 
+#: Status of a joint loop stopped by Ctrl-C (given by the Python side: the C loop never returns it).
+INTERRUPTED = 5
 #: ``{name}_joint_run`` as templates/c/joint_loop.c.j2 defines it.
 JOINT_RUN = Signature("int", (
     ("int", "method"), ("int", "n_out"), ("const double *", "t_out"), ("double *", "X"), ("const double *", "W"),

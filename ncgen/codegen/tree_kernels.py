@@ -166,7 +166,7 @@ def write_tree_package(out_dir):
     fns = kernels()
     if any(f.sz_iw() for f in fns) or any(f.sz_arg() > 1 or f.sz_res() > 1 for f in fns):
         raise CodegenError("tree kernels: the loops expect kernels with no integer work, one argument and one result")
-    from ncgen.runtime.tree_check import PIVOT_TOL
+    from ncgen.codegen.tree_check import PIVOT_TOL
 
     context = {"pivot_tol": repr(float(PIVOT_TOL)),
                "kinds": [{"name": k.name, "nq": k.nq, "nv": k.nv, "n_num": k.n_num} for k in JOINT_KINDS],

@@ -1,7 +1,7 @@
 """A tree's numbers as data tables for the joint-space algorithms of the tree library
 (``templates/c/runtime/ncgen_tree_tables.h``; kernels :mod:`ncgen.codegen.tree_kernels`).
 
-:func:`tree_tables` packs a 3D tree (:func:`~ncgen.runtime.tree_check.check_tree`) into
+:func:`tree_tables` packs a 3D tree (:func:`~ncgen.codegen.tree_check.check_tree`) into
 :class:`TreeTables`: one body per member, parents before children (the spanning tree's
 breadth-first order), each with the kind of the joint to its parent, where its positions and
 rates start in ``qj``/``vj``, the joint's numbers (placements and axes) and the member's
@@ -68,7 +68,7 @@ def tree_tables(model) -> TreeTables:
 
 def _pack(model) -> TreeTables:
     from ncgen.assembly.tree_dynamics import MimicMap, _owned, member_inertia, member_twist_map, uniform_gravity
-    from ncgen.runtime.tree_check import check_tree
+    from ncgen.codegen.tree_check import check_tree
 
     js = model.joint_space
     if js.dim != 3:

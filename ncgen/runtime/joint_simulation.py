@@ -30,6 +30,7 @@ import time
 import casadi as ca
 import numpy as np
 
+from ncgen.codegen.joint_loop import INTERRUPTED
 from ncgen.errors import CompilerNotFound, ModelError, NcgenError, SimulationError, SimulationInterrupted, option
 from ncgen.runtime.feedback import FeedbackFailed, call_feedback, with_partial
 from ncgen.interrupts import call_interruptibly
@@ -44,9 +45,6 @@ _STATUS = {1: "the joint-space mass matrix is singular or the accelerations are 
               "a stiff joint limit or friction law; raise max_steps, loosen rtol, or use method='idas')",
            3: "the step size fell to round-off (a discontinuity or a stiff law)",
            4: "out of memory"}
-#: Status of a loop stopped by Ctrl-C.
-INTERRUPTED = 5
-
 
 
 def joint_space_applies(model) -> str | None:
@@ -104,7 +102,7 @@ class JointLoop:
         from ncgen.assembly.joint_ode import quaternion_offsets
         from ncgen.codegen.c_binding import bind, open_library
         from ncgen.codegen.joint_loop import JOINT_RUN
-        from ncgen.runtime.tree_check import tree_function
+        from ncgen.codegen.tree_check import tree_function
 
         self.model, self.ode, self.library = model, ode, library
         self._lib = open_library(library)

@@ -25,7 +25,7 @@ Conventions are Pinocchio's (``pinocchio.rnea``, ``crba``, ``aba``,
 ``[v, ω]`` in its frame), efforts ``τ`` and every derivative per independent joint rate
 (mimic followers left out), position derivatives in the tangent space, gravity and the
 model's other passive forces included at inputs ``u = 0``.  Models: trees of joints with
-coordinates, mimic joints allowed (:func:`~ncgen.runtime.tree_check.check_tree`), 3D.
+coordinates, mimic joints allowed (:func:`~ncgen.codegen.tree_check.check_tree`), 3D.
 """
 from __future__ import annotations
 
@@ -37,18 +37,8 @@ from ncgen.codegen.compiler import compiler_present
 from ncgen.codegen.fast_call import fast_caller
 from ncgen.errors import CompilerNotFound, ModelError, NcgenError, ShapeError
 from ncgen.model.data import cached, model_data
-from ncgen.runtime.tree_check import PIVOT_TOL, check_tree, compile_tree_function, unit_quaternions
+from ncgen.codegen.tree_check import ALGORITHMS, PIVOT_TOL, check_tree, compile_tree_function, unit_quaternions
 from ncgen.validation import MAX_MAGNITUDE, as_numbers, as_vector
-
-#: ``name: (inputs after t before p, outputs)`` of every algorithm.
-ALGORITHMS = {
-    "rnea": (("qj", "vj", "aj"), ("tau",)),
-    "crba": (("qj",), ("M",)),
-    "aba": (("qj", "vj", "tau"), ("aj",)),
-    "rnea_derivatives": (("qj", "vj", "aj"), ("tau", "dtau_dq", "dtau_dv", "dtau_da")),
-    "aba_derivatives": (("qj", "vj", "tau"), ("aj", "da_dq", "da_dv", "da_dtau")),
-}
-
 
 class AlgorithmKernel:
     """``k(*args) -> outputs``: one compiled algorithm of a tree (:data:`ALGORITHMS`: ``args``
@@ -151,7 +141,7 @@ class AlgorithmKernel:
 def algorithm_kernel(model, name: str, *, cflags=None) -> AlgorithmKernel:
     """The compiled algorithm ``name`` (a key of :data:`ALGORITHMS`) of the tree ``model``,
     built once per model (the library is cached by content).  Raises :class:`ModelError` for a
-    model that is not a tree (:func:`~ncgen.runtime.tree_check.check_tree`) or not 3D."""
+    model that is not a tree (:func:`~ncgen.codegen.tree_check.check_tree`) or not 3D."""
     from ncgen.assembly import tree_algorithms
 
     if name not in ALGORITHMS:

@@ -28,7 +28,7 @@ from ncgen.codegen.fast_call import fast_caller
 from ncgen.errors import ModelError
 from ncgen.model.data import cached, model_data
 from ncgen.runtime.joint_dynamics import forward_dynamics
-from ncgen.runtime.tree_check import PIVOT_TOL, check_tree, compile_tree_function, unit_quaternions
+from ncgen.codegen.tree_check import PIVOT_TOL, check_tree, compile_tree_function, unit_quaternions
 from ncgen.validation import MAX_MAGNITUDE, as_numbers, as_vector
 
 METHODS = ("auto", "recursive", "projection")
@@ -123,7 +123,7 @@ def joint_forward_dynamics_kernel(model, *, method: str = "auto", cflags=None) -
     """The compiled joint-space forward dynamics of the tree ``model`` (built once per model
     and method; the library is cached by content; ``cflags`` as for
     :func:`~ncgen.codegen.compile_cache.compile_package`, by default -O2, or -O1 up to
-    :data:`~ncgen.runtime.tree_check.O1_INSTRUCTIONS` and the package's large-source flags (-O1)
+    :data:`~ncgen.codegen.tree_check.O1_INSTRUCTIONS` and the package's large-source flags (-O1)
     beyond for long kernels).  ``method``: ``"recursive"`` (3D),
     ``"projection"`` (``M_j = Gᵀ M G`` by AD of the tree map) or ``"auto"`` (recursive in
     3D when every member is a rigid body, else projection).  Raises :class:`ModelError` for

@@ -5,7 +5,7 @@ the compile cache like the element library (:func:`~ncgen.runtime.table_library.
 index ``tree-tables-<sources key>-<compiler key>.json``): a tree of the shipped joint kinds
 reaches compiled RNEA/ABA with no call of the C compiler.
 
-:class:`TableAlgorithm` is one algorithm of :data:`~ncgen.runtime.tree_algorithms.ALGORITHMS`
+:class:`TableAlgorithm` is one algorithm of :data:`~ncgen.codegen.tree_check.ALGORITHMS`
 bound to one model's :class:`~ncgen.codegen.tree_tables.TreeTables`, with the interface the
 callers of :class:`~ncgen.runtime.tree_algorithms.AlgorithmKernel` use (``k(*args)``,
 :meth:`TableAlgorithm.batch`).  Time and parameters do not enter: the tables cover only
@@ -35,7 +35,7 @@ from ncgen.codegen.tree_kernels import JOINT_KINDS, PACKAGE, SOURCES, kind_names
 from ncgen.codegen.tree_tables import TreeTables
 from ncgen.errors import CodegenError, ModelError
 from ncgen.runtime.table_library import cached_library
-from ncgen.runtime.tree_check import PIVOT_TOL
+from ncgen.codegen.tree_check import ALGORITHMS, PIVOT_TOL
 from ncgen.validation import MAX_MAGNITUDE
 from ncgen.version import __version__
 
@@ -143,7 +143,7 @@ class BoundTree:
 
 class TableAlgorithm:
     """``k(*args) -> outputs``: the algorithm ``name`` (a key of
-    :data:`~ncgen.runtime.tree_algorithms.ALGORITHMS`) of one tree from its tables; the
+    :data:`~ncgen.codegen.tree_check.ALGORITHMS`) of one tree from its tables; the
     arguments as :class:`~ncgen.runtime.tree_algorithms.AlgorithmKernel` takes them (``qj``
     with unit quaternions), checked by the caller.  Outputs are fresh arrays (matrices
     ``(ni, ni)``).  Raises :class:`ModelError` for a singular mass matrix or a non-finite
@@ -152,8 +152,6 @@ class TableAlgorithm:
     kernels = "tables"
 
     def __init__(self, tree: BoundTree, name: str):
-        from ncgen.runtime.tree_algorithms import ALGORITHMS
-
         self.tree, self.name = tree, name
         self.input_names, self.output_names = ALGORITHMS[name]
         T = tree.tables
@@ -274,7 +272,7 @@ class TableJointLoop:
 
     def __init__(self, model):
         from ncgen.assembly.joint_ode import quaternion_offsets
-        from ncgen.runtime.tree_check import tree_function
+        from ncgen.codegen.tree_check import tree_function
 
         self.model = model
         self.tree_bound = table_algorithm(model, "aba").tree
@@ -298,7 +296,7 @@ class TableJointLoop:
             atol: float, substeps: int, max_steps: int, stop: bool, stats: np.ndarray) -> tuple[int, int]:
         """As ``JointLoop.run`` (``p`` does not enter: the tables' dynamics take none)."""
         from ncgen.interrupts import call_interruptibly
-        from ncgen.runtime.joint_simulation import INTERRUPTED
+        from ncgen.codegen.joint_loop import INTERRUPTED
 
         ptr = (lambda a: None if a is None or a.size == 0 else a.ctypes.data)
         done, flag = ctypes.c_int(0), ctypes.c_int(0)

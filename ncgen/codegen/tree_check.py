@@ -1,11 +1,21 @@
-"""What every compiled kernel of a tree shares: the check that a model is a tree (mimic joints
-allowed), the accepted Cholesky pivot, the compile flags of long kernels and the
-normalisation of joint quaternions."""
+"""What every compiled kernel of a tree shares: the algorithms' signatures, the check that a
+model is a tree (mimic joints allowed), the accepted Cholesky pivot, the compile flags of long
+kernels and the normalisation of joint quaternions."""
 from __future__ import annotations
 
 import numpy as np
 
 from ncgen.errors import ModelError
+
+#: ``name: (inputs after t before p, outputs)`` of every algorithm.
+ALGORITHMS = {
+    "rnea": (("qj", "vj", "aj"), ("tau",)),
+    "crba": (("qj",), ("M",)),
+    "aba": (("qj", "vj", "tau"), ("aj",)),
+    "rnea_derivatives": (("qj", "vj", "aj"), ("tau", "dtau_dq", "dtau_dv", "dtau_da")),
+    "aba_derivatives": (("qj", "vj", "tau"), ("aj", "da_dq", "da_dv", "da_dtau")),
+}
+
 
 #: Smallest accepted relative Cholesky pivot of the joint-space mass matrix ``M_j``
 #: (``d_k / (M_j)_kk ≥ 1 / cond``): below it the dynamics are refused as singular.
