@@ -35,7 +35,7 @@ def test_ctrl_c_stops_an_idas_run_keeps_the_old_result_and_writes_the_partial_on
     assert old.read_bytes() == b"the previous result"
     partial = tmp_path / "chain.incomplete.npz"
     if "partial trajectory" in err:                       # the run had started (not still building)
-        traj = nc.runtime.Trajectory.load(partial)
+        traj = Trajectory.load(partial)
         assert 0 < traj.t[-1] < 5000 and not traj.complete
 
 
