@@ -491,8 +491,10 @@ def test_stack_of_five_boxes_with_friction_rests_without_drift():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("n", [5, pytest.param(10, marks=pytest.mark.xfail(
-    reason="the 10-box frictional stack does not rest: from t = 3.4 s its boxes drift sideways, by 1.5 cm at "
-           "10 s (h = 5 ms; measured on the merged tree of stop 44); the 5-box stack rests", strict=True))])
+    reason="the 10-box frictional stack does not rest: at h = 5 ms its solves converge (least-norm loads, no "
+           "drift) until t = 1.52 s, where cone_newton fails from the warm start (residual 1e-4 for a problem "
+           "solved to 1e-14 the step before) and Gauss-Seidel stops at 300 sweeps; cause not found (issue 36)",
+    strict=True))])
 def test_stack_of_boxes_with_friction_rests_without_drift_for_10_s(n):
     _check_frictional_stack(simulate(stack(0.5, n), 10.0, dt=0.05), n)
 

@@ -350,8 +350,10 @@ static int cone_inside(const workspace *ws, int na, const int *first, const int 
  * rows of the contacts with an impulse and, with `touching`, of the closed contacts without
  * one whose normal and tangent velocities vanish (below CONE_FLOOR (1 + max |U|)): the laws
  * let those carry a load too, and a solve that happened to leave one of four symmetric
- * corners at 0 would otherwise keep it there and load the others unevenly.  Each contact
- * with an impulse must stick (tangent velocity below that floor) or have no friction (a
+ * corners at 0 would otherwise keep it there and load the others unevenly.  A contact whose
+ * impulse is of round-off size with P_N <= 0 (at most CONE_FLOOR max |P|: Newton's steps
+ * leave such specks outside the cone) first gets none, with U updated.  Each contact with
+ * an impulse must then stick (tangent velocity below that floor) or have no friction (a
  * slipping contact's tangent impulse is fixed by its normal one: then nothing is done).
  * G_AA = L L^T by Cholesky with the rows whose pivot falls below CONE_PIVOT of their
  * diagonal dropped; each dropped row j gives the null vector n_j = (-L_I^-T l_j, 1, 0, ...)
@@ -369,8 +371,18 @@ static int cone_min_norm_over(workspace *ws, int na, const int *first, const cas
   casadi_real *L = ws->S, *dP = ws->cn + 2 * ND, *gdp = ws->cn + 3 * ND, *P0 = ws->cn + 6 * ND, *U0 = ws->cn + 7 * ND;
   casadi_int *dropped = ws->cni + ND, *start = ws->cni;
   casadi_real before, after;
-  casadi_real size = 0, t = 1;
+  casadi_real size = 0, pmax = 0, t = 1;
   int idx[ND], in[NK], m = 0, nd = 0, nz = 0, c, d, i, j, k, pass;
+  for (i = 0; i < nr; ++i) pmax = fmax(pmax, fabs(ws->P[i]));
+  for (c = 0; c < na; ++c) { /* a contact's impulse of round-off size, P_N <= 0: set to 0 */
+    casadi_real most = 0;
+    for (i = first[c]; i < first[c + 1]; ++i) most = fmax(most, fabs(ws->P[i]));
+    if (ws->P[first[c]] > 0 || most > CONE_FLOOR * pmax) continue;
+    for (i = first[c]; i < first[c + 1]; ++i) {
+      for (k = (int) ws->gp[i]; k < ws->gp[i + 1]; ++k) ws->U[ws->gi[k]] -= ws->G[ws->gi[k] + i * nr] * ws->P[i];
+      ws->P[i] = 0;
+    }
+  }
   for (i = 0; i < nr; ++i) size = fmax(size, fabs(ws->U[i]));
   for (c = 0; c < na; ++c) {
     const int r0 = first[c], nt = first[c + 1] - r0 - 1, kc = (int) ws->act[c];

@@ -341,38 +341,17 @@ static int cone_inside(const workspace *ws, int na, const int *first, const int 
   return 1;
 }
 
-/* The group of each active contact into group[c] (its least member): contacts coupled
- * through G (sharing a member, directly or through other contacts) are in one group, and
- * groups are independent problems (the scenes of one model, the bodies of a heap apart). */
-static void cone_groups(const workspace *ws, int na, const int *first, int *group) {
-  int owner[ND], c, r, k;
-  for (c = 0; c < na; ++c) {
-    group[c] = c;
-    for (r = first[c]; r < first[c + 1]; ++r) owner[r] = c;
-  }
-  for (r = 0; r < first[na]; ++r)
-    for (k = (int) ws->gp[r]; k < ws->gp[r + 1]; ++k) {
-      int a = owner[r], b = owner[ws->gi[k]];
-      while (group[a] != a) a = group[a];
-      while (group[b] != b) b = group[b];
-      if (a < b) group[b] = a;
-      else if (b < a) group[a] = b;
-    }
-  for (c = 0; c < na; ++c)
-    while (group[c] != group[group[c]]) group[c] = group[group[c]];
-}
-
 /* Where the support is statically indeterminate (a box's four coplanar corners, a stack's
  * faces) the contact laws hold on a whole family P + null(G_AA) of impulses: this picks its
  * member of least Euclidean norm |P|, so that symmetric loads get symmetric forces.  A = the
  * rows of the contacts with an impulse and, with `touching`, of the closed contacts without
  * one whose normal and tangent velocities vanish (below CONE_FLOOR (1 + max |U|)): the laws
  * let those carry a load too, and a solve that happened to leave one of four symmetric
- * corners at 0 would otherwise keep it there and load the others unevenly.  A group of
- * coupled contacts (cone_groups()) takes part if each of its contacts with an impulse
- * sticks (tangent velocity below that floor) or has no friction (a slipping contact's
- * tangent impulse is fixed by its normal one); the other groups are left as they are (G
- * couples no two groups, so the move leaves their velocities alone).
+ * corners at 0 would otherwise keep it there and load the others unevenly.  A contact whose
+ * impulse is of round-off size with P_N <= 0 (at most CONE_FLOOR max |P|: Newton's steps
+ * leave such specks outside the cone) first gets none, with U updated.  Each contact with
+ * an impulse must then stick (tangent velocity below that floor) or have no friction (a
+ * slipping contact's tangent impulse is fixed by its normal one: then nothing is done).
  * G_AA = L L^T by Cholesky with the rows whose pivot falls below CONE_PIVOT of their
  * diagonal dropped; each dropped row j gives the null vector n_j = (-L_I^-T l_j, 1, 0, ...)
  * (L_I the kept rows before j, l_j row j of the factor), orthonormalised (Gram-Schmidt, twice)
@@ -389,12 +368,20 @@ static int cone_min_norm_over(workspace *ws, int na, const int *first, const cas
   casadi_real *L = ws->S, *dP = ws->cn + 2 * ND, *gdp = ws->cn + 3 * ND, *P0 = ws->cn + 6 * ND, *U0 = ws->cn + 7 * ND;
   casadi_int *dropped = ws->cni + ND, *start = ws->cni;
   casadi_real before, after;
-  casadi_real size = 0, t = 1;
-  int idx[ND], in[NK], group[NK], slips[NK], m = 0, nd = 0, nz = 0, c, d, i, j, k, pass;
+  casadi_real size = 0, pmax = 0, t = 1;
+  int idx[ND], in[NK], m = 0, nd = 0, nz = 0, c, d, i, j, k, pass;
+  for (i = 0; i < nr; ++i) pmax = fmax(pmax, fabs(ws->P[i]));
+  for (c = 0; c < na; ++c) { /* a contact's impulse of round-off size, P_N <= 0: set to 0 */
+    casadi_real most = 0;
+    for (i = first[c]; i < first[c + 1]; ++i) most = fmax(most, fabs(ws->P[i]));
+    if (ws->P[first[c]] > 0 || most > CONE_FLOOR * pmax) continue;
+    for (i = first[c]; i < first[c + 1]; ++i) {
+      for (k = (int) ws->gp[i]; k < ws->gp[i + 1]; ++k) ws->U[ws->gi[k]] -= ws->G[ws->gi[k] + i * nr] * ws->P[i];
+      ws->P[i] = 0;
+    }
+  }
   for (i = 0; i < nr; ++i) size = fmax(size, fabs(ws->U[i]));
-  cone_groups(ws, na, first, group);
-  for (c = 0; c < na; ++c) slips[c] = 0;
-  for (c = 0; c < na; ++c) { /* in[c]: 1 touching (normal and tangent velocities 0), 0 not */
+  for (c = 0; c < na; ++c) {
     const int r0 = first[c], nt = first[c + 1] - r0 - 1, kc = (int) ws->act[c];
     casadi_real pt = 0, vt = 0;
     for (d = 1; d <= nt; ++d) {
@@ -402,16 +389,13 @@ static int cone_min_norm_over(workspace *ws, int na, const int *first, const cas
       pt += ws->P[r0 + d] * ws->P[r0 + d];
       vt += v * v;
     }
-    in[c] = fabs(ws->U[r0] + bias[c]) <= CONE_FLOOR * (1 + size) && sqrt(vt) <= CONE_FLOOR * (1 + size);
-    if (ws->P[r0] > 0 ? sqrt(vt) > CONE_FLOOR * (1 + size) : pt > 0) slips[group[c]] = 1;
-  }
-  for (c = 0; c < na; ++c) {
-    const int r0 = first[c], nt = first[c + 1] - r0 - 1;
-    if (slips[group[c]] || (ws->P[r0] <= 0 && !(touching && in[c]))) {
-      in[c] = 0;
-      continue;
-    }
-    nz += ws->P[r0] <= 0;
+    in[c] = 0;
+    if (ws->P[r0] <= 0) {
+      if (pt > 0) return 1;
+      if (!touching || fabs(ws->U[r0] + bias[c]) > CONE_FLOOR * (1 + size) || sqrt(vt) > CONE_FLOOR * (1 + size))
+        continue;
+      ++nz;
+    } else if (sqrt(vt) > CONE_FLOOR * (1 + size)) return 1; /* slipping */
     in[c] = 1;
     for (d = 0; d <= nt; ++d) idx[m++] = r0 + d;
   }
