@@ -182,10 +182,12 @@ def test_fast_bodies_and_every_kind_run_as_with_the_flat_kernels():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(reason="not equal yet: a contact normal force differs by 3.06 N from the flat kernels' on the "
-                          "merged tree of stop 45 (cubes crossed at 45°, edges on; the eight edge crossings carry "
-                          "a statically indeterminate load); the closed-form rest test of test_contact_edges passes",
-                   strict=False)
+@pytest.mark.xfail(reason="the flat kernels' run misses the least-norm loads: at t = 0.053 s the bullet slides on "
+                          "the floor in the same contact problem, and cone_min_norm, stopped by any slipping contact, "
+                          "leaves the cubes' eight edge crossings at 0-3.54 N (0.055-0.1 s) where the element kernels' "
+                          "run has the least-norm 1.2263 N on each; a move per group of coupled contacts fixes that but "
+                          "made a ball on a crate lose a tenth of its load in one output row of the combined scene of "
+                          "test_contact_shapes_pairs (cause not found; issue 36)", strict=False)
 def test_crossed_cubes_on_their_edges_run_as_with_the_flat_kernels():
     """As above with the cubes crossed at 45°, resting on the crossings of their edges
     (``edges=True``: several minutes of compiling for the flat kernels)."""

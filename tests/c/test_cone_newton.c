@@ -173,10 +173,72 @@ static void test_min_norm(void) {
   CHECK(cone_residual(&ws, NK, first, bias) < 1e-13, "residual %g", cone_residual(&ws, NK, first, bias));
 }
 
+/* The redundant pair of test_redundant() after a solve that left contact 1 touching with no
+ * impulse (contact 0 alone stops the shared velocity, U = 0 on both): the laws let contact 1
+ * carry a share, so the least-norm move takes it in and splits the impulse evenly. */
+static void test_min_norm_touching(void) {
+  casadi_real G[ND * ND];
+  const casadi_real U0[ND] = {-1, 0.2, 0.1, -1, 0.2, 0.1, 1, 0, 0};
+  const casadi_real solved[3] = {1, -0.2, -0.1};
+  workspace ws;
+  int i, j, a, b;
+  memset(G, 0, sizeof G);
+  for (a = 0; a < 2; ++a)
+    for (b = 0; b < 2; ++b)
+      for (i = 0; i < 3; ++i) G[(3 * a + i) + (3 * b + i) * ND] = 1;
+  for (i = 6; i < ND; ++i) G[i + i * ND] = 1;
+  ws = make(G, U0);
+  for (i = 0; i < 3; ++i) {
+    ws.P[i] = solved[i];
+    for (j = 0; j < ND; ++j) ws.U[j] += G[j + i * ND] * solved[i];
+  }
+  cone_min_norm(&ws, NK, first, bias, 1e-13);
+  for (a = 0; a < 2; ++a) {
+    CHECK(fabs(ws.P[3 * a] - 0.5) < 1e-14, "P_N%d = %.17g, expected 1/2", a, ws.P[3 * a]);
+    CHECK(fabs(ws.P[3 * a + 1] + 0.1) < 1e-14 && fabs(ws.P[3 * a + 2] + 0.05) < 1e-14, "P_T%d = (%.17g, %.17g)", a,
+          ws.P[3 * a + 1], ws.P[3 * a + 2]);
+  }
+  for (i = 0; i < 6; ++i) CHECK(fabs(ws.U[i]) < 1e-13, "U[%d] = %g", i, ws.U[i]);
+  /* again with a speck of impulse outside contact 1's cone (P_N = -1e-18, P_T = 1e-18, as
+   * Newton's steps leave): it counts as none */
+  ws = make(G, U0);
+  for (i = 0; i < 3; ++i) {
+    ws.P[i] = solved[i];
+    for (j = 0; j < ND; ++j) ws.U[j] += G[j + i * ND] * solved[i];
+  }
+  ws.P[3] = -1e-18;
+  ws.P[4] = 1e-18;
+  cone_min_norm(&ws, NK, first, bias, 1e-13);
+  for (a = 0; a < 2; ++a) CHECK(fabs(ws.P[3 * a] - 0.5) < 1e-14, "speck: P_N%d = %.17g, expected 1/2", a, ws.P[3 * a]);
+}
+
+/* Contacts 0 and 1 on opposite sides of one normal row (G_NN blocks [1 -1; -1 1]: a member
+ * pressed between two stops), contact 1 touching with no impulse: the family's least-norm
+ * member would pull contact 1 (-1/2), so the move falls back to the contacts with an
+ * impulse (contact 0 alone: nothing to move) and the impulses stay as solved. */
+static void test_min_norm_touching_pulled(void) {
+  casadi_real G[ND * ND];
+  const casadi_real U0[ND] = {-1, 0, 0, 1, 0, 0, 1, 0, 0};
+  workspace ws;
+  int i;
+  memset(G, 0, sizeof G);
+  for (i = 0; i < ND; ++i) G[i + i * ND] = 1;
+  G[0 + 3 * ND] = G[3 + 0 * ND] = -1;
+  ws = make(G, U0);
+  ws.P[0] = 1;
+  ws.U[0] = 0;
+  ws.U[3] = 0;
+  cone_min_norm(&ws, NK, first, bias, 1e-13);
+  CHECK(ws.P[0] == 1 && ws.P[3] == 0, "P_N = %.17g, %.17g, expected 1, 0", ws.P[0], ws.P[3]);
+  for (i = 0; i < ND; ++i) CHECK(ws.P[i] == (i == 0), "P[%d] = %g", i, ws.P[i]);
+}
+
 int main(void) {
   test_jacobian();
   test_solution();
   test_redundant();
   test_min_norm();
+  test_min_norm_touching();
+  test_min_norm_touching_pulled();
   return report("test_cone_newton");
 }

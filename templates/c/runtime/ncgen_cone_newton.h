@@ -323,15 +323,19 @@ static int cone_newton(workspace *ws, int na, const int *first, const casadi_rea
   return 0;
 }
 
-/* Whether the impulses P + t dP of the contacts with an impulse are all in their cones. */
-static int cone_inside(const workspace *ws, int na, const int *first, const casadi_real *dP, casadi_real t) {
+/* Whether the impulses P + t dP of the contacts in the move (in[c]) are all in their cones:
+ * a normal impulse > 0, or = 0 with no tangent impulse (a touching contact that carried
+ * none and is given none). */
+static int cone_inside(const workspace *ws, int na, const int *first, const int *in, const casadi_real *dP,
+                       casadi_real t) {
   int c, d;
   for (c = 0; c < na; ++c) {
     const int r0 = first[c], nt = first[c + 1] - r0 - 1;
     const casadi_real pn = ws->P[r0] + t * dP[r0];
     casadi_real pt = 0;
-    if (ws->P[r0] <= 0) continue;
+    if (!in[c]) continue;
     for (d = 1; d <= nt; ++d) pt += (ws->P[r0 + d] + t * dP[r0 + d]) * (ws->P[r0 + d] + t * dP[r0 + d]);
+    if (pn == 0 && pt == 0) continue;
     if (!(pn > 0) || sqrt(pt) > mu[ws->act[c]] * pn) return 0;
   }
   return 1;
@@ -340,24 +344,42 @@ static int cone_inside(const workspace *ws, int na, const int *first, const casa
 /* Where the support is statically indeterminate (a box's four coplanar corners, a stack's
  * faces) the contact laws hold on a whole family P + null(G_AA) of impulses: this picks its
  * member of least Euclidean norm |P|, so that symmetric loads get symmetric forces.  A = the
- * rows of the contacts with an impulse, if each sticks (tangent velocity below CONE_FLOOR
- * (1 + max |U|)) or has no friction (a slipping contact's tangent impulse is fixed by its
- * normal one: then nothing is done).  G_AA = L L^T by Cholesky with the rows whose pivot falls below CONE_PIVOT of their
+ * rows of the contacts with an impulse and, with `touching`, of the closed contacts without
+ * one whose normal and tangent velocities vanish (below CONE_FLOOR (1 + max |U|)): the laws
+ * let those carry a load too, and a solve that happened to leave one of four symmetric
+ * corners at 0 would otherwise keep it there and load the others unevenly.  A contact whose
+ * impulse is of round-off size with P_N <= 0 (at most CONE_FLOOR max |P|: Newton's steps
+ * leave such specks outside the cone) first gets none, with U updated.  Each contact with
+ * an impulse must then stick (tangent velocity below that floor) or have no friction (a
+ * slipping contact's tangent impulse is fixed by its normal one: then nothing is done).
+ * G_AA = L L^T by Cholesky with the rows whose pivot falls below CONE_PIVOT of their
  * diagonal dropped; each dropped row j gives the null vector n_j = (-L_I^-T l_j, 1, 0, ...)
  * (L_I the kept rows before j, l_j row j of the factor), orthonormalised (Gram-Schmidt, twice)
  * in place of row j of the factor; then dP_A = -sum_j n_j (n_j . P_A), and P += t dP with
  * t = 1 or, if that leaves a cone (a contact on its cone's edge), the first of t = 1/2,
  * 1/4, ... that does not (the cones are convex: a step towards the least norm).  Kept only
  * if the contact laws hold as well as before (G dP is not exactly 0 where the rows are only
- * nearly dependent).  Uses ws->S (ws->fm = -1), ws->cni + ND and
- * ws->cn after its first 2 ND. */
-static void cone_min_norm(workspace *ws, int na, const int *first, const casadi_real *bias, casadi_real tol) {
+ * nearly dependent).  Returns 0 if a move over touching contacts without impulse left the
+ * cones at every t or broke the laws (the impulses are then unchanged), else 1.  Uses ws->S
+ * (ws->fm = -1), ws->cni + ND and ws->cn after its first 2 ND. */
+static int cone_min_norm_over(workspace *ws, int na, const int *first, const casadi_real *bias, casadi_real tol,
+                              int touching) {
   const int nr = first[na];
   casadi_real *L = ws->S, *dP = ws->cn + 2 * ND, *gdp = ws->cn + 3 * ND, *P0 = ws->cn + 6 * ND, *U0 = ws->cn + 7 * ND;
   casadi_int *dropped = ws->cni + ND, *start = ws->cni;
   casadi_real before, after;
-  casadi_real size = 0, t = 1;
-  int idx[ND], m = 0, nd = 0, c, d, i, j, k, pass;
+  casadi_real size = 0, pmax = 0, t = 1;
+  int idx[ND], in[NK], m = 0, nd = 0, nz = 0, c, d, i, j, k, pass;
+  for (i = 0; i < nr; ++i) pmax = fmax(pmax, fabs(ws->P[i]));
+  for (c = 0; c < na; ++c) { /* a contact's impulse of round-off size, P_N <= 0: set to 0 */
+    casadi_real most = 0;
+    for (i = first[c]; i < first[c + 1]; ++i) most = fmax(most, fabs(ws->P[i]));
+    if (ws->P[first[c]] > 0 || most > CONE_FLOOR * pmax) continue;
+    for (i = first[c]; i < first[c + 1]; ++i) {
+      for (k = (int) ws->gp[i]; k < ws->gp[i + 1]; ++k) ws->U[ws->gi[k]] -= ws->G[ws->gi[k] + i * nr] * ws->P[i];
+      ws->P[i] = 0;
+    }
+  }
   for (i = 0; i < nr; ++i) size = fmax(size, fabs(ws->U[i]));
   for (c = 0; c < na; ++c) {
     const int r0 = first[c], nt = first[c + 1] - r0 - 1, kc = (int) ws->act[c];
@@ -367,14 +389,17 @@ static void cone_min_norm(workspace *ws, int na, const int *first, const casadi_
       pt += ws->P[r0 + d] * ws->P[r0 + d];
       vt += v * v;
     }
+    in[c] = 0;
     if (ws->P[r0] <= 0) {
-      if (pt > 0) return;
-      continue;
-    }
-    if (sqrt(vt) > CONE_FLOOR * (1 + size)) return; /* slipping */
+      if (pt > 0) return 1;
+      if (!touching || fabs(ws->U[r0] + bias[c]) > CONE_FLOOR * (1 + size) || sqrt(vt) > CONE_FLOOR * (1 + size))
+        continue;
+      ++nz;
+    } else if (sqrt(vt) > CONE_FLOOR * (1 + size)) return 1; /* slipping */
+    in[c] = 1;
     for (d = 0; d <= nt; ++d) idx[m++] = r0 + d;
   }
-  if (m < 2) return;
+  if (m < 2) return 1;
   ws->fm = -1;
   for (i = 0; i < m; ++i) {
     casadi_real *li = L + (size_t) i * m, s, d0;
@@ -428,7 +453,7 @@ static void cone_min_norm(workspace *ws, int na, const int *first, const casadi_
     for (k = 0; k <= i; ++k) li[k] /= s;
     ++nd;
   }
-  if (!nd) return;
+  if (!nd) return 1;
   for (i = 0; i < nr; ++i) dP[i] = 0;
   for (i = 0; i < m; ++i)
     if (dropped[i]) {
@@ -437,8 +462,8 @@ static void cone_min_norm(workspace *ws, int na, const int *first, const casadi_
       for (k = 0; k <= i; ++k) s += ni[k] * ws->P[idx[k]];
       for (k = 0; k <= i; ++k) dP[idx[k]] -= s * ni[k];
     }
-  for (pass = 0; pass < CONE_BACKTRACK && !cone_inside(ws, na, first, dP, t); ++pass) t /= 2;
-  if (pass == CONE_BACKTRACK) return;
+  for (pass = 0; pass < CONE_BACKTRACK && !cone_inside(ws, na, first, in, dP, t); ++pass) t /= 2;
+  if (pass == CONE_BACKTRACK) return !nz;
   for (i = 0; i < nr; ++i) dP[i] *= t;
   for (i = 0; i < nr; ++i) gdp[i] = 0; /* G dP, by G's column nonzeros */
   for (j = 0; j < nr; ++j)
@@ -452,8 +477,15 @@ static void cone_min_norm(workspace *ws, int na, const int *first, const casadi_
     ws->U[i] += gdp[i];
   }
   after = cone_residual(ws, na, first, bias);
-  if (!(after <= fmax(2 * before, tol))) {
-    memcpy(ws->P, P0, (size_t) nr * sizeof(casadi_real));
-    memcpy(ws->U, U0, (size_t) nr * sizeof(casadi_real));
-  }
+  if (after <= fmax(2 * before, tol)) return 1;
+  memcpy(ws->P, P0, (size_t) nr * sizeof(casadi_real));
+  memcpy(ws->U, U0, (size_t) nr * sizeof(casadi_real));
+  return !nz;
+}
+
+/* The least-norm member of the family of solutions (cone_min_norm_over()) over the contacts
+ * with an impulse and the touching ones without; where that move fails (it would pull a
+ * touching contact's impulse below 0), over those with an impulse alone. */
+static void cone_min_norm(workspace *ws, int na, const int *first, const casadi_real *bias, casadi_real tol) {
+  if (!cone_min_norm_over(ws, na, first, bias, tol, 1)) (void) cone_min_norm_over(ws, na, first, bias, tol, 0);
 }
