@@ -12,6 +12,7 @@ import pytest
 
 import ncgen as nc
 from ncgen.errors import SimulationInterrupted
+from ncgen.runtime.trajectory import Trajectory
 
 from interrupt_helpers import ROOT, interrupt, start
 
