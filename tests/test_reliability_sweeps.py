@@ -83,7 +83,7 @@ def test_sweep_refuses_other_folders_and_files_but_takes_an_empty_one(slider_cra
 
 def test_a_missing_extra_is_found_before_compiling(slider_crank, tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "zarr", None)           # import zarr fails
-    monkeypatch.setattr(sweep_module, "load_stepper", lambda model: pytest.fail("compiled before the check"))
+    monkeypatch.setattr(sweep_module, "load_any_stepper", lambda model, **k: pytest.fail("compiled before the check"))
     with pytest.raises(NcgenError, match=r"sweep\(path='[^']*out\.zarr'\): writing results needs zarr and pyarrow "
                                          r"\(zarr is missing\)"):
         nc.sweep(slider_crank, {"omega": [3.0]}, t_end=0.1, dt=0.01, path=tmp_path / "out.zarr", progress=False)

@@ -489,7 +489,7 @@ extern const casadi_real box_stack_gravity[3];
 
 /* ---- box_stack_step_pair0_rows ----------------------------------------------------
  * Stepper: gaps and contact Jacobian rows of one contact element
- * In box_stack_kernels_0.c; 7752 instructions.
+ * In box_stack_kernels_0.c; 5452 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
@@ -521,7 +521,7 @@ extern const casadi_real box_stack_gravity[3];
 
 /* ---- box_stack_step_pair1_rows ----------------------------------------------------
  * Stepper: gaps and contact Jacobian rows of one contact element
- * In box_stack_kernels_1.c; 13017 instructions.
+ * In box_stack_kernels_1.c; 9009 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 12x1, nnz 12 [m] local coordinates of its second member. Default: zeros.
@@ -553,7 +553,7 @@ extern const casadi_real box_stack_gravity[3];
 
 /* ---- box_stack_step_pair2_rows ----------------------------------------------------
  * Stepper: gaps and contact Jacobian rows of one contact element
- * In box_stack_kernels_1.c; 350 instructions.
+ * In box_stack_kernels_1.c; 305 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
