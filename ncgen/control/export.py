@@ -142,11 +142,12 @@ def export_mpc(ocp, path, *, name: str | None = None, iterations: int = 1, termi
 def closed_loop(mpc, x0, t_end: float, *, substeps: int = 5, disturbance=(), warmup: int = 10, plant=None):
     """The demo program's loop in Python: ``(t, U, X)`` per control step (the state before
     the step).  ``plant``: a :class:`~ncgen.control.step.StepFunction` of ``mpc.h / substeps``
-    (built when not given)."""
+    (built when not given, on the flat kernels: the exported package's plant is that step, so the
+    two loops do the same arithmetic)."""
     from ncgen.control.step import step_function
     model, h = mpc.model, mpc.h
     hs = h / substeps
-    plant = plant or step_function(model, hs)
+    plant = plant or step_function(model, hs, kernels="flat")
     pl = pulses(disturbance, mpc.nu)
     x = np.asarray(x0, dtype=float).copy()
     mpc.reset(x, 0.0, iterations=warmup)
