@@ -98,6 +98,18 @@ def timed(fn: Callable[[], object]) -> tuple[float, float, object]:
     return time.perf_counter() - w, _cpu() - c, out
 
 
+def batches(fns: dict, calls: int, repeat: int) -> dict[str, list[float]]:
+    """Seconds per call of each function, ``repeat`` interleaved batches of ``calls`` calls."""
+    out = {k: [] for k in fns}
+    for _ in range(repeat):
+        for name, fn in fns.items():
+            start = time.perf_counter()
+            for _ in range(calls):
+                fn()
+            out[name].append((time.perf_counter() - start) / calls)
+    return out
+
+
 def in_turn(round_index: int, paths: dict[str, Callable[[], object]]) -> dict[str, object]:
     """Each path's result in one round of a comparison, the paths run in their order in even
     rounds and in reverse in odd ones (so that none always goes first on a shared machine)."""

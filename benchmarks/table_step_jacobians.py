@@ -27,13 +27,12 @@ import os
 import re
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import chain_mjcf, chain_system, machine  # noqa: E402
+from common import batches, chain_mjcf, chain_system, machine  # noqa: E402
 
 import ncgen as nc  # noqa: E402
 
@@ -46,18 +45,6 @@ def urdf_text(robot: str) -> str:
     text = Path(nc.robots.urdf_path(ROBOTS[robot])).read_text()
     text = re.sub(r"<mimic[^>]*/>", "", text)
     return re.sub(r"<dynamics[^>]*/>", "", text)
-
-
-def batches(fns: dict, calls: int, repeat: int) -> dict[str, list[float]]:
-    """Seconds per call of each function, ``repeat`` interleaved batches of ``calls`` calls."""
-    out = {k: [] for k in fns}
-    for _ in range(repeat):
-        for name, fn in fns.items():
-            start = time.perf_counter()
-            for _ in range(calls):
-                fn()
-            out[name].append((time.perf_counter() - start) / calls)
-    return out
 
 
 def report(title: str, t: dict) -> None:
