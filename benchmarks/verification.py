@@ -8,7 +8,8 @@ bicycle's published benchmark (tests/test_whipple.py), rolling discs and the Cha
 sleigh against closed forms (tests/test_rolling.py, tests/test_rolling_system.py), the heavy top's steady precession
 (tests/test_heavy_top.py), thin bodies against Euler's and the pendulum equation
 (tests/test_thin_bodies.py), the IFToMM A02 four-bar through its flat positions
-(tests/test_singular_positions.py), arboris' rigid-motion values (tests/test_rigid_motion.py),
+(tests/test_singular_positions.py), the IFToMM A01 pendulum, A03 Andrews' squeezer and A04
+Bricard mechanism (tests/test_iftomm.py), arboris' rigid-motion values (tests/test_rigid_motion.py),
 Pinocchio on example-robot-data robots (tests/test_urdf_pinocchio.py), MuJoCo on a falling
 chain, on shipped MJCF files and on a contact twin (tests/test_simulate_mujoco.py,
 tests/test_mjcf.py, tests/test_contact.py), contact closed forms (tests/test_contact.py, tests/test_contact_shapes.py) and
@@ -188,6 +189,40 @@ def iftomm_a02(smoke: bool) -> list[Row]:
     return [Row("IFToMM A02 four-bar (N = 1), through flat positions",
                 "exact motion: one pendulum's ODE by DOP853 at 1e-13", f"crank tip (m), worst over {t_end:g} s",
                 tip_error(traj, 1), 0.0, 1e-6)]
+
+
+def iftomm_a01_a03_a04(smoke: bool) -> list[Row]:
+    from test_iftomm import (ANDREWS_ACCEL0, ANDREWS_REFERENCE, ANDREWS_T, ANDREWS_TOL, andrews_initial_accelerations,
+                             andrews_run, bricard_reference, bricard_run, pendulum_run)
+    from andrews_squeezer import squeezer
+    rows = []
+    closed = "closed form: θ = 2 arcsin(k sn(K − √(g/L) t; k²)), k = sin(π/4)"
+    t_end = 10.0 if smoke else 2000.0
+    options = dict(rtol=1e-10, atol=1e-12) if smoke else dict(method="stepper", order=4, substeps=500, estimate=False)
+    traj, err, cpu = pendulum_run(t_end, **options)
+    how = "IDAS at rtol 1e-10" if smoke else "4th-order stepper, h = 1 ms"
+    rows.append(Row(f"IFToMM A01 simple pendulum ({how})", closed, f"P1 (m), worst of 4000 outputs over {t_end:g} s",
+                    err, 0.0, 1e-6 if smoke else 5e-6))
+    accel = andrews_initial_accelerations(squeezer().build())
+    test_set = "Test Set for IVP solvers (Mazzia et al.), andrews"
+    rows.append(Row("IFToMM A03 Andrews' squeezer (Hairer & Wanner VII.7)", f"{test_set}: consistent initial values",
+                    "β̈(0) (rad/s²)", accel[0], ANDREWS_ACCEL0[0], 1e-9 * abs(ANDREWS_ACCEL0[0])))
+    rows.append(Row("IFToMM A03 Andrews' squeezer (Hairer & Wanner VII.7)", f"{test_set}: consistent initial values",
+                    "Θ̈(0) (rad/s²)", accel[1], ANDREWS_ACCEL0[1], 1e-9 * abs(ANDREWS_ACCEL0[0])))
+    _, got, cpu = andrews_run()
+    for k, name in enumerate(("β", "Θ", "γ", "Φ", "δ", "Ω", "ε")):
+        rows.append(Row("IFToMM A03 Andrews' squeezer, IDAS at rtol 1e-12",
+                        f"{test_set}: reference solution (PSIDE at 1e-14)", f"{name} at t = {ANDREWS_T:g} s (rad)",
+                        got[k], ANDREWS_REFERENCE[k], ANDREWS_TOL))
+    t_end = 2.5 if smoke else 10.0
+    traj, p3, cpu = bricard_run(t_end)
+    case = "IFToMM A04 Bricard mechanism (overconstrained, 1 DOF), IDAS at rtol 1e-12"
+    rows.append(Row(case, "independent: Lagrange's equation in one hinge angle, SciPy DOP853 at 1e-12 (the "
+                    "benchmark's published history not reachable here)", f"P3 (m), worst over {t_end:g} s",
+                    float(np.max(np.linalg.norm(p3 - bricard_reference(traj.t), axis=1))), 0.0, 1e-7))
+    rows.append(Row(case, "conservation (no dissipation)", f"energy change over {t_end:g} s (J)",
+                    float(np.ptp(traj.energy)), 0.0, 1e-8))
+    return rows
 
 
 def mujoco_chain(smoke: bool) -> list[Row]:
@@ -401,14 +436,13 @@ def _worst(got, want):
 
 
 CASES = (whipple, rolling_disc, rolling_disc_model, chaplygin_sleigh, heavy_top, thin_bodies, iftomm_a02,
-         iftomm_a02_larger,
+         iftomm_a02_larger, iftomm_a01_a03_a04,
          arboris, pinocchio,
          mujoco_chain, mujoco_mjcf, contacts, tensegrity)
-#: External checks the project's page lacks: the IFToMM problems other than A02 and Hairer's
-#: Andrews squeezer (IFToMM A03) have no test or model in ncgen yet.
+#: External checks the project's page lacks: the IFToMM A05 flyball governor has no test or
+#: model in ncgen yet.
 NOT_YET = [
-    ("IFToMM A01 (pendulum), A03 (Andrews squeezer, Hairer & Wanner), A04 (Bricard), A05 (flyball governor)",
-     None),
+    ("IFToMM A05 (flyball governor)", None),
     ("MuJoCo work-precision comparisons", "benchmarks/work_precision.py (timings, not a reference)"),
 ]
 
@@ -425,7 +459,7 @@ def page(rows: list[Row], smoke: bool) -> str:
              "reference below is recomputed by ncgen, and its error compared with the tolerance the "
              "tests hold it to; the reference values are imported from those tests (`tests/test_whipple.py`, "
              "`tests/test_rolling.py`, `tests/test_rolling_system.py`, `tests/test_heavy_top.py`, "
-             "`tests/test_singular_positions.py`, `tests/test_thin_bodies.py`, "
+             "`tests/test_singular_positions.py`, `tests/test_iftomm.py`, `tests/test_thin_bodies.py`, "
              "`tests/test_rigid_motion.py`, `tests/test_urdf_pinocchio.py`, `tests/test_simulate_mujoco.py`, "
              "`tests/test_mjcf.py`, `tests/test_contact.py`, `tests/test_contact_shapes.py`, `tests/test_formfinding.py`, "
              "`tests/test_self_stress.py`) or computed by the independent engine (Pinocchio, MuJoCo, SciPy) in "

@@ -99,10 +99,11 @@ def test_a01_pendulum_against_its_closed_form():
 
 @pytest.mark.slow            # 2000 s of the benchmark: 2e6 steps, ~12 s CPU (the fast tier's 10 s run: the same model)
 def test_a01_pendulum_2000_s_within_the_benchmark_precision():
-    """The benchmark's whole run (2000 s, 4000 outputs) within its "high precision" bound
-    of 1e-3 m on P1, by the compiled fourth-order stepper."""
+    """The benchmark's whole run (2000 s, 4000 outputs) by the compiled fourth-order stepper:
+    P1 within 5e-6 m of the closed form (measured 5.0e-7 m; the benchmark's "high precision"
+    bound is 1e-3 m)."""
     _, err, cpu = pendulum_run(2000.0, method="stepper", order=4, substeps=500, estimate=False)
-    assert err < 1e-3, err
+    assert err < 5e-6, err
 
 
 def test_a03_andrews_initial_accelerations_as_published():
