@@ -70,9 +70,18 @@ def test_a_disc_written_in_toml_precesses_at_the_closed_form_rate(model):
     assert abs(np.polyfit(tr.t, heading, 1)[0] / omega - 1) < 1e-7
     assert np.ptp(tr.energy) <= 1e-9 * np.max(np.abs(tr.energy))
     assert np.max(tr.constraint_residual) <= 1e-12 and np.max(tr.velocity_residual) <= 1e-12
-    # the model's own multipliers (a free body: none) and the contact point on the ground
-    assert tr.lam.shape == (len(tr.t), model.nc)
+    # every multiplier (the model's: none, a free body; then the disc's height and rolling rows)
+    assert tr.lam.shape == (len(tr.t), model.nc + 3)
+    assert tr.constraint_names[model.nc:] == ["disc.rolling.height", "disc.rolling.x", "disc.rolling.y"]
     assert np.allclose(tr.point("disc", (0, 0, 0))[:, 2], a * np.cos(BETA), atol=1e-9)
+    # the contact carries the weight and the centre's centripetal force m Ω |v_c| (its
+    # circle's radius is |v_c| / Ω), normal to the centre's velocity
+    normal, friction = -tr.lam[:, model.nc], -tr.lam[:, model.nc + 1:]
+    np.testing.assert_allclose(normal, m * g, rtol=1e-9)
+    v_c = tr.v[:, model.layout.member_indices("disc")[:2]]          # the centre r_i's velocity along the plane
+    speed = np.linalg.norm(v_c, axis=1)
+    np.testing.assert_allclose(np.linalg.norm(friction, axis=1), m * abs(omega) * speed, rtol=1e-9)
+    assert np.max(np.abs(np.sum(friction * v_c, axis=1)) / (m * abs(omega) * speed ** 2)) < 1e-9
 
 
 def test_simulate_runs_what_simulate_rolling_runs(model):

@@ -46,7 +46,9 @@ class RollingSystem:
 
     ``phi(q)``: holonomic residuals (model's, then the elements' heights); ``B(q)``:
     the nonholonomic rows (2 per disc or ball, 1 per knife edge); ``A(q)``: ``[∂phi/∂q; B]``; ``gamma(q, v)``;
-    ``accel(q, v, f) -> (a, lam)``; ``tangent(q, v)``: the Jacobian of the state constraints
+    ``accel(q, v, f) -> (a, lam)`` (``lam`` by ``row_names``: the force of a height row on
+    the body is ``−λ e_z`` at the contact, N, so the normal force is ``−λ``; of the ``.x``/``.y``
+    rows ``−λ e_x``/``−λ e_y`` at the contact, the friction force); ``tangent(q, v)``: the Jacobian of the state constraints
     ``[phi; A v]`` with respect to ``[q; v]`` (its null space is the tangent space of the
     motion's manifold)."""
 
@@ -75,18 +77,31 @@ class RollingSystem:
             raise ModelError(f"RollingSystem: model {model.name!r} has time-dependent constraints "
                              "(drives); nonholonomic elements take scleronomic models only")
         R_all, p_all = model.functions["poses"](q)
-        heights, rows = [], []
+        heights, rows, height_names, row_names = [], [], [], []
         for element in elements:
             k = model.member_names.index(element.body)
             h, B = element.equations(R_all[:, 3 * k:3 * k + 3], p_all[:, k], q)
             heights.append(h)
             rows.append(B)
+            height_names += [f"{element.name}.height"] * int(h.shape[0])
+            row_names += [f"{element.name}.{axis}" for axis in
+                          (("lateral",) if isinstance(element, KnifeEdge) else ("x", "y"))]
+        #: Names of the rows of ``A`` (and of the multipliers ``lam``): the model's constraints,
+        #: then the elements' heights and their nonholonomic rows (``<element>.x``/``.y``: the
+        #: contact point's material velocity along the plane; ``.lateral``: across a blade).
+        self.row_names = list(model.constraint_names) + height_names + row_names
         phi = ca.vertcat(model.functions["phi"](t0, q, p0), *heights)
         B = ca.vertcat(*rows) if rows else ca.SX(0, nq)
         A = ca.vertcat(ca.jacobian(phi, q), B)
         Av = ca.mtimes(A, v)
         gamma = -ca.jtimes(Av, q, v)
         F = model.functions["F"](t0, q, v, u0, p0)
+        #: Whether the model's forces depend on time, and its constraints on the parameters
+        #: (the equations here hold ``t = 0``, ``u = 0`` and ``model.p0``).
+        self.timed_forces = bool(ca.depends_on(model.functions["F"](t, q, v, u0, p0), t))
+        p_sym = ca.SX.sym("p", len(model.p0))
+        self.parametric_constraints = bool(len(model.p0)) and bool(ca.depends_on(model.functions["phi"](t0, q, p_sym),
+                                                                                  p_sym))
         self.n_holonomic, self.n_nonholonomic = int(phi.shape[0]), int(B.shape[0])
         self.phi = ca.Function("phi", [q], [phi], ["q"], ["phi"])
         self.B = ca.Function("B", [q], [B], ["q"], ["B"])

@@ -107,18 +107,26 @@ def compiled_step(system, method: str):
 
 
 def integrate(system, grid, q0, v0, *, method: str = "dopri5", substeps: int = 1, rtol: float = 1e-8,
-              atol: float = 1e-10, compiled: bool | None = None) -> RollingTrajectory:
+              atol: float = 1e-10, compiled: bool | None = None, force=None) -> RollingTrajectory:
     """Integrate ``system`` from ``(q0, v0)`` (projected onto both constraint levels) over the
-    output times ``grid`` (s, increasing; the motion does not depend on time, so only the
-    differences count): ``"rk4"`` takes ``substeps`` equal steps per output interval,
-    ``"dopri5"`` controls its steps by ``rtol``/``atol``.  ``compiled``: whether each step
+    output times ``grid`` (s, increasing): ``"rk4"`` takes ``substeps`` equal steps per output
+    interval, ``"dopri5"`` controls its steps by ``rtol``/``atol``; steps end on the outputs.
+    ``force``: None, or ``force(t, q, v, t_step) -> f``, an extra generalised force (the
+    ``f`` of ``system.accel``) at the stage time ``t`` of a step that began at ``t_step`` (s);
+    without it the motion does not depend on time.  ``compiled``: whether each step
     (its stages and projection) is one call of compiled C (:func:`compiled_step`) instead of
     Python-driven CasADi calls (the same steps to round-off, 10–20 times faster): ``True``
     from the start (an error without a C compiler), ``False`` never, ``None`` (default)
     when compiled in this process already, else once the Python steps' pace says the run
     would take longer than :data:`COMPILE_PAYS` (then compiled, or read from the compile
-    cache, and continued; without a compiler, continued in Python)."""
+    cache, and continued; without a compiler, continued in Python).  The compiled step has
+    no extra force: with ``force``, ``compiled=True`` is refused and ``None`` runs in Python."""
     model = system.model
+    if force is not None:
+        if compiled:
+            raise NcgenError("simulate_rolling: compiled=True: the compiled step takes no extra force "
+                             "(inputs, parameters or time-dependent forces); give compiled=None or False")
+        compiled = False
     q, v = project(system, q0, v0)
     grid = np.asarray(grid, float)
     step = system.compiled_steps.get(method) if compiled is None else \
@@ -138,24 +146,25 @@ def integrate(system, grid, q0, v0, *, method: str = "dopri5", substeps: int = 1
             except CompilerNotFound:
                 pass
 
-    def rhs(y):
-        a = np.asarray(system.accel(y[:system.nq], y[system.nq:], zero)[0]).ravel()
-        return np.concatenate([y[system.nq:], a])
+    def rhs(y, t=0.0, t_step=0.0):
+        q_, v_ = y[:system.nq], y[system.nq:]
+        f = zero if force is None else force(t, q_, v_, t_step)
+        return np.concatenate([v_, np.asarray(system.accel(q_, v_, f)[0]).ravel()])
 
-    def rk_step(y, h):
-        """``(y⁺ projected, error estimate)`` of one step of ``method``."""
+    def rk_step(y, h, t=0.0):
+        """``(y⁺ projected, error estimate)`` of one step of ``method`` from time ``t``."""
         if step is not None:
             y_next, err = step(y, h)
             return y_next.copy(), err.copy()
         if method == "rk4":
-            k1 = rhs(y)
-            k2 = rhs(y + h / 2 * k1)
-            k3 = rhs(y + h / 2 * k2)
-            k4 = rhs(y + h * k3)
+            k1 = rhs(y, t, t)
+            k2 = rhs(y + h / 2 * k1, t + h / 2, t)
+            k3 = rhs(y + h / 2 * k2, t + h / 2, t)
+            k4 = rhs(y + h * k3, t + h, t)
             return np.concatenate(project(system, *np.split(y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4), 2))), None
-        k = [rhs(y)]
+        k = [rhs(y, t, t)]
         for i in range(1, 7):
-            k.append(rhs(y + h * sum(c * kj for c, kj in zip(_A[i], k))))
+            k.append(rhs(y + h * sum(c * kj for c, kj in zip(_A[i], k)), t + h * sum(_A[i]), t))
         y5 = y + h * sum(b * kj for b, kj in zip(_B5, k))
         return np.concatenate(project(system, *np.split(y5, 2))), h * sum(e * kj for e, kj in zip(_E, k))
 
@@ -171,8 +180,8 @@ def integrate(system, grid, q0, v0, *, method: str = "dopri5", substeps: int = 1
     if method == "rk4":
         for t_a, t_b in zip(grid[:-1], grid[1:]):
             h = (t_b - t_a) / substeps
-            for _ in range(substeps):
-                y = rk_step(y, h)[0]
+            for j in range(substeps):
+                y = rk_step(y, h, t_a + j * h)[0]
                 steps += 1
             record(*np.split(y, 2))
             switch(t_b)
@@ -181,7 +190,7 @@ def integrate(system, grid, q0, v0, *, method: str = "dopri5", substeps: int = 1
         for target in grid[1:]:
             while t < target - 1e-14 * max(1.0, abs(target)):
                 h_now = min(h, target - t)
-                y_next, err = rk_step(y, h_now)
+                y_next, err = rk_step(y, h_now, t)
                 # the unprojected step's error estimate against the start and the (projected) end
                 scale = atol + rtol * np.maximum(np.abs(y), np.abs(y_next))
                 ratio = float(np.sqrt(np.mean((err / scale) ** 2)))
@@ -208,11 +217,17 @@ class RollingIntegrator:
     holonomic and velocity constraints kept by projection after every step (module
     docstring).  The trajectory's ``constraint_residual`` is ``|Φ̂(q)|∞`` (the model's
     constraints and the elements' heights), its ``velocity_residual`` ``|Â(q) v|∞`` (both
-    levels, the rolling rows included); ``lam`` holds the model's multipliers,
-    ``info["rolling_names"]`` the elements."""
+    levels, the rolling rows included); ``lam`` holds every multiplier, named by
+    ``constraint_names`` (the model's, then the elements' rows,
+    :attr:`~ncgen.assembly.nonholonomic.RollingSystem.row_names`: the normal force at a
+    contact is ``−λ`` of its ``.height`` row, the friction force ``−λ`` of its ``.x``/``.y``
+    rows, N), ``info["rolling_names"]`` the elements.  Open-loop inputs (held as ``hold``
+    says), parameters other than the model's in the forces and forces that depend on time
+    enter as an extra generalised force, integrated in Python (the compiled step is built
+    without them)."""
 
     METHOD = "rolling"
-    OPTIONS = ("integrator", "rtol", "atol", "substeps", "backend")
+    OPTIONS = ("integrator", "rtol", "atol", "substeps", "backend", "hold")
 
     def __init__(self, model, opts: SimulationOptions):
         if opts.joint_dynamics:
@@ -221,29 +236,59 @@ class RollingIntegrator:
         self.model, self.opts = model, opts
         self.system = rolling_system(model)
 
+    def applied_force(self, run: Run):
+        """``force(t, q, v, t_step)`` for :func:`integrate`: the model's applied forces at the
+        run's inputs (sample of ``t_step``'s interval for ``"zoh"``, interpolated at ``t`` for
+        ``"linear"``) and parameters, less those the rolling equations hold
+        (``t = 0``, ``u = 0``, ``model.p0``); None when they are the same."""
+        model, system = self.model, self.system
+        F = model.functions["F"]
+        if system.parametric_constraints and not np.array_equal(run.p, model.p0):
+            raise NcgenError(f"method='rolling': model {model.name!r}: its constraints depend on the parameters, "
+                             "and the rolling equations are built with model.p0; give p=None")
+        if not (system.timed_forces or np.any(run.U != 0) or not np.array_equal(run.p, model.p0)):
+            return None
+        t_grid, U, p = run.t, np.asarray(run.U, float), np.asarray(run.p, float)
+        linear = self.opts.hold == "linear"
+
+        def u_at(t, t_step):
+            if linear:
+                return np.array([np.interp(t, t_grid, U[:, j]) for j in range(U.shape[1])])
+            k = int(np.clip(np.searchsorted(t_grid, t_step, side="right") - 1, 0, len(t_grid) - 1))
+            return U[k]
+
+        def force(t, q, v, t_step):
+            return np.asarray(F(t, q, v, u_at(t, t_step), p)).ravel() - np.asarray(system.F(q, v)).ravel()
+        return force
+
     def run(self, run: Run) -> Trajectory:
         model, o = self.model, self.opts
-        if run.controller is not None or run.feedback is not None or np.any(run.U != 0):
-            raise NcgenError(f"method='rolling': model {model.name!r}: inputs are not taken yet (the rolling "
-                             "equations are built with u = 0); give u=None")
-        if not np.array_equal(run.p, model.p0):
-            raise NcgenError(f"method='rolling': model {model.name!r}: parameters other than the model's "
-                             "are not taken yet (the rolling equations are built with model.p0); give p=None")
+        if run.controller is not None or run.feedback is not None:
+            raise NcgenError(f"method='rolling': model {model.name!r}: feedback and controllers are not taken "
+                             "(open-loop inputs are); give u as samples or a function of t")
+        force = self.applied_force(run)
         method = o.integrator or "dopri5"
         rtol = 1e-8 if o.rtol is None else o.rtol
         atol = 1e-10 if o.atol is None else o.atol
         start = time.perf_counter()
         compiled = {"vm": False, "compiled": True}.get(o.backend)
+        if force is not None and compiled:
+            raise NcgenError(f"method='rolling': model {model.name!r}: backend='compiled': the compiled step is "
+                             "built without inputs, other parameters or time-dependent forces; give backend='vm' "
+                             "or 'auto'")
         tr = integrate(self.system, run.t, run.q, run.v, method=method, substeps=o.substeps, rtol=rtol, atol=atol,
-                       compiled=compiled)
-        system, nc_ = self.system, model.nc
+                       compiled=compiled, force=force)
+        system = self.system
         zero = np.zeros(system.nq)
-        lam = np.array([np.asarray(system.accel(q, v, zero)[1]).ravel()[:nc_] for q, v in zip(tr.q, tr.v)])
+        lam = np.array([np.asarray(system.accel(q, v, zero if force is None else force(t, q, v, t))[1]).ravel()
+                        for t, q, v in zip(tr.t, tr.q, tr.v)])
         levels = np.array([system.residuals(q, v) for q, v in zip(tr.q, tr.v)])
         info = {"method": self.METHOD, "integrator": method, "steps": tr.steps, "rejected": tr.rejected,
                 "backend": "compiled" if tr.compiled else "vm",
                 "rolling_names": [e.name for e in model.rolling], "wall_time": time.perf_counter() - start,
                 **({"rtol": rtol, "atol": atol} if method == "dopri5" else {"substeps": o.substeps})}
-        traj = Trajectory.from_states(model, tr.t, tr.q, tr.v, lam.reshape(len(tr.t), nc_), run.U, run.p, info)
+        traj = Trajectory.from_states(model, tr.t, tr.q, tr.v, lam.reshape(len(tr.t), len(system.row_names)),
+                                      run.U, run.p, info)
+        traj.constraint_names = list(system.row_names)
         traj.constraint_residual, traj.velocity_residual = levels[:, 0], levels[:, 1]
         return traj
