@@ -98,6 +98,6 @@ def angles(traj) -> np.ndarray:
 
 if __name__ == "__main__":
     model = squeezer().build()
-    traj = nc.simulate(model, t_end=0.03, dt=1e-4, rtol=1e-10, atol=1e-12)
+    traj = nc.simulate(model, t_end=0.03, dt=1e-4, rtol=1e-12, atol=1e-14)
     for name, value in zip(("beta", "Theta", "gamma", "Phi", "delta", "Omega", "epsilon"), angles(traj)[-1]):
         print(f"{name:8s} {value: .12f} rad")
