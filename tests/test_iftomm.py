@@ -97,7 +97,7 @@ def test_a01_pendulum_against_its_closed_form():
     assert np.ptp(traj.energy) < 1e-6
 
 
-@pytest.mark.slow            # 2000 s of the benchmark: 2e6 steps, ~12 s CPU (the fast tier's 10 s run: the same model)
+@pytest.mark.slow            # 2000 s of the benchmark: 2e6 steps (23 s CPU measured with the shadow estimate, which this run leaves out; the fast tier's 10 s run: the same model)
 def test_a01_pendulum_2000_s_within_the_benchmark_precision():
     """The benchmark's whole run (2000 s, 4000 outputs) by the compiled fourth-order stepper:
     P1 within 5e-6 m of the closed form (measured 5.0e-7 m; the benchmark's "high precision"
