@@ -33,7 +33,8 @@ def assert_same_run(batch, i, traj):
 
 @pytest.mark.parametrize("estimate", [True, "local", False])
 def test_checked_batch_on_the_tables_equals_single_runs(chain, estimate):
-    V0 = initial_rates(4, seed=2)[0]
+    """States projected chunk by chunk while the threads integrate; checks screened."""
+    V0 = initial_rates(10 if estimate is True else 3, seed=2)[0]     # 10: more runs than a chunk
     batch = nc.simulate_batch(chain, 0.5, 0.05, v0=V0, substeps=10, workers=2, kernels="tables",
                               estimate=estimate)
     assert batch.info["kernels"] == "tables" and batch.ok.all(), batch.message

@@ -113,7 +113,8 @@ def simulate_batch(model, t_end: float, dt: float, *, q0=None, v0=None, p=None, 
     The batch size is that of the per-run arguments (they must agree).  Where a run's
     ``q0``/``v0`` are given or its ``p`` differs from the model's, its initial state is
     projected onto the constraints as :func:`ncgen.simulate` does (``ic_tolerance``), in
-    Python, a few milliseconds per run; ``project=False`` trusts the given states as
+    Python, a few milliseconds per run, chunk by chunk in the calling thread while the
+    worker threads integrate the chunks before; ``project=False`` trusts the given states as
     consistent (only the multipliers ``λ0`` are computed, for all runs in one compiled
     call): then preparing a run costs about 20 µs, its KKT solve included.
     ``check`` (default): each run is checked as a single run is (split steps, exploding Newton
@@ -142,15 +143,23 @@ def simulate_batch(model, t_end: float, dt: float, *, q0=None, v0=None, p=None, 
     runs = _Runs(model, stepper, t, n, hold, int(substeps), newton_tol, max_newton, max_halvings, ic_tolerance,
                  outputs or check, check, fixed_scheme(model, scheme), estimate)
     workers = runs.workers = _workers(workers, n)
-    runs.prepare(q0, v0, p, u, project)
+    pending = runs.prepare(q0, v0, p, u, project)      # projections: chunk by chunk, beside the threads
     chunks = [range(i, min(i + CHUNK, n)) for i in range(0, n, CHUNK)]
     stepping = time.perf_counter()
     if workers == 1:
         for c in chunks:
+            if pending:
+                pending(c)
             runs.integrate(c)
     else:
         with ThreadPoolExecutor(max_workers=workers) as pool:
-            list(pool.map(runs.integrate, chunks))
+            futures = []
+            for c in chunks:
+                if pending:
+                    pending(c)
+                futures.append(pool.submit(runs.integrate, c))
+            for f in futures:
+                f.result()
     checking = time.perf_counter()
     if check:
         runs.check_all()
@@ -237,9 +246,12 @@ class _Runs:
         self.message = [""] * n
         self.Y = np.full((n, T, stepper.nout), np.nan) if outputs else None
 
-    def prepare(self, q0, v0, p, u, project: bool) -> None:
-        """Parameters, consistent initial state, multipliers and inputs of every run (a run
-        whose setup fails gets ``STATUS_SETUP`` and the reason)."""
+    def prepare(self, q0, v0, p, u, project: bool):
+        """Parameters, consistent initial state, multipliers and inputs of the runs (a run
+        whose setup fails gets ``STATUS_SETUP`` and the reason).  States as given
+        (``project=False``): every run now, their ``λ0`` in one compiled call, and None is
+        returned; else a function that prepares the runs of a chunk (Python, milliseconds per
+        run), to be called chunk by chunk while the threads integrate the chunks before."""
         model, t, t0 = self.model, self.t, float(self.t[0])
         # the flat DAE names the cause of a singular KKT system (the tables' runs load it only then)
         dae = load_dae(model, "vm")[0] if project and not self.tables else None
@@ -247,27 +259,32 @@ class _Runs:
         if not per_run_u:
             U = input_samples(u, model, t)
             shared_u = (U, step_inputs(U, t, self.hold, self.substeps))
-        if not project:            # states as given: checked once for all runs
-            self.Q[:, 0] = _states(q0, model.q0, self.n, model.nq, "q0")
-            self.V[:, 0] = _states(v0, model.v0, self.n, model.nq, "v0")
-        for i in range(self.n):
-            try:
-                self.P[i] = pv = model.p0 if p is None else parameter_values(_pick_p(p, i, model), model)
-                if project:
-                    q, v = initial_state(model, _pick(q0, i, 1), _pick(v0, i, 1), t0, pv, self.ic_tolerance)
-                    self.Q[i, 0], self.V[i, 0] = q, v
-                if per_run_u:
-                    U = input_samples(u[i], model, t)
-                    self.U[i], self.US[i] = U, step_inputs(U, t, self.hold, self.substeps)
-                else:
-                    self.U[i], self.US[i] = shared_u
-                if project:
-                    self.LAM[i, 0] = self._initial_multipliers(t0, q, v, self.U[i][0], pv, dae)
-            except NcgenError as e:
-                self.status[i], self.message[i] = STATUS_SETUP, f"could not start: {e}"
-                self.Q[i, 0] = self.V[i, 0] = np.nan
-        if not project:
-            self._multipliers(t0)
+
+        def runs(chunk: range) -> None:
+            for i in chunk:
+                try:
+                    self.P[i] = pv = model.p0 if p is None else parameter_values(_pick_p(p, i, model), model)
+                    if project:
+                        q, v = initial_state(model, _pick(q0, i, 1), _pick(v0, i, 1), t0, pv, self.ic_tolerance)
+                        self.Q[i, 0], self.V[i, 0] = q, v
+                    if per_run_u:
+                        U = input_samples(u[i], model, t)
+                        self.U[i], self.US[i] = U, step_inputs(U, t, self.hold, self.substeps)
+                    else:
+                        self.U[i], self.US[i] = shared_u
+                    if project:
+                        self.LAM[i, 0] = self._initial_multipliers(t0, q, v, self.U[i][0], pv, dae)
+                except NcgenError as e:
+                    self.status[i], self.message[i] = STATUS_SETUP, f"could not start: {e}"
+                    self.Q[i, 0] = self.V[i, 0] = np.nan
+
+        if project:
+            return runs
+        self.Q[:, 0] = _states(q0, model.q0, self.n, model.nq, "q0")     # states as given: checked at once
+        self.V[:, 0] = _states(v0, model.v0, self.n, model.nq, "v0")
+        runs(range(self.n))
+        self._multipliers(t0)
+        return None
 
     def _initial_multipliers(self, t0: float, q, v, u, p, dae) -> np.ndarray:
         """``λ0`` of one run: from the element tables on their path, else (or to name the cause
