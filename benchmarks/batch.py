@@ -5,22 +5,26 @@ first end on the ground), released from the rest staircase with random angular v
 (seeded): bar k turns at ω_k (perpendicular to the bar, normal with σ = 0.5 rad/s per axis), so that the
 natural-coordinate rates are ``v_end(k) = v_end(k−1) + ω_k × d_k`` and MuJoCo's ball joint
 rates are ``ω_k − ω_(k−1)`` (body frames are parallel to the world at rest: the same motion).
+ncgen's kernels: ``--kernels`` (default flat, the faster for this small model).
 
 1. **Scaling**: ``--runs`` runs of ``--t-end`` s, stepper with h = ``--h``, every run checked as
    a single run is (``check=True``: shadow run and energy check), states trusted
    (``project=False``), on 1 and on 2 threads, run alternately ``--repeat`` times; RATIO
-   one thread / two threads (target ≥ 1.8 on an idle 2-core machine).  Also the per-run
+   one thread / two threads (target ≥ 1.8), and the CPU time per run (process time: the
+   threads' C and all Python) and the wall time per run outside the threads.  Also the per-run
    overhead: a batch of one-step runs, split into the preparation (Python, and the KKT
    solves of λ0 in one compiled call) and the compiled loop.
 2. **mujoco.rollout**: ``--rollout-runs`` runs, equal accuracy.  The tip error after
    ``--t-end`` s against IDAS (rtol 1e-12) on the first three runs fixes the steps: ncgen's
    stepper at h = ``--h``, MuJoCo RK4 at the largest step of STEPS whose error is at most
-   ncgen's.  Both then run the whole batch unchecked (``check=False``: MuJoCo checks nothing
-   either) on 1 and 2 threads (``Rollout(nthread=...)``), alternately; RATIO ncgen time /
-   MuJoCo time (< 1: ncgen faster), and the same with MuJoCo's time scaled to the step at
-   which its error equals ncgen's (log-log interpolation between the steps bracketing it:
-   RK4 is fourth order, RATTLE second).  ``mujoco.rollout`` records the state after every
-   step (its only mode); ``simulate_batch`` records every output time, here every 0.1 s.
+   ncgen's, refined by bisection on its number of steps (the largest step ``t_end / n`` as
+   accurate as ncgen's).  Both then run the whole batch unchecked (``check=False``: MuJoCo
+   checks nothing either; ncgen checked is timed beside them) on 1 and 2 threads
+   (``Rollout(nthread=...)``), alternately; RATIO ncgen time /
+   MuJoCo time (< 1: ncgen faster); where no step of STEPS brackets it, the same with
+   MuJoCo's time scaled to the step at which its error equals ncgen's (log-log
+   interpolation).  ``mujoco.rollout`` records the state after every step (its only mode);
+   ``simulate_batch`` records every output time, here every 0.1 s.
 
     python benchmarks/batch.py                     1000 runs of 2 s (minutes on a loaded machine)
     python benchmarks/batch.py --smoke             seconds (CI)
@@ -97,11 +101,13 @@ def mujoco_tips(model, qpos: np.ndarray) -> np.ndarray:
     return np.array(tips)
 
 
-def ncgen_batch(model, V0, t_end, h, threads, check):
+def ncgen_batch(model, V0, t_end, h, threads, check, kernels="flat"):
     import ncgen as nc
     substeps = int(round(OUTPUT_DT / h))
+    cpu = time.process_time()
     r = nc.simulate_batch(model, t_end, OUTPUT_DT, v0=V0, substeps=substeps, project=False, check=check,
-                          outputs=check, workers=threads)
+                          outputs=check, workers=threads, kernels=kernels)
+    r.info["cpu_time"] = time.process_time() - cpu
     return r
 
 
@@ -109,16 +115,23 @@ def scaling(model, args) -> None:
     V0, _ = initial_rates(args.runs)
     print(f"\n=== scaling: {args.runs} runs of the {N_BARS}-bar chain, {args.t_end:g} s each, stepper h = {args.h:g} s, "
           f"checked (check=True), states trusted (project=False) ===")
-    ncgen_batch(model, V0[:2], args.t_end, args.h, 1, True)          # load, warm up
-    times = {1: [], 2: []}
+    ncgen_batch(model, V0[:2], args.t_end, args.h, 1, True, args.kernels)          # load, warm up
+    times, cpu, checking = {1: [], 2: []}, {1: [], 2: []}, {1: [], 2: []}
     for _ in range(args.repeat):
         for threads in (1, 2):
-            r = ncgen_batch(model, V0, args.t_end, args.h, threads, True)
+            r = ncgen_batch(model, V0, args.t_end, args.h, threads, True, args.kernels)
             times[threads].append(r.info["wall_time"])
+            cpu[threads].append(r.info["cpu_time"] / args.runs)
+            checking[threads].append((r.info["wall_time"] - r.info["stepping_time"]) / args.runs)
     failed = int(np.sum(~r.ok))
+    print(f"kernels: {r.info['kernels']}; runs checked on their own (failed or flagged by the screen): "
+          f"{r.info['checked_alone']}")
     for threads, ts in times.items():
         print(f"{threads} thread(s): best {min(ts):.3f} s, median {np.median(ts):.3f} s "
-              f"({args.runs / min(ts):.0f} runs/s); {failed} run(s) failed their checks")
+              f"({args.runs / min(ts):.0f} runs/s); {failed} run(s) failed their checks; CPU time per run "
+              f"best {1e3 * min(cpu[threads]):.2f} ms, median {1e3 * np.median(cpu[threads]):.2f} ms; "
+              f"wall time per run outside the threads (preparation and the batch's checks, the main thread) "
+              f"{1e3 * np.median(checking[threads]):.3f} ms")
     ratios = np.array(times[1]) / np.array(times[2])
     print(f"RATIO one thread / two threads: min {ratios.min():.2f}, median {np.median(ratios):.2f} "
           f"(paired runs; target >= 1.8)")
@@ -127,7 +140,7 @@ def scaling(model, args) -> None:
     over = []
     for _ in range(args.repeat):
         r = nc.simulate_batch(model, args.h, args.h, v0=initial_rates(n)[0], project=False, check=False,
-                              outputs=False, workers=1)
+                              outputs=False, workers=1, kernels=args.kernels)
         over.append((r.info["wall_time"] / n, (r.info["wall_time"] - r.info["stepping_time"]) / n,
                      r.info["stepping_time"] / n))
     total, prep, loop = min(over)
@@ -144,7 +157,7 @@ def against_rollout(model, args) -> None:
           f"first {k} runs ===")
     ref = np.array([nc.simulate(model, args.t_end, OUTPUT_DT, v0=V0[r], rtol=1e-12, atol=1e-12, backend="compiled",
                                 max_steps=10**7).q[-1, -3:] for r in range(k)])
-    ours = ncgen_batch(model, V0[:k], args.t_end, args.h, 1, False)
+    ours = ncgen_batch(model, V0[:k], args.t_end, args.h, 1, False, args.kernels)
     err_ncgen = float(np.max(np.linalg.norm(ours.q[:, -1, -3:] - ref, axis=1)))
     print(f"ncgen stepper h = {args.h:g} s: tip error {err_ncgen:.2e} m")
     chosen, errors = None, {}
@@ -159,24 +172,44 @@ def against_rollout(model, args) -> None:
     if chosen is None:
         print(f"no MuJoCo step of {STEPS} is as accurate as ncgen's; using the smallest")
         chosen = STEPS[-1]
+    elif chosen != STEPS[0]:
+        chosen = finest_step(QVEL[:k], ref, args.t_end, chosen, STEPS[STEPS.index(chosen) - 1], err_ncgen)
+        equal = None             # searched: the step is the largest as accurate as ncgen's, no scaling
     mj, states = mujoco_setup(chosen, QVEL)
     print(f"MuJoCo RK4 at dt = {chosen:g} s ({int(round(args.t_end / chosen))} steps per run), ncgen at h = "
           f"{args.h:g} s ({int(round(args.t_end / args.h))} steps per run)")
-    ncgen_batch(model, V0[:2], args.t_end, args.h, 1, False)
+    ncgen_batch(model, V0[:2], args.t_end, args.h, 1, False, args.kernels)
     for threads in (1, 2):
-        t_nc, t_mj = [], []
+        t_nc, t_mj, t_checked = [], [], []
         for _ in range(args.repeat):
-            t_nc.append(ncgen_batch(model, V0, args.t_end, args.h, threads, False).info["wall_time"])
+            t_nc.append(ncgen_batch(model, V0, args.t_end, args.h, threads, False, args.kernels).info["wall_time"])
             t_mj.append(mujoco_rollout(mj, states, args.t_end, threads)[0])
-        ratio = np.array(t_nc) / np.array(t_mj)
+            t_checked.append(ncgen_batch(model, V0, args.t_end, args.h, threads, True, args.kernels).info["wall_time"])
+        ratio, checked = np.array(t_nc) / np.array(t_mj), np.array(t_checked) / np.array(t_mj)
         print(f"{threads} thread(s): ncgen simulate_batch best {min(t_nc):.3f} s ({n / min(t_nc):.0f} runs/s), "
-              f"mujoco.rollout best {min(t_mj):.3f} s ({n / min(t_mj):.0f} runs/s)")
-        print(f"RATIO ncgen / mujoco.rollout, {threads} thread(s): min {ratio.min():.2f}, median {np.median(ratio):.2f}")
+              f"checked {min(t_checked):.3f} s; mujoco.rollout best {min(t_mj):.3f} s ({n / min(t_mj):.0f} runs/s)")
+        print(f"RATIO ncgen / mujoco.rollout, {threads} thread(s): min {ratio.min():.2f}, median {np.median(ratio):.2f}"
+              f"; ncgen checked (check=True, shadow run) / mujoco.rollout: min {checked.min():.2f}, "
+              f"median {np.median(checked):.2f}")
         if equal is not None:
             scale = equal / chosen       # MuJoCo's time goes as its number of steps: chosen / equal of it
             print(f"  at exactly equal error (MuJoCo dt = {equal:.3g} s, log-log interpolated; its time scaled by the "
                   f"step count): RATIO min {ratio.min() * scale:.2f}, median {np.median(ratio) * scale:.2f}")
 
+
+
+def finest_step(QVEL, ref, t_end: float, good: float, bad: float, target: float) -> float:
+    """The largest MuJoCo step ``t_end / n`` (n whole) whose tip error is at most ``target``,
+    by bisection on n between the steps ``good`` (error at most ``target``) and ``bad``."""
+    n_good, n_bad = int(round(t_end / good)), int(round(t_end / bad))
+    while n_good - n_bad > 1:
+        n = (n_good + n_bad) // 2
+        mj, states = mujoco_setup(t_end / n, QVEL)
+        _, qpos = mujoco_rollout(mj, states, t_end, 1)
+        err = float(np.max(np.linalg.norm(mujoco_tips(mj, qpos) - ref, axis=1)))
+        print(f"MuJoCo RK4 dt = {t_end / n:.4g} s ({n} steps): tip error {err:.2e} m")
+        n_good, n_bad = (n, n_bad) if err <= target else (n_good, n)
+    return t_end / n_good
 
 
 def equal_error_step(errors: dict, target: float) -> float | None:
@@ -197,6 +230,8 @@ def main(argv=None) -> int:
     p.add_argument("--t-end", type=float, default=2.0)
     p.add_argument("--h", type=float, default=1e-3, help="ncgen's step (s)")
     p.add_argument("--repeat", type=int, default=3)
+    p.add_argument("--kernels", default="flat", choices=("flat", "tables", "auto"),
+                   help="the stepper's kernels (flat: the faster for this small model, benchmarks/table_stepper.py)")
     p.add_argument("--smoke", action="store_true", help="tiny: seconds")
     args = p.parse_args(argv)
     if args.smoke:

@@ -2,15 +2,19 @@
 
 Each run is what ``nc.simulate(model, t_end, dt, method="stepper", ...)`` computes with the
 same initial state, parameters and inputs, bit for bit (the same consistent initial state,
-multipliers and compiled loop, ``<model>_simulate``), without the per-run checks of a single
-run (no shadow run for an error estimate, no energy check: choose ``dt`` with one checked
-``nc.simulate`` first).  Runs are spread over ``workers`` threads: the compiled loop releases
-the GIL (ctypes), so the threads integrate in parallel; Python only prepares each run (a few
-µs unless its initial state must be made consistent, see :func:`simulate_batch`).
+multipliers and compiled loop, ``<model>_simulate_stats``), and is checked as a single run
+is (``check=True``: split steps, Newton iterations, energy, the shadow run's error estimate).
+Runs are spread over ``workers`` threads; per run, a thread makes compiled calls only (the
+loop, the multipliers and the outputs of its samples), each releasing the GIL, with a few
+tens of µs of Python around them, so that the threads integrate in parallel however busy
+the interpreter is.  The checks of all runs are then screened at once, in NumPy over the
+batch's arrays (:meth:`_Runs.screen`): only a run the screen flags, or one that failed, is
+checked on its own as a single run is, which names its reason.
 
 A run that fails (Newton fails on a step even when halved, an initial state that cannot be
-made consistent, parameters out of their limits) does not stop the batch: ``status[i]`` is
-nonzero, ``message[i]`` says why, and its rows after the failure are NaN.
+made consistent, parameters out of their limits) or fails its checks does not stop the
+batch: ``status[i]`` is nonzero, ``message[i]`` says why, and its rows after the failure are
+NaN.
 """
 from __future__ import annotations
 
@@ -25,17 +29,18 @@ import numpy as np
 
 from ncgen.codegen.c_binding import open_library
 from ncgen.codegen.stepper_abi import bind_stepper
-from ncgen.codegen.stepper_package import MAX_HALVINGS, MAX_ITER, STATUS, TOL, n_stats
+from ncgen.codegen.stepper_package import MAX_HALVINGS, MAX_ITER, STATS, STATUS, TOL, n_stats
 from ncgen.errors import NcgenError
 from ncgen.runtime.dae import load_dae
 from ncgen.runtime.energy_balance import by_remainder
 from ncgen.runtime.inputs import input_samples, parameter_values, time_grid
-from ncgen.runtime.joint_dynamics import multipliers_at_samples
 from ncgen.runtime.library import compiled_functions
 from ncgen.runtime.run_start import initial_multipliers, initial_state, point_bytes
 from ncgen.runtime.options import SimulationOptions
-from ncgen.runtime.stepper import COMPOSITION_STAGES, ESTIMATE_MODES, _trajectory, fixed_scheme, step_inputs
-from ncgen.runtime.stepper_checks import is_conservative, untrusted_row
+from ncgen.runtime.stepper import (COMPOSITION_STAGES, ESTIMATE_MODES, ESTIMATE_NAMES, _trajectory, fixed_scheme,
+                                   step_inputs)
+from ncgen.runtime.stepper_checks import (ENERGY_FRACTION, ERROR_FRACTION, NEWTON_LIMIT, is_conservative,
+                                          untrusted_row)
 from ncgen.runtime.stepper_library import _Options
 from ncgen.runtime.table_stepper import load_any_stepper
 from ncgen.validation import as_numbers, as_scalar
@@ -90,7 +95,7 @@ class BatchResult:
 def simulate_batch(model, t_end: float, dt: float, *, q0=None, v0=None, p=None, u=None, t0: float | None = None,
                    hold: str = "zoh", substeps: int = 1, newton_tol: float = TOL, max_newton: int = MAX_ITER,
                    max_halvings: int = MAX_HALVINGS, ic_tolerance: float | None = 1e-6, project: bool = True,
-                   check: bool = True, scheme: str = "auto",
+                   check: bool = True, estimate: bool | str = True, scheme: str = "auto",
                    outputs: bool = True, workers: int | None = None, kernels: str = "auto") -> BatchResult:
     """Integrate ``model`` with its compiled stepper once per run, on ``workers`` threads
     (default: all cores), over the grid ``t0, t0 + dt, ..., t_end`` (s).
@@ -108,16 +113,19 @@ def simulate_batch(model, t_end: float, dt: float, *, q0=None, v0=None, p=None, 
     The batch size is that of the per-run arguments (they must agree).  Where a run's
     ``q0``/``v0`` are given or its ``p`` differs from the model's, its initial state is
     projected onto the constraints as :func:`ncgen.simulate` does (``ic_tolerance``), in
-    Python, a few milliseconds per run; ``project=False`` trusts the given states as
+    Python, a few milliseconds per run, chunk by chunk in the calling thread while the
+    worker threads integrate the chunks before; ``project=False`` trusts the given states as
     consistent (only the multipliers ``λ0`` are computed, for all runs in one compiled
     call): then preparing a run costs about 20 µs, its KKT solve included.
-    ``check`` (default): each run is checked as a single run is (a shadow run with steps of
-    2h estimates its error, about half the work again; split steps, exploding Newton
-    iterations, energy drift or an estimated error above 1 % of the model's size: see
-    :mod:`ncgen.runtime.stepper_checks`); an untrustworthy run gets ``STATUS_UNTRUSTED``, its
-    rows from the problem on NaN, and the reason.  ``check=False``: the bare compiled loop
-    (fastest; choose ``dt`` with a checked run first).  ``outputs``: also the energies,
-    constraint residuals and markers (one compiled call per run; always with ``check``).
+    ``check`` (default): each run is checked as a single run is (split steps, exploding Newton
+    iterations, energy drift, and, with ``estimate``, an estimated error above 1 % of the
+    model's size: see :mod:`ncgen.runtime.stepper_checks`); an untrustworthy run gets
+    ``STATUS_UNTRUSTED``, its rows from the problem on NaN, and the reason.  ``estimate``: the
+    error estimate of the checks, as ``nc.simulate``'s (``True`` or ``"shadow"``: a shadow run
+    with steps of 2h, about half the work again; ``"local"``: a fifth; ``False``: none, the
+    other checks stay).  ``check=False``: the bare compiled loop (fastest; choose ``dt`` with
+    a checked run first).  ``outputs``: also the multipliers of the output states, the
+    energies, constraint residuals and markers (compiled calls per run; always with ``check``).
     ``kernels``: the stepper's kernels, as ``SimulationOptions(kernels=...)`` chooses them
     (:func:`ncgen.runtime.table_stepper.stepper_kernels`): a model of the kinds the element
     tables cover runs on the element library (no compile of the model, no flat function for
@@ -126,28 +134,41 @@ def simulate_batch(model, t_end: float, dt: float, *, q0=None, v0=None, p=None, 
     """
     start = time.perf_counter()
     SimulationOptions(method="stepper", hold=hold, substeps=substeps, newton_tol=newton_tol, max_newton=max_newton,
-                      max_halvings=max_halvings, ic_tolerance=ic_tolerance, scheme=scheme,
+                      max_halvings=max_halvings, ic_tolerance=ic_tolerance, scheme=scheme, estimate=estimate,
                       kernels=kernels)  # checked as for one run
     t0 = model.t0 if t0 is None else as_scalar(t0, "t0")
     t = time_grid(t0, t_end, dt, bytes_per_point=point_bytes(model))
     n = _batch_size(model, q0, v0, p, u, len(t))
     stepper = load_any_stepper(model, kernels=kernels)
     runs = _Runs(model, stepper, t, n, hold, int(substeps), newton_tol, max_newton, max_halvings, ic_tolerance,
-                 outputs or check, check, fixed_scheme(model, scheme))
+                 outputs or check, check, fixed_scheme(model, scheme), estimate)
     workers = runs.workers = _workers(workers, n)
-    runs.prepare(q0, v0, p, u, project)
+    pending = runs.prepare(q0, v0, p, u, project)      # projections: chunk by chunk, beside the threads
     chunks = [range(i, min(i + CHUNK, n)) for i in range(0, n, CHUNK)]
     stepping = time.perf_counter()
     if workers == 1:
         for c in chunks:
+            if pending:
+                pending(c)
             runs.integrate(c)
     else:
         with ThreadPoolExecutor(max_workers=workers) as pool:
-            list(pool.map(runs.integrate, chunks))
+            futures = []
+            for c in chunks:
+                if pending:
+                    pending(c)
+                futures.append(pool.submit(runs.integrate, c))
+            for f in futures:
+                f.result()
+    checking = time.perf_counter()
+    if check:
+        runs.check_all()
     end = time.perf_counter()
     result = runs.result()
-    result.info.update(model=model.name, method="stepper", kernels=stepper.kernels, h=runs.h, substeps=runs.substeps, hold=hold, check=check,
-                       workers=workers, runs=n, stepping_time=end - stepping, wall_time=end - start)
+    result.info.update(model=model.name, method="stepper", kernels=stepper.kernels, h=runs.h, substeps=runs.substeps,
+                       hold=hold, check=check, estimate=ESTIMATE_NAMES[runs.mode] if check else False,
+                       workers=workers, runs=n, stepping_time=checking - stepping, checking_time=end - checking,
+                       checked_alone=runs.checked_alone, wall_time=end - start)
     return result
 
 
@@ -200,8 +221,10 @@ class _Runs:
     """Inputs and result buffers of the runs, and the loop over a chunk of them."""
 
     def __init__(self, model, stepper, t, n, hold, substeps, tol, max_iter, max_halvings, ic_tolerance, outputs,
-                 check, scheme: str = "rattle"):
+                 check, scheme: str = "rattle", estimate: bool | str = True):
         self.model, self.stepper, self.t, self.n, self.check = model, stepper, t, n, check
+        self.mode = ESTIMATE_MODES[estimate] if check and estimate and not stepper.nd else 0
+        self.checked_alone = 0       # runs checked on their own (failed, or flagged by the screen)
         self.tables = stepper.kernels == "tables"
         self.conservative = is_conservative(model) if check else True
         self.hold, self.substeps, self.ic_tolerance, self.outputs = hold, substeps, ic_tolerance, outputs
@@ -214,6 +237,8 @@ class _Runs:
         self.Q, self.V = np.full((n, T, nq), np.nan), np.full((n, T, nq), np.nan)
         self.LAM = np.full((n, T, nc), np.nan)
         self.ITER = np.zeros((n, self.n_out), dtype=np.dtype(ctypes.c_long))
+        self.STATS = np.zeros((n, self.n_out, n_stats(stepper.nd))) if check else None
+        self.rows = np.zeros(n, dtype=int)       # output rows each run completed
         self.P = np.zeros((n, model.np))
         self.U = [None] * n          # inputs on the grid (len(t), nu) per run
         self.US = [None] * n         # inputs per step, or None
@@ -221,9 +246,12 @@ class _Runs:
         self.message = [""] * n
         self.Y = np.full((n, T, stepper.nout), np.nan) if outputs else None
 
-    def prepare(self, q0, v0, p, u, project: bool) -> None:
-        """Parameters, consistent initial state, multipliers and inputs of every run (a run
-        whose setup fails gets ``STATUS_SETUP`` and the reason)."""
+    def prepare(self, q0, v0, p, u, project: bool):
+        """Parameters, consistent initial state, multipliers and inputs of the runs (a run
+        whose setup fails gets ``STATUS_SETUP`` and the reason).  States as given
+        (``project=False``): every run now, their ``λ0`` in one compiled call, and None is
+        returned; else a function that prepares the runs of a chunk (Python, milliseconds per
+        run), to be called chunk by chunk while the threads integrate the chunks before."""
         model, t, t0 = self.model, self.t, float(self.t[0])
         # the flat DAE names the cause of a singular KKT system (the tables' runs load it only then)
         dae = load_dae(model, "vm")[0] if project and not self.tables else None
@@ -231,27 +259,32 @@ class _Runs:
         if not per_run_u:
             U = input_samples(u, model, t)
             shared_u = (U, step_inputs(U, t, self.hold, self.substeps))
-        if not project:            # states as given: checked once for all runs
-            self.Q[:, 0] = _states(q0, model.q0, self.n, model.nq, "q0")
-            self.V[:, 0] = _states(v0, model.v0, self.n, model.nq, "v0")
-        for i in range(self.n):
-            try:
-                self.P[i] = pv = model.p0 if p is None else parameter_values(_pick_p(p, i, model), model)
-                if project:
-                    q, v = initial_state(model, _pick(q0, i, 1), _pick(v0, i, 1), t0, pv, self.ic_tolerance)
-                    self.Q[i, 0], self.V[i, 0] = q, v
-                if per_run_u:
-                    U = input_samples(u[i], model, t)
-                    self.U[i], self.US[i] = U, step_inputs(U, t, self.hold, self.substeps)
-                else:
-                    self.U[i], self.US[i] = shared_u
-                if project:
-                    self.LAM[i, 0] = self._initial_multipliers(t0, q, v, self.U[i][0], pv, dae)
-            except NcgenError as e:
-                self.status[i], self.message[i] = STATUS_SETUP, f"could not start: {e}"
-                self.Q[i, 0] = self.V[i, 0] = np.nan
-        if not project:
-            self._multipliers(t0)
+
+        def runs(chunk: range) -> None:
+            for i in chunk:
+                try:
+                    self.P[i] = pv = model.p0 if p is None else parameter_values(_pick_p(p, i, model), model)
+                    if project:
+                        q, v = initial_state(model, _pick(q0, i, 1), _pick(v0, i, 1), t0, pv, self.ic_tolerance)
+                        self.Q[i, 0], self.V[i, 0] = q, v
+                    if per_run_u:
+                        U = input_samples(u[i], model, t)
+                        self.U[i], self.US[i] = U, step_inputs(U, t, self.hold, self.substeps)
+                    else:
+                        self.U[i], self.US[i] = shared_u
+                    if project:
+                        self.LAM[i, 0] = self._initial_multipliers(t0, q, v, self.U[i][0], pv, dae)
+                except NcgenError as e:
+                    self.status[i], self.message[i] = STATUS_SETUP, f"could not start: {e}"
+                    self.Q[i, 0] = self.V[i, 0] = np.nan
+
+        if project:
+            return runs
+        self.Q[:, 0] = _states(q0, model.q0, self.n, model.nq, "q0")     # states as given: checked at once
+        self.V[:, 0] = _states(v0, model.v0, self.n, model.nq, "v0")
+        runs(range(self.n))
+        self._multipliers(t0)
+        return None
 
     def _initial_multipliers(self, t0: float, q, v, u, p, dae) -> np.ndarray:
         """``λ0`` of one run: from the element tables on their path, else (or to name the cause
@@ -288,54 +321,117 @@ class _Runs:
                                f"project=True makes it so)")
 
     def integrate(self, chunk: range) -> None:
-        """The compiled loop over the runs of ``chunk`` (GIL released while it runs)."""
+        """The compiled loop over the runs of ``chunk``, then their multipliers and outputs
+        (:meth:`_derived`): compiled calls, each releasing the GIL."""
         st, raw = self.stepper, _raw_loops(self.model, self.stepper)
         done, splits = ctypes.c_long(0), ctypes.c_long(0)
         n_steps = self.n_out * self.substeps
         extra = [None] if st.nd else []
-        S = np.zeros((self.n_out, n_stats(st.nd))) if self.check else None
         Q, V, L = (_Address(a) for a in (self.Q, self.V, self.LAM))
         p_at, iter_at = _Address(self.P), _Address(self.ITER)
+        stats_at = _Address(self.STATS) if self.check else None
+        started = []
         for i in chunk:
             if self.status[i] != 0:
                 continue
+            started.append(i)
             US = self.US[i]
             common = (float(self.t[0]), self.h, n_steps, self.substeps, _ptr(US), st.nu if US is not None else 0,
                       p_at(i), Q(i, 1), V(i, 1), L(i, 1))
             if self.check:
-                status = raw.simulate_stats(Q(i, 0), V(i, 0), L(i, 0), *common, S.ctypes.data, self.options,
-                                            0 if st.nd else ESTIMATE_MODES["shadow"], int(not self.conservative),
-                                            ctypes.byref(done),
+                status = raw.simulate_stats(Q(i, 0), V(i, 0), L(i, 0), *common, stats_at(i), self.options,
+                                            self.mode, int(not self.conservative), ctypes.byref(done),
                                             ctypes.byref(splits), *extra)
-                self.ITER[i] = S[:, 1]
+                self.ITER[i] = self.STATS[i, :, STATS.index("newton_iterations")]
             else:
                 status = raw.simulate(Q(i, 0), V(i, 0), *common, iter_at(i), self.options, ctypes.byref(done),
                                       ctypes.byref(splits), *extra)
-            rows = done.value // self.substeps
+            self.rows[i] = rows = done.value // self.substeps
             if status != 0:
                 self.status[i] = status
                 t_fail = float(self.t[0]) + done.value * self.h
                 self.message[i] = (f"the stepper failed in the step from t = {t_fail:.6g} s to "
                                    f"{t_fail + self.h:.6g} s: {STATUS.get(status, f'status {status}')}")
                 self._blank(i, rows + 1)
-            if self.check:
-                self._checked(i, rows, S)
-            elif self.Y is not None:
-                k = rows + 1
-                U = self.U[i][:k] if self.model.nu else None
-                if self.tables and k > 1:
-                    self.LAM[i, 1:k] = st.multipliers(self.Q[i, 1:k], self.V[i, 1:k], None if U is None else U[1:k])
-                elif not by_remainder(self.model) and k > 1:      # as _trajectory: the states' multipliers
-                    self.LAM[i, 1:k] = multipliers_at_samples(self.model, self.t[1:k], self.Q[i, 1:k], self.V[i, 1:k],
-                                                              np.zeros((k - 1, 0)) if U is None else U[1:k],
-                                                              self.P[i], _compiled_accel(self.model))
-                self.Y[i, :k] = st.outputs(self.t[:k], self.Q[i, :k], self.V[i, :k], self.LAM[i, :k], U, self.P[i])
+        if self.Y is not None:
+            self._derived(started)
+
+    def _derived(self, runs: list) -> None:
+        """The multipliers of the output states (as a single run's trajectory has them: the
+        tables' KKT solve, the compiled ``accel`` mapped over the samples of all ``runs`` in
+        one call, or with nonsmooth contacts the stepper's own) and the outputs of the
+        compiled ``<model>_outputs``, of the completed rows of ``runs``."""
+        model, st, t = self.model, self.stepper, self.t
+        k = {i: int(self.rows[i]) + 1 for i in runs}
+        U = {i: self.U[i][:k[i]] if model.nu else None for i in runs}
+        if self.tables:
+            for i in runs:
+                if k[i] > 1:
+                    self.LAM[i, 1:k[i]] = st.multipliers(self.Q[i, 1:k[i]], self.V[i, 1:k[i]],
+                                                         None if U[i] is None else U[i][1:])
+        elif not by_remainder(model):
+            self._flat_multipliers([i for i in runs if k[i] > 1], k)
+        for i in runs:
+            self.Y[i, :k[i]] = st.outputs(t[:k[i]], self.Q[i, :k[i]], self.V[i, :k[i]], self.LAM[i, :k[i]], U[i],
+                                          self.P[i])
+
+    def _flat_multipliers(self, runs: list, k: dict) -> None:
+        """``λ`` at the output rows ``1 .. k[i] − 1`` of ``runs`` by the compiled ``accel``
+        mapped over all those samples in one call (each sample's evaluation is the one
+        :func:`~ncgen.runtime.joint_dynamics.multipliers_at_samples` makes for a single run)."""
+        if not runs or not self.model.nc:
+            return
+        model, t = self.model, self.t
+        rows = [(i, r) for i in runs for r in range(1, k[i])]
+        ii, rr = np.array([i for i, _ in rows]), np.array([r for _, r in rows])
+        U = np.array([self.U[i][r] for i, r in rows]).reshape(len(rows), model.nu)
+        _, lam = _compiled_accel(model).map(len(rows))(t[rr][None, :], self.Q[ii, rr].T, self.V[ii, rr].T, U.T,
+                                                       self.P[ii].T)
+        self.LAM[ii, rr] = np.array(lam).reshape(model.nc, len(rows)).T
+
+    def check_all(self) -> None:
+        """The checks of every started run (``check=True``): :meth:`screen` over the batch,
+        then each run it flags, and each run that failed, checked on its own as a single run
+        is (:meth:`_checked`, which names the reason)."""
+        started = self.status != STATUS_SETUP
+        alone = started & ((self.status != 0) | self.screen())
+        for i in np.flatnonzero(alone):
+            self._checked(i, int(self.rows[i]), self.STATS[i])
+        self.checked_alone = int(np.sum(alone))
+
+    def screen(self) -> np.ndarray:
+        """Per run: whether the checks of :func:`~ncgen.runtime.stepper_checks.untrusted_row`
+        may flag it, evaluated over all runs at once from their statistics and outputs.  The
+        energy error is measured against the energy scale without the round-off floor, which
+        only raises the scale, so every run the single-run check flags is flagged here too
+        (and a run flagged here only for round-off passes its own check).  Every run with
+        nonsmooth contacts is flagged (their checks are the contact stepper's)."""
+        if self.stepper.nd:
+            return np.ones(self.n, dtype=bool)
+        S, Y, col = self.STATS, self.Y, STATS.index
+        kinetic, potential = Y[:, :, 0], Y[:, :, 1]
+        E = kinetic + potential
+        work = np.concatenate([np.zeros((self.n, 1)), S[:, :, col("work")]], axis=1)
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            error = np.abs(E - E[:, :1] - (0.0 if self.conservative else work))[:, 1:]
+            terms = np.abs(np.stack([E, kinetic, potential - potential[:, :1], work])).max(axis=0)
+            scale = np.maximum.accumulate(terms, axis=1)[:, 1:]
+            e_rel = error / np.maximum(scale, 1e-300)
+        e_rel = np.where(np.isnan(e_rel), np.inf, e_rel)
+        steps, iters = S[:, :, col("steps")], S[:, :, col("newton_iterations")]
+        gq = S[:, :, col("error_q")]
+        size = max(float(np.max(np.abs(self.model.q0), initial=0.0)), 1e-9)
+        stages = COMPOSITION_STAGES if self.rattle4 else 1
+        bad = ((S[:, :, col("splits")] > 0) | (iters / np.maximum(steps * stages, 1) > NEWTON_LIMIT)
+               | (e_rel > ENERGY_FRACTION) | (np.nan_to_num(np.where(gq < 0, 0.0, gq)) > ERROR_FRACTION * size))
+        return bad.any(axis=1)
 
     def _checked(self, i: int, rows: int, S: np.ndarray) -> None:
         """Outputs of run ``i`` and the checks of a single run (:func:`untrusted_row`)."""
         model, Q, V, LAM = self.model, self.Q[i], self.V[i], self.LAM[i]
         info = {"method": "stepper", "h": self.h, "substeps": self.substeps, "stats": {},
-                "stages": COMPOSITION_STAGES if self.rattle4 else 1, "estimate": "shadow"}
+                "stages": COMPOSITION_STAGES if self.rattle4 else 1, "order": 4 if self.rattle4 else 2,
+                "estimate": ESTIMATE_NAMES[self.mode]}
         traj = _trajectory(model, self.stepper, self.t, Q[0], V[0], LAM[0], Q[1:], V[1:], LAM[1:], S, rows,
                            self.U[i], self.P[i], info, self.conservative, time.perf_counter(),
                            accel=self._accel())

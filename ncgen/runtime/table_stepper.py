@@ -21,8 +21,6 @@ kinds needs no C compiler.
 from __future__ import annotations
 
 import ctypes
-import threading
-import warnings
 from functools import partial
 from types import SimpleNamespace
 
@@ -37,7 +35,7 @@ from ncgen.errors import CodegenError, NcgenError
 from ncgen.model.data import model_data
 from ncgen.runtime.options import KERNELS
 from ncgen.runtime.stepper_library import CompiledStepper, load_stepper
-from ncgen.runtime.table_library import TABLE_FIELDS, ElementLibrary, TableFunctions, _Tables, load_element_library
+from ncgen.runtime.table_library import TABLE_FIELDS, ElementLibrary, _Tables, load_element_library
 
 
 _QR_FIELDS = (("int", "n"), *(("const int *", f) for f in ("k_colind", "k_row", "v_colind", "v_row", "r_colind",
@@ -46,8 +44,6 @@ _QR_FIELDS = (("int", "n"), *(("const int *", f) for f in ("k_colind", "k_row", 
 
 #: Size ``nq + nc`` below which "auto" runs a covered model flat when its package is loaded.
 AUTO_FLAT_BELOW = 160
-#: Size ``nq + nc`` up to which :meth:`TableStepper.multipliers` solves the KKT system dense.
-DENSE_KKT = 400
 
 
 class _QrPattern(ctypes.Structure):
@@ -131,7 +127,10 @@ class TableStepper(CompiledStepper):
                                               ("const double *", "v"), ("const double *", "u"),
                                               ("double *", "F")))
         self._forces = c_binding.bind(self._lib, f"{PACKAGE}_forces", forces, addresses=True)
-        self._local = threading.local()          # TableFunctions per thread (one work array each)
+        multipliers = c_binding.Signature("int", (("const void *", "S"), ("long", "n"), ("const double *", "q"),
+                                                   ("const double *", "v"), ("const double *", "u"),
+                                                   ("long", "u_stride"), ("double *", "lam")))
+        self._multipliers = c_binding.bind(self._lib, f"{PACKAGE}_multipliers", multipliers, addresses=True)
         self._raw = None
 
     def raw_loops(self) -> SimpleNamespace:
@@ -163,38 +162,24 @@ class TableStepper(CompiledStepper):
 
     def multipliers(self, q, v, u=None) -> np.ndarray:
         """``λ`` of the KKT system ``[[M, Aᵀ], [A, 0]] [q̈; λ] = [F; γ]`` at ``(q, v, u)`` from the
-        tables (one state, or one per row of ``q``, ``v`` and ``u``; ``u`` None: zero inputs); NaN
-        where it is singular.  Dense LU up to :data:`DENSE_KKT` unknowns, sparse LU above."""
+        tables (one state, or one per row of ``q``, ``v`` and ``u``; ``u`` None: zero inputs), by
+        the stepper's sparse QR in one compiled call (``ncgen_elements_multipliers``, the GIL
+        released); NaN where the system is singular."""
         q, v = np.asarray(q, float), np.asarray(v, float)
-        if q.ndim == 2:
-            U = [None] * len(q) if u is None or not self.nu else np.asarray(u, float).reshape(len(q), self.nu)
-            return np.array([self.multipliers(qk, vk, uk) for qk, vk, uk in zip(q, v, U)]).reshape(len(q), self.nc)
-        if not self.nc:
-            return np.zeros(0)
-        fn = getattr(self._local, "functions", None)
-        if fn is None:
-            fn = self._local.functions = TableFunctions(self.tables.tables, self.library_object)
-        T, a = self.tables.tables, self.tables.arrays
-        rhs = np.concatenate([self.forces(q, v, u), fn.gamma(q, v)])
-        n = self.nq + self.nc
-        if n <= DENSE_KKT:
-            K = np.zeros((n, n))
-            K[:self.nq, :self.nq] = T.dense_M(a["m_val"])
-            A = T.dense_A(fn.A(q))
-            K[self.nq:, :self.nq], K[:self.nq, self.nq:] = A, A.T
-            try:
-                return np.linalg.solve(K, rhs)[self.nq:]
-            except np.linalg.LinAlgError:
-                return np.full(self.nc, np.nan)
-        import scipy.sparse as sp
-        from scipy.sparse.linalg import MatrixRankWarning, spsolve
-
-        A = sp.csc_matrix((fn.A(q), T.a_indices, T.a_indptr), shape=(self.nc, self.nq))
-        M = sp.csc_matrix((a["m_val"], a["m_row"], a["m_colind"]), shape=(self.nq, self.nq))
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", MatrixRankWarning)
-            x = spsolve(sp.bmat([[M, A.T], [A, None]], format="csc"), rhs)
-        return np.asarray(x, float)[self.nq:]
+        one = q.ndim == 1
+        Q = np.ascontiguousarray(q.reshape(-1, self.nq))
+        V = np.ascontiguousarray(v.reshape(-1, self.nq))
+        n = len(Q)
+        if V.shape != Q.shape:
+            raise ValueError(f"multipliers: q and v disagree in shape ({q.shape}, {v.shape})")
+        U = None if u is None or not self.nu else np.ascontiguousarray(np.broadcast_to(
+            np.asarray(u, float).reshape(-1, self.nu), (n, self.nu)))
+        lam = np.zeros((n, self.nc))
+        status = self._multipliers(ctypes.byref(self._S), n, Q.ctypes.data, V.ctypes.data,
+                                   None if U is None else U.ctypes.data, self.nu, lam.ctypes.data)
+        if status:
+            raise CodegenError(f"model {self.name!r}: the element library's multipliers failed (status {status})")
+        return lam[0] if one else lam
 
 
 def table_balance_parts(t: np.ndarray, P: np.ndarray) -> dict[str, float]:

@@ -1,0 +1,86 @@
+"""``nc.simulate_batch`` with its checks screened over the batch: the runs of a 5-bar chain
+on the element tables (no compile) equal single ``nc.simulate`` runs bit for bit, checks
+included; a run the single-run check rejects is rejected with the same reason, and only such
+runs are checked one by one; ``estimate`` chooses the shadow run; the multipliers of the
+output states come from one compiled KKT solve per run and agree with the flat functions'."""
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import ncgen as nc
+from ncgen.errors import SimulationError
+from ncgen.runtime.batch import STATUS_UNTRUSTED
+from ncgen.runtime.table_stepper import load_any_stepper
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+from batch import initial_rates  # noqa: E402  (the benchmark's random bar rates, consistent)
+from common import chain_system  # noqa: E402
+
+KEYS = ("q", "v", "lam", "kinetic", "potential", "constraint_residual", "markers")
+
+
+@pytest.fixture(scope="module")
+def chain():
+    return chain_system(5).build()
+
+
+def assert_same_run(batch, i, traj):
+    for key in KEYS:
+        assert np.array_equal(getattr(batch, key)[i], getattr(traj, key), equal_nan=True), key
+
+
+@pytest.mark.parametrize("estimate", [True, "local", False])
+def test_checked_batch_on_the_tables_equals_single_runs(chain, estimate):
+    """States projected chunk by chunk while the threads integrate; checks screened."""
+    V0 = initial_rates(10 if estimate is True else 3, seed=2)[0]     # 10: more runs than a chunk
+    batch = nc.simulate_batch(chain, 0.5, 0.05, v0=V0, substeps=10, workers=2, kernels="tables",
+                              estimate=estimate)
+    assert batch.info["kernels"] == "tables" and batch.ok.all(), batch.message
+    assert batch.info["checked_alone"] == 0                   # the screen passed every run
+    assert batch.info["estimate"] == {True: "shadow"}.get(estimate, estimate)
+    for i in range(len(V0)):
+        single = nc.simulate(chain, 0.5, 0.05, method="stepper", v0=V0[i], substeps=10, kernels="tables",
+                             estimate=estimate)
+        assert_same_run(batch, i, single)
+
+
+def test_rejected_runs_carry_the_single_runs_reason(chain):
+    """RATTLE at h = 20 ms drifts by more than 1 % of the chain's energy (the energy check) and
+    at 50 ms needs split steps; at 5 ms it is trusted.  Each run of the batch is rejected
+    exactly when the single run raises, with its reason, and keeps the rows the single run
+    keeps; only the rejected runs are checked on their own."""
+    V0 = initial_rates(3, seed=0)[0] * np.array([0.5, 3.0, 12.0])[:, None]
+    for dt, substeps in ((0.02, 1), (0.05, 1), (0.02, 4)):
+        batch = nc.simulate_batch(chain, 0.6, dt, v0=V0, substeps=substeps, scheme="rattle", estimate=False,
+                                  kernels="tables", workers=2)
+        for i in range(len(V0)):
+            try:
+                single = nc.simulate(chain, 0.6, dt, method="stepper", v0=V0[i], substeps=substeps,
+                                     scheme="rattle", estimate=False, kernels="tables")
+            except SimulationError as e:
+                assert batch.status[i] == STATUS_UNTRUSTED
+                reason = batch.message[i].removeprefix("not trustworthy: ")
+                assert reason != batch.message[i] and reason + "." in str(e)
+                kept = len(e.trajectory.t)
+                assert np.array_equal(batch.q[i, :kept], e.trajectory.q) and np.isnan(batch.q[i, kept:]).all()
+            else:
+                assert batch.status[i] == 0 and batch.message[i] == ""
+                assert_same_run(batch, i, single)
+        assert batch.info["checked_alone"] == int(np.sum(batch.status != 0))
+    assert batch.ok.all()                                     # the last, at 5 ms: every run trusted
+
+
+def test_table_multipliers_agree_with_the_flat_accel(chain):
+    """λ of the KKT system at the states of a run, from the element library's compiled solve
+    (one call for all states, and one state alone), against the dense KKT solve of
+    ``nc.forward_dynamics`` on the flat functions (measured 1e-14 of 25 N/m)."""
+    traj = nc.simulate(chain, 0.5, 0.05, method="stepper", substeps=10, v0=initial_rates(1, seed=3)[0][0],
+                       kernels="tables")
+    stepper = load_any_stepper(chain, kernels="tables")
+    lam = stepper.multipliers(traj.q, traj.v)
+    ref = np.array([nc.forward_dynamics(chain, q, v)[1] for q, v in zip(traj.q, traj.v)])
+    np.testing.assert_allclose(lam, ref, rtol=0, atol=1e-13 * np.abs(ref).max())
+    assert np.array_equal(stepper.multipliers(traj.q[4], traj.v[4]), lam[4])
+    assert np.isnan(stepper.multipliers(np.zeros(chain.nq), np.zeros(chain.nq))).all()   # A = 0: singular
