@@ -66,3 +66,13 @@ def test_store_off(store, monkeypatch):
     monkeypatch.setenv(derivation_store.ENV, "0")
     assert stored_derivation(coordinate_type("rr", 3), Derivation).ctype is coordinate_type("rr", 3)
     assert not store.exists()
+
+
+def test_entries_of_other_sources_are_removed_when_one_is_written(store):
+    store.mkdir(parents=True)
+    old = store / "rr-3d-0123456789abcdef01234567.pickle"
+    other = store / "ru-3d-0123456789abcdef01234567.pickle"
+    old.write_bytes(b"from other sources")
+    other.write_bytes(b"another type")
+    stored_derivation(coordinate_type("rr", 3), Derivation)
+    assert sorted(p.name for p in store.iterdir()) == sorted([entry_path("rr", 3).name, other.name])

@@ -7,7 +7,8 @@ An entry is ``<cache_dir>/derivations/<type>-<dim>d-<key>.pickle``
 is made of: ncgen's version, SymPy's and Python's, and the bytes of the symbolic layer's
 sources, so an edited formula is derived again.  Entries are written atomically
 (:func:`ncgen.files.atomic_path`); one that cannot be read back (damaged, or not a derivation
-of this type) is removed, with a note on stderr, and derived again.  ``NCGEN_MODEL_CACHE=0``
+of this type) is removed, with a note on stderr, and derived again; writing an entry removes
+the entries of the same type made from other sources.  ``NCGEN_MODEL_CACHE=0``
 (the switch of the store of built models) turns this store off too.
 """
 from __future__ import annotations
@@ -74,6 +75,9 @@ def stored_derivation(ctype, derive: Callable):
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_path(path) as tmp:
             tmp.write_bytes(payload)
+        for old in path.parent.glob(f"{ctype.name}-{ctype.dim}d-*.pickle"):
+            if old != path:               # of other sources: would only pile up
+                old.unlink(missing_ok=True)
     except (OSError, NcgenError, pickle.PicklingError):
         pass                              # not stored: derived again next time
     return found
