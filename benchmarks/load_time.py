@@ -9,7 +9,14 @@ and the integration all count.  Per model:
 * **first run**: an empty ``NCGEN_CACHE_DIR`` (nothing stored, nothing compiled);
 * **later runs**: the same cache directory again (model read back, library found);
 * **store off**: later runs with ``NCGEN_MODEL_CACHE=0`` (the model built every time, as
-  before the store; the compiled library still found), interleaved with the later runs.
+  before the store; the compiled library still found), interleaved with the later runs;
+* **first run, derivations stored**: the cache emptied but for the coordinate types'
+  derivations (``ncgen/symbolic/derivation_store.py``): a model never seen, after ncgen has
+  run once.
+
+Python start-up alone (``python -c pass``) is printed too: what site-packages' ``.pth`` files
+import counts in every run.  A later run's heavy imports (SymPy, SciPy, matplotlib, Jinja2,
+yourdfpy, asyncio) are listed (none expected).
 
 Python's bytecode is written to a private ``PYTHONPYCACHEPREFIX`` warmed before timing (a
 user's installation has its ``.pyc`` files; ``PYTHONDONTWRITEBYTECODE`` would recompile
@@ -33,9 +40,11 @@ followed by a MuJoCo and a Pinocchio load of the same robot in fresh processes (
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import re
 import resource
+import shutil
 import statistics
 import subprocess
 import sys
@@ -81,7 +90,7 @@ def ncgen_runs(model: Path, t_end: float, rounds: int, base_env: dict) -> dict[s
     """First, later and store-off runs of ``ncgen simulate model`` (see the module docstring)."""
     cmd = [sys.executable, "-m", "ncgen.cli", "simulate", str(model), "--t-end", str(t_end)]
     out: dict[str, list[tuple[float, float]]] = {"first run (empty cache)": [], "later runs (model stored)": [],
-                                                 "later runs, store off": []}
+                                                 "later runs, store off": [], FIRST_DERIVED: []}
     with tempfile.TemporaryDirectory(prefix="ncgen-load-") as tmp:
         for r in range(rounds):
             cache = f"{tmp}/cache{r}"
@@ -92,7 +101,33 @@ def ncgen_runs(model: Path, t_end: float, rounds: int, base_env: dict) -> dict[s
                 out[label].append((wall, cpu))
             stored = list(Path(cache, "models").glob("*.model"))
             assert stored, f"{model.name}: nothing stored in {cache}/models"
+            for entry in Path(cache).iterdir():          # all but the derivations: a model never seen
+                if entry.name != "derivations":
+                    shutil.rmtree(entry) if entry.is_dir() else entry.unlink()
+            out[FIRST_DERIVED].append(run(cmd, env, tmp)[:2])
     return out
+
+
+#: A first run of a model (nothing stored, nothing compiled) after ncgen has run once: the
+#: coordinate types' derivations are in the store (ncgen/symbolic/derivation_store.py).
+FIRST_DERIVED = "first run, derivations stored"
+
+LATER_IMPORTS = """
+import json, sys
+from ncgen.cli import main
+assert main(sys.argv[1:]) == 0
+print(json.dumps(sorted(m for m in ("sympy", "scipy", "matplotlib", "jinja2", "yourdfpy", "asyncio") if m in sys.modules)))
+"""
+
+
+def later_imports(model: Path, t_end: float, base_env: dict) -> list[str]:
+    """The heavy modules a later run of ``ncgen simulate model`` imports (none expected)."""
+    args = ["simulate", str(model), "--t-end", str(t_end)]
+    with tempfile.TemporaryDirectory(prefix="ncgen-load-") as tmp:
+        env = {**base_env, "NCGEN_CACHE_DIR": f"{tmp}/cache"}
+        run([sys.executable, "-c", LATER_IMPORTS, *args], env, tmp)
+        text = run([sys.executable, "-c", LATER_IMPORTS, *args], env, tmp)[2]
+    return json.loads(text.strip().splitlines()[-1])
 
 
 PYTHON_CHILD = """
@@ -112,7 +147,6 @@ def python_runs(urdf: Path, rounds: int, base_env: dict, tmp: str) -> dict[str, 
     """``nc.System.from_urdf(urdf).build()`` in fresh processes: first, stored and store-off
     loads (the call alone, and the imports before it), each round followed by a MuJoCo and a
     Pinocchio load in fresh processes."""
-    import json
     stripped = Path(tmp) / "model.urdf"
     stripped.write_text(mesh_free_urdf(urdf))
     out: dict[str, list[tuple[float, float]]] = {}
@@ -192,6 +226,8 @@ def main() -> None:
         env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
         env.update(PYTHONPATH=str(ROOT), PYTHONPYCACHEPREFIX=pyc)
         run([sys.executable, "-c", "import ncgen, ncgen.cli, ncgen.codegen.model_cache, mujoco, pinocchio"], env, pyc)
+        startup = [run([sys.executable, "-c", "pass"], env, pyc)[:2] for _ in range(rounds)]
+        print(summary("python -c pass (start-up alone)", startup))
         for model in models:
             print(f"\n=== {model.stem}: ncgen simulate {model.name} --t-end {args.t_end:g}")
             results = ncgen_runs(model, args.t_end, rounds, env)
@@ -204,6 +240,7 @@ def main() -> None:
             print(f"  target: first run <= {TARGET_FIRST:g} s wall ({'met' if first <= TARGET_FIRST else 'NOT met'}), "
                   f"later runs <= {TARGET_LATER:g} s wall ({'met' if later <= TARGET_LATER else 'NOT met'})")
             print(f"RATIO later run, store off / stored, CPU: {off / on:.2f}")
+            print(f"  heavy modules a later run imports: {later_imports(model, args.t_end, env) or 'none'}")
             print(f"  load average now: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
         print(f"\n=== {urdf.stem} from Python: nc.System.from_urdf(path).build() in a fresh process "
               f"(the call; imports apart), interleaved with MuJoCo and Pinocchio loads")

@@ -34,6 +34,13 @@ _OWNED = re.compile(r"^\..+\.(?:tmp|old)-(?P<host>[A-Za-z0-9_]*)-(?P<pid>\d+)-[^
 _UNOWNED = re.compile(r"^\..+\.(?:tmp|old)-[a-z0-9_]{8}$")
 
 
+def cache_dir() -> Path:
+    """``$NCGEN_CACHE_DIR``, else ``~/.cache/ncgen``: the compile cache, the store of built
+    models and the stored derivations of coordinate types."""
+    env = os.environ.get("NCGEN_CACHE_DIR")
+    return Path(env) if env else Path.home() / ".cache" / "ncgen"
+
+
 def _host() -> str:
     return re.sub(r"[^A-Za-z0-9_]", "_", socket.gethostname())[:40]
 

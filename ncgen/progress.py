@@ -25,8 +25,13 @@ def enabled(mode: bool | None = None) -> bool:
 
 
 def bar(total: float | None, desc: str, unit: str = "it", mode: bool | None = None, **kw):
-    """A tqdm bar on stderr (disabled per :func:`enabled`), shown after :data:`DELAY` s in auto mode."""
-    from tqdm.auto import tqdm
+    """A tqdm bar on stderr (disabled per :func:`enabled`), shown after :data:`DELAY` s in auto mode;
+    the notebook's bar inside a Jupyter kernel (``tqdm.auto``, whose import costs a tenth of a
+    second: asyncio), the terminal's elsewhere."""
+    if "ipykernel" in sys.modules:
+        from tqdm.auto import tqdm
+    else:
+        from tqdm.std import tqdm
 
     return tqdm(total=total, desc=desc, unit=unit, disable=not enabled(mode), delay=0.0 if mode else DELAY,
                 leave=False, file=sys.stderr, dynamic_ncols=True, **kw)

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-HEAVY = ("sympy", "scipy", "matplotlib", "pandas", "dask", "zarr", "jinja2", "casadi", "yourdfpy", "trimesh")
+HEAVY = ("sympy", "scipy", "matplotlib", "pandas", "dask", "zarr", "jinja2", "casadi", "yourdfpy", "trimesh", "asyncio")
 
 
 def loaded_after(code: str) -> list[str]:
@@ -85,4 +85,4 @@ def test_later_cli_run_of_a_stored_tree_needs_no_sympy(tmp_path, source):
            "os.environ.pop('NCGEN_MODEL_CACHE', None)\n"
            f"from ncgen.cli import main\nassert main(['simulate', {urdf!r}, '--t-end', '0.05']) == 0")
     assert "sympy" in loaded_after(run)
-    assert loaded_after(run) == ["casadi", "jinja2"]
+    assert loaded_after(run) == ["casadi"]

@@ -19,7 +19,6 @@ the packages after an intended change, run::
 from __future__ import annotations
 
 import difflib
-import os
 import re
 import sys
 import time
@@ -48,25 +47,11 @@ def model_files() -> list[Path]:
 
 def regenerate(root: Path) -> dict[str, float]:
     """Generate the package of every ``examples/*.toml`` into ``root/<model>``; returns the
-    time (s) each took, model building included.  Models with ``[[contacts]]`` are built
-    with nonsmooth contacts, so that their packages hold the contact half of the compiled
-    stepper (``templates/c/runtime/ncgen_contact.h``).  Models are built afresh, never read
-    from the store of built models (a model read back from the store gives its contact element
-    kernels as other, equivalent CasADi expressions, and so other C)."""
+    time (s) each took, model building (or reading from the store of built models) included.
+    Models with ``[[contacts]]`` are built with nonsmooth contacts, so that their packages hold
+    the contact half of the compiled stepper (``templates/c/runtime/ncgen_contact.h``)."""
     import ncgen as nc
 
-    before = os.environ.get("NCGEN_MODEL_CACHE")
-    os.environ["NCGEN_MODEL_CACHE"] = "0"
-    try:
-        return _regenerate(nc, root)
-    finally:
-        if before is None:
-            del os.environ["NCGEN_MODEL_CACHE"]
-        else:
-            os.environ["NCGEN_MODEL_CACHE"] = before
-
-
-def _regenerate(nc, root: Path) -> dict[str, float]:
     times = {}
     for path in model_files():
         start = time.process_time()

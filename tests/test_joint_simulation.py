@@ -488,3 +488,30 @@ def test_generated_loop_compiles_warning_free(tmp_path, with_input):
         r = subprocess.run([cc, "-Wall", "-Wextra", "-Werror", "-c", src, "-o", str(tmp_path / "x.o")],
                            cwd=pkg.path, capture_output=True, text=True)
         assert r.returncode == 0, (src, r.stderr)
+
+
+def test_compiled_joint_loop_is_found_without_writing_its_package(tmp_path, monkeypatch):
+    """A second process (here: the loop's cache of the model emptied) finds the compiled
+    joint loop through its index file without writing the package (rendering its C costs
+    more than the rest of a later run); a library gone from the cache is compiled again."""
+    import json
+
+    from ncgen.codegen import joint_loop as jl
+    from ncgen.model.data import model_data
+
+    monkeypatch.setenv("NCGEN_CACHE_DIR", str(tmp_path))
+    model = link(with_input=False)[0].build()
+    first = nc.simulate(model, 0.2, 0.05, method="joint")
+    indexes = list(tmp_path.glob("joint-loop-*.json"))
+    assert len(indexes) == 1
+    model_data(model).joint_loops.clear()
+    written = []
+    real = jl.write_package
+    monkeypatch.setattr(jl, "write_package", lambda *a, **k: written.append(a[0]) or real(*a, **k))
+    again = nc.simulate(model, 0.2, 0.05, method="joint")
+    assert written == [] and np.array_equal(again.q, first.q)
+    library = Path(json.loads(indexes[0].read_text())["library"])
+    library.unlink()                      # (loaded in this process: removed, never overwritten)
+    model_data(model).joint_loops.clear()
+    rebuilt = nc.simulate(model, 0.2, 0.05, method="joint")
+    assert len(written) == 1 and np.array_equal(rebuilt.q, first.q)

@@ -198,3 +198,27 @@ def test_the_command_line_stores_complete_models_and_python_lazy_ones(store):
     assert all(stored(cli, name) for name in cli.functions)    # a later run derives nothing
     assert stored(python, "poses") and stored(python, "A") and not stored(python, "dae")
     assert np.array_equal(python.energy(python.q0, python.v0), cli.energy(cli.q0, cli.v0))
+
+
+@pytest.mark.parametrize("example", ["boxes", "box_stack"])
+def test_generated_c_does_not_depend_on_the_store(store, monkeypatch, tmp_path, example):
+    """``nc.generate`` writes the same bytes for a model built afresh and for the same model
+    read back from the store of built models (whose functions are other CasADi objects of the
+    same expressions): the nonsmooth contact kernels per element included."""
+    from ncgen.assembly import build as assembly_build
+
+    path = EXAMPLES / f"{example}.toml"
+    monkeypatch.setenv(model_cache.ENV, "0")
+    fresh = nc.System.from_toml(path).build(contacts="nonsmooth")
+    nc.generate(fresh, tmp_path / "fresh")
+    monkeypatch.delenv(model_cache.ENV)
+    nc.System.from_toml(path).build(contacts="nonsmooth")          # built and stored
+    monkeypatch.setattr(assembly_build, "build_model", lambda *a, **k: pytest.fail("built again, not read back"))
+    stored = nc.System.from_toml(path).build(contacts="nonsmooth")
+    assert stored.data.store_key is not None
+    nc.generate(stored, tmp_path / "stored")
+    files = sorted(p.relative_to(tmp_path / "fresh") for p in (tmp_path / "fresh").rglob("*") if p.is_file())
+    assert files == sorted(p.relative_to(tmp_path / "stored") for p in (tmp_path / "stored").rglob("*") if p.is_file())
+    assert any("pair" in (tmp_path / "fresh" / f).read_text() for f in files if f.suffix == ".c")
+    different = [str(f) for f in files if (tmp_path / "fresh" / f).read_bytes() != (tmp_path / "stored" / f).read_bytes()]
+    assert different == []

@@ -352,3 +352,28 @@ def test_forces_without_table_jacobians_take_the_flat_path():
     st = nc.step_function(model, 0.01, kernels="tables")
     x, u = moving_state(model, st)
     check_against_differences(st, x, u, "constant push")
+
+
+def test_input_force_map_is_checked_once_per_model(monkeypatch):
+    """``input_force_map``'s symbolic check runs once per force of a model, however many of
+    ``uncovered_elements``, ``input_forces`` and the step Jacobians' coverage ask for it; the
+    maps are the constant ``B`` of ``Q = B u`` (checked against ``F`` at two inputs)."""
+    from ncgen.codegen import stepper_tables
+    from ncgen.control.step import _jacobian_uncovered
+
+    model = pushed_springs(name="tab_pushed_once")
+    checked = []
+    real = stepper_tables._input_force_map
+    monkeypatch.setattr(stepper_tables, "_input_force_map", lambda m, f: checked.append(f.name) or real(m, f))
+    stepper_tables.uncovered_elements(model)
+    maps = stepper_tables.input_forces(model)
+    assert _jacobian_uncovered(model) == {}
+    stepper_tables.stepper_tables(model)
+    assert sorted(checked) == sorted(f.name for f in model.forces if type(f) is nc.PointForce)
+    B = sum(b for _, b in maps)
+    F = model.functions["F"]
+    u = np.array([0.3, -1.2, 0.7, 2.0])
+    dF = np.asarray(F(0.0, model.q0, model.v0, u, [])).ravel() - np.asarray(F(0.0, model.q0, model.v0, 0 * u, [])).ravel()
+    np.testing.assert_allclose(B @ u, dF, rtol=0, atol=1e-12)
+    with pytest.raises(ValueError):
+        maps[0][1][0, 0] = 1.0                       # the cached map is read-only

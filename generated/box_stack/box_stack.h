@@ -474,7 +474,7 @@ extern const casadi_real box_stack_gravity[3];
 
 /* ---- box_stack_step_pair0_gap ----------------------------------------------------
  * Stepper: the gaps of one contact element
- * In box_stack_kernels_0.c; 2481 instructions.
+ * In box_stack_kernels_0.c; 1708 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
@@ -489,7 +489,7 @@ extern const casadi_real box_stack_gravity[3];
 
 /* ---- box_stack_step_pair0_rows ----------------------------------------------------
  * Stepper: gaps and contact Jacobian rows of one contact element
- * In box_stack_kernels_0.c; 5452 instructions.
+ * In box_stack_kernels_0.c; 4397 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
@@ -506,7 +506,7 @@ extern const casadi_real box_stack_gravity[3];
 
 /* ---- box_stack_step_pair1_gap ----------------------------------------------------
  * Stepper: the gaps of one contact element
- * In box_stack_kernels_0.c; 4206 instructions.
+ * In box_stack_kernels_0.c; 2918 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 12x1, nnz 12 [m] local coordinates of its second member. Default: zeros.
@@ -521,7 +521,7 @@ extern const casadi_real box_stack_gravity[3];
 
 /* ---- box_stack_step_pair1_rows ----------------------------------------------------
  * Stepper: gaps and contact Jacobian rows of one contact element
- * In box_stack_kernels_1.c; 9009 instructions.
+ * In box_stack_kernels_1.c; 7389 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 12x1, nnz 12 [m] local coordinates of its second member. Default: zeros.
@@ -538,7 +538,7 @@ extern const casadi_real box_stack_gravity[3];
 
 /* ---- box_stack_step_pair2_gap ----------------------------------------------------
  * Stepper: the gaps of one contact element
- * In box_stack_kernels_1.c; 72 instructions.
+ * In box_stack_kernels_1.c; 68 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
@@ -553,7 +553,7 @@ extern const casadi_real box_stack_gravity[3];
 
 /* ---- box_stack_step_pair2_rows ----------------------------------------------------
  * Stepper: gaps and contact Jacobian rows of one contact element
- * In box_stack_kernels_1.c; 305 instructions.
+ * In box_stack_kernels_1.c; 298 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
@@ -585,7 +585,7 @@ extern const casadi_real box_stack_gravity[3];
 
 /* ---- box_stack_step_pair3_rows ----------------------------------------------------
  * Stepper: gaps and contact Jacobian rows of one contact element
- * In box_stack_kernels_1.c; 92 instructions.
+ * In box_stack_kernels_1.c; 91 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.

@@ -473,7 +473,7 @@ extern const casadi_real boxes_gravity[3];
 
 /* ---- boxes_step_pair0_gap ----------------------------------------------------
  * Stepper: the gaps of one contact element
- * In boxes_kernels_0.c; 144 instructions.
+ * In boxes_kernels_0.c; 88 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
@@ -488,7 +488,7 @@ extern const casadi_real boxes_gravity[3];
 
 /* ---- boxes_step_pair0_rows ----------------------------------------------------
  * Stepper: gaps and contact Jacobian rows of one contact element
- * In boxes_kernels_0.c; 447 instructions.
+ * In boxes_kernels_0.c; 391 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
@@ -520,7 +520,7 @@ extern const casadi_real boxes_gravity[3];
 
 /* ---- boxes_step_pair1_rows ----------------------------------------------------
  * Stepper: gaps and contact Jacobian rows of one contact element
- * In boxes_kernels_0.c; 244 instructions.
+ * In boxes_kernels_0.c; 226 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.

@@ -488,7 +488,7 @@ extern const casadi_real falling_chain_gravity[3];
 
 /* ---- falling_chain_step_pair0_rows ----------------------------------------------------
  * Stepper: gaps and contact Jacobian rows of one contact element
- * In falling_chain_kernels_0.c; 73 instructions.
+ * In falling_chain_kernels_0.c; 58 instructions.
  * Inputs:
  *   arg[0] q_a: 6x1, nnz 6 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
@@ -520,7 +520,7 @@ extern const casadi_real falling_chain_gravity[3];
 
 /* ---- falling_chain_step_pair1_rows ----------------------------------------------------
  * Stepper: gaps and contact Jacobian rows of one contact element
- * In falling_chain_kernels_0.c; 73 instructions.
+ * In falling_chain_kernels_0.c; 58 instructions.
  * Inputs:
  *   arg[0] q_a: 6x1, nnz 6 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.

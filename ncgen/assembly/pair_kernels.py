@@ -252,7 +252,10 @@ def pair_kernels(model) -> PairKernels:
         Wloc = ca.horzcat(*[W[:, i] if i >= 0 else ca.SX(W.shape[0], 1) for i in cols])
         g = gaps[first:first + len(pcs)]
         full = ca.Function("pair", [q, p], [g, Wloc])
-        g_loc, W_loc = full(qfull, p)
+        # common subexpressions merged: the kernel is then the same expression whether the
+        # model's functions were made in this process (g and W sharing nodes) or read back
+        # from the store of built models (two separate graphs), so the C is too
+        g_loc, W_loc = ca.cse([*full(qfull, p)])
         gap = ca.Function("gap", [qa, qb, p], [ca.densify(g_loc)], ["q_a", "q_b", "p"], ["g"])
         rowf = ca.Function("rows", [qa, qb, p], [ca.densify(g_loc), ca.densify(W_loc)],
                            ["q_a", "q_b", "p"], ["g", "W"])

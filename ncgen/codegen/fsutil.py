@@ -17,13 +17,7 @@ import tempfile
 from pathlib import Path
 from typing import Callable, Iterator
 
-from ncgen.files import sweep_stale, temporary_name
-
-
-def cache_dir() -> Path:
-    """``$NCGEN_CACHE_DIR``, else ``~/.cache/ncgen``: the compile cache and the store of built models."""
-    env = os.environ.get("NCGEN_CACHE_DIR")
-    return Path(env) if env else Path.home() / ".cache" / "ncgen"
+from ncgen.files import cache_dir, sweep_stale, temporary_name  # noqa: F401 (cache_dir: here for codegen)
 
 
 def sha256_bytes(data: bytes) -> str:

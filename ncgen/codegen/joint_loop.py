@@ -9,6 +9,8 @@ The library exports ``<name>_joint_run`` (:data:`JOINT_RUN`, defined by the glue
 codes by the runtime; ``tests/test_c_binding.py`` checks the definition and the table agree)."""
 from __future__ import annotations
 
+import hashlib
+import json
 import os
 import tempfile
 from pathlib import Path
@@ -16,7 +18,11 @@ from pathlib import Path
 import casadi as ca
 
 from ncgen.codegen.c_binding import Signature
-from ncgen.codegen.compile_cache import compile_package
+from ncgen.codegen.compile_cache import cache_dir, compile_package, entry_problem, resolve_cflags
+from ncgen.codegen.compiler import find_compiler
+from ncgen.codegen.model_cache import code_identity
+from ncgen.codegen.render import shipped_templates_dir
+from ncgen.files import atomic_path
 from ncgen.codegen.package import LARGE_FUNCTION_INSTRUCTIONS, ExtraSource, write_package
 
 #: ODE functions longer than the package's LARGE_FUNCTION_INSTRUCTIONS but at most this long
@@ -41,9 +47,43 @@ def build_joint_loop(name: str, ode: ca.Function, pivot_tol: float, cflags=None)
         cflags = "-O1"
     context = {"ode": f"{name}_{ode.name()}", "nx": ode.nnz_in(1), "nw": ode.nnz_in(2),
                "pivot_tol": repr(float(pivot_tol))}
+    index = _index(name, ode, context, cflags)
+    library = _indexed(index)
+    if library is not None:
+        return library
     with tempfile.TemporaryDirectory() as tmp:
         pkg = write_package(name, [ode], Path(tmp) / "pkg", extra_sources=joint_loop_sources(name, context))
-        return compile_package(pkg, cflags=cflags).path
+        library = compile_package(pkg, cflags=cflags).path
+    with atomic_path(index) as tmp_index:
+        tmp_index.write_text(json.dumps({"library": str(library)}) + "\n")
+    return library
+
+
+def _index(name: str, ode: ca.Function, context: dict, cflags) -> Path:
+    """The index file ``joint-loop-<key>.json`` of the compile cache that names the library
+    of this loop, so that a later process finds it without writing the package again (its
+    rendering costs more than the rest of a later run).  The key hashes what the package is
+    made of: the ODE's serialisation, the glue's context, ncgen's sources
+    (:func:`~ncgen.codegen.model_cache.code_identity`) and templates, the compiler and the flags."""
+    compiler = find_compiler()
+    h = hashlib.sha256(json.dumps({"name": name, "context": context, "ncgen": code_identity(),
+                                   "compiler": [*compiler.argv, compiler.version],
+                                   "cflags": resolve_cflags(cflags)}, sort_keys=True).encode())
+    h.update(ode.serialize().encode())
+    templates = shipped_templates_dir()
+    for path in sorted(templates.rglob("*")):
+        if path.is_file():
+            h.update(str(path.relative_to(templates)).encode() + b"\0" + path.read_bytes() + b"\0")
+    return cache_dir() / f"joint-loop-{h.hexdigest()[:32]}.json"
+
+
+def _indexed(index: Path) -> Path | None:
+    """The intact library that ``index`` names, or None."""
+    try:
+        library = Path(json.loads(index.read_text())["library"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    return library if entry_problem(library.parent, library) is None else None
 
 
 def joint_loop_sources(name: str, context: dict) -> list[ExtraSource]:

@@ -9,11 +9,12 @@ from __future__ import annotations
 import importlib.util
 from functools import lru_cache
 from pathlib import Path
-from typing import Mapping, Sequence
-
-import jinja2
+from typing import TYPE_CHECKING, Mapping, Sequence
 
 from ncgen.errors import CodegenError
+
+if TYPE_CHECKING:
+    import jinja2
 
 _COMMENT_STYLE = {".c": "c", ".h": "c", ".txt": "hash", "": "hash", ".mk": "hash", ".cmake": "hash"}
 
@@ -48,8 +49,11 @@ def shipped_templates_dir(sub: str = "c") -> Path:
 
 
 @lru_cache(maxsize=8)
-def environment(extra_dirs: tuple[str, ...] = ()) -> jinja2.Environment:
-    """Strict Jinja2 environment: ``extra_dirs`` first, then the shipped ``c`` templates."""
+def environment(extra_dirs: tuple[str, ...] = ()) -> "jinja2.Environment":
+    """Strict Jinja2 environment: ``extra_dirs`` first, then the shipped ``c`` templates
+    (Jinja2 imported here: a run that finds its libraries compiled renders nothing)."""
+    import jinja2
+
     loaders = [jinja2.FileSystemLoader(list(extra_dirs))] if extra_dirs else []
     loaders.append(jinja2.FileSystemLoader(str(shipped_templates_dir())))
     return jinja2.Environment(loader=jinja2.ChoiceLoader(loaders), undefined=jinja2.StrictUndefined,
@@ -59,6 +63,8 @@ def environment(extra_dirs: tuple[str, ...] = ()) -> jinja2.Environment:
 
 def render(template: str, output: str, context: Mapping, extra_dirs: Sequence[str | Path] = ()) -> str:
     """Render ``template`` for file ``output``: the banner, then the template's text."""
+    import jinja2
+
     env = environment(tuple(str(d) for d in extra_dirs))
     try:
         text = env.get_template(template).render(**context)

@@ -43,6 +43,7 @@ from ncgen.codegen.element_kernels import FEATURE_FORCE_KINDS, torque_constants
 from ncgen.codegen.model_tables import ModelTables, UnsupportedElements, _csc, _ints, _ptr, _reals, model_tables
 from ncgen.errors import CodegenError, NcgenError
 from ncgen.model.context import Context
+from ncgen.model.data import model_data
 from ncgen.model.forces import GeneralizedForce, PointForce, Spring, Torque, TorsionalSpring
 from ncgen.model.joint_equations import is_full
 
@@ -147,7 +148,19 @@ def actuator_element(model, joint) -> ActuatorElement | None:
 
 def input_force_map(model, force) -> np.ndarray | None:
     """``B`` (nq × nu) when the generalised force of ``force`` is ``Q = B u`` with ``B``
-    constant (no dependence on t, q, v or the parameters, nothing at u = 0), else None."""
+    constant (no dependence on t, q, v or the parameters, nothing at u = 0), else None;
+    checked symbolically once per model and force (``model.data.input_force_maps``)."""
+    maps = model_data(model).input_force_maps
+    hit = maps.get(id(force))
+    if hit is None or hit[0] is not force:
+        B = _input_force_map(model, force)
+        if B is not None:
+            B.setflags(write=False)
+        hit = maps[id(force)] = (force, B)
+    return hit[1]
+
+
+def _input_force_map(model, force) -> np.ndarray | None:
     if not model.nu or type(force) is Spring or getattr(force, "system", None) is None:
         return None
     ctx = _context(model, force)

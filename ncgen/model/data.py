@@ -102,6 +102,9 @@ class ModelData:
     #: ``accel`` of the initial multipliers (:mod:`ncgen.runtime.batch`).
     batch_loops: dict = field(default_factory=dict)
     batch_accel: object = None
+    #: ``{id(force): (force, B or None)}``: the constant input map ``Q = B u`` of each force,
+    #: checked symbolically once (:func:`ncgen.codegen.stepper_tables.input_force_map`).
+    input_force_maps: dict = field(default_factory=dict)
     #: The model's key in the store of built models (:mod:`ncgen.codegen.model_cache`) when it
     #: was read from or written to it; functions derived from it are stored under it too.
     store_key: str | None = None

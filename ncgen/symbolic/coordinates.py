@@ -165,7 +165,10 @@ class CoordinateType:
     # ------------------------------------------------------------- derivation
     @cached_property
     def derivation(self) -> "Derivation":
-        return Derivation(self)
+        """The SymPy derivation, read from the store of derivations when it holds it
+        (:mod:`ncgen.symbolic.derivation_store`), else derived (and stored)."""
+        from ncgen.symbolic.derivation_store import stored_derivation
+        return stored_derivation(self, Derivation)
 
     def report(self):
         """The derivation step by step (:func:`ncgen.symbolic.teaching.coordinates_report`)."""

@@ -1,0 +1,83 @@
+"""Derivations of coordinate types kept on disk, so that a process that builds a model does
+not derive them with SymPy again (about a second per type; issue 34: first runs).
+
+An entry is ``<cache_dir>/derivations/<type>-<dim>d-<key>.pickle``
+(:func:`ncgen.files.cache_dir`): the pickled :class:`~ncgen.symbolic.coordinates.Derivation`
+(SymPy matrices and symbols; its coordinate type by name).  The key hashes what a derivation
+is made of: ncgen's version, SymPy's and Python's, and the bytes of the symbolic layer's
+sources, so an edited formula is derived again.  Entries are written atomically
+(:func:`ncgen.files.atomic_path`); one that cannot be read back (damaged, or not a derivation
+of this type) is removed, with a note on stderr, and derived again; writing an entry removes
+the entries of the same type made from other sources.  ``NCGEN_MODEL_CACHE=0``
+(the switch of the store of built models) turns this store off too.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import pickle
+import sys
+from functools import lru_cache
+from pathlib import Path
+from typing import Callable
+
+from ncgen.errors import NcgenError
+from ncgen.files import atomic_path, cache_dir
+from ncgen.version import __version__
+
+#: The environment variable of the store of built models (:mod:`ncgen.codegen.model_cache`).
+ENV = "NCGEN_MODEL_CACHE"
+
+
+def enabled() -> bool:
+    """Whether derivations are read from and written to the store (``$NCGEN_MODEL_CACHE``)."""
+    return os.environ.get(ENV, "1").strip().lower() not in ("0", "off", "no", "false")
+
+
+@lru_cache(maxsize=1)
+def source_key() -> str:
+    """sha256 of the versions and of the symbolic layer's sources (module docstring)."""
+    import sympy
+
+    h = hashlib.sha256(f"{__version__} {sympy.__version__} {sys.version_info[:3]}".encode())
+    for path in sorted(Path(__file__).resolve().parent.glob("*.py")):
+        h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+def entry_path(name: str, dim: int) -> Path:
+    """The entry of the derivation of coordinate type ``name`` in ``dim`` dimensions."""
+    return cache_dir() / "derivations" / f"{name}-{dim}d-{source_key()[:24]}.pickle"
+
+
+def stored_derivation(ctype, derive: Callable):
+    """The derivation of ``ctype`` read from the store, else ``derive(ctype)`` stored."""
+    if not enabled():
+        return derive(ctype)
+    path = entry_path(ctype.name, ctype.dim)
+    try:
+        raw = path.read_bytes()
+    except OSError:
+        raw = None
+    if raw is not None:
+        try:
+            found = pickle.loads(raw)
+            if type(found) is not derive or found.ctype is not ctype:
+                raise TypeError(f"expected the derivation of {ctype!r}, found {type(found).__name__}")
+            return found
+        except Exception as exc:          # noqa: BLE001 — any failure of a stored entry means: derive again
+            print(f"ncgen: the stored derivation {path} cannot be read back ({type(exc).__name__}: {exc}); "
+                  "deriving it again", file=sys.stderr)
+            path.unlink(missing_ok=True)
+    found = derive(ctype)
+    try:
+        payload = pickle.dumps(found, protocol=pickle.HIGHEST_PROTOCOL)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(path) as tmp:
+            tmp.write_bytes(payload)
+        for old in path.parent.glob(f"{ctype.name}-{ctype.dim}d-*.pickle"):
+            if old != path:               # of other sources: would only pile up
+                old.unlink(missing_ok=True)
+    except (OSError, NcgenError, pickle.PicklingError):
+        pass                              # not stored: derived again next time
+    return found
