@@ -54,10 +54,20 @@ class _QrPattern(ctypes.Structure):
     _fields_ = [(f, ctypes.c_void_p if "*" in t else ctypes.c_int) for t, f in _QR_FIELDS]
 
 
-#: Fields of ``ncgen_stepper_tables``, in order (the struct ``qr`` last).
+#: Fields of ``ncgen_lu_pattern`` (``ncgen_sparse_lu.h``) and the stepper tables' arrays they point to.
+_LU_FIELDS = (("int", "n", None), ("int", "nnz_l", None), ("const int *", "k_colind", "k_colind"),
+              ("const int *", "k_row", "k_row"), ("const int *", "p", "lu_p"), ("const int *", "pinv", "lu_pinv"),
+              *(("const int *", f, f) for f in ("l_colind", "l_row", "u_colind", "u_row", "u_lpos")))
+
+
+class _LuPattern(ctypes.Structure):
+    _fields_ = [(f, ctypes.c_void_p if "*" in t else ctypes.c_int) for t, f, _ in _LU_FIELDS]
+
+
+#: Fields of ``ncgen_stepper_tables``, in order (then the structs ``qr`` and ``lu``).
 STEPPER_FIELDS = (
     ("const ncgen_tables *", "T"), ("int", "nu"), ("int", "np"), ("int", "n_markers"), ("int", "n_spring"),
-    ("double", "mass_scale"),
+    ("double", "mass_scale"), ("int", "m_nnz"),
     *(("const int *", f) for f in ("a_colind", "a_row", "m_colind", "m_row")),
     ("const double *", "m_val"), ("const double *", "f_gravity"), ("double", "v_gravity"),
     ("const int *", "spr_feat"), ("const double *", "spr_par"), ("const int *", "spr_kpos_ptr"),
@@ -77,7 +87,7 @@ STEPPER_FIELDS = (
 
 class _StepperTables(ctypes.Structure):
     _fields_ = [(f, ctypes.c_void_p if "*" in t else ctypes.c_double if t == "double" else ctypes.c_int)
-                for t, f in STEPPER_FIELDS] + [("qr", _QrPattern)]
+                for t, f in STEPPER_FIELDS] + [("qr", _QrPattern), ("lu", _LuPattern)]
 
 
 def _array(values, t: str) -> np.ndarray:
@@ -104,18 +114,21 @@ class TableStepper(CompiledStepper):
                  "nf": len(self._keep["feat_ptr"]) - 1, "ne": len(self._keep["el_kind"]),
                  "nm": len(self._keep["mem_kind"])}
         self._T = _Tables(**sizes, **{k: v.ctypes.data for k, v in self._keep.items()})
-        fields = {f: t for t, f in STEPPER_FIELDS} | {f: t for t, f in _QR_FIELDS}
+        fields = {f: t for t, f in STEPPER_FIELDS} | {f: t for t, f in _QR_FIELDS} \
+            | {a: t for t, _, a in _LU_FIELDS if a is not None}
         for f, t in fields.items():
             if "*" in t and f != "T":
                 self._keep[f"s.{f}"] = _array(st.arrays[f], t)
         ptr = {f: self._keep[f"s.{f}"].ctypes.data for f in fields if f"s.{f}" in self._keep}
         qr = _QrPattern(n=T.nq + T.nc, **{f: ptr[f] for _, f in _QR_FIELDS[1:]})
+        lu = _LuPattern(n=T.nq + T.nc, nnz_l=st.nnz_l, **{f: ptr[a] for _, f, a in _LU_FIELDS if a is not None})
         self._S = _StepperTables(T=ctypes.addressof(self._T), nu=st.nu, np=st.np, n_markers=st.n_markers,
                                  n_act=len(self._keep["s.act_kind"]),
-                                 n_spring=st.n_spring, mass_scale=st.mass_scale, v_gravity=st.v_gravity,
+                                 n_spring=st.n_spring, mass_scale=st.mass_scale, m_nnz=st.m_nnz,
+                                 v_gravity=st.v_gravity,
                                  nnz_k=st.nnz_k, nnz_v=st.nnz_v, nnz_r=st.nnz_r, n_ff=st.n_ff,
                                  n_torque=st.n_torque,
-                                 **{f: ptr[f] for t, f in STEPPER_FIELDS if "*" in t and f != "T"}, qr=qr)
+                                 **{f: ptr[f] for t, f in STEPPER_FIELDS if "*" in t and f != "T"}, qr=qr, lu=lu)
         self._lib = lib._lib
         check = c_binding.bind(self._lib, f"{PACKAGE}_stepper_check",
                                c_binding.Signature("int", (("const void *", "S"),)))
@@ -179,7 +192,7 @@ class TableStepper(CompiledStepper):
         n = self.nq + self.nc
         if n <= DENSE_KKT:
             K = np.zeros((n, n))
-            K[:self.nq, :self.nq] = T.dense_M(a["m_val"])
+            K[:self.nq, :self.nq] = M_sparse(a, self.nq).toarray()
             A = T.dense_A(fn.A(q))
             K[self.nq:, :self.nq], K[:self.nq, self.nq:] = A, A.T
             try:
@@ -190,11 +203,19 @@ class TableStepper(CompiledStepper):
         from scipy.sparse.linalg import MatrixRankWarning, spsolve
 
         A = sp.csc_matrix((fn.A(q), T.a_indices, T.a_indptr), shape=(self.nc, self.nq))
-        M = sp.csc_matrix((a["m_val"], a["m_row"], a["m_colind"]), shape=(self.nq, self.nq))
+        M = M_sparse(a, self.nq)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", MatrixRankWarning)
             x = spsolve(sp.bmat([[M, A.T], [A, None]], format="csc"), rhs)
         return np.asarray(x, float)[self.nq:]
+
+
+def M_sparse(arrays: dict, nq: int):
+    """The mass matrix of the stepper tables' ``arrays`` (``m_colind``, ``m_row``, ``m_val``) as
+    a SciPy CSC matrix (nq × nq, kg and kg·m per coordinate's units)."""
+    import scipy.sparse as sp
+
+    return sp.csc_matrix((arrays["m_val"], arrays["m_row"], arrays["m_colind"]), shape=(nq, nq))
 
 
 def table_balance_parts(t: np.ndarray, P: np.ndarray) -> dict[str, float]:
