@@ -415,8 +415,9 @@ def lu_analysis(nq: int, indptr: np.ndarray, indices: np.ndarray) -> dict[str, n
     ``p`` (the coordinates in the approximate minimum degree order of ``M̃ + AᵀA``'s pattern,
     each multiplier right after the last coordinate its constraint touches, so that no pivot is
     a structural zero and each is a Schur complement of a KKT block whose constraints are whole),
-    its inverse, the patterns of ``L`` and ``U = Lᵀ`` (CSC) of the ordered matrix, and the position
-    in ``L`` of the transpose of each entry of ``U``."""
+    its inverse, the rows of ``K``'s nonzeros in that order (``lu_k_prow``), the patterns of ``L``
+    and ``U = Lᵀ`` (CSC) of the ordered matrix, and the position in ``L`` of the transpose of each
+    entry of ``U``."""
     n = indptr.size - 1
     cols = np.repeat(np.arange(n), np.diff(indptr))
     rows = indices.astype(np.int64)
@@ -449,5 +450,5 @@ def lu_analysis(nq: int, indptr: np.ndarray, indices: np.ndarray) -> dict[str, n
     l_pos = np.empty(by_col.size, dtype=np.int64)
     l_pos[by_col] = np.arange(by_col.size)
     l_colind = np.concatenate([[0], np.cumsum(np.bincount(u_row, minlength=n))])
-    return {"lu_p": _ints(p), "lu_pinv": _ints(pinv), "l_colind": _ints(l_colind), "l_row": _ints(u_col[by_col]),
+    return {"lu_p": _ints(p), "lu_pinv": _ints(pinv), "lu_k_prow": _ints(pinv[rows]), "l_colind": _ints(l_colind), "l_row": _ints(u_col[by_col]),
             "u_colind": _ints(u_colind), "u_row": _ints(u_row), "u_lpos": _ints(l_pos)}

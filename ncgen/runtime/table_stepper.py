@@ -56,7 +56,7 @@ class _QrPattern(ctypes.Structure):
 
 #: Fields of ``ncgen_lu_pattern`` (``ncgen_sparse_lu.h``) and the stepper tables' arrays they point to.
 _LU_FIELDS = (("int", "n", None), ("int", "nnz_l", None), ("const int *", "k_colind", "k_colind"),
-              ("const int *", "k_row", "k_row"), ("const int *", "p", "lu_p"), ("const int *", "pinv", "lu_pinv"),
+              ("const int *", "k_prow", "lu_k_prow"), ("const int *", "p", "lu_p"), ("const int *", "pinv", "lu_pinv"),
               *(("const int *", f, f) for f in ("l_colind", "l_row", "u_colind", "u_row", "u_lpos")))
 
 

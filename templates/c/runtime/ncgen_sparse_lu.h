@@ -33,7 +33,7 @@
 
 typedef struct {
   int n, nnz_l;                              /* K is n x n; nonzeros of L (and of U) */
-  const int *k_colind, *k_row;               /* the pattern of K (CSC) */
+  const int *k_colind, *k_prow;              /* the pattern of K (CSC), its rows in the order (pinv[row]) */
   const int *p, *pinv;                       /* the order and its inverse */
   const int *l_colind, *l_row;               /* the pattern of L (strictly lower) */
   const int *u_colind, *u_row, *u_lpos;      /* the pattern of U (strictly upper), L(c, k) of U(k, c) */
@@ -48,7 +48,7 @@ static int ncgen_lu_factor(const ncgen_lu_pattern *P, const double *K, double *L
   for (c = 0; c < n; ++c) {
     int col = P->p[c];
     double ref = 0, piv;
-    for (e = P->k_colind[col]; e < P->k_colind[col + 1]; ++e) x[P->pinv[P->k_row[e]]] = K[e];
+    for (e = P->k_colind[col]; e < P->k_colind[col + 1]; ++e) x[P->k_prow[e]] = K[e];
     ref = fabs(x[c]);
     for (e = P->u_colind[c]; e < P->u_colind[c + 1]; ++e) {    /* (D U)(k, c), k ascending */
       double u;
