@@ -39,10 +39,9 @@ typedef struct {
   const int *u_colind, *u_row, *u_lpos;      /* the pattern of U (strictly upper), L(c, k) of U(k, c) */
 } ncgen_lu_pattern;
 
-/* The factors L, U (nnz_l each; U holds the entries of D U, so K(p, p) = L (D U)) and the
- * reciprocals of the pivots d (n) of K
- * (nonzeros in its pattern): 0, or 1 when a pivot is unsafe (above). */
-static int ncgen_lu_factor(const ncgen_lu_pattern *P, const double *K, double *L, double *U, double *d,
+/* The factors lo = L, up = D U (nnz_l each: K(p, p) = L (D U)) and the reciprocals dinv of
+ * the pivots (n) of K (nonzeros in its pattern): 0, or 1 when a pivot is unsafe (above). */
+static int ncgen_lu_factor(const ncgen_lu_pattern *P, const double *K, double *lo, double *up, double *dinv,
                            double *x) {
   int c, e, k, i, n = P->n;
   for (c = 0; c < n; ++c) {
@@ -55,9 +54,9 @@ static int ncgen_lu_factor(const ncgen_lu_pattern *P, const double *K, double *L
       k = P->u_row[e];
       u = x[k];
       x[k] = 0;
-      U[e] = u;
-      for (i = P->l_colind[k]; i < P->l_colind[k + 1]; ++i) x[P->l_row[i]] -= L[i] * u;
-      ref += fabs(L[P->u_lpos[e]] * U[e]);
+      up[e] = u;
+      for (i = P->l_colind[k]; i < P->l_colind[k + 1]; ++i) x[P->l_row[i]] -= lo[i] * u;
+      ref += fabs(lo[P->u_lpos[e]] * up[e]);
     }
     piv = x[c];
     x[c] = 0;
@@ -65,25 +64,25 @@ static int ncgen_lu_factor(const ncgen_lu_pattern *P, const double *K, double *L
       for (i = P->l_colind[c]; i < P->l_colind[c + 1]; ++i) x[P->l_row[i]] = 0;
       return 1;
     }
-    d[c] = 1 / piv;
+    dinv[c] = 1 / piv;
     for (i = P->l_colind[c]; i < P->l_colind[c + 1]; ++i) {
-      L[i] = x[P->l_row[i]] * d[c];
+      lo[i] = x[P->l_row[i]] * dinv[c];
       x[P->l_row[i]] = 0;
     }
   }
   return 0;
 }
 
-/* x = K⁻¹ b from the factors; y: n doubles of scratch. */
-static void ncgen_lu_solve(const ncgen_lu_pattern *P, const double *L, const double *U, const double *d,
+/* x = K⁻¹ b from the factors (as ncgen_lu_factor gives them); y: n doubles of scratch. */
+static void ncgen_lu_solve(const ncgen_lu_pattern *P, const double *lo, const double *up, const double *dinv,
                            const double *b, double *x, double *y) {
   int c, i, n = P->n;
   for (i = 0; i < n; ++i) y[P->pinv[i]] = b[i];
   for (c = 0; c < n; ++c)                    /* L z = y, column by column */
-    for (i = P->l_colind[c]; i < P->l_colind[c + 1]; ++i) y[P->l_row[i]] -= L[i] * y[c];
+    for (i = P->l_colind[c]; i < P->l_colind[c + 1]; ++i) y[P->l_row[i]] -= lo[i] * y[c];
   for (c = n - 1; c >= 0; --c) {             /* (D U) x = z, column by column */
-    y[c] *= d[c];
-    for (i = P->u_colind[c]; i < P->u_colind[c + 1]; ++i) y[P->u_row[i]] -= U[i] * y[c];
+    y[c] *= dinv[c];
+    for (i = P->u_colind[c]; i < P->u_colind[c + 1]; ++i) y[P->u_row[i]] -= up[i] * y[c];
   }
   for (c = 0; c < n; ++c) x[P->p[c]] = y[c];
 }

@@ -139,7 +139,7 @@ static long tab_work_size(const ncgen_stepper_tables *S) {
 }
 
 typedef struct {
-  double *ew, *qh, *F, *fq, *fv, *sx, *sy, *V, *R, *beta, *x, *y, *fx, *fy, *L, *U, *d;
+  double *ew, *qh, *F, *fq, *fv, *sx, *sy, *V, *R, *beta, *x, *y, *fx, *fy, *lu_l, *lu_u, *lu_d;
 } tab_work;
 
 static tab_work tab_layout(double *w) {
@@ -160,9 +160,9 @@ static tab_work tab_layout(double *w) {
   b.y = b.x + T->nq + T->nc;
   b.fx = b.y + T->nq + T->nc;
   b.fy = b.fx + TAB_FF_IN;
-  b.L = b.fy + TAB_FF_OUT;
-  b.U = b.L + S->lu.nnz_l;
-  b.d = b.U + S->lu.nnz_l;
+  b.lu_l = b.fy + TAB_FF_OUT;
+  b.lu_u = b.lu_l + S->lu.nnz_l;
+  b.lu_d = b.lu_u + S->lu.nnz_l;
   return b;
 }
 
@@ -512,8 +512,8 @@ static int tab_project(const casadi_real **arg, casadi_real **res, casadi_int *i
 static int tab_solve(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
   tab_work b = tab_layout(w);
   (void)iw; (void)mem;
-  if (tab_cur->lu.n && !ncgen_lu_factor(&tab_cur->lu, arg[0], b.L, b.U, b.d, b.x)) {
-    ncgen_lu_solve(&tab_cur->lu, b.L, b.U, b.d, arg[1], res[0], b.y);
+  if (tab_cur->lu.n && !ncgen_lu_factor(&tab_cur->lu, arg[0], b.lu_l, b.lu_u, b.lu_d, b.x)) {
+    ncgen_lu_solve(&tab_cur->lu, b.lu_l, b.lu_u, b.lu_d, arg[1], res[0], b.y);
     return 0;
   }
   if (ncgen_qr_factor(&tab_cur->qr, arg[0], b.V, b.R, b.beta, b.x)) {
