@@ -12,9 +12,10 @@ model's own package, compiled per model) or ``"auto"``: the tables when every el
 model is covered (:func:`~ncgen.codegen.stepper_tables.uncovered_elements` and
 :mod:`~ncgen.codegen.model_tables`), else flat — except that a small model (``nq + nc`` below
 :data:`AUTO_FLAT_BELOW`) whose flat package this process has already compiled or loaded runs
-flat: there the flat step is faster (benchmarks/table_stepper.py, CPU seconds per step of the
-tables over the flat package's: 2.2–2.9 for a 10-bar chain, nq + nc = 40; 1.2 at 40 bars,
-nq + nc = 160; 1.0 at 160 bars) and costs no compile.
+flat: it costs no compile, and there the flat step can still be the faster
+(benchmarks/table_stepper.py, CPU seconds per step of the tables over the flat package's, with
+the tables' sparse LU: 0.84–0.95 for a 10-bar chain, nq + nc = 40, but 1.25–1.44 for that
+chain with a cable, a spring-damper, a point force and a torque per bar; 0.5–0.7 at 40 bars).
 "auto" never compiles a covered model: the first compiled step of a new model of the shipped
 kinds needs no C compiler.
 """
