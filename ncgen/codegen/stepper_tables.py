@@ -423,7 +423,7 @@ def lu_analysis(nq: int, indptr: np.ndarray, indices: np.ndarray) -> dict[str, n
     rows = indices.astype(np.int64)
     qq = (rows < nq) & (cols < nq)
     r_q, c_q = [rows[qq], cols[qq], np.arange(nq)], [cols[qq], rows[qq], np.arange(nq)]
-    touched = [rows[(cols == nq + i) & (rows < nq)] for i in range(n - nq)]
+    touched = [r[r < nq] for r in (rows[indptr[c]:indptr[c + 1]] for c in range(nq, n))]
     for t in touched:                                # AᵀA: the coordinates of one constraint
         r_q.append(np.repeat(t, t.size))
         c_q.append(np.tile(t, t.size))
