@@ -9,7 +9,8 @@ a bounce with restitution), for both ways of building the Delassus matrix; the M
 (``ncgen_mpc.h``) on a hand-written iteration (input checks, the guess kept on failure); the
 joint-space loop (RK4 and Dormand–Prince) on ODEs with closed-form solutions; the element tables'
 loops (``ncgen_element_tables.h``) on hand-written kernels of a tiny planar model; the sparse
-QR of the table-driven stepper (``ncgen_sparse_qr.h``) on hand-analysed patterns, and that
+QR and LU of the table-driven stepper (``ncgen_sparse_qr.h``, ``ncgen_sparse_lu.h``: solutions,
+singular and ill-conditioned matrices refused) on hand-analysed patterns, and that
 stepper (``ncgen_table_stepper.h``) on the hand-made tables of a planar pendulum with a spring, and
 its step Jacobians (``ncgen_table_jacobians.h``) on the same with inputs and actuators; the
 tree loops (``ncgen_tree_tables.h``: RNEA, CRBA, forward dynamics, derivatives) on hand-written
@@ -36,7 +37,7 @@ ENV = {**os.environ, "ASAN_OPTIONS": "detect_leaks=0:abort_on_error=0",
 PROGRAMS = [("test_rattle.c", []), ("test_contact.c", []), ("test_contact.c", ["-DSCHUR_FACTORED"]),
             ("test_contact.c", ["-DPAIRS"]),
             ("test_cone_newton.c", []), ("test_mpc.c", []), ("test_joint_loop.c", []),
-            ("test_element_tables.c", []), ("test_sparse_qr.c", []),
+            ("test_element_tables.c", []), ("test_sparse_qr.c", []), ("test_sparse_lu.c", []),
             ("test_table_stepper.c", []), ("test_table_jacobians.c", []), ("test_tree_tables.c", [])]
 
 pytestmark = pytest.mark.skipif(CC is None, reason="no C compiler (gcc, clang or cc) on PATH")
@@ -54,7 +55,7 @@ def sanitizers(tmp_path_factory) -> Path:
 
 @pytest.mark.parametrize("source, defines", PROGRAMS, ids=["rattle", "contact-kkt", "contact-schur", "contact-pairs",
                                                           "cone-newton", "mpc", "joint-loop", "element-tables",
-                                                          "sparse-qr", "table-stepper", "table-jacobians",
+                                                          "sparse-qr", "sparse-lu", "table-stepper", "table-jacobians",
                                                           "tree-tables"])
 def test_runtime_c_unit_tests_pass_under_sanitizers(sanitizers, source, defines):
     exe = sanitizers / (Path(source).stem + "".join(d.lower().replace("-d", "_") for d in defines))

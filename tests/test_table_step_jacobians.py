@@ -313,21 +313,26 @@ def test_robot_table_jacobians_equal_the_flat_ones_and_central_differences(robot
 
 def test_stepper_tables_struct_matches_its_python_mirror():
     """The fields of ``ncgen_stepper_tables`` (templates/c/runtime/ncgen_table_stepper.h), in
-    order, are those of ``STEPPER_FIELDS`` (ncgen/runtime/table_stepper.py) and then ``qr``:
-    ctypes lays the struct out from that list, so a field added on one side only would shift
+    order, are those of ``STEPPER_FIELDS`` (ncgen/runtime/table_stepper.py) and then ``qr`` and
+    ``lu``, and those of ``ncgen_lu_pattern`` (ncgen_sparse_lu.h) those of ``_LU_FIELDS``:
+    ctypes lays the structs out from these lists, so a field added on one side only would shift
     every field after it."""
     import re
 
-    from ncgen.runtime.table_stepper import STEPPER_FIELDS
+    from ncgen.runtime.table_stepper import _LU_FIELDS, STEPPER_FIELDS
 
-    text = (ROOT / "templates" / "c" / "runtime" / "ncgen_table_stepper.h").read_text()
-    body = re.search(r"typedef struct \{(.*?)\} ncgen_stepper_tables;", text, re.S).group(1)
-    body = re.sub(r"/\*.*?\*/", "", body, flags=re.S)
-    names = []
-    for decl in filter(None, (d.strip() for d in body.split(";"))):
-        words = decl.split(None, 2) if decl.startswith("const") else decl.split(None, 1)
-        names += [n.strip().lstrip("*").strip() for n in words[-1].split(",")]
-    assert names == [f for _, f in STEPPER_FIELDS] + ["qr"]
+    def fields(header: str, struct: str) -> list[str]:
+        text = (ROOT / "templates" / "c" / "runtime" / header).read_text()
+        body = re.search(r"typedef struct \{(.*?)\} " + struct + ";", text, re.S).group(1)
+        body = re.sub(r"/\*.*?\*/", "", body, flags=re.S)
+        names = []
+        for decl in filter(None, (d.strip() for d in body.split(";"))):
+            words = decl.split(None, 2) if decl.startswith("const") else decl.split(None, 1)
+            names += [n.strip().lstrip("*").strip() for n in words[-1].split(",")]
+        return names
+
+    assert fields("ncgen_table_stepper.h", "ncgen_stepper_tables") == [f for _, f in STEPPER_FIELDS] + ["qr", "lu"]
+    assert fields("ncgen_sparse_lu.h", "ncgen_lu_pattern") == [f for _, f, _ in _LU_FIELDS]
 
 
 def test_forces_without_table_jacobians_take_the_flat_path():

@@ -281,7 +281,8 @@ def kernels() -> list[ca.Function]:
 #: Name of the package (and prefix of every C symbol) of the element kernels' library.
 PACKAGE = "ncgen_elements"
 #: The files the library is made of besides this module: the key of its cache entry hashes them.
-SOURCES = ("runtime/ncgen_element_tables.h", "element_tables.c.j2", "runtime/ncgen_sparse_qr.h",
+SOURCES = ("runtime/ncgen_element_tables.h", "element_tables.c.j2", "runtime/ncgen_sparse_lu.h",
+           "runtime/ncgen_sparse_qr.h",
            "runtime/ncgen_table_stepper.h", "runtime/ncgen_rattle.h", "runtime/ncgen_fixed.h",
            "runtime/ncgen_adaptive.h", "runtime/ncgen_table_jacobians.h")
 #: The runtime headers the library's C includes (copied into its package as they are).

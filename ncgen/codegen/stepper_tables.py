@@ -13,9 +13,11 @@ inputs, :func:`input_force_map`) summed into ``B_u`` (``bu_*``, CSC); the effort
 Revolute and Prismatic joints, linear in the inputs, on their coordinates (each a quadratic
 form of the coordinates it touches, or the angle ``atan2(y, x)`` of two such forms:
 :func:`actuator_element`, ``act_*``); the markers
-as point features; and the KKT matrix ``K = [[M − h/2 ∂F/∂w, Aᵀ], [A, 0]]``: its pattern,
-the nonzero of ``K`` every product of the loops adds to, and the symbolic analysis of its
-sparse QR (CasADi's ``Sparsity.qr_sparse``, approximate minimum degree column order).
+as point features; and the KKT matrix ``K = [[M − h/2 ∂F/∂w, Aᵀ], [A, 0]]``: its pattern
+(``M``'s nonzero entries only), the nonzero of ``K`` every product of the loops adds to, and
+the symbolic analyses of its sparse LU (:func:`lu_analysis`: an order without pivoting that
+keeps each multiplier after the coordinates its constraint touches) and of its sparse QR, the
+LU's fallback (CasADi's ``Sparsity.qr_sparse``, approximate minimum degree column order).
 
 The other forces of numbers (:func:`force_elements`): constant
 :class:`~ncgen.model.forces.PointForce` and
@@ -69,6 +71,11 @@ class StepperTables:
     #: Whether every force is ``−∇V`` (no damping, no constant force or torque outside V; every
     #: covered constraint is scleronomic).
     conservative: bool = False
+    #: Nonzeros of the sparse LU's factor L (:func:`lu_analysis`).
+    nnz_l: int = 0
+    #: Nonzero entries of M (``m_colind``, ``m_row``, ``m_val``: M's pattern in the element tables
+    #: less the entries whose value is zero).
+    m_nnz: int = 0
 
 
 def _number(value) -> bool:
@@ -263,10 +270,14 @@ def stepper_tables(model) -> StepperTables:
     nq, nc = T.nq, T.nc
     n = nq + nc
     a = T.arrays
-    # the entries of K, in the loops' order: M, A (lower block), Aᵀ (upper block), dampers
+    # the entries of K, in the loops' order: M (its nonzero entries), A (lower block), Aᵀ (upper
+    # block), dampers
+    M = np.asarray(model.M, dtype=float)
     m_cols = np.repeat(np.arange(nq), np.diff(T.m_indptr))
+    nonzero = M[T.m_indices, m_cols] != 0
+    m_rows, m_cols = T.m_indices[nonzero], m_cols[nonzero]
     a_cols = np.repeat(np.arange(nq), np.diff(T.a_indptr))
-    rows = [T.m_indices, nq + T.a_indices, a_cols]
+    rows = [m_rows, nq + T.a_indices, a_cols]
     cols = [m_cols, a_cols, nq + T.a_indices]
     counts = []
     for s in range(ns):
@@ -281,14 +292,14 @@ def stepper_tables(model) -> StepperTables:
         cols.append(c_s)
         ff_counts.append(len(r_s))
     k_indptr, k_indices, pos = _csc(n, n, np.concatenate(rows), np.concatenate(cols))
-    m_nnz, a_nnz = T.m_nnz, T.a_nnz
+    m_nnz, a_nnz = int(m_rows.size), T.a_nnz
     n_spr = m_nnz + 2 * a_nnz + sum(counts)
     qr = _qr_analysis(model.name, n, k_indptr, k_indices)
-    M = np.asarray(model.M, dtype=float)
+    lu = lu_analysis(nq, k_indptr, k_indices)
     ff, tq = elements["ff"], elements["torque"]
     arrays = {
-        "a_colind": T.a_indptr, "a_row": T.a_indices, "m_colind": T.m_indptr, "m_row": T.m_indices,
-        "m_val": _reals(M[T.m_indices, m_cols]),
+        "a_colind": T.a_indptr, "a_row": T.a_indices,
+        "m_colind": _ptr(np.bincount(m_cols, minlength=nq)), "m_row": _ints(m_rows), "m_val": _reals(M[m_rows, m_cols]),
         "f_gravity": _reals(f_gravity),
         "spr_feat": _ints(spr_feat),
         "spr_par": _reals([x for s in springs for x in (s.k, s.rest_length, s.damping)]),
@@ -307,13 +318,14 @@ def stepper_tables(model) -> StepperTables:
         "ff_kpos_ptr": _ptr(ff_counts), "ff_kpos": pos[n_spr:],
         "tq_member": _ints([e["member"] for e in tq]), "tq_c_ptr": _ptr([len(e["c"]) for e in tq]),
         "tq_c": _reals([x for e in tq for x in e["c"]]), "tq_val": _reals([x for e in tq for x in e["tau"]]),
-        "k_colind": k_indptr, "k_row": k_indices, **qr,
+        "k_colind": k_indptr, "k_row": k_indices, **qr, **lu,
     }
     conservative = not any(s.damping for s in springs) and not any(e["damping"] for e in ff) \
         and not np.any(elements["f_const"]) and not any(np.any(e["tau"]) for e in tq)
     return StepperTables(model.name, T, model.nu, model.np, len(markers), ns, len(ff), len(tq),
                          float(np.max(np.abs(M))) if nq else 1.0, v_gravity, int(k_indices.size),
-                         int(qr["v_row"].size), int(qr["r_row"].size), arrays, conservative)
+                         int(qr["v_row"].size), int(qr["r_row"].size), arrays, conservative,
+                         int(lu["l_row"].size), m_nnz)
 
 
 def _velocity_entries(a: dict, feats) -> tuple[np.ndarray, np.ndarray]:
@@ -408,3 +420,48 @@ def _qr_analysis(name: str, n: int, indptr: np.ndarray, indices: np.ndarray) -> 
                            f"(redundant constraints?); the stepper tables need a structurally regular one")
     return {"v_colind": _ints(vs.colind()), "v_row": _ints(vs.row()), "r_colind": _ints(rs.colind()),
             "r_row": _ints(rs.row()), "prinv": _ints(prinv), "pc": _ints(pc)}
+
+
+def lu_analysis(nq: int, indptr: np.ndarray, indices: np.ndarray) -> dict[str, np.ndarray]:
+    """The sparse LU's analysis (``ncgen_lu_pattern`` of ``ncgen_sparse_lu.h``) of the KKT
+    pattern ``[[M̃, Aᵀ], [A, 0]]`` (n × n, ``nq`` coordinates first, symmetric): the order
+    ``p`` (the coordinates in the approximate minimum degree order of ``M̃ + AᵀA``'s pattern,
+    each multiplier right after the last coordinate its constraint touches, so that no pivot is
+    a structural zero and each is a Schur complement of a KKT block whose constraints are whole),
+    its inverse, the rows of ``K``'s nonzeros in that order (``lu_k_prow``), the patterns of ``L``
+    and ``U = Lᵀ`` (CSC) of the ordered matrix, and the position in ``L`` of the transpose of each
+    entry of ``U``."""
+    n = indptr.size - 1
+    cols = np.repeat(np.arange(n), np.diff(indptr))
+    rows = indices.astype(np.int64)
+    qq = (rows < nq) & (cols < nq)
+    r_q, c_q = [rows[qq], cols[qq], np.arange(nq)], [cols[qq], rows[qq], np.arange(nq)]
+    touched = [r[r < nq] for r in (rows[indptr[c]:indptr[c + 1]] for c in range(nq, n))]
+    for t in touched:                                # AᵀA: the coordinates of one constraint
+        r_q.append(np.repeat(t, t.size))
+        c_q.append(np.tile(t, t.size))
+    order_q = list(ca.Sparsity.triplet(nq, nq, np.concatenate(r_q).tolist(), np.concatenate(c_q).tolist()).amd()) \
+        if nq else []
+    where = np.empty(nq, dtype=np.int64)
+    where[order_q] = np.arange(nq)
+    after: dict[int, list[int]] = {}
+    for i, t in enumerate(touched):
+        after.setdefault(int(where[t].max()) if t.size else -1, []).append(nq + i)
+    order = after.get(-1, [])
+    for k, c in enumerate(order_q):
+        order += [c] + after.get(k, [])
+    p = np.asarray(order, dtype=np.int64)
+    pinv = np.empty(n, dtype=np.int64)
+    pinv[p] = np.arange(n)
+    sym = ca.Sparsity.triplet(n, n, np.concatenate([pinv[rows], pinv[cols], np.arange(n)]).tolist(),
+                              np.concatenate([pinv[cols], pinv[rows], np.arange(n)]).tolist())
+    upper, _ = sym.ldl(False)                        # the pattern of Lᵀ = U (strictly upper)
+    u_colind, u_row = np.asarray(upper.colind()), np.asarray(upper.row())
+    u_col = np.repeat(np.arange(n), np.diff(u_colind))
+    # L = Uᵀ in CSC: entry U(k, c) is L(c, k), in column k
+    by_col = np.lexsort((u_col, u_row))              # sort U's entries by (k, c): L's CSC order
+    l_pos = np.empty(by_col.size, dtype=np.int64)
+    l_pos[by_col] = np.arange(by_col.size)
+    l_colind = np.concatenate([[0], np.cumsum(np.bincount(u_row, minlength=n))])
+    return {"lu_p": _ints(p), "lu_pinv": _ints(pinv), "lu_k_prow": _ints(pinv[rows]), "l_colind": _ints(l_colind), "l_row": _ints(u_col[by_col]),
+            "u_colind": _ints(u_colind), "u_row": _ints(u_row), "u_lpos": _ints(l_pos)}

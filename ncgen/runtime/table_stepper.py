@@ -12,9 +12,10 @@ model's own package, compiled per model) or ``"auto"``: the tables when every el
 model is covered (:func:`~ncgen.codegen.stepper_tables.uncovered_elements` and
 :mod:`~ncgen.codegen.model_tables`), else flat — except that a small model (``nq + nc`` below
 :data:`AUTO_FLAT_BELOW`) whose flat package this process has already compiled or loaded runs
-flat: there the flat step is faster (benchmarks/table_stepper.py, CPU seconds per step of the
-tables over the flat package's: 2.2–2.9 for a 10-bar chain, nq + nc = 40; 1.2 at 40 bars,
-nq + nc = 160; 1.0 at 160 bars) and costs no compile.
+flat: it costs no compile, and there the flat step can still be the faster
+(benchmarks/table_stepper.py, CPU seconds per step of the tables over the flat package's, with
+the tables' sparse LU: 0.84–0.95 for a 10-bar chain, nq + nc = 40, but 1.25–1.44 for that
+chain with a cable, a spring-damper, a point force and a torque per bar; 0.5–0.7 at 40 bars).
 "auto" never compiles a covered model: the first compiled step of a new model of the shipped
 kinds needs no C compiler.
 """
@@ -50,10 +51,20 @@ class _QrPattern(ctypes.Structure):
     _fields_ = [(f, ctypes.c_void_p if "*" in t else ctypes.c_int) for t, f in _QR_FIELDS]
 
 
-#: Fields of ``ncgen_stepper_tables``, in order (the struct ``qr`` last).
+#: Fields of ``ncgen_lu_pattern`` (``ncgen_sparse_lu.h``) and the stepper tables' arrays they point to.
+_LU_FIELDS = (("int", "n", None), ("int", "nnz_l", None), ("const int *", "k_colind", "k_colind"),
+              ("const int *", "k_prow", "lu_k_prow"), ("const int *", "p", "lu_p"), ("const int *", "pinv", "lu_pinv"),
+              *(("const int *", f, f) for f in ("l_colind", "l_row", "u_colind", "u_row", "u_lpos")))
+
+
+class _LuPattern(ctypes.Structure):
+    _fields_ = [(f, ctypes.c_void_p if "*" in t else ctypes.c_int) for t, f, _ in _LU_FIELDS]
+
+
+#: Fields of ``ncgen_stepper_tables``, in order (then the structs ``qr`` and ``lu``).
 STEPPER_FIELDS = (
     ("const ncgen_tables *", "T"), ("int", "nu"), ("int", "np"), ("int", "n_markers"), ("int", "n_spring"),
-    ("double", "mass_scale"),
+    ("double", "mass_scale"), ("int", "m_nnz"),
     *(("const int *", f) for f in ("a_colind", "a_row", "m_colind", "m_row")),
     ("const double *", "m_val"), ("const double *", "f_gravity"), ("double", "v_gravity"),
     ("const int *", "spr_feat"), ("const double *", "spr_par"), ("const int *", "spr_kpos_ptr"),
@@ -73,7 +84,7 @@ STEPPER_FIELDS = (
 
 class _StepperTables(ctypes.Structure):
     _fields_ = [(f, ctypes.c_void_p if "*" in t else ctypes.c_double if t == "double" else ctypes.c_int)
-                for t, f in STEPPER_FIELDS] + [("qr", _QrPattern)]
+                for t, f in STEPPER_FIELDS] + [("qr", _QrPattern), ("lu", _LuPattern)]
 
 
 def _array(values, t: str) -> np.ndarray:
@@ -100,18 +111,21 @@ class TableStepper(CompiledStepper):
                  "nf": len(self._keep["feat_ptr"]) - 1, "ne": len(self._keep["el_kind"]),
                  "nm": len(self._keep["mem_kind"])}
         self._T = _Tables(**sizes, **{k: v.ctypes.data for k, v in self._keep.items()})
-        fields = {f: t for t, f in STEPPER_FIELDS} | {f: t for t, f in _QR_FIELDS}
+        fields = {f: t for t, f in STEPPER_FIELDS} | {f: t for t, f in _QR_FIELDS} \
+            | {a: t for t, _, a in _LU_FIELDS if a is not None}
         for f, t in fields.items():
             if "*" in t and f != "T":
                 self._keep[f"s.{f}"] = _array(st.arrays[f], t)
         ptr = {f: self._keep[f"s.{f}"].ctypes.data for f in fields if f"s.{f}" in self._keep}
         qr = _QrPattern(n=T.nq + T.nc, **{f: ptr[f] for _, f in _QR_FIELDS[1:]})
+        lu = _LuPattern(n=T.nq + T.nc, nnz_l=st.nnz_l, **{f: ptr[a] for _, f, a in _LU_FIELDS if a is not None})
         self._S = _StepperTables(T=ctypes.addressof(self._T), nu=st.nu, np=st.np, n_markers=st.n_markers,
                                  n_act=len(self._keep["s.act_kind"]),
-                                 n_spring=st.n_spring, mass_scale=st.mass_scale, v_gravity=st.v_gravity,
+                                 n_spring=st.n_spring, mass_scale=st.mass_scale, m_nnz=st.m_nnz,
+                                 v_gravity=st.v_gravity,
                                  nnz_k=st.nnz_k, nnz_v=st.nnz_v, nnz_r=st.nnz_r, n_ff=st.n_ff,
                                  n_torque=st.n_torque,
-                                 **{f: ptr[f] for t, f in STEPPER_FIELDS if "*" in t and f != "T"}, qr=qr)
+                                 **{f: ptr[f] for t, f in STEPPER_FIELDS if "*" in t and f != "T"}, qr=qr, lu=lu)
         self._lib = lib._lib
         check = c_binding.bind(self._lib, f"{PACKAGE}_stepper_check",
                                c_binding.Signature("int", (("const void *", "S"),)))

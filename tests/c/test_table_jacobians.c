@@ -163,7 +163,7 @@ static void make_tables(double k, double l0, double c, double *par) {
   T.mem_c_ptr = mem_c_ptr; T.mem_c = mem_c; T.mem_row_ptr = mem_row_ptr; T.mem_row = mem_row;
   T.mem_apos_ptr = mem_apos_ptr; T.mem_apos = mem_apos; T.mem_mpos_ptr = mem_mpos_ptr; T.mem_mpos = mem_mpos;
   par[0] = k; par[1] = l0; par[2] = c;
-  S.T = &T; S.nu = 0; S.np = 0; S.n_markers = 1; S.n_spring = 1; S.mass_scale = MASS;
+  S.T = &T; S.nu = 0; S.np = 0; S.n_markers = 1; S.n_spring = 1; S.mass_scale = MASS; S.m_nnz = 4;
   S.a_colind = a_colind; S.a_row = a_row; S.m_colind = m_colind; S.m_row = m_row; S.m_val = m_val;
   S.f_gravity = f_gravity; S.v_gravity = 0; S.spr_feat = spr_feat; S.spr_par = par;
   S.spr_kpos_ptr = spr_kpos_ptr; S.spr_kpos = spr_kpos; S.marker_feat = marker_feat;

@@ -11,7 +11,10 @@
  * Checked: the element loops on these tables; the Newton matrix K of step_newton against central differences of its
  * residual r (the damper's and the drag's ∂F/∂v in it); undamped, 2000 RATTLE steps keep Φ ≤ 1e-9
  * and the energy to 1e-6; damped, the energy lost equals the work of the damper, drag, force and
- * push that the stepper integrates (step_power, to 1e-4), and the energy decreases; one step, and an error-controlled run on the constraint.  Built and run
+ * push that the stepper integrates (step_power, to 1e-4), and the energy decreases; one step, and an error-controlled run on the constraint;
+ * all of it with the QR alone and with the sparse LU (ncgen_sparse_lu.h), the two runs equal
+ * to round-off with the same Newton iterations; a singular K (at q = 0, A = 0) reported as
+ * STEP_NOT_FINITE.  Built and run
  * by tests/test_stepper_runtime_c.py under AddressSanitizer and UndefinedBehaviorSanitizer. */
 #include "check.h"
 #include "stepper_decls.h"
@@ -137,6 +140,11 @@ static const int k_colind[] = {0, 3, 6, 9}, k_row[] = {0, 1, 2, 0, 1, 2, 0, 1, 2
 static const int v_colind[] = {0, 3, 5, 6}, v_row[] = {0, 1, 2, 1, 2, 2};
 static const int r_colind[] = {0, 1, 3, 6}, r_row[] = {0, 0, 1, 0, 1, 2};
 static const int perm[] = {0, 1, 2};
+/* The LU's analysis of the same K in identity order (the multiplier after both coordinates):
+ * L and U whole strict triangles, U(k, c) = L(c, k). */
+static const int l_colind[] = {0, 2, 3, 3}, l_row[] = {1, 2, 2}, u_colind[] = {0, 0, 1, 3}, u_row[] = {0, 0, 1},
+                 u_lpos[] = {0, 1, 2};
+static int with_lu;                /* whether make_tables gives the LU's analysis (else QR only) */
 static const int a_colind[] = {0, 1, 2}, a_row[] = {0, 0}, m_colind[] = {0, 2, 4}, m_row[] = {0, 1, 0, 1};
 static const double m_val[] = {MASS, 0, 0, MASS}, f_gravity[] = {0, -MASS * G};
 static const int spr_feat[] = {2, 0}, spr_kpos_ptr[] = {0, 4}, spr_kpos[] = {0, 3, 1, 4}, marker_feat[] = {0};
@@ -158,7 +166,7 @@ static void make_tables(double k, double l0, double c, double *par) {
   T.mem_c_ptr = mem_c_ptr; T.mem_c = mem_c; T.mem_row_ptr = mem_row_ptr; T.mem_row = mem_row;
   T.mem_apos_ptr = mem_apos_ptr; T.mem_apos = mem_apos; T.mem_mpos_ptr = mem_mpos_ptr; T.mem_mpos = mem_mpos;
   par[0] = k; par[1] = l0; par[2] = c;
-  S.T = &T; S.nu = 0; S.np = 0; S.n_markers = 1; S.n_spring = 1; S.mass_scale = MASS;
+  S.T = &T; S.nu = 0; S.np = 0; S.n_markers = 1; S.n_spring = 1; S.mass_scale = MASS; S.m_nnz = 4;
   S.a_colind = a_colind; S.a_row = a_row; S.m_colind = m_colind; S.m_row = m_row; S.m_val = m_val;
   S.f_gravity = f_gravity; S.v_gravity = 0; S.spr_feat = spr_feat; S.spr_par = par;
   S.spr_kpos_ptr = spr_kpos_ptr; S.spr_kpos = spr_kpos; S.marker_feat = marker_feat;
@@ -169,6 +177,9 @@ static void make_tables(double k, double l0, double c, double *par) {
   S.n_torque = 1; S.tq_member = tq_member; S.tq_c_ptr = tq_c_ptr; S.tq_c = ff_par; S.tq_val = tq_val;
   S.qr.n = 3; S.qr.k_colind = k_colind; S.qr.k_row = k_row; S.qr.v_colind = v_colind; S.qr.v_row = v_row;
   S.qr.r_colind = r_colind; S.qr.r_row = r_row; S.qr.prinv = perm; S.qr.pc = perm;
+  S.lu.n = with_lu ? 3 : 0; S.lu.nnz_l = 3; S.lu.k_colind = k_colind; S.lu.k_prow = k_row; S.lu.p = perm;
+  S.lu.pinv = perm; S.lu.l_colind = l_colind; S.lu.l_row = l_row; S.lu.u_colind = u_colind; S.lu.u_row = u_row;
+  S.lu.u_lpos = u_lpos;
 }
 
 /* The element loops on these tables: Φ = |q|² − L², A = 2 qᵀ, γ = −2 |v|², Φ_t = 0, M. */
@@ -248,10 +259,57 @@ static void run(double c) {
   tab_end();
 }
 
+/* 300 damped steps with the LU and with the QR alone: the same iterations, the same states to
+ * round-off (two exact solves of the same Newton systems). */
+static void test_lu_against_qr(void) {
+  double par[3], q0[2] = {L * sin(0.5), -L * cos(0.5)}, v0[2] = {0.4, 0.3}, lam0[1] = {0};
+  double q[2][2 * 3], v[2][2 * 3], lam[2][3], stats[2][NSTATS * 3];
+  step_options o = DEFAULT_OPTIONS();
+  long done = 0, splits = 0;
+  int k, i, status;
+  for (k = 0; k < 2; ++k) {
+    with_lu = k;
+    make_tables(30.0, 0.4, 0.8, par);
+    CHECK(!tab_begin(&S), "run started");
+    status = run_fixed(q0, v0, lam0, 0, 1e-3, 300, 100, 0, 0, 0, q[k], v[k], lam[k], 0, stats[k], &o, 0, 0, &done,
+                       &splits, 0);
+    CHECK(status == STEP_OK && done == 300, "%s: status %d", k ? "LU" : "QR", status);
+    tab_end();
+  }
+  with_lu = 1;
+  for (i = 0; i < 6; ++i) {
+    CHECK(fabs(q[0][i] - q[1][i]) < 1e-13 && fabs(v[0][i] - v[1][i]) < 1e-12, "LU vs QR: q %.17g %.17g, v %.17g %.17g",
+          q[0][i], q[1][i], v[0][i], v[1][i]);
+  }
+  for (i = 0; i < 3; ++i)
+    CHECK(stats[0][i * NSTATS + 1] == stats[1][i * NSTATS + 1], "LU vs QR: Newton iterations %g, %g",
+          stats[0][i * NSTATS + 1], stats[1][i * NSTATS + 1]);
+}
+
+/* At q = 0 the constraint's gradient A = 2 qᵀ vanishes: K is singular, the LU refuses it, the
+ * QR finds a zero diagonal, and the step reports STEP_NOT_FINITE (no NaN state returned). */
+static void test_singular_reported(void) {
+  double par[3], q0[2] = {0, 0}, v0[2] = {0.1, 0}, qn[2] = {7, 7}, vn[2] = {7, 7}, la[1];
+  step_options o = DEFAULT_OPTIONS();
+  int iters = 0, status;
+  make_tables(30.0, 0.4, 0.8, par);
+  CHECK(!tab_begin(&S), "run started");
+  status = stepper_step(q0, v0, 0, 0, 0, 1e-3, qn, vn, la, &iters, &o, 0, 0);
+  CHECK(status == STEP_NOT_FINITE, "singular K: status %d", status);
+  tab_end();
+}
+
 int main(void) {
+  with_lu = 0;                  /* the QR alone, then the LU (QR where it refuses) */
   test_tables();
   test_newton_matrix();
   run(0.0);
   run(0.8);
+  with_lu = 1;
+  test_newton_matrix();
+  run(0.0);
+  run(0.8);
+  test_lu_against_qr();
+  test_singular_reported();
   return report("test_table_stepper");
 }

@@ -37,7 +37,10 @@
  * The Newton matrix K = [[M − h/2 ∂F/∂w, A(q)ᵀ], [A(q + h w), 0]] (nq + nc square) is kept in
  * one CSC pattern: k_mpos, k_apos, k_atpos give the nonzero of K of each nonzero of M, of
  * A (lower block) and of Aᵀ (upper block), spr_kpos those of the dampers' products in the
- * loop order of tab_springs; it is solved by the sparse QR of ncgen_sparse_qr.h.
+ * loop order of tab_springs; it is solved by the sparse LU of ncgen_sparse_lu.h (the analysis
+ * lu: each multiplier ordered after the coordinates its constraint touches; lu.n = 0: none),
+ * or, where that LU finds an unsafe pivot (K singular or too ill-conditioned for its order),
+ * by the sparse QR of ncgen_sparse_qr.h (stable in any order).
  *
  * What the including file defines first: casadi_real, casadi_int; TAB_KINDS (a const
  * ncgen_kinds *), TAB_SPRING_2D and TAB_SPRING_3D (kernels); TAB_FEATURE_FORCES (a const
@@ -52,15 +55,17 @@
 #include <string.h>
 
 #include "ncgen_element_tables.h"
+#include "ncgen_sparse_lu.h"
 #include "ncgen_sparse_qr.h"
 
 typedef struct {
   const ncgen_tables *T;            /* Φ, A and M: the element tables */
   int nu, np, n_markers, n_spring;
   double mass_scale;                /* max |M_ij| (kg) */
+  int m_nnz;                        /* nonzero entries of M */
   const int *a_colind, *a_row;      /* the CSC pattern of A (nc x nq) of T */
-  const int *m_colind, *m_row;      /* the CSC pattern of M (nq x nq) of T */
-  const double *m_val;              /* the nonzeros of M */
+  const int *m_colind, *m_row;      /* the CSC pattern of M's nonzero entries (nq x nq) */
+  const double *m_val;              /* their values */
   const double *f_gravity;          /* nq */
   double v_gravity;                 /* J */
   const int *spr_feat;              /* 2 per spring: the features of its ends a, b */
@@ -83,6 +88,7 @@ typedef struct {
   const int *tq_member, *tq_c_ptr;
   const double *tq_c, *tq_val;
   ncgen_qr_pattern qr;              /* n = nq + nc, the pattern of K and its analysis */
+  ncgen_lu_pattern lu;              /* n = nq + nc (or 0: QR only), the LU's analysis of that pattern */
 } ncgen_stepper_tables;
 
 #if defined(__STDC_VERSION__) && __STDC_VERSION__ >= 201112L
@@ -123,16 +129,17 @@ static void tab_end(void) {
 #define TAB_SPRING_OUT (3 + 2 + 3 * 12)
 
 /* The kernel work (doubles) of the tables S: element work, q + h w, F, the features
- * at q and their rates, the spring kernel's input and outputs, the QR factors and scratch. */
+ * at q and their rates, the spring kernel's input and outputs, the QR factors and scratch,
+ * the LU factors. */
 static long tab_work_size(const ncgen_stepper_tables *S) {
   const ncgen_tables *T = S->T;
   long n = T->nq + T->nc;
-  return tab_ew_size + 2L * T->nq + 2L * T->nf * T->dim +
-         TAB_SPRING_IN + TAB_SPRING_OUT + S->nnz_v + S->nnz_r + 3 * n + TAB_FF_IN + TAB_FF_OUT;
+  return tab_ew_size + 2L * T->nq + 2L * T->nf * T->dim + TAB_SPRING_IN + TAB_SPRING_OUT + S->nnz_v + S->nnz_r +
+         3 * n + TAB_FF_IN + TAB_FF_OUT + (S->lu.n ? 2L * S->lu.nnz_l + n : 0);
 }
 
 typedef struct {
-  double *ew, *qh, *F, *fq, *fv, *sx, *sy, *V, *R, *beta, *x, *y, *fx, *fy;
+  double *ew, *qh, *F, *fq, *fv, *sx, *sy, *V, *R, *beta, *x, *y, *fx, *fy, *lu_l, *lu_u, *lu_d;
 } tab_work;
 
 static tab_work tab_layout(double *w) {
@@ -153,6 +160,9 @@ static tab_work tab_layout(double *w) {
   b.y = b.x + T->nq + T->nc;
   b.fx = b.y + T->nq + T->nc;
   b.fy = b.fx + TAB_FF_IN;
+  b.lu_l = b.fy + TAB_FF_OUT;
+  b.lu_u = b.lu_l + S->lu.nnz_l;
+  b.lu_d = b.lu_u + S->lu.nnz_l;
   return b;
 }
 
@@ -394,7 +404,7 @@ static void tab_kkt(double *K, const double *lower, const double *upper) {
   const ncgen_stepper_tables *S = tab_cur;
   int k;
   memset(K, 0, sizeof(double) * (size_t)S->nnz_k);
-  for (k = 0; k < S->T->m_nnz; ++k) K[S->k_mpos[k]] = S->m_val[k];
+  for (k = 0; k < S->m_nnz; ++k) K[S->k_mpos[k]] = S->m_val[k];
   for (k = 0; k < S->T->a_nnz; ++k) {
     K[S->k_atpos[k]] = upper[k];
     K[S->k_apos[k]] = lower[k];
@@ -498,10 +508,14 @@ static int tab_project(const casadi_real **arg, casadi_real **res, casadi_int *i
   return 0;
 }
 
-/* step_solve: K, r -> K⁻¹ r. */
+/* step_solve: K, r -> K⁻¹ r: by the LU, or by the QR where the LU's pivots are unsafe. */
 static int tab_solve(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
   tab_work b = tab_layout(w);
   (void)iw; (void)mem;
+  if (tab_cur->lu.n && !ncgen_lu_factor(&tab_cur->lu, arg[0], b.lu_l, b.lu_u, b.lu_d, b.x)) {
+    ncgen_lu_solve(&tab_cur->lu, b.lu_l, b.lu_u, b.lu_d, arg[1], res[0], b.y);
+    return 0;
+  }
   if (ncgen_qr_factor(&tab_cur->qr, arg[0], b.V, b.R, b.beta, b.x)) {
     int i;                           /* singular: NaN, which the stepper reports as not finite */
     for (i = 0; i < tab_cur->qr.n; ++i) res[0][i] = NAN;
