@@ -27,7 +27,7 @@
  * since every δx⁺ lies in the 2 dof-dimensional tangent space of the state manifold at x⁺,
  * tab_jac_rows computes them as Q (Qᵀ [Jx Ju]) from 2 dof reverse passes instead (6 dof solves
  * and one more factorisation against 2 (2nq + nu) solves), and the columns one by one are
- * the fallback where that does not apply.
+ * the fallback where that does not apply (or always, when TAB_JAC_COLUMNS is defined).
  * L is given as the constant matrix D (tab_jac_hessian), computed once per model by the
  * caller from A(e_i) − A(0).
  *
@@ -269,6 +269,9 @@ static int tab_jac_rows(const double *q, const double *u, double h, const tab_ja
   double *mem, *Fq1, *Fq2, *Fw2, *Fu1, *Fu2, *Q, *R, *Kt, *V3, *R3, *beta3, *rhs, *sol, *gq, *c, *unit;
   int *imem, *tpos, *colof, *cnt, *ci;
   tab_jac_csc Cq1 = {0, 0, 0}, Cq2 = Cq1, Cw2 = Cq1, Cu1 = Cq1, Cu2 = Cq1;
+#ifdef TAB_JAC_COLUMNS                   /* the fallback forced (its unit test) */
+  return 1;
+#endif
   if (dof < 0) return 1;
   mem = malloc(sizeof(double) * ((forces ? 3 * nqq : 0) + 2 * (size_t)nq * nu + (size_t)nx * nt + (size_t)nt * m +
                                  nnz + S->nnz_v + S->nnz_r + 5 * (size_t)n + nq + 1));
