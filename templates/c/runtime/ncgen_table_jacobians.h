@@ -27,7 +27,9 @@
  * since every δx⁺ lies in the 2 dof-dimensional tangent space of the state manifold at x⁺,
  * tab_jac_rows computes them as Q (Qᵀ [Jx Ju]) from 2 dof reverse passes instead (6 dof solves
  * and one more factorisation against 2 (2nq + nu) solves), and the columns one by one are
- * the fallback where that does not apply (or always, when TAB_JAC_COLUMNS is defined).
+ * the fallback where that does not apply, where it takes more solves, or where its result
+ * disagrees with one forward column (TAB_JAC_COLUMNS and TAB_JAC_ROWS force either path for
+ * their unit tests).
  * L is given as the constant matrix D (tab_jac_hessian), computed once per model by the
  * caller from A(e_i) − A(0).
  *
@@ -502,7 +504,13 @@ static int tab_step_jacobians(const double *q, const double *v, double t, const 
   if (ncgen_tables_phi_jacobian(TAB_KINDS, T, q_next, b.phis, b.A1, b.ew)) goto done;
   if (tab_jac_springs(q, b.z1, b.sj1, &kb) || tab_jac_springs(q_next, b.z1, b.sj2, &kb)) goto done;
   memset(b.zero, 0, sizeof(double) * (size_t)nq);
+  /* the reverse passes (6 dof solves, a factorisation, 2 for the check) where they take fewer
+   * solves than the columns (2 (2nq + nu)) */
+#ifdef TAB_JAC_ROWS                      /* the reverse passes forced (their unit test) */
   i = tab_jac_rows(q, u, h, D, q_next, &b, Jx, Ju);
+#else
+  i = 3 * (nq - nc) + 3 < 2 * nq + nu ? tab_jac_rows(q, u, h, D, q_next, &b, Jx, Ju) : 1;
+#endif
   status = STEP_BAD_INPUT;
   if (i == 2) goto done;
   if (i == 0) {                          /* the rows checked on one forward column */
@@ -523,6 +531,10 @@ static int tab_step_jacobians(const double *q, const double *v, double t, const 
     free(want);
     i = err <= TAB_JAC_ROWS_TOL * scale ? 0 : 1;
   }
+#ifdef TAB_JAC_ROWS                      /* no fallback: a failed check fails the step */
+  status = STEP_KERNEL;
+  if (i) goto done;
+#endif
   status = STEP_OK;
   if (i != 1) goto done;
   for (j = 0; j < 2 * nq + nu; ++j) {
