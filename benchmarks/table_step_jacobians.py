@@ -13,7 +13,7 @@ once per ncgen version; issues 34 and 37).
 2. Time to the first Jacobian of a new robot, each in a fresh process: ``from_urdf`` →
    ``build`` → ``step_function`` → ``jacobians`` (CPU and wall seconds; the number of
    compiler runs, which must be 0 once the element library is cached): z1, Panda (mimic
-   removed), UR10, and with ``--talos`` Talos (floating base).
+   removed, and stock: its finger mimic), UR10, and with ``--talos`` Talos (floating base).
 3. The table stepper's Newton iterations per step on the z1 and the UR10 (100 steps of
    1 ms with random torques).
 
@@ -41,9 +41,11 @@ ROBOTS = {"z1": "z1", "panda": "panda", "ur10": "ur10", "talos": "talos_reduced"
 
 
 def urdf_text(robot: str) -> str:
-    """The robot's URDF (example-robot-data) with ``<mimic>`` and ``<dynamics>`` removed."""
-    text = Path(nc.robots.urdf_path(ROBOTS[robot])).read_text()
-    text = re.sub(r"<mimic[^>]*/>", "", text)
+    """The robot's URDF (example-robot-data) with ``<dynamics>`` removed, and ``<mimic>`` too
+    unless the name ends in ``_stock``."""
+    stock = robot.endswith("_stock")
+    text = Path(nc.robots.urdf_path(ROBOTS[robot.removesuffix("_stock")])).read_text()
+    text = text if stock else re.sub(r"<mimic[^>]*/>", "", text)
     return re.sub(r"<dynamics[^>]*/>", "", text)
 
 
@@ -120,13 +122,13 @@ print(json.dumps({{"kernels": st.kernels, "build_cpu": c1 - c0, "build_wall": w1
 
 
 def first_jacobian(robot: str) -> None:
-    code = CHILD.format(bench=str(Path(__file__).resolve().parent), robot=robot, floating=robot == "talos")
+    code = CHILD.format(bench=str(Path(__file__).resolve().parent), robot=robot, floating=robot.startswith("talos"))
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=3600)
     if out.returncode:
         print(f"  {robot}: failed: {out.stderr.strip().splitlines()[-1] if out.stderr.strip() else '?'}")
         return
     r = json.loads(out.stdout.strip().splitlines()[-1])
-    print(f"  {robot:6s} nx {r['nx']:4d}  kernels {r['kernels']:6s}  compiler runs {r['compiles']}  "
+    print(f"  {robot:11s} nx {r['nx']:4d}  kernels {r['kernels']:6s}  compiler runs {r['compiles']}  "
           f"from_urdf+build {r['build_cpu']:6.2f} s CPU ({r['build_wall']:6.2f} s wall)  "
           f"step_function + first jacobians {r['jac_cpu']:6.2f} s CPU ({r['jac_wall']:6.2f} s wall)")
 
@@ -167,7 +169,7 @@ def main(argv=None) -> int:
         model, m = panda_twin()
         compare(f"Panda (mimic removed), h = {H} s", model, m, m.nu, args.calls, args.repeat, args.flat)
         print("\n=== time to the first step Jacobians of a new robot (fresh process, element library cached)")
-        for robot in ["z1", "panda", "ur10"] + (["talos"] if args.talos else []):
+        for robot in ["z1", "panda", "panda_stock", "ur10"] + (["talos"] if args.talos else []):
             first_jacobian(robot)
         print("\n=== the table stepper's Newton iterations per step (h = 1 ms, random torques)")
         for robot in ("z1", "ur10"):

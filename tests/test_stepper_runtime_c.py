@@ -38,7 +38,8 @@ PROGRAMS = [("test_rattle.c", []), ("test_contact.c", []), ("test_contact.c", ["
             ("test_contact.c", ["-DPAIRS"]),
             ("test_cone_newton.c", []), ("test_mpc.c", []), ("test_joint_loop.c", []),
             ("test_element_tables.c", []), ("test_sparse_qr.c", []), ("test_sparse_lu.c", []),
-            ("test_table_stepper.c", []), ("test_table_jacobians.c", []), ("test_tree_tables.c", [])]
+            ("test_table_stepper.c", []), ("test_table_jacobians.c", ["-DTAB_JAC_ROWS"]),
+            ("test_table_jacobians.c", ["-DTAB_JAC_COLUMNS"]), ("test_tree_tables.c", [])]
 
 pytestmark = pytest.mark.skipif(CC is None, reason="no C compiler (gcc, clang or cc) on PATH")
 
@@ -56,7 +57,7 @@ def sanitizers(tmp_path_factory) -> Path:
 @pytest.mark.parametrize("source, defines", PROGRAMS, ids=["rattle", "contact-kkt", "contact-schur", "contact-pairs",
                                                           "cone-newton", "mpc", "joint-loop", "element-tables",
                                                           "sparse-qr", "sparse-lu", "table-stepper", "table-jacobians",
-                                                          "tree-tables"])
+                                                          "table-jacobians-columns", "tree-tables"])
 def test_runtime_c_unit_tests_pass_under_sanitizers(sanitizers, source, defines):
     exe = sanitizers / (Path(source).stem + "".join(d.lower().replace("-d", "_") for d in defines))
     built = subprocess.run([CC, *FLAGS, *defines, f"-I{RUNTIME}", f"-I{TESTS}", str(TESTS / source),

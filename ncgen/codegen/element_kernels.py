@@ -4,7 +4,7 @@ arguments (the structured code generation of issue 34, docs/architecture.md, "El
 Two families of kinds, both from :mod:`ncgen.symbolic`:
 
 * **joint kinds** ``(primitive, dim)``: a joint primitive of :mod:`ncgen.symbolic.joints`
-  (``coincidence``, ``dot``, ``offset_dot``, ``distance``) applied to points and directions
+  (``coincidence``, ``dot``, ``offset_dot``, ``distance``, ``slider_ratio``) applied to points and directions
   ``f`` (each a dim-vector) and constant scalars ``s`` (a dot product, an offset, a length).
   Kernel ``jk_<primitive>_<dim>d``: input ``x = [f_1; …; f_n; s_1; …]``, outputs ``phi`` (the
   primitive's rows) and ``J = ∂phi/∂[f_1; …; f_n]`` (dense, column-major); kernel

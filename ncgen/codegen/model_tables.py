@@ -16,7 +16,7 @@
 
 Rows follow ``model.constraint_names`` (equations that coordinate sharing or
 ``redundant="drop"`` left out are outputs without a row).  An element the tables cannot
-express (a drive, a mimic joint, a coordinate driver, geometry depending on t or on
+express (a drive, a mimic joint of a Revolute, a coordinate driver, geometry depending on t or on
 parameters) is refused by :class:`UnsupportedElements`, which names every such element: the
 tables never describe another model than the flat functions do.
 """
@@ -36,7 +36,7 @@ from ncgen.model.context import Context
 
 #: Joint classes whose equations (without a drive) are joint primitives of constant scalars.
 COVERED_JOINTS = ("Spherical", "Revolute", "Prismatic", "Cylindrical", "Universal", "Planar", "Fixed",
-                  "Distance", "PointOnLine", "PointOnPlane", "Free", "JointSequence")
+                  "Distance", "PointOnLine", "PointOnPlane", "Free", "JointSequence", "Mimic")
 #: Names of the intrinsic constraints' base vectors (``<member>.rigid.uv``).
 VECTOR_NAMES = "uvw"
 
@@ -170,6 +170,8 @@ def _uncovered_kind(joint) -> str | None:
         return joint.kind
     if joint.drive is not None:
         return f"driven {joint.kind}"
+    if joint.kind == "Mimic" and not all(type(joint.options[r]).__name__ == "Prismatic" for r in ("leader", "follower")):
+        return "Mimic of a Revolute joint (its angle, an atan2, is not a quadratic form of q)"
     return None
 
 

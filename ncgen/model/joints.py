@@ -149,15 +149,21 @@ class Prismatic(Joint):
         s = dot(a, pO - pC) + sign * self.drive_expr(ctx)
         return [(f"{self.name}.drive", ctx.apply("offset_dot", rC, rO, aC, s)[0])]
 
-    def coordinate(self, ctx) -> ca.SX:
-        """The displacement s (m) of B relative to A along ``axis``, zero initially."""
+    def offset(self, ctx) -> tuple:
+        """``(r_C, r_O, a_C, sign, d0)``: the displacement is ``sign ((r_O − r_C)ᵀa_C − d0)``
+        (the line's point and direction on its carrier C, the other side's point O)."""
         at, a = self.at(), self.axis()
         C, O, sign = self._sides()
         pC, pO = ctx.nearest_point(C, at), ctx.nearest_point(O, at)
         rC, _ = ctx.point(C, pC, self.label)
         rO, _ = ctx.point(O, pO, self.label)
         aC, _ = ctx.direction(C, a, self.label)
-        return sign * (ca.dot(rO - rC, aC) - dot(a, pO - pC))
+        return rC, rO, aC, sign, dot(a, pO - pC)
+
+    def coordinate(self, ctx) -> ca.SX:
+        """The displacement s (m) of B relative to A along ``axis``, zero initially."""
+        rC, rO, aC, sign, d0 = self.offset(ctx)
+        return sign * (ca.dot(rO - rC, aC) - d0)
 
 
 class Cylindrical(Joint):
@@ -559,9 +565,17 @@ class Mimic(Joint):
         return []
 
     def equations(self, ctx):
+        """Of two Prismatic joints, the ``slider_ratio`` primitive (quadratic in q); else
+        the coordinates' relation (a Revolute's is an atan2)."""
         self.geometry(ctx)
         o = self.options
-        e = o["follower"].coordinate(ctx) - o["multiplier"] * o["leader"].coordinate(ctx) - o["offset"]
+        f, lead, m = o["follower"], o["leader"], o["multiplier"]
+        if isinstance(f, Prismatic) and isinstance(lead, Prismatic):
+            rA, rB, a, s1, d1 = f.offset(ctx)
+            rC, rD, b, s2, d2 = lead.offset(ctx)
+            d = s1 * d1 - m * s2 * d2 + o["offset"]
+            return [(f"{self.name}.mimic", ctx.apply("slider_ratio", rA, rB, a, rC, rD, b, s1, m * s2, d)[0])]
+        e = f.coordinate(ctx) - m * lead.coordinate(ctx) - o["offset"]
         return [(f"{self.name}.mimic", e)]
 
 

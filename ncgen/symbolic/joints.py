@@ -59,6 +59,11 @@ def primitive(name: str, dim: int) -> Primitive:
     if name == "distance":
         return Primitive(name, sp.Matrix([_dot(rB - rA, rB - rA) - L**2]), (rA, rB, L),
                          "two points keep their distance: |r_B − r_A|² − L² = 0")
+    if name == "slider_ratio":
+        rC, rD, s1, s2 = _v("r_C", dim), _v("r_D", dim), sp.Symbol("s_1", real=True), sp.Symbol("s_2", real=True)
+        expr = sp.Matrix([s1 * _dot(rB - rA, a) - s2 * _dot(rD - rC, b) - d])
+        return Primitive(name, expr, (rA, rB, a, rC, rD, b, s1, s2, d),
+                         "two sliders' offsets in a fixed ratio: s_1 (r_B − r_A)ᵀa − s_2 (r_D − r_C)ᵀb − d = 0")
     if name == "angle":
         # a rotates to m_1 by θ about the joint axis; m_2 is a direction ⟂ m_1 (3D: axis × m_1)
         if dim == 2:
@@ -71,4 +76,4 @@ def primitive(name: str, dim: int) -> Primitive:
     raise KeyError(f"unknown joint primitive {name!r}; known: {', '.join(PRIMITIVES)}")
 
 
-PRIMITIVES = ("coincidence", "dot", "offset_dot", "distance", "angle")
+PRIMITIVES = ("coincidence", "dot", "offset_dot", "distance", "slider_ratio", "angle")
