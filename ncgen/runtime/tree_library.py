@@ -47,7 +47,7 @@ TREE_FIELDS = (("int", "nb"), ("int", "nq"), ("int", "nv"), ("int", "ni"),
                *(("const int *", f) for f in ("parent", "kind", "q_at", "v_at", "num_ptr")),
                *(("const double *", f) for f in ("num", "body", "gravity")),
                *(("const int *", f) for f in ("rate_src", "rate_col")), ("const double *", "rate_coef"),
-               ("const int *", "q_src"), *(("const double *", f) for f in ("q_coef", "q_off")))
+               ("const int *", "q_src"), *(("const double *", f) for f in ("q_coef", "q_off", "xin", "inertia")))
 _T, _D = "const ncgen_tree *", "const double *"
 #: The library's entry points (``PACKAGE`` prefix) as tree_tables.c.j2 spells them.
 SIGNATURES = {
