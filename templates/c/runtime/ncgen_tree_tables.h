@@ -41,6 +41,9 @@
 #define NCGEN_TREE_KERNEL 1
 #define NCGEN_TREE_BAD 2
 #define NCGEN_TREE_BODY 13
+#ifndef NCGEN_TREE_PIVOT_TOL
+#define NCGEN_TREE_PIVOT_TOL 1e-12   /* ncgen/codegen/tree_check.py: PIVOT_TOL */
+#endif
 
 typedef int (*ncgen_tree_kernel)(const double **arg, double **res, long long *iw, double *w, int mem);
 
@@ -73,6 +76,7 @@ typedef struct {
   double *dR, *dp, *dTt, *ddT, *dW, *dS, *dtau;
   double *M, *Mi, *L, *rhs, *taui, *in, *out, *kw;
   double *X, *Sl, *cl, *vl, *al, *fl, *IC, *IA, *U, *Dl, *ul;
+  double *Y, *Kc, *pr, *ar, *ur, *tf;
 } ncgen_tree_work;
 
 
@@ -136,6 +140,12 @@ static long ncgen_tree_layout(const ncgen_tree_kinds *K, const ncgen_tree *T, do
   NCGEN_TREE_TAKE(U, 6 * nv);
   NCGEN_TREE_TAKE(Dl, 36 * nb);
   NCGEN_TREE_TAKE(ul, nv);
+  NCGEN_TREE_TAKE(Y, nv * nv);
+  NCGEN_TREE_TAKE(Kc, 2 * nv * nv);
+  NCGEN_TREE_TAKE(pr, 6 * nb);
+  NCGEN_TREE_TAKE(ar, 6 * nb);
+  NCGEN_TREE_TAKE(ur, nv);
+  NCGEN_TREE_TAKE(tf, nv);
 #undef NCGEN_TREE_TAKE
   return o;
 }
@@ -623,6 +633,110 @@ static int ncgen_tree_articulated(const ncgen_tree_kinds *K, const ncgen_tree *T
   return 0;
 }
 
+/* y = M⁻¹ e (nv) for the joint efforts e (nv) by the last two passes of the articulated-body
+ * algorithm on the factors of the last ncgen_tree_articulated (no velocity, no gravity). */
+static void ncgen_tree_articulated_solve(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s,
+                                         const double *e, double *y) {
+  int b, i, j, r, c;
+  for (i = 0; i < 6 * T->nb; ++i) s->pr[i] = 0.0;
+  for (b = T->nb - 1; b >= 0; --b) {
+    const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
+    int nv = k->nv, va = T->v_at[b], par = T->parent[b];
+    const double *S = s->Sl + 6 * va, *U = s->U + 6 * va, *L = s->Dl + 36 * b;
+    double *pA = s->pr + 6 * b, *u = s->ur + va, w[6], pa[6];
+    for (j = 0; j < nv; ++j) {                  /* u = e − Sᵀ p^A, w = L⁻¹ u */
+      double x = e[va + j];
+      for (r = 0; r < 6; ++r) x -= S[6 * j + r] * pA[r];
+      u[j] = x;
+      for (c = 0; c < j; ++c) x -= L[j + 6 * c] * w[c];
+      w[j] = x / L[j + 6 * j];
+    }
+    if (par < 0) continue;
+    for (r = 0; r < 6; ++r) pa[r] = pA[r];       /* p^a = p^A + U D⁻¹ u */
+    for (j = nv - 1; j >= 0; --j) {              /* w = L⁻ᵀ L⁻¹ u = D⁻¹ u */
+      double x = w[j];
+      for (c = j + 1; c < nv; ++c) x -= L[c + 6 * j] * w[c];
+      w[j] = x / L[j + 6 * j];
+    }
+    for (j = 0; j < nv; ++j)
+      for (r = 0; r < 6; ++r) pa[r] += U[6 * j + r] * w[j];
+    sp_wrench_out_add(s->X + 12 * b, s->X + 12 * b + 9, pa, s->pr + 6 * par);
+  }
+  for (b = 0; b < T->nb; ++b) {
+    const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
+    int nv = k->nv, va = T->v_at[b], par = T->parent[b];
+    const double *S = s->Sl + 6 * va, *R = s->X + 12 * b, *U = s->U + 6 * va, *L = s->Dl + 36 * b;
+    const double zero[6] = {0, 0, 0, 0, 0, 0};
+    double *a = s->ar + 6 * b, x[6];
+    sp_twist_in(R, R + 9, par < 0 ? zero : s->ar + 6 * par, a);
+    for (j = 0; j < nv; ++j) {
+      double z = s->ur[va + j];
+      for (r = 0; r < 6; ++r) z -= U[6 * j + r] * a[r];
+      for (c = 0; c < j; ++c) z -= L[j + 6 * c] * x[c];
+      x[j] = z / L[j + 6 * j];
+    }
+    for (j = nv - 1; j >= 0; --j) {
+      double z = x[j];
+      for (c = j + 1; c < nv; ++c) z -= L[c + 6 * j] * x[c];
+      x[j] = z / L[j + 6 * j];
+    }
+    for (j = 0; j < nv; ++j) {
+      y[va + j] = x[j];
+      for (r = 0; r < 6; ++r) a[r] += S[6 * j + r] * x[j];
+    }
+  }
+}
+
+/* Forward dynamics of a tree with mimic joints by the articulated-body algorithm on the tree
+ * with every rate free and the followers held by the constraints C a = 0 (rows
+ * e_f − k_f e_leader): a = a₀ + Y λ with a₀ = M⁻¹ (τ − bias) (the efforts τ_i on the leaders),
+ * Y = M⁻¹ Cᵀ, (C Y) λ = −C a₀; the constraint forces Cᵀλ have no part along G, so G ᵀ τ = τ_i.
+ * Returns 1 (nothing written) when M or C Y is not positive definite beyond the pivot
+ * tolerance: the caller then solves M_i a_i = τ_i − b_i by Cholesky, which names the cause. */
+static int ncgen_tree_constrained(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s,
+                                  const double *tau_i, double *aj, double *pivot, int *failed) {
+  int i, j, k, m = 0, nv = T->nv;
+  double ratio;
+  *failed = 0;
+  for (i = 0; i < nv; ++i) s->tf[i] = T->rate_src[i] == i ? tau_i[T->rate_col[i]] : 0.0;
+  if (ncgen_tree_articulated(K, T, s, s->tf, aj, &ratio)) return NCGEN_TREE_KERNEL;
+  if (!(ratio > NCGEN_TREE_PIVOT_TOL)) {
+    *failed = 1;
+    return 0;
+  }
+  for (i = 0; i < nv; ++i) {                    /* Y's columns, one per follower */
+    if (T->rate_src[i] == i) continue;
+    for (j = 0; j < nv; ++j) s->tf[j] = 0.0;
+    s->tf[i] = 1.0;
+    s->tf[T->rate_src[i]] = -T->rate_coef[i];
+    ncgen_tree_articulated_solve(K, T, s, s->tf, s->Y + (long)nv * m);
+    ++m;
+  }
+  for (k = 0, j = 0; j < nv; ++j) {              /* C Y (m × m) and −C a₀ */
+    int f, c = 0;
+    if (T->rate_src[j] == j) continue;
+    for (f = 0; f < nv; ++f) {
+      if (T->rate_src[f] == f) continue;
+      s->Kc[k + m * c] = s->Y[(long)nv * c + j] - T->rate_coef[j] * s->Y[(long)nv * c + T->rate_src[j]];
+      ++c;
+    }
+    s->ur[k] = -(aj[j] - T->rate_coef[j] * aj[T->rate_src[j]]);
+    ++k;
+  }
+  ratio = fmin(ratio, ncgen_tree_cholesky(m, s->Kc, s->Kc + (long)m * m));
+  if (!(ratio > NCGEN_TREE_PIVOT_TOL)) {
+    *failed = 1;
+    return 0;
+  }
+  ncgen_tree_solve(m, s->Kc + (long)m * m, s->ur, 1);
+  for (k = 0; k < m; ++k)
+    for (i = 0; i < nv; ++i) aj[i] += s->Y[(long)nv * k + i] * s->ur[k];
+  for (i = 0; i < nv; ++i)
+    if (T->rate_src[i] != i) aj[i] = T->rate_coef[i] * aj[T->rate_src[i]];
+  *pivot = ratio;
+  return 0;
+}
+
 /* M_i and the bias b_i = τ_i(q, v, a = 0) (in s->rhs) of one local pass; the Cholesky
  * factor of M_i in s->L; returns the smallest relative pivot in *pivot. */
 static int ncgen_tree_factored(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, const double *q,
@@ -645,12 +759,20 @@ static int ncgen_tree_aba(const ncgen_tree_kinds *K, const ncgen_tree *T, const 
   int i;
   double sum = 0.0;
   ncgen_tree_layout(K, T, work, &s);
+  ncgen_tree_expand(T, &s, q, v, 0);
   if (ncgen_tree_unmapped(T)) {
-    ncgen_tree_expand(T, &s, q, v, 0);
     if (ncgen_tree_articulated(K, T, &s, tau_i, aj, &check[0])) return NCGEN_TREE_KERNEL;
     for (i = 0; i < T->nv; ++i) sum += aj[i];
     check[1] = sum;
     return 0;
+  } else {
+    int failed;
+    if (ncgen_tree_constrained(K, T, &s, tau_i, aj, &check[0], &failed)) return NCGEN_TREE_KERNEL;
+    if (!failed) {
+      for (i = 0; i < T->nv; ++i) sum += aj[i];
+      check[1] = sum;
+      return 0;
+    }
   }
   if (ncgen_tree_factored(K, T, &s, q, v, &check[0])) return NCGEN_TREE_KERNEL;
   for (i = 0; i < T->ni; ++i) s.rhs[i] = tau_i[i] - s.rhs[i];
