@@ -289,8 +289,20 @@ def call(model, k: AlgorithmKernel, args: tuple, p, t: float):
     if not isinstance(k, AlgorithmKernel):
         if p is not None:                   # the tables' algorithms do not depend on p: check it only
             as_vector(p, model.np, "p")
-        plain = k.plain(args)
-        return k(*(plain if plain is not None else _checked(model, k, args)))
+        fast = k._fast
+        if fast is None:
+            plain = k.plain(args)
+            return k(*(plain if plain is not None else _checked(model, k, args)))
+        if k._quaternions:
+            out = fast(*_checked(model, k, args))
+        else:
+            try:
+                out = fast(*args)
+            except (TypeError, ValueError, OverflowError):
+                out = fast(*_checked(model, k, args))
+        if out is None:
+            k.singular()
+        return tuple(o.copy() for o in out) if type(out) is tuple else out.copy()
     k._at(t, p)
     fast = k._fast
     if fast is not None and not k._quaternions:

@@ -141,6 +141,14 @@ class BoundTree:
         self.work = np.zeros(max(1, int(self.library.fn["work_size"](self.ref))))
 
 
+class _Direct:
+    """What :func:`~ncgen.codegen.fast_call.fast_caller` reads of a kernel: its input buffers,
+    entry point and argument addresses (``keep``: what the addresses point into)."""
+
+    def __init__(self, inputs, fn, args, keep):
+        self.inputs, self._fn, self._args, self.keep = inputs, fn, args, keep
+
+
 class TableAlgorithm:
     """``k(*args) -> outputs``: the algorithm ``name`` (a key of
     :data:`~ncgen.codegen.tree_check.ALGORITHMS`) of one tree from its tables; the
@@ -161,6 +169,34 @@ class TableAlgorithm:
         self._fn = tree.library.fn[name]
         self._single = None
         self._quaternions = bool(np.any(np.isin(np.asarray(JOINT_KINDS_NQ)[T.arrays["kind"]], (4, 7))))
+        self._fast = self._fast_caller()
+
+    def _fast_caller(self):
+        """The library's ``<name>_one`` through :func:`~ncgen.codegen.fast_call.fast_caller`
+        (inputs checked in C against :data:`~ncgen.validation.MAX_MAGNITUDE`; returns the
+        output buffers, matrices as ``(ni, ni)`` views of column-major storage, or None when
+        the pivot check fails), or None without the extension."""
+        from ncgen.codegen.fast_call import fast_caller
+
+        one = getattr(self.tree.library._lib, f"{PACKAGE}_{self.name}_one", None)
+        if one is None:
+            return None
+        ins = [np.zeros(n) for n in self._sizes]
+        outs = [np.zeros(int(np.prod(self._shape(o)))) for o in self.output_names]
+        check = self._fast_check = np.zeros(2) if self.name.startswith("aba") else None
+        arg = (ctypes.c_void_p * (1 + len(ins)))(self.tree.ref, *(x.ctypes.data for x in ins))
+        res = (ctypes.c_void_p * (len(outs) + 1))(*(o.ctypes.data for o in outs),
+                                                   None if check is None else check.ctypes.data)
+        shim = _Direct([None, *ins], one, (ctypes.addressof(arg), ctypes.addressof(res), 0,
+                                           self.tree.work.ctypes.data, 0), (arg, res, outs, self.tree))
+        views = [o if len(self._shape(n)) == 1 else o.reshape(self._shape(n)).T for o, n in zip(outs, self.output_names)]
+        return fast_caller(shim, len(ins), first=1, check=check, tol=PIVOT_TOL, bound=MAX_MAGNITUDE,
+                           result=views[0] if len(views) == 1 else tuple(views))
+
+    def singular(self):
+        """Raise the :class:`ModelError` of the failed check of the last fast call."""
+        self._checked(self._fast_check[None, :], 1)
+        raise ModelError(f"{self.name}: the check of the result failed")
 
     def plain(self, args) -> tuple | None:
         """``args`` when each is already a C-contiguous float64 vector of its size with finite
@@ -179,7 +215,13 @@ class TableAlgorithm:
 
     def __call__(self, *args):
         """The algorithm at one state (each argument a float vector of its size), through
-        buffers and addresses kept between calls."""
+        buffers and addresses kept between calls (the fast caller's when it is built)."""
+        fast = self._fast
+        if fast is not None:
+            out = fast(*args)
+            if out is None:
+                self.singular()
+            return tuple(o.copy() for o in out) if type(out) is tuple else out.copy()
         if self._single is None:
             self._in = [np.empty(n) for n in self._sizes]
             self._single = [np.empty((1, *self._shape(o))) for o in self.output_names]
