@@ -14,8 +14,9 @@ Kernels (``kernels=``, as the stepper's ``SimulationOptions(kernels=...)``): ``"
 the tree library's loops over the model's data tables (:mod:`ncgen.runtime.tree_library`,
 compiled once per ncgen version: no compiler call for a new robot), ``"flat"`` — the model's
 own SX functions compiled per model, ``"auto"`` (default) — flat wherever a C compiler is
-present or the flat kernel is already built in this process (a call on the tables costs 3–20×
-the flat kernel's: benchmarks/tree_tables.py), else the tables when they cover the model
+present or the flat kernel is already built in this process (per state in C the tables' local
+recursions cost 1.2–1.5× the flat RNEA, 3–4× the flat ABA and CRBA: benchmarks/tree_tables.py),
+else the tables when they cover the model
 (:func:`~ncgen.codegen.tree_tables.tree_tables`: a uniform gravity the only passive force).
 :func:`algorithm_kernels` says which one a call uses.
 
