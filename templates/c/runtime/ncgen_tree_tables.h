@@ -543,7 +543,14 @@ static int ncgen_tree_articulated(const ncgen_tree_kinds *K, const ncgen_tree *T
     const double *S = s->Sl + 6 * va, *R = s->X + 12 * b, *p = R + 9, *cb = s->cl + 6 * b;
     double *IA = s->IA + 36 * b, *pA = s->fl + 6 * b, *U = s->U + 6 * va, *L = s->Dl + 36 * b, *u = s->ul + va;
     double Z[36], pa[6], Ia[36], w[6];
-    for (j = 0; j < nv; ++j) {
+    if (k->mode == 1 || k->mode == 2) {         /* S = e_2 or e_5: U a column of I^A, D an entry */
+      int x = k->mode == 1 ? 2 : 5;
+      for (r = 0; r < 6; ++r) U[r] = IA[r + 6 * x];
+      L[0] = IA[x + 6 * x];
+      u[0] = tau[va] - pA[x];
+      w[0] = k->mode == 1 ? s->IC[NCGEN_TREE_BODY * b + 12] : s->IC[NCGEN_TREE_BODY * b];   /* I_o,zz or m */
+    }
+    for (j = 0; j < nv && k->mode != 1 && k->mode != 2; ++j) {
       double F[6], m = 0.0;
       for (r = 0; r < 6; ++r) {
         double x = 0.0;
@@ -591,10 +598,10 @@ static int ncgen_tree_articulated(const ncgen_tree_kinds *K, const ncgen_tree *T
       w[j] = x / L[j + 6 * j];
     }
     for (c = 0; c < 6; ++c)
-      for (r = 0; r < 6; ++r) {
+      for (r = c; r < 6; ++r) {
         double x = IA[r + 6 * c];
         for (j = 0; j < nv; ++j) x -= Z[6 * j + r] * Z[6 * j + c];
-        Ia[r + 6 * c] = x;
+        Ia[r + 6 * c] = Ia[c + 6 * r] = x;
       }
     for (r = 0; r < 6; ++r) {
       double x = pA[r];
