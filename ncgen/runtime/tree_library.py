@@ -12,11 +12,12 @@ callers of :class:`~ncgen.runtime.tree_algorithms.AlgorithmKernel` use (``k(*arg
 trees whose passive force is a uniform gravity.  :class:`TableJointLoop` is the joint-space
 simulation loop (``ncgen_joint_loop.h`` in the library) on the same tables.
 
-Speed (benchmarks/tree_tables.py, per state over batches of 500 in one C call, best of 5
-interleaved rounds, 2 shared cores at load 15–17): RNEA 1.46 µs against 1.19 µs for the flat
-per-robot kernel (whose numbers are folded into the code) on the Panda, 1.77 against 1.35 µs on
-the UR5; ABA 3.6 against 0.9 µs and CRBA 1.4 against 0.45 µs on the UR5.  A single call goes
-through the fast caller as the flat kernels' do.  The tables are the default for their
+Speed (benchmarks/tree_tables.py, per state over batches in one C call, best of 7
+interleaved rounds, AMD EPYC, 2 shared cores at load 5): against the flat per-robot kernel
+(whose numbers are folded into the code) RNEA 2.21 / 2.18 µs on the Panda, 1.45 / 0.83 µs on the
+UR5, 10.8 / 11.2 µs on Talos (load 8–14); ABA 8.96 / 3.07 (Panda, its mimic finger by a
+constraint), 4.47 / 1.29 (UR5), 51 / 44 µs (Talos); CRBA 2.90 / 1.00, 1.97 / 0.74, 37 / 8.3 µs.
+A single call goes through the fast caller as the flat kernels' do.  The tables are the default for their
 first-call cost (no compile) where no compiler is present, the flat kernel otherwise.
 """
 from __future__ import annotations
