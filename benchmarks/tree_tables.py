@@ -9,7 +9,10 @@ order rotating between rounds; best and median time per call over the rounds):
 * RNEA: ``TableAlgorithm(qj, vj, aj)`` (``kernels="tables"``) vs ``AlgorithmKernel(qj, vj,
   aj)`` (``kernels="flat"``) vs ``pinocchio.rnea``; ABA the same with ``pinocchio.aba``
   (target: tables ≤ 1.2× flat);
-* the public doors ``nc.rnea`` / ``nc.aba`` with each ``kernels=`` (argument checks included).
+* the public doors ``nc.rnea`` / ``nc.aba`` with each ``kernels=`` (argument checks included);
+* the arithmetic alone: RNEA, ABA and CRBA over ``--states`` states in one C call
+  (``nc.rnea(model, Q, V, A, kernels=...)``: the tables' loop, the flat kernel's batch loop),
+  time per state.
 
 Then ``ncgen simulate <panda.urdf> --t-end 1 -o traj.npz`` in fresh processes: the first run with an empty
 compile cache and model store, and later runs (targets: 3 s and 1 s), wall and CPU seconds.
@@ -17,7 +20,7 @@ The joint-space simulation still runs its flat per-robot loop (the tables do not
 
 CPU model, load average at start and end are printed: the machine is shared.
 
-    python benchmarks/tree_tables.py [--robots panda ur5] [--calls 2000] [--rounds 7] [--skip-simulate]
+    python benchmarks/tree_tables.py [--robots panda ur5] [--calls 2000] [--rounds 7] [--states 1000] [--skip-simulate]
     python benchmarks/tree_tables.py --smoke        one robot, few calls, one simulate run
 """
 from __future__ import annotations
@@ -49,12 +52,12 @@ def per_call(fn, calls: int) -> float:
     return (time.perf_counter() - start) / calls
 
 
-def compare(label: str, sides: dict, calls: int, rounds: int) -> None:
+def compare(label: str, sides: dict, calls: int, rounds: int, per: int = 1) -> None:
     names = list(sides)
     samples = {n: [] for n in names}
     for r in range(rounds):
         for n in names[r % len(names):] + names[:r % len(names)]:
-            samples[n].append(per_call(sides[n], calls))
+            samples[n].append(per_call(sides[n], calls) / per)
     best = {n: min(s) for n, s in samples.items()}
     line = ", ".join(f"{n} {best[n] * 1e6:.2f} µs (median {statistics.median(samples[n]) * 1e6:.2f})" for n in names)
     print(f"{label}: {line}")
@@ -102,6 +105,29 @@ def algorithms(name: str, calls: int, rounds: int) -> None:
                                      "flat": lambda: door(model, *args, kernels="flat")}, calls, rounds)
 
 
+def batches(name: str, states: int, rounds: int) -> None:
+    """Per state over ``states`` states in one call each (interleaved rounds, best and median)."""
+    import ncgen as nc
+    from ncgen.assembly.tree_dynamics import MimicMap
+    from pinocchio_robots import ROBOTS, pinocchio_models, random_configuration, JointMap, urdf_text
+
+    model = nc.System.from_urdf(urdf_text(name), floating_base=ROBOTS[name][1]).build()
+    _, pm = pinocchio_models(name)
+    jm, mimic = JointMap(model, pm), MimicMap(model)
+    rng = np.random.default_rng(1)
+    Q = np.array([jm.q_to_ncgen(random_configuration(pm, rng)) for _ in range(states)])
+    for i, (lead, k, off) in mimic.position.items():
+        Q[:, i] = k * Q[:, lead] + off
+    n = mimic.G.shape[1]
+    V, A = rng.normal(size=(states, n)) @ mimic.G.T, rng.normal(size=(states, n)) @ mimic.G.T
+    TAU = rng.normal(size=(states, n))
+    for alg, args in (("rnea", (Q, V, A)), ("aba", (Q, V, TAU)), ("crba", (Q,))):
+        door = getattr(nc, alg)
+        compare(f"{name} {alg} per state in batches of {states}",
+                {k: (lambda k=k: door(model, *args, kernels=k)) for k in ("tables", "flat")}, 1, rounds,
+                per=states)
+
+
 def simulate_runs(runs: int) -> None:
     from pinocchio_robots import urdf_text
 
@@ -128,15 +154,17 @@ def main() -> None:
     ap.add_argument("--robots", nargs="+", default=["panda", "ur5"])
     ap.add_argument("--calls", type=int, default=2000)
     ap.add_argument("--rounds", type=int, default=7)
+    ap.add_argument("--states", type=int, default=1000)
     ap.add_argument("--simulate-runs", type=int, default=3)
     ap.add_argument("--skip-simulate", action="store_true")
     ap.add_argument("--smoke", action="store_true")
     a = ap.parse_args()
     if a.smoke:
-        a.robots, a.calls, a.rounds, a.simulate_runs = ["ur5"], 20, 2, 1
+        a.robots, a.calls, a.rounds, a.simulate_runs, a.states = ["ur5"], 20, 2, 1, 20
     print(machine())
     for name in a.robots:
         algorithms(name, a.calls, a.rounds)
+        batches(name, a.states, a.rounds)
     if not a.skip_simulate:
         simulate_runs(a.simulate_runs)
     print(f"\nload average at the end: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")

@@ -14,7 +14,9 @@ singular and ill-conditioned matrices refused) on hand-analysed patterns, and th
 stepper (``ncgen_table_stepper.h``) on the hand-made tables of a planar pendulum with a spring, and
 its step Jacobians (``ncgen_table_jacobians.h``) on the same with inputs and actuators; the
 tree loops (``ncgen_tree_tables.h``: RNEA, CRBA, forward dynamics, derivatives) on hand-written
-kernels of a tree of sliders with a mimic joint.  Each program is
+kernels of a tree of sliders with a mimic joint (through their kernels and as the loops' own
+z sliders; the articulated-body algorithm without the mimic map), and the spatial algebra of
+its local recursion (``ncgen_spatial.h``) by its identities.  Each program is
 built with ``-Wall -Wextra -Werror -pedantic`` under AddressSanitizer and
 UndefinedBehaviorSanitizer and must print that all its checks passed."""
 from __future__ import annotations
@@ -39,7 +41,8 @@ PROGRAMS = [("test_rattle.c", []), ("test_contact.c", []), ("test_contact.c", ["
             ("test_cone_newton.c", []), ("test_mpc.c", []), ("test_joint_loop.c", []),
             ("test_element_tables.c", []), ("test_sparse_qr.c", []), ("test_sparse_lu.c", []),
             ("test_table_stepper.c", []), ("test_table_jacobians.c", ["-DTAB_JAC_ROWS"]),
-            ("test_table_jacobians.c", ["-DTAB_JAC_COLUMNS"]), ("test_tree_tables.c", [])]
+            ("test_table_jacobians.c", ["-DTAB_JAC_COLUMNS"]), ("test_tree_tables.c", []),
+            ("test_spatial.c", [])]
 
 pytestmark = pytest.mark.skipif(CC is None, reason="no C compiler (gcc, clang or cc) on PATH")
 
@@ -57,7 +60,7 @@ def sanitizers(tmp_path_factory) -> Path:
 @pytest.mark.parametrize("source, defines", PROGRAMS, ids=["rattle", "contact-kkt", "contact-schur", "contact-pairs",
                                                           "cone-newton", "mpc", "joint-loop", "element-tables",
                                                           "sparse-qr", "sparse-lu", "table-stepper", "table-jacobians",
-                                                          "table-jacobians-columns", "tree-tables"])
+                                                          "table-jacobians-columns", "tree-tables", "spatial"])
 def test_runtime_c_unit_tests_pass_under_sanitizers(sanitizers, source, defines):
     exe = sanitizers / (Path(source).stem + "".join(d.lower().replace("-d", "_") for d in defines))
     built = subprocess.run([CC, *FLAGS, *defines, f"-I{RUNTIME}", f"-I{TESTS}", str(TESTS / source),

@@ -47,7 +47,17 @@ def library():
 @pytest.fixture(scope="module")
 def tree():
     """Every joint kind of the tables on rigid bodies, a rotated body, and a mimic pair."""
-    s = nc.System("table_tree", gravity=(0.3, 0, -G))
+    return make_tree(mimic=True)
+
+
+@pytest.fixture(scope="module")
+def free_tree():
+    """The same tree without the mimic pair: forward dynamics by the articulated-body algorithm alone."""
+    return make_tree(mimic=False)
+
+
+def make_tree(mimic: bool):
+    s = nc.System("table_tree" if mimic else "table_tree_free", gravity=(0.3, 0, -G))
     R = quaternion_matrix(np.array([0.2, -0.4, 0.3, 0.8]) / np.linalg.norm([0.2, -0.4, 0.3, 0.8]))
     b = [s.add_body(f"b{k}", mass=1.0 + 0.2 * k, inertia=np.diag([0.1, 0.2, 0.25]) * (1 + 0.1 * k),
                     position=(k + 0.5, 0.1 * k, 0), rotation=R if k == 2 else np.eye(3)) for k in range(10)]
@@ -61,7 +71,8 @@ def tree():
     s.add_joint(nc.Fixed(b[6], b[7], at=(7, 0.6, 0), name="weld"))
     j1 = s.add_joint(nc.Revolute(b[7], b[8], at=(8, 0.7, 0), axis=(0, 0, 1), name="f1"))
     j2 = s.add_joint(nc.Revolute(b[7], b[9], at=(9, 0.8, 0), axis=(1, 0, 0), name="f2"))
-    s.add_joint(nc.Mimic(j1, j2, multiplier=-2.0, offset=0.1, name="link"))
+    if mimic:
+        s.add_joint(nc.Mimic(j1, j2, multiplier=-2.0, offset=0.1, name="link"))
     return s.build(assemble=True)
 
 
@@ -106,7 +117,23 @@ def assert_equal_to_flat(model, names, seed=0, states=2):
 
 
 def test_tables_equal_the_flat_functions(tree, library):
-    assert_equal_to_flat(tree, ("rnea", "crba"), states=1)
+    """RNEA, CRBA and forward dynamics (the articulated-body algorithm with the mimic follower
+    held by its constraint) over local frames: every joint kind, axes off the coordinate axes."""
+    assert_equal_to_flat(tree, ("rnea", "crba", "aba"), states=1)
+
+
+def test_articulated_body_algorithm_equals_the_flat_function_and_the_kkt_solve(free_tree, library):
+    """Without mimic joints forward dynamics is the articulated-body algorithm alone: equal to the
+    flat function (1e-12) and to the constrained equations in natural coordinates."""
+    assert_equal_to_flat(free_tree, ("aba", "rnea"), seed=3, states=2)
+    rng = np.random.default_rng(4)
+    qj, vj, _, tau = random_state(free_tree, rng)
+    aj = nc.aba(free_tree, qj, vj, np.zeros(len(tau)), kernels="tables")
+    q, v = free_tree.from_joint_space(qj, vj)
+    a, _ = nc.forward_dynamics(free_tree, q, v)
+    np.testing.assert_allclose(aj, free_tree.to_joint_space(q, v, a)[2], rtol=0, atol=1e-9)
+    tau_back = nc.rnea(free_tree, qj, vj, nc.aba(free_tree, qj, vj, tau, kernels="tables"), kernels="tables")
+    np.testing.assert_allclose(tau_back, tau, rtol=0, atol=1e-10 * max(1.0, np.abs(tau).max()))
 
 
 @pytest.mark.slow

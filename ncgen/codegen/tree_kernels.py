@@ -22,7 +22,12 @@ poses from :func:`ncgen.assembly.joint_tree.relative_pose` with symbolic axes.
   output ``[M_g (6×6); W]``: the mass matrix at g and the wrench ``M_g dT − ad(T)ᵀ M_g T``
   (N·m, N) the body needs; ``tk_body_fwd``: input ``[x; dR; dp; dT; ddT]``, output ``d[M_g; W]``;
 * ``tk_<k>_qdot``: ``[q; w] -> q̇`` (position rates: quaternions' ``½ q ⊗ [ω; 0]``, a free
-  joint's ``R v``) for the joint-space ODE.
+  joint's ``R v``) for the joint-space ODE;
+* ``tl_<k>`` (the local recursion of RNEA, CRBA and ABA, kinds other than ``fixed``,
+  ``revolute`` and ``prismatic``, which the loops write out about the z axis:
+  :data:`LOCAL_MODES`): input ``[q; w; numbers]``, output ``[R_J; p_J; S (6×nv); c_J]``: the
+  joint's own motion ``T(q) = [[R_J, p_J], [0, 1]]`` (:func:`~ncgen.assembly.joint_tree.relative_pose`),
+  its motion subspace in the frame it moves (``vee(T⁻¹ Ṫ) = S w``) and ``c_J = Ṡ w``.
 """
 from __future__ import annotations
 
@@ -61,6 +66,10 @@ JOINT_KINDS: tuple[TreeJointKind, ...] = (
     TreeJointKind("prismatic", "Prismatic", 1, 1, 1), TreeJointKind("cylindrical", "Cylindrical", 2, 2, 1),
     TreeJointKind("universal", "Universal", 2, 2, 2), TreeJointKind("planar", "Planar", 3, 3, 3),
     TreeJointKind("spherical", "Spherical", 4, 3, 0), TreeJointKind("free", "Free", 7, 6, 0))
+#: How the local recursion moves each kind (``ncgen_tree_tables.h``): 0 by its kernel ``tl_<k>``,
+#: 1 a rotation about z, 2 a translation along z (revolute and prismatic joints, their axis
+#: turned onto z by the tables), 3 not at all (fixed).
+LOCAL_MODES = {"fixed": 3, "revolute": 1, "prismatic": 2}
 #: Inputs of ``tk_body``: pose (12), twist (6), acceleration (6), mass, centre of mass (3), inertia (9).
 BODY_INPUTS = 37
 #: The body numbers of a member in the tables: ``[m; c; I_c]``.
@@ -107,6 +116,22 @@ def joint_kernels(name: str) -> tuple[ca.Function, ca.Function]:
 
 
 @lru_cache(maxsize=None)
+def local_kernel(name: str) -> ca.Function:
+    """``tl_<name>`` (module docstring)."""
+    k = next(j for j in JOINT_KINDS if j.name == name)
+    q, w, num = ca.SX.sym("q", k.nq), ca.SX.sym("w", k.nv), ca.SX.sym("num", k.n_num)
+    edge = Edge("", k.kind, "p", "c", (None, None), (None, None),
+                tuple(num[24 + 3 * i:24 + 3 * i + 3] for i in range(k.n_axes)))
+    R_J, p_J = relative_pose(edge, q, 3, sym=True)
+    H = _homogeneous(R_J, p_J)
+    qd = joint_position_rates(k.kind, 3, k.nq, q, w)
+    S = ca.jacobian(crm.se3_vee(ca.mtimes(crm.inverse(H), ca.reshape(ca.jtimes(ca.vec(H), q, qd), 4, 4))), w)
+    c_J = ca.jtimes(ca.mtimes(S, w), q, qd)
+    y = ca.densify(ca.vertcat(ca.vec(R_J), p_J, ca.vec(S), c_J))
+    return ca.Function(f"tl_{name}", [ca.vertcat(q, w, num)], [ca.cse(y)], ["x"], ["y"])
+
+
+@lru_cache(maxsize=None)
 def rate_kernel(name: str) -> ca.Function:
     """``tk_<name>_qdot``: ``[q; w] -> q̇`` (the joint's position rates; a quaternion
     normalised first, as the joint-space ODE sees it)."""
@@ -136,8 +161,11 @@ def body_kernels() -> tuple[ca.Function, ca.Function]:
 
 
 def kernels() -> list[ca.Function]:
-    """Every tree kernel, in the library's order: each joint kind's three, then the body's."""
-    return [f for k in JOINT_KINDS for f in (*joint_kernels(k.name), rate_kernel(k.name))] + list(body_kernels())
+    """Every tree kernel, in the library's order: each joint kind's three (four with
+    ``tl_<k>``), then the body's."""
+    return [f for k in JOINT_KINDS for f in (*joint_kernels(k.name), rate_kernel(k.name),
+                                             *(() if k.name in LOCAL_MODES else (local_kernel(k.name),)))] + \
+        list(body_kernels())
 
 
 def kind_names() -> str:
@@ -155,7 +183,7 @@ def joint_numbers(a1, b1, a2, b2, axes) -> np.ndarray:
 #: Name of the package (and prefix of every C symbol) of the tree library.
 PACKAGE = "ncgen_trees"
 #: The template files the library is made of besides this module (its cache key hashes them).
-SOURCES = ("runtime/ncgen_tree_tables.h", "tree_tables.c.j2", "runtime/ncgen_joint_loop.h")
+SOURCES = ("runtime/ncgen_tree_tables.h", "runtime/ncgen_spatial.h", "tree_tables.c.j2", "runtime/ncgen_joint_loop.h")
 
 
 def write_tree_package(out_dir):
@@ -169,12 +197,14 @@ def write_tree_package(out_dir):
     from ncgen.codegen.tree_check import PIVOT_TOL
 
     context = {"pivot_tol": repr(float(PIVOT_TOL)),
-               "kinds": [{"name": k.name, "nq": k.nq, "nv": k.nv, "n_num": k.n_num} for k in JOINT_KINDS],
+               "kinds": [{"name": k.name, "nq": k.nq, "nv": k.nv, "n_num": k.n_num,
+                          "mode": LOCAL_MODES.get(k.name, 0)} for k in JOINT_KINDS],
                "max_w": max(f.sz_w() for f in fns), "kind_names": kind_names()}
     doc = PackageDoc(summary="Tree kernels of the shipped joint kinds and the table-driven joint-space "
                              "algorithms (RNEA, CRBA, forward dynamics and their derivatives) of any tree")
     return write_package(PACKAGE, fns, out_dir, doc=doc, max_file_instructions=None, reroll_instructions=None,
                          extra_sources=[ExtraSource("runtime/ncgen_tree_tables.h", "ncgen_tree_tables.h",
                                                     included=True),
+                                        ExtraSource("runtime/ncgen_spatial.h", "ncgen_spatial.h", included=True),
                                         ExtraSource("runtime/ncgen_joint_loop.h", "ncgen_joint_loop.h", included=True),
                                         ExtraSource("tree_tables.c.j2", "tree_tables.c", context)])

@@ -7,7 +7,12 @@ breadth-first order), each with the kind of the joint to its parent, where its p
 rates start in ``qj``/``vj``, the joint's numbers (placements and axes) and the member's
 ``[m; c; I_c]``; the uniform gravity; the mimic map (``v_j = G v_i``: per rate the index of
 the rate it copies, its factor and its independent column; per position the position it
-copies, factor and offset).  :class:`UnsupportedTree` names what the tables do not cover:
+copies, factor and offset).  For the local recursion (RNEA, CRBA, ABA) each body also has its
+frame ``f_b`` (the joint frame after the joint's motion, turned so that a revolute or prismatic
+joint's axis is z: :func:`axis_frame`), the constant pose ``xin`` of the joint frame before
+the motion in the parent's ``f_p`` (``R`` column-major, ``p``), and its rigid-body inertia
+about ``f_b``'s origin in ``f_b`` axes, ``inertia = [m; h = m c; I_o]`` (kg, kg·m, kg·m²,
+``I_o`` column-major).  :class:`UnsupportedTree` names what the tables do not cover:
 passive forces other than a uniform gravity (springs, dampers, joint friction), a joint
 traversed from its B side, joint kinds outside :data:`~ncgen.codegen.tree_kernels.JOINT_KINDS`
 (bars' swings), members that are not rigid bodies.
@@ -51,6 +56,37 @@ class TreeTables:
 _KIND = {k.kind: i for i, k in enumerate(JOINT_KINDS)}
 
 
+def axis_frame(axis) -> np.ndarray:
+    """A rotation ``Q`` whose third column is the unit ``axis`` (a right-handed frame; a
+    permutation of the axes, exactly, when ``axis`` is ``±x``, ``±y`` or ``±z``), so that a
+    rotation about ``axis`` is ``Q Rz(θ) Qᵀ``."""
+    k = np.asarray(axis, float).reshape(3)
+    i = int(np.argmin(np.abs(k)))
+    u = np.zeros(3)
+    u[i] = 1.0
+    if np.count_nonzero(k) == 1:                  # ±x, ±y, ±z: the next two axes, exactly
+        j = int(np.flatnonzero(k)[0])
+        e1, e2 = np.eye(3)[(j + 1) % 3], np.eye(3)[(j + 2) % 3]
+        return np.column_stack([e1, e2, k]) if k[j] > 0 else np.column_stack([e2, e1, k])
+    e1 = u - k * (u @ k)
+    e1 /= np.linalg.norm(e1)
+    return np.column_stack([e1, np.cross(k, e1), k])
+
+
+def _compose(A, B):
+    """``(R, p)`` of ``[[R_a, p_a], [0, 1]] [[R_b, p_b], [0, 1]]``."""
+    return A[0] @ B[0], A[0] @ B[1] + A[1]
+
+
+def _local_inertia(m, c, I_c, R, p):
+    """``[m; m c_f; I_o]`` (13 numbers, ``I_o`` column-major) of a body of mass ``m``, centre
+    ``c`` and inertia ``I_c`` about it in its member frame placed at ``(R, p)`` in the frame
+    ``f``: ``c_f = R c + p``, ``I_o = R I_c Rᵀ − m ĉ_f ĉ_f`` (about f's origin)."""
+    c_f = R @ np.asarray(c, float) + p
+    I_o = R @ np.asarray(I_c, float) @ R.T + m * (c_f @ c_f * np.eye(3) - np.outer(c_f, c_f))
+    return [m, *(m * c_f), *I_o.reshape(-1, order="F")]
+
+
 def tree_tables(model) -> TreeTables:
     """The :class:`TreeTables` of ``model``, packed once per model (kept in ``model.data``);
     raises :class:`UnsupportedTree` (module docstring)."""
@@ -83,7 +119,8 @@ def _pack(model) -> TreeTables:
     if g is None:
         reasons.append("passive forces other than a uniform gravity (springs, dampers, joint friction)")
     index = {"ground": -1}
-    parent, kind, q_at, v_at, num_ptr, num, body = [], [], [], [], [0], [], []
+    parent, kind, q_at, v_at, num_ptr, num, body, xin, inertia = [], [], [], [], [0], [], [], [], []
+    to_member = {"ground": (np.eye(3), np.zeros(3))}      # member frame c in f_b
     sq, sv = js.slices(), js.slices(rates=True)
     for here, there, e, forward in tree:
         index[there] = len(parent)
@@ -107,12 +144,23 @@ def _pack(model) -> TreeTables:
             reasons.append(f"joint {e.name!r}: {numbers.size} numbers, expected {JOINT_KINDS[k].n_num}")
         num.extend(numbers)
         num_ptr.append(len(num))
+        Q = np.eye(3)
+        if JOINT_KINDS[k].name in ("revolute", "prismatic") and not reasons:
+            axis = np.asarray(e.axes[0], float)
+            if abs(np.linalg.norm(axis) - 1.0) > 1e-12:
+                reasons.append(f"joint {e.name!r}: its axis {axis.tolist()} is not a unit vector")
+            else:
+                Q = axis_frame(axis)
+        H_in = _compose(_compose(to_member[here], (a1, b1)), (Q, np.zeros(3)))
+        to_member[there] = (Q.T @ a2, Q.T @ b2)
+        xin.extend([*H_in[0].reshape(-1, order="F"), *H_in[1]])
         try:
             m, c, I_c = member_inertia(js, there, member_twist_map(js, there))
         except ModelError as err:
             reasons.append(str(err))
             m, c, I_c = 0.0, np.zeros(3), np.zeros((3, 3))
         body.extend([m, *c, *np.asarray(I_c, float).reshape(-1, order="F")])
+        inertia.extend(_local_inertia(m, c, I_c, *to_member[there]))
     if reasons:
         raise UnsupportedTree(model.name, reasons)
     mimic = MimicMap(model)
@@ -128,5 +176,6 @@ def _pack(model) -> TreeTables:
     arrays = {"parent": i32(parent), "kind": i32(kind), "q_at": i32(q_at), "v_at": i32(v_at),
               "num_ptr": i32(num_ptr), "num": f64(num), "body": f64(body), "gravity": f64(g),
               "rate_src": i32(rate_src), "rate_col": i32(rate_col), "rate_coef": f64(rate_coef),
-              "q_src": i32(q_src), "q_coef": f64(q_coef), "q_off": f64(q_off)}
+              "q_src": i32(q_src), "q_coef": f64(q_coef), "q_off": f64(q_off),
+              "xin": f64(xin), "inertia": f64(inertia)}
     return TreeTables(model.name, js.nq, js.nv, len(mimic.independent), arrays)

@@ -14,8 +14,10 @@ Kernels (``kernels=``, as the stepper's ``SimulationOptions(kernels=...)``): ``"
 the tree library's loops over the model's data tables (:mod:`ncgen.runtime.tree_library`,
 compiled once per ncgen version: no compiler call for a new robot), ``"flat"`` — the model's
 own SX functions compiled per model, ``"auto"`` (default) — flat wherever a C compiler is
-present or the flat kernel is already built in this process (a call on the tables costs 3–20×
-the flat kernel's: benchmarks/tree_tables.py), else the tables when they cover the model
+present or the flat kernel is already built in this process (per state in C the tables' local
+recursions cost 1.0–1.8× the flat RNEA, 2.9–3.5× the flat ABA, 2.7–4.5× the flat CRBA:
+benchmarks/tree_tables.py),
+else the tables when they cover the model
 (:func:`~ncgen.codegen.tree_tables.tree_tables`: a uniform gravity the only passive force).
 :func:`algorithm_kernels` says which one a call uses.
 
@@ -289,8 +291,20 @@ def call(model, k: AlgorithmKernel, args: tuple, p, t: float):
     if not isinstance(k, AlgorithmKernel):
         if p is not None:                   # the tables' algorithms do not depend on p: check it only
             as_vector(p, model.np, "p")
-        plain = k.plain(args)
-        return k(*(plain if plain is not None else _checked(model, k, args)))
+        fast = k._fast
+        if fast is None:
+            plain = k.plain(args)
+            return k(*(plain if plain is not None else _checked(model, k, args)))
+        if k._quaternions:
+            out = fast(*_checked(model, k, args))
+        else:
+            try:
+                out = fast(*args)
+            except (TypeError, ValueError, OverflowError):
+                out = fast(*_checked(model, k, args))
+        if out is None:
+            k.singular()
+        return tuple(o.copy() for o in out) if type(out) is tuple else out.copy()
     k._at(t, p)
     fast = k._fast
     if fast is not None and not k._quaternions:

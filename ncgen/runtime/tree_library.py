@@ -12,10 +12,13 @@ callers of :class:`~ncgen.runtime.tree_algorithms.AlgorithmKernel` use (``k(*arg
 trees whose passive force is a uniform gravity.  :class:`TableJointLoop` is the joint-space
 simulation loop (``ncgen_joint_loop.h`` in the library) on the same tables.
 
-Speed (benchmarks/tree_tables.py, Panda RNEA, 2 shared cores at load 9–16): one state costs
-8–20 µs in the C loops against 2–6 µs for the flat per-robot kernel (whose numbers are folded
-into the code), and a single call through :meth:`TableAlgorithm.__call__` about 15 µs more; the tables are the default for
-their first-call cost (no compile), the flat kernel once this process has built it.
+Speed (benchmarks/tree_tables.py, per state over batches in one C call, best of 7
+interleaved rounds, AMD EPYC, 2 shared cores at load 5): against the flat per-robot kernel
+(whose numbers are folded into the code) RNEA 2.21 / 2.18 µs on the Panda, 1.45 / 0.83 µs on the
+UR5, 10.8 / 11.2 µs on Talos (load 8–14); ABA 8.96 / 3.07 (Panda, its mimic finger by a
+constraint), 4.47 / 1.29 (UR5), 51 / 44 µs (Talos); CRBA 2.90 / 1.00, 1.97 / 0.74, 37 / 8.3 µs.
+A single call goes through the fast caller as the flat kernels' do.  The tables are the default for their
+first-call cost (no compile) where no compiler is present, the flat kernel otherwise.
 """
 from __future__ import annotations
 
@@ -47,7 +50,7 @@ TREE_FIELDS = (("int", "nb"), ("int", "nq"), ("int", "nv"), ("int", "ni"),
                *(("const int *", f) for f in ("parent", "kind", "q_at", "v_at", "num_ptr")),
                *(("const double *", f) for f in ("num", "body", "gravity")),
                *(("const int *", f) for f in ("rate_src", "rate_col")), ("const double *", "rate_coef"),
-               ("const int *", "q_src"), *(("const double *", f) for f in ("q_coef", "q_off")))
+               ("const int *", "q_src"), *(("const double *", f) for f in ("q_coef", "q_off", "xin", "inertia")))
 _T, _D = "const ncgen_tree *", "const double *"
 #: The library's entry points (``PACKAGE`` prefix) as tree_tables.c.j2 spells them.
 SIGNATURES = {
@@ -141,6 +144,14 @@ class BoundTree:
         self.work = np.zeros(max(1, int(self.library.fn["work_size"](self.ref))))
 
 
+class _Direct:
+    """What :func:`~ncgen.codegen.fast_call.fast_caller` reads of a kernel: its input buffers,
+    entry point and argument addresses (``keep``: what the addresses point into)."""
+
+    def __init__(self, inputs, fn, args, keep):
+        self.inputs, self._fn, self._args, self.keep = inputs, fn, args, keep
+
+
 class TableAlgorithm:
     """``k(*args) -> outputs``: the algorithm ``name`` (a key of
     :data:`~ncgen.codegen.tree_check.ALGORITHMS`) of one tree from its tables; the
@@ -161,6 +172,34 @@ class TableAlgorithm:
         self._fn = tree.library.fn[name]
         self._single = None
         self._quaternions = bool(np.any(np.isin(np.asarray(JOINT_KINDS_NQ)[T.arrays["kind"]], (4, 7))))
+        self._fast = self._fast_caller()
+
+    def _fast_caller(self):
+        """The library's ``<name>_one`` through :func:`~ncgen.codegen.fast_call.fast_caller`
+        (inputs checked in C against :data:`~ncgen.validation.MAX_MAGNITUDE`; returns the
+        output buffers, matrices as ``(ni, ni)`` views of column-major storage, or None when
+        the pivot check fails), or None without the extension."""
+        from ncgen.codegen.fast_call import fast_caller
+
+        one = getattr(self.tree.library._lib, f"{PACKAGE}_{self.name}_one", None)
+        if one is None:
+            return None
+        ins = [np.zeros(n) for n in self._sizes]
+        outs = [np.zeros(int(np.prod(self._shape(o)))) for o in self.output_names]
+        check = self._fast_check = np.zeros(2) if self.name.startswith("aba") else None
+        arg = (ctypes.c_void_p * (1 + len(ins)))(self.tree.ref, *(x.ctypes.data for x in ins))
+        res = (ctypes.c_void_p * (len(outs) + 1))(*(o.ctypes.data for o in outs),
+                                                   None if check is None else check.ctypes.data)
+        shim = _Direct([None, *ins], one, (ctypes.addressof(arg), ctypes.addressof(res), 0,
+                                           self.tree.work.ctypes.data, 0), (arg, res, outs, self.tree))
+        views = [o if len(self._shape(n)) == 1 else o.reshape(self._shape(n)).T for o, n in zip(outs, self.output_names)]
+        return fast_caller(shim, len(ins), first=1, check=check, tol=PIVOT_TOL, bound=MAX_MAGNITUDE,
+                           result=views[0] if len(views) == 1 else tuple(views))
+
+    def singular(self):
+        """Raise the :class:`ModelError` of the failed check of the last fast call."""
+        self._checked(self._fast_check[None, :], 1)
+        raise ModelError(f"{self.name}: the check of the result failed")
 
     def plain(self, args) -> tuple | None:
         """``args`` when each is already a C-contiguous float64 vector of its size with finite
@@ -179,7 +218,13 @@ class TableAlgorithm:
 
     def __call__(self, *args):
         """The algorithm at one state (each argument a float vector of its size), through
-        buffers and addresses kept between calls."""
+        buffers and addresses kept between calls (the fast caller's when it is built)."""
+        fast = self._fast
+        if fast is not None:
+            out = fast(*args)
+            if out is None:
+                self.singular()
+            return tuple(o.copy() for o in out) if type(out) is tuple else out.copy()
         if self._single is None:
             self._in = [np.empty(n) for n in self._sizes]
             self._single = [np.empty((1, *self._shape(o))) for o in self.output_names]

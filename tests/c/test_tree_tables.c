@@ -108,8 +108,25 @@ static int k_body_fwd(const double **arg, double **res, long long *iw, double *w
   return 0;
 }
 
-static const ncgen_tree_joint_kind JOINT_KINDS[1] = {{k_slide, k_slide_fwd, k_slide_qdot, 1, 1, 3}};
-static const ncgen_tree_kinds KINDS = {JOINT_KINDS, 1, k_body, k_body_fwd, 0};
+/* Its local motion for RNEA, CRBA and ABA (mode 0): [q; w; e] -> [R_J = 1; p_J = q e; S = [0; e]; c_J = 0]. */
+static int k_slide_local(const double **arg, double **res, long long *iw, double *w, int mem) {
+  const double *x = arg[0], *e = x + 2;
+  double *y = res[0];
+  int i;
+  (void)iw; (void)w; (void)mem;
+  if (fail_kernel) return 1;
+  for (i = 0; i < 9; ++i) y[i] = i % 4 == 0 ? 1.0 : 0.0;
+  for (i = 0; i < 3; ++i) y[9 + i] = x[0] * e[i];
+  for (i = 0; i < 3; ++i) y[12 + i] = 0.0, y[15 + i] = e[i];
+  for (i = 0; i < 6; ++i) y[18 + i] = 0.0;
+  return 0;
+}
+
+/* Kind 0 through its kernels; kind 1 the same slider as the loops' own prismatic joint along z
+ * (mode 2), used with placements that turn z onto the slider's axis. */
+static const ncgen_tree_joint_kind JOINT_KINDS[2] = {{k_slide, k_slide_fwd, k_slide_qdot, k_slide_local, 1, 1, 3, 0},
+                                                     {k_slide, k_slide_fwd, k_slide_qdot, 0, 1, 1, 3, 2}};
+static const ncgen_tree_kinds KINDS = {JOINT_KINDS, 2, k_body, k_body_fwd, 0};
 
 static const double MASS[3] = {1.5, 0.7, 0.4};
 
@@ -120,10 +137,30 @@ static const double body[39] = {1.5, 0.1, 0.2, 0.0, 0, 0, 0, 0, 0, 0, 0, 0, 0,
                                 0.7, -0.3, 0.1, 0.2, 0, 0, 0, 0, 0, 0, 0, 0, 0,
                                 0.4, 0.2, 0.0, -0.1, 0, 0, 0, 0, 0, 0, 0, 0, 0};
 static const double gravity[3] = {0.0, -GRAV, 0.0};
+/* xin: identity placements (kind 0); for kind 1 the rotations taking z onto e_x, e_y, e_x */
+static const double xin[36] = {1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0,
+                               1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0};
+static const double xin_z[36] = {0, 1, 0, 0, 0, 1, 1, 0, 0, 0, 0, 0,
+                                 0, 1, 0, 0, 0, 1, 1, 0, 0, 0, 0, 0,
+                                 0, 0, 1, 1, 0, 0, 0, 1, 0, 0, 0, 0};
+static double inertia[39], inertia_z[39];
+
+/* [m; m c; I_o = −m ĉ ĉ] of a point mass m at c, in the frame f_b (c turned by Rᵀ for kind 1:
+ * the body frames of a chain of turned frames, each f_b = f_p R since p_in = 0). */
+static void point_inertia(double m, const double *c, double *I) {
+  int i, j;
+  double cc = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
+  I[0] = m;
+  for (i = 0; i < 3; ++i) I[1 + i] = m * c[i];
+  for (i = 0; i < 3; ++i)
+    for (j = 0; j < 3; ++j) I[4 + i + 3 * j] = m * ((i == j ? cc : 0.0) - c[i] * c[j]);
+}
 static const int rate_src[3] = {0, 1, 0}, rate_col[3] = {0, 1, 0};
 static const double rate_coef[3] = {1.0, 1.0, 2.0};
 static const int q_src[3] = {-1, -1, 0};
 static const double q_coef[3] = {1.0, 1.0, 2.0}, q_off[3] = {0.0, 0.0, 0.1};
+
+static double close_to(double a, double b) { return fabs(a - b) <= 1e-12 * (1.0 + fabs(b)); }
 
 static ncgen_tree tree(void) {
   ncgen_tree T;
@@ -132,10 +169,57 @@ static ncgen_tree tree(void) {
   T.num = num; T.body = body; T.gravity = gravity;
   T.rate_src = rate_src; T.rate_col = rate_col; T.rate_coef = rate_coef;
   T.q_src = q_src; T.q_coef = q_coef; T.q_off = q_off;
+  T.xin = xin; T.inertia = inertia;
   return T;
 }
 
-static double close_to(double a, double b) { return fabs(a - b) <= 1e-12 * (1.0 + fabs(b)); }
+/* The body numbers in f_b of both kinds: kind 0's f_b has the world's axes; kind 1's f_b of
+ * body b is turned by R_0 ⋯ R_b (xin_z), so its centre is (R_0 ⋯ R_b)ᵀ c. */
+static void make_inertias(void) {
+  double Racc[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  int b, i, j, k;
+  for (b = 0; b < 3; ++b) {
+    const double *m = body + 13 * b, *R = xin_z + 12 * b;
+    double N[9], c[3];
+    point_inertia(m[0], m + 1, inertia + 13 * b);
+    for (i = 0; i < 3; ++i)
+      for (j = 0; j < 3; ++j) {
+        double t = 0.0;
+        for (k = 0; k < 3; ++k) t += Racc[i + 3 * k] * R[k + 3 * j];
+        N[i + 3 * j] = t;
+      }
+    memcpy(Racc, N, sizeof N);
+    for (i = 0; i < 3; ++i) c[i] = Racc[3 * i] * m[1] + Racc[3 * i + 1] * m[2] + Racc[3 * i + 2] * m[3];
+    point_inertia(m[0], c, inertia_z + 13 * b);
+  }
+}
+
+/* The tree without its mimic map (three independent sliders): M = [[m0 + m1 + m2, 0, m2],
+ * [0, m1 + m2, 0], [m2, 0, m2]], bias (0, (m1 + m2) g, 0): the articulated-body algorithm. */
+static void check_articulated(ncgen_tree *T) {
+  static const int src[3] = {0, 1, 2}, no_q[3] = {-1, -1, -1};
+  static const double one[3] = {1, 1, 1}, zero[3] = {0, 0, 0};
+  ncgen_tree U = *T;
+  double q[3] = {0.3, -0.2, 0.4}, v[3] = {0.7, -1.1, 0.2}, t_in[3] = {1.2, -0.4, 0.5}, aj[3], check[2], tau[3];
+  double m0 = MASS[0], m1 = MASS[1], m2 = MASS[2], a0, a2, det;
+  double *work;
+  U.ni = 3; U.rate_src = src; U.rate_col = src; U.rate_coef = one; U.q_src = no_q; U.q_coef = one; U.q_off = zero;
+  work = (double *)malloc((size_t)ncgen_tree_work_size(&KINDS, &U) * sizeof(double));
+  if (!work) return;
+  det = (m0 + m1 + m2) * m2 - m2 * m2;
+  a0 = (m2 * t_in[0] - m2 * t_in[2]) / det;
+  a2 = (-m2 * t_in[0] + (m0 + m1 + m2) * t_in[2]) / det;
+  CHECK(ncgen_tree_aba(&KINDS, &U, q, v, t_in, aj, check, work) == 0, "aba (articulated) failed");
+  CHECK(close_to(aj[0], a0) && close_to(aj[1], (t_in[1] - (m1 + m2) * GRAV) / (m1 + m2)) && close_to(aj[2], a2),
+        "articulated aj = (%g, %g, %g), expected (%g, %g, %g)", aj[0], aj[1], aj[2], a0,
+        (t_in[1] - (m1 + m2) * GRAV) / (m1 + m2), a2);
+  CHECK(check[0] > 0.0 && check[0] <= 1.0 && close_to(check[1], aj[0] + aj[1] + aj[2]), "articulated check (%g, %g)",
+        check[0], check[1]);
+  CHECK(ncgen_tree_rnea(&KINDS, &U, q, v, aj, tau, work) == 0 && close_to(tau[0], t_in[0]) &&
+        close_to(tau[1], t_in[1]) && close_to(tau[2], t_in[2]), "rnea(aba(τ)) = (%g, %g, %g)", tau[0], tau[1], tau[2]);
+  free(work);
+}
+
 
 int main(void) {
   ncgen_tree T = tree();
@@ -147,20 +231,37 @@ int main(void) {
   CHECK(ncgen_tree_check(&KINDS, &T) == 0, "consistent tables refused");
   work = (double *)malloc((size_t)n * sizeof(double));
   if (!work) return 1;
+  make_inertias();
 
-  CHECK(ncgen_tree_rnea(&KINDS, &T, q, v, a, tau, work) == 0, "rnea failed");
-  CHECK(close_to(tau[0], M0 * a[0]), "tau0 = %.17g, expected %.17g", tau[0], M0 * a[0]);
-  CHECK(close_to(tau[1], M1 * a[1] + bias1), "tau1 = %.17g, expected %.17g", tau[1], M1 * a[1] + bias1);
+  {
+    static int kind_z[3] = {1, 1, 1};
+    int pass;
+    for (pass = 0; pass < 2; ++pass) {          /* kind 0 (kernels), then kind 1 (z sliders turned) */
+      if (pass) {
+        T.kind = kind_z;
+        T.xin = xin_z;
+        T.inertia = inertia_z;
+      }
+      CHECK(ncgen_tree_rnea(&KINDS, &T, q, v, a, tau, work) == 0, "rnea failed");
+      CHECK(close_to(tau[0], M0 * a[0]), "pass %d: tau0 = %.17g, expected %.17g", pass, tau[0], M0 * a[0]);
+      CHECK(close_to(tau[1], M1 * a[1] + bias1), "pass %d: tau1 = %.17g, expected %.17g", pass, tau[1],
+            M1 * a[1] + bias1);
 
-  CHECK(ncgen_tree_crba(&KINDS, &T, q, M, work) == 0, "crba failed");
-  CHECK(close_to(M[0], M0) && close_to(M[3], M1) && fabs(M[1]) < 1e-14 && fabs(M[2]) < 1e-14,
-        "M = [%g %g; %g %g]", M[0], M[2], M[1], M[3]);
+      CHECK(ncgen_tree_crba(&KINDS, &T, q, M, work) == 0, "crba failed");
+      CHECK(close_to(M[0], M0) && close_to(M[3], M1) && fabs(M[1]) < 1e-14 && fabs(M[2]) < 1e-14,
+            "pass %d: M = [%g %g; %g %g]", pass, M[0], M[2], M[1], M[3]);
 
-  CHECK(ncgen_tree_aba(&KINDS, &T, q, v, t_in, aj, check, work) == 0, "aba failed");
-  CHECK(close_to(aj[0], t_in[0] / M0) && close_to(aj[1], (t_in[1] - bias1) / M1) && close_to(aj[2], 2 * aj[0]),
-        "aj = (%g, %g, %g)", aj[0], aj[1], aj[2]);
-  CHECK(close_to(check[0], 1.0) && close_to(check[1], aj[0] + aj[1] + aj[2]), "check = (%g, %g)", check[0],
-        check[1]);
+      CHECK(ncgen_tree_aba(&KINDS, &T, q, v, t_in, aj, check, work) == 0, "aba failed");
+      CHECK(close_to(aj[0], t_in[0] / M0) && close_to(aj[1], (t_in[1] - bias1) / M1) && close_to(aj[2], 2 * aj[0]),
+            "pass %d: aj = (%g, %g, %g)", pass, aj[0], aj[1], aj[2]);
+      CHECK(check[0] > 0.0 && check[0] <= 1.0 && close_to(check[1], aj[0] + aj[1] + aj[2]), "check = (%g, %g)",
+            check[0], check[1]);
+      check_articulated(&T);
+    }
+    T.kind = kind;
+    T.xin = xin;
+    T.inertia = inertia;
+  }
 
   CHECK(ncgen_tree_rnea_derivatives(&KINDS, &T, q, v, a, tau, dq, dv, M, work) == 0, "rnea derivatives failed");
   for (i = 0; i < 4; ++i) CHECK(fabs(dq[i]) < 1e-12 && fabs(dv[i]) < 1e-12, "dtau[%d]: %g, %g", i, dq[i], dv[i]);
@@ -189,12 +290,13 @@ int main(void) {
   /* a singular mass matrix: a massless leaf body alone on its rate */
   {
     double massless[39];
-    memcpy(massless, body, sizeof massless);
-    massless[13] = massless[26] = 0.0;
-    T.body = massless;
+    int k;
+    memcpy(massless, inertia, sizeof massless);
+    for (k = 13; k < 39; ++k) massless[k] = 0.0;
+    T.inertia = massless;
     CHECK(ncgen_tree_aba(&KINDS, &T, q, v, t_in, aj, check, work) == 0 && !(check[0] > 1e-12),
           "pivot %g of a singular M", check[0]);
-    T.body = body;
+    T.inertia = inertia;
   }
 
   fail_kernel = 1;
@@ -210,7 +312,7 @@ int main(void) {
   v_at[2] = 3;
   CHECK(ncgen_tree_check(&KINDS, &T) == NCGEN_TREE_BAD, "rate out of range accepted");
   v_at[2] = 2;
-  kind[0] = 1;
+  kind[0] = 2;
   CHECK(ncgen_tree_check(&KINDS, &T) == NCGEN_TREE_BAD, "unknown kind accepted");
   kind[0] = 0;
   CHECK(ncgen_tree_check(&KINDS, &T) == 0, "restored tables refused");

@@ -1,8 +1,16 @@
 /* Joint-space algorithms of a tree over data tables: inverse dynamics (RNEA), the joint-space
- * mass matrix (CRBA), forward dynamics (M_i a_i = τ − bias by Cholesky) and the derivatives of
- * RNEA and forward dynamics, as plain loops over the bodies that call one small kernel per
- * kind of joint and one per rigid body (ncgen/codegen/tree_kernels.py generates them,
- * ncgen/codegen/tree_tables.py packs the tables).  The same C for every tree: a model is data.
+ * mass matrix (CRBA), forward dynamics (the articulated-body algorithm; with mimic joints
+ * M_i a_i = τ − bias by Cholesky) and the derivatives of RNEA and forward dynamics, as plain
+ * loops over the bodies that call one small kernel per kind of joint and one per rigid body
+ * (ncgen/codegen/tree_kernels.py generates them, ncgen/codegen/tree_tables.py packs the
+ * tables).  The same C for every tree: a model is data.
+ *
+ * RNEA, CRBA and ABA run in local frames (Featherstone's recursions): body b's frame f_b is its
+ * joint frame after the joint's motion, at xin[12 b ...] · T(q) in its parent's (xin: R
+ * column-major, p), its rigid inertia inertia[13 b ...] = [m; h; I_o] about f_b's origin
+ * (ncgen_spatial.h); a kind's mode says how T(q) and the motion subspace S (in f_b) are had:
+ * 1 a rotation about z (S = [e_z; 0]), 2 a translation along z (S = [0; e_z]), 3 none (fixed),
+ * 0 its kernel local.  The derivatives run the tangent recursion in the ground frame.
  *
  * Notation (docs/architecture.md, "Element tables"): poses H = [[R, p], [0, 1]] of member
  * frames in the ground frame g, twists [ω; v] and wrenches [τ; f] expressed in g; R column-major.
@@ -19,6 +27,7 @@
  *   body      [R; p; T; dT; m; c; I_c] -> [M_g (6 × 6); W = M_g dT − ad(T)ᵀ M_g T]
  *   body_fwd  [body input; dR; dp; dT; ddT] -> d(body output)
  *   qdot      [q; w] -> q̇ (the joint's position rates, quaternions normalised first)
+ *   local     [q; w; numbers] -> [R_J; p_J; S (6 × nv, in f_b); c_J = Ṡ w] (mode 0 only; else NULL)
  * Call ncgen_tree_check once on new tables: the loops trust them.  Position derivatives are
  * per independent rate in the tangent space (Pinocchio's convention). */
 #ifndef NCGEN_TREE_TABLES_H
@@ -27,15 +36,20 @@
 #include <math.h>
 #include <string.h>
 
+#include "ncgen_spatial.h"
+
 #define NCGEN_TREE_KERNEL 1
 #define NCGEN_TREE_BAD 2
 #define NCGEN_TREE_BODY 13
+#ifndef NCGEN_TREE_PIVOT_TOL
+#define NCGEN_TREE_PIVOT_TOL 1e-12   /* ncgen/codegen/tree_check.py: PIVOT_TOL */
+#endif
 
 typedef int (*ncgen_tree_kernel)(const double **arg, double **res, long long *iw, double *w, int mem);
 
 typedef struct {
-  ncgen_tree_kernel edge, edge_fwd, qdot;
-  int nq, nv, n_num;
+  ncgen_tree_kernel edge, edge_fwd, qdot, local;
+  int nq, nv, n_num, mode;
 } ncgen_tree_joint_kind;
 
 typedef struct {
@@ -53,6 +67,7 @@ typedef struct {
   const double *rate_coef;
   const int *q_src;
   const double *q_coef, *q_off;
+  const double *xin, *inertia;
 } ncgen_tree;
 
 /* The work array, cut into the pieces the loops use. */
@@ -60,6 +75,8 @@ typedef struct {
   double *q, *v, *a, *R, *p, *T, *dT, *W, *Mg, *S, *tau;
   double *dR, *dp, *dTt, *ddT, *dW, *dS, *dtau;
   double *M, *Mi, *L, *rhs, *taui, *in, *out, *kw;
+  double *X, *Sl, *cl, *vl, *al, *fl, *IC, *IA, *U, *Dl, *ul;
+  double *Y, *Kc, *pr, *ar, *ur, *tf;
 } ncgen_tree_work;
 
 
@@ -112,6 +129,23 @@ static long ncgen_tree_layout(const ncgen_tree_kinds *K, const ncgen_tree *T, do
   NCGEN_TREE_TAKE(in, ncgen_tree_max_in(K));
   NCGEN_TREE_TAKE(out, ncgen_tree_max_out(K));
   NCGEN_TREE_TAKE(kw, K->max_w > 0 ? K->max_w : 1);
+  NCGEN_TREE_TAKE(X, 12 * nb);
+  NCGEN_TREE_TAKE(Sl, 6 * nv);
+  NCGEN_TREE_TAKE(cl, 6 * nb);
+  NCGEN_TREE_TAKE(vl, 6 * nb);
+  NCGEN_TREE_TAKE(al, 6 * nb);
+  NCGEN_TREE_TAKE(fl, 6 * nb);
+  NCGEN_TREE_TAKE(IC, NCGEN_TREE_BODY * nb);
+  NCGEN_TREE_TAKE(IA, 36 * nb);
+  NCGEN_TREE_TAKE(U, 6 * nv);
+  NCGEN_TREE_TAKE(Dl, 36 * nb);
+  NCGEN_TREE_TAKE(ul, nv);
+  NCGEN_TREE_TAKE(Y, nv * nv);
+  NCGEN_TREE_TAKE(Kc, 2 * nv * nv);
+  NCGEN_TREE_TAKE(pr, 6 * nb);
+  NCGEN_TREE_TAKE(ar, 6 * nb);
+  NCGEN_TREE_TAKE(ur, nv);
+  NCGEN_TREE_TAKE(tf, nv);
 #undef NCGEN_TREE_TAKE
   return o;
 }
@@ -319,14 +353,151 @@ static void ncgen_tree_solve(int n, const double *L, double *x, int m) {
   }
 }
 
+/* Local frames, outwards: each body's pose in its parent's frame (s->X: R, p), its motion
+ * subspace S (s->Sl) and c = c_J + v × (S w) (s->cl), from q and v of the work. */
+static int ncgen_tree_local_poses(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s) {
+  int b, i, j;
+  for (b = 0; b < T->nb; ++b) {
+    const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
+    const double *xin = T->xin + 12 * b, *q = s->q + T->q_at[b];
+    double *R = s->X + 12 * b, *p = R + 9, *S = s->Sl + 6 * T->v_at[b], *c = s->cl + 6 * b;
+    for (i = 0; i < 6; ++i) c[i] = 0.0;
+    if (k->mode == 1) {                                   /* R = R_in Rz(q) */
+      double cq = cos(q[0]), sq = sin(q[0]);
+      for (i = 0; i < 3; ++i) {
+        R[i] = cq * xin[i] + sq * xin[3 + i];
+        R[3 + i] = cq * xin[3 + i] - sq * xin[i];
+        R[6 + i] = xin[6 + i];
+        p[i] = xin[9 + i];
+      }
+      for (i = 0; i < 6; ++i) S[i] = i == 2 ? 1.0 : 0.0;
+    } else if (k->mode == 2 || k->mode == 3) {            /* p = p_in + q R_in e_z; fixed: H_in */
+      for (i = 0; i < 9; ++i) R[i] = xin[i];
+      for (i = 0; i < 3; ++i) p[i] = xin[9 + i] + (k->mode == 2 ? q[0] * xin[6 + i] : 0.0);
+      if (k->mode == 2)
+        for (i = 0; i < 6; ++i) S[i] = i == 5 ? 1.0 : 0.0;
+    } else {                                              /* H_in T(q) from the kind's kernel */
+      double *in = s->in, *out = s->out;
+      int n = 0;
+      for (i = 0; i < k->nq; ++i) in[n++] = q[i];
+      for (i = 0; i < k->nv; ++i) in[n++] = s->v[T->v_at[b] + i];
+      for (i = 0; i < k->n_num; ++i) in[n++] = T->num[T->num_ptr[b] + i];
+      if (ncgen_tree_call(k->local, in, out, s->kw)) return NCGEN_TREE_KERNEL;
+      for (j = 0; j < 3; ++j) sp_rot(xin, out + 3 * j, R + 3 * j);
+      sp_rot(xin, out + 9, p);
+      for (i = 0; i < 3; ++i) p[i] += xin[9 + i];
+      memcpy(S, out + 12, 6 * (size_t)k->nv * sizeof(double));
+      memcpy(c, out + 12 + 6 * k->nv, 6 * sizeof(double));
+    }
+  }
+  return 0;
+}
+
+/* Local frames, outwards after ncgen_tree_local_poses: twists (s->vl), c of the poses
+ * completed to c_J + v × (S w) (s->cl) and each body's wrench (s->fl): with accelerations, the
+ * accelerations with s->a (s->al; the ground's [0; −g]) and f = I a − ad(v)ᵀ I v, else the
+ * bias f = −ad(v)ᵀ I v. */
+static void ncgen_tree_local_motion(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s,
+                                    int accelerations) {
+  int b, i, j;
+  const double zero[6] = {0, 0, 0, 0, 0, 0};
+  const double a0[6] = {0, 0, 0, -T->gravity[0], -T->gravity[1], -T->gravity[2]};
+  for (b = 0; b < T->nb; ++b) {
+    const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
+    int par = T->parent[b], va = T->v_at[b];
+    const double *R = s->X + 12 * b, *p = R + 9, *S = s->Sl + 6 * va, *I = T->inertia + NCGEN_TREE_BODY * b;
+    double *v = s->vl + 6 * b, *a = s->al + 6 * b, *c = s->cl + 6 * b, *f = s->fl + 6 * b;
+    double vJ[6], t[6], h[6];
+    sp_twist_in(R, p, par < 0 ? zero : s->vl + 6 * par, v);
+    for (i = 0; i < 6; ++i) {
+      double x = 0.0;
+      for (j = 0; j < k->nv; ++j) x += S[6 * j + i] * s->v[va + j];
+      vJ[i] = x;
+      v[i] += x;
+    }
+    sp_ad(v, vJ, t);
+    for (i = 0; i < 6; ++i) c[i] += t[i];
+    sp_inertia_apply(I, v, h);
+    sp_ad_star(v, h, f);
+    if (!accelerations) continue;
+    sp_twist_in(R, p, par < 0 ? a0 : s->al + 6 * par, a);
+    for (i = 0; i < 6; ++i) {
+      double y = c[i];
+      for (j = 0; j < k->nv; ++j) y += S[6 * j + i] * s->a[va + j];
+      a[i] += y;
+    }
+    sp_inertia_apply(I, a, t);
+    for (i = 0; i < 6; ++i) f[i] += t[i];
+  }
+}
+
+/* Local frames, inwards: τ_j = S_jᵀ f per joint rate (s->tau), f summed into the parents. */
+static void ncgen_tree_local_backward(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s) {
+  int b, i, j;
+  for (b = T->nb - 1; b >= 0; --b) {
+    const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
+    const double *f = s->fl + 6 * b, *S = s->Sl + 6 * T->v_at[b];
+    for (j = 0; j < k->nv; ++j) {
+      double t = 0.0;
+      for (i = 0; i < 6; ++i) t += S[6 * j + i] * f[i];
+      s->tau[T->v_at[b] + j] = t;
+    }
+    if (T->parent[b] >= 0) sp_wrench_out_add(s->X + 12 * b, s->X + 12 * b + 9, f, s->fl + 6 * T->parent[b]);
+  }
+}
+
+/* Composite rigid inertias (s->IC, each in its body's frame), inwards from the poses. */
+static void ncgen_tree_local_composite(const ncgen_tree *T, ncgen_tree_work *s) {
+  int b;
+  memcpy(s->IC, T->inertia, NCGEN_TREE_BODY * (size_t)T->nb * sizeof(double));
+  for (b = T->nb - 1; b >= 0; --b)
+    if (T->parent[b] >= 0) sp_inertia_out_add(s->X + 12 * b, s->X + 12 * b + 9, s->IC + NCGEN_TREE_BODY * b,
+                                              s->IC + NCGEN_TREE_BODY * T->parent[b]);
+}
+
+/* M (nv × nv, s->M) by Featherstone's CRBA from the composite inertias, then M_i = Gᵀ M G. */
+static void ncgen_tree_local_mass(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, double *Mi) {
+  int b, i, j, r, c, nv = T->nv, ni = T->ni;
+  ncgen_tree_local_composite(T, s);
+  for (i = 0; i < nv * nv; ++i) s->M[i] = 0.0;
+  for (b = 0; b < T->nb; ++b) {
+    const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
+    for (j = 0; j < k->nv; ++j) {
+      int col = T->v_at[b] + j, up = b;
+      double F[6], G[6];
+      sp_inertia_apply(s->IC + NCGEN_TREE_BODY * b, s->Sl + 6 * col, F);
+      for (;;) {
+        const ncgen_tree_joint_kind *ku = &K->joint[T->kind[up]];
+        for (i = 0; i < ku->nv; ++i) {
+          int row = T->v_at[up] + i;
+          double t = 0.0;
+          for (r = 0; r < 6; ++r) t += s->Sl[6 * row + r] * F[r];
+          s->M[row + nv * col] = t;
+          s->M[col + nv * row] = t;
+        }
+        if (T->parent[up] < 0) break;
+        for (r = 0; r < 6; ++r) G[r] = 0.0;
+        sp_wrench_out_add(s->X + 12 * up, s->X + 12 * up + 9, F, G);
+        memcpy(F, G, sizeof F);
+        up = T->parent[up];
+      }
+    }
+  }
+  for (i = 0; i < ni * ni; ++i) Mi[i] = 0.0;
+  for (c = 0; c < nv; ++c)
+    for (r = 0; r < nv; ++r)
+      Mi[T->rate_col[r] + ni * T->rate_col[c]] += T->rate_coef[r] * T->rate_coef[c] * s->M[r + nv * c];
+}
+
 /* τ_i (ni): the efforts of the independent rates giving accelerations a at (q, v). */
 static int ncgen_tree_rnea(const ncgen_tree_kinds *K, const ncgen_tree *T, const double *q, const double *v,
                            const double *a, double *tau_i, double *work) {
   ncgen_tree_work s;
   ncgen_tree_layout(K, T, work, &s);
   ncgen_tree_expand(T, &s, q, v, a);
-  if (ncgen_tree_forward(K, T, &s)) return NCGEN_TREE_KERNEL;
-  ncgen_tree_backward(K, T, s.W, s.S, s.tau);
+  if (ncgen_tree_local_poses(K, T, &s)) return NCGEN_TREE_KERNEL;
+  ncgen_tree_local_motion(K, T, &s, 1);
+  ncgen_tree_local_backward(K, T, &s);
   ncgen_tree_project(T, s.tau, tau_i);
   return 0;
 }
@@ -339,31 +510,277 @@ static int ncgen_tree_crba(const ncgen_tree_kinds *K, const ncgen_tree *T, const
   ncgen_tree_layout(K, T, work, &s);
   for (i = 0; i < T->nv; ++i) s.tau[i] = 0.0;
   ncgen_tree_expand(T, &s, q, s.tau, 0);
-  if (ncgen_tree_forward(K, T, &s)) return NCGEN_TREE_KERNEL;
-  ncgen_tree_composite(K, T, &s, Mi);
+  if (ncgen_tree_local_poses(K, T, &s)) return NCGEN_TREE_KERNEL;
+  ncgen_tree_local_mass(K, T, &s, Mi);
   return 0;
 }
 
-/* M_i and the bias b_i = τ_i(q, v, a = 0) (in s->rhs) of one forward pass; the Cholesky
+/* 1 when the rates are all independent (no mimic joint: G = 1). */
+static int ncgen_tree_unmapped(const ncgen_tree *T) {
+  int i;
+  if (T->ni != T->nv) return 0;
+  for (i = 0; i < T->nv; ++i)
+    if (T->rate_src[i] != i || T->rate_coef[i] != 1.0) return 0;
+  return 1;
+}
+
+/* The articulated-body algorithm (no mimic joint): aj = M⁻¹ (τ − bias) in three passes over
+ * local frames; *pivot = min d_k / (S_kᵀ I^C S_k) over the Cholesky pivots d_k of each
+ * joint's D = Sᵀ I^A S (the pivots of M's factorisation from the leaves, relative to M's
+ * diagonal; NaN stays). */
+static int ncgen_tree_articulated(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s,
+                                  const double *tau, double *aj, double *pivot) {
+  int b, i, j, r, c, first = 1;
+  const double a0[6] = {0, 0, 0, -T->gravity[0], -T->gravity[1], -T->gravity[2]};
+  double ratio = 1.0;
+  if (ncgen_tree_local_poses(K, T, s)) return NCGEN_TREE_KERNEL;
+  ncgen_tree_local_motion(K, T, s, 0);          /* s->fl: p^A = −ad(v)ᵀ I v */
+  memcpy(s->IC, T->inertia, NCGEN_TREE_BODY * (size_t)T->nb * sizeof(double));
+  for (b = 0; b < T->nb; ++b) sp_inertia_matrix(T->inertia + NCGEN_TREE_BODY * b, s->IA + 36 * b);
+  for (b = T->nb - 1; b >= 0; --b) {
+    const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
+    int nv = k->nv, va = T->v_at[b], par = T->parent[b];
+    const double *S = s->Sl + 6 * va, *R = s->X + 12 * b, *p = R + 9, *cb = s->cl + 6 * b;
+    double *IA = s->IA + 36 * b, *pA = s->fl + 6 * b, *U = s->U + 6 * va, *L = s->Dl + 36 * b, *u = s->ul + va;
+    double Z[36], pa[6], Ia[36], w[6];
+    if (k->mode == 1 || k->mode == 2) {         /* S = e_2 or e_5: U a column of I^A, D an entry */
+      int x = k->mode == 1 ? 2 : 5;
+      for (r = 0; r < 6; ++r) U[r] = IA[r + 6 * x];
+      L[0] = IA[x + 6 * x];
+      u[0] = tau[va] - pA[x];
+      w[0] = k->mode == 1 ? s->IC[NCGEN_TREE_BODY * b + 12] : s->IC[NCGEN_TREE_BODY * b];   /* I_o,zz or m */
+    }
+    for (j = 0; j < nv && k->mode != 1 && k->mode != 2; ++j) {
+      double F[6], m = 0.0;
+      for (r = 0; r < 6; ++r) {
+        double x = 0.0;
+        for (c = 0; c < 6; ++c) x += IA[r + 6 * c] * S[6 * j + c];
+        U[6 * j + r] = x;
+      }
+      sp_inertia_apply(s->IC + NCGEN_TREE_BODY * b, S + 6 * j, F);
+      for (r = 0; r < 6; ++r) m += S[6 * j + r] * F[r];
+      for (i = 0; i < nv; ++i) {
+        double x = 0.0;
+        for (r = 0; r < 6; ++r) x += S[6 * i + r] * U[6 * j + r];
+        L[i + 6 * j] = x;                       /* D, then its Cholesky factor (lower) */
+      }
+      {
+        double x = tau[va + j];
+        for (r = 0; r < 6; ++r) x -= S[6 * j + r] * pA[r];
+        u[j] = x;
+      }
+      w[j] = m;                                 /* M_kk = S_kᵀ I^C S_k */
+    }
+    for (j = 0; j < nv; ++j) {                  /* D = L Lᵀ */
+      double d = L[j + 6 * j], q;
+      for (c = 0; c < j; ++c) d -= L[j + 6 * c] * L[j + 6 * c];
+      q = d / w[j];
+      if (first || q < ratio || !(q == q)) ratio = q;
+      first = 0;
+      L[j + 6 * j] = sqrt(d > 0.0 ? d : 0.0);
+      for (i = j + 1; i < nv; ++i) {
+        double x = L[i + 6 * j];
+        for (c = 0; c < j; ++c) x -= L[i + 6 * c] * L[j + 6 * c];
+        L[i + 6 * j] = x / L[j + 6 * j];
+      }
+    }
+    if (par < 0) continue;
+    /* Z = U L⁻ᵀ (6 × nv): I^a = I^A − Z Zᵀ, p^a = p^A + I^a c + Z L⁻¹ u */
+    for (r = 0; r < 6; ++r)
+      for (j = 0; j < nv; ++j) {
+        double x = U[6 * j + r];
+        for (c = 0; c < j; ++c) x -= Z[6 * c + r] * L[j + 6 * c];
+        Z[6 * j + r] = x / L[j + 6 * j];
+      }
+    for (j = 0; j < nv; ++j) {                  /* w = L⁻¹ u */
+      double x = u[j];
+      for (c = 0; c < j; ++c) x -= L[j + 6 * c] * w[c];
+      w[j] = x / L[j + 6 * j];
+    }
+    for (c = 0; c < 6; ++c)
+      for (r = c; r < 6; ++r) {
+        double x = IA[r + 6 * c];
+        for (j = 0; j < nv; ++j) x -= Z[6 * j + r] * Z[6 * j + c];
+        Ia[r + 6 * c] = Ia[c + 6 * r] = x;
+      }
+    for (r = 0; r < 6; ++r) {
+      double x = pA[r];
+      for (c = 0; c < 6; ++c) x += Ia[r + 6 * c] * cb[c];
+      for (j = 0; j < nv; ++j) x += Z[6 * j + r] * w[j];
+      pa[r] = x;
+    }
+    sp_matrix_out_add(R, p, Ia, s->IA + 36 * par);
+    sp_wrench_out_add(R, p, pa, s->fl + 6 * par);
+    sp_inertia_out_add(R, p, s->IC + NCGEN_TREE_BODY * b, s->IC + NCGEN_TREE_BODY * par);
+  }
+  for (b = 0; b < T->nb; ++b) {
+    const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
+    int nv = k->nv, va = T->v_at[b], par = T->parent[b];
+    const double *S = s->Sl + 6 * va, *R = s->X + 12 * b, *p = R + 9, *U = s->U + 6 * va, *L = s->Dl + 36 * b;
+    double *a = s->al + 6 * b, x[6];
+    sp_twist_in(R, p, par < 0 ? a0 : s->al + 6 * par, a);
+    for (i = 0; i < 6; ++i) a[i] += s->cl[6 * b + i];
+    for (j = 0; j < nv; ++j) {                  /* ẇ = D⁻¹ (u − Uᵀ a') */
+      double y = s->ul[va + j];
+      for (r = 0; r < 6; ++r) y -= U[6 * j + r] * a[r];
+      for (c = 0; c < j; ++c) y -= L[j + 6 * c] * x[c];
+      x[j] = y / L[j + 6 * j];
+    }
+    for (j = nv - 1; j >= 0; --j) {
+      double y = x[j];
+      for (c = j + 1; c < nv; ++c) y -= L[c + 6 * j] * x[c];
+      x[j] = y / L[j + 6 * j];
+    }
+    for (j = 0; j < nv; ++j) {
+      aj[va + j] = x[j];
+      for (r = 0; r < 6; ++r) a[r] += S[6 * j + r] * x[j];
+    }
+  }
+  *pivot = ratio;
+  return 0;
+}
+
+/* y = M⁻¹ e (nv) for the joint efforts e (nv) by the last two passes of the articulated-body
+ * algorithm on the factors of the last ncgen_tree_articulated (no velocity, no gravity). */
+static void ncgen_tree_articulated_solve(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s,
+                                         const double *e, double *y) {
+  int b, i, j, r, c;
+  for (i = 0; i < 6 * T->nb; ++i) s->pr[i] = 0.0;
+  for (b = T->nb - 1; b >= 0; --b) {
+    const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
+    int nv = k->nv, va = T->v_at[b], par = T->parent[b];
+    const double *S = s->Sl + 6 * va, *U = s->U + 6 * va, *L = s->Dl + 36 * b;
+    double *pA = s->pr + 6 * b, *u = s->ur + va, w[6], pa[6];
+    for (j = 0; j < nv; ++j) {                  /* u = e − Sᵀ p^A, w = L⁻¹ u */
+      double x = e[va + j];
+      for (r = 0; r < 6; ++r) x -= S[6 * j + r] * pA[r];
+      u[j] = x;
+      for (c = 0; c < j; ++c) x -= L[j + 6 * c] * w[c];
+      w[j] = x / L[j + 6 * j];
+    }
+    if (par < 0) continue;
+    for (r = 0; r < 6; ++r) pa[r] = pA[r];       /* p^a = p^A + U D⁻¹ u */
+    for (j = nv - 1; j >= 0; --j) {              /* w = L⁻ᵀ L⁻¹ u = D⁻¹ u */
+      double x = w[j];
+      for (c = j + 1; c < nv; ++c) x -= L[c + 6 * j] * w[c];
+      w[j] = x / L[j + 6 * j];
+    }
+    for (j = 0; j < nv; ++j)
+      for (r = 0; r < 6; ++r) pa[r] += U[6 * j + r] * w[j];
+    sp_wrench_out_add(s->X + 12 * b, s->X + 12 * b + 9, pa, s->pr + 6 * par);
+  }
+  for (b = 0; b < T->nb; ++b) {
+    const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
+    int nv = k->nv, va = T->v_at[b], par = T->parent[b];
+    const double *S = s->Sl + 6 * va, *R = s->X + 12 * b, *U = s->U + 6 * va, *L = s->Dl + 36 * b;
+    const double zero[6] = {0, 0, 0, 0, 0, 0};
+    double *a = s->ar + 6 * b, x[6];
+    sp_twist_in(R, R + 9, par < 0 ? zero : s->ar + 6 * par, a);
+    for (j = 0; j < nv; ++j) {
+      double z = s->ur[va + j];
+      for (r = 0; r < 6; ++r) z -= U[6 * j + r] * a[r];
+      for (c = 0; c < j; ++c) z -= L[j + 6 * c] * x[c];
+      x[j] = z / L[j + 6 * j];
+    }
+    for (j = nv - 1; j >= 0; --j) {
+      double z = x[j];
+      for (c = j + 1; c < nv; ++c) z -= L[c + 6 * j] * x[c];
+      x[j] = z / L[j + 6 * j];
+    }
+    for (j = 0; j < nv; ++j) {
+      y[va + j] = x[j];
+      for (r = 0; r < 6; ++r) a[r] += S[6 * j + r] * x[j];
+    }
+  }
+}
+
+/* Forward dynamics of a tree with mimic joints by the articulated-body algorithm on the tree
+ * with every rate free and the followers held by the constraints C a = 0 (rows
+ * e_f − k_f e_leader): a = a₀ + Y λ with a₀ = M⁻¹ (τ − bias) (the efforts τ_i on the leaders),
+ * Y = M⁻¹ Cᵀ, (C Y) λ = −C a₀; the constraint forces Cᵀλ have no part along G, so G ᵀ τ = τ_i.
+ * Returns 1 (nothing written) when M or C Y is not positive definite beyond the pivot
+ * tolerance: the caller then solves M_i a_i = τ_i − b_i by Cholesky, which names the cause. */
+static int ncgen_tree_constrained(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s,
+                                  const double *tau_i, double *aj, double *pivot, int *failed) {
+  int i, j, k, m = 0, nv = T->nv;
+  double ratio;
+  *failed = 0;
+  for (i = 0; i < nv; ++i) s->tf[i] = T->rate_src[i] == i ? tau_i[T->rate_col[i]] : 0.0;
+  if (ncgen_tree_articulated(K, T, s, s->tf, aj, &ratio)) return NCGEN_TREE_KERNEL;
+  if (!(ratio > NCGEN_TREE_PIVOT_TOL)) {
+    *failed = 1;
+    return 0;
+  }
+  for (i = 0; i < nv; ++i) {                    /* Y's columns, one per follower */
+    if (T->rate_src[i] == i) continue;
+    for (j = 0; j < nv; ++j) s->tf[j] = 0.0;
+    s->tf[i] = 1.0;
+    s->tf[T->rate_src[i]] = -T->rate_coef[i];
+    ncgen_tree_articulated_solve(K, T, s, s->tf, s->Y + (long)nv * m);
+    ++m;
+  }
+  for (k = 0, j = 0; j < nv; ++j) {              /* C Y (m × m) and −C a₀ */
+    int f, c = 0;
+    if (T->rate_src[j] == j) continue;
+    for (f = 0; f < nv; ++f) {
+      if (T->rate_src[f] == f) continue;
+      s->Kc[k + m * c] = s->Y[(long)nv * c + j] - T->rate_coef[j] * s->Y[(long)nv * c + T->rate_src[j]];
+      ++c;
+    }
+    s->ur[k] = -(aj[j] - T->rate_coef[j] * aj[T->rate_src[j]]);
+    ++k;
+  }
+  ratio = fmin(ratio, ncgen_tree_cholesky(m, s->Kc, s->Kc + (long)m * m));
+  if (!(ratio > NCGEN_TREE_PIVOT_TOL)) {
+    *failed = 1;
+    return 0;
+  }
+  ncgen_tree_solve(m, s->Kc + (long)m * m, s->ur, 1);
+  for (k = 0; k < m; ++k)
+    for (i = 0; i < nv; ++i) aj[i] += s->Y[(long)nv * k + i] * s->ur[k];
+  for (i = 0; i < nv; ++i)
+    if (T->rate_src[i] != i) aj[i] = T->rate_coef[i] * aj[T->rate_src[i]];
+  *pivot = ratio;
+  return 0;
+}
+
+/* M_i and the bias b_i = τ_i(q, v, a = 0) (in s->rhs) of one local pass; the Cholesky
  * factor of M_i in s->L; returns the smallest relative pivot in *pivot. */
 static int ncgen_tree_factored(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, const double *q,
                                const double *v, double *pivot) {
   ncgen_tree_expand(T, s, q, v, 0);
-  if (ncgen_tree_forward(K, T, s)) return NCGEN_TREE_KERNEL;
-  ncgen_tree_backward(K, T, s->W, s->S, s->tau);
+  if (ncgen_tree_local_poses(K, T, s)) return NCGEN_TREE_KERNEL;
+  ncgen_tree_local_motion(K, T, s, 1);
+  ncgen_tree_local_backward(K, T, s);
   ncgen_tree_project(T, s->tau, s->rhs);
-  ncgen_tree_composite(K, T, s, s->Mi);
+  ncgen_tree_local_mass(K, T, s, s->Mi);
   *pivot = ncgen_tree_cholesky(T->ni, s->Mi, s->L);
   return 0;
 }
 
-/* aj (nv) = G M_i⁻¹ (τ_i − b_i): forward dynamics; check = [smallest relative Cholesky pivot, Σ aj]. */
+/* aj (nv) = G M_i⁻¹ (τ_i − b_i): forward dynamics, by the articulated-body algorithm without
+ * mimic joints, else by Cholesky; check = [smallest relative pivot, Σ aj]. */
 static int ncgen_tree_aba(const ncgen_tree_kinds *K, const ncgen_tree *T, const double *q, const double *v,
                           const double *tau_i, double *aj, double *check, double *work) {
   ncgen_tree_work s;
   int i;
   double sum = 0.0;
   ncgen_tree_layout(K, T, work, &s);
+  ncgen_tree_expand(T, &s, q, v, 0);
+  if (ncgen_tree_unmapped(T)) {
+    if (ncgen_tree_articulated(K, T, &s, tau_i, aj, &check[0])) return NCGEN_TREE_KERNEL;
+    for (i = 0; i < T->nv; ++i) sum += aj[i];
+    check[1] = sum;
+    return 0;
+  } else {
+    int failed;
+    if (ncgen_tree_constrained(K, T, &s, tau_i, aj, &check[0], &failed)) return NCGEN_TREE_KERNEL;
+    if (!failed) {
+      for (i = 0; i < T->nv; ++i) sum += aj[i];
+      check[1] = sum;
+      return 0;
+    }
+  }
   if (ncgen_tree_factored(K, T, &s, q, v, &check[0])) return NCGEN_TREE_KERNEL;
   for (i = 0; i < T->ni; ++i) s.rhs[i] = tau_i[i] - s.rhs[i];
   ncgen_tree_solve(T->ni, s.L, s.rhs, 1);
