@@ -28,7 +28,7 @@ from ncgen.codegen.stepper_abi import bind_stepper
 from ncgen.codegen.stepper_package import MAX_HALVINGS, MAX_ITER, STATUS, TOL, n_stats
 from ncgen.errors import NcgenError
 from ncgen.runtime.dae import load_dae
-from ncgen.runtime.energy_balance import by_remainder
+from ncgen.runtime.energy_balance import nonsmooth_contacts
 from ncgen.runtime.inputs import input_samples, parameter_values, time_grid
 from ncgen.runtime.joint_dynamics import multipliers_at_samples
 from ncgen.runtime.library import compiled_functions
@@ -325,7 +325,7 @@ class _Runs:
                 U = self.U[i][:k] if self.model.nu else None
                 if self.tables and k > 1:
                     self.LAM[i, 1:k] = st.multipliers(self.Q[i, 1:k], self.V[i, 1:k], None if U is None else U[1:k])
-                elif not by_remainder(self.model) and k > 1:      # as _trajectory: the states' multipliers
+                elif not nonsmooth_contacts(self.model) and k > 1:      # as _trajectory: the states' multipliers
                     self.LAM[i, 1:k] = multipliers_at_samples(self.model, self.t[1:k], self.Q[i, 1:k], self.V[i, 1:k],
                                                               np.zeros((k - 1, 0)) if U is None else U[1:k],
                                                               self.P[i], _compiled_accel(self.model))

@@ -23,7 +23,7 @@
 #define NNZ_K 4
 #define MASS_SCALE M_P
 #define MAX_HALVINGS 10
-#define NSTATS 10
+#define NSTATS 16
 #define NOUT 5
 
 #define NCGEN_CONTACTS
@@ -145,8 +145,9 @@ static int k_project(const casadi_real **arg, casadi_real **res, casadi_int *iw,
 }
 
 static int k_power(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  int i;
   (void) arg, (void) iw, (void) w, (void) mem;
-  *res[0] = 0;
+  for (i = 0; i < 5; ++i) res[0][i] = 0;
   return 0;
 }
 
@@ -316,8 +317,8 @@ static void test_contact_steps(void) {
     }
     bounced = bounced || v[k * NQ + 3] > 0;
     if (bounced) apex = fmax(apex, q[k * NQ + 3] - R_P);
-    unconverged += (long) stats[k * NSTATS + 6];
-    CHECK(stats[k * NSTATS + 8] <= 2 * PENETRATION_TOL, "penetration %g at row %ld", stats[k * NSTATS + 8], k);
+    unconverged += (long) stats[k * NSTATS + 12];
+    CHECK(stats[k * NSTATS + 14] <= 2 * PENETRATION_TOL, "penetration %g at row %ld", stats[k * NSTATS + 14], k);
   }
   CHECK(fabs(pn - M_P * G_P * t_slide) < 1e-3 * M_P * G_P * t_slide, "normal impulse %g", pn);
   CHECK(fabs(pt + mu[0] * pn) < 1e-9, "friction impulse %g, normal %g", pt, pn);
