@@ -72,11 +72,14 @@ def stepper_works(S: np.ndarray) -> dict[str, np.ndarray]:
     return out
 
 
-def stepper_parts(model, S: np.ndarray) -> dict[str, float]:
-    """Work of each class a model can have (:func:`present_parts`) at the end of a compiled
-    stepper's run with statistics ``S``."""
-    w = stepper_works(S)
-    return {k: float(w[k][-1]) for k in present_parts(model)}
+def balance_report(model, report: dict, w: dict[str, np.ndarray]) -> dict:
+    """``report`` (an energy report of a non-conservative run) with the work of each class
+    at the end (``"parts"``) and at every output time (``"works"``: lists, J, ``"total"``
+    and the classes the model can have) from ``w`` (:func:`stepper_works` or IDAS's)."""
+    keys = [k for k in present_parts(model) if k in w]
+    report["parts"] = {k: float(w[k][-1]) for k in keys}
+    report["works"] = {k: [float(x) for x in w[k]] for k in ["total", *keys]}
+    return report
 
 
 def nonsmooth_contacts(model) -> bool:
@@ -122,7 +125,6 @@ def idas_report(model, traj, conservative: bool, work: np.ndarray | None = None)
         w = {"total": total, "contacts": contacts, "friction": friction, "inputs": inputs, "drives": drives,
              "dampers": total - contacts - friction - inputs - drives}
         how = "integrated by IDAS as quadratures"
-    report = energy_report(traj, w["total"], False)
-    report["parts"] = {k: float(w[k][-1]) for k in present_parts(model) if k in w}
+    report = balance_report(model, energy_report(traj, w["total"], False), w)
     report["quadrature"] = how
     return report

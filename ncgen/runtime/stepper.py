@@ -58,7 +58,7 @@ import numpy as np
 from ncgen.codegen.stepper_package import STATS, STATUS, STEP_INTERRUPTED, TOL
 from ncgen.errors import NcgenError, SimulationError, SimulationInterrupted, option
 from ncgen.progress import Ticker
-from ncgen.runtime.energy_balance import nonsmooth_contacts, stepper_parts
+from ncgen.runtime.energy_balance import balance_report, nonsmooth_contacts, stepper_works
 from ncgen.runtime.joint_dynamics import multipliers_at_samples
 from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.stepper_checks import (SHADOW_FACTOR, check_fixed, check_global, contact_report, energy_report,
@@ -277,7 +277,7 @@ def _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info,
                                                  info.get("order") == 4)
     traj.info["energy"] = energy_report(traj, work, conservative, S[:rows])
     if not conservative and len(traj):
-        traj.info["energy"]["parts"] = stepper_parts(model, S[:rows])
+        balance_report(model, traj.info["energy"], stepper_works(S[:rows]))
     traj.info["wall_time"] = time.perf_counter() - start
     return traj
 

@@ -17,7 +17,7 @@ from ncgen.runtime.options import SimulationOptions
 from ncgen.codegen.stepper_package import CONTACT_STATS, STATS, WORK_PARTS
 from ncgen.runtime.stepper import simulate_stepper
 from ncgen.runtime.table_stepper import load_any_stepper, stepper_kernels
-from ncgen.runtime.energy_balance import stepper_parts
+from ncgen.runtime.energy_balance import balance_report, stepper_works
 from ncgen.runtime.stepper_checks import check_fixed, energy_report, is_conservative, trusted_before_failure
 from ncgen.runtime.trajectory import Trajectory
 
@@ -158,7 +158,7 @@ def _checked(model, opts: SimulationOptions, traj: Trajectory, S: np.ndarray, af
     work = np.concatenate([[0.0], S[:, STATS.index("work")]])
     traj.info["energy"] = energy_report(traj, work, conservative, S)
     if not conservative:
-        traj.info["energy"]["parts"] = stepper_parts(model, S)
+        balance_report(model, traj.info["energy"], stepper_works(S))
     if not opts.check:
         return traj
     if opts.rtol is None:
