@@ -146,3 +146,23 @@ def test_falling_chain_closes_its_balance_on_idas():
     assert energy["quadrature"].startswith("integrated by IDAS")
     assert energy["relative"] < 1e-5
     assert energy["parts"]["contacts"] < 0 and energy["parts"]["friction"] < 0
+
+
+def test_an_interval_idas_did_not_integrate_gets_the_trapezoidal_rule():
+    """An interval crossed by the RATTLE bridge (no quadrature: NaN) gets the trapezoidal rule
+    of the powers over its ends (the damped oscillator at 1 ms: within 1e-7 J of IDAS's
+    quadrature over that interval), the others keep their quadrature."""
+    from ncgen.runtime.energy_balance import interval_works
+
+    model = oscillator()
+    tr = nc.simulate(model, 0.5, 1e-3, rtol=1e-10, atol=1e-12)
+    works = tr.info["energy"]["works"]
+    W = np.zeros((len(tr.t), 5))
+    W[1:, 0] = np.diff(works["total"])
+    quad = np.cumsum(W, axis=0)
+    W[[1, 200, 201]] = np.nan
+    X, Z = np.hstack([tr.q, tr.v]), np.hstack([np.zeros_like(tr.q), tr.lam])
+    filled = interval_works(model, tr.t, X, Z, tr.u, tr.p, W)
+    np.testing.assert_allclose(filled[:, 0], quad[:, 0], atol=1e-7)
+    assert filled[1, 0] != quad[1, 0]                      # a trapezoid, not the quadrature
+    np.testing.assert_allclose(np.diff(filled[202:, 0]), np.diff(quad[202:, 0]), rtol=1e-9, atol=1e-15)

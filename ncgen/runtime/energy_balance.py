@@ -20,7 +20,7 @@ work by the trapezoidal rule over each step with each end's own multipliers, sec
 RATTLE; an impulse ``P`` on the contact rows ``W0`` of the step's start and ``W`` of its free
 end: ``¼ P·(W0 (v + w) + W (w + v⁺))`` exactly, the kinetic energy it adds to the step), so
 the residual ``E − E0 − W`` is the integrator's own energy error.  An IDAS run integrates
-the powers over its output samples by the trapezoidal rule (:func:`works`).  A model is
+the powers as quadrature states (:mod:`ncgen.runtime.idas`, :func:`interval_works`).  A model is
 conservative for a run when it is so with the run's inputs
 (:func:`ncgen.runtime.stepper_checks.is_conservative`); its report is the energy drift
 instead.
@@ -33,20 +33,6 @@ from ncgen.assembly.derived import power_parts_function
 from ncgen.codegen.stepper_package import STATS, WORK_PARTS
 
 PARTS = WORK_PARTS
-
-
-def works(model, t, q, v, lam, u, p) -> dict[str, np.ndarray]:
-    """Work (J) of each of :data:`PARTS` but ``push_out`` and in all (``"total"``) from
-    ``t[0]`` to each output time, by the trapezoidal rule over the output samples (IDAS runs;
-    no impulses)."""
-    n = len(t)
-    P = power_parts_function(model).map(n)(np.asarray(t, float)[None, :], q.T, v.T, lam.T,
-                                           np.asarray(u, float).reshape(n, model.nu).T, np.asarray(p, float))
-    total, contacts, friction, inputs, drives = np.array(P).reshape(5, n)
-    powers = {"total": total, "contacts": contacts, "friction": friction, "inputs": inputs, "drives": drives,
-              "dampers": total - contacts - friction - inputs - drives}
-    dt = np.diff(np.asarray(t, float))
-    return {k: np.concatenate([[0.0], np.cumsum(0.5 * dt * (w[1:] + w[:-1]))]) for k, w in powers.items()}
 
 
 def present_parts(model) -> list[str]:
@@ -107,24 +93,18 @@ def interval_works(model, t, X, Z, U, p, W: np.ndarray) -> np.ndarray:
     return np.cumsum(W, axis=0)
 
 
-def idas_report(model, traj, conservative: bool, work: np.ndarray | None = None) -> dict:
+def idas_report(model, traj, conservative: bool, work: np.ndarray | None) -> dict:
     """``info["energy"]`` of an IDAS run: drift (conservative) or balance with its parts,
-    from ``work`` (:func:`interval_works` at the output times; without it, the trapezoidal
-    rule over the output samples)."""
+    from ``work`` (:func:`interval_works` at the output times; None for a conservative run)."""
     from ncgen.runtime.stepper_checks import energy_report
 
     if not len(traj):
         return {"conservative": conservative}
     if conservative:
         return energy_report(traj, np.zeros(len(traj)), True)
-    if work is None:
-        w = works(model, traj.t, traj.q, traj.v, traj.lam, traj.u, traj.p)
-        how = "trapezoidal rule over the output samples"
-    else:
-        total, contacts, friction, inputs, drives = np.asarray(work, float)[:len(traj)].T
-        w = {"total": total, "contacts": contacts, "friction": friction, "inputs": inputs, "drives": drives,
-             "dampers": total - contacts - friction - inputs - drives}
-        how = "integrated by IDAS as quadratures"
+    total, contacts, friction, inputs, drives = np.asarray(work, float)[:len(traj)].T
+    w = {"total": total, "contacts": contacts, "friction": friction, "inputs": inputs, "drives": drives,
+         "dampers": total - contacts - friction - inputs - drives}
     report = balance_report(model, energy_report(traj, w["total"], False), w)
-    report["quadrature"] = how
+    report["quadrature"] = "integrated by IDAS as quadratures"
     return report
