@@ -241,8 +241,8 @@ def test_energy_balance_of_a_driven_model_closes_at_order_two():
     """A driven crank (rheonomic constraint ``θ = ω t``) does work ``λᵀΦ_t``: each RATTLE step's
     work pairs its start with the first half-step's multiplier and its end with the second's,
     so the balance closes at order 2 (a first-order multiplier once made it fail at ω = 14
-    rad/s for every step size); the drive's work from the reported multipliers (those of
-    the output states) is IDAS's."""
+    rad/s for every step size); the drive's work, accumulated step by step, converges at
+    order 2 to IDAS's (its quadrature at rtol 1e-10)."""
     model = nc.System.from_toml(ROOT / "examples" / "slider_crank.toml").build()
     p = {"omega": 14.0}
     runs = [nc.simulate(model, 1.0, 0.01, method="stepper", substeps=s, p=p, scheme="rattle") for s in (1, 2, 4)]
@@ -250,9 +250,13 @@ def test_energy_balance_of_a_driven_model_closes_at_order_two():
     assert errors[0] < 5e-3 * abs(runs[0].info["energy"]["work"])
     for coarse, fine in zip(errors, errors[1:]):
         assert 0.2 < fine / coarse < 0.3                                              # h²: 1/4
+    # the drive's work accumulated in the steps converges at order 2 to IDAS's quadrature
+    # (measured 2.0e-3, 5.0e-4, 1.2e-4 of it at h = 10, 5, 2.5 ms: (ω h)² / 10)
     drives = reference(model, 1.0, 0.01, p=p).info["energy"]["parts"]["drives"]
-    for r in runs:
-        assert abs(r.info["energy"]["parts"]["drives"] - drives) < 1e-5 * abs(drives)
+    off = [abs(r.info["energy"]["parts"]["drives"] - drives) for r in runs]
+    assert off[0] < 3e-3 * abs(drives)
+    for coarse, fine in zip(off, off[1:]):
+        assert 0.2 < fine / coarse < 0.3
     # the default fourth-order composition: its five steps' work summed, the balance at order 4
     errors = [nc.simulate(model, 1.0, 0.01, method="stepper", substeps=s, p=p).info["energy"]["balance_error"]
               for s in (1, 2, 4)]

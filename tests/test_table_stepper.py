@@ -171,8 +171,8 @@ def test_new_models_step_with_no_compiler(library, tmp_path):
     assert runs.pop("batch") == {"kernels": "tables", "ok": True}
     for name, r in runs.items():
         assert r["kernels"] == "tables" and r["complete"], (name, r)
-        # the models with dampers and loads: W is the trapezoidal integral of their power at the
-        # output times, and the planar one's cable goes slack and taut (its balance: 8e-6)
+        # the models with dampers and loads: W is accumulated step by step in the C loop (the
+        # trapezoidal rule of their power over each step), and the planar one's cable goes slack and taut (its balance: 8e-6)
         assert r["drift"] < (5e-5 if "forces" in name else 1e-5) and r["phi"] < 1e-9, (name, r)
 
 

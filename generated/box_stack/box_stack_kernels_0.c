@@ -15321,11 +15321,15 @@ CASADI_SYMBOL_EXPORT int box_stack_step_project_work_bytes(casadi_int *sz_arg, c
   return 0;
 }
 
-/* box_stack_step_power:(t,q[36],v[36],lam[18],u[0],p[0])->(P) */
+/* box_stack_step_power:(t,q[36],v[36],lam[18],u[0],p[0])->(P[5]) */
 static int casadi_f56(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a0;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
+  if (res[0]!=0) res[0][1]=a0;
+  if (res[0]!=0) res[0][2]=a0;
+  if (res[0]!=0) res[0][3]=a0;
+  if (res[0]!=0) res[0][4]=a0;
   return 0;
 }
 
@@ -15389,7 +15393,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* box_stack_step_power_sparsity_in(casadi_i
 
 CASADI_SYMBOL_EXPORT const casadi_int* box_stack_step_power_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s0;
+    case 0: return casadi_s48;
     default: return 0;
   }
 }

@@ -63,13 +63,15 @@ extern "C" {
 
 /* Columns of a row of stats_out (box_stack_simulate_stats, box_stack_simulate_adaptive):
  * steps, Newton iterations, step splits (fixed) or rejected steps (adaptive), local error
- * estimate in q (m) and in v (m/s), work W (J) of the non-conservative forces and drives
- * since t0 (the integral of box_stack_step_power; 0 unless track_work);
+ * estimate in q (m) and in v (m/s), work W (J) of the non-conservative forces, drives,
+ * contact impulses and push-outs since t0, then its parts (J since t0): contacts' normal forces
+ * and impulses, friction, inputs, drives, dampers and other forces, the energy changed by the
+ * push-out of penetrating contacts (all 0 unless track_work);
  * contacts, box_stack_simulate_stats only: the number of contact solves whose projected
  * Gauss-Seidel stopped at its sweep limit (their impulses did not converge), the largest
  * last-sweep change of a contact velocity among them, relative to 1 + max |U| (m/s per m/s),
  * and the deepest penetration left at the end of a step, after the push-out (m). */
-#define BOX_STACK_STEP_NSTATS 10
+#define BOX_STACK_STEP_NSTATS 16
 /* Values per sample of box_stack_outputs: T, V (J), max |Phi| (m^2), max |A v + Phi_t|
  * (m^2/s), P (W), then the marker positions (m), 3 per marker. */
 #define BOX_STACK_STEP_NOUT 5
@@ -152,8 +154,12 @@ int box_stack_simulate(const casadi_real *q0, const casadi_real *v0, casadi_real
  * global error estimate |y_h - y_2h| / (2^p - 1) after every second step.  The error
  * columns hold the latest estimate (-1 before the first, -2 once a shadow step of 2h
  * failed: no estimate from there on; models with contacts have none).  track_work != 0:
- * W accumulates the trapezoidal rule of P over each step, its start with the step's
- * multiplier lambda and its end with mu (second order; contact impulses not included).  impulse_out
+ * W and its parts accumulate the trapezoidal rule of the powers of box_stack_step_power over
+ * each step, its start with the step's multiplier lambda and its end with mu (second
+ * order), the exact work of the contact impulses in the step (the
+ * kinetic energy they add: 1/4 P . (W0 (v + w) + W (w + v+)), W0 and W the contact rows at
+ * the step's start and its free end, w its midpoint rates) and the change of E = T + V by
+ * each push-out.  impulse_out
  * (contacts only): as in box_stack_simulate. */
 int box_stack_simulate_stats(const casadi_real *q0, const casadi_real *v0, const casadi_real *lam0,
                              casadi_real t0, casadi_real h, long n_steps, long every,

@@ -11868,11 +11868,15 @@ CASADI_SYMBOL_EXPORT int boxes_step_project_work_bytes(casadi_int *sz_arg, casad
   return 0;
 }
 
-/* boxes_step_power:(t,q[24],v[24],lam[12],u[0],p[0])->(P) */
+/* boxes_step_power:(t,q[24],v[24],lam[12],u[0],p[0])->(P[5]) */
 static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a0;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
+  if (res[0]!=0) res[0][1]=a0;
+  if (res[0]!=0) res[0][2]=a0;
+  if (res[0]!=0) res[0][3]=a0;
+  if (res[0]!=0) res[0][4]=a0;
   return 0;
 }
 
@@ -11936,7 +11940,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* boxes_step_power_sparsity_in(casadi_int i
 
 CASADI_SYMBOL_EXPORT const casadi_int* boxes_step_power_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s0;
+    case 0: return casadi_s31;
     default: return 0;
   }
 }

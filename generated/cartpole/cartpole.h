@@ -429,7 +429,7 @@ extern const casadi_real cartpole_gravity[2];
 
 /* ---- cartpole_step_power ----------------------------------------------------
  * Stepper: power of the non-conservative forces and drives, dE/dt
- * In cartpole_kernels_0.c; 4 instructions.
+ * In cartpole_kernels_0.c; 10 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: cartpole_t0.
  *   arg[1] q: 8x1, nnz 8 [m] coordinates. Default: cartpole_q0.
@@ -438,7 +438,7 @@ extern const casadi_real cartpole_gravity[2];
  *   arg[4] u: 1x1, nnz 1 inputs. Default: zeros.
  *   arg[5] p: 0x1, nnz 0 parameters. Default: zeros.
  * Outputs:
- *   res[0] P: 1x1, nnz 1 [W] v^T (F + grad V) + dV/dt + lam^T Phi_t.
+ *   res[0] P: 5x1, nnz 5 [W] [P, P_contacts, P_friction, P_inputs, P_drives]: P = v^T (F + grad V) + dV/dt + lam^T Phi_t and its parts (smooth contacts' normal forces less their springs, friction, inputs, drives).
  */
 #define CARTPOLE_STEP_POWER_IN_T_NNZ 1
 #define CARTPOLE_STEP_POWER_IN_Q_NNZ 8
@@ -446,7 +446,7 @@ extern const casadi_real cartpole_gravity[2];
 #define CARTPOLE_STEP_POWER_IN_LAM_NNZ 6
 #define CARTPOLE_STEP_POWER_IN_U_NNZ 1
 #define CARTPOLE_STEP_POWER_IN_P_NNZ 0
-#define CARTPOLE_STEP_POWER_OUT_P_NNZ 1
+#define CARTPOLE_STEP_POWER_OUT_P_NNZ 5
 
 /* ---- cartpole_step_outputs ----------------------------------------------------
  * Stepper: derived quantities of one trajectory sample

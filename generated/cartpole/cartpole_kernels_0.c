@@ -108,6 +108,7 @@ extern "C" {
 #define casadi_s30 CASADI_PREFIX(s30)
 #define casadi_s31 CASADI_PREFIX(s31)
 #define casadi_s32 CASADI_PREFIX(s32)
+#define casadi_s33 CASADI_PREFIX(s33)
 #define casadi_s4 CASADI_PREFIX(s4)
 #define casadi_s5 CASADI_PREFIX(s5)
 #define casadi_s6 CASADI_PREFIX(s6)
@@ -523,7 +524,8 @@ static const casadi_int casadi_s28[63] =
 static const casadi_int casadi_s29[3] = {2, 1, 1};
 static const casadi_int casadi_s30[3] = {2, 4, 1};
 static const casadi_int casadi_s31[3] = {2, 2, 1};
-static const casadi_int casadi_s32[3] = {7, 1, 1};
+static const casadi_int casadi_s32[3] = {5, 1, 1};
+static const casadi_int casadi_s33[3] = {7, 1, 1};
 
 static const casadi_real casadi_c0[12] = 
   {1.0666666666666667e+00, 3.3333333333333340e-02, 1.0666666666666667e+00, 3.3333333333333340e-02, 1.0000000000000000e-02, 1.0000000000000000e-02, 1.0000000000000000e-02, 1.0000000000000000e-02,
@@ -4824,13 +4826,19 @@ CASADI_SYMBOL_EXPORT int cartpole_step_project_work_bytes(casadi_int *sz_arg, ca
   return 0;
 }
 
-/* cartpole_step_power:(t,q[8],v[8],lam[6],u,p[0])->(P) */
+/* cartpole_step_power:(t,q[8],v[8],lam[6],u,p[0])->(P[5]) */
 static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real a0, a1;
+  casadi_real a0, a1, a2;
   a0=arg[2]? arg[2][0] : 0;
   a1=arg[4]? arg[4][0] : 0;
+  a2=(a0*a1);
+  if (res[0]!=0) res[0][0]=a2;
+  a2=0.;
+  if (res[0]!=0) res[0][1]=a2;
+  if (res[0]!=0) res[0][2]=a2;
   a0=(a0*a1);
-  if (res[0]!=0) res[0][0]=a0;
+  if (res[0]!=0) res[0][3]=a0;
+  if (res[0]!=0) res[0][4]=a2;
   return 0;
 }
 
@@ -4894,7 +4902,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* cartpole_step_power_sparsity_in(casadi_in
 
 CASADI_SYMBOL_EXPORT const casadi_int* cartpole_step_power_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s0;
+    case 0: return casadi_s32;
     default: return 0;
   }
 }
@@ -5124,7 +5132,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* cartpole_step_outputs_sparsity_in(casadi_
 
 CASADI_SYMBOL_EXPORT const casadi_int* cartpole_step_outputs_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s32;
+    case 0: return casadi_s33;
     default: return 0;
   }
 }

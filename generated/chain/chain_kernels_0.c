@@ -10139,13 +10139,18 @@ CASADI_SYMBOL_EXPORT int chain_step_project_work_bytes(casadi_int *sz_arg, casad
   return 0;
 }
 
-/* chain_step_power:(t,q[15],v[15],lam[5],u[0],p[0])->(P) */
+/* chain_step_power:(t,q[15],v[15],lam[5],u[0],p[0])->(P[5]) */
 static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a0, a1;
   a0=-2.2204460492503131e-16;
   a1=arg[2]? arg[2][2] : 0;
   a0=(a0*a1);
   if (res[0]!=0) res[0][0]=a0;
+  a0=0.;
+  if (res[0]!=0) res[0][1]=a0;
+  if (res[0]!=0) res[0][2]=a0;
+  if (res[0]!=0) res[0][3]=a0;
+  if (res[0]!=0) res[0][4]=a0;
   return 0;
 }
 
@@ -10209,7 +10214,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* chain_step_power_sparsity_in(casadi_int i
 
 CASADI_SYMBOL_EXPORT const casadi_int* chain_step_power_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s0;
+    case 0: return casadi_s3;
     default: return 0;
   }
 }

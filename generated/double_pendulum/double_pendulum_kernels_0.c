@@ -107,6 +107,7 @@ extern "C" {
 #define casadi_s3 CASADI_PREFIX(s3)
 #define casadi_s30 CASADI_PREFIX(s30)
 #define casadi_s31 CASADI_PREFIX(s31)
+#define casadi_s32 CASADI_PREFIX(s32)
 #define casadi_s4 CASADI_PREFIX(s4)
 #define casadi_s5 CASADI_PREFIX(s5)
 #define casadi_s6 CASADI_PREFIX(s6)
@@ -583,7 +584,8 @@ static const casadi_int casadi_s27[158] =
 static const casadi_int casadi_s28[3] = {3, 1, 1};
 static const casadi_int casadi_s29[3] = {3, 6, 1};
 static const casadi_int casadi_s30[3] = {3, 2, 1};
-static const casadi_int casadi_s31[3] = {8, 1, 1};
+static const casadi_int casadi_s31[3] = {5, 1, 1};
+static const casadi_int casadi_s32[3] = {8, 1, 1};
 
 static const casadi_real casadi_c0[18] = 
   {6.6599999999999993e-01, -3.3279999999999998e-01, 6.6599999999999993e-01, -3.3279999999999998e-01, 6.6599999999999993e-01, -3.3279999999999998e-01, 5.0000000000000044e-04, 5.0000000000000044e-04,
@@ -8389,11 +8391,15 @@ CASADI_SYMBOL_EXPORT int double_pendulum_step_project_work_bytes(casadi_int *sz_
   return 0;
 }
 
-/* double_pendulum_step_power:(t,q[12],v[12],lam[10],u[0],p[0])->(P) */
+/* double_pendulum_step_power:(t,q[12],v[12],lam[10],u[0],p[0])->(P[5]) */
 static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a0;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
+  if (res[0]!=0) res[0][1]=a0;
+  if (res[0]!=0) res[0][2]=a0;
+  if (res[0]!=0) res[0][3]=a0;
+  if (res[0]!=0) res[0][4]=a0;
   return 0;
 }
 
@@ -8457,7 +8463,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* double_pendulum_step_power_sparsity_in(ca
 
 CASADI_SYMBOL_EXPORT const casadi_int* double_pendulum_step_power_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s0;
+    case 0: return casadi_s31;
     default: return 0;
   }
 }
@@ -8794,7 +8800,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* double_pendulum_step_outputs_sparsity_in(
 
 CASADI_SYMBOL_EXPORT const casadi_int* double_pendulum_step_outputs_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s31;
+    case 0: return casadi_s32;
     default: return 0;
   }
 }

@@ -63,9 +63,10 @@ extern "C" {
 
 /* Columns of a row of stats_out (double_pendulum_simulate_stats, double_pendulum_simulate_adaptive):
  * steps, Newton iterations, step splits (fixed) or rejected steps (adaptive), local error
- * estimate in q (m) and in v (m/s), work W (J) of the non-conservative forces and drives
- * since t0 (the integral of double_pendulum_step_power; 0 unless track_work). */
-#define DOUBLE_PENDULUM_STEP_NSTATS 6
+ * estimate in q (m) and in v (m/s), work W (J) of the non-conservative forces, drives since t0, then its parts (J since t0): contacts' normal forces
+ * and impulses, friction, inputs, drives, dampers and other forces, the energy changed by the
+ * push-out of penetrating contacts (all 0 unless track_work). */
+#define DOUBLE_PENDULUM_STEP_NSTATS 12
 /* Values per sample of double_pendulum_outputs: T, V (J), max |Phi| (m^2), max |A v + Phi_t|
  * (m^2/s), P (W), then the marker positions (m), 3 per marker. */
 #define DOUBLE_PENDULUM_STEP_NOUT 8
@@ -134,8 +135,9 @@ int double_pendulum_simulate(const casadi_real *q0, const casadi_real *v0, casad
  * global error estimate |y_h - y_2h| / (2^p - 1) after every second step.  The error
  * columns hold the latest estimate (-1 before the first, -2 once a shadow step of 2h
  * failed: no estimate from there on; models with contacts have none).  track_work != 0:
- * W accumulates the trapezoidal rule of P over each step, its start with the step's
- * multiplier lambda and its end with mu (second order; contact impulses not included).  impulse_out
+ * W and its parts accumulate the trapezoidal rule of the powers of double_pendulum_step_power over
+ * each step, its start with the step's multiplier lambda and its end with mu (second
+ * order).  impulse_out
  * (contacts only): as in double_pendulum_simulate. */
 int double_pendulum_simulate_stats(const casadi_real *q0, const casadi_real *v0, const casadi_real *lam0,
                                    casadi_real t0, casadi_real h, long n_steps, long every,

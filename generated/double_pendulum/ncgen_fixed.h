@@ -24,7 +24,7 @@ static int step_rattle4(const casadi_real *q, const casadi_real *v, casadi_real 
                         const casadi_real *p, casadi_real h, casadi_real *q_next, casadi_real *v_next,
                         casadi_real *lam, int *iterations, const step_options *o, int warm, workspace *ws) {
   const casadi_real g = COMPOSITION_G, gamma[COMPOSITION_STAGES] = {g, g, 1 - 4 * g, g, g};
-  casadi_real *buffer[2] = {ws->sub, ws->sub + 2 * NQ}, t_i = t, h_prev = 0, work = 0;
+  casadi_real *buffer[2] = {ws->sub, ws->sub + 2 * NQ}, t_i = t, h_prev = 0, work[NWORK] = {0};
   const casadi_real *q_i = q, *v_i = v;
   int s, it = 0, sum = 0, status = STEP_OK;
   for (s = 0; s < COMPOSITION_STAGES && status == STEP_OK; ++s) {
@@ -32,11 +32,11 @@ static int step_rattle4(const casadi_real *q, const casadi_real *v, casadi_real 
     casadi_real h_s = gamma[s] * h, *q_o = last ? q_next : buffer[s % 2], *v_o = last ? v_next : buffer[s % 2] + NQ;
     if (s > 0) predict_scaled(ws->x, ws->x, ws->dx, v_i, h_s / h_prev);
     status = step(q_i, v_i, t_i, u, p, h_s, q_o, v_o, last ? lam : 0, &it, o, s > 0 ? 1 : warm, ws);
-    if (status == STEP_OK && !last) work += ws->step_work;
+    if (status == STEP_OK && !last) work_add(work, ws->step_work);
     sum += it;
     q_i = q_o, v_i = v_o, t_i += h_s, h_prev = h_s;
   }
-  if (status == STEP_OK) ws->step_work += work;
+  if (status == STEP_OK) work_add(ws->step_work, work);
   if (iterations) *iterations = sum;
   return status;
 }
@@ -78,10 +78,11 @@ static int step_split(const casadi_real *q, const casadi_real *v, casadi_real t,
   if (status != STEP_OK) return status;
   predict(ws);
   {
-    casadi_real work = ws->step_work;
+    casadi_real work[NWORK];
+    memcpy(work, ws->step_work, sizeof work);
     status = step_split(q_mid, v_mid, t + h / 2, u, p, h / 2, q_next, v_next, lam, iterations, splits, o, 1, ws,
                         depth + 1);
-    ws->step_work += work;
+    work_add(ws->step_work, work);
   }
   return status;
 }
@@ -120,14 +121,19 @@ static int stepper_step(const casadi_real *q, const casadi_real *v, casadi_real 
   return status;
 }
 
+/* A row of statistics holds the work of every class (a compile-time check of NSTATS). */
+typedef char ncgen_nstats_holds_the_work[NSTATS >= 5 + NWORK ? 1 : -1];
+
+/* A row of statistics: steps, Newton iterations, splits, the error estimates, and the work of
+ * each class (WORK_*) since the start of the run. */
 static void put_stats(casadi_real *row, long steps, long iterations, long splits, casadi_real err_q,
-                      casadi_real err_v, casadi_real work) {
+                      casadi_real err_v, const casadi_real *work) {
   row[0] = (casadi_real) steps;
   row[1] = (casadi_real) iterations;
   row[2] = (casadi_real) splits;
   row[3] = err_q;
   row[4] = err_v;
-  row[5] = work;
+  memcpy(row + 5, work, NWORK * sizeof *work);
 }
 
 /* The fixed-step run's error estimates (the argument `estimate` of run_fixed()). */
@@ -197,7 +203,7 @@ static int run_fixed(const casadi_real *q0, const casadi_real *v0, const casadi_
   char *block;
   casadi_real *state, *q, *v, *q1, *v1, *lam, *swap, *q_s, *v_s, *q2, *v2, *x_save, *dx_save, *x_s, *dx_s, *u_bar;
   casadi_real *sum, *sum_r, *d_r, *q_r, *v_r, *x_r, *dx_r;
-  casadi_real work = 0, err_q = -1, err_v = -1, richardson = o->scheme == SCHEME_RATTLE4 ? 15 : 3;
+  casadi_real work[NWORK] = {0}, err_q = -1, err_v = -1, richardson = o->scheme == SCHEME_RATTLE4 ? 15 : 3;
   casadi_real growth_q = 1, growth_v = 1, first = o->scheme == SCHEME_RATTLE4 ? COMPOSITION_G : 1;
   long k = 0, i, row = 0, iter_sum = 0, n_splits = 0, row_splits = 0, last_sample = -1;
   step_options o_r = *o; /* RATTLE, for the growth */
@@ -268,7 +274,7 @@ static int run_fixed(const casadi_real *q0, const casadi_real *v0, const casadi_
     ws.track_work = track_work;
     status = step_split(q, v, tk, uk, p, h, q1, v1, lam, &iters, &n_splits, o, k > 0, &ws, 0);
     if (status != STEP_OK) break;
-    if (track_work) work += ws.step_work; /* both ends with the step's inputs */
+    if (track_work) work_add(work, ws.step_work); /* both ends with the step's inputs */
     ws.track_work = 0;                     /* not for the shadow */
     iter_sum += iters;
     if ((shadow || local) && k % 2 == 1) {

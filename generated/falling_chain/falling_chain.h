@@ -431,7 +431,7 @@ extern const casadi_real falling_chain_gravity[3];
 
 /* ---- falling_chain_step_power ----------------------------------------------------
  * Stepper: power of the non-conservative forces and drives, dE/dt
- * In falling_chain_kernels_0.c; 2 instructions.
+ * In falling_chain_kernels_0.c; 6 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: falling_chain_t0.
  *   arg[1] q: 15x1, nnz 15 [m] coordinates. Default: falling_chain_q0.
@@ -440,7 +440,7 @@ extern const casadi_real falling_chain_gravity[3];
  *   arg[4] u: 0x1, nnz 0 inputs. Default: zeros.
  *   arg[5] p: 0x1, nnz 0 parameters. Default: zeros.
  * Outputs:
- *   res[0] P: 1x1, nnz 1 [W] v^T (F + grad V) + dV/dt + lam^T Phi_t.
+ *   res[0] P: 5x1, nnz 5 [W] [P, P_contacts, P_friction, P_inputs, P_drives]: P = v^T (F + grad V) + dV/dt + lam^T Phi_t and its parts (smooth contacts' normal forces less their springs, friction, inputs, drives).
  */
 #define FALLING_CHAIN_STEP_POWER_IN_T_NNZ 1
 #define FALLING_CHAIN_STEP_POWER_IN_Q_NNZ 15
@@ -448,7 +448,7 @@ extern const casadi_real falling_chain_gravity[3];
 #define FALLING_CHAIN_STEP_POWER_IN_LAM_NNZ 3
 #define FALLING_CHAIN_STEP_POWER_IN_U_NNZ 0
 #define FALLING_CHAIN_STEP_POWER_IN_P_NNZ 0
-#define FALLING_CHAIN_STEP_POWER_OUT_P_NNZ 1
+#define FALLING_CHAIN_STEP_POWER_OUT_P_NNZ 5
 
 /* ---- falling_chain_step_outputs ----------------------------------------------------
  * Stepper: derived quantities of one trajectory sample

@@ -8034,11 +8034,15 @@ CASADI_SYMBOL_EXPORT int falling_chain_step_project_work_bytes(casadi_int *sz_ar
   return 0;
 }
 
-/* falling_chain_step_power:(t,q[15],v[15],lam[3],u[0],p[0])->(P) */
+/* falling_chain_step_power:(t,q[15],v[15],lam[3],u[0],p[0])->(P[5]) */
 static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a0;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
+  if (res[0]!=0) res[0][1]=a0;
+  if (res[0]!=0) res[0][2]=a0;
+  if (res[0]!=0) res[0][3]=a0;
+  if (res[0]!=0) res[0][4]=a0;
   return 0;
 }
 
@@ -8102,7 +8106,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* falling_chain_step_power_sparsity_in(casa
 
 CASADI_SYMBOL_EXPORT const casadi_int* falling_chain_step_power_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s0;
+    case 0: return casadi_s31;
     default: return 0;
   }
 }

@@ -107,6 +107,7 @@ extern "C" {
 #define casadi_s3 CASADI_PREFIX(s3)
 #define casadi_s30 CASADI_PREFIX(s30)
 #define casadi_s31 CASADI_PREFIX(s31)
+#define casadi_s32 CASADI_PREFIX(s32)
 #define casadi_s4 CASADI_PREFIX(s4)
 #define casadi_s5 CASADI_PREFIX(s5)
 #define casadi_s6 CASADI_PREFIX(s6)
@@ -586,7 +587,8 @@ static const casadi_int casadi_s27[172] =
 static const casadi_int casadi_s28[3] = {3, 1, 1};
 static const casadi_int casadi_s29[3] = {3, 9, 1};
 static const casadi_int casadi_s30[3] = {3, 3, 1};
-static const casadi_int casadi_s31[3] = {8, 1, 1};
+static const casadi_int casadi_s31[3] = {5, 1, 1};
+static const casadi_int casadi_s32[3] = {8, 1, 1};
 
 static const casadi_real casadi_c0[24] = 
   {6.0166666666666657e-01, -2.7755575615628938e-19, 1.3333333333333336e-01, 6.0166666666666657e-01, -2.7755575615628938e-19, 1.3333333333333336e-01, 6.0166666666666657e-01, -2.7755575615628938e-19,
@@ -8853,11 +8855,15 @@ CASADI_SYMBOL_EXPORT int fourbar_3d_step_project_work_bytes(casadi_int *sz_arg, 
   return 0;
 }
 
-/* fourbar_3d_step_power:(t,q[12],v[12],lam[11],u[0],p[0])->(P) */
+/* fourbar_3d_step_power:(t,q[12],v[12],lam[11],u[0],p[0])->(P[5]) */
 static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a0;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
+  if (res[0]!=0) res[0][1]=a0;
+  if (res[0]!=0) res[0][2]=a0;
+  if (res[0]!=0) res[0][3]=a0;
+  if (res[0]!=0) res[0][4]=a0;
   return 0;
 }
 
@@ -8921,7 +8927,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* fourbar_3d_step_power_sparsity_in(casadi_
 
 CASADI_SYMBOL_EXPORT const casadi_int* fourbar_3d_step_power_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s0;
+    case 0: return casadi_s31;
     default: return 0;
   }
 }
@@ -9307,7 +9313,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* fourbar_3d_step_outputs_sparsity_in(casad
 
 CASADI_SYMBOL_EXPORT const casadi_int* fourbar_3d_step_outputs_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s31;
+    case 0: return casadi_s32;
     default: return 0;
   }
 }

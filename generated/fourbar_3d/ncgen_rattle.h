@@ -27,14 +27,29 @@
  *                              f(arg, res, iw, w, mem)); ncgen.assembly.stepper_equations
  *                              documents their inputs and outputs
  *   KERNEL_WORKS               the list of every kernel's _work function, comma-separated
- *   NCGEN_CONTACTS             defined for nonsmooth contacts, then also what
- *                              ncgen_contact.h lists
+ *   NCGEN_CONTACTS             defined for nonsmooth contacts, then also NOUT (values of
+ *                              KERNEL_OUTPUTS) and what ncgen_contact.h lists
  */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
 #define NX (NQ + NC)
+/* The work of a step by class (ws->step_work, the statistics' columns 5 .. 5 + NWORK - 1):
+ * all of it, then the smooth contacts' normal forces and nonsmooth normal impulses, the
+ * friction forces and impulses, the inputs, the drives (rheonomic constraints and
+ * time-dependent potentials), the dampers and every other force doing work outside V, and
+ * the energy the push-out of penetrating contacts changed (ncgen_contact.h).  KERNEL_POWER
+ * gives the powers of the first NPOWER classes (the dampers' is the total less the others). */
+#define NPOWER 5
+#define WORK_TOTAL 0
+#define WORK_CONTACTS 1
+#define WORK_FRICTION 2
+#define WORK_INPUTS 3
+#define WORK_DRIVES 4
+#define WORK_DAMPERS 5
+#define WORK_PUSH_OUT 6
+#define NWORK 7
 #ifdef NCGEN_CONTACTS
 #define ND (NK * DC)
 #endif
@@ -57,12 +72,16 @@ typedef struct {
   casadi_real *lam2; /* the last step's multipliers lambda (start) and mu (end), NC each */
   casadi_real *mid; /* states at the middle of split steps: [q; v] per splitting depth */
   casadi_real *sub; /* the two intermediate states [q; v] of a composed step */
+#ifdef NCGEN_CONTACTS
+  casadi_real *y;   /* KERNEL_OUTPUTS of one state (NOUT): the energy around a push-out */
+#endif
   casadi_real *w;   /* kernel work */
   casadi_int *iw;
   int track_work;    /* whether step() sets step_work */
-  casadi_real step_work; /* work of all forces over the last step (h/2 (P(t, q, v, lambda) +
-                            P(t + h, q+, v+, mu)): each end with the multiplier that acts
-                            there, second order), or over the last composed or split step */
+  casadi_real step_work[NWORK]; /* work of each class (WORK_*) over the last step (the forces':
+                            h/2 (P(t, q, v, lambda) + P(t + h, q+, v+, mu)), each end with the
+                            multiplier that acts there, second order; the impulses': exact,
+                            ncgen_contact.h), or over the last composed or split step */
 #ifdef NCGEN_CONTACTS
   casadi_real *j;    /* generalised contact impulse of the step's second half, W(q_free)^T P */
   casadi_real *j0;   /* ... and of its first half, W(q)^T P (the rows at the start of the step) */
@@ -160,6 +179,9 @@ static size_t layout(workspace *ws, char *block) {
   sizes[8] = (size_t) sz_iw * sizeof(casadi_int);
   sizes[9] = (2 * NQ * MAX_HALVINGS + 4 * NQ) * sizeof(casadi_real);
 #ifdef NCGEN_CONTACTS
+  sizes[9] += NOUT * sizeof(casadi_real);
+#endif
+#ifdef NCGEN_CONTACTS
   sizes[10] = 2 * NQ * sizeof(casadi_real);
   sizes[11] = NK * sizeof(casadi_real);
   sizes[12] = 2 * NNZ_W * sizeof(casadi_real);
@@ -202,11 +224,14 @@ static size_t layout(workspace *ws, char *block) {
     ws->chk = (casadi_real *) (void *) (block + off[6]);
     ws->lam2 = ws->chk + 3;
     ws->track_work = 0;
-    ws->step_work = 0;
+    memset(ws->step_work, 0, sizeof ws->step_work);
     ws->w = (casadi_real *) (void *) (block + off[7]);
     ws->iw = (casadi_int *) (void *) (block + off[8]);
     ws->mid = (casadi_real *) (void *) (block + off[9]);
     ws->sub = ws->mid + 2 * NQ * MAX_HALVINGS;
+#ifdef NCGEN_CONTACTS
+    ws->y = ws->sub + 4 * NQ;
+#endif
 #ifdef NCGEN_CONTACTS
     ws->j = (casadi_real *) (void *) (block + off[10]);
     ws->j0 = ws->j + NQ;
@@ -286,7 +311,8 @@ static int solve(workspace *ws, const casadi_real *K, const casadi_real *r, casa
   return KERNEL_SOLVE(ws->arg, ws->res, ws->iw, ws->w, 0);
 }
 
-/* P = dE/dt at (t, q, v, lam, u) (KERNEL_POWER) into *P. */
+/* P = dE/dt at (t, q, v, lam, u) (KERNEL_POWER) and its parts into P[0 .. NPOWER - 1]
+ * (WORK_TOTAL .. WORK_DRIVES). */
 static int power(workspace *ws, casadi_real t, const casadi_real *q, const casadi_real *v, const casadi_real *lam,
                  const casadi_real *u, const casadi_real *p, casadi_real *P) {
   ws->arg[0] = &t;
@@ -390,17 +416,28 @@ static int step(const casadi_real *q, const casadi_real *v, casadi_real t, const
   if (ws->track_work) {
     /* lambda and mu are each within O(h) of the exact multiplier, with errors of opposite
      * sign: the trapezoidal rule pairing each end with its own keeps the work second order */
-    casadi_real P0, P1;
+    casadi_real P0[NPOWER], P1[NPOWER];
     for (i = 0; i < NC; ++i) {
       ws->lam2[i] = 2 * ws->x[NQ + i] / h;
       ws->lam2[NC + i] = 2 * ws->dx[NQ + i] / h;
     }
-    if (power(ws, t, q, v, ws->lam2, u, p, &P0) != STEP_OK ||
-        power(ws, t1, q_next, v_next, ws->lam2 + NC, u, p, &P1) != STEP_OK)
+    if (power(ws, t, q, v, ws->lam2, u, p, P0) != STEP_OK ||
+        power(ws, t1, q_next, v_next, ws->lam2 + NC, u, p, P1) != STEP_OK)
       return STEP_KERNEL;
-    ws->step_work = h / 2 * (P0 + P1);
+    ws->step_work[WORK_DAMPERS] = ws->step_work[WORK_PUSH_OUT] = 0;
+    for (i = 0; i < NPOWER; ++i) {
+      ws->step_work[i] = h / 2 * (P0[i] + P1[i]);
+      if (i > WORK_TOTAL) ws->step_work[WORK_DAMPERS] -= ws->step_work[i];
+    }
+    ws->step_work[WORK_DAMPERS] += ws->step_work[WORK_TOTAL];
   }
   return STEP_OK;
+}
+
+/* acc += the work by class `add` (NWORK values). */
+static void work_add(casadi_real *acc, const casadi_real *add) {
+  int i;
+  for (i = 0; i < NWORK; ++i) acc[i] += add[i];
 }
 
 /* Warm start of the step after a successful one: w' = 2 v+ - w, h/2 lambda' = h/2 mu

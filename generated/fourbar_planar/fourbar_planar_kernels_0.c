@@ -108,6 +108,7 @@ extern "C" {
 #define casadi_s30 CASADI_PREFIX(s30)
 #define casadi_s31 CASADI_PREFIX(s31)
 #define casadi_s32 CASADI_PREFIX(s32)
+#define casadi_s33 CASADI_PREFIX(s33)
 #define casadi_s4 CASADI_PREFIX(s4)
 #define casadi_s5 CASADI_PREFIX(s5)
 #define casadi_s6 CASADI_PREFIX(s6)
@@ -496,6 +497,7 @@ static const casadi_int casadi_s32[36] =
   1, 3, 4, 5, 0, 2, 5, 6,
   1, 3, 5, 6, 0, 1, 0, 1,
   2, 3, 2, 3};
+static const casadi_int casadi_s33[3] = {5, 1, 1};
 
 static const casadi_real casadi_c0[8] = {6.6666666666666663e-01, 2.5000000000000000e-01, 6.6666666666666663e-01, 2.5000000000000000e-01, 2.5000000000000000e-01, 9.0000000000000002e-01, 2.5000000000000000e-01, 9.0000000000000002e-01};
 
@@ -4565,7 +4567,7 @@ CASADI_SYMBOL_EXPORT int fourbar_planar_step_project_work_bytes(casadi_int *sz_a
   return 0;
 }
 
-/* fourbar_planar_step_power:(t,q[4],v[4],lam[3],u[0],p)->(P) */
+/* fourbar_planar_step_power:(t,q[4],v[4],lam[3],u[0],p)->(P[5]) */
 static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15;
@@ -4651,6 +4653,11 @@ static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a14=(a14*a10);
   a00=(a00+a14);
   if (res[0]!=0) res[0][0]=a00;
+  a00=0.;
+  if (res[0]!=0) res[0][1]=a00;
+  if (res[0]!=0) res[0][2]=a00;
+  if (res[0]!=0) res[0][3]=a00;
+  if (res[0]!=0) res[0][4]=a00;
   return 0;
 }
 
@@ -4714,7 +4721,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* fourbar_planar_step_power_sparsity_in(cas
 
 CASADI_SYMBOL_EXPORT const casadi_int* fourbar_planar_step_power_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s0;
+    case 0: return casadi_s33;
     default: return 0;
   }
 }

@@ -428,7 +428,7 @@ extern const casadi_real heavy_top_gravity[3];
 
 /* ---- heavy_top_step_power ----------------------------------------------------
  * Stepper: power of the non-conservative forces and drives, dE/dt
- * In heavy_top_kernels_0.c; 2 instructions.
+ * In heavy_top_kernels_0.c; 6 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: heavy_top_t0.
  *   arg[1] q: 9x1, nnz 9 [m] coordinates. Default: heavy_top_q0.
@@ -437,7 +437,7 @@ extern const casadi_real heavy_top_gravity[3];
  *   arg[4] u: 0x1, nnz 0 inputs. Default: zeros.
  *   arg[5] p: 0x1, nnz 0 parameters. Default: zeros.
  * Outputs:
- *   res[0] P: 1x1, nnz 1 [W] v^T (F + grad V) + dV/dt + lam^T Phi_t.
+ *   res[0] P: 5x1, nnz 5 [W] [P, P_contacts, P_friction, P_inputs, P_drives]: P = v^T (F + grad V) + dV/dt + lam^T Phi_t and its parts (smooth contacts' normal forces less their springs, friction, inputs, drives).
  */
 #define HEAVY_TOP_STEP_POWER_IN_T_NNZ 1
 #define HEAVY_TOP_STEP_POWER_IN_Q_NNZ 9
@@ -445,7 +445,7 @@ extern const casadi_real heavy_top_gravity[3];
 #define HEAVY_TOP_STEP_POWER_IN_LAM_NNZ 6
 #define HEAVY_TOP_STEP_POWER_IN_U_NNZ 0
 #define HEAVY_TOP_STEP_POWER_IN_P_NNZ 0
-#define HEAVY_TOP_STEP_POWER_OUT_P_NNZ 1
+#define HEAVY_TOP_STEP_POWER_OUT_P_NNZ 5
 
 /* ---- heavy_top_step_outputs ----------------------------------------------------
  * Stepper: derived quantities of one trajectory sample

@@ -106,6 +106,7 @@ extern "C" {
 #define casadi_s29 CASADI_PREFIX(s29)
 #define casadi_s3 CASADI_PREFIX(s3)
 #define casadi_s30 CASADI_PREFIX(s30)
+#define casadi_s31 CASADI_PREFIX(s31)
 #define casadi_s4 CASADI_PREFIX(s4)
 #define casadi_s5 CASADI_PREFIX(s5)
 #define casadi_s6 CASADI_PREFIX(s6)
@@ -552,7 +553,8 @@ static const casadi_int casadi_s27[120] =
   7, 8, 9, 10, 11, 12, 13, 14};
 static const casadi_int casadi_s28[3] = {3, 1, 1};
 static const casadi_int casadi_s29[3] = {3, 3, 1};
-static const casadi_int casadi_s30[3] = {8, 1, 1};
+static const casadi_int casadi_s30[3] = {5, 1, 1};
+static const casadi_int casadi_s31[3] = {8, 1, 1};
 
 static const casadi_real casadi_c0[15] = 
   {2.9999999999999997e-04, 4.9960036108132049e-20, 2.9999999999999997e-04, 4.9960036108132049e-20, 2.9999999999999997e-04, 4.9960036108132049e-20, 2.9999999999999997e-04, 2.9999999999999997e-04,
@@ -7721,11 +7723,15 @@ CASADI_SYMBOL_EXPORT int heavy_top_step_project_work_bytes(casadi_int *sz_arg, c
   return 0;
 }
 
-/* heavy_top_step_power:(t,q[9],v[9],lam[6],u[0],p[0])->(P) */
+/* heavy_top_step_power:(t,q[9],v[9],lam[6],u[0],p[0])->(P[5]) */
 static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a0;
   a0=0.;
   if (res[0]!=0) res[0][0]=a0;
+  if (res[0]!=0) res[0][1]=a0;
+  if (res[0]!=0) res[0][2]=a0;
+  if (res[0]!=0) res[0][3]=a0;
+  if (res[0]!=0) res[0][4]=a0;
   return 0;
 }
 
@@ -7789,7 +7795,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* heavy_top_step_power_sparsity_in(casadi_i
 
 CASADI_SYMBOL_EXPORT const casadi_int* heavy_top_step_power_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s0;
+    case 0: return casadi_s30;
     default: return 0;
   }
 }
@@ -8077,7 +8083,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* heavy_top_step_outputs_sparsity_in(casadi
 
 CASADI_SYMBOL_EXPORT const casadi_int* heavy_top_step_outputs_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s30;
+    case 0: return casadi_s31;
     default: return 0;
   }
 }

@@ -82,7 +82,7 @@ static int simulate_adaptive(const casadi_real *q0, const casadi_real *v0, const
   workspace ws;
   char *block;
   casadi_real *y, *big, *mid, *fine, *y_new, *lam, *lam_fine, *x_prev, *dx_prev, *x_big, *u_buf, *phidot;
-  casadi_real t = t0, H = h0 > 0 ? h0 : dt, h_prev = 0, work = 0, work_mid = 0;
+  casadi_real t = t0, H = h0 > 0 ? h0 : dt, h_prev = 0, work[NWORK] = {0}, work_mid[NWORK] = {0};
   long row = 0, i;
   int status = STEP_OK, have_prev = 0, order;
   casadi_real richardson;
@@ -162,7 +162,7 @@ static int simulate_adaptive(const casadi_real *q0, const casadi_real *v0, const
         status = step_split(y, y + NQ, t, uk, p, Hs / 2, mid, mid + NQ, 0, &iters, &unused, &single, warm, &ws, 0);
       }
       if (status == STEP_OK) {
-        work_mid = ws.step_work;
+        memcpy(work_mid, ws.step_work, sizeof work_mid);
         predict(&ws);
         status = step_split(mid, mid + NQ, t + Hs / 2, uk, p, Hs / 2, fine, fine + NQ, lam_fine, &iters, &unused,
                             &single, 1, &ws, 0);
@@ -207,7 +207,10 @@ static int simulate_adaptive(const casadi_real *q0, const casadi_real *v0, const
       ++steps;
       sum_q += err_q;
       sum_v += err_v;
-      if (track_work) work += work_mid + ws.step_work; /* the two steps of Hs/2 */
+      if (track_work) { /* the two steps of Hs/2 */
+        work_add(work, work_mid);
+        work_add(work, ws.step_work);
+      }
       H = (land && Hs < H) ? fmax(H, Hs * factor) : Hs * factor;
     }
     if (q_out) memcpy(q_out + row * NQ, y, NQ * sizeof *y);

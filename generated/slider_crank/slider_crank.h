@@ -430,7 +430,7 @@ extern const casadi_real slider_crank_gravity[2];
 
 /* ---- slider_crank_step_power ----------------------------------------------------
  * Stepper: power of the non-conservative forces and drives, dE/dt
- * In slider_crank_kernels_0.c; 72 instructions.
+ * In slider_crank_kernels_0.c; 78 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: slider_crank_t0.
  *   arg[1] q: 8x1, nnz 8 [m] coordinates. Default: slider_crank_q0.
@@ -439,7 +439,7 @@ extern const casadi_real slider_crank_gravity[2];
  *   arg[4] u: 0x1, nnz 0 inputs. Default: zeros.
  *   arg[5] p: 1x1, nnz 1 parameters. Default: slider_crank_p0.
  * Outputs:
- *   res[0] P: 1x1, nnz 1 [W] v^T (F + grad V) + dV/dt + lam^T Phi_t.
+ *   res[0] P: 5x1, nnz 5 [W] [P, P_contacts, P_friction, P_inputs, P_drives]: P = v^T (F + grad V) + dV/dt + lam^T Phi_t and its parts (smooth contacts' normal forces less their springs, friction, inputs, drives).
  */
 #define SLIDER_CRANK_STEP_POWER_IN_T_NNZ 1
 #define SLIDER_CRANK_STEP_POWER_IN_Q_NNZ 8
@@ -447,7 +447,7 @@ extern const casadi_real slider_crank_gravity[2];
 #define SLIDER_CRANK_STEP_POWER_IN_LAM_NNZ 8
 #define SLIDER_CRANK_STEP_POWER_IN_U_NNZ 0
 #define SLIDER_CRANK_STEP_POWER_IN_P_NNZ 1
-#define SLIDER_CRANK_STEP_POWER_OUT_P_NNZ 1
+#define SLIDER_CRANK_STEP_POWER_OUT_P_NNZ 5
 
 /* ---- slider_crank_step_outputs ----------------------------------------------------
  * Stepper: derived quantities of one trajectory sample

@@ -105,6 +105,7 @@ extern "C" {
 #define casadi_s26 CASADI_PREFIX(s26)
 #define casadi_s27 CASADI_PREFIX(s27)
 #define casadi_s28 CASADI_PREFIX(s28)
+#define casadi_s29 CASADI_PREFIX(s29)
 #define casadi_s3 CASADI_PREFIX(s3)
 #define casadi_s4 CASADI_PREFIX(s4)
 #define casadi_s5 CASADI_PREFIX(s5)
@@ -562,7 +563,8 @@ static const casadi_int casadi_s27[69] =
   7, 10, 11, 0, 1, 4, 5, 6,
   7, 4, 5, 6, 7, 0, 1, 2,
   3, 0, 1, 5, 3};
-static const casadi_int casadi_s28[3] = {7, 1, 1};
+static const casadi_int casadi_s28[3] = {5, 1, 1};
+static const casadi_int casadi_s29[3] = {7, 1, 1};
 
 static const casadi_real casadi_c0[12] = 
   {2.6666666666666672e-01, 4.9999999999999989e-02, 2.6666666666666672e-01, 4.9999999999999989e-02, 4.9999999999999989e-02, 1.1000000000000001e+00, 4.9999999999999989e-02, 1.1000000000000001e+00,
@@ -6259,7 +6261,7 @@ CASADI_SYMBOL_EXPORT int slider_crank_step_project_work_bytes(casadi_int *sz_arg
   return 0;
 }
 
-/* slider_crank_step_power:(t,q[8],v[8],lam[8],u[0],p)->(P) */
+/* slider_crank_step_power:(t,q[8],v[8],lam[8],u[0],p)->(P[5]) */
 static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10;
   a00=arg[2]? arg[2][2] : 0;
@@ -6334,6 +6336,12 @@ static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw
   a07=(a07*a06);
   a00=(a00-a07);
   if (res[0]!=0) res[0][0]=a00;
+  a00=0.;
+  if (res[0]!=0) res[0][1]=a00;
+  if (res[0]!=0) res[0][2]=a00;
+  if (res[0]!=0) res[0][3]=a00;
+  a07=(-a07);
+  if (res[0]!=0) res[0][4]=a07;
   return 0;
 }
 
@@ -6397,7 +6405,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* slider_crank_step_power_sparsity_in(casad
 
 CASADI_SYMBOL_EXPORT const casadi_int* slider_crank_step_power_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s0;
+    case 0: return casadi_s28;
     default: return 0;
   }
 }
@@ -6755,7 +6763,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* slider_crank_step_outputs_sparsity_in(cas
 
 CASADI_SYMBOL_EXPORT const casadi_int* slider_crank_step_outputs_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s28;
+    case 0: return casadi_s29;
     default: return 0;
   }
 }

@@ -431,7 +431,7 @@ extern const casadi_real tensegrity_gravity[3];
 
 /* ---- tensegrity_step_power ----------------------------------------------------
  * Stepper: power of the non-conservative forces and drives, dE/dt
- * In tensegrity_kernels_1.c; 851 instructions.
+ * In tensegrity_kernels_1.c; 855 instructions.
  * Inputs:
  *   arg[0] t: 1x1, nnz 1 [s] time. Default: tensegrity_t0.
  *   arg[1] q: 18x1, nnz 18 [m] coordinates. Default: tensegrity_q0.
@@ -440,7 +440,7 @@ extern const casadi_real tensegrity_gravity[3];
  *   arg[4] u: 0x1, nnz 0 inputs. Default: zeros.
  *   arg[5] p: 3x1, nnz 3 parameters. Default: tensegrity_p0.
  * Outputs:
- *   res[0] P: 1x1, nnz 1 [W] v^T (F + grad V) + dV/dt + lam^T Phi_t.
+ *   res[0] P: 5x1, nnz 5 [W] [P, P_contacts, P_friction, P_inputs, P_drives]: P = v^T (F + grad V) + dV/dt + lam^T Phi_t and its parts (smooth contacts' normal forces less their springs, friction, inputs, drives).
  */
 #define TENSEGRITY_STEP_POWER_IN_T_NNZ 1
 #define TENSEGRITY_STEP_POWER_IN_Q_NNZ 18
@@ -448,7 +448,7 @@ extern const casadi_real tensegrity_gravity[3];
 #define TENSEGRITY_STEP_POWER_IN_LAM_NNZ 6
 #define TENSEGRITY_STEP_POWER_IN_U_NNZ 0
 #define TENSEGRITY_STEP_POWER_IN_P_NNZ 3
-#define TENSEGRITY_STEP_POWER_OUT_P_NNZ 1
+#define TENSEGRITY_STEP_POWER_OUT_P_NNZ 5
 
 /* ---- tensegrity_step_outputs ----------------------------------------------------
  * Stepper: derived quantities of one trajectory sample

@@ -54,6 +54,7 @@ extern "C" {
 #define casadi_s5 CASADI_PREFIX(s5)
 #define casadi_s6 CASADI_PREFIX(s6)
 #define casadi_s7 CASADI_PREFIX(s7)
+#define casadi_s8 CASADI_PREFIX(s8)
 #define casadi_sq CASADI_PREFIX(sq)
 
 /* Symbol visibility in DLLs */
@@ -145,7 +146,8 @@ static const casadi_int casadi_s3[3] = {18, 1, 1};
 static const casadi_int casadi_s4[3] = {3, 1, 1};
 static const casadi_int casadi_s5[3] = {6, 1, 1};
 static const casadi_int casadi_s6[3] = {0, 1, 1};
-static const casadi_int casadi_s7[3] = {8, 1, 1};
+static const casadi_int casadi_s7[3] = {5, 1, 1};
+static const casadi_int casadi_s8[3] = {8, 1, 1};
 
 /* tensegrity_step_solve:(K[24x24,276nz],r[24])->(x[24]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
@@ -12642,7 +12644,7 @@ CASADI_SYMBOL_EXPORT int tensegrity_step_project_work_bytes(casadi_int *sz_arg, 
   return 0;
 }
 
-/* tensegrity_step_power:(t,q[18],v[18],lam[6],u[0],p[3])->(P) */
+/* tensegrity_step_power:(t,q[18],v[18],lam[6],u[0],p[3])->(P[5]) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
@@ -13371,7 +13373,7 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a13=(a13/a01);
   a12=(a12-a13);
   a12=(a05-a12);
-  a04=(a04<a12);
+  a13=(a04<a12);
   a34=(2.*a34);
   a12=(2.*a12);
   a53=(a53*a01);
@@ -13380,7 +13382,7 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a12=(a12/a05);
   a34=(a34*a12);
   a05=(-a34);
-  a05=(a04?a05:0);
+  a05=(a13?a05:0);
   a81=(a81+a05);
   a51=(a91?a51:0);
   a81=(a81+a51);
@@ -13399,7 +13401,7 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a37=(2.*a37);
   a37=(a37*a12);
   a35=(-a37);
-  a35=(a04?a35:0);
+  a35=(a13?a35:0);
   a62=(a62+a35);
   a23=(a91?a23:0);
   a62=(a62+a23);
@@ -13419,7 +13421,7 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a39=(2.*a39);
   a39=(a39*a12);
   a12=(-a39);
-  a12=(a04?a12:0);
+  a12=(a13?a12:0);
   a41=(a41+a12);
   a91=(a91?a33:0);
   a41=(a41+a91);
@@ -13473,7 +13475,7 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a84=(-a84);
   a84=(a89?a84:0);
   a47=(a47+a84);
-  a34=(a04?a34:0);
+  a34=(a13?a34:0);
   a47=(a47+a34);
   a68=(a68+a47);
   a44=(a44*a68);
@@ -13484,7 +13486,7 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a86=(-a86);
   a86=(a89?a86:0);
   a49=(a49+a86);
-  a37=(a04?a37:0);
+  a37=(a13?a37:0);
   a49=(a49+a37);
   a70=(a70+a49);
   a45=(a45*a70);
@@ -13496,13 +13498,17 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a87=(-a87);
   a89=(a89?a87:0);
   a52=(a52+a89);
-  a04=(a04?a39:0);
-  a52=(a52+a04);
+  a13=(a13?a39:0);
+  a52=(a52+a13);
   a52=(a52+a67);
   a31=(a31+a52);
   a38=(a38*a31);
   a00=(a00+a38);
   if (res[0]!=0) res[0][0]=a00;
+  if (res[0]!=0) res[0][1]=a04;
+  if (res[0]!=0) res[0][2]=a04;
+  if (res[0]!=0) res[0][3]=a04;
+  if (res[0]!=0) res[0][4]=a04;
   return 0;
 }
 
@@ -13566,7 +13572,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* tensegrity_step_power_sparsity_in(casadi_
 
 CASADI_SYMBOL_EXPORT const casadi_int* tensegrity_step_power_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s2;
+    case 0: return casadi_s7;
     default: return 0;
   }
 }
@@ -14876,7 +14882,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* tensegrity_step_outputs_sparsity_in(casad
 
 CASADI_SYMBOL_EXPORT const casadi_int* tensegrity_step_outputs_sparsity_out(casadi_int i) {
   switch (i) {
-    case 0: return casadi_s7;
+    case 0: return casadi_s8;
     default: return 0;
   }
 }

@@ -21,6 +21,7 @@ import numpy as np
 
 from ncgen.assembly.functions import _accel
 from ncgen.assembly.mass import mass_is_regular, sparse_dm
+from ncgen.assembly.stepper_equations import power_function
 from ncgen.model.data import model_data
 
 
@@ -120,31 +121,11 @@ def potential_force_residual_function(model) -> ca.Function:
 
 
 def power_parts_function(model) -> ca.Function:
-    """``(t, q, v, lam, u, p) -> [P, P_contacts, P_inputs, P_drives]`` (W): the power of all
-    forces and its parts for the energy balance (:mod:`ncgen.runtime.energy_balance`), kept in
-    the model's data."""
+    """``(t, q, v, lam, u, p) -> [P, P_contacts, P_friction, P_inputs, P_drives]`` (W): the
+    power of all forces and its parts for the energy balance
+    (:mod:`ncgen.runtime.energy_balance`; the stepper's ``step_power``,
+    :func:`~ncgen.assembly.stepper_equations.power_function`), kept in the model's data."""
     data = model_data(model)
-    if "power_parts" in data.functions:
-        return data.functions["power_parts"]
-    f = model.functions
-    t, q, v = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq)
-    lam, u, p = ca.SX.sym("lam", model.nc), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
-    V = ca.sum1(model.potential_terms(t, q, p))
-    F = f["F"](t, q, v, u, p)
-    F0 = f["F"](t, q, v, ca.DM.zeros(model.nu), p)
-    drives = ca.dot(lam, ca.densify(f["phi_t"](t, q, p))) + ca.jacobian(V, t)
-    total = ca.dot(v, F + ca.gradient(V, q)) + drives
-    contacts = ca.SX(0)
-    if getattr(model, "nk", 0) and getattr(model, "contact_model", "smooth") == "smooth":
-        g = f["gap"](q, p)
-        WN, WT = f["contact_jacobian"](q, p)
-        fN, fT = f["contact_force"](t, q, v, p)
-        rate = -ca.mtimes(WN, v)
-        for k, c in enumerate(model.contacts):
-            delta = ca.fmax(0, -g[k])
-            spring = ca.if_else(delta > 0, c["stiffness"] * delta ** c["exponent"], 0)
-            contacts += -rate[k] * (fN[k] - spring)
-        contacts += ca.dot(fT, ca.mtimes(WT, v))
-    out = ca.Function("power_parts", [t, q, v, lam, u, p], [total, contacts, ca.dot(v, F - F0), drives])
-    data.functions["power_parts"] = out
-    return out
+    if "power_parts" not in data.functions:
+        data.functions["power_parts"] = power_function(model)
+    return data.functions["power_parts"]

@@ -118,7 +118,9 @@ DOCS = {
         "purpose": "Stepper: power of the non-conservative forces and drives, dE/dt",
         "inputs": {"t": ("time", "s"), "q": ("coordinates", "m"), "v": ("coordinate rates", "m/s"),
                    "lam": ("multipliers", "N per unit of Phi"), "u": ("inputs", ""), "p": ("parameters", "")},
-        "outputs": {"P": ("v^T (F + grad V) + dV/dt + lam^T Phi_t", "W")}},
+        "outputs": {"P": ("[P, P_contacts, P_friction, P_inputs, P_drives]: P = v^T (F + grad V) + dV/dt + "
+                          "lam^T Phi_t and its parts (smooth contacts' normal forces less their springs, "
+                          "friction, inputs, drives)", "W")}},
     "step_outputs": {
         "purpose": "Stepper: derived quantities of one trajectory sample",
         "inputs": {"t": ("time", "s"), "q": ("coordinates", "m"), "v": ("coordinate rates", "m/s"),
@@ -247,17 +249,40 @@ def contact_function(model) -> ca.Function:
                        ["q", "v", "p"], ["g", "Wt", "U"])
 
 
+#: The parts of ``step_power``'s output after the total (``WORK_CONTACTS`` .. ``WORK_DRIVES``
+#: of ``runtime/ncgen_rattle.h``); the dampers' power is the total less these.
+POWER_PARTS = ("contacts", "friction", "inputs", "drives")
+
+
 def power_function(model) -> ca.Function:
-    """``step_power``: ``P = vᵀ(F + ∇V) + ∂V/∂t + λᵀΦ_t`` (W).  Along a motion
-    ``dE/dt = vᵀ M a + ∇V·v + ∂V/∂t`` with ``M a = F − Aᵀλ`` and ``A v = −Φ_t``, so ``P`` is
-    exactly the rate of change of ``E = T + V``; it vanishes for conservative models."""
+    """``step_power``: ``[P, P_contacts, P_friction, P_inputs, P_drives]`` (W), ``P = vᵀ(F +
+    ∇V) + ∂V/∂t + λᵀΦ_t``.  Along a motion ``dE/dt = vᵀ M a + ∇V·v + ∂V/∂t`` with ``M a = F −
+    Aᵀλ`` and ``A v = −Φ_t``, so ``P`` is exactly the rate of change of ``E = T + V``; it
+    vanishes for conservative models.  Its parts: the smooth contacts' normal forces less
+    their springs ``−δ̇ (f_N − k δⁿ)`` (the springs are in V), their friction ``f_T·(W_T v)``,
+    the inputs ``vᵀ(F(u) − F(0))`` and the drives ``λᵀΦ_t + ∂V/∂t``; the rest, ``vᵀ(F(0) +
+    ∇V)`` less the contacts', is the dampers' and every other non-conservative force's."""
     f = model.functions
     t, q, v = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq)
     lam, u, p = ca.SX.sym("lam", model.nc), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
     V = ca.sum1(model.potential_terms(t, q, p))
-    P = (ca.dot(v, f["F"](t, q, v, u, p) + ca.gradient(V, q)) + ca.jacobian(V, t)
-         + ca.dot(lam, f["phi_t"](t, q, p)))
-    return ca.Function("step_power", [t, q, v, lam, u, p], [ca.densify(P)], ["t", "q", "v", "lam", "u", "p"], ["P"])
+    F = f["F"](t, q, v, u, p)
+    inputs = ca.dot(v, F - f["F"](t, q, v, ca.DM.zeros(model.nu), p)) if model.nu else ca.SX(0)
+    drives = ca.jacobian(V, t) + ca.dot(lam, ca.densify(f["phi_t"](t, q, p)))
+    P = ca.dot(v, F + ca.gradient(V, q)) + drives
+    normal, friction = ca.SX(0), ca.SX(0)
+    if getattr(model, "nk", 0) and getattr(model, "contact_model", "smooth") == "smooth":
+        g = f["gap"](q, p)
+        WN, WT = f["contact_jacobian"](q, p)
+        fN, fT = f["contact_force"](t, q, v, p)
+        rate = -ca.mtimes(WN, v)
+        for k, c in enumerate(model.contacts):
+            delta = ca.fmax(0, -g[k])
+            spring = ca.if_else(delta > 0, c["stiffness"] * delta ** c["exponent"], 0)
+            normal += -rate[k] * (fN[k] - spring)
+        friction = ca.dot(fT, ca.mtimes(WT, v))
+    out = ca.densify(ca.vertcat(P, normal, friction, inputs, drives))
+    return ca.Function("step_power", [t, q, v, lam, u, p], [out], ["t", "q", "v", "lam", "u", "p"], ["P"])
 
 
 def outputs_function(model, check: ca.Function, power: ca.Function) -> ca.Function:
@@ -266,7 +291,7 @@ def outputs_function(model, check: ca.Function, power: ca.Function) -> ca.Functi
     lam, u, p = ca.MX.sym("lam", model.nc), ca.MX.sym("u", model.nu), ca.MX.sym("p", model.np)
     T, V = model.functions["energy"](t, q, v, p)
     r_max, rd_max = check(t, q, v, p)
-    parts = [T, V, r_max, rd_max, power(t, q, v, lam, u, p)]
+    parts = [T, V, r_max, rd_max, power(t, q, v, lam, u, p)[0]]
     if model.marker_names:
         parts.append(ca.vec(model.functions["markers"](q, v)[0]))
     return ca.Function("step_outputs", [t, q, v, lam, u, p], [ca.densify(ca.vertcat(*parts))],

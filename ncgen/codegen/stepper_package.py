@@ -42,8 +42,15 @@ STATUS = {
 }
 #: Status of a loop stopped through ``options->stop`` (``<MODEL>_STEP_INTERRUPTED``).
 STEP_INTERRUPTED = 8
-#: Columns of the per-output-row statistics of the C loops (``<MODEL>_STEP_NSTATS``).
-STATS = ("steps", "newton_iterations", "splits", "error_q", "error_v", "work")
+#: The classes of work the C loops accumulate step by step beside the total (``WORK_*`` of
+#: ``runtime/ncgen_rattle.h``, in its order): contacts' normal forces and impulses, friction
+#: forces and impulses, inputs, drives (rheonomic constraints, time-dependent potentials),
+#: dampers and every other force doing work outside V, and the energy changed by the
+#: push-out of penetrating nonsmooth contacts.
+WORK_PARTS = ("contacts", "friction", "inputs", "drives", "dampers", "push_out")
+#: Columns of the per-output-row statistics of the C loops (``<MODEL>_STEP_NSTATS``); the
+#: work columns hold the work (J) since the start of the run.
+STATS = ("steps", "newton_iterations", "splits", "error_q", "error_v", "work") + tuple(f"work_{k}" for k in WORK_PARTS)
 #: Columns the nonsmooth contact stepper appends to :data:`STATS` (fixed steps): contact
 #: solves whose projected Gauss–Seidel stopped at PGS_MAX_ITER sweeps, the largest
 #: last-sweep change of a contact velocity among them, relative to 1 + max |U|, and the

@@ -32,7 +32,7 @@ from ncgen.codegen.stepper_abi import bind_stepper
 from ncgen.codegen.stepper_package import MAX_HALVINGS, MAX_ITER, STATS, STATUS, TOL, n_stats
 from ncgen.errors import NcgenError
 from ncgen.runtime.dae import load_dae
-from ncgen.runtime.energy_balance import by_remainder
+from ncgen.runtime.energy_balance import nonsmooth_contacts
 from ncgen.runtime.inputs import input_samples, parameter_values, time_grid
 from ncgen.runtime.library import compiled_functions
 from ncgen.runtime.run_start import initial_multipliers, initial_state, point_bytes
@@ -369,7 +369,7 @@ class _Runs:
                 if k[i] > 1:
                     self.LAM[i, 1:k[i]] = st.multipliers(self.Q[i, 1:k[i]], self.V[i, 1:k[i]],
                                                          None if U[i] is None else U[i][1:])
-        elif not by_remainder(model):
+        elif not nonsmooth_contacts(model):
             self._flat_multipliers([i for i in runs if k[i] > 1], k)
         for i in runs:
             self.Y[i, :k[i]] = st.outputs(t[:k[i]], self.Q[i, :k[i]], self.V[i, :k[i]], self.LAM[i, :k[i]], U[i],

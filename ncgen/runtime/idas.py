@@ -18,6 +18,13 @@ error-test failures), sparse Jacobian ``∂(ode, alg)/∂(y, z)`` derived by Cas
 SX expressions, or through the compiled Jacobian kernel) and factorised by ``linear_solver``
 (default ``"csparse"``, a sparse LU).  Inputs enter as the integrator's piecewise-constant
 controls, one column per grid interval (see :mod:`ncgen.runtime.inputs`).
+
+With a ``power`` function ``(t, q, v, λ, u, p) -> P`` (the energy balance's powers,
+their inputs with ``extra(t, q, v, p)`` added: a compiled controller's and the joint dynamics',
+:func:`ncgen.assembly.stepper_equations.power_function`) IDAS integrates ``P`` as quadrature
+states beside the motion (left out of its error test), so that the work of each class over
+each grid interval (``last_work`` after :meth:`ChunkedIDAS.advance`) is integrated on IDAS's
+own steps, to the run's tolerance.
 """
 from __future__ import annotations
 
@@ -65,7 +72,10 @@ class ChunkedIDAS:
     linear_solver: str
     expand: bool
     algebraic: Callable | None = None
+    power: ca.Function | None = None
+    extra: ca.Function | None = None
     stats: dict = field(default_factory=lambda: dict.fromkeys(STAT_KEYS, 0))
+    last_work: np.ndarray | None = None
 
     def __post_init__(self):
         self.nx = self.dae.size1_in(1)
@@ -88,9 +98,16 @@ class ChunkedIDAS:
         P, U = ca.MX.sym("p", np_ + 1 + nx), ca.MX.sym("u", ncol)
         p, t_s, xdot_s = P[:np_], P[np_], P[np_ + 1:]
         t = t_s + tau
-        ode, alg = self.dae(t, y + tau * xdot_s, z, self._input(U, t), p)
+        x, u = y + tau * xdot_s, self._input(U, t)
+        ode, alg = self.dae(t, x, z, u, p)
+        quad = ca.MX(0, 1)
+        if self.power is not None:
+            nq = nx // 2
+            q, v = x[:nq], x[nq:]
+            applied = u if self.extra is None else u + self.extra(t, q, v, p)
+            quad = self.power(t, q, v, z[nq:], applied, p)
         return ca.Function("ncgen_shifted_dae", [tau, y, z, P, U],
-                           [ode - xdot_s, alg, ca.MX(0, 1), ca.MX(0, 1)], ca.dyn_in(), ca.dyn_out())
+                           [ode - xdot_s, alg, quad, ca.MX(0, 1)], ca.dyn_in(), ca.dyn_out())
 
     def integrator(self, n: int, max_steps: int | None = None) -> ca.Function:
         """The integrator over ``n`` grid intervals, at most ``max_steps`` (default
@@ -124,7 +141,8 @@ class ChunkedIDAS:
                 ) -> tuple[np.ndarray, np.ndarray]:
         """States ``(X, Z)`` at the ``n = columns.shape[1]`` grid times after ``t_s``, shapes
         ``(n, nx)`` and ``(n, nz)``, at most ``max_steps`` steps per interval (default
-        ``self.max_steps``); raises :class:`ChunkFailure`."""
+        ``self.max_steps``); raises :class:`ChunkFailure`.  With ``power``, ``last_work``
+        holds the integral of each power over each interval, shape ``(n, len(P))``."""
         n = columns.shape[1]
         if self.algebraic is not None:
             z = self.algebraic(t_s, x, self._input(columns[:, 0], t_s))
@@ -143,6 +161,9 @@ class ChunkedIDAS:
         st = F.stats()
         for k in STAT_KEYS:
             self.stats[k] += int(st.get(k, 0))
+        if self.power is not None:
+            cumulative = np.array(res["qf"]).reshape(-1, n).T
+            self.last_work = np.diff(cumulative, axis=0, prepend=0.0)
         tau = self.h * np.arange(1, n + 1)
         X = np.array(res["xf"]).T + tau[:, None] * xdot[None, :]
         return X, np.array(res["zf"]).T.reshape(n, self.nz)

@@ -18,7 +18,8 @@ from ncgen.interrupts import raise_if_interrupted
 from ncgen.runtime.backend_policy import choose_backend
 from ncgen.runtime.dae import load_dae
 from ncgen.runtime.diagnose import explain, shift_time
-from ncgen.runtime.energy_balance import idas_report
+from ncgen.assembly.derived import power_parts_function
+from ncgen.runtime.energy_balance import idas_report, interval_works
 from ncgen.runtime.feedback import FeedbackFailed, with_partial
 from ncgen.runtime.idas import ChunkedIDAS, ChunkFailure
 from ncgen.runtime.inputs import hold_columns
@@ -137,8 +138,10 @@ def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions, *, c
     watch = project == "auto" and model.nq * model.nc <= AUTO_MAX_SIZE and model.nc > 0
     projector = ManifoldProjector(model, pv, atol) if (project is True or watch) and feedback is None else None
     m = 1 if projector is None else math.ceil((t[1] - t[0]) / WATCHED_SAMPLE - 1e-9)
+    balance = feedback is None and not is_conservative(model, inputs=bool(np.any(U != 0)) or extra is not None)
     runner = ChunkedIDAS(dae, h=float(t[1] - t[0]) / m, nu=model.nu, hold=hold, rtol=rtol, atol=atol,
                          max_steps=opts.max_steps, linear_solver=opts.linear_solver, expand=(used == "vm"),
+                         power=power_parts_function(model) if balance else None, extra=extra,
                          algebraic=lambda tk, x, uk: _algebraic(
                              model, tk, x, uk + _extra_value(model, extra, tk, x[:model.nq], x[model.nq:], pv), pv))
     if feedback is not None:
@@ -153,9 +156,11 @@ def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions, *, c
     bar = Progress(t0, t[-1], opts.progress, label=f"simulating {model.name}: ")
     start = time.perf_counter()
     grid = t if m == 1 else t[0] + (t[-1] - t[0]) * np.arange(m * (len(t) - 1) + 1) / (m * (len(t) - 1))
+    W = np.full((len(grid), 5), np.nan) if balance else None      # each interval's work by class (quadratures)
     try:
         X, Z, failure, projected_from = _run(runner, grid, np.concatenate([q, v]), np.concatenate([a, lam]),
-                                             np.repeat(columns, m, axis=1), pv, bar, projector, bridge, auto=watch)
+                                             np.repeat(columns, m, axis=1), pv, bar, projector, bridge, auto=watch,
+                                             work=W)
     finally:
         bar.close()
     reached = float(grid[len(X) - 1])        # the last good time, on the watched grid
@@ -165,6 +170,10 @@ def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions, *, c
         message = _failure_message(model, failure, grid, len(X) - 1, X[-1], Z[-1, model.nq:], U[(len(X) - 1) // m],
                                    pv, dae)
     changes, departure = _branch_changes(model, projector, bridge, grid, X) if projector is not None else ([], 0.0)
+    work = None
+    if W is not None:
+        u_grid = U[np.minimum(np.arange(len(X)) // m, len(U) - 1)]
+        work = interval_works(model, grid[:len(X)], X, Z, u_grid, pv, W[:len(X)])[::m]
     X, Z = X[::m], Z[::m]
     nq, k = model.nq, len(X) - 1
     stats = dict(runner.stats)
@@ -186,7 +195,7 @@ def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions, *, c
     U_applied = U[:k + 1] + np.array([_extra_value(model, extra, t[i], X[i, :nq], X[i, nq:], pv)
                                        for i in range(k + 1)]) if extra is not None else U[:k + 1]
     traj = Trajectory.from_states(model, t[:k + 1], X[:, :nq], X[:, nq:], Z[:, nq:], U_applied, pv, info)
-    traj.info["energy"] = idas_report(model, traj, is_conservative(model, inputs=bool(np.any(U_applied != 0))))
+    traj.info["energy"] = idas_report(model, traj, is_conservative(model, inputs=bool(np.any(U_applied != 0))), work)
     if failure is INTERRUPTED:
         raise SimulationInterrupted(message, time=reached, trajectory=traj)
     if failure is not None:
@@ -328,7 +337,8 @@ class _bridge:
         return x1, _algebraic(self.model, t1, x1, u1, self.p)
 
 
-def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=None, bridge=None, auto=False):
+def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=None, bridge=None, auto=False,
+         work=None):
     """States on the grid up to the end or the first failure: ``(X, Z, failure or None,
     index of the first output time from which the run was bridged or projected, or None)``.
 
@@ -348,7 +358,9 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
     that starts or ends at a near-singular configuration, that could hide one, or that IDAS
     fails on not far from one (:data:`FAILING_NEAR_SINGULAR`), is crossed by ``bridge``
     instead, from the projected state.  ``t`` is the watched grid (see :data:`WATCHED_SAMPLE`).
-    ``auto=False``: the state is also projected after every interval."""
+    ``auto=False``: the state is also projected after every interval.  ``work`` (an array of
+    a row per grid time, or None): row ``k + 1`` receives the work of each class over interval
+    ``k`` from IDAS's quadratures (``runner.last_work``); a bridged interval's stays as it was."""
     n_int = len(t) - 1
     watching = projector is not None
     full = 1 if watching and not auto else max(1, math.ceil(n_int / CHUNKS))
@@ -364,6 +376,8 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
 
     def advance(k, n, max_steps=None):
         X[k + 1:k + n + 1], Z[k + 1:k + n + 1] = runner.advance(t[k], X[k], Z[k], columns[:, k:k + n], p, max_steps)
+        if work is not None:
+            work[k + 1:k + n + 1] = runner.last_work
         R[k + 1:k + n + 1] = np.nan
         top[0] = k + n
 

@@ -58,13 +58,13 @@ import numpy as np
 from ncgen.codegen.stepper_package import STATS, STATUS, STEP_INTERRUPTED, TOL
 from ncgen.errors import NcgenError, SimulationError, SimulationInterrupted, option
 from ncgen.progress import Ticker
-from ncgen.runtime.energy_balance import balance_parts, by_remainder
+from ncgen.runtime.energy_balance import balance_report, nonsmooth_contacts, stepper_works
 from ncgen.runtime.joint_dynamics import multipliers_at_samples
 from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.stepper_checks import (SHADOW_FACTOR, check_fixed, check_global, contact_report, energy_report,
                                           error_estimate, is_conservative, shadow_estimates,
                                           shadow_report, trusted_before_failure, warn_unconverged)
-from ncgen.runtime.table_stepper import load_any_stepper, table_balance_parts
+from ncgen.runtime.table_stepper import load_any_stepper
 from ncgen.runtime.trajectory import NAME_KEYS, Trajectory, derived_outputs
 
 #: With error control, the Newton tolerance is at most this fraction of min(rtol, atol)
@@ -258,7 +258,7 @@ def _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info,
     v = np.vstack([v0, V[:rows]])
     tt, u = t[:rows + 1], U[:rows + 1]
     tables = getattr(stepper, "kernels", "flat") == "tables"      # no flat function on the tables' path
-    if by_remainder(model):       # nonsmooth contacts: the step's own multipliers (μ)
+    if nonsmooth_contacts(model):  # nonsmooth contacts: the step's own multipliers (μ)
         lam = np.vstack([lam0, LAM[:rows]])
     elif tables:
         lam = stepper.multipliers(q, v, u)
@@ -277,7 +277,7 @@ def _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info,
                                                  info.get("order") == 4)
     traj.info["energy"] = energy_report(traj, work, conservative, S[:rows])
     if not conservative and len(traj):
-        traj.info["energy"]["parts"] = table_balance_parts(tt, Y[:, 4]) if tables else balance_parts(model, traj)
+        balance_report(model, traj.info["energy"], stepper_works(S[:rows]))
     traj.info["wall_time"] = time.perf_counter() - start
     return traj
 

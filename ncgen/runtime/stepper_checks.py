@@ -89,6 +89,14 @@ GLOBAL_FACTOR = 100.0
 
 
 
+def created_work(S: np.ndarray) -> np.ndarray:
+    """The work (J) of every class but the contacts' (normal, friction, push-out) from the
+    start to each output row of a stepper's run with statistics ``S``, 0 prepended: ``E −
+    E0`` less it is the contacts' doing, which must never be a gain."""
+    rest = S[:, STATS.index("work")] - sum(S[:, STATS.index(f"work_{k}")] for k in ("contacts", "friction", "push_out"))
+    return np.concatenate([[0.0], rest])
+
+
 def check_fixed(model, traj, S: np.ndarray, h: float, substeps: int, contacts: bool, conservative: bool,
                 after: str = "") -> None:
     """Raise :class:`~ncgen.errors.SimulationError` from the first output interval where a
@@ -421,8 +429,8 @@ def untrusted_row(model, traj, S: np.ndarray, h: float, contacts: bool = False) 
     gq, _ = global_estimates(S, traj.info.get("substeps"))
     size = max(float(np.max(np.abs(model.q0), initial=0.0)), 1e-9)
     if contacts:
-        E = traj.energy
-        gain = (E - E[0] - work)[1:]                    # a gain only: contacts dissipate
+        E = traj.energy                                 # a gain only: contacts dissipate
+        gain = (E - E[0] - created_work(S))[1:]         # E - E0 less the work of all but the contacts
         e_rel = gain / energy_denominator(model, traj, work, S, np.maximum(gain, 0.0))
         residual = S[:, len(STATS) + CONTACT_STATS.index("pgs_residual")]
     else:

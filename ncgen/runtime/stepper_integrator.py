@@ -14,9 +14,10 @@ from ncgen.runtime.feedback import FeedbackFailed, with_partial
 from ncgen.runtime.integrator import Run, refuse_integrator
 from ncgen.runtime.run_start import failed_at_start
 from ncgen.runtime.options import SimulationOptions
-from ncgen.codegen.stepper_package import CONTACT_STATS, STATS
+from ncgen.codegen.stepper_package import CONTACT_STATS, STATS, WORK_PARTS
 from ncgen.runtime.stepper import simulate_stepper
 from ncgen.runtime.table_stepper import load_any_stepper, stepper_kernels
+from ncgen.runtime.energy_balance import balance_report, stepper_works
 from ncgen.runtime.stepper_checks import check_fixed, energy_report, is_conservative, trusted_before_failure
 from ncgen.runtime.trajectory import Trajectory
 
@@ -133,8 +134,9 @@ def _interval_row(part: Trajectory) -> list:
     """One output interval's statistics in the columns of the fixed-step run's (``STATS``
     and, with nonsmooth contacts, ``CONTACT_STATS``); no error estimate (-1)."""
     stats, energy = part.info["stats"], part.info["energy"]
+    parts = energy.get("parts", {})
     row = [stats["nsteps"], stats["newton_iterations"], stats.get("step_splits", 0), -1.0, -1.0,
-           energy.get("work", 0.0)]
+           energy.get("work", 0.0)] + [parts.get(k, 0.0) for k in WORK_PARTS]
     if "contacts" in part.info:
         row += [part.info["contacts"][key] for key in CONTACT_STATS]
     return row
@@ -150,10 +152,13 @@ def _checked(model, opts: SimulationOptions, traj: Trajectory, S: np.ndarray, af
     if not len(S):
         return traj
     conservative = is_conservative(model, inputs=bool(np.any(traj.u != 0)))
-    work = np.concatenate([[0.0], np.cumsum(S[:, STATS.index("work")])])
     S = S.copy()
-    S[:, STATS.index("work")] = work[1:]
+    columns = [STATS.index("work")] + [STATS.index(f"work_{k}") for k in WORK_PARTS]
+    S[:, columns] = np.cumsum(S[:, columns], axis=0)
+    work = np.concatenate([[0.0], S[:, STATS.index("work")]])
     traj.info["energy"] = energy_report(traj, work, conservative, S)
+    if not conservative:
+        balance_report(model, traj.info["energy"], stepper_works(S))
     if not opts.check:
         return traj
     if opts.rtol is None:

@@ -196,15 +196,6 @@ class TableStepper(CompiledStepper):
         return lam[0] if one else lam
 
 
-def table_balance_parts(t: np.ndarray, P: np.ndarray) -> dict[str, float]:
-    """The energy balance's parts (:mod:`ncgen.runtime.energy_balance`) of a run on the tables
-    from the power ``P`` of its outputs (W, at the output times ``t``): every covered force
-    that does work outside V is a damper or a constant load (``"dampers"``, trapezoidal
-    rule); no drives."""
-    W = float(np.sum(0.5 * np.diff(np.asarray(t, float)) * (P[1:] + P[:-1]))) if len(t) > 1 else 0.0
-    return {"dampers": W, "drives": 0.0}
-
-
 def table_stepper(model, library: ElementLibrary | None = None) -> TableStepper:
     """The table-driven stepper of ``model`` (raises
     :class:`~ncgen.codegen.model_tables.UnsupportedElements` naming the elements not covered).

@@ -395,23 +395,19 @@ def _json_default(x):
 
 
 #: How the summary names the parts of an energy balance (ncgen.runtime.energy_balance).
-_PART_NAMES = {"contacts": "contacts", "dampers": "dampers and other forces", "inputs": "inputs",
-               "drives": "drives"}
+_PART_NAMES = {"contacts": "contacts (normal)", "friction": "friction", "dampers": "dampers and other forces",
+               "inputs": "inputs", "drives": "drives", "push_out": "contact push-out"}
 
 
 def _balance_line(traj, energy: dict) -> str:
-    """The summary's energy balance: change of E, the work of each part, the residual."""
-    from ncgen.runtime.energy_balance import by_remainder
-
+    """The summary's energy balance: change of E, the work of each class, the residual."""
     change = float(traj.energy[-1] - traj.energy[0])
     parts = energy.get("parts") or {}
     tiny = 1e-9 * (abs(float(traj.energy[0])) + abs(energy["work"]) + abs(change))
     shown = ", ".join(f"{_PART_NAMES[k]} {w:.4g} J" for k, w in parts.items() if abs(w) > tiny)
+    how = energy.get("quadrature", "accumulated step by step in the integrator")
     head = f"  energy balance (dissipative or driven run): E(t0) = {traj.energy[0]:.6g} J, E(end) - E(t0) = {change:.4g} J"
-    if traj.model is not None and by_remainder(traj.model):
-        return (f"{head} = work of {shown or 'nothing'} (the contacts' part, impacts and friction, is the "
-                f"balance's remainder: no residual to check)")
-    split = f" ({shown}; parts by the trapezoidal rule at the output times)" if shown else ""
+    split = f" ({shown}; {how})" if shown else ""
     return (f"{head}; work W = {energy['work']:.4g} J{split}; residual max |E - E(t0) - W| = "
             f"{energy['balance_error']:.3g} J ({energy['relative']:.2g} relative)")
 

@@ -53,11 +53,12 @@ def summary_figure(traj, points=None):
     drift = traj.energy - traj.energy[0]
     factor, unit = unit_scale(drift, "J")
     ax.plot(t, drift / factor, color="tab:red", label="E - E(t0)")
-    if traj.info.get("energy", {}).get("conservative") is False and traj.model is not None:
-        from ncgen.runtime.energy_balance import works
-        w = works(traj.model, t, traj.q, traj.v, traj.lam, traj.u, traj.p)
-        for key, style in (("contacts", ":"), ("dampers", "--"), ("inputs", "-."), ("drives", "-.")):
-            if np.any(w[key] != 0):
+    works = traj.info.get("energy", {}).get("works")
+    if traj.info.get("energy", {}).get("conservative") is False and works:
+        w = {k: np.asarray(x, float) for k, x in works.items()}
+        for key, style in (("contacts", ":"), ("friction", ":"), ("dampers", "--"), ("inputs", "-."),
+                           ("drives", "-."), ("push_out", ":")):
+            if key in w and np.any(w[key] != 0):
                 ax.plot(t, w[key] / factor, style, lw=0.9, label=f"work of {key}")
         ax.plot(t, (drift - w["total"]) / factor, color="k", lw=0.8, label="residual E - E(t0) - W")
         ax.legend(fontsize=7)

@@ -23,7 +23,7 @@
 #define NNZ_K 4
 #define MASS_SCALE M_P
 #define MAX_HALVINGS 10
-#define NSTATS 10
+#define NSTATS 16
 #define NOUT 5
 
 #define NCGEN_CONTACTS
@@ -145,8 +145,9 @@ static int k_project(const casadi_real **arg, casadi_real **res, casadi_int *iw,
 }
 
 static int k_power(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  int i;
   (void) arg, (void) iw, (void) w, (void) mem;
-  *res[0] = 0;
+  for (i = 0; i < 5; ++i) res[0][i] = 0;
   return 0;
 }
 
@@ -300,7 +301,7 @@ static void test_contact_steps(void) {
   int status;
   mu[0] = 0.5, mu[1] = 0;
   restitution[0] = 0, restitution[1] = 0.5;
-  status = run_fixed(q0, vel0, 0, 0, h, N, 1, 0, 0, 0, q, v, 0, 0, stats, &o, 0, 0, &done, &splits, imp);
+  status = run_fixed(q0, vel0, 0, 0, h, N, 1, 0, 0, 0, q, v, 0, 0, stats, &o, 0, 1, &done, &splits, imp);
   CHECK(status == STEP_OK && done == N && splits == 0, "status %d, %ld steps, %ld splits", status, done, splits);
   k = (long) (t_slide / h + 0.5) - 1; /* row k: the state at (k + 1) h */
   CHECK(fabs(v[k * NQ] - (v0 - mu[0] * G_P * t_slide)) < 1e-9, "x' = %.12g at t = %g", v[k * NQ], t_slide);
@@ -316,8 +317,8 @@ static void test_contact_steps(void) {
     }
     bounced = bounced || v[k * NQ + 3] > 0;
     if (bounced) apex = fmax(apex, q[k * NQ + 3] - R_P);
-    unconverged += (long) stats[k * NSTATS + 6];
-    CHECK(stats[k * NSTATS + 8] <= 2 * PENETRATION_TOL, "penetration %g at row %ld", stats[k * NSTATS + 8], k);
+    unconverged += (long) stats[k * NSTATS + 12];
+    CHECK(stats[k * NSTATS + 14] <= 2 * PENETRATION_TOL, "penetration %g at row %ld", stats[k * NSTATS + 14], k);
   }
   CHECK(fabs(pn - M_P * G_P * t_slide) < 1e-3 * M_P * G_P * t_slide, "normal impulse %g", pn);
   CHECK(fabs(pt + mu[0] * pn) < 1e-9, "friction impulse %g, normal %g", pt, pn);
@@ -325,6 +326,18 @@ static void test_contact_steps(void) {
   CHECK(unconverged == 0, "%ld contact solves did not converge", unconverged);
   CHECK(bounced && fabs(apex - 0.25 * drop) < 0.02 * 0.25 * drop, "rebound apex %g m, expected %g", apex,
         0.25 * drop);
+  { /* the work by class (track_work): friction took the slider's kinetic energy exactly, the
+     * balance E - E0 - W closes to round-off, and the contacts' work is all of W */
+    const casadi_real *w = stats + (N - 1) * NSTATS + 5, *qe = q + (N - 1) * NQ, *ve = v + (N - 1) * NQ;
+    casadi_real e0 = M_P * v0 * v0 / 2 + M_P * G_P * (q0[1] + q0[3]), e1 = M_P * G_P * (qe[1] + qe[3]);
+    for (k = 0; k < NQ; ++k) e1 += M_P * ve[k] * ve[k] / 2;
+    CHECK(fabs(w[WORK_FRICTION] + M_P * v0 * v0 / 2) < 1e-9, "friction work %.12g, expected %.12g",
+          w[WORK_FRICTION], -M_P * v0 * v0 / 2);
+    CHECK(fabs(e1 - e0 - w[WORK_TOTAL]) < 1e-9 * e0, "E - E0 = %.12g, W = %.12g", e1 - e0, w[WORK_TOTAL]);
+    CHECK(fabs(w[WORK_TOTAL] - w[WORK_CONTACTS] - w[WORK_FRICTION] - w[WORK_PUSH_OUT]) < 1e-12 * e0 &&
+          w[WORK_CONTACTS] < 0, "W = %g, contacts %g, friction %g, push-out %g", w[WORK_TOTAL], w[WORK_CONTACTS],
+          w[WORK_FRICTION], w[WORK_PUSH_OUT]);
+  }
   free(q), free(v), free(imp), free(stats);
 }
 

@@ -21,7 +21,7 @@
 #define NNZ_K 9
 #define MASS_SCALE M_P
 #define MAX_HALVINGS 10
-#define NSTATS 6
+#define NSTATS 12
 #define NOUT 5
 
 static casadi_real phi(const casadi_real *q) {
@@ -115,7 +115,9 @@ static int k_project(const casadi_real **arg, casadi_real **res, casadi_int *iw,
 /* Power of the non-conservative force u: u x'. */
 static int k_power(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
   (void) iw, (void) w, (void) mem;
-  *res[0] = at(arg[4], 0) * arg[2][0];
+  int i;
+  for (i = 0; i < 5; ++i) res[0][i] = 0;
+  res[0][0] = res[0][3] = at(arg[4], 0) * arg[2][0]; /* P, all of it the input's */
   return 0;
 }
 

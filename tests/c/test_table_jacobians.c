@@ -95,7 +95,7 @@ static const ncgen_torque_kind TORQUE_KINDS[1] = {{0, 0}};
 #define TAB_FF_IN 1
 #define TAB_FF_OUT 1
 #define MAX_HALVINGS 10
-#define NSTATS 6
+#define NSTATS 12
 #define STEP_OK 0
 #define STEP_NO_CONVERGENCE 1
 #define STEP_NOT_FINITE 2

@@ -119,7 +119,7 @@ static const ncgen_torque_kind TORQUE_KINDS[1] = {{k_twist, 0}};
 #define TAB_FF_IN 5
 #define TAB_FF_OUT 8
 #define MAX_HALVINGS 10
-#define NSTATS 6
+#define NSTATS 12
 
 #include "ncgen_table_stepper.h"
 

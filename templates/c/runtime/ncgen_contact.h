@@ -88,16 +88,20 @@ static void contact_clear(workspace *ws) {
   ws->repeat = 1;
 }
 
+/* The first of the contact statistics' columns, after the work (ncgen_fixed.h: put_stats()). */
+#define CONTACT_COL (5 + NWORK)
+
 /* Ends an output row: the impulses summed since the last row into impulse (ND values) and
- * the contact statistics into columns 6 .. 9 of stats (each may be NULL), then clears them. */
+ * the contact statistics into columns CONTACT_COL .. CONTACT_COL + 3 of stats (each may be
+ * NULL), then clears them. */
 static void contact_row(workspace *ws, casadi_real *impulse, casadi_real *stats) {
   if (impulse) memcpy(impulse, ws->Pacc, ND * sizeof(casadi_real));
   memset(ws->Pacc, 0, ND * sizeof(casadi_real));
   if (stats) {
-    stats[6] = (casadi_real) ws->pgs_unconverged;
-    stats[7] = ws->pgs_residual;
-    stats[8] = ws->penetration;
-    stats[9] = ws->cone_residual;
+    stats[CONTACT_COL] = (casadi_real) ws->pgs_unconverged;
+    stats[CONTACT_COL + 1] = ws->pgs_residual;
+    stats[CONTACT_COL + 2] = ws->penetration;
+    stats[CONTACT_COL + 3] = ws->cone_residual;
   }
   ws->pgs_unconverged = 0;
   ws->pgs_residual = 0;
@@ -508,6 +512,45 @@ static void x_add(workspace *ws, int n, const casadi_real *c, casadi_real s, cas
 }
 #endif
 
+/* The work of the impulses of a step that took W0^T P in its first half and W^T P in its
+ * second (rows by wt_colind, wt_row; P[a] acts on row rows[a], or on row a if rows is NULL):
+ * the kinetic energy they add to RATTLE's step, exactly.  The first half's momentum balance
+ * M (w - v) = ... + W0^T P / 2 adds W0^T P / 2 . (w + v) / 2 to 1/2 w^T M w - 1/2 v^T M v,
+ * the second's W^T P / 2 . (v+ + w) / 2 (for an impact with fixed rows, 1/2 P . (U- + U+)
+ * with w the mean of v and v+).  Normal rows into WORK_CONTACTS, tangent rows into
+ * WORK_FRICTION, both into WORK_TOTAL. */
+static void impulse_work(workspace *ws, const casadi_real *W0, const casadi_real *W, const int *rows, int n,
+                         const casadi_real *P, const casadi_real *v, const casadi_real *v_next) {
+  int a, i;
+  for (a = 0; a < n; ++a) {
+    int r = rows ? rows[a] : a;
+    casadi_real s = 0, dw;
+    if (P[a] == 0) continue;
+    for (i = wt_colind[r]; i < wt_colind[r + 1]; ++i) {
+      int c = wt_row[i];
+      s += W0[i] * (v[c] + ws->x[c]) + W[i] * (ws->x[c] + v_next[c]);
+    }
+    dw = s * P[a] / 4;
+    ws->step_work[r % DC ? WORK_FRICTION : WORK_CONTACTS] += dw;
+    ws->step_work[WORK_TOTAL] += dw;
+  }
+}
+
+/* E = T + V at (t, q, v) (KERNEL_OUTPUTS) into *E. */
+static int energy(workspace *ws, casadi_real t, const casadi_real *q, const casadi_real *v, const casadi_real *p,
+                  casadi_real *E) {
+  ws->arg[0] = &t;
+  ws->arg[1] = q;
+  ws->arg[2] = v;
+  ws->arg[3] = 0;
+  ws->arg[4] = 0;
+  ws->arg[5] = p;
+  ws->res[0] = ws->y;
+  if (KERNEL_OUTPUTS(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+  *E = ws->y[0] + ws->y[1];
+  return STEP_OK;
+}
+
 /* Contacts that end the step inside (gap < -PENETRATION_TOL) are put back on their surface: the
  * displacement dq = sum_a X_a pi_a, smallest in the KKT metric, with pi >= 0 and the
  * linearised gaps g + G pi >= 0 _|_ pi of every contact within reach (gap below
@@ -515,11 +558,12 @@ static void x_add(workspace *ws, int n, const casadi_real *c, casadi_real s, cas
  * with lcp_newton() steps, to 1e-12 of the deepest gap); then
  * Newton back onto Phi = 0 and the velocities projected onto A v + Phi_t = 0.  A position
  * correction: it removes the penetration of the step an impact is resolved in (at most
- * h v / 2) and adds no momentum but the bilateral constraints'. */
+ * h v / 2) and adds no momentum but the bilateral constraints'.  With ws->track_work the
+ * energy E = T + V it changes goes into WORK_PUSH_OUT and WORK_TOTAL. */
 static int push_out(const casadi_real *p, casadi_real t1, casadi_real *q_next, casadi_real *v_next,
                     const step_options *o, workspace *ws, int *pushed) {
   int i, a, k, n = 0, it, sweep, newton_at = NEWTON_FIRST, rows[NK];
-  casadi_real one = 1, zero = 0, t0 = t1 - 1, deepest = 0;
+  casadi_real one = 1, zero = 0, t0 = t1 - 1, deepest = 0, E0 = 0, E1;
   pairs_bounds(ws, q_next, 0);
   pairs_select(ws, 0, 0, 0);
   if (contact_gap(ws, q_next, p, ws->g)) return STEP_KERNEL;
@@ -530,6 +574,7 @@ static int push_out(const casadi_real *p, casadi_real t1, casadi_real *q_next, c
     }
   *pushed = n;
   if (!n) return STEP_OK;
+  if (ws->track_work && energy(ws, t1, q_next, v_next, p, &E0)) return STEP_KERNEL;
   /* every contact within reach of the push (gap below twice the deepest penetration) takes
    * part, so that pushing one out pushes no other in (a column of spheres: else one pass
    * per sphere) */
@@ -594,6 +639,11 @@ static int push_out(const casadi_real *p, casadi_real t1, casadi_real *q_next, c
   if (solve(ws, ws->K, ws->rhs, ws->rhs + NX)) return STEP_KERNEL;
   if (!all_finite(ws->rhs + NX, NQ)) return STEP_NOT_FINITE;
   memcpy(v_next, ws->rhs + NX, NQ * sizeof(casadi_real));
+  if (ws->track_work) {
+    if (energy(ws, t1, q_next, v_next, p, &E1)) return STEP_KERNEL;
+    ws->step_work[WORK_PUSH_OUT] += E1 - E0;
+    ws->step_work[WORK_TOTAL] += E1 - E0;
+  }
   return STEP_OK;
 }
 
@@ -694,6 +744,7 @@ static int repeat_step(const casadi_real *q, const casadi_real *v, casadi_real t
   }
   if (*kept) {
     for (r = 0; r < ND; ++r) ws->Pacc[r] += P[r];
+    if (ws->track_work) impulse_work(ws, W0, W0, 0, ND, P, v, v_next);
     return STEP_OK;
   }
   ws->repeat = 0;
@@ -881,6 +932,7 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
     ws->Pacc[rows[a]] += ws->P[a];
     ws->F[rows[a]] = ws->P[a] / h;
   }
+  if (ws->track_work) impulse_work(ws, ws->W0, ws->W, rows, nr, ws->P, v, v_next);
   if (!converged) {
     ++ws->pgs_unconverged;
     ws->pgs_residual = fmax(ws->pgs_residual, residual);

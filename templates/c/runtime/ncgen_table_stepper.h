@@ -525,14 +525,20 @@ static int tab_solve(const casadi_real **arg, casadi_real **res, casadi_int *iw,
   return 0;
 }
 
-/* step_power: t, q, v, lam, u, p -> P = vᵀ(F + ∇V) + ∂V/∂t + λᵀΦ_t: the dampers' power. */
+/* step_power: t, q, v, lam, u, p -> [P, P_contacts, P_friction, P_inputs, P_drives] with
+ * P = vᵀ(F + ∇V) + ∂V/∂t + λᵀΦ_t (ncgen_rattle.h: NPOWER): the dampers' and constant loads'
+ * power and the inputs' (no contacts, no drives on the tables). */
 static int tab_power(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
   tab_work b = tab_layout(w);
-  double P = 0;
+  double P = 0, Pu;
   (void)iw; (void)mem;
   if (tab_forces(arg[1], arg[2], 0, 0, 0, 0, &P, &b)) return 1;
-  P += tab_input_power(arg[1], arg[2], arg[4]);
-  if (res[0]) *res[0] = P;
+  Pu = tab_input_power(arg[1], arg[2], arg[4]);
+  if (res[0]) {
+    res[0][0] = P + Pu;
+    res[0][1] = res[0][2] = res[0][4] = 0;
+    res[0][3] = Pu;
+  }
   return 0;
 }
 
