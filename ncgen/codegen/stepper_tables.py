@@ -456,7 +456,7 @@ def lu_analysis(nq: int, indptr: np.ndarray, indices: np.ndarray) -> dict[str, n
     sym = ca.Sparsity.triplet(n, n, np.concatenate([pinv[rows], pinv[cols], np.arange(n)]).tolist(),
                               np.concatenate([pinv[cols], pinv[rows], np.arange(n)]).tolist())
     upper, _ = sym.ldl(False)                        # the pattern of Lᵀ = U (strictly upper)
-    u_colind, u_row = np.asarray(upper.colind()), np.asarray(upper.row())
+    u_colind, u_row = (np.asarray(x, dtype=np.int64) for x in (upper.colind(), upper.row()))
     u_col = np.repeat(np.arange(n), np.diff(u_colind))
     # L = Uᵀ in CSC: entry U(k, c) is L(c, k), in column k
     by_col = np.lexsort((u_col, u_row))              # sort U's entries by (k, c): L's CSC order
