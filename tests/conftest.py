@@ -4,9 +4,11 @@ The default run (``pytest -q -n auto``, the README's command) deselects the test
 ``slow`` (pyproject's ``addopts``): robot-scale models, Dask clusters, sanitizer builds,
 benchmark smokes and long tight-tolerance runs. ``pytest -q -n auto -m "slow and not
 exhaustive"`` runs them; CI runs both. The slow tests also marked ``exhaustive`` (the largest
-models of a full matrix, hours of CPU) are run by hand: ``pytest -q -n auto -m exhaustive``. Every test has a time limit (pyproject's ``timeout``, pytest-timeout), generous
-enough for a loaded machine; a test that needs more says so with ``pytest.mark.timeout``.
-A test moved to the slow tier names at its mark the fast test that takes the same code path.
+models of a full matrix, hours of CPU) are run by hand: ``pytest -q -n auto -m exhaustive``.
+Every test has a time limit (pytest-timeout), generous enough for a loaded machine: pyproject's
+``timeout`` (300 s) for a fast test, :data:`SLOW_TIMEOUT` for a slow one; a test that needs more
+says so with ``pytest.mark.timeout``. A test moved to the slow tier names at its mark the fast
+test that takes the same code path.
 """
 import pytest
 
@@ -18,9 +20,19 @@ EXHAUSTIVE = ("exhaustive: slow tests too long for CI (hours of CPU in all: the 
               "full matrix); run by hand with `pytest -q -n auto -m exhaustive`")
 
 
+#: Seconds a slow test may take unless it says otherwise (``pytest.mark.timeout``).
+SLOW_TIMEOUT = 900
+
+
 def pytest_configure(config):
     config.addinivalue_line("markers", SLOW)
     config.addinivalue_line("markers", EXHAUSTIVE)
+
+
+def pytest_collection_modifyitems(items):
+    for item in items:
+        if item.get_closest_marker("slow") is not None and item.get_closest_marker("timeout") is None:
+            item.add_marker(pytest.mark.timeout(SLOW_TIMEOUT))
 
 
 def pytest_report_header(config):
