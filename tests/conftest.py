@@ -6,7 +6,7 @@ benchmark smokes and long tight-tolerance runs. ``pytest -q -n auto -m "slow and
 exhaustive"`` runs them; CI runs both. The slow tests also marked ``exhaustive`` (the largest
 models of a full matrix, hours of CPU) are run by hand: ``pytest -q -n auto -m exhaustive``.
 Every test has a time limit (pytest-timeout), generous enough for a loaded machine: pyproject's
-``timeout`` (300 s) for a fast test, :data:`SLOW_TIMEOUT` for a slow one; a test that needs more
+``timeout`` (600 s) for a fast test, :data:`SLOW_TIMEOUT` for a slow one; a test that needs more
 says so with ``pytest.mark.timeout``. A test moved to the slow tier names at its mark the fast
 test that takes the same code path.
 """
