@@ -6,7 +6,10 @@ solvers (Mazzia et al., problem "andrews", PSIDE at 1e-14) at t = 0.03 s and aga
 published consistent initial accelerations; A04, Bricard's overconstrained mechanism
 (examples/iftomm_a04_bricard.py), against its one-coordinate Lagrange equation written here
 independently (the benchmark's published time history is not reachable from here) and
-against conservation of energy.  A05 (flyball governor) has no model yet."""
+against conservation of energy; A05, the stiff flyball governor (examples/iftomm_a05_governor.py),
+against its Lagrange equations in the four minimal coordinates (shaft angle, rod angles, sleeve
+height) written here independently, and against the energy balance with the dampers' work
+(the benchmark's published s(t) is a plot, not numbers reachable from here)."""
 import sys
 import time
 from pathlib import Path
@@ -26,6 +29,7 @@ try:
     from andrews_squeezer import ANGLES0, BODIES, angles, squeezer
     from iftomm_a04_bricard import AXES, CORNERS, P3, bricard as bricard_system
     from iftomm_a04_bricard import build as bricard
+    import iftomm_a05_governor as a05
 finally:
     sys.path.remove(str(EXAMPLES))
 
@@ -248,3 +252,80 @@ def test_a04_bricard_against_its_lagrange_equation():
     traj, p3, cpu = bricard_run()
     err = np.max(np.linalg.norm(p3 - bricard_reference(traj.t), axis=1))
     assert err < 1e-7, err
+
+
+# ---------------------------------------------------------------- A05: the stiff flyball governor
+def governor_reference(t) -> dict:
+    """A05 from Lagrange's equations in the minimal coordinates ψ (the shaft's angle about z),
+    θ1, θ2 (each rod's angle from the downward vertical, outward positive) and s (the sleeve's
+    height), with the dampers' Rayleigh function ½ c Σ L̇²; SymPy derives them, LSODA
+    integrates them at rtol 1e-11 (DOP853 and BDF agree to 1e-12 m in s).  Written without
+    ncgen: angles, not natural coordinates.  Returns ``s`` (m), ``psi`` (rad) and the energy the
+    dampers took, ``dissipated`` (J), at the times ``t`` (s)."""
+    import sympy as sp
+    q, qd = sp.symbols("psi th1 th2 s"), sp.symbols("psid th1d th2d sd")
+    psi, s = q[0], q[3]
+    Rz = sp.Matrix([[sp.cos(psi), -sp.sin(psi), 0], [sp.sin(psi), sp.cos(psi), 0], [0, 0, 1]])
+
+    def rate(x):
+        return x.jacobian(q) * sp.Matrix(qd)
+    along = a05.ROD_MASS * 2 * a05.SECTION ** 2 / 12
+    across = a05.ROD_MASS * (a05.ROD_LENGTH ** 2 + a05.SECTION ** 2) / 12
+    T = (along + a05.SLEEVE_MASS * a05.CUBE ** 2 / 6) * qd[0] ** 2 / 2 + a05.SLEEVE_MASS * qd[3] ** 2 / 2
+    V, R = G * a05.SLEEVE_MASS * s, 0
+    for side, th, thd in ((1, q[1], qd[1]), (-1, q[2], qd[2])):
+        hinge = sp.Matrix([side * a05.OFFSET, 0, a05.TOP])
+        d = sp.Matrix([side * sp.sin(th), 0, -sp.cos(th)])
+        c, end = hinge + a05.ROD_LENGTH / 2 * d, hinge + a05.ROD_LENGTH * d
+        vc, ve = rate(Rz * c), rate(Rz * end)
+        w = sp.Matrix([0, -side * thd, qd[0]])                 # the rod's angular velocity, shaft axes
+        inertia = across * (sp.eye(3) - d * d.T) + along * d * d.T
+        T += (a05.ROD_MASS * vc.dot(vc) + a05.BALL_MASS * ve.dot(ve) + (w.T * inertia * w)[0]) / 2
+        V += G * (a05.ROD_MASS * c[2] + a05.BALL_MASS * end[2])
+        gap = c - sp.Matrix([side * a05.OFFSET, 0, s])
+        L = sp.sqrt(gap.dot(gap))
+        V += a05.K * (L - a05.REST) ** 2 / 2
+        R += a05.C * rate(sp.Matrix([L]))[0] ** 2 / 2
+    M = sp.hessian(T, qd)
+    p = sp.Matrix([T]).jacobian(qd).T
+    rhs = (sp.Matrix([T]).jacobian(q).T - p.jacobian(q) * sp.Matrix(qd) - sp.Matrix([V]).jacobian(q).T
+           - sp.Matrix([R]).jacobian(qd).T)
+    mass, force, power = (sp.lambdify([q, qd], e, "numpy") for e in (M, rhs, 2 * R))
+
+    def f(_, y):
+        x, xd = y[:4], y[4:8]
+        return np.r_[xd, np.linalg.solve(mass(x, xd), np.ravel(force(x, xd))), power(x, xd)]
+    theta0 = np.pi / 2 - a05.ALPHA
+    y0 = np.r_[0.0, theta0, theta0, a05.S0, a05.SPIN, 0.0, 0.0, 0.0, 0.0]
+    sol = solve_ivp(f, (t[0], t[-1]), y0, t_eval=t, method="LSODA", rtol=1e-11, atol=1e-12)
+    assert sol.success, sol.message
+    return {"s": sol.y[3], "psi": sol.y[0], "dissipated": sol.y[8]}
+
+
+def governor_run(t_end: float = 2.0, rtol: float = 1e-10, atol: float = 1e-12):
+    """A05 by IDAS; (trajectory, s (m), ψ (rad, the shaft's angle from ball 1's azimuth), CPU seconds)."""
+    model = a05.governor().build()
+    start = time.process_time()
+    traj = nc.simulate(model, t_end, 0.01, rtol=rtol, atol=atol)
+    cpu = time.process_time() - start
+    ball = traj.point("ball1", (0.0, 0.0, 0.0))
+    return traj, a05.sleeve_height(traj), np.unwrap(np.arctan2(ball[:, 1], ball[:, 0])), cpu
+
+
+def test_a05_governor_against_its_lagrange_equations_and_energy_balance():
+    """2 s at rtol 1e-10 (s rises from 0.5 to 0.74 m and falls back twice; 1.5 s CPU): s and the
+    shaft's angle within 1e-8 of the minimal-coordinate reference (measured 3.0e-10 m), and
+    the energy balance E(t) − E(0) = −(energy the dampers took, from the reference) within
+    1e-6 J on E ≈ 239 J (measured 1.1e-7 J); IDAS's own quadrature of the dampers' work agrees
+    with the reference's to 1e-8 J (measured 1.7e-10 J)."""
+    traj, s, psi, cpu = governor_run()
+    assert traj.model.dof == 4
+    ref = governor_reference(traj.t)
+    assert np.max(np.abs(s - ref["s"])) < 1e-8, np.max(np.abs(s - ref["s"]))
+    assert np.max(np.abs(psi - ref["psi"])) < 1e-8, np.max(np.abs(psi - ref["psi"]))
+    assert np.ptp(s) > 0.2
+    balance = traj.energy - traj.energy[0] + ref["dissipated"]
+    assert np.max(np.abs(balance)) < 1e-6, np.max(np.abs(balance))
+    dampers = np.asarray(traj.info["energy"]["works"]["dampers"])
+    assert np.max(np.abs(dampers + ref["dissipated"])) < 1e-8
+    assert ref["dissipated"][-1] > 1e-3                      # the dampers work: not a conservative run
