@@ -67,7 +67,10 @@ def linearize_steady(system, q0, v0, K_spin, coordinates, tol: float = 1e-8) -> 
     about the steady motion of ``system`` (:class:`ncgen.assembly.nonholonomic.RollingSystem`)
     through ``(q0, v0)``, whose spins have the generator ``K_spin`` (nq × nq).  Raises when
     the state is off the constraints or not a steady motion (beyond ``tol``, relative) or the
-    coordinates' equations are not closed."""
+    coordinates' equations are not closed, or an element's plane moves."""
+    if getattr(system, "rheonomic", False):
+        raise NcgenError("linearize_steady: the system has elements on a moving plane (plane_velocity); steady "
+                         "motions are linearised on a plane at rest only")
     nq = system.nq
     q0, v0 = np.asarray(q0, float), np.asarray(v0, float)
     K_spin = np.asarray(K_spin, float)

@@ -1,4 +1,4 @@
-"""Nonholonomic constraints ``B(q) v = 0`` beside a model's holonomic ones.
+"""Nonholonomic constraints ``B(q) v = c(q, t)`` beside a model's holonomic ones.
 
 :class:`RollingSystem` joins a built model and its nonholonomic elements
 (:class:`ncgen.model.rolling.RollingDisc`, :class:`~ncgen.model.rolling.RollingSphere`,
@@ -13,11 +13,14 @@ in the disc's plane:
   contact point in body axes held fixed: the velocity of the material point at the contact.
 
 All constraints together, ``Φ̂(q) = 0`` (the model's Φ and the discs' heights) and
-``Â(q) v = 0`` (``Â = [∂Φ̂/∂q; B]``), give the accelerations from the KKT system
-``[[M, Âᵀ], [Â, 0]] [a; λ] = [F + f; γ̂]``, ``γ̂ = −∂(Â v)/∂q v`` (no stabilisation
-terms: exact on the constraint manifold).  ``f`` is an extra generalised force (N in the
-natural coordinates' sense: its power is ``fᵀ v``).  The model's constraints must not
-depend on time (no drives).
+``Â(q) v = ĉ(q, t)`` (``Â = [∂Φ̂/∂q; B]``; ``ĉ`` is zero but for the rows of elements on a
+moving plane, whose contact point moves with the plane: ``c = w(t)``, the plane's velocity,
+:mod:`ncgen.model.rolling`), give the accelerations from the KKT system
+``[[M, Âᵀ], [Â, 0]] [a; λ] = [F + f; γ̂ + ĉ_q v + ĉ_t]``, ``γ̂ = −∂(Â v)/∂q v`` (no
+stabilisation terms: exact on the constraint manifold).  ``f`` is an extra generalised
+force (N in the natural coordinates' sense: its power is ``fᵀ v``).  The constraint forces
+``−Âᵀλ`` of a moving plane do work, power ``−λᵀ ĉ`` (W): ``dE/dt = vᵀ(F + f + ∇V) − λᵀ ĉ``.
+The model's own constraints must not depend on time (no drives).
 """
 from __future__ import annotations
 
@@ -46,7 +49,8 @@ class RollingSystem:
 
     ``phi(q)``: holonomic residuals (model's, then the elements' heights); ``B(q)``:
     the nonholonomic rows (2 per disc or ball, 1 per knife edge); ``A(q)``: ``[∂phi/∂q; B]``; ``gamma(q, v)``;
-    ``accel(q, v, f) -> (a, lam)`` (``lam`` by ``row_names``: the force of a height row on
+    ``rate(q, t)``: ``ĉ`` (zeros for the holonomic rows); ``accel(q, v, f) -> (a, lam)``, on a
+    plane at rest, and ``accel_t(q, v, f, t)``, any plane (``lam`` by ``row_names``: the force of a height row on
     the body is ``−λ e_z`` at the contact, N, so the normal force is ``−λ``; of the ``.x``/``.y``
     rows ``−λ e_x``/``−λ e_y`` at the contact, the friction force); ``tangent(q, v)``: the Jacobian of the state constraints
     ``[phi; A v]`` with respect to ``[q; v]`` (its null space is the tangent space of the
@@ -77,12 +81,13 @@ class RollingSystem:
             raise ModelError(f"RollingSystem: model {model.name!r} has time-dependent constraints "
                              "(drives); nonholonomic elements take scleronomic models only")
         R_all, p_all = model.functions["poses"](q)
-        heights, rows, height_names, row_names = [], [], [], []
+        heights, rows, rates, height_names, row_names = [], [], [], [], []
         for element in elements:
             k = model.member_names.index(element.body)
             h, B = element.equations(R_all[:, 3 * k:3 * k + 3], p_all[:, k], q)
             heights.append(h)
             rows.append(B)
+            rates.append(element.rate(R_all[:, 3 * k:3 * k + 3], t))
             height_names += [f"{element.name}.height"] * int(h.shape[0])
             row_names += [f"{element.name}.{axis}" for axis in
                           (("lateral",) if isinstance(element, KnifeEdge) else ("x", "y"))]
@@ -95,6 +100,10 @@ class RollingSystem:
         A = ca.vertcat(ca.jacobian(phi, q), B)
         Av = ca.mtimes(A, v)
         gamma = -ca.jtimes(Av, q, v)
+        c = ca.vertcat(ca.SX.zeros(phi.shape[0]), *rates)
+        #: Whether an element's plane moves (``ĉ`` depends on time or is not zero).
+        self.rheonomic = any(e.rheonomic for e in elements)
+        gamma_t = gamma + ca.jtimes(c, q, v) + ca.jacobian(c, t)
         F = model.functions["F"](t0, q, v, u0, p0)
         #: Whether the model's forces depend on time, and its constraints on the parameters
         #: (the equations here hold ``t = 0``, ``u = 0`` and ``model.p0``).
@@ -107,6 +116,8 @@ class RollingSystem:
         self.B = ca.Function("B", [q], [B], ["q"], ["B"])
         self.A = ca.Function("A", [q], [A], ["q"], ["A"])
         self.gamma = ca.Function("gamma", [q, v], [gamma], ["q", "v"], ["gamma"])
+        self.rate = ca.Function("rate", [q, t], [c], ["q", "t"], ["c"])
+        self.gamma_t = ca.Function("gamma_t", [q, v, t], [gamma_t], ["q", "v", "t"], ["gamma"])
         self.F = ca.Function("F", [q, v], [F], ["q", "v"], ["F"])
         self.tangent = ca.Function("tangent", [q, v], [ca.jacobian(ca.vertcat(phi, Av), ca.vertcat(q, v))],
                                    ["q", "v"], ["G"])
@@ -116,6 +127,10 @@ class RollingSystem:
         K = ca.blockcat([[ca.MX(ca.DM(model.M)), Am.T], [Am, ca.MX(m, m)]])
         z = ca.solve(K, ca.vertcat(self.F(qm, vm) + fm, self.gamma(qm, vm)))
         self.accel = ca.Function("accel", [qm, vm, fm], [z[:nq], z[nq:]], ["q", "v", "f"], ["a", "lam"])
+        tm = ca.MX.sym("t")
+        z_t = ca.solve(K, ca.vertcat(self.F(qm, vm) + fm, self.gamma_t(qm, vm, tm)))
+        self.accel_t = ca.Function("accel_t", [qm, vm, fm, tm], [z_t[:nq], z_t[nq:]], ["q", "v", "f", "t"],
+                                   ["a", "lam"])
         x = ca.vertcat(qm, vm)
         rhs = ca.vertcat(vm, z[:nq])
         self.jacobians = ca.Function("jacobians", [qm, vm, fm],
@@ -131,10 +146,12 @@ class RollingSystem:
                              f"(holonomic and rolling) are dependent at this configuration "
                              f"(smallest singular value {s[-1]:.3g} of {s[0]:.3g})")
 
-    def residuals(self, q, v) -> tuple[float, float]:
-        """``(|phi(q)|∞, |A(q) v|∞)``: holonomic and velocity-level constraint residuals."""
+    def residuals(self, q, v, t: float = 0.0) -> tuple[float, float]:
+        """``(|phi(q)|∞, |A(q) v − ĉ(q, t)|∞)``: holonomic and velocity-level constraint
+        residuals at time ``t`` (s)."""
+        level = np.asarray(self.A(q)) @ np.asarray(v, float) - np.asarray(self.rate(q, t)).ravel()
         return (float(np.max(np.abs(np.asarray(self.phi(q))), initial=0.0)),
-                float(np.max(np.abs(np.asarray(self.A(q)) @ np.asarray(v, float)), initial=0.0)))
+                float(np.max(np.abs(level), initial=0.0)))
 
 
 def rolling_system(model) -> RollingSystem:

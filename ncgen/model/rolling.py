@@ -9,8 +9,15 @@ point of the rim at the contact has no velocity along the plane): velocity const
 :class:`KnifeEdge` (the Chaplygin sleigh's blade, a skate) lets a body-fixed point move only
 along a body-fixed blade direction in the plane (one nonholonomic constraint).  A :class:`RollingSphere` is a ball rolling without slipping.
 
+A plane that moves along itself (a treadmill, a cart's floor) is given to an element as its
+velocity ``plane_velocity = (w_x, w_y)`` (m/s: numbers, text expressions of ``t``, CasADi SX of
+a time symbol or callables ``f(t)``, :mod:`ncgen.model.expressions`): the contact point's
+material velocity along the plane then equals the plane's, rheonomic velocity constraints
+``B(q) v = c(q, t)`` (``c = w`` for a disc or ball, ``(e_z × R b̄)·w`` for a knife edge).
+
 Each element gives its equations from its body's pose ``(R, p)`` (CasADi, functions of the
-natural coordinates ``q``): ``equations(R, p, q) -> (holonomic residuals, rows of B)``;
+natural coordinates ``q``): ``equations(R, p, q) -> (holonomic residuals, rows of B)`` and
+``rate(R, t) -> c`` (zeros on a plane at rest);
 :mod:`ncgen.assembly.nonholonomic` assembles them.  An element joins a system by
 ``System.add_rolling`` (TOML ``[[rolling]]``, :data:`ROLLING_TYPES`; ``spec()`` is its table)
 and is then part of the built model (``model.rolling``), which ``nc.simulate`` runs with
@@ -22,16 +29,60 @@ import casadi as ca
 import numpy as np
 
 from ncgen.errors import ModelError
+from ncgen.model.expressions import evaluate, scope, value_to_toml
 from ncgen.validation import as_vector
 
+#: The time symbol (s) the planes' velocities are written in.
+_T = ca.SX.sym("t")
 
-class RollingDisc:
+
+def plane_velocity_text(value, what: str):
+    """``value`` (two components, each a number or a value of ``t``; None: a plane at rest)
+    checked and kept as TOML data: a list of two numbers or expression strings."""
+    if value is None:
+        return None
+    sc = scope(_T, {})
+    text = value_to_toml(evaluate(value, sc, 2, what), sc, what)
+    return [float(x) if isinstance(x, (int, float)) else x for x in text]
+
+
+class _MovingPlane:
+    """The plane's velocity along itself, shared by the elements."""
+
+    plane_velocity = None
+
+    @property
+    def rheonomic(self) -> bool:
+        """Whether the plane moves (the velocity constraints depend on time)."""
+        return self.plane_velocity is not None and any(x != 0.0 for x in self.plane_velocity)
+
+    def plane_velocity_at(self, t) -> ca.SX:
+        """``(w_x, w_y, 0)`` (m/s) at the time symbol ``t``."""
+        if self.plane_velocity is None:
+            return ca.SX.zeros(3)
+        w = evaluate(self.plane_velocity, scope(_T, {}), 2, f"{self!r}: plane_velocity")
+        return ca.vertcat(ca.substitute(w, _T, t), 0.0)
+
+    def rate(self, R, t) -> ca.SX:
+        """``c(q, t)``: the value of the element's rows ``B v`` (the plane's velocity along the
+        rows' directions; ``R`` the body's rotation)."""
+        return self.plane_velocity_at(t)[:2]
+
+    def _spec_plane(self, spec: dict) -> dict:
+        if self.plane_velocity is not None:
+            spec["plane_velocity"] = list(self.plane_velocity)
+        return spec
+
+
+class RollingDisc(_MovingPlane):
     """A disc of ``radius`` (m) on ``body`` (a body or its name), axle ``axle`` in the
-    body's frame, rolling without slipping on the plane ``z = 0``."""
+    body's frame, rolling without slipping on the plane ``z = 0`` (moving along itself at
+    ``plane_velocity``, m/s, if given)."""
 
     kind = "RollingDisc"
 
-    def __init__(self, body, *, radius: float, axle=(0.0, 1.0, 0.0), name: str | None = None):
+    def __init__(self, body, *, radius: float, axle=(0.0, 1.0, 0.0), name: str | None = None,
+                 plane_velocity=None):
         self.body = body if isinstance(body, str) else getattr(body, "name", None)
         if not isinstance(self.body, str):
             raise ModelError(f"RollingDisc: body: expected a body or its name, found {body!r}")
@@ -44,6 +95,7 @@ class RollingDisc:
         self.radius = float(radius)
         self.axle = a / np.linalg.norm(a)
         self.name = name or f"{self.body}.rolling"
+        self.plane_velocity = plane_velocity_text(plane_velocity, f"RollingDisc on {self.body}: plane_velocity")
 
     def equations(self, R, p, q) -> tuple[ca.SX, ca.SX]:
         """Height of the rim's lowest point ``n·p − ρ|d|`` (1) and the contact point's
@@ -61,20 +113,21 @@ class RollingDisc:
 
     def spec(self) -> dict:
         """The element as plain data (its TOML table)."""
-        return {"type": self.kind, "name": self.name, "body": self.body, "radius": self.radius,
-                "axle": self.axle.tolist()}
+        return self._spec_plane({"type": self.kind, "name": self.name, "body": self.body, "radius": self.radius,
+                                 "axle": self.axle.tolist()})
 
     def __repr__(self) -> str:
         return f"RollingDisc({self.body!r}, radius={self.radius}, axle={tuple(self.axle)})"
 
 
-class RollingSphere:
+class RollingSphere(_MovingPlane):
     """A ball of ``radius`` (m) centred at ``body``'s centre of mass (a body or its name),
-    rolling without slipping on the plane ``z = 0``."""
+    rolling without slipping on the plane ``z = 0`` (moving along itself at
+    ``plane_velocity``, m/s, if given)."""
 
     kind = "RollingSphere"
 
-    def __init__(self, body, *, radius: float, name: str | None = None):
+    def __init__(self, body, *, radius: float, name: str | None = None, plane_velocity=None):
         self.body = body if isinstance(body, str) else getattr(body, "name", None)
         if not isinstance(self.body, str):
             raise ModelError(f"RollingSphere: body: expected a body or its name, found {body!r}")
@@ -83,6 +136,7 @@ class RollingSphere:
                              f"found {radius!r}")
         self.radius = float(radius)
         self.name = name or f"{self.body}.rolling"
+        self.plane_velocity = plane_velocity_text(plane_velocity, f"RollingSphere on {self.body}: plane_velocity")
 
     def equations(self, R, p, q) -> tuple[ca.SX, ca.SX]:
         """Height ``p_z − ρ`` (1) and the material velocity along the plane of the point at
@@ -94,20 +148,22 @@ class RollingSphere:
 
     def spec(self) -> dict:
         """The element as plain data (its TOML table)."""
-        return {"type": self.kind, "name": self.name, "body": self.body, "radius": self.radius}
+        return self._spec_plane({"type": self.kind, "name": self.name, "body": self.body, "radius": self.radius})
 
     def __repr__(self) -> str:
         return f"RollingSphere({self.body!r}, radius={self.radius})"
 
 
-class KnifeEdge:
+class KnifeEdge(_MovingPlane):
     """A blade on ``body`` (a body or its name) at ``at`` (body frame, m) along ``blade``
     (body frame): the point's velocity along ``e_z × R blade`` (in the plane ``z = 0``'s
-    directions, across the blade) is zero.  The body is kept on the plane by its joints."""
+    directions, across the blade) is zero, or the plane's (``plane_velocity``, m/s).  The
+    body is kept on the plane by its joints."""
 
     kind = "KnifeEdge"
 
-    def __init__(self, body, *, at=(0.0, 0.0, 0.0), blade=(1.0, 0.0, 0.0), name: str | None = None):
+    def __init__(self, body, *, at=(0.0, 0.0, 0.0), blade=(1.0, 0.0, 0.0), name: str | None = None,
+                 plane_velocity=None):
         self.body = body if isinstance(body, str) else getattr(body, "name", None)
         if not isinstance(self.body, str):
             raise ModelError(f"KnifeEdge: body: expected a body or its name, found {body!r}")
@@ -117,6 +173,7 @@ class KnifeEdge:
             raise ModelError(f"KnifeEdge on {self.body}: blade: expected a nonzero direction, found {b}")
         self.blade = b / np.linalg.norm(b)
         self.name = name or f"{self.body}.knife_edge"
+        self.plane_velocity = plane_velocity_text(plane_velocity, f"KnifeEdge on {self.body}: plane_velocity")
 
     def equations(self, R, p, q) -> tuple[ca.SX, ca.SX]:
         """No holonomic residual; one row: ``(e_z × R blade)ᵀ ∂(p + R at)/∂q``."""
@@ -124,10 +181,15 @@ class KnifeEdge:
         row = ca.mtimes(across.T, ca.jacobian(p + ca.mtimes(R, ca.DM(self.at)), q))
         return ca.SX(0, 1), row
 
+    def rate(self, R, t) -> ca.SX:
+        """``(e_z × R blade)·w(t)``: the plane's velocity across the blade."""
+        across = ca.cross(ca.DM([0.0, 0.0, 1.0]), ca.mtimes(R, ca.DM(self.blade)))
+        return ca.dot(across, self.plane_velocity_at(t))
+
     def spec(self) -> dict:
         """The element as plain data (its TOML table)."""
-        return {"type": self.kind, "name": self.name, "body": self.body, "at": self.at.tolist(),
-                "blade": self.blade.tolist()}
+        return self._spec_plane({"type": self.kind, "name": self.name, "body": self.body, "at": self.at.tolist(),
+                                 "blade": self.blade.tolist()})
 
     def __repr__(self) -> str:
         return f"KnifeEdge({self.body!r}, at={tuple(self.at)}, blade={tuple(self.blade)})"

@@ -26,7 +26,7 @@ Layout of a file (every table optional except ``members``)::
                   length, at, rotation, box = "ground", size, box_at, box_rotation); all with mu,
                   restitution, stiffness, damping, exponent, slip_velocity, name
     [[rolling]]   type = "RollingDisc" (body, radius, axle), "RollingSphere" (body, radius) or
-                  "KnifeEdge" (body, at, blade); all with name (docs/rolling.md)
+                  "KnifeEdge" (body, at, blade); all with name and plane_velocity (docs/rolling.md)
 
 Shared basic points are written ``"crank.r_j"`` (slot ``r_j`` of member ``crank``) or
 ``{ground = [x, y, z]}``.  Values that may vary are numbers or expression strings
@@ -65,10 +65,11 @@ FORCE_TYPES = {**_BASIC_FORCES, ClusteredCable.kind: ClusteredCable}
 TOP_KEYS = ("system", "parameters", "inputs", "members", "joints", "forces", "contacts", "rolling", "initial",
             "initial_rates", "controller")
 #: Keys of each ``[[rolling]]`` type besides ``type`` and ``name``: ``(key, number of values)``
-#: (:mod:`ncgen.model.rolling`; 0: a string, 1: a number, 3: a vector).
-ROLLING_FIELDS = {"RollingDisc": (("body", 0), ("radius", 1), ("axle", 3)),
-                  "RollingSphere": (("body", 0), ("radius", 1)),
-                  "KnifeEdge": (("body", 0), ("at", 3), ("blade", 3))}
+#: (:mod:`ncgen.model.rolling`; 0: a string, 1: a number, 3: a vector; None: values, numbers or
+#: expressions of ``t``, checked by the element).
+ROLLING_FIELDS = {"RollingDisc": (("body", 0), ("radius", 1), ("axle", 3), ("plane_velocity", None)),
+                  "RollingSphere": (("body", 0), ("radius", 1), ("plane_velocity", None)),
+                  "KnifeEdge": (("body", 0), ("at", 3), ("blade", 3), ("plane_velocity", None))}
 #: Material keys every contact table may have (:class:`~ncgen.model.contacts.Contact`).
 CONTACT_MATERIAL = ("mu", "restitution", "stiffness", "damping", "exponent", "slip_velocity")
 
@@ -642,7 +643,8 @@ class _Loader:
             v = t.get(key, required=key in ("body", "radius"))
             if v is not None:
                 where = t.at(key)
-                kw[key] = _string(v, where) if n == 0 else _number(v, where) if n == 1 else _vector(v, n, where)
+                kw[key] = v if n is None else _string(v, where) if n == 0 else _number(v, where) if n == 1 \
+                    else _vector(v, n, where)
         name = t.get("name")
         t.finish(("type", "name", *(k for k, _ in ROLLING_FIELDS[typ])))
         name = None if name is None else _string(name, t.at("name"))

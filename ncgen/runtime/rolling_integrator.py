@@ -2,7 +2,8 @@
 (:class:`ncgen.assembly.nonholonomic.RollingSystem`): explicit Runge–Kutta steps of
 ``q̇ = v``, ``v̇ = a(q, v)`` (the KKT accelerations, exact on the constraints) each followed
 by a projection onto both constraint levels, ``Φ̂(q) = 0`` (Newton, least-norm corrections)
-and ``Â(q) v = 0`` (orthogonal projection).
+and ``Â(q) v = ĉ(q, t)`` (orthogonal projection; ``ĉ`` is zero but for elements on a moving
+plane).
 
 Methods: ``"rk4"`` — the classical fourth-order scheme at the fixed step ``h``;
 ``"dopri5"`` — Dormand–Prince 5(4) with error control (``rtol``, ``atol`` on ``[q; v]``),
@@ -56,9 +57,10 @@ class RollingTrajectory:
     compiled: bool = False
 
 
-def project(system, q, v, tol: float = 1e-14, max_iter: int = 20) -> tuple[np.ndarray, np.ndarray]:
+def project(system, q, v, tol: float = 1e-14, max_iter: int = 20,
+            t: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """``(q, v)`` moved to ``Φ̂(q) = 0`` by least-norm Newton steps, then ``v`` to
-    ``Â(q) v = 0`` orthogonally."""
+    ``Â(q) v = ĉ(q, t)`` orthogonally (``t``: the time, s)."""
     q = np.array(q, float)
     nh = system.n_holonomic
     bound = tol * system_size(q)
@@ -69,7 +71,8 @@ def project(system, q, v, tol: float = 1e-14, max_iter: int = 20) -> tuple[np.nd
         raise NcgenError(f"project: Newton's method did not bring |Φ| below {tol:g} in {max_iter} "
                          f"iterations (|Φ| = {res:.3g}); the state is far from the constraints")
     A = np.asarray(system.A(q))
-    v = np.asarray(v, float) - np.linalg.lstsq(A, A @ v, rcond=None)[0]
+    v = np.asarray(v, float)
+    v = v - np.linalg.lstsq(A, A @ v - np.asarray(system.rate(q, t)).ravel(), rcond=None)[0]
     return q, v
 
 
@@ -120,15 +123,17 @@ def integrate(system, grid, q0, v0, *, method: str = "dopri5", substeps: int = 1
     when compiled in this process already, else once the Python steps' pace says the run
     would take longer than :data:`COMPILE_PAYS` (then compiled, or read from the compile
     cache, and continued; without a compiler, continued in Python).  The compiled step has
-    no extra force: with ``force``, ``compiled=True`` is refused and ``None`` runs in Python."""
+    no extra force and no moving plane: with ``force`` or ``system.rheonomic``,
+    ``compiled=True`` is refused and ``None`` runs in Python."""
     model = system.model
-    if force is not None:
+    if force is not None or system.rheonomic:
         if compiled:
             raise NcgenError("simulate_rolling: compiled=True: the compiled step takes no extra force "
-                             "(inputs, parameters or time-dependent forces); give compiled=None or False")
+                             "(inputs, parameters or time-dependent forces) and no moving plane (plane_velocity); "
+                             "give compiled=None or False")
         compiled = False
-    q, v = project(system, q0, v0)
     grid = np.asarray(grid, float)
+    q, v = project(system, q0, v0, t=float(grid[0]))
     step = system.compiled_steps.get(method) if compiled is None else \
         compiled_step(system, method) if compiled else None
     started, span = time.perf_counter(), float(grid[-1] - grid[0])
@@ -149,7 +154,7 @@ def integrate(system, grid, q0, v0, *, method: str = "dopri5", substeps: int = 1
     def rhs(y, t=0.0, t_step=0.0):
         q_, v_ = y[:system.nq], y[system.nq:]
         f = zero if force is None else force(t, q_, v_, t_step)
-        return np.concatenate([v_, np.asarray(system.accel(q_, v_, f)[0]).ravel()])
+        return np.concatenate([v_, np.asarray(system.accel_t(q_, v_, f, t)[0]).ravel()])
 
     def rk_step(y, h, t=0.0):
         """``(y⁺ projected, error estimate)`` of one step of ``method`` from time ``t``."""
@@ -161,21 +166,22 @@ def integrate(system, grid, q0, v0, *, method: str = "dopri5", substeps: int = 1
             k2 = rhs(y + h / 2 * k1, t + h / 2, t)
             k3 = rhs(y + h / 2 * k2, t + h / 2, t)
             k4 = rhs(y + h * k3, t + h, t)
-            return np.concatenate(project(system, *np.split(y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4), 2))), None
+            return np.concatenate(project(system, *np.split(y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4), 2),
+                                          t=t + h)), None
         k = [rhs(y, t, t)]
         for i in range(1, 7):
             k.append(rhs(y + h * sum(c * kj for c, kj in zip(_A[i], k)), t + h * sum(_A[i]), t))
         y5 = y + h * sum(b * kj for b, kj in zip(_B5, k))
-        return np.concatenate(project(system, *np.split(y5, 2))), h * sum(e * kj for e, kj in zip(_E, k))
+        return np.concatenate(project(system, *np.split(y5, 2), t=t + h)), h * sum(e * kj for e, kj in zip(_E, k))
 
     energy = model.functions["energy"]
     rows = []
 
-    def record(q, v):
+    def record(q, v, t):
         T, V = energy(0.0, q, v, model.p0)
-        rows.append((q, v, float(T) + float(V), max(system.residuals(q, v))))
+        rows.append((q, v, float(T) + float(V), max(system.residuals(q, v, t))))
 
-    record(q, v)
+    record(q, v, grid[0])
     y, steps, rejected = np.concatenate([q, v]), 0, 0
     if method == "rk4":
         for t_a, t_b in zip(grid[:-1], grid[1:]):
@@ -183,7 +189,7 @@ def integrate(system, grid, q0, v0, *, method: str = "dopri5", substeps: int = 1
             for j in range(substeps):
                 y = rk_step(y, h, t_a + j * h)[0]
                 steps += 1
-            record(*np.split(y, 2))
+            record(*np.split(y, 2), t_b)
             switch(t_b)
     else:
         t, h = grid[0], min(grid[1] - grid[0], 1e-3) if len(grid) > 1 else 1e-3
@@ -206,7 +212,7 @@ def integrate(system, grid, q0, v0, *, method: str = "dopri5", substeps: int = 1
                 h = max(h, proposed) if ratio <= 1.0 and h_now < h else proposed
                 if h < 1e-12 * max(1.0, abs(target)):
                     raise NcgenError(f"simulate_rolling: the step fell below {h:.3g} s at t = {t:.6g} s")
-            record(*np.split(y, 2))
+            record(*np.split(y, 2), target)
     q_out, v_out, e_out, r_out = (np.array(x) for x in zip(*rows))
     return RollingTrajectory(t=grid, q=q_out, v=v_out, energy=e_out, residual=r_out, steps=steps,
                              rejected=rejected, method=method, compiled=step is not None)
@@ -272,17 +278,17 @@ class RollingIntegrator:
         atol = 1e-10 if o.atol is None else o.atol
         start = time.perf_counter()
         compiled = {"vm": False, "compiled": True}.get(o.backend)
-        if force is not None and compiled:
+        if (force is not None or self.system.rheonomic) and compiled:
             raise NcgenError(f"method='rolling': model {model.name!r}: backend='compiled': the compiled step is "
-                             "built without inputs, other parameters or time-dependent forces; give backend='vm' "
-                             "or 'auto'")
+                             "built without inputs, other parameters, time-dependent forces or moving planes; "
+                             "give backend='vm' or 'auto'")
         tr = integrate(self.system, run.t, run.q, run.v, method=method, substeps=o.substeps, rtol=rtol, atol=atol,
                        compiled=compiled, force=force)
         system = self.system
         zero = np.zeros(system.nq)
-        lam = np.array([np.asarray(system.accel(q, v, zero if force is None else force(t, q, v, t))[1]).ravel()
+        lam = np.array([np.asarray(system.accel_t(q, v, zero if force is None else force(t, q, v, t), t)[1]).ravel()
                         for t, q, v in zip(tr.t, tr.q, tr.v)])
-        levels = np.array([system.residuals(q, v) for q, v in zip(tr.q, tr.v)])
+        levels = np.array([system.residuals(q, v, t) for t, q, v in zip(tr.t, tr.q, tr.v)])
         info = {"method": self.METHOD, "integrator": method, "steps": tr.steps, "rejected": tr.rejected,
                 "backend": "compiled" if tr.compiled else "vm",
                 "rolling_names": [e.name for e in model.rolling], "wall_time": time.perf_counter() - start,
