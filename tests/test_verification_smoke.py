@@ -44,6 +44,7 @@ def test_an_unknown_group_is_named(tmp_path):
 def test_verification_ladder_in_full(tmp_path):
     text, stdout = ladder(tmp_path, timeout=1800)
     for case in ("Whipple bicycle", "rolling disc, steady precession", "rolling disc, upright",
+                 "ball on a plane accelerating at 1.5 m/s² (B v = c(t)), nc.simulate at rtol 1e-10",
                  "Chaplygin sleigh", "heavy top, steady precession",
                  "IFToMM A02 four-bar (N = 1), through flat positions",
                  "IFToMM A02 four-bar (N = 10), through flat positions",
