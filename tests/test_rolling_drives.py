@@ -140,3 +140,27 @@ def test_plane_velocity_in_toml_and_its_errors(tmp_path):
     from ncgen.analysis.steady_motion import linearize_steady
     with pytest.raises(NcgenError, match="moving plane"):
         linearize_steady(rolling_system(model), model.q0, model.v0, np.zeros((model.nq, model.nq)), None)
+
+
+def test_the_acceleration_right_side_against_finite_differences():
+    """``gamma_t(q, v, t) = −d/dε [Â(q + εv) v − ĉ(q + εv, t + ε)]`` at ε = 0 (central
+    differences, 1e-7 of its scale) for a knife edge, whose ``ĉ`` depends on q and t, and a
+    ball on a plane shaken along x and y, at random states off the motion."""
+    s = nc.System("shaken", gravity=(0.0, 0.0, -G))
+    s.add_body("ball", mass=M, inertia=0.4 * M * R * R * np.eye(3), position=(0, 0, R))
+    s.add_rolling(nc.RollingSphere("ball", radius=R, plane_velocity=("0.3*sin(2*t)", "t*t")))
+    sled = s.add_body("sled", mass=1.0, inertia=np.diag([0.02, 0.04, 0.05]), position=(1.0, 0.0, 0.1))
+    s.add_joint(nc.Planar(s.ground, sled, at=(1.0, 0.0, 0.1), normal=(0.0, 0.0, 1.0)))
+    s.add_rolling(nc.KnifeEdge(sled, at=(-0.3, 0.0, 0.0), plane_velocity=("cos(t)", "0.5*t")))
+    rs = rolling_system(s.build())
+    rng = np.random.default_rng(7)
+    for _ in range(3):
+        q = rs.model.q0 + 0.1 * rng.standard_normal(rs.nq)
+        v, t, h = rng.standard_normal(rs.nq), float(rng.uniform(0, 2)), 1e-5
+
+        def level(e):
+            return np.asarray(rs.A(q + e * v)).dot(v) - np.asarray(rs.rate(q + e * v, t + e)).ravel()
+        fd = -(level(h) - level(-h)) / (2 * h)
+        got = np.asarray(rs.gamma_t(q, v, t)).ravel()
+        np.testing.assert_allclose(got, fd, rtol=0, atol=1e-7 * max(1.0, np.abs(fd).max()))
+        assert np.abs(got - np.asarray(rs.gamma(q, v)).ravel()).max() > 1e-3     # the plane's terms count
