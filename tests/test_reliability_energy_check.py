@@ -54,14 +54,18 @@ def test_a_motion_at_round_off_energy_is_no_false_alarm(slider, push):
 
 
 def test_a_real_energy_error_is_still_caught(slider):
-    """RATTLE is unstable for h ω > 2: at h = 0.25 s the pushed slider's energy grows, and
-    the check stops the run within its first output times, tiny push or not."""
-    for push in (1.0, 1e-10):
+    """RATTLE is unstable for h ω > 2: at h = 0.25 s the pushed slider's energy grows (about
+    fourfold a step), and the check stops the run within its first output times, tiny push or
+    not.  Pushed by 1e-10 N the energy starts at 1e-22 J, inside the round-off floor of the
+    check (gravity's potential on y = 0 held to round-off), and is caught once the growth lifts
+    it out: by t = 1.5 s (6 steps) where y stays exactly 0 (the element tables' solve), at once
+    where y carries round-off (the flat kernels)."""
+    for push, within in ((1.0, r"0.(25|5|75)"), (1e-10, r"(0.25|0.5|0.75|1|1.25|1.5)")):
         with pytest.raises(SimulationError, match=r"energy balance E - E0 - W .* is off by .* of its energy scale "
-                                                  r"by t = 0.(25|5|75) s") as err:
+                                                  rf"by t = {within} s") as err:
             nc.simulate(slider, 5.0, 0.25, u=lambda t: [push], method="stepper", substeps=1, scheme="rattle",
                         estimate=False)
-        assert len(err.value.trajectory.t) <= 3
+        assert len(err.value.trajectory.t) <= (3 if push == 1.0 else 7)
 
 
 def test_block_push_replays_checked():

@@ -49,8 +49,13 @@ def test_rattle4_keeps_the_energy_of_a_conservative_chain_bounded():
     assert traj.info["energy"]["conservative"]
     drift = np.abs(traj.energy - traj.energy[0])
     fifth = len(drift) // 5
-    assert drift.max() < 1e-3 * np.abs(traj.kinetic).max(), drift.max()
-    assert drift[-fifth:].max() < 3 * drift[:fifth].max(), (drift[:fifth].max(), drift[-fifth:].max())
+    scale = np.abs(traj.kinetic).max()
+    assert drift.max() < 1e-3 * scale, drift.max()
+    # the chain's motion is chaotic: runs equal up to round-off (flat kernels or tables, Newton
+    # tolerance 1e-10 or 1e-13) give last-fifth / first-fifth maxima from 0.4 to 4.3, so the
+    # window ratio is no test of drift; the last fifth's error stays within 1e-4 of the kinetic
+    # energy's scale (measured 1.1e-5 to 4.2e-5 of it on those runs)
+    assert drift[-fifth:].max() < 1e-4 * scale, (drift[:fifth].max(), drift[-fifth:].max())
     assert traj.constraint_residual.max() < 1e-10 and traj.velocity_residual.max() < 1e-10
     assert traj.info["stats"]["step_splits"] == 0
 

@@ -69,9 +69,9 @@ def reroll(f: ca.Function, *, min_instances: int = MIN_INSTANCES,
     if not f.is_a("SXFunction"):
         return f
     xs = f.sx_in()
-    X = ca.vertcat(*[x.nz[:] for x in xs]) if xs else ca.SX(0, 1)
+    X = ca.vertcat(*[ca.vec(x.nz[:]) for x in xs]) if xs else ca.SX(0, 1)
     outs = f.call(xs)
-    Y = ca.vertcat(*[y.nz[:] for y in outs]) if outs else ca.SX(0, 1)
+    Y = ca.vertcat(*[ca.vec(y.nz[:]) for y in outs]) if outs else ca.SX(0, 1)
     g = ca.Function("reroll", [X], [Y], {"live_variables": False})   # one work slot per instruction
     algorithm = _Algorithm(g)
     shapes, constant_rows, copied_rows, flat_rows = _shapes(algorithm, _dependencies(g), max_block_inputs)
@@ -198,7 +198,7 @@ def _assemble(f: ca.Function, X: ca.SX, Y: ca.SX, algorithm: _Algorithm, shapes:
     """The MX function: gather, mapped kernels, constants and the flat rest, scattered back
     into the outputs' nonzeros."""
     ins = [ca.MX.sym(f.name_in(i), f.sparsity_in(i)) for i in range(f.n_in())]
-    Xm = ca.vertcat(*[x.nz[:] for x in ins]) if ins else ca.MX(0, 1)
+    Xm = ca.vertcat(*[ca.vec(x.nz[:]) for x in ins]) if ins else ca.MX(0, 1)
     pieces, order = [], []
     for i, s in enumerate(shapes):
         kernel = _kernel(f"{f.name()}_k{i}", algorithm, s)
