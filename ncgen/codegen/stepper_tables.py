@@ -41,6 +41,7 @@ from types import SimpleNamespace
 import casadi as ca
 import numpy as np
 
+from ncgen.assembly.mass import mass_is_regular
 from ncgen.codegen.element_kernels import FEATURE_FORCE_KINDS, torque_constants
 from ncgen.codegen.model_tables import ModelTables, UnsupportedElements, _csc, _ints, _ptr, _reals, model_tables
 from ncgen.errors import CodegenError, NcgenError
@@ -76,6 +77,9 @@ class StepperTables:
     #: Nonzero entries of M (``m_colind``, ``m_row``, ``m_val``: M's pattern in the element tables
     #: less the entries whose value is zero).
     m_nnz: int = 0
+    #: Whether the stepper solves K by the sparse LU (M regular: every coordinate's pivot before
+    #: its constraints' multipliers is a mass); a flat body's singular M leaves it to the QR.
+    use_lu: bool = True
 
 
 def _number(value) -> bool:
@@ -325,7 +329,7 @@ def stepper_tables(model) -> StepperTables:
     return StepperTables(model.name, T, model.nu, model.np, len(markers), ns, len(ff), len(tq),
                          float(np.max(np.abs(M))) if nq else 1.0, v_gravity, int(k_indices.size),
                          int(qr["v_row"].size), int(qr["r_row"].size), arrays, conservative,
-                         int(lu["l_row"].size), m_nnz)
+                         int(lu["l_row"].size), m_nnz, mass_is_regular(model))
 
 
 def _velocity_entries(a: dict, feats) -> tuple[np.ndarray, np.ndarray]:

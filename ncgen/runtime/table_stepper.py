@@ -118,7 +118,7 @@ class TableStepper(CompiledStepper):
                 self._keep[f"s.{f}"] = _array(st.arrays[f], t)
         ptr = {f: self._keep[f"s.{f}"].ctypes.data for f in fields if f"s.{f}" in self._keep}
         qr = _QrPattern(n=T.nq + T.nc, **{f: ptr[f] for _, f in _QR_FIELDS[1:]})
-        lu = _LuPattern(n=T.nq + T.nc, nnz_l=st.nnz_l, **{f: ptr[a] for _, f, a in _LU_FIELDS if a is not None})
+        lu = _LuPattern(n=T.nq + T.nc if st.use_lu else 0, nnz_l=st.nnz_l, **{f: ptr[a] for _, f, a in _LU_FIELDS if a is not None})
         self._S = _StepperTables(T=ctypes.addressof(self._T), nu=st.nu, np=st.np, n_markers=st.n_markers,
                                  n_act=len(self._keep["s.act_kind"]),
                                  n_spring=st.n_spring, mass_scale=st.mass_scale, m_nnz=st.m_nnz,
