@@ -41,6 +41,16 @@ def cache_dir() -> Path:
     return Path(env) if env else Path.home() / ".cache" / "ncgen"
 
 
+#: The environment variable that turns the stores of built models and of derivations off.
+MODEL_CACHE_ENV = "NCGEN_MODEL_CACHE"
+
+
+def model_cache_enabled() -> bool:
+    """Whether built models and derivations are read from and written to their stores
+    (``$NCGEN_MODEL_CACHE``: ``0``, ``off``, ``no`` or ``false`` turn them off)."""
+    return os.environ.get(MODEL_CACHE_ENV, "1").strip().lower() not in ("0", "off", "no", "false")
+
+
 def _host() -> str:
     return re.sub(r"[^A-Za-z0-9_]", "_", socket.gethostname())[:40]
 

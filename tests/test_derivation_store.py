@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 import sympy as sp
 
-from ncgen.symbolic import derivation_store
+from ncgen.files import MODEL_CACHE_ENV
 from ncgen.symbolic.coordinates import Derivation, coordinate_type
 from ncgen.symbolic.derivation_store import entry_path, stored_derivation
 
@@ -14,7 +14,7 @@ from ncgen.symbolic.derivation_store import entry_path, stored_derivation
 @pytest.fixture
 def store(tmp_path, monkeypatch):
     monkeypatch.setenv("NCGEN_CACHE_DIR", str(tmp_path))
-    monkeypatch.delenv(derivation_store.ENV, raising=False)
+    monkeypatch.delenv(MODEL_CACHE_ENV, raising=False)
     return tmp_path / "derivations"
 
 
@@ -63,7 +63,7 @@ def test_another_types_entry_is_refused(store, capsys):
 
 
 def test_store_off(store, monkeypatch):
-    monkeypatch.setenv(derivation_store.ENV, "0")
+    monkeypatch.setenv(MODEL_CACHE_ENV, "0")
     assert stored_derivation(coordinate_type("rr", 3), Derivation).ctype is coordinate_type("rr", 3)
     assert not store.exists()
 

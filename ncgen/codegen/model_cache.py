@@ -36,22 +36,21 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Callable
 
-from ncgen.files import atomic_path
+from ncgen.files import MODEL_CACHE_ENV, atomic_path, model_cache_enabled
 from ncgen.version import __version__
 
 #: Bump when the layout of an entry or of the pickled state changes.
 FORMAT = 1
 #: The environment variable that turns the store off.
-ENV = "NCGEN_MODEL_CACHE"
+ENV = MODEL_CACHE_ENV
 SUFFIX = ".model"
 #: Size of the store (bytes) beyond which the least recently used entries are removed after a
 #: write (every edit of ncgen's sources makes new keys; old entries would pile up).
 MAX_BYTES = 512 * 2**20
 
 
-def enabled() -> bool:
-    """Whether built models are read from and written to the store (``$NCGEN_MODEL_CACHE``)."""
-    return os.environ.get(ENV, "1").strip().lower() not in ("0", "off", "no", "false")
+#: Whether built models are read from and written to the store (``$NCGEN_MODEL_CACHE``).
+enabled = model_cache_enabled
 
 
 def store_dir() -> Path:

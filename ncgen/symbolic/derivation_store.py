@@ -14,7 +14,6 @@ the entries of the same type made from other sources.  ``NCGEN_MODEL_CACHE=0``
 from __future__ import annotations
 
 import hashlib
-import os
 import pickle
 import sys
 from functools import lru_cache
@@ -22,17 +21,8 @@ from pathlib import Path
 from typing import Callable
 
 from ncgen.errors import NcgenError
-from ncgen.files import atomic_path, cache_dir
+from ncgen.files import atomic_path, cache_dir, model_cache_enabled
 from ncgen.version import __version__
-
-#: The environment variable of the store of built models (:mod:`ncgen.codegen.model_cache`).
-ENV = "NCGEN_MODEL_CACHE"
-
-
-def enabled() -> bool:
-    """Whether derivations are read from and written to the store (``$NCGEN_MODEL_CACHE``)."""
-    return os.environ.get(ENV, "1").strip().lower() not in ("0", "off", "no", "false")
-
 
 @lru_cache(maxsize=1)
 def source_key() -> str:
@@ -52,7 +42,7 @@ def entry_path(name: str, dim: int) -> Path:
 
 def stored_derivation(ctype, derive: Callable):
     """The derivation of ``ctype`` read from the store, else ``derive(ctype)`` stored."""
-    if not enabled():
+    if not model_cache_enabled():
         return derive(ctype)
     path = entry_path(ctype.name, ctype.dim)
     try:
