@@ -15,6 +15,8 @@ and never touches anything else.
 from __future__ import annotations
 
 import contextlib
+import hashlib
+import json
 import os
 import re
 import shutil
@@ -22,7 +24,7 @@ import socket
 import tempfile
 import time
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator
 
 from ncgen.errors import NcgenError
 
@@ -168,3 +170,50 @@ def _new_file_mode(target: Path) -> int:
     umask = os.umask(0)
     os.umask(umask)
     return 0o666 & ~umask
+
+
+def write_entry(path: str | os.PathLike, header: dict, payload: bytes) -> bool:
+    """Write a store entry atomically: one line of JSON (``header`` with the payload's size and
+    sha256 added), then ``payload``; False if it cannot be written."""
+    path = Path(path)
+    head = json.dumps({**header, "size": len(payload), "sha256": hashlib.sha256(payload).hexdigest()}).encode()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(path) as tmp:
+            tmp.write_bytes(head + b"\n" + payload)
+    except (OSError, NcgenError):
+        return False
+    return True
+
+
+def read_entry(path: str | os.PathLike, header: dict, decode: Callable[[bytes], object], what: str,
+               redo: str = "building it again"):
+    """``decode(payload)`` of the store entry at ``path`` written by :func:`write_entry`, or None:
+    absent, or damaged (a field of ``header``, the size or the sha256 not matching, or ``decode``
+    failing), then removed with a note on stderr naming it as ``what`` and saying ``redo``."""
+    import sys
+
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError:
+        return None
+    head, _, payload = raw.partition(b"\n")
+    try:
+        found = json.loads(head)
+        ok = (isinstance(found, dict) and all(found.get(k) == v for k, v in header.items())
+              and found.get("size") == len(payload) and found.get("sha256") == hashlib.sha256(payload).hexdigest())
+    except ValueError:
+        ok = False
+    if ok:
+        try:
+            hit = decode(payload)
+            os.utime(path)                 # most recently used: kept longest by a pruning store
+            return hit
+        except Exception as exc:          # noqa: BLE001 — any failure of a stored entry means: make it again
+            why = f"cannot be read back ({type(exc).__name__}: {exc})"
+    else:
+        why = "is damaged or from another version of ncgen"
+    print(f"ncgen: the stored {what} {path} {why}; {redo}", file=sys.stderr)
+    path.unlink(missing_ok=True)
+    return None

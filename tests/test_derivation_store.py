@@ -51,7 +51,7 @@ def test_a_damaged_entry_is_derived_again(store, capsys):
     path.parent.mkdir(parents=True)
     path.write_bytes(b"not a pickle")
     found = stored_derivation(ct, Derivation)
-    assert found.ctype is ct and "cannot be read back" in capsys.readouterr().err
+    assert found.ctype is ct and "is damaged" in capsys.readouterr().err
     assert stored_derivation(ct, Derivation).ctype is ct and capsys.readouterr().err == ""
 
 
@@ -59,7 +59,19 @@ def test_another_types_entry_is_refused(store, capsys):
     stored_derivation(coordinate_type("rr", 2), Derivation)
     entry_path("rr", 2).rename(entry_path("ru", 2))
     found = stored_derivation(coordinate_type("ru", 2), Derivation)
-    assert found.ctype is coordinate_type("ru", 2) and "expected the derivation" in capsys.readouterr().err
+    assert found.ctype is coordinate_type("ru", 2) and "is damaged" in capsys.readouterr().err
+
+
+def test_a_payload_not_matching_its_checksum_is_never_unpickled(store, monkeypatch, capsys):
+    ct = coordinate_type("rr", 2)
+    stored_derivation(ct, Derivation)
+    path = entry_path("rr", 2)
+    raw = bytearray(path.read_bytes())
+    raw[-3] ^= 0xFF                                             # one byte of the pickle changed
+    path.write_bytes(bytes(raw))
+    monkeypatch.setattr("pickle.loads", no_derivation)
+    found = stored_derivation(ct, Derivation)
+    assert found.ctype is ct and "is damaged" in capsys.readouterr().err
 
 
 def test_store_off(store, monkeypatch):
@@ -70,8 +82,10 @@ def test_store_off(store, monkeypatch):
 
 def test_entries_of_other_sources_are_removed_when_one_is_written(store):
     store.mkdir(parents=True)
-    old = store / "rr-3d-0123456789abcdef01234567.pickle"
-    other = store / "ru-3d-0123456789abcdef01234567.pickle"
+    old = store / "rr-3d-0123456789abcdef01234567.derivation"
+    older = store / "rr-3d-0123456789abcdef01234567.pickle"            # the layout before headers
+    other = store / "ru-3d-0123456789abcdef01234567.derivation"
+    older.write_bytes(b"an entry without a header")
     old.write_bytes(b"from other sources")
     other.write_bytes(b"another type")
     stored_derivation(coordinate_type("rr", 3), Derivation)

@@ -36,7 +36,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Callable
 
-from ncgen.files import MODEL_CACHE_ENV, atomic_path, model_cache_enabled
+from ncgen.files import MODEL_CACHE_ENV, model_cache_enabled, read_entry, write_entry
 from ncgen.version import __version__
 
 #: Bump when the layout of an entry or of the pickled state changes.
@@ -250,46 +250,19 @@ def derived_function(model, what: str, build: Callable[[], object]):
     return f
 
 
+def _header(key: str) -> dict:
+    return {"format": FORMAT, "ncgen": __version__, "key": key}
+
+
 def _read(path: Path, key: str, decode: Callable[[bytes], object]):
     """``decode(payload)`` of the entry at ``path``, or None: absent, or damaged (the header's
     format, version, key, size or sha256 not matching, or ``decode`` failing), then removed."""
-    try:
-        raw = path.read_bytes()
-    except OSError:
-        return None
-    head, _, payload = raw.partition(b"\n")
-    try:
-        header = json.loads(head)
-        ok = (isinstance(header, dict) and header.get("format") == FORMAT and header.get("ncgen") == __version__
-              and header.get("key") == key and header.get("size") == len(payload)
-              and header.get("sha256") == hashlib.sha256(payload).hexdigest())
-    except ValueError:
-        ok = False
-    if ok:
-        try:
-            hit = decode(payload)
-            os.utime(path)                 # most recently used: kept longest (:func:`_prune`)
-            return hit
-        except Exception as exc:          # noqa: BLE001 — any failure of a stored entry means: rebuild
-            why = f"cannot be read back ({type(exc).__name__}: {exc})"
-    else:
-        why = "is damaged or from another version of ncgen"
-    print(f"ncgen: the stored model entry {path} {why}; building it again", file=sys.stderr)
-    path.unlink(missing_ok=True)
-    return None
+    return read_entry(path, _header(key), decode, "model entry")
 
 
 def _write(path: Path, key: str, payload: bytes) -> bool:
     """Write an entry (header line, then ``payload``) atomically; False if it cannot be written."""
-    from ncgen.errors import NcgenError
-
-    header = json.dumps({"format": FORMAT, "ncgen": __version__, "key": key, "size": len(payload),
-                         "sha256": hashlib.sha256(payload).hexdigest()}).encode()
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_path(path) as tmp:
-            tmp.write_bytes(header + b"\n" + payload)
-    except (OSError, NcgenError):
+    if not write_entry(path, _header(key), payload):
         return False
     _prune(path.parent, keep=path)
     return True

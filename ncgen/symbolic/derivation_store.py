@@ -1,11 +1,13 @@
 """Derivations of coordinate types kept on disk, so that a process that builds a model does
 not derive them with SymPy again (about a second per type; issue 34: first runs).
 
-An entry is ``<cache_dir>/derivations/<type>-<dim>d-<key>.pickle``
-(:func:`ncgen.files.cache_dir`): the pickled :class:`~ncgen.symbolic.coordinates.Derivation`
-(SymPy matrices and symbols; its coordinate type by name).  The key hashes what a derivation
-is made of: ncgen's version, SymPy's and Python's, and the bytes of the symbolic layer's
-sources, so an edited formula is derived again.  Entries are written atomically
+An entry is ``<cache_dir>/derivations/<type>-<dim>d-<key>.derivation``
+(:func:`ncgen.files.cache_dir`): one line of JSON (format, ncgen's version, the key, the type,
+the payload's size and sha256; :func:`ncgen.files.write_entry`), then the pickled
+:class:`~ncgen.symbolic.coordinates.Derivation` (SymPy matrices and symbols; its coordinate
+type by name), unpickled only when the header and the checksum match.  The key hashes what a
+derivation is made of: ncgen's version, SymPy's and Python's, and the bytes of the symbolic
+layer's sources, so an edited formula is derived again.  Entries are written atomically
 (:func:`ncgen.files.atomic_path`); one that cannot be read back (damaged, or not a derivation
 of this type) is removed, with a note on stderr, and derived again; writing an entry removes
 the entries of the same type made from other sources.  ``NCGEN_MODEL_CACHE=0``
@@ -20,9 +22,12 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Callable
 
-from ncgen.errors import NcgenError
-from ncgen.files import atomic_path, cache_dir, model_cache_enabled
+from ncgen.files import cache_dir, model_cache_enabled, read_entry, write_entry
 from ncgen.version import __version__
+
+#: Bump when the layout of an entry changes.
+FORMAT = "derivation-1"
+SUFFIX = ".derivation"
 
 @lru_cache(maxsize=1)
 def source_key() -> str:
@@ -37,7 +42,7 @@ def source_key() -> str:
 
 def entry_path(name: str, dim: int) -> Path:
     """The entry of the derivation of coordinate type ``name`` in ``dim`` dimensions."""
-    return cache_dir() / "derivations" / f"{name}-{dim}d-{source_key()[:24]}.pickle"
+    return cache_dir() / "derivations" / f"{name}-{dim}d-{source_key()[:24]}{SUFFIX}"
 
 
 def stored_derivation(ctype, derive: Callable):
@@ -45,29 +50,24 @@ def stored_derivation(ctype, derive: Callable):
     if not model_cache_enabled():
         return derive(ctype)
     path = entry_path(ctype.name, ctype.dim)
-    try:
-        raw = path.read_bytes()
-    except OSError:
-        raw = None
-    if raw is not None:
-        try:
-            found = pickle.loads(raw)
-            if type(found) is not derive or found.ctype is not ctype:
-                raise TypeError(f"expected the derivation of {ctype!r}, found {type(found).__name__}")
-            return found
-        except Exception as exc:          # noqa: BLE001 — any failure of a stored entry means: derive again
-            print(f"ncgen: the stored derivation {path} cannot be read back ({type(exc).__name__}: {exc}); "
-                  "deriving it again", file=sys.stderr)
-            path.unlink(missing_ok=True)
+    header = {"format": FORMAT, "ncgen": __version__, "key": source_key(), "type": f"{ctype.name}-{ctype.dim}d"}
+
+    def decode(payload: bytes):
+        found = pickle.loads(payload)
+        if type(found) is not derive or found.ctype is not ctype:
+            raise TypeError(f"expected the derivation of {ctype!r}, found {type(found).__name__}")
+        return found
+
+    found = read_entry(path, header, decode, "derivation", redo="deriving it again")
+    if found is not None:
+        return found
     found = derive(ctype)
     try:
         payload = pickle.dumps(found, protocol=pickle.HIGHEST_PROTOCOL)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_path(path) as tmp:
-            tmp.write_bytes(payload)
-        for old in path.parent.glob(f"{ctype.name}-{ctype.dim}d-*.pickle"):
-            if old != path:               # of other sources: would only pile up
+    except pickle.PicklingError:
+        return found                      # not stored: derived again next time
+    if write_entry(path, header, payload):
+        for old in path.parent.glob(f"{ctype.name}-{ctype.dim}d-*"):
+            if old != path:               # of other sources or an older layout: would only pile up
                 old.unlink(missing_ok=True)
-    except (OSError, NcgenError, pickle.PicklingError):
-        pass                              # not stored: derived again next time
     return found
