@@ -39,8 +39,7 @@ from ncgen.runtime.run_start import initial_multipliers, initial_state, point_by
 from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.stepper import (COMPOSITION_STAGES, ESTIMATE_MODES, ESTIMATE_NAMES, _trajectory, fixed_scheme,
                                    step_inputs)
-from ncgen.runtime.stepper_checks import (ENERGY_FRACTION, ERROR_FRACTION, NEWTON_LIMIT, is_conservative,
-                                          untrusted_row)
+from ncgen.runtime.stepper_checks import is_conservative, row_flags, untrusted_row
 from ncgen.runtime.stepper_library import _Options
 from ncgen.runtime.table_stepper import load_any_stepper
 from ncgen.validation import as_numbers, as_scalar
@@ -401,7 +400,8 @@ class _Runs:
 
     def screen(self) -> np.ndarray:
         """Per run: whether the checks of :func:`~ncgen.runtime.stepper_checks.untrusted_row`
-        may flag it, evaluated over all runs at once from their statistics and outputs.  The
+        (its :func:`~ncgen.runtime.stepper_checks.row_flags`) may flag it, evaluated over all runs
+        at once from their statistics and outputs.  The
         energy error is measured against the energy scale without the round-off floor, which
         only raises the scale, so every run the single-run check flags is flagged here too
         (and a run flagged here only for round-off passes its own check).  Every run with
@@ -418,13 +418,10 @@ class _Runs:
             scale = np.maximum.accumulate(terms, axis=1)[:, 1:]
             e_rel = error / np.maximum(scale, 1e-300)
         e_rel = np.where(np.isnan(e_rel), np.inf, e_rel)
-        steps, iters = S[:, :, col("steps")], S[:, :, col("newton_iterations")]
-        gq = S[:, :, col("error_q")]
         size = max(float(np.max(np.abs(self.model.q0), initial=0.0)), 1e-9)
-        stages = COMPOSITION_STAGES if self.rattle4 else 1
-        bad = ((S[:, :, col("splits")] > 0) | (iters / np.maximum(steps * stages, 1) > NEWTON_LIMIT)
-               | (e_rel > ENERGY_FRACTION) | (np.nan_to_num(np.where(gq < 0, 0.0, gq)) > ERROR_FRACTION * size))
-        return bad.any(axis=1)
+        flags = row_flags(S[:, :, col("splits")], S[:, :, col("newton_iterations")], S[:, :, col("steps")],
+                          COMPOSITION_STAGES if self.rattle4 else 1, e_rel, S[:, :, col("error_q")], size)
+        return np.logical_or.reduce(list(flags.values())).any(axis=1)
 
     def _checked(self, i: int, rows: int, S: np.ndarray) -> None:
         """Outputs of run ``i`` and the checks of a single run (:func:`untrusted_row`)."""

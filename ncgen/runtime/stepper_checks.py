@@ -416,6 +416,22 @@ def contact_report(S: np.ndarray) -> dict:
             "penetration_tol": PENETRATION_TOL, "cone_residual": float(law.max(initial=0.0))}
 
 
+def row_flags(splits, iters, steps, stages: int, e_rel, gq, size: float, residual=None) -> dict[str, np.ndarray]:
+    """The checks of :func:`untrusted_row`, per output row of the statistics (arrays of any
+    shape, e.g. runs × rows): which rows each check flags.  ``e_rel``: the energy error over
+    its scale; ``gq``: the global error estimate in q (m); ``size``: the largest |q0| (m);
+    ``residual``: the contact solves' last sweep change (None: no contacts)."""
+    flags = {
+        "splits": splits > 0,
+        "newton": iters / np.maximum(steps * stages, 1) > NEWTON_LIMIT,
+        "energy": e_rel > ENERGY_FRACTION,
+        "error": np.nan_to_num(np.maximum(gq, 0.0)) > ERROR_FRACTION * size,
+    }
+    if residual is not None:
+        flags["contacts"] = residual > PGS_TRUST
+    return flags
+
+
 def untrusted_row(model, traj, S: np.ndarray, h: float, contacts: bool = False) -> tuple[int, str] | None:
     """``(row, reason)`` of the first output row where the fixed-step run stops being
     trustworthy (module docstring), or None; ``contacts``: a run of the nonsmooth contact
@@ -435,16 +451,10 @@ def untrusted_row(model, traj, S: np.ndarray, h: float, contacts: bool = False) 
         residual = S[:, len(STATS) + CONTACT_STATS.index("pgs_residual")]
     else:
         e_rel = relative_energy_error(model, traj, work, conservative, S)
-        residual = np.zeros(len(S))
+        residual = None
     e_rel = np.where(np.isnan(e_rel), np.inf, e_rel)    # overflowed or NaN states: diverged
     dt = h * traj.info.get("substeps", 1)
-    flags = {
-        "splits": splits > 0,
-        "newton": iters / np.maximum(steps * stages, 1) > NEWTON_LIMIT,
-        "energy": e_rel > ENERGY_FRACTION,
-        "error": np.nan_to_num(gq) > ERROR_FRACTION * size,
-        "contacts": residual > PGS_TRUST,
-    }
+    flags = row_flags(splits, iters, steps, stages, e_rel, gq, size, residual)
     first = {k: int(np.argmax(f)) for k, f in flags.items() if f.any()}
     if not first:
         return None
