@@ -336,17 +336,15 @@ class ContactImplicit(Transcription):
                                slack[:, k - 1], fN[:, k], True)]
                 friction(f"node {k}", PN[:, k - 1], ca.mtimes(WT, wk) + np.repeat(e, nt) * ca.mtimes(WT, vk),
                          Pbeta[:, k - 1], Pgam[:, k - 1])
-        products, signs = [], []                       # every ``c`` is a variable bounded below by 0
+        rows = []                                      # every ``c`` is a variable bounded below by 0
         for pair in pairs:
             product = pair.a * pair.c
             if ca.symvar(product):                     # (a gap fixed at 0 by the initial state leaves c free)
-                products.append(product)
+                rows.append(product - self.sigma)
             if not pair.a_imposed:
-                signs.append(pair.a)
-        if products:                                   # one call each: Opti's subject_to costs ~2 ms a call
-            opti.subject_to(ca.vertcat(*products) <= self.sigma)
-        if signs:
-            opti.subject_to(ca.vertcat(*signs) >= 0)
+                rows.append(-pair.a)
+        if rows:                                       # one call: Opti's subject_to costs ~2 ms a call
+            opti.subject_to(ca.vertcat(*rows) <= 0)
         self.pairs = pairs
         self.vars = dict(Q=Q, V=V, W=W, Mid=Mid, scale=scale, slack=slack, fN=fN, beta=beta, PN=PN, Pbeta=Pbeta,
                          t=t, h=h, D=D)
