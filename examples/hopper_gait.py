@@ -10,7 +10,7 @@ T = 1 s, ending at rest where it started, with the least ``∫ leg² dt`` and tr
 Internal forces cannot lift the centre of mass: only the floor can, so following the
 reference means pushing off, flying and landing.  The guess is the hopper standing still
 (``"rest"``); the transcription (:mod:`ncgen.optim.contact_implicit`) finds where the foot
-leaves and meets the floor: it pushes off at 0.27 s, flies, taps the floor once at 0.43 s,
+leaves and meets the floor: it pushes off at 0.23 s, flies, taps the floor once at 0.43 s,
 flies again and lands at 0.63 s.  The homotopy starts at σ = 1 (:data:`CONTACTS`).
 
 The leg force acts on the body alone apart from gravity, so the body's motion is set by the

@@ -434,7 +434,8 @@ class ContactImplicit(Transcription):
             residual = complementarity_residual(self.pairs, value)
             stats = nlp.opti.stats()
             self.history.append({"sigma": sigma, "status": stats.get("return_status", ""),
-                                 "iterations": int(stats.get("iter_count", 0)), "residual": residual})
+                                 "iterations": int(stats.get("iter_count", 0)), "residual": residual,
+                                 "cpu_time": float(stats.get("t_proc_total", math.nan))})
             self.status = stats.get("return_status", "")
             if sigma <= s["sigma_final"] or self.status not in SUCCESS:
                 break
@@ -473,6 +474,7 @@ class ContactImplicit(Transcription):
         stats = opti.stats()
         self.history.append({"sigma": "polish", "status": stats.get("return_status", ""),
                              "iterations": int(stats.get("iter_count", 0)),
+                             "cpu_time": float(stats.get("t_proc_total", math.nan)),
                              "residual": complementarity_residual(self.pairs, polished)})
         if stats.get("return_status", "") not in SUCCESS:
             return None
