@@ -64,15 +64,13 @@ def continuous_cost(T):
     return MASS ** 2 * (12 * DISTANCE ** 2 / Tm ** 3 + (MU * G) ** 2 * Tm)
 
 
-def replay(model, sol, substeps=10, check=True):
+def replay(model, sol, substeps=10):
     """The optimal push replayed by the nonsmooth stepper (held over each step), with the
-    stepper's checks on unless ``check=False``.  The block rests under a push of round-off
-    size (1e-14..1e-11 N) before and after the motion; where it rests at x = 0 the check's
-    round-off floor (:func:`ncgen.runtime.stepper_checks.roundoff_energy`, proportional to
-    max|q|) is 0 and a push of 3e-12 N was flagged (T = 1 s), so the tests replay that case
-    unchecked and compare the positions at every node instead."""
+    stepper's checks on: the block rests under a push of round-off size (~1e-14 N) before and
+    after the motion, energies the check measures against their round-off
+    (:func:`ncgen.runtime.stepper_checks.roundoff_energy`)."""
     T = sol.t[-1] - sol.t[0]
-    return nc.simulate(model, T, T / N, u=sol.u, hold="zoh", method="stepper", substeps=substeps, check=check)
+    return nc.simulate(model, T, T / N, u=sol.u, hold="zoh", method="stepper", substeps=substeps)
 
 
 if __name__ == "__main__":
@@ -86,7 +84,7 @@ if __name__ == "__main__":
               f"{best:.9f}; continuous time {continuous_cost(T):.6f}); moving during {moving} of {N} nodes; "
               f"complementarity residual {sol.complementarity_residual:.2e}; {sol.stats.iterations} iterations, "
               f"{sol.stats.solve_time:.1f} s")
-        sim = replay(model, sol, check=T < 1)
+        sim = replay(model, sol)
         print(f"  replayed by the nonsmooth stepper: ends {abs(sim.q[-1, 0] - sol.q[-1, 0]):.2e} m from the optimum")
     from ncgen.optim.plots import plot_solution
     plot_solution(sol, "block_push.png")

@@ -141,7 +141,7 @@ def test_block_push_over_a_long_horizon_rests_part_of_the_time(block):
     assert effort < ex.closed_form(T)[1]                      # cheaper than sliding throughout
     assert np.any(np.abs(sol.v[1:-1, 0]) < 1e-9)              # it sticks somewhere
     assert sol.complementarity_residual < 1e-6
-    sim = ex.replay(model, sol, check=False)                 # the check's false alarm: block_push.replay
+    sim = ex.replay(model, sol)
     assert np.max(np.abs(sim.q[:, 0] - sol.q[:, 0])) < 1e-6
 
 
