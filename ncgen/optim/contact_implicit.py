@@ -36,7 +36,10 @@ cone with ``n_d`` unit directions ``d_j`` in the tangent plane, ``f_T = Σ β_j 
   friction on ``U⁺_T + e U⁻_T`` (the stepper's law) as above with ``P_N``.
 
 Each complementarity pair ``a ≥ 0, c ≥ 0, a c = 0`` is relaxed to ``a c ≤ σ`` (Scholtes) and
-IPOPT solves the sequence ``σ = σ₀, σ₀ κ, …, σ_final``, each from the last, with
+IPOPT solves the sequence ``σ = σ₀, σ₀ κ, …, σ_final`` (σ a parameter of the NLP built once;
+the first solve with the adaptive barrier update, the others warm started from the last
+solution and its multipliers on the same IPOPT instance: :data:`FIRST_SOLVE`,
+:data:`WARM_START`), with
 ``ρ Σ a·c`` in the cost (every pair but the friction cone's ``(μ f_N − Σ β) γ``: ``γ`` is
 unbounded where ``μ f_N = 0``, and the tolerance on the cone would pay for it).  The polish
 then solves once more with the active set fixed (the smaller side of every pair set to 0),
