@@ -238,3 +238,67 @@ def test_bilateral_multipliers_of_a_bar_pushed_on_frictionless_ends():
     assert np.max(np.abs(u)) > 1.0
     assert np.max(np.abs(sol.lam[1:, 0] + u / (4 * L))) < 1e-6 * np.max(np.abs(u))
     assert np.allclose(sol.contact_force.sum(axis=1), m * 9.81, rtol=1e-6)
+
+
+@pytest.fixture(scope="module")
+def hopper():
+    ex = _example("hopper_gait")
+    model = ex.build()
+    return ex, model, ex.problem(model).solve("rest")
+
+
+@pytest.mark.slow      # fast: test_block_push_sliding_throughout_matches_the_closed_form (the same transcription)
+def test_hopper_finds_a_hop_from_standing(hopper):
+    """From the standing guess the optimum pushes off, flies and lands: contact force in the
+    first and last intervals, an interval where the foot is off the floor on both ends with
+    no force, every pair complementary; in flight the foot falls under gravity and the leg
+    force alone (the step is exact for constant accelerations: a closed form)."""
+    ex, model, sol = hopper
+    assert sol.complementarity_residual < 1e-6
+    stance, flight = ex.phases(sol)
+    assert stance[0] and stance[-1]
+    assert flight.any()
+    first, last = np.flatnonzero(flight)[[0, -1]]
+    assert not stance[first:last + 1].any()                   # breaks contact, then makes it again
+    gap = sol.marker("foot.centre")[:, 1] - ex.RADIUS
+    assert gap.max() > 0.1 and gap.min() > -1e-9
+    h = ex.T / ex.N
+    y, vy = sol.marker("foot.centre")[:, 1], sol.v[:, model.coordinate_names.index("foot.r_i.y")]
+    for k in np.flatnonzero(flight):
+        a = -sol.u[k, 0] / ex.FOOT - ex.G
+        assert y[k + 1] == pytest.approx(y[k] + h * vy[k] + h * h / 2 * a, abs=1e-9)
+        assert vy[k + 1] == pytest.approx(vy[k] + h * a, abs=1e-9)
+    # standing still with the body on the reference is a worse optimum (the hop is not a tie)
+    assert sol.stats.objective < 0.75 * _standing_cost(ex)
+
+
+def _standing_cost(ex):
+    """The cost of the best motion that keeps the foot on the floor: the body then follows
+    ``ÿ = leg/m − g`` alone, a linear least-squares problem in the N leg forces (the foot's
+    tracking error ``∫ lift² dt`` is fixed); the RATTLE step is exact for it."""
+    h, n, w, e = ex.T / ex.N, ex.N, 1000.0, ex.EFFORT
+    t = np.arange(n + 1) * h
+    # y_k = y_0 + Σ_j c_kj a_j with a_j = leg_j/m − g; v_N = h Σ a_j = 0, y_N = y_0
+    C = np.array([[h * h * (k - j - 0.5) if j < k else 0.0 for j in range(n)] for k in range(n + 1)])
+    quad = np.concatenate([[h / 2], np.full(n - 1, h), [h / 2]])            # trapezoid on the nodes
+    ref = ex.lift(t)
+    # minimise w Σ quad (C a − ref)² + e h Σ (m (a + g))² subject to Σ a = 0, C[-1] a = 0
+    Hq = 2 * (w * C.T @ np.diag(quad) @ C + e * h * ex.BODY ** 2 * np.eye(n))
+    gq = -2 * (w * C.T @ (quad * ref)) + 2 * e * h * ex.BODY ** 2 * ex.G * np.ones(n)
+    A = np.vstack([np.ones(n), C[-1]])
+    kkt = np.block([[Hq, A.T], [A, np.zeros((2, 2))]])
+    a = np.linalg.solve(kkt, np.concatenate([-gq, [0, 0]]))[:n]
+    body = w * quad @ (C @ a - ref) ** 2 + e * h * np.sum((ex.BODY * (a + ex.G)) ** 2)
+    return body + w * quad @ ref ** 2
+
+
+@pytest.mark.slow      # fast: test_ball_optimum_is_complementary_and_replays_in_the_nonsmooth_stepper
+def test_hopper_optimum_replays_in_the_nonsmooth_stepper(hopper):
+    """The optimal leg force held over each step, simulated by the nonsmooth stepper at
+    T/N/400: the body (driven by the leg force alone) agrees to round-off; the foot, which
+    lands inside steps, to 2 mm (first order in the stepper's step: 3.6 mm at T/N/200)."""
+    ex, model, sol = hopper
+    sim = ex.replay(model, sol, substeps=400)
+    assert np.max(np.abs(sim.marker("body.centre") - sol.marker("body.centre"))) < 1e-9
+    assert np.max(np.abs(sim.marker("foot.centre") - sol.marker("foot.centre"))) < 2e-3
+    assert np.max(np.abs(sim.q[-1] - sol.q[-1])) < 1e-9

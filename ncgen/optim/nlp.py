@@ -402,8 +402,11 @@ class NLP:
                    "linear_solver": linear_solver, **ocp.transcription.ipopt_options, **ipopt}
         if max_wall_time is not None:
             options["max_wall_time"] = float(max_wall_time)
-        opti.solver("ipopt", {"expand": self.disc.expandable, "detect_simple_bounds": True,
-                              "print_time": False, "ipopt": options})
+        solver_options = {"expand": self.disc.expandable, "detect_simple_bounds": True, "print_time": False,
+                          "ipopt": options}
+        if solver_options != getattr(self, "_solver_options", None):  # same options: IPOPT as built last time
+            opti.solver("ipopt", solver_options)
+            self._solver_options = solver_options
         start = time.perf_counter()
         shown = enabled(None) and not verbose          # IPOPT's own log replaces the bar
         with deferred_interrupt() as interrupt, \
@@ -432,8 +435,9 @@ def build_and_solve(ocp, warm_start, *, max_iter: int, tol: float, verbose: bool
     nlp = NLP(ocp)
     nlp.build(warm_start)
     build_time = time.perf_counter() - start
-    value = ocp.transcription.solve(nlp, lambda: nlp.solve(max_iter=max_iter, tol=tol, verbose=verbose, ipopt=ipopt,
-                                                           linear_solver=linear_solver), tol)
+    value = ocp.transcription.solve(nlp, lambda **extra: nlp.solve(max_iter=max_iter, tol=tol, verbose=verbose,
+                                                                   ipopt={**extra, **ipopt},
+                                                                   linear_solver=linear_solver), tol)
     result = extract(nlp, value, build_time)
     ocp.transcription.finish(value, result)
     if not result.stats.success:
