@@ -125,6 +125,40 @@ static inline void sp_inertia_out_add(const double *R, const double *p, const do
   for (i = 0; i < 3; ++i) Ia[1 + i] += h[i] + m * p[i];
 }
 
+/* Ia += the rigid inertia Ib, both in the same axes, Ib about a point b and Ia about a point a
+ * with b − a = d (the move of sp_inertia_out_add with R = 1): h_a = h + m d, I_o,a = I_o + 2 (g·d) 1 − d gᵀ − g dᵀ with
+ * g = h + (m / 2) d (Ia not Ib). */
+static inline void sp_inertia_shift_add(const double *d, const double *Ib, double *Ia) {
+  const double m = Ib[0];
+  double g[3], gd, x;
+  int i;
+  for (i = 0; i < 3; ++i) g[i] = Ib[1 + i] + 0.5 * m * d[i];
+  gd = 2.0 * (g[0] * d[0] + g[1] * d[1] + g[2] * d[2]);
+  Ia[4] += Ib[4] + gd - 2.0 * d[0] * g[0];
+  Ia[8] += Ib[8] + gd - 2.0 * d[1] * g[1];
+  Ia[12] += Ib[12] + gd - 2.0 * d[2] * g[2];
+  x = -d[0] * g[1] - g[0] * d[1];
+  Ia[5] += Ib[5] + x;
+  Ia[7] += Ib[7] + x;
+  x = -d[0] * g[2] - g[0] * d[2];
+  Ia[6] += Ib[6] + x;
+  Ia[10] += Ib[10] + x;
+  x = -d[1] * g[2] - g[1] * d[2];
+  Ia[9] += Ib[9] + x;
+  Ia[11] += Ib[11] + x;
+  Ia[0] += m;
+  for (i = 0; i < 3; ++i) Ia[1 + i] += Ib[1 + i] + m * d[i];
+}
+
+/* The wrench W about a point b, made about a point a with b − a = d (same axes): τ += d × f */
+static inline void sp_wrench_shift(const double *d, double *W) {
+  double t[3];
+  sp_cross(d, W + 3, t);
+  W[0] += t[0];
+  W[1] += t[1];
+  W[2] += t[2];
+}
+
 /* T_a = Ad(H_ab) T_b: ω_a = R ω_b, v_a = R v_b + p × ω_a (T_a not T_b) */
 static inline void sp_twist_out(const double *R, const double *p, const double *Tb, double *Ta) {
   double t[3];

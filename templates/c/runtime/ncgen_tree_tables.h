@@ -76,7 +76,7 @@ typedef struct {
   double *dR, *dp, *dTt, *ddT, *dW, *dS, *dtau;
   double *M, *Mi, *L, *rhs, *taui, *in, *out, *kw;
   double *X, *Sl, *cl, *vl, *al, *fl, *IC, *IA, *U, *Dl, *ul;
-  double *Y, *Kc, *pr, *ar, *ur, *tf;
+  double *Y, *Kc, *pr, *ar, *ur, *tf, *d;
 } ncgen_tree_work;
 
 
@@ -146,6 +146,7 @@ static long ncgen_tree_layout(const ncgen_tree_kinds *K, const ncgen_tree *T, do
   NCGEN_TREE_TAKE(ar, 6 * nb);
   NCGEN_TREE_TAKE(ur, nv);
   NCGEN_TREE_TAKE(tf, nv);
+  NCGEN_TREE_TAKE(d, 3 * nb);
 #undef NCGEN_TREE_TAKE
   return o;
 }
@@ -446,6 +447,18 @@ static void ncgen_tree_local_backward(const ncgen_tree_kinds *K, const ncgen_tre
   }
 }
 
+/* a · b of 6-vectors */
+static inline double ncgen_tree_dot6(const double *a, const double *b) {
+  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] + a[4] * b[4] + a[5] * b[5];
+}
+
+/* y = A x (A 6 × 6, column-major; y not x) */
+static inline void ncgen_tree_mat6_apply(const double *A, const double *x, double *y) {
+  int r;
+  for (r = 0; r < 6; ++r)
+    y[r] = A[r] * x[0] + A[r + 6] * x[1] + A[r + 12] * x[2] + A[r + 18] * x[3] + A[r + 24] * x[4] + A[r + 30] * x[5];
+}
+
 /* The ground frame, outwards after ncgen_tree_local_poses: each body's pose (s->R, s->p), its
  * motion subspace S_g = Ad(H_gb) S (s->S) and, for kinds by kernel, Ad(H_gb) c_J (s->cl; the
  * other kinds' c_J is 0).  A revolute joint's S_g is [z_b; p_b × z_b], a prismatic one's
@@ -484,19 +497,12 @@ static void ncgen_tree_ground_poses(const ncgen_tree_kinds *K, const ncgen_tree 
 }
 
 /* Each body's rigid inertia in the ground frame, about its origin (s->IC), from the poses of
- * ncgen_tree_ground_poses; summed over subtrees (the composite inertias) when composite. */
-static void ncgen_tree_ground_inertias(const ncgen_tree *T, ncgen_tree_work *s, int composite) {
+ * ncgen_tree_ground_poses. */
+static void ncgen_tree_ground_inertias(const ncgen_tree *T, ncgen_tree_work *s) {
   int b;
   memset(s->IC, 0, NCGEN_TREE_BODY * (size_t)T->nb * sizeof(double));
   for (b = 0; b < T->nb; ++b)
     sp_inertia_out_add(s->R + 9 * b, s->p + 3 * b, T->inertia + NCGEN_TREE_BODY * b, s->IC + NCGEN_TREE_BODY * b);
-  if (!composite) return;
-  for (b = T->nb - 1; b >= 0; --b)
-    if (T->parent[b] >= 0) {
-      double *Ic = s->IC + NCGEN_TREE_BODY * b, *Ip = s->IC + NCGEN_TREE_BODY * T->parent[b];
-      int i;
-      for (i = 0; i < NCGEN_TREE_BODY; ++i) Ip[i] += Ic[i];
-    }
 }
 
 /* 1 when the rates are all independent (no mimic joint: G = 1). */
@@ -517,29 +523,56 @@ static void ncgen_tree_map_mass(const ncgen_tree *T, const double *M, double *Mi
       Mi[T->rate_col[r] + ni * T->rate_col[c]] += T->rate_coef[r] * T->rate_coef[c] * M[r + nv * c];
 }
 
-/* M (nv × nv, s->M) by the composite-rigid-body algorithm in the ground frame (poses of
- * ncgen_tree_ground_poses): M_rc = S_rᵀ I^C_b S_c for a rate c of body b and a rate r of b or
- * of an ancestor (no wrench moved: every S and I^C in the ground frame), then M_i = Gᵀ M G. */
+/* M (nv × nv, s->M) by the composite-rigid-body algorithm in the ground's axes about each body's
+ * origin (poses of ncgen_tree_ground_poses): body b's motion subspace S'_b = R_gb S (s->Sl, in
+ * place) and composite inertia I^C_b (s->IC) about p_b, a child's moved to its parent by a
+ * translation (no rotation; short lever arms, so no digits lost to the distance from the
+ * ground's origin); M_rc = S'_rᵀ F for a rate c of body b and a rate r of b or an ancestor u,
+ * F = I^C_b S'_c moved from p_b to p_u.  Then M_i = Gᵀ M G. */
 static void ncgen_tree_ground_mass(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, double *Mi) {
-  int b, i, j, r, nv = T->nv, direct = ncgen_tree_unmapped(T);
+  int b, i, j, nv = T->nv, direct = ncgen_tree_unmapped(T);
   double *M = direct ? Mi : s->M;               /* G = 1: M_i = M */
-  ncgen_tree_ground_inertias(T, s, 1);
+  const double zero[3] = {0, 0, 0};
+  memset(s->IC, 0, NCGEN_TREE_BODY * (size_t)T->nb * sizeof(double));
+  for (b = 0; b < T->nb; ++b) {
+    const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
+    const double *R = s->R + 9 * b;
+    double *S = s->Sl + 6 * T->v_at[b], *d = s->d + 3 * b, x[6];
+    sp_inertia_out_add(R, zero, T->inertia + NCGEN_TREE_BODY * b, s->IC + NCGEN_TREE_BODY * b);
+    if (T->parent[b] >= 0)                      /* d_b = p_b − p_parent */
+      for (i = 0; i < 3; ++i) d[i] = s->p[3 * b + i] - s->p[3 * T->parent[b] + i];
+    if (k->mode == 1 || k->mode == 2)           /* S' = [z_b; 0] or [0; z_b] */
+      for (i = 0; i < 3; ++i) {
+        S[i] = k->mode == 1 ? R[6 + i] : 0.0;
+        S[3 + i] = k->mode == 1 ? 0.0 : R[6 + i];
+      }
+    else
+      for (j = 0; j < k->nv; ++j, S += 6) {
+        memcpy(x, S, sizeof x);
+        sp_rot(R, x, S);
+        sp_rot(R, x + 3, S + 3);
+      }
+  }
+  for (b = T->nb - 1; b >= 0; --b)
+    if (T->parent[b] >= 0)
+      sp_inertia_shift_add(s->d + 3 * b, s->IC + NCGEN_TREE_BODY * b, s->IC + NCGEN_TREE_BODY * T->parent[b]);
   for (i = 0; i < nv * nv; ++i) M[i] = 0.0;
   for (b = 0; b < T->nb; ++b) {
     const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
     for (j = 0; j < k->nv; ++j) {
-      int col = T->v_at[b] + j, up;
+      int col = T->v_at[b] + j, up = b;
       double F[6];
-      sp_inertia_apply(s->IC + NCGEN_TREE_BODY * b, s->S + 6 * col, F);
-      for (up = b; up >= 0; up = T->parent[up]) {
-        int nu = K->joint[T->kind[up]].nv, row = T->v_at[up];
+      sp_inertia_apply(s->IC + NCGEN_TREE_BODY * b, s->Sl + 6 * col, F);
+      for (;;) {
+        int nu = K->joint[T->kind[up]].nv, row = T->v_at[up], par = T->parent[up];
         for (i = 0; i < nu; ++i, ++row) {
-          const double *Sr = s->S + 6 * row;
-          double t = 0.0;
-          for (r = 0; r < 6; ++r) t += Sr[r] * F[r];
+          double t = ncgen_tree_dot6(s->Sl + 6 * row, F);
           M[row + nv * col] = t;
           M[col + nv * row] = t;
         }
+        if (par < 0) break;
+        sp_wrench_shift(s->d + 3 * up, F);
+        up = par;
       }
     }
   }
@@ -616,7 +649,7 @@ static int ncgen_tree_articulated(const ncgen_tree_kinds *K, const ncgen_tree *T
   double ratio = 1.0;
   if (ncgen_tree_local_poses(K, T, s)) return NCGEN_TREE_KERNEL;
   ncgen_tree_ground_poses(K, T, s);
-  ncgen_tree_ground_inertias(T, s, 0);
+  ncgen_tree_ground_inertias(T, s);
   for (b = 0; b < T->nb; ++b) {                 /* twists, c = Ṡ w, I^A = I, p^A = −ad(v)ᵀ I v */
     const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
     int par = T->parent[b], va = T->v_at[b];
@@ -644,40 +677,28 @@ static int ncgen_tree_articulated(const ncgen_tree_kinds *K, const ncgen_tree *T
       double *ICp = s->IC + NCGEN_TREE_BODY * par;
       for (i = 0; i < NCGEN_TREE_BODY; ++i) ICp[i] += IC[i];
     }
-    if (nv == 1) {                              /* one rate: D = d, I^a = I^A − U Uᵀ / d */
-      double d = 0.0, x = tau[va], m = 0.0, q, e, *IAp, *pAp;
-      for (r = 0; r < 6; ++r) {
-        U[r] = IA[r] * S[0] + IA[r + 6] * S[1] + IA[r + 12] * S[2] + IA[r + 18] * S[3] + IA[r + 24] * S[4] +
-               IA[r + 30] * S[5];
-        d += S[r] * U[r];
-        x -= S[r] * pA[r];
-      }
-      u[0] = x;
+    if (nv == 1) {                              /* one rate: D = d = l², I^a = I^A − Z Zᵀ, Z = U / l */
+      double d, x, m, q, l, e, *IAp, *pAp, Z[6], y[6];
+      ncgen_tree_mat6_apply(IA, S, U);
+      d = ncgen_tree_dot6(S, U);
+      u[0] = x = tau[va] - ncgen_tree_dot6(S, pA);
       sp_inertia_apply(IC, S, F);               /* M_kk = Sᵀ I^C S */
-      for (r = 0; r < 6; ++r) m += S[r] * F[r];
+      m = ncgen_tree_dot6(S, F);
       q = d / m;
       if (first || q < ratio || !(q == q)) ratio = q;
       first = 0;
-      L[0] = sqrt(d > 0.0 ? d : 0.0);
+      L[0] = l = sqrt(d > 0.0 ? d : 0.0);
       if (par < 0) continue;
       IAp = s->IA + 36 * par;
       pAp = s->fl + 6 * par;
-      for (r = 0; r < 6; ++r) x -= U[r] * cb[r];
-      e = x / d;                                /* p^A_p += p^A + I^A c + U (u − Uᵀ c) / d */
+      e = (x - ncgen_tree_dot6(U, cb)) / l;     /* p^A_p += p^A + I^A c + Z (u − Uᵀ c) / l */
+      ncgen_tree_mat6_apply(IA, cb, y);
       for (r = 0; r < 6; ++r) {
-        double y = pA[r] + U[r] * e;
-        for (c = 0; c < 6; ++c) y += IA[r + 6 * c] * cb[c];
-        pAp[r] += y;
-        F[r] = U[r] / d;
+        Z[r] = U[r] / l;
+        pAp[r] += pA[r] + y[r] + Z[r] * e;
       }
-      for (c = 0; c < 6; ++c) {                 /* I^A_p += I^A − U Uᵀ / d, symmetric */
-        IAp[7 * c] += IA[7 * c] - U[c] * F[c];
-        for (r = c + 1; r < 6; ++r) {
-          double y = IA[r + 6 * c] - U[r] * F[c];
-          IAp[r + 6 * c] += y;
-          IAp[c + 6 * r] += y;
-        }
-      }
+      for (c = 0; c < 6; ++c)                   /* I^A_p += I^A − Z Zᵀ */
+        for (r = 0; r < 6; ++r) IAp[r + 6 * c] += IA[r + 6 * c] - Z[r] * Z[c];
       continue;
     }
     for (j = 0; j < nv; ++j) {                  /* U = I^A S, D = Sᵀ U (lower), u = τ − Sᵀ p^A */
