@@ -1,16 +1,19 @@
 /* Joint-space algorithms of a tree over data tables: inverse dynamics (RNEA), the joint-space
- * mass matrix (CRBA), forward dynamics (the articulated-body algorithm; with mimic joints
- * M_i a_i = τ − bias by Cholesky) and the derivatives of RNEA and forward dynamics, as plain
+ * mass matrix (CRBA), forward dynamics (the articulated-body algorithm; with mimic joints the
+ * followers held by their constraints, M_i a_i = τ − bias by Cholesky the fallback) and the derivatives of RNEA and forward dynamics, as plain
  * loops over the bodies that call one small kernel per kind of joint and one per rigid body
  * (ncgen/codegen/tree_kernels.py generates them, ncgen/codegen/tree_tables.py packs the
  * tables).  The same C for every tree: a model is data.
  *
- * RNEA, CRBA and ABA run in local frames (Featherstone's recursions): body b's frame f_b is its
- * joint frame after the joint's motion, at xin[12 b ...] · T(q) in its parent's (xin: R
- * column-major, p), its rigid inertia inertia[13 b ...] = [m; h; I_o] about f_b's origin
- * (ncgen_spatial.h); a kind's mode says how T(q) and the motion subspace S (in f_b) are had:
- * 1 a rotation about z (S = [e_z; 0]), 2 a translation along z (S = [0; e_z]), 3 none (fixed),
- * 0 its kernel local.  The derivatives run the tangent recursion in the ground frame.
+ * Body b's frame f_b is its joint frame after the joint's motion, at xin[12 b ...] · T(q) in its
+ * parent's (xin: R column-major, p), its rigid inertia inertia[13 b ...] = [m; h; I_o] about
+ * f_b's origin (ncgen_spatial.h); a kind's mode says how T(q) and the motion subspace S (in f_b)
+ * are had: 1 a rotation about z (S = [e_z; 0]), 2 a translation along z (S = [0; e_z]), 3 none
+ * (fixed), 0 its kernel local.  RNEA runs in the local frames f_b (Featherstone's recursion);
+ * CRBA in the ground's axes about each body's origin (composite inertias and forces carried up
+ * by translations alone); ABA in the ground frame (articulated inertias summed into the parent
+ * with no change of frame, as Pinocchio's).  The derivatives run the tangent recursion in the
+ * ground frame.
  *
  * Notation (docs/architecture.md, "Element tables"): poses H = [[R, p], [0, 1]] of member
  * frames in the ground frame g, twists [ω; v] and wrenches [τ; f] expressed in g; R column-major.
