@@ -12,12 +12,13 @@ callers of :class:`~ncgen.runtime.tree_algorithms.AlgorithmKernel` use (``k(*arg
 trees whose passive force is a uniform gravity.  :class:`TableJointLoop` is the joint-space
 simulation loop (``ncgen_joint_loop.h`` in the library) on the same tables.
 
-Speed (benchmarks/tree_tables.py, CPU time per state over batches of 1000 in one C call, best of 7
-and of 25 interleaved rounds in two runs, AMD EPYC, 2 shared cores at load 11–15) against the flat per-robot kernel
-(whose numbers are folded into the code), tables / flat: RNEA 1.04–1.05 (Panda), 1.38–1.62
-(UR5), 0.94 (Talos); ABA 1.50–1.79 (Panda, its mimic finger by a constraint), 1.84–2.21 (UR5),
-0.79 (Talos); CRBA 1.69–1.74, 1.81–2.10, 1.13.  CRBA and ABA run in the ground's axes
-(``ncgen_tree_tables.h``); they were 2.9 (ABA) and 2.7–4.5× (CRBA) in local frames.
+Speed (benchmarks/tree_tables.py, CPU time per state over batches of 1000 in one C call, best of
+7 or 25 interleaved rounds, three runs, AMD EPYC, 2 shared cores at load 11–15: the spread is
+the machine's) against the flat per-robot kernel (whose numbers are folded into the code),
+tables / flat: RNEA 0.97–1.05 (Panda), 1.38–1.62 (UR5), 0.94 (Talos); ABA 1.50–2.46 (Panda,
+its mimic finger by a constraint), 1.66–2.21 (UR5), 0.79 (Talos); CRBA 1.54–1.74, 1.81–2.61,
+1.13.  CRBA and ABA run in the ground's axes (``ncgen_tree_tables.h``); in local frames they
+were 2.9–3.5× (ABA) and 2.7–4.5× (CRBA).
 A single call goes through the fast caller as the flat kernels' do.  The tables are the default for their
 first-call cost (no compile) where no compiler is present, the flat kernel otherwise (the
 Panda's and UR5's ABA and CRBA miss 1.2× the flat kernels).
