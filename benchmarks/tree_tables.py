@@ -4,7 +4,7 @@ from the robot's own flat SX functions (compiled per robot), and ``ncgen simulat
 stock Panda URDF.
 
 Per call (interleaved: each round times a batch of ``--calls`` calls of each side in turn, the
-order rotating between rounds; best and median time per call over the rounds):
+order rotating between rounds; best and median CPU time per call over the rounds):
 
 * RNEA: ``TableAlgorithm(qj, vj, aj)`` (``kernels="tables"``) vs ``AlgorithmKernel(qj, vj,
   aj)`` (``kernels="flat"``) vs ``pinocchio.rnea``; ABA the same with ``pinocchio.aba``
@@ -46,10 +46,12 @@ from common import machine  # noqa: E402
 
 
 def per_call(fn, calls: int) -> float:
-    start = time.perf_counter()
+    """CPU seconds of this process per call (``time.process_time``: on a shared machine the wall
+    time of a call counts the other processes' time slices)."""
+    start = time.process_time()
     for _ in range(calls):
         fn()
-    return (time.perf_counter() - start) / calls
+    return (time.process_time() - start) / calls
 
 
 def compare(label: str, sides: dict, calls: int, rounds: int, per: int = 1) -> None:

@@ -12,13 +12,16 @@ callers of :class:`~ncgen.runtime.tree_algorithms.AlgorithmKernel` use (``k(*arg
 trees whose passive force is a uniform gravity.  :class:`TableJointLoop` is the joint-space
 simulation loop (``ncgen_joint_loop.h`` in the library) on the same tables.
 
-Speed (benchmarks/tree_tables.py, per state over batches in one C call, best of 7
-interleaved rounds, AMD EPYC, 2 shared cores at load 5): against the flat per-robot kernel
-(whose numbers are folded into the code) RNEA 2.21 / 2.18 µs on the Panda, 1.45 / 0.83 µs on the
-UR5, 10.8 / 11.2 µs on Talos (load 8–14); ABA 8.96 / 3.07 (Panda, its mimic finger by a
-constraint), 4.47 / 1.29 (UR5), 51 / 44 µs (Talos); CRBA 2.90 / 1.00, 1.97 / 0.74, 37 / 8.3 µs.
+Speed (benchmarks/tree_tables.py, CPU time per state over batches of 1000 in one C call, best of
+7 or 25 interleaved rounds, three runs, AMD EPYC, 2 shared cores at load 11–15: the spread is
+the machine's) against the flat per-robot kernel (whose numbers are folded into the code),
+tables / flat: RNEA 0.97–1.05 (Panda), 1.38–1.62 (UR5), 0.94 (Talos); ABA 1.50–2.46 (Panda,
+its mimic finger by a constraint), 1.66–2.21 (UR5), 0.79 (Talos); CRBA 1.54–1.74, 1.81–2.61,
+1.13.  CRBA and ABA run in the ground's axes (``ncgen_tree_tables.h``); in local frames they
+were 2.9–3.5× (ABA) and 2.7–4.5× (CRBA).
 A single call goes through the fast caller as the flat kernels' do.  The tables are the default for their
-first-call cost (no compile) where no compiler is present, the flat kernel otherwise.
+first-call cost (no compile) where no compiler is present, the flat kernel otherwise (the
+Panda's and UR5's ABA and CRBA miss 1.2× the flat kernels).
 """
 from __future__ import annotations
 

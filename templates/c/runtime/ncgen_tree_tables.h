@@ -1,16 +1,19 @@
 /* Joint-space algorithms of a tree over data tables: inverse dynamics (RNEA), the joint-space
- * mass matrix (CRBA), forward dynamics (the articulated-body algorithm; with mimic joints
- * M_i a_i = τ − bias by Cholesky) and the derivatives of RNEA and forward dynamics, as plain
+ * mass matrix (CRBA), forward dynamics (the articulated-body algorithm; with mimic joints the
+ * followers held by their constraints, M_i a_i = τ − bias by Cholesky the fallback) and the derivatives of RNEA and forward dynamics, as plain
  * loops over the bodies that call one small kernel per kind of joint and one per rigid body
  * (ncgen/codegen/tree_kernels.py generates them, ncgen/codegen/tree_tables.py packs the
  * tables).  The same C for every tree: a model is data.
  *
- * RNEA, CRBA and ABA run in local frames (Featherstone's recursions): body b's frame f_b is its
- * joint frame after the joint's motion, at xin[12 b ...] · T(q) in its parent's (xin: R
- * column-major, p), its rigid inertia inertia[13 b ...] = [m; h; I_o] about f_b's origin
- * (ncgen_spatial.h); a kind's mode says how T(q) and the motion subspace S (in f_b) are had:
- * 1 a rotation about z (S = [e_z; 0]), 2 a translation along z (S = [0; e_z]), 3 none (fixed),
- * 0 its kernel local.  The derivatives run the tangent recursion in the ground frame.
+ * Body b's frame f_b is its joint frame after the joint's motion, at xin[12 b ...] · T(q) in its
+ * parent's (xin: R column-major, p), its rigid inertia inertia[13 b ...] = [m; h; I_o] about
+ * f_b's origin (ncgen_spatial.h); a kind's mode says how T(q) and the motion subspace S (in f_b)
+ * are had: 1 a rotation about z (S = [e_z; 0]), 2 a translation along z (S = [0; e_z]), 3 none
+ * (fixed), 0 its kernel local.  RNEA runs in the local frames f_b (Featherstone's recursion);
+ * CRBA in the ground's axes about each body's origin (composite inertias and forces carried up
+ * by translations alone); ABA in the ground frame (articulated inertias summed into the parent
+ * with no change of frame, as Pinocchio's).  The derivatives run the tangent recursion in the
+ * ground frame.
  *
  * Notation (docs/architecture.md, "Element tables"): poses H = [[R, p], [0, 1]] of member
  * frames in the ground frame g, twists [ω; v] and wrenches [τ; f] expressed in g; R column-major.
@@ -76,7 +79,7 @@ typedef struct {
   double *dR, *dp, *dTt, *ddT, *dW, *dS, *dtau;
   double *M, *Mi, *L, *rhs, *taui, *in, *out, *kw;
   double *X, *Sl, *cl, *vl, *al, *fl, *IC, *IA, *U, *Dl, *ul;
-  double *Y, *Kc, *pr, *ar, *ur, *tf;
+  double *Y, *Kc, *pr, *ar, *ur, *tf, *d;
 } ncgen_tree_work;
 
 
@@ -146,6 +149,7 @@ static long ncgen_tree_layout(const ncgen_tree_kinds *K, const ncgen_tree *T, do
   NCGEN_TREE_TAKE(ar, 6 * nb);
   NCGEN_TREE_TAKE(ur, nv);
   NCGEN_TREE_TAKE(tf, nv);
+  NCGEN_TREE_TAKE(d, 3 * nb);
 #undef NCGEN_TREE_TAKE
   return o;
 }
@@ -446,73 +450,62 @@ static void ncgen_tree_local_backward(const ncgen_tree_kinds *K, const ncgen_tre
   }
 }
 
-/* Composite rigid inertias (s->IC, each in its body's frame), inwards from the poses. */
-static void ncgen_tree_local_composite(const ncgen_tree *T, ncgen_tree_work *s) {
-  int b;
-  memcpy(s->IC, T->inertia, NCGEN_TREE_BODY * (size_t)T->nb * sizeof(double));
-  for (b = T->nb - 1; b >= 0; --b)
-    if (T->parent[b] >= 0) sp_inertia_out_add(s->X + 12 * b, s->X + 12 * b + 9, s->IC + NCGEN_TREE_BODY * b,
-                                              s->IC + NCGEN_TREE_BODY * T->parent[b]);
+/* a · b of 6-vectors */
+static inline double ncgen_tree_dot6(const double *a, const double *b) {
+  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] + a[4] * b[4] + a[5] * b[5];
 }
 
-/* M (nv × nv, s->M) by Featherstone's CRBA from the composite inertias, then M_i = Gᵀ M G. */
-static void ncgen_tree_local_mass(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, double *Mi) {
-  int b, i, j, r, c, nv = T->nv, ni = T->ni;
-  ncgen_tree_local_composite(T, s);
-  for (i = 0; i < nv * nv; ++i) s->M[i] = 0.0;
+/* y = A x (A 6 × 6, column-major; y not x) */
+static inline void ncgen_tree_mat6_apply(const double *A, const double *x, double *y) {
+  int r;
+  for (r = 0; r < 6; ++r)
+    y[r] = A[r] * x[0] + A[r + 6] * x[1] + A[r + 12] * x[2] + A[r + 18] * x[3] + A[r + 24] * x[4] + A[r + 30] * x[5];
+}
+
+/* The ground frame, outwards after ncgen_tree_local_poses: each body's pose (s->R, s->p), its
+ * motion subspace S_g = Ad(H_gb) S (s->S) and, for kinds by kernel, Ad(H_gb) c_J (s->cl; the
+ * other kinds' c_J is 0).  A revolute joint's S_g is [z_b; p_b × z_b], a prismatic one's
+ * [0; z_b] (z_b: the third column of R_gb). */
+static void ncgen_tree_ground_poses(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s) {
+  int b, i, j;
   for (b = 0; b < T->nb; ++b) {
     const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
-    for (j = 0; j < k->nv; ++j) {
-      int col = T->v_at[b] + j, up = b;
-      double F[6], G[6];
-      sp_inertia_apply(s->IC + NCGEN_TREE_BODY * b, s->Sl + 6 * col, F);
-      for (;;) {
-        const ncgen_tree_joint_kind *ku = &K->joint[T->kind[up]];
-        for (i = 0; i < ku->nv; ++i) {
-          int row = T->v_at[up] + i;
-          double t = 0.0;
-          for (r = 0; r < 6; ++r) t += s->Sl[6 * row + r] * F[r];
-          s->M[row + nv * col] = t;
-          s->M[col + nv * row] = t;
-        }
-        if (T->parent[up] < 0) break;
-        for (r = 0; r < 6; ++r) G[r] = 0.0;
-        sp_wrench_out_add(s->X + 12 * up, s->X + 12 * up + 9, F, G);
-        memcpy(F, G, sizeof F);
-        up = T->parent[up];
+    int par = T->parent[b], va = T->v_at[b];
+    const double *Rl = s->X + 12 * b, *pl = Rl + 9;
+    double *R = s->R + 9 * b, *p = s->p + 3 * b, *S = s->S + 6 * va;
+    if (par < 0) {
+      memcpy(R, Rl, 9 * sizeof(double));
+      memcpy(p, pl, 3 * sizeof(double));
+    } else {
+      const double *Rp = s->R + 9 * par, *pp = s->p + 3 * par;
+      for (j = 0; j < 3; ++j) sp_rot(Rp, Rl + 3 * j, R + 3 * j);
+      sp_rot(Rp, pl, p);
+      for (i = 0; i < 3; ++i) p[i] += pp[i];
+    }
+    if (k->mode == 1) {
+      for (i = 0; i < 3; ++i) S[i] = R[6 + i];
+      sp_cross(p, S, S + 3);
+    } else if (k->mode == 2) {
+      for (i = 0; i < 3; ++i) {
+        S[i] = 0.0;
+        S[3 + i] = R[6 + i];
       }
+    } else if (k->mode == 0) {
+      double c[6];
+      for (j = 0; j < k->nv; ++j) sp_twist_out(R, p, s->Sl + 6 * (va + j), S + 6 * j);
+      memcpy(c, s->cl + 6 * b, sizeof c);
+      sp_twist_out(R, p, c, s->cl + 6 * b);
     }
   }
-  for (i = 0; i < ni * ni; ++i) Mi[i] = 0.0;
-  for (c = 0; c < nv; ++c)
-    for (r = 0; r < nv; ++r)
-      Mi[T->rate_col[r] + ni * T->rate_col[c]] += T->rate_coef[r] * T->rate_coef[c] * s->M[r + nv * c];
 }
 
-/* τ_i (ni): the efforts of the independent rates giving accelerations a at (q, v). */
-static int ncgen_tree_rnea(const ncgen_tree_kinds *K, const ncgen_tree *T, const double *q, const double *v,
-                           const double *a, double *tau_i, double *work) {
-  ncgen_tree_work s;
-  ncgen_tree_layout(K, T, work, &s);
-  ncgen_tree_expand(T, &s, q, v, a);
-  if (ncgen_tree_local_poses(K, T, &s)) return NCGEN_TREE_KERNEL;
-  ncgen_tree_local_motion(K, T, &s, 1);
-  ncgen_tree_local_backward(K, T, &s);
-  ncgen_tree_project(T, s.tau, tau_i);
-  return 0;
-}
-
-/* M_i (ni × ni, column-major, both triangles) at q. */
-static int ncgen_tree_crba(const ncgen_tree_kinds *K, const ncgen_tree *T, const double *q, double *Mi,
-                           double *work) {
-  ncgen_tree_work s;
-  int i;
-  ncgen_tree_layout(K, T, work, &s);
-  for (i = 0; i < T->nv; ++i) s.tau[i] = 0.0;
-  ncgen_tree_expand(T, &s, q, s.tau, 0);
-  if (ncgen_tree_local_poses(K, T, &s)) return NCGEN_TREE_KERNEL;
-  ncgen_tree_local_mass(K, T, &s, Mi);
-  return 0;
+/* Each body's rigid inertia in the ground frame, about its origin (s->IC), from the poses of
+ * ncgen_tree_ground_poses. */
+static void ncgen_tree_ground_inertias(const ncgen_tree *T, ncgen_tree_work *s) {
+  int b;
+  memset(s->IC, 0, NCGEN_TREE_BODY * (size_t)T->nb * sizeof(double));
+  for (b = 0; b < T->nb; ++b)
+    sp_inertia_out_add(s->R + 9 * b, s->p + 3 * b, T->inertia + NCGEN_TREE_BODY * b, s->IC + NCGEN_TREE_BODY * b);
 }
 
 /* 1 when the rates are all independent (no mimic joint: G = 1). */
@@ -524,57 +517,216 @@ static int ncgen_tree_unmapped(const ncgen_tree *T) {
   return 1;
 }
 
+/* M_i = Gᵀ M G (ni × ni) from M (nv × nv, s->M). */
+static void ncgen_tree_map_mass(const ncgen_tree *T, const double *M, double *Mi) {
+  int r, c, nv = T->nv, ni = T->ni;
+  for (r = 0; r < ni * ni; ++r) Mi[r] = 0.0;
+  for (c = 0; c < nv; ++c)
+    for (r = 0; r < nv; ++r)
+      Mi[T->rate_col[r] + ni * T->rate_col[c]] += T->rate_coef[r] * T->rate_coef[c] * M[r + nv * c];
+}
+
+/* M (nv × nv, s->M) by the composite-rigid-body algorithm in the ground's axes about each body's
+ * origin (poses of ncgen_tree_ground_poses): body b's motion subspace S'_b = R_gb S (s->Sl, in
+ * place) and composite inertia I^C_b (s->IC) about p_b, a child's moved to its parent by a
+ * translation (no rotation; short lever arms, so no digits lost to the distance from the
+ * ground's origin); M_rc = S'_rᵀ F for a rate c of body b and a rate r of b or an ancestor u,
+ * F = I^C_b S'_c moved from p_b to p_u.  Then M_i = Gᵀ M G. */
+static void ncgen_tree_ground_mass(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, double *Mi) {
+  int b, i, j, nv = T->nv, direct = ncgen_tree_unmapped(T);
+  double *M = direct ? Mi : s->M;               /* G = 1: M_i = M */
+  const double zero[3] = {0, 0, 0};
+  memset(s->IC, 0, NCGEN_TREE_BODY * (size_t)T->nb * sizeof(double));
+  for (b = 0; b < T->nb; ++b) {
+    const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
+    const double *R = s->R + 9 * b;
+    double *S = s->Sl + 6 * T->v_at[b], *d = s->d + 3 * b, x[6];
+    sp_inertia_out_add(R, zero, T->inertia + NCGEN_TREE_BODY * b, s->IC + NCGEN_TREE_BODY * b);
+    if (T->parent[b] >= 0)                      /* d_b = p_b − p_parent */
+      for (i = 0; i < 3; ++i) d[i] = s->p[3 * b + i] - s->p[3 * T->parent[b] + i];
+    if (k->mode == 1 || k->mode == 2)           /* S' = [z_b; 0] or [0; z_b] */
+      for (i = 0; i < 3; ++i) {
+        S[i] = k->mode == 1 ? R[6 + i] : 0.0;
+        S[3 + i] = k->mode == 1 ? 0.0 : R[6 + i];
+      }
+    else
+      for (j = 0; j < k->nv; ++j, S += 6) {
+        memcpy(x, S, sizeof x);
+        sp_rot(R, x, S);
+        sp_rot(R, x + 3, S + 3);
+      }
+  }
+  for (b = T->nb - 1; b >= 0; --b)
+    if (T->parent[b] >= 0)
+      sp_inertia_shift_add(s->d + 3 * b, s->IC + NCGEN_TREE_BODY * b, s->IC + NCGEN_TREE_BODY * T->parent[b]);
+  for (i = 0; i < nv * nv; ++i) M[i] = 0.0;
+  for (b = 0; b < T->nb; ++b) {
+    const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
+    for (j = 0; j < k->nv; ++j) {
+      int col = T->v_at[b] + j, up = b;
+      double F[6];
+      sp_inertia_apply(s->IC + NCGEN_TREE_BODY * b, s->Sl + 6 * col, F);
+      for (;;) {
+        int nu = K->joint[T->kind[up]].nv, row = T->v_at[up], par = T->parent[up];
+        for (i = 0; i < nu; ++i, ++row) {
+          double t = ncgen_tree_dot6(s->Sl + 6 * row, F);
+          M[row + nv * col] = t;
+          M[col + nv * row] = t;
+        }
+        if (par < 0) break;
+        sp_wrench_shift(s->d + 3 * up, F);
+        up = par;
+      }
+    }
+  }
+  if (!direct) ncgen_tree_map_mass(T, M, Mi);
+}
+
+/* τ_i (ni): the efforts of the independent rates giving accelerations a at (q, v), in the
+ * work s (ncgen_tree_layout). */
+static int ncgen_tree_rnea_at(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, const double *q,
+                              const double *v, const double *a, double *tau_i) {
+  ncgen_tree_expand(T, s, q, v, a);
+  if (ncgen_tree_local_poses(K, T, s)) return NCGEN_TREE_KERNEL;
+  ncgen_tree_local_motion(K, T, s, 1);
+  ncgen_tree_local_backward(K, T, s);
+  ncgen_tree_project(T, s->tau, tau_i);
+  return 0;
+}
+
+/* The same with the work array work. */
+static int ncgen_tree_rnea(const ncgen_tree_kinds *K, const ncgen_tree *T, const double *q, const double *v,
+                           const double *a, double *tau_i, double *work) {
+  ncgen_tree_work s;
+  ncgen_tree_layout(K, T, work, &s);
+  return ncgen_tree_rnea_at(K, T, &s, q, v, a, tau_i);
+}
+
+/* M_i (ni × ni, column-major, both triangles) at q, in the work s. */
+static int ncgen_tree_crba_at(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, const double *q,
+                              double *Mi) {
+  int i;
+  for (i = 0; i < T->nv; ++i) s->tau[i] = 0.0;
+  ncgen_tree_expand(T, s, q, s->tau, 0);
+  if (ncgen_tree_local_poses(K, T, s)) return NCGEN_TREE_KERNEL;
+  ncgen_tree_ground_poses(K, T, s);
+  ncgen_tree_ground_mass(K, T, s, Mi);
+  return 0;
+}
+
+/* The same with the work array work. */
+static int ncgen_tree_crba(const ncgen_tree_kinds *K, const ncgen_tree *T, const double *q, double *Mi,
+                           double *work) {
+  ncgen_tree_work s;
+  ncgen_tree_layout(K, T, work, &s);
+  return ncgen_tree_crba_at(K, T, &s, q, Mi);
+}
+
+/* x = D⁻¹ y of one joint (nv rates) from the Cholesky factor L (lower, column stride 6) of D. */
+static void ncgen_tree_joint_solve(int nv, const double *L, const double *y, double *x) {
+  int j, c;
+  for (j = 0; j < nv; ++j) {
+    double t = y[j];
+    for (c = 0; c < j; ++c) t -= L[j + 6 * c] * x[c];
+    x[j] = t / L[j + 6 * j];
+  }
+  for (j = nv - 1; j >= 0; --j) {
+    double t = x[j];
+    for (c = j + 1; c < nv; ++c) t -= L[c + 6 * j] * x[c];
+    x[j] = t / L[j + 6 * j];
+  }
+}
+
 /* The articulated-body algorithm (no mimic joint): aj = M⁻¹ (τ − bias) in three passes over
- * local frames; *pivot = min d_k / (S_kᵀ I^C S_k) over the Cholesky pivots d_k of each
- * joint's D = Sᵀ I^A S (the pivots of M's factorisation from the leaves, relative to M's
- * diagonal; NaN stays). */
+ * the bodies, every quantity in the ground frame (twists and accelerations of the bodies as
+ * [ω; v] at the ground's origin, articulated inertias I^A and bias wrenches p^A about it), so
+ * that an articulated inertia passes to its parent by a sum, I^A_p += I^A − U D⁻¹ Uᵀ
+ * (U = I^A S, D = Sᵀ U), with no change of frame; *pivot = min d_k / (S_kᵀ I^C S_k) over
+ * the Cholesky pivots d_k of each joint's D (the pivots of M's factorisation from the leaves,
+ * relative to M's diagonal; NaN stays). */
 static int ncgen_tree_articulated(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s,
                                   const double *tau, double *aj, double *pivot) {
   int b, i, j, r, c, first = 1;
+  const double zero[6] = {0, 0, 0, 0, 0, 0};
   const double a0[6] = {0, 0, 0, -T->gravity[0], -T->gravity[1], -T->gravity[2]};
   double ratio = 1.0;
   if (ncgen_tree_local_poses(K, T, s)) return NCGEN_TREE_KERNEL;
-  ncgen_tree_local_motion(K, T, s, 0);          /* s->fl: p^A = −ad(v)ᵀ I v */
-  memcpy(s->IC, T->inertia, NCGEN_TREE_BODY * (size_t)T->nb * sizeof(double));
-  for (b = 0; b < T->nb; ++b) sp_inertia_matrix(T->inertia + NCGEN_TREE_BODY * b, s->IA + 36 * b);
+  ncgen_tree_ground_poses(K, T, s);
+  ncgen_tree_ground_inertias(T, s);
+  for (b = 0; b < T->nb; ++b) {                 /* twists, c = Ṡ w, I^A = I, p^A = −ad(v)ᵀ I v */
+    const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
+    int par = T->parent[b], va = T->v_at[b];
+    const double *S = s->S + 6 * va, *vp = par < 0 ? zero : s->vl + 6 * par, *I = s->IC + NCGEN_TREE_BODY * b;
+    double *v = s->vl + 6 * b, *cb = s->cl + 6 * b, vJ[6], t[6];
+    for (i = 0; i < 6; ++i) {
+      double x = 0.0;
+      for (j = 0; j < k->nv; ++j) x += S[6 * j + i] * s->v[va + j];
+      vJ[i] = x;
+      v[i] = vp[i] + x;
+    }
+    sp_ad(v, vJ, t);
+    for (i = 0; i < 6; ++i) cb[i] += t[i];
+    sp_inertia_matrix(I, s->IA + 36 * b);
+    sp_inertia_apply(I, v, t);
+    sp_ad_star(v, t, s->fl + 6 * b);
+  }
   for (b = T->nb - 1; b >= 0; --b) {
     const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
     int nv = k->nv, va = T->v_at[b], par = T->parent[b];
-    const double *S = s->Sl + 6 * va, *R = s->X + 12 * b, *p = R + 9, *cb = s->cl + 6 * b;
+    const double *S = s->S + 6 * va, *cb = s->cl + 6 * b, *IC = s->IC + NCGEN_TREE_BODY * b;
     double *IA = s->IA + 36 * b, *pA = s->fl + 6 * b, *U = s->U + 6 * va, *L = s->Dl + 36 * b, *u = s->ul + va;
-    double Z[36], pa[6], Ia[36], w[6];
-    if (k->mode == 1 || k->mode == 2) {         /* S = e_2 or e_5: U a column of I^A, D an entry */
-      int x = k->mode == 1 ? 2 : 5;
-      for (r = 0; r < 6; ++r) U[r] = IA[r + 6 * x];
-      L[0] = IA[x + 6 * x];
-      u[0] = tau[va] - pA[x];
-      w[0] = k->mode == 1 ? s->IC[NCGEN_TREE_BODY * b + 12] : s->IC[NCGEN_TREE_BODY * b];   /* I_o,zz or m */
+    double mkk[6], w[6], F[6];
+    if (par >= 0) {
+      double *ICp = s->IC + NCGEN_TREE_BODY * par;
+      for (i = 0; i < NCGEN_TREE_BODY; ++i) ICp[i] += IC[i];
     }
-    for (j = 0; j < nv && k->mode != 1 && k->mode != 2; ++j) {
-      double F[6], m = 0.0;
+    if (nv == 1) {                              /* one rate: D = d = l², I^a = I^A − Z Zᵀ, Z = U / l */
+      double d, x, m, q, l, e, *IAp, *pAp, Z[6], y[6];
+      ncgen_tree_mat6_apply(IA, S, U);
+      d = ncgen_tree_dot6(S, U);
+      u[0] = x = tau[va] - ncgen_tree_dot6(S, pA);
+      sp_inertia_apply(IC, S, F);               /* M_kk = Sᵀ I^C S */
+      m = ncgen_tree_dot6(S, F);
+      q = d / m;
+      if (first || q < ratio || !(q == q)) ratio = q;
+      first = 0;
+      L[0] = l = sqrt(d > 0.0 ? d : 0.0);
+      if (par < 0) continue;
+      IAp = s->IA + 36 * par;
+      pAp = s->fl + 6 * par;
+      e = (x - ncgen_tree_dot6(U, cb)) / l;     /* p^A_p += p^A + I^A c + Z (u − Uᵀ c) / l */
+      ncgen_tree_mat6_apply(IA, cb, y);
       for (r = 0; r < 6; ++r) {
-        double x = 0.0;
-        for (c = 0; c < 6; ++c) x += IA[r + 6 * c] * S[6 * j + c];
-        U[6 * j + r] = x;
+        Z[r] = U[r] / l;
+        pAp[r] += pA[r] + y[r] + Z[r] * e;
       }
-      sp_inertia_apply(s->IC + NCGEN_TREE_BODY * b, S + 6 * j, F);
-      for (r = 0; r < 6; ++r) m += S[6 * j + r] * F[r];
-      for (i = 0; i < nv; ++i) {
-        double x = 0.0;
-        for (r = 0; r < 6; ++r) x += S[6 * i + r] * U[6 * j + r];
-        L[i + 6 * j] = x;                       /* D, then its Cholesky factor (lower) */
+      for (c = 0; c < 6; ++c)                   /* I^A_p += I^A − Z Zᵀ */
+        for (r = 0; r < 6; ++r) IAp[r + 6 * c] += IA[r + 6 * c] - Z[r] * Z[c];
+      continue;
+    }
+    for (j = 0; j < nv; ++j) {                  /* U = I^A S, D = Sᵀ U (lower), u = τ − Sᵀ p^A */
+      const double *Sj = S + 6 * j;
+      double *Uj = U + 6 * j, x = tau[va + j], m = 0.0;
+      for (r = 0; r < 6; ++r) Uj[r] = 0.0;
+      for (c = 0; c < 6; ++c) {
+        double sc = Sj[c];
+        for (r = 0; r < 6; ++r) Uj[r] += IA[r + 6 * c] * sc;
       }
-      {
-        double x = tau[va + j];
-        for (r = 0; r < 6; ++r) x -= S[6 * j + r] * pA[r];
-        u[j] = x;
+      for (i = j; i < nv; ++i) {
+        double y = 0.0;
+        for (r = 0; r < 6; ++r) y += S[6 * i + r] * Uj[r];
+        L[i + 6 * j] = y;
       }
-      w[j] = m;                                 /* M_kk = S_kᵀ I^C S_k */
+      for (r = 0; r < 6; ++r) x -= Sj[r] * pA[r];
+      u[j] = x;
+      sp_inertia_apply(IC, Sj, F);              /* M_kk = S_kᵀ I^C S_k */
+      for (r = 0; r < 6; ++r) m += Sj[r] * F[r];
+      mkk[j] = m;
     }
     for (j = 0; j < nv; ++j) {                  /* D = L Lᵀ */
       double d = L[j + 6 * j], q;
       for (c = 0; c < j; ++c) d -= L[j + 6 * c] * L[j + 6 * c];
-      q = d / w[j];
+      q = d / mkk[j];
       if (first || q < ratio || !(q == q)) ratio = q;
       first = 0;
       L[j + 6 * j] = sqrt(d > 0.0 ? d : 0.0);
@@ -585,52 +737,49 @@ static int ncgen_tree_articulated(const ncgen_tree_kinds *K, const ncgen_tree *T
       }
     }
     if (par < 0) continue;
-    /* Z = U L⁻ᵀ (6 × nv): I^a = I^A − Z Zᵀ, p^a = p^A + I^a c + Z L⁻¹ u */
-    for (r = 0; r < 6; ++r)
-      for (j = 0; j < nv; ++j) {
-        double x = U[6 * j + r];
-        for (c = 0; c < j; ++c) x -= Z[6 * c + r] * L[j + 6 * c];
-        Z[6 * j + r] = x / L[j + 6 * j];
+    {
+      double *IAp = s->IA + 36 * par, *pAp = s->fl + 6 * par;
+      double y[6], Z[36];
+      for (r = 0; r < 6; ++r) {                 /* Z = U L⁻ᵀ (6 × nv) */
+        for (j = 0; j < nv; ++j) {
+          double x = U[6 * j + r];
+          for (c = 0; c < j; ++c) x -= Z[6 * c + r] * L[j + 6 * c];
+          Z[6 * j + r] = x / L[j + 6 * j];
+        }
       }
-    for (j = 0; j < nv; ++j) {                  /* w = L⁻¹ u */
-      double x = u[j];
-      for (c = 0; c < j; ++c) x -= L[j + 6 * c] * w[c];
-      w[j] = x / L[j + 6 * j];
-    }
-    for (c = 0; c < 6; ++c)
-      for (r = c; r < 6; ++r) {
-        double x = IA[r + 6 * c];
-        for (j = 0; j < nv; ++j) x -= Z[6 * j + r] * Z[6 * j + c];
-        Ia[r + 6 * c] = Ia[c + 6 * r] = x;
+      for (j = 0; j < nv; ++j) {                /* w = L⁻¹ (u − Uᵀ c) */
+        double x = u[j];
+        for (r = 0; r < 6; ++r) x -= U[6 * j + r] * cb[r];
+        for (c = 0; c < j; ++c) x -= L[j + 6 * c] * w[c];
+        w[j] = x / L[j + 6 * j];
       }
-    for (r = 0; r < 6; ++r) {
-      double x = pA[r];
-      for (c = 0; c < 6; ++c) x += Ia[r + 6 * c] * cb[c];
-      for (j = 0; j < nv; ++j) x += Z[6 * j + r] * w[j];
-      pa[r] = x;
+      /* p^A_p += p^A + I^A c + Z w (= p^A + I^a c + U D⁻¹ u, I^a = I^A − Z Zᵀ); I^A_p += I^a */
+      for (r = 0; r < 6; ++r) y[r] = pA[r];
+      for (c = 0; c < 6; ++c)
+        for (r = 0; r < 6; ++r) y[r] += IA[r + 6 * c] * cb[c];
+      for (j = 0; j < nv; ++j)
+        for (r = 0; r < 6; ++r) y[r] += Z[6 * j + r] * w[j];
+      for (r = 0; r < 6; ++r) pAp[r] += y[r];
+      for (c = 0; c < 6; ++c)
+        for (r = 0; r < 6; ++r) {
+          double x = IA[r + 6 * c];
+          for (j = 0; j < nv; ++j) x -= Z[6 * j + r] * Z[6 * j + c];
+          IAp[r + 6 * c] += x;
+        }
     }
-    sp_matrix_out_add(R, p, Ia, s->IA + 36 * par);
-    sp_wrench_out_add(R, p, pa, s->fl + 6 * par);
-    sp_inertia_out_add(R, p, s->IC + NCGEN_TREE_BODY * b, s->IC + NCGEN_TREE_BODY * par);
   }
-  for (b = 0; b < T->nb; ++b) {
+  for (b = 0; b < T->nb; ++b) {                 /* a = a_p + c + S ẇ, ẇ = D⁻¹ (u − Uᵀ (a_p + c)) */
     const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
     int nv = k->nv, va = T->v_at[b], par = T->parent[b];
-    const double *S = s->Sl + 6 * va, *R = s->X + 12 * b, *p = R + 9, *U = s->U + 6 * va, *L = s->Dl + 36 * b;
-    double *a = s->al + 6 * b, x[6];
-    sp_twist_in(R, p, par < 0 ? a0 : s->al + 6 * par, a);
-    for (i = 0; i < 6; ++i) a[i] += s->cl[6 * b + i];
-    for (j = 0; j < nv; ++j) {                  /* ẇ = D⁻¹ (u − Uᵀ a') */
-      double y = s->ul[va + j];
-      for (r = 0; r < 6; ++r) y -= U[6 * j + r] * a[r];
-      for (c = 0; c < j; ++c) y -= L[j + 6 * c] * x[c];
-      x[j] = y / L[j + 6 * j];
+    const double *S = s->S + 6 * va, *U = s->U + 6 * va, *ap = par < 0 ? a0 : s->al + 6 * par;
+    double *a = s->al + 6 * b, y[6], x[6];
+    for (i = 0; i < 6; ++i) a[i] = ap[i] + s->cl[6 * b + i];
+    for (j = 0; j < nv; ++j) {
+      double t = s->ul[va + j];
+      for (r = 0; r < 6; ++r) t -= U[6 * j + r] * a[r];
+      y[j] = t;
     }
-    for (j = nv - 1; j >= 0; --j) {
-      double y = x[j];
-      for (c = j + 1; c < nv; ++c) y -= L[c + 6 * j] * x[c];
-      x[j] = y / L[j + 6 * j];
-    }
+    ncgen_tree_joint_solve(nv, s->Dl + 36 * b, y, x);
     for (j = 0; j < nv; ++j) {
       aj[va + j] = x[j];
       for (r = 0; r < 6; ++r) a[r] += S[6 * j + r] * x[j];
@@ -644,49 +793,39 @@ static int ncgen_tree_articulated(const ncgen_tree_kinds *K, const ncgen_tree *T
  * algorithm on the factors of the last ncgen_tree_articulated (no velocity, no gravity). */
 static void ncgen_tree_articulated_solve(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s,
                                          const double *e, double *y) {
-  int b, i, j, r, c;
+  int b, i, j, r;
+  const double zero[6] = {0, 0, 0, 0, 0, 0};
   for (i = 0; i < 6 * T->nb; ++i) s->pr[i] = 0.0;
   for (b = T->nb - 1; b >= 0; --b) {
     const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
     int nv = k->nv, va = T->v_at[b], par = T->parent[b];
-    const double *S = s->Sl + 6 * va, *U = s->U + 6 * va, *L = s->Dl + 36 * b;
-    double *pA = s->pr + 6 * b, *u = s->ur + va, w[6], pa[6];
-    for (j = 0; j < nv; ++j) {                  /* u = e − Sᵀ p^A, w = L⁻¹ u */
-      double x = e[va + j];
-      for (r = 0; r < 6; ++r) x -= S[6 * j + r] * pA[r];
-      u[j] = x;
-      for (c = 0; c < j; ++c) x -= L[j + 6 * c] * w[c];
-      w[j] = x / L[j + 6 * j];
+    const double *S = s->S + 6 * va, *U = s->U + 6 * va, *pA = s->pr + 6 * b;
+    double *u = s->ur + va, x[6];
+    for (j = 0; j < nv; ++j) {                  /* u = e − Sᵀ p^A */
+      double t = e[va + j];
+      for (r = 0; r < 6; ++r) t -= S[6 * j + r] * pA[r];
+      u[j] = t;
     }
     if (par < 0) continue;
-    for (r = 0; r < 6; ++r) pa[r] = pA[r];       /* p^a = p^A + U D⁻¹ u */
-    for (j = nv - 1; j >= 0; --j) {              /* w = L⁻ᵀ L⁻¹ u = D⁻¹ u */
-      double x = w[j];
-      for (c = j + 1; c < nv; ++c) x -= L[c + 6 * j] * w[c];
-      w[j] = x / L[j + 6 * j];
+    ncgen_tree_joint_solve(nv, s->Dl + 36 * b, u, x);  /* p^A_p += p^A + U D⁻¹ u */
+    for (r = 0; r < 6; ++r) {
+      double t = pA[r];
+      for (j = 0; j < nv; ++j) t += U[6 * j + r] * x[j];
+      s->pr[6 * par + r] += t;
     }
-    for (j = 0; j < nv; ++j)
-      for (r = 0; r < 6; ++r) pa[r] += U[6 * j + r] * w[j];
-    sp_wrench_out_add(s->X + 12 * b, s->X + 12 * b + 9, pa, s->pr + 6 * par);
   }
   for (b = 0; b < T->nb; ++b) {
     const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
     int nv = k->nv, va = T->v_at[b], par = T->parent[b];
-    const double *S = s->Sl + 6 * va, *R = s->X + 12 * b, *U = s->U + 6 * va, *L = s->Dl + 36 * b;
-    const double zero[6] = {0, 0, 0, 0, 0, 0};
-    double *a = s->ar + 6 * b, x[6];
-    sp_twist_in(R, R + 9, par < 0 ? zero : s->ar + 6 * par, a);
+    const double *S = s->S + 6 * va, *U = s->U + 6 * va, *ap = par < 0 ? zero : s->ar + 6 * par;
+    double *a = s->ar + 6 * b, z[6], x[6];
+    for (r = 0; r < 6; ++r) a[r] = ap[r];
     for (j = 0; j < nv; ++j) {
-      double z = s->ur[va + j];
-      for (r = 0; r < 6; ++r) z -= U[6 * j + r] * a[r];
-      for (c = 0; c < j; ++c) z -= L[j + 6 * c] * x[c];
-      x[j] = z / L[j + 6 * j];
+      double t = s->ur[va + j];
+      for (r = 0; r < 6; ++r) t -= U[6 * j + r] * a[r];
+      z[j] = t;
     }
-    for (j = nv - 1; j >= 0; --j) {
-      double z = x[j];
-      for (c = j + 1; c < nv; ++c) z -= L[c + 6 * j] * x[c];
-      x[j] = z / L[j + 6 * j];
-    }
+    ncgen_tree_joint_solve(nv, s->Dl + 36 * b, z, x);
     for (j = 0; j < nv; ++j) {
       y[va + j] = x[j];
       for (r = 0; r < 6; ++r) a[r] += S[6 * j + r] * x[j];
@@ -753,43 +892,51 @@ static int ncgen_tree_factored(const ncgen_tree_kinds *K, const ncgen_tree *T, n
   ncgen_tree_local_motion(K, T, s, 1);
   ncgen_tree_local_backward(K, T, s);
   ncgen_tree_project(T, s->tau, s->rhs);
-  ncgen_tree_local_mass(K, T, s, s->Mi);
+  ncgen_tree_ground_poses(K, T, s);
+  ncgen_tree_ground_mass(K, T, s, s->Mi);
   *pivot = ncgen_tree_cholesky(T->ni, s->Mi, s->L);
   return 0;
 }
 
-/* aj (nv) = G M_i⁻¹ (τ_i − b_i): forward dynamics, by the articulated-body algorithm without
- * mimic joints, else by Cholesky; check = [smallest relative pivot, Σ aj]. */
-static int ncgen_tree_aba(const ncgen_tree_kinds *K, const ncgen_tree *T, const double *q, const double *v,
-                          const double *tau_i, double *aj, double *check, double *work) {
-  ncgen_tree_work s;
+/* aj (nv) = G M_i⁻¹ (τ_i − b_i) in the work s: forward dynamics, by the articulated-body
+ * algorithm (with mimic joints: their followers held by constraints), else (M or C Y not
+ * positive definite) by Cholesky of M_i; check = [smallest relative pivot, Σ aj]. */
+static int ncgen_tree_aba_at(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, const double *q,
+                             const double *v, const double *tau_i, double *aj, double *check) {
   int i;
   double sum = 0.0;
-  ncgen_tree_layout(K, T, work, &s);
-  ncgen_tree_expand(T, &s, q, v, 0);
+  ncgen_tree_expand(T, s, q, v, 0);
   if (ncgen_tree_unmapped(T)) {
-    if (ncgen_tree_articulated(K, T, &s, tau_i, aj, &check[0])) return NCGEN_TREE_KERNEL;
+    if (ncgen_tree_articulated(K, T, s, tau_i, aj, &check[0])) return NCGEN_TREE_KERNEL;
     for (i = 0; i < T->nv; ++i) sum += aj[i];
     check[1] = sum;
     return 0;
   } else {
     int failed;
-    if (ncgen_tree_constrained(K, T, &s, tau_i, aj, &check[0], &failed)) return NCGEN_TREE_KERNEL;
+    if (ncgen_tree_constrained(K, T, s, tau_i, aj, &check[0], &failed)) return NCGEN_TREE_KERNEL;
     if (!failed) {
       for (i = 0; i < T->nv; ++i) sum += aj[i];
       check[1] = sum;
       return 0;
     }
   }
-  if (ncgen_tree_factored(K, T, &s, q, v, &check[0])) return NCGEN_TREE_KERNEL;
-  for (i = 0; i < T->ni; ++i) s.rhs[i] = tau_i[i] - s.rhs[i];
-  ncgen_tree_solve(T->ni, s.L, s.rhs, 1);
+  if (ncgen_tree_factored(K, T, s, q, v, &check[0])) return NCGEN_TREE_KERNEL;
+  for (i = 0; i < T->ni; ++i) s->rhs[i] = tau_i[i] - s->rhs[i];
+  ncgen_tree_solve(T->ni, s->L, s->rhs, 1);
   for (i = 0; i < T->nv; ++i) {
-    aj[i] = T->rate_coef[i] * s.rhs[T->rate_col[i]];
+    aj[i] = T->rate_coef[i] * s->rhs[T->rate_col[i]];
     sum += aj[i];
   }
   check[1] = sum;
   return 0;
+}
+
+/* The same with the work array work. */
+static int ncgen_tree_aba(const ncgen_tree_kinds *K, const ncgen_tree *T, const double *q, const double *v,
+                          const double *tau_i, double *aj, double *check, double *work) {
+  ncgen_tree_work s;
+  ncgen_tree_layout(K, T, work, &s);
+  return ncgen_tree_aba_at(K, T, &s, q, v, tau_i, aj, check);
 }
 
 /* The tangent pass along direction d of the independent rates (d < ni: positions, q moved
