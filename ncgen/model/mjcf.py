@@ -32,10 +32,14 @@ by :mod:`ncgen.model.mjcf_inertia`; the ncgen model comes from the XML alone.
   :class:`~ncgen.model.forces.TorsionalSpring` towards ``springref``.
 * Fixed tendons without a force of their own (stiffness, damping, friction loss, range) are
   ``system.tendons`` (``{name: {joint coordinate: coef}}``): transmissions of actuators and
-  of equalities.  Actuators: ``motor`` and ``general`` (fixed gain, no bias, no dynamics) on
-  a hinge, slide or such a tendon, as ``system.actuators`` (name, joint or tendon, ``gear`` ×
-  gain, ``ctrlrange``: data, not enforced) and the matrix ``system.actuator_gear`` (``tau =
-  actuator_gear @ ctrl``; a tendon's column holds ``gear × coef``).
+  of equalities.  Actuators (:mod:`ncgen.model.mjcf_actuators`): ``motor``, ``position``,
+  ``velocity``, ``damper`` and ``general`` (fixed or affine gain, none or affine bias, no
+  activation dynamics) on a hinge, slide or such a tendon, with MuJoCo's ``ctrlrange``,
+  ``forcerange`` and the joint's ``actuatorfrcrange`` clamps, as ``system.actuation``
+  (``actuation.tau(model, qj, vj, ctrl)``, ``actuation.controller(ctrl)``: a compiled
+  controller whose output is ``tau``), their moment arms ``system.actuator_gear`` (``tau =
+  actuator_gear @ f``; a tendon's column holds ``gear × coef``) and ``system.actuators``
+  (name, kind, joint or tendon, gear, gain, bias, ranges).
 * Sites are markers of their member (``<body>_<site>`` frames for those on the ground);
   every body and site is a named frame (``system.frames``).
 * ``<equality><connect body1 body2 anchor>`` closes a loop exactly: a
@@ -49,7 +53,8 @@ by :mod:`ncgen.model.mjcf_inertia`; the ncgen model comes from the XML alone.
 Not part of the imported model, by design: contacts (geom collisions, ``<contact>``),
 sensors, cameras, lights, visual and asset data, keyframes (``system.mjcf_ignored`` lists
 what the file had).  Everything else the import cannot represent — other equality
-constraints, spatial tendons and tendon forces, other actuators, fluid forces, a slide's
+constraints, spatial tendons and tendon forces, actuators with activation dynamics or on
+sites and bodies, fluid forces, a slide's
 ``stiffness``, dynamics on ball and free joints, ... — is named, element and line, in ONE :class:`MjcfWarning`, and
 listed in ``system.mjcf_unsupported``.
 """
@@ -452,9 +457,14 @@ def _joint_dynamics(joint, j, a, kind, compiler, unsupported, spring) -> None:
             raise ModelError(f"MJCF {where(j)}: <joint range={a.get('range')!r}>: the lower bound is above the upper")
         dyn.update(lower=angle(lo) - ref, upper=angle(hi) - ref)
     joint.set_dynamics(**dyn)
+    joint.mjcf_actuatorfrcrange = None
     if a.get("actuatorfrclimited") == "true" or (a.get("actuatorfrclimited", "auto") == "auto"
                                                   and "actuatorfrcrange" in a):
-        unsupported.add(j, "actuatorfrcrange (the actuator force on the joint is not clamped)")
+        lo, hi = numbers(j, a, "actuatorfrcrange", 2, default=(0, 0))
+        if lo > hi:
+            raise ModelError(f"MJCF {where(j)}: <joint actuatorfrcrange={a.get('actuatorfrcrange')!r}>: the lower "
+                             "bound is above the upper")
+        joint.mjcf_actuatorfrcrange = (float(lo), float(hi))
     k = number(j, a, "stiffness", 0.0)
     if "springdamper" in a:
         unsupported.add(j, "springdamper")
@@ -516,11 +526,15 @@ def _tendons(s, root, joints, driven, defaults, compiler, unsupported) -> dict:
 
 
 def _actuators(s, root, joints, driven, tendons, defaults, unsupported) -> None:
-    """Motors as ``s.actuators`` and the map ``s.actuator_gear`` from ``ctrl`` to ``tau``;
-    a motor on a fixed tendon acts on its joints with the tendon's coefficients."""
+    """The actuators on hinges, slides and imported fixed tendons as ``s.actuation``
+    (:class:`~ncgen.model.mjcf_actuators.Actuation`: MuJoCo's gain, bias and clamps), their
+    moment arms ``s.actuator_gear`` (``tau = actuator_gear @ f``; a tendon's column holds
+    ``gear × coef``) and ``s.actuators`` (one dict per actuator, for reports)."""
+    from ncgen.model.mjcf_actuators import Actuation, actuator_law
     index = _rate_index(joints, driven)
+    coordinate = {d: _coordinate(joints, n, d) for n, d in ((n, driven[k]) for n, k in index.items())}
     s.actuators = []
-    columns = []
+    columns, laws = [], []
     elements = [el for section in root.findall("actuator") for el in section]
     for k, el in enumerate(elements):
         a = defaults.attributes(el, None)
@@ -531,34 +545,43 @@ def _actuators(s, root, joints, driven, tendons, defaults, unsupported) -> None:
                              f"body), found {target or 'none'}")
         if target[0] in ("joint", "jointinparent") and a[target[0]] not in joints:
             raise ModelError(f"MJCF {where(el)}: <{el.tag} {target[0]}={a[target[0]]!r}>: no joint of that name")
-        plain = el.tag == "motor" or (el.tag == "general" and a.get("gaintype", "fixed") == "fixed"
-                                      and a.get("biastype", "none") == "none"
-                                      and a.get("dyntype", "none") == "none")
         if target[0] == "tendon" and a["tendon"] not in tendons:
             raise ModelError(f"MJCF {where(el)}: <{el.tag} tendon={a['tendon']!r}>: no tendon of that name")
-        if target[0] == "tendon" and tendons[a["tendon"]] is None and plain:
-            unsupported.add(el, f"actuator {name!r} on tendon {a['tendon']!r}, which is not imported")
-            continue
+        law, why = actuator_law(el, a, name)
         on_tendon = target[0] == "tendon" and tendons[a["tendon"]] is not None
-        if not plain or not (on_tendon or (target[0] == "joint" and a["joint"] in index)):
-            unsupported.add(el, f"actuator {name!r} (only motor/general with fixed gain on a hinge, slide or "
-                            "fixed tendon)")
+        if law is not None and target[0] == "tendon" and not on_tendon:
+            why = f"actuator {name!r} on tendon {a['tendon']!r}, which is not imported"
+        elif law is not None and not (on_tendon or (target[0] == "joint" and a["joint"] in index)):
+            why = f"actuator {name!r} on a {target[0]} (only hinges, slides and fixed tendons are imported)"
+        if why:
+            unsupported.add(el, why)
             continue
         gear = numbers(el, a, "gear", None, default=(1.0,))[0]
-        gain = numbers(el, a, "gainprm", None, default=(1.0,))[0] if el.tag == "general" else 1.0
-        if a.get("forcelimited") == "true" or (a.get("forcelimited", "auto") == "auto" and "forcerange" in a):
-            unsupported.add(el, f"forcerange of actuator {name!r} (the force is not clamped)")
-        ctrl = numbers(el, a, "ctrlrange", 2)
-        limited = a.get("ctrllimited", "auto")
-        limited = limited == "true" or (limited == "auto" and ctrl is not None)
         column = np.zeros(len(driven))
         for joint, c in (tendons[a["tendon"]] if on_tendon else [(a["joint"], 1.0)]):
-            column[index[joint]] += gear * gain * c
+            column[index[joint]] += gear * c
         columns.append(column)
-        s.actuators.append({"name": name, ("tendon" if on_tendon else "joint"):
-                            a["tendon"] if on_tendon else driven[index[a["joint"]]], "gear": gear * gain,
-                            "ctrlrange": tuple(ctrl) if limited and ctrl is not None else None})
+        laws.append(law)
+        s.actuators.append({"name": name, "kind": el.tag, ("tendon" if on_tendon else "joint"):
+                            a["tendon"] if on_tendon else driven[index[a["joint"]]], "gear": gear,
+                            "gain": law.gain, "bias": law.bias, "ctrlrange": law.ctrlrange,
+                            "forcerange": law.forcerange})
     s.actuator_gear = np.column_stack(columns) if columns else np.zeros((len(driven), 0))
+    ref = np.zeros(len(driven))
+    ranges = {}
+    for d, obj in coordinate.items():
+        ref[driven.index(d)] = getattr(obj, "mjcf_ref", 0.0)
+        if getattr(obj, "mjcf_actuatorfrcrange", None) is not None:
+            ranges[driven.index(d)] = obj.mjcf_actuatorfrcrange
+    s.actuation = Actuation(laws, s.actuator_gear, ref, driven, ranges)
+
+
+def _coordinate(joints, mjcf_name, driven_name):
+    """The joint (a hinge or slide) or sequence law whose coordinate is ``driven_name``."""
+    joint, kind = joints[mjcf_name]
+    if kind != "sequence":
+        return joint
+    return next(law for law in joint.laws if f"{joint.name}.{law.name}" == driven_name)
 
 
 def _frames(s, ground, groups, member_of, sites, defaults, compiler) -> None:
