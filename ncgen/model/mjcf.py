@@ -50,9 +50,10 @@ by :mod:`ncgen.model.mjcf_inertia`; the ncgen model comes from the XML alone.
   so is ``<tendon tendon1>`` on a fixed tendon of two hinges or slides (``c_1 x_1 + c_2 x_2 = 0``).
 * ``<option gravity>`` (and ``<flag gravity="disable"/>``) sets gravity.
 
-Not part of the imported model, by design: contacts (geom collisions, ``<contact>``),
-sensors, cameras, lights, visual and asset data, keyframes (``system.mjcf_ignored`` lists
-what the file had).  Everything else the import cannot represent — other equality
+Contacts (geom collisions, ``<contact>``) only with ``contacts=True``
+(:mod:`ncgen.model.mjcf_contacts`).  Not part of the imported model, by design: sensors,
+cameras, lights, visual and asset data, keyframes (``system.mjcf_ignored`` lists what the
+file had).  Everything else the import cannot represent — other equality
 constraints, spatial tendons and tendon forces, actuators with activation dynamics or on
 sites and bodies, fluid forces, a slide's
 ``stiffness``, dynamics on ball and free joints, ... — is named, element and line, in ONE :class:`MjcfWarning`, and
@@ -90,12 +91,13 @@ class _Group:
 
     def __init__(self, body, T, joints, parent):
         self.body, self.T, self.joints, self.parent = body, T, joints, parent
-        self.bodies, self.parts = [], []
+        self.bodies, self.parts, self.geoms = [], [], []
 
 
-def system_from_mjcf(source, system_class, *, name=None):
+def system_from_mjcf(source, system_class, *, name=None, contacts=False):
     """A system (an instance of ``system_class``) from an MJCF file or text; see the module
-    docstring."""
+    docstring; ``contacts`` (True or a dict of contact keywords): the geoms as contact shapes
+    (:mod:`ncgen.model.mjcf_contacts`)."""
     root, _, fname = read_document(source)
     compiler, bound = read_compiler(root)
     defaults = Defaults(root)
@@ -112,14 +114,20 @@ def system_from_mjcf(source, system_class, *, name=None):
         for child, T, cls in _flatten(wb, np.eye(4), None, compiler):
             if child.tag == "site":
                 sites.append((child, T, ground, cls))
+            if child.tag == "geom":
+                ground.geoms.append(_geom(child, T, cls, ground, None, defaults))
             _walk(child, T, ground, cls, groups, sites, compiler, defaults, unsupported)
     if compiler.totalmass > 0:
         _scale_mass(compiler.totalmass, [ground] + groups)
-    s.mjcf_ignored = sorted({el.tag for el in root if el.tag in IGNORED})
+    s.mjcf_ignored = sorted({el.tag for el in root if el.tag in IGNORED and not (contacts and el.tag == "contact")})
     member_of, joints, driven = _members(s, ground, groups, compiler, defaults, unsupported)
     tendons = _tendons(s, root, joints, driven, defaults, compiler, unsupported)
     _actuators(s, root, joints, driven, tendons, defaults, unsupported)
     _frames(s, ground, groups, member_of, sites, defaults, compiler)
+    if contacts is not False and contacts is not None:
+        from ncgen.model.mjcf_contacts import add_contacts
+        add_contacts(s, [g for group in [ground] + groups for g in group.geoms], {id(g): g.parent for g in groups},
+                     member_of, _local, root, contacts, compiler, unsupported)
     for el in root:
         if el.tag == "equality":
             _equality(s, el, ground, groups, member_of, joints, tendons, defaults, unsupported)
@@ -283,8 +291,19 @@ def _walk(el, T_parent, group, childclass, groups, sites, compiler, defaults, un
     for child, Tc, ccls in contents:
         if child.tag == "site":
             sites.append((child, T @ Tc, group, ccls))
+        if child.tag == "geom":
+            group.geoms.append(_geom(child, T @ Tc, ccls, group, el, defaults))
     for child, Tc, ccls in contents:
         _walk(child, T @ Tc, group, ccls, groups, sites, compiler, defaults, unsupported)
+
+
+def _geom(el, T, cls, group, body, defaults):
+    """A :class:`~ncgen.model.mjcf_contacts.Geom` of ``group`` (``body``: its MJCF body, None
+    in ``<worldbody>``), at ``T`` (its container's world pose)."""
+    from ncgen.model.mjcf_contacts import Geom
+    owner = "world" if body is None else body.get("name") or "body"
+    name = el.get("name") or f"{owner}_geom{len(group.geoms)}"
+    return Geom(el, defaults.attributes(el, cls), T, group, body, name)
 
 
 def _scale_mass(total: float, groups) -> None:

@@ -325,20 +325,23 @@ class System:
         return _read_through_store(cls, "urdf", source, lambda: system_from_urdf(source, cls, **options), **options)
 
     @classmethod
-    def from_mjcf(cls, source, name=None) -> "System":
+    def from_mjcf(cls, source, name=None, contacts=False) -> "System":
         """A MuJoCo model from an MJCF file (a path) or MJCF text: bodies, inertials,
         hinge/slide/ball/free joints (hinges and slides actuated by the input ``tau``, one
         component each, ``model.joint_names`` order), joint damping, armature, friction,
         range and stiffness, actuators as ``system.actuation`` (MuJoCo's force laws and clamps); what cannot be
         represented is named in one :class:`~ncgen.model.mjcf.MjcfWarning`.  See
-        :mod:`ncgen.model.mjcf`.  A file read before (its bytes and those of its includes
-        unchanged) comes from the store of built models without parsing."""
+        :mod:`ncgen.model.mjcf`.  ``contacts=True`` (or a dict of contact keywords: ``mu``,
+        ``stiffness``, ...) makes the geoms contact shapes, paired as MuJoCo filters them
+        (:mod:`ncgen.model.mjcf_contacts`; off by default).  A file read before (its bytes and
+        those of its includes unchanged) comes from the store of built models without parsing."""
         from ncgen.model.mjcf import system_from_mjcf
         from ncgen.model.mjcf_xml import included_files
         path = _file(source)
         includes = [] if path is None else [(f, _digest(f)) for f in included_files(path)]
-        return _read_through_store(cls, "mjcf", source, lambda: system_from_mjcf(source, cls, name=name),
-                                   name=name, includes=includes)
+        return _read_through_store(cls, "mjcf", source,
+                                   lambda: system_from_mjcf(source, cls, name=name, contacts=contacts),
+                                   name=name, includes=includes, contacts=contacts)
 
     def to_toml(self) -> str:
         """The system as TOML text that :meth:`from_toml` reads back."""
