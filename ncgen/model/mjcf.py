@@ -121,9 +121,11 @@ def system_from_mjcf(source, system_class, *, name=None, contacts=False):
         _scale_mass(compiler.totalmass, [ground] + groups)
     s.mjcf_ignored = sorted({el.tag for el in root if el.tag in IGNORED and not (contacts and el.tag == "contact")})
     member_of, joints, driven = _members(s, ground, groups, compiler, defaults, unsupported)
-    tendons = _tendons(s, root, joints, driven, defaults, compiler, unsupported)
+    spatial: list = []
+    tendons = _tendons(s, root, joints, driven, defaults, compiler, unsupported, spatial)
     _actuators(s, root, joints, driven, tendons, defaults, unsupported)
     _frames(s, ground, groups, member_of, sites, defaults, compiler)
+    _spatial_tendons(s, spatial, unsupported)
     if contacts is not False and contacts is not None:
         from ncgen.model.mjcf_contacts import add_contacts
         add_contacts(s, [g for group in [ground] + groups for g in group.geoms], {id(g): g.parent for g in groups},
@@ -504,7 +506,7 @@ def _rate_index(joints, driven) -> dict:
 TENDON_FORCES = ("stiffness", "damping", "frictionloss", "armature")
 
 
-def _tendons(s, root, joints, driven, defaults, compiler, unsupported) -> dict:
+def _tendons(s, root, joints, driven, defaults, compiler, unsupported, spatial) -> dict:
     """Fixed tendons as ``s.tendons`` (``{name: {joint coordinate: coef}}``, the length
     ``L = Σ coef x_k`` of hinge and slide coordinates): they carry an actuator's transmission
     (a motor's force ``f`` acts as ``coef_k f`` on joint k) or an equality.  A tendon with a
@@ -519,6 +521,9 @@ def _tendons(s, root, joints, driven, defaults, compiler, unsupported) -> dict:
                  **defaults.attributes(el, None)}
             name = a.get("name") or f"tendon{k}"
             out[name] = None
+            if el.tag == "spatial":
+                spatial.append((el, a, name))
+                continue
             if el.tag != "fixed":
                 unsupported.add(el, f"tendon {el.tag} {name!r} is not imported")
                 continue
@@ -542,6 +547,43 @@ def _tendons(s, root, joints, driven, defaults, compiler, unsupported) -> dict:
                 continue
             s.tendons[name], out[name] = coefs, pairs
     return out
+
+
+def _spatial_tendons(s, spatial, unsupported) -> None:
+    """Spatial tendons through sites only, with a ``stiffness`` or ``damping`` and no other
+    force (friction loss, armature, range), as
+    :class:`~ncgen.model.cables.ClusteredCable` forces named as the tendon: the length ``L =
+    Σ |s_{i+1} − s_i|`` between the sites, the tension ``k (L − springlength) + c L̇``
+    (``springlength`` −1: the file's length), kept ≥ 0 (MuJoCo's tendon spring also pushes
+    below ``springlength``; a cable goes slack).  Others are unsupported."""
+    from ncgen.model.cables import ClusteredCable
+    for el, a, name in spatial:
+        k, c = number(el, a, "stiffness", 0.0), number(el, a, "damping", 0.0)
+        others = [key for key in ("frictionloss", "armature") if number(el, a, key, 0.0) != 0]
+        if _limited(el, a):
+            others.append("range")
+        items = [item.tag if item.tag != "site" else None for item in el]
+        rest = numbers(el, a, "springlength", (1, 2), default=(-1.0,))
+        if others or any(items) or len(items) < 2 or rest[0] != rest[-1] or k < 0 or c < 0 or not (k or c):
+            why = (f"{', '.join(others)} not modelled" if others else
+                   f"<{next(t for t in items if t)}> in its path (only sites are taken)" if any(items) else
+                   "a dead band (two springlength values)" if rest[0] != rest[-1] else
+                   "no stiffness or damping: nothing acts" if not (k or c) else "fewer than two sites")
+            unsupported.add(el, f"tendon spatial {name!r} ({why})")
+            continue
+        path = []
+        for item in el:
+            site = identifier(item.get("site", ""))
+            if site not in s.frames:
+                raise ModelError(f"MJCF {where(item)}: <site site={item.get('site')!r}> in tendon {name!r}: "
+                                 "no site of that name")
+            member, _, p = s.frames[site]
+            path.append((s.ground if member == "ground" else s.member(member), p))
+        if rest[0] < 0:
+            ends = [s.frames[identifier(item.get("site"))] for item in el]
+            world = [p if m == "ground" else s.member(m).R0 @ p + s.member(m).p0 for m, _, p in ends]
+            rest = [sum(float(np.linalg.norm(b - q)) for q, b in zip(world, world[1:]))]
+        s.add_force(ClusteredCable(path, k=k, rest_length=float(rest[0]), damping=c, name=identifier(name)))
 
 
 def _actuators(s, root, joints, driven, tendons, defaults, unsupported) -> None:
