@@ -43,6 +43,8 @@ def test_pairs_are_mujocos():
     assert len(ours) == len(s.contacts) == 15
     assert ours | named == theirs
     assert "contact" not in s.mjcf_ignored
+    again = nc.System.from_toml(s.to_toml())                   # the contacts have a TOML form
+    assert [(c.name, c.kind, c.mu) for c in again.contacts] == [(c.name, c.kind, c.mu) for c in s.contacts]
 
 
 def drop(shape: str, size: str, z0: float):

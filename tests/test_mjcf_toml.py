@@ -20,7 +20,7 @@ from test_mjcf import CHAIN, import_quietly  # noqa: E402
 DATA = Path(__file__).parent / "data"
 
 
-@pytest.mark.parametrize("source", ["chain", "sequences.xml", "actuators.xml"])
+@pytest.mark.parametrize("source", ["chain", "sequences.xml", "actuators.xml", "tendons.xml"])
 def test_toml_of_an_imported_model_keeps_its_dynamics(source):
     """Damping, armature, friction and ranges of every coordinate (hinges, slides, joint
     sequences) survive the TOML text, and qacc of the rebuilt model equals the imported one's

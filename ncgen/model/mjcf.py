@@ -41,7 +41,9 @@ by :mod:`ncgen.model.mjcf_inertia`; the ncgen model comes from the XML alone.
   actuator_gear @ f``; a tendon's column holds ``gear × coef``) and ``system.actuators``
   (name, kind, joint or tendon, gear, gain, bias, ranges).
 * Sites are markers of their member (``<body>_<site>`` frames for those on the ground);
-  every body and site is a named frame (``system.frames``).
+  every body and site is a named frame (``system.frames``).  A spatial tendon through sites
+  with a ``stiffness`` or ``damping`` is a :class:`~ncgen.model.cables.ClusteredCable`
+  (:func:`_spatial_tendons`).
 * ``<equality><connect body1 body2 anchor>`` closes a loop exactly: a
   :class:`~ncgen.model.joints.Spherical` joint at the anchor (body1's frame), the two
   bodies sharing the point (MuJoCo's constraint is soft; ncgen's holds to round-off);
@@ -54,8 +56,8 @@ Contacts (geom collisions, ``<contact>``) only with ``contacts=True``
 (:mod:`ncgen.model.mjcf_contacts`).  Not part of the imported model, by design: sensors,
 cameras, lights, visual and asset data, keyframes (``system.mjcf_ignored`` lists what the
 file had).  Everything else the import cannot represent — other equality
-constraints, spatial tendons and tendon forces, actuators with activation dynamics or on
-sites and bodies, fluid forces, a slide's
+constraints, spatial tendons over geoms or with a range, fixed tendons' forces, actuators
+with activation dynamics or on sites, bodies and spatial tendons, fluid forces, a slide's
 ``stiffness``, dynamics on ball and free joints, ... — is named, element and line, in ONE :class:`MjcfWarning`, and
 listed in ``system.mjcf_unsupported``.
 """
