@@ -122,8 +122,10 @@ def test_cassie_accelerates_as_mujoco_with_its_loops_held(cassie):
     for _ in range(4):
         q, v = on_loops(model, rng, 0.1)
         ctrl = rng.uniform(-1.0, 1.0, mj.nu)
-        qj, vj = model.to_joint_space(q, v)
-        a, _ = model.accel(q, v, u=system.actuation.tau(model, qj, vj, ctrl))
+        assert all(a["kind"] == "motor" and a["forcerange"] is None and (a["ctrlrange"] is None or (
+            a["ctrlrange"][0] <= -1 and a["ctrlrange"][1] >= 1)) for a in system.actuators)
+        tau = system.actuator_gear @ ctrl          # motors (gain 1, no bias) inside their ctrlrange
+        a, _ = model.accel(q, v, u=tau)
         qj, vj, aj = model.to_joint_space(q, v, np.asarray(a).ravel())
         qpos, qvel, qacc = to_mujoco(model, mj, qj, vj, aj)
         d.qpos[:], d.qvel[:], d.ctrl[:] = qpos, qvel, ctrl
