@@ -123,9 +123,8 @@ class Actuation:
         tau = ca.vertcat(*[_clamp(tau[k], self.joint_ranges.get(k)) for k in range(len(self.coordinates))])
         return f, tau
 
-    def rows(self, model) -> list[int]:
-        """The rows of the driven coordinates in ``model``'s joint-space ``q_j`` (= in ``v_j``:
-        hinges and slides have one position per rate)."""
+    def rows(self, model) -> list[tuple[int, int]]:
+        """``(row in q_j, row in v_j)`` of each driven coordinate in ``model``'s joint space."""
         js = model.joint_space
         sq, sv = js.slices(), js.slices(rates=True)
         out = []

@@ -24,8 +24,6 @@ from __future__ import annotations
 
 import itertools
 
-import numpy as np
-
 from ncgen.errors import ModelError
 from ncgen.model.mjcf_inertia import geom_frame
 from ncgen.model.mjcf_xml import number, numbers, where
