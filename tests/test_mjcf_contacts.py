@@ -76,3 +76,14 @@ def test_a_dropped_shape_rests_at_the_closed_form_depth(shape, size):
 def test_bad_contacts_option_is_named():
     with pytest.raises(ModelError, match="contacts: unknown key\\(s\\) 'stifness'"):
         nc.System.from_mjcf(SCENE, contacts={"stifness": 1.0})
+
+
+def test_a_pair_its_element_refuses_is_named():
+    """A sphere fixed in the world against a moving sphere (SphereSphere needs both moving):
+    named in the warning with the element's reason, not added."""
+    text = """<mujoco><worldbody><geom name="post" type="sphere" size="0.1"/>
+      <body pos="0 0 0.5"><freejoint/><geom name="bob" type="sphere" size="0.1"/></body></worldbody></mujoco>"""
+    with pytest.warns(MjcfWarning, match=r"text:2 <geom>: contact of geom 'bob' \(sphere\) with 'post' \(sphere\) at "
+                                         r"text:1 \(.*a sphere needs a moving member"):
+        s = nc.System.from_mjcf(text, contacts=True)
+    assert s.contacts == []

@@ -18,7 +18,9 @@ Friction ``mu`` is the larger of the two geoms' sliding friction (MuJoCo's defau
 ``contacts`` may be a dict of contact keywords (``mu``, ``stiffness``, ``damping``,
 ``restitution``, ``exponent``, ``slip_velocity``) that apply to every pair.  Pairs of shapes
 ncgen has no element for (a cylinder against a box, a capsule or a cylinder; ellipsoids,
-meshes, height fields) and ``<contact><pair>`` are named in the import's warning.
+meshes, height fields; a sphere fixed in the world against a moving sphere, capsule or cylinder, a
+capsule fixed in the world against a moving box) and ``<contact><pair>`` are named in the
+import's warning.
 """
 from __future__ import annotations
 
@@ -117,9 +119,15 @@ def add_contacts(s, geoms, parent_of, member_of, local, root, contacts, compiler
             a, b = b, a
         if b.kind == "plane" and a.kind == "plane":
             continue
+        if a.kind == b.kind and a.group.body is None:
+            a, b = b, a                              # the moving shape first (SphereSphere's a, BoxBox's a)
         mu = max(numbers(g.el, g.attrs, "friction", (1, 2, 3), default=(1.0,))[0] for g in (a, b))
         kw = {"mu": mu, **material, "name": identifier(f"{a.name}__{b.name}")}
-        s.add_contact(_element(a, b, member_of, local, kw))
+        try:
+            s.add_contact(_element(a, b, member_of, local, kw))
+        except ModelError as e:                      # e.g. a fixed sphere against a moving capsule
+            unsupported.add(a.el, f"contact of geom {a.name!r} ({a.kind}) with {b.name!r} ({b.kind}) at "
+                            f"{where(b.el)} ({e})")
 
 
 def _element(a: Geom, b: Geom, member_of, local, kw):
