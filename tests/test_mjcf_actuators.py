@@ -152,3 +152,16 @@ def test_bad_ranges_are_named():
             warnings.simplefilter("error", MjcfWarning)
             nc.System.from_mjcf(f"<mujoco>{BODY}<actuator><motor joint='h'/></actuator></mujoco>") \
                 .actuation.controller([1.0, 2.0])
+
+
+def test_inheritrange_gives_mujocos_ctrlrange():
+    """``inheritrange`` r: the ctrlrange is the joint's range (degrees here, ``ref`` ≠ 0)
+    scaled by r about its centre, as MuJoCo compiles it (``actuator_ctrlrange``); on a joint
+    without a range it is an error, as in MuJoCo."""
+    text = """<mujoco><compiler angle="degree"/><worldbody><body><joint name='h' range='-30 90' ref='10'/>
+      <geom size='0.1'/></body></worldbody><actuator><position joint='h' kp='5' inheritrange='0.8'/></actuator></mujoco>"""
+    mj = mujoco.MjModel.from_xml_string(text)
+    s = import_quietly(text)
+    assert np.allclose(s.actuators[0]["ctrlrange"], mj.actuator_ctrlrange[0], rtol=0, atol=1e-15)
+    with pytest.raises(ModelError, match=r"text:2: <position inheritrange=...> on joint 'h', which has no range"):
+        nc.System.from_mjcf(text.replace(" range='-30 90'", ""))

@@ -593,7 +593,7 @@ def _actuators(s, root, joints, driven, tendons, defaults, unsupported) -> None:
     (:class:`~ncgen.model.mjcf_actuators.Actuation`: MuJoCo's gain, bias and clamps), their
     moment arms ``s.actuator_gear`` (``tau = actuator_gear @ f``; a tendon's column holds
     ``gear × coef``) and ``s.actuators`` (one dict per actuator, for reports)."""
-    from ncgen.model.mjcf_actuators import Actuation, actuator_law
+    from ncgen.model.mjcf_actuators import Actuation, actuator_law, inherited_range
     index = _rate_index(joints, driven)
     coordinate = {d: _coordinate(joints, n, d) for n, d in ((n, driven[k]) for n, k in index.items())}
     s.actuators = []
@@ -619,6 +619,17 @@ def _actuators(s, root, joints, driven, tendons, defaults, unsupported) -> None:
         if why:
             unsupported.add(el, why)
             continue
+        if law.inheritrange > 0:
+            obj = None if on_tendon else coordinate[driven[index[a["joint"]]]]
+            limits = {} if obj is None else obj.limits
+            if on_tendon:
+                unsupported.add(el, f"actuator {name!r}: inheritrange on a tendon")
+                continue
+            if "lower" not in limits or "upper" not in limits:
+                raise ModelError(f"MJCF {where(el)}: <position inheritrange=...> on joint {a['joint']!r}, which has "
+                                 "no range (MuJoCo refuses it too)")
+            ref = getattr(obj, "mjcf_ref", 0.0)
+            law.ctrlrange = inherited_range(law, (limits["lower"] + ref, limits["upper"] + ref))
         gear = numbers(el, a, "gear", None, default=(1.0,))[0]
         column = np.zeros(len(driven))
         for joint, c in (tendons[a["tendon"]] if on_tendon else [(a["joint"], 1.0)]):

@@ -15,7 +15,8 @@ joint's ``actuatorfrcrange`` when it has one.  The shortcuts set ``g`` and ``b``
 ``motor`` ``g = (1)``; ``position`` (``kp``, ``kv``) ``g = (kp)``, ``b = (0, −kp, −kv)`` —
 the PD law ``kp (u − L) − kv L̇``; ``velocity`` (``kv``) ``g = (kv)``, ``b = (0, 0, −kv)``;
 ``damper`` (``kv``) ``g = (0, 0, −kv)``.  A clamp applies where the element is limited
-(``ctrllimited``/``forcelimited`` true, or auto with the range given).
+(``ctrllimited``/``forcelimited`` true, or auto with the range given); a ``position``'s
+``inheritrange`` r sets its ``ctrlrange`` to its joint's range scaled by r about the centre.
 """
 from __future__ import annotations
 
@@ -35,13 +36,16 @@ KINDS = ("motor", "position", "velocity", "damper", "general")
 @dataclass
 class Actuator:
     """One MJCF actuator: ``gain``, ``bias`` (3 coefficients each, on ``(1, L, L̇)``), the
-    ``ctrlrange`` and ``forcerange`` clamps (None: not limited)."""
+    ``ctrlrange`` and ``forcerange`` clamps (None: not limited); a position servo's
+    ``inheritrange`` (> 0: its ``ctrlrange`` is its joint's range scaled about the centre,
+    :func:`inherited_range`)."""
 
     name: str
     gain: tuple
     bias: tuple
     ctrlrange: tuple | None
     forcerange: tuple | None
+    inheritrange: float = 0.0
 
 
 def _limited(attrs: dict, flag: str, key: str, el) -> tuple | None:
@@ -73,16 +77,27 @@ def actuator_law(el, attrs: dict, name: str) -> tuple[Actuator | None, str | Non
         if btype == "none":
             b[:] = 0.0
     else:
-        for key in ("timeconst", "dampratio", "inheritrange"):
+        for key in ("timeconst", "dampratio"):
             if tag == "position" and number(el, attrs, key, 0.0) != 0:
                 return None, f"actuator {name!r}: {key} (activation dynamics or derived gains are not imported)"
         kp = number(el, attrs, "kp", 1.0)
         kv = number(el, attrs, "kv", 0.0 if tag == "position" else 1.0)
         g, b = {"motor": ((1.0, 0, 0), (0, 0, 0)), "position": ((kp, 0, 0), (0, -kp, -kv)),
                 "velocity": ((kv, 0, 0), (0, 0, -kv)), "damper": ((0, 0, -kv), (0, 0, 0))}[tag]
+    inherit = number(el, attrs, "inheritrange", 0.0) if tag == "position" else 0.0
+    if inherit < 0:
+        raise ModelError(f"MJCF {where(el)}: <position inheritrange={attrs['inheritrange']!r}>: expected a number ≥ 0")
     return Actuator(name, tuple(map(float, g)), tuple(map(float, b)),
                     _limited(attrs, "ctrllimited", "ctrlrange", el),
-                    _limited(attrs, "forcelimited", "forcerange", el)), None
+                    _limited(attrs, "forcelimited", "forcerange", el), inherit), None
+
+
+def inherited_range(law: Actuator, joint_range: tuple) -> tuple:
+    """A position servo's ``ctrlrange`` from ``inheritrange`` r and its joint's range ``(lo,
+    hi)`` (MuJoCo's ``qpos`` units): the centre ± r × the half width."""
+    lo, hi = joint_range
+    mid, half = 0.5 * (lo + hi), 0.5 * law.inheritrange * (hi - lo)
+    return float(mid - half), float(mid + half)
 
 
 def _clamp(x, bounds):
