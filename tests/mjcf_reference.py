@@ -110,13 +110,13 @@ def joint_ode(model):
 
 
 def mujoco_free_dynamics(path):
-    """MuJoCo's model of ``path`` with contacts, limits, equality constraints, friction loss
-    and control clamping off (the dynamics the import represents)."""
+    """MuJoCo's model of ``path`` with contacts, limits, equality constraints and friction
+    loss off (the dynamics the import represents; controls are clamped to ``ctrlrange`` as
+    the imported actuation does)."""
     import mujoco
     mj = mujoco.MjModel.from_xml_path(str(path))
     D = mujoco.mjtDisableBit
-    mj.opt.disableflags |= (D.mjDSBL_CONTACT | D.mjDSBL_LIMIT | D.mjDSBL_EQUALITY | D.mjDSBL_FRICTIONLOSS
-                            | D.mjDSBL_CLAMPCTRL)
+    mj.opt.disableflags |= D.mjDSBL_CONTACT | D.mjDSBL_LIMIT | D.mjDSBL_EQUALITY | D.mjDSBL_FRICTIONLOSS
     return mj
 
 
@@ -201,8 +201,7 @@ def constrained_qacc(mj, d, J) -> np.ndarray:
 def mujoco_without_meshes(path):
     """MuJoCo's compiled model of ``path`` with its mesh geoms, meshes and textures taken out
     (a Menagerie model whose mesh files are not here; their inertials are explicit, so the
-    dynamics do not change), contacts, limits, equality constraints, friction loss and
-    control clamping off."""
+    dynamics do not change), contacts, limits, equality constraints and friction loss off."""
     import mujoco
     spec = mujoco.MjSpec.from_file(str(path))
     for g in list(spec.geoms):
@@ -214,8 +213,7 @@ def mujoco_without_meshes(path):
         mat.textures = [""] * len(mat.textures)
     mj = spec.compile()
     D = mujoco.mjtDisableBit
-    mj.opt.disableflags |= (D.mjDSBL_CONTACT | D.mjDSBL_LIMIT | D.mjDSBL_EQUALITY | D.mjDSBL_FRICTIONLOSS
-                            | D.mjDSBL_CLAMPCTRL)
+    mj.opt.disableflags |= D.mjDSBL_CONTACT | D.mjDSBL_LIMIT | D.mjDSBL_EQUALITY | D.mjDSBL_FRICTIONLOSS
     return mj
 
 

@@ -74,7 +74,7 @@ def qacc_error(path, trials: int = 5, seed: int = 0, reference=None) -> float:
         expected = constrained_qacc(mj, d, J)
         assert np.max(np.abs(expected)) > 1e-3           # a state that moves
         qj, vj = jmap.to_ncgen(qpos, qvel)
-        tau = system.actuator_gear @ ctrl if reference is None else ctrl     # exported: one motor per joint
+        tau = system.actuation.tau(model, qj, vj, ctrl) if reference is None else ctrl   # exported: a motor a joint
         xdot = np.asarray(ode(0.0, np.r_[qj, vj], tau, np.zeros(model.np))[0]).ravel()
         qacc = jmap.acceleration_to_mujoco(qpos, qvel, xdot[len(qj):])
         worst = max(worst, np.max(np.abs(qacc - expected)) / max(1.0, np.max(np.abs(expected))))
@@ -422,7 +422,7 @@ def test_unsupported_named_in_one_warning():
         <body name="b" pos="0 0 -0.5"><joint name="k" type="hinge"/><geom size="0.1"/></body></body>
       </worldbody>
       <tendon><fixed name="t" stiffness="1"><joint joint="j" coef="1"/></fixed></tendon>
-      <actuator><position joint="j" kp="10"/></actuator>
+      <actuator><position joint="j" kp="10" timeconst="0.1"/></actuator>
       <equality><joint joint1="j" joint2="k" polycoef="0 1 0.5 0 0"/></equality></mujoco>"""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -431,7 +431,7 @@ def test_unsupported_named_in_one_warning():
     assert len(ours) == 1
     message = str(ours[0].message)
     for part in ("text:1 <option>: viscosity", "text:5 <fixed>: tendon fixed 't' (stiffness not modelled)",
-                 "text:6 <position>",
+                 "text:6 <position>: actuator 'actuator0': timeconst",
                  "text:7 <joint>: equality joint"):
         assert part in message, (part, message)
     assert len(system.mjcf_unsupported) == 4
@@ -476,7 +476,8 @@ def test_actuator_gear_rows_follow_tau():
       <body pos="0 0 -0.5" name="b"><joint name="k" axis="1 0 0"/><geom size="0.1"/></body></body></worldbody>
       <actuator><motor joint="k" gear="7" ctrlrange="-1 1"/></actuator></mujoco>""")
     assert s.actuator_gear.tolist() == [[0.0], [7.0]]
-    assert s.actuators == [{"name": "actuator0", "joint": "k", "gear": 7.0, "ctrlrange": (-1.0, 1.0)}]
+    assert s.actuators == [{"name": "actuator0", "kind": "motor", "joint": "k", "gear": 7.0, "gain": (1.0, 0.0, 0.0),
+                            "bias": (0.0, 0.0, 0.0), "ctrlrange": (-1.0, 1.0), "forcerange": None}]
     assert s.build().nu == 2
 
 

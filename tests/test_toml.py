@@ -152,7 +152,7 @@ position = [0, 0, 1]
      '[[joints]]\ntype = "Revolute"\nbetween = ["ground", "crank"]\nat = [0, 0, 0]\naxis = [0, 1]\n',
      "joints[0].axis: expected 3 numbers, got 2"),
     ('[[joints]]\ntype = "Revolute"\nbetween = ["ground", "crank"]\nat = [0, 0, 0]\naxes = [0, 1, 0]\n',
-     "joints[0].axes: unknown key (did you mean 'axis'?); expected one of: type, name, between, at, axis, drive"),
+     "joints[0].axes: unknown key (did you mean 'axis'?); expected one of: type, dynamics, name, between, at, axis, drive"),
     ('[[joints]]\ntype = "Revolut"\nbetween = ["ground", "crank"]\n',
      "joints[0].type: unknown joint type 'Revolut' (did you mean 'Revolute'?)"),
     ('[[joints]]\ntype = "Spherical"\nbetween = ["ground", "crnk"]\nat = [0, 0, 0]\n',

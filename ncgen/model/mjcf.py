@@ -32,12 +32,18 @@ by :mod:`ncgen.model.mjcf_inertia`; the ncgen model comes from the XML alone.
   :class:`~ncgen.model.forces.TorsionalSpring` towards ``springref``.
 * Fixed tendons without a force of their own (stiffness, damping, friction loss, range) are
   ``system.tendons`` (``{name: {joint coordinate: coef}}``): transmissions of actuators and
-  of equalities.  Actuators: ``motor`` and ``general`` (fixed gain, no bias, no dynamics) on
-  a hinge, slide or such a tendon, as ``system.actuators`` (name, joint or tendon, ``gear`` ×
-  gain, ``ctrlrange``: data, not enforced) and the matrix ``system.actuator_gear`` (``tau =
-  actuator_gear @ ctrl``; a tendon's column holds ``gear × coef``).
+  of equalities.  Actuators (:mod:`ncgen.model.mjcf_actuators`): ``motor``, ``position``,
+  ``velocity``, ``damper`` and ``general`` (fixed or affine gain, none or affine bias, no
+  activation dynamics) on a hinge, slide or such a tendon, with MuJoCo's ``ctrlrange``,
+  ``forcerange`` and the joint's ``actuatorfrcrange`` clamps, as ``system.actuation``
+  (``actuation.tau(model, qj, vj, ctrl)``, ``actuation.controller(ctrl)``: a compiled
+  controller whose output is ``tau``), their moment arms ``system.actuator_gear`` (``tau =
+  actuator_gear @ f``; a tendon's column holds ``gear × coef``) and ``system.actuators``
+  (name, kind, joint or tendon, gear, gain, bias, ranges).
 * Sites are markers of their member (``<body>_<site>`` frames for those on the ground);
-  every body and site is a named frame (``system.frames``).
+  every body and site is a named frame (``system.frames``).  A spatial tendon through sites
+  with a ``stiffness`` or ``damping`` is a :class:`~ncgen.model.cables.ClusteredCable`
+  (:func:`_spatial_tendons`).
 * ``<equality><connect body1 body2 anchor>`` closes a loop exactly: a
   :class:`~ncgen.model.joints.Spherical` joint at the anchor (body1's frame), the two
   bodies sharing the point (MuJoCo's constraint is soft; ncgen's holds to round-off);
@@ -46,10 +52,12 @@ by :mod:`ncgen.model.mjcf_inertia`; the ncgen model comes from the XML alone.
   so is ``<tendon tendon1>`` on a fixed tendon of two hinges or slides (``c_1 x_1 + c_2 x_2 = 0``).
 * ``<option gravity>`` (and ``<flag gravity="disable"/>``) sets gravity.
 
-Not part of the imported model, by design: contacts (geom collisions, ``<contact>``),
-sensors, cameras, lights, visual and asset data, keyframes (``system.mjcf_ignored`` lists
-what the file had).  Everything else the import cannot represent — other equality
-constraints, spatial tendons and tendon forces, other actuators, fluid forces, a slide's
+Contacts (geom collisions, ``<contact>``) only with ``contacts=True``
+(:mod:`ncgen.model.mjcf_contacts`).  Not part of the imported model, by design: sensors,
+cameras, lights, visual and asset data, keyframes (``system.mjcf_ignored`` lists what the
+file had).  Everything else the import cannot represent — other equality
+constraints, spatial tendons over geoms or with a range, fixed tendons' forces, actuators
+with activation dynamics or on sites, bodies and spatial tendons, fluid forces, a slide's
 ``stiffness``, dynamics on ball and free joints, ... — is named, element and line, in ONE :class:`MjcfWarning`, and
 listed in ``system.mjcf_unsupported``.
 """
@@ -85,12 +93,13 @@ class _Group:
 
     def __init__(self, body, T, joints, parent):
         self.body, self.T, self.joints, self.parent = body, T, joints, parent
-        self.bodies, self.parts = [], []
+        self.bodies, self.parts, self.geoms = [], [], []
 
 
-def system_from_mjcf(source, system_class, *, name=None):
+def system_from_mjcf(source, system_class, *, name=None, contacts=False):
     """A system (an instance of ``system_class``) from an MJCF file or text; see the module
-    docstring."""
+    docstring; ``contacts`` (True or a dict of contact keywords): the geoms as contact shapes
+    (:mod:`ncgen.model.mjcf_contacts`)."""
     root, _, fname = read_document(source)
     compiler, bound = read_compiler(root)
     defaults = Defaults(root)
@@ -107,14 +116,22 @@ def system_from_mjcf(source, system_class, *, name=None):
         for child, T, cls in _flatten(wb, np.eye(4), None, compiler):
             if child.tag == "site":
                 sites.append((child, T, ground, cls))
+            if child.tag == "geom":
+                ground.geoms.append(_geom(child, T, cls, ground, None, defaults))
             _walk(child, T, ground, cls, groups, sites, compiler, defaults, unsupported)
     if compiler.totalmass > 0:
         _scale_mass(compiler.totalmass, [ground] + groups)
-    s.mjcf_ignored = sorted({el.tag for el in root if el.tag in IGNORED})
+    s.mjcf_ignored = sorted({el.tag for el in root if el.tag in IGNORED and not (contacts and el.tag == "contact")})
     member_of, joints, driven = _members(s, ground, groups, compiler, defaults, unsupported)
-    tendons = _tendons(s, root, joints, driven, defaults, compiler, unsupported)
+    spatial: list = []
+    tendons = _tendons(s, root, joints, driven, defaults, compiler, unsupported, spatial)
     _actuators(s, root, joints, driven, tendons, defaults, unsupported)
     _frames(s, ground, groups, member_of, sites, defaults, compiler)
+    _spatial_tendons(s, spatial, unsupported)
+    if contacts is not False and contacts is not None:
+        from ncgen.model.mjcf_contacts import add_contacts
+        add_contacts(s, [g for group in [ground] + groups for g in group.geoms], {id(g): g.parent for g in groups},
+                     member_of, _local, root, contacts, compiler, unsupported)
     for el in root:
         if el.tag == "equality":
             _equality(s, el, ground, groups, member_of, joints, tendons, defaults, unsupported)
@@ -278,8 +295,19 @@ def _walk(el, T_parent, group, childclass, groups, sites, compiler, defaults, un
     for child, Tc, ccls in contents:
         if child.tag == "site":
             sites.append((child, T @ Tc, group, ccls))
+        if child.tag == "geom":
+            group.geoms.append(_geom(child, T @ Tc, ccls, group, el, defaults))
     for child, Tc, ccls in contents:
         _walk(child, T @ Tc, group, ccls, groups, sites, compiler, defaults, unsupported)
+
+
+def _geom(el, T, cls, group, body, defaults):
+    """A :class:`~ncgen.model.mjcf_contacts.Geom` of ``group`` (``body``: its MJCF body, None
+    in ``<worldbody>``), at ``T`` (its container's world pose)."""
+    from ncgen.model.mjcf_contacts import Geom
+    owner = "world" if body is None else body.get("name") or "body"
+    name = el.get("name") or f"{owner}_geom{len(group.geoms)}"
+    return Geom(el, defaults.attributes(el, cls), T, group, body, name)
 
 
 def _scale_mass(total: float, groups) -> None:
@@ -452,9 +480,14 @@ def _joint_dynamics(joint, j, a, kind, compiler, unsupported, spring) -> None:
             raise ModelError(f"MJCF {where(j)}: <joint range={a.get('range')!r}>: the lower bound is above the upper")
         dyn.update(lower=angle(lo) - ref, upper=angle(hi) - ref)
     joint.set_dynamics(**dyn)
+    joint.mjcf_actuatorfrcrange = None
     if a.get("actuatorfrclimited") == "true" or (a.get("actuatorfrclimited", "auto") == "auto"
                                                   and "actuatorfrcrange" in a):
-        unsupported.add(j, "actuatorfrcrange (the actuator force on the joint is not clamped)")
+        lo, hi = numbers(j, a, "actuatorfrcrange", 2, default=(0, 0))
+        if lo > hi:
+            raise ModelError(f"MJCF {where(j)}: <joint actuatorfrcrange={a.get('actuatorfrcrange')!r}>: the lower "
+                             "bound is above the upper")
+        joint.mjcf_actuatorfrcrange = (float(lo), float(hi))
     k = number(j, a, "stiffness", 0.0)
     if "springdamper" in a:
         unsupported.add(j, "springdamper")
@@ -475,7 +508,7 @@ def _rate_index(joints, driven) -> dict:
 TENDON_FORCES = ("stiffness", "damping", "frictionloss", "armature")
 
 
-def _tendons(s, root, joints, driven, defaults, compiler, unsupported) -> dict:
+def _tendons(s, root, joints, driven, defaults, compiler, unsupported, spatial) -> dict:
     """Fixed tendons as ``s.tendons`` (``{name: {joint coordinate: coef}}``, the length
     ``L = Σ coef x_k`` of hinge and slide coordinates): they carry an actuator's transmission
     (a motor's force ``f`` acts as ``coef_k f`` on joint k) or an equality.  A tendon with a
@@ -490,6 +523,9 @@ def _tendons(s, root, joints, driven, defaults, compiler, unsupported) -> dict:
                  **defaults.attributes(el, None)}
             name = a.get("name") or f"tendon{k}"
             out[name] = None
+            if el.tag == "spatial":
+                spatial.append((el, a, name))
+                continue
             if el.tag != "fixed":
                 unsupported.add(el, f"tendon {el.tag} {name!r} is not imported")
                 continue
@@ -515,12 +551,53 @@ def _tendons(s, root, joints, driven, defaults, compiler, unsupported) -> dict:
     return out
 
 
+def _spatial_tendons(s, spatial, unsupported) -> None:
+    """Spatial tendons through sites only, with a ``stiffness`` or ``damping`` and no other
+    force (friction loss, armature, range), as
+    :class:`~ncgen.model.cables.ClusteredCable` forces named as the tendon: the length ``L =
+    Σ |s_{i+1} − s_i|`` between the sites, the tension ``k (L − springlength) + c L̇``
+    (``springlength`` −1: the file's length), kept ≥ 0 (MuJoCo's tendon spring also pushes
+    below ``springlength``; a cable goes slack).  Others are unsupported."""
+    from ncgen.model.cables import ClusteredCable
+    for el, a, name in spatial:
+        k, c = number(el, a, "stiffness", 0.0), number(el, a, "damping", 0.0)
+        others = [key for key in ("frictionloss", "armature") if number(el, a, key, 0.0) != 0]
+        if _limited(el, a):
+            others.append("range")
+        items = [item.tag if item.tag != "site" else None for item in el]
+        rest = numbers(el, a, "springlength", (1, 2), default=(-1.0,))
+        if others or any(items) or len(items) < 2 or rest[0] != rest[-1] or k < 0 or c < 0 or not (k or c):
+            why = (f"{', '.join(others)} not modelled" if others else
+                   f"<{next(t for t in items if t)}> in its path (only sites are taken)" if any(items) else
+                   "a dead band (two springlength values)" if rest[0] != rest[-1] else
+                   "no stiffness or damping: nothing acts" if not (k or c) else "fewer than two sites")
+            unsupported.add(el, f"tendon spatial {name!r} ({why})")
+            continue
+        path = []
+        for item in el:
+            site = identifier(item.get("site", ""))
+            if site not in s.frames:
+                raise ModelError(f"MJCF {where(item)}: <site site={item.get('site')!r}> in tendon {name!r}: "
+                                 "no site of that name")
+            member, _, p = s.frames[site]
+            path.append((s.ground if member == "ground" else s.member(member), p))
+        if rest[0] < 0:
+            ends = [s.frames[identifier(item.get("site"))] for item in el]
+            world = [p if m == "ground" else s.member(m).R0 @ p + s.member(m).p0 for m, _, p in ends]
+            rest = [sum(float(np.linalg.norm(b - q)) for q, b in zip(world, world[1:]))]
+        s.add_force(ClusteredCable(path, k=k, rest_length=float(rest[0]), damping=c, name=identifier(name)))
+
+
 def _actuators(s, root, joints, driven, tendons, defaults, unsupported) -> None:
-    """Motors as ``s.actuators`` and the map ``s.actuator_gear`` from ``ctrl`` to ``tau``;
-    a motor on a fixed tendon acts on its joints with the tendon's coefficients."""
+    """The actuators on hinges, slides and imported fixed tendons as ``s.actuation``
+    (:class:`~ncgen.model.mjcf_actuators.Actuation`: MuJoCo's gain, bias and clamps), their
+    moment arms ``s.actuator_gear`` (``tau = actuator_gear @ f``; a tendon's column holds
+    ``gear × coef``) and ``s.actuators`` (one dict per actuator, for reports)."""
+    from ncgen.model.mjcf_actuators import Actuation, actuator_law, inherited_range
     index = _rate_index(joints, driven)
+    coordinate = {d: _coordinate(joints, n, d) for n, d in ((n, driven[k]) for n, k in index.items())}
     s.actuators = []
-    columns = []
+    columns, laws = [], []
     elements = [el for section in root.findall("actuator") for el in section]
     for k, el in enumerate(elements):
         a = defaults.attributes(el, None)
@@ -531,34 +608,54 @@ def _actuators(s, root, joints, driven, tendons, defaults, unsupported) -> None:
                              f"body), found {target or 'none'}")
         if target[0] in ("joint", "jointinparent") and a[target[0]] not in joints:
             raise ModelError(f"MJCF {where(el)}: <{el.tag} {target[0]}={a[target[0]]!r}>: no joint of that name")
-        plain = el.tag == "motor" or (el.tag == "general" and a.get("gaintype", "fixed") == "fixed"
-                                      and a.get("biastype", "none") == "none"
-                                      and a.get("dyntype", "none") == "none")
         if target[0] == "tendon" and a["tendon"] not in tendons:
             raise ModelError(f"MJCF {where(el)}: <{el.tag} tendon={a['tendon']!r}>: no tendon of that name")
-        if target[0] == "tendon" and tendons[a["tendon"]] is None and plain:
-            unsupported.add(el, f"actuator {name!r} on tendon {a['tendon']!r}, which is not imported")
-            continue
+        law, why = actuator_law(el, a, name)
         on_tendon = target[0] == "tendon" and tendons[a["tendon"]] is not None
-        if not plain or not (on_tendon or (target[0] == "joint" and a["joint"] in index)):
-            unsupported.add(el, f"actuator {name!r} (only motor/general with fixed gain on a hinge, slide or "
-                            "fixed tendon)")
+        if law is not None and target[0] == "tendon" and not on_tendon:
+            why = f"actuator {name!r} on tendon {a['tendon']!r}, which is not imported"
+        elif law is not None and not (on_tendon or (target[0] == "joint" and a["joint"] in index)):
+            why = f"actuator {name!r} on a {target[0]} (only hinges, slides and fixed tendons are imported)"
+        if why:
+            unsupported.add(el, why)
             continue
+        if law.inheritrange > 0:
+            obj = None if on_tendon else coordinate[driven[index[a["joint"]]]]
+            limits = {} if obj is None else obj.limits
+            if on_tendon:
+                unsupported.add(el, f"actuator {name!r}: inheritrange on a tendon")
+                continue
+            if "lower" not in limits or "upper" not in limits:
+                raise ModelError(f"MJCF {where(el)}: <position inheritrange=...> on joint {a['joint']!r}, which has "
+                                 "no range (MuJoCo refuses it too)")
+            ref = getattr(obj, "mjcf_ref", 0.0)
+            law.ctrlrange = inherited_range(law, (limits["lower"] + ref, limits["upper"] + ref))
         gear = numbers(el, a, "gear", None, default=(1.0,))[0]
-        gain = numbers(el, a, "gainprm", None, default=(1.0,))[0] if el.tag == "general" else 1.0
-        if a.get("forcelimited") == "true" or (a.get("forcelimited", "auto") == "auto" and "forcerange" in a):
-            unsupported.add(el, f"forcerange of actuator {name!r} (the force is not clamped)")
-        ctrl = numbers(el, a, "ctrlrange", 2)
-        limited = a.get("ctrllimited", "auto")
-        limited = limited == "true" or (limited == "auto" and ctrl is not None)
         column = np.zeros(len(driven))
         for joint, c in (tendons[a["tendon"]] if on_tendon else [(a["joint"], 1.0)]):
-            column[index[joint]] += gear * gain * c
+            column[index[joint]] += gear * c
         columns.append(column)
-        s.actuators.append({"name": name, ("tendon" if on_tendon else "joint"):
-                            a["tendon"] if on_tendon else driven[index[a["joint"]]], "gear": gear * gain,
-                            "ctrlrange": tuple(ctrl) if limited and ctrl is not None else None})
+        laws.append(law)
+        s.actuators.append({"name": name, "kind": el.tag, ("tendon" if on_tendon else "joint"):
+                            a["tendon"] if on_tendon else driven[index[a["joint"]]], "gear": gear,
+                            "gain": law.gain, "bias": law.bias, "ctrlrange": law.ctrlrange,
+                            "forcerange": law.forcerange})
     s.actuator_gear = np.column_stack(columns) if columns else np.zeros((len(driven), 0))
+    ref = np.zeros(len(driven))
+    ranges = {}
+    for d, obj in coordinate.items():
+        ref[driven.index(d)] = getattr(obj, "mjcf_ref", 0.0)
+        if getattr(obj, "mjcf_actuatorfrcrange", None) is not None:
+            ranges[driven.index(d)] = obj.mjcf_actuatorfrcrange
+    s.actuation = Actuation(laws, s.actuator_gear, ref, driven, ranges)
+
+
+def _coordinate(joints, mjcf_name, driven_name):
+    """The joint (a hinge or slide) or sequence law whose coordinate is ``driven_name``."""
+    joint, kind = joints[mjcf_name]
+    if kind != "sequence":
+        return joint
+    return next(law for law in joint.laws if f"{joint.name}.{law.name}" == driven_name)
 
 
 def _frames(s, ground, groups, member_of, sites, defaults, compiler) -> None:

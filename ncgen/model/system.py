@@ -27,6 +27,9 @@ from ncgen.symbolic.member import RigidMember
 from ncgen.validation import as_scalar, as_vector, rotation, system_name
 
 DEFAULT_GRAVITY = (0.0, 0.0, -9.81)
+#: What a model file's import attaches to a system (``from_mjcf``, ``from_urdf``) that TOML does
+#: not hold; pickles (and the store of read files) carry it (:meth:`System.description`).
+IMPORTED = ("actuation", "actuator_gear", "actuators", "tendons", "mjcf_ignored", "mjcf_unsupported")
 
 
 class System:
@@ -322,20 +325,23 @@ class System:
         return _read_through_store(cls, "urdf", source, lambda: system_from_urdf(source, cls, **options), **options)
 
     @classmethod
-    def from_mjcf(cls, source, name=None) -> "System":
+    def from_mjcf(cls, source, name=None, contacts=False) -> "System":
         """A MuJoCo model from an MJCF file (a path) or MJCF text: bodies, inertials,
         hinge/slide/ball/free joints (hinges and slides actuated by the input ``tau``, one
         component each, ``model.joint_names`` order), joint damping, armature, friction,
-        range and stiffness, motor actuators as ``system.actuator_gear``; what cannot be
+        range and stiffness, actuators as ``system.actuation`` (MuJoCo's force laws and clamps); what cannot be
         represented is named in one :class:`~ncgen.model.mjcf.MjcfWarning`.  See
-        :mod:`ncgen.model.mjcf`.  A file read before (its bytes and those of its includes
-        unchanged) comes from the store of built models without parsing."""
+        :mod:`ncgen.model.mjcf`.  ``contacts=True`` (or a dict of contact keywords: ``mu``,
+        ``stiffness``, ...) makes the geoms contact shapes, paired as MuJoCo filters them
+        (:mod:`ncgen.model.mjcf_contacts`; off by default).  A file read before (its bytes and
+        those of its includes unchanged) comes from the store of built models without parsing."""
         from ncgen.model.mjcf import system_from_mjcf
         from ncgen.model.mjcf_xml import included_files
         path = _file(source)
         includes = [] if path is None else [(f, _digest(f)) for f in included_files(path)]
-        return _read_through_store(cls, "mjcf", source, lambda: system_from_mjcf(source, cls, name=name),
-                                   name=name, includes=includes)
+        return _read_through_store(cls, "mjcf", source,
+                                   lambda: system_from_mjcf(source, cls, name=name, contacts=contacts),
+                                   name=name, includes=includes, contacts=contacts)
 
     def to_toml(self) -> str:
         """The system as TOML text that :meth:`from_toml` reads back."""
@@ -343,12 +349,14 @@ class System:
         return system_to_toml(self)
 
     def description(self) -> tuple:
-        """``(toml, frames, visuals, joint_laws)``: what the system is, as plain data (its
-        TOML text, and the named frames, visual geometry and joint dynamics and limits, e.g.
+        """``(toml, frames, visuals, joint_laws, imported)``: what the system is, as plain data
+        (its TOML text, and the named frames, visual geometry and joint dynamics and limits, e.g.
         of a URDF or an MJCF file, that TOML does not hold: ``joint_laws = {joint: [(limits,
         dynamics) of each coordinate]}``, one pair for a one-coordinate joint, one per
-        coordinate of a :class:`~ncgen.model.joints.JointSequence`); :func:`from_description`
-        makes the same system again.  Pickling a system sends this."""
+        coordinate of a :class:`~ncgen.model.joints.JointSequence`; ``imported``: what a model
+        file's import attached, :data:`IMPORTED` of the system and ``mjcf_*`` of each
+        coordinate); :func:`from_description` makes the same system again.  Pickling a system
+        sends this."""
         try:
             text = self.to_toml()
         except (NcgenError, TypeError, ValueError) as e:
@@ -358,7 +366,10 @@ class System:
         from ncgen.model.joint_dynamics import coordinate_laws
         laws = {j.name: [(dict(law.limits), dict(law.dynamics)) for law in coordinate_laws(j)] for j in self.joints
                 if any(law.limits or law.dynamics for law in coordinate_laws(j))}
-        return text, frames, [dict(v) for v in self.visuals], laws
+        imported = {"system": {k: copy.deepcopy(self.__dict__[k]) for k in IMPORTED if k in self.__dict__},
+                    "coordinates": {j.name: [{k: v for k, v in vars(law).items() if k.startswith("mjcf_")}
+                                             for law in coordinate_laws(j)] for j in self.joints}}
+        return text, frames, [dict(v) for v in self.visuals], laws, imported
 
     def __reduce__(self):
         from ncgen.version import __version__
@@ -421,7 +432,7 @@ def rebuilt_system(version: str, description: tuple) -> System:
     return _read_pickled(description)
 
 
-def from_description(toml: str, frames: dict, visuals: list, joint_laws: dict) -> System:
+def from_description(toml: str, frames: dict, visuals: list, joint_laws: dict, imported: dict) -> System:
     """The system of :meth:`System.description` (how a pickled system is read back)."""
     from ncgen.model.joint_dynamics import coordinate_laws
     system = System.from_toml(toml)
@@ -430,6 +441,9 @@ def from_description(toml: str, frames: dict, visuals: list, joint_laws: dict) -
     for joint in system.joints:
         for law, (limits, dynamics) in zip(coordinate_laws(joint), joint_laws.get(joint.name, ())):
             law.limits, law.dynamics = dict(limits), dict(dynamics)
+        for law, attributes in zip(coordinate_laws(joint), imported["coordinates"].get(joint.name, ())):
+            law.__dict__.update(attributes)
+    system.__dict__.update(copy.deepcopy(imported["system"]))
     return system
 
 

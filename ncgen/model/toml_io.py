@@ -10,7 +10,9 @@ Layout of a file (every table optional except ``members``)::
     [[joints]]    type = "Revolute", ..., name, between = ["ground", "crank"]
                   (CoordinateDriver: member = "crank"), and the joint's keywords
                   (JointSequence: steps = [{kind = "hinge", at = [...], axis = [...]}, ...],
-                  names, effort = one value per step)
+                  names, effort = one value per step); dynamics = {damping, armature, friction,
+                  lower, upper, ...} (docs/robots.md's joint dynamics; a JointSequence: one
+                  such table per coordinate)
     [[forces]]    type = "Spring", ..., name, and the force's arguments
     [[contacts]]  type = "SpherePlane" (sphere, at, radius, plane = "ground", point, normal)
                   or "SphereSphere" (between = ["a", "b"], at_a, radius_a, at_b, radius_b),
@@ -54,6 +56,8 @@ from ncgen.model.contacts import BoxBox, SphereSphere
 from ncgen.model.cables import ClusteredCable
 from ncgen.model.forces import FORCE_TYPES as _BASIC_FORCES
 from ncgen.model.joint_base import Joint
+from ncgen.model.joint_dynamics import DYNAMICS_KEYS, LIMIT_KEYS, coordinate_laws
+from ncgen.model.joint_dynamics import KINDS as DYNAMICS_KINDS
 from ncgen.model.joints import JOINT_TYPES, CoordinateDriver, JointSequence, Mimic
 from ncgen.model.members import NodeRef
 from ncgen.model.shapes import shape_from_table
@@ -610,8 +614,32 @@ class _Loader:
                              f"expected one of {', '.join(JOINT_TYPES)}")
         steps = t.data.get("steps")
         n = len(steps) if isinstance(steps, list) else 1
-        kw = self._fields(t, (Field("name", "string"), *joint_fields(cls, self.dim, n)), ("type",))
-        self._wrap(t.path, self.s.add_joint, cls(**kw))
+        dynamics = t.get("dynamics")
+        kw = self._fields(t, (Field("name", "string"), *joint_fields(cls, self.dim, n)), ("type", "dynamics"))
+        joint = self._wrap(t.path, self.s.add_joint, cls(**kw))
+        if dynamics is not None:
+            self._joint_dynamics(joint, dynamics, t.at("dynamics"))
+
+    def _joint_dynamics(self, joint, dynamics, path: str) -> None:
+        """``dynamics``: a table of :func:`~ncgen.model.joint_dynamics.set_joint_dynamics`'s
+        keys (one-coordinate joints), or one per coordinate (a JointSequence)."""
+        laws = coordinate_laws(joint)
+        many = isinstance(joint, JointSequence)
+        if many and (not isinstance(dynamics, list) or len(dynamics) != len(laws)):
+            raise ModelError(f"{path}: expected {len(laws)} tables (one per coordinate of {joint.label}), "
+                             f"got {_describe(dynamics)}")
+        if not many and joint.kind not in DYNAMICS_KINDS:
+            raise ModelError(f"{path}: joint dynamics apply to {', '.join(DYNAMICS_KINDS)} joints and joint "
+                             f"sequences, not {joint.kind}")
+        for k, (law, values) in enumerate(zip(laws, dynamics if many else [dynamics])):
+            at = f"{path}[{k}]" if many else path
+            values = _Table(values, at).data
+            for key, v in values.items():
+                if key not in DYNAMICS_KEYS + LIMIT_KEYS:
+                    raise ModelError(f"{at}.{key}: unknown key{did_you_mean(key, DYNAMICS_KEYS + LIMIT_KEYS)}; "
+                                     f"expected one of: {', '.join(DYNAMICS_KEYS + LIMIT_KEYS)}")
+                _number(v, f"{at}.{key}")
+            self._wrap(at, law.set_dynamics, **values)
 
     # ---------------------------------------------------------------- forces
     def _force(self, t: _Table):
@@ -748,6 +776,10 @@ def _joint_entries(j, sc) -> dict:
             out[k] = [dict(zip(STEP_KEYS, (kind, _plain(at), _plain(axis)))) for kind, at, axis in v]
         else:
             out[k] = _plain(v)
+    laws = [{**law.dynamics, **{k: v for k, v in law.limits.items() if k in LIMIT_KEYS and np.isfinite(v)}}
+            for law in coordinate_laws(j)] if isinstance(j, JointSequence) or j.kind in DYNAMICS_KINDS else []
+    if any(laws):
+        out["dynamics"] = laws if isinstance(j, JointSequence) else laws[0]
     return out
 
 

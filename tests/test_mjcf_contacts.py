@@ -1,0 +1,89 @@
+"""MJCF geoms as contact shapes (ncgen.model.mjcf_contacts, ``from_mjcf(..., contacts=True)``):
+the pairs are MuJoCo's collision filtering (self, parent–child and welded bodies,
+contype/conaffinity, ``<exclude>``) on a small scene, and a ball and a box dropped on the
+floor from MJCF rest at the smooth law's closed-form depth."""
+from __future__ import annotations
+
+import re
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import ncgen as nc
+from ncgen.errors import ModelError
+from ncgen.model.mjcf import MjcfWarning
+
+SCENE = Path(__file__).parent / "data" / "contacts.xml"
+
+
+def test_off_by_default():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", MjcfWarning)
+        s = nc.System.from_mjcf(SCENE)
+    assert s.contacts == [] and s.mjcf_ignored == ["contact"]
+
+
+def test_pairs_are_mujocos():
+    """With a 5 m margin on every geom MuJoCo's ``mj_collision`` reports every pair its filter
+    lets through; ncgen's contacts plus the pairs it names as unsupported (a cylinder against
+    a box) are the same set."""
+    mujoco = pytest.importorskip("mujoco")
+    text = SCENE.read_text().replace('<geom density="500"/>', '<geom density="500" margin="5"/>')
+    mj = mujoco.MjModel.from_xml_string(text)
+    d = mujoco.MjData(mj)
+    mujoco.mj_forward(mj, d)
+    theirs = {frozenset((mj.geom(c.geom1).name, mj.geom(c.geom2).name)) for c in d.contact[:d.ncon]}
+    with pytest.warns(MjcfWarning) as caught:
+        s = nc.System.from_mjcf(SCENE, contacts=True)
+    ours = {frozenset(c.name.split("__")) for c in s.contacts}
+    named = {frozenset(m) for m in re.findall(r"contact of geom '(\w+)' \(\w+\) with '(\w+)'", str(caught[0].message))}
+    assert named == {frozenset(("step", "lower")), frozenset(("crate", "lower"))}
+    assert len(ours) == len(s.contacts) == 15
+    assert ours | named == theirs
+    assert "contact" not in s.mjcf_ignored
+    again = nc.System.from_toml(s.to_toml())                   # the contacts have a TOML form
+    assert [(c.name, c.kind, c.mu) for c in again.contacts] == [(c.name, c.kind, c.mu) for c in s.contacts]
+
+
+def drop(shape: str, size: str, z0: float):
+    """A free ``shape`` body dropped on the floor plane, 2 s (IDAS): its final height."""
+    text = f"""<mujoco><worldbody><geom type="plane" size="2 2 0.1"/>
+      <body pos="0.1 -0.2 {z0}"><freejoint/><geom type="{shape}" size="{size}" density="600"/></body>
+    </worldbody></mujoco>"""
+    s = nc.System.from_mjcf(text, contacts={"stiffness": 2e4, "damping": 1e5, "mu": 0.5})
+    model = s.build()
+    traj = nc.simulate(model, 2.0, 0.05, rtol=1e-8, atol=1e-10)
+    body = s.joints[0].B
+    return s, model, traj, body
+
+
+@pytest.mark.parametrize("shape, size", [("sphere", "0.1"), ("box", "0.1 0.15 0.05")])
+def test_a_dropped_shape_rests_at_the_closed_form_depth(shape, size):
+    """At rest the contact forces carry the weight: a sphere sinks δ with ``k δ^1.5 = m g``;
+    a box lying flat on its 4 lower corners, ``k δ^1.5 = m g / 4`` each (Hunt–Crossley law,
+    exponent 1.5).  Final height within 1e-6 m of ``half height − δ``."""
+    half = float(size.split()[-1])
+    s, model, traj, body = drop(shape, size, half + 0.05)
+    n = 1 if shape == "sphere" else 4
+    delta = (body.spec["mass"] * 9.81 / n / 2e4) ** (1 / 1.5)
+    z = traj.q[-1][model.coordinate_names.index(f"{body.name}.r_i.z")]        # the centre of mass
+    assert abs(z - (half - delta)) < 1e-6, (z, half - delta)
+    assert np.max(np.abs(traj.v[-1])) < 1e-4
+
+
+def test_bad_contacts_option_is_named():
+    with pytest.raises(ModelError, match="contacts: unknown key\\(s\\) 'stifness'"):
+        nc.System.from_mjcf(SCENE, contacts={"stifness": 1.0})
+
+
+def test_a_pair_its_element_refuses_is_named():
+    """A sphere fixed in the world against a moving sphere (SphereSphere needs both moving):
+    named in the warning with the element's reason, not added."""
+    text = """<mujoco><worldbody><geom name="post" type="sphere" size="0.1"/>
+      <body pos="0 0 0.5"><freejoint/><geom name="bob" type="sphere" size="0.1"/></body></worldbody></mujoco>"""
+    with pytest.warns(MjcfWarning, match=r"text:2 <geom>: contact of geom 'bob' \(sphere\) with 'post' \(sphere\) at "
+                                         r"text:1 \(.*a sphere needs a moving member"):
+        s = nc.System.from_mjcf(text, contacts=True)
+    assert s.contacts == []
