@@ -1,0 +1,299 @@
+"""Step functions of models with nonsmooth contacts: the compiled stepper's step and its exact
+derivatives from the active set of its converged contact solve (``nc.step_function`` on a
+model built with ``contacts="nonsmooth"``).
+
+Each call runs one step of the model's compiled contact stepper (from a cold start: no
+repeat of earlier impulses), classifies every contact from the impulses it converged to —
+separated (``P_N = 0``), sticking (``|P_T| < μ P_N``), sliding (on the cone's boundary) — and
+whether the step is an impact, then solves the step's equations with that active set
+(:mod:`ncgen.control.contact_equations`, the stepper's own formulas) by Newton's method from
+the stepper's solution to the rounding floor, and differentiates them by the implicit
+function theorem: one sparse LU of ``R_Z``, all columns of ``R_y = ∂R/∂[x; u; p]`` at once::
+
+    ∂Z/∂y = −R_Z⁻¹ R_y,      ∂x⁺/∂y = [I_q 0] + E ∂Z/∂y.
+
+The state returned is that solution (it equals the stepper's to its Newton and contact
+tolerances; :attr:`ContactStep.stepper_difference` says by how much), so that ``x⁺`` and its
+Jacobians are one smooth function inside a mode, and central differences of ``x⁺`` agree
+with them there.
+
+Switching points.  Where a contact sits on the boundary between two modes the step is not
+differentiable; the Jacobians returned are then one-sided, those of the mode the solve
+converged to, with these choices: ``P_N = 0`` is separated; a contact on the cone's boundary
+with no slip (``|V_T| ≤`` the solver's tolerance) is sticking (the derivative for
+perturbations that keep it stuck).  A step is flagged (:attr:`ContactStep.at_switch`, the
+reasons in :attr:`ContactStep.switches`) when, relative to :data:`SWITCH_TOL`, a closed
+contact's ``P_N`` or a separated contact's normal velocity margin vanishes, the free step
+ends with a gap at 0, a sticking contact's friction reaches the cone, a sliding contact's
+slip vanishes, a restitution's ``min(U⁻_N, 0)`` is at its kink, or the impact test is at its
+threshold.  A push-out of a penetrating contact (``PENETRATION_TOL``) is not in the
+equations: such a step is refused (:class:`~ncgen.control.step.StepDidNotConverge`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ncgen.control.contact_equations import IMPACT_STEPS, NSEL, contact_residual, contact_sensitivities, layout
+from ncgen.control.discrete import residual_scale
+from ncgen.errors import NcgenError
+from ncgen.validation import as_scalar
+
+#: Relative tolerance of the switching tests (module docstring).
+SWITCH_TOL = 1e-7
+#: Newton iterations of the polishing solve, and its residual tolerance relative to
+#: :func:`~ncgen.control.discrete.residual_scale`.
+POLISH_MAX_ITER, POLISH_TOL = 20, 1e-13
+#: Largest ``|x⁺ − x⁺_stepper|∞ / (1 + |x⁺|∞)`` accepted: the stepper converges its contact
+#: solve to ``CONTACT_REFINE_TOL`` = 1e-8 after an impact.
+MATCH_TOL = 1e-6
+MODES = ("separated", "sticking", "sliding", "closed")
+
+
+@dataclass
+class ContactStep:
+    """One step: ``x1`` (2nq), ``A = ∂x⁺/∂x``, ``B = ∂x⁺/∂u``, ``C = ∂x⁺/∂p``; ``modes`` per
+    contact (``"separated"``, ``"sticking"``, ``"sliding"``, or ``"closed"`` for a closed
+    contact without friction); ``impact``: whether the step is an impact (its contact laws
+    hold on the velocities the step ends with); ``at_switch`` and ``switches`` (contact name
+    and reason); ``impulses`` (nk × dim, N·s: normal, then tangents); ``stepper_difference``:
+    ``|x⁺ − x⁺_stepper|∞``."""
+
+    x1: np.ndarray
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    modes: list
+    impact: bool
+    impulses: np.ndarray
+    stepper_difference: float
+    switches: list = field(default_factory=list)
+
+    @property
+    def at_switch(self) -> bool:
+        return bool(self.switches)
+
+
+class ContactStepFunction:
+    """``x1 = st(x, u, p=None, t=None)``; ``x1, A, B = st.jacobians(x, u)``; ``st.step(x, u)``
+    → :class:`ContactStep` with the modes and the switch flag; ``st.last``: the
+    :class:`ContactStep` of the last call.  Rollouts run step by step.  No second derivatives
+    (iLQR runs Gauss–Newton on it)."""
+
+    kernels = "contact"
+    second_derivatives = False
+
+    def __init__(self, model, h: float, *, max_iter: int, abstol: float):
+        from ncgen.runtime.stepper_library import load_stepper
+
+        self.model, self.h = model, h
+        self.nx, self.nu, self.np = 2 * model.nq, model.nu, model.np
+        self._max_iter, self._abstol = max_iter, abstol
+        self._stepper = load_stepper(model)
+        self._R = contact_residual(model, h)
+        self._S = contact_sensitivities(self._R)
+        self._L = layout(model)
+        self._scale = residual_scale(model)
+        self.names = [c["name"] for c in model.contacts]
+        self.last: ContactStep | None = None
+
+    def __repr__(self) -> str:
+        return (f"<ContactStepFunction of {self.model.name!r}: RATTLE with {self.model.nk} nonsmooth contacts, "
+                f"h={self.h} s, nx={self.nx}, nu={self.nu}>")
+
+    # ------------------------------------------------------------------ arguments
+    def _args(self, x, u, p, t):
+        from ncgen.control.step import _vector
+        x = _vector(x, self.nx, "x", "the state [q; v]")
+        u = np.zeros(0) if u is None and self.nu == 0 else _vector(u, self.nu, "u", "the inputs")
+        p = np.asarray(self.model.p0, float) if p is None else _vector(p, self.np, "p", "the parameters")
+        t = self.model.t0 if t is None else as_scalar(t, "t")
+        return x, u, p, t
+
+    def _inputs(self, U) -> np.ndarray:
+        U = np.atleast_2d(np.asarray(U, float))
+        if self.nu == 0 and U.size == 0:
+            return U.reshape(U.shape[0] if U.ndim == 2 else 0, 0)
+        if U.ndim != 2 or U.shape[1] != self.nu:
+            raise NcgenError(f"inputs U: expected an array of shape (N, {self.nu}), got shape {np.shape(U)}")
+        return U
+
+    # ----------------------------------------------------------------------- step
+    def __call__(self, x, u=None, p=None, t=None) -> np.ndarray:
+        return self.step(x, u, p, t).x1
+
+    def jacobians(self, x, u=None, p=None, t=None, *, parameters: bool = False):
+        """``(x1, A, B)`` (and ``C`` if ``parameters``) of one step (:meth:`step`)."""
+        s = self.step(x, u, p, t)
+        return (s.x1, s.A, s.B, s.C) if parameters else (s.x1, s.A, s.B)
+
+    def rollout(self, x0, U, p=None, t0=None) -> np.ndarray:
+        """States ``x₁ … x_N`` (N × nx) under the inputs ``U`` (N × nu)."""
+        U = self._inputs(U)
+        x, _, p, t0 = self._args(x0, U[0] if len(U) else None, p, t0)
+        X = np.empty((len(U), self.nx))
+        for k in range(len(U)):
+            x = X[k] = self.step(x, U[k], p, t0 + k * self.h).x1
+        return X
+
+    def step(self, x, u=None, p=None, t=None) -> ContactStep:
+        """The step from ``x`` with its Jacobians, modes and switch flag (module docstring)."""
+        from ncgen.control.step import StepDidNotConverge
+        from ncgen.codegen.stepper_package import TOL
+
+        x, u, p, t = self._args(x, u, p, t)
+        nq, nk, dim = self.model.nq, self.model.nk, self.model.dim
+        impulses = np.zeros((1, nk * dim))
+        Q, V, _, _, status, _, _ = self._stepper.simulate(
+            x[:nq], x[nq:], t, self.h, 1, 1, u.reshape(1, -1) if self.nu else None, p, TOL, 12, 0, impulses)
+        where = f"step of {self.model.name!r} (h = {self.h:g} s)"
+        if status != 0:
+            from ncgen.codegen.stepper_package import STATUS
+            raise StepDidNotConverge(f"{where}: the contact stepper failed ({STATUS.get(status, status)})")
+        x1_c, P = np.concatenate([Q[0], V[0]]), impulses[0]
+        Z = self._start(x, x1_c, P)
+        sel = self._modes(P, None, None)
+        for _ in range(3):   # the modes depend on the free step and on the slip: settle them
+            Z, info = self._polish(Z, x, u, p, t, sel, where)
+            new = self._modes(P, info, sel)
+            if np.array_equal(new, sel):
+                break
+            sel = new
+        x1 = info[:self.nx]
+        difference = float(np.max(np.abs(x1 - x1_c)))
+        if difference > MATCH_TOL * (1 + np.max(np.abs(x1))):
+            raise StepDidNotConverge(f"{where}: the step's equations with the active set of its contact solve "
+                                     f"end {difference:.3g} from the stepper's state (a push-out of a penetrating "
+                                     "contact, or a contact solve that did not converge): no derivatives there")
+        RZ, Ry = self._S(Z, x, u, p, t, sel)
+        dZ = -spla.splu(sp.csc_matrix(RZ.sparse())).solve(np.asarray(Ry.full()))
+        L = self._L
+        J = np.vstack([np.hstack([np.eye(nq), np.zeros((nq, dZ.shape[1] - nq))]) + self.h * dZ[L["z"]][:nq],
+                       dZ[L["z"]][nq + self.model.nc:2 * nq + self.model.nc]])
+        nx, nu = self.nx, self.nu
+        P_end = Z[L["P"]]
+        self.last = ContactStep(x1, J[:, :nx], J[:, nx:nx + nu], J[:, nx + nu:], self._mode_names(sel),
+                                bool(sel[-1]), P_end.reshape(nk, dim), difference, self._switches(P_end, info, sel))
+        return self.last
+
+    # ------------------------------------------------------------------- internals
+    def _start(self, x, x1, P) -> np.ndarray:
+        """Newton's start: the free step and the final step from the stepper's end state."""
+        nq, nc, L = self.model.nq, self.model.nc, self._L
+        Z = np.zeros(L["z"].stop)
+        w = (x1[:nq] - x[:nq]) / self.h
+        Z[L["zf"]][:nq] = w
+        Z[L["zf"]][nq + nc:2 * nq + nc] = x1[nq:]
+        Z[L["P"]] = P
+        Z[L["z"]][:nq] = w
+        Z[L["z"]][nq + nc:2 * nq + nc] = x1[nq:]
+        return Z
+
+    def _polish(self, Z, x, u, p, t, sel, where):
+        """Newton on the residual with the modes ``sel`` to its rounding floor."""
+        from ncgen.control.step import StepDidNotConverge
+        tol = POLISH_TOL * self._scale
+        for _ in range(POLISH_MAX_ITER):
+            R = np.asarray(self._R(Z, x, u, p, t, sel)[0].full()).ravel()
+            if not np.all(np.isfinite(R)):
+                break
+            if np.max(np.abs(R)) <= tol:
+                return Z, np.asarray(self._R(Z, x, u, p, t, sel)[1].full()).ravel()
+            RZ = self._S(Z, x, u, p, t, sel)[0]
+            try:
+                dZ = spla.splu(sp.csc_matrix(RZ.sparse())).solve(R)
+            except RuntimeError:
+                break
+            Z = Z - dZ
+            if np.max(np.abs(dZ)) <= 1e-15 * (1 + np.max(np.abs(Z))):
+                R = np.asarray(self._R(Z, x, u, p, t, sel)[0].full()).ravel()
+                if np.max(np.abs(R)) <= 1e3 * tol:
+                    return Z, np.asarray(self._R(Z, x, u, p, t, sel)[1].full()).ravel()
+        raise StepDidNotConverge(f"{where}: the step's equations with the active set of its contact solve did "
+                                 f"not converge (residual {np.max(np.abs(R)):.3g}); no derivatives there")
+
+    def _info(self, info):
+        """``(U, U⁻, U_f, g_f, g⁺)`` from the residual's ``info``."""
+        nd, nk = self.model.nk * self.model.dim, self.model.nk
+        o = self.nx
+        return (info[o:o + nd], info[o + nd:o + 2 * nd], info[o + 2 * nd:o + 3 * nd],
+                info[o + 3 * nd:o + 3 * nd + nk], info[o + 3 * nd + nk:o + 3 * nd + 2 * nk])
+
+    def _modes(self, P, info, previous) -> np.ndarray:
+        """Selectors (:mod:`ncgen.control.contact_equations`) from the stepper's impulses ``P``
+        and, once solved, the free step's gaps, the slips and the impact test."""
+        nk, dim, contacts = self.model.nk, self.model.dim, self.model.contacts
+        sel = np.zeros(NSEL * nk + 1)
+        U = U0 = Uf = gf = None
+        if info is not None:
+            U, U0, Uf, gf, _ = self._info(info)
+            vtol = self._vtol(U)
+        for k, c in enumerate(contacts):
+            n = k * dim
+            closed = P[n] > 0
+            sel[NSEL * k] = closed
+            sel[NSEL * k + 1] = 1.0 if gf is None else float(gf[k] <= 0)
+            if closed and c["mu"] > 0:
+                slide = np.linalg.norm(P[n + 1:n + dim]) >= c["mu"] * P[n] * (1 - 1e-9)
+                if slide and U is not None:
+                    slip = U[n + 1:n + dim] + c["restitution"] * U0[n + 1:n + dim]
+                    slide = np.linalg.norm(slip) > vtol
+                sel[NSEL * k + 2], sel[NSEL * k + 3] = (0.0, 1.0) if slide else (1.0, 0.0)
+        if info is not None:
+            sel[-1] = float(self._jump(U, Uf, sel) > IMPACT_STEPS * self._g * self.h)
+        elif previous is not None:
+            sel[-1] = previous[-1]
+        return sel
+
+    @property
+    def _g(self) -> float:
+        return float(np.linalg.norm(self.model.gravity))
+
+    def _jump(self, U, Uf, sel) -> float:
+        """The impact test's measure: the largest change of a closed contact's velocity."""
+        dim = self.model.dim
+        rows = [k * dim + d for k in range(self.model.nk) if sel[NSEL * k] for d in range(dim)]
+        return float(np.max(np.abs(U[rows] - Uf[rows]), initial=0.0))
+
+    def _vtol(self, U) -> float:
+        return SWITCH_TOL * (1 + float(np.max(np.abs(U), initial=0.0)))
+
+    def _mode_names(self, sel) -> list[str]:
+        out = []
+        for k, c in enumerate(self.model.contacts):
+            s = sel[NSEL * k:NSEL * (k + 1)]
+            out.append("separated" if not s[0] else "sticking" if s[2] else "sliding" if s[3] else "closed")
+        return out
+
+    def _switches(self, P, info, sel) -> list[tuple[str, str]]:
+        """Contacts (name, reason) at a switching point (module docstring)."""
+        U, U0, Uf, gf, _ = self._info(info)
+        dim, h = self.model.dim, self.h
+        vtol = self._vtol(U)
+        ptol = SWITCH_TOL * max(float(np.max(np.abs(P), initial=0.0)), self._scale * self._g * h)
+        gtol = vtol * h
+        out = []
+        for k, c in enumerate(self.model.contacts):
+            n, name, s = k * dim, self.names[k], sel[NSEL * k:NSEL * (k + 1)]
+            if abs(gf[k]) <= gtol:
+                out.append((name, "the free step ends with the gap at 0"))
+            if s[0]:
+                if P[n] <= ptol:
+                    out.append((name, "closed with a normal impulse at 0"))
+                if c["restitution"] > 0 and abs(U0[n]) <= vtol:
+                    out.append((name, "approach velocity at 0 (restitution's kink)"))
+                if not s[1] and abs(2 * gf[k] / h - Uf[n]) <= vtol:
+                    out.append((name, "about to close with its bias at its kink"))
+                if s[2] and np.linalg.norm(P[n + 1:n + dim]) >= c["mu"] * P[n] * (1 - SWITCH_TOL):
+                    out.append((name, "sticking with the friction on the cone's boundary"))
+                if s[3] and np.linalg.norm(U[n + 1:n + dim] + c["restitution"] * U0[n + 1:n + dim]) <= 1e3 * vtol:
+                    out.append((name, "sliding with its slip at 0"))
+            elif gf[k] <= 0 and U[n] + c["restitution"] * min(U0[n], 0) <= vtol:
+                out.append((name, "separated with its normal velocity margin at 0"))
+        limit = IMPACT_STEPS * self._g * h
+        if limit > 0 and abs(self._jump(U, Uf, sel) - limit) <= 1e-3 * limit:
+            out.append(("(step)", "the impact test at its threshold"))
+        return out
