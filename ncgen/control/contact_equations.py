@@ -26,29 +26,44 @@ normal velocity, ``V_T = U_T + e U⁻_T`` the slip, ``U⁻ = W(q) v`` at the sta
 * sliding (closed, ``|P_T| = μ P_N``): ``P_T + μ P_N V_T/|V_T| = 0`` — the solver's own cone
   (circular in 3-D, a segment in 2-D), not a polyhedron.
 
+4. the push-out (``push_out`` in ncgen_contact.h), where a contact ends the step inside
+   (gap below ``−PENETRATION_TOL``): the displacement ``Δ = y₂_q``, ``K(q⁺) y₂ = [W_N(q⁺)ᵀ π; 0]``,
+   with ``π ≥ 0`` the smallest push making the linearised gaps ``g(q⁺) + W_N Δ`` of the pushed
+   contacts 0; then back onto ``Φ = 0`` (``M (q_p − q⁺ − Δ) + A(q_p)ᵀ α = 0``, ``Φ(q_p) = 0``:
+   the stepper's Newton iterations' limit to second order in their corrections, exact without
+   constraints) and the velocities projected, ``[M A_pᵀ; A_p 0] [v_p; μ] = [M v⁺; −Φ_t]``;
+   ``x⁺ = [q_p; v_p]``.
+
 The residual takes the modes as numbers ``0``/``1`` (``sel``: per contact closed, closed at
-the free step's end, sticking, sliding; then impact), so one function serves every active
-set.  Unknowns ``Z = [z_f; y; P; z]`` (``4 (nq + nc) + (nq + nc) + nk·dim``).
+the free step's end, sticking, sliding, pushed out; then impact, any push-out), so one
+function serves every active set.  Unknowns ``Z = [z_f; y; P; z; π; y₂; q_p; α; v_p; μ]``.
 """
 from __future__ import annotations
 
 import casadi as ca
 
+from ncgen.assembly.mass import sparse_dm
 from ncgen.assembly.stepper_equations import contact_function, stepper_functions
 
 #: An impulse changing a contact velocity by more than this many steps of gravity is an
 #: impact (the compiled stepper's ``CONTACT_IMPACT_STEPS``).
 IMPACT_STEPS = 10
-#: Selector columns per contact: closed, closed at the free step's end, sticking, sliding.
-NSEL = 4
+#: Selector columns per contact: closed, closed at the free step's end, sticking, sliding,
+#: pushed out (then two for the step: impact, push-out).
+NSEL = 5
+NGLOBAL = 2
 
 
 def layout(model) -> dict[str, slice]:
     """Where the blocks of ``Z`` sit."""
     n1 = model.nq + model.nc
     nd = model.nk * model.dim
+    nq, nk = model.nq, model.nk
+    o = 5 * n1 + nd
     return {"zf": slice(0, 2 * n1), "y": slice(2 * n1, 3 * n1), "P": slice(3 * n1, 3 * n1 + nd),
-            "z": slice(3 * n1 + nd, 5 * n1 + nd)}
+            "z": slice(3 * n1 + nd, o), "pi": slice(o, o + nk), "y2": slice(o + nk, o + nk + n1),
+            "qa": slice(o + nk + n1, o + nk + 2 * n1), "vm": slice(o + nk + 2 * n1, o + nk + 3 * n1),
+            "x1": (slice(o + nk + n1, o + nk + n1 + nq), slice(o + nk + 2 * n1, o + nk + 2 * n1 + nq))}
 
 
 def _rattle(newton, velocity, nq, nc, h, t, q, v, u, p, zz, j0, j):
@@ -62,16 +77,17 @@ def _rattle(newton, velocity, nq, nc, h, t, q, v, u, p, zz, j0, j):
 
 def contact_residual(model, h: float) -> ca.Function:
     """``R: (Z, x, u, p, t, sel) -> (R, info)``: the residual of the module docstring and
-    ``info = [x⁺; U; U⁻; U_f; g(q_f); g(q⁺)]`` (``U_f = W_f v_f`` the free step's contact
-    velocities) for classifying the modes."""
+    ``info = [x⁺; U; U⁻; U_f; g(q_f); g(q⁺ before the push-out); π; the gaps the push-out
+    leaves, linearised]`` (``U_f = W_f v_f`` the free step's contact velocities) for
+    classifying the modes."""
     newton, velocity = stepper_functions(model)[:2]
     rows = contact_function(model)
     nq, nc, nk, dim = model.nq, model.nc, model.nk, model.dim
     n1, nd = nq + nc, nk * dim
     L = layout(model)
-    Z = ca.SX.sym("Z", 5 * n1 + nd)
+    Z = ca.SX.sym("Z", L["vm"].stop)
     x, u, p, t = ca.SX.sym("x", 2 * nq), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np), ca.SX.sym("t")
-    sel = ca.SX.sym("sel", NSEL * nk + 1)
+    sel = ca.SX.sym("sel", NSEL * nk + NGLOBAL)
     q, v = x[:nq], x[nq:]
     zf, y, P, z = Z[L["zf"]], Z[L["y"]], Z[L["P"]], Z[L["z"]]
     zero = ca.SX.zeros(nq)
@@ -82,13 +98,13 @@ def contact_residual(model, h: float) -> ca.Function:
     j_f, j_0 = ca.mtimes(Wt_f, P), ca.mtimes(Wt_0, P)
     response = ca.mtimes(K_f, y) - ca.vertcat(j_f, ca.SX.zeros(nc))
     G_end, _ = _rattle(newton, velocity, nq, nc, h, t, q, v, u, p, z, j_0, j_f)
-    x1 = ca.vertcat(q + h * z[:nq], z[n1:n1 + nq])
-    g_1, _, U_1 = rows(x1[:nq], x1[nq:], p)
-    impact = sel[NSEL * nk]
+    q1, v1 = q + h * z[:nq], z[n1:n1 + nq]
+    g_1, Wt_1, U_1 = rows(q1, v1, p)
+    impact, push = sel[NSEL * nk], sel[NSEL * nk + 1]
     U = impact * U_1 + (1 - impact) * (U_f + ca.mtimes(Wt_f.T, y[:nq]))
     laws = []
     for k, spec in enumerate(model.contacts):
-        closed, closed_free, stick, slide = (sel[NSEL * k + i] for i in range(NSEL))
+        closed, closed_free, stick, slide = (sel[NSEL * k + i] for i in range(4))
         e, mu, n = spec["restitution"], spec["mu"], k * dim
         bias = closed_free * e * ca.fmin(U_0[n], 0) + (1 - closed_free) * ca.fmax(0, 2 * g_f[k] / h - U_f[n])
         laws.append(closed * (U[n] + bias) + (1 - closed) * P[n])
@@ -99,8 +115,11 @@ def contact_residual(model, h: float) -> ca.Function:
             laws.append(stick * VT + slide * (PT + mu * P[n] * VT / speed) + (1 - stick - slide) * PT)
         else:
             laws.append(PT)
-    R = ca.vertcat(G_free, response, *laws, G_end)
-    info = ca.vertcat(x1, U, U_0, U_f, g_f, g_1)
+    R = ca.vertcat(G_free, response, *laws, G_end,
+                   _push_out(model, h, t, p, q1, v1, g_1, Wt_1, Z, L, sel, velocity))
+    x1 = ca.vertcat(Z[L["x1"][0]], Z[L["x1"][1]])
+    gaps = g_1 + ca.mtimes(Wt_1[:, [k * dim for k in range(nk)]].T, Z[L["y2"]][:nq])
+    info = ca.vertcat(x1, U, U_0, U_f, g_f, g_1, Z[L["pi"]], gaps)
     return ca.Function("contact_step_residual", [Z, x, u, p, t, sel], [ca.densify(R), ca.densify(info)],
                        ["Z", "x", "u", "p", "t", "sel"], ["R", "info"])
 
@@ -112,3 +131,24 @@ def contact_sensitivities(R: ca.Function) -> ca.Function:
     return ca.Function("contact_step_sensitivities", [Z, x, u, p, t, sel],
                        [ca.jacobian(r, Z), ca.jacobian(r, ca.vertcat(x, u, p))],
                        ["Z", "x", "u", "p", "t", "sel"], ["R_Z", "R_y"])
+
+
+def _push_out(model, h, t, p, q1, v1, g_1, Wt_1, Z, L, sel, velocity):
+    """The push-out's rows (step 4 of the module docstring); with no contact pushed
+    (``sel`` push 0) ``π = 0``, ``x⁺`` the step's end."""
+    nq, nc, nk, dim = model.nq, model.nc, model.nk, model.dim
+    f = model.functions
+    push = sel[NSEL * nk + 1]
+    pi, y2, qa, vm = Z[L["pi"]], Z[L["y2"]], Z[L["qa"]], Z[L["vm"]]
+    q_p, alpha = qa[:nq], qa[nq:]
+    WN = Wt_1[:, [k * dim for k in range(nk)]]
+    _, K1 = velocity(t + h, q1, v1, ca.SX.zeros(model.nu), p, 0, ca.SX.zeros(nq))
+    rows = [ca.mtimes(K1, y2) - ca.vertcat(ca.mtimes(WN, pi), ca.SX.zeros(nc))]
+    gaps = g_1 + ca.mtimes(WN.T, y2[:nq])
+    rows += [sel[NSEL * k + 4] * gaps[k] + (1 - sel[NSEL * k + 4]) * pi[k] for k in range(nk)]
+    M = sparse_dm(model.M)
+    back = ca.mtimes(M, q_p - q1 - y2[:nq]) + ca.mtimes(f["A"](t + h, q_p, p).T, alpha)
+    rows += [push * back + (1 - push) * (q_p - q1), push * f["phi"](t + h, q_p, p) + (1 - push) * alpha]
+    b, K2 = velocity(t + h, q_p, v1, ca.SX.zeros(model.nu), p, 0, ca.SX.zeros(nq))
+    rows += [push * (ca.mtimes(K2, vm) - b) + (1 - push) * (vm - ca.vertcat(v1, ca.SX.zeros(nc)))]
+    return ca.vertcat(*rows)

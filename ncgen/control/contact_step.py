@@ -37,7 +37,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ncgen.control.contact_equations import IMPACT_STEPS, NSEL, contact_residual, contact_sensitivities, layout
+from ncgen.control.contact_equations import IMPACT_STEPS, NGLOBAL, NSEL, contact_residual, contact_sensitivities, layout
+from ncgen.codegen.stepper_package import PENETRATION_TOL
 from ncgen.control.discrete import residual_scale
 from ncgen.errors import NcgenError
 from ncgen.validation import as_scalar
@@ -51,6 +52,8 @@ POLISH_MAX_ITER, POLISH_TOL = 20, 1e-13
 #: solve to ``CONTACT_REFINE_TOL`` = 1e-8 after an impact.
 MATCH_TOL = 1e-6
 MODES = ("separated", "sticking", "sliding", "closed")
+#: Passes of classifying the modes and solving with them, at most.
+MODE_PASSES = 5
 
 
 @dataclass
@@ -60,7 +63,7 @@ class ContactStep:
     contact without friction); ``impact``: whether the step is an impact (its contact laws
     hold on the velocities the step ends with); ``at_switch`` and ``switches`` (contact name
     and reason); ``impulses`` (nk × dim, N·s: normal, then tangents); ``stepper_difference``:
-    ``|x⁺ − x⁺_stepper|∞``."""
+    ``|x⁺ − x⁺_stepper|∞``; ``push_out``: the push-out's ``π`` per contact (kg·m, 0 where none)."""
 
     x1: np.ndarray
     A: np.ndarray
@@ -71,6 +74,7 @@ class ContactStep:
     impulses: np.ndarray
     stepper_difference: float
     switches: list = field(default_factory=list)
+    push_out: np.ndarray | None = None
 
     @property
     def at_switch(self) -> bool:
@@ -156,12 +160,14 @@ class ContactStepFunction:
         x1_c, P = np.concatenate([Q[0], V[0]]), impulses[0]
         Z = self._start(x, x1_c, P)
         sel = self._modes(P, None, None)
-        for _ in range(3):   # the modes depend on the free step and on the slip: settle them
+        for _ in range(MODE_PASSES):   # the modes depend on the free step, the slips, the push-out
             Z, info = self._polish(Z, x, u, p, t, sel, where)
             new = self._modes(P, info, sel)
             if np.array_equal(new, sel):
                 break
             sel = new
+        else:
+            raise StepDidNotConverge(f"{where}: the modes of its contacts did not settle in {MODE_PASSES} passes")
         x1 = info[:self.nx]
         difference = float(np.max(np.abs(x1 - x1_c)))
         if difference > MATCH_TOL * (1 + np.max(np.abs(x1))):
@@ -171,25 +177,26 @@ class ContactStepFunction:
         RZ, Ry = self._S(Z, x, u, p, t, sel)
         dZ = -spla.splu(sp.csc_matrix(RZ.sparse())).solve(np.asarray(Ry.full()))
         L = self._L
-        J = np.vstack([np.hstack([np.eye(nq), np.zeros((nq, dZ.shape[1] - nq))]) + self.h * dZ[L["z"]][:nq],
-                       dZ[L["z"]][nq + self.model.nc:2 * nq + self.model.nc]])
+        J = np.vstack([dZ[L["x1"][0]], dZ[L["x1"][1]]])
         nx, nu = self.nx, self.nu
         P_end = Z[L["P"]]
         self.last = ContactStep(x1, J[:, :nx], J[:, nx:nx + nu], J[:, nx + nu:], self._mode_names(sel),
-                                bool(sel[-1]), P_end.reshape(nk, dim), difference, self._switches(P_end, info, sel))
+                                bool(sel[-2]), P_end.reshape(nk, dim), difference, self._switches(P_end, info, sel),
+                                Z[L["pi"]].copy())
         return self.last
 
     # ------------------------------------------------------------------- internals
     def _start(self, x, x1, P) -> np.ndarray:
         """Newton's start: the free step and the final step from the stepper's end state."""
         nq, nc, L = self.model.nq, self.model.nc, self._L
-        Z = np.zeros(L["z"].stop)
+        Z = np.zeros(L["vm"].stop)
         w = (x1[:nq] - x[:nq]) / self.h
         Z[L["zf"]][:nq] = w
         Z[L["zf"]][nq + nc:2 * nq + nc] = x1[nq:]
         Z[L["P"]] = P
         Z[L["z"]][:nq] = w
         Z[L["z"]][nq + nc:2 * nq + nc] = x1[nq:]
+        Z[L["x1"][0]], Z[L["x1"][1]] = x1[:nq], x1[nq:]
         return Z
 
     def _polish(self, Z, x, u, p, t, sel, where):
@@ -200,42 +207,44 @@ class ContactStepFunction:
             R = np.asarray(self._R(Z, x, u, p, t, sel)[0].full()).ravel()
             if not np.all(np.isfinite(R)):
                 break
-            if np.max(np.abs(R)) <= tol:
-                return Z, np.asarray(self._R(Z, x, u, p, t, sel)[1].full()).ravel()
+            converged = np.max(np.abs(R)) <= tol
             RZ = self._S(Z, x, u, p, t, sel)[0]
             try:
                 dZ = spla.splu(sp.csc_matrix(RZ.sparse())).solve(R)
             except RuntimeError:
                 break
-            Z = Z - dZ
-            if np.max(np.abs(dZ)) <= 1e-15 * (1 + np.max(np.abs(Z))):
-                R = np.asarray(self._R(Z, x, u, p, t, sel)[0].full()).ravel()
-                if np.max(np.abs(R)) <= 1e3 * tol:
-                    return Z, np.asarray(self._R(Z, x, u, p, t, sel)[1].full()).ravel()
+            Z = Z - dZ   # once more after the test: the quadratic step reaches the rounding floor
+            if converged:
+                return Z, np.asarray(self._R(Z, x, u, p, t, sel)[1].full()).ravel()
         raise StepDidNotConverge(f"{where}: the step's equations with the active set of its contact solve did "
                                  f"not converge (residual {np.max(np.abs(R)):.3g}); no derivatives there")
 
     def _info(self, info):
-        """``(U, U⁻, U_f, g_f, g⁺)`` from the residual's ``info``."""
+        """``(U, U⁻, U_f, g_f, g⁺, π, g_pushed)`` from the residual's ``info``."""
         nd, nk = self.model.nk * self.model.dim, self.model.nk
-        o = self.nx
-        return (info[o:o + nd], info[o + nd:o + 2 * nd], info[o + 2 * nd:o + 3 * nd],
-                info[o + 3 * nd:o + 3 * nd + nk], info[o + 3 * nd + nk:o + 3 * nd + 2 * nk])
+        o = self.nx + 3 * nd
+        return (info[self.nx:self.nx + nd], info[self.nx + nd:o - nd], info[o - nd:o],
+                *(info[o + i * nk:o + (i + 1) * nk] for i in range(4)))
 
     def _modes(self, P, info, previous) -> np.ndarray:
         """Selectors (:mod:`ncgen.control.contact_equations`) from the stepper's impulses ``P``
         and, once solved, the free step's gaps, the slips and the impact test."""
         nk, dim, contacts = self.model.nk, self.model.dim, self.model.contacts
-        sel = np.zeros(NSEL * nk + 1)
+        sel = np.zeros(NSEL * nk + NGLOBAL)
         U = U0 = Uf = gf = None
         if info is not None:
-            U, U0, Uf, gf, _ = self._info(info)
+            U, U0, Uf, gf, g1, pi, g_pushed = self._info(info)
             vtol = self._vtol(U)
+            push = np.min(g1, initial=0.0) < -PENETRATION_TOL
+            sel[-1] = push
+            if push:   # the pushed contacts: those pushed, and those the push leaves inside
+                pushed = (pi > 0) | (g_pushed < 0) if previous[-1] else g1 < 0
+                sel[4:NSEL * nk:NSEL] = pushed
         for k, c in enumerate(contacts):
             n = k * dim
             closed = P[n] > 0
             sel[NSEL * k] = closed
-            sel[NSEL * k + 1] = 1.0 if gf is None else float(gf[k] <= 0)
+            sel[NSEL * k + 1] = closed and (gf is None or gf[k] <= 0)
             if closed and c["mu"] > 0:
                 slide = np.linalg.norm(P[n + 1:n + dim]) >= c["mu"] * P[n] * (1 - 1e-9)
                 if slide and U is not None:
@@ -243,9 +252,7 @@ class ContactStepFunction:
                     slide = np.linalg.norm(slip) > vtol
                 sel[NSEL * k + 2], sel[NSEL * k + 3] = (0.0, 1.0) if slide else (1.0, 0.0)
         if info is not None:
-            sel[-1] = float(self._jump(U, Uf, sel) > IMPACT_STEPS * self._g * self.h)
-        elif previous is not None:
-            sel[-1] = previous[-1]
+            sel[-2] = float(self._jump(U, Uf, sel) > IMPACT_STEPS * self._g * self.h)
         return sel
 
     @property
@@ -270,7 +277,7 @@ class ContactStepFunction:
 
     def _switches(self, P, info, sel) -> list[tuple[str, str]]:
         """Contacts (name, reason) at a switching point (module docstring)."""
-        U, U0, Uf, gf, _ = self._info(info)
+        U, U0, Uf, gf, g1, pi, _ = self._info(info)
         dim, h = self.model.dim, self.h
         vtol = self._vtol(U)
         ptol = SWITCH_TOL * max(float(np.max(np.abs(P), initial=0.0)), self._scale * self._g * h)
@@ -293,6 +300,11 @@ class ContactStepFunction:
                     out.append((name, "sliding with its slip at 0"))
             elif gf[k] <= 0 and U[n] + c["restitution"] * min(U0[n], 0) <= vtol:
                 out.append((name, "separated with its normal velocity margin at 0"))
+        for k, name in enumerate(self.names):
+            if abs(g1[k] + PENETRATION_TOL) <= 1e-3 * PENETRATION_TOL:
+                out.append((name, "ends the step at the push-out's threshold depth"))
+            if sel[NSEL * k + 4] and pi[k] <= ptol * h:
+                out.append((name, "pushed out with a push at 0"))
         limit = IMPACT_STEPS * self._g * h
         if limit > 0 and abs(self._jump(U, Uf, sel) - limit) <= 1e-3 * limit:
             out.append(("(step)", "the impact test at its threshold"))
