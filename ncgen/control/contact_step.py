@@ -38,6 +38,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ncgen.control.contact_equations import IMPACT_STEPS, NGLOBAL, NSEL, contact_residual, contact_sensitivities, layout
+from ncgen.assembly.stepper_equations import contact_function
 from ncgen.codegen.stepper_package import PENETRATION_TOL
 from ncgen.control.discrete import residual_scale
 from ncgen.errors import NcgenError
@@ -99,6 +100,7 @@ class ContactStepFunction:
         self._stepper = load_stepper(model)
         self._R = contact_residual(model, h)
         self._S = contact_sensitivities(self._R)
+        self._rows = contact_function(model)
         self._L = layout(model)
         self._scale = residual_scale(model)
         self.names = [c["name"] for c in model.contacts]
@@ -159,7 +161,9 @@ class ContactStepFunction:
             raise StepDidNotConverge(f"{where}: the contact stepper failed ({STATUS.get(status, status)})")
         x1_c, P = np.concatenate([Q[0], V[0]]), impulses[0]
         Z = self._start(x, x1_c, P)
-        sel = self._modes(P, None, None)
+        # the first modes from the stepper's impulses and, for the slips, its end velocities
+        U_end, U_start = (np.asarray(self._rows(xx[:nq], xx[nq:], p)[2].full()).ravel() for xx in (x1_c, x))
+        sel = self._modes(P, None, None, (U_end, U_start))
         for _ in range(MODE_PASSES):   # the modes depend on the free step, the slips, the push-out
             Z, info = self._polish(Z, x, u, p, t, sel, where)
             new = self._modes(P, info, sel)
@@ -226,12 +230,16 @@ class ContactStepFunction:
         return (info[self.nx:self.nx + nd], info[self.nx + nd:o - nd], info[o - nd:o],
                 *(info[o + i * nk:o + (i + 1) * nk] for i in range(4)))
 
-    def _modes(self, P, info, previous) -> np.ndarray:
+    def _modes(self, P, info, previous, velocities=None) -> np.ndarray:
         """Selectors (:mod:`ncgen.control.contact_equations`) from the stepper's impulses ``P``
-        and, once solved, the free step's gaps, the slips and the impact test."""
+        and, once solved, the free step's gaps, the slips and the impact test (before:
+        ``velocities``, the contact velocities at the stepper's end and start)."""
         nk, dim, contacts = self.model.nk, self.model.dim, self.model.contacts
         sel = np.zeros(NSEL * nk + NGLOBAL)
         U = U0 = Uf = gf = None
+        if velocities is not None:
+            U, U0 = velocities
+            vtol = self._vtol(U)
         if info is not None:
             U, U0, Uf, gf, g1, pi, g_pushed = self._info(info)
             vtol = self._vtol(U)
