@@ -124,13 +124,14 @@ def contact_residual(model, h: float) -> ca.Function:
                        ["Z", "x", "u", "p", "t", "sel"], ["R", "info"])
 
 
-def contact_sensitivities(R: ca.Function) -> ca.Function:
-    """``(Z, x, u, p, t, sel) -> (R_Z, R_y)`` (sparse), ``y = [x; u; p]``."""
+def contact_system(R: ca.Function) -> ca.Function:
+    """``(Z, x, u, p, t, sel) -> (R, info, R_Z, R_y)`` (``R_Z``, ``R_y`` sparse), ``y = [x; u; p]``:
+    what each Newton iteration and the implicit function theorem need, in one evaluation."""
     Z, x, u, p, t, sel = (R.sx_in(i) for i in range(6))
-    r = R(Z, x, u, p, t, sel)[0]
-    return ca.Function("contact_step_sensitivities", [Z, x, u, p, t, sel],
-                       [ca.jacobian(r, Z), ca.jacobian(r, ca.vertcat(x, u, p))],
-                       ["Z", "x", "u", "p", "t", "sel"], ["R_Z", "R_y"])
+    r, info = R(Z, x, u, p, t, sel)
+    return ca.Function("contact_step_system", [Z, x, u, p, t, sel],
+                       [r, info, ca.jacobian(r, Z), ca.jacobian(r, ca.vertcat(x, u, p))],
+                       ["Z", "x", "u", "p", "t", "sel"], ["R", "info", "R_Z", "R_y"])
 
 
 def _push_out(model, h, t, p, q1, v1, g_1, Wt_1, Z, L, sel, velocity):

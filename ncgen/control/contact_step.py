@@ -26,18 +26,27 @@ reasons in :attr:`ContactStep.switches`) when, relative to :data:`SWITCH_TOL`, a
 contact's ``P_N`` or a separated contact's normal velocity margin vanishes, the free step
 ends with a gap at 0, a sticking contact's friction reaches the cone, a sliding contact's
 slip vanishes, a restitution's ``min(U⁻_N, 0)`` is at its kink, or the impact test is at its
-threshold.  A push-out of a penetrating contact (``PENETRATION_TOL``) is not in the
-equations: such a step is refused (:class:`~ncgen.control.step.StepDidNotConverge`).
+threshold, or a contact ends the step at the push-out's threshold depth or is pushed out
+by nothing.  The push-out is itself a switch: a contact resting on its surface (gap 0) is
+pushed back only below ``−PENETRATION_TOL`` (1e-8 m), so the Jacobians of a resting contact
+are those of the side that is not pushed out (central differences of such a step must stay
+within 1e-8 m).  The stepper repeats a push-out while its linearisation leaves a gap below
+that threshold (curved gaps: sphere pairs, after a deep penetration); the equations hold one
+pass, and a step whose result then differs from the stepper's by more than
+:data:`MATCH_TOL` is refused (:class:`~ncgen.control.step.StepDidNotConverge`), as is a step
+whose modes do not settle or whose equations do not converge.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import ctypes
+
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ncgen.control.contact_equations import IMPACT_STEPS, NGLOBAL, NSEL, contact_residual, contact_sensitivities, layout
+from ncgen.control.contact_equations import IMPACT_STEPS, NGLOBAL, NSEL, contact_residual, contact_system, layout
 from ncgen.assembly.stepper_equations import contact_function
 from ncgen.codegen.stepper_package import PENETRATION_TOL
 from ncgen.control.discrete import residual_scale
@@ -53,6 +62,8 @@ POLISH_MAX_ITER, POLISH_TOL = 20, 1e-13
 #: solve to ``CONTACT_REFINE_TOL`` = 1e-8 after an impact.
 MATCH_TOL = 1e-6
 MODES = ("separated", "sticking", "sliding", "closed")
+#: Newton iterations of the compiled stepper's step (its default, ``MAX_ITER`` of the package).
+STEPPER_MAX_ITER = 12
 #: Passes of classifying the modes and solving with them, at most.
 MODE_PASSES = 5
 
@@ -98,8 +109,11 @@ class ContactStepFunction:
         self.nx, self.nu, self.np = 2 * model.nq, model.nu, model.np
         self._max_iter, self._abstol = max_iter, abstol
         self._stepper = load_stepper(model)
-        self._R = contact_residual(model, h)
-        self._S = contact_sensitivities(self._R)
+        from ncgen.control.step import _compile
+        system = contact_system(contact_residual(model, h))
+        self._system = _compile(f"{model.name}_contact_step", [system])[system.name()]
+        self._patterns = [(np.array(sp_.row()), np.array(sp_.colind()), sp_.shape)
+                          for sp_ in (system.sparsity_out(2), system.sparsity_out(3))]
         self._rows = contact_function(model)
         self._L = layout(model)
         self._scale = residual_scale(model)
@@ -148,39 +162,34 @@ class ContactStepFunction:
     def step(self, x, u=None, p=None, t=None) -> ContactStep:
         """The step from ``x`` with its Jacobians, modes and switch flag (module docstring)."""
         from ncgen.control.step import StepDidNotConverge
-        from ncgen.codegen.stepper_package import TOL
 
         x, u, p, t = self._args(x, u, p, t)
         nq, nk, dim = self.model.nq, self.model.nk, self.model.dim
-        impulses = np.zeros((1, nk * dim))
-        Q, V, _, _, status, _, _ = self._stepper.simulate(
-            x[:nq], x[nq:], t, self.h, 1, 1, u.reshape(1, -1) if self.nu else None, p, TOL, 12, 0, impulses)
+        status, x1_c, P = self._stepper_step(x, u, p, t)
         where = f"step of {self.model.name!r} (h = {self.h:g} s)"
         if status != 0:
             from ncgen.codegen.stepper_package import STATUS
             raise StepDidNotConverge(f"{where}: the contact stepper failed ({STATUS.get(status, status)})")
-        x1_c, P = np.concatenate([Q[0], V[0]]), impulses[0]
         Z = self._start(x, x1_c, P)
         # the first modes from the stepper's impulses and, for the slips, its end velocities
         U_end, U_start = (np.asarray(self._rows(xx[:nq], xx[nq:], p)[2].full()).ravel() for xx in (x1_c, x))
         sel = self._modes(P, None, None, (U_end, U_start))
         for _ in range(MODE_PASSES):   # the modes depend on the free step, the slips, the push-out
-            Z, info = self._polish(Z, x, u, p, t, sel, where)
+            Z, info, lu, Ry = self._polish(Z, x, u, p, t, sel, where)
             new = self._modes(P, info, sel)
             if np.array_equal(new, sel):
                 break
             sel = new
         else:
             raise StepDidNotConverge(f"{where}: the modes of its contacts did not settle in {MODE_PASSES} passes")
-        x1 = info[:self.nx]
+        L = self._L
+        x1 = np.concatenate([Z[L["x1"][0]], Z[L["x1"][1]]])
         difference = float(np.max(np.abs(x1 - x1_c)))
         if difference > MATCH_TOL * (1 + np.max(np.abs(x1))):
             raise StepDidNotConverge(f"{where}: the step's equations with the active set of its contact solve "
                                      f"end {difference:.3g} from the stepper's state (a push-out of a penetrating "
                                      "contact, or a contact solve that did not converge): no derivatives there")
-        RZ, Ry = self._S(Z, x, u, p, t, sel)
-        dZ = -spla.splu(sp.csc_matrix(RZ.sparse())).solve(np.asarray(Ry.full()))
-        L = self._L
+        dZ = -lu.solve(Ry)
         J = np.vstack([dZ[L["x1"][0]], dZ[L["x1"][1]]])
         nx, nu = self.nx, self.nu
         P_end = Z[L["P"]]
@@ -190,6 +199,24 @@ class ContactStepFunction:
         return self.last
 
     # ------------------------------------------------------------------- internals
+    def _stepper_step(self, x, u, p, t):
+        """``(status, x⁺, P)``: one step of the compiled contact stepper from a cold start (no
+        halving), called directly (a single step needs no interruptible worker thread)."""
+        from ncgen.codegen.stepper_package import TOL
+        from ncgen.runtime.stepper_library import _Options, _ptr
+        nq, nc = self.model.nq, self.model.nc
+        q0, v0 = np.ascontiguousarray(x[:nq]), np.ascontiguousarray(x[nq:])
+        Q, V, LAM = np.zeros((1, nq)), np.zeros((1, nq)), np.zeros((1, nc))
+        it, done, splits = ctypes.c_long(0), ctypes.c_long(0), ctypes.c_long(0)
+        P = np.zeros(self.model.nk * self.model.dim)
+        U = np.ascontiguousarray(u, float) if self.nu else None
+        status = self._stepper._simulate(_ptr(q0), _ptr(v0), float(t), float(self.h), 1, 1, _ptr(U),
+                                         self.nu if U is not None else 0, _ptr(np.ascontiguousarray(p, float)),
+                                         _ptr(Q), _ptr(V), _ptr(LAM), ctypes.byref(it),
+                                         ctypes.byref(_Options(TOL, STEPPER_MAX_ITER, 0)), ctypes.byref(done),
+                                         ctypes.byref(splits), _ptr(P))
+        return int(status), np.concatenate([Q[0], V[0]]), P
+
     def _start(self, x, x1, P) -> np.ndarray:
         """Newton's start: the free step and the final step from the stepper's end state."""
         nq, nc, L = self.model.nq, self.model.nc, self._L
@@ -204,22 +231,24 @@ class ContactStepFunction:
         return Z
 
     def _polish(self, Z, x, u, p, t, sel, where):
-        """Newton on the residual with the modes ``sel`` to its rounding floor."""
+        """``(Z, info, lu, R_y)``: Newton on the residual with the modes ``sel`` to its rounding
+        floor; ``lu`` factors ``R_Z`` at the last iterate but one (``R_y`` there too), whose
+        Newton step is at the rounding floor: the implicit function theorem's matrix."""
         from ncgen.control.step import StepDidNotConverge
         tol = POLISH_TOL * self._scale
+        (row, colind, shape), (row_y, colind_y, shape_y) = self._patterns
         for _ in range(POLISH_MAX_ITER):
-            R = np.asarray(self._R(Z, x, u, p, t, sel)[0].full()).ravel()
+            R, info, RZ, Ry = self._system(Z, x, u, p, [t], sel)
             if not np.all(np.isfinite(R)):
                 break
             converged = np.max(np.abs(R)) <= tol
-            RZ = self._S(Z, x, u, p, t, sel)[0]
             try:
-                dZ = spla.splu(sp.csc_matrix(RZ.sparse())).solve(R)
+                lu = spla.splu(sp.csc_matrix((RZ, row, colind), shape=shape))
             except RuntimeError:
                 break
-            Z = Z - dZ   # once more after the test: the quadratic step reaches the rounding floor
+            Z = Z - lu.solve(R)   # once more after the test: the quadratic step reaches the rounding floor
             if converged:
-                return Z, np.asarray(self._R(Z, x, u, p, t, sel)[1].full()).ravel()
+                return Z, info.copy(), lu, sp.csc_matrix((Ry, row_y, colind_y), shape=shape_y).toarray()
         raise StepDidNotConverge(f"{where}: the step's equations with the active set of its contact solve did "
                                  f"not converge (residual {np.max(np.abs(R)):.3g}); no derivatives there")
 
