@@ -193,3 +193,19 @@ def test_tables_kernels_refused(block):
     model, _ = block
     with pytest.raises(NcgenError, match="nonsmooth contacts"):
         nc.step_function(model, H, kernels="tables")
+
+
+def test_parameter_jacobian_sliding():
+    """``C = ∂x⁺/∂p``: the push scaled by a parameter ``gain``; sliding, ∂v⁺/∂gain = h u/m."""
+    s = nc.System("cjac_gain", gravity=(0, -G))
+    b = s.add_point("block", mass=MASS, position=(0, 0))
+    push, gain = s.add_input("push"), s.add_parameter("gain", 1.0)
+    s.add_force(nc.PointForce(b, (0, 0), force=ca.vertcat(gain * push, 0)))
+    s.add_contact(nc.SpherePlane(b, radius=0.0, mu=MU, name="floor"))
+    model = s.build(contacts="nonsmooth")
+    st = nc.step_function(model, H)
+    x, u, p = np.array([0, 0, 0.5, 0]), np.array([20.0]), np.array([1.2])
+    x1, A, B, C = st.jacobians(x, u, p, parameters=True)
+    central_p = (st(x, u, p + EPS) - st(x, u, p - EPS)) / (2 * EPS)
+    assert np.allclose(C.ravel(), central_p, atol=1e-6 * max(1.0, np.max(np.abs(central_p))))
+    assert np.isclose(C[2, 0], H * 20.0 / MASS, rtol=1e-12) and st.last.modes == ["sliding"]
