@@ -55,6 +55,8 @@ from ncgen.validation import as_scalar
 
 #: Relative tolerance of the switching tests (module docstring).
 SWITCH_TOL = 1e-7
+#: A free step's gap within this (relative to ``h (1 + max |U|)``) of 0 counts as closed.
+ROUNDOFF = 1e-12
 #: Newton iterations of the polishing solve, and its residual tolerance relative to
 #: :func:`~ncgen.control.discrete.residual_scale`.
 POLISH_MAX_ITER, POLISH_TOL = 20, 1e-13
@@ -275,13 +277,18 @@ class ContactStepFunction:
             push = np.min(g1, initial=0.0) < -PENETRATION_TOL
             sel[-1] = push
             if push:   # the pushed contacts: those pushed, and those the push leaves inside
-                pushed = (pi > 0) | (g_pushed < 0) if previous[-1] else g1 < 0
+                was = previous[4:NSEL * nk:NSEL] > 0
+                big = float(np.max(np.abs(pi), initial=0.0))
+                pushed = ((was & (pi > ROUNDOFF * big)) | (~was & (g_pushed < -PENETRATION_TOL * ROUNDOFF))
+                          if previous[-1] else g1 < 0)
                 sel[4:NSEL * nk:NSEL] = pushed
         for k, c in enumerate(contacts):
             n = k * dim
             closed = P[n] > 0
             sel[NSEL * k] = closed
-            sel[NSEL * k + 1] = closed and (gf is None or gf[k] <= 0)
+            # closed at the free step's end; a gap within round-off of 0 (bodies falling
+            # together in the free step: a stack) counts as closed, the side that presses it
+            sel[NSEL * k + 1] = closed and (gf is None or gf[k] <= ROUNDOFF * (1 + np.max(np.abs(U))) * self.h)
             if closed and c["mu"] > 0:
                 slide = np.linalg.norm(P[n + 1:n + dim]) >= c["mu"] * P[n] * (1 - 1e-9)
                 if slide and U is not None:
