@@ -55,6 +55,7 @@ def main(argv=None) -> int:
     mj = mujoco.MjModel.from_xml_string(heap_mjcf(args.heap, H, False))
     d = mujoco.MjData(mj)
     mujoco.mj_step(mj, d, nstep=round(args.settle / H))
+    print(f"ncgen evaluates the step's equations with {st.evaluation}")
     print(f"MuJoCo twin: nv {mj.nv}, {d.ncon} contacts active after {args.settle:g} s")
     nxm = 2 * mj.nv + mj.na
     A, B = np.zeros((nxm, nxm)), np.zeros((nxm, mj.nu))

@@ -237,3 +237,16 @@ def test_dropped_pile_every_step():
             assert_matches_differences(st, X[k], np.zeros(0))
             checked += 1
     assert checked == 2
+
+
+def test_virtual_machine_path_equals_compiled(block, monkeypatch):
+    """Above COMPILE_MAX_INSTRUCTIONS the equations run on CasADi's VM: the same step."""
+    import ncgen.control.contact_step as contact_step
+    model, st = block
+    monkeypatch.setattr(contact_step, "COMPILE_MAX_INSTRUCTIONS", 0)
+    vm = nc.step_function(model, H)
+    assert vm.evaluation == "casadi-vm" and st.evaluation == "compiled"
+    x, u = np.array([0, 0, 0.5, 0]), np.array([20.0])
+    a, b = vm.step(x, u), st.step(x, u)
+    assert a.modes == b.modes and np.allclose(a.x1, b.x1, atol=1e-15)
+    assert np.allclose(a.A, b.A, atol=1e-12) and np.allclose(a.B, b.B, atol=1e-12)

@@ -64,6 +64,10 @@ POLISH_MAX_ITER, POLISH_TOL = 20, 1e-13
 #: solve to ``CONTACT_REFINE_TOL`` = 1e-8 after an impact.
 MATCH_TOL = 1e-6
 MODES = ("separated", "sticking", "sliding", "closed")
+#: Largest system function (CasADi instructions) compiled to C; larger ones run on CasADi's
+#: virtual machine (the 20-sphere heap's 1.1 million instructions kept gcc -O1 busy for more
+#: than 15 minutes on a loaded 2-core machine; its VM evaluation takes 70 ms).
+COMPILE_MAX_INSTRUCTIONS = 200_000
 #: Newton iterations of the compiled stepper's step (its default, ``MAX_ITER`` of the package).
 STEPPER_MAX_ITER = 12
 #: Passes of classifying the modes and solving with them, at most.
@@ -113,7 +117,11 @@ class ContactStepFunction:
         self._stepper = load_stepper(model)
         from ncgen.control.step import _compile
         system = contact_system(contact_residual(model, h))
-        self._system = _compile(f"{model.name}_contact_step", [system])[system.name()]
+        #: How the step's equations are evaluated: ``"compiled"`` (generated C, cached by
+        #: content) or, above :data:`COMPILE_MAX_INSTRUCTIONS`, ``"casadi-vm"``.
+        self.evaluation = "compiled" if system.n_instructions() <= COMPILE_MAX_INSTRUCTIONS else "casadi-vm"
+        self._system = (_compile(f"{model.name}_contact_step", [system])[system.name()]
+                        if self.evaluation == "compiled" else _Nonzeros(system))
         self._patterns = [(np.array(sp_.row()), np.array(sp_.colind()), sp_.shape)
                           for sp_ in (system.sparsity_out(2), system.sparsity_out(3))]
         self._rows = contact_function(model)
@@ -353,3 +361,14 @@ class ContactStepFunction:
         if limit > 0 and abs(self._jump(U, Uf, sel) - limit) <= 1e-3 * limit:
             out.append(("(step)", "the impact test at its threshold"))
         return out
+
+
+class _Nonzeros:
+    """A CasADi function on its virtual machine, called as a compiled
+    :class:`~ncgen.codegen.direct.DirectFunction` is: its outputs' nonzeros as arrays."""
+
+    def __init__(self, f):
+        self.f = f
+
+    def __call__(self, *args):
+        return [np.array(out.nonzeros()) for out in self.f(*args)]
