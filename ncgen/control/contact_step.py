@@ -199,7 +199,7 @@ class ContactStepFunction:
             raise StepDidNotConverge(f"{where}: the step's equations with the active set of its contact solve "
                                      f"end {difference:.3g} from the stepper's state (a push-out of a penetrating "
                                      "contact, or a contact solve that did not converge): no derivatives there")
-        dZ = -_solve_columns(lu, Ry)
+        dZ = -lu.solve(Ry)
         J = np.vstack([dZ[L["x1"][0]], dZ[L["x1"][1]]])
         nx, nu = self.nx, self.nu
         P_end = Z[L["P"]]
@@ -253,7 +253,7 @@ class ContactStepFunction:
                 break
             converged = np.max(np.abs(R)) <= tol
             try:
-                lu = spla.splu(sp.csc_matrix((RZ, row, colind), shape=shape))
+                lu = _Factor(sp.csc_matrix((RZ, row, colind), shape=shape))
             except RuntimeError:
                 break
             Z = Z - lu.solve(R)   # once more after the test: the quadratic step reaches the rounding floor
@@ -383,3 +383,30 @@ def _solve_columns(lu, B: np.ndarray) -> np.ndarray:
     Y = spla.spsolve_triangular(lu.L.tocsr(), Pr @ B, lower=True, unit_diagonal=True)
     Y = spla.spsolve_triangular(lu.U.tocsr(), Y, lower=False)
     return Y[lu.perm_c]
+
+
+class _Factor:
+    """``R_Z`` factored for solves: the rows that hold one unknown alone (``P = 0`` of a
+    separated contact, ``π = 0`` of a contact not pushed out: most rows of a heap) are
+    solved first, exactly (the matrix is block triangular), and the rest by SuperLU's sparse
+    LU (the heap: 690 of 1320 unknowns, 1 ms instead of 100 ms)."""
+
+    def __init__(self, A):
+        A = A.tocsr()
+        A.eliminate_zeros()          # entries the modes' selectors set to 0
+        d = A.diagonal()
+        self.single = (np.diff(A.indptr) == 1) & (d != 0)
+        self.keep = ~self.single
+        self.d = d[self.single]
+        rows = A[self.keep]
+        self.A_ks = rows[:, self.single]
+        self.lu = spla.splu(rows[:, self.keep].tocsc())
+
+    def solve(self, B: np.ndarray) -> np.ndarray:
+        """``R_Z⁻¹ B`` for a vector or the columns of a matrix."""
+        X = np.empty(B.shape)
+        X_s = B[self.single] / (self.d if B.ndim == 1 else self.d[:, None])
+        B_k = B[self.keep] - self.A_ks @ X_s
+        X[self.single] = X_s
+        X[self.keep] = self.lu.solve(B_k) if B.ndim == 1 else _solve_columns(self.lu, B_k)
+        return X
