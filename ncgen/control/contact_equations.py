@@ -83,7 +83,7 @@ def contact_residual(model, h: float) -> ca.Function:
     newton, velocity = stepper_functions(model)[:2]
     rows = contact_function(model)
     nq, nc, nk, dim = model.nq, model.nc, model.nk, model.dim
-    n1, nd = nq + nc, nk * dim
+    n1 = nq + nc
     L = layout(model)
     Z = ca.SX.sym("Z", L["vm"].stop)
     x, u, p, t = ca.SX.sym("x", 2 * nq), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np), ca.SX.sym("t")
@@ -100,7 +100,7 @@ def contact_residual(model, h: float) -> ca.Function:
     G_end, _ = _rattle(newton, velocity, nq, nc, h, t, q, v, u, p, z, j_0, j_f)
     q1, v1 = q + h * z[:nq], z[n1:n1 + nq]
     g_1, Wt_1, U_1 = rows(q1, v1, p)
-    impact, push = sel[NSEL * nk], sel[NSEL * nk + 1]
+    impact = sel[NSEL * nk]
     U = impact * U_1 + (1 - impact) * (U_f + ca.mtimes(Wt_f.T, y[:nq]))
     laws = []
     for k, spec in enumerate(model.contacts):
