@@ -70,7 +70,9 @@ def step_function(model, h: float, method: str = "rattle", *, max_iter: int = MA
     scheme, in natural coordinates, also for trees) as a :class:`StepFunction`.  ``abstol``:
     the Newton iterations' residual tolerance, default
     :func:`~ncgen.control.discrete.default_abstol` (``1e-12 (1 + max |M_ij|)``).
-    ``kernels``: ``"auto"``, ``"tables"`` or ``"flat"`` (module docstring)."""
+    ``kernels``: ``"auto"``, ``"tables"`` or ``"flat"`` (module docstring).  A model with
+    nonsmooth contacts gets a :class:`~ncgen.control.contact_step.ContactStepFunction`
+    (Jacobians from the active set of the contact solve; ``kernels="tables"`` refused)."""
     if method not in METHODS:
         raise NcgenError(f"step_function: method: expected one of {', '.join(METHODS)}, got {method!r}")
     h = _positive(h, "h", "a positive, finite step in seconds")
