@@ -250,3 +250,29 @@ def test_virtual_machine_path_equals_compiled(block, monkeypatch):
     a, b = vm.step(x, u), st.step(x, u)
     assert a.modes == b.modes and np.allclose(a.x1, b.x1, atol=1e-15)
     assert np.allclose(a.A, b.A, atol=1e-12) and np.allclose(a.B, b.B, atol=1e-12)
+
+
+def test_box_standing_on_two_corners():
+    """A planar box resting on two corners (redundant sticking contacts: the stepper takes the
+    least-norm impulses of their family; R_Z is singular, solved least-norm).  Along the
+    states a motion can have (the tangent space of both constraint levels) its Jacobians equal
+    central differences; off it, the stepper's own redundant impulses jump (not checked)."""
+    from scipy.linalg import null_space
+    s = nc.System("cjac_box2d", gravity=(0, -G))
+    a, b = 0.2, 0.1
+    box = s.add_body("box", "ruv", mass=1.0, inertia=(a * a + b * b) / 12, position=(0, b / 2))
+    f = s.add_input("f")
+    s.add_force(nc.PointForce(box, (0, 0), force=ca.vertcat(f, 0)))
+    s.add_contact(nc.BoxPlane(box, size=(a, b), mu=MU, name="floor"))
+    model = s.build(contacts="nonsmooth")
+    st = nc.step_function(model, 0.005)
+    x, u = np.concatenate([model.q0, np.zeros(model.nq)]), np.array([1.0])
+    step = st.step(x, u)
+    assert step.modes == ["sticking", "sticking", "separated", "separated"]
+    N = null_space(np.array(model.functions["A"](0, model.q0, model.p0)))
+    T = np.block([[N, np.zeros_like(N)], [np.zeros_like(N), N]])       # v = 0: A v's q-derivative is 0
+    fd_T = np.column_stack([(st(x + EPS * c, u) - st(x - EPS * c, u)) / (2 * EPS) for c in T.T])
+    assert np.max(np.abs(step.A @ T - fd_T)) <= 1e-6 * max(1.0, np.max(np.abs(fd_T)))
+    _, B = central(st, x, u)
+    assert np.max(np.abs(step.B - B)) <= 1e-6 * max(1.0, np.max(np.abs(B)))
+    assert np.max(np.abs(step.B)) < 1e-12          # stuck: a small push does not move it

@@ -68,6 +68,8 @@ MODES = ("separated", "sticking", "sliding", "closed")
 #: virtual machine (the 20-sphere heap's 1.1 million instructions kept gcc -O1 busy for more
 #: than 15 minutes on a loaded 2-core machine; its VM evaluation takes 70 ms).
 COMPILE_MAX_INSTRUCTIONS = 200_000
+#: Relative singular-value cut of the least-norm solves of a singular ``R_Z`` (:class:`_Factor`).
+LSTSQ_RCOND = 1e-10
 #: Newton iterations of the compiled stepper's step (its default, ``MAX_ITER`` of the package).
 STEPPER_MAX_ITER = 12
 #: Passes of classifying the modes and solving with them, at most.
@@ -400,13 +402,28 @@ class _Factor:
         self.d = d[self.single]
         rows = A[self.keep]
         self.A_ks = rows[:, self.single]
-        self.lu = spla.splu(rows[:, self.keep].tocsc())
+        self.A_kk = rows[:, self.keep].tocsc()
+        try:
+            self.lu = spla.splu(self.A_kk)
+        except RuntimeError:           # exactly singular: redundant contacts
+            self.lu = None
 
     def solve(self, B: np.ndarray) -> np.ndarray:
-        """``R_Z⁻¹ B`` for a vector or the columns of a matrix."""
+        """``R_Z⁻¹ B`` for a vector or the columns of a matrix; where ``R_Z`` is singular
+        (redundant sticking contacts: a box standing on two or more corners, whose impulses
+        are a family — the stepper takes its least-norm member), the least-norm solution:
+        ``x⁺`` and its Jacobians do not depend on how the family's impulses are split."""
         X = np.empty(B.shape)
         X_s = B[self.single] / (self.d if B.ndim == 1 else self.d[:, None])
         B_k = B[self.keep] - self.A_ks @ X_s
         X[self.single] = X_s
-        X[self.keep] = self.lu.solve(B_k) if B.ndim == 1 else _solve_columns(self.lu, B_k)
+        X_k = None
+        if self.lu is not None:
+            X_k = self.lu.solve(B_k) if B.ndim == 1 else _solve_columns(self.lu, B_k)
+            scale = 1 + np.max(np.abs(B_k), initial=0.0)
+            if not (np.all(np.isfinite(X_k)) and np.max(np.abs(self.A_kk @ X_k - B_k), initial=0.0) <= 1e-9 * scale):
+                self.lu = X_k = None
+        if X_k is None:
+            X_k = np.linalg.lstsq(self.A_kk.toarray(), B_k, rcond=LSTSQ_RCOND)[0]
+        X[self.keep] = X_k
         return X
