@@ -13,6 +13,9 @@ iteration whose full step (``α = 1``) was accepted, the backward pass is DDP's:
 step's second derivatives contracted with ``V_x`` (:mod:`ncgen.control.step_curvature`),
 which makes the final convergence quadratic; after a shortened step it is Gauss–Newton
 (iLQR) again, which is more robust far from the optimum (``second_order=False``: always).
+On a model with nonsmooth contacts (:mod:`ncgen.control.contact_step`) the step's Jacobians
+are those of the active set of each step's contact solve (one-sided at switching points) and
+it is Gauss–Newton throughout (no second derivatives of a contact step).
 
 The constraint manifold.  The iterations run in natural coordinates ``x = [q; v]``: every
 trajectory is a rollout of the step, so it satisfies both constraint levels exactly, and
@@ -97,7 +100,8 @@ def ilqr(st, x0, U0, costs, *, p=None, t0=None, max_iter: int = 200, tol: float 
     history, gradients, converged, message = [J], [], False, f"stopped after {max_iter} iterations"
     K = np.zeros((N, st.nu, st.nx))
     it = 0
-    curvature = StepCurvature(st.model, st.h) if second_order else None
+    # a step with nonsmooth contacts has no second derivatives (ncgen.control.contact_step): Gauss-Newton
+    curvature = StepCurvature(st.model, st.h) if second_order and getattr(st, "second_derivatives", True) else None
     full_step, alpha = False, np.nan
     while True:
         A, B = _linearisation(st, X, U, p, t0)

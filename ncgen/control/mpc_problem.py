@@ -25,6 +25,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from ncgen.assembly.stepper_equations import nonsmooth
+
 from ncgen.errors import OptimizationError
 
 
@@ -49,6 +51,12 @@ class MPCProblem:
 def mpc_problem(ocp, terminal_weight: float) -> MPCProblem:
     """The :class:`MPCProblem` of ``ocp`` (see the module docstring)."""
     model = ocp.model
+    if nonsmooth(model):
+        names = ", ".join(repr(c["name"]) for c in model.contacts)
+        raise OptimizationError(f"MPC of {model.name!r}: the model has nonsmooth contacts ({names}); the "
+                                "receding-horizon controller's step has no contacts (they would be ignored), so it "
+                                "is not supported: use nc.ilqr on nc.step_function(model, h), whose Jacobians "
+                                "go through the contacts, or build the model with contacts='smooth'")
     unsupported = [what for what, bad in (
         ("a free final time", ocp.t_final_bounds is not None),
         ("free parameters", bool(ocp.p_free)),

@@ -70,18 +70,23 @@ def step_function(model, h: float, method: str = "rattle", *, max_iter: int = MA
     scheme, in natural coordinates, also for trees) as a :class:`StepFunction`.  ``abstol``:
     the Newton iterations' residual tolerance, default
     :func:`~ncgen.control.discrete.default_abstol` (``1e-12 (1 + max |M_ij|)``).
-    ``kernels``: ``"auto"``, ``"tables"`` or ``"flat"`` (module docstring)."""
+    ``kernels``: ``"auto"``, ``"tables"`` or ``"flat"`` (module docstring).  A model with
+    nonsmooth contacts gets a :class:`~ncgen.control.contact_step.ContactStepFunction`
+    (Jacobians from the active set of the contact solve; ``kernels="tables"`` refused)."""
     if method not in METHODS:
         raise NcgenError(f"step_function: method: expected one of {', '.join(METHODS)}, got {method!r}")
     h = _positive(h, "h", "a positive, finite step in seconds")
     abstol = default_abstol(model) if abstol is None else _positive(abstol, "abstol", "a positive, finite tolerance")
-    if getattr(model, "contact_model", "smooth") == "nonsmooth" and getattr(model, "nk", 0) > 0:
-        raise NcgenError(f"step_function: model {model.name!r} has nonsmooth contacts; their step is not "
-                         "differentiable at impacts and is not supported (use contacts='smooth')")
     if not isinstance(max_iter, int) or max_iter < 1:
         raise NcgenError(f"step_function: max_iter: expected a positive integer, got {max_iter!r}")
     if not isinstance(kernels, str) or kernels not in KERNELS:
         raise NcgenError(f"step_function: kernels: expected one of {', '.join(map(repr, KERNELS))}, got {kernels!r}")
+    if getattr(model, "contact_model", "smooth") == "nonsmooth" and getattr(model, "nk", 0) > 0:
+        if kernels == "tables":
+            raise NcgenError(f"step_function: kernels: the element tables have no contact step; model "
+                             f"{model.name!r} has nonsmooth contacts (use kernels='auto')")
+        from ncgen.control.contact_step import ContactStepFunction
+        return ContactStepFunction(model, h, max_iter=max_iter, abstol=abstol)
     return StepFunction(model, h, max_iter=max_iter, abstol=abstol, kernels=kernels)
 
 

@@ -1,0 +1,429 @@
+"""Step functions of models with nonsmooth contacts: the compiled stepper's step and its exact
+derivatives from the active set of its converged contact solve (``nc.step_function`` on a
+model built with ``contacts="nonsmooth"``).
+
+Each call runs one step of the model's compiled contact stepper (from a cold start: no
+repeat of earlier impulses), classifies every contact from the impulses it converged to —
+separated (``P_N = 0``), sticking (``|P_T| < μ P_N``), sliding (on the cone's boundary) — and
+whether the step is an impact, then solves the step's equations with that active set
+(:mod:`ncgen.control.contact_equations`, the stepper's own formulas) by Newton's method from
+the stepper's solution to the rounding floor, and differentiates them by the implicit
+function theorem: one sparse LU of ``R_Z``, all columns of ``R_y = ∂R/∂[x; u; p]`` at once::
+
+    ∂Z/∂y = −R_Z⁻¹ R_y,      ∂x⁺/∂y = [I_q 0] + E ∂Z/∂y.
+
+The state returned is that solution (it equals the stepper's to its Newton and contact
+tolerances; :attr:`ContactStep.stepper_difference` says by how much), so that ``x⁺`` and its
+Jacobians are one smooth function inside a mode, and central differences of ``x⁺`` agree
+with them there.
+
+Switching points.  Where a contact sits on the boundary between two modes the step is not
+differentiable; the Jacobians returned are then one-sided, those of the mode the solve
+converged to, with these choices: ``P_N = 0`` is separated; a contact on the cone's boundary
+with no slip (``|V_T| ≤`` the solver's tolerance) is sticking (the derivative for
+perturbations that keep it stuck).  A step is flagged (:attr:`ContactStep.at_switch`, the
+reasons in :attr:`ContactStep.switches`) when, relative to :data:`SWITCH_TOL`, a closed
+contact's ``P_N`` or a separated contact's normal velocity margin vanishes, the free step
+ends with a gap at 0, a sticking contact's friction reaches the cone, a sliding contact's
+slip vanishes, a restitution's ``min(U⁻_N, 0)`` is at its kink, or the impact test is at its
+threshold, or a contact ends the step at the push-out's threshold depth or is pushed out
+by nothing.  The push-out is itself a switch: a contact resting on its surface (gap 0) is
+pushed back only below ``−PENETRATION_TOL`` (1e-8 m), so the Jacobians of a resting contact
+are those of the side that is not pushed out (central differences of such a step must stay
+within 1e-8 m).  The stepper repeats a push-out while its linearisation leaves a gap below
+that threshold (curved gaps: sphere pairs, after a deep penetration); the equations hold one
+pass, and a step whose result then differs from the stepper's by more than
+:data:`MATCH_TOL` is refused (:class:`~ncgen.control.step.StepDidNotConverge`), as is a step
+whose modes do not settle or whose equations do not converge.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import ctypes
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ncgen.control.contact_equations import IMPACT_STEPS, NGLOBAL, NSEL, contact_residual, contact_system, layout
+from ncgen.assembly.stepper_equations import contact_function
+from ncgen.codegen.stepper_package import PENETRATION_TOL
+from ncgen.control.discrete import residual_scale
+from ncgen.errors import NcgenError
+from ncgen.validation import as_scalar
+
+#: Relative tolerance of the switching tests (module docstring).
+SWITCH_TOL = 1e-7
+#: A free step's gap within this (relative to ``h (1 + max |U|)``) of 0 counts as closed.
+ROUNDOFF = 1e-12
+#: Newton iterations of the polishing solve, and its residual tolerance relative to
+#: :func:`~ncgen.control.discrete.residual_scale`.
+POLISH_MAX_ITER, POLISH_TOL = 20, 1e-13
+#: Largest ``|x⁺ − x⁺_stepper|∞ / (1 + |x⁺|∞)`` accepted: the stepper converges its contact
+#: solve to ``CONTACT_REFINE_TOL`` = 1e-8 after an impact.
+MATCH_TOL = 1e-6
+MODES = ("separated", "sticking", "sliding", "closed")
+#: Largest system function (CasADi instructions) compiled to C; larger ones run on CasADi's
+#: virtual machine (the 20-sphere heap's 1.1 million instructions kept gcc -O1 busy for more
+#: than 15 minutes on a loaded 2-core machine; its VM evaluation takes 70 ms).
+COMPILE_MAX_INSTRUCTIONS = 200_000
+#: Relative singular-value cut of the least-norm solves of a singular ``R_Z`` (:class:`_Factor`).
+LSTSQ_RCOND = 1e-10
+#: Newton iterations of the compiled stepper's step (its default, ``MAX_ITER`` of the package).
+STEPPER_MAX_ITER = 12
+#: Passes of classifying the modes and solving with them, at most.
+MODE_PASSES = 5
+
+
+@dataclass
+class ContactStep:
+    """One step: ``x1`` (2nq), ``A = ∂x⁺/∂x``, ``B = ∂x⁺/∂u``, ``C = ∂x⁺/∂p``; ``modes`` per
+    contact (``"separated"``, ``"sticking"``, ``"sliding"``, or ``"closed"`` for a closed
+    contact without friction); ``impact``: whether the step is an impact (its contact laws
+    hold on the velocities the step ends with); ``at_switch`` and ``switches`` (contact name
+    and reason); ``impulses`` (nk × dim, N·s: normal, then tangents); ``stepper_difference``:
+    ``|x⁺ − x⁺_stepper|∞``; ``push_out``: the push-out's ``π`` per contact (kg·m, 0 where none)."""
+
+    x1: np.ndarray
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    modes: list
+    impact: bool
+    impulses: np.ndarray
+    stepper_difference: float
+    switches: list = field(default_factory=list)
+    push_out: np.ndarray | None = None
+
+    @property
+    def at_switch(self) -> bool:
+        return bool(self.switches)
+
+
+class ContactStepFunction:
+    """``x1 = st(x, u, p=None, t=None)``; ``x1, A, B = st.jacobians(x, u)``; ``st.step(x, u)``
+    → :class:`ContactStep` with the modes and the switch flag; ``st.last``: the
+    :class:`ContactStep` of the last call.  Rollouts run step by step.  No second derivatives
+    (iLQR runs Gauss–Newton on it)."""
+
+    kernels = "contact"
+    second_derivatives = False
+
+    def __init__(self, model, h: float, *, max_iter: int, abstol: float):
+        from ncgen.runtime.stepper_library import load_stepper
+
+        self.model, self.h = model, h
+        self.nx, self.nu, self.np = 2 * model.nq, model.nu, model.np
+        self._max_iter, self._abstol = max_iter, abstol
+        self._stepper = load_stepper(model)
+        from ncgen.control.step import _compile
+        system = contact_system(contact_residual(model, h))
+        #: How the step's equations are evaluated: ``"compiled"`` (generated C, cached by
+        #: content) or, above :data:`COMPILE_MAX_INSTRUCTIONS`, ``"casadi-vm"``.
+        self.evaluation = "compiled" if system.n_instructions() <= COMPILE_MAX_INSTRUCTIONS else "casadi-vm"
+        self._system = (_compile(f"{model.name}_contact_step", [system])[system.name()]
+                        if self.evaluation == "compiled" else _Nonzeros(system))
+        self._patterns = [(np.array(sp_.row()), np.array(sp_.colind()), sp_.shape)
+                          for sp_ in (system.sparsity_out(2), system.sparsity_out(3))]
+        self._rows = contact_function(model)
+        self._L = layout(model)
+        self._scale = residual_scale(model)
+        self.names = [c["name"] for c in model.contacts]
+        self.last: ContactStep | None = None
+
+    def __repr__(self) -> str:
+        return (f"<ContactStepFunction of {self.model.name!r}: RATTLE with {self.model.nk} nonsmooth contacts, "
+                f"h={self.h} s, nx={self.nx}, nu={self.nu}>")
+
+    # ------------------------------------------------------------------ arguments
+    def _args(self, x, u, p, t):
+        from ncgen.control.step import _vector
+        x = _vector(x, self.nx, "x", "the state [q; v]")
+        u = np.zeros(0) if u is None and self.nu == 0 else _vector(u, self.nu, "u", "the inputs")
+        p = np.asarray(self.model.p0, float) if p is None else _vector(p, self.np, "p", "the parameters")
+        t = self.model.t0 if t is None else as_scalar(t, "t")
+        return x, u, p, t
+
+    def _inputs(self, U) -> np.ndarray:
+        U = np.atleast_2d(np.asarray(U, float))
+        if self.nu == 0 and U.size == 0:
+            return U.reshape(U.shape[0] if U.ndim == 2 else 0, 0)
+        if U.ndim != 2 or U.shape[1] != self.nu:
+            raise NcgenError(f"inputs U: expected an array of shape (N, {self.nu}), got shape {np.shape(U)}")
+        return U
+
+    # ----------------------------------------------------------------------- step
+    def __call__(self, x, u=None, p=None, t=None) -> np.ndarray:
+        return self.step(x, u, p, t).x1
+
+    def jacobians(self, x, u=None, p=None, t=None, *, parameters: bool = False):
+        """``(x1, A, B)`` (and ``C`` if ``parameters``) of one step (:meth:`step`)."""
+        s = self.step(x, u, p, t)
+        return (s.x1, s.A, s.B, s.C) if parameters else (s.x1, s.A, s.B)
+
+    def rollout(self, x0, U, p=None, t0=None) -> np.ndarray:
+        """States ``x₁ … x_N`` (N × nx) under the inputs ``U`` (N × nu)."""
+        U = self._inputs(U)
+        x, _, p, t0 = self._args(x0, U[0] if len(U) else None, p, t0)
+        X = np.empty((len(U), self.nx))
+        for k in range(len(U)):
+            x = X[k] = self.step(x, U[k], p, t0 + k * self.h).x1
+        return X
+
+    def step(self, x, u=None, p=None, t=None) -> ContactStep:
+        """The step from ``x`` with its Jacobians, modes and switch flag (module docstring)."""
+        from ncgen.control.step import StepDidNotConverge
+
+        x, u, p, t = self._args(x, u, p, t)
+        nq, nk, dim = self.model.nq, self.model.nk, self.model.dim
+        status, x1_c, P = self._stepper_step(x, u, p, t)
+        where = f"step of {self.model.name!r} (h = {self.h:g} s)"
+        if status != 0:
+            from ncgen.codegen.stepper_package import STATUS
+            raise StepDidNotConverge(f"{where}: the contact stepper failed ({STATUS.get(status, status)})")
+        Z = self._start(x, x1_c, P)
+        # the first modes from the stepper's impulses and, for the slips, its end velocities
+        U_end, U_start = (np.asarray(self._rows(xx[:nq], xx[nq:], p)[2].full()).ravel() for xx in (x1_c, x))
+        sel = self._modes(P, None, None, (U_end, U_start))
+        for _ in range(MODE_PASSES):   # the modes depend on the free step, the slips, the push-out
+            Z, info, lu, Ry = self._polish(Z, x, u, p, t, sel, where)
+            new = self._modes(P, info, sel)
+            if np.array_equal(new, sel):
+                break
+            sel = new
+        else:
+            raise StepDidNotConverge(f"{where}: the modes of its contacts did not settle in {MODE_PASSES} passes")
+        L = self._L
+        x1 = np.concatenate([Z[L["x1"][0]], Z[L["x1"][1]]])
+        difference = float(np.max(np.abs(x1 - x1_c)))
+        if difference > MATCH_TOL * (1 + np.max(np.abs(x1))):
+            raise StepDidNotConverge(f"{where}: the step's equations with the active set of its contact solve "
+                                     f"end {difference:.3g} from the stepper's state (a push-out of a penetrating "
+                                     "contact, or a contact solve that did not converge): no derivatives there")
+        dZ = -lu.solve(Ry)
+        J = np.vstack([dZ[L["x1"][0]], dZ[L["x1"][1]]])
+        nx, nu = self.nx, self.nu
+        P_end = Z[L["P"]]
+        self.last = ContactStep(x1, J[:, :nx], J[:, nx:nx + nu], J[:, nx + nu:], self._mode_names(sel),
+                                bool(sel[-2]), P_end.reshape(nk, dim), difference, self._switches(P_end, info, sel),
+                                Z[L["pi"]].copy())
+        return self.last
+
+    # ------------------------------------------------------------------- internals
+    def _stepper_step(self, x, u, p, t):
+        """``(status, x⁺, P)``: one step of the compiled contact stepper from a cold start (no
+        halving), called directly (a single step needs no interruptible worker thread)."""
+        from ncgen.codegen.stepper_package import TOL
+        from ncgen.runtime.stepper_library import _Options, _ptr
+        nq, nc = self.model.nq, self.model.nc
+        q0, v0 = np.ascontiguousarray(x[:nq]), np.ascontiguousarray(x[nq:])
+        Q, V, LAM = np.zeros((1, nq)), np.zeros((1, nq)), np.zeros((1, nc))
+        it, done, splits = ctypes.c_long(0), ctypes.c_long(0), ctypes.c_long(0)
+        P = np.zeros(self.model.nk * self.model.dim)
+        U = np.ascontiguousarray(u, float) if self.nu else None
+        status = self._stepper._simulate(_ptr(q0), _ptr(v0), float(t), float(self.h), 1, 1, _ptr(U),
+                                         self.nu if U is not None else 0, _ptr(np.ascontiguousarray(p, float)),
+                                         _ptr(Q), _ptr(V), _ptr(LAM), ctypes.byref(it),
+                                         ctypes.byref(_Options(TOL, STEPPER_MAX_ITER, 0)), ctypes.byref(done),
+                                         ctypes.byref(splits), _ptr(P))
+        return int(status), np.concatenate([Q[0], V[0]]), P
+
+    def _start(self, x, x1, P) -> np.ndarray:
+        """Newton's start: the free step and the final step from the stepper's end state."""
+        nq, nc, L = self.model.nq, self.model.nc, self._L
+        Z = np.zeros(L["vm"].stop)
+        w = (x1[:nq] - x[:nq]) / self.h
+        Z[L["zf"]][:nq] = w
+        Z[L["zf"]][nq + nc:2 * nq + nc] = x1[nq:]
+        Z[L["P"]] = P
+        Z[L["z"]][:nq] = w
+        Z[L["z"]][nq + nc:2 * nq + nc] = x1[nq:]
+        Z[L["x1"][0]], Z[L["x1"][1]] = x1[:nq], x1[nq:]
+        return Z
+
+    def _polish(self, Z, x, u, p, t, sel, where):
+        """``(Z, info, lu, R_y)``: Newton on the residual with the modes ``sel`` to its rounding
+        floor; ``lu`` factors ``R_Z`` at the last iterate but one (``R_y`` there too), whose
+        Newton step is at the rounding floor: the implicit function theorem's matrix."""
+        from ncgen.control.step import StepDidNotConverge
+        tol = POLISH_TOL * self._scale
+        (row, colind, shape), (row_y, colind_y, shape_y) = self._patterns
+        for _ in range(POLISH_MAX_ITER):
+            R, info, RZ, Ry = self._system(Z, x, u, p, [t], sel)
+            if not np.all(np.isfinite(R)):
+                break
+            converged = np.max(np.abs(R)) <= tol
+            try:
+                lu = _Factor(sp.csc_matrix((RZ, row, colind), shape=shape))
+            except RuntimeError:
+                break
+            Z = Z - lu.solve(R)   # once more after the test: the quadratic step reaches the rounding floor
+            if converged:
+                return Z, info.copy(), lu, sp.csc_matrix((Ry, row_y, colind_y), shape=shape_y).toarray()
+        raise StepDidNotConverge(f"{where}: the step's equations with the active set of its contact solve did "
+                                 f"not converge (residual {np.max(np.abs(R)):.3g}); no derivatives there")
+
+    def _info(self, info):
+        """``(U, U⁻, U_f, g_f, g⁺, π, g_pushed)`` from the residual's ``info``."""
+        nd, nk = self.model.nk * self.model.dim, self.model.nk
+        o = self.nx + 3 * nd
+        return (info[self.nx:self.nx + nd], info[self.nx + nd:o - nd], info[o - nd:o],
+                *(info[o + i * nk:o + (i + 1) * nk] for i in range(4)))
+
+    def _modes(self, P, info, previous, velocities=None) -> np.ndarray:
+        """Selectors (:mod:`ncgen.control.contact_equations`) from the stepper's impulses ``P``
+        and, once solved, the free step's gaps, the slips and the impact test (before:
+        ``velocities``, the contact velocities at the stepper's end and start)."""
+        nk, dim, contacts = self.model.nk, self.model.dim, self.model.contacts
+        sel = np.zeros(NSEL * nk + NGLOBAL)
+        U = U0 = Uf = gf = None
+        if velocities is not None:
+            U, U0 = velocities
+            vtol = self._vtol(U)
+        if info is not None:
+            U, U0, Uf, gf, g1, pi, g_pushed = self._info(info)
+            vtol = self._vtol(U)
+            push = np.min(g1, initial=0.0) < -PENETRATION_TOL
+            sel[-1] = push
+            if push:   # the pushed contacts: those pushed, and those the push leaves inside
+                was = previous[4:NSEL * nk:NSEL] > 0
+                big = float(np.max(np.abs(pi), initial=0.0))
+                pushed = ((was & (pi > ROUNDOFF * big)) | (~was & (g_pushed < -PENETRATION_TOL * ROUNDOFF))
+                          if previous[-1] else g1 < 0)
+                sel[4:NSEL * nk:NSEL] = pushed
+        for k, c in enumerate(contacts):
+            n = k * dim
+            closed = P[n] > 0
+            sel[NSEL * k] = closed
+            # closed at the free step's end; a gap within round-off of 0 (bodies falling
+            # together in the free step: a stack) counts as closed, the side that presses it
+            sel[NSEL * k + 1] = closed and (gf is None or gf[k] <= ROUNDOFF * (1 + np.max(np.abs(U))) * self.h)
+            if closed and c["mu"] > 0:
+                slide = np.linalg.norm(P[n + 1:n + dim]) >= c["mu"] * P[n] * (1 - 1e-9)
+                if slide and U is not None:
+                    slip = U[n + 1:n + dim] + c["restitution"] * U0[n + 1:n + dim]
+                    slide = np.linalg.norm(slip) > vtol
+                sel[NSEL * k + 2], sel[NSEL * k + 3] = (0.0, 1.0) if slide else (1.0, 0.0)
+        if info is not None:
+            sel[-2] = float(self._jump(U, Uf, sel) > IMPACT_STEPS * self._g * self.h)
+        return sel
+
+    @property
+    def _g(self) -> float:
+        return float(np.linalg.norm(self.model.gravity))
+
+    def _jump(self, U, Uf, sel) -> float:
+        """The impact test's measure: the largest change of a closed contact's velocity."""
+        dim = self.model.dim
+        rows = [k * dim + d for k in range(self.model.nk) if sel[NSEL * k] for d in range(dim)]
+        return float(np.max(np.abs(U[rows] - Uf[rows]), initial=0.0))
+
+    def _vtol(self, U) -> float:
+        return SWITCH_TOL * (1 + float(np.max(np.abs(U), initial=0.0)))
+
+    def _mode_names(self, sel) -> list[str]:
+        out = []
+        for k, c in enumerate(self.model.contacts):
+            s = sel[NSEL * k:NSEL * (k + 1)]
+            out.append("separated" if not s[0] else "sticking" if s[2] else "sliding" if s[3] else "closed")
+        return out
+
+    def _switches(self, P, info, sel) -> list[tuple[str, str]]:
+        """Contacts (name, reason) at a switching point (module docstring)."""
+        U, U0, Uf, gf, g1, pi, _ = self._info(info)
+        dim, h = self.model.dim, self.h
+        vtol = self._vtol(U)
+        ptol = SWITCH_TOL * max(float(np.max(np.abs(P), initial=0.0)), self._scale * self._g * h)
+        gtol = vtol * h
+        out = []
+        for k, c in enumerate(self.model.contacts):
+            n, name, s = k * dim, self.names[k], sel[NSEL * k:NSEL * (k + 1)]
+            if abs(gf[k]) <= gtol:
+                out.append((name, "the free step ends with the gap at 0"))
+            if s[0]:
+                if P[n] <= ptol:
+                    out.append((name, "closed with a normal impulse at 0"))
+                if c["restitution"] > 0 and abs(U0[n]) <= vtol:
+                    out.append((name, "approach velocity at 0 (restitution's kink)"))
+                if not s[1] and abs(2 * gf[k] / h - Uf[n]) <= vtol:
+                    out.append((name, "about to close with its bias at its kink"))
+                if s[2] and np.linalg.norm(P[n + 1:n + dim]) >= c["mu"] * P[n] * (1 - SWITCH_TOL):
+                    out.append((name, "sticking with the friction on the cone's boundary"))
+                if s[3] and np.linalg.norm(U[n + 1:n + dim] + c["restitution"] * U0[n + 1:n + dim]) <= 1e3 * vtol:
+                    out.append((name, "sliding with its slip at 0"))
+            elif gf[k] <= 0 and U[n] + c["restitution"] * min(U0[n], 0) <= vtol:
+                out.append((name, "separated with its normal velocity margin at 0"))
+        for k, name in enumerate(self.names):
+            if abs(g1[k] + PENETRATION_TOL) <= 1e-3 * PENETRATION_TOL:
+                out.append((name, "ends the step at the push-out's threshold depth"))
+            if sel[NSEL * k + 4] and pi[k] <= ptol * h:
+                out.append((name, "pushed out with a push at 0"))
+        limit = IMPACT_STEPS * self._g * h
+        if limit > 0 and abs(self._jump(U, Uf, sel) - limit) <= 1e-3 * limit:
+            out.append(("(step)", "the impact test at its threshold"))
+        return out
+
+
+class _Nonzeros:
+    """A CasADi function on its virtual machine, called as a compiled
+    :class:`~ncgen.codegen.direct.DirectFunction` is: its outputs' nonzeros as arrays."""
+
+    def __init__(self, f):
+        self.f = f
+
+    def __call__(self, *args):
+        return [np.array(out.nonzeros()) for out in self.f(*args)]
+
+
+def _solve_columns(lu, B: np.ndarray) -> np.ndarray:
+    """``A⁻¹ B`` for many columns from SuperLU's factors ``Pr A Pc = L U`` by sparse triangular
+    solves (SuperLU's own multi-column solve took 0.5 s where these take 30 ms: the heap's
+    690 × 690 system, 120 columns)."""
+    n = B.shape[0]
+    Pr = sp.csr_matrix((np.ones(n), (lu.perm_r, np.arange(n))), shape=(n, n))
+    Y = spla.spsolve_triangular(lu.L.tocsr(), Pr @ B, lower=True, unit_diagonal=True)
+    Y = spla.spsolve_triangular(lu.U.tocsr(), Y, lower=False)
+    return Y[lu.perm_c]
+
+
+class _Factor:
+    """``R_Z`` factored for solves: the rows that hold one unknown alone (``P = 0`` of a
+    separated contact, ``π = 0`` of a contact not pushed out: most rows of a heap) are
+    solved first, exactly (the matrix is block triangular), and the rest by SuperLU's sparse
+    LU (the heap: 690 of 1320 unknowns, 1 ms instead of 100 ms)."""
+
+    def __init__(self, A):
+        A = A.tocsr()
+        A.eliminate_zeros()          # entries the modes' selectors set to 0
+        d = A.diagonal()
+        self.single = (np.diff(A.indptr) == 1) & (d != 0)
+        self.keep = ~self.single
+        self.d = d[self.single]
+        rows = A[self.keep]
+        self.A_ks = rows[:, self.single]
+        self.A_kk = rows[:, self.keep].tocsc()
+        try:
+            self.lu = spla.splu(self.A_kk)
+        except RuntimeError:           # exactly singular: redundant contacts
+            self.lu = None
+
+    def solve(self, B: np.ndarray) -> np.ndarray:
+        """``R_Z⁻¹ B`` for a vector or the columns of a matrix; where ``R_Z`` is singular
+        (redundant sticking contacts: a box standing on two or more corners, whose impulses
+        are a family — the stepper takes its least-norm member), the least-norm solution:
+        ``x⁺`` and its Jacobians do not depend on how the family's impulses are split."""
+        X = np.empty(B.shape)
+        X_s = B[self.single] / (self.d if B.ndim == 1 else self.d[:, None])
+        B_k = B[self.keep] - self.A_ks @ X_s
+        X[self.single] = X_s
+        X_k = None
+        if self.lu is not None:
+            X_k = self.lu.solve(B_k) if B.ndim == 1 else _solve_columns(self.lu, B_k)
+            scale = 1 + np.max(np.abs(B_k), initial=0.0)
+            if not (np.all(np.isfinite(X_k)) and np.max(np.abs(self.A_kk @ X_k - B_k), initial=0.0) <= 1e-9 * scale):
+                self.lu = X_k = None
+        if X_k is None:
+            X_k = np.linalg.lstsq(self.A_kk.toarray(), B_k, rcond=LSTSQ_RCOND)[0]
+        X[self.keep] = X_k
+        return X
