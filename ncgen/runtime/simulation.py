@@ -166,11 +166,11 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
     """
     opts = SimulationOptions.resolve(options, **shortcuts)
     method, why_not = opts.method, None
-    if model.rolling and method not in ("auto", "rolling"):
+    if model.rolling and method not in ("auto", "rolling", "idas"):
         raise NcgenError(f"method={method!r}: model {model.name!r} has rolling elements "
                          f"({', '.join(e.name for e in model.rolling)}), whose velocity constraints only "
-                         "method='rolling' keeps (the default for it)")
-    if model.rolling:
+                         "method='rolling' (the default for it) and method='idas' keep")
+    if model.rolling and method == "auto":
         method, why_not = "rolling", "the model has rolling elements (method='rolling')"
     elif method == "auto":                 # the joint loop is compiled: backend="vm" asks for no compiling
         why_not = "backend='vm' compiles nothing" if opts.backend == "vm" else joint_space_applies(model)
