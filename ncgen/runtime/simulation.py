@@ -166,10 +166,10 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
     """
     opts = SimulationOptions.resolve(options, **shortcuts)
     method, why_not = opts.method, None
-    if model.rolling and method not in ("auto", "rolling", "idas"):
+    if model.rolling and method not in ("auto", "rolling", "idas", "stepper"):
         raise NcgenError(f"method={method!r}: model {model.name!r} has rolling elements "
                          f"({', '.join(e.name for e in model.rolling)}), whose velocity constraints only "
-                         "method='rolling' (the default for it) and method='idas' keep")
+                         "method='rolling' (the default for it), 'idas' and 'stepper' keep")
     if model.rolling and method == "auto":
         method, why_not = "rolling", "the model has rolling elements (method='rolling')"
     elif method == "auto":                 # the joint loop is compiled: backend="vm" asks for no compiling
