@@ -132,11 +132,13 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
       with one IDAS call per grid interval and the state projected after each.  ``False``:
       IDAS alone.
     * ``method="rolling"``: the method of a model with rolling elements (``model.rolling``:
-      ``System.add_rolling``, TOML ``[[rolling]]``), chosen by ``"auto"`` and the only one
-      that takes it: explicit Runge–Kutta steps (``integrator="dopri5"``, default, with
+      ``System.add_rolling``, TOML ``[[rolling]]``), chosen by ``"auto"`` (``"idas"``:
+      :mod:`ncgen.runtime.rolling_idas`, and ``"stepper"``: RATTLE with velocity
+      constraints, :mod:`ncgen.runtime.rolling_rattle`, take it too): explicit Runge–Kutta
+      steps (``integrator="dopri5"``, default, with
       ``rtol``/``atol``, or ``"rk4"`` with ``substeps``) each projected onto the holonomic
       and the velocity constraints (:mod:`ncgen.runtime.rolling_integrator`, docs/rolling.md);
-      no inputs or parameter values other than the model's yet.
+      no feedback or controllers.
     * ``method="stepper"``: the compiled fixed-step stepper (generated C, Newton loop
       included; :mod:`ncgen.runtime.stepper`): ``scheme="auto"`` (default) Suzuki's
       fourth-order composition of five RATTLE steps per step (``"rattle4"``), RATTLE alone
