@@ -6,12 +6,12 @@ From ``(q, v)`` at ``t`` over a step ``h`` (s), with ``Φ̂`` the holonomic rows
 constraints and the elements' heights), ``Â = [∂Φ̂/∂q; B]`` all velocity rows, ``ĉ(q, t)``
 their right side (zero but on a moving plane) and ``F(t, q, v, u, p)`` the applied force:
 
-1. a half kick and a drift, ``M (v½ − v) = h/2 (F(t, q, v) − Φ̂_q(q)ᵀ λ − B(q)ᵀ μ)``,
-   ``q⁺ = q + h v½``, ``Φ̂(q⁺) = 0``: unknowns ``(v½, λ)``; ``μ`` is the nonholonomic rows'
+1. a half kick and a drift, ``M (v½ − v) = h/2 (F(t, q, v) − Φ̂_q(q, t)ᵀ λ − B(q)ᵀ μ)``,
+   ``q⁺ = q + h v½``, ``Φ̂(q⁺, t + h) = 0`` (a drive's rows at the step's end): unknowns ``(v½, λ)``; ``μ`` is the nonholonomic rows'
    multiplier of the KKT system at ``(q, v)`` (the exact constraint force at the step's
    start, given);
 2. a half kick ending on both constraint levels, ``M (v⁺ − v½) = h/2 (F(t + h, q⁺, v⁺) −
-   Â(q⁺)ᵀ ν)``, ``Â(q⁺) v⁺ = ĉ(q⁺, t + h)``: unknowns ``(v⁺, ν)``.
+   Â(q⁺, t + h)ᵀ ν)``, ``Â(q⁺, t + h) v⁺ = ĉ(q⁺, t + h)``: unknowns ``(v⁺, ν)``.
 
 On holonomic rows alone this is RATTLE; the nonholonomic force is taken by the trapezoidal
 rule between the exact one at the start and the implicit one at the end, so the scheme is of
@@ -30,7 +30,7 @@ def rattle_functions(system) -> dict[str, ca.Function]:
     ``drift(y, q, v, mu, t, h, u, p) -> (r, J)``: ``y = [v½; λ]``, residual
     ``r = [M (v½ − v) − h/2 (F − Φ̂_qᵀ λ − Bᵀ μ); Φ̂(q + h v½)]`` and ``J = ∂r/∂y``;
     ``kick(y, q, vh, t, h, u, p) -> (r, J)``: ``y = [v⁺; ν]`` at ``q = q⁺``,
-    ``r = [M (v⁺ − v½) − h/2 (F(t + h, q, v⁺) − Âᵀ ν); Â v⁺ − ĉ(q, t + h)]``."""
+    ``r = [M (v⁺ − v½) − h/2 (F(t + h, q, v⁺) − Â(q, t + h)ᵀ ν); Â(q, t + h) v⁺ − ĉ(q, t + h)]``."""
     model, nq = system.model, system.nq
     nh, nn = system.n_holonomic, system.n_nonholonomic
     M = ca.DM(model.M)
@@ -39,15 +39,15 @@ def rattle_functions(system) -> dict[str, ca.Function]:
     t, h = ca.SX.sym("t"), ca.SX.sym("h")
     u, p = ca.SX.sym("u", model.nu), ca.SX.sym("p", len(model.p0))
     mu = ca.SX.sym("mu", nn)
-    A = system.A(q)
+    A, A_end = system.A_at(q, t), system.A_at(q, t + h)
     y1 = ca.SX.sym("y", nq + nh)
     v_half, lam = y1[:nq], y1[nq:]
     r1 = ca.vertcat(ca.mtimes(M, v_half - v) - h / 2 * (F(t, q, v, u, p) - ca.mtimes(A.T, ca.vertcat(lam, mu))),
-                    system.phi(q + h * v_half))
+                    system.phi_at(q + h * v_half, t + h))
     y2 = ca.SX.sym("y", nq + nh + nn)
     v_end, nu_ = y2[:nq], y2[nq:]
-    r2 = ca.vertcat(ca.mtimes(M, v_end - vh) - h / 2 * (F(t + h, q, v_end, u, p) - ca.mtimes(A.T, nu_)),
-                    ca.mtimes(A, v_end) - system.rate(q, t + h))
+    r2 = ca.vertcat(ca.mtimes(M, v_end - vh) - h / 2 * (F(t + h, q, v_end, u, p) - ca.mtimes(A_end.T, nu_)),
+                    ca.mtimes(A_end, v_end) - system.rate(q, t + h))
     return {"drift": ca.Function("rolling_rattle_drift", [y1, q, v, mu, t, h, u, p], [r1, ca.jacobian(r1, y1)],
                                  ["y", "q", "v", "mu", "t", "h", "u", "p"], ["r", "J"]),
             "kick": ca.Function("rolling_rattle_kick", [y2, q, vh, t, h, u, p], [r2, ca.jacobian(r2, y2)],

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import inspect
 
+from ncgen.assembly.nonholonomic import rolling_system
 from ncgen.errors import NcgenError
 from ncgen.interrupts import raise_if_interrupted, sticky_interrupt
 from ncgen.model.controllers import Controller
@@ -132,7 +133,8 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
       with one IDAS call per grid interval and the state projected after each.  ``False``:
       IDAS alone.
     * ``method="rolling"``: the method of a model with rolling elements (``model.rolling``:
-      ``System.add_rolling``, TOML ``[[rolling]]``), chosen by ``"auto"`` (``"idas"``:
+      ``System.add_rolling``, TOML ``[[rolling]]``), chosen by ``"auto"`` (``"idas"`` for a
+      model with drives as well, which ``"rolling"`` refuses; ``"idas"``:
       :mod:`ncgen.runtime.rolling_idas`, and ``"stepper"``: RATTLE with velocity
       constraints, :mod:`ncgen.runtime.rolling_rattle`, take it too): explicit Runge–Kutta
       steps (``integrator="dopri5"``, default, with
@@ -173,7 +175,10 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
                          f"({', '.join(e.name for e in model.rolling)}), whose velocity constraints only "
                          "method='rolling' (the default for it), 'idas' and 'stepper' keep")
     if model.rolling and method == "auto":
-        method, why_not = "rolling", "the model has rolling elements (method='rolling')"
+        if rolling_system(model).driven:
+            method, why_not = "idas", "the model has rolling elements and drives (method='idas')"
+        else:
+            method, why_not = "rolling", "the model has rolling elements (method='rolling')"
     elif method == "auto":                 # the joint loop is compiled: backend="vm" asks for no compiling
         why_not = "backend='vm' compiles nothing" if opts.backend == "vm" else joint_space_applies(model)
         method = "joint" if why_not is None else "idas"
