@@ -131,6 +131,8 @@ def test_refusals_are_named(model):
     with pytest.raises(NcgenError, match="method='idas': model 'rolling_disc' has rolling elements: "
                                          "joint_dynamics=True is not taken"):
         nc.simulate(model, 0.1, 0.05, method="idas", joint_dynamics=True)
+    with pytest.raises(NcgenError, match="backend='compiled' is not taken"):
+        nc.simulate(model, 0.1, 0.05, method="idas", backend="compiled")
     with pytest.raises(NcgenError, match="project=True is not taken"):
         nc.simulate(model, 0.1, 0.05, method="idas", project=True)
     with pytest.raises(NcgenError, match="feedback and controllers are not taken"):

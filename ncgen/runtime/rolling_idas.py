@@ -19,7 +19,8 @@ over 2 s with 200 restarts), so the projection is of the outputs only.
 
 Taken: open-loop inputs (``hold``), parameter values in the forces, forces of time, planes
 moving along themselves.  Not taken (refused by name): feedback and compiled controllers,
-``joint_dynamics``, other parameter values in the model's constraints.
+``joint_dynamics``, ``project=True``, ``backend="compiled"`` (the DAE runs on CasADi's virtual
+machine, ``info["backend"] = "vm"``), other parameter values in the model's constraints.
 """
 from __future__ import annotations
 
@@ -47,6 +48,9 @@ def check_rolling_idas(model, opts: SimulationOptions) -> None:
     if opts.joint_dynamics:
         raise NcgenError(f"method='idas': model {model.name!r} has rolling elements: joint_dynamics=True is not "
                          "taken (the joints' damping, friction and limits are not in the rolling equations)")
+    if opts.backend == "compiled":
+        raise NcgenError(f"method='idas': model {model.name!r} has rolling elements: backend='compiled' is not "
+                         "taken (the rolling DAE runs on CasADi's virtual machine); give backend='vm' or 'auto'")
     if opts.project is True:
         raise NcgenError(f"method='idas': model {model.name!r} has rolling elements: project=True is not taken "
                          "(its outputs are always projected onto both constraint levels); give project='auto'")

@@ -7,7 +7,9 @@ included; order 2), Python-driven: each step is two Newton solves on CasADi func
 
 ``substeps`` steps of ``dt / substeps`` per output interval; ``scheme`` ``"auto"`` or
 ``"rattle"`` (the fourth-order composition is not built on this step); no error control
-(``rtol``), no compiled step, no feedback or compiled controller (refused by name).  Inputs
+(``rtol``), no compiled step, no feedback or compiled controller (refused by name); the
+compiled stepper's shadow-run error estimate and checks (``estimate``, ``check``), step
+halving (``max_halvings``) and ``kernels`` do not apply and are ignored.  Inputs
 are held as the run's samples say (``"zoh"``: the sample of the step's interval; ``"linear"``:
 interpolated at the step's start and end).  ``info["stats"]`` counts steps and Newton
 iterations; ``lam`` holds the multipliers of the last step's end kick (per output time; at
