@@ -108,8 +108,7 @@ def simulate_rolling_idas(model, run: Run, opts: SimulationOptions) -> Trajector
         bar.close()
     X, tk = X[:k + 1], t[:k + 1]
     U = run.U[:k + 1]
-    lam = np.array([multipliers(ti, x, runner._input(columns[:, min(i, n_int - 1)], ti))[nq:]
-                    for i, (ti, x) in enumerate(zip(tk, X))])
+    lam = np.array([multipliers(ti, x, U[i])[nq:] for i, (ti, x) in enumerate(zip(tk, X))])
     stats = dict(runner.stats, drift=drift)
     info = {"method": "idas", "backend": "vm", "rtol": rtol, "atol": atol, "hold": opts.hold, "stats": stats,
             "rolling_names": [e.name for e in model.rolling], "auto": run.why_not,
