@@ -68,6 +68,9 @@ def linearize_steady(system, q0, v0, K_spin, coordinates, tol: float = 1e-8) -> 
     through ``(q0, v0)``, whose spins have the generator ``K_spin`` (nq × nq).  Raises when
     the state is off the constraints or not a steady motion (beyond ``tol``, relative) or the
     coordinates' equations are not closed, or an element's plane moves."""
+    if getattr(system, "driven", False):
+        raise NcgenError("linearize_steady: the model has drives (time-dependent constraints); steady motions "
+                         "are taken about scleronomic models only")
     if getattr(system, "rheonomic", False):
         raise NcgenError("linearize_steady: the system has elements on a moving plane (plane_velocity); steady "
                          "motions are linearised on a plane at rest only")

@@ -20,7 +20,8 @@ moving plane, whose contact point moves with the plane: ``c = w(t)``, the plane'
 stabilisation terms: exact on the constraint manifold).  ``f`` is an extra generalised
 force (N in the natural coordinates' sense: its power is ``fᵀ v``).  The constraint forces
 ``−Âᵀλ`` of a moving plane do work, power ``−λᵀ ĉ`` (W): ``dE/dt = vᵀ(F + f + ∇V) − λᵀ ĉ``.
-The model's own constraints must not depend on time (no drives).
+The model's own constraints may depend on time (drives): ``Φ̂(q, t)``, and their rows of ``ĉ``
+are ``−∂Φ̂/∂t``; only IDAS and the RATTLE stepper run such a model (``driven``).
 """
 from __future__ import annotations
 
@@ -47,9 +48,11 @@ class RollingSystem:
     """A model with nonholonomic elements: the CasADi functions of all its constraints and
     its accelerations.
 
-    ``phi(q)``: holonomic residuals (model's, then the elements' heights); ``B(q)``:
+    ``phi(q)``: holonomic residuals (model's, then the elements' heights; ``phi_at(q, t)``
+    and ``A_at(q, t)`` at the time ``t``, which a driven model's need); ``B(q)``:
     the nonholonomic rows (2 per disc or ball, 1 per knife edge); ``A(q)``: ``[∂phi/∂q; B]``; ``gamma(q, v)``;
-    ``rate(q, t)``: ``ĉ`` (zeros for the holonomic rows); ``accel(q, v, f) -> (a, lam)``, on a
+    ``rate(q, t)``: ``ĉ`` (``−∂Φ̂/∂t`` for the holonomic rows: zeros without drives);
+    ``gamma_t(q, v, t) = −∂(Â v − ĉ)/∂q v + ∂ĉ/∂t − ∂Â/∂t v``; ``accel(q, v, f) -> (a, lam)``, on a
     plane at rest, and ``accel_t(q, v, f, t)``, any plane (``lam`` by ``row_names``: the force of a height row on
     the body is ``−λ e_z`` at the contact, N, so the normal force is ``−λ``; of the ``.x``/``.y``
     rows ``−λ e_x``/``−λ e_y`` at the contact, the friction force); ``tangent(q, v)``: the Jacobian of the state constraints
@@ -77,9 +80,12 @@ class RollingSystem:
         q, v = ca.SX.sym("q", nq), ca.SX.sym("v", nq)
         t0, u0, p0 = 0.0, ca.DM.zeros(model.nu), ca.DM(model.p0)
         t = ca.SX.sym("t")
-        if ca.depends_on(model.functions["phi"](t, q, p0), t):
-            raise ModelError(f"RollingSystem: model {model.name!r} has time-dependent constraints "
-                             "(drives); nonholonomic elements take scleronomic models only")
+        phi_model = model.functions["phi"](t, q, p0)
+        #: Whether the model's own constraints depend on time (drives): then ``phi``, ``A``,
+        #: ``gamma``, ``accel``, ``accel_t``, ``tangent`` and the compiled steps, written at
+        #: ``t = 0``, do not describe the motion, and only ``phi_at``, ``A_at``, ``rate`` and
+        #: ``gamma_t`` (IDAS, the RATTLE stepper) do.
+        self.driven = bool(ca.depends_on(phi_model, t))
         R_all, p_all = model.functions["poses"](q)
         heights, rows, rates, height_names, row_names = [], [], [], [], []
         for element in elements:
@@ -95,15 +101,19 @@ class RollingSystem:
         #: then the elements' heights and their nonholonomic rows (``<element>.x``/``.y``: the
         #: contact point's material velocity along the plane; ``.lateral``: across a blade).
         self.row_names = list(model.constraint_names) + height_names + row_names
-        phi = ca.vertcat(model.functions["phi"](t0, q, p0), *heights)
+        phi_t = ca.vertcat(phi_model, *heights)
+        phi = ca.substitute(phi_t, t, t0)
         B = ca.vertcat(*rows) if rows else ca.SX(0, nq)
         A = ca.vertcat(ca.jacobian(phi, q), B)
+        A_t = ca.vertcat(ca.jacobian(phi_t, q), B)
         Av = ca.mtimes(A, v)
         gamma = -ca.jtimes(Av, q, v)
-        c = ca.vertcat(ca.SX.zeros(phi.shape[0]), *rates)
+        # ĉ: −∂Φ̂/∂t for the holonomic rows (drives), the planes' rates for the rolling rows
+        c = ca.vertcat(-ca.jacobian(phi_t, t), *rates)
         #: Whether an element's plane moves (``ĉ`` depends on time or is not zero).
         self.rheonomic = any(e.rheonomic for e in elements)
-        gamma_t = gamma + ca.jtimes(c, q, v) + ca.jacobian(c, t)
+        level = ca.mtimes(A_t, v) - c
+        gamma_t = -ca.jtimes(level, q, v) - ca.jacobian(level, t)
         F = model.functions["F"](t0, q, v, u0, p0)
         #: Whether the model's forces depend on time, and its constraints on the parameters
         #: (the equations here hold ``t = 0``, ``u = 0`` and ``model.p0``).
@@ -113,6 +123,8 @@ class RollingSystem:
                                                                                   p_sym))
         self.n_holonomic, self.n_nonholonomic = int(phi.shape[0]), int(B.shape[0])
         self.phi = ca.Function("phi", [q], [phi], ["q"], ["phi"])
+        self.phi_at = ca.Function("phi_at", [q, t], [phi_t], ["q", "t"], ["phi"])
+        self.A_at = ca.Function("A_at", [q, t], [A_t], ["q", "t"], ["A"])
         self.B = ca.Function("B", [q], [B], ["q"], ["B"])
         self.A = ca.Function("A", [q], [A], ["q"], ["A"])
         self.gamma = ca.Function("gamma", [q, v], [gamma], ["q", "v"], ["gamma"])
@@ -149,8 +161,8 @@ class RollingSystem:
     def residuals(self, q, v, t: float = 0.0) -> tuple[float, float]:
         """``(|phi(q)|∞, |A(q) v − ĉ(q, t)|∞)``: holonomic and velocity-level constraint
         residuals at time ``t`` (s)."""
-        level = np.asarray(self.A(q)) @ np.asarray(v, float) - np.asarray(self.rate(q, t)).ravel()
-        return (float(np.max(np.abs(np.asarray(self.phi(q))), initial=0.0)),
+        level = np.asarray(self.A_at(q, t)) @ np.asarray(v, float) - np.asarray(self.rate(q, t)).ravel()
+        return (float(np.max(np.abs(np.asarray(self.phi_at(q, t))), initial=0.0)),
                 float(np.max(np.abs(level), initial=0.0)))
 
 

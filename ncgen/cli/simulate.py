@@ -30,7 +30,8 @@ def _simulate_arguments(p: argparse.ArgumentParser) -> None:
                         "--integrator rk4 with --substeps), idas (variable-step BDF with error control) or "
                         "stepper (the compiled constraint-preserving stepper: fixed steps DT/N, see "
                         "--substeps, or error-controlled with --rtol) or rolling (models with [[rolling]] "
-                        "elements, their only method and the auto choice: projected Runge-Kutta, --integrator)")
+                        "elements, the auto choice for them without drives: projected Runge-Kutta, --integrator; "
+                        "idas and stepper (RATTLE with velocity constraints, fixed steps) take them too)")
     p.add_argument("--integrator", default=None, choices=("dopri5", "rk4"),
                    help="joint and rolling methods: dopri5 (error-controlled, default) or rk4 (--substeps fixed "
                         "steps per DT)")

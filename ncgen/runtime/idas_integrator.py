@@ -26,6 +26,7 @@ from ncgen.runtime.inputs import hold_columns
 from ncgen.runtime.integrator import Run, refuse_integrator
 from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.progress import Progress
+from ncgen.runtime.rolling_idas import check_rolling_idas, simulate_rolling_idas
 from ncgen.runtime.rattle_bridge import RattleFailure, compiled_interval, rattle_interval
 from ncgen.runtime.run_start import failed_at_start, initial_multipliers, natural_feedback
 from ncgen.runtime.stepper_checks import is_conservative
@@ -104,9 +105,13 @@ class IdasIntegrator:
             raise NcgenError(f"simulate: model {model.name!r} was built with {built}, which only the compiled "
                              f"stepper handles: use {stepper}, or {smooth} (compliant contacts) for IDAS")
         refuse_integrator(opts, self.METHOD)
+        if model.rolling:
+            check_rolling_idas(model, opts)
         self.model, self.opts = model, opts
 
     def run(self, run: Run) -> Trajectory:
+        if self.model.rolling:
+            return simulate_rolling_idas(self.model, run, self.opts)
         return _simulate_idas(self.model, run.t, run.U, run.columns, run.p, run.q, run.v, self.opts,
                               controller=run.controller, feedback=run.feedback, why_not=run.why_not)
 

@@ -64,13 +64,13 @@ def project(system, q, v, tol: float = 1e-14, max_iter: int = 20,
     q = np.array(q, float)
     nh = system.n_holonomic
     bound = tol * system_size(q)
-    q, _, res = newton(lambda x: np.asarray(system.phi(x), float).ravel(),
-                       lambda x: np.asarray(system.A(x), float)[:nh], q, np.arange(q.size),
+    q, _, res = newton(lambda x: np.asarray(system.phi_at(x, t), float).ravel(),
+                       lambda x: np.asarray(system.A_at(x, t), float)[:nh], q, np.arange(q.size),
                        tol=bound, max_iter=max_iter)
     if not res <= bound:
         raise NcgenError(f"project: Newton's method did not bring |Φ| below {tol:g} in {max_iter} "
                          f"iterations (|Φ| = {res:.3g}); the state is far from the constraints")
-    A = np.asarray(system.A(q))
+    A = np.asarray(system.A_at(q, t))
     v = np.asarray(v, float)
     v = v - np.linalg.lstsq(A, A @ v - np.asarray(system.rate(q, t)).ravel(), rcond=None)[0]
     return q, v
@@ -241,6 +241,9 @@ class RollingIntegrator:
                              "and limits are not in the rolling equations)")
         self.model, self.opts = model, opts
         self.system = rolling_system(model)
+        if self.system.driven:
+            raise NcgenError(f"method='rolling': model {model.name!r} has drives (time-dependent constraints), "
+                             "which the rolling integrator does not take; use method='idas' or 'stepper'")
 
     def applied_force(self, run: Run):
         """``force(t, q, v, t_step)`` for :func:`integrate`: the model's applied forces at the

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import inspect
 
+from ncgen.assembly.nonholonomic import rolling_system
 from ncgen.errors import NcgenError
 from ncgen.interrupts import raise_if_interrupted, sticky_interrupt
 from ncgen.model.controllers import Controller
@@ -132,11 +133,14 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
       with one IDAS call per grid interval and the state projected after each.  ``False``:
       IDAS alone.
     * ``method="rolling"``: the method of a model with rolling elements (``model.rolling``:
-      ``System.add_rolling``, TOML ``[[rolling]]``), chosen by ``"auto"`` and the only one
-      that takes it: explicit Runge–Kutta steps (``integrator="dopri5"``, default, with
+      ``System.add_rolling``, TOML ``[[rolling]]``), chosen by ``"auto"`` (``"idas"`` for a
+      model with drives as well, which ``"rolling"`` refuses; ``"idas"``:
+      :mod:`ncgen.runtime.rolling_idas`, and ``"stepper"``: RATTLE with velocity
+      constraints, :mod:`ncgen.runtime.rolling_rattle`, take it too): explicit Runge–Kutta
+      steps (``integrator="dopri5"``, default, with
       ``rtol``/``atol``, or ``"rk4"`` with ``substeps``) each projected onto the holonomic
       and the velocity constraints (:mod:`ncgen.runtime.rolling_integrator`, docs/rolling.md);
-      no inputs or parameter values other than the model's yet.
+      no feedback or controllers.
     * ``method="stepper"``: the compiled fixed-step stepper (generated C, Newton loop
       included; :mod:`ncgen.runtime.stepper`): ``scheme="auto"`` (default) Suzuki's
       fourth-order composition of five RATTLE steps per step (``"rattle4"``), RATTLE alone
@@ -166,12 +170,15 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
     """
     opts = SimulationOptions.resolve(options, **shortcuts)
     method, why_not = opts.method, None
-    if model.rolling and method not in ("auto", "rolling"):
+    if model.rolling and method not in ("auto", "rolling", "idas", "stepper"):
         raise NcgenError(f"method={method!r}: model {model.name!r} has rolling elements "
                          f"({', '.join(e.name for e in model.rolling)}), whose velocity constraints only "
-                         "method='rolling' keeps (the default for it)")
-    if model.rolling:
-        method, why_not = "rolling", "the model has rolling elements (method='rolling')"
+                         "method='rolling' (the default for it), 'idas' and 'stepper' keep")
+    if model.rolling and method == "auto":
+        if rolling_system(model).driven:
+            method, why_not = "idas", "the model has rolling elements and drives (method='idas')"
+        else:
+            method, why_not = "rolling", "the model has rolling elements (method='rolling')"
     elif method == "auto":                 # the joint loop is compiled: backend="vm" asks for no compiling
         why_not = "backend='vm' compiles nothing" if opts.backend == "vm" else joint_space_applies(model)
         method = "joint" if why_not is None else "idas"

@@ -12,6 +12,7 @@ from ncgen.errors import CompilerNotFound, NcgenError, SimulationError, option
 from ncgen.model.data import model_data
 from ncgen.runtime.feedback import FeedbackFailed, with_partial
 from ncgen.runtime.integrator import Run, refuse_integrator
+from ncgen.runtime.rolling_rattle import check_rolling_stepper, simulate_rolling_rattle
 from ncgen.runtime.run_start import failed_at_start
 from ncgen.runtime.options import SimulationOptions
 from ncgen.codegen.stepper_package import CONTACT_STATS, STATS, WORK_PARTS
@@ -37,6 +38,8 @@ class StepperIntegrator:
         refuse_integrator(opts, self.METHOD)
         if opts.joint_dynamics:
             raise NcgenError(NO_CONTROLLER)
+        if model.rolling:
+            check_rolling_stepper(model, opts)
         self.model, self.opts = model, opts
 
     def _load(self) -> None:
@@ -60,6 +63,8 @@ class StepperIntegrator:
     def run(self, run: Run) -> Trajectory:
         if run.controller is not None:
             raise NcgenError(NO_CONTROLLER)
+        if self.model.rolling:
+            return simulate_rolling_rattle(self.model, run, self.opts)
         if run.feedback is not None:
             return _stepwise(self.model, run, self.opts)
         lam = self._table_multipliers(run)
