@@ -68,7 +68,8 @@ STEPPER_FIELDS = (
     *(("const int *", f) for f in ("a_colind", "a_row", "m_colind", "m_row")),
     ("const double *", "m_val"), ("const double *", "f_gravity"), ("double", "v_gravity"),
     ("const int *", "spr_feat"), ("const double *", "spr_par"), ("const int *", "spr_kpos_ptr"),
-    ("const int *", "spr_kpos"), ("const int *", "marker_feat"),
+    ("const int *", "spr_kpos"), ("const double *", "spr_kcoef"), ("const int *", "spr_kj"),
+    ("const int *", "marker_feat"),
     ("int", "nnz_k"), ("int", "nnz_v"), ("int", "nnz_r"),
     *(("const int *", f) for f in ("k_mpos", "k_apos", "k_atpos")),
     ("const int *", "bu_colind"), ("const int *", "bu_row"), ("const double *", "bu_val"),
@@ -77,6 +78,7 @@ STEPPER_FIELDS = (
     ("const double *", "f_const"), ("int", "n_ff"),
     *(("const int *", f) for f in ("ff_kind", "ff_feat_ptr", "ff_feat", "ff_par_ptr")),
     ("const double *", "ff_par"), ("const int *", "ff_kpos_ptr"), ("const int *", "ff_kpos"),
+    ("const double *", "ff_kcoef"), ("const int *", "ff_kj"),
     ("int", "n_torque"), ("const int *", "tq_member"), ("const int *", "tq_c_ptr"),
     ("const double *", "tq_c"), ("const double *", "tq_val"),
 )

@@ -55,8 +55,9 @@ static int ncgen_lu_factor(const ncgen_lu_pattern *P, const double *K, double *l
       u = x[k];
       x[k] = 0;
       up[e] = u;
+      if (u == 0) continue;                                   /* a zero in the pattern: nothing to subtract */
       for (i = P->l_colind[k]; i < P->l_colind[k + 1]; ++i) x[P->l_row[i]] -= lo[i] * u;
-      ref += fabs(lo[P->u_lpos[e]] * up[e]);
+      ref += fabs(lo[P->u_lpos[e]] * u);
     }
     piv = x[c];
     x[c] = 0;
