@@ -88,4 +88,24 @@ static void ncgen_lu_solve(const ncgen_lu_pattern *P, const double *lo, const do
   for (c = 0; c < n; ++c) x[P->p[c]] = y[c];
 }
 
+/* x = K⁻ᵀ b from the same factors: K(p, p)ᵀ = (D U)ᵀ Lᵀ, so (D U)ᵀ z = b(p) forwards (row c
+ * of (D U)ᵀ is column c of D U), then Lᵀ x(p) = z backwards (row c of Lᵀ is column c of L);
+ * y: n doubles of scratch.  Inline: only the step Jacobians use it. */
+static inline void ncgen_lu_solve_transposed(const ncgen_lu_pattern *P, const double *lo, const double *up,
+                                             const double *dinv, const double *b, double *x, double *y) {
+  int c, i, n = P->n;
+  for (i = 0; i < n; ++i) y[P->pinv[i]] = b[i];
+  for (c = 0; c < n; ++c) {
+    double s = y[c];
+    for (i = P->u_colind[c]; i < P->u_colind[c + 1]; ++i) s -= up[i] * y[P->u_row[i]];
+    y[c] = s * dinv[c];
+  }
+  for (c = n - 1; c >= 0; --c) {
+    double s = y[c];
+    for (i = P->l_colind[c]; i < P->l_colind[c + 1]; ++i) s -= lo[i] * y[P->l_row[i]];
+    y[c] = s;
+  }
+  for (c = 0; c < n; ++c) x[P->p[c]] = y[c];
+}
+
 #endif
