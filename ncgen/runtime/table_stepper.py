@@ -14,8 +14,9 @@ model is covered (:func:`~ncgen.codegen.stepper_tables.uncovered_elements` and
 :data:`AUTO_FLAT_BELOW`) whose flat package this process has already compiled or loaded runs
 flat: it costs no compile, and there the flat step can still be the faster
 (benchmarks/table_stepper.py, CPU seconds per step of the tables over the flat package's, with
-the tables' sparse LU: 0.84–0.95 for a 10-bar chain, nq + nc = 40, but 1.25–1.44 for that
-chain with a cable, a spring-damper, a point force and a torque per bar; 0.5–0.7 at 40 bars).
+the tables' sparse LU: 0.84–0.95 for a 10-bar chain, nq + nc = 40, but 0.96–1.28 (min) and
+1.0–1.23 (median) for that chain with a cable, a spring-damper, a point force and a torque per
+bar, measured at load 8–14; 0.5–0.7 at 40 bars).
 "auto" never compiles a covered model: the first compiled step of a new model of the shipped
 kinds needs no C compiler.
 """
