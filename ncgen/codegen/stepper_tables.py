@@ -283,18 +283,22 @@ def stepper_tables(model) -> StepperTables:
     a_cols = np.repeat(np.arange(nq), np.diff(T.a_indptr))
     rows = [m_rows, nq + T.a_indices, a_cols]
     cols = [m_cols, a_cols, nq + T.a_indices]
-    counts = []
+    counts, spr_coef, spr_j = [], [], []
     for s in range(ns):
-        r_s, c_s = _velocity_entries(a, spr_feat[2 * s:2 * s + 2])
+        r_s, c_s, g_s, j_s = _velocity_entries(a, spr_feat[2 * s:2 * s + 2], T.dim, spring=True)
         rows.append(r_s)
         cols.append(c_s)
         counts.append(len(r_s))
-    ff_counts, ff_ptr = [], _ptr([len(e["vectors"]) for e in elements["ff"]])
+        spr_coef.append(g_s)
+        spr_j.append(j_s)
+    ff_counts, ff_coef, ff_j, ff_ptr = [], [], [], _ptr([len(e["vectors"]) for e in elements["ff"]])
     for k in range(len(elements["ff"])):
-        r_s, c_s = _velocity_entries(a, ff_feat[ff_ptr[k]:ff_ptr[k + 1]])
+        r_s, c_s, g_s, j_s = _velocity_entries(a, ff_feat[ff_ptr[k]:ff_ptr[k + 1]], T.dim, spring=False)
         rows.append(r_s)
         cols.append(c_s)
         ff_counts.append(len(r_s))
+        ff_coef.append(g_s)
+        ff_j.append(j_s)
     k_indptr, k_indices, pos = _csc(n, n, np.concatenate(rows), np.concatenate(cols))
     m_nnz, a_nnz = int(m_rows.size), T.a_nnz
     n_spr = m_nnz + 2 * a_nnz + sum(counts)
@@ -308,6 +312,8 @@ def stepper_tables(model) -> StepperTables:
         "spr_feat": _ints(spr_feat),
         "spr_par": _reals([x for s in springs for x in (s.k, s.rest_length, s.damping)]),
         "spr_kpos_ptr": _ptr(counts), "spr_kpos": pos[m_nnz + 2 * a_nnz:n_spr],
+        "spr_kcoef": _reals(np.concatenate(spr_coef) if ns else []),
+        "spr_kj": _ints(np.concatenate(spr_j) if ns else []),
         "marker_feat": _ints(markers),
         "k_mpos": pos[:m_nnz], "k_apos": pos[m_nnz:m_nnz + a_nnz], "k_atpos": pos[m_nnz + a_nnz:m_nnz + 2 * a_nnz],
         "bu_colind": _ptr([len(r) for r in bu_rows]), "bu_row": bu_row, "bu_val": bu_val,
@@ -320,6 +326,7 @@ def stepper_tables(model) -> StepperTables:
         "ff_kind": _ints([e["kind"] for e in ff]), "ff_feat_ptr": ff_ptr, "ff_feat": _ints(ff_feat),
         "ff_par_ptr": _ptr([len(e["par"]) for e in ff]), "ff_par": _reals([x for e in ff for x in e["par"]]),
         "ff_kpos_ptr": _ptr(ff_counts), "ff_kpos": pos[n_spr:],
+        "ff_kcoef": _reals(np.concatenate(ff_coef) if ff else []), "ff_kj": _ints(np.concatenate(ff_j) if ff else []),
         "tq_member": _ints([e["member"] for e in tq]), "tq_c_ptr": _ptr([len(e["c"]) for e in tq]),
         "tq_c": _reals([x for e in tq for x in e["c"]]), "tq_val": _reals([x for e in tq for x in e["tau"]]),
         "k_colind": k_indptr, "k_row": k_indices, **qr, **lu,
@@ -332,18 +339,30 @@ def stepper_tables(model) -> StepperTables:
                          int(lu["l_row"].size), m_nnz, mass_is_regular(model))
 
 
-def _velocity_entries(a: dict, feats) -> tuple[np.ndarray, np.ndarray]:
-    """The entries ``(row, column)`` of ``K`` that the velocity derivative of a force on the
-    features ``feats`` adds, in the loops' order (every entry of each feature against every
-    entry of each)."""
+def _velocity_entries(a: dict, feats, dim: int, spring: bool) -> tuple[np.ndarray, ...]:
+    """The products that the velocity derivative of a force on the features ``feats`` adds
+    into ``K``, in the loops' order (every entry ``e`` of each feature ``X`` against every entry
+    ``e2`` of each feature ``Y``): ``(row, column, coefficient, index)``, the product being
+    ``K[col_e, col_e2] += kscale · coefficient · J[index]`` with ``coefficient = s_X G_e G_e2``
+    (``s_X`` the sign of the force on ``X``: −1 on a spring's first end, else +1) and ``index``
+    the entry ``∂g_(X, row_e)/∂ḟ_(Y, row_e2)`` of the kernel's ``J`` (column-major): a spring's
+    ``J = ∂f/∂[r_a; r_b; ṙ_a; ṙ_b]`` (dim × 4 dim), a force element's ``J = ∂g/∂ḟ``
+    (n dim × n dim)."""
     spans = [(a["feat_ptr"][f], a["feat_ptr"][f + 1]) for f in feats]
-    r_s, c_s = [], []
-    for lo, hi in spans:
+    nd = len(feats) * dim
+    r_s, c_s, g_s, j_s = [], [], [], []
+    for X, (lo, hi) in enumerate(spans):
+        sign = (1.0 if X else -1.0) if spring else 1.0
         for e in range(lo, hi):
-            for lo2, hi2 in spans:
-                r_s += [a["feat_col"][e]] * (hi2 - lo2)
-                c_s += list(a["feat_col"][lo2:hi2])
-    return _ints(r_s), _ints(c_s)
+            i = a["feat_row"][e] if spring else X * dim + a["feat_row"][e]
+            for Y, (lo2, hi2) in enumerate(spans):
+                for e2 in range(lo2, hi2):
+                    r_s.append(a["feat_col"][e])
+                    c_s.append(a["feat_col"][e2])
+                    g_s.append(sign * a["feat_coef"][e] * a["feat_coef"][e2])
+                    j_s.append(i + dim * ((2 + Y) * dim + a["feat_row"][e2]) if spring
+                               else i + nd * (Y * dim + a["feat_row"][e2]))
+    return _ints(r_s), _ints(c_s), _reals(g_s), _ints(j_s)
 
 
 def force_elements(model) -> dict:

@@ -14,8 +14,9 @@ model is covered (:func:`~ncgen.codegen.stepper_tables.uncovered_elements` and
 :data:`AUTO_FLAT_BELOW`) whose flat package this process has already compiled or loaded runs
 flat: it costs no compile, and there the flat step can still be the faster
 (benchmarks/table_stepper.py, CPU seconds per step of the tables over the flat package's, with
-the tables' sparse LU: 0.84–0.95 for a 10-bar chain, nq + nc = 40, but 1.25–1.44 for that
-chain with a cable, a spring-damper, a point force and a torque per bar; 0.5–0.7 at 40 bars).
+the tables' sparse LU: 0.84–0.95 for a 10-bar chain, nq + nc = 40, but 0.96–1.28 (min) and
+1.0–1.23 (median) for that chain with a cable, a spring-damper, a point force and a torque per
+bar, measured at load 8–14; 0.5–0.7 at 40 bars).
 "auto" never compiles a covered model: the first compiled step of a new model of the shipped
 kinds needs no C compiler.
 """
@@ -68,7 +69,8 @@ STEPPER_FIELDS = (
     *(("const int *", f) for f in ("a_colind", "a_row", "m_colind", "m_row")),
     ("const double *", "m_val"), ("const double *", "f_gravity"), ("double", "v_gravity"),
     ("const int *", "spr_feat"), ("const double *", "spr_par"), ("const int *", "spr_kpos_ptr"),
-    ("const int *", "spr_kpos"), ("const int *", "marker_feat"),
+    ("const int *", "spr_kpos"), ("const double *", "spr_kcoef"), ("const int *", "spr_kj"),
+    ("const int *", "marker_feat"),
     ("int", "nnz_k"), ("int", "nnz_v"), ("int", "nnz_r"),
     *(("const int *", f) for f in ("k_mpos", "k_apos", "k_atpos")),
     ("const int *", "bu_colind"), ("const int *", "bu_row"), ("const double *", "bu_val"),
@@ -77,6 +79,7 @@ STEPPER_FIELDS = (
     ("const double *", "f_const"), ("int", "n_ff"),
     *(("const int *", f) for f in ("ff_kind", "ff_feat_ptr", "ff_feat", "ff_par_ptr")),
     ("const double *", "ff_par"), ("const int *", "ff_kpos_ptr"), ("const int *", "ff_kpos"),
+    ("const double *", "ff_kcoef"), ("const int *", "ff_kj"),
     ("int", "n_torque"), ("const int *", "tq_member"), ("const int *", "tq_c_ptr"),
     ("const double *", "tq_c"), ("const double *", "tq_val"),
 )

@@ -8,7 +8,8 @@
  * redundant constraint (K singular), a constraint redundant to 1e-14 (ill-conditioned beyond
  * the pivot test; also 1e-6: a pivot cancelling to 1e-12 of its terms), NaN in K; an
  * ill-conditioned but acceptable KKT matrix (constraints 1e-4 apart) still solved to a small
- * backward error.  Built and run by
+ * backward error.  The transposed solve Kᵀ x = b from the same factors, against the
+ * residual of Kᵀ, in each of these.  Built and run by
  * tests/test_stepper_runtime_c.py under AddressSanitizer and UndefinedBehaviorSanitizer. */
 #include "check.h"
 #include "ncgen_sparse_lu.h"
@@ -32,6 +33,13 @@ static double backward_error(const double *K, const double *x, const double *b, 
     if (fabs(b[i]) > bn) bn = fabs(b[i]);
   }
   return r / (kn * xn + bn);
+}
+
+/* Kᵀ (n x n, column-major) of K into Kt. */
+static void transpose(const double *K, double *Kt, int n) {
+  int i, j;
+  for (j = 0; j < n; ++j)
+    for (i = 0; i < n; ++i) Kt[i * n + j] = K[j * n + i];
 }
 
 /* The analysis of the dense pattern (K stored whole, column-major) in the order p. */
@@ -93,7 +101,7 @@ static void kkt(double *K, const double *A1, const double *A2) {
 
 static void test_dense(void) {
   static const int order[3][N] = {{0, 1, 2, 3, 4}, {2, 4, 0, 1, 3}, {1, 0, 2, 3, 4}};
-  double K[N * N], L[NL], U[NL], d[N], x[N], y[N], b[N], s[N] = {0};
+  double K[N * N], Kt[N * N], L[NL], U[NL], d[N], x[N], y[N], b[N], s[N] = {0};
   dense_analysis a;
   int trial, i, j, o;
   for (o = 0; o < 3; ++o) {
@@ -107,6 +115,10 @@ static void test_dense(void) {
       ncgen_lu_solve(&a.P, L, U, d, b, x, y);
       CHECK(backward_error(K, x, b, N) < 1e-15, "order %d, trial %d: backward error %g", o, trial,
             backward_error(K, x, b, N));
+      transpose(K, Kt, N);
+      ncgen_lu_solve_transposed(&a.P, L, U, d, b, x, y);
+      CHECK(backward_error(Kt, x, b, N) < 1e-15, "order %d, trial %d: Kᵀ x = b, backward error %g", o, trial,
+            backward_error(Kt, x, b, N));
     }
   }
 }
@@ -114,7 +126,8 @@ static void test_dense(void) {
 static void test_kkt(void) {
   /* each multiplier (3, 4) after the coordinates 0, 1, 2 its constraint touches */
   static const int safe[N] = {1, 0, 2, 3, 4}, lambda_first[N] = {3, 0, 1, 2, 4};
-  double A1[6] = {1.0, 0.2, -0.5, 1.1, 0.3, 0.7}, A2[6], K[N * N], L[NL], U[NL], d[N], x[N], y[N], s[N] = {0};
+  double A1[6] = {1.0, 0.2, -0.5, 1.1, 0.3, 0.7}, A2[6], K[N * N], Kt[N * N], L[NL], U[NL], d[N], x[N], y[N],
+         s[N] = {0};
   double b[N] = {0.3, -1.2, 0.8, 0.05, -0.4};
   dense_analysis a;
   int i;
@@ -124,6 +137,9 @@ static void test_kkt(void) {
   CHECK(ncgen_lu_factor(&a.P, K, L, U, d, s) == 0, "KKT: factored");
   ncgen_lu_solve(&a.P, L, U, d, b, x, y);
   CHECK(backward_error(K, x, b, N) < 1e-15, "KKT: backward error %g", backward_error(K, x, b, N));
+  transpose(K, Kt, N);                   /* A1 ≠ A2: Kᵀ is another matrix */
+  ncgen_lu_solve_transposed(&a.P, L, U, d, b, x, y);
+  CHECK(backward_error(Kt, x, b, N) < 1e-15, "KKT: Kᵀ x = b, backward error %g", backward_error(Kt, x, b, N));
 
   dense(&a, lambda_first);               /* a multiplier first: its pivot is K's zero diagonal */
   CHECK(ncgen_lu_factor(&a.P, K, L, U, d, s) == 1, "a zero pivot is refused");
@@ -161,7 +177,7 @@ static void test_tridiagonal(void) {
   enum { M = 7, NNZ = 3 * M - 2 };
   int k_colind[M + 1], k_prow[NNZ], p[M], l_colind[M + 1], l_row[M - 1], u_colind[M + 1], u_row[M - 1],
       u_lpos[M - 1], c, i, e = 0;
-  double K[NNZ], L[M - 1], U[M - 1], d[M], x[M], y[M], b[M], s[M] = {0}, dense_K[M * M] = {0};
+  double K[NNZ], L[M - 1], U[M - 1], d[M], x[M], y[M], b[M], s[M] = {0}, dense_K[M * M] = {0}, dense_Kt[M * M];
   ncgen_lu_pattern P;
   for (c = 0; c < M; ++c) {
     k_colind[c] = e;
@@ -191,6 +207,10 @@ static void test_tridiagonal(void) {
   CHECK(all_zero(s, M), "the scratch is left zero");
   ncgen_lu_solve(&P, L, U, d, b, x, y);
   CHECK(backward_error(dense_K, x, b, M) < 1e-15, "tridiagonal: backward error %g", backward_error(dense_K, x, b, M));
+  transpose(dense_K, dense_Kt, M);
+  ncgen_lu_solve_transposed(&P, L, U, d, b, x, y);
+  CHECK(backward_error(dense_Kt, x, b, M) < 1e-15, "tridiagonal: Kᵀ x = b, backward error %g",
+        backward_error(dense_Kt, x, b, M));
 }
 
 int main(void) {

@@ -11,7 +11,8 @@
  * Checked: the input forces against τ ∇θ by central differences of θ; the step of
  * tab_step_jacobians against the stepper's own (stepper_step); ∂x⁺/∂x and ∂x⁺/∂u against
  * central differences of the step, with and without the damper; the polished residual at
- * the rounding floor.  Built and run by tests/test_stepper_runtime_c.py under
+ * the rounding floor; all of it with the stages factored by the sparse QR and by the sparse LU
+ * (its transposed solve in the reverse passes), the two equal to 1e-12.  Built and run by tests/test_stepper_runtime_c.py under
  * AddressSanitizer and UndefinedBehaviorSanitizer. */
 #include "check.h"
 
@@ -145,9 +146,16 @@ static const int k_colind[] = {0, 3, 6, 9}, k_row[] = {0, 1, 2, 0, 1, 2, 0, 1, 2
 static const int v_colind[] = {0, 3, 5, 6}, v_row[] = {0, 1, 2, 1, 2, 2};
 static const int r_colind[] = {0, 1, 3, 6}, r_row[] = {0, 0, 1, 0, 1, 2};
 static const int perm[] = {0, 1, 2};
+/* The LU's analysis of the same K in identity order (the multiplier after both coordinates). */
+static const int l_colind[] = {0, 2, 3, 3}, l_row[] = {1, 2, 2}, u_colind[] = {0, 0, 1, 3}, u_row[] = {0, 0, 1},
+                 u_lpos[] = {0, 1, 2};
+static int with_lu;                /* whether make_tables gives the LU's analysis (else QR only) */
 static const int a_colind[] = {0, 1, 2}, a_row[] = {0, 0}, m_colind[] = {0, 2, 4}, m_row[] = {0, 1, 0, 1};
 static const double m_val[] = {MASS, 0, 0, MASS}, f_gravity[] = {0, -MASS * G};
 static const int spr_feat[] = {2, 0}, spr_kpos_ptr[] = {0, 4}, spr_kpos[] = {0, 3, 1, 4}, marker_feat[] = {0};
+/* the damper's products: J = ∂f/∂[r_a; r_b; ṙ_a; ṙ_b] (2 x 8), ∂f_i/∂ṙ_b,j at i + 2 (6 + j) */
+static const int spr_kj[] = {12, 14, 13, 15};
+static const double spr_kcoef[] = {1, 1, 1, 1};
 static const int k_mpos[] = {0, 1, 3, 4}, k_apos[] = {2, 5}, k_atpos[] = {6, 7};
 
 static ncgen_tables T;
@@ -166,10 +174,13 @@ static void make_tables(double k, double l0, double c, double *par) {
   S.T = &T; S.nu = 0; S.np = 0; S.n_markers = 1; S.n_spring = 1; S.mass_scale = MASS; S.m_nnz = 4;
   S.a_colind = a_colind; S.a_row = a_row; S.m_colind = m_colind; S.m_row = m_row; S.m_val = m_val;
   S.f_gravity = f_gravity; S.v_gravity = 0; S.spr_feat = spr_feat; S.spr_par = par;
-  S.spr_kpos_ptr = spr_kpos_ptr; S.spr_kpos = spr_kpos; S.marker_feat = marker_feat;
+  S.spr_kpos_ptr = spr_kpos_ptr; S.spr_kpos = spr_kpos; S.spr_kcoef = spr_kcoef; S.spr_kj = spr_kj; S.marker_feat = marker_feat;
   S.nnz_k = 9; S.nnz_v = 6; S.nnz_r = 6; S.k_mpos = k_mpos; S.k_apos = k_apos; S.k_atpos = k_atpos;
   S.qr.n = 3; S.qr.k_colind = k_colind; S.qr.k_row = k_row; S.qr.v_colind = v_colind; S.qr.v_row = v_row;
   S.qr.r_colind = r_colind; S.qr.r_row = r_row; S.qr.prinv = perm; S.qr.pc = perm;
+  S.lu.n = with_lu ? 3 : 0; S.lu.nnz_l = 3; S.lu.k_colind = k_colind; S.lu.k_prow = k_row; S.lu.p = perm;
+  S.lu.pinv = perm; S.lu.l_colind = l_colind; S.lu.l_row = l_row; S.lu.u_colind = u_colind; S.lu.u_row = u_row;
+  S.lu.u_lpos = u_lpos;
 }
 
 
@@ -251,10 +262,10 @@ static void one_step(const double *x, const double *u, double h, double *x1, dou
   tab_end();
 }
 
-/* ∂x⁺/∂x and ∂x⁺/∂u against central differences of the step. */
-static void test_jacobians(double c) {
+/* ∂x⁺/∂x and ∂x⁺/∂u against central differences of the step (and into Jx, Ju). */
+static void test_jacobians(double c, double *Jx, double *Ju) {
   double par[3], x[4] = {0.5, -sqrt(L * L - 0.25), 0.9, 0.6}, u[3] = {0.8, -1.3, 0.6}, h = 0.01, e = 1e-6;
-  double x1[4], x1n[4], xs[4], qn[2], vn[2], lam[1], Jx[16], Ju[12], res, res2, worst = 0;
+  double x1[4], x1n[4], xs[4], qn[2], vn[2], lam[1], res, res2, worst = 0;
   step_options o = default_options();
   int i, j, it, status;
   make_tables(30.0, 0.4, c, par);
@@ -295,10 +306,12 @@ static void test_jacobians(double c) {
     }
   }
   CHECK(fabs(Jx[0]) > 0.5 && fabs(Ju[4 * 1 + 2]) > 1e-4, "the Jacobians are not trivial");
-  printf("c = %g: largest difference to central differences %.2e\n", c, worst);
+  printf("c = %g, %s: largest difference to central differences %.2e\n", c, with_lu ? "LU" : "QR", worst);
 }
 
 int main(void) {
+  double Jx[2][32], Ju[2][24];
+  int i;
   (void)run_fixed;                  /* the runtime's loops, tested by test_table_stepper.c */
   (void)stepper_outputs;
   (void)simulate_adaptive;
@@ -308,7 +321,13 @@ int main(void) {
   (void)ncgen_tables_mass;
   test_hessian();
   test_input_forces();
-  test_jacobians(0.0);
-  test_jacobians(0.8);
+  for (with_lu = 0; with_lu < 2; ++with_lu) {    /* the stages by the QR, then by the LU */
+    test_jacobians(0.0, Jx[with_lu], Ju[with_lu]);
+    test_jacobians(0.8, Jx[with_lu] + 16, Ju[with_lu] + 12);
+  }
+  for (i = 0; i < 32; ++i)
+    CHECK(fabs(Jx[0][i] - Jx[1][i]) < 1e-12 * (1 + fabs(Jx[0][i])), "Jx by the LU and the QR: %g", Jx[1][i] - Jx[0][i]);
+  for (i = 0; i < 24; ++i)
+    CHECK(fabs(Ju[0][i] - Ju[1][i]) < 1e-12 * (1 + fabs(Ju[0][i])), "Ju by the LU and the QR: %g", Ju[1][i] - Ju[0][i]);
   return report("test_table_jacobians");
 }

@@ -148,10 +148,14 @@ static int with_lu;                /* whether make_tables gives the LU's analysi
 static const int a_colind[] = {0, 1, 2}, a_row[] = {0, 0}, m_colind[] = {0, 2, 4}, m_row[] = {0, 1, 0, 1};
 static const double m_val[] = {MASS, 0, 0, MASS}, f_gravity[] = {0, -MASS * G};
 static const int spr_feat[] = {2, 0}, spr_kpos_ptr[] = {0, 4}, spr_kpos[] = {0, 3, 1, 4}, marker_feat[] = {0};
+/* the damper's products: J = ∂f/∂[r_a; r_b; ṙ_a; ṙ_b] (2 x 8), ∂f_i/∂ṙ_b,j at i + 2 (6 + j) */
+static const int spr_kj[] = {12, 14, 13, 15};
+static const double spr_kcoef[] = {1, 1, 1, 1};
 static const int k_mpos[] = {0, 1, 3, 4}, k_apos[] = {2, 5}, k_atpos[] = {6, 7};
 static double f_const[2], ff_par[1], tq_val[1];
 static const int ff_kind[] = {0}, ff_feat_ptr[] = {0, 1}, ff_feat[] = {0}, ff_par_ptr[] = {0, 1};
 static const int ff_kpos_ptr[] = {0, 4}, ff_kpos[] = {0, 3, 1, 4}, tq_member[] = {0}, tq_c_ptr[] = {0, 0};
+static const int ff_kj[] = {0, 2, 1, 3};   /* J = ∂g/∂ḟ (2 x 2), column-major */
 
 static ncgen_tables T;
 static ncgen_stepper_tables S;
@@ -169,11 +173,11 @@ static void make_tables(double k, double l0, double c, double *par) {
   S.T = &T; S.nu = 0; S.np = 0; S.n_markers = 1; S.n_spring = 1; S.mass_scale = MASS; S.m_nnz = 4;
   S.a_colind = a_colind; S.a_row = a_row; S.m_colind = m_colind; S.m_row = m_row; S.m_val = m_val;
   S.f_gravity = f_gravity; S.v_gravity = 0; S.spr_feat = spr_feat; S.spr_par = par;
-  S.spr_kpos_ptr = spr_kpos_ptr; S.spr_kpos = spr_kpos; S.marker_feat = marker_feat;
+  S.spr_kpos_ptr = spr_kpos_ptr; S.spr_kpos = spr_kpos; S.spr_kcoef = spr_kcoef; S.spr_kj = spr_kj; S.marker_feat = marker_feat;
   S.nnz_k = 9; S.nnz_v = 6; S.nnz_r = 6; S.k_mpos = k_mpos; S.k_apos = k_apos; S.k_atpos = k_atpos;
   f_const[0] = c / 4; f_const[1] = 0; ff_par[0] = c / 2; tq_val[0] = c / 8;   /* c = 0: conservative */
   S.f_const = f_const; S.n_ff = 1; S.ff_kind = ff_kind; S.ff_feat_ptr = ff_feat_ptr; S.ff_feat = ff_feat;
-  S.ff_par_ptr = ff_par_ptr; S.ff_par = ff_par; S.ff_kpos_ptr = ff_kpos_ptr; S.ff_kpos = ff_kpos;
+  S.ff_par_ptr = ff_par_ptr; S.ff_par = ff_par; S.ff_kpos_ptr = ff_kpos_ptr; S.ff_kpos = ff_kpos; S.ff_kcoef = spr_kcoef; S.ff_kj = ff_kj;
   S.n_torque = 1; S.tq_member = tq_member; S.tq_c_ptr = tq_c_ptr; S.tq_c = ff_par; S.tq_val = tq_val;
   S.qr.n = 3; S.qr.k_colind = k_colind; S.qr.k_row = k_row; S.qr.v_colind = v_colind; S.qr.v_row = v_row;
   S.qr.r_colind = r_colind; S.qr.r_row = r_row; S.qr.prinv = perm; S.qr.pc = perm;

@@ -55,8 +55,9 @@ static int ncgen_lu_factor(const ncgen_lu_pattern *P, const double *K, double *l
       u = x[k];
       x[k] = 0;
       up[e] = u;
+      if (u == 0) continue;                                   /* a zero in the pattern: nothing to subtract */
       for (i = P->l_colind[k]; i < P->l_colind[k + 1]; ++i) x[P->l_row[i]] -= lo[i] * u;
-      ref += fabs(lo[P->u_lpos[e]] * up[e]);
+      ref += fabs(lo[P->u_lpos[e]] * u);
     }
     piv = x[c];
     x[c] = 0;
@@ -83,6 +84,26 @@ static void ncgen_lu_solve(const ncgen_lu_pattern *P, const double *lo, const do
   for (c = n - 1; c >= 0; --c) {             /* (D U) x = z, column by column */
     y[c] *= dinv[c];
     for (i = P->u_colind[c]; i < P->u_colind[c + 1]; ++i) y[P->u_row[i]] -= up[i] * y[c];
+  }
+  for (c = 0; c < n; ++c) x[P->p[c]] = y[c];
+}
+
+/* x = K⁻ᵀ b from the same factors: K(p, p)ᵀ = (D U)ᵀ Lᵀ, so (D U)ᵀ z = b(p) forwards (row c
+ * of (D U)ᵀ is column c of D U), then Lᵀ x(p) = z backwards (row c of Lᵀ is column c of L);
+ * y: n doubles of scratch.  Inline: only the step Jacobians use it. */
+static inline void ncgen_lu_solve_transposed(const ncgen_lu_pattern *P, const double *lo, const double *up,
+                                             const double *dinv, const double *b, double *x, double *y) {
+  int c, i, n = P->n;
+  for (i = 0; i < n; ++i) y[P->pinv[i]] = b[i];
+  for (c = 0; c < n; ++c) {
+    double s = y[c];
+    for (i = P->u_colind[c]; i < P->u_colind[c + 1]; ++i) s -= up[i] * y[P->u_row[i]];
+    y[c] = s * dinv[c];
+  }
+  for (c = n - 1; c >= 0; --c) {
+    double s = y[c];
+    for (i = P->l_colind[c]; i < P->l_colind[c + 1]; ++i) s -= lo[i] * y[P->l_row[i]];
+    y[c] = s;
   }
   for (c = 0; c < n; ++c) x[P->p[c]] = y[c];
 }

@@ -11,7 +11,8 @@
  *
  * q⁺ = q + h w, x⁺ = [q⁺; v⁺].  Their Jacobians in z are the stepper's matrices,
  * K1 = [[M − h/2 F_w(q, w), A(q)ᵀ], [A(q⁺), 0]] and K2 = [[M, A(q⁺)ᵀ], [A(q⁺), 0]], each
- * factored once (sparse QR, ncgen_sparse_qr.h).  A perturbation (δq, δv, δu) of the step's
+ * factored once (the sparse LU of ncgen_sparse_lu.h where the stepper uses it — M regular —
+ * and it accepts the matrix, else the sparse QR of ncgen_sparse_qr.h).  A perturbation (δq, δv, δu) of the step's
  * inputs moves the solution by
  *
  *   δz1 = −K1⁻¹ [−M δv − h/2 (F_q(q, w) δq + F_u δu) + L(δq)ᵀ ν;  A(q⁺) δq / h]
@@ -41,9 +42,19 @@
 #ifndef NCGEN_TABLE_JACOBIANS_H
 #define NCGEN_TABLE_JACOBIANS_H
 
+/* The factors of one stage matrix K (its nonzeros): the sparse LU's (lu = 1: L, D U and the
+ * pivots' reciprocals) where the tables use it and it accepts the matrix, else the sparse QR's
+ * (V, R, beta). */
+typedef struct {
+  int lu, refine;                  /* refine: the LU's solutions refined once (tab_jac_solve) */
+  const double *K;
+  double *V, *R, *beta, *lo, *up, *dinv;
+} tab_jac_factors;
+
 /* The scratch of tab_step_jacobians: the factors of K1 and K2 and the vectors of the solves. */
 typedef struct {
-  double *V1, *R1, *beta1, *V2, *R2, *beta2, *K, *K1, *r, *z1, *z2, *dr, *dz1, *dz2, *dq1, *dy, *zero;
+  tab_jac_factors f1, f2;
+  double *K, *K1, *r, *z1, *z2, *dr, *dz1, *dz2, *dq1, *dy, *zero;
   double *A1, *La, *phis, *ew, *fd, *fdw, *sj1, *sj2, *dF, *x, *y;
 } tab_jac_work;
 
@@ -52,8 +63,8 @@ static long tab_jac_size(void) {
   const ncgen_stepper_tables *S = tab_cur;
   const ncgen_tables *T = S->T;
   long n = T->nq + T->nc, nf = (long)T->nf * T->dim, nsj = (long)S->n_spring * T->dim * 4 * T->dim;
-  return 2 * ((long)S->nnz_v + S->nnz_r + n) + 2L * S->nnz_k + 10 * n + (2L * T->nq + S->nu) + T->nq +
-         2L * T->a_nnz + T->nq + T->nc + tab_ew_size + 2 * nf + 2 * nsj;
+  return 2 * ((long)S->nnz_v + S->nnz_r + n + 2L * S->lu.nnz_l + n) + 2L * S->nnz_k + 12 * n +
+         (2L * T->nq + S->nu) + T->nq + 2L * T->a_nnz + T->nq + T->nc + tab_ew_size + 2 * nf + 2 * nsj;
 }
 
 static tab_jac_work tab_jac_layout(double *p) {
@@ -61,11 +72,20 @@ static tab_jac_work tab_jac_layout(double *p) {
   const ncgen_tables *T = S->T;
   long n = T->nq + T->nc, nf = (long)T->nf * T->dim, nsj = (long)S->n_spring * T->dim * 4 * T->dim;
   tab_jac_work b;
-  b.V1 = p; b.R1 = b.V1 + S->nnz_v; b.beta1 = b.R1 + S->nnz_r;
-  b.V2 = b.beta1 + n; b.R2 = b.V2 + S->nnz_v; b.beta2 = b.R2 + S->nnz_r;
-  b.K = b.beta2 + n; b.K1 = b.K + S->nnz_k; b.r = b.K1 + S->nnz_k; b.z1 = b.r + n; b.z2 = b.z1 + n; b.dr = b.z2 + n;
+  tab_jac_factors *f[2];
+  int i;
+  f[0] = &b.f1;
+  f[1] = &b.f2;
+  for (i = 0; i < 2; ++i) {
+    f[i]->lu = 0;
+    f[i]->refine = i;              /* K2's solves (tab_jac_solve) */
+    f[i]->V = p; f[i]->R = f[i]->V + S->nnz_v; f[i]->beta = f[i]->R + S->nnz_r;
+    f[i]->lo = f[i]->beta + n; f[i]->up = f[i]->lo + S->lu.nnz_l; f[i]->dinv = f[i]->up + S->lu.nnz_l;
+    p = f[i]->dinv + n;
+  }
+  b.K = p; b.K1 = b.K + S->nnz_k; b.r = b.K1 + S->nnz_k; b.z1 = b.r + n; b.z2 = b.z1 + n; b.dr = b.z2 + n;
   b.dz1 = b.dr + n; b.dz2 = b.dz1 + n; b.dq1 = b.dz2 + n; b.x = b.dq1 + n; b.y = b.x + n;
-  b.dy = b.y + 2 * n; b.zero = b.dy + 2 * T->nq + S->nu;
+  b.dy = b.y + 3 * n; b.zero = b.dy + 2 * T->nq + S->nu;
   b.A1 = b.zero + T->nq; b.La = b.A1 + T->a_nnz;
   b.phis = b.La + T->a_nnz; b.dF = b.phis + T->nc; b.ew = b.dF + T->nq;
   b.fd = b.ew + tab_ew_size; b.fdw = b.fd + nf; b.sj1 = b.fdw + nf; b.sj2 = b.sj1 + nsj;
@@ -78,6 +98,48 @@ typedef struct {
   const int *colind, *row;
   const double *val;
 } tab_jac_hessian;
+
+/* The factors of K (nonzeros in the stepper's pattern) into f: 0, or 1 when K is singular;
+ * x: n doubles of scratch. */
+static int tab_jac_factor(tab_jac_factors *f, const double *K, double *x) {
+  const ncgen_stepper_tables *S = tab_cur;
+  memset(x, 0, sizeof(double) * (size_t)S->qr.n);
+  f->K = K;
+  f->lu = S->lu.n && !ncgen_lu_factor(&S->lu, K, f->lo, f->up, f->dinv, x);
+  return f->lu ? 0 : ncgen_qr_factor(&S->qr, K, f->V, f->R, f->beta, x);
+}
+
+/* x = K⁻¹ r (transposed: K⁻ᵀ r, the LU's factors only) from the factors f of K; y: 3n doubles of
+ * scratch.  With f->refine the LU's solution is refined once (the residual r − K x solved
+ * again and added): without pivoting its forward error on the second stage's K2 can be far
+ * above the QR's (the Panda's reverse passes disagreed with a forward column by 3.7e-8
+ * relative, 5.7e-10 with the QR, 5e-12 with K2's solves refined; refining K1's solves too,
+ * plain or transposed, changed nothing). */
+static void tab_jac_solve(const tab_jac_factors *f, int transposed, const double *r, double *x, double *y) {
+  const ncgen_qr_pattern *P = &tab_cur->qr;
+  const ncgen_lu_pattern *U = &tab_cur->lu;
+  double *res = y + P->n, *dx = y + 2 * P->n;
+  int i, j, k;
+  if (!f->lu) {
+    ncgen_qr_solve(P, f->V, f->R, f->beta, r, x, y);
+    return;
+  }
+  for (i = 0; i < 1 + f->refine; ++i) {
+    const double *rhs = i ? res : r;
+    double *sol = i ? dx : x;
+    if (transposed) ncgen_lu_solve_transposed(U, f->lo, f->up, f->dinv, rhs, sol, y);
+    else ncgen_lu_solve(U, f->lo, f->up, f->dinv, rhs, sol, y);
+    if (i || !f->refine) break;
+    memcpy(res, r, sizeof(double) * (size_t)P->n);
+    for (j = 0; j < P->n; ++j)
+      for (k = P->k_colind[j]; k < P->k_colind[j + 1]; ++k) {
+        if (transposed) res[j] -= f->K[k] * x[P->k_row[k]];
+        else res[P->k_row[k]] -= f->K[k] * x[j];
+      }
+  }
+  if (f->refine)
+    for (j = 0; j < P->n; ++j) x[j] += dx[j];
+}
 
 /* La = L(d) = D d (nonzeros of A). */
 static void tab_jac_dA(const tab_jac_hessian *D, const double *d, tab_jac_work *b) {
@@ -254,9 +316,10 @@ static double tab_jac_tdot(const tab_jac_csc *C, int j, const double *x) {
  *
  * Q comes from K2 too: n_k = [I 0] K2⁻¹ [M r_k; 0] (r_k fixed pseudo-random vectors) spans
  * null A(q⁺), p_k = [I 0] K2⁻¹ [0; −L_v n_k] completes [n_k; p_k] and [0; n_k] to a basis of
- * T(x⁺), orthonormalised by Gram–Schmidt twice.  K1ᵀ is factored in K's own pattern (its
+ * T(x⁺), orthonormalised by Gram–Schmidt twice.  K1ᵀ is solved by the LU's transposed solve
+ * with K1's own factors; where K1 has QR factors, K1ᵀ is QR-factored in K's own pattern (its
  * values moved by the pattern's transpose).  Returns 0, 1 when this path does not apply (K's
- * pattern not structurally symmetric, a basis vector lost in the orthonormalisation: the
+ * pattern not structurally symmetric on the QR's path, a basis vector lost in the orthonormalisation: the
  * caller then takes the columns one by one) or 2 when out of memory. */
 static int tab_jac_rows(const double *q, const double *u, double h, const tab_jac_hessian *D, const double *q_next,
                         tab_jac_work *b, double *Jx, double *Ju) {
@@ -286,20 +349,22 @@ static int tab_jac_rows(const double *q, const double *u, double h, const tab_ja
   c = gq + n; unit = c + n;
   tpos = imem; colof = tpos + nnz; cnt = colof + T->a_nnz; ci = cnt + n + 1;
   status = 1;
-  /* K1ᵀ in K's pattern: entry k at (i, j) goes to the entry at (j, i) */
-  for (i = 0; i <= n; ++i) cnt[i] = 0;
-  for (k = 0; k < nnz; ++k) ++cnt[P->k_row[k]];
-  for (i = 0; i < n; ++i)
-    if (cnt[i] != P->k_colind[i + 1] - P->k_colind[i]) goto done;
-  for (i = 0; i < n; ++i) cnt[i] = P->k_colind[i];
-  for (j = 0; j < n; ++j)
-    for (k = P->k_colind[j]; k < P->k_colind[j + 1]; ++k) {
-      int t = cnt[P->k_row[k]]++;
-      if (P->k_row[t] != j) goto done;   /* rows of a column not ascending, or not symmetric */
-      tpos[k] = t;
-    }
-  for (k = 0; k < nnz; ++k) Kt[tpos[k]] = b->K1[k];
-  if (ncgen_qr_factor(P, Kt, V3, R3, beta3, b->x)) goto done;
+  if (!b->f1.lu) {                         /* K1ᵀ solved by the LU's transposed solve, else */
+    /* K1ᵀ in K's pattern, QR-factored: entry k at (i, j) goes to the entry at (j, i) */
+    for (i = 0; i <= n; ++i) cnt[i] = 0;
+    for (k = 0; k < nnz; ++k) ++cnt[P->k_row[k]];
+    for (i = 0; i < n; ++i)
+      if (cnt[i] != P->k_colind[i + 1] - P->k_colind[i]) goto done;
+    for (i = 0; i < n; ++i) cnt[i] = P->k_colind[i];
+    for (j = 0; j < n; ++j)
+      for (k = P->k_colind[j]; k < P->k_colind[j + 1]; ++k) {
+        int t = cnt[P->k_row[k]]++;
+        if (P->k_row[t] != j) goto done;   /* rows of a column not ascending, or not symmetric */
+        tpos[k] = t;
+      }
+    for (k = 0; k < nnz; ++k) Kt[tpos[k]] = b->K1[k];
+    if (ncgen_qr_factor(P, Kt, V3, R3, beta3, b->x)) goto done;
+  }
   for (j = 0; j < nq; ++j)
     for (k = S->a_colind[j]; k < S->a_colind[j + 1]; ++k) colof[k] = j;
   /* the force derivatives: F_q1 at (q, w), F_q2 and F_w2 at (q⁺, w) (F_w1 is in K1) */
@@ -328,7 +393,7 @@ static int tab_jac_rows(const double *q, const double *u, double h, const tab_ja
       }
       memset(rhs, 0, sizeof(double) * (size_t)n);
       tab_mass_times(unit, rhs);
-      ncgen_qr_solve(P, b->V2, b->R2, b->beta2, rhs, sol, b->y);
+      tab_jac_solve(&b->f2, 0, rhs, sol, b->y);
       memcpy(cq, sol, sizeof(double) * (size_t)nq);
       memset(cv, 0, sizeof(double) * (size_t)nq);
       memcpy(cv + nq, sol, sizeof(double) * (size_t)nq);
@@ -337,7 +402,7 @@ static int tab_jac_rows(const double *q, const double *u, double h, const tab_ja
       tab_a_times(b->La, v1, rhs + nq, 0);
       for (i = 0; i < nc; ++i) rhs[nq + i] = -rhs[nq + i];
       for (i = 0; i < nq; ++i) rhs[i] = 0;
-      ncgen_qr_solve(P, b->V2, b->R2, b->beta2, rhs, sol, b->y);
+      tab_jac_solve(&b->f2, 0, rhs, sol, b->y);
       memcpy(cq + nq, sol, sizeof(double) * (size_t)nq);
     }
     for (k = 0; k < nt; ++k) {              /* Gram–Schmidt, twice */
@@ -363,7 +428,7 @@ static int tab_jac_rows(const double *q, const double *u, double h, const tab_ja
     double *row = R + (size_t)k * m;
     memcpy(rhs, bb, sizeof(double) * (size_t)nq);
     memset(rhs + nq, 0, sizeof(double) * (size_t)nc);
-    ncgen_qr_solve(P, b->V2, b->R2, b->beta2, rhs, sol, b->y);
+    tab_jac_solve(&b->f2, 0, rhs, sol, b->y);
     al = sol;
     be = sol + nq;
     for (i = 0; i < nq; ++i) {              /* g_q = a − P2ᵀ α − L_vᵀ β */
@@ -379,7 +444,8 @@ static int tab_jac_rows(const double *q, const double *u, double h, const tab_ja
     memset(c, 0, sizeof(double) * (size_t)n);   /* c = W2ᵀ α + h g_q */
     tab_mass_times(al, c);
     for (i = 0; i < nq; ++i) c[i] += (forces ? h / 2 * tab_jac_tdot(&Cw2, i, al) : 0) + h * gq[i];
-    ncgen_qr_solve(P, V3, R3, beta3, c, sol, b->y);
+    if (b->f1.lu) tab_jac_solve(&b->f1, 1, c, sol, b->y);
+    else ncgen_qr_solve(P, V3, R3, beta3, c, sol, b->y);
     al = sol;
     be = sol + nq;
     for (i = 0; i < nq; ++i) {              /* g_q − P1ᵀ α1 − A(q⁺)ᵀ β1 / h */
@@ -415,8 +481,10 @@ done:
 
 /* The relative agreement below which the rows' [Jx Ju] d (tab_jac_rows) must meet the
  * forward column of a pseudo-random d, else the columns are taken one by one: the reverse
- * passes lose digits on some models (Talos with its floating base: 1e-5 against 1e-11 on the
- * Panda). */
+ * passes lose digits where K2's solves are not accurate enough (their forward error, amplified
+ * in the basis of T(x⁺) and in α: with K2's solves unrefined, Talos with its floating base
+ * 9e-8 by the LU and 1e-5 by the QR, the Panda 4e-8 by the LU; refined, Talos 6e-10, the
+ * Panda 5e-12). */
 #define TAB_JAC_ROWS_TOL 1e-9
 
 /* col = δx⁺ (2nq) for the perturbation b->dy = [δq; δv; δu] (the top of the file). */
@@ -435,7 +503,7 @@ static void tab_jac_column(const double *q, const double *u, double h, const tab
   tab_a_times(b->La, b->z1 + nq, b->dr, 1);
   tab_a_times(b->A1, dq, b->dr + nq, 0);
   for (i = 0; i < nc; ++i) b->dr[nq + i] /= h;
-  ncgen_qr_solve(&S->qr, b->V1, b->R1, b->beta1, b->dr, b->dz1, b->y);
+  tab_jac_solve(&b->f1, 0, b->dr, b->dz1, b->y);
   for (i = 0; i < n; ++i) b->dz1[i] = -b->dz1[i];
   /* second stage: δq⁺ = δq + h δw, δz2 = −K2⁻¹ δr2 */
   for (i = 0; i < nq; ++i) b->dq1[i] = dq[i] + h * b->dz1[i];
@@ -446,7 +514,7 @@ static void tab_jac_column(const double *q, const double *u, double h, const tab
   for (i = 0; i < nq; ++i) b->dr[i] = -b->dr[i] - h / 2 * b->dF[i];
   tab_a_times(b->La, b->z2 + nq, b->dr, 1);
   tab_a_times(b->La, b->z2, b->dr + nq, 0);
-  ncgen_qr_solve(&S->qr, b->V2, b->R2, b->beta2, b->dr, b->dz2, b->y);
+  tab_jac_solve(&b->f2, 0, b->dr, b->dz2, b->y);
   for (i = 0; i < nq; ++i) {
     col[i] = b->dq1[i];
     col[nq + i] = -b->dz2[i];
@@ -480,18 +548,19 @@ static int tab_step_jacobians(const double *q, const double *v, double t, const 
   arg[0] = &t; arg[1] = q; arg[2] = v; arg[3] = u; arg[4] = p; arg[5] = &h; arg[6] = b.z1; arg[7] = b.z1 + nq;
   out[0] = b.r; out[1] = b.K;
   status = STEP_KERNEL;
-  if (tab_newton(arg, out, 0, kw, 0) || ncgen_qr_factor(&S->qr, b.K, b.V1, b.R1, b.beta1, b.x)) goto done;
-  ncgen_qr_solve(&S->qr, b.V1, b.R1, b.beta1, b.r, b.dz1, b.y);
+  if (tab_newton(arg, out, 0, kw, 0) || tab_jac_factor(&b.f1, b.K, b.x)) goto done;
+  tab_jac_solve(&b.f1, 0, b.r, b.dz1, b.y);
   for (i = 0; i < n; ++i) b.z1[i] -= b.dz1[i];
-  if (tab_newton(arg, out, 0, kw, 0) || ncgen_qr_factor(&S->qr, b.K, b.V1, b.R1, b.beta1, b.x)) goto done;
+  if (tab_newton(arg, out, 0, kw, 0) || tab_jac_factor(&b.f1, b.K, b.x)) goto done;
   memcpy(b.K1, b.K, sizeof(double) * (size_t)S->nnz_k);
+  b.f1.K = b.K1;                         /* b.K is K2's below */
   r1 = tab_norm_inf(b.r, n);
   for (i = 0; i < nq; ++i) q_next[i] = q[i] + h * b.z1[i];
   /* second stage at (q⁺, w): K2 z2 = b, factored */
   arg[0] = &t1; arg[1] = q_next; arg[2] = b.z1;
   out[0] = b.r; out[1] = b.K;
-  if (tab_velocity(arg, out, 0, kw, 0) || ncgen_qr_factor(&S->qr, b.K, b.V2, b.R2, b.beta2, b.x)) goto done;
-  ncgen_qr_solve(&S->qr, b.V2, b.R2, b.beta2, b.r, b.z2, b.y);
+  if (tab_velocity(arg, out, 0, kw, 0) || tab_jac_factor(&b.f2, b.K, b.x)) goto done;
+  tab_jac_solve(&b.f2, 0, b.r, b.z2, b.y);
   tab_jac_kkt_times(b.K, b.z2, b.dr);
   for (i = 0; i < n; ++i) b.dr[i] -= b.r[i];
   r2 = tab_norm_inf(b.dr, n);

@@ -29,15 +29,16 @@
  *                   TAB_FEATURE_FORCES[ff_kind[e]] (kernel x = [f_1..f_n; ḟ_1..ḟ_n; numbers]
  *                   -> y = [g (n dim); V; P], J = ∂g/∂ḟ) acts on the features
  *                   ff_feat[ff_feat_ptr[e] ..] with the numbers ff_par[ff_par_ptr[e] ..]:
- *                   Q = Σ_X G_Xᵀ g_X, its damping's products at ff_kpos in the loop order of
- *                   tab_feature_forces;
+ *                   Q = Σ_X G_Xᵀ g_X, its damping's products ff_kpos, ff_kcoef, ff_kj (below);
  *   torques         a constant couple tq_val (3 per torque in 3D, 1 in 2D) on member
  *                   tq_member[e]: Q_I = W(q_I)ᵀ τ by the kernel TAB_TORQUES[mem_kind] (x =
  *                   [q_I; c_W; τ], c_W = tq_c[tq_c_ptr[e] ..]); its power v_Iᵀ Q_I counts in P.
  * The Newton matrix K = [[M − h/2 ∂F/∂w, A(q)ᵀ], [A(q + h w), 0]] (nq + nc square) is kept in
  * one CSC pattern: k_mpos, k_apos, k_atpos give the nonzero of K of each nonzero of M, of
- * A (lower block) and of Aᵀ (upper block), spr_kpos those of the dampers' products in the
- * loop order of tab_springs; it is solved by the sparse LU of ncgen_sparse_lu.h (the analysis
+ * A (lower block) and of Aᵀ (upper block); the dampers' products of each force are worked out
+ * once per model (ncgen/codegen/stepper_tables.py: _velocity_entries), product k of spring s
+ * (spr_kpos_ptr[s] <= k < spr_kpos_ptr[s + 1]) being K[spr_kpos[k]] += kscale spr_kcoef[k]
+ * J[spr_kj[k]] with its kernel's J (ff_kpos, ff_kcoef, ff_kj the same for the force elements); it is solved by the sparse LU of ncgen_sparse_lu.h (the analysis
  * lu: each multiplier ordered after the coordinates its constraint touches; lu.n = 0: none),
  * or, where that LU finds an unsafe pivot (K singular or too ill-conditioned for its order),
  * by the sparse QR of ncgen_sparse_qr.h (stable in any order).
@@ -70,7 +71,9 @@ typedef struct {
   double v_gravity;                 /* J */
   const int *spr_feat;              /* 2 per spring: the features of its ends a, b */
   const double *spr_par;            /* 3 per spring: k (N/m), rest length (m), damping (N s/m) */
-  const int *spr_kpos_ptr, *spr_kpos;
+  const int *spr_kpos_ptr, *spr_kpos;  /* the dampers' products: spr_kpos_ptr[s] .. of spring s */
+  const double *spr_kcoef;          /* K[spr_kpos[k]] += kscale spr_kcoef[k] J[spr_kj[k]] */
+  const int *spr_kj;
   const int *marker_feat;           /* n_markers features */
   int nnz_k, nnz_v, nnz_r;
   const int *k_mpos, *k_apos, *k_atpos;
@@ -83,7 +86,9 @@ typedef struct {
   int n_ff;                         /* force elements over features */
   const int *ff_kind, *ff_feat_ptr, *ff_feat, *ff_par_ptr;
   const double *ff_par;
-  const int *ff_kpos_ptr, *ff_kpos;
+  const int *ff_kpos_ptr, *ff_kpos;  /* the dampers' products, as spr_kpos .. spr_kj */
+  const double *ff_kcoef;
+  const int *ff_kj;
   int n_torque;                     /* constant couples */
   const int *tq_member, *tq_c_ptr;
   const double *tq_c, *tq_val;
@@ -104,15 +109,22 @@ static TAB_THREAD const ncgen_stepper_tables *tab_cur;
 static TAB_THREAD long tab_ew_size;
 static TAB_THREAD double *tab_cache[2];
 static TAB_THREAD int tab_valid[2], tab_recent;
+/* The forces' terms that depend on q alone, at the last q (a step's Newton iterations keep q,
+ * and its velocity stage's q⁺ is the next step's q): q, the features at q (nf dim) and the
+ * torques' generalised force (nq), at tab_qcache; tab_qvalid whether it holds them. */
+static TAB_THREAD double *tab_qcache;
+static TAB_THREAD int tab_qvalid;
 
 /* Starts a run on the tables S in this thread: 0, or 1 when out of memory. */
 static int tab_begin(const ncgen_stepper_tables *S) {
   size_t n = (size_t)S->T->nq + (size_t)S->T->nc + (size_t)S->T->a_nnz;
+  size_t nqc = 2 * (size_t)S->T->nq + (size_t)S->T->nf * (size_t)S->T->dim;
   tab_cur = S;
   tab_ew_size = ncgen_tables_work_size(TAB_KINDS, S->T);
-  tab_cache[0] = malloc(2 * n * sizeof(double) + 1);
+  tab_cache[0] = malloc((2 * n + nqc) * sizeof(double) + 1);
   tab_cache[1] = tab_cache[0] ? tab_cache[0] + n : 0;
-  tab_valid[0] = tab_valid[1] = 0;
+  tab_qcache = tab_cache[0] ? tab_cache[0] + 2 * n : 0;
+  tab_valid[0] = tab_valid[1] = tab_qvalid = 0;
   tab_recent = 0;
   return tab_cache[0] == 0;
 }
@@ -120,8 +132,8 @@ static int tab_begin(const ncgen_stepper_tables *S) {
 /* Ends the run of tab_begin. */
 static void tab_end(void) {
   free(tab_cache[0]);
-  tab_cache[0] = tab_cache[1] = 0;
-  tab_valid[0] = tab_valid[1] = 0;
+  tab_cache[0] = tab_cache[1] = tab_qcache = 0;
+  tab_valid[0] = tab_valid[1] = tab_qvalid = 0;
 }
 
 /* The spring kernel's input and outputs at most (3D): x, then y = [f; V; P] and J. */
@@ -188,19 +200,20 @@ static int tab_phi_jacobian(const double *q, const double **phi, const double **
 
 /* The constant forces, the force elements over features and the torques (see the top of
  * this file), as tab_forces: added into F, kscale ∂F/∂v into K, energies into *V, powers into
- * *P (each if not NULL); the features at q and v already in b->fq, b->fv; v NULL: at rest. */
+ * *P (each if not NULL); the features at q and v already in b->fq, b->fv; v NULL: at rest;
+ * q_cached: the torques' Q at this q already in tab_qcache (else computed into it). */
 static int tab_feature_forces(const double *q, const double *v, double *F, double *K, double kscale, double *V,
-                              double *P, tab_work *b) {
+                              double *P, int q_cached, tab_work *b) {
   const ncgen_stepper_tables *S = tab_cur;
   const ncgen_tables *T = S->T;
-  int dim = T->dim, el, i, j, X, Y, e, e2;
+  int dim = T->dim, el, i, j, X, e;
   if (F && S->f_const)                   /* f_const NULL: no constant load */
     for (i = 0; i < T->nq; ++i) F[i] += S->f_const[i];
   if (P && v && S->f_const)
     for (i = 0; i < T->nq; ++i) *P += v[i] * S->f_const[i];
   for (el = 0; el < S->n_ff; ++el) {
     const ncgen_feature_force_kind *k = &TAB_FEATURE_FORCES[S->ff_kind[el]];
-    const int *f = S->ff_feat + S->ff_feat_ptr[el], *pos = S->ff_kpos + S->ff_kpos_ptr[el];
+    const int *f = S->ff_feat + S->ff_feat_ptr[el];
     int nd = k->n_feat * dim;
     const double *arg[1];
     double *res[2], *J = b->fy + nd + 2;
@@ -215,35 +228,39 @@ static int tab_feature_forces(const double *q, const double *v, double *F, doubl
     if (k->eval(arg, res, 0, b->ew, 0)) return 1;
     if (V) *V += b->fy[nd];
     if (P) *P += b->fy[nd + 1];
-    for (X = 0; X < k->n_feat; ++X)
-      for (e = T->feat_ptr[f[X]]; e < T->feat_ptr[f[X] + 1]; ++e) {
-        i = X * dim + T->feat_row[e];
-        if (F) F[T->feat_col[e]] += T->feat_coef[e] * b->fy[i];
-        if (!K) continue;
-        for (Y = 0; Y < k->n_feat; ++Y)   /* ∂Q_col(e)/∂v_col(e2) = G_e (∂g_i/∂ḟ_Y,j) G_e2 */
-          for (e2 = T->feat_ptr[f[Y]]; e2 < T->feat_ptr[f[Y] + 1]; ++e2)
-            K[*pos++] += kscale * T->feat_coef[e] * T->feat_coef[e2] * J[i + nd * (Y * dim + T->feat_row[e2])];
-      }
+    if (F)
+      for (X = 0; X < k->n_feat; ++X)
+        for (e = T->feat_ptr[f[X]]; e < T->feat_ptr[f[X] + 1]; ++e)
+          F[T->feat_col[e]] += T->feat_coef[e] * b->fy[X * dim + T->feat_row[e]];
+    if (K)                              /* ∂Q_col(e)/∂v_col(e2) = G_e (∂g_i/∂ḟ_Y,j) G_e2 */
+      for (e = S->ff_kpos_ptr[el]; e < S->ff_kpos_ptr[el + 1]; ++e)
+        K[S->ff_kpos[e]] += kscale * S->ff_kcoef[e] * J[S->ff_kj[e]];
   }
-  for (el = 0; el < S->n_torque; ++el) {
-    int m = S->tq_member[el], base = T->mem_q_ptr[m];
-    const ncgen_torque_kind *k = &TAB_TORQUES[T->mem_kind[m]];
-    int nq_i = TAB_KINDS->member[T->mem_kind[m]].n_q, n_tau = dim == 3 ? 3 : 1;
-    const double *arg[1];
-    double *res[1];
-    for (j = 0; j < nq_i; ++j)
-      b->fx[j] = T->mem_q_col[base + j] >= 0 ? q[T->mem_q_col[base + j]] : T->mem_q_const[base + j];
-    memcpy(b->fx + nq_i, S->tq_c + S->tq_c_ptr[el], sizeof(double) * (size_t)k->n_c);
-    memcpy(b->fx + nq_i + k->n_c, S->tq_val + n_tau * el, sizeof(double) * (size_t)n_tau);
-    arg[0] = b->fx;
-    res[0] = b->fy;
-    if (k->eval(arg, res, 0, b->ew, 0)) return 1;
-    for (j = 0; j < nq_i; ++j) {
-      int c = T->mem_q_col[base + j];
-      if (c < 0) continue;
-      if (F) F[c] += b->fy[j];
-      if (P && v) *P += v[c] * b->fy[j];
+  if (!S->n_torque) return 0;
+  if (!q_cached) {                       /* the torques' Q at q into the cache */
+    double *Q = tab_qcache + T->nq + (size_t)T->nf * dim;
+    memset(Q, 0, sizeof(double) * (size_t)T->nq);
+    for (el = 0; el < S->n_torque; ++el) {
+      int m = S->tq_member[el], base = T->mem_q_ptr[m];
+      const ncgen_torque_kind *k = &TAB_TORQUES[T->mem_kind[m]];
+      int nq_i = TAB_KINDS->member[T->mem_kind[m]].n_q, n_tau = dim == 3 ? 3 : 1;
+      const double *arg[1];
+      double *res[1];
+      for (j = 0; j < nq_i; ++j)
+        b->fx[j] = T->mem_q_col[base + j] >= 0 ? q[T->mem_q_col[base + j]] : T->mem_q_const[base + j];
+      memcpy(b->fx + nq_i, S->tq_c + S->tq_c_ptr[el], sizeof(double) * (size_t)k->n_c);
+      memcpy(b->fx + nq_i + k->n_c, S->tq_val + n_tau * el, sizeof(double) * (size_t)n_tau);
+      arg[0] = b->fx;
+      res[0] = b->fy;
+      if (k->eval(arg, res, 0, b->ew, 0)) return 1;
+      for (j = 0; j < nq_i; ++j)
+        if (T->mem_q_col[base + j] >= 0) Q[T->mem_q_col[base + j]] += b->fy[j];
     }
+  }
+  for (i = 0; i < T->nq; ++i) {
+    double Qi = tab_qcache[T->nq + (size_t)T->nf * dim + i];
+    if (F) F[i] += Qi;
+    if (P && v) *P += v[i] * Qi;
   }
   return 0;
 }
@@ -256,18 +273,26 @@ static int tab_forces(const double *q, const double *v, double *F, double *K, do
                       tab_work *b) {
   const ncgen_stepper_tables *S = tab_cur;
   const ncgen_tables *T = S->T;
-  int dim = T->dim, s, i, X, Y, e, e2;
+  int dim = T->dim, s, X, e;
   ncgen_kernel spring = dim == 3 ? TAB_SPRING_3D : TAB_SPRING_2D;
+  size_t nfd = (size_t)T->nf * (size_t)dim;
+  int q_cached = tab_qvalid && !memcmp(q, tab_qcache, sizeof(double) * (size_t)T->nq);
   if (F) memcpy(F, S->f_gravity, sizeof(double) * (size_t)T->nq);
-  if (S->n_spring || S->n_ff) {
-    ncgen_tables_features(T, q, b->fq, T->feat_const);
-    if (v) ncgen_tables_features(T, v, b->fv, 0);
-    else memset(b->fv, 0, sizeof(double) * (size_t)T->nf * (size_t)dim);
+  if (!q_cached) {
+    tab_qvalid = 0;
+    memcpy(tab_qcache, q, sizeof(double) * (size_t)T->nq);
+    if (S->n_spring || S->n_ff) ncgen_tables_features(T, q, tab_qcache + T->nq, T->feat_const);
   }
-  if (tab_feature_forces(q, v, F, K, kscale, V, P, b)) return 1;
+  if (S->n_spring || S->n_ff) {
+    memcpy(b->fq, tab_qcache + T->nq, sizeof(double) * nfd);
+    if (v) ncgen_tables_features(T, v, b->fv, 0);
+    else memset(b->fv, 0, sizeof(double) * nfd);
+  }
+  if (tab_feature_forces(q, v, F, K, kscale, V, P, q_cached, b)) return 1;
+  tab_qvalid = 1;
   if (!S->n_spring) return 0;
   for (s = 0; s < S->n_spring; ++s) {
-    const int *f = S->spr_feat + 2 * s, *pos = S->spr_kpos + S->spr_kpos_ptr[s];
+    const int *f = S->spr_feat + 2 * s;
     const double *arg[1];
     double *res[2], *J = b->sy + dim + 2;
     for (X = 0; X < 2; ++X) {
@@ -281,18 +306,15 @@ static int tab_forces(const double *q, const double *v, double *F, double *K, do
     if (spring(arg, res, 0, b->ew, 0)) return 1;
     if (V) *V += b->sy[dim];
     if (P) *P += b->sy[dim + 1];
-    for (X = 0; X < 2; ++X) {
-      double sign = X ? 1.0 : -1.0;
-      for (e = T->feat_ptr[f[X]]; e < T->feat_ptr[f[X] + 1]; ++e) {
-        i = T->feat_row[e];
-        if (F) F[T->feat_col[e]] += sign * T->feat_coef[e] * b->sy[i];
-        if (!K) continue;
-        for (Y = 0; Y < 2; ++Y)      /* ∂Q_col(e)/∂v_col(e2) = sign G_e (∂f_i/∂ṙ_Y,j) G_e2 */
-          for (e2 = T->feat_ptr[f[Y]]; e2 < T->feat_ptr[f[Y] + 1]; ++e2)
-            K[*pos++] += kscale * sign * T->feat_coef[e] * T->feat_coef[e2] *
-                         J[i + dim * ((2 + Y) * dim + T->feat_row[e2])];
+    if (F)
+      for (X = 0; X < 2; ++X) {
+        double sign = X ? 1.0 : -1.0;
+        for (e = T->feat_ptr[f[X]]; e < T->feat_ptr[f[X] + 1]; ++e)
+          F[T->feat_col[e]] += sign * T->feat_coef[e] * b->sy[T->feat_row[e]];
       }
-    }
+    if (K)                           /* ∂Q_col(e)/∂v_col(e2) = sign G_e (∂f_i/∂ṙ_Y,j) G_e2 */
+      for (e = S->spr_kpos_ptr[s]; e < S->spr_kpos_ptr[s + 1]; ++e)
+        K[S->spr_kpos[e]] += kscale * S->spr_kcoef[e] * J[S->spr_kj[e]];
   }
   return 0;
 }
