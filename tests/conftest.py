@@ -15,6 +15,8 @@ Delassus and KKT solves) sets ``QUICK_COMPILE = True``: its tests compile genera
 :data:`QUICK_CFLAGS` (``$NCGEN_CFLAGS`` for the module, unless the environment sets it).  No
 check there depends on the optimisation level; the -O2 builds keep their own tests
 (``test_reliability_optimized_warnings.py``, ``test_model_package.py``, ``test_reroll.py``).
+Such a module runs no table-driven stepper: the element library is compiled once per compile
+cache, with the flags of the first run that needs it.
 """
 import os
 
