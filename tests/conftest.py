@@ -55,6 +55,13 @@ def quick_compile(request):
         yield
 
 
+@pytest.fixture
+def quick_cflags(monkeypatch):
+    """:func:`quick_compile` for one test (in a module that also runs table-driven steppers)."""
+    if "NCGEN_CFLAGS" not in os.environ:
+        monkeypatch.setenv("NCGEN_CFLAGS", QUICK_CFLAGS)
+
+
 def pytest_collection_modifyitems(items):
     for item in items:
         if item.get_closest_marker("slow") is not None and item.get_closest_marker("timeout") is None:
