@@ -9,7 +9,17 @@ Every test has a time limit (pytest-timeout), generous enough for a loaded machi
 ``timeout`` (600 s) for a fast test, :data:`SLOW_TIMEOUT` for a slow one; a test that needs more
 says so with ``pytest.mark.timeout``. A test moved to the slow tier names at its mark the fast
 test that takes the same code path.
+
+A module whose time is mostly gcc compiling its models' packages (contact scenes: the unrolled
+Delassus and KKT solves) sets ``QUICK_COMPILE = True``: its tests compile generated C with
+:data:`QUICK_CFLAGS` (``$NCGEN_CFLAGS`` for the module, unless the environment sets it).  No
+check there depends on the optimisation level; the -O2 builds keep their own tests
+(``test_reliability_optimized_warnings.py``, ``test_model_package.py``, ``test_reroll.py``).
+Such a module runs no table-driven stepper: the element library is compiled once per compile
+cache, with the flags of the first run that needs it.
 """
+import os
+
 import pytest
 
 SLOW = ("slow: robot-scale models, Dask clusters, sanitizer builds, benchmark smokes, long "
@@ -23,10 +33,33 @@ EXHAUSTIVE = ("exhaustive: slow tests too long for CI (hours of CPU in all: the 
 #: Seconds a slow test may take unless it says otherwise (``pytest.mark.timeout``).
 SLOW_TIMEOUT = 900
 
+#: Flags of a ``QUICK_COMPILE`` module's compiles: a box scene's package (6 boxes, 48 corner
+#: contacts) takes 8 s of gcc CPU at -O0 against 32 s at -O2, and its 1.5 s run 0.9 s against 0.3 s.
+QUICK_CFLAGS = "-O0"
+
 
 def pytest_configure(config):
     config.addinivalue_line("markers", SLOW)
     config.addinivalue_line("markers", EXHAUSTIVE)
+
+
+@pytest.fixture(autouse=True, scope="module")
+def quick_compile(request):
+    """``$NCGEN_CFLAGS`` = :data:`QUICK_CFLAGS` for a module with ``QUICK_COMPILE = True``
+    (module docstring), set before its module-scoped fixtures build their scenes."""
+    if not getattr(request.module, "QUICK_COMPILE", False) or "NCGEN_CFLAGS" in os.environ:
+        yield
+        return
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("NCGEN_CFLAGS", QUICK_CFLAGS)
+        yield
+
+
+@pytest.fixture
+def quick_cflags(monkeypatch):
+    """:func:`quick_compile` for one test (in a module that also runs table-driven steppers)."""
+    if "NCGEN_CFLAGS" not in os.environ:
+        monkeypatch.setenv("NCGEN_CFLAGS", QUICK_CFLAGS)
 
 
 def pytest_collection_modifyitems(items):

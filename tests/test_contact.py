@@ -16,6 +16,7 @@ from ncgen.reproducible import perpendicular_basis
 from ncgen.runtime.contact_outputs import OPEN, SLIP, STICK
 
 G = 9.81
+QUICK_COMPILE = True             # its time is gcc compiling its scenes: -O0 (tests/conftest.py)
 
 
 def spinning_ball(R=0.1):

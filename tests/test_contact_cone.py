@@ -18,6 +18,7 @@ from energy_helpers import assert_no_energy_created
 
 G, R, M, MU = 9.81, 0.03, 0.2, 0.5
 BOX = (0.4, 0.3, 0.2)
+QUICK_COMPILE = True             # its time is gcc compiling its scenes: -O0 (tests/conftest.py)
 
 
 def _run(model, t_end, strict=True):

@@ -10,6 +10,7 @@ import pytest
 import ncgen as nc
 
 G, R, M, MU = 9.81, 0.1, 1.0, 0.1
+QUICK_COMPILE = True             # its time is gcc compiling its scenes: -O0 (tests/conftest.py)
 V0 = np.array([2.0, 0.0, 0.0])
 W0 = np.array([5.0, 3.0, 20.0])
 T_END = 0.4                                            # sliding lasts 0.52 s

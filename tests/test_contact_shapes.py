@@ -13,6 +13,7 @@ from ncgen.runtime.contact_outputs import STICK
 
 G = 9.81
 H, SUB = 0.01, 10                                    # output step, substeps: h = 1 ms
+QUICK_COMPILE = True             # its time is gcc compiling its scenes: -O0 (tests/conftest.py)
 
 
 def R_y(b):

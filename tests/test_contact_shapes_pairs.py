@@ -14,6 +14,7 @@ from energy_helpers import assert_no_energy_created
 from ncgen.errors import ModelError, NcgenError
 
 G = 9.81
+QUICK_COMPILE = True             # its time is gcc compiling its scenes: -O0 (tests/conftest.py)
 H, SUB = 0.01, 10                                    # output step, substeps: h = 1 ms
 
 

@@ -124,10 +124,11 @@ def example(name: str, contacts: str):
 @pytest.mark.filterwarnings("ignore:simulate.*contact solve")
 @pytest.mark.parametrize("name, t_end, bound", [("falling_chain", 0.6, 1e-5), ("boxes", 0.4, 1e-5),
                                                 ("box_stack", 0.3, 1e-5)])
-def test_contact_examples_close_their_balance_on_the_stepper(name, t_end, bound):
+def test_contact_examples_close_their_balance_on_the_stepper(name, t_end, bound, quick_cflags):
     """The nonsmooth contact examples (61 %, 4.1 % and 7.7 % of residual by the old
     remainder and trapezoidal rule): E − E0 − W within ``bound`` of the energy scale (measured
-    9e-7, 1e-7 and below), every class named, and no energy created."""
+    9e-7, 1e-7 and below), every class named, and no energy created (compiled at -O0:
+    ``quick_cflags``, tests/conftest.py)."""
     tr = nc.simulate(example(name, "nonsmooth"), t_end, 0.01, method="stepper", substeps=10)
     energy = tr.info["energy"]
     assert energy["relative"] < bound

@@ -41,8 +41,8 @@ def test_model_builds_and_simulates(path):
 
 
 #: Scripts run in the slow tier (a subprocess, a compile and a plot each); their models build and
-#: simulate in the fast tier above, and the other scripts take the same path there.
-SLOW_SCRIPTS = {"cartpole", "double_pendulum", "heavy_top"}
+#: simulate in the fast tier above, and the chain's script takes the same path there.
+SLOW_SCRIPTS = {"cartpole", "double_pendulum", "heavy_top", "slider_crank", "tensegrity"}
 
 
 @pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.slow) if p.stem in SLOW_SCRIPTS else p

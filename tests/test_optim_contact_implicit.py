@@ -7,6 +7,8 @@ import pytest
 import ncgen as nc
 from ncgen.errors import OptimizationError, ProblemFileError
 
+QUICK_COMPILE = True             # its replays' time is gcc compiling their scenes: -O0 (tests/conftest.py)
+
 
 def _ball(contacts="nonsmooth", restitution=0.8, mu=0.0):
     s = nc.System("ball", gravity=(0, -9.81))

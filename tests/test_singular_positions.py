@@ -171,7 +171,7 @@ def test_stepper_with_rtol_follows_the_exact_motion_over_10_s(N):
     assert tip_error(traj, N) < 1e-6
 
 
-@pytest.mark.parametrize("N", [1, 10])
+@pytest.mark.parametrize("N", [1, pytest.param(10, marks=pytest.mark.slow)])   # N = 10: fast: N = 1, the same path
 def test_stepper_at_tight_rtol_crosses_the_flat_positions(N):
     """rtol 1e-11: next to a flat position the KKT solves are ill-conditioned and the part of
     the step-doubling difference normal to the constraints stops falling with the step (it
@@ -196,8 +196,8 @@ def test_stepper_below_round_off_still_fails_loudly():
     assert failure.value.trajectory.t[-1] < 1.0
 
 
-@pytest.mark.parametrize("N, t_end", [(1, 2.0), (10, 1.0)])
-def test_idas_with_projection_stays_on_the_physical_branch(N, t_end):
+@pytest.mark.parametrize("N, t_end", [(1, 2.0), pytest.param(10, 1.0, marks=pytest.mark.slow)])   # N = 10 compiles
+def test_idas_with_projection_stays_on_the_physical_branch(N, t_end):                       # its bridge; fast: N = 1
     """project=True: one output interval per IDAS call, projected after each; through every
     flat position (at t ≈ 0.42 s, ...) on the parallelogram branch."""
     model = n_fourbar(N)
@@ -251,7 +251,7 @@ def test_rattle_bridge_crosses_the_flat_position_at_second_order():
     assert 3.5 < errors[0] / errors[1] < 4.5
 
 
-@pytest.mark.parametrize("N", [1, 10])
+@pytest.mark.parametrize("N", [1, pytest.param(10, marks=pytest.mark.slow)])   # N = 10 compiles its bridge; fast: N = 1
 def test_idas_by_default_is_replaced_from_the_first_flat_position(N):
     """project="auto" (the default): the chunk that meets the first near-singular
     configuration is cut there and the interval crossed by the compiled stepper

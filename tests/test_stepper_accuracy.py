@@ -188,10 +188,11 @@ def test_past_the_stability_limit_raises():
     nc.simulate(model, 1.0, 0.02, method="stepper", substeps=substeps)       # checked, passes
 
 
-def test_tensegrity_at_its_default_step_fails_loudly_and_the_suggested_step_is_accurate(tmp_path):
+def test_tensegrity_at_its_default_step_fails_loudly_and_the_suggested_step_is_accurate(tmp_path, quick_cflags):
     """``ncgen simulate examples/tensegrity.toml --method stepper`` at the default dt: exit
     status 1 and a message naming the step to use; at that step the run passes its checks
-    and is within the stated accuracy (1 % of the size) of IDAS."""
+    and is within the stated accuracy (1 % of the size) of IDAS (compiled at -O0:
+    ``quick_cflags``, tests/conftest.py)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         model = nc.System.from_toml(ROOT / "examples" / "tensegrity.toml").build()

@@ -36,12 +36,17 @@ FLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O0", "-g",
          "-fsanitize=address,undefined", "-fno-sanitize-recover=all", "-fno-omit-frame-pointer"]
 ENV = {**os.environ, "ASAN_OPTIONS": "detect_leaks=0:abort_on_error=0",
        "UBSAN_OPTIONS": "print_stacktrace=1:halt_on_error=1"}
-PROGRAMS = [("test_rattle.c", []), ("test_contact.c", []), ("test_contact.c", ["-DSCHUR_FACTORED"]),
-            ("test_contact.c", ["-DPAIRS"]),
+#: The second and third builds of a program (other -D paths) in the slow tier; fast: the generated
+#: packages take the Schur path and the pair kernels (tests/test_contact*.py), the table step's
+#: Jacobians by rows (tests/test_table_step_jacobians.py), and the first build of each program here.
+SLOW_BUILD = pytest.mark.slow
+PROGRAMS = [("test_rattle.c", []), ("test_contact.c", []),
+            pytest.param("test_contact.c", ["-DSCHUR_FACTORED"], marks=SLOW_BUILD),
+            pytest.param("test_contact.c", ["-DPAIRS"], marks=SLOW_BUILD),
             ("test_cone_newton.c", []), ("test_mpc.c", []), ("test_joint_loop.c", []),
             ("test_element_tables.c", []), ("test_sparse_qr.c", []), ("test_sparse_lu.c", []),
             ("test_table_stepper.c", []), ("test_table_jacobians.c", ["-DTAB_JAC_ROWS"]),
-            ("test_table_jacobians.c", ["-DTAB_JAC_COLUMNS"]), ("test_tree_tables.c", []),
+            pytest.param("test_table_jacobians.c", ["-DTAB_JAC_COLUMNS"], marks=SLOW_BUILD), ("test_tree_tables.c", []),
             ("test_spatial.c", [])]
 
 pytestmark = pytest.mark.skipif(CC is None, reason="no C compiler (gcc, clang or cc) on PATH")
@@ -76,7 +81,7 @@ def test_every_runtime_file_is_unit_tested():
     """Every C file of the runtime is included by one of the unit-test programs
     (ncgen_adaptive.h by test_rattle.c; ncgen_contact.h by test_contact.c;
     ncgen_joint_loop.h by test_joint_loop.c)."""
-    included = "".join((TESTS / s).read_text() for s, _ in PROGRAMS)
+    included = "".join((TESTS / s).read_text() for s, _ in (getattr(p, "values", p) for p in PROGRAMS))
     for path in sorted(RUNTIME.glob("*.h")):
         assert f'#include "{path.name}"' in included, path.name
 

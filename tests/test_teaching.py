@@ -128,10 +128,14 @@ def test_jupyter_reprs():
 
 # ------------------------------------------------------------------------- pdflatex
 LATEX_CASES = [(n, str(d)) for d, n in ALL_TYPES] + [("se3", "3")]
+#: Reports typeset in the fast tier: a 3D body's, a planar body's and SE(3)'s; the other types' (the same
+#: template over fewer or other columns) in the slow tier.
+FAST_LATEX = {("ruvw", "3"), ("rrv", "2"), ("se3", "3")}
 
 
 @pytest.mark.skipif(shutil.which("pdflatex") is None, reason="pdflatex not installed")
-@pytest.mark.parametrize("name,dim", LATEX_CASES, ids=[f"{n}-{d}d" for n, d in LATEX_CASES])
+@pytest.mark.parametrize("name,dim", [c if c in FAST_LATEX else pytest.param(*c, marks=pytest.mark.slow)
+                                      for c in LATEX_CASES], ids=[f"{n}-{d}d" for n, d in LATEX_CASES])
 def test_latex_report_compiles(tmp_path, name, dim):
     tex = tmp_path / "d.tex"
     args = ["derive", name, "--format", "latex", "-o", str(tex)] + ([] if name == "se3" else ["--dim", dim])

@@ -340,11 +340,12 @@ def test_disc_given_a_printed_rotation_is_projected_and_reported():
         nc.System("off").add_body("disc", mass=MASS, inertia=DISC, rotation=R + 1e-4 * np.eye(3))
 
 
-def test_spinning_coin_bounces_on_the_floor_with_the_nonsmooth_stepper():
+def test_spinning_coin_bounces_on_the_floor_with_the_nonsmooth_stepper(quick_cflags):
     """A horizontal coin (thin disc) spinning at 20 rad/s about its normal, dropped from 0.5 m
     onto a point contact at its centre with restitution e = 0.5: the impulses pass through
     the centre of mass, so the apexes are e^{2k} h (to the 1 ms sampling) and the spin angle
-    is ω t; the contact's Delassus matrix comes from the KKT factors, not M⁻¹."""
+    is ω t; the contact's Delassus matrix comes from the KKT factors, not M⁻¹ (its time is gcc
+    compiling them: ``quick_cflags``, tests/conftest.py)."""
     s = nc.System("coin", gravity=(0.0, 0.0, -G))
     b = s.add_body("coin", mass=MASS, inertia=DISC, position=(0.0, 0.0, 0.5), angular_velocity=(0.0, 0.0, 20.0))
     s.add_contact(nc.SpherePlane(b, (0.0, 0.0, 0.0), radius=0.0, restitution=0.5, name="floor"))

@@ -145,7 +145,9 @@ def test_nonlinear_run_follows_the_linearisation(bike):
     gaps = []
     for eps in (1e-3, 2e-3):
         v = v0 + Nv @ np.linalg.solve(W, [eps, 0.0, 0.0])
-        tr = simulate_rolling(bike.rolling, 2.0, 0.05, q0, v, rtol=1e-10, atol=1e-12)
+        # Python steps (15 s of CPU for both runs): the default compiles the step once the run's pace says it
+        # pays, which on a loaded machine is a 40 s compile; tests/test_rolling_system.py checks the compiled step
+        tr = simulate_rolling(bike.rolling, 2.0, 0.05, q0, v, rtol=1e-10, atol=1e-12, compiled=False)
         y = np.array([np.asarray(bike.coordinates(q, w)[0]).ravel() for q, w in zip(tr.q, tr.v)])
         y_lin = np.array([(expm(S * t) @ [0.0, 0.0, eps, 0.0])[:2] for t in tr.t])
         gaps.append(np.max(np.abs(y - y_lin)))
