@@ -326,6 +326,26 @@ static int cone_newton(workspace *ws, int na, const int *first, const casadi_rea
   return 0;
 }
 
+/* The groups of coupled contacts: contacts c and d are in one group if G couples a row of
+ * one to a row of the other (they share a member, or members that constraints link), or a
+ * chain of such couplings joins them.  grp[c] gets the smallest contact of c's group. */
+static void cone_groups(const workspace *ws, int na, const int *first, int *grp) {
+  int owner[ND], c, r, k;
+  for (c = 0; c < na; ++c) {
+    grp[c] = c;
+    for (r = first[c]; r < first[c + 1]; ++r) owner[r] = c;
+  }
+  for (r = 0; r < first[na]; ++r)
+    for (k = (int) ws->gp[r]; k < ws->gp[r + 1]; ++k) { /* union of the roots, the smaller the root */
+      int a = owner[r], b = owner[ws->gi[k]];
+      while (grp[a] != a) a = grp[a] = grp[grp[a]];
+      while (grp[b] != b) b = grp[b] = grp[grp[b]];
+      if (a < b) grp[b] = a;
+      else grp[a] = b;
+    }
+  for (c = 0; c < na; ++c) grp[c] = grp[grp[c]]; /* roots are smaller: one pass flattens */
+}
+
 /* Whether the impulses P + t dP of the contacts in the move (in[c]) are all in their cones:
  * a normal impulse > 0, or = 0 with no tangent impulse (a touching contact that carried
  * none and is given none). */
@@ -347,14 +367,13 @@ static int cone_inside(const workspace *ws, int na, const int *first, const int 
 /* Where the support is statically indeterminate (a box's four coplanar corners, a stack's
  * faces) the contact laws hold on a whole family P + null(G_AA) of impulses: this picks its
  * member of least Euclidean norm |P|, so that symmetric loads get symmetric forces.  A = the
- * rows of the contacts with an impulse and, with `touching`, of the closed contacts without
- * one whose normal and tangent velocities vanish (below CONE_FLOOR (1 + max |U|)): the laws
- * let those carry a load too, and a solve that happened to leave one of four symmetric
- * corners at 0 would otherwise keep it there and load the others unevenly.  A contact whose
- * impulse is of round-off size with P_N <= 0 (at most CONE_FLOOR max |P|: Newton's steps
- * leave such specks outside the cone) first gets none, with U updated.  Each contact with
- * an impulse must then stick (tangent velocity below that floor) or have no friction (a
- * slipping contact's tangent impulse is fixed by its normal one: then nothing is done).
+ * rows of the contacts of group g (grp[c] == g, cone_groups()) with an impulse and, with
+ * `touching`, of its closed contacts without one whose normal and tangent velocities vanish
+ * (below CONE_FLOOR (1 + max |U|)): the laws let those carry a load too, and a solve that
+ * happened to leave one of four symmetric corners at 0 would otherwise keep it there and
+ * load the others unevenly.  Each contact of A with an impulse must stick (tangent velocity
+ * below that floor) or have no friction (a slipping contact's tangent impulse is fixed by
+ * its normal one: then nothing is done for the group).
  * G_AA = L L^T by Cholesky with the rows whose pivot falls below CONE_PIVOT of their
  * diagonal dropped; each dropped row j gives the null vector n_j = (-L_I^-T l_j, 1, 0, ...)
  * (L_I the kept rows before j, l_j row j of the factor), orthonormalised (Gram-Schmidt, twice)
@@ -366,33 +385,24 @@ static int cone_inside(const workspace *ws, int na, const int *first, const int 
  * cones at every t or broke the laws (the impulses are then unchanged), else 1.  Uses ws->S
  * (ws->fm = -1), ws->cni + ND and ws->cn after its first 2 ND. */
 static int cone_min_norm_over(workspace *ws, int na, const int *first, const casadi_real *bias, casadi_real tol,
-                              int touching) {
+                              const int *grp, int g, int touching) {
   const int nr = first[na];
   casadi_real *L = ws->S, *dP = ws->cn + 2 * ND, *gdp = ws->cn + 3 * ND, *P0 = ws->cn + 6 * ND, *U0 = ws->cn + 7 * ND;
   casadi_int *dropped = ws->cni + ND, *start = ws->cni;
   casadi_real before, after;
-  casadi_real size = 0, pmax = 0, t = 1;
+  casadi_real size = 0, t = 1;
   int idx[ND], in[NK], m = 0, nd = 0, nz = 0, c, d, i, j, k, pass;
-  for (i = 0; i < nr; ++i) pmax = fmax(pmax, fabs(ws->P[i]));
-  for (c = 0; c < na; ++c) { /* a contact's impulse of round-off size, P_N <= 0: set to 0 */
-    casadi_real most = 0;
-    for (i = first[c]; i < first[c + 1]; ++i) most = fmax(most, fabs(ws->P[i]));
-    if (ws->P[first[c]] > 0 || most > CONE_FLOOR * pmax) continue;
-    for (i = first[c]; i < first[c + 1]; ++i) {
-      for (k = (int) ws->gp[i]; k < ws->gp[i + 1]; ++k) ws->U[ws->gi[k]] -= ws->G[ws->gi[k] + i * nr] * ws->P[i];
-      ws->P[i] = 0;
-    }
-  }
   for (i = 0; i < nr; ++i) size = fmax(size, fabs(ws->U[i]));
   for (c = 0; c < na; ++c) {
     const int r0 = first[c], nt = first[c + 1] - r0 - 1, kc = (int) ws->act[c];
     casadi_real pt = 0, vt = 0;
+    in[c] = 0;
+    if (grp[c] != g) continue;
     for (d = 1; d <= nt; ++d) {
       const casadi_real v = ws->U[r0 + d] + restitution[kc] * ws->Um[kc * DC + d];
       pt += ws->P[r0 + d] * ws->P[r0 + d];
       vt += v * v;
     }
-    in[c] = 0;
     if (ws->P[r0] <= 0) {
       if (pt > 0) return 1;
       if (!touching || fabs(ws->U[r0] + bias[c]) > CONE_FLOOR * (1 + size) || sqrt(vt) > CONE_FLOOR * (1 + size))
@@ -486,9 +496,29 @@ static int cone_min_norm_over(workspace *ws, int na, const int *first, const cas
   return !nz;
 }
 
-/* The least-norm member of the family of solutions (cone_min_norm_over()) over the contacts
- * with an impulse and the touching ones without; where that move fails (it would pull a
- * touching contact's impulse below 0), over those with an impulse alone. */
+/* The least-norm member of the family of solutions (cone_min_norm_over()), group by group
+ * of coupled contacts (cone_groups(): a slipping contact stops the move of its own group
+ * only), over the contacts with an impulse and the touching ones without; where that move
+ * fails (it would pull a touching contact's impulse below 0), over those with an impulse
+ * alone.  First, a contact whose impulse is of round-off size with P_N <= 0 (at most
+ * CONE_FLOOR max |P|: Newton's steps leave such specks outside the cone) gets none, with U
+ * updated. */
 static void cone_min_norm(workspace *ws, int na, const int *first, const casadi_real *bias, casadi_real tol) {
-  if (!cone_min_norm_over(ws, na, first, bias, tol, 1)) (void) cone_min_norm_over(ws, na, first, bias, tol, 0);
+  const int nr = first[na];
+  casadi_real pmax = 0;
+  int grp[NK], c, i, k;
+  for (i = 0; i < nr; ++i) pmax = fmax(pmax, fabs(ws->P[i]));
+  for (c = 0; c < na; ++c) {
+    casadi_real most = 0;
+    for (i = first[c]; i < first[c + 1]; ++i) most = fmax(most, fabs(ws->P[i]));
+    if (ws->P[first[c]] > 0 || most > CONE_FLOOR * pmax) continue;
+    for (i = first[c]; i < first[c + 1]; ++i) {
+      for (k = (int) ws->gp[i]; k < ws->gp[i + 1]; ++k) ws->U[ws->gi[k]] -= ws->G[ws->gi[k] + i * nr] * ws->P[i];
+      ws->P[i] = 0;
+    }
+  }
+  cone_groups(ws, na, first, grp);
+  for (c = 0; c < na; ++c)
+    if (grp[c] == c && !cone_min_norm_over(ws, na, first, bias, tol, grp, c, 1))
+      (void) cone_min_norm_over(ws, na, first, bias, tol, grp, c, 0);
 }
