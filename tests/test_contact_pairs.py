@@ -198,13 +198,7 @@ def test_crossed_cubes_on_their_edges_run_as_with_the_flat_kernels():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("example", [
-    pytest.param("box_stack", marks=pytest.mark.xfail(
-        reason="issue 36: a contact normal force differs by 0.40 N between the element kernels and the flat "
-               "kernels (bound 1.3e-9): where one contact of a step's problem slips, cone_min_norm makes no "
-               "least-norm move for any, so the statically indeterminate distribution each path keeps is "
-               "its own round-off's (docs/contact.md; the stop-46 note)", strict=False)),
-    "boxes", "falling_chain"])
+@pytest.mark.parametrize("example", ["box_stack", "boxes", "falling_chain"])
 def test_shipped_examples_run_as_with_the_flat_kernels(example):
     def build():
         return nc.System.from_toml(ROOT / "examples" / f"{example}.toml").build(contacts="nonsmooth")
