@@ -48,18 +48,23 @@
  * direction then makes little progress: a stack of boxes crawled at 1/256 steps). */
 #define CONE_LM_AFTER 4
 
-/* rho_N and rho_T of each active contact into rho (row r0 = first[c]: rho_N, r0 + 1: rho_T,
- * if the contact has friction).  A zero diagonal (a contact the step cannot move) gives 0. */
+/* rho_N and rho_T of active contact c into rho (row r0 = first[c]: rho_N, r0 + 1: rho_T, if
+ * the contact has friction; nr rows in all).  A zero diagonal (a contact the step cannot
+ * move) gives 0. */
+static void cone_scale(const workspace *ws, int nr, const int *first, int c, casadi_real *rho) {
+  const int r0 = first[c], nt = first[c + 1] - r0 - 1;
+  const casadi_real gnn = ws->G[r0 + r0 * nr];
+  casadi_real gt = 0;
+  int d;
+  rho[r0] = gnn > 0 ? 1 / gnn : 0;
+  for (d = 1; d <= nt; ++d) gt = fmax(gt, ws->G[(r0 + d) + (r0 + d) * nr]);
+  for (d = 1; d <= nt; ++d) rho[r0 + d] = gt > 0 ? 1 / gt : 0;
+}
+
+/* cone_scale() of every active contact. */
 static void cone_scales(const workspace *ws, int na, const int *first, casadi_real *rho) {
-  int nr = first[na], c, d;
-  for (c = 0; c < na; ++c) {
-    const int r0 = first[c], nt = first[c + 1] - r0 - 1;
-    const casadi_real gnn = ws->G[r0 + r0 * nr];
-    casadi_real gt = 0;
-    rho[r0] = gnn > 0 ? 1 / gnn : 0;
-    for (d = 1; d <= nt; ++d) gt = fmax(gt, ws->G[(r0 + d) + (r0 + d) * nr]);
-    for (d = 1; d <= nt; ++d) rho[r0 + d] = gt > 0 ? 1 / gt : 0;
-  }
+  int c;
+  for (c = 0; c < na; ++c) cone_scale(ws, first[na], first, c, rho);
 }
 
 /* phi of contact c at the impulses P and velocities U (compact rows) into phi; if J is not
@@ -326,17 +331,37 @@ static int cone_newton(workspace *ws, int na, const int *first, const casadi_rea
   return 0;
 }
 
-/* Whether the impulses P + t dP of the contacts in the move (in[c]) are all in their cones:
- * a normal impulse > 0, or = 0 with no tangent impulse (a touching contact that carried
- * none and is given none). */
-static int cone_inside(const workspace *ws, int na, const int *first, const int *in, const casadi_real *dP,
-                       casadi_real t) {
-  int c, d;
+/* The groups of coupled contacts: contacts c and d are in one group if G couples a row of
+ * one to a row of the other (they share a member, or members that constraints link), or a
+ * chain of such couplings joins them.  grp[c] gets the smallest contact of c's group. */
+static void cone_groups(const workspace *ws, int na, const int *first, int *grp) {
+  int owner[ND], c, r, k;
   for (c = 0; c < na; ++c) {
-    const int r0 = first[c], nt = first[c + 1] - r0 - 1;
+    grp[c] = c;
+    for (r = first[c]; r < first[c + 1]; ++r) owner[r] = c;
+  }
+  for (r = 0; r < first[na]; ++r)
+    for (k = (int) ws->gp[r]; k < ws->gp[r + 1]; ++k) { /* union of the roots, the smaller the root */
+      int a = owner[r], b = owner[ws->gi[k]];
+      while (grp[a] != a) a = grp[a] = grp[grp[a]];
+      while (grp[b] != b) b = grp[b] = grp[grp[b]];
+      if (a < b) grp[b] = a;
+      else grp[a] = b;
+    }
+  for (c = 0; c < na; ++c) grp[c] = grp[grp[c]]; /* roots are smaller: one pass flattens */
+}
+
+/* Whether the impulses P + t dP of the contacts in the move (in[a] for contact mem[a]) are
+ * all in their cones: a normal impulse > 0, or = 0 with no tangent impulse (a touching
+ * contact that carried none and is given none). */
+static int cone_inside(const workspace *ws, const int *first, const int *mem, int nm, const int *in,
+                       const casadi_real *dP, casadi_real t) {
+  int a, d;
+  for (a = 0; a < nm; ++a) {
+    const int c = mem[a], r0 = first[c], nt = first[c + 1] - r0 - 1;
     const casadi_real pn = ws->P[r0] + t * dP[r0];
     casadi_real pt = 0;
-    if (!in[c]) continue;
+    if (!in[a]) continue;
     for (d = 1; d <= nt; ++d) pt += (ws->P[r0 + d] + t * dP[r0 + d]) * (ws->P[r0 + d] + t * dP[r0 + d]);
     if (pn == 0 && pt == 0) continue;
     if (!(pn > 0) || sqrt(pt) > mu[ws->act[c]] * pn) return 0;
@@ -344,17 +369,31 @@ static int cone_inside(const workspace *ws, int na, const int *first, const int 
   return 1;
 }
 
+/* cone_residual() over the contacts mem[0 .. nm - 1] alone, relative to 1 + size. */
+static casadi_real cone_residual_of(workspace *ws, int nr, const int *first, const casadi_real *bias, const int *mem,
+                                    int nm, casadi_real size) {
+  casadi_real *rho = ws->cn, *phi = ws->cn + ND, res = 0;
+  int a, r;
+  for (a = 0; a < nm; ++a) {
+    const int c = mem[a];
+    cone_scale(ws, nr, first, c, rho);
+    cone_map(ws, nr, c, first, bias, rho, ws->P, ws->U, phi, 0);
+    for (r = first[c]; r < first[c + 1]; ++r)
+      if (rho[r] > 0) res = nan_max(res, fabs(phi[r]) / rho[r]);
+  }
+  return res / (1 + size);
+}
+
 /* Where the support is statically indeterminate (a box's four coplanar corners, a stack's
  * faces) the contact laws hold on a whole family P + null(G_AA) of impulses: this picks its
  * member of least Euclidean norm |P|, so that symmetric loads get symmetric forces.  A = the
- * rows of the contacts with an impulse and, with `touching`, of the closed contacts without
- * one whose normal and tangent velocities vanish (below CONE_FLOOR (1 + max |U|)): the laws
- * let those carry a load too, and a solve that happened to leave one of four symmetric
- * corners at 0 would otherwise keep it there and load the others unevenly.  A contact whose
- * impulse is of round-off size with P_N <= 0 (at most CONE_FLOOR max |P|: Newton's steps
- * leave such specks outside the cone) first gets none, with U updated.  Each contact with
- * an impulse must then stick (tangent velocity below that floor) or have no friction (a
- * slipping contact's tangent impulse is fixed by its normal one: then nothing is done).
+ * rows of the contacts of one group (cone_groups()) with an impulse and, with
+ * `touching`, of its closed contacts without one whose normal and tangent velocities vanish
+ * (below CONE_FLOOR (1 + max |U|)): the laws let those carry a load too, and a solve that
+ * happened to leave one of four symmetric corners at 0 would otherwise keep it there and
+ * load the others unevenly.  Each contact of A with an impulse must stick (tangent velocity
+ * below that floor) or have no friction (a slipping contact's tangent impulse is fixed by
+ * its normal one: then nothing is done for the group).
  * G_AA = L L^T by Cholesky with the rows whose pivot falls below CONE_PIVOT of their
  * diagonal dropped; each dropped row j gives the null vector n_j = (-L_I^-T l_j, 1, 0, ...)
  * (L_I the kept rows before j, l_j row j of the factor), orthonormalised (Gram-Schmidt, twice)
@@ -363,43 +402,33 @@ static int cone_inside(const workspace *ws, int na, const int *first, const int 
  * 1/4, ... that does not (the cones are convex: a step towards the least norm).  Kept only
  * if the contact laws hold as well as before (G dP is not exactly 0 where the rows are only
  * nearly dependent).  Returns 0 if a move over touching contacts without impulse left the
- * cones at every t or broke the laws (the impulses are then unchanged), else 1.  Uses ws->S
- * (ws->fm = -1), ws->cni + ND and ws->cn after its first 2 ND. */
-static int cone_min_norm_over(workspace *ws, int na, const int *first, const casadi_real *bias, casadi_real tol,
-                              int touching) {
-  const int nr = first[na];
+ * cones at every t or broke the laws (the impulses are then unchanged), else 1.  The group's
+ * contacts are mem[0 .. nm - 1] (ascending), its rows rows[0 .. nr_g - 1]; size = max |U|;
+ * the work is that of the group alone.  Uses ws->S (ws->fm = -1), ws->cni + ND and ws->cn
+ * after its first 2 ND. */
+static int cone_min_norm_over(workspace *ws, int nr, const int *first, const casadi_real *bias, casadi_real tol,
+                              const int *mem, int nm, const int *rows, int nr_g, casadi_real size, int touching) {
   casadi_real *L = ws->S, *dP = ws->cn + 2 * ND, *gdp = ws->cn + 3 * ND, *P0 = ws->cn + 6 * ND, *U0 = ws->cn + 7 * ND;
   casadi_int *dropped = ws->cni + ND, *start = ws->cni;
-  casadi_real before, after;
-  casadi_real size = 0, pmax = 0, t = 1;
-  int idx[ND], in[NK], m = 0, nd = 0, nz = 0, c, d, i, j, k, pass;
-  for (i = 0; i < nr; ++i) pmax = fmax(pmax, fabs(ws->P[i]));
-  for (c = 0; c < na; ++c) { /* a contact's impulse of round-off size, P_N <= 0: set to 0 */
-    casadi_real most = 0;
-    for (i = first[c]; i < first[c + 1]; ++i) most = fmax(most, fabs(ws->P[i]));
-    if (ws->P[first[c]] > 0 || most > CONE_FLOOR * pmax) continue;
-    for (i = first[c]; i < first[c + 1]; ++i) {
-      for (k = (int) ws->gp[i]; k < ws->gp[i + 1]; ++k) ws->U[ws->gi[k]] -= ws->G[ws->gi[k] + i * nr] * ws->P[i];
-      ws->P[i] = 0;
-    }
-  }
-  for (i = 0; i < nr; ++i) size = fmax(size, fabs(ws->U[i]));
-  for (c = 0; c < na; ++c) {
-    const int r0 = first[c], nt = first[c + 1] - r0 - 1, kc = (int) ws->act[c];
+  casadi_real before, after, t = 1;
+  int idx[ND], in[NK], m = 0, nd = 0, nz = 0, a, c, d, i, j, k, pass;
+  for (a = 0; a < nm; ++a) {
+    const int r0 = first[mem[a]], nt = first[mem[a] + 1] - r0 - 1, kc = (int) ws->act[mem[a]];
     casadi_real pt = 0, vt = 0;
+    c = mem[a];
+    in[a] = 0;
     for (d = 1; d <= nt; ++d) {
       const casadi_real v = ws->U[r0 + d] + restitution[kc] * ws->Um[kc * DC + d];
       pt += ws->P[r0 + d] * ws->P[r0 + d];
       vt += v * v;
     }
-    in[c] = 0;
     if (ws->P[r0] <= 0) {
       if (pt > 0) return 1;
       if (!touching || fabs(ws->U[r0] + bias[c]) > CONE_FLOOR * (1 + size) || sqrt(vt) > CONE_FLOOR * (1 + size))
         continue;
       ++nz;
     } else if (sqrt(vt) > CONE_FLOOR * (1 + size)) return 1; /* slipping */
-    in[c] = 1;
+    in[a] = 1;
     for (d = 0; d <= nt; ++d) idx[m++] = r0 + d;
   }
   if (m < 2) return 1;
@@ -457,7 +486,7 @@ static int cone_min_norm_over(workspace *ws, int na, const int *first, const cas
     ++nd;
   }
   if (!nd) return 1;
-  for (i = 0; i < nr; ++i) dP[i] = 0;
+  for (i = 0; i < nr_g; ++i) dP[rows[i]] = 0;
   for (i = 0; i < m; ++i)
     if (dropped[i]) {
       const casadi_real *ni = L + (size_t) i * m;
@@ -465,30 +494,67 @@ static int cone_min_norm_over(workspace *ws, int na, const int *first, const cas
       for (k = 0; k <= i; ++k) s += ni[k] * ws->P[idx[k]];
       for (k = 0; k <= i; ++k) dP[idx[k]] -= s * ni[k];
     }
-  for (pass = 0; pass < CONE_BACKTRACK && !cone_inside(ws, na, first, in, dP, t); ++pass) t /= 2;
+  for (pass = 0; pass < CONE_BACKTRACK && !cone_inside(ws, first, mem, nm, in, dP, t); ++pass) t /= 2;
   if (pass == CONE_BACKTRACK) return !nz;
-  for (i = 0; i < nr; ++i) dP[i] *= t;
-  for (i = 0; i < nr; ++i) gdp[i] = 0; /* G dP, by G's column nonzeros */
-  for (j = 0; j < nr; ++j)
-    if (dP[j] != 0)
-      for (k = (int) ws->gp[j]; k < ws->gp[j + 1]; ++k) gdp[ws->gi[k]] += ws->G[ws->gi[k] + j * nr] * dP[j];
-  before = cone_residual(ws, na, first, bias);
-  memcpy(P0, ws->P, (size_t) nr * sizeof(casadi_real));
-  memcpy(U0, ws->U, (size_t) nr * sizeof(casadi_real));
-  for (i = 0; i < nr; ++i) {
-    ws->P[i] += dP[i];
-    ws->U[i] += gdp[i];
+  for (i = 0; i < nr_g; ++i) { /* G dP, by G's column nonzeros (all in the group's rows) */
+    dP[rows[i]] *= t;
+    gdp[rows[i]] = 0;
   }
-  after = cone_residual(ws, na, first, bias);
+  for (i = 0; i < nr_g; ++i)
+    if (dP[rows[i]] != 0)
+      for (k = (int) ws->gp[rows[i]]; k < ws->gp[rows[i] + 1]; ++k)
+        gdp[ws->gi[k]] += ws->G[ws->gi[k] + rows[i] * nr] * dP[rows[i]];
+  before = cone_residual_of(ws, nr, first, bias, mem, nm, size);
+  for (i = 0; i < nr_g; ++i) {
+    P0[rows[i]] = ws->P[rows[i]];
+    U0[rows[i]] = ws->U[rows[i]];
+    ws->P[rows[i]] += dP[rows[i]];
+    ws->U[rows[i]] += gdp[rows[i]];
+  }
+  after = cone_residual_of(ws, nr, first, bias, mem, nm, size);
   if (after <= fmax(2 * before, tol)) return 1;
-  memcpy(ws->P, P0, (size_t) nr * sizeof(casadi_real));
-  memcpy(ws->U, U0, (size_t) nr * sizeof(casadi_real));
+  for (i = 0; i < nr_g; ++i) {
+    ws->P[rows[i]] = P0[rows[i]];
+    ws->U[rows[i]] = U0[rows[i]];
+  }
   return !nz;
 }
 
-/* The least-norm member of the family of solutions (cone_min_norm_over()) over the contacts
- * with an impulse and the touching ones without; where that move fails (it would pull a
- * touching contact's impulse below 0), over those with an impulse alone. */
+/* The least-norm member of the family of solutions (cone_min_norm_over()), group by group
+ * of coupled contacts (cone_groups(): a slipping contact stops the move of its own group
+ * only), over the contacts with an impulse and the touching ones without; where that move
+ * fails (it would pull a touching contact's impulse below 0), over those with an impulse
+ * alone.  First, a contact whose impulse is of round-off size with P_N <= 0 (at most
+ * CONE_FLOOR max |P|: Newton's steps leave such specks outside the cone) gets none, with U
+ * updated.  1 + max |U| (the scale of the floors) is taken once, before the moves (they
+ * change U by round-off). */
 static void cone_min_norm(workspace *ws, int na, const int *first, const casadi_real *bias, casadi_real tol) {
-  if (!cone_min_norm_over(ws, na, first, bias, tol, 1)) (void) cone_min_norm_over(ws, na, first, bias, tol, 0);
+  const int nr = first[na];
+  casadi_real pmax = 0, size = 0;
+  int grp[NK], next[NK], mem[NK], rows[ND], c, i, k;
+  for (i = 0; i < nr; ++i) pmax = fmax(pmax, fabs(ws->P[i]));
+  for (c = 0; c < na; ++c) {
+    casadi_real most = 0;
+    for (i = first[c]; i < first[c + 1]; ++i) most = fmax(most, fabs(ws->P[i]));
+    if (ws->P[first[c]] > 0 || most > CONE_FLOOR * pmax) continue;
+    for (i = first[c]; i < first[c + 1]; ++i) {
+      for (k = (int) ws->gp[i]; k < ws->gp[i + 1]; ++k) ws->U[ws->gi[k]] -= ws->G[ws->gi[k] + i * nr] * ws->P[i];
+      ws->P[i] = 0;
+    }
+  }
+  for (i = 0; i < nr; ++i) size = fmax(size, fabs(ws->U[i]));
+  cone_groups(ws, na, first, grp);
+  for (c = 0; c < na; ++c) next[c] = -1; /* next[c]: the next contact of c's group (-1: none); a root heads it */
+  for (c = na - 1; c >= 0; --c)
+    if (grp[c] != c) next[c] = next[grp[c]], next[grp[c]] = c;
+  for (c = 0; c < na; ++c) {
+    int nm = 0, nr_g = 0, e;
+    if (grp[c] != c) continue;
+    for (e = c; e >= 0; e = next[e]) {
+      mem[nm++] = e;
+      for (i = first[e]; i < first[e + 1]; ++i) rows[nr_g++] = i;
+    }
+    if (!cone_min_norm_over(ws, nr, first, bias, tol, mem, nm, rows, nr_g, size, 1))
+      (void) cone_min_norm_over(ws, nr, first, bias, tol, mem, nm, rows, nr_g, size, 0);
+  }
 }

@@ -233,6 +233,39 @@ static void test_min_norm_touching_pulled(void) {
   for (i = 0; i < ND; ++i) CHECK(ws.P[i] == (i == 0), "P[%d] = %g", i, ws.P[i]);
 }
 
+/* The redundant pair of test_redundant() sticking with an uneven split (0.7 / 0.3), and contact 2, not
+ * coupled to it, slipping (P_N = 1, P_T = -mu P_N along U_T = (1, 0)): the slip fixes
+ * contact 2's impulse but not the pair's, so the pair's group still moves to the even split
+ * and contact 2 keeps its impulse (one least-norm move for the whole problem stopped at the
+ * slipping contact and left 0.9 / 0.1). */
+static void test_min_norm_per_group(void) {
+  casadi_real G[ND * ND];
+  const casadi_real U0[ND] = {-1, 0.2, 0.1, -1, 0.2, 0.1, -1, 1.5, 0};
+  const casadi_real P[ND] = {0.7, -0.15, -0.07, 0.3, -0.05, -0.03, 1, -0.5, 0};
+  workspace ws;
+  int i, j, a, b;
+  memset(G, 0, sizeof G);
+  for (a = 0; a < 2; ++a)
+    for (b = 0; b < 2; ++b)
+      for (i = 0; i < 3; ++i) G[(3 * a + i) + (3 * b + i) * ND] = 1;
+  for (i = 6; i < ND; ++i) G[i + i * ND] = 1;
+  ws = make(G, U0);
+  for (i = 0; i < ND; ++i) {
+    ws.P[i] = P[i];
+    for (j = 0; j < ND; ++j) ws.U[j] += G[j + i * ND] * P[i];
+  }
+  CHECK(cone_residual(&ws, NK, first, bias) < 1e-15, "not a solution: residual %g", cone_residual(&ws, NK, first, bias));
+  cone_min_norm(&ws, NK, first, bias, 1e-13);
+  for (a = 0; a < 2; ++a) {
+    CHECK(fabs(ws.P[3 * a] - 0.5) < 1e-14, "P_N%d = %.17g, expected 1/2", a, ws.P[3 * a]);
+    CHECK(fabs(ws.P[3 * a + 1] + 0.1) < 1e-14 && fabs(ws.P[3 * a + 2] + 0.05) < 1e-14, "P_T%d = (%.17g, %.17g)", a,
+          ws.P[3 * a + 1], ws.P[3 * a + 2]);
+  }
+  for (i = 6; i < ND; ++i) CHECK(ws.P[i] == P[i], "slipping contact: P[%d] = %.17g, was %.17g", i, ws.P[i], P[i]);
+  CHECK(fabs(ws.U[7] - 1) < 1e-15, "slip velocity %.17g", ws.U[7]);
+  CHECK(cone_residual(&ws, NK, first, bias) < 1e-13, "residual %g", cone_residual(&ws, NK, first, bias));
+}
+
 int main(void) {
   test_jacobian();
   test_solution();
@@ -240,5 +273,6 @@ int main(void) {
   test_min_norm();
   test_min_norm_touching();
   test_min_norm_touching_pulled();
+  test_min_norm_per_group();
   return report("test_cone_newton");
 }
