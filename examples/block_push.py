@@ -66,8 +66,9 @@ def continuous_cost(T):
 
 def replay(model, sol, substeps=10):
     """The optimal push replayed by the nonsmooth stepper (held over each step), with the
-    stepper's checks on: the block rests under a push of round-off size (~1e-14 N) before and
-    after the motion, energies the check measures against their round-off
+    stepper's checks on: the block rests under a push of round-off size (1e-14..1e-11 N) before
+    and after the motion, and creeps within the contact solves' tolerance where that push
+    reverses: energies the check measures against what round-off and that tolerance can make
     (:func:`ncgen.runtime.stepper_checks.roundoff_energy`)."""
     T = sol.t[-1] - sol.t[0]
     return nc.simulate(model, T, T / N, u=sol.u, hold="zoh", method="stepper", substeps=substeps)

@@ -13,7 +13,9 @@ A fixed-step run (:func:`ncgen.runtime.stepper.simulate_stepper` without ``rtol`
   energy scale, or, for a model with non-conservative forces or drives, the energy balance
   ``E(t) − E(t0) − W(t)`` (``W``: work of those forces and drives) is off by that much (the
   scale is at least :func:`roundoff_energy`, the error that rounding the positions can
-  make, so that a motion of round-off energy, a block resting under 1e-15 N, is no alarm);
+  make and, with nonsmooth contacts, the work the contacts can do within their solves'
+  velocity tolerance, so that a motion of that energy, a block resting under 1e-15 N, or at
+  the origin under a reversing push of 1e-12 N, is no alarm);
 * the estimated global error in q exceeds :data:`ERROR_FRACTION` of the model's size
   ``max |q0|`` (m);
 * nonsmooth contacts: a contact solve stopped at its sweep limit with a last sweep that
@@ -63,7 +65,9 @@ import warnings
 import numpy as np
 
 from ncgen.assembly.derived import depends_on_time, potential_force_residual_function
-from ncgen.codegen.stepper_package import CONTACT_STATS, PENETRATION_TOL, PGS_MAX_ITER, PGS_TOL, STATS
+from ncgen.assembly.stepper_equations import nonsmooth
+from ncgen.codegen.stepper_package import (CONTACT_STATS, PENETRATION_TOL, PGS_MAX_ITER, PGS_TOL, REPEAT_TOL,
+                                         STATS)
 from ncgen.errors import AccuracyWarning, SimulationError, option, user_stacklevel
 from ncgen.model.data import model_data
 
@@ -338,16 +342,29 @@ def energy_error(traj, work: np.ndarray, conservative: bool) -> np.ndarray:
 
 
 def roundoff_energy(model, traj, S: np.ndarray) -> np.ndarray:
-    """Per output row (at its end): the energy error that round-off of the positions alone
-    can make, ``ε N max|q| max‖F‖₁`` (J), where ``N`` is the number of RATTLE steps so far
-    and ``F(t, q, v, u, p)`` the applied generalised forces at the output samples so far.
+    """Per output row (at its end): the energy error that the run's own round-off and, with
+    nonsmooth contacts, the tolerance of its contact solves can make (J),
 
-    Each step rounds ``q`` to within ``ε max|q|`` per coordinate, and ``E − E0 − W`` changes
-    by the work ``F · δq`` of the applied forces over that rounding (the kinetic energy comes
-    from ``v``, which is not rounded with ``q``): a motion whose energy is of this size (a
-    block resting under 1e-15 N, a spring at rest pushed by 1e-10 N) is below what the
-    energy can tell.  Zero where it is not finite (an overflowed state is judged by the
-    energy error alone)."""
+        ``N max‖F‖₁ (ε max|q| + τ h (1 + max|v|))``,
+
+    where ``N`` is the number of RATTLE steps so far, ``F(t, q, v, u, p)`` the applied
+    generalised forces, ``q`` and ``v`` the samples so far, ``h`` the step (s) and ``τ`` the
+    contact solves' relative velocity tolerance (:data:`~ncgen.codegen.stepper_package.PGS_TOL`,
+    ``REPEAT_TOL``; 0 without nonsmooth contacts).
+
+    Positions: each step rounds ``q`` to within ``ε max|q|`` per coordinate, and ``E − E0 − W``
+    changes by the work ``F · δq`` of the applied forces over that rounding (the kinetic
+    energy comes from ``v``, which is not rounded with ``q``).  Contacts: a solve accepts
+    impulses ``P`` whose contact velocities meet Signorini's and Coulomb's laws to
+    ``τ (1 + max|U|)`` m/s, not exactly (a block at rest keeps the last step's friction
+    impulse while the push reverses, and creeps at ~1e-13 m/s with friction pushing it), so
+    over a step the contacts can do the positive work ``|P| τ (1 + max|U|)``; contacts that
+    hold the applied forces take ``|P| ≤ h ‖F‖₁`` per step (``max|U|`` taken as ``max|v|``;
+    an impact's impulse ``m |Δv|`` is not in it, which matters only at impact speeds below
+    ~1e-10 m/s).  A motion whose energy is of this size (a block resting under 1e-15 N, at
+    the origin under a push of 1e-12 N that reverses, a spring at rest pushed by 1e-10 N) is
+    below what the energy can tell.  Zero where it is not finite (an overflowed state is
+    judged by the energy error alone)."""
     if not len(S):
         return np.zeros(0)
     n = len(S) + 1
@@ -361,7 +378,11 @@ def roundoff_energy(model, traj, S: np.ndarray) -> np.ndarray:
     size = np.maximum.accumulate(np.max(np.abs(traj.q[:n]), axis=1, initial=0.0))[1:]
     steps = np.cumsum(S[:, STATS.index("steps")]) * traj.info.get("stages", 1)
     with np.errstate(invalid="ignore", over="ignore"):
-        floor = np.finfo(float).eps * steps * size * force
+        creep = 0.0
+        if nonsmooth(model):
+            speed = np.maximum.accumulate(np.max(np.abs(traj.v[:n]), axis=1, initial=0.0))[1:]
+            creep = max(PGS_TOL, REPEAT_TOL) * float(traj.info.get("h", 0.0)) * (1 + speed)
+        floor = steps * force * (np.finfo(float).eps * size + creep)
     return np.where(np.isfinite(floor), floor, 0.0)
 
 
