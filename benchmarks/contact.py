@@ -45,8 +45,25 @@ ground on a square grid 0.2 m apart (no two touch), with a SphereSphere contact 
 heap, 1 s: the time per step with N (N − 1) / 2 far pairs, against the heap's (the broad
 phase makes it grow with the close pairs, not with all pairs); ncgen only.
 
+Pyramid (``--pyramid``: this scene alone): 10 cubes (edge 0.1 m, 1 kg, μ = 0.5 everywhere, e = 0)
+in rows of 4, 3, 2, 1 in the x-z plane, 1 cm apart within a row, each above the first row
+centred over the gap between the two it stands on, placed at rest touching, 2 s.  ncgen: 'ruvw'
+bodies, a BoxPlane per box of the first row and a BoxBox per box and each of its two supports
+(224 point contacts; neighbours in a row never touch and have no contact).  The MuJoCo twin:
+free bodies with box geoms (every pair collides), condim 3, elliptic cones, default
+solref/solimp, Newton solver.  Each runs at its largest resting step: no box centre moves
+sideways by more than 1 mm over the run, no speed above 1e-2 m/s at the end (ncgen also: no
+contact solve at the sweep cap); ncgen's from 2.5, 5, 10, 20, 40 ms, MuJoCo's from 1, 2, 4, …
+128 ms then 5 bisections, with the Euler and the implicitfast integrator, the faster kept; and
+MuJoCo's largest step that also keeps the pyramid's shape (no box centre moved by more than a
+tenth of the edge: its boxes sink into each other and the floor), timed against ncgen too.
+Printed: the search, ncgen's first run in a fresh process with an empty compile cache,
+penetration (deepest contact at any step, m), drift (largest displacement of a box centre, m),
+solves at the cap, and the interleaved min / median ratio of the stepping times.
+
     python benchmarks/contact.py [--sizes 5 20] [--pile 20] [--heap 20] [--sparse 100] [--t-end 2] [--h 1e-3] [--repeat 3]
     python benchmarks/contact.py --smoke
+    python benchmarks/contact.py --pyramid [--repeat 7] [--smoke]
 """
 from __future__ import annotations
 
@@ -320,8 +337,9 @@ def run_mujoco(xml: str, t_end: float, h: float, repeat: int):
 
 
 #: Resting: no box centre moves sideways by more than this (m) over the run, and none moves
-#: faster than PYR_VMAX (m/s) at the end.
-PYR_SIDEWAYS, PYR_VMAX = 1e-3, 1e-2
+#: faster than PYR_VMAX (m/s) at the end; keeping its shape, also: no box centre moves by more
+#: than PYR_SHAPE (m, a tenth of the edge) in any direction (MuJoCo's boxes sink).
+PYR_SIDEWAYS, PYR_VMAX, PYR_SHAPE = 1e-3, 1e-2, 0.1 * CUBE
 
 
 def pyramid_ncgen(model, h: float, t_end: float) -> dict:
@@ -370,16 +388,16 @@ def pyramid_mujoco(h: float, t_end: float, integrator: str) -> dict:
     v_end = float(np.abs(d.qvel).max())
     ok = bool(np.all(np.isfinite(d.qpos)) and sideways <= PYR_SIDEWAYS and v_end <= PYR_VMAX)
     return {"penetration": depth, "drift": drift, "sideways": sideways, "v_end": v_end, "energy_gain": gain,
-            "rests": ok}
+            "rests": ok, "shape": ok and drift <= PYR_SHAPE}
 
 
 def largest_resting_step(rests, coarse: list[float], fine: int) -> tuple[float, list[str]]:
-    """The largest step h of ``coarse`` (ascending) with ``rests(h)`` true before the first that
+    """The largest step h of ``coarse`` (ascending) with ``rests(h)`` true (passes) before the first that
     fails, then ``fine`` bisections between it and that failing one; and a log of the tries."""
     log, good, bad = [], None, None
     for h in coarse:
         ok = rests(h)
-        log.append(f"{h * 1e3:g} ms {'rests' if ok else 'fails'}")
+        log.append(f"{h * 1e3:g} ms {'passes' if ok else 'fails'}")
         if not ok:
             bad = h
             break
@@ -389,7 +407,7 @@ def largest_resting_step(rests, coarse: list[float], fine: int) -> tuple[float, 
     for _ in range(fine if bad is not None else 0):
         mid = 0.5 * (good + bad)
         ok = rests(mid)
-        log.append(f"{mid * 1e3:.4g} ms {'rests' if ok else 'fails'}")
+        log.append(f"{mid * 1e3:.4g} ms {'passes' if ok else 'fails'}")
         good, bad = (mid, bad) if ok else (good, mid)
     return good, log
 
@@ -449,22 +467,31 @@ def pyramid_bench(t_end: float, rounds: int, ncgen_steps: list[float], mj_coarse
         if best is None or t < best[2]:
             best = (integrator, h, t)
     integrator, h_mj, _ = best
+    h_shape, log = largest_resting_step(
+        lambda h: theirs.setdefault((integrator, h), pyramid_mujoco(h, t_end, integrator))["shape"], mj_coarse, fine)
+    print(f"MuJoCo step search, Newton {integrator}, keeping the shape (also no box centre moved by more than "
+          f"{PYR_SHAPE:g} m): {', '.join(log)} -> h = {h_shape * 1e3:.4g} ms")
     xml = pyramid_mjcf(h_mj, integrator)
     a, b = ours[h_nc], theirs[(integrator, h_mj)]
     for name, r, h in ((f"ncgen stepper, h = {h_nc * 1e3:g} ms", a, h_nc),
-                       (f"MuJoCo Newton {integrator}, h = {h_mj * 1e3:.4g} ms", b, h_mj)):
+                       (f"MuJoCo Newton {integrator}, h = {h_mj * 1e3:.4g} ms", b, h_mj),
+                       (f"MuJoCo, shape kept, h = {h_shape * 1e3:.4g} ms", theirs[(integrator, h_shape)], h_shape)):
         print(f"{name:<36} penetration {r['penetration']:.2e} m, drift of a box centre {r['drift']:.2e} m "
               f"(sideways {r['sideways']:.2e} m), largest speed at the end {r['v_end']:.1e} m/s, "
               f"energy gain {r['energy_gain']:.2e} J")
     print(f"ncgen bilateral constraint drift max |phi| = {a['phi']:.2e} m^2; contact solves at the sweep cap: {a['cap']}; "
           f"point contacts {a['contacts']}")
-    ratios = []
+    ratios, shaped = [], []
+    xml_shape = pyramid_mjcf(h_shape, integrator)
     for _ in range(rounds):
         t_ours = pyramid_ncgen(model, h_nc, t_end)["stepper"]
         ratios.append(t_ours / mujoco_time(xml, t_end))
+        shaped.append(t_ours / mujoco_time(xml_shape, t_end))
     print(f"ncgen stepper per simulated s {t_ours / t_end * 1e3:.1f} ms ({t_ours / t_end * h_nc * 1e3:.2f} ms per step)")
     print(f"RATIO ncgen / MuJoCo interleaved (pyramid of 10, each at its largest resting step, {rounds} rounds): "
           f"min {min(ratios):.2f}, median {float(np.median(ratios)):.2f}; load average {os.getloadavg()[0]:.2f}")
+    print(f"RATIO ncgen / MuJoCo interleaved (pyramid of 10, MuJoCo at its largest step keeping the shape, "
+          f"{rounds} rounds): min {min(shaped):.2f}, median {float(np.median(shaped)):.2f}")
     ratio = a["penetration"] / b["penetration"] if b["penetration"] > 0 else float("nan")
     print(f"RATIO ncgen / MuJoCo penetration (pyramid of 10): {ratio:.3g}")
 
