@@ -45,8 +45,25 @@ ground on a square grid 0.2 m apart (no two touch), with a SphereSphere contact 
 heap, 1 s: the time per step with N (N − 1) / 2 far pairs, against the heap's (the broad
 phase makes it grow with the close pairs, not with all pairs); ncgen only.
 
+Pyramid (``--pyramid``: this scene alone): 10 cubes (edge 0.1 m, 1 kg, μ = 0.5 everywhere, e = 0)
+in rows of 4, 3, 2, 1 in the x-z plane, 1 cm apart within a row, each above the first row
+centred over the gap between the two it stands on, placed at rest touching, 2 s.  ncgen: 'ruvw'
+bodies, a BoxPlane per box of the first row and a BoxBox per box and each of its two supports
+(224 point contacts; neighbours in a row never touch and have no contact).  The MuJoCo twin:
+free bodies with box geoms (every pair collides), condim 3, elliptic cones, default
+solref/solimp, Newton solver.  Each runs at its largest resting step: no box centre moves
+sideways by more than 1 mm over the run, no speed above 1e-2 m/s at the end (ncgen also: no
+contact solve at the sweep cap); ncgen's from 2.5, 5, 10, 20, 30, 40 ms, MuJoCo's from 1, 2, 4, …
+128 ms then 5 bisections, with the Euler and the implicitfast integrator, the faster kept; and
+MuJoCo's largest step that also keeps the pyramid's shape (no box centre moved by more than a
+tenth of the edge: its boxes sink into each other and the floor), timed against ncgen too.
+Printed: the search, ncgen's first run in a fresh process with an empty compile cache,
+penetration (deepest contact at any step, m), drift (largest displacement of a box centre, m),
+solves at the cap, and the interleaved min / median ratio of the stepping times.
+
     python benchmarks/contact.py [--sizes 5 20] [--pile 20] [--heap 20] [--sparse 100] [--t-end 2] [--h 1e-3] [--repeat 3]
     python benchmarks/contact.py --smoke
+    python benchmarks/contact.py --pyramid [--repeat 7] [--smoke]
 """
 from __future__ import annotations
 
@@ -150,6 +167,56 @@ def sparse(n: int):
             s.add_contact(nc.SphereSphere(balls[i], None, HEAP_R, balls[j], None, HEAP_R, mu=HEAP_MU,
                                           name=f"pair{i}_{j}"))
     return s.build(contacts="nonsmooth")
+
+
+#: The pyramid: cube edge (m), mass (kg), friction coefficient, gap between neighbours in a row (m),
+#: boxes per row from the ground up, simulated time (s).
+CUBE, CUBE_M, PYR_MU, PYR_GAP, PYR_ROWS, PYR_T = 0.1, 1.0, 0.5, 0.01, (4, 3, 2, 1), 2.0
+
+
+def cube_centres() -> list[tuple[int, np.ndarray]]:
+    """The pyramid's boxes at rest, (row, centre) from the ground up and in x: each box above the
+    first row centred over the gap between the two it stands on (y = 0, faces touching)."""
+    pitch = CUBE + PYR_GAP
+    return [(row, np.array([(k - (n - 1) / 2) * pitch, 0.0, CUBE * (row + 0.5)]))
+            for row, n in enumerate(PYR_ROWS) for k in range(n)]
+
+
+def pyramid():
+    """The ncgen pyramid (contacts="nonsmooth"), see the module docstring: a BoxPlane per box of
+    the first row and a BoxBox per box and each of the two it stands on."""
+    import ncgen as nc
+
+    s = nc.System("pyramid10", gravity=GRAVITY)
+    size = np.full(3, CUBE)
+    inertia = CUBE_M * CUBE**2 / 6 * np.eye(3)
+    boxes = [s.add_body(f"box{k}", mass=CUBE_M, inertia=inertia, position=tuple(c))
+             for k, (_, c) in enumerate(cube_centres())]
+    start = np.cumsum((0,) + PYR_ROWS)
+    for row, n in enumerate(PYR_ROWS):
+        for k in range(n):
+            i = start[row] + k
+            if row == 0:
+                s.add_contact(nc.BoxPlane(boxes[i], size=size, mu=PYR_MU, name=f"floor_{i}"))
+                continue
+            for j in (start[row - 1] + k, start[row - 1] + k + 1):
+                s.add_contact(nc.BoxBox(boxes[i], size, boxes[j], size, mu=PYR_MU, name=f"on{i}_{j}"))
+    return s.build(contacts="nonsmooth")
+
+
+def pyramid_mjcf(h: float, integrator: str = "Euler", solver: str = "Newton") -> str:
+    """The MuJoCo twin of :func:`pyramid`: free bodies with box geoms (every pair collides),
+    condim 3, elliptic cones, default solref/solimp."""
+    inertia = CUBE_M * CUBE**2 / 6
+    boxes = "".join(f'<body name="box{k}" pos="{_nums(c)}"><freejoint/>'
+                    f'<inertial pos="0 0 0" mass="{CUBE_M}" diaginertia="{inertia} {inertia} {inertia}"/>'
+                    f'<geom type="box" size="{_nums([CUBE / 2] * 3)}"/></body>'
+                    for k, (_, c) in enumerate(cube_centres()))
+    return (f'<mujoco model="pyramid10"><compiler inertiafromgeom="false"/>'
+            f'<option timestep="{h!r}" gravity="{_nums(GRAVITY)}" cone="elliptic" integrator="{integrator}" '
+            f'solver="{solver}"><flag energy="enable"/></option>'
+            f'<default><geom condim="3" friction="{PYR_MU} 0 0" contype="1" conaffinity="1"/></default>'
+            f'<worldbody><geom type="plane" size="5 5 0.1"/>{boxes}</worldbody></mujoco>')
 
 
 def heap_mjcf(n: int, h: float, rotating: bool) -> str:
@@ -269,6 +336,166 @@ def run_mujoco(xml: str, t_end: float, h: float, repeat: int):
             "rest_height": float(np.mean(data.geom_xpos[node_geoms, 2]))}
 
 
+#: Resting: no box centre moves sideways by more than this (m) over the run, and none moves
+#: faster than PYR_VMAX (m/s) at the end; keeping its shape, also: no box centre moves by more
+#: than PYR_SHAPE (m, a tenth of the edge) in any direction (MuJoCo's boxes sink).
+PYR_SIDEWAYS, PYR_VMAX, PYR_SHAPE = 1e-3, 1e-2, 0.1 * CUBE
+
+
+def pyramid_ncgen(model, h: float, t_end: float) -> dict:
+    """One ncgen run of the pyramid at step h (output every max(h, SAMPLE)): stepping time (s),
+    penetration (m, deepest gap at the samples and at the end of any step), drift (m, largest
+    displacement of a box centre from its start at the samples), solves at the sweep cap."""
+    import warnings
+
+    import ncgen as nc
+
+    substeps = max(1, int(round(SAMPLE / h)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tr = nc.simulate(model, t_end, h * substeps, method="stepper", substeps=substeps)
+    start = [c for _, c in cube_centres()]
+    x = np.stack([tr.point(f"box{k}", (0, 0, 0)) for k in range(len(start))], axis=1)
+    moved = np.abs(x - np.array(start))
+    v_end = np.abs(tr.v[-1]).max()
+    return {"stepper": tr.info["stepping_time"], "penetration": max(0.0, -float(tr.gap.min()),
+                                                                      tr.info["contacts"]["penetration"]),
+            "drift": float(moved.max()), "sideways": float(moved[..., :2].max()),
+            "cap": tr.info["contacts"]["pgs_unconverged"], "energy_gain": float(np.max(tr.energy - tr.energy[0])),
+            "phi": float(tr.constraint_residual.max()), "v_end": float(v_end), "contacts": len(tr.contact_names),
+            "rests": bool(moved[..., :2].max() <= PYR_SIDEWAYS and v_end <= PYR_VMAX
+                          and tr.info["contacts"]["pgs_unconverged"] == 0)}
+
+
+def pyramid_mujoco(h: float, t_end: float, integrator: str) -> dict:
+    """One MuJoCo run of the twin at step h, stepped one step at a time for the figures
+    (penetration: deepest contact, m; drift: largest displacement of a box centre, m); the
+    time is taken separately (:func:`mujoco_time`)."""
+    import mujoco
+
+    m = mujoco.MjModel.from_xml_string(pyramid_mjcf(h, integrator))
+    d = mujoco.MjData(m)
+    start = np.array([c for _, c in cube_centres()])
+    drift = sideways = depth = 0.0
+    mujoco.mj_forward(m, d)
+    E0, gain = d.energy.sum(), 0.0
+    for _ in range(int(round(t_end / h))):
+        mujoco.mj_step(m, d)
+        moved = np.abs(d.xpos[1:] - start)
+        drift, sideways = max(drift, float(moved.max())), max(sideways, float(moved[:, :2].max()))
+        depth = max(depth, float(-d.contact.dist[:d.ncon].min()) if d.ncon else 0.0)
+        gain = max(gain, float(d.energy.sum() - E0))
+    v_end = float(np.abs(d.qvel).max())
+    ok = bool(np.all(np.isfinite(d.qpos)) and sideways <= PYR_SIDEWAYS and v_end <= PYR_VMAX)
+    return {"penetration": depth, "drift": drift, "sideways": sideways, "v_end": v_end, "energy_gain": gain,
+            "rests": ok, "shape": ok and drift <= PYR_SHAPE}
+
+
+def largest_resting_step(rests, coarse: list[float], fine: int) -> tuple[float, list[str]]:
+    """The largest step h of ``coarse`` (ascending) with ``rests(h)`` true (passes) before the first that
+    fails, then ``fine`` bisections between it and that failing one; and a log of the tries."""
+    log, good, bad = [], None, None
+    for h in coarse:
+        ok = rests(h)
+        log.append(f"{h * 1e3:g} ms {'passes' if ok else 'fails'}")
+        if not ok:
+            bad = h
+            break
+        good = h
+    if good is None:
+        raise RuntimeError(f"no step of {coarse} keeps the pyramid resting: {log}")
+    for _ in range(fine if bad is not None else 0):
+        mid = 0.5 * (good + bad)
+        ok = rests(mid)
+        log.append(f"{mid * 1e3:.4g} ms {'passes' if ok else 'fails'}")
+        good, bad = (mid, bad) if ok else (good, mid)
+    return good, log
+
+
+def mujoco_time(xml: str, t_end: float) -> float:
+    """Seconds of ``mj_step`` with ``nstep`` over t_end (no Python in the loop)."""
+    import mujoco
+
+    m = mujoco.MjModel.from_xml_string(xml)
+    d = mujoco.MjData(m)
+    start = time.perf_counter()
+    mujoco.mj_step(m, d, nstep=int(round(t_end / m.opt.timestep)))
+    return time.perf_counter() - start
+
+
+def first_run_cold() -> float:
+    """Wall seconds of a fresh Python process that builds the pyramid and takes one step with
+    an empty compile cache (NCGEN_CACHE_DIR in a temporary directory)."""
+    import subprocess
+    import sys
+    import tempfile
+
+    here = os.path.dirname(os.path.abspath(__file__))
+    code = ("import sys; sys.path.insert(0, %r); import contact, ncgen as nc; "
+            "nc.simulate(contact.pyramid(), contact.SAMPLE, contact.SAMPLE, method='stepper', substeps=1)" % here)
+    with tempfile.TemporaryDirectory() as tmp:
+        start = time.perf_counter()
+        subprocess.run([sys.executable, "-c", code], check=True, env={**os.environ, "NCGEN_CACHE_DIR": tmp},
+                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        return time.perf_counter() - start
+
+
+def pyramid_bench(t_end: float, rounds: int, ncgen_steps: list[float], mj_coarse: list[float], fine: int) -> None:
+    """The 10-box pyramid against its MuJoCo twin, each at its largest resting step (see the
+    module docstring); prints the search, the figures and the interleaved RATIO line."""
+    import ncgen as nc
+
+    print(f"\n=== pyramid of 10 boxes ({'-'.join(map(str, PYR_ROWS))}, {CUBE:g} m cubes of {CUBE_M:g} kg, "
+          f"mu = {PYR_MU}) resting on the ground, {t_end:g} s")
+    cold = first_run_cold()
+    print(f"ncgen first run, fresh process and empty cache (import, build, C generation, compile, one step): "
+          f"{cold:.1f} s wall; load average {os.getloadavg()[0]:.2f}")
+    model = pyramid()
+    nc.simulate(model, SAMPLE, SAMPLE, method="stepper", substeps=1)        # compile outside the timings
+    ours = {}
+    h_nc, log = largest_resting_step(lambda h: ours.setdefault(h, pyramid_ncgen(model, h, t_end))["rests"],
+                                     ncgen_steps, 0)
+    print(f"ncgen step search (drift of a box sideways <= {PYR_SIDEWAYS:g} m, speeds at the end <= {PYR_VMAX:g} m/s, "
+          f"no solve at the sweep cap): {', '.join(log)} -> h = {h_nc * 1e3:g} ms")
+    theirs, best = {}, None
+    for integrator in ("Euler", "implicitfast"):
+        h, log = largest_resting_step(
+            lambda h: theirs.setdefault((integrator, h), pyramid_mujoco(h, t_end, integrator))["rests"], mj_coarse, fine)
+        t = min(mujoco_time(pyramid_mjcf(h, integrator), t_end) for _ in range(3))
+        print(f"MuJoCo step search, Newton solver, elliptic cones, {integrator} (same criterion): {', '.join(log)} "
+              f"-> h = {h * 1e3:.4g} ms, {t / t_end * 1e3:.2f} ms per simulated s")
+        if best is None or t < best[2]:
+            best = (integrator, h, t)
+    integrator, h_mj, _ = best
+    h_shape, log = largest_resting_step(
+        lambda h: theirs.setdefault((integrator, h), pyramid_mujoco(h, t_end, integrator))["shape"], mj_coarse, fine)
+    print(f"MuJoCo step search, Newton {integrator}, keeping the shape (also no box centre moved by more than "
+          f"{PYR_SHAPE:g} m): {', '.join(log)} -> h = {h_shape * 1e3:.4g} ms")
+    xml = pyramid_mjcf(h_mj, integrator)
+    a, b = ours[h_nc], theirs[(integrator, h_mj)]
+    for name, r, h in ((f"ncgen stepper, h = {h_nc * 1e3:g} ms", a, h_nc),
+                       (f"MuJoCo Newton {integrator}, h = {h_mj * 1e3:.4g} ms", b, h_mj),
+                       (f"MuJoCo, shape kept, h = {h_shape * 1e3:.4g} ms", theirs[(integrator, h_shape)], h_shape)):
+        print(f"{name:<36} penetration {r['penetration']:.2e} m, drift of a box centre {r['drift']:.2e} m "
+              f"(sideways {r['sideways']:.2e} m), largest speed at the end {r['v_end']:.1e} m/s, "
+              f"energy gain {r['energy_gain']:.2e} J")
+    print(f"ncgen bilateral constraint drift max |phi| = {a['phi']:.2e} m^2; contact solves at the sweep cap: {a['cap']}; "
+          f"point contacts {a['contacts']}")
+    ratios, shaped = [], []
+    xml_shape = pyramid_mjcf(h_shape, integrator)
+    for _ in range(rounds):
+        t_ours = pyramid_ncgen(model, h_nc, t_end)["stepper"]
+        ratios.append(t_ours / mujoco_time(xml, t_end))
+        shaped.append(t_ours / mujoco_time(xml_shape, t_end))
+    print(f"ncgen stepper per simulated s {t_ours / t_end * 1e3:.1f} ms ({t_ours / t_end * h_nc * 1e3:.2f} ms per step)")
+    print(f"RATIO ncgen / MuJoCo interleaved (pyramid of 10, each at its largest resting step, {rounds} rounds): "
+          f"min {min(ratios):.2f}, median {float(np.median(ratios)):.2f}; load average {os.getloadavg()[0]:.2f}")
+    print(f"RATIO ncgen / MuJoCo interleaved (pyramid of 10, MuJoCo at its largest step keeping the shape, "
+          f"{rounds} rounds): min {min(shaped):.2f}, median {float(np.median(shaped)):.2f}")
+    ratio = a["penetration"] / b["penetration"] if b["penetration"] > 0 else float("nan")
+    print(f"RATIO ncgen / MuJoCo penetration (pyramid of 10): {ratio:.3g}")
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--sizes", type=int, nargs="*", default=[5, 20], help="numbers of bars (default 5 20; none: no chain)")
@@ -278,11 +505,18 @@ def main(argv=None) -> int:
     parser.add_argument("--t-end", type=float, default=2.0, help="simulated time, s (default 2)")
     parser.add_argument("--h", type=float, default=1e-3, help="fixed step of both, s (default 1e-3)")
     parser.add_argument("--repeat", type=int, default=3, help="runs per timing, the best kept (default 3)")
+    parser.add_argument("--pyramid", action="store_true", help="the 10-box pyramid against its MuJoCo twin only "
+                        "(see the module docstring)")
     parser.add_argument("--smoke", action="store_true", help="N = 3, 0.3 s, one run (CI)")
     args = parser.parse_args(argv)
     if args.smoke:
         args.sizes, args.pile, args.heap, args.t_end, args.repeat = [3], 4, 4, 0.3, 1
     print(machine())
+    if args.pyramid:
+        t_end = 0.3 if args.smoke else PYR_T
+        pyramid_bench(t_end, args.repeat, [1e-2] if args.smoke else [2.5e-3, 5e-3, 1e-2, 2e-2, 3e-2, 4e-2],
+                      [4e-3, 8e-3] if args.smoke else [1e-3 * 2**k for k in range(8)], 1 if args.smoke else 5)
+        return 0
     for n in args.sizes:
         print(f"\n=== chain of N = {n} bars falling on the ground, {args.t_end:g} s, h = {args.h:g} s")
         compare(f"chain N = {n}", chain_with_contacts(n), chain_mjcf(n, args.h), args.t_end, args.h, args.repeat)
