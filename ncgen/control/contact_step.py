@@ -117,12 +117,12 @@ class ContactStepFunction:
         self.nx, self.nu, self.np = 2 * model.nq, model.nu, model.np
         self._max_iter, self._abstol = max_iter, abstol
         self._stepper = load_stepper(model)
-        from ncgen.control.step import _compile
+        from ncgen.control.step_support import compile_functions
         system = contact_system(contact_residual(model, h))
         #: How the step's equations are evaluated: ``"compiled"`` (generated C, cached by
         #: content) or, above :data:`COMPILE_MAX_INSTRUCTIONS`, ``"casadi-vm"``.
         self.evaluation = "compiled" if system.n_instructions() <= COMPILE_MAX_INSTRUCTIONS else "casadi-vm"
-        self._system = (_compile(f"{model.name}_contact_step", [system])[system.name()]
+        self._system = (compile_functions(f"{model.name}_contact_step", [system])[system.name()]
                         if self.evaluation == "compiled" else _Nonzeros(system))
         self._patterns = [(np.array(sp_.row()), np.array(sp_.colind()), sp_.shape)
                           for sp_ in (system.sparsity_out(2), system.sparsity_out(3))]
@@ -138,10 +138,10 @@ class ContactStepFunction:
 
     # ------------------------------------------------------------------ arguments
     def _args(self, x, u, p, t):
-        from ncgen.control.step import _vector
-        x = _vector(x, self.nx, "x", "the state [q; v]")
-        u = np.zeros(0) if u is None and self.nu == 0 else _vector(u, self.nu, "u", "the inputs")
-        p = np.asarray(self.model.p0, float) if p is None else _vector(p, self.np, "p", "the parameters")
+        from ncgen.control.step_support import state_vector
+        x = state_vector(x, self.nx, "x", "the state [q; v]")
+        u = np.zeros(0) if u is None and self.nu == 0 else state_vector(u, self.nu, "u", "the inputs")
+        p = np.asarray(self.model.p0, float) if p is None else state_vector(p, self.np, "p", "the parameters")
         t = self.model.t0 if t is None else as_scalar(t, "t")
         return x, u, p, t
 
@@ -173,7 +173,7 @@ class ContactStepFunction:
 
     def step(self, x, u=None, p=None, t=None) -> ContactStep:
         """The step from ``x`` with its Jacobians, modes and switch flag (module docstring)."""
-        from ncgen.control.step import StepDidNotConverge
+        from ncgen.control.step_support import StepDidNotConverge
 
         x, u, p, t = self._args(x, u, p, t)
         nq, nk, dim = self.model.nq, self.model.nk, self.model.dim
@@ -246,7 +246,7 @@ class ContactStepFunction:
         """``(Z, info, lu, R_y)``: Newton on the residual with the modes ``sel`` to its rounding
         floor; ``lu`` factors ``R_Z`` at the last iterate but one (``R_y`` there too), whose
         Newton step is at the rounding floor: the implicit function theorem's matrix."""
-        from ncgen.control.step import StepDidNotConverge
+        from ncgen.control.step_support import StepDidNotConverge
         tol = POLISH_TOL * self._scale
         (row, colind, shape), (row_y, colind_y, shape_y) = self._patterns
         for _ in range(POLISH_MAX_ITER):

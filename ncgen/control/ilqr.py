@@ -226,7 +226,7 @@ def _backward(A, B, lx, lu, lxx, luu, lux, Vx, Vxx, mu, curvature=None):
 
 def _forward(st, x0, X, U, kff, K, alpha, p, t0):
     """Closed-loop rollout through the nonlinear step; ``(None, None)`` if a step fails."""
-    from ncgen.control.step import StepDidNotConverge
+    from ncgen.control.step_support import StepDidNotConverge
     N = U.shape[0]
     Xn, Un = np.empty_like(X), np.empty_like(U)
     Xn[0] = x0

@@ -180,8 +180,8 @@ class MPC:
         self.iterations = iterations
         self.functions = mpc_functions(self.model, self.problem, regularization=regularization,
                                        qp_max_iter=qp_max_iter)
-        from ncgen.control.step import _compile
-        lib = _compile(f"{self.model.name}_mpc", self.functions)
+        from ncgen.control.step_support import compile_functions
+        lib = compile_functions(f"{self.model.name}_mpc", self.functions)
         self._data, self._qp, self._update, self._merit_fn = (lib[f.name()] for f in self.functions)
         self._residual_tol = residual_tolerance(self.model)
         #: qrqp's status of each QP of the last control step (0: converged).
@@ -248,8 +248,8 @@ class MPC:
     def reset(self, x, t: float | None = None, iterations: int = 0) -> None:
         """Start again from the guess of :meth:`initial_guess`, then run ``iterations``
         solves at ``x`` without shifting (to converge the first solution)."""
-        from ncgen.control.step import _vector
-        x = _vector(x, self.nx, "x", "the state [q; v]")
+        from ncgen.control.step_support import state_vector
+        x = state_vector(x, self.nx, "x", "the state [q; v]")
         t = self.model.t0 if t is None else as_scalar(t, "MPC.reset: t")
         if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 0:
             raise OptimizationError(f"MPC.reset: iterations: expected an integer >= 0, got {iterations!r}")
@@ -262,8 +262,8 @@ class MPC:
         """The input to apply now, from the measured state ``x`` at time ``t``; the solution
         (``mpc.solution``: states and inputs along the horizon), shifted by one interval,
         is the next call's guess.  The input is inside its bounds (checked)."""
-        from ncgen.control.step import _vector
-        x = _vector(x, self.nx, "x", "the state [q; v]")
+        from ncgen.control.step_support import state_vector
+        x = state_vector(x, self.nx, "x", "the state [q; v]")
         t = self.model.t0 if t is None else as_scalar(t, "MPC: t")
         if self.X is None:
             self.reset(x)

@@ -33,14 +33,13 @@ Not thread-safe: one object per thread.
 """
 from __future__ import annotations
 
-import os
-import tempfile
-from pathlib import Path
 
 import numpy as np
 
 from ncgen.control.discrete import (MAX_ITER, ROLLOUT_CHUNK, default_abstol, residual_scale, rollout_function,
                                     state_constraint_jacobian, step_functions)
+from ncgen.control.step_support import (PACKAGE_OPTIONS, StepDidNotConverge, compile_flags,  # noqa: F401
+                                        compile_functions, state_vector)
 from ncgen.errors import NcgenError
 from ncgen.validation import as_numbers, as_scalar
 
@@ -50,18 +49,9 @@ KERNELS = ("auto", "tables", "flat")
 #: The functions of :func:`ncgen.control.discrete.step_functions` a step function compiles
 #: (one translation unit each, compiled in parallel).
 COMPILED = ("step_solution", "step_G_z", "step_G_y", "step_jacobian", "step_adjoint")
-#: How a step function's package is written: not rerolled (the exported MPC package is
-#: written the same way, so that Python and C run the same arithmetic in the same order), one
-#: function per file, so that the solve and the two sensitivities compile in parallel.
-PACKAGE_OPTIONS = {"reroll_instructions": None, "max_file_instructions": 0}
 #: A step whose residual ‖G‖∞ exceeds this (relative to the largest mass-matrix entry plus
 #: one), or whose state or unknowns are not finite, did not converge and is refused.
 RESIDUAL_TOL = 1e-8
-
-
-class StepDidNotConverge(NcgenError):
-    """The Newton iterations of a step ended with a residual above :data:`RESIDUAL_TOL` or
-    with NaN or inf in the state."""
 
 
 def step_function(model, h: float, method: str = "rattle", *, max_iter: int = MAX_ITER,
@@ -166,7 +156,7 @@ class StepFunction:
     def _load_flat(self) -> None:
         """The model's own step package, generated and compiled (cached by content)."""
         if self._flat is None:
-            lib = _compile(f"{self.model.name}_step", [self.functions[k] for k in COMPILED])
+            lib = compile_functions(f"{self.model.name}_step", [self.functions[k] for k in COMPILED])
             self._solution, self._G_z, self._G_y = lib["step_solution"], lib["step_G_z"], lib["step_G_y"]
             self._jacobian, self._adjoint = lib["step_jacobian"], lib["step_adjoint"]
             self._flat = lib
@@ -177,9 +167,9 @@ class StepFunction:
 
     # ----------------------------------------------------------------- arguments
     def _args(self, x, u, p, t) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-        x = _vector(x, self.nx, "x", "the state [q; v]")
-        u = np.zeros(0) if u is None and self.nu == 0 else _vector(u, self.nu, "u", "the inputs")
-        p = self.model.p0 if p is None else _vector(p, self.np, "p", "the parameters")
+        x = state_vector(x, self.nx, "x", "the state [q; v]")
+        u = np.zeros(0) if u is None and self.nu == 0 else state_vector(u, self.nu, "u", "the inputs")
+        p = self.model.p0 if p is None else state_vector(p, self.np, "p", "the parameters")
         t = self.model.t0 if t is None else as_scalar(t, "t")
         return x, u, p, t
 
@@ -255,7 +245,7 @@ class StepFunction:
         if n not in self._rollouts:
             self._load_flat()
             f = rollout_function(self.functions["step_solution"], n, self.h)
-            self._rollouts[n] = _compile(f"{self.model.name}_rollout{n}", [f])["rollout"]
+            self._rollouts[n] = compile_functions(f"{self.model.name}_rollout{n}", [f])["rollout"]
         return self._rollouts[n]
 
     def _chunks(self, N: int) -> list[tuple[int, int]]:
@@ -351,38 +341,3 @@ def _positive(value, name: str, what: str) -> float:
     if isinstance(value, bool) or out is None or not np.isfinite(out) or out <= 0:
         raise NcgenError(f"step_function: {name}: expected {what}, got {value!r}")
     return out
-
-
-def _vector(a, n: int, name: str, what: str) -> np.ndarray:
-    """``a`` as ``n`` finite floats; raw bytes, text, complex numbers and ragged nestings
-    are refused by ``name`` (:func:`~ncgen.validation.as_numbers`)."""
-    a = as_numbers(a, name, f"{n} finite number(s) ({what})").reshape(-1) if a is not None else np.zeros(0)
-    if a.size == 1 and n > 1 and name == "u":
-        a = np.full(n, a[0])
-    if a.size != n or not np.all(np.isfinite(a)):
-        raise NcgenError(f"{name}: expected {n} finite number(s) ({what}), got {a.size} value(s)"
-                         + ("" if np.all(np.isfinite(a)) else " with NaN or inf"))
-    return a
-
-
-def compile_flags() -> tuple[str, ...] | None:
-    """The flags of a step function's package: ``$NCGEN_CFLAGS`` if set, else ``-O1``
-    (:data:`ncgen.codegen.compile_cache.LARGE_CFLAGS`: its files are long straight-line
-    functions, which gcc compiles about 1.5x faster at -O1 than at -O2, and which run no
-    slower)."""
-    from ncgen.codegen.compile_cache import LARGE_CFLAGS
-    return None if os.environ.get("NCGEN_CFLAGS") is not None else LARGE_CFLAGS
-
-
-def _compile(name: str, functions: list) -> dict:
-    """``functions`` generated as the C package ``name``, compiled (cached by content) and
-    loaded for direct calls: ``{function name: DirectFunction}``."""
-    from ncgen.codegen.compile_cache import compile_package
-    from ncgen.codegen.direct import DirectFunction
-    from ncgen.codegen.package import write_package
-
-    with tempfile.TemporaryDirectory() as tmp:
-        pkg = write_package(name, functions, Path(tmp) / "pkg", **PACKAGE_OPTIONS)
-        built = compile_package(pkg, cflags=compile_flags())
-        names = {f.name(): pkg.c_name(f.name()) for f in functions}
-    return {f.name(): DirectFunction(built.path, names[f.name()], f) for f in functions}
