@@ -10,8 +10,9 @@ of one model.  The deployment is posed as optimal control (rest lengths the cont
 1.5 s; warm-started by a simulated cosine ramp of the rest lengths) and tracked in
 simulation from a disturbed start by cable-space feedback: each cable's rest length set so
 that its tension is the plan's plus ``k_f (l − l*) + c_f (l̇ − l̇*)`` about the planned length
-``l*`` (the prestressed structure is stiff in its cables' lengths; an MPC on this model is
-not used: building its step functions took longer than 8 min here, see docs/tensegrity.md).
+``l*`` (the prestressed structure is stiff in its cables' lengths; ``nc.MPC`` does not track
+it: its step is stable only for h ≤ 0.01 s, so its horizon of a few steps is too short, see
+docs/tensegrity.md).
 """
 import time
 

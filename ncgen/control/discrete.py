@@ -170,16 +170,18 @@ def _state_jacobian(Z_y, nq: int, nc: int, h: float):
 
 
 def step_jacobian_function(model, h: float, *, abstol: float = ABSTOL, abstol_step: float = ABSTOL_STEP,
-                           max_iter: int = MAX_ITER) -> ca.Function:
+                           max_iter: int = MAX_ITER, sx_qr_max_nnz: int | None = None) -> ca.Function:
     """``step_jac: (x, u, p, t) -> (x1, A, B, C, res)`` (``A``, ``B``, ``C`` dense): the IFT
-    solve with one QR of ``G_z`` for all columns (:func:`qr_solve_columns`), in one function
-    with the step: what the MPC's generated C calls at every node of its horizon."""
+    solve with one QR of ``G_z`` for all columns (:func:`qr_solve_columns`, unrolled up to
+    ``sx_qr_max_nnz``, default :data:`SX_QR_MAX_NNZ`), in one function with the step: what the
+    MPC's generated C calls at every node of its horizon."""
     nq, nc = model.nq, model.nc
     (x, u, p, t), z, x1, res = _whole_newton_step(model, h, abstol, abstol_step, max_iter)
     G_z_f, G_y_f = _sensitivities(step_residual(model, h))
     G_z, G_y = G_z_f(z, x, u, p, t), G_y_f(z, x, u, p, t)
     ny = G_y.size2()
-    X1_y = _state_jacobian(-qr_solve_columns(G_z, ca.densify(G_y), G_z_f.sparsity_out(0), ny), nq, nc, h)
+    X1_y = _state_jacobian(-qr_solve_columns(G_z, ca.densify(G_y), G_z_f.sparsity_out(0), ny, sx_qr_max_nnz),
+                           nq, nc, h)
     nu_ = model.nu
     return ca.Function("step_jac", [x, u, p, t],
                        [x1] + [ca.densify(X1_y[:, c]) for c in (slice(0, 2 * nq), slice(2 * nq, 2 * nq + nu_),
@@ -209,12 +211,13 @@ def _whole_newton_step(model, h: float, abstol: float, abstol_step: float, max_i
 SX_QR_MAX_NNZ = 20_000
 
 
-def qr_solve_columns(K: ca.MX, B: ca.MX, pattern: ca.Sparsity, ncol: int) -> ca.MX:
+def qr_solve_columns(K: ca.MX, B: ca.MX, pattern: ca.Sparsity, ncol: int, max_nnz: int | None = None) -> ca.MX:
     """``K⁻¹ B`` for the ``ncol`` columns of ``B`` with one factorisation: the sparse
     Householder QR of ``K`` (pattern ``pattern``) unrolled into an SX function, then an SX
-    back-substitution mapped over the columns (a loop in C)."""
+    back-substitution mapped over the columns (a loop in C); CasADi's ``qr`` solver (loops)
+    when ``nnz(V) + nnz(R)`` exceeds ``max_nnz`` (default :data:`SX_QR_MAX_NNZ`)."""
     V, R, *_ = ca.qr_sparse(ca.DM(pattern, 1.0), True)
-    if V.nnz() + R.nnz() > SX_QR_MAX_NNZ:
+    if V.nnz() + R.nnz() > (SX_QR_MAX_NNZ if max_nnz is None else max_nnz):
         return ca.solve(K, B, "qr")
     Ks = ca.SX.sym("K", pattern)
     V, R, beta, prinv, pc = ca.qr_sparse(Ks, True)

@@ -50,7 +50,7 @@ ARMIJO, GAMMA, C_MIN = 1e-4, 1e-5, 1e-10
 
 
 def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
-                  qp_max_iter: int = 100) -> list[ca.Function]:
+                  qp_max_iter: int = 100, sx_qr_max_nnz: int | None = None) -> list[ca.Function]:
     """The four CasADi functions of one SQP iteration (see the module docstring):
 
     * ``mpc_qp_data: (x, t, X̄, Ū) -> (H, g, A, lba, uba, lbx, ubx, Xs, S)``: the condensed QP
@@ -59,10 +59,13 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
       failure: the caller checks it);
     * ``mpc_update: (Xs, S, Ū, δU) -> (X⁺, U⁺)``: the full step;
     * ``mpc_merit`` (:func:`merit_function`): cost and infeasibility of a trial.
+
+    ``sx_qr_max_nnz``: the step Jacobians' QR is unrolled into straight-line C up to this size
+    (:func:`ncgen.control.discrete.qr_solve_columns`), else generated as loops.
     """
     h, N, p = problem.h, problem.N, problem.p
     nx, nu = 2 * model.nq, model.nu
-    jac = step_jacobian_function(model, h).map(N)
+    jac = step_jacobian_function(model, h, sx_qr_max_nnz=sx_qr_max_nnz).map(N)
 
     # cost, its gradient and (Gauss–Newton) Hessian in y = [vec X; vec U] (SX)
     Xs, Us = ca.SX.sym("X", nx, N + 1), ca.SX.sym("U", nu, N)
@@ -157,14 +160,19 @@ class MPC:
     generated C; see the module docstring);
     ``iterations``: SQP iterations per control step (1: real-time iteration);
     ``terminal_weight``: weight ``W`` of the OCP's final conditions, soft in MPC
-    (:mod:`ncgen.control.mpc_problem`).  The horizon is the OCP's: ``N`` intervals of
+    (:mod:`ncgen.control.mpc_problem`);
+    ``sx_qr_max_nnz``: the largest QR of the step's Jacobian (``nnz(V) + nnz(R)``) unrolled into
+    straight-line C (default :data:`ncgen.control.discrete.SX_QR_MAX_NNZ`); ``0`` generates it
+    as loops, slower per solve but quick to compile (the two-stage tensegrity tower's unrolled QR,
+    26k instructions in one C function, had gcc -O1 still compiling after 5 min at 2.3 GB).  The horizon is the OCP's: ``N`` intervals of
     ``h = t_final / N`` seconds, and ``mpc`` is meant to be called every ``h`` seconds.
     ``mpc.reset(x, iterations=...)`` (also done by the first call) sets the guess to ``x``
     held with zero inputs (clipped into their bounds) and iterates on it.
     ``mpc.qp_status`` and ``mpc.step_lengths`` report each iteration of the last call."""
 
     def __init__(self, ocp, solver: str = "sqp", *, iterations: int = 1, terminal_weight: float = 1e3,
-                 regularization: float = REGULARIZATION, qp_max_iter: int = 100):
+                 regularization: float = REGULARIZATION, qp_max_iter: int = 100,
+                 sx_qr_max_nnz: int | None = None):
         if solver not in SOLVERS:
             hint = (" (Fatrop is not wired into ncgen's MPC: CasADi's wheel ships libfatrop, its conic and "
                     "nlpsol plugins and headers, but the MPC does not yet pose its QP in Fatrop's stage-wise form "
@@ -178,8 +186,11 @@ class MPC:
         self.h, self.N = self.problem.h, self.problem.N
         self.nx, self.nu = 2 * self.model.nq, self.model.nu
         self.iterations = iterations
+        if sx_qr_max_nnz is not None and (isinstance(sx_qr_max_nnz, bool) or not isinstance(sx_qr_max_nnz, int)
+                                          or sx_qr_max_nnz < 0):
+            raise OptimizationError(f"MPC: sx_qr_max_nnz: expected an integer >= 0 or None, got {sx_qr_max_nnz!r}")
         self.functions = mpc_functions(self.model, self.problem, regularization=regularization,
-                                       qp_max_iter=qp_max_iter)
+                                       qp_max_iter=qp_max_iter, sx_qr_max_nnz=sx_qr_max_nnz)
         from ncgen.control.step_support import compile_functions
         lib = compile_functions(f"{self.model.name}_mpc", self.functions)
         self._data, self._qp, self._update, self._merit_fn = (lib[f.name()] for f in self.functions)
