@@ -110,6 +110,18 @@ def batches(fns: dict, calls: int, repeat: int) -> dict[str, list[float]]:
     return out
 
 
+def report_ratios(title: str, t: dict[str, list[float]], ref: str, target: str) -> None:
+    """Print each path's min and median of ``t`` (seconds, shown in ms) under ``title``, then
+    ``ref``'s ratio to every MuJoCo path (min and median), with the ``target`` stated."""
+    print(f"\n=== {title}")
+    for name, ts in t.items():
+        print(f"  {name:34s} min {1e3 * min(ts):9.3f} ms   median {1e3 * np.median(ts):9.3f} ms")
+    for name in t:
+        if name.startswith("mujoco"):
+            print(f"  RATIO {ref} / {name}: min {min(t[ref]) / min(t[name]):.2f}, median "
+                  f"{np.median(t[ref]) / np.median(t[name]):.2f} ({target})")
+
+
 def in_turn(round_index: int, paths: dict[str, Callable[[], object]]) -> dict[str, object]:
     """Each path's result in one round of a comparison, the paths run in their order in even
     rounds and in reverse in odd ones (so that none always goes first on a shared machine)."""

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import batches, machine  # noqa: E402
+from common import batches, machine, report_ratios  # noqa: E402
 from contact import heap, heap_mjcf  # noqa: E402
 
 import ncgen as nc  # noqa: E402
@@ -63,14 +63,8 @@ def main(argv=None) -> int:
            "mujoco mjd_transitionFD centred": lambda: mujoco.mjd_transitionFD(mj, d, 1e-6, True, A, B, None, None),
            "mujoco mjd_transitionFD forward": lambda: mujoco.mjd_transitionFD(mj, d, 1e-6, False, A, B, None, None)}
     t = batches(fns, args.calls, args.repeat)
-    print(f"\n=== heap of {args.heap}, h = {H} s: ncgen A {2 * model.nq}×{2 * model.nq}; MuJoCo A {nxm}×{nxm}")
-    for name, ts in t.items():
-        print(f"  {name:34s} min {1e3 * min(ts):9.3f} ms   median {1e3 * np.median(ts):9.3f} ms")
-    ref = t["ncgen st.jacobians"]
-    for name in t:
-        if name.startswith("mujoco"):
-            print(f"  RATIO ncgen / {name}: min {min(ref) / min(t[name]):.2f}, median "
-                  f"{np.median(ref) / np.median(t[name]):.2f} (target ≤ 0.5 against the centred)")
+    report_ratios(f"heap of {args.heap}, h = {H} s: ncgen A {2 * model.nq}×{2 * model.nq}; MuJoCo A {nxm}×{nxm}",
+                  t, "ncgen st.jacobians", "target ≤ 0.5 against the centred")
     print(f"\nload average at end: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
     return 0
 

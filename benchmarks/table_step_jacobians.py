@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import batches, chain_mjcf, chain_system, machine  # noqa: E402
+from common import batches, chain_mjcf, chain_system, machine, report_ratios  # noqa: E402
 
 import ncgen as nc  # noqa: E402
 
@@ -47,17 +47,6 @@ def urdf_text(robot: str) -> str:
     text = Path(nc.robots.urdf_path(ROBOTS[robot.removesuffix("_stock")])).read_text()
     text = text if stock else re.sub(r"<mimic[^>]*/>", "", text)
     return re.sub(r"<dynamics[^>]*/>", "", text)
-
-
-def report(title: str, t: dict) -> None:
-    print(f"\n=== {title}")
-    for name, ts in t.items():
-        print(f"  {name:34s} min {1e3 * min(ts):8.3f} ms   median {1e3 * np.median(ts):8.3f} ms")
-    ref = t["ncgen tables st.jacobians"]
-    for name in t:
-        if name.startswith("mujoco"):
-            print(f"  RATIO ncgen tables / {name}: min {min(ref) / min(t[name]):.2f}, median "
-                  f"{np.median(ref) / np.median(t[name]):.2f} (target ≤ 0.5)")
 
 
 def compare(title: str, model, mj, nu_mj: int, calls: int, repeat: int, flat: bool) -> None:
@@ -79,8 +68,8 @@ def compare(title: str, model, mj, nu_mj: int, calls: int, repeat: int, flat: bo
         fns["ncgen flat st.jacobians"] = lambda: fl.jacobians(x, u)
     fns["mujoco mjd_transitionFD forward"] = lambda: mujoco.mjd_transitionFD(mj, d, 1e-6, False, A, B, None, None)
     fns["mujoco mjd_transitionFD centred"] = lambda: mujoco.mjd_transitionFD(mj, d, 1e-6, True, A, B, None, None)
-    report(f"{title}: ncgen A {2 * model.nq}×{2 * model.nq}, B {2 * model.nq}×{model.nu} ({st.kernels}); "
-           f"MuJoCo A {nxm}×{nxm}", batches(fns, calls, repeat))
+    report_ratios(f"{title}: ncgen A {2 * model.nq}×{2 * model.nq}, B {2 * model.nq}×{model.nu} ({st.kernels}); "
+                  f"MuJoCo A {nxm}×{nxm}", batches(fns, calls, repeat), "ncgen tables st.jacobians", "target ≤ 0.5")
 
 
 def panda_twin():
