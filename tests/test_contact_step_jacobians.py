@@ -240,16 +240,26 @@ def test_dropped_pile_every_step():
 
 
 def test_virtual_machine_path_equals_compiled(block, monkeypatch):
-    """Above COMPILE_MAX_INSTRUCTIONS the equations run on CasADi's VM: the same step."""
+    """The all-contacts equations above COMPILE_MAX_INSTRUCTIONS run on CasADi's VM: the same
+    step as compiled, and as the active-contact equations (the default)."""
     import ncgen.control.contact_step as contact_step
     model, st = block
+    compiled = contact_step.ContactStepFunction(model, H, max_iter=20, abstol=1e-12, equations="all")
     monkeypatch.setattr(contact_step, "COMPILE_MAX_INSTRUCTIONS", 0)
-    vm = nc.step_function(model, H)
-    assert vm.evaluation == "casadi-vm" and st.evaluation == "compiled"
+    vm = contact_step.ContactStepFunction(model, H, max_iter=20, abstol=1e-12, equations="all")
+    assert vm.evaluation == "casadi-vm" and compiled.evaluation == "compiled" and st.evaluation == "active"
     x, u = np.array([0, 0, 0.5, 0]), np.array([20.0])
-    a, b = vm.step(x, u), st.step(x, u)
-    assert a.modes == b.modes and np.allclose(a.x1, b.x1, atol=1e-15)
-    assert np.allclose(a.A, b.A, atol=1e-12) and np.allclose(a.B, b.B, atol=1e-12)
+    a, b, c = vm.step(x, u), compiled.step(x, u), st.step(x, u)
+    assert a.modes == b.modes == c.modes and np.allclose(a.x1, b.x1, atol=1e-15) and np.allclose(c.x1, b.x1, atol=1e-15)
+    for s in (a, c):
+        assert np.allclose(s.A, b.A, atol=1e-12) and np.allclose(s.B, b.B, atol=1e-12)
+
+
+def test_equations_option_checked(block):
+    model, _ = block
+    from ncgen.control.contact_step import ContactStepFunction
+    with pytest.raises(NcgenError, match="equations: expected one of 'active', 'all', got 'some'"):
+        ContactStepFunction(model, H, max_iter=20, abstol=1e-12, equations="some")
 
 
 def test_box_standing_on_two_corners():

@@ -46,6 +46,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ncgen.control.contact_active import ActiveContactEquations
 from ncgen.control.contact_equations import IMPACT_STEPS, NGLOBAL, NSEL, contact_residual, contact_system, layout
 from ncgen.assembly.stepper_equations import contact_function
 from ncgen.codegen.stepper_package import PENETRATION_TOL
@@ -64,6 +65,9 @@ POLISH_MAX_ITER, POLISH_TOL = 20, 1e-13
 #: solve to ``CONTACT_REFINE_TOL`` = 1e-8 after an impact.
 MATCH_TOL = 1e-6
 MODES = ("separated", "sticking", "sliding", "closed")
+#: The step's equations: over the active contacts (compiled pieces, the default) or over all
+#: contacts (one function; :class:`AllContactEquations`).
+EQUATIONS = ("active", "all")
 #: Largest system function (CasADi instructions) compiled to C; larger ones run on CasADi's
 #: virtual machine (the 20-sphere heap's 1.1 million instructions kept gcc -O1 busy for more
 #: than 15 minutes on a loaded 2-core machine; its VM evaluation takes 70 ms).
@@ -110,27 +114,31 @@ class ContactStepFunction:
     kernels = "contact"
     second_derivatives = False
 
-    def __init__(self, model, h: float, *, max_iter: int, abstol: float):
+    def __init__(self, model, h: float, *, max_iter: int, abstol: float, equations: str = "active"):
         from ncgen.runtime.stepper_library import load_stepper
 
+        if equations not in EQUATIONS:
+            raise NcgenError(f"equations: expected one of {', '.join(map(repr, EQUATIONS))}, got {equations!r}")
         self.model, self.h = model, h
         self.nx, self.nu, self.np = 2 * model.nq, model.nu, model.np
         self._max_iter, self._abstol = max_iter, abstol
         self._stepper = load_stepper(model)
-        from ncgen.control.step_support import compile_functions
-        system = contact_system(contact_residual(model, h))
-        #: How the step's equations are evaluated: ``"compiled"`` (generated C, cached by
-        #: content) or, above :data:`COMPILE_MAX_INSTRUCTIONS`, ``"casadi-vm"``.
-        self.evaluation = "compiled" if system.n_instructions() <= COMPILE_MAX_INSTRUCTIONS else "casadi-vm"
-        self._system = (compile_functions(f"{model.name}_contact_step", [system])[system.name()]
-                        if self.evaluation == "compiled" else _Nonzeros(system))
-        self._patterns = [(np.array(sp_.row()), np.array(sp_.colind()), sp_.shape)
-                          for sp_ in (system.sparsity_out(2), system.sparsity_out(3))]
-        self._rows = contact_function(model)
-        self._L = layout(model)
+        #: Which equations the Jacobians come from (:data:`EQUATIONS`); a step with a push-out
+        #: always uses ``"all"``'s (made on first need).
+        self.equations = equations
+        self._active = ActiveContactEquations(model, h) if equations == "active" else None
+        self._all = AllContactEquations(model, h) if equations == "all" else None
         self._scale = residual_scale(model)
         self.names = [c["name"] for c in model.contacts]
         self.last: ContactStep | None = None
+
+    @property
+    def evaluation(self) -> str:
+        """How the step's equations are evaluated: ``"active"`` (compiled pieces over the active
+        contacts, :mod:`ncgen.control.contact_active`), or the all-contacts function
+        ``"compiled"`` (generated C, cached by content) or, above
+        :data:`COMPILE_MAX_INSTRUCTIONS`, ``"casadi-vm"``."""
+        return "active" if self._active is not None else self._all.evaluation
 
     def __repr__(self) -> str:
         return (f"<ContactStepFunction of {self.model.name!r}: RATTLE with {self.model.nk} nonsmooth contacts, "
@@ -182,33 +190,50 @@ class ContactStepFunction:
         if status != 0:
             from ncgen.codegen.stepper_package import STATUS
             raise StepDidNotConverge(f"{where}: the contact stepper failed ({STATUS.get(status, status)})")
-        Z = self._start(x, x1_c, P)
         # the first modes from the stepper's impulses and, for the slips, its end velocities
-        U_end, U_start = (np.asarray(self._rows(xx[:nq], xx[nq:], p)[2].full()).ravel() for xx in (x1_c, x))
+        eq = self._active if self._active is not None else self._equations_all()
+        U_end, U_start = eq.velocities(x, x1_c, p)
         sel = self._modes(P, None, None, (U_end, U_start))
-        for _ in range(MODE_PASSES):   # the modes depend on the free step, the slips, the push-out
-            Z, info, lu, Ry = self._polish(Z, x, u, p, t, sel, where)
-            new = self._modes(P, info, sel)
-            if np.array_equal(new, sel):
-                break
-            sel = new
-        else:
-            raise StepDidNotConverge(f"{where}: the modes of its contacts did not settle in {MODE_PASSES} passes")
-        L = self._L
-        x1 = np.concatenate([Z[L["x1"][0]], Z[L["x1"][1]]])
+        solved = self._solve(eq, x, x1_c, P, u, p, t, sel, where)
+        if solved is None:        # a push-out: the all-contacts equations
+            eq = self._equations_all()
+            solved = self._solve(eq, x, x1_c, P, u, p, t, sel, where)
+        Z, info, lu, Ry, sel = solved
+        x1 = eq.x1(Z, x)
         difference = float(np.max(np.abs(x1 - x1_c)))
         if difference > MATCH_TOL * (1 + np.max(np.abs(x1))):
             raise StepDidNotConverge(f"{where}: the step's equations with the active set of its contact solve "
                                      f"end {difference:.3g} from the stepper's state (a push-out of a penetrating "
                                      "contact, or a contact solve that did not converge): no derivatives there")
-        dZ = -lu.solve(Ry)
-        J = np.vstack([dZ[L["x1"][0]], dZ[L["x1"][1]]])
+        J = eq.jacobian(-lu.solve(Ry))
         nx, nu = self.nx, self.nu
-        P_end = Z[L["P"]]
+        P_end = eq.impulses(Z, sel)
         self.last = ContactStep(x1, J[:, :nx], J[:, nx:nx + nu], J[:, nx + nu:], self._mode_names(sel),
                                 bool(sel[-2]), P_end.reshape(nk, dim), difference, self._switches(P_end, info, sel),
-                                Z[L["pi"]].copy())
+                                eq.push(Z))
         return self.last
+
+    def _equations_all(self) -> "AllContactEquations":
+        if self._all is None:
+            self._all = AllContactEquations(self.model, self.h)
+        return self._all
+
+    def _solve(self, eq, x, x1_c, P, u, p, t, sel, where):
+        """``(Z, info, lu, R_y, sel)``: the step's equations ``eq`` solved with the modes
+        classified again after each solve until they settle; None when the active-contact
+        equations meet a push-out (they have none)."""
+        from ncgen.control.step_support import StepDidNotConverge
+        Z = eq.start(x, x1_c, P, sel)
+        for _ in range(MODE_PASSES):   # the modes depend on the free step, the slips, the push-out
+            Z, lu, Ry = self._polish(eq, Z, x, u, p, t, sel, where)
+            info = eq.info(Z, x, p, sel)
+            new = self._modes(P, info, sel)
+            if new[-1] and not eq.push_out:
+                return None
+            if np.array_equal(new, sel):
+                return Z, info, lu, Ry, sel
+            sel = new
+        raise StepDidNotConverge(f"{where}: the modes of its contacts did not settle in {MODE_PASSES} passes")
 
     # ------------------------------------------------------------------- internals
     def _stepper_step(self, x, u, p, t):
@@ -229,40 +254,26 @@ class ContactStepFunction:
                                          ctypes.byref(splits), _ptr(P))
         return int(status), np.concatenate([Q[0], V[0]]), P
 
-    def _start(self, x, x1, P) -> np.ndarray:
-        """Newton's start: the free step and the final step from the stepper's end state."""
-        nq, nc, L = self.model.nq, self.model.nc, self._L
-        Z = np.zeros(L["vm"].stop)
-        w = (x1[:nq] - x[:nq]) / self.h
-        Z[L["zf"]][:nq] = w
-        Z[L["zf"]][nq + nc:2 * nq + nc] = x1[nq:]
-        Z[L["P"]] = P
-        Z[L["z"]][:nq] = w
-        Z[L["z"]][nq + nc:2 * nq + nc] = x1[nq:]
-        Z[L["x1"][0]], Z[L["x1"][1]] = x1[:nq], x1[nq:]
-        return Z
-
-    def _polish(self, Z, x, u, p, t, sel, where):
-        """``(Z, info, lu, R_y)``: Newton on the residual with the modes ``sel`` to its rounding
-        floor; ``lu`` factors ``R_Z`` at the last iterate but one (``R_y`` there too), whose
-        Newton step is at the rounding floor: the implicit function theorem's matrix."""
+    def _polish(self, eq, Z, x, u, p, t, sel, where):
+        """``(Z, lu, R_y)``: Newton on the equations ``eq`` with the modes ``sel`` to its
+        rounding floor; ``lu`` factors ``R_Z`` at the last iterate but one (``R_y`` there too),
+        whose Newton step is at the rounding floor: the implicit function theorem's matrix."""
         from ncgen.control.step_support import StepDidNotConverge
         tol = POLISH_TOL * self._scale
-        (row, colind, shape), (row_y, colind_y, shape_y) = self._patterns
         for _ in range(POLISH_MAX_ITER):
-            R, info, RZ, Ry = self._system(Z, x, u, p, [t], sel)
+            R, RZ, Ry = eq.system(Z, x, u, p, t, sel)
             if not np.all(np.isfinite(R)):
                 break
-            converged = np.max(np.abs(R)) <= tol
+            converged = np.max(np.abs(R), initial=0.0) <= tol
             try:
-                lu = _Factor(sp.csc_matrix((RZ, row, colind), shape=shape))
+                lu = _Factor(RZ)
             except RuntimeError:
                 break
             Z = Z - lu.solve(R)   # once more after the test: the quadratic step reaches the rounding floor
             if converged:
-                return Z, info.copy(), lu, sp.csc_matrix((Ry, row_y, colind_y), shape=shape_y).toarray()
+                return Z, lu, Ry
         raise StepDidNotConverge(f"{where}: the step's equations with the active set of its contact solve did "
-                                 f"not converge (residual {np.max(np.abs(R)):.3g}); no derivatives there")
+                                 f"not converge (residual {np.max(np.abs(R), initial=0.0):.3g}); no derivatives there")
 
     def _info(self, info):
         """``(U, U⁻, U_f, g_f, g⁺, π, g_pushed)`` from the residual's ``info``."""
@@ -363,6 +374,73 @@ class ContactStepFunction:
         if limit > 0 and abs(self._jump(U, Uf, sel) - limit) <= 1e-3 * limit:
             out.append(("(step)", "the impact test at its threshold"))
         return out
+
+
+class AllContactEquations:
+    """The step's equations over every contact, the modes as 0/1 selectors
+    (:func:`~ncgen.control.contact_equations.contact_residual`): one function for every active
+    set, push-outs included; compiled up to :data:`COMPILE_MAX_INSTRUCTIONS`, else run on
+    CasADi's virtual machine.  The interface of
+    :class:`~ncgen.control.contact_active.ActiveContactEquations`."""
+
+    push_out = True
+
+    def __init__(self, model, h: float):
+        from ncgen.control.step_support import compile_functions
+        self.model, self.h = model, h
+        system = contact_system(contact_residual(model, h))
+        self.evaluation = "compiled" if system.n_instructions() <= COMPILE_MAX_INSTRUCTIONS else "casadi-vm"
+        self._system = (compile_functions(f"{model.name}_contact_step", [system])[system.name()]
+                        if self.evaluation == "compiled" else _Nonzeros(system))
+        self._patterns = [(np.array(sp_.row()), np.array(sp_.colind()), sp_.shape)
+                          for sp_ in (system.sparsity_out(2), system.sparsity_out(3))]
+        self._rows = contact_function(model)
+        self._L = layout(model)
+        self._info = None
+
+    def velocities(self, x, x1, p):
+        """The contact velocities ``(W(q⁺) v⁺, W(q) v)`` of every contact."""
+        nq = self.model.nq
+        return (np.asarray(self._rows(xx[:nq], xx[nq:], p)[2].full()).ravel() for xx in (x1, x))
+
+    def start(self, x, x1, P, sel) -> np.ndarray:
+        """Newton's start: the free step and the final step from the stepper's end state."""
+        nq, nc, L = self.model.nq, self.model.nc, self._L
+        Z = np.zeros(L["vm"].stop)
+        w = (x1[:nq] - x[:nq]) / self.h
+        Z[L["zf"]][:nq] = w
+        Z[L["zf"]][nq + nc:2 * nq + nc] = x1[nq:]
+        Z[L["P"]] = P
+        Z[L["z"]][:nq] = w
+        Z[L["z"]][nq + nc:2 * nq + nc] = x1[nq:]
+        Z[L["x1"][0]], Z[L["x1"][1]] = x1[:nq], x1[nq:]
+        return Z
+
+    def system(self, Z, x, u, p, t, sel):
+        """``(R, R_Z, R_y)`` at ``Z`` (``R_Z`` sparse, ``R_y`` dense); :meth:`info` keeps the
+        classifying vector of this evaluation."""
+        (row, colind, shape), (row_y, colind_y, shape_y) = self._patterns
+        R, info, RZ, Ry = self._system(Z, x, u, p, [t], sel)
+        self._info = info.copy()
+        return R, sp.csc_matrix((RZ, row, colind), shape=shape), sp.csc_matrix((Ry, row_y, colind_y),
+                                                                               shape=shape_y).toarray()
+
+    def info(self, Z, x, p, sel) -> np.ndarray:
+        return self._info
+
+    def x1(self, Z, x) -> np.ndarray:
+        L = self._L
+        return np.concatenate([Z[L["x1"][0]], Z[L["x1"][1]]])
+
+    def jacobian(self, dZ) -> np.ndarray:
+        L = self._L
+        return np.vstack([dZ[L["x1"][0]], dZ[L["x1"][1]]])
+
+    def impulses(self, Z, sel) -> np.ndarray:
+        return Z[self._L["P"]].copy()
+
+    def push(self, Z) -> np.ndarray:
+        return Z[self._L["pi"]].copy()
 
 
 class _Nonzeros:

@@ -1,0 +1,312 @@
+"""The contact step's equations over its active contacts only, assembled at run time from
+compiled pieces (used by :mod:`ncgen.control.contact_step`).
+
+The equations are those of :mod:`ncgen.control.contact_equations` (the stepper's own formulas;
+see its docstring) for a step without a push-out.  A separated contact has ``P = 0`` and
+contributes nothing else, so its impulses are no unknowns here; the generalised impulses
+enter the RATTLE steps through two unknowns of their own, ``j₀ = W(q)ᵀ P`` and
+``j_f = W(q_f)ᵀ P`` (nq each).  Unknowns ``Z = [z_f; y; z; j₀; j_f; P_a]`` (``P_a``: the active
+contacts' impulses, dim each, in the order of the model's contacts), rows::
+
+    R = [G_free(z_f); K_f y − [j_f; 0]; G_end(z; j₀, j_f); j₀ − Σ_a W_a(q)ᵀ P_a;
+         j_f − Σ_a W_a(q_f)ᵀ P_a; the contact laws of the active contacts].
+
+Compiled once per model and step: the *smooth part* (the rows without the sums, with their
+sparse Jacobians in ``Z`` and ``y = [x; u; p]``, O(nq) in size) and, per *kind* of point
+contact (equal gap and Jacobian-row formulas in the coordinates the contact depends on:
+the equal spheres of a heap are two kinds, sphere–floor and sphere–sphere), a *law kernel*
+(one active contact's law rows, ``−W(q)ᵀP`` and ``−W(q_f)ᵀP`` over its coordinates, and
+their dense Jacobian in its local arguments) and an *info kernel* mapped over every contact of
+the kind (the velocities and gaps that classify the modes).  A call evaluates the smooth
+part once and the law kernel per active contact, and assembles ``R_Z`` and ``R_y`` as one
+sparse matrix; the state ``x⁺ = [q + h w; v⁺]`` is read from ``z``.
+"""
+from __future__ import annotations
+
+import hashlib
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+
+from ncgen.assembly.stepper_equations import contact_function, stepper_functions
+from ncgen.control.contact_equations import _rattle
+
+#: Law kernel selectors per active contact: closed at the free step's end, sticking,
+#: sliding, impact (the step's), restitution, friction coefficient.
+NS = 6
+#: Arguments of a contact's kernels, in order, as blocks of nq (then its impulse and p):
+#: start positions and velocities, the free step's w and end velocity, the response y's
+#: velocity part, the final step's w and end velocity.
+BLOCKS = ("q", "v", "wf", "vf", "yv", "w", "v1")
+
+
+class _Kind:
+    """One kind of point contact: ``rows(q_l, p) -> (g, W)`` (W: dim × n_l, normal row then
+    tangent rows), its law kernel and its contacts (indices, local coordinates)."""
+
+    def __init__(self, rows, n_l):
+        self.rows, self.n_l = rows, n_l
+        self.contacts: list[int] = []
+        self.law = self.info = None
+
+
+def _local_rows(g, W, q, p):
+    """``(columns, rows function)`` of one point contact: the coordinates its gap and rows
+    depend on or act on, and ``(q_l, p) -> (g, W_l)`` in them (subexpressions merged, so that
+    equal contacts give equal functions)."""
+    expr = ca.vertcat(g, ca.vec(W))
+    cols = sorted(set(ca.jacobian_sparsity(expr, q).get_col()) | set(W.sparsity().get_col()))
+    ql = ca.SX.sym("q_l", len(cols))
+    qfull = ca.SX.zeros(q.shape[0])
+    for k, i in enumerate(cols):
+        qfull[i] = ql[k]
+    f = ca.Function("f", [q, p], [g, W[:, cols]])
+    g_l, W_l = ca.cse([*f(qfull, p)])
+    return cols, ca.Function("rows", [ql, p], [ca.densify(g_l), ca.densify(W_l)], ["q_l", "p"], ["g", "W"])
+
+
+def _law_kernel(kind: _Kind, dim: int, np_: int, h: float, name: str) -> ca.Function:
+    """``(a, s) -> (r, J)``: one active contact's rows ``r = [laws (dim); −W(q)ᵀP; −W(q_f)ᵀP]``
+    and ``J = ∂r/∂a``, ``a = [q, v, w_f, v_f, y_v, w, v⁺ (local); P (dim); p]``."""
+    n = kind.n_l
+    a = ca.SX.sym("a", len(BLOCKS) * n + dim + np_)
+    q, v, wf, vf, yv, w, v1 = (a[i * n:(i + 1) * n] for i in range(len(BLOCKS)))
+    P, p = a[len(BLOCKS) * n:len(BLOCKS) * n + dim], a[len(BLOCKS) * n + dim:]
+    s = ca.SX.sym("s", NS)
+    closed_free, stick, slide, impact, e, mu = (s[i] for i in range(NS))
+    U, U0, Uf, gf, _, W0, Wf = _velocities(kind.rows, q, v, wf, vf, yv, w, v1, p, impact, h)
+    bias = closed_free * e * ca.fmin(U0[0], 0) + (1 - closed_free) * ca.fmax(0, 2 * gf / h - Uf[0])
+    PT, VT = P[1:], U[1:] + e * U0[1:]
+    speed = ca.sqrt(ca.sumsqr(VT) + (1 - slide))
+    r = ca.vertcat(U[0] + bias, stick * VT + slide * (PT + mu * P[0] * VT / speed) + (1 - stick - slide) * PT,
+                   -ca.mtimes(W0.T, P), -ca.mtimes(Wf.T, P))
+    return ca.Function(name, [a, s], [ca.densify(r), ca.densify(ca.jacobian(r, a))], ["a", "s"], ["r", "J"])
+
+
+def _velocities(rows, q, v, wf, vf, yv, w, v1, p, impact, h):
+    """``(U, U⁻, U_f, g_f, g⁺, W(q), W(q_f))`` of one contact (module docstring of
+    :mod:`ncgen.control.contact_equations`)."""
+    qf = q + h * wf
+    _, W0 = rows(q, p)
+    gf, Wf = rows(qf, p)
+    g1, W1 = rows(q + h * w, p)
+    U0, Uf = ca.mtimes(W0, v), ca.mtimes(Wf, vf)
+    U = impact * ca.mtimes(W1, v1) + (1 - impact) * (Uf + ca.mtimes(Wf, yv))
+    return U, U0, Uf, gf, g1, W0, Wf
+
+
+def _info_kernel(kind: _Kind, np_: int, h: float, name: str) -> ca.Function:
+    """``(a, p, impact) -> [U; U⁻; U_f; g_f; g⁺]`` of every contact of ``kind`` (mapped: ``a``
+    one column per contact, its ``q, v, w_f, v_f, y_v, w, v⁺``)."""
+    n = kind.n_l
+    a, p, impact = ca.SX.sym("a", len(BLOCKS) * n), ca.SX.sym("p", np_), ca.SX.sym("impact")
+    U, U0, Uf, gf, g1, _, _ = _velocities(kind.rows, *(a[i * n:(i + 1) * n] for i in range(len(BLOCKS))),
+                                          p, impact, h)
+    one = ca.Function(f"{name}_one", [a, p, impact], [ca.densify(ca.vertcat(U, U0, Uf, gf, g1))],
+                      ["a", "p", "impact"], ["info"])
+    return one.map(name, "serial", len(kind.contacts), [1, 2], [])
+
+
+class ActiveContactEquations:
+    """The step's equations over the active contacts (module docstring) of ``model`` with
+    step ``h``: :meth:`start`, :meth:`system`, :meth:`info`, :meth:`x1`, :meth:`jacobian`."""
+
+    def __init__(self, model, h: float):
+        from ncgen.control.step_support import compile_functions
+
+        self.model, self.h = model, h
+        nq, nc, self.dim = model.nq, model.nc, model.dim
+        self.n1, self.nq = nq + nc, nq
+        self.nZs = 5 * self.n1 + 2 * nq
+        self.ny = 2 * nq + model.nu + model.np
+        smooth = self._smooth_function()
+        self._kinds, self._cols = self._contact_kinds()
+        for k, kind in enumerate(self._kinds):
+            kind.law = _law_kernel(kind, self.dim, model.np, h, f"contact_law{k}")
+            kind.info = _info_kernel(kind, model.np, h, f"contact_info{k}")
+        functions = [smooth] + [f for kind in self._kinds for f in (kind.law, kind.info)]
+        compiled = compile_functions(f"{model.name}_contact_active", functions)
+        self._smooth = compiled[smooth.name()]
+        for kind in self._kinds:
+            kind.law, kind.info = compiled[kind.law.name()], compiled[kind.info.name()]
+        self._kind_of = np.empty(model.nk, int)
+        for k, kind in enumerate(self._kinds):
+            self._kind_of[kind.contacts] = k
+        # the smooth part's Jacobians as (row, column) lists in [Z; y]
+        self._smooth_rc = [(np.array(smooth.sparsity_out(i).row()), np.array(smooth.sparsity_out(i).get_col()))
+                           for i in (1, 2)]
+        self._e_mu = np.array([[c["restitution"], c["mu"]] for c in model.contacts]).reshape(-1, 2)
+        self._active_key = None
+
+    # ----------------------------------------------------------------- building
+    def _smooth_function(self) -> ca.Function:
+        model, h, nq, nc, n1 = self.model, self.h, self.nq, self.model.nc, self.n1
+        newton, velocity = stepper_functions(model)[:2]
+        Z = ca.SX.sym("Z", self.nZs)
+        x, u, p, t = ca.SX.sym("x", 2 * nq), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np), ca.SX.sym("t")
+        q, v = x[:nq], x[nq:]
+        zf, y, z = Z[:2 * n1], Z[2 * n1:3 * n1], Z[3 * n1:5 * n1]
+        j0, jf = Z[5 * n1:5 * n1 + nq], Z[5 * n1 + nq:]
+        zero = ca.SX.zeros(nq)
+        G_free, K_f = _rattle(newton, velocity, nq, nc, h, t, q, v, u, p, zf, zero, zero)
+        G_end, _ = _rattle(newton, velocity, nq, nc, h, t, q, v, u, p, z, j0, jf)
+        R = ca.densify(ca.vertcat(G_free, ca.mtimes(K_f, y) - ca.vertcat(jf, ca.SX.zeros(nc)), G_end, j0, jf))
+        yy = ca.vertcat(x, u, p)
+        return ca.Function("contact_smooth", [Z, x, u, p, t], [R, ca.jacobian(R, Z), ca.jacobian(R, yy)],
+                           ["Z", "x", "u", "p", "t"], ["R", "R_Z", "R_y"])
+
+    def _contact_kinds(self):
+        """The kinds of point contact (:class:`_Kind`) and each contact's coordinates."""
+        model = self.model
+        q, p = ca.SX.sym("q", model.nq), ca.SX.sym("p", model.np)
+        g, Wt, _ = contact_function(model)(q, ca.SX.zeros(model.nq), p)
+        kinds: dict[str, _Kind] = {}
+        cols = []
+        dim = self.dim
+        for k in range(model.nk):
+            c, rows = _local_rows(g[k], Wt[:, k * dim:(k + 1) * dim].T, q, p)
+            key = hashlib.sha256(rows.serialize().encode()).hexdigest()
+            kind = kinds.setdefault(key, _Kind(rows, len(c)))
+            kind.contacts.append(k)
+            cols.append(np.array(c, int))
+        return list(kinds.values()), cols
+
+    # ------------------------------------------------------------------- layout
+    def _gather(self, active):
+        """Per-active-set index tables (kept for the last active set): per active contact its
+        kernel arguments' places in the gather vector ``[q, v, w_f, v_f, y_v, w, v⁺, P_a, p]``
+        and its rows' places in ``R``; the rows and columns in ``[Z; y]`` of every nonzero of
+        ``[R_Z R_y]`` (the smooth part's, then each contact's ``J`` column by column)."""
+        key = tuple(active)
+        if key == self._active_key:
+            return self._tables
+        nq, n1, nZs, dim, npar = self.nq, self.n1, self.nZs, self.dim, self.model.np
+        na = len(active)
+        nZ = nZs + na * dim
+        p_y = nZ + 2 * nq + self.model.nu + np.arange(npar)
+        gathered = [0, nq, 2 * nq, 3 * nq, 4 * nq, 5 * nq, 6 * nq]          # BLOCKS in the gather vector
+        placed = [nZ, nZ + nq, 0, n1, 2 * n1, 3 * n1, 4 * n1]               # ... and in [Z; y]
+        (rz, cz), (ry, cy) = self._smooth_rc
+        src, rrows, rows_all, cols_all = [], [], [rz, ry], [cz, cy + nZ]
+        for a, k in enumerate(active):
+            I, P_a = self._cols[k], nZs + a * dim + np.arange(dim)
+            src.append(np.concatenate([s + I for s in gathered] + [7 * nq + a * dim + np.arange(dim),
+                                                                   7 * nq + na * dim + np.arange(npar)]))
+            cols = np.concatenate([s + I for s in placed] + [P_a, p_y])
+            rows = np.concatenate([P_a, 5 * n1 + I, 5 * n1 + nq + I])
+            rrows.append(rows)
+            rows_all.append(np.tile(rows, len(cols)))
+            cols_all.append(np.repeat(cols, len(rows)))
+        self._tables = (src, rrows, np.concatenate(rows_all), np.concatenate(cols_all), nZ)
+        self._active_key = key
+        return self._tables
+
+    def _blocks(self, Z, x):
+        """The gather vector's block part ``[q, v, w_f, v_f, y_v, w, v⁺]``."""
+        nq, n1 = self.nq, self.n1
+        return np.concatenate([x, Z[:nq], Z[n1:n1 + nq], Z[2 * n1:2 * n1 + nq], Z[3 * n1:3 * n1 + nq],
+                               Z[4 * n1:4 * n1 + nq]])
+
+    # ---------------------------------------------------------------- interface
+    #: No push-out in these equations (a step with one uses the all-contacts equations).
+    push_out = False
+
+    @staticmethod
+    def active(sel) -> np.ndarray:
+        """The active (closed) contacts of the selectors ``sel`` (:mod:`contact_equations`)."""
+        from ncgen.control.contact_equations import NSEL
+        nk = (len(sel) - 2) // NSEL
+        return np.flatnonzero(sel[0:NSEL * nk:NSEL] > 0)
+
+    def start(self, x, x1, P, sel) -> np.ndarray:
+        """Newton's start from the stepper's end state ``x1`` and impulses ``P`` (all contacts)."""
+        nq, n1, dim = self.nq, self.n1, self.dim
+        active = self.active(sel)
+        Z = np.zeros(self.nZs + len(active) * dim)
+        w = (x1[:nq] - x[:nq]) / self.h
+        for o in (0, 3 * n1):
+            Z[o:o + nq], Z[o + n1:o + n1 + nq] = w, x1[nq:]
+        Z[self.nZs:] = P.reshape(-1, dim)[active].ravel()
+        return Z
+
+    def resize(self, Z, old_sel, new_sel) -> np.ndarray:
+        """``Z`` of the selectors ``old_sel`` as a start for ``new_sel`` (a contact that
+        becomes active starts at ``P = 0``)."""
+        dim = self.dim
+        P = np.zeros((self.model.nk, dim))
+        P[self.active(old_sel)] = Z[self.nZs:].reshape(-1, dim)
+        new = self.active(new_sel)
+        return np.concatenate([Z[:self.nZs], P[new].ravel()])
+
+    def system(self, Z, x, u, p, t, sel):
+        """``(R, R_Z, R_y)`` at ``Z`` (``R_Z`` sparse CSC, ``R_y`` dense)."""
+        active = self.active(sel)
+        src, rrows, rows, cols, nZ = self._gather(active)
+        R_s, J_Z, J_y = self._smooth(Z[:self.nZs], x, u, p, [t])
+        R = np.zeros(nZ)
+        R[:self.nZs] = R_s
+        data = [J_Z, J_y]
+        if len(active):
+            g = np.concatenate([self._blocks(Z, x), Z[self.nZs:], p])
+            impact = sel[-2]
+            for a, k in enumerate(active):
+                s = self._selectors(k, sel, impact)
+                r, J = self._kinds[self._kind_of[k]].law(g[src[a]], s)
+                R[rrows[a]] += r
+                data.append(J.copy())
+        M = sp.csc_matrix((np.concatenate(data), (rows, cols)), shape=(nZ, nZ + self.ny))
+        return R, M[:, :nZ], M[:, nZ:].toarray()
+
+    def _selectors(self, k, sel, impact):
+        from ncgen.control.contact_equations import NSEL
+        b = NSEL * k
+        return np.array([sel[b + 1], sel[b + 2], sel[b + 3], impact, *self._e_mu[k]])
+
+    def info(self, Z, x, p, sel) -> np.ndarray:
+        """The info vector of :func:`~ncgen.control.contact_equations.contact_residual`
+        (``[x⁺; U; U⁻; U_f; g_f; g⁺; π; the pushed gaps]``, π = 0 and the pushed gaps g⁺:
+        no push-out here) over every contact."""
+        model, dim, nk = self.model, self.dim, self.model.nk
+        B = self._blocks(Z, x).reshape(len(BLOCKS), self.nq)
+        out = np.empty((nk, 3 * dim + 2))
+        for kind in self._kinds:
+            I = np.array([self._cols[k] for k in kind.contacts])       # contacts × n_l
+            a = B[:, I].transpose(1, 0, 2).reshape(len(kind.contacts), -1)
+            res = kind.info(a.ravel(), p, [sel[-2]])[0]
+            out[kind.contacts] = res.reshape(len(kind.contacts), -1)
+        U, U0, Uf = (out[:, i * dim:(i + 1) * dim].ravel() for i in range(3))
+        g1 = out[:, 3 * dim + 1]
+        return np.concatenate([self.x1(Z, x), U, U0, Uf, out[:, 3 * dim], g1, np.zeros(nk), g1])
+
+    def velocities(self, x, x1, p):
+        """The contact velocities ``(W(q⁺) v⁺, W(q) v)`` of every contact."""
+        nq, n1 = self.nq, self.n1
+        Z = np.zeros(self.nZs)
+        Z[3 * n1:3 * n1 + nq], Z[4 * n1:4 * n1 + nq] = (x1[:nq] - x[:nq]) / self.h, x1[nq:]
+        sel = np.zeros(2)
+        sel[0] = 1.0                      # "impact": U from the end of the step
+        info = self.info(Z, x, p, sel)
+        nd = self.model.nk * self.dim
+        return info[2 * nq:2 * nq + nd], info[2 * nq + nd:2 * nq + 2 * nd]
+
+    def push(self, Z) -> np.ndarray:
+        return np.zeros(self.model.nk)
+
+    def x1(self, Z, x) -> np.ndarray:
+        """``x⁺ = [q + h w; v⁺]``."""
+        nq, n1 = self.nq, self.n1
+        return np.concatenate([x[:nq] + self.h * Z[3 * n1:3 * n1 + nq], Z[4 * n1:4 * n1 + nq]])
+
+    def jacobian(self, dZ) -> np.ndarray:
+        """``∂x⁺/∂y`` from ``∂Z/∂y``."""
+        nq, n1 = self.nq, self.n1
+        J = np.vstack([self.h * dZ[3 * n1:3 * n1 + nq], dZ[4 * n1:4 * n1 + nq]])
+        J[np.arange(nq), np.arange(nq)] += 1.0
+        return J
+
+    def impulses(self, Z, sel) -> np.ndarray:
+        """Every contact's impulse (nk·dim, zero where separated)."""
+        P = np.zeros((self.model.nk, self.dim))
+        P[self.active(sel)] = Z[self.nZs:].reshape(-1, self.dim)
+        return P.ravel()
