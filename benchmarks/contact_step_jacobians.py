@@ -8,7 +8,11 @@ then the Jacobians of one step (h = 1 ms) at its settled state are timed, interl
 same scheme (MuJoCo's soft contacts, ncgen's impulses): the same job, one step's
 linearisation with its contacts.  ncgen's figure is the whole call: one step of the compiled
 contact stepper, the modes, the Newton polish of the active set's equations and the
-implicit-function-theorem solve (ncgen/control/contact_step.py).
+implicit-function-theorem solve (ncgen/control/contact_step.py, the equations over the active
+contacts of ncgen/control/contact_active.py).  numpy's OpenBLAS runs single-threaded
+(``OPENBLAS_NUM_THREADS=1`` unless set): SuperLU's solves call it, and on the shared, loaded
+machine its threads wait for the other processes (the Jacobian call's median 0.9 s instead of
+40 ms under a load of 12; benchmarks/README.md has the same for the inverse kinematics).
 
     python benchmarks/contact_step_jacobians.py [--heap 20] [--settle 0.5] [--calls 10] [--repeat 5] [--smoke]
 """
@@ -17,6 +21,9 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import time
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")   # before numpy (module docstring)
 from collections import Counter
 from pathlib import Path
 
@@ -62,9 +69,12 @@ def main(argv=None) -> int:
     fns = {"ncgen st.jacobians": lambda: st.jacobians(x, np.zeros(0)),
            "mujoco mjd_transitionFD centred": lambda: mujoco.mjd_transitionFD(mj, d, 1e-6, True, A, B, None, None),
            "mujoco mjd_transitionFD forward": lambda: mujoco.mjd_transitionFD(mj, d, 1e-6, False, A, B, None, None)}
+    title = f"heap of {args.heap}, h = {H} s: ncgen A {2 * model.nq}×{2 * model.nq}; MuJoCo A {nxm}×{nxm}"
     t = batches(fns, args.calls, args.repeat)
-    report_ratios(f"heap of {args.heap}, h = {H} s: ncgen A {2 * model.nq}×{2 * model.nq}; MuJoCo A {nxm}×{nxm}",
-                  t, "ncgen st.jacobians", "target ≤ 0.5 against the centred")
+    report_ratios(f"{title} (wall clock)", t, "ncgen st.jacobians", "target ≤ 0.5 against the centred")
+    t = batches(fns, args.calls, args.repeat, clock=time.process_time)
+    report_ratios(f"{title} (CPU time of the process: both single-threaded, steadier on a loaded machine)", t,
+                  "ncgen st.jacobians", "target ≤ 0.5 against the centred")
     print(f"\nload average at end: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
     return 0
 

@@ -160,9 +160,50 @@ def test_three_sphere_pile():
     model = s.build(contacts="nonsmooth")
     traj = nc.simulate(model, 0.2, 0.002, method="stepper")
     st = nc.step_function(model, 0.002)
-    s_ = assert_matches_differences(st, np.concatenate([traj.q[-1], traj.v[-1]]), np.zeros(0))
+    x = np.concatenate([traj.q[-1], traj.v[-1]])
+    s_ = assert_matches_differences(st, x, np.zeros(0))
     assert s_.modes == ["sticking", "separated", "separated", "sticking", "separated", "sticking"]
     assert not s_.at_switch
+    assert_equals_all_contacts(all_contacts(model, 0.002), st, x, np.zeros(0))
+
+
+def all_contacts(model, h):
+    """The step function of the all-contacts equations (one function of every contact, the
+    modes as selectors): the reference of the active-contact ones (the default)."""
+    from ncgen.control.contact_step import ContactStepFunction
+    return ContactStepFunction(model, h, max_iter=20, abstol=1e-12, equations="all")
+
+
+def assert_equals_all_contacts(reference, st, x, u, tol=1e-8):
+    """``st`` (the active-contact equations) gives ``reference``'s step at ``x``."""
+    assert st.evaluation == "active" and reference.equations == "all"
+    ref = reference.step(x, u)
+    s = st.step(x, u)
+    assert s.modes == ref.modes and s.impact == ref.impact and s.switches == ref.switches
+    assert np.max(np.abs(s.x1 - ref.x1)) <= tol * max(1.0, np.max(np.abs(ref.x1)))
+    for a, b in ((s.A, ref.A), (s.B, ref.B), (s.impulses, ref.impulses)):
+        assert np.max(np.abs(a - b), initial=0.0) <= tol * max(1.0, np.max(np.abs(b), initial=0.0))
+    return s
+
+
+@pytest.mark.slow       # the all-contacts equations of 210 contacts: built for minutes, run on CasADi's VM
+def test_heap_of_twenty_active_equals_all_contacts():
+    """The benchmark's settled 20-sphere heap (benchmarks/contact_step_jacobians.py): 20 of 210
+    contacts closed; the active-contact step equals the all-contacts one (1e-8).  Not against
+    central differences: touching pairs keep their free-step gap at 0 (the step is flagged at a
+    switch), and a perturbation of 1e-9 m closes them."""
+    import sys
+    from pathlib import Path
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from contact import heap
+    model = heap(20, rotating=False)
+    h = 1e-3
+    traj = nc.simulate(model, 0.5, 0.5, method="stepper", substeps=500)
+    x = np.concatenate([traj.q[-1], traj.v[-1]])
+    st = nc.step_function(model, h)
+    s = assert_equals_all_contacts(all_contacts(model, h), st, x, np.zeros(0))
+    assert s.modes.count("sticking") == 20 and s.modes.count("separated") == 190
+    assert s.at_switch and all(why == "the free step ends with the gap at 0" for _, why in s.switches)
 
 
 def test_ilqr_pushes_the_block_to_its_target(block):
@@ -229,14 +270,18 @@ def test_dropped_pile_every_step():
     traj = nc.simulate(model, 0.4, h, method="stepper")
     st = nc.step_function(model, h)
     X = np.column_stack([traj.q, traj.v])
-    checked = 0
+    checked = compared = 0
+    reference = all_contacts(model, h)
     for k in range(len(X) - 1):
         step = st.step(X[k], np.zeros(0))
         assert np.max(np.abs(step.x1 - X[k + 1])) < 1e-8
         if step.impact and not step.at_switch and checked < 2:
             assert_matches_differences(st, X[k], np.zeros(0))
             checked += 1
-    assert checked == 2
+        if k % 20 == 0 and not step.push_out.any():   # a push-out's step is the all-contacts equations'
+            assert_equals_all_contacts(reference, st, X[k], np.zeros(0))
+            compared += 1
+    assert checked == 2 and compared >= 5
 
 
 def test_virtual_machine_path_equals_compiled(block, monkeypatch):

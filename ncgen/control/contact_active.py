@@ -30,6 +30,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ncgen.assembly.stepper_equations import contact_function, stepper_functions
+from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
 from ncgen.control.contact_equations import _rattle
 
 #: Law kernel selectors per active contact: closed at the free step's end, sticking,
@@ -48,7 +49,7 @@ class _Kind:
     def __init__(self, rows, n_l):
         self.rows, self.n_l = rows, n_l
         self.contacts: list[int] = []
-        self.law = self.info = None
+        self.law = self.info = self.pattern = None
 
 
 def _local_rows(g, W, q, p):
@@ -68,7 +69,7 @@ def _local_rows(g, W, q, p):
 
 def _law_kernel(kind: _Kind, dim: int, np_: int, h: float, name: str) -> ca.Function:
     """``(a, s) -> (r, J)``: one active contact's rows ``r = [laws (dim); −W(q)ᵀP; −W(q_f)ᵀP]``
-    and ``J = ∂r/∂a``, ``a = [q, v, w_f, v_f, y_v, w, v⁺ (local); P (dim); p]``."""
+    and ``J = ∂r/∂a`` (sparse), ``a = [q, v, w_f, v_f, y_v, w, v⁺ (local); P (dim); p]``."""
     n = kind.n_l
     a = ca.SX.sym("a", len(BLOCKS) * n + dim + np_)
     q, v, wf, vf, yv, w, v1 = (a[i * n:(i + 1) * n] for i in range(len(BLOCKS)))
@@ -81,7 +82,7 @@ def _law_kernel(kind: _Kind, dim: int, np_: int, h: float, name: str) -> ca.Func
     speed = ca.sqrt(ca.sumsqr(VT) + (1 - slide))
     r = ca.vertcat(U[0] + bias, stick * VT + slide * (PT + mu * P[0] * VT / speed) + (1 - stick - slide) * PT,
                    -ca.mtimes(W0.T, P), -ca.mtimes(Wf.T, P))
-    return ca.Function(name, [a, s], [ca.densify(r), ca.densify(ca.jacobian(r, a))], ["a", "s"], ["r", "J"])
+    return ca.Function(name, [a, s], [ca.densify(r), ca.jacobian(r, a)], ["a", "s"], ["r", "J"])
 
 
 def _velocities(rows, q, v, wf, vf, yv, w, v1, p, impact, h):
@@ -126,13 +127,16 @@ class ActiveContactEquations:
             kind.law = _law_kernel(kind, self.dim, model.np, h, f"contact_law{k}")
             kind.info = _info_kernel(kind, model.np, h, f"contact_info{k}")
         functions = [smooth] + [f for kind in self._kinds for f in (kind.law, kind.info)]
-        compiled = compile_functions(f"{model.name}_contact_active", functions)
+        # rerolled: a long map over many contacts stays a loop (not unrolled)
+        compiled = compile_functions(f"{model.name}_contact_active", functions, reroll_instructions=REROLL_INSTRUCTIONS)
         self._smooth = compiled[smooth.name()]
         for kind in self._kinds:
+            kind.pattern = kind.law.sparsity_out(1)
             kind.law, kind.info = compiled[kind.law.name()], compiled[kind.info.name()]
         self._kind_of = np.empty(model.nk, int)
         for k, kind in enumerate(self._kinds):
             self._kind_of[kind.contacts] = k
+            kind.I = np.array([self._cols[c] for c in kind.contacts])     # contacts × n_l
         # the smooth part's Jacobians as (row, column) lists in [Z; y]
         self._smooth_rc = [(np.array(smooth.sparsity_out(i).row()), np.array(smooth.sparsity_out(i).get_col()))
                            for i in (1, 2)]
@@ -177,7 +181,7 @@ class ActiveContactEquations:
         """Per-active-set index tables (kept for the last active set): per active contact its
         kernel arguments' places in the gather vector ``[q, v, w_f, v_f, y_v, w, v⁺, P_a, p]``
         and its rows' places in ``R``; the rows and columns in ``[Z; y]`` of every nonzero of
-        ``[R_Z R_y]`` (the smooth part's, then each contact's ``J`` column by column)."""
+        ``[R_Z R_y]`` (the smooth part's, then each contact's ``J``), summed into ``R_Z`` (CSC) and ``R_y``."""
         key = tuple(active)
         if key == self._active_key:
             return self._tables
@@ -196,9 +200,16 @@ class ActiveContactEquations:
             cols = np.concatenate([s + I for s in placed] + [P_a, p_y])
             rows = np.concatenate([P_a, 5 * n1 + I, 5 * n1 + nq + I])
             rrows.append(rows)
-            rows_all.append(np.tile(rows, len(cols)))
-            cols_all.append(np.repeat(cols, len(rows)))
-        self._tables = (src, rrows, np.concatenate(rows_all), np.concatenate(cols_all), nZ)
+            J = self._kinds[self._kind_of[k]].pattern
+            rows_all.append(rows[J.row()])
+            cols_all.append(cols[J.get_col()])
+        rows, cols = np.concatenate(rows_all), np.concatenate(cols_all)
+        # [R_Z R_y]'s nonzeros summed into R_Z's CSC data and R_y's dense entries
+        in_Z = cols < nZ
+        keys, where = np.unique(cols[in_Z] * nZ + rows[in_Z], return_inverse=True)
+        indptr = np.searchsorted(keys // nZ, np.arange(nZ + 1))
+        flat_y = rows[~in_Z] * self.ny + cols[~in_Z] - nZ
+        self._tables = (src, rrows, nZ, in_Z, where, len(keys), keys % nZ, indptr, flat_y)
         self._active_key = key
         return self._tables
 
@@ -211,6 +222,8 @@ class ActiveContactEquations:
     # ---------------------------------------------------------------- interface
     #: No push-out in these equations (a step with one uses the all-contacts equations).
     push_out = False
+    #: Few rows hold one unknown alone: :class:`~ncgen.control.contact_step._Factor` factors all.
+    single_rows = False
 
     @staticmethod
     def active(sel) -> np.ndarray:
@@ -242,26 +255,29 @@ class ActiveContactEquations:
     def system(self, Z, x, u, p, t, sel):
         """``(R, R_Z, R_y)`` at ``Z`` (``R_Z`` sparse CSC, ``R_y`` dense)."""
         active = self.active(sel)
-        src, rrows, rows, cols, nZ = self._gather(active)
+        src, rrows, nZ, in_Z, where, nnz, indices, indptr, flat_y = self._gather(active)
         R_s, J_Z, J_y = self._smooth(Z[:self.nZs], x, u, p, [t])
         R = np.zeros(nZ)
         R[:self.nZs] = R_s
         data = [J_Z, J_y]
         if len(active):
             g = np.concatenate([self._blocks(Z, x), Z[self.nZs:], p])
-            impact = sel[-2]
+            S = self._selectors(active, sel)
             for a, k in enumerate(active):
-                s = self._selectors(k, sel, impact)
-                r, J = self._kinds[self._kind_of[k]].law(g[src[a]], s)
+                r, J = self._kinds[self._kind_of[k]].law(g[src[a]], S[a])
                 R[rrows[a]] += r
                 data.append(J.copy())
-        M = sp.csc_matrix((np.concatenate(data), (rows, cols)), shape=(nZ, nZ + self.ny))
-        return R, M[:, :nZ], M[:, nZ:].toarray()
+        data = np.concatenate(data)
+        R_Z = sp.csc_matrix((np.bincount(where, data[in_Z], nnz), indices, indptr), shape=(nZ, nZ))
+        R_y = np.bincount(flat_y, data[~in_Z], nZ * self.ny).reshape(nZ, self.ny)
+        return R, R_Z, R_y
 
-    def _selectors(self, k, sel, impact):
+    def _selectors(self, active, sel) -> np.ndarray:
+        """The law kernels' selectors ``s`` (:data:`NS`) of the active contacts."""
         from ncgen.control.contact_equations import NSEL
-        b = NSEL * k
-        return np.array([sel[b + 1], sel[b + 2], sel[b + 3], impact, *self._e_mu[k]])
+        b = NSEL * active
+        return np.column_stack([sel[b + 1], sel[b + 2], sel[b + 3], np.full(len(active), sel[-2]),
+                                self._e_mu[active]])
 
     def info(self, Z, x, p, sel) -> np.ndarray:
         """The info vector of :func:`~ncgen.control.contact_equations.contact_residual`
@@ -271,8 +287,7 @@ class ActiveContactEquations:
         B = self._blocks(Z, x).reshape(len(BLOCKS), self.nq)
         out = np.empty((nk, 3 * dim + 2))
         for kind in self._kinds:
-            I = np.array([self._cols[k] for k in kind.contacts])       # contacts × n_l
-            a = B[:, I].transpose(1, 0, 2).reshape(len(kind.contacts), -1)
+            a = B[:, kind.I].transpose(1, 0, 2).reshape(len(kind.contacts), -1)
             res = kind.info(a.ravel(), p, [sel[-2]])[0]
             out[kind.contacts] = res.reshape(len(kind.contacts), -1)
         U, U0, Uf = (out[:, i * dim:(i + 1) * dim].ravel() for i in range(3))

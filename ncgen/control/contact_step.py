@@ -130,6 +130,8 @@ class ContactStepFunction:
         self._all = AllContactEquations(model, h) if equations == "all" else None
         self._scale = residual_scale(model)
         self.names = [c["name"] for c in model.contacts]
+        self._mu = np.array([c["mu"] for c in model.contacts], float)
+        self._e = np.array([c["restitution"] for c in model.contacts], float)
         self.last: ContactStep | None = None
 
     @property
@@ -266,7 +268,7 @@ class ContactStepFunction:
                 break
             converged = np.max(np.abs(R), initial=0.0) <= tol
             try:
-                lu = _Factor(RZ)
+                lu = _Factor(RZ, split=eq.single_rows)
             except RuntimeError:
                 break
             Z = Z - lu.solve(R)   # once more after the test: the quadratic step reaches the rounding floor
@@ -286,7 +288,7 @@ class ContactStepFunction:
         """Selectors (:mod:`ncgen.control.contact_equations`) from the stepper's impulses ``P``
         and, once solved, the free step's gaps, the slips and the impact test (before:
         ``velocities``, the contact velocities at the stepper's end and start)."""
-        nk, dim, contacts = self.model.nk, self.model.dim, self.model.contacts
+        nk, dim = self.model.nk, self.model.dim
         sel = np.zeros(NSEL * nk + NGLOBAL)
         U = U0 = Uf = gf = None
         if velocities is not None:
@@ -303,19 +305,19 @@ class ContactStepFunction:
                 pushed = ((was & (pi > ROUNDOFF * big)) | (~was & (g_pushed < -PENETRATION_TOL * ROUNDOFF))
                           if previous[-1] else g1 < 0)
                 sel[4:NSEL * nk:NSEL] = pushed
-        for k, c in enumerate(contacts):
-            n = k * dim
-            closed = P[n] > 0
-            sel[NSEL * k] = closed
-            # closed at the free step's end; a gap within round-off of 0 (bodies falling
-            # together in the free step: a stack) counts as closed, the side that presses it
-            sel[NSEL * k + 1] = closed and (gf is None or gf[k] <= ROUNDOFF * (1 + np.max(np.abs(U))) * self.h)
-            if closed and c["mu"] > 0:
-                slide = np.linalg.norm(P[n + 1:n + dim]) >= c["mu"] * P[n] * (1 - 1e-9)
-                if slide and U is not None:
-                    slip = U[n + 1:n + dim] + c["restitution"] * U0[n + 1:n + dim]
-                    slide = np.linalg.norm(slip) > vtol
-                sel[NSEL * k + 2], sel[NSEL * k + 3] = (0.0, 1.0) if slide else (1.0, 0.0)
+        S = sel[:NSEL * nk].reshape(nk, NSEL)          # a view: the contacts' selectors
+        Pk, mu, e = P.reshape(nk, dim), self._mu, self._e
+        closed = Pk[:, 0] > 0
+        S[:, 0] = closed
+        # closed at the free step's end; a gap within round-off of 0 (bodies falling
+        # together in the free step: a stack) counts as closed, the side that presses it
+        S[:, 1] = closed if gf is None else closed & (gf <= ROUNDOFF * (1 + np.max(np.abs(U))) * self.h)
+        friction = closed & (mu > 0)
+        slide = friction & (np.linalg.norm(Pk[:, 1:], axis=1) >= mu * Pk[:, 0] * (1 - 1e-9))
+        if U is not None:
+            slip = U.reshape(nk, dim)[:, 1:] + e[:, None] * U0.reshape(nk, dim)[:, 1:]
+            slide &= np.linalg.norm(slip, axis=1) > vtol
+        S[:, 2], S[:, 3] = friction & ~slide, slide
         if info is not None:
             sel[-2] = float(self._jump(U, Uf, sel) > IMPACT_STEPS * self._g * self.h)
         return sel
@@ -326,19 +328,16 @@ class ContactStepFunction:
 
     def _jump(self, U, Uf, sel) -> float:
         """The impact test's measure: the largest change of a closed contact's velocity."""
-        dim = self.model.dim
-        rows = [k * dim + d for k in range(self.model.nk) if sel[NSEL * k] for d in range(dim)]
-        return float(np.max(np.abs(U[rows] - Uf[rows]), initial=0.0))
+        nk, dim = self.model.nk, self.model.dim
+        closed = sel[0:NSEL * nk:NSEL] > 0
+        return float(np.max(np.abs((U - Uf).reshape(nk, dim)[closed]), initial=0.0))
 
     def _vtol(self, U) -> float:
         return SWITCH_TOL * (1 + float(np.max(np.abs(U), initial=0.0)))
 
     def _mode_names(self, sel) -> list[str]:
-        out = []
-        for k, c in enumerate(self.model.contacts):
-            s = sel[NSEL * k:NSEL * (k + 1)]
-            out.append("separated" if not s[0] else "sticking" if s[2] else "sliding" if s[3] else "closed")
-        return out
+        S = sel[:NSEL * self.model.nk].reshape(-1, NSEL)
+        return ["separated" if not s[0] else "sticking" if s[2] else "sliding" if s[3] else "closed" for s in S.tolist()]
 
     def _switches(self, P, info, sel) -> list[tuple[str, str]]:
         """Contacts (name, reason) at a switching point (module docstring)."""
@@ -347,29 +346,28 @@ class ContactStepFunction:
         vtol = self._vtol(U)
         ptol = SWITCH_TOL * max(float(np.max(np.abs(P), initial=0.0)), self._scale * self._g * h)
         gtol = vtol * h
+        nk, mu, e = self.model.nk, self._mu, self._e
+        S = sel[:NSEL * nk].reshape(nk, NSEL) > 0
+        Pk, Uk, U0k, Ufk = (a.reshape(nk, dim) for a in (P, U, U0, Uf))
+        closed = S[:, 0]
+        reasons = [
+            (np.abs(gf) <= gtol, "the free step ends with the gap at 0"),
+            (closed & (Pk[:, 0] <= ptol), "closed with a normal impulse at 0"),
+            (closed & (e > 0) & (np.abs(U0k[:, 0]) <= vtol), "approach velocity at 0 (restitution's kink)"),
+            (closed & ~S[:, 1] & (np.abs(2 * gf / h - Ufk[:, 0]) <= vtol), "about to close with its bias at its kink"),
+            (closed & S[:, 2] & (np.linalg.norm(Pk[:, 1:], axis=1) >= mu * Pk[:, 0] * (1 - SWITCH_TOL)),
+             "sticking with the friction on the cone's boundary"),
+            (closed & S[:, 3] & (np.linalg.norm(Uk[:, 1:] + e[:, None] * U0k[:, 1:], axis=1) <= 1e3 * vtol),
+             "sliding with its slip at 0"),
+            (~closed & (gf <= 0) & (Uk[:, 0] + e * np.minimum(U0k[:, 0], 0) <= vtol),
+             "separated with its normal velocity margin at 0")]
+        depths = [
+            (np.abs(g1 + PENETRATION_TOL) <= 1e-3 * PENETRATION_TOL, "ends the step at the push-out's threshold depth"),
+            (S[:, 4] & (pi <= ptol * h), "pushed out with a push at 0")]
         out = []
-        for k, c in enumerate(self.model.contacts):
-            n, name, s = k * dim, self.names[k], sel[NSEL * k:NSEL * (k + 1)]
-            if abs(gf[k]) <= gtol:
-                out.append((name, "the free step ends with the gap at 0"))
-            if s[0]:
-                if P[n] <= ptol:
-                    out.append((name, "closed with a normal impulse at 0"))
-                if c["restitution"] > 0 and abs(U0[n]) <= vtol:
-                    out.append((name, "approach velocity at 0 (restitution's kink)"))
-                if not s[1] and abs(2 * gf[k] / h - Uf[n]) <= vtol:
-                    out.append((name, "about to close with its bias at its kink"))
-                if s[2] and np.linalg.norm(P[n + 1:n + dim]) >= c["mu"] * P[n] * (1 - SWITCH_TOL):
-                    out.append((name, "sticking with the friction on the cone's boundary"))
-                if s[3] and np.linalg.norm(U[n + 1:n + dim] + c["restitution"] * U0[n + 1:n + dim]) <= 1e3 * vtol:
-                    out.append((name, "sliding with its slip at 0"))
-            elif gf[k] <= 0 and U[n] + c["restitution"] * min(U0[n], 0) <= vtol:
-                out.append((name, "separated with its normal velocity margin at 0"))
-        for k, name in enumerate(self.names):
-            if abs(g1[k] + PENETRATION_TOL) <= 1e-3 * PENETRATION_TOL:
-                out.append((name, "ends the step at the push-out's threshold depth"))
-            if sel[NSEL * k + 4] and pi[k] <= ptol * h:
-                out.append((name, "pushed out with a push at 0"))
+        for group in (reasons, depths):       # by contact, each contact's reasons in this order
+            flagged = np.column_stack([m for m, _ in group])
+            out += [(self.names[k], group[i][1]) for k, i in zip(*np.nonzero(flagged))]
         limit = IMPACT_STEPS * self._g * h
         if limit > 0 and abs(self._jump(U, Uf, sel) - limit) <= 1e-3 * limit:
             out.append(("(step)", "the impact test at its threshold"))
@@ -384,6 +382,8 @@ class AllContactEquations:
     :class:`~ncgen.control.contact_active.ActiveContactEquations`."""
 
     push_out = True
+    #: Most rows hold one unknown alone (separated contacts' ``P = 0``, ``π = 0``): :class:`_Factor` splits them off.
+    single_rows = True
 
     def __init__(self, model, h: float):
         from ncgen.control.step_support import compile_functions
@@ -466,21 +466,29 @@ def _solve_columns(lu, B: np.ndarray) -> np.ndarray:
 
 
 class _Factor:
-    """``R_Z`` factored for solves: the rows that hold one unknown alone (``P = 0`` of a
-    separated contact, ``π = 0`` of a contact not pushed out: most rows of a heap) are
-    solved first, exactly (the matrix is block triangular), and the rest by SuperLU's sparse
-    LU (the heap: 690 of 1320 unknowns, 1 ms instead of 100 ms)."""
+    """``R_Z`` factored for solves.  With ``split`` (the all-contacts equations) the rows that
+    hold one unknown alone (``P = 0`` of a separated contact, ``π = 0`` of a contact not pushed
+    out: most rows of a heap) are solved first, exactly (the matrix is block triangular), and
+    the rest by SuperLU's sparse LU (the heap: 690 of 1320 unknowns, 1 ms instead of 100 ms),
+    its many columns by sparse triangular solves (:func:`_solve_columns`).  Without (the
+    active-contact equations, which have no such rows to speak of) the whole matrix by
+    SuperLU, its many columns by SuperLU's own solve (the heap's 480 unknowns: 120 columns in
+    3 ms, where the triangular solves take 20 ms)."""
 
-    def __init__(self, A):
-        A = A.tocsr()
-        A.eliminate_zeros()          # entries the modes' selectors set to 0
-        d = A.diagonal()
-        self.single = (np.diff(A.indptr) == 1) & (d != 0)
-        self.keep = ~self.single
-        self.d = d[self.single]
-        rows = A[self.keep]
-        self.A_ks = rows[:, self.single]
-        self.A_kk = rows[:, self.keep].tocsc()
+    def __init__(self, A, split: bool = True):
+        self.split = split
+        if split:
+            A = A.tocsr()
+            A.eliminate_zeros()          # entries the modes' selectors set to 0
+            d = A.diagonal()
+            self.single = (np.diff(A.indptr) == 1) & (d != 0)
+            self.keep = ~self.single
+            self.d = d[self.single]
+            rows = A[self.keep]
+            self.A_ks = rows[:, self.single]
+            self.A_kk = rows[:, self.keep].tocsc()
+        else:
+            self.A_kk = A
         try:
             self.lu = spla.splu(self.A_kk)
         except RuntimeError:           # exactly singular: redundant contacts
@@ -491,17 +499,23 @@ class _Factor:
         (redundant sticking contacts: a box standing on two or more corners, whose impulses
         are a family — the stepper takes its least-norm member), the least-norm solution:
         ``x⁺`` and its Jacobians do not depend on how the family's impulses are split."""
-        X = np.empty(B.shape)
-        X_s = B[self.single] / (self.d if B.ndim == 1 else self.d[:, None])
-        B_k = B[self.keep] - self.A_ks @ X_s
-        X[self.single] = X_s
+        if self.split:
+            X = np.empty(B.shape)
+            X_s = B[self.single] / (self.d if B.ndim == 1 else self.d[:, None])
+            B_k = B[self.keep] - self.A_ks @ X_s
+            X[self.single] = X_s
+        else:
+            B_k = B
         X_k = None
         if self.lu is not None:
-            X_k = self.lu.solve(B_k) if B.ndim == 1 else _solve_columns(self.lu, B_k)
+            X_k = (self.lu.solve(B_k) if B.ndim == 1 else
+                   _solve_columns(self.lu, B_k) if self.split else self.lu.solve(np.asfortranarray(B_k)))
             scale = 1 + np.max(np.abs(B_k), initial=0.0)
             if not (np.all(np.isfinite(X_k)) and np.max(np.abs(self.A_kk @ X_k - B_k), initial=0.0) <= 1e-9 * scale):
                 self.lu = X_k = None
         if X_k is None:
             X_k = np.linalg.lstsq(self.A_kk.toarray(), B_k, rcond=LSTSQ_RCOND)[0]
+        if not self.split:
+            return X_k
         X[self.keep] = X_k
         return X

@@ -45,15 +45,16 @@ def compile_flags() -> tuple[str, ...] | None:
     return None if os.environ.get("NCGEN_CFLAGS") is not None else LARGE_CFLAGS
 
 
-def compile_functions(name: str, functions: list) -> dict:
-    """``functions`` generated as the C package ``name``, compiled (cached by content) and
-    loaded for direct calls: ``{function name: DirectFunction}``."""
+def compile_functions(name: str, functions: list, **options) -> dict:
+    """``functions`` generated as the C package ``name`` (:data:`PACKAGE_OPTIONS`, updated by
+    ``options``), compiled (cached by content) and loaded for direct calls:
+    ``{function name: DirectFunction}``."""
     from ncgen.codegen.compile_cache import compile_package
     from ncgen.codegen.direct import DirectFunction
     from ncgen.codegen.package import write_package
 
     with tempfile.TemporaryDirectory() as tmp:
-        pkg = write_package(name, functions, Path(tmp) / "pkg", **PACKAGE_OPTIONS)
+        pkg = write_package(name, functions, Path(tmp) / "pkg", **{**PACKAGE_OPTIONS, **options})
         built = compile_package(pkg, cflags=compile_flags())
         names = {f.name(): pkg.c_name(f.name()) for f in functions}
     return {f.name(): DirectFunction(built.path, names[f.name()], f) for f in functions}
