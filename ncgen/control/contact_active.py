@@ -16,7 +16,7 @@ sparse Jacobians in ``Z`` and ``y = [x; u; p]``, O(nq) in size) and, per *kind* 
 contact (equal gap and Jacobian-row formulas in the coordinates the contact depends on:
 the equal spheres of a heap are two kinds, sphere–floor and sphere–sphere), a *law kernel*
 (one active contact's law rows, ``−W(q)ᵀP`` and ``−W(q_f)ᵀP`` over its coordinates, and
-their dense Jacobian in its local arguments) and an *info kernel* mapped over every contact of
+their sparse Jacobian in its local arguments) and an *info kernel* mapped over every contact of
 the kind (the velocities and gaps that classify the modes).  A call evaluates the smooth
 part once and the law kernel per active contact, and assembles ``R_Z`` and ``R_y`` as one
 sparse matrix; the state ``x⁺ = [q + h w; v⁺]`` is read from ``z``.
@@ -31,7 +31,7 @@ import scipy.sparse as sp
 
 from ncgen.assembly.stepper_equations import contact_function, stepper_functions
 from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
-from ncgen.control.contact_equations import _rattle
+from ncgen.control.contact_equations import rattle_residual
 
 #: Law kernel selectors per active contact: closed at the free step's end, sticking,
 #: sliding, impact (the step's), restitution, friction coefficient.
@@ -153,8 +153,8 @@ class ActiveContactEquations:
         zf, y, z = Z[:2 * n1], Z[2 * n1:3 * n1], Z[3 * n1:5 * n1]
         j0, jf = Z[5 * n1:5 * n1 + nq], Z[5 * n1 + nq:]
         zero = ca.SX.zeros(nq)
-        G_free, K_f = _rattle(newton, velocity, nq, nc, h, t, q, v, u, p, zf, zero, zero)
-        G_end, _ = _rattle(newton, velocity, nq, nc, h, t, q, v, u, p, z, j0, jf)
+        G_free, K_f = rattle_residual(newton, velocity, nq, nc, h, t, q, v, u, p, zf, zero, zero)
+        G_end, _ = rattle_residual(newton, velocity, nq, nc, h, t, q, v, u, p, z, j0, jf)
         R = ca.densify(ca.vertcat(G_free, ca.mtimes(K_f, y) - ca.vertcat(jf, ca.SX.zeros(nc)), G_end, j0, jf))
         yy = ca.vertcat(x, u, p)
         return ca.Function("contact_smooth", [Z, x, u, p, t], [R, ca.jacobian(R, Z), ca.jacobian(R, yy)],
@@ -243,15 +243,6 @@ class ActiveContactEquations:
         Z[self.nZs:] = P.reshape(-1, dim)[active].ravel()
         return Z
 
-    def resize(self, Z, old_sel, new_sel) -> np.ndarray:
-        """``Z`` of the selectors ``old_sel`` as a start for ``new_sel`` (a contact that
-        becomes active starts at ``P = 0``)."""
-        dim = self.dim
-        P = np.zeros((self.model.nk, dim))
-        P[self.active(old_sel)] = Z[self.nZs:].reshape(-1, dim)
-        new = self.active(new_sel)
-        return np.concatenate([Z[:self.nZs], P[new].ravel()])
-
     def system(self, Z, x, u, p, t, sel):
         """``(R, R_Z, R_y)`` at ``Z`` (``R_Z`` sparse CSC, ``R_y`` dense)."""
         active = self.active(sel)
@@ -283,7 +274,7 @@ class ActiveContactEquations:
         """The info vector of :func:`~ncgen.control.contact_equations.contact_residual`
         (``[x⁺; U; U⁻; U_f; g_f; g⁺; π; the pushed gaps]``, π = 0 and the pushed gaps g⁺:
         no push-out here) over every contact."""
-        model, dim, nk = self.model, self.dim, self.model.nk
+        dim, nk = self.dim, self.model.nk
         B = self._blocks(Z, x).reshape(len(BLOCKS), self.nq)
         out = np.empty((nk, 3 * dim + 2))
         for kind in self._kinds:

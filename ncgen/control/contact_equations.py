@@ -66,7 +66,7 @@ def layout(model) -> dict[str, slice]:
             "x1": (slice(o + nk + n1, o + nk + n1 + nq), slice(o + nk + 2 * n1, o + nk + 2 * n1 + nq))}
 
 
-def _rattle(newton, velocity, nq, nc, h, t, q, v, u, p, zz, j0, j):
+def rattle_residual(newton, velocity, nq, nc, h, t, q, v, u, p, zz, j0, j):
     """The RATTLE residual ``G(z)`` of :mod:`ncgen.control.discrete` with the impulse ``j0``
     in the first half-step and ``j`` in the second; also ``K₂`` at its end."""
     w, nu_h, vmu = zz[:nq], zz[nq:nq + nc], zz[nq + nc:]
@@ -91,13 +91,13 @@ def contact_residual(model, h: float) -> ca.Function:
     q, v = x[:nq], x[nq:]
     zf, y, P, z = Z[L["zf"]], Z[L["y"]], Z[L["P"]], Z[L["z"]]
     zero = ca.SX.zeros(nq)
-    G_free, K_f = _rattle(newton, velocity, nq, nc, h, t, q, v, u, p, zf, zero, zero)
+    G_free, K_f = rattle_residual(newton, velocity, nq, nc, h, t, q, v, u, p, zf, zero, zero)
     q_f, v_f = q + h * zf[:nq], zf[n1:n1 + nq]
     g_f, Wt_f, U_f = rows(q_f, v_f, p)
     _, Wt_0, U_0 = rows(q, v, p)
     j_f, j_0 = ca.mtimes(Wt_f, P), ca.mtimes(Wt_0, P)
     response = ca.mtimes(K_f, y) - ca.vertcat(j_f, ca.SX.zeros(nc))
-    G_end, _ = _rattle(newton, velocity, nq, nc, h, t, q, v, u, p, z, j_0, j_f)
+    G_end, _ = rattle_residual(newton, velocity, nq, nc, h, t, q, v, u, p, z, j_0, j_f)
     q1, v1 = q + h * z[:nq], z[n1:n1 + nq]
     g_1, Wt_1, U_1 = rows(q1, v1, p)
     impact = sel[NSEL * nk]

@@ -6,11 +6,14 @@ Each call runs one step of the model's compiled contact stepper (from a cold sta
 repeat of earlier impulses), classifies every contact from the impulses it converged to —
 separated (``P_N = 0``), sticking (``|P_T| < μ P_N``), sliding (on the cone's boundary) — and
 whether the step is an impact, then solves the step's equations with that active set
-(:mod:`ncgen.control.contact_equations`, the stepper's own formulas) by Newton's method from
-the stepper's solution to the rounding floor, and differentiates them by the implicit
-function theorem: one sparse LU of ``R_Z``, all columns of ``R_y = ∂R/∂[x; u; p]`` at once::
+(:mod:`ncgen.control.contact_equations`, the stepper's own formulas; by default written over
+the active contacts only, :mod:`ncgen.control.contact_active`, and over all contacts — one
+function, :class:`AllContactEquations` — for a step with a push-out or with
+``equations="all"``) by Newton's method from the stepper's solution to the rounding floor,
+and differentiates them by the implicit function theorem: one sparse LU of ``R_Z``, all
+columns of ``R_y = ∂R/∂[x; u; p]`` at once::
 
-    ∂Z/∂y = −R_Z⁻¹ R_y,      ∂x⁺/∂y = [I_q 0] + E ∂Z/∂y.
+    ∂Z/∂y = −R_Z⁻¹ R_y,      ∂x⁺/∂y = E ∂Z/∂y  (+ [I_q 0] where x⁺'s q is q + h w).
 
 The state returned is that solution (it equals the stepper's to its Newton and contact
 tolerances; :attr:`ContactStep.stepper_difference` says by how much), so that ``x⁺`` and its
@@ -186,7 +189,7 @@ class ContactStepFunction:
         from ncgen.control.step_support import StepDidNotConverge
 
         x, u, p, t = self._args(x, u, p, t)
-        nq, nk, dim = self.model.nq, self.model.nk, self.model.dim
+        nk, dim = self.model.nk, self.model.dim
         status, x1_c, P = self._stepper_step(x, u, p, t)
         where = f"step of {self.model.name!r} (h = {self.h:g} s)"
         if status != 0:
