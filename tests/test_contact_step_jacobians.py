@@ -331,3 +331,22 @@ def test_box_standing_on_two_corners():
     _, B = central(st, x, u)
     assert np.max(np.abs(step.B - B)) <= 1e-6 * max(1.0, np.max(np.abs(B)))
     assert np.max(np.abs(step.B)) < 1e-12          # stuck: a small push does not move it
+
+
+def test_frictionless_contact_closed():
+    """A frictionless block on the floor pushed sideways: mode ``"closed"``, no friction, so
+    ``B = [h²/2m, 0, h/m, 0]`` and ``P_N = m g h``; the active-contact equations equal the
+    all-contacts ones and central differences."""
+    s = nc.System("cjac_slick", gravity=(0, -G))
+    b = s.add_point("block", mass=MASS, position=(0, 0))
+    push = s.add_input("push")
+    s.add_force(nc.PointForce(b, (0, 0), force=ca.vertcat(push, 0)))
+    s.add_contact(nc.SpherePlane(b, radius=0.0, mu=0.0, name="floor"))
+    model = s.build(contacts="nonsmooth")
+    st = nc.step_function(model, H)
+    x, u = np.array([0, 0, 0.3, 0]), np.array([2.0])
+    step = assert_matches_differences(st, x, u)
+    assert step.modes == ["closed"] and not step.at_switch
+    assert np.allclose(step.B.ravel(), [H * H / (2 * MASS), 0, H / MASS, 0], atol=1e-13)
+    assert np.isclose(step.impulses[0, 0], MASS * G * H, rtol=1e-12) and step.impulses[0, 1] == 0
+    assert_equals_all_contacts(all_contacts(model, H), st, x, u)
