@@ -165,7 +165,10 @@ def test_toml_round_trip_hash_and_errors():
         nc.RollingDisc("wheel", radius=R, tube_radius=float("nan"))
 
 
-def test_the_viewer_draws_the_torus(precessing):
+def test_the_viewer_draws_the_torus(precessing, tmp_path):
+    tr = nc.simulate(precessing, 0.1, 0.05, method="rolling", backend="vm")
+    html = tr.to_html(tmp_path / "torus.html").read_text()
+    assert '"kind":"torus","size":[0.1,0.03]' in html and "case 'torus': return new THREE.TorusGeometry" in html
     prims = member_primitives(precessing, 1.0)["wheel"]
     assert [p.kind for p in prims] == ["torus"]
     np.testing.assert_allclose(prims[0].size, [R, r])
