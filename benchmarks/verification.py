@@ -171,9 +171,12 @@ def rolling_idas_stepper(smoke: bool) -> list[Row]:
 
 def rolling_torus(smoke: bool) -> list[Row]:
     """A torus wheel (tube radius r) turning steadily and rolling upright, on the projected
-    DOPRI5 and the compiled RATTLE stepper (tests/test_rolling_torus.py)."""
+    DOPRI5 and the compiled RATTLE stepper, and its upright stability limit
+    (tests/test_rolling_torus.py)."""
     import ncgen as nc
-    from test_rolling_torus import BETA, R, W3, axle, r, torus_precession, torus_wheel
+    from scipy.optimize import brentq
+    from test_rolling_torus import (A_t, BETA, C_t, R, W3, axle, g, m, r, torus_precession, torus_wheel,
+                                    upright_linearisation)
     model = torus_wheel().build()
     t_end = 0.5 if smoke else 2.0
     closed = "closed form (Newton–Euler of steady turning, tube included)"
@@ -189,6 +192,13 @@ def rolling_torus(smoke: bool) -> list[Row]:
                      1.0, tol),
                  Row(case, "the constraints", f"both levels' residual over {t_end:g} s",
                      float(max(tr.constraint_residual.max(), tr.velocity_residual.max())), 0.0, 1e-12)]
+    def stiffness(speed):
+        L = upright_linearisation(speed)
+        return (L.K[0, 0] - L.C[0, 1] * L.C[1, 0] / L.M[1, 1]) / L.M[0, 0]
+    rho = R + r
+    v_c = rho * np.sqrt(m * g * R * A_t / (C_t * (C_t + m * rho ** 2)))
+    rows.append(Row("torus wheel, upright", "closed form: v_c = (R + r) √(m g R A / (C (C + m (R + r)²)))",
+                    "stability limit (m/s)", brentq(stiffness, 0.1, 2.0, xtol=1e-14), v_c, 1e-10))
     upright = torus_wheel(0.0, 20.0, 0.0).build()
     tr = nc.simulate(upright, t_end, 0.05, method="rolling", rtol=1e-10, atol=1e-12)
     rows.append(Row("torus wheel, upright rolling", "closed form: x = w3 (R + r) t", f"centre x (m), worst over {t_end:g} s",

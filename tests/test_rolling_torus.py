@@ -2,8 +2,9 @@
 rolling without slipping: its steady precession against the closed form of the Newton–Euler
 equations of steady turning (derived below and checked as vectors), its steady upright
 rolling, energy and both constraint levels on the three integrators (projected Runge–Kutta,
-IDAS, the RATTLE stepper), the r → 0 limit (the knife-edge disc), TOML, the model's hash and
-the viewer's torus.
+IDAS, the RATTLE stepper), the upright wheel's linearisation and stability limit against their
+closed form, the r → 0 limit (the knife-edge disc), TOML, the model's hash and the viewer's
+torus.
 
 Steady turning: tilt β (the axle ``k = cos β e_y + sin β e_z``, ``d = cos β e_z − sin β e_y``
 toward the top of the wheel's plane), heading turning at Ω about ``e_z = sin β k + cos β d``,
@@ -16,10 +17,14 @@ A Ω cos β d``).  Euler's equation about G with the contact force ``F = m a_G +
     Ω² [A sβ cβ + m r sβ cβ (R cβ + r)] − Ω w3 [C cβ + m (R cβ + r)(R + r cβ)] − m g R sβ = 0,
 
 which for r = 0 is the disc's ``A Ω² sβ cβ − (C + m R²) w3 Ω cβ − m g R sβ = 0``."""
+import casadi as ca
 import numpy as np
 import pytest
+from scipy.optimize import brentq
 
 import ncgen as nc
+from ncgen.analysis.steady_motion import linearize_steady, spin_generator, translation_rate
+from ncgen.assembly.nonholonomic import coordinate_function, rolling_system
 from ncgen.errors import ModelError
 from ncgen.viz.geometry import member_primitives, outline
 from test_rolling import steady_precession
@@ -114,6 +119,46 @@ def test_steady_precession_on_idas_and_the_stepper(precessing):
         assert abs(np.polyfit(tr.t, heading, 1)[0] / omega - 1) < tol, method
         assert max(tr.constraint_residual.max(), tr.velocity_residual.max()) <= level, method
         np.testing.assert_allclose(-tr.lam[:, precessing.nc], m * g, rtol=10 * tol)
+
+
+def upright_linearisation(speed):
+    """``linearize_steady`` of the upright torus wheel rolling along x at ``speed`` (m/s), in
+    lean and heading (as tests/test_rolling.py does for the disc)."""
+    model = torus_wheel(0.0, 0.0, 0.0).build()
+    rs = rolling_system(model)
+    K = spin_generator(model, "wheel", (0.0, 1.0, 0.0))
+    T = translation_rate(model, (1.0, 0.0, 0.0))
+    Aq = np.asarray(rs.A(model.q0))
+    rate = np.linalg.lstsq((Aq @ K @ model.q0)[:, None], -Aq @ T, rcond=None)[0][0]
+    idx = model.layout.member_indices("wheel")
+
+    def lean_heading(q):
+        k = q[idx[6]], q[idx[7]], q[idx[8]]
+        return ca.vertcat(ca.asin(k[2]), ca.atan2(-k[0], k[1]))
+    return linearize_steady(rs, model.q0, speed * (T + rate * K @ model.q0), speed * rate * K,
+                            coordinate_function(lean_heading, model.nq))
+
+
+def test_upright_torus_against_the_closed_form_and_its_stability_limit():
+    """Lean α and heading ψ of the upright torus wheel rolling at v = ω ρ, ρ = R + r (the
+    centre's height): the contact force's lateral part ``m (v ψ̇ + ρ α̈)`` acts at the height ρ
+    below the centre, the weight at the horizontal offset ``R α`` (the potential is
+    ``m g (R cos α + r)``), so ``(A + m ρ²) α̈ ± (C + m ρ²) ω ψ̇ − m g R α = 0`` and
+    ``A ψ̈ ∓ C ω α̇ = 0``; stable above ``v_c = ρ √(m g R A / (C (C + m ρ²)))``."""
+    rho, v = R + r, 1.3
+    lin = upright_linearisation(v)
+    w = v / rho
+    assert lin.closure < 1e-11 and lin.reference < 1e-9
+    np.testing.assert_allclose(lin.M, np.diag([A_t + m * rho ** 2, A_t]), atol=1e-12)
+    np.testing.assert_allclose(np.abs(lin.C), [[0, (C_t + m * rho ** 2) * w], [C_t * w, 0]], atol=1e-12)
+    assert lin.C[0, 1] * lin.C[1, 0] < 0
+    np.testing.assert_allclose(lin.K, [[-m * g * R, 0], [0, 0]], atol=1e-12)
+
+    def stiffness(speed):       # of α̈ + k α = 0 once ψ̇ is eliminated
+        L = upright_linearisation(speed)
+        return (L.K[0, 0] - L.C[0, 1] * L.C[1, 0] / L.M[1, 1]) / L.M[0, 0]
+    v_c = rho * np.sqrt(m * g * R * A_t / (C_t * (C_t + m * rho ** 2)))
+    assert abs(brentq(stiffness, 0.1, 2.0, xtol=1e-14) - v_c) < 1e-10
 
 
 def test_steady_upright_rolling():
