@@ -85,3 +85,29 @@ def test_auto_compiles_when_it_pays_and_falls_back_without_a_compiler(wobbly, mo
 def test_a_newton_failure_is_named(wobbly):  # noqa: F811
     with pytest.raises(SimulationError, match="\\(compiled\\): Newton's method did not bring the residual below"):
         nc.simulate(wobbly, 0.1, 0.1, method="stepper", backend="compiled", max_newton=1, newton_tol=1e-15)
+
+
+def test_a_moving_plane_and_a_drive_compiled():
+    """The compiled step carries the time of the rows: a ball on a plane accelerating at a_p
+    (centre at a_p t² / 7, friction 2/7 m a_p: RATTLE is exact on this motion of constant
+    acceleration) and a ball pulled by a driven distance (tests/test_rolling_driven.py: the
+    centre on its prescribed path, the friction −(2/5) m a)."""
+    from test_rolling_drives import A_P, M, ball_on_treadmill
+    from test_rolling_forces import multipliers
+    import test_rolling_driven as driven
+    tr = nc.simulate(ball_on_treadmill().build(), 1.0, 0.05, method="stepper", substeps=5, backend="compiled")
+    assert tr.info["backend"] == "compiled"
+    np.testing.assert_allclose(tr.point("ball", (0, 0, 0))[:, 0], A_P * tr.t ** 2 / 7, rtol=0, atol=1e-11)
+    np.testing.assert_allclose(multipliers(tr)[1], 2 * M * A_P / 7, rtol=1e-9)
+    s = nc.System("pulled_ball", gravity=(0, 0, -9.81))
+    ball = s.add_body("ball", mass=driven.M, inertia=0.4 * driven.M * driven.R ** 2 * np.eye(3),
+                      position=(driven.D0, 0, driven.R))
+    s.add_joint(nc.Distance(s.ground, ball, at=[(0, 0, driven.R), (driven.D0, 0, driven.R)],
+                            drive=f"{driven.D0} + 0.5*{driven.ACC}*t**2"))
+    s.add_rolling(nc.RollingSphere(ball, radius=driven.R))
+    tr = nc.simulate(s.build(), 1.0, 0.05, method="stepper", substeps=10, backend="compiled")
+    np.testing.assert_allclose(tr.point("ball", (0, 0, 0))[:, 0], driven.D0 + 0.5 * driven.ACC * tr.t ** 2,
+                               rtol=0, atol=1e-12)
+    np.testing.assert_allclose(-tr.lam[:, tr.constraint_names.index("ball.rolling.x")], -0.4 * driven.M * driven.ACC,
+                               rtol=1e-9)
+    assert max(tr.constraint_residual.max(), tr.velocity_residual.max()) < 1e-12
