@@ -181,7 +181,8 @@ def rolling_torus(smoke: bool) -> list[Row]:
     t_end = 0.5 if smoke else 2.0
     closed = "closed form (Newton–Euler of steady turning, tube included)"
     rows = []
-    for label, kw, tol in (("method='rolling' at rtol 1e-10", {"method": "rolling", "rtol": 1e-10, "atol": 1e-12}, 1e-7),
+    for label, kw, tol in (("method='rolling' at rtol 1e-10",
+                            {"method": "rolling", "rtol": 1e-10, "atol": 1e-12}, 1e-7),
                            ("RATTLE (method='stepper', compiled), h = 1 ms",
                             {"method": "stepper", "substeps": 20, "backend": "compiled"}, 1e-4)):
         tr = nc.simulate(model, t_end, 0.02, **kw)
@@ -202,7 +203,8 @@ def rolling_torus(smoke: bool) -> list[Row]:
     upright = torus_wheel(0.0, 20.0, 0.0).build()
     t_end = 0.5 if smoke else 1.0                    # the test's run: DOPRI5's error grows with the distance
     tr = nc.simulate(upright, t_end, 0.05, method="rolling", rtol=1e-10, atol=1e-12)
-    rows.append(Row("torus wheel, upright rolling", "closed form: x = w3 (R + r) t", f"centre x (m), worst over {t_end:g} s",
+    rows.append(Row("torus wheel, upright rolling", "closed form: x = w3 (R + r) t",
+                    f"centre x (m), worst over {t_end:g} s",
                     *_worst(tr.point("wheel", (0, 0, 0))[:, 0], 20.0 * (R + r) * tr.t), 1e-9))
     return rows
 

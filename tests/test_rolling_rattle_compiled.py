@@ -13,12 +13,18 @@ from ncgen.assembly.nonholonomic import rolling_system
 from ncgen.errors import CompilerNotFound, SimulationError
 from ncgen.runtime.options import SimulationOptions
 from test_rolling_forces import pushed_ball
-from test_rolling_rattle import wobbly  # noqa: F401  (the fixture)
+from test_rolling_system import disc_toml
 
 TOL, MAX_ITER = SimulationOptions().newton_tol, SimulationOptions().max_newton
 
 
-def test_the_compiled_step_equals_the_python_step(wobbly):  # noqa: F811
+@pytest.fixture(scope="module")
+def wobbly():
+    """A disc tilted by 0.3 rad, spinning at 25 rad/s and wobbling (tests/test_rolling_rattle.py's)."""
+    return nc.System.from_toml(disc_toml(0.3, 25.0, 0.0, wobble=1.0)).build()
+
+
+def test_the_compiled_step_equals_the_python_step(wobbly):
     """From states along a wobbling disc's motion and a ball pushed by an input (``u0`` and
     ``u1`` differ), for h = 1 ms and 10 ms: positions and velocities equal to 1e-12, the
     multipliers to 1e-12 of their size."""
@@ -36,7 +42,7 @@ def test_the_compiled_step_equals_the_python_step(wobbly):  # noqa: F811
             q, v = a[0], a[1]
 
 
-def test_second_order_and_both_levels_compiled(wobbly):  # noqa: F811
+def test_second_order_and_both_levels_compiled(wobbly):
     """``backend="compiled"``: the error at T = 0.2 s against DOPRI5 at rtol 1e-13 falls by 4
     per halving of h (order ≥ 1.8), every output on both levels to 1e-12, and the run equal to
     the Python-driven one to 1e-12."""
@@ -56,7 +62,7 @@ def test_second_order_and_both_levels_compiled(wobbly):  # noqa: F811
     np.testing.assert_allclose(tr.v, py.v, rtol=0, atol=1e-12)
 
 
-def test_auto_compiles_when_it_pays_and_falls_back_without_a_compiler(wobbly, monkeypatch):  # noqa: F811
+def test_auto_compiles_when_it_pays_and_falls_back_without_a_compiler(wobbly, monkeypatch):
     rs = rolling_system(wobbly)
     rs.compiled_steps.clear()
     monkeypatch.setattr(rolling_rattle, "COMPILE_PAYS", 1e9)
@@ -82,7 +88,7 @@ def test_auto_compiles_when_it_pays_and_falls_back_without_a_compiler(wobbly, mo
     assert nc.simulate(wobbly, 0.1, 0.1, method="stepper", substeps=10).info["backend"] == "compiled"
 
 
-def test_a_newton_failure_is_named(wobbly):  # noqa: F811
+def test_a_newton_failure_is_named(wobbly):
     with pytest.raises(SimulationError, match="\\(compiled\\): Newton's method did not bring the residual below"):
         nc.simulate(wobbly, 0.1, 0.1, method="stepper", backend="compiled", max_newton=1, newton_tol=1e-15)
 

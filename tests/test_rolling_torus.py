@@ -199,8 +199,8 @@ def test_toml_round_trip_hash_and_errors():
     plain = torus_wheel(tube=0.0)
     assert "tube_radius" not in plain.to_toml() and "tube_radius" not in plain.rolling[0].spec()
     assert plain.build().content_hash != model.content_hash
-    for value, expected in (("-0.1", "rolling\\[0\\].*tube_radius: expected a number ≥ 0 \\(m; 0: a knife-edge disc\\)"
-                                      ", found -0.1"),
+    for value, expected in (("-0.1", "rolling\\[0\\].*tube_radius: expected a number ≥ 0 "
+                                      "\\(m; 0: a knife-edge disc\\), found -0.1"),
                             ('"thin"', "rolling\\[0\\].tube_radius")):
         with pytest.raises(ModelError, match=expected):
             nc.System.from_toml(text.replace("tube_radius = 0.03", f"tube_radius = {value}"))

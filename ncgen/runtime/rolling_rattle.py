@@ -61,10 +61,15 @@ def compiled_step(system, tol: float, max_iter: int):
     (:func:`ncgen.codegen.direct.compile_direct`, cached by content), kept in
     ``system.compiled_steps``; raises :class:`~ncgen.errors.CompilerNotFound`."""
     from ncgen.codegen.direct import compile_direct
-    key = ("rattle", float(tol), int(max_iter))
+    key = _step_key(tol, max_iter)
     if key not in system.compiled_steps:
         system.compiled_steps[key] = compile_direct("rolling_rattle_step", step_function(system, tol, max_iter))
     return system.compiled_steps[key]
+
+
+def _step_key(tol: float, max_iter: int) -> tuple:
+    """The compiled step's key in ``system.compiled_steps``."""
+    return "rattle", float(tol), int(max_iter)
 
 
 def compiled_rattle_step(step, t: float, q, v, h: float, u0, u1, p, tol: float):
@@ -127,8 +132,7 @@ def simulate_rolling_rattle(model, run: Run, opts: SimulationOptions) -> Traject
     lam[0] = np.asarray(_functions(system)[2](t[0], q, v, U[0], p)[1]).ravel()
     steps = iterations = 0
     start = time.perf_counter()
-    key = ("rattle", float(opts.newton_tol), int(opts.max_newton))
-    step = system.compiled_steps.get(key) if opts.backend == "auto" else None
+    step = system.compiled_steps.get(_step_key(opts.newton_tol, opts.max_newton)) if opts.backend == "auto" else None
     if opts.backend == "compiled":
         try:
             step = compiled_step(system, opts.newton_tol, opts.max_newton)
