@@ -6,7 +6,8 @@ The references are those of the tests (imported from them, so the page and the t
 cannot drift apart) or computed by the independent engine in the same run: the Whipple
 bicycle's published benchmark (tests/test_whipple.py), rolling discs and the Chaplygin
 sleigh against closed forms (tests/test_rolling.py, tests/test_rolling_system.py; on IDAS and
-the RATTLE stepper: tests/test_rolling_idas.py, tests/test_rolling_rattle.py), a ball on a
+the RATTLE stepper: tests/test_rolling_idas.py, tests/test_rolling_rattle.py), a torus wheel
+(tests/test_rolling_torus.py), a ball on a
 moving plane (tests/test_rolling_drives.py), the heavy top's steady precession
 (tests/test_heavy_top.py), thin bodies against Euler's and the pendulum equation
 (tests/test_thin_bodies.py), the IFToMM A02 four-bar through its flat positions
@@ -165,6 +166,46 @@ def rolling_idas_stepper(smoke: bool) -> list[Row]:
     case = "wobbling rolling disc, RATTLE with velocity constraints (method='stepper')"
     rows.append(Row(case, "DOPRI5 at rtol 1e-13 (method='rolling'), h = 10 and 5 ms",
                     "order: log2 of the error ratio at 0.2 s", float(np.log2(err[0] / err[1])), 2.0, 0.2))
+    return rows
+
+
+def rolling_torus(smoke: bool) -> list[Row]:
+    """A torus wheel (tube radius r) turning steadily and rolling upright, on the projected
+    DOPRI5 and the compiled RATTLE stepper, and its upright stability limit
+    (tests/test_rolling_torus.py)."""
+    import ncgen as nc
+    from scipy.optimize import brentq
+    from test_rolling_torus import (A_t, BETA, C_t, R, W3, axle, g, m, r, torus_precession, torus_wheel,
+                                    upright_linearisation)
+    model = torus_wheel().build()
+    t_end = 0.5 if smoke else 2.0
+    closed = "closed form (Newton–Euler of steady turning, tube included)"
+    rows = []
+    for label, kw, tol in (("method='rolling' at rtol 1e-10",
+                            {"method": "rolling", "rtol": 1e-10, "atol": 1e-12}, 1e-7),
+                           ("RATTLE (method='stepper', compiled), h = 1 ms",
+                            {"method": "stepper", "substeps": 20, "backend": "compiled"}, 1e-4)):
+        tr = nc.simulate(model, t_end, 0.02, **kw)
+        k = axle(model, tr.q)
+        case = f"torus wheel (R = {R:g} m, r = {r:g} m), steady turning, {label}"
+        rows += [Row(case, closed, "precession rate / closed form",
+                     np.polyfit(tr.t, np.unwrap(np.arctan2(-k[:, 0], k[:, 1])), 1)[0] / torus_precession(BETA, W3),
+                     1.0, tol),
+                 Row(case, "the constraints", f"both levels' residual over {t_end:g} s",
+                     float(max(tr.constraint_residual.max(), tr.velocity_residual.max())), 0.0, 1e-12)]
+    def stiffness(speed):
+        L = upright_linearisation(speed)
+        return (L.K[0, 0] - L.C[0, 1] * L.C[1, 0] / L.M[1, 1]) / L.M[0, 0]
+    rho = R + r
+    v_c = rho * np.sqrt(m * g * R * A_t / (C_t * (C_t + m * rho ** 2)))
+    rows.append(Row("torus wheel, upright", "closed form: v_c = (R + r) √(m g R A / (C (C + m (R + r)²)))",
+                    "stability limit (m/s)", brentq(stiffness, 0.1, 2.0, xtol=1e-14), v_c, 1e-10))
+    upright = torus_wheel(0.0, 20.0, 0.0).build()
+    t_end = 0.5 if smoke else 1.0                    # the test's run: DOPRI5's error grows with the distance
+    tr = nc.simulate(upright, t_end, 0.05, method="rolling", rtol=1e-10, atol=1e-12)
+    rows.append(Row("torus wheel, upright rolling", "closed form: x = w3 (R + r) t",
+                    f"centre x (m), worst over {t_end:g} s",
+                    *_worst(tr.point("wheel", (0, 0, 0))[:, 0], 20.0 * (R + r) * tr.t), 1e-9))
     return rows
 
 
@@ -505,7 +546,7 @@ def _worst(got, want):
     return float(got[i]), float(want[i])
 
 
-CASES = (whipple, rolling_disc, rolling_disc_model, rolling_idas_stepper, rolling_moving_plane, chaplygin_sleigh, heavy_top, thin_bodies,
+CASES = (whipple, rolling_disc, rolling_disc_model, rolling_idas_stepper, rolling_torus, rolling_moving_plane, chaplygin_sleigh, heavy_top, thin_bodies,
          iftomm_a02,
          iftomm_a02_larger, iftomm_a01_a03_a04, iftomm_a05,
          arboris, pinocchio,
@@ -528,7 +569,7 @@ def page(rows: list[Row], smoke: bool) -> str:
              "reference below is recomputed by ncgen, and its error compared with the tolerance the "
              "tests hold it to; the reference values are imported from those tests (`tests/test_whipple.py`, "
              "`tests/test_rolling.py`, `tests/test_rolling_system.py`, `tests/test_rolling_drives.py`, `tests/test_rolling_idas.py`, "
-             "`tests/test_rolling_rattle.py`, "
+             "`tests/test_rolling_rattle.py`, `tests/test_rolling_torus.py`, "
              "`tests/test_heavy_top.py`, "
              "`tests/test_singular_positions.py`, `tests/test_iftomm.py`, `tests/test_thin_bodies.py`, "
              "`tests/test_rigid_motion.py`, `tests/test_urdf_pinocchio.py`, `tests/test_simulate_mujoco.py`, "

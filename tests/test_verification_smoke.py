@@ -43,7 +43,7 @@ def test_an_unknown_group_is_named(tmp_path):
 @pytest.mark.slow                       # the whole ladder: a few minutes (compiles, IDAS at 1e-10, robots)
 def test_verification_ladder_in_full(tmp_path):
     text, stdout = ladder(tmp_path, timeout=1800)
-    for case in ("Whipple bicycle", "rolling disc, steady precession", "rolling disc, upright",
+    for case in ("Whipple bicycle", "rolling disc, steady precession", "rolling disc, upright", "torus wheel, upright rolling",
                  "ball on a plane accelerating at 1.5 m/s² (B v = c(t)), nc.simulate at rtol 1e-10",
                  "Chaplygin sleigh", "heavy top, steady precession",
                  "IFToMM A02 four-bar (N = 1), through flat positions",

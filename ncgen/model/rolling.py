@@ -1,10 +1,12 @@
 """Nonholonomic elements: a wheel rolling without slipping and a knife edge on the ground.
 
-A :class:`RollingDisc` is a knife-edge disc of radius ``radius`` (m), fixed to a body,
-with its axle along ``axle`` (a direction in the body's local frame, through the centre of
-mass), touching the plane ``z = 0`` (normal ``+z``).  It imposes one holonomic constraint
-(the lowest point of the rim is on the plane) and two nonholonomic ones (the material
-point of the rim at the contact has no velocity along the plane): velocity constraints
+A :class:`RollingDisc` is a wheel fixed to a body, with its axle along ``axle`` (a
+direction in the body's local frame, through the centre of mass), touching the plane
+``z = 0`` (normal ``+z``): a knife-edge disc of radius ``radius`` (m), or with
+``tube_radius = r > 0`` a torus (a tyre) whose tube of radius ``r`` (m) is centred on the
+circle of radius ``radius`` about the axle.  It imposes one holonomic constraint (the lowest
+point of the wheel is on the plane) and two nonholonomic ones (the material point of the
+wheel at the contact has no velocity along the plane): velocity constraints
 ``B(q) v = 0`` that are not the derivative of any position constraint.  A
 :class:`KnifeEdge` (the Chaplygin sleigh's blade, a skate) lets a body-fixed point move only
 along a body-fixed blade direction in the plane (one nonholonomic constraint).  A :class:`RollingSphere` is a ball rolling without slipping.
@@ -77,18 +79,24 @@ class _MovingPlane:
 class RollingDisc(_MovingPlane):
     """A disc of ``radius`` (m) on ``body`` (a body or its name), axle ``axle`` in the
     body's frame, rolling without slipping on the plane ``z = 0`` (moving along itself at
-    ``plane_velocity``, m/s, if given)."""
+    ``plane_velocity``, m/s, if given); with ``tube_radius`` (m, default 0: a knife edge) a
+    torus of radii ``radius`` (centre to the tube's centre line) and ``tube_radius``."""
 
     kind = "RollingDisc"
 
     def __init__(self, body, *, radius: float, axle=(0.0, 1.0, 0.0), name: str | None = None,
-                 plane_velocity=None):
+                 plane_velocity=None, tube_radius: float = 0.0):
         self.body = body if isinstance(body, str) else getattr(body, "name", None)
         if not isinstance(self.body, str):
             raise ModelError(f"RollingDisc: body: expected a body or its name, found {body!r}")
         if not (isinstance(radius, (int, float)) and np.isfinite(radius) and radius > 0):
             raise ModelError(f"RollingDisc on {self.body}: radius: expected a positive number (m), "
                              f"found {radius!r}")
+        if isinstance(tube_radius, bool) or not (isinstance(tube_radius, (int, float)) and np.isfinite(tube_radius)
+                                                 and tube_radius >= 0):
+            raise ModelError(f"RollingDisc on {self.body}: tube_radius: expected a number ≥ 0 (m; 0: a knife-edge "
+                             f"disc), found {tube_radius!r}")
+        self.tube_radius = float(tube_radius)
         a = as_vector(axle, 3, f"RollingDisc on {self.body}: axle")
         if np.linalg.norm(a) < 1e-12:
             raise ModelError(f"RollingDisc on {self.body}: axle: expected a nonzero direction, found {a}")
@@ -98,26 +106,32 @@ class RollingDisc(_MovingPlane):
         self.plane_velocity = plane_velocity_text(plane_velocity, f"RollingDisc on {self.body}: plane_velocity")
 
     def equations(self, R, p, q) -> tuple[ca.SX, ca.SX]:
-        """Height of the rim's lowest point ``n·p − ρ|d|`` (1) and the contact point's
+        """Height of the wheel's lowest point ``n·p − ρ|d| − r`` (1) and the contact point's
         material velocity along the plane as rows of ``B`` (2 × nq): ``d = n − (n·â)â``,
-        ``P = p − ρ d/|d|``, ``v_P = ṗ + Ṙ ℓ`` with ``ℓ = Rᵀ(P − p)`` held fixed."""
+        ``P = p − ρ d/|d| − r n`` (``ρ`` the radius, ``r`` the tube's: the tube's centre
+        circle's lowest point, then straight down through the tube), ``v_P = ṗ + Ṙ ℓ`` with
+        ``ℓ = Rᵀ(P − p)`` held fixed."""
         n = ca.DM([0.0, 0.0, 1.0])
         a = ca.mtimes(R, ca.DM(self.axle))
         a_hat = a / ca.norm_2(a)
         d = n - ca.dot(n, a_hat) * a_hat
         d_norm = ca.norm_2(d)
-        ell = ca.mtimes(R.T, -self.radius * d / d_norm)
+        ell = ca.mtimes(R.T, -self.radius * d / d_norm - self.tube_radius * n)
         ell_frozen = ca.SX.sym("ell", 3)
         B = ca.jacobian((p + ca.mtimes(R, ell_frozen))[:2], q)
-        return ca.dot(n, p) - self.radius * d_norm, ca.substitute(B, ell_frozen, ell)
+        return ca.dot(n, p) - self.radius * d_norm - self.tube_radius, ca.substitute(B, ell_frozen, ell)
 
     def spec(self) -> dict:
-        """The element as plain data (its TOML table)."""
-        return self._spec_plane({"type": self.kind, "name": self.name, "body": self.body, "radius": self.radius,
-                                 "axle": self.axle.tolist()})
+        """The element as plain data (its TOML table; ``tube_radius`` only when not zero)."""
+        spec = {"type": self.kind, "name": self.name, "body": self.body, "radius": self.radius,
+                "axle": self.axle.tolist()}
+        if self.tube_radius:
+            spec["tube_radius"] = self.tube_radius
+        return self._spec_plane(spec)
 
     def __repr__(self) -> str:
-        return f"RollingDisc({self.body!r}, radius={self.radius}, axle={tuple(self.axle)})"
+        tube = f", tube_radius={self.tube_radius}" if self.tube_radius else ""
+        return f"RollingDisc({self.body!r}, radius={self.radius}{tube}, axle={tuple(self.axle)})"
 
 
 class RollingSphere(_MovingPlane):

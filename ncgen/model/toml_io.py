@@ -27,7 +27,7 @@ Layout of a file (every table optional except ``members``)::
                   radius_b, length_b, at_a, rotation_a, at_b, rotation_b) or "CapsuleBox" (capsule, radius,
                   length, at, rotation, box = "ground", size, box_at, box_rotation); all with mu,
                   restitution, stiffness, damping, exponent, slip_velocity, name
-    [[rolling]]   type = "RollingDisc" (body, radius, axle), "RollingSphere" (body, radius) or
+    [[rolling]]   type = "RollingDisc" (body, radius, tube_radius, axle), "RollingSphere" (body, radius) or
                   "KnifeEdge" (body, at, blade); all with name and plane_velocity (docs/rolling.md)
 
 Shared basic points are written ``"crank.r_j"`` (slot ``r_j`` of member ``crank``) or
@@ -71,7 +71,8 @@ TOP_KEYS = ("system", "parameters", "inputs", "members", "joints", "forces", "co
 #: Keys of each ``[[rolling]]`` type besides ``type`` and ``name``: ``(key, number of values)``
 #: (:mod:`ncgen.model.rolling`; 0: a string, 1: a number, 3: a vector; None: values, numbers or
 #: expressions of ``t``, checked by the element).
-ROLLING_FIELDS = {"RollingDisc": (("body", 0), ("radius", 1), ("axle", 3), ("plane_velocity", None)),
+ROLLING_FIELDS = {"RollingDisc": (("body", 0), ("radius", 1), ("tube_radius", 1), ("axle", 3),
+                                   ("plane_velocity", None)),
                   "RollingSphere": (("body", 0), ("radius", 1), ("plane_velocity", None)),
                   "KnifeEdge": (("body", 0), ("at", 3), ("blade", 3), ("plane_velocity", None))}
 #: Material keys every contact table may have (:class:`~ncgen.model.contacts.Contact`).

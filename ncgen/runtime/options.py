@@ -95,7 +95,10 @@ class SimulationOptions:
     the tables when the model is covered, else flat; ``traj.info["kernels"]`` says which ran;
     see :mod:`ncgen.runtime.table_stepper`; for ``method="joint"`` the same choice between the
     tree library's loop on the model's tree tables, for trees without a compiled controller or
-    joint dynamics, and the model's compiled joint-space ODE: :func:`ncgen.runtime.joint_simulation.joint_loop`).
+    joint dynamics, and the model's compiled joint-space ODE: :func:`ncgen.runtime.joint_simulation.joint_loop`),
+    ``backend`` for a model with rolling elements only (``"compiled"``: each RATTLE step one
+    call of compiled C; ``"vm"``: Python-driven; ``"auto"``: compiled when it pays,
+    :mod:`ncgen.runtime.rolling_rattle`).
     """
 
     method: str = "auto"

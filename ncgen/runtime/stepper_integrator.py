@@ -32,7 +32,7 @@ class StepperIntegrator:
 
     METHOD = "stepper"
     OPTIONS = ("rtol", "atol", "hold", "max_steps", "substeps", "newton_tol", "max_newton", "max_halvings",
-               "order", "scheme", "check", "estimate", "kernels")
+               "order", "scheme", "check", "estimate", "kernels", "backend")
 
     def __init__(self, model, opts: SimulationOptions):
         refuse_integrator(opts, self.METHOD)

@@ -1,4 +1,4 @@
-"""What each member looks like: primitives (box, cylinder, capsule, sphere, ellipsoid, mesh)
+"""What each member looks like: primitives (box, cylinder, capsule, sphere, ellipsoid, torus, mesh)
 placed in member frames, from the model alone (NumPy; no drawing library).
 
 Rules, in order, per member:
@@ -15,7 +15,7 @@ Rules, in order, per member:
   basic points and markers; a point member: a small sphere.
 
 A body with a rolling disc or ball (``model.rolling``) is drawn as that disc (a thin
-cylinder of its radius about its axle) or ball unless it has a shape or visuals of its own; a
+cylinder of its radius about its axle; a torus of its radii when it has a tube) or ball unless it has a shape or visuals of its own; a
 knife edge as a thin blade along its direction.
 
 Joints are drawn on their second member (the first when the second is the ground): a
@@ -48,8 +48,9 @@ MIN_EDGE = 0.04
 @dataclass
 class Primitive:
     """One solid in a member frame: ``kind`` (box, cylinder, capsule, sphere, ellipsoid,
-    mesh), ``size`` (box edges; cylinder/capsule radius and length, axis along the
-    primitive's z; sphere radius; ellipsoid semi-axes; mesh scale), placement ``R``
+    torus, mesh), ``size`` (box edges; cylinder/capsule radius and length, axis along the
+    primitive's z; sphere radius; ellipsoid semi-axes; torus radius and tube radius, axis
+    along z; mesh scale), placement ``R``
     (primitive → member axes) and ``p`` (m), ``color`` and, for meshes, ``filename``."""
 
     kind: str
@@ -137,8 +138,10 @@ def member_primitives(model, size: float, colors: dict | None = None) -> dict[st
 
 
 def _rolling(element, size: float, color) -> Primitive:
-    """A rolling disc (thickness a tenth of its radius), ball or knife edge (a blade a fifth
-    of the scene long) in its body's frame."""
+    """A rolling disc (thickness a tenth of its radius; a torus of its radii when it has a
+    tube), ball or knife edge (a blade a fifth of the scene long) in its body's frame."""
+    if element.kind == "RollingDisc" and element.tube_radius:
+        return Primitive("torus", np.array([element.radius, element.tube_radius]), z_to(element.axle), color=color)
     if element.kind == "RollingDisc":
         return Primitive("cylinder", np.array([element.radius, 0.1 * element.radius]), z_to(element.axle),
                          color=color)
@@ -274,7 +277,8 @@ def _joint(model, joint, size: float) -> tuple[str, Primitive] | None:
 def outline(prim: Primitive, segments: int = 24) -> np.ndarray:
     """Line drawing of a primitive in its member frame: ``(m, 3)`` points, NaN rows between
     separate strokes (box edges; cylinder and capsule end circles and four sides; three
-    principal ellipses of spheres and ellipsoids; a stick's axis).  Meshes: no rows."""
+    principal ellipses of spheres and ellipsoids; a torus's inner, outer, top and bottom
+    circles and four cross-sections of its tube; a stick's axis).  Meshes: no rows."""
     a = np.linspace(0, 2 * np.pi, segments + 1)
     c, s, z = np.cos(a), np.sin(a), np.zeros_like(a)
     gap = np.full((1, 3), np.nan)
@@ -308,6 +312,13 @@ def outline(prim: Primitive, segments: int = 24) -> np.ndarray:
         semi = np.full(3, prim.size[0]) if prim.kind == "sphere" else prim.size
         for ring in ((c, s, z), (c, z, s), (z, c, s)):
             strokes.append(np.column_stack(ring) * semi)
+    elif prim.kind == "torus":
+        big, tube = prim.size
+        for radius, height in ((big - tube, 0.0), (big + tube, 0.0), (big, -tube), (big, tube)):
+            strokes.append(np.column_stack([radius * c, radius * s, np.full_like(a, height)]))
+        for k in range(4):
+            e = np.array([np.cos(k * np.pi / 2), np.sin(k * np.pi / 2), 0.0])
+            strokes.append(np.outer(big + tube * c, e) + np.outer(tube * s, [0.0, 0.0, 1.0]))
     if not strokes:
         return np.zeros((0, 3))
     local = np.concatenate([x for stroke in strokes for x in (stroke, gap)][:-1])
