@@ -79,6 +79,8 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800),   # each benchmark sc
                                  "RATIO clustered / independent, stepper"]),
     ("step_jacobians.py", ["=== twodofs: nq = ", "C: ", "compiler peak RSS", "st.jacobians(x, u)",
                            "central differences: A", "TARGET twodofs"]),
+    ("tree_tables_callgrind.py", ["=== ur5: instructions per state", "ur5 aba: tables",
+                                  "RATIO ur5 crba instructions: tables / flat", "results agree"]),
     ("mjcf_import_time.py", ["first    parse wall", "later 1  parse wall", "n =   10:", "CPU per element",
                              "load average at the end"]),
 ])
@@ -88,6 +90,11 @@ def test_smoke(tmp_path, script, expected):
         pytest.importorskip("yourdfpy")
     if script == "step_jacobians.py":
         pytest.importorskip("yourdfpy")
+    if script == "tree_tables_callgrind.py":
+        pytest.importorskip("pinocchio")     # with example-robot-data's URDFs
+        pytest.importorskip("yourdfpy")
+        if shutil.which("valgrind") is None:
+            pytest.skip("valgrind is not installed")
     root = str(BENCHMARKS.parent)        # the checkout under test, whatever ncgen is installed
     env = {**os.environ, "NCGEN_CACHE_DIR": str(tmp_path / "cache"),
            "PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")]))}

@@ -33,6 +33,7 @@ void w_inertia_apply(const double *I, const double *T, double *W) { sp_inertia_a
 void w_inertia_out_add(const double *R, const double *p, const double *I, double *J) { sp_inertia_out_add(R, p, I, J); }
 void w_inertia_matrix(const double *I, double *M) { sp_inertia_matrix(I, M); }
 void w_twist_out(const double *R, const double *p, const double *T, double *Y) { sp_twist_out(R, p, T, Y); }
+void w_inertia_rotate(const double *R, const double *I, double *J) { sp_inertia_rotate(R, I, J); }
 void w_inertia_shift_add(const double *d, const double *I, double *J) { sp_inertia_shift_add(d, I, J); }
 void w_wrench_shift(const double *d, const double *W, double *Y) { int i; for (i = 0; i < 6; ++i) Y[i] = W[i]; sp_wrench_shift(d, Y); }
 """
@@ -94,6 +95,9 @@ def test_spatial_algebra_equals_the_symbolic_forms(lib, seed):
     moved = call(lib, "w_inertia_out_add", 13, R, p, I, out=J)
     close(call(lib, "w_inertia_matrix", 36, moved).reshape(6, 6, order="F"),
           N + rm.transport_mass_matrix(M, rm.inverse(H)))
+    turned = call(lib, "w_inertia_rotate", 13, R, I)    # a rotation alone
+    close(call(lib, "w_inertia_matrix", 36, turned).reshape(6, 6, order="F"),
+          rm.transport_mass_matrix(M, rm.inverse(rm.homogeneous(R, np.zeros(3)))))
     close(call(lib, "w_twist_out", 6, R, p, T), rm.Ad(H) @ T)
     D = rm.homogeneous(np.eye(3), p)                 # a translation alone
     shifted = call(lib, "w_inertia_shift_add", 13, p, I, out=J)

@@ -14,9 +14,9 @@ Kernels (``kernels=``, as the stepper's ``SimulationOptions(kernels=...)``): ``"
 the tree library's loops over the model's data tables (:mod:`ncgen.runtime.tree_library`,
 compiled once per ncgen version: no compiler call for a new robot), ``"flat"`` — the model's
 own SX functions compiled per model, ``"auto"`` (default) — flat wherever a C compiler is
-present or the flat kernel is already built in this process (per state in C the tables' local
-recursions cost 1.0–1.8× the flat RNEA, 2.9–3.5× the flat ABA, 2.7–4.5× the flat CRBA:
-benchmarks/tree_tables.py),
+present or the flat kernel is already built in this process (per state in C the tables cost
+0.7–1.4× the flat RNEA, 1.4–2.1× the flat ABA and 1.2–1.9× the flat CRBA on the Panda, UR5,
+UR10 and Talos: :mod:`ncgen.runtime.tree_library`, benchmarks/tree_tables.py),
 else the tables when they cover the model
 (:func:`~ncgen.codegen.tree_tables.tree_tables`: a uniform gravity the only passive force).
 :func:`algorithm_kernels` says which one a call uses.

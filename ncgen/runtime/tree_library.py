@@ -12,16 +12,22 @@ callers of :class:`~ncgen.runtime.tree_algorithms.AlgorithmKernel` use (``k(*arg
 trees whose passive force is a uniform gravity.  :class:`TableJointLoop` is the joint-space
 simulation loop (``ncgen_joint_loop.h`` in the library) on the same tables.
 
-Speed (benchmarks/tree_tables.py, CPU time per state over batches of 1000 in one C call, best of
-7 or 25 interleaved rounds, three runs, AMD EPYC, 2 shared cores at load 11–15: the spread is
-the machine's) against the flat per-robot kernel (whose numbers are folded into the code),
-tables / flat: RNEA 0.97–1.05 (Panda), 1.38–1.62 (UR5), 0.94 (Talos); ABA 1.50–2.46 (Panda,
-its mimic finger by a constraint), 1.66–2.21 (UR5), 0.79 (Talos); CRBA 1.54–1.74, 1.81–2.61,
-1.13.  CRBA and ABA run in the ground's axes (``ncgen_tree_tables.h``); in local frames they
-were 2.9–3.5× (ABA) and 2.7–4.5× (CRBA).
+Speed against the flat per-robot kernel (whose numbers are folded into the code), tables / flat.
+Instructions per state (callgrind, batches of 200 states in one C call, robust to the load):
+RNEA 8 755 / 6 825 (Panda), 5 995 / 4 132 (UR5), 5 995 / 4 023 (UR10), 36 701 / 32 581 (Talos);
+ABA 23 155 / 8 935, 12 669 / 5 090, 12 673 / 5 070, 81 948 / 53 856; CRBA 13 742 / 5 436,
+7 885 / 2 976, 7 885 / 2 933, 71 447 / 29 477.  CPU time per state (benchmarks/tree_tables.py,
+batches of 500, best of 7 interleaved rounds, AMD EPYC, 2 shared cores at load 17–18: the
+spread is the machine's): RNEA 0.97 (Panda), 1.17 (UR5); ABA 1.44, 1.71; CRBA 1.35, 1.77; in a
+C harness (best of 60 rounds, same load) RNEA 0.85, 1.17–1.44 (UR5), 1.17 (UR10), 0.72 (Talos);
+ABA 2.05, 1.82, 1.91, 0.96; CRBA 1.73, 1.68, 1.87, 1.18.  The flat kernels fold the
+placements' 0/±1 and the inertias' zeros; the tables pay dense spatial products in the ground
+frame (CRBA, ABA: each body's pose and inertia turned into the ground's axes, 6 × 6
+articulated inertias).  CRBA and ABA run in the ground's axes (``ncgen_tree_tables.h``); in
+local frames they were 2.9–3.5× (ABA) and 2.7–4.5× (CRBA).
 A single call goes through the fast caller as the flat kernels' do.  The tables are the default for their
 first-call cost (no compile) where no compiler is present, the flat kernel otherwise (the
-Panda's and UR5's ABA and CRBA miss 1.2× the flat kernels).
+Panda's, UR5's and UR10's ABA and CRBA miss 1.2× the flat kernels).
 """
 from __future__ import annotations
 

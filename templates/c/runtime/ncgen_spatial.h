@@ -125,6 +125,30 @@ static inline void sp_inertia_out_add(const double *R, const double *p, const do
   for (i = 0; i < 3; ++i) Ia[1 + i] += h[i] + m * p[i];
 }
 
+/* Ia = the rigid inertia Ib (in b) in the axes of a, about the same origin (b turned by R in
+ * a): h_a = R h, I_o,a = R I_o Rᵀ (Ia not Ib; I_o symmetric: its lower triangle read, both
+ * written). */
+static inline void sp_inertia_rotate(const double *R, const double *Ib, double *Ia) {
+  const double *I = Ib + 4;
+  double A[9];
+  int i;
+  sp_rot(R, Ib + 1, Ia + 1);
+  for (i = 0; i < 3; ++i) {                     /* A = R I_o: row i of R times the symmetric I_o */
+    A[i] = R[i] * I[0] + R[i + 3] * I[1] + R[i + 6] * I[2];
+    A[i + 3] = R[i] * I[1] + R[i + 3] * I[4] + R[i + 6] * I[5];
+    A[i + 6] = R[i] * I[2] + R[i + 3] * I[5] + R[i + 6] * I[8];
+  }
+#define SP_AR(i, j) (A[i] * R[j] + A[i + 3] * R[j + 3] + A[i + 6] * R[j + 6])
+  Ia[0] = Ib[0];
+  Ia[4] = SP_AR(0, 0);
+  Ia[8] = SP_AR(1, 1);
+  Ia[12] = SP_AR(2, 2);
+  Ia[5] = Ia[7] = SP_AR(1, 0);
+  Ia[6] = Ia[10] = SP_AR(2, 0);
+  Ia[9] = Ia[11] = SP_AR(2, 1);
+#undef SP_AR
+}
+
 /* Ia += the rigid inertia Ib, both in the same axes, Ib about a point b and Ia about a point a
  * with b − a = d (the move of sp_inertia_out_add with R = 1): h_a = h + m d, I_o,a = I_o + 2 (g·d) 1 − d gᵀ − g dᵀ with
  * g = h + (m / 2) d (Ia not Ib). */

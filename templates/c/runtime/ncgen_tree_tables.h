@@ -408,28 +408,46 @@ static void ncgen_tree_local_motion(const ncgen_tree_kinds *K, const ncgen_tree 
   const double a0[6] = {0, 0, 0, -T->gravity[0], -T->gravity[1], -T->gravity[2]};
   for (b = 0; b < T->nb; ++b) {
     const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
-    int par = T->parent[b], va = T->v_at[b];
+    int par = T->parent[b], va = T->v_at[b], mode = k->mode;
     const double *R = s->X + 12 * b, *p = R + 9, *S = s->Sl + 6 * va, *I = T->inertia + NCGEN_TREE_BODY * b;
     double *v = s->vl + 6 * b, *a = s->al + 6 * b, *c = s->cl + 6 * b, *f = s->fl + 6 * b;
-    double vJ[6], t[6], h[6];
+    double t[6], h[6];
     sp_twist_in(R, p, par < 0 ? zero : s->vl + 6 * par, v);
-    for (i = 0; i < 6; ++i) {
-      double x = 0.0;
-      for (j = 0; j < k->nv; ++j) x += S[6 * j + i] * s->v[va + j];
-      vJ[i] = x;
-      v[i] += x;
+    if (mode == 1) {                            /* S = [e_z; 0]: ad(v) S w = w [ω_y, −ω_x, 0, v_y, −v_x, 0] */
+      double w = s->v[va];
+      v[2] += w;
+      c[0] = w * v[1];
+      c[1] = -w * v[0];
+      c[3] = w * v[4];
+      c[4] = -w * v[3];
+    } else if (mode == 2) {                     /* S = [0; e_z]: ad(v) S w = w [0, 0, 0, ω_y, −ω_x, 0] */
+      double w = s->v[va];
+      v[5] += w;
+      c[3] = w * v[1];
+      c[4] = -w * v[0];
+    } else if (mode == 0) {
+      double vJ[6];
+      for (i = 0; i < 6; ++i) {
+        double x = 0.0;
+        for (j = 0; j < k->nv; ++j) x += S[6 * j + i] * s->v[va + j];
+        vJ[i] = x;
+        v[i] += x;
+      }
+      sp_ad(v, vJ, t);
+      for (i = 0; i < 6; ++i) c[i] += t[i];
     }
-    sp_ad(v, vJ, t);
-    for (i = 0; i < 6; ++i) c[i] += t[i];
     sp_inertia_apply(I, v, h);
     sp_ad_star(v, h, f);
     if (!accelerations) continue;
     sp_twist_in(R, p, par < 0 ? a0 : s->al + 6 * par, a);
-    for (i = 0; i < 6; ++i) {
-      double y = c[i];
-      for (j = 0; j < k->nv; ++j) y += S[6 * j + i] * s->a[va + j];
-      a[i] += y;
-    }
+    for (i = 0; i < 6; ++i) a[i] += c[i];
+    if (mode == 1)
+      a[2] += s->a[va];
+    else if (mode == 2)
+      a[5] += s->a[va];
+    else
+      for (j = 0; j < k->nv; ++j)
+        for (i = 0; i < 6; ++i) a[i] += S[6 * j + i] * s->a[va + j];
     sp_inertia_apply(I, a, t);
     for (i = 0; i < 6; ++i) f[i] += t[i];
   }
@@ -441,11 +459,14 @@ static void ncgen_tree_local_backward(const ncgen_tree_kinds *K, const ncgen_tre
   for (b = T->nb - 1; b >= 0; --b) {
     const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
     const double *f = s->fl + 6 * b, *S = s->Sl + 6 * T->v_at[b];
-    for (j = 0; j < k->nv; ++j) {
-      double t = 0.0;
-      for (i = 0; i < 6; ++i) t += S[6 * j + i] * f[i];
-      s->tau[T->v_at[b] + j] = t;
-    }
+    if (k->mode == 1 || k->mode == 2)           /* S = [e_z; 0] or [0; e_z] */
+      s->tau[T->v_at[b]] = f[k->mode == 1 ? 2 : 5];
+    else
+      for (j = 0; j < k->nv; ++j) {
+        double t = 0.0;
+        for (i = 0; i < 6; ++i) t += S[6 * j + i] * f[i];
+        s->tau[T->v_at[b] + j] = t;
+      }
     if (T->parent[b] >= 0) sp_wrench_out_add(s->X + 12 * b, s->X + 12 * b + 9, f, s->fl + 6 * T->parent[b]);
   }
 }
@@ -460,6 +481,21 @@ static inline void ncgen_tree_mat6_apply(const double *A, const double *x, doubl
   int r;
   for (r = 0; r < 6; ++r)
     y[r] = A[r] * x[0] + A[r + 6] * x[1] + A[r + 12] * x[2] + A[r + 18] * x[3] + A[r + 24] * x[4] + A[r + 30] * x[5];
+}
+
+/* y = A x (A 6 × 6 symmetric, column-major, its lower triangle read; y not x) */
+static inline void ncgen_tree_sym6_apply(const double *A, const double *x, double *y) {
+#define NCGEN_TREE_SYM(r, c) ((r) >= (c) ? A[(r) + 6 * (c)] : A[(c) + 6 * (r)])
+#define NCGEN_TREE_ROW(r) (NCGEN_TREE_SYM(r, 0) * x[0] + NCGEN_TREE_SYM(r, 1) * x[1] + NCGEN_TREE_SYM(r, 2) * x[2] + \
+                           NCGEN_TREE_SYM(r, 3) * x[3] + NCGEN_TREE_SYM(r, 4) * x[4] + NCGEN_TREE_SYM(r, 5) * x[5])
+  y[0] = NCGEN_TREE_ROW(0);
+  y[1] = NCGEN_TREE_ROW(1);
+  y[2] = NCGEN_TREE_ROW(2);
+  y[3] = NCGEN_TREE_ROW(3);
+  y[4] = NCGEN_TREE_ROW(4);
+  y[5] = NCGEN_TREE_ROW(5);
+#undef NCGEN_TREE_ROW
+#undef NCGEN_TREE_SYM
 }
 
 /* The ground frame, outwards after ncgen_tree_local_poses: each body's pose (s->R, s->p), its
@@ -535,13 +571,11 @@ static void ncgen_tree_map_mass(const ncgen_tree *T, const double *M, double *Mi
 static void ncgen_tree_ground_mass(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, double *Mi) {
   int b, i, j, nv = T->nv, direct = ncgen_tree_unmapped(T);
   double *M = direct ? Mi : s->M;               /* G = 1: M_i = M */
-  const double zero[3] = {0, 0, 0};
-  memset(s->IC, 0, NCGEN_TREE_BODY * (size_t)T->nb * sizeof(double));
   for (b = 0; b < T->nb; ++b) {
     const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
     const double *R = s->R + 9 * b;
     double *S = s->Sl + 6 * T->v_at[b], *d = s->d + 3 * b, x[6];
-    sp_inertia_out_add(R, zero, T->inertia + NCGEN_TREE_BODY * b, s->IC + NCGEN_TREE_BODY * b);
+    sp_inertia_rotate(R, T->inertia + NCGEN_TREE_BODY * b, s->IC + NCGEN_TREE_BODY * b);
     if (T->parent[b] >= 0)                      /* d_b = p_b − p_parent */
       for (i = 0; i < 3; ++i) d[i] = s->p[3 * b + i] - s->p[3 * T->parent[b] + i];
     if (k->mode == 1 || k->mode == 2)           /* S' = [z_b; 0] or [0; z_b] */
@@ -564,12 +598,19 @@ static void ncgen_tree_ground_mass(const ncgen_tree_kinds *K, const ncgen_tree *
     const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
     for (j = 0; j < k->nv; ++j) {
       int col = T->v_at[b] + j, up = b;
+      const double *IC = s->IC + NCGEN_TREE_BODY * b, *z = s->Sl + 6 * col;
       double F[6];
-      sp_inertia_apply(s->IC + NCGEN_TREE_BODY * b, s->Sl + 6 * col, F);
+      if (k->mode == 1) {                       /* F = I^C [z; 0] = [I_o z; z × h] */
+        sp_rot(IC + 4, z, F);
+        sp_cross(z, IC + 1, F + 3);
+      } else
+        sp_inertia_apply(IC, z, F);
       for (;;) {
-        int nu = K->joint[T->kind[up]].nv, row = T->v_at[up], par = T->parent[up];
+        const ncgen_tree_joint_kind *ku = &K->joint[T->kind[up]];
+        int nu = ku->nv, row = T->v_at[up], par = T->parent[up];
         for (i = 0; i < nu; ++i, ++row) {
-          double t = ncgen_tree_dot6(s->Sl + 6 * row, F);
+          const double *Sr = s->Sl + 6 * row;
+          double t = ku->mode == 1 ? Sr[0] * F[0] + Sr[1] * F[1] + Sr[2] * F[2] : ncgen_tree_dot6(Sr, F);
           M[row + nv * col] = t;
           M[col + nv * row] = t;
         }
@@ -625,6 +666,10 @@ static int ncgen_tree_crba(const ncgen_tree_kinds *K, const ncgen_tree *T, const
 /* x = D⁻¹ y of one joint (nv rates) from the Cholesky factor L (lower, column stride 6) of D. */
 static void ncgen_tree_joint_solve(int nv, const double *L, const double *y, double *x) {
   int j, c;
+  if (nv == 1) {
+    x[0] = y[0] / L[0] / L[0];
+    return;
+  }
   for (j = 0; j < nv; ++j) {
     double t = y[j];
     for (c = 0; c < j; ++c) t -= L[j + 6 * c] * x[c];
@@ -641,7 +686,7 @@ static void ncgen_tree_joint_solve(int nv, const double *L, const double *y, dou
  * the bodies, every quantity in the ground frame (twists and accelerations of the bodies as
  * [ω; v] at the ground's origin, articulated inertias I^A and bias wrenches p^A about it), so
  * that an articulated inertia passes to its parent by a sum, I^A_p += I^A − U D⁻¹ Uᵀ
- * (U = I^A S, D = Sᵀ U), with no change of frame; *pivot = min d_k / (S_kᵀ I^C S_k) over
+ * (U = I^A S, D = Sᵀ U), with no change of frame (I^A symmetric: its lower triangle kept); *pivot = min d_k / (S_kᵀ I^C S_k) over
  * the Cholesky pivots d_k of each joint's D (the pivots of M's factorisation from the leaves,
  * relative to M's diagonal; NaN stays). */
 static int ncgen_tree_articulated(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s,
@@ -660,7 +705,10 @@ static int ncgen_tree_articulated(const ncgen_tree_kinds *K, const ncgen_tree *T
     double *v = s->vl + 6 * b, *cb = s->cl + 6 * b, vJ[6], t[6];
     for (i = 0; i < 6; ++i) {
       double x = 0.0;
-      for (j = 0; j < k->nv; ++j) x += S[6 * j + i] * s->v[va + j];
+      if (k->nv == 1)
+        x = S[i] * s->v[va];
+      else
+        for (j = 0; j < k->nv; ++j) x += S[6 * j + i] * s->v[va + j];
       vJ[i] = x;
       v[i] = vp[i] + x;
     }
@@ -682,7 +730,7 @@ static int ncgen_tree_articulated(const ncgen_tree_kinds *K, const ncgen_tree *T
     }
     if (nv == 1) {                              /* one rate: D = d = l², I^a = I^A − Z Zᵀ, Z = U / l */
       double d, x, m, q, l, e, *IAp, *pAp, Z[6], y[6];
-      ncgen_tree_mat6_apply(IA, S, U);
+      ncgen_tree_sym6_apply(IA, S, U);
       d = ncgen_tree_dot6(S, U);
       u[0] = x = tau[va] - ncgen_tree_dot6(S, pA);
       sp_inertia_apply(IC, S, F);               /* M_kk = Sᵀ I^C S */
@@ -695,23 +743,25 @@ static int ncgen_tree_articulated(const ncgen_tree_kinds *K, const ncgen_tree *T
       IAp = s->IA + 36 * par;
       pAp = s->fl + 6 * par;
       e = (x - ncgen_tree_dot6(U, cb)) / l;     /* p^A_p += p^A + I^A c + Z (u − Uᵀ c) / l */
-      ncgen_tree_mat6_apply(IA, cb, y);
+      ncgen_tree_sym6_apply(IA, cb, y);
       for (r = 0; r < 6; ++r) {
         Z[r] = U[r] / l;
         pAp[r] += pA[r] + y[r] + Z[r] * e;
       }
-      for (c = 0; c < 6; ++c)                   /* I^A_p += I^A − Z Zᵀ */
-        for (r = 0; r < 6; ++r) IAp[r + 6 * c] += IA[r + 6 * c] - Z[r] * Z[c];
+      /* I^A_p += I^A − Z Zᵀ (lower triangle) */
+#define NCGEN_TREE_UPD(r, c) IAp[(r) + 6 * (c)] += IA[(r) + 6 * (c)] - Z[r] * Z[c]
+      NCGEN_TREE_UPD(0, 0); NCGEN_TREE_UPD(1, 0); NCGEN_TREE_UPD(2, 0); NCGEN_TREE_UPD(3, 0); NCGEN_TREE_UPD(4, 0);
+      NCGEN_TREE_UPD(5, 0); NCGEN_TREE_UPD(1, 1); NCGEN_TREE_UPD(2, 1); NCGEN_TREE_UPD(3, 1); NCGEN_TREE_UPD(4, 1);
+      NCGEN_TREE_UPD(5, 1); NCGEN_TREE_UPD(2, 2); NCGEN_TREE_UPD(3, 2); NCGEN_TREE_UPD(4, 2); NCGEN_TREE_UPD(5, 2);
+      NCGEN_TREE_UPD(3, 3); NCGEN_TREE_UPD(4, 3); NCGEN_TREE_UPD(5, 3); NCGEN_TREE_UPD(4, 4); NCGEN_TREE_UPD(5, 4);
+      NCGEN_TREE_UPD(5, 5);
+#undef NCGEN_TREE_UPD
       continue;
     }
     for (j = 0; j < nv; ++j) {                  /* U = I^A S, D = Sᵀ U (lower), u = τ − Sᵀ p^A */
       const double *Sj = S + 6 * j;
       double *Uj = U + 6 * j, x = tau[va + j], m = 0.0;
-      for (r = 0; r < 6; ++r) Uj[r] = 0.0;
-      for (c = 0; c < 6; ++c) {
-        double sc = Sj[c];
-        for (r = 0; r < 6; ++r) Uj[r] += IA[r + 6 * c] * sc;
-      }
+      ncgen_tree_sym6_apply(IA, Sj, Uj);
       for (i = j; i < nv; ++i) {
         double y = 0.0;
         for (r = 0; r < 6; ++r) y += S[6 * i + r] * Uj[r];
@@ -754,14 +804,13 @@ static int ncgen_tree_articulated(const ncgen_tree_kinds *K, const ncgen_tree *T
         w[j] = x / L[j + 6 * j];
       }
       /* p^A_p += p^A + I^A c + Z w (= p^A + I^a c + U D⁻¹ u, I^a = I^A − Z Zᵀ); I^A_p += I^a */
-      for (r = 0; r < 6; ++r) y[r] = pA[r];
-      for (c = 0; c < 6; ++c)
-        for (r = 0; r < 6; ++r) y[r] += IA[r + 6 * c] * cb[c];
+      ncgen_tree_sym6_apply(IA, cb, y);
+      for (r = 0; r < 6; ++r) y[r] += pA[r];
       for (j = 0; j < nv; ++j)
         for (r = 0; r < 6; ++r) y[r] += Z[6 * j + r] * w[j];
       for (r = 0; r < 6; ++r) pAp[r] += y[r];
       for (c = 0; c < 6; ++c)
-        for (r = 0; r < 6; ++r) {
+        for (r = c; r < 6; ++r) {
           double x = IA[r + 6 * c];
           for (j = 0; j < nv; ++j) x -= Z[6 * j + r] * Z[6 * j + c];
           IAp[r + 6 * c] += x;
