@@ -39,7 +39,9 @@ from ncgen.control.mpc_problem import mpc_problem
 from ncgen.errors import NcgenError, OptimizationError
 from ncgen.validation import as_scalar
 
-SOLVERS = ("sqp",)
+#: ``"sqp"``: this module's SQP (generated C); ``"fatrop"``: CasADi's Fatrop on the stage-wise
+#: problem (:mod:`ncgen.control.mpc_fatrop`).
+SOLVERS = ("sqp", "fatrop")
 #: Added to the diagonal of the QP Hessian (keeps it positive definite on the inputs).
 REGULARIZATION = 1e-8
 #: Step lengths tried by the line search, longest first; its Armijo fraction, the filter's
@@ -172,13 +174,9 @@ class MPC:
 
     def __init__(self, ocp, solver: str = "sqp", *, iterations: int = 1, terminal_weight: float = 1e3,
                  regularization: float = REGULARIZATION, qp_max_iter: int = 100,
-                 sx_qr_max_nnz: int | None = None):
-        if solver not in SOLVERS:
-            hint = (" (Fatrop is not wired into ncgen's MPC: CasADi's wheel ships libfatrop, its conic and "
-                    "nlpsol plugins and headers, but the MPC does not yet pose its QP in Fatrop's stage-wise form "
-                    "nor link the exported C package against libfatrop (C++); see docs/control.md)"
-                    if solver == "fatrop" else "")
-            raise OptimizationError(f"MPC: solver: expected one of {', '.join(SOLVERS)}, got {solver!r}{hint}")
+                 sx_qr_max_nnz: int | None = None, fatrop_options: dict | None = None):
+        if not isinstance(solver, str) or solver not in SOLVERS:
+            raise OptimizationError(f"MPC: solver: expected one of {', '.join(SOLVERS)}, got {solver!r}")
         if not isinstance(iterations, int) or iterations < 1:
             raise OptimizationError(f"MPC: iterations: expected a positive integer, got {iterations!r}")
         self.ocp, self.model = ocp, ocp.model
@@ -189,11 +187,19 @@ class MPC:
         if sx_qr_max_nnz is not None and (isinstance(sx_qr_max_nnz, bool) or not isinstance(sx_qr_max_nnz, int)
                                           or sx_qr_max_nnz < 0):
             raise OptimizationError(f"MPC: sx_qr_max_nnz: expected an integer >= 0 or None, got {sx_qr_max_nnz!r}")
-        self.functions = mpc_functions(self.model, self.problem, regularization=regularization,
-                                       qp_max_iter=qp_max_iter, sx_qr_max_nnz=sx_qr_max_nnz)
-        from ncgen.control.step_support import compile_functions
-        lib = compile_functions(f"{self.model.name}_mpc", self.functions)
-        self._data, self._qp, self._update, self._merit_fn = (lib[f.name()] for f in self.functions)
+        self.solver = solver
+        #: Fatrop's stage-wise problem (``solver="fatrop"``), else ``None``; ``mpc.Z``: the guess of
+        #: the steps' unknowns.
+        self.fatrop = self.Z = None
+        if solver == "fatrop":
+            from ncgen.control.mpc_fatrop import FatropSolver
+            self.fatrop = FatropSolver(self.model, self.problem, fatrop_options)
+        else:
+            self.functions = mpc_functions(self.model, self.problem, regularization=regularization,
+                                           qp_max_iter=qp_max_iter, sx_qr_max_nnz=sx_qr_max_nnz)
+            from ncgen.control.step_support import compile_functions
+            lib = compile_functions(f"{self.model.name}_mpc", self.functions)
+            self._data, self._qp, self._update, self._merit_fn = (lib[f.name()] for f in self.functions)
         self._residual_tol = residual_tolerance(self.model)
         #: qrqp's status of each QP of the last control step (0: converged).
         self.qp_status: list[int] = []
@@ -205,6 +211,9 @@ class MPC:
         self.X = self.U = self.solution = None
 
     def __repr__(self) -> str:
+        if self.fatrop is not None:
+            return (f"<MPC of {self.model.name!r}: N={self.N}, h={self.h} s, {self.iterations} Fatrop "
+                    f"solve(s) per step>")
         return (f"<MPC of {self.model.name!r}: N={self.N}, h={self.h} s, {self.iterations} SQP "
                 f"iteration(s) per step, qrqp>")
 
@@ -220,8 +229,14 @@ class MPC:
         return (J, c) if res <= self._residual_tol and np.isfinite(J) and np.isfinite(c) else None
 
     def _solve(self, x, t: float, X: np.ndarray, U: np.ndarray):
-        """``iterations`` globalised SQP iterations from the guess ``(X, U)``: ``(X, U)``."""
+        """``iterations`` globalised SQP iterations (or Fatrop solves) from the guess ``(X, U)``:
+        ``(X, U)``."""
         self.qp_status, self.step_lengths = [], []
+        if self.fatrop is not None:
+            self.fatrop.clear()
+            for _ in range(self.iterations):
+                X, U, self.Z = self.fatrop.solve(x, t, X, U, self.Z)
+            return X, U
         for _ in range(self.iterations):
             X, U = self._iteration(x, t, X, U)
         return X, U
@@ -265,6 +280,9 @@ class MPC:
         if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 0:
             raise OptimizationError(f"MPC.reset: iterations: expected an integer >= 0, got {iterations!r}")
         X, U = self.initial_guess(x)
+        if self.fatrop is not None:
+            from ncgen.control.mpc_fatrop import unknowns_guess
+            self.Z = unknowns_guess(self.model, self.h, X)
         for _ in range(iterations):
             X, U = self._solve(x, t, X, U)
         self.X, self.U = X, U
@@ -287,6 +305,8 @@ class MPC:
         self.solution = (X, U)
         self.X = np.vstack([X[1:], X[-1:]])
         self.U = np.vstack([U[1:], U[-1:]])
+        if self.Z is not None:
+            self.Z = np.vstack([self.Z[1:], self.Z[-1:]])
         return u
 
 
