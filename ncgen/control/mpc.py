@@ -159,8 +159,12 @@ class MPC:
     ``u = mpc(x, t)``.
 
     ``solver``: ``"sqp"`` (Gauss–Newton SQP with CasADi's ``qrqp`` and a filter line search,
-    generated C; see the module docstring);
-    ``iterations``: SQP iterations per control step (1: real-time iteration);
+    generated C; see the module docstring) or ``"fatrop"`` (CasADi's Fatrop, an interior-point
+    method, solving the stage-wise problem of :mod:`ncgen.control.mpc_fatrop` to its tolerance
+    from the previous solution shifted; Python only: ``nc.export_mpc`` writes the SQP);
+    ``iterations``: SQP iterations (Fatrop: solves) per control step (1: real-time iteration);
+    ``fatrop_options``: Fatrop's own options by name (``{"tolerance": 1e-8, "max_iter": 50}``,
+    over :data:`ncgen.control.mpc_fatrop.FATROP_OPTIONS`), checked by a first solve;
     ``terminal_weight``: weight ``W`` of the OCP's final conditions, soft in MPC
     (:mod:`ncgen.control.mpc_problem`);
     ``sx_qr_max_nnz``: the largest QR of the step's Jacobian (``nnz(V) + nnz(R)``) unrolled into
@@ -170,7 +174,9 @@ class MPC:
     ``h = t_final / N`` seconds, and ``mpc`` is meant to be called every ``h`` seconds.
     ``mpc.reset(x, iterations=...)`` (also done by the first call) sets the guess to ``x``
     held with zero inputs (clipped into their bounds) and iterates on it.
-    ``mpc.qp_status`` and ``mpc.step_lengths`` report each iteration of the last call."""
+    ``mpc.qp_status`` and ``mpc.step_lengths`` report each iteration of the last call (SQP),
+    ``mpc.fatrop.status`` and ``mpc.fatrop.iteration_counts`` each solve of the last call
+    (Fatrop: ``"0"`` is success; a failed solve keeps the guess)."""
 
     def __init__(self, ocp, solver: str = "sqp", *, iterations: int = 1, terminal_weight: float = 1e3,
                  regularization: float = REGULARIZATION, qp_max_iter: int = 100,
@@ -223,7 +229,8 @@ class MPC:
         if not (np.all(np.isfinite(X)) and np.all(np.isfinite(U))):
             return None
         try:
-            J, c, res = (float(o[0]) for o in self._merit_fn(x, t, X.ravel(), U.ravel()))
+            # t as a 1-array: the compiled function's fast copy (a float took its checked path, 0.1 ms)
+            J, c, res = (float(o[0]) for o in self._merit_fn(x, np.array([t]), X.ravel(), U.ravel()))
         except (NcgenError, RuntimeError):         # a kernel (a step's Newton iterations) reported failure
             return None
         return (J, c) if res <= self._residual_tol and np.isfinite(J) and np.isfinite(c) else None
@@ -250,7 +257,7 @@ class MPC:
             raise OptimizationError(f"MPC of {self.model.name!r}: a step of the model does not converge along "
                                     f"the guess at t = {t:g} s (state {np.asarray(x).tolist()}); reset() the guess")
         J0, c0 = current
-        H, g, A, lba, uba, lbx, ubx, Xs, S = (o.copy() for o in self._data(x, t, X.ravel(), U.ravel()))
+        H, g, A, lba, uba, lbx, ubx, Xs, S = (o.copy() for o in self._data(x, np.array([t]), X.ravel(), U.ravel()))
         self.qp_status.append(self._qp.status_call(H, g, A, lba, uba, lbx, ubx, 0.0, 0.0, 0.0))
         dU, model_decrease = self._qp.outputs[0].copy(), float(self._qp.outputs[1][0])
         if np.all(np.isfinite(dU)) and np.isfinite(model_decrease):
