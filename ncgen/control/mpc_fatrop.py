@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ncgen.control.discrete import step_residual
+from ncgen.control.discrete import _step_state, step_residual
 from ncgen.errors import OptimizationError
 
 #: Fatrop's options for an MPC solve: quiet, a small initial barrier parameter (the guess is
@@ -78,7 +78,7 @@ def fatrop_problem(model, problem, *, options: dict | None = None) -> FatropProb
         w += [U[k], Z[k]]
         lbx += list(lo_u) + [-np.inf] * nz
         ubx += list(hi_u) + [np.inf] * nz
-        g.append(X[k + 1] - ca.vertcat(X[k][:nq] + h * Z[k][:nq], Z[k][nq + nc:2 * nq + nc]))
+        g.append(X[k + 1] - _step_state(X[k], Z[k], nq, nc, h))
         if k == 0:
             g.append(X[0] - x_meas)
         g.append(G(Z[k], X[k], U[k], p, t + k * h))
