@@ -90,6 +90,18 @@ def test_closed_loop_is_the_converged_sqp_loop(ocp, fatrop, sqp):
     assert abs(X_f[-1, 0]) < 2e-3 and np.linalg.norm(X_f[-1, 6:8] - [0.0, 0.5]) < 2e-3
 
 
+@pytest.mark.slow
+@pytest.mark.timeout(1800)
+def test_swings_up_from_the_documented_start_with_inputs_within_the_bounds(ocp, fatrop):
+    """From the model's start (the pole hanging 0.3 rad off the downward vertical) the push
+    saturates at the ±20 N bound (Fatrop's relaxed bound clipped) and the pole ends upright."""
+    model = ocp.model
+    plant = nc.step_function(model, fatrop.h / 5, kernels="flat")
+    _, U, X = closed_loop(fatrop, np.concatenate([model.q0, model.v0]), 4.0, plant=plant)
+    assert np.all(np.abs(U) <= 20.0) and np.any(np.abs(U) == 20.0)
+    assert abs(X[-1, 0]) < 2e-3 and np.linalg.norm(X[-1, 6:8] - [0.0, 0.5]) < 2e-3, X[-1]
+
+
 def test_warm_start_takes_fewer_iterations_than_a_cold_start(fatrop):
     x = tilted(0.25)
     fatrop.reset(x, 0.0, iterations=1)
