@@ -16,10 +16,13 @@ MPC step against re-solving the same horizon problem with IPOPT.
    closed loop from a 0.2 rad tilt with a push, against re-solving the same discrete horizon
    problem with IPOPT at the same states (``ncgen.control.reference.DiscreteOCP``: built once,
    warm-started from the MPC's converged solution at that state, the most favourable start;
-   solve time only).  The C demo's own step time is not measured here (the same code without
-   the Python calls).
+   solve time only), and against ``nc.MPC(ocp, "fatrop")`` (Fatrop on the stage-wise problem,
+   solved to its tolerance from the same state's converged solution: the warm start of a
+   quiet closed loop).  The two controllers' calls are interleaved, each state's time the
+   minimum over ``--repeat`` calls.  The C demo's own step time is not measured here (the same
+   code without the Python calls).
 
-    python benchmarks/control.py [--calls 200] [--repeat 7] [--smoke]
+    python benchmarks/control.py [--calls 200] [--repeat 7] [--smoke] [--mpc-only]
 """
 from __future__ import annotations
 
@@ -87,26 +90,37 @@ def cartpole_mpc(steps: int, repeat: int) -> None:
     _, _, X = closed_loop(mpc, x0, steps * mpc.h, disturbance=[(1.0, 1.1, [8.0])])
     st = nc.step_function(model, mpc.h)
     ipopt = DiscreteOCP(st, mpc.N, (mpc.problem.stage, mpc.problem.terminal), tol=1e-8)
-    t_mpc, t_ip = [], []
+    fatrop = nc.MPC(ocp, "fatrop", terminal_weight=100.0)
+    t_mpc, t_ip, t_fat, iters = [], [], [], []
     for x in X[::max(1, len(X) // 10)]:
         mpc.reset(x, iterations=10)
         guess = mpc.U.copy()
-        runs = []
+        fatrop.reset(x, iterations=1)
+        converged = fatrop.X, fatrop.U, fatrop.Z
+        runs, runs_f = [], []
         for _ in range(repeat):
             mpc.X, mpc.U = mpc.initial_guess(x)
             mpc.reset(x, iterations=10)
             start = time.perf_counter()
             mpc(x, 0.0)
             runs.append(time.perf_counter() - start)
+            fatrop.X, fatrop.U, fatrop.Z = converged
+            start = time.perf_counter()
+            fatrop(x, 0.0)
+            runs_f.append(time.perf_counter() - start)
+            iters += fatrop.fatrop.iteration_counts
         t_mpc.append(min(runs))
+        t_fat.append(min(runs_f))
         start = time.perf_counter()
         ipopt.solve(x, guess)
         t_ip.append(time.perf_counter() - start)
-    t_mpc, t_ip = np.array(t_mpc), np.array(t_ip)
+    t_mpc, t_ip, t_fat = np.array(t_mpc), np.array(t_ip), np.array(t_fat)
     print(f"\n=== cart-pole MPC (N = {mpc.N}, h = {mpc.h} s, 1 SQP iteration, qrqp), {len(t_mpc)} states "
           "of a closed loop:")
     print(f"  nc.MPC control step       min {1e3 * t_mpc.min():.3f} ms   median {1e3 * np.median(t_mpc):.3f} ms "
           f"(target ≤ 1 ms)")
+    print(f"  nc.MPC 'fatrop' step      min {1e3 * t_fat.min():.3f} ms   median {1e3 * np.median(t_fat):.3f} ms "
+          f"(target ≤ 1 ms; {min(iters)}–{max(iters)} interior-point iterations, median {np.median(iters):g})")
     print(f"  IPOPT re-solve (warm)     min {1e3 * t_ip.min():.1f} ms   median {1e3 * np.median(t_ip):.1f} ms")
     r = t_ip / t_mpc
     print(f"  RATIO IPOPT re-solve / MPC step: min {r.min():.0f}, median {np.median(r):.0f} (target ≥ 50)")
@@ -118,11 +132,13 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=7)
     ap.add_argument("--bars", type=int, default=20)
     ap.add_argument("--smoke", action="store_true", help="tiny sizes: check that the script runs")
+    ap.add_argument("--mpc-only", action="store_true", help="only the cart-pole MPC")
     args = ap.parse_args(argv)
     if args.smoke:
         args.calls, args.repeat, args.bars = 5, 2, 3
     print(machine())
-    step_jacobians(args.bars, args.calls, args.repeat)
+    if not args.mpc_only:
+        step_jacobians(args.bars, args.calls, args.repeat)
     cartpole_mpc(20 if args.smoke else 80, args.repeat)
     print(f"load average at end: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
     return 0

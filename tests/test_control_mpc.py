@@ -146,8 +146,8 @@ def test_unsupported_problems_and_solvers_are_named(setup):
     free = nc.OptimalControl(model, N=10, t_final=(0.5, 2.0))
     with pytest.raises(OptimizationError, match="a free final time"):
         nc.MPC(free)
-    with pytest.raises(OptimizationError, match="solver: expected one of sqp, got 'fatrop'.*libfatrop"):
-        nc.MPC(ocp, solver="fatrop")
+    with pytest.raises(OptimizationError, match="solver: expected one of sqp, fatrop, got 'qpoases'"):
+        nc.MPC(ocp, solver="qpoases")
     with pytest.raises(OptimizationError, match="iterations: expected a positive integer"):
         nc.MPC(ocp, iterations=0)
 

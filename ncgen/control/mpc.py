@@ -39,7 +39,9 @@ from ncgen.control.mpc_problem import mpc_problem
 from ncgen.errors import NcgenError, OptimizationError
 from ncgen.validation import as_scalar
 
-SOLVERS = ("sqp",)
+#: ``"sqp"``: this module's SQP (generated C); ``"fatrop"``: CasADi's Fatrop on the stage-wise
+#: problem (:mod:`ncgen.control.mpc_fatrop`).
+SOLVERS = ("sqp", "fatrop")
 #: Added to the diagonal of the QP Hessian (keeps it positive definite on the inputs).
 REGULARIZATION = 1e-8
 #: Step lengths tried by the line search, longest first; its Armijo fraction, the filter's
@@ -157,8 +159,12 @@ class MPC:
     ``u = mpc(x, t)``.
 
     ``solver``: ``"sqp"`` (Gauss–Newton SQP with CasADi's ``qrqp`` and a filter line search,
-    generated C; see the module docstring);
-    ``iterations``: SQP iterations per control step (1: real-time iteration);
+    generated C; see the module docstring) or ``"fatrop"`` (CasADi's Fatrop, an interior-point
+    method, solving the stage-wise problem of :mod:`ncgen.control.mpc_fatrop` to its tolerance
+    from the previous solution shifted; Python only: ``nc.export_mpc`` writes the SQP);
+    ``iterations``: SQP iterations (Fatrop: solves) per control step (1: real-time iteration);
+    ``fatrop_options``: Fatrop's own options by name (``{"tolerance": 1e-8, "max_iter": 50}``,
+    over :data:`ncgen.control.mpc_fatrop.FATROP_OPTIONS`), checked by a first solve;
     ``terminal_weight``: weight ``W`` of the OCP's final conditions, soft in MPC
     (:mod:`ncgen.control.mpc_problem`);
     ``sx_qr_max_nnz``: the largest QR of the step's Jacobian (``nnz(V) + nnz(R)``) unrolled into
@@ -168,17 +174,15 @@ class MPC:
     ``h = t_final / N`` seconds, and ``mpc`` is meant to be called every ``h`` seconds.
     ``mpc.reset(x, iterations=...)`` (also done by the first call) sets the guess to ``x``
     held with zero inputs (clipped into their bounds) and iterates on it.
-    ``mpc.qp_status`` and ``mpc.step_lengths`` report each iteration of the last call."""
+    ``mpc.qp_status`` and ``mpc.step_lengths`` report each iteration of the last call (SQP),
+    ``mpc.fatrop.status`` and ``mpc.fatrop.iteration_counts`` each solve of the last call
+    (Fatrop: ``"0"`` is success; a failed solve keeps the guess)."""
 
     def __init__(self, ocp, solver: str = "sqp", *, iterations: int = 1, terminal_weight: float = 1e3,
                  regularization: float = REGULARIZATION, qp_max_iter: int = 100,
-                 sx_qr_max_nnz: int | None = None):
-        if solver not in SOLVERS:
-            hint = (" (Fatrop is not wired into ncgen's MPC: CasADi's wheel ships libfatrop, its conic and "
-                    "nlpsol plugins and headers, but the MPC does not yet pose its QP in Fatrop's stage-wise form "
-                    "nor link the exported C package against libfatrop (C++); see docs/control.md)"
-                    if solver == "fatrop" else "")
-            raise OptimizationError(f"MPC: solver: expected one of {', '.join(SOLVERS)}, got {solver!r}{hint}")
+                 sx_qr_max_nnz: int | None = None, fatrop_options: dict | None = None):
+        if not isinstance(solver, str) or solver not in SOLVERS:
+            raise OptimizationError(f"MPC: solver: expected one of {', '.join(SOLVERS)}, got {solver!r}")
         if not isinstance(iterations, int) or iterations < 1:
             raise OptimizationError(f"MPC: iterations: expected a positive integer, got {iterations!r}")
         self.ocp, self.model = ocp, ocp.model
@@ -189,11 +193,19 @@ class MPC:
         if sx_qr_max_nnz is not None and (isinstance(sx_qr_max_nnz, bool) or not isinstance(sx_qr_max_nnz, int)
                                           or sx_qr_max_nnz < 0):
             raise OptimizationError(f"MPC: sx_qr_max_nnz: expected an integer >= 0 or None, got {sx_qr_max_nnz!r}")
-        self.functions = mpc_functions(self.model, self.problem, regularization=regularization,
-                                       qp_max_iter=qp_max_iter, sx_qr_max_nnz=sx_qr_max_nnz)
-        from ncgen.control.step_support import compile_functions
-        lib = compile_functions(f"{self.model.name}_mpc", self.functions)
-        self._data, self._qp, self._update, self._merit_fn = (lib[f.name()] for f in self.functions)
+        self.solver = solver
+        #: Fatrop's stage-wise problem (``solver="fatrop"``), else ``None``; ``mpc.Z``: the guess of
+        #: the steps' unknowns.
+        self.fatrop = self.Z = None
+        if solver == "fatrop":
+            from ncgen.control.mpc_fatrop import FatropSolver
+            self.fatrop = FatropSolver(self.model, self.problem, fatrop_options)
+        else:
+            self.functions = mpc_functions(self.model, self.problem, regularization=regularization,
+                                           qp_max_iter=qp_max_iter, sx_qr_max_nnz=sx_qr_max_nnz)
+            from ncgen.control.step_support import compile_functions
+            lib = compile_functions(f"{self.model.name}_mpc", self.functions)
+            self._data, self._qp, self._update, self._merit_fn = (lib[f.name()] for f in self.functions)
         self._residual_tol = residual_tolerance(self.model)
         #: qrqp's status of each QP of the last control step (0: converged).
         self.qp_status: list[int] = []
@@ -205,6 +217,9 @@ class MPC:
         self.X = self.U = self.solution = None
 
     def __repr__(self) -> str:
+        if self.fatrop is not None:
+            return (f"<MPC of {self.model.name!r}: N={self.N}, h={self.h} s, {self.iterations} Fatrop "
+                    f"solve(s) per step>")
         return (f"<MPC of {self.model.name!r}: N={self.N}, h={self.h} s, {self.iterations} SQP "
                 f"iteration(s) per step, qrqp>")
 
@@ -214,14 +229,21 @@ class MPC:
         if not (np.all(np.isfinite(X)) and np.all(np.isfinite(U))):
             return None
         try:
-            J, c, res = (float(o[0]) for o in self._merit_fn(x, t, X.ravel(), U.ravel()))
+            # t as a 1-array: the compiled function's fast copy (a float took its checked path, 0.1 ms)
+            J, c, res = (float(o[0]) for o in self._merit_fn(x, np.array([t]), X.ravel(), U.ravel()))
         except (NcgenError, RuntimeError):         # a kernel (a step's Newton iterations) reported failure
             return None
         return (J, c) if res <= self._residual_tol and np.isfinite(J) and np.isfinite(c) else None
 
     def _solve(self, x, t: float, X: np.ndarray, U: np.ndarray):
-        """``iterations`` globalised SQP iterations from the guess ``(X, U)``: ``(X, U)``."""
+        """``iterations`` globalised SQP iterations (or Fatrop solves) from the guess ``(X, U)``:
+        ``(X, U)``."""
         self.qp_status, self.step_lengths = [], []
+        if self.fatrop is not None:
+            self.fatrop.clear()
+            for _ in range(self.iterations):
+                X, U, self.Z = self.fatrop.solve(x, t, X, U, self.Z)
+            return X, U
         for _ in range(self.iterations):
             X, U = self._iteration(x, t, X, U)
         return X, U
@@ -235,7 +257,7 @@ class MPC:
             raise OptimizationError(f"MPC of {self.model.name!r}: a step of the model does not converge along "
                                     f"the guess at t = {t:g} s (state {np.asarray(x).tolist()}); reset() the guess")
         J0, c0 = current
-        H, g, A, lba, uba, lbx, ubx, Xs, S = (o.copy() for o in self._data(x, t, X.ravel(), U.ravel()))
+        H, g, A, lba, uba, lbx, ubx, Xs, S = (o.copy() for o in self._data(x, np.array([t]), X.ravel(), U.ravel()))
         self.qp_status.append(self._qp.status_call(H, g, A, lba, uba, lbx, ubx, 0.0, 0.0, 0.0))
         dU, model_decrease = self._qp.outputs[0].copy(), float(self._qp.outputs[1][0])
         if np.all(np.isfinite(dU)) and np.isfinite(model_decrease):
@@ -265,6 +287,9 @@ class MPC:
         if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 0:
             raise OptimizationError(f"MPC.reset: iterations: expected an integer >= 0, got {iterations!r}")
         X, U = self.initial_guess(x)
+        if self.fatrop is not None:
+            from ncgen.control.mpc_fatrop import unknowns_guess
+            self.Z = unknowns_guess(self.model, self.h, X)
         for _ in range(iterations):
             X, U = self._solve(x, t, X, U)
         self.X, self.U = X, U
@@ -287,6 +312,8 @@ class MPC:
         self.solution = (X, U)
         self.X = np.vstack([X[1:], X[-1:]])
         self.U = np.vstack([U[1:], U[-1:]])
+        if self.Z is not None:
+            self.Z = np.vstack([self.Z[1:], self.Z[-1:]])
         return u
 
 
