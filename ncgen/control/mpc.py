@@ -178,7 +178,8 @@ class MPC:
     ``mpc.reset(x, t, iterations=...)`` (also done by the first call) sets the guess to ``x``
     held with zero inputs (clipped into their bounds), or to the reference along the horizon
     from ``t``, and iterates on it.
-    ``mpc.qp_status`` and ``mpc.step_lengths`` report each iteration of the last call."""
+    ``mpc.qp_status``, ``mpc.step_lengths`` and ``mpc.infeasibility`` report each iteration of
+    the last call."""
 
     def __init__(self, ocp, solver: str = "sqp", *, iterations: int = 1, terminal_weight: float = 1e3,
                  regularization: float = REGULARIZATION, qp_max_iter: int = 100,
@@ -210,6 +211,9 @@ class MPC:
         #: the step length α taken by each SQP iteration of the last control step (0: no trial
         #: was acceptable, the iterate was kept).
         self.step_lengths: list[float] = []
+        #: the infeasibility ``c`` (ℓ1 of the shooting gaps and state-bound violations, m and m/s
+        #: summed over the horizon) of the iterate each SQP iteration of the last control step ended with.
+        self.infeasibility: list[float] = []
         self.u_bounds = self.problem.u_bounds
         self.u_rest = np.clip(np.zeros(self.nu), *self.u_bounds)
         self.X = self.U = self.solution = None
@@ -231,7 +235,7 @@ class MPC:
 
     def _solve(self, x, t: float, X: np.ndarray, U: np.ndarray):
         """``iterations`` globalised SQP iterations from the guess ``(X, U)``: ``(X, U)``."""
-        self.qp_status, self.step_lengths = [], []
+        self.qp_status, self.step_lengths, self.infeasibility = [], [], []
         for _ in range(self.iterations):
             X, U = self._iteration(x, t, X, U)
         return X, U
@@ -258,8 +262,10 @@ class MPC:
                 trial = self._merit(x, t, Xa, Ua)
                 if trial is not None and acceptable(J0, c0, *trial, alpha, model_decrease):
                     self.step_lengths.append(alpha)
+                    self.infeasibility.append(trial[1])
                     return Xa, Ua
         self.step_lengths.append(0.0)
+        self.infeasibility.append(c0)
         return X, U
 
     def initial_guess(self, x, t: float | None = None) -> tuple[np.ndarray, np.ndarray]:
