@@ -24,7 +24,7 @@ from ncgen.analysis.tensegrity_model import rest_length_inputs
 from ncgen.analysis.tensegrity_shapes import stacked_prisms, tower_of_radii
 
 K, DAMPING, SUPPORTS = 2000.0, 10.0, [0, 1, 2]
-INPUT_WEIGHT = 1e3          # MPC: weight of (u − u_ref)² per m² (see mpc_tracking)
+INPUT_WEIGHT = 1.0          # MPC: weight of (u − u_ref)² per m² (see mpc_tracking)
 
 
 def designs():

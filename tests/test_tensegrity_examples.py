@@ -90,3 +90,16 @@ def test_deployment_tracked_by_mpc(deployment_output):
     errors = end_errors(out)
     assert errors["MPC"] <= 5e-3 and errors["MPC"] < errors["open loop"] and errors["MPC"] < errors["tracked"], errors
     assert float(re.search(r"MPC: constraints within ([\d.e+-]+)", out).group(1)) < 1e-6
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(1800)
+@pytest.mark.xfail(reason="issue 41: the MPC's SQP iterates stay infeasible (l1 shooting gap about 0.1, m and m/s "
+                          "summed over the horizon, at the end; 1 or 3 iterations a step alike): its QP steps lengthen "
+                          "rest lengths by centimetres, cables go slack within the step and the gap along the QP's "
+                          "direction rises from a step length of about 0.005 on (a kink crossed); a softplus cable "
+                          "in the controller's model (1 N or 5 N) did not close it", strict=False)
+def test_deployment_mpc_iterates_feasible_at_the_end(deployment_output):
+    """The MPC's last solution is feasible: its l1 infeasibility (shooting gaps) below 1e-6."""
+    gap = float(re.search(r"l1 gap of its last solution ([\d.e+-]+)", deployment_output).group(1))
+    assert gap < 1e-6, gap
