@@ -113,25 +113,3 @@ def test_bad_weights_are_named(cartpole_ocp, kw, message):
     nx, nu = 2 * cartpole_ocp.model.nq, cartpole_ocp.model.nu
     with pytest.raises(NcgenError, match=message):
         nc.MPC(cartpole_ocp, reference=plan(nx=nx, nu=nu), **kw)
-
-
-def test_input_step_bounds_each_iterations_input_change(cartpole_ocp):
-    """``input_step``: the QP's bounds on ``δu`` are the input bounds moved by the guess, cut
-    to ``±input_step`` (evaluated by CasADi, not compiled)."""
-    from ncgen.control.mpc import mpc_functions
-    ocp = cartpole_ocp
-    model = ocp.model
-    problem = mpc_problem(ocp, 1.0)
-    data = mpc_functions(model, problem, sx_qr_max_nnz=0, input_step=0.5)[0]
-    x0 = np.concatenate([model.q0, model.v0])
-    U = np.array([[-19.8, -3.0, 0.0, 19.9, 5.0]])
-    out = data(x=x0, t=0.0, X_guess=ca.repmat(ca.DM(x0), 1, problem.N + 1), U_guess=U)
-    lbx, ubx = (np.asarray(out[k]).ravel() for k in ("lbx", "ubx"))
-    np.testing.assert_allclose(lbx, np.maximum(-20.0 - U[0], -0.5), rtol=0, atol=1e-12)
-    np.testing.assert_allclose(ubx, np.minimum(20.0 - U[0], 0.5), rtol=0, atol=1e-12)
-
-
-@pytest.mark.parametrize("bad", [0.0, -1e-3, np.inf, True, "1"])
-def test_bad_input_step_is_named(cartpole_ocp, bad):
-    with pytest.raises(NcgenError, match="input_step: expected a positive number or None"):
-        nc.MPC(cartpole_ocp, input_step=bad)

@@ -50,8 +50,7 @@ ARMIJO, GAMMA, C_MIN = 1e-4, 1e-5, 1e-10
 
 
 def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
-                  qp_max_iter: int = 100, sx_qr_max_nnz: int | None = None,
-                  input_step: float | None = None) -> list[ca.Function]:
+                  qp_max_iter: int = 100, sx_qr_max_nnz: int | None = None) -> list[ca.Function]:
     """The four CasADi functions of one SQP iteration (see the module docstring):
 
     * ``mpc_qp_data: (x, t, X̄, Ū) -> (H, g, A, lba, uba, lbx, ubx, Xs, S)``: the condensed QP
@@ -62,8 +61,7 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
     * ``mpc_merit`` (:func:`merit_function`): cost and infeasibility of a trial.
 
     ``sx_qr_max_nnz``: the step Jacobians' QR is unrolled into straight-line C up to this size
-    (:func:`ncgen.control.discrete.qr_solve_columns`), else generated as loops;
-    ``input_step``: a trust region ``|δu| ≤ input_step`` on each input of each iteration (None: none).
+    (:func:`ncgen.control.discrete.qr_solve_columns`), else generated as loops.
     """
     h, N, p = problem.h, problem.N, problem.p
     nx, nu = 2 * model.nq, model.nu
@@ -95,13 +93,11 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
     Hc = ca.mtimes(S.T, ca.mtimes(H_XX, S) + H_XU) + ca.mtimes(H_XU.T, S) + H_UU
     gc = ca.mtimes(S.T, ca.mtimes(H_XX, s) + g[:nX]) + ca.mtimes(H_XU.T, s) + g[nX:]
     Xn = ca.vec(X) + s
-    lbx, ubx = ca.vec(ca.repmat(lo_u, 1, N) - U), ca.vec(ca.repmat(hi_u, 1, N) - U)
-    if input_step is not None:
-        lbx, ubx = ca.fmax(lbx, -input_step), ca.fmin(ubx, input_step)
     data = ca.Function(
         "mpc_qp_data", [x, t, X, U],
         [ca.densify(e) for e in (0.5 * (Hc + Hc.T), gc, S[rows, :], ca.DM(np.tile(lo_x[bounded], N)) - Xn[rows],
-                                 ca.DM(np.tile(hi_x[bounded], N)) - Xn[rows], lbx, ubx, Xn, S)],
+                                 ca.DM(np.tile(hi_x[bounded], N)) - Xn[rows], ca.vec(ca.repmat(lo_u, 1, N) - U),
+                                 ca.vec(ca.repmat(hi_u, 1, N) - U), Xn, S)],
         ["x", "t", "X_guess", "U_guess"], ["H", "g", "A", "lba", "uba", "lbx", "ubx", "Xs", "S"])
     Xs_, S_, U_, dU = ca.MX.sym("Xs", nX), ca.MX.sym("S", nX, nU), ca.MX.sym("U", nu, N), ca.MX.sym("dU", nU)
     update = ca.Function("mpc_update", [Xs_, S_, U_, dU],
@@ -177,8 +173,7 @@ class MPC:
     (:mod:`ncgen.control.mpc_reference`), with the weights ``state_weight`` (``Q``: nx numbers or
     one) and ``input_weight`` (``r``: nu or one) of the stage cost on ``x − x_ref``, ``u − u_ref``
     (:mod:`ncgen.control.mpc_problem`; the final conditions' target becomes ``x_ref`` at the
-    horizon's end); ``input_step``: a trust region, each input's change in one SQP iteration at
-    most this (its units; None: none).  The horizon is the OCP's: ``N`` intervals of
+    horizon's end).  The horizon is the OCP's: ``N`` intervals of
     ``h = t_final / N`` seconds, and ``mpc`` is meant to be called every ``h`` seconds.
     ``mpc.reset(x, t, iterations=...)`` (also done by the first call) sets the guess to ``x``
     held with zero inputs (clipped into their bounds), or to the reference along the horizon
@@ -188,8 +183,7 @@ class MPC:
 
     def __init__(self, ocp, solver: str = "sqp", *, iterations: int = 1, terminal_weight: float = 1e3,
                  regularization: float = REGULARIZATION, qp_max_iter: int = 100,
-                 sx_qr_max_nnz: int | None = None, reference=None, state_weight=1.0, input_weight=0.0,
-                 input_step: float | None = None):
+                 sx_qr_max_nnz: int | None = None, reference=None, state_weight=1.0, input_weight=0.0):
         if solver not in SOLVERS:
             hint = (" (Fatrop is not wired into ncgen's MPC: CasADi's wheel ships libfatrop, its conic and "
                     "nlpsol plugins and headers, but the MPC does not yet pose its QP in Fatrop's stage-wise form "
@@ -206,12 +200,8 @@ class MPC:
         if sx_qr_max_nnz is not None and (isinstance(sx_qr_max_nnz, bool) or not isinstance(sx_qr_max_nnz, int)
                                           or sx_qr_max_nnz < 0):
             raise OptimizationError(f"MPC: sx_qr_max_nnz: expected an integer >= 0 or None, got {sx_qr_max_nnz!r}")
-        if input_step is not None and (isinstance(input_step, bool) or not isinstance(input_step, (int, float))
-                                       or not np.isfinite(input_step) or input_step <= 0):
-            raise OptimizationError(f"MPC: input_step: expected a positive number or None, got {input_step!r}")
         self.functions = mpc_functions(self.model, self.problem, regularization=regularization,
-                                       qp_max_iter=qp_max_iter, sx_qr_max_nnz=sx_qr_max_nnz,
-                                       input_step=None if input_step is None else float(input_step))
+                                       qp_max_iter=qp_max_iter, sx_qr_max_nnz=sx_qr_max_nnz)
         from ncgen.control.step_support import compile_functions
         lib = compile_functions(f"{self.model.name}_mpc", self.functions)
         self._data, self._qp, self._update, self._merit_fn = (lib[f.name()] for f in self.functions)
