@@ -113,3 +113,8 @@ def test_bad_weights_are_named(cartpole_ocp, kw, message):
     nx, nu = 2 * cartpole_ocp.model.nq, cartpole_ocp.model.nu
     with pytest.raises(NcgenError, match=message):
         nc.MPC(cartpole_ocp, reference=plan(nx=nx, nu=nu), **kw)
+
+
+def test_weights_without_a_reference_are_refused(cartpole_ocp):
+    with pytest.raises(NcgenError, match="state_weight: a weight of the tracking cost, given without a reference"):
+        nc.MPC(cartpole_ocp, state_weight=1.0)

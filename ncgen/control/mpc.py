@@ -171,7 +171,7 @@ class MPC:
     26k instructions in one C function, had gcc -O1 still compiling after 5 min at 2.3 GB);
     ``reference``: a plan to track, ``(t, X, U)`` or an OCP's solution
     (:mod:`ncgen.control.mpc_reference`), with the weights ``state_weight`` (``Q``: nx numbers or
-    one) and ``input_weight`` (``r``: nu or one) of the stage cost on ``x − x_ref``, ``u − u_ref``
+    one, default 1) and ``input_weight`` (``r``: nu or one, default 0) of the stage cost on ``x − x_ref``, ``u − u_ref``
     (:mod:`ncgen.control.mpc_problem`; the final conditions' target becomes ``x_ref`` at the
     horizon's end).  The horizon is the OCP's: ``N`` intervals of
     ``h = t_final / N`` seconds, and ``mpc`` is meant to be called every ``h`` seconds.
@@ -183,7 +183,7 @@ class MPC:
 
     def __init__(self, ocp, solver: str = "sqp", *, iterations: int = 1, terminal_weight: float = 1e3,
                  regularization: float = REGULARIZATION, qp_max_iter: int = 100,
-                 sx_qr_max_nnz: int | None = None, reference=None, state_weight=1.0, input_weight=0.0):
+                 sx_qr_max_nnz: int | None = None, reference=None, state_weight=None, input_weight=None):
         if solver not in SOLVERS:
             hint = (" (Fatrop is not wired into ncgen's MPC: CasADi's wheel ships libfatrop, its conic and "
                     "nlpsol plugins and headers, but the MPC does not yet pose its QP in Fatrop's stage-wise form "

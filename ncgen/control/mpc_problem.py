@@ -15,10 +15,11 @@ Integrals become sums over the ``N`` intervals' first nodes (rectangle rule, as 
 are held).  With a time-varying ``reference`` (a plan to track, :mod:`ncgen.control.mpc_reference`)
 the stage and terminal costs measure the distance to it at the nodes' times ``t_k``::
 
-    ℓ(x, u, t) = h [(u − u_ref(t))ᵀ (R + diag r) (u − u_ref(t)) + (x − x_ref(t))ᵀ diag Q (x − x_ref(t)) + markers]
+    ℓ(x, u, t) = h [(u − u_ref)ᵀ (R + diag r) (u − u_ref) + (x − x_ref)ᵀ diag Q (x − x_ref) + markers]
     ℓ_N(x, t)  = Σ terminal costs + W |x − x_ref(t)|²       (in place of the final conditions)
 
-(``Q``: ``state_weight``, ``r``: ``input_weight``).  The final conditions of the OCP are *soft* in MPC (weight ``W``,
+(``x_ref``, ``u_ref`` at ``t``; ``Q``: ``state_weight``, ``r``: ``input_weight``).  The final
+conditions of the OCP are *soft* in MPC (weight ``W``,
 ``terminal_weight``): a hard terminal equality can be infeasible from a disturbed state,
 and a controller must always return an input.  Not supported in MPC (a clear error):
 free final time, free parameters, periodic conditions, marker and joint path constraints,
@@ -58,10 +59,11 @@ class MPCProblem:
     reference: ca.Function | None = None
 
 
-def mpc_problem(ocp, terminal_weight: float, reference=None, state_weight=1.0, input_weight=0.0) -> MPCProblem:
+def mpc_problem(ocp, terminal_weight: float, reference=None, state_weight=None, input_weight=None) -> MPCProblem:
     """The :class:`MPCProblem` of ``ocp`` (see the module docstring); ``reference``: a plan
     ``(t, X, U)`` or an OCP solution (:func:`ncgen.control.mpc_reference.reference_arrays`),
-    ``state_weight`` (nx or a scalar), ``input_weight`` (nu or a scalar): its weights."""
+    ``state_weight`` (nx or a scalar; default 1), ``input_weight`` (nu or a scalar; default 0):
+    its weights, refused without a reference."""
     model = ocp.model
     if nonsmooth(model):
         names = ", ".join(repr(c["name"]) for c in model.contacts)
@@ -92,11 +94,15 @@ def mpc_problem(ocp, terminal_weight: float, reference=None, state_weight=1.0, i
     nq = model.nq
     R = np.zeros((model.nu, model.nu)) if ocp.effort_R is None else ocp.effort_R
     plan = Q = None
+    for what, w in (("state_weight", state_weight), ("input_weight", input_weight)):
+        if reference is None and w is not None:
+            raise OptimizationError(f"MPC: {what}: a weight of the tracking cost, given without a reference "
+                                    "(reference=plan)")
     if reference is not None:
         from ncgen.control.mpc_reference import reference_arrays, reference_function
         plan = reference_function(*reference_arrays(reference, 2 * nq, model.nu))
-        Q = weights(state_weight, 2 * nq, "state_weight")
-        R = R + np.diag(weights(input_weight, model.nu, "input_weight"))
+        Q = weights(1.0 if state_weight is None else state_weight, 2 * nq, "state_weight")
+        R = R + np.diag(weights(0.0 if input_weight is None else input_weight, model.nu, "input_weight"))
     markers = model.functions["markers"] if model.marker_names else None
 
     def marker(q, name):
