@@ -12,10 +12,10 @@ import pytest
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
 
-def run(name, tmp_path):
+def run(name, tmp_path, timeout=600):
     env = {**os.environ, "MPLBACKEND": "Agg", "NCGEN_CACHE_DIR": str(tmp_path / "cache")}
     out = subprocess.run([sys.executable, str(EXAMPLES / name)], cwd=tmp_path, env=env, capture_output=True,
-                         text=True, timeout=600)
+                         text=True, timeout=timeout)
     assert out.returncode == 0, out.stderr
     return out.stdout
 
@@ -50,19 +50,57 @@ def test_bodies_example(tmp_path):
     assert float(shape) < 1e-9 and float(tension) < 1e-9
 
 
-@pytest.mark.slow       # the optimal-control solve: about 4 min at load 16 on 2 cores
+@pytest.fixture(scope="module")
+def deployment_output(tmp_path_factory):
+    """What examples/tensegrity_deployment.py prints (run once: the optimal-control solve, about
+    4 min at load 16 on 2 cores, and the MPC's build, 2–3 min)."""
+    return run("tensegrity_deployment.py", tmp_path_factory.mktemp("deployment"), timeout=1700)
+
+
+def end_errors(out):
+    """``|q − qB|`` (m) at the end of each tracked run the example prints, by name."""
+    return {name: float(e) for name, e in re.findall(r"(open loop|tracked|MPC) from a disturbed start: .*?\|q - qB\| "
+                                                     r"([\d.e+-]+) m", out)}
+
+
+@pytest.mark.slow
 @pytest.mark.timeout(1800)
 @pytest.mark.xfail(reason="issue 41: on the merged tree of stop 46 the tracked run ended 9.5e-3 m from the "
                           "target against 1.24e-2 m open loop (the bound asks for a third; on its branch: 5.4e-3 "
                           "against 7.6e-2) — the plan of 20 intervals does not resolve the cables' ~100 rad/s "
                           "oscillation, so the open-loop figure is not a stable reference; cause of the change "
                           "not found", strict=False)
-def test_deployment_example(tmp_path):
+def test_deployment_example(deployment_output):
     """The plan reaches the deployed design (IPOPT's defects), and the cable-space feedback
     tracks it from a disturbed start better than its inputs replayed open loop."""
-    out = run("tensegrity_deployment.py", tmp_path)
+    out = deployment_output
     assert "compact top 0.7964 m, deployed top 1.0000 m" in out
     assert float(re.search(r"largest dynamics defect ([\d.e+-]+)", out).group(1)) < 1e-8
-    errors = {name: float(e) for name, e in re.findall(r"(open loop|tracked) from a disturbed start: .*\|q - qB\| "
-                                                       r"([\d.e+-]+) m", out)}
+    errors = end_errors(out)
     assert errors["tracked"] < errors["open loop"] / 3
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(1800)
+def test_deployment_tracked_by_mpc(deployment_output):
+    """nc.MPC with the plan as its reference (IDAS plant, the same disturbed start) ends within
+    5 mm of the deployed design, closer than the plan's inputs replayed open loop and than the
+    cable-space feedback; the strut lengths held along the run."""
+    out = deployment_output
+    errors = end_errors(out)
+    assert errors["MPC"] <= 5e-3 and errors["MPC"] < errors["open loop"] and errors["MPC"] < errors["tracked"], errors
+    assert float(re.search(r"MPC: constraints within ([\d.e+-]+)", out).group(1)) < 1e-6
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(1800)
+@pytest.mark.xfail(reason="issue 41: the MPC's SQP iterates stay infeasible (l1 shooting gap about 0.1, m and m/s "
+                          "summed over the horizon, at the end; 1 or 3 iterations a step alike): its QP steps lengthen "
+                          "rest lengths by centimetres, cables go slack within the step and the gap along the QP's "
+                          "direction rises from a step length of about 0.005 on (a kink crossed); a softplus cable "
+                          "in the controller's model (1 N or 5 N) or a 2 mm trust region on the input steps did not "
+                          "close it", strict=False)
+def test_deployment_mpc_iterates_feasible_at_the_end(deployment_output):
+    """The MPC's last solution is feasible: its l1 infeasibility (shooting gaps) below 1e-6."""
+    gap = float(re.search(r"l1 gap of its last solution ([\d.e+-]+)", deployment_output).group(1))
+    assert gap < 1e-6, gap

@@ -70,12 +70,11 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
     jac = step_jacobian_function(model, h, sx_qr_max_nnz=sx_qr_max_nnz).map(N)
 
     # cost, its gradient and (Gauss–Newton) Hessian in y = [vec X; vec U] (SX)
-    Xs, Us = ca.SX.sym("X", nx, N + 1), ca.SX.sym("U", nu, N)
-    J = sum(problem.stage(Xs[:, k], Us[:, k]) for k in range(N)) + problem.terminal(Xs[:, N])
+    Xs, Us, ts = ca.SX.sym("X", nx, N + 1), ca.SX.sym("U", nu, N), ca.SX.sym("t")
     y = ca.vertcat(ca.vec(Xs), ca.vec(Us))
-    H_sx, g_sx = ca.hessian(J, y)
+    H_sx, g_sx = ca.hessian(total_cost(problem, Xs, Us, ts), y)
     H_sx = H_sx + regularization * ca.SX.eye(y.numel())
-    cost = ca.Function("mpc_cost", [Xs, Us], [H_sx, g_sx])
+    cost = ca.Function("mpc_cost", [Xs, Us, ts], [H_sx, g_sx])
     nX, nU = nx * (N + 1), nu * N
     # the condensed QP's general rows: the bounded state components at nodes 1..N
     lo_x, hi_x = problem.x_bounds
@@ -90,7 +89,7 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
     lo_u, hi_u = (ca.DM(b) for b in problem.u_bounds)
     times = t + h * ca.DM(np.arange(N)).T
     x1, A, B, _, _ = jac(X[:, :N], U, ca.repmat(ca.DM(p), 1, N), times)
-    H, g = cost(X, U)
+    H, g = cost(X, U, t)
     S, s = condense(A, B, x - X[:, 0], x1 - X[:, 1:], N)
     H_XX, H_XU, H_UU = H[:nX, :nX], H[:nX, nX:], H[nX:, nX:]
     Hc = ca.mtimes(S.T, ca.mtimes(H_XX, S) + H_XU) + ca.mtimes(H_XU.T, S) + H_UU
@@ -134,11 +133,16 @@ def merit_function(model, problem) -> ca.Function:
             c += ca.sum2(ca.fmax(0, float(lo_x[i]) - row))
         if np.isfinite(hi_x[i]):
             c += ca.sum2(ca.fmax(0, row - float(hi_x[i])))
-    Xs, Us = ca.SX.sym("X", nx, N + 1), ca.SX.sym("U", nu, N)
-    cost = ca.Function("mpc_total_cost", [Xs, Us], [sum(problem.stage(Xs[:, k], Us[:, k]) for k in range(N))
-                                                    + problem.terminal(Xs[:, N])])
-    return ca.Function("mpc_merit", [x, t, X, U], [cost(X, U), c, ca.mmax(res)],
+    Xs, Us, ts = ca.SX.sym("X", nx, N + 1), ca.SX.sym("U", nu, N), ca.SX.sym("t")
+    cost = ca.Function("mpc_total_cost", [Xs, Us, ts], [total_cost(problem, Xs, Us, ts)])
+    return ca.Function("mpc_merit", [x, t, X, U], [cost(X, U, t), c, ca.mmax(res)],
                        ["x", "t", "X_trial", "U_trial"], ["J", "c", "res"])
+
+
+def total_cost(problem, X, U, t):
+    """``Σ_{k<N} ℓ(X_k, U_k, t + k h) + ℓ_N(X_N, t + N h)`` (SX)."""
+    h, N = problem.h, problem.N
+    return sum(problem.stage(X[:, k], U[:, k], t + k * h) for k in range(N)) + problem.terminal(X[:, N], t + N * h)
 
 
 def condense(A, B, d0, defects, N: int):
@@ -170,23 +174,30 @@ class MPC:
     ``sx_qr_max_nnz``: the largest QR of the step's Jacobian (``nnz(V) + nnz(R)``) unrolled into
     straight-line C (default :data:`ncgen.control.discrete.SX_QR_MAX_NNZ`); ``0`` generates it
     as loops, slower per solve but quick to compile (the two-stage tensegrity tower's unrolled QR,
-    26k instructions in one C function, had gcc -O1 still compiling after 5 min at 2.3 GB).  The horizon is the OCP's: ``N`` intervals of
+    26k instructions in one C function, had gcc -O1 still compiling after 5 min at 2.3 GB);
+    ``reference``: a plan to track, ``(t, X, U)`` or an OCP's solution
+    (:mod:`ncgen.control.mpc_reference`), with the weights ``state_weight`` (``Q``: nx numbers or
+    one, default 1) and ``input_weight`` (``r``: nu or one, default 0) of the stage cost on ``x − x_ref``, ``u − u_ref``
+    (:mod:`ncgen.control.mpc_problem`; the final conditions' target becomes ``x_ref`` at the
+    horizon's end).  The horizon is the OCP's: ``N`` intervals of
     ``h = t_final / N`` seconds, and ``mpc`` is meant to be called every ``h`` seconds.
-    ``mpc.reset(x, iterations=...)`` (also done by the first call) sets the guess to ``x``
-    held with zero inputs (clipped into their bounds) and iterates on it.
-    ``mpc.qp_status`` and ``mpc.step_lengths`` report each iteration of the last call (SQP),
-    ``mpc.fatrop.status`` and ``mpc.fatrop.iteration_counts`` each solve of the last call
-    (Fatrop: ``"0"`` is success; a failed solve keeps the guess)."""
+    ``mpc.reset(x, t, iterations=...)`` (also done by the first call) sets the guess to ``x``
+    held with zero inputs (clipped into their bounds), or to the reference along the horizon
+    from ``t``, and iterates on it.
+    ``mpc.qp_status``, ``mpc.step_lengths`` and ``mpc.infeasibility`` report each iteration of
+    the last call (SQP), ``mpc.fatrop.status`` and ``mpc.fatrop.iteration_counts`` each solve of
+    the last call (Fatrop: ``"0"`` is success; a failed solve keeps the guess)."""
 
     def __init__(self, ocp, solver: str = "sqp", *, iterations: int = 1, terminal_weight: float = 1e3,
                  regularization: float = REGULARIZATION, qp_max_iter: int = 100,
-                 sx_qr_max_nnz: int | None = None, fatrop_options: dict | None = None):
+                 sx_qr_max_nnz: int | None = None, fatrop_options: dict | None = None,
+                 reference=None, state_weight=None, input_weight=None):
         if not isinstance(solver, str) or solver not in SOLVERS:
             raise OptimizationError(f"MPC: solver: expected one of {', '.join(SOLVERS)}, got {solver!r}")
         if not isinstance(iterations, int) or iterations < 1:
             raise OptimizationError(f"MPC: iterations: expected a positive integer, got {iterations!r}")
         self.ocp, self.model = ocp, ocp.model
-        self.problem = mpc_problem(ocp, terminal_weight)
+        self.problem = mpc_problem(ocp, terminal_weight, reference, state_weight, input_weight)
         self.h, self.N = self.problem.h, self.problem.N
         self.nx, self.nu = 2 * self.model.nq, self.model.nu
         self.iterations = iterations
@@ -212,6 +223,9 @@ class MPC:
         #: the step length α taken by each SQP iteration of the last control step (0: no trial
         #: was acceptable, the iterate was kept).
         self.step_lengths: list[float] = []
+        #: the infeasibility ``c`` (ℓ1 of the shooting gaps and state-bound violations, m and m/s
+        #: summed over the horizon) of the iterate each SQP iteration of the last control step ended with.
+        self.infeasibility: list[float] = []
         self.u_bounds = self.problem.u_bounds
         self.u_rest = np.clip(np.zeros(self.nu), *self.u_bounds)
         self.X = self.U = self.solution = None
@@ -238,7 +252,7 @@ class MPC:
     def _solve(self, x, t: float, X: np.ndarray, U: np.ndarray):
         """``iterations`` globalised SQP iterations (or Fatrop solves) from the guess ``(X, U)``:
         ``(X, U)``."""
-        self.qp_status, self.step_lengths = [], []
+        self.qp_status, self.step_lengths, self.infeasibility = [], [], []
         if self.fatrop is not None:
             self.fatrop.clear()
             for _ in range(self.iterations):
@@ -270,13 +284,25 @@ class MPC:
                 trial = self._merit(x, t, Xa, Ua)
                 if trial is not None and acceptable(J0, c0, *trial, alpha, model_decrease):
                     self.step_lengths.append(alpha)
+                    self.infeasibility.append(trial[1])
                     return Xa, Ua
         self.step_lengths.append(0.0)
+        self.infeasibility.append(c0)
         return X, U
 
-    def initial_guess(self, x) -> tuple[np.ndarray, np.ndarray]:
-        """``(X, U)``: ``x`` at every node, inputs zero clipped into their bounds."""
-        return np.tile(x, (self.N + 1, 1)), np.tile(self.u_rest, (self.N, 1))
+    def initial_guess(self, x, t: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """``(X, U)``: ``x`` at every node, inputs zero clipped into their bounds; with a
+        reference, the reference at the nodes' times from ``t`` (inputs clipped)."""
+        if self.problem.reference is None:
+            return np.tile(x, (self.N + 1, 1)), np.tile(self.u_rest, (self.N, 1))
+        t = self.model.t0 if t is None else t
+        X, U = zip(*(self._reference(t + k * self.h) for k in range(self.N + 1)))
+        return np.array(X), np.array(U[:self.N])
+
+    def _reference(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(x_ref(t), u_ref(t))``, the input clipped into its bounds."""
+        x, u = (np.asarray(o, float).reshape(-1) for o in self.problem.reference(t))
+        return x, np.clip(u, *self.u_bounds)
 
     def reset(self, x, t: float | None = None, iterations: int = 0) -> None:
         """Start again from the guess of :meth:`initial_guess`, then run ``iterations``
@@ -286,7 +312,7 @@ class MPC:
         t = self.model.t0 if t is None else as_scalar(t, "MPC.reset: t")
         if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 0:
             raise OptimizationError(f"MPC.reset: iterations: expected an integer >= 0, got {iterations!r}")
-        X, U = self.initial_guess(x)
+        X, U = self.initial_guess(x, t)
         if self.fatrop is not None:
             from ncgen.control.mpc_fatrop import unknowns_guess
             self.Z = unknowns_guess(self.model, self.h, X)
@@ -302,7 +328,7 @@ class MPC:
         x = state_vector(x, self.nx, "x", "the state [q; v]")
         t = self.model.t0 if t is None else as_scalar(t, "MPC: t")
         if self.X is None:
-            self.reset(x)
+            self.reset(x, t)
         X, U = self._solve(x, t, self.X, self.U)
         u = U[0].copy()
         lo, hi = self.u_bounds
@@ -310,8 +336,11 @@ class MPC:
             raise OptimizationError(f"MPC of {self.model.name!r}: the control step returned {u.tolist()}, "
                                     f"outside the bounds [{lo.tolist()}, {hi.tolist()}]")
         self.solution = (X, U)
-        self.X = np.vstack([X[1:], X[-1:]])
-        self.U = np.vstack([U[1:], U[-1:]])
+        if self.problem.reference is None:
+            self.X, self.U = np.vstack([X[1:], X[-1:]]), np.vstack([U[1:], U[-1:]])
+        else:                                   # the horizon's new last node and input from the reference
+            self.X = np.vstack([X[1:], self._reference(t + (self.N + 1) * self.h)[0]])
+            self.U = np.vstack([U[1:], self._reference(t + self.N * self.h)[1]])
         if self.Z is not None:
             self.Z = np.vstack([self.Z[1:], self.Z[-1:]])
         return u

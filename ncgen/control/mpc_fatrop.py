@@ -66,7 +66,7 @@ def fatrop_problem(model, problem, *, options: dict | None = None) -> FatropProb
     lo_u, hi_u = problem.u_bounds
     lo_x, hi_x = problem.x_bounds
     lbx, ubx = [], []
-    J = problem.terminal(X[N])
+    J = problem.terminal(X[N], t + N * h)
     for k in range(N + 1):
         state.append(np.arange(len(lbx), len(lbx) + nx))
         w.append(X[k])
@@ -83,7 +83,7 @@ def fatrop_problem(model, problem, *, options: dict | None = None) -> FatropProb
         if k == 0:
             g.append(X[0] - x_meas)
         g.append(G(Z[k], X[k], U[k], p, t + k * h))
-        J += problem.stage(X[k], U[k])
+        J += problem.stage(X[k], U[k], t + k * h)
     g = ca.vertcat(*g)
     nlp = {"x": ca.vertcat(*w), "f": J, "g": g, "p": ca.vertcat(x_meas, t)}
     opts = {"structure_detection": "auto", "equality": [True] * g.numel(), "print_time": False,

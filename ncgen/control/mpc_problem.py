@@ -12,11 +12,18 @@ parameters, the costs and the bounds::
                + W (|q − q_f|² + |v − v_f|²)                     (final(q=…, v=…), soft)
 
 Integrals become sums over the ``N`` intervals' first nodes (rectangle rule, as the inputs
-are held).  The final conditions of the OCP are *soft* in MPC (weight ``W``,
+are held).  With a time-varying ``reference`` (a plan to track, :mod:`ncgen.control.mpc_reference`)
+the stage and terminal costs measure the distance to it at the nodes' times ``t_k``::
+
+    ℓ(x, u, t) = h [(u − u_ref)ᵀ (R + diag r) (u − u_ref) + (x − x_ref)ᵀ diag Q (x − x_ref) + markers]
+    ℓ_N(x, t)  = Σ terminal costs + W |x − x_ref(t)|²       (in place of the final conditions)
+
+(``x_ref``, ``u_ref`` at ``t``; ``Q``: ``state_weight``, ``r``: ``input_weight``).  The final
+conditions of the OCP are *soft* in MPC (weight ``W``,
 ``terminal_weight``): a hard terminal equality can be infeasible from a disturbed state,
 and a controller must always return an input.  Not supported in MPC (a clear error):
 free final time, free parameters, periodic conditions, marker and joint path constraints,
-final poses/joints/markers, time-varying references.
+final poses/joints/markers, time-varying marker references.
 """
 from __future__ import annotations
 
@@ -28,11 +35,13 @@ import numpy as np
 from ncgen.assembly.stepper_equations import nonsmooth
 
 from ncgen.errors import OptimizationError
+from ncgen.validation import as_numbers, as_scalar
 
 
 @dataclass
 class MPCProblem:
-    """``stage(x, u)`` and ``terminal(x)`` (SX callables), bounds as ``(lower, upper)``
+    """``stage(x, u, t)`` and ``terminal(x, t)`` (SX callables; ``t``, the node's time, is used
+    only with a reference and may be left out without one), bounds as ``(lower, upper)``
     arrays (``u``: nu, ``x``: nx = 2 nq), ``h`` (s), ``N``, ``p``, the final target and
     ``x_start``: the OCP's initial state (``initial(q=…, v=…)``, the model's where it gives
     none), the exported demo's default start."""
@@ -46,10 +55,15 @@ class MPCProblem:
     x_bounds: np.ndarray
     x_final: np.ndarray | None
     x_start: np.ndarray | None = None
+    #: ``mpc_reference: t -> (x_ref, u_ref)`` (:mod:`ncgen.control.mpc_reference`), or None.
+    reference: ca.Function | None = None
 
 
-def mpc_problem(ocp, terminal_weight: float) -> MPCProblem:
-    """The :class:`MPCProblem` of ``ocp`` (see the module docstring)."""
+def mpc_problem(ocp, terminal_weight: float, reference=None, state_weight=None, input_weight=None) -> MPCProblem:
+    """The :class:`MPCProblem` of ``ocp`` (see the module docstring); ``reference``: a plan
+    ``(t, X, U)`` or an OCP solution (:func:`ncgen.control.mpc_reference.reference_arrays`),
+    ``state_weight`` (nx or a scalar; default 1), ``input_weight`` (nu or a scalar; default 0):
+    its weights, refused without a reference."""
     model = ocp.model
     if nonsmooth(model):
         names = ", ".join(repr(c["name"]) for c in model.contacts)
@@ -79,13 +93,27 @@ def mpc_problem(ocp, terminal_weight: float) -> MPCProblem:
     h, N, p = ocp.t_final / ocp.N, ocp.N, ocp.p_values.copy()
     nq = model.nq
     R = np.zeros((model.nu, model.nu)) if ocp.effort_R is None else ocp.effort_R
+    plan = Q = None
+    for what, w in (("state_weight", state_weight), ("input_weight", input_weight)):
+        if reference is None and w is not None:
+            raise OptimizationError(f"MPC: {what}: a weight of the tracking cost, given without a reference "
+                                    "(reference=plan)")
+    if reference is not None:
+        from ncgen.control.mpc_reference import reference_arrays, reference_function
+        plan = reference_function(*reference_arrays(reference, 2 * nq, model.nu))
+        Q = weights(1.0 if state_weight is None else state_weight, 2 * nq, "state_weight")
+        R = R + np.diag(weights(0.0 if input_weight is None else input_weight, model.nu, "input_weight"))
     markers = model.functions["markers"] if model.marker_names else None
 
     def marker(q, name):
         return markers(q, ca.SX.zeros(nq))[0][:, ocp.marker_index(name)]
 
-    def stage(x, u):
-        out = ca.mtimes([u.T, ca.DM(R), u])
+    def stage(x, u, t=None):
+        if plan is None:
+            out = ca.mtimes([u.T, ca.DM(R), u])
+        else:
+            x_ref, u_ref = plan(t)
+            out = ca.mtimes([(u - u_ref).T, ca.DM(R), u - u_ref]) + ca.sum1(ca.DM(Q) * (x - x_ref) ** 2)
         for name, ref, w in ocp.tracking:
             out += w * ca.sumsqr(marker(x[:nq], name) - ca.DM(ref))
         return h * out
@@ -99,7 +127,7 @@ def mpc_problem(ocp, terminal_weight: float) -> MPCProblem:
         from ncgen.optim.conditions import resolve_velocity
         v_f = resolve_velocity(model, ocp.final_spec["v"], model.q0 if q_f is None else q_f, t=t_end, p=p)
 
-    def terminal(x):
+    def terminal(x, t=None):
         q, v = x[:nq], x[nq:]
         out = ca.SX(0)
         for _, spec in ocp.terminal:
@@ -109,6 +137,8 @@ def mpc_problem(ocp, terminal_weight: float) -> MPCProblem:
                 _, name, target, w = spec
                 given = ~np.isnan(target)
                 out += w * ca.sumsqr((marker(q, name) - ca.DM(np.nan_to_num(target)))[np.flatnonzero(given).tolist()])
+        if plan is not None:
+            return out + W * ca.sumsqr(x - plan(t)[0])
         if q_f is not None:
             out += W * ca.sumsqr(q - q_f)
         if v_f is not None:
@@ -117,7 +147,16 @@ def mpc_problem(ocp, terminal_weight: float) -> MPCProblem:
 
     x_bounds = np.hstack([ocp.q_bounds, ocp.v_bounds])
     x_final = None if q_f is None else np.concatenate([q_f, np.zeros(nq) if v_f is None else v_f])
-    return MPCProblem(h, N, p, stage, terminal, ocp.u_bounds.copy(), x_bounds, x_final, initial_state(ocp, p))
+    return MPCProblem(h, N, p, stage, terminal, ocp.u_bounds.copy(), x_bounds, x_final, initial_state(ocp, p), plan)
+
+
+def weights(w, n: int, what: str) -> np.ndarray:
+    """``w`` (a scalar or ``n`` numbers, each finite and ≥ 0) as ``n`` weights."""
+    a = as_numbers(w, f"MPC: {what}") if np.ndim(w) else np.full(n, as_scalar(w, f"MPC: {what}"))
+    if a.shape != (n,) or not np.all(np.isfinite(a)) or np.any(a < 0):
+        raise OptimizationError(f"MPC: {what}: expected a number or {n} numbers, finite and >= 0, got "
+                                f"{np.asarray(w).tolist() if np.size(w) <= 12 else np.shape(w)}")
+    return a
 
 
 def initial_state(ocp, p) -> np.ndarray:
