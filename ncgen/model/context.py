@@ -22,7 +22,7 @@ from ncgen.model.layout import Layout
 from ncgen.model.members import Member
 from ncgen.model.sym2casadi import to_casadi
 from ncgen.reproducible import dot, matmul, matvec, norm, perpendicular_basis, snap
-from ncgen.symbolic.joints import primitive
+from ncgen.symbolic.joints import PRIMITIVES
 
 #: The coordinate types' formulas as SX functions (generated: ncgen/model/forms_generator.py).
 INSTANCE_FORMS = Path(__file__).with_name("instance_forms.json")
@@ -40,17 +40,6 @@ def instance_form(name: str, dim: int, formula: str) -> tuple[tuple[str, ...], c
     :mod:`ncgen.model.forms_generator`), ``c`` the constants' values in the order named."""
     entry = _instance_table()[f"{name}-{dim}d"]
     return tuple(entry["constants"]), ca.Function.deserialize(entry[formula])
-
-
-@lru_cache(maxsize=None)
-def primitive_form(name: str, dim: int) -> ca.Function:
-    """The joint primitive ``name`` in ``dim`` dimensions as the SX function of its argument
-    groups shipped in ``instance_forms.json`` (:mod:`ncgen.model.forms_generator`)."""
-    key = f"primitive-{name}-{dim}d"
-    table = _instance_table()
-    if key not in table:
-        primitive(name, dim)                     # raises, naming the known primitives
-    return ca.Function.deserialize(table[key])
 
 
 class Context:
@@ -206,8 +195,9 @@ class Context:
 
     def apply(self, name: str, *args):
         """Instantiate the joint primitive ``name`` (:mod:`ncgen.symbolic.joints`) with CasADi
-        arguments, through its shipped SX function (:func:`primitive_form`; no SymPy)."""
-        f = primitive_form(name, self.dim)
-        inputs = [ca.SX(ca.vertcat(*[a[k] for k in range(f.size1_in(i))])) if f.size1_in(i) > 1 else ca.SX(a)
-                  for i, a in enumerate(args)]
-        return f(*inputs)
+        arguments, through its generated Python form (:mod:`ncgen.model.primitive_forms`; no SymPy)."""
+        from ncgen.model.primitive_forms import FORMS
+        form = FORMS.get((name, self.dim))
+        if form is None:
+            raise KeyError(f"unknown joint primitive {name!r}; known: {', '.join(PRIMITIVES)}")
+        return form(*args)

@@ -6,9 +6,12 @@
   constant Hessians as literals;
 * ``ncgen/model/instance_forms.json``: each formula the assembly instantiates in CasADi
   (:meth:`ncgen.model.context.Context.instantiate`) as a serialised SX function of
-  ``(q_I, q̇_I, c)`` (``c`` the member's constants in the order listed beside it), and each
-  joint primitive (:mod:`ncgen.symbolic.joints`, :meth:`~ncgen.model.context.Context.apply`)
-  as an SX function of its argument groups.
+  ``(q_I, q̇_I, c)`` (``c`` the member's constants in the order listed beside it);
+* ``ncgen/model/primitive_forms.py``: each joint primitive (:mod:`ncgen.symbolic.joints`,
+  :meth:`~ncgen.model.context.Context.apply`) as Python that performs, on the values it is
+  given (CasADi expressions or numbers), the operations :func:`ncgen.model.sym2casadi.to_casadi`
+  performs walking its SymPy tree, in the same order and with the same sharing, so the
+  expressions (and the C generated from them) are the same.
 
 Both are deterministic; ``tests/test_shipped_forms.py`` regenerates them and fails on any
 difference.  ``python -m ncgen.model.forms_generator`` rewrites them (after a change of a
@@ -17,6 +20,7 @@ formula in ``ncgen/symbolic``).
 from __future__ import annotations
 
 import builtins
+import functools
 import inspect
 import json
 import re
@@ -36,6 +40,7 @@ from ncgen.symbolic.numeric import lambdify_inputs
 ROOT = Path(__file__).resolve().parents[1]
 NUMERIC_PATH = ROOT / "symbolic" / "numeric_forms.py"
 INSTANCE_PATH = ROOT / "model" / "instance_forms.json"
+PRIMITIVE_PATH = ROOT / "model" / "primitive_forms.py"
 
 #: Formulas a member evaluates with its constants bound: name -> the derivation's argument groups.
 MEMBER_FORMULAS = {
@@ -139,20 +144,90 @@ def instance_source() -> str:
             vals.update({s: v[k] for k, s in enumerate(D.qd)})
             entry[f] = ca.Function("instance", [q, v, c], [to_casadi(expr, vals)]).serialize()
         table[f"{name}-{dim}d"] = entry
+    return json.dumps(table, indent=1, sort_keys=True) + "\n"
+
+
+class _Printer:
+    """Python of a SymPy expression following :func:`ncgen.model.sym2casadi.to_casadi`'s
+    walk: one temporary per distinct composite node (its memo), ``Add``/``Mul`` folded left
+    to right over the node's arguments, its rules for powers, numbers as Python numbers."""
+
+    def __init__(self, names: dict):
+        self.names, self.lines, self.memo = dict(names), [], {}
+
+    def walk(self, e) -> str:
+        hit = self.memo.get(e)
+        if hit is None:
+            hit = self.memo[e] = self._convert(e)
+        return hit
+
+    def _convert(self, e) -> str:
+        import sympy as sp
+        if e.is_Symbol:
+            return self.names[e]
+        if e.is_Integer:
+            return f"({int(e)})"
+        if e.is_Number:
+            return f"({float(e)!r})"
+        args = [self.walk(a) for a in e.args]
+        if e.is_Add:
+            text = functools.reduce(lambda a, b: f"({a} + {b})", args)
+        elif e.is_Mul:
+            text = functools.reduce(lambda a, b: f"({a} * {b})", args)
+        elif e.is_Pow and e.exp == sp.Rational(1, 2):
+            text = f"ca.sqrt({args[0]})"
+        elif e.is_Pow and e.exp == -1:
+            text = f"(1 / {args[0]})"
+        elif e.is_Pow and e.exp.is_Integer and e.exp > 0:
+            text = f"ca.constpow({args[0]}, {int(e.exp)})"
+        elif e.is_Pow:
+            text = f"({args[0]} ** {args[1]})"
+        elif type(e) in (sp.sin, sp.cos):
+            text = f"ca.{type(e).__name__}({args[0]})"
+        else:
+            raise RuntimeError(f"forms_generator: no Python form for {type(e).__name__} in {e}")
+        name = f"x{len(self.lines)}"
+        self.lines.append(f"    {name} = {text}")
+        return name
+
+
+def primitive_source() -> str:
+    """The text of ``ncgen/model/primitive_forms.py``."""
+    defs, entries = [], []
     for dim in (2, 3):
         for name in PRIMITIVES:
             prim = primitive(name, dim)
-            groups = [ca.SX.sym(f"x{k}", len(sym) if hasattr(sym, "shape") else 1) for k, sym in enumerate(prim.args)]
-            vals = {}
-            for sym, x in zip(prim.args, groups):
-                vals.update({s: x[k] for k, s in enumerate(sym)} if hasattr(sym, "shape") else {sym: x[0]})
-            table[f"primitive-{name}-{dim}d"] = ca.Function(name, groups, [to_casadi(prim.expr, vals)]).serialize()
-    return json.dumps(table, indent=1, sort_keys=True) + "\n"
+            params, names, head = [], {}, []
+            for sym in prim.args:
+                if hasattr(sym, "shape"):
+                    group = str(sym[0]).rsplit("_", 1)[0]
+                    params.append(group)
+                    for k, s in enumerate(sym):
+                        names[s] = str(s)
+                        head.append(f"    {s} = {group}[{k}]")
+                else:
+                    params.append(str(sym))
+                    names[sym] = str(sym)
+            printer = _Printer(names)
+            rows = [[printer.walk(prim.expr[i, j]) for j in range(prim.expr.shape[1])] for i in range(prim.expr.shape[0])]
+            fname = f"_{name}_{dim}d"
+            body = "\n".join(head + printer.lines)
+            defs.append(f"def {fname}({', '.join(params)}):\n    \"\"\"{prim.doc}\"\"\"\n{body}\n"
+                        f"    return matrix([{', '.join('[' + ', '.join(r) + ']' for r in rows)}])\n")
+            entries.append(f"    ({name!r}, {dim}): {fname},")
+    return (PRIMITIVE_BANNER + "import casadi as ca\n\nfrom ncgen.model.sym2casadi import matrix\n\n\n"
+            + "\n\n".join(defs) + "\n\nFORMS = {\n" + "\n".join(entries) + "\n}\n")
+
+
+PRIMITIVE_BANNER = ('"""Generated by ncgen/model/forms_generator.py from ncgen/symbolic/joints.py -- do not edit.\n\n'
+                    "FORMS[(primitive, dim)](*argument groups): the primitive in CasADi, the operations of\n"
+                    "ncgen.model.sym2casadi.to_casadi on its SymPy tree.\n"
+                    '"""\n')
 
 
 def rendered() -> dict[Path, str]:
     """Every generated file and its text."""
-    return {NUMERIC_PATH: numeric_source(), INSTANCE_PATH: instance_source()}
+    return {NUMERIC_PATH: numeric_source(), INSTANCE_PATH: instance_source(), PRIMITIVE_PATH: primitive_source()}
 
 
 def main() -> int:
