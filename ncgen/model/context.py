@@ -24,7 +24,7 @@ from ncgen.model.sym2casadi import to_casadi
 from ncgen.reproducible import dot, matmul, matvec, norm, perpendicular_basis, snap
 from ncgen.symbolic.joints import PRIMITIVES
 
-#: The coordinate types' formulas as SX functions (generated: ncgen/model/forms_generator.py).
+#: The coordinate types' formulas as SX functions (generated: ncgen/codegen/forms_generator.py).
 INSTANCE_FORMS = Path(__file__).with_name("instance_forms.json")
 
 
@@ -37,7 +37,7 @@ def _instance_table() -> dict:
 def instance_form(name: str, dim: int, formula: str) -> tuple[tuple[str, ...], ca.Function]:
     """``(constant names, f(q_I, q̇_I, c))``: ``formula`` of coordinate type ``name`` as the
     SX function shipped in ``instance_forms.json`` (generated from the SymPy derivation by
-    :mod:`ncgen.model.forms_generator`), ``c`` the constants' values in the order named."""
+    :mod:`ncgen.codegen.forms_generator`), ``c`` the constants' values in the order named."""
     entry = _instance_table()[f"{name}-{dim}d"]
     return tuple(entry["constants"]), ca.Function.deserialize(entry[formula])
 

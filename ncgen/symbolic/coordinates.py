@@ -349,7 +349,7 @@ class Derivation:
         """(R, p, ω, v) ↦ (q, q̇): slots from the pose and the twist of the COM frame."""
         import sympy as sp
         ct, d, k = self.ctype, self.ctype.dim, self.ctype.k
-        self.R_sym = sp.Matrix(d, d, lambda a, b: sp.Symbol(f"R_{a + 1}{b + 1}", real=True))
+        self.R_sym = sp.Matrix(d, d, lambda a, b: sp.Symbol(matrix_names("R", d)[a][b], real=True))
         self.p_sym = _vec("p", d)
         self.v_sym = _vec("v", d)
         self.omega_sym = _vec("omega", 3) if d == 3 else sp.Matrix([sp.Symbol("omega", real=True)])
