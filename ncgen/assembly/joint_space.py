@@ -30,7 +30,6 @@ from ncgen.assembly.joint_tree import (
 )
 from ncgen.assembly.manifold import NEWTON_TOL as TOL, newton, solve_linear, system_size
 from ncgen.model.data import model_data
-from ncgen.model.member_forms import FORMS as MEMBER_FORMS
 from ncgen.symbolic.coordinates import component_names, matrix_names
 from ncgen.errors import ModelError
 from ncgen.validation import as_vector
@@ -308,7 +307,8 @@ class JointSpace:
         vals = dict(m.rigid.constant_values)
         vals.update({n: R[a, b] for a, row in enumerate(matrix_names("R", d)) for b, n in enumerate(row)})
         vals.update(zip(component_names("p", d), (pos[a] for a in range(d))))
-        return MEMBER_FORMS[m.ctype.name, d, "q_of_pose"](vals)
+        from ncgen.model.member_forms import FORMS   # generated; a stored model never needs it
+        return FORMS[m.ctype.name, d, "q_of_pose"](vals)
 
     def _propagate(self, model, given) -> np.ndarray:
         """Poses from the ground through the spanning tree; unreached members keep q0."""

@@ -26,7 +26,6 @@ import numpy as np
 from ncgen.assembly.joint_tree import carry, relative_pose
 from ncgen.assembly.mass import sparse_dm
 from ncgen.errors import ModelError
-from ncgen.model.member_forms import FORMS as MEMBER_FORMS
 from ncgen.symbolic.coordinates import component_names, matrix_names
 from ncgen.rigid_motion import casadi_forms as crm
 
@@ -147,7 +146,8 @@ def member_twist_map(js, name: str) -> ca.Function:
     T_p = crm.transport_twist(crm.translation(-p), T_g)
     vals.update(zip(component_names("omega", 3), (T_p[a] for a in range(3))))
     vals.update(zip(component_names("v", 3), (T_p[3 + a] for a in range(3))))
-    qd = MEMBER_FORMS[m.ctype.name, 3, "qd_of_twist"](vals)
+    from ncgen.model.member_forms import FORMS   # generated; a stored model never needs it
+    qd = FORMS[m.ctype.name, 3, "qd_of_twist"](vals)
     return ca.Function("twist_map", [R, p], [ca.jacobian(qd, T_g)])
 
 
