@@ -222,10 +222,9 @@ def constraint_rows(system, ctx: Context, plan: SharingPlan | None = None) -> tu
     stated twice or between fixed nodes only (:func:`~ncgen.model.sharing.intrinsic_key`)."""
     labels, rows, seen = [], [], set()
     for m in system.members.values():
-        D = m.ctype.derivation
         if not m.ctype.pairs:
             continue
-        phi = ctx.instantiate(m, D.Phi)
+        phi = ctx.instantiate(m, "Phi")
         names = "uvw"
         for k, (s, t) in enumerate(m.ctype.pairs):
             label = f"{m.name}.rigid.{names[s]}{names[t]}"

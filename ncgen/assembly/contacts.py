@@ -84,10 +84,9 @@ def contact_terms(ctx: Context, contacts) -> list[ContactTerms]:
 
 def _omega_cross(ctx: Context, member, d):
     """``ω × d = ω̂ d`` for member ``member`` (zero for points; ``crm.so3_hat`` in 3D); ``ω`` linear in q̇."""
-    D = member.ctype.derivation
-    if getattr(D, "omega", None) is None:
+    if member.ctype.kind == "point":
         return ca.SX.zeros(ctx.dim)
-    w = ctx.instantiate(member, D.omega)
+    w = ctx.instantiate(member, "omega")
     if ctx.dim == 2:
         return w[0] * ca.vertcat(-d[1], d[0])
     return ca.mtimes(crm.so3_hat(w), d)

@@ -244,9 +244,8 @@ def _markers(ctx: Context, system):
 def _poses(ctx: Context, system):
     Rs, ps = [], []
     for m in system.members.values():
-        D = m.ctype.derivation
-        ps.append(ctx.instantiate(m, D.p))
-        Rs.append(ctx.instantiate(m, D.R) if D.R is not None else ca.SX.eye(ctx.dim))
+        ps.append(ctx.instantiate(m, "p"))
+        Rs.append(ctx.instantiate(m, "R") if m.ctype.kind != "point" else ca.SX.eye(ctx.dim))
     return ca.horzcat(*Rs), ca.horzcat(*ps)
 
 

@@ -273,8 +273,7 @@ def member_frame(ctx, m, R0, o0, label: str):
     are ``R0``, ``o0`` in the initial configuration: ``R = R_m(q) R_m0ᵀ R0``."""
     if m.is_ground:
         return ca.DM(R0), ca.DM(np.asarray(o0, float))
-    D = m.ctype.derivation
-    R = ca.mtimes(ctx.instantiate(m, D.R), ca.DM(m.R0.T @ R0))
+    R = ca.mtimes(ctx.instantiate(m, "R"), ca.DM(m.R0.T @ R0))
     return R, ctx.point(m, o0, label)[0]
 
 

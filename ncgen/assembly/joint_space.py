@@ -30,7 +30,7 @@ from ncgen.assembly.joint_tree import (
 )
 from ncgen.assembly.manifold import NEWTON_TOL as TOL, newton, solve_linear, system_size
 from ncgen.model.data import model_data
-from ncgen.model.sym2casadi import to_casadi
+from ncgen.symbolic.coordinates import component_names, matrix_names
 from ncgen.errors import ModelError
 from ncgen.validation import as_vector
 
@@ -303,12 +303,12 @@ class JointSpace:
         """The natural coordinates of member ``name`` (its own slots) at the pose ``(R, pos)``
         of its frame (SX)."""
         m = self.members[name]
-        D = m.ctype.derivation
         d = self.dim
-        vals = dict(m.rigid.constants())
-        vals.update({D.R_sym[a, b]: R[a, b] for a in range(d) for b in range(d)})
-        vals.update({D.p_sym[a]: pos[a] for a in range(d)})
-        return to_casadi(D.q_of_pose, vals)
+        vals = dict(m.rigid.constant_values)
+        vals.update({n: R[a, b] for a, row in enumerate(matrix_names("R", d)) for b, n in enumerate(row)})
+        vals.update(zip(component_names("p", d), (pos[a] for a in range(d))))
+        from ncgen.model.member_forms import FORMS   # generated; a stored model never needs it
+        return FORMS[m.ctype.name, d, "q_of_pose"](vals)
 
     def _propagate(self, model, given) -> np.ndarray:
         """Poses from the ground through the spanning tree; unreached members keep q0."""

@@ -26,7 +26,7 @@ import numpy as np
 from ncgen.assembly.joint_tree import carry, relative_pose
 from ncgen.assembly.mass import sparse_dm
 from ncgen.errors import ModelError
-from ncgen.model.sym2casadi import to_casadi
+from ncgen.symbolic.coordinates import component_names, matrix_names
 from ncgen.rigid_motion import casadi_forms as crm
 
 
@@ -138,16 +138,16 @@ def member_twist_map(js, name: str) -> ca.Function:
     its frame: the member's ``q̇(R, p, ω, v_p)`` with ``[ω; v_p] = Ad(H_pg) T_g``, p the
     frame at the member's origin with g's axes."""
     m = js.members[name]
-    D = m.ctype.derivation
     R, p = ca.SX.sym("R", 3, 3), ca.SX.sym("p", 3)
     T_g = ca.SX.sym("T_g", 6)
-    vals = dict(m.rigid.constants())
-    vals.update({D.R_sym[a, b]: R[a, b] for a in range(3) for b in range(3)})
-    vals.update({D.p_sym[a]: p[a] for a in range(3)})
+    vals = dict(m.rigid.constant_values)
+    vals.update({n: R[a, b] for a, row in enumerate(matrix_names("R", 3)) for b, n in enumerate(row)})
+    vals.update(zip(component_names("p", 3), (p[a] for a in range(3))))
     T_p = crm.transport_twist(crm.translation(-p), T_g)
-    vals.update({D.omega_sym[a]: T_p[a] for a in range(3)})
-    vals.update({D.v_sym[a]: T_p[3 + a] for a in range(3)})
-    qd = to_casadi(D.qd_of_twist, vals)
+    vals.update(zip(component_names("omega", 3), (T_p[a] for a in range(3))))
+    vals.update(zip(component_names("v", 3), (T_p[3 + a] for a in range(3))))
+    from ncgen.model.member_forms import FORMS   # generated; a stored model never needs it
+    qd = FORMS[m.ctype.name, 3, "qd_of_twist"](vals)
     return ca.Function("twist_map", [R, p], [ca.jacobian(qd, T_g)])
 
 

@@ -8,6 +8,10 @@ points and directions are constants.
 """
 from __future__ import annotations
 
+import json
+from functools import lru_cache
+from pathlib import Path
+
 import casadi as ca
 import numpy as np
 
@@ -18,7 +22,24 @@ from ncgen.model.layout import Layout
 from ncgen.model.members import Member
 from ncgen.model.sym2casadi import to_casadi
 from ncgen.reproducible import dot, matmul, matvec, norm, perpendicular_basis, snap
-from ncgen.symbolic.joints import primitive
+from ncgen.symbolic.joints import PRIMITIVES
+
+#: The coordinate types' formulas as SX functions (generated: ncgen/codegen/forms_generator.py).
+INSTANCE_FORMS = Path(__file__).with_name("instance_forms.json")
+
+
+@lru_cache(maxsize=1)
+def _instance_table() -> dict:
+    return json.loads(INSTANCE_FORMS.read_text(encoding="utf-8"))
+
+
+@lru_cache(maxsize=None)
+def instance_form(name: str, dim: int, formula: str) -> tuple[tuple[str, ...], ca.Function]:
+    """``(constant names, f(q_I, q̇_I, c))``: ``formula`` of coordinate type ``name`` as the
+    SX function shipped in ``instance_forms.json`` (generated from the SymPy derivation by
+    :mod:`ncgen.codegen.forms_generator`), ``c`` the constants' values in the order named."""
+    entry = _instance_table()[f"{name}-{dim}d"]
+    return tuple(entry["constants"]), ca.Function.deserialize(entry[formula])
 
 
 class Context:
@@ -35,7 +56,6 @@ class Context:
         self.p = ca.vertcat(*(s for s, _ in system.parameters.values())) if system.parameters else ca.SX(0, 1)
         self._q_local: dict[str, ca.SX] = {}
         self._v_local: dict[str, ca.SX] = {}
-        self._instances: dict[tuple, tuple] = {}
         #: joint name -> f(drive expression) replacing it (assembly by continuation of the drives)
         self.drive_blend: dict = {}
         for name in layout.slots:                        # the layout's members: all, or those of a check
@@ -67,39 +87,13 @@ class Context:
     def v_of(self, member: Member) -> ca.SX:
         return self._v_local[member.name]
 
-    def instantiate(self, member: Member, expr, extra: dict | None = None):
-        """A SymPy formula of ``member``'s derivation in CasADi (q ↦ q_I, q̇ ↦ v_I).
-
-        Without ``extra`` values the formula is translated once per coordinate type into an
-        SX function of (q_I, q̇_I, the member's constants) and then called per member: the
-        SymPy tree walk costs far more than the call, which adds the same operations."""
-        constants = member.rigid._constants          # computed once per member
-        qI, vI = self.q_of(member), self.v_of(member)
-        if extra:
-            D = member.ctype.derivation
-            vals = dict(constants)
-            vals.update({s: qI[k] for k, s in enumerate(D.q)})
-            vals.update({s: vI[k] for k, s in enumerate(D.qd)})
-            vals.update(extra)
-            return to_casadi(expr, vals)
-        names, f = self._instance_function(member, expr, constants)
-        return f(qI, vI, ca.DM([float(constants[s]) for s in names]))
-
-    def _instance_function(self, member: Member, expr, constants: dict):
-        """``(constant symbols, f(q_I, q̇_I, c))`` for ``expr`` of ``member``'s type, cached."""
-        key = (member.ctype.name, id(expr), frozenset(constants))
-        hit = self._instances.get(key)
-        if hit is None or hit[0] is not expr:
-            names = tuple(sorted(constants, key=str))
-            D = member.ctype.derivation
-            q, v = ca.SX.sym("q", len(D.q)), ca.SX.sym("v", len(D.qd))
-            c = ca.SX.sym("c", len(names))
-            vals = {s: c[k] for k, s in enumerate(names)}
-            vals.update({s: q[k] for k, s in enumerate(D.q)})
-            vals.update({s: v[k] for k, s in enumerate(D.qd)})
-            hit = (expr, names, ca.Function("instance", [q, v, c], [to_casadi(expr, vals)]))
-            self._instances[key] = hit
-        return hit[1], hit[2]
+    def instantiate(self, member: Member, formula: str):
+        """A formula of ``member``'s derivation (``"Phi"``, ``"p"``, ``"R"``, ``"omega"``,
+        ``"W"``) in CasADi (q ↦ q_I, q̇ ↦ v_I): its shipped SX function of (q_I, q̇_I, the
+        member's constants) called on the member (:func:`instance_form`; no SymPy)."""
+        names, f = instance_form(member.ctype.name, member.ctype.dim, formula)
+        constants = member.rigid.constant_values
+        return f(self.q_of(member), self.v_of(member), ca.DM([float(constants[n]) for n in names]))
 
     def scatter(self, member: Member, Q_local) -> ca.SX:
         """``S_Iᵀ Q_I``: a member's generalised force as a system vector."""
@@ -200,12 +194,10 @@ class Context:
         return evaluate(value, self.scope(inputs=inputs, state=state), size, what, call=call)
 
     def apply(self, name: str, *args):
-        """Instantiate the joint primitive ``name`` with CasADi arguments."""
-        prim = primitive(name, self.dim)
-        vals = {}
-        for sym, val in zip(prim.args, args, strict=True):
-            if hasattr(sym, "shape"):
-                vals.update({s: val[k] for k, s in enumerate(sym)})
-            else:
-                vals[sym] = val
-        return to_casadi(prim.expr, vals)
+        """Instantiate the joint primitive ``name`` (:mod:`ncgen.symbolic.joints`) with CasADi
+        arguments, through its generated Python form (:mod:`ncgen.model.primitive_forms`; no SymPy)."""
+        from ncgen.model.primitive_forms import FORMS
+        form = FORMS.get((name, self.dim))
+        if form is None:
+            raise KeyError(f"unknown joint primitive {name!r}; known: {', '.join(PRIMITIVES)}")
+        return form(*args)

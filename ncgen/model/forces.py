@@ -163,7 +163,7 @@ class Torque(Force):
     def generalized(self, ctx):
         n = 3 if ctx.dim == 3 else 1
         tau = self._value(ctx, self.torque, n, "torque")
-        W = ctx.instantiate(self.member, self.member.ctype.derivation.W)
+        W = ctx.instantiate(self.member, "W")
         return ctx.scatter(self.member, ca.mtimes(W.T, tau))
 
 

@@ -46,8 +46,13 @@ def to_casadi(expr, values: dict):
     if isinstance(expr, sp.MatrixBase):
         rows = [[_walk(expr[i, j], values, memo) for j in range(expr.shape[1])]
                 for i in range(expr.shape[0])]
-        return ca.vertcat(*[ca.horzcat(*r) for r in rows]) if rows and rows[0] else ca.DM.zeros(*expr.shape)
+        return matrix(rows) if rows and rows[0] else ca.DM.zeros(*expr.shape)
     return _walk(sp.sympify(expr), values, memo)
+
+
+def matrix(rows: list):
+    """A CasADi matrix of the rows' entries."""
+    return ca.vertcat(*[ca.horzcat(*r) for r in rows])
 
 
 def _walk(e, values, memo):

@@ -1,6 +1,7 @@
 """URDF import: a robot description as a :class:`~ncgen.model.system.System`.
 
-Parsing is yourdfpy's (meshes are not loaded); this module maps the parsed tree:
+Parsing is the standard library's (:mod:`ncgen.model.urdf_reader`; meshes are not loaded);
+this module maps the parsed tree:
 
 * Links joined by ``fixed`` joints are merged into one member; their masses, centres of mass
   and inertia tensors are lumped exactly (parallel-axis theorem).  Everything fixed to the
@@ -35,7 +36,6 @@ Names: link and joint names become identifiers (characters other than letters, d
 """
 from __future__ import annotations
 
-import io
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,6 +44,7 @@ import numpy as np
 
 from ncgen.errors import ModelError
 from ncgen.model.urdf_checks import check_urdf_document
+from ncgen.model.urdf_reader import read_urdf
 from ncgen.validation import as_system_name
 
 MOVABLE = ("revolute", "continuous", "prismatic")
@@ -71,11 +72,8 @@ def identifier(name: str) -> str:
 
 
 def load_urdf(source):
-    """The yourdfpy ``URDF`` of a path or of URDF text (meshes not loaded)."""
-    try:
-        import yourdfpy
-    except ImportError:
-        raise ModelError("URDF import needs the package yourdfpy (pip install yourdfpy)") from None
+    """``(robot, where)``: the records of a URDF file or text (:mod:`ncgen.model.urdf_reader`;
+    meshes are not loaded) and the name of its source for messages."""
     text = str(source)
     if "<" in text:
         where = "URDF text"
@@ -89,11 +87,9 @@ def load_urdf(source):
         except (OSError, UnicodeDecodeError) as e:
             raise ModelError(f"URDF {where}: cannot read it: {e}") from None
     check_urdf_document(text, where)
-    handle = io.BytesIO(text.encode()) if where == "URDF text" else where
     try:
-        return yourdfpy.URDF.load(handle, build_scene_graph=False, load_meshes=False,
-                                  build_collision_scene_graph=False, load_collision_meshes=False), where
-    except Exception as e:          # yourdfpy/lxml raise many types for malformed files
+        return read_urdf(text), where
+    except ValueError as e:         # a number the checks do not cover (a <limit>, a shape's size)
         raise ModelError(f"URDF {where}: cannot parse it: {e}") from None
 
 
@@ -107,8 +103,7 @@ def system_from_urdf(source, system_class, *, floating_base: bool = False, gravi
     URDF file or text; see the module docstring."""
     from ncgen.model.joints import Free, Mimic, Prismatic, Revolute
 
-    urdf, where = load_urdf(source)
-    robot = urdf.robot
+    robot, where = load_urdf(source)
     links = {ln.name: ln for ln in robot.links}
     joints = list(robot.joints)
     parent_of = {j.child: j for j in joints}

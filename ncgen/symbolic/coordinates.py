@@ -67,18 +67,39 @@ def _coordinate_type(name: str, dim: int) -> "CoordinateType":
     return CoordinateType(name, dim)
 
 
-def _vec(prefix: str, dim: int) -> sp.Matrix:
-    """Component symbols: ``u`` -> u_x, u_y, ...; ``r_i`` -> r_ix, r_iy, ... (SymPy renders
-    ``ubar_x`` as ū_x and ``rdot_ix`` as ṙ_ix)."""
-    import sympy as sp
+def component_names(prefix: str, dim: int) -> list[str]:
+    """Names of a vector's components: ``u`` -> u_x, u_y, ...; ``r_i`` -> r_ix, r_iy, ..."""
     sep = "" if "_" in prefix else "_"
-    return sp.Matrix([sp.Symbol(f"{prefix}{sep}{a}", real=True) for a in AXES[:dim]])
+    return [f"{prefix}{sep}{a}" for a in AXES[:dim]]
+
+
+def symmetric_names(name: str, n: int) -> list[list[str]]:
+    """Names of a symmetric n×n matrix's entries, ``name_ab`` (a ≤ b), row by row."""
+    return [[f"{name}_{min(a, b) + 1}{max(a, b) + 1}" for b in range(n)] for a in range(n)]
+
+
+def matrix_names(name: str, n: int) -> list[list[str]]:
+    """Names of an n×n matrix's entries, ``name_ab``, row by row."""
+    return [[f"{name}_{a + 1}{b + 1}" for b in range(n)] for a in range(n)]
+
+
+def com_names(k: int) -> list[str]:
+    """Names of the centre of mass's affine coordinates c_g1, c_g2, ..."""
+    return [f"c_g{s}" for s in range(1, k + 1)]
+
+
+def _vec(prefix: str, dim: int) -> sp.Matrix:
+    """Component symbols (:func:`component_names`; SymPy renders ``ubar_x`` as ū_x and
+    ``rdot_ix`` as ṙ_ix)."""
+    import sympy as sp
+    return sp.Matrix([sp.Symbol(n, real=True) for n in component_names(prefix, dim)])
 
 
 def _sym_matrix(name: str, n: int) -> sp.Matrix:
     """Symmetric n×n matrix of symbols ``name_ab`` (a ≤ b)."""
     import sympy as sp
-    return sp.Matrix(n, n, lambda a, b: sp.Symbol(f"{name}_{min(a, b) + 1}{max(a, b) + 1}", real=True))
+    names = symmetric_names(name, n)
+    return sp.Matrix(n, n, lambda a, b: sp.Symbol(names[a][b], real=True))
 
 
 def _skew_vee(S: sp.Matrix, dim: int):
@@ -236,7 +257,7 @@ class Derivation:
         self.hessians = [sp.hessian(phi, self.q) for phi in self.Phi]
         # mass matrix from the generalised inertia G = [[m, m c_gᵀ], [m c_g, B]]
         self.m = sp.Symbol("m", positive=True)
-        self.c_g = sp.Matrix([sp.Symbol(f"c_g{s}", real=True) for s in range(1, k + 1)])
+        self.c_g = sp.Matrix([sp.Symbol(n, real=True) for n in com_names(k)])
         self.B = _sym_matrix("B", k)
         G = sp.zeros(k + 1, k + 1)
         G[0, 0] = self.m
@@ -296,7 +317,7 @@ class Derivation:
         self.R = None
         self.omega = None
         if ct.kind == "body":
-            self.Xbar_inv = sp.Matrix(d, d, lambda a, b: sp.Symbol(f"Xbarinv_{a + 1}{b + 1}", real=True))
+            self.Xbar_inv = sp.Matrix(d, d, lambda a, b: sp.Symbol(matrix_names("Xbarinv", d)[a][b], real=True))
             self.R = self.X * self.Xbar_inv
             self.Gbar = _sym_matrix("Gbar", d)              # (X̄ᵀX̄)⁻¹, so that ω̂ = Ẋ Ḡ Xᵀ
             self.omega = _skew_vee(Xd * self.Gbar * self.X.T, d).applyfunc(sp.expand)
@@ -328,7 +349,7 @@ class Derivation:
         """(R, p, ω, v) ↦ (q, q̇): slots from the pose and the twist of the COM frame."""
         import sympy as sp
         ct, d, k = self.ctype, self.ctype.dim, self.ctype.k
-        self.R_sym = sp.Matrix(d, d, lambda a, b: sp.Symbol(f"R_{a + 1}{b + 1}", real=True))
+        self.R_sym = sp.Matrix(d, d, lambda a, b: sp.Symbol(matrix_names("R", d)[a][b], real=True))
         self.p_sym = _vec("p", d)
         self.v_sym = _vec("v", d)
         self.omega_sym = _vec("omega", 3) if d == 3 else sp.Matrix([sp.Symbol("omega", real=True)])

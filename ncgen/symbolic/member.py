@@ -3,8 +3,9 @@
 A :class:`RigidMember` holds a coordinate type, the local basis (basic point ``r̄_i`` and
 base vectors ``X̄`` in the member's local frame, whose origin is the centre of mass), the
 mass and the inertia.  Every numeric method evaluates a SymPy formula of
-:class:`ncgen.symbolic.coordinates.Derivation` through :func:`numpy_function`; the same
-formulas are instantiated in CasADi by :meth:`RigidMember.constants`.
+:class:`ncgen.symbolic.coordinates.Derivation` in its shipped NumPy form
+(:func:`ncgen.symbolic.numeric.shipped_function`: no SymPy at run time); the same formulas
+are instantiated in CasADi with the values of :attr:`RigidMember.constant_values`.
 
 Conventions: SI units; ``R`` maps local to world axes; ``p`` is the centre of mass;
 ``omega`` is the angular velocity in world axes (a scalar in 2D); ``v`` the velocity of the
@@ -19,8 +20,10 @@ import numpy as np
 
 from ncgen.errors import BasisError, InertiaError, ShapeError
 from ncgen.reproducible import inv, matmul, matvec, snap
-from ncgen.symbolic.coordinates import CoordinateType, coordinate_type
-from ncgen.symbolic.numeric import numpy_function
+from ncgen.symbolic.coordinates import (CoordinateType, com_names, component_names, coordinate_type, matrix_names,
+                                        symmetric_names)
+from ncgen.symbolic.notation import VECTOR_NAMES
+from ncgen.symbolic.numeric import shipped_function
 from ncgen.validation import as_array, as_scalar, as_vector, positive, rotation
 
 #: Relative tolerance below which a body's base vectors count as coplanar.
@@ -32,13 +35,13 @@ AXIS_TOL = 1e-9
 def inertia_J(ctype: CoordinateType, inertia, length: float | None = None) -> np.ndarray:
     """``J̄ = ∫ρ r̄ r̄ᵀ`` about the centre of mass from the user's inertia.
 
-    Evaluates the derivation's ``Jbar_formula``.  3D body: ``Ī`` (3×3, body axes, about the
+    Evaluates the derivation's ``Jbar_formula`` (shipped form ``Jbar``).  3D body: ``Ī`` (3×3, body axes, about the
     COM), ``J̄ = ½ tr(Ī) 1 − Ī``.  2D body: the scalar moment ``I`` about the COM,
     ``J̄ = ½ I 1`` (only tr J̄ is seen by rigid motion).  Bar: the transverse moment ``I_t``
     about the COM, ``J̄ = diag(I_t, 0[, 0])``.
     """
-    d, D = ctype.dim, ctype.derivation
-    J_of = numpy_function(D.Jbar_formula, [D.Ibar_sym], key=("Jbar", ctype.name, d))
+    d = ctype.dim
+    J_of = shipped_function(ctype.name, d, "Jbar")[0]
     if ctype.kind == "bar":
         return J_of(positive(inertia, "inertia (transverse moment of the bar about its centre of mass)"))
     if d == 2:
@@ -60,16 +63,14 @@ def inertia_J(ctype: CoordinateType, inertia, length: float | None = None) -> np
     return J_of(Ib)
 
 
-#: ``id(expr) -> (expr, its free symbols)`` of the derivations' formulas (walking a SymPy tree
-#: for them costs more than evaluating the formula; every member of a type asks for the same).
-_FREE_SYMBOLS: dict[int, tuple] = {}
-
-
-def _free_symbols(expr) -> frozenset:
-    hit = _FREE_SYMBOLS.get(id(expr))
-    if hit is None or hit[0] is not expr:
-        hit = _FREE_SYMBOLS[id(expr)] = (expr, frozenset(getattr(expr, "free_symbols", ())))
-    return hit[1]
+def constant_symbols(ctype: CoordinateType) -> list:
+    """The derivation's constant symbols (a member's numbers), each once: ``m``, ``r̄_i``,
+    ``x̄_s``, ``c_g``, ``B``, and ``X̄⁻¹``, ``Ḡ`` for bodies."""
+    D = ctype.derivation
+    symbols = [D.m, *D.rbar_i, *(x for s in range(ctype.k) for x in D.xbar[s]), *D.c_g, *D.B]
+    if ctype.kind == "body":
+        symbols += [*D.Xbar_inv, *D.Gbar]
+    return list(dict.fromkeys(symbols))
 
 
 class RigidMember:
@@ -79,9 +80,9 @@ class RigidMember:
         return self              # constant: copies of a model share it
 
     def __getstate__(self) -> dict:
-        """The description only: the memo of compiled NumPy functions and the SymPy-keyed
-        constants are rebuilt on use (a stored model reads back without SymPy)."""
-        return {k: v for k, v in self.__dict__.items() if k not in ("_fn_memo", "_constants")}
+        """The description only: the memo of NumPy functions and the constants' values are
+        rebuilt on use."""
+        return {k: v for k, v in self.__dict__.items() if k not in ("_fn_memo", "constant_values")}
 
     def __init__(self, ctype: CoordinateType, mass: float, rbar_i, Xbar, Jbar):
         self.ctype = ctype
@@ -163,85 +164,82 @@ class RigidMember:
                                  f"got {self.rbar_i.tolist()}")
 
     # -------------------------------------------------------------- constants
+    def _shipped(self, formula: str):
+        return shipped_function(self.ctype.name, self.ctype.dim, formula)[0]
+
     @cached_property
     def Xbar_pinv(self) -> np.ndarray:
-        D = self.ctype.derivation
-        return numpy_function(D.Xbar_pinv, [D.Xbar_sym], key=("Xbar_pinv", self.ctype.name, self.ctype.dim))(self.Xbar)
+        return self._shipped("Xbar_pinv")(self.Xbar)
 
     @cached_property
     def c_g(self) -> np.ndarray:
         """Affine coordinates of the centre of mass."""
-        D = self.ctype.derivation
         if self.ctype.k == 0:
             return np.zeros(0)
-        f = numpy_function(D.c_g_formula, [D.Xbar_sym, D.rbar_i_sym], key=("c_g", self.ctype.name, self.ctype.dim))
-        return f(self.Xbar, self.rbar_i.reshape(-1, 1)).reshape(-1)
+        return self._shipped("c_g")(self.Xbar, self.rbar_i.reshape(-1, 1)).reshape(-1)
 
     @cached_property
     def B(self) -> np.ndarray:
         """``∫ρ c cᵀ``."""
-        D = self.ctype.derivation
         if self.ctype.k == 0:
             return np.zeros((0, 0))
-        f = numpy_function(D.B_formula, [D.Xbar_sym, D.Jbar_sym, D.m, D.rbar_i_sym],
-                           key=("B", self.ctype.name, self.ctype.dim))
-        return f(self.Xbar, self.Jbar, self.mass, self.rbar_i.reshape(-1, 1))
+        return self._shipped("B")(self.Xbar, self.Jbar, self.mass, self.rbar_i.reshape(-1, 1))
 
     @cached_property
-    def _constants(self) -> dict:
-        return self.constants()
+    def constant_values(self) -> dict[str, float]:
+        """Values of the derivation's constant symbols, by symbol name (the names of
+        :mod:`ncgen.symbolic.coordinates`): ``m``, ``r̄_i``, ``x̄_s``, ``c_g``, ``B``, and
+        ``X̄⁻¹``, ``Ḡ = (X̄ᵀX̄)⁻¹`` for bodies."""
+        ct, d, k = self.ctype, self.ctype.dim, self.ctype.k
+        vals = {"m": self.mass}
+        vals.update(zip(component_names("rbar_i", d), self.rbar_i))
+        B_names = symmetric_names("B", k)
+        for s in range(k):
+            vals.update(zip(component_names(f"{VECTOR_NAMES[s]}bar", d), self.Xbar[:, s]))
+            vals[com_names(k)[s]] = self.c_g[s]
+            for t in range(k):
+                vals[B_names[s][t]] = self.B[s, t]
+        if ct.kind == "body":
+            Xi = inv(self.Xbar)
+            vals.update(zip((n for row in matrix_names("Xbarinv", d) for n in row), Xi.reshape(-1)))
+            vals.update(zip((n for row in symmetric_names("Gbar", d) for n in row), matmul(Xi, Xi.T).reshape(-1)))
+        return vals
 
     def constants(self) -> dict:
         """Values of every constant symbol of the derivation, for instantiation (SymPy ↦ float)."""
-        D, ct = self.ctype.derivation, self.ctype
-        vals = {D.m: self.mass}
-        vals.update(zip(D.rbar_i, self.rbar_i))
-        for s in range(ct.k):
-            vals.update(zip(D.xbar[s], self.Xbar[:, s]))
-            vals[D.c_g[s]] = self.c_g[s]
-            for t in range(ct.k):
-                vals[D.B[s, t]] = self.B[s, t]
-        if ct.kind == "body":
-            Xi = inv(self.Xbar)
-            vals.update(zip(D.Xbar_inv, Xi.reshape(-1)))
-            vals.update(zip(D.Gbar, matmul(Xi, Xi.T).reshape(-1)))
-        return vals
+        named = self.constant_values
+        return {sym: named[sym.name] for sym in constant_symbols(self.ctype)}
 
-    def _fn(self, name: str, expr, *groups):
-        """NumPy function of ``expr`` in ``groups`` of symbols, constants bound."""
+    def _fn(self, formula: str):
+        """The shipped NumPy form of ``formula`` (its arguments but the constants), constants bound."""
         memo = self.__dict__.setdefault("_fn_memo", {})
-        hit = memo.get(name)
-        if hit is None or hit[0] is not expr:
-            key = ("member", name, self.ctype.name, self.ctype.dim)
-            consts = self._constants
-            csyms = sorted((s for s in _free_symbols(expr) if s in consts), key=str)
-            f = numpy_function(expr, [*groups, list(csyms)], key=key + (tuple(map(str, csyms)),))
-            cvals = [consts[s] for s in csyms]
-            hit = memo[name] = (expr, lambda *vals: f(*vals, cvals))
-        return hit[1]
+        hit = memo.get(formula)
+        if hit is None:
+            f, names = shipped_function(self.ctype.name, self.ctype.dim, formula)
+            cvals = [self.constant_values[n] for n in names]
+            hit = memo[formula] = lambda *vals: f(*vals, cvals)
+        return hit
 
     # ----------------------------------------------------------- mass matrix
     @cached_property
     def M(self) -> np.ndarray:
-        D = self.ctype.derivation
-        return self._fn("M", D.M)()
+        return self._fn("M")()
 
     @cached_property
     def hessians(self) -> list[np.ndarray]:
         """Constant Hessians ``H_k = ∂²Φ_k/∂q²``."""
-        return [np.array(H, dtype=float) for H in self.ctype.derivation.hessians]
+        from ncgen.symbolic.numeric_forms import HESSIANS
+        return [np.array(H, dtype=float) for H in HESSIANS[self.ctype.name, self.ctype.dim]]
 
     # ------------------------------------------------------------ constraints
     def _q(self, q, what="q") -> np.ndarray:
         return as_vector(q, self.ctype.nq, f"{what} of a {self.ctype.name} member")
 
     def phi(self, q) -> np.ndarray:
-        D = self.ctype.derivation
-        return self._fn("Phi", D.Phi, D.q)(self._q(q)).reshape(-1)
+        return self._fn("Phi")(self._q(q)).reshape(-1)
 
     def phi_q(self, q) -> np.ndarray:
-        D = self.ctype.derivation
-        return self._fn("Phi_q", D.Phi_q, D.q)(self._q(q)).reshape(self.ctype.n_phi, self.ctype.nq)
+        return self._fn("Phi_q")(self._q(q)).reshape(self.ctype.n_phi, self.ctype.nq)
 
     def gamma(self, qd) -> np.ndarray:
         """``γ = −Ȧ q̇ = −[q̇ᵀ H_k q̇]_k``."""
@@ -268,8 +266,7 @@ class RigidMember:
         return c
 
     def C(self, c) -> np.ndarray:
-        D = self.ctype.derivation
-        return self._fn("C", D.C, D.c)(as_vector(c, self.ctype.k, "affine coordinates c"))
+        return self._fn("C")(as_vector(c, self.ctype.k, "affine coordinates c"))
 
     def position(self, q, rbar) -> np.ndarray:
         """World position of the body-fixed point with local coordinates ``rbar``."""
@@ -281,21 +278,19 @@ class RigidMember:
     # ------------------------------------------------------- pose and twist
     def pose(self, q):
         """``(R, p)``: rotation local→world (``None`` for a point) and centre of mass."""
-        D = self.ctype.derivation
         q = self._q(q)
-        p = self._fn("p", D.p, D.q)(q).reshape(-1)
-        R = None if D.R is None else self._fn("R", D.R, D.q)(q)
+        p = self._fn("p")(q).reshape(-1)
+        R = None if self.ctype.kind == "point" else self._fn("R")(q)
         return R, p
 
     def twist(self, q, qd):
         """``(ω, v)``: world angular velocity (minimum-norm, ⟂ axis, for bars; ``None`` for a
         point; a scalar in 2D) and velocity of the centre of mass."""
-        D = self.ctype.derivation
         q, qd = self._q(q), self._q(qd, "q̇")
-        v = self._fn("v_com", D.v_com, D.q, D.qd)(q, qd).reshape(-1)
-        if D.omega is None:
+        v = self._fn("v_com")(q, qd).reshape(-1)
+        if self.ctype.kind == "point":
             return None, v
-        w = self._fn("omega", D.omega, D.q, D.qd)(q, qd).reshape(-1)
+        w = self._fn("omega")(q, qd).reshape(-1)
         return (w if self.ctype.dim == 3 else float(w[0])), v
 
     def _pose_args(self, R, p):
@@ -309,16 +304,14 @@ class RigidMember:
         return np.array([as_scalar(omega, "angular_velocity (a scalar in 2D)")])
 
     def q_from_pose(self, R, p) -> np.ndarray:
-        D = self.ctype.derivation
         R, p = self._pose_args(R, p)
-        return self._fn("q_of_pose", D.q_of_pose, D.R_sym, D.p_sym)(R, p).reshape(-1)
+        return self._fn("q_of_pose")(R, p).reshape(-1)
 
     def qd_from_twist(self, R, p, omega, v) -> np.ndarray:
-        D = self.ctype.derivation
         R, p = self._pose_args(R, p)
         w = np.zeros(3 if self.ctype.dim == 3 else 1) if omega is None else self._omega(omega)
         v = as_vector(v, self.ctype.dim, "velocity")
-        f = self._fn("qd_of_twist", D.qd_of_twist, D.R_sym, D.p_sym, D.omega_sym, D.v_sym)
+        f = self._fn("qd_of_twist")
         return f(R, p, w, v).reshape(-1)
 
     # ------------------------------------------------------- generalised forces
@@ -329,10 +322,9 @@ class RigidMember:
     def torque(self, q, tau) -> np.ndarray:
         """Generalised force ``Q = W(q)ᵀ τ`` of a pure couple (world axes; scalar in 2D),
         where ``ω = W(q) q̇``.  On a bar only the part of τ normal to the axis acts."""
-        D = self.ctype.derivation
-        if D.W is None:
+        if self.ctype.kind == "point":
             raise BasisError("a point member cannot carry a torque")
-        W = self._fn("W", D.W, D.q)(self._q(q))
+        W = self._fn("W")(self._q(q))
         return W.T @ self._omega(tau)
 
     def __repr__(self) -> str:
