@@ -70,6 +70,43 @@ def test_equal_elements_share_one_kernel():
     assert [e.kernel for e in pairs.elements] == [0] * 5 + [1] * 10
 
 
+def test_each_member_side_bounded_once():
+    """The C's broad phase bounds each distinct member side once per call: in a heap of 5
+    spheres every element side that is sphere k has the same side number, 5 numbers in all,
+    each first met at the element and side the table names (pair_srep); the floors'
+    half-spaces have none.  In the shapes scene the sides of one member with different
+    features (a box's corners, a capsule's ends, a sphere) are distinct sides."""
+    s = nc.System("heap5s")
+    balls = [s.add_point(f"b{k}", mass=0.1, position=(0.1 * k, 0, 0.05 + 0.1 * k)) for k in range(5)]
+    for k, b in enumerate(balls):
+        s.add_contact(nc.SpherePlane(b, None, 0.03, mu=0.5, name=f"floor{k}"))
+    for i in range(5):
+        for j in range(i + 1, 5):
+            s.add_contact(nc.SphereSphere(balls[i], None, 0.03, balls[j], None, 0.03, mu=0.5, name=f"p{i}{j}"))
+    model = s.build(contacts="nonsmooth")
+    pairs = pair_kernels(model)
+    ctx = stepper_package.pair_context(model, pairs)
+    sid, srep = ctx["pair_sid"], ctx["pair_srep"]
+    assert ctx["pair_ns"] == 5 and len(sid) == 2 * len(pairs.elements)
+    member = {}
+    for e, element in enumerate(pairs.elements):
+        for side, idx in enumerate((element.idx_a, element.idx_b)):
+            if element.sides[side].kind != "member":
+                assert sid[2 * e + side] == -1
+                continue
+            k = sid[2 * e + side]
+            assert member.setdefault(k, tuple(idx)) == tuple(idx), f"side {k} is two members"
+            first = pairs.elements[srep[2 * k]]
+            assert tuple((first.idx_a, first.idx_b)[srep[2 * k + 1]]) == tuple(idx)
+    assert sorted(member.values()) == sorted({tuple(model.layout.member_indices(f"b{k}")) for k in range(5)})
+    shapes = shapes_system("shapes_sides").build(contacts="nonsmooth")
+    sp = pair_kernels(shapes)
+    ctx = stepper_package.pair_context(shapes, sp)
+    distinct = {(tuple(idx), tuple(e.sides[k].centre.ravel()), tuple(e.sides[k].extents))
+                for e in sp.elements for k, idx in enumerate((e.idx_a, e.idx_b)) if e.sides[k].kind == "member"}
+    assert ctx["pair_ns"] == len(distinct)
+
+
 def random_state(model, rng, spread):
     """A configuration on the constraint manifold: every member at a random pose within
     ``spread`` (m) of the origin, with random rates."""

@@ -348,9 +348,11 @@ static int delassus(workspace *ws, const int *rows, int n) {
   /* scratch in ws->cni after cone_newton()'s 2 ND: envelope starts of L (NC), the first and
    * last nonzero of each Z_a (2 ND), W's active nonzeros by columns (NQ + 1 starts, then
    * row and position per nonzero), the first and last nonzero of each row of T (2 NC, read
-   * by x_add()), A's nonzeros by columns (NQ + 1 starts, NNZ_A positions) */
+   * by x_add()), A's nonzeros by columns (NQ + 1 starts, NNZ_A positions), the first and
+   * last nonzero of each B_a (2 ND, read by x_add()) */
   casadi_int *env = ws->cni + 2 * ND, *zlo = env + NC, *zhi = zlo + ND, *cp = zhi + ND, *cr = cp + NQ + 1,
-             *ck = cr + NNZ_W, *tlo = ck + NNZ_W, *thi = tlo + NC, *acp = thi + NC, *ak = acp + NQ + 1;
+             *ck = cr + NNZ_W, *tlo = ck + NNZ_W, *thi = tlo + NC, *acp = thi + NC, *ak = acp + NQ + 1,
+             *bfirst = ak + NNZ_A, *blast = bfirst + ND;
   int a, b, i, j, k;
   if (ws->tl_zero) /* the rows of T and L the last call wrote (A's pattern does not change) */
     for (i = 0; i < NC; ++i) {
@@ -420,29 +422,35 @@ static int delassus(workspace *ws, const int *rows, int n) {
         if (minv_row[j] > bhi) bhi = minv_row[j];
       }
     }
+    bfirst[a] = blo, blast[a] = bhi;
     memset(za, 0, NC * sizeof(casadi_real));
+    zlo[a] = NC, zhi[a] = -1;
 #if NNZ_A > 0
     for (j = blo; j <= bhi; ++j) /* A B_a, by A's columns */
       if (ba[j] != 0)
-        for (k = (int) acp[j]; k < acp[j + 1]; ++k) za[a_row[ak[k]]] += ws->K[a_nz[ak[k]]] * ba[j];
+        for (k = (int) acp[j]; k < acp[j + 1]; ++k) {
+          const casadi_int r = a_row[ak[k]];
+          za[r] += ws->K[a_nz[ak[k]]] * ba[j];
+          if (r < zlo[a]) zlo[a] = r;
+        }
 #else
-    (void) blo, (void) bhi, (void) acp, (void) ak;
+    (void) acp, (void) ak;
 #endif
-    for (i = 0; i < NC; ++i) { /* Z_a = L^-1 A B_a */
+    /* Z_a = L^-1 A B_a from its first nonzero; row i stays zero where A B_a's is and its
+     * envelope starts after the last nonzero so far (free bodies: Z_a within their blocks) */
+    for (i = (int) zlo[a]; i < NC; ++i) {
+      if (za[i] == 0 && env[i] > zhi[a]) continue;
       for (k = (int) env[i]; k < i; ++k) za[i] -= L[i + k * NC] * za[k];
       za[i] /= L[i + i * NC];
+      if (za[i] != 0) zhi[a] = i;
     }
+    if (zhi[a] < 0) zlo[a] = NC;
     memcpy(ya, za, NC * sizeof(casadi_real));
-    for (i = NC - 1; i >= 0; --i) { /* Y_a = L^-T Z_a, by columns of L^T */
+    for (i = (int) zhi[a]; i >= 0; --i) { /* Y_a = L^-T Z_a, by columns of L^T, from Z_a's last nonzero */
       ya[i] /= L[i + i * NC];
-      for (k = (int) env[i]; k < i; ++k) ya[k] -= L[i + k * NC] * ya[i];
+      if (ya[i] != 0)
+        for (k = (int) env[i]; k < i; ++k) ya[k] -= L[i + k * NC] * ya[i];
     }
-    zlo[a] = NC, zhi[a] = -1;
-    for (i = 0; i < NC; ++i)
-      if (za[i] != 0) {
-        if (zlo[a] == NC) zlo[a] = i;
-        zhi[a] = i;
-      }
   }
   /* W's nonzeros of the active rows by columns: column i has rows cr[cp[i] .. cp[i + 1] - 1],
    * at positions ck[...] of ws->W */
@@ -461,7 +469,7 @@ static int delassus(workspace *ws, const int *rows, int n) {
   for (b = 0; b < n; ++b) { /* G_ab = W_a B_b for a <= b, by B_b's nonzeros */
     const casadi_real *bb = B + b * NQ;
     casadi_real *gb = ws->G + b * n;
-    for (i = 0; i < NQ; ++i)
+    for (i = (int) bfirst[b]; i <= blast[b]; ++i)
       if (bb[i] != 0)
         for (k = (int) cp[i]; k < cp[i + 1] && cr[k] <= b; ++k) gb[cr[k]] += ws->W[ck[k]] * bb[i];
   }
@@ -476,9 +484,11 @@ static int delassus(workspace *ws, const int *rows, int n) {
   return all_finite(ws->G, n * n) ? STEP_OK : STEP_NOT_FINITE;
 }
 
-/* out += s X c for the columns X_a (a < n) of the last delassus(): X c = B c - T^T (Y c). */
+/* out += s X c for the columns X_a (a < n) of the last delassus(): X c = B c - T^T (Y c),
+ * B_a between its first and last nonzero, Y_a up to Z_a's last. */
 static void x_add(workspace *ws, int n, const casadi_real *c, casadi_real s, casadi_real *out) {
-  const casadi_int *tlo = ws->cni + 2 * ND + NC + 2 * ND + NQ + 1 + 2 * NNZ_W, *thi = tlo + NC; /* delassus()'s */
+  const casadi_int *zhi = ws->cni + 2 * ND + NC + ND, *tlo = zhi + ND + NQ + 1 + 2 * NNZ_W, *thi = tlo + NC,
+                   *bfirst = thi + NC + NQ + 1 + NNZ_A, *blast = bfirst + ND; /* delassus()'s */
   casadi_real y[NC + 1];
   int a, i, j;
   if (!ws->schur) {
@@ -491,8 +501,8 @@ static void x_add(workspace *ws, int n, const casadi_real *c, casadi_real s, cas
     const casadi_real *ya = ws->Y + a * NC, *ba = ws->Xc + a * NQ;
     casadi_real ca = s * c[a];
     if (ca == 0) continue;
-    for (i = 0; i < NQ; ++i) out[i] += ca * ba[i];
-    for (j = 0; j < NC; ++j) y[j] += ca * ya[j];
+    for (i = (int) bfirst[a]; i <= blast[a]; ++i) out[i] += ca * ba[i];
+    for (j = 0; j <= zhi[a]; ++j) y[j] += ca * ya[j];
   }
   for (j = 0; j < NC; ++j) { /* along row j of T between its first and last nonzero */
     const casadi_real *t = ws->T + j * NQ;

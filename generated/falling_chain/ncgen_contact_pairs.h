@@ -24,6 +24,10 @@
  *                              (k), radius, |G|; a fixed side: centre (DC), radius; a
  *                              half-space: point (DC), normal (DC)
  *   pair_bound[NE * 3]         per element: kappa, d_min, cap (ncgen/assembly/pair_kernels.py)
+ *   PAIR_NS, pair_sid[NE * 2]  the distinct member sides (the same member's coordinates and the
+ *                              same bounding data: a sphere of a heap is one side of all its
+ *                              elements) and per element side its number (-1: not a member)
+ *   pair_srep[PAIR_NS * 2]     per distinct member side an element and side that has it
  *   pair_gap_fn, pair_rows_fn  the kernels by number; PAIR_MAX_Q, PAIR_MAX_G, PAIR_MAX_W:
  *                              the largest na + nb, point contacts and dense W of an element
  *
@@ -64,67 +68,69 @@ static casadi_real pair_norm(const casadi_real *x) {
   return sqrt(s);
 }
 
-/* Side s of element e from its local coordinates ql (and rates vl, or NULL): centre x0 (DC),
- * radius R, and the speed terms lin = |x0'| + sum_j e_j |X_j'| and rot = |G| |X'|_F |X|_F
- * (a bound of |omega|).  Returns its kind. */
-static int pair_side_bound(int e, int s, const casadi_real *ql, const casadi_real *vl, casadi_real *x0,
-                           casadi_real *R, casadi_real *lin, casadi_real *rot) {
-  const int kind = pair_side[6 * e + 3 * s], k = pair_side[6 * e + 3 * s + 1];
-  const casadi_real *b = pair_bdata + pair_side[6 * e + 3 * s + 2];
-  const int n = pair_int[8 * e + 3 + s], o = s ? pair_int[8 * e + 3] : 0;
+/* Side s of element e, a member, from its local coordinates ql (and rates vl, or NULL):
+ * out = centre x0 (DC), radius R, and the speed terms lin = |x0'| + sum_j e_j |X_j'| and
+ * rot = |G| |X'|_F |X|_F (a bound of |omega|). */
+static void pair_member_bound(int e, int s, const casadi_real *ql, const casadi_real *vl, casadi_real *out) {
+  const int k = pair_side[6 * e + 3 * s + 1], n = pair_int[8 * e + 3 + s];
+  const casadi_real *b = pair_bdata + pair_side[6 * e + 3 * s + 2], *ext = b + DC * n * (1 + k);
+  casadi_real xv[DC], xf = 0, vf = 0, *x0 = out, *R = out + DC, *lin = out + DC + 1, *rot = out + DC + 2;
   int d, i, j;
   *lin = *rot = 0;
-  if (kind == PAIR_FIXED) {
-    for (d = 0; d < DC; ++d) x0[d] = b[d];
-    *R = b[DC];
-  } else if (kind == PAIR_MEMBER) {
-    const casadi_real *ext = b + DC * n * (1 + k);
-    casadi_real xv[DC], xf = 0, vf = 0;
-    for (d = 0; d < DC; ++d) {
-      x0[d] = xv[d] = 0;
-      for (i = 0; i < n; ++i) {
-        x0[d] += b[d + DC * i] * ql[o + i];
-        if (vl) xv[d] += b[d + DC * i] * vl[o + i];
-      }
+  for (d = 0; d < DC; ++d) {
+    x0[d] = xv[d] = 0;
+    for (i = 0; i < n; ++i) {
+      x0[d] += b[d + DC * i] * ql[i];
+      if (vl) xv[d] += b[d + DC * i] * vl[i];
     }
-    *R = ext[k];
-    if (vl) *lin = pair_norm(xv);
-    for (j = 0; j < k; ++j) {
-      const casadi_real *a = b + DC * n * (1 + j);
-      casadi_real X[DC], V[DC], nx, nv;
-      for (d = 0; d < DC; ++d) {
-        X[d] = V[d] = 0;
-        for (i = 0; i < n; ++i) {
-          X[d] += a[d + DC * i] * ql[o + i];
-          if (vl) V[d] += a[d + DC * i] * vl[o + i];
-        }
-      }
-      nx = pair_norm(X);
-      *R += ext[j] * nx;
-      xf += nx * nx;
-      if (vl) {
-        nv = pair_norm(V);
-        *lin += ext[j] * nv;
-        vf += nv * nv;
-      }
-    }
-    if (vl) *rot = ext[k + 1] * sqrt(vf) * sqrt(xf);
   }
-  return kind;
+  *R = ext[k];
+  if (vl) *lin = pair_norm(xv);
+  for (j = 0; j < k; ++j) {
+    const casadi_real *a = b + DC * n * (1 + j);
+    casadi_real X[DC], V[DC], nx, nv;
+    for (d = 0; d < DC; ++d) {
+      X[d] = V[d] = 0;
+      for (i = 0; i < n; ++i) {
+        X[d] += a[d + DC * i] * ql[i];
+        if (vl) V[d] += a[d + DC * i] * vl[i];
+      }
+    }
+    nx = pair_norm(X);
+    *R += ext[j] * nx;
+    xf += nx * nx;
+    if (vl) {
+      nv = pair_norm(V);
+      *lin += ext[j] * nv;
+      vf += nv * nv;
+    }
+  }
+  if (vl) *rot = ext[k + 1] * sqrt(vf) * sqrt(xf);
 }
 
-/* Element e's lower bound of its gaps at q (-INFINITY where there is none) and, given
- * rates v (or NULL), the bound *speed of its rows' velocities W_r v. */
-static casadi_real pair_lower(workspace *ws, int e, const casadi_real *q, const casadi_real *v, casadi_real *speed) {
-  casadi_real x[2][DC], R[2], lin[2], rot[2], D, lever, lb;
-  casadi_real *ql = ws->pq, *vl = v ? ws->pq + PAIR_MAX_Q : 0;
+/* Element e's lower bound of its gaps (-INFINITY where there is none) and the bound *speed
+ * of its rows' velocities W_r v, from its member sides' numbers of the last pairs_bounds()
+ * (ws->psb; their speed terms 0 without rates). */
+static casadi_real pair_lower(workspace *ws, int e, casadi_real *speed) {
+  const casadi_real *x[2];
+  casadi_real R[2], lin[2], rot[2], D, lever, lb;
   int kind[2], s, d;
   *speed = 0;
-  pair_gather(e, q, 0, ql);
-  if (v) pair_gather(e, v, 1, vl);
   for (s = 0; s < 2; ++s) {
-    kind[s] = pair_side_bound(e, s, ql, vl, x[s], R + s, lin + s, rot + s);
+    const casadi_real *b = pair_bdata + pair_side[6 * e + 3 * s + 2];
+    kind[s] = pair_side[6 * e + 3 * s];
     if (kind[s] == PAIR_UNBOUNDED) return -INFINITY;
+    if (kind[s] == PAIR_MEMBER) {
+      const casadi_real *sb = ws->psb + (DC + 3) * pair_sid[2 * e + s];
+      x[s] = sb;
+      R[s] = sb[DC];
+      lin[s] = sb[DC + 1];
+      rot[s] = sb[DC + 2];
+    } else {
+      x[s] = b;
+      R[s] = kind[s] == PAIR_FIXED ? b[DC] : 0;
+      lin[s] = rot[s] = 0;
+    }
   }
   if (kind[0] == PAIR_HALFSPACE || kind[1] == PAIR_HALFSPACE) {
     const int h = kind[0] == PAIR_HALFSPACE ? 0 : 1, m = 1 - h;
@@ -148,8 +154,19 @@ static casadi_real pair_lower(workspace *ws, int e, const casadi_real *q, const 
 /* Every element's lower bound at q (ws->plb) and, given rates (or NULL), its speed bound
  * (ws->pspd). */
 static void pairs_bounds(workspace *ws, const casadi_real *q, const casadi_real *rates) {
-  int e;
-  for (e = 0; e < NE; ++e) ws->plb[e] = pair_lower(ws, e, q, rates, ws->pspd + e);
+  int e, k;
+  for (k = 0; k < PAIR_NS; ++k) { /* each member side once, however many elements it is in */
+    const int se = pair_srep[2 * k], s = pair_srep[2 * k + 1], *pi = pair_int + 8 * se;
+    const int o = pi[5] + (s ? pi[3] : 0), n = pi[3 + s];
+    int i;
+    for (i = 0; i < n; ++i) {
+      const int c = pair_qidx[o + i];
+      ws->pq[i] = c >= 0 ? q[c] : pair_qconst[o + i];
+      ws->pq[PAIR_MAX_Q + i] = c >= 0 && rates ? rates[c] : 0;
+    }
+    pair_member_bound(se, s, ws->pq, rates ? ws->pq + PAIR_MAX_Q : 0, ws->psb + (DC + 3) * k);
+  }
+  for (e = 0; e < NE; ++e) ws->plb[e] = pair_lower(ws, e, ws->pspd + e);
 }
 
 /* Whether a contact row of element e carries a force of the last step. */

@@ -291,7 +291,7 @@ def _side_numbers(side: Side, ql, vl):
 def element_bounds(element: Element, q, v=None) -> tuple[float, float]:
     """``(b, S)``: the lower bound of ``element``'s gaps at ``q`` (−inf where none) and the
     bound of its rows' velocities ``|W_r v|`` (module docstring); the formulas of
-    ``pair_lower`` in ``templates/c/runtime/ncgen_contact_pairs.h``, for tests."""
+    ``pair_member_bound`` and ``pair_lower`` in ``templates/c/runtime/ncgen_contact_pairs.h``, for tests."""
     def local(idx, const, x, rates):
         return np.array([x[i] if i >= 0 else (0.0 if rates else c) for i, c in zip(idx, const)])
     q = np.asarray(q, float)

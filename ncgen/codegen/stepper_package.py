@@ -141,11 +141,14 @@ def pair_docs(functions) -> dict:
 def pair_context(model, pairs) -> dict:
     """The template context of the element table (``runtime/ncgen_contact_pairs.h``): the
     pattern of W (per contact row the coordinates of its element's members; none for the
-    tangent rows of a frictionless contact) and the tables the header lists."""
+    tangent rows of a frictionless contact) and the tables the header lists, with the distinct
+    member sides (``pair_sid``, ``pair_srep``: equal coordinates and bounding data, so a sphere
+    in twenty elements has its bounds computed once per broad phase)."""
     dim = model.dim
     kinds = {"unbounded": 0, "member": 1, "fixed": 2, "halfspace": 3}
     colind, wrow = [0], []
     ints, qidx, qconst, wpos, sides, bdata, bound = [], [], [], [], [], [], []
+    sid, srep, distinct = [], [], {}      # the distinct member sides: bounds computed once per member
     max_q = max_g = max_w = 1
     for e in pairs.elements:
         loc = e.idx_a + e.idx_b
@@ -165,7 +168,7 @@ def pair_context(model, pairs) -> dict:
                 row = first_row + r
                 start, stop = colind[row], colind[row + 1]
                 wpos.append(start + cols.index(c) if c >= 0 and stop > start else -1)
-        for side in e.sides:
+        for which, (side, const) in enumerate(zip(e.sides, (e.const_a, e.const_b))):
             sides += [kinds[side.kind], len(side.extents), len(bdata)]
             if side.kind == "member":
                 values = [side.centre.ravel(order="F")] + [a.ravel(order="F") for a in side.axes] + \
@@ -176,13 +179,23 @@ def pair_context(model, pairs) -> dict:
                 values = [side.fixed, side.normal]
             else:
                 values = []
-            bdata += [c_real(x) for v in values for x in np.asarray(v, float).ravel()]
+            numbers = [c_real(x) for v in values for x in np.asarray(v, float).ravel()]
+            if side.kind == "member":
+                key = (tuple(side.idx), tuple(c_real(x) for x in const), tuple(numbers))
+                if key not in distinct:
+                    distinct[key] = len(srep) // 2
+                    srep += [len(ints) // 8 - 1, which]
+                sid.append(distinct[key])
+            else:
+                sid.append(-1)
+            bdata += numbers
         bound += [c_real(e.kappa), c_real(e.dmin), c_real(min(e.cap, 1e300))]
         max_q, max_g, max_w = max(max_q, len(loc)), max(max_g, e.count), max(max_w, nrow * len(loc))
     nkernels = 1 + max(e.kernel for e in pairs.elements)
     return {"pairs": True, "ne": len(pairs.elements), "pair_int": ints, "pair_qidx": qidx,
             "pair_qconst": qconst or ["0"], "pair_wpos": wpos, "pair_side": sides, "pair_bdata": bdata or ["0"],
-            "pair_bound": bound, "pair_max_q": max_q, "pair_max_g": max_g, "pair_max_w": max_w,
+            "pair_bound": bound, "pair_ns": len(srep) // 2, "pair_sid": sid, "pair_srep": srep or [0, 0],
+            "pair_max_q": max_q, "pair_max_g": max_g, "pair_max_w": max_w,
             "pair_gap_fn": [f"{model.name}_step_pair{k}_gap" for k in range(nkernels)],
             "pair_rows_fn": [f"{model.name}_step_pair{k}_rows" for k in range(nkernels)],
             "wt_colind": colind, "wt_row": wrow}

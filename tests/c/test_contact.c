@@ -62,6 +62,10 @@ static const int pair_side[NE * 6] = {1, 0, 0, 3, 0, 6, 1, 0, 0, 3, 0, 6};
 /* centre = the point (2 x 2 identity), radius R_P, |G| = 0; the floor's point and normal */
 static const casadi_real pair_bdata[10] = {1, 0, 0, 1, R_P, 0, 0, 0, 0, 1};
 static const casadi_real pair_bound[NE * 3] = {1, 0, 1e300, 1, 0, 1e300};
+/* two distinct member sides (the points), each the side a of its element */
+#define PAIR_NS 2
+static const int pair_sid[NE * 2] = {0, -1, 1, -1};
+static const int pair_srep[PAIR_NS * 2] = {0, 0, 1, 0};
 /* gap y - R_P; W rows dy (normal) and dx (tangent), column-major over (x, y) */
 static int k_pair_gap(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
   (void) iw, (void) w, (void) mem;
