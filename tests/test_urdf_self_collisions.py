@@ -106,3 +106,13 @@ def test_broad_phase_bound_is_below_the_gap_with_shared_coordinates():
     for wrist in (0.0, -0.2, -0.38):
         q, _ = model.from_joint_space(np.array([0.0, 0.0, wrist]), np.zeros(3))
         assert element_bounds(element, q)[0] <= model.gap(q)[-1] + 1e-12
+
+
+def test_skipped_collisions_survive_pickling():
+    """A stored system (the store of read files, spawn pools) keeps the list."""
+    import pickle
+    text = ARM.read_text().replace('<geometry><sphere radius="0.04"/></geometry>',
+                                   '<geometry><mesh filename="tip.stl"/></geometry>')
+    s = nc.System.from_urdf(text, collisions=SELF)
+    assert s.skipped_collisions == ["link3_tip_collision0"]
+    assert pickle.loads(pickle.dumps(s)).skipped_collisions == ["link3_tip_collision0"]

@@ -29,7 +29,8 @@ from ncgen.validation import as_scalar, as_vector, rotation, system_name
 DEFAULT_GRAVITY = (0.0, 0.0, -9.81)
 #: What a model file's import attaches to a system (``from_mjcf``, ``from_urdf``) that TOML does
 #: not hold; pickles (and the store of read files) carry it (:meth:`System.description`).
-IMPORTED = ("actuation", "actuator_gear", "actuators", "tendons", "mjcf_ignored", "mjcf_unsupported")
+IMPORTED = ("actuation", "actuator_gear", "actuators", "tendons", "mjcf_ignored", "mjcf_unsupported",
+            "skipped_collisions")
 
 
 class System:
