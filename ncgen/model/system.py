@@ -319,8 +319,9 @@ class System:
         merge them), movable joints are actuated by the input ``tau`` (one component per
         joint, ``model.joint_names`` order); ``floating_base=True`` adds a free joint
         ``root``; ``collisions=True`` (or a dict of contact keywords) turns the moving links'
-        ``<collision>`` boxes, cylinders and spheres into contacts with the ground plane z = 0.
-        See :mod:`ncgen.model.urdf`."""
+        ``<collision>`` boxes, cylinders and spheres into contacts with the ground plane z = 0
+        (``{"self": True, "exclude": [(link, link), ...]}``: between links too).  See
+        :mod:`ncgen.model.urdf`."""
         from ncgen.model.urdf import system_from_urdf
         options = dict(floating_base=floating_base, gravity=gravity, name=name, collisions=collisions)
         return _read_through_store(cls, "urdf", source, lambda: system_from_urdf(source, cls, **options), **options)
