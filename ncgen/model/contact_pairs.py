@@ -80,9 +80,18 @@ def contact_between(a, b, **material) -> Contact:
     if ka == kb == "plane":
         raise ModelError("contact_between: both members are the ground")
     try:
-        cls, swap = pair_element(ka, kb)
+        pair_element(ka, kb)
     except ModelError as e:
         raise ModelError(f"contact_between({a.name!r}, {b.name!r}): {e}") from None
+    return shape_contact(a, sa, b, sb, **material)
+
+
+def shape_contact(a, sa, b, sb, **material) -> Contact:
+    """The element of :data:`PAIRS` between shape ``sa`` (a :class:`~ncgen.model.shapes.Shape`
+    placed in member ``a``'s frame) and ``sb`` on ``b``; a shape None is the ground's plane
+    z = 0.  A pair not in the table raises :func:`pair_element`'s error."""
+    ka, kb = ("plane" if sh is None else sh.kind for sh in (sa, sb))
+    cls, swap = pair_element(ka, kb)
     if swap:
         (a, sa, ka), (b, sb, kb) = (b, sb, kb), (a, sa, ka)
     if kb == "plane":

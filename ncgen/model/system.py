@@ -29,7 +29,8 @@ from ncgen.validation import as_scalar, as_vector, rotation, system_name
 DEFAULT_GRAVITY = (0.0, 0.0, -9.81)
 #: What a model file's import attaches to a system (``from_mjcf``, ``from_urdf``) that TOML does
 #: not hold; pickles (and the store of read files) carry it (:meth:`System.description`).
-IMPORTED = ("actuation", "actuator_gear", "actuators", "tendons", "mjcf_ignored", "mjcf_unsupported")
+IMPORTED = ("actuation", "actuator_gear", "actuators", "tendons", "mjcf_ignored", "mjcf_unsupported",
+            "skipped_collisions")
 
 
 class System:
@@ -318,8 +319,9 @@ class System:
         merge them), movable joints are actuated by the input ``tau`` (one component per
         joint, ``model.joint_names`` order); ``floating_base=True`` adds a free joint
         ``root``; ``collisions=True`` (or a dict of contact keywords) turns the moving links'
-        ``<collision>`` boxes, cylinders and spheres into contacts with the ground plane z = 0.
-        See :mod:`ncgen.model.urdf`."""
+        ``<collision>`` boxes, cylinders and spheres into contacts with the ground plane z = 0
+        (``{"self": True, "exclude": [(link, link), ...]}``: between links too).  See
+        :mod:`ncgen.model.urdf`."""
         from ncgen.model.urdf import system_from_urdf
         options = dict(floating_base=floating_base, gravity=gravity, name=name, collisions=collisions)
         return _read_through_store(cls, "urdf", source, lambda: system_from_urdf(source, cls, **options), **options)

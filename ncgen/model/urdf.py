@@ -24,19 +24,29 @@ this module maps the parsed tree:
   joint named ``root`` (Pinocchio's free flyer at the root link's frame).
 * Link frames (``model.frames``, ``model.frame_pose``) and visual geometry
   (``system.visuals``: boxes, cylinders, spheres; meshes by file name) are kept as data.
-* ``collisions=True`` (or a dict of contact keywords, e.g. ``{"mu": 0.8}``): each moving
-  link's ``<collision>`` box, cylinder and sphere becomes a contact against the ground plane
-  z = 0 (:class:`~ncgen.model.contacts.BoxPlane`, ``CylinderPlane``, ``SpherePlane``) named
-  ``<link>_collision<i>`` (``i`` counts the link's collision elements); meshes, and the
-  geometry of links fixed to the ground, are skipped (``system.skipped_collisions`` names
-  them).  Collisions between links are not modelled.
+* ``collisions=True`` (or a dict): each moving link's ``<collision>`` box, cylinder and
+  sphere becomes a contact against the ground plane z = 0 (:class:`~ncgen.model.contacts.BoxPlane`,
+  ``CylinderPlane``, ``SpherePlane``) named ``<link>_collision<i>`` (``i`` counts the link's
+  collision elements); meshes, and the geometry of links fixed to the ground, are skipped
+  (``system.skipped_collisions`` names them).  The dict holds contact keywords for every
+  contact (``mu``, ``restitution``, ``stiffness``, ``damping``, ``exponent``,
+  ``slip_velocity``) and ``ground`` (default True: the contacts with the ground plane),
+  ``self`` (default False: contacts between links) and ``exclude`` (pairs of link names).
+  With ``self=True`` every two shapes of different rigid bodies (links welded by fixed joints
+  are one body; the ground's links included) are paired by the element of
+  :data:`~ncgen.model.contact_pairs.PAIRS`, named ``<shape a>__<shape b>``, except a body
+  and its parent body (the two sides of a movable joint) and the bodies of each ``exclude``
+  pair.  Pairs without an element (a cylinder against a box or a cylinder) are named in one
+  :class:`UrdfCollisionWarning` and in ``system.skipped_collisions``.
 
 Names: link and joint names become identifiers (characters other than letters, digits and
 ``_`` replaced by ``_``).
 """
 from __future__ import annotations
 
+import itertools
 import re
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -48,6 +58,13 @@ from ncgen.model.urdf_reader import read_urdf
 from ncgen.validation import as_system_name
 
 MOVABLE = ("revolute", "continuous", "prismatic")
+#: Keys of ``collisions`` that choose the contacts, and the contact keywords it may give.
+COLLISION_KEYS = ("ground", "self", "exclude")
+CONTACT_KEYS = ("mu", "restitution", "stiffness", "damping", "exponent", "slip_velocity")
+
+
+class UrdfCollisionWarning(UserWarning):
+    """Pairs of links' collision shapes that no contact element joins (``collisions`` with ``self``)."""
 
 #: Relative tolerance under which a principal moment sum ``I_a + I_b − I_c`` counts as zero
 #: (a thin disc or plate, whose natural-coordinate mass matrix is singular).
@@ -204,41 +221,111 @@ def system_from_urdf(source, system_class, *, floating_base: bool = False, gravi
                               offset=j.mimic.offset or 0.0, name=identifier(f"{j.name}_mimic")))
     s.skipped_collisions = []
     if collisions is not False and collisions is not None:
-        _add_collisions(s, collisions, order, links, member_of, group_of, pose, where)
+        _add_collisions(s, collisions, order, links, member_of, group_of, pose, where, parent_of)
     return s
 
 
-def _add_collisions(s, collisions, order, links, member_of, group_of, pose, where) -> None:
-    """Contacts against the ground plane z = 0 for the links' collision geometry (see the
-    module docstring)."""
-    from ncgen.model.contacts import BoxPlane, CylinderPlane, SpherePlane
-    if collisions is True:
-        material = {}
-    elif isinstance(collisions, dict):
-        material = dict(collisions)
-    else:
-        raise ModelError(f"URDF {where}: collisions: expected True, False or a dict of contact keywords "
-                         f"(mu, restitution, ...), got {collisions!r}")
+def _add_collisions(s, collisions, order, links, member_of, group_of, pose, where, parent_of) -> None:
+    """The contacts of the links' collision geometry: against the ground plane, and between
+    links with ``self`` (see the module docstring)."""
+    from ncgen.model.contact_pairs import shape_contact
+    material, ground, self_contact, excluded = _collision_options(collisions, links, group_of, where)
+    shapes = []                                      # (group, member, name, shape) in link order
     for ln in order:
         m = member_of[group_of[ln]]
         for i, col in enumerate(links[ln].collisions or []):
-            g, name = col.geometry, identifier(f"{ln}_collision{i}")
-            if m.is_ground or g is None or (g.box is None and g.cylinder is None and g.sphere is None):
+            name = identifier(f"{ln}_collision{i}")
+            try:
+                shape = _collision_shape(col.geometry, *_local(m, pose[ln] @ _origin(col.origin)))
+            except ModelError as e:
+                raise ModelError(f"URDF {where}: link {ln!r}: <collision> {i}: {e}") from None
+            if shape is None or (m.is_ground and not self_contact):
                 s.skipped_collisions.append(name)
                 continue
-            R, p = _local(m, pose[ln] @ _origin(col.origin))
-            kw = dict(material, name=name)
-            try:
-                if g.box is not None:
-                    contact = BoxPlane(m, size=np.asarray(g.box.size, float), at=p, rotation=R, **kw)
-                elif g.cylinder is not None:
-                    contact = CylinderPlane(m, radius=g.cylinder.radius, length=g.cylinder.length, at=p, rotation=R,
-                                            **kw)
-                else:
-                    contact = SpherePlane(m, p, g.sphere.radius, **kw)
-            except TypeError as e:
-                raise ModelError(f"URDF {where}: collisions: {e}") from None
-            s.add_contact(contact)
+            if ground and not m.is_ground:
+                s.add_contact(shape_contact(m, shape, s.ground, None, name=name, **material))
+            shapes.append((group_of[ln], m, name, shape))
+    if not self_contact:
+        return
+    parent_group = {g: group_of[parent_of[g].parent] for g in set(group_of.values()) if g in parent_of}
+    refused = []
+    for (ga, ma, na, sa), (gb, mb, nb, sb) in itertools.combinations(shapes, 2):
+        if ga == gb or parent_group.get(ga) == gb or parent_group.get(gb) == ga or frozenset((ga, gb)) in excluded:
+            continue
+        name = f"{na}__{nb}"
+        reason = _pair_refusal(s, (ma, sa, mb, sb), name, material)
+        if reason:
+            s.skipped_collisions.append(name)
+            refused.append(f"{name} ({sa.kind}–{sb.kind}: {reason})")
+    if refused:
+        warnings.warn(f"URDF {where}: collisions: {len(refused)} pair(s) of links' shapes have no contact element "
+                      f"and are not modelled (system.skipped_collisions): " + "; ".join(refused),
+                      UrdfCollisionWarning, stacklevel=4)
+
+
+def _pair_refusal(s, shapes, name, material) -> str | None:
+    """Add the contact between two placed shapes ``(ma, sa, mb, sb)``; None, or why not."""
+    from ncgen.model.contact_pairs import pair_element, shape_contact
+    try:
+        pair_element(shapes[1].kind, shapes[3].kind)
+    except ModelError:
+        return "no contact element for that pair"
+    try:
+        s.add_contact(shape_contact(*shapes, name=name, **material))
+    except ModelError as e:                          # e.g. an element that takes no shape on the ground
+        return str(e)
+    return None
+
+
+def _collision_options(collisions, links, group_of, where) -> tuple[dict, bool, bool, set]:
+    """``(material, ground, self, excluded)`` of ``collisions`` (True or a dict); ``excluded``:
+    ``{frozenset((group, group))}`` of the ``exclude`` pairs of links."""
+    if collisions is True:
+        return {}, True, False, set()
+    if not isinstance(collisions, dict):
+        raise ModelError(f"URDF {where}: collisions: expected True, False or a dict of contact keywords "
+                         f"(mu, restitution, ...) and of ground, self, exclude, got {collisions!r}")
+    unknown = [k for k in collisions if k not in CONTACT_KEYS + COLLISION_KEYS]
+    if unknown:
+        raise ModelError(f"URDF {where}: collisions: unknown key(s) {', '.join(map(repr, unknown))}; expected "
+                         f"{', '.join(COLLISION_KEYS + CONTACT_KEYS)}")
+    flags = {}
+    for key, default in (("ground", True), ("self", False)):
+        flags[key] = collisions.get(key, default)
+        if not isinstance(flags[key], bool):
+            raise ModelError(f"URDF {where}: collisions: {key}: expected True or False, got {flags[key]!r}")
+    pairs = collisions.get("exclude", [])
+    if pairs and not flags["self"]:
+        raise ModelError(f"URDF {where}: collisions: exclude: filters the pairs of links, which only self=True makes")
+    if not isinstance(pairs, (list, tuple)):
+        raise ModelError(f"URDF {where}: collisions: exclude: expected a list of pairs of link names, got {pairs!r}")
+    excluded = set()
+    for k, pair in enumerate(pairs):
+        if not (isinstance(pair, (list, tuple)) and len(pair) == 2 and all(isinstance(x, str) for x in pair)):
+            raise ModelError(f"URDF {where}: collisions: exclude[{k}]: expected a pair of link names, got {pair!r}")
+        for ln in pair:
+            if ln not in links:
+                raise ModelError(f"URDF {where}: collisions: exclude[{k}]: {ln!r} is not a link of this robot "
+                                 f"(links: {', '.join(links)})")
+        excluded.add(frozenset(group_of[ln] for ln in pair))
+    material = {k: v for k, v in collisions.items() if k in CONTACT_KEYS}
+    return material, flags["ground"], flags["self"], excluded
+
+
+def _collision_shape(g, R, p):
+    """The :mod:`~ncgen.model.shapes` shape of a URDF collision geometry placed at ``(R, p)``
+    in its member's frame; None for a mesh or no geometry."""
+    from ncgen.model.shapes import Box, Cylinder, Sphere
+    place = dict(position=p, rotation=R)
+    if g is None:
+        return None
+    if g.box is not None:
+        return Box(*np.asarray(g.box.size, float), **place)
+    if g.cylinder is not None:
+        return Cylinder(g.cylinder.radius, g.cylinder.length, **place)
+    if g.sphere is not None:
+        return Sphere(g.sphere.radius, **place)
+    return None
 
 
 def _lump(g: Group, links, pose) -> None:
