@@ -58,6 +58,7 @@ import numpy as np
 from ncgen.assembly.contacts import EDGE_TOL
 from ncgen.model.capsule_contacts import CapsuleSphere
 from ncgen.model.contacts import BoxCorner, EdgeContact, SphereBox, SpherePlane, SphereSphere
+from ncgen.model.sharing import share_coordinates
 
 #: Relative slack of the lower bounds (see the module docstring).
 BOUND_SLACK = 1e-6
@@ -149,14 +150,17 @@ def _features(pc) -> tuple[list, dict | None, tuple]:
     return None, None, (1.0, 0.0, math.inf, True)
 
 
-def _side(member, layout, feats, dim) -> Side:
-    """The bounding volume of ``feats`` (``(point, radius)``) on ``member``."""
+def _side(member, layout, feats, dim, built) -> Side:
+    """The bounding volume of ``feats`` (``(point, radius)`` in ``member``'s frame) on
+    ``member``; ``built``: the members as the model was built, by name, whose coordinate
+    types the layout indexes (coordinate sharing re-bases a body on its joints' points and
+    axes: same frame, other local coordinates)."""
     radius = max((r for _, r in feats), default=0.0)
     if member.is_ground:
         pts = np.array([np.asarray(x, float) for x, _ in feats])
         lo, hi = pts.min(axis=0), pts.max(axis=0)
         return Side("fixed", fixed=(lo + hi) / 2, radius=float(np.linalg.norm(hi - lo) / 2 + radius))
-    rigid = member.rigid
+    rigid = built[member.name].rigid
     cs = np.array([rigid.affine(np.asarray(x, float)) for x, _ in feats]).reshape(len(feats), -1)
     k = cs.shape[1]
     lo, hi = cs.min(axis=0), cs.max(axis=0)
@@ -172,8 +176,8 @@ def _side(member, layout, feats, dim) -> Side:
     return Side("member", idx=idx, centre=C0, axes=axes, extents=e, radius=float(radius), gnorm=gnorm)
 
 
-def _element_sides(element, pcs, layout, dim):
-    """The two :class:`Side` s of ``element`` and its bound constants."""
+def _element_sides(element, pcs, layout, dim, built):
+    """The two :class:`Side` s of ``element`` and its bound constants (``built``: :func:`_side`)."""
     members = element.members()
     feats: dict[int, list] = {id(m): [] for m in members}
     planes, bounds, known = [], [], True
@@ -200,7 +204,7 @@ def _element_sides(element, pcs, layout, dim):
             sides.append(Side("halfspace", fixed=np.asarray(plane["point"], float),
                               normal=np.asarray(plane["normal"], float)))
         else:
-            sides.append(_side(m, layout, feats[id(m)], dim))
+            sides.append(_side(m, layout, feats[id(m)], dim, built))
     return sides, kappa, dmin, cap, rate_bounded
 
 
@@ -222,10 +226,21 @@ def pair_system(model):
     return system if names == list(model.contact_names) else None
 
 
+def built_members(model, system) -> dict:
+    """``system``'s members as ``model`` was built from them, by name: re-based by coordinate
+    sharing when the build shared coordinates (the same deterministic pass as
+    :func:`ncgen.assembly.build.build_model`), else ``system``'s own."""
+    options = model.recipe[1]
+    if options.get("share") and not options.get("fix"):
+        system = share_coordinates(system)[0]
+    return system.members
+
+
 def pair_kernels(model) -> PairKernels:
     """The element kernels and table of ``model`` (nonsmooth contacts; module docstring);
     ``model`` must have a :func:`pair_system`."""
     system, layout, dim = pair_system(model), model.layout, model.dim
+    built = built_members(model, system)
     jac = model.functions["contact_jacobian"]
     q, p = jac.sx_in(0), jac.sx_in(1)
     WN, WT = jac(q, p)                        # the flat rows' expressions (not derived again)
@@ -267,7 +282,7 @@ def pair_kernels(model) -> PairKernels:
                                       ["g"]),
                           ca.Function(f"step_pair{k}_rows", rowf.sx_in(), rowf.call(rowf.sx_in()),
                                       ["q_a", "q_b", "p"], ["g", "W"])]
-        sides, kappa, dmin, cap, rate_bounded = _element_sides(element, pcs, layout, dim)
+        sides, kappa, dmin, cap, rate_bounded = _element_sides(element, pcs, layout, dim, built)
         elements.append(Element(element.name, first, len(pcs), kernels[key], idx_a, idx_b, const_a, const_b,
                                 tuple(sides), kappa, dmin, cap, rate_bounded, [pc.mu > 0 for pc in pcs]))
         first += len(pcs)
