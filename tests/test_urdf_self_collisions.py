@@ -66,15 +66,15 @@ def test_pairs_without_an_element_are_warned_about_and_listed():
     assert [c.name for c in s.contacts] == PAIRS + ["link1_collision1__link3_tip_collision0"]   # CylinderSphere
 
 
-def test_folded_arm_rests_on_its_sphere_with_the_torque_balance_force():
+@pytest.mark.parametrize("share", [True, False])
+def test_folded_arm_rests_on_its_sphere_with_the_torque_balance_force(share):
     """Links 1 and 2 turn about vertical axes, so the vertical forces leave them still;
     link3 (with the welded tip, mass m at distance c from the wrist) rests on the sphere at
     distance d: N d cos θ = m g c cos θ, so N = m g c / d whatever the resting angle θ.
-
-    Built with ``share=False``: with shared coordinates the broad phase's bound is wrong
-    (see the xfail below)."""
+    With shared coordinates (the default) the links are re-based on their joints, which the
+    broad phase's bounds must follow (the sphere sank 18 mm into link1 when they did not)."""
     s = arm(**SELF)
-    model = s.build(contacts="nonsmooth", share=False)
+    model = s.build(contacts="nonsmooth", share=share)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")               # the box corners near the face: redundant rows
         tr = nc.simulate(model, 1.0, 0.01, method="stepper", substeps=10)
@@ -95,17 +95,20 @@ def test_folded_arm_rests_on_its_sphere_with_the_torque_balance_force():
     assert E[-1] < E[0] - 0.1                                 # the landing's loss (e = 0)
 
 
-@pytest.mark.xfail(strict=True, reason="broad phase (ncgen/assembly/pair_kernels.py, heap36's): with shared "
-                   "coordinates a body's bounding sphere is placed by the member's own frame, not the built "
-                   "model's local coordinates, so its lower bound exceeds the true gap and the stepper skips "
-                   "the element: the arm's sphere sinks 18 mm into link1")
 def test_broad_phase_bound_is_below_the_gap_with_shared_coordinates():
+    """Every element's lower bound is below each of its gaps, at folded and random poses of
+    the re-based (shared) links."""
     from ncgen.assembly.pair_kernels import element_bounds, pair_kernels
     model = arm(**SELF).build(contacts="nonsmooth")
-    element = pair_kernels(model).elements[1]
-    for wrist in (0.0, -0.2, -0.38):
-        q, _ = model.from_joint_space(np.array([0.0, 0.0, wrist]), np.zeros(3))
-        assert element_bounds(element, q)[0] <= model.gap(q)[-1] + 1e-12
+    assert model.sharing.eliminated                          # the links are re-based
+    elements = pair_kernels(model).elements
+    rng = np.random.default_rng(3)
+    poses = [np.array([0.0, 0.0, w]) for w in (0.0, -0.2, -0.38)] + list(rng.uniform(-1.5, 1.5, (20, 3)))
+    for pose in poses:
+        q, _ = model.from_joint_space(pose, np.zeros(3))
+        g = model.gap(q)
+        for element in elements:
+            assert element_bounds(element, q)[0] <= g[element.first:element.first + element.count].min() + 1e-12
 
 
 def test_skipped_collisions_survive_pickling():
