@@ -11,8 +11,11 @@ box must end 0.15 m to the right, upright, everything at rest, in T = 1 s, with 
 
 Status: **not solved yet.**  From the rest guess the homotopy's first solve (σ = 0.1, or
 σ = 1) succeeds and the next (σ = 1e-3 or 1e-2, κ = 0.01 or 0.1) ends "locally infeasible"
-with the complementarity residual at exactly sqrt(σ) (a pair stuck at a = c = sqrt(σ), not
-identified); N = 16 and 20 fail alike.  With the final velocities left free (only the box's
+with the complementarity residual at exactly sqrt(σ): at the last iterate (σ = 1e-2 from
+σ₀ = 1) the box's top corners, 0.1 m above the floor, carry 0.1 N each (a·c = σ: the
+relaxation lets contacts far apart push), and the floor's and the pusher's pairs sit at the
+bound at several nodes; why IPOPT finds no feasible point is not isolated.  N = 16 and 20 fail
+alike.  With the final velocities left free (only the box's
 pose imposed) N = 10 solved (residual 2.5e-12, replay 4e-4 m), but its box then keeps an
 alternating node velocity of ±0.04 m/s at rest (the friction law acts on each interval's mean
 velocity, which is 0, so the node velocities of a sticking body are held by nothing but the
