@@ -63,8 +63,14 @@ from ncgen.errors import OptimizationError
 from ncgen.optim.diagnostics import SUCCESS
 from ncgen.optim.transcription import Discretisation, Horizon, Transcription, guess_times
 
-#: Point-contact kinds whose gap is smooth in q (ncgen.assembly.contacts): transcribed here.
-SUPPORTED_KINDS = ("SpherePlane", "SphereSphere", "BoxPlane", "CapsulePlane", "CylinderPlane")
+#: Point-contact kinds transcribed here: their gap (ncgen.assembly.contacts, the formulas of the
+#: simulator's pair kernels) is smooth in q, or, a sphere against a box, continuously
+#: differentiable wherever the gap is ≥ 0 (the distance to a convex body; its normal and
+#: tangents those of the face, edge or corner nearest to the sphere).  Refused, named, until
+#: transcribed: box corners against a box (``BoxBox``: the gap jumps from face to face),
+#: edge crossings, capsules against spheres, capsules and boxes, a cylinder against a sphere,
+#: a mesh against a plane.
+SUPPORTED_KINDS = ("SpherePlane", "SphereSphere", "BoxPlane", "CapsulePlane", "CylinderPlane", "SphereBox")
 
 #: Default homotopy and discretisation settings (``OptimalControl(contacts={...})``).
 DEFAULTS = {
@@ -119,8 +125,8 @@ def refuse_unsupported(model, method: str) -> None:
     if bad:
         raise OptimizationError(
             f"model {model.name!r}: no optimal-control transcription handles the contact(s) "
-            f"{', '.join(_label(c) for c in bad)}: their gap is piecewise (faces, edges, corners of a box); "
-            f"the contact-implicit transcription handles {', '.join(SUPPORTED_KINDS)}. Build the model with "
+            f"{', '.join(_label(c) for c in bad)}: the contact-implicit transcription handles "
+            f"{', '.join(SUPPORTED_KINDS)} only. Build the model with "
             "contacts='smooth' to optimise with the compliant law")
 
 
