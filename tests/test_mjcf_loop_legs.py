@@ -96,13 +96,13 @@ def test_hanging_legs_keep_their_loops_closed_for_10_s():
     configuration swing under gravity and the preloaded heel springs with their joint damping
     (IDAS, ``joint_dynamics=True``, rtol 1e-10): the anchors of both connects stay within
     1e-10 m for 10 s, and ``E(t) + W_damping(t) = E(0)`` (the damping work ``∫ Σ c θ̇² dt``
-    by Simpson's rule on the 10 ms output grid) to 1e-3 of the work."""
+    by Simpson's rule on the 5 ms output grid) to 2e-4 of the work."""
     system = without_friction_and_limits(import_quietly(PATH.read_text().replace('<freejoint name="root"/>', "")))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         model = system.build()
     assert model.dof == 10
-    dt = 1e-2
+    dt = 5e-3
     traj = nc.simulate(model, 10.0, dt, rtol=1e-10, atol=1e-12, joint_dynamics=True)
     js = model.joint_space
     c = np.zeros(js.nv)
@@ -116,5 +116,5 @@ def test_hanging_legs_keep_their_loops_closed_for_10_s():
     assert np.ptp(knees) > 0.1 and work[-1] > 0.1
     imbalance = np.max(np.abs(traj.energy + work - traj.energy[0]))
     gap = anchor_gap(model, traj.q)
-    assert imbalance < 1e-3 * work[-1]
+    assert imbalance < 2e-4 * work[-1]
     assert gap < 1e-10
