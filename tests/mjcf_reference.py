@@ -288,3 +288,14 @@ def loop_qacc(mj, d):
     MJ = np.linalg.solve(M, J.T)
     lam = np.linalg.lstsq(J @ MJ, J @ d.qacc + Jdv, rcond=1e-12)[0]
     return d.qacc - MJ @ lam
+
+
+def on_loops(model, rng, spread: float):
+    """A random state on the constraints: ``q0`` moved along the tangent space, then by
+    minimum-norm Newton onto ``Φ = 0``; a random velocity in the null space of ``A(q)``."""
+    from ncgen.assembly.manifold import newton, null_basis
+    N = null_basis(np.asarray(model.A(model.q0)), model.nq)
+    q, _, residual = newton(lambda x: np.asarray(model.phi(x)).ravel(), lambda x: np.asarray(model.A(x)),
+                            model.q0 + N @ rng.normal(0.0, spread, N.shape[1]), np.arange(model.nq), tol=1e-13)
+    assert residual <= 1e-13
+    return q, null_basis(np.asarray(model.A(q)), model.nq) @ rng.normal(0.0, 1.0, N.shape[1])

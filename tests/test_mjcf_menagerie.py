@@ -26,7 +26,7 @@ from ncgen.model.mjcf import MjcfWarning
 
 mujoco = pytest.importorskip("mujoco")
 
-from mjcf_reference import (JointMap, joint_ode, loop_qacc, mujoco_without_meshes,  # noqa: E402
+from mjcf_reference import (JointMap, joint_ode, loop_qacc, mujoco_without_meshes, on_loops,  # noqa: E402
                             random_state, to_mujoco)
 from test_mjcf import without_friction_and_limits  # noqa: E402
 
@@ -94,17 +94,6 @@ def cassie():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")              # the foot loops' dependent rows, named at build
         return system, system.build()
-
-
-def on_loops(model, rng, spread: float):
-    """A random state on the constraints: ``q0`` moved along the tangent space, then by
-    minimum-norm Newton onto ``Φ = 0``; a random velocity in the null space of ``A(q)``."""
-    from ncgen.assembly.manifold import newton, null_basis
-    N = null_basis(np.asarray(model.A(model.q0)), model.nq)
-    q, _, residual = newton(lambda x: np.asarray(model.phi(x)).ravel(), lambda x: np.asarray(model.A(x)),
-                            model.q0 + N @ rng.normal(0.0, spread, N.shape[1]), np.arange(model.nq), tol=1e-13)
-    assert residual <= 1e-13
-    return q, null_basis(np.asarray(model.A(q)), model.nq) @ rng.normal(0.0, 1.0, N.shape[1])
 
 
 def test_cassie_accelerates_as_mujoco_with_its_loops_held(cassie):
