@@ -6,6 +6,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 pytest.importorskip("yourdfpy")
@@ -86,3 +87,34 @@ def test_cli_check_of_a_looped_urdf_exits_1_at_once(tmp_path):
                        timeout=60)
     assert r.returncode == 1, r.stderr
     assert "loop" in r.stderr and "internal error" not in r.stderr
+
+
+PLACEHOLDER = (1e-6,) * 6        # Go1's and ANYmal's base link: rank one, I_a + I_b < I_c
+
+
+def test_a_placeholder_inertia_welded_to_a_body_is_lumped_into_it():
+    """A link of non-physical inertia welded to a massive one is accepted (only the lumped
+    body is a rigid body), and the lumped inertia is the parallel-axis sum."""
+    parts = [link("a"), link("pad", mass=1e-6, inertia=PLACEHOLDER), joint("ja", "base", "a"),
+             joint("w", "a", "pad", kind="fixed", xyz="0 0 0")]
+    s = nc.System.from_urdf(robot(*parts))
+    (body,) = s.members.values()
+    expected = np.diag([0.01, 0.02, 0.025]) + 1e-6 * np.ones((3, 3))     # both at the same point
+    np.testing.assert_allclose(body.rigid.mass, 1.0 + 1e-6, rtol=1e-15)
+    np.testing.assert_allclose(body.spec["inertia"], expected, atol=1e-15)
+
+
+def test_a_placeholder_inertia_alone_or_lumped_into_nothing_physical_is_refused():
+    alone = [link("a", inertia=PLACEHOLDER), joint("ja", "base", "a")]
+    with pytest.raises(nc.ModelError, match=r"link 'a': the inertia tensor is not physical"):
+        nc.System.from_urdf(robot(*alone))
+    welded = [link("a", mass=1e-6, inertia=PLACEHOLDER), link("pad", mass=1e-6, inertia=PLACEHOLDER),
+              joint("ja", "base", "a"), joint("w", "a", "pad", kind="fixed", xyz="0 0 0")]
+    with pytest.raises(nc.ModelError, match=r"link\(s\) a, pad \(moved by joint 'ja'\): the inertia tensor is not physical"):
+        nc.System.from_urdf(robot(*welded))
+
+
+def test_contact_functions_of_a_model_without_contacts_are_refused_by_name():
+    model = nc.System.from_urdf(robot(*GOOD)).build()
+    with pytest.raises(nc.ModelError, match=r"has no function 'gap' \(it has no contacts\); its functions: .*phi"):
+        model.gap(model.q0)

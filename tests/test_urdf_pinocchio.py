@@ -32,6 +32,8 @@ ROBOTS = {
     "panda": ("panda_description/urdf/panda.urdf", False),
     "ur5": ("ur_description/urdf/ur5_robot.urdf", False),
     "solo12": ("solo_description/robots/solo12.urdf", True),
+    # its base link is a placeholder of non-physical inertia (1e-6 in every entry) welded to the trunk
+    "go1": ("go1_description/urdf/go1.urdf", True),
 }
 N_STATES = 20
 

@@ -282,7 +282,11 @@ class Model:
         return out
 
     def _call(self, name, **kw):
-        f = self.functions[name]
+        f = self.functions.get(name)
+        if f is None:
+            why = (" (it has no contacts)" if name in ("gap", "contact_jacobian", "contact_force") else "")
+            raise ModelError(f"model {self.name!r} has no function {name!r}{why}; its functions: "
+                             f"{', '.join(sorted(self.functions))}")
         a = self._args(**kw)
         res = f.call({k: a[k] for k in f.name_in()})
         outs = [np.array(res[k]) for k in f.name_out()]

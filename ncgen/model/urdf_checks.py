@@ -36,8 +36,10 @@ def check_urdf_document(text: str, where: str) -> None:
         raise ModelError(f"URDF {where}: expected a <robot> root element, found <{robot.tag}>{hint}")
     links = _named(robot, "link", where)
     joints = _named(robot, "joint", where)
+    welded = {el.get("link") for j in joints.values() if j.get("type") == "fixed"
+              for el in (j.find("parent"), j.find("child")) if el is not None}
     for name, link in links.items():
-        _check_link(link, f"URDF {where}: link {name!r}")
+        _check_link(link, f"URDF {where}: link {name!r}", lumped=name in welded)
     parent_of: dict[str, str] = {}
     for name, joint in joints.items():
         what = f"URDF {where}: joint {name!r}"
@@ -96,7 +98,12 @@ def _check_no_loop(joints: dict, where: str) -> None:
         done.update(path)
 
 
-def _check_link(link, what: str) -> None:
+def _check_link(link, what: str, lumped: bool) -> None:
+    """Finite numbers, a mass ≥ 0 and principal moments ≥ 0; and ``I_a + I_b ≥ I_c`` unless
+    the link is ``lumped`` (welded by a fixed joint): then only the inertia of the body it is
+    lumped into is a rigid body's (checked when the groups are made, :mod:`ncgen.model.urdf`) —
+    stock URDFs weld placeholder links of a point-like, non-physical inertia (Go1's and
+    ANYmal's ``base``: 1e-6 in every entry) to the body that carries the mass."""
     inertial = link.find("inertial")
     if inertial is None:
         return
@@ -114,7 +121,7 @@ def _check_link(link, what: str) -> None:
     e = np.linalg.eigvalsh(I)
     tol = INERTIA_TOL * max(float(np.abs(e).max()), 1e-300)
     triangle = min(e[1] + e[2] - e[0], e[0] + e[2] - e[1], e[0] + e[1] - e[2])
-    if e.min() < -tol or triangle < -tol:
+    if e.min() < -tol or (triangle < -tol and not lumped):
         raise ModelError(f"{what}: the inertia tensor is not physical: principal moments "
                          f"{np.array2string(e, precision=6)} kg·m² (expected all ≥ 0 and I_a + I_b ≥ I_c)")
 
