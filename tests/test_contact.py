@@ -661,3 +661,25 @@ def test_energy_check_with_contacts_is_one_sided(monkeypatch, drops):
     monkeypatch.setattr(checks, "ENERGY_FRACTION", -0.5)
     with pytest.raises(SimulationError, match="rose through its contacts"):
         nc.simulate(drops, 1.0, 1e-3, method="stepper", substeps=10)
+
+
+def test_contact_forces_of_a_run_with_a_python_feedback_are_the_steppers():
+    """A mass pressed on the floor by a feedback force: its contact force is the stepper's mean
+    force per output interval (m g + push, as in the same run with the inputs given as a
+    table), not the force at the sampled states, where a resting contact sits a round-off gap
+    apart (it read 0 N throughout before)."""
+    import casadi as ca
+    s = nc.System("pressed")
+    p = s.add_point("m", mass=2.0, position=(0, 0, 0.0))
+    push = s.add_input("push")
+    s.add_force(nc.PointForce(p, (0, 0, 0), force=ca.vertcat(0, 0, -push)))
+    s.add_contact(nc.SpherePlane(p, radius=0.0, name="floor"))
+    model = s.build(contacts="nonsmooth")
+    t_out = np.linspace(0, 0.05, 6)
+    fed = nc.simulate(model, 0.05, 0.01, method="stepper", u=lambda t, q, v: [3.0 + 10 * t])
+    table = nc.simulate(model, 0.05, 0.01, method="stepper", u=np.array([[3.0 + 10 * t] for t in t_out]),
+                        hold="zoh")
+    expected = 2.0 * G + 3.0 + 10 * t_out[:-1]               # the push held over each interval
+    np.testing.assert_allclose(fed.contact_normal[1:, 0], expected, rtol=1e-9)
+    np.testing.assert_allclose(fed.contact_normal, table.contact_normal, rtol=1e-9, atol=1e-12)
+    assert fed.contact_normal[0, 0] == 0.0 and np.all(fed.contact_state[1:, 0] > 0)

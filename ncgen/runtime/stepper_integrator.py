@@ -87,6 +87,7 @@ def _stepwise(model, run: Run, opts: SimulationOptions) -> Trajectory:
     t, p, feedback = run.t, run.p, run.feedback
     step_opts = dataclasses.replace(opts, method="stepper", check=False, estimate=False)
     Q, V, LAM, UU, S = [run.q], [run.v], [], [], []
+    IMP: list | None = None             # nonsmooth contacts: each interval's impulse sums (N·s)
     info = {"method": "stepper", "backend": "compiled", "feedback": feedback[0], "hold": "zoh",
             "substeps": opts.substeps, "estimate": False,
             **({"rtol": opts.rtol, "atol": opts.rtol if opts.atol is None else opts.atol} if opts.rtol else {})}
@@ -103,7 +104,7 @@ def _stepwise(model, run: Run, opts: SimulationOptions) -> Trajectory:
                     from e.__cause__
             LAM.append(run.multipliers(float(t[k]), Q[-1], V[-1], UU[-1]))
             UU.append(UU[-1])
-            traj = _checked(model, opts, _states(model, t, Q, V, LAM, UU, p, info, part), np.array(S),
+            traj = _checked(model, opts, _states(model, t, Q, V, LAM, UU, p, info, part, IMP), np.array(S),
                             f" Then {str(e).rstrip('.')}.")
             raise with_partial(e, traj) from e.__cause__
         lam = run.multipliers(float(t[k]), Q[-1], V[-1], uk)
@@ -112,27 +113,39 @@ def _stepwise(model, run: Run, opts: SimulationOptions) -> Trajectory:
         try:
             part = simulate_stepper(model, t[k:k + 2], np.vstack([uk, uk]), p, Q[-1], V[-1], lam, step_opts)
         except SimulationError as e:
-            traj = _states(model, t, Q, V, LAM, UU, p, {**info, "complete": False}, part)
+            traj = _states(model, t, Q, V, LAM, UU, p, {**info, "complete": False}, part, IMP)
             traj = _checked(model, opts, traj, np.array(S), f" The stepper then failed at t = {t[k]:.6g} s: {e}")
             traj.info["message"] = str(e)
             raise SimulationError(str(e), time=float(t[k]), trajectory=traj) from None
         Q.append(part.q[-1])
         V.append(part.v[-1])
         S.append(_interval_row(part))
+        if "contacts" in part.info:
+            IMP = (IMP or []) + [_interval_impulses(part)]
     LAM.append(part.lam[-1])
     UU.append(UU[-1])
     info.update(wall_time=time.perf_counter() - start, complete=True)
-    return _checked(model, opts, _states(model, t, Q, V, LAM, UU, p, info, part), np.array(S))
+    return _checked(model, opts, _states(model, t, Q, V, LAM, UU, p, info, part, IMP), np.array(S))
 
 
-def _states(model, t, Q, V, LAM, UU, p, info: dict, part) -> Trajectory:
+def _states(model, t, Q, V, LAM, UU, p, info: dict, part, IMP=None) -> Trajectory:
     """The rows reached so far, as a trajectory (``part``: the last interval's run, for its
-    scheme's name and stages)."""
+    scheme's name and stages; ``IMP``: with nonsmooth contacts, each interval's impulse sums,
+    so the contact outputs are the stepper's mean forces as in a run without feedback — the
+    states alone put a resting contact a round-off gap apart, with no force)."""
     k = len(Q)
     if part is not None:
         info = {**info, **{key: part.info[key] for key in ("scheme", "order", "stages", "h") if key in part.info}}
+    impulses = None if IMP is None else np.array(IMP[:k - 1]).reshape(k - 1, -1)
     return Trajectory.from_states(model, t[:k], np.array(Q), np.array(V), np.array(LAM[:k]), np.array(UU[:k]),
-                                  p, dict(info))
+                                  p, dict(info), impulses=impulses)
+
+
+def _interval_impulses(part: Trajectory) -> np.ndarray:
+    """The impulse sums (N·s, ``(nk·dim,)`` in :func:`~ncgen.runtime.contact_outputs.impulse_outputs`'
+    layout) of a one-interval nonsmooth run: its mean forces times the interval."""
+    dt = float(part.t[-1] - part.t[0])
+    return np.concatenate([part.contact_normal[-1][:, None], part.contact_tangent[-1]], axis=1).reshape(-1) * dt
 
 
 def _interval_row(part: Trajectory) -> list:
