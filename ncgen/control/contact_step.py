@@ -236,7 +236,7 @@ class ContactStepFunction:
         classified again after each solve until they settle; None when the active-contact
         equations meet a push-out (they have none)."""
         from ncgen.control.step_support import StepDidNotConverge
-        Z = eq.start(x, x1_c, P, sel)
+        Z = eq.start(x, x1_c, P, sel, u, p, t)
         for _ in range(MODE_PASSES):   # the modes depend on the free step, the slips, the push-out
             Z, lu, Ry = self._polish(eq, Z, x, u, p, t, sel, where)
             info = eq.info(Z, x, p, sel)
@@ -414,7 +414,7 @@ class AllContactEquations:
         nq = self.model.nq
         return (np.asarray(self._rows(xx[:nq], xx[nq:], p)[2].full()).ravel() for xx in (x1, x))
 
-    def start(self, x, x1, P, sel) -> np.ndarray:
+    def start(self, x, x1, P, sel, u, p, t) -> np.ndarray:
         """Newton's start: the free step and the final step from the stepper's end state."""
         nq, nc, L = self.model.nq, self.model.nc, self._L
         Z = np.zeros(L["vm"].stop)
