@@ -218,7 +218,7 @@ class ActiveContactEquations:
         in_Z = cols < nZ
         keys, where = np.unique(cols[in_Z] * nZ + rows[in_Z], return_inverse=True)
         indptr = np.searchsorted(keys // nZ, np.arange(nZ + 1))
-        flat_y = rows[~in_Z] * self.ny + cols[~in_Z] - nZ
+        flat_y = (cols[~in_Z] - nZ) * nZ + rows[~in_Z]       # column-major: R_y for SuperLU's solve
         self._tables = (src, rrows, nZ, in_Z, where, len(keys), keys % nZ, indptr, flat_y)
         self._active_key = key
         return self._tables
@@ -307,7 +307,7 @@ class ActiveContactEquations:
         R[:self.nZs] += R_s
         data = np.concatenate([J_Z, J_y] + data)
         R_Z = sp.csc_matrix((np.bincount(where, data[in_Z], nnz), indices, indptr), shape=(nZ, nZ))
-        R_y = np.bincount(flat_y, data[~in_Z], nZ * self.ny).reshape(nZ, self.ny)
+        R_y = np.bincount(flat_y, data[~in_Z], nZ * self.ny).reshape(self.ny, nZ).T
         return R, R_Z, R_y
 
     def _laws(self, Z, x, p, sel, active, src, rrows, nZ):
