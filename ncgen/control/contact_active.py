@@ -146,9 +146,8 @@ class ActiveContactEquations:
         # the smooth part's Jacobians as (row, column) lists in [Z; y]
         self._smooth_rc = [(np.array(smooth.sparsity_out(i).row()), np.array(smooth.sparsity_out(i).get_col()))
                            for i in (1, 2)]
-        rz, cz = self._smooth_rc[0]
-        self._block_masks = {a: (rz >= a) & (rz < b) & (cz >= a) & (cz < b)
-                             for a, b in ((0, 2 * self.n1), (2 * self.n1, 3 * self.n1), (3 * self.n1, 5 * self.n1))}
+        self._block_csc = {a: self._block_pattern(a, b)
+                           for a, b in ((0, 2 * self.n1), (2 * self.n1, 3 * self.n1), (3 * self.n1, 5 * self.n1))}
         self._scale = residual_scale(model)
         self._e_mu = np.array([[c["restitution"], c["mu"]] for c in model.contacts]).reshape(-1, 2)
         self._active_key = None
@@ -275,14 +274,23 @@ class ActiveContactEquations:
         self._block_newton(Z, x, u, p, t, end, tol, (R_s, J_Z))
         return Z
 
+    def _block_pattern(self, a: int, b: int):
+        """``(order, indices, indptr)``: the smooth part's diagonal block ``[a, b)`` of ``R_Z`` as
+        CSC, its data ``J_Z[order]`` (``J_Z``: the smooth part's nonzeros)."""
+        rz, cz = self._smooth_rc[0]
+        inside = np.flatnonzero((rz >= a) & (rz < b) & (cz >= a) & (cz < b))
+        M = sp.csc_matrix((inside + 1.0, (rz[inside] - a, cz[inside] - a)), shape=(b - a, b - a))
+        M.sort_indices()
+        return M.data.astype(int) - 1, M.indices, M.indptr
+
     def _block(self, J_Z, s, R_s) -> np.ndarray:
         """The Newton step ``J_ss⁻¹ R_s[s]`` of the smooth part's diagonal block ``s`` (0 where
         the block is singular)."""
-        mask = self._block_masks[s.start]
-        (rz, cz), n = self._smooth_rc[0], s.stop - s.start
-        J = sp.csc_matrix((J_Z[mask], (rz[mask] - s.start, cz[mask] - s.start)), shape=(n, n))
+        order, indices, indptr = self._block_csc[s.start]
+        n = s.stop - s.start
+        J = sp.csc_matrix((J_Z[order], indices, indptr), shape=(n, n))
         try:
-            d = spla.splu(J).solve(R_s[s])
+            d = spla.splu(J, permc_spec="NATURAL", diag_pivot_thresh=0.1).solve(R_s[s])
         except RuntimeError:     # singular: left to the polish (least-norm solves)
             return np.zeros(n)
         return d if np.all(np.isfinite(d)) else np.zeros(n)
