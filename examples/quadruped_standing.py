@@ -32,7 +32,7 @@ import ncgen as nc
 FLOOR, CLEARANCE, T, DT, HOLD = 0.45, 0.005, 2.0, 1e-3, 0.1
 THIGH, CALF, FOOT_RADIUS = 0.8, -1.6, 0.02          # rad, rad, m (the A1's foot spheres)
 LEG = 0.2                                            # m: thigh and calf lengths of the A1
-KP, KD = 80.0, 2.0                                   # N·m/rad, N·m·s/rad
+KP, KD = 80.0, 4.0                                   # N·m/rad, N·m·s/rad
 LEGS = ("FR", "FL", "RR", "RL")
 STAND = {f"{leg}_{j}_joint": a for leg in LEGS for j, a in (("hip", 0.0), ("thigh", THIGH), ("calf", CALF))}
 #: base height (m, world z) at which the feet of the standing posture are CLEARANCE above the floor
