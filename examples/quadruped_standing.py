@@ -64,9 +64,7 @@ def run(model):
 
 def held(model, traj, duration=HOLD):
     """The run continued open loop from its last state for ``duration`` (s), the last PD
-    torques held: the stepper's own contact forces (with a Python feedback, the trajectory's
-    ``contact_normal`` are the multipliers at the sampled states, zero while the feet sit a
-    fraction of a micrometre above the floor between steps)."""
+    torques held: a still posture under constant torques, whose feet must carry m g."""
     return nc.simulate(model, duration, DT, q0=traj.q[-1], v0=traj.v[-1], u=traj.u[-1], method="stepper")
 
 

@@ -83,6 +83,10 @@ def test_feet_carry_the_weight_once_settled(standing):
     mass = sum(float(i.find("mass").get("value")) for i in _urdf().iter("inertial"))
     late = traj.t >= SETTLED
     assert np.abs(traj.vj[late, 2]).max() < 1e-3                        # m/s: the base at rest
+    feet = [k for k, name in enumerate(traj.contact_names) if "foot" in name]
+    others = [k for k in range(len(traj.contact_names)) if k not in feet]
+    np.testing.assert_allclose(traj.contact_normal[late][:, feet].sum(axis=1), mass * G, rtol=1e-2)
+    assert np.abs(traj.contact_normal[late][:, others]).max() == 0.0   # under PD: only the feet touch
     rest = ex.held(model, traj)                  # the stepper's own contact forces, torques held
     feet = [k for k, name in enumerate(rest.contact_names) if "foot" in name]
     others = [k for k in range(len(rest.contact_names)) if k not in feet]
