@@ -250,6 +250,18 @@ def derived_function(model, what: str, build: Callable[[], object]):
     return f
 
 
+def stored_function(model, what: str):
+    """The function :func:`derived_function` stored beside ``model`` under ``what``, or None
+    (the model did not come through the store, or nothing was stored): nothing is derived."""
+    import casadi
+
+    key = model.data.store_key
+    path = None if key is None or not enabled() else _path(key, what)
+    if path is None or not path.is_file():
+        return None
+    return _read(path, key, lambda payload: casadi.Function.deserialize(payload.decode()))
+
+
 def _header(key: str) -> dict:
     return {"format": FORMAT, "ncgen": __version__, "key": key}
 
