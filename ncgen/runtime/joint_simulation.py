@@ -166,6 +166,8 @@ def choose_kernels(model, outputs: int, controller=None, joint_dynamics: bool = 
         return Choice(kernels, "chosen")
     if controller is not None or joint_dynamics:
         return Choice("flat", "the tables' loop takes no compiled controller and no joint dynamics")
+    if model.np:
+        return Choice("flat", "the tables' loop takes no parameters")
     if not compiler_present():
         return Choice("tables", "no C compiler") if _table_loop(model) is not None else \
             Choice("flat", "the tree tables do not cover the model")
