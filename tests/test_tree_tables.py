@@ -446,6 +446,8 @@ def test_joint_kernels_rule():
     assert bp.choose_joint_kernels(9, pays - 1, None).backend == "tables"
     choice = bp.choose_joint_kernels(9, pays, None)
     assert choice.backend == "flat" and "saves" in choice.reason
+    choice = bp.choose_joint_kernels(9, 10, None, tables_ready=False)          # the library not compiled yet
+    assert choice.backend == "flat" and "tree library is not compiled yet" in choice.reason
 
 
 def test_auto_joint_run_takes_the_tables_and_says_why(library, monkeypatch):
@@ -456,8 +458,15 @@ def test_auto_joint_run_takes_the_tables_and_says_why(library, monkeypatch):
     import ncgen.codegen.compile_cache as cc
     from ncgen.runtime.joint_simulation import choose_kernels
 
+    import ncgen.runtime.tree_library as tl
+
     model = small_tree(f"auto_tree_{os.getpid()}")
+    assert tl.tree_library_ready()                          # the fixture compiled it
     assert choose_kernels(model, 10).backend == "tables"
+    ready = tl.tree_library_ready
+    monkeypatch.setattr(tl, "tree_library_ready", lambda: False)
+    assert choose_kernels(model, 10).backend == "flat"      # not compiled yet: the model's own loop is cheaper
+    monkeypatch.setattr(tl, "tree_library_ready", ready)
     assert choose_kernels(model, 10, controller=nc.PD(kp=10.0, kd=1.0, target=[0.0, 0.0])).backend == "flat"
     assert choose_kernels(model, 10, joint_dynamics=True).backend == "flat"
     assert choose_kernels(model, 10, kernels="flat").reason == "chosen"

@@ -174,7 +174,8 @@ def choose_kernels(model, outputs: int, controller=None, joint_dynamics: bool = 
     ready = _flat_ready(model)
     if ready is None and _table_loop(model) is None:
         return Choice("flat", "the tree tables do not cover the model")
-    return choose_joint_kernels(model.joint_space.nv, outputs, ready)
+    from ncgen.runtime.tree_library import tree_library_ready
+    return choose_joint_kernels(model.joint_space.nv, outputs, ready, tables_ready=tree_library_ready())
 
 
 def _flat_ready(model) -> str | None:
