@@ -6,7 +6,10 @@ Python start-up, imports, the model (built, or read from the store of built mode
 ``ncgen/codegen/model_cache.py``), the compiled code (compiled, or found in the compile cache)
 and the integration all count.  Per model:
 
-* **first run**: an empty ``NCGEN_CACHE_DIR`` (nothing stored, nothing compiled);
+* **first run**: an ``NCGEN_CACHE_DIR`` empty but for the libraries compiled once per ncgen
+  version and compiler (the tree library, the element library, the fast caller: a user pays
+  them once, not per model; compiled before timing, :data:`PER_VERSION`) — nothing of the
+  model stored or compiled;
 * **later runs**: the same cache directory again (model read back, library found);
 * **store off**: later runs with ``NCGEN_MODEL_CACHE=0`` (the model built every time, as
   before the store; the compiled library still found), interleaved with the later runs;
@@ -86,15 +89,18 @@ def summary(name: str, samples: list[tuple[float, float]]) -> str:
             f"CPU min {min(cpus):7.3f} s, median {statistics.median(cpus):7.3f} s  ({len(samples)} runs)")
 
 
-def ncgen_runs(model: Path, t_end: float, rounds: int, base_env: dict) -> dict[str, list[tuple[float, float]]]:
-    """First, later and store-off runs of ``ncgen simulate model`` (see the module docstring)."""
-    cmd = [sys.executable, "-m", "ncgen.cli", "simulate", str(model), "--t-end", str(t_end)]
+def ncgen_runs(model: Path, t_end: float, rounds: int, base_env: dict, per_version: Path,
+               kernels: str = "auto") -> dict[str, list[tuple[float, float]]]:
+    """First, later and store-off runs of ``ncgen simulate model --kernels kernels`` (see the
+    module docstring); each fresh cache starts with the per-version libraries of ``per_version``."""
+    cmd = [sys.executable, "-m", "ncgen.cli", "simulate", str(model), "--t-end", str(t_end), "--kernels", kernels]
     out: dict[str, list[tuple[float, float]]] = {"first run (empty cache)": [], "later runs (model stored)": [],
                                                  "later runs, store off": [], FIRST_DERIVED: []}
     with tempfile.TemporaryDirectory(prefix="ncgen-load-") as tmp:
         for r in range(rounds):
             cache = f"{tmp}/cache{r}"
             env = {**base_env, "NCGEN_CACHE_DIR": cache}
+            seed_per_version(per_version, Path(cache))
             out["first run (empty cache)"].append(run(cmd, env, tmp)[:2])
             for label, extra in (("later runs (model stored)", {}), ("later runs, store off", {"NCGEN_MODEL_CACHE": "0"})):
                 wall, cpu, text = run(cmd, {**env, **extra}, tmp)
@@ -104,8 +110,29 @@ def ncgen_runs(model: Path, t_end: float, rounds: int, base_env: dict) -> dict[s
             for entry in Path(cache).iterdir():          # all but the derivations: a model never seen
                 if entry.name != "derivations":
                     shutil.rmtree(entry) if entry.is_dir() else entry.unlink()
+            seed_per_version(per_version, Path(cache))
             out[FIRST_DERIVED].append(run(cmd, env, tmp)[:2])
     return out
+
+
+#: What a fresh cache starts with: the libraries compiled once per ncgen version and compiler
+#: (their index files name the libraries where they were compiled), the fast caller.
+PER_VERSION = ("tree-tables-*.json", "element-tables-*.json", "fast_call-*")
+#: Compiles the per-version libraries into a cache (the tree and element libraries, the fast caller).
+PER_VERSION_BUILD = """
+from ncgen.runtime.table_library import load_element_library
+from ncgen.runtime.tree_library import load_tree_library
+import ncgen.codegen.fast_call as fc
+load_tree_library(); load_element_library(); fc._module()
+"""
+
+
+def seed_per_version(per_version: Path, cache: Path) -> None:
+    """Copy the per-version entries of the cache ``per_version`` into ``cache``."""
+    cache.mkdir(parents=True, exist_ok=True)
+    for pattern in PER_VERSION:
+        for entry in per_version.glob(pattern):
+            (shutil.copytree if entry.is_dir() else shutil.copy2)(entry, cache / entry.name)
 
 
 #: A first run of a model (nothing stored, nothing compiled) after ncgen has run once: the
@@ -217,20 +244,28 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--t-end", type=float, default=0.1, help="simulated time of each run (s)")
     ap.add_argument("--smoke", action="store_true", help="slider_crank only, 1 round")
+    ap.add_argument("--kernels", default="auto", choices=("auto", "tables", "flat"),
+                    help="ncgen simulate --kernels (default auto)")
+    ap.add_argument("--panda-only", action="store_true", help="the Panda's ncgen runs only (no box_stack, "
+                    "no Python or reference loads)")
     args = ap.parse_args()
     print(machine())
     rounds = 1 if args.smoke else args.rounds
     urdf = panda_urdf()
-    models = [EXAMPLES / "slider_crank.toml"] if args.smoke else [urdf, EXAMPLES / "box_stack.toml"]
+    models = [EXAMPLES / "slider_crank.toml"] if args.smoke else [urdf] if args.panda_only else \
+        [urdf, EXAMPLES / "box_stack.toml"]
     with tempfile.TemporaryDirectory(prefix="ncgen-pyc-") as pyc:
         env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
         env.update(PYTHONPATH=str(ROOT), PYTHONPYCACHEPREFIX=pyc)
         run([sys.executable, "-c", "import ncgen, ncgen.cli, ncgen.codegen.model_cache, mujoco, pinocchio"], env, pyc)
+        per_version = Path(pyc, "per-version")
+        if not args.smoke:          # slider_crank needs none of them
+            run([sys.executable, "-c", PER_VERSION_BUILD], {**env, "NCGEN_CACHE_DIR": str(per_version)}, pyc)
         startup = [run([sys.executable, "-c", "pass"], env, pyc)[:2] for _ in range(rounds)]
         print(summary("python -c pass (start-up alone)", startup))
         for model in models:
             print(f"\n=== {model.stem}: ncgen simulate {model.name} --t-end {args.t_end:g}")
-            results = ncgen_runs(model, args.t_end, rounds, env)
+            results = ncgen_runs(model, args.t_end, rounds, env, per_version, args.kernels)
             for label, samples in results.items():
                 print(summary(label, samples))
             first = statistics.median(s[0] for s in results["first run (empty cache)"])
@@ -242,6 +277,8 @@ def main() -> None:
             print(f"RATIO later run, store off / stored, CPU: {off / on:.2f}")
             print(f"  heavy modules a later run imports: {later_imports(model, args.t_end, env) or 'none'}")
             print(f"  load average now: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
+        if args.panda_only:
+            return
         print(f"\n=== {urdf.stem} from Python: nc.System.from_urdf(path).build() in a fresh process "
               f"(the call; imports apart), interleaved with MuJoCo and Pinocchio loads")
         for label, samples in python_runs(urdf, rounds, env, pyc).items():

@@ -501,17 +501,17 @@ def test_compiled_joint_loop_is_found_without_writing_its_package(tmp_path, monk
 
     monkeypatch.setenv("NCGEN_CACHE_DIR", str(tmp_path))
     model = link(with_input=False)[0].build()
-    first = nc.simulate(model, 0.2, 0.05, method="joint")
+    first = nc.simulate(model, 0.2, 0.05, method="joint", kernels="flat")
     indexes = list(tmp_path.glob("joint-loop-*.json"))
     assert len(indexes) == 1
     model_data(model).joint_loops.clear()
     written = []
     real = jl.write_package
     monkeypatch.setattr(jl, "write_package", lambda *a, **k: written.append(a[0]) or real(*a, **k))
-    again = nc.simulate(model, 0.2, 0.05, method="joint")
+    again = nc.simulate(model, 0.2, 0.05, method="joint", kernels="flat")
     assert written == [] and np.array_equal(again.q, first.q)
     library = Path(json.loads(indexes[0].read_text())["library"])
     library.unlink()                      # (loaded in this process: removed, never overwritten)
     model_data(model).joint_loops.clear()
-    rebuilt = nc.simulate(model, 0.2, 0.05, method="joint")
+    rebuilt = nc.simulate(model, 0.2, 0.05, method="joint", kernels="flat")
     assert len(written) == 1 and np.array_equal(rebuilt.q, first.q)

@@ -228,15 +228,16 @@ def test_warnings_of_the_build_are_given_again_when_read_back(store):
 
 
 def test_cli_run_of_a_stored_urdf_model_equals_a_fresh_run(store, tmp_path, monkeypatch):
-    """``ncgen simulate robot.urdf`` (joint space): the second run reads the model and its
-    joint-space ODE from the store and gives the trajectory of a run with the store off."""
+    """``ncgen simulate robot.urdf --kernels flat`` (joint space, the model's own loop): the
+    second run reads the model and its joint-space ODE from the store and gives the trajectory
+    of a run with the store off."""
     from ncgen.cli import main
     urdf = str(nc.robots.urdf_path("ur5"))
     runs = {}
     for label, env in (("first", "1"), ("stored", "1"), ("off", "0")):
         monkeypatch.setenv(model_cache.ENV, env)
         out = tmp_path / f"{label}.npz"
-        assert main(["simulate", urdf, "--t-end", "0.05", "-o", str(out)]) in (0, None)
+        assert main(["simulate", urdf, "--t-end", "0.05", "--kernels", "flat", "-o", str(out)]) in (0, None)
         runs[label] = np.load(out)
     monkeypatch.setenv(model_cache.ENV, "1")
     key = load_model(urdf).data.store_key

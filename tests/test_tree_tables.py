@@ -422,3 +422,101 @@ def test_tree_package_is_deterministic_and_warning_free(tmp_path):
         out = subprocess.run([*cc.split(), "-std=c99", "-Wall", "-Wextra", "-Werror", "-O0", "-I.", "-c", src, "-o",
                               str(tmp_path / f"{src}.o")], cwd=a.path, capture_output=True, text=True, timeout=600)
         assert out.returncode == 0, out.stderr[-3000:]
+
+
+def small_tree(name: str):
+    """A hinge and a slider on two bodies: a tree the tables cover, new to this process."""
+    s = nc.System(name, gravity=(0.0, 0.0, -G))
+    b1 = s.add_body("b1", mass=1.3, inertia=np.diag([0.1, 0.2, 0.25]), position=(0.4, 0.0, 0.1))
+    b2 = s.add_body("b2", mass=0.8, inertia=np.diag([0.05, 0.06, 0.07]), position=(0.9, 0.1, 0.0))
+    s.add_joint(nc.Revolute(s.ground, b1, at=(0.0, 0.0, 0.0), axis=(0.0, 1.0, 0.0), name="hinge"))
+    s.add_joint(nc.Prismatic(b1, b2, at=(0.8, 0.0, 0.0), axis=(1.0, 0.0, 0.0), name="slide"))
+    return s.build()
+
+
+def test_joint_kernels_rule():
+    """``backend_policy.choose_joint_kernels``: the tables for a short run, the flat loop when
+    it is ready or when the run is long enough for its faster evaluations to pay its compile."""
+    from ncgen.runtime import backend_policy as bp
+
+    assert bp.choose_joint_kernels(9, 10, None).backend == "tables"
+    assert bp.choose_joint_kernels(9, 10, "loaded in this process").backend == "flat"
+    cost = bp.JOINT_COMPILE_FIXED_SECONDS + 9 * bp.JOINT_COMPILE_SECONDS_PER_RATE
+    pays = int(cost / (bp.JOINT_EVALS_PER_OUTPUT * 9 * bp.TABLES_EXTRA_SECONDS)) + 1
+    assert bp.choose_joint_kernels(9, pays - 1, None).backend == "tables"
+    choice = bp.choose_joint_kernels(9, pays, None)
+    assert choice.backend == "flat" and "saves" in choice.reason
+    choice = bp.choose_joint_kernels(9, 10, None, tables_ready=False)          # the library not compiled yet
+    assert choice.backend == "flat" and "tree library is not compiled yet" in choice.reason
+
+
+def test_auto_joint_run_takes_the_tables_and_says_why(library, monkeypatch):
+    """``method="joint"`` with ``kernels="auto"`` runs a new tree on the tables (nothing
+    compiled for it: ``compile_package`` fails if called) and the summary says which kernels
+    ran and why; a controller, joint dynamics or the user's choice send it to the flat loop;
+    a bad value is refused by name."""
+    import ncgen.codegen.compile_cache as cc
+    from ncgen.runtime.joint_simulation import choose_kernels
+
+    import ncgen.runtime.tree_library as tl
+
+    model = small_tree(f"auto_tree_{os.getpid()}")
+    assert tl.tree_library_ready()                          # the fixture compiled it
+    assert choose_kernels(model, 10).backend == "tables"
+    ready = tl.tree_library_ready
+    monkeypatch.setattr(tl, "tree_library_ready", lambda: False)
+    assert choose_kernels(model, 10).backend == "flat"      # not compiled yet: the model's own loop is cheaper
+    monkeypatch.setattr(tl, "tree_library_ready", ready)
+    assert choose_kernels(model, 10, controller=nc.PD(kp=10.0, kd=1.0, target=[0.0, 0.0])).backend == "flat"
+    assert choose_kernels(model, 10, joint_dynamics=True).backend == "flat"
+    assert choose_kernels(model, 10, kernels="flat").reason == "chosen"
+    with pytest.raises(nc.NcgenError, match="kernels: expected one of 'auto', 'tables', 'flat', got 'table'"):
+        choose_kernels(model, 10, kernels="table")
+
+    def no_compile(*a, **k):
+        raise AssertionError("the compiler was called")
+    monkeypatch.setattr(cc, "compile_package", no_compile)
+    traj = nc.simulate(model, 0.1, 0.01, method="joint")
+    assert (traj.info["kernels"], traj.info["kernels_reason"].split(";")[0]) == ("tables", "nothing to compile")
+    assert "  kernels: tables: nothing to compile" in traj.summary()
+    assert traj.energy_drift <= 1e-6 * max(1.0, traj.energy_scale)
+
+
+def test_cli_kernels_option_and_stored_tables(library, tmp_path, monkeypatch, capsys):
+    """``ncgen simulate robot.urdf --kernels tables`` prints the kernels line; a later run of
+    the same file reads the model's tree tables from the store of built models (not packed
+    again)."""
+    from ncgen.cli import main
+    from ncgen.codegen import tree_tables as tt
+
+    monkeypatch.setenv("NCGEN_MODEL_CACHE", "1")
+    path = tmp_path / "arm.urdf"
+    path.write_text(new_urdf(f"cli_arm_{os.getpid()}"))
+    assert main(["simulate", str(path), "--t-end", "0.05", "--kernels", "tables"]) == 0
+    assert "  kernels: tables: chosen" in capsys.readouterr().out
+    monkeypatch.setattr(tt, "_pack", lambda model: pytest.fail("the tree tables were packed again"))
+    assert main(["simulate", str(path), "--t-end", "0.05"]) == 0
+    assert "  kernels: tables: nothing to compile" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(1800)
+def test_panda_joint_run_tables_equal_flat(library):
+    """The Panda of example-robot-data (its mimic finger), 0.1 s under gravity in joint space:
+    ``kernels="auto"`` runs the tables while the flat loop is not built, the flat loop once it
+    is loaded; the tables' run equals the flat loop's to 1e-9 (the same steps)."""
+    try:
+        path = nc.robots.urdf_path("panda")
+    except Exception as e:  # noqa: BLE001 - example-robot-data not installed
+        pytest.skip(f"no Panda URDF: {e}")
+    model = nc.System.from_urdf(path).build()
+    auto = nc.simulate(model, 0.1, 0.01, method="joint")
+    assert auto.info["kernels"] == "tables", auto.info["kernels_reason"]
+    flat_run = nc.simulate(model, 0.1, 0.01, method="joint", kernels="flat")
+    again = nc.simulate(model, 0.1, 0.01, method="joint")
+    assert (again.info["kernels"], again.info["kernels_reason"]) == \
+        ("flat", "the model's own loop is ready (loaded in this process)")
+    assert auto.info["stats"] == flat_run.info["stats"]
+    for x in ("qj", "vj"):
+        a, b = getattr(auto, x), getattr(flat_run, x)
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-9 * max(1.0, np.abs(b).max()), err_msg=x)

@@ -52,6 +52,12 @@ def _simulate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--backend", default="auto", choices=("auto", "compiled", "vm"),
                    help="where IDAS evaluates the equations: compiled (generated C, built once and "
                         "cached by content), vm (CasADi's virtual machine) or " + RULE)
+    p.add_argument("--kernels", default="auto", choices=("auto", "tables", "flat"),
+                   help="joint and stepper methods: tables (the kernels of every shipped kind over the model's "
+                        "data tables, compiled once per ncgen version: nothing compiled for the model), flat "
+                        "(the model's own C, compiled once per model and cached) or auto (default: the tables, "
+                        "unless the model's own code is ready or the run is long enough to win back its "
+                        "compile; the summary says which ran and why)")
     p.add_argument("--rtol", type=float, default=None,
                    help="relative tolerance: IDAS's and the joint loop's (default 1e-8); with --method stepper, the stepper "
                         "chooses its steps to meet it (default: fixed steps of DT, checked)")
@@ -116,7 +122,7 @@ def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         controller = _controller(args.controller) if args.controller else model.controller
         traj = run(model, t_end=args.t_end, dt=args.dt, method=args.method, backend=args.backend,
                    rtol=args.rtol, atol=args.atol, integrator=args.integrator, u=controller,
-                   joint_dynamics=args.joint_dynamics, **stepper)
+                   joint_dynamics=args.joint_dynamics, kernels=args.kernels, **stepper)
     except (SimulationError, SimulationInterrupted) as e:
         if e.trajectory is None or not len(e.trajectory):
             raise

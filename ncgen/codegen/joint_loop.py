@@ -42,12 +42,7 @@ JOINT_RUN = Signature("int", (
 def build_joint_loop(name: str, ode: ca.Function, pivot_tol: float, cflags=None) -> Path:
     """Generate and compile the package ``name`` (the ODE ``ode`` ``(t, x, w, p) -> (xdot,
     check)`` and the loop); returns the library's path."""
-    if cflags is None and "NCGEN_CFLAGS" not in os.environ and \
-            LARGE_FUNCTION_INSTRUCTIONS < ode.n_instructions() <= O1_INSTRUCTIONS:
-        cflags = "-O1"
-    context = {"ode": f"{name}_{ode.name()}", "nx": ode.nnz_in(1), "nw": ode.nnz_in(2),
-               "pivot_tol": repr(float(pivot_tol))}
-    index = _index(name, ode, context, cflags)
+    cflags, context, index = _settings(name, ode, pivot_tol, cflags)
     library = _indexed(index)
     if library is not None:
         return library
@@ -57,6 +52,22 @@ def build_joint_loop(name: str, ode: ca.Function, pivot_tol: float, cflags=None)
     with atomic_path(index) as tmp_index:
         tmp_index.write_text(json.dumps({"library": str(library)}) + "\n")
     return library
+
+
+def cached_joint_loop(name: str, ode: ca.Function, pivot_tol: float, cflags=None) -> Path | None:
+    """The library :func:`build_joint_loop` would return if it is already compiled and in the
+    compile cache, else None (nothing written or compiled)."""
+    return _indexed(_settings(name, ode, pivot_tol, cflags)[2])
+
+
+def _settings(name: str, ode: ca.Function, pivot_tol: float, cflags) -> tuple:
+    """``(cflags, glue context, index file)`` of the package ``name``."""
+    if cflags is None and "NCGEN_CFLAGS" not in os.environ and \
+            LARGE_FUNCTION_INSTRUCTIONS < ode.n_instructions() <= O1_INSTRUCTIONS:
+        cflags = "-O1"
+    context = {"ode": f"{name}_{ode.name()}", "nx": ode.nnz_in(1), "nw": ode.nnz_in(2),
+               "pivot_tol": repr(float(pivot_tol))}
+    return cflags, context, _index(name, ode, context, cflags)
 
 
 def _index(name: str, ode: ca.Function, context: dict, cflags) -> Path:

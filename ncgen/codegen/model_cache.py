@@ -250,6 +250,32 @@ def derived_function(model, what: str, build: Callable[[], object]):
     return f
 
 
+def derived_data(model, what: str, build: Callable[[], object]):
+    """As :func:`derived_function` for an object of plain data (numbers, strings, NumPy
+    arrays) that pickles: ``build()``, stored beside a stored model and read back later."""
+    key = model.data.store_key
+    if key is None or not enabled():
+        return build()
+    path = _path(key, what)
+    obj = _read(path, key, pickle.loads)
+    if obj is None:
+        obj = build()
+        _write(path, key, pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL))
+    return obj
+
+
+def stored_function(model, what: str):
+    """The function :func:`derived_function` stored beside ``model`` under ``what``, or None
+    (the model did not come through the store, or nothing was stored): nothing is derived."""
+    import casadi
+
+    key = model.data.store_key
+    path = None if key is None or not enabled() else _path(key, what)
+    if path is None or not path.is_file():
+        return None
+    return _read(path, key, lambda payload: casadi.Function.deserialize(payload.decode()))
+
+
 def _header(key: str) -> dict:
     return {"format": FORMAT, "ncgen": __version__, "key": key}
 

@@ -88,12 +88,16 @@ def _local_inertia(m, c, I_c, R, p):
 
 
 def tree_tables(model) -> TreeTables:
-    """The :class:`TreeTables` of ``model``, packed once per model (kept in ``model.data``);
-    raises :class:`UnsupportedTree` (module docstring)."""
+    """The :class:`TreeTables` of ``model``, packed once per model (kept in ``model.data``, and
+    beside the model in the store of built models when it came through it:
+    :func:`~ncgen.codegen.model_cache.derived_data`); raises :class:`UnsupportedTree` (module
+    docstring)."""
+    from ncgen.codegen.model_cache import derived_data
+
     data = model_data(model)
     if data.tree_tables is None:
         try:
-            data.tree_tables = (_pack(model), None)
+            data.tree_tables = (derived_data(model, "tree-tables", lambda: _pack(model)), None)
         except UnsupportedTree as e:
             data.tree_tables = (None, e)
     tables, error = data.tree_tables

@@ -149,19 +149,61 @@ def dynamics_function(model) -> ca.Function:
     return tree_dynamics_function(model)
 
 
-def joint_loop(model, controller=None, joint_dynamics: bool = False, cflags=None, kernels: str = "auto"):
-    """The compiled loop (built on first use per model, controller object and option).
-    ``kernels`` (``SimulationOptions.kernels``): ``"tables"`` — the tree library's loop on the
-    model's tables (:class:`~ncgen.runtime.tree_library.TableJointLoop`: no controller, no joint
-    dynamics, a tree the tables cover; nothing compiled), ``"flat"`` — the model's own ODE
-    compiled with the loop, ``"auto"`` — flat where a C compiler is present (the flat loop is the
-    faster: benchmarks/tree_tables.py), else the tables where they apply."""
+def choose_kernels(model, outputs: int, controller=None, joint_dynamics: bool = False, kernels: str = "auto"):
+    """The :class:`~ncgen.runtime.backend_policy.Choice` of the joint loop's kernels for a run
+    over ``outputs`` output intervals: ``"tables"`` — the tree library's loop on the model's
+    tables (:class:`~ncgen.runtime.tree_library.TableJointLoop`: no controller, no joint
+    dynamics, a tree the tables cover; nothing compiled for the model), ``"flat"`` — the
+    model's own ODE compiled with the loop; ``kernels="auto"`` as
+    :func:`~ncgen.runtime.backend_policy.choose_joint_kernels` rules (the tables where no C
+    compiler is present), else the user's choice."""
     from ncgen.codegen.compiler import compiler_present
+    from ncgen.runtime.backend_policy import Choice, choose_joint_kernels
 
     if kernels not in ("auto", "tables", "flat"):
         raise NcgenError(f"kernels: expected one of 'auto', 'tables', 'flat', got {kernels!r}")
-    if (kernels == "tables" or (kernels == "auto" and not compiler_present())) and controller is None \
-            and not joint_dynamics:
+    if kernels != "auto":
+        return Choice(kernels, "chosen")
+    if controller is not None or joint_dynamics:
+        return Choice("flat", "the tables' loop takes no compiled controller and no joint dynamics")
+    if model.np:
+        return Choice("flat", "the tables' loop takes no parameters")
+    if not compiler_present():
+        return Choice("tables", "no C compiler") if _table_loop(model) is not None else \
+            Choice("flat", "the tree tables do not cover the model")
+    ready = _flat_ready(model)
+    if ready is None and _table_loop(model) is None:
+        return Choice("flat", "the tree tables do not cover the model")
+    from ncgen.runtime.tree_library import tree_library_ready
+    return choose_joint_kernels(model.joint_space.nv, outputs, ready, tables_ready=tree_library_ready())
+
+
+def _flat_ready(model) -> str | None:
+    """Why the model's own loop (no controller, no joint dynamics) is ready without a compile
+    — loaded in this process, or its ODE stored beside the model and its library in the
+    compile cache — or None."""
+    from ncgen.codegen.joint_loop import cached_joint_loop
+    from ncgen.codegen.model_cache import stored_function
+    from ncgen.model.data import model_data
+    from ncgen.runtime.tree_kernel import PIVOT_TOL
+
+    if (id(None), False, None) in model_data(model).joint_loops:
+        return "loaded in this process"
+    ode = stored_function(model, "joint-ode")
+    if ode is not None and cached_joint_loop(f"{model.name}_jsim", ode, PIVOT_TOL) is not None:
+        return "compiled earlier, in the compile cache"
+    return None
+
+
+def joint_loop(model, controller=None, joint_dynamics: bool = False, cflags=None, kernels: str = "auto"):
+    """The compiled loop (built on first use per model, controller object and option) with the
+    kernels ``kernels`` (``"tables"``, ``"flat"``, or ``"auto"``: :func:`choose_kernels` for a
+    short run)."""
+    if kernels == "auto":
+        kernels = choose_kernels(model, 1, controller, joint_dynamics).backend
+    if kernels not in ("tables", "flat"):
+        raise NcgenError(f"kernels: expected one of 'auto', 'tables', 'flat', got {kernels!r}")
+    if kernels == "tables" and controller is None and not joint_dynamics:
         table = _table_loop(model)
         if table is not None:
             return table
@@ -230,7 +272,8 @@ def simulate_joint(model, t: np.ndarray, U: np.ndarray, hold: str, p: np.ndarray
     rtol, atol = 1e-8 if rtol is None else rtol, 1e-10 if atol is None else atol
     js = model.joint_space
     build_start = time.perf_counter()
-    loop = joint_loop(model, controller, joint_dynamics, kernels=kernels)
+    choice = choose_kernels(model, len(t) - 1, controller, joint_dynamics, kernels)
+    loop = joint_loop(model, controller, joint_dynamics, kernels=choice.backend)
     build_time = time.perf_counter() - build_start
     qj0, vj0 = model.to_joint_space(q0, v0)
     n = len(t)
@@ -275,7 +318,7 @@ def simulate_joint(model, t: np.ndarray, U: np.ndarray, hold: str, p: np.ndarray
     info = {"method": "joint", "integrator": integrator, **steps, "hold": hold,
             "controller": None if controller is None else controller.describe(),
             "feedback": None if feedback is None else feedback[0], "joint_dynamics": bool(joint_dynamics),
-            "kernels": loop.kernels,
+            "kernels": loop.kernels, "kernels_reason": choice.reason,
             "stats": {"nsteps": int(stats[0]), "rejected_steps": int(stats[1]), "evaluations": int(stats[2])},
             "build_time": build_time, "wall_time": time.perf_counter() - start, "complete": status == 0}
     trusted, why = k + 1, ""

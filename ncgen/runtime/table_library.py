@@ -124,6 +124,14 @@ def element_library(cflags: str | None = None) -> tuple[Path, bool]:
     return cached_library(INDEX_PREFIX, sources_key(), write_element_package, PACKAGE, cflags)
 
 
+def library_ready(prefix: str, source: str) -> bool:
+    """Whether :func:`cached_library` would find the library in the compile cache (no compile)."""
+    compiler = compiler_path()
+    if compiler is None:
+        return any(_indexed(index) is not None for index in cache_dir().glob(f"{prefix}-{source[:20]}-*.json"))
+    return _indexed(_index(prefix, source, compiler)) is not None
+
+
 def cached_library(prefix: str, source: str, write, package: str, cflags: str | None = None) -> tuple[Path, bool]:
     """``(path, compiled now)`` of the library ``package`` written by ``write(out_dir)`` and
     compiled once per ``source`` key and compiler, found through the index files

@@ -272,6 +272,8 @@ class Trajectory:
                  f"t = {self.t[0]:g} ... {self.t[-1]:g} s"]
         if info.get("method"):
             lines.append(f"  integrator: {info['method']} ({_settings(info)}): {_work(info)}")
+        if info.get("kernels_reason"):
+            lines.append(f"  kernels: {info['kernels']}: {info['kernels_reason']}")
         if "error_estimate" in info:
             est = info["error_estimate"]
             if np.isfinite(est["q"]) and np.isfinite(est["v"]):

@@ -46,7 +46,7 @@ from ncgen.codegen.render import shipped_templates_dir
 from ncgen.codegen.tree_kernels import JOINT_KINDS, PACKAGE, SOURCES, kind_names, write_tree_package
 from ncgen.codegen.tree_tables import TreeTables
 from ncgen.errors import CodegenError, ModelError
-from ncgen.runtime.table_library import cached_library
+from ncgen.runtime.table_library import cached_library, library_ready
 from ncgen.codegen.tree_check import ALGORITHMS, PIVOT_TOL
 from ncgen.validation import MAX_MAGNITUDE
 from ncgen.version import __version__
@@ -103,6 +103,11 @@ def sources_key() -> str:
     for f in files:
         h.update(f.name.encode() + b"\0" + f.read_bytes() + b"\0")
     return h.hexdigest()
+
+
+def tree_library_ready() -> bool:
+    """Whether the tree library is compiled (in the compile cache): using it compiles nothing."""
+    return library_ready(INDEX_PREFIX, sources_key())
 
 
 def tree_library(cflags: str | None = None) -> tuple[Path, bool]:
