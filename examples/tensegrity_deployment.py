@@ -25,6 +25,7 @@ from ncgen.analysis.tensegrity_shapes import stacked_prisms, tower_of_radii
 
 K, DAMPING, SUPPORTS = 2000.0, 10.0, [0, 1, 2]
 INPUT_WEIGHT = 1.0          # MPC: weight of (u − u_ref)² per m² (see mpc_tracking)
+MIN_TENSION = None          # MPC: no tension constraint (with 1 N its QPs fail in qrqp: see docs/tensegrity.md)
 
 
 def designs():
@@ -70,17 +71,18 @@ def cable_feedback(model, plan, gain: float = 4 * K, damping: float = 20.0):
 
 
 def mpc_tracking(model, plan, u_final, bounds, *, N: int = 5, h: float = 0.01, state_weight=(1e3, 1.0),
-                 input_weight: float = INPUT_WEIGHT, terminal_weight: float = 1e3):
+                 input_weight: float = INPUT_WEIGHT, terminal_weight: float = 1e3, min_tension=MIN_TENSION):
     """``nc.MPC`` tracking ``plan`` (its states and inputs; after the plan the inputs
     ``u_final`` hold its final state): a horizon of ``N`` steps of ``h`` s, the rest lengths
     within ``bounds`` (lower, upper), stage weights ``Q`` (on q, on v) and ``r`` (on u − u_ref, per
-    m²), ``W`` on the horizon's end (the step Jacobians' QR as loops: quick to compile)."""
+    m²), ``W`` on the horizon's end, every cable's pull ``≥ min_tension`` (N) along the horizon
+    (None: no such constraint; the step Jacobians' QR as loops: quick to compile)."""
     ocp = nc.OptimalControl(model, N=N, t_final=N * h)
     ocp.bound_input("l0", *bounds)
     reference = (plan.t, np.hstack([plan.q, plan.v]), np.vstack([plan.u[:len(plan.t) - 1], u_final]))
     Q = np.repeat(state_weight, model.nq)
     return nc.MPC(ocp, sx_qr_max_nnz=0, reference=reference, state_weight=Q, input_weight=input_weight,
-                  terminal_weight=terminal_weight)
+                  terminal_weight=terminal_weight, min_tension=min_tension)
 
 
 def timed(mpc):

@@ -11,8 +11,9 @@ inputs on the ``N`` intervals; multiple shooting):
    (:mod:`ncgen.control.discrete`, implicit function theorem);
 2. the QP in ``(δX, δU)``: minimise ``½ δᵀ H δ + gᵀ δ`` (``g``, ``H``: gradient and Hessian of
    the cost at the guess — a Gauss–Newton Hessian: the dynamics' curvature is left out),
-   subject to ``δx_0 = x − x̄_0``, ``δx_{k+1} = A_k δx_k + B_k δu_k + x̄⁺_k − x̄_{k+1}`` and the
-   OCP's bounds moved by the guess — condensed onto the inputs (``vec δX = S δU + s``,
+   subject to ``δx_0 = x − x̄_0``, ``δx_{k+1} = A_k δx_k + B_k δu_k + x̄⁺_k − x̄_{k+1}``, the
+   OCP's bounds moved by the guess (and, with ``min_tension``, the cables' pull linearised,
+   :func:`taut_rows`) — condensed onto the inputs (``vec δX = S δU + s``,
    :func:`condense`: ``N·nu`` variables, the bounded state components as general rows) and
    solved by CasADi's active-set ``qrqp``;
 3. a backtracking line search with a filter on (cost ``J``, infeasibility ``c``: the ℓ1 norm
@@ -80,7 +81,9 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
     lo_x, hi_x = problem.x_bounds
     bounded = np.flatnonzero(np.isfinite(lo_x) | np.isfinite(hi_x))
     rows = [nx * k + i for k in range(1, N + 1) for i in bounded]
-    qp = ca.conic("mpc_qp", "qrqp", {"h": ca.Sparsity.dense(nU, nU), "a": ca.Sparsity.dense(len(rows), nU)},
+    n_taut = 0 if problem.min_tension is None else 2 * N * problem.cable_pull.numel_out(0)
+    qp = ca.conic("mpc_qp", "qrqp", {"h": ca.Sparsity.dense(nU, nU),
+                                     "a": ca.Sparsity.dense(len(rows) + n_taut, nU)},
                   {"print_iter": False, "print_header": False, "print_info": False, "max_iter": qp_max_iter,
                    "error_on_fail": False})
 
@@ -95,10 +98,15 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
     Hc = ca.mtimes(S.T, ca.mtimes(H_XX, S) + H_XU) + ca.mtimes(H_XU.T, S) + H_UU
     gc = ca.mtimes(S.T, ca.mtimes(H_XX, s) + g[:nX]) + ca.mtimes(H_XU.T, s) + g[nX:]
     Xn = ca.vec(X) + s
+    A_rows, lb_rows = S[rows, :], ca.DM(np.tile(lo_x[bounded], N)) - Xn[rows]
+    ub_rows = ca.DM(np.tile(hi_x[bounded], N)) - Xn[rows]
+    if n_taut:
+        A_taut, lb_taut = taut_rows(problem, X, U, times, S, s)
+        A_rows, lb_rows = ca.vertcat(A_rows, A_taut), ca.vertcat(lb_rows, lb_taut)
+        ub_rows = ca.vertcat(ub_rows, ca.DM.inf(n_taut))
     data = ca.Function(
         "mpc_qp_data", [x, t, X, U],
-        [ca.densify(e) for e in (0.5 * (Hc + Hc.T), gc, S[rows, :], ca.DM(np.tile(lo_x[bounded], N)) - Xn[rows],
-                                 ca.DM(np.tile(hi_x[bounded], N)) - Xn[rows], ca.vec(ca.repmat(lo_u, 1, N) - U),
+        [ca.densify(e) for e in (0.5 * (Hc + Hc.T), gc, A_rows, lb_rows, ub_rows, ca.vec(ca.repmat(lo_u, 1, N) - U),
                                  ca.vec(ca.repmat(hi_u, 1, N) - U), Xn, S)],
         ["x", "t", "X_guess", "U_guess"], ["H", "g", "A", "lba", "uba", "lbx", "ubx", "Xs", "S"])
     Xs_, S_, U_, dU = ca.MX.sym("Xs", nX), ca.MX.sym("S", nX, nU), ca.MX.sym("U", nu, N), ca.MX.sym("dU", nU)
@@ -107,6 +115,27 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
                           ca.densify(U_ + ca.reshape(dU, nu, N))],
                          ["Xs", "S", "U_guess", "dU"], ["X_sol", "U_sol"])
     return [data, qp, update, merit_function(model, problem)]
+
+
+def taut_rows(problem, X, U, times, S, s):
+    """``(A, lb)``: the cables' path constraint (:mod:`ncgen.control.mpc_problem`) linearised
+    at the guess and condensed, ``A δU ≥ lb``: for each interval ``k`` and its ends ``j = k,
+    k + 1``, ``P_x(x̄_j, ū_k) δx_j + P_u δu_k ≥ T_min − P(x̄_j, ū_k)`` with
+    ``δx_j = S_j δU + s_j``."""
+    pull, N = problem.cable_pull, problem.N
+    nx, nu, m = pull.numel_in(0), pull.numel_in(1), pull.numel_out(0)
+    xs, us, ts = ca.SX.sym("x", nx), ca.SX.sym("u", nu), ca.SX.sym("t")
+    P = pull(xs, us, ts)
+    lin = ca.Function("cable_pull_lin", [xs, us, ts], [P, ca.jacobian(P, xs), ca.jacobian(P, us)])
+    A, lb = [], []
+    for k in range(N):
+        for j in (k, k + 1):
+            P_k, P_x, P_u = lin(X[:, j], U[:, k], times[k])
+            S_j, s_j = S[nx * j:nx * (j + 1), :], s[nx * j:nx * (j + 1)]
+            E_k = ca.horzcat(ca.MX(m, nu * k), P_u, ca.MX(m, nu * (N - k - 1)))
+            A.append(ca.mtimes(P_x, S_j) + E_k)
+            lb.append(problem.min_tension - P_k - ca.mtimes(P_x, s_j))
+    return ca.vertcat(*A), ca.vertcat(*lb)
 
 
 def merit_function(model, problem) -> ca.Function:
@@ -133,6 +162,10 @@ def merit_function(model, problem) -> ca.Function:
             c += ca.sum2(ca.fmax(0, float(lo_x[i]) - row))
         if np.isfinite(hi_x[i]):
             c += ca.sum2(ca.fmax(0, row - float(hi_x[i])))
+    if problem.min_tension is not None:           # the cables' tension below T_min, at both ends of each interval
+        pull = problem.cable_pull.map("mpc_cable_pulls", "serial", int(N), [], [])
+        for ends in (X[:, :N], X[:, 1:]):
+            c += ca.sum2(ca.sum1(ca.fmax(0, problem.min_tension - pull(ends, U, times))))
     Xs, Us, ts = ca.SX.sym("X", nx, N + 1), ca.SX.sym("U", nu, N), ca.SX.sym("t")
     cost = ca.Function("mpc_total_cost", [Xs, Us, ts], [total_cost(problem, Xs, Us, ts)])
     return ca.Function("mpc_merit", [x, t, X, U], [cost(X, U, t), c, ca.mmax(res)],
@@ -179,7 +212,10 @@ class MPC:
     (:mod:`ncgen.control.mpc_reference`), with the weights ``state_weight`` (``Q``: nx numbers or
     one, default 1) and ``input_weight`` (``r``: nu or one, default 0) of the stage cost on ``x − x_ref``, ``u − u_ref``
     (:mod:`ncgen.control.mpc_problem`; the final conditions' target becomes ``x_ref`` at the
-    horizon's end).  The horizon is the OCP's: ``N`` intervals of
+    horizon's end); ``min_tension``: ``T_min`` (N), the cables kept at a pull ``≥ T_min`` at both
+    ends of every interval (a path constraint of the QP, linearised like the state bounds, and in
+    the infeasibility ``c``; :mod:`ncgen.control.mpc_problem`), refused on a model without
+    cables and with ``"fatrop"``.  The horizon is the OCP's: ``N`` intervals of
     ``h = t_final / N`` seconds, and ``mpc`` is meant to be called every ``h`` seconds.
     ``mpc.reset(x, t, iterations=...)`` (also done by the first call) sets the guess to ``x``
     held with zero inputs (clipped into their bounds), or to the reference along the horizon
@@ -191,13 +227,15 @@ class MPC:
     def __init__(self, ocp, solver: str = "sqp", *, iterations: int = 1, terminal_weight: float = 1e3,
                  regularization: float = REGULARIZATION, qp_max_iter: int = 100,
                  sx_qr_max_nnz: int | None = None, fatrop_options: dict | None = None,
-                 reference=None, state_weight=None, input_weight=None):
+                 reference=None, state_weight=None, input_weight=None, min_tension=None):
         if not isinstance(solver, str) or solver not in SOLVERS:
             raise OptimizationError(f"MPC: solver: expected one of {', '.join(SOLVERS)}, got {solver!r}")
         if not isinstance(iterations, int) or iterations < 1:
             raise OptimizationError(f"MPC: iterations: expected a positive integer, got {iterations!r}")
         self.ocp, self.model = ocp, ocp.model
-        self.problem = mpc_problem(ocp, terminal_weight, reference, state_weight, input_weight)
+        if min_tension is not None and solver == "fatrop":
+            raise OptimizationError("MPC: min_tension: supported by solver='sqp' only, got solver='fatrop'")
+        self.problem = mpc_problem(ocp, terminal_weight, reference, state_weight, input_weight, min_tension)
         self.h, self.N = self.problem.h, self.problem.N
         self.nx, self.nu = 2 * self.model.nq, self.model.nu
         self.iterations = iterations

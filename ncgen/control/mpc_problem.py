@@ -18,7 +18,15 @@ the stage and terminal costs measure the distance to it at the nodes' times ``t_
     ℓ(x, u, t) = h [(u − u_ref)ᵀ (R + diag r) (u − u_ref) + (x − x_ref)ᵀ diag Q (x − x_ref) + markers]
     ℓ_N(x, t)  = Σ terminal costs + W |x − x_ref(t)|²       (in place of the final conditions)
 
-(``x_ref``, ``u_ref`` at ``t``; ``Q``: ``state_weight``, ``r``: ``input_weight``).  The final
+(``x_ref``, ``u_ref`` at ``t``; ``Q``: ``state_weight``, ``r``: ``input_weight``).  With
+``min_tension`` (``T_min``, N) the cables (``Spring(cable=True)``, ``ClusteredCable``) are kept
+taut at both ends of every interval::
+
+    P_i(x_k, u_k) ≥ T_min,  P_i(x_{k+1}, u_k) ≥ T_min     (k < N, every cable i)
+
+on the pull ``P = k (l − l₀) + c l̇`` (N; :mod:`ncgen.assembly.springs`), smooth where the
+tension ``max(P, 0)`` has its kink: a step whose cables stay taut is a smooth function of
+``(x_k, u_k)``, which the SQP's linearisation needs.  The final
 conditions of the OCP are *soft* in MPC (weight ``W``,
 ``terminal_weight``): a hard terminal equality can be infeasible from a disturbed state,
 and a controller must always return an input.  Not supported in MPC (a clear error):
@@ -57,13 +65,19 @@ class MPCProblem:
     x_start: np.ndarray | None = None
     #: ``mpc_reference: t -> (x_ref, u_ref)`` (:mod:`ncgen.control.mpc_reference`), or None.
     reference: ca.Function | None = None
+    #: ``T_min`` (N) of the cables' path constraint, or None.
+    min_tension: float | None = None
+    #: ``cable_pull: (x, u, t) -> P`` (SX, N: one per cable), with ``min_tension``; else None.
+    cable_pull: ca.Function | None = None
 
 
-def mpc_problem(ocp, terminal_weight: float, reference=None, state_weight=None, input_weight=None) -> MPCProblem:
+def mpc_problem(ocp, terminal_weight: float, reference=None, state_weight=None, input_weight=None,
+                min_tension=None) -> MPCProblem:
     """The :class:`MPCProblem` of ``ocp`` (see the module docstring); ``reference``: a plan
     ``(t, X, U)`` or an OCP solution (:func:`ncgen.control.mpc_reference.reference_arrays`),
     ``state_weight`` (nx or a scalar; default 1), ``input_weight`` (nu or a scalar; default 0):
-    its weights, refused without a reference."""
+    its weights, refused without a reference; ``min_tension``: ``T_min`` (N, finite), refused
+    on a model without cables."""
     model = ocp.model
     if nonsmooth(model):
         names = ", ".join(repr(c["name"]) for c in model.contacts)
@@ -147,7 +161,28 @@ def mpc_problem(ocp, terminal_weight: float, reference=None, state_weight=None, 
 
     x_bounds = np.hstack([ocp.q_bounds, ocp.v_bounds])
     x_final = None if q_f is None else np.concatenate([q_f, np.zeros(nq) if v_f is None else v_f])
-    return MPCProblem(h, N, p, stage, terminal, ocp.u_bounds.copy(), x_bounds, x_final, initial_state(ocp, p), plan)
+    T_min, pull = cable_constraint(model, p, min_tension)
+    return MPCProblem(h, N, p, stage, terminal, ocp.u_bounds.copy(), x_bounds, x_final, initial_state(ocp, p), plan,
+                      T_min, pull)
+
+
+def cable_constraint(model, p, min_tension) -> tuple[float | None, ca.Function | None]:
+    """``(T_min, cable_pull)`` of the ``min_tension`` option (see the module docstring);
+    ``(None, None)`` without it."""
+    if min_tension is None:
+        return None, None
+    T_min = as_scalar(min_tension, "MPC: min_tension")
+    if not np.isfinite(T_min) or T_min < 0:
+        raise OptimizationError(f"MPC: min_tension: expected a finite tension >= 0 in N, got {min_tension!r}")
+    table = model.springs
+    cables = [] if table is None else [i for i, c in enumerate(table.cable) if c]
+    if not cables:
+        raise OptimizationError(f"MPC: min_tension: the model {model.name!r} has no cables (Spring(cable=True) or "
+                                "ClusteredCable) to keep taut")
+    nq = model.nq
+    x, u, t = ca.SX.sym("x", 2 * nq), ca.SX.sym("u", model.nu), ca.SX.sym("t")
+    P = table.function(t, x[:nq], x[nq:], u, ca.DM(p))[2][cables]
+    return T_min, ca.Function("cable_pull", [x, u, t], [P], ["x", "u", "t"], ["P"])
 
 
 def weights(w, n: int, what: str) -> np.ndarray:
