@@ -435,7 +435,7 @@ def test_contact_doc_snippets_run(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     text = (Path(__file__).resolve().parents[1] / "docs" / "contact.md").read_text(encoding="utf-8")
     blocks = re.findall(r"```python\n(.*?)```", text, re.S)
-    assert len(blocks) == 3
+    assert len(blocks) == 4                       # the bounce, the incline, a box, a URDF's collisions
     runs = 0
     for code in blocks:
         scope: dict = {}
