@@ -121,7 +121,8 @@ def _stepwise(model, run: Run, opts: SimulationOptions) -> Trajectory:
         V.append(part.v[-1])
         S.append(_interval_row(part))
         if "contacts" in part.info:
-            IMP = (IMP or []) + [_interval_impulses(part)]
+            IMP = [] if IMP is None else IMP
+            IMP.append(_interval_impulses(part))
     LAM.append(part.lam[-1])
     UU.append(UU[-1])
     info.update(wall_time=time.perf_counter() - start, complete=True)
