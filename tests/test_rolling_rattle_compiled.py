@@ -81,6 +81,7 @@ def test_auto_compiles_when_it_pays_and_falls_back_without_a_compiler(wobbly, mo
         nc.simulate(wobbly, 0.1, 0.1, method="stepper", backend="compiled")
     monkeypatch.undo()
     monkeypatch.setattr(rolling_rattle, "COMPILE_PAYS", 0.0)
+    monkeypatch.setattr(rolling_rattle, "PACE_AFTER", 0.0)      # a fast machine: the run may end within 0.5 s
     tr = nc.simulate(wobbly, 1.0, 0.1, method="stepper", substeps=10)
     assert tr.info["backend"] == "compiled" and tr.velocity_residual.max() <= 1e-12
     # compiled in this process: the next run takes it from its first step

@@ -38,6 +38,8 @@ _A, _B5, _E = DOPRI5
 #: Projected wall time (s) of a run's Python-driven steps beyond which ``compiled=None``
 #: compiles the step (a first compile takes 20–45 s on a loaded 2-core machine; a cached one ~1 s).
 COMPILE_PAYS = 30.0
+#: Wall time (s) of Python-driven steps before their pace is trusted for that projection.
+PACE_AFTER = 0.5
 
 
 
@@ -143,7 +145,7 @@ def integrate(system, grid, q0, v0, *, method: str = "dopri5", substeps: int = 1
         """Compile the step when the Python pace projects the run beyond COMPILE_PAYS."""
         nonlocal step, compiled
         elapsed = time.perf_counter() - started
-        if compiled is None and step is None and elapsed > 0.5 and t_now > grid[0] and \
+        if compiled is None and step is None and elapsed > PACE_AFTER and t_now > grid[0] and \
                 elapsed * span / (t_now - grid[0]) > COMPILE_PAYS:
             compiled = False                          # decided: asked once per run
             try:

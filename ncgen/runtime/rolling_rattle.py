@@ -33,7 +33,7 @@ from ncgen.assembly.rolling_rattle import rattle_functions, step_function
 from ncgen.errors import CompilerNotFound, NcgenError, SimulationError
 from ncgen.runtime.integrator import Run
 from ncgen.runtime.options import SimulationOptions
-from ncgen.runtime.rolling_integrator import COMPILE_PAYS, project
+from ncgen.runtime.rolling_integrator import COMPILE_PAYS, PACE_AFTER, project
 from ncgen.runtime.trajectory import Trajectory
 
 
@@ -161,7 +161,7 @@ def simulate_rolling_rattle(model, run: Run, opts: SimulationOptions) -> Traject
                     {"method": "stepper", "complete": False})) from None
             steps, iterations = steps + 1, iterations + n
             elapsed = time.perf_counter() - start
-            if not decided and elapsed > 0.5 and elapsed * total / steps > COMPILE_PAYS:
+            if not decided and elapsed > PACE_AFTER and elapsed * total / steps > COMPILE_PAYS:
                 decided = True                           # asked once per run
                 try:
                     step = compiled_step(system, opts.newton_tol, opts.max_newton)
