@@ -23,6 +23,7 @@ sparse matrix; the state ``x⁺ = [q + h w; v⁺]`` is read from ``z``.
 """
 from __future__ import annotations
 
+import ctypes
 import hashlib
 
 import casadi as ca
@@ -31,9 +32,12 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ncgen.assembly.stepper_equations import contact_function, stepper_functions
+from ncgen.codegen.c_binding import open_library
+from ncgen.codegen.package import ExtraSource
 from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
 from ncgen.control.contact_equations import rattle_residual
 from ncgen.control.discrete import residual_scale
+from ncgen.errors import NcgenError
 
 #: Law kernel selectors per active contact: closed at the free step's end, sticking,
 #: sliding, impact (the step's), restitution, friction coefficient.
@@ -50,12 +54,30 @@ BLOCKS = ("q", "v", "wf", "vf", "yv", "w", "v1")
 
 class _Kind:
     """One kind of point contact: ``rows(q_l, p) -> (g, W)`` (W: dim × n_l, normal row then
-    tangent rows), its law kernel and its contacts (indices, local coordinates)."""
+    tangent rows), its law kernel (``law``; compiled: ``loop`` over many contacts, with its
+    work arrays ``iw``, ``w``; its ``J``'s ``pattern``, rows ``n_r`` and nonzeros ``nnz``),
+    info kernel and contacts (indices, local coordinates)."""
 
     def __init__(self, rows, n_l):
         self.rows, self.n_l = rows, n_l
         self.contacts: list[int] = []
-        self.law = self.info = self.pattern = None
+        self.law = self.info = self.pattern = self.loop = self.iw = self.w = None
+        self.n_r = self.nnz = 0
+
+
+def _c_function(lib, symbol: str, argtypes: list):
+    """``lib``'s C function ``symbol`` (returning int) with ``argtypes``."""
+    f = getattr(lib, symbol)
+    f.restype, f.argtypes = ctypes.c_int, argtypes
+    return f
+
+
+def _work_arrays(lib, symbol: str):
+    """The integer and real work arrays of the compiled CasADi function ``symbol``."""
+    sizes = [ctypes.c_longlong() for _ in range(4)]
+    if getattr(lib, f"{symbol}_work")(*(ctypes.byref(s) for s in sizes)):
+        raise NcgenError(f"{symbol}_work failed")
+    return np.zeros(max(1, sizes[2].value), np.int64), np.zeros(max(1, sizes[3].value))
 
 
 def _local_rows(g, W, q, p):
@@ -133,12 +155,24 @@ class ActiveContactEquations:
             kind.law = _law_kernel(kind, self.dim, model.np, h, f"contact_law{k}")
             kind.info = _info_kernel(kind, model.np, h, f"contact_info{k}")
         functions = [smooth] + [f for kind in self._kinds for f in (kind.law, kind.info)]
+        name = f"{model.name}_contact_active"
+        laws = [{"name": kind.law.name(), "n_a": kind.law.nnz_in(0), "n_s": NS, "n_r": kind.law.nnz_out(0),
+                 "nnz_J": kind.law.nnz_out(1)} for kind in self._kinds]
         # rerolled: a long map over many contacts stays a loop (not unrolled)
-        compiled = compile_functions(f"{model.name}_contact_active", functions, reroll_instructions=REROLL_INSTRUCTIONS)
+        compiled = compile_functions(name, functions, reroll_instructions=REROLL_INSTRUCTIONS,
+                                     extra_sources=[ExtraSource("contact_active.c.j2", "contact_active.c",
+                                                                {"laws": laws}),
+                                                    ExtraSource("runtime/ncgen_lu_columns.h", "ncgen_lu_columns.h",
+                                                                included=True)])
         self._smooth = compiled[smooth.name()]
-        for kind in self._kinds:
+        lib = open_library(self._smooth.library)
+        for k, kind in enumerate(self._kinds):
             kind.pattern = kind.law.sparsity_out(1)
+            kind.n_r, kind.nnz = kind.law.nnz_out(0), kind.law.nnz_out(1)
             kind.law, kind.info = compiled[kind.law.name()], compiled[kind.info.name()]
+            kind.loop = _c_function(lib, f"{name}_law_{k}", [ctypes.c_int] + [ctypes.c_void_p] * 6)
+            kind.iw, kind.w = _work_arrays(lib, f"{name}_{laws[k]['name']}")
+        self._lu_columns = _c_function(lib, f"{name}_lu_columns", [ctypes.c_int] * 2 + [ctypes.c_void_p] * 11)
         self._kind_of = np.empty(model.nk, int)
         for k, kind in enumerate(self._kinds):
             self._kind_of[kind.contacts] = k
@@ -151,6 +185,8 @@ class ActiveContactEquations:
         self._scale = residual_scale(model)
         self._e_mu = np.array([[c["restitution"], c["mu"]] for c in model.contacts]).reshape(-1, 2)
         self._active_key = None
+        self._columns_buffers = (np.empty((0, 0)),) * 2
+        self._Ry = np.empty((0, 0))
 
     # ----------------------------------------------------------------- building
     def _smooth_function(self) -> ca.Function:
@@ -187,10 +223,13 @@ class ActiveContactEquations:
 
     # ------------------------------------------------------------------- layout
     def _gather(self, active):
-        """Per-active-set index tables (kept for the last active set): per active contact its
-        kernel arguments' places in the gather vector ``[q, v, w_f, v_f, y_v, w, v⁺, P_a, p]``
-        and its rows' places in ``R``; the rows and columns in ``[Z; y]`` of every nonzero of
-        ``[R_Z R_y]`` (the smooth part's, then each contact's ``J``), summed into ``R_Z`` (CSC) and ``R_y``."""
+        """Per-active-set index tables (kept for the last active set): per kind of contact
+        (:meth:`_laws` calls its law kernel once over them) its active contacts' places in
+        ``active``, their kernel arguments' places in the gather vector
+        ``[q, v, w_f, v_f, y_v, w, v⁺, P_a, p]`` and their rows' places in ``R`` (one row of
+        each per contact); the rows and columns in ``[Z; y]`` of every nonzero of ``[R_Z R_y]``
+        (the smooth part's, then each kind's contacts' ``J``), summed into ``R_Z`` (CSC) and
+        ``R_y`` (row-major)."""
         key = tuple(active)
         if key == self._active_key:
             return self._tables
@@ -201,24 +240,31 @@ class ActiveContactEquations:
         gathered = [0, nq, 2 * nq, 3 * nq, 4 * nq, 5 * nq, 6 * nq]          # BLOCKS in the gather vector
         placed = [nZ, nZ + nq, 0, n1, 2 * n1, 3 * n1, 4 * n1]               # ... and in [Z; y]
         (rz, cz), (ry, cy) = self._smooth_rc
-        src, rrows, rows_all, cols_all = [], [], [rz, ry], [cz, cy + nZ]
-        for a, k in enumerate(active):
-            I, P_a = self._cols[k], nZs + a * dim + np.arange(dim)
-            src.append(np.concatenate([s + I for s in gathered] + [7 * nq + a * dim + np.arange(dim),
-                                                                   7 * nq + na * dim + np.arange(npar)]))
-            cols = np.concatenate([s + I for s in placed] + [P_a, p_y])
-            rows = np.concatenate([P_a, 5 * n1 + I, 5 * n1 + nq + I])
-            rrows.append(rows)
-            J = self._kinds[self._kind_of[k]].pattern
-            rows_all.append(rows[J.row()])
-            cols_all.append(cols[J.get_col()])
+        groups, rows_all, cols_all = [], [rz, ry], [cz, cy + nZ]
+        kinds = self._kind_of[active]
+        for k, kind in enumerate(self._kinds):
+            pos = np.flatnonzero(kinds == k)
+            if not len(pos):
+                continue
+            src, rrows = [], []
+            J = kind.pattern
+            for a in pos:
+                I, P_a = self._cols[active[a]], nZs + a * dim + np.arange(dim)
+                src.append(np.concatenate([s + I for s in gathered] + [7 * nq + a * dim + np.arange(dim),
+                                                                       7 * nq + na * dim + np.arange(npar)]))
+                cols = np.concatenate([s + I for s in placed] + [P_a, p_y])
+                rows = np.concatenate([P_a, 5 * n1 + I, 5 * n1 + nq + I])
+                rrows.append(rows)
+                rows_all.append(rows[J.row()])
+                cols_all.append(cols[J.get_col()])
+            groups.append((kind, pos, np.array(src), np.array(rrows).ravel()))
         rows, cols = np.concatenate(rows_all), np.concatenate(cols_all)
         # [R_Z R_y]'s nonzeros summed into R_Z's CSC data and R_y's dense entries
         in_Z = cols < nZ
         keys, where = np.unique(cols[in_Z] * nZ + rows[in_Z], return_inverse=True)
         indptr = np.searchsorted(keys // nZ, np.arange(nZ + 1))
-        flat_y = (cols[~in_Z] - nZ) * nZ + rows[~in_Z]       # column-major: R_y for SuperLU's solve
-        self._tables = (src, rrows, nZ, in_Z, where, len(keys), keys % nZ, indptr, flat_y)
+        flat_y = rows[~in_Z] * self.ny + (cols[~in_Z] - nZ)       # row-major: the many-column solve's
+        self._tables = (groups, nZ, in_Z, where, len(keys), keys % nZ, indptr, *np.unique(flat_y, return_inverse=True))
         self._active_key = key
         return self._tables
 
@@ -266,8 +312,8 @@ class ActiveContactEquations:
         free, response, end = slice(0, 2 * n1), slice(2 * n1, 3 * n1), slice(3 * n1, 5 * n1)
         R_s, J_Z = self._block_newton(Z, x, u, p, t, free, tol)
         active = self.active(sel)
-        src, rrows, nZ = self._gather(active)[:3]
-        R_laws = self._laws(Z, x, p, sel, active, src, rrows, nZ)[0]
+        groups, nZ = self._gather(active)[:2]
+        R_laws = self._laws(Z, x, p, sel, active, groups, nZ)[0]
         Z[5 * n1:nZs] = -R_laws[5 * n1:nZs]      # j₀ = Σ W_a(q)ᵀ P_a, j_f = Σ W_a(q_f)ᵀ P_a
         R_s, J_Z = self._smooth(Z[:nZs], x, u, p, [t])[:2]
         Z[response] -= self._block(J_Z, response, R_s)  # linear in y
@@ -307,29 +353,57 @@ class ActiveContactEquations:
         return R_s, J_Z
 
     def system(self, Z, x, u, p, t, sel):
-        """``(R, R_Z, R_y)`` at ``Z`` (``R_Z`` sparse CSC, ``R_y`` dense)."""
+        """``(R, R_Z, R_y)`` at ``Z`` (``R_Z`` sparse CSC, ``R_y`` dense, row-major: a buffer of
+        this object, overwritten by the next call, as :meth:`solve_columns`'s result)."""
         active = self.active(sel)
-        src, rrows, nZ, in_Z, where, nnz, indices, indptr, flat_y = self._gather(active)
-        R, data = self._laws(Z, x, p, sel, active, src, rrows, nZ)
+        groups, nZ, in_Z, where, nnz, indices, indptr, flat_y, into_y = self._gather(active)
+        R, data = self._laws(Z, x, p, sel, active, groups, nZ)
         R_s, J_Z, J_y = self._smooth(Z[:self.nZs], x, u, p, [t])
         R[:self.nZs] += R_s
         data = np.concatenate([J_Z, J_y] + data)
         R_Z = sp.csc_matrix((np.bincount(where, data[in_Z], nnz), indices, indptr), shape=(nZ, nZ))
-        R_y = np.bincount(flat_y, data[~in_Z], nZ * self.ny).reshape(self.ny, nZ).T
+        if self._Ry.shape != (nZ, self.ny):
+            self._Ry = np.empty((nZ, self.ny))
+        R_y = self._Ry
+        R_y.fill(0.0)
+        R_y.flat[flat_y] = np.bincount(into_y, data[~in_Z], len(flat_y))
         return R, R_Z, R_y
 
-    def _laws(self, Z, x, p, sel, active, src, rrows, nZ):
+    def _laws(self, Z, x, p, sel, active, groups, nZ):
         """``(R, J)``: the law kernels' rows summed into a residual of length ``nZ`` and their
-        Jacobians' nonzeros (one array per active contact, in the order of :meth:`_gather`)."""
+        Jacobians' nonzeros (one array per kind, in the order of :meth:`_gather`); each kind's
+        kernel runs over its active contacts in one C call."""
         R, data = np.zeros(nZ), []
         if len(active):
             g = np.concatenate([self._blocks(Z, x), Z[self.nZs:], p])
             S = self._selectors(active, sel)
-            for a, k in enumerate(active):
-                r, J = self._kinds[self._kind_of[k]].law(g[src[a]], S[a])
-                R[rrows[a]] += r
-                data.append(J.copy())
+            for kind, pos, src, rows in groups:
+                a, s = g[src], np.ascontiguousarray(S[pos])
+                r, J = np.empty((len(pos), kind.n_r)), np.empty((len(pos), kind.nnz))
+                if kind.loop(len(pos), a.ctypes.data, s.ctypes.data, r.ctypes.data, J.ctypes.data,
+                             kind.iw.ctypes.data, kind.w.ctypes.data):
+                    raise NcgenError(f"{self.model.name}: the compiled contact law kernel failed")
+                R += np.bincount(rows, r.ravel(), nZ)
+                data.append(J.ravel())
         return R, data
+
+    def solve_columns(self, lu, B: np.ndarray) -> np.ndarray | None:
+        """``A⁻¹ B`` for the many columns of ``B`` (row-major) from SuperLU's factors ``lu`` of
+        ``A`` (``ncgen_lu_columns.h``, compiled with the kernels: a row of ``B`` at a time, 2×
+        SuperLU's own column-at-a-time solve); None where ``U`` has a zero pivot.  The result
+        is a buffer of this object, overwritten by the next call (fresh arrays of this size
+        cost their page faults: as much as the solve)."""
+        L, U = lu.L, lu.U
+        n, m = B.shape
+        B = np.ascontiguousarray(B, float)
+        if self._columns_buffers[0].shape != (n, m):
+            self._columns_buffers = (np.empty((n, m)), np.empty((n, m)))
+        X, Y = self._columns_buffers
+        arrays = [np.ascontiguousarray(a, np.intc) if a.dtype.kind == "i" else np.ascontiguousarray(a, float)
+                  for a in (L.indptr, L.indices, L.data, U.indptr, U.indices, U.data, lu.perm_r, lu.perm_c)]
+        if self._lu_columns(n, m, *(a.ctypes.data for a in arrays), B.ctypes.data, Y.ctypes.data, X.ctypes.data):
+            return None
+        return X
 
     def _selectors(self, active, sel) -> np.ndarray:
         """The law kernels' selectors ``s`` (:data:`NS`) of the active contacts."""

@@ -280,7 +280,7 @@ class ContactStepFunction:
                 break
             converged = np.max(np.abs(R), initial=0.0) <= tol
             try:
-                lu = _Factor(RZ, split=eq.single_rows)
+                lu = _Factor(RZ, split=eq.single_rows, columns=getattr(eq, "solve_columns", None))
             except RuntimeError:
                 break
             Z = Z - lu.solve(R)   # once more after the test: the quadratic step reaches the rounding floor
@@ -485,11 +485,14 @@ class _Factor:
     the rest by SuperLU's sparse LU (the heap: 690 of 1320 unknowns, 1 ms instead of 100 ms),
     its many columns by sparse triangular solves (:func:`_solve_columns`).  Without (the
     active-contact equations, which have no such rows to speak of) the whole matrix by
-    SuperLU with :data:`FAST_LU`, its many columns by SuperLU's own solve (the heap's 480
-    unknowns: 120 columns in 1 ms, where the triangular solves take 3 ms)."""
+    SuperLU with :data:`FAST_LU`, its many columns by ``columns(lu, B)`` where given (the
+    active-contact equations' compiled row-major solve,
+    :meth:`~ncgen.control.contact_active.ActiveContactEquations.solve_columns`; None: a
+    zero pivot) else by SuperLU's own solve (the heap's 480 unknowns: 120 columns in 1 ms,
+    where the triangular solves take 3 ms)."""
 
-    def __init__(self, A, split: bool = True):
-        self.split = split
+    def __init__(self, A, split: bool = True, columns=None):
+        self.split, self.columns = split, columns
         if split:
             A = A.tocsr()
             A.eliminate_zeros()          # entries the modes' selectors set to 0
@@ -541,8 +544,11 @@ class _Factor:
         with random signs, relative to the columns' count)."""
         if self.lu is None:
             return None
-        X_k = (self.lu.solve(B_k) if B_k.ndim == 1 else
-               _solve_columns(self.lu, B_k) if self.split else self.lu.solve(np.asfortranarray(B_k)))
+        X_k = (self.lu.solve(B_k) if B_k.ndim == 1 else _solve_columns(self.lu, B_k) if self.split else
+               self.columns(self.lu, B_k) if self.columns is not None else self.lu.solve(np.asfortranarray(B_k)))
+        if X_k is None:
+            self.lu = None
+            return None
         X, B, scale = X_k, B_k, 1 + np.max(np.abs(B_k), initial=0.0)
         if B.ndim == 2:       # a fifth of the cost of every column's residual
             signs = _SIGNS.choice((-1.0, 1.0), B.shape[1])
