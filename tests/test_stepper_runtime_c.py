@@ -16,7 +16,8 @@ its step Jacobians (``ncgen_table_jacobians.h``) on the same with inputs and act
 tree loops (``ncgen_tree_tables.h``: RNEA, CRBA, forward dynamics, derivatives) on hand-written
 kernels of a tree of sliders with a mimic joint (through their kernels and as the loops' own
 z sliders; the articulated-body algorithm without the mimic map), and the spatial algebra of
-its local recursion (``ncgen_spatial.h``) by its identities.  Each program is
+its local recursion (``ncgen_spatial.h``) by its identities; the many-column solve with sparse
+LU factors (``ncgen_lu_columns.h``) on hand-made factors.  Each program is
 built with ``-Wall -Wextra -Werror -pedantic`` under AddressSanitizer and
 UndefinedBehaviorSanitizer and must print that all its checks passed."""
 from __future__ import annotations
@@ -47,7 +48,7 @@ PROGRAMS = [("test_rattle.c", []), ("test_contact.c", []),
             ("test_element_tables.c", []), ("test_sparse_qr.c", []), ("test_sparse_lu.c", []),
             ("test_table_stepper.c", []), ("test_table_jacobians.c", ["-DTAB_JAC_ROWS"]),
             pytest.param("test_table_jacobians.c", ["-DTAB_JAC_COLUMNS"], marks=SLOW_BUILD), ("test_tree_tables.c", []),
-            ("test_spatial.c", [])]
+            ("test_spatial.c", []), ("test_lu_columns.c", [])]
 
 pytestmark = pytest.mark.skipif(CC is None, reason="no C compiler (gcc, clang or cc) on PATH")
 
@@ -65,7 +66,8 @@ def sanitizers(tmp_path_factory) -> Path:
 @pytest.mark.parametrize("source, defines", PROGRAMS, ids=["rattle", "contact-kkt", "contact-schur", "contact-pairs",
                                                           "cone-newton", "mpc", "joint-loop", "element-tables",
                                                           "sparse-qr", "sparse-lu", "table-stepper", "table-jacobians",
-                                                          "table-jacobians-columns", "tree-tables", "spatial"])
+                                                          "table-jacobians-columns", "tree-tables", "spatial",
+                                                          "lu-columns"])
 def test_runtime_c_unit_tests_pass_under_sanitizers(sanitizers, source, defines):
     exe = sanitizers / (Path(source).stem + "".join(d.lower().replace("-d", "_") for d in defines))
     built = subprocess.run([CC, *FLAGS, *defines, f"-I{RUNTIME}", f"-I{TESTS}", str(TESTS / source),
