@@ -486,7 +486,7 @@ class _Factor:
     its many columns by sparse triangular solves (:func:`_solve_columns`).  Without (the
     active-contact equations, which have no such rows to speak of) the whole matrix by
     SuperLU with :data:`FAST_LU`, its many columns by ``columns(lu, B)`` where given (the
-    active-contact equations' compiled row-major solve,
+    active-contact equations' compiled solve of sparse columns,
     :meth:`~ncgen.control.contact_active.ActiveContactEquations.solve_columns`; None: a
     zero pivot) else by SuperLU's own solve (the heap's 480 unknowns: 120 columns in 1 ms,
     where the triangular solves take 3 ms)."""

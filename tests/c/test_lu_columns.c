@@ -2,7 +2,8 @@
  * written by hand: L unit lower triangular with its diagonal stored (as SuperLU's), U upper
  * triangular with the rows of a column out of order, row and column permutations; the matrix
  * A with Pr A Pc = L U is formed here from them (A[i][j] = (L U)[perm_r[i]][perm_c[j]]) and
- * every column's solution is checked against the residual A x − b (row-major B and X).  The
+ * every column's solution is checked against the residual A x − b (column-major B and X, a
+ * column of B with zeros).  The
  * refusals (return 1, X not written): a zero diagonal entry of U, a missing one, a NaN.  Built
  * and run by tests/test_stepper_runtime_c.py under AddressSanitizer and
  * UndefinedBehaviorSanitizer. */
@@ -47,35 +48,35 @@ static void matrix(const double *ux, double *A) {
 }
 
 static void test_solve(void) {
-  double A[N * N], B[N * M], X[N * M], Y[N * M];
+  double A[N * N], B[N * M], X[N * M], y[N];
   int i, j, k;
   matrix(u_x, A);
   for (i = 0; i < N; ++i)
-    for (k = 0; k < M; ++k) B[i * M + k] = (k == 0) ? (i == 2) : (double)(i + 1) * (k == 1 ? 1.5 : -0.3) + k;
-  CHECK(ncgen_lu_columns(N, M, l_colind, l_row, l_x, u_colind, u_row, u_x, perm_r, perm_c, B, Y, X) == 0,
+    for (k = 0; k < M; ++k) B[k * N + i] = (k == 0) ? (i == 2) : (double)(i + 1) * (k == 1 ? 1.5 : -0.3) + k;
+  CHECK(ncgen_lu_columns(N, M, l_colind, l_row, l_x, u_colind, u_row, u_x, perm_r, perm_c, B, y, X) == 0,
         "a regular matrix is solved");
   for (k = 0; k < M; ++k)
     for (i = 0; i < N; ++i) {
-      double r = -B[i * M + k];
-      for (j = 0; j < N; ++j) r += A[i * N + j] * X[j * M + k];
-      CHECK(fabs(r) <= 1e-14 * (1 + fabs(B[i * M + k])), "column %d, row %d: residual %g", k, i, r);
+      double r = -B[k * N + i];
+      for (j = 0; j < N; ++j) r += A[i * N + j] * X[k * N + j];
+      CHECK(fabs(r) <= 1e-14 * (1 + fabs(B[k * N + i])), "column %d, row %d: residual %g", k, i, r);
     }
 }
 
 static void test_refused(void) {
-  double B[N * M], X[N * M], Y[N * M], ux[8];
+  double B[N * M], X[N * M], y[N], ux[8];
   int i;
   const int no_diagonal_row[8] = {0, 1, 0, 2, 1, 0, 0, 2};   /* column 3: no row 3 */
   for (i = 0; i < N * M; ++i) B[i] = 1, X[i] = 7;
   memcpy(ux, u_x, sizeof ux);
   ux[3] = 0;                                                  /* U(2, 2) = 0 */
-  CHECK(ncgen_lu_columns(N, M, l_colind, l_row, l_x, u_colind, u_row, ux, perm_r, perm_c, B, Y, X) == 1,
+  CHECK(ncgen_lu_columns(N, M, l_colind, l_row, l_x, u_colind, u_row, ux, perm_r, perm_c, B, y, X) == 1,
         "a zero pivot is refused");
   memcpy(ux, u_x, sizeof ux);
   ux[1] = NAN;                                                /* U(1, 1) */
-  CHECK(ncgen_lu_columns(N, M, l_colind, l_row, l_x, u_colind, u_row, ux, perm_r, perm_c, B, Y, X) == 1,
+  CHECK(ncgen_lu_columns(N, M, l_colind, l_row, l_x, u_colind, u_row, ux, perm_r, perm_c, B, y, X) == 1,
         "a NaN pivot is refused");
-  CHECK(ncgen_lu_columns(N, M, l_colind, l_row, l_x, u_colind, no_diagonal_row, u_x, perm_r, perm_c, B, Y, X) == 1,
+  CHECK(ncgen_lu_columns(N, M, l_colind, l_row, l_x, u_colind, no_diagonal_row, u_x, perm_r, perm_c, B, y, X) == 1,
         "a missing pivot is refused");
   for (i = 0; i < N * M; ++i) CHECK(X[i] == 7, "X[%d] written by a refused solve", i);
 }
