@@ -61,7 +61,7 @@ class _Kind:
     def __init__(self, rows, n_l):
         self.rows, self.n_l = rows, n_l
         self.contacts: list[int] = []
-        self.law = self.info = self.pattern = self.loop = self.iw = self.w = None
+        self.law = self.info = self.pattern = self.loop = self.iw = self.w = self.I = self.info_args = None
         self.n_r = self.nnz = 0
 
 
@@ -177,6 +177,8 @@ class ActiveContactEquations:
         for k, kind in enumerate(self._kinds):
             self._kind_of[kind.contacts] = k
             kind.I = np.array([self._cols[c] for c in kind.contacts])     # contacts × n_l
+            # the info kernel's argument: per contact its BLOCKS' local coordinates
+            kind.info_args = (np.arange(len(BLOCKS))[None, :, None] * self.nq + kind.I[:, None, :]).ravel()
         # the smooth part's Jacobians as (row, column) lists in [Z; y]
         self._smooth_rc = [(np.array(smooth.sparsity_out(i).row()), np.array(smooth.sparsity_out(i).get_col()))
                            for i in (1, 2)]
@@ -396,7 +398,7 @@ class ActiveContactEquations:
         n, m = B.shape
         B = np.asfortranarray(B, float)
         if self._columns_buffers[0].shape != (n, m):
-            self._columns_buffers = (np.empty((n, m), order="F"), np.empty(n))
+            self._columns_buffers = (np.empty((n, m), order="F"), np.empty(2 * n))
         X, y = self._columns_buffers
         arrays = [np.ascontiguousarray(a, np.intc) if a.dtype.kind == "i" else np.ascontiguousarray(a, float)
                   for a in (L.indptr, L.indices, L.data, U.indptr, U.indices, U.data, lu.perm_r, lu.perm_c)]
@@ -416,11 +418,10 @@ class ActiveContactEquations:
         (``[x⁺; U; U⁻; U_f; g_f; g⁺; π; the pushed gaps]``, π = 0 and the pushed gaps g⁺:
         no push-out here) over every contact."""
         dim, nk = self.dim, self.model.nk
-        B = self._blocks(Z, x).reshape(len(BLOCKS), self.nq)
+        B = self._blocks(Z, x)
         out = np.empty((nk, 3 * dim + 2))
         for kind in self._kinds:
-            a = B[:, kind.I].transpose(1, 0, 2).reshape(len(kind.contacts), -1)
-            res = kind.info(a.ravel(), p, [sel[-2]])[0]
+            res = kind.info(B[kind.info_args], p, [sel[-2]])[0]
             out[kind.contacts] = res.reshape(len(kind.contacts), -1)
         U, U0, Uf = (out[:, i * dim:(i + 1) * dim].ravel() for i in range(3))
         g1 = out[:, 3 * dim + 1]
@@ -445,10 +446,10 @@ class ActiveContactEquations:
         nq, n1 = self.nq, self.n1
         return np.concatenate([x[:nq] + self.h * Z[3 * n1:3 * n1 + nq], Z[4 * n1:4 * n1 + nq]])
 
-    def jacobian(self, dZ) -> np.ndarray:
-        """``∂x⁺/∂y`` from ``∂Z/∂y``."""
+    def jacobian(self, dZ, sign: float = 1.0) -> np.ndarray:
+        """``∂x⁺/∂y`` from ``∂Z/∂y = sign dZ``."""
         nq, n1 = self.nq, self.n1
-        J = np.vstack([self.h * dZ[3 * n1:3 * n1 + nq], dZ[4 * n1:4 * n1 + nq]])
+        J = np.vstack([(sign * self.h) * dZ[3 * n1:3 * n1 + nq], sign * dZ[4 * n1:4 * n1 + nq]])
         J[np.arange(nq), np.arange(nq)] += 1.0
         return J
 

@@ -68,6 +68,7 @@ POLISH_MAX_ITER, POLISH_TOL = 20, 1e-13
 #: solve to ``CONTACT_REFINE_TOL`` = 1e-8 after an impact.
 MATCH_TOL = 1e-6
 MODES = ("separated", "sticking", "sliding", "closed")
+_MODE_NAMES = np.array(MODES)
 #: The step's equations: over the active contacts (compiled pieces, the default) or over all
 #: contacts (one function; :class:`AllContactEquations`).
 EQUATIONS = ("active", "all")
@@ -219,7 +220,7 @@ class ContactStepFunction:
             raise StepDidNotConverge(f"{where}: the step's equations with the active set of its contact solve "
                                      f"end {difference:.3g} from the stepper's state (a push-out of a penetrating "
                                      "contact, or a contact solve that did not converge): no derivatives there")
-        J = eq.jacobian(-lu.solve(Ry))
+        J = eq.jacobian(lu.solve(Ry), -1.0)
         nx, nu = self.nx, self.nu
         P_end = eq.impulses(Z, sel)
         self.last = ContactStep(x1, J[:, :nx], J[:, nx:nx + nu], J[:, nx + nu:], self._mode_names(sel),
@@ -323,13 +324,13 @@ class ContactStepFunction:
         # together in the free step: a stack) counts as closed, the side that presses it
         S[:, 1] = closed if gf is None else closed & (gf <= ROUNDOFF * (1 + np.max(np.abs(U))) * self.h)
         friction = closed & (mu > 0)
-        slide = friction & (np.linalg.norm(Pk[:, 1:], axis=1) >= mu * Pk[:, 0] * (1 - 1e-9))
+        slide = friction & (_row_norms(Pk[:, 1:]) >= mu * Pk[:, 0] * (1 - 1e-9))
         if U is None and velocities is not None and slide.any():
             U, U0 = velocities()
             vtol = self._vtol(U)
         if U is not None:
             slip = U.reshape(nk, dim)[:, 1:] + e[:, None] * U0.reshape(nk, dim)[:, 1:]
-            slide &= np.linalg.norm(slip, axis=1) > vtol
+            slide &= _row_norms(slip) > vtol
         S[:, 2], S[:, 3] = friction & ~slide, slide
         if info is not None:
             sel[-2] = float(self._jump(U, Uf, sel) > IMPACT_STEPS * self._g * self.h)
@@ -349,8 +350,8 @@ class ContactStepFunction:
         return SWITCH_TOL * (1 + float(np.max(np.abs(U), initial=0.0)))
 
     def _mode_names(self, sel) -> list[str]:
-        S = sel[:NSEL * self.model.nk].reshape(-1, NSEL)
-        return ["separated" if not s[0] else "sticking" if s[2] else "sliding" if s[3] else "closed" for s in S.tolist()]
+        S = sel[:NSEL * self.model.nk].reshape(-1, NSEL) > 0
+        return _MODE_NAMES[np.where(~S[:, 0], 0, np.where(S[:, 2], 1, np.where(S[:, 3], 2, 3)))].tolist()
 
     def _switches(self, P, info, sel) -> list[tuple[str, str]]:
         """Contacts (name, reason) at a switching point (module docstring)."""
@@ -368,9 +369,9 @@ class ContactStepFunction:
             (closed & (Pk[:, 0] <= ptol), "closed with a normal impulse at 0"),
             (closed & (e > 0) & (np.abs(U0k[:, 0]) <= vtol), "approach velocity at 0 (restitution's kink)"),
             (closed & ~S[:, 1] & (np.abs(2 * gf / h - Ufk[:, 0]) <= vtol), "about to close with its bias at its kink"),
-            (closed & S[:, 2] & (np.linalg.norm(Pk[:, 1:], axis=1) >= mu * Pk[:, 0] * (1 - SWITCH_TOL)),
+            (closed & S[:, 2] & (_row_norms(Pk[:, 1:]) >= mu * Pk[:, 0] * (1 - SWITCH_TOL)),
              "sticking with the friction on the cone's boundary"),
-            (closed & S[:, 3] & (np.linalg.norm(Uk[:, 1:] + e[:, None] * U0k[:, 1:], axis=1) <= 1e3 * vtol),
+            (closed & S[:, 3] & (_row_norms(Uk[:, 1:] + e[:, None] * U0k[:, 1:]) <= 1e3 * vtol),
              "sliding with its slip at 0"),
             (~closed & (gf <= 0) & (Uk[:, 0] + e * np.minimum(U0k[:, 0], 0) <= vtol),
              "separated with its normal velocity margin at 0")]
@@ -445,15 +446,20 @@ class AllContactEquations:
         L = self._L
         return np.concatenate([Z[L["x1"][0]], Z[L["x1"][1]]])
 
-    def jacobian(self, dZ) -> np.ndarray:
+    def jacobian(self, dZ, sign: float = 1.0) -> np.ndarray:
         L = self._L
-        return np.vstack([dZ[L["x1"][0]], dZ[L["x1"][1]]])
+        return sign * np.vstack([dZ[L["x1"][0]], dZ[L["x1"][1]]])
 
     def impulses(self, Z, sel) -> np.ndarray:
         return Z[self._L["P"]].copy()
 
     def push(self, Z) -> np.ndarray:
         return Z[self._L["pi"]].copy()
+
+
+def _row_norms(X: np.ndarray) -> np.ndarray:
+    """The Euclidean norm of each row of ``X`` (``np.linalg.norm(X, axis=1)``, without its overhead)."""
+    return np.sqrt(np.einsum("ij,ij->i", X, X))
 
 
 class _Nonzeros:
@@ -549,8 +555,8 @@ class _Factor:
         if X_k is None:
             self.lu = None
             return None
-        X, B, scale = X_k, B_k, 1 + np.max(np.abs(B_k), initial=0.0)
-        if B.ndim == 2:       # a fifth of the cost of every column's residual
+        X, B, scale = X_k, B_k, 1 + max(B_k.max(initial=0.0), -B_k.min(initial=0.0))   # no temporaries
+        if B.ndim == 2:       # a fifth of the cost of every column's residual; a NaN or inf stays in the sum
             signs = _SIGNS.choice((-1.0, 1.0), B.shape[1])
             X, B, scale = X @ signs, B @ signs, scale * B.shape[1]
         if not (np.all(np.isfinite(X)) and np.max(np.abs(self.A_kk @ X - B), initial=0.0) <= 1e-9 * scale):

@@ -48,7 +48,7 @@ static void matrix(const double *ux, double *A) {
 }
 
 static void test_solve(void) {
-  double A[N * N], B[N * M], X[N * M], y[N];
+  double A[N * N], B[N * M], X[N * M], y[2 * N];
   int i, j, k;
   matrix(u_x, A);
   for (i = 0; i < N; ++i)
@@ -64,7 +64,7 @@ static void test_solve(void) {
 }
 
 static void test_refused(void) {
-  double B[N * M], X[N * M], y[N], ux[8];
+  double B[N * M], X[N * M], y[2 * N], ux[8];
   int i;
   const int no_diagonal_row[8] = {0, 1, 0, 2, 1, 0, 0, 2};   /* column 3: no row 3 */
   for (i = 0; i < N * M; ++i) B[i] = 1, X[i] = 7;

@@ -10,7 +10,8 @@
  * column j of a factor is applied only where y[j] is nonzero: a sparse right-hand side (the
  * implicit-function theorem's R_y of a contact step: a few nonzeros a column) then costs the
  * nonzeros of the factors it reaches, not all of them (the 20-sphere heap: 52 000 of 451 000
- * multiply-adds).  Skipping exact zeros changes no result.  plain C99, no allocation.
+ * multiply-adds).  Skipping exact zeros changes no result.  y is 2n numbers of scratch
+ * (the pivots' reciprocals in its second half).  plain C99, no allocation.
  *
  * Returns 0, or 1 when a diagonal entry of U is missing, zero or not finite (X is then not
  * written). */
@@ -23,12 +24,14 @@
 static int ncgen_lu_columns(int n, int m, const int *l_colind, const int *l_row, const double *l_x,
                             const int *u_colind, const int *u_row, const double *u_x, const int *perm_r,
                             const int *perm_c, const double *B, double *y, double *X) {
+  double *dinv = y + n;
   int i, j, e, k;
   for (j = 0; j < n; ++j) {                     /* every pivot present, nonzero and finite */
-    double d = 0;
+    dinv[j] = 0;
     for (e = u_colind[j]; e < u_colind[j + 1]; ++e)
-      if (u_row[e] == j) d = u_x[e];
-    if (d == 0 || !isfinite(d)) return 1;
+      if (u_row[e] == j) dinv[j] = u_x[e];
+    if (dinv[j] == 0 || !isfinite(dinv[j])) return 1;
+    dinv[j] = 1 / dinv[j];
   }
   for (k = 0; k < m; ++k) {
     const double *b = B + (size_t)k * n;
@@ -43,9 +46,7 @@ static int ncgen_lu_columns(int n, int m, const int *l_colind, const int *l_row,
     for (j = n - 1; j >= 0; --j) {              /* U z = y, the last column first */
       double yj = y[j];
       if (yj == 0) continue;
-      for (e = u_colind[j]; e < u_colind[j + 1]; ++e)
-        if (u_row[e] == j) yj /= u_x[e];
-      y[j] = yj;
+      y[j] = yj = yj * dinv[j];
       for (e = u_colind[j]; e < u_colind[j + 1]; ++e)
         if (u_row[e] < j) y[u_row[e]] -= u_x[e] * yj;
     }
