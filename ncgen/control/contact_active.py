@@ -29,7 +29,6 @@ import hashlib
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from ncgen.assembly.stepper_equations import contact_function, stepper_functions
 from ncgen.codegen.c_binding import open_library
@@ -63,6 +62,11 @@ class _Kind:
         self.contacts: list[int] = []
         self.law = self.info = self.pattern = self.loop = self.iw = self.w = self.I = self.info_args = None
         self.n_r = self.nnz = 0
+
+
+def _finite(d: np.ndarray) -> np.ndarray:
+    """A Newton step ``d``, or zeros where it is not finite (a singular block)."""
+    return d if np.all(np.isfinite(d)) else np.zeros(len(d))
 
 
 def _c_function(lib, symbol: str, argtypes: list):
@@ -154,7 +158,7 @@ class ActiveContactEquations:
         for k, kind in enumerate(self._kinds):
             kind.law = _law_kernel(kind, self.dim, model.np, h, f"contact_law{k}")
             kind.info = _info_kernel(kind, model.np, h, f"contact_info{k}")
-        functions = [smooth] + [f for kind in self._kinds for f in (kind.law, kind.info)]
+        functions = [smooth, self._steps_function] + [f for kind in self._kinds for f in (kind.law, kind.info)]
         name = f"{model.name}_contact_active"
         laws = [{"name": kind.law.name(), "n_a": kind.law.nnz_in(0), "n_s": NS, "n_r": kind.law.nnz_out(0),
                  "nnz_J": kind.law.nnz_out(1)} for kind in self._kinds]
@@ -164,7 +168,7 @@ class ActiveContactEquations:
                                                                 {"laws": laws}),
                                                     ExtraSource("runtime/ncgen_lu_columns.h", "ncgen_lu_columns.h",
                                                                 included=True)])
-        self._smooth = compiled[smooth.name()]
+        self._smooth, self._steps = compiled[smooth.name()], compiled[self._steps_function.name()]
         lib = open_library(self._smooth.library)
         for k, kind in enumerate(self._kinds):
             kind.pattern = kind.law.sparsity_out(1)
@@ -182,8 +186,6 @@ class ActiveContactEquations:
         # the smooth part's Jacobians as (row, column) lists in [Z; y]
         self._smooth_rc = [(np.array(smooth.sparsity_out(i).row()), np.array(smooth.sparsity_out(i).get_col()))
                            for i in (1, 2)]
-        self._block_csc = {a: self._block_pattern(a, b)
-                           for a, b in ((0, 2 * self.n1), (2 * self.n1, 3 * self.n1), (3 * self.n1, 5 * self.n1))}
         self._scale = residual_scale(model)
         self._e_mu = np.array([[c["restitution"], c["mu"]] for c in model.contacts]).reshape(-1, 2)
         self._active_key = None
@@ -204,7 +206,12 @@ class ActiveContactEquations:
         G_end, _ = rattle_residual(newton, velocity, nq, nc, h, t, q, v, u, p, z, j0, jf)
         R = ca.densify(ca.vertcat(G_free, ca.mtimes(K_f, y) - ca.vertcat(jf, ca.SX.zeros(nc)), G_end, j0, jf))
         yy = ca.vertcat(x, u, p)
-        return ca.Function("contact_smooth", [Z, x, u, p, t], [R, ca.jacobian(R, Z), ca.jacobian(R, yy)],
+        R_Z = ca.jacobian(R, Z)
+        blocks = [slice(0, 2 * n1), slice(2 * n1, 3 * n1), slice(3 * n1, 5 * n1)]
+        D = ca.vertcat(*(ca.solve(R_Z[b, b], R[b]) for b in blocks))
+        self._steps_function = ca.Function("contact_block_steps", [Z, x, u, p, t], [R, ca.densify(D)],
+                                           ["Z", "x", "u", "p", "t"], ["R", "D"])
+        return ca.Function("contact_smooth", [Z, x, u, p, t], [R, R_Z, ca.jacobian(R, yy)],
                            ["Z", "x", "u", "p", "t"], ["R", "R_Z", "R_y"])
 
     def _contact_kinds(self):
@@ -312,47 +319,27 @@ class ActiveContactEquations:
         n1, nZs = self.n1, self.nZs
         tol = START_TOL * self._scale
         free, response, end = slice(0, 2 * n1), slice(2 * n1, 3 * n1), slice(3 * n1, 5 * n1)
-        R_s, J_Z = self._block_newton(Z, x, u, p, t, free, tol)
+        self._block_newton(Z, x, u, p, t, free, tol)
         active = self.active(sel)
         groups, nZ = self._gather(active)[:2]
         R_laws = self._laws(Z, x, p, sel, active, groups, nZ)[0]
         Z[5 * n1:nZs] = -R_laws[5 * n1:nZs]      # j₀ = Σ W_a(q)ᵀ P_a, j_f = Σ W_a(q_f)ᵀ P_a
-        R_s, J_Z = self._smooth(Z[:nZs], x, u, p, [t])[:2]
-        Z[response] -= self._block(J_Z, response, R_s)  # linear in y
-        self._block_newton(Z, x, u, p, t, end, tol, (R_s, J_Z))
+        R_s, D = self._steps(Z[:nZs], x, u, p, [t])
+        Z[response] -= _finite(D[response])      # linear in y
+        self._block_newton(Z, x, u, p, t, end, tol, (R_s, D))
         return Z
 
-    def _block_pattern(self, a: int, b: int):
-        """``(order, indices, indptr)``: the smooth part's diagonal block ``[a, b)`` of ``R_Z`` as
-        CSC, its data ``J_Z[order]`` (``J_Z``: the smooth part's nonzeros)."""
-        rz, cz = self._smooth_rc[0]
-        inside = np.flatnonzero((rz >= a) & (rz < b) & (cz >= a) & (cz < b))
-        M = sp.csc_matrix((inside + 1.0, (rz[inside] - a, cz[inside] - a)), shape=(b - a, b - a))
-        M.sort_indices()
-        return M.data.astype(int) - 1, M.indices, M.indptr
-
-    def _block(self, J_Z, s, R_s) -> np.ndarray:
-        """The Newton step ``J_ss⁻¹ R_s[s]`` of the smooth part's diagonal block ``s`` (0 where
-        the block is singular)."""
-        order, indices, indptr = self._block_csc[s.start]
-        n = s.stop - s.start
-        J = sp.csc_matrix((J_Z[order], indices, indptr), shape=(n, n))
-        try:
-            d = spla.splu(J, permc_spec="NATURAL", diag_pivot_thresh=0.1).solve(R_s[s])
-        except RuntimeError:     # singular: left to the polish (least-norm solves)
-            return np.zeros(n)
-        return d if np.all(np.isfinite(d)) else np.zeros(n)
-
     def _block_newton(self, Z, x, u, p, t, s, tol, evaluated=None):
-        """Newton on the smooth part's rows ``s`` in the unknowns ``s`` (``Z`` in place);
-        ``evaluated``: the smooth part's ``(R, R_Z)`` at ``Z`` if at hand."""
+        """Newton on the smooth part's rows ``s`` in the unknowns ``s`` (``Z`` in place), its
+        steps ``J_ss⁻¹ R_s`` compiled (``contact_block_steps``: CasADi's sparse QR of each
+        diagonal block; 0 where a block is singular: left to the polish); ``evaluated``: that
+        function's ``(R, D)`` at ``Z`` if at hand."""
         for _ in range(START_ITER):
-            R_s, J_Z = evaluated if evaluated is not None else self._smooth(Z[:self.nZs], x, u, p, [t])[:2]
+            R_s, D = evaluated if evaluated is not None else self._steps(Z[:self.nZs], x, u, p, [t])
             evaluated = None
             if np.max(np.abs(R_s[s]), initial=0.0) <= tol:
                 break
-            Z[s] -= self._block(J_Z, s, R_s)
-        return R_s, J_Z
+            Z[s] -= _finite(D[s])
 
     def system(self, Z, x, u, p, t, sel):
         """``(R, R_Z, R_y)`` at ``Z`` (``R_Z`` sparse CSC, ``R_y`` dense, column-major: a buffer
