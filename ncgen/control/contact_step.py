@@ -557,8 +557,8 @@ class _Factor:
             return None
         X, B, scale = X_k, B_k, 1 + max(B_k.max(initial=0.0), -B_k.min(initial=0.0))   # no temporaries
         if B.ndim == 2:       # a fifth of the cost of every column's residual; a NaN or inf stays in the sum
-            signs = _SIGNS.choice((-1.0, 1.0), B.shape[1])
-            X, B, scale = X @ signs, B @ signs, scale * B.shape[1]
+            signs = _SIGNS.choice((-1.0, 1.0), B.shape[1])    # einsum: no BLAS threads (module docstring)
+            X, B, scale = np.einsum("ij,j->i", X, signs), np.einsum("ij,j->i", B, signs), scale * B.shape[1]
         if not (np.all(np.isfinite(X)) and np.max(np.abs(self.A_kk @ X - B), initial=0.0) <= 1e-9 * scale):
             self.lu = None
             return None
