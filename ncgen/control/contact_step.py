@@ -42,6 +42,7 @@ whose modes do not settle or whose equations do not converge.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import ctypes
 
@@ -90,8 +91,6 @@ MODE_PASSES = 5
 #: columns' solve 1.2 ms instead of 2.4 ms.  A factorisation whose solve fails the residual
 #: test is done again with SuperLU's defaults (COLAMD, partial pivoting) before a least-norm solve.
 FAST_LU = {"permc_spec": "NATURAL", "diag_pivot_thresh": 0.1}
-#: Random signs of the many-column solves' residual test (:meth:`_Factor._lu_solve`).
-_SIGNS = np.random.default_rng(39)
 
 
 @dataclass
@@ -143,6 +142,7 @@ class ContactStepFunction:
         self._active = ActiveContactEquations(model, h) if equations == "active" else None
         self._all = AllContactEquations(model, h) if equations == "all" else None
         self._scale = residual_scale(model)
+        self._g = float(np.linalg.norm(model.gravity))
         self.names = [c["name"] for c in model.contacts]
         self._mu = np.array([c["mu"] for c in model.contacts], float)
         self._e = np.array([c["restitution"] for c in model.contacts], float)
@@ -336,9 +336,6 @@ class ContactStepFunction:
             sel[-2] = float(self._jump(U, Uf, sel) > IMPACT_STEPS * self._g * self.h)
         return sel
 
-    @property
-    def _g(self) -> float:
-        return float(np.linalg.norm(self.model.gravity))
 
     def _jump(self, U, Uf, sel) -> float:
         """The impact test's measure: the largest change of a closed contact's velocity."""
@@ -457,6 +454,13 @@ class AllContactEquations:
         return Z[self._L["pi"]].copy()
 
 
+@lru_cache(maxsize=8)
+def _signs(m: int) -> np.ndarray:
+    """``m`` random signs, drawn once per ``m`` (the many-column solves' residual test: a failed
+    solve is no adversary of a fixed combination)."""
+    return np.random.default_rng(39).choice((-1.0, 1.0), m)
+
+
 def _row_norms(X: np.ndarray) -> np.ndarray:
     """The Euclidean norm of each row of ``X`` (``np.linalg.norm(X, axis=1)``, without its overhead)."""
     return np.sqrt(np.einsum("ij,ij->i", X, X))
@@ -557,7 +561,7 @@ class _Factor:
             return None
         X, B, scale = X_k, B_k, 1 + max(B_k.max(initial=0.0), -B_k.min(initial=0.0))   # no temporaries
         if B.ndim == 2:       # a fifth of the cost of every column's residual; a NaN or inf stays in the sum
-            signs = _SIGNS.choice((-1.0, 1.0), B.shape[1])    # einsum: no BLAS threads (module docstring)
+            signs = _signs(B.shape[1])                         # einsum: no BLAS threads (module docstring)
             X, B, scale = np.einsum("ij,j->i", X, signs), np.einsum("ij,j->i", B, signs), scale * B.shape[1]
         if not (np.all(np.isfinite(X)) and np.max(np.abs(self.A_kk @ X - B), initial=0.0) <= 1e-9 * scale):
             self.lu = None
