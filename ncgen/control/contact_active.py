@@ -273,7 +273,8 @@ class ActiveContactEquations:
         keys, where = np.unique(cols[in_Z] * nZ + rows[in_Z], return_inverse=True)
         indptr = np.searchsorted(keys // nZ, np.arange(nZ + 1))
         flat_y = (cols[~in_Z] - nZ) * nZ + rows[~in_Z]           # column-major: the many-column solve's
-        self._tables = (groups, nZ, in_Z, where, len(keys), keys % nZ, indptr, *np.unique(flat_y, return_inverse=True))
+        self._tables = (groups, nZ, np.flatnonzero(in_Z), np.flatnonzero(~in_Z), where, len(keys), keys % nZ, indptr,
+                        *np.unique(flat_y, return_inverse=True))
         self._active_key = key
         return self._tables
 
@@ -345,7 +346,7 @@ class ActiveContactEquations:
         """``(R, R_Z, R_y)`` at ``Z`` (``R_Z`` sparse CSC, ``R_y`` dense, column-major: a buffer
         of this object, overwritten by the next call, as :meth:`solve_columns`'s result)."""
         active = self.active(sel)
-        groups, nZ, in_Z, where, nnz, indices, indptr, flat_y, into_y = self._gather(active)
+        groups, nZ, in_Z, in_y, where, nnz, indices, indptr, flat_y, into_y = self._gather(active)
         R, data = self._laws(Z, x, p, sel, active, groups, nZ)
         R_s, J_Z, J_y = self._smooth(Z[:self.nZs], x, u, p, [t])
         R[:self.nZs] += R_s
@@ -354,7 +355,7 @@ class ActiveContactEquations:
         if self._Ry.shape != (self.ny, nZ):
             self._Ry = np.empty((self.ny, nZ))
         self._Ry.fill(0.0)
-        self._Ry.flat[flat_y] = np.bincount(into_y, data[~in_Z], len(flat_y))
+        self._Ry.flat[flat_y] = np.bincount(into_y, data[in_y], len(flat_y))
         return R, R_Z, self._Ry.T
 
     def _laws(self, Z, x, p, sel, active, groups, nZ):
