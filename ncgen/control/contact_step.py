@@ -336,7 +336,6 @@ class ContactStepFunction:
             sel[-2] = float(self._jump(U, Uf, sel) > IMPACT_STEPS * self._g * self.h)
         return sel
 
-
     def _jump(self, U, Uf, sel) -> float:
         """The impact test's measure: the largest change of a closed contact's velocity."""
         nk, dim = self.model.nk, self.model.dim
