@@ -35,7 +35,6 @@ void w_inertia_matrix(const double *I, double *M) { sp_inertia_matrix(I, M); }
 void w_twist_out(const double *R, const double *p, const double *T, double *Y) { sp_twist_out(R, p, T, Y); }
 void w_inertia_rotate(const double *R, const double *I, double *J) { sp_inertia_rotate(R, I, J); }
 void w_inertia_shift_add(const double *d, const double *I, double *J) { sp_inertia_shift_add(d, I, J); }
-void w_sym6_out_add(const double *R, const double *p, const double *A, double *B) { sp_sym6_out_add(R, p, A, B); }
 void w_wrench_shift(const double *d, const double *W, double *Y) { int i; for (i = 0; i < 6; ++i) Y[i] = W[i]; sp_wrench_shift(d, Y); }
 """
 
@@ -105,18 +104,3 @@ def test_spatial_algebra_equals_the_symbolic_forms(lib, seed):
     close(call(lib, "w_inertia_matrix", 36, shifted).reshape(6, 6, order="F"),
           N + rm.transport_mass_matrix(M, rm.inverse(D)))
     close(call(lib, "w_wrench_shift", 6, p, W), rm.transport_wrench(rm.inverse(D), W))
-
-
-@pytest.mark.parametrize("seed", range(5))
-def test_symmetric_6x6_moved_to_the_parent_equals_the_symbolic_form(lib, seed):
-    """An articulated inertia (symmetric 6 × 6 of no special form) carried from b to a, the
-    lower triangles read and written, equals ``Ad(H_ab)⁻ᵀ A Ad(H_ab)⁻¹``."""
-    rng = np.random.default_rng(seed)
-    R, p = pose(rng)
-    X, Y = rng.normal(size=(6, 6)), rng.normal(size=(6, 6))
-    A, B = X @ X.T, Y + Y.T
-    got = call(lib, "w_sym6_out_add", 36, R, p, np.tril(A) + 1e3 * np.triu(A, 1), out=B).reshape(6, 6, order="F")
-    X_inv = rm.Ad(rm.inverse(rm.homogeneous(R, p)))          # Ad(H_ab)⁻¹
-    want = B + X_inv.T @ A @ X_inv
-    close(np.tril(got), np.tril(want))
-    close(np.triu(got, 1), np.triu(B, 1))

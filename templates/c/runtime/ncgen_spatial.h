@@ -11,8 +11,6 @@
 #ifndef NCGEN_SPATIAL_H
 #define NCGEN_SPATIAL_H
 
-#include <string.h>
-
 /* c = a × b (c not a or b) */
 static inline void sp_cross(const double *a, const double *b, double *c) {
   c[0] = a[1] * b[2] - a[2] * b[1];
@@ -207,65 +205,6 @@ static inline void sp_inertia_matrix(const double *I, double *M) {
   M[18] = 0.0;   M[19] = h2;    M[20] = -h1;   M[21] = m;    M[22] = 0.0; M[23] = 0.0;
   M[24] = -h2;   M[25] = 0.0;   M[26] = h0;    M[27] = 0.0;  M[28] = m;   M[29] = 0.0;
   M[30] = h1;    M[31] = -h0;   M[32] = 0.0;   M[33] = 0.0;  M[34] = 0.0; M[35] = m;
-}
-
-/* Y = R X Rᵀ (3 × 3, column-major; Y not X); lower: X symmetric, Y's lower triangle alone
- * written.  Written out (gcc -O2 keeps short loops). */
-static inline void sp_congruence3(const double *R, const double *X, double *Y, int lower) {
-  double W[9];
-#define SP_W(i, j) W[(i) + 3 * (j)] = X[i] * R[j] + X[(i) + 3] * R[(j) + 3] + X[(i) + 6] * R[(j) + 6]
-#define SP_Y(i, j) Y[(i) + 3 * (j)] = R[i] * W[3 * (j)] + R[(i) + 3] * W[3 * (j) + 1] + R[(i) + 6] * W[3 * (j) + 2]
-  SP_W(0, 0); SP_W(1, 0); SP_W(2, 0); SP_W(0, 1); SP_W(1, 1); SP_W(2, 1); SP_W(0, 2); SP_W(1, 2); SP_W(2, 2);
-  SP_Y(0, 0); SP_Y(1, 0); SP_Y(2, 0); SP_Y(1, 1); SP_Y(2, 1); SP_Y(2, 2);
-  if (!lower) {
-    SP_Y(0, 1); SP_Y(0, 2); SP_Y(1, 2);
-  }
-#undef SP_W
-#undef SP_Y
-}
-
-/* Ap (6 × 6, in a) += Ad(H_ab)⁻ᵀ Ab Ad(H_ab)⁻¹ of the symmetric Ab (6 × 6, in b; b at (R, p) in
- * a), both column-major, lower triangles read and written.  With Ab = [[A, Eᵀ], [E, C]]: turned,
- * A' = R A Rᵀ, E' = R E Rᵀ, C' = R C Rᵀ; moved by p: C'' = C', E'' = E' + (p̂ C')ᵀ,
- * A'' = A' + p̂ E'' + (p̂ E')ᵀ (Ap not Ab). */
-static inline void sp_sym6_out_add(const double *R, const double *p, const double *Ab, double *Ap) {
-  double A[9], C[9], E[9], A1[9], C1[9], E1[9], F[9], K[9];
-#define SP_DIAG(X, i, o) X[4 * (i)] = Ab[7 * ((o) + (i))]
-#define SP_SYM(X, i, j, o) X[(i) + 3 * (j)] = X[(j) + 3 * (i)] = Ab[(o) + (i) + 6 * ((o) + (j))]
-  SP_DIAG(A, 0, 0); SP_SYM(A, 1, 0, 0); SP_SYM(A, 2, 0, 0); SP_DIAG(A, 1, 0); SP_SYM(A, 2, 1, 0); SP_DIAG(A, 2, 0);
-  SP_DIAG(C, 0, 3); SP_SYM(C, 1, 0, 3); SP_SYM(C, 2, 0, 3); SP_DIAG(C, 1, 3); SP_SYM(C, 2, 1, 3); SP_DIAG(C, 2, 3);
-#undef SP_SYM
-#undef SP_DIAG
-  memcpy(E, Ab + 3, 3 * sizeof(double));
-  memcpy(E + 3, Ab + 9, 3 * sizeof(double));
-  memcpy(E + 6, Ab + 15, 3 * sizeof(double));
-  sp_congruence3(R, A, A1, 1);
-  sp_congruence3(R, C, C1, 1);
-  sp_congruence3(R, E, E1, 0);
-  C1[3] = C1[1];
-  C1[6] = C1[2];
-  C1[7] = C1[5];
-  sp_cross(p, C1, F);                           /* F = p̂ C' */
-  sp_cross(p, C1 + 3, F + 3);
-  sp_cross(p, C1 + 6, F + 6);
-  sp_cross(p, E1, K);                           /* K = p̂ E' */
-  sp_cross(p, E1 + 3, K + 3);
-  sp_cross(p, E1 + 6, K + 6);
-#define SP_E(i, j) Ap[3 + (i) + 6 * (j)] += E1[(i) + 3 * (j)] += F[(j) + 3 * (i)]     /* E'' = E' + Fᵀ */
-  SP_E(0, 0); SP_E(1, 0); SP_E(2, 0); SP_E(0, 1); SP_E(1, 1); SP_E(2, 1); SP_E(0, 2); SP_E(1, 2); SP_E(2, 2);
-#undef SP_E
-  Ap[21] += C1[0];
-  Ap[22] += C1[1];
-  Ap[23] += C1[2];
-  Ap[28] += C1[4];
-  Ap[29] += C1[5];
-  Ap[35] += C1[8];
-  sp_cross(p, E1, F);                           /* F = p̂ E'' */
-  sp_cross(p, E1 + 3, F + 3);
-  sp_cross(p, E1 + 6, F + 6);
-#define SP_A(i, j) Ap[(i) + 6 * (j)] += A1[(i) + 3 * (j)] + F[(i) + 3 * (j)] + K[(j) + 3 * (i)]
-  SP_A(0, 0); SP_A(1, 0); SP_A(2, 0); SP_A(1, 1); SP_A(2, 1); SP_A(2, 2);
-#undef SP_A
 }
 
 #endif

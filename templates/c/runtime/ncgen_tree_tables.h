@@ -535,6 +535,15 @@ static void ncgen_tree_ground_poses(const ncgen_tree_kinds *K, const ncgen_tree 
   }
 }
 
+/* Each body's rigid inertia in the ground frame, about its origin (s->IC), from the poses of
+ * ncgen_tree_ground_poses. */
+static void ncgen_tree_ground_inertias(const ncgen_tree *T, ncgen_tree_work *s) {
+  int b;
+  memset(s->IC, 0, NCGEN_TREE_BODY * (size_t)T->nb * sizeof(double));
+  for (b = 0; b < T->nb; ++b)
+    sp_inertia_out_add(s->R + 9 * b, s->p + 3 * b, T->inertia + NCGEN_TREE_BODY * b, s->IC + NCGEN_TREE_BODY * b);
+}
+
 /* 1 when the rates are all independent (no mimic joint: G = 1). */
 static int ncgen_tree_unmapped(const ncgen_tree *T) {
   int i;
@@ -673,91 +682,114 @@ static void ncgen_tree_joint_solve(int nv, const double *L, const double *y, dou
   }
 }
 
-/* Sᵀ x of joint rate j of a body whose kind has the mode (1: S = [e_z; 0], 2: [0; e_z]). */
-static inline double ncgen_tree_s_dot(int mode, const double *S, const double *x) {
-  return mode == 1 ? x[2] : mode == 2 ? x[5] : ncgen_tree_dot6(S, x);
-}
-
 /* The articulated-body algorithm (no mimic joint): aj = M⁻¹ (τ − bias) in three passes over
- * the bodies in their local frames f_b (Featherstone's): outwards, twists, c = c_J + v × S w
- * and the bias wrenches p^A = −ad(v)ᵀ I v (ncgen_tree_local_motion); inwards, with U = I^A S,
- * D = Sᵀ U = L Lᵀ and u = τ − Sᵀ p^A, the articulated inertia I^a = I^A − U D⁻¹ Uᵀ and bias
- * p^a = p^A + I^a c + U D⁻¹ u carried into the parent by the body's pose X_b in it,
- * I^A_p += X_b⁻ᵀ I^a X_b⁻¹ (sp_sym6_out_add; I^A symmetric, its lower triangle kept) and
- * p^A_p += X_b⁻ᵀ p^a; outwards, a = X_b⁻¹ a_p + c + S ẇ with ẇ = D⁻¹ (u − Uᵀ (X_b⁻¹ a_p + c))
- * (the ground's a = [0; −g]).  A revolute (prismatic) joint about z reads U as column 2 (5) of
- * I^A.  *pivot = min d_k / (S_kᵀ I^C S_k) over the Cholesky pivots d_k of each joint's D (the
- * pivots of M's factorisation from the leaves, relative to M's diagonal; I^C the composite
- * rigid inertia in f_b, carried inwards by sp_inertia_out_add; NaN stays). */
+ * the bodies, every quantity in the ground frame (twists and accelerations of the bodies as
+ * [ω; v] at the ground's origin, articulated inertias I^A and bias wrenches p^A about it), so
+ * that an articulated inertia passes to its parent by a sum, I^A_p += I^A − U D⁻¹ Uᵀ
+ * (U = I^A S, D = Sᵀ U), with no change of frame (I^A symmetric: its lower triangle kept); *pivot = min d_k / (S_kᵀ I^C S_k) over
+ * the Cholesky pivots d_k of each joint's D (the pivots of M's factorisation from the leaves,
+ * relative to M's diagonal; NaN stays). */
 static int ncgen_tree_articulated(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s,
                                   const double *tau, double *aj, double *pivot) {
   int b, i, j, r, c, first = 1;
+  const double zero[6] = {0, 0, 0, 0, 0, 0};
   const double a0[6] = {0, 0, 0, -T->gravity[0], -T->gravity[1], -T->gravity[2]};
   double ratio = 1.0;
   if (ncgen_tree_local_poses(K, T, s)) return NCGEN_TREE_KERNEL;
-  ncgen_tree_local_motion(K, T, s, 0);
-  memcpy(s->IC, T->inertia, NCGEN_TREE_BODY * (size_t)T->nb * sizeof(double));
-  for (b = 0; b < T->nb; ++b) sp_inertia_matrix(T->inertia + NCGEN_TREE_BODY * b, s->IA + 36 * b);
+  ncgen_tree_ground_poses(K, T, s);
+  ncgen_tree_ground_inertias(T, s);
+  for (b = 0; b < T->nb; ++b) {                 /* twists, c = Ṡ w, I^A = I, p^A = −ad(v)ᵀ I v */
+    const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
+    int par = T->parent[b], va = T->v_at[b];
+    const double *S = s->S + 6 * va, *vp = par < 0 ? zero : s->vl + 6 * par, *I = s->IC + NCGEN_TREE_BODY * b;
+    double *v = s->vl + 6 * b, *cb = s->cl + 6 * b, vJ[6], t[6];
+    for (i = 0; i < 6; ++i) {
+      double x = 0.0;
+      if (k->nv == 1)
+        x = S[i] * s->v[va];
+      else
+        for (j = 0; j < k->nv; ++j) x += S[6 * j + i] * s->v[va + j];
+      vJ[i] = x;
+      v[i] = vp[i] + x;
+    }
+    sp_ad(v, vJ, t);
+    for (i = 0; i < 6; ++i) cb[i] += t[i];
+    sp_inertia_matrix(I, s->IA + 36 * b);
+    sp_inertia_apply(I, v, t);
+    sp_ad_star(v, t, s->fl + 6 * b);
+  }
   for (b = T->nb - 1; b >= 0; --b) {
     const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
-    int nv = k->nv, va = T->v_at[b], par = T->parent[b], mode = k->mode;
-    const double *S = s->Sl + 6 * va, *cb = s->cl + 6 * b, *IC = s->IC + NCGEN_TREE_BODY * b, *X = s->X + 12 * b;
+    int nv = k->nv, va = T->v_at[b], par = T->parent[b];
+    const double *S = s->S + 6 * va, *cb = s->cl + 6 * b, *IC = s->IC + NCGEN_TREE_BODY * b;
     double *IA = s->IA + 36 * b, *pA = s->fl + 6 * b, *U = s->U + 6 * va, *L = s->Dl + 36 * b, *u = s->ul + va;
-    double Ia[36], y[6], mkk[6], w[6], F[6];
-    if (par >= 0) sp_inertia_out_add(X, X + 9, IC, s->IC + NCGEN_TREE_BODY * par);
+    double mkk[6], w[6], F[6];
+    if (par >= 0) {
+      double *ICp = s->IC + NCGEN_TREE_BODY * par;
+      for (i = 0; i < NCGEN_TREE_BODY; ++i) ICp[i] += IC[i];
+    }
     if (nv == 1) {                              /* one rate: D = d = l², I^a = I^A − Z Zᵀ, Z = U / l */
-      double d, x, m, q, l, e, Z[6];
-      if (mode == 1 || mode == 2) {             /* U = column z of I^A; M_kk = I^C_zz or m^C */
-        int z = mode == 1 ? 2 : 5;
-        for (r = 0; r < 6; ++r) U[r] = r >= z ? IA[r + 6 * z] : IA[z + 6 * r];
-        m = mode == 1 ? IC[12] : IC[0];
-      } else {
-        ncgen_tree_sym6_apply(IA, S, U);
-        sp_inertia_apply(IC, S, F);
-        m = ncgen_tree_dot6(S, F);
-      }
-      d = ncgen_tree_s_dot(mode, S, U);
-      u[0] = x = tau[va] - ncgen_tree_s_dot(mode, S, pA);
+      double d, x, m, q, l, e, *IAp, *pAp, Z[6], y[6];
+      ncgen_tree_sym6_apply(IA, S, U);
+      d = ncgen_tree_dot6(S, U);
+      u[0] = x = tau[va] - ncgen_tree_dot6(S, pA);
+      sp_inertia_apply(IC, S, F);               /* M_kk = Sᵀ I^C S */
+      m = ncgen_tree_dot6(S, F);
       q = d / m;
       if (first || q < ratio || !(q == q)) ratio = q;
       first = 0;
       L[0] = l = sqrt(d > 0.0 ? d : 0.0);
       if (par < 0) continue;
-      e = (x - ncgen_tree_dot6(U, cb)) / l;     /* p^a = p^A + I^A c + Z (u − Uᵀ c) / l */
+      IAp = s->IA + 36 * par;
+      pAp = s->fl + 6 * par;
+      e = (x - ncgen_tree_dot6(U, cb)) / l;     /* p^A_p += p^A + I^A c + Z (u − Uᵀ c) / l */
       ncgen_tree_sym6_apply(IA, cb, y);
       for (r = 0; r < 6; ++r) {
         Z[r] = U[r] / l;
-        y[r] += pA[r] + Z[r] * e;
+        pAp[r] += pA[r] + y[r] + Z[r] * e;
       }
-      for (c = 0; c < 6; ++c)
-        for (r = c; r < 6; ++r) Ia[r + 6 * c] = IA[r + 6 * c] - Z[r] * Z[c];
-    } else {
-      double Z[36];
-      for (j = 0; j < nv; ++j) {                /* U = I^A S, D = Sᵀ U (lower), u = τ − Sᵀ p^A */
-        const double *Sj = S + 6 * j;
-        double *Uj = U + 6 * j, x = tau[va + j], m = 0.0;
-        ncgen_tree_sym6_apply(IA, Sj, Uj);
-        for (i = j; i < nv; ++i) L[i + 6 * j] = ncgen_tree_dot6(S + 6 * i, Uj);
-        for (r = 0; r < 6; ++r) x -= Sj[r] * pA[r];
-        u[j] = x;
-        sp_inertia_apply(IC, Sj, F);            /* M_kk = S_kᵀ I^C S_k */
-        for (r = 0; r < 6; ++r) m += Sj[r] * F[r];
-        mkk[j] = m;
+      /* I^A_p += I^A − Z Zᵀ (lower triangle) */
+#define NCGEN_TREE_UPD(r, c) IAp[(r) + 6 * (c)] += IA[(r) + 6 * (c)] - Z[r] * Z[c]
+      NCGEN_TREE_UPD(0, 0); NCGEN_TREE_UPD(1, 0); NCGEN_TREE_UPD(2, 0); NCGEN_TREE_UPD(3, 0); NCGEN_TREE_UPD(4, 0);
+      NCGEN_TREE_UPD(5, 0); NCGEN_TREE_UPD(1, 1); NCGEN_TREE_UPD(2, 1); NCGEN_TREE_UPD(3, 1); NCGEN_TREE_UPD(4, 1);
+      NCGEN_TREE_UPD(5, 1); NCGEN_TREE_UPD(2, 2); NCGEN_TREE_UPD(3, 2); NCGEN_TREE_UPD(4, 2); NCGEN_TREE_UPD(5, 2);
+      NCGEN_TREE_UPD(3, 3); NCGEN_TREE_UPD(4, 3); NCGEN_TREE_UPD(5, 3); NCGEN_TREE_UPD(4, 4); NCGEN_TREE_UPD(5, 4);
+      NCGEN_TREE_UPD(5, 5);
+#undef NCGEN_TREE_UPD
+      continue;
+    }
+    for (j = 0; j < nv; ++j) {                  /* U = I^A S, D = Sᵀ U (lower), u = τ − Sᵀ p^A */
+      const double *Sj = S + 6 * j;
+      double *Uj = U + 6 * j, x = tau[va + j], m = 0.0;
+      ncgen_tree_sym6_apply(IA, Sj, Uj);
+      for (i = j; i < nv; ++i) {
+        double y = 0.0;
+        for (r = 0; r < 6; ++r) y += S[6 * i + r] * Uj[r];
+        L[i + 6 * j] = y;
       }
-      for (j = 0; j < nv; ++j) {                /* D = L Lᵀ */
-        double d = L[j + 6 * j], q;
-        for (c = 0; c < j; ++c) d -= L[j + 6 * c] * L[j + 6 * c];
-        q = d / mkk[j];
-        if (first || q < ratio || !(q == q)) ratio = q;
-        first = 0;
-        L[j + 6 * j] = sqrt(d > 0.0 ? d : 0.0);
-        for (i = j + 1; i < nv; ++i) {
-          double x = L[i + 6 * j];
-          for (c = 0; c < j; ++c) x -= L[i + 6 * c] * L[j + 6 * c];
-          L[i + 6 * j] = x / L[j + 6 * j];
-        }
+      for (r = 0; r < 6; ++r) x -= Sj[r] * pA[r];
+      u[j] = x;
+      sp_inertia_apply(IC, Sj, F);              /* M_kk = S_kᵀ I^C S_k */
+      for (r = 0; r < 6; ++r) m += Sj[r] * F[r];
+      mkk[j] = m;
+    }
+    for (j = 0; j < nv; ++j) {                  /* D = L Lᵀ */
+      double d = L[j + 6 * j], q;
+      for (c = 0; c < j; ++c) d -= L[j + 6 * c] * L[j + 6 * c];
+      q = d / mkk[j];
+      if (first || q < ratio || !(q == q)) ratio = q;
+      first = 0;
+      L[j + 6 * j] = sqrt(d > 0.0 ? d : 0.0);
+      for (i = j + 1; i < nv; ++i) {
+        double x = L[i + 6 * j];
+        for (c = 0; c < j; ++c) x -= L[i + 6 * c] * L[j + 6 * c];
+        L[i + 6 * j] = x / L[j + 6 * j];
       }
-      if (par < 0) continue;
+    }
+    if (par < 0) continue;
+    {
+      double *IAp = s->IA + 36 * par, *pAp = s->fl + 6 * par;
+      double y[6], Z[36];
       for (r = 0; r < 6; ++r) {                 /* Z = U L⁻ᵀ (6 × nv) */
         for (j = 0; j < nv; ++j) {
           double x = U[6 * j + r];
@@ -771,36 +803,35 @@ static int ncgen_tree_articulated(const ncgen_tree_kinds *K, const ncgen_tree *T
         for (c = 0; c < j; ++c) x -= L[j + 6 * c] * w[c];
         w[j] = x / L[j + 6 * j];
       }
-      ncgen_tree_sym6_apply(IA, cb, y);         /* p^a = p^A + I^A c + Z w, I^a = I^A − Z Zᵀ */
-      for (r = 0; r < 6; ++r) {
-        y[r] += pA[r];
-        for (j = 0; j < nv; ++j) y[r] += Z[6 * j + r] * w[j];
-      }
+      /* p^A_p += p^A + I^A c + Z w (= p^A + I^a c + U D⁻¹ u, I^a = I^A − Z Zᵀ); I^A_p += I^a */
+      ncgen_tree_sym6_apply(IA, cb, y);
+      for (r = 0; r < 6; ++r) y[r] += pA[r];
+      for (j = 0; j < nv; ++j)
+        for (r = 0; r < 6; ++r) y[r] += Z[6 * j + r] * w[j];
+      for (r = 0; r < 6; ++r) pAp[r] += y[r];
       for (c = 0; c < 6; ++c)
         for (r = c; r < 6; ++r) {
           double x = IA[r + 6 * c];
           for (j = 0; j < nv; ++j) x -= Z[6 * j + r] * Z[6 * j + c];
-          Ia[r + 6 * c] = x;
+          IAp[r + 6 * c] += x;
         }
     }
-    sp_sym6_out_add(X, X + 9, Ia, s->IA + 36 * par);
-    sp_wrench_out_add(X, X + 9, y, s->fl + 6 * par);
   }
-  for (b = 0; b < T->nb; ++b) {                 /* a = X⁻¹ a_p + c + S ẇ, ẇ = D⁻¹ (u − Uᵀ (X⁻¹ a_p + c)) */
+  for (b = 0; b < T->nb; ++b) {                 /* a = a_p + c + S ẇ, ẇ = D⁻¹ (u − Uᵀ (a_p + c)) */
     const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
     int nv = k->nv, va = T->v_at[b], par = T->parent[b];
-    const double *S = s->Sl + 6 * va, *U = s->U + 6 * va, *X = s->X + 12 * b;
+    const double *S = s->S + 6 * va, *U = s->U + 6 * va, *ap = par < 0 ? a0 : s->al + 6 * par;
     double *a = s->al + 6 * b, y[6], x[6];
-    sp_twist_in(X, X + 9, par < 0 ? a0 : s->al + 6 * par, a);
-    for (i = 0; i < 6; ++i) a[i] += s->cl[6 * b + i];
-    for (j = 0; j < nv; ++j) y[j] = s->ul[va + j] - ncgen_tree_dot6(U + 6 * j, a);
+    for (i = 0; i < 6; ++i) a[i] = ap[i] + s->cl[6 * b + i];
+    for (j = 0; j < nv; ++j) {
+      double t = s->ul[va + j];
+      for (r = 0; r < 6; ++r) t -= U[6 * j + r] * a[r];
+      y[j] = t;
+    }
     ncgen_tree_joint_solve(nv, s->Dl + 36 * b, y, x);
     for (j = 0; j < nv; ++j) {
       aj[va + j] = x[j];
-      if (k->mode == 1 || k->mode == 2)
-        a[k->mode == 1 ? 2 : 5] += x[j];
-      else
-        for (r = 0; r < 6; ++r) a[r] += S[6 * j + r] * x[j];
+      for (r = 0; r < 6; ++r) a[r] += S[6 * j + r] * x[j];
     }
   }
   *pivot = ratio;
@@ -808,8 +839,7 @@ static int ncgen_tree_articulated(const ncgen_tree_kinds *K, const ncgen_tree *T
 }
 
 /* y = M⁻¹ e (nv) for the joint efforts e (nv) by the last two passes of the articulated-body
- * algorithm on the factors of the last ncgen_tree_articulated, in the same local frames (no
- * velocity, no gravity). */
+ * algorithm on the factors of the last ncgen_tree_articulated (no velocity, no gravity). */
 static void ncgen_tree_articulated_solve(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s,
                                          const double *e, double *y) {
   int b, i, j, r;
@@ -818,24 +848,32 @@ static void ncgen_tree_articulated_solve(const ncgen_tree_kinds *K, const ncgen_
   for (b = T->nb - 1; b >= 0; --b) {
     const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
     int nv = k->nv, va = T->v_at[b], par = T->parent[b];
-    const double *S = s->Sl + 6 * va, *U = s->U + 6 * va, *pA = s->pr + 6 * b, *X = s->X + 12 * b;
-    double *u = s->ur + va, x[6], t[6];
-    for (j = 0; j < nv; ++j) u[j] = e[va + j] - ncgen_tree_s_dot(k->mode, S + 6 * j, pA);  /* u = e − Sᵀ p^A */
-    if (par < 0) continue;
-    ncgen_tree_joint_solve(nv, s->Dl + 36 * b, u, x);  /* p^A_p += X⁻ᵀ (p^A + U D⁻¹ u) */
-    for (r = 0; r < 6; ++r) {
-      t[r] = pA[r];
-      for (j = 0; j < nv; ++j) t[r] += U[6 * j + r] * x[j];
+    const double *S = s->S + 6 * va, *U = s->U + 6 * va, *pA = s->pr + 6 * b;
+    double *u = s->ur + va, x[6];
+    for (j = 0; j < nv; ++j) {                  /* u = e − Sᵀ p^A */
+      double t = e[va + j];
+      for (r = 0; r < 6; ++r) t -= S[6 * j + r] * pA[r];
+      u[j] = t;
     }
-    sp_wrench_out_add(X, X + 9, t, s->pr + 6 * par);
+    if (par < 0) continue;
+    ncgen_tree_joint_solve(nv, s->Dl + 36 * b, u, x);  /* p^A_p += p^A + U D⁻¹ u */
+    for (r = 0; r < 6; ++r) {
+      double t = pA[r];
+      for (j = 0; j < nv; ++j) t += U[6 * j + r] * x[j];
+      s->pr[6 * par + r] += t;
+    }
   }
   for (b = 0; b < T->nb; ++b) {
     const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
     int nv = k->nv, va = T->v_at[b], par = T->parent[b];
-    const double *S = s->Sl + 6 * va, *U = s->U + 6 * va, *X = s->X + 12 * b;
+    const double *S = s->S + 6 * va, *U = s->U + 6 * va, *ap = par < 0 ? zero : s->ar + 6 * par;
     double *a = s->ar + 6 * b, z[6], x[6];
-    sp_twist_in(X, X + 9, par < 0 ? zero : s->ar + 6 * par, a);
-    for (j = 0; j < nv; ++j) z[j] = s->ur[va + j] - ncgen_tree_dot6(U + 6 * j, a);
+    for (r = 0; r < 6; ++r) a[r] = ap[r];
+    for (j = 0; j < nv; ++j) {
+      double t = s->ur[va + j];
+      for (r = 0; r < 6; ++r) t -= U[6 * j + r] * a[r];
+      z[j] = t;
+    }
     ncgen_tree_joint_solve(nv, s->Dl + 36 * b, z, x);
     for (j = 0; j < nv; ++j) {
       y[va + j] = x[j];
