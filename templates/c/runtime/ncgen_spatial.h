@@ -133,13 +133,15 @@ static inline void sp_inertia_out_add(const double *R, const double *p, const do
 static inline void sp_inertia_rotate(const double *R, const double *Ib, double *Ia) {
   const double *I = Ib + 4;
   double A[9];
-  int i;
   sp_rot(R, Ib + 1, Ia + 1);
-  for (i = 0; i < 3; ++i) {                     /* A = R I_o: row i of R times the symmetric I_o */
-    A[i] = R[i] * I[0] + R[i + 3] * I[1] + R[i + 6] * I[2];
-    A[i + 3] = R[i] * I[1] + R[i + 3] * I[4] + R[i + 6] * I[5];
-    A[i + 6] = R[i] * I[2] + R[i + 3] * I[5] + R[i + 6] * I[8];
-  }
+#define SP_RI(i)                                            /* A = R I_o: row i of R times the symmetric I_o */ \
+  A[i] = R[i] * I[0] + R[(i) + 3] * I[1] + R[(i) + 6] * I[2];                                                    \
+  A[(i) + 3] = R[i] * I[1] + R[(i) + 3] * I[4] + R[(i) + 6] * I[5];                                              \
+  A[(i) + 6] = R[i] * I[2] + R[(i) + 3] * I[5] + R[(i) + 6] * I[8]
+  SP_RI(0);
+  SP_RI(1);
+  SP_RI(2);
+#undef SP_RI
 #define SP_AR(i, j) (A[i] * R[j] + A[i + 3] * R[j + 3] + A[i + 6] * R[j + 6])
   Ia[0] = Ib[0];
   Ia[4] = SP_AR(0, 0);
@@ -157,8 +159,9 @@ static inline void sp_inertia_rotate(const double *R, const double *Ib, double *
 static inline void sp_inertia_shift_add(const double *d, const double *Ib, double *Ia) {
   const double m = Ib[0];
   double g[3], gd, x;
-  int i;
-  for (i = 0; i < 3; ++i) g[i] = Ib[1 + i] + 0.5 * m * d[i];
+  g[0] = Ib[1] + 0.5 * m * d[0];
+  g[1] = Ib[2] + 0.5 * m * d[1];
+  g[2] = Ib[3] + 0.5 * m * d[2];
   gd = 2.0 * (g[0] * d[0] + g[1] * d[1] + g[2] * d[2]);
   Ia[4] += Ib[4] + gd - 2.0 * d[0] * g[0];
   Ia[8] += Ib[8] + gd - 2.0 * d[1] * g[1];
@@ -173,7 +176,9 @@ static inline void sp_inertia_shift_add(const double *d, const double *Ib, doubl
   Ia[9] += Ib[9] + x;
   Ia[11] += Ib[11] + x;
   Ia[0] += m;
-  for (i = 0; i < 3; ++i) Ia[1 + i] += Ib[1 + i] + m * d[i];
+  Ia[1] += Ib[1] + m * d[0];
+  Ia[2] += Ib[2] + m * d[1];
+  Ia[3] += Ib[3] + m * d[2];
 }
 
 /* The wrench W about a point b, made about a point a with b − a = d (same axes): τ += d × f */

@@ -365,16 +365,18 @@ static int ncgen_tree_local_poses(const ncgen_tree_kinds *K, const ncgen_tree *T
     const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
     const double *xin = T->xin + 12 * b, *q = s->q + T->q_at[b];
     double *R = s->X + 12 * b, *p = R + 9, *S = s->Sl + 6 * T->v_at[b], *c = s->cl + 6 * b;
-    for (i = 0; i < 6; ++i) c[i] = 0.0;
-    if (k->mode == 1) {                                   /* R = R_in Rz(q) */
+    memset(c, 0, 6 * sizeof(double));
+    if (k->mode == 1) {                                   /* R = R_in Rz(q) (written out: gcc -O2 keeps short loops) */
       double cq = cos(q[0]), sq = sin(q[0]);
-      for (i = 0; i < 3; ++i) {
-        R[i] = cq * xin[i] + sq * xin[3 + i];
-        R[3 + i] = cq * xin[3 + i] - sq * xin[i];
-        R[6 + i] = xin[6 + i];
-        p[i] = xin[9 + i];
-      }
-      for (i = 0; i < 6; ++i) S[i] = i == 2 ? 1.0 : 0.0;
+      R[0] = cq * xin[0] + sq * xin[3];
+      R[1] = cq * xin[1] + sq * xin[4];
+      R[2] = cq * xin[2] + sq * xin[5];
+      R[3] = cq * xin[3] - sq * xin[0];
+      R[4] = cq * xin[4] - sq * xin[1];
+      R[5] = cq * xin[5] - sq * xin[2];
+      memcpy(R + 6, xin + 6, 6 * sizeof(double));        /* R's third column and p */
+      S[0] = S[1] = S[3] = S[4] = S[5] = 0.0;
+      S[2] = 1.0;
     } else if (k->mode == 2 || k->mode == 3) {            /* p = p_in + q R_in e_z; fixed: H_in */
       for (i = 0; i < 9; ++i) R[i] = xin[i];
       for (i = 0; i < 3; ++i) p[i] = xin[9 + i] + (k->mode == 2 ? q[0] * xin[6 + i] : 0.0);
@@ -516,10 +518,12 @@ static void ncgen_tree_ground_poses(const ncgen_tree_kinds *K, const ncgen_tree 
       const double *Rp = s->R + 9 * par, *pp = s->p + 3 * par;
       for (j = 0; j < 3; ++j) sp_rot(Rp, Rl + 3 * j, R + 3 * j);
       sp_rot(Rp, pl, p);
-      for (i = 0; i < 3; ++i) p[i] += pp[i];
+      p[0] += pp[0];
+      p[1] += pp[1];
+      p[2] += pp[2];
     }
     if (k->mode == 1) {
-      for (i = 0; i < 3; ++i) S[i] = R[6 + i];
+      memcpy(S, R + 6, 3 * sizeof(double));
       sp_cross(p, S, S + 3);
     } else if (k->mode == 2) {
       for (i = 0; i < 3; ++i) {
@@ -576,8 +580,12 @@ static void ncgen_tree_ground_mass(const ncgen_tree_kinds *K, const ncgen_tree *
     const double *R = s->R + 9 * b;
     double *S = s->Sl + 6 * T->v_at[b], *d = s->d + 3 * b, x[6];
     sp_inertia_rotate(R, T->inertia + NCGEN_TREE_BODY * b, s->IC + NCGEN_TREE_BODY * b);
-    if (T->parent[b] >= 0)                      /* d_b = p_b − p_parent */
-      for (i = 0; i < 3; ++i) d[i] = s->p[3 * b + i] - s->p[3 * T->parent[b] + i];
+    if (T->parent[b] >= 0) {                    /* d_b = p_b − p_parent */
+      const double *pb = s->p + 3 * b, *pp = s->p + 3 * T->parent[b];
+      d[0] = pb[0] - pp[0];
+      d[1] = pb[1] - pp[1];
+      d[2] = pb[2] - pp[2];
+    }
     if (k->mode == 1 || k->mode == 2)           /* S' = [z_b; 0] or [0; z_b] */
       for (i = 0; i < 3; ++i) {
         S[i] = k->mode == 1 ? R[6 + i] : 0.0;
