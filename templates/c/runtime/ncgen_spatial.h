@@ -98,15 +98,16 @@ static inline void sp_inertia_apply(const double *I, const double *T, double *W)
 static inline void sp_inertia_out_add(const double *R, const double *p, const double *Ib, double *Ia) {
   const double m = Ib[0], *I = Ib + 4;
   double h[3], g[3], A[9], gp, d;
-  int i;
   sp_rot(R, Ib + 1, h);
-  for (i = 0; i < 3; ++i) {
-    g[i] = h[i] + 0.5 * m * p[i];
-    /* A = R I_o: row i of R times the symmetric I_o */
-    A[i] = R[i] * I[0] + R[i + 3] * I[3] + R[i + 6] * I[6];
-    A[i + 3] = R[i] * I[3] + R[i + 3] * I[4] + R[i + 6] * I[7];
-    A[i + 6] = R[i] * I[6] + R[i + 3] * I[7] + R[i + 6] * I[8];
-  }
+#define SP_GA(i)                                            /* A = R I_o: row i of R times the symmetric I_o */ \
+  g[i] = h[i] + 0.5 * m * p[i];                                                                                  \
+  A[i] = R[i] * I[0] + R[(i) + 3] * I[3] + R[(i) + 6] * I[6];                                                    \
+  A[(i) + 3] = R[i] * I[3] + R[(i) + 3] * I[4] + R[(i) + 6] * I[7];                                              \
+  A[(i) + 6] = R[i] * I[6] + R[(i) + 3] * I[7] + R[(i) + 6] * I[8]
+  SP_GA(0);
+  SP_GA(1);
+  SP_GA(2);
+#undef SP_GA
   gp = 2.0 * (g[0] * p[0] + g[1] * p[1] + g[2] * p[2]);
   /* (A Rᵀ)_ij = Σ_k A_ik R_jk */
 #define SP_IO(i, j) (A[i] * R[j] + A[i + 3] * R[j + 3] + A[i + 6] * R[j + 6] - p[i] * g[j] - g[i] * p[j])
@@ -124,7 +125,9 @@ static inline void sp_inertia_out_add(const double *R, const double *p, const do
   Ia[11] += d;
 #undef SP_IO
   Ia[0] += m;
-  for (i = 0; i < 3; ++i) Ia[1 + i] += h[i] + m * p[i];
+  Ia[1] += h[0] + m * p[0];
+  Ia[2] += h[1] + m * p[1];
+  Ia[3] += h[2] + m * p[2];
 }
 
 /* Ia = the rigid inertia Ib (in b) in the axes of a, about the same origin (b turned by R in
