@@ -18,16 +18,18 @@ static inline void sp_cross(const double *a, const double *b, double *c) {
   c[2] = a[0] * b[1] - a[1] * b[0];
 }
 
-/* y = R x */
+/* y = R x (y not x; written out: gcc -O2 keeps 3-step loops) */
 static inline void sp_rot(const double *R, const double *x, double *y) {
-  int i;
-  for (i = 0; i < 3; ++i) y[i] = R[i] * x[0] + R[i + 3] * x[1] + R[i + 6] * x[2];
+  y[0] = R[0] * x[0] + R[3] * x[1] + R[6] * x[2];
+  y[1] = R[1] * x[0] + R[4] * x[1] + R[7] * x[2];
+  y[2] = R[2] * x[0] + R[5] * x[1] + R[8] * x[2];
 }
 
-/* y = Rᵀ x */
+/* y = Rᵀ x (y not x) */
 static inline void sp_rot_t(const double *R, const double *x, double *y) {
-  int i;
-  for (i = 0; i < 3; ++i) y[i] = R[3 * i] * x[0] + R[3 * i + 1] * x[1] + R[3 * i + 2] * x[2];
+  y[0] = R[0] * x[0] + R[1] * x[1] + R[2] * x[2];
+  y[1] = R[3] * x[0] + R[4] * x[1] + R[5] * x[2];
+  y[2] = R[6] * x[0] + R[7] * x[1] + R[8] * x[2];
 }
 
 /* T_b = Ad(H_ab)⁻¹ T_a: ω_b = Rᵀ ω_a, v_b = Rᵀ (v_a + ω_a × p) (T_b not T_a) */
@@ -96,15 +98,16 @@ static inline void sp_inertia_apply(const double *I, const double *T, double *W)
 static inline void sp_inertia_out_add(const double *R, const double *p, const double *Ib, double *Ia) {
   const double m = Ib[0], *I = Ib + 4;
   double h[3], g[3], A[9], gp, d;
-  int i;
   sp_rot(R, Ib + 1, h);
-  for (i = 0; i < 3; ++i) {
-    g[i] = h[i] + 0.5 * m * p[i];
-    /* A = R I_o: row i of R times the symmetric I_o */
-    A[i] = R[i] * I[0] + R[i + 3] * I[3] + R[i + 6] * I[6];
-    A[i + 3] = R[i] * I[3] + R[i + 3] * I[4] + R[i + 6] * I[7];
-    A[i + 6] = R[i] * I[6] + R[i + 3] * I[7] + R[i + 6] * I[8];
-  }
+#define SP_GA(i)                                            /* A = R I_o: row i of R times the symmetric I_o */ \
+  g[i] = h[i] + 0.5 * m * p[i];                                                                                  \
+  A[i] = R[i] * I[0] + R[(i) + 3] * I[3] + R[(i) + 6] * I[6];                                                    \
+  A[(i) + 3] = R[i] * I[3] + R[(i) + 3] * I[4] + R[(i) + 6] * I[7];                                              \
+  A[(i) + 6] = R[i] * I[6] + R[(i) + 3] * I[7] + R[(i) + 6] * I[8]
+  SP_GA(0);
+  SP_GA(1);
+  SP_GA(2);
+#undef SP_GA
   gp = 2.0 * (g[0] * p[0] + g[1] * p[1] + g[2] * p[2]);
   /* (A Rᵀ)_ij = Σ_k A_ik R_jk */
 #define SP_IO(i, j) (A[i] * R[j] + A[i + 3] * R[j + 3] + A[i + 6] * R[j + 6] - p[i] * g[j] - g[i] * p[j])
@@ -122,7 +125,9 @@ static inline void sp_inertia_out_add(const double *R, const double *p, const do
   Ia[11] += d;
 #undef SP_IO
   Ia[0] += m;
-  for (i = 0; i < 3; ++i) Ia[1 + i] += h[i] + m * p[i];
+  Ia[1] += h[0] + m * p[0];
+  Ia[2] += h[1] + m * p[1];
+  Ia[3] += h[2] + m * p[2];
 }
 
 /* Ia = the rigid inertia Ib (in b) in the axes of a, about the same origin (b turned by R in
@@ -131,13 +136,15 @@ static inline void sp_inertia_out_add(const double *R, const double *p, const do
 static inline void sp_inertia_rotate(const double *R, const double *Ib, double *Ia) {
   const double *I = Ib + 4;
   double A[9];
-  int i;
   sp_rot(R, Ib + 1, Ia + 1);
-  for (i = 0; i < 3; ++i) {                     /* A = R I_o: row i of R times the symmetric I_o */
-    A[i] = R[i] * I[0] + R[i + 3] * I[1] + R[i + 6] * I[2];
-    A[i + 3] = R[i] * I[1] + R[i + 3] * I[4] + R[i + 6] * I[5];
-    A[i + 6] = R[i] * I[2] + R[i + 3] * I[5] + R[i + 6] * I[8];
-  }
+#define SP_RI(i)                                            /* A = R I_o: row i of R times the symmetric I_o */ \
+  A[i] = R[i] * I[0] + R[(i) + 3] * I[1] + R[(i) + 6] * I[2];                                                    \
+  A[(i) + 3] = R[i] * I[1] + R[(i) + 3] * I[4] + R[(i) + 6] * I[5];                                              \
+  A[(i) + 6] = R[i] * I[2] + R[(i) + 3] * I[5] + R[(i) + 6] * I[8]
+  SP_RI(0);
+  SP_RI(1);
+  SP_RI(2);
+#undef SP_RI
 #define SP_AR(i, j) (A[i] * R[j] + A[i + 3] * R[j + 3] + A[i + 6] * R[j + 6])
   Ia[0] = Ib[0];
   Ia[4] = SP_AR(0, 0);
@@ -155,8 +162,9 @@ static inline void sp_inertia_rotate(const double *R, const double *Ib, double *
 static inline void sp_inertia_shift_add(const double *d, const double *Ib, double *Ia) {
   const double m = Ib[0];
   double g[3], gd, x;
-  int i;
-  for (i = 0; i < 3; ++i) g[i] = Ib[1 + i] + 0.5 * m * d[i];
+  g[0] = Ib[1] + 0.5 * m * d[0];
+  g[1] = Ib[2] + 0.5 * m * d[1];
+  g[2] = Ib[3] + 0.5 * m * d[2];
   gd = 2.0 * (g[0] * d[0] + g[1] * d[1] + g[2] * d[2]);
   Ia[4] += Ib[4] + gd - 2.0 * d[0] * g[0];
   Ia[8] += Ib[8] + gd - 2.0 * d[1] * g[1];
@@ -171,7 +179,9 @@ static inline void sp_inertia_shift_add(const double *d, const double *Ib, doubl
   Ia[9] += Ib[9] + x;
   Ia[11] += Ib[11] + x;
   Ia[0] += m;
-  for (i = 0; i < 3; ++i) Ia[1 + i] += Ib[1 + i] + m * d[i];
+  Ia[1] += Ib[1] + m * d[0];
+  Ia[2] += Ib[2] + m * d[1];
+  Ia[3] += Ib[3] + m * d[2];
 }
 
 /* The wrench W about a point b, made about a point a with b − a = d (same axes): τ += d × f */

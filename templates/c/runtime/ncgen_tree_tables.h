@@ -365,16 +365,18 @@ static int ncgen_tree_local_poses(const ncgen_tree_kinds *K, const ncgen_tree *T
     const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
     const double *xin = T->xin + 12 * b, *q = s->q + T->q_at[b];
     double *R = s->X + 12 * b, *p = R + 9, *S = s->Sl + 6 * T->v_at[b], *c = s->cl + 6 * b;
-    for (i = 0; i < 6; ++i) c[i] = 0.0;
-    if (k->mode == 1) {                                   /* R = R_in Rz(q) */
+    memset(c, 0, 6 * sizeof(double));
+    if (k->mode == 1) {                                   /* R = R_in Rz(q) (written out: gcc -O2 keeps short loops) */
       double cq = cos(q[0]), sq = sin(q[0]);
-      for (i = 0; i < 3; ++i) {
-        R[i] = cq * xin[i] + sq * xin[3 + i];
-        R[3 + i] = cq * xin[3 + i] - sq * xin[i];
-        R[6 + i] = xin[6 + i];
-        p[i] = xin[9 + i];
-      }
-      for (i = 0; i < 6; ++i) S[i] = i == 2 ? 1.0 : 0.0;
+      R[0] = cq * xin[0] + sq * xin[3];
+      R[1] = cq * xin[1] + sq * xin[4];
+      R[2] = cq * xin[2] + sq * xin[5];
+      R[3] = cq * xin[3] - sq * xin[0];
+      R[4] = cq * xin[4] - sq * xin[1];
+      R[5] = cq * xin[5] - sq * xin[2];
+      memcpy(R + 6, xin + 6, 6 * sizeof(double));        /* R's third column and p */
+      S[0] = S[1] = S[3] = S[4] = S[5] = 0.0;
+      S[2] = 1.0;
     } else if (k->mode == 2 || k->mode == 3) {            /* p = p_in + q R_in e_z; fixed: H_in */
       for (i = 0; i < 9; ++i) R[i] = xin[i];
       for (i = 0; i < 3; ++i) p[i] = xin[9 + i] + (k->mode == 2 ? q[0] * xin[6 + i] : 0.0);
@@ -516,10 +518,12 @@ static void ncgen_tree_ground_poses(const ncgen_tree_kinds *K, const ncgen_tree 
       const double *Rp = s->R + 9 * par, *pp = s->p + 3 * par;
       for (j = 0; j < 3; ++j) sp_rot(Rp, Rl + 3 * j, R + 3 * j);
       sp_rot(Rp, pl, p);
-      for (i = 0; i < 3; ++i) p[i] += pp[i];
+      p[0] += pp[0];
+      p[1] += pp[1];
+      p[2] += pp[2];
     }
     if (k->mode == 1) {
-      for (i = 0; i < 3; ++i) S[i] = R[6 + i];
+      memcpy(S, R + 6, 3 * sizeof(double));
       sp_cross(p, S, S + 3);
     } else if (k->mode == 2) {
       for (i = 0; i < 3; ++i) {
@@ -576,8 +580,12 @@ static void ncgen_tree_ground_mass(const ncgen_tree_kinds *K, const ncgen_tree *
     const double *R = s->R + 9 * b;
     double *S = s->Sl + 6 * T->v_at[b], *d = s->d + 3 * b, x[6];
     sp_inertia_rotate(R, T->inertia + NCGEN_TREE_BODY * b, s->IC + NCGEN_TREE_BODY * b);
-    if (T->parent[b] >= 0)                      /* d_b = p_b − p_parent */
-      for (i = 0; i < 3; ++i) d[i] = s->p[3 * b + i] - s->p[3 * T->parent[b] + i];
+    if (T->parent[b] >= 0) {                    /* d_b = p_b − p_parent */
+      const double *pb = s->p + 3 * b, *pp = s->p + 3 * T->parent[b];
+      d[0] = pb[0] - pp[0];
+      d[1] = pb[1] - pp[1];
+      d[2] = pb[2] - pp[2];
+    }
     if (k->mode == 1 || k->mode == 2)           /* S' = [z_b; 0] or [0; z_b] */
       for (i = 0; i < 3; ++i) {
         S[i] = k->mode == 1 ? R[6 + i] : 0.0;
@@ -703,17 +711,25 @@ static int ncgen_tree_articulated(const ncgen_tree_kinds *K, const ncgen_tree *T
     int par = T->parent[b], va = T->v_at[b];
     const double *S = s->S + 6 * va, *vp = par < 0 ? zero : s->vl + 6 * par, *I = s->IC + NCGEN_TREE_BODY * b;
     double *v = s->vl + 6 * b, *cb = s->cl + 6 * b, vJ[6], t[6];
-    for (i = 0; i < 6; ++i) {
-      double x = 0.0;
-      if (k->nv == 1)
-        x = S[i] * s->v[va];
-      else
+    if (k->nv == 1) {                           /* written out (gcc -O2 keeps short loops) */
+      double w = s->v[va];
+#define NCGEN_TREE_VJ(i) vJ[i] = S[i] * w, v[i] = vp[i] + vJ[i]
+      NCGEN_TREE_VJ(0); NCGEN_TREE_VJ(1); NCGEN_TREE_VJ(2); NCGEN_TREE_VJ(3); NCGEN_TREE_VJ(4); NCGEN_TREE_VJ(5);
+#undef NCGEN_TREE_VJ
+    } else
+      for (i = 0; i < 6; ++i) {
+        double x = 0.0;
         for (j = 0; j < k->nv; ++j) x += S[6 * j + i] * s->v[va + j];
-      vJ[i] = x;
-      v[i] = vp[i] + x;
-    }
+        vJ[i] = x;
+        v[i] = vp[i] + x;
+      }
     sp_ad(v, vJ, t);
-    for (i = 0; i < 6; ++i) cb[i] += t[i];
+    cb[0] += t[0];
+    cb[1] += t[1];
+    cb[2] += t[2];
+    cb[3] += t[3];
+    cb[4] += t[4];
+    cb[5] += t[5];
     sp_inertia_matrix(I, s->IA + 36 * b);
     sp_inertia_apply(I, v, t);
     sp_ad_star(v, t, s->fl + 6 * b);
@@ -724,9 +740,13 @@ static int ncgen_tree_articulated(const ncgen_tree_kinds *K, const ncgen_tree *T
     const double *S = s->S + 6 * va, *cb = s->cl + 6 * b, *IC = s->IC + NCGEN_TREE_BODY * b;
     double *IA = s->IA + 36 * b, *pA = s->fl + 6 * b, *U = s->U + 6 * va, *L = s->Dl + 36 * b, *u = s->ul + va;
     double mkk[6], w[6], F[6];
-    if (par >= 0) {
+    if (par >= 0) {                             /* I^C_p += I^C (written out) */
       double *ICp = s->IC + NCGEN_TREE_BODY * par;
-      for (i = 0; i < NCGEN_TREE_BODY; ++i) ICp[i] += IC[i];
+#define NCGEN_TREE_IC(i) ICp[i] += IC[i]
+      NCGEN_TREE_IC(0); NCGEN_TREE_IC(1); NCGEN_TREE_IC(2); NCGEN_TREE_IC(3); NCGEN_TREE_IC(4); NCGEN_TREE_IC(5);
+      NCGEN_TREE_IC(6); NCGEN_TREE_IC(7); NCGEN_TREE_IC(8); NCGEN_TREE_IC(9); NCGEN_TREE_IC(10); NCGEN_TREE_IC(11);
+      NCGEN_TREE_IC(12);
+#undef NCGEN_TREE_IC
     }
     if (nv == 1) {                              /* one rate: D = d = l², I^a = I^A − Z Zᵀ, Z = U / l */
       double d, x, m, q, l, e, *IAp, *pAp, Z[6], y[6];
@@ -821,13 +841,23 @@ static int ncgen_tree_articulated(const ncgen_tree_kinds *K, const ncgen_tree *T
     const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
     int nv = k->nv, va = T->v_at[b], par = T->parent[b];
     const double *S = s->S + 6 * va, *U = s->U + 6 * va, *ap = par < 0 ? a0 : s->al + 6 * par;
+    const double *cb = s->cl + 6 * b;
     double *a = s->al + 6 * b, y[6], x[6];
-    for (i = 0; i < 6; ++i) a[i] = ap[i] + s->cl[6 * b + i];
-    for (j = 0; j < nv; ++j) {
-      double t = s->ul[va + j];
-      for (r = 0; r < 6; ++r) t -= U[6 * j + r] * a[r];
-      y[j] = t;
+    a[0] = ap[0] + cb[0];
+    a[1] = ap[1] + cb[1];
+    a[2] = ap[2] + cb[2];
+    a[3] = ap[3] + cb[3];
+    a[4] = ap[4] + cb[4];
+    a[5] = ap[5] + cb[5];
+    if (nv == 1) {                              /* written out (gcc -O2 keeps short loops) */
+      double l = s->Dl[36 * b];
+      x[0] = aj[va] = (s->ul[va] - ncgen_tree_dot6(U, a)) / l / l;
+#define NCGEN_TREE_ACC(r) a[r] += S[r] * x[0]
+      NCGEN_TREE_ACC(0); NCGEN_TREE_ACC(1); NCGEN_TREE_ACC(2); NCGEN_TREE_ACC(3); NCGEN_TREE_ACC(4); NCGEN_TREE_ACC(5);
+#undef NCGEN_TREE_ACC
+      continue;
     }
+    for (j = 0; j < nv; ++j) y[j] = s->ul[va + j] - ncgen_tree_dot6(U + 6 * j, a);
     ncgen_tree_joint_solve(nv, s->Dl + 36 * b, y, x);
     for (j = 0; j < nv; ++j) {
       aj[va + j] = x[j];
@@ -850,11 +880,7 @@ static void ncgen_tree_articulated_solve(const ncgen_tree_kinds *K, const ncgen_
     int nv = k->nv, va = T->v_at[b], par = T->parent[b];
     const double *S = s->S + 6 * va, *U = s->U + 6 * va, *pA = s->pr + 6 * b;
     double *u = s->ur + va, x[6];
-    for (j = 0; j < nv; ++j) {                  /* u = e − Sᵀ p^A */
-      double t = e[va + j];
-      for (r = 0; r < 6; ++r) t -= S[6 * j + r] * pA[r];
-      u[j] = t;
-    }
+    for (j = 0; j < nv; ++j) u[j] = e[va + j] - ncgen_tree_dot6(S + 6 * j, pA);  /* u = e − Sᵀ p^A */
     if (par < 0) continue;
     ncgen_tree_joint_solve(nv, s->Dl + 36 * b, u, x);  /* p^A_p += p^A + U D⁻¹ u */
     for (r = 0; r < 6; ++r) {
@@ -868,12 +894,8 @@ static void ncgen_tree_articulated_solve(const ncgen_tree_kinds *K, const ncgen_
     int nv = k->nv, va = T->v_at[b], par = T->parent[b];
     const double *S = s->S + 6 * va, *U = s->U + 6 * va, *ap = par < 0 ? zero : s->ar + 6 * par;
     double *a = s->ar + 6 * b, z[6], x[6];
-    for (r = 0; r < 6; ++r) a[r] = ap[r];
-    for (j = 0; j < nv; ++j) {
-      double t = s->ur[va + j];
-      for (r = 0; r < 6; ++r) t -= U[6 * j + r] * a[r];
-      z[j] = t;
-    }
+    memcpy(a, ap, 6 * sizeof(double));
+    for (j = 0; j < nv; ++j) z[j] = s->ur[va + j] - ncgen_tree_dot6(U + 6 * j, a);
     ncgen_tree_joint_solve(nv, s->Dl + 36 * b, z, x);
     for (j = 0; j < nv; ++j) {
       y[va + j] = x[j];
