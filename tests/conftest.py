@@ -18,8 +18,9 @@ keep their own flags (``$NCGEN_CFLAGS`` does not apply to them).  No check depen
 optimisation level: neither level reorders floating-point arithmetic (no ``-ffast-math``; on
 x86-64 no fused multiply-adds without ``-mfma``), so results differ at most at round-off (a
 library call such as ``pow(x, 2)`` folded into ``x*x``), below every tolerance.  The
-default flags keep their own tests (``test_codegen_build.py``) and the -O2 builds theirs
-(``test_reliability_optimized_warnings.py``, ``test_model_package.py``, ``test_reroll.py``).
+default flags keep their own tests (``test_codegen_build.py``, which unsets ``$NCGEN_CFLAGS``)
+and the -O2 builds theirs, with the flags by name (``test_reroll.py``'s looped package,
+``test_reliability_optimized_warnings.py``).
 In a run that includes slow tests, a module whose time is mostly gcc compiling its scenes
 (contact scenes: the unrolled Delassus and KKT solves) sets ``QUICK_COMPILE = True`` to get
 :data:`QUICK_CFLAGS` still, and one such test elsewhere takes the fixture ``quick_cflags``.
