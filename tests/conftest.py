@@ -10,13 +10,20 @@ Every test has a time limit (pytest-timeout), generous enough for a loaded machi
 says so with ``pytest.mark.timeout``. A test moved to the slow tier names at its mark the fast
 test that takes the same code path.
 
-A module whose time is mostly gcc compiling its models' packages (contact scenes: the unrolled
-Delassus and KKT solves) sets ``QUICK_COMPILE = True``: its tests compile generated C with
-:data:`QUICK_CFLAGS` (``$NCGEN_CFLAGS`` for the module, unless the environment sets it).  No
-check there depends on the optimisation level; the -O2 builds keep their own tests
-(``test_reliability_optimized_warnings.py``, ``test_model_package.py``, ``test_reroll.py``).
-Such a module runs no table-driven stepper: the element library is compiled once per compile
-cache, with the flags of the first run that needs it.
+Compile flags: a run that selects no slow test (the fast tier, or some of its files) compiles
+its models' packages with :data:`QUICK_CFLAGS` (``$NCGEN_CFLAGS`` for the session, unless the
+environment sets it): most of the fast tier's time is gcc compiling small models' packages, and
+a test's run of them is short.  ncgen's model-independent libraries (element and tree tables)
+keep their own flags (``$NCGEN_CFLAGS`` does not apply to them).  No check depends on the
+optimisation level: neither level reorders floating-point arithmetic (no ``-ffast-math``; on
+x86-64 no fused multiply-adds without ``-mfma``), so results differ at most at round-off (a
+library call such as ``pow(x, 2)`` folded into ``x*x``), below every tolerance.  The
+default flags keep their own tests (``test_codegen_build.py``, which unsets ``$NCGEN_CFLAGS``)
+and the -O2 builds theirs, with the flags by name (``test_reroll.py``'s looped package,
+``test_reliability_optimized_warnings.py``).
+In a run that includes slow tests, a module whose time is mostly gcc compiling its scenes
+(contact scenes: the unrolled Delassus and KKT solves) sets ``QUICK_COMPILE = True`` to get
+:data:`QUICK_CFLAGS` still, and one such test elsewhere takes the fixture ``quick_cflags``.
 """
 import os
 
@@ -33,14 +40,23 @@ EXHAUSTIVE = ("exhaustive: slow tests too long for CI (hours of CPU in all: the 
 #: Seconds a slow test may take unless it says otherwise (``pytest.mark.timeout``).
 SLOW_TIMEOUT = 900
 
-#: Flags of a ``QUICK_COMPILE`` module's compiles: a box scene's package (6 boxes, 48 corner
-#: contacts) takes 8 s of gcc CPU at -O0 against 32 s at -O2, and its 1.5 s run 0.9 s against 0.3 s.
+#: Flags of a fast run's compiles (module docstring): a box scene's package (6 boxes, 48 corner
+#: contacts) takes 8 s of gcc CPU at -O0 against 32 s at -O2, and its 1.5 s run 0.9 s against
+#: 0.3 s; the contact step Jacobians' file 29 s of CPU against 66 s.
 QUICK_CFLAGS = "-O0"
 
 
 def pytest_configure(config):
     config.addinivalue_line("markers", SLOW)
     config.addinivalue_line("markers", EXHAUSTIVE)
+
+
+def pytest_collection_finish(session):
+    """``$NCGEN_CFLAGS`` = :data:`QUICK_CFLAGS` for this process (and the processes its tests
+    start) if no selected test is slow and the environment does not set it (module docstring)."""
+    if "NCGEN_CFLAGS" not in os.environ and session.items and \
+            not any(item.get_closest_marker("slow") is not None for item in session.items):
+        os.environ["NCGEN_CFLAGS"] = QUICK_CFLAGS
 
 
 @pytest.fixture(autouse=True, scope="module")

@@ -1,4 +1,5 @@
 """compile_package and load_functions: correctness, cache, concurrency, errors, VM fallback."""
+import json
 import os
 import shutil
 import stat
@@ -84,6 +85,21 @@ def test_key_depends_on_flags_and_sources(tmp_path, pkg, monkeypatch):
     smaller = write_package("chain", chain_functions()[:1], tmp_path / "other")
     assert compile_package(smaller).key != base.key
     assert compile_package(pkg).cached
+
+
+def test_model_independent_libraries_keep_their_own_flags(tmp_path, pkg, monkeypatch):
+    """``$NCGEN_CFLAGS`` applies to model packages, not to ncgen's per-version libraries
+    (``env_flags=False``; :func:`ncgen.runtime.table_library.cached_library`, whose index
+    records no flags): those are built at the defaults; flags passed by name still apply."""
+    from ncgen.runtime.table_library import cached_library
+    monkeypatch.setenv("NCGEN_CFLAGS", "-O0")
+    assert compile_package(pkg).cflags == ("-O0",)
+    assert compile_package(pkg, env_flags=False).cflags == ("-O2",)
+    assert compile_package(pkg, cflags="-O1", env_flags=False).cflags == ("-O1",)
+    path, compiled = cached_library("test-library", "0" * 64, lambda out: write_package(
+        "chain", chain_functions()[:1], out), "chain")
+    commands = json.loads((path.parent / "build.json").read_text())["commands"]
+    assert compiled and all("-O2" in cmd and "-O0" not in cmd for cmd in commands)
 
 
 def test_very_long_functions_compile_at_O1_never_O0(tmp_path, monkeypatch):

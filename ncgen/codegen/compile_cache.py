@@ -16,7 +16,9 @@ raw OSError); the damaged entry is removed and rebuilt, with a note on stderr.  
 build folders left by killed builds are removed once their process is gone
 (:func:`ncgen.files.sweep_stale`).
 
-Flags: ``cflags`` argument, else ``$NCGEN_CFLAGS``, else the defaults: ``-O2``, and ``-O1``
+Flags: ``cflags`` argument, else ``$NCGEN_CFLAGS`` (unless ``env_flags`` is false: ncgen's
+model-independent libraries, compiled once per ncgen version and compiler whatever the flags),
+else the defaults: ``-O2``, and ``-O1``
 for the package's ``build.large_sources`` (files holding a function so long, or belonging
 to a package so big, that gcc's -O2 passes take several times longer than -O1's; see
 :data:`ncgen.codegen.package.LARGE_FUNCTION_INSTRUCTIONS`).  Never ``-O0``: straight-line
@@ -72,32 +74,35 @@ class BuildResult:
         return str(self.path)
 
 
-def resolve_cflags(cflags: str | Sequence[str] | None) -> tuple[str, ...]:
-    """The user part of the flags: ``cflags``, else ``$NCGEN_CFLAGS``, else ``-O2``."""
+def resolve_cflags(cflags: str | Sequence[str] | None, env_flags: bool = True) -> tuple[str, ...]:
+    """The user part of the flags: ``cflags``, else ``$NCGEN_CFLAGS`` (if ``env_flags``), else ``-O2``."""
     if cflags is None:
-        env = os.environ.get("NCGEN_CFLAGS")
+        env = os.environ.get("NCGEN_CFLAGS") if env_flags else None
         return tuple(shlex.split(env)) if env is not None else DEFAULT_CFLAGS
     return tuple(shlex.split(cflags)) if isinstance(cflags, str) else tuple(cflags)
 
 
-def source_cflags(pkg: Package, cflags: str | Sequence[str] | None) -> dict[str, tuple[str, ...]]:
-    """The flags of each source of ``pkg``: the user's for all (``cflags`` or
-    ``$NCGEN_CFLAGS``), else :data:`DEFAULT_CFLAGS`, and :data:`LARGE_CFLAGS` for the
-    manifest's ``build.large_sources``."""
+def source_cflags(pkg: Package, cflags: str | Sequence[str] | None,
+                  env_flags: bool = True) -> dict[str, tuple[str, ...]]:
+    """The flags of each source of ``pkg``: the user's for all (``cflags``, or
+    ``$NCGEN_CFLAGS`` if ``env_flags``), else :data:`DEFAULT_CFLAGS`, and :data:`LARGE_CFLAGS`
+    for the manifest's ``build.large_sources``."""
     build = pkg.manifest["build"]
-    flags = resolve_cflags(cflags)
-    chosen = cflags is not None or os.environ.get("NCGEN_CFLAGS") is not None
+    flags = resolve_cflags(cflags, env_flags)
+    chosen = cflags is not None or (env_flags and os.environ.get("NCGEN_CFLAGS") is not None)
     large = set() if chosen else set(build.get("large_sources", ()))
     return {src: LARGE_CFLAGS if src in large else flags for src in build["sources"]}
 
 
 def compile_package(pkg: Package | str | os.PathLike, cc: str | None = None,
-                    cflags: str | Sequence[str] | None = None, jobs: int | None = None) -> BuildResult:
-    """Build (or find in the cache) the shared library of package ``pkg``."""
+                    cflags: str | Sequence[str] | None = None, jobs: int | None = None,
+                    env_flags: bool = True) -> BuildResult:
+    """Build (or find in the cache) the shared library of package ``pkg`` (``env_flags``:
+    whether ``$NCGEN_CFLAGS`` applies when ``cflags`` is None; module docstring)."""
     pkg = pkg if isinstance(pkg, Package) else Package.open(pkg)
     compiler = find_compiler(cc)
-    flags = resolve_cflags(cflags)
-    per_source = source_cflags(pkg, cflags)
+    flags = resolve_cflags(cflags, env_flags)
+    per_source = source_cflags(pkg, cflags, env_flags)
     key = build_key(pkg, compiler, per_source)
     root = cache_dir()
     entry = root / f"{pkg.name}-{key[:24]}"

@@ -135,7 +135,9 @@ def library_ready(prefix: str, source: str) -> bool:
 def cached_library(prefix: str, source: str, write, package: str, cflags: str | None = None) -> tuple[Path, bool]:
     """``(path, compiled now)`` of the library ``package`` written by ``write(out_dir)`` and
     compiled once per ``source`` key and compiler, found through the index files
-    ``<prefix>-<source>-<compiler>.json`` of the compile cache (module docstring)."""
+    ``<prefix>-<source>-<compiler>.json`` of the compile cache (module docstring), with the
+    flags ``cflags``, else ncgen's defaults: ``$NCGEN_CFLAGS`` does not apply (the index
+    records no flags, so the first build's would hold for every later run)."""
     compiler = compiler_path()
     if compiler is None:            # no compiler: any library of these sources will do
         for index in sorted(cache_dir().glob(f"{prefix}-{source[:20]}-*.json")):
@@ -151,7 +153,7 @@ def cached_library(prefix: str, source: str, write, package: str, cflags: str | 
     from ncgen.codegen.compile_cache import compile_package
 
     with tempfile.TemporaryDirectory(prefix=f"{package}-") as tmp:
-        built = compile_package(write(Path(tmp) / package), cflags=cflags)
+        built = compile_package(write(Path(tmp) / package), cflags=cflags, env_flags=False)
     index.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(index) as tmp_index:
         tmp_index.write_text(json.dumps({"library": str(built.path), "compiler": built.compiler.version,
