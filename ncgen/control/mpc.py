@@ -233,6 +233,7 @@ class MPC:
         if not isinstance(iterations, int) or iterations < 1:
             raise OptimizationError(f"MPC: iterations: expected a positive integer, got {iterations!r}")
         self.ocp, self.model = ocp, ocp.model
+        min_tension = getattr(ocp, "cable_min_tension", None) if min_tension is None else min_tension
         if min_tension is not None and solver == "fatrop":
             raise OptimizationError("MPC: min_tension: supported by solver='sqp' only, got solver='fatrop'")
         self.problem = mpc_problem(ocp, terminal_weight, reference, state_weight, input_weight, min_tension)

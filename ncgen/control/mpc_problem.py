@@ -167,21 +167,16 @@ def mpc_problem(ocp, terminal_weight: float, reference=None, state_weight=None, 
 
 
 def cable_constraint(model, p, min_tension) -> tuple[float | None, ca.Function | None]:
-    """``(T_min, cable_pull)`` of the ``min_tension`` option (see the module docstring);
-    ``(None, None)`` without it."""
+    """``(T_min, cable_pull)`` of the ``min_tension`` option (see the module docstring; the pull
+    of :mod:`ncgen.optim.cables`); ``(None, None)`` without it."""
     if min_tension is None:
         return None, None
-    T_min = as_scalar(min_tension, "MPC: min_tension")
-    if not np.isfinite(T_min) or T_min < 0:
-        raise OptimizationError(f"MPC: min_tension: expected a finite tension >= 0 in N, got {min_tension!r}")
-    table = model.springs
-    cables = [] if table is None else [i for i, c in enumerate(table.cable) if c]
-    if not cables:
-        raise OptimizationError(f"MPC: min_tension: the model {model.name!r} has no cables (Spring(cable=True) or "
-                                "ClusteredCable) to keep taut")
+    from ncgen.optim.cables import cable_pull_function, tension_floor
+    T_min = tension_floor(min_tension, "MPC: min_tension")
+    pull = cable_pull_function(model, "MPC: min_tension")
     nq = model.nq
     x, u, t = ca.SX.sym("x", 2 * nq), ca.SX.sym("u", model.nu), ca.SX.sym("t")
-    P = table.function(t, x[:nq], x[nq:], u, ca.DM(p))[2][cables]
+    P = pull(t, x[:nq], x[nq:], u, ca.DM(p))
     return T_min, ca.Function("cable_pull", [x, u, t], [P], ["x", "u", "t"], ["P"])
 
 

@@ -343,6 +343,8 @@ class NLP:
                 x = qj if kind == "position" else vj
                 self.constrain(f"path constraint on joint {name!r} ({kind})", "path",
                                x[rows[kind][name].start, :], lo, hi)
+        if ocp.cable_min_tension is not None:
+            self._taut_cables()
         if not ocp.marker_bounds:
             return
         nm = len(model.marker_names)
@@ -355,6 +357,26 @@ class NLP:
                 if np.isfinite(lo[c]) or np.isfinite(hi[c]):
                     self.constrain(f"path constraint on marker {name!r} ({'xyz'[c]})", "path",
                                    r[c, cols], lo[c], hi[c])
+
+    def _taut_cables(self):
+        """``P(t, q, v, u) ≥ T_min`` (:meth:`~ncgen.optim.problem.OptimalControl.min_tension`) at
+        node 0 with the first input and at each path point with its interval's input (the path
+        points come interval by interval, the same number in each)."""
+        from ncgen.optim.cables import cable_pull_function
+        ocp, model, disc = self.ocp, self.model, self.disc
+        pull = cable_pull_function(model, "min_tension")
+        npts, N = disc.path_q.shape[1], ocp.N
+        if npts % N:
+            raise OptimizationError(f"min_tension: the transcription's {npts} path points are not the same number "
+                                    f"in each of its {N} intervals")
+        m, nu = npts // N, model.nu
+        U = disc.U if nu else ca.DM(0, N)
+        U_path = ca.reshape(ca.repmat(U, m, 1), nu, npts)      # column k m + j: U[:, k]
+        P0 = pull(ocp.t0, disc.q[:, 0], disc.v[:, 0], U[:, 0], self.p)
+        P = pull.map(npts)(disc.path_t, disc.path_q, disc.path_v, U_path, self.p)
+        T_min = ocp.cable_min_tension
+        self.constrain("path constraint min_tension (cable pulls at the initial node)", "path", P0, T_min, np.inf)
+        self.constrain("path constraint min_tension (cable pulls)", "path", ca.vec(P), T_min, np.inf)
 
     def _objective(self):
         ocp, model, disc = self.ocp, self.model, self.disc
