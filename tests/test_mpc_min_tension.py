@@ -61,6 +61,19 @@ def test_bad_min_tension_refused_by_name(model, kwargs, message):
         nc.MPC(rising(model), **kwargs)
 
 
+def test_bad_qp_solver_refused_by_name(model):
+    with pytest.raises(NcgenError, match="qp_solver: expected one of qrqp, qpoases, got 'gurobi'"):
+        nc.MPC(rising(model), qp_solver="gurobi")
+
+
+def test_the_ocps_floor_is_the_mpcs_and_export_refuses_it(model, tmp_path):
+    ocp = rising(model).min_tension(3.0)
+    assert mpc_problem(ocp, 1e3).min_tension == 3.0
+    assert mpc_problem(ocp, 1e3, min_tension=1.0).min_tension == 1.0
+    with pytest.raises(NcgenError, match=r"export_mpc: the problem's min_tension \(3 N"):
+        nc.export_mpc(ocp, tmp_path)
+
+
 def test_min_tension_refused_without_cables():
     with pytest.raises(NcgenError, match="min_tension: the model 'hang' has no cables"):
         nc.MPC(rising(hanging(cable=False)), min_tension=1.0)
@@ -103,10 +116,10 @@ def test_infeasibility_counts_the_tension_below_its_minimum(model):
     assert c1 == pytest.approx(c0 + by_hand, rel=1e-12, abs=1e-12)
 
 
-def closed_loop(model, min_tension, calls=6):
+def closed_loop(model, min_tension, calls=6, qp_solver="qrqp"):
     """The MPC's solutions from rest, each applied as planned: ``(infeasibility, pulls)`` per call,
     the gaps measured by an independent step function, the pulls by hand."""
-    mpc = nc.MPC(rising(model), min_tension=min_tension, iterations=3, sx_qr_max_nnz=0)
+    mpc = nc.MPC(rising(model), min_tension=min_tension, iterations=3, sx_qr_max_nnz=0, qp_solver=qp_solver)
     step = nc.step_function(model, mpc.h)
     x, gaps, pulls = np.array([0, 0, -1.0, 0, 0, 0]), [], []
     for i in range(calls):
@@ -119,11 +132,12 @@ def closed_loop(model, min_tension, calls=6):
     return np.array(gaps), np.array(pulls)
 
 
-def test_mpc_keeps_the_cable_taut_and_its_iterates_feasible(model):
-    gaps, pulls = closed_loop(model, None)
+@pytest.mark.parametrize("qp_solver", ["qrqp", "qpoases"])
+def test_mpc_keeps_the_cable_taut_and_its_iterates_feasible(model, qp_solver):
+    gaps, pulls = closed_loop(model, None, qp_solver=qp_solver)
     assert pulls.min() < 0 and gaps[-3:].min() > 0.1         # the problem the option solves
     T_min = 2.0
-    gaps, pulls = closed_loop(model, T_min)
+    gaps, pulls = closed_loop(model, T_min, qp_solver=qp_solver)
     feasible = gaps < 1e-8
     assert feasible[-4:].all(), gaps                         # the last four solutions feasible
     assert np.all(pulls[feasible] >= T_min - 1e-6), pulls

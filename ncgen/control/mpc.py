@@ -37,6 +37,7 @@ import numpy as np
 
 from ncgen.control.discrete import step_jacobian_function
 from ncgen.control.mpc_problem import mpc_problem
+from ncgen.control.mpc_qp import GENERATED, InProcessQP, check_qp_solver, qp_function
 from ncgen.errors import NcgenError, OptimizationError
 from ncgen.validation import as_scalar
 
@@ -53,13 +54,14 @@ ARMIJO, GAMMA, C_MIN = 1e-4, 1e-5, 1e-10
 
 
 def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
-                  qp_max_iter: int = 100, sx_qr_max_nnz: int | None = None) -> list[ca.Function]:
+                  qp_max_iter: int = 100, sx_qr_max_nnz: int | None = None,
+                  qp_solver: str = "qrqp") -> list[ca.Function]:
     """The four CasADi functions of one SQP iteration (see the module docstring):
 
     * ``mpc_qp_data: (x, t, X̄, Ū) -> (H, g, A, lba, uba, lbx, ubx, Xs, S)``: the condensed QP
       in ``δU`` (``vec δX = S δU + (Xs − vec X̄)``);
     * ``mpc_qp``: CasADi's ``qrqp`` on it (returns its last iterate also when it reports a
-      failure: the caller checks it);
+      failure: the caller checks it), or the ``qp_solver`` of :mod:`ncgen.control.mpc_qp`;
     * ``mpc_update: (Xs, S, Ū, δU) -> (X⁺, U⁺)``: the full step;
     * ``mpc_merit`` (:func:`merit_function`): cost and infeasibility of a trial.
 
@@ -82,10 +84,7 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
     bounded = np.flatnonzero(np.isfinite(lo_x) | np.isfinite(hi_x))
     rows = [nx * k + i for k in range(1, N + 1) for i in bounded]
     n_taut = 0 if problem.min_tension is None else 2 * N * problem.cable_pull.numel_out(0)
-    qp = ca.conic("mpc_qp", "qrqp", {"h": ca.Sparsity.dense(nU, nU),
-                                     "a": ca.Sparsity.dense(len(rows) + n_taut, nU)},
-                  {"print_iter": False, "print_header": False, "print_info": False, "max_iter": qp_max_iter,
-                   "error_on_fail": False})
+    qp = qp_function(qp_solver, nU, len(rows) + n_taut, qp_max_iter)
 
     x, t = ca.MX.sym("x", nx), ca.MX.sym("t")
     X, U = ca.MX.sym("X", nx, N + 1), ca.MX.sym("U", nu, N)
@@ -217,6 +216,8 @@ class MPC:
     the infeasibility ``c``; :mod:`ncgen.control.mpc_problem`), refused on a model without
     cables and with ``"fatrop"``.  The horizon is the OCP's: ``N`` intervals of
     ``h = t_final / N`` seconds, and ``mpc`` is meant to be called every ``h`` seconds.
+    ``qp_solver``: ``"qrqp"`` (generated C) or ``"qpoases"`` (in this process; not exported), see
+    :mod:`ncgen.control.mpc_qp`.
     ``mpc.reset(x, t, iterations=...)`` (also done by the first call) sets the guess to ``x``
     held with zero inputs (clipped into their bounds), or to the reference along the horizon
     from ``t``, and iterates on it.
@@ -227,16 +228,17 @@ class MPC:
     def __init__(self, ocp, solver: str = "sqp", *, iterations: int = 1, terminal_weight: float = 1e3,
                  regularization: float = REGULARIZATION, qp_max_iter: int = 100,
                  sx_qr_max_nnz: int | None = None, fatrop_options: dict | None = None,
-                 reference=None, state_weight=None, input_weight=None, min_tension=None):
+                 reference=None, state_weight=None, input_weight=None, min_tension=None,
+                 qp_solver: str = "qrqp"):
         if not isinstance(solver, str) or solver not in SOLVERS:
             raise OptimizationError(f"MPC: solver: expected one of {', '.join(SOLVERS)}, got {solver!r}")
         if not isinstance(iterations, int) or iterations < 1:
             raise OptimizationError(f"MPC: iterations: expected a positive integer, got {iterations!r}")
         self.ocp, self.model = ocp, ocp.model
-        min_tension = getattr(ocp, "cable_min_tension", None) if min_tension is None else min_tension
-        if min_tension is not None and solver == "fatrop":
-            raise OptimizationError("MPC: min_tension: supported by solver='sqp' only, got solver='fatrop'")
         self.problem = mpc_problem(ocp, terminal_weight, reference, state_weight, input_weight, min_tension)
+        if self.problem.min_tension is not None and solver == "fatrop":
+            raise OptimizationError("MPC: min_tension: supported by solver='sqp' only, got solver='fatrop'")
+        self.qp_solver = check_qp_solver(qp_solver)
         self.h, self.N = self.problem.h, self.problem.N
         self.nx, self.nu = 2 * self.model.nq, self.model.nu
         self.iterations = iterations
@@ -252,12 +254,14 @@ class MPC:
             self.fatrop = FatropSolver(self.model, self.problem, fatrop_options)
         else:
             self.functions = mpc_functions(self.model, self.problem, regularization=regularization,
-                                           qp_max_iter=qp_max_iter, sx_qr_max_nnz=sx_qr_max_nnz)
+                                           qp_max_iter=qp_max_iter, sx_qr_max_nnz=sx_qr_max_nnz, qp_solver=qp_solver)
             from ncgen.control.step_support import compile_functions
-            lib = compile_functions(f"{self.model.name}_mpc", self.functions)
+            compiled = [f for f in self.functions if f.name() != "mpc_qp" or qp_solver in GENERATED]
+            lib = compile_functions(f"{self.model.name}_mpc", compiled)
+            lib.setdefault("mpc_qp", InProcessQP(self.functions[1]))
             self._data, self._qp, self._update, self._merit_fn = (lib[f.name()] for f in self.functions)
         self._residual_tol = residual_tolerance(self.model)
-        #: qrqp's status of each QP of the last control step (0: converged).
+        #: the QP solver's status of each QP of the last control step (0: converged).
         self.qp_status: list[int] = []
         #: the step length α taken by each SQP iteration of the last control step (0: no trial
         #: was acceptable, the iterate was kept).
@@ -274,7 +278,7 @@ class MPC:
             return (f"<MPC of {self.model.name!r}: N={self.N}, h={self.h} s, {self.iterations} Fatrop "
                     f"solve(s) per step>")
         return (f"<MPC of {self.model.name!r}: N={self.N}, h={self.h} s, {self.iterations} SQP "
-                f"iteration(s) per step, qrqp>")
+                f"iteration(s) per step, {self.qp_solver}>")
 
     def _merit(self, x, t: float, X: np.ndarray, U: np.ndarray):
         """``(J, c)`` of the iterate, or ``None`` when a step along it did not converge or

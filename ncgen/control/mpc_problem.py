@@ -77,7 +77,7 @@ def mpc_problem(ocp, terminal_weight: float, reference=None, state_weight=None, 
     ``(t, X, U)`` or an OCP solution (:func:`ncgen.control.mpc_reference.reference_arrays`),
     ``state_weight`` (nx or a scalar; default 1), ``input_weight`` (nu or a scalar; default 0):
     its weights, refused without a reference; ``min_tension``: ``T_min`` (N, finite), refused
-    on a model without cables."""
+    on a model without cables; without it, the OCP's own floor (``ocp.min_tension(T_min)``)."""
     model = ocp.model
     if nonsmooth(model):
         names = ", ".join(repr(c["name"]) for c in model.contacts)
@@ -161,7 +161,8 @@ def mpc_problem(ocp, terminal_weight: float, reference=None, state_weight=None, 
 
     x_bounds = np.hstack([ocp.q_bounds, ocp.v_bounds])
     x_final = None if q_f is None else np.concatenate([q_f, np.zeros(nq) if v_f is None else v_f])
-    T_min, pull = cable_constraint(model, p, min_tension)
+    T_min, pull = cable_constraint(model, p, ocp.cable_min_tension if min_tension is None
+                                   else min_tension)
     return MPCProblem(h, N, p, stage, terminal, ocp.u_bounds.copy(), x_bounds, x_final, initial_state(ocp, p), plan,
                       T_min, pull)
 

@@ -360,8 +360,9 @@ class NLP:
 
     def _taut_cables(self):
         """``P(t, q, v, u) ≥ T_min`` (:meth:`~ncgen.optim.problem.OptimalControl.min_tension`) at
-        node 0 with the first input and at each path point with its interval's input (the path
-        points come interval by interval, the same number in each)."""
+        both ends of every interval and at its path points, each with the interval's input (the
+        input jumps at the nodes, so node ``k`` is taken with ``u_{k−1}`` and with ``u_k``; the
+        path points come interval by interval, the same number in each, the interval's end last)."""
         from ncgen.optim.cables import cable_pull_function
         ocp, model, disc = self.ocp, self.model, self.disc
         pull = cable_pull_function(model, "min_tension")
@@ -372,10 +373,12 @@ class NLP:
         m, nu = npts // N, model.nu
         U = disc.U if nu else ca.DM(0, N)
         U_path = ca.reshape(ca.repmat(U, m, 1), nu, npts)      # column k m + j: U[:, k]
-        P0 = pull(ocp.t0, disc.q[:, 0], disc.v[:, 0], U[:, 0], self.p)
+        t_start = ocp.t0 + self.T * ca.DM(np.arange(N)).T / N if disc.t_nodes is None else disc.t_nodes[:, :N]
+        starts = pull.map(N)(t_start, disc.q[:, :N], disc.v[:, :N], U, self.p)
         P = pull.map(npts)(disc.path_t, disc.path_q, disc.path_v, U_path, self.p)
         T_min = ocp.cable_min_tension
-        self.constrain("path constraint min_tension (cable pulls at the initial node)", "path", P0, T_min, np.inf)
+        self.constrain("path constraint min_tension (cable pulls at the intervals' starts)", "path", ca.vec(starts),
+                       T_min, np.inf)
         self.constrain("path constraint min_tension (cable pulls)", "path", ca.vec(P), T_min, np.inf)
 
     def _objective(self):

@@ -181,8 +181,8 @@ class OptimalControl:
         return self
 
     def min_tension(self, T_min) -> "OptimalControl":
-        """Path constraint: every cable's pull ``P = k (l − l₀) + c l̇ ≥ T_min`` (N, ≥ 0) at the
-        initial node with the first input and at every path point with its interval's input
+        """Path constraint: every cable's pull ``P = k (l − l₀) + c l̇ ≥ T_min`` (N, ≥ 0) at both
+        ends of every interval and at its path points, with the interval's input
         (:mod:`ncgen.optim.cables`): the cables stay taut, so the plan never relies on the
         tension's cut at zero.  Refused on a model without cables."""
         from ncgen.optim.cables import cable_indices, tension_floor
