@@ -83,7 +83,7 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
     lo_x, hi_x = problem.x_bounds
     bounded = np.flatnonzero(np.isfinite(lo_x) | np.isfinite(hi_x))
     rows = [nx * k + i for k in range(1, N + 1) for i in bounded]
-    n_taut = 0 if problem.min_tension is None else 2 * N * problem.cable_pull.numel_out(0)
+    n_taut = 0 if problem.min_tension is None else N * problem.cable_pull.numel_out(0)
     qp = qp_function(qp_solver, nU, len(rows) + n_taut, qp_max_iter)
 
     x, t = ca.MX.sym("x", nx), ca.MX.sym("t")
@@ -118,22 +118,22 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
 
 def taut_rows(problem, X, U, times, S, s):
     """``(A, lb)``: the cables' path constraint (:mod:`ncgen.control.mpc_problem`) linearised
-    at the guess and condensed, ``A δU ≥ lb``: for each interval ``k`` and its ends ``j = k,
-    k + 1``, ``P_x(x̄_j, ū_k) δx_j + P_u δu_k ≥ T_min − P(x̄_j, ū_k)`` with
-    ``δx_j = S_j δU + s_j``."""
+    at the guess and condensed, ``A δU ≥ lb``: for each interval ``k``,
+    ``P_a δx_k + P_b δx_{k+1} + P_u δu_k ≥ T_min − P(x̄_k, x̄_{k+1}, ū_k)`` (``P``: the pulls at the
+    interval's two ends) with ``δx_j = S_j δU + s_j``."""
     pull, N = problem.cable_pull, problem.N
-    nx, nu, m = pull.numel_in(0), pull.numel_in(1), pull.numel_out(0)
-    xs, us, ts = ca.SX.sym("x", nx), ca.SX.sym("u", nu), ca.SX.sym("t")
-    P = pull(xs, us, ts)
-    lin = ca.Function("cable_pull_lin", [xs, us, ts], [P, ca.jacobian(P, xs), ca.jacobian(P, us)])
+    nx, nu, m = pull.numel_in(0), pull.numel_in(2), pull.numel_out(0)
+    xa, xb, us, ts = ca.SX.sym("x", nx), ca.SX.sym("x_next", nx), ca.SX.sym("u", nu), ca.SX.sym("t")
+    P = pull(xa, xb, us, ts)
+    lin = ca.Function("cable_pull_lin", [xa, xb, us, ts],
+                      [P, ca.jacobian(P, xa), ca.jacobian(P, xb), ca.jacobian(P, us)])
     A, lb = [], []
     for k in range(N):
-        for j in (k, k + 1):
-            P_k, P_x, P_u = lin(X[:, j], U[:, k], times[k])
-            S_j, s_j = S[nx * j:nx * (j + 1), :], s[nx * j:nx * (j + 1)]
-            E_k = ca.horzcat(ca.MX(m, nu * k), P_u, ca.MX(m, nu * (N - k - 1)))
-            A.append(ca.mtimes(P_x, S_j) + E_k)
-            lb.append(problem.min_tension - P_k - ca.mtimes(P_x, s_j))
+        P_k, P_a, P_b, P_u = lin(X[:, k], X[:, k + 1], U[:, k], times[k])
+        a, b = slice(nx * k, nx * (k + 1)), slice(nx * (k + 1), nx * (k + 2))
+        E_k = ca.horzcat(ca.MX(m, nu * k), P_u, ca.MX(m, nu * (N - k - 1)))
+        A.append(ca.mtimes(P_a, S[a, :]) + ca.mtimes(P_b, S[b, :]) + E_k)
+        lb.append(problem.min_tension - P_k - ca.mtimes(P_a, s[a]) - ca.mtimes(P_b, s[b]))
     return ca.vertcat(*A), ca.vertcat(*lb)
 
 
@@ -161,10 +161,9 @@ def merit_function(model, problem) -> ca.Function:
             c += ca.sum2(ca.fmax(0, float(lo_x[i]) - row))
         if np.isfinite(hi_x[i]):
             c += ca.sum2(ca.fmax(0, row - float(hi_x[i])))
-    if problem.min_tension is not None:           # the cables' tension below T_min, at both ends of each interval
+    if problem.min_tension is not None:           # the cables' pull below T_min, at both ends of each interval
         pull = problem.cable_pull.map("mpc_cable_pulls", "serial", int(N), [], [])
-        for ends in (X[:, :N], X[:, 1:]):
-            c += ca.sum2(ca.sum1(ca.fmax(0, problem.min_tension - pull(ends, U, times))))
+        c += ca.sum2(ca.sum1(ca.fmax(0, problem.min_tension - pull(X[:, :N], X[:, 1:], U, times))))
     Xs, Us, ts = ca.SX.sym("X", nx, N + 1), ca.SX.sym("U", nu, N), ca.SX.sym("t")
     cost = ca.Function("mpc_total_cost", [Xs, Us, ts], [total_cost(problem, Xs, Us, ts)])
     return ca.Function("mpc_merit", [x, t, X, U], [cost(X, U, t), c, ca.mmax(res)],
