@@ -4,8 +4,8 @@
 * ``"qrqp"`` (default): CasADi's active-set solver, generated into C with the other functions
   (so ``nc.export_mpc`` writes it too);
 * ``"qpoases"``: qpOASES (online active set, dense), from CasADi's own library in this
-  process: Python only (it cannot be generated into self-contained C; ``nc.export_mpc``
-  refuses it).  It solves the tensegrity tower's condensed QPs with the cables' pull rows
+  process: Python only (CasADi cannot generate it into self-contained C; ``nc.export_mpc``
+  writes ``qrqp`` and has no such option).  It solves the tensegrity tower's condensed QPs with the cables' pull rows
   (Hessian eigenvalues spread over 1e7), on which ``qrqp`` stops short.
 """
 from __future__ import annotations
