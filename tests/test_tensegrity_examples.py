@@ -85,10 +85,14 @@ def test_deployment_example(deployment_output):
 @pytest.mark.timeout(1800)
 def test_deployment_plan_keeps_the_cables_taut(deployment_output):
     """The plan (``OptimalControl.min_tension``) keeps every cable's pull at both ends of each
-    interval above its floor (without it the plan's own inputs slackened a cable: −111 N)."""
+    interval above its floor (without it the plan's own inputs slackened a cable: −111 N), and
+    so does the simulator (IDAS) replaying its inputs, sampled ten times an interval."""
     pull, floor = (float(x) for x in re.search(r"smallest cable pull at the nodes ([\d.e+-]+) N \(floor "
                                                 r"([\d.e+-]+) N\)", deployment_output).groups())
     assert floor > 0 and pull >= floor - 1e-6, (pull, floor)
+    replayed = float(re.search(r"replayed \(IDAS, open loop\).*smallest cable pull ([\d.e+-]+) N",
+                               deployment_output).group(1))
+    assert replayed >= floor, replayed          # the simulator's motion under the plan's inputs keeps them taut
 
 
 @pytest.mark.slow
