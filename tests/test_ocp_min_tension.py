@@ -114,3 +114,19 @@ def test_plan_keeps_the_cable_taut_in_the_simulator(model):
     pulls = np.array([pull(q, v, u[0]) for q, v, u in zip(replay.q, replay.v, held)])
     assert T_min - 0.05 <= pulls.min() <= T_min + 0.1, pulls.min()   # kept, and binding
     assert replay.q[-1, 2] == pytest.approx(-0.95, abs=1e-4)
+
+
+def test_multiple_shooting_keeps_the_floor_at_the_nodes(model):
+    """With ``method="shooting"`` (the path points are the nodes) the floor holds at both ends of
+    every interval, with the interval's input, and binds."""
+    ocp = nc.OptimalControl(model, N=N, t_final=T_FINAL, method="shooting")
+    ocp.bound_input("l0", 0.5, 1.5)
+    ocp.minimize_effort(1e-3)
+    ocp.initial(q=[0, 0, -1.0], v=[0, 0, 0])
+    ocp.final(q=[0, 0, -0.95], v=[0, 0, 0])
+    T_min = 4.0
+    ramp = nc.simulate(model, T_FINAL, T_FINAL / N, q0=[0, 0, -1.0], backend="vm",
+                       u=lambda t: [REST_LOW + (REST_HIGH - REST_LOW) * 0.5 * (1 - np.cos(np.pi * min(t / 0.15, 1)))])
+    plan = ocp.min_tension(T_min).solve(warm_start=ramp, diagnose=False)
+    pulls = [pull(plan.q[j], plan.v[j], plan.u[k][0]) for k in range(N) for j in (k, k + 1)]
+    assert T_min - 1e-6 <= min(pulls) <= T_min + 1e-3, min(pulls)
