@@ -7,13 +7,14 @@ top at 1 m), each with its least prestress (cables ≥ 10 N).  Realised with eve
 length an input (k = 2000 N/m, damping 10 N·s/m, 0.2 kg per node), both are stable equilibria
 of one model.  The deployment is posed as optimal control (rest lengths the controls, within
 2 cm of both designs; from the compact equilibrium at rest to the deployed one at rest in
-1.5 s; warm-started by a simulated cosine ramp of the rest lengths) and tracked in
+1.5 s; every cable's pull at least 2 N, so no cable goes slack; warm-started by a simulated
+cosine ramp of the rest lengths) and tracked in
 simulation from a disturbed start, two ways: by cable-space feedback (each cable's rest length
 set so that its tension is the plan's plus ``k_f (l − l*) + c_f (l̇ − l̇*)`` about the planned
 length ``l*``) and by ``nc.MPC`` with the plan as its time-varying reference (a horizon of
 5 steps of 10 ms — its RATTLE step is stable only for h ≤ 0.01 s here — the stage cost on
-``x − x_ref`` and ``u − u_ref``, the deployed design's rest lengths after the plan; see
-docs/tensegrity.md).
+``x − x_ref`` and ``u − u_ref``, the deployed design's rest lengths after the plan, every
+cable's pull at least 1 N along the horizon, its QPs solved by qpOASES; see docs/tensegrity.md).
 """
 import time
 
@@ -24,8 +25,11 @@ from ncgen.analysis.tensegrity_model import rest_length_inputs
 from ncgen.analysis.tensegrity_shapes import stacked_prisms, tower_of_radii
 
 K, DAMPING, SUPPORTS = 2000.0, 10.0, [0, 1, 2]
+PLAN_MIN_TENSION = 2.0      # N: the plan keeps every cable's pull at least this (OptimalControl.min_tension)
 INPUT_WEIGHT = 1.0          # MPC: weight of (u − u_ref)² per m² (see mpc_tracking)
-MIN_TENSION = None          # MPC: no tension constraint (with 1 N its QPs fail in qrqp: see docs/tensegrity.md)
+MIN_TENSION = 1.0           # MPC: every cable's pull >= 1 N along the horizon (N)
+QP_SOLVER = "qpoases"       # MPC: the QP solver (ncgen.control.mpc_qp; qrqp fails on these QPs)
+ITERATIONS = 6              # MPC: SQP iterations per call
 
 
 def designs():
@@ -40,6 +44,15 @@ def designs():
                                  node_mass=0.2).build()
     u = tuple(rest_length_inputs(model, x) for x in l0)
     return model, u, tuple(nc.equilibrium(model, u=ui).q for ui in u)
+
+
+def plan_pulls(model, plan) -> np.ndarray:
+    """The cables' pulls ``k (l − l₀) + c l̇`` (N) at both ends of each of the plan's intervals,
+    with the interval's rest lengths (intervals × 2 × cables)."""
+    f = model.springs.function
+    n = len(plan.t) - 1
+    return np.array([[np.asarray(f(plan.t[j], plan.q[j], plan.v[j], plan.u[k], model.p0)[2]).reshape(-1)
+                      for j in (k, k + 1)] for k in range(n)])
 
 
 def cable_feedback(model, plan, gain: float = 4 * K, damping: float = 20.0):
@@ -71,18 +84,21 @@ def cable_feedback(model, plan, gain: float = 4 * K, damping: float = 20.0):
 
 
 def mpc_tracking(model, plan, u_final, bounds, *, N: int = 5, h: float = 0.01, state_weight=(1e3, 1.0),
-                 input_weight: float = INPUT_WEIGHT, terminal_weight: float = 1e3, min_tension=MIN_TENSION):
+                 input_weight: float = INPUT_WEIGHT, terminal_weight: float = 1e3, min_tension=MIN_TENSION,
+                 qp_solver: str = QP_SOLVER, iterations: int = ITERATIONS):
     """``nc.MPC`` tracking ``plan`` (its states and inputs; after the plan the inputs
     ``u_final`` hold its final state): a horizon of ``N`` steps of ``h`` s, the rest lengths
     within ``bounds`` (lower, upper), stage weights ``Q`` (on q, on v) and ``r`` (on u − u_ref, per
     m²), ``W`` on the horizon's end, every cable's pull ``≥ min_tension`` (N) along the horizon
-    (None: no such constraint; the step Jacobians' QR as loops: quick to compile)."""
+    (None: no such constraint), the QPs solved by ``qp_solver``, ``iterations`` SQP iterations a
+    call (the step Jacobians' QR as loops: quick to compile)."""
     ocp = nc.OptimalControl(model, N=N, t_final=N * h)
     ocp.bound_input("l0", *bounds)
     reference = (plan.t, np.hstack([plan.q, plan.v]), np.vstack([plan.u[:len(plan.t) - 1], u_final]))
     Q = np.repeat(state_weight, model.nq)
     return nc.MPC(ocp, sx_qr_max_nnz=0, reference=reference, state_weight=Q, input_weight=input_weight,
-                  terminal_weight=terminal_weight, min_tension=min_tension)
+                  terminal_weight=terminal_weight, min_tension=min_tension, qp_solver=qp_solver,
+                  iterations=iterations)
 
 
 def timed(mpc):
@@ -112,13 +128,19 @@ if __name__ == "__main__":
     ocp.bound_input("l0", *bounds)
     ocp.initial(q=qA, v=0)
     ocp.final(q=qB, v=0)
+    ocp.min_tension(PLAN_MIN_TENSION)
     start = time.perf_counter()
     plan = ocp.solve(warm_start=ramp)
     print(f"optimal control: {plan.stats.iterations} IPOPT iterations, {time.perf_counter() - start:.1f} s wall, "
-          f"largest dynamics defect {plan.stats.max_defect:.1e}")
-    opened = nc.simulate(model, t_final, plan.t[1], u=plan.u, q0=qA, backend="vm")
+          f"largest dynamics defect {plan.stats.max_defect:.1e}; smallest cable pull at the nodes "
+          f"{plan_pulls(model, plan).min():.2f} N (floor {PLAN_MIN_TENSION:g} N)")
+    grid = np.linspace(0.0, t_final, 10 * (len(plan.t) - 1) + 1)       # ten samples an interval, inputs held
+    held_u = plan.u[np.minimum(np.searchsorted(plan.t, grid, side="right") - 1, len(plan.t) - 2)]
+    opened = nc.simulate(model, t_final, grid[1], u=held_u, q0=qA, backend="vm")
+    pulls = [np.asarray(model.springs.function(t, q, v, u, model.p0)[2]).min()
+             for t, q, v, u in zip(opened.t, opened.q, opened.v, held_u)]
     print(f"its inputs replayed (IDAS, open loop): top at {opened.q[-1, z]:.4f} m, "
-          f"|q - qB| {np.abs(opened.q[-1] - qB).max():.2e} m")
+          f"|q - qB| {np.abs(opened.q[-1] - qB).max():.2e} m, smallest cable pull {min(pulls):.2f} N")
     v0 = np.zeros(model.nq)
     v0[z] = 0.3                                     # a push on a top node
     held = lambda t: plan.u[min(np.searchsorted(plan.t, t, side="right") - 1, len(plan.u) - 1)]  # noqa: E731

@@ -4,8 +4,9 @@ A point mass hanging from the ground by one cable whose rest length is the input
 rise 5 cm in 0.1 s and stop: the unconstrained controller slackens the cable (its optimum
 throws the mass up and lets it fall), and its SQP iterates stay infeasible along the kink of
 ``max(P, 0)`` (tiny steps, ℓ1 gap ~0.5); with ``T_min`` the cable's pull ``P = k (l − l₀) + c l̇``
-stays ≥ ``T_min`` at both ends of every interval and the iterates are feasible (gaps checked
-with an independent step function).  The constraint's rows are the pull's first-order model
+stays ≥ ``T_min`` at both ends of every interval, where the step evaluates it (with the
+half-step velocity), and the iterates are feasible (gaps checked with an independent step
+function).  The constraint's rows are the pull's first-order model
 (checked against the pull itself); its violation enters the infeasibility as
 ``Σ max(0, T_min − P)`` (checked by hand); bad values are refused by name."""
 from __future__ import annotations
@@ -45,6 +46,13 @@ def pull(x, u):
     return K * (l - u) + C * q @ v / l
 
 
+def step_pull(X, U, k, j, h):
+    """The pull by hand where the step of interval ``k`` evaluates it: at ``q_j`` (``j = k, k + 1``)
+    with the half-step velocity ``w_k = (q_{k+1} − q_k) / h``."""
+    w = (X[k + 1][:3] - X[k][:3]) / h
+    return pull(np.concatenate([X[j][:3], w]), U[k][0])
+
+
 @pytest.fixture(scope="module")
 def model():
     return hanging()
@@ -61,6 +69,19 @@ def test_bad_min_tension_refused_by_name(model, kwargs, message):
         nc.MPC(rising(model), **kwargs)
 
 
+def test_bad_qp_solver_refused_by_name(model):
+    with pytest.raises(NcgenError, match="qp_solver: expected one of qrqp, qpoases, got 'gurobi'"):
+        nc.MPC(rising(model), qp_solver="gurobi")
+
+
+def test_the_ocps_floor_is_the_mpcs_and_export_refuses_it(model, tmp_path):
+    ocp = rising(model).min_tension(3.0)
+    assert mpc_problem(ocp, 1e3).min_tension == 3.0
+    assert mpc_problem(ocp, 1e3, min_tension=1.0).min_tension == 1.0
+    with pytest.raises(NcgenError, match=r"export_mpc: the problem's min_tension \(3 N"):
+        nc.export_mpc(ocp, tmp_path)
+
+
 def test_min_tension_refused_without_cables():
     with pytest.raises(NcgenError, match="min_tension: the model 'hang' has no cables"):
         nc.MPC(rising(hanging(cable=False)), min_tension=1.0)
@@ -68,7 +89,8 @@ def test_min_tension_refused_without_cables():
 
 def test_taut_rows_are_the_pulls_first_order_model(model):
     """The QP's tension rows ``A δU ≥ lb`` are ``f(0) + f′(0) ≥ T_min`` with
-    ``f(τ) = P(x̄_j + τ δx_j, ū_k + τ δu_k)``, ``vec δX = S δU + s`` (the QP's own prediction,
+    ``f(τ) = P(q̄_j + τ δq_j, w̄_k + τ δw_k, ū_k + τ δu_k)`` (``w_k = (q_{k+1} − q_k) / h``: where
+    the step evaluates the pull), ``vec δX = S δU + s`` (the QP's own prediction,
     ``s``: the guess's gaps closed), ``f′`` by central differences of the pull by hand."""
     N, T_min = 3, 2.0
     problem = mpc_problem(rising(model, N=N, t_final=0.06), 1e3, min_tension=T_min)
@@ -83,14 +105,14 @@ def test_taut_rows_are_the_pulls_first_order_model(model):
         dX = (Xs.ravel() + S @ dU).reshape(N + 1, 6) - X
         model_rows = A @ dU - lba.ravel() + T_min
         eps = 1e-6
-        f = lambda tau, k, j: pull(X[j] + tau * dX[j], U[k, 0] + tau * dU[k])  # noqa: E731
+        f = lambda tau, k, j: step_pull(X + tau * dX, U + tau * dU[:, None], k, j, 0.02)  # noqa: E731
         by_hand = [f(0, k, j) + (f(eps, k, j) - f(-eps, k, j)) / (2 * eps) for k in range(N) for j in (k, k + 1)]
         np.testing.assert_allclose(model_rows, by_hand, rtol=0, atol=1e-6)
 
 
 def test_infeasibility_counts_the_tension_below_its_minimum(model):
     """``c`` with ``min_tension`` = ``c`` without it + ``Σ max(0, T_min − P)`` over both ends of
-    each interval (P by hand)."""
+    each interval (P by hand, at the step's half-step velocity)."""
     N, T_min = 3, 5.0
     ocp = rising(model, N=N, t_final=0.06)
     with_, without = (merit_function(model, mpc_problem(ocp, 1e3, min_tension=m)) for m in (T_min, None))
@@ -98,15 +120,15 @@ def test_infeasibility_counts_the_tension_below_its_minimum(model):
     X = np.tile(x, (N + 1, 1))
     U = np.array([[0.99], [1.0], [0.97]])            # pulls near and below T_min
     c1, c0 = (float(f(x, 0.0, X.T, U.T)[1]) for f in (with_, without))
-    by_hand = sum(max(0.0, T_min - pull(X[j], U[k, 0])) for k in range(N) for j in (k, k + 1))
+    by_hand = sum(max(0.0, T_min - step_pull(X, U, k, j, 0.02)) for k in range(N) for j in (k, k + 1))
     assert by_hand > 1.0
     assert c1 == pytest.approx(c0 + by_hand, rel=1e-12, abs=1e-12)
 
 
-def closed_loop(model, min_tension, calls=6):
+def closed_loop(model, min_tension, calls=6, qp_solver="qrqp"):
     """The MPC's solutions from rest, each applied as planned: ``(infeasibility, pulls)`` per call,
     the gaps measured by an independent step function, the pulls by hand."""
-    mpc = nc.MPC(rising(model), min_tension=min_tension, iterations=3, sx_qr_max_nnz=0)
+    mpc = nc.MPC(rising(model), min_tension=min_tension, iterations=3, sx_qr_max_nnz=0, qp_solver=qp_solver)
     step = nc.step_function(model, mpc.h)
     x, gaps, pulls = np.array([0, 0, -1.0, 0, 0, 0]), [], []
     for i in range(calls):
@@ -114,16 +136,17 @@ def closed_loop(model, min_tension, calls=6):
         X, U = mpc.solution
         gaps.append(sum(np.abs(step(X[k], U[k], mpc.problem.p, (i + k) * mpc.h) - X[k + 1]).sum()
                         for k in range(mpc.N)))
-        pulls.append(min(pull(X[j], U[k, 0]) for k in range(mpc.N) for j in (k, k + 1)))
+        pulls.append(min(step_pull(X, U, k, j, mpc.h) for k in range(mpc.N) for j in (k, k + 1)))
         x = X[1]
     return np.array(gaps), np.array(pulls)
 
 
-def test_mpc_keeps_the_cable_taut_and_its_iterates_feasible(model):
-    gaps, pulls = closed_loop(model, None)
+@pytest.mark.parametrize("qp_solver", ["qrqp", "qpoases"])
+def test_mpc_keeps_the_cable_taut_and_its_iterates_feasible(model, qp_solver):
+    gaps, pulls = closed_loop(model, None, qp_solver=qp_solver)
     assert pulls.min() < 0 and gaps[-3:].min() > 0.1         # the problem the option solves
     T_min = 2.0
-    gaps, pulls = closed_loop(model, T_min)
+    gaps, pulls = closed_loop(model, T_min, qp_solver=qp_solver)
     feasible = gaps < 1e-8
     assert feasible[-4:].all(), gaps                         # the last four solutions feasible
     assert np.all(pulls[feasible] >= T_min - 1e-6), pulls

@@ -93,6 +93,9 @@ def export_mpc(ocp, path, *, name: str | None = None, iterations: int = 1, termi
         raise NcgenError(f"export_mpc: warmup: expected an integer ≥ 0, got {warmup!r}")
     if not isinstance(iterations, int) or iterations < 1:
         raise NcgenError(f"export_mpc: iterations: expected a positive integer, got {iterations!r}")
+    if ocp.cable_min_tension is not None:
+        raise NcgenError(f"export_mpc: the problem's min_tension ({ocp.cable_min_tension:g} N, the cables' pull floor) "
+                         "is not exported: the exported controller has no cable rows; use nc.MPC in Python")
     problem = mpc_problem(ocp, terminal_weight)
     nx, nu = 2 * model.nq, model.nu
     t_end = as_scalar(t_end, "export_mpc: t_end")

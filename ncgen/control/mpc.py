@@ -37,6 +37,7 @@ import numpy as np
 
 from ncgen.control.discrete import step_jacobian_function
 from ncgen.control.mpc_problem import mpc_problem
+from ncgen.control.mpc_qp import GENERATED, InProcessQP, check_qp_solver, qp_function
 from ncgen.errors import NcgenError, OptimizationError
 from ncgen.validation import as_scalar
 
@@ -53,13 +54,14 @@ ARMIJO, GAMMA, C_MIN = 1e-4, 1e-5, 1e-10
 
 
 def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
-                  qp_max_iter: int = 100, sx_qr_max_nnz: int | None = None) -> list[ca.Function]:
+                  qp_max_iter: int = 100, sx_qr_max_nnz: int | None = None,
+                  qp_solver: str = "qrqp") -> list[ca.Function]:
     """The four CasADi functions of one SQP iteration (see the module docstring):
 
     * ``mpc_qp_data: (x, t, X̄, Ū) -> (H, g, A, lba, uba, lbx, ubx, Xs, S)``: the condensed QP
       in ``δU`` (``vec δX = S δU + (Xs − vec X̄)``);
     * ``mpc_qp``: CasADi's ``qrqp`` on it (returns its last iterate also when it reports a
-      failure: the caller checks it);
+      failure: the caller checks it), or the ``qp_solver`` of :mod:`ncgen.control.mpc_qp`;
     * ``mpc_update: (Xs, S, Ū, δU) -> (X⁺, U⁺)``: the full step;
     * ``mpc_merit`` (:func:`merit_function`): cost and infeasibility of a trial.
 
@@ -81,11 +83,8 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
     lo_x, hi_x = problem.x_bounds
     bounded = np.flatnonzero(np.isfinite(lo_x) | np.isfinite(hi_x))
     rows = [nx * k + i for k in range(1, N + 1) for i in bounded]
-    n_taut = 0 if problem.min_tension is None else 2 * N * problem.cable_pull.numel_out(0)
-    qp = ca.conic("mpc_qp", "qrqp", {"h": ca.Sparsity.dense(nU, nU),
-                                     "a": ca.Sparsity.dense(len(rows) + n_taut, nU)},
-                  {"print_iter": False, "print_header": False, "print_info": False, "max_iter": qp_max_iter,
-                   "error_on_fail": False})
+    n_taut = 0 if problem.min_tension is None else N * problem.cable_pull.numel_out(0)
+    qp = qp_function(qp_solver, nU, len(rows) + n_taut, qp_max_iter)
 
     x, t = ca.MX.sym("x", nx), ca.MX.sym("t")
     X, U = ca.MX.sym("X", nx, N + 1), ca.MX.sym("U", nu, N)
@@ -119,22 +118,22 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
 
 def taut_rows(problem, X, U, times, S, s):
     """``(A, lb)``: the cables' path constraint (:mod:`ncgen.control.mpc_problem`) linearised
-    at the guess and condensed, ``A δU ≥ lb``: for each interval ``k`` and its ends ``j = k,
-    k + 1``, ``P_x(x̄_j, ū_k) δx_j + P_u δu_k ≥ T_min − P(x̄_j, ū_k)`` with
-    ``δx_j = S_j δU + s_j``."""
+    at the guess and condensed, ``A δU ≥ lb``: for each interval ``k``,
+    ``P_a δx_k + P_b δx_{k+1} + P_u δu_k ≥ T_min − P(x̄_k, x̄_{k+1}, ū_k)`` (``P``: the pulls at the
+    interval's two ends) with ``δx_j = S_j δU + s_j``."""
     pull, N = problem.cable_pull, problem.N
-    nx, nu, m = pull.numel_in(0), pull.numel_in(1), pull.numel_out(0)
-    xs, us, ts = ca.SX.sym("x", nx), ca.SX.sym("u", nu), ca.SX.sym("t")
-    P = pull(xs, us, ts)
-    lin = ca.Function("cable_pull_lin", [xs, us, ts], [P, ca.jacobian(P, xs), ca.jacobian(P, us)])
+    nx, nu, m = pull.numel_in(0), pull.numel_in(2), pull.numel_out(0)
+    xa, xb, us, ts = ca.SX.sym("x", nx), ca.SX.sym("x_next", nx), ca.SX.sym("u", nu), ca.SX.sym("t")
+    P = pull(xa, xb, us, ts)
+    lin = ca.Function("cable_pull_lin", [xa, xb, us, ts],
+                      [P, ca.jacobian(P, xa), ca.jacobian(P, xb), ca.jacobian(P, us)])
     A, lb = [], []
     for k in range(N):
-        for j in (k, k + 1):
-            P_k, P_x, P_u = lin(X[:, j], U[:, k], times[k])
-            S_j, s_j = S[nx * j:nx * (j + 1), :], s[nx * j:nx * (j + 1)]
-            E_k = ca.horzcat(ca.MX(m, nu * k), P_u, ca.MX(m, nu * (N - k - 1)))
-            A.append(ca.mtimes(P_x, S_j) + E_k)
-            lb.append(problem.min_tension - P_k - ca.mtimes(P_x, s_j))
+        P_k, P_a, P_b, P_u = lin(X[:, k], X[:, k + 1], U[:, k], times[k])
+        a, b = slice(nx * k, nx * (k + 1)), slice(nx * (k + 1), nx * (k + 2))
+        E_k = ca.horzcat(ca.MX(m, nu * k), P_u, ca.MX(m, nu * (N - k - 1)))
+        A.append(ca.mtimes(P_a, S[a, :]) + ca.mtimes(P_b, S[b, :]) + E_k)
+        lb.append(problem.min_tension - P_k - ca.mtimes(P_a, s[a]) - ca.mtimes(P_b, s[b]))
     return ca.vertcat(*A), ca.vertcat(*lb)
 
 
@@ -162,10 +161,9 @@ def merit_function(model, problem) -> ca.Function:
             c += ca.sum2(ca.fmax(0, float(lo_x[i]) - row))
         if np.isfinite(hi_x[i]):
             c += ca.sum2(ca.fmax(0, row - float(hi_x[i])))
-    if problem.min_tension is not None:           # the cables' tension below T_min, at both ends of each interval
+    if problem.min_tension is not None:           # the cables' pull below T_min, at both ends of each interval
         pull = problem.cable_pull.map("mpc_cable_pulls", "serial", int(N), [], [])
-        for ends in (X[:, :N], X[:, 1:]):
-            c += ca.sum2(ca.sum1(ca.fmax(0, problem.min_tension - pull(ends, U, times))))
+        c += ca.sum2(ca.sum1(ca.fmax(0, problem.min_tension - pull(X[:, :N], X[:, 1:], U, times))))
     Xs, Us, ts = ca.SX.sym("X", nx, N + 1), ca.SX.sym("U", nu, N), ca.SX.sym("t")
     cost = ca.Function("mpc_total_cost", [Xs, Us, ts], [total_cost(problem, Xs, Us, ts)])
     return ca.Function("mpc_merit", [x, t, X, U], [cost(X, U, t), c, ca.mmax(res)],
@@ -217,6 +215,8 @@ class MPC:
     the infeasibility ``c``; :mod:`ncgen.control.mpc_problem`), refused on a model without
     cables and with ``"fatrop"``.  The horizon is the OCP's: ``N`` intervals of
     ``h = t_final / N`` seconds, and ``mpc`` is meant to be called every ``h`` seconds.
+    ``qp_solver``: ``"qrqp"`` (generated C) or ``"qpoases"`` (in this process; not exported), see
+    :mod:`ncgen.control.mpc_qp`.
     ``mpc.reset(x, t, iterations=...)`` (also done by the first call) sets the guess to ``x``
     held with zero inputs (clipped into their bounds), or to the reference along the horizon
     from ``t``, and iterates on it.
@@ -227,15 +227,17 @@ class MPC:
     def __init__(self, ocp, solver: str = "sqp", *, iterations: int = 1, terminal_weight: float = 1e3,
                  regularization: float = REGULARIZATION, qp_max_iter: int = 100,
                  sx_qr_max_nnz: int | None = None, fatrop_options: dict | None = None,
-                 reference=None, state_weight=None, input_weight=None, min_tension=None):
+                 reference=None, state_weight=None, input_weight=None, min_tension=None,
+                 qp_solver: str = "qrqp"):
         if not isinstance(solver, str) or solver not in SOLVERS:
             raise OptimizationError(f"MPC: solver: expected one of {', '.join(SOLVERS)}, got {solver!r}")
         if not isinstance(iterations, int) or iterations < 1:
             raise OptimizationError(f"MPC: iterations: expected a positive integer, got {iterations!r}")
         self.ocp, self.model = ocp, ocp.model
-        if min_tension is not None and solver == "fatrop":
-            raise OptimizationError("MPC: min_tension: supported by solver='sqp' only, got solver='fatrop'")
         self.problem = mpc_problem(ocp, terminal_weight, reference, state_weight, input_weight, min_tension)
+        if self.problem.min_tension is not None and solver == "fatrop":
+            raise OptimizationError("MPC: min_tension: supported by solver='sqp' only, got solver='fatrop'")
+        self.qp_solver = check_qp_solver(qp_solver)
         self.h, self.N = self.problem.h, self.problem.N
         self.nx, self.nu = 2 * self.model.nq, self.model.nu
         self.iterations = iterations
@@ -251,12 +253,14 @@ class MPC:
             self.fatrop = FatropSolver(self.model, self.problem, fatrop_options)
         else:
             self.functions = mpc_functions(self.model, self.problem, regularization=regularization,
-                                           qp_max_iter=qp_max_iter, sx_qr_max_nnz=sx_qr_max_nnz)
+                                           qp_max_iter=qp_max_iter, sx_qr_max_nnz=sx_qr_max_nnz, qp_solver=qp_solver)
             from ncgen.control.step_support import compile_functions
-            lib = compile_functions(f"{self.model.name}_mpc", self.functions)
+            compiled = [f for f in self.functions if f.name() != "mpc_qp" or qp_solver in GENERATED]
+            lib = compile_functions(f"{self.model.name}_mpc", compiled)
+            lib.setdefault("mpc_qp", InProcessQP(self.functions[1]))
             self._data, self._qp, self._update, self._merit_fn = (lib[f.name()] for f in self.functions)
         self._residual_tol = residual_tolerance(self.model)
-        #: qrqp's status of each QP of the last control step (0: converged).
+        #: the QP solver's status of each QP of the last control step (0: converged).
         self.qp_status: list[int] = []
         #: the step length α taken by each SQP iteration of the last control step (0: no trial
         #: was acceptable, the iterate was kept).
@@ -273,7 +277,7 @@ class MPC:
             return (f"<MPC of {self.model.name!r}: N={self.N}, h={self.h} s, {self.iterations} Fatrop "
                     f"solve(s) per step>")
         return (f"<MPC of {self.model.name!r}: N={self.N}, h={self.h} s, {self.iterations} SQP "
-                f"iteration(s) per step, qrqp>")
+                f"iteration(s) per step, {self.qp_solver}>")
 
     def _merit(self, x, t: float, X: np.ndarray, U: np.ndarray):
         """``(J, c)`` of the iterate, or ``None`` when a step along it did not converge or

@@ -20,13 +20,17 @@ the stage and terminal costs measure the distance to it at the nodes' times ``t_
 
 (``x_ref``, ``u_ref`` at ``t``; ``Q``: ``state_weight``, ``r``: ``input_weight``).  With
 ``min_tension`` (``T_min``, N) the cables (``Spring(cable=True)``, ``ClusteredCable``) are kept
-taut at both ends of every interval::
+taut where the step evaluates their forces, at both ends of every interval::
 
-    P_i(x_k, u_k) ≥ T_min,  P_i(x_{k+1}, u_k) ≥ T_min     (k < N, every cable i)
+    P_i(q_k, w_k, u_k) ≥ T_min,  P_i(q_{k+1}, w_k, u_k) ≥ T_min,  w_k = (q_{k+1} − q_k) / h
+                                                              (k < N, every cable i)
 
-on the pull ``P = k (l − l₀) + c l̇`` (N; :mod:`ncgen.assembly.springs`), smooth where the
-tension ``max(P, 0)`` has its kink: a step whose cables stay taut is a smooth function of
-``(x_k, u_k)``, which the SQP's linearisation needs.  The final
+on the pull ``P = k (l − l₀) + c l̇`` (N; :mod:`ncgen.optim.cables`), smooth where the
+tension ``max(P, 0)`` has its kink: RATTLE evaluates the forces at ``(q_k, w_k)`` and
+``(q_{k+1}, w_k)`` with the half-step velocity ``w_k`` (:mod:`ncgen.assembly.stepper_equations`;
+``q_{k+1} = q_k + h w_k``), so a step whose cables stay taut there is a smooth function of
+``(x_k, u_k)``, which the SQP's linearisation needs (the pulls at the nodes' own velocities
+``v_k`` may be taut while the step's are slack: the damper's ``c (l̇(w) − l̇(v))``).  The final
 conditions of the OCP are *soft* in MPC (weight ``W``,
 ``terminal_weight``): a hard terminal equality can be infeasible from a disturbed state,
 and a controller must always return an input.  Not supported in MPC (a clear error):
@@ -67,7 +71,8 @@ class MPCProblem:
     reference: ca.Function | None = None
     #: ``T_min`` (N) of the cables' path constraint, or None.
     min_tension: float | None = None
-    #: ``cable_pull: (x, u, t) -> P`` (SX, N: one per cable), with ``min_tension``; else None.
+    #: ``cable_pull: (x_k, x_{k+1}, u_k, t_k) -> P`` (SX, N: the cables' pulls at the interval's
+    #: start, then at its end, both with ``w_k``), with ``min_tension``; else None.
     cable_pull: ca.Function | None = None
 
 
@@ -77,7 +82,7 @@ def mpc_problem(ocp, terminal_weight: float, reference=None, state_weight=None, 
     ``(t, X, U)`` or an OCP solution (:func:`ncgen.control.mpc_reference.reference_arrays`),
     ``state_weight`` (nx or a scalar; default 1), ``input_weight`` (nu or a scalar; default 0):
     its weights, refused without a reference; ``min_tension``: ``T_min`` (N, finite), refused
-    on a model without cables."""
+    on a model without cables; without it, the OCP's own floor (``ocp.min_tension(T_min)``)."""
     model = ocp.model
     if nonsmooth(model):
         names = ", ".join(repr(c["name"]) for c in model.contacts)
@@ -161,28 +166,25 @@ def mpc_problem(ocp, terminal_weight: float, reference=None, state_weight=None, 
 
     x_bounds = np.hstack([ocp.q_bounds, ocp.v_bounds])
     x_final = None if q_f is None else np.concatenate([q_f, np.zeros(nq) if v_f is None else v_f])
-    T_min, pull = cable_constraint(model, p, min_tension)
+    T_min, pull = cable_constraint(model, h, p, ocp.cable_min_tension if min_tension is None
+                                   else min_tension)
     return MPCProblem(h, N, p, stage, terminal, ocp.u_bounds.copy(), x_bounds, x_final, initial_state(ocp, p), plan,
                       T_min, pull)
 
 
-def cable_constraint(model, p, min_tension) -> tuple[float | None, ca.Function | None]:
-    """``(T_min, cable_pull)`` of the ``min_tension`` option (see the module docstring);
-    ``(None, None)`` without it."""
+def cable_constraint(model, h: float, p, min_tension) -> tuple[float | None, ca.Function | None]:
+    """``(T_min, cable_pull)`` of the ``min_tension`` option (see the module docstring; the pull
+    of :mod:`ncgen.optim.cables` at the step's two force evaluations); ``(None, None)`` without it."""
     if min_tension is None:
         return None, None
-    T_min = as_scalar(min_tension, "MPC: min_tension")
-    if not np.isfinite(T_min) or T_min < 0:
-        raise OptimizationError(f"MPC: min_tension: expected a finite tension >= 0 in N, got {min_tension!r}")
-    table = model.springs
-    cables = [] if table is None else [i for i, c in enumerate(table.cable) if c]
-    if not cables:
-        raise OptimizationError(f"MPC: min_tension: the model {model.name!r} has no cables (Spring(cable=True) or "
-                                "ClusteredCable) to keep taut")
+    from ncgen.optim.cables import cable_pull_function, tension_floor
+    T_min = tension_floor(min_tension, "MPC: min_tension")
+    pull = cable_pull_function(model, "MPC: min_tension")
     nq = model.nq
-    x, u, t = ca.SX.sym("x", 2 * nq), ca.SX.sym("u", model.nu), ca.SX.sym("t")
-    P = table.function(t, x[:nq], x[nq:], u, ca.DM(p))[2][cables]
-    return T_min, ca.Function("cable_pull", [x, u, t], [P], ["x", "u", "t"], ["P"])
+    x, x1, u, t = ca.SX.sym("x", 2 * nq), ca.SX.sym("x_next", 2 * nq), ca.SX.sym("u", model.nu), ca.SX.sym("t")
+    w = (x1[:nq] - x[:nq]) / h
+    P = ca.vertcat(pull(t, x[:nq], w, u, ca.DM(p)), pull(t + h, x1[:nq], w, u, ca.DM(p)))
+    return T_min, ca.Function("cable_pull", [x, x1, u, t], [P], ["x", "x_next", "u", "t"], ["P"])
 
 
 def weights(w, n: int, what: str) -> np.ndarray:

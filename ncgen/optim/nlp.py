@@ -343,6 +343,8 @@ class NLP:
                 x = qj if kind == "position" else vj
                 self.constrain(f"path constraint on joint {name!r} ({kind})", "path",
                                x[rows[kind][name].start, :], lo, hi)
+        if ocp.cable_min_tension is not None:
+            self._taut_cables()
         if not ocp.marker_bounds:
             return
         nm = len(model.marker_names)
@@ -355,6 +357,29 @@ class NLP:
                 if np.isfinite(lo[c]) or np.isfinite(hi[c]):
                     self.constrain(f"path constraint on marker {name!r} ({'xyz'[c]})", "path",
                                    r[c, cols], lo[c], hi[c])
+
+    def _taut_cables(self):
+        """``P(t, q, v, u) ≥ T_min`` (:meth:`~ncgen.optim.problem.OptimalControl.min_tension`) at
+        both ends of every interval and at its path points, each with the interval's input (the
+        input jumps at the nodes, so node ``k`` is taken with ``u_{k−1}`` and with ``u_k``; the
+        path points come interval by interval, the same number in each, the interval's end last)."""
+        from ncgen.optim.cables import cable_pull_function
+        ocp, model, disc = self.ocp, self.model, self.disc
+        pull = cable_pull_function(model, "min_tension")
+        npts, N = disc.path_q.shape[1], ocp.N
+        if npts % N:
+            raise OptimizationError(f"min_tension: the transcription's {npts} path points are not the same number "
+                                    f"in each of its {N} intervals")
+        m, nu = npts // N, model.nu
+        U = disc.U if nu else ca.DM(0, N)
+        U_path = ca.reshape(ca.repmat(U, m, 1), nu, npts)      # column k m + j: U[:, k]
+        t_start = ocp.t0 + self.T * ca.DM(np.arange(N)).T / N if disc.t_nodes is None else disc.t_nodes[:, :N]
+        starts = pull.map(N)(t_start, disc.q[:, :N], disc.v[:, :N], U, self.p)
+        P = pull.map(npts)(disc.path_t, disc.path_q, disc.path_v, U_path, self.p)
+        T_min = ocp.cable_min_tension
+        self.constrain("path constraint min_tension (cable pulls at the intervals' starts)", "path", ca.vec(starts),
+                       T_min, np.inf)
+        self.constrain("path constraint min_tension (cable pulls)", "path", ca.vec(P), T_min, np.inf)
 
     def _objective(self):
         ocp, model, disc = self.ocp, self.model, self.disc

@@ -95,6 +95,8 @@ class OptimalControl:
         self.marker_bounds: list[tuple[str, np.ndarray, np.ndarray]] = []
         #: Joint-space path constraints: (joint, "position" or "rate", lower, upper).
         self.joint_bounds: list[tuple[str, str, float, float]] = []
+        #: ``T_min`` (N) of :meth:`min_tension`, or None.
+        self.cable_min_tension: float | None = None
         self.initial_spec = {"q": MODEL_STATE, "v": MODEL_STATE, "markers": []}
         self.final_spec = {"q": None, "v": None, "markers": [], "pose": None, "joints": None}
         self.periodic_spec = {"q": False, "v": False}
@@ -176,6 +178,17 @@ class OptimalControl:
         if np.any(lo > hi):
             raise OptimizationError(f"bound_marker {name!r}: lower {lo.tolist()} exceeds upper {hi.tolist()}")
         self.marker_bounds.append((name, lo, hi))
+        return self
+
+    def min_tension(self, T_min) -> "OptimalControl":
+        """Path constraint: every cable's pull ``P = k (l − l₀) + c l̇ ≥ T_min`` (N, ≥ 0) at both
+        ends of every interval and at its path points, with the interval's input
+        (:mod:`ncgen.optim.cables`): the cables stay taut, so the plan never relies on the
+        tension's cut at zero.  Refused on a model without cables."""
+        from ncgen.optim.cables import cable_indices, tension_floor
+        value = tension_floor(T_min, "min_tension")
+        cable_indices(self.model, "min_tension")
+        self.cable_min_tension = value
         return self
 
     def bound_joint(self, name: str, lower=-np.inf, upper=np.inf, *, rate=None) -> "OptimalControl":

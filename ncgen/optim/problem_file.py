@@ -9,6 +9,7 @@ The format is documented in docs/optimal-control.md.  Every table is optional::
     [free_parameters.NAME]  lower, upper, guess     (design parameters)
     [bounds.inputs] / [bounds.coordinates] / [bounds.velocities]   name = [lower, upper]
     [bounds.markers.NAME]   lower = [...], upper = [...]   ("free" = unbounded component)
+    [bounds]         min_tension = T_min            (every cable's pull ≥ T_min, N)
     [initial] / [final]     q, v, markers = {NAME = [x, y(, z)]}, joints = {JOINT = value}
     [final.pose.MEMBER]     rotation = 3×3 rows (body→world; an angle in a plane), position
     [periodic]       q = true, v = true
@@ -178,7 +179,11 @@ class _Reader:
                               integrator=integrator, integrator_options=options, contacts=contacts)
 
     def _bounds(self, ocp, b):
-        b = self.table(b, "bounds", ("inputs", "coordinates", "velocities", "markers"))
+        b = self.table(b, "bounds", ("inputs", "coordinates", "velocities", "markers", "min_tension"))
+        if "min_tension" in b:
+            T_min = self.number(b["min_tension"], "bounds.min_tension")
+            self.where = "bounds.min_tension"
+            ocp.min_tension(T_min)
         setters = {"inputs": ocp.bound_input, "coordinates": ocp.bound_coordinate, "velocities": ocp.bound_velocity}
         for kind, setter in setters.items():
             for name, pair in self.table(b.get(kind, {}), f"bounds.{kind}", None).items():
