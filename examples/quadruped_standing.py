@@ -6,10 +6,10 @@ standing on its own collision geometry, held by joint PD feedback on the nonsmoo
 22 elements, 148 contact points (trunk and IMU boxes, hip and shoulder cylinders, thigh and
 calf boxes, the four foot spheres of radius 0.02 m); all of them are kept, none filtered.
 
-The floor is the plane z = −``FLOOR`` (m), not z = 0: ``build()`` checks the contacts' gaps
-in the URDF's zero configuration (base at the origin, legs straight down, feet 0.42 m below
-it) before it applies the initial joint state, so the plane must lie below that pose.  The
-robot starts with the base ``DROP`` m lower than the origin, so that the feet are
+The floor is the plane z = −``FLOOR`` (m; 0: the world's z = 0).  The URDF's zero
+configuration (base at the origin, legs straight down, feet 0.42 m below it) reaches through
+it; ``build()`` checks the contacts' gaps where the run starts, in the initial joint state.  The
+robot starts with the base at z = ``DROP`` (m), so that the feet are
 ``CLEARANCE`` above the floor, in the standing posture ``STAND`` (hips 0, thighs 0.8 rad,
 calves −1.6 rad) at rest.  A joint PD law ``τ = K_p (q* − q_j) − K_d q̇_j`` (a Python feedback
 ``u(t, qj, vj)``, held over each 1 ms output interval) holds the posture: the robot falls
@@ -29,7 +29,7 @@ import numpy as np
 
 import ncgen as nc
 
-FLOOR, CLEARANCE, T, DT, HOLD = 0.45, 0.005, 2.0, 1e-3, 0.1
+FLOOR, CLEARANCE, T, DT, HOLD = 0.0, 0.005, 2.0, 1e-3, 0.1
 THIGH, CALF, FOOT_RADIUS = 0.8, -1.6, 0.02          # rad, rad, m (the A1's foot spheres)
 LEG = 0.2                                            # m: thigh and calf lengths of the A1
 KP, KD = 80.0, 4.0                                   # N·m/rad, N·m·s/rad

@@ -141,8 +141,11 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     makers, potential = system_functions(ctx, phi, F, V, M, factor, alpha, beta, system)
     functions = FunctionSet(makers, contact_functions(ctx, terms) if terms else None)   # each made on first use
     weight = sum(m.rigid.mass for m in members) * float(np.linalg.norm(system.gravity))
-    if terms:                      # before the consistent state, whose contact forces need a defined normal
-        check_initial_gaps(system.name, system.contacts, functions["gap"], q_init, p0, contacts, weight)
+    coordinates_later = bool(system.initial_coordinates or system.initial_coordinate_rates)
+    posture_later = coordinates_later or bool(system.initial_joints or system.initial_joint_rates)
+    if terms:                      # before the consistent state, whose contact forces need a defined normal;
+        check_initial_gaps(system.name, system.contacts, functions["gap"], q_init, p0, contacts, weight,
+                           depth=not posture_later)      # depths where the run starts, after the posture
     state = consistent_state(functions, layout, labels, q_init, v_init, p0, t0, tolerance, M,
                              fixed=fixed, assemble=assemble)
     if not assemble:
@@ -161,7 +164,8 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     if system.initial_joints or system.initial_joint_rates:
         q, v = joint_space.initial_state(model, system.initial_joints, system.initial_joint_rates)
         if terms:
-            check_initial_gaps(system.name, system.contacts, functions["gap"], q, p0, contacts, weight)
+            check_initial_gaps(system.name, system.contacts, functions["gap"], q, p0, contacts, weight,
+                               depth=not coordinates_later)
         model = model_with(consistent_state(functions, layout, labels, q, v, p0, t0, tolerance, M, fixed=fixed))
     if system.initial_coordinates or system.initial_coordinate_rates:
         q, v = _initial_coordinates(model, system)

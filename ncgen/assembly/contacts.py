@@ -393,9 +393,12 @@ def contact_functions(ctx: Context, terms: list[ContactTerms]) -> dict[str, ca.F
 INITIAL_PENETRATION_TOL = 1e-6
 
 
-def check_initial_gaps(system_name: str, contacts, gap, q, p, contact_model: str, weight: float) -> np.ndarray:
+def check_initial_gaps(system_name: str, contacts, gap, q, p, contact_model: str, weight: float,
+                       depth: bool = True) -> np.ndarray:
     """The gaps ``g`` (m) of ``contacts`` at ``(q, p)``, after refusing what no run can start
-    from, naming the contact and the depth:
+    from, naming the contact and the depth (``depth=False``: only the first, at a
+    configuration the run does not start from, as a URDF's zero pose before its initial
+    joints are applied):
 
     * coincident sphere centres (the normal is undefined);
     * ``contact_model="nonsmooth"``: a penetration deeper than :data:`INITIAL_PENETRATION_TOL`;
@@ -411,7 +414,8 @@ def check_initial_gaps(system_name: str, contacts, gap, q, p, contact_model: str
             raise ModelError(f"system {system_name!r}: {c.label}: the centres of the spheres on {c.a.name!r} "
                              f"and {c.b.name!r} coincide in the initial configuration (the contact normal is "
                              "undefined); move one of the members")
-        depth = -gk
+        if not depth:
+            continue
         if contact_model == "nonsmooth":
             limit, why = INITIAL_PENETRATION_TOL, f"the nonsmooth stepper starts from at most {INITIAL_PENETRATION_TOL:g} m"
         elif c.kind == "SphereSphere":
@@ -421,10 +425,10 @@ def check_initial_gaps(system_name: str, contacts, gap, q, p, contact_model: str
             limit = max(radius, 10 * resting)
             why = (f"deeper than the sphere's radius and than 10 × the depth {resting:.3g} m at which the compliant "
                    "law carries the system's weight: the run would start with an explosion")
-        if depth > limit:
+        if -gk > limit:
             raise ModelError(f"system {system_name!r}: {c.label}: the initial configuration penetrates by "
-                             f"{depth:.6g} m (gap {gk:.6g} m); {why}. Start the members apart (move them by "
-                             f"at least {depth:.6g} m along the contact normal)")
+                             f"{-gk:.6g} m (gap {gk:.6g} m); {why}. Start the members apart (move them by "
+                             f"at least {-gk:.6g} m along the contact normal)")
     return g
 
 

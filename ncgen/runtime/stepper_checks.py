@@ -19,7 +19,13 @@ A fixed-step run (:func:`ncgen.runtime.stepper.simulate_stepper` without ``rtol`
 * the estimated global error in q exceeds :data:`ERROR_FRACTION` of the model's size
   ``max |q0|`` (m);
 * nonsmooth contacts: a contact solve stopped at its sweep limit with a last sweep that
-  still changed a contact velocity by more than :data:`PGS_TRUST` (1 + max |U|) m/s.
+  still changed a contact velocity by more than :data:`PGS_TRUST` (1 + max |U|) m/s;
+* nonsmooth contacts: the contacts created energy, their work (normal + friction +
+  push-out, accumulated step by step by the C loop) rising over an output row by more than
+  :data:`CREATED_FRACTION` of the energy scale and the round-off floor
+  (:func:`created_rows`, :func:`created_floor`), as when an unstable step lets a stack sink
+  and the push-out lifts it back (a model whose contacts cannot dissipate is conservative:
+  its contact work is not tracked, and ``E − E0`` itself is checked).
 
 Models with nonsmooth contacts get no shadow run: an impact falls into different steps of
 the run and of its shadow (steps of 2h), so their difference measures where the impact was
@@ -93,12 +99,72 @@ GLOBAL_FACTOR = 100.0
 
 
 
+#: Nonsmooth contacts: the largest rise of the contacts' work (normal + friction + push-out)
+#: over one output row, as a fraction of the energy scale, that is not energy created by the
+#: contacts (beside the round-off floor; :func:`created_floor` says why).
+CREATED_FRACTION = 1e-4
+#: The classes of work that are the nonsmooth contacts' doing (``work_<class>`` of :data:`STATS`).
+CONTACT_WORK = ("contacts", "friction", "push_out")
+
+
 def created_work(S: np.ndarray) -> np.ndarray:
     """The work (J) of every class but the contacts' (normal, friction, push-out) from the
     start to each output row of a stepper's run with statistics ``S``, 0 prepended: ``E −
     E0`` less it is the contacts' doing, which must never be a gain."""
-    rest = S[:, STATS.index("work")] - sum(S[:, STATS.index(f"work_{k}")] for k in ("contacts", "friction", "push_out"))
+    rest = S[:, STATS.index("work")] - sum(S[:, STATS.index(f"work_{k}")] for k in CONTACT_WORK)
     return np.concatenate([[0.0], rest])
+
+
+def contact_work_rise(S: np.ndarray) -> np.ndarray:
+    """Per output row: the increment (J) of the contacts' work (normal + friction + push-out,
+    :data:`CONTACT_WORK`) over the row, one column per class (rows × 3)."""
+    W = np.column_stack([S[:, STATS.index(f"work_{k}")] for k in CONTACT_WORK])
+    return np.diff(np.vstack([np.zeros((1, len(CONTACT_WORK))), W]), axis=0)
+
+
+def created_floor(model, traj, S: np.ndarray, work: np.ndarray, rise: np.ndarray) -> np.ndarray:
+    """Per output row: the largest rise (J) of the contacts' work over the row that is no
+    creation of energy,
+
+        ``CREATED_FRACTION E_s + n max‖F‖₁ (ε max|q| + τ h (1 + max|v|))``,
+
+    ``E_s`` the energy scale ``max(|E|, T, |V − V0|, |W|)`` so far, ``n`` the RATTLE steps
+    of the row and the second term :func:`roundoff_energy`'s floor per step at the row's end
+    (the round-off of the positions under the applied forces ``F``, and the work contacts
+    holding them, ``|P| ≤ h ‖F‖₁``, can do within the solves' velocity tolerance ``τ (1 +
+    max|U|)``: a block creeping with its friction pushing it), which matters where the
+    energy scale is itself of round-off size.  The first term is the discretisation's: the
+    impulses' work is a second-order rule over each step on the contact rows at its two
+    ends, and the push-out lifts the loads by the gap the steps' second-order drift sank, so
+    contacts that only take energy in the motion show small positive rises on the grid
+    (measured over the contact tests, h = 1 ms, at most 9.1e-6 of ``E_s`` in an output row:
+    tests/test_contact.py's box dropped with random spins, 2.9e-4 J of 32 J in 10 ms at an
+    impact; box_stack's push-out at rest 3.1e-7; the A1 of examples/quadruped_standing.py,
+    whose feet's rows turn as they roll, 6e-9 per 1 ms); :data:`CREATED_FRACTION` is 11
+    times the largest, and 77 times below the 40 ms pyramid's (7.7e-3 in one step).  ``rise``: the rows' increments
+    (:func:`contact_work_rise` summed); the force term is computed only where the first does
+    not cover them."""
+    floor = CREATED_FRACTION * _energy_scale(traj, work)[1:len(S) + 1]
+    if np.any(~(rise <= floor)):
+        n = S[:, STATS.index("steps")] * traj.info.get("stages", 1)
+        floor = floor + n * roundoff_energy(model, traj, S) / np.maximum(np.cumsum(n), 1)
+    return floor
+
+
+def created_rows(model, traj, S: np.ndarray, work: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(flags, rise, floor)``: per output row of a nonsmooth contact run, whether the
+    contacts created energy there, their work's increments by class (:func:`contact_work_rise`)
+    and the floor (:func:`created_floor`) their sum is measured against.  Contacts
+    with restitution ``e ≤ 1`` and Coulomb friction only take energy, and the push-out only
+    removes a penetration the step made, so a row where normal, friction and push-out work
+    together rise above the floor is a step too large for the motion (an unstable stack whose
+    push-out lifts the boxes it let sink).  The rule is on the sum: at an impact the push-out
+    alone adds energy (it lifts the bodies out of the penetration of that step) and friction
+    can too, while the normal impulse takes more."""
+    rise = contact_work_rise(S)
+    total = rise.sum(axis=1)
+    floor = created_floor(model, traj, S, work, total)
+    return ~(total <= floor), rise, floor
 
 
 def check_fixed(model, traj, S: np.ndarray, h: float, substeps: int, contacts: bool, conservative: bool,
@@ -476,6 +542,8 @@ def untrusted_row(model, traj, S: np.ndarray, h: float, contacts: bool = False) 
     e_rel = np.where(np.isnan(e_rel), np.inf, e_rel)    # overflowed or NaN states: diverged
     dt = h * traj.info.get("substeps", 1)
     flags = row_flags(splits, iters, steps, stages, e_rel, gq, size, residual)
+    if contacts and not conservative:           # a conservative run's contact work is not tracked: E - E0 tells
+        flags["created"], rise, floor = created_rows(model, traj, S, work)
     first = {k: int(np.argmax(f)) for k, f in flags.items() if f.any()}
     if not first:
         return None
@@ -501,6 +569,17 @@ def untrusted_row(model, traj, S: np.ndarray, h: float, contacts: bool = False) 
         reason = (f"the {what} by {e_rel[row]:.3g} of its energy scale by t = {t_row:.6g} s (more than "
                   f"{ENERGY_FRACTION:g})" if np.isfinite(e_rel[row]) else
                   f"the motion diverged: the energy is no longer finite by t = {t_row:.6g} s")
+    elif kind == "created":
+        parts = ", ".join(f"{name} {w:+.3g} J" for name, w in zip(("normal", "friction", "push-out"), rise[row]))
+        scale = float(_energy_scale(traj, work)[row + 1])
+        reason = (f"its contacts created energy: their work (normal + friction + push-out) rose by "
+                  f"{rise[row].sum():.3g} J ({rise[row].sum() / scale:.3g} of its energy scale {scale:.3g} J) over "
+                  f"the output interval to t = {t_row:.6g} s ({parts}), above its floor {floor[row]:.3g} J "
+                  f"({CREATED_FRACTION:g} of the scale and round-off); contacts with restitution <= 1 and "
+                  f"Coulomb friction only take energy, and the push-out only removes what the step sank "
+                  f"(deepest penetration left so far "
+                  f"{S[:row + 1, len(STATS) + CONTACT_STATS.index('penetration')].max():.3g} m): the step is too "
+                  f"large for this motion")
     elif kind == "contacts":
         reason = (f"the contact impulses did not converge by t = {t_row:.6g} s: projected Gauss-Seidel stopped "
                   f"at {PGS_MAX_ITER} sweeps with a last sweep still changing a contact velocity by "
