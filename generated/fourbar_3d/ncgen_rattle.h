@@ -142,7 +142,8 @@ typedef struct {
 #endif
 #endif
 #ifdef KKT_BLOCKS
-  casadi_real *kb;   /* kkt_schur(): the blocks' A_1, A_0 (KKT_NA each), T = M^-1 A_0^T (KKT_NA),
+  casadi_real *kb;   /* kkt_schur(): the blocks' A_1, A_0 (KKT_NA each; zero but at K's nonzeros
+                        since layout()), T = M^-1 A_0^T (KKT_NA),
                         S (KKT_NS), then y (NQ) */
   int *kbi;          /* ... and the pivots of S (KKT_CMAX) */
 #endif
@@ -294,6 +295,7 @@ static size_t layout(workspace *ws, char *block) {
 #ifdef KKT_BLOCKS
     ws->kb = (casadi_real *) (void *) (block + off[KKT_BLOCK]);
     ws->kbi = (int *) (void *) (ws->kb + 3 * KKT_NA + KKT_NS + NQ);
+    memset(ws->kb, 0, 2 * KKT_NA * sizeof(casadi_real)); /* A_1, A_0 outside K's pattern */
 #endif
   }
   return off[N_BLOCKS];
@@ -339,7 +341,8 @@ static int solve(workspace *ws, const casadi_real *K, const casadi_real *r, casa
 static int kkt_lu_solve(casadi_real *s, int n, int *piv, casadi_real *b) {
   casadi_real smax = 0;
   int i, j, k;
-  for (i = 0; i < n * n; ++i) smax = nan_max(smax, fabs(s[i]));
+  for (i = 0; i < n * n; ++i)
+    if (fabs(s[i]) > smax) smax = fabs(s[i]); /* NaN: no pivot passes the test below */
   if (!(smax > 0)) return 1;
   for (k = 0; k < n; ++k) {
     int p = k;
@@ -379,7 +382,6 @@ static int kkt_lu_solve(casadi_real *s, int n, int *piv, casadi_real *b) {
 static int kkt_schur(workspace *ws, const casadi_real *K, const casadi_real *r, casadi_real *out) {
   casadi_real *A1 = ws->kb, *A0 = A1 + KKT_NA, *T = A0 + KKT_NA, *S = T + KKT_NA, *y = S + KKT_NS;
   int b, i, j, c, k, aoff = 0, soff = 0;
-  memset(A1, 0, 2 * KKT_NA * sizeof(casadi_real));
   for (k = 0; k < KKT_NA1; ++k) A1[kkt_a1_dst[k]] = K[kkt_a1_nz[k]];
   for (k = 0; k < KKT_NA0; ++k) A0[kkt_a0_dst[k]] = K[kkt_a0_nz[k]];
   for (b = 0; b < KKT_NB; ++b) {
