@@ -26,6 +26,8 @@ from ncgen.codegen.cnames import c_real
 #: The largest block (constraints) solved by the Schur complement: beyond, the dense LU of a
 #: block (nc_b³/3 multiply-adds) costs more than the sparse QR of the whole KKT matrix.
 KKT_BLOCK_MAX = 24
+#: ... and of at most this many coordinates (M's coupled coordinates are inverted densely).
+KKT_BLOCK_MAX_Q = 192
 #: M is inverted only when its condition number is below this (as the contact Delassus path).
 KKT_MAX_COND = 1e12
 
@@ -33,7 +35,8 @@ KKT_MAX_COND = 1e12
 def kkt_block_context(model, K) -> dict:
     """The template context of the block Schur solve for the KKT pattern ``K`` (a CasADi
     Sparsity, (nq + nc)²): ``kkt_blocks`` False when it does not apply (M singular or
-    ill-conditioned, no constraint, a block above :data:`KKT_BLOCK_MAX`), else the blocks
+    ill-conditioned, no constraint, a block above :data:`KKT_BLOCK_MAX` constraints or
+    :data:`KKT_BLOCK_MAX_Q` coordinates), else the blocks
     (``kkt_q0``/``kkt_q``: coordinates by block, ``kkt_c0``/``kkt_c``: constraints by block),
     each block's M⁻¹ by columns (``kkt_m_colind``: NQ + 1 starts, column j of block b at
     kkt_q0[b] + j; ``kkt_m_row``: rows within the block; ``kkt_m_val``), where the nonzeros of ``K``'s
@@ -43,10 +46,8 @@ def kkt_block_context(model, K) -> dict:
     and ``kkt_newton``: whether Newton's K has M as its upper-left block (∂F/∂v structurally 0)."""
     nq, nc = model.nq, model.nc
     M = np.asarray(model.M, dtype=float)
-    if nc == 0 or not mass_is_regular(model) or not np.all(np.isfinite(M)) or np.linalg.cond(M) > KKT_MAX_COND:
+    if nc == 0 or not mass_is_regular(model) or not np.all(np.isfinite(M)):
         return {"kkt_blocks": False}
-    minv = np.linalg.inv(M)
-    minv = (minv + minv.T) / 2
     colind, row = K.colind(), K.row()
     lower, upper = [], []                      # (K index, constraint, coordinate)
     for j in range(nq + nc):
@@ -66,8 +67,21 @@ def kkt_block_context(model, K) -> dict:
     def join(i, j):
         parent[root(i)] = root(j)
 
-    for i, j in zip(*np.nonzero(minv)):
+    for i, j in zip(*np.nonzero(M)):           # M's blocks: M⁻¹ has the same
         join(int(i), int(j))
+    members = {}
+    for i in range(nq):
+        members.setdefault(root(i), []).append(i)
+    if max(len(comp) for comp in members.values()) > KKT_BLOCK_MAX_Q:
+        return {"kkt_blocks": False}
+    minv, sigma = {}, []                       # M⁻¹ by M's blocks: (i, j) -> entry
+    for comp in members.values():
+        inv = np.linalg.inv(M[np.ix_(comp, comp)])
+        inv = (inv + inv.T) / 2
+        sigma += list(np.linalg.svd(M[np.ix_(comp, comp)], compute_uv=False))
+        minv.update({(i, j): inv[a, b] for a, i in enumerate(comp) for b, j in enumerate(comp) if inv[a, b] != 0})
+    if max(sigma) > KKT_MAX_COND * min(sigma):
+        return {"kkt_blocks": False}
     touched = [[] for _ in range(nc)]
     for _, c, j in lower + upper:
         touched[c].append(j)
@@ -85,7 +99,7 @@ def kkt_block_context(model, K) -> dict:
         if not cols:                           # a constraint on no coordinate: S singular
             return {"kkt_blocks": False}
         cs[order[root(cols[0])]].append(c)
-    if max(len(c) for c in cs) > KKT_BLOCK_MAX:
+    if max(len(c) for c in cs) > KKT_BLOCK_MAX or max(len(q) for q in qs) > KKT_BLOCK_MAX_Q:
         return {"kkt_blocks": False}
     local_q, local_c, a_off = {}, {}, {}
     m_colind, m_row, m_val, off = [0], [], [], 0
@@ -94,11 +108,10 @@ def kkt_block_context(model, K) -> dict:
         local_c.update({c: k for k, c in enumerate(cb)})
         a_off[b] = off
         off += len(cb) * len(qb)
-        block = minv[np.ix_(qb, qb)]
-        for j in range(len(qb)):
-            rows = np.flatnonzero(block[:, j])
-            m_row += [int(i) for i in rows]
-            m_val += [c_real(x) for x in block[rows, j]]
+        for j in qb:
+            rows = [(a, minv[i, j]) for a, i in enumerate(qb) if (i, j) in minv]
+            m_row += [a for a, _ in rows]
+            m_val += [c_real(x) for _, x in rows]
             m_colind.append(len(m_row))
 
     def scatter(entries):
