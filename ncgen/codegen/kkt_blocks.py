@@ -128,6 +128,7 @@ def kkt_block_context(model, K) -> dict:
     return {"kkt_blocks": True, "kkt_newton": newton, "kkt_nb": len(qs),
             "kkt_q0": [int(x) for x in np.cumsum([0] + [len(q) for q in qs])], "kkt_q": [i for q in qs for i in q],
             "kkt_c0": [int(x) for x in np.cumsum([0] + [len(c) for c in cs])], "kkt_c": [c for cb in cs for c in cb],
-            "kkt_m_colind": m_colind, "kkt_m_row": m_row, "kkt_m_val": m_val, "kkt_na": off, "kkt_ns": sum(len(c) ** 2 for c in cs),
+            "kkt_m_colind": m_colind, "kkt_m_row": m_row, "kkt_m_val": m_val, "kkt_na": off,
+            "kkt_ns": sum(len(c) ** 2 for c in cs),
             "kkt_cmax": max(len(c) for c in cs), "kkt_a1_nz": a1_nz, "kkt_a1_dst": a1_dst,
             "kkt_a0_nz": a0_nz, "kkt_a0_dst": a0_dst}
