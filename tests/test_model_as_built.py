@@ -8,6 +8,7 @@ pickle."""
 from __future__ import annotations
 
 import pickle
+from collections import OrderedDict
 
 import numpy as np
 import pytest
@@ -75,7 +76,8 @@ def test_broad_phase_bounds_are_below_the_closed_form_gaps(model):
     elements = pair_kernels(model).elements
     assert [e.name for e in elements] == ["balls", "ball_box"]
     rng = np.random.default_rng(11)
-    angles = [(0.0, 0.0), (0.3, -2.9), (-0.5, 2.95), (1.0, np.pi)] + [tuple(x) for x in rng.uniform(-np.pi, np.pi, (40, 2))]
+    folded = [(0.0, 0.0), (0.3, -2.9), (-0.5, 2.95), (1.0, np.pi)]
+    angles = folded + [tuple(x) for x in rng.uniform(-np.pi, np.pi, (40, 2))]
     tight = 0
     for shoulder, elbow in angles:
         qj = np.zeros(len(model.joint_names))
@@ -90,16 +92,24 @@ def test_broad_phase_bounds_are_below_the_closed_form_gaps(model):
     assert tight > 40
 
 
-def test_the_built_elements_survive_the_store_and_pickling(model):
-    """A model read back (the store of built models, or a pickle rebuilding it) keeps its
-    contact elements on its own members, with the same broad-phase tables."""
-    from ncgen.model.model import model_state, restored_model
-    from ncgen.codegen.model_cache import _pickle, _unpickle
+def test_the_built_elements_survive_the_store_and_pickling(tmp_path, monkeypatch):
+    """A model read back (from the store of built models, or a pickle rebuilding it) keeps
+    its contact elements on its own members, with the same broad-phase tables."""
+    from ncgen.codegen import model_cache
+    from ncgen.model import model as model_module
 
-    stored = restored_model(_unpickle(_pickle({"state": model_state(model), "warnings": []}))["state"])
-    rebuilt = pickle.loads(pickle.dumps(model))
+    monkeypatch.setenv("NCGEN_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.delenv(model_cache.ENV, raising=False)
+    model = arm().build(contacts="nonsmooth")
+    stored, _ = model_cache.load(model.data.store_key)          # the entry on disk
+    text = pickle.dumps(model)
+    monkeypatch.setattr(model_module, "_known", {})              # as in another process: built again
+    monkeypatch.setattr(model_module, "_rebuilt", OrderedDict())
+    monkeypatch.setenv(model_cache.ENV, "0")
+    rebuilt = pickle.loads(text)
     expected = pair_kernels(model).elements
     for other in (stored, rebuilt):
+        assert other is not model
         for element in other.contact_elements:
             assert all(m is other.members[m.name] for m in element.members())
         for e, f in zip(pair_kernels(other).elements, expected, strict=True):
