@@ -219,8 +219,7 @@ def pair_contacts(model) -> tuple | None:
     """The contact elements of ``model`` as built (``model.contact_elements``: their members
     are ``model.members``, re-based by coordinate sharing as the layout indexes them), or
     None when it has none (the flat kernels are used)."""
-    elements = tuple(getattr(model, "contact_elements", ()))
-    return elements or None
+    return tuple(model.contact_elements) or None
 
 
 def pair_kernels(model) -> PairKernels:
