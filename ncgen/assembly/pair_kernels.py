@@ -58,7 +58,6 @@ import numpy as np
 from ncgen.assembly.contacts import EDGE_TOL
 from ncgen.model.capsule_contacts import CapsuleSphere
 from ncgen.model.contacts import BoxCorner, EdgeContact, SphereBox, SpherePlane, SphereSphere
-from ncgen.model.sharing import share_coordinates
 
 #: Relative slack of the lower bounds (see the module docstring).
 BOUND_SLACK = 1e-6
@@ -150,17 +149,17 @@ def _features(pc) -> tuple[list, dict | None, tuple]:
     return None, None, (1.0, 0.0, math.inf, True)
 
 
-def _side(member, layout, feats, dim, built) -> Side:
+def _side(member, layout, feats, dim) -> Side:
     """The bounding volume of ``feats`` (``(point, radius)`` in ``member``'s frame) on
-    ``member``; ``built``: the members as the model was built, by name, whose coordinate
-    types the layout indexes (coordinate sharing re-bases a body on its joints' points and
-    axes: same frame, other local coordinates)."""
+    ``member``, a member as the model was built, whose coordinate type the layout indexes
+    (coordinate sharing re-bases a body on its joints' points and axes: same frame, other
+    local coordinates; :func:`pair_contacts`)."""
     radius = max((r for _, r in feats), default=0.0)
     if member.is_ground:
         pts = np.array([np.asarray(x, float) for x, _ in feats])
         lo, hi = pts.min(axis=0), pts.max(axis=0)
         return Side("fixed", fixed=(lo + hi) / 2, radius=float(np.linalg.norm(hi - lo) / 2 + radius))
-    rigid = built[member.name].rigid
+    rigid = member.rigid
     cs = np.array([rigid.affine(np.asarray(x, float)) for x, _ in feats]).reshape(len(feats), -1)
     k = cs.shape[1]
     lo, hi = cs.min(axis=0), cs.max(axis=0)
@@ -176,8 +175,8 @@ def _side(member, layout, feats, dim, built) -> Side:
     return Side("member", idx=idx, centre=C0, axes=axes, extents=e, radius=float(radius), gnorm=gnorm)
 
 
-def _element_sides(element, pcs, layout, dim, built):
-    """The two :class:`Side` s of ``element`` and its bound constants (``built``: :func:`_side`)."""
+def _element_sides(element, pcs, layout, dim):
+    """The two :class:`Side` s of ``element`` and its bound constants."""
     members = element.members()
     feats: dict[int, list] = {id(m): [] for m in members}
     planes, bounds, known = [], [], True
@@ -204,7 +203,7 @@ def _element_sides(element, pcs, layout, dim, built):
             sides.append(Side("halfspace", fixed=np.asarray(plane["point"], float),
                               normal=np.asarray(plane["normal"], float)))
         else:
-            sides.append(_side(m, layout, feats[id(m)], dim, built))
+            sides.append(_side(m, layout, feats[id(m)], dim))
     return sides, kappa, dmin, cap, rate_bounded
 
 
@@ -216,31 +215,17 @@ def _local(member, layout):
     return idx, np.asarray(layout.member_constant(member.name), float)
 
 
-def pair_system(model):
-    """The system ``model`` was built from, if its contacts are still those of the model
-    (else None: the flat kernels are used)."""
-    system = model.recipe[0] if getattr(model, "recipe", None) else None
-    if system is None or not hasattr(system, "contacts"):
-        return None
-    names = [pc.name for element in system.contacts for pc in element.point_contacts()]
-    return system if names == list(model.contact_names) else None
-
-
-def built_members(model, system) -> dict:
-    """``system``'s members as ``model`` was built from them, by name: re-based by coordinate
-    sharing when the build shared coordinates (the same deterministic pass as
-    :func:`ncgen.assembly.build.build_model`), else ``system``'s own."""
-    options = model.recipe[1]
-    if options.get("share") and not options.get("fix"):
-        system = share_coordinates(system)[0]
-    return system.members
+def pair_contacts(model) -> tuple | None:
+    """The contact elements of ``model`` as built (``model.contact_elements``: their members
+    are ``model.members``, re-based by coordinate sharing as the layout indexes them), or
+    None when it has none (the flat kernels are used)."""
+    return tuple(model.contact_elements) or None
 
 
 def pair_kernels(model) -> PairKernels:
     """The element kernels and table of ``model`` (nonsmooth contacts; module docstring);
-    ``model`` must have a :func:`pair_system`."""
-    system, layout, dim = pair_system(model), model.layout, model.dim
-    built = built_members(model, system)
+    ``model`` must have :func:`pair_contacts`."""
+    contacts, layout, dim = pair_contacts(model), model.layout, model.dim
     jac = model.functions["contact_jacobian"]
     q, p = jac.sx_in(0), jac.sx_in(1)
     WN, WT = jac(q, p)                        # the flat rows' expressions (not derived again)
@@ -249,7 +234,7 @@ def pair_kernels(model) -> PairKernels:
     kernels: dict[str, int] = {}
     functions, elements = [], []
     first = 0
-    for element in system.contacts:
+    for element in contacts:
         pcs = element.point_contacts()
         members = element.members()
         (idx_a, const_a), (idx_b, const_b) = (_local(m, layout) for m in members)
@@ -282,7 +267,7 @@ def pair_kernels(model) -> PairKernels:
                                       ["g"]),
                           ca.Function(f"step_pair{k}_rows", rowf.sx_in(), rowf.call(rowf.sx_in()),
                                       ["q_a", "q_b", "p"], ["g", "W"])]
-        sides, kappa, dmin, cap, rate_bounded = _element_sides(element, pcs, layout, dim, built)
+        sides, kappa, dmin, cap, rate_bounded = _element_sides(element, pcs, layout, dim)
         elements.append(Element(element.name, first, len(pcs), kernels[key], idx_a, idx_b, const_a, const_b,
                                 tuple(sides), kappa, dmin, cap, rate_bounded, [pc.mu > 0 for pc in pcs]))
         first += len(pcs)

@@ -14,7 +14,7 @@ import numpy as np
 
 
 from ncgen.assembly.mass import mass_is_regular
-from ncgen.assembly.pair_kernels import pair_kernels, pair_system
+from ncgen.assembly.pair_kernels import pair_contacts, pair_kernels
 from ncgen.assembly.stepper_equations import CONTACT_DOCS, DOCS, mass_scale, nonsmooth, stepper_functions
 from ncgen.codegen import PackageDoc, write_package
 from ncgen.codegen.cnames import c_real
@@ -112,7 +112,7 @@ def stepper_section(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS
     """The stepper's part of ``model``'s C package (a
     :class:`~ncgen.codegen.section.Section`)."""
 
-    pairs = pair_kernels(model) if nonsmooth(model) and CONTACT_PAIRS and pair_system(model) is not None else None
+    pairs = pair_kernels(model) if nonsmooth(model) and CONTACT_PAIRS and pair_contacts(model) is not None else None
     functions = stepper_functions(model, primitives(model) if is_large(model, reroll_instructions) else None, pairs)
     names = {f.name() for f in functions}
     docs = {k: v for k, v in {**DOCS, **CONTACT_DOCS, **pair_docs(functions)}.items() if k in names} \

@@ -2,10 +2,12 @@
 matrix and the whole-system CasADi functions (see :mod:`ncgen.assembly.functions`).
 
 A model is constant (Pinocchio's model/data split): it owns a private copy of the system's
-description made at ``build()`` (``model.members``, ``model.joints``, ``model.forces``), so
-editing the :class:`~ncgen.model.system.System` afterwards does not reach it, and its
-attributes and arrays cannot be reassigned or written.  What a run needs beyond it (loaded
-libraries, work arrays) lives in the runtime, keyed by the model.
+description as built (``model.members``, ``model.joints``, ``model.forces``,
+``model.contact_elements``: after coordinate sharing, the members the layout indexes; the
+system as written is kept only to pickle it, ``model.recipe``), so editing the
+:class:`~ncgen.model.system.System` afterwards does not reach it, and its attributes and
+arrays cannot be reassigned or written.  What a run needs beyond it (loaded libraries, work
+arrays) lives in the runtime, keyed by the model.
 
 Numeric conveniences (``model.phi(q)``, ``model.A(q)``, ...) evaluate those functions with
 the default parameters and zero inputs unless told otherwise and return NumPy arrays.
@@ -100,6 +102,10 @@ class Model:
         #: Plain-data descriptions of the contacts (:mod:`ncgen.model.contacts`), in order.
         self.contacts = [dict(c) for c in contacts]
         self.contact_names = [c["name"] for c in self.contacts]
+        #: The contact elements as built (:mod:`ncgen.model.contacts`), in order: their members
+        #: are ``model.members`` (re-based by coordinate sharing, as the layout indexes them),
+        #: what the element kernels and their broad phase read (:mod:`ncgen.assembly.pair_kernels`).
+        self.contact_elements = tuple(getattr(system, "contacts", ()))
         #: "smooth" (compliant forces in F) or "nonsmooth" (the compiled stepper's impacts).
         self.contact_model = contact_model
         #: The nonholonomic elements (:mod:`ncgen.model.rolling`), in order: velocity
@@ -110,8 +116,10 @@ class Model:
         #: how to build the same system with ``share=False`` (reactions of the eliminated joints;
         #: :class:`ncgen.assembly.unshared.UnsharedForm`; the built model is kept in ``data``), or None
         self.unshared = unshared
-        #: ``(system, build options)`` it was built from: what a pickled model sends (see
-        #: :meth:`__reduce__`); None for a model made otherwise, which cannot be pickled
+        #: ``(system as written, build options)`` it was built from: what a pickled model sends
+        #: (see :meth:`__reduce__`); None for a model made otherwise, which cannot be pickled.
+        #: Its members are not the built ones (coordinate sharing re-bases bodies): read those
+        #: from ``members``, ``joints``, ``forces``, ``contact_elements``
         self.recipe = recipe
         for key, value in vars(self).items():
             object.__setattr__(self, key, _frozen(value))
