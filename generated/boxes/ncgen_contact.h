@@ -689,12 +689,7 @@ static int contact_laws_hold(int k, const casadi_real *P, const casadi_real *U, 
  * forces) they solve this step's contact problem, and contact_step()'s Delassus matrix and
  * solve are not needed.  contact_step() would close the contacts whose gap is <= 0 at the
  * end of the free step; that gap is estimated, linearised, as g - h/2 W_N X j (the impulse
- * j = W^T P moves the midpoint rates by X j / 2, X j = [M A^T; A 0]^-1 [j; 0]: one solve),
- * and counted closed up to h/2 REPEAT_TOL (1 + max |U|): the gap that the contact laws'
- * velocity tolerance below moves over the half-step.  Resting contacts between bodies that
- * fall together in the free step (a box on a box) have that gap at round-off, either side
- * of 0 (measured +3e-17 .. +1.4e-16 m in the pyramid of benchmarks/contact.py); taken as
- * open, they made every repeat fail there.
+ * j = W^T P moves the midpoint rates by X j / 2, X j = [M A^T; A 0]^-1 [j; 0]: one solve).
  * The step is kept (*kept = 1) if every contact with an impulse is closed in that sense and
  * has Jacobian rows that moved by at most REPEAT_TOL (1 + max |W|) over the step (so the
  * impulses act as contact_step() would apply them), and every closed contact satisfies the
@@ -706,7 +701,7 @@ static int repeat_step(const casadi_real *q, const casadi_real *v, casadi_real t
                        const casadi_real *p, casadi_real h, casadi_real *q_next, casadi_real *v_next,
                        casadi_real *lam, int *iterations, const step_options *o, int warm,
                        workspace *ws, int *kept) {
-  casadi_real *W0 = ws->Xc, *P = ws->P, scale = 1, gap_tol;
+  casadi_real *W0 = ws->Xc, *P = ws->P, scale = 1;
   int i, k, r, status, any = 0;
   *kept = 0;
   if (iterations) *iterations = 0;
@@ -738,14 +733,13 @@ static int repeat_step(const casadi_real *q, const casadi_real *v, casadi_real t
     if (contact_rows(ws, q, v, p, 0, W0, ws->Um, 1)) return STEP_KERNEL;
 #endif
     scale += norm_inf(ws->U, ND); /* the elements evaluated (with CONTACT_PAIRS) */
-    gap_tol = h / 2 * REPEAT_TOL * scale;
     *kept = all_finite(ws->rhs + NX, NQ);
     for (k = 0; k < NK && *kept; ++k) {
       casadi_real g_free = ws->g[k];
       int loaded = 0, d;
       for (i = wt_colind[k * DC]; i < wt_colind[k * DC + 1]; ++i) g_free -= h / 2 * ws->W[i] * ws->rhs[NX + wt_row[i]];
       for (d = 0; d < DC; ++d) loaded = loaded || P[k * DC + d] != 0;
-      if (g_free > gap_tol) {
+      if (g_free > 0) {
         if (loaded) *kept = 0; /* contact_step() would leave it open */
         continue;
       }
