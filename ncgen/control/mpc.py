@@ -19,8 +19,7 @@ inputs on the ``N`` intervals; multiple shooting):
 3. a backtracking line search with a filter on (cost ``J``, infeasibility ``c``: the ℓ1 norm
    of the shooting gaps and of the state-bound violations, :func:`merit_function`) along
    ``X̄ + α (X⁺ − X̄)``, ``clip(Ū + α δU)`` into the input bounds (``X⁺``: the QP's full step),
-   ``α`` = 1, ½, … (:data:`ALPHAS`; ``α = 1`` only at a stationary iterate,
-   :func:`step_lengths_tried`), accepted by :func:`acceptable`.  A trial whose steps do
+   ``α`` = 1, ½, … (:data:`ALPHAS`), accepted by :func:`acceptable`.  A trial whose steps do
    not converge, or that has NaN or inf anywhere, is rejected; a QP answer that is not finite,
    or no acceptable ``α``, keeps the guess (``mpc.step_lengths``: 0).  So every input
    returned is inside its bounds (and checked), and nothing NaN or diverging is ever answered
@@ -52,10 +51,6 @@ REGULARIZATION = 1e-8
 #: as feasible.
 ALPHAS = tuple(0.5 ** i for i in range(11))
 ARMIJO, GAMMA, C_MIN = 1e-4, 1e-5, 1e-10
-#: A nearly feasible iterate whose QP predicts a decrease of the cost below this fraction of
-#: ``1 + |J|`` is stationary to round-off: its line search tries ``α = 1`` only
-#: (:func:`step_lengths_tried`).
-STATIONARY = 1e-12
 
 
 def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
@@ -347,7 +342,7 @@ class MPC:
         if np.isfinite(dU).all() and np.isfinite(model_decrease):
             Xf = self._update(Xs, S, U.ravel(), dU)[0].reshape(self.N + 1, self.nx)
             lo, hi = self._u_lo, self._u_hi
-            for alpha in ALPHAS[:step_lengths_tried(J0, c0, model_decrease)]:
+            for alpha in ALPHAS:
                 Xa = X + alpha * (Xf - X)
                 Ua = np.minimum(np.maximum(U.ravel() + alpha * dU, lo), hi).reshape(self.N, self.nu)
                 trial = self._merit(x, t, Xa, Ua)
@@ -426,17 +421,6 @@ def acceptable(J0: float, c0: float, J: float, c: float, alpha: float, model_dec
     if c0 <= C_MIN and model_decrease < 0:
         return c <= C_MIN and J <= J0 + ARMIJO * alpha * model_decrease
     return c <= (1.0 - GAMMA) * c0 or (J <= J0 - GAMMA * c0 and c <= c0)
-
-
-def step_lengths_tried(J0: float, c0: float, model_decrease: float) -> int:
-    """How many of :data:`ALPHAS` the line search tries from the iterate ``(J0, c0)``: one
-    when it is nearly feasible (``c0 ≤`` :data:`C_MIN`) and the QP's predicted decrease is
-    below :data:`STATIONARY` ``(1 + |J0|)`` (a shorter step cannot pass Armijo's test but by
-    round-off; trying them all cost ten merit evaluations at every converged iterate), else all.
-    The same expression as the exported package's C."""
-    if c0 <= C_MIN and -model_decrease <= STATIONARY * (1.0 + abs(J0)):
-        return 1
-    return len(ALPHAS)
 
 
 def residual_tolerance(model) -> float:
