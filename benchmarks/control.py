@@ -107,7 +107,7 @@ C_DRIVER = r"""
 #include <stdio.h>
 #include <stdlib.h>
 #include <time.h>
-#include "cartpole_mpc.h"
+#include "cartpole.h"
 #define NX CARTPOLE_MPC_NX
 static double now(void) { struct timespec s; clock_gettime(CLOCK_MONOTONIC, &s); return s.tv_sec + 1e-9 * s.tv_nsec; }
 int main(int argc, char** argv) {
