@@ -19,10 +19,16 @@ MPC step against re-solving the same horizon problem with IPOPT.
    solve time only), and against ``nc.MPC(ocp, "fatrop")`` (Fatrop on the stage-wise problem,
    solved to its tolerance from the same state's converged solution: the warm start of a
    quiet closed loop).  The two controllers' calls are interleaved, each state's time the
-   minimum over ``--repeat`` calls.  The C demo's own step time is not measured here (the same
-   code without the Python calls).
+   minimum over ``--repeat`` calls.  At a converged guess the SQP's line search often finds
+   no step that decreases the cost beyond round-off and tries all its step lengths, so the
+   step of the closed loop itself (a new state and the shifted guess at every call: what a
+   controller does) is timed too: each of its steps the minimum over ``--repeat`` runs of
+   the loop.  ``--export``: the same closed loop in the exported C package
+   (``nc.export_mpc``, built by its Makefile at its default flags), each
+   ``cartpole_mpc_step`` call timed by ``clock_gettime`` in a C driver of its own, and its
+   inputs compared with the Python loop's.
 
-    python benchmarks/control.py [--calls 200] [--repeat 7] [--smoke] [--mpc-only]
+    python benchmarks/control.py [--calls 200] [--repeat 7] [--smoke] [--mpc-only] [--export]
 """
 from __future__ import annotations
 
@@ -78,7 +84,77 @@ def step_jacobians(n: int, calls: int, repeat: int) -> None:
               " (target ≤ 0.5)")
 
 
-def cartpole_mpc(steps: int, repeat: int) -> None:
+class _TimedCalls:
+    """``mpc`` with each control step's time (s) appended to :attr:`times`."""
+
+    def __init__(self, mpc):
+        self.mpc, self.times = mpc, []
+
+    def __getattr__(self, name):
+        return getattr(self.mpc, name)
+
+    def __call__(self, x, t):
+        start = time.perf_counter()
+        u = self.mpc(x, t)
+        self.times.append(time.perf_counter() - start)
+        return u
+
+
+#: The exported package's closed loop with each controller call timed (``--export``): the
+#: demo's loop (warm-up, plant substeps, the push) around ``cartpole_mpc_step``.
+C_DRIVER = r"""
+#define _POSIX_C_SOURCE 199309L
+#include <stdio.h>
+#include <stdlib.h>
+#include <time.h>
+#include "cartpole.h"
+#define NX CARTPOLE_MPC_NX
+static double now(void) { struct timespec s; clock_gettime(CLOCK_MONOTONIC, &s); return s.tv_sec + 1e-9 * s.tv_nsec; }
+int main(int argc, char** argv) {
+    static cartpole_mpc m;
+    const long steps = atol(argv[1]), repeat = atol(argv[2]);
+    const double h = CARTPOLE_MPC_H, hs = h / CARTPOLE_PLANT_SUBSTEPS;
+    for (long r = 0; r < repeat; ++r) {
+        double x[NX], u[1], up[1], start;
+        for (int i = 0; i < NX; ++i) x[i] = atof(argv[3 + i]);
+        if (cartpole_mpc_init(&m, x, 0.0, 10)) return 1;
+        for (long k = 0; k < steps; ++k) {
+            double t = k * h;
+            start = now();
+            if (cartpole_mpc_step(&m, x, t, u)) return 1;
+            printf("%ld %.17g %.9g\n", k, u[0], now() - start);
+            for (int j = 0; j < CARTPOLE_PLANT_SUBSTEPS; ++j) {
+                double ts = t + j * hs;
+                up[0] = u[0] + ((ts >= 1.0 && ts < 1.1) ? 8.0 : 0.0);
+                if (cartpole_plant(x, up, ts, x)) return 1;
+            }
+        }
+    }
+    return 0;
+}
+"""
+
+
+def exported_loop(ocp, x0, steps: int, repeat: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(U, T)``: the exported package's closed loop (:data:`C_DRIVER`): its inputs and each
+    step's time, the minimum over ``repeat`` runs."""
+    import subprocess
+    import tempfile
+    from ncgen.control.export import export_mpc
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "cartpole_mpc"
+        export_mpc(ocp, out, name="cartpole", terminal_weight=100.0, x0=x0, disturbance=[(1.0, 1.1, [8.0])])
+        subprocess.run(["make", "demo"], cwd=out, check=True, capture_output=True)
+        (out / "timing.c").write_text(C_DRIVER)
+        objects = [f.name for f in sorted(out.glob("*.o")) if f.name not in ("demo.o", "main.o")]
+        subprocess.run(["cc", "-O2", "-o", "timing", "timing.c", *objects, "-lm"], cwd=out, check=True)
+        run = subprocess.run(["./timing", str(steps), str(repeat), *(repr(float(v)) for v in x0)], cwd=out,
+                             check=True, capture_output=True, text=True)
+    rows = np.array([[float(v) for v in line.split()] for line in run.stdout.splitlines()])
+    return rows[:steps, 1], rows[:, 2].reshape(repeat, steps).min(axis=0)
+
+
+def cartpole_mpc(steps: int, repeat: int, export: bool = False) -> None:
     from ncgen.control.export import closed_loop
     from ncgen.control.reference import DiscreteOCP
     from ncgen.optim.problem_file import load_problem
@@ -124,6 +200,16 @@ def cartpole_mpc(steps: int, repeat: int) -> None:
     print(f"  IPOPT re-solve (warm)     min {1e3 * t_ip.min():.1f} ms   median {1e3 * np.median(t_ip):.1f} ms")
     r = t_ip / t_mpc
     print(f"  RATIO IPOPT re-solve / MPC step: min {r.min():.0f}, median {np.median(r):.0f} (target ≥ 50)")
+    timed = _TimedCalls(mpc)
+    for _ in range(repeat):
+        _, U_py, _ = closed_loop(timed, x0, steps * mpc.h, disturbance=[(1.0, 1.1, [8.0])])
+    t_loop = np.array(timed.times).reshape(repeat, -1).min(axis=0)
+    print(f"  nc.MPC closed-loop step   min {1e3 * t_loop.min():.3f} ms   median {1e3 * np.median(t_loop):.3f} ms "
+          f"(target ≤ 1 ms; {len(t_loop)} steps, each the minimum of {repeat} runs)")
+    if export:
+        U_c, t_c = exported_loop(ocp, x0, len(t_loop), repeat)
+        print(f"  exported C closed-loop step min {1e3 * t_c.min():.3f} ms   median {1e3 * np.median(t_c):.3f} ms "
+              f"(target ≤ 1 ms; inputs vs Python's: max |ΔU| {np.max(np.abs(U_c - U_py[:, 0])):.1e} N)")
 
 
 def main(argv=None) -> int:
@@ -133,13 +219,14 @@ def main(argv=None) -> int:
     ap.add_argument("--bars", type=int, default=20)
     ap.add_argument("--smoke", action="store_true", help="tiny sizes: check that the script runs")
     ap.add_argument("--mpc-only", action="store_true", help="only the cart-pole MPC")
+    ap.add_argument("--export", action="store_true", help="also the exported C package's closed loop (builds it)")
     args = ap.parse_args(argv)
     if args.smoke:
         args.calls, args.repeat, args.bars = 5, 2, 3
     print(machine())
     if not args.mpc_only:
         step_jacobians(args.bars, args.calls, args.repeat)
-    cartpole_mpc(20 if args.smoke else 80, args.repeat)
+    cartpole_mpc(20 if args.smoke else 80, args.repeat, args.export)
     print(f"load average at end: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
     return 0
 

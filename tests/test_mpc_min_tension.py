@@ -99,7 +99,7 @@ def test_taut_rows_are_the_pulls_first_order_model(model):
     x = np.array([0.01, -0.02, -0.97, 0.1, 0.0, 0.4])
     X = x + 0.01 * rng.normal(size=(N + 1, 6))
     U = 0.9 + 0.01 * rng.normal(size=(N, 1))
-    _, _, A, lba, uba, _, _, Xs, S = (np.array(o) for o in data(x, 0.0, X.T, U.T))
+    _, _, A, lba, uba, _, _, Xs, S = (np.array(o) for o in data(x, 0.0, X.T, U.T)[:9])
     assert A.shape == (2 * N, N) and np.all(np.isinf(uba))
     for dU in (np.zeros(N), rng.normal(size=N)):
         dX = (Xs.ravel() + S @ dU).reshape(N + 1, 6) - X

@@ -25,10 +25,11 @@ inputs on the ``N`` intervals; multiple shooting):
    returned is inside its bounds (and checked), and nothing NaN or diverging is ever answered
    or kept as the next guess; a guess along which the steps do not converge is an error.
 
-An iteration is four generated functions (:func:`mpc_functions`): the QP's data, ``qrqp``,
-the full step and the merit of a trial.  ``mpc(x, t)`` calls them through
-:class:`ncgen.codegen.direct.DirectFunction`; :func:`ncgen.control.export.export_mpc` writes
-the same functions and the same loop in C, so Python and C compute the same numbers.
+An iteration is four generated functions (:func:`mpc_functions`): the QP's data (with the
+guess's cost and infeasibility, from the same steps), ``qrqp``, the full step and the merit
+of a trial.  ``mpc(x, t)`` calls them through :class:`ncgen.codegen.direct.DirectFunction`;
+:func:`ncgen.control.export.export_mpc` writes the same functions and the same loop in C, so
+Python and C compute the same numbers.
 """
 from __future__ import annotations
 
@@ -58,8 +59,9 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
                   qp_solver: str = "qrqp") -> list[ca.Function]:
     """The four CasADi functions of one SQP iteration (see the module docstring):
 
-    * ``mpc_qp_data: (x, t, X̄, Ū) -> (H, g, A, lba, uba, lbx, ubx, Xs, S)``: the condensed QP
-      in ``δU`` (``vec δX = S δU + (Xs − vec X̄)``);
+    * ``mpc_qp_data: (x, t, X̄, Ū) -> (H, g, A, lba, uba, lbx, ubx, Xs, S, J, c, res)``: the
+      condensed QP in ``δU`` (``vec δX = S δU + (Xs − vec X̄)``) and the guess's merit
+      (:func:`merit_function`'s outputs, from the steps the QP is built on);
     * ``mpc_qp``: CasADi's ``qrqp`` on it (returns its last iterate also when it reports a
       failure: the caller checks it), or the ``qp_solver`` of :mod:`ncgen.control.mpc_qp`;
     * ``mpc_update: (Xs, S, Ū, δU) -> (X⁺, U⁺)``: the full step;
@@ -90,7 +92,7 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
     X, U = ca.MX.sym("X", nx, N + 1), ca.MX.sym("U", nu, N)
     lo_u, hi_u = (ca.DM(b) for b in problem.u_bounds)
     times = t + h * ca.DM(np.arange(N)).T
-    x1, A, B, _, _ = jac(X[:, :N], U, ca.repmat(ca.DM(p), 1, N), times)
+    x1, A, B, _, res = jac(X[:, :N], U, ca.repmat(ca.DM(p), 1, N), times)
     H, g = cost(X, U, t)
     S, s = condense(A, B, x - X[:, 0], x1 - X[:, 1:], N)
     H_XX, H_XU, H_UU = H[:nX, :nX], H[:nX, nX:], H[nX:, nX:]
@@ -106,8 +108,10 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
     data = ca.Function(
         "mpc_qp_data", [x, t, X, U],
         [ca.densify(e) for e in (0.5 * (Hc + Hc.T), gc, A_rows, lb_rows, ub_rows, ca.vec(ca.repmat(lo_u, 1, N) - U),
-                                 ca.vec(ca.repmat(hi_u, 1, N) - U), Xn, S)],
-        ["x", "t", "X_guess", "U_guess"], ["H", "g", "A", "lba", "uba", "lbx", "ubx", "Xs", "S"])
+                                 ca.vec(ca.repmat(hi_u, 1, N) - U), Xn, S,
+                                 total_cost_function(problem, nx, nu)(X, U, t),
+                                 infeasibility(problem, x, X, U, x1, times), ca.mmax(res))],
+        ["x", "t", "X_guess", "U_guess"], ["H", "g", "A", "lba", "uba", "lbx", "ubx", "Xs", "S", "J", "c", "res"])
     Xs_, S_, U_, dU = ca.MX.sym("Xs", nX), ca.MX.sym("S", nX, nU), ca.MX.sym("U", nu, N), ca.MX.sym("dU", nU)
     update = ca.Function("mpc_update", [Xs_, S_, U_, dU],
                          [ca.densify(ca.reshape(Xs_ + ca.mtimes(S_, dU), nx, N + 1)),
@@ -153,6 +157,16 @@ def merit_function(model, problem) -> ca.Function:
     # generate ``casadi_copy(0, 0, 0+ i*0)``, which gcc refuses
     step_p = ca.Function("mpc_step", [xs, us, ts], list(step(xs, us, ca.DM(p), ts)))
     X1, res = step_p.map("mpc_steps", "serial", int(N), [], [])(X[:, :N], U, times)
+    return ca.Function("mpc_merit", [x, t, X, U],
+                       [total_cost_function(problem, nx, nu)(X, U, t), infeasibility(problem, x, X, U, X1, times),
+                        ca.mmax(res)],
+                       ["x", "t", "X_trial", "U_trial"], ["J", "c", "res"])
+
+
+def infeasibility(problem, x, X, U, X1, times):
+    """``c`` of :func:`merit_function` (MX) from the steps ``X1`` (nx × N) of the nodes
+    ``X[:, :N]`` with ``U`` at ``times``."""
+    N = problem.N
     c = ca.norm_1(x - X[:, 0]) + ca.sum2(ca.sum1(ca.fabs(X1 - X[:, 1:])))
     lo_x, hi_x = problem.x_bounds
     for i in np.flatnonzero(np.isfinite(lo_x) | np.isfinite(hi_x)):
@@ -164,10 +178,13 @@ def merit_function(model, problem) -> ca.Function:
     if problem.min_tension is not None:           # the cables' pull below T_min, at both ends of each interval
         pull = problem.cable_pull.map("mpc_cable_pulls", "serial", int(N), [], [])
         c += ca.sum2(ca.sum1(ca.fmax(0, problem.min_tension - pull(X[:, :N], X[:, 1:], U, times))))
-    Xs, Us, ts = ca.SX.sym("X", nx, N + 1), ca.SX.sym("U", nu, N), ca.SX.sym("t")
-    cost = ca.Function("mpc_total_cost", [Xs, Us, ts], [total_cost(problem, Xs, Us, ts)])
-    return ca.Function("mpc_merit", [x, t, X, U], [cost(X, U, t), c, ca.mmax(res)],
-                       ["x", "t", "X_trial", "U_trial"], ["J", "c", "res"])
+    return c
+
+
+def total_cost_function(problem, nx: int, nu: int) -> ca.Function:
+    """``mpc_total_cost: (X, U, t) -> J`` (SX, :func:`total_cost`)."""
+    Xs, Us, ts = ca.SX.sym("X", nx, problem.N + 1), ca.SX.sym("U", nu, problem.N), ca.SX.sym("t")
+    return ca.Function("mpc_total_cost", [Xs, Us, ts], [total_cost(problem, Xs, Us, ts)])
 
 
 def total_cost(problem, X, U, t):
@@ -270,6 +287,7 @@ class MPC:
         self.infeasibility: list[float] = []
         self.u_bounds = self.problem.u_bounds
         self.u_rest = np.clip(np.zeros(self.nu), *self.u_bounds)
+        self._u_lo, self._u_hi = (np.tile(b, self.N) for b in self.u_bounds)   # the inputs' bounds along the horizon
         self.X = self.U = self.solution = None
 
     def __repr__(self) -> str:
@@ -282,7 +300,7 @@ class MPC:
     def _merit(self, x, t: float, X: np.ndarray, U: np.ndarray):
         """``(J, c)`` of the iterate, or ``None`` when a step along it did not converge or
         anything is not finite."""
-        if not (np.all(np.isfinite(X)) and np.all(np.isfinite(U))):
+        if not (np.isfinite(X).all() and np.isfinite(U).all()):
             return None
         try:
             # t as a 1-array: the compiled function's fast copy (a float took its checked path, 0.1 ms)
@@ -305,21 +323,29 @@ class MPC:
         return X, U
 
     def _iteration(self, x, t, X, U):
-        """One SQP iteration (see the module docstring): the QP at the guess, then the filter
-        line search along ``X + α (X⁺ − X)``, ``clip(U + α δU)``; the guess itself must be
-        valid (its steps converge), else :class:`OptimizationError`."""
-        current = self._merit(x, t, X, U)
-        if current is None:
+        """One SQP iteration (see the module docstring): the QP at the guess (with the guess's
+        merit, from the same steps), then the filter line search along ``X + α (X⁺ − X)``,
+        ``clip(U + α δU)``; the guess itself must be valid (its steps converge), else
+        :class:`OptimizationError`.  The QP data are the compiled function's buffers, used
+        before its next call."""
+        t1 = np.array([t])                 # a 1-array: the compiled function's fast copy
+        data = None
+        if np.isfinite(X).all() and np.isfinite(U).all():
+            try:
+                data = self._data(x, t1, X.ravel(), U.ravel())
+            except (NcgenError, RuntimeError):         # a kernel (a step's Newton iterations) reported failure
+                pass
+        if data is None or not (data[11][0] <= self._residual_tol and np.isfinite(data[9][0])
+                                and np.isfinite(data[10][0])):
             raise OptimizationError(f"MPC of {self.model.name!r}: a step of the model does not converge along "
                                     f"the guess at t = {t:g} s (state {np.asarray(x).tolist()}); reset() the guess")
-        J0, c0 = current
-        H, g, A, lba, uba, lbx, ubx, Xs, S = (o.copy() for o in self._data(x, np.array([t]), X.ravel(), U.ravel()))
+        H, g, A, lba, uba, lbx, ubx, Xs, S, J0, c0, _ = data
+        J0, c0 = float(J0[0]), float(c0[0])
         self.qp_status.append(self._qp.status_call(H, g, A, lba, uba, lbx, ubx, 0.0, 0.0, 0.0))
         dU, model_decrease = self._qp.outputs[0].copy(), float(self._qp.outputs[1][0])
-        if np.all(np.isfinite(dU)) and np.isfinite(model_decrease):
-            Xf, _ = self._update(Xs, S, U.ravel(), dU)
-            Xf = Xf.reshape(self.N + 1, self.nx)
-            lo, hi = (np.tile(b, self.N) for b in self.u_bounds)
+        if np.isfinite(dU).all() and np.isfinite(model_decrease):
+            Xf = self._update(Xs, S, U.ravel(), dU)[0].reshape(self.N + 1, self.nx)
+            lo, hi = self._u_lo, self._u_hi
             for alpha in ALPHAS:
                 Xa = X + alpha * (Xf - X)
                 Ua = np.minimum(np.maximum(U.ravel() + alpha * dU, lo), hi).reshape(self.N, self.nu)

@@ -1,0 +1,71 @@
+"""The MPC's QP-data function returns the guess's merit (cost ``J``, infeasibility ``c``,
+largest step residual) from the steps it linearises, in place of a separate merit call at
+every SQP iteration (issue 37): its values equal the merit function's, whose steps are solved
+by another Newton scheme (the staged RATTLE solve of :func:`ncgen.control.discrete.step_functions`
+against the whole-residual rootfinder of the step Jacobians), to round-off, at a guess with
+shooting gaps, a state bound violated and (with ``min_tension``) a slack cable; and ``c`` is
+the sum of its terms evaluated by hand from the merit's own steps."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import ncgen as nc
+from ncgen.control.discrete import step_functions
+from ncgen.control.mpc import merit_function, mpc_functions
+from ncgen.control.mpc_problem import mpc_problem
+
+N, H = 3, 0.02
+K, C, MASS = 200.0, 5.0, 1.0
+
+
+def hanging():
+    """A point mass hanging from the ground by a cable whose rest length is the input."""
+    s = nc.System("hang", gravity=(0, 0, -9.81))
+    p = s.add_point("p", mass=MASS, position=(0, 0, -1.0))
+    u = s.add_input("l0", 1)
+    s.add_force(nc.Spring(s.ground, (0, 0, 0), p, (0, 0, 0), k=K, rest_length=u[0], damping=C, cable=True,
+                          name="c"))
+    return s.build()
+
+
+@pytest.fixture(scope="module")
+def model():
+    return hanging()
+
+
+def problem_of(model, min_tension):
+    ocp = nc.OptimalControl(model, N=N, t_final=N * H)
+    ocp.bound_input("l0", 0.5, 1.5)
+    ocp.bound_coordinate(model.coordinate_names[2], -1.2, -0.99)      # the height: violated by the guess below
+    ocp.minimize_effort(1e-3)
+    ocp.final(q=[0, 0, -0.95], v=[0, 0, 0])
+    return mpc_problem(ocp, 1e3, min_tension=min_tension)
+
+
+@pytest.mark.parametrize("min_tension", [None, 50.0])
+def test_qp_data_returns_the_merit_of_its_guess(model, min_tension):
+    problem = problem_of(model, min_tension)
+    data = mpc_functions(model, problem)[0]
+    merit = merit_function(model, problem)
+    rng = np.random.default_rng(3)
+    x = np.array([0.01, -0.02, -0.97, 0.1, 0.0, 0.4])
+    X = x + 0.02 * rng.normal(size=(N + 1, 6))
+    U = 0.9 + 0.05 * rng.normal(size=(N, 1))
+    out = dict(zip(data.name_out(), data(x, 0.1, X.T, U.T)))
+    J, c, res = (float(o) for o in merit(x, 0.1, X.T, U.T))
+    assert out["res"] < 1e-10 and res < 1e-10
+    assert abs(float(out["J"]) - J) <= 1e-12 * abs(J)
+    assert abs(float(out["c"]) - c) <= 1e-12 * c
+    # c by hand: the gaps of the merit's own steps, the height's bound, the cable's pull at both ends
+    step = step_functions(model, H)["step"]
+    X1 = np.array([np.array(step(X[k], U[k], problem.p, 0.1 + k * H)[0]).ravel() for k in range(N)])
+    by_hand = np.abs(x - X[0]).sum() + np.abs(X1 - X[1:]).sum()
+    by_hand += np.maximum(0, X[1:, 2] - (-0.99)).sum() + np.maximum(0, -1.2 - X[1:, 2]).sum()
+    if min_tension is not None:
+        def pull(xk, u):
+            q, v = xk[:3], xk[3:]
+            return K * (np.linalg.norm(q) - u) + C * q @ v / np.linalg.norm(q)
+        by_hand += sum(max(0.0, min_tension - pull(X[j], U[k, 0])) for k in range(N) for j in (k, k + 1))
+    assert np.max(X[1:, 2]) > -0.99 and (min_tension is None or by_hand > np.abs(X1 - X[1:]).sum() + 1e-3)
+    assert abs(float(out["c"]) - by_hand) <= 1e-12 * by_hand
