@@ -30,7 +30,7 @@ from ncgen.codegen.compiler import CANDIDATES
 from ncgen.codegen.tree_tables import UnsupportedTree, tree_tables
 from ncgen.errors import ShapeError
 from ncgen.runtime import tree_algorithms as rta
-from ncgen.runtime.tree_library import load_tree_library
+from ncgen.runtime.tree_library import build_tree_library, load_tree_library
 
 ROOT = Path(__file__).resolve().parent.parent
 G = 9.81
@@ -41,6 +41,8 @@ pytestmark = pytest.mark.skipif(not any(shutil.which(c) for c in CANDIDATES) and
 
 @pytest.fixture(scope="module")
 def library():
+    """Every unit of the tree library compiled (the children with no compiler need them)."""
+    build_tree_library()
     return load_tree_library()
 
 
@@ -446,8 +448,15 @@ def test_joint_kernels_rule():
     assert bp.choose_joint_kernels(9, pays - 1, None).backend == "tables"
     choice = bp.choose_joint_kernels(9, pays, None)
     assert choice.backend == "flat" and "saves" in choice.reason
-    choice = bp.choose_joint_kernels(9, 10, None, tables_ready=False)          # the library not compiled yet
-    assert choice.backend == "flat" and "tree library is not compiled yet" in choice.reason
+    # the forward unit not compiled yet: the tables while it costs less than the model's own loop
+    choice = bp.choose_joint_kernels(9, 10, None, ("forward",))
+    assert choice.backend == "tables" and choice.reason.startswith("compiling the tree library's forward")
+    units = bp.TREE_UNIT_COMPILE_SECONDS
+    assert bp.choose_joint_kernels(9, pays - int(units / (bp.JOINT_EVALS_PER_OUTPUT * 9 * bp.TABLES_EXTRA_SECONDS)),
+                                   None, ("forward",)).backend == "flat"
+    many = ("forward", "local_spherical", "local_free", "local_planar", "local_universal")
+    choice = bp.choose_joint_kernels(2, 10, None, many)                          # more to compile than a small loop
+    assert choice.backend == "flat" and "local_universal not compiled yet" in choice.reason
 
 
 def test_auto_joint_run_takes_the_tables_and_says_why(library, monkeypatch):
@@ -461,12 +470,13 @@ def test_auto_joint_run_takes_the_tables_and_says_why(library, monkeypatch):
     import ncgen.runtime.tree_library as tl
 
     model = small_tree(f"auto_tree_{os.getpid()}")
-    assert tl.tree_library_ready()                          # the fixture compiled it
+    assert tl.tree_library_ready() and not tl.missing_units(["revolute", "prismatic"])   # the fixture compiled it
     assert choose_kernels(model, 10).backend == "tables"
-    ready = tl.tree_library_ready
-    monkeypatch.setattr(tl, "tree_library_ready", lambda: False)
-    assert choose_kernels(model, 10).backend == "flat"      # not compiled yet: the model's own loop is cheaper
-    monkeypatch.setattr(tl, "tree_library_ready", ready)
+    missing = tl.missing_units
+    monkeypatch.setattr(tl, "missing_units", lambda kinds, unit: ["forward"])
+    from ncgen.runtime import backend_policy as bp
+    assert choose_kernels(model, 10) == bp.choose_joint_kernels(2, 10, None, ("forward",))   # the unit's cost counted
+    monkeypatch.setattr(tl, "missing_units", missing)
     assert choose_kernels(model, 10, controller=nc.PD(kp=10.0, kd=1.0, target=[0.0, 0.0])).backend == "flat"
     assert choose_kernels(model, 10, joint_dynamics=True).backend == "flat"
     assert choose_kernels(model, 10, kernels="flat").reason == "chosen"
