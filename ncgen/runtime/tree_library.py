@@ -250,12 +250,18 @@ class BoundTree:
         self.kinds = sorted({JOINT_KINDS[int(k)].name for k in self._arrays["kind"] if 0 <= k < len(JOINT_KINDS)})
         self.work: np.ndarray | None = None
         self._checked: dict[str, AlgorithmUnit] = {}
+        self._lock = threading.Lock()
 
     def unit(self, unit: str) -> AlgorithmUnit:
         """The algorithm unit ``unit`` for these tables (compiled if needed; checked once).  The
         work array is sized by the first unit: every unit lays out the same work."""
         alg = self._checked.get(unit)
-        if alg is None:
+        if alg is not None:
+            return alg
+        with self._lock:            # the work array is made once: fast callers keep its address
+            alg = self._checked.get(unit)
+            if alg is not None:
+                return alg
             alg = self.library.unit(unit, self.kinds)
             status = alg.fn["check"](self.ref)
             if status:
@@ -268,7 +274,7 @@ class BoundTree:
                 raise CodegenError(f"{alg.path}: the {unit} unit needs {size} doubles of work, the tables' work "
                                    f"has {len(self.work)}; delete the tree library's units to have them rebuilt")
             self._checked[unit] = alg
-        return alg
+            return alg
 
 
 class _Direct:
