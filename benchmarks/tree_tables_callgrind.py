@@ -14,7 +14,7 @@ the same to 1e-12 relative; the script fails when they differ).
 
     python benchmarks/tree_tables_callgrind.py [--robots panda ur5 ur10 talos] [--states 200]
     python benchmarks/tree_tables_callgrind.py --smoke        the UR5, 5 states
-    python benchmarks/tree_tables_callgrind.py --robots panda ur5 --loops-cflags -O1   the loops at -O1
+    python benchmarks/tree_tables_callgrind.py --robots panda ur5 --loops-cflags=-O1   the loops at -O1
 """
 from __future__ import annotations
 
