@@ -411,17 +411,26 @@ def table_algorithm(model, name: str) -> TableAlgorithm:
     """The algorithm ``name`` of ``model`` from its tree tables, bound once per model (raises
     :class:`~ncgen.codegen.tree_tables.UnsupportedTree`, or
     :class:`~ncgen.errors.CompilerNotFound` with no compiler and no library in the cache)."""
-    from ncgen.codegen.tree_tables import tree_tables
     from ncgen.model.data import model_data
 
     data = model_data(model)
     k = data.table_algorithms.get(name)
     if k is None:
-        tree = data.table_algorithms.get(None)
-        if tree is None:
-            tree = data.table_algorithms[None] = BoundTree(tree_tables(model))
-        k = data.table_algorithms[name] = TableAlgorithm(tree, name)
+        k = data.table_algorithms[name] = TableAlgorithm(bound_tree(model), name)
     return k
+
+
+def bound_tree(model) -> BoundTree:
+    """``model``'s tree tables bound once per model (raises
+    :class:`~ncgen.codegen.tree_tables.UnsupportedTree`)."""
+    from ncgen.codegen.tree_tables import tree_tables
+    from ncgen.model.data import model_data
+
+    data = model_data(model)
+    tree = data.table_algorithms.get(None)
+    if tree is None:
+        tree = data.table_algorithms[None] = BoundTree(tree_tables(model))
+    return tree
 
 
 def input_efforts(model) -> np.ndarray:
@@ -454,11 +463,11 @@ class TableJointLoop:
         from ncgen.codegen.tree_check import tree_function
 
         self.model = model
-        self.tree_bound = table_algorithm(model, "aba").tree
+        self.tree_bound = bound_tree(model)         # no fast caller: the loop runs in C
+        self._fn = self.tree_bound.unit("forward").fn["joint_run"]
         self.E = input_efforts(model)
         self.quat = np.array(quaternion_offsets(model.joint_space), dtype=np.int32)
         self.tree = tree_function(model)
-        self._fn = self.tree_bound.unit("forward").fn["joint_run"]
         self._maps: dict = {}
 
     def mapped(self, what: str, n: int):
