@@ -7,9 +7,10 @@ Python start-up, imports, the model (built, or read from the store of built mode
 and the integration all count.  Per model:
 
 * **first run**: an ``NCGEN_CACHE_DIR`` empty but for the libraries compiled once per ncgen
-  version and compiler (the tree library, the element library, the fast caller: a user pays
-  them once, not per model; compiled before timing, :data:`PER_VERSION`) — nothing of the
-  model stored or compiled;
+  version and compiler (the tree library's units, the element library, the fast caller: a user
+  pays them once, not per model; compiled before timing, :data:`PER_VERSION`) — nothing of the
+  model stored or compiled; with ``--empty``, a completely empty cache (a user's first-ever
+  run: what the run needs of the per-version libraries is compiled in it);
 * **later runs**: the same cache directory again (model read back, library found);
 * **store off**: later runs with ``NCGEN_MODEL_CACHE=0`` (the model built every time, as
   before the store; the compiled library still found), interleaved with the later runs;
@@ -39,6 +40,7 @@ followed by a MuJoCo and a Pinocchio load of the same robot in fresh processes (
     python benchmarks/load_time.py                 Panda and box_stack, 5 rounds
     python benchmarks/load_time.py --rounds 3
     python benchmarks/load_time.py --smoke         slider_crank, 1 round (CI)
+    python benchmarks/load_time.py --panda-only --rounds 3 --empty     first-ever runs
 """
 from __future__ import annotations
 
@@ -89,10 +91,11 @@ def summary(name: str, samples: list[tuple[float, float]]) -> str:
             f"CPU min {min(cpus):7.3f} s, median {statistics.median(cpus):7.3f} s  ({len(samples)} runs)")
 
 
-def ncgen_runs(model: Path, t_end: float, rounds: int, base_env: dict, per_version: Path,
+def ncgen_runs(model: Path, t_end: float, rounds: int, base_env: dict, per_version: Path | None,
                kernels: str = "auto") -> dict[str, list[tuple[float, float]]]:
     """First, later and store-off runs of ``ncgen simulate model --kernels kernels`` (see the
-    module docstring); each fresh cache starts with the per-version libraries of ``per_version``."""
+    module docstring); each fresh cache starts with the per-version libraries of ``per_version``
+    (None: empty)."""
     cmd = [sys.executable, "-m", "ncgen.cli", "simulate", str(model), "--t-end", str(t_end), "--kernels", kernels]
     out: dict[str, list[tuple[float, float]]] = {"first run (empty cache)": [], "later runs (model stored)": [],
                                                  "later runs, store off": [], FIRST_DERIVED: []}
@@ -121,15 +124,17 @@ PER_VERSION = ("tree-tables-*.json", "element-tables-*.json", "fast_call-*")
 #: Compiles the per-version libraries into a cache (the tree and element libraries, the fast caller).
 PER_VERSION_BUILD = """
 from ncgen.runtime.table_library import load_element_library
-from ncgen.runtime.tree_library import load_tree_library
+from ncgen.runtime.tree_library import build_tree_library
 import ncgen.codegen.fast_call as fc
-load_tree_library(); load_element_library(); fc._module()
+build_tree_library(); load_element_library(); fc._module()
 """
 
 
-def seed_per_version(per_version: Path, cache: Path) -> None:
-    """Copy the per-version entries of the cache ``per_version`` into ``cache``."""
+def seed_per_version(per_version: Path | None, cache: Path) -> None:
+    """Copy the per-version entries of the cache ``per_version`` (None: none) into ``cache``."""
     cache.mkdir(parents=True, exist_ok=True)
+    if per_version is None:
+        return
     for pattern in PER_VERSION:
         for entry in per_version.glob(pattern):
             (shutil.copytree if entry.is_dir() else shutil.copy2)(entry, cache / entry.name)
@@ -248,6 +253,8 @@ def main() -> None:
                     help="ncgen simulate --kernels (default auto)")
     ap.add_argument("--panda-only", action="store_true", help="the Panda's ncgen runs only (no box_stack, "
                     "no Python or reference loads)")
+    ap.add_argument("--empty", action="store_true", help="first runs from a completely empty cache (no "
+                    "per-version library compiled before)")
     args = ap.parse_args()
     print(machine())
     rounds = 1 if args.smoke else args.rounds
@@ -259,12 +266,15 @@ def main() -> None:
         env.update(PYTHONPATH=str(ROOT), PYTHONPYCACHEPREFIX=pyc)
         run([sys.executable, "-c", "import ncgen, ncgen.cli, ncgen.codegen.model_cache, mujoco, pinocchio"], env, pyc)
         per_version = Path(pyc, "per-version")
-        if not args.smoke:          # slider_crank needs none of them
+        if args.empty:
+            per_version = None
+        elif not args.smoke:        # slider_crank needs none of them
             run([sys.executable, "-c", PER_VERSION_BUILD], {**env, "NCGEN_CACHE_DIR": str(per_version)}, pyc)
         startup = [run([sys.executable, "-c", "pass"], env, pyc)[:2] for _ in range(rounds)]
         print(summary("python -c pass (start-up alone)", startup))
         for model in models:
-            print(f"\n=== {model.stem}: ncgen simulate {model.name} --t-end {args.t_end:g}")
+            print(f"\n=== {model.stem}: ncgen simulate {model.name} --t-end {args.t_end:g}"
+                  + (" (first runs from a completely empty cache)" if args.empty else ""))
             results = ncgen_runs(model, args.t_end, rounds, env, per_version, args.kernels)
             for label, samples in results.items():
                 print(summary(label, samples))

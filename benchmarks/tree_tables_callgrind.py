@@ -14,6 +14,7 @@ the same to 1e-12 relative; the script fails when they differ).
 
     python benchmarks/tree_tables_callgrind.py [--robots panda ur5 ur10 talos] [--states 200]
     python benchmarks/tree_tables_callgrind.py --smoke        the UR5, 5 states
+    python benchmarks/tree_tables_callgrind.py --robots panda ur5 --loops-cflags=-O1   the loops at -O1
 """
 from __future__ import annotations
 
@@ -185,6 +186,8 @@ def main() -> None:
     ap.add_argument("--robots", nargs="+", default=list(ROBOTS), choices=list(ROBOTS))
     ap.add_argument("--states", type=int, default=200)
     ap.add_argument("--smoke", action="store_true")
+    ap.add_argument("--loops-cflags", default="-O2", help="flags of the tables' loops (tree_tables.c; the tree "
+                    "library's units use -O1: ncgen/runtime/tree_library.py UNIT_CFLAGS)")
     a = ap.parse_args()
     if a.smoke:
         a.robots, a.states = ["ur5"], 5
@@ -200,8 +203,8 @@ def main() -> None:
     differ = []
     with tempfile.TemporaryDirectory() as tmp:
         lib = write_tree_package(Path(tmp) / "lib").path
-        for src in ("ncgen_trees_kernels_0.c", "tree_tables.c"):
-            subprocess.run([cc, "-O2", "-fPIC", "-std=c99", f"-I{lib}", "-c", str(lib / src), "-o",
+        for src, flag in (("ncgen_trees_kernels_0.c", "-O2"), ("tree_tables.c", a.loops_cflags)):
+            subprocess.run([cc, *flag.split(), "-fPIC", "-std=c99", f"-I{lib}", "-c", str(lib / src), "-o",
                             str(lib / f"{src}.o")], check=True)
         for name in a.robots:
             out = Path(tmp) / name

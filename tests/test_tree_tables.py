@@ -30,7 +30,7 @@ from ncgen.codegen.compiler import CANDIDATES
 from ncgen.codegen.tree_tables import UnsupportedTree, tree_tables
 from ncgen.errors import ShapeError
 from ncgen.runtime import tree_algorithms as rta
-from ncgen.runtime.tree_library import load_tree_library
+from ncgen.runtime.tree_library import build_tree_library, load_tree_library
 
 ROOT = Path(__file__).resolve().parent.parent
 G = 9.81
@@ -41,6 +41,8 @@ pytestmark = pytest.mark.skipif(not any(shutil.which(c) for c in CANDIDATES) and
 
 @pytest.fixture(scope="module")
 def library():
+    """Every unit of the tree library compiled (the children with no compiler need them)."""
+    build_tree_library()
     return load_tree_library()
 
 
@@ -408,20 +410,65 @@ def test_urdf_robots_match_pinocchio_and_the_flat_kernels(name, library, monkeyp
 
 
 def test_tree_package_is_deterministic_and_warning_free(tmp_path):
-    """The tree library's package: the same bytes when written twice, and its C compiles with
-    -Wall -Wextra -Werror."""
-    from ncgen.codegen.tree_kernels import write_tree_package
+    """The tree library's package (every unit in one library) and each of its units: the same
+    bytes when written twice, and their C compiles with -Wall -Wextra -Werror."""
+    from ncgen.codegen.tree_kernels import ALGORITHM_UNITS, kernel_units, write_tree_package, write_tree_unit
 
-    a, b = write_tree_package(tmp_path / "a"), write_tree_package(tmp_path / "b")
-    files = sorted(p.name for p in a.path.iterdir())
-    assert files == sorted(p.name for p in b.path.iterdir())
-    for name in files:
-        assert (a.path / name).read_bytes() == (b.path / name).read_bytes(), name
     cc = os.environ.get("CC") or next(shutil.which(c) for c in CANDIDATES if shutil.which(c))
-    for src in a.manifest["build"]["sources"]:
-        out = subprocess.run([*cc.split(), "-std=c99", "-Wall", "-Wextra", "-Werror", "-O0", "-I.", "-c", src, "-o",
-                              str(tmp_path / f"{src}.o")], cwd=a.path, capture_output=True, text=True, timeout=600)
-        assert out.returncode == 0, out.stderr[-3000:]
+    writers = {"all": write_tree_package, **{u: (lambda out, u=u: write_tree_unit(u, out))
+                                            for u in (*ALGORITHM_UNITS, *kernel_units())}}
+    for unit, write in writers.items():
+        a, b = write(tmp_path / unit / "a"), write(tmp_path / unit / "b")
+        files = sorted(p.name for p in a.path.iterdir())
+        assert files == sorted(p.name for p in b.path.iterdir())
+        for name in files:
+            assert (a.path / name).read_bytes() == (b.path / name).read_bytes(), (unit, name)
+        for src in a.manifest["build"]["sources"]:
+            out = subprocess.run([*cc.split(), "-std=c99", "-Wall", "-Wextra", "-Werror", "-O0", "-I.", "-c", src,
+                                  "-o", str(tmp_path / f"{src}.o")], cwd=a.path, capture_output=True, text=True,
+                                 timeout=600)
+            assert out.returncode == 0, (unit, out.stderr[-3000:])
+
+
+def test_units_are_compiled_as_trees_need_them(tmp_path, monkeypatch):
+    """A fresh compile cache: forward dynamics of a revolute/prismatic tree compiles the forward
+    unit alone, its RNEA the inverse unit; a spherical joint adds its local kernel unit, the
+    derivatives the derivatives unit with the edge kernels of its kinds and the body's; the
+    tables of a kind whose kernels are not set are refused by the unit's check."""
+    import ctypes
+
+    import ncgen.runtime.tree_library as tl
+    from ncgen.codegen.tree_tables import tree_tables
+
+    monkeypatch.setenv("NCGEN_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(tl, "_LOADED", {})
+    compiled = []
+    unit_library = tl.unit_library
+    monkeypatch.setattr(tl, "unit_library", lambda unit, cflags=None: compiled.append(unit) or unit_library(unit, cflags))
+    model = small_tree(f"units_tree_{os.getpid()}")
+    qj, vj = np.array([0.3, 0.1]), np.array([0.2, -0.1])
+    assert tl.missing_units(["revolute", "prismatic"]) == ["forward"]
+    nc.aba(model, qj, vj, np.zeros(2), kernels="tables")
+    assert compiled == ["forward"] and tl.missing_units(["revolute", "prismatic"]) == []
+    nc.rnea(model, qj, vj, np.zeros(2), kernels="tables")
+    assert compiled == ["forward", "inverse"]
+    s = nc.System(f"units_ball_{os.getpid()}", gravity=(0.0, 0.0, -G))
+    b = s.add_body("b", mass=1.0, inertia=np.diag([0.1, 0.2, 0.3]), position=(0.0, 0.0, -0.5))
+    s.add_joint(nc.Spherical(s.ground, b, at=(0.0, 0.0, 0.0), name="ball"))
+    ball = s.build()
+    q = np.array(ball.joint_space.positions(ball.q0)).ravel()
+    unit = tl.load_tree_library().unit("forward", ["revolute"])
+    tables = tree_tables(ball)
+    arrays = {f: np.ascontiguousarray(tables.arrays[f], dtype=np.int32 if "int" in t else np.float64)
+              for t, f in tl.TREE_FIELDS if "*" in t}
+    struct = tl._Tree(nb=tables.nb, nq=tables.nq, nv=tables.nv, ni=tables.ni,
+                      **{k: v.ctypes.data for k, v in arrays.items()})
+    assert unit.fn["check"](ctypes.addressof(struct)) == 3            # the spherical joint's tl kernel not set
+    a = nc.aba(ball, q, np.zeros(3), np.zeros(3), kernels="tables")
+    np.testing.assert_allclose(a, nc.aba(ball, q, np.zeros(3), np.zeros(3), kernels="flat"), atol=1e-12)
+    assert compiled[2:] == ["local_spherical"]
+    nc.aba_derivatives(ball, q, np.full(3, 0.1), np.zeros(3), kernels="tables")
+    assert compiled[3:] == ["derivatives", "edge_spherical", "body"]
 
 
 def small_tree(name: str):
@@ -446,8 +493,15 @@ def test_joint_kernels_rule():
     assert bp.choose_joint_kernels(9, pays - 1, None).backend == "tables"
     choice = bp.choose_joint_kernels(9, pays, None)
     assert choice.backend == "flat" and "saves" in choice.reason
-    choice = bp.choose_joint_kernels(9, 10, None, tables_ready=False)          # the library not compiled yet
-    assert choice.backend == "flat" and "tree library is not compiled yet" in choice.reason
+    # the forward unit not compiled yet: the tables while it costs less than the model's own loop
+    choice = bp.choose_joint_kernels(9, 10, None, ("forward",))
+    assert choice.backend == "tables" and choice.reason.startswith("compiling the tree library's forward")
+    units = bp.TREE_UNIT_COMPILE_SECONDS
+    assert bp.choose_joint_kernels(9, pays - int(units / (bp.JOINT_EVALS_PER_OUTPUT * 9 * bp.TABLES_EXTRA_SECONDS)),
+                                   None, ("forward",)).backend == "flat"
+    many = ("forward", "local_spherical", "local_free", "local_planar", "local_universal")
+    choice = bp.choose_joint_kernels(2, 10, None, many)                          # more to compile than a small loop
+    assert choice.backend == "flat" and "local_universal not compiled yet" in choice.reason
 
 
 def test_auto_joint_run_takes_the_tables_and_says_why(library, monkeypatch):
@@ -461,12 +515,13 @@ def test_auto_joint_run_takes_the_tables_and_says_why(library, monkeypatch):
     import ncgen.runtime.tree_library as tl
 
     model = small_tree(f"auto_tree_{os.getpid()}")
-    assert tl.tree_library_ready()                          # the fixture compiled it
+    assert tl.tree_library_ready() and not tl.missing_units(["revolute", "prismatic"])   # the fixture compiled it
     assert choose_kernels(model, 10).backend == "tables"
-    ready = tl.tree_library_ready
-    monkeypatch.setattr(tl, "tree_library_ready", lambda: False)
-    assert choose_kernels(model, 10).backend == "flat"      # not compiled yet: the model's own loop is cheaper
-    monkeypatch.setattr(tl, "tree_library_ready", ready)
+    missing = tl.missing_units
+    monkeypatch.setattr(tl, "missing_units", lambda kinds, unit: ["forward"])
+    from ncgen.runtime import backend_policy as bp
+    assert choose_kernels(model, 10) == bp.choose_joint_kernels(2, 10, None, ("forward",))   # the unit's cost counted
+    monkeypatch.setattr(tl, "missing_units", missing)
     assert choose_kernels(model, 10, controller=nc.PD(kp=10.0, kd=1.0, target=[0.0, 0.0])).backend == "flat"
     assert choose_kernels(model, 10, joint_dynamics=True).backend == "flat"
     assert choose_kernels(model, 10, kernels="flat").reason == "chosen"

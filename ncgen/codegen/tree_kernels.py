@@ -184,27 +184,90 @@ def joint_numbers(a1, b1, a2, b2, axes) -> np.ndarray:
 PACKAGE = "ncgen_trees"
 #: The template files the library is made of besides this module (its cache key hashes them).
 SOURCES = ("runtime/ncgen_tree_tables.h", "runtime/ncgen_spatial.h", "tree_tables.c.j2", "runtime/ncgen_joint_loop.h")
+#: The algorithm units of the tree library and their entry points (besides ``work_size``,
+#: ``check``, ``kind_names``, ``set_kernel``); each unit also holds every kind's rate kernel.
+ALGORITHM_UNITS = {"inverse": ("rnea", "crba"), "forward": ("aba", "joint_run"),
+                   "derivatives": ("rnea_derivatives", "aba_derivatives")}
+#: Doubles of work each kernel may take in the units (the kernels are checked against it).
+KERNEL_WORK = 1024
+
+
+def kernel_units() -> tuple[str, ...]:
+    """The kernel units: ``local_<k>`` (``tl_<k>``) of each kind the loops do not write out,
+    ``edge_<k>`` (``tk_<k>``, ``tk_<k>_fwd``) of every kind, ``body`` (``tk_body``, ``tk_body_fwd``)."""
+    return tuple(f"local_{k.name}" for k in JOINT_KINDS if k.name not in LOCAL_MODES) + \
+        tuple(f"edge_{k.name}" for k in JOINT_KINDS) + ("body",)
+
+
+def units_of(unit: str, kinds) -> tuple[str, ...]:
+    """The units the algorithm unit ``unit`` needs for a tree of the joint kinds ``kinds``
+    (names): itself, the local kernels of its kinds the loops do not write out, and for the
+    derivatives every kind's edge kernels and the body's."""
+    kinds = sorted(set(kinds), key=[k.name for k in JOINT_KINDS].index)
+    need = [unit] + [f"local_{k}" for k in kinds if k not in LOCAL_MODES]
+    if unit == "derivatives":
+        need += [f"edge_{k}" for k in kinds] + ["body"]
+    return tuple(need)
+
+
+def unit_kernels(unit: str) -> list[ca.Function]:
+    """The CasADi kernels of the unit ``unit`` (an algorithm unit: the rate kernels)."""
+    if unit in ALGORITHM_UNITS:
+        return [rate_kernel(k.name) for k in JOINT_KINDS if k.nq]
+    if unit == "body":
+        return list(body_kernels())
+    what, _, kind = unit.partition("_")
+    if what == "local" and kind in {k.name for k in JOINT_KINDS} - set(LOCAL_MODES):
+        return [local_kernel(kind)]
+    if what == "edge" and kind in {k.name for k in JOINT_KINDS}:
+        return list(joint_kernels(kind))
+    raise CodegenError(f"tree library: no unit {unit!r} (expected one of {', '.join(ALGORITHM_UNITS)}, "
+                       f"{', '.join(kernel_units())})")
+
+
+def _context(units, linked: bool, fns) -> dict:
+    from ncgen.codegen.tree_check import PIVOT_TOL
+
+    if any(f.sz_iw() for f in fns) or any(f.sz_arg() > 1 or f.sz_res() > 1 for f in fns):
+        raise CodegenError("tree kernels: the loops expect kernels with no integer work, one argument and one result")
+    return {"pivot_tol": repr(float(PIVOT_TOL)),
+            "kinds": [{"name": k.name, "nq": k.nq, "nv": k.nv, "n_num": k.n_num,
+                       "mode": LOCAL_MODES.get(k.name, 0)} for k in JOINT_KINDS],
+            "max_w": max(f.sz_w() for f in fns) if linked else KERNEL_WORK, "kind_names": kind_names(),
+            "units": list(units), "linked": linked}
+
+
+def _write(name: str, fns, out_dir, context: dict | None, summary: str):
+    from ncgen.codegen.package import ExtraSource, PackageDoc, write_package
+
+    extra = [] if context is None else [
+        ExtraSource("runtime/ncgen_tree_tables.h", "ncgen_tree_tables.h", included=True),
+        ExtraSource("runtime/ncgen_spatial.h", "ncgen_spatial.h", included=True),
+        ExtraSource("runtime/ncgen_joint_loop.h", "ncgen_joint_loop.h", included=True),
+        ExtraSource("tree_tables.c.j2", "tree_tables.c", context)]
+    return write_package(name, fns, out_dir, doc=PackageDoc(summary=summary), max_file_instructions=None,
+                         reroll_instructions=None, extra_sources=extra)
 
 
 def write_tree_package(out_dir):
-    """The C package of the tree kernels and loops (``PACKAGE``) in ``out_dir``; its
-    functions are documented in ``templates/c/tree_tables.c.j2``."""
-    from ncgen.codegen.package import ExtraSource, PackageDoc, write_package
-
+    """The C package of every tree kernel and every loop (``PACKAGE``, all units in one
+    library) in ``out_dir``; its functions are documented in ``templates/c/tree_tables.c.j2``."""
     fns = kernels()
-    if any(f.sz_iw() for f in fns) or any(f.sz_arg() > 1 or f.sz_res() > 1 for f in fns):
-        raise CodegenError("tree kernels: the loops expect kernels with no integer work, one argument and one result")
-    from ncgen.codegen.tree_check import PIVOT_TOL
+    return _write(PACKAGE, fns, out_dir, _context(ALGORITHM_UNITS, True, fns),
+                  "Tree kernels of the shipped joint kinds and the table-driven joint-space algorithms "
+                  "(RNEA, CRBA, forward dynamics and their derivatives) of any tree")
 
-    context = {"pivot_tol": repr(float(PIVOT_TOL)),
-               "kinds": [{"name": k.name, "nq": k.nq, "nv": k.nv, "n_num": k.n_num,
-                          "mode": LOCAL_MODES.get(k.name, 0)} for k in JOINT_KINDS],
-               "max_w": max(f.sz_w() for f in fns), "kind_names": kind_names()}
-    doc = PackageDoc(summary="Tree kernels of the shipped joint kinds and the table-driven joint-space "
-                             "algorithms (RNEA, CRBA, forward dynamics and their derivatives) of any tree")
-    return write_package(PACKAGE, fns, out_dir, doc=doc, max_file_instructions=None, reroll_instructions=None,
-                         extra_sources=[ExtraSource("runtime/ncgen_tree_tables.h", "ncgen_tree_tables.h",
-                                                    included=True),
-                                        ExtraSource("runtime/ncgen_spatial.h", "ncgen_spatial.h", included=True),
-                                        ExtraSource("runtime/ncgen_joint_loop.h", "ncgen_joint_loop.h", included=True),
-                                        ExtraSource("tree_tables.c.j2", "tree_tables.c", context)])
+
+def write_tree_unit(unit: str, out_dir):
+    """The C package ``ncgen_trees_<unit>`` of one unit of the tree library in ``out_dir``: an
+    algorithm unit (:data:`ALGORITHM_UNITS`: its loops and the rate kernels) or a kernel
+    unit (:func:`kernel_units`), each compiled on its own when a tree first needs it."""
+    fns = unit_kernels(unit)
+    if unit not in ALGORITHM_UNITS:
+        too_big = [f.name() for f in fns if f.sz_w() > KERNEL_WORK]
+        if too_big:
+            raise CodegenError(f"tree kernels {', '.join(too_big)} need more than KERNEL_WORK = {KERNEL_WORK} "
+                               "doubles of work: raise it in ncgen/codegen/tree_kernels.py")
+        return _write(f"{PACKAGE}_{unit}", fns, out_dir, None, f"Tree kernels of the unit {unit} (tree library)")
+    return _write(f"{PACKAGE}_{unit}", fns, out_dir, _context((unit,), False, fns),
+                  f"The tree library's {unit} unit: {', '.join(ALGORITHM_UNITS[unit])} of any tree over its tables")

@@ -24,15 +24,17 @@ one line (:func:`ncgen.codegen.load.warn_no_compiler`); the stepper has no VM fo
 says which option to use instead.
 
 The joint-space loop of a tree (``method="joint"``, ``kernels="auto"``,
-:func:`choose_joint_kernels`) runs on the tree tables (the tree library, compiled once per
-ncgen version: nothing compiled per model) unless the model's own flat loop is ready (loaded
-in this process, or compiled earlier and found in the compile cache) or the run is long
-enough for the flat loop's faster evaluations to win back deriving and compiling it, or the
-tree library is not compiled yet (its one compile, ``TREE_LIBRARY_COMPILE_SECONDS``, costs
-ten times a robot's own loop: the first ``kernels="tables"`` run pays it)::
+:func:`choose_joint_kernels`) runs on the tree tables (the tree library: units compiled once
+per ncgen version, nothing compiled per model) unless the model's own flat loop is ready
+(loaded in this process, or compiled earlier and found in the compile cache) or the run is
+long enough for the flat loop's faster evaluations to win back deriving and compiling it
+beyond what compiling the library units the tables still lack costs (the forward unit,
+``TREE_UNIT_COMPILE_SECONDS``, and a kernel unit per joint kind the loops do not write out,
+``TREE_KERNEL_UNIT_COMPILE_SECONDS``; nothing once they are in the cache)::
 
       saving  = outputs × JOINT_EVALS_PER_OUTPUT × n_v × TABLES_EXTRA_SECONDS
       compile = JOINT_COMPILE_FIXED_SECONDS + n_v × JOINT_COMPILE_SECONDS_PER_RATE
+      flat when saving > compile − units
 
 with ``n_v`` the joint rates.  Measured on the Panda (9 rates, AMD EPYC, load 5–6): 5.2 µs
 per ODE evaluation on the tables, 4.0 µs flat; 26 evaluations per output interval of 0.01 s
@@ -65,8 +67,9 @@ JOINT_EVALS_PER_OUTPUT = 30
 TABLES_EXTRA_SECONDS = 0.15e-6
 #: CPU seconds to derive and compile a tree's flat joint loop: fixed, and per joint rate.
 JOINT_COMPILE_FIXED_SECONDS, JOINT_COMPILE_SECONDS_PER_RATE = 1.0, 0.2
-#: CPU seconds to compile the tree library once per ncgen version (measured 30.6 s at load 12).
-TREE_LIBRARY_COMPILE_SECONDS = 30.0
+#: CPU seconds to compile the tree library's forward unit (its loops and rate kernels, -O1) once
+#: per ncgen version, and one of its kernel units (ncgen/runtime/tree_library.py).
+TREE_UNIT_COMPILE_SECONDS, TREE_KERNEL_UNIT_COMPILE_SECONDS = 1.5, 0.6
 
 
 @dataclass(frozen=True)
@@ -108,24 +111,25 @@ def choose_backend(model, outputs: int, backend: str = "auto", method: str = "id
     return Choice("vm", f"compiling (~{cost:.0f} s) would save ~{saving:.1f} s on this run")
 
 
-def choose_joint_kernels(nv: int, outputs: int, flat_ready: str | None, tables_ready: bool = True) -> Choice:
+def choose_joint_kernels(nv: int, outputs: int, flat_ready: str | None, missing: tuple[str, ...] = ()) -> Choice:
     """The kernels (``"tables"`` or ``"flat"``) of a joint-space run of a tree with ``nv``
     joint rates over ``outputs`` output intervals that the tree tables cover and a compiler
     could build (module docstring); ``flat_ready``: why its flat loop is ready, or None;
-    ``tables_ready``: whether the tree library (compiled once per ncgen version) is compiled —
-    if not, compiling it costs far more than the model's own loop, so this run takes the flat
-    loop (``kernels="tables"`` compiles the library once)."""
+    ``missing``: the units of the tree library the tables' run needs that are not compiled
+    yet (``"forward"``, kernel units)."""
     if flat_ready is not None:
         return Choice("flat", f"the model's own loop is ready ({flat_ready})")
     cost = JOINT_COMPILE_FIXED_SECONDS + nv * JOINT_COMPILE_SECONDS_PER_RATE
-    if not tables_ready:
-        return Choice("flat", f"the tree library is not compiled yet (~{TREE_LIBRARY_COMPILE_SECONDS:.0f} s once per "
-                              f"ncgen version, on the first kernels='tables' run); the model's own loop takes "
-                              f"~{cost:.0f} s")
+    units = sum(TREE_UNIT_COMPILE_SECONDS if u == "forward" else TREE_KERNEL_UNIT_COMPILE_SECONDS for u in missing)
     saving = outputs * JOINT_EVALS_PER_OUTPUT * nv * TABLES_EXTRA_SECONDS
     if saving > cost:
         return Choice("flat", f"compiling the model's own loop (~{cost:.0f} s) saves ~{saving:.0f} s on this run")
-    return Choice("tables", f"nothing to compile; the model's own loop (~{cost:.0f} s to compile) would save "
+    if saving > cost - units:
+        return Choice("flat", f"the tree library's {', '.join(missing)} not compiled yet (~{units:.1f} s once per "
+                              f"ncgen version, more than the model's own loop: ~{cost:.1f} s)")
+    first = "nothing to compile" if not missing else \
+        f"compiling the tree library's {', '.join(missing)} (~{units:.1f} s, once per ncgen version)"
+    return Choice("tables", f"{first}; the model's own loop (~{cost:.0f} s to compile) would save "
                             f"~{saving:.2g} s on this run")
 
 

@@ -172,10 +172,27 @@ def choose_kernels(model, outputs: int, controller=None, joint_dynamics: bool = 
         return Choice("tables", "no C compiler") if _table_loop(model) is not None else \
             Choice("flat", "the tree tables do not cover the model")
     ready = _flat_ready(model)
-    if ready is None and _table_loop(model) is None:
+    kinds = _table_kinds(model)
+    if ready is None and kinds is None:
         return Choice("flat", "the tree tables do not cover the model")
-    from ncgen.runtime.tree_library import tree_library_ready
-    return choose_joint_kernels(model.joint_space.nv, outputs, ready, tables_ready=tree_library_ready())
+    from ncgen.runtime.tree_library import missing_units
+    return choose_joint_kernels(model.joint_space.nv, outputs, ready,
+                                () if kinds is None else tuple(missing_units(kinds, "forward")))
+
+
+def _table_kinds(model) -> list[str] | None:
+    """The joint kinds of ``model``'s tree tables when the tables' loop covers it (its tables
+    and constant input efforts; nothing loaded or compiled), else None."""
+    from ncgen.codegen.tree_kernels import JOINT_KINDS
+    from ncgen.codegen.tree_tables import UnsupportedTree, tree_tables
+    from ncgen.runtime.tree_library import input_efforts
+
+    try:
+        kinds = tree_tables(model).arrays["kind"]
+        input_efforts(model)
+    except UnsupportedTree:
+        return None
+    return sorted({JOINT_KINDS[int(k)].name for k in kinds})
 
 
 def _flat_ready(model) -> str | None:

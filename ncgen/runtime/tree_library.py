@@ -1,9 +1,19 @@
 """The tree library: the joint-space algorithms of any tree over its data tables (RNEA, CRBA,
 forward dynamics and their derivatives, ``templates/c/runtime/ncgen_tree_tables.h``), compiled
-once per ncgen version and compiler and shared by every model, found through an index file of
-the compile cache like the element library (:func:`~ncgen.runtime.table_library.cached_library`,
-index ``tree-tables-<sources key>-<compiler key>.json``): a tree of the shipped joint kinds
-reaches compiled RNEA/ABA with no call of the C compiler.
+once per ncgen version and compiler and shared by every model — in units, each compiled at the
+first run that needs it and found through an index file of the compile cache like the element
+library (:func:`~ncgen.runtime.table_library.cached_library`, index
+``tree-tables-<unit>-<sources key>-<compiler key>.json``): a tree of the shipped joint kinds
+whose units are compiled reaches compiled RNEA/ABA with no call of the C compiler.
+
+Units (:mod:`ncgen.codegen.tree_kernels`): the algorithm units ``forward`` (ABA, the joint
+loop), ``inverse`` (RNEA, CRBA) and ``derivatives``, each with every kind's rate kernel, loops at
+:data:`UNIT_CFLAGS`; the kernel units ``local_<kind>``, ``edge_<kind>`` and ``body``, whose
+kernels :class:`TreeLibrary` sets in an algorithm unit (``set_kernel``) for the kinds of the
+trees it serves.  One library of everything took 30 s of CPU to compile (18 s of it the kernels
+of every kind and their derivatives at -O2, one translation unit, 2.4 s the loops); the Panda's
+joint run needs the forward unit alone (about 1.2–1.9 s of CPU at -O1, load 12–18; -O1 costs
++9 % instructions per ABA against -O2 by callgrind, -Og +39 %).
 
 :class:`TableAlgorithm` is one algorithm of :data:`~ncgen.codegen.tree_check.ALGORITHMS`
 bound to one model's :class:`~ncgen.codegen.tree_tables.TreeTables`, with the interface the
@@ -33,8 +43,11 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
+import os
 import platform
 import sys
+import threading
+from functools import partial
 from pathlib import Path
 
 import casadi as ca
@@ -43,7 +56,8 @@ import numpy as np
 from ncgen.codegen import c_binding
 from ncgen.codegen.compile_cache import BUILD_SCHEME
 from ncgen.codegen.render import shipped_templates_dir
-from ncgen.codegen.tree_kernels import JOINT_KINDS, PACKAGE, SOURCES, kind_names, write_tree_package
+from ncgen.codegen.tree_kernels import (ALGORITHM_UNITS, JOINT_KINDS, PACKAGE, SOURCES, kernel_units, kind_names,
+                                        units_of, write_tree_unit)
 from ncgen.codegen.tree_tables import TreeTables
 from ncgen.errors import CodegenError, ModelError
 from ncgen.runtime.table_library import cached_library, library_ready
@@ -105,46 +119,126 @@ def sources_key() -> str:
     return h.hexdigest()
 
 
+#: The algorithm unit of each entry point.
+UNIT_OF = {fn: unit for unit, fns in ALGORITHM_UNITS.items() for fn in fns}
+#: Flags of the algorithm units' loops (``-O1``: …); the kernel units take the compile cache's defaults.
+UNIT_CFLAGS = "-O1"
+
+
+def _index_prefix(unit: str) -> str:
+    return f"{INDEX_PREFIX}-{unit}"
+
+
+def unit_ready(unit: str) -> bool:
+    """Whether the unit ``unit`` of the tree library is compiled (in the compile cache)."""
+    return library_ready(_index_prefix(unit), sources_key())
+
+
+def missing_units(kinds, unit: str = "forward") -> list[str]:
+    """The units the algorithm unit ``unit`` needs for the joint kinds ``kinds`` (names,
+    :func:`~ncgen.codegen.tree_kernels.units_of`) that are not compiled yet."""
+    key = sources_key()
+    return [u for u in units_of(unit, kinds) if not library_ready(_index_prefix(u), key)]
+
+
 def tree_library_ready() -> bool:
-    """Whether the tree library is compiled (in the compile cache): using it compiles nothing."""
-    return library_ready(INDEX_PREFIX, sources_key())
+    """Whether every unit of the tree library is compiled (in the compile cache)."""
+    return not [u for u in (*ALGORITHM_UNITS, *kernel_units()) if not unit_ready(u)]
 
 
-def tree_library(cflags: str | None = None) -> tuple[Path, bool]:
-    """``(path of the tree library, whether it was compiled now)``."""
-    return cached_library(INDEX_PREFIX, sources_key(), write_tree_package, PACKAGE, cflags)
+def unit_library(unit: str, cflags: str | None = None) -> tuple[Path, bool]:
+    """``(path of the unit's library, whether it was compiled now)``: compiled at first use
+    (algorithm units with :data:`UNIT_CFLAGS` unless ``cflags`` is given)."""
+    if cflags is None and unit in ALGORITHM_UNITS and os.environ.get("NCGEN_CFLAGS") is None:
+        cflags = UNIT_CFLAGS
+    return cached_library(_index_prefix(unit), sources_key(), partial(write_tree_unit, unit), f"{PACKAGE}_{unit}",
+                          cflags)
+
+
+def build_tree_library(cflags: str | None = None) -> dict[str, Path]:
+    """Every unit of the tree library, compiled now where not in the cache (e.g. ahead of
+    a machine's first runs): ``{unit: path}``."""
+    return {u: unit_library(u, cflags)[0] for u in (*ALGORITHM_UNITS, *kernel_units())}
+
+
+class AlgorithmUnit:
+    """One loaded algorithm unit: its entry points bound (:data:`SIGNATURES`), the kernels
+    of the kernel units set in it as trees need them."""
+
+    def __init__(self, unit: str, path: Path):
+        self.unit, self.path, self.prefix = unit, path, f"{PACKAGE}_{unit}"
+        self._lib = c_binding.open_library(path)
+        names = {"work_size", "check", *ALGORITHM_UNITS[unit]}
+        self.fn = {k: c_binding.bind(self._lib, f"{self.prefix}_{k}", s, structs={"ncgen_tree": _Tree},
+                                     addresses=True) for k, s in SIGNATURES.items() if k in names}
+        kinds = getattr(self._lib, f"{self.prefix}_kind_names", None)
+        if kinds is None:
+            raise CodegenError(f"{path}: no function {self.prefix}_kind_names; delete it to have it rebuilt")
+        kinds.restype, kinds.argtypes = ctypes.c_char_p, []
+        if kinds().decode() != kind_names():
+            raise CodegenError(f"{path}: tree library of other joint kinds ({kinds().decode()!r}, expected "
+                               f"{kind_names()!r}); delete it to have it rebuilt")
+        self._set = self._lib[f"{self.prefix}_set_kernel"]
+        self._set.restype, self._set.argtypes = ctypes.c_int, [ctypes.c_int, ctypes.c_int, ctypes.c_void_p]
+        self.kernel_units: set[str] = set()
+
+    def set_kernels(self, unit: str, lib: ctypes.CDLL) -> None:
+        """Set the kernels of the kernel unit ``unit`` (loaded as ``lib``) in this unit: slots
+        0, 1 (``tk_<k>``, ``tk_<k>_fwd``; the body's ``tk_body``, ``tk_body_fwd``: kind −1)
+        and 3 (``tl_<k>``) of ``set_kernel`` (templates/c/tree_tables.c.j2)."""
+        what, _, kind = unit.partition("_")
+        if unit == "body":
+            slots, at = {0: "tk_body", 1: "tk_body_fwd"}, -1
+        else:
+            slots = {3: f"tl_{kind}"} if what == "local" else {0: f"tk_{kind}", 1: f"tk_{kind}_fwd"}
+            at = [k.name for k in JOINT_KINDS].index(kind)
+        for slot, name in slots.items():
+            address = ctypes.cast(lib[f"{PACKAGE}_{unit}_{name}"], ctypes.c_void_p).value
+            if self._set(at, slot, address):
+                raise CodegenError(f"{self.path}: could not set the kernel {name} (kind {at}, slot {slot})")
+        self.kernel_units.add(unit)
 
 
 class TreeLibrary:
-    """The loaded tree library: its entry points bound (:data:`SIGNATURES`)."""
+    """The tree library: its units (:data:`~ncgen.codegen.tree_kernels.ALGORITHM_UNITS` and the
+    kernel units), each compiled once per ncgen version at first need and loaded once per process."""
 
-    def __init__(self, path: Path):
-        self.path = path
-        self._lib = c_binding.open_library(path)
-        self.fn = {k: c_binding.bind(self._lib, f"{PACKAGE}_{k}", s, structs={"ncgen_tree": _Tree}, addresses=True)
-                   for k, s in SIGNATURES.items()}
-        names = getattr(self._lib, f"{PACKAGE}_kind_names", None)
-        if names is None:
-            raise CodegenError(f"{path}: no function {PACKAGE}_kind_names; delete it to have it rebuilt")
-        names.restype, names.argtypes = ctypes.c_char_p, []
-        if names().decode() != kind_names():
-            raise CodegenError(f"{path}: tree library of other joint kinds ({names().decode()!r}, expected "
-                               f"{kind_names()!r}); delete it to have it rebuilt")
+    def __init__(self, cflags: str | None = None):
+        self.cflags = cflags
+        self._units: dict[str, AlgorithmUnit] = {}
+        self._kernels: dict[str, ctypes.CDLL] = {}
+        self._lock = threading.Lock()
+
+    def unit(self, unit: str, kinds) -> AlgorithmUnit:
+        """The algorithm unit ``unit`` with the kernels of the joint kinds ``kinds`` (names) set
+        (each unit compiled here if not in the cache)."""
+        with self._lock:
+            alg = self._units.get(unit)
+            if alg is None:
+                alg = self._units[unit] = AlgorithmUnit(unit, unit_library(unit, self.cflags)[0])
+            for need in units_of(unit, kinds)[1:]:
+                if need in alg.kernel_units:
+                    continue
+                lib = self._kernels.get(need)
+                if lib is None:
+                    lib = self._kernels[need] = c_binding.open_library(unit_library(need, self.cflags)[0])
+                alg.set_kernels(need, lib)
+            return alg
 
 
-_LOADED: dict[Path, TreeLibrary] = {}
+_LOADED: dict[str | None, TreeLibrary] = {}
 
 
 def load_tree_library(cflags: str | None = None) -> TreeLibrary:
-    """The tree library, compiled at first use (:func:`tree_library`) and loaded once per process."""
-    path, _ = tree_library(cflags)
-    if path not in _LOADED:
-        _LOADED[path] = TreeLibrary(path)
-    return _LOADED[path]
+    """The tree library of this process (its units compiled and loaded as trees need them)."""
+    if cflags not in _LOADED:
+        _LOADED[cflags] = TreeLibrary(cflags)
+    return _LOADED[cflags]
 
 
 class BoundTree:
-    """One model's :class:`TreeTables` as the library's ``ncgen_tree`` (checked once) with a work array."""
+    """One model's :class:`TreeTables` as the library's ``ncgen_tree`` with a work array; the
+    algorithm units it is used with are checked against it once (:meth:`unit`)."""
 
     def __init__(self, tables: TreeTables, library: TreeLibrary | None = None):
         self.tables, self.library = tables, library or load_tree_library()
@@ -153,9 +247,34 @@ class BoundTree:
         self._struct = _Tree(nb=tables.nb, nq=tables.nq, nv=tables.nv, ni=tables.ni,
                              **{k: v.ctypes.data for k, v in self._arrays.items()})
         self.ref = ctypes.addressof(self._struct)
-        if self.library.fn["check"](self.ref):
-            raise CodegenError(f"model {tables.name!r}: its tree tables are inconsistent (ncgen_tree_check)")
-        self.work = np.zeros(max(1, int(self.library.fn["work_size"](self.ref))))
+        self.kinds = sorted({JOINT_KINDS[int(k)].name for k in self._arrays["kind"] if 0 <= k < len(JOINT_KINDS)})
+        self.work: np.ndarray | None = None
+        self._checked: dict[str, AlgorithmUnit] = {}
+        self._lock = threading.Lock()
+
+    def unit(self, unit: str) -> AlgorithmUnit:
+        """The algorithm unit ``unit`` for these tables (compiled if needed; checked once).  The
+        work array is sized by the first unit: every unit lays out the same work."""
+        alg = self._checked.get(unit)
+        if alg is not None:
+            return alg
+        with self._lock:            # the work array is made once: fast callers keep its address
+            alg = self._checked.get(unit)
+            if alg is not None:
+                return alg
+            alg = self.library.unit(unit, self.kinds)
+            status = alg.fn["check"](self.ref)
+            if status:
+                raise CodegenError(f"model {self.tables.name!r}: its tree tables are inconsistent (ncgen_tree_check, "
+                                   f"status {status})")
+            size = max(1, int(alg.fn["work_size"](self.ref)))
+            if self.work is None:
+                self.work = np.zeros(size)
+            elif size > len(self.work):
+                raise CodegenError(f"{alg.path}: the {unit} unit needs {size} doubles of work, the tables' work "
+                                   f"has {len(self.work)}; delete the tree library's units to have them rebuilt")
+            self._checked[unit] = alg
+            return alg
 
 
 class _Direct:
@@ -183,7 +302,8 @@ class TableAlgorithm:
         self._in_sizes = {"qj": T.nq, "vj": T.nv, "aj": T.nv, "tau": T.ni}
         self._sizes = [self._in_sizes[a] for a in self.input_names]
         self._out_sizes = {"tau": (T.ni,), "aj": (T.nv,), "M": (T.ni, T.ni)}
-        self._fn = tree.library.fn[name]
+        self.unit = tree.unit(UNIT_OF[name])
+        self._fn = self.unit.fn[name]
         self._single = None
         self._quaternions = bool(np.any(np.isin(np.asarray(JOINT_KINDS_NQ)[T.arrays["kind"]], (4, 7))))
         self._fast = self._fast_caller()
@@ -195,7 +315,7 @@ class TableAlgorithm:
         the pivot check fails), or None without the extension."""
         from ncgen.codegen.fast_call import fast_caller
 
-        one = getattr(self.tree.library._lib, f"{PACKAGE}_{self.name}_one", None)
+        one = getattr(self.unit._lib, f"{self.unit.prefix}_{self.name}_one", None)
         if one is None:
             return None
         ins = [np.zeros(n) for n in self._sizes]
@@ -291,17 +411,26 @@ def table_algorithm(model, name: str) -> TableAlgorithm:
     """The algorithm ``name`` of ``model`` from its tree tables, bound once per model (raises
     :class:`~ncgen.codegen.tree_tables.UnsupportedTree`, or
     :class:`~ncgen.errors.CompilerNotFound` with no compiler and no library in the cache)."""
-    from ncgen.codegen.tree_tables import tree_tables
     from ncgen.model.data import model_data
 
     data = model_data(model)
     k = data.table_algorithms.get(name)
     if k is None:
-        tree = data.table_algorithms.get(None)
-        if tree is None:
-            tree = data.table_algorithms[None] = BoundTree(tree_tables(model))
-        k = data.table_algorithms[name] = TableAlgorithm(tree, name)
+        k = data.table_algorithms[name] = TableAlgorithm(bound_tree(model), name)
     return k
+
+
+def bound_tree(model) -> BoundTree:
+    """``model``'s tree tables bound once per model (raises
+    :class:`~ncgen.codegen.tree_tables.UnsupportedTree`)."""
+    from ncgen.codegen.tree_tables import tree_tables
+    from ncgen.model.data import model_data
+
+    data = model_data(model)
+    tree = data.table_algorithms.get(None)
+    if tree is None:
+        tree = data.table_algorithms[None] = BoundTree(tree_tables(model))
+    return tree
 
 
 def input_efforts(model) -> np.ndarray:
@@ -334,11 +463,11 @@ class TableJointLoop:
         from ncgen.codegen.tree_check import tree_function
 
         self.model = model
-        self.tree_bound = table_algorithm(model, "aba").tree
+        self.tree_bound = bound_tree(model)         # no fast caller: the loop runs in C
+        self._fn = self.tree_bound.unit("forward").fn["joint_run"]
         self.E = input_efforts(model)
         self.quat = np.array(quaternion_offsets(model.joint_space), dtype=np.int32)
         self.tree = tree_function(model)
-        self._fn = self.tree_bound.library.fn["joint_run"]
         self._maps: dict = {}
 
     def mapped(self, what: str, n: int):
