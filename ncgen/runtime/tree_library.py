@@ -43,7 +43,6 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
-import os
 import platform
 import sys
 import threading
@@ -149,7 +148,7 @@ def tree_library_ready() -> bool:
 def unit_library(unit: str, cflags: str | None = None) -> tuple[Path, bool]:
     """``(path of the unit's library, whether it was compiled now)``: compiled at first use
     (algorithm units with :data:`UNIT_CFLAGS` unless ``cflags`` is given)."""
-    if cflags is None and unit in ALGORITHM_UNITS and os.environ.get("NCGEN_CFLAGS") is None:
+    if cflags is None and unit in ALGORITHM_UNITS:      # $NCGEN_CFLAGS does not reach ncgen's libraries
         cflags = UNIT_CFLAGS
     return cached_library(_index_prefix(unit), sources_key(), partial(write_tree_unit, unit), f"{PACKAGE}_{unit}",
                           cflags)
