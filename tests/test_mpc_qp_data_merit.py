@@ -63,9 +63,9 @@ def test_qp_data_returns_the_merit_of_its_guess(model, min_tension):
     by_hand = np.abs(x - X[0]).sum() + np.abs(X1 - X[1:]).sum()
     by_hand += np.maximum(0, X[1:, 2] - (-0.99)).sum() + np.maximum(0, -1.2 - X[1:, 2]).sum()
     if min_tension is not None:
-        def pull(xk, u):
-            q, v = xk[:3], xk[3:]
-            return K * (np.linalg.norm(q) - u) + C * q @ v / np.linalg.norm(q)
-        by_hand += sum(max(0.0, min_tension - pull(X[j], U[k, 0])) for k in range(N) for j in (k, k + 1))
+        def pull(q, w, u):                      # at the step's force evaluations: q_k, q_k+1 with w_k
+            return K * (np.linalg.norm(q) - u) + C * q @ w / np.linalg.norm(q)
+        by_hand += sum(max(0.0, min_tension - pull(X[j, :3], (X[k + 1, :3] - X[k, :3]) / H, U[k, 0]))
+                       for k in range(N) for j in (k, k + 1))
     assert np.max(X[1:, 2]) > -0.99 and (min_tension is None or by_hand > np.abs(X1 - X[1:]).sum() + 1e-3)
     assert abs(float(out["c"]) - by_hand) <= 1e-12 * by_hand
