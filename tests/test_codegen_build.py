@@ -163,8 +163,9 @@ def test_long_functions_called_through_mx_count_as_long(tmp_path, monkeypatch):
 
 
 def test_two_processes_build_at_once(tmp_path, pkg, cache):
-    cc, _ = logging_compiler(tmp_path, delay=1.5)  # long enough to overlap and show progress
-    script = ("import sys; from ncgen.codegen import compile_package, load_functions\n"
+    cc, _ = logging_compiler(tmp_path, delay=1.5)  # long enough to overlap
+    script = ("import sys; from ncgen.codegen import compile_cache, compile_package, load_functions\n"
+              "compile_cache.PROGRESS_DELAY = 0.0\n"       # progress shown however fast the compile
               "r = compile_package(sys.argv[1], cc=sys.argv[2]); load_functions(r, ['phi'])\n"
               "print(r.path, r.cached)\n")
     procs = [subprocess.Popen([sys.executable, "-c", script, str(pkg.path), cc], stdout=subprocess.PIPE,

@@ -220,6 +220,33 @@ def test_ten_seconds_of_the_toml_disc_at_rtol_1e_8(model):
     assert abs(np.polyfit(tr.t, heading, 1)[0] / steady_precession(BETA, W3) - 1) < 1e-7
 
 
+@pytest.mark.parametrize("method", ["dopri5", "rk4"])
+def test_auto_asks_for_the_compiled_step_once_when_the_pace_says_it_pays(model, method, monkeypatch):
+    """``backend="auto"`` compiles the step when the Python steps' pace (trusted after
+    ``PACE_AFTER`` s) projects the run beyond ``COMPILE_PAYS`` s: both set here, so that the
+    decision does not depend on the machine's speed; asked once per run, and without a
+    compiler the run goes on in Python."""
+    from ncgen.assembly.nonholonomic import rolling_system
+    from ncgen.errors import CompilerNotFound
+    from ncgen.runtime import rolling_integrator
+    monkeypatch.setattr(rolling_system(model), "compiled_steps", {})      # none compiled in this process
+    tried = []
+
+    def no_compiler(system, method):
+        tried.append(method)
+        raise CompilerNotFound("no C compiler (test)")
+
+    monkeypatch.setattr(rolling_integrator, "compiled_step", no_compiler)
+    monkeypatch.setattr(rolling_integrator, "PACE_AFTER", 0.0)
+    options = dict(rtol=1e-9, atol=1e-11) if method == "dopri5" else dict(substeps=4)
+    for pays, asked in ((1e9, []), (0.0, [method])):
+        monkeypatch.setattr(rolling_integrator, "COMPILE_PAYS", pays)
+        tried.clear()
+        tr = nc.simulate(model, 0.1, 0.02, integrator=method, **options)
+        assert tried == asked and tr.info["backend"] == "vm" and tr.complete
+        assert tr.info["steps"] >= 5 and max(tr.constraint_residual.max(), tr.velocity_residual.max()) <= 1e-12
+
+
 def test_the_compiled_steps_function_agrees_with_the_python_step(model):
     """The function that is compiled (evaluated here on CasADi's virtual machine, no compile):
     its Schur-complement accelerations equal the KKT solve, its projection the Newton and

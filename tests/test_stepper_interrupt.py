@@ -4,15 +4,13 @@ result file untouched, the partial trajectory written as ``*.incomplete.*``; fro
 :class:`~ncgen.errors.SimulationInterrupted` carrying the trajectory so far."""
 from __future__ import annotations
 
-import subprocess
 import sys
-import time
 
 import pytest
 
 import ncgen as nc
 
-from interrupt_helpers import ENV, ROOT, interrupt, start
+from interrupt_helpers import IN_C_LOOP, ROOT, cli, interrupt, start, wait_until_running
 
 CHAIN = str(ROOT / "examples" / "chain.toml")
 PENDULUM = str(ROOT / "examples" / "double_pendulum.toml")        # a tree, for the joint-space loop
@@ -23,7 +21,7 @@ RUNS = {"fixed": "method='stepper', substeps=1000", "adaptive": "method='stepper
 
 @pytest.mark.parametrize("mode", sorted(RUNS))
 def test_interrupt_in_python_stops_within_seconds_with_the_trajectory_so_far(mode):
-    code = ("import ncgen as nc, time\n"
+    code = (IN_C_LOOP + "import ncgen as nc, time\n"
             f"m = nc.System.from_toml({PENDULUM if mode == 'joint' else CHAIN!r}).build()\n"
             "from ncgen.runtime.stepper_library import load_stepper\n"
             "from ncgen.runtime.joint_simulation import joint_loop\n"
@@ -39,6 +37,7 @@ def test_interrupt_in_python_stops_within_seconds_with_the_trajectory_so_far(mod
     p = start([sys.executable, "-c", code], ROOT)
     line = p.stdout.readline()
     assert line.strip() == "built", line + p.stderr.read()[-2000:]
+    wait_until_running(p)                # SIGINT 3 s into the C loop (rows > 1), long before its end (minutes)
     rc, out, err, after = interrupt(p, 3.0)
     assert rc == 0, err
     assert after < 5.0, f"{after:.1f} s after SIGINT"
@@ -51,27 +50,18 @@ def test_interrupt_in_python_stops_within_seconds_with_the_trajectory_so_far(mod
 
 @pytest.mark.slow      # fast: Ctrl-C in the C loop (test above, stepper and joint) and the CLI's partial result (IDAS, test_reliability_interrupt.py)
 def test_ctrl_c_stops_a_stepper_run_keeps_the_old_result_and_writes_the_partial_one(tmp_path):
-    # what the command does before its run (imports, build, the compiled stepper: compiled by
-    # the first call, found in the cache by the second), timed, so that SIGINT comes during the
-    # run however loaded the machine
-    prepare = [sys.executable, "-c", "import ncgen as nc\nfrom ncgen.runtime.stepper_library import load_stepper\n"
-               f"load_stepper(nc.System.from_toml({CHAIN!r}).build())"]
-    for _ in range(2):
-        began = time.monotonic()
-        done = subprocess.run(prepare, cwd=tmp_path, env=ENV, capture_output=True, text=True)
-        assert done.returncode == 0, done.stderr
-    ready = time.monotonic() - began
     old = tmp_path / "chain.npz"
     old.write_bytes(b"the previous result")
-    p = start([sys.executable, "-m", "ncgen.cli", "simulate", CHAIN, "--method", "stepper", "--t-end", "2000",
-               "--dt", "0.1", "--substeps", "1000", "-o", str(old)], tmp_path)
-    rc, out, err, after = interrupt(p, 5.0 + 2 * ready)
+    p = start(cli(IN_C_LOOP, "simulate", CHAIN, "--method", "stepper", "--t-end", "2000", "--dt", "0.1",
+                  "--substeps", "1000", "-o", str(old)), tmp_path)
+    wait_until_running(p)                # SIGINT 3 s into the C loop, long before its end, however loaded the machine
+    rc, out, err, after = interrupt(p, 3.0)
     assert rc == 130, err
     assert "interrupted" in err and "internal error" not in err and "Traceback" not in err, err
     # wall time by nature: the C loop checks the flag every step (microseconds) and the partial
     # trajectory is written in ~0.3 s unloaded; 5 s leaves > 10× for load 8 on 2 cores
     assert after < 5.0, f"{after:.1f} s after SIGINT"
     assert old.read_bytes() == b"the previous result"
-    traj = nc.runtime.Trajectory.load(tmp_path / "chain.incomplete.npz")
+    traj = nc.Trajectory.load(tmp_path / "chain.incomplete.npz")
     assert 0 < traj.t[-1] < 2000 and not traj.complete
     assert traj.constraint_residual.max() < 1e-8
