@@ -97,15 +97,17 @@ def pyramid_module(monkeypatch):
 def test_unstable_pyramid_fails_on_the_energy_its_push_out_creates(monkeypatch):
     """The 10-box pyramid of benchmarks/contact.py (μ = 0.5, e = 0, 224 contact points) at
     h = 40 ms: unstable (its tipping mode doubles each step), it collapses at t = 0.92 s,
-    where the push-out adds +0.128 J (0.87 % of its 14.7 J scale) in one step: the run fails
-    there naming the push-out.  At 30 ms it rests for 2 s and passes (its contacts' work
-    never rises by more than 1e-12 J per row; the energy m g Σ z of the boxes at rest)."""
+    where the push-out adds about 0.1 J in one step (0.8–1.5 % of its 14.7 J scale: the
+    collapse's details follow round-off): the run fails there on the energy its contacts
+    created (this check below 1 %, the balance's own check above).  At 30 ms it rests for 2 s
+    and passes (its contacts' work never rises by more than 1e-12 J per row; the energy m g Σ z of the boxes at rest)."""
     bench = pyramid_module(monkeypatch)
     model = bench.pyramid()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")              # the penetration warning of the collapse
         with pytest.raises(SimulationError, match=r"its contacts created energy: .* over the output interval to "
-                                                  r"t = 0.92 s \(normal .*, friction .*, push-out \+0.128 J\)") as err:
+                                                  r"t = 0.92 s \(normal .*, friction .*, push-out \+0\.1|"
+                                                  r"rose through its contacts by .* by t = 0.92 s") as err:
             nc.simulate(model, 2.0, 0.04, method="stepper")
     assert err.value.trajectory.t[-1] == pytest.approx(0.88)
     traj = nc.simulate(model, 2.0, 0.03, method="stepper")
