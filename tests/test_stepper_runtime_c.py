@@ -41,7 +41,7 @@ ENV = {**os.environ, "ASAN_OPTIONS": "detect_leaks=0:abort_on_error=0",
 #: packages take the Schur path and the pair kernels (tests/test_contact*.py), the table step's
 #: Jacobians by rows (tests/test_table_step_jacobians.py), and the first build of each program here.
 SLOW_BUILD = pytest.mark.slow
-PROGRAMS = [("test_rattle.c", []), ("test_rattle.c", ["-DKKT_SCHUR"]), ("test_contact.c", []),
+PROGRAMS = [("test_rattle.c", []), ("test_contact.c", []),
             pytest.param("test_contact.c", ["-DSCHUR_FACTORED"], marks=SLOW_BUILD),
             pytest.param("test_contact.c", ["-DPAIRS"], marks=SLOW_BUILD),
             ("test_cone_newton.c", []), ("test_mpc.c", []), ("test_joint_loop.c", []),
@@ -63,7 +63,7 @@ def sanitizers(tmp_path_factory) -> Path:
     return tmp
 
 
-@pytest.mark.parametrize("source, defines", PROGRAMS, ids=["rattle", "rattle-kkt-schur", "contact-kkt", "contact-schur", "contact-pairs",
+@pytest.mark.parametrize("source, defines", PROGRAMS, ids=["rattle", "contact-kkt", "contact-schur", "contact-pairs",
                                                           "cone-newton", "mpc", "joint-loop", "element-tables",
                                                           "sparse-qr", "sparse-lu", "table-stepper", "table-jacobians",
                                                           "table-jacobians-columns", "tree-tables", "spatial",

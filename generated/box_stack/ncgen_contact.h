@@ -634,7 +634,7 @@ static int push_out(const casadi_real *p, casadi_real t1, casadi_real *q_next, c
     if (it == o->max_iter) return STEP_NO_CONVERGENCE;
     for (i = 0; i < NQ; ++i) ws->rhs[i] = 0;
     memcpy(ws->rhs + NQ, ws->r + NQ, NC * sizeof(casadi_real));
-    if (newton_solve(ws, ws->K, ws->rhs, ws->rhs + NX)) return STEP_KERNEL;
+    if (solve(ws, ws->K, ws->rhs, ws->rhs + NX)) return STEP_KERNEL;
     if (!all_finite(ws->rhs + NX, NX)) return STEP_NOT_FINITE;
     for (i = 0; i < NQ; ++i) q_next[i] -= ws->rhs[NX + i];
   }
@@ -649,7 +649,7 @@ static int push_out(const casadi_real *p, casadi_real t1, casadi_real *q_next, c
   ws->res[0] = ws->rhs;
   ws->res[1] = ws->K;
   if (KERNEL_VELOCITY(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
-  if (kkt_solve(ws, ws->K, ws->rhs, ws->rhs + NX)) return STEP_KERNEL;
+  if (solve(ws, ws->K, ws->rhs, ws->rhs + NX)) return STEP_KERNEL;
   if (!all_finite(ws->rhs + NX, NQ)) return STEP_NOT_FINITE;
   memcpy(v_next, ws->rhs + NX, NQ * sizeof(casadi_real));
   if (ws->track_work) {
@@ -723,7 +723,7 @@ static int repeat_step(const casadi_real *q, const casadi_real *v, casadi_real t
   if (status == STEP_OK) {
     memcpy(ws->rhs, ws->j, NQ * sizeof(casadi_real)); /* X j, with ws->K = [M A^T; A 0] at q_next */
     for (i = NQ; i < NX; ++i) ws->rhs[i] = 0;
-    if (kkt_solve(ws, ws->K, ws->rhs, ws->rhs + NX)) return STEP_KERNEL;
+    if (solve(ws, ws->K, ws->rhs, ws->rhs + NX)) return STEP_KERNEL;
     /* the elements whose gaps g - h/2 W X j may be <= 0, and those with a force; at q too
      * (the start-of-step velocities of the contacts that close) */
     pairs_bounds(ws, q_next, ws->rhs + NX);

@@ -96,32 +96,6 @@ static const int a_nz[NNZ_A] = {4, 5, 6, 8, 9, 10, 12, 13, 14, 16, 17, 18, 20, 2
 static const int a_row[NNZ_A] = {0, 4, 5, 0, 4, 5, 0, 4, 5, 1, 3, 5, 1, 3, 5, 1, 3, 5, 2, 3, 4, 2, 3, 4, 2, 3, 4, 6, 10, 11, 6, 10, 11, 6, 10, 11, 7, 9, 11, 7, 9, 11, 7, 9, 11, 8, 9, 10, 8, 9, 10, 8, 9, 10};
 static const int a_col[NNZ_A] = {3, 3, 3, 4, 4, 4, 5, 5, 5, 6, 6, 6, 7, 7, 7, 8, 8, 8, 9, 9, 9, 10, 10, 10, 11, 11, 11, 15, 15, 15, 16, 16, 16, 17, 17, 17, 18, 18, 18, 19, 19, 19, 20, 20, 20, 21, 21, 21, 22, 22, 22, 23, 23, 23};
 
-/* The KKT solves by the Schur complement in blocks of the constant M^-1 (kkt_schur() in
- * ncgen_rattle.h; ncgen/codegen/kkt_blocks.py): KKT_NB blocks, their coordinates
- * kkt_q[kkt_q0[b] ..], constraints kkt_c[kkt_c0[b] ..] and M^-1 (by columns: column j of
- * block b has rows kkt_m_row[k] within the block, k from kkt_m_colind[kkt_q0[b] + j]);
- * K's nonzero kkt_a1_nz[k] (A_1, lower left) is entry kkt_a1_dst[k] of the blocks' dense A
- * (row-major nc_b x nq_b, concatenated), kkt_a0_nz[k] (A_0^T, upper right) likewise. */
-#define KKT_BLOCKS
-#define KKT_NEWTON
-#define KKT_NB 8
-#define KKT_NA 108
-#define KKT_NS 72
-#define KKT_CMAX 6
-#define KKT_NA1 54
-#define KKT_NA0 54
-static const int kkt_q0[KKT_NB + 1] = {0, 1, 2, 3, 12, 13, 14, 15, 24};
-static const int kkt_q[NQ] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 23};
-static const int kkt_c0[KKT_NB + 1] = {0, 0, 0, 0, 6, 6, 6, 6, 12};
-static const int kkt_c[NC] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11};
-static const int kkt_m_colind[NQ + 1] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22, 23, 24};
-static const int kkt_m_row[24] = {0, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 0, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8};
-static const casadi_real kkt_m_val[24] = {1.0, 1.0, 1.0, 299.999850000075, 299.999850000075, 299.999850000075, 533.3347555593482, 533.3347555593482, 533.3347555593482, 1199.9976000047998, 1199.9976000047998, 1199.9976000047998, 2.0, 2.0, 2.0, 4999.999999999998, 4999.999999999998, 4999.999999999998, 4999.999999999998, 4999.999999999998, 4999.999999999998, 599.9988000024, 599.9988000024, 599.9988000024};
-static const int kkt_a1_nz[KKT_NA1] = {4, 5, 6, 8, 9, 10, 12, 13, 14, 16, 17, 18, 20, 21, 22, 24, 25, 26, 28, 29, 30, 32, 33, 34, 36, 37, 38, 43, 44, 45, 47, 48, 49, 51, 52, 53, 55, 56, 57, 59, 60, 61, 63, 64, 65, 67, 68, 69, 71, 72, 73, 75, 76, 77};
-static const int kkt_a1_dst[KKT_NA1] = {0, 36, 45, 1, 37, 46, 2, 38, 47, 12, 30, 48, 13, 31, 49, 14, 32, 50, 24, 33, 42, 25, 34, 43, 26, 35, 44, 54, 90, 99, 55, 91, 100, 56, 92, 101, 66, 84, 102, 67, 85, 103, 68, 86, 104, 78, 87, 96, 79, 88, 97, 80, 89, 98};
-static const int kkt_a0_nz[KKT_NA0] = {78, 79, 80, 81, 82, 83, 84, 85, 86, 87, 88, 89, 90, 91, 92, 93, 94, 95, 96, 97, 98, 99, 100, 101, 102, 103, 104, 105, 106, 107, 108, 109, 110, 111, 112, 113, 114, 115, 116, 117, 118, 119, 120, 121, 122, 123, 124, 125, 126, 127, 128, 129, 130, 131};
-static const int kkt_a0_dst[KKT_NA0] = {0, 1, 2, 12, 13, 14, 24, 25, 26, 30, 31, 32, 33, 34, 35, 36, 37, 38, 42, 43, 44, 45, 46, 47, 48, 49, 50, 54, 55, 56, 66, 67, 68, 78, 79, 80, 84, 85, 86, 87, 88, 89, 90, 91, 92, 96, 97, 98, 99, 100, 101, 102, 103, 104};
-
 #include "ncgen_rattle.h"
 #include "ncgen_cone_newton.h"
 #include "ncgen_contact_pairs.h"

@@ -38,32 +38,6 @@ typedef cartpole_step_options step_options;
 #define KERNEL_OUTPUTS cartpole_step_outputs
 #define KERNEL_WORKS cartpole_step_newton_work, cartpole_step_velocity_work, cartpole_step_check_work, cartpole_step_solve_work, cartpole_step_project_work, cartpole_step_power_work, cartpole_step_outputs_work
 
-/* The KKT solves by the Schur complement in blocks of the constant M^-1 (kkt_schur() in
- * ncgen_rattle.h; ncgen/codegen/kkt_blocks.py): KKT_NB blocks, their coordinates
- * kkt_q[kkt_q0[b] ..], constraints kkt_c[kkt_c0[b] ..] and M^-1 (by columns: column j of
- * block b has rows kkt_m_row[k] within the block, k from kkt_m_colind[kkt_q0[b] + j]);
- * K's nonzero kkt_a1_nz[k] (A_1, lower left) is entry kkt_a1_dst[k] of the blocks' dense A
- * (row-major nc_b x nq_b, concatenated), kkt_a0_nz[k] (A_0^T, upper right) likewise. */
-#define KKT_BLOCKS
-#define KKT_NEWTON
-#define KKT_NB 2
-#define KKT_NA 24
-#define KKT_NS 20
-#define KKT_CMAX 4
-#define KKT_NA1 14
-#define KKT_NA0 14
-static const int kkt_q0[KKT_NB + 1] = {0, 4, 8};
-static const int kkt_q[NQ] = {0, 1, 6, 7, 2, 3, 4, 5};
-static const int kkt_c0[KKT_NB + 1] = {0, 2, 6};
-static const int kkt_c[NC] = {3, 5, 0, 1, 2, 4};
-static const int kkt_m_colind[NQ + 1] = {0, 2, 4, 6, 8, 9, 10, 11, 12};
-static const int kkt_m_row[12] = {0, 2, 1, 3, 0, 2, 1, 3, 0, 1, 2, 3};
-static const casadi_real kkt_m_val[12] = {0.9523809523809523, -0.4761904761904763, 0.9523809523809523, -0.4761904761904763, -0.4761904761904763, 15.238095238095237, -0.4761904761904763, 15.238095238095237, 100.0, 100.0, 100.0, 100.0};
-static const int kkt_a1_nz[KKT_NA1] = {2, 5, 6, 8, 9, 11, 12, 13, 15, 16, 18, 19, 22, 25};
-static const int kkt_a1_dst[KKT_NA1] = {0, 1, 5, 8, 16, 9, 17, 21, 14, 18, 15, 19, 2, 3};
-static const int kkt_a0_nz[KKT_NA0] = {26, 27, 28, 29, 30, 31, 32, 33, 34, 35, 36, 37, 38, 39};
-static const int kkt_a0_dst[KKT_NA0] = {8, 9, 14, 15, 16, 17, 18, 19, 0, 1, 2, 3, 21, 5};
-
 #include "ncgen_rattle.h"
 #include "ncgen_fixed.h"
 #include "ncgen_adaptive.h"

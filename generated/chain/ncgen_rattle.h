@@ -29,10 +29,6 @@
  *   KERNEL_WORKS               the list of every kernel's _work function, comma-separated
  *   NCGEN_CONTACTS             defined for nonsmooth contacts, then also NOUT (values of
  *                              KERNEL_OUTPUTS) and what ncgen_contact.h lists
- *   KKT_BLOCKS                 defined when the KKT solves go by the Schur complement in
- *                              blocks of the constant M^-1 (kkt_schur() below), with KKT_NEWTON
- *                              when Newton's matrix has M as its upper-left block, KKT_NB ..
- *                              KKT_NA0 and the arrays kkt_* (templates/c/stepper.c.j2)
  */
 #include <math.h>
 #include <stdlib.h>
@@ -141,23 +137,16 @@ typedef struct {
   int *pon;          /* per element: 0 skipped, 1 evaluated, 2 to be evaluated (ncgen_contact_pairs.h) */
 #endif
 #endif
-#ifdef KKT_BLOCKS
-  casadi_real *kb;   /* kkt_schur(): the blocks' A_1, A_0 (KKT_NA each; zero but at K's nonzeros
-                        since layout()), T = M^-1 A_0^T (KKT_NA),
-                        S (KKT_NS), then y (NQ) */
-  int *kbi;          /* ... and the pivots of S (KKT_CMAX) */
-#endif
 } workspace;
 
-/* Blocks of the workspace (layout()): KKT_BLOCK, kkt_schur()'s, is the last. */
+/* Blocks of the workspace (layout()). */
 #ifdef CONTACT_PAIRS
-#define KKT_BLOCK 27
+#define N_BLOCKS 27
 #elif defined(NCGEN_CONTACTS)
-#define KKT_BLOCK 26
+#define N_BLOCKS 26
 #else
-#define KKT_BLOCK 10
+#define N_BLOCKS 10
 #endif
-#define N_BLOCKS (KKT_BLOCK + 1)
 
 static size_t align_up(size_t n) {
   return (n + ALIGN - 1) / ALIGN * ALIGN;
@@ -225,11 +214,6 @@ static size_t layout(workspace *ws, char *block) {
               NE * sizeof(int);
 #endif
 #endif
-#ifdef KKT_BLOCKS
-  sizes[KKT_BLOCK] = (3 * KKT_NA + KKT_NS + NQ) * sizeof(casadi_real) + KKT_CMAX * sizeof(int);
-#else
-  sizes[KKT_BLOCK] = 0;
-#endif
   off[0] = 0;
   for (k = 0; k < N_BLOCKS; ++k) off[k + 1] = off[k] + align_up(sizes[k]);
   if (ws) {
@@ -292,11 +276,6 @@ static size_t layout(workspace *ws, char *block) {
     ws->tl_zero = 0;
 #endif
 #endif
-#ifdef KKT_BLOCKS
-    ws->kb = (casadi_real *) (void *) (block + off[KKT_BLOCK]);
-    ws->kbi = (int *) (void *) (ws->kb + 3 * KKT_NA + KKT_NS + NQ);
-    memset(ws->kb, 0, 2 * KKT_NA * sizeof(casadi_real)); /* A_1, A_0 outside K's pattern */
-#endif
   }
   return off[N_BLOCKS];
 }
@@ -333,122 +312,6 @@ static int solve(workspace *ws, const casadi_real *K, const casadi_real *r, casa
   ws->arg[1] = r;
   ws->res[0] = x;
   return KERNEL_SOLVE(ws->arg, ws->res, ws->iw, ws->w, 0);
-}
-
-#ifdef KKT_BLOCKS
-/* LU with partial pivoting of the n x n matrix s (row-major) in place, then s z = b solved in
- * place of b; returns 1 when a pivot is at most 1e-12 max |s_ij| (numerically singular). */
-static int kkt_lu_solve(casadi_real *s, int n, int *piv, casadi_real *b) {
-  casadi_real smax = 0;
-  int i, j, k;
-  for (i = 0; i < n * n; ++i)
-    if (fabs(s[i]) > smax) smax = fabs(s[i]); /* NaN: no pivot passes the test below */
-  if (!(smax > 0)) return 1;
-  for (k = 0; k < n; ++k) {
-    int p = k;
-    for (i = k + 1; i < n; ++i)
-      if (fabs(s[i * n + k]) > fabs(s[p * n + k])) p = i;
-    if (!(fabs(s[p * n + k]) > 1e-12 * smax)) return 1;
-    piv[k] = p;
-    if (p != k)
-      for (j = 0; j < n; ++j) {
-        casadi_real t = s[k * n + j];
-        s[k * n + j] = s[p * n + j];
-        s[p * n + j] = t;
-      }
-    for (i = k + 1; i < n; ++i) {
-      casadi_real l = s[i * n + k] /= s[k * n + k];
-      if (l != 0)
-        for (j = k + 1; j < n; ++j) s[i * n + j] -= l * s[k * n + j];
-    }
-  }
-  for (k = 0; k < n; ++k) { /* L z' = P b */
-    casadi_real t = b[piv[k]];
-    b[piv[k]] = b[k];
-    b[k] = t;
-    for (i = 0; i < k; ++i) b[k] -= s[k * n + i] * b[i];
-  }
-  for (k = n - 1; k >= 0; --k) { /* U z = z' */
-    for (i = k + 1; i < n; ++i) b[k] -= s[k * n + i] * b[i];
-    b[k] /= s[k * n + k];
-  }
-  return 0;
-}
-
-/* [x; y] = K^-1 [r; s] for K = [[M, A_0^T], [A_1, 0]] with the constant M (its blocks' inverses
- * kkt_m_*), by blocks: S_b = A_1 M^-1 A_0^T, S_b y = A_1 M^-1 r - s, x = M^-1 (r - A_0^T y)
- * (ncgen/codegen/kkt_blocks.py).  Returns 1 when a block's S_b is numerically singular (then
- * out is unchanged). */
-static int kkt_schur(workspace *ws, const casadi_real *K, const casadi_real *r, casadi_real *out) {
-  casadi_real *A1 = ws->kb, *A0 = A1 + KKT_NA, *T = A0 + KKT_NA, *S = T + KKT_NA, *y = S + KKT_NS;
-  int b, i, j, c, k, aoff = 0, soff = 0;
-  for (k = 0; k < KKT_NA1; ++k) A1[kkt_a1_dst[k]] = K[kkt_a1_nz[k]];
-  for (k = 0; k < KKT_NA0; ++k) A0[kkt_a0_dst[k]] = K[kkt_a0_nz[k]];
-  for (b = 0; b < KKT_NB; ++b) {
-    const int nqb = kkt_q0[b + 1] - kkt_q0[b], ncb = kkt_c0[b + 1] - kkt_c0[b], *qb = kkt_q + kkt_q0[b],
-              *cb = kkt_c + kkt_c0[b], *mp = kkt_m_colind + kkt_q0[b];
-    const casadi_real *a1 = A1 + aoff, *a0 = A0 + aoff;
-    casadi_real *t = T + aoff, *s = S + soff, *yb = y + kkt_q0[b], z[KKT_CMAX];
-    for (i = 0; i < nqb; ++i) yb[i] = 0;
-    for (j = 0; j < nqb; ++j) { /* y_b = M_b^-1 r_b, by M_b^-1's columns */
-      const casadi_real rj = r[qb[j]];
-      if (rj != 0)
-        for (k = mp[j]; k < mp[j + 1]; ++k) yb[kkt_m_row[k]] += kkt_m_val[k] * rj;
-    }
-    if (ncb > 0) {
-      for (i = 0; i < nqb * ncb; ++i) t[i] = 0;
-      for (c = 0; c < ncb; ++c) /* T_b = M_b^-1 A_0b^T (nq_b x nc_b), by A_0b's nonzeros */
-        for (j = 0; j < nqb; ++j) {
-          const casadi_real acj = a0[c * nqb + j];
-          if (acj != 0)
-            for (k = mp[j]; k < mp[j + 1]; ++k) t[kkt_m_row[k] * ncb + c] += kkt_m_val[k] * acj;
-        }
-      for (c = 0; c < ncb; ++c) { /* S_b = A_1b T_b, z = A_1b y_b - s_b */
-        casadi_real v = -r[NQ + cb[c]];
-        for (k = 0; k < ncb; ++k) s[c * ncb + k] = 0;
-        for (i = 0; i < nqb; ++i) {
-          const casadi_real aci = a1[c * nqb + i];
-          if (aci == 0) continue;
-          v += aci * yb[i];
-          for (k = 0; k < ncb; ++k) s[c * ncb + k] += aci * t[i * ncb + k];
-        }
-        z[c] = v;
-      }
-      if (kkt_lu_solve(s, ncb, ws->kbi, z)) return 1;
-      for (i = 0; i < nqb; ++i) /* x_b = y_b - T_b z */
-        for (c = 0; c < ncb; ++c) yb[i] -= t[i * ncb + c] * z[c];
-      for (c = 0; c < ncb; ++c) s[c] = z[c]; /* z kept until out is written */
-    }
-    aoff += ncb * nqb;
-    soff += ncb * ncb;
-  }
-  for (b = 0, soff = 0; b < KKT_NB; ++b) {
-    const int nqb = kkt_q0[b + 1] - kkt_q0[b], ncb = kkt_c0[b + 1] - kkt_c0[b];
-    for (i = 0; i < nqb; ++i) out[kkt_q[kkt_q0[b] + i]] = y[kkt_q0[b] + i];
-    for (c = 0; c < ncb; ++c) out[NQ + kkt_c[kkt_c0[b] + c]] = S[soff + c];
-    soff += ncb * ncb;
-  }
-  return 0;
-}
-#endif
-
-/* x = K^-1 r for a KKT matrix [[M, A^T], [A, 0]] (KERNEL_VELOCITY's, KERNEL_PROJECT's): by
- * kkt_schur() where it applies and succeeds, else by the sparse QR. */
-static int kkt_solve(workspace *ws, const casadi_real *K, const casadi_real *r, casadi_real *x) {
-#ifdef KKT_BLOCKS
-  if (!kkt_schur(ws, K, r, x)) return 0;
-#endif
-  return solve(ws, K, r, x);
-}
-
-/* x = K^-1 r for KERNEL_NEWTON's K: as kkt_solve() when its upper-left block is M (KKT_NEWTON:
- * the forces do not depend on v), else by the sparse QR. */
-static int newton_solve(workspace *ws, const casadi_real *K, const casadi_real *r, casadi_real *x) {
-#ifdef KKT_NEWTON
-  return kkt_solve(ws, K, r, x);
-#else
-  return solve(ws, K, r, x);
-#endif
 }
 
 /* P = dE/dt at (t, q, v, lam, u) (KERNEL_POWER) and its parts into P[0 .. NPOWER - 1]
@@ -517,7 +380,7 @@ static int step(const casadi_real *q, const casadi_real *v, casadi_real t, const
       if (iterations) *iterations = it;
       return STEP_NO_CONVERGENCE;
     }
-    if (newton_solve(ws, ws->K, ws->r, ws->dx)) return STEP_KERNEL;
+    if (solve(ws, ws->K, ws->r, ws->dx)) return STEP_KERNEL;
     if (!all_finite(ws->dx, NX)) return STEP_NOT_FINITE;
     for (i = 0; i < NX; ++i) ws->x[i] -= ws->dx[i];
   }
@@ -537,7 +400,7 @@ static int step(const casadi_real *q, const casadi_real *v, casadi_real t, const
   ws->res[0] = ws->r;
   ws->res[1] = ws->K;
   if (KERNEL_VELOCITY(ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
-  if (kkt_solve(ws, ws->K, ws->r, ws->dx)) return STEP_KERNEL;
+  if (solve(ws, ws->K, ws->r, ws->dx)) return STEP_KERNEL;
   if (!all_finite(ws->dx, NX)) return STEP_NOT_FINITE;
   memcpy(v_next, ws->dx, NQ * sizeof *v_next);
   if (lam)
@@ -631,12 +494,12 @@ static int project(workspace *ws, casadi_real t, casadi_real *q, casadi_real *v,
     if (!all_finite(ws->r + NQ, NC)) return STEP_NOT_FINITE;
     if (norm_inf(ws->r + NQ, NC) <= o->tol) break;
     if (it == o->max_iter) return STEP_NO_CONVERGENCE;
-    if (kkt_solve(ws, ws->K, ws->r, ws->dx)) return STEP_KERNEL;
+    if (solve(ws, ws->K, ws->r, ws->dx)) return STEP_KERNEL;
     if (!all_finite(ws->dx, NX)) return STEP_NOT_FINITE;
     for (i = 0; i < NQ; ++i) q[i] -= ws->dx[i];
   }
   memcpy(ws->r + NQ, phidot, NC * sizeof *phidot);
-  if (kkt_solve(ws, ws->K, ws->r, ws->dx)) return STEP_KERNEL;
+  if (solve(ws, ws->K, ws->r, ws->dx)) return STEP_KERNEL;
   if (!all_finite(ws->dx, NX)) return STEP_NOT_FINITE;
   for (i = 0; i < NQ; ++i) v[i] -= ws->dx[i];
   return STEP_OK;

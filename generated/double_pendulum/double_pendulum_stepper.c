@@ -38,32 +38,6 @@ typedef double_pendulum_step_options step_options;
 #define KERNEL_OUTPUTS double_pendulum_step_outputs
 #define KERNEL_WORKS double_pendulum_step_newton_work, double_pendulum_step_velocity_work, double_pendulum_step_check_work, double_pendulum_step_solve_work, double_pendulum_step_project_work, double_pendulum_step_power_work, double_pendulum_step_outputs_work
 
-/* The KKT solves by the Schur complement in blocks of the constant M^-1 (kkt_schur() in
- * ncgen_rattle.h; ncgen/codegen/kkt_blocks.py): KKT_NB blocks, their coordinates
- * kkt_q[kkt_q0[b] ..], constraints kkt_c[kkt_c0[b] ..] and M^-1 (by columns: column j of
- * block b has rows kkt_m_row[k] within the block, k from kkt_m_colind[kkt_q0[b] + j]);
- * K's nonzero kkt_a1_nz[k] (A_1, lower left) is entry kkt_a1_dst[k] of the blocks' dense A
- * (row-major nc_b x nq_b, concatenated), kkt_a0_nz[k] (A_0^T, upper right) likewise. */
-#define KKT_BLOCKS
-#define KKT_NEWTON
-#define KKT_NB 1
-#define KKT_NA 120
-#define KKT_NS 100
-#define KKT_CMAX 10
-#define KKT_NA1 35
-#define KKT_NA0 35
-static const int kkt_q0[KKT_NB + 1] = {0, 12};
-static const int kkt_q[NQ] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11};
-static const int kkt_c0[KKT_NB + 1] = {0, 10};
-static const int kkt_c[NC] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9};
-static const int kkt_m_colind[NQ + 1] = {0, 2, 4, 6, 7, 8, 9, 11, 13, 15, 16, 17, 18};
-static const int kkt_m_row[18] = {0, 6, 1, 7, 2, 8, 3, 4, 5, 0, 6, 1, 7, 2, 8, 9, 10, 11};
-static const casadi_real kkt_m_val[18] = {1.715560483701558, 0.4283752468306411, 1.715560483701558, 0.4283752468306411, 1.715560483701558, 0.4283752468306411, 1999.9999999999982, 1999.9999999999982, 1999.9999999999982, 0.4283752468306411, 0.8572653677560305, 0.4283752468306411, 0.8572653677560305, 0.4283752468306411, 0.8572653677560305, 1999.9999999999982, 1999.9999999999982, 1999.9999999999982};
-static const int kkt_a1_nz[KKT_NA1] = {2, 3, 4, 5, 8, 9, 10, 11, 12, 13, 16, 17, 18, 19, 21, 22, 24, 25, 26, 28, 29, 32, 33, 36, 37, 38, 41, 42, 44, 45, 47, 48, 49, 51, 52};
-static const int kkt_a1_dst[KKT_NA1] = {0, 36, 60, 96, 1, 37, 49, 61, 97, 109, 2, 38, 62, 98, 15, 39, 16, 28, 40, 17, 41, 66, 102, 67, 103, 115, 68, 104, 81, 105, 82, 94, 106, 83, 107};
-static const int kkt_a0_nz[KKT_NA0] = {53, 54, 55, 56, 57, 58, 59, 60, 61, 62, 63, 64, 65, 66, 67, 68, 69, 70, 71, 72, 73, 74, 75, 76, 77, 78, 79, 80, 81, 82, 83, 84, 85, 86, 87};
-static const int kkt_a0_dst[KKT_NA0] = {0, 1, 2, 15, 16, 17, 28, 36, 37, 38, 39, 40, 41, 49, 60, 61, 62, 66, 67, 68, 81, 82, 83, 94, 96, 97, 98, 102, 103, 104, 105, 106, 107, 109, 115};
-
 #include "ncgen_rattle.h"
 #include "ncgen_fixed.h"
 #include "ncgen_adaptive.h"

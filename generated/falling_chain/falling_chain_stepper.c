@@ -99,32 +99,6 @@ static const int a_nz[NNZ_A] = {2, 5, 8, 12, 13, 17, 18, 22, 23, 27, 28, 32, 33,
 static const int a_row[NNZ_A] = {0, 0, 0, 0, 1, 0, 1, 0, 1, 1, 2, 1, 2, 1, 2, 2, 2, 2};
 static const int a_col[NNZ_A] = {0, 1, 2, 3, 3, 4, 4, 5, 5, 6, 6, 7, 7, 8, 8, 9, 10, 11};
 
-/* The KKT solves by the Schur complement in blocks of the constant M^-1 (kkt_schur() in
- * ncgen_rattle.h; ncgen/codegen/kkt_blocks.py): KKT_NB blocks, their coordinates
- * kkt_q[kkt_q0[b] ..], constraints kkt_c[kkt_c0[b] ..] and M^-1 (by columns: column j of
- * block b has rows kkt_m_row[k] within the block, k from kkt_m_colind[kkt_q0[b] + j]);
- * K's nonzero kkt_a1_nz[k] (A_1, lower left) is entry kkt_a1_dst[k] of the blocks' dense A
- * (row-major nc_b x nq_b, concatenated), kkt_a0_nz[k] (A_0^T, upper right) likewise. */
-#define KKT_BLOCKS
-#define KKT_NEWTON
-#define KKT_NB 4
-#define KKT_NA 36
-#define KKT_NS 9
-#define KKT_CMAX 3
-#define KKT_NA1 18
-#define KKT_NA0 18
-static const int kkt_q0[KKT_NB + 1] = {0, 12, 13, 14, 15};
-static const int kkt_q[NQ] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14};
-static const int kkt_c0[KKT_NB + 1] = {0, 3, 3, 3, 3};
-static const int kkt_c[NC] = {0, 1, 2};
-static const int kkt_m_colind[NQ + 1] = {0, 4, 8, 12, 16, 20, 24, 28, 32, 36, 40, 44, 48, 49, 50, 51};
-static const int kkt_m_row[51] = {0, 3, 6, 9, 1, 4, 7, 10, 2, 5, 8, 11, 0, 3, 6, 9, 1, 4, 7, 10, 2, 5, 8, 11, 0, 3, 6, 9, 1, 4, 7, 10, 2, 5, 8, 11, 0, 3, 6, 9, 1, 4, 7, 10, 2, 5, 8, 11, 0, 0, 0};
-static const casadi_real kkt_m_val[51] = {34.66666666666666, -9.333333333333327, 2.6666666666666634, -1.3333333333333313, 34.66666666666666, -9.333333333333327, 2.6666666666666634, -1.3333333333333313, 34.66666666666666, -9.333333333333327, 2.6666666666666634, -1.3333333333333313, -9.333333333333327, 18.66666666666666, -5.3333333333333295, 2.666666666666664, -9.333333333333327, 18.66666666666666, -5.3333333333333295, 2.666666666666664, -9.333333333333327, 18.66666666666666, -5.3333333333333295, 2.666666666666664, 2.6666666666666634, -5.3333333333333295, 18.66666666666666, -9.333333333333327, 2.6666666666666634, -5.3333333333333295, 18.66666666666666, -9.333333333333327, 2.6666666666666634, -5.3333333333333295, 18.66666666666666, -9.333333333333327, -1.3333333333333313, 2.666666666666664, -9.333333333333327, 34.66666666666666, -1.3333333333333313, 2.666666666666664, -9.333333333333327, 34.66666666666666, -1.3333333333333313, 2.666666666666664, -9.333333333333327, 34.66666666666666, 20.0, 20.0, 20.0};
-static const int kkt_a1_nz[KKT_NA1] = {2, 5, 8, 12, 13, 17, 18, 22, 23, 27, 28, 32, 33, 37, 38, 41, 44, 47};
-static const int kkt_a1_dst[KKT_NA1] = {0, 1, 2, 3, 15, 4, 16, 5, 17, 18, 30, 19, 31, 20, 32, 33, 34, 35};
-static const int kkt_a0_nz[KKT_NA0] = {51, 52, 53, 54, 55, 56, 57, 58, 59, 60, 61, 62, 63, 64, 65, 66, 67, 68};
-static const int kkt_a0_dst[KKT_NA0] = {0, 1, 2, 3, 4, 5, 15, 16, 17, 18, 19, 20, 30, 31, 32, 33, 34, 35};
-
 #include "ncgen_rattle.h"
 #include "ncgen_cone_newton.h"
 #include "ncgen_contact_pairs.h"

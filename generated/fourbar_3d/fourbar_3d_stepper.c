@@ -38,32 +38,6 @@ typedef fourbar_3d_step_options step_options;
 #define KERNEL_OUTPUTS fourbar_3d_step_outputs
 #define KERNEL_WORKS fourbar_3d_step_newton_work, fourbar_3d_step_velocity_work, fourbar_3d_step_check_work, fourbar_3d_step_solve_work, fourbar_3d_step_project_work, fourbar_3d_step_power_work, fourbar_3d_step_outputs_work
 
-/* The KKT solves by the Schur complement in blocks of the constant M^-1 (kkt_schur() in
- * ncgen_rattle.h; ncgen/codegen/kkt_blocks.py): KKT_NB blocks, their coordinates
- * kkt_q[kkt_q0[b] ..], constraints kkt_c[kkt_c0[b] ..] and M^-1 (by columns: column j of
- * block b has rows kkt_m_row[k] within the block, k from kkt_m_colind[kkt_q0[b] + j]);
- * K's nonzero kkt_a1_nz[k] (A_1, lower left) is entry kkt_a1_dst[k] of the blocks' dense A
- * (row-major nc_b x nq_b, concatenated), kkt_a0_nz[k] (A_0^T, upper right) likewise. */
-#define KKT_BLOCKS
-#define KKT_NEWTON
-#define KKT_NB 1
-#define KKT_NA 132
-#define KKT_NS 121
-#define KKT_CMAX 11
-#define KKT_NA1 34
-#define KKT_NA0 34
-static const int kkt_q0[KKT_NB + 1] = {0, 12};
-static const int kkt_q[NQ] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11};
-static const int kkt_c0[KKT_NB + 1] = {0, 11};
-static const int kkt_c[NC] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10};
-static const int kkt_m_colind[NQ + 1] = {0, 3, 6, 9, 12, 15, 18, 21, 24, 27, 28, 29, 30};
-static const int kkt_m_row[30] = {0, 3, 6, 1, 4, 7, 2, 5, 8, 0, 3, 6, 1, 4, 7, 2, 5, 8, 0, 3, 6, 1, 4, 7, 2, 5, 8, 9, 10, 11};
-static const casadi_real kkt_m_val[30] = {1.7286232556781087, 9.595786696781676e-17, -0.3004124412474629, 1.7286232556781087, 9.595786696781676e-17, -0.3004124412474629, 1.7286232556781087, 9.595786696781676e-17, -0.3004124412474629, 9.595786696781676e-17, 199.99999999999983, -1.667624045783927e-17, 9.595786696781676e-17, 199.99999999999983, -1.667624045783927e-17, 9.595786696781676e-17, 199.99999999999983, -1.667624045783927e-17, -0.3004124412474629, -1.667624045783927e-17, 1.3556111411291758, -0.3004124412474629, -1.667624045783927e-17, 1.3556111411291758, -0.3004124412474629, -1.667624045783927e-17, 1.3556111411291758, 133.33333333333323, 133.33333333333323, 133.33333333333323};
-static const int kkt_a1_nz[KKT_NA1] = {3, 4, 5, 9, 10, 11, 15, 16, 17, 18, 21, 22, 25, 26, 29, 30, 31, 34, 35, 36, 37, 40, 41, 42, 45, 46, 47, 49, 50, 51, 53, 54, 56, 57};
-static const int kkt_a1_dst[KKT_NA1] = {0, 36, 120, 1, 37, 121, 2, 38, 50, 122, 15, 39, 16, 40, 17, 29, 41, 66, 102, 114, 126, 67, 103, 127, 68, 104, 128, 81, 93, 105, 82, 106, 83, 107};
-static const int kkt_a0_nz[KKT_NA0] = {58, 59, 60, 61, 62, 63, 64, 65, 66, 67, 68, 69, 70, 71, 72, 73, 74, 75, 76, 77, 78, 79, 80, 81, 82, 83, 84, 85, 86, 87, 88, 89, 90, 91};
-static const int kkt_a0_dst[KKT_NA0] = {0, 1, 2, 15, 16, 17, 29, 36, 37, 38, 39, 40, 41, 50, 66, 67, 68, 81, 82, 83, 93, 102, 103, 104, 105, 106, 107, 114, 120, 121, 122, 126, 127, 128};
-
 #include "ncgen_rattle.h"
 #include "ncgen_fixed.h"
 #include "ncgen_adaptive.h"

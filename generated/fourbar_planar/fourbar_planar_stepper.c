@@ -38,31 +38,6 @@ typedef fourbar_planar_step_options step_options;
 #define KERNEL_OUTPUTS fourbar_planar_step_outputs
 #define KERNEL_WORKS fourbar_planar_step_newton_work, fourbar_planar_step_velocity_work, fourbar_planar_step_check_work, fourbar_planar_step_solve_work, fourbar_planar_step_project_work, fourbar_planar_step_power_work, fourbar_planar_step_outputs_work
 
-/* The KKT solves by the Schur complement in blocks of the constant M^-1 (kkt_schur() in
- * ncgen_rattle.h; ncgen/codegen/kkt_blocks.py): KKT_NB blocks, their coordinates
- * kkt_q[kkt_q0[b] ..], constraints kkt_c[kkt_c0[b] ..] and M^-1 (by columns: column j of
- * block b has rows kkt_m_row[k] within the block, k from kkt_m_colind[kkt_q0[b] + j]);
- * K's nonzero kkt_a1_nz[k] (A_1, lower left) is entry kkt_a1_dst[k] of the blocks' dense A
- * (row-major nc_b x nq_b, concatenated), kkt_a0_nz[k] (A_0^T, upper right) likewise. */
-#define KKT_BLOCKS
-#define KKT_NB 1
-#define KKT_NA 12
-#define KKT_NS 9
-#define KKT_CMAX 3
-#define KKT_NA1 8
-#define KKT_NA0 8
-static const int kkt_q0[KKT_NB + 1] = {0, 4};
-static const int kkt_q[NQ] = {0, 1, 2, 3};
-static const int kkt_c0[KKT_NB + 1] = {0, 3};
-static const int kkt_c[NC] = {0, 1, 2};
-static const int kkt_m_colind[NQ + 1] = {0, 2, 4, 6, 8};
-static const int kkt_m_row[8] = {0, 2, 1, 3, 0, 2, 1, 3};
-static const casadi_real kkt_m_val[8] = {1.6744186046511627, -0.46511627906976744, 1.6744186046511627, -0.46511627906976744, -0.46511627906976744, 1.2403100775193798, -0.46511627906976744, 1.2403100775193798};
-static const int kkt_a1_nz[KKT_NA1] = {3, 4, 8, 9, 12, 13, 16, 17};
-static const int kkt_a1_dst[KKT_NA1] = {0, 4, 1, 5, 6, 10, 7, 11};
-static const int kkt_a0_nz[KKT_NA0] = {18, 19, 20, 21, 22, 23, 24, 25};
-static const int kkt_a0_dst[KKT_NA0] = {0, 1, 4, 5, 6, 7, 10, 11};
-
 #include "ncgen_rattle.h"
 #include "ncgen_fixed.h"
 #include "ncgen_adaptive.h"

@@ -38,32 +38,6 @@ typedef heavy_top_step_options step_options;
 #define KERNEL_OUTPUTS heavy_top_step_outputs
 #define KERNEL_WORKS heavy_top_step_newton_work, heavy_top_step_velocity_work, heavy_top_step_check_work, heavy_top_step_solve_work, heavy_top_step_project_work, heavy_top_step_power_work, heavy_top_step_outputs_work
 
-/* The KKT solves by the Schur complement in blocks of the constant M^-1 (kkt_schur() in
- * ncgen_rattle.h; ncgen/codegen/kkt_blocks.py): KKT_NB blocks, their coordinates
- * kkt_q[kkt_q0[b] ..], constraints kkt_c[kkt_c0[b] ..] and M^-1 (by columns: column j of
- * block b has rows kkt_m_row[k] within the block, k from kkt_m_colind[kkt_q0[b] + j]);
- * K's nonzero kkt_a1_nz[k] (A_1, lower left) is entry kkt_a1_dst[k] of the blocks' dense A
- * (row-major nc_b x nq_b, concatenated), kkt_a0_nz[k] (A_0^T, upper right) likewise. */
-#define KKT_BLOCKS
-#define KKT_NEWTON
-#define KKT_NB 1
-#define KKT_NA 54
-#define KKT_NS 36
-#define KKT_CMAX 6
-#define KKT_NA1 27
-#define KKT_NA0 27
-static const int kkt_q0[KKT_NB + 1] = {0, 9};
-static const int kkt_q[NQ] = {0, 1, 2, 3, 4, 5, 6, 7, 8};
-static const int kkt_c0[KKT_NB + 1] = {0, 6};
-static const int kkt_c[NC] = {0, 1, 2, 3, 4, 5};
-static const int kkt_m_colind[NQ + 1] = {0, 2, 4, 6, 7, 8, 9, 11, 13, 15};
-static const int kkt_m_row[15] = {0, 6, 1, 7, 2, 8, 3, 4, 5, 0, 6, 1, 7, 2, 8};
-static const casadi_real kkt_m_val[15] = {3333.3333333333335, -1.8503717077085946e-13, 3333.3333333333335, -1.8503717077085946e-13, 3333.3333333333335, -1.8503717077085946e-13, 3333.3333333333335, 3333.3333333333335, 3333.3333333333335, -1.8503717077085946e-13, 1111.111111111111, -1.8503717077085946e-13, 1111.111111111111, -1.8503717077085946e-13, 1111.111111111111};
-static const int kkt_a1_nz[KKT_NA1] = {2, 3, 4, 7, 8, 9, 12, 13, 14, 16, 17, 18, 20, 21, 22, 24, 25, 26, 29, 30, 31, 34, 35, 36, 39, 40, 41};
-static const int kkt_a1_dst[KKT_NA1] = {0, 36, 45, 1, 37, 46, 2, 38, 47, 12, 30, 48, 13, 31, 49, 14, 32, 50, 24, 33, 42, 25, 34, 43, 26, 35, 44};
-static const int kkt_a0_nz[KKT_NA0] = {42, 43, 44, 45, 46, 47, 48, 49, 50, 51, 52, 53, 54, 55, 56, 57, 58, 59, 60, 61, 62, 63, 64, 65, 66, 67, 68};
-static const int kkt_a0_dst[KKT_NA0] = {0, 1, 2, 12, 13, 14, 24, 25, 26, 30, 31, 32, 33, 34, 35, 36, 37, 38, 42, 43, 44, 45, 46, 47, 48, 49, 50};
-
 #include "ncgen_rattle.h"
 #include "ncgen_fixed.h"
 #include "ncgen_adaptive.h"

@@ -38,32 +38,6 @@ typedef iftomm_a01_pendulum_step_options step_options;
 #define KERNEL_OUTPUTS iftomm_a01_pendulum_step_outputs
 #define KERNEL_WORKS iftomm_a01_pendulum_step_newton_work, iftomm_a01_pendulum_step_velocity_work, iftomm_a01_pendulum_step_check_work, iftomm_a01_pendulum_step_solve_work, iftomm_a01_pendulum_step_project_work, iftomm_a01_pendulum_step_power_work, iftomm_a01_pendulum_step_outputs_work
 
-/* The KKT solves by the Schur complement in blocks of the constant M^-1 (kkt_schur() in
- * ncgen_rattle.h; ncgen/codegen/kkt_blocks.py): KKT_NB blocks, their coordinates
- * kkt_q[kkt_q0[b] ..], constraints kkt_c[kkt_c0[b] ..] and M^-1 (by columns: column j of
- * block b has rows kkt_m_row[k] within the block, k from kkt_m_colind[kkt_q0[b] + j]);
- * K's nonzero kkt_a1_nz[k] (A_1, lower left) is entry kkt_a1_dst[k] of the blocks' dense A
- * (row-major nc_b x nq_b, concatenated), kkt_a0_nz[k] (A_0^T, upper right) likewise. */
-#define KKT_BLOCKS
-#define KKT_NEWTON
-#define KKT_NB 1
-#define KKT_NA 2
-#define KKT_NS 1
-#define KKT_CMAX 1
-#define KKT_NA1 2
-#define KKT_NA0 2
-static const int kkt_q0[KKT_NB + 1] = {0, 2};
-static const int kkt_q[NQ] = {0, 1};
-static const int kkt_c0[KKT_NB + 1] = {0, 1};
-static const int kkt_c[NC] = {0};
-static const int kkt_m_colind[NQ + 1] = {0, 1, 2};
-static const int kkt_m_row[2] = {0, 1};
-static const casadi_real kkt_m_val[2] = {1.0, 1.0};
-static const int kkt_a1_nz[KKT_NA1] = {1, 3};
-static const int kkt_a1_dst[KKT_NA1] = {0, 1};
-static const int kkt_a0_nz[KKT_NA0] = {4, 5};
-static const int kkt_a0_dst[KKT_NA0] = {0, 1};
-
 #include "ncgen_rattle.h"
 #include "ncgen_fixed.h"
 #include "ncgen_adaptive.h"

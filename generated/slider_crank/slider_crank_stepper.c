@@ -38,31 +38,6 @@ typedef slider_crank_step_options step_options;
 #define KERNEL_OUTPUTS slider_crank_step_outputs
 #define KERNEL_WORKS slider_crank_step_newton_work, slider_crank_step_velocity_work, slider_crank_step_check_work, slider_crank_step_solve_work, slider_crank_step_project_work, slider_crank_step_power_work, slider_crank_step_outputs_work
 
-/* The KKT solves by the Schur complement in blocks of the constant M^-1 (kkt_schur() in
- * ncgen_rattle.h; ncgen/codegen/kkt_blocks.py): KKT_NB blocks, their coordinates
- * kkt_q[kkt_q0[b] ..], constraints kkt_c[kkt_c0[b] ..] and M^-1 (by columns: column j of
- * block b has rows kkt_m_row[k] within the block, k from kkt_m_colind[kkt_q0[b] + j]);
- * K's nonzero kkt_a1_nz[k] (A_1, lower left) is entry kkt_a1_dst[k] of the blocks' dense A
- * (row-major nc_b x nq_b, concatenated), kkt_a0_nz[k] (A_0^T, upper right) likewise. */
-#define KKT_BLOCKS
-#define KKT_NB 2
-#define KKT_NA 32
-#define KKT_NS 32
-#define KKT_CMAX 4
-#define KKT_NA1 18
-#define KKT_NA0 18
-static const int kkt_q0[KKT_NB + 1] = {0, 4, 8};
-static const int kkt_q[NQ] = {0, 1, 2, 3, 4, 5, 6, 7};
-static const int kkt_c0[KKT_NB + 1] = {0, 4, 8};
-static const int kkt_c[NC] = {0, 4, 5, 7, 1, 2, 3, 6};
-static const int kkt_m_colind[NQ + 1] = {0, 2, 4, 6, 8, 9, 10, 11, 12};
-static const int kkt_m_row[12] = {0, 2, 1, 3, 0, 2, 1, 3, 0, 1, 2, 3};
-static const casadi_real kkt_m_val[12] = {3.7822349570200564, -0.17191977077363885, 3.7822349570200564, -0.17191977077363885, -0.17191977077363885, 0.9169054441260743, -0.17191977077363885, 0.9169054441260743, 1000.0, 1000.0, 1000.0, 1000.0};
-static const int kkt_a1_nz[KKT_NA1] = {2, 3, 4, 7, 8, 9, 13, 17, 18, 20, 21, 23, 24, 25, 27, 28, 30, 31};
-static const int kkt_a1_dst[KKT_NA1] = {0, 4, 8, 1, 5, 9, 6, 7, 15, 16, 24, 17, 25, 29, 22, 26, 23, 27};
-static const int kkt_a0_nz[KKT_NA0] = {32, 33, 34, 35, 36, 37, 38, 39, 40, 41, 42, 43, 44, 45, 46, 47, 48, 49};
-static const int kkt_a0_dst[KKT_NA0] = {0, 1, 16, 17, 22, 23, 24, 25, 26, 27, 4, 5, 6, 7, 8, 9, 29, 15};
-
 #include "ncgen_rattle.h"
 #include "ncgen_fixed.h"
 #include "ncgen_adaptive.h"

@@ -38,31 +38,6 @@ typedef tensegrity_step_options step_options;
 #define KERNEL_OUTPUTS tensegrity_step_outputs
 #define KERNEL_WORKS tensegrity_step_newton_work, tensegrity_step_velocity_work, tensegrity_step_check_work, tensegrity_step_solve_work, tensegrity_step_project_work, tensegrity_step_power_work, tensegrity_step_outputs_work
 
-/* The KKT solves by the Schur complement in blocks of the constant M^-1 (kkt_schur() in
- * ncgen_rattle.h; ncgen/codegen/kkt_blocks.py): KKT_NB blocks, their coordinates
- * kkt_q[kkt_q0[b] ..], constraints kkt_c[kkt_c0[b] ..] and M^-1 (by columns: column j of
- * block b has rows kkt_m_row[k] within the block, k from kkt_m_colind[kkt_q0[b] + j]);
- * K's nonzero kkt_a1_nz[k] (A_1, lower left) is entry kkt_a1_dst[k] of the blocks' dense A
- * (row-major nc_b x nq_b, concatenated), kkt_a0_nz[k] (A_0^T, upper right) likewise. */
-#define KKT_BLOCKS
-#define KKT_NB 3
-#define KKT_NA 36
-#define KKT_NS 12
-#define KKT_CMAX 2
-#define KKT_NA1 21
-#define KKT_NA0 21
-static const int kkt_q0[KKT_NB + 1] = {0, 6, 12, 18};
-static const int kkt_q[NQ] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17};
-static const int kkt_c0[KKT_NB + 1] = {0, 2, 4, 6};
-static const int kkt_c[NC] = {0, 3, 1, 4, 2, 5};
-static const int kkt_m_colind[NQ + 1] = {0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30, 32, 34, 36};
-static const int kkt_m_row[36] = {0, 3, 1, 4, 2, 5, 0, 3, 1, 4, 2, 5, 0, 3, 1, 4, 2, 5, 0, 3, 1, 4, 2, 5, 0, 3, 1, 4, 2, 5, 0, 3, 1, 4, 2, 5};
-static const casadi_real kkt_m_val[36] = {40.00000000000004, -20.00000000000003, 40.00000000000004, -20.00000000000003, 40.00000000000004, -20.00000000000003, -20.00000000000003, 40.00000000000001, -20.00000000000003, 40.00000000000001, -20.00000000000003, 40.00000000000001, 40.00000000000004, -20.00000000000003, 40.00000000000004, -20.00000000000003, 40.00000000000004, -20.00000000000003, -20.00000000000003, 40.00000000000001, -20.00000000000003, 40.00000000000001, -20.00000000000003, 40.00000000000001, 40.00000000000002, -20.000000000000014, 40.00000000000002, -20.000000000000014, 40.00000000000002, -20.000000000000014, -20.000000000000014, 40.00000000000001, -20.000000000000014, 40.00000000000001, -20.000000000000014, 40.00000000000001};
-static const int kkt_a1_nz[KKT_NA1] = {13, 27, 41, 42, 56, 70, 84, 98, 112, 126, 127, 141, 155, 169, 183, 197, 211, 212, 226, 240, 254};
-static const int kkt_a1_dst[KKT_NA1] = {0, 1, 2, 8, 3, 4, 5, 12, 13, 14, 20, 15, 16, 17, 24, 25, 26, 32, 27, 28, 29};
-static const int kkt_a0_nz[KKT_NA0] = {255, 256, 257, 258, 259, 260, 261, 262, 263, 264, 265, 266, 267, 268, 269, 270, 271, 272, 273, 274, 275};
-static const int kkt_a0_dst[KKT_NA0] = {0, 1, 2, 3, 4, 5, 12, 13, 14, 15, 16, 17, 24, 25, 26, 27, 28, 29, 8, 20, 32};
-
 #include "ncgen_rattle.h"
 #include "ncgen_fixed.h"
 #include "ncgen_adaptive.h"

@@ -18,7 +18,6 @@ from ncgen.assembly.pair_kernels import pair_contacts, pair_kernels
 from ncgen.assembly.stepper_equations import CONTACT_DOCS, DOCS, mass_scale, nonsmooth, stepper_functions
 from ncgen.codegen import PackageDoc, write_package
 from ncgen.codegen.cnames import c_real
-from ncgen.codegen.kkt_blocks import kkt_block_context
 from ncgen.codegen.looped import is_large, primitives, reroll_limit
 from ncgen.codegen.package import ExtraSource
 from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
@@ -213,8 +212,7 @@ def extra_sources(model, functions, pairs=None) -> list[ExtraSource]:
                "nout": n_outputs(model), "nstats": len(STATS) + (len(CONTACT_STATS) if nonsmooth(model) else 0),
                "kernels": [f"{name}_{f.name()}" for f in functions],
                # the default fixed-step scheme, as nc.simulate's scheme="auto": RATTLE with contacts
-               "default_scheme": "RATTLE" if getattr(model, "contacts", None) else "RATTLE4",
-               **kkt_block_context(model, functions[0].sparsity_out("K"))}
+               "default_scheme": "RATTLE" if getattr(model, "contacts", None) else "RATTLE4"}
     if nonsmooth(model):
         factor = next((f for f in functions if f.name() == "step_factor"), None)
         if factor is not None:

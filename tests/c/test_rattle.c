@@ -8,9 +8,7 @@
  * The reference motion is independent of the stepper: the angle theta from the downward
  * vertical obeys m L theta'' = u cos(theta) - m g sin(theta), integrated by classical
  * Runge-Kutta with a step 100 times smaller.  Built and run by tests/test_stepper_runtime_c.py
- * under AddressSanitizer and UndefinedBehaviorSanitizer; with -DKKT_SCHUR the KKT solves go
- * by kkt_schur() (one block: both coordinates, the constraint, M^-1 = I / m), which must give
- * k_solve()'s results and fall back to it where A = 0. */
+ * under AddressSanitizer and UndefinedBehaviorSanitizer. */
 #include "harness.h"
 
 #define M_P 2.0
@@ -142,22 +140,6 @@ static int k_outputs(const casadi_real **arg, casadi_real **res, casadi_int *iw,
 #define KERNEL_PROJECT k_project
 #define KERNEL_POWER k_power
 #define KERNEL_OUTPUTS k_outputs
-
-#ifdef KKT_SCHUR
-/* K column-major: A_1 = (K[2], K[5]), A_0^T = (K[6], K[7]). */
-#define KKT_BLOCKS
-#define KKT_NEWTON
-#define KKT_NB 1
-#define KKT_NA 2
-#define KKT_NS 1
-#define KKT_CMAX 1
-#define KKT_NA1 2
-#define KKT_NA0 2
-static const int kkt_q0[2] = {0, 2}, kkt_q[2] = {0, 1}, kkt_c0[2] = {0, 1}, kkt_c[1] = {0};
-static const int kkt_m_colind[3] = {0, 1, 2}, kkt_m_row[2] = {0, 1};
-static const casadi_real kkt_m_val[2] = {1 / M_P, 1 / M_P};
-static const int kkt_a1_nz[2] = {2, 5}, kkt_a1_dst[2] = {0, 1}, kkt_a0_nz[2] = {6, 7}, kkt_a0_dst[2] = {0, 1};
-#endif
 
 #include "ncgen_rattle.h"
 #include "ncgen_fixed.h"
@@ -437,33 +419,7 @@ static void test_stop_request(void) {
   CHECK(status == STEP_OK && done == 4, "fixed, not stopped: status %d, %ld steps", status, done);
 }
 
-#ifdef KKT_SCHUR
-/* kkt_schur() against k_solve() on Newton's nonsymmetric K (A_0 != A_1) and on
- * [m I, A^T; A, 0]; A = 0 (S singular): kkt_schur() refuses and leaves x as it was. */
-static void test_kkt_schur(void) {
-  static char block[1 << 16];
-  workspace ws;
-  casadi_real K[9], r[3] = {0.3, -1.7, 0.25}, x[3], xr[3], a[2] = {0.6, -0.8}, b[2] = {0.62, -0.77}, zero[2] = {0, 0};
-  int i, pass;
-  CHECK(step_work_bytes() <= sizeof block, "workspace %zu bytes", step_work_bytes());
-  layout(&ws, block);
-  for (pass = 0; pass < 2; ++pass) {
-    kkt(K, a, pass ? a : b);
-    CHECK(kkt_schur(&ws, K, r, x) == 0, "kkt_schur refused a regular K");
-    CHECK(solve(&ws, K, r, xr) == 0, "k_solve");
-    for (i = 0; i < 3; ++i) CHECK(fabs(x[i] - xr[i]) <= 1e-14 * (1 + fabs(xr[i])), "x[%d] = %.17g, k_solve %.17g", i, x[i], xr[i]);
-  }
-  kkt(K, zero, zero);
-  x[0] = x[1] = x[2] = 7;
-  CHECK(kkt_schur(&ws, K, r, x) == 1, "kkt_schur accepted a singular S");
-  CHECK(x[0] == 7 && x[1] == 7 && x[2] == 7, "x changed by a refused solve");
-}
-#endif
-
 int main(void) {
-#ifdef KKT_SCHUR
-  test_kkt_schur();
-#endif
   test_newton_step();
   test_fixed_order_work_estimate();
   test_rattle4_order_estimate();
