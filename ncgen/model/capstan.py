@@ -1,0 +1,196 @@
+"""``CapstanCable``: an elastic cable through the points of ``path`` with capstan
+(Euler–Eytelwein) friction at one pulley, sticking or slipping in a simulation.
+
+The pulley ``path[j]`` splits the cable into side a (``path[0..j]``, length ``l_a``) and
+side b (``path[j..]``, ``l_b``); the other points of the path are frictionless pulleys.  The
+cable material on each side is a state: the rest length ``s`` of side a (m; side b carries
+``l₀ − s``, the whole rest length ``l₀`` is conserved), the coordinate of a *material point*
+of mass ``m_s`` (the cable's mass lumped at the pulley, kg) that slides on a line of the
+ground perpendicular to gravity (``s = s₀ + e·(r_m − r_m0)``, :func:`add_capstan_cable`).
+Its rate ``ṡ`` (m/s, > 0: material passes from side b to side a) is the slip.
+
+Sides (axial stiffness ``EA``, N): ``T_a = EA (l_a − s)/s``, ``T_b = EA (l_b − l₀ + s)/(l₀ − s)``
+(kept ≥ 0: slack), potential ``V = Σ EA (l − s)²/(2 s)`` over taut sides.  The material point
+is driven by ``P = −∂V/∂s = T_a + T_a²/(2EA) − T_b − T_b²/(2EA)`` and held by the friction
+
+    F_f = (e^{μθ} − 1) (T_b max(τ, 0) + T_a min(τ, 0)),   τ = tanh(ṡ / v_s)
+
+(``μ`` friction coefficient, ``θ`` wrap angle in rad, ``v_s`` the slip velocity scale, m/s):
+``m_s s̈ = P − F_f``.  Sliding at ``|ṡ| ≫ v_s``, ``|F_f|`` is the capstan bound: slipping
+towards a, ``T_a − T_b = (e^{μθ} − 1) T_b`` i.e. ``T_a = T_b e^{μθ}``; towards b,
+``T_b = T_a e^{μθ}``, each up to the relative error ``1 − tanh(|ṡ|/v_s)`` in the friction,
+the material's inertia ``m_s s̈`` and the strain terms ``T²/(2EA)`` of ``P``.  While
+``e^{−μθ} < T_a/T_b < e^{μθ}`` the cable sticks: ``τ = P / F_max`` balances ``P`` and the
+material creeps at ``|ṡ| = v_s atanh(|P|/F_max) `` (``F_max`` the bound on that side), which
+is the regularisation's error (``v_s → 0``: exact stick).  The friction's power ``−F_f ṡ`` is
+≤ 0: it only dissipates.
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ncgen.errors import ModelError
+from ncgen.model.forces import Force
+from ncgen.validation import as_scalar
+
+#: Default slip velocity scale ``v_s`` (m/s) of the regularised stick.
+SLIP_VELOCITY = 1e-4
+
+
+def side_tension(length, rest, ea):
+    """Tension ``EA (l − s)/s`` (N) of a cable side of length ``l`` and rest length ``s`` (m),
+    kept ≥ 0 (slack)."""
+    return ca.fmax(ea * (length - rest) / rest, 0)
+
+
+def side_energy(length, rest, ea):
+    """Elastic energy ``EA (l − s)²/(2 s)`` (J) of a taut side, 0 while slack."""
+    return ca.if_else(length > rest, ea * (length - rest) ** 2 / (2 * rest), 0)
+
+
+def capstan_friction(t_a, t_b, rate, mu, wrap, slip_velocity):
+    """Friction ``F_f`` (N) the pulley exerts against the slip ``rate`` (module docstring)."""
+    tau = ca.tanh(rate / slip_velocity)
+    return (ca.exp(mu * wrap) - 1) * (t_b * ca.fmax(tau, 0) + t_a * ca.fmin(tau, 0))
+
+
+class CapstanCable(Force):
+    """A cable through ``path`` with capstan friction at ``path[pulley]`` (module docstring):
+    ``mu`` ≥ 0, ``wrap`` θ (rad, > 0), ``ea`` (N, > 0), ``rest_lengths = (s₀, l₀ − s₀)`` of
+    the two sides (m, > 0), ``material`` the point member whose position along ``axis`` (a
+    world unit vector) is the slip, ``slip_velocity`` ``v_s`` (m/s, > 0)."""
+
+    kind = "CapstanCable"
+
+    def __init__(self, path, *, pulley: int, mu, wrap, ea, rest_lengths, material, axis,
+                 slip_velocity=SLIP_VELOCITY, name: str | None = None):
+        super().__init__(name)
+        self.path, self.pulley = list(path), pulley
+        self.mu, self.wrap, self.ea, self.slip_velocity = mu, wrap, ea, slip_velocity
+        self.rest_lengths, self.material, self.axis = rest_lengths, material, axis
+
+    def members(self):
+        return [item[0] for item in self.path if isinstance(item, (tuple, list)) and len(item) == 2] + [self.material]
+
+    def check(self, system):
+        n = len(self.path)
+        if n < 3:
+            raise ModelError(f"{self.label}: path: expected three or more (member, point) pairs, got {n}")
+        for i, item in enumerate(self.path):
+            if not isinstance(item, (tuple, list)) or len(item) != 2:
+                raise ModelError(f"{self.label}: path[{i}]: expected a (member, point) pair, got {item!r}")
+            self._local_point(item[0], item[1], f"path[{i}]")
+        if isinstance(self.pulley, bool) or not isinstance(self.pulley, (int, np.integer)) \
+                or not 0 < self.pulley < n - 1:
+            raise ModelError(f"{self.label}: pulley: expected the index of an inner point of the path "
+                             f"(1 to {n - 2}), got {self.pulley!r}")
+        for key in ("mu", "wrap", "ea", "slip_velocity"):
+            v = as_scalar(getattr(self, key), f"{self.label}: {key}")
+            if not np.isfinite(v) or v < 0 or (key != "mu" and v == 0):
+                raise ModelError(f"{self.label}: {key}: expected a finite number {'>= 0' if key == 'mu' else '> 0'}, "
+                                 f"got {v:g}")
+        rest = np.asarray(self.rest_lengths, float)
+        if rest.shape != (2,) or not np.all(np.isfinite(rest)) or np.any(rest <= 0):
+            raise ModelError(f"{self.label}: rest_lengths: expected two rest lengths > 0 (m), of sides a and b, "
+                             f"got {self.rest_lengths!r}")
+        if self.material.is_ground or self.material.kind != "point":
+            raise ModelError(f"{self.label}: material: expected a point member, got {self.material.name} "
+                             f"({self.material.kind})")
+        e = np.asarray(self.axis, float)
+        if e.shape != (system.dim,) or abs(np.linalg.norm(e) - 1) > 1e-12:
+            raise ModelError(f"{self.label}: axis: expected a unit vector of {system.dim} components, got {self.axis!r}")
+
+    def _points(self, ctx):
+        out = []
+        for m, at in self.path:
+            at = np.asarray(at, float)
+            out.append((ca.DM(at), ca.DM.zeros(ctx.dim)) if m.is_ground else ctx.local_point(m, at))
+        return out
+
+    def slip(self, ctx):
+        """``(s, ṡ)``: the rest length of side a (m) and the slip rate (m/s)."""
+        r, v = ctx.local_point(self.material, np.zeros(ctx.dim))
+        e = ca.DM(np.asarray(self.axis, float))
+        r0 = ca.DM(np.asarray(self.material.p0, float))
+        return self.rest_lengths[0] + ca.dot(e, r - r0), ca.dot(e, v)
+
+    def lengths(self, ctx):
+        """``(l_a, l_b)``: the lengths (m) of the two sides."""
+        pts = self._points(ctx)
+        seg = [ca.sqrt(ca.sumsqr(rb - ra)) for (ra, _), (rb, _) in zip(pts, pts[1:])]
+        return sum(seg[:self.pulley], ca.SX(0)), sum(seg[self.pulley:], ca.SX(0))
+
+    def tensions(self, ctx):
+        """``(T_a, T_b)`` (N) of the two sides."""
+        l_a, l_b = self.lengths(ctx)
+        s, _ = self.slip(ctx)
+        total = float(sum(self.rest_lengths))
+        ea = self._value(ctx, self.ea, 1, "ea")
+        return side_tension(l_a, s, ea), side_tension(l_b, total - s, ea)
+
+    def friction(self, ctx):
+        """``F_f`` (N), the pulley's friction on the material (module docstring)."""
+        t_a, t_b = self.tensions(ctx)
+        _, rate = self.slip(ctx)
+        mu = self._value(ctx, self.mu, 1, "mu")
+        wrap = self._value(ctx, self.wrap, 1, "wrap")
+        v_s = self._value(ctx, self.slip_velocity, 1, "slip_velocity")
+        return capstan_friction(t_a, t_b, rate, mu, wrap, v_s)
+
+    def generalized(self, ctx):
+        t_a, t_b = self.tensions(ctx)
+        pts = self._points(ctx)
+        pull = [ca.SX.zeros(ctx.dim) for _ in pts]          # force of the cable on each point
+        for i, ((ra, _), (rb, _)) in enumerate(zip(pts, pts[1:])):
+            d = rb - ra
+            f = (t_a if i < self.pulley else t_b) * d / ca.sqrt(ca.sumsqr(d))
+            pull[i] += f
+            pull[i + 1] -= f
+        ea = self._value(ctx, self.ea, 1, "ea")
+        drive = t_a + t_a**2 / (2 * ea) - t_b - t_b**2 / (2 * ea)
+        on_material = (drive - self.friction(ctx)) * ca.DM(np.asarray(self.axis, float))
+        Q = ca.SX.zeros(ctx.layout.nq)
+        for (m, at), f in list(zip(self.path, pull)) + [((self.material, np.zeros(ctx.dim)), on_material)]:
+            if not m.is_ground:
+                C = ca.DM(m.rigid.C(m.rigid.affine(np.asarray(at, float))))
+                Q += ctx.scatter(m, ca.mtimes(C.T, f))
+        return Q
+
+    def potential(self, ctx):
+        """``Σ EA (l − s)²/(2 s)`` over the taut sides (J)."""
+        l_a, l_b = self.lengths(ctx)
+        s, _ = self.slip(ctx)
+        ea = self._value(ctx, self.ea, 1, "ea (in the potential energy)", inputs=False)
+        return side_energy(l_a, s, ea) + side_energy(l_b, float(sum(self.rest_lengths)) - s, ea)
+
+
+def add_capstan_cable(system, path, *, pulley: int, mu, wrap, ea, rest_lengths, material_mass: float,
+                      slip_velocity=SLIP_VELOCITY, name: str = "capstan"):
+    """Add a :class:`CapstanCable` to ``system`` with its material point ``<name>_material``
+    (mass ``material_mass`` kg > 0, at the pulley's point if on the ground, else at the
+    origin) on a ground line perpendicular to gravity; returns the force."""
+    from ncgen.model.joints import PointOnLine
+
+    m_s = as_scalar(material_mass, f"capstan cable {name!r}: material_mass")
+    if not np.isfinite(m_s) or m_s <= 0:
+        raise ModelError(f"capstan cable {name!r}: material_mass: expected a number > 0 (kg), got {m_s:g}")
+    g = np.asarray(system.gravity, float)
+    axis = _across(g)
+    member, at = path[pulley] if isinstance(pulley, (int, np.integer)) and 0 <= pulley < len(path) else (None, None)
+    where = np.asarray(at, float) if member is not None and member.is_ground else np.zeros(system.dim)
+    material = system.add_point(f"{name}_material", mass=m_s, position=where)
+    system.add_joint(PointOnLine(system.ground, material, at=where, axis=axis))
+    return system.add_force(CapstanCable(path, pulley=pulley, mu=mu, wrap=wrap, ea=ea, rest_lengths=rest_lengths,
+                                         material=material, axis=axis, slip_velocity=slip_velocity, name=name))
+
+
+def _across(g: np.ndarray) -> np.ndarray:
+    """A unit vector perpendicular to the gravity ``g`` (any one if ``g`` is 0)."""
+    if g.size == 2:
+        e = np.array([-g[1], g[0]]) if np.linalg.norm(g) > 0 else np.array([1.0, 0.0])
+    else:
+        e = np.cross(g, [1.0, 0, 0]) if np.linalg.norm(np.cross(g, [1.0, 0, 0])) > 1e-9 * np.linalg.norm(g) \
+            else np.cross(g, [0, 1.0, 0])
+        e = e if np.linalg.norm(e) > 0 else np.array([1.0, 0, 0])
+    return e / np.linalg.norm(e)
