@@ -16,8 +16,9 @@ import ncgen as nc
 G = 9.81
 
 
-def capstan_lift(force, wrap, *, mu=0.3, mass=1.0, hand=0.2, ea=1e5, material_mass=1e-3, slip_velocity=1e-4):
-    """The system (see the module docstring); ``ea`` the rope's axial stiffness (N)."""
+def capstan_lift(force, wrap, *, mu=0.3, mass=1.0, hand=0.2, ea=1e5, damping=20.0, material_mass=1e-3, slip_velocity=1e-4):
+    """The system (see the module docstring); ``ea`` the rope's axial stiffness (N), ``damping``
+    its internal damping (N·s/m)."""
     s = nc.System("capstan_lift", gravity=(0, 0, -G))
     w = s.add_point("weight", mass=mass, position=(-0.1, 0, 0))
     h = s.add_point("hand", mass=hand, position=(0.1, 0, 0))
@@ -27,7 +28,7 @@ def capstan_lift(force, wrap, *, mu=0.3, mass=1.0, hand=0.2, ea=1e5, material_ma
     t_a, t_b = mass * G, force + hand * G
     nc.add_capstan_cable(s, [(w, (0, 0, 0)), (s.ground, (-0.1, 0, 1)), (s.ground, (0.1, 0, 1)), (h, (0, 0, 0))],
                          pulley=1, mu=mu, wrap=wrap, ea=ea, rest_lengths=(1.0 / (1 + t_a / ea), 1.2 / (1 + t_b / ea)),
-                         material_mass=material_mass, slip_velocity=slip_velocity, name="rope")
+                         damping=damping, material_mass=material_mass, slip_velocity=slip_velocity, name="rope")
     return s
 
 
@@ -45,7 +46,7 @@ def closed_form(force, wrap, *, mu=0.3, mass=1.0, hand=0.2):
 if __name__ == "__main__":
     for wrap, name in ((np.pi, "π"), (2 * np.pi, "2π")):
         for force in (0.0, 10.0, 30.0, 70.0):
-            traj = nc.simulate(capstan_lift(force, wrap).build(), t_end=0.4, dt=0.01, backend="vm")
+            traj = nc.simulate(capstan_lift(force, wrap).build(), t_end=0.25, dt=0.005, backend="vm")
             z = traj.point("weight", (0, 0, 0))[:, 2]
             a = 2 * np.polyfit(traj.t, z, 2)[0]
             print(f"θ = {name:2s}  F = {force:4.1f} N: weight acceleration {a:+.4f} m/s², "

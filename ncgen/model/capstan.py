@@ -9,9 +9,11 @@ of mass ``m_s`` (the cable's mass lumped at the pulley, kg) that slides on a lin
 ground perpendicular to gravity (``s = s₀ + e·(r_m − r_m0)``, :func:`add_capstan_cable`).
 Its rate ``ṡ`` (m/s, > 0: material passes from side b to side a) is the slip.
 
-Sides (axial stiffness ``EA``, N): ``T_a = EA (l_a − s)/s``, ``T_b = EA (l_b − l₀ + s)/(l₀ − s)``
-(kept ≥ 0: slack), potential ``V = Σ EA (l − s)²/(2 s)`` over taut sides.  The material point
-is driven by ``P = −∂V/∂s = T_a + T_a²/(2EA) − T_b − T_b²/(2EA)`` and held by the friction
+Sides (axial stiffness ``EA``, N; damping ``c``, N·s/m, on each side's stretching rate):
+``T_a = EA (l_a − s)/s + c (l̇_a − ṡ)``, ``T_b = EA (l_b − l₀ + s)/(l₀ − s) + c (l̇_b + ṡ)`` (kept
+≥ 0: slack), potential ``V = Σ EA (l − s)²/(2 s)`` over taut sides.  The material point is
+driven by ``P = T_a + E_a²/(2EA) − T_b − E_b²/(2EA)`` (``E`` the elastic part of ``T``: the
+elastic part of ``P`` is ``−∂V/∂s``) and held by the friction
 
     F_f = (e^{μθ} − 1) (T_b max(τ, 0) + T_a min(τ, 0)),   τ = tanh(ṡ / v_s)
 
@@ -23,7 +25,7 @@ the material's inertia ``m_s s̈`` and the strain terms ``T²/(2EA)`` of ``P``. 
 ``e^{−μθ} < T_a/T_b < e^{μθ}`` the cable sticks: ``τ = P / F_max`` balances ``P`` and the
 material creeps at ``|ṡ| = v_s atanh(|P|/F_max) `` (``F_max`` the bound on that side), which
 is the regularisation's error (``v_s → 0``: exact stick).  The friction's power ``−F_f ṡ`` is
-≤ 0: it only dissipates.
+≤ 0, and the damping's ``−c Σ (stretching rate)²`` too: they only dissipate.
 """
 from __future__ import annotations
 
@@ -38,10 +40,10 @@ from ncgen.validation import as_scalar
 SLIP_VELOCITY = 1e-4
 
 
-def side_tension(length, rest, ea):
-    """Tension ``EA (l − s)/s`` (N) of a cable side of length ``l`` and rest length ``s`` (m),
-    kept ≥ 0 (slack)."""
-    return ca.fmax(ea * (length - rest) / rest, 0)
+def side_tension(length, rest, ea, drag=0):
+    """Tension ``EA (l − s)/s + drag`` (N) of a cable side of length ``l`` and rest length ``s``
+    (m), ``drag`` its damping force (N), kept ≥ 0 (slack)."""
+    return ca.fmax(ea * (length - rest) / rest + drag, 0)
 
 
 def side_energy(length, rest, ea):
@@ -57,15 +59,16 @@ def capstan_friction(t_a, t_b, rate, mu, wrap, slip_velocity):
 
 class CapstanCable(Force):
     """A cable through ``path`` with capstan friction at ``path[pulley]`` (module docstring):
-    ``mu`` ≥ 0, ``wrap`` θ (rad, > 0), ``ea`` (N, > 0), ``rest_lengths = (s₀, l₀ − s₀)`` of
+    ``mu`` ≥ 0, ``wrap`` θ (rad, > 0), ``ea`` (N, > 0), ``damping`` c (N·s/m, ≥ 0), ``rest_lengths = (s₀, l₀ − s₀)`` of
     the two sides (m, > 0), ``material`` the point member whose position along ``axis`` (a
     world unit vector) is the slip, ``slip_velocity`` ``v_s`` (m/s, > 0)."""
 
     kind = "CapstanCable"
 
-    def __init__(self, path, *, pulley: int, mu, wrap, ea, rest_lengths, material, axis,
+    def __init__(self, path, *, pulley: int, mu, wrap, ea, rest_lengths, material, axis, damping=0.0,
                  slip_velocity=SLIP_VELOCITY, name: str | None = None):
         super().__init__(name)
+        self.damping = damping
         self.path, self.pulley = list(path), pulley
         self.mu, self.wrap, self.ea, self.slip_velocity = mu, wrap, ea, slip_velocity
         self.rest_lengths, self.material, self.axis = rest_lengths, material, axis
@@ -74,6 +77,16 @@ class CapstanCable(Force):
         return [item[0] for item in self.path if isinstance(item, (tuple, list)) and len(item) == 2] + [self.material]
 
     def check(self, system):
+        self.check_values()
+        if self.material.is_ground or self.material.kind != "point":
+            raise ModelError(f"{self.label}: material: expected a point member, got {self.material.name} "
+                             f"({self.material.kind})")
+        e = np.asarray(self.axis, float)
+        if e.shape != (system.dim,) or abs(np.linalg.norm(e) - 1) > 1e-12:
+            raise ModelError(f"{self.label}: axis: expected a unit vector of {system.dim} components, got {self.axis!r}")
+
+    def check_values(self):
+        """Check the path, the pulley's index and the numbers (not the material)."""
         n = len(self.path)
         if n < 3:
             raise ModelError(f"{self.label}: path: expected three or more (member, point) pairs, got {n}")
@@ -85,21 +98,15 @@ class CapstanCable(Force):
                 or not 0 < self.pulley < n - 1:
             raise ModelError(f"{self.label}: pulley: expected the index of an inner point of the path "
                              f"(1 to {n - 2}), got {self.pulley!r}")
-        for key in ("mu", "wrap", "ea", "slip_velocity"):
+        for key in ("mu", "damping", "wrap", "ea", "slip_velocity"):
             v = as_scalar(getattr(self, key), f"{self.label}: {key}")
-            if not np.isfinite(v) or v < 0 or (key != "mu" and v == 0):
-                raise ModelError(f"{self.label}: {key}: expected a finite number {'>= 0' if key == 'mu' else '> 0'}, "
-                                 f"got {v:g}")
+            if not np.isfinite(v) or v < 0 or (key not in ("mu", "damping") and v == 0):
+                raise ModelError(f"{self.label}: {key}: expected a finite number "
+                                 f"{'>= 0' if key in ('mu', 'damping') else '> 0'}, got {v:g}")
         rest = np.asarray(self.rest_lengths, float)
         if rest.shape != (2,) or not np.all(np.isfinite(rest)) or np.any(rest <= 0):
             raise ModelError(f"{self.label}: rest_lengths: expected two rest lengths > 0 (m), of sides a and b, "
                              f"got {self.rest_lengths!r}")
-        if self.material.is_ground or self.material.kind != "point":
-            raise ModelError(f"{self.label}: material: expected a point member, got {self.material.name} "
-                             f"({self.material.kind})")
-        e = np.asarray(self.axis, float)
-        if e.shape != (system.dim,) or abs(np.linalg.norm(e) - 1) > 1e-12:
-            raise ModelError(f"{self.label}: axis: expected a unit vector of {system.dim} components, got {self.axis!r}")
 
     def _points(self, ctx):
         out = []
@@ -116,18 +123,23 @@ class CapstanCable(Force):
         return self.rest_lengths[0] + ca.dot(e, r - r0), ca.dot(e, v)
 
     def lengths(self, ctx):
-        """``(l_a, l_b)``: the lengths (m) of the two sides."""
+        """``((l_a, l̇_a), (l_b, l̇_b))``: the lengths (m) of the two sides and their rates (m/s)."""
         pts = self._points(ctx)
         seg = [ca.sqrt(ca.sumsqr(rb - ra)) for (ra, _), (rb, _) in zip(pts, pts[1:])]
-        return sum(seg[:self.pulley], ca.SX(0)), sum(seg[self.pulley:], ca.SX(0))
+        rate = [ca.dot(rb - ra, vb - va) / d for ((ra, va), (rb, vb)), d in zip(zip(pts, pts[1:]), seg)]
+        j = self.pulley
+        return ((sum(seg[:j], ca.SX(0)), sum(rate[:j], ca.SX(0))),
+                (sum(seg[j:], ca.SX(0)), sum(rate[j:], ca.SX(0))))
 
     def tensions(self, ctx):
-        """``(T_a, T_b)`` (N) of the two sides."""
-        l_a, l_b = self.lengths(ctx)
-        s, _ = self.slip(ctx)
+        """``(T_a, T_b)`` (N) of the two sides, with their damping."""
+        (l_a, rate_a), (l_b, rate_b) = self.lengths(ctx)
+        s, slip = self.slip(ctx)
         total = float(sum(self.rest_lengths))
         ea = self._value(ctx, self.ea, 1, "ea")
-        return side_tension(l_a, s, ea), side_tension(l_b, total - s, ea)
+        c = self._value(ctx, self.damping, 1, "damping")
+        return (side_tension(l_a, s, ea, c * (rate_a - slip)),
+                side_tension(l_b, total - s, ea, c * (rate_b + slip)))
 
     def friction(self, ctx):
         """``F_f`` (N), the pulley's friction on the material (module docstring)."""
@@ -148,7 +160,10 @@ class CapstanCable(Force):
             pull[i] += f
             pull[i + 1] -= f
         ea = self._value(ctx, self.ea, 1, "ea")
-        drive = t_a + t_a**2 / (2 * ea) - t_b - t_b**2 / (2 * ea)
+        (l_a, _), (l_b, _) = self.lengths(ctx)
+        s, _ = self.slip(ctx)
+        e_a, e_b = side_tension(l_a, s, ea), side_tension(l_b, float(sum(self.rest_lengths)) - s, ea)
+        drive = t_a + e_a**2 / (2 * ea) - t_b - e_b**2 / (2 * ea)
         on_material = (drive - self.friction(ctx)) * ca.DM(np.asarray(self.axis, float))
         Q = ca.SX.zeros(ctx.layout.nq)
         for (m, at), f in list(zip(self.path, pull)) + [((self.material, np.zeros(ctx.dim)), on_material)]:
@@ -159,14 +174,14 @@ class CapstanCable(Force):
 
     def potential(self, ctx):
         """``Σ EA (l − s)²/(2 s)`` over the taut sides (J)."""
-        l_a, l_b = self.lengths(ctx)
+        (l_a, _), (l_b, _) = self.lengths(ctx)
         s, _ = self.slip(ctx)
         ea = self._value(ctx, self.ea, 1, "ea (in the potential energy)", inputs=False)
         return side_energy(l_a, s, ea) + side_energy(l_b, float(sum(self.rest_lengths)) - s, ea)
 
 
 def add_capstan_cable(system, path, *, pulley: int, mu, wrap, ea, rest_lengths, material_mass: float,
-                      slip_velocity=SLIP_VELOCITY, name: str = "capstan"):
+                      damping=0.0, slip_velocity=SLIP_VELOCITY, name: str = "capstan"):
     """Add a :class:`CapstanCable` to ``system`` with its material point ``<name>_material``
     (mass ``material_mass`` kg > 0, at the pulley's point if on the ground, else at the
     origin) on a ground line perpendicular to gravity; returns the force."""
@@ -177,12 +192,15 @@ def add_capstan_cable(system, path, *, pulley: int, mu, wrap, ea, rest_lengths, 
         raise ModelError(f"capstan cable {name!r}: material_mass: expected a number > 0 (kg), got {m_s:g}")
     g = np.asarray(system.gravity, float)
     axis = _across(g)
-    member, at = path[pulley] if isinstance(pulley, (int, np.integer)) and 0 <= pulley < len(path) else (None, None)
-    where = np.asarray(at, float) if member is not None and member.is_ground else np.zeros(system.dim)
+    force = CapstanCable(path, pulley=pulley, mu=mu, wrap=wrap, ea=ea, rest_lengths=rest_lengths, material=None,
+                         axis=axis, damping=damping, slip_velocity=slip_velocity, name=name)
+    force.check_values()
+    member, at = path[pulley]
+    where = np.asarray(at, float) if member.is_ground else np.zeros(system.dim)
     material = system.add_point(f"{name}_material", mass=m_s, position=where)
     system.add_joint(PointOnLine(system.ground, material, at=where, axis=axis))
-    return system.add_force(CapstanCable(path, pulley=pulley, mu=mu, wrap=wrap, ea=ea, rest_lengths=rest_lengths,
-                                         material=material, axis=axis, slip_velocity=slip_velocity, name=name))
+    force.material = material
+    return system.add_force(force)
 
 
 def _across(g: np.ndarray) -> np.ndarray:
