@@ -170,3 +170,24 @@ def test_bad_values_are_named():
                                  axis=(1, 0, 0)))
     with pytest.raises(ModelError, match=r"path: expected three or more"):
         add_capstan_cable(s, path[:2], **ok, name="short")
+
+
+def test_toml_round_trip_and_bad_values():
+    s = example.capstan_lift(30.0, np.pi)
+    text = s.to_toml()
+    assert 'type = "CapstanCable"' in text
+    back = nc.System.from_toml(text)
+    assert back.to_toml() == text
+    m1, m2 = s.build(), back.build()
+    rng = np.random.default_rng(4)
+    q, v = m1.q0 + 0.01 * rng.normal(size=m1.nq), rng.normal(size=m1.nq)
+    F1 = np.array(m1.functions["F"](0, q, v, np.zeros(0), np.zeros(0)))
+    np.testing.assert_allclose(np.array(m2.functions["F"](0, q, v, np.zeros(0), np.zeros(0))), F1, rtol=1e-14)
+    assert np.abs(F1).max() > 1.0
+    for old, new, message in (("mu = 0.3", "mu = -0.3", r"forces\[1\].*mu: expected a finite number >= 0"),
+                              ("pulley = 1", "pulley = 3", r"forces\[1\].*pulley: expected the index of an inner point"),
+                              ('material = "rope_material"', 'material = "nobody"', r"forces\[1\]\.material"),
+                              ("wrap = 3.14", "wrap = -3.14", r"forces\[1\].*wrap: expected a finite number > 0")):
+        assert old in text
+        with pytest.raises(ModelError, match=message):
+            nc.System.from_toml(text.replace(old, new))
