@@ -17,8 +17,8 @@ G = 9.81
 
 
 def capstan_lift(force, wrap, *, mu=0.3, mass=1.0, hand=0.2, ea=1e5, damping=20.0, material_mass=1e-3, slip_velocity=1e-4):
-    """The system (see the module docstring); ``ea`` the rope's axial stiffness (N), ``damping``
-    its internal damping (N·s/m)."""
+    """The system (see the module docstring); ``wrap`` θ (rad; None: from the shape, π/2 here),
+    ``ea`` the rope's axial stiffness (N), ``damping`` its internal damping (N·s/m)."""
     s = nc.System("capstan_lift", gravity=(0, 0, -G))
     w = s.add_point("weight", mass=mass, position=(-0.1, 0, 0))
     h = s.add_point("hand", mass=hand, position=(0.1, 0, 0))

@@ -23,6 +23,7 @@ sticking, a creep ``v_s atanh(|P|/F_max)``.
 import importlib.util
 from pathlib import Path
 
+import casadi as ca
 import numpy as np
 import pytest
 
@@ -160,7 +161,9 @@ def test_bad_values_are_named():
                                 ("slip_velocity", 0.0, r"slip_velocity: expected a finite number > 0"),
                                 ("pulley", 2, r"pulley: expected the index of an inner point of the path \(1 to 1\)"),
                                 ("rest_lengths", (1.0, -1.0), r"rest_lengths: expected two rest lengths > 0"),
-                                ("material_mass", 0.0, r"material_mass: expected a number > 0 \(kg\), got 0")):
+                                ("material_mass", 0.0, r"material_mass: expected a number > 0 \(kg\), got 0"),
+                                ("turns", -1, r"turns: expected an integer >= 0, got -1"),
+                                ("turns", 1, r"turns: only with wrap = None")):
         with pytest.raises(ModelError, match=message):
             add_capstan_cable(s, path, **{**ok, key: value}, name=f"bad_{key}")
     assert list(s.members) == ["w", "h"]                       # a refused cable adds nothing
@@ -208,3 +211,33 @@ def test_compiled_stepper_sticks_and_slips_as_the_closed_form(force, tmp_path, m
         assert abs(fit - a) < 0.004 * abs(a), (fit, a)
     else:
         assert np.max(np.abs(z)) < 1e-5
+
+
+def test_wrap_angle_from_the_shape():
+    """``wrap=None``: on the rig the rope comes up into the drum and leaves it horizontally,
+    θ = π/2 all along the lift (e^{0.3 π/2} = 1.60): F = 20 N slips as the closed form at
+    θ = π/2; at a drum the rope turns back over (weight straight below, θ = π) the force's
+    Jacobian stays finite, and ``turns`` adds 2π each."""
+    from ncgen.model.capstan import wrap_angle
+    u = np.array([0.0, 0, 1])
+    assert float(wrap_angle(u, -u, 0)) == pytest.approx(np.pi, abs=1e-8)
+    assert float(wrap_angle(u, np.array([1.0, 0, 0]), 1)) == pytest.approx(2.5 * np.pi, abs=1e-12)
+    assert float(wrap_angle(u, u, 0)) == pytest.approx(0, abs=1e-8)
+    force = 20.0
+    model = example.capstan_lift(force, None, mu=MU, mass=M, hand=MH, ea=EA, material_mass=MS,
+                                 slip_velocity=VS).build()
+    traj = nc.simulate(model, t_end=0.25, dt=0.005, backend="vm")
+    a, _, _ = ideal(force, np.pi / 2)
+    assert a > 0
+    fit = 2 * np.polyfit(traj.t, traj.point("weight", (0, 0, 0))[:, 2], 2)[0]
+    assert abs(fit - a) < 0.004 * a, (fit, a)
+    s = nc.System("over", gravity=(0, 0, -G))
+    w = s.add_point("w", mass=1.0, position=(0, 0, 0))
+    h = s.add_point("h", mass=1.0, position=(0, 0, 0.5))
+    add_capstan_cable(s, [(w, (0, 0, 0)), (s.ground, (0, 0, 1)), (h, (0, 0, 0))], pulley=1, mu=0.3, ea=1e4,
+                      rest_lengths=(0.99, 0.49), material_mass=1e-3, name="rope")
+    m = s.build()
+    q, v = ca.SX.sym("q", m.nq), ca.SX.sym("v", m.nq)
+    J = ca.Function("J", [q, v], [ca.jacobian(m.functions["F"](0, q, v, np.zeros(0), np.zeros(0)), ca.vertcat(q, v))])
+    values = np.array(J(m.q0, np.full(m.nq, 0.1)))
+    assert np.all(np.isfinite(values)) and np.abs(values).max() > 0

@@ -17,7 +17,11 @@ elastic part of ``P`` is ``−∂V/∂s``) and held by the friction
 
     F_f = (e^{μθ} − 1) (T_b max(τ, 0) + T_a min(τ, 0)),   τ = tanh(ṡ / v_s)
 
-(``μ`` friction coefficient, ``θ`` wrap angle in rad, ``v_s`` the slip velocity scale, m/s):
+(``μ`` friction coefficient, ``θ`` wrap angle in rad, ``v_s`` the slip velocity scale, m/s).
+The wrap angle is given, or (``wrap=None``) taken from the shape: the angle between the
+directions of the cable into and out of the drum, ``θ = 2 atan2(|u₁ − u₂|, |u₁ + u₂|)``
+(0 straight through, π turned back; the norms regularised by ``(1e-9)²`` so that its
+derivative stays finite there) plus ``2π`` per extra turn in ``turns``:
 ``m_s s̈ = P − F_f``.  Sliding at ``|ṡ| ≫ v_s``, ``|F_f|`` is the capstan bound: slipping
 towards a, ``T_a − T_b = (e^{μθ} − 1) T_b`` i.e. ``T_a = T_b e^{μθ}``; towards b,
 ``T_b = T_a e^{μθ}``, each up to the relative error ``1 − tanh(|ṡ|/v_s)`` in the friction,
@@ -51,6 +55,19 @@ def side_energy(length, rest, ea):
     return ca.if_else(length > rest, ea * (length - rest) ** 2 / (2 * rest), 0)
 
 
+#: Regularisation of the norms in the wrap angle from the shape (dimensionless).
+WRAP_EPSILON = 1e-9
+
+
+def wrap_angle(u_in, u_out, turns):
+    """``θ = 2 atan2(|u₁ − u₂|, |u₁ + u₂|) + 2π turns`` (rad) between the unit directions
+    ``u_in`` into and ``u_out`` out of a drum (module docstring)."""
+    def norm(x):
+        return ca.sqrt(ca.sumsqr(x) + WRAP_EPSILON**2)
+
+    return 2 * ca.atan2(norm(u_in - u_out), norm(u_in + u_out)) + 2 * np.pi * turns
+
+
 def capstan_friction(t_a, t_b, rate, mu, wrap, slip_velocity):
     """Friction ``F_f`` (N) the pulley exerts against the slip ``rate`` (module docstring)."""
     tau = ca.tanh(rate / slip_velocity)
@@ -59,18 +76,19 @@ def capstan_friction(t_a, t_b, rate, mu, wrap, slip_velocity):
 
 class CapstanCable(Force):
     """A cable through ``path`` with capstan friction at ``path[pulley]`` (module docstring):
-    ``mu`` ≥ 0, ``wrap`` θ (rad, > 0), ``ea`` (N, > 0), ``damping`` c (N·s/m, ≥ 0), ``rest_lengths = (s₀, l₀ − s₀)`` of
-    the two sides (m, > 0), ``material`` the point member whose position along ``axis`` (a
-    world unit vector) is the slip, ``slip_velocity`` ``v_s`` (m/s, > 0)."""
+    ``mu`` ≥ 0, ``wrap`` θ (rad, > 0; ``None``: from the shape, plus ``turns`` full turns),
+    ``ea`` (N, > 0), ``damping`` c (N·s/m, ≥ 0), ``rest_lengths = (s₀, l₀ − s₀)`` of the two
+    sides (m, > 0), ``material`` the point member whose position along ``axis`` (a world unit
+    vector) is the slip, ``slip_velocity`` ``v_s`` (m/s, > 0)."""
 
     kind = "CapstanCable"
 
-    def __init__(self, path, *, pulley: int, mu, wrap, ea, rest_lengths, material, axis, damping=0.0,
-                 slip_velocity=SLIP_VELOCITY, name: str | None = None):
+    def __init__(self, path, *, pulley: int, mu, ea, rest_lengths, material, axis, wrap=None, damping=0.0,
+                 turns: int = 0, slip_velocity=SLIP_VELOCITY, name: str | None = None):
         super().__init__(name)
         self.damping = damping
         self.path, self.pulley = list(path), pulley
-        self.mu, self.wrap, self.ea, self.slip_velocity = mu, wrap, ea, slip_velocity
+        self.mu, self.wrap, self.ea, self.slip_velocity, self.turns = mu, wrap, ea, slip_velocity, turns
         self.rest_lengths, self.material, self.axis = rest_lengths, material, axis
 
     def members(self):
@@ -98,7 +116,12 @@ class CapstanCable(Force):
                 or not 0 < self.pulley < n - 1:
             raise ModelError(f"{self.label}: pulley: expected the index of an inner point of the path "
                              f"(1 to {n - 2}), got {self.pulley!r}")
-        for key in ("mu", "damping", "wrap", "ea", "slip_velocity"):
+        if isinstance(self.turns, bool) or not isinstance(self.turns, (int, np.integer)) or self.turns < 0:
+            raise ModelError(f"{self.label}: turns: expected an integer >= 0, got {self.turns!r}")
+        if self.wrap is not None and self.turns:
+            raise ModelError(f"{self.label}: turns: only with wrap = None (the angle from the shape); "
+                             f"a given wrap includes its turns")
+        for key in ("mu", "damping", "ea", "slip_velocity") + (("wrap",) if self.wrap is not None else ()):
             v = as_scalar(getattr(self, key), f"{self.label}: {key}")
             if not np.isfinite(v) or v < 0 or (key not in ("mu", "damping") and v == 0):
                 raise ModelError(f"{self.label}: {key}: expected a finite number "
@@ -141,12 +164,19 @@ class CapstanCable(Force):
         return (side_tension(l_a, s, ea, c * (rate_a - slip)),
                 side_tension(l_b, total - s, ea, c * (rate_b + slip)))
 
+    def wrap_angle(self, ctx):
+        """θ (rad): the given ``wrap``, or the shape's (module docstring)."""
+        if self.wrap is not None:
+            return self._value(ctx, self.wrap, 1, "wrap")
+        (r0, _), (r1, _), (r2, _) = self._points(ctx)[self.pulley - 1:self.pulley + 2]
+        return wrap_angle((r1 - r0) / ca.sqrt(ca.sumsqr(r1 - r0)), (r2 - r1) / ca.sqrt(ca.sumsqr(r2 - r1)), self.turns)
+
     def friction(self, ctx):
         """``F_f`` (N), the pulley's friction on the material (module docstring)."""
         t_a, t_b = self.tensions(ctx)
         _, rate = self.slip(ctx)
         mu = self._value(ctx, self.mu, 1, "mu")
-        wrap = self._value(ctx, self.wrap, 1, "wrap")
+        wrap = self.wrap_angle(ctx)
         v_s = self._value(ctx, self.slip_velocity, 1, "slip_velocity")
         return capstan_friction(t_a, t_b, rate, mu, wrap, v_s)
 
@@ -180,8 +210,8 @@ class CapstanCable(Force):
         return side_energy(l_a, s, ea) + side_energy(l_b, float(sum(self.rest_lengths)) - s, ea)
 
 
-def add_capstan_cable(system, path, *, pulley: int, mu, wrap, ea, rest_lengths, material_mass: float,
-                      damping=0.0, slip_velocity=SLIP_VELOCITY, name: str = "capstan"):
+def add_capstan_cable(system, path, *, pulley: int, mu, ea, rest_lengths, material_mass: float, wrap=None,
+                      damping=0.0, turns: int = 0, slip_velocity=SLIP_VELOCITY, name: str = "capstan"):
     """Add a :class:`CapstanCable` to ``system`` with its material point ``<name>_material``
     (mass ``material_mass`` kg > 0, at the pulley's point if on the ground, else at the
     origin) on a ground line perpendicular to gravity; returns the force."""
@@ -193,7 +223,7 @@ def add_capstan_cable(system, path, *, pulley: int, mu, wrap, ea, rest_lengths, 
     g = np.asarray(system.gravity, float)
     axis = _across(g)
     force = CapstanCable(path, pulley=pulley, mu=mu, wrap=wrap, ea=ea, rest_lengths=rest_lengths, material=None,
-                         axis=axis, damping=damping, slip_velocity=slip_velocity, name=name)
+                         axis=axis, damping=damping, turns=turns, slip_velocity=slip_velocity, name=name)
     force.check_values()
     member, at = path[pulley]
     where = np.asarray(at, float) if member.is_ground else np.zeros(system.dim)

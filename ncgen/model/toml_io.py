@@ -120,7 +120,8 @@ FORCE_FIELDS = {
     "ClusteredCable": (Field("path", "cable path", True), Field("k", "value", True),
                        Field("rest_length", "value", True), Field("damping", "value")),
     "CapstanCable": (Field("path", "cable path", True), Field("pulley", "index", True), Field("mu", "number", True),
-                     Field("wrap", "number", True), Field("ea", "number", True), Field("rest_lengths", "value[2]", True),
+                     Field("wrap", "number"), Field("turns", "index"), Field("ea", "number", True),
+                     Field("rest_lengths", "value[2]", True),
                      Field("material", "member, not the ground", True), Field("axis", "vector", True),
                      Field("damping", "number"), Field("slip_velocity", "number")),
 }
