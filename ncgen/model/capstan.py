@@ -17,19 +17,22 @@ elastic part of ``P`` is ``−∂V/∂s``) and held by the friction
 
     F_f = (e^{μθ} − 1) (T_b max(τ, 0) + T_a min(τ, 0)),   τ = tanh(ṡ / v_s)
 
-(``μ`` friction coefficient, ``θ`` wrap angle in rad, ``v_s`` the slip velocity scale, m/s).
-The wrap angle is given, or (``wrap=None``) taken from the shape: the angle between the
-directions of the cable into and out of the drum, ``θ = 2 atan2(|u₁ − u₂|, |u₁ + u₂|)``
-(0 straight through, π turned back; the norms regularised by ``(1e-9)²`` so that its
-derivative stays finite there) plus ``2π`` per extra turn in ``turns``:
+(``μ`` friction coefficient, ``θ`` wrap angle in rad, ``v_s`` the slip velocity scale, m/s):
 ``m_s s̈ = P − F_f``.  Sliding at ``|ṡ| ≫ v_s``, ``|F_f|`` is the capstan bound: slipping
 towards a, ``T_a − T_b = (e^{μθ} − 1) T_b`` i.e. ``T_a = T_b e^{μθ}``; towards b,
 ``T_b = T_a e^{μθ}``, each up to the relative error ``1 − tanh(|ṡ|/v_s)`` in the friction,
 the material's inertia ``m_s s̈`` and the strain terms ``T²/(2EA)`` of ``P``.  While
 ``e^{−μθ} < T_a/T_b < e^{μθ}`` the cable sticks: ``τ = P / F_max`` balances ``P`` and the
-material creeps at ``|ṡ| = v_s atanh(|P|/F_max) `` (``F_max`` the bound on that side), which
+material creeps at ``|ṡ| = v_s atanh(|P|/F_max)`` (``F_max`` the bound on that side), which
 is the regularisation's error (``v_s → 0``: exact stick).  The friction's power ``−F_f ṡ`` is
 ≤ 0, and the damping's ``−c Σ (stretching rate)²`` too: they only dissipate.
+
+The wrap angle is given, or (``wrap=None``) taken from the shape: the angle between the
+directions ``u₁``, ``u₂`` of the cable into and out of the drum,
+``θ = 2 atan2(|u₁ − u₂|, |u₁ + u₂|)`` (0 straight through, π turned back; the norms
+regularised by ``(1e-9)²`` so that its derivative stays finite there), plus ``2π`` per extra
+turn in ``turns``.  The material mode is stiff (``m_s`` small on a stiff rope): IDAS takes
+it as it is, the compiled stepper needs steps of about 0.1 ms.
 """
 from __future__ import annotations
 
