@@ -30,6 +30,7 @@ _HOMES: dict[str, tuple[str, ...]] = {
     "ncgen.codegen.model_package": ("generate",),
     "ncgen.control": ("MPC", "StepDidNotConverge", "StepFunction", "export_mpc", "ilqr", "step_function"),
     "ncgen.model.cables": ("ClusteredCable",),
+    "ncgen.model.capstan": ("CapstanCable", "add_capstan_cable"),
     "ncgen.model.capsule_contacts": ("CapsuleBox", "CapsuleCapsule", "CapsuleSphere", "CylinderSphere"),
     "ncgen.model.contact_pairs": ("contact_between",),
     "ncgen.model.contacts": ("BoxBox", "BoxPlane", "CapsulePlane", "Contact", "CylinderPlane", "MeshPlane",

@@ -54,6 +54,7 @@ from ncgen.model.capsule_contacts import CapsuleCapsule
 from ncgen.model.contact_pairs import CONTACT_TYPES
 from ncgen.model.contacts import BoxBox, SphereSphere
 from ncgen.model.cables import ClusteredCable
+from ncgen.model.capstan import CapstanCable
 from ncgen.model.forces import FORCE_TYPES as _BASIC_FORCES
 from ncgen.model.joint_base import Joint
 from ncgen.model.joint_dynamics import DYNAMICS_KEYS, LIMIT_KEYS, coordinate_laws
@@ -64,7 +65,7 @@ from ncgen.model.shapes import shape_from_table
 from ncgen.validation import as_scalar, as_system_name
 
 #: Force types by their TOML name.
-FORCE_TYPES = {**_BASIC_FORCES, ClusteredCable.kind: ClusteredCable}
+FORCE_TYPES = {**_BASIC_FORCES, ClusteredCable.kind: ClusteredCable, CapstanCable.kind: CapstanCable}
 
 TOP_KEYS = ("system", "parameters", "inputs", "members", "joints", "forces", "contacts", "rolling", "initial",
             "initial_rates", "controller")
@@ -118,6 +119,11 @@ FORCE_FIELDS = {
     "GeneralizedForce": (Field("value", "generalized force", True),),
     "ClusteredCable": (Field("path", "cable path", True), Field("k", "value", True),
                        Field("rest_length", "value", True), Field("damping", "value")),
+    "CapstanCable": (Field("path", "cable path", True), Field("pulley", "index", True), Field("mu", "number", True),
+                     Field("wrap", "number"), Field("turns", "index"), Field("ea", "number", True),
+                     Field("rest_lengths", "value[2]", True),
+                     Field("material", "member, not the ground", True), Field("axis", "vector", True),
+                     Field("damping", "number"), Field("slip_velocity", "number")),
 }
 
 _SHAPE_PLANE = (Field("at", "vector"), Field("rotation", "rotation"), Field("plane", "member"), Field("point", "vector"), Field("normal", "vector"))
@@ -793,7 +799,7 @@ def _force_entries(f, sc, system) -> dict:
         value = tuple(getattr(f, a) for a in field.arg) if isinstance(field.arg, tuple) else getattr(f, field.key)
         if value is None and not field.required:
             continue
-        if field.kind in ("member", "two members"):
+        if field.kind in ("member", "member, not the ground", "two members"):
             out[field.key] = [_member_name(m) for m in value] if isinstance(value, tuple) else _member_name(value)
         elif field.kind == "joint":
             out[field.key] = value.name
