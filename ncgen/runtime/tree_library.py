@@ -13,9 +13,8 @@ Units (:mod:`ncgen.codegen.tree_kernels`): the algorithm units ``forward`` (ABA)
 kernels :class:`TreeLibrary` sets in an algorithm unit (``set_kernel``) for the kinds of the
 trees it serves.  One library of everything took 30 s of CPU to compile (18 s of it the kernels
 of every kind and their derivatives at -O2, one translation unit, 2.4 s the loops); the Panda's
-joint run needs the joint loop's unit of its integrator alone (the forward unit with both
-integrators took about 1.2–1.9 s of CPU at -O1, load 12–18, its loops 1.1 s of it, of which the
-two integrators 0.3–0.5 s; -O1 costs +9 % instructions per ABA against -O2 by callgrind, -Og +39 %).
+joint run needs the forward unit alone (about 1.2–1.9 s of CPU at -O1, load 12–18; -O1 costs
++9 % instructions per ABA against -O2 by callgrind, -Og +39 %).
 
 :class:`TableAlgorithm` is one algorithm of :data:`~ncgen.codegen.tree_check.ALGORITHMS`
 bound to one model's :class:`~ncgen.codegen.tree_tables.TreeTables`, with the interface the
