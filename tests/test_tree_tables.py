@@ -433,11 +433,9 @@ def test_tree_package_is_deterministic_and_warning_free(tmp_path):
 
 def test_units_are_compiled_as_trees_need_them(tmp_path, monkeypatch):
     """A fresh compile cache: forward dynamics of a revolute/prismatic tree compiles the forward
-    unit alone, its RNEA the inverse unit, a joint run the joint loop's unit of its integrator
-    alone (which refuses the other integrator: JOINT_NO_METHOD); a spherical joint adds its
-    local kernel unit, the derivatives the derivatives unit with the edge kernels of its kinds
-    and the body's; the tables of a kind whose kernels are not set are refused by the unit's
-    check."""
+    unit alone, its RNEA the inverse unit; a spherical joint adds its local kernel unit, the
+    derivatives the derivatives unit with the edge kernels of its kinds and the body's; the
+    tables of a kind whose kernels are not set are refused by the unit's check."""
     import ctypes
 
     import ncgen.runtime.tree_library as tl
@@ -455,22 +453,6 @@ def test_units_are_compiled_as_trees_need_them(tmp_path, monkeypatch):
     assert compiled == ["forward"] and tl.missing_units(["revolute", "prismatic"]) == []
     nc.rnea(model, qj, vj, np.zeros(2), kernels="tables")
     assert compiled == ["forward", "inverse"]
-    assert tl.missing_units(["revolute", "prismatic"], tl.joint_unit("rk4")) == ["joint_rk4"]
-    rk4 = nc.simulate(model, 0.1, 0.01, q0=model.q0, method="joint", integrator="rk4", kernels="tables")
-    assert compiled[2:] == ["joint_rk4"]
-    dopri5 = nc.simulate(model, 0.1, 0.01, q0=model.q0, method="joint", integrator="dopri5", kernels="tables")
-    assert compiled[2:] == ["joint_rk4", "joint_dopri5"]
-    np.testing.assert_allclose(rk4.q, dopri5.q, atol=1e-6)         # two integrators of the same motion
-    loop = tl.TableJointLoop(model)
-    t, stats, X = np.array([0.0, 0.01]), np.zeros(5), np.zeros((2, 4))
-    X[0, :2] = qj
-    status, done = loop.run(1, t, X, np.zeros((1, max(model.nu, 1))), None, np.zeros(0), 1e-8, 1e-10, 4, 1000,
-                            False, stats)
-    assert (status, done) == (0, 1)
-    fn = loop.tree_bound.unit("joint_rk4").fn["joint_run"]
-    k = ctypes.c_int(-1)
-    assert fn(loop.tree_bound.ref, None, 0, 1, 1, t.ctypes.data, X.ctypes.data, None, None, 0, None, 1e-8, 1e-10, 4,
-              1000, 0, stats.ctypes.data, ctypes.addressof(k), None) == 6 and k.value == 0   # JOINT_NO_METHOD
     s = nc.System(f"units_ball_{os.getpid()}", gravity=(0.0, 0.0, -G))
     b = s.add_body("b", mass=1.0, inertia=np.diag([0.1, 0.2, 0.3]), position=(0.0, 0.0, -0.5))
     s.add_joint(nc.Spherical(s.ground, b, at=(0.0, 0.0, 0.0), name="ball"))
@@ -485,9 +467,9 @@ def test_units_are_compiled_as_trees_need_them(tmp_path, monkeypatch):
     assert unit.fn["check"](ctypes.addressof(struct)) == 3            # the spherical joint's tl kernel not set
     a = nc.aba(ball, q, np.zeros(3), np.zeros(3), kernels="tables")
     np.testing.assert_allclose(a, nc.aba(ball, q, np.zeros(3), np.zeros(3), kernels="flat"), atol=1e-12)
-    assert compiled[4:] == ["local_spherical"]
+    assert compiled[2:] == ["local_spherical"]
     nc.aba_derivatives(ball, q, np.full(3, 0.1), np.zeros(3), kernels="tables")
-    assert compiled[5:] == ["derivatives", "edge_spherical", "body"]
+    assert compiled[3:] == ["derivatives", "edge_spherical", "body"]
 
 
 def small_tree(name: str):
@@ -512,13 +494,13 @@ def test_joint_kernels_rule():
     assert bp.choose_joint_kernels(9, pays - 1, None).backend == "tables"
     choice = bp.choose_joint_kernels(9, pays, None)
     assert choice.backend == "flat" and "saves" in choice.reason
-    # the joint loop's unit not compiled yet: the tables while it costs less than the model's own loop
-    choice = bp.choose_joint_kernels(9, 10, None, ("joint_dopri5",))
-    assert choice.backend == "tables" and choice.reason.startswith("compiling the tree library's joint_dopri5")
+    # the forward unit not compiled yet: the tables while it costs less than the model's own loop
+    choice = bp.choose_joint_kernels(9, 10, None, ("forward",))
+    assert choice.backend == "tables" and choice.reason.startswith("compiling the tree library's forward")
     units = bp.TREE_UNIT_COMPILE_SECONDS
     assert bp.choose_joint_kernels(9, pays - int(units / (bp.JOINT_EVALS_PER_OUTPUT * 9 * bp.TABLES_EXTRA_SECONDS)),
-                                   None, ("joint_dopri5",)).backend == "flat"
-    many = ("joint_dopri5", "local_spherical", "local_free", "local_planar", "local_universal")
+                                   None, ("forward",)).backend == "flat"
+    many = ("forward", "local_spherical", "local_free", "local_planar", "local_universal")
     choice = bp.choose_joint_kernels(2, 10, None, many)                          # more to compile than a small loop
     assert choice.backend == "flat" and "local_universal not compiled yet" in choice.reason
 
@@ -537,9 +519,9 @@ def test_auto_joint_run_takes_the_tables_and_says_why(library, monkeypatch):
     assert tl.tree_library_ready() and not tl.missing_units(["revolute", "prismatic"])   # the fixture compiled it
     assert choose_kernels(model, 10).backend == "tables"
     missing = tl.missing_units
-    monkeypatch.setattr(tl, "missing_units", lambda kinds, unit: ["joint_dopri5"])
+    monkeypatch.setattr(tl, "missing_units", lambda kinds, unit: ["forward"])
     from ncgen.runtime import backend_policy as bp
-    assert choose_kernels(model, 10) == bp.choose_joint_kernels(2, 10, None, ("joint_dopri5",))   # the unit's cost counted
+    assert choose_kernels(model, 10) == bp.choose_joint_kernels(2, 10, None, ("forward",))   # the unit's cost counted
     monkeypatch.setattr(tl, "missing_units", missing)
     assert choose_kernels(model, 10, controller=nc.PD(kp=10.0, kd=1.0, target=[0.0, 0.0])).backend == "flat"
     assert choose_kernels(model, 10, joint_dynamics=True).backend == "flat"

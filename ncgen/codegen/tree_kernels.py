@@ -184,14 +184,9 @@ def joint_numbers(a1, b1, a2, b2, axes) -> np.ndarray:
 PACKAGE = "ncgen_trees"
 #: The template files the library is made of besides this module (its cache key hashes them).
 SOURCES = ("runtime/ncgen_tree_tables.h", "runtime/ncgen_spatial.h", "tree_tables.c.j2", "runtime/ncgen_joint_loop.h")
-#: The joint loop's integrators (``ncgen_joint_loop.h``), by its ``method`` number.
-JOINT_METHODS = ("rk4", "dopri5")
 #: The algorithm units of the tree library and their entry points (besides ``work_size``,
 #: ``check``, ``kind_names``, ``set_kernel``); each unit also holds every kind's rate kernel.
-#: The joint loop is one unit per integrator (``joint_<method>``, ABA inside): a run compiles
-#: the integrator it uses alone.
-ALGORITHM_UNITS = {"inverse": ("rnea", "crba"), "forward": ("aba",),
-                   **{f"joint_{m}": ("joint_run",) for m in JOINT_METHODS},
+ALGORITHM_UNITS = {"inverse": ("rnea", "crba"), "forward": ("aba", "joint_run"),
                    "derivatives": ("rnea_derivatives", "aba_derivatives")}
 #: Doubles of work each kernel may take in the units (the kernels are checked against it).
 KERNEL_WORK = 1024
@@ -239,8 +234,7 @@ def _context(units, linked: bool, fns) -> dict:
             "kinds": [{"name": k.name, "nq": k.nq, "nv": k.nv, "n_num": k.n_num,
                        "mode": LOCAL_MODES.get(k.name, 0)} for k in JOINT_KINDS],
             "max_w": max(f.sz_w() for f in fns) if linked else KERNEL_WORK, "kind_names": kind_names(),
-            "units": list(units), "linked": linked,
-            "joint_methods": [i for i, m in enumerate(JOINT_METHODS) if f"joint_{m}" in units]}
+            "units": list(units), "linked": linked}
 
 
 def _write(name: str, fns, out_dir, context: dict | None, summary: str):

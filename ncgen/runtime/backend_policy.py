@@ -28,8 +28,8 @@ The joint-space loop of a tree (``method="joint"``, ``kernels="auto"``,
 per ncgen version, nothing compiled per model) unless the model's own flat loop is ready
 (loaded in this process, or compiled earlier and found in the compile cache) or the run is
 long enough for the flat loop's faster evaluations to win back deriving and compiling it
-beyond what compiling the library units the tables still lack costs (the joint loop's unit of
-the run's integrator, ``TREE_UNIT_COMPILE_SECONDS``, and a kernel unit per joint kind the loops do not write out,
+beyond what compiling the library units the tables still lack costs (the forward unit,
+``TREE_UNIT_COMPILE_SECONDS``, and a kernel unit per joint kind the loops do not write out,
 ``TREE_KERNEL_UNIT_COMPILE_SECONDS``; nothing once they are in the cache)::
 
       saving  = outputs × JOINT_EVALS_PER_OUTPUT × n_v × TABLES_EXTRA_SECONDS
@@ -67,8 +67,7 @@ JOINT_EVALS_PER_OUTPUT = 30
 TABLES_EXTRA_SECONDS = 0.15e-6
 #: CPU seconds to derive and compile a tree's flat joint loop: fixed, and per joint rate.
 JOINT_COMPILE_FIXED_SECONDS, JOINT_COMPILE_SECONDS_PER_RATE = 1.0, 0.2
-#: CPU seconds to compile one of the tree library's algorithm units (a joint loop's: ABA, one
-#: integrator and the rate kernels, -O1) once
+#: CPU seconds to compile the tree library's forward unit (its loops and rate kernels, -O1) once
 #: per ncgen version, and one of its kernel units (ncgen/runtime/tree_library.py).
 TREE_UNIT_COMPILE_SECONDS, TREE_KERNEL_UNIT_COMPILE_SECONDS = 1.5, 0.6
 
@@ -117,12 +116,11 @@ def choose_joint_kernels(nv: int, outputs: int, flat_ready: str | None, missing:
     joint rates over ``outputs`` output intervals that the tree tables cover and a compiler
     could build (module docstring); ``flat_ready``: why its flat loop is ready, or None;
     ``missing``: the units of the tree library the tables' run needs that are not compiled
-    yet (algorithm units such as ``"joint_dopri5"``; kernel units ``local_*``, ``edge_*``, ``body``)."""
+    yet (``"forward"``, kernel units)."""
     if flat_ready is not None:
         return Choice("flat", f"the model's own loop is ready ({flat_ready})")
     cost = JOINT_COMPILE_FIXED_SECONDS + nv * JOINT_COMPILE_SECONDS_PER_RATE
-    units = sum(TREE_KERNEL_UNIT_COMPILE_SECONDS if u == "body" or u.startswith(("local_", "edge_"))
-                else TREE_UNIT_COMPILE_SECONDS for u in missing)
+    units = sum(TREE_UNIT_COMPILE_SECONDS if u == "forward" else TREE_KERNEL_UNIT_COMPILE_SECONDS for u in missing)
     saving = outputs * JOINT_EVALS_PER_OUTPUT * nv * TABLES_EXTRA_SECONDS
     if saving > cost:
         return Choice("flat", f"compiling the model's own loop (~{cost:.0f} s) saves ~{saving:.0f} s on this run")

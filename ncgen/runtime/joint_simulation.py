@@ -149,11 +149,10 @@ def dynamics_function(model) -> ca.Function:
     return tree_dynamics_function(model)
 
 
-def choose_kernels(model, outputs: int, controller=None, joint_dynamics: bool = False, kernels: str = "auto",
-                   integrator: str = INTEGRATORS[0]):
+def choose_kernels(model, outputs: int, controller=None, joint_dynamics: bool = False, kernels: str = "auto"):
     """The :class:`~ncgen.runtime.backend_policy.Choice` of the joint loop's kernels for a run
-    over ``outputs`` output intervals with the integrator ``integrator``: ``"tables"`` — the
-    tree library's loop on the model's tables (:class:`~ncgen.runtime.tree_library.TableJointLoop`: no controller, no joint
+    over ``outputs`` output intervals: ``"tables"`` — the tree library's loop on the model's
+    tables (:class:`~ncgen.runtime.tree_library.TableJointLoop`: no controller, no joint
     dynamics, a tree the tables cover; nothing compiled for the model), ``"flat"`` — the
     model's own ODE compiled with the loop; ``kernels="auto"`` as
     :func:`~ncgen.runtime.backend_policy.choose_joint_kernels` rules (the tables where no C
@@ -176,9 +175,9 @@ def choose_kernels(model, outputs: int, controller=None, joint_dynamics: bool = 
     kinds = _table_kinds(model)
     if ready is None and kinds is None:
         return Choice("flat", "the tree tables do not cover the model")
-    from ncgen.runtime.tree_library import joint_unit, missing_units
+    from ncgen.runtime.tree_library import missing_units
     return choose_joint_kernels(model.joint_space.nv, outputs, ready,
-                                () if kinds is None else tuple(missing_units(kinds, joint_unit(integrator))))
+                                () if kinds is None else tuple(missing_units(kinds, "forward")))
 
 
 def _table_kinds(model) -> list[str] | None:
@@ -290,7 +289,7 @@ def simulate_joint(model, t: np.ndarray, U: np.ndarray, hold: str, p: np.ndarray
     rtol, atol = 1e-8 if rtol is None else rtol, 1e-10 if atol is None else atol
     js = model.joint_space
     build_start = time.perf_counter()
-    choice = choose_kernels(model, len(t) - 1, controller, joint_dynamics, kernels, integrator)
+    choice = choose_kernels(model, len(t) - 1, controller, joint_dynamics, kernels)
     loop = joint_loop(model, controller, joint_dynamics, kernels=choice.backend)
     build_time = time.perf_counter() - build_start
     qj0, vj0 = model.to_joint_space(q0, v0)

@@ -6,9 +6,8 @@ library (:func:`~ncgen.runtime.table_library.cached_library`, index
 ``tree-tables-<unit>-<sources key>-<compiler key>.json``): a tree of the shipped joint kinds
 whose units are compiled reaches compiled RNEA/ABA with no call of the C compiler.
 
-Units (:mod:`ncgen.codegen.tree_kernels`): the algorithm units ``forward`` (ABA),
-``joint_rk4`` and ``joint_dopri5`` (the joint loop with one integrator, ABA inside:
-:func:`joint_unit`), ``inverse`` (RNEA, CRBA) and ``derivatives``, each with every kind's rate kernel, loops at
+Units (:mod:`ncgen.codegen.tree_kernels`): the algorithm units ``forward`` (ABA, the joint
+loop), ``inverse`` (RNEA, CRBA) and ``derivatives``, each with every kind's rate kernel, loops at
 :data:`UNIT_CFLAGS`; the kernel units ``local_<kind>``, ``edge_<kind>`` and ``body``, whose
 kernels :class:`TreeLibrary` sets in an algorithm unit (``set_kernel``) for the kinds of the
 trees it serves.  One library of everything took 30 s of CPU to compile (18 s of it the kernels
@@ -56,8 +55,8 @@ import numpy as np
 from ncgen.codegen import c_binding
 from ncgen.codegen.compile_cache import BUILD_SCHEME
 from ncgen.codegen.render import shipped_templates_dir
-from ncgen.codegen.tree_kernels import (ALGORITHM_UNITS, JOINT_KINDS, JOINT_METHODS, PACKAGE, SOURCES, kernel_units,
-                                        kind_names, units_of, write_tree_unit)
+from ncgen.codegen.tree_kernels import (ALGORITHM_UNITS, JOINT_KINDS, PACKAGE, SOURCES, kernel_units, kind_names,
+                                        units_of, write_tree_unit)
 from ncgen.codegen.tree_tables import TreeTables
 from ncgen.errors import CodegenError, ModelError
 from ncgen.runtime.table_library import cached_library, library_ready
@@ -119,21 +118,10 @@ def sources_key() -> str:
     return h.hexdigest()
 
 
-#: The algorithm unit of each entry point (the joint loop's: :func:`joint_unit`).
-UNIT_OF = {fn: unit for unit, fns in ALGORITHM_UNITS.items() for fn in fns if fn != "joint_run"}
+#: The algorithm unit of each entry point.
+UNIT_OF = {fn: unit for unit, fns in ALGORITHM_UNITS.items() for fn in fns}
 #: Flags of the algorithm units' loops (``-O1``: …); the kernel units take the compile cache's defaults.
 UNIT_CFLAGS = "-O1"
-
-
-def joint_unit(method: int | str) -> str:
-    """The algorithm unit of the joint loop with the integrator ``method`` (its number in
-    ``ncgen_joint_loop.h`` or its name, :data:`~ncgen.codegen.tree_kernels.JOINT_METHODS`)."""
-    if method in JOINT_METHODS:
-        return f"joint_{method}"
-    if isinstance(method, int) and 0 <= method < len(JOINT_METHODS):
-        return f"joint_{JOINT_METHODS[method]}"
-    raise CodegenError(f"tree library: no joint loop method {method!r} (expected one of {', '.join(JOINT_METHODS)} "
-                       f"or 0 .. {len(JOINT_METHODS) - 1})")
 
 
 def _index_prefix(unit: str) -> str:
@@ -475,6 +463,7 @@ class TableJointLoop:
 
         self.model = model
         self.tree_bound = bound_tree(model)         # no fast caller: the loop runs in C
+        self._fn = self.tree_bound.unit("forward").fn["joint_run"]
         self.E = input_efforts(model)
         self.quat = np.array(quaternion_offsets(model.joint_space), dtype=np.int32)
         self.tree = tree_function(model)
@@ -499,7 +488,7 @@ class TableJointLoop:
         ptr = (lambda a: None if a is None or a.size == 0 else a.ctypes.data)
         done, flag = ctypes.c_int(0), ctypes.c_int(0)
         status, interrupted = call_interruptibly(
-            self.tree_bound.unit(joint_unit(int(method))).fn["joint_run"], self.tree_bound.ref, ptr(self.E), self.model.nu, int(method), len(t) - 1, ptr(t), ptr(X),
+            self._fn, self.tree_bound.ref, ptr(self.E), self.model.nu, int(method), len(t) - 1, ptr(t), ptr(X),
             ptr(W), ptr(S), len(self.quat), ptr(self.quat), float(rtol), float(atol), int(substeps),
             int(max_steps), int(stop), ptr(stats), ctypes.addressof(done), ctypes.addressof(flag), stop=flag)
         return INTERRUPTED if interrupted else int(status), int(done.value)

@@ -11,8 +11,6 @@
  *                 const double *x, double *f) writing f = x'(t) on output interval k, which
  *                 starts at t_k = t_out[k] (the model interpolates its inputs from them);
  *                 nonzero when the dynamics are singular or not finite at (t, x)
- * and may define JOINT_METHOD (0 or 1) to compile that method alone (the other returns
- * JOINT_NO_METHOD); undefined, both are compiled.
  *
  * joint_run() integrates from t_out[0] over the n_out output intervals and writes the state
  * at every output time into X (row-major, (n_out + 1) x NX; row 0 is the initial state on
@@ -37,7 +35,6 @@
 #define JOINT_STEP_UNDERFLOW 3  /* step size underflow */
 #define JOINT_NO_MEMORY 4       /* out of memory (the glue's allocations) */
 #define JOINT_STOPPED 5         /* stopped through *stop */
-#define JOINT_NO_METHOD 6       /* a method other than JOINT_METHOD */
 
 typedef struct {
     JOINT_MODEL *model;
@@ -74,7 +71,6 @@ static double err_norm(const double *y0, const double *y1, const double *e, doub
     return sqrt(s / NX);
 }
 
-#if !defined(JOINT_METHOD) || JOINT_METHOD == 0
 static int run_rk4(joint_loop *c, int n_out, const double *t_out, double *X, int substeps,
                    int nquat, const int *quat, double *stats, int *k_done, volatile int *stop) {
     double k1[NX], k2[NX], k3[NX], k4[NX], y[NX], tmp[NX];
@@ -112,9 +108,6 @@ static int run_rk4(joint_loop *c, int n_out, const double *t_out, double *X, int
     return JOINT_OK;
 }
 
-#endif
-
-#if !defined(JOINT_METHOD) || JOINT_METHOD == 1
 /* Dormand-Prince 5(4) coefficients, and Hairer's dense output (DOPRI5, contd5). */
 #define C2 (1.0 / 5)
 #define C3 (3.0 / 10)
@@ -291,8 +284,6 @@ static int run_dopri5(joint_loop *c, int n_out, const double *t_out, double *X, 
     return JOINT_OK;
 }
 
-#endif
-
 /* The run described at the top of this file, on the model's data `model`. */
 static int joint_run(JOINT_MODEL *model, int method, int n_out, const double *t_out, double *X, int nquat,
                      const int *quat, double rtol, double atol, int substeps, long max_steps,
@@ -303,26 +294,11 @@ static int joint_run(JOINT_MODEL *model, int method, int n_out, const double *t_
     c.k = 0;
     c.t_k = t_out[0];
     c.nfev = 0.0;
-#if defined(JOINT_METHOD)
-    if (method != JOINT_METHOD) {
-        *k_done = 0;
-        return JOINT_NO_METHOD;
-    }
-#endif
-#if !defined(JOINT_METHOD)
     if (method == 0)
         status = run_rk4(&c, n_out, t_out, X, substeps, nquat, quat, stats, k_done, stop);
     else
         status = run_dopri5(&c, n_out, t_out, X, rtol, atol, max_steps, stop_at_outputs, nquat, quat,
                             stats, k_done, stop);
-#elif JOINT_METHOD == 0
-    (void)rtol; (void)atol; (void)max_steps; (void)stop_at_outputs;
-    status = run_rk4(&c, n_out, t_out, X, substeps, nquat, quat, stats, k_done, stop);
-#else
-    (void)substeps;
-    status = run_dopri5(&c, n_out, t_out, X, rtol, atol, max_steps, stop_at_outputs, nquat, quat, stats,
-                        k_done, stop);
-#endif
     stats[2] += c.nfev;
     return status;
 }
