@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -575,3 +576,34 @@ def test_panda_joint_run_tables_equal_flat(library):
     for x in ("qj", "vj"):
         a, b = getattr(auto, x), getattr(flat_run, x)
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-9 * max(1.0, np.abs(b).max()), err_msg=x)
+
+
+def test_member_twist_map_at_identity_equals_the_symbolic_map():
+    """``member_twist_map_at_identity`` (the form evaluated in floats at the six unit twists)
+    equals the symbolic map's Jacobian ``member_twist_map(js, m)(I, 0)`` for every 3D
+    coordinate type, with random constants (its columns rely on ``q̇`` being linear in the twist)."""
+    from types import SimpleNamespace
+
+    from ncgen.assembly.tree_dynamics import member_twist_map, member_twist_map_at_identity
+    from ncgen.model.member_forms import FORMS
+
+    class Recorder(dict):
+        def __missing__(self, key):
+            self.setdefault("_keys", set()).add(key)
+            return 0.5
+
+    rng = np.random.default_rng(3)
+    kinds = sorted(k for k, dim, what in FORMS if dim == 3 and what == "qd_of_twist")
+    assert len(kinds) >= 5
+    for kind in kinds:
+        rec = Recorder()
+        FORMS[kind, 3, "qd_of_twist"](rec)
+        pose = re.compile(r"^(R_\d\d|p_[xyz]|omega_[xyz]|v_[xyz])$")
+        constants = {k: np.float64(rng.uniform(-1.0, 1.0)) for k in rec["_keys"] if not pose.match(k)}
+        member = SimpleNamespace(ctype=SimpleNamespace(name=kind), rigid=SimpleNamespace(constant_values=constants))
+        js = SimpleNamespace(members={"m": member})
+        expected = np.array(member_twist_map(js, "m")(np.eye(3), np.zeros(3)))
+        got = member_twist_map_at_identity(js, "m")
+        assert got.shape == expected.shape == (expected.shape[0], 6), kind
+        np.testing.assert_allclose(got, expected, rtol=0, atol=1e-14 * max(1.0, np.max(np.abs(expected))),
+                                   err_msg=kind)

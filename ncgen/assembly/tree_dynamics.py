@@ -151,13 +151,29 @@ def member_twist_map(js, name: str) -> ca.Function:
     return ca.Function("twist_map", [R, p], [ca.jacobian(qd, T_g)])
 
 
-def member_inertia(js, name: str, Q: ca.Function) -> tuple[float, np.ndarray, np.ndarray]:
+def member_twist_map_at_identity(js, name: str) -> np.ndarray:
+    """``Q₀ = Q(I, 0)`` of :func:`member_twist_map` (the member's frame at the ground's pose,
+    where ``[ω; v_p] = T_g``): column ``i`` is the member's ``q̇`` form (linear in the twist)
+    at ``T_g = e_i``, evaluated in floats — no symbols (a twentieth of the symbolic map's cost)."""
+    m = js.members[name]
+    vals = {k: float(v) for k, v in m.rigid.constant_values.items()}
+    vals.update({n: float(a == b) for a, row in enumerate(matrix_names("R", 3)) for b, n in enumerate(row)})
+    vals.update(zip(component_names("p", 3), (0.0, 0.0, 0.0)))
+    from ncgen.model.member_forms import FORMS   # generated; a stored model never needs it
+    form = FORMS[m.ctype.name, 3, "qd_of_twist"]
+    names = (*component_names("omega", 3), *component_names("v", 3))
+    columns = [np.array(form({**vals, **{n: float(i == k) for k, n in enumerate(names)}}), float).reshape(-1)
+               for i in range(6)]
+    return np.stack(columns, axis=1)
+
+
+def member_inertia(js, name: str) -> tuple[float, np.ndarray, np.ndarray]:
     """``(m, c, I_c)``: mass, centre of mass and inertia about it (member axes) from the
-    member's natural-coordinate mass matrix: ``M_m = Q₀ᵀ M Q₀`` at the identity pose is its
-    mass matrix at its frame, split by ``mass_matrix_parts``.  Raises :class:`ModelError` if
-    that matrix is not a rigid body's."""
+    member's natural-coordinate mass matrix: ``M_m = Q₀ᵀ M Q₀`` at the identity pose
+    (:func:`member_twist_map_at_identity`) is its mass matrix at its frame, split by
+    ``mass_matrix_parts``.  Raises :class:`ModelError` if that matrix is not a rigid body's."""
     M = np.asarray(js.members[name].rigid.M, float)
-    Q0 = np.array(Q(np.eye(3), np.zeros(3)))
+    Q0 = member_twist_map_at_identity(js, name)
     M_m = Q0.T @ M @ Q0
     mass = M_m[3, 3]
     if mass > 0:
@@ -239,7 +255,7 @@ def uniform_gravity(model, owned) -> np.ndarray | None:
     F0 = np.array(f(*[np.zeros(x.shape) for x in ins])).reshape(-1)
     B = np.zeros((model.nq, 3))
     for name in owned:
-        T = np.array(member_twist_map(js, name)(np.eye(3), np.zeros(3)))[:, 3:]
+        T = member_twist_map_at_identity(js, name)[:, 3:]
         local = np.asarray(js.members[name].rigid.M, float) @ T
         for k, i in enumerate(model.layout.member_indices(name)):
             if i is not None:
@@ -363,7 +379,7 @@ class _Recursion:
         F = js.passive_force(t, q, v, u, p)
         self.inertia, wrench = {}, {}
         for _, name, _, _ in tree:
-            mass, c, I_c = member_inertia(js, name, member_twist_map(js, name))
+            mass, c, I_c = member_inertia(js, name)
             R, pos = pose[name]
             M_g = _mass_matrix_g(mass, pos + ca.mtimes(R, ca.DM(c)), R, I_c)
             W_ext = ca.SX.zeros(6)

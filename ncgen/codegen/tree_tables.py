@@ -107,7 +107,7 @@ def tree_tables(model) -> TreeTables:
 
 
 def _pack(model) -> TreeTables:
-    from ncgen.assembly.tree_dynamics import MimicMap, _owned, member_inertia, member_twist_map, uniform_gravity
+    from ncgen.assembly.tree_dynamics import MimicMap, _owned, member_inertia, uniform_gravity
     from ncgen.codegen.tree_check import check_tree
 
     js = model.joint_space
@@ -159,7 +159,7 @@ def _pack(model) -> TreeTables:
         to_member[there] = (Q.T @ a2, Q.T @ b2)
         xin.extend([*H_in[0].reshape(-1, order="F"), *H_in[1]])
         try:
-            m, c, I_c = member_inertia(js, there, member_twist_map(js, there))
+            m, c, I_c = member_inertia(js, there)
         except ModelError as err:
             reasons.append(str(err))
             m, c, I_c = 0.0, np.zeros(3), np.zeros((3, 3))
