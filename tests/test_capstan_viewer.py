@@ -96,3 +96,27 @@ def test_html_page_carries_the_sides(lifting, tmp_path):
     panel = [p for p in data["plots"] if p["title"] == "spring and cable tensions"]
     assert panel and [s["label"] for s in panel[0]["series"]] == ["rope.a", "rope.b"]
     assert "rope.b" in lifting.to_html(tmp_path / "capstan.html").read_text()
+
+
+def test_table_pulls_and_their_derivatives(lifting):
+    """``model.springs``' pulls at a perturbed state: the NumPy formula, and their Jacobian in
+    ``(q, v)`` against central differences (what ``min_tension`` and IPOPT use)."""
+    import casadi as ca
+
+    model = lifting.model
+    rng = np.random.default_rng(41)
+    q = lifting.q[-1] + 1e-3 * rng.normal(size=model.nq)
+    v = lifting.v[-1] + 0.1 * rng.normal(size=model.nq)
+    f = model.springs.function
+    pulls = lambda x, y: np.asarray(f(0.0, x, y, np.zeros(model.nu), model.p0)[2]).reshape(-1)
+    one = nc.Trajectory.from_states(model, np.zeros(1), q[None], v[None], np.zeros((1, model.nc)),
+                                    np.zeros((1, model.nu)), model.p0, {})
+    t_a, t_b = numpy_tensions(one)
+    np.testing.assert_allclose(np.maximum(pulls(q, v), 0), [t_a[0], t_b[0]], rtol=1e-10)
+    Q, V = ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq)
+    P = f(0.0, Q, V, np.zeros(model.nu), model.p0)[2]
+    J = np.asarray(ca.Function("J", [Q, V], [ca.jacobian(P, ca.vertcat(Q, V))])(q, v))
+    z, eps = np.concatenate([q, v]), 1e-6
+    fd = np.column_stack([(pulls(*np.split(z + eps * e, 2)) - pulls(*np.split(z - eps * e, 2))) / (2 * eps)
+                          for e in np.eye(2 * model.nq)])
+    np.testing.assert_allclose(J, fd, rtol=1e-6, atol=1e-4)
