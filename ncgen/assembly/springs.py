@@ -3,10 +3,12 @@ function evaluating every spring's tension, so that statics, form-finding and th
 report prestress and slack cables without going back to the force elements.
 
 ``springs: t, q, v, u, p -> tension, length, pull`` (one entry per
-:class:`~ncgen.model.forces.Spring` and :class:`~ncgen.model.cables.ClusteredCable`, in the
-order the forces were added): ``pull = k (l − l₀) + c l̇`` (N), ``tension`` the force the
-element exerts (``max(pull, 0)`` for a cable, ``pull`` otherwise), ``length`` ``l`` (m; a
-clustered cable's whole length ``L``, the sum of its segments).
+:class:`~ncgen.model.forces.Spring` and :class:`~ncgen.model.cables.ClusteredCable`, two per
+:class:`~ncgen.model.capstan.CapstanCable`, its sides ``<name>.a`` and ``<name>.b``, in the
+order the forces were added): ``pull = k (l − l₀) + c l̇`` (N; a capstan side's
+``EA (l − s)/s + c (l̇ ∓ ṡ)``), ``tension`` the force the element exerts (``max(pull, 0)`` for a
+cable, ``pull`` otherwise), ``length`` ``l`` (m; a clustered cable's whole length ``L``, the sum
+of its segments; a capstan side's length).
 """
 from __future__ import annotations
 
@@ -28,21 +30,41 @@ class SpringTable:
 
 
 def tension_elements(forces) -> list:
-    """The forces of a model that the table describes, in order: its ``Spring`` and
-    ``ClusteredCable`` elements."""
+    """The forces of a model that the table describes, in order: its ``Spring``,
+    ``ClusteredCable`` and ``CapstanCable`` elements."""
     from ncgen.model.cables import ClusteredCable
+    from ncgen.model.capstan import CapstanCable
     from ncgen.model.forces import Spring
 
-    return [f for f in forces if isinstance(f, (Spring, ClusteredCable))]
+    return [f for f in forces if isinstance(f, (Spring, ClusteredCable, CapstanCable))]
+
+
+def tension_rows(forces) -> list[tuple]:
+    """The table's rows, in order: ``(element, name, path)``, ``path`` the ``(member, point)``
+    pairs the row's segments join (a spring's two ends; a capstan cable's side a, then b)."""
+    from ncgen.model.capstan import CapstanCable
+
+    rows = []
+    for f in tension_elements(forces):
+        if isinstance(f, CapstanCable):
+            j = f.pulley
+            rows += [(f, f"{f.name}.a", f.path[:j + 1]), (f, f"{f.name}.b", f.path[j:])]
+        else:
+            rows.append((f, f.name, f.path if hasattr(f, "path") else [(f.a, f.at_a), (f.b, f.at_b)]))
+    return rows
 
 
 def spring_table(system, ctx) -> SpringTable:
-    """The :class:`SpringTable` of ``system`` (its springs and clustered cables)."""
+    """The :class:`SpringTable` of ``system`` (its springs, clustered and capstan cables)."""
+    from ncgen.model.capstan import CapstanCable
     from ncgen.model.cables import ClusteredCable
 
-    elements = tension_elements(system.forces)
     pulls, lengths = [], []
-    for s in elements:
+    for s in tension_elements(system.forces):
+        if isinstance(s, CapstanCable):
+            pulls += list(s.pulls(ctx))
+            lengths += [length for length, _ in s.lengths(ctx)]
+            continue
         if isinstance(s, ClusteredCable):
             length, rate = s.length(ctx)
         else:
@@ -52,12 +74,13 @@ def spring_table(system, ctx) -> SpringTable:
         c = s._value(ctx, s.damping, 1, "damping")
         pulls.append(k * (length - l0) + c * rate)
         lengths.append(length)
-    cable = tuple(isinstance(s, ClusteredCable) or s.cable for s in elements)
-    pull = ca.vertcat(*pulls) if elements else ca.SX(0, 1)
-    length = ca.vertcat(*lengths) if elements else ca.SX(0, 1)
-    tension = ca.vertcat(*[ca.fmax(pulls[i], 0) if cable[i] else pulls[i] for i in range(len(elements))]) \
-        if elements else ca.SX(0, 1)
+    rows = tension_rows(system.forces)
+    cable = tuple(getattr(s, "cable", True) for s, _, _ in rows)
+    pull = ca.vertcat(*pulls) if rows else ca.SX(0, 1)
+    length = ca.vertcat(*lengths) if rows else ca.SX(0, 1)
+    tension = ca.vertcat(*[ca.fmax(pulls[i], 0) if cable[i] else pulls[i] for i in range(len(rows))]) \
+        if rows else ca.SX(0, 1)
     f = ca.Function("springs", [ctx.t, ctx.q, ctx.v, ctx.u, ctx.p], [tension, length, pull],
                     ["t", "q", "v", "u", "p"], ["tension", "length", "pull"])
-    segments = tuple(len(s.path) - 1 if isinstance(s, ClusteredCable) else 1 for s in elements)
-    return SpringTable(tuple(s.name for s in elements), cable, f, segments)
+    segments = tuple(len(path) - 1 for _, _, path in rows)
+    return SpringTable(tuple(name for _, name, _ in rows), cable, f, segments)

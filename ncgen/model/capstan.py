@@ -157,15 +157,20 @@ class CapstanCable(Force):
         return ((sum(seg[:j], ca.SX(0)), sum(rate[:j], ca.SX(0))),
                 (sum(seg[j:], ca.SX(0)), sum(rate[j:], ca.SX(0))))
 
-    def tensions(self, ctx):
-        """``(T_a, T_b)`` (N) of the two sides, with their damping."""
+    def pulls(self, ctx):
+        """``(P_a, P_b)`` (N): the sides' ``EA (l − s)/s + c (l̇ ∓ ṡ)`` before the cut at 0
+        (rest lengths ``s`` and ``l₀ − s``)."""
         (l_a, rate_a), (l_b, rate_b) = self.lengths(ctx)
         s, slip = self.slip(ctx)
         total = float(sum(self.rest_lengths))
         ea = self._value(ctx, self.ea, 1, "ea")
         c = self._value(ctx, self.damping, 1, "damping")
-        return (side_tension(l_a, s, ea, c * (rate_a - slip)),
-                side_tension(l_b, total - s, ea, c * (rate_b + slip)))
+        return (ea * (l_a - s) / s + c * (rate_a - slip),
+                ea * (l_b - total + s) / (total - s) + c * (rate_b + slip))
+
+    def tensions(self, ctx):
+        """``(T_a, T_b)`` (N) of the two sides, with their damping: the pulls kept ≥ 0."""
+        return tuple(ca.fmax(pull, 0) for pull in self.pulls(ctx))
 
     def wrap_angle(self, ctx):
         """θ (rad): the given ``wrap``, or the shape's (module docstring)."""
@@ -211,6 +216,12 @@ class CapstanCable(Force):
         s, _ = self.slip(ctx)
         ea = self._value(ctx, self.ea, 1, "ea (in the potential energy)", inputs=False)
         return side_energy(l_a, s, ea) + side_energy(l_b, float(sum(self.rest_lengths)) - s, ea)
+
+
+def material_names(forces) -> set[str]:
+    """The names of the material points of the :class:`CapstanCable` elements in ``forces``:
+    state, not bodies (the viewer does not draw them)."""
+    return {f.material.name for f in forces if isinstance(f, CapstanCable) and f.material is not None}
 
 
 def add_capstan_cable(system, path, *, pulley: int, mu, ea, rest_lengths, material_mass: float, wrap=None,

@@ -105,7 +105,10 @@ def checked_colors(model, colors) -> dict:
 def member_primitives(model, size: float, colors: dict | None = None) -> dict[str, list[Primitive]]:
     """``{member name or "ground": [Primitive, ...]}`` for ``model`` (see the module docstring);
     ``colors`` overrides the colour of named members (CSS colours: names or ``#rrggbb``)."""
+    from ncgen.model.capstan import material_names
+
     colors = checked_colors(model, colors)
+    materials = material_names(model.forces)               # a capstan cable's material: not drawn
     out: dict[str, list[Primitive]] = {}
     visuals: dict[str, list[dict]] = {}
     for v in model.visuals:
@@ -118,6 +121,8 @@ def member_primitives(model, size: float, colors: dict | None = None) -> dict[st
             prims = [_user_shape(m, shape, color)]
         elif name in visuals:
             prims = [p for v in visuals[name] if (p := _visual(v, color)) is not None]
+        elif name in materials:
+            prims = []
         else:
             prims = _default(m, size, color)
         wheels = [e for e in getattr(model, "rolling", ()) if e.body == name]

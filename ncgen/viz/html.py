@@ -288,15 +288,15 @@ def _springs(traj, sc, idx) -> list[dict]:
     """Per spring or cable segment (a clustered cable's segments each): its ends
     ``(n, 2, 3)`` per frame, whether it is a cable and slack, its element's rest length and
     tension (N) per frame; ``sc`` holds the frames ``idx``."""
-    from ncgen.assembly.springs import tension_elements
+    from ncgen.assembly.springs import tension_rows
 
-    elements = tension_elements(traj.model.forces)
+    rows = tension_rows(traj.model.forces)
     out = []
     for i, j in enumerate(sc.spring_owner):
-        s = elements[j]
-        out.append({"name": s.name, "cable": bool(sc.spring_cable[i]),
-                    "rest_length": float(s.rest_length) if isinstance(s.rest_length, (int, float))
-                    and not hasattr(s, "path") else None,
+        s, name, _ = rows[j]
+        out.append({"name": name, "cable": bool(sc.spring_cable[i]),
+                    "rest_length": float(s.rest_length) if not hasattr(s, "path")
+                    and isinstance(s.rest_length, (int, float)) else None,
                     "ends": _pack(geometry.embed(sc.spring_ends[idx, i], traj.dim)),
                     "slack": _pack(sc.spring_slack[idx, i], np.uint8),
                     "tension": _pack(sc.spring_tension[idx, i])})

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ncgen.errors import NcgenError
+from ncgen.model.capstan import material_names
 from ncgen.runtime.contact_outputs import gaps as gaps_of
 from ncgen.viz import geometry
 
@@ -51,7 +52,7 @@ class Scene:
     spring_slack: np.ndarray = None     # (n_t, n_springs) True: a cable without tension
     spring_tension: np.ndarray = None   # (n_t, n_springs) the element's tension (N)
     spring_owner: np.ndarray = None     # (n_springs,) index of the element in spring_names
-    spring_names: list = None           # names of the springs and clustered cables
+    spring_names: list = None           # names of the springs, clustered cables, capstan sides
     shape_box: np.ndarray = None        # (2, dim): smallest and largest coordinate of the outlines
     size: float = 1.0                   # the scene's size (m) that default shapes are scaled by
 
@@ -103,7 +104,8 @@ def scene(traj, colors: dict | None = None) -> Scene:
     members = [model.member(name) for name in model.member_names]
     bars = [m for m in members if m.kind == "bar"]
     bodies = [m for m in members if m.kind == "body"]
-    points = [m for m in members if m.kind == "point"]
+    materials = material_names(model.forces)              # a capstan cable's material: not drawn
+    points = [m for m in members if m.kind == "point" and m.name not in materials]
     bar_ends = [np.stack([traj.point(m.name, m.rigid.rbar_i),
                           traj.point(m.name, m.rigid.rbar_i + m.rigid.Xbar[:, 0])], axis=1) for m in bars]
     body_points = [traj.point(m.name, local) for m in bodies for local in _basic_points(m)]
@@ -196,23 +198,23 @@ def spring_scene(traj, idx=None) -> dict:
     """Ends of every spring and cable segment per frame (``idx``: the frames, default all),
     which are cables, when a cable is slack (its pull ``k (l − l₀) + c l̇`` is not positive),
     the tension (N) and the element of each segment (a clustered cable has one segment per
-    pair of consecutive points of its path, all with its one tension).  From the model's
+    pair of consecutive points of its path, all with its one tension; a capstan cable's two
+    sides are two elements, ``<name>.a`` and ``<name>.b``, each with its own tension).  From the model's
     :class:`~ncgen.assembly.springs.SpringTable` and its force elements."""
-    from ncgen.assembly.springs import tension_elements
+    from ncgen.assembly.springs import tension_rows
 
     model = traj.model
     table = getattr(model, "springs", None)
-    elements = tension_elements(model.forces)
-    if table is None or not elements:
+    rows = tension_rows(model.forces)
+    if table is None or not rows:
         return {}
     idx = np.arange(len(traj)) if idx is None else np.asarray(idx)
     d, n = traj.dim, len(idx)
     batch = table.function.map(n)(traj.t[idx][None, :], traj.q[idx].T, traj.v[idx].T, traj.u[idx].T,
                                   np.tile(np.reshape(traj.p, (-1, 1)), (1, n)))
-    tension, pulls = (np.asarray(batch[i]).reshape(len(elements), n).T for i in (0, 2))
+    tension, pulls = (np.asarray(batch[i]).reshape(len(rows), n).T for i in (0, 2))
     ends, owner = [], []
-    for j, element in enumerate(elements):
-        path = element.path if hasattr(element, "path") else [(element.a, element.at_a), (element.b, element.at_b)]
+    for j, (_, _, path) in enumerate(rows):
         pts = [np.broadcast_to(np.asarray(at, float), (n, d)) if m.is_ground else traj.point(m.name, at)[idx]
                for m, at in path]
         for a, b in zip(pts, pts[1:]):
