@@ -10,7 +10,6 @@ import time
 
 import pytest
 
-import ncgen as nc
 from ncgen.errors import SimulationInterrupted
 from ncgen.runtime.trajectory import Trajectory
 

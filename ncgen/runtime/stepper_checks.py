@@ -141,9 +141,9 @@ def created_floor(model, traj, S: np.ndarray, work: np.ndarray, rise: np.ndarray
     tests/test_contact.py's box dropped with random spins, 2.9e-4 J of 32 J in 10 ms at an
     impact; box_stack's push-out at rest 3.1e-7; the A1 of examples/quadruped_standing.py,
     whose feet's rows turn as they roll, 6e-9 per 1 ms); :data:`CREATED_FRACTION` is 11
-    times the largest, and 77 times below the 40 ms pyramid's (7.7e-3 in one step).  ``rise``: the rows' increments
-    (:func:`contact_work_rise` summed); the force term is computed only where the first does
-    not cover them."""
+    times the largest, and 77 times below the 40 ms pyramid's (7.7e-3 in one step).
+    ``rise``: the rows' increments (:func:`contact_work_rise` summed); the force term is
+    computed only where the first does not cover them."""
     floor = CREATED_FRACTION * _energy_scale(traj, work)[1:len(S) + 1]
     if np.any(~(rise <= floor)):
         n = S[:, STATS.index("steps")] * traj.info.get("stages", 1)
