@@ -88,3 +88,98 @@ def test_joint_run_matches_the_joint_loop_template():
     assert returns == JOINT_RUN.returns
     assert [c_type(re.sub(r"\w+\s*$", "", a)) for a in args.split(",")] == JOINT_RUN.types("m")
     assert [re.search(r"(\w+)\s*$", a).group(1) for a in args.split(",")] == [n for _, n in JOINT_RUN.args]
+
+
+def definitions(text: str, prefix: str) -> dict[str, tuple[str, list[tuple[str, str]]]]:
+    """``{suffix: (return type, [(argument type, name)])}`` of the functions ``prefix<suffix>``
+    declared or defined in the C ``text`` (a template with ``{{ name }}`` already replaced)."""
+    code = re.sub(r"/\*.*?\*/", " ", text, flags=re.S)
+    found = {}
+    for returns, suffix, args in re.findall(rf"^(\w[\w ]*?[\s*]+){prefix}(\w*)\(([^)]*)\)\s*[;{{]", code,
+                                            flags=re.M | re.S):
+        args = [] if args.strip() == "void" else args.split(",")
+        found[suffix] = (c_type(returns), [(c_type(re.sub(r"\w+\s*$", "", a)), re.search(r"(\w+)\s*$", a).group(1))
+                                           for a in args])
+    return found
+
+
+def assert_table_matches(table: dict, declared: dict, name: str = "m") -> None:
+    """Every signature of ``table`` (by suffix) is declared so in ``declared``."""
+    for suffix, sig in table.items():
+        assert suffix in declared, f"{suffix}: not in the C source"
+        returns, args = declared[suffix]
+        assert c_type(sig.returns.format(name=name)) == returns, suffix
+        assert list(zip(sig.types(name), [n for _, n in sig.args])) == args, suffix
+
+
+def template(relative: str, **values) -> str:
+    """templates/c/``relative`` with ``{{ key }}`` replaced by ``values[key]``."""
+    text = (ROOT / "templates" / "c" / relative).read_text()
+    for key, value in values.items():
+        text = text.replace("{{ " + key + " }}", value)
+    return text
+
+
+def test_the_element_library_tables_match_element_tables_template():
+    """The element library's entry points (table_library.SIGNATURES), its stepper's
+    (table_stepper.SIGNATURES) and its step Jacobians (table_step.SIGNATURE), as
+    templates/c/element_tables.c.j2 defines them."""
+    from ncgen.codegen.element_kernels import PACKAGE
+    from ncgen.runtime import table_library, table_step, table_stepper
+
+    text = template("element_tables.c.j2", name=PACKAGE)
+    alias = f"typedef {PACKAGE}_step_options step_options;"     # the template's short name of the struct
+    assert alias in text
+    declared = definitions(text.replace(alias, "").replace(" step_options *", f" {PACKAGE}_step_options *"),
+                           f"{PACKAGE}_")
+    assert_table_matches(table_library.SIGNATURES, declared, name=PACKAGE)
+    assert_table_matches(table_stepper.SIGNATURES, declared, name=PACKAGE)
+    assert_table_matches({"step_jacobians": table_step.SIGNATURE}, declared, name=PACKAGE)
+
+
+def test_the_tree_library_table_matches_tree_tables_template():
+    from ncgen.runtime.tree_library import SIGNATURES
+
+    declared = definitions(template("tree_tables.c.j2", name="m"), "m_")
+    assert_table_matches(SIGNATURES, declared)
+
+
+def test_the_contact_library_table_matches_contact_active_template():
+    from ncgen.control.contact_active import SIGNATURES
+
+    declared = definitions(template("contact_active.c.j2", name="m", **{"loop.index0": "0"}), "m_")
+    assert_table_matches({"law_0": SIGNATURES["law"], "lu_columns": SIGNATURES["lu_columns"]}, declared)
+
+
+def test_the_casadi_table_matches_a_generated_kernel_header():
+    """casadi_abi.FUNCTIONS as CasADi declares a generated function (the first one of each
+    committed kernels header)."""
+    from ncgen.codegen.casadi_abi import FUNCTIONS
+
+    headers = sorted((ROOT / "generated").glob("*/*_kernels_0.h"))
+    assert headers
+    for header in headers[:3]:
+        text = header.read_text()
+        fn = re.search(r"^int (\w+)\(const casadi_real\*\* arg", text, flags=re.M).group(1)
+        assert_table_matches(FUNCTIONS, definitions(text, fn))
+
+
+def test_a_bound_casadi_function_evaluates_and_sizes_its_work():
+    """bind_casadi on a function compiled here: ``y = x₀ x₁`` and its gradient, against the
+    product rule."""
+    import casadi as ca
+    import numpy as np
+
+    from ncgen.codegen.casadi_abi import bind_casadi, work_arrays
+    from ncgen.codegen.direct import compile_direct
+
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("prod_grad", [x], [x[0] * x[1], ca.gradient(x[0] * x[1], x)])
+    direct = compile_direct("cabi_prod", f)
+    y, g = direct(np.array([3.0, -2.0]))
+    assert y[0] == -6.0 and list(g) == [-2.0, 3.0]
+    abi = bind_casadi(direct._lib, direct.c_name)
+    iw, w = work_arrays(abi, direct.c_name)
+    assert iw.dtype == np.int64 and iw.size >= 1 and w.size >= 1
+    with pytest.raises(CodegenError, match=r"no function 'cabi_nothing'"):
+        bind_casadi(direct._lib, "cabi_nothing")

@@ -4,7 +4,13 @@ A C signature is written once, as C spells it (:class:`Signature`: the return ty
 ``(type, name)`` per argument); :func:`bind` gives ctypes the matching types.  Pointers bind
 either typed (``POINTER(c_double)``: NumPy arrays pass through ``_ptr``) or as addresses
 (``c_void_p``: plain integers pass without conversion objects, for loops called per run).
-``casadi_real`` is ``double`` (the generated packages' default).
+``casadi_real`` is ``double`` and ``casadi_int`` ``long long`` (the generated packages'
+defaults).  The tables: :mod:`ncgen.codegen.stepper_abi` (a model's stepper),
+:mod:`ncgen.codegen.casadi_abi` (a function CasADi generates), ``SIGNATURES`` of
+:mod:`ncgen.runtime.table_library`, :mod:`ncgen.runtime.tree_library` and
+:mod:`ncgen.control.contact_active`, ``JOINT_RUN`` of :mod:`ncgen.codegen.joint_loop` and
+``SIGNATURE`` of :mod:`ncgen.runtime.table_step`; ``tests/test_c_binding.py`` checks each
+against the header or template that defines it.
 """
 from __future__ import annotations
 
@@ -17,7 +23,8 @@ from ncgen.errors import CodegenError
 
 #: C scalar types of the generated interfaces and their ctypes.
 SCALARS = {"casadi_real": ctypes.c_double, "double": ctypes.c_double, "int": ctypes.c_int,
-           "long": ctypes.c_long, "long long": ctypes.c_longlong, "size_t": ctypes.c_size_t}
+           "long": ctypes.c_long, "long long": ctypes.c_longlong, "size_t": ctypes.c_size_t,
+           "casadi_int": ctypes.c_longlong}
 
 
 @dataclass(frozen=True)
@@ -34,13 +41,15 @@ class Signature:
 
 
 def c_type(text: str) -> str:
-    """``text`` with single spaces and ``*`` attached to its type: ``const double *``."""
-    return re.sub(r"\s*\*\s*", " *", " ".join(text.split())).strip()
+    """``text`` with single spaces and its ``*`` run attached to its type: ``const double *``,
+    ``const casadi_real **``."""
+    return re.sub(r"(?<!\*)\*", " *", re.sub(r"\s*\*\s*", "*", " ".join(text.split()))).strip()
 
 
 def ctypes_of(spelling: str, structs: dict[str, type], addresses: bool):
     """The ctypes type of the C type ``spelling`` (a scalar of :data:`SCALARS`, a pointer to
-    one, to a struct of ``structs`` or ``void``); pointers as ``c_void_p`` if ``addresses``."""
+    one, to a struct of ``structs`` or ``void``; ``const char *`` as ``c_char_p``, a string; a
+    type of ``structs`` by value); pointers as ``c_void_p`` if ``addresses``."""
     base = c_type(spelling).replace("const ", "").replace("volatile ", "")
     if base.endswith("*"):
         if addresses:
@@ -48,6 +57,8 @@ def ctypes_of(spelling: str, structs: dict[str, type], addresses: bool):
         target = base[:-1].strip()
         if target == "void":
             return ctypes.c_void_p
+        if target == "char":
+            return ctypes.c_char_p
         if target in structs:
             return ctypes.POINTER(structs[target])
         if target in SCALARS:

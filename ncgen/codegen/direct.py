@@ -21,10 +21,10 @@ import casadi as ca
 import numpy as np
 
 from ncgen.codegen.c_binding import open_library
+from ncgen.codegen.casadi_abi import bind_casadi, work_sizes
 from ncgen.errors import CodegenError, ShapeError
 from ncgen.validation import as_numbers
 
-_INT = ctypes.c_longlong          # casadi_int of the generated code (long long by default)
 _REAL_P = ctypes.POINTER(ctypes.c_double)
 #: Arguments that hold raw bytes, never read as numbers (NumPy would read a bytearray's bytes).
 RAW_BYTES = (bytes, bytearray, memoryview)
@@ -38,17 +38,8 @@ class DirectFunction:
         self.library = Path(library)
         self.name, self.c_name, self.function = f.name(), c_name, f
         self._lib = open_library(self.library)
-        try:
-            fn = getattr(self._lib, c_name)
-            work = getattr(self._lib, f"{c_name}_work")
-        except AttributeError as e:
-            raise CodegenError(f"cannot load {c_name!r} from {self.library}: {e}") from None
-        fn.restype = ctypes.c_int
-        fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int]
-        sizes = [_INT() for _ in range(4)]
-        if work(*(ctypes.byref(s) for s in sizes)):
-            raise CodegenError(f"{c_name}_work failed in {self.library}")
-        sz_arg, sz_res, sz_iw, sz_w = (max(1, int(s.value)) for s in sizes)
+        abi = bind_casadi(self._lib, c_name)
+        sz_arg, sz_res, sz_iw, sz_w = work_sizes(abi, c_name)
         self.inputs = [np.zeros(f.nnz_in(i)) for i in range(f.n_in())]
         self.outputs = [np.zeros(f.nnz_out(i)) for i in range(f.n_out())]
         self.input_names, self.output_names = f.name_in(), f.name_out()
@@ -56,16 +47,10 @@ class DirectFunction:
         self._res = (_REAL_P * sz_res)(*[b.ctypes.data_as(_REAL_P) for b in self.outputs])
         self._iw = np.zeros(sz_iw, dtype=np.int64)
         self._w = np.zeros(sz_w)
-        self._mem = 0
-        for suffix in ("incref",):
-            g = getattr(self._lib, f"{c_name}_{suffix}", None)
-            if g is not None:
-                g()
-        checkout = getattr(self._lib, f"{c_name}_checkout", None)
-        if checkout is not None:
-            checkout.restype = ctypes.c_int
-            self._mem = int(checkout())
-        self._fn = fn
+        if abi.incref is not None:
+            abi.incref()
+        self._mem = 0 if abi.checkout is None else int(abi.checkout())
+        self._fn = abi.eval
         self._args = (ctypes.addressof(self._arg), ctypes.addressof(self._res), self._iw.ctypes.data,
                       self._w.ctypes.data, self._mem)
 

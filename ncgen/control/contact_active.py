@@ -23,7 +23,6 @@ sparse matrix; the state ``x⁺ = [q + h w; v⁺]`` is read from ``z``.
 """
 from __future__ import annotations
 
-import ctypes
 import hashlib
 
 import casadi as ca
@@ -31,7 +30,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from ncgen.assembly.stepper_equations import contact_function, stepper_functions
-from ncgen.codegen.c_binding import open_library
+from ncgen.codegen.c_binding import Signature, bind, open_library
+from ncgen.codegen.casadi_abi import bind_casadi, work_arrays
 from ncgen.codegen.package import ExtraSource
 from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
 from ncgen.control.contact_equations import rattle_residual
@@ -49,6 +49,17 @@ START_ITER, START_TOL = 4, 1e-13
 #: start positions and velocities, the free step's w and end velocity, the response y's
 #: velocity part, the final step's w and end velocity.
 BLOCKS = ("q", "v", "wf", "vf", "yv", "w", "v1")
+#: The library's own entry points (``<model>_contact_active_`` prefix; ``law`` stands for
+#: ``law_<k>``, one per kind of contact), as templates/c/contact_active.c.j2 spells them.
+SIGNATURES = {
+    "law": Signature("int", (("int", "n"), ("const casadi_real *", "a"), ("const casadi_real *", "s"),
+                             ("casadi_real *", "r"), ("casadi_real *", "J"), ("casadi_int *", "iw"),
+                             ("casadi_real *", "w"))),
+    "lu_columns": Signature("int", (("int", "n"), ("int", "m"), *(("const int *", f) for f in ("l_colind", "l_row")),
+                                    ("const double *", "l_x"), *(("const int *", f) for f in ("u_colind", "u_row")),
+                                    ("const double *", "u_x"), ("const int *", "perm_r"), ("const int *", "perm_c"),
+                                    ("const double *", "B"), ("double *", "y"), ("double *", "X"))),
+}
 
 
 class _Kind:
@@ -67,21 +78,6 @@ class _Kind:
 def _finite(d: np.ndarray) -> np.ndarray:
     """A Newton step ``d``, or zeros where it is not finite (a singular block)."""
     return d if np.all(np.isfinite(d)) else np.zeros(len(d))
-
-
-def _c_function(lib, symbol: str, argtypes: list):
-    """``lib``'s C function ``symbol`` (returning int) with ``argtypes``."""
-    f = getattr(lib, symbol)
-    f.restype, f.argtypes = ctypes.c_int, argtypes
-    return f
-
-
-def _work_arrays(lib, symbol: str):
-    """The integer and real work arrays of the compiled CasADi function ``symbol``."""
-    sizes = [ctypes.c_longlong() for _ in range(4)]
-    if getattr(lib, f"{symbol}_work")(*(ctypes.byref(s) for s in sizes)):
-        raise NcgenError(f"{symbol}_work failed")
-    return np.zeros(max(1, sizes[2].value), np.int64), np.zeros(max(1, sizes[3].value))
 
 
 def _local_rows(g, W, q, p):
@@ -174,9 +170,10 @@ class ActiveContactEquations:
             kind.pattern = kind.law.sparsity_out(1)
             kind.n_r, kind.nnz = kind.law.nnz_out(0), kind.law.nnz_out(1)
             kind.law, kind.info = compiled[kind.law.name()], compiled[kind.info.name()]
-            kind.loop = _c_function(lib, f"{name}_law_{k}", [ctypes.c_int] + [ctypes.c_void_p] * 6)
-            kind.iw, kind.w = _work_arrays(lib, f"{name}_{laws[k]['name']}")
-        self._lu_columns = _c_function(lib, f"{name}_lu_columns", [ctypes.c_int] * 2 + [ctypes.c_void_p] * 11)
+            kind.loop = bind(lib, f"{name}_law_{k}", SIGNATURES["law"], addresses=True)
+            law = f"{name}_{laws[k]['name']}"
+            kind.iw, kind.w = work_arrays(bind_casadi(lib, law), law)
+        self._lu_columns = bind(lib, f"{name}_lu_columns", SIGNATURES["lu_columns"], addresses=True)
         self._kind_of = np.empty(model.nk, int)
         for k, kind in enumerate(self._kinds):
             self._kind_of[kind.contacts] = k

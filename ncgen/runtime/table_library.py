@@ -57,9 +57,9 @@ TABLE_FIELDS = (
     *(("const int *", f) for f in ("mem_row_ptr", "mem_row", "mem_apos_ptr", "mem_apos", "mem_mpos_ptr",
                                    "mem_mpos")),
 )
-#: The library's entry points (``PACKAGE`` prefix), as element_tables.c.j2 spells them
-#: (besides ``const char *kind_names(void)``).
+#: The library's entry points (``PACKAGE`` prefix), as element_tables.c.j2 spells them.
 SIGNATURES = {
+    "kind_names": c_binding.Signature("const char *", ()),
     "work_size": c_binding.Signature("long", (("const ncgen_tables *", "T"),)),
     "check": c_binding.Signature("int", (("const ncgen_tables *", "T"),)),
     "phi": c_binding.Signature("int", (("const ncgen_tables *", "T"), ("const double *", "q"),
@@ -170,11 +170,7 @@ class ElementLibrary:
         structs = {"ncgen_tables": _Tables}
         self.fn = {k: c_binding.bind(self._lib, f"{PACKAGE}_{k}", s, structs=structs, addresses=True)
                    for k, s in SIGNATURES.items()}
-        names = getattr(self._lib, f"{PACKAGE}_kind_names", None)
-        if names is None:
-            raise CodegenError(f"{path}: no function {PACKAGE}_kind_names; delete it to have it rebuilt")
-        names.restype, names.argtypes = ctypes.c_char_p, []
-        found = names().decode()
+        found = self.fn["kind_names"]().decode()
         if found != kind_names():
             raise CodegenError(f"{path}: element library of other kinds ({found!r}, expected {kind_names()!r}); "
                                "delete it to have it rebuilt")

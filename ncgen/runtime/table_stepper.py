@@ -85,6 +85,28 @@ STEPPER_FIELDS = (
 )
 
 
+_S = ("const ncgen_stepper_tables *", "S")
+
+
+def _after_tables(sig: c_binding.Signature) -> c_binding.Signature:
+    """``sig`` with the stepper tables ``S`` as its first argument."""
+    return c_binding.Signature(sig.returns, (_S, *sig.args))
+
+
+#: The element library's stepper entry points (``PACKAGE`` prefix) as element_tables.c.j2
+#: spells them: a model stepper's loops (:data:`~ncgen.codegen.stepper_abi.LOOPS`, without
+#: contacts) after the tables ``S``, and its own.
+SIGNATURES = {
+    "stepper_check": c_binding.Signature("int", (_S,)),
+    **{loop: _after_tables(signature(loop, False)) for loop in LOOPS},
+    "forces": c_binding.Signature("int", (_S, ("const casadi_real *", "q"), ("const casadi_real *", "v"),
+                                          ("const casadi_real *", "u"), ("casadi_real *", "F"))),
+    "multipliers": c_binding.Signature("int", (_S, ("long", "n"), ("const casadi_real *", "q"),
+                                               ("const casadi_real *", "v"), ("const casadi_real *", "u"),
+                                               ("long", "u_stride"), ("casadi_real *", "lam"))),
+}
+
+
 class _StepperTables(ctypes.Structure):
     _fields_ = [(f, ctypes.c_void_p if "*" in t else ctypes.c_double if t == "double" else ctypes.c_int)
                 for t, f in STEPPER_FIELDS] + [("qr", _QrPattern), ("lu", _LuPattern)]
@@ -130,37 +152,25 @@ class TableStepper(CompiledStepper):
                                  n_torque=st.n_torque,
                                  **{f: ptr[f] for t, f in STEPPER_FIELDS if "*" in t and f != "T"}, qr=qr, lu=lu)
         self._lib = lib._lib
-        check = c_binding.bind(self._lib, f"{PACKAGE}_stepper_check",
-                               c_binding.Signature("int", (("const void *", "S"),)))
+        structs = {f"{PACKAGE}_step_options": StepOptions, "ncgen_stepper_tables": _StepperTables}
+        check = c_binding.bind(self._lib, f"{PACKAGE}_stepper_check", SIGNATURES["stepper_check"], structs=structs)
         if check(ctypes.byref(self._S)):
             raise CodegenError(f"model {st.name!r}: its stepper tables are inconsistent (ncgen_elements_stepper_check)")
-        structs = {f"{PACKAGE}_step_options": StepOptions}
         for loop in LOOPS:
-            sig = signature(loop, False)
-            sig = c_binding.Signature(sig.returns, (("const void *", "S"), *sig.args))
-            fn = c_binding.bind(self._lib, f"{PACKAGE}_{loop}", sig, name=PACKAGE, structs=structs)
+            fn = c_binding.bind(self._lib, f"{PACKAGE}_{loop}", SIGNATURES[loop], name=PACKAGE, structs=structs)
             setattr(self, f"_{loop}", partial(fn, ctypes.byref(self._S)))
-        forces = c_binding.Signature("int", (("const void *", "S"), ("const double *", "q"),
-                                              ("const double *", "v"), ("const double *", "u"),
-                                              ("double *", "F")))
-        self._forces = c_binding.bind(self._lib, f"{PACKAGE}_forces", forces, addresses=True)
-        multipliers = c_binding.Signature("int", (("const void *", "S"), ("long", "n"), ("const double *", "q"),
-                                                   ("const double *", "v"), ("const double *", "u"),
-                                                   ("long", "u_stride"), ("double *", "lam")))
-        self._multipliers = c_binding.bind(self._lib, f"{PACKAGE}_multipliers", multipliers, addresses=True)
+        self._forces = c_binding.bind(self._lib, f"{PACKAGE}_forces", SIGNATURES["forces"], addresses=True)
+        self._multipliers = c_binding.bind(self._lib, f"{PACKAGE}_multipliers", SIGNATURES["multipliers"],
+                                           addresses=True)
         self._raw = None
 
     def raw_loops(self) -> SimpleNamespace:
         """``simulate`` and ``simulate_stats`` of the element library bound to these tables with
         address arguments (as :func:`ncgen.runtime.batch._raw_loops` binds a model's own)."""
         if self._raw is None:
-            structs = {f"{PACKAGE}_step_options": StepOptions}
             loops = {}
             for loop in ("simulate", "simulate_stats"):
-                sig = signature(loop, False)
-                sig = c_binding.Signature(sig.returns, (("const void *", "S"), *sig.args))
-                fn = c_binding.bind(self._lib, f"{PACKAGE}_{loop}", sig, name=PACKAGE, structs=structs,
-                                    addresses=True)
+                fn = c_binding.bind(self._lib, f"{PACKAGE}_{loop}", SIGNATURES[loop], name=PACKAGE, addresses=True)
                 loops[loop] = partial(fn, ctypes.addressof(self._S))
             self._raw = SimpleNamespace(**loops, lib=self._lib)
         return self._raw

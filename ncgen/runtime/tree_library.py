@@ -76,6 +76,8 @@ TREE_FIELDS = (("int", "nb"), ("int", "nq"), ("int", "nv"), ("int", "ni"),
 _T, _D = "const ncgen_tree *", "const double *"
 #: The library's entry points (``PACKAGE`` prefix) as tree_tables.c.j2 spells them.
 SIGNATURES = {
+    "kind_names": c_binding.Signature("const char *", ()),
+    "set_kernel": c_binding.Signature("int", (("int", "kind"), ("int", "slot"), ("ncgen_tree_kernel", "f"))),
     "work_size": c_binding.Signature("long", ((_T, "T"),)),
     "check": c_binding.Signature("int", ((_T, "T"),)),
     "rnea": c_binding.Signature("int", ((_T, "T"), ("int", "n"), (_D, "q"), (_D, "v"), (_D, "a"),
@@ -167,18 +169,15 @@ class AlgorithmUnit:
     def __init__(self, unit: str, path: Path):
         self.unit, self.path, self.prefix = unit, path, f"{PACKAGE}_{unit}"
         self._lib = c_binding.open_library(path)
-        names = {"work_size", "check", *ALGORITHM_UNITS[unit]}
-        self.fn = {k: c_binding.bind(self._lib, f"{self.prefix}_{k}", s, structs={"ncgen_tree": _Tree},
-                                     addresses=True) for k, s in SIGNATURES.items() if k in names}
-        kinds = getattr(self._lib, f"{self.prefix}_kind_names", None)
-        if kinds is None:
-            raise CodegenError(f"{path}: no function {self.prefix}_kind_names; delete it to have it rebuilt")
-        kinds.restype, kinds.argtypes = ctypes.c_char_p, []
-        if kinds().decode() != kind_names():
-            raise CodegenError(f"{path}: tree library of other joint kinds ({kinds().decode()!r}, expected "
+        names = {"kind_names", "set_kernel", "work_size", "check", *ALGORITHM_UNITS[unit]}
+        structs = {"ncgen_tree": _Tree, "ncgen_tree_kernel": ctypes.c_void_p}
+        self.fn = {k: c_binding.bind(self._lib, f"{self.prefix}_{k}", s, structs=structs, addresses=True)
+                   for k, s in SIGNATURES.items() if k in names}
+        kinds = self.fn["kind_names"]().decode()
+        if kinds != kind_names():
+            raise CodegenError(f"{path}: tree library of other joint kinds ({kinds!r}, expected "
                                f"{kind_names()!r}); delete it to have it rebuilt")
-        self._set = self._lib[f"{self.prefix}_set_kernel"]
-        self._set.restype, self._set.argtypes = ctypes.c_int, [ctypes.c_int, ctypes.c_int, ctypes.c_void_p]
+        self._set = self.fn["set_kernel"]
         self.kernel_units: set[str] = set()
 
     def set_kernels(self, unit: str, lib: ctypes.CDLL) -> None:
