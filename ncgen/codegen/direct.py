@@ -118,16 +118,25 @@ class DirectFunction:
             buf[:] = a
 
 
-def compile_direct(name: str, f: ca.Function, cflags: str | None = None) -> DirectFunction:
-    """``f`` generated as the one-function C package ``name``, compiled (the library is
-    cached by content, :mod:`ncgen.codegen.compile_cache`) and loaded for direct calls."""
+def compile_functions(name: str, functions: list, cflags: str | tuple[str, ...] | None = None,
+                      **package_options) -> dict[str, DirectFunction]:
+    """``functions`` generated as the C package ``name`` (``package_options``: those of
+    :func:`~ncgen.codegen.package.write_package`), compiled with ``cflags`` (None: the
+    defaults of :func:`~ncgen.codegen.compile_cache.compile_package`; the library is cached by
+    content) and loaded for direct calls: ``{function name: DirectFunction}``.  The one helper
+    that compiles CasADi functions for calls from Python."""
     import tempfile
 
     from ncgen.codegen.compile_cache import compile_package
     from ncgen.codegen.package import write_package
 
     with tempfile.TemporaryDirectory() as tmp:
-        pkg = write_package(name, [f], Path(tmp) / "pkg")
+        pkg = write_package(name, functions, Path(tmp) / "pkg", **package_options)
         built = compile_package(pkg, cflags=cflags)
-        c_name = next(x["c_name"] for x in pkg.manifest["functions"] if x["name"] == f.name())
-    return DirectFunction(built.path, c_name, f)
+        names = {f.name(): pkg.c_name(f.name()) for f in functions}
+    return {f.name(): DirectFunction(built.path, names[f.name()], f) for f in functions}
+
+
+def compile_direct(name: str, f: ca.Function, cflags: str | None = None) -> DirectFunction:
+    """``f`` alone as the C package ``name``, compiled and loaded (:func:`compile_functions`)."""
+    return compile_functions(name, [f], cflags)[f.name()]

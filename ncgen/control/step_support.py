@@ -5,8 +5,6 @@ into a loaded C package."""
 from __future__ import annotations
 
 import os
-import tempfile
-from pathlib import Path
 
 import numpy as np
 
@@ -46,15 +44,10 @@ def compile_flags() -> tuple[str, ...] | None:
 
 
 def compile_functions(name: str, functions: list, **options) -> dict:
-    """``functions`` generated as the C package ``name`` (:data:`PACKAGE_OPTIONS`, updated by
-    ``options``), compiled (cached by content) and loaded for direct calls:
+    """``functions`` as the C package ``name`` with the step packages' options
+    (:data:`PACKAGE_OPTIONS`, updated by ``options``) and flags (:func:`compile_flags`),
+    compiled and loaded by :func:`ncgen.codegen.direct.compile_functions`:
     ``{function name: DirectFunction}``."""
-    from ncgen.codegen.compile_cache import compile_package
-    from ncgen.codegen.direct import DirectFunction
-    from ncgen.codegen.package import write_package
+    from ncgen.codegen import direct
 
-    with tempfile.TemporaryDirectory() as tmp:
-        pkg = write_package(name, functions, Path(tmp) / "pkg", **{**PACKAGE_OPTIONS, **options})
-        built = compile_package(pkg, cflags=compile_flags())
-        names = {f.name(): pkg.c_name(f.name()) for f in functions}
-    return {f.name(): DirectFunction(built.path, names[f.name()], f) for f in functions}
+    return direct.compile_functions(name, functions, compile_flags(), **{**PACKAGE_OPTIONS, **options})

@@ -24,7 +24,8 @@ STATUS = {1: "no convergence within max_iter", 2: "NaN or inf", 3: "the velocity
           4: "a kernel failed or the Newton matrix is singular", 5: "bad input or out of memory"}
 #: ``ncgen_elements_step_jacobians``'s arguments after the stepper tables.
 SIGNATURE = c_binding.Signature("int", (
-    ("const ncgen_stepper_tables *", "S"), ("const casadi_real *", "q"), ("const casadi_real *", "v"), ("casadi_real", "t"),
+    ("const ncgen_stepper_tables *", "S"), ("const casadi_real *", "q"), ("const casadi_real *", "v"),
+    ("casadi_real", "t"),
     ("const casadi_real *", "u"), ("const casadi_real *", "p"), ("casadi_real", "h"),
     ("const ncgen_elements_step_options *", "options"), ("const int *", "d_colind"), ("const int *", "d_row"),
     ("const double *", "d_val"), ("casadi_real *", "q_next"),
