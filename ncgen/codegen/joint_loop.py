@@ -9,6 +9,7 @@ The library exports ``<name>_joint_run`` (:data:`JOINT_RUN`, defined by the glue
 codes by the runtime; ``tests/test_c_binding.py`` checks the definition and the table agree)."""
 from __future__ import annotations
 
+import ctypes
 import hashlib
 import json
 import os
@@ -17,7 +18,7 @@ from pathlib import Path
 
 import casadi as ca
 
-from ncgen.codegen.c_binding import Signature
+from ncgen.codegen.c_binding import Signature, structure
 from ncgen.codegen.compile_cache import cache_dir, compile_package, entry_problem, resolve_cflags
 from ncgen.codegen.compiler import find_compiler
 from ncgen.codegen.model_cache import code_identity
@@ -31,12 +32,34 @@ O1_INSTRUCTIONS = 40_000
 
 #: Status of a joint loop stopped by Ctrl-C (given by the Python side: the C loop never returns it).
 INTERRUPTED = 5
+#: ``ncgen_joint_options`` (templates/c/runtime/ncgen_joint_loop.h): the joint loop's options,
+#: passed to C whole, as ``(C type, field)``.
+JOINT_OPTIONS = (("int", "method"), ("double", "rtol"), ("double", "atol"), ("int", "substeps"),
+                 ("long", "max_steps"), ("int", "stop_at_outputs"), ("volatile int *", "stop"))
+
+
+class JointOptions(ctypes.Structure):
+    """``ncgen_joint_options`` (:data:`JOINT_OPTIONS`): ``method`` 0 RK4 (``substeps`` steps
+    per output interval), 1 Dormand–Prince (``rtol``, ``atol``, at most ``max_steps`` steps
+    per output interval, restarted at every output time if ``stop_at_outputs``); ``stop``: a
+    flag read before every step (Ctrl-C)."""
+
+    _fields_ = structure(JOINT_OPTIONS)
+
+
 #: ``{name}_joint_run`` as templates/c/joint_loop.c.j2 defines it.
 JOINT_RUN = Signature("int", (
-    ("int", "method"), ("int", "n_out"), ("const double *", "t_out"), ("double *", "X"), ("const double *", "W"),
-    ("const double *", "S"), ("const double *", "p"), ("int", "nquat"), ("const int *", "quat"),
-    ("double", "rtol"), ("double", "atol"), ("int", "substeps"), ("long", "max_steps"),
-    ("int", "stop_at_outputs"), ("double *", "stats"), ("int *", "k_done"), ("volatile int *", "stop")))
+    ("const ncgen_joint_options *", "options"), ("int", "n_out"), ("const double *", "t_out"), ("double *", "X"),
+    ("const double *", "W"), ("const double *", "S"), ("const double *", "p"), ("int", "nquat"),
+    ("const int *", "quat"), ("double *", "stats"), ("int *", "k_done")))
+
+
+def joint_options(method: int, rtol: float, atol: float, substeps: int, max_steps: int, stop_at_outputs: bool,
+                  stop: ctypes.c_int) -> JointOptions:
+    """The options struct of one run (``stop``: the flag Ctrl-C sets, kept alive by the caller)."""
+    return JointOptions(method=int(method), rtol=float(rtol), atol=float(atol), substeps=int(substeps),
+                        max_steps=int(max_steps), stop_at_outputs=int(bool(stop_at_outputs)),
+                        stop=ctypes.pointer(stop))
 
 
 def build_joint_loop(name: str, ode: ca.Function, pivot_tol: float, cflags=None) -> Path:

@@ -101,12 +101,12 @@ class JointLoop:
     def __init__(self, model, library, ode: ca.Function, name: str):
         from ncgen.assembly.joint_ode import quaternion_offsets
         from ncgen.codegen.c_binding import bind, open_library
-        from ncgen.codegen.joint_loop import JOINT_RUN
+        from ncgen.codegen.joint_loop import JOINT_RUN, JointOptions
         from ncgen.codegen.tree_check import tree_function
 
         self.model, self.ode, self.library = model, ode, library
         self._lib = open_library(library)
-        self._fn = bind(self._lib, f"{name}_joint_run", JOINT_RUN)
+        self._fn = bind(self._lib, f"{name}_joint_run", JOINT_RUN, structs={"ncgen_joint_options": JointOptions})
         self.quat = np.array(quaternion_offsets(model.joint_space), dtype=np.int32)
         self.tree = tree_function(model)
         self._maps: dict = {}
@@ -123,15 +123,17 @@ class JointLoop:
             atol: float, substeps: int, max_steps: int, stop: bool, stats: np.ndarray) -> tuple[int, int]:
         """Integrate over the grid ``t`` (``X[0]`` given, the rest written); ``(status, k_done)``,
         status :data:`INTERRUPTED` after Ctrl-C (:func:`~ncgen.interrupts.call_interruptibly`)."""
+        from ncgen.codegen.joint_loop import joint_options
+
         D = ctypes.POINTER(ctypes.c_double)
         done = ctypes.c_int(0)
         ptr = (lambda a: None if a is None or a.size == 0 else a.ctypes.data_as(D))
         flag = ctypes.c_int(0)
+        options = joint_options(method, rtol, atol, substeps, max_steps, stop, flag)
         status, interrupted = call_interruptibly(
-            self._fn, int(method), len(t) - 1, ptr(t), ptr(X), ptr(W), ptr(S), ptr(p), len(self.quat),
-            self.quat.ctypes.data_as(ctypes.POINTER(ctypes.c_int)) if len(self.quat) else None, float(rtol),
-            float(atol), int(substeps), int(max_steps), int(stop), ptr(stats), ctypes.byref(done),
-            ctypes.byref(flag), stop=flag)
+            self._fn, ctypes.byref(options), len(t) - 1, ptr(t), ptr(X), ptr(W), ptr(S), ptr(p), len(self.quat),
+            self.quat.ctypes.data_as(ctypes.POINTER(ctypes.c_int)) if len(self.quat) else None, ptr(stats),
+            ctypes.byref(done), stop=flag)
         return INTERRUPTED if interrupted else int(status), int(done.value)
 
 

@@ -91,10 +91,9 @@ SIGNATURES = {
                                                    *(("double *", x) for x in ("a", "dq", "dv", "Minv", "check",
                                                                                "w")))),
     "joint_run": c_binding.Signature("int", (
-        (_T, "T"), (_D, "E"), ("int", "nu"), ("int", "method"), ("int", "n_out"), (_D, "t_out"), ("double *", "X"),
-        (_D, "W"), (_D, "S"), ("int", "nquat"), ("const int *", "quat"), ("double", "rtol"), ("double", "atol"),
-        ("int", "substeps"), ("long", "max_steps"), ("int", "stop_at_outputs"), ("double *", "stats"),
-        ("int *", "k_done"), ("volatile int *", "stop"))),
+        (_T, "T"), (_D, "E"), ("int", "nu"), ("const ncgen_joint_options *", "options"), ("int", "n_out"),
+        (_D, "t_out"), ("double *", "X"), (_D, "W"), (_D, "S"), ("int", "nquat"), ("const int *", "quat"),
+        ("double *", "stats"), ("int *", "k_done"))),
 }
 
 
@@ -482,12 +481,13 @@ class TableJointLoop:
             atol: float, substeps: int, max_steps: int, stop: bool, stats: np.ndarray) -> tuple[int, int]:
         """As ``JointLoop.run`` (``p`` does not enter: the tables' dynamics take none)."""
         from ncgen.interrupts import call_interruptibly
-        from ncgen.codegen.joint_loop import INTERRUPTED
+        from ncgen.codegen.joint_loop import INTERRUPTED, joint_options
 
         ptr = (lambda a: None if a is None or a.size == 0 else a.ctypes.data)
         done, flag = ctypes.c_int(0), ctypes.c_int(0)
+        options = joint_options(method, rtol, atol, substeps, max_steps, stop, flag)
         status, interrupted = call_interruptibly(
-            self._fn, self.tree_bound.ref, ptr(self.E), self.model.nu, int(method), len(t) - 1, ptr(t), ptr(X),
-            ptr(W), ptr(S), len(self.quat), ptr(self.quat), float(rtol), float(atol), int(substeps),
-            int(max_steps), int(stop), ptr(stats), ctypes.addressof(done), ctypes.addressof(flag), stop=flag)
+            self._fn, self.tree_bound.ref, ptr(self.E), self.model.nu, ctypes.addressof(options), len(t) - 1,
+            ptr(t), ptr(X), ptr(W), ptr(S), len(self.quat), ptr(self.quat), ptr(stats), ctypes.addressof(done),
+            stop=flag)
         return INTERRUPTED if interrupted else int(status), int(done.value)

@@ -114,8 +114,15 @@ static int run(test_model *m, int method, int n, const double *t, double *X, int
     memset(stats, 0, 5 * sizeof(double));
     m->evaluations = 0;
     start(X);
-    return joint_run(m, method, n, t, X, nquat, QUAT, rtol, atol, substeps, max_steps, stop_at_outputs, stats,
-                     k_done, stop);
+    ncgen_joint_options o;
+    o.method = method;
+    o.rtol = rtol;
+    o.atol = atol;
+    o.substeps = substeps;
+    o.max_steps = max_steps;
+    o.stop_at_outputs = stop_at_outputs;
+    o.stop = stop;
+    return joint_run(m, &o, n, t, X, nquat, QUAT, stats, k_done);
 }
 
 /* RK4: the error of the final state falls by 2^4 per halving of the step; each step costs
@@ -225,7 +232,9 @@ static void test_non_finite_state(void) {
         X[1] = NAN;
         X[NX] = 12345.0;
         k_done = -1;
-        status = joint_run(&m, method, 4, t, X, 1, QUAT, 1e-8, 1e-8, 4, 1000, 1, stats, &k_done, 0);
+        ncgen_joint_options o = {0, 1e-8, 1e-8, 4, 1000, 1, NULL};
+        o.method = method;
+        status = joint_run(&m, &o, 4, t, X, 1, QUAT, stats, &k_done);
         CHECK(status == JOINT_SINGULAR && k_done == 0 && stats[4] == 0.0 && stats[0] == 0.0,
               "method %d: status %d, k_done %d, failed at t = %g after %g steps", method, status, k_done, stats[4],
               stats[0]);

@@ -14,12 +14,14 @@
  *
  * joint_run() integrates from t_out[0] over the n_out output intervals and writes the state
  * at every output time into X (row-major, (n_out + 1) x NX; row 0 is the initial state on
- * entry).
+ * entry), as its options (ncgen_joint_options, below: simulate(method="joint")'s option
+ * group, passed whole) say.
  *   method 0: classical RK4, `substeps` equal steps per output interval;
  *   method 1: Dormand-Prince 5(4) (error per step: sqrt(mean((e_i / (atol + rtol max(|y0_i|,
  *             |y1_i|)))^2)) <= 1; step control as Hairer's DOPRI5), outputs by its
  *             4th-order dense output, restarted at every output time when stop_at_outputs
- *             (otherwise one segment over the whole grid, on output interval k = 0's data).
+ *             (otherwise one segment over the whole grid, on output interval k = 0's data);
+ *             at most max_steps steps per output interval.
  * After every step the unit quaternions (starts quat[0..nquat-1] in x) are renormalised.
  * stats (in/out): [0] steps, [1] rejected steps, [2] ODE evaluations, [3] next step size
  * (in: first step to try, 0 = estimate), [4] time reached when failing.
@@ -35,6 +37,17 @@
 #define JOINT_STEP_UNDERFLOW 3  /* step size underflow */
 #define JOINT_NO_MEMORY 4       /* out of memory (the glue's allocations) */
 #define JOINT_STOPPED 5         /* stopped through *stop */
+
+/* The joint loop's options (fields as described at the top of this file). */
+typedef struct {
+    int method;
+    double rtol;
+    double atol;
+    int substeps;
+    long max_steps;
+    int stop_at_outputs;
+    volatile int *stop;
+} ncgen_joint_options;
 
 typedef struct {
     JOINT_MODEL *model;
@@ -285,20 +298,19 @@ static int run_dopri5(joint_loop *c, int n_out, const double *t_out, double *X, 
 }
 
 /* The run described at the top of this file, on the model's data `model`. */
-static int joint_run(JOINT_MODEL *model, int method, int n_out, const double *t_out, double *X, int nquat,
-                     const int *quat, double rtol, double atol, int substeps, long max_steps,
-                     int stop_at_outputs, double *stats, int *k_done, volatile int *stop) {
+static int joint_run(JOINT_MODEL *model, const ncgen_joint_options *o, int n_out, const double *t_out, double *X,
+                     int nquat, const int *quat, double *stats, int *k_done) {
     joint_loop c;
     int status;
     c.model = model;
     c.k = 0;
     c.t_k = t_out[0];
     c.nfev = 0.0;
-    if (method == 0)
-        status = run_rk4(&c, n_out, t_out, X, substeps, nquat, quat, stats, k_done, stop);
+    if (o->method == 0)
+        status = run_rk4(&c, n_out, t_out, X, o->substeps, nquat, quat, stats, k_done, o->stop);
     else
-        status = run_dopri5(&c, n_out, t_out, X, rtol, atol, max_steps, stop_at_outputs, nquat, quat,
-                            stats, k_done, stop);
+        status = run_dopri5(&c, n_out, t_out, X, o->rtol, o->atol, o->max_steps, o->stop_at_outputs, nquat, quat,
+                            stats, k_done, o->stop);
     stats[2] += c.nfev;
     return status;
 }
