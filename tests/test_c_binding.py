@@ -183,3 +183,16 @@ def test_a_bound_casadi_function_evaluates_and_sizes_its_work():
     assert iw.dtype == np.int64 and iw.size >= 1 and w.size >= 1
     with pytest.raises(CodegenError, match=r"no function 'cabi_nothing'"):
         bind_casadi(direct._lib, "cabi_nothing")
+
+
+def test_the_joint_options_struct_matches_the_joint_loop_header():
+    """``ncgen_joint_options`` as templates/c/runtime/ncgen_joint_loop.h declares it is
+    JOINT_OPTIONS (JointOptions is made from it; its stop flag an int pointer)."""
+    from ncgen.codegen.joint_loop import JOINT_OPTIONS, JointOptions
+
+    text = (ROOT / "templates" / "c" / "runtime" / "ncgen_joint_loop.h").read_text()
+    body = re.sub(r"/\*.*?\*/", " ", re.search(r"typedef struct \{(.*?)\}\s*ncgen_joint_options;", text,
+                                               flags=re.S).group(1), flags=re.S)
+    declared = [(c_type(m.group(1)), m.group(2)) for m in re.finditer(r"([\w ]+?\s*\*?)\s*(\w+);", body)]
+    assert declared == [(c_type(t), f) for t, f in JOINT_OPTIONS]
+    assert JointOptions._fields_[-1][1] is ctypes.POINTER(ctypes.c_int)
