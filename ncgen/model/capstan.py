@@ -176,7 +176,9 @@ class CapstanCable(Force):
         drums = len(js)
         for key in ("mu", "wrap", "turns", "material"):
             value = getattr(self, key)
-            if _one_or_many(value) and (len(value) != drums or not _one_or_many(self.pulley)):
+            if _one_or_many(value) and not _one_or_many(self.pulley):
+                raise ModelError(f"{self.label}: {key}: expected one value (pulley is one drum), got a list")
+            if _one_or_many(value) and len(value) != drums:
                 raise ModelError(f"{self.label}: {key}: expected one value or one per drum ({drums}), "
                                  f"got {len(value)}")
         wraps, turns = self.per_drum("wrap"), self.per_drum("turns")
