@@ -226,11 +226,15 @@ class CapstanCable(Force):
             out.append((total + ca.dot(e, r - ca.DM(np.asarray(m.p0, float))), ca.dot(e, v)))
         return out
 
-    def side_rests(self, ctx) -> list[tuple]:
-        """``[(ρ_i, ρ̇_i)]``: the sides' rest lengths (m) and their rates (m/s)."""
+    def _cumulative(self, ctx) -> list[tuple]:
+        """``[(S_{i−1}, S_i)]`` per side with their rates: ``S_{−1} = 0``, ``S_n = L₀``."""
         total = sum(self._rests(ctx), ca.SX(0))
         cum = [(ca.SX(0), ca.SX(0))] + self.slip(ctx) + [(total, ca.SX(0))]
-        return [(s1 - s0, r1 - r0) for (s0, r0), (s1, r1) in zip(cum, cum[1:])]
+        return list(zip(cum, cum[1:]))
+
+    def side_rests(self, ctx) -> list[tuple]:
+        """``[(ρ_i, ρ̇_i)]``: the sides' rest lengths (m) and their rates (m/s)."""
+        return [(s1 - s0, r1 - r0) for (s0, r0), (s1, r1) in self._cumulative(ctx)]
 
     def lengths(self, ctx) -> list[tuple]:
         """``[(l_i, l̇_i)]``: the lengths (m) of the sides and their rates (m/s)."""
@@ -245,8 +249,8 @@ class CapstanCable(Force):
         """``[P_i]`` (N): the sides' ``EA (l − ρ)/ρ + c (l̇ − ρ̇)`` before the cut at 0."""
         ea = self._value(ctx, self.ea, 1, "ea")
         c = self._value(ctx, self.damping, 1, "damping")
-        return [ea * (length - rho) / rho + c * (rate - rho_rate)
-                for (length, rate), (rho, rho_rate) in zip(self.lengths(ctx), self.side_rests(ctx))]
+        return [ea * (length - s1 + s0) / (s1 - s0) + c * (rate - (r1 - r0))
+                for (length, rate), ((s0, r0), (s1, r1)) in zip(self.lengths(ctx), self._cumulative(ctx))]
 
     def tensions(self, ctx) -> list:
         """``[T_i]`` (N) of the sides, with their damping: the pulls kept ≥ 0."""
@@ -283,10 +287,11 @@ class CapstanCable(Force):
             pull[i] += f
             pull[i + 1] -= f
         ea = self._value(ctx, self.ea, 1, "ea")
-        strain = [t_i + side_tension(length, rho, ea) ** 2 / (2 * ea)
-                  for t_i, (length, _), (rho, _) in zip(t, self.lengths(ctx), self.side_rests(ctx))]
+        strain = [side_tension(length, rho, ea) ** 2 / (2 * ea)
+                  for (length, _), (rho, _) in zip(self.lengths(ctx), self.side_rests(ctx))]
         axis = ca.DM(np.asarray(self.axis, float))
-        on_material = [(strain[k] - strain[k + 1] - f) * axis for k, f in enumerate(self.friction(ctx))]
+        on_material = [(t[k] + strain[k] - t[k + 1] - strain[k + 1] - f) * axis
+                       for k, f in enumerate(self.friction(ctx))]
         Q = ca.SX.zeros(ctx.layout.nq)
         at0 = np.zeros(ctx.dim)
         for (m, at), f in list(zip(self.path, pull)) + [((m, at0), f) for m, f in zip(self.materials, on_material)]:
