@@ -329,3 +329,36 @@ def test_compiled_stepper_with_a_drum_on_a_moving_block(tmp_path, monkeypatch):
     traj = nc.simulate(s.build(), t_end=0.25, dt=0.005, method="stepper", substeps=40)
     fit = -acceleration(traj, "block")
     assert abs(fit - a) < 0.005 * a, (fit, a)
+
+
+def _parametric_rig(values, names=None):
+    s = nc.System("parametric_drums", gravity=(0, 0, -G))
+    pts = [s.add_point(f"p{i}", mass=1.0, position=x) for i, x in enumerate([(0, 0, 0), (1.5, 1, 0.3), (0.2, 1.4, -0.1)])]
+    path = [(pts[0], (0, 0, 0)), (s.ground, (1, 0.2, 0)), (pts[1], (0, 0, 0)), (s.ground, (0, 2.5, 0)),
+            (pts[2], (0, 0, 0))]
+    if names:
+        for n, v in zip(names, values):
+            s.add_parameter(n, v)
+    mu, wrap, ea, r0, r1, r2 = names or values
+    nc.add_capstan_cable(s, path, pulley=[1, 3], mu=[mu, 0.2], wrap=[wrap, 1.0], ea=ea, rest_lengths=(r0, r1, r2),
+                         material_mass=0.1, damping=1.0, name="rope")
+    return s.build()
+
+
+def test_parameters_give_what_a_rebuild_with_their_values_gives():
+    """μ, θ, EA and the rest lengths as parameters: F and the energy at p equal those of a
+    model built with p's numbers (random states), and differ from the defaults'."""
+    names = ("mu", "wrap", "ea", "r0", "r1", "r2")
+    default, other = (0.3, 2.0, 300.0, 1.2, 1.1, 0.9), (0.5, 2.5, 450.0, 1.3, 1.0, 1.0)
+    model = _parametric_rig(default, names)
+    rebuilt = _parametric_rig(other)
+    rng = np.random.default_rng(5)
+    p = np.array(other)
+    for _ in range(5):
+        q, v = model.q0 + 0.05 * rng.normal(size=model.nq), rng.normal(size=model.nq)
+        F = np.array(model.functions["F"](0, q, v, np.zeros(0), p)).reshape(-1)
+        np.testing.assert_allclose(F, np.array(rebuilt.functions["F"](0, q, v, np.zeros(0), np.zeros(0))).reshape(-1),
+                                   rtol=1e-12, atol=1e-12 * np.abs(F).max())
+        V = float(model.functions["energy"](0, q, v, p)[1])
+        assert V == pytest.approx(float(rebuilt.functions["energy"](0, q, v, np.zeros(0))[1]), rel=1e-12)
+        assert np.abs(F - np.array(model.functions["F"](0, q, v, np.zeros(0), model.p0)).reshape(-1)).max() > 1e-3
