@@ -241,6 +241,8 @@ def test_toml_round_trip_of_several_drums_and_parameters():
         assert old in text
         with pytest.raises(ModelError, match=message):
             nc.System.from_toml(text.replace(old, new))
+    with pytest.raises(ModelError, match=r"to_toml: .*rope.*: wrap: a list with None .* has no TOML form"):
+        two_drums(90.0, wraps=(None, np.pi)).to_toml()
 
 
 def test_several_drums_bad_values_are_named():

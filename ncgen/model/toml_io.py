@@ -825,6 +825,9 @@ def _force_entries(f, sc, system) -> dict:
         elif field.kind in ("index", "index or indices"):
             out[field.key] = [int(x) for x in value] if isinstance(value, (tuple, list)) else int(value)
         elif field.kind in ("value or values", "values of parameters") and isinstance(value, (tuple, list, np.ndarray)):
+            if any(x is None for x in value):
+                raise ModelError(f"to_toml: {f.label}: {field.key}: a list with None (the angle from the shape) "
+                                 f"has no TOML form; give every drum's or none")
             out[field.key] = [value_to_toml(x, sc, f"{f.label}: {field.key}[{i}]") for i, x in enumerate(value)]
         elif field.kind == "vector":
             out[field.key] = _plain(value)
