@@ -160,7 +160,7 @@ def test_bad_values_are_named():
                                 ("damping", -1.0, r"damping: expected a finite number >= 0"),
                                 ("slip_velocity", 0.0, r"slip_velocity: expected a finite number > 0"),
                                 ("pulley", 2, r"pulley: expected the index of an inner point of the path \(1 to 1\)"),
-                                ("rest_lengths", (1.0, -1.0), r"rest_lengths: expected two rest lengths > 0"),
+                                ("rest_lengths", (1.0, -1.0), r"rest_lengths: expected 2 rest lengths > 0 \(m\), one per side \(a to b\)"),
                                 ("material_mass", 0.0, r"material_mass: expected a number > 0 \(kg\), got 0"),
                                 ("turns", -1, r"turns: expected an integer >= 0, got -1"),
                                 ("turns", 1, r"turns: only with wrap = None")):

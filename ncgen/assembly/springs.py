@@ -3,10 +3,10 @@ function evaluating every spring's tension, so that statics, form-finding and th
 report prestress and slack cables without going back to the force elements.
 
 ``springs: t, q, v, u, p -> tension, length, pull`` (one entry per
-:class:`~ncgen.model.forces.Spring` and :class:`~ncgen.model.cables.ClusteredCable`, two per
-:class:`~ncgen.model.capstan.CapstanCable`, its sides ``<name>.a`` and ``<name>.b``, in the
+:class:`~ncgen.model.forces.Spring` and :class:`~ncgen.model.cables.ClusteredCable`, one per side of a
+:class:`~ncgen.model.capstan.CapstanCable`, its sides ``<name>.a``, ``<name>.b``, … in path order, in the
 order the forces were added): ``pull = k (l − l₀) + c l̇`` (N; a capstan side's
-``EA (l − s)/s + c (l̇ ∓ ṡ)``), ``tension`` the force the element exerts (``max(pull, 0)`` for a
+``EA (l − ρ)/ρ + c (l̇ − ρ̇)``), ``tension`` the force the element exerts (``max(pull, 0)`` for a
 cable, ``pull`` otherwise), ``length`` ``l`` (m; a clustered cable's whole length ``L``, the sum
 of its segments; a capstan side's length).
 """
@@ -41,14 +41,13 @@ def tension_elements(forces) -> list:
 
 def tension_rows(forces) -> list[tuple]:
     """The table's rows, in order: ``(element, name, path)``, ``path`` the ``(member, point)``
-    pairs the row's segments join (a spring's two ends; a capstan cable's side a, then b)."""
+    pairs the row's segments join (a spring's two ends; a capstan cable's sides a, b, … in turn)."""
     from ncgen.model.capstan import CapstanCable
 
     rows = []
     for f in tension_elements(forces):
         if isinstance(f, CapstanCable):
-            j = f.pulley
-            rows += [(f, f"{f.name}.a", f.path[:j + 1]), (f, f"{f.name}.b", f.path[j:])]
+            rows += [(f, name, path) for name, path in zip(f.side_names(), f.side_paths())]
         else:
             rows.append((f, f.name, f.path if hasattr(f, "path") else [(f.a, f.at_a), (f.b, f.at_b)]))
     return rows

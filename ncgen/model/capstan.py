@@ -1,38 +1,46 @@
 """``CapstanCable``: an elastic cable through the points of ``path`` with capstan
-(Euler–Eytelwein) friction at one pulley, sticking or slipping in a simulation.
+(Euler–Eytelwein) friction at one or several drums, sticking or slipping in a simulation.
 
-The pulley ``path[j]`` splits the cable into side a (``path[0..j]``, length ``l_a``) and
-side b (``path[j..]``, ``l_b``); the other points of the path are frictionless pulleys.  The
-cable material on each side is a state: the rest length ``s`` of side a (m; side b carries
-``l₀ − s``, the whole rest length ``l₀`` is conserved), the coordinate of a *material point*
-of mass ``m_s`` (the cable's mass lumped at the pulley, kg) that slides on a line of the
-ground perpendicular to gravity (``s = s₀ + e·(r_m − r_m0)``, :func:`add_capstan_cable`).
-Its rate ``ṡ`` (m/s, > 0: material passes from side b to side a) is the slip.
+The drums ``path[j₁], …, path[j_n]`` (``pulley``: one index or an increasing list) split the
+cable into ``n + 1`` sides ``0 … n`` (side ``i`` from drum ``i − 1`` to drum ``i``, the path's
+ends closing the first and the last; named ``a, b, c, …``); the other points of the path are
+frictionless pulleys.  The cable material is state: drum ``k`` carries the *cumulative* rest
+length ``S_k`` of sides ``0 … k`` (m), the coordinate of a *material point* of mass ``m_s`` (the
+cable's mass lumped at the drum, kg) that slides on a line of the ground perpendicular to
+gravity (``S_k = S_k0 + e·(r_k − r_k0)``, :func:`add_capstan_cable`).  Side ``i`` has the rest
+length ``ρ_i = S_i − S_{i−1}`` (``S_{−1} = 0``, ``S_n = L₀`` the whole rest length, conserved).
+The rate ``Ṡ_k`` (m/s, > 0: material passes from side ``k + 1`` to side ``k``) is drum k's slip.
 
 Sides (axial stiffness ``EA``, N; damping ``c``, N·s/m, on each side's stretching rate):
-``T_a = EA (l_a − s)/s + c (l̇_a − ṡ)``, ``T_b = EA (l_b − l₀ + s)/(l₀ − s) + c (l̇_b + ṡ)`` (kept
-≥ 0: slack), potential ``V = Σ EA (l − s)²/(2 s)`` over taut sides.  The material point is
-driven by ``P = T_a + E_a²/(2EA) − T_b − E_b²/(2EA)`` (``E`` the elastic part of ``T``: the
-elastic part of ``P`` is ``−∂V/∂s``) and held by the friction
+``T_i = EA (l_i − ρ_i)/ρ_i + c (l̇_i − ρ̇_i)`` (kept ≥ 0: slack), potential
+``V = Σ EA (l_i − ρ_i)²/(2 ρ_i)`` over taut sides.  Material point ``k`` is driven by
+``P_k = T_k + E_k²/(2EA) − T_{k+1} − E_{k+1}²/(2EA)`` (``E`` the elastic part of ``T``: the
+elastic part of ``P_k`` is ``−∂V/∂S_k``) and held by drum k's friction between its two
+neighbouring sides (``T_a = T_k``, ``T_b = T_{k+1}``)
 
-    F_f = (e^{μθ} − 1) (T_b max(τ, 0) + T_a min(τ, 0)),   τ = tanh(ṡ / v_s)
+    F_f = (e^{μθ} − 1) (T_b max(τ, 0) + T_a min(τ, 0)),   τ = tanh(Ṡ_k / v_s)
 
-(``μ`` friction coefficient, ``θ`` wrap angle in rad, ``v_s`` the slip velocity scale, m/s):
-``m_s s̈ = P − F_f``.  Sliding at ``|ṡ| ≫ v_s``, ``|F_f|`` is the capstan bound: slipping
-towards a, ``T_a − T_b = (e^{μθ} − 1) T_b`` i.e. ``T_a = T_b e^{μθ}``; towards b,
-``T_b = T_a e^{μθ}``, each up to the relative error ``1 − tanh(|ṡ|/v_s)`` in the friction,
-the material's inertia ``m_s s̈`` and the strain terms ``T²/(2EA)`` of ``P``.  While
-``e^{−μθ} < T_a/T_b < e^{μθ}`` the cable sticks: ``τ = P / F_max`` balances ``P`` and the
-material creeps at ``|ṡ| = v_s atanh(|P|/F_max)`` (``F_max`` the bound on that side), which
-is the regularisation's error (``v_s → 0``: exact stick).  The friction's power ``−F_f ṡ`` is
-≤ 0, and the damping's ``−c Σ (stretching rate)²`` too: they only dissipate.
+(``μ`` friction coefficient, ``θ`` wrap angle in rad, both per drum; ``v_s`` the slip velocity
+scale, m/s): ``m_s S̈_k = P_k − F_f``.  Sliding at ``|Ṡ| ≫ v_s``, ``|F_f|`` is the capstan
+bound: slipping towards a, ``T_a = T_b e^{μθ}``; towards b, ``T_b = T_a e^{μθ}``, each up to the
+relative error ``1 − tanh(|Ṡ|/v_s)`` in the friction, the material's inertia ``m_s S̈`` and the
+strain terms ``T²/(2EA)`` of ``P``; over several slipping drums the ratios multiply
+(``e^{μ₁θ₁ + μ₂θ₂ + …}``).  While ``e^{−μθ} < T_a/T_b < e^{μθ}`` the drum sticks: the material
+creeps at ``|Ṡ| = v_s atanh(|P|/F_max)`` (``F_max`` the bound on that side), the
+regularisation's error.  The friction's power ``−F_f Ṡ`` is ≤ 0, the damping's
+``−c Σ (stretching rate)²`` too: they only dissipate.
 
-The wrap angle is given, or (``wrap=None``) taken from the shape: the angle between the
-directions ``u₁``, ``u₂`` of the cable into and out of the drum,
+A drum may sit on a moving member: its point (a drum of radius 0 fixed to the member, not
+spinning) and, with ``wrap=None``, its wrap angle follow the member; the cable's pull on the
+drum's point is ``T_k`` and ``T_{k+1}`` along the two sides, so the friction's reaction acts on
+the member.  The wrap angle is given, or (``wrap=None``) taken from the shape: the angle
+between the directions ``u₁``, ``u₂`` of the cable into and out of the drum,
 ``θ = 2 atan2(|u₁ − u₂|, |u₁ + u₂|)`` (0 straight through, π turned back; the norms
 regularised by ``(1e-9)²`` so that its derivative stays finite there), plus ``2π`` per extra
-turn in ``turns``.  The material mode is stiff (``m_s`` small on a stiff rope): IDAS takes
-it as it is, the compiled stepper needs steps of about 0.1 ms.
+turn in ``turns``.  ``mu``, ``wrap``, ``ea``, ``damping`` and ``slip_velocity`` are values
+(:mod:`ncgen.model.expressions`: parameters and inputs allowed), the rest lengths values of
+parameters (they enter the potential energy).  The material mode is stiff (``m_s`` small on a
+stiff rope): IDAS takes it as it is, the compiled stepper needs steps of about 0.1 ms.
 """
 from __future__ import annotations
 
@@ -45,6 +53,9 @@ from ncgen.validation import as_scalar
 
 #: Default slip velocity scale ``v_s`` (m/s) of the regularised stick.
 SLIP_VELOCITY = 1e-4
+
+#: Most drums on one cable (its sides are named by the letters a to z).
+MAX_DRUMS = 25
 
 
 def side_tension(length, rest, ea, drag=0):
@@ -72,42 +83,83 @@ def wrap_angle(u_in, u_out, turns):
 
 
 def capstan_friction(t_a, t_b, rate, mu, wrap, slip_velocity):
-    """Friction ``F_f`` (N) the pulley exerts against the slip ``rate`` (module docstring)."""
+    """Friction ``F_f`` (N) a drum exerts against the slip ``rate`` (module docstring)."""
     tau = ca.tanh(rate / slip_velocity)
     return (ca.exp(mu * wrap) - 1) * (t_b * ca.fmax(tau, 0) + t_a * ca.fmin(tau, 0))
 
 
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+
+
+def _one_or_many(value) -> bool:
+    """Whether ``value`` is a list of per-drum values (not one value)."""
+    return isinstance(value, (list, tuple, np.ndarray))
+
+
 class CapstanCable(Force):
-    """A cable through ``path`` with capstan friction at ``path[pulley]`` (module docstring):
-    ``mu`` ≥ 0, ``wrap`` θ (rad, > 0; ``None``: from the shape, plus ``turns`` full turns),
-    ``ea`` (N, > 0), ``damping`` c (N·s/m, ≥ 0), ``rest_lengths = (s₀, l₀ − s₀)`` of the two
-    sides (m, > 0), ``material`` the point member whose position along ``axis`` (a world unit
-    vector) is the slip, ``slip_velocity`` ``v_s`` (m/s, > 0)."""
+    """A cable through ``path`` with capstan friction at the drums ``path[pulley]`` (one index
+    or an increasing list; module docstring): ``mu`` ≥ 0 and ``wrap`` θ (rad, > 0; ``None``:
+    from the shape, plus ``turns`` full turns), each one value or one per drum; ``ea`` (N, > 0),
+    ``damping`` c (N·s/m, ≥ 0), ``rest_lengths`` the ``n + 1`` sides' (m, > 0), ``material`` the
+    point member (one per drum, a list with several) whose position along ``axis`` (a world
+    unit vector) is the drum's cumulative rest length, ``slip_velocity`` ``v_s`` (m/s, > 0)."""
 
     kind = "CapstanCable"
 
-    def __init__(self, path, *, pulley: int, mu, ea, rest_lengths, material, axis, wrap=None, damping=0.0,
-                 turns: int = 0, slip_velocity=SLIP_VELOCITY, name: str | None = None):
+    def __init__(self, path, *, pulley, mu, ea, rest_lengths, material, axis, wrap=None, damping=0.0,
+                 turns=0, slip_velocity=SLIP_VELOCITY, name: str | None = None):
         super().__init__(name)
         self.damping = damping
         self.path, self.pulley = list(path), pulley
         self.mu, self.wrap, self.ea, self.slip_velocity, self.turns = mu, wrap, ea, slip_velocity, turns
         self.rest_lengths, self.material, self.axis = rest_lengths, material, axis
 
-    def members(self):
-        return [item[0] for item in self.path if isinstance(item, (tuple, list)) and len(item) == 2] + [self.material]
+    # ------------------------------------------------------------ structure
+    @property
+    def drums(self) -> list[int]:
+        """The path indices of the drums."""
+        return [int(j) for j in self.pulley] if _one_or_many(self.pulley) else [int(self.pulley)]
 
+    @property
+    def materials(self) -> list:
+        """The material points, one per drum."""
+        return list(self.material) if _one_or_many(self.material) else [self.material]
+
+    def per_drum(self, key: str) -> list:
+        """The value of ``key`` (``mu``, ``wrap``, ``turns``) at each drum."""
+        value = getattr(self, key)
+        return list(value) if _one_or_many(value) else [value] * len(self.drums)
+
+    def side_names(self) -> list[str]:
+        """``<name>.a``, ``<name>.b``, …: the sides in path order."""
+        return [f"{self.name}.{chr(ord('a') + i)}" for i in range(len(self.drums) + 1)]
+
+    def side_paths(self) -> list[list]:
+        """The ``(member, point)`` pairs each side runs through (drums shared by neighbours)."""
+        cuts = [0, *self.drums, len(self.path) - 1]
+        return [self.path[i:j + 1] for i, j in zip(cuts, cuts[1:])]
+
+    def members(self):
+        return [item[0] for item in self.path if isinstance(item, (tuple, list)) and len(item) == 2] + \
+            [m for m in self.materials if m is not None]
+
+    # ------------------------------------------------------------ checks
     def check(self, system):
         self.check_values()
-        if self.material.is_ground or self.material.kind != "point":
-            raise ModelError(f"{self.label}: material: expected a point member, got {self.material.name} "
-                             f"({self.material.kind})")
+        for k, m in enumerate(self.materials):
+            if m is None or m.is_ground or m.kind != "point":
+                raise ModelError(f"{self.label}: material{self._at(k)}: expected a point member, got "
+                                 f"{getattr(m, 'name', m)} ({getattr(m, 'kind', type(m).__name__)})")
         e = np.asarray(self.axis, float)
         if e.shape != (system.dim,) or abs(np.linalg.norm(e) - 1) > 1e-12:
             raise ModelError(f"{self.label}: axis: expected a unit vector of {system.dim} components, got {self.axis!r}")
 
+    def _at(self, k) -> str:
+        return f"[{k}]" if _one_or_many(self.pulley) else ""
+
     def check_values(self):
-        """Check the path, the pulley's index and the numbers (not the material)."""
+        """Check the path, the drums' indices and the numbers (not the materials)."""
         n = len(self.path)
         if n < 3:
             raise ModelError(f"{self.label}: path: expected three or more (member, point) pairs, got {n}")
@@ -115,25 +167,44 @@ class CapstanCable(Force):
             if not isinstance(item, (tuple, list)) or len(item) != 2:
                 raise ModelError(f"{self.label}: path[{i}]: expected a (member, point) pair, got {item!r}")
             self._local_point(item[0], item[1], f"path[{i}]")
-        if isinstance(self.pulley, bool) or not isinstance(self.pulley, (int, np.integer)) \
-                or not 0 < self.pulley < n - 1:
+        js = list(self.pulley) if _one_or_many(self.pulley) else [self.pulley]
+        if not js or len(js) > min(MAX_DRUMS, n - 2) \
+                or any(isinstance(j, bool) or not isinstance(j, (int, np.integer)) or not 0 < j < n - 1 for j in js) \
+                or any(b <= a for a, b in zip(js, js[1:])):
             raise ModelError(f"{self.label}: pulley: expected the index of an inner point of the path "
-                             f"(1 to {n - 2}), got {self.pulley!r}")
-        if isinstance(self.turns, bool) or not isinstance(self.turns, (int, np.integer)) or self.turns < 0:
-            raise ModelError(f"{self.label}: turns: expected an integer >= 0, got {self.turns!r}")
-        if self.wrap is not None and self.turns:
-            raise ModelError(f"{self.label}: turns: only with wrap = None (the angle from the shape); "
-                             f"a given wrap includes its turns")
-        for key in ("mu", "damping", "ea", "slip_velocity") + (("wrap",) if self.wrap is not None else ()):
-            v = as_scalar(getattr(self, key), f"{self.label}: {key}")
+                             f"(1 to {n - 2}), or an increasing list of up to {MAX_DRUMS} of them, got {self.pulley!r}")
+        drums = len(js)
+        for key in ("mu", "wrap", "turns", "material"):
+            value = getattr(self, key)
+            if _one_or_many(value) and not _one_or_many(self.pulley):
+                raise ModelError(f"{self.label}: {key}: expected one value (pulley is one drum), got a list")
+            if _one_or_many(value) and len(value) != drums:
+                raise ModelError(f"{self.label}: {key}: expected one value or one per drum ({drums}), "
+                                 f"got {len(value)}")
+        wraps, turns = self.per_drum("wrap"), self.per_drum("turns")
+        for k, (wrap, turn) in enumerate(zip(wraps, turns)):
+            if isinstance(turn, bool) or not isinstance(turn, (int, np.integer)) or turn < 0:
+                raise ModelError(f"{self.label}: turns{self._at(k)}: expected an integer >= 0, got {turn!r}")
+            if wrap is not None and turn:
+                raise ModelError(f"{self.label}: turns{self._at(k)}: only with wrap = None (the angle from the "
+                                 f"shape); a given wrap includes its turns")
+        checks = [("mu", v, k) for k, v in enumerate(self.per_drum("mu"))] + \
+            [("wrap", v, k) for k, v in enumerate(wraps) if v is not None] + \
+            [(key, getattr(self, key), None) for key in ("damping", "ea", "slip_velocity")]
+        for key, value, k in checks:
+            if isinstance(value, (str, ca.SX)) or callable(value):
+                continue                                    # a value of parameters or inputs: checked when built
+            v = as_scalar(value, f"{self.label}: {key}")
             if not np.isfinite(v) or v < 0 or (key not in ("mu", "damping") and v == 0):
-                raise ModelError(f"{self.label}: {key}: expected a finite number "
-                                 f"{'>= 0' if key in ('mu', 'damping') else '> 0'}, got {v:g}")
-        rest = np.asarray(self.rest_lengths, float)
-        if rest.shape != (2,) or not np.all(np.isfinite(rest)) or np.any(rest <= 0):
-            raise ModelError(f"{self.label}: rest_lengths: expected two rest lengths > 0 (m), of sides a and b, "
-                             f"got {self.rest_lengths!r}")
+                raise ModelError(f"{self.label}: {key}{self._at(k) if k is not None else ''}: expected a finite "
+                                 f"number {'>= 0' if key in ('mu', 'damping') else '> 0'}, got {v:g}")
+        rest = self.rest_lengths
+        if not _one_or_many(rest) or len(rest) != drums + 1 or any(
+                _is_number(x) and (not np.isfinite(x) or x <= 0) for x in rest):
+            raise ModelError(f"{self.label}: rest_lengths: expected {drums + 1} rest lengths > 0 (m), one per side "
+                             f"(a to {chr(ord('a') + drums)}), got {rest!r}")
 
+    # ------------------------------------------------------------ kinematics
     def _points(self, ctx):
         out = []
         for m, at in self.path:
@@ -141,94 +212,113 @@ class CapstanCable(Force):
             out.append((ca.DM(at), ca.DM.zeros(ctx.dim)) if m.is_ground else ctx.local_point(m, at))
         return out
 
-    def slip(self, ctx):
-        """``(s, ṡ)``: the rest length of side a (m) and the slip rate (m/s)."""
-        r, v = ctx.local_point(self.material, np.zeros(ctx.dim))
-        e = ca.DM(np.asarray(self.axis, float))
-        r0 = ca.DM(np.asarray(self.material.p0, float))
-        return self.rest_lengths[0] + ca.dot(e, r - r0), ca.dot(e, v)
+    def _rests(self, ctx) -> list:
+        """The sides' initial rest lengths (m) as SX (values of parameters)."""
+        return [self._value(ctx, x, 1, f"rest_lengths[{i}]", inputs=False) for i, x in enumerate(self.rest_lengths)]
 
-    def lengths(self, ctx):
-        """``((l_a, l̇_a), (l_b, l̇_b))``: the lengths (m) of the two sides and their rates (m/s)."""
+    def slip(self, ctx) -> list[tuple]:
+        """``[(S_k, Ṡ_k)]``: each drum's cumulative rest length (m) and slip rate (m/s)."""
+        e = ca.DM(np.asarray(self.axis, float))
+        rests, out, total = self._rests(ctx), [], 0
+        for k, m in enumerate(self.materials):
+            total = total + rests[k]
+            r, v = ctx.local_point(m, np.zeros(ctx.dim))
+            out.append((total + ca.dot(e, r - ca.DM(np.asarray(m.p0, float))), ca.dot(e, v)))
+        return out
+
+    def _cumulative(self, ctx) -> list[tuple]:
+        """``[(S_{i−1}, S_i)]`` per side with their rates: ``S_{−1} = 0``, ``S_n = L₀``."""
+        total = sum(self._rests(ctx), ca.SX(0))
+        cum = [(ca.SX(0), ca.SX(0))] + self.slip(ctx) + [(total, ca.SX(0))]
+        return list(zip(cum, cum[1:]))
+
+    def side_rests(self, ctx) -> list[tuple]:
+        """``[(ρ_i, ρ̇_i)]``: the sides' rest lengths (m) and their rates (m/s)."""
+        return [(s1 - s0, r1 - r0) for (s0, r0), (s1, r1) in self._cumulative(ctx)]
+
+    def lengths(self, ctx) -> list[tuple]:
+        """``[(l_i, l̇_i)]``: the lengths (m) of the sides and their rates (m/s)."""
         pts = self._points(ctx)
         seg = [ca.sqrt(ca.sumsqr(rb - ra)) for (ra, _), (rb, _) in zip(pts, pts[1:])]
         rate = [ca.dot(rb - ra, vb - va) / d for ((ra, va), (rb, vb)), d in zip(zip(pts, pts[1:]), seg)]
-        j = self.pulley
-        return ((sum(seg[:j], ca.SX(0)), sum(rate[:j], ca.SX(0))),
-                (sum(seg[j:], ca.SX(0)), sum(rate[j:], ca.SX(0))))
+        cuts = [0, *self.drums, len(self.path) - 1]
+        return [(sum(seg[i:j], ca.SX(0)), sum(rate[i:j], ca.SX(0))) for i, j in zip(cuts, cuts[1:])]
 
-    def pulls(self, ctx):
-        """``(P_a, P_b)`` (N): the sides' ``EA (l − s)/s + c (l̇ ∓ ṡ)`` before the cut at 0
-        (rest lengths ``s`` and ``l₀ − s``)."""
-        (l_a, rate_a), (l_b, rate_b) = self.lengths(ctx)
-        s, slip = self.slip(ctx)
-        total = float(sum(self.rest_lengths))
+    # ------------------------------------------------------------ forces
+    def pulls(self, ctx) -> list:
+        """``[P_i]`` (N): the sides' ``EA (l − ρ)/ρ + c (l̇ − ρ̇)`` before the cut at 0."""
         ea = self._value(ctx, self.ea, 1, "ea")
         c = self._value(ctx, self.damping, 1, "damping")
-        return (ea * (l_a - s) / s + c * (rate_a - slip),
-                ea * (l_b - total + s) / (total - s) + c * (rate_b + slip))
+        return [ea * (length - s1 + s0) / (s1 - s0) + c * (rate - (r1 - r0))
+                for (length, rate), ((s0, r0), (s1, r1)) in zip(self.lengths(ctx), self._cumulative(ctx))]
 
-    def tensions(self, ctx):
-        """``(T_a, T_b)`` (N) of the two sides, with their damping: the pulls kept ≥ 0."""
-        return tuple(ca.fmax(pull, 0) for pull in self.pulls(ctx))
+    def tensions(self, ctx) -> list:
+        """``[T_i]`` (N) of the sides, with their damping: the pulls kept ≥ 0."""
+        return [ca.fmax(pull, 0) for pull in self.pulls(ctx)]
 
-    def wrap_angle(self, ctx):
-        """θ (rad): the given ``wrap``, or the shape's (module docstring)."""
-        if self.wrap is not None:
-            return self._value(ctx, self.wrap, 1, "wrap")
-        (r0, _), (r1, _), (r2, _) = self._points(ctx)[self.pulley - 1:self.pulley + 2]
-        return wrap_angle((r1 - r0) / ca.sqrt(ca.sumsqr(r1 - r0)), (r2 - r1) / ca.sqrt(ca.sumsqr(r2 - r1)), self.turns)
+    def wrap_angles(self, ctx) -> list:
+        """θ_k (rad) of each drum: the given ``wrap``, or the shape's (module docstring)."""
+        pts, out = self._points(ctx), []
+        for k, (j, wrap, turns) in enumerate(zip(self.drums, self.per_drum("wrap"), self.per_drum("turns"))):
+            if wrap is not None:
+                out.append(self._value(ctx, wrap, 1, f"wrap{self._at(k)}"))
+                continue
+            (r0, _), (r1, _), (r2, _) = pts[j - 1:j + 2]
+            out.append(wrap_angle((r1 - r0) / ca.sqrt(ca.sumsqr(r1 - r0)), (r2 - r1) / ca.sqrt(ca.sumsqr(r2 - r1)),
+                                  turns))
+        return out
 
-    def friction(self, ctx):
-        """``F_f`` (N), the pulley's friction on the material (module docstring)."""
-        t_a, t_b = self.tensions(ctx)
-        _, rate = self.slip(ctx)
-        mu = self._value(ctx, self.mu, 1, "mu")
-        wrap = self.wrap_angle(ctx)
+    def friction(self, ctx) -> list:
+        """``[F_f,k]`` (N): each drum's friction on its material (module docstring)."""
+        t = self.tensions(ctx)
         v_s = self._value(ctx, self.slip_velocity, 1, "slip_velocity")
-        return capstan_friction(t_a, t_b, rate, mu, wrap, v_s)
+        mus = [self._value(ctx, mu, 1, f"mu{self._at(k)}") for k, mu in enumerate(self.per_drum("mu"))]
+        return [capstan_friction(t[k], t[k + 1], rate, mu, wrap, v_s)
+                for k, ((_, rate), mu, wrap) in enumerate(zip(self.slip(ctx), mus, self.wrap_angles(ctx)))]
 
     def generalized(self, ctx):
-        t_a, t_b = self.tensions(ctx)
+        t = self.tensions(ctx)
         pts = self._points(ctx)
+        side = np.searchsorted(np.asarray(self.drums), np.arange(len(pts) - 1), side="right")
         pull = [ca.SX.zeros(ctx.dim) for _ in pts]          # force of the cable on each point
         for i, ((ra, _), (rb, _)) in enumerate(zip(pts, pts[1:])):
             d = rb - ra
-            f = (t_a if i < self.pulley else t_b) * d / ca.sqrt(ca.sumsqr(d))
+            f = t[side[i]] * d / ca.sqrt(ca.sumsqr(d))
             pull[i] += f
             pull[i + 1] -= f
         ea = self._value(ctx, self.ea, 1, "ea")
-        (l_a, _), (l_b, _) = self.lengths(ctx)
-        s, _ = self.slip(ctx)
-        e_a, e_b = side_tension(l_a, s, ea), side_tension(l_b, float(sum(self.rest_lengths)) - s, ea)
-        drive = t_a + e_a**2 / (2 * ea) - t_b - e_b**2 / (2 * ea)
-        on_material = (drive - self.friction(ctx)) * ca.DM(np.asarray(self.axis, float))
+        strain = [side_tension(length, rho, ea) ** 2 / (2 * ea)
+                  for (length, _), (rho, _) in zip(self.lengths(ctx), self.side_rests(ctx))]
+        axis = ca.DM(np.asarray(self.axis, float))
+        on_material = [(t[k] + strain[k] - t[k + 1] - strain[k + 1] - f) * axis
+                       for k, f in enumerate(self.friction(ctx))]
         Q = ca.SX.zeros(ctx.layout.nq)
-        for (m, at), f in list(zip(self.path, pull)) + [((self.material, np.zeros(ctx.dim)), on_material)]:
+        at0 = np.zeros(ctx.dim)
+        for (m, at), f in list(zip(self.path, pull)) + [((m, at0), f) for m, f in zip(self.materials, on_material)]:
             if not m.is_ground:
                 C = ca.DM(m.rigid.C(m.rigid.affine(np.asarray(at, float))))
                 Q += ctx.scatter(m, ca.mtimes(C.T, f))
         return Q
 
     def potential(self, ctx):
-        """``Σ EA (l − s)²/(2 s)`` over the taut sides (J)."""
-        (l_a, _), (l_b, _) = self.lengths(ctx)
-        s, _ = self.slip(ctx)
+        """``Σ EA (l − ρ)²/(2 ρ)`` over the taut sides (J)."""
         ea = self._value(ctx, self.ea, 1, "ea (in the potential energy)", inputs=False)
-        return side_energy(l_a, s, ea) + side_energy(l_b, float(sum(self.rest_lengths)) - s, ea)
+        return sum((side_energy(length, rho, ea) for (length, _), (rho, _) in
+                    zip(self.lengths(ctx), self.side_rests(ctx))), ca.SX(0))
 
 
 def material_names(forces) -> set[str]:
     """The names of the material points of the :class:`CapstanCable` elements in ``forces``:
     state, not bodies (the viewer does not draw them)."""
-    return {f.material.name for f in forces if isinstance(f, CapstanCable) and f.material is not None}
+    return {m.name for f in forces if isinstance(f, CapstanCable) for m in f.materials if m is not None}
 
 
-def add_capstan_cable(system, path, *, pulley: int, mu, ea, rest_lengths, material_mass: float, wrap=None,
-                      damping=0.0, turns: int = 0, slip_velocity=SLIP_VELOCITY, name: str = "capstan"):
-    """Add a :class:`CapstanCable` to ``system`` with its material point ``<name>_material``
-    (mass ``material_mass`` kg > 0, at the pulley's point if on the ground, else at the
-    origin) on a ground line perpendicular to gravity; returns the force."""
+def add_capstan_cable(system, path, *, pulley, mu, ea, rest_lengths, material_mass: float, wrap=None,
+                      damping=0.0, turns=0, slip_velocity=SLIP_VELOCITY, name: str = "capstan"):
+    """Add a :class:`CapstanCable` to ``system`` with a material point per drum (mass
+    ``material_mass`` kg > 0, at the drum's point if on the ground, else at the origin) on a
+    ground line perpendicular to gravity: ``<name>_material`` for one drum (``pulley`` an
+    index), ``<name>_material1``, ``<name>_material2``, … for a list of drums; returns the force."""
     from ncgen.model.joints import PointOnLine
 
     m_s = as_scalar(material_mass, f"capstan cable {name!r}: material_mass")
@@ -236,14 +326,19 @@ def add_capstan_cable(system, path, *, pulley: int, mu, ea, rest_lengths, materi
         raise ModelError(f"capstan cable {name!r}: material_mass: expected a number > 0 (kg), got {m_s:g}")
     g = np.asarray(system.gravity, float)
     axis = _across(g)
-    force = CapstanCable(path, pulley=pulley, mu=mu, wrap=wrap, ea=ea, rest_lengths=rest_lengths, material=None,
-                         axis=axis, damping=damping, turns=turns, slip_velocity=slip_velocity, name=name)
+    many = _one_or_many(pulley)
+    force = CapstanCable(path, pulley=pulley, mu=mu, wrap=wrap, ea=ea, rest_lengths=rest_lengths,
+                         material=[None] * len(pulley) if many else None, axis=axis, damping=damping, turns=turns,
+                         slip_velocity=slip_velocity, name=name)
     force.check_values()
-    member, at = path[pulley]
-    where = np.asarray(at, float) if member.is_ground else np.zeros(system.dim)
-    material = system.add_point(f"{name}_material", mass=m_s, position=where)
-    system.add_joint(PointOnLine(system.ground, material, at=where, axis=axis))
-    force.material = material
+    materials = []
+    for k, j in enumerate(force.drums):
+        member, at = path[j]
+        where = np.asarray(at, float) if member.is_ground else np.zeros(system.dim)
+        material = system.add_point(f"{name}_material{k + 1 if many else ''}", mass=m_s, position=where)
+        system.add_joint(PointOnLine(system.ground, material, at=where, axis=axis))
+        materials.append(material)
+    force.material = materials if many else materials[0]
     return system.add_force(force)
 
 

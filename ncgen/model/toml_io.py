@@ -119,11 +119,12 @@ FORCE_FIELDS = {
     "GeneralizedForce": (Field("value", "generalized force", True),),
     "ClusteredCable": (Field("path", "cable path", True), Field("k", "value", True),
                        Field("rest_length", "value", True), Field("damping", "value")),
-    "CapstanCable": (Field("path", "cable path", True), Field("pulley", "index", True), Field("mu", "number", True),
-                     Field("wrap", "number"), Field("turns", "index"), Field("ea", "number", True),
-                     Field("rest_lengths", "value[2]", True),
-                     Field("material", "member, not the ground", True), Field("axis", "vector", True),
-                     Field("damping", "number"), Field("slip_velocity", "number")),
+    "CapstanCable": (Field("path", "cable path", True), Field("pulley", "index or indices", True),
+                     Field("mu", "value or values", True), Field("wrap", "value or values"),
+                     Field("turns", "index or indices"), Field("ea", "value", True),
+                     Field("rest_lengths", "values of parameters", True),
+                     Field("material", "member or members, not the ground", True), Field("axis", "vector", True),
+                     Field("damping", "value"), Field("slip_velocity", "value")),
 }
 
 _SHAPE_PLANE = (Field("at", "vector"), Field("rotation", "rotation"), Field("plane", "member"), Field("point", "vector"), Field("normal", "vector"))
@@ -525,6 +526,19 @@ class _Loader:
             if not isinstance(v, int) or isinstance(v, bool) or v < 0:
                 raise ModelError(f"{path}: expected an index (an integer ≥ 0), got {_describe(v)}")
             return v
+        if kind == "index or indices":
+            return [self.value("index", x, f"{path}[{i}]") for i, x in enumerate(v)] if isinstance(v, list) \
+                else self.value("index", v, path)
+        if kind == "member or members, not the ground":
+            return [self._member_ref(x, f"{path}[{i}]", ground=False) for i, x in enumerate(v)] \
+                if isinstance(v, list) else self._member_ref(v, path, ground=False)
+        if kind == "value or values":                # one value, or a list of them (one each)
+            return [self._expr(x, f"{path}[{i}]") for i, x in enumerate(v)] if isinstance(v, list) \
+                else self._expr(v, path)
+        if kind == "values of parameters":           # a list of values of t and parameters
+            if not isinstance(v, list) or not v:
+                raise ModelError(f"{path}: expected a list of numbers or expression strings, got {_describe(v)}")
+            return [self._expr(x, f"{path}[{i}]", inputs=False) for i, x in enumerate(v)]
         if kind == "slot or axis":
             if not isinstance(v, (str, int)) or isinstance(v, bool):
                 raise ModelError(f"{path}: expected a name or an index, got {_describe(v)}")
@@ -799,16 +813,22 @@ def _force_entries(f, sc, system) -> dict:
         value = tuple(getattr(f, a) for a in field.arg) if isinstance(field.arg, tuple) else getattr(f, field.key)
         if value is None and not field.required:
             continue
-        if field.kind in ("member", "member, not the ground", "two members"):
-            out[field.key] = [_member_name(m) for m in value] if isinstance(value, tuple) else _member_name(value)
+        if field.kind in ("member", "member, not the ground", "two members", "member or members, not the ground"):
+            out[field.key] = [_member_name(m) for m in value] if isinstance(value, (tuple, list)) \
+                else _member_name(value)
         elif field.kind == "joint":
             out[field.key] = value.name
         elif field.kind == "cable path":
             out[field.key] = [[_member_name(m), _plain(at)] for m, at in value]
         elif field.kind == "bool":
             out[field.key] = bool(value)
-        elif field.kind == "index":
-            out[field.key] = int(value)
+        elif field.kind in ("index", "index or indices"):
+            out[field.key] = [int(x) for x in value] if isinstance(value, (tuple, list)) else int(value)
+        elif field.kind in ("value or values", "values of parameters") and isinstance(value, (tuple, list, np.ndarray)):
+            if any(x is None for x in value):
+                raise ModelError(f"to_toml: {f.label}: {field.key}: a list with None (the angle from the shape) "
+                                 f"has no TOML form; give every drum's or none")
+            out[field.key] = [value_to_toml(x, sc, f"{f.label}: {field.key}[{i}]") for i, x in enumerate(value)]
         elif field.kind == "vector":
             out[field.key] = _plain(value)
         elif field.kind == "generalized force":

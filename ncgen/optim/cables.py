@@ -18,7 +18,7 @@ from ncgen.validation import as_scalar
 
 def cable_indices(model, who: str) -> list[int]:
     """The springs of ``model`` that are cables (``Spring(cable=True)``, ``ClusteredCable``, a
-    ``CapstanCable``'s two sides); refused by name (``who``: the option asking) when there is none."""
+    ``CapstanCable``'s sides); refused by name (``who``: the option asking) when there is none."""
     table = model.springs
     cables = [] if table is None else [i for i, c in enumerate(table.cable) if c]
     if not cables:

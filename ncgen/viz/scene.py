@@ -198,8 +198,8 @@ def spring_scene(traj, idx=None) -> dict:
     """Ends of every spring and cable segment per frame (``idx``: the frames, default all),
     which are cables, when a cable is slack (its pull ``k (l − l₀) + c l̇`` is not positive),
     the tension (N) and the element of each segment (a clustered cable has one segment per
-    pair of consecutive points of its path, all with its one tension; a capstan cable's two
-    sides are two elements, ``<name>.a`` and ``<name>.b``, each with its own tension).  From the model's
+    pair of consecutive points of its path, all with its one tension; a capstan cable's
+    sides are one element each, ``<name>.a``, ``<name>.b``, … in path order, each with its own tension).  From the model's
     :class:`~ncgen.assembly.springs.SpringTable` and its force elements."""
     from ncgen.assembly.springs import tension_rows
 
