@@ -461,6 +461,9 @@ def pyramid_bench(t_end: float, rounds: int, ncgen_steps: list[float], mj_coarse
                                      ncgen_steps, 0)
     print(f"ncgen step search (drift of a box sideways <= {PYR_SIDEWAYS:g} m, speeds at the end <= {PYR_VMAX:g} m/s, "
           f"no solve at the sweep cap): {', '.join(log)} -> h = {h_nc * 1e3:g} ms")
+    for h, r in sorted(ours.items()):
+        if "refused" in r:
+            print(f"ncgen at h = {h * 1e3:g} ms refused by the stepper's checks: {r['refused']}")
     theirs, best = {}, None
     for integrator in ("Euler", "implicitfast"):
         h, log = largest_resting_step(
