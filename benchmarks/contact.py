@@ -349,11 +349,15 @@ def pyramid_ncgen(model, h: float, t_end: float) -> dict:
     import warnings
 
     import ncgen as nc
+    from ncgen.errors import SimulationError
 
     substeps = max(1, int(round(SAMPLE / h)))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        tr = nc.simulate(model, t_end, h * substeps, method="stepper", substeps=substeps)
+        try:
+            tr = nc.simulate(model, t_end, h * substeps, method="stepper", substeps=substeps)
+        except SimulationError as err:   # the run's checks refused it (e.g. energy created): not at rest
+            return {"rests": False, "refused": str(err).split(": ", 1)[-1][:120]}
     start = [c for _, c in cube_centres()]
     x = np.stack([tr.point(f"box{k}", (0, 0, 0)) for k in range(len(start))], axis=1)
     moved = np.abs(x - np.array(start))
@@ -457,6 +461,9 @@ def pyramid_bench(t_end: float, rounds: int, ncgen_steps: list[float], mj_coarse
                                      ncgen_steps, 0)
     print(f"ncgen step search (drift of a box sideways <= {PYR_SIDEWAYS:g} m, speeds at the end <= {PYR_VMAX:g} m/s, "
           f"no solve at the sweep cap): {', '.join(log)} -> h = {h_nc * 1e3:g} ms")
+    for h, r in sorted(ours.items()):
+        if "refused" in r:
+            print(f"ncgen at h = {h * 1e3:g} ms refused by the stepper's checks: {r['refused']}")
     theirs, best = {}, None
     for integrator in ("Euler", "implicitfast"):
         h, log = largest_resting_step(
