@@ -27,8 +27,8 @@ def winch(reel, *, mu=0.3, ea=1e5, damping=C, material_mass=MS, slip_velocity=VS
     s.add_joint(nc.PointOnLine(s.ground, w, at=(0, 0, 0), axis=(0, 0, 1)))
     rests = [length / (1 + M * G / ea) for length in (1.0, 0.5)]
     nc.add_capstan_cable(s, [(w, (0, 0, 0)), (s.ground, DRUM), (s.ground, WINCH)], pulley=1, mu=mu, wrap=np.pi,
-                         ea=ea, damping=damping, rest_lengths=rests, material_mass=material_mass, slip_velocity=slip_velocity,
-                         reeled=(0, reel), name="rope")
+                         ea=ea, damping=damping, rest_lengths=rests, material_mass=material_mass,
+                         slip_velocity=slip_velocity, reeled=(0, reel), name="rope")
     return s
 
 
