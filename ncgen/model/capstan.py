@@ -30,6 +30,16 @@ creeps at ``|Ṡ| = v_s atanh(|P|/F_max)`` (``F_max`` the bound on that side), t
 regularisation's error.  The friction's power ``−F_f Ṡ`` is ≤ 0, the damping's
 ``−c Σ (stretching rate)²`` too: they only dissipate.
 
+Winches (``reeled = (w_a, w_z)``, m): the rest length reeled in at the path's first and last
+ends, values of ``t``, parameters and inputs (> 0 reels in, < 0 pays out): ``S_{−1} = w_a``,
+``S_n = L₀ − w_z``, so the first side's rest length is ``S_0 − w_a`` and the last's
+``L₀ − w_z − S_{n−1}``, their rates ``∂w/∂t``.  The winch at the last end does the work
+``∫ (E_n + E_n²/(2EA)) ẇ_z dt`` (``E_n`` the last side's elastic tension; the same at the first
+end), which a run's energy balance reports as ``drives`` (``∂V/∂t``) for a reel given as an
+expression of time; a reel depending on inputs leaves the potential out (0, as an input rest
+length of a :class:`~ncgen.model.cables.ClusteredCable`), the forces' work then being in
+``inputs`` and ``dampers``, and needs ``damping = 0`` (an input's rate is unknown).
+
 A drum may sit on a moving member: its point (a drum of radius 0 fixed to the member, not
 spinning) and, with ``wrap=None``, its wrap angle follow the member; the cable's pull on the
 drum's point is ``T_k`` and ``T_{k+1}`` along the two sides, so the friction's reaction acts on
@@ -48,6 +58,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.errors import ModelError
+from ncgen.model.expressions import ExpressionError
 from ncgen.model.forces import Force
 from ncgen.validation import as_scalar
 
@@ -103,13 +114,16 @@ class CapstanCable(Force):
     from the shape, plus ``turns`` full turns), each one value or one per drum; ``ea`` (N, > 0),
     ``damping`` c (N·s/m, ≥ 0), ``rest_lengths`` the ``n + 1`` sides' (m, > 0), ``material`` the
     point member (one per drum, a list with several) whose position along ``axis`` (a world
-    unit vector) is the drum's cumulative rest length, ``slip_velocity`` ``v_s`` (m/s, > 0)."""
+    unit vector) is the drum's cumulative rest length, ``slip_velocity`` ``v_s`` (m/s, > 0),
+    ``reeled`` ``(w_a, w_z)`` the rest length winches at the path's first and last ends have
+    reeled in (m, values of t, parameters and inputs; None: no winch; module docstring)."""
 
     kind = "CapstanCable"
 
     def __init__(self, path, *, pulley, mu, ea, rest_lengths, material, axis, wrap=None, damping=0.0,
-                 turns=0, slip_velocity=SLIP_VELOCITY, name: str | None = None):
+                 turns=0, slip_velocity=SLIP_VELOCITY, reeled=None, name: str | None = None):
         super().__init__(name)
+        self.reeled = reeled
         self.damping = damping
         self.path, self.pulley = list(path), pulley
         self.mu, self.wrap, self.ea, self.slip_velocity, self.turns = mu, wrap, ea, slip_velocity, turns
@@ -198,6 +212,9 @@ class CapstanCable(Force):
             if not np.isfinite(v) or v < 0 or (key not in ("mu", "damping") and v == 0):
                 raise ModelError(f"{self.label}: {key}{self._at(k) if k is not None else ''}: expected a finite "
                                  f"number {'>= 0' if key in ('mu', 'damping') else '> 0'}, got {v:g}")
+        if self.reeled is not None and (not _one_or_many(self.reeled) or len(self.reeled) != 2):
+            raise ModelError(f"{self.label}: reeled: expected two values (the rest length reeled in at the path's "
+                             f"first and last ends, m), got {self.reeled!r}")
         rest = self.rest_lengths
         if not _one_or_many(rest) or len(rest) != drums + 1 or any(
                 _is_number(x) and (not np.isfinite(x) or x <= 0) for x in rest):
@@ -226,15 +243,33 @@ class CapstanCable(Force):
             out.append((total + ca.dot(e, r - ca.DM(np.asarray(m.p0, float))), ca.dot(e, v)))
         return out
 
-    def _cumulative(self, ctx) -> list[tuple]:
-        """``[(S_{i−1}, S_i)]`` per side with their rates: ``S_{−1} = 0``, ``S_n = L₀``."""
+    def reels(self, ctx, *, inputs: bool = True) -> list[tuple]:
+        """``[(w_a, ẇ_a), (w_z, ẇ_z)]``: the rest length reeled in at the first and last ends (m)
+        and its rate (m/s, ``∂w/∂t``; an input's rate is unknown: refused with damping)."""
+        out = []
+        for i, w in enumerate(self.reeled):
+            x = self._value(ctx, w, 1, f"reeled[{i}]", inputs=inputs)
+            u = [ca.vec(sym) for sym in ctx.system.inputs.values()]
+            if u and not (_is_number(self.damping) and self.damping == 0) and ca.depends_on(x, ca.vertcat(*u)):
+                raise ModelError(f"{self.label}: reeled[{i}]: an input's rate is unknown to the sides' damping: "
+                                 f"give damping = 0, or the reel as an expression of t")
+            out.append((x, ca.jacobian(x, ctx.t)))
+        return out
+
+    def _cumulative(self, ctx, *, inputs: bool = True) -> list[tuple]:
+        """``[(S_{i−1}, S_i)]`` per side with their rates: ``S_{−1} = w_a``, ``S_n = L₀ − w_z``
+        (``S_{−1} = 0``, ``S_n = L₀`` without winches)."""
         total = sum(self._rests(ctx), ca.SX(0))
-        cum = [(ca.SX(0), ca.SX(0))] + self.slip(ctx) + [(total, ca.SX(0))]
+        if self.reeled is None:
+            cum = [(ca.SX(0), ca.SX(0))] + self.slip(ctx) + [(total, ca.SX(0))]
+        else:
+            (w_a, r_a), (w_z, r_z) = self.reels(ctx, inputs=inputs)
+            cum = [(w_a, r_a)] + self.slip(ctx) + [(total - w_z, -r_z)]
         return list(zip(cum, cum[1:]))
 
-    def side_rests(self, ctx) -> list[tuple]:
+    def side_rests(self, ctx, *, inputs: bool = True) -> list[tuple]:
         """``[(ρ_i, ρ̇_i)]``: the sides' rest lengths (m) and their rates (m/s)."""
-        return [(s1 - s0, r1 - r0) for (s0, r0), (s1, r1) in self._cumulative(ctx)]
+        return [(s1 - s0, r1 - r0) for (s0, r0), (s1, r1) in self._cumulative(ctx, inputs=inputs)]
 
     def lengths(self, ctx) -> list[tuple]:
         """``[(l_i, l̇_i)]``: the lengths (m) of the sides and their rates (m/s)."""
@@ -301,10 +336,16 @@ class CapstanCable(Force):
         return Q
 
     def potential(self, ctx):
-        """``Σ EA (l − ρ)²/(2 ρ)`` over the taut sides (J)."""
+        """``Σ EA (l − ρ)²/(2 ρ)`` over the taut sides (J); 0 when a reel depends on inputs
+        (the winch then does work on the system: the sides' forces are not counted as
+        conservative, as :class:`~ncgen.model.cables.ClusteredCable`'s with an input rest length)."""
         ea = self._value(ctx, self.ea, 1, "ea (in the potential energy)", inputs=False)
+        try:
+            rests = self.side_rests(ctx, inputs=False)
+        except ExpressionError:          # generalized() has accepted the reels with the inputs
+            return ca.SX(0)
         return sum((side_energy(length, rho, ea) for (length, _), (rho, _) in
-                    zip(self.lengths(ctx), self.side_rests(ctx))), ca.SX(0))
+                    zip(self.lengths(ctx), rests)), ca.SX(0))
 
 
 def material_names(forces) -> set[str]:
@@ -314,7 +355,7 @@ def material_names(forces) -> set[str]:
 
 
 def add_capstan_cable(system, path, *, pulley, mu, ea, rest_lengths, material_mass: float, wrap=None,
-                      damping=0.0, turns=0, slip_velocity=SLIP_VELOCITY, name: str = "capstan"):
+                      damping=0.0, turns=0, slip_velocity=SLIP_VELOCITY, reeled=None, name: str = "capstan"):
     """Add a :class:`CapstanCable` to ``system`` with a material point per drum (mass
     ``material_mass`` kg > 0, at the drum's point if on the ground, else at the origin) on a
     ground line perpendicular to gravity: ``<name>_material`` for one drum (``pulley`` an
@@ -329,7 +370,7 @@ def add_capstan_cable(system, path, *, pulley, mu, ea, rest_lengths, material_ma
     many = _one_or_many(pulley)
     force = CapstanCable(path, pulley=pulley, mu=mu, wrap=wrap, ea=ea, rest_lengths=rest_lengths,
                          material=[None] * len(pulley) if many else None, axis=axis, damping=damping, turns=turns,
-                         slip_velocity=slip_velocity, name=name)
+                         slip_velocity=slip_velocity, reeled=reeled, name=name)
     force.check_values()
     materials = []
     for k, j in enumerate(force.drums):

@@ -124,7 +124,7 @@ FORCE_FIELDS = {
                      Field("turns", "index or indices"), Field("ea", "value", True),
                      Field("rest_lengths", "values of parameters", True),
                      Field("material", "member or members, not the ground", True), Field("axis", "vector", True),
-                     Field("damping", "value"), Field("slip_velocity", "value")),
+                     Field("damping", "value"), Field("slip_velocity", "value"), Field("reeled", "value or values")),
 }
 
 _SHAPE_PLANE = (Field("at", "vector"), Field("rotation", "rotation"), Field("plane", "member"), Field("point", "vector"), Field("normal", "vector"))
