@@ -147,6 +147,23 @@ def test_capstan_stick_and_slip(theta, turns):
             rope_over_pulley(W, F, mu, turns)
 
 
+def test_t_bar_forces_are_statics_by_hand():
+    """Skelton's planar T-bar (two struts each way through a class-4 centre node, four cables
+    from the ends to the tips), compressed by F between its ends: every cable at the bound t,
+    horizontal struts F + t L / ℓ, vertical t h / ℓ (ℓ the cable length), one self-stress."""
+    L, h, F, t = 1.0, 0.4, 50.0, 10.0
+    nodes = np.array([[-L / 2, 0], [L / 2, 0], [0, h / 2], [0, -h / 2], [0, 0]])
+    loads = np.zeros_like(nodes)
+    loads[1, 0] = -F
+    inv = inverse_statics(nodes, [(0, 4), (4, 1), (2, 4), (4, 3)], [(0, 2), (0, 3), (1, 2), (1, 3)], loads,
+                          {0: "xy", 1: "y"}, cable_min=t)
+    ell = np.hypot(L, h) / 2
+    assert (inv.analysis.n_self_stress, inv.analysis.n_mechanisms) == (1, 0)
+    np.testing.assert_allclose(inv.tensions, t, rtol=1e-12)
+    np.testing.assert_allclose(-inv.strut_forces, [F + t * L / ell] * 2 + [t * h / ell] * 2, rtol=1e-12)
+    np.testing.assert_allclose(inv.reactions[0], [F, 0], atol=1e-12 * F)
+
+
 def test_tower_of_100_members_within_a_second_of_cpu():
     nodes, struts, cables, loads, sup = loaded_tower(n=10, stages=3)
     assert len(struts) + len(cables) == 100
