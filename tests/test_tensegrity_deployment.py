@@ -41,15 +41,22 @@ def test_least_prestress_of_the_compact_tower_is_the_qp_optimum():
     assert active.size and res < 1e-8 * max(1.0, np.abs(grad).max())
 
 
-@pytest.fixture(scope="module")
-def deployment():
+CLUSTERS = [[9 + i, 12 + (i - 1) % 3] for i in range(3)]     # lower vertical i, then the upper one it meets
+
+
+@pytest.fixture(scope="module", params=[None, CLUSTERS], ids=["independent", "clustered"])
+def deployment(request):
     """The model (rest lengths as inputs, no damping), the compact (A) and deployed (B)
-    designs: inputs and equilibria."""
+    designs: inputs and equilibria; with independent cables, or with each lower vertical
+    cable running on over a middle-ring node into an upper one (``ClusteredCable``s over
+    frictionless pulleys, as in benchmarks/tensegrity_clustered.py)."""
+    clusters = request.param
     (A, struts, cables), B = tower(0.35, 0.35), tower(0.3, 0.3)[0]
-    designs = [nc.inverse_statics(X, struts, cables, supports=SUPPORTS, cable_min=10.0) for X in (A, B)]
+    designs = [nc.inverse_statics(X, struts, cables, supports=SUPPORTS, cable_min=10.0, clusters=clusters)
+               for X in (A, B)]
     model = nc.tensegrity_system(B, struts, cables, designs[1].rest_lengths(K)[:len(cables)], K,
-                                 supports=SUPPORTS, actuated=True, node_mass=0.2).build()
-    u = [rest_length_inputs(model, d.rest_lengths(K)[:len(cables)]) for d in designs]
+                                 supports=SUPPORTS, clusters=clusters, actuated=True, node_mass=0.2).build()
+    u = [rest_length_inputs(model, d.rest_lengths(K)[:len(cables)], clusters) for d in designs]
     eqs = [nc.equilibrium(model, u=ui) for ui in u]
     return model, (A, B), u, eqs
 
@@ -71,8 +78,10 @@ def test_energy_balance_of_a_deployment(deployment):
     kinetic and elastic energy ``½ vᵀ M v + Σ ½ k (l − l₀)²`` equals the work of the
     rest-length changes ``−Σ ∫ T l̇₀ dt`` (the input is interpolated linearly between the
     samples, so ``l̇₀`` is constant on each interval, and ``∫ T dt`` there is the trapezoid
-    rule with its end correction ``h² (Ṫ₀ − Ṫ₁) / 12``, ``Ṫ = k (l̇ − l̇₀)``)."""
+    rule with its end correction ``h² (Ṫ₀ − Ṫ₁) / 12``, ``Ṫ = k (l̇ − l̇₀)``).  A clustered
+    cable of two segments: its total length and rest length, stiffness ``K/2`` (in series)."""
     model, _, (uA, uB), (eqA, _) = deployment
+    k = np.array([K / 2 if name.startswith("k") else K for name in model.springs.names])
     l0 = lambda t: uA + np.multiply.outer(0.5 * (1 - np.cos(np.pi * np.minimum(t, 1.0))), uB - uA)  # noqa: E731
     traj = nc.simulate(model, 1.2, 1e-3, u=lambda t: l0(t), q0=eqA.q, hold="linear", backend="vm", rtol=1e-10,
                        atol=1e-12)
@@ -88,10 +97,10 @@ def test_energy_balance_of_a_deployment(deployment):
     assert stretch.min() > 0, "a cable went slack"
     kinetic = np.array([0.5 * v @ (model.M @ v) for v in traj.v])
     np.testing.assert_allclose(traj.energy - traj.energy[0], kinetic - kinetic[0], atol=1e-9)  # no other potential
-    E = kinetic + 0.5 * K * np.sum(stretch**2, axis=1)
+    E = kinetic + 0.5 * np.sum(k * stretch**2, axis=1)
     h, du = np.diff(traj.t)[:, None], np.diff(traj.u, axis=0)
-    Tdot = K * (rate[:, :] - np.vstack([du / h, du[-1:] / h[-1:]]))      # l̇₀ of the interval after each sample
-    Tdot_end = K * (rate[1:] - du / h)                                     # and at each interval's end
+    Tdot = k * (rate[:, :] - np.vstack([du / h, du[-1:] / h[-1:]]))      # l̇₀ of the interval after each sample
+    Tdot_end = k * (rate[1:] - du / h)                                     # and at each interval's end
     integral = 0.5 * h * (T[1:] + T[:-1]) + h**2 / 12 * (Tdot[:-1] - Tdot_end)
     work = np.concatenate([[0], np.cumsum(-np.sum(integral * du / h, axis=1))])
     np.testing.assert_allclose(E - E[0], work, atol=1e-6 * np.abs(work).max())
