@@ -107,3 +107,36 @@ def test_energy_balance_of_a_deployment(deployment):
     assert np.abs(work).max() > 0.05
     top = traj.q[:, model.coordinate_names.index("n6.r_i.z")]
     assert top[-1] > 0.95, "the tower deployed"
+
+
+@pytest.mark.slow      # one 1.2 s IDAS run of the tower (VM backend) per model
+def test_viewer_shows_the_deploying_towers_tensions(deployment):
+    """The viewer's scene and HTML page of a deployment: every drawn cable segment carries its
+    cable's tension, equal to ``k (l − l₀(t))`` computed by NumPy from the nodes' positions and
+    the input rest lengths (a clustered cable: its segments' summed length, ``K/2``, the same
+    tension on both segments), and the tensions change along the deployment."""
+    from ncgen.viz import html
+    from ncgen.viz.scene import scene
+
+    model, (_, B), (uA, uB), (eqA, _) = deployment
+    traj = nc.simulate(model, 1.2, 0.02, u=lambda t: uA + 0.5 * (1 - np.cos(np.pi * min(t, 1.0))) * (uB - uA),
+                       q0=eqA.q, hold="linear", backend="vm", rtol=1e-9, atol=1e-11)
+    names = model.coordinate_names
+    X = np.stack([np.broadcast_to(B[i], (len(traj), 3)) if i in SUPPORTS else
+                  traj.q[:, [names.index(f"n{i}.r_i.{c}") for c in "xyz"]] for i in range(len(B))], axis=1)
+    _, struts, cables = tower(0.3, 0.3)
+    clusters = dict(enumerate(CLUSTERS)) if any(n.startswith("k") for n in model.springs.names) else {}
+    expected = []
+    for j, name in enumerate(model.springs.names):
+        members = clusters[int(name[1:])] if name.startswith("k") else [int(name[1:])]
+        length = sum(np.linalg.norm(X[:, cables[e][0]] - X[:, cables[e][1]], axis=1) for e in members)
+        expected.append(K / len(members) * (length - traj.u[:, j]))
+    expected = np.column_stack(expected)
+    assert expected.min() > 0 and np.ptp(expected, axis=0).max() > 5.0, "taut cables whose tensions change"
+    sc = scene(traj)
+    assert sc.spring_names == list(model.springs.names) and sc.spring_cable.all()
+    assert len(sc.spring_owner) == len(cables) - len(SUPPORTS)        # every realised segment drawn
+    np.testing.assert_allclose(sc.spring_tension, expected[:, sc.spring_owner], rtol=1e-9, atol=1e-9)
+    data = html.page_data(traj)
+    panel = [p for p in data["plots"] if p["title"] == "spring and cable tensions"]
+    assert panel and [s["label"] for s in panel[0]["series"]] == list(model.springs.names)
