@@ -122,6 +122,7 @@ def test_deployment_tracked_by_mpc(deployment_output):
     errors = end_errors(out)
     assert errors["MPC"] <= 5e-3 and errors["MPC"] < errors["open loop"] and errors["MPC"] < errors["tracked"], errors
     assert float(re.search(r"MPC: constraints within ([\d.e+-]+)", out).group(1)) < 1e-6
+    assert "wrote tensegrity_deployment.html" in out
 
 
 @pytest.mark.slow
