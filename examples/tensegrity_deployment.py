@@ -15,6 +15,7 @@ length ``l*``) and by ``nc.MPC`` with the plan as its time-varying reference (a 
 5 steps of 10 ms — its RATTLE step is stable only for h ≤ 0.01 s here — the stage cost on
 ``x − x_ref`` and ``u − u_ref``, the deployed design's rest lengths after the plan, every
 cable's pull at least 1 N along the horizon, its QPs solved by qpOASES; see docs/tensegrity.md).
+The MPC's run is written to tensegrity_deployment.html (cables coloured by their tension).
 """
 import time
 
@@ -161,3 +162,5 @@ if __name__ == "__main__":
           f"speed {np.abs(traj.v[-1]).max():.2e} m/s; inputs within their bounds; l1 gap of its last solution "
           f"{gap[-1]:.1e} (largest over the last 0.1 s {gap[-10:].max():.1e}); per step median {1e3 * np.median(wall):.1f} "
           f"ms wall, {1e3 * np.median(cpu):.1f} ms CPU (period {1e3 * mpc.h:.0f} ms)")
+    traj.to_html("tensegrity_deployment.html", title="tensegrity tower deployed by MPC")
+    print("wrote tensegrity_deployment.html (the MPC's run: cables coloured by tension, a tension panel)")

@@ -1,7 +1,8 @@
 """Inverse statics (ncgen.analysis.inverse_statics): the forces of a known equilibrium (found
 by Newton on the natural-coordinate model) reproduced to 1e-10; realised rest lengths that
 the forward statics of a class-2 tower holds; clustered cables sharing one tension; the
-capstan law at θ = π and 2π (stick, slip); the 100-member tower in 0.5 s."""
+capstan law at θ = π and 2π (stick, slip); Skelton's T-bar as by hand; the 100-member tower
+within 1 s of CPU (the 0.5 s target is measured by benchmarks/tensegrity_statics.py)."""
 import time
 
 import numpy as np
@@ -145,6 +146,23 @@ def test_capstan_stick_and_slip(theta, turns):
     for F in (1.001 * W * e, 0.999 * W / e):
         with pytest.raises(NcgenError, match="pulley at node 0"):
             rope_over_pulley(W, F, mu, turns)
+
+
+def test_t_bar_forces_are_statics_by_hand():
+    """Skelton's planar T-bar (two struts each way through a class-4 centre node, four cables
+    from the ends to the tips), compressed by F between its ends: every cable at the bound t,
+    horizontal struts F + t L / ℓ, vertical t h / ℓ (ℓ the cable length), one self-stress."""
+    L, h, F, t = 1.0, 0.4, 50.0, 10.0
+    nodes = np.array([[-L / 2, 0], [L / 2, 0], [0, h / 2], [0, -h / 2], [0, 0]])
+    loads = np.zeros_like(nodes)
+    loads[1, 0] = -F
+    inv = inverse_statics(nodes, [(0, 4), (4, 1), (2, 4), (4, 3)], [(0, 2), (0, 3), (1, 2), (1, 3)], loads,
+                          {0: "xy", 1: "y"}, cable_min=t)
+    ell = np.hypot(L, h) / 2
+    assert (inv.analysis.n_self_stress, inv.analysis.n_mechanisms) == (1, 0)
+    np.testing.assert_allclose(inv.tensions, t, rtol=1e-12)
+    np.testing.assert_allclose(-inv.strut_forces, [F + t * L / ell] * 2 + [t * h / ell] * 2, rtol=1e-12)
+    np.testing.assert_allclose(inv.reactions[0], [F, 0], atol=1e-12 * F)
 
 
 def test_tower_of_100_members_within_a_second_of_cpu():

@@ -41,15 +41,22 @@ def test_least_prestress_of_the_compact_tower_is_the_qp_optimum():
     assert active.size and res < 1e-8 * max(1.0, np.abs(grad).max())
 
 
-@pytest.fixture(scope="module")
-def deployment():
+CLUSTERS = [[9 + i, 12 + (i - 1) % 3] for i in range(3)]     # lower vertical i, then the upper one it meets
+
+
+@pytest.fixture(scope="module", params=[None, CLUSTERS], ids=["independent", "clustered"])
+def deployment(request):
     """The model (rest lengths as inputs, no damping), the compact (A) and deployed (B)
-    designs: inputs and equilibria."""
+    designs: inputs and equilibria; with independent cables, or with each lower vertical
+    cable running on over a middle-ring node into an upper one (``ClusteredCable``s over
+    frictionless pulleys, as in benchmarks/tensegrity_clustered.py)."""
+    clusters = request.param
     (A, struts, cables), B = tower(0.35, 0.35), tower(0.3, 0.3)[0]
-    designs = [nc.inverse_statics(X, struts, cables, supports=SUPPORTS, cable_min=10.0) for X in (A, B)]
+    designs = [nc.inverse_statics(X, struts, cables, supports=SUPPORTS, cable_min=10.0, clusters=clusters)
+               for X in (A, B)]
     model = nc.tensegrity_system(B, struts, cables, designs[1].rest_lengths(K)[:len(cables)], K,
-                                 supports=SUPPORTS, actuated=True, node_mass=0.2).build()
-    u = [rest_length_inputs(model, d.rest_lengths(K)[:len(cables)]) for d in designs]
+                                 supports=SUPPORTS, clusters=clusters, actuated=True, node_mass=0.2).build()
+    u = [rest_length_inputs(model, d.rest_lengths(K)[:len(cables)], clusters) for d in designs]
     eqs = [nc.equilibrium(model, u=ui) for ui in u]
     return model, (A, B), u, eqs
 
@@ -71,8 +78,10 @@ def test_energy_balance_of_a_deployment(deployment):
     kinetic and elastic energy ``½ vᵀ M v + Σ ½ k (l − l₀)²`` equals the work of the
     rest-length changes ``−Σ ∫ T l̇₀ dt`` (the input is interpolated linearly between the
     samples, so ``l̇₀`` is constant on each interval, and ``∫ T dt`` there is the trapezoid
-    rule with its end correction ``h² (Ṫ₀ − Ṫ₁) / 12``, ``Ṫ = k (l̇ − l̇₀)``)."""
+    rule with its end correction ``h² (Ṫ₀ − Ṫ₁) / 12``, ``Ṫ = k (l̇ − l̇₀)``).  A clustered
+    cable of two segments: its total length and rest length, stiffness ``K/2`` (in series)."""
     model, _, (uA, uB), (eqA, _) = deployment
+    k = np.array([K / 2 if name.startswith("k") else K for name in model.springs.names])
     l0 = lambda t: uA + np.multiply.outer(0.5 * (1 - np.cos(np.pi * np.minimum(t, 1.0))), uB - uA)  # noqa: E731
     traj = nc.simulate(model, 1.2, 1e-3, u=lambda t: l0(t), q0=eqA.q, hold="linear", backend="vm", rtol=1e-10,
                        atol=1e-12)
@@ -88,13 +97,46 @@ def test_energy_balance_of_a_deployment(deployment):
     assert stretch.min() > 0, "a cable went slack"
     kinetic = np.array([0.5 * v @ (model.M @ v) for v in traj.v])
     np.testing.assert_allclose(traj.energy - traj.energy[0], kinetic - kinetic[0], atol=1e-9)  # no other potential
-    E = kinetic + 0.5 * K * np.sum(stretch**2, axis=1)
+    E = kinetic + 0.5 * np.sum(k * stretch**2, axis=1)
     h, du = np.diff(traj.t)[:, None], np.diff(traj.u, axis=0)
-    Tdot = K * (rate[:, :] - np.vstack([du / h, du[-1:] / h[-1:]]))      # l̇₀ of the interval after each sample
-    Tdot_end = K * (rate[1:] - du / h)                                     # and at each interval's end
+    Tdot = k * (rate[:, :] - np.vstack([du / h, du[-1:] / h[-1:]]))      # l̇₀ of the interval after each sample
+    Tdot_end = k * (rate[1:] - du / h)                                     # and at each interval's end
     integral = 0.5 * h * (T[1:] + T[:-1]) + h**2 / 12 * (Tdot[:-1] - Tdot_end)
     work = np.concatenate([[0], np.cumsum(-np.sum(integral * du / h, axis=1))])
     np.testing.assert_allclose(E - E[0], work, atol=1e-6 * np.abs(work).max())
     assert np.abs(work).max() > 0.05
     top = traj.q[:, model.coordinate_names.index("n6.r_i.z")]
     assert top[-1] > 0.95, "the tower deployed"
+
+
+@pytest.mark.slow      # one 1.2 s IDAS run of the tower (VM backend) per model
+def test_viewer_shows_the_deploying_towers_tensions(deployment):
+    """The viewer's scene and HTML page of a deployment: every drawn cable segment carries its
+    cable's tension, equal to ``k (l − l₀(t))`` computed by NumPy from the nodes' positions and
+    the input rest lengths (a clustered cable: its segments' summed length, ``K/2``, the same
+    tension on both segments), and the tensions change along the deployment."""
+    from ncgen.viz import html
+    from ncgen.viz.scene import scene
+
+    model, (_, B), (uA, uB), (eqA, _) = deployment
+    traj = nc.simulate(model, 1.2, 0.02, u=lambda t: uA + 0.5 * (1 - np.cos(np.pi * min(t, 1.0))) * (uB - uA),
+                       q0=eqA.q, hold="linear", backend="vm", rtol=1e-9, atol=1e-11)
+    names = model.coordinate_names
+    X = np.stack([np.broadcast_to(B[i], (len(traj), 3)) if i in SUPPORTS else
+                  traj.q[:, [names.index(f"n{i}.r_i.{c}") for c in "xyz"]] for i in range(len(B))], axis=1)
+    _, struts, cables = tower(0.3, 0.3)
+    clusters = dict(enumerate(CLUSTERS)) if any(n.startswith("k") for n in model.springs.names) else {}
+    expected = []
+    for j, name in enumerate(model.springs.names):
+        members = clusters[int(name[1:])] if name.startswith("k") else [int(name[1:])]
+        length = sum(np.linalg.norm(X[:, cables[e][0]] - X[:, cables[e][1]], axis=1) for e in members)
+        expected.append(K / len(members) * (length - traj.u[:, j]))
+    expected = np.column_stack(expected)
+    assert expected.min() > 0 and np.ptp(expected, axis=0).max() > 5.0, "taut cables whose tensions change"
+    sc = scene(traj)
+    assert sc.spring_names == list(model.springs.names) and sc.spring_cable.all()
+    assert len(sc.spring_owner) == len(cables) - len(SUPPORTS)        # every realised segment drawn
+    np.testing.assert_allclose(sc.spring_tension, expected[:, sc.spring_owner], rtol=1e-9, atol=1e-9)
+    data = html.page_data(traj)
+    panel = [p for p in data["plots"] if p["title"] == "spring and cable tensions"]
+    assert panel and [s["label"] for s in panel[0]["series"]] == list(model.springs.names)

@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
@@ -38,6 +39,22 @@ def test_tower_example(tmp_path):
     sags = [float(s) for s in re.findall(r"top sags ([\d.]+) mm", out)]
     assert len(sags) == 2 and sags[1] < sags[0]
     assert all(float(r) < 1e-9 for r in re.findall(r"\|A t - f\| = ([\d.e+-]+) N", out))
+
+
+@pytest.mark.slow       # a fresh process building a model: ~20 s; fast: test_inverse_statics.py's T-bar
+@pytest.mark.timeout(900)
+def test_tbar_example(tmp_path):
+    """The T-bar's strut forces against statics by hand: F + t L / ℓ and t h / ℓ (L = 1, h = 0.4,
+    F = 50 N, t = 10 N, ℓ = √(L² + h²) / 2); the realised model back at the design."""
+    out = run("tensegrity_tbar.py", tmp_path)
+    assert "1 - 0 = 8 - (7 - 0)" in out
+    assert "cables 10.000000..10.000000 N" in out
+    struts = [float(x) for x in re.search(r"struts \(compression\) \[([^\]]+)\]", out).group(1).split()]
+    ell = np.hypot(1.0, 0.4) / 2
+    np.testing.assert_allclose(struts, [50 + 10 / ell] * 2 + [10 * 0.4 / ell] * 2, atol=2e-6)   # printed to 1e-6
+    shape, tension, strut = re.search(r"within ([\d.e+-]+) m, tensions within ([\d.e+-]+) N, struts within "
+                                      r"([\d.e+-]+) N of the design; stable", out).groups()
+    assert float(shape) < 1e-10 and float(tension) < 1e-7 and float(strut) < 1e-7
 
 
 @pytest.mark.slow       # a fresh process building a body model: ~20 s; fast: test_rigid_tensegrity.py's table
@@ -105,6 +122,7 @@ def test_deployment_tracked_by_mpc(deployment_output):
     errors = end_errors(out)
     assert errors["MPC"] <= 5e-3 and errors["MPC"] < errors["open loop"] and errors["MPC"] < errors["tracked"], errors
     assert float(re.search(r"MPC: constraints within ([\d.e+-]+)", out).group(1)) < 1e-6
+    assert "wrote tensegrity_deployment.html" in out
 
 
 @pytest.mark.slow
