@@ -482,6 +482,30 @@ def small_tree(name: str):
     return s.build()
 
 
+def test_rate_kernels_only_where_the_position_rates_are_not_the_rates():
+    """The kinds whose ``q̇`` the loops copy from ``w`` (no ``tk_<k>_qdot``) are exactly those
+    whose position rates (ncgen.assembly.joint_space, at random positions and rates) equal
+    the rates; the others keep their kernels in every algorithm unit."""
+    import casadi as ca
+
+    from ncgen.assembly.joint_space import joint_position_rates
+    from ncgen.codegen.tree_kernels import ALGORITHM_UNITS, JOINT_KINDS, rate_kernel_kinds, unit_kernels
+
+    rng = np.random.default_rng(3)
+    copied = []
+    for k in JOINT_KINDS:
+        if not k.nq:
+            continue
+        q, w = rng.normal(size=k.nq), rng.normal(size=k.nv)
+        rates = np.array(ca.evalf(joint_position_rates(k.kind, 3, k.nq, ca.DM(q), ca.DM(w)))).ravel()
+        if rates.shape == w.shape and np.array_equal(rates, w):
+            copied.append(k.name)
+    assert set(copied) == {"revolute", "prismatic", "cylindrical", "universal", "planar"}
+    assert rate_kernel_kinds() == tuple(k.name for k in JOINT_KINDS if k.nq and k.name not in copied)
+    for unit in ALGORITHM_UNITS:
+        assert [f.name() for f in unit_kernels(unit)] == [f"tk_{k}_qdot" for k in rate_kernel_kinds()]
+
+
 def test_joint_kernels_rule():
     """``backend_policy.choose_joint_kernels``: the tables for a short run, the flat loop when
     it is ready or when the run is long enough for its faster evaluations to pay its compile."""

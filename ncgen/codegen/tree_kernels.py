@@ -22,7 +22,8 @@ poses from :func:`ncgen.assembly.joint_tree.relative_pose` with symbolic axes.
   output ``[M_g (6×6); W]``: the mass matrix at g and the wrench ``M_g dT − ad(T)ᵀ M_g T``
   (N·m, N) the body needs; ``tk_body_fwd``: input ``[x; dR; dp; dT; ddT]``, output ``d[M_g; W]``;
 * ``tk_<k>_qdot``: ``[q; w] -> q̇`` (position rates: quaternions' ``½ q ⊗ [ω; 0]``, a free
-  joint's ``R v``) for the joint-space ODE;
+  joint's ``R v``) for the joint-space ODE, of the kinds whose rates are not their positions'
+  derivatives (:func:`rate_kernel_kinds`; for the others the loops copy ``q̇ = w``);
 * ``tl_<k>`` (the local recursion of RNEA, CRBA and ABA, kinds other than ``fixed``,
   ``revolute`` and ``prismatic``, which the loops write out about the z axis:
   :data:`LOCAL_MODES`): input ``[q; w; numbers]``, output ``[R_J; p_J; S (6×nv); c_J]``: the
@@ -146,6 +147,23 @@ def rate_kernel(name: str) -> ca.Function:
 
 
 @lru_cache(maxsize=None)
+def rate_kernel_kinds() -> tuple[str, ...]:
+    """The joint kinds whose position rates need a kernel: all but those with ``q̇ = w``
+    exactly (no position, or the rate kernel's output is its rate input, read off the
+    formula); the loops copy ``w`` for the others (``qdot`` unset in the tables' kinds)."""
+    need = []
+    for k in JOINT_KINDS:
+        if not k.nq:
+            continue
+        f = rate_kernel(k.name)
+        x = f.sx_in(0)
+        y, w = f(x), x[k.nq:]
+        if k.nq != k.nv or ca.depends_on(y - w, x) or np.any(np.array(ca.evalf(y - w))):
+            need.append(k.name)
+    return tuple(need)
+
+
+@lru_cache(maxsize=None)
 def body_kernels() -> tuple[ca.Function, ca.Function]:
     """``(tk_body, tk_body_fwd)`` (module docstring)."""
     R, p, T, dT = ca.SX.sym("R", 3, 3), ca.SX.sym("p", 3), ca.SX.sym("T", 6), ca.SX.sym("dT", 6)
@@ -161,9 +179,11 @@ def body_kernels() -> tuple[ca.Function, ca.Function]:
 
 
 def kernels() -> list[ca.Function]:
-    """Every tree kernel, in the library's order: each joint kind's three (four with
-    ``tl_<k>``), then the body's."""
-    return [f for k in JOINT_KINDS for f in (*joint_kernels(k.name), rate_kernel(k.name),
+    """Every tree kernel, in the library's order: each joint kind's ``tk_<k>``, ``tk_<k>_fwd``,
+    ``tk_<k>_qdot`` (:func:`rate_kernel_kinds`) and ``tl_<k>`` (not :data:`LOCAL_MODES`), then the body's."""
+    rates = rate_kernel_kinds()
+    return [f for k in JOINT_KINDS for f in (*joint_kernels(k.name),
+                                             *((rate_kernel(k.name),) if k.name in rates else ()),
                                              *(() if k.name in LOCAL_MODES else (local_kernel(k.name),)))] + \
         list(body_kernels())
 
@@ -185,7 +205,8 @@ PACKAGE = "ncgen_trees"
 #: The template files the library is made of besides this module (its cache key hashes them).
 SOURCES = ("runtime/ncgen_tree_tables.h", "runtime/ncgen_spatial.h", "tree_tables.c.j2", "runtime/ncgen_joint_loop.h")
 #: The algorithm units of the tree library and their entry points (besides ``work_size``,
-#: ``check``, ``kind_names``, ``set_kernel``); each unit also holds every kind's rate kernel.
+#: ``check``, ``kind_names``, ``set_kernel``); each unit also holds the rate kernels
+#: (:func:`rate_kernel_kinds`).
 ALGORITHM_UNITS = {"inverse": ("rnea", "crba"), "forward": ("aba", "joint_run"),
                    "derivatives": ("rnea_derivatives", "aba_derivatives")}
 #: Doubles of work each kernel may take in the units (the kernels are checked against it).
@@ -213,7 +234,7 @@ def units_of(unit: str, kinds) -> tuple[str, ...]:
 def unit_kernels(unit: str) -> list[ca.Function]:
     """The CasADi kernels of the unit ``unit`` (an algorithm unit: the rate kernels)."""
     if unit in ALGORITHM_UNITS:
-        return [rate_kernel(k.name) for k in JOINT_KINDS if k.nq]
+        return [rate_kernel(k) for k in rate_kernel_kinds()]
     if unit == "body":
         return list(body_kernels())
     what, _, kind = unit.partition("_")
@@ -232,7 +253,7 @@ def _context(units, linked: bool, fns) -> dict:
         raise CodegenError("tree kernels: the loops expect kernels with no integer work, one argument and one result")
     return {"pivot_tol": repr(float(PIVOT_TOL)),
             "kinds": [{"name": k.name, "nq": k.nq, "nv": k.nv, "n_num": k.n_num,
-                       "mode": LOCAL_MODES.get(k.name, 0)} for k in JOINT_KINDS],
+                       "rate": k.name in rate_kernel_kinds(), "mode": LOCAL_MODES.get(k.name, 0)} for k in JOINT_KINDS],
             "max_w": max(f.sz_w() for f in fns) if linked else KERNEL_WORK, "kind_names": kind_names(),
             "units": list(units), "linked": linked}
 

@@ -7,10 +7,11 @@ library (:func:`~ncgen.runtime.table_library.cached_library`, index
 whose units are compiled reaches compiled RNEA/ABA with no call of the C compiler.
 
 Units (:mod:`ncgen.codegen.tree_kernels`): the algorithm units ``forward`` (ABA, the joint
-loop), ``inverse`` (RNEA, CRBA) and ``derivatives``, each with every kind's rate kernel, loops at
-:data:`UNIT_CFLAGS`; the kernel units ``local_<kind>``, ``edge_<kind>`` and ``body``, whose
-kernels :class:`TreeLibrary` sets in an algorithm unit (``set_kernel``) for the kinds of the
-trees it serves.  One library of everything took 30 s of CPU to compile (18 s of it the kernels
+loop), ``inverse`` (RNEA, CRBA) and ``derivatives``, each with the rate kernels of the spherical
+and free joints (the other kinds have q̇ = w), loops at :data:`UNIT_CFLAGS`; the kernel units
+``local_<kind>``, ``edge_<kind>`` and ``body``, whose kernels :class:`TreeLibrary` sets in an
+algorithm unit (``set_kernel``) for the kinds of the trees it serves.  One library of
+everything took 30 s of CPU to compile (18 s of it the kernels
 of every kind and their derivatives at -O2, one translation unit, 2.4 s the loops); the Panda's
 joint run needs the forward unit alone (about 1.2–1.9 s of CPU at -O1, load 12–18; -O1 costs
 +9 % instructions per ABA against -O2 by callgrind, -Og +39 %).

@@ -29,7 +29,7 @@
  *   edge_fwd  [edge input; dR_p; dp_p; dT_p; δ; dw] -> d(edge output), q moved in the tangent space
  *   body      [R; p; T; dT; m; c; I_c] -> [M_g (6 × 6); W = M_g dT − ad(T)ᵀ M_g T]
  *   body_fwd  [body input; dR; dp; dT; ddT] -> d(body output)
- *   qdot      [q; w] -> q̇ (the joint's position rates, quaternions normalised first)
+ *   qdot      [q; w] -> q̇ (the joint's position rates, quaternions normalised first; NULL where q̇ = w)
  *   local     [q; w; numbers] -> [R_J; p_J; S (6 × nv, in f_b); c_J = Ṡ w] (mode 0 only; else NULL)
  * Call ncgen_tree_check once on new tables: the loops trust them.  Position derivatives are
  * per independent rate in the tangent space (Pinocchio's convention). */
@@ -172,7 +172,8 @@ static int ncgen_tree_check(const ncgen_tree_kinds *K, const ncgen_tree *T) {
     if (!ncgen_tree_in(T->parent[b], -1, b) || !ncgen_tree_in(T->kind[b], 0, K->n_joint)) return NCGEN_TREE_BAD;
     k = &K->joint[T->kind[b]];
     if (T->num_ptr[b + 1] - T->num_ptr[b] != k->n_num) return NCGEN_TREE_BAD;
-    if (T->q_at[b] < 0 || T->q_at[b] + k->nq > T->nq || T->v_at[b] < 0 || T->v_at[b] + k->nv > T->nv)
+    if (T->q_at[b] < 0 || T->q_at[b] + k->nq > T->nq || T->v_at[b] < 0 || T->v_at[b] + k->nv > T->nv ||
+        (k->nq && !k->qdot && k->nq != k->nv))  /* no rate kernel: q̇ = w */
       return NCGEN_TREE_BAD;
   }
   for (i = 0; i < T->nv; ++i)
@@ -1131,6 +1132,10 @@ static int ncgen_tree_ode(const ncgen_tree_kinds *K, const ncgen_tree *T, const 
   for (b = 0; b < T->nb; ++b) {
     const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
     if (!k->nq) continue;
+    if (!k->qdot) {                             /* q̇ = w */
+      for (i = 0; i < k->nv; ++i) xdot[T->q_at[b] + i] = x[T->nq + T->v_at[b] + i];
+      continue;
+    }
     for (i = 0; i < k->nq; ++i) s.in[i] = x[T->q_at[b] + i];
     for (i = 0; i < k->nv; ++i) s.in[k->nq + i] = x[T->nq + T->v_at[b] + i];
     if (ncgen_tree_call(k->qdot, s.in, xdot + T->q_at[b], s.kw)) return NCGEN_TREE_KERNEL;
