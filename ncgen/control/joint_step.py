@@ -12,7 +12,7 @@ and its Jacobians follow from ABA's derivatives (:func:`ncgen.runtime.tree_algor
 ``∂a/∂q``, ``∂a/∂v``, ``∂a/∂τ = M⁻¹``, compiled C)::
 
     ∂v⁺/∂x = [h ∂a/∂q,  I + h ∂a/∂v],      ∂v⁺/∂τ = h M⁻¹,
-    ∂q⁺/∂x = [I, h I] + h ∂v⁺/∂x,          ∂q⁺/∂τ = h ∂v⁺/∂τ.
+    ∂q⁺/∂x = [I, 0] + h ∂v⁺/∂x,            ∂q⁺/∂τ = h ∂v⁺/∂τ.
 
 Only trees whose joint positions add (``q⁺ = q + h v``: hinges and slides, no quaternion) and
 whose every rate is independent (no mimic joint) take it; others are refused by name.
@@ -77,5 +77,4 @@ class JointStep:
         B[n:] = h * Minv
         A[:n], B[:n] = h * A[n:], h * B[n:]
         A[:n, :n] += np.eye(n)
-        A[:n, n:] += h * np.eye(n)
         return np.concatenate([q + h * v1, v1]), A, B
