@@ -67,6 +67,18 @@ def test_joint_step_refuses_quaternions_and_bad_input(two_link):
         JointStep(two_link, 0.01).jacobians(np.zeros(4), np.zeros(3))
 
 
+def test_locked_urdf_fixes_the_named_joints_and_names_bad_ones():
+    pytest.importorskip("yourdfpy")
+    fingers = ["panda_finger_joint1", "panda_finger_joint2"]
+    text = nc.robots.locked_urdf("panda", fingers)
+    assert "<mimic" not in text and text.count('type="fixed"') > nc.robots.urdf_path("panda").read_text().count(
+        'type="fixed"')
+    with pytest.raises(nc.ModelError, match="no joint 'panda_finger'"):
+        nc.robots.locked_urdf("panda", ["panda_finger"])
+    with pytest.raises(nc.ModelError, match="'panda_finger_joint2' mimics the locked joint 'panda_finger_joint1'"):
+        nc.robots.locked_urdf("panda", fingers[:1])
+
+
 def test_box_qp_matches_qpoases_with_active_bounds():
     import casadi as ca
 
