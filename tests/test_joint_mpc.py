@@ -19,7 +19,8 @@ from ncgen.control.joint_step import JointStep
 from ncgen.errors import NcgenError
 
 TWO_LINK = """<robot name="two_link">
-  <link name="base"><inertial><mass value="1"/><inertia ixx="0.1" iyy="0.1" izz="0.1" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="base"><inertial><mass value="1"/>
+    <inertia ixx="0.1" iyy="0.1" izz="0.1" ixy="0" ixz="0" iyz="0"/></inertial></link>
   <link name="upper"><inertial><origin xyz="0.25 0 0"/><mass value="1.5"/>
     <inertia ixx="0.01" iyy="0.03" izz="0.03" ixy="0" ixz="0" iyz="0"/></inertial></link>
   <link name="fore"><inertial><origin xyz="0.2 0 0.02"/><mass value="0.8"/>
