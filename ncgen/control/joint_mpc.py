@@ -27,7 +27,7 @@ from ncgen.control.box_qp import box_qp
 from ncgen.control.joint_step import JointStep
 from ncgen.control.mpc_qp import InProcessQP, check_qp_solver, qp_function
 from ncgen.errors import NcgenError, OptimizationError
-from ncgen.runtime.tree_algorithms import aba, rnea
+from ncgen.runtime.tree_algorithms import rnea
 from ncgen.validation import as_scalar, as_vector
 
 #: Step lengths of the line search, longest first, and its Armijo fraction.
@@ -112,11 +112,9 @@ class JointMPC:
 
     def total_cost(self, x: np.ndarray, U: np.ndarray, Xr: np.ndarray, Ur: np.ndarray) -> float:
         """``J`` of the inputs ``U`` from ``x`` (forward rollout); inf when it is not finite."""
-        n, h, J = self.step.n, self.h, 0.0
+        J = 0.0
         for k in range(self.N):
-            q, v = x[:n], x[n:]
-            v = v + h * aba(self.model, q, v, U[k], p=self.p)
-            x = np.concatenate([q + h * v, v])
+            x = self.step.unchecked(x, U[k])
             e, du = x - Xr[k], U[k] - Ur[k]
             J += 0.5 * (self.node_weights[k] * e @ (self.W * e) + du @ (self.R * du))
         return J if np.isfinite(J) else np.inf

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from ncgen.errors import NcgenError
-from ncgen.runtime.tree_algorithms import aba_derivatives
+from ncgen.runtime.tree_algorithms import aba, aba_derivatives
 from ncgen.validation import as_vector, positive
 
 
@@ -58,7 +58,14 @@ class JointStep:
                 as_vector(tau, self.nu, "tau (efforts of the joint rates)"))
 
     def __call__(self, x, tau) -> np.ndarray:
-        return self.jacobians(x, tau)[0]
+        return self.unchecked(*self._split(x, tau))
+
+    def unchecked(self, x: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """``x⁺`` of a float vector ``x`` and ``tau`` of the right sizes, unchecked (by ABA
+        alone, without its derivatives)."""
+        n, h = self.n, self.h
+        v1 = x[n:] + h * aba(self.model, x[:n], x[n:], tau, p=self.p)
+        return np.concatenate([x[:n] + h * v1, v1])
 
     def jacobians(self, x, tau) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(x⁺, A = ∂x⁺/∂x, B = ∂x⁺/∂τ)`` at ``(x, τ)``."""
