@@ -11,30 +11,35 @@ the steps are printed, with the tracking error in joint space (max over the run,
 end) and of the hand's position (``panda_hand``'s origin, mm).  ``--qpoases``: the same with
 CasADi's qpOASES for the QPs, interleaved run by run (the same inputs to 1e-6: checked).
 
-``OPENBLAS_NUM_THREADS=1`` is set (unless given): the QP's 140 × 140 matrices are small, and
-OpenBLAS's threads spinning on a shared 2-core machine cost 20–50× the single-threaded time.
+BLAS threads: each run is a fresh process, alternately with the BLAS's default threads
+(``OPENBLAS_NUM_THREADS``, ``OMP_NUM_THREADS``, ``MKL_NUM_THREADS`` removed from its
+environment: what a user has) and with ``OPENBLAS_NUM_THREADS=1``; both are printed, with the
+largest difference of their inputs (the controller makes no large BLAS call: the Gauss–Newton
+QP is kept in its stages, ``ncgen.control.stagewise_hessian``).
 
-``--smoke``: one run of 0.3 s (30 steps), for the tests.
+``--smoke``: one run of 0.3 s (30 steps) in each setting, for the tests.
 
     python benchmarks/joint_mpc.py [--repeat 3] [--qpoases] [--smoke]
 """
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import subprocess
 import sys
 import time
 from pathlib import Path
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")    # before numpy (module docstring)
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-import ncgen as nc  # noqa: E402
+import ncgen as nc
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine  # noqa: E402
 
+THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+SETTINGS = {"default BLAS threads": {}, "OPENBLAS_NUM_THREADS=1": {"OPENBLAS_NUM_THREADS": "1"}}
 Q0 = np.array([0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785])
 Q1 = Q0 + np.array([0.8, 0.4, -0.5, 0.6, 0.5, -0.4, 0.6])
 T_REACH, H, N = 1.0, 0.01, 20
@@ -71,49 +76,76 @@ def hand_error_mm(model, tr) -> np.ndarray:
     return np.array(err)
 
 
+def child(solvers: list[str], t_end: float) -> None:
+    """One run of each solver in this process; prints the times, inputs and errors as JSON."""
+    urdf = nc.robots.locked_urdf("panda", ["panda_finger_joint1", "panda_finger_joint2"])
+    model = nc.System.from_urdf(urdf, name="panda_arm").build()
+    run(model, "box", 0.05)                                # compiles and loads the kernels
+    out = {}
+    for s in solvers:
+        times, U, tr = run(model, s, t_end)
+        qj = np.array(tr.qj)
+        err = np.array([np.max(np.abs(q - reference(t)[0])) for q, t in zip(qj, tr.t)])
+        hand = hand_error_mm(model, tr)
+        out[s] = {"times": times.tolist(), "inputs": U.tolist(), "err": [err.max(), err[-1]],
+                  "hand": [hand.max(), hand[-1]]}
+    print(json.dumps(out))
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--qpoases", action="store_true", help="also time CasADi's qpOASES for the QPs, interleaved")
-    ap.add_argument("--smoke", action="store_true", help="one run of 0.3 s")
+    ap.add_argument("--smoke", action="store_true", help="one run of 0.3 s in each BLAS setting")
+    ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     t_end, repeat = (0.3, 1) if args.smoke else (1.5, args.repeat)
-    print(machine())
-    urdf = nc.robots.locked_urdf("panda", ["panda_finger_joint1", "panda_finger_joint2"])
-    model = nc.System.from_urdf(urdf, name="panda_arm").build()
     solvers = ["box"] + (["qpoases"] if args.qpoases else [])
-    run(model, "box", 0.05)                                # compiles and loads the kernels
-    best = {s: None for s in solvers}
-    every = {s: [] for s in solvers}
-    inputs = {}
+    if args.child:
+        return child(solvers, t_end)
+    print(machine())
+    base = {k: v for k, v in os.environ.items() if k not in THREAD_VARIABLES}
+    command = [sys.executable, __file__, "--child", "--repeat", "1"] + (["--qpoases"] if args.qpoases else []) + \
+        (["--smoke"] if args.smoke else [])
+    best, every, last = {}, {}, {}
     for _ in range(repeat):
-        for s in solvers:
-            times, U, tr = run(model, s, t_end)
-            best[s] = times if best[s] is None else np.minimum(best[s], times)
-            every[s].append(times)
-            inputs[s] = U
-    print(f"load average at the end: {os.getloadavg()[0]:.2f}; "
-          f"OPENBLAS_NUM_THREADS={os.environ['OPENBLAS_NUM_THREADS']}")
-    qj = np.array(tr.qj)
-    err = np.array([np.max(np.abs(q - reference(t)[0])) for q, t in zip(qj, tr.t)])
-    hand = hand_error_mm(model, tr)
+        for setting, extra in SETTINGS.items():
+            done = subprocess.run(command, env={**base, **extra}, capture_output=True, text=True)
+            if done.returncode != 0:
+                raise SystemExit(f"the run with {setting} failed:\n{done.stderr[-3000:]}")
+            for s, res in json.loads(done.stdout.splitlines()[-1]).items():
+                times = np.array(res["times"])
+                best[setting, s] = times if (setting, s) not in best else np.minimum(best[setting, s], times)
+                every.setdefault((setting, s), []).append(times)
+                last[setting, s] = res
+    print(f"load average at the end: {os.getloadavg()[0]:.2f}; each setting in its own processes, "
+          f"interleaved run by run")
+    res = last["default BLAS threads", "box"]
+    U = np.array(res["inputs"])
     print(f"Panda reach over {t_end} s, h = {H} s, N = {N}, {len(U)} control steps: "
-          f"joint error max {err.max():.2e} rad, final {err[-1]:.2e} rad; "
-          f"hand position error max {hand.max():.2f} mm, final {hand[-1]:.2e} mm; "
+          f"joint error max {res['err'][0]:.2e} rad, final {res['err'][1]:.2e} rad; "
+          f"hand position error max {res['hand'][0]:.2f} mm, final {res['hand'][1]:.2e} mm; "
           f"|tau| max {np.round(np.abs(U).max(0), 1).tolist()} N·m")
-    for s in solvers:
-        t = 1e3 * best[s]
-        print(f"  JointMPC qp_solver={s!r}: per step (min over {repeat} runs) min {t.min():.2f} ms, "
+    for (setting, s), b in best.items():
+        t, e = 1e3 * b, 1e3 * np.array(every[setting, s])
+        print(f"  JointMPC qp_solver={s!r}, {setting}: per step (min over {repeat} runs) min {t.min():.2f} ms, "
               f"median {np.median(t):.2f} ms, max {t.max():.2f} ms; every step of every run: median "
-              f"{1e3 * np.median(every[s]):.2f} ms, 95th percentile {1e3 * np.percentile(every[s], 95):.2f} ms "
-              f"(target: ≤ 10 ms)")
+              f"{np.median(e):.2f} ms, 95th percentile {np.percentile(e, 95):.2f} ms (target: ≤ 10 ms)")
+    one, default = (np.array(last[k, "box"]["inputs"]) for k in ("OPENBLAS_NUM_THREADS=1", "default BLAS threads"))
+    ratio = best["default BLAS threads", "box"] / best["OPENBLAS_NUM_THREADS=1", "box"]
+    gap = np.max(np.abs(one - default))
+    print(f"  default threads / OPENBLAS_NUM_THREADS=1 (box): min {ratio.min():.2f}×, median {np.median(ratio):.2f}×; "
+          f"inputs differ by {gap:.1e} N·m")
+    if not gap < 1e-9:
+        raise SystemExit(f"the inputs with and without OPENBLAS_NUM_THREADS=1 differ by {gap:.1e} N·m")
     if args.qpoases:
-        gap = np.max(np.abs(inputs["box"] - inputs["qpoases"]))
-        ratio = best["qpoases"] / best["box"]
-        print(f"  qpOASES / box: min {ratio.min():.1f}×, median {np.median(ratio):.1f}×; "
-              f"inputs differ by {gap:.1e} N·m")
-        if not gap < 1e-6:
-            raise SystemExit(f"the two QP solvers' inputs differ by {gap:.1e} N·m (expected < 1e-6)")
+        for setting in SETTINGS:
+            gap = np.max(np.abs(np.array(last[setting, "box"]["inputs"]) - np.array(last[setting, "qpoases"]["inputs"])))
+            ratio = best[setting, "qpoases"] / best[setting, "box"]
+            print(f"  qpOASES / box, {setting}: min {ratio.min():.1f}×, median {np.median(ratio):.1f}×; "
+                  f"inputs differ by {gap:.1e} N·m")
+            if not gap < 1e-6:
+                raise SystemExit(f"the two QP solvers' inputs differ by {gap:.1e} N·m (expected < 1e-6)")
 
 
 if __name__ == "__main__":

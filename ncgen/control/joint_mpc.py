@@ -7,12 +7,15 @@ Jacobians from ABA's derivatives, compiled C) by single shooting: at each contro
 the previous inputs shifted by one interval as the guess ``Ū`` (``N`` intervals of ``h``):
 
 1. roll the step out from the measured state ``x``: ``x̄_{k+1} = f(x̄_k, ū_k)``, ``A_k``, ``B_k``;
-2. condense: ``δx_{k+1} = A_k δx_k + B_k δu_k``, ``δx_0 = 0`` gives ``vec δX = S δU``;
+2. linearise: ``δx_{k+1} = A_k δx_k + B_k δu_k``, ``δx_0 = 0`` gives ``vec δX = S δU``
+   (kept in its stages, :class:`~ncgen.control.stagewise_hessian.StagewiseHessian`: no
+   ``S`` nor dense Hessian is formed for the default QP solver);
 3. the Gauss–Newton QP of the tracking cost
    ``J = ½ Σ_{k=1..N} w_k ‖x_k − x_r(t_k)‖²_W + ½ Σ_{k=0..N−1} ‖u_k − τ_r(t_k)‖²_R``
    (``w_N = terminal_weight``, else 1; ``τ_r = RNEA(q_r, v_r, 0)``: the reference's holding
    torque) in ``δU``, with the torque bounds ``lb − Ū ≤ δU ≤ ub − Ū``, solved by projected
-   Newton (:mod:`ncgen.control.box_qp`; or CasADi's ``qpOASES``, ``qrqp``);
+   Newton (:mod:`ncgen.control.box_qp`, its Newton steps by a Riccati recursion on the free
+   inputs; or CasADi's ``qpOASES``, ``qrqp`` on the condensed dense Hessian);
 4. a backtracking (Armijo) line search on the true cost along ``Ū + α δU``; an answer that is
    not finite, or no decrease, keeps ``Ū`` (``mpc.step_length`` 0).
 
@@ -26,6 +29,7 @@ import numpy as np
 from ncgen.control.box_qp import box_qp
 from ncgen.control.joint_step import JointStep
 from ncgen.control.mpc_qp import InProcessQP, check_qp_solver, qp_function
+from ncgen.control.stagewise_hessian import StagewiseHessian
 from ncgen.errors import NcgenError, OptimizationError
 from ncgen.runtime.tree_algorithms import rnea
 from ncgen.validation import as_scalar, as_vector
@@ -121,31 +125,25 @@ class JointMPC:
 
     def _iteration(self, x: np.ndarray, U: np.ndarray, Xr: np.ndarray, Ur: np.ndarray) -> np.ndarray:
         N, nx, nu = self.N, self.step.nx, self.step.nu
-        S = np.zeros((N * nx, N * nu))
-        P = np.zeros((nx, N * nu))
-        X = np.empty((N, nx))
+        A, B, X = np.empty((N, nx, nx)), np.empty((N, nx, nu)), np.empty((N, nx))
         xk = x
         for k in range(N):
-            xk, A, B = self.step.unchecked_jacobians(xk, U[k])
-            P[:, :k * nu] = A @ P[:, :k * nu]
-            P[:, k * nu:(k + 1) * nu] = B
-            S[k * nx:(k + 1) * nx] = P
+            xk, A[k], B[k] = self.step.unchecked_jacobians(xk, U[k])
             X[k] = xk
-        ex, eu = (X - Xr).reshape(-1), (U - Ur).reshape(-1)
-        w = (self.node_weights[:, None] * self.W[None, :]).reshape(-1)
+        ex, eu = X - Xr, (U - Ur).reshape(-1)
+        w = self.node_weights[:, None] * self.W[None, :]
         r = np.tile(self.R, N)
-        J0 = 0.5 * (ex @ (w * ex) + eu @ (r * eu))
+        J0 = 0.5 * (np.sum(w * ex * ex) + eu @ (r * eu))
         if not np.isfinite(J0):
             raise OptimizationError(f"JointMPC: the rollout of the guess from x = {x} is not finite")
-        H = S.T @ (w[:, None] * S)
-        H[np.diag_indices_from(H)] += r + REGULARIZATION
-        g = S.T @ (w * ex) + r * eu
+        H = StagewiseHessian(A, B, w, self.R + REGULARIZATION)
+        g = H.adjoint(ex) + r * eu
         u = U.reshape(-1)
         lb, ub = np.tile(self.lb, N) - u, np.tile(self.ub, N) - u
         if self.qp is None:
             dU, solved, _ = box_qp(H, g, lb, ub, max_iter=self.qp_max_iter)
         else:
-            solved = self.qp.status_call(H, g, [], [], [], lb, ub) == 0
+            solved = self.qp.status_call(H.dense(), g, [], [], [], lb, ub) == 0
             dU = self.qp.outputs[0]
         self.step_length, self.cost, self.qp_solved = 0.0, J0, solved
         if not np.all(np.isfinite(dU)):
