@@ -14,6 +14,7 @@ import pytest
 
 import ncgen as nc
 from ncgen.control.box_qp import box_qp, kkt_error
+from ncgen.control.stagewise_hessian import StagewiseHessian
 from ncgen.control.joint_mpc import JointMPC
 from ncgen.control.joint_step import JointStep
 from ncgen.errors import NcgenError
@@ -101,6 +102,56 @@ def test_box_qp_matches_qpoases_with_active_bounds():
 def test_box_qp_reports_a_hessian_that_is_not_positive_definite():
     x, converged, _ = box_qp(-np.eye(3), np.ones(3), -np.ones(3), 2 * np.ones(3), x0=np.zeros(3))
     assert not converged
+
+
+def condensed_hessian(A, B, w, r):
+    """``Sᵀ diag(w) S + diag(r)`` with ``S``'s blocks ``A_j ⋯ A_{k+1} B_k`` multiplied out one
+    by one (the textbook condensing, independent of StagewiseHessian's recursions)."""
+    N, nx, nu = B.shape
+    S = np.zeros((N * nx, N * nu))
+    for j in range(N):
+        for k in range(j + 1):
+            block = B[k]
+            for i in range(k + 1, j + 1):
+                block = A[i] @ block
+            S[j * nx:(j + 1) * nx, k * nu:(k + 1) * nu] = block
+    return S.T @ (w.reshape(-1)[:, None] * S) + np.diag(np.tile(r, N)), S
+
+
+def test_stagewise_hessian_equals_the_condensed_matrix(two_link):
+    """Products, gradients, Riccati Newton steps on subsets of the inputs (a stage all free,
+    partly held, all held) and the box QP's answer equal those of the dense condensed matrix,
+    on the two-link arm's linearisation along a rollout."""
+    step = nc.JointStep(two_link, 0.02)
+    rng = np.random.default_rng(3)
+    N, nx, nu = 12, step.nx, step.nu
+    A, B = np.empty((N, nx, nx)), np.empty((N, nx, nu))
+    x = np.array([1.3, 0.2, 0.5, -0.4])
+    for k in range(N):
+        x, A[k], B[k] = step.jacobians(x, rng.normal(size=nu))
+    w, r = rng.uniform(0.5, 1e3, size=(N, nx)), np.array([1e-3, 2e-3])
+    H = StagewiseHessian(A, B, w, r)
+    D, S = condensed_hessian(A, B, w, r)
+    assert np.allclose(H.dense(), D, rtol=1e-12, atol=1e-12 * np.abs(D).max())
+    dU, Y = rng.normal(size=N * nu), rng.normal(size=(N, nx))
+    assert np.allclose(H @ dU, D @ dU, rtol=1e-10, atol=1e-10 * np.abs(D @ dU).max())
+    assert np.allclose(H.rollout(dU).reshape(-1), S @ dU, rtol=1e-10, atol=1e-12)
+    assert np.allclose(H.adjoint(Y), S.T @ (w * Y).reshape(-1), rtol=1e-10, atol=1e-10)
+    g = rng.normal(size=N * nu)
+    for free in (np.ones(N * nu, bool), rng.uniform(size=N * nu) < 0.6, np.zeros(N * nu, bool)):
+        free[2 * nu:3 * nu] = False                  # one stage with every input held
+        d = H.newton(free, g)
+        ref = np.zeros(N * nu)
+        if free.any():
+            ref[free] = -np.linalg.solve(D[np.ix_(free, free)], g[free])
+        assert np.allclose(d, ref, rtol=1e-9, atol=1e-9 * max(np.abs(ref).max(), 1.0))
+        assert np.all(d[~free] == 0.0)
+    l, u = -np.full(N * nu, 0.05), np.full(N * nu, 0.05)
+    (a, ok_a, _), (b, ok_b, _) = box_qp(H, g, l, u), box_qp(D, g, l, u)
+    assert ok_a and ok_b and np.sum((a <= l) | (a >= u)) >= 2, "bounds that bind"
+    assert np.max(np.abs(a - b)) < 1e-9 * np.abs(b).max()
+    # H = −diag(r) (no state weight): not positive definite, refused
+    assert StagewiseHessian(A, B, np.zeros_like(w), -r).newton(np.ones(N * nu, bool), g) is None
 
 
 def reach(q0, q1, T):

@@ -53,7 +53,11 @@ class StagewiseHessian:
     def newton(self, free: np.ndarray, grad: np.ndarray) -> np.ndarray | None:
         """``d`` with ``H_ff d_f = −grad_f`` on the ``free`` components and ``d = 0`` on the
         others (the minimiser of ``½ dᵀ H d + gradᵀ d`` with those held), by a Riccati
-        recursion on each stage's free inputs; None when ``H_ff`` is not positive definite."""
+        recursion on each stage's free inputs ``f``: with ``P``, ``p`` the cost-to-go's Hessian
+        and gradient in ``δx_{k+1}``, ``Q_uu = B_fᵀ P B_f + R_f``, ``Q_ux = B_fᵀ P A_k``,
+        ``q_u = B_fᵀ p + grad_{k,f}``, the gains ``[K_k, κ_k] = −Q_uu⁻¹ [Q_ux, q_u]``, then
+        ``P ← A_kᵀ P A_k + Q_uxᵀ K_k + W_{k−1}``, ``p ← A_kᵀ p + Q_uxᵀ κ_k``; None when a ``Q_uu``
+        is not positive definite (``H_ff`` then is not)."""
         N, nx = self.N, self.nx
         free, grad = free.reshape(N, self.nu), grad.reshape(N, self.nu)
         gains = [None] * N
