@@ -134,13 +134,14 @@ def main(argv=None):
     one, default = (np.array(last[k, "box"]["inputs"]) for k in ("OPENBLAS_NUM_THREADS=1", "default BLAS threads"))
     ratio = best["default BLAS threads", "box"] / best["OPENBLAS_NUM_THREADS=1", "box"]
     gap = np.max(np.abs(one - default))
-    print(f"  default threads / OPENBLAS_NUM_THREADS=1 (box): min {ratio.min():.2f}×, median {np.median(ratio):.2f}×; "
-          f"inputs differ by {gap:.1e} N·m")
+    print(f"  default threads / OPENBLAS_NUM_THREADS=1 (box): min {ratio.min():.2f}×, "
+          f"median {np.median(ratio):.2f}×; inputs differ by {gap:.1e} N·m")
     if not gap < 1e-9:
         raise SystemExit(f"the inputs with and without OPENBLAS_NUM_THREADS=1 differ by {gap:.1e} N·m")
     if args.qpoases:
         for setting in SETTINGS:
-            gap = np.max(np.abs(np.array(last[setting, "box"]["inputs"]) - np.array(last[setting, "qpoases"]["inputs"])))
+            box, qpoases = (np.array(last[setting, s]["inputs"]) for s in ("box", "qpoases"))
+            gap = np.max(np.abs(box - qpoases))
             ratio = best[setting, "qpoases"] / best[setting, "box"]
             print(f"  qpOASES / box, {setting}: min {ratio.min():.1f}×, median {np.median(ratio):.1f}×; "
                   f"inputs differ by {gap:.1e} N·m")
