@@ -29,6 +29,8 @@ _HOMES: dict[str, tuple[str, ...]] = {
     "ncgen.assembly.kinematics": ("assemble", "dof_report", "project_velocity", "solve_kinematics"),
     "ncgen.codegen.model_package": ("generate",),
     "ncgen.control": ("MPC", "StepDidNotConverge", "StepFunction", "export_mpc", "ilqr", "step_function"),
+    "ncgen.control.joint_mpc": ("JointMPC",),
+    "ncgen.control.joint_step": ("JointStep",),
     "ncgen.model.cables": ("ClusteredCable",),
     "ncgen.model.capstan": ("CapstanCable", "add_capstan_cable"),
     "ncgen.model.capsule_contacts": ("CapsuleBox", "CapsuleCapsule", "CapsuleSphere", "CylinderSphere"),

@@ -1,0 +1,87 @@
+"""The discrete step of a tree robot in joint space, with its exact Jacobians, for the
+joint-space MPC (:mod:`ncgen.control.joint_mpc`).
+
+State ``x = [q_j; v_j]`` (joint positions and rates, ``model.joint_names`` order; rad or m,
+rad/s or m/s), input ``τ`` (the efforts of the joint rates, N·m or N: Pinocchio's ``tau``,
+for a URDF robot its input ``tau``).  One step of length ``h`` (s) is semi-implicit
+(symplectic) Euler on the articulated-body algorithm's accelerations ``a = ABA(q, v, τ)``::
+
+    v⁺ = v + h a(q, v, τ),        q⁺ = q + h v⁺
+
+and its Jacobians follow from ABA's derivatives (:func:`ncgen.runtime.tree_algorithms.aba_derivatives`:
+``∂a/∂q``, ``∂a/∂v``, ``∂a/∂τ = M⁻¹``, compiled C)::
+
+    ∂v⁺/∂x = [h ∂a/∂q,  I + h ∂a/∂v],      ∂v⁺/∂τ = h M⁻¹,
+    ∂q⁺/∂x = [I, 0] + h ∂v⁺/∂x,            ∂q⁺/∂τ = h ∂v⁺/∂τ.
+
+Only trees whose joint positions add (``q⁺ = q + h v``: hinges and slides, no quaternion) and
+whose every rate is independent (no mimic joint) take it; others are refused by name.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ncgen.errors import NcgenError
+from ncgen.runtime.tree_algorithms import aba, aba_derivatives
+from ncgen.validation import as_vector, positive
+
+
+def joint_step_refusal(model) -> str | None:
+    """Why ``model`` has no joint-space step of this module, or None."""
+    js = getattr(model, "joint_space", None)
+    if js is None:
+        return f"model {model.name!r} has no joint space (not a tree of joints)"
+    if js.nq != js.nv:
+        return (f"model {model.name!r}: joint positions do not add (nq = {js.nq} ≠ nv = {js.nv}: "
+                f"a quaternion joint); the step q⁺ = q + h v needs hinges and slides only")
+    return None
+
+
+class JointStep:
+    """``x⁺ = step(x, τ)`` and ``(x⁺, A, B) = step.jacobians(x, τ)`` (module docstring) of
+    ``model`` with the step ``h`` (s) and parameters ``p`` (None: the model's)."""
+
+    def __init__(self, model, h: float, *, p=None):
+        why = joint_step_refusal(model)
+        if why is not None:
+            raise NcgenError(f"JointStep: {why}")
+        self.model, self.h, self.p = model, positive(h, "JointStep: h (the step, s)"), p
+        self.n = model.joint_space.nv
+        a, *_ = aba_derivatives(model, np.zeros(self.n), np.zeros(self.n), np.zeros(self.n), p=p)
+        if a.shape != (self.n,):
+            raise NcgenError(f"JointStep: model {model.name!r} has dependent joint rates (a mimic joint: "
+                             f"{a.shape[0]} independent of {self.n}); lock or remove the follower joints")
+        self.nx, self.nu = 2 * self.n, self.n
+
+    def _split(self, x, tau):
+        return (as_vector(x, self.nx, "x (joint positions and rates [q_j; v_j])"),
+                as_vector(tau, self.nu, "tau (efforts of the joint rates)"))
+
+    def __call__(self, x, tau) -> np.ndarray:
+        return self.unchecked(*self._split(x, tau))
+
+    def unchecked(self, x: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """``x⁺`` of a float vector ``x`` and ``tau`` of the right sizes, unchecked (by ABA
+        alone, without its derivatives)."""
+        n, h = self.n, self.h
+        v1 = x[n:] + h * aba(self.model, x[:n], x[n:], tau, p=self.p)
+        return np.concatenate([x[:n] + h * v1, v1])
+
+    def jacobians(self, x, tau) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(x⁺, A = ∂x⁺/∂x, B = ∂x⁺/∂τ)`` at ``(x, τ)``."""
+        return self.unchecked_jacobians(*self._split(x, tau))
+
+    def unchecked_jacobians(self, x: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`jacobians` of a float vector ``x`` and ``tau`` of the right sizes, unchecked
+        (the MPC's rollout; the kernel still refuses values that are not finite)."""
+        h, n = self.h, self.n
+        q, v = x[:n], x[n:]
+        a, da_dq, da_dv, Minv = aba_derivatives(self.model, q, v, tau, p=self.p)
+        v1 = v + h * a
+        A, B = np.empty((2 * n, 2 * n)), np.empty((2 * n, n))
+        A[n:, :n], A[n:, n:] = h * da_dq, h * da_dv
+        A[n:, n:] += np.eye(n)
+        B[n:] = h * Minv
+        A[:n], B[:n] = h * A[n:], h * B[n:]
+        A[:n, :n] += np.eye(n)
+        return np.concatenate([q + h * v1, v1]), A, B
