@@ -9,20 +9,20 @@ the face nearest to the sphere, the formulas of the simulator's pair kernels.  F
 box must end 0.15 m to the right, upright, everything at rest, in T = 1 s, with the least
 ``∫ push² dt``; the guess is everything at rest.
 
-Status: **not solved yet.**  From the rest guess the homotopy's first solve (σ = 0.1, or
-σ = 1) succeeds and the next (σ = 1e-3 or 1e-2, κ = 0.01 or 0.1) ends "locally infeasible"
-with the complementarity residual at exactly sqrt(σ): at the last iterate (σ = 1e-2 from
-σ₀ = 1) the box's top corners, 0.1 m above the floor, carry 0.1 N each (a·c = σ: the
-relaxation lets contacts far apart push), and the floor's and the pusher's pairs sit at the
-bound at several nodes; why IPOPT finds no feasible point is not isolated.  N = 16 and 20 fail
-alike.  With the final velocities left free (only the box's
-pose imposed) N = 10 solved (residual 2.5e-12, replay 4e-4 m), but its box then keeps an
-alternating node velocity of ±0.04 m/s at rest (the friction law acts on each interval's mean
-velocity, which is 0, so the node velocities of a sticking body are held by nothing but the
-dynamics).  The same failure with a two-link arm in place of the pusher, starting in contact
-or 1 cm apart.  A sphere against a box fixed to the ground solves (tests/test_optim_contact_boxes.py).
+The homotopy starts at σ₀ = 1e-3 (``CONTACTS``; from the default σ₀ = 0.1 the next solve, at
+σ = 1e-3, ends "locally infeasible").  Why: σ bounds every product gap · force (m·N) and
+gap · impulse (m·N·s) in absolute units, so at σ = 0.1 contacts 0.1 m apart may still push
+with 1 N (or 1 N·s).  From rest the first solve moves the box by that action at a distance:
+the pusher, 0.1–0.3 m behind the box, pushes it with 1.2 N, the top corners take node
+impulses of 0.08 and 0.25 N·s, the box hops 6.8 mm, and it reaches the target while the pusher
+goes backwards (0.42 → 0.27 m).  Nothing of this survives σ → 0, and from there, with the
+pusher far behind the box, IPOPT finds no feasible point at σ = 1e-3.  From σ₀ = 1e-3 a
+contact 0.1 m apart carries at most 0.01 N, and the homotopy goes through: the pusher draws
+back, strikes the box (a plastic impact, 0.94 N·s) and pushes it to the target, where both
+stop (cost ∫ push² dt = 15.41 N²·s, a local optimum; complementarity residual 6e-11 after the
+polish; 671 IPOPT iterations).
 
-Checks meant for it (tests/test_optim_contact_boxes.py, xfail): the complementarity residual;
+Checked (tests/test_optim_contact_boxes.py): the complementarity residual;
 the box at the target; where the box slides over an interval its momentum changes by the
 push less Coulomb's sliding friction μ Σ f_N (exact for constant forces); the box never lifts
 or turns; the optimal push replayed by the nonsmooth stepper ends where the optimiser said.
@@ -39,6 +39,7 @@ G = 9.81
 BOX, BOX_MASS, BOX_X = 0.1, 1.0, 0.5               # edge (m), mass (kg), initial centre x (m)
 PUSHER_MASS, RADIUS, GAP, MU_FLOOR = 0.5, 0.02, 0.01, 0.4
 DISTANCE, T, N = 0.15, 1.0, 10
+CONTACTS = {"sigma0": 1e-3}                     # the homotopy's first σ (m·N; docstring)
 
 
 def build():
@@ -56,7 +57,7 @@ def build():
     return s.build(contacts="nonsmooth")
 
 
-def problem(model, contacts=None):
+def problem(model, contacts=CONTACTS):
     """The box moved by ``DISTANCE``, upright (two of its points), everything at rest at the end."""
     ocp = nc.OptimalControl(model, N=N, t_final=T, contacts=contacts)
     ocp.final(marker=[("box.centre", (BOX_X + DISTANCE, BOX / 2)),

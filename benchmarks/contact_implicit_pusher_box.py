@@ -1,0 +1,92 @@
+"""The pusher and the box (examples/pusher_box.py) from a naive guess against the same problem
+with its contact sequence fixed (issue 39's target: ≤ 10× the IPOPT time).
+
+* naive: ``OptimalControl`` from everything at rest, the Scholtes homotopy from σ₀ = 1e-3,
+  its warm starts and the polish (every IPOPT call's CPU time summed);
+* fixed sequence: the same NLP built anew from the same rest guess, with the contact sequence
+  of the naive optimum imposed — in every complementarity pair the side that is 0 at that
+  optimum set to 0 (an equality), as one would write each phase's contacts by hand — and
+  solved once by IPOPT (ncgen's options, the adaptive barrier of the homotopy's first solve).
+
+Both NLPs are built before the clock starts; the times are the CPU times of the IPOPT calls,
+in interleaved rounds (min and median printed), with the costs and IPOPT's iterations.
+nosnoc is not run on this case: its models are Filippov systems or a single contact with
+friction (CLS), not a box on four corners with a pusher.
+
+Run:  python benchmarks/contact_implicit_pusher_box.py [--rounds 3]
+"""
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import time
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from common import machine
+from ncgen.optim.contact_implicit import FIRST_SOLVE, pair_values
+from ncgen.optim.nlp import NLP
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _example():
+    spec = importlib.util.spec_from_file_location("pusher_box", ROOT / "examples" / "pusher_box.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def naive(ex, model):
+    """``(cost, solver CPU, iterations, sequence)``; ``sequence[i][j]``: pair i's element j has
+    its first side (``a``) at 0 (else its second, ``c``)."""
+    sol = ex.problem(model).solve("rest")
+    value, pairs = sol.nlp.value, sol.nlp.ocp.transcription.pairs
+    sequence = [a <= c for a, c in pair_values(pairs, value)]
+    return sol.stats.objective, sum(h["cpu_time"] for h in sol.homotopy), sol.stats.iterations, sequence
+
+
+def fixed_sequence(ex, model, sequence):
+    """``(cost, solver CPU, iterations, status)`` of the NLP with ``sequence`` imposed."""
+    ocp = ex.problem(model)
+    nlp = NLP(ocp)
+    nlp.build("rest")
+    tr = ocp.transcription
+    nlp.opti.set_value(tr.sigma, tr.settings["sigma_final"])
+    sides = {}
+    for pair, a_zero in zip(tr.pairs, sequence):
+        for i, zero in enumerate(a_zero):
+            side = pair.a[i] if zero else pair.c[i]
+            if ca.symvar(side):
+                sides.setdefault(str(side), side)
+    nlp.opti.subject_to(ca.vertcat(*sides.values()) == 0)
+    cpu = time.process_time()
+    value = nlp.solve(max_iter=3000, tol=1e-8, verbose=False, ipopt=dict(FIRST_SOLVE))
+    cpu = time.process_time() - cpu
+    stats = nlp.opti.stats()
+    return float(value(nlp.opti.f)), cpu, int(stats["iter_count"]), stats["return_status"]
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--rounds", type=int, default=3)
+    args = ap.parse_args(argv)
+    print(machine())
+    ex = _example()
+    model = ex.build()
+    ratios, rows = [], []
+    for r in range(args.rounds):
+        c_n, t_n, it_n, sequence = naive(ex, model)
+        c_f, t_f, it_f, status = fixed_sequence(ex, model, sequence)
+        ratios.append(t_n / t_f)
+        print(f"round {r}: naive cost {c_n:.9f}, IPOPT CPU {t_n:.2f} s, {it_n} iterations | fixed sequence cost "
+              f"{c_f:.9f} ({status}), IPOPT CPU {t_f:.2f} s, {it_f} iterations | ratio {t_n / t_f:.1f}", flush=True)
+        rows.append((c_n, c_f))
+    print(f"RATIO naive / fixed sequence, IPOPT CPU: min {min(ratios):.1f}, median {np.median(ratios):.1f} "
+          f"(target ≤ 10); cost difference {max(abs(a - b) for a, b in rows):.2e}")
+
+
+if __name__ == "__main__":
+    main()
