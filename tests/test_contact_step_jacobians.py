@@ -43,11 +43,12 @@ def assert_matches_differences(st, x, u, tol=1e-6):
 
 @pytest.fixture(scope="module")
 def block():
-    """A 2 kg block (a point) on the floor, μ = 0.5, pushed horizontally by input 0 (N)."""
+    """A 2 kg block (a point) on the floor, μ = 0.5, pushed horizontally by input 0 (N) times
+    the parameter ``gain`` (1 unless a test gives it)."""
     s = nc.System("cjac_block", gravity=(0, -G))
     b = s.add_point("block", mass=MASS, position=(0, 0))
-    push = s.add_input("push")
-    s.add_force(nc.PointForce(b, (0, 0), force=ca.vertcat(push, 0)))
+    push, gain = s.add_input("push"), s.add_parameter("gain", 1.0)
+    s.add_force(nc.PointForce(b, (0, 0), force=ca.vertcat(gain * push, 0)))
     s.add_contact(nc.SpherePlane(b, radius=0.0, mu=MU, name="floor"))
     model = s.build(contacts="nonsmooth")
     return model, nc.step_function(model, H)
@@ -146,25 +147,35 @@ def test_sphere_rolling_and_sliding_on_a_plane():
     assert np.isclose(rolling.B[i, 0], 5 * 0.005 / 7, rtol=1e-9)
 
 
-def test_three_sphere_pile():
-    """Three spheres resting in a pile (settled by the simulator): contacts on the floor and
-    between the spheres sticking, the rest separated."""
+R3, H3 = 0.05, 0.002
+
+
+@pytest.fixture(scope="module")
+def three_spheres():
+    """Three 0.3 kg spheres (r = 5 cm) with floor and pair contacts (μ = 0.5), their step
+    function at 2 ms and its all-contacts reference: one model for the resting pile and the
+    dropped column (their initial positions given to ``simulate``)."""
     s = nc.System("cjac_pile3", gravity=(0, 0, -G))
-    r = 0.05
-    balls = [s.add_point(f"b{k}", mass=0.3, position=(0.01 * k, 0.005 * k, r + 2 * r * k)) for k in range(3)]
+    balls = [s.add_point(f"b{k}", mass=0.3, position=(0.01 * k, 0.005 * k, R3 + 2 * R3 * k)) for k in range(3)]
     for k, b in enumerate(balls):
-        s.add_contact(nc.SpherePlane(b, None, r, mu=0.5, name=f"floor{k}"))
+        s.add_contact(nc.SpherePlane(b, None, R3, mu=0.5, name=f"floor{k}"))
     for i in range(3):
         for j in range(i + 1, 3):
-            s.add_contact(nc.SphereSphere(balls[i], None, r, balls[j], None, r, mu=0.5, name=f"pair{i}{j}"))
+            s.add_contact(nc.SphereSphere(balls[i], None, R3, balls[j], None, R3, mu=0.5, name=f"pair{i}{j}"))
     model = s.build(contacts="nonsmooth")
-    traj = nc.simulate(model, 0.2, 0.002, method="stepper")
-    st = nc.step_function(model, 0.002)
+    return model, nc.step_function(model, H3), all_contacts(model, H3)
+
+
+def test_three_sphere_pile(three_spheres):
+    """Three spheres resting in a pile (settled by the simulator): contacts on the floor and
+    between the spheres sticking, the rest separated."""
+    model, st, reference = three_spheres
+    traj = nc.simulate(model, 0.2, H3, method="stepper")
     x = np.concatenate([traj.q[-1], traj.v[-1]])
     s_ = assert_matches_differences(st, x, np.zeros(0))
     assert s_.modes == ["sticking", "separated", "separated", "sticking", "separated", "sticking"]
     assert not s_.at_switch
-    assert_equals_all_contacts(all_contacts(model, 0.002), st, x, np.zeros(0))
+    assert_equals_all_contacts(reference, st, x, np.zeros(0))
 
 
 def all_contacts(model, h):
@@ -236,15 +247,9 @@ def test_tables_kernels_refused(block):
         nc.step_function(model, H, kernels="tables")
 
 
-def test_parameter_jacobian_sliding():
-    """``C = ∂x⁺/∂p``: the push scaled by a parameter ``gain``; sliding, ∂v⁺/∂gain = h u/m."""
-    s = nc.System("cjac_gain", gravity=(0, -G))
-    b = s.add_point("block", mass=MASS, position=(0, 0))
-    push, gain = s.add_input("push"), s.add_parameter("gain", 1.0)
-    s.add_force(nc.PointForce(b, (0, 0), force=ca.vertcat(gain * push, 0)))
-    s.add_contact(nc.SpherePlane(b, radius=0.0, mu=MU, name="floor"))
-    model = s.build(contacts="nonsmooth")
-    st = nc.step_function(model, H)
+def test_parameter_jacobian_sliding(block):
+    """``C = ∂x⁺/∂p``: the push scaled by the parameter ``gain``; sliding, ∂v⁺/∂gain = h u/m."""
+    _, st = block
     x, u, p = np.array([0, 0, 0.5, 0]), np.array([20.0]), np.array([1.2])
     x1, A, B, C = st.jacobians(x, u, p, parameters=True)
     central_p = (st(x, u, p + EPS) - st(x, u, p - EPS)) / (2 * EPS)
@@ -252,26 +257,17 @@ def test_parameter_jacobian_sliding():
     assert np.isclose(C[2, 0], H * 20.0 / MASS, rtol=1e-12) and st.last.modes == ["sliding"]
 
 
-def test_dropped_pile_every_step():
+def test_dropped_pile_every_step(three_spheres):
     """Three spheres dropped in a column (gaps 1 cm, e = 0): every step of the simulator's
     run has Jacobians, its state equals the simulator's next one (1e-8), and at impacts away
     from switches the Jacobians equal central differences."""
-    s = nc.System("cjac_drop3", gravity=(0, 0, -G))
-    r = 0.05
-    balls = [s.add_point(f"b{k}", mass=0.3, position=(0.01 * k, 0.005 * k, r + 0.01 + (2 * r + 0.01) * k))
-             for k in range(3)]
-    for k, b in enumerate(balls):
-        s.add_contact(nc.SpherePlane(b, None, r, mu=0.5, name=f"floor{k}"))
-    for i in range(3):
-        for j in range(i + 1, 3):
-            s.add_contact(nc.SphereSphere(balls[i], None, r, balls[j], None, r, mu=0.5, name=f"pair{i}{j}"))
-    model = s.build(contacts="nonsmooth")
-    h = 0.002
-    traj = nc.simulate(model, 0.4, h, method="stepper")
-    st = nc.step_function(model, h)
+    model, st, reference = three_spheres
+    h = H3
+    q0 = np.concatenate([(0.01 * k, 0.005 * k, R3 + 0.01 + (2 * R3 + 0.01) * k) for k in range(3)])
+    traj = nc.simulate(model, 0.4, h, method="stepper", q0=q0)
+    assert np.array_equal(traj.q[0], q0)
     X = np.column_stack([traj.q, traj.v])
     checked = compared = 0
-    reference = all_contacts(model, h)
     for k in range(len(X) - 1):
         step = st.step(X[k], np.zeros(0))
         assert np.max(np.abs(step.x1 - X[k + 1])) < 1e-8
