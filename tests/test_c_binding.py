@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from ncgen.codegen.c_binding import Signature, bind, c_type, ctypes_of, open_library
-from ncgen.codegen.stepper_abi import FUNCTIONS, STEP_OPTIONS, StepOptions, signature
+from ncgen.codegen.stepper_abi import FUNCTIONS, RUN_OPTIONS, STEP_OPTIONS, RunOptions, StepOptions, signature
 from ncgen.errors import CodegenError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -31,8 +31,9 @@ def prototypes(text: str, name: str) -> dict[str, tuple[str, list[str]]]:
     return found
 
 
-def options_struct(text: str, name: str) -> list[tuple[str, str]]:
-    body = re.search(r"typedef struct \{(.*?)\}\s*" + name + r"_step_options;", text, flags=re.S).group(1)
+def options_struct(text: str, name: str, struct: str = "step_options") -> list[tuple[str, str]]:
+    """The fields ``(C type, name)`` of the struct ``{name}_{struct}`` declared in ``text``."""
+    body = re.search(r"typedef struct \{([^{}]*)\}\s*" + name + "_" + struct + ";", text).group(1)
     body = re.sub(r"/\*.*?\*/", " ", body, flags=re.S)
     return [(c_type(m.group(1)), m.group(2)) for m in re.finditer(r"([\w ]+?\s*\*?)\s*(\w+);", body)]
 
@@ -53,6 +54,20 @@ def test_table_matches_the_generated_header(header):
         assert c_type(sig.returns.format(name=name)) == returns, suffix
         assert list(zip(sig.types(name), [n for _, n in sig.args])) == args, suffix
     assert options_struct(header.read_text(), name) == [(c_type(t), f) for t, f in STEP_OPTIONS]
+    assert options_struct(header.read_text(), name, "run_options") == [(c_type(t), f) for t, f in RUN_OPTIONS]
+
+
+def test_the_run_options_struct_matches_the_stepper_headers():
+    """``{name}_run_options`` (the options of an error-controlled run, passed to C whole) as
+    the stepper header template and the element library declare it is RUN_OPTIONS, and
+    RunOptions is made from it."""
+    from ncgen.codegen.element_kernels import PACKAGE
+
+    expected = [(c_type(t), f) for t, f in RUN_OPTIONS]
+    header = (ROOT / "templates" / "c" / "stepper.h.j2").read_text().replace("{{ name }}", "m")
+    assert options_struct(header, "m", "run_options") == expected
+    assert options_struct(template("element_tables.c.j2", name=PACKAGE), PACKAGE, "run_options") == expected
+    assert [(f, t) for f, t in RunOptions._fields_] == [(f, ctypes_of(t, {}, False)) for t, f in RUN_OPTIONS]
 
 
 def test_ctypes_of_binds_typed_pointers_or_addresses():
@@ -128,10 +143,11 @@ def test_the_element_library_tables_match_element_tables_template():
     from ncgen.runtime import table_library, table_step, table_stepper
 
     text = template("element_tables.c.j2", name=PACKAGE)
-    alias = f"typedef {PACKAGE}_step_options step_options;"     # the template's short name of the struct
-    assert alias in text
-    declared = definitions(text.replace(alias, "").replace(" step_options *", f" {PACKAGE}_step_options *"),
-                           f"{PACKAGE}_")
+    for struct in ("step_options", "run_options"):           # the template's short names of the structs
+        alias = f"typedef {PACKAGE}_{struct} {struct};"
+        assert alias in text
+        text = text.replace(alias, "").replace(f" {struct} *", f" {PACKAGE}_{struct} *")
+    declared = definitions(text, f"{PACKAGE}_")
     assert_table_matches(table_library.SIGNATURES, declared, name=PACKAGE)
     assert_table_matches(table_stepper.SIGNATURES, declared, name=PACKAGE)
     assert_table_matches({"step_jacobians": table_step.SIGNATURE}, declared, name=PACKAGE)

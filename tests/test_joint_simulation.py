@@ -515,3 +515,27 @@ def test_compiled_joint_loop_is_found_without_writing_its_package(tmp_path, monk
     model_data(model).joint_loops.clear()
     rebuilt = nc.simulate(model, 0.2, 0.05, method="joint", kernels="flat")
     assert len(written) == 1 and np.array_equal(rebuilt.q, first.q)
+
+
+def test_the_joint_options_are_checked_once_and_each_run_has_its_own_stop_flag():
+    """``joint_options`` (the joint method's options, passed to C whole) refuses an unknown
+    integrator and a step count below 1, naming the option; its defaults are SimulationOptions'
+    documented ones (dopri5, rtol 1e-8, atol 1e-10); ``run_options`` copies the options with
+    ``stop_at_outputs`` set and a fresh, cleared stop flag, the original's left alone."""
+    from ncgen.codegen.joint_loop import integrator_name, joint_options, run_options
+
+    with pytest.raises(NcgenError, match="integrator: expected one of rk4, dopri5, got 'euler'"):
+        joint_options("euler", None, None, 1, 10)
+    for name, args in (("substeps", (0, 10)), ("max_steps", (1, 0))):
+        with pytest.raises(NcgenError, match=f"{name}: expected a positive integer, got 0"):
+            joint_options(None, None, None, *args)
+    options = joint_options(None, None, None, 3, 7)
+    assert (integrator_name(options), options.rtol, options.atol, options.substeps, options.max_steps) == \
+        ("dopri5", 1e-8, 1e-10, 3, 7)
+    options.stop[0] = 1
+    run = run_options(options, True)
+    assert run.stop_at_outputs == 1 and options.stop_at_outputs == 0
+    assert run.stop[0] == 0 and options.stop[0] == 1
+    assert (run.method, run.rtol, run.atol, run.substeps, run.max_steps) == \
+        (options.method, options.rtol, options.atol, options.substeps, options.max_steps)
+    assert integrator_name(joint_options("rk4", 1e-6, 1e-9, 2, 5)) == "rk4"

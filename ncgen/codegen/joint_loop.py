@@ -23,6 +23,7 @@ from ncgen.codegen.compile_cache import cache_dir, compile_package, entry_proble
 from ncgen.codegen.compiler import find_compiler
 from ncgen.codegen.model_cache import code_identity
 from ncgen.codegen.render import shipped_templates_dir
+from ncgen.errors import NcgenError
 from ncgen.files import atomic_path
 from ncgen.codegen.package import LARGE_FUNCTION_INSTRUCTIONS, ExtraSource, write_package
 
@@ -36,6 +37,10 @@ INTERRUPTED = 5
 #: passed to C whole, as ``(C type, field)``.
 JOINT_OPTIONS = (("int", "method"), ("double", "rtol"), ("double", "atol"), ("int", "substeps"),
                  ("long", "max_steps"), ("int", "stop_at_outputs"), ("volatile int *", "stop"))
+
+
+#: The integrators by their ``method`` code in ``ncgen_joint_options``.
+METHODS = ("rk4", "dopri5")
 
 
 class JointOptions(ctypes.Structure):
@@ -54,12 +59,36 @@ JOINT_RUN = Signature("int", (
     ("const int *", "quat"), ("double *", "stats"), ("int *", "k_done")))
 
 
-def joint_options(method: int, rtol: float, atol: float, substeps: int, max_steps: int, stop_at_outputs: bool,
-                  stop: ctypes.c_int) -> JointOptions:
-    """The options struct of one run (``stop``: the flag Ctrl-C sets, kept alive by the caller)."""
-    return JointOptions(method=int(method), rtol=float(rtol), atol=float(atol), substeps=int(substeps),
+def joint_options(integrator: str | None, rtol: float | None, atol: float | None, substeps: int, max_steps: int,
+                  stop_at_outputs: bool = False) -> JointOptions:
+    """The joint loop's options, checked: ``integrator`` one of :data:`METHODS` (None:
+    ``"dopri5"``), ``rtol``/``atol`` (None: 1e-8, 1e-10), ``substeps`` RK4 steps per output
+    interval (≥ 1), ``max_steps`` Dormand–Prince steps per output interval (≥ 1); with its own
+    stop flag, cleared (``options.stop[0]``, set by Ctrl-C)."""
+    integrator = "dopri5" if integrator is None else integrator
+    if integrator not in METHODS:
+        raise NcgenError(f"integrator: expected one of {', '.join(METHODS)}, got {integrator!r}")
+    for name, value in (("substeps", substeps), ("max_steps", max_steps)):
+        if int(value) < 1:
+            raise NcgenError(f"{name}: expected a positive integer, got {value}")
+    return JointOptions(method=METHODS.index(integrator), rtol=1e-8 if rtol is None else float(rtol),
+                        atol=1e-10 if atol is None else float(atol), substeps=int(substeps),
                         max_steps=int(max_steps), stop_at_outputs=int(bool(stop_at_outputs)),
-                        stop=ctypes.pointer(stop))
+                        stop=ctypes.pointer(ctypes.c_int(0)))
+
+
+def run_options(options: JointOptions, stop_at_outputs: bool) -> JointOptions:
+    """A copy of ``options`` for one run: restarted at every output time if
+    ``stop_at_outputs``, with its own stop flag, cleared (runs never share one)."""
+    copy = JointOptions.from_buffer_copy(options)
+    copy.stop_at_outputs = int(bool(stop_at_outputs))
+    copy.stop = ctypes.pointer(ctypes.c_int(0))
+    return copy
+
+
+def integrator_name(options: JointOptions) -> str:
+    """``"rk4"`` or ``"dopri5"``: the integrator ``options.method`` codes."""
+    return METHODS[options.method]
 
 
 def build_joint_loop(name: str, ode: ca.Function, pivot_tol: float, cflags=None) -> Path:

@@ -16,10 +16,15 @@ from ncgen.codegen.c_binding import Signature, bind, structure
 REAL, CREAL = "casadi_real", "const casadi_real *"
 OUT, LONG_OUT = "casadi_real *", "long *"
 OPTIONS = "const {name}_step_options *"
+RUN = "const {name}_run_options *"
 
 #: ``{name}_step_options``: fields as ``(C type, name)``.
 STEP_OPTIONS = (("casadi_real", "tol"), ("int", "max_iter"), ("int", "max_halvings"), ("int", "scheme"),
                 ("volatile int *", "stop"))
+
+#: ``{name}_run_options``, the options of an error-controlled run: fields as ``(C type, name)``.
+RUN_OPTIONS = (("casadi_real", "rtol"), ("casadi_real", "atol"), ("casadi_real", "h0"), ("int", "extrapolate"),
+               ("long", "max_steps"), ("int", "hold_linear"), ("int", "track_work"))
 
 #: ``{name}_<function>`` of the header, by function suffix.
 FUNCTIONS = {
@@ -41,10 +46,8 @@ FUNCTIONS = {
         (LONG_OUT, "steps_done"), (LONG_OUT, "splits"), (OUT, "impulse_out"))),
     "simulate_adaptive": Signature("int", (
         (CREAL, "q0"), (CREAL, "v0"), (CREAL, "lam0"), (REAL, "t0"), (REAL, "dt"), ("long", "n_out"),
-        (CREAL, "u"), ("long", "u_stride"), ("int", "hold_linear"), (CREAL, "p"), (REAL, "rtol"), (REAL, "atol"),
-        (REAL, "h0"), ("int", "extrapolate"), ("long", "max_steps"), ("int", "track_work"), (OUT, "q_out"),
-        (OUT, "v_out"), (OUT, "lam_out"), (OUT, "stats_out"), (OPTIONS, "options"), (LONG_OUT, "rows_done"),
-        (OUT, "h_next"))),
+        (CREAL, "u"), ("long", "u_stride"), (CREAL, "p"), (RUN, "run"), (OUT, "q_out"), (OUT, "v_out"),
+        (OUT, "lam_out"), (OUT, "stats_out"), (OPTIONS, "options"), (LONG_OUT, "rows_done"), (OUT, "h_next"))),
     "outputs": Signature("int", (
         ("long", "n"), (CREAL, "t"), (CREAL, "q"), (CREAL, "v"), (CREAL, "lam"), (CREAL, "u"),
         ("long", "u_stride"), (CREAL, "p"), (OUT, "y"))),
@@ -70,10 +73,20 @@ class StepOptions(ctypes.Structure):
     _fields_ = structure(STEP_OPTIONS)
 
 
+class RunOptions(ctypes.Structure):
+    """``{name}_run_options`` (:data:`RUN_OPTIONS`)."""
+
+    _fields_ = structure(RUN_OPTIONS)
+
+
+def structs(name: str) -> dict:
+    """The ctypes structures of model ``name``'s stepper interface, by C type name."""
+    return {f"{name}_step_options": StepOptions, f"{name}_run_options": RunOptions}
+
+
 def bind_stepper(lib: ctypes.CDLL, name: str, contacts: bool, functions=LOOPS, *, addresses: bool = False):
     """``functions`` (suffixes of :data:`FUNCTIONS`) of model ``name``'s stepper in ``lib``,
     as attributes of a namespace (pointers as addresses if ``addresses``, see
     :func:`~ncgen.codegen.c_binding.bind`)."""
-    structs = {f"{name}_step_options": StepOptions}
-    return SimpleNamespace(**{f: bind(lib, f"{name}_{f}", signature(f, contacts), name=name, structs=structs,
+    return SimpleNamespace(**{f: bind(lib, f"{name}_{f}", signature(f, contacts), name=name, structs=structs(name),
                                       addresses=addresses) for f in functions})

@@ -30,14 +30,13 @@ import time
 import casadi as ca
 import numpy as np
 
-from ncgen.codegen.joint_loop import INTERRUPTED
+from ncgen.codegen.joint_loop import INTERRUPTED, JointOptions, integrator_name, joint_options, run_options
 from ncgen.errors import CompilerNotFound, ModelError, NcgenError, SimulationError, SimulationInterrupted, option
 from ncgen.runtime.feedback import FeedbackFailed, call_feedback, with_partial
 from ncgen.interrupts import call_interruptibly
 from ncgen.runtime.progress import Progress
 from ncgen.runtime.trajectory import Trajectory, once
 
-INTEGRATORS = ("dopri5", "rk4")
 #: The run is cut into at most this many calls of the C loop (progress updates).
 CHUNKS = 20
 _STATUS = {1: "the joint-space mass matrix is singular or the accelerations are not finite",
@@ -119,21 +118,19 @@ class JointLoop:
             self._maps[key] = f.map(n)
         return self._maps[key]
 
-    def run(self, method: int, t: np.ndarray, X: np.ndarray, W: np.ndarray, S, p: np.ndarray, rtol: float,
-            atol: float, substeps: int, max_steps: int, stop: bool, stats: np.ndarray) -> tuple[int, int]:
-        """Integrate over the grid ``t`` (``X[0]`` given, the rest written); ``(status, k_done)``,
-        status :data:`INTERRUPTED` after Ctrl-C (:func:`~ncgen.interrupts.call_interruptibly`)."""
-        from ncgen.codegen.joint_loop import joint_options
-
+    def run(self, options: JointOptions, t: np.ndarray, X: np.ndarray, W: np.ndarray, S, p: np.ndarray,
+            stats: np.ndarray) -> tuple[int, int]:
+        """Integrate over the grid ``t`` (``X[0]`` given, the rest written) with the options
+        ``options`` (:class:`~ncgen.codegen.joint_loop.JointOptions`, passed to C whole);
+        ``(status, k_done)``, status :data:`INTERRUPTED` after Ctrl-C (its stop flag set,
+        :func:`~ncgen.interrupts.call_interruptibly`)."""
         D = ctypes.POINTER(ctypes.c_double)
         done = ctypes.c_int(0)
         ptr = (lambda a: None if a is None or a.size == 0 else a.ctypes.data_as(D))
-        flag = ctypes.c_int(0)
-        options = joint_options(method, rtol, atol, substeps, max_steps, stop, flag)
         status, interrupted = call_interruptibly(
             self._fn, ctypes.byref(options), len(t) - 1, ptr(t), ptr(X), ptr(W), ptr(S), ptr(p), len(self.quat),
             self.quat.ctypes.data_as(ctypes.POINTER(ctypes.c_int)) if len(self.quat) else None, ptr(stats),
-            ctypes.byref(done), stop=flag)
+            ctypes.byref(done), stop=options.stop.contents)
         return INTERRUPTED if interrupted else int(status), int(done.value)
 
 
@@ -272,23 +269,17 @@ def joint_loop(model, controller=None, joint_dynamics: bool = False, cflags=None
 
 
 def simulate_joint(model, t: np.ndarray, U: np.ndarray, hold: str, p: np.ndarray, q0, v0, *,
-                   integrator: str | None, rtol: float | None, atol: float | None, substeps: int,
-                   max_steps: int, feedback=None, controller=None, joint_dynamics: bool = False,
+                   options: JointOptions, feedback=None, controller=None, joint_dynamics: bool = False,
                    progress: bool | None = None, kernels: str = "auto") -> Trajectory:
     """Integrate in joint space on the grid ``t`` from the natural state ``(q0, v0)``
-    (module docstring).  ``U``: input samples on the grid (the open-loop part);
+    (module docstring) with the loop's options ``options`` (checked by
+    :func:`~ncgen.codegen.joint_loop.joint_options`; ``stop_at_outputs`` is set here, where
+    the inputs vary).  ``U``: input samples on the grid (the open-loop part);
     ``feedback``: ``(kind, u)`` with ``kind`` ``"natural"`` (``u(t, q, v)``) or ``"joint"``
     (``u(t, qj, vj)``), called at the start of every output interval."""
-    integrator = "dopri5" if integrator is None else integrator
-    if integrator not in INTEGRATORS:
-        raise NcgenError(f"integrator: expected one of {', '.join(INTEGRATORS)}, got {integrator!r}")
     if hold == "linear" and feedback is not None:
         raise NcgenError("hold='linear' with a feedback u(t, q, v): the feedback is held over each output "
                          "interval (zoh); use hold='zoh'")
-    substeps = int(substeps)
-    if substeps < 1:
-        raise NcgenError(f"substeps: expected a positive integer, got {substeps}")
-    rtol, atol = 1e-8 if rtol is None else rtol, 1e-10 if atol is None else atol
     js = model.joint_space
     build_start = time.perf_counter()
     choice = choose_kernels(model, len(t) - 1, controller, joint_dynamics, kernels)
@@ -305,8 +296,9 @@ def simulate_joint(model, t: np.ndarray, U: np.ndarray, hold: str, p: np.ndarray
         S = np.zeros_like(U)
         S[:-1] = np.diff(U, axis=0) / np.diff(t)[:, None]
     varying = model.nu > 0 and (feedback is not None or bool(np.any(U != U[:1])))
+    options = run_options(options, varying)
+    integrator = integrator_name(options)
     stats = np.zeros(5)
-    method = 1 if integrator == "dopri5" else 0
     bar = Progress(float(t[0]), float(t[-1]), progress, label=f"simulating {model.name} (joint space): ")
     start = time.perf_counter()
     status, k = 0, 0
@@ -323,17 +315,16 @@ def simulate_joint(model, t: np.ndarray, U: np.ndarray, hold: str, p: np.ndarray
                     break
             sl = slice(k, k + m + 1)
             Xs = X[sl]
-            status, done = loop.run(method, np.ascontiguousarray(t[sl]), Xs, np.ascontiguousarray(W[k:k + m]),
-                                    None if S is None else np.ascontiguousarray(S[k:k + m]), p, rtol, atol,
-                                    substeps, max_steps, varying, stats)
+            status, done = loop.run(options, np.ascontiguousarray(t[sl]), Xs, np.ascontiguousarray(W[k:k + m]),
+                                    None if S is None else np.ascontiguousarray(S[k:k + m]), p, stats)
             k += done
             bar.update(float(t[k]))
     except KeyboardInterrupt:             # between chunks (in a feedback u(t, q, v))
         status = INTERRUPTED
     finally:
         bar.close()
-    steps = {"rtol": rtol, "atol": atol} if integrator == "dopri5" else \
-        {"h": float(t[1] - t[0]) / substeps, "substeps": substeps}
+    steps = {"rtol": options.rtol, "atol": options.atol} if integrator == "dopri5" else \
+        {"h": float(t[1] - t[0]) / options.substeps, "substeps": options.substeps}
     info = {"method": "joint", "integrator": integrator, **steps, "hold": hold,
             "controller": None if controller is None else controller.describe(),
             "feedback": None if feedback is None else feedback[0], "joint_dynamics": bool(joint_dynamics),
@@ -342,7 +333,7 @@ def simulate_joint(model, t: np.ndarray, U: np.ndarray, hold: str, p: np.ndarray
             "build_time": build_time, "wall_time": time.perf_counter() - start, "complete": status == 0}
     trusted, why = k + 1, ""
     if integrator == "rk4" and (failed is not None or status not in (0, INTERRUPTED)):
-        trusted, why = _trusted_rk4_rows(model, loop, t[:k + 1], X[:k + 1], W, S, p, max_steps, varying)
+        trusted, why = _trusted_rk4_rows(model, loop, t[:k + 1], X[:k + 1], W, S, p, options)
         info["complete"] = False
     traj = _trajectory(model, loop, t[:trusted], X[:trusted], W[:trusted], p, info)
     if failed is not None:
@@ -379,9 +370,9 @@ def _controller_cause(model, loop: JointLoop, times: tuple, x: np.ndarray, p) ->
     return None
 
 
-def _trusted_rk4_rows(model, loop: JointLoop, t, X, W, S, p, max_steps: int, varying: bool) -> tuple[int, str]:
+def _trusted_rk4_rows(model, loop: JointLoop, t, X, W, S, p, options: JointOptions) -> tuple[int, str]:
     """How many rows of a failed fixed-step RK4 run ``X`` (on the grid ``t``, with the
-    inputs ``W`` it applied) to keep, and why (``""``: all of them).  RK4 past its stability
+    inputs ``W`` it applied and the options ``options``) to keep, and why (``""``: all of them).  RK4 past its stability
     limit grows until the accelerations overflow; the rows kept are those before the first
     where its natural coordinates depart from an error-controlled run with the same inputs
     (Dormand–Prince, rtol 1e-8, atol 1e-10) by more than
@@ -392,9 +383,9 @@ def _trusted_rk4_rows(model, loop: JointLoop, t, X, W, S, p, max_steps: int, var
     n = len(t)
     R = np.zeros_like(X)
     R[0] = X[0]
-    status, done = loop.run(1, np.ascontiguousarray(t), R, np.ascontiguousarray(W[:n - 1]),
-                            None if S is None else np.ascontiguousarray(S[:n - 1]), p, 1e-8, 1e-10, 1, max_steps,
-                            varying, np.zeros(5))
+    reference = joint_options("dopri5", 1e-8, 1e-10, 1, options.max_steps, bool(options.stop_at_outputs))
+    status, done = loop.run(reference, np.ascontiguousarray(t), R, np.ascontiguousarray(W[:n - 1]),
+                            None if S is None else np.ascontiguousarray(S[:n - 1]), p, np.zeros(5))
     m = (n - 1 if status == 0 else done) + 1
     tree = loop.mapped("tree", m)
     nqj = model.joint_space.nq

@@ -12,7 +12,7 @@ import ctypes
 import numpy as np
 
 from ncgen.codegen.c_binding import open_library
-from ncgen.codegen.stepper_abi import StepOptions, bind_stepper
+from ncgen.codegen.stepper_abi import RunOptions, StepOptions, bind_stepper
 from ncgen.codegen.stepper_package import STEP_INTERRUPTED, n_impulses, n_outputs, n_stats
 from ncgen.interrupts import call_interruptibly
 from ncgen.model.data import model_data
@@ -98,13 +98,15 @@ class CompiledStepper:
         None for zeros."""
         Q, V, LAM, S = self._buffers(n_out)
         U = None if U is None or self.nu == 0 else np.ascontiguousarray(U, float)
+        run = RunOptions(rtol=float(rtol), atol=float(atol), h0=float(h0), extrapolate=int(bool(extrapolate)),
+                         max_steps=int(max_steps), hold_linear=int(bool(hold_linear)),
+                         track_work=int(bool(track_work)))
         rows, h_next = ctypes.c_long(0), ctypes.c_double(0.0)
         status = _interruptible(self._simulate_adaptive, _ptr(_vec(q0)), _ptr(_vec(v0)), _ptr(_vec(lam0)), float(t0), float(dt),
-                                         int(n_out), _ptr(U), self.nu if U is not None else 0, int(bool(hold_linear)),
-                                         _ptr(_vec(p)), float(rtol), float(atol), float(h0), int(bool(extrapolate)),
-                                         int(max_steps), int(bool(track_work)), _ptr(Q), _ptr(V), _ptr(LAM),
-                                         _ptr(S), _Options(float(tol), int(max_iter), 0, int(scheme)),
-                                         ctypes.byref(rows), ctypes.byref(h_next))
+                                int(n_out), _ptr(U), self.nu if U is not None else 0, _ptr(_vec(p)),
+                                ctypes.byref(run), _ptr(Q), _ptr(V), _ptr(LAM), _ptr(S),
+                                _Options(float(tol), int(max_iter), 0, int(scheme)), ctypes.byref(rows),
+                                ctypes.byref(h_next))
         return Q, V, LAM, S, int(status), int(rows.value), float(h_next.value)
 
     def outputs(self, t, Q, V, LAM, U, p) -> np.ndarray:

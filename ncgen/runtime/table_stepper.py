@@ -31,7 +31,7 @@ import numpy as np
 from ncgen.codegen import c_binding
 from ncgen.codegen.element_kernels import PACKAGE
 from ncgen.codegen.model_tables import UnsupportedElements
-from ncgen.codegen.stepper_abi import LOOPS, StepOptions, signature
+from ncgen.codegen.stepper_abi import LOOPS, signature, structs as stepper_structs
 from ncgen.codegen.stepper_tables import StepperTables, stepper_tables
 from ncgen.errors import CodegenError, NcgenError
 from ncgen.model.data import model_data
@@ -152,7 +152,7 @@ class TableStepper(CompiledStepper):
                                  n_torque=st.n_torque,
                                  **{f: ptr[f] for t, f in STEPPER_FIELDS if "*" in t and f != "T"}, qr=qr, lu=lu)
         self._lib = lib._lib
-        structs = {f"{PACKAGE}_step_options": StepOptions, "ncgen_stepper_tables": _StepperTables}
+        structs = {**stepper_structs(PACKAGE), "ncgen_stepper_tables": _StepperTables}
         check = c_binding.bind(self._lib, f"{PACKAGE}_stepper_check", SIGNATURES["stepper_check"], structs=structs)
         if check(ctypes.byref(self._S)):
             raise CodegenError(f"model {st.name!r}: its stepper tables are inconsistent (ncgen_elements_stepper_check)")

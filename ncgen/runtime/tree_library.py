@@ -55,6 +55,7 @@ import numpy as np
 
 from ncgen.codegen import c_binding
 from ncgen.codegen.compile_cache import BUILD_SCHEME
+from ncgen.codegen.joint_loop import INTERRUPTED, JointOptions
 from ncgen.codegen.render import shipped_templates_dir
 from ncgen.codegen.tree_kernels import (ALGORITHM_UNITS, JOINT_KINDS, PACKAGE, SOURCES, kernel_units, kind_names,
                                         units_of, write_tree_unit)
@@ -478,17 +479,15 @@ class TableJointLoop:
             self._maps[key] = {"tree": self.tree, "accel": self.model.functions["accel"]}[what].map(n)
         return self._maps[key]
 
-    def run(self, method: int, t: np.ndarray, X: np.ndarray, W: np.ndarray, S, p: np.ndarray, rtol: float,
-            atol: float, substeps: int, max_steps: int, stop: bool, stats: np.ndarray) -> tuple[int, int]:
+    def run(self, options: JointOptions, t: np.ndarray, X: np.ndarray, W: np.ndarray, S, p: np.ndarray,
+            stats: np.ndarray) -> tuple[int, int]:
         """As ``JointLoop.run`` (``p`` does not enter: the tables' dynamics take none)."""
         from ncgen.interrupts import call_interruptibly
-        from ncgen.codegen.joint_loop import INTERRUPTED, joint_options
 
         ptr = (lambda a: None if a is None or a.size == 0 else a.ctypes.data)
-        done, flag = ctypes.c_int(0), ctypes.c_int(0)
-        options = joint_options(method, rtol, atol, substeps, max_steps, stop, flag)
+        done = ctypes.c_int(0)
         status, interrupted = call_interruptibly(
             self._fn, self.tree_bound.ref, ptr(self.E), self.model.nu, ctypes.addressof(options), len(t) - 1,
             ptr(t), ptr(X), ptr(W), ptr(S), len(self.quat), ptr(self.quat), ptr(stats), ctypes.addressof(done),
-            stop=flag)
+            stop=options.stop.contents)
         return INTERRUPTED if interrupted else int(status), int(done.value)

@@ -260,7 +260,8 @@ static void test_rattle4_order_estimate(void) {
   CHECK(err[0] / err[1] > 14 && err[0] / err[1] < 18, "errors %g, %g: not fourth order", err[0], err[1]);
   /* a scheme beyond the composition is refused; a backward step is internal only */
   o.scheme = SCHEME_RATTLE4 + 1;
-  status = simulate_adaptive(q0, v0, 0, 0, 0.1, 1, 0, 0, 0, 0, 1e-6, 1e-6, 0, 1, 100, 0, q, v, 0, 0, &o, 0, 0);
+  status = simulate_adaptive(q0, v0, 0, 0, 0.1, 1, 0, 0, 0, &RUN_OPTIONS(1e-6, 1e-6, 0, 1, 100, 0),
+                             q, v, 0, 0, &o, 0, 0);
   CHECK(status == STEP_BAD_INPUT, "adaptive with scheme %d: status %d", o.scheme, status);
   o.scheme = SCHEME_RATTLE4;
   status = stepper_step(q0, v0, 0, &u, 0, -1e-3, q, v, 0, 0, &o, 0, 0);
@@ -335,8 +336,8 @@ static void test_adaptive(void) {
   cartesian(theta0, 0, q0, v0);
   for (k = 0; k < 2; ++k) {
     casadi_real rtol = k ? 1e-8 : 1e-5;
-    status = simulate_adaptive(q0, v0, 0, 0, T / 10, 10, uu, 1, 0, 0, rtol, rtol, 0, 1, 1000, 1, q, v, 0,
-                               stats, 0, &rows, &h_next);
+    status = simulate_adaptive(q0, v0, 0, 0, T / 10, 10, uu, 1, 0, &RUN_OPTIONS(rtol, rtol, 0, 1, 1000, 1),
+                               q, v, 0, stats, 0, &rows, &h_next);
     CHECK(status == STEP_OK && rows == 10, "status %d, %ld rows", status, rows);
     CHECK(h_next > 0, "next step %g", h_next);
     for (r = 0; r < 10; ++r) steps[k] += (long) stats[NSTATS * r];
@@ -346,9 +347,11 @@ static void test_adaptive(void) {
   }
   CHECK(err[1] < err[0] / 5, "errors %g, %g", err[0], err[1]);
   CHECK(steps[1] > 3 * steps[0], "steps %ld, %ld", steps[0], steps[1]);
-  status = simulate_adaptive(q0, v0, 0, 0, T, 1, 0, 0, 0, 0, 1e-10, 1e-10, T, 0, 2, 0, q, v, 0, 0, 0, &rows, 0);
+  status = simulate_adaptive(q0, v0, 0, 0, T, 1, 0, 0, 0, &RUN_OPTIONS(1e-10, 1e-10, T, 0, 2, 0),
+                             q, v, 0, 0, 0, &rows, 0);
   CHECK(status == STEP_TOO_MANY_STEPS && rows == 0, "status %d, %ld rows", status, rows);
-  status = simulate_adaptive(q0, v0, 0, 0, T, 1, 0, 0, 0, 0, 0, 1e-8, 0, 0, 10, 0, q, v, 0, 0, 0, &rows, 0);
+  status = simulate_adaptive(q0, v0, 0, 0, T, 1, 0, 0, 0, &RUN_OPTIONS(0, 1e-8, 0, 0, 10, 0),
+                             q, v, 0, 0, 0, &rows, 0);
   CHECK(status == STEP_BAD_INPUT, "rtol = 0: status %d", status);
 }
 
@@ -366,8 +369,8 @@ static void test_adaptive_rattle4(void) {
   o.scheme = SCHEME_RATTLE4;
   for (k = 0; k < 2; ++k) {
     casadi_real rtol = k ? 1e-9 : 1e-6;
-    status = simulate_adaptive(q0, v0, 0, 0, T / 10, 10, uu, 1, 0, 0, rtol, rtol, 0, 0, 1000, 0, q, v, 0,
-                               stats, &o, &rows, 0);
+    status = simulate_adaptive(q0, v0, 0, 0, T / 10, 10, uu, 1, 0, &RUN_OPTIONS(rtol, rtol, 0, 0, 1000, 0),
+                               q, v, 0, stats, &o, &rows, 0);
     CHECK(status == STEP_OK && rows == 10, "status %d, %ld rows", status, rows);
     for (r = 0; r < 10; ++r) steps[k] += (long) stats[NSTATS * r];
     err[k] = position_error(q + 18, theta0, 0, T);
@@ -377,8 +380,8 @@ static void test_adaptive_rattle4(void) {
   CHECK(err[1] < err[0] / 30, "errors %g, %g", err[0], err[1]);
   CHECK(steps[1] > 2.5 * steps[0] && steps[1] < 7 * steps[0], "steps %ld, %ld: not order 4", steps[0], steps[1]);
   o.scheme = 0;
-  status = simulate_adaptive(q0, v0, 0, 0, T / 10, 10, uu, 1, 0, 0, 1e-9, 1e-9, 0, 0, 100000, 0, q, v, 0, stats,
-                             &o, &rows, 0);
+  status = simulate_adaptive(q0, v0, 0, 0, T / 10, 10, uu, 1, 0, &RUN_OPTIONS(1e-9, 1e-9, 0, 0, 100000, 0),
+                             q, v, 0, stats, &o, &rows, 0);
   for (r = 0; r < 10; ++r) steps_rattle += (long) stats[NSTATS * r];
   CHECK(status == STEP_OK && steps_rattle > 5 * steps[1], "RATTLE %ld steps, the composition %ld", steps_rattle,
         steps[1]);
@@ -412,7 +415,8 @@ static void test_stop_request(void) {
   o.stop = &stop;
   status = run_fixed(q0, v0, 0, 0, 1e-3, 4, 2, 0, 0, 0, q, v, 0, 0, 0, &o, 1, 0, &done, 0, 0);
   CHECK(status == STEP_INTERRUPTED && done == 0, "fixed: status %d, %ld steps", status, done);
-  status = simulate_adaptive(q0, v0, 0, 0, 0.1, 2, 0, 0, 0, 0, 1e-6, 1e-6, 0, 1, 100, 0, q, v, 0, 0, &o, &rows, 0);
+  status = simulate_adaptive(q0, v0, 0, 0, 0.1, 2, 0, 0, 0, &RUN_OPTIONS(1e-6, 1e-6, 0, 1, 100, 0),
+                             q, v, 0, 0, &o, &rows, 0);
   CHECK(status == STEP_INTERRUPTED && rows == 0, "adaptive: status %d, %ld rows", status, rows);
   stop = 0;
   status = run_fixed(q0, v0, 0, 0, 1e-3, 4, 2, 0, 0, 0, q, v, 0, 0, 0, &o, 1, 0, &done, 0, 0);

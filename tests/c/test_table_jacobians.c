@@ -114,6 +114,15 @@ typedef struct {
   int scheme;
   volatile int *stop;
 } step_options;
+typedef struct {
+  casadi_real rtol;
+  casadi_real atol;
+  casadi_real h0;
+  int extrapolate;
+  long max_steps;
+  int hold_linear;
+  int track_work;
+} run_options;
 
 static step_options default_options(void) {
   step_options o;

@@ -256,8 +256,8 @@ static void run(double c) {
   }
   status = stepper_step(q0, v0, 0, 0, 0, 1e-3, qn, vn, la, &iters, &o, 0, 0);
   CHECK(status == STEP_OK && iters >= 1, "one step: status %d", status);
-  status = simulate_adaptive(q0, v0, lam0, 0, 0.02, 5, 0, 0, 0, 0, 1e-6, 1e-6, 1e-3, 1, 10000, 1, qa, va, la, sa,
-                             &o, &rows, &h_next);
+  status = simulate_adaptive(q0, v0, lam0, 0, 0.02, 5, 0, 0, 0, &RUN_OPTIONS(1e-6, 1e-6, 1e-3, 1, 10000, 1),
+                             qa, va, la, sa, &o, &rows, &h_next);
   CHECK(status == STEP_OK && rows == 5, "error control: status %d, %ld rows", status, rows);
   CHECK(fabs(qa[8] * qa[8] + qa[9] * qa[9] - L * L) < 1e-9, "error control keeps the constraint");
   tab_end();
