@@ -159,7 +159,7 @@ def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions, *, c
         projector.start(t0, np.concatenate([q, v]))
     bridge = _bridge(model, runner, pv, rtol, atol) if projector is not None else None
     bar = Progress(t0, t[-1], opts.progress, label=f"simulating {model.name}: ")
-    start = time.perf_counter()
+    start, cpu_start = time.perf_counter(), time.process_time()
     grid = t if m == 1 else t[0] + (t[-1] - t[0]) * np.arange(m * (len(t) - 1) + 1) / (m * (len(t) - 1))
     W = np.full((len(grid), 5), np.nan) if balance else None      # each interval's work by class (quadratures)
     try:
@@ -191,8 +191,8 @@ def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions, *, c
             "linear_solver": opts.linear_solver, "stats": stats, "project": project,
             "projected_from": None if projected_from is None else float(grid[projected_from]),
             "watched_interval": float(grid[1] - grid[0]) if projector is not None else None,
-            "branch_changes": changes,
-            "wall_time": time.perf_counter() - start, "complete": failure is None}
+            "branch_changes": changes, "wall_time": time.perf_counter() - start,
+            "cpu_time": time.process_time() - cpu_start, "complete": failure is None}
     if failure is not None:
         if t[k] < reached:
             message += f" On the output grid it ends at t = {t[k]:.6g} s."
@@ -242,7 +242,7 @@ def _idas_feedback(model, runner, t, q, v, a, lam, U, p, feedback, progress, met
     Z = np.empty((len(t), nq + model.nc))
     X[0], Z[0] = np.concatenate([q, v]), np.concatenate([a, lam])
     bar = Progress(t[0], t[-1], progress, label=f"simulating {model.name}: ")
-    start, failure, k = time.perf_counter(), None, 0
+    start, cpu_start, failure, k = time.perf_counter(), time.process_time(), None, 0
     try:
         while k < len(t) - 1:
             if k:
@@ -263,7 +263,8 @@ def _idas_feedback(model, runner, t, q, v, a, lam, U, p, feedback, progress, met
     U[k] = U[k - 1] if k else U[0]
     info = {"method": method, "backend": used, "rtol": rtol, "atol": atol, "hold": "zoh",
             "feedback": feedback[0], "linear_solver": linear_solver, "stats": dict(runner.stats),
-            "wall_time": time.perf_counter() - start, "complete": failure is None}
+            "wall_time": time.perf_counter() - start, "cpu_time": time.process_time() - cpu_start,
+            "complete": failure is None}
     traj = Trajectory.from_states(model, t[:k + 1], X[:k + 1, :nq], X[:k + 1, nq:], Z[:k + 1, nq:], U[:k + 1], p,
                                   info)
     if isinstance(failure, FeedbackFailed):

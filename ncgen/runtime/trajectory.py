@@ -387,7 +387,8 @@ def _work(info: dict) -> str:
     labels = {"nsteps": "steps", "netfails": "error-test failures", "newton_iterations": "Newton iterations",
               "rejected_steps": "rejected steps", "step_splits": "step splits"}
     parts = [f"{stats[key]} {label}" for key, label in labels.items() if key in stats]
-    return ", ".join(parts + [f"{info.get('wall_time', 0.0):.3g} s"])
+    cpu = f" ({info['cpu_time']:.3g} s CPU)" if "cpu_time" in info else ""
+    return ", ".join(parts + [f"{info.get('wall_time', 0.0):.3g} s wall{cpu}"])
 
 
 def _json_default(x):
