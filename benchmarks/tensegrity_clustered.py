@@ -63,7 +63,7 @@ def deploying(clusters):
     return model, lambda t: uA + 0.5 * (1 - np.cos(np.pi * min(t, 1.0))) * (uB - uA)
 
 
-RUNS = {"IDAS": (dict(rtol=1e-8, method="idas"), 0.01), "stepper": (dict(method="stepper"), 0.001)}
+RUNS = {"IDAS": (dict(rtol=1e-8, method="idas", backend="compiled"), 0.01), "stepper": (dict(method="stepper"), 0.001)}
 
 
 def _instrument(on: bool) -> None:
@@ -89,7 +89,8 @@ NCGEN_CACHE = os.environ.get("NCGEN_CACHE_DIR", "ncgen")
 def _group(obj: str) -> str:
     """The part of the program a shared object belongs to."""
     base = os.path.basename(obj)
-    for key, label in (("sundials", "SUNDIALS"), ("libpython", "libpython"), ("python3", "libpython"),
+    for key, label in (("sundials", "IDAS (SUNDIALS)"), ("integrator_idas", "IDAS (SUNDIALS)"),
+                       ("casadi", "CasADi"), ("libpython", "libpython"), ("python3", "libpython"),
                        ("numpy", "NumPy"), ("openblas", "BLAS/LAPACK"), ("lapack", "BLAS/LAPACK"),
                        ("libc.so", "libc/libm"), ("libm.so", "libc/libm"), ("ld-linux", "libc/libm")):
         if key in obj.lower():
@@ -107,18 +108,19 @@ def self_cost_by_object(out: Path) -> Counter:
         if skip:
             skip = False
             continue
-        m = re.match(r"ob=\((\d+)\)(?: (.*))?$", line) or re.match(r"ob=()(.*)$", line)
+        m = re.match(r"(c?)ob=\((\d+)\)(?: (.*))?$", line)    # compressed names: defined where first met
         if m:
-            key, obj = m.groups()
+            called, key, obj = m.groups()
             if obj:
                 names[key] = obj
-            ob = names.get(key, obj)
+            if not called:
+                ob = names[key]
         elif line.startswith("calls="):
             skip = True                                      # the next line is the call's inclusive cost
         elif line[:1].isdigit() or line[:1] in "+-*":
             fields = line.split()                            # position, then the cost (omitted when 0)
             cost[_group(ob)] += int(fields[1]) if len(fields) > 1 else 0
-    total = int(re.search(r"^(?:totals|summary): (\d+)", text, re.M).group(1))
+    total = int(re.search(r"^totals: (\d+)", text, re.M).group(1))
     if sum(cost.values()) != total:
         raise RuntimeError(f"{out}: the self costs by object sum to {sum(cost.values())}, callgrind's total is {total}")
     return cost
