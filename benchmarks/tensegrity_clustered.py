@@ -16,12 +16,12 @@ evaluations, factorisations: the work, independent of the load).  ``--smoke``: 2
 
 ``--callgrind``: instead of times, instructions (valgrind's callgrind, deterministic, robust to
 the load).  Each (integrator, model) pair runs in its own process under callgrind with the
-instrumentation off; that process builds both models and simulates once (compiling into, or
+instrumentation off; that process builds its model and simulates once (compiling into, or
 loading from, the cache; run the script once without valgrind first so that nothing is
 compiled under valgrind), then switches the instrumentation on (``callgrind_control -i on``
 on its own pid), simulates once more, and switches it off: only that ``nc.simulate`` call is
 counted.  Printed: the instructions (Ir) of each run, split by shared object (the model's
-compiled kernels, SUNDIALS, libpython, NumPy, the rest), and the ``RATIO clustered /
+compiled kernels, CasADi, IDAS, libpython, NumPy, the rest), and the ``RATIO clustered /
 independent`` of the totals.  ``--t-end`` shortens the simulated time (default 1.2 s).
 """
 from __future__ import annotations
@@ -138,9 +138,11 @@ def callgrind(t_end: float, keep: str | None) -> None:
         for how in RUNS:
             for name in ("independent", "clustered"):
                 out = Path(tmp) / f"{how}.{name}.out"
-                subprocess.run(["valgrind", "--tool=callgrind", "--instr-atstart=no", f"--callgrind-out-file={out}",
-                                sys.executable, __file__, "--counted", how, name, "--t-end", str(t_end)],
-                               check=True, capture_output=True)
+                run = subprocess.run(["valgrind", "--tool=callgrind", "--instr-atstart=no",
+                                      f"--callgrind-out-file={out}", sys.executable, __file__,
+                                      "--counted", how, name, "--t-end", str(t_end)], capture_output=True, text=True)
+                if run.returncode:
+                    raise SystemExit(f"{how} {name} under callgrind failed:\n{run.stderr[-3000:]}")
                 parts = self_cost_by_object(out)
                 totals[(how, name)] = sum(parts.values())
                 print(f"{how:8s} {name:12s} Ir {totals[(how, name)]:>15,d}   "
