@@ -13,13 +13,30 @@ compiled stepper (RATTLE, h = 1 ms); after a warm-up (compile, caches) the two m
 in interleaved rounds, taking turns going first; wall and CPU time, min and median, and the
 load average are printed with the ``RATIO clustered / independent`` lines, and IDAS's counters (steps, residual
 evaluations, factorisations: the work, independent of the load).  ``--smoke``: 2 rounds, 0.2 s.
+
+``--callgrind``: instead of times, instructions (valgrind's callgrind, deterministic, robust to
+the load).  Each (integrator, model) pair runs in its own process under callgrind with the
+instrumentation off; that process builds its model and simulates once (compiling into, or
+loading from, the cache; run the script once without valgrind first so that nothing is
+compiled under valgrind), then switches the instrumentation on (``callgrind_control -i on``
+on its own pid), simulates once more, and switches it off: only that ``nc.simulate`` call is
+counted.  Printed: the instructions (Ir) of each run, split by shared object (the model's
+compiled kernels, CasADi, IDAS, libpython, NumPy, the rest), and the ``RATIO clustered /
+independent`` of the totals.  ``--t-end`` shortens the simulated time (default 1.2 s).
 """
 from __future__ import annotations
 
 import argparse
 import os
+import re
+import shutil
 import statistics
+import subprocess
+import sys
+import tempfile
 import time
+from collections import Counter
+from pathlib import Path
 
 import numpy as np
 
@@ -46,19 +63,117 @@ def deploying(clusters):
     return model, lambda t: uA + 0.5 * (1 - np.cos(np.pi * min(t, 1.0))) * (uB - uA)
 
 
+RUNS = {"IDAS": (dict(rtol=1e-8, method="idas", backend="compiled"), 0.01), "stepper": (dict(method="stepper"), 0.001)}
+
+
+def _instrument(on: bool) -> None:
+    """Switch callgrind's instrumentation of this process on or off."""
+    subprocess.run(["callgrind_control", "-i", "on" if on else "off", str(os.getpid())],
+                   check=True, capture_output=True)
+
+
+def counted_run(how: str, name: str, t_end: float) -> None:
+    """One ``nc.simulate`` of ``name`` by ``how`` with callgrind's instrumentation on (after a
+    first, uncounted run that compiles or loads the model's library)."""
+    model, u = deploying(CLUSTERS if name == "clustered" else None)
+    opts, dt = RUNS[how]
+    nc.simulate(model, t_end, dt, u=u, **opts)
+    _instrument(True)
+    nc.simulate(model, t_end, dt, u=u, **opts)
+    _instrument(False)
+
+
+NCGEN_CACHE = os.environ.get("NCGEN_CACHE_DIR", "ncgen")
+
+
+def _group(obj: str) -> str:
+    """The part of the program a shared object belongs to."""
+    base = os.path.basename(obj)
+    for key, label in (("sundials", "IDAS (SUNDIALS)"), ("integrator_idas", "IDAS (SUNDIALS)"),
+                       ("casadi", "CasADi"), ("libpython", "libpython"), ("python3", "libpython"),
+                       ("numpy", "NumPy"), ("openblas", "BLAS/LAPACK"), ("lapack", "BLAS/LAPACK"),
+                       ("libc.so", "libc/libm"), ("libm.so", "libc/libm"), ("ld-linux", "libc/libm")):
+        if key in obj.lower():
+            return label
+    if NCGEN_CACHE in obj or base.startswith(("ncgen", "lib_ncgen")):
+        return "model kernels"
+    return base
+
+
+def self_cost_by_object(out: Path) -> Counter:
+    """Instructions (self cost) of a callgrind output file, summed by shared object."""
+    names, cost, ob, skip = {}, Counter(), "?", False
+    text = out.read_text()
+    for line in text.splitlines():
+        if skip:
+            skip = False
+            continue
+        m = re.match(r"(c?)ob=\((\d+)\)(?: (.*))?$", line)    # compressed names: defined where first met
+        if m:
+            called, key, obj = m.groups()
+            if obj:
+                names[key] = obj
+            if not called:
+                ob = names[key]
+        elif line.startswith("calls="):
+            skip = True                                      # the next line is the call's inclusive cost
+        elif line[:1].isdigit() or line[:1] in "+-*":
+            fields = line.split()                            # position, then the cost (omitted when 0)
+            cost[_group(ob)] += int(fields[1]) if len(fields) > 1 else 0
+    total = int(re.search(r"^totals: (\d+)", text, re.M).group(1))
+    if sum(cost.values()) != total:
+        raise RuntimeError(f"{out}: the self costs by object sum to {sum(cost.values())}, callgrind's total is {total}")
+    return cost
+
+
+def callgrind(t_end: float, keep: str | None) -> None:
+    """Each (integrator, model) pair under callgrind: totals by shared object and the ratios."""
+    if shutil.which("valgrind") is None or shutil.which("callgrind_control") is None:
+        raise SystemExit("valgrind (callgrind_control) is not on PATH: callgrind counts the instructions")
+    print(machine())
+    with tempfile.TemporaryDirectory(prefix="tensegrity_callgrind_") as tmp:
+        tmp = keep or tmp
+        os.makedirs(tmp, exist_ok=True)
+        totals = {}
+        for how in RUNS:
+            for name in ("independent", "clustered"):
+                out = Path(tmp) / f"{how}.{name}.out"
+                run = subprocess.run(["valgrind", "--tool=callgrind", "--instr-atstart=no",
+                                      f"--callgrind-out-file={out}", sys.executable, __file__,
+                                      "--counted", how, name, "--t-end", str(t_end)], capture_output=True, text=True)
+                if run.returncode:
+                    raise SystemExit(f"{how} {name} under callgrind failed:\n{run.stderr[-3000:]}")
+                parts = self_cost_by_object(out)
+                totals[(how, name)] = sum(parts.values())
+                print(f"{how:8s} {name:12s} Ir {totals[(how, name)]:>15,d}   "
+                      + ", ".join(f"{k} {v:,d}" for k, v in parts.most_common(6)))
+    print(f"=== deploying tower, {t_end} s simulated, instructions of one nc.simulate (callgrind)")
+    for how in RUNS:
+        print(f"RATIO clustered / independent, {how}: instructions "
+              f"{totals[(how, 'clustered')] / totals[(how, 'independent')]:.3f}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--smoke", action="store_true")
     ap.add_argument("--rounds", type=int, default=7)
+    ap.add_argument("--callgrind", action="store_true", help="count instructions with callgrind instead of timing")
+    ap.add_argument("--t-end", type=float, default=1.2, help="simulated time, s (callgrind mode)")
+    ap.add_argument("--keep", metavar="DIR", help="write callgrind's output files into DIR (callgrind mode)")
+    ap.add_argument("--counted", nargs=2, metavar=("HOW", "MODEL"), help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.counted:
+        return counted_run(*args.counted, args.t_end)
+    if args.callgrind:
+        return callgrind(args.t_end, args.keep)
     rounds, t_end = (2, 0.2) if args.smoke else (args.rounds, 1.2)
     print(machine())
     models = {"independent": deploying(None), "clustered": deploying(CLUSTERS)}
     for name, (model, _) in models.items():
         print(f"{name}: {model.nq} coordinates, {model.nc} constraints, {model.nu} inputs, "
               f"cables {', '.join(model.springs.names)}")
-    runs = {"IDAS": dict(rtol=1e-8, method="idas"), "stepper": dict(method="stepper")}
-    dt = {"IDAS": 0.01, "stepper": 0.001}
+    runs = {how: opts for how, (opts, _) in RUNS.items()}
+    dt = {how: step for how, (_, step) in RUNS.items()}
     tops = {}
     for how, opts in runs.items():
         for name, (model, u) in models.items():            # warm-up: compile and load
