@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from ncgen.errors import NcgenError
-from ncgen.runtime.tree_algorithms import aba, aba_derivatives
+from ncgen.runtime.tree_algorithms import aba, aba_derivatives, call, kernel_of
 from ncgen.validation import as_vector, positive
 
 
@@ -52,10 +52,18 @@ class JointStep:
             raise NcgenError(f"JointStep: model {model.name!r} has dependent joint rates (a mimic joint: "
                              f"{a.shape[0]} independent of {self.n}); lock or remove the follower joints")
         self.nx, self.nu = 2 * self.n, self.n
+        n, h = self.n, self.h
+        self._derivatives = kernel_of(model, "aba_derivatives", "auto")
+        self._A0 = np.block([[np.eye(n), h * np.eye(n)], [np.zeros((n, n)), np.eye(n)]])
 
     def _split(self, x, tau):
-        return (as_vector(x, self.nx, "x (joint positions and rates [q_j; v_j])"),
-                as_vector(tau, self.nu, "tau (efforts of the joint rates)"))
+        """``x, tau`` as float vectors of the right sizes (float64 vectors of those sizes pass
+        as they are; their values are checked by the kernel in C)."""
+        if not (type(x) is np.ndarray and x.dtype == np.float64 and x.shape == (self.nx,)):
+            x = as_vector(x, self.nx, "x (joint positions and rates [q_j; v_j])")
+        if not (type(tau) is np.ndarray and tau.dtype == np.float64 and tau.shape == (self.nu,)):
+            tau = as_vector(tau, self.nu, "tau (efforts of the joint rates)")
+        return x, tau
 
     def __call__(self, x, tau) -> np.ndarray:
         return self.unchecked(*self._split(x, tau))
@@ -75,13 +83,11 @@ class JointStep:
         """:meth:`jacobians` of a float vector ``x`` and ``tau`` of the right sizes, unchecked
         (the MPC's rollout; the kernel still refuses values that are not finite)."""
         h, n = self.h, self.n
-        q, v = x[:n], x[n:]
-        a, da_dq, da_dv, Minv = aba_derivatives(self.model, q, v, tau, p=self.p)
+        v = x[n:]
+        a, da_dq, da_dv, Minv = call(self.model, self._derivatives, (x[:n], v, tau), self.p, 0.0)
+        dv = np.hstack((da_dq, da_dv))
+        dv *= h                             # ∂v⁺/∂x − [0, I]
+        Bv = h * Minv
         v1 = v + h * a
-        A, B = np.empty((2 * n, 2 * n)), np.empty((2 * n, n))
-        A[n:, :n], A[n:, n:] = h * da_dq, h * da_dv
-        A[n:, n:] += np.eye(n)
-        B[n:] = h * Minv
-        A[:n], B[:n] = h * A[n:], h * B[n:]
-        A[:n, :n] += np.eye(n)
-        return np.concatenate([q + h * v1, v1]), A, B
+        return (np.concatenate([x[:n] + h * v1, v1]), self._A0 + np.vstack((h * dv, dv)),
+                np.vstack((h * Bv, Bv)))
