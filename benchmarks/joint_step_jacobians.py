@@ -4,7 +4,8 @@
 The 7-DOF Panda of example-robot-data (fingers locked: ``nc.robots.locked_urdf``; ``<dynamics>``
 removed, so no joint damping or friction on either side, and no armature: URDF has none).  The twin
 is the same URDF text compiled by MuJoCo (visuals and collisions dropped, contacts disabled), a
-``motor`` actuator of gear 1 on each joint (no control limits), its Euler integrator at the same
+``motor`` actuator of gear 1 on each joint (no control limits, and the URDF's efforts not
+taken as force limits: ncgen's step does not clip either), its Euler integrator at the same
 step h = 1 ms.  Both are the same discrete map: semi-implicit Euler ``v⁺ = v + h a``,
 ``q⁺ = q + h v⁺`` on the rigid-body accelerations; the joint limits of the URDF are inactive at
 the state used (checked: MuJoCo reports no constraint).  First the two ``(A, B)`` are compared
@@ -46,15 +47,18 @@ def panda_urdf() -> str:
     return re.sub(r"<dynamics[^>]*/>", "", nc.robots.locked_urdf("panda", FINGERS))
 
 
-def twin(text: str, joint_names):
-    """MuJoCo model of ``text``: Euler at ``H``, contacts off, a motor (gear 1) per joint."""
+def twin(text: str, joint_names, h: float = H):
+    """MuJoCo model of the URDF ``text``: Euler at the step ``h``, contacts off, a motor (gear 1)
+    per joint of ``joint_names`` (which must be MuJoCo's joints in its order)."""
     import mujoco
     spec = mujoco.MjSpec.from_string(re.sub(r"<(visual|collision)\b.*?</\1>", "", text, flags=re.S))
+    for j in spec.joints:                   # MuJoCo reads URDF efforts as limits of the actuator force
+        j.actfrclimited = mujoco.mjtLimited.mjLIMITED_FALSE
     for j in joint_names:
         spec.add_actuator(name=f"motor_{j}", target=j, trntype=mujoco.mjtTrn.mjTRN_JOINT,
                           gear=[1, 0, 0, 0, 0, 0], ctrllimited=0)
     m = spec.compile()
-    m.opt.timestep = H
+    m.opt.timestep = h
     m.opt.integrator = mujoco.mjtIntegrator.mjINT_EULER
     m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
     names = [m.joint(i).name for i in range(m.njnt)]

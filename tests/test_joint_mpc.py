@@ -1,6 +1,7 @@
 """The joint-space step and MPC of tree robots (ncgen.control.joint_step, joint_mpc, box_qp).
 
-* the step's Jacobians against central differences of the step itself;
+* the step's Jacobians against central differences of the step itself, and the step and its
+  Jacobians against MuJoCo's Euler step and ``mjd_transitionFD`` on the robot's MuJoCo twin;
 * the box QP against CasADi's qpOASES (an independent active-set solver) and its KKT conditions;
 * the MPC in closed loop against the joint-space simulator (``nc.simulate(method="joint")``,
   Dormand–Prince on ABA: another integrator than the controller's semi-implicit Euler), with
@@ -8,6 +9,9 @@
 * slow: the 7-DOF Panda (example-robot-data, fingers locked) tracking a joint-space reach.
 """
 from __future__ import annotations
+
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -59,6 +63,20 @@ def test_joint_step_jacobians_match_central_differences(two_link):
         assert np.allclose(x1[:2], x[:2] + 0.01 * x1[2:], rtol=0, atol=1e-15)
 
 
+def test_joint_step_is_mujocos_euler_step(two_link):
+    """The same discrete map as MuJoCo's (semi-)implicit Euler on the same URDF: x⁺ to round-off,
+    A and B to the accuracy of MuJoCo's centred differences."""
+    pytest.importorskip("mujoco")
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from joint_step_jacobians import agreement, twin
+    step = JointStep(two_link, 0.01)
+    m = twin(TWO_LINK, two_link.joint_names, 0.01)
+    rng = np.random.default_rng(4)
+    for _ in range(3):
+        dx, dA, dB = agreement(step, m, 0.5 * rng.normal(size=4), 3 * rng.normal(size=2), 1e-6)
+        assert dx < 1e-13 and dA < 1e-7 and dB < 1e-7, (dx, dA, dB)
+
+
 def test_joint_step_refuses_quaternions_and_bad_input(two_link):
     floating = nc.System.from_urdf(TWO_LINK, floating_base=True).build()
     with pytest.raises(NcgenError, match="quaternion"):
@@ -67,6 +85,12 @@ def test_joint_step_refuses_quaternions_and_bad_input(two_link):
         JointStep(two_link, -0.01)
     with pytest.raises(NcgenError, match="tau"):
         JointStep(two_link, 0.01).jacobians(np.zeros(4), np.zeros(3))
+    step = JointStep(two_link, 0.01)
+    for bad in (np.array([0.0, np.nan, 0.0, 0.0]), np.array([0.0, 0.0, np.inf, 0.0])):
+        with pytest.raises(NcgenError, match="finite"):
+            step.jacobians(bad, np.zeros(2))
+    x1, A, B = step.jacobians([0.1, 0.2, 0.0, 0.0], [1, 2])        # lists and integers are converted
+    assert np.array_equal(x1, step.jacobians(np.array([0.1, 0.2, 0.0, 0.0]), np.array([1.0, 2.0]))[0])
 
 
 def test_locked_urdf_fixes_the_named_joints_and_names_bad_ones():
