@@ -21,6 +21,7 @@ from ncgen.control.box_qp import box_qp, kkt_error
 from ncgen.control.stagewise_hessian import StagewiseHessian
 from ncgen.control.joint_mpc import JointMPC
 from ncgen.control.joint_step import JointStep
+from ncgen.control.reference import solve_joint_discrete
 from ncgen.errors import NcgenError
 
 TWO_LINK = """<robot name="two_link">
@@ -252,3 +253,33 @@ def test_panda_joint_mpc_tracks_a_reach():
     assert np.all(np.abs(U) <= np.array([87, 87, 87, 87, 12, 12, 12]))
     err = np.array([np.max(np.abs(q - ref(t)[0])) for q, t in zip(np.array(tr.qj), tr.t)])
     assert err.max() < 2e-3 and err[-1] < 1e-5, (err.max(), err[-1])
+
+
+def joint_reach(n, h, q1, effort):
+    """Costs of a joint-space reach to ``q1`` at rest (efforts scaled by ``effort``, N·m)."""
+    import casadi as ca
+
+    def stage(x, u):
+        return h * (1e-2 * ca.sumsqr(u / effort) + 1e-2 * ca.sumsqr(x[n:]))
+
+    def terminal(x):
+        return 100 * ca.sumsqr(x[:n] - q1) + ca.sumsqr(x[n:])
+    return stage, terminal
+
+
+def test_ilqr_on_the_joint_step_reaches_ipopts_optimum(two_link):
+    """iLQR through JointStep (Gauss–Newton) against IPOPT on the same discrete problem written
+    with RNEA instead of ABA (ncgen.control.reference.solve_joint_discrete): the same cost to
+    1e-6 relative, a stationary point (exact gradient ≤ 1e-6)."""
+    h, N = 0.02, 40
+    step = JointStep(two_link, h)
+    x0 = np.zeros(4)
+    U0 = np.tile(nc.rnea(two_link, np.zeros(2), np.zeros(2), np.zeros(2)), (N, 1))   # holds x0
+    costs = joint_reach(2, h, np.array([0.8, -0.6]), 4.0)
+    res = nc.ilqr(step, x0, U0, costs, max_iter=500, tol=1e-7)
+    assert res.converged, res.message
+    _, U_ip, J_ip = solve_joint_discrete(step, x0, U0, costs)
+    assert abs(res.cost - J_ip) <= 1e-6 * J_ip, (res.cost, J_ip)
+    assert np.max(np.abs(res.U - U_ip)) < 1e-3 * np.max(np.abs(U_ip))
+    with pytest.raises(NcgenError, match="p: the parameters are fixed"):
+        nc.ilqr(step, x0, U0, costs, p=np.zeros(0))

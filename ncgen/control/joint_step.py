@@ -14,6 +14,9 @@ and its Jacobians follow from ABA's derivatives (:func:`ncgen.runtime.tree_algor
     ∂v⁺/∂x = [h ∂a/∂q,  I + h ∂a/∂v],      ∂v⁺/∂τ = h M⁻¹,
     ∂q⁺/∂x = [I, 0] + h ∂v⁺/∂x,            ∂q⁺/∂τ = h ∂v⁺/∂τ.
 
+It is time-invariant; :func:`ncgen.control.ilqr.ilqr` takes it as it takes a natural-coordinate
+step (Gauss–Newton: no second derivatives of this step; the parameters are those given here).
+
 Only trees whose joint positions add (``q⁺ = q + h v``: hinges and slides, no quaternion) and
 whose every rate is independent (no mimic joint) take it; others are refused by name.
 """
@@ -23,7 +26,7 @@ import numpy as np
 
 from ncgen.errors import NcgenError
 from ncgen.runtime.tree_algorithms import aba, aba_derivatives, call, kernel_of
-from ncgen.validation import as_vector, positive
+from ncgen.validation import as_numbers, as_vector, positive
 
 
 def joint_step_refusal(model) -> str | None:
@@ -40,6 +43,9 @@ def joint_step_refusal(model) -> str | None:
 class JointStep:
     """``x⁺ = step(x, τ)`` and ``(x⁺, A, B) = step.jacobians(x, τ)`` (module docstring) of
     ``model`` with the step ``h`` (s) and parameters ``p`` (None: the model's)."""
+
+    #: iLQR runs Gauss–Newton on this step (:func:`ncgen.control.ilqr.ilqr`).
+    second_derivatives = False
 
     def __init__(self, model, h: float, *, p=None):
         why = joint_step_refusal(model)
@@ -65,8 +71,39 @@ class JointStep:
             tau = as_vector(tau, self.nu, "tau (efforts of the joint rates)")
         return x, tau
 
-    def __call__(self, x, tau) -> np.ndarray:
+    def _same(self, p, what: str) -> None:
+        if p is not None:
+            raise NcgenError(f"JointStep.{what}: p: the parameters are fixed when the step is made "
+                             f"(JointStep(model, h, p=...)); got p = {p!r}")
+
+    def __call__(self, x, tau, p=None, t=None) -> np.ndarray:
+        """``x⁺`` (``t``, s, is ignored: the step is time-invariant)."""
+        self._same(p, "__call__")
         return self.unchecked(*self._split(x, tau))
+
+    def _inputs(self, U) -> np.ndarray:
+        U = as_numbers(U, "U", f"finite inputs of shape (N, {self.nu}) (one row per step)")
+        if U.ndim != 2 or U.shape[1] != self.nu or U.shape[0] < 1 or not np.all(np.isfinite(U)):
+            raise NcgenError(f"U: expected finite inputs of shape (N, {self.nu}) (one row per step), got shape "
+                             f"{U.shape}")
+        return U
+
+    def rollout(self, x0, U, p=None, t0=None) -> np.ndarray:
+        """States after each of the ``N = len(U)`` steps, shape ``(N, nx)`` (``U``: ``(N, nu)``)."""
+        self._same(p, "rollout")
+        U = self._inputs(U)
+        x = self._split(x0, U[0])[0]
+        X = np.empty((U.shape[0], self.nx))
+        for k in range(U.shape[0]):
+            x = X[k] = self.unchecked(x, U[k])
+        return X
+
+    def ilqr_start(self, x0, U0, p, t0):
+        """``(x0, U, p, t0)`` of :func:`ncgen.control.ilqr.ilqr` for this step: ``x0`` checked,
+        ``U`` a float copy of ``U0`` (N × nu), ``t0`` 0 (the step is time-invariant)."""
+        self._same(p, "ilqr")
+        U = self._inputs(U0).copy()
+        return self._split(x0, U[0])[0], U, None, 0.0
 
     def unchecked(self, x: np.ndarray, tau: np.ndarray) -> np.ndarray:
         """``x⁺`` of a float vector ``x`` and ``tau`` of the right sizes, unchecked (by ABA
@@ -75,8 +112,9 @@ class JointStep:
         v1 = x[n:] + h * aba(self.model, x[:n], x[n:], tau, p=self.p)
         return np.concatenate([x[:n] + h * v1, v1])
 
-    def jacobians(self, x, tau) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(x⁺, A = ∂x⁺/∂x, B = ∂x⁺/∂τ)`` at ``(x, τ)``."""
+    def jacobians(self, x, tau, p=None, t=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(x⁺, A = ∂x⁺/∂x, B = ∂x⁺/∂τ)`` at ``(x, τ)`` (``t`` ignored)."""
+        self._same(p, "jacobians")
         return self.unchecked_jacobians(*self._split(x, tau))
 
     def unchecked_jacobians(self, x: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
