@@ -2,6 +2,7 @@
 
 * the step's Jacobians against central differences of the step itself, and the step and its
   Jacobians against MuJoCo's Euler step and ``mjd_transitionFD`` on the robot's MuJoCo twin;
+* iLQR through the step against IPOPT on the same discrete problem written with RNEA;
 * the box QP against CasADi's qpOASES (an independent active-set solver) and its KKT conditions;
 * the MPC in closed loop against the joint-space simulator (``nc.simulate(method="joint")``,
   Dormand–Prince on ABA: another integrator than the controller's semi-implicit Euler), with
@@ -255,27 +256,17 @@ def test_panda_joint_mpc_tracks_a_reach():
     assert err.max() < 2e-3 and err[-1] < 1e-5, (err.max(), err[-1])
 
 
-def joint_reach(n, h, q1, effort):
-    """Costs of a joint-space reach to ``q1`` at rest (efforts scaled by ``effort``, N·m)."""
-    import casadi as ca
-
-    def stage(x, u):
-        return h * (1e-2 * ca.sumsqr(u / effort) + 1e-2 * ca.sumsqr(x[n:]))
-
-    def terminal(x):
-        return 100 * ca.sumsqr(x[:n] - q1) + ca.sumsqr(x[n:])
-    return stage, terminal
-
-
 def test_ilqr_on_the_joint_step_reaches_ipopts_optimum(two_link):
     """iLQR through JointStep (Gauss–Newton) against IPOPT on the same discrete problem written
     with RNEA instead of ABA (ncgen.control.reference.solve_joint_discrete): the same cost to
     1e-6 relative, a stationary point (exact gradient ≤ 1e-6)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from joint_ilqr_reach import reach_costs
     h, N = 0.02, 40
     step = JointStep(two_link, h)
     x0 = np.zeros(4)
     U0 = np.tile(nc.rnea(two_link, np.zeros(2), np.zeros(2), np.zeros(2)), (N, 1))   # holds x0
-    costs = joint_reach(2, h, np.array([0.8, -0.6]), 4.0)
+    costs = reach_costs(2, h, np.array([0.8, -0.6]), np.array([12.0, 4.0]))
     res = nc.ilqr(step, x0, U0, costs, max_iter=500, tol=1e-7)
     assert res.converged, res.message
     _, U_ip, J_ip = solve_joint_discrete(step, x0, U0, costs)
