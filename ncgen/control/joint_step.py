@@ -24,9 +24,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ncgen.control.step import StepFunction
 from ncgen.errors import NcgenError
 from ncgen.runtime.tree_algorithms import aba, aba_derivatives, call, kernel_of
-from ncgen.validation import as_numbers, as_vector, positive
+from ncgen.validation import as_vector, positive
 
 
 def joint_step_refusal(model) -> str | None:
@@ -81,12 +82,7 @@ class JointStep:
         self._same(p, "__call__")
         return self.unchecked(*self._split(x, tau))
 
-    def _inputs(self, U) -> np.ndarray:
-        U = as_numbers(U, "U", f"finite inputs of shape (N, {self.nu}) (one row per step)")
-        if U.ndim != 2 or U.shape[1] != self.nu or U.shape[0] < 1 or not np.all(np.isfinite(U)):
-            raise NcgenError(f"U: expected finite inputs of shape (N, {self.nu}) (one row per step), got shape "
-                             f"{U.shape}")
-        return U
+    _inputs = StepFunction._inputs         # U: (N, nu) finite, checked as a natural-coordinate step's
 
     def rollout(self, x0, U, p=None, t0=None) -> np.ndarray:
         """States after each of the ``N = len(U)`` steps, shape ``(N, nx)`` (``U``: ``(N, nu)``)."""
