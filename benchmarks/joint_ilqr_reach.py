@@ -68,7 +68,8 @@ def main(argv=None) -> int:
     print(f"  IPOPT cost {J_ip:.12g}  (the step written with RNEA)  CPU {t_ip:.2f} s")
     print(f"  GAP (iLQR − IPOPT) / IPOPT = {(res.cost - J_ip) / J_ip:.2e} (target ≤ 1e-3); "
           f"max |U_iLQR − U_IPOPT| = {np.max(np.abs(res.U - U_ip)):.1e} N·m")
-    print(f"  final joint error {np.max(np.abs(res.X[-1, :7] - Q1)):.1e} rad, speed {np.max(np.abs(res.X[-1, 7:])):.1e} rad/s")
+    print(f"  final joint error {np.max(np.abs(res.X[-1, :7] - Q1)):.1e} rad, "
+          f"speed {np.max(np.abs(res.X[-1, 7:])):.1e} rad/s")
     print(f"\nload average at end: {', '.join(f'{v:.2f}' for v in os.getloadavg())}")
     return 0
 
