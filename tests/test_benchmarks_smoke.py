@@ -83,6 +83,9 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800),   # each benchmark sc
                                   "RATIO ur5 crba instructions: tables / flat", "results agree"]),
     ("joint_mpc.py", ["Panda reach over 0.3 s", "JointMPC qp_solver='box', default BLAS threads: per step",
                      "JointMPC qp_solver='box', OPENBLAS_NUM_THREADS=1: per step", "load average at the end"]),
+    ("joint_step_jacobians.py", ["AGREE to 1e-06", "RATIO ncgen JointStep.jacobians / mujoco mjd_transitionFD centred",
+                                 "aba_derivatives is", "load average at end"]),
+    ("joint_ilqr_reach.py", ["Panda reach over 0.2 s", "GAP (iLQR − IPOPT) / IPOPT", "converged True"]),
     ("mjcf_import_time.py", ["first    parse wall", "later 1  parse wall", "n =   10:", "CPU per element",
                              "load average at the end"]),
 ])
@@ -90,7 +93,7 @@ def test_smoke(tmp_path, script, expected):
     if script in ("joint_space.py", "joint_simulation.py", "tree_algorithms.py", "load_time.py", "call_overhead.py"):
         pytest.importorskip("pinocchio")
         pytest.importorskip("yourdfpy")
-    if script in ("step_jacobians.py", "joint_mpc.py"):
+    if script in ("step_jacobians.py", "joint_mpc.py", "joint_step_jacobians.py", "joint_ilqr_reach.py"):
         pytest.importorskip("yourdfpy")
     if script == "tree_tables_callgrind.py":
         pytest.importorskip("pinocchio")     # with example-robot-data's URDFs

@@ -1,6 +1,8 @@
 """The joint-space step and MPC of tree robots (ncgen.control.joint_step, joint_mpc, box_qp).
 
-* the step's Jacobians against central differences of the step itself;
+* the step's Jacobians against central differences of the step itself, and the step and its
+  Jacobians against MuJoCo's Euler step and ``mjd_transitionFD`` on the robot's MuJoCo twin;
+* iLQR through the step against IPOPT on the same discrete problem written with RNEA;
 * the box QP against CasADi's qpOASES (an independent active-set solver) and its KKT conditions;
 * the MPC in closed loop against the joint-space simulator (``nc.simulate(method="joint")``,
   Dormand–Prince on ABA: another integrator than the controller's semi-implicit Euler), with
@@ -8,6 +10,9 @@
 * slow: the 7-DOF Panda (example-robot-data, fingers locked) tracking a joint-space reach.
 """
 from __future__ import annotations
+
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,6 +22,7 @@ from ncgen.control.box_qp import box_qp, kkt_error
 from ncgen.control.stagewise_hessian import StagewiseHessian
 from ncgen.control.joint_mpc import JointMPC
 from ncgen.control.joint_step import JointStep
+from ncgen.control.reference import solve_joint_discrete
 from ncgen.errors import NcgenError
 
 TWO_LINK = """<robot name="two_link">
@@ -59,6 +65,20 @@ def test_joint_step_jacobians_match_central_differences(two_link):
         assert np.allclose(x1[:2], x[:2] + 0.01 * x1[2:], rtol=0, atol=1e-15)
 
 
+def test_joint_step_is_mujocos_euler_step(two_link):
+    """The same discrete map as MuJoCo's (semi-)implicit Euler on the same URDF: x⁺ to round-off,
+    A and B to the accuracy of MuJoCo's centred differences."""
+    pytest.importorskip("mujoco")
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from joint_step_jacobians import agreement, twin
+    step = JointStep(two_link, 0.01)
+    m = twin(TWO_LINK, two_link.joint_names, 0.01)
+    rng = np.random.default_rng(4)
+    for _ in range(3):
+        dx, dA, dB = agreement(step, m, 0.5 * rng.normal(size=4), 3 * rng.normal(size=2), 1e-6)
+        assert dx < 1e-13 and dA < 1e-7 and dB < 1e-7, (dx, dA, dB)
+
+
 def test_joint_step_refuses_quaternions_and_bad_input(two_link):
     floating = nc.System.from_urdf(TWO_LINK, floating_base=True).build()
     with pytest.raises(NcgenError, match="quaternion"):
@@ -67,6 +87,12 @@ def test_joint_step_refuses_quaternions_and_bad_input(two_link):
         JointStep(two_link, -0.01)
     with pytest.raises(NcgenError, match="tau"):
         JointStep(two_link, 0.01).jacobians(np.zeros(4), np.zeros(3))
+    step = JointStep(two_link, 0.01)
+    for bad in (np.array([0.0, np.nan, 0.0, 0.0]), np.array([0.0, 0.0, np.inf, 0.0])):
+        with pytest.raises(NcgenError, match="finite"):
+            step.jacobians(bad, np.zeros(2))
+    x1, A, B = step.jacobians([0.1, 0.2, 0.0, 0.0], [1, 2])        # lists and integers are converted
+    assert np.array_equal(x1, step.jacobians(np.array([0.1, 0.2, 0.0, 0.0]), np.array([1.0, 2.0]))[0])
 
 
 def test_locked_urdf_fixes_the_named_joints_and_names_bad_ones():
@@ -228,3 +254,23 @@ def test_panda_joint_mpc_tracks_a_reach():
     assert np.all(np.abs(U) <= np.array([87, 87, 87, 87, 12, 12, 12]))
     err = np.array([np.max(np.abs(q - ref(t)[0])) for q, t in zip(np.array(tr.qj), tr.t)])
     assert err.max() < 2e-3 and err[-1] < 1e-5, (err.max(), err[-1])
+
+
+def test_ilqr_on_the_joint_step_reaches_ipopts_optimum(two_link):
+    """iLQR through JointStep (Gauss–Newton) against IPOPT on the same discrete problem written
+    with RNEA instead of ABA (ncgen.control.reference.solve_joint_discrete): the same cost to
+    1e-6 relative, a stationary point (exact gradient ≤ 1e-6)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from joint_ilqr_reach import reach_costs
+    h, N = 0.02, 40
+    step = JointStep(two_link, h)
+    x0 = np.zeros(4)
+    U0 = np.tile(nc.rnea(two_link, np.zeros(2), np.zeros(2), np.zeros(2)), (N, 1))   # holds x0
+    costs = reach_costs(2, h, np.array([0.8, -0.6]), np.array([12.0, 4.0]))
+    res = nc.ilqr(step, x0, U0, costs, max_iter=500, tol=1e-7)
+    assert res.converged, res.message
+    _, U_ip, J_ip = solve_joint_discrete(step, x0, U0, costs)
+    assert abs(res.cost - J_ip) <= 1e-6 * J_ip, (res.cost, J_ip)
+    assert np.max(np.abs(res.U - U_ip)) < 1e-3 * np.max(np.abs(U_ip))
+    with pytest.raises(NcgenError, match="p: the parameters are fixed"):
+        nc.ilqr(step, x0, U0, costs, p=np.zeros(0))

@@ -25,6 +25,8 @@ feedback ``K_k (x − x̄_k)`` is evaluated on differences of states of the mani
 first order); directions normal to the manifold carry no cost curvature and no dynamics, so
 nothing needs regularising there beyond ``Q_uu``.  (:meth:`StepFunction.reduced_jacobians`
 gives the same recursion in a minimal tangent basis.)  Inputs are unconstrained.
+The joint-space step of a tree (:class:`~ncgen.control.joint_step.JointStep`, ``x = [q_j; v_j]``)
+is taken too, with its own checks of ``x0`` (``st.ilqr_start``), Gauss–Newton throughout.
 """
 from __future__ import annotations
 
@@ -82,10 +84,8 @@ def ilqr(st, x0, U0, costs, *, p=None, t0=None, max_iter: int = 200, tol: float 
     tol = nonnegative(tol, "ilqr: tol")
     mu = nonnegative(mu, "ilqr: mu")
     stage_d, terminal_d = cost_functions(costs, st.nx, st.nu)
-    U = st._inputs(U0).copy()
+    x0, U, pv, t0 = _start(st, x0, U0, p, t0)
     N = U.shape[0]
-    x0, _, pv, t0 = st._args(x0, U[0], p, t0)
-    check_consistent(st.model, x0, pv, t0, "ilqr: x0")
     stage_map = stage_d.map(N)
 
     def total(X, U):
@@ -150,6 +150,18 @@ def ilqr(st, x0, U0, costs, *, p=None, t0=None, max_iter: int = 200, tol: float 
         history.append(J)
         mu = max(mu / MU_FACTOR, MU_MIN)
     return ILQRResult(X, U, K, J, it, converged, gnorm, history, gradients, message)
+
+
+def _start(st, x0, U0, p, t0):
+    """``(x0, U, p, t0)`` checked: the step's own rule (``st.ilqr_start``, e.g. the joint-space
+    step :class:`~ncgen.control.joint_step.JointStep`) or a natural-coordinate step's (``x0``
+    consistent by ``nc.simulate``'s rule)."""
+    if hasattr(st, "ilqr_start"):
+        return st.ilqr_start(x0, U0, p, t0)
+    U = st._inputs(U0).copy()
+    x0, _, pv, t0 = st._args(x0, U[0], p, t0)
+    check_consistent(st.model, x0, pv, t0, "ilqr: x0")
+    return x0, U, pv, t0
 
 
 def _linearisation(st, X, U, p, t0):
