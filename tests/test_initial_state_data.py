@@ -8,6 +8,7 @@ import pytest
 
 import ncgen as nc
 import ncgen.codegen.compile_cache as compile_cache
+from ncgen.codegen.model_package import SYSTEM_FUNCTIONS
 
 L, G = 1.0, 9.81
 
@@ -39,6 +40,8 @@ def compiles(monkeypatch, tmp_path):
 def test_new_initial_state_compiles_nothing_and_starts_there(compiles, tmp_path):
     first, second = pendulum(0.3).build(), pendulum(0.1).build()
     assert not np.allclose(first.q0, second.q0)
+    # the premise: the same functions (a length rounded differently would be another model)
+    assert all(first.functions[f].serialize() == second.functions[f].serialize() for f in SYSTEM_FUNCTIONS)
     nc.simulate(first, t_end=0.1, dt=0.01, method="stepper", kernels="flat")
     assert compiles == ["swing"]
 
