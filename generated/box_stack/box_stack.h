@@ -84,7 +84,8 @@ extern const casadi_real box_stack_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define BOX_STACK_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define BOX_STACK_MODEL_HASH "f9ebed99e03fd2632e49935a0352557abbe87a0561a05ed1ad50f71090bbd7e1"
+extern const char box_stack_model_hash[];
+#define BOX_STACK_MODEL_HASH box_stack_model_hash
 
 /* ---- box_stack_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names

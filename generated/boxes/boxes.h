@@ -83,7 +83,8 @@ extern const casadi_real boxes_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define BOXES_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define BOXES_MODEL_HASH "58a2db293766d1a158f26c4faef5629c84febecb265887b6f88b50fc0b54fb83"
+extern const char boxes_model_hash[];
+#define BOXES_MODEL_HASH boxes_model_hash
 
 /* ---- boxes_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names

@@ -83,7 +83,8 @@ extern const casadi_real capstan_winch_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define CAPSTAN_WINCH_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define CAPSTAN_WINCH_MODEL_HASH "8bfcd1f8aed926df9f9b19a7f3808a206530b4ae7546366999f1e15c932b4ae8"
+extern const char capstan_winch_model_hash[];
+#define CAPSTAN_WINCH_MODEL_HASH capstan_winch_model_hash
 
 /* ---- capstan_winch_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names

@@ -19,42 +19,6 @@ const char *const capstan_winch_member_names[3] = {
   "weight", "rope_material1", "rope_material2"
 };
 
-const casadi_real capstan_winch_t0[1] = {
-  0.0
-};
-
-const casadi_real capstan_winch_q0[9] = {
-  -0.3, 0.0, 0.0, -0.3,
-  0.0, 1.0, 0.3, 0.0,
-  1.0
-};
-
-const casadi_real capstan_winch_v0[9] = {
-  0.0, 0.0, 0.0, 0.0,
-  0.0, 0.0, 0.0, 0.0,
-  0.0
-};
-
-const casadi_real capstan_winch_lam0[6] = {
-  -0.0, 0.0, -0.009810000000000003, 0.0,
-  -0.009810000000000003, 0.0
-};
-
-const casadi_real capstan_winch_x0[18] = {
-  -0.3, 0.0, 0.0, -0.3,
-  0.0, 1.0, 0.3, 0.0,
-  1.0, 0.0, 0.0, 0.0,
-  0.0, 0.0, 0.0, 0.0,
-  0.0, 0.0
-};
-
-const casadi_real capstan_winch_z0[15] = {
-  0.0, 0.0, -3.774079693030785e-05, 0.0,
-  -3.331705137471497e-08, 1.5229644776811834e-18, 0.0, 2.7763925544450202e-08,
-  1.5229644776811834e-18, -0.0, 0.0, -0.009810000000000003,
-  0.0, -0.009810000000000003, 0.0
-};
-
 const casadi_real capstan_winch_gravity[3] = {
   0.0, 0.0, -9.81
 };

@@ -85,7 +85,8 @@ extern const casadi_real cartpole_gravity[2];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define CARTPOLE_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define CARTPOLE_MODEL_HASH "46fbb4061db5abffc277874feb6643877553d9fe4987fa247ee868d26caad72f"
+extern const char cartpole_model_hash[];
+#define CARTPOLE_MODEL_HASH cartpole_model_hash
 
 /* ---- cartpole_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names

@@ -84,7 +84,8 @@ extern const casadi_real chain_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define CHAIN_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define CHAIN_MODEL_HASH "98d581194fe20b46806e846744e94b94c95bff17afc57f6e2ba5a0d41b86e520"
+extern const char chain_model_hash[];
+#define CHAIN_MODEL_HASH chain_model_hash
 
 /* ---- chain_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names

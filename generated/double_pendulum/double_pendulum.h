@@ -84,7 +84,8 @@ extern const casadi_real double_pendulum_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define DOUBLE_PENDULUM_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define DOUBLE_PENDULUM_MODEL_HASH "372ba3b60fc809d297543ae713c3ede029ee47534bf72dbfb8183278fa4ef7a5"
+extern const char double_pendulum_model_hash[];
+#define DOUBLE_PENDULUM_MODEL_HASH double_pendulum_model_hash
 
 /* ---- double_pendulum_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names

@@ -83,7 +83,8 @@ extern const casadi_real falling_chain_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define FALLING_CHAIN_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define FALLING_CHAIN_MODEL_HASH "3d8f8165932ed6be589186f09fd66a1253cba572773ba2af51e0b9d738f53b26"
+extern const char falling_chain_model_hash[];
+#define FALLING_CHAIN_MODEL_HASH falling_chain_model_hash
 
 /* ---- falling_chain_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names

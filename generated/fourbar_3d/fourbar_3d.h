@@ -84,7 +84,8 @@ extern const casadi_real fourbar_3d_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define FOURBAR_3D_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define FOURBAR_3D_MODEL_HASH "a5a65037f04f7642c8bfb744b9f8831395bcbf12d1f4dd631a1a8e41502485ce"
+extern const char fourbar_3d_model_hash[];
+#define FOURBAR_3D_MODEL_HASH fourbar_3d_model_hash
 
 /* ---- fourbar_3d_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names

@@ -86,7 +86,8 @@ extern const casadi_real fourbar_planar_gravity[2];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define FOURBAR_PLANAR_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define FOURBAR_PLANAR_MODEL_HASH "b403e7997bc89acd645fc6c4e0f5e9d4128be697105804e05df20210afda1486"
+extern const char fourbar_planar_model_hash[];
+#define FOURBAR_PLANAR_MODEL_HASH fourbar_planar_model_hash
 
 /* ---- fourbar_planar_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names

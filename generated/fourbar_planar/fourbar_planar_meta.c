@@ -24,36 +24,6 @@ const char *const fourbar_planar_marker_names[1] = {
   "coupler.midpoint"
 };
 
-const casadi_real fourbar_planar_t0[1] = {
-  0.0
-};
-
-const casadi_real fourbar_planar_q0[4] = {
-  0.5000000000000001, 0.8660254037844386, 3.0428529212959905, 2.4578479506333157
-};
-
-const casadi_real fourbar_planar_v0[4] = {
-  0.0, 0.0, 0.0, 0.0
-};
-
-const casadi_real fourbar_planar_lam0[3] = {
-  -6.572201834165654, -0.8247353701336391, -2.1309563785897248
-};
-
-const casadi_real fourbar_planar_x0[8] = {
-  0.5000000000000001, 0.8660254037844386, 3.0428529212959905, 2.4578479506333157,
-  0.0, 0.0, 0.0, 0.0
-};
-
-const casadi_real fourbar_planar_z0[7] = {
-  2.936830099265171, -1.6955796483749426, 1.679814443365199, 0.31243684758909984,
-  -6.572201834165654, -0.8247353701336391, -2.1309563785897248
-};
-
-const casadi_real fourbar_planar_p0[1] = {
-  2.0
-};
-
 const casadi_real fourbar_planar_gravity[2] = {
   0.0, -9.81
 };

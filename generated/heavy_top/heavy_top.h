@@ -84,7 +84,8 @@ extern const casadi_real heavy_top_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define HEAVY_TOP_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define HEAVY_TOP_MODEL_HASH "46fa6bfe32ab6c6465f9914b8f00e014347476fb8682200a858dacd9e7a005d3"
+extern const char heavy_top_model_hash[];
+#define HEAVY_TOP_MODEL_HASH heavy_top_model_hash
 
 /* ---- heavy_top_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names

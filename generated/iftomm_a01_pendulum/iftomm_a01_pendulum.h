@@ -83,7 +83,8 @@ extern const casadi_real iftomm_a01_pendulum_gravity[2];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define IFTOMM_A01_PENDULUM_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define IFTOMM_A01_PENDULUM_MODEL_HASH "0ce3e5ed1ee64ebac6a64e3c6c26a5ec70753f77c6c7ae5b07051ff7ef660d46"
+extern const char iftomm_a01_pendulum_model_hash[];
+#define IFTOMM_A01_PENDULUM_MODEL_HASH iftomm_a01_pendulum_model_hash
 
 /* ---- iftomm_a01_pendulum_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names

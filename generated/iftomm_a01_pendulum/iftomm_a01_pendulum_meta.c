@@ -16,30 +16,6 @@ const char *const iftomm_a01_pendulum_member_names[1] = {
   "P1"
 };
 
-const casadi_real iftomm_a01_pendulum_t0[1] = {
-  0.0
-};
-
-const casadi_real iftomm_a01_pendulum_q0[2] = {
-  1.0, 0.0
-};
-
-const casadi_real iftomm_a01_pendulum_v0[2] = {
-  0.0, 0.0
-};
-
-const casadi_real iftomm_a01_pendulum_lam0[1] = {
-  0.0
-};
-
-const casadi_real iftomm_a01_pendulum_x0[4] = {
-  1.0, 0.0, 0.0, 0.0
-};
-
-const casadi_real iftomm_a01_pendulum_z0[3] = {
-  0.0, -9.81, 0.0
-};
-
 const casadi_real iftomm_a01_pendulum_gravity[2] = {
   0.0, -9.81
 };

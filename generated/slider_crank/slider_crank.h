@@ -86,7 +86,8 @@ extern const casadi_real slider_crank_gravity[2];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define SLIDER_CRANK_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define SLIDER_CRANK_MODEL_HASH "2ab88c7c1072c346b68c5a7f7b6010fa34dfad3fdfaa795dffb1fa9af81230ec"
+extern const char slider_crank_model_hash[];
+#define SLIDER_CRANK_MODEL_HASH slider_crank_model_hash
 
 /* ---- slider_crank_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names

@@ -26,43 +26,6 @@ const char *const slider_crank_marker_names[1] = {
   "rod.middle"
 };
 
-const casadi_real slider_crank_t0[1] = {
-  0.0
-};
-
-const casadi_real slider_crank_q0[8] = {
-  0.1, 0.0, 0.4, 0.0,
-  1.0, 0.0, 0.0, 1.0
-};
-
-const casadi_real slider_crank_v0[8] = {
-  0.0, 0.6283185307179586, 0.0, 0.0,
-  0.0, 0.0, 0.0, 0.0
-};
-
-const casadi_real slider_crank_lam0[8] = {
-  136.51753628403046, 0.0, 0.0, 0.0,
-  43.31260000554586, -0.3924, 0.0, -11.281500000000007
-};
-
-const casadi_real slider_crank_x0[16] = {
-  0.1, 0.0, 0.4, 0.0,
-  1.0, 0.0, 0.0, 1.0,
-  0.0, 0.6283185307179586, 0.0, 0.0,
-  0.0, 0.0, 0.0, 0.0
-};
-
-const casadi_real slider_crank_z0[16] = {
-  -3.9478417604357277, -2.849659558040505e-17, -5.263789013914313, 4.962053741869469e-15,
-  0.0, 0.0, 0.0, 0.0,
-  136.51753628403046, 0.0, 0.0, 0.0,
-  43.31260000554586, -0.3924, 0.0, -11.281500000000007
-};
-
-const casadi_real slider_crank_p0[1] = {
-  6.283185307179586
-};
-
 const casadi_real slider_crank_gravity[2] = {
   0.0, -9.81
 };

@@ -87,7 +87,8 @@ extern const casadi_real tensegrity_gravity[3];
 /* Baumgarte coefficient beta of alg and accel (1/s) */
 #define TENSEGRITY_BAUMGARTE_BETA 5.0
 /* sha256 of the model's system functions and the metadata above: equal hashes, same model */
-#define TENSEGRITY_MODEL_HASH "65dd3e660f6a2ef1ed0e471aa7142b81b34dca2779b8614b37ed722bc1af7592"
+extern const char tensegrity_model_hash[];
+#define TENSEGRITY_MODEL_HASH tensegrity_model_hash
 
 /* ---- tensegrity_phi ----------------------------------------------------
  * constraint residuals Φ(t, q): intrinsic constraints of every member, then joint equations, in the order of constraint_names

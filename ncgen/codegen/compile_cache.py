@@ -4,7 +4,10 @@ The cache lives in ``$NCGEN_CACHE_DIR`` (default ``~/.cache/ncgen``); an entry
 ``<name>-<key>/`` holds ``lib<name>.so``, a copy of the package manifest and
 ``build.json`` (commands used, and ``library_sha256``: the hash of the library recorded
 when the entry was published).  The key hashes the package's C sources and headers, the
-compiler (path and version) and the flags, so an unchanged package is never rebuilt.
+compiler (path and version) and the flags, so an unchanged package is never rebuilt.  The
+package's *data* sources (``build.data``: its initial state, which Python reads from the
+manifest) are left out of the library and of the key, so a model at a new initial state
+finds its library in the cache (:func:`library_sources`).
 Entries are built in a temporary sibling directory, flushed to disk (fsync) and renamed
 into place under an exclusive lock, so concurrent builds of the same package are safe,
 yield one library, and a crash or a kill leaves either no entry or a complete one.
@@ -39,7 +42,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Mapping, Sequence
 
 from ncgen.codegen import fsutil, manifest
 from ncgen.codegen.compiler import Compiler, find_compiler
@@ -91,7 +94,15 @@ def source_cflags(pkg: Package, cflags: str | Sequence[str] | None,
     flags = resolve_cflags(cflags, env_flags)
     chosen = cflags is not None or (env_flags and os.environ.get("NCGEN_CFLAGS") is not None)
     large = set() if chosen else set(build.get("large_sources", ()))
-    return {src: LARGE_CFLAGS if src in large else flags for src in build["sources"]}
+    return {src: LARGE_CFLAGS if src in large else flags for src in library_sources(build)}
+
+
+def library_sources(build: Mapping) -> list[str]:
+    """The sources of a package's cached library: its manifest's ``build.sources`` without
+    ``build.data`` (the files the Makefile adds for C programs, see
+    :class:`~ncgen.codegen.doc.PackageDoc`)."""
+    data = set(build.get("data", ()))
+    return [src for src in build["sources"] if src not in data]
 
 
 def compile_package(pkg: Package | str | os.PathLike, cc: str | None = None,
@@ -165,7 +176,7 @@ def build_key(pkg: Package, compiler: Compiler, per_source: dict[str, tuple[str,
     """sha256 of what the library depends on: sources, headers, compiler, flags of each
     source, platform."""
     build = pkg.manifest["build"]
-    files = {rel: fsutil.sha256_file(pkg.path / rel) for rel in build["sources"] + build["headers"]}
+    files = {rel: fsutil.sha256_file(pkg.path / rel) for rel in library_sources(build) + build["headers"]}
     data = {"scheme": BUILD_SCHEME, "name": pkg.name, "files": files, "compiler": list(compiler.argv),
             "compiler_version": compiler.version, "cflags": {k: list(v) for k, v in per_source.items()},
             "platform": [sys.platform, platform.machine()]}
@@ -176,7 +187,7 @@ def _build(pkg: Package, compiler: Compiler, flags: tuple[str, ...], per_source:
            jobs: int | None, out: Path) -> list[list[str]]:
     """Compile every source of ``pkg`` to an object in ``out`` (``per_source`` flags) and link
     ``out/lib<name>.so`` (``flags``)."""
-    sources = pkg.manifest["build"]["sources"]
+    sources = library_sources(pkg.manifest["build"])
     compile_cmds = [[*compiler.argv, *per_source[src], "-fPIC", "-I.", "-c", src, "-o", str(out / f"{src}.o")]
                     for src in sources]
     link_cmd = [*compiler.argv, *flags, "-shared", "-o", str(out / f"lib{pkg.name}.so"),

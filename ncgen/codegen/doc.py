@@ -18,6 +18,13 @@ identifier; its value becomes, in ``<name>.h``:
 - 1-D sequence of str     -> ``extern const char *const <name>_<key>[n];``
   (both also get ``#define <NAME>_<KEY>_LEN n``; the arrays live in ``<name>_meta.c``).
 
+``data`` lists the metadata keys that are the model's *data* rather than its code: values
+another run of the same compiled functions may change (the initial state and what hashes
+it).  They live in ``<name>_data.c`` (arrays, and strings as ``extern const char
+<name>_<key>[]`` with ``#define <NAME>_<KEY> <name>_<key>``), so the header and the other
+sources do not depend on them; the Makefile and CMake build it into the library and the
+programs, the compile cache leaves it out (Python reads them from the manifest).
+
 ``defaults`` maps a function *input name* to the metadata key holding its default value
 (nonzeros in CasADi's column-major order); ``main.c`` evaluates with these, zeros elsewhere.
 """
@@ -108,6 +115,7 @@ class PackageDoc:
     metadata_doc: Mapping[str, str] = field(default_factory=dict)
     defaults: Mapping[str, str] = field(default_factory=dict)
     main_function: str | None = None
+    data: tuple[str, ...] = ()
 
     def __post_init__(self):
         set_ = object.__setattr__
@@ -117,6 +125,11 @@ class PackageDoc:
                                 for k, v in dict(self.metadata).items()})
         set_(self, "metadata_doc", {str(k): str(v) for k, v in dict(self.metadata_doc).items()})
         set_(self, "defaults", {str(k): str(v) for k, v in dict(self.defaults).items()})
+        set_(self, "data", tuple(str(k) for k in self.data))
+        for key in self.data:
+            if not isinstance(self.metadata.get(key), (list, str)):
+                raise CodegenError(f"PackageDoc.data names {key!r}, which must be a metadata key holding "
+                                   f"a list or a string; found {self.metadata.get(key)!r}")
         for key in self.metadata_doc:
             if key not in self.metadata:
                 raise CodegenError(f"PackageDoc.metadata_doc documents {key!r}, which is not a "
@@ -133,7 +146,7 @@ class PackageDoc:
                 "metadata": dict(sorted(self.metadata.items())),
                 "metadata_doc": dict(sorted(self.metadata_doc.items())),
                 "defaults": dict(sorted(self.defaults.items())),
-                "main_function": self.main_function}
+                "main_function": self.main_function, **({"data": list(self.data)} if self.data else {})}
 
 
 def _plain(key: str, value: Any):

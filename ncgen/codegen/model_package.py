@@ -8,7 +8,9 @@ solve ``accel``, energies, markers, poses), each documented in ``<model>.h`` fro
 :data:`ncgen.assembly.functions.DOCS`, and the model as metadata: dimensions, the names of
 coordinates, constraints, inputs, parameters, members and markers, the consistent initial
 state (``t0``, ``q0``, ``v0``, ``lam0``, ``x0``, ``z0``, ``p0``),
-gravity, the Baumgarte coefficients and ``model_hash``.  ``main.c`` evaluates ``accel`` (or
+gravity, the Baumgarte coefficients and ``model_hash``.  The initial state and
+``model_hash`` are the package's data (``<model>_data.c``, :data:`DATA`): the compiled
+library does not depend on them, so the same system at another initial state reuses it.  ``main.c`` evaluates ``accel`` (or
 any other function) at the initial state without Python.  The compiled stepper
 (``<model>_step``, ``<model>_simulate`` in ``<model>_stepper.h``) and its example program
 ``<model>_simulate`` complete it.
@@ -49,6 +51,10 @@ SYSTEM_JACOBIANS = ("dae",)
 MAIN_FUNCTION = "accel"
 #: Input name -> metadata key of its default value (used by ``main.c`` and documented).
 DEFAULTS = {"t": "t0", "q": "q0", "v": "v0", "lam": "lam0", "x": "x0", "z": "z0", "p": "p0"}
+#: Metadata that is the model's data, not its code (:attr:`ncgen.codegen.doc.PackageDoc.data`):
+#: the initial state, its default parameters and the hash that covers them.  Kept out of the
+#: compiled library's sources, so a model rebuilt at a new initial state compiles nothing.
+DATA = (*DEFAULTS.values(), "model_hash")
 
 
 def generate(model, out_dir: str | os.PathLike, *, cflags=None, compile: bool = False,
@@ -86,7 +92,7 @@ def generate(model, out_dir: str | os.PathLike, *, cflags=None, compile: bool = 
         metadata=metadata,
         metadata_doc={k: v for s in sections for k, v in s.metadata_doc.items()},
         defaults={arg: key for arg, key in DEFAULTS.items() if key in metadata},
-        main_function=MAIN_FUNCTION)
+        main_function=MAIN_FUNCTION, data=tuple(key for key in DATA if key in metadata))
     options = dict(doc=doc, jacobians=[j for s in sections for j in s.jacobians],
                    reroll_instructions=reroll_instructions,
                    extra_sources=[e for s in sections for e in s.extra_sources])

@@ -5,6 +5,7 @@ A package directory ``out_dir`` holds (for package name ``name``)::
     <name>.h               the API: every function documented, metadata as macros/arrays
     <name>_kernels_<k>.c/.h CasADi's code, C symbol of function f is <name>_<f>
     <name>_meta.c          definitions of the metadata arrays
+    <name>_data.c          the model's data (initial state): metadata listed in PackageDoc.data
     <extra sources>        hand-written templates rendered next to the kernels
     main.c                 evaluates one function at the default inputs and prints it
     <programs>.c           extra sources marked ``program``: stand-alone example programs
@@ -176,9 +177,10 @@ def _render_files(name: str, functions: list[ca.Function], doc: PackageDoc, opti
     file_of = {c: k.stem + ".c" for k in kernels for c in k.functions}
     header = f"{name}.h"
     meta_c = f"{name}_meta.c"
+    data_c = f"{name}_data.c" if doc.data else None
     fn_info = [_function_info(name, f, c, file_of[c.name()], doc, f.name() in with_jac)
                for f, c in zip(functions, c_funcs)]
-    build = {"sources": [k.stem + ".c" for k in kernels] + [meta_c]
+    build = {"sources": [k.stem + ".c" for k in kernels] + [meta_c] + ([data_c] if data_c else [])
              + [s.output for s in extra_sources if s.output.endswith(".c") and not s.program],
              "headers": [header] + [k.stem + ".h" for k in kernels]
              + [s.output for s in extra_sources if s.output.endswith(".h")],
@@ -190,6 +192,8 @@ def _render_files(name: str, functions: list[ca.Function], doc: PackageDoc, opti
     qp_sources = sorted({file_of[c.name()] for f, c in zip(functions, c_funcs) if f.class_name() == "Qrqp"})
     if qp_sources:                  # files holding CasADi's qrqp: a gcc warning off (templates/c/Makefile.j2)
         build["qp_sources"] = qp_sources
+    if data_c:
+        build["data"] = [data_c]
     programs = [s.output for s in extra_sources if s.program]
     if programs:
         build["programs"] = programs
@@ -209,7 +213,12 @@ def _render_files(name: str, functions: list[ca.Function], doc: PackageDoc, opti
                                       {**context, "code": k.c_code, "kernel_functions": k.functions})
         files[k.stem + ".h"] = render("kernels.h.j2", k.stem + ".h",
                                       {**context, "code": k.h_code, "guard": k.stem.upper() + "_H"})
-    files[meta_c] = render("meta.c.j2", meta_c, context)
+    entries = context["metadata"]
+    files[meta_c] = render("meta.c.j2", meta_c, {**context, "metadata": [m for m in entries if not m["data"]],
+                                                 "data": False})
+    if data_c:
+        files[data_c] = render("meta.c.j2", data_c, {**context, "metadata": [m for m in entries if m["data"]],
+                                                     "data": True})
     for s in extra_sources:
         files[s.output] = (copy_source(s.template, s.output) if s.included else
                            render(s.template, s.output, {**context, **s.context}, template_dirs))
@@ -227,7 +236,7 @@ def _render_files(name: str, functions: list[ca.Function], doc: PackageDoc, opti
 
 def _check_extra_sources(name: str, extra_sources: Sequence[ExtraSource]) -> None:
     """Outputs must be new plain file names; contexts must be plain JSON data."""
-    taken = {*_FIXED_FILES, f"{name}.h", f"{name}_meta.c", manifest.FILENAME}
+    taken = {*_FIXED_FILES, f"{name}.h", f"{name}_meta.c", f"{name}_data.c", manifest.FILENAME}
     for s in extra_sources:
         if s.output in taken or Path(s.output).name != s.output or s.output.startswith(f"{name}_kernels_"):
             raise CodegenError(f"extra source output {s.output!r} must be a plain file name, not one of "
@@ -394,7 +403,7 @@ def _metadata_info(name: str, doc: PackageDoc) -> list[dict]:
     out = []
     for key, value in doc.metadata.items():
         item = {"key": key, "macro": f"{name}_{key}".upper(), "c_name": f"{name}_{key}",
-                "doc": cnames.c_comment(doc.metadata_doc.get(key, ""))}
+                "doc": cnames.c_comment(doc.metadata_doc.get(key, "")), "data": key in doc.data}
         if isinstance(value, int):
             item.update(kind="int", literal=str(value))
         elif isinstance(value, float):
