@@ -28,6 +28,7 @@
 #define STEP_INTERRUPTED CAPSTAN_WINCH_STEP_INTERRUPTED
 #define SCHEME_RATTLE4 CAPSTAN_WINCH_STEP_RATTLE4
 typedef capstan_winch_step_options step_options;
+typedef capstan_winch_run_options run_options;
 #define DEFAULT_OPTIONS capstan_winch_step_default_options
 #define KERNEL_NEWTON capstan_winch_step_newton
 #define KERNEL_VELOCITY capstan_winch_step_velocity
@@ -86,14 +87,12 @@ int capstan_winch_simulate_stats(const casadi_real *q0, const casadi_real *v0, c
 
 int capstan_winch_simulate_adaptive(const casadi_real *q0, const casadi_real *v0, const casadi_real *lam0,
                                     casadi_real t0, casadi_real dt, long n_out, const casadi_real *u,
-                                    long u_stride, int hold_linear, const casadi_real *p,
-                                    casadi_real rtol, casadi_real atol, casadi_real h0, int extrapolate,
-                                    long max_steps, int track_work, casadi_real *q_out,
-                                    casadi_real *v_out, casadi_real *lam_out, casadi_real *stats_out,
-                                    const capstan_winch_step_options *options, long *rows_done,
-                                    casadi_real *h_next) {
-  return simulate_adaptive(q0, v0, lam0, t0, dt, n_out, u, u_stride, hold_linear, p, rtol, atol, h0, extrapolate,
-                           max_steps, track_work, q_out, v_out, lam_out, stats_out, options, rows_done, h_next);
+                                    long u_stride, const casadi_real *p, const capstan_winch_run_options *run,
+                                    casadi_real *q_out, casadi_real *v_out, casadi_real *lam_out,
+                                    casadi_real *stats_out, const capstan_winch_step_options *options,
+                                    long *rows_done, casadi_real *h_next) {
+  return simulate_adaptive(q0, v0, lam0, t0, dt, n_out, u, u_stride, p, run, q_out, v_out, lam_out, stats_out,
+                           options, rows_done, h_next);
 }
 
 int capstan_winch_outputs(long n, const casadi_real *t, const casadi_real *q, const casadi_real *v,

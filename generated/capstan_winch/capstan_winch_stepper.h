@@ -95,6 +95,17 @@ typedef struct {
 
 capstan_winch_step_options capstan_winch_step_default_options(void);
 
+/* The options of an error-controlled run (capstan_winch_simulate_adaptive), passed whole. */
+typedef struct {
+  casadi_real rtol;  /* local error tolerance, relative (> 0) */
+  casadi_real atol;  /* local error tolerance, absolute, in the units of q and v (> 0) */
+  casadi_real h0;    /* first step (s; <= 0: dt) */
+  int extrapolate;   /* nonzero: continue from the projected Richardson extrapolation */
+  long max_steps;    /* step attempts allowed per output interval (>= 1) */
+  int hold_linear;   /* nonzero: the input of a step interpolated at its midpoint, else held */
+  int track_work;    /* nonzero: the work columns of stats_out accumulated */
+} capstan_winch_run_options;
+
 /* Bytes of workspace one call of capstan_winch_step needs (pass it as `work`). */
 size_t capstan_winch_step_work_bytes(void);
 
@@ -159,21 +170,19 @@ int capstan_winch_simulate_stats(const casadi_real *q0, const casadi_real *v0, c
  * with extrapolate != 0 from the Richardson extrapolation halves + (halves - whole) / R
  * (order p + 2: both schemes are symmetric) projected onto both constraint levels in the
  * mass metric.  Next step H (0.2 .. 4) * 0.9 e^(-1/(p + 1)) for the relative error e; steps end on every output
- * time.  Newton failures reject the step (H / 4) instead of splitting it.  u: samples at
- * the output times (row k at u + k * u_stride; n_out + 1 rows if hold_linear, then the
+ * time.  Newton failures reject the step (H / 4) instead of splitting it.  run: rtol, atol,
+ * h0, extrapolate, max_steps, hold_linear, track_work (capstan_winch_run_options above).  u: samples at
+ * the output times (row k at u + k * u_stride; n_out + 1 rows if run->hold_linear, then the
  * input of a step is interpolated at its midpoint, else row k is held over interval k).
- * h0: first step (<= 0: dt).  max_steps: step attempts allowed per output interval.
  * Outputs as in capstan_winch_simulate_stats, one row per output time (the error columns sum
  * the estimates of the row's steps); *rows_done: rows written; *h_next: the step it would
  * take next.  Returns a status code. */
 int capstan_winch_simulate_adaptive(const casadi_real *q0, const casadi_real *v0, const casadi_real *lam0,
                                     casadi_real t0, casadi_real dt, long n_out, const casadi_real *u,
-                                    long u_stride, int hold_linear, const casadi_real *p,
-                                    casadi_real rtol, casadi_real atol, casadi_real h0, int extrapolate,
-                                    long max_steps, int track_work, casadi_real *q_out,
-                                    casadi_real *v_out, casadi_real *lam_out, casadi_real *stats_out,
-                                    const capstan_winch_step_options *options, long *rows_done,
-                                    casadi_real *h_next);
+                                    long u_stride, const casadi_real *p, const capstan_winch_run_options *run,
+                                    casadi_real *q_out, casadi_real *v_out, casadi_real *lam_out,
+                                    casadi_real *stats_out, const capstan_winch_step_options *options,
+                                    long *rows_done, casadi_real *h_next);
 
 /* Derived quantities of n samples (t[k], row k of q, v (nq values), lam (nc values, or
  * NULL), u (at u + k * u_stride, or NULL)): row k of y gets CAPSTAN_WINCH_STEP_NOUT values (see

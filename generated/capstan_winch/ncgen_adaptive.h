@@ -73,11 +73,13 @@ static casadi_real step_factor_order(casadi_real e, int p) {
 /* Error-controlled steps over n_out output intervals (see <model>_simulate_adaptive). */
 static int simulate_adaptive(const casadi_real *q0, const casadi_real *v0, const casadi_real *lam0,
                              casadi_real t0, casadi_real dt, long n_out, const casadi_real *u,
-                             long u_stride, int hold_linear, const casadi_real *p,
-                             casadi_real rtol, casadi_real atol, casadi_real h0, int extrapolate,
-                             long max_steps, int track_work, casadi_real *q_out,
-                             casadi_real *v_out, casadi_real *lam_out, casadi_real *stats_out,
-                             const step_options *options, long *rows_done, casadi_real *h_next) {
+                             long u_stride, const casadi_real *p, const run_options *run,
+                             casadi_real *q_out, casadi_real *v_out, casadi_real *lam_out,
+                             casadi_real *stats_out, const step_options *options, long *rows_done,
+                             casadi_real *h_next) {
+  const casadi_real rtol = run->rtol, atol = run->atol, h0 = run->h0;
+  const long max_steps = run->max_steps;
+  const int extrapolate = run->extrapolate, hold_linear = run->hold_linear, track_work = run->track_work;
   step_options defaults, single;
   workspace ws;
   char *block;
