@@ -15,9 +15,7 @@
  * (its transposed solve in the reverse passes), the two equal to 1e-12.  Built and run by tests/test_stepper_runtime_c.py under
  * AddressSanitizer and UndefinedBehaviorSanitizer. */
 #include "check.h"
-
-typedef double casadi_real;
-typedef long long casadi_int;
+#include "stepper_decls.h"
 
 #include "ncgen_element_tables.h"
 
@@ -97,43 +95,6 @@ static const ncgen_torque_kind TORQUE_KINDS[1] = {{0, 0}};
 #define TAB_FF_OUT 1
 #define MAX_HALVINGS 10
 #define NSTATS 12
-#define STEP_OK 0
-#define STEP_NO_CONVERGENCE 1
-#define STEP_NOT_FINITE 2
-#define STEP_VELOCITY 3
-#define STEP_KERNEL 4
-#define STEP_BAD_INPUT 5
-#define STEP_TOO_MANY_STEPS 6
-#define STEP_TOO_SMALL 7
-#define STEP_INTERRUPTED 8
-#define SCHEME_RATTLE4 1
-typedef struct {
-  casadi_real tol;
-  int max_iter;
-  int max_halvings;
-  int scheme;
-  volatile int *stop;
-} step_options;
-typedef struct {
-  casadi_real rtol;
-  casadi_real atol;
-  casadi_real h0;
-  int extrapolate;
-  long max_steps;
-  int hold_linear;
-  int track_work;
-} run_options;
-
-static step_options default_options(void) {
-  step_options o;
-  o.tol = 1e-10;
-  o.max_iter = 12;
-  o.max_halvings = 4;
-  o.scheme = 0;
-  o.stop = 0;
-  return o;
-}
-#define DEFAULT_OPTIONS default_options
 
 #include "ncgen_table_stepper.h"
 #include "ncgen_table_jacobians.h"
@@ -259,7 +220,7 @@ static void test_input_forces(void) {
 
 /* One step: x⁺ by tab_step_jacobians with and without its Jacobians and by stepper_step. */
 static void one_step(const double *x, const double *u, double h, double *x1, double *Jx, double *Ju, double *res) {
-  step_options o = default_options();
+  step_options o = DEFAULT_OPTIONS();
   tab_jac_hessian D;
   int it = 0, status;
   o.tol = 1e-12;
@@ -275,7 +236,7 @@ static void one_step(const double *x, const double *u, double h, double *x1, dou
 static void test_jacobians(double c, double *Jx, double *Ju) {
   double par[3], x[4] = {0.5, -sqrt(L * L - 0.25), 0.9, 0.6}, u[3] = {0.8, -1.3, 0.6}, h = 0.01, e = 1e-6;
   double x1[4], x1n[4], xs[4], qn[2], vn[2], lam[1], res, res2, worst = 0;
-  step_options o = default_options();
+  step_options o = DEFAULT_OPTIONS();
   int i, j, it, status;
   make_tables(30.0, 0.4, c, par);
   with_inputs();
