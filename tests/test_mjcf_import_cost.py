@@ -4,6 +4,11 @@ and a file read before comes from the store of built models without parsing, unl
 a file it includes changed.  Timings: benchmarks/mjcf_import_time.py."""
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -11,6 +16,9 @@ import ncgen as nc
 from ncgen.codegen import model_cache
 from ncgen.model import context as context_module
 from ncgen.model import mjcf as mjcf_module
+
+#: Test files covering every joint kind, a loop, actuators, tendons and contacts.
+FORMS = ("sequences.xml", "loop_legs.xml", "actuators.xml", "tendons.xml", "contacts.xml")
 
 
 def chain(n: int) -> str:
@@ -67,3 +75,22 @@ def test_the_warning_of_a_stored_file_is_given_again(tmp_path, monkeypatch):
     for _ in range(2):
         with pytest.warns(mjcf_module.MjcfWarning, match=r"fluid\.xml:1 <option>: density"):
             nc.System.from_mjcf(path)
+
+
+def test_first_import_of_every_form_needs_no_sympy(tmp_path):
+    """An empty store, a fresh process: MJCF files with every joint kind (hinge, slide, ball,
+    free and the joint sequences), leg loops closed by ``connect``, actuators of every kind,
+    fixed and spatial tendons, and contacts are imported and built without importing SymPy
+    (the coordinate types' formulas come shipped as generated data), so the first import of
+    an arm costs about a second of CPU (``benchmarks/mjcf_import_time.py``)."""
+    data = Path(__file__).parent / "data"
+    code = ("import sys, warnings\nwarnings.simplefilter('ignore')\nimport ncgen as nc\n"
+            f"for name in {FORMS!r}:\n"
+            f"    system = nc.System.from_mjcf({str(data)!r} + '/' + name, contacts=name == 'contacts.xml')\n"
+            "    assert system.build().dof > 0, name\n"
+            "assert 'sympy' not in sys.modules, 'SymPy imported'\nprint('ok')")
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).parents[1]), "NCGEN_CACHE_DIR": str(tmp_path / "cache")}
+    env.pop("NCGEN_MODEL_CACHE", None)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=tmp_path,
+                         timeout=600)
+    assert out.returncode == 0 and out.stdout.strip().endswith("ok"), out.stderr[-3000:]
