@@ -299,3 +299,33 @@ def on_loops(model, rng, spread: float):
                             model.q0 + N @ rng.normal(0.0, spread, N.shape[1]), np.arange(model.nq), tol=1e-13)
     assert residual <= 1e-13
     return q, null_basis(np.asarray(model.A(q)), model.nq) @ rng.normal(0.0, 1.0, N.shape[1])
+
+
+def connect_gap(mj, d) -> float:
+    """The largest distance (m) between the two anchors of MuJoCo's ``<connect>``
+    equalities at ``d`` (after ``mj_forward`` or ``mj_step``): their closure error."""
+    import mujoco
+    worst = 0.0
+    for k in range(mj.neq):
+        if mj.eq_type[k] == mujoco.mjtEq.mjEQ_CONNECT:
+            b1, b2 = mj.eq_obj1id[k], mj.eq_obj2id[k]
+            x1 = d.xpos[b1] + d.xmat[b1].reshape(3, 3) @ mj.eq_data[k, 0:3]
+            x2 = d.xpos[b2] + d.xmat[b2].reshape(3, 3) @ mj.eq_data[k, 3:6]
+            worst = max(worst, float(np.linalg.norm(x1 - x2)))
+    return worst
+
+
+def closure_run(mj, t_end: float, every: int = 0):
+    """MuJoCo's run of ``mj`` from its initial state for ``t_end`` s at its own integrator and
+    timestep: ``(largest connect gap (m) over every step, qpos at t = 0 and after every
+    ``every`` steps (none if 0))``."""
+    import mujoco
+    d = mujoco.MjData(mj)
+    mujoco.mj_forward(mj, d)
+    gap, qpos = connect_gap(mj, d), [d.qpos.copy()]
+    for k in range(int(round(t_end / mj.opt.timestep))):
+        mujoco.mj_step(mj, d)
+        gap = max(gap, connect_gap(mj, d))
+        if every and (k + 1) % every == 0:
+            qpos.append(d.qpos.copy())
+    return gap, np.array(qpos)
