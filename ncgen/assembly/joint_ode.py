@@ -183,14 +183,25 @@ def armature_vector(model) -> np.ndarray:
 def armature_dynamics_function(model, inverse_dynamics: ca.Function, arm: np.ndarray) -> ca.Function:
     """``(t, qj, vj, u, p) -> (aj, check)`` with armature: ``(M_j + diag(arm)) a_j = τ − C``,
     from the inverse dynamics residual ``r = M_j a_j + C − τ`` (linear in ``a_j``:
-    ``M_j = ∂r/∂a_j``, ``τ − C = −r(0)``), solved by the written-out Cholesky."""
+    ``M_j = ∂r/∂a_j``, ``τ − C = −r(0)``), solved by the written-out Cholesky.  With mimic
+    joints (``a_j = G a_i``, :class:`~ncgen.assembly.tree_dynamics.MimicMap`; ``r`` has a row
+    per independent rate) the system is in the independent rates,
+    ``(Gᵀ M_j G + Gᵀ diag(arm) G) a_i = Gᵀ (τ − C)``: each follower's armature reflected
+    through its ratio."""
+    from ncgen.assembly.tree_dynamics import MimicMap
     js = model.joint_space
     t, u, p = ca.SX.sym("t"), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.np)
-    qj, vj, aj = ca.SX.sym("qj", js.nq), ca.SX.sym("vj", js.nv), ca.SX.sym("aj", js.nv)
-    r = inverse_dynamics(t, qj, vj, aj, u, p)
-    M = ca.jacobian(r, aj) + ca.diag(ca.DM(arm))
-    b = -ca.substitute(r, aj, ca.SX.zeros(js.nv))
+    qj, vj = ca.SX.sym("qj", js.nq), ca.SX.sym("vj", js.nv)
+    G = MimicMap(model).G
+    mimic = G.shape[1] < js.nv
+    ai = ca.SX.sym("aj", G.shape[1])
+    Gs = ca.sparsify(ca.DM(G))
+    r = inverse_dynamics(t, qj, vj, ca.mtimes(Gs, ai) if mimic else ai, u, p)
+    reflected = ca.sparsify(ca.DM(G.T @ np.diag(arm) @ G)) if mimic else ca.diag(ca.DM(arm))
+    M = ca.jacobian(r, ai) + reflected
+    b = -ca.substitute(r, ai, ca.SX.zeros(ai.numel()))
     x, pivot = cholesky_solve(M, b)
+    x = ca.mtimes(Gs, x) if mimic else x
     return ca.Function("joint_forward_dynamics_armature", [t, qj, vj, u, p], [x, ca.vertcat(pivot, ca.sum1(x))],
                        ["t", "qj", "vj", "u", "p"], ["aj", "check"])
 
