@@ -40,7 +40,7 @@ from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.stepper import (COMPOSITION_STAGES, ESTIMATE_MODES, ESTIMATE_NAMES, _trajectory, fixed_scheme,
                                    step_inputs)
 from ncgen.runtime.stepper_checks import is_conservative, row_flags, untrusted_row
-from ncgen.runtime.stepper_library import _Options
+from ncgen.runtime.stepper_library import step_options
 from ncgen.runtime.table_stepper import load_any_stepper
 from ncgen.validation import as_numbers, as_scalar
 
@@ -230,7 +230,7 @@ class _Runs:
         self.h = float(t[1] - t[0]) / substeps
         self.n_out = len(t) - 1
         self.rattle4 = scheme == "rattle4"
-        self._options = _Options(float(tol), int(max_iter), int(max_halvings), int(self.rattle4))
+        self._options = step_options(tol, max_iter, max_halvings, int(self.rattle4))
         self.options = ctypes.byref(self._options)
         nq, nc, T = model.nq, model.nc, len(t)
         self.Q, self.V = np.full((n, T, nq), np.nan), np.full((n, T, nq), np.nan)

@@ -7,6 +7,8 @@ from __future__ import annotations
 import math
 import time
 import warnings
+from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -24,7 +26,7 @@ from ncgen.runtime.feedback import FeedbackFailed, with_partial
 from ncgen.runtime.idas import ChunkedIDAS, ChunkFailure
 from ncgen.runtime.inputs import hold_columns
 from ncgen.runtime.integrator import Run, refuse_integrator
-from ncgen.runtime.options import SimulationOptions
+from ncgen.runtime.options import OptionGroup, SimulationOptions
 from ncgen.runtime.progress import Progress
 from ncgen.runtime.rolling_idas import check_rolling_idas, simulate_rolling_idas
 from ncgen.runtime.rattle_bridge import RattleFailure, compiled_interval, rattle_interval
@@ -89,13 +91,39 @@ BRANCH_DEPARTURE = 0.3
 BRIDGE_MAX_STEPS = 20_000
 
 
+PROJECTS = (True, False, "auto")
+
+
+@dataclass(frozen=True)
+class IdasOptions(OptionGroup):
+    """IDAS's option group, made by ``IdasOptions.of(simulation_options)`` (each field as
+    :class:`~ncgen.runtime.options.SimulationOptions` documents it); checks the fields only
+    IDAS reads."""
+
+    METHOD: ClassVar[str] = "idas"
+    rtol: float | None
+    atol: float | None
+    hold: str
+    max_steps: int
+    backend: str
+    linear_solver: str
+    progress: bool | None
+    project: bool | str
+    joint_dynamics: bool
+
+    def __post_init__(self):
+        if not isinstance(self.linear_solver, str):
+            self.fail("linear_solver", "the name of a CasADi linear solver")
+        if not any(self.project is v or (isinstance(v, str) and self.project == v) for v in PROJECTS):
+            self.fail("project", "True, False or 'auto'")
+
+
 class IdasIntegrator:
     """``method="idas"``: IDAS on the index-1 DAE (:func:`_simulate_idas`) behind the
     integrator seam (:mod:`ncgen.runtime.integrator`)."""
 
     METHOD = "idas"
-    OPTIONS = ("rtol", "atol", "hold", "max_steps", "backend", "linear_solver", "progress", "project",
-               "joint_dynamics")
+    Options = IdasOptions
 
     def __init__(self, model, opts: SimulationOptions):
         if getattr(model, "contact_model", "smooth") == "nonsmooth" and model.nk:
@@ -105,9 +133,9 @@ class IdasIntegrator:
             raise NcgenError(f"simulate: model {model.name!r} was built with {built}, which only the compiled "
                              f"stepper handles: use {stepper}, or {smooth} (compliant contacts) for IDAS")
         refuse_integrator(opts, self.METHOD)
+        self.model, self.opts = model, IdasOptions.of(opts)
         if model.rolling:
-            check_rolling_idas(model, opts)
-        self.model, self.opts = model, opts
+            check_rolling_idas(model, self.opts)
 
     def run(self, run: Run) -> Trajectory:
         if self.model.rolling:
@@ -116,7 +144,7 @@ class IdasIntegrator:
                               controller=run.controller, feedback=run.feedback, why_not=run.why_not)
 
 
-def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions, *, controller=None, feedback=None,
+def _simulate_idas(model, t, U, columns, pv, q, v, opts: IdasOptions, *, controller=None, feedback=None,
                    why_not=None) -> Trajectory:
     """IDAS over the grid ``t`` from the consistent state ``(q, v)`` (see :func:`simulate`);
     a compiled ``controller`` and the joint dynamics enter its DAE, a Python ``feedback`` is

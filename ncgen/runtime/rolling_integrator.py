@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -30,7 +31,7 @@ from ncgen.assembly.nonholonomic import rolling_system
 from ncgen.assembly.rolling_step import DOPRI5, step_function
 from ncgen.errors import CompilerNotFound, NcgenError
 from ncgen.runtime.integrator import Run
-from ncgen.runtime.options import SimulationOptions
+from ncgen.runtime.options import OptionGroup, SimulationOptions
 from ncgen.runtime.trajectory import Trajectory
 
 METHODS = ("rk4", "dopri5")
@@ -220,6 +221,21 @@ def integrate(system, grid, q0, v0, *, method: str = "dopri5", substeps: int = 1
                              rejected=rejected, method=method, compiled=step is not None)
 
 
+@dataclass(frozen=True)
+class RollingOptions(OptionGroup):
+    """The rolling integrator's option group, made by ``RollingOptions.of(simulation_options)``
+    (each field as :class:`~ncgen.runtime.options.SimulationOptions` documents it; every one of
+    them is checked there, as other methods read it too)."""
+
+    METHOD: ClassVar[str] = "rolling"
+    integrator: str | None
+    rtol: float | None
+    atol: float | None
+    substeps: int
+    backend: str
+    hold: str
+
+
 class RollingIntegrator:
     """``method="rolling"``: a model with nonholonomic elements (``model.rolling``), its
     holonomic and velocity constraints kept by projection after every step (module
@@ -235,13 +251,13 @@ class RollingIntegrator:
     without them)."""
 
     METHOD = "rolling"
-    OPTIONS = ("integrator", "rtol", "atol", "substeps", "backend", "hold")
+    Options = RollingOptions
 
     def __init__(self, model, opts: SimulationOptions):
         if opts.joint_dynamics:
             raise NcgenError("method='rolling' does not take joint_dynamics=True (the joints' damping, friction "
                              "and limits are not in the rolling equations)")
-        self.model, self.opts = model, opts
+        self.model, self.opts = model, RollingOptions.of(opts)
         self.system = rolling_system(model)
         if self.system.driven:
             raise NcgenError(f"method='rolling': model {model.name!r} has drives (time-dependent constraints), "
