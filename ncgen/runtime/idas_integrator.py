@@ -7,8 +7,6 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from dataclasses import dataclass
-from typing import ClassVar
 
 import numpy as np
 
@@ -26,7 +24,8 @@ from ncgen.runtime.feedback import FeedbackFailed, with_partial
 from ncgen.runtime.idas import ChunkedIDAS, ChunkFailure
 from ncgen.runtime.inputs import hold_columns
 from ncgen.runtime.integrator import Run, refuse_integrator
-from ncgen.runtime.options import OptionGroup, SimulationOptions
+from ncgen.runtime.idas_options import IdasOptions
+from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.progress import Progress
 from ncgen.runtime.rolling_idas import check_rolling_idas, simulate_rolling_idas
 from ncgen.runtime.rattle_bridge import RattleFailure, compiled_interval, rattle_interval
@@ -89,33 +88,6 @@ BRANCH_DEPARTURE = 0.3
 #: Largest number of NumPy RATTLE steps across one output interval (``_bridge`` without a
 #: C compiler).
 BRIDGE_MAX_STEPS = 20_000
-
-
-PROJECTS = (True, False, "auto")
-
-
-@dataclass(frozen=True)
-class IdasOptions(OptionGroup):
-    """IDAS's option group, made by ``IdasOptions.of(simulation_options)`` (each field as
-    :class:`~ncgen.runtime.options.SimulationOptions` documents it); checks the fields only
-    IDAS reads."""
-
-    METHOD: ClassVar[str] = "idas"
-    rtol: float | None
-    atol: float | None
-    hold: str
-    max_steps: int
-    backend: str
-    linear_solver: str
-    progress: bool | None
-    project: bool | str
-    joint_dynamics: bool
-
-    def __post_init__(self):
-        if not isinstance(self.linear_solver, str):
-            self.fail("linear_solver", "the name of a CasADi linear solver")
-        if not any(self.project is v or (isinstance(v, str) and self.project == v) for v in PROJECTS):
-            self.fail("project", "True, False or 'auto'")
 
 
 class IdasIntegrator:

@@ -28,7 +28,8 @@ from typing import Callable, ClassVar, Protocol
 import numpy as np
 
 from ncgen.errors import NcgenError
-from ncgen.runtime.options import OptionGroup, SimulationOptions
+from ncgen.runtime.option_group import OptionGroup
+from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.trajectory import Trajectory
 
 

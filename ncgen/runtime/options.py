@@ -24,9 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import numbers
 from dataclasses import dataclass
-from typing import ClassVar, NoReturn
 
 import numpy as np
 
@@ -34,12 +32,19 @@ from ncgen.codegen.stepper_package import MAX_HALVINGS, MAX_ITER, TOL
 from ncgen.errors import NcgenError
 from ncgen.model.expressions import did_you_mean
 from ncgen.runtime.dae import BACKENDS
+from ncgen.runtime.idas_options import IdasOptions
 from ncgen.runtime.inputs import HOLDS
+from ncgen.runtime.joint_loop_options import JointLoopOptions
+from ncgen.runtime.option_group import is_count, is_real
+from ncgen.runtime.rolling_options import RollingOptions
+from ncgen.runtime.stepper_options import StepperOptions
 
 METHODS = ("auto", "joint", "idas", "stepper", "rolling")
 INTEGRATORS = ("dopri5", "rk4")
 #: The stepper's kernels (``kernels``): chosen, from the element tables, or the model's own.
 KERNELS = ("auto", "tables", "flat")
+#: The integrators' option groups, checked whenever options are made.
+GROUPS = (IdasOptions, StepperOptions, JointLoopOptions, RollingOptions)
 
 
 @dataclass(frozen=True)
@@ -163,9 +168,8 @@ class SimulationOptions:
                              f"from the element tables or the model's own package), got {self.kernels!r}")
         if not isinstance(self.joint_dynamics, bool):
             raise NcgenError(f"joint_dynamics: expected True or False, got {self.joint_dynamics!r}")
-        from ncgen.runtime.simulation import INTEGRATORS as METHOD_CLASSES    # they import this module
-        for cls in METHOD_CLASSES.values():
-            cls.Options.of(self)
+        for group in GROUPS:
+            group.of(self)
 
     @classmethod
     def resolve(cls, options: "SimulationOptions | None" = None, **shortcuts) -> "SimulationOptions":
@@ -181,35 +185,3 @@ class SimulationOptions:
         if options is None:
             return cls(**shortcuts)
         return dataclasses.replace(options, **shortcuts) if shortcuts else options
-
-
-class OptionGroup:
-    """One integrator's options: a frozen dataclass whose fields are those of
-    :class:`SimulationOptions` it reads, ``METHOD`` its method; its ``__post_init__`` checks the
-    fields only it reads, by :meth:`fail`."""
-
-    METHOD: ClassVar[str]
-
-    @classmethod
-    def of(cls, opts: SimulationOptions):
-        """The group's fields taken from ``opts``, checked."""
-        return cls(**{f.name: getattr(opts, f.name) for f in dataclasses.fields(cls)})
-
-    @classmethod
-    def names(cls) -> tuple[str, ...]:
-        return tuple(f.name for f in dataclasses.fields(cls))
-
-    def fail(self, name: str, expected: str) -> NoReturn:
-        """Raise the error of option ``name``: ``expected``, the value given, the method."""
-        raise NcgenError(f"{name}: expected {expected}, got {getattr(self, name)!r} (an option of "
-                         f"method={self.METHOD!r})")
-
-
-def is_real(x) -> bool:
-    """A real number, not a bool."""
-    return isinstance(x, numbers.Real) and not isinstance(x, (bool, np.bool_))
-
-
-def is_count(x, lowest: int) -> bool:
-    """An int (not a bool) of at least ``lowest``."""
-    return isinstance(x, int) and not isinstance(x, bool) and x >= lowest

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import ClassVar
 
 import numpy as np
 
@@ -31,7 +30,8 @@ from ncgen.assembly.nonholonomic import rolling_system
 from ncgen.assembly.rolling_step import DOPRI5, step_function
 from ncgen.errors import CompilerNotFound, NcgenError
 from ncgen.runtime.integrator import Run
-from ncgen.runtime.options import OptionGroup, SimulationOptions
+from ncgen.runtime.options import SimulationOptions
+from ncgen.runtime.rolling_options import RollingOptions
 from ncgen.runtime.trajectory import Trajectory
 
 METHODS = ("rk4", "dopri5")
@@ -219,21 +219,6 @@ def integrate(system, grid, q0, v0, *, method: str = "dopri5", substeps: int = 1
     q_out, v_out, e_out, r_out = (np.array(x) for x in zip(*rows))
     return RollingTrajectory(t=grid, q=q_out, v=v_out, energy=e_out, residual=r_out, steps=steps,
                              rejected=rejected, method=method, compiled=step is not None)
-
-
-@dataclass(frozen=True)
-class RollingOptions(OptionGroup):
-    """The rolling integrator's option group, made by ``RollingOptions.of(simulation_options)``
-    (each field as :class:`~ncgen.runtime.options.SimulationOptions` documents it; every one of
-    them is checked there, as other methods read it too)."""
-
-    METHOD: ClassVar[str] = "rolling"
-    integrator: str | None
-    rtol: float | None
-    atol: float | None
-    substeps: int
-    backend: str
-    hold: str
 
 
 class RollingIntegrator:

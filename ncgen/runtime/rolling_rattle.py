@@ -32,7 +32,7 @@ from ncgen.assembly.rolling_dae import rolling_kkt
 from ncgen.assembly.rolling_rattle import rattle_functions, step_function
 from ncgen.errors import CompilerNotFound, NcgenError, SimulationError
 from ncgen.runtime.integrator import Run
-from ncgen.runtime.stepper import StepperOptions
+from ncgen.runtime.stepper_options import StepperOptions
 from ncgen.runtime.rolling_integrator import COMPILE_PAYS, PACE_AFTER, project
 from ncgen.runtime.trajectory import Trajectory
 

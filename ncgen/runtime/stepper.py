@@ -51,24 +51,22 @@ solve the KKT system.
 """
 from __future__ import annotations
 
-import math
 import time
-from dataclasses import dataclass
-from typing import ClassVar
 
 import numpy as np
 
 from ncgen.codegen.stepper_abi import RunOptions
-from ncgen.codegen.stepper_package import HALVINGS_LIMIT, STATS, STATUS, STEP_INTERRUPTED, TOL
+from ncgen.codegen.stepper_package import STATS, STATUS, STEP_INTERRUPTED, TOL
 from ncgen.errors import NcgenError, SimulationError, SimulationInterrupted, option
 from ncgen.progress import Ticker
 from ncgen.runtime.energy_balance import balance_report, nonsmooth_contacts, stepper_works
 from ncgen.runtime.joint_dynamics import multipliers_at_samples
-from ncgen.runtime.options import OptionGroup, SimulationOptions, is_count, is_real
+from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.stepper_checks import (SHADOW_FACTOR, check_fixed, check_global, contact_report, energy_report,
                                           error_estimate, is_conservative, shadow_estimates,
                                           shadow_report, trusted_before_failure, warn_unconverged)
 from ncgen.runtime.stepper_library import step_options
+from ncgen.runtime.stepper_options import StepperOptions
 from ncgen.runtime.table_stepper import load_any_stepper
 from ncgen.runtime.trajectory import NAME_KEYS, Trajectory, derived_outputs
 
@@ -78,63 +76,6 @@ NEWTON_FRACTION = 1e-3
 #: Step attempts allowed per output interval of the RATTLE bridge
 #: (:func:`ncgen.runtime.rattle_bridge.compiled_interval`).
 MAX_STEPS = 100_000
-#: Fixed-step schemes of the stepper: ``"auto"`` (``"rattle4"``, or ``"rattle"`` for models with
-#: contacts), RATTLE (order 2) and its fourth-order composition.
-SCHEMES = ("auto", "rattle", "rattle4")
-#: The fixed-step stepper's error estimates (``estimate``; True is ``"shadow"``).
-ESTIMATES = (True, False, "local", "shadow")
-
-
-@dataclass(frozen=True)
-class StepperOptions(OptionGroup):
-    """The compiled stepper's option group, made by ``StepperOptions.of(simulation_options)``
-    (each field as :class:`~ncgen.runtime.options.SimulationOptions` documents it); checks the
-    fields only the stepper reads."""
-
-    METHOD: ClassVar[str] = "stepper"
-    rtol: float | None
-    atol: float | None
-    hold: str
-    max_steps: int
-    substeps: int
-    newton_tol: float
-    max_newton: int
-    max_halvings: int
-    order: int
-    scheme: str
-    check: bool
-    estimate: bool | str
-    kernels: str
-    backend: str
-
-    def __post_init__(self):
-        if not (is_real(self.newton_tol) and math.isfinite(self.newton_tol) and self.newton_tol > 0):
-            self.fail("newton_tol", "a positive Newton tolerance")
-        if not is_count(self.max_newton, 1):
-            self.fail("max_newton", "at least one Newton iteration per step (the stepper's max_iter)")
-        if not (is_count(self.max_halvings, 0) and self.max_halvings <= HALVINGS_LIMIT):
-            self.fail("max_halvings", f"0 to {HALVINGS_LIMIT} step halvings")
-        if self.order not in (2, 4) or isinstance(self.order, bool):
-            self.fail("order", "2 (RATTLE) or 4 (Richardson-extrapolated RATTLE)")
-        if not isinstance(self.scheme, str) or self.scheme not in SCHEMES:
-            self.fail("scheme", f"one of {', '.join(SCHEMES)} (the stepper's fixed-step scheme)")
-        if not any(self.estimate is e or (isinstance(e, str) and self.estimate == e) for e in ESTIMATES):
-            self.fail("estimate", "True, False, 'local' or 'shadow'")
-        if not isinstance(self.check, bool):
-            self.fail("check", "True or False")
-
-    def check_together(self) -> None:
-        """The rule between fields, checked when the stepper runs: ``estimate="shadow"`` is the
-        fixed-step run's."""
-        if self.estimate == "shadow" and self.rtol is not None:
-            raise NcgenError("estimate: 'shadow' is the fixed-step run's shadow run with steps of 2h; with rtol the "
-                             "error control runs its own shadow run at 10x looser tolerances (estimate=True)")
-
-    @property
-    def error_control(self) -> bool:
-        return self.rtol is not None
-
-
 def simulate_stepper(model, t: np.ndarray, U: np.ndarray, p: np.ndarray, q0: np.ndarray, v0: np.ndarray,
                      lam0: np.ndarray, options: StepperOptions | SimulationOptions | None = None, *, cflags=None,
                      **shortcuts) -> Trajectory:

@@ -16,7 +16,8 @@ from ncgen.runtime.rolling_rattle import check_rolling_stepper, simulate_rolling
 from ncgen.runtime.run_start import failed_at_start
 from ncgen.runtime.options import SimulationOptions
 from ncgen.codegen.stepper_package import CONTACT_STATS, STATS, WORK_PARTS
-from ncgen.runtime.stepper import StepperOptions, simulate_stepper
+from ncgen.runtime.stepper import simulate_stepper
+from ncgen.runtime.stepper_options import StepperOptions
 from ncgen.runtime.table_stepper import load_any_stepper, stepper_kernels
 from ncgen.runtime.energy_balance import balance_report, stepper_works
 from ncgen.runtime.stepper_checks import check_fixed, energy_report, is_conservative, trusted_before_failure
