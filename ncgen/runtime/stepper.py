@@ -120,7 +120,8 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, opts: StepperOptions, conserva
     with Ticker(f"stepper: {model.name}, {n_out * substeps:,} steps"):
         Q, V, LAM, S, status, done, splits = stepper.simulate_stats(
             q0, v0, lam0, float(t[0]), h, n_out * substeps, substeps, step_inputs(U, t, hold, substeps), p,
-            step_options(tol, max_iter, max_halvings, int(rattle4)), mode, not conservative, impulse_out=IMP)
+            step_options(tol, max_iter, max_halvings, int(rattle4)),
+            RunOptions(estimate=mode, track_work=int(not conservative)), impulse_out=IMP)
     stepping = time.perf_counter() - start
     rows = done // substeps
     info = {"method": "stepper", "backend": "compiled", "kernels": stepper.kernels,

@@ -70,20 +70,21 @@ class CompiledStepper:
                 np.zeros((rows, n_stats(self.nd))))
 
     def simulate_stats(self, q0, v0, lam0, t0: float, h: float, n_steps: int, every: int, U: np.ndarray | None,
-                       p: np.ndarray, step: "StepSettings", estimate: int, track_work: bool, impulse_out=None):
+                       p: np.ndarray, step: "StepSettings", run: RunOptions, impulse_out=None):
         """``(Q, V, LAM, STATS, status, steps_done, splits)``: fixed steps with per-row
         statistics (columns :data:`~ncgen.codegen.stepper_package.STATS`, then for the
         nonsmooth contact stepper :data:`~ncgen.codegen.stepper_package.CONTACT_STATS`; see
         ``<model>_simulate_stats``).  ``U``: inputs per step, shape ``(n_steps, nu)``, or None
-        for zeros; ``step``: the steps' options (:func:`step_options`); ``estimate``: 0 none, 1
-        the local estimate, 2 the shadow run (``ESTIMATE_*`` of ncgen_fixed.h)."""
+        for zeros; ``step``: the steps' options (:func:`step_options`); ``run``: the run's
+        (``<model>_run_options``; fixed steps read ``estimate``: 0 none, 1 the local estimate, 2
+        the shadow run, ``ESTIMATE_*`` of ncgen_fixed.h, and ``track_work``)."""
         Q, V, LAM, S = self._buffers(n_steps // every)
         U = None if U is None or self.nu == 0 else np.ascontiguousarray(U, float)
         done, splits = ctypes.c_long(0), ctypes.c_long(0)
         status = _interruptible(self._simulate_stats, _ptr(_vec(q0)), _ptr(_vec(v0)), _ptr(_vec(lam0)), float(t0), float(h),
                                       int(n_steps), int(every), _ptr(U), self.nu if U is not None else 0,
                                       _ptr(_vec(p)), _ptr(Q), _ptr(V), _ptr(LAM), _ptr(S), step,
-                                      int(estimate), int(bool(track_work)), ctypes.byref(done),
+                                      ctypes.byref(run), ctypes.byref(done),
                                       ctypes.byref(splits), *self._impulses(impulse_out, n_steps // every))
         return Q, V, LAM, S, int(status), int(done.value), int(splits.value)
 
