@@ -45,8 +45,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 def one_step(stepper, model, n_steps: int = 1):
     """``n_steps`` RATTLE steps of 1 ms from the model's initial state (status checked)."""
+    from ncgen.codegen.stepper_abi import RunOptions
+    from ncgen.runtime.stepper_library import step_options
+
     out = stepper.simulate_stats(model.q0, model.v0, np.zeros(model.nc), 0.0, 1e-3, n_steps, n_steps, None,
-                                 model.p0, 1e-10, 12, 4, 0, False, scheme=0)
+                                 model.p0, step_options(1e-10, 12, 4), RunOptions())
     if out[4] != 0:
         raise RuntimeError(f"{model.name}: the stepper failed with status {out[4]}")
     return out

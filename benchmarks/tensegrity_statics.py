@@ -9,8 +9,12 @@ or more, then the rest lengths for k = 2000 N/m.  *Prestress*: the stiffest pres
 free tower's mechanisms with cables between 1 and 100 N (IPOPT).  Each answer is checked
 (13 states of self-stress and a balance residual below 1e-9 N; 17 mechanisms, positive
 smallest stiffness, the largest cable at its bound) before its time is kept.  The two runs
-alternate for ``--rounds`` rounds; CPU (``time.process_time``) and wall time, min and median,
-the load average and the BLAS threads are printed with ``TARGET`` lines.  ``--smoke``: 2 rounds.
+alternate for ``--rounds`` rounds, each under ncgen's BLAS thread rule (``NCGEN_BLAS_THREADS``
+unset: one thread inside ncgen, ncgen/blas_threads.py) and with the BLAS's own threads
+(``NCGEN_BLAS_THREADS=0``, what ncgen did before the rule), interleaved; CPU
+(``time.process_time``, every thread of the process) and wall time, min and median, the ratios
+own threads / rule, the load average and the BLAS variables are printed, with ``TARGET`` lines
+for the rule.  ``--smoke``: 2 rounds.
 """
 from __future__ import annotations
 
@@ -28,6 +32,7 @@ from ncgen.analysis.self_stress import framework
 from ncgen.analysis.tensegrity_shapes import stacked_prisms
 
 TARGETS = {"inverse statics": 0.5, "prestress optimisation": 5.0}       # s of CPU, issue 41
+SETTINGS = {"rule": None, "own threads": "0"}                   # NCGEN_BLAS_THREADS
 
 
 def loaded_tower():
@@ -65,19 +70,33 @@ def main() -> None:
     runs = {"inverse statics": lambda: inverse(*tower), "prestress optimisation": lambda: prestress(*tower[:3])}
     for run in runs.values():                                          # warm-up: imports, CasADi plugins
         run()
-    times = {name: ([], []) for name in runs}
+    times = {(name, setting): ([], []) for name in runs for setting in SETTINGS}
     for _ in range(rounds):
         for name, run in runs.items():
-            w, c = time.perf_counter(), time.process_time()
-            run()
-            times[name][0].append(time.perf_counter() - w)
-            times[name][1].append(time.process_time() - c)
+            for setting, value in SETTINGS.items():
+                os.environ.pop("NCGEN_BLAS_THREADS", None)
+                if value is not None:
+                    os.environ["NCGEN_BLAS_THREADS"] = value
+                w, c = time.perf_counter(), time.process_time()
+                run()
+                times[name, setting][0].append(time.perf_counter() - w)
+                times[name, setting][1].append(time.process_time() - c)
+    os.environ.pop("NCGEN_BLAS_THREADS", None)
     print(f"=== 3-stage tower, 100 members, {rounds} interleaved rounds, "
           f"load average {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
-    for name, (wall, cpu) in times.items():
-        print(f"TARGET {name}: CPU min {min(cpu):.3f} s, median {statistics.median(cpu):.3f} s "
-              f"(target <= {TARGETS[name]} s: {'met' if statistics.median(cpu) <= TARGETS[name] else 'MISSED'}); "
-              f"wall min {min(wall):.3f} s, median {statistics.median(wall):.3f} s")
+    for (name, setting), (wall, cpu) in times.items():
+        line = (f"{name}, {setting}: CPU min {min(cpu):.3f} s, median {statistics.median(cpu):.3f} s; "
+                f"wall min {min(wall):.3f} s, median {statistics.median(wall):.3f} s")
+        if setting == "rule":
+            target = TARGETS[name]
+            line = f"TARGET {line} (target CPU <= {target} s: " \
+                   f"{'met' if statistics.median(cpu) <= target else 'MISSED'})"
+        print(line)
+    for name in runs:
+        for k, what in enumerate(("wall", "CPU")):
+            ratio = np.array(times[name, "own threads"][k]) / np.array(times[name, "rule"][k])
+            print(f"{name}: {what} own threads / rule, per round: min {ratio.min():.2f}x, "
+                  f"median {np.median(ratio):.2f}x")
 
 
 if __name__ == "__main__":

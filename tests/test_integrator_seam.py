@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 
 import numpy as np
 import pytest
@@ -28,13 +29,61 @@ def pendulum():
 
 def test_every_method_has_an_integrator_and_every_option_a_reader():
     assert set(simulation.INTEGRATORS) == set(METHODS) - {"auto"}
-    fields = {f.name for f in dataclasses.fields(SimulationOptions)}
+    fields = {f.name: f for f in dataclasses.fields(SimulationOptions)}
     read = {"method", "ic_tolerance"}                       # read by simulate itself
     for method, cls in simulation.INTEGRATORS.items():
-        assert cls.METHOD == method and callable(cls.run)
-        assert set(cls.OPTIONS) <= fields, (method, set(cls.OPTIONS) - fields)
-        read |= set(cls.OPTIONS)
-    assert read == fields, f"options no integrator reads: {fields - read}"
+        assert cls.METHOD == method == cls.Options.METHOD and callable(cls.run)
+        group = {f.name: f for f in dataclasses.fields(cls.Options)}
+        assert set(group) <= set(fields), (method, set(group) - set(fields))
+        assert all(group[n].type == fields[n].type for n in group), method       # the same field, typed alike
+        assert cls.Options.__dataclass_params__.frozen
+        read |= set(group)
+    assert read == set(fields), f"options no integrator reads: {set(fields) - read}"
+
+
+def test_each_integrator_takes_its_group_whole():
+    """An integrator keeps its group of the options (the fields it reads, as given), and the
+    group goes down: a field outside it is not there to be read."""
+    model = pendulum().build()
+    opts = SimulationOptions(rtol=1e-7, substeps=3, newton_tol=1e-11, project=False)
+    for method, cls in simulation.INTEGRATORS.items():
+        if method == "rolling":
+            continue                                        # needs rolling elements
+        group = cls(model, opts).opts
+        assert type(group) is cls.Options
+        assert {n: getattr(group, n) for n in cls.Options.names()} == {n: getattr(opts, n) for n in cls.Options.names()}
+    assert not hasattr(simulation.INTEGRATORS["idas"](model, opts).opts, "newton_tol")
+
+
+@pytest.mark.parametrize("kwargs, method, match", [
+    ({"max_halvings": 11}, "stepper", "max_halvings: expected 0 to 10 step halvings, got 11"),
+    ({"newton_tol": -1.0}, "stepper", "newton_tol: expected a positive Newton tolerance, got -1.0"),
+    ({"estimate": "global"}, "stepper", "estimate: expected True, False, 'local' or 'shadow', got 'global'"),
+    ({"scheme": "rk4"}, "stepper", "scheme: expected one of auto, rattle, rattle4"),
+    ({"project": "yes"}, "idas", "project: expected True, False or 'auto', got 'yes'"),
+    ({"linear_solver": 3}, "idas", "linear_solver: expected the name of a CasADi linear solver, got 3"),
+])
+def test_a_bad_option_is_named_with_its_integrator(kwargs, method, match):
+    """Checked by the integrator's group when the options are made, whichever method they
+    choose, and by the group itself."""
+    said = re.escape(match) + r".*\(an option of method=" + repr(method) + r"\)"
+    for chosen in ("auto", "idas", "joint", "stepper"):
+        with pytest.raises(NcgenError, match=said):
+            SimulationOptions(method=chosen, **kwargs)
+    group = simulation.INTEGRATORS[method].Options
+    good = group.of(SimulationOptions())
+    with pytest.raises(NcgenError, match=said):
+        dataclasses.replace(good, **kwargs)
+
+
+def test_the_stepper_s_rule_between_options_is_its_own():
+    """estimate='shadow' with rtol: refused when the stepper is prepared, not when another
+    method is chosen (IDAS ignores both)."""
+    model = pendulum().build()
+    opts = SimulationOptions(estimate="shadow", rtol=1e-8)
+    simulation.INTEGRATORS["idas"](model, opts)
+    with pytest.raises(NcgenError, match="estimate: 'shadow' is the fixed-step run's shadow run"):
+        simulation.INTEGRATORS["stepper"](model, opts)
 
 
 def test_simulate_prepares_once_and_runs_a_consistent_run(monkeypatch):
@@ -44,7 +93,7 @@ def test_simulate_prepares_once_and_runs_a_consistent_run(monkeypatch):
     seen = {}
 
     class Recorder:
-        METHOD, OPTIONS = "idas", ()
+        METHOD, Options = "idas", simulation.INTEGRATORS["idas"].Options
 
         def __init__(self, m, opts):
             seen["prepared"] = seen.get("prepared", 0) + 1
@@ -73,7 +122,7 @@ def test_a_python_feedback_reaches_the_run_as_inputs_at_a_state(monkeypatch):
     seen = {}
 
     class Recorder:
-        METHOD, OPTIONS = "stepper", ()
+        METHOD, Options = "stepper", simulation.INTEGRATORS["stepper"].Options
 
         def __init__(self, m, opts):
             pass

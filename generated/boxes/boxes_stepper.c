@@ -140,11 +140,12 @@ int boxes_simulate_stats(const casadi_real *q0, const casadi_real *v0, const cas
                          const casadi_real *u, long u_stride, const casadi_real *p,
                          casadi_real *q_out, casadi_real *v_out, casadi_real *lam_out,
                          casadi_real *stats_out, const boxes_step_options *options,
-                         int estimate, int track_work, long *steps_done, long *splits,
+                         const boxes_run_options *run, long *steps_done, long *splits,
                          casadi_real *impulse_out) {
   boxes_step_options defaults;
   return run_fixed(q0, v0, lam0, t0, h, n_steps, every, u, u_stride, p, q_out, v_out, lam_out, 0, stats_out,
-                   options_or_default(options, &defaults), estimate, track_work, steps_done, splits,
+                   options_or_default(options, &defaults), run ? run->estimate : 0, run ? run->track_work : 0,
+                   steps_done, splits,
                    impulse_out);
 }
 

@@ -95,7 +95,8 @@ typedef struct {
 
 capstan_winch_step_options capstan_winch_step_default_options(void);
 
-/* The options of an error-controlled run (capstan_winch_simulate_adaptive), passed whole. */
+/* The options of a run, passed whole: of an error-controlled run (capstan_winch_simulate_adaptive)
+ * all but estimate; of fixed steps (capstan_winch_simulate_stats) track_work and estimate only. */
 typedef struct {
   casadi_real rtol;  /* local error tolerance, relative (> 0) */
   casadi_real atol;  /* local error tolerance, absolute, in the units of q and v (> 0) */
@@ -104,6 +105,7 @@ typedef struct {
   long max_steps;    /* step attempts allowed per output interval (>= 1) */
   int hold_linear;   /* nonzero: the input of a step interpolated at its midpoint, else held */
   int track_work;    /* nonzero: the work columns of stats_out accumulated */
+  int estimate;      /* fixed steps: 0 none, 1 local, 2 shadow (capstan_winch_simulate_stats) */
 } capstan_winch_run_options;
 
 /* Bytes of workspace one call of capstan_winch_step needs (pass it as `work`). */
@@ -136,7 +138,7 @@ int capstan_winch_simulate(const casadi_real *q0, const casadi_real *v0, casadi_
 
 /* As capstan_winch_simulate, with per-row statistics and error estimates.  lam0: multipliers at
  * t0 (nc values, NULL for zeros; no longer read: kept for the signature).  stats_out (CAPSTAN_WINCH_STEP_NSTATS
- * values per row, may be NULL): see above.  estimate: 0 none; 1 (local) one pair of steps
+ * values per row, may be NULL): see above.  run (NULL: neither estimate nor work): run->estimate: 0 none; 1 (local) one pair of steps
  * in six (and the last) is retaken as one step of 2h, whose difference gives the pair's
  * local error (y_2h - y_pair) / (2^p - 1) (p the scheme's order); the estimate is the
  * largest component of their sum, each weighted by the pairs it stands for, for the
@@ -145,7 +147,7 @@ int capstan_winch_simulate(const casadi_real *q0, const casadi_real *v0, casadi_
  * shadow run with steps of 2h from the same start (about half the work again) gives the
  * global error estimate |y_h - y_2h| / (2^p - 1) after every second step.  The error
  * columns hold the latest estimate (-1 before the first, -2 once a shadow step of 2h
- * failed: no estimate from there on; models with contacts have none).  track_work != 0:
+ * failed: no estimate from there on; models with contacts have none).  run->track_work != 0:
  * W and its parts accumulate the trapezoidal rule of the powers of capstan_winch_step_power over
  * each step, its start with the step's multiplier lambda and its end with mu (second
  * order).  impulse_out
@@ -155,7 +157,7 @@ int capstan_winch_simulate_stats(const casadi_real *q0, const casadi_real *v0, c
                                  const casadi_real *u, long u_stride, const casadi_real *p,
                                  casadi_real *q_out, casadi_real *v_out, casadi_real *lam_out,
                                  casadi_real *stats_out, const capstan_winch_step_options *options,
-                                 int estimate, int track_work, long *steps_done, long *splits);
+                                 const capstan_winch_run_options *run, long *steps_done, long *splits);
 
 /* Error-controlled steps over n_out output intervals of dt from (q0, v0, lam0) at t0, of
  * RATTLE (options->scheme 0, order p = 2) or of its fourth-order composition (the scheme of

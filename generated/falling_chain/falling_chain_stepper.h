@@ -101,7 +101,8 @@ typedef struct {
 
 falling_chain_step_options falling_chain_step_default_options(void);
 
-/* The options of an error-controlled run (falling_chain_simulate_adaptive), passed whole. */
+/* The options of a run, passed whole: of an error-controlled run (falling_chain_simulate_adaptive)
+ * all but estimate; of fixed steps (falling_chain_simulate_stats) track_work and estimate only. */
 typedef struct {
   casadi_real rtol;  /* local error tolerance, relative (> 0) */
   casadi_real atol;  /* local error tolerance, absolute, in the units of q and v (> 0) */
@@ -110,6 +111,7 @@ typedef struct {
   long max_steps;    /* step attempts allowed per output interval (>= 1) */
   int hold_linear;   /* nonzero: the input of a step interpolated at its midpoint, else held */
   int track_work;    /* nonzero: the work columns of stats_out accumulated */
+  int estimate;      /* fixed steps: 0 none, 1 local, 2 shadow (falling_chain_simulate_stats) */
 } falling_chain_run_options;
 
 /* Bytes of workspace one call of falling_chain_step needs (pass it as `work`). */
@@ -155,7 +157,7 @@ int falling_chain_simulate(const casadi_real *q0, const casadi_real *v0, casadi_
 
 /* As falling_chain_simulate, with per-row statistics and error estimates.  lam0: multipliers at
  * t0 (nc values, NULL for zeros; no longer read: kept for the signature).  stats_out (FALLING_CHAIN_STEP_NSTATS
- * values per row, may be NULL): see above.  estimate: 0 none; 1 (local) one pair of steps
+ * values per row, may be NULL): see above.  run (NULL: neither estimate nor work): run->estimate: 0 none; 1 (local) one pair of steps
  * in six (and the last) is retaken as one step of 2h, whose difference gives the pair's
  * local error (y_2h - y_pair) / (2^p - 1) (p the scheme's order); the estimate is the
  * largest component of their sum, each weighted by the pairs it stands for, for the
@@ -164,7 +166,7 @@ int falling_chain_simulate(const casadi_real *q0, const casadi_real *v0, casadi_
  * shadow run with steps of 2h from the same start (about half the work again) gives the
  * global error estimate |y_h - y_2h| / (2^p - 1) after every second step.  The error
  * columns hold the latest estimate (-1 before the first, -2 once a shadow step of 2h
- * failed: no estimate from there on; models with contacts have none).  track_work != 0:
+ * failed: no estimate from there on; models with contacts have none).  run->track_work != 0:
  * W and its parts accumulate the trapezoidal rule of the powers of falling_chain_step_power over
  * each step, its start with the step's multiplier lambda and its end with mu (second
  * order), the exact work of the contact impulses in the step (the
@@ -177,7 +179,7 @@ int falling_chain_simulate_stats(const casadi_real *q0, const casadi_real *v0, c
                                  const casadi_real *u, long u_stride, const casadi_real *p,
                                  casadi_real *q_out, casadi_real *v_out, casadi_real *lam_out,
                                  casadi_real *stats_out, const falling_chain_step_options *options,
-                                 int estimate, int track_work, long *steps_done, long *splits,
+                                 const falling_chain_run_options *run, long *steps_done, long *splits,
                                  casadi_real *impulse_out);
 
 /* Error-controlled steps over n_out output intervals of dt from (q0, v0, lam0) at t0, of

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ncgen.blas_threads import one_blas_thread
 from ncgen.errors import NcgenError
 from ncgen.analysis.modes import Modes, modes
 from ncgen.analysis.statics import Equilibrium, equilibrium
@@ -83,6 +84,7 @@ class Tensegrity:
         return "\n".join(lines) + "\n"
 
 
+@one_blas_thread
 def form_find(nodes, struts, cables, *, rest_lengths=None, force_densities=None, stiffness=1000.0,
               strut_mass: float = 1.0, node_mass: float = 0.1, name: str = "tensegrity") -> Tensegrity:
     """A self-equilibrated configuration of the tensegrity ``(nodes, struts, cables)`` from

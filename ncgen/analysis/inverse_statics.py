@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ncgen.blas_threads import one_blas_thread
 from ncgen.errors import NcgenError
 from ncgen.analysis.self_stress import RANK_TOL, Framework, SelfStress, analyse, framework
 
@@ -145,6 +146,7 @@ class InverseStatics:
         return "\n".join(lines) + "\n"
 
 
+@one_blas_thread
 def inverse_statics(nodes, struts, cables, loads=None, supports=None, *, cable_min: float = 0.0,
                     cable_max: float | None = None, strut_max: float | None = None, clusters=None,
                     friction=None, turns=None, bodies=None, tol: float = RANK_TOL) -> InverseStatics:

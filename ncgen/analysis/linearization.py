@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ncgen.blas_threads import one_blas_thread
 from ncgen.assembly.linearization import linearization_function
 from ncgen.errors import NcgenError
 from ncgen.analysis.statics import _parameters
@@ -92,6 +93,7 @@ def linearization(model):
                                                                        model.dof))
 
 
+@one_blas_thread
 def linearize(model, q, v=None, u=None, p=None, *, t: float | None = None, coordinates=None,
               space: str = "natural"):
     """Linearise ``model`` about ``(q, v)`` (consistent: ``Φ = 0``, ``A v + Φ_t = 0``; ``v``

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
+from ncgen.blas_threads import one_blas_thread
 from ncgen.analysis.statics import Equilibrium, equilibrium
 from ncgen.analysis.stability import ZERO_TOL
 from ncgen.assembly.manifold import manifold_point
@@ -88,6 +89,7 @@ class Modes:
                                       np.tile(eq.u, (n, 1)), eq.p, info)
 
 
+@one_blas_thread
 def modes(model, eq: Equilibrium | None = None, **equilibrium_options) -> Modes:
     """Natural frequencies and mode shapes of ``model`` about ``eq`` (default: the
     equilibrium :func:`~ncgen.analysis.statics.equilibrium` finds with

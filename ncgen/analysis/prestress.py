@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ncgen.blas_threads import one_blas_thread
 from ncgen.errors import NcgenError
 from ncgen.analysis.inverse_statics import InverseStatics, least_norm, problem
 from ncgen.analysis.self_stress import RANK_TOL
@@ -40,6 +41,7 @@ class PrestressDesign(InverseStatics):
     solve_time: float = 0.0
 
 
+@one_blas_thread
 def optimize_prestress(nodes, struts, cables, loads=None, supports=None, *, objective: str = "stiffness",
                        cable_min: float = 0.0, cable_max: float | None = None, strut_max: float | None = None,
                        clusters=None, friction=None, turns=None, bodies=None, tol: float = RANK_TOL,

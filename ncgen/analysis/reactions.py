@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
+from ncgen.blas_threads import one_blas_thread
 from ncgen.errors import ModelError
 from ncgen.validation import as_vector
 
@@ -88,6 +89,7 @@ def _wrench(model, member, Q_full: np.ndarray, q: np.ndarray, point_local):
     return P, f, float(tau_g[0] + r[0] * f[1] - r[1] * f[0])
 
 
+@one_blas_thread
 def joint_reactions(model, q, lam, *, v=None, t=None, u=None, p=None, joints=None) -> dict[str, JointReaction]:
     """Reactions of ``joints`` (default: every joint with equations, those that coordinate
     sharing eliminated included) at the state ``q`` with multipliers ``lam`` (from

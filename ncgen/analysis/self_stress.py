@@ -47,6 +47,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ncgen.blas_threads import one_blas_thread
 from ncgen.errors import NcgenError
 from ncgen.analysis.formfinding import rigid_motions
 from ncgen.analysis.stability import classify
@@ -360,6 +361,7 @@ class SelfStress:
         return "\n".join(lines) + "\n"
 
 
+@one_blas_thread
 def self_stress(nodes, struts, cables, supports=None, clusters=None, *, bodies=None,
                 tol: float = RANK_TOL) -> SelfStress:
     """States of self-stress and infinitesimal mechanisms of the configuration ``nodes``

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ncgen.blas_threads import one_blas_thread
 from ncgen.assembly.statics import statics_function
 from ncgen.errors import ModelError, NcgenError
 from ncgen.analysis.reactions import unshared_state
@@ -174,6 +175,7 @@ def evaluate(model, q, lam, t, u, p):
             np.array(A, float).reshape(-1, model.nq))
 
 
+@one_blas_thread
 def equilibrium(model, q_guess=None, u=None, p=None, *, t: float | None = None, method: str = "descent",
                 tol: float = 1e-10, max_iter: int = 100) -> Equilibrium:
     """A static equilibrium of ``model`` near ``q_guess`` (default ``model.q0``) under the

@@ -22,9 +22,10 @@ RUN = "const {name}_run_options *"
 STEP_OPTIONS = (("casadi_real", "tol"), ("int", "max_iter"), ("int", "max_halvings"), ("int", "scheme"),
                 ("volatile int *", "stop"))
 
-#: ``{name}_run_options``, the options of an error-controlled run: fields as ``(C type, name)``.
+#: ``{name}_run_options``, the options of a run (error control: all but ``estimate``; fixed steps:
+#: ``track_work`` and ``estimate``): fields as ``(C type, name)``.
 RUN_OPTIONS = (("casadi_real", "rtol"), ("casadi_real", "atol"), ("casadi_real", "h0"), ("int", "extrapolate"),
-               ("long", "max_steps"), ("int", "hold_linear"), ("int", "track_work"))
+               ("long", "max_steps"), ("int", "hold_linear"), ("int", "track_work"), ("int", "estimate"))
 
 #: ``{name}_<function>`` of the header, by function suffix.
 FUNCTIONS = {
@@ -42,7 +43,7 @@ FUNCTIONS = {
     "simulate_stats": Signature("int", (
         (CREAL, "q0"), (CREAL, "v0"), (CREAL, "lam0"), (REAL, "t0"), (REAL, "h"), ("long", "n_steps"),
         ("long", "every"), (CREAL, "u"), ("long", "u_stride"), (CREAL, "p"), (OUT, "q_out"), (OUT, "v_out"),
-        (OUT, "lam_out"), (OUT, "stats_out"), (OPTIONS, "options"), ("int", "estimate"), ("int", "track_work"),
+        (OUT, "lam_out"), (OUT, "stats_out"), (OPTIONS, "options"), (RUN, "run"),
         (LONG_OUT, "steps_done"), (LONG_OUT, "splits"), (OUT, "impulse_out"))),
     "simulate_adaptive": Signature("int", (
         (CREAL, "q0"), (CREAL, "v0"), (CREAL, "lam0"), (REAL, "t0"), (REAL, "dt"), ("long", "n_out"),

@@ -255,7 +255,7 @@ class ContactStepFunction:
         """``(status, x⁺, P)``: one step of the compiled contact stepper from a cold start (no
         halving), called directly (a single step needs no interruptible worker thread)."""
         from ncgen.codegen.stepper_package import TOL
-        from ncgen.runtime.stepper_library import _Options, _ptr
+        from ncgen.runtime.stepper_library import _ptr, step_options
         nq, nc = self.model.nq, self.model.nc
         q0, v0 = np.ascontiguousarray(x[:nq]), np.ascontiguousarray(x[nq:])
         Q, V, LAM = np.zeros((1, nq)), np.zeros((1, nq)), np.zeros((1, nc))
@@ -265,7 +265,7 @@ class ContactStepFunction:
         status = self._stepper._simulate(_ptr(q0), _ptr(v0), float(t), float(self.h), 1, 1, _ptr(U),
                                          self.nu if U is not None else 0, _ptr(np.ascontiguousarray(p, float)),
                                          _ptr(Q), _ptr(V), _ptr(LAM), ctypes.byref(it),
-                                         ctypes.byref(_Options(TOL, STEPPER_MAX_ITER, 0)), ctypes.byref(done),
+                                         ctypes.byref(step_options(TOL, STEPPER_MAX_ITER, 0)), ctypes.byref(done),
                                          ctypes.byref(splits), _ptr(P))
         return int(status), np.concatenate([Q[0], V[0]]), P
 

@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ncgen.blas_threads import one_blas_thread
 from ncgen.control.costs import cost_functions
 from ncgen.control.initial import check_consistent
 from ncgen.control.step_curvature import StepCurvature
@@ -68,6 +69,7 @@ class ILQRResult:
     message: str = ""
 
 
+@one_blas_thread
 def ilqr(st, x0, U0, costs, *, p=None, t0=None, max_iter: int = 200, tol: float = 1e-8,
          mu: float = 1e-6, second_order: bool = True, verbose: bool = False) -> ILQRResult:
     """iLQR from the initial guess ``U0`` (N × nu); ``costs = (stage, terminal)`` as in

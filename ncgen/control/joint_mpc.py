@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ncgen.blas_threads import one_blas_thread
 from ncgen.control.box_qp import box_qp
 from ncgen.control.joint_step import JointStep
 from ncgen.control.mpc_qp import InProcessQP, check_qp_solver, qp_function
@@ -157,6 +158,7 @@ class JointMPC:
                 return trial
         return U
 
+    @one_blas_thread
     def __call__(self, x, t: float = 0.0) -> np.ndarray:
         x = as_vector(x, self.step.nx, "x (joint positions and rates [q_j; v_j])")
         t = as_scalar(t, "t")

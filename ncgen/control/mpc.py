@@ -36,6 +36,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from ncgen.blas_threads import one_blas_thread
 from ncgen.control.discrete import step_jacobian_function
 from ncgen.control.mpc_problem import mpc_problem
 from ncgen.control.mpc_qp import GENERATED, InProcessQP, check_qp_solver, qp_function
@@ -372,6 +373,7 @@ class MPC:
         x, u = (np.asarray(o, float).reshape(-1) for o in self.problem.reference(t))
         return x, np.clip(u, *self.u_bounds)
 
+    @one_blas_thread
     def reset(self, x, t: float | None = None, iterations: int = 0) -> None:
         """Start again from the guess of :meth:`initial_guess`, then run ``iterations``
         solves at ``x`` without shifting (to converge the first solution)."""
@@ -388,6 +390,7 @@ class MPC:
             X, U = self._solve(x, t, X, U)
         self.X, self.U = X, U
 
+    @one_blas_thread
     def __call__(self, x, t: float | None = None) -> np.ndarray:
         """The input to apply now, from the measured state ``x`` at time ``t``; the solution
         (``mpc.solution``: states and inputs along the horizon), shifted by one interval,

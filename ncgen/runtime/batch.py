@@ -40,7 +40,8 @@ from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.stepper import (COMPOSITION_STAGES, ESTIMATE_MODES, ESTIMATE_NAMES, _trajectory, fixed_scheme,
                                    step_inputs)
 from ncgen.runtime.stepper_checks import is_conservative, row_flags, untrusted_row
-from ncgen.runtime.stepper_library import _Options
+from ncgen.codegen.stepper_abi import RunOptions
+from ncgen.runtime.stepper_library import step_options
 from ncgen.runtime.table_stepper import load_any_stepper
 from ncgen.validation import as_numbers, as_scalar
 
@@ -230,8 +231,10 @@ class _Runs:
         self.h = float(t[1] - t[0]) / substeps
         self.n_out = len(t) - 1
         self.rattle4 = scheme == "rattle4"
-        self._options = _Options(float(tol), int(max_iter), int(max_halvings), int(self.rattle4))
+        self._options = step_options(tol, max_iter, max_halvings, int(self.rattle4))
         self.options = ctypes.byref(self._options)
+        self._run = RunOptions(estimate=self.mode, track_work=int(not self.conservative))
+        self.run_options = ctypes.byref(self._run)
         nq, nc, T = model.nq, model.nc, len(t)
         self.Q, self.V = np.full((n, T, nq), np.nan), np.full((n, T, nq), np.nan)
         self.LAM = np.full((n, T, nc), np.nan)
@@ -339,7 +342,7 @@ class _Runs:
                       p_at(i), Q(i, 1), V(i, 1), L(i, 1))
             if self.check:
                 status = raw.simulate_stats(Q(i, 0), V(i, 0), L(i, 0), *common, stats_at(i), self.options,
-                                            self.mode, int(not self.conservative), ctypes.byref(done),
+                                            self.run_options, ctypes.byref(done),
                                             ctypes.byref(splits), *extra)
                 self.ITER[i] = self.STATS[i, :, STATS.index("newton_iterations")]
             else:

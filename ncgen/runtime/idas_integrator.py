@@ -24,6 +24,7 @@ from ncgen.runtime.feedback import FeedbackFailed, with_partial
 from ncgen.runtime.idas import ChunkedIDAS, ChunkFailure
 from ncgen.runtime.inputs import hold_columns
 from ncgen.runtime.integrator import Run, refuse_integrator
+from ncgen.runtime.idas_options import IdasOptions
 from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.progress import Progress
 from ncgen.runtime.rolling_idas import check_rolling_idas, simulate_rolling_idas
@@ -94,8 +95,7 @@ class IdasIntegrator:
     integrator seam (:mod:`ncgen.runtime.integrator`)."""
 
     METHOD = "idas"
-    OPTIONS = ("rtol", "atol", "hold", "max_steps", "backend", "linear_solver", "progress", "project",
-               "joint_dynamics")
+    Options = IdasOptions
 
     def __init__(self, model, opts: SimulationOptions):
         if getattr(model, "contact_model", "smooth") == "nonsmooth" and model.nk:
@@ -105,9 +105,9 @@ class IdasIntegrator:
             raise NcgenError(f"simulate: model {model.name!r} was built with {built}, which only the compiled "
                              f"stepper handles: use {stepper}, or {smooth} (compliant contacts) for IDAS")
         refuse_integrator(opts, self.METHOD)
+        self.model, self.opts = model, IdasOptions.of(opts)
         if model.rolling:
-            check_rolling_idas(model, opts)
-        self.model, self.opts = model, opts
+            check_rolling_idas(model, self.opts)
 
     def run(self, run: Run) -> Trajectory:
         if self.model.rolling:
@@ -116,7 +116,7 @@ class IdasIntegrator:
                               controller=run.controller, feedback=run.feedback, why_not=run.why_not)
 
 
-def _simulate_idas(model, t, U, columns, pv, q, v, opts: SimulationOptions, *, controller=None, feedback=None,
+def _simulate_idas(model, t, U, columns, pv, q, v, opts: IdasOptions, *, controller=None, feedback=None,
                    why_not=None) -> Trajectory:
     """IDAS over the grid ``t`` from the consistent state ``(q, v)`` (see :func:`simulate`);
     a compiled ``controller`` and the joint dynamics enter its DAE, a Python ``feedback`` is

@@ -4,11 +4,12 @@ per integration method, prepared once for a model and its options, then run over
 An integrator class has
 
 * ``METHOD``: its name in ``SimulationOptions.method`` (and ``info["method"]``);
-* ``OPTIONS``: the fields of :class:`~ncgen.runtime.options.SimulationOptions` it reads, its
-  option group (the others are ignored by it);
-* ``__init__(model, opts)``: prepares: checks the options against the model (a bad
-  combination raises :class:`~ncgen.errors.NcgenError` naming the option) and loads or
-  compiles what it runs;
+* ``Options``: its option group, a frozen :class:`~ncgen.runtime.options.OptionGroup` of the
+  fields of :class:`~ncgen.runtime.options.SimulationOptions` it reads (the others are ignored
+  by it), defined beside it and checking the fields only it reads;
+* ``__init__(model, opts)``: prepares: takes its group of ``opts`` (``Options.of(opts)``),
+  checks it against the model (a bad combination raises :class:`~ncgen.errors.NcgenError`
+  naming the option) and loads or compiles what it runs; the group goes down whole;
 * ``run(run)``: integrates the :class:`Run` and returns a
   :class:`~ncgen.runtime.trajectory.Trajectory`.
 
@@ -16,7 +17,7 @@ An integrator class has
 integrator, makes the :class:`Run` and calls it.  The implementations: the joint-space loop
 (:mod:`ncgen.runtime.joint_integrator`), the compiled stepper
 (:mod:`ncgen.runtime.stepper_integrator`), IDAS (``IdasIntegrator`` in
-:mod:`ncgen.runtime.simulation`) and the rolling integrator of models with nonholonomic
+:mod:`ncgen.runtime.idas_integrator`) and the rolling integrator of models with nonholonomic
 elements (``RollingIntegrator`` in :mod:`ncgen.runtime.rolling_integrator`).
 """
 from __future__ import annotations
@@ -27,6 +28,7 @@ from typing import Callable, ClassVar, Protocol
 import numpy as np
 
 from ncgen.errors import NcgenError
+from ncgen.runtime.option_group import OptionGroup
 from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.trajectory import Trajectory
 
@@ -61,7 +63,7 @@ class Integrator(Protocol):
     """What ``simulate`` needs of an integration method (module docstring)."""
 
     METHOD: ClassVar[str]
-    OPTIONS: ClassVar[tuple[str, ...]]
+    Options: ClassVar[type[OptionGroup]]
 
     def __init__(self, model, opts: SimulationOptions) -> None: ...
 

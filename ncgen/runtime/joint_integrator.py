@@ -4,8 +4,8 @@ joint coordinates integrated by a compiled RK4 or Dormand–Prince loop
 C whole (:func:`ncgen.codegen.joint_loop.joint_options`)."""
 from __future__ import annotations
 
-from ncgen.codegen.joint_loop import joint_options
 from ncgen.runtime.integrator import Run
+from ncgen.runtime.joint_loop_options import JointLoopOptions
 from ncgen.runtime.joint_simulation import simulate_joint
 from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.trajectory import Trajectory
@@ -16,11 +16,11 @@ class JointIntegrator:
     dynamics in the C loop, a Python feedback once per output interval."""
 
     METHOD = "joint"
-    OPTIONS = ("integrator", "rtol", "atol", "substeps", "max_steps", "hold", "joint_dynamics", "progress", "kernels")
+    Options = JointLoopOptions
 
     def __init__(self, model, opts: SimulationOptions):
-        self.model, self.opts = model, opts
-        self.loop_options = joint_options(opts.integrator, opts.rtol, opts.atol, opts.substeps, opts.max_steps)
+        self.model, self.opts = model, JointLoopOptions.of(opts)
+        self.loop_options = self.opts.loop_options()
 
     def run(self, run: Run) -> Trajectory:
         o = self.opts

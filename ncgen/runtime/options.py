@@ -6,7 +6,15 @@ The run's data — the model, the time grid, inputs ``u``, parameters ``p``, the
 here.  The object is frozen and validated once, when made: a bad value raises
 :class:`~ncgen.errors.NcgenError` naming the option, what was expected and what was given.
 ``simulate(model, t_end, dt, options=opts, rtol=1e-9)`` takes ``options`` whole, and its
-keyword arguments are shortcuts for the same fields (:meth:`SimulationOptions.resolve`)::
+keyword arguments are shortcuts for the same fields (:meth:`SimulationOptions.resolve`).
+
+Each integrator owns its option group (as Drake's integrator configs): a frozen
+:class:`OptionGroup` next to the integrator (``IdasOptions``, ``StepperOptions``,
+``JointLoopOptions``, ``RollingOptions``), holding the fields it reads and checking those only it
+reads, its errors naming the method; the fields several read (the tolerances, ``hold``,
+``substeps``, ``backend``, ...) are checked here.  ``SimulationOptions`` is checked whole when
+made (every group's checks run, whichever method is chosen), and ``simulate`` passes the
+chosen integrator its group, which goes down whole::
 
     opts = nc.SimulationOptions(method="stepper", substeps=4)
     traj = nc.simulate(model, 2.0, 0.01, options=opts)
@@ -16,27 +24,27 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import numbers
 from dataclasses import dataclass
 
 import numpy as np
 
-from ncgen.codegen.stepper_package import HALVINGS_LIMIT, MAX_HALVINGS, MAX_ITER, TOL
+from ncgen.codegen.stepper_package import MAX_HALVINGS, MAX_ITER, TOL
 from ncgen.errors import NcgenError
 from ncgen.model.expressions import did_you_mean
 from ncgen.runtime.dae import BACKENDS
+from ncgen.runtime.idas_options import IdasOptions
 from ncgen.runtime.inputs import HOLDS
+from ncgen.runtime.joint_loop_options import JointLoopOptions
+from ncgen.runtime.option_group import is_count, is_real
+from ncgen.runtime.rolling_options import RollingOptions
+from ncgen.runtime.stepper_options import StepperOptions
 
 METHODS = ("auto", "joint", "idas", "stepper", "rolling")
 INTEGRATORS = ("dopri5", "rk4")
-#: Fixed-step schemes of the stepper: ``"auto"`` (``"rattle4"``, or ``"rattle"`` for models with
-#: contacts), RATTLE (order 2) and its fourth-order composition.
-SCHEMES = ("auto", "rattle", "rattle4")
-#: The fixed-step stepper's error estimates (``estimate``; True is ``"shadow"``).
-ESTIMATES = (True, False, "local", "shadow")
-PROJECTS = (True, False, "auto")
 #: The stepper's kernels (``kernels``): chosen, from the element tables, or the model's own.
 KERNELS = ("auto", "tables", "flat")
+#: The integrators' option groups, checked whenever options are made.
+GROUPS = (IdasOptions, StepperOptions, JointLoopOptions, RollingOptions)
 
 
 @dataclass(frozen=True)
@@ -126,59 +134,42 @@ class SimulationOptions:
     def __post_init__(self):
         for name in ("max_steps", "substeps", "max_newton", "max_halvings", "order"):
             value = getattr(self, name)           # 4.0 or numpy.int64(4) count as 4
-            if _real(value) and math.isfinite(value) and int(value) == value:
+            if is_real(value) and math.isfinite(value) and int(value) == value:
                 object.__setattr__(self, name, int(value))
         for name in ("rtol", "atol", "ic_tolerance", "newton_tol"):
             value = getattr(self, name)
-            if _real(value):
+            if is_real(value):
                 object.__setattr__(self, name, float(value))
         for name in ("check", "estimate", "joint_dynamics"):
             value = getattr(self, name)
-            if isinstance(value, (bool, np.bool_)) or (_real(value) and value in (0, 1)):
+            if isinstance(value, (bool, np.bool_)) or (is_real(value) and value in (0, 1)):
                 object.__setattr__(self, name, bool(value))
         if self.method not in METHODS:
             raise NcgenError(f"method: expected one of {', '.join(METHODS)}, got {self.method!r}")
         for name in ("rtol", "atol", "ic_tolerance"):
             value = getattr(self, name)
-            if value is not None and not (_real(value) and math.isfinite(value) and value > 0):
+            if value is not None and not (is_real(value) and math.isfinite(value) and value > 0):
                 raise NcgenError(f"{name}: expected a positive tolerance, got {value!r}")
         if self.hold not in HOLDS:
             raise NcgenError(f"hold: expected one of {', '.join(HOLDS)}, got {self.hold!r}")
         if self.backend not in BACKENDS:
             raise NcgenError(f"backend: expected one of {', '.join(BACKENDS)}, got {self.backend!r}")
-        if not isinstance(self.linear_solver, str):
-            raise NcgenError(f"linear_solver: expected the name of a CasADi linear solver, got {self.linear_solver!r}")
         if self.progress not in (True, False, None):
             raise NcgenError(f"progress: expected True, False or None, got {self.progress!r}")
-        if not any(self.project is v or (isinstance(v, str) and self.project == v) for v in PROJECTS):
-            raise NcgenError(f"project: expected True, False or 'auto', got {self.project!r}")
-        if not _count(self.max_steps, 1):
+        if not is_count(self.max_steps, 1):
             raise NcgenError(f"max_steps: expected a positive number of steps, got {self.max_steps!r}")
-        if not _count(self.substeps, 1):
+        if not is_count(self.substeps, 1):
             raise NcgenError(f"substeps: expected a positive number of steps per output interval, got {self.substeps!r}")
-        if not (_real(self.newton_tol) and math.isfinite(self.newton_tol) and self.newton_tol > 0):
-            raise NcgenError(f"newton_tol: expected a positive Newton tolerance, got {self.newton_tol!r}")
-        if not _count(self.max_newton, 1):
-            raise NcgenError(f"max_newton: expected at least one Newton iteration per step (the stepper's "
-                             f"max_iter), got {self.max_newton!r}")
-        if not (_count(self.max_halvings, 0) and self.max_halvings <= HALVINGS_LIMIT):
-            raise NcgenError(f"max_halvings: expected 0 to {HALVINGS_LIMIT} step halvings, got {self.max_halvings!r}")
-        if self.order not in (2, 4) or isinstance(self.order, bool):
-            raise NcgenError(f"order: expected 2 (RATTLE) or 4 (Richardson-extrapolated RATTLE), got {self.order!r}")
-        if not isinstance(self.scheme, str) or self.scheme not in SCHEMES:
-            raise NcgenError(f"scheme: expected one of {', '.join(SCHEMES)} (the stepper's fixed-step scheme), "
-                             f"got {self.scheme!r}")
         if self.integrator is not None and self.integrator not in INTEGRATORS:
             raise NcgenError(f"integrator: expected one of {', '.join(INTEGRATORS)} (method='joint' or 'rolling'), "
                              f"got {self.integrator!r}")
         if not isinstance(self.kernels, str) or self.kernels not in KERNELS:
             raise NcgenError(f"kernels: expected one of {', '.join(map(repr, KERNELS))} (the stepper's kernels: "
                              f"from the element tables or the model's own package), got {self.kernels!r}")
-        if not any(self.estimate is e or (isinstance(e, str) and self.estimate == e) for e in ESTIMATES):
-            raise NcgenError(f"estimate: expected True, False, 'local' or 'shadow', got {self.estimate!r}")
-        for name in ("check", "joint_dynamics"):
-            if not isinstance(getattr(self, name), bool):
-                raise NcgenError(f"{name}: expected True or False, got {getattr(self, name)!r}")
+        if not isinstance(self.joint_dynamics, bool):
+            raise NcgenError(f"joint_dynamics: expected True or False, got {self.joint_dynamics!r}")
+        for group in GROUPS:
+            group.of(self)
 
     @classmethod
     def resolve(cls, options: "SimulationOptions | None" = None, **shortcuts) -> "SimulationOptions":
@@ -194,11 +185,3 @@ class SimulationOptions:
         if options is None:
             return cls(**shortcuts)
         return dataclasses.replace(options, **shortcuts) if shortcuts else options
-
-
-def _real(x) -> bool:
-    return isinstance(x, numbers.Real) and not isinstance(x, (bool, np.bool_))
-
-
-def _count(x, lowest: int) -> bool:
-    return isinstance(x, int) and not isinstance(x, bool) and x >= lowest

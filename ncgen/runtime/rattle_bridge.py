@@ -32,9 +32,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from ncgen.codegen.stepper_abi import RunOptions
 from ncgen.codegen.stepper_package import MAX_ITER as STEPPER_MAX_ITER, STATUS, STEP_INTERRUPTED
 from ncgen.assembly.manifold import RANK_TOL
 from ncgen.runtime.stepper import MAX_STEPS, newton_tolerance
+from ncgen.runtime.stepper_library import step_options
 
 #: Gauss–Newton iterations per step at most.
 MAX_ITER = 20
@@ -54,9 +56,10 @@ def compiled_interval(stepper, x: np.ndarray, lam: np.ndarray, t0: float, dt: fl
     step it would take next.  Raises :class:`RattleFailure`, or KeyboardInterrupt on Ctrl-C."""
     nq = len(x) // 2
     tol = newton_tolerance(rtol, atol)
-    Q, V, _, _, status, rows, h_next = stepper.simulate_adaptive(
-        x[:nq], x[nq:], lam, t0, dt, 1, U, hold_linear, p, rtol, atol, h0, True, MAX_STEPS, False, tol,
-        STEPPER_MAX_ITER)
+    run = RunOptions(rtol=rtol, atol=atol, h0=h0, extrapolate=1, max_steps=MAX_STEPS, hold_linear=int(hold_linear),
+                     track_work=0)
+    Q, V, _, _, status, rows, h_next = stepper.simulate_adaptive(x[:nq], x[nq:], lam, t0, dt, 1, U, p, run,
+                                                                 step_options(tol, STEPPER_MAX_ITER, 0))
     if status == STEP_INTERRUPTED:
         raise KeyboardInterrupt
     if status != 0 or rows != 1:

@@ -34,7 +34,6 @@ from ncgen.assembly.rolling_dae import rolling_dae, rolling_kkt
 from ncgen.errors import NcgenError, SimulationError
 from ncgen.runtime.idas import ChunkedIDAS, ChunkFailure
 from ncgen.runtime.integrator import Run
-from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.progress import Progress
 from ncgen.runtime.rolling_integrator import project
 from ncgen.runtime.trajectory import Trajectory
@@ -43,8 +42,9 @@ from ncgen.runtime.trajectory import Trajectory
 CHUNKS = 20
 
 
-def check_rolling_idas(model, opts: SimulationOptions) -> None:
-    """Refuse, by name, what the rolling IDAS path does not take (module docstring)."""
+def check_rolling_idas(model, opts) -> None:
+    """Refuse, by name, what the rolling IDAS path does not take (module docstring); ``opts``:
+    IDAS's option group (:class:`~ncgen.runtime.idas_integrator.IdasOptions`)."""
     if opts.joint_dynamics:
         raise NcgenError(f"method='idas': model {model.name!r} has rolling elements: joint_dynamics=True is not "
                          "taken (the joints' damping, friction and limits are not in the rolling equations)")
@@ -63,8 +63,9 @@ def _functions(system):
     return system.compiled_steps["idas"]
 
 
-def simulate_rolling_idas(model, run: Run, opts: SimulationOptions) -> Trajectory:
-    """IDAS over ``run``'s grid for a model with rolling elements (module docstring)."""
+def simulate_rolling_idas(model, run: Run, opts) -> Trajectory:
+    """IDAS over ``run``'s grid for a model with rolling elements (module docstring); ``opts``:
+    IDAS's option group (:class:`~ncgen.runtime.idas_integrator.IdasOptions`)."""
     if run.controller is not None or run.feedback is not None:
         raise NcgenError(f"method='idas': model {model.name!r} has rolling elements: feedback and controllers are "
                          "not taken (open-loop inputs are); give u as samples or a function of t")

@@ -31,6 +31,7 @@ from ncgen.assembly.rolling_step import DOPRI5, step_function
 from ncgen.errors import CompilerNotFound, NcgenError
 from ncgen.runtime.integrator import Run
 from ncgen.runtime.options import SimulationOptions
+from ncgen.runtime.rolling_options import RollingOptions
 from ncgen.runtime.trajectory import Trajectory
 
 METHODS = ("rk4", "dopri5")
@@ -235,13 +236,13 @@ class RollingIntegrator:
     without them)."""
 
     METHOD = "rolling"
-    OPTIONS = ("integrator", "rtol", "atol", "substeps", "backend", "hold")
+    Options = RollingOptions
 
     def __init__(self, model, opts: SimulationOptions):
         if opts.joint_dynamics:
             raise NcgenError("method='rolling' does not take joint_dynamics=True (the joints' damping, friction "
                              "and limits are not in the rolling equations)")
-        self.model, self.opts = model, opts
+        self.model, self.opts = model, RollingOptions.of(opts)
         self.system = rolling_system(model)
         if self.system.driven:
             raise NcgenError(f"method='rolling': model {model.name!r} has drives (time-dependent constraints), "

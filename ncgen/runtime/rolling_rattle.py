@@ -32,12 +32,12 @@ from ncgen.assembly.rolling_dae import rolling_kkt
 from ncgen.assembly.rolling_rattle import rattle_functions, step_function
 from ncgen.errors import CompilerNotFound, NcgenError, SimulationError
 from ncgen.runtime.integrator import Run
-from ncgen.runtime.options import SimulationOptions
+from ncgen.runtime.stepper_options import StepperOptions
 from ncgen.runtime.rolling_integrator import COMPILE_PAYS, PACE_AFTER, project
 from ncgen.runtime.trajectory import Trajectory
 
 
-def check_rolling_stepper(model, opts: SimulationOptions) -> None:
+def check_rolling_stepper(model, opts: StepperOptions) -> None:
     """Refuse, by name, the stepper's options this path does not take (module docstring)."""
     if opts.scheme not in ("auto", "rattle"):
         raise NcgenError(f"method='stepper': model {model.name!r} has rolling elements: scheme={opts.scheme!r} is "
@@ -113,7 +113,7 @@ def rattle_step(system, t: float, q, v, h: float, u0, u1, p, tol: float = 1e-12,
     return q_next, y[:nq], y[nq:], n1 + n2
 
 
-def simulate_rolling_rattle(model, run: Run, opts: SimulationOptions) -> Trajectory:
+def simulate_rolling_rattle(model, run: Run, opts: StepperOptions) -> Trajectory:
     """Fixed RATTLE steps over ``run``'s grid (module docstring)."""
     if run.controller is not None or run.feedback is not None:
         raise NcgenError(f"method='stepper': model {model.name!r} has rolling elements: feedback and controllers "

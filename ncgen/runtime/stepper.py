@@ -55,6 +55,7 @@ import time
 
 import numpy as np
 
+from ncgen.codegen.stepper_abi import RunOptions
 from ncgen.codegen.stepper_package import STATS, STATUS, STEP_INTERRUPTED, TOL
 from ncgen.errors import NcgenError, SimulationError, SimulationInterrupted, option
 from ncgen.progress import Ticker
@@ -64,6 +65,8 @@ from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.stepper_checks import (SHADOW_FACTOR, check_fixed, check_global, contact_report, energy_report,
                                           error_estimate, is_conservative, shadow_estimates,
                                           shadow_report, trusted_before_failure, warn_unconverged)
+from ncgen.runtime.stepper_library import step_options
+from ncgen.runtime.stepper_options import StepperOptions
 from ncgen.runtime.table_stepper import load_any_stepper
 from ncgen.runtime.trajectory import NAME_KEYS, Trajectory, derived_outputs
 
@@ -73,21 +76,21 @@ NEWTON_FRACTION = 1e-3
 #: Step attempts allowed per output interval of the RATTLE bridge
 #: (:func:`ncgen.runtime.rattle_bridge.compiled_interval`).
 MAX_STEPS = 100_000
-
-
 def simulate_stepper(model, t: np.ndarray, U: np.ndarray, p: np.ndarray, q0: np.ndarray, v0: np.ndarray,
-                     lam0: np.ndarray, options: SimulationOptions | None = None, *, cflags=None,
+                     lam0: np.ndarray, options: StepperOptions | SimulationOptions | None = None, *, cflags=None,
                      **shortcuts) -> Trajectory:
     """Integrate ``model`` over the uniform grid ``t`` (s) from the consistent state
     ``(q0, v0)`` with multipliers ``lam0`` at ``t[0]``; ``U`` holds the input samples on the
-    grid, shape ``(len(t), nu)``, ``p`` the parameter values.  ``options``
-    (:class:`~ncgen.runtime.options.SimulationOptions`; keyword arguments are shortcuts for
-    its fields): ``rtol`` (and ``atol``, default ``rtol``, units of q and v) switch to error
-    control (module docstring); ``check=False`` turns off the checks of a fixed-step run,
-    ``estimate=False`` its error estimate (and so the error check).  Raises
+    grid, shape ``(len(t), nu)``, ``p`` the parameter values.  ``options``: the stepper's group
+    (:class:`StepperOptions`) or a :class:`~ncgen.runtime.options.SimulationOptions` (keyword
+    arguments are shortcuts for its fields): ``rtol`` (and ``atol``, default ``rtol``, units of
+    q and v) switch to error control (module docstring); ``check=False`` turns off the checks of
+    a fixed-step run, ``estimate=False`` its error estimate (and so the error check).  Raises
     :class:`~ncgen.errors.SimulationError` naming the time and the cause, with the
     trajectory up to the last output time before it."""
-    opts = SimulationOptions.resolve(options, **shortcuts)
+    opts = options if isinstance(options, StepperOptions) and not shortcuts else \
+        StepperOptions.of(SimulationOptions.resolve(options, **shortcuts))
+    opts.check_together()
     stepper = load_any_stepper(model, cflags, opts.kernels)
     conservative = is_conservative(model, inputs=bool(np.any(np.asarray(U) != 0)))
     if opts.rtol is not None and stepper.nd:
@@ -98,14 +101,11 @@ def simulate_stepper(model, t: np.ndarray, U: np.ndarray, p: np.ndarray, q0: np.
         raise NcgenError(f"scheme: 'rattle4' needs a smooth model; {model.name!r} has nonsmooth contacts, which "
                          f"keep their own scheme (first order at impacts): use scheme='rattle' or build it with "
                          f"contacts='smooth'")
-    if opts.estimate == "shadow" and opts.rtol is not None:
-        raise NcgenError("estimate: 'shadow' is the fixed-step run's shadow run with steps of 2h; with rtol the "
-                         "error control runs its own shadow run at 10x looser tolerances (estimate=True)")
     run = _fixed if opts.rtol is None else _adaptive
     return run(model, stepper, t, U, p, q0, v0, lam0, opts, conservative)
 
 
-def _fixed(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, conservative: bool) -> Trajectory:
+def _fixed(model, stepper, t, U, p, q0, v0, lam0, opts: StepperOptions, conservative: bool) -> Trajectory:
     """Fixed steps (module docstring)."""
     hold, substeps, tol, max_iter, max_halvings = opts.hold, opts.substeps, opts.newton_tol, opts.max_newton, \
         opts.max_halvings
@@ -119,9 +119,9 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, conse
     mode = ESTIMATE_MODES[opts.estimate] if estimate and not contacts else 0
     with Ticker(f"stepper: {model.name}, {n_out * substeps:,} steps"):
         Q, V, LAM, S, status, done, splits = stepper.simulate_stats(
-            q0, v0, lam0, float(t[0]), h, n_out * substeps, substeps, step_inputs(U, t, hold, substeps), p, tol,
-            max_iter, max_halvings, mode, not conservative, impulse_out=IMP,
-            scheme=int(rattle4))
+            q0, v0, lam0, float(t[0]), h, n_out * substeps, substeps, step_inputs(U, t, hold, substeps), p,
+            step_options(tol, max_iter, max_halvings, int(rattle4)),
+            RunOptions(estimate=mode, track_work=int(not conservative)), impulse_out=IMP)
     stepping = time.perf_counter() - start
     rows = done // substeps
     info = {"method": "stepper", "backend": "compiled", "kernels": stepper.kernels,
@@ -156,7 +156,7 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, conse
     return traj
 
 
-def _adaptive(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, conservative: bool) -> Trajectory:
+def _adaptive(model, stepper, t, U, p, q0, v0, lam0, opts: StepperOptions, conservative: bool) -> Trajectory:
     """Error control (module docstring)."""
     hold, tol, max_iter, order, max_steps = opts.hold, opts.newton_tol, opts.max_newton, opts.order, opts.max_steps
     check, estimate = opts.check, opts.estimate
@@ -168,10 +168,10 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, opts: SimulationOptions, co
     start = time.perf_counter()
 
     def run(rtol, atol):
-        return stepper.simulate_adaptive(q0, v0, lam0, float(t[0]), dt, n_out, U if model.nu else None,
-                                         hold == "linear", p, rtol, atol, 0.0, order == 4,
-                                         max_steps, not conservative, newton_tolerance(rtol, atol, tol), max_iter,
-                                         scheme=int(rattle4))
+        options = RunOptions(rtol=rtol, atol=atol, h0=0.0, extrapolate=int(order == 4), max_steps=max_steps,
+                             hold_linear=int(hold == "linear"), track_work=int(not conservative))
+        return stepper.simulate_adaptive(q0, v0, lam0, float(t[0]), dt, n_out, U if model.nu else None, p, options,
+                                         step_options(newton_tolerance(rtol, atol, tol), max_iter, 0, int(rattle4)))
 
     with Ticker(f"stepper: {model.name}, rtol {rtol:g}"):
         Q, V, LAM, S, status, rows, h_next = run(rtol, atol)

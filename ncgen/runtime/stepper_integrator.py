@@ -17,6 +17,7 @@ from ncgen.runtime.run_start import failed_at_start
 from ncgen.runtime.options import SimulationOptions
 from ncgen.codegen.stepper_package import CONTACT_STATS, STATS, WORK_PARTS
 from ncgen.runtime.stepper import simulate_stepper
+from ncgen.runtime.stepper_options import StepperOptions
 from ncgen.runtime.table_stepper import load_any_stepper, stepper_kernels
 from ncgen.runtime.energy_balance import balance_report, stepper_works
 from ncgen.runtime.stepper_checks import check_fixed, energy_report, is_conservative, trusted_before_failure
@@ -31,16 +32,16 @@ class StepperIntegrator:
     control), compiled when prepared."""
 
     METHOD = "stepper"
-    OPTIONS = ("rtol", "atol", "hold", "max_steps", "substeps", "newton_tol", "max_newton", "max_halvings",
-               "order", "scheme", "check", "estimate", "kernels", "backend")
+    Options = StepperOptions
 
     def __init__(self, model, opts: SimulationOptions):
         refuse_integrator(opts, self.METHOD)
         if opts.joint_dynamics:
             raise NcgenError(NO_CONTROLLER)
+        self.model, self.opts = model, StepperOptions.of(opts)
+        self.opts.check_together()
         if model.rolling:
-            check_rolling_stepper(model, opts)
-        self.model, self.opts = model, opts
+            check_rolling_stepper(model, self.opts)
 
     def _load(self) -> None:
         try:
@@ -74,7 +75,7 @@ class StepperIntegrator:
         return simulate_stepper(self.model, run.t, run.U, run.p, run.q, run.v, lam, self.opts)
 
 
-def _stepwise(model, run: Run, opts: SimulationOptions) -> Trajectory:
+def _stepwise(model, run: Run, opts: StepperOptions) -> Trajectory:
     """The compiled stepper one output interval at a time, the feedback evaluated at the
     start of each (no shadow run: it needs the whole run).  The intervals' statistics (steps,
     Newton iterations, split steps, work of the non-conservative forces, contact solves) are
@@ -85,7 +86,7 @@ def _stepwise(model, run: Run, opts: SimulationOptions) -> Trajectory:
         raise NcgenError("hold='linear' with a feedback u(t, q, v): the feedback is held over each output "
                          "interval (zoh); use hold='zoh'")
     t, p, feedback = run.t, run.p, run.feedback
-    step_opts = dataclasses.replace(opts, method="stepper", check=False, estimate=False)
+    step_opts = dataclasses.replace(opts, check=False, estimate=False)
     Q, V, LAM, UU, S = [run.q], [run.v], [], [], []
     IMP: list | None = None             # nonsmooth contacts: each interval's impulse sums (N·s)
     info = {"method": "stepper", "backend": "compiled", "feedback": feedback[0], "hold": "zoh",
@@ -161,7 +162,7 @@ def _interval_row(part: Trajectory) -> list:
     return row
 
 
-def _checked(model, opts: SimulationOptions, traj: Trajectory, S: np.ndarray, after: str = "") -> Trajectory:
+def _checked(model, opts: StepperOptions, traj: Trajectory, S: np.ndarray, after: str = "") -> Trajectory:
     """``traj`` with its energy report, checked unless ``check=False`` from the statistics
     ``S`` (one row per interval; ``after``: the failure that ended the run, or ""): fixed
     steps as a fixed-step run (:func:`~ncgen.runtime.stepper_checks.check_fixed`, raising

@@ -54,7 +54,7 @@ class CompiledStepper:
         status = _interruptible(self._simulate, _ptr(q0), _ptr(v0), float(t0), float(h), int(n_steps), int(every),
                                 _ptr(U), self.nu if U is not None else 0, _ptr(p), _ptr(Q), _ptr(V), _ptr(LAM),
                                 ITER.ctypes.data_as(ctypes.POINTER(ctypes.c_long)),
-                                _Options(float(tol), int(max_iter), int(max_halvings), scheme),
+                                step_options(tol, max_iter, max_halvings, scheme),
                                 ctypes.byref(done), ctypes.byref(splits), *self._impulses(impulse_out, rows))
         return Q, V, LAM, ITER, int(status), int(done.value), int(splits.value)
 
@@ -70,42 +70,38 @@ class CompiledStepper:
                 np.zeros((rows, n_stats(self.nd))))
 
     def simulate_stats(self, q0, v0, lam0, t0: float, h: float, n_steps: int, every: int, U: np.ndarray | None,
-                       p: np.ndarray, tol: float, max_iter: int, max_halvings: int, estimate: int,
-                       track_work: bool, impulse_out=None, scheme: int = 0):
+                       p: np.ndarray, step: "StepSettings", run: RunOptions, impulse_out=None):
         """``(Q, V, LAM, STATS, status, steps_done, splits)``: fixed steps with per-row
         statistics (columns :data:`~ncgen.codegen.stepper_package.STATS`, then for the
         nonsmooth contact stepper :data:`~ncgen.codegen.stepper_package.CONTACT_STATS`; see
         ``<model>_simulate_stats``).  ``U``: inputs per step, shape ``(n_steps, nu)``, or None
-        for zeros; ``estimate``: 0 none, 1 the local estimate, 2 the shadow run (``ESTIMATE_*``
-        of ncgen_fixed.h); ``scheme`` as for :meth:`simulate`."""
+        for zeros; ``step``: the steps' options (:func:`step_options`); ``run``: the run's
+        (``<model>_run_options``; fixed steps read ``estimate``: 0 none, 1 the local estimate, 2
+        the shadow run, ``ESTIMATE_*`` of ncgen_fixed.h, and ``track_work``)."""
         Q, V, LAM, S = self._buffers(n_steps // every)
         U = None if U is None or self.nu == 0 else np.ascontiguousarray(U, float)
         done, splits = ctypes.c_long(0), ctypes.c_long(0)
         status = _interruptible(self._simulate_stats, _ptr(_vec(q0)), _ptr(_vec(v0)), _ptr(_vec(lam0)), float(t0), float(h),
                                       int(n_steps), int(every), _ptr(U), self.nu if U is not None else 0,
-                                      _ptr(_vec(p)), _ptr(Q), _ptr(V), _ptr(LAM), _ptr(S),
-                                      _Options(float(tol), int(max_iter), int(max_halvings), scheme),
-                                      int(estimate), int(bool(track_work)), ctypes.byref(done),
+                                      _ptr(_vec(p)), _ptr(Q), _ptr(V), _ptr(LAM), _ptr(S), step,
+                                      ctypes.byref(run), ctypes.byref(done),
                                       ctypes.byref(splits), *self._impulses(impulse_out, n_steps // every))
         return Q, V, LAM, S, int(status), int(done.value), int(splits.value)
 
     def simulate_adaptive(self, q0, v0, lam0, t0: float, dt: float, n_out: int, U: np.ndarray | None,
-                          hold_linear: bool, p: np.ndarray, rtol: float, atol: float, h0: float, extrapolate: bool,
-                          max_steps: int, track_work: bool, tol: float, max_iter: int, scheme: int = 0):
+                          p: np.ndarray, run: RunOptions, step: "StepSettings"):
         """``(Q, V, LAM, STATS, status, rows_done, h_next)``: error-controlled steps (see
-        ``<model>_simulate_adaptive``) of RATTLE (``scheme`` 0) or its fourth-order
-        composition (1).  ``U``: input samples at the output times, ``(n_out + 1, nu)``, or
-        None for zeros."""
+        ``<model>_simulate_adaptive``) with the run's options ``run`` (``<model>_run_options``:
+        tolerances, first step, extrapolation, step attempts, input hold, work tracking) and the
+        steps' ``step`` (:func:`step_options`: Newton tolerance and iterations, the scheme: 0
+        RATTLE, 1 its fourth-order composition).  ``U``: input samples at the output times,
+        ``(n_out + 1, nu)``, or None for zeros."""
         Q, V, LAM, S = self._buffers(n_out)
         U = None if U is None or self.nu == 0 else np.ascontiguousarray(U, float)
-        run = RunOptions(rtol=float(rtol), atol=float(atol), h0=float(h0), extrapolate=int(bool(extrapolate)),
-                         max_steps=int(max_steps), hold_linear=int(bool(hold_linear)),
-                         track_work=int(bool(track_work)))
         rows, h_next = ctypes.c_long(0), ctypes.c_double(0.0)
         status = _interruptible(self._simulate_adaptive, _ptr(_vec(q0)), _ptr(_vec(v0)), _ptr(_vec(lam0)), float(t0), float(dt),
                                 int(n_out), _ptr(U), self.nu if U is not None else 0, _ptr(_vec(p)),
-                                ctypes.byref(run), _ptr(Q), _ptr(V), _ptr(LAM), _ptr(S),
-                                _Options(float(tol), int(max_iter), 0, int(scheme)), ctypes.byref(rows),
+                                ctypes.byref(run), _ptr(Q), _ptr(V), _ptr(LAM), _ptr(S), step, ctypes.byref(rows),
                                 ctypes.byref(h_next))
         return Q, V, LAM, S, int(status), int(rows.value), float(h_next.value)
 
@@ -127,19 +123,25 @@ def _vec(a):
     return None if a is None else np.ascontiguousarray(a, float)
 
 
-class _Options(StepOptions):
-    """``<model>_step_options``, its stop flag pointing at ``self.flag``."""
+class StepSettings(StepOptions):
+    """``<model>_step_options`` of one loop call, its stop flag pointing at ``self.flag``."""
 
     def __init__(self, tol: float, max_iter: int, max_halvings: int, scheme: int = 0):
         self.flag = ctypes.c_int(0)
         super().__init__(tol, max_iter, max_halvings, int(scheme), ctypes.pointer(self.flag))
 
 
+def step_options(tol: float, max_iter: int, max_halvings: int, scheme: int = 0) -> StepSettings:
+    """The steps' options of a loop: Newton tolerance and iterations, halvings of a failed
+    step, the scheme (0 RATTLE, 1 its fourth-order composition), a cleared stop flag."""
+    return StepSettings(float(tol), int(max_iter), int(max_halvings), int(scheme))
+
+
 def _interruptible(fn, *args) -> int:
     """The status of ``fn(*args)``, a compiled loop whose arguments include one
-    :class:`_Options`, by :func:`~ncgen.interrupts.call_interruptibly` on its stop flag:
+    :class:`StepSettings`, by :func:`~ncgen.interrupts.call_interruptibly` on its stop flag:
     :data:`~ncgen.codegen.stepper_package.STEP_INTERRUPTED` after Ctrl-C."""
-    options = next(a for a in args if isinstance(a, _Options))
+    options = next(a for a in args if isinstance(a, StepSettings))
     status, interrupted = call_interruptibly(fn, *(ctypes.byref(a) if a is options else a for a in args),
                                              stop=options.flag)
     return STEP_INTERRUPTED if interrupted else status

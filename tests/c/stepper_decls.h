@@ -28,7 +28,7 @@ typedef struct {
   volatile int *stop;
 } step_options;
 
-/* The options of an error-controlled run (simulate_adaptive()), as <model>_run_options. */
+/* The options of a run (simulate_adaptive(); fixed steps: track_work, estimate), as <model>_run_options. */
 typedef struct {
   casadi_real rtol;
   casadi_real atol;
@@ -37,12 +37,13 @@ typedef struct {
   long max_steps;
   int hold_linear;
   int track_work;
+  int estimate;
 } run_options;
 
 /* run_options of rtol, atol, h0, extrapolate, max_steps, track_work (inputs held). */
 #define RUN_OPTIONS(rtol_, atol_, h0_, extrapolate_, max_steps_, track_work_) \
   ((run_options){.rtol = (rtol_), .atol = (atol_), .h0 = (h0_), .extrapolate = (extrapolate_), \
-                 .max_steps = (max_steps_), .hold_linear = 0, .track_work = (track_work_)})
+                 .max_steps = (max_steps_), .hold_linear = 0, .track_work = (track_work_), .estimate = 0})
 
 /* The default step_options: Newton to 1e-10 in at most 12 iterations, at most 4 halvings of
  * a step, plain RATTLE, no stop flag. */
