@@ -165,7 +165,7 @@ def callgrind(t_end: float, keep: str | None) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--smoke", action="store_true")
-    ap.add_argument("--rounds", type=int, default=7)
+    ap.add_argument("--rounds", type=int, default=15)
     ap.add_argument("--callgrind", action="store_true", help="count instructions with callgrind instead of timing")
     ap.add_argument("--t-end", type=float, default=1.2, help="simulated time, s (callgrind mode)")
     ap.add_argument("--keep", metavar="DIR", help="write callgrind's output files into DIR (callgrind mode)")
