@@ -173,3 +173,9 @@ def rolling_system(model) -> RollingSystem:
     if data.rolling_system is None:
         data.rolling_system = RollingSystem(model, model.rolling)
     return data.rolling_system
+
+
+def multiplier_count(model) -> int:
+    """The number of multipliers of a run of ``model``: its constraints' ``model.nc``, and
+    with rolling elements also their heights and rolling rows (``rolling_system(model).row_names``)."""
+    return len(rolling_system(model).row_names) if model.rolling else model.nc
