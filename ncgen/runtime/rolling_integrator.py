@@ -31,6 +31,7 @@ from ncgen.assembly.rolling_step import DOPRI5, step_function
 from ncgen.errors import CompilerNotFound, NcgenError
 from ncgen.runtime.integrator import Run
 from ncgen.runtime.options import SimulationOptions
+from ncgen.runtime.stepper_checks import energy_report, is_conservative
 from ncgen.runtime.trajectory import Trajectory
 
 METHODS = ("rk4", "dopri5")
@@ -57,6 +58,14 @@ class RollingTrajectory:
     rejected: int
     method: str
     compiled: bool = False
+
+
+def conservative_run(system, U) -> bool:
+    """Whether a run of a model with rolling elements keeps its energy: its planes at rest, no
+    drives, and its forces conservative with the run's inputs ``U`` (samples; all zero: as
+    without inputs), :func:`~ncgen.runtime.stepper_checks.is_conservative`."""
+    return (not system.rheonomic and not system.driven
+            and is_conservative(system.model, inputs=bool(np.any(np.asarray(U) != 0))))
 
 
 def project(system, q, v, tol: float = 1e-14, max_iter: int = 20,
@@ -302,4 +311,6 @@ class RollingIntegrator:
                                       run.U, run.p, info)
         traj.constraint_names = list(system.row_names)
         traj.constraint_residual, traj.velocity_residual = levels[:, 0], levels[:, 1]
+        if force is None and conservative_run(system, run.U):      # else: no work tracked, no report
+            traj.info["energy"] = energy_report(traj, np.zeros(len(traj)), True)
         return traj

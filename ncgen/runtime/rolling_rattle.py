@@ -35,8 +35,8 @@ from ncgen.errors import CompilerNotFound, NcgenError, SimulationError
 from ncgen.runtime.energy_balance import balance_report, stepper_works
 from ncgen.runtime.integrator import Run
 from ncgen.runtime.options import SimulationOptions
-from ncgen.runtime.rolling_integrator import COMPILE_PAYS, PACE_AFTER, project
-from ncgen.runtime.stepper_checks import check_fixed, energy_report, error_estimate, is_conservative
+from ncgen.runtime.rolling_integrator import COMPILE_PAYS, PACE_AFTER, conservative_run, project
+from ncgen.runtime.stepper_checks import check_fixed, energy_report, error_estimate
 from ncgen.runtime.trajectory import Trajectory
 
 
@@ -238,8 +238,7 @@ def simulate_rolling_rattle(model, run: Run, opts: SimulationOptions) -> Traject
     linear = opts.hold == "linear"
     q0, v0 = project(system, run.q, run.v, t=float(t[0]))
     lam0 = np.asarray(_functions(system)[2](t[0], q0, v0, U[0], p)[1]).ravel()
-    conservative = (not system.rheonomic and not system.driven
-                    and is_conservative(model, inputs=bool(np.any(U != 0))))
+    conservative = conservative_run(system, run.U)
     power = None if conservative else power_function(system)
     steps = _Steps(system, opts, (len(t) - 1) * substeps * (1 if opts.estimate is False else 2))
     Q, V, LAM, iterations, work, failure = _march(steps, t, U, p, q0, v0, lam0, substeps, linear, power)
