@@ -66,7 +66,7 @@ def test_auto_compiles_when_it_pays_and_falls_back_without_a_compiler(wobbly, mo
     rs = rolling_system(wobbly)
     rs.compiled_steps.clear()
     monkeypatch.setattr(rolling_rattle, "COMPILE_PAYS", 1e9)
-    tr = nc.simulate(wobbly, 1.0, 0.1, method="stepper", substeps=10)
+    tr = nc.simulate(wobbly, 1.0, 0.1, method="stepper", substeps=10, check=False)      # h = 10 ms: coarse
     assert tr.info["backend"] == "vm"
     monkeypatch.setattr(rolling_rattle, "COMPILE_PAYS", 0.0)
     monkeypatch.setattr(rolling_rattle, "PACE_AFTER", 0.0)      # a fast machine: the run may end within 0.5 s
@@ -77,7 +77,7 @@ def test_auto_compiles_when_it_pays_and_falls_back_without_a_compiler(wobbly, mo
         raise CompilerNotFound("no C compiler (test)")
 
     monkeypatch.setattr(rolling_rattle, "compiled_step", no_compiler)
-    tr = nc.simulate(wobbly, 1.0, 0.1, method="stepper", substeps=10)
+    tr = nc.simulate(wobbly, 1.0, 0.1, method="stepper", substeps=10, check=False)
     assert len(tried) == 1 and tr.info["backend"] == "vm" and tr.velocity_residual.max() <= 1e-12
     with pytest.raises(CompilerNotFound, match="backend='compiled' compiles the rolling RATTLE step; install gcc, "
                                                "or give backend='auto' or 'vm'"):

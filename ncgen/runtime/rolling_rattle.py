@@ -13,9 +13,20 @@ Python); ``info["backend"]`` says which ran last.
 
 ``substeps`` steps of ``dt / substeps`` per output interval; ``scheme`` ``"auto"`` or
 ``"rattle"`` (the fourth-order composition is not built on this step); no error control
-(``rtol``), no feedback or compiled controller (refused by name); the
-compiled stepper's shadow-run error estimate and checks (``estimate``, ``check``), step
-halving (``max_halvings``) and ``kernels`` do not apply and are ignored.  Inputs
+(``rtol``), no feedback or compiled controller (refused by name); step halving
+(``max_halvings``) and ``kernels`` do not apply and are ignored.
+
+What the run says of its accuracy is the compiled stepper's
+(:mod:`ncgen.runtime.stepper_checks`, from per-row statistics in its columns):
+``info["error_estimate"]`` a global estimate (``estimate=True``, the default) by Richardson
+against a shadow run with steps of 2h (``substeps`` even: half the work again) or of h/2
+(odd: twice the work), order 2; ``info["energy"]`` the drift of a conservative run or the
+energy balance with the work of inputs, drives and moving planes
+(:func:`ncgen.assembly.nonholonomic.power_function` by the trapezoidal rule over each step,
+each end with its own multipliers); and ``check=True`` (default) raises
+:class:`~ncgen.errors.SimulationError` from the first output row where the estimate passes
+1 % of the model's size or the energy error 1 % of its scale (Newton iterations are counted
+on the Python-driven steps only).  Inputs
 are held as the run's samples say (``"zoh"``: the sample of the step's interval; ``"linear"``:
 interpolated at the step's start and end).  ``info["stats"]`` counts steps and Newton
 iterations of the Python-driven steps; ``lam`` holds the multipliers of the last step's end kick (per output time; at
@@ -45,6 +56,9 @@ def check_rolling_stepper(model, opts: SimulationOptions) -> None:
     if opts.scheme not in ("auto", "rattle"):
         raise NcgenError(f"method='stepper': model {model.name!r} has rolling elements: scheme={opts.scheme!r} is "
                          "not taken (RATTLE with velocity constraints, order 2, only); give scheme='rattle'")
+    if opts.estimate == "local":
+        raise NcgenError(f"method='stepper': model {model.name!r} has rolling elements: estimate='local' is not "
+                         "taken (its estimate is the shadow run's); give estimate=True or False")
     if opts.rtol is not None or opts.atol is not None:
         raise NcgenError(f"method='stepper': model {model.name!r} has rolling elements: rtol/atol (error control) "
                          "are not taken by its fixed RATTLE steps; give substeps, or use method='rolling' or 'idas'")
