@@ -170,7 +170,7 @@ def integrate(system, grid, q0, v0, *, method: str = "dopri5", substeps: int = 1
     def rk_step(y, h, t=0.0):
         """``(y⁺ projected, error estimate)`` of one step of ``method`` from time ``t``."""
         if step is not None:
-            y_next, err = step(y, h)
+            y_next, err = step(y, (h,))        # a sized step: the direct call's fast copy
             return y_next.copy(), err.copy()
         if method == "rk4":
             k1 = rhs(y, t, t)

@@ -92,7 +92,7 @@ def _step_key(tol: float, max_iter: int) -> tuple:
 def compiled_rattle_step(step, t: float, q, v, h: float, u0, u1, p, tol: float):
     """One step by the compiled ``step`` (:func:`compiled_step`): ``(q⁺, v⁺, ν)``; raises
     :class:`~ncgen.errors.SimulationError` when a Newton solve did not reach ``tol``."""
-    q_next, v_next, nu_, res = step(q, v, t, h, u0, u1, p)
+    q_next, v_next, nu_, res = step(q, v, (t,), (h,), u0, u1, p)      # sized arguments: the direct call's fast copy
     if not float(res[0]) <= tol:
         raise SimulationError(f"RATTLE step with velocity constraints from t = {t:.6g} s (compiled): Newton's method "
                               f"did not bring the residual below {tol:g} (residual {float(res[0]):.3g}); take "
