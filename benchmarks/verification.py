@@ -161,11 +161,17 @@ def rolling_idas_stepper(smoke: bool) -> list[Row]:
                 float(np.ptp(tr.energy) / np.max(np.abs(tr.energy))), 0.0, 1e-5)]
     wobbly = nc.System.from_toml(disc_toml(0.3, 25.0, 0.0, wobble=1.0)).build()
     ref = nc.simulate(wobbly, 0.2, 0.2, method="rolling", rtol=1e-13, atol=1e-15)
-    err = [np.max(np.abs(nc.simulate(wobbly, 0.2, 0.2, method="stepper", substeps=n).q[-1] - ref.q[-1]))
+    err = [np.max(np.abs(nc.simulate(wobbly, 0.2, 0.2, method="stepper", substeps=n, check=False).q[-1] - ref.q[-1]))
            for n in (20, 40)]
     case = "wobbling rolling disc, RATTLE with velocity constraints (method='stepper')"
     rows.append(Row(case, "DOPRI5 at rtol 1e-13 (method='rolling'), h = 10 and 5 ms",
                     "order: log2 of the error ratio at 0.2 s", float(np.log2(err[0] / err[1])), 2.0, 0.2))
+    t_end = 0.2 if smoke else 1.0
+    ref = nc.simulate(wobbly, t_end, 0.05, method="rolling", rtol=1e-12, atol=1e-14)
+    tr = nc.simulate(wobbly, t_end, 0.05, method="stepper", substeps=16, check=False)
+    rows.append(Row(case, "DOPRI5 at rtol 1e-12, h = 3.1 ms",
+                    f"error estimate (shadow run, Richardson) / true error in q at {t_end:g} s",
+                    tr.info["error_estimate"]["q"] / float(np.max(np.abs(tr.q[-1] - ref.q[-1]))), 1.0, 0.3))
     return rows
 
 
@@ -229,7 +235,14 @@ def rolling_moving_plane(smoke: bool) -> list[Row]:
             Row(case, "energy balance: E(t) − E(0) = ∫ −λᵀc dt (the plane's work, Simpson on the outputs)",
                 "energy change (J), worst output", *_worst(traj.energy - traj.energy[0], drive_work(traj, c)), 1e-9),
             Row(case, "the constraints", f"‖B v − c(t)‖∞ over {t_end:g} s", float(traj.velocity_residual.max()),
-                0.0, 1e-12)]
+                0.0, 1e-12)] + [
+            Row(f"ball on a plane accelerating at {A_P:g} m/s², {how}", closed,
+                "the plane's work in info['energy'] (J), worst output",
+                *_worst(run.info["energy"]["works"]["drives"], M * A_P ** 2 * run.t ** 2 / 7), 1e-8)
+            for how, run in (("IDAS at rtol 1e-10 (quadratures)",
+                              nc.simulate(model, t_end, 0.01, method="idas", rtol=1e-10, atol=1e-12)),
+                             ("the stepper at h = 2 ms (trapezoidal rule)",
+                              nc.simulate(model, t_end, 0.01, method="stepper", substeps=5)))]
 
 
 def chaplygin_sleigh(smoke: bool) -> list[Row]:

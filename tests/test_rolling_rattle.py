@@ -30,8 +30,8 @@ def test_second_order_on_the_rolling_disc(wobbly):
     T = 0.2
     ref = nc.simulate(wobbly, T, T, method="rolling", rtol=1e-13, atol=1e-15)
     err = []
-    for substeps in (20, 40, 80):
-        tr = nc.simulate(wobbly, T, T, method="stepper", substeps=substeps)
+    for substeps in (20, 40, 80):        # steps too coarse to pass the run's check (5e-2 to 3e-3 m): on purpose
+        tr = nc.simulate(wobbly, T, T, method="stepper", substeps=substeps, check=False)
         assert max(tr.constraint_residual.max(), tr.velocity_residual.max()) <= 1e-12
         err.append(np.max(np.abs(tr.q[-1] - ref.q[-1])))
     orders = np.log2(np.array(err[:-1]) / np.array(err[1:]))

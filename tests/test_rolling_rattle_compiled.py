@@ -50,13 +50,13 @@ def test_second_order_and_both_levels_compiled(wobbly):
     ref = nc.simulate(wobbly, T, T, method="rolling", rtol=1e-13, atol=1e-15)
     err = []
     for substeps in (20, 40, 80):
-        tr = nc.simulate(wobbly, T, 0.05, method="stepper", substeps=substeps // 4, backend="compiled")
+        tr = nc.simulate(wobbly, T, 0.05, method="stepper", substeps=substeps // 4, backend="compiled", check=False)
         assert tr.info["backend"] == "compiled" and tr.info["stats"]["steps"] == substeps
         assert max(tr.constraint_residual.max(), tr.velocity_residual.max()) <= 1e-12
         err.append(np.max(np.abs(tr.q[-1] - ref.q[-1])))
     orders = np.log2(np.array(err[:-1]) / np.array(err[1:]))
     assert np.all((orders > 1.8) & (orders < 2.2)), orders
-    py = nc.simulate(wobbly, T, 0.05, method="stepper", substeps=20, backend="vm")
+    py = nc.simulate(wobbly, T, 0.05, method="stepper", substeps=20, backend="vm", check=False)
     assert py.info["backend"] == "vm"
     np.testing.assert_allclose(tr.q, py.q, rtol=0, atol=1e-12)
     np.testing.assert_allclose(tr.v, py.v, rtol=0, atol=1e-12)
@@ -66,7 +66,7 @@ def test_auto_compiles_when_it_pays_and_falls_back_without_a_compiler(wobbly, mo
     rs = rolling_system(wobbly)
     rs.compiled_steps.clear()
     monkeypatch.setattr(rolling_rattle, "COMPILE_PAYS", 1e9)
-    tr = nc.simulate(wobbly, 1.0, 0.1, method="stepper", substeps=10)
+    tr = nc.simulate(wobbly, 1.0, 0.1, method="stepper", substeps=10, check=False)      # h = 10 ms: coarse
     assert tr.info["backend"] == "vm"
     monkeypatch.setattr(rolling_rattle, "COMPILE_PAYS", 0.0)
     monkeypatch.setattr(rolling_rattle, "PACE_AFTER", 0.0)      # a fast machine: the run may end within 0.5 s
@@ -77,7 +77,7 @@ def test_auto_compiles_when_it_pays_and_falls_back_without_a_compiler(wobbly, mo
         raise CompilerNotFound("no C compiler (test)")
 
     monkeypatch.setattr(rolling_rattle, "compiled_step", no_compiler)
-    tr = nc.simulate(wobbly, 1.0, 0.1, method="stepper", substeps=10)
+    tr = nc.simulate(wobbly, 1.0, 0.1, method="stepper", substeps=10, check=False)
     assert len(tried) == 1 and tr.info["backend"] == "vm" and tr.velocity_residual.max() <= 1e-12
     with pytest.raises(CompilerNotFound, match="backend='compiled' compiles the rolling RATTLE step; install gcc, "
                                                "or give backend='auto' or 'vm'"):
@@ -85,11 +85,11 @@ def test_auto_compiles_when_it_pays_and_falls_back_without_a_compiler(wobbly, mo
     monkeypatch.undo()
     monkeypatch.setattr(rolling_rattle, "COMPILE_PAYS", 0.0)
     monkeypatch.setattr(rolling_rattle, "PACE_AFTER", 0.0)      # a fast machine: the run may end within 0.5 s
-    tr = nc.simulate(wobbly, 1.0, 0.1, method="stepper", substeps=10)
+    tr = nc.simulate(wobbly, 1.0, 0.1, method="stepper", substeps=10, check=False)      # h = 10 ms: coarse
     assert tr.info["backend"] == "compiled" and tr.velocity_residual.max() <= 1e-12
     # compiled in this process: the next run takes it from its first step
     monkeypatch.setattr(rolling_rattle, "COMPILE_PAYS", 1e9)
-    assert nc.simulate(wobbly, 0.1, 0.1, method="stepper", substeps=10).info["backend"] == "compiled"
+    assert nc.simulate(wobbly, 0.1, 0.1, method="stepper", substeps=10, check=False).info["backend"] == "compiled"
 
 
 def test_a_newton_failure_is_named(wobbly):

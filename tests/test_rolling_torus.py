@@ -182,7 +182,7 @@ def test_a_wobbling_torus_conserves_energy_on_both_levels():
     assert max(tr.constraint_residual.max(), tr.velocity_residual.max()) <= 1e-12
     spread = []
     for n in (5, 10):
-        st = nc.simulate(model, 0.4, 0.02, method="stepper", substeps=n)
+        st = nc.simulate(model, 0.4, 0.02, method="stepper", substeps=n, check=False)     # h = 4, 2 ms: coarse
         assert max(st.constraint_residual.max(), st.velocity_residual.max()) <= 1e-12
         spread.append(np.ptp(st.energy))
     assert 3.5 < spread[0] / spread[1] < 4.5, spread

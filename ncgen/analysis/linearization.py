@@ -17,6 +17,7 @@ import numpy as np
 from ncgen.blas_threads import one_blas_thread
 from ncgen.assembly.linearization import linearization_function
 from ncgen.errors import NcgenError
+from ncgen.model.rolling import STEADY_MOTIONS, refuse_rolling
 from ncgen.analysis.statics import _parameters
 from ncgen.analysis.stability import cached
 from ncgen.assembly.manifold import coordinate_basis, manifold_point, numerical_rank, tangent_velocity
@@ -106,6 +107,7 @@ def linearize(model, q, v=None, u=None, p=None, *, t: float | None = None, coord
     rates and the result is the joint-space model of
     :func:`~ncgen.analysis.joint_linearization.joint_linearization` (Pinocchio's
     ``computeABADerivatives``, at any state)."""
+    refuse_rolling(model, "linearize", STEADY_MOTIONS)
     if space not in ("natural", "joint"):
         raise NcgenError(f"linearize: space: expected 'natural' or 'joint', got {space!r}")
     if space == "joint":

@@ -22,6 +22,7 @@ from ncgen.blas_threads import one_blas_thread
 from ncgen.analysis.statics import Equilibrium, equilibrium
 from ncgen.analysis.stability import ZERO_TOL
 from ncgen.assembly.manifold import manifold_point
+from ncgen.model.rolling import STEADY_MOTIONS, refuse_rolling
 
 
 @dataclass
@@ -94,6 +95,7 @@ def modes(model, eq: Equilibrium | None = None, **equilibrium_options) -> Modes:
     """Natural frequencies and mode shapes of ``model`` about ``eq`` (default: the
     equilibrium :func:`~ncgen.analysis.statics.equilibrium` finds with
     ``equilibrium_options``); see the module docstring."""
+    refuse_rolling(model, "modes", STEADY_MOTIONS)
     if eq is None:
         eq = equilibrium(model, **equilibrium_options)
     N = eq.N

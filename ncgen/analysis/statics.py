@@ -23,6 +23,7 @@ import numpy as np
 from ncgen.blas_threads import one_blas_thread
 from ncgen.assembly.statics import statics_function
 from ncgen.errors import ModelError, NcgenError
+from ncgen.model.rolling import refuse_rolling
 from ncgen.analysis.reactions import unshared_state
 from ncgen.analysis.stability import cached, classify
 from ncgen.assembly.manifold import newton, null_basis
@@ -199,6 +200,8 @@ def equilibrium(model, q_guess=None, u=None, p=None, *, t: float | None = None, 
     least 1 N; ``s_q`` the size of the system, at least 1 m; the middle term is the round-off
     of stiff springs).  Raises :class:`~ncgen.errors.NcgenError` if it does not converge.
     """
+    refuse_rolling(model, "equilibrium", "not supported yet for rolling elements (the elements' heights "
+                   "would be missing)")
     if method not in ("descent", "newton"):
         raise NcgenError(f"equilibrium: method: expected 'descent' or 'newton', got {method!r}")
     tol = as_scalar(tol, "equilibrium: tol")

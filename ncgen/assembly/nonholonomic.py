@@ -173,3 +173,25 @@ def rolling_system(model) -> RollingSystem:
     if data.rolling_system is None:
         data.rolling_system = RollingSystem(model, model.rolling)
     return data.rolling_system
+
+
+def multiplier_count(model) -> int:
+    """The number of multipliers of a run of ``model``: its constraints' ``model.nc``, and
+    with rolling elements also their heights and rolling rows (``rolling_system(model).row_names``)."""
+    return len(rolling_system(model).row_names) if model.rolling else model.nc
+
+
+def power_function(system: RollingSystem) -> ca.Function:
+    """``(t, q, v, lam, u, p) -> [P; P_contacts; P_friction; P_inputs; P_drives]`` (W, one vector) of a
+    model with rolling elements, ``lam`` its multipliers on all of ``system.row_names``: the
+    model's own (:func:`ncgen.assembly.derived.power_parts_function` with its rows'
+    multipliers) and the power the moving planes put in through their rows, ``−λ_rᵀ ĉ_r``
+    (``M a = F − Âᵀλ`` and ``Â v = ĉ``), added to ``P`` and to the drives' part; a plane at
+    rest does no work (``ĉ_r = 0``)."""
+    from ncgen.assembly.derived import power_parts_function
+    model = system.model
+    t, q, v = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq)
+    lam, u, p = ca.SX.sym("lam", len(system.row_names)), ca.SX.sym("u", model.nu), ca.SX.sym("p", len(model.p0))
+    plane = -ca.dot(lam[model.nc:], system.rate(q, t)[model.nc:])
+    P = power_parts_function(model)(t, q, v, lam[:model.nc], u, p) + ca.vertcat(plane, 0, 0, 0, plane)
+    return ca.Function("rolling_power", [t, q, v, lam, u, p], [P], ["t", "q", "v", "lam", "u", "p"], ["P"])

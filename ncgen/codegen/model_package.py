@@ -41,6 +41,7 @@ from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
 from ncgen.codegen.section import Section
 from ncgen.codegen.stepper_package import stepper_section
 from ncgen.model.model import component_names
+from ncgen.model.rolling import refuse_rolling
 
 #: The system functions in the package, in this order.
 SYSTEM_FUNCTIONS = ("phi", "A", "phi_t", "gamma", "F", "mass", "Minv", "ode", "alg", "dae", "accel",
@@ -80,7 +81,8 @@ def generate(model, out_dir: str | os.PathLike, *, cflags=None, compile: bool = 
     ``linearization=True`` adds the kernel ``linearize`` (minimal-state ``A``, ``B``, ``C``
     about any consistent state, :mod:`ncgen.codegen.linearization_package`).
     """
-
+    refuse_rolling(model, "generate", "the package's stepper and DAE are the model's without the rolling "
+                   "rows; simulate it with nc.simulate (method 'rolling', 'idas' or 'stepper')")
     reroll_instructions = reroll_limit(model, reroll_instructions)
     makers = SECTIONS + ([linearization_section] if linearization else [])
     sections = [make(model, reroll_instructions) for make in makers]

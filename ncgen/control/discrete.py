@@ -52,6 +52,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.assembly.stepper_equations import mass_scale, stepper_functions
+from ncgen.model.rolling import ROLLING_STEP, refuse_rolling
 
 #: Rootfinder defaults: residual tolerance (relative: :func:`default_abstol`), absolute step
 #: tolerance, iteration limit.
@@ -136,6 +137,7 @@ def step_functions(model, h: float, *, abstol: float = ABSTOL, abstol_step: floa
     sparse ``G_z``, ``G_y`` at a converged ``z`` (see the module docstring): separate
     functions, so that the C of the solve and of each sensitivity is a translation unit of its
     own."""
+    refuse_rolling(model, "the RATTLE step (step_function, MPC, export_mpc)", ROLLING_STEP)
     nq, nc = model.nq, model.nc
     args, z, x1, res = _solved_step(model, h, abstol, abstol_step, max_iter)
     names = ["x", "u", "p", "t"]

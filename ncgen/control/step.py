@@ -41,6 +41,7 @@ from ncgen.control.discrete import (MAX_ITER, ROLLOUT_CHUNK, default_abstol, res
 from ncgen.control.step_support import (PACKAGE_OPTIONS, StepDidNotConverge, compile_flags,  # noqa: F401
                                         compile_functions, state_vector)
 from ncgen.errors import NcgenError
+from ncgen.model.rolling import ROLLING_STEP, refuse_rolling
 from ncgen.validation import as_numbers, as_scalar
 
 METHODS = ("rattle",)
@@ -63,6 +64,7 @@ def step_function(model, h: float, method: str = "rattle", *, max_iter: int = MA
     ``kernels``: ``"auto"``, ``"tables"`` or ``"flat"`` (module docstring).  A model with
     nonsmooth contacts gets a :class:`~ncgen.control.contact_step.ContactStepFunction`
     (Jacobians from the active set of the contact solve; ``kernels="tables"`` refused)."""
+    refuse_rolling(model, "step_function", ROLLING_STEP)
     if method not in METHODS:
         raise NcgenError(f"step_function: method: expected one of {', '.join(METHODS)}, got {method!r}")
     h = _positive(h, "h", "a positive, finite step in seconds")

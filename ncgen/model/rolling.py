@@ -211,3 +211,23 @@ class KnifeEdge(_MovingPlane):
 
 #: The nonholonomic elements by their TOML ``type``.
 ROLLING_TYPES = {cls.kind: cls for cls in (RollingDisc, RollingSphere, KnifeEdge)}
+
+
+#: Where a model with rolling elements is linearised (about a steady motion, not a state of rest).
+STEADY_MOTIONS = ("linearise about a steady motion with ncgen.analysis.steady_motion.linearize_steady("
+                  "ncgen.assembly.nonholonomic.rolling_system(model), q0, v0, K_spin, coordinates)")
+#: Where the step of a model with rolling elements is.
+ROLLING_STEP = ("nc.simulate(model, ..., method='stepper') runs the RATTLE step with the velocity constraints "
+                "(ncgen.assembly.rolling_rattle.step_function)")
+
+
+def refuse_rolling(model, what: str, instead: str) -> None:
+    """Raise :class:`~ncgen.errors.ModelError` if ``model`` has rolling elements
+    (``model.rolling``): ``what`` (a function of the model's own constraints, which would
+    give a motion, an equilibrium or a step without the elements' rows) does not keep them;
+    the message names the elements and says what does (``instead``)."""
+    elements = getattr(model, "rolling", ())
+    if elements:
+        raise ModelError(f"{what}: model {model.name!r} has rolling elements "
+                         f"({', '.join(e.name for e in elements)}), whose constraints {what} does not keep "
+                         f"(its result would be the model's without them); {instead}")

@@ -31,6 +31,7 @@ import numpy as np
 
 from ncgen.blas_threads import one_blas_thread
 from ncgen.errors import NcgenError, OptimizationError
+from ncgen.model.rolling import refuse_rolling
 from ncgen.validation import as_numbers, as_scalar
 from ncgen.optim.transcription import MODEL_STATE
 
@@ -58,6 +59,7 @@ class OptimalControl:
                  form: str = "auto", integrator: str = "idas", integrator_options: dict | None = None,
                  parameters: dict | None = None, contacts: dict | None = None):
         from ncgen.optim.contact_implicit import ContactImplicit, nonsmooth_contacts, refuse_unsupported
+        refuse_rolling(model, "OptimalControl", "optimal control with rolling elements is not supported yet")
         if not isinstance(N, (int, np.integer)) or isinstance(N, bool) or N < 1:
             raise OptimizationError(f"N: expected a positive integer number of intervals, got {N!r}")
         if method is None:

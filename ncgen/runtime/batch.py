@@ -31,6 +31,7 @@ from ncgen.codegen.c_binding import open_library
 from ncgen.codegen.stepper_abi import bind_stepper
 from ncgen.codegen.stepper_package import MAX_HALVINGS, MAX_ITER, STATS, STATUS, TOL, n_stats
 from ncgen.errors import NcgenError
+from ncgen.model.rolling import refuse_rolling
 from ncgen.runtime.dae import load_dae
 from ncgen.runtime.energy_balance import nonsmooth_contacts
 from ncgen.runtime.inputs import input_samples, parameter_values, time_grid
@@ -132,6 +133,8 @@ def simulate_batch(model, t_end: float, dt: float, *, q0=None, v0=None, p=None, 
     the multipliers; ``info["kernels"]``).
     Returns a :class:`BatchResult`; failed runs are reported there, never raised.
     """
+    refuse_rolling(model, "simulate_batch", "run nc.simulate once per run (method 'rolling', 'idas' or 'stepper' "
+                   "keep them), or nc.sweep(..., method='idas')")
     start = time.perf_counter()
     SimulationOptions(method="stepper", hold=hold, substeps=substeps, newton_tol=newton_tol, max_newton=max_newton,
                       max_halvings=max_halvings, ic_tolerance=ic_tolerance, scheme=scheme, estimate=estimate,

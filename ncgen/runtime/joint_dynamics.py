@@ -26,6 +26,7 @@ from ncgen.assembly.derived import joint_kkt_function, kkt_function
 from ncgen.assembly.manifold import solve_linear
 from ncgen.errors import ModelError
 from ncgen.model.data import cached, model_data
+from ncgen.model.rolling import refuse_rolling
 from ncgen.runtime.tree_algorithms import call, kernel_of, rnea_applies
 from ncgen.validation import as_vector
 
@@ -47,6 +48,8 @@ def forward_dynamics_kernel(model, *, joint_space: bool = False, cflags=None):
     ``[a, lam]``, or ``k(t, qj, vj, u, p)`` → ``[aj, a, lam]`` (buffers reused by the next
     call)."""
     from ncgen.codegen.direct import compile_direct
+    refuse_rolling(model, "forward_dynamics_kernel", "the accelerations with the rolling rows are rolling_system(model).accel(q, v, f) "
+                   "(ncgen.assembly.nonholonomic)")
 
     def build():
         f = joint_kkt_function(model) if joint_space else kkt_function(model)
@@ -73,6 +76,8 @@ def forward_dynamics(model, q, v, u=None, p=None, t: float = 0.0, *, backend: st
     with inputs ``u`` (default zero) and parameters ``p`` (default ``model.p0``).
     ``backend``: ``"numpy"`` (the KKT matrix assembled and solved here) or ``"compiled"``
     (:func:`forward_dynamics_kernel`, the fast path for repeated calls)."""
+    refuse_rolling(model, "forward_dynamics", "the accelerations with the rolling rows are rolling_system(model).accel(q, v, f) "
+                   "(ncgen.assembly.nonholonomic)")
     q = as_vector(q, model.nq, "q")
     v = as_vector(v, model.nq, "v")
     u = np.zeros(model.nu) if u is None else as_vector(u, model.nu, "u (model.input_names order)")

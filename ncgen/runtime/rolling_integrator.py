@@ -32,6 +32,7 @@ from ncgen.errors import CompilerNotFound, NcgenError
 from ncgen.runtime.integrator import Run
 from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.rolling_options import RollingOptions
+from ncgen.runtime.stepper_checks import energy_report, is_conservative
 from ncgen.runtime.trajectory import Trajectory
 
 METHODS = ("rk4", "dopri5")
@@ -58,6 +59,14 @@ class RollingTrajectory:
     rejected: int
     method: str
     compiled: bool = False
+
+
+def conservative_run(system, U) -> bool:
+    """Whether a run of a model with rolling elements keeps its energy: its planes at rest, no
+    drives, and its forces conservative with the run's inputs ``U`` (samples; all zero: as
+    without inputs), :func:`~ncgen.runtime.stepper_checks.is_conservative`."""
+    return (not system.rheonomic and not system.driven
+            and is_conservative(system.model, inputs=bool(np.any(np.asarray(U) != 0))))
 
 
 def project(system, q, v, tol: float = 1e-14, max_iter: int = 20,
@@ -162,7 +171,7 @@ def integrate(system, grid, q0, v0, *, method: str = "dopri5", substeps: int = 1
     def rk_step(y, h, t=0.0):
         """``(y⁺ projected, error estimate)`` of one step of ``method`` from time ``t``."""
         if step is not None:
-            y_next, err = step(y, h)
+            y_next, err = step(y, (h,))        # a sized step: the direct call's fast copy
             return y_next.copy(), err.copy()
         if method == "rk4":
             k1 = rhs(y, t, t)
@@ -303,4 +312,6 @@ class RollingIntegrator:
                                       run.U, run.p, info)
         traj.constraint_names = list(system.row_names)
         traj.constraint_residual, traj.velocity_residual = levels[:, 0], levels[:, 1]
+        if force is None and conservative_run(system, run.U):      # else: no work tracked, no report
+            traj.info["energy"] = energy_report(traj, np.zeros(len(traj)), True)
         return traj

@@ -550,7 +550,7 @@ def untrusted_row(model, traj, S: np.ndarray, h: float, contacts: bool = False) 
     kind = min(first, key=first.get)
     row = first[kind]
     t_row = float(traj.t[row + 1])
-    suggest = _suggestion(h, dt, gq[row], size, kind)
+    suggest = _suggestion(h, dt, gq[row], size, kind, adaptive=not getattr(model, "rolling", ()))
     if kind == "splits":
         reason = (f"{int(splits.sum())} step(s) had to be split, the first by t = {t_row:.6g} s: Newton's method "
                   f"does not converge at this step, which is far beyond the step the motion needs")
@@ -591,21 +591,22 @@ def untrusted_row(model, traj, S: np.ndarray, h: float, contacts: bool = False) 
     return row, f"{reason}. {suggest}"
 
 
-def _suggestion(h: float, dt: float, err: float, size: float, kind: str) -> str:
+def _suggestion(h: float, dt: float, err: float, size: float, kind: str, adaptive: bool = True) -> str:
     if kind == "contacts":
         return ("A smaller step makes the contact problems smaller changes of the last one (warm start); "
                 "check=False returns the run unchecked")
-    return _step_suggestion(h, dt, err, size, kind)
+    return _step_suggestion(h, dt, err, size, kind, adaptive)
 
 
-def _step_suggestion(h: float, dt: float, err: float, size: float, kind: str) -> str:
+def _step_suggestion(h: float, dt: float, err: float, size: float, kind: str, adaptive: bool = True) -> str:
     """Which step to use instead: a quarter of ``h`` after split steps, exploding Newton
     iterations or an energy error, half of it after a large error estimate, and in every
-    case no more than the step at which the estimate (∝ h²) would be 1 % of the size."""
+    case no more than the step at which the estimate (∝ h²) would be 1 % of the size;
+    ``adaptive``: error control (``rtol``) is offered too (not for rolling elements)."""
     h_new = h / 2 if kind == "error" else h / 4
     if err > 0 and math.isfinite(err):
         h_new = min(h_new, h * math.sqrt(0.1 * ERROR_FRACTION * size / err))
     substeps = max(1, math.ceil(dt / h_new - 1e-9))
-    return (f"Use a step of at most {dt / substeps:.3g} s ({option('substeps=', '--substeps ')}{substeps} with "
-            f"{option('dt = ', '--dt ')}{dt:.3g} s), or {option('rtol=...', '--rtol RTOL')} to let the stepper "
-            f"choose its steps")
+    step = (f"Use a step of at most {dt / substeps:.3g} s ({option('substeps=', '--substeps ')}{substeps} with "
+            f"{option('dt = ', '--dt ')}{dt:.3g} s)")
+    return f"{step}, or {option('rtol=...', '--rtol RTOL')} to let the stepper choose its steps" if adaptive else step

@@ -35,7 +35,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ncgen.assembly.nonholonomic import multiplier_count
 from ncgen.errors import NcgenError
+from ncgen.model.rolling import refuse_rolling
 from ncgen.runtime.inputs import time_grid
 from ncgen.runtime.samples import Samples, as_samples
 from ncgen.runtime.table_stepper import load_any_stepper
@@ -119,6 +121,8 @@ def sweep(model, params, *, t_end: float, dt: float, method: str = "stepper", ou
     start = time.perf_counter()
     if method not in METHODS:
         raise NcgenError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+    if method == "stepper":
+        refuse_rolling(model, "sweep(method='stepper')", "give method='idas' (nc.simulate per run, which keeps them)")
     outputs = list(outputs)
     unknown = [o for o in outputs if o not in OUTPUTS]
     if unknown:
@@ -209,7 +213,7 @@ def _idas_runs(model, P, job, given, each):
     t = time_grid(model.t0, job["t_end"], job["dt"])
     n, T = len(P), len(t)
     data = {"q": np.full((n, T, model.nq), np.nan), "v": np.full((n, T, model.nq), np.nan),
-            "lam": np.full((n, T, model.nc), np.nan), "kinetic": np.full((n, T), np.nan),
+            "lam": np.full((n, T, multiplier_count(model)), np.nan), "kinetic": np.full((n, T), np.nan),
             "potential": np.full((n, T), np.nan), "constraint_residual": np.full((n, T), np.nan),
             "markers": np.full((n, T, len(model.marker_names), model.dim), np.nan)}
     status, message = np.zeros(n, dtype=int), [""] * n
@@ -474,7 +478,7 @@ def _stored_chunk(path) -> int | None:
 
 
 def _shapes(model, n_t: int) -> dict:
-    nq, nc = model.nq, model.nc
+    nq, nc = model.nq, multiplier_count(model)
     return {"q": (n_t, nq), "v": (n_t, nq), "lam": (n_t, nc), "kinetic": (n_t,), "potential": (n_t,),
             "constraint_residual": (n_t,), "markers": (n_t, len(model.marker_names), model.dim)}
 
