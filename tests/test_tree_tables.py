@@ -5,7 +5,9 @@ the model's tables, compiled once per ncgen version) equal the model's flat SX f
 in natural coordinates and a mimic gripper's closed form, derivatives equal central
 differences (positions moved in the tangent space); models the tables do not cover are
 refused by name and ``kernels="auto"`` falls back to the flat kernels; the joint-space
-simulation on the tables conserves energy (and, slow, equals the flat loop); a new tree (and,
+simulation on the tables conserves energy (and, slow, equals the flat loop); forward dynamics'
+Cholesky fallback is compiled only when a tree first needs it and then equals the Lagrangian's
+closed form; a new tree (and,
 slow, a URDF robot not seen before) is evaluated and simulated in a process with no compiler
 on PATH.
 Slow tier: example-robot-data's URDFs against the flat compiled kernels (1e-12) and Pinocchio

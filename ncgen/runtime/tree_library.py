@@ -14,7 +14,9 @@ algorithm unit (``set_kernel``) for the kinds of the trees it serves.  One libra
 everything took 30 s of CPU to compile (18 s of it the kernels
 of every kind and their derivatives at -O2, one translation unit, 2.4 s the loops); the Panda's
 joint run needs the forward unit alone (about 1.2–1.9 s of CPU at -O1, load 12–18; -O1 costs
-+9 % instructions per ABA against -O2 by callgrind, -Og +39 %).
++9 % instructions per ABA against -O2 by callgrind, -Og +39 %), and without forward dynamics'
+Cholesky fallback (the inverse unit's, set when a tree first needs it: :meth:`TreeLibrary.set_fallback`):
+the whole forward unit's gcc 1.41 → 1.19 s of CPU (median of 5 interleaved, load 18).
 
 :class:`TableAlgorithm` is one algorithm of :data:`~ncgen.codegen.tree_check.ALGORITHMS`
 bound to one model's :class:`~ncgen.codegen.tree_tables.TreeTables`, with the interface the
