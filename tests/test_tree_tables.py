@@ -5,7 +5,9 @@ the model's tables, compiled once per ncgen version) equal the model's flat SX f
 in natural coordinates and a mimic gripper's closed form, derivatives equal central
 differences (positions moved in the tangent space); models the tables do not cover are
 refused by name and ``kernels="auto"`` falls back to the flat kernels; the joint-space
-simulation on the tables conserves energy (and, slow, equals the flat loop); a new tree (and,
+simulation on the tables conserves energy (and, slow, equals the flat loop); forward dynamics'
+Cholesky fallback is compiled only when a tree first needs it and then equals the Lagrangian's
+closed form; a new tree (and,
 slow, a URDF robot not seen before) is evaluated and simulated in a process with no compiler
 on PATH.
 Slow tier: example-robot-data's URDFs against the flat compiled kernels (1e-12) and Pinocchio
@@ -470,6 +472,68 @@ def test_units_are_compiled_as_trees_need_them(tmp_path, monkeypatch):
     assert compiled[2:] == ["local_spherical"]
     nc.aba_derivatives(ball, q, np.full(3, 0.1), np.zeros(3), kernels="tables")
     assert compiled[3:] == ["derivatives", "edge_spherical", "body"]
+
+
+def fallback_tree(name: str):
+    """Where forward dynamics needs the Cholesky fallback: b2 (mass 1e-13) slides along z on the
+    ground, a mimic follower of b1 (z2 = −2 z1), and carries b3 sliding along z; the tree with every
+    rate free has a relative ABA pivot of 1e-13 at b2's joint, while M_i (rates z1, z3) is well
+    conditioned.  Lagrangian in (z1, z3), b3 at height z2 + z3: M_i = [[m1 + 4 ε + 4 m3, −2 m3],
+    [−2 m3, m3]], gravity forces −g (m1 − 2 ε − 2 m3, m3)."""
+    s = nc.System(name, gravity=(0.0, 0.0, -G))
+    bodies = [s.add_body(f"b{k}", mass=m, inertia=np.diag([0.1, 0.2, 0.25]) * m, position=(0.5, y, 0.0))
+              for k, (m, y) in enumerate(((1.0, 0.0), (1e-13, 1.0), (1.0, 1.0)), start=1)]
+    j1 = s.add_joint(nc.Prismatic(s.ground, bodies[0], at=(0.5, 0.0, 0.0), axis=(0, 0, 1), name="f1"))
+    j2 = s.add_joint(nc.Prismatic(s.ground, bodies[1], at=(0.5, 1.0, 0.0), axis=(0, 0, 1), name="f2"))
+    s.add_joint(nc.Prismatic(bodies[1], bodies[2], at=(0.5, 1.0, 0.0), axis=(0, 0, 1), name="f3"))
+    s.add_joint(nc.Mimic(j1, j2, multiplier=-2.0, name="link"))
+    return s.build()
+
+
+def test_the_cholesky_fallback_is_compiled_when_a_tree_first_needs_it(tmp_path, monkeypatch):
+    """A fresh compile cache: a mimic tree whose constrained ABA succeeds (the gripper) compiles
+    the forward unit alone; a tree whose constrained ABA fails its pivot check
+    (:func:`fallback_tree`) then gets the Cholesky fallback, the inverse unit's: its joint-space
+    run (restarted once the fallback is set) and its forward dynamics equal the closed form of
+    the Lagrangian in the independent rates and the flat function (1e-12), and its energy holds."""
+    import ncgen.runtime.tree_library as tl
+
+    monkeypatch.setenv("NCGEN_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(tl, "_LOADED", {})
+    compiled = []
+    unit_library = tl.unit_library
+    monkeypatch.setattr(tl, "unit_library", lambda unit, cflags=None: compiled.append(unit) or unit_library(unit, cflags))
+    s = nc.System(f"fallback_gripper_{os.getpid()}", gravity=(0, 0, -G))
+    b1 = s.add_body("b1", mass=1.0, inertia=np.diag([0.1, 0.2, 0.25]), position=(0.5, 0, 0))
+    b2 = s.add_body("b2", mass=1.0, inertia=np.diag([0.1, 0.2, 0.25]), position=(0.5, 1, 0))
+    j1 = s.add_joint(nc.Prismatic(s.ground, b1, at=(0.5, 0, 0), axis=(0, 0, 1), name="f1"))
+    j2 = s.add_joint(nc.Prismatic(s.ground, b2, at=(0.5, 1, 0), axis=(0, 0, 1), name="f2"))
+    s.add_joint(nc.Mimic(j1, j2, multiplier=-2.0, name="link"))
+    gripper = s.build()
+    traj = nc.simulate(gripper, 0.2, 0.05, method="joint", kernels="tables")
+    np.testing.assert_allclose(traj.qj[-1, 0] - traj.qj[0, 0], G / 5 * 0.2 ** 2 / 2, rtol=1e-9)
+    assert compiled == ["forward"] and not tl.load_tree_library().fallback
+
+    model = fallback_tree(f"fallback_tree_{os.getpid()}")
+    eps, m = 1e-13, 1.0
+    Mi = np.array([[m + 4 * eps + 4 * m, -2 * m], [-2 * m, m]])
+    a_i = np.linalg.solve(Mi, -G * np.array([m - 2 * eps - 2 * m, m]))          # (−g, −3g)
+    traj = nc.simulate(model, 0.2, 0.05, method="joint", kernels="tables", integrator="dopri5",
+                       rtol=1e-10, atol=1e-12)
+    assert compiled == ["forward", "inverse"] and tl.load_tree_library().fallback
+    assert traj.info["kernels"] == "tables"
+    t = traj.t - traj.t[0]
+    expected = traj.qj[0][None, :] + np.outer(t ** 2 / 2, [a_i[0], -2 * a_i[0], a_i[1]])
+    np.testing.assert_allclose(traj.qj, expected, rtol=0, atol=1e-9)
+    assert traj.energy_drift <= 1e-9 * max(1.0, traj.energy_scale)
+    qj, vj = np.array([0.1, -0.2 + 0.0, 0.3]), np.array([0.4, -0.8, -0.1])
+    qj[1] = -2 * qj[0]
+    for tau in (np.zeros(2), np.array([0.7, -0.3])):
+        got = nc.aba(model, qj, vj, tau, kernels="tables")
+        want = np.linalg.solve(Mi, tau - G * np.array([m - 2 * eps - 2 * m, m]))
+        np.testing.assert_allclose(got, [want[0], -2 * want[0], want[1]], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(got, nc.aba(model, qj, vj, tau, kernels="flat"), rtol=0, atol=1e-12)
+    assert compiled == ["forward", "inverse"]
 
 
 def small_tree(name: str):

@@ -14,7 +14,9 @@ algorithm unit (``set_kernel``) for the kinds of the trees it serves.  One libra
 everything took 30 s of CPU to compile (18 s of it the kernels
 of every kind and their derivatives at -O2, one translation unit, 2.4 s the loops); the Panda's
 joint run needs the forward unit alone (about 1.2–1.9 s of CPU at -O1, load 12–18; -O1 costs
-+9 % instructions per ABA against -O2 by callgrind, -Og +39 %).
++9 % instructions per ABA against -O2 by callgrind, -Og +39 %), and without forward dynamics'
+Cholesky fallback (the inverse unit's, set when a tree first needs it: :meth:`TreeLibrary.set_fallback`):
+the whole forward unit's gcc 1.41 → 1.19 s of CPU (median of 5 interleaved, load 18).
 
 :class:`TableAlgorithm` is one algorithm of :data:`~ncgen.codegen.tree_check.ALGORITHMS`
 bound to one model's :class:`~ncgen.codegen.tree_tables.TreeTables`, with the interface the
@@ -80,6 +82,7 @@ _T, _D = "const ncgen_tree *", "const double *"
 SIGNATURES = {
     "kind_names": c_binding.Signature("const char *", ()),
     "set_kernel": c_binding.Signature("int", (("int", "kind"), ("int", "slot"), ("ncgen_tree_kernel", "f"))),
+    "set_fallback": c_binding.Signature("int", (("ncgen_tree_fallback_fn", "f"),)),
     "work_size": c_binding.Signature("long", ((_T, "T"),)),
     "check": c_binding.Signature("int", ((_T, "T"),)),
     "rnea": c_binding.Signature("int", ((_T, "T"), ("int", "n"), (_D, "q"), (_D, "v"), (_D, "a"),
@@ -123,6 +126,10 @@ def sources_key() -> str:
 
 #: The algorithm unit of each entry point.
 UNIT_OF = {fn: unit for unit, fns in ALGORITHM_UNITS.items() for fn in fns}
+#: What the forward unit's ``aba`` (and ``aba_one``) and ``joint_run`` return while forward dynamics of a tree
+#: with mimic joints needs the Cholesky fallback (M or C Y not positive definite) and it is not set
+#: (``templates/c/tree_tables.c.j2``): the caller sets it (:meth:`TreeLibrary.set_fallback`) and calls again.
+NO_FALLBACK, RUN_NO_FALLBACK = 4, 6
 #: Flags of the algorithm units' loops (``-O1``: …); the kernel units take the compile cache's defaults.
 UNIT_CFLAGS = "-O1"
 
@@ -170,8 +177,9 @@ class AlgorithmUnit:
     def __init__(self, unit: str, path: Path):
         self.unit, self.path, self.prefix = unit, path, f"{PACKAGE}_{unit}"
         self._lib = c_binding.open_library(path)
-        names = {"kind_names", "set_kernel", "work_size", "check", *ALGORITHM_UNITS[unit]}
-        structs = {"ncgen_tree": _Tree, "ncgen_tree_kernel": ctypes.c_void_p}
+        names = {"kind_names", "set_kernel", "work_size", "check", *ALGORITHM_UNITS[unit],
+                 *(("set_fallback",) if unit == "forward" else ())}
+        structs = {"ncgen_tree": _Tree, "ncgen_tree_kernel": ctypes.c_void_p, "ncgen_tree_fallback_fn": ctypes.c_void_p}
         self.fn = {k: c_binding.bind(self._lib, f"{self.prefix}_{k}", s, structs=structs, addresses=True)
                    for k, s in SIGNATURES.items() if k in names}
         kinds = self.fn["kind_names"]().decode()
@@ -200,29 +208,54 @@ class AlgorithmUnit:
 
 class TreeLibrary:
     """The tree library: its units (:data:`~ncgen.codegen.tree_kernels.ALGORITHM_UNITS` and the
-    kernel units), each compiled once per ncgen version at first need and loaded once per process."""
+    kernel units), each compiled once per ncgen version at first need and loaded once per process.
+    The forward unit's Cholesky fallback (forward dynamics with mimic joints where M or C Y is not
+    positive definite) is the inverse unit's ``factored_aba``, set in it only when a tree first
+    needs it (:meth:`set_fallback`): a first run of a robot compiles the forward unit alone."""
 
     def __init__(self, cflags: str | None = None):
         self.cflags = cflags
         self._units: dict[str, AlgorithmUnit] = {}
         self._kernels: dict[str, ctypes.CDLL] = {}
         self._lock = threading.Lock()
+        self.fallback = False
 
     def unit(self, unit: str, kinds) -> AlgorithmUnit:
         """The algorithm unit ``unit`` with the kernels of the joint kinds ``kinds`` (names) set
         (each unit compiled here if not in the cache)."""
         with self._lock:
-            alg = self._units.get(unit)
-            if alg is None:
-                alg = self._units[unit] = AlgorithmUnit(unit, unit_library(unit, self.cflags)[0])
-            for need in units_of(unit, kinds)[1:]:
-                if need in alg.kernel_units:
-                    continue
-                lib = self._kernels.get(need)
-                if lib is None:
-                    lib = self._kernels[need] = c_binding.open_library(unit_library(need, self.cflags)[0])
-                alg.set_kernels(need, lib)
+            alg = self._unit(unit, kinds)
+            if unit == "forward" and self.fallback:      # the fallback serves the forward unit's kinds
+                self._unit("inverse", kinds)
             return alg
+
+    def _unit(self, unit: str, kinds) -> AlgorithmUnit:
+        alg = self._units.get(unit)
+        if alg is None:
+            alg = self._units[unit] = AlgorithmUnit(unit, unit_library(unit, self.cflags)[0])
+        for need in units_of(unit, kinds)[1:]:
+            if need in alg.kernel_units:
+                continue
+            lib = self._kernels.get(need)
+            if lib is None:
+                lib = self._kernels[need] = c_binding.open_library(unit_library(need, self.cflags)[0])
+            alg.set_kernels(need, lib)
+        return alg
+
+    def set_fallback(self) -> bool:
+        """Set the inverse unit's ``factored_aba`` (compiled now if not in the cache, with the
+        kernels of every kind the forward unit serves) as the forward unit's fallback; False
+        when it was set already."""
+        with self._lock:
+            if self.fallback:
+                return False
+            forward = self._units["forward"]
+            kinds = [u.partition("_")[2] for u in forward.kernel_units if u.startswith("local_")]
+            inverse = self._unit("inverse", kinds)
+            address = ctypes.cast(inverse._lib[f"{inverse.prefix}_factored_aba"], ctypes.c_void_p).value
+            forward.fn["set_fallback"](address)
+            self.fallback = True
+            return True
 
 
 _LOADED: dict[str | None, TreeLibrary] = {}
@@ -354,7 +387,12 @@ class TableAlgorithm:
         buffers and addresses kept between calls (the fast caller's when it is built)."""
         fast = self._fast
         if fast is not None:
-            out = fast(*args)
+            try:
+                out = fast(*args)
+            except RuntimeError:                    # a kernel failed, or the fallback is wanted
+                if not (self.name == "aba" and self.tree.library.set_fallback()):
+                    raise
+                out = fast(*args)
             if out is None:
                 self.singular()
             return tuple(o.copy() for o in out) if type(out) is tuple else out.copy()
@@ -367,7 +405,11 @@ class TableAlgorithm:
                                self.tree.work.ctypes.data)
         for buf, x in zip(self._in, args):
             buf[...] = x
-        if self._fn(*self._addresses):
+        status = self._fn(*self._addresses)
+        if status == NO_FALLBACK:
+            self.tree.library.set_fallback()
+            status = self._fn(*self._addresses)
+        if status:
             raise ModelError(f"{self.name}: a kernel of the tree library failed")
         if self._check is not None:
             self._checked(self._check[None, :], 1)
@@ -397,7 +439,11 @@ class TableAlgorithm:
         ptrs = [a.ctypes.data for a in arrays] + [o.ctypes.data for o in outs]
         if check is not None:
             ptrs.append(check.ctypes.data)
-        if self._fn(self.tree.ref, n, *ptrs, self.tree.work.ctypes.data):
+        status = self._fn(self.tree.ref, n, *ptrs, self.tree.work.ctypes.data)
+        if status == NO_FALLBACK:
+            self.tree.library.set_fallback()
+            status = self._fn(self.tree.ref, n, *ptrs, self.tree.work.ctypes.data)
+        if status:
             raise ModelError(f"{self.name}: a kernel of the tree library failed")
         if check is not None:
             self._checked(check, n)
@@ -486,8 +532,17 @@ class TableJointLoop:
 
         ptr = (lambda a: None if a is None or a.size == 0 else a.ctypes.data)
         done = ctypes.c_int(0)
-        status, interrupted = call_interruptibly(
-            self._fn, self.tree_bound.ref, ptr(self.E), self.model.nu, ctypes.addressof(options), len(t) - 1,
-            ptr(t), ptr(X), ptr(W), ptr(S), len(self.quat), ptr(self.quat), ptr(stats), ctypes.addressof(done),
-            stop=options.stop.contents)
+        start = (X.copy(), stats.copy())
+
+        def once():
+            return call_interruptibly(
+                self._fn, self.tree_bound.ref, ptr(self.E), self.model.nu, ctypes.addressof(options), len(t) - 1,
+                ptr(t), ptr(X), ptr(W), ptr(S), len(self.quat), ptr(self.quat), ptr(stats), ctypes.addressof(done),
+                stop=options.stop.contents)
+
+        status, interrupted = once()
+        if not interrupted and status == RUN_NO_FALLBACK:
+            self.tree_bound.library.set_fallback()
+            X[...], stats[...] = start                 # the same run again from its start, with the fallback
+            status, interrupted = once()
         return INTERRUPTED if interrupted else int(status), int(done.value)

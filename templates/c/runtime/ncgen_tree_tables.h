@@ -1,6 +1,7 @@
 /* Joint-space algorithms of a tree over data tables: inverse dynamics (RNEA), the joint-space
  * mass matrix (CRBA), forward dynamics (the articulated-body algorithm; with mimic joints the
- * followers held by their constraints, M_i a_i = τ − bias by Cholesky the fallback) and the derivatives of RNEA and forward dynamics, as plain
+ * followers held by their constraints, M_i a_i = τ − bias by Cholesky the fallback, which an includer
+ * may supply instead: NCGEN_TREE_EXTERNAL_FALLBACK) and the derivatives of RNEA and forward dynamics, as plain
  * loops over the bodies that call one small kernel per kind of joint and one per rigid body
  * (ncgen/codegen/tree_kernels.py generates them, ncgen/codegen/tree_tables.py packs the
  * tables).  The same C for every tree: a model is data.
@@ -970,9 +971,36 @@ static int ncgen_tree_factored(const ncgen_tree_kinds *K, const ncgen_tree *T, n
   return 0;
 }
 
+/* aj (nv) = G M_i⁻¹ (τ_i − b_i) by Cholesky of M_i (the fallback of forward dynamics with mimic
+ * joints when M or C Y is not positive definite); check = [smallest relative pivot, Σ aj]. */
+static int ncgen_tree_factored_aba(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s,
+                                   const double *q, const double *v, const double *tau_i, double *aj,
+                                   double *check) {
+  int i;
+  double sum = 0.0;
+  if (ncgen_tree_factored(K, T, s, q, v, &check[0])) return NCGEN_TREE_KERNEL;
+  for (i = 0; i < T->ni; ++i) s->rhs[i] = tau_i[i] - s->rhs[i];
+  ncgen_tree_solve(T->ni, s->L, s->rhs, 1);
+  for (i = 0; i < T->nv; ++i) {
+    aj[i] = T->rate_coef[i] * s->rhs[T->rate_col[i]];
+    sum += aj[i];
+  }
+  check[1] = sum;
+  return 0;
+}
+
+#ifdef NCGEN_TREE_EXTERNAL_FALLBACK
+/* Defined by the includer (a unit of the tree library without the Cholesky path): the
+ * fallback of ncgen_tree_aba_at, the same contract as ncgen_tree_factored_aba. */
+static int ncgen_tree_fallback(const ncgen_tree *T, ncgen_tree_work *s, const double *q, const double *v,
+                               const double *tau_i, double *aj, double *check);
+#endif
+
 /* aj (nv) = G M_i⁻¹ (τ_i − b_i) in the work s: forward dynamics, by the articulated-body
  * algorithm (with mimic joints: their followers held by constraints), else (M or C Y not
- * positive definite) by Cholesky of M_i; check = [smallest relative pivot, Σ aj]. */
+ * positive definite) by Cholesky of M_i (ncgen_tree_factored_aba, or the includer's
+ * ncgen_tree_fallback where NCGEN_TREE_EXTERNAL_FALLBACK is defined); check = [smallest
+ * relative pivot, Σ aj]. */
 static int ncgen_tree_aba_at(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, const double *q,
                              const double *v, const double *tau_i, double *aj, double *check) {
   int i;
@@ -992,15 +1020,11 @@ static int ncgen_tree_aba_at(const ncgen_tree_kinds *K, const ncgen_tree *T, ncg
       return 0;
     }
   }
-  if (ncgen_tree_factored(K, T, s, q, v, &check[0])) return NCGEN_TREE_KERNEL;
-  for (i = 0; i < T->ni; ++i) s->rhs[i] = tau_i[i] - s->rhs[i];
-  ncgen_tree_solve(T->ni, s->L, s->rhs, 1);
-  for (i = 0; i < T->nv; ++i) {
-    aj[i] = T->rate_coef[i] * s->rhs[T->rate_col[i]];
-    sum += aj[i];
-  }
-  check[1] = sum;
-  return 0;
+#ifdef NCGEN_TREE_EXTERNAL_FALLBACK
+  return ncgen_tree_fallback(T, s, q, v, tau_i, aj, check);
+#else
+  return ncgen_tree_factored_aba(K, T, s, q, v, tau_i, aj, check);
+#endif
 }
 
 /* The same with the work array work. */
@@ -1096,17 +1120,8 @@ static int ncgen_tree_aba_derivatives(const ncgen_tree_kinds *K, const ncgen_tre
                                       double *da_dv, double *Minv, double *check, double *work) {
   ncgen_tree_work s;
   int i, ni = T->ni;
-  double sum = 0.0, *a_i;
   ncgen_tree_layout(K, T, work, &s);
-  if (ncgen_tree_factored(K, T, &s, q, v, &check[0])) return NCGEN_TREE_KERNEL;
-  a_i = s.rhs;
-  for (i = 0; i < ni; ++i) a_i[i] = tau_i[i] - a_i[i];
-  ncgen_tree_solve(ni, s.L, a_i, 1);
-  for (i = 0; i < T->nv; ++i) {
-    aj[i] = T->rate_coef[i] * a_i[T->rate_col[i]];
-    sum += aj[i];
-  }
-  check[1] = sum;
+  if (ncgen_tree_factored_aba(K, T, &s, q, v, tau_i, aj, check)) return NCGEN_TREE_KERNEL;
   ncgen_tree_expand(T, &s, q, v, aj);
   if (ncgen_tree_forward(K, T, &s)) return NCGEN_TREE_KERNEL;
   ncgen_tree_backward(K, T, s.W, s.S, s.tau);
