@@ -22,7 +22,8 @@ with the hand down, everything at rest, after 1 s; the URDF's joint limits; leas
 ``weight`` ∫ |τ|² dt; σ₀ = 1e-3 and the joints' reactions guessed (``reaction_guess``); the
 guess is the rest posture with the box at its start.  ``--task reach``: the same arm and
 final posture with the box out of reach (2 m away), the control problem without the push.
-Printed: the NLP's size, IPOPT's iterations and CPU per iteration, the status of each stage
+``--pusher point``: the arm replaced by a 0.5 kg point on a guide along x carrying the same
+sphere (the same box, contacts and target; weight 1 for its ∫ push² dt).  Printed: the NLP's size, IPOPT's iterations and CPU per iteration, the status of each stage
 and, over the last stage, the largest inertia regularisation and the last primal and dual
 infeasibilities (what shows the push stalling where the reach converges).
 
@@ -115,9 +116,12 @@ def planar_posture(model, x):
     raise RuntimeError(f"inverse kinematics of the tool at x = {x} m did not converge ({np.max(np.abs(r)):.1e})")
 
 
-def locked_problem(N: int, task: str, feet: str, weight: float):
-    """``(ocp, model)``: the planar Panda's push or reach (module docstring)."""
-    s = _planar_arm()
+def locked_problem(N: int, task: str, feet: str, weight: float, pusher: str = "arm"):
+    """``(ocp, model)``: the planar Panda's push or reach (module docstring); ``pusher="point"``:
+    the arm replaced by a 0.5 kg point on a guide along x carrying the same sphere at the same
+    place, driven by a force (N) — the same box, contacts and target."""
+    import casadi as ca
+    s = _planar_arm() if pusher == "arm" else nc.System("point_push", gravity=(0, 0, -9.81))
     box_x = START + RADIUS + GAP + EDGE / 2 if task == "push" else 2.0
     box = s.add_body("box", mass=1.0, inertia=np.eye(3) * EDGE ** 2 / 6, position=(box_x, 0.0, EDGE / 2))
     if feet == "tripod":
@@ -127,6 +131,17 @@ def locked_problem(N: int, task: str, feet: str, weight: float):
             s.add_contact(nc.SpherePlane(box, at, FOOT, mu=0.4, name=name))
     else:
         s.add_contact(nc.BoxPlane(box, size=(EDGE,) * 3, mu=0.4, name="floor"))
+    if pusher == "point":
+        start = (START, 0.0, HEIGHT)
+        point = s.add_point("pusher", mass=0.5, position=start)
+        s.add_joint(nc.PointOnLine(s.ground, point, at=start, axis=(1, 0, 0), name="guide"))
+        s.add_force(nc.PointForce(point, (0, 0, 0), force=ca.vertcat(s.add_input("push"), 0, 0)))
+        s.add_contact(nc.SphereBox(point, (0, 0, 0), RADIUS, box=box, size=(EDGE,) * 3, mu=0.2, name="push"))
+        model = s.build(contacts="nonsmooth")
+        ocp = nc.OptimalControl(model, N=N, t_final=1.0, contacts={"sigma0": 1e-3, "reaction_guess": True})
+        ocp.final(pose={"box": (np.eye(3), (box_x + (DISTANCE if task == "push" else 0.0), 0.0, EDGE / 2))}, v=0)
+        ocp.minimize_effort(weight)
+        return ocp, model
     arm = s.members["panda_link6"]
     s.add_contact(nc.SphereBox(arm, arm.markers["tool"], RADIUS, box=box, size=(EDGE,) * 3, mu=0.2, name="push"))
     model = s.build(contacts="nonsmooth")
@@ -145,7 +160,7 @@ def locked_problem(N: int, task: str, feet: str, weight: float):
 
 
 def locked(args):
-    ocp, model = locked_problem(args.N, args.task, args.feet, args.weight)
+    ocp, model = locked_problem(args.N, args.task, args.feet, args.weight, args.pusher)
     cpu = time.process_time()
     try:
         result = ocp.solve("rest", max_iter=args.max_iter, diagnose=False)
@@ -153,7 +168,7 @@ def locked(args):
         result = exc.result
     cpu = time.process_time() - cpu
     st = result.stats
-    print(f"planar Panda, {args.task}, box on {args.feet}, N = {args.N}: {model}; {st.n_variables} variables, "
+    print(f"planar Panda ({args.pusher} pusher), {args.task}, box on {args.feet}, N = {args.N}: {model}; {st.n_variables} variables, "
           f"{st.n_constraints} constraints; NLP built in {st.build_time:.1f} s (wall)")
     for stage in result.homotopy:
         print(f"  σ = {stage['sigma']}: {stage['status']}, {stage['iterations']} iterations, "
@@ -174,6 +189,7 @@ def main(argv=None):
     ap.add_argument("--locked", action="store_true", help="the planar 3-joint arm (module docstring)")
     ap.add_argument("--task", choices=("push", "reach"), default="push")
     ap.add_argument("--feet", choices=("tripod", "corners"), default="tripod")
+    ap.add_argument("--pusher", choices=("arm", "point"), default="arm", help="--locked: the arm or a point on a guide")
     ap.add_argument("--weight", type=float, default=0.01, help="weight of ∫ |τ|² dt (--locked)")
     ap.add_argument("--max-iter", type=int, default=300, help="IPOPT iterations per stage (--locked)")
     args = ap.parse_args(argv)
