@@ -23,7 +23,7 @@ with the hand down, everything at rest, after 1 s; the URDF's joint limits; leas
 guess is the rest posture with the box at its start.  ``--task reach``: the same arm and
 final posture with the box out of reach (2 m away), the control problem without the push.
 ``--pusher point``: the arm replaced by a 0.5 kg point on a guide along x carrying the same
-sphere (the same box, contacts and target; weight 1 for its ∫ push² dt).  Printed: the NLP's size, IPOPT's iterations and CPU per iteration, the status of each stage
+sphere (the same box, contacts and target; run it with ``--weight 1``).  Printed: the NLP's size, IPOPT's iterations and CPU per iteration, the status of each stage
 and, over the last stage, the largest inertia regularisation and the last primal and dual
 infeasibilities (what shows the push stalling where the reach converges).
 
