@@ -23,13 +23,14 @@ with the hand down, everything at rest, after 1 s; the URDF's joint limits; leas
 guess is the rest posture with the box at its start.  ``--task reach``: the same arm and
 final posture with the box out of reach (2 m away), the control problem without the push.
 ``--pusher point``: the arm replaced by a 0.5 kg point on a guide along x carrying the same
-sphere (the same box, contacts and target; run it with ``--weight 1``).  Printed: the NLP's size, IPOPT's iterations and CPU per iteration, the status of each stage
-and, over the last stage, the largest inertia regularisation and the last primal and dual
-infeasibilities (what shows the push stalling where the reach converges).
+sphere (the same box, contacts and target; run it with ``--weight 1``).  Printed: the NLP's
+size, IPOPT's iterations and CPU per iteration, the status of each stage and, over the last
+stage, the largest inertia regularisation and the last primal and dual infeasibilities (what
+shows the push stalling where the reach and the point's push converge).
 
 Run:  python benchmarks/contact_implicit_panda.py [--N 20] [--iterations 3 10]
       python benchmarks/contact_implicit_panda.py --locked [--task push|reach] [--feet tripod|corners]
-             [--N 10] [--weight 0.01] [--max-iter 300]
+             [--pusher arm|point] [--N 10] [--weight 0.01] [--max-iter 300]
 """
 from __future__ import annotations
 
