@@ -15,7 +15,7 @@ The planar variant (``--locked``): the stock URDF through ``nc.robots.locked_urd
 fingers and joints 1, 3, 5, 7 locked at 0, so that joints 2, 4, 6 (parallel axes, the world y)
 move the arm in the x–z plane: three bodies, nq = 21.  The hand points down; a sphere of
 radius 2 cm at its tool point (``panda_hand`` + 0.1034 m along z) is 1 cm behind a 1 kg box of
-0.1 m standing on the floor (``--feet corners``: ``BoxPlane``, its 8 corners; ``tripod``: three
+0.1 m standing on the floor (``--feet corners``, the default: ``BoxPlane``, its 8 corners; ``tripod``: three
 spheres of 5 mm under it, statically determinate), μ = 0.4 on the floor, 0.2 on the box.  The
 task (``--task push``): the box 0.1 m further along x, the arm in the posture that touches it
 with the hand down, everything at rest, after 1 s; the URDF's joint limits; least
@@ -29,7 +29,7 @@ stage, the largest inertia regularisation and the last primal and dual infeasibi
 shows the push stalling where the reach and the point's push converge).
 
 Run:  python benchmarks/contact_implicit_panda.py [--N 20] [--iterations 3 10]
-      python benchmarks/contact_implicit_panda.py --locked [--task push|reach] [--feet tripod|corners]
+      python benchmarks/contact_implicit_panda.py --locked [--task push|reach] [--feet corners|tripod]
              [--pusher arm|point] [--N 10] [--weight 0.01] [--max-iter 300]
 """
 from __future__ import annotations
@@ -189,7 +189,7 @@ def main(argv=None):
     ap.add_argument("--iterations", type=int, nargs=2, default=(3, 10))
     ap.add_argument("--locked", action="store_true", help="the planar 3-joint arm (module docstring)")
     ap.add_argument("--task", choices=("push", "reach"), default="push")
-    ap.add_argument("--feet", choices=("tripod", "corners"), default="tripod")
+    ap.add_argument("--feet", choices=("corners", "tripod"), default="corners")
     ap.add_argument("--pusher", choices=("arm", "point"), default="arm", help="--locked: the arm or a point on a guide")
     ap.add_argument("--weight", type=float, default=0.01, help="weight of ∫ |τ|² dt (--locked)")
     ap.add_argument("--max-iter", type=int, default=300, help="IPOPT iterations per stage (--locked)")
