@@ -11,7 +11,26 @@ stopped after ``a`` and ``b`` IPOPT iterations (the first σ of the homotopy onl
 time per iteration is the difference of their solver CPU times over ``b − a`` (what both
 share: IPOPT's set-up, CasADi's derivative functions, the first evaluations).
 
+The planar variant (``--locked``): the stock URDF through ``nc.robots.locked_urdf`` with the
+fingers and joints 1, 3, 5, 7 locked at 0, so that joints 2, 4, 6 (parallel axes, the world y)
+move the arm in the x–z plane: three bodies, nq = 21.  The hand points down; a sphere of
+radius 2 cm at its tool point (``panda_hand`` + 0.1034 m along z) is 1 cm behind a 1 kg box of
+0.1 m standing on the floor (``--feet corners``, the default: ``BoxPlane``, its 8 corners; ``tripod``: three
+spheres of 5 mm under it, statically determinate), μ = 0.4 on the floor, 0.2 on the box.  The
+task (``--task push``): the box 0.1 m further along x, the arm in the posture that touches it
+with the hand down, everything at rest, after 1 s; the URDF's joint limits; least
+``weight`` ∫ |τ|² dt; σ₀ = 1e-3 and the joints' reactions guessed (``reaction_guess``); the
+guess is the rest posture with the box at its start.  ``--task reach``: the same arm and
+final posture with the box out of reach (2 m away), the control problem without the push.
+``--pusher point``: the arm replaced by a 0.5 kg point on a guide along x carrying the same
+sphere (the same box, contacts and target; run it with ``--weight 1``).  Printed: the NLP's
+size, IPOPT's iterations and CPU per iteration, the status of each stage and, over the last
+stage, the largest inertia regularisation and the last primal and dual infeasibilities (what
+shows the push stalling where the reach and the point's push converge).
+
 Run:  python benchmarks/contact_implicit_panda.py [--N 20] [--iterations 3 10]
+      python benchmarks/contact_implicit_panda.py --locked [--task push|reach] [--feet corners|tripod]
+             [--pusher arm|point] [--N 10] [--weight 0.01] [--max-iter 300]
 """
 from __future__ import annotations
 
@@ -68,11 +87,117 @@ def stopped_solve(N: int, iterations: int):
     return model, tip, result
 
 
+LOCKED = ["panda_finger_joint1", "panda_finger_joint2", "panda_joint1", "panda_joint3", "panda_joint5",
+          "panda_joint7"]
+TOOL, HEIGHT, START, GAP, DISTANCE, FOOT = 0.1034, 0.05, 0.5, 0.01, 0.1, 0.005
+
+
+def _planar_arm():
+    """The locked Panda, the marker ``panda_link6.tool`` at the tool point."""
+    s = nc.System.from_urdf(nc.robots.locked_urdf("panda", LOCKED))
+    member, R, p = s.frames["panda_hand"]
+    s.members[member].add_marker("tool", p + R @ np.array([0.0, 0.0, TOOL]))
+    return s
+
+
+def planar_posture(model, x):
+    """Joints 2, 4, 6 (rad) putting the tool at ``(x, 0, HEIGHT)``, the hand pointing down
+    (Newton's method on the planar inverse kinematics)."""
+    def residual(qj):
+        R, p = model.frame_pose("panda_hand", model.from_joint_space(qj, np.zeros(3))[0])
+        tool = p + R @ np.array([0.0, 0.0, TOOL])
+        return np.array([tool[0] - x, tool[2] - HEIGHT, R[0, 2]])
+    qj = np.array([0.75, -1.6, 2.35])
+    for _ in range(50):
+        r = residual(qj)
+        if np.max(np.abs(r)) < 1e-12:
+            return qj
+        J = np.column_stack([(residual(qj + 1e-7 * e) - r) / 1e-7 for e in np.eye(3)])
+        qj = qj - np.linalg.solve(J, r)
+    raise RuntimeError(f"inverse kinematics of the tool at x = {x} m did not converge ({np.max(np.abs(r)):.1e})")
+
+
+def locked_problem(N: int, task: str, feet: str, weight: float, pusher: str = "arm"):
+    """``(ocp, model)``: the planar Panda's push or reach (module docstring); ``pusher="point"``:
+    the arm replaced by a 0.5 kg point on a guide along x carrying the same sphere at the same
+    place, driven by a force (N) — the same box, contacts and target."""
+    import casadi as ca
+    s = _planar_arm() if pusher == "arm" else nc.System("point_push", gravity=(0, 0, -9.81))
+    box_x = START + RADIUS + GAP + EDGE / 2 if task == "push" else 2.0
+    box = s.add_body("box", mass=1.0, inertia=np.eye(3) * EDGE ** 2 / 6, position=(box_x, 0.0, EDGE / 2))
+    if feet == "tripod":
+        a = EDGE / 2
+        for name, at in (("foot_left", (FOOT - a, a - FOOT, FOOT - a)), ("foot_right", (FOOT - a, FOOT - a, FOOT - a)),
+                         ("foot_front", (a - FOOT, 0.0, FOOT - a))):
+            s.add_contact(nc.SpherePlane(box, at, FOOT, mu=0.4, name=name))
+    else:
+        s.add_contact(nc.BoxPlane(box, size=(EDGE,) * 3, mu=0.4, name="floor"))
+    if pusher == "point":
+        start = (START, 0.0, HEIGHT)
+        point = s.add_point("pusher", mass=0.5, position=start)
+        s.add_joint(nc.PointOnLine(s.ground, point, at=start, axis=(1, 0, 0), name="guide"))
+        s.add_force(nc.PointForce(point, (0, 0, 0), force=ca.vertcat(s.add_input("push"), 0, 0)))
+        s.add_contact(nc.SphereBox(point, (0, 0, 0), RADIUS, box=box, size=(EDGE,) * 3, mu=0.2, name="push"))
+        model = s.build(contacts="nonsmooth")
+        ocp = nc.OptimalControl(model, N=N, t_final=1.0, contacts={"sigma0": 1e-3, "reaction_guess": True})
+        ocp.final(pose={"box": (np.eye(3), (box_x + (DISTANCE if task == "push" else 0.0), 0.0, EDGE / 2))}, v=0)
+        ocp.minimize_effort(weight)
+        return ocp, model
+    arm = s.members["panda_link6"]
+    s.add_contact(nc.SphereBox(arm, arm.markers["tool"], RADIUS, box=box, size=(EDGE,) * 3, mu=0.2, name="push"))
+    model = s.build(contacts="nonsmooth")
+    alone = _planar_arm().build()
+    q0, q1 = np.array(model.q0, float), np.array(model.q0, float)
+    for q, x in ((q0, START), (q1, START + GAP + DISTANCE)):
+        q[:alone.nq] = alone.from_joint_space(planar_posture(alone, x), np.zeros(3))[0]   # the arm comes first
+    if task == "push":
+        q1[model.coordinate_names.index("box.r_i.x")] += DISTANCE
+    ocp = nc.OptimalControl(model, N=N, t_final=1.0, contacts={"sigma0": 1e-3, "reaction_guess": True})
+    ocp.initial(q=q0, v=np.zeros(model.nq))
+    ocp.final(q=q1, v=0)
+    ocp.joint_limits()
+    ocp.minimize_effort(weight)
+    return ocp, model
+
+
+def locked(args):
+    ocp, model = locked_problem(args.N, args.task, args.feet, args.weight, args.pusher)
+    cpu = time.process_time()
+    try:
+        result = ocp.solve("rest", max_iter=args.max_iter, diagnose=False)
+    except OptimizationError as exc:
+        result = exc.result
+    cpu = time.process_time() - cpu
+    st = result.stats
+    print(f"planar Panda ({args.pusher} pusher), {args.task}, box on {args.feet}, N = {args.N}: {model}; {st.n_variables} variables, "
+          f"{st.n_constraints} constraints; NLP built in {st.build_time:.1f} s (wall)")
+    for stage in result.homotopy:
+        print(f"  σ = {stage['sigma']}: {stage['status']}, {stage['iterations']} iterations, "
+              f"{stage['cpu_time']:.1f} s CPU, complementarity residual {stage['residual']:.1e}")
+    it = result.nlp.opti.stats().get("iterations", {})
+    reg = [x for x in it.get("regularization_size", []) if x > 0]
+    print(f"  last stage: largest inertia regularisation {max(reg, default=0.0):.1e}, last primal / dual "
+          f"infeasibility {it['inf_pr'][-1]:.1e} / {it['inf_du'][-1]:.1e}")
+    iterations = sum(stage["iterations"] for stage in result.homotopy)
+    print(f"  {st.status}; {iterations} iterations in {cpu:.1f} s CPU ({cpu / max(iterations, 1):.2f} s each, "
+          f"NLP build included)")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--N", type=int, default=20)
+    ap.add_argument("--N", type=int, default=None, help="intervals (default 20, --locked 10)")
     ap.add_argument("--iterations", type=int, nargs=2, default=(3, 10))
+    ap.add_argument("--locked", action="store_true", help="the planar 3-joint arm (module docstring)")
+    ap.add_argument("--task", choices=("push", "reach"), default="push")
+    ap.add_argument("--feet", choices=("corners", "tripod"), default="corners")
+    ap.add_argument("--pusher", choices=("arm", "point"), default="arm", help="--locked: the arm or a point on a guide")
+    ap.add_argument("--weight", type=float, default=0.01, help="weight of ∫ |τ|² dt (--locked)")
+    ap.add_argument("--max-iter", type=int, default=300, help="IPOPT iterations per stage (--locked)")
     args = ap.parse_args(argv)
+    if args.locked:
+        args.N = args.N or 10
+        return locked(args)
+    args.N = args.N or 20
     a, b = args.iterations
     runs = {}
     for n in (a, b):

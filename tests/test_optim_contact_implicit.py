@@ -304,3 +304,32 @@ def test_hopper_optimum_replays_in_the_nonsmooth_stepper(hopper):
     assert np.max(np.abs(sim.marker("body.centre") - sol.marker("body.centre"))) < 1e-9
     assert np.max(np.abs(sim.marker("foot.centre") - sol.marker("foot.centre"))) < 2e-3
     assert np.max(np.abs(sim.q[-1] - sol.q[-1])) < 1e-9
+
+
+@pytest.mark.parametrize("reaction_guess", [False, True])
+def test_reaction_guess_puts_the_guide_reaction_in_the_half_steps(reaction_guess):
+    """A 2 kg cart on a horizontal guide (its weight carried by the guide's reaction) and a
+    ball resting on the floor, guessed at rest: with ``reaction_guess`` the half-steps'
+    multipliers start at ν = h/2 λ, λ the static reaction (m g on the guide), and the first
+    iterate's dynamics hold; without it they start at 0 and every half-step is off by the
+    impulse h/2 m g the guide must carry."""
+    import casadi as ca
+    m, g, N, T = 2.0, 9.81, 4, 0.4
+    s = nc.System("cart_ball", gravity=(0, -g))
+    cart = s.add_point("cart", mass=m, position=(0, 0.5))
+    s.add_joint(nc.PointOnLine(s.ground, cart, at=(0, 0.5), axis=(1, 0), name="guide"))
+    s.add_force(nc.PointForce(cart, (0, 0), force=ca.vertcat(s.add_input("push"), 0)))
+    ball = s.add_point("ball", mass=1.0, position=(1.0, 0.1))
+    s.add_contact(nc.SpherePlane(ball, radius=0.1, name="floor"))
+    model = s.build(contacts="nonsmooth")
+    ocp = nc.OptimalControl(model, N=N, t_final=T, contacts={"reaction_guess": reaction_guess})
+    ocp.minimize_effort()
+    with pytest.raises(OptimizationError) as info:
+        ocp.solve("rest", max_iter=0, diagnose=False)
+    nlp = info.value.result.nlp
+    half_steps = [grp for grp in nlp.groups if "half-step" in grp.label]
+    assert len(half_steps) == 2 * N
+    residual = ca.Function("r", [nlp.opti.x], [ca.vertcat(*[grp.expr for grp in half_steps])])
+    worst = float(np.max(np.abs(np.array(residual(nlp.x_opt)))))
+    expected = 0.0 if reaction_guess else T / N / 2 * m * g
+    assert worst == pytest.approx(expected, abs=1e-9)

@@ -85,6 +85,8 @@ DEFAULTS = {
     "directions": None,          # friction cone directions per contact (None: 2 planar, 4 in 3D)
     "penalty": 1.0,              # weight ρ of Σ a·c over the pairs in the cost (0: none)
     "polish": True,              # a last solve with the active set fixed (module docstring)
+    "reaction_guess": False,     # guess the half-steps' ν₁, ν₂ = h/2 λ from the guess's multipliers
+                                 # (its inverse dynamics) instead of 0 (a robot holding its weight)
 }
 
 
@@ -141,8 +143,9 @@ def check_settings(settings, dim: int, contacts=()) -> dict:
     if unknown:
         raise OptimizationError(f"contacts: unknown setting(s) {', '.join(unknown)}; known: {', '.join(DEFAULTS)}")
     out = {**DEFAULTS, **settings}
-    if not isinstance(out["polish"], bool):
-        raise OptimizationError(f"contacts.polish: expected true or false, got {out['polish']!r}")
+    for key in ("polish", "reaction_guess"):
+        if not isinstance(out[key], bool):
+            raise OptimizationError(f"contacts.{key}: expected true or false, got {out[key]!r}")
     for key in ("sigma0", "sigma_final", "tol", "step_weight", "penalty"):
         x = out[key]
         if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) or x < 0 or (
@@ -290,7 +293,7 @@ class ContactImplicit(Transcription):
                                   mu[i] * normal[i] - ca.sum1(beta_k[i * nd:(i + 1) * nd]), gam_k[i], penalised=False))
 
         rows = [contact_rows(q[:, k]) for k in range(N + 1)] if nk else None
-        lam_nodes = []
+        lam_nodes, half_steps = [], []
         for k in range(N):
             tk, tk1, hk = t[k], t[k + 1], h[k]
             qk, wk, qk1, vk1, mk = q[:, k], w[:, k], q[:, k + 1], v[:, k + 1], Mid[:, k]
@@ -306,6 +309,7 @@ class ContactImplicit(Transcription):
             r2 = ca.mtimes(M, vk1 - mk) - hk / 2 * (f["F"](tk1, qk1, vk1, uk, p) + force1)
             if nc:
                 nu1, nu2 = opti.variable(nc), opti.variable(nc)
+                half_steps.append((nu1, nu2))
                 lam_nodes.append(2 * nu2 / hk)          # λ at node k+1 (the second half-step's ν₂ = h/2 λ)
                 r1 += ca.mtimes(f["A"](tk, qk, p).T, nu1)
                 r2 += ca.mtimes(f["A"](tk1, qk1, p).T, nu2)
@@ -379,6 +383,11 @@ class ContactImplicit(Transcription):
                 o.set_initial(U, g.u(guess_times(hz, g.T, [0.0])).T)
             if s["step_lengths"] == "free":
                 o.set_initial(scale, np.ones(N))
+            if s["reaction_guess"] and nc:
+                lam_g = g.lam(guess_times(hz, g.T, np.array([0.0, 1.0]))).T     # λ at the start and end of each step
+                for k, (nu1, nu2) in enumerate(half_steps):
+                    o.set_initial(nu1, g.T / N / 2 * lam_g[:, 2 * k])
+                    o.set_initial(nu2, g.T / N / 2 * lam_g[:, 2 * k + 1])
             if nk and N > 1:
                 v_all = np.hstack([g.v(np.array([hz.t0])).T, vg])
                 u_all = g.u(guess_times(hz, g.T, [0.0])).T if nu else np.zeros((0, N))
