@@ -52,7 +52,7 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800),   # each benchmark sc
     ("contact.py --pyramid", ["=== pyramid of 10 boxes", "ncgen first run, fresh process and empty cache",
                               "ncgen step search", "MuJoCo step search, Newton solver, elliptic cones, Euler",
                               "contact solves at the sweep cap: 0",
-                              "RATIO ncgen / MuJoCo interleaved (pyramid of 10", "keeping the shape",
+                              "RATIO ncgen / MuJoCo CPU interleaved (pyramid of 10", "keeping the shape",
                               "RATIO ncgen / MuJoCo penetration (pyramid of 10)"]),
     ("joint_space.py", ["=== call overhead", "RATIO casadi.external / direct", "=== Panda",
                         "RATIO ncgen joint kernel / pinocchio.aba", "RATIO ncgen joint kernel C loop"]),

@@ -322,18 +322,68 @@ def solve_function(pattern: ca.Sparsity) -> ca.Function:
     factorisation unrolled into straight-line code, about 15 instructions per nonzero and
     twice as fast as the library routine (the whole step of a 20-bar chain: 15 µs instead
     of 30 µs), but slow to compile (gcc -O2: about 0.3 ms per instruction, 15 s at the
-    limit).  Beyond, it is an MX function calling CasADi's ``qr`` linear solver, generated
-    as loops over the factors' patterns."""
+    limit).  Beyond, where K is block diagonal (the connected components of its pattern:
+    free bodies, which only contacts couple), each block is solved alone by
+    :func:`_block_solves`; else it is an MX function calling CasADi's ``qr`` linear solver,
+    generated as loops over the factors' patterns."""
     n = pattern.size1()
     V, R, *_ = ca.qr_sparse(ca.DM(pattern, 1.0), True)
     if V.nnz() + R.nnz() <= SX_QR_MAX_NNZ:
-        K, r = ca.SX.sym("K", pattern), ca.SX.sym("r", n)
-        V, R, beta, prinv, pc = ca.qr_sparse(K, True)
-        x = ca.qr_solve(r, V, R, beta, prinv, pc)
-    else:
-        K, r = ca.MX.sym("K", pattern), ca.MX.sym("r", n)
-        x = ca.solve(K, r, "qr")
+        return _sx_solve(pattern, "step_solve")
+    K, r = ca.MX.sym("K", pattern), ca.MX.sym("r", n)
+    blocks = _components(pattern)
+    x = _block_solves(pattern, blocks, K, r) if len(blocks) > 1 else ca.solve(K, r, "qr")
     return ca.Function("step_solve", [K, r], [x], ["K", "r"], ["x"])
+
+
+def _sx_solve(pattern: ca.Sparsity, name: str) -> ca.Function:
+    """``name: (K, r) -> K⁻¹ r``, K of ``pattern``: the sparse QR unrolled into SX."""
+    K, r = ca.SX.sym("K", pattern), ca.SX.sym("r", pattern.size1())
+    V, R, beta, prinv, pc = ca.qr_sparse(K, True)
+    return ca.Function(name, [K, r], [ca.qr_solve(r, V, R, beta, prinv, pc)], ["K", "r"], ["x"])
+
+
+def _components(pattern: ca.Sparsity) -> list[np.ndarray]:
+    """The diagonal blocks of a square ``pattern``: the connected components of the graph
+    with an edge i–j for each structural nonzero (i, j), each as its sorted indices."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    rows, cols = pattern.get_triplet()
+    n = pattern.size1()
+    graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
+    count, label = connected_components(graph, directed=False)
+    return [np.flatnonzero(label == k) for k in range(count)]
+
+
+def _block_solves(pattern: ca.Sparsity, blocks: list[np.ndarray], K: ca.MX, r: ca.MX) -> ca.MX:
+    """K⁻¹ r for a block-diagonal K (``blocks``: the indices of each diagonal block, which
+    together cover every row once): x_b = K_bb⁻¹ r_b per block, the blocks grouped by their
+    pattern, one solve function per pattern (SX-unrolled QR where its factors are small
+    enough, else CasADi's ``qr``) mapped over its group's blocks (one copy of the code).  The
+    same QR per block as of the whole matrix, in a column order found per block."""
+    groups: dict[tuple, list[np.ndarray]] = {}
+    for idx in blocks:
+        sub, _ = pattern.sub(idx.tolist(), idx.tolist())
+        key = (sub.size1(), tuple(sub.colind()), tuple(sub.row()))
+        groups.setdefault(key, []).append(idx)
+    parts, order = [], []
+    for g, members in enumerate(groups.values()):
+        idx0 = members[0].tolist()
+        sub, _ = pattern.sub(idx0, idx0)
+        V, R, *_ = ca.qr_sparse(ca.DM(sub, 1.0), True)
+        if V.nnz() + R.nnz() <= SX_QR_MAX_NNZ:
+            f = _sx_solve(sub, f"step_solve_block{g}")
+        else:
+            Kb, rb = ca.MX.sym("K", sub), ca.MX.sym("r", sub.size1())
+            f = ca.Function(f"step_solve_block{g}", [Kb, rb], [ca.solve(Kb, rb, "qr")], ["K", "r"], ["x"])
+        Ks = ca.horzcat(*[K[idx.tolist(), idx.tolist()] for idx in members])
+        rs = ca.horzcat(*[r[idx.tolist()] for idx in members])
+        parts.append(ca.vec(f.map(len(members), "serial")(Ks, rs)))
+        order.extend(np.concatenate(members).tolist())
+    inverse = np.empty(len(order), dtype=int)
+    inverse[order] = np.arange(len(order))
+    return ca.vertcat(*parts)[inverse.tolist()]
 
 
 def mass_scale(model) -> float:

@@ -266,6 +266,49 @@ static void test_min_norm_per_group(void) {
   CHECK(cone_residual(&ws, NK, first, bias) < 1e-13, "residual %g", cone_residual(&ws, NK, first, bias));
 }
 
+/* Three contacts on a rank-4 Delassus matrix G = B B^T (B: 9 x 4, every contact coupled to
+ * every other, five null directions: more than one dropped pivot, so the move's QR and
+ * its reflections all take part), sticking (U = 0): from P = P* + n, P* in range(B) inside
+ * the cones and n in null(B^T), the least-norm member of P + null(G) is P* (the reference:
+ * n made orthogonal to B's columns by Gram-Schmidt here, independently of the solver). */
+static void test_min_norm_rank_deficient(void) {
+  const casadi_real Ps[ND] = {1, 0.1, -0.2, 0.8, -0.15, 0.05, 1.2, 0.3, 0.1};
+  casadi_real B[4][ND], E[4][ND], n[ND] = {0.3, -0.7, 0.2, 0.5, 0.1, -0.4, 0.6, -0.2, 0.9}, G[ND * ND], s;
+  workspace ws;
+  int i, j, a, b;
+  for (i = 0; i < ND; ++i) { /* B = [P*, three fixed columns] */
+    B[0][i] = Ps[i];
+    B[1][i] = sin(1.0 + 3 * i);
+    B[2][i] = cos(0.5 + 2 * i * i);
+    B[3][i] = 0.1 * i - 0.4;
+  }
+  for (a = 0; a < 4; ++a) { /* E: orthonormal columns spanning range(B) */
+    memcpy(E[a], B[a], sizeof E[a]);
+    for (b = 0; b < a; ++b) {
+      for (s = 0, i = 0; i < ND; ++i) s += E[b][i] * E[a][i];
+      for (i = 0; i < ND; ++i) E[a][i] -= s * E[b][i];
+    }
+    for (s = 0, i = 0; i < ND; ++i) s += E[a][i] * E[a][i];
+    for (i = 0; i < ND; ++i) E[a][i] /= sqrt(s);
+  }
+  for (a = 0; a < 4; ++a) { /* n -= E E^T n, then |n| = 0.05 */
+    for (s = 0, i = 0; i < ND; ++i) s += E[a][i] * n[i];
+    for (i = 0; i < ND; ++i) n[i] -= s * E[a][i];
+  }
+  for (s = 0, i = 0; i < ND; ++i) s += n[i] * n[i];
+  for (i = 0; i < ND; ++i) n[i] *= 0.05 / sqrt(s);
+  for (i = 0; i < ND; ++i)
+    for (j = 0; j < ND; ++j) {
+      for (s = 0, a = 0; a < 4; ++a) s += B[a][i] * B[a][j];
+      G[i + j * ND] = s;
+    }
+  ws = make(G, (const casadi_real[ND]){0});
+  for (i = 0; i < ND; ++i) ws.P[i] = Ps[i] + n[i];
+  cone_min_norm(&ws, NK, first, bias, 1e-13);
+  for (i = 0; i < ND; ++i) CHECK(fabs(ws.P[i] - Ps[i]) < 1e-13, "P[%d] = %.17g, expected %.17g", i, ws.P[i], Ps[i]);
+  for (i = 0; i < ND; ++i) CHECK(fabs(ws.U[i]) < 1e-13, "U[%d] = %g", i, ws.U[i]);
+}
+
 int main(void) {
   test_jacobian();
   test_solution();
@@ -274,5 +317,6 @@ int main(void) {
   test_min_norm_touching();
   test_min_norm_touching_pulled();
   test_min_norm_per_group();
+  test_min_norm_rank_deficient();
   return report("test_cone_newton");
 }
