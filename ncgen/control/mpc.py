@@ -234,6 +234,10 @@ class MPC:
     ``h = t_final / N`` seconds, and ``mpc`` is meant to be called every ``h`` seconds.
     ``qp_solver``: ``"qrqp"`` (generated C) or ``"qpoases"`` (in this process; not exported), see
     :mod:`ncgen.control.mpc_qp`.
+    ``loop``: ``"python"`` (the iterations driven from Python, every iteration reported) or
+    ``"c"`` (the whole control step one call of the exported package's C controller compiled
+    into the same package, :mod:`ncgen.control.mpc_c_loop`: the same numbers; ``qrqp``, no
+    reference, no ``min_tension``; only the last iteration of a step reported).
     ``mpc.reset(x, t, iterations=...)`` (also done by the first call) sets the guess to ``x``
     held with zero inputs (clipped into their bounds), or to the reference along the horizon
     from ``t``, and iterates on it.
