@@ -109,7 +109,7 @@ def closed_loop_cost(problem, X, U) -> float:
     import casadi as ca
     x, u = ca.SX.sym("x", X.shape[1]), ca.SX.sym("u", U.shape[1])
     stage = ca.Function("stage", [x, u], [problem.stage(x, u)])
-    return float(np.sum(stage.map(len(U))(X.T, U.T)))
+    return float(np.sum(np.array(stage.map(len(U))(X.T, U.T))))
 
 
 #: The exported package's closed loop with each controller call timed (``--export``): the

@@ -1,7 +1,7 @@
 """``nc.MPC(ocp, loop="c")`` on the cart-pole (examples/cartpole_mpc.toml): the control step
 in one C call (the exported package's controller compiled into the MPC's package).  Its
 converged solution is IPOPT's on the same discrete horizon problem (an independent solver on
-the step equations as constraints); its real-time-iteration closed loop costs within 0.5 % of
+the step equations as constraints); its real-time-iteration closed loop costs within 0.1 % of
 the converged MPC's closed loop (10 SQP iterations a step) from the same start and push; it
 answers the Python loop's inputs; a guess along which the steps fail raises and is kept;
 bad ``loop`` values and the controllers the C loop does not cover are refused by name."""
@@ -43,7 +43,7 @@ def rti(ocp):
 def loop_cost(problem, X, U):
     """``Σ_k ℓ(x_k, u_k)`` along a closed loop (the horizon problem's stage cost)."""
     x, u = ca.SX.sym("x", X.shape[1]), ca.SX.sym("u", U.shape[1])
-    return float(np.sum(ca.Function("l", [x, u], [problem.stage(x, u)]).map(len(U))(X.T, U.T)))
+    return float(np.sum(np.array(ca.Function("l", [x, u], [problem.stage(x, u)]).map(len(U))(X.T, U.T))))
 
 
 @pytest.mark.parametrize("bad", ["C", "fortran", 1, None])
@@ -75,7 +75,7 @@ def test_converged_c_loop_is_the_ipopt_solution_of_the_horizon_problem(ocp, rti)
 
 
 @pytest.mark.slow
-def test_real_time_iteration_costs_within_half_a_percent_of_the_converged_mpc(ocp, rti):
+def test_real_time_iteration_costs_within_a_tenth_of_a_percent_of_the_converged_mpc(ocp, rti):
     """One SQP iteration a step (C loop) against ten (converged: twenty give the same inputs),
     and the Python loop's inputs equal to round-off (the same arithmetic)."""
     x0 = tilted(0.2)
@@ -85,7 +85,7 @@ def test_real_time_iteration_costs_within_half_a_percent_of_the_converged_mpc(oc
     _, U20, _ = closed_loop(nc.MPC(ocp, terminal_weight=100.0, iterations=20, loop="c"), x0, 3.0, disturbance=PUSH)
     assert np.max(np.abs(U20 - U10)) < 1e-6
     J, J10 = loop_cost(rti.problem, X, U), loop_cost(rti.problem, X10, U10)
-    assert abs(J / J10 - 1) < 5e-3, (J, J10)
+    assert abs(J / J10 - 1) < 1e-3, (J, J10)          # measured 2e-5 (benchmarks/control.py)
     assert np.all(np.abs(U) <= 20.0) and np.max(np.abs(U)) > 1.0
     assert np.linalg.norm(X[-1, 6:8] - [0.0, 0.5]) < 1e-2              # upright again after the push
     _, U_py, _ = closed_loop(nc.MPC(ocp, terminal_weight=100.0), x0, 3.0, disturbance=PUSH)
