@@ -30,7 +30,8 @@ import casadi as ca
 import numpy as np
 
 from ncgen.control.discrete import default_abstol, step_functions
-from ncgen.control.mpc import ALPHAS, ARMIJO, C_MIN, GAMMA, REGULARIZATION, mpc_functions, residual_tolerance
+from ncgen.control.mpc import (ALPHAS, ARMIJO, C_MIN, GAMMA, REGULARIZATION, STATIONARY, mpc_functions,
+                               residual_tolerance)
 from ncgen.control.mpc_problem import mpc_problem
 from ncgen.control.initial import check_consistent
 from ncgen.errors import NcgenError
@@ -150,7 +151,7 @@ def controller_context(model, problem, fns, iterations: int | None) -> dict:
         "u_lo": ", ".join(_bound(v) for v in problem.u_bounds[0]) or "0",
         "u_hi": ", ".join(_bound(v) for v in problem.u_bounds[1]) or "0",
         "alphas": len(ALPHAS), "armijo": _c(ARMIJO), "gamma": _c(GAMMA), "c_min": _c(C_MIN),
-        "step_tol": _c(residual_tolerance(model)),
+        "stationary": _c(STATIONARY), "step_tol": _c(residual_tolerance(model)),
     }
 
 
