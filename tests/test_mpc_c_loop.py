@@ -104,3 +104,29 @@ def test_a_failing_guess_raises_and_is_kept(ocp, rti):
     assert np.array_equal(rti.X, bad)
     with pytest.raises(nc.NcgenError, match="x"):
         rti(np.full(16, np.nan), 0.0)
+
+
+def test_stationary_needs_a_converged_qp_a_feasible_guess_and_a_round_off_decrease():
+    from ncgen.control.mpc import C_MIN, STATIONARY, stationary
+    J0 = 0.625
+    assert stationary(J0, 0.0, -0.5 * STATIONARY * J0, 0)
+    assert stationary(0.0, 0.0, 0.0, 0)
+    assert not stationary(J0, 0.0, -2 * STATIONARY * J0, 0)            # a decrease a trial can confirm
+    assert not stationary(J0, 10 * C_MIN, 0.0, 0)                      # infeasible: the filter decides
+    assert not stationary(J0, 0.0, 0.0, 1)                             # the QP failed: its prediction says nothing
+
+
+@pytest.mark.slow
+def test_at_the_upright_equilibrium_the_guess_is_kept_without_trials(ocp, rti):
+    """Upright at rest is the optimum (u = 0 holds it): after converging there, a control step
+    keeps the guess without evaluating a single trial, in Python and in C, and answers 0 N."""
+    x = tilted(0.0)
+    py = nc.MPC(ocp, terminal_weight=100.0)
+    merit, calls = py._merit_fn, []
+    py._merit_fn = lambda *a: calls.append(1) or merit(*a)
+    for mpc in (py, rti):
+        mpc.reset(x, iterations=10)
+        u = mpc(x, 0.0)
+        assert mpc.step_lengths == [0.0] and mpc.qp_status == [0]
+        assert abs(u[0]) < 1e-9
+    assert calls == []
