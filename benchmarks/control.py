@@ -22,10 +22,14 @@ MPC step against re-solving the same horizon problem with IPOPT.
    minimum over ``--repeat`` calls.  At a converged guess the SQP's line search often finds
    no step that decreases the cost beyond round-off and tries all its step lengths, so the
    step of the closed loop itself (a new state and the shifted guess at every call: what a
-   controller does) is timed too: each of its steps the minimum over ``--repeat`` runs of
-   the loop.  ``--export``: the same closed loop in the exported C package
-   (``nc.export_mpc``, built by its Makefile at its default flags), each
-   ``cartpole_mpc_step`` call timed by ``clock_gettime`` in a C driver of its own, and its
+   controller does) is timed too, with the SQP loop in Python and in C (``nc.MPC(ocp,
+   loop="c")``: the whole control step one compiled call), the two loops' runs interleaved,
+   each step the minimum over ``--repeat`` runs.  The controller's quality: the closed-loop
+   cost ``Σ ℓ(x_k, u_k)`` of the real-time iteration against the converged MPC's (10 SQP
+   iterations a step, checked against 20).  All times are CPU times (``time.process_time``;
+   the C driver's ``CLOCK_PROCESS_CPUTIME_ID``).  ``--export``: the same closed loop in the
+   exported C package (``nc.export_mpc``, built by its Makefile at its default flags), each
+   ``cartpole_mpc_step`` call timed in a C driver of its own, and its
    inputs compared with the Python loop's.
 
     python benchmarks/control.py [--calls 200] [--repeat 7] [--smoke] [--mpc-only] [--export]
@@ -85,7 +89,7 @@ def step_jacobians(n: int, calls: int, repeat: int) -> None:
 
 
 class _TimedCalls:
-    """``mpc`` with each control step's time (s) appended to :attr:`times`."""
+    """``mpc`` with each control step's CPU time (s) appended to :attr:`times`."""
 
     def __init__(self, mpc):
         self.mpc, self.times = mpc, []
@@ -94,10 +98,18 @@ class _TimedCalls:
         return getattr(self.mpc, name)
 
     def __call__(self, x, t):
-        start = time.perf_counter()
+        start = time.process_time()
         u = self.mpc(x, t)
-        self.times.append(time.perf_counter() - start)
+        self.times.append(time.process_time() - start)
         return u
+
+
+def closed_loop_cost(problem, X, U) -> float:
+    """``Σ_k ℓ(x_k, u_k)``: the horizon problem's stage cost summed along a closed loop."""
+    import casadi as ca
+    x, u = ca.SX.sym("x", X.shape[1]), ca.SX.sym("u", U.shape[1])
+    stage = ca.Function("stage", [x, u], [problem.stage(x, u)])
+    return float(np.sum(np.array(stage.map(len(U))(X.T, U.T))))
 
 
 #: The exported package's closed loop with each controller call timed (``--export``): the
@@ -109,7 +121,7 @@ C_DRIVER = r"""
 #include <time.h>
 #include "cartpole.h"
 #define NX CARTPOLE_MPC_NX
-static double now(void) { struct timespec s; clock_gettime(CLOCK_MONOTONIC, &s); return s.tv_sec + 1e-9 * s.tv_nsec; }
+static double now(void) { struct timespec s; clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &s); return s.tv_sec + 1e-9 * s.tv_nsec; }
 int main(int argc, char** argv) {
     static cartpole_mpc m;
     const long steps = atol(argv[1]), repeat = atol(argv[2]);
@@ -167,7 +179,7 @@ def cartpole_mpc(steps: int, repeat: int, export: bool = False) -> None:
     st = nc.step_function(model, mpc.h)
     ipopt = DiscreteOCP(st, mpc.N, (mpc.problem.stage, mpc.problem.terminal), tol=1e-8)
     fatrop = nc.MPC(ocp, "fatrop", terminal_weight=100.0)
-    t_mpc, t_ip, t_fat, iters = [], [], [], []
+    t_mpc, t_ip, t_fat, iters, t_fun = [], [], [], [], []
     for x in X[::max(1, len(X) // 10)]:
         mpc.reset(x, iterations=10)
         guess = mpc.U.copy()
@@ -177,19 +189,21 @@ def cartpole_mpc(steps: int, repeat: int, export: bool = False) -> None:
         for _ in range(repeat):
             mpc.X, mpc.U = mpc.initial_guess(x)
             mpc.reset(x, iterations=10)
-            start = time.perf_counter()
+            start = time.process_time()
             mpc(x, 0.0)
-            runs.append(time.perf_counter() - start)
+            runs.append(time.process_time() - start)
             fatrop.X, fatrop.U, fatrop.Z = converged
-            start = time.perf_counter()
+            start = time.process_time()
             fatrop(x, 0.0)
-            runs_f.append(time.perf_counter() - start)
+            runs_f.append(time.process_time() - start)
             iters += fatrop.fatrop.iteration_counts
+            stats = fatrop.fatrop.nlp.solver.stats()
+            t_fun.append(sum(v for k, v in stats.items() if k.startswith("t_proc_nlp")))
         t_mpc.append(min(runs))
         t_fat.append(min(runs_f))
-        start = time.perf_counter()
+        start = time.process_time()
         ipopt.solve(x, guess)
-        t_ip.append(time.perf_counter() - start)
+        t_ip.append(time.process_time() - start)
     t_mpc, t_ip, t_fat = np.array(t_mpc), np.array(t_ip), np.array(t_fat)
     print(f"\n=== cart-pole MPC (N = {mpc.N}, h = {mpc.h} s, 1 SQP iteration, qrqp), {len(t_mpc)} states "
           "of a closed loop:")
@@ -197,17 +211,35 @@ def cartpole_mpc(steps: int, repeat: int, export: bool = False) -> None:
           f"(target ≤ 1 ms)")
     print(f"  nc.MPC 'fatrop' step      min {1e3 * t_fat.min():.3f} ms   median {1e3 * np.median(t_fat):.3f} ms "
           f"(target ≤ 1 ms; {min(iters)}–{max(iters)} interior-point iterations, median {np.median(iters):g})")
+    print(f"      of which CasADi's evaluations of the NLP's functions (Fatrop's stats, t_proc_nlp_*): median "
+          f"{1e3 * np.median(t_fun):.3f} ms; the rest is Fatrop's own work and the call")
     print(f"  IPOPT re-solve (warm)     min {1e3 * t_ip.min():.1f} ms   median {1e3 * np.median(t_ip):.1f} ms")
     r = t_ip / t_mpc
     print(f"  RATIO IPOPT re-solve / MPC step: min {r.min():.0f}, median {np.median(r):.0f} (target ≥ 50)")
-    timed = _TimedCalls(mpc)
-    for _ in range(repeat):
-        _, U_py, _ = closed_loop(timed, x0, steps * mpc.h, disturbance=[(1.0, 1.1, [8.0])])
-    t_loop = np.array(timed.times).reshape(repeat, -1).min(axis=0)
-    print(f"  nc.MPC closed-loop step   min {1e3 * t_loop.min():.3f} ms   median {1e3 * np.median(t_loop):.3f} ms "
-          f"(target ≤ 1 ms; {len(t_loop)} steps, each the minimum of {repeat} runs)")
+    loops = {"python": _TimedCalls(mpc), "c": _TimedCalls(nc.MPC(ocp, terminal_weight=100.0, loop="c"))}
+    for _ in range(repeat):                     # interleaved: a run of each loop per round
+        runs = {k: closed_loop(m, x0, steps * mpc.h, disturbance=[(1.0, 1.1, [8.0])]) for k, m in loops.items()}
+    U_py, X_py = runs["python"][1], runs["python"][2]
+    t_py, t_cl = (np.array(loops[k].times).reshape(repeat, -1).min(axis=0) for k in ("python", "c"))
+    print(f"  closed loop, CPU time of each step the minimum of {repeat} interleaved runs ({len(t_py)} steps):")
+    for what, t_loop in (("nc.MPC (SQP loop in Python)", t_py), ("nc.MPC(loop='c')", t_cl)):
+        print(f"  {what:28s} min {1e3 * t_loop.min():.3f} ms   median {1e3 * np.median(t_loop):.3f} ms   "
+              f"max {1e3 * t_loop.max():.3f} ms (target ≤ 1 ms)")
+    r = t_cl / t_py
+    print(f"  RATIO loop='c' / Python loop: min {r.min():.2f}, median {np.median(r):.2f}; inputs max |ΔU| "
+          f"{np.max(np.abs(runs['c'][1] - U_py)):.1e} N")
+    # the controller's quality: the real-time iteration against the converged MPC (10 SQP
+    # iterations per step; 20 as its own convergence check), same start, push and plant
+    J_rti = closed_loop_cost(mpc.problem, X_py, U_py)
+    conv = {n: closed_loop(nc.MPC(ocp, terminal_weight=100.0, iterations=n, loop="c"), x0, steps * mpc.h,
+                           disturbance=[(1.0, 1.1, [8.0])]) for n in (10, 20)}
+    J10, J20 = (closed_loop_cost(mpc.problem, conv[n][2], conv[n][1]) for n in (10, 20))
+    print(f"  closed-loop cost Σ ℓ(x_k, u_k): real-time iteration {J_rti:.6f}, converged MPC (10 iterations a "
+          f"step) {J10:.6f}: {100 * (J_rti / J10 - 1):+.3f} %; 20 iterations {J20:.6f} (inputs vs 10: "
+          f"max |ΔU| {np.max(np.abs(conv[20][1] - conv[10][1])):.1e} N); RTI inputs vs converged: max |ΔU| "
+          f"{np.max(np.abs(U_py - conv[10][1])):.2e} N")
     if export:
-        U_c, t_c = exported_loop(ocp, x0, len(t_loop), repeat)
+        U_c, t_c = exported_loop(ocp, x0, len(t_py), repeat)
         print(f"  exported C closed-loop step min {1e3 * t_c.min():.3f} ms   median {1e3 * np.median(t_c):.3f} ms "
               f"(target ≤ 1 ms; inputs vs Python's: max |ΔU| {np.max(np.abs(U_c - U_py[:, 0])):.1e} N)")
 

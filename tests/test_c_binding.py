@@ -212,3 +212,12 @@ def test_the_joint_options_struct_matches_the_joint_loop_header():
     declared = [(c_type(m.group(1)), m.group(2)) for m in re.finditer(r"([\w ]+?\s*\*?)\s*(\w+);", body)]
     assert declared == [(c_type(t), f) for t, f in JOINT_OPTIONS]
     assert JointOptions._fields_[-1][1] is ctypes.POINTER(ctypes.c_int)
+
+
+def test_the_mpc_loop_table_matches_the_mpc_header_template():
+    """The in-process controller's entry points (ncgen.control.mpc_c_loop.SIGNATURES), as
+    templates/c/mpc/mpc.h.j2 declares them."""
+    from ncgen.control.mpc_c_loop import SIGNATURES
+
+    declared = definitions(template("mpc/mpc.h.j2", name="m"), "m_")
+    assert_table_matches(SIGNATURES, declared)

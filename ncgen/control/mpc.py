@@ -53,6 +53,9 @@ REGULARIZATION = 1e-8
 #: as feasible.
 ALPHAS = tuple(0.5 ** i for i in range(11))
 ARMIJO, GAMMA, C_MIN = 1e-4, 1e-5, 1e-10
+#: A converged QP predicting a decrease of at most this fraction of the cost at a nearly
+#: feasible guess: the guess is optimal to round-off and kept without trials (:func:`stationary`).
+STATIONARY = 1e-12
 
 
 def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
@@ -235,6 +238,10 @@ class MPC:
     ``h = t_final / N`` seconds, and ``mpc`` is meant to be called every ``h`` seconds.
     ``qp_solver``: ``"qrqp"`` (generated C) or ``"qpoases"`` (in this process; not exported), see
     :mod:`ncgen.control.mpc_qp`.
+    ``loop``: ``"python"`` (the iterations driven from Python, every iteration reported) or
+    ``"c"`` (the whole control step one call of the exported package's C controller compiled
+    into the same package, :mod:`ncgen.control.mpc_c_loop`: the same numbers; ``qrqp``, no
+    reference, no ``min_tension``; only the last iteration of a step reported).
     ``mpc.reset(x, t, iterations=...)`` (also done by the first call) sets the guess to ``x``
     held with zero inputs (clipped into their bounds), or to the reference along the horizon
     from ``t``, and iterates on it.
@@ -246,7 +253,7 @@ class MPC:
                  regularization: float = REGULARIZATION, qp_max_iter: int = 100,
                  sx_qr_max_nnz: int | None = None, fatrop_options: dict | None = None,
                  reference=None, state_weight=None, input_weight=None, min_tension=None,
-                 qp_solver: str = "qrqp"):
+                 qp_solver: str = "qrqp", loop: str = "python"):
         if not isinstance(solver, str) or solver not in SOLVERS:
             raise OptimizationError(f"MPC: solver: expected one of {', '.join(SOLVERS)}, got {solver!r}")
         if not isinstance(iterations, int) or iterations < 1:
@@ -256,6 +263,11 @@ class MPC:
         if self.problem.min_tension is not None and solver == "fatrop":
             raise OptimizationError("MPC: min_tension: supported by solver='sqp' only, got solver='fatrop'")
         self.qp_solver = check_qp_solver(qp_solver)
+        from ncgen.control.mpc_c_loop import check_loop, loop_refusal
+        self.loop, refusal = check_loop(loop), loop_refusal(solver, qp_solver, self.problem)
+        if self.loop == "c" and refusal is not None:
+            raise OptimizationError(f"MPC: loop='c': the compiled control step is the exported package's "
+                                    f"(solver='sqp', qp_solver='qrqp', no reference, no min_tension), got {refusal}")
         self.h, self.N = self.problem.h, self.problem.N
         self.nx, self.nu = 2 * self.model.nq, self.model.nu
         self.iterations = iterations
@@ -266,6 +278,8 @@ class MPC:
         #: Fatrop's stage-wise problem (``solver="fatrop"``), else ``None``; ``mpc.Z``: the guess of
         #: the steps' unknowns.
         self.fatrop = self.Z = None
+        #: the compiled control step (:class:`~ncgen.control.mpc_c_loop.CompiledLoop`) where it applies
+        self._c = None
         if solver == "fatrop":
             from ncgen.control.mpc_fatrop import FatropSolver
             self.fatrop = FatropSolver(self.model, self.problem, fatrop_options)
@@ -274,9 +288,14 @@ class MPC:
                                            qp_max_iter=qp_max_iter, sx_qr_max_nnz=sx_qr_max_nnz, qp_solver=qp_solver)
             from ncgen.control.step_support import compile_functions
             compiled = [f for f in self.functions if f.name() != "mpc_qp" or qp_solver in GENERATED]
-            lib = compile_functions(f"{self.model.name}_mpc", compiled)
+            name = f"{self.model.name}_mpc"
+            lib = compile_functions(name, compiled, extra_sources=() if refusal else controller_sources(
+                self.model, self.problem, self.functions, name))
             lib.setdefault("mpc_qp", InProcessQP(self.functions[1]))
             self._data, self._qp, self._update, self._merit_fn = (lib[f.name()] for f in self.functions)
+            if refusal is None:
+                from ncgen.control.mpc_c_loop import CompiledLoop
+                self._c = CompiledLoop(self._data.library, name, self.nx, self.nu, self.N)
         self._residual_tol = residual_tolerance(self.model)
         #: the QP solver's status of each QP of the last control step (0: converged).
         self.qp_status: list[int] = []
@@ -344,7 +363,8 @@ class MPC:
         J0, c0 = float(J0[0]), float(c0[0])
         self.qp_status.append(self._qp.status_call(H, g, A, lba, uba, lbx, ubx, 0.0, 0.0, 0.0))
         dU, model_decrease = self._qp.outputs[0].copy(), float(self._qp.outputs[1][0])
-        if np.isfinite(dU).all() and np.isfinite(model_decrease):
+        if (np.isfinite(dU).all() and np.isfinite(model_decrease)
+                and not stationary(J0, c0, model_decrease, self.qp_status[-1])):
             Xf = self._update(Xs, S, U.ravel(), dU)[0].reshape(self.N + 1, self.nx)
             lo, hi = self._u_lo, self._u_hi
             for alpha in ALPHAS:
@@ -382,6 +402,10 @@ class MPC:
         t = self.model.t0 if t is None else as_scalar(t, "MPC.reset: t")
         if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 0:
             raise OptimizationError(f"MPC.reset: iterations: expected an integer >= 0, got {iterations!r}")
+        if self.loop == "c":
+            self._check_c(self._c.start(x, t, int(iterations), self.iterations), t, x)
+            self.X, self.U = self._c.X, self._c.U
+            return
         X, U = self.initial_guess(x, t)
         if self.fatrop is not None:
             from ncgen.control.mpc_fatrop import unknowns_guess
@@ -400,12 +424,10 @@ class MPC:
         t = self.model.t0 if t is None else as_scalar(t, "MPC: t")
         if self.X is None:
             self.reset(x, t)
+        if self.loop == "c":
+            return self._c_step(x, t)
         X, U = self._solve(x, t, self.X, self.U)
-        u = U[0].copy()
-        lo, hi = self.u_bounds
-        if not (np.all(np.isfinite(u)) and np.all(lo <= u) and np.all(u <= hi)):
-            raise OptimizationError(f"MPC of {self.model.name!r}: the control step returned {u.tolist()}, "
-                                    f"outside the bounds [{lo.tolist()}, {hi.tolist()}]")
+        u = self._checked_input(U[0].copy())
         self.solution = (X, U)
         if self.problem.reference is None:
             self.X, self.U = np.vstack([X[1:], X[-1:]]), np.vstack([U[1:], U[-1:]])
@@ -415,6 +437,47 @@ class MPC:
         if self.Z is not None:
             self.Z = np.vstack([self.Z[1:], self.Z[-1:]])
         return u
+
+
+    def _checked_input(self, u: np.ndarray) -> np.ndarray:
+        """``u``, refused unless finite and inside the input bounds."""
+        lo, hi = self.u_bounds
+        if not (np.all(np.isfinite(u)) and np.all(lo <= u) and np.all(u <= hi)):
+            raise OptimizationError(f"MPC of {self.model.name!r}: the control step returned {u.tolist()}, "
+                                    f"outside the bounds [{lo.tolist()}, {hi.tolist()}]")
+        return u
+
+    def _c_step(self, x: np.ndarray, t: float) -> np.ndarray:
+        """``loop="c"``: the control step in one C call (:mod:`ncgen.control.mpc_c_loop`), from
+        the guess ``mpc.X``, ``mpc.U`` (the struct's own arrays unless replaced)."""
+        c = self._c
+        if self.X is not c.X or self.U is not c.U:
+            c.X[:], c.U[:] = self.X, self.U
+            self.X, self.U = c.X, c.U
+        status, u = c.step(x, t)
+        self._check_c(status, t, x)
+        qp_status, alpha = c.report()
+        self.qp_status, self.step_lengths, self.infeasibility = [qp_status], [alpha], []
+        self.solution = (c.X_sol.copy(), c.U_sol.copy())
+        return self._checked_input(u.copy())
+
+    def _check_c(self, status: int, t: float, x: np.ndarray) -> None:
+        """A status of the compiled controller other than 0 as an :class:`OptimizationError`."""
+        if status:
+            raise OptimizationError(f"MPC of {self.model.name!r}: the compiled control step failed at t = {t:g} s "
+                                    f"(state {np.asarray(x).tolist()}): a step of the model does not converge "
+                                    "along the guess, or an iterate is not finite; the guess is kept")
+
+
+def controller_sources(model, problem, functions, name: str) -> list:
+    """The exported package's controller (``templates/c/mpc``, rendered ``in_process``) as
+    extra sources of the MPC's package ``name`` (:mod:`ncgen.control.mpc_c_loop`)."""
+    from ncgen.codegen.package import ExtraSource
+    from ncgen.control.export import controller_context
+    context = controller_context(model, problem, functions, None)
+    return [ExtraSource("runtime/ncgen_mpc.h", "ncgen_mpc.h", included=True),
+            ExtraSource("mpc/mpc.h.j2", f"{name}_mpc.h", context),
+            ExtraSource("mpc/mpc.c.j2", f"{name}_mpc.c", context)]
 
 
 def acceptable(J0: float, c0: float, J: float, c: float, alpha: float, model_decrease: float) -> bool:
@@ -428,6 +491,16 @@ def acceptable(J0: float, c0: float, J: float, c: float, alpha: float, model_dec
     if c0 <= C_MIN and model_decrease < 0:
         return c <= C_MIN and J <= J0 + ARMIJO * alpha * model_decrease
     return c <= (1.0 - GAMMA) * c0 or (J <= J0 - GAMMA * c0 and c <= c0)
+
+
+def stationary(J0: float, c0: float, model_decrease: float, qp_status: int) -> bool:
+    """Whether the guess is optimal to round-off: nearly feasible (``c0 ≤`` :data:`C_MIN`) and
+    the converged QP (status 0) predicts a decrease of at most :data:`STATIONARY` ``|J0|``,
+    below what an evaluation of the cost resolves, so that the line search could pass its
+    Armijo test only by round-off (at a converged guess it used to try all 11 step lengths:
+    twelve merit calls, 2–3 ms on the cart-pole).  The guess is then kept without trials
+    (``mpc.step_lengths``: 0).  The same test as the exported package's C."""
+    return qp_status == 0 and c0 <= C_MIN and -model_decrease <= STATIONARY * abs(J0)
 
 
 def residual_tolerance(model) -> float:
