@@ -53,7 +53,7 @@ import casadi as ca  # noqa: E402
 
 import ncgen as nc  # noqa: E402
 from common import best_time, machine  # noqa: E402
-from ncgen.runtime.joint_dynamics import forward_dynamics_kernel  # noqa: E402
+from ncgen.runtime.dynamics_at_state import forward_dynamics_kernel  # noqa: E402
 
 
 def robot_file(rel: str) -> Path:

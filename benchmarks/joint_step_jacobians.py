@@ -14,7 +14,7 @@ to about its ``eps``² for centred ones), then timed in interleaved batches (CPU
 ``time.process_time``), min and median per call:
 
 - ``JointStep.jacobians`` (checked inputs), ``JointStep.unchecked_jacobians``, and the call it
-  makes, ``ncgen.runtime.tree_algorithms.aba_derivatives`` (compiled ABA derivatives), which
+  makes, ``ncgen.runtime.tree_algorithm_kernels.aba_derivatives`` (compiled ABA derivatives), which
   shows where the time goes: the rest is the assembly of A and B in NumPy;
 - ``mujoco.mjd_transitionFD`` centred (eps 1e-6) and forward.
 
@@ -35,7 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import batches, machine, report_ratios  # noqa: E402
 
 import ncgen as nc  # noqa: E402
-from ncgen.runtime.tree_algorithms import aba_derivatives  # noqa: E402
+from ncgen.runtime.tree_algorithm_kernels import aba_derivatives  # noqa: E402
 
 H = 1e-3
 FINGERS = ["panda_finger_joint1", "panda_finger_joint2"]

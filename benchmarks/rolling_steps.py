@@ -35,12 +35,12 @@ def main(argv=None) -> int:
     from test_rolling_system import disc_toml
 
     from ncgen.assembly.nonholonomic import rolling_system
-    from ncgen.runtime import rolling_integrator, rolling_rattle
+    from ncgen.runtime import rolling_integrator, rolling_stepper
     from ncgen.runtime.options import SimulationOptions
     model = nc.System.from_toml(disc_toml()).build()
     system = rolling_system(model)
     o = SimulationOptions()
-    rattle = rolling_rattle.compiled_step(system, o.newton_tol, o.max_newton)
+    rattle = rolling_stepper.compiled_step(system, o.newton_tol, o.max_newton)
     dopri = rolling_integrator.compiled_step(system, "dopri5")
     q, v, p, u, h = model.q0, model.v0, model.p0, np.zeros(0), 1e-3
     y = np.concatenate([q, v])

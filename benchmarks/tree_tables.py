@@ -70,7 +70,7 @@ def compare(label: str, sides: dict, calls: int, rounds: int, per: int = 1) -> N
 def algorithms(name: str, calls: int, rounds: int) -> None:
     import ncgen as nc
     from ncgen.assembly.tree_dynamics import MimicMap
-    from ncgen.runtime import tree_algorithms as rta
+    from ncgen.runtime import tree_algorithm_kernels as rta
     from pinocchio_robots import ROBOTS, JointMap, pin, pinocchio_models, random_configuration, urdf_text
 
     t = time.perf_counter()

@@ -15,7 +15,7 @@ Run:  python examples/arm_min_time.py       (writes arm_min_time.png and .gif)
 import numpy as np
 
 import ncgen as nc
-from ncgen.optim.plots import plot_solution
+from ncgen.optim.solution_plot import plot_solution
 
 s = nc.System("arm", gravity=(0, -9.81))
 upper = s.add_bar("upper", mass=1.0, ends=[s.ground.point((0, 0)), (0.5, 0)])

@@ -77,7 +77,7 @@ if __name__ == "__main__":
     sim = replay(model, sol)
     miss = np.linalg.norm(sim.marker("ball.centre")[-1] - sol.marker("ball.centre")[-1])
     print(f"replayed by the nonsmooth stepper (h = 0.1 ms): ends {miss:.2e} m from the optimum")
-    from ncgen.optim.plots import plot_solution
+    from ncgen.optim.solution_plot import plot_solution
     plot_solution(sol, "ball_bounce_target.png")
     sol.to_html("ball_bounce_target.html")
     print("wrote ball_bounce_target.png, ball_bounce_target.html")

@@ -87,7 +87,7 @@ if __name__ == "__main__":
               f"{sol.stats.solve_time:.1f} s")
         sim = replay(model, sol)
         print(f"  replayed by the nonsmooth stepper: ends {abs(sim.q[-1, 0] - sol.q[-1, 0]):.2e} m from the optimum")
-    from ncgen.optim.plots import plot_solution
+    from ncgen.optim.solution_plot import plot_solution
     plot_solution(sol, "block_push.png")
     sol.to_html("block_push.html")
     print("wrote block_push.png, block_push.html")

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 import ncgen as nc
-from ncgen.optim.plots import plot_solution
+from ncgen.optim.solution_plot import plot_solution
 
 model = nc.System.from_toml(Path(__file__).with_name("cartpole.toml")).build()
 down = {"cart.r_i.x": 0.0, "pole.r_j.x": 0.0, "pole.r_j.y": -0.5}   # coordinates kept; the rest assembled

@@ -13,7 +13,7 @@ Run:  python examples/double_pendulum_swingup.py   (writes double_pendulum_swing
 import numpy as np
 
 import ncgen as nc
-from ncgen.optim.plots import plot_solution
+from ncgen.optim.solution_plot import plot_solution
 
 s = nc.System("double_pendulum_2d", gravity=(0, -9.81))
 upper = s.add_bar("upper", mass=1.0, ends=[s.ground.point((0, 0)), (0, -1)])

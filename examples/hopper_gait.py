@@ -94,7 +94,7 @@ if __name__ == "__main__":
     sim = replay(model, sol)
     miss = max(np.abs(sim.marker(m)[-1] - sol.marker(m)[-1]).max() for m in ("body.centre", "foot.centre"))
     print(f"replayed by the nonsmooth stepper: ends {miss:.2e} m from the optimum")
-    from ncgen.optim.plots import plot_solution
+    from ncgen.optim.solution_plot import plot_solution
     plot_solution(sol, "hopper_gait.png")
     sol.to_html("hopper_gait.html")
     print("wrote hopper_gait.png, hopper_gait.html")

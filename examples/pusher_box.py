@@ -94,7 +94,7 @@ if __name__ == "__main__":
     sim = replay(model, sol)
     miss = np.abs(sim.marker("box.centre")[-1] - sol.marker("box.centre")[-1]).max()
     print(f"replayed by the nonsmooth stepper: the box ends {miss:.2e} m from the optimum")
-    from ncgen.optim.plots import plot_solution
+    from ncgen.optim.solution_plot import plot_solution
     plot_solution(sol, "pusher_box.png")
     sol.to_html("pusher_box.html")
     print("wrote pusher_box.png, pusher_box.html")

@@ -15,7 +15,7 @@ Run:  python examples/spring_design.py      (writes spring_design.png)
 import numpy as np
 
 import ncgen as nc
-from ncgen.optim.plots import plot_solution
+from ncgen.optim.solution_plot import plot_solution
 
 s = nc.System("catapult", gravity=(0, -9.81))
 arm = s.add_bar("arm", mass=1.0, ends=[s.ground.point((0, 0)), (1.0, 0)])

@@ -181,7 +181,7 @@ def test_a_bad_row_is_named(hinge):
 def test_rows_without_the_accelerator_give_the_same(hinge, monkeypatch):
     theta = np.linspace(-1.0, 1.0, 4)[:, None]
     with_c = nc.rnea_derivatives(hinge, theta, np.ones((4, 1)), np.ones((4, 1)))
-    from ncgen.runtime import tree_algorithms
+    from ncgen.runtime import tree_algorithm_kernels as tree_algorithms
     k = tree_algorithms.algorithm_kernel(hinge, "rnea_derivatives")
     monkeypatch.setattr(k, "_fast", None)
     without = tree_algorithms.batch(hinge, k, (theta, np.ones((4, 1)), np.ones((4, 1))), None, 0.0)

@@ -72,7 +72,7 @@ def test_mode_animation(tmp_path):
     model = nc.System.from_toml(EXAMPLES / "cartpole.toml").build()
     modes = nc.modes(model)
     k = modes.kind.index("vibration")
-    from ncgen.viz.modes import animate_mode
+    from ncgen.viz.statics_pictures import animate_mode
     path = animate_mode(modes, k, tmp_path / "mode.gif", cycles=1, frames_per_cycle=4)
     assert Path(path).stat().st_size > 1000
     traj = modes.trajectory(k, cycles=1, frames_per_cycle=4)

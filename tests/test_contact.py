@@ -411,7 +411,7 @@ def test_contacts_from_toml_round_trip_and_check(tmp_path):
 
 def test_contacts_are_drawn(drops, tmp_path):
     from ncgen.viz.animation import animate
-    from ncgen.viz.plots import plot
+    from ncgen.viz.summary_plot import plot
     from ncgen.viz.scene import scene
     tr = nc.simulate(drops, 1.0, 0.01, method="stepper", substeps=10)
     sc = scene(tr)

@@ -5,7 +5,7 @@ in 0.2 s and stops: stopping needs the cable to pull less than the weight, so a 
 pull binds.  The plan's inputs are replayed by the simulator (IDAS, inputs held per
 interval) and the cable's pull ``k (l − l₀) + c l̇`` computed by hand along the replay: it
 stays ≥ ``T_min`` (up to the collocation error between the points), and it touches it.  The
-pull's function (:mod:`ncgen.optim.cables`, the one the MPC uses too) is checked against the
+pull's function (:mod:`ncgen.optim.taut_cables`, the one the MPC uses too) is checked against the
 formula by hand, its derivatives against central differences; bad values and models without
 cables are refused by name."""
 from __future__ import annotations
@@ -15,7 +15,7 @@ import pytest
 
 import ncgen as nc
 from ncgen.errors import NcgenError
-from ncgen.optim.cables import cable_pull_function
+from ncgen.optim.taut_cables import cable_pull_function
 
 K, C, MASS = 200.0, 5.0, 1.0
 T_FINAL, N = 0.2, 20

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import ncgen as nc
-from ncgen.assembly.contacts import INITIAL_PENETRATION_TOL
+from ncgen.assembly.contact_kinematics import INITIAL_PENETRATION_TOL
 
 
 def ball_on_floor(height, radius=0.1, plane_normal=(0, 0, 1)):

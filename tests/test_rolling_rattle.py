@@ -1,5 +1,5 @@
 """RATTLE with velocity constraints (``nc.simulate(model, method="stepper")`` on a model with
-nonholonomic elements; ncgen/assembly/rolling_rattle.py, ncgen/runtime/rolling_rattle.py):
+nonholonomic elements; ncgen/assembly/rolling_rattle.py, ncgen/runtime/rolling_stepper.py):
 its order on the rolling disc against a tight reference of the projected DOPRI5 integrator,
 both constraint levels at every step's end, the energy error falling as h², the steady
 precession's closed form, a ball on an accelerating plane, the step equations' Jacobians

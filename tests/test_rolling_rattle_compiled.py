@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import ncgen as nc
-import ncgen.runtime.rolling_rattle as rolling_rattle
+import ncgen.runtime.rolling_stepper as rolling_rattle
 from ncgen.assembly.nonholonomic import rolling_system
 from ncgen.errors import CompilerNotFound, SimulationError
 from ncgen.runtime.options import SimulationOptions

@@ -32,7 +32,7 @@ def test_member_numeric_forms_equal_lambdify_of_the_derivation(dim, name):
     """A member's numeric formulas (shipped NumPy source) equal lambdify of the derivation at
     random arguments, bit for bit; its constants by name equal the SymPy-keyed ones."""
     from ncgen.symbolic.member import RigidMember, constant_symbols
-    from ncgen.symbolic.numeric import numpy_function
+    from ncgen.symbolic.numpy_forms import numpy_function
 
     ct = coordinate_type(name, dim)
     D = ct.derivation
@@ -72,7 +72,7 @@ def test_generated_python_follows_to_casadi():
     generated C does not change."""
     from ncgen.model.member_forms import FORMS as MEMBER
     from ncgen.model.primitive_forms import FORMS as PRIMITIVE
-    from ncgen.symbolic.joints import PRIMITIVES, primitive
+    from ncgen.symbolic.joint_primitives import PRIMITIVES, primitive
 
     for dim in (2, 3):
         for name in PRIMITIVES:

@@ -1,5 +1,5 @@
 """Compiled RNEA, CRBA, ABA and the derivatives of RNEA and ABA
-(:mod:`ncgen.runtime.tree_algorithms`) against Pinocchio, an independent engine, on
+(:mod:`ncgen.runtime.tree_algorithm_kernels`) against Pinocchio, an independent engine, on
 example-robot-data's URDFs as shipped: the Panda (its second finger mimics the first), the
 UR5, Solo12 (free flyer) and Talos (free flyer, 38 joint rates), at random states, 1e-9
 relative to the largest entry of the reference.
@@ -21,7 +21,7 @@ from pinocchio_robots import ROBOTS, JointMap, pin, pinocchio_models, random_con
 
 import ncgen as nc  # noqa: E402
 from ncgen.assembly.tree_dynamics import MimicMap  # noqa: E402
-from ncgen.runtime import tree_algorithms as rta  # noqa: E402
+from ncgen.runtime import tree_algorithm_kernels as rta  # noqa: E402
 
 TOL = 1e-9
 N_STATES = 5

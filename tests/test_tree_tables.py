@@ -32,7 +32,7 @@ from ncgen.assembly.tree_dynamics import MimicMap
 from ncgen.codegen.compiler import CANDIDATES
 from ncgen.codegen.tree_tables import UnsupportedTree, tree_tables
 from ncgen.errors import ShapeError
-from ncgen.runtime import tree_algorithms as rta
+from ncgen.runtime import tree_algorithm_kernels as rta
 from ncgen.runtime.tree_library import build_tree_library, load_tree_library
 
 ROOT = Path(__file__).resolve().parent.parent

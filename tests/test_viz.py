@@ -180,7 +180,7 @@ def test_animation_fits_its_time_budget_and_shows_progress(sprung, tmp_path, cap
 
 
 def test_summary_has_no_empty_panel_and_states_small_units():
-    from ncgen.viz.plots import summary_figure, unit_scale
+    from ncgen.viz.summary_plot import summary_figure, unit_scale
 
     s = nc.System("arm")                                  # joints, no markers: joint positions and a path
     a = s.add_body("a", mass=1.0, inertia=np.diag([0.01, 0.01, 0.002]), position=(0.0, 0.0, -0.2))
@@ -198,7 +198,7 @@ def test_summary_has_no_empty_panel_and_states_small_units():
 
 
 def test_a_tiny_wobble_is_drawn_flat(tmp_path):
-    from ncgen.viz.plots import summary_figure
+    from ncgen.viz.summary_plot import summary_figure
 
     s = nc.System("circle")                            # a point on a horizontal circle: z constant to round-off
     p = s.add_point("p", mass=1.0, position=(0.1, 0.0, 0.0), velocity=(0.0, 0.5, 0.0))

@@ -1,5 +1,5 @@
 """Joint-space linearisation of a tree (``nc.linearize(model, qj, vj, u, space="joint")``)
-from the compiled ABA derivatives of :mod:`ncgen.runtime.tree_algorithms`: joint-angle
+from the compiled ABA derivatives of :mod:`ncgen.runtime.tree_algorithm_kernels`: joint-angle
 ``A``, ``B`` at any state (matching Pinocchio's ``computeABADerivatives``)."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ncgen.errors import ModelError
-from ncgen.runtime.tree_algorithms import aba_derivatives, rnea_applies
+from ncgen.runtime.tree_algorithm_kernels import aba_derivatives, rnea_applies
 from ncgen.codegen.tree_check import check_tree, unit_quaternions
 from ncgen.validation import as_vector
 

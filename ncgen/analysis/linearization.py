@@ -6,7 +6,7 @@ State ``x = [z; w]`` with ``z = G (q − q*)`` and ``w = G v`` (2·dof entries).
 and ``G = Nᵀ``; ``coordinates=G`` (dof × nq) chooses other independent coordinates, for
 instance rows of ``∂(joint angles)/∂q`` so that ``z`` are joint-angle deviations.  Outputs
 ``y = [δq; δv]`` (the natural coordinates and rates to first order), ``D = 0``.  The
-formulas, valid about non-equilibrium states too, are in :mod:`ncgen.assembly.linearization`.
+formulas, valid about non-equilibrium states too, are in :mod:`ncgen.assembly.linearization_function`.
 """
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ncgen.blas_threads import one_blas_thread
-from ncgen.assembly.linearization import linearization_function
+from ncgen.assembly.linearization_function import linearization_function
 from ncgen.errors import NcgenError
 from ncgen.model.rolling import STEADY_MOTIONS, refuse_rolling
 from ncgen.analysis.statics import _parameters
@@ -88,7 +88,7 @@ class LinearModel:
 
 
 def linearization(model):
-    """The model's ``linearize`` CasADi function (built once; see :mod:`ncgen.assembly.linearization`)."""
+    """The model's ``linearize`` CasADi function (built once; see :mod:`ncgen.assembly.linearization_function`)."""
     from ncgen.assembly.mass import sparse_dm
     return cached(model, "linearize", lambda: linearization_function(model.functions, sparse_dm(model.M),
                                                                        model.dof))

@@ -93,7 +93,7 @@ def _wrench(model, member, Q_full: np.ndarray, q: np.ndarray, point_local):
 def joint_reactions(model, q, lam, *, v=None, t=None, u=None, p=None, joints=None) -> dict[str, JointReaction]:
     """Reactions of ``joints`` (default: every joint with equations, those that coordinate
     sharing eliminated included) at the state ``q`` with multipliers ``lam`` (from
-    :func:`~ncgen.runtime.joint_dynamics.forward_dynamics`, or a trajectory's ``lam``);
+    :func:`~ncgen.runtime.dynamics_at_state.forward_dynamics`, or a trajectory's ``lam``);
     ``u``, ``t``, ``p`` for the efforts of actuated joints and the applied forces; ``v`` is
     needed for the reactions of eliminated joints when a force depends on velocities."""
     q = as_vector(q, model.nq, "q")

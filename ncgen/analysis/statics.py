@@ -4,7 +4,7 @@ Solves ``G(q, λ) = F(t, q, 0, u, p) − Aᵀ λ = 0``, ``Φ(t, q) = 0`` by Newt
 KKT system
 
     [ −K   −Aᵀ ] [Δq]     [G]
-    [  A    0  ] [Δλ] = − [Φ],      K = −∂G/∂q  (tangent stiffness, :mod:`ncgen.assembly.statics`),
+    [  A    0  ] [Δλ] = − [Φ],      K = −∂G/∂q  (tangent stiffness, :mod:`ncgen.assembly.statics_functions`),
 
 with a backtracking line search on ``½(|G|² + |Φ|²)``; steps are least-squares solutions,
 so zero-stiffness directions (a free-floating structure's rigid motions) leave the
@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ncgen.blas_threads import one_blas_thread
-from ncgen.assembly.statics import statics_function
+from ncgen.assembly.statics_functions import statics_function
 from ncgen.errors import ModelError, NcgenError
 from ncgen.model.rolling import refuse_rolling
 from ncgen.analysis.reactions import unshared_state

@@ -9,7 +9,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.assembly.drive_assembly import assemble_drives
-from ncgen.assembly.contacts import (check_initial_gaps, contact_functions, contact_specs, contact_terms,
+from ncgen.assembly.contact_kinematics import (check_initial_gaps, contact_functions, contact_specs, contact_terms,
                                      smooth_forces)
 from ncgen.assembly.functions import system_functions
 from ncgen.assembly.initial_state import consistent_state

@@ -3,7 +3,7 @@
 
 * :func:`kkt_function` — forward dynamics ``(t, q, v, u, p) -> (a, λ)`` by the Schur
   complement of the constant mass matrix (compiled alone by
-  :func:`ncgen.runtime.joint_dynamics.forward_dynamics_kernel`);
+  :func:`ncgen.runtime.dynamics_at_state.forward_dynamics_kernel`);
 * :func:`kkt_qr_function` — the same from the KKT system by sparse QR: the model's
   ``accel`` with the Baumgarte terms at zero (the path of a singular ``M``);
 * :func:`joint_kkt_function` — joint space in and out for a tree;
@@ -95,7 +95,7 @@ def residual_function(model) -> ca.Function:
 
 def slip_function(model) -> ca.Function:
     """``(q, v, p) -> W_T v``: the contacts' tangential velocities (m/s), ``(nk·(dim − 1))``
-    stacked per contact (:mod:`ncgen.assembly.contacts`)."""
+    stacked per contact (:mod:`ncgen.assembly.contact_kinematics`)."""
     qs, vs, ps = ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq), ca.SX.sym("p", model.np)
     return ca.Function("slip", [qs, vs, ps], [ca.mtimes(model.functions["contact_jacobian"](qs, ps)[1], vs)])
 

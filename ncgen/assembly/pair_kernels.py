@@ -5,7 +5,7 @@ The nonsmooth stepper's contact rows (gaps ``g``, Jacobian rows ``W``; see
 (a sphere pair, a box pair with its corners and edges, a shape against a plane, …), called
 by a C loop over the element table (``templates/c/runtime/ncgen_contact_pairs.h``) instead
 of one flat function of every contact.  The formulas are those of
-:mod:`ncgen.assembly.contacts` (one source): an element's rows are built there over the whole
+:mod:`ncgen.assembly.contact_kinematics` (one source): an element's rows are built there over the whole
 system's symbols (the expressions of the model's ``gap`` and ``contact_jacobian``) and made a function of its members' local coordinates ``q_a``, ``q_b``
 (the coordinates each member uses are index tables in the C).  Elements whose kernels are
 equal (the same kinds, shapes, coordinate types and numbers: equal spheres of a heap, equal
@@ -55,7 +55,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from ncgen.assembly.contacts import EDGE_TOL
+from ncgen.assembly.contact_kinematics import EDGE_TOL
 from ncgen.model.capsule_contacts import CapsuleSphere
 from ncgen.model.contacts import BoxCorner, EdgeContact, SphereBox, SpherePlane, SphereSphere
 

@@ -1,6 +1,6 @@
 """The equations of one RATTLE step with velocity constraints (a model with nonholonomic
 elements, :class:`~ncgen.assembly.nonholonomic.RollingSystem`), as CasADi functions whose
-zeros :mod:`ncgen.runtime.rolling_rattle` finds by Newton's method.
+zeros :mod:`ncgen.runtime.rolling_stepper` finds by Newton's method.
 
 From ``(q, v)`` at ``t`` over a step ``h`` (s), with ``Φ̂`` the holonomic rows (the model's
 constraints and the elements' heights), ``Â = [∂Φ̂/∂q; B]`` all velocity rows, ``ĉ(q, t)``
@@ -21,7 +21,7 @@ motions have no symplectic structure); its energy error stays of order h².
 
 :func:`step_function` is the whole step as one CasADi function (the KKT solve for ``μ``, both
 Newton solves by CasADi's ``fast_newton`` rootfinder with sparse QR, which C code generation
-supports), which :mod:`ncgen.runtime.rolling_rattle` compiles.
+supports), which :mod:`ncgen.runtime.rolling_stepper` compiles.
 """
 from __future__ import annotations
 
@@ -77,7 +77,7 @@ def step_function(system, tol: float, max_iter: int) -> ca.Function:
     max-norm is ≤ ``tol`` (at most ``max_iter`` iterations), then takes one more Newton
     correction; ``res`` is the larger of the two solves' residuals before that correction
     (above ``tol``: a solve did not converge).  The same iterates as
-    :func:`ncgen.runtime.rolling_rattle.rattle_step`."""
+    :func:`ncgen.runtime.rolling_stepper.rattle_step`."""
     model, nq, nh = system.model, system.nq, system.n_holonomic
     residuals, newton_systems = _residual_functions(system), rattle_functions(system)
     kkt = rolling_kkt(system)

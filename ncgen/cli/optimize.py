@@ -53,7 +53,7 @@ def _arguments(p: argparse.ArgumentParser) -> None:
 )
 def optimize(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from ncgen.files import atomic_path
-    from ncgen.optim.plots import plot_solution
+    from ncgen.optim.solution_plot import plot_solution
     from ncgen.optim.problem_file import model_path, problem_from_data, read_problem_file
 
     problem = Path(args.problem or args.file)

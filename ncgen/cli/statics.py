@@ -97,7 +97,7 @@ def equilibrium_command(args: argparse.Namespace, parser: argparse.ArgumentParse
         eq.save(args.output)
         print(f"wrote {args.output}", file=sys.stderr)
     if args.plot:
-        from ncgen.viz.modes import plot_configuration
+        from ncgen.viz.statics_pictures import plot_configuration
         plot_configuration(model, eq.q, args.plot, title=f"{model.name}: equilibrium ({eq.stability})")
         print(f"wrote {args.plot}", file=sys.stderr)
     if args.html:
@@ -138,7 +138,7 @@ def modes_command(args: argparse.Namespace, parser: argparse.ArgumentParser) -> 
         result.save(args.output)
         print(f"wrote {args.output}", file=sys.stderr)
     if args.plot:
-        from ncgen.viz.modes import plot_modes
+        from ncgen.viz.statics_pictures import plot_modes
         plot_modes(result, args.plot)
         print(f"wrote {args.plot}", file=sys.stderr)
     if args.animate or args.html:
@@ -152,7 +152,7 @@ def modes_command(args: argparse.Namespace, parser: argparse.ArgumentParser) -> 
         to_html(result.trajectory(k, cycles=4), args.html, title=f"{eq.model.name}: mode {k + 1} ({what})")
         print(f"wrote {args.html}", file=sys.stderr)
     if args.animate:
-        from ncgen.viz.modes import animate_mode
+        from ncgen.viz.statics_pictures import animate_mode
         animate_mode(result, k, args.animate)
         print(f"wrote {args.animate}", file=sys.stderr)
     return 0

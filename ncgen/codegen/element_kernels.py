@@ -3,7 +3,7 @@ arguments (the structured code generation of issue 34, docs/architecture.md, "El
 
 Two families of kinds, both from :mod:`ncgen.symbolic`:
 
-* **joint kinds** ``(primitive, dim)``: a joint primitive of :mod:`ncgen.symbolic.joints`
+* **joint kinds** ``(primitive, dim)``: a joint primitive of :mod:`ncgen.symbolic.joint_primitives`
   (``coincidence``, ``dot``, ``offset_dot``, ``distance``, ``slider_ratio``) applied to points and directions
   ``f`` (each a dim-vector) and constant scalars ``s`` (a dot product, an offset, a length).
   Kernel ``jk_<primitive>_<dim>d``: input ``x = [f_1; …; f_n; s_1; …]``, outputs ``phi`` (the
@@ -56,7 +56,7 @@ from ncgen.errors import CodegenError
 from ncgen.model.forces import cable_energy, cable_tension, spring_energy, spring_tension, torsion_deflection
 from ncgen.model.sym2casadi import to_casadi
 from ncgen.symbolic.coordinates import available_types, coordinate_type
-from ncgen.symbolic.joints import PRIMITIVES, primitive
+from ncgen.symbolic.joint_primitives import PRIMITIVES, primitive
 
 #: Joint kinds ``(primitive, dim)``, in table order: every primitive but ``angle``, which only
 #: drives use (a drive is a function of t and the parameters, not a kind the tables cover).
@@ -107,7 +107,7 @@ def member_kind_name(dim: int, ctype: str) -> str:
 
 @lru_cache(maxsize=None)
 def joint_kind(prim: str, dim: int) -> JointKind:
-    """The kernel of joint kind ``(prim, dim)`` from :func:`ncgen.symbolic.joints.primitive`."""
+    """The kernel of joint kind ``(prim, dim)`` from :func:`ncgen.symbolic.joint_primitives.primitive`."""
     P = primitive(prim, dim)
     vectors = [a for a in P.args if hasattr(a, "shape")]
     scalars = [a for a in P.args if not hasattr(a, "shape")]

@@ -10,7 +10,7 @@
   its constants (:func:`~ncgen.codegen.element_kernels.member_constants`) and the rows of
   ``Φ`` its intrinsic constraints ``<member>.rigid.<uv>`` are;
 * every joint equation is an output of a *joint element*: a joint primitive of
-  :mod:`ncgen.symbolic.joints` applied to points and directions of members (*features*,
+  :mod:`ncgen.symbolic.joint_primitives` applied to points and directions of members (*features*,
   affine in q: ``f = G q + g``, recorded as the joint writes its equations through the
   :class:`~ncgen.model.context.Context`) and constant scalars.
 

@@ -32,7 +32,7 @@ from ncgen.control.joint_step import JointStep
 from ncgen.control.mpc_qp import InProcessQP, check_qp_solver, qp_function
 from ncgen.control.stagewise_hessian import StagewiseHessian
 from ncgen.errors import NcgenError, OptimizationError
-from ncgen.runtime.tree_algorithms import rnea
+from ncgen.runtime.tree_algorithm_kernels import rnea
 from ncgen.validation import as_scalar, as_vector
 
 #: Step lengths of the line search, longest first, and its Armijo fraction.

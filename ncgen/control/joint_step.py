@@ -8,7 +8,7 @@ for a URDF robot its input ``tau``).  One step of length ``h`` (s) is semi-impli
 
     v⁺ = v + h a(q, v, τ),        q⁺ = q + h v⁺
 
-and its Jacobians follow from ABA's derivatives (:func:`ncgen.runtime.tree_algorithms.aba_derivatives`:
+and its Jacobians follow from ABA's derivatives (:func:`ncgen.runtime.tree_algorithm_kernels.aba_derivatives`:
 ``∂a/∂q``, ``∂a/∂v``, ``∂a/∂τ = M⁻¹``, compiled C)::
 
     ∂v⁺/∂x = [h ∂a/∂q,  I + h ∂a/∂v],      ∂v⁺/∂τ = h M⁻¹,
@@ -26,7 +26,7 @@ import numpy as np
 
 from ncgen.control.step import StepFunction
 from ncgen.errors import NcgenError
-from ncgen.runtime.tree_algorithms import aba, aba_derivatives, call, kernel_of
+from ncgen.runtime.tree_algorithm_kernels import aba, aba_derivatives, call, kernel_of
 from ncgen.validation import as_vector, positive
 
 

@@ -25,7 +25,7 @@ taut where the step evaluates their forces, at both ends of every interval::
     P_i(q_k, w_k, u_k) ≥ T_min,  P_i(q_{k+1}, w_k, u_k) ≥ T_min,  w_k = (q_{k+1} − q_k) / h
                                                               (k < N, every cable i)
 
-on the pull ``P = k (l − l₀) + c l̇`` (N; :mod:`ncgen.optim.cables`), smooth where the
+on the pull ``P = k (l − l₀) + c l̇`` (N; :mod:`ncgen.optim.taut_cables`), smooth where the
 tension ``max(P, 0)`` has its kink: RATTLE evaluates the forces at ``(q_k, w_k)`` and
 ``(q_{k+1}, w_k)`` with the half-step velocity ``w_k`` (:mod:`ncgen.assembly.stepper_equations`;
 ``q_{k+1} = q_k + h w_k``), so a step whose cables stay taut there is a smooth function of
@@ -174,10 +174,10 @@ def mpc_problem(ocp, terminal_weight: float, reference=None, state_weight=None, 
 
 def cable_constraint(model, h: float, p, min_tension) -> tuple[float | None, ca.Function | None]:
     """``(T_min, cable_pull)`` of the ``min_tension`` option (see the module docstring; the pull
-    of :mod:`ncgen.optim.cables` at the step's two force evaluations); ``(None, None)`` without it."""
+    of :mod:`ncgen.optim.taut_cables` at the step's two force evaluations); ``(None, None)`` without it."""
     if min_tension is None:
         return None, None
-    from ncgen.optim.cables import cable_pull_function, tension_floor
+    from ncgen.optim.taut_cables import cable_pull_function, tension_floor
     T_min = tension_floor(min_tension, "MPC: min_tension")
     pull = cable_pull_function(model, "MPC: min_tension")
     nq = model.nq

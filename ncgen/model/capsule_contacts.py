@@ -17,7 +17,7 @@ along the local z of its axes ``rotation`` (columns, in its member's frame), cen
   the capsule (``<name>.corner0 …``) and the segment against the box's edges where they
   cross (``<name>.edge2j0r``, :class:`~ncgen.model.contacts.EdgeContact`).
 
-Gaps and normals: :mod:`ncgen.assembly.contacts`.  Sign conventions as in
+Gaps and normals: :mod:`ncgen.assembly.contact_kinematics`.  Sign conventions as in
 :mod:`ncgen.model.contacts`: the normal points from the capsule (or ``a``'s segment)
 towards the other element, whose forces are reported.
 """
@@ -234,7 +234,7 @@ class CylinderSphere(CapsuleSphere):
     centred at ``at`` of ``cylinder`` (the ground by default, or a body).  One point: the
     signed distance from the sphere's centre to the cylinder less ``sphere_radius`` —
     outside, the distance to its nearest point (side, end face or rim); inside, the largest
-    of the side's and the end planes' distances (:mod:`ncgen.assembly.contacts`).  The
+    of the side's and the end planes' distances (:mod:`ncgen.assembly.contact_kinematics`).  The
     normal points from the cylinder towards the sphere; forces are those on the sphere."""
 
     kind = "CylinderSphere"

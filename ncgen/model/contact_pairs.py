@@ -2,7 +2,7 @@
 collision functions.
 
 :data:`PAIRS` maps a pair of shape kinds (:mod:`ncgen.model.shapes`; ``"plane"`` for the
-ground) to the element whose gap and normal :mod:`ncgen.assembly.contacts` computes, one
+ground) to the element whose gap and normal :mod:`ncgen.assembly.contact_kinematics` computes, one
 function per pair:
 
 =================  =========================================================================

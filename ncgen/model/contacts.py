@@ -15,7 +15,7 @@ Every contact has, besides its geometry (SI units):
 * ``restitution``: Newton's normal restitution coefficient ``e`` in [0, 1] (nonsmooth
   stepper: post-impact normal velocity ``= −e ×`` pre-impact);
 * the smooth (compliant) law used when the model is built with ``contacts="smooth"``
-  (:mod:`ncgen.assembly.contacts`): ``stiffness`` k (N/m^n), ``damping`` d
+  (:mod:`ncgen.assembly.contact_kinematics`): ``stiffness`` k (N/m^n), ``damping`` d
   (N·s/m^(n+1)), ``exponent`` n (Hunt–Crossley: ``f_N = max(0, δⁿ (k + d δ̇))`` with the
   penetration ``δ = max(0, −g)``) and ``slip_velocity`` v_s (m/s, friction regularised as
   ``f_T = −μ f_N v_T / sqrt(|v_T|² + v_s²)``).  A contact given ``restitution`` and no
@@ -403,7 +403,7 @@ class CylinderPlane(ShapePlane):
     centred at ``at``, against a plane.  Each end face contributes its exact lowest rim point
     (``<name>.end0``, ``<name>.end1``: the lowest point of the rim circle, smooth except within
     ~1e-4 rad of standing upright, where it moves to the face centre;
-    :mod:`ncgen.assembly.contacts`), so a cylinder rolls, lies and pivots on a rim exactly; and
+    :mod:`ncgen.assembly.contact_kinematics`), so a cylinder rolls, lies and pivots on a rim exactly; and
     ``face_points`` (default 3) fixed points equally spaced on each end face at half the
     radius (``<name>.face0 …``, face 0 at z = −L/2), so it stands on an end.  Inside the rim,
     they never touch while the cylinder lies or rolls (a point on the rim itself would strike
@@ -519,7 +519,7 @@ class SphereBox(Contact):
     systems) carried by ``box`` (the ground by default, or a body), centred at ``box_at`` with
     its axes along the columns of ``box_rotation``, both in ``box``'s frame (the world frame
     for the ground).  The gap is the signed distance from the sphere to the box
-    (:mod:`ncgen.assembly.contacts`): the distance to the box's nearest point less the
+    (:mod:`ncgen.assembly.contact_kinematics`): the distance to the box's nearest point less the
     radius while the centre is outside, and the largest face-plane distance less the radius
     inside.  The normal points from the box towards the sphere; forces are those on the
     sphere."""
@@ -559,7 +559,7 @@ class BoxCorner(SphereBox):
     corner ``signs`` (±1 per axis) of the box ``(size, at, rotation)`` on ``member`` against
     the other box.  Its gap is the corner's distance to the plane of one face of the other
     box, the face chosen among those the corner is over (``_sphere_box`` in
-    :mod:`ncgen.assembly.contacts`); ``corner_rotation``, ``corner_signs`` and
+    :mod:`ncgen.assembly.contact_kinematics`); ``corner_rotation``, ``corner_signs`` and
     ``corner_size`` say which faces of its own box meet at the corner and how large it is
     (they settle near ties between faces)."""
 
@@ -585,7 +585,7 @@ class BoxCorner(SphereBox):
 PARALLEL_SIN = 1e-2
 #: Edge contacts and box corners: the margin, relative to the smallest edge of the two
 #: shapes, by which a crossing must lie inside both edges (the corners cover the rest, with
-#: the same tolerance: ``EDGE_TOL`` of :mod:`ncgen.assembly.contacts`).
+#: the same tolerance: ``EDGE_TOL`` of :mod:`ncgen.assembly.contact_kinematics`).
 EDGE_MARGIN = 1e-2
 
 
@@ -596,7 +596,7 @@ class EdgeContact(Contact):
     Each side ``(member, size, at, rotation, axis, choice, radius)`` is a box of full edge
     lengths ``size`` centred at ``at`` with axes ``rotation`` (columns) in the member's frame
     (the world frame for the ground): its edges parallel to axis ``axis``, of which the one
-    facing the other shape (:mod:`ncgen.assembly.contacts`, ``choice`` ∈ {0, 1} picking the
+    facing the other shape (:mod:`ncgen.assembly.contact_kinematics`, ``choice`` ∈ {0, 1} picking the
     side where the facing direction is ambiguous), swollen by ``radius`` (m).  A capsule's
     segment is the box ``(0, 0, L)`` with ``axis = 2`` and its radius.  The gap is the
     distance between the two edges' lines along their common normal ``n`` (from ``a``'s

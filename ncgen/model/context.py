@@ -22,7 +22,7 @@ from ncgen.model.layout import Layout
 from ncgen.model.members import Member
 from ncgen.model.sym2casadi import to_casadi
 from ncgen.reproducible import dot, matmul, matvec, norm, perpendicular_basis, snap
-from ncgen.symbolic.joints import PRIMITIVES
+from ncgen.symbolic.joint_primitives import PRIMITIVES
 
 #: The coordinate types' formulas as SX functions (generated: ncgen/codegen/forms_generator.py).
 INSTANCE_FORMS = Path(__file__).with_name("instance_forms.json")
@@ -194,7 +194,7 @@ class Context:
         return evaluate(value, self.scope(inputs=inputs, state=state), size, what, call=call)
 
     def apply(self, name: str, *args):
-        """Instantiate the joint primitive ``name`` (:mod:`ncgen.symbolic.joints`) with CasADi
+        """Instantiate the joint primitive ``name`` (:mod:`ncgen.symbolic.joint_primitives`) with CasADi
         arguments, through its generated Python form (:mod:`ncgen.model.primitive_forms`; no SymPy)."""
         from ncgen.model.primitive_forms import FORMS
         form = FORMS.get((name, self.dim))

@@ -46,7 +46,7 @@ class ModelData:
     #: The same with the inputs at zero (``is_conservative(model, inputs=False)``).
     conservative_idle: bool | None = None
     #: ``{joint_space: DirectFunction}``: the compiled forward dynamics
-    #: (:func:`ncgen.runtime.joint_dynamics.forward_dynamics_kernel`).
+    #: (:func:`ncgen.runtime.dynamics_at_state.forward_dynamics_kernel`).
     forward_dynamics_kernels: dict = field(default_factory=dict)
     #: ``{(method, cflags): JointDynamicsKernel or the ModelError of a non-tree}``
     #: (:func:`ncgen.runtime.tree_kernel.joint_forward_dynamics_kernel`).
@@ -54,7 +54,7 @@ class ModelData:
     #: ``nc.joint_forward_dynamics``' own copy of the default tree kernel (False: none).
     tree_kernel: object = None
     #: ``{(name, cflags): AlgorithmKernel or the ModelError of a non-tree}``: RNEA, CRBA, ABA
-    #: and the derivatives, each its own library (:func:`ncgen.runtime.tree_algorithms.algorithm_kernel`).
+    #: and the derivatives, each its own library (:func:`ncgen.runtime.tree_algorithm_kernels.algorithm_kernel`).
     algorithm_kernels: dict = field(default_factory=dict)
     #: ``(TreeTables or None, UnsupportedTree or None)``: the model's tree tables
     #: (:func:`ncgen.codegen.tree_tables.tree_tables`).
@@ -63,10 +63,10 @@ class ModelData:
     #: (:func:`ncgen.runtime.tree_library.table_algorithm`).
     table_algorithms: dict = field(default_factory=dict)
     #: ``(indices,)``: the independent joint rates when the compiled algorithms take the model,
-    #: indices None when not (:func:`ncgen.runtime.tree_algorithms.rnea_applies`).
+    #: indices None when not (:func:`ncgen.runtime.tree_algorithm_kernels.rnea_applies`).
     algorithm_rates: tuple | None = None
     #: ``{joints: AlgorithmKernel or False}``: the compiled RNEA when it gives
-    #: ``nc.inverse_dynamics(..., joints=joints)`` (:func:`ncgen.runtime.joint_dynamics._rnea_kernel`).
+    #: ``nc.inverse_dynamics(..., joints=joints)`` (:func:`ncgen.runtime.dynamics_at_state._rnea_kernel`).
     rnea_efforts: dict = field(default_factory=dict)
     #: ``(f,)``: the joint-space tree map ``(q_j, v_j) -> (q, v)``, f None for a model that is
     #: not a tree (``JointSpace._tree`` in :mod:`ncgen.assembly.joint_space`).

@@ -63,7 +63,7 @@ from ncgen.errors import OptimizationError
 from ncgen.optim.diagnostics import SUCCESS
 from ncgen.optim.transcription import Discretisation, Horizon, Transcription, guess_times
 
-#: Point-contact kinds transcribed here: their gap (ncgen.assembly.contacts, the formulas of the
+#: Point-contact kinds transcribed here: their gap (ncgen.assembly.contact_kinematics, the formulas of the
 #: simulator's pair kernels) is smooth in q, or, a sphere against a box, continuously
 #: differentiable wherever the gap is ≥ 0 (the distance to a convex body; its normal and
 #: tangents those of the face, edge or corner nearest to the sphere).  Refused, named, until

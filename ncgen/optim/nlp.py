@@ -363,7 +363,7 @@ class NLP:
         both ends of every interval and at its path points, each with the interval's input (the
         input jumps at the nodes, so node ``k`` is taken with ``u_{k−1}`` and with ``u_k``; the
         path points come interval by interval, the same number in each, the interval's end last)."""
-        from ncgen.optim.cables import cable_pull_function
+        from ncgen.optim.taut_cables import cable_pull_function
         ocp, model, disc = self.ocp, self.model, self.disc
         pull = cable_pull_function(model, "min_tension")
         npts, N = disc.path_q.shape[1], ocp.N

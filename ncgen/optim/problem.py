@@ -186,9 +186,9 @@ class OptimalControl:
     def min_tension(self, T_min) -> "OptimalControl":
         """Path constraint: every cable's pull ``P = k (l − l₀) + c l̇ ≥ T_min`` (N, ≥ 0) at both
         ends of every interval and at its path points, with the interval's input
-        (:mod:`ncgen.optim.cables`): the cables stay taut, so the plan never relies on the
+        (:mod:`ncgen.optim.taut_cables`): the cables stay taut, so the plan never relies on the
         tension's cut at zero.  Refused on a model without cables."""
-        from ncgen.optim.cables import cable_indices, tension_floor
+        from ncgen.optim.taut_cables import cable_indices, tension_floor
         value = tension_floor(T_min, "min_tension")
         cable_indices(self.model, "min_tension")
         self.cable_min_tension = value

@@ -1,7 +1,7 @@
 """Rigid-motion algebra on NumPy arrays, with input validation.
 
 Every function here is the NumPy form (``sympy.lambdify``, through
-:func:`ncgen.symbolic.numeric.numpy_function`) of the SymPy formula of the same name in
+:func:`ncgen.symbolic.numpy_forms.numpy_function`) of the SymPy formula of the same name in
 :mod:`ncgen.symbolic.rigid_motion` or :mod:`ncgen.symbolic.spatial_inertia`; see those modules
 for the mathematics and ``docs/notation.md`` for the symbols.  Conventions (arboris):
 ``H_ab = [[R_ab, p_ab], [0, 1]]`` is the pose of frame b in frame a, twists are ``[ω; v]``,
@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from ncgen.errors import InertiaError, RotationError, ShapeError
-from ncgen.symbolic.numeric import numpy_function
+from ncgen.symbolic.numpy_forms import numpy_function
 from ncgen.validation import ROTATION_TOL, nearest_rotation
 
 ROTATION_TOLERANCE = ROTATION_TOL

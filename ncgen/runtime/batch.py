@@ -383,7 +383,7 @@ class _Runs:
     def _flat_multipliers(self, runs: list, k: dict) -> None:
         """``λ`` at the output rows ``1 .. k[i] − 1`` of ``runs`` by the compiled ``accel``
         mapped over all those samples in one call (each sample's evaluation is the one
-        :func:`~ncgen.runtime.joint_dynamics.multipliers_at_samples` makes for a single run)."""
+        :func:`~ncgen.runtime.dynamics_at_state.multipliers_at_samples` makes for a single run)."""
         if not runs or not self.model.nc:
             return
         model, t = self.model, self.t

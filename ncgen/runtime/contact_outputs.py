@@ -6,7 +6,7 @@ Per output time and contact (order of ``model.contact_names``):
 * ``contact_normal`` (N): the normal force on the contact's second element (sphere, or
   sphere ``b``), ``≥ 0``;
 * ``contact_tangent`` (N), ``(n_t, nk, dim − 1)``: its tangential components along the
-  contact's tangent basis (:mod:`ncgen.assembly.contacts`);
+  contact's tangent basis (:mod:`ncgen.assembly.contact_kinematics`);
 * ``contact_state``: :data:`OPEN` (no force), :data:`STICK` or :data:`SLIP`.
 
 Smooth contacts (``contacts="smooth"``): the compliant law at each state; a contact sticks

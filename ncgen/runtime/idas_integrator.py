@@ -26,7 +26,7 @@ from ncgen.runtime.inputs import hold_columns
 from ncgen.runtime.integrator import Run, refuse_integrator
 from ncgen.runtime.idas_options import IdasOptions
 from ncgen.runtime.options import SimulationOptions
-from ncgen.runtime.progress import Progress
+from ncgen.runtime.simulation_progress import Progress
 from ncgen.runtime.rolling_idas import check_rolling_idas, simulate_rolling_idas
 from ncgen.runtime.rattle_bridge import RattleFailure, compiled_interval, rattle_interval
 from ncgen.runtime.run_start import failed_at_start, initial_multipliers, natural_feedback

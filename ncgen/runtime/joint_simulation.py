@@ -34,7 +34,7 @@ from ncgen.codegen.joint_loop import INTERRUPTED, JointOptions, integrator_name,
 from ncgen.errors import CompilerNotFound, ModelError, NcgenError, SimulationError, SimulationInterrupted, option
 from ncgen.runtime.feedback import FeedbackFailed, call_feedback, with_partial
 from ncgen.interrupts import call_interruptibly
-from ncgen.runtime.progress import Progress
+from ncgen.runtime.simulation_progress import Progress
 from ncgen.runtime.trajectory import Trajectory, once
 
 #: The run is cut into at most this many calls of the C loop (progress updates).

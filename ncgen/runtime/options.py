@@ -106,7 +106,7 @@ class SimulationOptions:
     joint dynamics, and the model's compiled joint-space ODE: :func:`ncgen.runtime.joint_simulation.joint_loop`),
     ``backend`` for a model with rolling elements only (``"compiled"``: each RATTLE step one
     call of compiled C; ``"vm"``: Python-driven; ``"auto"``: compiled when it pays,
-    :mod:`ncgen.runtime.rolling_rattle`).
+    :mod:`ncgen.runtime.rolling_stepper`).
     """
 
     method: str = "auto"

@@ -38,7 +38,7 @@ from ncgen.errors import NcgenError, SimulationError
 from ncgen.runtime.energy_balance import idas_report
 from ncgen.runtime.idas import ChunkedIDAS, ChunkFailure
 from ncgen.runtime.integrator import Run
-from ncgen.runtime.progress import Progress
+from ncgen.runtime.simulation_progress import Progress
 from ncgen.runtime.rolling_integrator import conservative_run, project
 from ncgen.runtime.trajectory import Trajectory
 

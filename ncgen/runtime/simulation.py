@@ -136,7 +136,7 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
       ``System.add_rolling``, TOML ``[[rolling]]``), chosen by ``"auto"`` (``"idas"`` for a
       model with drives as well, which ``"rolling"`` refuses; ``"idas"``:
       :mod:`ncgen.runtime.rolling_idas`, and ``"stepper"``: RATTLE with velocity
-      constraints, :mod:`ncgen.runtime.rolling_rattle`, take it too): explicit Runge–Kutta
+      constraints, :mod:`ncgen.runtime.rolling_stepper`, take it too): explicit Runge–Kutta
       steps (``integrator="dopri5"``, default, with
       ``rtol``/``atol``, or ``"rk4"`` with ``substeps``) each projected onto the holonomic
       and the velocity constraints (:mod:`ncgen.runtime.rolling_integrator`, docs/rolling.md);

@@ -60,7 +60,7 @@ from ncgen.codegen.stepper_package import STATS, STATUS, STEP_INTERRUPTED, TOL
 from ncgen.errors import NcgenError, SimulationError, SimulationInterrupted, option
 from ncgen.progress import Ticker
 from ncgen.runtime.energy_balance import balance_report, nonsmooth_contacts, stepper_works
-from ncgen.runtime.joint_dynamics import multipliers_at_samples
+from ncgen.runtime.dynamics_at_state import multipliers_at_samples
 from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.stepper_checks import (SHADOW_FACTOR, check_fixed, check_global, contact_report, energy_report,
                                           error_estimate, is_conservative, shadow_estimates,
@@ -251,7 +251,7 @@ def _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info,
     compiled ``<model>_outputs`` (joint states and contact outputs from
     :func:`~ncgen.runtime.trajectory.derived_outputs`; ``impulses``: the nonsmooth contact
     impulses per output interval); the multipliers of the output states
-    (:func:`~ncgen.runtime.joint_dynamics.multipliers_at_samples` with ``accel``), or with
+    (:func:`~ncgen.runtime.dynamics_at_state.multipliers_at_samples` with ``accel``), or with
     nonsmooth contacts the stepper's ``LAM``; sets the error estimate, the energy report and
     the wall time (from ``start``) in ``info``."""
     q = np.vstack([q0, Q[:rows]])

@@ -12,7 +12,7 @@ from ncgen.errors import CompilerNotFound, NcgenError, SimulationError, option
 from ncgen.model.data import model_data
 from ncgen.runtime.feedback import FeedbackFailed, with_partial
 from ncgen.runtime.integrator import Run, refuse_integrator
-from ncgen.runtime.rolling_rattle import check_rolling_stepper, simulate_rolling_rattle
+from ncgen.runtime.rolling_stepper import check_rolling_stepper, simulate_rolling_rattle
 from ncgen.runtime.run_start import failed_at_start
 from ncgen.runtime.options import SimulationOptions
 from ncgen.codegen.stepper_package import CONTACT_STATS, STATS, WORK_PARTS

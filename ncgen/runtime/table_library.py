@@ -83,7 +83,7 @@ def sources_key() -> str:
     import ncgen.codegen.element_kernels as ek
     import ncgen.model.sym2casadi as s2c
     import ncgen.symbolic.coordinates as coords
-    import ncgen.symbolic.joints as joints
+    import ncgen.symbolic.joint_primitives as joints
 
     templates = shipped_templates_dir()
     files = [templates / rel for rel in SOURCES] + [Path(m.__file__) for m in (ek, s2c, coords, joints)]

@@ -3,7 +3,7 @@
 * :func:`joint_forward_dynamics` — ``a_j`` from joint positions, rates and inputs (joint
   space in and out, ``model.joint_names`` order); by default the compiled kernel below for
   trees (mimic joints included), else (closed loops, drives) ``from_joint_space`` → the exact KKT
-  solve (:func:`~ncgen.runtime.joint_dynamics.forward_dynamics`) → ``to_joint_space``.
+  solve (:func:`~ncgen.runtime.dynamics_at_state.forward_dynamics`) → ``to_joint_space``.
 * :func:`joint_forward_dynamics_kernel` — the compiled kernel as a callable
   ``k(qj, vj, u) -> a_j`` (:class:`JointDynamicsKernel`): the recursive form of
   :func:`~ncgen.assembly.tree_dynamics.recursive_dynamics_function` for 3D trees (the
@@ -27,7 +27,7 @@ import numpy as np
 from ncgen.codegen.fast_call import fast_caller
 from ncgen.errors import ModelError
 from ncgen.model.data import cached, model_data
-from ncgen.runtime.joint_dynamics import forward_dynamics
+from ncgen.runtime.dynamics_at_state import forward_dynamics
 from ncgen.codegen.tree_check import PIVOT_TOL, check_tree, compile_tree_function, unit_quaternions
 from ncgen.validation import MAX_MAGNITUDE, as_numbers, as_vector
 
@@ -158,7 +158,7 @@ def joint_forward_dynamics(model, qj, vj, u=None, p=None, t: float = 0.0, *, bac
     and parameters ``p`` (default ``model.p0``).  ``backend="compiled"``: the kernel of
     :func:`joint_forward_dynamics_kernel` for trees, mimic joints included (built on first
     use), else the ``"numpy"`` path: ``from_joint_space``, the KKT solve of
-    :func:`~ncgen.runtime.joint_dynamics.forward_dynamics`, ``to_joint_space``."""
+    :func:`~ncgen.runtime.dynamics_at_state.forward_dynamics`, ``to_joint_space``."""
     if backend not in ("compiled", "numpy"):
         raise ModelError(f"joint_forward_dynamics: backend: expected 'compiled' or 'numpy', got {backend!r}")
     k = model_data(model).tree_kernel

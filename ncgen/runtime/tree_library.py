@@ -20,7 +20,7 @@ the whole forward unit's gcc 1.41 → 1.19 s of CPU (median of 5 interleaved, lo
 
 :class:`TableAlgorithm` is one algorithm of :data:`~ncgen.codegen.tree_check.ALGORITHMS`
 bound to one model's :class:`~ncgen.codegen.tree_tables.TreeTables`, with the interface the
-callers of :class:`~ncgen.runtime.tree_algorithms.AlgorithmKernel` use (``k(*args)``,
+callers of :class:`~ncgen.runtime.tree_algorithm_kernels.AlgorithmKernel` use (``k(*args)``,
 :meth:`TableAlgorithm.batch`).  Time and parameters do not enter: the tables cover only
 trees whose passive force is a uniform gravity.  :class:`TableJointLoop` is the joint-space
 simulation loop (``ncgen_joint_loop.h`` in the library) on the same tables.
@@ -320,7 +320,7 @@ class _Direct:
 class TableAlgorithm:
     """``k(*args) -> outputs``: the algorithm ``name`` (a key of
     :data:`~ncgen.codegen.tree_check.ALGORITHMS`) of one tree from its tables; the
-    arguments as :class:`~ncgen.runtime.tree_algorithms.AlgorithmKernel` takes them (``qj``
+    arguments as :class:`~ncgen.runtime.tree_algorithm_kernels.AlgorithmKernel` takes them (``qj``
     with unit quaternions), checked by the caller.  Outputs are fresh arrays (matrices
     ``(ni, ni)``).  Raises :class:`ModelError` for a singular mass matrix or a non-finite
     result.  Not thread-safe (one work array)."""

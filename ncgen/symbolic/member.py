@@ -4,7 +4,7 @@ A :class:`RigidMember` holds a coordinate type, the local basis (basic point ``r
 base vectors ``X̄`` in the member's local frame, whose origin is the centre of mass), the
 mass and the inertia.  Every numeric method evaluates a SymPy formula of
 :class:`ncgen.symbolic.coordinates.Derivation` in its shipped NumPy form
-(:func:`ncgen.symbolic.numeric.shipped_function`: no SymPy at run time); the same formulas
+(:func:`ncgen.symbolic.numpy_forms.shipped_function`: no SymPy at run time); the same formulas
 are instantiated in CasADi with the values of :attr:`RigidMember.constant_values`.
 
 Conventions: SI units; ``R`` maps local to world axes; ``p`` is the centre of mass;
@@ -23,7 +23,7 @@ from ncgen.reproducible import inv, matmul, matvec, snap
 from ncgen.symbolic.coordinates import (CoordinateType, com_names, component_names, coordinate_type, matrix_names,
                                         symmetric_names)
 from ncgen.symbolic.notation import VECTOR_NAMES
-from ncgen.symbolic.numeric import shipped_function
+from ncgen.symbolic.numpy_forms import shipped_function
 from ncgen.validation import as_array, as_scalar, as_vector, positive, rotation
 
 #: Relative tolerance below which a body's base vectors count as coplanar.

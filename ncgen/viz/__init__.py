@@ -8,8 +8,8 @@
 
 
 def plot(traj, path, points=None, **kwargs):
-    """See :func:`ncgen.viz.plots.plot`."""
-    from ncgen.viz.plots import plot as _plot
+    """See :func:`ncgen.viz.summary_plot.plot`."""
+    from ncgen.viz.summary_plot import plot as _plot
     return _plot(traj, path, points, **kwargs)
 
 

@@ -23,7 +23,7 @@ from matplotlib.animation import FFMpegWriter
 
 from ncgen.errors import NcgenError
 from ncgen.files import atomic_path
-from ncgen.runtime.progress import Progress
+from ncgen.runtime.simulation_progress import Progress
 from ncgen.validation import as_scalar
 from ncgen.viz.draw import SceneArtists, figure, scene_axes
 from ncgen.viz.scene import scene

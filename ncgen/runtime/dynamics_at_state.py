@@ -27,7 +27,7 @@ from ncgen.assembly.manifold import solve_linear
 from ncgen.errors import ModelError
 from ncgen.model.data import cached, model_data
 from ncgen.model.rolling import refuse_rolling
-from ncgen.runtime.tree_algorithms import call, kernel_of, rnea_applies
+from ncgen.runtime.tree_algorithm_kernels import call, kernel_of, rnea_applies
 from ncgen.validation import as_vector
 
 
@@ -120,7 +120,7 @@ def inverse_dynamics(model, qj, vj, aj, p=None, t: float = 0.0, joints: str = "a
     ``joint_names`` order).  ``joints="all"``: efforts conjugate to every joint rate, as if
     every joint were actuated (a floating base's wrench included; Pinocchio's ``rnea``).
     Trees (3D, mimic joints included) use the compiled RNEA
-    (:func:`~ncgen.runtime.tree_algorithms.rnea`, from the tree tables when they cover the model) when the efforts asked for are those of the
+    (:func:`~ncgen.runtime.tree_algorithm_kernels.rnea`, from the tree tables when they cover the model) when the efforts asked for are those of the
     independent joint rates; other models solve the constrained equations of motion."""
     if joints not in ("actuated", "all"):
         raise ModelError(f"inverse_dynamics: joints: expected 'actuated' or 'all', got {joints!r}")
