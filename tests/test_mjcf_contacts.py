@@ -87,3 +87,32 @@ def test_a_pair_its_element_refuses_is_named():
                                          r"text:1 \(.*a sphere needs a moving member"):
         s = nc.System.from_mjcf(text, contacts=True)
     assert s.contacts == []
+
+
+RSSR = Path(__file__).parent / "data" / "rssr.xml"
+
+
+def test_capsules_meeting_at_a_loop_point_are_named():
+    """The coupler's and the rocker's capsules share the end point where ``<connect>`` closes the
+    loop: MuJoCo's ``mj_collision`` collides them there (0.04 m deep, both radii), so the import
+    keeps the pair, and the build refuses it by name (its normal is undefined: the cores meet)
+    instead of a non-finite initial state that names nothing.  Excluded, the loop builds."""
+    mujoco = pytest.importorskip("mujoco")
+    mj = mujoco.MjModel.from_xml_path(str(RSSR))
+    d = mujoco.MjData(mj)
+    mujoco.mj_forward(mj, d)
+    theirs = {frozenset((mj.body(mj.geom_bodyid[c.geom1]).name, mj.body(mj.geom_bodyid[c.geom2]).name)): c.dist
+              for c in d.contact[:d.ncon]}
+    assert set(theirs) == {frozenset(("coupler", "rocker"))} and theirs[frozenset(("coupler", "rocker"))] == \
+        pytest.approx(-0.04, abs=1e-12)
+    s = nc.System.from_mjcf(RSSR, contacts=True)
+    assert "coupler_geom0__rocker_geom0" in [c.name for c in s.contacts]
+    with pytest.raises(ModelError, match=r"contact 'coupler_geom0__rocker_geom0\.b_end1' \(CapsuleCapsule\) between "
+                                         r"'rocker' and 'coupler': its contact normal is undefined.*gap -0\.04 m"):
+        s.build()
+    text = RSSR.read_text().replace("</equality>", '</equality><contact><exclude body1="coupler" body2="rocker"/>'
+                                                   "</contact>")
+    s = nc.System.from_mjcf(text, contacts=True)
+    assert [c.name for c in s.contacts] == ["crank_geom0__rocker_geom0"]
+    model = s.build()
+    assert np.all(np.array(model.functions["gap"](model.q0, model.p0)) > 0.1)

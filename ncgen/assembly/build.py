@@ -144,7 +144,7 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     coordinates_later = bool(system.initial_coordinates or system.initial_coordinate_rates)
     posture_later = coordinates_later or bool(system.initial_joints or system.initial_joint_rates)
     if terms:                      # before the consistent state, whose contact forces need a defined normal;
-        check_initial_gaps(system.name, system.contacts, functions["gap"], q_init, p0, contacts, weight,
+        check_initial_gaps(system.name, system.contacts, functions, q_init, p0, contacts, weight,
                            depth=not posture_later)      # depths where the run starts, after the posture
     state = consistent_state(functions, layout, labels, q_init, v_init, p0, t0, tolerance, M,
                              fixed=fixed, assemble=assemble)
@@ -164,13 +164,13 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     if system.initial_joints or system.initial_joint_rates:
         q, v = joint_space.initial_state(model, system.initial_joints, system.initial_joint_rates)
         if terms:
-            check_initial_gaps(system.name, system.contacts, functions["gap"], q, p0, contacts, weight,
+            check_initial_gaps(system.name, system.contacts, functions, q, p0, contacts, weight,
                                depth=not coordinates_later)
         model = model_with(consistent_state(functions, layout, labels, q, v, p0, t0, tolerance, M, fixed=fixed))
     if system.initial_coordinates or system.initial_coordinate_rates:
         q, v = _initial_coordinates(model, system)
         if terms:
-            check_initial_gaps(system.name, system.contacts, functions["gap"], q, p0, contacts, weight)
+            check_initial_gaps(system.name, system.contacts, functions, q, p0, contacts, weight)
         model = model_with(consistent_state(functions, layout, labels, q, v, p0, t0, tolerance, M, fixed=fixed))
     raise_if_interrupted()               # a Ctrl-C that CasADi swallowed while the functions were built
     return model

@@ -393,27 +393,42 @@ def contact_functions(ctx: Context, terms: list[ContactTerms]) -> dict[str, ca.F
 INITIAL_PENETRATION_TOL = 1e-6
 
 
-def check_initial_gaps(system_name: str, contacts, gap, q, p, contact_model: str, weight: float,
+def check_initial_gaps(system_name: str, contacts, functions, q, p, contact_model: str, weight: float,
                        depth: bool = True) -> np.ndarray:
-    """The gaps ``g`` (m) of ``contacts`` at ``(q, p)``, after refusing what no run can start
-    from, naming the contact and the depth (``depth=False``: only the first, at a
+    """The gaps ``g`` (m) of ``contacts`` at ``(q, p)`` (``functions``: the model's, with
+    :func:`contact_functions`' ``gap`` and ``contact_jacobian``), after refusing what no run
+    can start from, naming the contact and the depth (``depth=False``: only the first two, at a
     configuration the run does not start from, as a URDF's zero pose before its initial
     joints are applied):
 
     * coincident sphere centres (the normal is undefined);
+    * any other contact whose normal is undefined, its Jacobian rows not finite: the
+      nearest points of its shapes' cores coincide (a capsule's end on the other's segment);
     * ``contact_model="nonsmooth"``: a penetration deeper than :data:`INITIAL_PENETRATION_TOL`;
     * the smooth law: two spheres overlapping past a centre (the normal, from centre to
       centre, points the wrong way), or a sphere deeper in a plane than its radius and than
       ten times the depth ``(W/k)^(1/n)`` at which the contact alone would carry the system's
       weight ``W`` (N) — a start that launches the members.
     """
-    g = np.array(gap(q, p), float).reshape(-1)
-    for c, gk in zip(point_contacts(contacts), g):
+    g = np.array(functions["gap"](q, p), float).reshape(-1)
+    points = point_contacts(contacts)
+    undefined = _undefined_normals(points, functions["contact_jacobian"], q, p)
+    for k, (c, gk) in enumerate(zip(points, g)):
         radius = c.radius_a + c.radius_b if c.kind == "SphereSphere" else getattr(c, "total_radius", c.radius)
         if c.kind == "SphereSphere" and gk + radius <= 1e-12 * max(radius, 1.0):
             raise ModelError(f"system {system_name!r}: {c.label}: the centres of the spheres on {c.a.name!r} "
                              f"and {c.b.name!r} coincide in the initial configuration (the contact normal is "
                              "undefined); move one of the members")
+        if k in undefined:
+            others = [points[i].name for i in undefined if i != k]
+            raise ModelError(
+                f"system {system_name!r}: {c.label} between {' and '.join(repr(m.name) for m in c.members())}: "
+                f"its contact normal is undefined in the initial configuration (the Jacobian rows "
+                f"{', '.join(undefined[k])} are not finite, gap {gk:.6g} m): the nearest points of the two "
+                f"shapes' cores coincide, as where a capsule's end lies on the other's axis"
+                + (f" (also {', '.join(others)})" if others else "")
+                + ". Move the members apart, or leave this pair out of the contacts (in MJCF: contype/"
+                "conaffinity or <contact><exclude>)")
         if not depth:
             continue
         if contact_model == "nonsmooth":
@@ -430,6 +445,20 @@ def check_initial_gaps(system_name: str, contacts, gap, q, p, contact_model: str
                              f"{-gk:.6g} m (gap {gk:.6g} m); {why}. Start the members apart (move them by "
                              f"at least {-gk:.6g} m along the contact normal)")
     return g
+
+
+def _undefined_normals(points, jacobian, q, p) -> dict[int, list[str]]:
+    """``{k: ["W_N", "W_T"] (those not finite)}`` of the point contacts whose Jacobian rows
+    ``jacobian(q, p)`` are not all finite."""
+    WN, WT = (np.array(x, float) for x in jacobian(q, p))
+    per = WT.shape[0] // max(len(points), 1)
+    out = {}
+    for k in range(len(points)):
+        bad = [name for name, rows in (("W_N", WN[k:k + 1]), ("W_T", WT[k * per:(k + 1) * per]))
+               if not np.all(np.isfinite(rows))]
+        if bad:
+            out[k] = bad
+    return out
 
 
 def contact_specs(contacts) -> list[dict]:
