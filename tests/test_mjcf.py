@@ -475,11 +475,23 @@ def test_unsupported_named_in_one_warning():
      "</mujoco>", "MJCF text:1: a ball joint in body 'body1' with other joints"),
     ("<mujoco><worldbody><body><joint/><inertial mass='1' diaginertia='1 1 3'/></body></worldbody></mujoco>",
      "the inertia tensor is not physical"),
+    ("<mujoco><worldbody><body name='a'><joint/><geom size='1'/><body name='b'><geom size='1'/></body></body>"
+     "</worldbody>\n<equality><connect body1='a' body2='b' anchor='0 0 0'/></equality></mujoco>",
+     "MJCF text:2: <connect>: body1 and body2 move together (one rigid group)"),
 ])
 def test_malformed_mjcf_is_named(text, expected):
     with pytest.raises(ModelError) as e:
         nc.System.from_mjcf(text)
     assert expected in str(e.value)
+
+
+def test_an_include_loop_is_named(tmp_path):
+    """Files that include each other: the error names the element, its line and the chain."""
+    (tmp_path / "a.xml").write_text("<mujoco>\n<include file='b.xml'/></mujoco>")
+    (tmp_path / "b.xml").write_text("<mujoco><include file='a.xml'/></mujoco>")
+    with pytest.raises(ModelError, match=r"MJCF b\.xml:1: <include file='a\.xml'> includes itself "
+                                         r"\(through a\.xml → b\.xml\)"):
+        nc.System.from_mjcf(tmp_path / "a.xml")
 
 
 def test_actuator_gear_rows_follow_tau():

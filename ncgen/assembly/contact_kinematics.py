@@ -422,10 +422,11 @@ def check_initial_gaps(system_name: str, contacts, functions, q, p, contact_mode
         if k in undefined:
             others = [points[i].name for i in undefined if i != k]
             raise ModelError(
-                f"system {system_name!r}: {c.label} between {' and '.join(repr(m.name) for m in c.members())}: "
-                f"its contact normal is undefined in the initial configuration (the Jacobian rows "
-                f"{', '.join(undefined[k])} are not finite, gap {gk:.6g} m): the nearest points of the two "
-                f"shapes' cores coincide, as where a capsule's end lies on the other's axis"
+                f"system {system_name!r}: {c.label} between "
+                f"{' and '.join(repr(m.name) for m in c.members())}: its contact normal is undefined in the "
+                f"initial configuration (the Jacobian rows {', '.join(undefined[k])} are not finite, gap "
+                f"{gk:.6g} m): the nearest points of the two shapes' cores coincide, as where a capsule's end "
+                "lies on the other's axis"
                 + (f" (also {', '.join(others)})" if others else "")
                 + ". Move the members apart, or leave this pair out of the contacts (in MJCF: contype/"
                 "conaffinity or <contact><exclude>)")
