@@ -8,7 +8,8 @@ Each file is one of: ``ok`` (imported, nothing left out), ``warned`` (imported; 
 MjcfWarning's items counted), ``refused`` (a ModelError: what the import cannot represent
 at all, e.g. a mesh giving mass).  Only the import is run (no build).  With gymnasium 1.4.0
 and dm_control 1.0.50: 27 of 33 files (82 %) ok, 5 warned, 1 refused; with the Menagerie's
-UR5e, Go1 and Cassie 29 of 36 (81 %) (docs/mjcf.md).
+UR5e, Go1 and Cassie 29 of 36 (81 %) (docs/mjcf.md); with the UR5e, Panda and Gen3 (no Go1,
+no Cassie) 30 of 36 (83 %).
 ``python benchmarks/mjcf_coverage.py [--verbose]``."""
 from __future__ import annotations
 
@@ -24,8 +25,10 @@ from ncgen.errors import NcgenError
 from ncgen.model.mjcf import MjcfWarning
 
 
-#: The Menagerie models of tests/test_mjcf_menagerie.py: an arm, a quadruped, a loop robot.
-MENAGERIE = ("universal_robots_ur5e/ur5e.xml", "unitree_go1/go1.xml", "agility_cassie/cassie.xml")
+#: The Menagerie models of tests/test_mjcf_menagerie.py: an arm, a quadruped, a loop robot,
+#: and the further arms checked there when present (Panda, Kinova Gen3).
+MENAGERIE = ("universal_robots_ur5e/ur5e.xml", "unitree_go1/go1.xml", "agility_cassie/cassie.xml",
+             "franka_emika_panda/panda.xml", "kinova_gen3/gen3.xml")
 
 
 def shipped() -> dict[str, Path]:
