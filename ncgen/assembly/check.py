@@ -69,6 +69,8 @@ class CheckReport:
         d = self.dof
         lines += _sharing(m, m.nc + len(d.dropped))
         lines.append(f"rank A = {d.rank}, DOF = {d.dof}")
+        if d.rolling_summary():
+            lines.append(d.rolling_summary())
         if not m.mass_factor.regular:
             flat = ", ".join(m.mass_factor.flat) or "coordinates without inertia"
             lines.append(f"mass matrix: singular ({flat}), positive definite on the constraint tangent space "

@@ -9,6 +9,12 @@
   ``v_f = v̄_f + M_ff⁻¹ A_fᵀ μ`` with ``(A_f M_ff⁻¹ A_fᵀ) μ = −Φ_t − A v̄``.
 * :func:`dof_report` — rank of ``A``, degrees of freedom ``nq − rank A`` and the names of
   the constraints that depend on earlier ones (:func:`~ncgen.assembly.rank.dependent_rows`).
+
+A model with rolling elements (``model.rolling``, :mod:`ncgen.assembly.nonholonomic`) has
+more rows: the elements' heights join ``Φ`` (assembly, the velocity projection and the
+rank of ``dof_report``), and their nonholonomic rows ``B(q) v = c(q, t)`` join ``A v = −Φ_t``
+in the velocity projection and the velocity degrees of freedom ``nq − rank Â``,
+``Â = [Φ̂_q; B]`` (assembly, a position-level problem, has no use for them).
 * :func:`solve_kinematics` — position, velocity and acceleration of a driven (0-DOF)
   mechanism over a time grid: ``Φ(t, q) = 0``, ``A v = −Φ_t``, ``A a = γ``.
 
@@ -84,6 +90,24 @@ def _numeric(model, t, p):
     return t, p, phi, jac
 
 
+def _element_rows(model, t: float) -> tuple[list[str], int, callable, callable, callable]:
+    """The rows that ``model``'s rolling elements add (none without them), from its
+    :func:`~ncgen.assembly.nonholonomic.rolling_system`: ``(names, n_heights, height(q),
+    rows(q), rate(q))`` — the names of the heights then of the nonholonomic rows, the heights'
+    residuals (m), the Jacobian rows of the heights then ``B(q)``, and their right-hand sides
+    ``ĉ`` (zeros for the heights; the plane's rates at ``t`` for the rolling rows, m/s)."""
+    if not getattr(model, "rolling", ()):
+        empty = np.zeros((0, model.nq))
+        return [], 0, lambda x: np.zeros(0), lambda x: empty, lambda x: np.zeros(0)
+    from ncgen.assembly.nonholonomic import rolling_system
+    system, nc = rolling_system(model), model.nc
+    n_heights = system.n_holonomic - nc
+    return (system.row_names[nc:], n_heights,
+            lambda x: np.asarray(system.phi_at(x, t), float).reshape(-1)[nc:],
+            lambda x: np.asarray(system.A_at(x, t), float)[nc:],
+            lambda x: np.asarray(system.rate(x, t), float).reshape(-1)[nc:])
+
+
 def _free(model, fix) -> np.ndarray:
     fixed = set(resolve_fix(model.layout, model.members, fix))
     return np.array([i for i in range(model.nq) if i not in fixed], dtype=int)
@@ -114,9 +138,14 @@ def assemble(model, q=None, *, t=None, p=None, fix=(), values: dict | None = Non
     """``q`` (default ``model.q0``) moved onto ``Φ(t, q) = 0`` by Newton, the coordinates in
     ``fix`` kept and those in ``values`` (``{name: value}``, m; names as written resolve,
     see the module docstring) set; raises :class:`ModelError` naming the worst constraint
-    if it fails."""
+    if it fails.  With rolling elements, their heights are among the equations."""
     q = np.array(model.q0 if q is None else q, dtype=float)
     t, p, phi, jac = _numeric(model, t, p)
+    element_names, n_heights, height, rows, _ = _element_rows(model, t)
+    if n_heights:
+        phi_m, jac_m = phi, jac
+        phi = lambda x: np.concatenate([phi_m(x), height(x)])          # noqa: E731
+        jac = lambda x: np.vstack([jac_m(x), rows(x)[:n_heights]])     # noqa: E731
     direct, S, c, x_w, written = _values(model, values, "values")
     for i, value in direct.items():
         q[i] = value
@@ -131,7 +160,8 @@ def assemble(model, q=None, *, t=None, p=None, fix=(), values: dict | None = Non
     if res > tol * size**2 or not np.isfinite(res):
         r = phi(q_new)
         worst = int(np.nanargmax(np.abs(r)))
-        label = (model.constraint_names + [f"{n} = {x:g}" for n, x in zip(written, x_w)])[worst]
+        label = (model.constraint_names + element_names[:n_heights]
+                 + [f"{n} = {x:g}" for n, x in zip(written, x_w)])[worst]
         kept = model.nq - free.size + len(written)
         hint = f" with {kept} coordinate(s) fixed" if kept else ""
         raise ModelError(f"assembly failed{hint}: after {it} Newton iterations "
@@ -144,7 +174,8 @@ def project_velocity(model, q, v=None, *, t=None, p=None, fix=(), values: dict |
     """The velocity nearest to ``v`` (default ``model.v0``) in the kinetic-energy metric that
     satisfies ``A v = −Φ_t`` at ``(t, q)``; the components in ``fix`` are kept and the
     rates in ``values`` (``{coordinate name: rate}``, m/s; names as written resolve, their
-    rate ``s · v``) set."""
+    rate ``s · v``) set.  With rolling elements the rows of their heights and their rolling
+    rows ``B(q) v = c(q, t)`` are kept too (all rows ``Â v = ĉ``)."""
     q = np.asarray(q, float)
     v = np.array(model.v0 if v is None else v, dtype=float)
     t, p, _, jac = _numeric(model, t, p)
@@ -153,7 +184,8 @@ def project_velocity(model, q, v=None, *, t=None, p=None, fix=(), values: dict |
         v[i] = value
     fix = [fix] if isinstance(fix, (str, int, np.integer)) else list(fix)
     phi_t = np.asarray(model.functions["phi_t"](t, q, p), dtype=float).reshape(-1)
-    A, b = jac(q), -phi_t
+    _, _, _, rows, rate = _element_rows(model, t)
+    A, b = np.vstack([jac(q), rows(q)]), np.concatenate([-phi_t, rate(q)])
     if written:                        # s · v = value
         A, b = np.vstack([A, S]), np.concatenate([b, x_w])
     return project(A, b, v, model.M, _free(model, fix + list(direct)))
@@ -161,38 +193,68 @@ def project_velocity(model, q, v=None, *, t=None, p=None, fix=(), values: dict |
 
 @dataclass
 class DofReport:
-    """Constraint rank and degrees of freedom at one configuration."""
+    """Constraint rank and degrees of freedom at one configuration.  With rolling elements,
+    ``heights`` (their holonomic rows) are in ``rank`` (of ``Φ̂_q``: ``dof`` is then the
+    configuration's) and ``rolling`` (their nonholonomic rows) in ``velocity_rank`` (of
+    ``Â = [Φ̂_q; B]``): ``velocity_dof = nq − rank Â``, the velocities free at ``q``."""
 
     nq: int
     nc: int
     rank: int
     dependent: list[str]                    # constraints depending on earlier ones, at q
     dropped: list[str] = field(default_factory=list)   # dropped as redundant when building
+    heights: list[str] = field(default_factory=list)   # rolling elements' height rows
+    rolling: list[str] = field(default_factory=list)   # rolling elements' nonholonomic rows
+    velocity_rank: int | None = None        # rank Â (None: no rolling rows, = rank)
 
     @property
     def dof(self) -> int:
         return self.nq - self.rank
 
     @property
+    def velocity_dof(self) -> int:
+        return self.nq - (self.rank if self.velocity_rank is None else self.velocity_rank)
+
+    @property
     def redundant(self) -> list[str]:
         return self.dropped + self.dependent
+
+    def rolling_summary(self) -> str:
+        """The line on the rolling rows ("" without rolling elements)."""
+        if not self.heights and not self.rolling:
+            return ""
+        return (f"rolling elements: {len(self.heights)} height row(s) in rank A and DOF, "
+                f"{len(self.rolling)} nonholonomic row(s) ({', '.join(self.rolling)}): "
+                f"rank Â = {self.velocity_rank}, velocity DOF = {self.velocity_dof}")
 
     def __str__(self) -> str:
         red = ", ".join(self.redundant) or "none"
         written = f" ({self.nc + len(self.dropped)} as written, {len(self.dropped)} dropped)" if self.dropped else ""
+        rolling = self.rolling_summary()
         return (f"nq = {self.nq} coordinates, nc = {self.nc} constraints{written}, "
-                f"rank A = {self.rank}, DOF = {self.dof}\nredundant constraints: {red}")
+                f"rank A = {self.rank}, DOF = {self.dof}\n" + (rolling + "\n" if rolling else "")
+                + f"redundant constraints: {red}")
 
 
 def dof_report(model, q=None, *, t=None, p=None) -> DofReport:
     """Rank of ``A(t, q)`` (default the initial state) and the constraints that are linearly
-    dependent there; those dropped at build time are listed as ``dropped``."""
+    dependent there; those dropped at build time are listed as ``dropped``.  With rolling
+    elements, ``rank`` counts their heights too and ``velocity_rank`` all their rows (see
+    :class:`DofReport`)."""
     q = model.q0 if q is None else np.asarray(q, float)
-    _, _, _, jac = _numeric(model, t, p)
-    A = jac(q)
-    rank = numerical_rank(A)
-    dep = [model.constraint_names[i] for i in dependent_rows(A)]
-    return DofReport(model.nq, model.nc, rank, dep, list(model.redundant) if model.redundant_dropped else [])
+    t, _, _, jac = _numeric(model, t, p)
+    names, n_heights, _, rows, _ = _element_rows(model, t)
+    extra = rows(q)
+    A_hat = np.vstack([jac(q), extra])
+    nh = model.nc + n_heights
+    rank = numerical_rank(A_hat[:nh])
+    labels = list(model.constraint_names) + names
+    dep = [labels[i] for i in dependent_rows(A_hat)]
+    dropped = list(model.redundant) if model.redundant_dropped else []
+    if not names:
+        return DofReport(model.nq, model.nc, rank, dep, dropped)
+    return DofReport(model.nq, model.nc, rank, dep, dropped, heights=names[:n_heights], rolling=names[n_heights:],
+                     velocity_rank=numerical_rank(A_hat))
 
 
 @dataclass
