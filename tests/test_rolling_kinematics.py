@@ -144,3 +144,17 @@ def test_projected_velocity_on_a_moving_plane():
         R, p = model.functions["poses"](x)
         ends.append(np.asarray(R)[:, :3] @ ell + np.asarray(p)[:, 0])
     assert (ends[0] - ends[1]) / (2 * eps) == pytest.approx([1.0, 0.0, 0.0], abs=1e-12)
+
+
+def test_reports_show_the_velocity_dof():
+    """``ncgen check``'s report, the notebook's model table and the model's repr tell a
+    rolling model's degrees of freedom from the model's own constraints'."""
+    from ncgen.assembly.check import check_system
+    from ncgen.viz.notebook import model_table
+    system = _disc()
+    text = check_system(system).render()
+    assert "rank A = 7, DOF = 5" in text and "velocity DOF = 3" in text
+    table = model_table(system.build())
+    assert "<th style='text-align:left'>velocity degrees of freedom</th><td style='text-align:left'>3</td>" in table
+    assert "<th style='text-align:left'>degrees of freedom</th><td style='text-align:left'>5</td>" in table
+    assert "rolling elements=1 (nc.dof_report)" in repr(system.build())

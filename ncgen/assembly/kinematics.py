@@ -223,7 +223,8 @@ class DofReport:
         """The line on the rolling rows ("" without rolling elements)."""
         if not self.heights and not self.rolling:
             return ""
-        return (f"rolling elements: {len(self.heights)} height row(s) in rank A and DOF, "
+        heights = f" ({', '.join(self.heights)})" if self.heights else ""
+        return (f"rolling elements: {len(self.heights)} height row(s){heights} counted in rank A and DOF, "
                 f"{len(self.rolling)} nonholonomic row(s) ({', '.join(self.rolling)}): "
                 f"rank Â = {self.velocity_rank}, velocity DOF = {self.velocity_dof}")
 

@@ -262,13 +262,15 @@ class Model:
     @property
     def rank(self) -> int:
         """Rank of A at the initial configuration, by the manifold's one rank rule
-        (:func:`ncgen.assembly.manifold.numerical_rank`)."""
+        (:func:`ncgen.assembly.manifold.numerical_rank`): the model's own constraints (with
+        rolling elements, ``nc.dof_report`` counts their heights and rolling rows too)."""
         from ncgen.assembly.manifold import numerical_rank
         return numerical_rank(self.A(self.q0))
 
     @property
     def dof(self) -> int:
-        """Degrees of freedom: nq − rank A(q0)."""
+        """Degrees of freedom of the model's own constraints: nq − rank A(q0) (with rolling
+        elements, ``nc.dof_report`` gives the configuration's and the velocities')."""
         return self.nq - self.rank
 
     @property
@@ -381,8 +383,9 @@ class Model:
         write_mjcf(self, path)
 
     def __repr__(self) -> str:
+        rolling = f", rolling elements={len(self.rolling)} (nc.dof_report)" if self.rolling else ""
         return (f"<Model {self.name!r}: dim={self.dim}, nq={self.nq}, nc={self.nc}, dof={self.dof}, "
-                f"nu={self.nu}, np={self.np}>")
+                f"nu={self.nu}, np={self.np}{rolling}>")
 
 
 #: Models of this process by content hash: those pickled here (weakly) and those rebuilt

@@ -25,9 +25,17 @@ def trajectory_cell(traj, height: int = CELL_HEIGHT) -> str | None:
 
 def model_table(model) -> str:
     """An HTML table of ``model``'s name and sizes (coordinates q, constraints, degrees of
-    freedom, inputs, parameters, members, joints, contacts)."""
+    freedom, inputs, parameters, members, joints, contacts; with rolling elements, the
+    degrees of freedom of :func:`ncgen.assembly.kinematics.dof_report`, their heights counted,
+    and the velocity degrees of freedom)."""
+    dof = [("degrees of freedom", model.dof)]
+    if model.rolling:
+        from ncgen.assembly.kinematics import dof_report
+        report = dof_report(model)
+        dof = [("degrees of freedom", report.dof), ("velocity degrees of freedom", report.velocity_dof),
+               ("rolling elements", ", ".join(e.name for e in model.rolling))]
     rows = [("name", model.name), ("dimension", f"{model.dim}D"),
-            ("coordinates q", model.nq), ("constraints", model.nc), ("degrees of freedom", model.dof),
+            ("coordinates q", model.nq), ("constraints", model.nc), *dof,
             ("inputs", ", ".join(model.input_names) or "none"),
             ("parameters", ", ".join(model.parameter_names) or "none"),
             ("members", ", ".join(model.member_names)),
