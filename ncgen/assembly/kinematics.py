@@ -28,6 +28,7 @@ Units: q in m, v in m/s, a in m/s², t in s.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -90,7 +91,7 @@ def _numeric(model, t, p):
     return t, p, phi, jac
 
 
-def _element_rows(model, t: float) -> tuple[list[str], int, callable, callable, callable]:
+def _element_rows(model, t: float) -> tuple[list[str], int, Callable, Callable, Callable]:
     """The rows that ``model``'s rolling elements add (none without them), from its
     :func:`~ncgen.assembly.nonholonomic.rolling_system`: ``(names, n_heights, height(q),
     rows(q), rate(q))`` — the names of the heights then of the nonholonomic rows, the heights'
