@@ -1,5 +1,6 @@
 """The command line follows one set of rules: -o/--plot/--animate optional and checked alike in
-every subcommand, helps that name every accepted model format, --floating-base for URDF."""
+every subcommand, helps that name every accepted model format, --floating-base for URDF,
+--mjcf-contacts for MJCF."""
 import argparse
 from pathlib import Path
 
@@ -53,6 +54,17 @@ def test_simulate_without_output_prints_the_summary_only(capsys, tmp_path, monke
 def test_floating_base_is_for_urdf_only(capsys):
     assert main(["check", str(EXAMPLES / "double_pendulum.toml"), "--floating-base"]) == 1
     assert "--floating-base applies to URDF robots" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("name", MODEL_COMMANDS + ("optimize", "sweep", "mpc"))
+def test_every_model_command_takes_mjcf_contacts(name):
+    text = subparsers()[name].format_help()
+    assert "--mjcf-contacts" in text and "MJCF only (.xml): the geoms collide" in " ".join(text.split())
+
+
+def test_mjcf_contacts_is_for_mjcf_only(capsys):
+    assert main(["check", str(EXAMPLES / "double_pendulum.toml"), "--mjcf-contacts"]) == 1
+    assert "--mjcf-contacts applies to MJCF models (.xml); " in capsys.readouterr().err
 
 
 def test_floating_base_urdf(capsys, tmp_path):

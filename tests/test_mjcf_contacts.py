@@ -116,3 +116,31 @@ def test_capsules_meeting_at_a_loop_point_are_named():
     assert [c.name for c in s.contacts] == ["crank_geom0__rocker_geom0"]
     model = s.build()
     assert np.all(np.array(model.functions["gap"](model.q0, model.p0)) > 0.1)
+
+
+BALL = """<mujoco><worldbody><geom name="floor" type="plane" size="2 2 0.1"/>
+  <body name="ball" pos="0 0 0.12"><freejoint/><geom name="ball" type="sphere" size="0.1" density="600"/></body>
+</worldbody></mujoco>"""
+
+
+def test_cli_mjcf_contacts_rest_the_ball_at_the_closed_form_depth(tmp_path, monkeypatch):
+    """``ncgen simulate ball.xml --mjcf-contacts``: a ball dropped 2 cm onto the floor comes to
+    rest where its contact carries its weight, ``k δ^e = m g`` (m = ρ 4/3 π r³; k, e the law's
+    stiffness and exponent), within 5e-6 m after 20 s; without the flag it falls through."""
+    from ncgen.cli import main
+    monkeypatch.setenv("NCGEN_CACHE_DIR", str(tmp_path / "cache"))
+    path = tmp_path / "ball.xml"
+    path.write_text(BALL)
+    law = nc.System.from_mjcf(path, contacts=True).contacts[0]
+    mass = 600 * 4 / 3 * np.pi * 0.1 ** 3
+    delta = (mass * 9.81 / law.stiffness) ** (1 / law.exponent)
+    z = {}
+    for flag in ([], ["--mjcf-contacts"]):
+        out = tmp_path / f"run{len(flag)}.npz"
+        assert main(["simulate", str(path), *flag, "--t-end", "20", "--dt", "0.5", "-o", str(out)]) in (0, None)
+        run = np.load(out)
+        z[bool(flag)] = run["q"][:, list(run["coordinate_names"]).index("ball.r_i.z")]
+    assert z[False][-1] < -100                                   # free fall: 0.12 − g t²/2
+    assert abs(z[True][-1] - (0.1 - delta)) < 5e-6, (z[True][-1], 0.1 - delta)
+    assert z[True].min() > 0.1 - 10 * delta                      # never through the floor
+

@@ -254,7 +254,7 @@ def test_least_recently_used_entries_go_beyond_the_size_limit(store, monkeypatch
     for path in paths:
         load_model(str(path))
     used = [model_cache._path(model_cache.file_key(str(p), params=[], contacts="smooth", share=True,
-                                                   floating_base=False)) for p in paths]
+                                                   floating_base=False, mjcf_contacts=False)) for p in paths]
     now = time.time()
     for entry, age in zip(used, (100, 50, 10)):
         os.utime(entry, (now - age, now - age))

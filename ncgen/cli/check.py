@@ -43,7 +43,7 @@ def check(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
 
     if not 0 < args.tolerance < float("inf"):
         parser.error(f"--tolerance: expected a positive finite number, got {args.tolerance}")
-    system = load_system(args.model, args.param, args.floating_base)
+    system = load_system(args.model, args.param, args.floating_base, args.mjcf_contacts)
     report = check_system(system, tolerance=args.tolerance, share=not args.no_share)
     sys.stdout.write(report.render(args.model))
     return 0 if report.ok else 1

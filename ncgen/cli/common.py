@@ -35,6 +35,17 @@ def model_arguments(p) -> None:
     p.add_argument("--floating-base", action="store_true",
                    help="URDF only: the robot's base is free (a 6-DOF free joint to the ground) instead of "
                         "fixed to it")
+    mjcf_contacts_argument(p)
+
+
+def mjcf_contacts_argument(p) -> None:
+    """--mjcf-contacts: an MJCF model's geoms as contact shapes (off by default, as in MuJoCo's
+    import without a collision model)."""
+    p.add_argument("--mjcf-contacts", action="store_true",
+                   help="MJCF only (.xml): the geoms collide — each pair MuJoCo's filter lets through (not one "
+                        "body, not parent and child, contype/conaffinity, <contact><exclude>) becomes a contact "
+                        "with ncgen's compliant law (docs/mjcf.md); without it an MJCF model has no contacts "
+                        "and a body falls through the floor")
 
 
 def file_arguments(p, output: tuple[str, ...] | None, what: str, plot: str | None = None,
@@ -138,11 +149,12 @@ def missing_model(origin: str, data: dict, command: str, alternative: str = "") 
 
 
 def load_model(path: str, params: list[str] | None = None, contacts: str = "smooth", share: bool = True,
-               floating_base: bool = False):
+               floating_base: bool = False, mjcf_contacts: bool = False):
     """Build the model in TOML file ``path``; ``params`` (``name=value`` strings, a vector as
     ``name=1,2,3``) replace default parameter values.  Raises NcgenError with a message
     naming the file (and the key path, for invalid models).  ``contacts``, ``share``: as in
-    ``System.build``; ``floating_base``: for URDF files (``--floating-base``).  A model built
+    ``System.build``; ``floating_base``: for URDF files (``--floating-base``); ``mjcf_contacts``:
+    for MJCF files (``--mjcf-contacts``).  A model built
     before from the same file and options is read from the store of built models
     (:mod:`ncgen.codegen.model_cache`; ``NCGEN_MODEL_CACHE=0`` turns it off)."""
     from ncgen.assembly.build import build_model
@@ -151,10 +163,10 @@ def load_model(path: str, params: list[str] | None = None, contacts: str = "smoo
     key = None
     if Path(path).is_file() and model_cache.enabled():
         key = model_cache.file_key(path, params=list(params or []), contacts=contacts, share=share,
-                                   floating_base=floating_base)
+                                   floating_base=floating_base, mjcf_contacts=mjcf_contacts)
 
     def build():
-        system = load_system(path, params, floating_base)
+        system = load_system(path, params, floating_base, mjcf_contacts)
         try:             # stored under the file's key (or, without one, under the system's by System.build)
             return (build_model(system, contacts=contacts, share=share) if key is not None
                     else system.build(contacts=contacts, share=share))
@@ -164,7 +176,8 @@ def load_model(path: str, params: list[str] | None = None, contacts: str = "smoo
     return model_cache.cached(key, build, complete=True)       # a later run derives nothing
 
 
-def load_system(path: str, params: list[str] | None = None, floating_base: bool = False):
+def load_system(path: str, params: list[str] | None = None, floating_base: bool = False,
+                mjcf_contacts: bool = False):
     """The :class:`~ncgen.model.system.System` in model file ``path`` — a URDF robot
     (``.urdf``: fixed base, joint torques as the input ``tau``), an MJCF model (``.xml``,
     :meth:`~ncgen.model.system.System.from_mjcf`) or TOML (anything else) — with
@@ -183,11 +196,15 @@ def load_system(path: str, params: list[str] | None = None, floating_base: bool 
         raise ModelError(f"--floating-base applies to URDF robots (.urdf); {path} is "
                          f"{'an MJCF' if suffix == '.xml' else 'a TOML'} model, whose "
                          "members say themselves how they are held")
+    if mjcf_contacts and suffix != ".xml":
+        raise ModelError(f"--mjcf-contacts applies to MJCF models (.xml); {path} is "
+                         + ("a URDF robot (its <collision> shapes: System.from_urdf(path, collisions=True) in "
+                            "Python)" if urdf else "a TOML model, whose [[contacts]] tables give its contacts"))
     try:
         if urdf:
             system = System.from_urdf(file, floating_base=floating_base)
         elif suffix == ".xml":
-            system = System.from_mjcf(file)
+            system = System.from_mjcf(file, contacts=mjcf_contacts)
         else:
             system = System.from_toml(file)
     except NcgenError as e:

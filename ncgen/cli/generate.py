@@ -63,7 +63,7 @@ def generate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from ncgen.codegen.reroll import REROLL_INSTRUCTIONS
 
     check_files(args, parser, None, directories=("output",))
-    model = load_model(args.model, args.param, floating_base=args.floating_base)
+    model = load_model(args.model, args.param, floating_base=args.floating_base, mjcf_contacts=args.mjcf_contacts)
     limit = {None: REROLL_INSTRUCTIONS, "none": None}.get(args.reroll, args.reroll)
     pkg = generate_package(model, args.output, cflags=args.cflags, compile=args.compile,
                            reroll_instructions=limit)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ncgen.cli.common import check_files, load_model, missing_model
+from ncgen.cli.common import check_files, load_model, missing_model, mjcf_contacts_argument
 from ncgen.cli.registry import subcommand
 
 
@@ -28,6 +28,7 @@ def _arguments(p: argparse.ArgumentParser) -> None:
                    help="an input pulse added by the demo's plant (repeatable), e.g. 1.0:1.1:8")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    help="replace a model parameter's default value (repeatable)")
+    mjcf_contacts_argument(p)
 
 
 @subcommand(
@@ -63,7 +64,7 @@ def mpc(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     model_file = model_path(data, origin)
     if model_file is None:
         raise missing_model(origin, data, "mpc")
-    model = load_model(str(model_file), args.param)
+    model = load_model(str(model_file), args.param, mjcf_contacts=args.mjcf_contacts)
     ocp, _ = problem_from_data(data, model, origin)
     x0 = None
     if args.x0:

@@ -11,7 +11,7 @@ import contextlib
 import sys
 from pathlib import Path
 
-from ncgen.cli.common import check_files, file_arguments, load_model, missing_model
+from ncgen.cli.common import check_files, file_arguments, load_model, missing_model, mjcf_contacts_argument
 from ncgen.cli.registry import subcommand
 
 
@@ -28,6 +28,7 @@ def _arguments(p: argparse.ArgumentParser) -> None:
                    help="replace a model parameter's default value (repeatable)")
     p.add_argument("--floating-base", action="store_true",
                    help="URDF models only: the robot's base is free instead of fixed to the ground")
+    mjcf_contacts_argument(p)
     p.add_argument("--contacts", default="smooth", choices=("smooth", "nonsmooth"),
                    help="contacts of the model: smooth (compliant law in the dynamics; default) or nonsmooth "
                         "(rigid impacts and Coulomb friction: the contact-implicit transcription, settings in "
@@ -66,7 +67,8 @@ def optimize(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         model_file = model_path(data, origin)
         if model_file is None:
             raise missing_model(origin, data, "optimize", ", or give the model first and the problem with --problem")
-    model = load_model(str(model_file), args.param, contacts=args.contacts, floating_base=args.floating_base)
+    model = load_model(str(model_file), args.param, contacts=args.contacts, floating_base=args.floating_base,
+                       mjcf_contacts=args.mjcf_contacts)
     ocp, options = problem_from_data(data, model, origin)
     kwargs = options.kwargs()
     kwargs["verbose"] = kwargs["verbose"] or args.verbose

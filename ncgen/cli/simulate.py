@@ -116,7 +116,8 @@ def simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from ncgen.runtime import simulate as run
 
     check_files(args, parser, OUTPUTS)
-    model = load_model(args.model, args.param, args.contacts, floating_base=args.floating_base)
+    model = load_model(args.model, args.param, args.contacts, floating_base=args.floating_base,
+                       mjcf_contacts=args.mjcf_contacts)
     try:
         stepper = {"substeps": args.substeps} if args.method in ("stepper", "joint", "rolling", "auto") else {}
         controller = _controller(args.controller) if args.controller else model.controller

@@ -67,7 +67,8 @@ def _inputs(model, items: list[str]):
 
 def _solve(args):
     from ncgen.analysis.statics import equilibrium
-    model = load_model(args.model, args.param, share=not args.no_share, floating_base=args.floating_base)
+    model = load_model(args.model, args.param, share=not args.no_share, floating_base=args.floating_base,
+                       mjcf_contacts=args.mjcf_contacts)
     return equilibrium(model, u=_inputs(model, args.input), method=args.method, tol=args.tol)
 
 

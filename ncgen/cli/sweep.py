@@ -7,14 +7,15 @@ import math
 import sys
 from pathlib import Path
 
-from ncgen.cli.common import check_files, load_model
+from ncgen.cli.common import check_files, load_model, mjcf_contacts_argument
 from ncgen.cli.registry import subcommand
 
 SAMPLERS = ("lhs", "sobol", "random")
 
 
 def _arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("model", metavar="MODEL.toml", help="model file: TOML, or a URDF robot (.urdf)")
+    p.add_argument("model", metavar="MODEL.toml", help="model file: TOML, a URDF robot (.urdf) or an MJCF model (.xml)")
+    mjcf_contacts_argument(p)
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUES", required=True,
                    help="a parameter to vary (repeatable). Grid: NAME=START:STOP:STEP (STOP included, "
                         "e.g. k=10:100:10) or NAME=V1,V2,... (e.g. m=0.5,1); every combination runs. "
@@ -76,7 +77,7 @@ def sweep(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         parser.error("--seed: only with --samples (a grid draws nothing at random)")
     params = _params(args, parser)
     check_store_path(Path(args.output))          # the extras and the user's files, before any work
-    model = load_model(args.model)
+    model = load_model(args.model, mjcf_contacts=args.mjcf_contacts)
     options = {}
     if args.substeps is not None:
         if args.method != "stepper":
