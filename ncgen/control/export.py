@@ -30,8 +30,8 @@ import casadi as ca
 import numpy as np
 
 from ncgen.control.discrete import default_abstol, step_functions
-from ncgen.control.mpc import (ALPHAS, ARMIJO, C_MIN, GAMMA, REGULARIZATION, STATIONARY, mpc_functions,
-                               residual_tolerance)
+from ncgen.control.mpc import REGULARIZATION, line_search_rules, mpc_functions, residual_tolerance
+from ncgen.control.mpc_context import c_double as _c, controller_context
 from ncgen.control.mpc_problem import mpc_problem
 from ncgen.control.initial import check_consistent
 from ncgen.errors import NcgenError
@@ -115,7 +115,7 @@ def export_mpc(ocp, path, *, name: str | None = None, iterations: int = 1, termi
     plant = plant_function(model, problem.h / substeps)
     pl = pulses(disturbance, nu)
     context = {
-        **controller_context(model, problem, fns, iterations), "substeps": substeps,
+        **controller_context(model, problem, fns, iterations, line_search_rules(model)), "substeps": substeps,
         "plant_sz_arg": plant.sz_arg(), "plant_sz_res": plant.sz_res(), "plant_sz_iw": plant.sz_iw(),
         "plant_sz_w": plant.sz_w(), "plant_tol": _c(residual_tolerance(model)),
         "params": ", ".join(_c(v) for v in problem.p) or "0",
@@ -130,29 +130,6 @@ def export_mpc(ocp, path, *, name: str | None = None, iterations: int = 1, termi
              ExtraSource("mpc/mpc.c.j2", f"{name}_mpc.c", context),
              ExtraSource("mpc/demo.c.j2", "demo.c", context, program=True)]
     return write_package(name, [*fns, plant], Path(path), extra_sources=extra, reroll_instructions=None)
-
-
-def controller_context(model, problem, fns, iterations: int | None) -> dict:
-    """The templates' context of the controller (``templates/c/mpc/mpc.{h,c}.j2``: sizes,
-    bounds, the line search's constants) for the SQP functions ``fns``
-    (:func:`~ncgen.control.mpc.mpc_functions`); ``iterations``: per control step, or ``None``
-    for the controller inside ``nc.MPC(..., loop="c")`` (``in_process``: iterations set at run
-    time, no plant)."""
-    nx, nu = 2 * model.nq, model.nu
-    u_rest = np.clip(np.zeros(nu), *problem.u_bounds)
-    return {
-        "model_name": model.name, "N": problem.N, "h": f"{problem.h:g}", "h_c": _c(problem.h),
-        "iterations": iterations or 0, "in_process": iterations is None, "nx": nx, "nu": nu, "np": model.np,
-        "sz_arg": max(f.sz_arg() for f in fns), "sz_res": max(f.sz_res() for f in fns),
-        "sz_iw": max(f.sz_iw() for f in fns), "sz_w": max(f.sz_w() for f in fns),
-        "nnz": {f"{f.name()}_{io}{i}": (f.nnz_in(i) if io == "in" else f.nnz_out(i))
-                for f in fns for io in ("in", "out") for i in range(f.n_in() if io == "in" else f.n_out())},
-        "u_rest": ", ".join(_c(v) for v in u_rest) or "0",
-        "u_lo": ", ".join(_bound(v) for v in problem.u_bounds[0]) or "0",
-        "u_hi": ", ".join(_bound(v) for v in problem.u_bounds[1]) or "0",
-        "alphas": len(ALPHAS), "armijo": _c(ARMIJO), "gamma": _c(GAMMA), "c_min": _c(C_MIN),
-        "stationary": _c(STATIONARY), "step_tol": _c(residual_tolerance(model)),
-    }
 
 
 def closed_loop(mpc, x0, t_end: float, *, substeps: int = 5, disturbance=(), warmup: int = 10, plant=None):
@@ -181,16 +158,3 @@ def closed_loop(mpc, x0, t_end: float, *, substeps: int = 5, disturbance=(), war
                     up += np.asarray(p.values)
             x = plant(x, up, mpc.problem.p, ts)
     return np.array(T), np.array(U), np.array(X)
-
-
-def _bound(v: float) -> str:
-    """A bound as a C expression: ``INFINITY``/``-INFINITY`` (math.h) for an absent one."""
-    return ("INFINITY" if v > 0 else "-INFINITY") if np.isinf(v) else _c(v)
-
-
-def _c(v: float) -> str:
-    """A double as a C literal that reads back exactly."""
-    v = float(v)
-    if not np.isfinite(v):
-        raise NcgenError(f"export_mpc: cannot write the non-finite number {v} into C")
-    return repr(v) if ("." in repr(v) or "e" in repr(v)) else repr(v) + ".0"

@@ -473,8 +473,8 @@ def controller_sources(model, problem, functions, name: str) -> list:
     """The exported package's controller (``templates/c/mpc``, rendered ``in_process``) as
     extra sources of the MPC's package ``name`` (:mod:`ncgen.control.mpc_c_loop`)."""
     from ncgen.codegen.package import ExtraSource
-    from ncgen.control.export import controller_context
-    context = controller_context(model, problem, functions, None)
+    from ncgen.control.mpc_context import controller_context
+    context = controller_context(model, problem, functions, None, line_search_rules(model))
     return [ExtraSource("runtime/ncgen_mpc.h", "ncgen_mpc.h", included=True),
             ExtraSource("mpc/mpc.h.j2", f"{name}_mpc.h", context),
             ExtraSource("mpc/mpc.c.j2", f"{name}_mpc.c", context)]
@@ -501,6 +501,14 @@ def stationary(J0: float, c0: float, model_decrease: float, qp_status: int) -> b
     twelve merit calls, 2–3 ms on the cart-pole).  The guess is then kept without trials
     (``mpc.step_lengths``: 0).  The same test as the exported package's C."""
     return qp_status == 0 and c0 <= C_MIN and -model_decrease <= STATIONARY * abs(J0)
+
+
+def line_search_rules(model) -> dict:
+    """The SQP line search's rules as the exported controller's C takes them: the number of
+    step lengths (:data:`ALPHAS`), :data:`ARMIJO`, :data:`GAMMA`, :data:`C_MIN`,
+    :data:`STATIONARY` and the step's residual tolerance (:func:`residual_tolerance`)."""
+    return {"alphas": len(ALPHAS), "armijo": ARMIJO, "gamma": GAMMA, "c_min": C_MIN, "stationary": STATIONARY,
+            "step_tol": residual_tolerance(model)}
 
 
 def residual_tolerance(model) -> float:
