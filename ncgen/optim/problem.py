@@ -29,7 +29,6 @@ import re
 
 import numpy as np
 
-from ncgen.blas_threads import one_blas_thread
 from ncgen.errors import NcgenError, OptimizationError
 from ncgen.model.rolling import refuse_rolling
 from ncgen.validation import as_numbers, as_scalar
@@ -419,7 +418,6 @@ class OptimalControl:
         return self
 
     # ------------------------------------------------------------------ solve
-    @one_blas_thread
     def solve(self, warm_start=None, *, max_iter: int = 1000, tol: float = 1e-8, verbose: bool = False,
               ipopt: dict | None = None, linear_solver: str = "mumps", diagnose: float | bool = True,
               coarse_start: bool = False):
