@@ -144,3 +144,36 @@ def test_cli_mjcf_contacts_rest_the_ball_at_the_closed_form_depth(tmp_path, monk
     assert abs(z[True][-1] - (0.1 - delta)) < 5e-6, (z[True][-1], 0.1 - delta)
     assert z[True].min() > 0.1 - 10 * delta                      # never through the floor
 
+
+def test_contact_points_share_their_nodes_without_changing_a_number():
+    """Elements at one point share its expressions (``Context.local_point``, one pair per
+    point: the Menagerie Panda's 400 box corners built in 5.5 s CPU instead of 7): the gaps,
+    contact Jacobians and smooth forces of the scene's every shape pair at random states are
+    bitwise those of each point contact written alone in a context of its own, as before."""
+    import casadi as ca
+
+    from ncgen.assembly.contact_kinematics import contact_terms, smooth_forces
+    from ncgen.model.context import Context
+    from ncgen.model.contacts import point_contacts
+    with pytest.warns(MjcfWarning):
+        s = nc.System.from_mjcf(SCENE, contacts=True)
+    model = s.build()
+    points = point_contacts(model.contact_elements)
+    assert len(points) == model.nk > 50
+    rng = np.random.default_rng(5)
+    f = model.functions
+    for _ in range(3):
+        q = model.q0 + 0.05 * rng.normal(size=model.nq)
+        v = rng.normal(size=model.nq)
+        g = np.array(f["gap"](q, model.p0)).ravel()
+        WN, WT = (np.array(x) for x in f["contact_jacobian"](q, model.p0))
+        fN = np.array(f["contact_force"](0.0, q, v, model.p0)[0]).ravel()
+        per = WT.shape[0] // len(points)
+        for k, point in enumerate(points):
+            ctx = Context(s, model.layout)
+            (alone,) = contact_terms(ctx, [point])
+            fn_alone = smooth_forces(ctx, [alone])[0]
+            one = ca.Function("one", [ctx.t, ctx.q, ctx.v, ctx.p], [alone.g, alone.WN, alone.WT, fn_alone])
+            gk, WNk, WTk, fNk = (np.array(x) for x in one(0.0, q, v, model.p0))
+            assert gk.item() == g[k] and fNk.item() == fN[k], point.name
+            assert np.array_equal(WNk, WN[k:k + 1]) and np.array_equal(WTk, WT[k * per:(k + 1) * per]), point.name

@@ -222,9 +222,10 @@ def save(key: str, model, said=(), complete: bool = False) -> bool:
         for name in (model.functions if complete else STORED_FUNCTIONS):
             if name in model.functions:
                 model.functions[name]
-        for name in model.functions.made():      # CasADi 3.8 writes some solves it cannot read back
-            casadi.Function.deserialize(model.functions[name].serialize())
-        payload = _pickle({"state": model_state(model), "warnings": list(said)})
+        texts = {name: model.functions[name].serialize() for name in model.functions.made()}
+        for text in texts.values():              # CasADi 3.8 writes some solves it cannot read back
+            casadi.Function.deserialize(text)
+        payload = _pickle({"state": model_state(model), "warnings": list(said)}, (model.functions, texts))
     except Exception:                      # noqa: BLE001 — e.g. a Python function inside a force
         return False
     if not _write(_path(key), key, payload):
@@ -318,13 +319,21 @@ def _mapping_proxy(items: dict) -> types.MappingProxyType:
 
 
 class _Pickler(pickle.Pickler):
-    """Pickles a model's state as it is: read-only views by their contents, and a
+    """Pickles a model's state as it is: read-only views by their contents, a
     :class:`~ncgen.model.system.System` by its attributes (its own pickling goes by description,
-    which would rebuild it through SymPy when read)."""
+    which would rebuild it through SymPy when read), and the function set of ``made``,
+    ``(functions, {name: text})``, with the serialisations of its made functions (a function
+    serialised for the read-back check is not serialised again)."""
+
+    def __init__(self, file, made: tuple | None, **kw):
+        super().__init__(file, **kw)
+        self.made = made
 
     def reducer_override(self, obj):
         from ncgen.model.model import ReadOnlyList
 
+        if self.made is not None and obj is self.made[0]:
+            return obj.reduced(self.made[1])
         if type(obj) is types.MappingProxyType:
             return _mapping_proxy, (dict(obj),)
         if type(obj) is ReadOnlyList:
@@ -340,12 +349,13 @@ def _is_system(obj) -> bool:
     return any(c.__name__ == "System" and c.__module__ == "ncgen.model.system" for c in type(obj).__mro__)
 
 
-def _pickle(stored: dict) -> bytes:
+def _pickle(stored: dict, made: tuple | None = None) -> bytes:
+    """``stored`` pickled (:class:`_Pickler`; ``made``: a function set and its serialisations)."""
     import casadi
 
     buffer = io.BytesIO()
     with casadi.global_pickle_context():
-        _Pickler(buffer, protocol=5).dump(stored)
+        _Pickler(buffer, made, protocol=5).dump(stored)
     return buffer.getvalue()
 
 

@@ -56,6 +56,7 @@ class Context:
         self.p = ca.vertcat(*(s for s, _ in system.parameters.values())) if system.parameters else ca.SX(0, 1)
         self._q_local: dict[str, ca.SX] = {}
         self._v_local: dict[str, ca.SX] = {}
+        self._points: dict[tuple, tuple[ca.SX, ca.SX]] = {}
         #: joint name -> f(drive expression) replacing it (assembly by continuation of the drives)
         self.drive_blend: dict = {}
         for name in layout.slots:                        # the layout's members: all, or those of a check
@@ -120,8 +121,14 @@ class Context:
         return self.local_point(member, self._local_point(member, world, what))
 
     def local_point(self, member, rbar):
-        C = ca.DM(member.rigid.C(member.rigid.affine(rbar)))
-        return ca.mtimes(C, self.q_of(member)), ca.mtimes(C, self.v_of(member))
+        """World position and velocity expressions of the point at local ``rbar`` of
+        ``member``; one pair per point, so that the elements at a point share its nodes."""
+        key = (member.name, np.asarray(rbar, float).tobytes())
+        found = self._points.get(key)
+        if found is None:
+            C = ca.DM(member.rigid.C(member.rigid.affine(rbar)))
+            found = self._points[key] = (ca.mtimes(C, self.q_of(member)), ca.mtimes(C, self.v_of(member)))
+        return found
 
     def direction(self, member, world_dir, what: str):
         """Expression of the body-fixed direction of ``member`` equal to ``world_dir``

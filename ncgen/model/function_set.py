@@ -74,10 +74,17 @@ class FunctionSet(Mapping):
     def __reduce__(self):
         """Pickled as makers: portable ones as they are, the others run first; a function
         already made travels as its CasADi serialisation, read back on its first access."""
+        return self.reduced()
+
+    def reduced(self, texts: Mapping[str, str] | None = None):
+        """:meth:`__reduce__`, taking the serialisations of ``texts`` (``{name: text}`` of
+        functions made, serialised already) instead of serialising those functions again."""
+        texts = texts or {}
         makers = {k: m for k, m in self._makers.items() if _portable(m) and k not in self._made}
         for name in self._names:
             if name not in makers:
-                makers[name] = functools.partial(deserialized, self[name].serialize())
+                text = texts.get(name)
+                makers[name] = functools.partial(deserialized, self[name].serialize() if text is None else text)
         return FunctionSet, ({k: makers[k] for k in self._names}, None, self._names)
 
 
