@@ -19,6 +19,7 @@
 
 #include "box_stack_kernels_0.h"
 #include "box_stack_kernels_1.h"
+#include "box_stack_kernels_2.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -235,7 +236,7 @@ extern const char box_stack_model_hash[];
 
 /* ---- box_stack_dae ----------------------------------------------------
  * the index-1 DAE in IDAS's form, ẋ = ode, 0 = alg, with x = [q; v], z = [a; λ], ode = [v; a] and alg = [M a + Aᵀλ − F; A a − γ + 2α Φ̇ + β² Φ] (sparse Jacobian)
- * In box_stack_kernels_0.c; 41 instructions.
+ * In box_stack_kernels_0.c; 1134 instructions.
  * Jacobian: jac_box_stack_dae() (CasADi's convention: the inputs, then the nominal outputs;
  * one output jac_<out>_<in> per pair), found by casadi.external for exact derivatives.
  * Inputs:
@@ -399,7 +400,7 @@ extern const char box_stack_model_hash[];
 
 /* ---- box_stack_step_solve ----------------------------------------------------
  * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
- * In box_stack_kernels_0.c; 13 instructions.
+ * In box_stack_kernels_0.c; 6270 instructions.
  * Inputs:
  *   arg[0] K: 54x54, nnz 198 (sparse) KKT matrix in the stepper's pattern. Default: zeros.
  *   arg[1] r: 54x1, nnz 54 right-hand side. Default: zeros.
@@ -490,7 +491,7 @@ extern const char box_stack_model_hash[];
 
 /* ---- box_stack_step_pair0_rows ----------------------------------------------------
  * Stepper: gaps and contact Jacobian rows of one contact element
- * In box_stack_kernels_0.c; 4397 instructions.
+ * In box_stack_kernels_1.c; 4397 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
@@ -507,7 +508,7 @@ extern const char box_stack_model_hash[];
 
 /* ---- box_stack_step_pair1_gap ----------------------------------------------------
  * Stepper: the gaps of one contact element
- * In box_stack_kernels_0.c; 2918 instructions.
+ * In box_stack_kernels_1.c; 2918 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 12x1, nnz 12 [m] local coordinates of its second member. Default: zeros.
@@ -603,7 +604,7 @@ extern const char box_stack_model_hash[];
 
 /* ---- box_stack_step_factor ----------------------------------------------------
  * Stepper: sparse Householder QR of the KKT matrix (for the contact Delassus matrix)
- * In box_stack_kernels_1.c; 67 instructions.
+ * In box_stack_kernels_2.c; 5586 instructions.
  * Inputs:
  *   arg[0] K: 54x54, nnz 198 (sparse) KKT matrix in the stepper's pattern. Default: zeros.
  * Outputs:
@@ -618,7 +619,7 @@ extern const char box_stack_model_hash[];
 
 /* ---- box_stack_step_backsolve ----------------------------------------------------
  * Stepper: x = K^-1 b from the factors of step_factor
- * In box_stack_kernels_1.c; 16 instructions.
+ * In box_stack_kernels_2.c; 1887 instructions.
  * Inputs:
  *   arg[0] V: 54x54, nnz 183 (sparse) Householder vectors. Default: zeros.
  *   arg[1] R: 54x54, nnz 288 (sparse) triangular factor. Default: zeros.

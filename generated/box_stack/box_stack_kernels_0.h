@@ -200,10 +200,10 @@ const casadi_int* box_stack_dae_sparsity_in(casadi_int i);
 const casadi_int* box_stack_dae_sparsity_out(casadi_int i);
 int box_stack_dae_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int box_stack_dae_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define box_stack_dae_SZ_ARG 13
-#define box_stack_dae_SZ_RES 4
+#define box_stack_dae_SZ_ARG 5
+#define box_stack_dae_SZ_RES 2
 #define box_stack_dae_SZ_IW 0
-#define box_stack_dae_SZ_W 762
+#define box_stack_dae_SZ_W 0
 int jac_box_stack_dae(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int jac_box_stack_dae_checkout(void);
 void jac_box_stack_dae_release(int mem);
@@ -218,10 +218,10 @@ const casadi_int* jac_box_stack_dae_sparsity_in(casadi_int i);
 const casadi_int* jac_box_stack_dae_sparsity_out(casadi_int i);
 int jac_box_stack_dae_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int jac_box_stack_dae_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define jac_box_stack_dae_SZ_ARG 17
-#define jac_box_stack_dae_SZ_RES 12
+#define jac_box_stack_dae_SZ_ARG 7
+#define jac_box_stack_dae_SZ_RES 10
 #define jac_box_stack_dae_SZ_IW 0
-#define jac_box_stack_dae_SZ_W 1547
+#define jac_box_stack_dae_SZ_W 0
 int box_stack_accel(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int box_stack_accel_checkout(void);
 void box_stack_accel_release(int mem);
@@ -362,10 +362,10 @@ const casadi_int* box_stack_step_solve_sparsity_in(casadi_int i);
 const casadi_int* box_stack_step_solve_sparsity_out(casadi_int i);
 int box_stack_step_solve_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int box_stack_step_solve_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define box_stack_step_solve_SZ_ARG 6
-#define box_stack_step_solve_SZ_RES 3
+#define box_stack_step_solve_SZ_ARG 2
+#define box_stack_step_solve_SZ_RES 1
 #define box_stack_step_solve_SZ_IW 0
-#define box_stack_step_solve_SZ_W 801
+#define box_stack_step_solve_SZ_W 0
 int box_stack_step_project(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int box_stack_step_project_checkout(void);
 void box_stack_step_project_release(int mem);
@@ -438,42 +438,6 @@ int box_stack_step_pair0_gap_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, 
 #define box_stack_step_pair0_gap_SZ_RES 1
 #define box_stack_step_pair0_gap_SZ_IW 0
 #define box_stack_step_pair0_gap_SZ_W 0
-int box_stack_step_pair0_rows(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
-int box_stack_step_pair0_rows_checkout(void);
-void box_stack_step_pair0_rows_release(int mem);
-void box_stack_step_pair0_rows_incref(void);
-void box_stack_step_pair0_rows_decref(void);
-casadi_int box_stack_step_pair0_rows_n_in(void);
-casadi_int box_stack_step_pair0_rows_n_out(void);
-casadi_real box_stack_step_pair0_rows_default_in(casadi_int i);
-const char* box_stack_step_pair0_rows_name_in(casadi_int i);
-const char* box_stack_step_pair0_rows_name_out(casadi_int i);
-const casadi_int* box_stack_step_pair0_rows_sparsity_in(casadi_int i);
-const casadi_int* box_stack_step_pair0_rows_sparsity_out(casadi_int i);
-int box_stack_step_pair0_rows_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-int box_stack_step_pair0_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define box_stack_step_pair0_rows_SZ_ARG 3
-#define box_stack_step_pair0_rows_SZ_RES 2
-#define box_stack_step_pair0_rows_SZ_IW 0
-#define box_stack_step_pair0_rows_SZ_W 0
-int box_stack_step_pair1_gap(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
-int box_stack_step_pair1_gap_checkout(void);
-void box_stack_step_pair1_gap_release(int mem);
-void box_stack_step_pair1_gap_incref(void);
-void box_stack_step_pair1_gap_decref(void);
-casadi_int box_stack_step_pair1_gap_n_in(void);
-casadi_int box_stack_step_pair1_gap_n_out(void);
-casadi_real box_stack_step_pair1_gap_default_in(casadi_int i);
-const char* box_stack_step_pair1_gap_name_in(casadi_int i);
-const char* box_stack_step_pair1_gap_name_out(casadi_int i);
-const casadi_int* box_stack_step_pair1_gap_sparsity_in(casadi_int i);
-const casadi_int* box_stack_step_pair1_gap_sparsity_out(casadi_int i);
-int box_stack_step_pair1_gap_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-int box_stack_step_pair1_gap_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define box_stack_step_pair1_gap_SZ_ARG 3
-#define box_stack_step_pair1_gap_SZ_RES 1
-#define box_stack_step_pair1_gap_SZ_IW 0
-#define box_stack_step_pair1_gap_SZ_W 0
 void box_stack_kernels_0_casadi_version(int* major, int* minor, int* patch);
 int box_stack_kernels_0_casadi_int_size(void);
 int box_stack_kernels_0_casadi_real_size(void);
