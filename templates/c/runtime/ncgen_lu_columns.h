@@ -38,12 +38,17 @@ static int ncgen_lu_columns(int n, int m, const int *l_colind, const int *l_row,
     if (dinv[j] == 0 || !isfinite(dinv[j])) return 1;
     dinv[j] = 1 / dinv[j];
   }
-  for (i = 0; i < n; ++i) xs[i] = 0;
+  for (i = 0; i < n; ++i) xs[i] = 0;            /* Σ signs[k] y_k first, Pc applied at the end */
   for (k = 0; k < m; ++k) {
     double *x = X + (size_t)k * nr;
+    int first = n;                              /* y's first nonzero: L leaves y above it alone */
     for (i = 0; i < n; ++i) y[i] = 0;
-    for (e = b_colind[k]; e < b_colind[k + 1]; ++e) y[perm_r[b_row[e]]] += b_x[e];
-    for (j = 0; j < n; ++j) {                   /* L y = Pr b */
+    for (e = b_colind[k]; e < b_colind[k + 1]; ++e) {
+      i = perm_r[b_row[e]];
+      y[i] += b_x[e];
+      if (i < first) first = i;
+    }
+    for (j = first; j < n; ++j) {               /* L y = Pr b */
       double yj = y[j];
       if (yj == 0) continue;
       for (e = l_colind[j]; e < l_colind[j + 1]; ++e)
@@ -57,8 +62,10 @@ static int ncgen_lu_columns(int n, int m, const int *l_colind, const int *l_row,
         if (u_row[e] < j) y[u_row[e]] -= u_x[e] * yj;
     }
     for (i = 0; i < nr; ++i) x[i] = y[perm_c[rows[i]]];
-    for (i = 0; i < n; ++i) xs[i] += signs[k] * y[perm_c[i]];
+    for (i = 0; i < n; ++i) xs[i] += signs[k] * y[i];
   }
+  for (i = 0; i < n; ++i) y[i] = xs[i];
+  for (i = 0; i < n; ++i) xs[i] = y[perm_c[i]];
   return 0;
 }
 
