@@ -50,7 +50,7 @@ static void matrix(const double *ux, double *A) {
 }
 
 /* B (dense, column-major N x M, a zero in each column) as compressed sparse columns, its entry
- * (1, 1) split in two summed entries. */
+ * in row 2 of column 1 split in two summed entries. */
 static void sparse_columns(const double *B, int *colind, int *row, double *x) {
   int i, k, e = 0;
   for (k = 0; k < M; ++k) {
@@ -58,8 +58,8 @@ static void sparse_columns(const double *B, int *colind, int *row, double *x) {
     for (i = 0; i < N; ++i)
       if (B[k * N + i] != 0) {
         row[e] = i;
-        x[e++] = (k == 1 && i == 1) ? 0.25 * B[k * N + i] : B[k * N + i];
-        if (k == 1 && i == 1) row[e] = i, x[e++] = 0.75 * B[k * N + i];
+        x[e++] = (k == 1 && i == 2) ? 0.25 * B[k * N + i] : B[k * N + i];
+        if (k == 1 && i == 2) row[e] = i, x[e++] = 0.75 * B[k * N + i];
       }
   }
   colind[M] = e;
@@ -73,7 +73,8 @@ static void test_solve(void) {
   int i, j, k;
   matrix(u_x, A);
   for (i = 0; i < N; ++i)
-    for (k = 0; k < M; ++k) B[k * N + i] = (k == 0) ? (i == 2) : (i == k) ? 0 : (double)(i + 1) * (k == 1 ? 1.5 : -0.3) + k;
+    for (k = 0; k < M; ++k)
+      B[k * N + i] = (k == 0) ? (i == 2) : (i == k) ? 0 : (double)(i + 1) * (k == 1 ? 1.5 : -0.3) + k;
   sparse_columns(B, b_colind, b_row, b_x);
   CHECK(ncgen_lu_columns(N, M, l_colind, l_row, l_x, u_colind, u_row, u_x, perm_r, perm_c, b_colind, b_row, b_x,
                          N, all, signs, y, X, xs) == 0, "a regular matrix is solved");
