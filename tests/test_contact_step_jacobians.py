@@ -197,24 +197,52 @@ def assert_equals_all_contacts(reference, st, x, u, tol=1e-8):
     return s
 
 
-@pytest.mark.slow       # the all-contacts equations of 210 contacts: built for minutes, run on CasADi's VM
-def test_heap_of_twenty_active_equals_all_contacts():
-    """The benchmark's settled 20-sphere heap (benchmarks/contact_step_jacobians.py): 20 of 210
-    contacts closed; the active-contact step equals the all-contacts one (1e-8).  Not against
-    central differences: touching pairs keep their free-step gap at 0 (the step is flagged at a
-    switch), and a perturbation of 1e-9 m closes them."""
+@pytest.fixture(scope="module")
+def heap20():
+    """The 20-sphere heap of benchmarks/contact_step_jacobians.py (210 contacts), its step
+    function at 1 ms and its all-contacts reference."""
     import sys
     from pathlib import Path
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
     from contact import heap
     model = heap(20, rotating=False)
-    h = 1e-3
+    return model, nc.step_function(model, 1e-3), all_contacts(model, 1e-3)
+
+
+@pytest.mark.slow       # the heap's packages: compiled for minutes
+def test_heap_of_twenty_active_equals_all_contacts(heap20):
+    """The benchmark's settled 20-sphere heap (benchmarks/contact_step_jacobians.py): 20 of 210
+    contacts closed; the active-contact step equals the all-contacts one (1e-8).  Not against
+    central differences: touching pairs keep their free-step gap at 0 (the step is flagged at a
+    switch), and a perturbation of 1e-9 m closes them."""
+    model, st, reference = heap20
     traj = nc.simulate(model, 0.5, 0.5, method="stepper", substeps=500)
     x = np.concatenate([traj.q[-1], traj.v[-1]])
-    st = nc.step_function(model, h)
-    s = assert_equals_all_contacts(all_contacts(model, h), st, x, np.zeros(0))
+    s = assert_equals_all_contacts(reference, st, x, np.zeros(0))
     assert s.modes.count("sticking") == 20 and s.modes.count("separated") == 190
     assert s.at_switch and any(why == "the free step ends with the gap at 0" for _, why in s.switches)
+
+
+@pytest.mark.slow       # the heap's packages: compiled for minutes
+@pytest.mark.parametrize("landed", ["sticking", "sliding"])
+def test_heap_of_twenty_landing_against_central_differences(heap20, landed):
+    """The heap 64 ms after its release (its own simulator): four spheres landed on the floor,
+    sixteen in flight, no contact at a switch; as simulated (the landed ones sticking), and with
+    the landed ones given 0.2 m/s along the floor (sliding).  The Jacobian of the active-contact
+    equations (the default) equals central differences (1e-6) and the all-contacts equations'
+    (1e-12)."""
+    model, st, reference = heap20
+    traj = nc.simulate(model, 0.064, 0.064, method="stepper", substeps=64)
+    x, nq = np.concatenate([traj.q[-1], traj.v[-1]]), model.nq
+    on_floor = [k for k in range(model.nk) if st.step(x, np.zeros(0)).modes[k] != "separated"]
+    assert on_floor == [0, 1, 2, 3]            # the floor contacts of the first four spheres
+    if landed == "sliding":
+        for k in on_floor:
+            x[nq + 3 * k:nq + 3 * k + 2] = 0.2 * np.cos(k), 0.2 * np.sin(k)
+    s = assert_matches_differences(st, x, np.zeros(0))
+    assert [s.modes[k] for k in on_floor] == [landed] * 4 and s.modes.count("separated") == model.nk - 4
+    assert not s.at_switch and not s.impact and not s.push_out.any()
+    assert_equals_all_contacts(reference, st, x, np.zeros(0), tol=1e-12)
 
 
 def test_ilqr_pushes_the_block_to_its_target(block):

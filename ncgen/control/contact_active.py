@@ -19,7 +19,9 @@ the equal spheres of a heap are two kinds, sphere–floor and sphere–sphere), 
 their sparse Jacobian in its local arguments) and an *info kernel* mapped over every contact of
 the kind (the velocities and gaps that classify the modes).  A call evaluates the smooth
 part once and the law kernel per active contact, and assembles ``R_Z`` and ``R_y`` as one
-sparse matrix; the state ``x⁺ = [q + h w; v⁺]`` is read from ``z``.
+sparse matrix (``R_y`` in compressed sparse columns: a few nonzeros a column); the state
+``x⁺ = [q + h w; v⁺]`` is read from ``z``, and of ``∂Z/∂y`` only its rows (:attr:`state_rows`)
+are solved for.
 """
 from __future__ import annotations
 
@@ -58,7 +60,9 @@ SIGNATURES = {
     "lu_columns": Signature("int", (("int", "n"), ("int", "m"), *(("const int *", f) for f in ("l_colind", "l_row")),
                                     ("const double *", "l_x"), *(("const int *", f) for f in ("u_colind", "u_row")),
                                     ("const double *", "u_x"), ("const int *", "perm_r"), ("const int *", "perm_c"),
-                                    ("const double *", "B"), ("double *", "y"), ("double *", "X"))),
+                                    ("const int *", "b_colind"), ("const int *", "b_row"), ("const double *", "b_x"),
+                                    ("int", "nr"), ("const int *", "rows"), ("const double *", "signs"),
+                                    ("double *", "y"), ("double *", "X"), ("double *", "xs"))),
 }
 
 
@@ -186,8 +190,9 @@ class ActiveContactEquations:
         self._scale = residual_scale(model)
         self._e_mu = np.array([[c["restitution"], c["mu"]] for c in model.contacts]).reshape(-1, 2)
         self._active_key = None
-        self._columns_buffers = (np.empty((0, 0)),) * 2
-        self._Ry = np.empty((0, 0))
+        self._columns_buffers = (np.empty((0, 0)), np.empty(0), np.empty(0))
+        #: The rows of ``Z`` that ``x⁺`` reads (``w``, then ``v⁺``): :meth:`jacobian`'s.
+        self.state_rows = np.concatenate([3 * self.n1 + np.arange(nq), 4 * self.n1 + np.arange(nq)])
 
     # ----------------------------------------------------------------- building
     def _smooth_function(self) -> ca.Function:
@@ -234,8 +239,8 @@ class ActiveContactEquations:
         ``active``, their kernel arguments' places in the gather vector
         ``[q, v, w_f, v_f, y_v, w, v⁺, P_a, p]`` and their rows' places in ``R`` (one row of
         each per contact); the rows and columns in ``[Z; y]`` of every nonzero of ``[R_Z R_y]``
-        (the smooth part's, then each kind's contacts' ``J``), summed into ``R_Z`` (CSC) and
-        ``R_y`` (column-major)."""
+        (the smooth part's, then each kind's contacts' ``J``), summed into ``R_Z`` and ``R_y``
+        (both CSC)."""
         key = tuple(active)
         if key == self._active_key:
             return self._tables
@@ -269,9 +274,10 @@ class ActiveContactEquations:
         in_Z = cols < nZ
         keys, where = np.unique(cols[in_Z] * nZ + rows[in_Z], return_inverse=True)
         indptr = np.searchsorted(keys // nZ, np.arange(nZ + 1))
-        flat_y = (cols[~in_Z] - nZ) * nZ + rows[~in_Z]           # column-major: the many-column solve's
+        keys_y, where_y = np.unique((cols[~in_Z] - nZ) * nZ + rows[~in_Z], return_inverse=True)
+        indptr_y = np.searchsorted(keys_y // nZ, np.arange(self.ny + 1))
         self._tables = (groups, nZ, np.flatnonzero(in_Z), np.flatnonzero(~in_Z), where, len(keys), keys % nZ, indptr,
-                        *np.unique(flat_y, return_inverse=True))
+                        where_y, len(keys_y), keys_y % nZ, indptr_y)
         self._active_key = key
         return self._tables
 
@@ -340,20 +346,16 @@ class ActiveContactEquations:
             Z[s] -= _finite(D[s])
 
     def system(self, Z, x, u, p, t, sel):
-        """``(R, R_Z, R_y)`` at ``Z`` (``R_Z`` sparse CSC, ``R_y`` dense, column-major: a buffer
-        of this object, overwritten by the next call, as :meth:`solve_columns`'s result)."""
+        """``(R, R_Z, R_y)`` at ``Z`` (``R_Z`` and ``R_y`` sparse CSC)."""
         active = self.active(sel)
-        groups, nZ, in_Z, in_y, where, nnz, indices, indptr, flat_y, into_y = self._gather(active)
+        groups, nZ, in_Z, in_y, where, nnz, indices, indptr, where_y, nnz_y, indices_y, indptr_y = self._gather(active)
         R, data = self._laws(Z, x, p, sel, active, groups, nZ)
         R_s, J_Z, J_y = self._smooth(Z[:self.nZs], x, u, p, [t])
         R[:self.nZs] += R_s
         data = np.concatenate([J_Z, J_y] + data)
         R_Z = sp.csc_matrix((np.bincount(where, data[in_Z], nnz), indices, indptr), shape=(nZ, nZ))
-        if self._Ry.shape != (self.ny, nZ):
-            self._Ry = np.empty((self.ny, nZ))
-        self._Ry.fill(0.0)
-        self._Ry.flat[flat_y] = np.bincount(into_y, data[in_y], len(flat_y))
-        return R, R_Z, self._Ry.T
+        R_y = sp.csc_matrix((np.bincount(where_y, data[in_y], nnz_y), indices_y, indptr_y), shape=(nZ, self.ny))
+        return R, R_Z, R_y
 
     def _laws(self, Z, x, p, sel, active, groups, nZ):
         """``(R, J)``: the law kernels' rows summed into a residual of length ``nZ`` and their
@@ -373,23 +375,26 @@ class ActiveContactEquations:
                 data.append(J.ravel())
         return R, data
 
-    def solve_columns(self, lu, B: np.ndarray) -> np.ndarray | None:
-        """``A⁻¹ B`` for the many sparse columns of ``B`` from SuperLU's factors ``lu`` of ``A``
-        (``ncgen_lu_columns.h``, compiled with the kernels: each column through the factors'
-        columns it reaches; the heap's 120 columns 9× fewer operations than SuperLU's dense
-        solve); None where ``U`` has a zero pivot.  The result is a buffer of this object,
-        overwritten by the next call (fresh arrays of this size cost their page faults)."""
+    def solve_columns(self, lu, B, rows: np.ndarray, signs: np.ndarray):
+        """``((A⁻¹ B)[rows], A⁻¹ B signs)`` for the many sparse columns of ``B`` (CSC) from
+        SuperLU's factors ``lu`` of ``A`` (``ncgen_lu_columns.h``, compiled with the kernels:
+        each column through the factors' columns it reaches; the heap's 120 columns 9× fewer
+        operations than SuperLU's dense solve; of each solution only the rows asked for
+        written); None where ``U`` has a zero pivot.  The rows are a buffer of this object,
+        overwritten by the next call (fresh arrays cost their page faults)."""
         L, U = lu.L, lu.U
         n, m = B.shape
-        B = np.asfortranarray(B, float)
-        if self._columns_buffers[0].shape != (n, m):
-            self._columns_buffers = (np.empty((n, m), order="F"), np.empty(2 * n))
-        X, y = self._columns_buffers
+        X, y, xs = self._columns_buffers
+        if X.shape != (len(rows), m) or len(xs) != n:
+            X, y, xs = self._columns_buffers = (np.empty((len(rows), m), order="F"), np.empty(2 * n), np.empty(n))
         arrays = [np.ascontiguousarray(a, np.intc) if a.dtype.kind == "i" else np.ascontiguousarray(a, float)
-                  for a in (L.indptr, L.indices, L.data, U.indptr, U.indices, U.data, lu.perm_r, lu.perm_c)]
-        if self._lu_columns(n, m, *(a.ctypes.data for a in arrays), B.ctypes.data, y.ctypes.data, X.ctypes.data):
+                  for a in (L.indptr, L.indices, L.data, U.indptr, U.indices, U.data, lu.perm_r, lu.perm_c,
+                            B.indptr, B.indices, B.data)]
+        rows, signs = np.ascontiguousarray(rows, np.intc), np.ascontiguousarray(signs, float)
+        if self._lu_columns(n, m, *(a.ctypes.data for a in arrays), len(rows), rows.ctypes.data, signs.ctypes.data,
+                            y.ctypes.data, X.ctypes.data, xs.ctypes.data):
             return None
-        return X
+        return X, xs
 
     def _selectors(self, active, sel) -> np.ndarray:
         """The law kernels' selectors ``s`` (:data:`NS`) of the active contacts."""
@@ -432,9 +437,10 @@ class ActiveContactEquations:
         return np.concatenate([x[:nq] + self.h * Z[3 * n1:3 * n1 + nq], Z[4 * n1:4 * n1 + nq]])
 
     def jacobian(self, dZ, sign: float = 1.0) -> np.ndarray:
-        """``∂x⁺/∂y`` from ``∂Z/∂y = sign dZ``."""
-        nq, n1 = self.nq, self.n1
-        J = np.vstack([(sign * self.h) * dZ[3 * n1:3 * n1 + nq], sign * dZ[4 * n1:4 * n1 + nq]])
+        """``∂x⁺/∂y`` from the rows :attr:`state_rows` of ``∂Z/∂y = sign dZ``."""
+        nq = self.nq
+        J = sign * dZ
+        J[:nq] *= self.h
         J[np.arange(nq), np.arange(nq)] += 1.0
         return J
 

@@ -220,7 +220,7 @@ class ContactStepFunction:
             raise StepDidNotConverge(f"{where}: the step's equations with the active set of its contact solve "
                                      f"end {difference:.3g} from the stepper's state (a push-out of a penetrating "
                                      "contact, or a contact solve that did not converge): no derivatives there")
-        J = eq.jacobian(lu.solve(Ry), -1.0)
+        J = eq.jacobian(lu.solve_rows(Ry, eq.state_rows), -1.0)
         nx, nu = self.nx, self.nu
         P_end = eq.impulses(Z, sel)
         self.last = ContactStep(x1, J[:, :nx], J[:, nx:nx + nu], J[:, nx + nu:], self._mode_names(sel),
@@ -407,6 +407,8 @@ class AllContactEquations:
         self._rows = contact_function(model)
         self._L = layout(model)
         self._info = None
+        #: The rows of ``Z`` holding ``x⁺``: :meth:`jacobian`'s.
+        self.state_rows = np.concatenate([np.arange(self._L["vm"].stop)[s] for s in self._L["x1"]])
 
     def velocities(self, x, x1, p):
         """The contact velocities ``(W(q⁺) v⁺, W(q) v)`` of every contact."""
@@ -443,8 +445,8 @@ class AllContactEquations:
         return np.concatenate([Z[L["x1"][0]], Z[L["x1"][1]]])
 
     def jacobian(self, dZ, sign: float = 1.0) -> np.ndarray:
-        L = self._L
-        return sign * np.vstack([dZ[L["x1"][0]], dZ[L["x1"][1]]])
+        """``∂x⁺/∂y`` from the rows :attr:`state_rows` of ``∂Z/∂y = sign dZ``."""
+        return sign * dZ
 
     def impulses(self, Z, sel) -> np.ndarray:
         return Z[self._L["P"]].copy()
@@ -494,11 +496,12 @@ class _Factor:
     the rest by SuperLU's sparse LU (the heap: 690 of 1320 unknowns, 1 ms instead of 100 ms),
     its many columns by sparse triangular solves (:func:`_solve_columns`).  Without (the
     active-contact equations, which have no such rows to speak of) the whole matrix by
-    SuperLU with :data:`FAST_LU`, its many columns by ``columns(lu, B)`` where given (the
-    active-contact equations' compiled solve of sparse columns,
-    :meth:`~ncgen.control.contact_active.ActiveContactEquations.solve_columns`; None: a
-    zero pivot) else by SuperLU's own solve (the heap's 480 unknowns: 120 columns in 1 ms,
-    where the triangular solves take 3 ms)."""
+    SuperLU with :data:`FAST_LU`, its many columns by SuperLU's own solve (the heap's 480
+    unknowns: 120 columns in 1 ms, where the triangular solves take 3 ms) or, for sparse
+    columns of which only some rows are wanted (:meth:`solve_rows`), by ``columns(lu, B,
+    rows, signs)`` where given (the active-contact equations' compiled solve,
+    :meth:`~ncgen.control.contact_active.ActiveContactEquations.solve_columns`; None: a zero
+    pivot)."""
 
     def __init__(self, A, split: bool = True, columns=None):
         self.split, self.columns = split, columns
@@ -547,6 +550,22 @@ class _Factor:
         X[self.keep] = X_k
         return X
 
+    def solve_rows(self, B, rows: np.ndarray) -> np.ndarray:
+        """``(R_Z⁻¹ B)[rows]`` for the columns of ``B`` (dense, or sparse CSC: then by
+        ``columns`` where given, its solutions' combination with random signs checked as
+        :meth:`_lu_solve` checks, and else as :meth:`solve` does)."""
+        if sp.issparse(B):
+            if self.columns is not None and not self.split and self.lu is not None:
+                signs = _signs(B.shape[1])
+                solved = self.columns(self.lu, B, rows, signs)
+                if solved is not None:
+                    X, xs = solved
+                    scale = (1 + np.max(np.abs(B.data), initial=0.0)) * B.shape[1]
+                    if np.all(np.isfinite(X)) and _residual_ok(self.A_kk, xs, B @ signs, scale):
+                        return X
+            B = B.toarray()
+        return self.solve(B)[rows]
+
     def _lu_solve(self, B_k):
         """``A_kk⁻¹ B_k`` from the LU factors, or None (and no factors kept) where there are none
         or the solve fails its residual test (1e-9 relative; many columns: their combination
@@ -554,15 +573,17 @@ class _Factor:
         if self.lu is None:
             return None
         X_k = (self.lu.solve(B_k) if B_k.ndim == 1 else _solve_columns(self.lu, B_k) if self.split else
-               self.columns(self.lu, B_k) if self.columns is not None else self.lu.solve(np.asfortranarray(B_k)))
-        if X_k is None:
-            self.lu = None
-            return None
+               self.lu.solve(np.asfortranarray(B_k)))
         X, B, scale = X_k, B_k, 1 + max(B_k.max(initial=0.0), -B_k.min(initial=0.0))   # no temporaries
         if B.ndim == 2:       # a fifth of the cost of every column's residual; a NaN or inf stays in the sum
             signs = _signs(B.shape[1])                         # einsum: no BLAS threads (module docstring)
             X, B, scale = np.einsum("ij,j->i", X, signs), np.einsum("ij,j->i", B, signs), scale * B.shape[1]
-        if not (np.all(np.isfinite(X)) and np.max(np.abs(self.A_kk @ X - B), initial=0.0) <= 1e-9 * scale):
+        if not _residual_ok(self.A_kk, X, B, scale):
             self.lu = None
             return None
         return X_k
+
+
+def _residual_ok(A, X, B, scale: float) -> bool:
+    """``X`` finite and ``|A X − B|∞ ≤ 1e-9 scale`` (a NaN or inf fails)."""
+    return bool(np.all(np.isfinite(X)) and np.max(np.abs(A @ X - B), initial=0.0) <= 1e-9 * scale)
