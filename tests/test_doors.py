@@ -27,11 +27,14 @@ URDF = """<robot name="door_tree">
   <link name="c"><inertial><mass value="0.5"/><origin xyz="0.05 0.01 0"/>
     <inertia ixx="0.002" iyy="0.003" izz="0.0025" ixy="0" ixz="0" iyz="0.0001"/></inertial></link>
   <joint name="ja" type="revolute"><parent link="base"/><child link="a"/>
-    <origin xyz="0.1 0 0.05" rpy="0.2 0 0.1"/><axis xyz="0 1 0"/><limit effort="50" velocity="3" lower="-3" upper="3"/></joint>
+    <origin xyz="0.1 0 0.05" rpy="0.2 0 0.1"/>
+    <axis xyz="0 1 0"/><limit effort="50" velocity="3" lower="-3" upper="3"/></joint>
   <joint name="jb" type="revolute"><parent link="a"/><child link="b"/>
-    <origin xyz="0 0 0.3" rpy="0 0.3 0"/><axis xyz="1 0 1"/><limit effort="50" velocity="3" lower="-3" upper="3"/></joint>
+    <origin xyz="0 0 0.3" rpy="0 0.3 0"/>
+    <axis xyz="1 0 1"/><limit effort="50" velocity="3" lower="-3" upper="3"/></joint>
   <joint name="jc" type="prismatic"><parent link="base"/><child link="c"/>
-    <origin xyz="-0.1 0.05 0" rpy="0 0 0.4"/><axis xyz="0 0 1"/><limit effort="50" velocity="3" lower="-1" upper="1"/></joint>
+    <origin xyz="-0.1 0.05 0" rpy="0 0 0.4"/>
+    <axis xyz="0 0 1"/><limit effort="50" velocity="3" lower="-1" upper="1"/></joint>
 </robot>"""
 
 TOL = 1e-10
@@ -65,6 +68,10 @@ CALLS = {
 }
 
 
+def close(got, ref):
+    np.testing.assert_allclose(got, ref, rtol=0, atol=TOL * max(1.0, float(np.abs(ref).max())))
+
+
 def test_every_door_equals_pinocchio(tree):
     pin = pytest.importorskip("pinocchio")
     from pinocchio_robots import JointMap
@@ -82,7 +89,6 @@ def test_every_door_equals_pinocchio(tree):
         M = P.T @ pin.crba(pm, d, qp) @ P
         M = np.triu(M) + np.triu(M, 1).T
         a_ref = P.T @ pin.aba(pm, d, qp, vp, P @ tau)
-        close = lambda got, ref: np.testing.assert_allclose(got, ref, rtol=0, atol=TOL * max(1, np.abs(ref).max()))  # noqa: E731
         close(CALLS["rnea"](tree, x), P.T @ pin.rnea(pm, d, qp, vp, ap))
         close(CALLS["inverse_dynamics"](tree, x), P.T @ pin.rnea(pm, d, qp, vp, ap))
         close(CALLS["crba"](tree, x), M)

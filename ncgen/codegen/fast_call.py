@@ -14,8 +14,11 @@ None).  With ``bound > 0`` every input value
 must be finite and of magnitude at most ``bound`` (checked while copying, a few ns a value),
 an array one-dimensional and a sequence's items Python floats or ints (not booleans); a
 TypeError or ValueError otherwise, so that the caller builds its detailed message only then.
-It is an accelerator only: when the Python headers or a compiler are missing, :func:`fast_caller`
-returns None and callers keep the ctypes path.
+A door (``outputs=``) returns fresh NumPy arrays of the outputs or writes them into an
+``out`` argument, and can normalise the quaternions of its first input: the whole of
+``nc.rnea`` and its siblings in one C call (:class:`~ncgen.runtime.tree_algorithm_kernels.Door`).
+It is an accelerator only: when the Python or NumPy headers or a compiler are missing,
+:func:`fast_caller` returns None and callers keep the ctypes path.
 """
 from __future__ import annotations
 
