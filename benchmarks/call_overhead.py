@@ -110,7 +110,10 @@ def robot_pairs(name: str, calls: int, rounds: int, alone: bool = False, cpp: bo
     pin_aba = lambda: pin.aba(pm, d, qp, vp, full)                            # noqa: E731
     if not mimic.relations:
         out["aba_agreement"] = float(np.max(np.abs(P @ nc.aba(model, qj, vj, tau_i) - pin_aba())))
-        out["fd_agreement"] = float(np.max(np.abs(P @ nc.joint_forward_dynamics(model, qj, vj, u) - pin_aba())))
+        tau_u = np.zeros(n_i)                       # the inputs' efforts only (a free base has none)
+        tau_u[[mimic.independent.index(i) for i in act]] = u
+        out["fd_agreement"] = float(np.max(np.abs(P @ nc.joint_forward_dynamics(model, qj, vj, u)
+                                                  - pin.aba(pm, d, qp, vp, P @ tau_u))))
     else:
         out["aba_note"] = out["fd_note"] = "Pinocchio's ABA refuses mimic joints: its model without them"
     out["aba"] = interleaved(lambda: nc.aba(model, qj, vj, tau_i), pin_aba, calls, rounds)
