@@ -53,27 +53,29 @@ from common import machine  # noqa: E402
 ROBOT_ARGS = {"panda": False, "ur5": False, "talos": True}
 
 
-def batch_time(fn, calls: int) -> float:
-    t = time.perf_counter()
+def batch_time(fn, calls: int, clock=time.perf_counter) -> float:
+    t = clock()
     for _ in range(calls):
         fn()
-    return (time.perf_counter() - t) / calls
+    return (clock() - t) / calls
 
 
-def interleaved(ours, theirs, calls: int, rounds: int, pairs: int = 3) -> dict:
+def interleaved(ours, theirs, calls: int, rounds: int, pairs: int = 3, clock=time.perf_counter) -> dict:
     """Best µs per call of each side and the min and median of the per-round ratios; a round
     alternates ``pairs`` batches of each side and compares their best batches (a preempted
-    batch does not make a ratio)."""
+    batch does not make a ratio).  ``clock``: wall time by default; ``time.process_time`` for
+    CPU time (on a loaded machine the wall time of a batch is its CPU time times the share of
+    the cores it gets)."""
     for f in (ours, theirs):                       # warm up
-        batch_time(f, max(1, calls // 10))
+        batch_time(f, max(1, calls // 10), clock)
     ratios, best_ours, best_theirs = [], float("inf"), float("inf")
     for r in range(rounds):
         a = b = float("inf")
         for k in range(pairs):
             if (r + k) % 2:
-                b, a = min(b, batch_time(theirs, calls)), min(a, batch_time(ours, calls))
+                b, a = min(b, batch_time(theirs, calls, clock)), min(a, batch_time(ours, calls, clock))
             else:
-                a, b = min(a, batch_time(ours, calls)), min(b, batch_time(theirs, calls))
+                a, b = min(a, batch_time(ours, calls, clock)), min(b, batch_time(theirs, calls, clock))
         ratios.append(a / b)
         best_ours, best_theirs = min(best_ours, a), min(best_theirs, b)
     return {"ncgen_us": best_ours * 1e6, "pinocchio_us": best_theirs * 1e6,

@@ -194,6 +194,27 @@ def as_vector(x, n: int, what: str) -> np.ndarray:
     return as_array(x, (n,), what)
 
 
+def write_out(out, result, what: str):
+    """``out`` (an array, or a tuple of arrays for several results) with ``result`` (an array
+    or a tuple of arrays) written into it, for the ``out=`` argument of ``what``; a
+    :class:`~ncgen.errors.ShapeError` naming ``out`` unless each array is a writable
+    C-contiguous float64 array of its result's shape."""
+    several = type(result) is tuple
+    results, outs = (result, out) if several else ((result,), (out,))
+    if several and not (type(out) is tuple and len(out) == len(result)):
+        raise ShapeError(f"{what}: out: expected a tuple of {len(result)} arrays (one per output), got "
+                         f"{type(out).__name__}")
+    for o, r in zip(outs, results):
+        if not (type(o) is np.ndarray and o.dtype == np.float64 and o.shape == r.shape and o.flags.c_contiguous
+                and o.flags.writeable):
+            found = (f"{o.dtype} array of shape {o.shape}{'' if o.flags.c_contiguous else ', not C-contiguous'}"
+                     f"{'' if o.flags.writeable else ', read-only'}" if isinstance(o, np.ndarray) else type(o).__name__)
+            raise ShapeError(f"{what}: out: expected a writable C-contiguous float64 array of shape {r.shape}, "
+                             f"got {found}")
+        o[...] = r
+    return out
+
+
 def as_scalar(x, what: str) -> float:
     try:
         v = float(_float_array(x, what).reshape(()))

@@ -14,8 +14,11 @@ None).  With ``bound > 0`` every input value
 must be finite and of magnitude at most ``bound`` (checked while copying, a few ns a value),
 an array one-dimensional and a sequence's items Python floats or ints (not booleans); a
 TypeError or ValueError otherwise, so that the caller builds its detailed message only then.
-It is an accelerator only: when the Python headers or a compiler are missing, :func:`fast_caller`
-returns None and callers keep the ctypes path.
+A door (``outputs=``) returns fresh NumPy arrays of the outputs or writes them into an
+``out`` argument, and can normalise the quaternions of its first input: the whole of
+``nc.rnea`` and its siblings in one C call (:class:`~ncgen.runtime.tree_algorithm_kernels.Door`).
+It is an accelerator only: when the Python or NumPy headers or a compiler are missing,
+:func:`fast_caller` returns None and callers keep the ctypes path.
 """
 from __future__ import annotations
 
@@ -31,6 +34,8 @@ from pathlib import Path
 SOURCE = r"""
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
+#define NPY_NO_DEPRECATED_API NPY_1_7_API_VERSION
+#include <numpy/arrayobject.h>
 #include <string.h>
 #include <math.h>
 #include <stddef.h>
@@ -38,6 +43,7 @@ SOURCE = r"""
 
 typedef int (*kernel_fn)(const double**, double**, long long*, double*, int);
 #define MAX_IN 8
+#define MAX_QUAT 64
 
 typedef struct {
     PyObject_HEAD
@@ -49,6 +55,11 @@ typedef struct {
     Py_ssize_t size[MAX_IN];
     const double *check; double tol; double bound;
     PyObject *result; PyObject *keep;
+    int n_out;                                  /* > 0: fresh outputs (or `out` written) each call */
+    double *obuf[MAX_IN];
+    Py_ssize_t rows[MAX_IN], cols[MAX_IN];      /* cols 0: a vector of rows values */
+    int n_quat;
+    Py_ssize_t quat[MAX_QUAT];                  /* offsets of [qx, qy, qz, qw] in the first input */
 } Caller;
 
 static int raw_bytes(PyObject *x) {
@@ -107,20 +118,99 @@ static int copy_in(double *dst, Py_ssize_t n, PyObject *x, int k, double bound) 
     return bound > 0 ? check_bound(dst, n, bound, k) : 0;
 }
 
+/* The quaternions of the first input normalised, qw >= 0 (as numpy's x / |x| * sign). */
+static int unit_quaternions(Caller *self) {
+    for (int i = 0; i < self->n_quat; i++) {
+        double *x = self->buf[0] + self->quat[i];
+        double n = sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3]);
+        if (!(n > 0)) {
+            PyErr_Format(PyExc_ValueError, "argument 0: the quaternion at %zd is zero", self->quat[i]);
+            return -1;
+        }
+        int flip = !(x[3] >= 0);
+        for (int k = 0; k < 4; k++) { x[k] = x[k] / n; if (flip) x[k] = -x[k]; }
+    }
+    return 0;
+}
+
+/* Output j as row-major values (matrices are stored column-major by the kernels). */
+static void write_output(const Caller *self, int j, double *dst) {
+    Py_ssize_t r = self->rows[j], c = self->cols[j];
+    const double *src = self->obuf[j];
+    if (!c) { memcpy(dst, src, (size_t)r * 8); return; }
+    for (Py_ssize_t i = 0; i < r; i++)
+        for (Py_ssize_t k = 0; k < c; k++) dst[i * c + k] = src[k * r + i];
+}
+
+/* Whether x is a writable, aligned, C-contiguous native float64 array of output j's shape. */
+static int output_fits(const Caller *self, int j, PyObject *x) {
+    if (!PyArray_Check(x)) return 0;
+    PyArrayObject *a = (PyArrayObject *)x;
+    int nd = self->cols[j] ? 2 : 1;
+    return PyArray_TYPE(a) == NPY_DOUBLE && PyArray_ISCARRAY(a) && PyArray_ISNOTSWAPPED(a) && PyArray_NDIM(a) == nd
+           && PyArray_DIM(a, 0) == self->rows[j] && (nd == 1 || PyArray_DIM(a, 1) == self->cols[j]);
+}
+
+static PyObject *new_output(const Caller *self, int j) {
+    npy_intp dims[2] = {self->rows[j], self->cols[j]};
+    PyObject *a = PyArray_SimpleNew(self->cols[j] ? 2 : 1, dims, NPY_DOUBLE);
+    if (a) write_output(self, j, (double *)PyArray_DATA((PyArrayObject *)a));
+    return a;
+}
+
+/* The outputs as fresh arrays (a tuple for several), or written into `out` (an array, or a
+   tuple of arrays for several outputs) and `out` returned. */
+static PyObject *outputs(const Caller *self, PyObject *out) {
+    if (out) {
+        for (int j = 0; j < self->n_out; j++)
+            write_output(self, j, (double *)PyArray_DATA((PyArrayObject *)(
+                self->n_out == 1 ? out : PyTuple_GET_ITEM(out, j))));
+        Py_INCREF(out);
+        return out;
+    }
+    if (self->n_out == 1) return new_output(self, 0);
+    PyObject *t = PyTuple_New(self->n_out);
+    if (!t) return NULL;
+    for (int j = 0; j < self->n_out; j++) {
+        PyObject *a = new_output(self, j);
+        if (!a) { Py_DECREF(t); return NULL; }
+        PyTuple_SET_ITEM(t, j, a);
+    }
+    return t;
+}
+
+static int out_fits(const Caller *self, PyObject *out) {
+    if (self->n_out == 1) return output_fits(self, 0, out);
+    if (!PyTuple_Check(out) || PyTuple_GET_SIZE(out) != self->n_out) return 0;
+    for (int j = 0; j < self->n_out; j++)
+        if (!output_fits(self, j, PyTuple_GET_ITEM(out, j))) return 0;
+    return 1;
+}
+
 static PyObject *caller_call(PyObject *self_, PyObject *const *args, size_t nargsf, PyObject *kwnames) {
     Caller *self = (Caller *)self_;
     Py_ssize_t nargs = PyVectorcall_NARGS(nargsf);
-    if (kwnames || nargs != self->n_in) {
+    PyObject *out = NULL;
+    if (kwnames || !(nargs == self->n_in || (self->n_out && nargs == self->n_in + 1))) {
         PyErr_Format(PyExc_TypeError, "expected %d positional arguments, got %zd", self->n_in, nargs);
         return NULL;
     }
+    if (nargs > self->n_in && args[self->n_in] != Py_None) {
+        out = args[self->n_in];
+        if (!out_fits(self, out)) {
+            PyErr_SetString(PyExc_ValueError, "out: not float64 C-contiguous writable arrays of the outputs' shapes");
+            return NULL;
+        }
+    }
     for (int k = 0; k < self->n_in; k++)
         if (copy_in(self->buf[k], self->size[k], args[k], k, self->bound)) return NULL;
+    if (self->n_quat && unit_quaternions(self)) return NULL;
     if (self->fn(self->arg, self->res, self->iw, self->w, self->mem)) {
         PyErr_SetString(PyExc_RuntimeError, "the compiled kernel returned an error");
         return NULL;
     }
     if (self->check && !(self->check[0] > self->tol && isfinite(self->check[1]))) Py_RETURN_NONE;
+    if (self->n_out) return outputs(self, out);
     Py_INCREF(self->result);
     return self->result;
 }
@@ -203,12 +293,14 @@ static PyMethodDef caller_methods[] = {
 static PyObject *caller_new(PyTypeObject *type, PyObject *a, PyObject *kw) {
     unsigned long long fn, arg, res, iw, w, check; int mem; double tol, bound;
     (void)kw;
-    PyObject *bufs, *sizes, *result, *keep;
-    if (!PyArg_ParseTuple(a, "KKKKKiOOKddOO", &fn, &arg, &res, &iw, &w, &mem, &bufs, &sizes, &check, &tol, &bound,
-                          &result, &keep))
+    PyObject *bufs, *sizes, *result, *keep, *outs = NULL, *quats = NULL;
+    if (!PyArg_ParseTuple(a, "KKKKKiOOKddOO|OO", &fn, &arg, &res, &iw, &w, &mem, &bufs, &sizes, &check, &tol, &bound,
+                          &result, &keep, &outs, &quats))
         return NULL;
     Py_ssize_t n = PySequence_Size(bufs);
-    if (n < 0 || n > MAX_IN || PySequence_Size(sizes) != n) {
+    Py_ssize_t n_out = outs ? PySequence_Size(outs) : 0, n_quat = quats ? PySequence_Size(quats) : 0;
+    if (n < 0 || n > MAX_IN || PySequence_Size(sizes) != n || n_out < 0 || n_out > MAX_IN || n_quat < 0
+        || n_quat > MAX_QUAT || (n_quat && !n)) {
         PyErr_SetString(PyExc_ValueError, "bad buffer lists"); return NULL;
     }
     Caller *self = (Caller *)type->tp_alloc(type, 0);
@@ -224,6 +316,22 @@ static PyObject *caller_new(PyTypeObject *type, PyObject *a, PyObject *kw) {
     }
     self->check = (const double *)(uintptr_t)check; self->tol = tol; self->bound = bound;
     Py_INCREF(result); self->result = result; Py_INCREF(keep); self->keep = keep;
+    self->n_out = (int)n_out; self->n_quat = (int)n_quat;
+    for (Py_ssize_t j = 0; j < n_out; j++) {
+        unsigned long long address = 0;
+        PyObject *o = PySequence_GetItem(outs, j);
+        if (o && !PyArg_ParseTuple(o, "Knn", &address, &self->rows[j], &self->cols[j])) PyErr_Clear(), address = 0;
+        Py_XDECREF(o);
+        self->obuf[j] = (double *)(uintptr_t)address;
+        if (!address && !PyErr_Occurred()) PyErr_SetString(PyExc_ValueError, "bad output list");
+    }
+    for (Py_ssize_t i = 0; i < n_quat; i++) {
+        PyObject *o = PySequence_GetItem(quats, i);
+        self->quat[i] = o ? PyLong_AsSsize_t(o) : -1;
+        Py_XDECREF(o);
+        if (!PyErr_Occurred() && (self->quat[i] < 0 || self->quat[i] + 4 > self->size[0]))
+            PyErr_SetString(PyExc_ValueError, "bad quaternion offsets");
+    }
     if (PyErr_Occurred()) { Py_DECREF(self); return NULL; }
     return (PyObject *)self;
 }
@@ -248,6 +356,7 @@ static PyTypeObject CallerType = {
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "ncgen_fast_call", NULL, -1, NULL, NULL, NULL, NULL, NULL};
 
 PyMODINIT_FUNC PyInit_ncgen_fast_call(void) {
+    import_array();
     if (PyType_Ready(&CallerType) < 0) return NULL;
     PyObject *m = PyModule_Create(&module);
     if (!m) return NULL;
@@ -272,12 +381,15 @@ def _module():
         from ncgen.codegen.compile_cache import cache_dir
         from ncgen.codegen.compiler import find_compiler
 
-        include = sysconfig.get_paths()["include"]
-        if not (Path(include) / "Python.h").exists():
+        import numpy
+
+        include, numpy_include = sysconfig.get_paths()["include"], numpy.get_include()
+        if not (Path(include) / "Python.h").exists() or not (Path(numpy_include) / "numpy" / "arrayobject.h").exists():
             return None
         compiler = find_compiler()
         suffix = importlib.machinery.EXTENSION_SUFFIXES[0]
-        key = hashlib.sha256("\n".join([SOURCE, sys.version, compiler.version, include]).encode()).hexdigest()[:24]
+        key = hashlib.sha256("\n".join([SOURCE, sys.version, compiler.version, include, numpy_include,
+                                         numpy.__version__]).encode()).hexdigest()[:24]
         entry = cache_dir() / f"fast_call-{key}"
         library = entry / f"ncgen_fast_call{suffix}"
         if not library.exists():
@@ -287,7 +399,7 @@ def _module():
                     with fsutil.temporary_sibling(entry) as tmp:
                         (tmp / "fast_call.c").write_text(SOURCE)
                         subprocess.run([*compiler.argv, "-O2", "-Wall", "-Wextra", "-Werror", "-shared", "-fPIC",
-                                        f"-I{include}", "-o",
+                                        f"-I{include}", f"-I{numpy_include}", "-o",
                                         str(tmp / library.name), str(tmp / "fast_call.c")],
                                        check=True, capture_output=True)
                         os.replace(tmp, entry)
@@ -301,11 +413,20 @@ def _module():
 
 
 def fast_caller(direct, n_inputs: int, first: int = 0, check=None, tol: float = 0.0, result=None,
-                bound: float = 0.0):
+                bound: float = 0.0, outputs=None, quaternions=()):
     """``caller(*arrays)`` for the inputs ``first .. first + n_inputs − 1`` of the
     :class:`~ncgen.codegen.direct.DirectFunction` ``direct`` (module docstring; ``check``: a
     2-entry output buffer, ``result``: what a call returns, ``bound``: the largest magnitude of
-    an input value, 0 for no check), or None without the extension."""
+    an input value, 0 for no check), or None without the extension.
+
+    A door (``outputs``: ``[(buffer, rows, columns)]``, the kernel's output buffers, matrices
+    column-major, ``columns`` 0 for a vector): each call returns fresh arrays of the outputs
+    (matrices row-major ``(rows, columns)``, a tuple for several) or, given one more argument
+    ``out`` (an array, or a tuple of arrays for several outputs; float64, C-contiguous,
+    writable, the outputs' shapes, else a ValueError), writes them into it and returns it.
+    ``quaternions``: offsets of ``[qx, qy, qz, qw]`` in the first input, normalised after the
+    copy with ``qw ≥ 0`` (as :func:`~ncgen.codegen.tree_check.unit_quaternions`; a zero one a
+    ValueError)."""
     mod = _module()
     if mod is None:
         return None
@@ -313,6 +434,7 @@ def fast_caller(direct, n_inputs: int, first: int = 0, check=None, tol: float = 
     fn, arg, res, iw, w, mem = direct._fn, *direct._args
     import ctypes
     address = ctypes.cast(fn, ctypes.c_void_p).value
+    outs = [(b.ctypes.data, int(r), int(c)) for b, r, c in (outputs or ())]
     return mod.Caller(address, arg, res, iw, w, mem, [b.ctypes.data for b in bufs], [b.size for b in bufs],
                       0 if check is None else check.ctypes.data, float(tol), float(bound), result,
-                      (direct, bufs, check))
+                      (direct, bufs, check, outputs), outs, [int(i) for i in quaternions])

@@ -99,6 +99,14 @@ def compile_tree_function(model, f, cflags, suffix: str):
     return compile_direct(f"{model.name}_{suffix}", f, cflags)
 
 
+def quaternion_offsets(js) -> list[int]:
+    """Where the quaternion ``[qx, qy, qz, qw]`` of each spherical and free joint starts in
+    ``qj`` (the entries :func:`unit_quaternions` normalises; none in 2D)."""
+    if js.dim != 3:
+        return []
+    return [s.stop - 4 for name, s in js.slices().items() if js.nq_joint[name] in (4, 7)]
+
+
 def unit_quaternions(js, qj: np.ndarray) -> np.ndarray:
     """``qj`` (one state, or one per row) with the quaternions of spherical and free joints
     normalised (qw ≥ 0)."""

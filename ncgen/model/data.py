@@ -65,7 +65,10 @@ class ModelData:
     #: ``(indices,)``: the independent joint rates when the compiled algorithms take the model,
     #: indices None when not (:func:`ncgen.runtime.tree_algorithm_kernels.rnea_applies`).
     algorithm_rates: tuple | None = None
-    #: ``{joints: AlgorithmKernel or False}``: the compiled RNEA when it gives
+    #: ``{(name, kernels): Door}``: ``nc.rnea``, ``nc.aba``, ... bound to their kernels
+    #: (:func:`ncgen.runtime.tree_algorithm_kernels.door`).
+    doors: dict = field(default_factory=dict)
+    #: ``{joints: Door or False}``: the compiled RNEA when it gives
     #: ``nc.inverse_dynamics(..., joints=joints)`` (:func:`ncgen.runtime.dynamics_at_state._rnea_kernel`).
     rnea_efforts: dict = field(default_factory=dict)
     #: ``(f,)``: the joint-space tree map ``(q_j, v_j) -> (q, v)``, f None for a model that is
@@ -110,14 +113,24 @@ class ModelData:
     store_key: str | None = None
 
 
-_DATA: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+#: ``{id(model): (weak reference to the model, its ModelData)}``: a dictionary keyed by ``id``
+#: (one lookup, ~50 ns, where a ``WeakKeyDictionary`` builds a reference per lookup); an entry
+#: goes with its model.
+_DATA: dict = {}
 
 
 def model_data(model) -> ModelData:
     """The :class:`ModelData` of ``model``, created empty on first use."""
-    data = _DATA.get(model)
-    if data is None:
-        data = _DATA[model] = ModelData()
+    entry = _DATA.get(id(model))
+    if entry is not None and entry[0]() is model:
+        return entry[1]
+    key, data = id(model), ModelData()
+
+    def gone(ref, key=key, entries=_DATA):
+        if entries.get(key, (None,))[0] is ref:
+            del entries[key]
+
+    _DATA[key] = (weakref.ref(model, gone), data)
     return data
 
 

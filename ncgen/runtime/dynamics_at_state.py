@@ -27,8 +27,8 @@ from ncgen.assembly.manifold import solve_linear
 from ncgen.errors import ModelError
 from ncgen.model.data import cached, model_data
 from ncgen.model.rolling import refuse_rolling
-from ncgen.runtime.tree_algorithm_kernels import call, kernel_of, rnea_applies
-from ncgen.validation import as_vector
+from ncgen.runtime.tree_algorithm_kernels import door, rnea_applies
+from ncgen.validation import as_vector, write_out
 
 
 def _kkt(model, q, v, t, u, p):
@@ -100,8 +100,11 @@ def forward_dynamics(model, q, v, u=None, p=None, t: float = 0.0, *, backend: st
 
 
 def _rnea_kernel(model, joints: str):
-    """The compiled RNEA when it gives the efforts ``joints`` asks for (a 3D tree whose asked-for
-    efforts are those of its independent joint rates), else False (decided once per model)."""
+    """The door of the compiled RNEA (:func:`~ncgen.runtime.tree_algorithm_kernels.door`) when it
+    gives the efforts ``joints`` asks for (a 3D tree whose asked-for efforts are those of its
+    independent joint rates), else False (decided once per model)."""
+    if joints not in ("actuated", "all"):
+        raise ModelError(f"inverse_dynamics: joints: expected 'actuated' or 'all', got {joints!r}")
     data = model_data(model)
     k = data.rnea_efforts.get(joints)
     if k is None:
@@ -110,24 +113,24 @@ def _rnea_kernel(model, joints: str):
         actuated = [i for n in js.joint_names if n in model.actuated_joints for i in range(sv[n].start, sv[n].stop)]
         takes = independent is not None and (
             independent == actuated if joints == "actuated" else len(independent) == js.nv)
-        k = data.rnea_efforts[joints] = kernel_of(model, "rnea", "auto") if takes else False
+        k = data.rnea_efforts[joints] = door(model, "rnea") if takes else False
     return k
 
 
-def inverse_dynamics(model, qj, vj, aj, p=None, t: float = 0.0, joints: str = "actuated") -> np.ndarray:
+def inverse_dynamics(model, qj, vj, aj, p=None, t: float = 0.0, joints: str = "actuated", *,
+                     out=None) -> np.ndarray:
     """Efforts of ``model.actuated_joints`` (concatenated, ``joint_names`` order) that give
     the joint accelerations ``aj`` at joint positions ``qj`` and rates ``vj`` (vectors in
     ``joint_names`` order).  ``joints="all"``: efforts conjugate to every joint rate, as if
     every joint were actuated (a floating base's wrench included; Pinocchio's ``rnea``).
     Trees (3D, mimic joints included) use the compiled RNEA
     (:func:`~ncgen.runtime.tree_algorithm_kernels.rnea`, from the tree tables when they cover the model) when the efforts asked for are those of the
-    independent joint rates; other models solve the constrained equations of motion."""
-    if joints not in ("actuated", "all"):
-        raise ModelError(f"inverse_dynamics: joints: expected 'actuated' or 'all', got {joints!r}")
-    t = float(t)
-    k = _rnea_kernel(model, joints)
+    independent joint rates; other models solve the constrained equations of motion.
+    ``out``: an array of the efforts' size written and returned (float64, C-contiguous)."""
+    k = model_data(model).rnea_efforts.get(joints) or _rnea_kernel(model, joints)
     if k:
-        return call(model, k, (qj, vj, aj), p, t)
+        return k((qj, vj, aj), p, t, out)
+    t = float(t)
     js = model.joint_space
     p = model.p0 if p is None else as_vector(p, model.np, "p")
     q, v = model.from_joint_space(qj, vj, t=t, p=p)
@@ -153,4 +156,4 @@ def inverse_dynamics(model, qj, vj, aj, p=None, t: float = 0.0, joints: str = "a
     if x is None:
         raise ModelError(f"inverse_dynamics: these accelerations need efforts on joints without actuators "
                          f"(or the constraint forces are not unique); actuated joints: {', '.join(js.actuated)}")
-    return x[A.shape[0]:]
+    return x[A.shape[0]:] if out is None else write_out(out, x[A.shape[0]:], "inverse_dynamics")

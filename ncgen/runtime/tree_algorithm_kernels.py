@@ -1,4 +1,4 @@
-"""Compiled rigid-body algorithms of trees, called from Python with ~1 µs overhead: RNEA,
+"""Compiled rigid-body algorithms of trees, called from Python with 1–3 µs overhead: RNEA,
 CRBA, ABA and the derivatives of RNEA and ABA (SX functions of
 :mod:`ncgen.assembly.tree_algorithms`, one small C library each, compiled on first use and
 cached on disk by content, called through :class:`~ncgen.codegen.direct.DirectFunction`).
@@ -6,6 +6,10 @@ cached on disk by content, called through :class:`~ncgen.codegen.direct.DirectFu
 * :func:`rnea` — ``τ(qj, vj, aj)``;  :func:`crba` — ``M(qj)``;  :func:`aba` — ``aj(qj, vj, τ)``;
 * :func:`rnea_derivatives` — ``(τ, ∂τ/∂q, ∂τ/∂v, ∂τ/∂a)``;
 * :func:`aba_derivatives` — ``(aj, ∂a/∂q, ∂a/∂v, ∂a/∂τ)``;
+* every one takes ``out=``: an array (a tuple of arrays for the derivatives) of the outputs'
+  shapes, float64 and C-contiguous, written in place and returned (no allocation); a call with
+  the last call's time and parameters is one C call (:class:`Door`: 1–3 µs beside the kernel
+  alone on a loaded 2-core machine, benchmarks/call_overhead.py ``--alone``);
 * :func:`algorithm_kernel` — the compiled kernel itself (:class:`AlgorithmKernel`), for loops
   (``nc.linearize(model, qj, vj, u, space="joint")`` uses the ABA derivatives:
   :mod:`ncgen.analysis.joint_linearization`).
@@ -39,8 +43,9 @@ from ncgen.codegen.compiler import compiler_present
 from ncgen.codegen.fast_call import fast_caller
 from ncgen.errors import CompilerNotFound, ModelError, NcgenError, ShapeError
 from ncgen.model.data import cached, model_data
-from ncgen.codegen.tree_check import ALGORITHMS, PIVOT_TOL, check_tree, compile_tree_function, unit_quaternions
-from ncgen.validation import MAX_MAGNITUDE, as_numbers, as_vector
+from ncgen.codegen.tree_check import (ALGORITHMS, PIVOT_TOL, check_tree, compile_tree_function, quaternion_offsets,
+                                      unit_quaternions)
+from ncgen.validation import MAX_MAGNITUDE, as_numbers, as_vector, write_out
 
 class AlgorithmKernel:
     """``k(*args) -> outputs``: one compiled algorithm of a tree (:data:`ALGORITHMS`: ``args``
@@ -75,6 +80,18 @@ class AlgorithmKernel:
                                  check=None if self._check is None else direct.outputs[-1], tol=PIVOT_TOL,
                                  bound=MAX_MAGNITUDE)
         self.set(t=model.t0, p=model.p0)
+
+    def door_caller(self, quaternions):
+        """The fast caller returning fresh outputs or writing ``out``
+        (:func:`~ncgen.codegen.fast_call.fast_caller`'s ``outputs``), the quaternions at
+        ``quaternions`` in ``qj`` normalised in C; None without the extension."""
+        d, names = self.direct, ALGORITHMS[self.name][1]
+        outs = []
+        for j, name in enumerate(names):
+            rows, cols = d.function.size_out(j)
+            outs.append((d.outputs[j], rows, 0 if name in ("tau", "aj") else cols))
+        return fast_caller(d, len(self._inputs), first=1, check=None if self._check is None else d.outputs[-1],
+                           tol=PIVOT_TOL, bound=MAX_MAGNITUDE, outputs=outs, quaternions=quaternions)
 
     def copy(self) -> "AlgorithmKernel":
         """The same compiled kernel with buffers (and time, parameters) of its own."""
@@ -216,18 +233,51 @@ def kernel_of(model, name: str, kernels: str):
     return k if isinstance(k, AlgorithmKernel) else algorithm_kernel(model, name)
 
 
-def _run(model, name: str, args: tuple, p, t: float, kernels: str = "auto"):
-    """The outputs (copies) of the algorithm ``name`` at ``args`` (in ``ALGORITHMS`` order)
-    with the kernels :func:`algorithm_kernels` chooses.
-    Without quaternion joints the arguments go straight to a flat kernel, whose caller checks
-    their lengths, kinds and magnitudes in C (:func:`~ncgen.codegen.fast_call.fast_caller`'s
-    ``bound``); the detailed message is built only when that fails (:func:`_checked`).
-    Arguments of one row per state (2-D, ``n`` rows each) give outputs with a first axis of
-    ``n`` (:func:`batch`)."""
-    k = kernel_of(model, name, kernels)
-    if np.ndim(args[0]) == 2:
-        return batch(model, k, args, p, t)
-    return call(model, k, args, p, t)
+class Door:
+    """``door(args, p, t, out)``: the algorithm of one model as ``nc.rnea`` and its siblings
+    call it.  With the time and parameters of the last call (``p`` None) the arguments go
+    straight to the kernel's door caller (:func:`~ncgen.codegen.fast_call.fast_caller` with
+    ``outputs``), which checks their lengths, kinds and magnitudes, normalises the quaternions,
+    runs the kernel, checks its pivot and returns fresh outputs or writes them into ``out``, all
+    in C.  Whatever it refuses, other times or parameters, and
+    rows of states take the checked path (:func:`call`, :func:`batch`), whose error names the
+    argument."""
+
+    __slots__ = ("model", "kernel", "fast", "tables")
+
+    def __init__(self, model, name: str, kernels: str):
+        k = self.kernel = kernel_of(model, name, kernels)
+        self.model, self.tables = model, not isinstance(k, AlgorithmKernel)
+        self.fast = k.door_caller(quaternion_offsets(model.joint_space))
+
+    def __call__(self, args: tuple, p, t: float, out):
+        k, fast = self.kernel, self.fast
+        if fast is not None and p is None and (self.tables or (t == k._t and k._default_p)):
+            try:
+                result = fast(*args, out)
+            except (TypeError, ValueError, OverflowError, RuntimeError):
+                result = False              # the checked path names what is wrong, or runs a fallback
+            if result is None:
+                k.singular() if self.tables else k._singular()
+            if result is not False:
+                return result
+        return self.checked(args, p, t, out)
+
+    def checked(self, args: tuple, p, t: float, out):
+        """The call with every argument checked in Python (one state or rows of states)."""
+        model, k = self.model, self.kernel
+        result = batch(model, k, args, p, t) if np.ndim(args[0]) == 2 else call(model, k, args, p, t)
+        return result if out is None else write_out(out, result, k.name)
+
+
+def door(model, name: str, kernels: str = "auto") -> Door:
+    """The :class:`Door` of the algorithm ``name`` of ``model`` with the kernels ``kernels``
+    (:func:`algorithm_kernels`), bound once per model."""
+    doors = model_data(model).doors
+    d = doors.get((name, kernels))
+    if d is None:
+        d = doors[name, kernels] = Door(model, name, kernels)
+    return d
 
 
 def batch(model, k: AlgorithmKernel, args: tuple, p, t: float):
@@ -287,7 +337,11 @@ def batch(model, k: AlgorithmKernel, args: tuple, p, t: float):
 
 
 def call(model, k: AlgorithmKernel, args: tuple, p, t: float):
-    """:func:`_run` with the kernel ``k`` of ``model`` at hand."""
+    """The outputs (copies) of the kernel ``k`` of ``model`` at one state ``args`` (in
+    :data:`ALGORITHMS` order).  Without quaternion joints the arguments go straight to the
+    kernel's caller, which checks their lengths, kinds and magnitudes in C
+    (:func:`~ncgen.codegen.fast_call.fast_caller`'s ``bound``); the detailed message is built
+    only when that fails (:func:`_checked`)."""
     if not isinstance(k, AlgorithmKernel):
         if p is not None:                   # the tables' algorithms do not depend on p: check it only
             as_vector(p, model.np, "p")
@@ -333,28 +387,30 @@ def _checked(model, k: AlgorithmKernel, args: tuple) -> list:
     return values
 
 
-def rnea(model, qj, vj, aj, *, p=None, t: float = 0.0, kernels: str = "auto") -> np.ndarray:
+def rnea(model, qj, vj, aj, *, p=None, t: float = 0.0, kernels: str = "auto", out=None) -> np.ndarray:
     """``τ``: the efforts of the independent joint rates giving accelerations ``aj`` at
     ``(qj, vj)`` (module docstring; Pinocchio's ``rnea``)."""
-    return _run(model, "rnea", (qj, vj, aj,), p, t, kernels)
+    return door(model, "rnea", kernels)((qj, vj, aj,), p, t, out)
 
 
-def crba(model, qj, *, p=None, t: float = 0.0, kernels: str = "auto") -> np.ndarray:
+def crba(model, qj, *, p=None, t: float = 0.0, kernels: str = "auto", out=None) -> np.ndarray:
     """``M``: the joint-space mass matrix of the independent rates (Pinocchio's ``crba``, both triangles)."""
-    return _run(model, "crba", (qj,), p, t, kernels)
+    return door(model, "crba", kernels)((qj,), p, t, out)
 
 
-def aba(model, qj, vj, tau, *, p=None, t: float = 0.0, kernels: str = "auto") -> np.ndarray:
+def aba(model, qj, vj, tau, *, p=None, t: float = 0.0, kernels: str = "auto", out=None) -> np.ndarray:
     """``aj``: joint accelerations under the efforts ``tau`` of the independent rates (Pinocchio's ``aba``)."""
-    return _run(model, "aba", (qj, vj, tau,), p, t, kernels)
+    return door(model, "aba", kernels)((qj, vj, tau,), p, t, out)
 
 
-def rnea_derivatives(model, qj, vj, aj, *, p=None, t: float = 0.0, kernels: str = "auto") -> tuple[np.ndarray, ...]:
+def rnea_derivatives(model, qj, vj, aj, *, p=None, t: float = 0.0, kernels: str = "auto",
+                     out=None) -> tuple[np.ndarray, ...]:
     """``(τ, ∂τ/∂q, ∂τ/∂v, ∂τ/∂a)`` (Pinocchio's ``computeRNEADerivatives``; ∂τ/∂a = M)."""
-    return _run(model, "rnea_derivatives", (qj, vj, aj,), p, t, kernels)
+    return door(model, "rnea_derivatives", kernels)((qj, vj, aj,), p, t, out)
 
 
-def aba_derivatives(model, qj, vj, tau, *, p=None, t: float = 0.0, kernels: str = "auto") -> tuple[np.ndarray, ...]:
+def aba_derivatives(model, qj, vj, tau, *, p=None, t: float = 0.0, kernels: str = "auto",
+                    out=None) -> tuple[np.ndarray, ...]:
     """``(aj, ∂a/∂q, ∂a/∂v, ∂a/∂τ)`` (Pinocchio's ``computeABADerivatives``; ∂a/∂τ = M⁻¹;
     rows per independent rate)."""
-    return _run(model, "aba_derivatives", (qj, vj, tau,), p, t, kernels)
+    return door(model, "aba_derivatives", kernels)((qj, vj, tau,), p, t, out)

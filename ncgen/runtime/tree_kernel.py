@@ -28,8 +28,9 @@ from ncgen.codegen.fast_call import fast_caller
 from ncgen.errors import ModelError
 from ncgen.model.data import cached, model_data
 from ncgen.runtime.dynamics_at_state import forward_dynamics
-from ncgen.codegen.tree_check import PIVOT_TOL, check_tree, compile_tree_function, unit_quaternions
-from ncgen.validation import MAX_MAGNITUDE, as_numbers, as_vector
+from ncgen.codegen.tree_check import (PIVOT_TOL, check_tree, compile_tree_function, quaternion_offsets,
+                                      unit_quaternions)
+from ncgen.validation import MAX_MAGNITUDE, as_numbers, as_vector, write_out
 
 METHODS = ("auto", "recursive", "projection")
 
@@ -54,11 +55,11 @@ class JointDynamicsKernel:
         self._fn, self._args = direct._fn, direct._args
         self._zero_u = np.zeros(self.nu)
         self._fast = fast_caller(direct, 3, first=1, check=check, tol=PIVOT_TOL, result=self._aj)
-        #: the same caller refusing non-finite or too large inputs (``nc.joint_forward_dynamics``'s checks)
-        self._checked = fast_caller(direct, 3, first=1, check=check, tol=PIVOT_TOL, result=self._aj,
-                                    bound=MAX_MAGNITUDE)
         js = model.joint_space
-        self._quaternions = js.dim == 3 and any(n in (4, 7) for n in js.nq_joint.values())
+        #: ``nc.joint_forward_dynamics``' door: non-finite or too large inputs refused, quaternions
+        #: normalised, a fresh ``a_j`` returned or ``out`` written, in C
+        self._door = fast_caller(direct, 3, first=1, check=check, tol=PIVOT_TOL, bound=MAX_MAGNITUDE,
+                                 outputs=[(self._aj, self.nv, 0)], quaternions=quaternion_offsets(js))
         self.set(t=model.t0, p=model.p0)
 
     def copy(self) -> "JointDynamicsKernel":
@@ -152,26 +153,28 @@ def joint_forward_dynamics_kernel(model, *, method: str = "auto", cflags=None) -
     return cached(model_data(model).tree_kernels, (method, cflags), build)
 
 
-def joint_forward_dynamics(model, qj, vj, u=None, p=None, t: float = 0.0, *, backend: str = "compiled") -> np.ndarray:
+def joint_forward_dynamics(model, qj, vj, u=None, p=None, t: float = 0.0, *, backend: str = "compiled",
+                           out=None) -> np.ndarray:
     """Joint accelerations ``a_j`` (``model.joint_names`` order; a free base: ``[a, α]`` in
     its frame) at joint positions ``qj`` and rates ``vj`` with inputs ``u`` (default zero)
     and parameters ``p`` (default ``model.p0``).  ``backend="compiled"``: the kernel of
     :func:`joint_forward_dynamics_kernel` for trees, mimic joints included (built on first
     use), else the ``"numpy"`` path: ``from_joint_space``, the KKT solve of
-    :func:`~ncgen.runtime.dynamics_at_state.forward_dynamics`, ``to_joint_space``."""
-    if backend not in ("compiled", "numpy"):
-        raise ModelError(f"joint_forward_dynamics: backend: expected 'compiled' or 'numpy', got {backend!r}")
+    :func:`~ncgen.runtime.dynamics_at_state.forward_dynamics`, ``to_joint_space``.
+    ``out``: an array of ``nv`` values written and returned (float64, C-contiguous)."""
     k = model_data(model).tree_kernel
-    if backend == "compiled" and k and k._checked is not None and not k._quaternions:
+    if backend == "compiled" and k and k._door is not None:
         k._at(t, p)                 # arguments straight to C, checked there; the messages below only on failure
         try:
-            out = k._checked(qj, vj, k._zero_u if u is None else u)
+            a = k._door(qj, vj, k._zero_u if u is None else u, out)
         except (TypeError, ValueError, OverflowError):
-            out = False
-        if out is None:
+            a = False
+        if a is None:
             k._singular()
-        if out is not False:
-            return out.copy()
+        if a is not False:
+            return a
+    if backend not in ("compiled", "numpy"):
+        raise ModelError(f"joint_forward_dynamics: backend: expected 'compiled' or 'numpy', got {backend!r}")
     js = model.joint_space
     qj = as_vector(qj, js.nq, "qj (joint positions, joint_names order)")
     vj = as_vector(vj, js.nv, "vj (joint rates, joint_names order)")
@@ -188,7 +191,9 @@ def joint_forward_dynamics(model, qj, vj, u=None, p=None, t: float = 0.0, *, bac
         k = data.tree_kernel
         if k:
             k.set(t=t, p=p)
-            return k(qj, vj, u).copy()
+            a = k(qj, vj, u).copy()
+            return a if out is None else write_out(out, a, "joint_forward_dynamics")
     q, v = model.from_joint_space(qj, vj, t=t, p=p)
     a, _ = forward_dynamics(model, q, v, u=u, p=p, t=t)
-    return model.to_joint_space(q, v, a)[2]
+    a = model.to_joint_space(q, v, a)[2]
+    return a if out is None else write_out(out, a, "joint_forward_dynamics")

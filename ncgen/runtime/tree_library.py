@@ -356,11 +356,25 @@ class TableAlgorithm:
         arg = (ctypes.c_void_p * (1 + len(ins)))(self.tree.ref, *(x.ctypes.data for x in ins))
         res = (ctypes.c_void_p * (len(outs) + 1))(*(o.ctypes.data for o in outs),
                                                    None if check is None else check.ctypes.data)
-        shim = _Direct([None, *ins], one, (ctypes.addressof(arg), ctypes.addressof(res), 0,
-                                           self.tree.work.ctypes.data, 0), (arg, res, outs, self.tree))
+        shim = self._shim = _Direct([None, *ins], one, (ctypes.addressof(arg), ctypes.addressof(res), 0,
+                                                        self.tree.work.ctypes.data, 0), (arg, res, outs, self.tree))
+        self._out_buffers = outs
         views = [o if len(self._shape(n)) == 1 else o.reshape(self._shape(n)).T for o, n in zip(outs, self.output_names)]
         return fast_caller(shim, len(ins), first=1, check=check, tol=PIVOT_TOL, bound=MAX_MAGNITUDE,
                            result=views[0] if len(views) == 1 else tuple(views))
+
+    def door_caller(self, quaternions):
+        """The fast caller returning fresh outputs or writing ``out``
+        (:func:`~ncgen.codegen.fast_call.fast_caller`'s ``outputs``), the quaternions at
+        ``quaternions`` in ``qj`` normalised in C; None without the extension."""
+        from ncgen.codegen.fast_call import fast_caller
+
+        if self._fast is None:
+            return None
+        shapes = [self._shape(n) for n in self.output_names]
+        return fast_caller(self._shim, len(self._sizes), first=1, check=self._fast_check, tol=PIVOT_TOL,
+                           bound=MAX_MAGNITUDE, quaternions=quaternions,
+                           outputs=[(o, s[0], s[1] if len(s) == 2 else 0) for o, s in zip(self._out_buffers, shapes)])
 
     def singular(self):
         """Raise the :class:`ModelError` of the failed check of the last fast call."""

@@ -1,0 +1,207 @@
+"""The doors of the compiled tree algorithms (issue 37): ``nc.rnea``, ``nc.crba``, ``nc.aba``,
+their derivatives, ``nc.inverse_dynamics`` and ``nc.joint_forward_dynamics`` take one C call
+(:class:`ncgen.runtime.tree_algorithm_kernels.Door`: checks, quaternion normalisation, kernel,
+pivot check and fresh outputs or ``out=`` in C), and give what the checked Python path and
+Pinocchio give.
+
+References: Pinocchio's ``rnea``, ``crba``, ``aba``, ``computeRNEADerivatives`` and
+``computeABADerivatives`` on the same URDF (a free-flying three-link tree whose base
+quaternion is given unnormalised and with ``qw < 0``), to 1e-10; the checked Python path
+(``Door.checked``: ``unit_quaternions`` in NumPy) bit for bit."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import ncgen as nc
+from ncgen.errors import ModelError, NcgenError, ShapeError
+from ncgen.runtime import tree_algorithm_kernels as rta
+
+URDF = """<robot name="door_tree">
+  <link name="base"><inertial><mass value="3.0"/><origin xyz="0.01 0 0.02"/>
+    <inertia ixx="0.05" iyy="0.06" izz="0.07" ixy="0.001" ixz="0" iyz="0.002"/></inertial></link>
+  <link name="a"><inertial><mass value="1.2"/><origin xyz="0 0.02 0.15" rpy="0.1 0.2 0.3"/>
+    <inertia ixx="0.011" iyy="0.012" izz="0.004" ixy="0.0005" ixz="0" iyz="0"/></inertial></link>
+  <link name="b"><inertial><mass value="0.8"/><origin xyz="0.02 0 0.1"/>
+    <inertia ixx="0.006" iyy="0.007" izz="0.002" ixy="0" ixz="0.0003" iyz="0"/></inertial></link>
+  <link name="c"><inertial><mass value="0.5"/><origin xyz="0.05 0.01 0"/>
+    <inertia ixx="0.002" iyy="0.003" izz="0.0025" ixy="0" ixz="0" iyz="0.0001"/></inertial></link>
+  <joint name="ja" type="revolute"><parent link="base"/><child link="a"/>
+    <origin xyz="0.1 0 0.05" rpy="0.2 0 0.1"/>
+    <axis xyz="0 1 0"/><limit effort="50" velocity="3" lower="-3" upper="3"/></joint>
+  <joint name="jb" type="revolute"><parent link="a"/><child link="b"/>
+    <origin xyz="0 0 0.3" rpy="0 0.3 0"/>
+    <axis xyz="1 0 1"/><limit effort="50" velocity="3" lower="-3" upper="3"/></joint>
+  <joint name="jc" type="prismatic"><parent link="base"/><child link="c"/>
+    <origin xyz="-0.1 0.05 0" rpy="0 0 0.4"/>
+    <axis xyz="0 0 1"/><limit effort="50" velocity="3" lower="-1" upper="1"/></joint>
+</robot>"""
+
+TOL = 1e-10
+
+
+@pytest.fixture(scope="module")
+def tree():
+    return nc.System.from_urdf(URDF, floating_base=True).build()
+
+
+def state(model, seed=0):
+    """``(qj, vj, aj, tau)`` with the base quaternion of norm 1.7 and ``qw < 0``."""
+    rng = np.random.default_rng(seed)
+    js = model.joint_space
+    qj = rng.uniform(-1, 1, js.nq)
+    s = js.slices()["root"]
+    quat = rng.normal(size=4)
+    quat[3] = -abs(quat[3])
+    qj[s.stop - 4:s.stop] = 1.7 * quat / np.linalg.norm(quat)
+    return qj, rng.normal(size=js.nv), rng.normal(size=js.nv), rng.normal(size=js.nv)
+
+
+CALLS = {
+    "rnea": lambda m, x, out=None: nc.rnea(m, x[0], x[1], x[2], out=out),
+    "crba": lambda m, x, out=None: nc.crba(m, x[0], out=out),
+    "aba": lambda m, x, out=None: nc.aba(m, x[0], x[1], x[3], out=out),
+    "rnea_derivatives": lambda m, x, out=None: nc.rnea_derivatives(m, x[0], x[1], x[2], out=out),
+    "aba_derivatives": lambda m, x, out=None: nc.aba_derivatives(m, x[0], x[1], x[3], out=out),
+    "inverse_dynamics": lambda m, x, out=None: nc.inverse_dynamics(m, x[0], x[1], x[2], joints="all", out=out),
+    "joint_forward_dynamics": lambda m, x, out=None: nc.joint_forward_dynamics(m, x[0], x[1], out=out),
+}
+
+
+def close(got, ref):
+    np.testing.assert_allclose(got, ref, rtol=0, atol=TOL * max(1.0, float(np.abs(ref).max())))
+
+
+def test_every_door_equals_pinocchio(tree):
+    pin = pytest.importorskip("pinocchio")
+    from pinocchio_robots import JointMap
+
+    pm = pin.buildModelFromXML(URDF, pin.JointModelFreeFlyer())
+    d, jm = pm.createData(), JointMap(tree, pm)
+    P = jm.P
+    for seed in range(3):
+        x = state(tree, seed)
+        qj, vj, aj, tau = x
+        qu = qj.copy()
+        s = tree.joint_space.slices()["root"]
+        qu[s.stop - 4:s.stop] /= np.linalg.norm(qu[s.stop - 4:s.stop])       # Pinocchio takes unit quaternions
+        qp, vp, ap = jm.q_to_pin(qu, pm.nq), P @ vj, P @ aj
+        M = P.T @ pin.crba(pm, d, qp) @ P
+        M = np.triu(M) + np.triu(M, 1).T
+        a_ref = P.T @ pin.aba(pm, d, qp, vp, P @ tau)
+        close(CALLS["rnea"](tree, x), P.T @ pin.rnea(pm, d, qp, vp, ap))
+        close(CALLS["inverse_dynamics"](tree, x), P.T @ pin.rnea(pm, d, qp, vp, ap))
+        close(CALLS["crba"](tree, x), M)
+        close(CALLS["aba"](tree, x), a_ref)
+        close(nc.joint_forward_dynamics(tree, qj, vj, np.zeros(tree.nu)), P.T @ pin.aba(pm, d, qp, vp, np.zeros(pm.nv)))
+        rdq, rdv, _ = pin.computeRNEADerivatives(pm, d, qp, vp, ap)
+        for got, ref in zip(CALLS["rnea_derivatives"](tree, x), (P.T @ pin.rnea(pm, d, qp, vp, ap), P.T @ rdq @ P,
+                                                                  P.T @ rdv @ P, M)):
+            close(got, ref)
+        adq, adv, aM = pin.computeABADerivatives(pm, d, qp, vp, P @ tau)
+        for got, ref in zip(CALLS["aba_derivatives"](tree, x), (a_ref, P.T @ adq @ P, P.T @ adv @ P,
+                                                                 P.T @ (np.triu(aM) + np.triu(aM, 1).T) @ P)):
+            close(got, ref)
+
+
+@pytest.mark.parametrize("name", list(CALLS))
+def test_out_is_written_in_place_and_equals_the_checked_path(tree, name):
+    """``out=`` receives the result and is returned; the C door (quaternion normalised in C)
+    equals the checked Python path bit for bit, fresh results are new arrays, matrices row-major."""
+    x = state(tree, 3)
+    fresh = CALLS[name](tree, x)
+    several = type(fresh) is tuple
+    out = tuple(np.full_like(f, np.nan) for f in fresh) if several else np.full_like(fresh, np.nan)
+    got = CALLS[name](tree, x, out)
+    assert got is out
+    for f, o in zip(fresh if several else (fresh,), out if several else (out,)):
+        np.testing.assert_array_equal(o, f)
+        assert f.flags.c_contiguous and f.flags.owndata
+    if name in rta.ALGORITHMS:
+        args = {"rnea": x[:3], "crba": x[:1], "aba": (x[0], x[1], x[3]), "rnea_derivatives": x[:3],
+                "aba_derivatives": (x[0], x[1], x[3])}[name]
+        checked = rta.door(tree, name).checked(tuple(args), None, 0.0, None)
+        for f, c in zip(fresh if several else (fresh,), checked if several else (checked,)):
+            np.testing.assert_array_equal(f, c)
+    again = CALLS[name](tree, x)                                     # a second call: new arrays, the first kept
+    for a, f in zip(again if several else (again,), fresh if several else (fresh,)):
+        assert a is not f and np.array_equal(a, f)
+
+
+def test_rows_of_states_write_out_too(tree):
+    X = [np.array([state(tree, s)[i] for s in range(4)]) for i in range(4)]
+    fresh = nc.rnea(tree, X[0], X[1], X[2])
+    out = np.empty_like(fresh)
+    assert nc.rnea(tree, X[0], X[1], X[2], out=out) is out
+    np.testing.assert_array_equal(out, fresh)
+    for i in range(4):
+        np.testing.assert_array_equal(fresh[i], nc.rnea(tree, X[0][i], X[1][i], X[2][i]))
+
+
+BAD_OUTS = {
+    "float32": (lambda r: r.astype(np.float32), r"got float32 array"),
+    "shape": (lambda r: np.zeros(r.size + 1), r"got float64 array of shape \(10,\)"),
+    "strided": (lambda r: np.zeros(2 * r.size)[::2], r"not C-contiguous"),
+    "read-only": (lambda r: np.frombuffer(bytes(8 * r.size)), r"read-only"),
+    "list": (lambda r: [0.0] * r.size, r"got list"),
+}
+
+
+@pytest.mark.parametrize("kind", list(BAD_OUTS))
+def test_a_bad_out_is_named(tree, kind):
+    x = state(tree, 4)
+    make, found = BAD_OUTS[kind]
+    ref = nc.rnea(tree, *x[:3])
+    out = make(ref)
+    before = np.array(out, dtype=float, copy=True)
+    for f in (lambda: nc.rnea(tree, *x[:3], out=out), lambda: nc.inverse_dynamics(tree, *x[:3], joints="all", out=out),
+              lambda: nc.aba(tree, x[0], x[1], x[3], out=out)):
+        with pytest.raises(ShapeError, match=r"(rnea|inverse_dynamics|aba): out: expected a writable C-contiguous "
+                                             r"float64 array of shape \(9,\), " + ".*" + found):
+            f()
+    np.testing.assert_array_equal(np.asarray(out, dtype=float), before)            # nothing written
+    with pytest.raises(ShapeError, match=r"rnea_derivatives: out: expected a tuple of 4 arrays"):
+        nc.rnea_derivatives(tree, *x[:3], out=np.zeros(9))
+    with pytest.raises(ShapeError, match=r"rnea_derivatives: out: .* of shape \(9, 9\), got float64 array of shape "
+                                         r"\(9,\)"):
+        nc.rnea_derivatives(tree, *x[:3], out=tuple(np.zeros(9) for _ in range(4)))
+
+
+def test_bad_arguments_are_named_at_the_door(tree):
+    qj, vj, aj, tau = state(tree, 5)
+    for f in (nc.rnea, nc.aba):
+        bad = vj.copy()
+        bad[2] = np.nan
+        with pytest.raises(ShapeError, match=r"vj \(joint rates, joint_names order\): expected finite numbers, "
+                                             r"got \[.*, nan, "):
+            f(tree, qj, bad, aj)
+        with pytest.raises(ShapeError, match=r"vj \(joint rates, joint_names order\): expected 9 numbers, got 8"):
+            f(tree, qj, vj[:8], aj)
+        with pytest.raises(NcgenError, match=r"vj.*expected real numbers"):
+            f(tree, qj, vj.astype(complex), aj)
+    zero = qj.copy()
+    s = tree.joint_space.slices()["root"]
+    zero[s.stop - 4:s.stop] = 0.0
+    with pytest.raises(ModelError, match=r"qj\['root'\]: the quaternion \[qx, qy, qz, qw\] is zero"):
+        nc.rnea(tree, zero, vj, aj)
+    with pytest.raises(ModelError, match=r"qj\['root'\]: the quaternion \[qx, qy, qz, qw\] is zero"):
+        nc.joint_forward_dynamics(tree, zero, vj)
+
+
+def test_a_good_call_takes_the_c_door_only(tree, monkeypatch):
+    """Arrays of the right sizes at the last call's time and parameters never reach the
+    Python checks (which would cost microseconds)."""
+    x = state(tree, 6)
+    for name in ("rnea", "crba", "aba", "rnea_derivatives", "aba_derivatives", "inverse_dynamics"):
+        CALLS[name](tree, x)                                                     # doors built, kernels compiled
+
+    def refused(*args, **kwargs):
+        raise AssertionError("the checked path was taken")
+
+    monkeypatch.setattr(rta.Door, "checked", refused)
+    monkeypatch.setattr(rta, "as_vector", refused)
+    for name in ("rnea", "crba", "aba", "rnea_derivatives", "aba_derivatives", "inverse_dynamics"):
+        CALLS[name](tree, x)
+        CALLS[name](tree, [list(v) for v in x])                                  # lists of floats too
+    with pytest.raises(AssertionError, match="checked path"):
+        nc.rnea(tree, *x[:3], t=1.0)                                             # a new time: the checked path
