@@ -139,6 +139,20 @@ def member_constants(dim: int, ctype: str) -> tuple:
 
 
 @lru_cache(maxsize=None)
+def member_constant_names(dim: int, ctype: str) -> tuple[str, ...]:
+    """The names of :func:`member_constants`, read from the shipped numeric forms of ``Φ`` and
+    ``M`` (:mod:`ncgen.symbolic.numeric_forms`, generated from the same derivation) so that
+    packing a model's tables needs no SymPy."""
+    from ncgen.symbolic.numeric_forms import FORMS
+
+    names = set()
+    for formula in ("Phi", "M"):
+        if (ctype, dim, formula) in FORMS:
+            names.update(FORMS[ctype, dim, formula][3])
+    return tuple(sorted(names))
+
+
+@lru_cache(maxsize=None)
 def member_kind(dim: int, ctype: str) -> MemberKind:
     """The kernels of member kind ``(dim, ctype)`` from its derivation."""
     ct = coordinate_type(ctype, dim)

@@ -129,7 +129,15 @@ def _linear_in_inputs(ctx, e: ca.SX, n_out: int) -> np.ndarray | None:
 def actuator_element(model, joint) -> ActuatorElement | None:
     """The :class:`ActuatorElement` of an actuated joint (``effort=``), or None when the
     tables do not cover it (another kind, an effort not linear in the inputs, a coordinate
-    not of that form)."""
+    not of that form); worked out once per model and joint (``model.data.actuator_elements``)."""
+    elements = model_data(model).actuator_elements
+    hit = elements.get(id(joint))
+    if hit is None or hit[0] is not joint:
+        hit = elements[id(joint)] = (joint, _actuator_element(model, joint))
+    return hit[1]
+
+
+def _actuator_element(model, joint) -> ActuatorElement | None:
     if (joint.kind not in ACTUATED_KINDS or type(joint).__module__ != "ncgen.model.joints"
             or getattr(joint, "system", None) is None or not model.nu):
         return None
