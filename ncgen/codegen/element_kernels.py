@@ -139,17 +139,23 @@ def member_constants(dim: int, ctype: str) -> tuple:
 
 
 @lru_cache(maxsize=None)
-def member_constant_names(dim: int, ctype: str) -> tuple[str, ...]:
-    """The names of :func:`member_constants`, read from the shipped numeric forms of ``Φ`` and
-    ``M`` (:mod:`ncgen.symbolic.numeric_forms`, generated from the same derivation) so that
-    packing a model's tables needs no SymPy."""
+def shipped_constant_names(dim: int, ctype: str, formulas: tuple[str, ...]) -> tuple[str, ...]:
+    """The names of the constants of a member kind's ``formulas``, sorted, read from their shipped
+    numeric forms (:mod:`ncgen.symbolic.numeric_forms`, generated from the derivation) so that
+    packing a model's tables needs no SymPy: ``("Phi", "M")`` gives the names of
+    :func:`member_constants`, ``("W",)`` those of :func:`torque_constants`."""
     from ncgen.symbolic.numeric_forms import FORMS
 
     names = set()
-    for formula in ("Phi", "M"):
+    for formula in formulas:
         if (ctype, dim, formula) in FORMS:
             names.update(FORMS[ctype, dim, formula][3])
     return tuple(sorted(names))
+
+
+def member_constant_names(dim: int, ctype: str) -> tuple[str, ...]:
+    """The names of :func:`member_constants` (:func:`shipped_constant_names`)."""
+    return shipped_constant_names(dim, ctype, ("Phi", "M"))
 
 
 @lru_cache(maxsize=None)
@@ -261,6 +267,11 @@ def torque_constants(dim: int, ctype: str) -> tuple:
     """The constant symbols of a member kind's ``W`` (other than its coordinates), sorted by name."""
     D = coordinate_type(ctype, dim).derivation
     return tuple(sorted(set(D.W.free_symbols) - set(D.q) - set(D.qd), key=str))
+
+
+def torque_constant_names(dim: int, ctype: str) -> tuple[str, ...]:
+    """The names of :func:`torque_constants` (:func:`shipped_constant_names`)."""
+    return shipped_constant_names(dim, ctype, ("W",))
 
 
 @lru_cache(maxsize=None)

@@ -42,7 +42,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.assembly.mass import mass_is_regular
-from ncgen.codegen.element_kernels import FEATURE_FORCE_KINDS, torque_constants
+from ncgen.codegen.element_kernels import FEATURE_FORCE_KINDS, torque_constant_names
 from ncgen.codegen.model_tables import ModelTables, UnsupportedElements, _csc, _ints, _ptr, _reals, model_tables
 from ncgen.errors import CodegenError, NcgenError
 from ncgen.model.context import Context
@@ -403,9 +403,9 @@ def force_elements(model) -> dict:
                        "par": [f.k, f.damping, f.rest_angle, sign], "damping": f.damping})
         elif type(f) is Torque:
             m = f.member
-            values = m.rigid.constants()
+            values = m.rigid.constant_values
             torques.append({"member": names.index(m.name),
-                            "c": [float(values[s]) for s in torque_constants(dim, m.ctype.name)],
+                            "c": [float(values[n]) for n in torque_constant_names(dim, m.ctype.name)],
                             "tau": _numbers(f.torque, 3 if dim == 3 else 1)})
     return {"f_const": f_const, "ff": ff, "torque": torques}
 
