@@ -70,9 +70,14 @@ print(json.dumps({"imports": t1 - t0, "system": t2 - t1, "build": t3 - t2, "firs
 """
 
 
-def child_env(root: Path, cache: Path, compiler: bool) -> dict:
-    env = {k: v for k, v in os.environ.items() if k not in ("CC", "PYTHONPATH", "NCGEN_CACHE_DIR")}
+def child_env(root: Path, cache: Path, pycache: Path, compiler: bool) -> dict:
+    """The child's environment: ``root`` on the path, ``cache`` as compile cache, Python's bytecode
+    in the private prefix ``pycache`` (written by the preparing runs, as a user's installation
+    has its ``.pyc`` files), and with ``compiler`` False an empty ``PATH`` and no ``CC``."""
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("CC", "PYTHONPATH", "NCGEN_CACHE_DIR", "PYTHONDONTWRITEBYTECODE")}
     env["PYTHONPATH"], env["NCGEN_CACHE_DIR"] = str(root), str(cache)
+    env["PYTHONPYCACHEPREFIX"] = str(pycache)
     if not compiler:
         env["PATH"] = str(cache.parent / "no-compiler-bin")
     return env
@@ -83,8 +88,8 @@ def prepare(root: Path, base: Path, models: list[str]) -> None:
     once with a compiler), then the store of built models emptied."""
     base.mkdir(parents=True)
     for kind in models:
-        out = subprocess.run([sys.executable, "-c", CHILD, kind, "999", str(H)], env=child_env(root, base, True),
-                             capture_output=True, text=True)
+        env = child_env(root, base, base.parent / "pycache", True)
+        out = subprocess.run([sys.executable, "-c", CHILD, kind, "999", str(H)], env=env, capture_output=True, text=True)
         if out.returncode:
             sys.exit(f"{root}: preparing {kind} failed:\n{out.stderr[-2000:]}")
     shutil.rmtree(base / "models", ignore_errors=True)
@@ -95,8 +100,8 @@ def run(root: Path, base: Path, kind: str, seed: int) -> dict:
     cache = work / "cache"
     shutil.copytree(base, cache)
     (work / "no-compiler-bin").mkdir()
-    out = subprocess.run([sys.executable, "-c", CHILD, kind, str(seed), str(H)], env=child_env(root, cache, False),
-                         capture_output=True, text=True)
+    env = child_env(root, cache, base.parent / "pycache", False)
+    out = subprocess.run([sys.executable, "-c", CHILD, kind, str(seed), str(H)], env=env, capture_output=True, text=True)
     shutil.rmtree(work, ignore_errors=True)
     if out.returncode:
         sys.exit(f"{root}: {kind} failed without a compiler:\n{out.stderr[-2000:]}")
