@@ -66,7 +66,8 @@ t3 = time.process_time()
 traj = nc.simulate(model, 2 * h, h, method="stepper", kernels="tables")
 t4 = time.process_time()
 print(json.dumps({"imports": t1 - t0, "system": t2 - t1, "build": t3 - t2, "first step": t4 - t3,
-                  "total": t4 - t1, "sympy": "sympy" in sys.modules, "kernels": traj.info.get("kernels")}))
+                  "total": t4 - t1, "sympy": "sympy" in sys.modules, "kernels": traj.info.get("kernels"),
+                  "ncgen": nc.__file__}))
 """
 
 
@@ -89,7 +90,8 @@ def prepare(root: Path, base: Path, models: list[str]) -> None:
     base.mkdir(parents=True)
     for kind in models:
         env = child_env(root, base, base.parent / "pycache", True)
-        out = subprocess.run([sys.executable, "-c", CHILD, kind, "999", str(H)], env=env, capture_output=True, text=True)
+        out = subprocess.run([sys.executable, "-c", CHILD, kind, "999", str(H)], env=env, capture_output=True, text=True,
+                             cwd=base.parent)
         if out.returncode:
             sys.exit(f"{root}: preparing {kind} failed:\n{out.stderr[-2000:]}")
     shutil.rmtree(base / "models", ignore_errors=True)
@@ -101,11 +103,15 @@ def run(root: Path, base: Path, kind: str, seed: int) -> dict:
     shutil.copytree(base, cache)
     (work / "no-compiler-bin").mkdir()
     env = child_env(root, cache, base.parent / "pycache", False)
-    out = subprocess.run([sys.executable, "-c", CHILD, kind, str(seed), str(H)], env=env, capture_output=True, text=True)
+    out = subprocess.run([sys.executable, "-c", CHILD, kind, str(seed), str(H)], env=env, capture_output=True, text=True,
+                         cwd=work)       # not the caller's directory: `python -c` puts it first on sys.path
     shutil.rmtree(work, ignore_errors=True)
     if out.returncode:
         sys.exit(f"{root}: {kind} failed without a compiler:\n{out.stderr[-2000:]}")
-    return json.loads(out.stdout.strip().splitlines()[-1])
+    result = json.loads(out.stdout.strip().splitlines()[-1])
+    if not Path(result["ncgen"]).resolve().is_relative_to(root):
+        sys.exit(f"{root}: the child imported ncgen from {result['ncgen']}")
+    return result
 
 
 def main() -> None:
