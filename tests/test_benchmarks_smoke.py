@@ -45,6 +45,8 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800),   # each benchmark sc
                       "=== panda from Python", "from_urdf().build(), stored", "first run, derivations stored",
                       "heavy modules a later run imports: none"]),
     ("build_scaling.py", ["=== ncgen: chain of N bars", "KanesMethod", "EXTRAPOLATED"]),
+    ("second_model.py", ["=== a model never seen -> first compiled step, no compiler on PATH", "chain    this",
+                         "SymPy imported: False", "kernels tables"]),
     ("build_scaling.py --build-cpu ..", ["=== System -> build() of the chain", "made by build(): phi, A"]),
     ("long_run.py", ["=== heavy top", "=== chain of 5 bars", "RATIO ncgen / MuJoCo RK4"]),
     ("contact.py", ["=== chain of N = 3 bars falling on the ground", "RATIO ncgen / MuJoCo wall time",

@@ -18,9 +18,13 @@ import numpy as np
 import pytest
 
 import ncgen as nc
-from ncgen.codegen.element_kernels import JOINT_KINDS, MEMBER_KINDS, joint_kind, member_kind
+from ncgen.codegen.element_kernels import (
+    JOINT_KINDS, MEMBER_KINDS, joint_kind, member_constant_names, member_constants, member_kind, torque_constant_names,
+    torque_constants,
+)
 from ncgen.codegen.model_tables import UnsupportedElements, model_tables
 from ncgen.codegen.compiler import CANDIDATES
+from ncgen.symbolic.coordinates import coordinate_type
 from ncgen.runtime.table_library import TableFunctions, load_element_library, table_functions
 from no_compiler import run_without_compiler
 
@@ -203,6 +207,18 @@ def test_member_kernels_equal_the_members_own_formulas():
             np.testing.assert_allclose(np.array(J), m.rigid.phi_q(q), rtol=0, atol=1e-13)
             np.testing.assert_allclose(-np.array(k.hvv(q, c)).reshape(-1), m.rigid.gamma(q), rtol=0, atol=1e-13)
     assert {(3, m.ctype.name) for m in members} == {k for k in MEMBER_KINDS if k[0] == 3}
+
+
+def test_member_constant_names_are_the_derivation_s():
+    """The constants a model's tables are packed with (read from the shipped numeric forms,
+    no SymPy) are, in order, the derivation's constant symbols of Φ and M that the member
+    kernels take, and of W that the torque kernels take."""
+    for dim, ctype in MEMBER_KINDS:
+        names = member_constant_names(dim, ctype)
+        assert names == tuple(map(str, member_constants(dim, ctype))) == member_kind(dim, ctype).constants, \
+            (dim, ctype)
+        if coordinate_type(ctype, dim).derivation.W is not None:
+            assert torque_constant_names(dim, ctype) == tuple(map(str, torque_constants(dim, ctype))), (dim, ctype)
 
 
 def test_uncovered_kinds_are_refused_by_name():

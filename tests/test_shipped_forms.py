@@ -98,6 +98,17 @@ def test_generated_python_follows_to_casadi():
             assert str(got) == str(to_casadi(expr, values)), (name, dim, formula)
 
 
+def test_primitive_rows_are_the_formulas_rows():
+    """``primitive_rows`` (no SymPy) is the row count of each primitive's formula."""
+    from ncgen.symbolic.joint_primitives import PRIMITIVES, primitive, primitive_rows
+
+    for dim in (2, 3):
+        for name in PRIMITIVES:
+            assert primitive_rows(name, dim) == primitive(name, dim).expr.shape[0], (name, dim)
+    with pytest.raises(KeyError, match="unknown joint primitive 'hinge'"):
+        primitive_rows("hinge", 3)
+
+
 def test_shipped_sx_functions_equal_the_translation():
     """The serialised instance and rigid-motion functions, called on symbols, print the same
     expression as the translation made now."""

@@ -131,7 +131,7 @@ def test_auto_choice_override_and_refusal(library):
 
 
 CHILD = r"""
-import json, time
+import json, sys, time
 import numpy as np
 import ncgen as nc
 from no_compiler import chain, forbid_compiler, fourbar
@@ -156,6 +156,7 @@ for system in (chain("nocc_chain13", 13, (0.29, 0.13, -0.04)), fourbar("nocc_fou
 model = every_force(3, "nocc_batch").build()
 batch = nc.simulate_batch(model, 0.2, 0.01, v0=np.tile(model.v0, (3, 1)), workers=2)
 out["batch"] = {"kernels": batch.info["kernels"], "ok": bool(np.all(batch.ok))}
+out["sympy"] = "sympy" in sys.modules
 print(json.dumps(out))
 """
 
@@ -165,8 +166,10 @@ def test_new_models_step_with_no_compiler(library, tmp_path):
     with every force kind of the tables (3D and planar) are built and stepped in a process
     with no compiler on PATH (and compile_package replaced by a failure), and a batch of
     runs of a new one: the tables' stepper, the energy balance (E − E0 − W, the work of the non-conservative forces;
-    relative to the largest kinetic energy) and the constraints kept."""
+    relative to the largest kinetic energy) and the constraints kept; SymPy is not imported
+    (the tables are packed from the shipped forms)."""
     runs = run_without_compiler(CHILD, tmp_path)
+    assert runs.pop("sympy") is False
     assert set(runs) == {"nocc_chain13", "nocc_fourbar", "nocc_forces3d", "nocc_forces2d", "batch"}
     assert runs.pop("batch") == {"kernels": "tables", "ok": True}
     for name, r in runs.items():

@@ -139,6 +139,26 @@ def member_constants(dim: int, ctype: str) -> tuple:
 
 
 @lru_cache(maxsize=None)
+def shipped_constant_names(dim: int, ctype: str, formulas: tuple[str, ...]) -> tuple[str, ...]:
+    """The names of the constants of a member kind's ``formulas``, sorted, read from their shipped
+    numeric forms (:mod:`ncgen.symbolic.numeric_forms`, generated from the derivation) so that
+    packing a model's tables needs no SymPy: ``("Phi", "M")`` gives the names of
+    :func:`member_constants`, ``("W",)`` those of :func:`torque_constants`."""
+    from ncgen.symbolic.numeric_forms import FORMS
+
+    names = set()
+    for formula in formulas:
+        if (ctype, dim, formula) in FORMS:
+            names.update(FORMS[ctype, dim, formula][3])
+    return tuple(sorted(names))
+
+
+def member_constant_names(dim: int, ctype: str) -> tuple[str, ...]:
+    """The names of :func:`member_constants` (:func:`shipped_constant_names`)."""
+    return shipped_constant_names(dim, ctype, ("Phi", "M"))
+
+
+@lru_cache(maxsize=None)
 def member_kind(dim: int, ctype: str) -> MemberKind:
     """The kernels of member kind ``(dim, ctype)`` from its derivation."""
     ct = coordinate_type(ctype, dim)
@@ -247,6 +267,11 @@ def torque_constants(dim: int, ctype: str) -> tuple:
     """The constant symbols of a member kind's ``W`` (other than its coordinates), sorted by name."""
     D = coordinate_type(ctype, dim).derivation
     return tuple(sorted(set(D.W.free_symbols) - set(D.q) - set(D.qd), key=str))
+
+
+def torque_constant_names(dim: int, ctype: str) -> tuple[str, ...]:
+    """The names of :func:`torque_constants` (:func:`shipped_constant_names`)."""
+    return shipped_constant_names(dim, ctype, ("W",))
 
 
 @lru_cache(maxsize=None)

@@ -7,7 +7,7 @@
 * every member is a *member element* of kind ``(dim, coordinate type)``
   (:data:`~ncgen.codegen.element_kernels.MEMBER_KINDS`): its local coordinates
   ``q_I = S_I q + b_I`` (a column of ``q`` per coordinate, or -1 and the ground point's value),
-  its constants (:func:`~ncgen.codegen.element_kernels.member_constants`) and the rows of
+  its constants (:func:`~ncgen.codegen.element_kernels.member_constant_names`) and the rows of
   ``Φ`` its intrinsic constraints ``<member>.rigid.<uv>`` are;
 * every joint equation is an output of a *joint element*: a joint primitive of
   :mod:`ncgen.symbolic.joint_primitives` applied to points and directions of members (*features*,
@@ -29,10 +29,11 @@ import casadi as ca
 import numpy as np
 
 from ncgen.codegen.element_kernels import (
-    JOINT_KINDS, MEMBER_KINDS, joint_kind, joint_kind_name, member_constants, member_kind_name,
+    JOINT_KINDS, MEMBER_KINDS, joint_kind_name, member_constant_names, member_kind_name,
 )
 from ncgen.errors import CodegenError
 from ncgen.model.context import Context
+from ncgen.symbolic.joint_primitives import primitive_rows
 
 #: Joint classes whose equations (without a drive) are joint primitives of constant scalars.
 COVERED_JOINTS = ("Spherical", "Revolute", "Prismatic", "Cylindrical", "Universal", "Planar", "Fixed",
@@ -111,7 +112,7 @@ class _Recorder(Context):
 
     def apply(self, name: str, *args):
         if (name, self.dim) in JOINT_KINDS:
-            out = ca.SX.sym(f"{name}{len(self.calls)}", joint_kind(name, self.dim).n_out)
+            out = ca.SX.sym(f"{name}{len(self.calls)}", primitive_rows(name, self.dim))
         else:
             out = super().apply(name, *args)
         self.calls.append((name, args, out))
@@ -232,11 +233,11 @@ def _constant(s, ctx) -> float | None:
 def _member_element(model, m, rows: dict[str, int]) -> dict:
     ct = m.ctype
     kind = MEMBER_KINDS.index((model.dim, ct.name))
-    values = m.rigid.constants()
+    values = m.rigid.constant_values
     labels = [f"{m.name}.rigid.{VECTOR_NAMES[s]}{VECTOR_NAMES[t]}" for s, t in ct.pairs]
     cols = [-1 if i is None else i for i in model.layout.member_indices(m.name)]
     return {"kind": kind, "cols": cols, "const": model.layout.member_constant(m.name),
-            "c": [float(values[s]) for s in member_constants(model.dim, ct.name)],
+            "c": [float(values[n]) for n in member_constant_names(model.dim, ct.name)],
             "labels": labels, "rows": [rows.get(label, -1) for label in labels]}
 
 

@@ -42,7 +42,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.assembly.mass import mass_is_regular
-from ncgen.codegen.element_kernels import FEATURE_FORCE_KINDS, torque_constants
+from ncgen.codegen.element_kernels import FEATURE_FORCE_KINDS, torque_constant_names
 from ncgen.codegen.model_tables import ModelTables, UnsupportedElements, _csc, _ints, _ptr, _reals, model_tables
 from ncgen.errors import CodegenError, NcgenError
 from ncgen.model.context import Context
@@ -129,7 +129,15 @@ def _linear_in_inputs(ctx, e: ca.SX, n_out: int) -> np.ndarray | None:
 def actuator_element(model, joint) -> ActuatorElement | None:
     """The :class:`ActuatorElement` of an actuated joint (``effort=``), or None when the
     tables do not cover it (another kind, an effort not linear in the inputs, a coordinate
-    not of that form)."""
+    not of that form); worked out once per model and joint (``model.data.actuator_elements``)."""
+    elements = model_data(model).actuator_elements
+    hit = elements.get(id(joint))
+    if hit is None or hit[0] is not joint:
+        hit = elements[id(joint)] = (joint, _actuator_element(model, joint))
+    return hit[1]
+
+
+def _actuator_element(model, joint) -> ActuatorElement | None:
     if (joint.kind not in ACTUATED_KINDS or type(joint).__module__ != "ncgen.model.joints"
             or getattr(joint, "system", None) is None or not model.nu):
         return None
@@ -395,9 +403,9 @@ def force_elements(model) -> dict:
                        "par": [f.k, f.damping, f.rest_angle, sign], "damping": f.damping})
         elif type(f) is Torque:
             m = f.member
-            values = m.rigid.constants()
+            values = m.rigid.constant_values
             torques.append({"member": names.index(m.name),
-                            "c": [float(values[s]) for s in torque_constants(dim, m.ctype.name)],
+                            "c": [float(values[n]) for n in torque_constant_names(dim, m.ctype.name)],
                             "tau": _numbers(f.torque, 3 if dim == 3 else 1)})
     return {"f_const": f_const, "ff": ff, "torque": torques}
 

@@ -32,7 +32,6 @@ contact forces are those on the second element (the sphere, ``b``, or the corner
 from __future__ import annotations
 
 import math
-from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -55,36 +54,28 @@ MIN_RESTITUTION = 0.01
 def damping_for_restitution(stiffness: float, restitution: float, exponent: float = EXPONENT) -> float:
     """The damping d (N·s/m^(n+1)) with which ``f_N = δⁿ (k + d δ̇)`` returns a normal impact
     at :data:`RESTITUTION_SPEED` with restitution ``e`` (at least :data:`MIN_RESTITUTION`).
-    Scaled by ``δ = L y``, ``L^(n+1) = m v²/k``, the impact is ``y'' = −yⁿ (1 + ζ y')⁺`` with
-    ``ζ = d v / k`` alone, so ``ζ(e, n)`` is solved once (bisection) and ``d = ζ k / v``."""
-    return _zeta(round(max(float(restitution), MIN_RESTITUTION), 6), float(exponent)) * stiffness / RESTITUTION_SPEED
+    Scaled by ``δ = L y``, ``L^(n+1) = m v²/k``, the impact is ``y'' = −yⁿ (1 + ζ y')`` with
+    ``ζ = d v / k`` alone, and ``d = ζ k / v`` with ζ from :func:`restitution_zeta` (the same
+    for every exponent n: ``exponent`` is accepted and does not change the result)."""
+    return restitution_zeta(max(float(restitution), MIN_RESTITUTION)) * stiffness / RESTITUTION_SPEED
 
 
-@lru_cache(maxsize=64)
-def _zeta(e: float, n: float) -> float:
+def restitution_zeta(e: float) -> float:
+    """The scaled damping ζ of the Hunt–Crossley impact ``y'' = −yⁿ (1 + ζ y')``, ``y(0) = 0``,
+    ``y'(0) = 1``, that rebounds with speed ``e`` (0 < e ≤ 1).  With ``y'' = v dv/dy`` the
+    equation separates, ``v dv / (1 + ζ v) = −yⁿ dy``; integrated over the whole impact
+    (from ``v = 1`` at ``y = 0`` back to ``y = 0`` at ``v = −e``) its right side vanishes, so
+    ``∫_{−e}^{1} v / (1 + ζ v) dv = 0``, i.e. ``ln((1 + ζ)/(1 − e ζ)) = (1 + e) ζ``
+    whatever n.  ``1 + ζ v`` stays positive (the integral diverges as ``v → −1/ζ``), so the
+    force never vanishes before separation; the root in ``(0, 1/e)`` is found by bisection
+    (the left side minus the right is negative below it, positive above)."""
     if e >= 1.0:
         return 0.0
-    lo, hi = 0.0, 1.0
-    while _rebound(hi, n) > e:
-        hi *= 2.0
-    while hi - lo > 1e-7 * hi:
+    lo, hi = 0.0, 1.0 / e
+    while hi - lo > 4.0 * math.ulp(hi):
         mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if _rebound(mid, n) > e else (lo, mid)
+        lo, hi = (mid, hi) if math.log1p(mid) - math.log1p(-e * mid) < (1.0 + e) * mid else (lo, mid)
     return 0.5 * (lo + hi)
-
-
-def _rebound(zeta: float, n: float) -> float:
-    """Rebound speed of the scaled impact ``y'' = −yⁿ (1 + ζ y')⁺``, ``y(0) = 0, y'(0) = 1``."""
-    from scipy.integrate import solve_ivp
-
-    def rhs(_, x):
-        return [x[1], -max(x[0], 0.0) ** n * max(1.0 + zeta * x[1], 0.0)]
-
-    def apart(_, x):          # the force has vanished while moving out, or the sphere left
-        return min(x[0], 1.0 + zeta * x[1]) if x[1] < 0 else 1.0
-    apart.terminal, apart.direction = True, -1
-    sol = solve_ivp(rhs, (0.0, 100.0), [0.0, 1.0], events=apart, method="LSODA", rtol=1e-9, atol=1e-12)
-    return float(-sol.y[1, -1])
 
 
 def _check_name(name) -> None:

@@ -108,6 +108,9 @@ class ModelData:
     #: ``{id(force): (force, B or None)}``: the constant input map ``Q = B u`` of each force,
     #: checked symbolically once (:func:`ncgen.codegen.stepper_tables.input_force_map`).
     input_force_maps: dict = field(default_factory=dict)
+    #: ``{id(joint): (joint, ActuatorElement or None)}``: each actuated joint's table element,
+    #: checked symbolically once (:func:`ncgen.codegen.stepper_tables.actuator_element`).
+    actuator_elements: dict = field(default_factory=dict)
     #: The model's key in the store of built models (:mod:`ncgen.codegen.model_cache`) when it
     #: was read from or written to it; functions derived from it are stored under it too.
     store_key: str | None = None

@@ -77,3 +77,11 @@ def primitive(name: str, dim: int) -> Primitive:
 
 
 PRIMITIVES = ("coincidence", "dot", "offset_dot", "distance", "slider_ratio", "angle")
+
+
+def primitive_rows(name: str, dim: int) -> int:
+    """The number of equations of the primitive ``name`` in dimension ``dim`` without deriving
+    it: ``dim`` for ``coincidence`` (a vector equation), 1 for the scalar ones."""
+    if name not in PRIMITIVES:
+        raise KeyError(f"unknown joint primitive {name!r}; known: {', '.join(PRIMITIVES)}")
+    return dim if name == "coincidence" else 1
