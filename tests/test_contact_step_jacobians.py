@@ -126,6 +126,8 @@ def test_bounce_impact(block):
         assert np.isclose(s.x1[3], 0.6 * 2.0, rtol=1e-12)    # Newton's law on the start-of-step approach speed
 
 
+@pytest.mark.slow      # a sphere scene compiled; fast: test_block_sticking_small_push and
+#                       test_block_sliding_hard_push (stick and slip on a plane), test_three_sphere_pile
 def test_sphere_rolling_and_sliding_on_a_plane():
     """A rigid sphere (12 natural coordinates, 6 constraints) on the floor, pushed at its
     centre: it rolls (sticking) under a small push, slides under a large one."""

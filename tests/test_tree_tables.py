@@ -412,6 +412,8 @@ def test_urdf_robots_match_pinocchio_and_the_flat_kernels(name, library, monkeyp
                                        atol=1e-12 * max(1.0, np.abs(want).max()), err_msg=f"{name} {alg}")
 
 
+@pytest.mark.slow      # writes every unit twice, compiles each source at -Werror (≈ 25 gcc calls); fast:
+#                       test_tables_equal_the_flat_functions compiles every unit through the library fixture
 def test_tree_package_is_deterministic_and_warning_free(tmp_path):
     """The tree library's package (every unit in one library) and each of its units: the same
     bytes when written twice, and their C compiles with -Wall -Wextra -Werror."""
@@ -433,6 +435,8 @@ def test_tree_package_is_deterministic_and_warning_free(tmp_path):
             assert out.returncode == 0, (unit, out.stderr[-3000:])
 
 
+@pytest.mark.slow      # compiles six units into an empty cache; fast: test_tables_equal_the_flat_functions,
+#                       test_auto_joint_run_takes_the_tables_and_says_why (missing_units)
 def test_units_are_compiled_as_trees_need_them(tmp_path, monkeypatch):
     """A fresh compile cache: forward dynamics of a revolute/prismatic tree compiles the forward
     unit alone, its RNEA the inverse unit; a spherical joint adds its local kernel unit, the
