@@ -281,6 +281,9 @@ def test_benchmark_smoke(tmp_path):
         assert line in out.stdout, (line, out.stdout[-3000:])
 
 
+@pytest.mark.slow      # writes the package twice, compiles it at -Werror; fast:
+#                       test_examples_equal_the_flat_functions_or_are_refused_by_kind (the library compiled and
+#                       checked), tests/test_c_binding.py (its tables against the template)
 def test_element_package_is_deterministic_and_warning_free(tmp_path):
     """The element library's package: the same bytes when written twice, and its C compiles
     with -Wall -Wextra -Werror."""
