@@ -142,7 +142,7 @@ def pytest_terminal_summary(terminalreporter):
         terminalreporter.write_line(f"{len(over)} fast tests over the budget of {FAST_TEST_BUDGET:g} CPU-s "
                                     "(tests/conftest.py; the first users of the element and tree libraries "
                                     "carry their compile):")
-        for cpu, nodeid in over[:30]:
+        for cpu, nodeid in over:
             terminalreporter.write_line(f"  {cpu:7.1f} CPU-s  {nodeid}")
     deselected = terminalreporter.stats.get("deselected", [])
     slow = sum(1 for item in deselected if item.get_closest_marker("slow") is not None)
