@@ -10,6 +10,8 @@ from scipy.optimize import minimize
 
 import ncgen as nc
 
+QUICK_COMPILE = True             # its time is gcc compiling its scenes: -O0 (tests/conftest.py)
+
 G = 9.81
 
 

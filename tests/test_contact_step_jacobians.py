@@ -10,6 +10,7 @@ import pytest
 import ncgen as nc
 from ncgen.errors import NcgenError, OptimizationError
 
+QUICK_COMPILE = True             # its time is gcc compiling its scenes: -O0 (tests/conftest.py)
 G, MASS, MU, H = 9.81, 2.0, 0.5, 0.01
 #: Central differences stay inside the push-out's threshold (PENETRATION_TOL = 1e-8 m): a
 #: resting contact pushed 1e-6 m down is pushed out, the other side is not (a switch).
