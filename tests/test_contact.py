@@ -173,6 +173,8 @@ def test_bounce_heights_follow_restitution(drops):
     assert np.all(tr.contact_normal[flight, 0] == 0) and np.all(tr.contact_state[flight, 0] == OPEN)
 
 
+@pytest.mark.slow      # the exported package built by make at -O2; fast: test_bounce_heights_follow_restitution (the
+#                       same drops in Python), tests/c/test_contact.c (the C contact solve)
 @pytest.mark.skipif(shutil.which("make") is None, reason="make not installed")
 def test_c_program_simulates_contacts_like_python(drops, tmp_path):
     pkg = nc.generate(drops, tmp_path / drops.name)

@@ -58,7 +58,8 @@ def assert_equal_to_flat(model, library, seed=0):
     return tf
 
 
-@pytest.mark.parametrize("path", EXAMPLES, ids=[p.stem for p in EXAMPLES])
+@pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.slow) if p.stem == "box_stack" else p   # the largest;
+                                  for p in EXAMPLES], ids=[p.stem for p in EXAMPLES])            # fast: boxes
 def test_examples_equal_the_flat_functions_or_are_refused_by_kind(path, library):
     model = nc.System.from_toml(path).build()
     if path.stem in REFUSED:
@@ -257,6 +258,9 @@ print(json.dumps(out))
 """
 
 
+@pytest.mark.slow      # a subprocess without a compiler; fast:
+#                       tests/test_tree_tables.py::test_a_new_tree_needs_no_compiler (the same no-compiler loading of
+#                       a cached library)
 def test_a_new_model_needs_no_compiler(library, tmp_path):
     """Once the library is cached, a new chain and a new four-bar are evaluated in a process
     with no compiler on PATH (and compile_package replaced by a failure)."""

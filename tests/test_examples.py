@@ -55,7 +55,7 @@ def test_box_stack_idas_work_is_bounded():
 
 #: Scripts run in the slow tier (a subprocess, a compile and a plot each); their models build and
 #: simulate in the fast tier above, and the chain's script takes the same path there.
-SLOW_SCRIPTS = {"cartpole", "double_pendulum", "heavy_top", "slider_crank", "tensegrity"}
+SLOW_SCRIPTS = {"capstan_winch", "cartpole", "double_pendulum", "heavy_top", "slider_crank", "tensegrity"}
 
 
 @pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.slow) if p.stem in SLOW_SCRIPTS else p
