@@ -92,7 +92,7 @@ def test_over_a_frictionless_drum_the_reel_is_the_rest_to_rest_cubic():
 
 
 @pytest.mark.parametrize("mu, tol", [(0.0, 1e-5), pytest.param(0.3, 1e-4, marks=pytest.mark.slow)])   # fast: μ = 0;
-def test_simulator_replays_the_plan(                                   # the friction drum's run: tests/test_capstan_cable.pymu, tol):
+def test_simulator_replays_the_plan(mu, tol):          # the friction drum's runs: tests/test_capstan_cable.py
     """IDAS with the optimal coefficients: the weight ends within ``tol`` (m) of H, at rest within
     10 tol per s, and follows the plan within ``tol``.  Over the friction drum the plan is a local
     optimum that changes with the last bits of the model (see the module docstring): looser."""
