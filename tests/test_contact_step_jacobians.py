@@ -220,6 +220,8 @@ def test_heap_of_twenty_active_equals_all_contacts():
     assert s.at_switch and any(why == "the free step ends with the gap at 0" for _, why in s.switches)
 
 
+@pytest.mark.slow      # an iLQR solve through the contact step; fast: the block's step Jacobians above,
+#                       tests/test_control_ilqr.py (iLQR's gradient and curvature)
 def test_ilqr_pushes_the_block_to_its_target(block):
     """iLQR through the contact steps: the block pushed from rest to x = 0.5 m at rest in
     0.8 s with the least effort (soft terminal penalty); replayed by the simulator."""
@@ -306,6 +308,8 @@ def test_equations_option_checked(block):
         ContactStepFunction(model, H, max_iter=20, abstol=1e-12, equations="some")
 
 
+@pytest.mark.slow      # a box scene of its own compiled; fast: test_block_sticking_small_push and
+#                       test_block_at_a_switch_is_flagged_one_sided (the block's corners on the floor)
 def test_box_standing_on_two_corners():
     """A planar box resting on two corners (redundant sticking contacts: the stepper takes the
     least-norm impulses of their family; R_Z is singular, solved least-norm).  Along the
