@@ -201,6 +201,9 @@ def test_forward_dynamics_of_a_thin_disc_against_newton_euler(backend):
     assert np.all(np.isfinite(lam))
 
 
+@pytest.mark.slow      # a package of its own compiled; fast:
+#                       test_forward_dynamics_of_a_thin_disc_against_newton_euler (the same disc's compiled forward
+#                       dynamics)
 def test_generated_package_of_a_thin_disc(tmp_path):
     """The generated C package of a free disc: ``ode`` (the augmented form) with the exact
     multipliers gives the Newton–Euler accelerations, ``alg`` vanishes there, and ``Minv``
