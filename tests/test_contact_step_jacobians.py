@@ -262,6 +262,7 @@ def test_parameter_jacobian_sliding(block):
     assert np.isclose(C[2, 0], H * 20.0 / MASS, rtol=1e-12) and st.last.modes == ["sliding"]
 
 
+@pytest.mark.slow      # every step of a dropped pile; fast: test_three_sphere_pile (the same model)
 def test_dropped_pile_every_step(three_spheres):
     """Three spheres dropped in a column (gaps 1 cm, e = 0): every step of the simulator's
     run has Jacobians, its state equals the simulator's next one (1e-8), and at impacts away
@@ -336,6 +337,7 @@ def test_box_standing_on_two_corners():
     assert np.max(np.abs(step.B)) < 1e-12          # stuck: a small push does not move it
 
 
+@pytest.mark.slow      # a scene of its own compiled; fast: test_block_sticking_small_push, test_bounce_impact
 def test_frictionless_contact_closed():
     """A frictionless block on the floor pushed sideways: mode ``"closed"``, no friction, so
     ``B = [h²/2m, 0, h/m, 0]`` and ``P_N = m g h``; the active-contact equations equal the

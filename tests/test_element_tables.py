@@ -157,7 +157,7 @@ def _systems_2d():
     return out
 
 
-@pytest.mark.parametrize("share", [True, False], ids=["shared", "unshared"])
+@pytest.mark.parametrize("share", [True, pytest.param(False, marks=pytest.mark.slow)], ids=["shared", "unshared"])   # fast: shared
 def test_every_covered_joint_kind_equals_the_flat_functions(share, library):
     used = set()
     for kind, system in {**_systems_3d(), **_systems_2d()}.items():

@@ -174,6 +174,8 @@ def test_main_c_evaluates_accel_at_the_initial_state(tmp_path):
     assert np.allclose(values["a"], model.a0, atol=1e-9)
 
 
+@pytest.mark.slow      # a package compiled at -Werror; fast: test_compile_true_builds_the_library,
+#                       tests/test_reliability_optimized_warnings.py (-O2 -Werror)
 @needs_cc
 def test_package_compiles_warning_free(tmp_path):
     pkg = nc.generate(example("heavy_top"), tmp_path / "ht")

@@ -230,6 +230,8 @@ def parse_demo(text: str) -> dict[str, np.ndarray]:
     return {k: np.array(v) for k, v in values.items()}
 
 
+@pytest.mark.slow      # make builds and runs an example's C program; fast:
+#                       tests/test_model_package.py::test_main_c_builds_without_constraints_parameters_or_markers
 @pytest.mark.skipif(shutil.which("make") is None, reason="make not installed")
 def test_c_example_program_prints_the_python_final_state(tmp_path):
     model = spring_damper()

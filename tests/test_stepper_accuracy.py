@@ -191,6 +191,8 @@ def test_past_the_stability_limit_raises():
     nc.simulate(model, 1.0, 0.02, method="stepper", substeps=substeps)       # checked, passes
 
 
+@pytest.mark.slow      # the tensegrity compiled and run twice; fast: test_past_the_stability_limit_raises (the same
+#                       loud failure past the stability limit)
 def test_tensegrity_at_its_default_step_fails_loudly_and_the_suggested_step_is_accurate(tmp_path, quick_cflags):
     """``ncgen simulate examples/tensegrity.toml --method stepper`` at the default dt: exit
     status 1 and a message naming the step to use; at that step the run passes its checks

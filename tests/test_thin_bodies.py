@@ -343,6 +343,8 @@ def test_disc_given_a_printed_rotation_is_projected_and_reported():
         nc.System("off").add_body("disc", mass=MASS, inertia=DISC, rotation=R + 1e-4 * np.eye(3))
 
 
+@pytest.mark.slow      # a contact scene compiled; fast:
+#                       test_nearly_flat_coin_forms_its_delassus_matrix_without_the_constant_inverse
 def test_spinning_coin_bounces_on_the_floor_with_the_nonsmooth_stepper(quick_cflags):
     """A horizontal coin (thin disc) spinning at 20 rad/s about its normal, dropped from 0.5 m
     onto a point contact at its centre with restitution e = 0.5: the impulses pass through

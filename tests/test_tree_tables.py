@@ -494,6 +494,8 @@ def fallback_tree(name: str):
     return s.build()
 
 
+@pytest.mark.slow      # a fallback unit compiled into an empty cache; fast:
+#                       test_articulated_body_algorithm_equals_the_flat_function_and_the_kkt_solve
 def test_the_cholesky_fallback_is_compiled_when_a_tree_first_needs_it(tmp_path, monkeypatch):
     """A fresh compile cache: a mimic tree whose constrained ABA succeeds (the gripper) compiles
     the forward unit alone; a tree whose constrained ABA fails its pivot check
