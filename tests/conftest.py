@@ -24,8 +24,17 @@ and the -O2 builds theirs, with the flags by name (``test_reroll.py``'s looped p
 In a run that includes slow tests, a module whose time is mostly gcc compiling its scenes
 (contact scenes: the unrolled Delassus and KKT solves) sets ``QUICK_COMPILE = True`` to get
 :data:`QUICK_CFLAGS` still, and one such test elsewhere takes the fixture ``quick_cflags``.
+
+The fast tier's budget: ≤ 5 minutes on 2 cores with an empty compile cache, ≈ 600 CPU-seconds
+for its ≈ 2 500 tests.  A fast test should take at most :data:`FAST_TEST_BUDGET` CPU-seconds
+(its process and the compilers it waited for; setup and teardown included, on an empty cache);
+a heavier one goes to the slow tier with a fast twin.  Every run measures each test's CPU time
+and ends with the fast tests over the budget and the CPU-seconds of each tier
+(:func:`pytest_terminal_summary`); the first users of the element and tree libraries carry their
+one compile (≈ 15 and 25 CPU-s, once per compile cache).
 """
 import os
+import resource
 
 import pytest
 
@@ -39,6 +48,9 @@ EXHAUSTIVE = ("exhaustive: slow tests too long for CI (hours of CPU in all: the 
 
 #: Seconds a slow test may take unless it says otherwise (``pytest.mark.timeout``).
 SLOW_TIMEOUT = 900
+
+#: CPU-seconds a fast test may take (module docstring).
+FAST_TEST_BUDGET = 5.0
 
 #: Flags of a fast run's compiles (module docstring): a box scene's package (6 boxes, 48 corner
 #: contacts) takes 8 s of gcc CPU at -O0 against 32 s at -O2, and its 1.5 s run 0.9 s against
@@ -88,8 +100,50 @@ def pytest_report_header(config):
     return f"tier: -m {config.option.markexpr!r}" if config.option.markexpr else "tier: every test"
 
 
+def cpu_seconds() -> float:
+    """CPU time of this process (all its threads) and of the child processes it has waited for."""
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item):
+    item.cpu_start = cpu_seconds()
+    yield
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    """The test's CPU-seconds (setup to teardown) on its teardown report (workers send it along)."""
+    outcome = yield
+    if call.when == "teardown" and hasattr(item, "cpu_start"):
+        outcome.get_result().user_properties.append(("cpu_seconds", cpu_seconds() - item.cpu_start))
+
+
+def pytest_runtest_logreport(report):
+    if report.when == "teardown":
+        cpu = dict(report.user_properties).get("cpu_seconds")
+        if cpu is not None:
+            CPU_OF_TESTS["slow" if "slow" in report.keywords else "fast"].append((cpu, report.nodeid))
+
+
+#: ``{tier: [(CPU-seconds, node id), ...]}`` of this run's tests (in the controller with xdist).
+CPU_OF_TESTS: dict[str, list[tuple[float, str]]] = {"fast": [], "slow": []}
+
+
 @pytest.hookimpl(trylast=True)
 def pytest_terminal_summary(terminalreporter):
+    for tier, tests in CPU_OF_TESTS.items():
+        if tests:
+            terminalreporter.write_line(f"{tier} tests: {len(tests)}, {sum(c for c, _ in tests):.0f} CPU-s")
+    over = sorted(CPU_OF_TESTS["fast"], reverse=True)
+    over = [(c, n) for c, n in over if c > FAST_TEST_BUDGET]
+    if over:
+        terminalreporter.write_line(f"{len(over)} fast tests over the budget of {FAST_TEST_BUDGET:g} CPU-s "
+                                    "(tests/conftest.py; the first users of the element and tree libraries "
+                                    "carry their compile):")
+        for cpu, nodeid in over:
+            terminalreporter.write_line(f"  {cpu:7.1f} CPU-s  {nodeid}")
     deselected = terminalreporter.stats.get("deselected", [])
     slow = sum(1 for item in deselected if item.get_closest_marker("slow") is not None)
     if slow:

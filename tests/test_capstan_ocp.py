@@ -15,6 +15,10 @@ import pytest
 
 import ncgen as nc
 
+#: Slow: one IPOPT solve of up to 3000 iterations through the capstan (≈ 50 s); fast: tests/test_capstan_winch_ocp.py
+#: (an OCP through a CapstanCable, checked against its closed form and replayed by the simulator).
+pytestmark = pytest.mark.slow
+
 G = 9.81
 M, MH, MU, EA, C, MS, VS = 1.0, 0.2, 0.3, 1e4, 20.0, 5e-2, 5e-3
 T, N, H = 0.5, 40, 0.05

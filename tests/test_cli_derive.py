@@ -69,6 +69,8 @@ def test_bad_options_exit_2(capsys):
     assert "SUBCOMMAND" in capsys.readouterr().err
 
 
+@pytest.mark.slow      # SE(3)'s derivation rendered; fast: test_derive_every_type_and_format, tests/test_teaching.py
+#                       (the reports)
 def test_se3(capsys):
     assert main(["derive", "se3", "--format", "markdown"]) == 0
     out = capsys.readouterr().out

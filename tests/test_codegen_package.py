@@ -51,6 +51,8 @@ def test_same_bytes_from_another_process(tmp_path, pkg):
     assert files_of(tmp_path / "other") == files_of(pkg.path)
 
 
+@pytest.mark.slow      # three interpreters writing 15 times each; fast: test_same_bytes_from_another_process,
+#                       test_failed_write_leaves_target_untouched (the atomic replace)
 def test_three_processes_write_at_once(tmp_path, pkg):
     script = (f"import sys; sys.path[:0] = [{str(TESTS.parent)!r}, {str(TESTS)!r}]  # this checkout's ncgen\n"
               "from test_codegen_samples import chain_doc, chain_functions\n"

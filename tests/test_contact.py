@@ -173,6 +173,8 @@ def test_bounce_heights_follow_restitution(drops):
     assert np.all(tr.contact_normal[flight, 0] == 0) and np.all(tr.contact_state[flight, 0] == OPEN)
 
 
+@pytest.mark.slow      # the exported package built by make at -O2; fast: test_bounce_heights_follow_restitution (the
+#                       same drops in Python), tests/c/test_contact.c (the C contact solve)
 @pytest.mark.skipif(shutil.which("make") is None, reason="make not installed")
 def test_c_program_simulates_contacts_like_python(drops, tmp_path):
     pkg = nc.generate(drops, tmp_path / drops.name)
@@ -307,6 +309,9 @@ def box_and_ball(name="box"):
 
 # the box landing flat on four corners with friction: some contact solves stop at the sweep
 # limit with small residuals (reported by a warning, which is not what this test is about)
+@pytest.mark.slow      # a contact scene compiled, several runs; fast: test_bounce_heights_follow_restitution (the
+#                       energy of each impact against restitution),
+#                       tests/test_energy_work.py::test_impact_work_is_the_kinetic_energy_lost
 @pytest.mark.filterwarnings("ignore:simulate.*contact solve")
 def test_energy_never_increases_through_impacts():
     """The box and the ball of :func:`box_and_ball` dropped with random orientations and

@@ -10,6 +10,8 @@ from scipy.optimize import minimize
 
 import ncgen as nc
 
+QUICK_COMPILE = True             # its time is gcc compiling its scenes: -O0 (tests/conftest.py)
+
 G = 9.81
 
 
@@ -179,6 +181,7 @@ def test_equal_cubes_crossed_at_45_degrees_rest_on_their_edges(drop, mu):
     assert tr.gap[:, edges].min() > -1e-8
 
 
+@pytest.mark.slow      # two box-box scenes compiled; fast: test_crossed_beams_touch_at_their_edges (edge contacts on)
 def test_edges_are_off_by_default_and_round_trip_through_toml():
     s = nc.System("flags")
     a = s.add_body("a", mass=1.0, inertia=box_inertia(1.0, CUBE), position=(0, 0, 0.1))

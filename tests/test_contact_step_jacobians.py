@@ -10,6 +10,7 @@ import pytest
 import ncgen as nc
 from ncgen.errors import NcgenError, OptimizationError
 
+QUICK_COMPILE = True             # its time is gcc compiling its scenes: -O0 (tests/conftest.py)
 G, MASS, MU, H = 9.81, 2.0, 0.5, 0.01
 #: Central differences stay inside the push-out's threshold (PENETRATION_TOL = 1e-8 m): a
 #: resting contact pushed 1e-6 m down is pushed out, the other side is not (a switch).
@@ -126,6 +127,8 @@ def test_bounce_impact(block):
         assert np.isclose(s.x1[3], 0.6 * 2.0, rtol=1e-12)    # Newton's law on the start-of-step approach speed
 
 
+@pytest.mark.slow      # a sphere scene compiled; fast: test_block_sticking_small_push and
+#                       test_block_sliding_hard_push (stick and slip on a plane), test_three_sphere_pile
 def test_sphere_rolling_and_sliding_on_a_plane():
     """A rigid sphere (12 natural coordinates, 6 constraints) on the floor, pushed at its
     centre: it rolls (sticking) under a small push, slides under a large one."""
@@ -245,6 +248,8 @@ def test_heap_of_twenty_landing_against_central_differences(heap20, landed):
     assert_equals_all_contacts(reference, st, x, np.zeros(0), tol=1e-12)
 
 
+@pytest.mark.slow      # an iLQR solve through the contact step; fast: the block's step Jacobians above,
+#                       tests/test_control_ilqr.py (iLQR's gradient and curvature)
 def test_ilqr_pushes_the_block_to_its_target(block):
     """iLQR through the contact steps: the block pushed from rest to x = 0.5 m at rest in
     0.8 s with the least effort (soft terminal penalty); replayed by the simulator."""
@@ -285,6 +290,7 @@ def test_parameter_jacobian_sliding(block):
     assert np.isclose(C[2, 0], H * 20.0 / MASS, rtol=1e-12) and st.last.modes == ["sliding"]
 
 
+@pytest.mark.slow      # every step of a dropped pile; fast: test_three_sphere_pile (the same model)
 def test_dropped_pile_every_step(three_spheres):
     """Three spheres dropped in a column (gaps 1 cm, e = 0): every step of the simulator's
     run has Jacobians, its state equals the simulator's next one (1e-8), and at impacts away
@@ -331,6 +337,8 @@ def test_equations_option_checked(block):
         ContactStepFunction(model, H, max_iter=20, abstol=1e-12, equations="some")
 
 
+@pytest.mark.slow      # a box scene of its own compiled; fast: test_block_sticking_small_push and
+#                       test_block_at_a_switch_is_flagged_one_sided (the block's corners on the floor)
 def test_box_standing_on_two_corners():
     """A planar box resting on two corners (redundant sticking contacts: the stepper takes the
     least-norm impulses of their family; R_Z is singular, solved least-norm).  Along the
@@ -357,6 +365,7 @@ def test_box_standing_on_two_corners():
     assert np.max(np.abs(step.B)) < 1e-12          # stuck: a small push does not move it
 
 
+@pytest.mark.slow      # a scene of its own compiled; fast: test_block_sticking_small_push, test_bounce_impact
 def test_frictionless_contact_closed():
     """A frictionless block on the floor pushed sideways: mode ``"closed"``, no friction, so
     ``B = [h²/2m, 0, h/m, 0]`` and ``P_N = m g h``; the active-contact equations equal the

@@ -37,6 +37,9 @@ def swingup():
     return st, x0, U0, (stage, terminal)
 
 
+@pytest.mark.slow      # the whole iLQR swing-up and an IPOPT solve; fast:
+#                       test_gradient_is_the_rollout_adjoint_and_finite_differences,
+#                       test_step_curvature_is_the_derivative_of_the_exact_jacobians
 def test_ilqr_swings_the_pole_up_with_the_cost_of_ipopt(swingup):
     st, x0, U0, costs = swingup
     res = nc.ilqr(st, x0, U0, costs, tol=1e-8)

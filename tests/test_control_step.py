@@ -128,6 +128,8 @@ def test_tangent_basis_and_reduced_jacobians(cases):
     assert np.allclose(T1 @ A_T, A @ T, atol=1e-8)
 
 
+@pytest.mark.slow      # 1000-step rollouts differenced; fast: test_step_jacobians_match_central_differences (the
+#                       step's own Jacobians)
 def test_rollout_gradient_matches_central_differences_over_1000_steps(cases):
     model, st = cases["spring_damper"]
     rng = np.random.default_rng(5)

@@ -62,7 +62,8 @@ def assert_equal_to_flat(model, library, seed=0):
     return tf
 
 
-@pytest.mark.parametrize("path", EXAMPLES, ids=[p.stem for p in EXAMPLES])
+@pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.slow) if p.stem == "box_stack" else p   # the largest;
+                                  for p in EXAMPLES], ids=[p.stem for p in EXAMPLES])            # fast: boxes
 def test_examples_equal_the_flat_functions_or_are_refused_by_kind(path, library):
     model = nc.System.from_toml(path).build()
     if path.stem in REFUSED:
@@ -160,7 +161,7 @@ def _systems_2d():
     return out
 
 
-@pytest.mark.parametrize("share", [True, False], ids=["shared", "unshared"])
+@pytest.mark.parametrize("share", [True, pytest.param(False, marks=pytest.mark.slow)], ids=["shared", "unshared"])   # fast: shared
 def test_every_covered_joint_kind_equals_the_flat_functions(share, library):
     used = set()
     for kind, system in {**_systems_3d(), **_systems_2d()}.items():
@@ -273,6 +274,9 @@ print(json.dumps(out))
 """
 
 
+@pytest.mark.slow      # a subprocess without a compiler; fast:
+#                       tests/test_tree_tables.py::test_a_new_tree_needs_no_compiler (the same no-compiler loading of
+#                       a cached library)
 def test_a_new_model_needs_no_compiler(library, tmp_path):
     """Once the library is cached, a new chain and a new four-bar are evaluated in a process
     with no compiler on PATH (and compile_package replaced by a failure)."""
@@ -297,6 +301,9 @@ def test_benchmark_smoke(tmp_path):
         assert line in out.stdout, (line, out.stdout[-3000:])
 
 
+@pytest.mark.slow      # writes the package twice, compiles it at -Werror; fast:
+#                       test_examples_equal_the_flat_functions_or_are_refused_by_kind (the library compiled and
+#                       checked), tests/test_c_binding.py (its tables against the template)
 def test_element_package_is_deterministic_and_warning_free(tmp_path):
     """The element library's package: the same bytes when written twice, and its C compiles
     with -Wall -Wextra -Werror."""

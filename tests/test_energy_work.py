@@ -122,8 +122,9 @@ def example(name: str, contacts: str):
 # the falling chain lying flat: a contact solve may stop at the sweep limit with a small
 # residual (reported by a warning, which is not what this test is about)
 @pytest.mark.filterwarnings("ignore:simulate.*contact solve")
-@pytest.mark.parametrize("name, t_end, bound", [("falling_chain", 0.6, 1e-5), ("boxes", 0.4, 1e-5),
-                                                ("box_stack", 0.3, 1e-5)])
+@pytest.mark.parametrize("name, t_end, bound", [("falling_chain", 0.6, 1e-5),      # fast: the falling chain
+                                                *(pytest.param(*c, marks=pytest.mark.slow) for c in (("boxes", 0.4, 1e-5),
+                                                                                                   ("box_stack", 0.3, 1e-5)))])
 def test_contact_examples_close_their_balance_on_the_stepper(name, t_end, bound, quick_cflags):
     """The nonsmooth contact examples (61 %, 4.1 % and 7.7 % of residual by the old
     remainder and trapezoidal rule): E − E0 − W within ``bound`` of the energy scale (measured

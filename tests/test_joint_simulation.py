@@ -185,8 +185,8 @@ def test_constant_input_vector(method):
     assert np.max(np.abs(theta - exact)) < (3e-8 if method != "stepper" else 1e-5)
 
 
-@pytest.mark.parametrize("method", ["idas", "stepper"])
-def test_python_feedback_same_in_every_method(method):
+@pytest.mark.parametrize("method", [pytest.param("idas", marks=pytest.mark.slow), "stepper"])   # fast: the stepper;
+def test_python_feedback_same_in_every_method(method):    # IDAS with a Python feedback: tests/test_reliability_feedback.py
     """A Python PD ``u(t, q, v)`` (natural coordinates, held over each output interval):
     IDAS and the stepper agree with the joint loop given the same law as ``u(t, qj, vj)``."""
     s, _, _ = link()
@@ -250,6 +250,9 @@ def test_compiled_controllers_match_python_controller():
     assert 1.6 < errors[0] / errors[1] < 2.5
 
 
+@pytest.mark.slow      # the Panda built and run at rtol 1e-11; fast:
+#                       test_compiled_controllers_match_python_controller (the compiled PD that ComputedTorque
+#                       extends), tests/test_reliability_feedback.py (ComputedTorque's checks)
 def test_computed_torque_tracks_exactly_on_the_panda():
     """Computed torque with the model's own inverse dynamics: the error obeys
     ë + kd ė + kp e = 0 (critically damped, closed form e(t) = e0 (1 + ω t) e^{−ω t})."""

@@ -31,9 +31,9 @@ SUPPORTED = ["gymnasium/inverted_pendulum.xml", "gymnasium/hopper.xml", "dm_cont
              "gymnasium/reacher.xml", "dm_control/acrobot.xml", "dm_control/cartpole.xml", "dm_control/finger.xml",
              "dm_control/hopper.xml", "dm_control/humanoid_CMU.xml", "dm_control/manipulator.xml",
              "dm_control/pendulum.xml", "dm_control/reacher.xml", "dm_control/stacker.xml", "dm_control/walker.xml"]
-#: Fast tier: planar roots, two slides (a point mass on a tendon-driven motor) and the humanoid
-#: (three hinges at a hip, two on skew axes at an ankle, springs, armature).
-FAST = SUPPORTED[:4]          # the humanoid (17 s) is slow: its joint sequences are covered fast by sequences.xml
+#: Fast tier: planar roots and two slides (a point mass on a tendon-driven motor); the cheetah and the
+#: humanoid (17 s) are slow: their joint sequences are covered fast by sequences.xml.
+FAST = [k for k in SUPPORTED[:4] if k != "dm_control/cheetah.xml"]
 SEQUENCES = Path(__file__).parent / "data" / "sequences.xml"
 
 
@@ -149,6 +149,8 @@ def passive_runs(path, methods, t_end: float = 1.0, scale: float = 1.0):
     return out, np.ptp(ref, axis=0)
 
 
+@pytest.mark.slow      # 1 s at rtol 1e-11 and 10 000 MuJoCo steps; fast: test_joint_sequences_against_mujoco (the
+#                       same model's qacc), test_passive_run_equals_mujoco_rk4 (a run against MuJoCo's RK4)
 def test_joint_sequences_run_as_mujoco_rk4_idas():
     """1 s of the sequences model in natural coordinates (IDAS: the sequences' equations,
     damping and springs as joint dynamics and forces) against MuJoCo's RK4: every joint
@@ -253,8 +255,8 @@ def test_passive_run_equals_mujoco_rk4():
     assert errors["joint"] < 1e-6
 
 
-@pytest.mark.parametrize("key", ["chain", "sequences", "gymnasium/ant.xml", "dm_control/cheetah.xml",
-                                 pytest.param("dm_control/humanoid.xml", marks=pytest.mark.slow)])
+@pytest.mark.parametrize("key", ["chain", "sequences"] + [pytest.param(k, marks=pytest.mark.slow) for k in (   # fast:
+    "gymnasium/ant.xml", "dm_control/cheetah.xml", "dm_control/humanoid.xml")])          # chain, sequences
 def test_round_trip_mjcf_ncgen_mjcf(key, tmp_path):
     """MJCF → ncgen → to_mjcf → MuJoCo: the exported file's qacc equals the imported model's
     (hence the original's, test above) to 1e-8 relative, free joint, planar root, joint
@@ -302,6 +304,8 @@ def mujoco_loop_run(path, solref, t_end: float):
     return np.array(crank), gap
 
 
+@pytest.mark.slow      # 2 s of IDAS and three 20 000-step MuJoCo runs; fast: test_loop_round_trip[rssr] imports and
+#                       builds the same connect loop, test_weld_is_exact holds a closure exactly
 def test_connect_closes_the_loop_exactly():
     """An RSSR loop closed by <equality><connect>: ncgen holds the closure to 1e-10 m over 2 s
     (shared point: measured 0); MuJoCo's soft connect opens by 2.6 mm at its default solref,
@@ -354,6 +358,9 @@ COUPLED = """<mujoco><worldbody>
   </body></worldbody><equality><joint joint1="j1" joint2="j2" polycoef="0 0.5 0 0 0"/></equality></mujoco>"""
 
 
+@pytest.mark.slow      # three runs (IDAS at 1e-10, two 10 000-step MuJoCo runs); fast:
+#                       test_armature_on_coupled_joints_equals_mujoco (the same coupling's qacc),
+#                       test_loop_round_trip[rssr]
 def test_joint_equality_is_exact():
     """<equality><joint polycoef="0 0.5 ...">: ncgen holds x1 = 0.5 x2 to round-off over 1 s;
     MuJoCo's soft coupling converges to ncgen's run as it stiffens (x2 apart by 2.3e-4 rad at
@@ -393,7 +400,7 @@ def test_armature_on_coupled_joints_equals_mujoco(tmp_path):
     assert qacc_error(path, trials=4) < 1e-8
 
 
-@pytest.mark.parametrize("source", ["rssr", "coupled"])
+@pytest.mark.parametrize("source", ["rssr", pytest.param("coupled", marks=pytest.mark.slow)])   # fast: rssr
 def test_loop_round_trip(source, tmp_path):
     """A loop model (connect; a joint coupling) exported back to MJCF (loops as <equality>)
     runs in MuJoCo as the original file does: 1 s of RK4 at 1e-4 s, joint angles within 1e-6
@@ -516,6 +523,8 @@ def test_cli_loads_mjcf(tmp_path):
         load_system(str(path), floating_base=True)
 
 
+@pytest.mark.slow      # a compile from an empty cache; fast: test_cli_loads_mjcf, tests/test_cli_simulate.py (the
+#                       store's second run)
 def test_cli_simulates_an_mjcf_file_twice(tmp_path, monkeypatch):
     """``ncgen simulate model.xml``: the second run (model read from the store of built
     models) gives the first run's trajectory."""

@@ -227,6 +227,8 @@ def test_warnings_of_the_build_are_given_again_when_read_back(store):
     assert again.redundant == first.redundant == ["d.drive"] and again.dof == 1
 
 
+@pytest.mark.slow      # the UR5 run three times through the CLI; fast: test_stored_urdf_model_equals_a_fresh_build,
+#                       test_stored_urdf_model_holds_no_sympy_and_its_tree_map_is_stored
 def test_cli_run_of_a_stored_urdf_model_equals_a_fresh_run(store, tmp_path, monkeypatch):
     """``ncgen simulate robot.urdf --kernels flat`` (joint space, the model's own loop): the
     second run reads the model and its joint-space ODE from the store and gives the trajectory

@@ -73,6 +73,8 @@ def test_compiled_matches_vm_on_random_inputs(tmp_path, name, cflags):
 
 
 # ------------------------------------------------------------------ determinism
+@pytest.mark.slow      # a second interpreter building the model; fast:
+#                       tests/test_codegen_package.py::test_same_bytes_from_another_process
 def test_same_model_same_bytes_in_two_processes(tmp_path):
     script = ("import sys, ncgen as nc\n"
               f"m = nc.System.from_toml({str(EXAMPLES / 'slider_crank.toml')!r}).build()\n"
@@ -144,6 +146,8 @@ def test_vector_inputs_get_one_name_per_value(tmp_path):
 
 
 # ------------------------------------------------------------- C without Python
+@pytest.mark.slow      # make builds and runs the slider-crank's main.c; fast:
+#                       test_main_c_builds_without_constraints_parameters_or_markers (the same Makefile and main.c)
 @needs_cc
 @pytest.mark.skipif(shutil.which("make") is None, reason="no make")
 def test_main_c_evaluates_accel_at_the_initial_state(tmp_path):
@@ -170,6 +174,8 @@ def test_main_c_evaluates_accel_at_the_initial_state(tmp_path):
     assert np.allclose(values["a"], model.a0, atol=1e-9)
 
 
+@pytest.mark.slow      # a package compiled at -Werror; fast: test_compile_true_builds_the_library,
+#                       tests/test_reliability_optimized_warnings.py (-O2 -Werror)
 @needs_cc
 def test_package_compiles_warning_free(tmp_path):
     pkg = nc.generate(example("heavy_top"), tmp_path / "ht")

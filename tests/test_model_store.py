@@ -200,7 +200,7 @@ def test_the_command_line_stores_complete_models_and_python_lazy_ones(store):
     assert np.array_equal(python.energy(python.q0, python.v0), cli.energy(cli.q0, cli.v0))
 
 
-@pytest.mark.parametrize("example", ["boxes", "box_stack"])
+@pytest.mark.parametrize("example", ["boxes", pytest.param("box_stack", marks=pytest.mark.slow)])   # fast: boxes
 def test_generated_c_does_not_depend_on_the_store(store, monkeypatch, tmp_path, example):
     """``nc.generate`` writes the same bytes for a model built afresh and for the same model
     read back from the store of built models (whose functions are other CasADi objects of the

@@ -116,6 +116,8 @@ def test_plan_keeps_the_cable_taut_in_the_simulator(model):
     assert replay.q[-1, 2] == pytest.approx(-0.95, abs=1e-4)
 
 
+@pytest.mark.slow      # a second transcription's solve; fast: test_plan_keeps_the_cable_taut_in_the_simulator (the
+#                       same floor by collocation, replayed)
 def test_multiple_shooting_keeps_the_floor_at_the_nodes(model):
     """With ``method="shooting"`` (the path points are the nodes) the floor holds at both ends of
     every interval, with the interval's input, and binds."""

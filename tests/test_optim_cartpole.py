@@ -89,6 +89,8 @@ def test_warm_start_from_a_simulation(swingup):
     np.testing.assert_allclose(again.marker("pole.tip")[-1], [0.0, 0.5], atol=1e-5)
 
 
+@pytest.mark.slow      # IDAS sensitivities over every interval; fast:
+#                       test_multiple_shooting_with_the_stepper_scheme_replays_on_the_compiled_stepper
 def test_multiple_shooting_with_idas():
     """Pendulum swing-up by multiple shooting: the IDAS defects vanish, and the motion
     re-simulates to the integrator's tolerance."""

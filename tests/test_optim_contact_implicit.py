@@ -147,6 +147,8 @@ def test_block_push_over_a_long_horizon_rests_part_of_the_time(block):
     assert np.max(np.abs(sim.q[:, 0] - sol.q[:, 0])) < 1e-6
 
 
+@pytest.mark.slow      # a second solve by nosnoc; fast: test_block_push_sliding_throughout_matches_the_closed_form
+#                       (the same block against its closed form)
 def test_block_push_cost_agrees_with_nosnoc(block):
     """The same push solved by nosnoc (a test-only dependency: pip install nosnoc) as a
     Filippov system with FESD: both schemes are exact for piecewise-constant accelerations."""

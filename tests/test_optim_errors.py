@@ -207,6 +207,8 @@ def pendulum_files(tmp_path):
     return tmp_path
 
 
+@pytest.mark.slow      # an IPOPT solve and a plot through the CLI; fast: test_cli_optimize_failures (the same
+#                       command's error paths), test_unreachable_final_marker_is_reported_as_infeasible (the solve)
 def test_cli_optimize_writes_trajectory_and_plot(pendulum_files, capsys, monkeypatch):
     status, out, err = _ncgen("optimize", "swing.toml", "-o", "swing.npz", "--plot", "swing.png", cwd=pendulum_files,
                               capsys=capsys, monkeypatch=monkeypatch)

@@ -21,8 +21,9 @@ SCRIPTS = {
 #: Run in the slow tier (a solve and a GIF each, 30 s on a loaded 2-core machine); their problems
 #: are solved in the fast tier by tests/test_optim_cartpole.py (free final time) and
 #: tests/test_optim_targets.py (the double pendulum), the cart-pole's by its swing-up in
-#: tests/test_optim_cartpole.py; spring_design.py runs here.
-SLOW_SCRIPTS = {"arm_min_time.py", "double_pendulum_swingup.py", "cartpole_swingup.py"}
+#: tests/test_optim_cartpole.py, spring_design.py's free parameters by tests/test_optim_nlp.py and
+#: tests/test_capstan_winch_ocp.py.
+SLOW_SCRIPTS = {"arm_min_time.py", "double_pendulum_swingup.py", "cartpole_swingup.py", "spring_design.py"}
 
 
 @pytest.mark.parametrize("script", [pytest.param(s, marks=pytest.mark.slow) if s in SLOW_SCRIPTS else s

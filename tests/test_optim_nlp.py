@@ -33,8 +33,8 @@ def everything(method: str = "collocation", N: int = 6) -> nc.OptimalControl:
     return ocp
 
 
-@pytest.mark.parametrize("method", ["collocation", "shooting"])
-def test_ipopt_derivatives_match_finite_differences(method):
+@pytest.mark.parametrize("method", ["collocation", pytest.param("shooting", marks=pytest.mark.slow)])   # fast: collocation;
+def test_ipopt_derivatives_match_finite_differences(method):    # IDAS shooting: test_equality_constraints_are_never_redundant
     """IPOPT's own gradient and constraint Jacobian (the CasADi solver's nlp_grad_f and
     nlp_jac_g, after simple-bound detection) against central differences, at the solution
     and at a perturbed point."""

@@ -44,7 +44,13 @@ def test_no_python_block_outside_sections():
     assert not BLOCK.findall(preamble), "python blocks before the first '## ' section would not run"
 
 
-@pytest.mark.parametrize("title, blocks", SECTIONS, ids=[re.sub(r"\W+", "_", t).strip("_") for t, _ in SECTIONS])
+#: Sections run in the slow tier: §6 (every integrator on compiled models) and §8 (packages generated and
+#: compiled); the same calls run fast in tests/test_simulate.py, test_stepper.py and test_model_package.py.
+SLOW_SECTIONS = ("6. Simulation", "8. Generated C packages")
+
+
+@pytest.mark.parametrize("title, blocks", [pytest.param(t, b, marks=pytest.mark.slow) if t in SLOW_SECTIONS else (t, b)
+                                           for t, b in SECTIONS], ids=[re.sub(r"\W+", "_", t).strip("_") for t, _ in SECTIONS])
 def test_section_runs(title, blocks, tmp_path, monkeypatch):
     """The section's snippets run in order in one namespace and print what the guide shows
     (tests/doc_snippets.py)."""

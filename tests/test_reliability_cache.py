@@ -120,6 +120,9 @@ def test_unwritable_cache_is_a_clear_error(built_pkg, tmp_path, monkeypatch):
         compile_package(built_pkg)
 
 
+@pytest.mark.slow      # two CLI subprocesses compiling from an empty cache; fast:
+#                       test_damaged_library_is_rebuilt_never_loaded (the same healing in-process, every kind of
+#                       damage)
 def test_cli_stepper_heals_a_truncated_cache(tmp_path, cache):
     """``ncgen simulate --method stepper`` (library loaded with ctypes) after the cached
     library was truncated: a note, a rebuild and the same result, not SIGBUS."""

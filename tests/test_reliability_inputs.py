@@ -247,6 +247,8 @@ def test_partial_output_files_are_swept(tmp_path):
 HOSTILE_VALUES = ["nan", "1" * 400, "1e300", '"1/0"', '"sqrt(-1)"', "true", "-1.0"]
 
 
+@pytest.mark.slow      # ≈ 100 builds of one model file; fast:
+#                       test_bad_models_are_one_clear_message_in_check_and_simulate, test_numbers_one_rule
 def test_no_number_of_a_model_file_can_cause_an_internal_error(tmp_path, capsys):
     """The class test: every number of a shipped model file replaced by each hostile value
     gives exit 0 or 1 and a message, never a traceback or an internal error (exit 70)."""

@@ -57,6 +57,9 @@ def test_interrupt_in_python_carries_the_trajectory_so_far():
     assert issubclass(SimulationInterrupted, KeyboardInterrupt)
 
 
+@pytest.mark.slow      # a subprocess solving an OCP until SIGINT; fast:
+#                       test_ctrl_c_stops_an_idas_run_keeps_the_old_result_and_writes_the_partial_one (the same signal
+#                       path), test_deferred_interrupt_raises_on_leaving_and_replaces_the_solver_failure
 def test_ctrl_c_stops_ipopt_at_its_next_iteration(tmp_path):
     for name in ("cartpole.toml", "cartpole_swingup.toml"):
         text = (ROOT / "examples" / name).read_text()

@@ -219,6 +219,9 @@ def test_a_blown_up_batch_run_keeps_only_its_trusted_rows(repelled):
     assert np.array_equal(single.q, run.q[0, :len(single.t)]) and len(single.t) == kept
 
 
+@pytest.mark.slow      # two error-controlled runs to failure; fast:
+#                       test_a_blown_up_batch_run_keeps_only_its_trusted_rows (the same trusted-rows rule on the
+#                       fixed-step stepper)
 def test_a_failed_error_controlled_run_keeps_only_its_trusted_rows(repelled):
     """The error control accepts the run-away step by step until its steps shrink to nothing;
     checked, only the rows before the shadow run's global estimate passes 1 % of the size are
@@ -252,6 +255,9 @@ def repelled_pushed():
     return s.build()
 
 
+@pytest.mark.slow      # a second model compiled and three runs to failure; fast:
+#                       test_a_blown_up_batch_run_keeps_only_its_trusted_rows, tests/test_reliability_feedback.py (a
+#                       failing feedback on the stepper)
 def test_a_blown_up_feedback_run_keeps_only_its_trusted_rows(repelled_pushed):
     """One output interval at a time (a feedback), the stepper's rows are checked together
     as an open-loop run's are: the run away is stopped where steps had to be split, not

@@ -149,6 +149,9 @@ def test_generated_code_does_not_grow_with_the_number_of_members():
 
 
 # ------------------------------------------------------------------ looped packages
+@pytest.mark.slow      # a long model's package compiled at -O2; fast:
+#                       test_reroll_reproduces_every_function_of_the_shipped_examples (looped functions equal the flat
+#                       ones)
 @needs_cc
 def test_package_of_a_long_model_is_looped_compiles_at_o2_and_is_exact(tmp_path):
     model = long_chain(60)
@@ -185,6 +188,8 @@ def test_looped_stepper_and_idas_agree_on_a_long_model(monkeypatch):
     assert np.all(fine.constraint_residual <= 1e-10)
 
 
+@pytest.mark.slow      # a long model's package written twice; fast:
+#                       test_generated_code_does_not_grow_with_the_number_of_members
 def test_looped_package_is_reproducible(tmp_path):
     """Two builds of the same long model give the same bytes: the shapes, kernels and
     tables do not depend on hashing or on the objects' identity."""

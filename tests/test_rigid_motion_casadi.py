@@ -161,6 +161,8 @@ def test_numpy_casadi_and_c_agree(compiled, name):
         assert_same(numeric, compiled[name](*args))
 
 
+@pytest.mark.slow      # two fresh interpreters writing the package; fast: test_numpy_casadi_and_c_agree compiles and
+#                       checks the same package; tests/test_codegen_package.py::test_same_bytes_from_another_process
 def test_c_package_is_deterministic(tmp_path):
     """Same package bytes from separate processes with different hash seeds."""
     script = ("import sys; from ncgen.codegen.rigid_motion_package import write_c_package; "

@@ -95,6 +95,9 @@ def test_a_sleigh_on_a_plane_moving_steadily_is_the_sleigh_seen_from_the_plane()
     assert rolling_system(moving.model).rheonomic and not rolling_system(at_rest.model).rheonomic
 
 
+@pytest.mark.slow      # a disc shaken for 1 s at 1 ms outputs; fast:
+#                       test_a_ball_on_an_accelerating_plane_as_the_closed_form_says (a driven plane against its
+#                       closed form)
 def test_a_disc_on_an_oscillating_plane_keeps_its_energy_balance():
     """A disc rolling and precessing on a plane shaken along x and y: E(t) − E(0) equals the
     constraint forces' work ∫ −λᵀc dt (Simpson's rule on 1 ms outputs, whose own error is

@@ -40,6 +40,8 @@ def test_second_order_on_the_rolling_disc(wobbly):
     assert tr.info["stats"]["steps"] == 80
 
 
+@pytest.mark.slow      # 1 s at two steps; fast: test_second_order_on_the_rolling_disc (the same model's order of
+#                       convergence)
 def test_energy_error_falls_as_h_squared(wobbly):
     """No dissipation: the energy's spread over 1 s is 1.7e-5 J at h = 2 ms and 4.3e-6 J at
     1 ms (of 5.6 J): bounded by 1e-5 of itself at 1 ms and falling by 4 ± 0.5 per halving."""

@@ -20,6 +20,9 @@ from ncgen.symbolic.coordinates import available_types, coordinate_type
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.slow      # renders every form from SymPy; fast:
+#                       test_member_numeric_forms_equal_lambdify_of_the_derivation (the shipped forms against the
+#                       derivation)
 def test_shipped_forms_are_regenerated():
     """Each generated file equals what the generator writes from ncgen/symbolic now."""
     stale = [str(path.relative_to(ROOT)) for path, text in fg.rendered().items()

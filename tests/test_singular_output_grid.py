@@ -59,6 +59,7 @@ def test_a_millisecond_grid_and_the_vm_backend_follow_the_same_motion():
     np.testing.assert_allclose(vm.q, ref.q[::50], rtol=0, atol=1e-6)
 
 
+@pytest.mark.slow      # a long watched run; fast: test_every_output_grid_gives_the_same_motion_on_the_branch
 def test_long_output_intervals_no_longer_run_out_of_steps():
     """Planar N = 10 with an output every 0.5 s stopped with "IDAS needed more than max_steps
     steps": the step limit is per interval of the watched grid, not per output interval."""

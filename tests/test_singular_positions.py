@@ -137,6 +137,9 @@ def test_a_failed_watched_chunk_is_retried_up_to_just_before_where_idas_gave_up(
     assert idas_integrator._retry_length(ChunkFailure("X", "no time here", ""), 1.0, 0.01, 64) == 32
 
 
+@pytest.mark.slow      # 2000 IDAS restarts over 20 s; fast: test_hand_over_and_return_hold_both_constraint_levels
+#                       (the chunked IDAS run with its first step),
+#                       test_a_failed_watched_chunk_is_retried_up_to_just_before_where_idas_gave_up
 def test_idas_restarted_at_every_output_keeps_its_accuracy(monkeypatch):
     """The cause of the error above, on a regular motion (released at −8°, never flat, IDAS
     alone): one IDAS call per output interval (2000 restarts in 20 s) stays within 1e-6 m of

@@ -120,8 +120,9 @@ def test_step_inputs_hold():
 STEP = {"heavy_top": 1e-4, "capstan_winch": 5e-6}
 
 
-@pytest.mark.parametrize("path", example_models(), ids=lambda p: p.stem)
-def test_agrees_with_idas_on_shipped_examples(path):
+@pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.slow) if p.stem == "capstan_winch" else p
+                                  for p in example_models()], ids=lambda p: p.stem)   # capstan_winch: 60 000 steps
+def test_agrees_with_idas_on_shipped_examples(path):   # of 5 µs; fast: the other examples, tests/test_capstan_winch.py
     if "[[contacts]]" in path.read_text():
         pytest.skip("a contact scene: its smooth law (what IDAS integrates) is stiff at impact; the contact "
                     "examples are checked against closed forms in test_contact*.py and run by the sanitizer test")
@@ -229,6 +230,8 @@ def parse_demo(text: str) -> dict[str, np.ndarray]:
     return {k: np.array(v) for k, v in values.items()}
 
 
+@pytest.mark.slow      # make builds and runs an example's C program; fast:
+#                       tests/test_model_package.py::test_main_c_builds_without_constraints_parameters_or_markers
 @pytest.mark.skipif(shutil.which("make") is None, reason="make not installed")
 def test_c_example_program_prints_the_python_final_state(tmp_path):
     model = spring_damper()

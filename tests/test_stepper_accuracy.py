@@ -60,7 +60,7 @@ def size(y):
 
 # -------------------------------------------------------------- error control
 @pytest.mark.parametrize("case", ["chain", "stiff", "spinning"])
-@pytest.mark.parametrize("rtol", [1e-5, 1e-7])
+@pytest.mark.parametrize("rtol", [1e-5, pytest.param(1e-7, marks=pytest.mark.slow)])   # fast: 1e-5, every case
 def test_rtol_final_state_agrees_with_idas(case, rtol):
     """With rtol the final q and v agree with IDAS (rtol 1e-10) within 100 rtol (relative to
     the size of the state) after 2 s (the spinning chain's errors grow fast: 22 rtol at
@@ -104,8 +104,8 @@ def test_adaptive_sum_of_local_estimates_bounds_the_true_error():
     assert "sum of the local" in traj.info["error_estimate"]["how"]
 
 
-@pytest.mark.parametrize("case", ["chain", "stiff", "spinning"])
-def test_adaptive_global_estimate_against_the_true_error(case):
+@pytest.mark.parametrize("case", ["chain", *(pytest.param(c, marks=pytest.mark.slow) for c in ("stiff", "spinning"))])
+def test_adaptive_global_estimate_against_the_true_error(case):     # fast: chain; the others' runs: rtol test above
     """The global estimate of an rtol run (shadow run at 10 rtol: |y − y_shadow| / 10)
     against the true error in q after 2 s (IDAS at 1e-12): within a factor 10 (measured
     0.4–6), including the spinning chain whose error grows to 22 rtol."""
@@ -120,6 +120,8 @@ def test_adaptive_global_estimate_against_the_true_error(case):
     assert "estimated error at the end" in traj.summary()
 
 
+@pytest.mark.slow      # runs of the spinning chain to its warning and failure; fast:
+#                       test_a_chaotic_run_with_a_large_error_fails_loudly
 def test_rtol_on_a_chaotic_motion_warns_or_fails_loudly():
     """rtol bounds the error of each step, not the global error: on the spinning chain the
     error grows along the motion.  Past 100 × the tolerance the run warns; past 1 % of the
@@ -141,7 +143,8 @@ def test_rtol_on_a_chaotic_motion_warns_or_fails_loudly():
 
 
 # ------------------------------------------------------------ fixed-step estimate
-@pytest.mark.parametrize("case, h", [("chain", 5e-3), ("chain", 2.5e-3), ("spinning", 2e-3), ("stiff", 1e-3)])
+@pytest.mark.parametrize("case, h", [("chain", 5e-3), pytest.param("chain", 2.5e-3, marks=pytest.mark.slow),
+                                     pytest.param("spinning", 2e-3, marks=pytest.mark.slow), ("stiff", 1e-3)])   # fast: 2
 def test_fixed_step_error_estimate_against_the_true_error(case, h):
     """The Richardson estimate of a RATTLE fixed-step run (against its shadow run with steps of 2h)
     against the true error in q at the end (IDAS at 1e-10), on a chain, a fast-spinning
@@ -188,6 +191,8 @@ def test_past_the_stability_limit_raises():
     nc.simulate(model, 1.0, 0.02, method="stepper", substeps=substeps)       # checked, passes
 
 
+@pytest.mark.slow      # the tensegrity compiled and run twice; fast: test_past_the_stability_limit_raises (the same
+#                       loud failure past the stability limit)
 def test_tensegrity_at_its_default_step_fails_loudly_and_the_suggested_step_is_accurate(tmp_path, quick_cflags):
     """``ncgen simulate examples/tensegrity.toml --method stepper`` at the default dt: exit
     status 1 and a message naming the step to use; at that step the run passes its checks

@@ -40,14 +40,19 @@ ENV = {**os.environ, "ASAN_OPTIONS": "detect_leaks=0:abort_on_error=0",
 #: The second and third builds of a program (other -D paths) in the slow tier; fast: the generated
 #: packages take the Schur path and the pair kernels (tests/test_contact*.py), the table step's
 #: Jacobians by rows (tests/test_table_step_jacobians.py), and the first build of each program here.
+#: Slow: the program's variants, and the four largest programs (42–60 s each at load ≈ 20, stop 53; the same C
+#: runs in the fast tier inside the packages of tests/test_contact.py, test_table_stepper.py,
+#: test_table_step_jacobians.py and test_tree_tables.py, without the sanitizers).
 SLOW_BUILD = pytest.mark.slow
-PROGRAMS = [("test_rattle.c", []), ("test_contact.c", []),
+PROGRAMS = [("test_rattle.c", []), pytest.param("test_contact.c", [], marks=SLOW_BUILD),
             pytest.param("test_contact.c", ["-DSCHUR_FACTORED"], marks=SLOW_BUILD),
             pytest.param("test_contact.c", ["-DPAIRS"], marks=SLOW_BUILD),
             ("test_cone_newton.c", []), ("test_mpc.c", []), ("test_joint_loop.c", []),
             ("test_element_tables.c", []), ("test_sparse_qr.c", []), ("test_sparse_lu.c", []),
-            ("test_table_stepper.c", []), ("test_table_jacobians.c", ["-DTAB_JAC_ROWS"]),
-            pytest.param("test_table_jacobians.c", ["-DTAB_JAC_COLUMNS"], marks=SLOW_BUILD), ("test_tree_tables.c", []),
+            pytest.param("test_table_stepper.c", [], marks=SLOW_BUILD),
+            pytest.param("test_table_jacobians.c", ["-DTAB_JAC_ROWS"], marks=SLOW_BUILD),
+            pytest.param("test_table_jacobians.c", ["-DTAB_JAC_COLUMNS"], marks=SLOW_BUILD),
+            pytest.param("test_tree_tables.c", [], marks=SLOW_BUILD),
             ("test_spatial.c", []), ("test_lu_columns.c", [])]
 
 pytestmark = pytest.mark.skipif(CC is None, reason="no C compiler (gcc, clang or cc) on PATH")

@@ -233,6 +233,8 @@ def test_auto_choice_override_and_refusal(cases):
         nc.step_function(model, 0.02, max_iter=1)(x, 0.0)
 
 
+@pytest.mark.slow      # a controlled model compiled flat and on the tables; fast:
+#                       test_table_jacobians_equal_central_differences
 def test_table_stepper_runs_a_controlled_model_as_the_flat_one(cases):
     """The table stepper with inputs (an input force, actuated joints) runs the same motion
     as the flat stepper under a time-varying input."""
@@ -287,6 +289,8 @@ print(json.dumps({"kernels": st.kernels, "err_A": err_A, "err_B": err_B}))
 """
 
 
+@pytest.mark.slow      # a subprocess without a compiler; fast:
+#                       tests/test_tree_tables.py::test_a_new_tree_needs_no_compiler
 def test_new_model_step_jacobians_with_no_compiler(tmp_path):
     """Once the element library is cached, a new chain pushed by inputs gets its step
     Jacobians in a process with no compiler on PATH (and compile_package replaced by a

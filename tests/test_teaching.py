@@ -128,9 +128,9 @@ def test_jupyter_reprs():
 
 # ------------------------------------------------------------------------- pdflatex
 LATEX_CASES = [(n, str(d)) for d, n in ALL_TYPES] + [("se3", "3")]
-#: Reports typeset in the fast tier: a 3D body's, a planar body's and SE(3)'s; the other types' (the same
-#: template over fewer or other columns) in the slow tier.
-FAST_LATEX = {("ruvw", "3"), ("rrv", "2"), ("se3", "3")}
+#: Report typeset in the fast tier: a planar body's (pdflatex's time: ≈ 3 CPU-s a report); the other types'
+#: (the same template over fewer or other columns, SE(3)'s) in the slow tier.
+FAST_LATEX = {("rrv", "2")}
 
 
 @pytest.mark.skipif(shutil.which("pdflatex") is None, reason="pdflatex not installed")

@@ -201,6 +201,9 @@ def test_forward_dynamics_of_a_thin_disc_against_newton_euler(backend):
     assert np.all(np.isfinite(lam))
 
 
+@pytest.mark.slow      # a package of its own compiled; fast:
+#                       test_forward_dynamics_of_a_thin_disc_against_newton_euler (the same disc's compiled forward
+#                       dynamics)
 def test_generated_package_of_a_thin_disc(tmp_path):
     """The generated C package of a free disc: ``ode`` (the augmented form) with the exact
     multipliers gives the Newton–Euler accelerations, ``alg`` vanishes there, and ``Minv``
@@ -340,6 +343,8 @@ def test_disc_given_a_printed_rotation_is_projected_and_reported():
         nc.System("off").add_body("disc", mass=MASS, inertia=DISC, rotation=R + 1e-4 * np.eye(3))
 
 
+@pytest.mark.slow      # a contact scene compiled; fast:
+#                       test_nearly_flat_coin_forms_its_delassus_matrix_without_the_constant_inverse
 def test_spinning_coin_bounces_on_the_floor_with_the_nonsmooth_stepper(quick_cflags):
     """A horizontal coin (thin disc) spinning at 20 rad/s about its normal, dropped from 0.5 m
     onto a point contact at its centre with restitution e = 0.5: the impulses pass through

@@ -412,6 +412,8 @@ def test_urdf_robots_match_pinocchio_and_the_flat_kernels(name, library, monkeyp
                                        atol=1e-12 * max(1.0, np.abs(want).max()), err_msg=f"{name} {alg}")
 
 
+@pytest.mark.slow      # writes every unit twice, compiles each source at -Werror (≈ 25 gcc calls); fast:
+#                       test_tables_equal_the_flat_functions compiles every unit through the library fixture
 def test_tree_package_is_deterministic_and_warning_free(tmp_path):
     """The tree library's package (every unit in one library) and each of its units: the same
     bytes when written twice, and their C compiles with -Wall -Wextra -Werror."""
@@ -433,6 +435,8 @@ def test_tree_package_is_deterministic_and_warning_free(tmp_path):
             assert out.returncode == 0, (unit, out.stderr[-3000:])
 
 
+@pytest.mark.slow      # compiles six units into an empty cache; fast: test_tables_equal_the_flat_functions,
+#                       test_auto_joint_run_takes_the_tables_and_says_why (missing_units)
 def test_units_are_compiled_as_trees_need_them(tmp_path, monkeypatch):
     """A fresh compile cache: forward dynamics of a revolute/prismatic tree compiles the forward
     unit alone, its RNEA the inverse unit; a spherical joint adds its local kernel unit, the
@@ -490,6 +494,8 @@ def fallback_tree(name: str):
     return s.build()
 
 
+@pytest.mark.slow      # a fallback unit compiled into an empty cache; fast:
+#                       test_articulated_body_algorithm_equals_the_flat_function_and_the_kkt_solve
 def test_the_cholesky_fallback_is_compiled_when_a_tree_first_needs_it(tmp_path, monkeypatch):
     """A fresh compile cache: a mimic tree whose constrained ABA succeeds (the gripper) compiles
     the forward unit alone; a tree whose constrained ABA fails its pivot check

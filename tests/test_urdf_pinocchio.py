@@ -36,6 +36,14 @@ ROBOTS = {
     "go1": ("go1_description/urdf/go1.urdf", True),
 }
 N_STATES = 20
+#: Robots of the fast tier: the UR5 (a fixed-base arm) and Solo12 (a floating base); the Panda and Go1
+#: take the same code paths at robot scale (their builds and kernels' compiles) in the slow tier.
+FAST_ROBOTS = ("ur5", "solo12")
+
+
+def robots(names, fast=FAST_ROBOTS):
+    """``names`` as parameters, those not in ``fast`` marked slow."""
+    return [n if n in fast else pytest.param(n, marks=pytest.mark.slow) for n in names]
 
 
 def robot_file(rel: str) -> Path:
@@ -99,7 +107,7 @@ def states(pm, seed):
         yield qp, rng.normal(size=pm.nv), 5 * rng.normal(size=pm.nv), rng.normal(size=pm.nv)
 
 
-@pytest.mark.parametrize("name", list(ROBOTS))
+@pytest.mark.parametrize("name", robots(ROBOTS))
 def test_dynamics_and_kinematics_match_pinocchio(name):
     model, pm = robot(name)
     pd = pm.createData()
@@ -181,7 +189,7 @@ def test_ur5_falls_like_pinocchio():
 
 
 @pytest.mark.parametrize("share", [False, True])
-@pytest.mark.parametrize("name", ["ur5", "panda"])
+@pytest.mark.parametrize("name", robots(["ur5", "panda"]))
 def test_joint_reactions_match_pinocchio_joint_forces(name, share):
     """Under the torques of RNEA, each joint's reaction wrench on its child (world axes, about
     the joint origin) plus the actuator torque about the axis is Pinocchio's ``data.f``
@@ -216,7 +224,7 @@ def test_joint_reactions_match_pinocchio_joint_forces(name, share):
             assert np.max(np.abs(r.moment + r.effort * (R @ S[3:]) - R @ forces[jid].angular)) < 1e-9 * scale
 
 
-@pytest.mark.parametrize("name", ["panda", "solo12"])
+@pytest.mark.parametrize("name", robots(["panda", "solo12"]))
 def test_joint_space_kernel_matches_aba(name):
     """The one-function joint-space forward dynamics (tree map + Schur solve + a_j), as
     compiled by ``forward_dynamics_kernel(joint_space=True)``, evaluated here by CasADi."""
@@ -239,7 +247,7 @@ def test_joint_space_kernel_matches_aba(name):
         assert np.max(np.abs(rates_to_pin(model, pm, aj) - a_pin)) <= 1e-8 * max(1.0, np.max(np.abs(a_pin)))
 
 
-@pytest.mark.parametrize("name", list(ROBOTS))
+@pytest.mark.parametrize("name", robots(ROBOTS, fast=("ur5",)))   # a floating base's kernel: joint_space_kernel
 def test_joint_forward_dynamics_kernel_matches_aba(name):
     """The joint-space tree kernel (recursive form), at 20 random states: compiled and
     called directly for the Panda (``nc.joint_forward_dynamics_kernel``), its CasADi function

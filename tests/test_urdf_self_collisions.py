@@ -66,6 +66,8 @@ def test_pairs_without_an_element_are_warned_about_and_listed():
     assert [c.name for c in s.contacts] == PAIRS + ["link1_collision1__link3_tip_collision0"]   # CylinderSphere
 
 
+@pytest.mark.slow      # the arm compiled with its self-collisions and run to rest; fast: the pairs' and the broad phase's
+#                        tests of this file (test_broad_phase_bound_is_below_the_gap_with_shared_coordinates)
 @pytest.mark.parametrize("share", [True, False])
 def test_folded_arm_rests_on_its_sphere_with_the_torque_balance_force(share):
     """Links 1 and 2 turn about vertical axes, so the vertical forces leave them still;

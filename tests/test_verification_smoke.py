@@ -21,6 +21,9 @@ def ladder(tmp_path, *args, timeout):
     return out.read_text(), run.stdout
 
 
+@pytest.mark.slow      # the ladder script in a subprocess; fast: test_an_unknown_group_is_named (the script),
+#                       tests/test_whipple.py, tests/test_rigid_motion.py, tests/test_tensegrity*.py (each group's
+#                       closed forms)
 def test_quick_groups_of_the_ladder(tmp_path):
     """The closed forms that need no simulation (bicycle, arboris, tensegrity), each row
     within its tolerance; the groups not asked for are not run."""

@@ -131,6 +131,9 @@ def test_rolling_rows_are_the_contact_point_velocity(bike):
         np.testing.assert_allclose(A[row] @ v, fd[2], rtol=1e-7, atol=1e-8)
 
 
+@pytest.mark.slow      # nonlinear runs of the bicycle on CasADi's VM; fast:
+#                       test_accelerations_jacobian_against_finite_differences, test_eigenvalues_match_table_2 (the
+#                       same equations linearised)
 def test_nonlinear_run_follows_the_linearisation(bike):
     """The full model simulated (projected Dormand–Prince) from upright running at 4 m/s with
     a lean rate ε: lean and steer follow ``exp(S t) [0, 0, ε, 0]`` of the linearisation, the
@@ -181,6 +184,8 @@ def test_bad_input_is_named(bike):
         WhippleParameters(**{**BENCHMARK.__dict__, "I_B": (1.0, 2.0)})
 
 
+@pytest.mark.slow      # the example script in a subprocess; fast: test_matrices_match_the_published_values (the
+#                       example's model)
 def test_example_runs_as_written(tmp_path):
     env = {**os.environ, "MPLBACKEND": "Agg"}
     out = subprocess.run([sys.executable, str(EXAMPLES / "whipple_bicycle.py")], cwd=tmp_path, env=env,
