@@ -9,9 +9,9 @@ same scheme (MuJoCo's soft contacts, ncgen's impulses): the same job, one step's
 linearisation with its contacts.  ncgen's figure is the whole call: one step of the compiled
 contact stepper, the modes, the Newton polish of the active set's equations and the
 implicit-function-theorem solve (ncgen/control/contact_step.py, the equations over the active
-contacts of ncgen/control/contact_active.py).  numpy's OpenBLAS runs single-threaded
-(``OPENBLAS_NUM_THREADS=1`` unless set), so that CPU times compare single-threaded work; the
-step no longer calls BLAS for its many-column solve (SuperLU's did, and on the shared, loaded
+contacts of ncgen/control/contact_active.py).  The step runs its algebra on one BLAS thread
+(ncgen's rule, ncgen/blas_threads.py: ``$NCGEN_BLAS_THREADS``), so that CPU times compare
+single-threaded work; the step no longer calls BLAS for its many-column solve (SuperLU's did, and on the shared, loaded
 machine its threads waited for the other processes: 0.9 s instead of 40 ms under a load of 12).
 
     python benchmarks/contact_step_jacobians.py [--heap 20] [--settle 0.5] [--calls 10] [--repeat 5] [--smoke]
@@ -23,7 +23,6 @@ import os
 import sys
 import time
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")   # before numpy (module docstring)
 from collections import Counter
 from pathlib import Path
 

@@ -16,6 +16,7 @@ from ncgen import blas_threads
 from ncgen.analysis import inverse_statics as inverse_statics_module
 from ncgen.analysis.tensegrity_shapes import prism
 from ncgen.blas_threads import ENV, blas_limit
+from ncgen.control.contact_step import ContactStepFunction
 from ncgen.errors import NcgenError
 
 OUTER = 2                   # the caller's own setting, which every exit must restore
@@ -101,6 +102,6 @@ def test_ipopt_uses_the_openblas_that_is_limited():
 @pytest.mark.parametrize("entry", [
     nc.form_find, nc.inverse_statics, nc.linearize, nc.modes, nc.optimize_prestress, nc.joint_reactions,
     nc.self_stress, nc.equilibrium, nc.ilqr, nc.MPC.__call__, nc.MPC.reset,
-    nc.JointMPC.__call__], ids=lambda f: f.__qualname__)
+    nc.JointMPC.__call__, ContactStepFunction.step], ids=lambda f: f.__qualname__)
 def test_the_entry_points_of_dense_algebra_follow_the_rule(entry):
     assert getattr(entry, "blas_limit", False), f"{entry.__qualname__} is not decorated with one_blas_thread"

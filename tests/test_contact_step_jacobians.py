@@ -64,6 +64,33 @@ def test_block_sticking_small_push(block):
     assert np.max(np.abs(s.B)) < 1e-12 and np.max(np.abs(s.A[2:, 2:])) < 1e-12
 
 
+def test_the_step_s_factorisations_run_on_one_blas_thread(block, monkeypatch):
+    """The step's sparse LU and its solves see one BLAS thread (ncgen/blas_threads.py: the
+    benchmark no longer sets OPENBLAS_NUM_THREADS); the caller's two threads are back after."""
+    import threadpoolctl
+
+    from ncgen import blas_threads
+    from ncgen.control import contact_step
+
+    _, st = block
+    monkeypatch.delenv(blas_threads.ENV, raising=False)
+    counts = lambda: {lib.filepath: lib.get_num_threads() for lib in blas_threads.blas_libraries()}  # noqa: E731
+    seen, factor = [], contact_step._Factor
+
+    def recording(*args, **kwargs):
+        seen.append(counts())
+        return factor(*args, **kwargs)
+
+    monkeypatch.setattr(contact_step, "_Factor", recording)
+    with threadpoolctl.threadpool_limits(limits=2, user_api="blas"):
+        for lib in blas_threads.blas_libraries():
+            lib.set_num_threads(2)
+        st.jacobians(np.array([0, 0, 0.5, 0]), np.array([20.0]))
+        after = counts()
+    assert seen and all(set(c.values()) == {1} for c in seen), seen
+    assert set(after.values()) == {2}, after
+
+
 def test_block_sliding_hard_push(block):
     _, st = block
     u = 20.0

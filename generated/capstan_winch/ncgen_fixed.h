@@ -136,7 +136,7 @@ static void put_stats(casadi_real *row, long steps, long iterations, long splits
   memcpy(row + 5, work, NWORK * sizeof *work);
 }
 
-/* The fixed-step run's error estimates (the argument `estimate` of run_fixed()). */
+/* The fixed-step run's error estimates (the field `estimate` of run_fixed()'s run_options). */
 #define ESTIMATE_NONE 0
 #define ESTIMATE_LOCAL 1
 #define ESTIMATE_SHADOW 2
@@ -178,7 +178,8 @@ static casadi_real max_diff(const casadi_real *a, const casadi_real *b, long n) 
 }
 
 /* Fixed steps (see <model>_simulate_stats; impulse_out: contacts only), p the order of the
- * scheme (RATTLE 2, its composition 4), R = 2^p - 1.  Error estimates:
+ * scheme (RATTLE 2, its composition 4), R = 2^p - 1.  Of the run's options `run` it reads
+ * `estimate` and `track_work` (NULL: neither).  Error estimates (run->estimate):
  * ESTIMATE_SHADOW: a shadow run with steps of 2h from the same start (one every second
  * step) gives the global error estimate (y_h - y_2h) / R after every even step.
  * ESTIMATE_LOCAL: the pair of steps k, k+1 is sampled when k/2 is LOCAL_EVERY - 1 modulo
@@ -196,9 +197,9 @@ static casadi_real max_diff(const casadi_real *a, const casadi_real *b, long n) 
 static int run_fixed(const casadi_real *q0, const casadi_real *v0, const casadi_real *lam0, casadi_real t0,
                      casadi_real h, long n_steps, long every, const casadi_real *u, long u_stride,
                      const casadi_real *p, casadi_real *q_out, casadi_real *v_out, casadi_real *lam_out,
-                     long *iter_out, casadi_real *stats_out, const step_options *o,
-                     int estimate, int track_work, long *steps_done, long *splits,
-                     casadi_real *impulse_out) {
+                     long *iter_out, casadi_real *stats_out, const step_options *o, const run_options *run,
+                     long *steps_done, long *splits, casadi_real *impulse_out) {
+  int estimate = run ? run->estimate : ESTIMATE_NONE, track_work = run ? run->track_work : 0;
   workspace ws;
   char *block;
   casadi_real *state, *q, *v, *q1, *v1, *lam, *swap, *q_s, *v_s, *q2, *v2, *x_save, *dx_save, *x_s, *dx_s, *u_bar;

@@ -70,7 +70,7 @@ int fourbar_3d_simulate(const casadi_real *q0, const casadi_real *v0, casadi_rea
                         long *steps_done, long *splits) {
   fourbar_3d_step_options defaults;
   return run_fixed(q0, v0, 0, t0, h, n_steps, every, u, u_stride, p, q_out, v_out, lam_out, iter_out, 0,
-                   options_or_default(options, &defaults), 0, 0, steps_done, splits, 0);
+                   options_or_default(options, &defaults), 0, steps_done, splits, 0);
 }
 
 int fourbar_3d_simulate_stats(const casadi_real *q0, const casadi_real *v0, const casadi_real *lam0,
@@ -81,9 +81,7 @@ int fourbar_3d_simulate_stats(const casadi_real *q0, const casadi_real *v0, cons
                               const fourbar_3d_run_options *run, long *steps_done, long *splits) {
   fourbar_3d_step_options defaults;
   return run_fixed(q0, v0, lam0, t0, h, n_steps, every, u, u_stride, p, q_out, v_out, lam_out, 0, stats_out,
-                   options_or_default(options, &defaults), run ? run->estimate : 0, run ? run->track_work : 0,
-                   steps_done, splits,
-                   0);
+                   options_or_default(options, &defaults), run, steps_done, splits, 0);
 }
 
 int fourbar_3d_simulate_adaptive(const casadi_real *q0, const casadi_real *v0, const casadi_real *lam0,

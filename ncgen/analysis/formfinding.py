@@ -84,6 +84,29 @@ class Tensegrity:
         return "\n".join(lines) + "\n"
 
 
+def _from_force_densities(nodes, struts: list, cables: list, force_densities, k: np.ndarray):
+    """``(nodes, rest lengths)``: the configuration the force densities (one per cable, then
+    one per strut) hold in equilibrium, and the cables' rest lengths at stiffnesses ``k``
+    that give them those tensions there."""
+    rho = np.asarray(force_densities, float).reshape(-1)
+    if rho.size != len(cables) + len(struts):
+        raise NcgenError(f"form_find: force_densities: expected {len(cables) + len(struts)} values (cables, "
+                         f"then struts), got {rho.size}")
+    bad = [i for i in range(len(cables)) if rho[i] <= 0]
+    if bad:
+        raise NcgenError(f"form_find: force_densities: cables can only pull; cable(s) {bad} have "
+                         f"non-positive force densities {rho[bad].tolist()}")
+    nodes = _force_density_configuration(nodes, struts + cables, np.concatenate([rho[len(cables):],
+                                                                                  rho[:len(cables)]]))
+    lengths = np.array([np.linalg.norm(nodes[j] - nodes[i]) for i, j in cables])
+    l0 = lengths - rho[:len(cables)] * lengths / k
+    if np.any(l0 <= 0):
+        i = int(np.argmin(l0))
+        raise NcgenError(f"form_find: cable {i} would need a rest length {l0[i]:.3g} m <= 0 to carry "
+                         f"{rho[i] * lengths[i]:.3g} N at stiffness {k[i]:g} N/m; raise the stiffness")
+    return nodes, l0
+
+
 @one_blas_thread
 def form_find(nodes, struts, cables, *, rest_lengths=None, force_densities=None, stiffness=1000.0,
               strut_mass: float = 1.0, node_mass: float = 0.1, name: str = "tensegrity") -> Tensegrity:
@@ -112,22 +135,7 @@ def form_find(nodes, struts, cables, *, rest_lengths=None, force_densities=None,
         raise NcgenError("form_find: give exactly one of rest_lengths (one per cable) and force_densities "
                          "(one per cable, then one per strut)")
     if force_densities is not None:
-        rho = np.asarray(force_densities, float).reshape(-1)
-        if rho.size != len(cables) + len(struts):
-            raise NcgenError(f"form_find: force_densities: expected {len(cables) + len(struts)} values (cables, "
-                             f"then struts), got {rho.size}")
-        bad = [i for i in range(len(cables)) if rho[i] <= 0]
-        if bad:
-            raise NcgenError(f"form_find: force_densities: cables can only pull; cable(s) {bad} have "
-                             f"non-positive force densities {rho[bad].tolist()}")
-        nodes = _force_density_configuration(nodes, struts + cables, np.concatenate([rho[len(cables):],
-                                                                                      rho[:len(cables)]]))
-        lengths = np.array([np.linalg.norm(nodes[j] - nodes[i]) for i, j in cables])
-        l0 = lengths - rho[:len(cables)] * lengths / k
-        if np.any(l0 <= 0):
-            i = int(np.argmin(l0))
-            raise NcgenError(f"form_find: cable {i} would need a rest length {l0[i]:.3g} m <= 0 to carry "
-                             f"{rho[i] * lengths[i]:.3g} N at stiffness {k[i]:g} N/m; raise the stiffness")
+        nodes, l0 = _from_force_densities(nodes, struts, cables, force_densities, k)
     else:
         l0 = np.asarray(rest_lengths, float).reshape(-1)
         if l0.size != len(cables) or np.any(l0 <= 0):

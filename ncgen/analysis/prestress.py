@@ -41,6 +41,41 @@ class PrestressDesign(InverseStatics):
     solve_time: float = 0.0
 
 
+def _smallest_stiffness(pr, alpha, t, start: np.ndarray) -> tuple:
+    """``(g, lbg, ubg, x, f, x0)`` of the objective ``"stiffness"``: the smallest eigenvalue
+    ``μ`` of the prestress stiffness ``Q(α)`` on the mechanisms maximised, ``Q − μ I = L Lᵀ``
+    with ``L`` lower triangular as equality constraints (``t``, the member forces, unused);
+    started from the forces ``start`` with ``μ₀`` just below ``Q``'s smallest eigenvalue there."""
+    import casadi as ca
+
+    an, n_s = pr.analysis, pr.T.shape[1]
+    nm = an.mechanisms.shape[1]
+    Qs = [an.prestress_stiffness(pr.t_p)] + [an.prestress_stiffness(pr.T[:, i]) for i in range(n_s)]
+    Q = ca.DM(Qs[0]) + sum((alpha[i] * ca.DM(Qs[1 + i]) for i in range(n_s)), ca.DM.zeros(nm, nm))
+    low = [(i, j) for i in range(nm) for j in range(i + 1)]
+    mu, ell = ca.MX.sym("mu"), ca.MX.sym("L", len(low))
+    L = ca.MX.zeros(nm, nm)
+    for k, (i, j) in enumerate(low):
+        L[i, j] = ell[k]
+    R = Q - mu * ca.DM.eye(nm) - ca.mtimes(L, L.T)
+    Q0 = Qs[0] + sum(a * Qi for a, Qi in zip(start, Qs[1:]))
+    mu0 = float(np.linalg.eigvalsh(Q0)[0]) - 1e-3 * max(1.0, float(np.abs(Q0).max()))
+    L0 = np.linalg.cholesky(Q0 - mu0 * np.eye(nm))
+    return (ca.vertcat(*[R[i, j] for i, j in low]), [0.0] * len(low), [0.0] * len(low), ca.vertcat(alpha, mu, ell),
+            -mu, np.concatenate([start, [mu0], [L0[i, j] for i, j in low]]))
+
+
+def _largest_cable_force(pr, alpha, t, start: np.ndarray) -> tuple:
+    """``(g, lbg, ubg, x, f, x0)`` of the objective ``"max_cable"``: the largest cable force
+    ``z`` minimised, ``t_cables ≤ z`` as constraints, started from the forces ``start``."""
+    import casadi as ca
+
+    nc = len(pr.framework.cables)
+    z = ca.MX.sym("z")
+    return (t[:nc] - z, [-np.inf] * nc, [0.0] * nc, ca.vertcat(alpha, z), z,
+            np.concatenate([start, [float((pr.forces(start)[:nc]).max(initial=0.0))]]))
+
+
 @one_blas_thread
 def optimize_prestress(nodes, struts, cables, loads=None, supports=None, *, objective: str = "stiffness",
                        cable_min: float = 0.0, cable_max: float | None = None, strut_max: float | None = None,
@@ -75,31 +110,11 @@ def optimize_prestress(nodes, struts, cables, loads=None, supports=None, *, obje
     g = [ca.mtimes(ca.DM(pr.B), t) - ca.DM(pr.b)]
     lbg, ubg = [-np.inf] * len(pr.b), [0.0] * len(pr.b)
     start = least_norm(pr, who)                    # inside the bounds
-    if objective == "stiffness":
-        nm = M.shape[1]
-        Qs = [an.prestress_stiffness(pr.t_p)] + [an.prestress_stiffness(pr.T[:, i]) for i in range(n_s)]
-        Q = ca.DM(Qs[0]) + sum((alpha[i] * ca.DM(Qs[1 + i]) for i in range(n_s)), ca.DM.zeros(nm, nm))
-        low = [(i, j) for i in range(nm) for j in range(i + 1)]
-        mu, ell = ca.MX.sym("mu"), ca.MX.sym("L", len(low))
-        L = ca.MX.zeros(nm, nm)
-        for k, (i, j) in enumerate(low):
-            L[i, j] = ell[k]
-        R = Q - mu * ca.DM.eye(nm) - ca.mtimes(L, L.T)
-        g.append(ca.vertcat(*[R[i, j] for i, j in low]))
-        lbg += [0.0] * len(low)
-        ubg += [0.0] * len(low)
-        x, f = ca.vertcat(alpha, mu, ell), -mu
-        Q0 = Qs[0] + sum(a * Qi for a, Qi in zip(start, Qs[1:]))
-        mu0 = float(np.linalg.eigvalsh(Q0)[0]) - 1e-3 * max(1.0, float(np.abs(Q0).max()))
-        L0 = np.linalg.cholesky(Q0 - mu0 * np.eye(nm))
-        x0 = np.concatenate([start, [mu0], [L0[i, j] for i, j in low]])
-    else:
-        z = ca.MX.sym("z")
-        g.append(t[:nc] - z)
-        lbg += [-np.inf] * nc
-        ubg += [0.0] * nc
-        x, f = ca.vertcat(alpha, z), z
-        x0 = np.concatenate([start, [float((pr.forces(start)[:nc]).max(initial=0.0))]])
+    objective_terms = _smallest_stiffness if objective == "stiffness" else _largest_cable_force
+    g_o, lbg_o, ubg_o, x, f, x0 = objective_terms(pr, alpha, t, start)
+    g.append(g_o)
+    lbg += lbg_o
+    ubg += ubg_o
     opts = {"print_time": False, "ipopt": {"print_level": 0, "sb": "yes", "tol": 1e-10,
                                            "bound_relax_factor": 0.0,
                                            **(ipopt_options or {})}}

@@ -176,6 +176,34 @@ def evaluate(model, q, lam, t, u, p):
             np.array(A, float).reshape(-1, model.nq))
 
 
+def _check_options(method: str, tol, max_iter) -> float:
+    """:func:`equilibrium`'s ``tol`` as a number, after refusing an unknown method, a ``tol``
+    that is not positive or a ``max_iter`` that is not a positive integer."""
+    if method not in ("descent", "newton"):
+        raise NcgenError(f"equilibrium: method: expected 'descent' or 'newton', got {method!r}")
+    tol = as_scalar(tol, "equilibrium: tol")
+    if tol <= 0:
+        raise NcgenError(f"equilibrium: tol: expected a number > 0 (relative), got {tol:g}")
+    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
+        raise NcgenError(f"equilibrium: max_iter: expected an integer ≥ 1, got {max_iter!r}")
+    return tol
+
+
+def _descent_shift(Kr: np.ndarray, f: np.ndarray, f_tol: float, extent: float) -> tuple[np.ndarray, bool]:
+    """``(K_r + μ I, True)`` where the reduced stiffness ``K_r`` is not positive definite along
+    the unbalanced force ``f`` (negative, or zero along a direction ``f`` pushes, beyond
+    ``f_tol``), ``μ`` large enough to make it so and to keep the step within
+    ``MAX_DESCENT_STEP × extent``; else ``(K_r, False)``.  Zero-stiffness motions the force does
+    not drive (rigid motions of a self-equilibrated structure) are left to the least-squares step."""
+    ev, V = np.linalg.eigh(0.5 * (Kr + Kr.T)) if Kr.size else (np.zeros(1), np.ones((1, 1)))
+    scale = float(np.abs(ev).max(initial=0))
+    soft = ev <= 1e-6 * scale
+    if ev.min(initial=np.inf) < -1e-6 * scale or np.linalg.norm(V[:, soft].T @ f) > 1e-6 * np.linalg.norm(f) + f_tol:
+        mu = max(-ev.min() + 1e-3 * scale, np.linalg.norm(f) / (MAX_DESCENT_STEP * extent))
+        return Kr + mu * np.eye(Kr.shape[0]), True
+    return Kr, False
+
+
 @one_blas_thread
 def equilibrium(model, q_guess=None, u=None, p=None, *, t: float | None = None, method: str = "descent",
                 tol: float = 1e-10, max_iter: int = 100) -> Equilibrium:
@@ -202,13 +230,7 @@ def equilibrium(model, q_guess=None, u=None, p=None, *, t: float | None = None, 
     """
     refuse_rolling(model, "equilibrium", "not supported yet for rolling elements (the elements' heights "
                    "would be missing)")
-    if method not in ("descent", "newton"):
-        raise NcgenError(f"equilibrium: method: expected 'descent' or 'newton', got {method!r}")
-    tol = as_scalar(tol, "equilibrium: tol")
-    if tol <= 0:
-        raise NcgenError(f"equilibrium: tol: expected a number > 0 (relative), got {tol:g}")
-    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
-        raise NcgenError(f"equilibrium: max_iter: expected an integer ≥ 1, got {max_iter!r}")
+    tol = _check_options(method, tol, max_iter)
     nq = model.nq
     t = model.t0 if t is None else float(t)
     q = np.array(model.q0 if q_guess is None else as_vector(q_guess, nq, "q_guess"), float)
@@ -242,33 +264,27 @@ def equilibrium(model, q_guess=None, u=None, p=None, *, t: float | None = None, 
         Kr = N.T @ K @ N
         shifted = False
         if method == "descent":
-            ev, V = np.linalg.eigh(0.5 * (Kr + Kr.T)) if Kr.size else (np.zeros(1), np.ones((1, 1)))
-            scale = float(np.abs(ev).max(initial=0))
-            soft = ev <= 1e-6 * scale
-            # shift where the stiffness is negative, or zero along a direction the force pushes
-            # (zero-stiffness motions the force does not drive, rigid motions of a
-            # self-equilibrated structure, are left to the least-squares step)
-            if ev.min(initial=np.inf) < -1e-6 * scale or \
-                    np.linalg.norm(V[:, soft].T @ f) > 1e-6 * np.linalg.norm(f) + tol * f_scale:
-                mu = max(-ev.min() + 1e-3 * scale, np.linalg.norm(f) / (MAX_DESCENT_STEP * extent))
-                Kr, shifted = Kr + mu * np.eye(Kr.shape[0]), True
+            Kr, shifted = _descent_shift(Kr, f, tol * f_scale, extent)
         dz = np.linalg.lstsq(Kr, f, rcond=None)[0]
         if method == "descent" and np.linalg.norm(dz) > MAX_DESCENT_STEP * extent:
             dz *= MAX_DESCENT_STEP * extent / np.linalg.norm(dz)
             shifted = True
-        step = N @ dz
-        merit, alpha = f @ f, 1.0
-        while True:
-            trial = at(q + alpha * step)
-            # a descent step is also accepted while the force still pushes along it: the
-            # potential keeps decreasing up to the new point
-            if (trial[7] @ trial[7] <= (1 - 1e-4 * alpha) * merit or alpha < 1e-4
-                    or (shifted and trial[2] @ step >= 0)):
-                break
-            alpha *= 0.5
-        q, lam, G, phi, K, A, N, f = trial
+        q, lam, G, phi, K, A, N, f = _line_search(at, q, N @ dz, f, shifted)
         it += 1
     return _result(model, q, lam, t, u, p, G, phi, K, A, it)
+
+
+def _line_search(at, q: np.ndarray, step: np.ndarray, f: np.ndarray, shifted: bool) -> tuple:
+    """``at(q + α step)`` for the first ``α`` of 1, 1/2, 1/4, … (down to 1e-4) that decreases
+    ``|Nᵀ G|²`` enough (Armijo); a descent step (``shifted``) is also accepted while the force
+    still pushes along it: the potential keeps decreasing up to the new point."""
+    merit, alpha = f @ f, 1.0
+    while True:
+        trial = at(q + alpha * step)
+        if (trial[7] @ trial[7] <= (1 - 1e-4 * alpha) * merit or alpha < 1e-4
+                or (shifted and trial[2] @ step >= 0)):
+            return trial
+        alpha *= 0.5
 
 
 def _project(model, q, t, u, p, tol: float, max_iter: int = 50) -> np.ndarray:

@@ -69,42 +69,25 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     from ncgen.model.model import Model
 
     system = copy.deepcopy(system)       # the model's own description: later edits of the caller's system do not reach it
-    if not system.members:
-        raise ModelError(f"system {system.name!r} has no members; add bodies, bars or points first")
-    if contacts not in CONTACT_MODELS:
-        raise ModelError(f"contacts: expected one of {', '.join(CONTACT_MODELS)}, got {contacts!r}")
-    if redundant not in REDUNDANT_MODES:
-        raise ModelError(f"redundant: expected one of {', '.join(REDUNDANT_MODES)}, got {redundant!r}")
+    _check_build_options(system, contacts, redundant)
     alpha, beta = (float(x) for x in baumgarte)
     recipe = (system, dict(baumgarte=(alpha, beta), redundant=redundant, tolerance=tolerance, t0=t0,
                            assemble=assemble, fix=tuple(fix), contacts=contacts, share=share))
     plan = unshared = None
     if share and not fix:          # fix names coordinates as written: no sharing then
-        nq_before = make_layout(system.dim, list(system.members.values())).nq
-        source = system
-        system, plan = share_coordinates(system)
-        plan.nq_before = nq_before
-        if plan.eliminated or plan.partial:
-            options = dict(baumgarte=baumgarte, redundant=redundant, tolerance=tolerance, t0=t0,
-                           assemble=assemble, contacts=contacts)
-            unshared = UnsharedForm(source, options, build_model)
+        system, plan, unshared = _shared_coordinates(system, dict(baumgarte=baumgarte, redundant=redundant,
+                                                                  tolerance=tolerance, t0=t0, assemble=assemble,
+                                                                  contacts=contacts))
     members = list(system.members.values())
     layout = make_layout(system.dim, members)
     ctx = Context(system, layout)
 
     fixed = resolve_fix(layout, system.members, fix)
     labels, rows = constraint_rows(system, ctx, plan)
-    F, V = force_terms(system, ctx)
     limits = model_limits(system, ctx)
     coords, skipped = build_joint_coordinates(system, ctx)
     actuation = actuator_forces(ctx, coords)
-    passive = F
-    if actuation[2]:
-        F = F + ca.mtimes(actuation[0], actuation[1])
-    terms = contact_terms(ctx, system.contacts)
-    if terms and contacts == "smooth":
-        _, _, Q, Vc = smooth_forces(ctx, terms)
-        F, V, passive = F + Q, ca.vertcat(V, Vc), passive + Q
+    F, V, passive, terms = _applied_forces(system, ctx, actuation, contacts)
     M = assemble_mass(layout, members)
     flat = flat_members(members, layout)
     factor = mass_factor(M, layout.coordinate_names, flat, flat_support(members, layout, flat))
@@ -114,25 +97,8 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
 
     if assemble:                    # drives move the mechanism first: the checks below see where they put it
         q_init = assemble_drives(system, ctx, lambda c: constraint_rows(system, c, plan)[1], q_init, p0, t0, fixed)
-    A_fn = ca.Function("A", [ctx.t, ctx.q, ctx.p], [ca.jacobian(ca.vertcat(*rows), ctx.q)]) \
-        if rows else None
-    dependent = dependent_rows(np.array(A_fn(t0, q_init, p0)) if A_fn else np.zeros((0, layout.nq)))
-    redundant_labels = [labels[i] for i in dependent]
-    hint = ""
-    if dependent and plan is not None and plan.eliminated:
-        hint = (f" (coordinate sharing replaced the joints {', '.join(plan.eliminated)} by shared coordinates; "
-                "build(share=False) keeps their equations, so the redundant ones are named)")
-    if dependent and redundant == "error":
-        raise ModelError(f"system {system.name!r}: redundant constraints at the initial configuration: "
-                         f"{', '.join(redundant_labels)}{hint}; remove them or build(redundant='drop')")
-    if dependent and redundant == "drop":
-        phi_fn = ca.Function("phi", [ctx.t, ctx.q, ctx.p], [ca.vertcat(*rows)])
-        _check_droppable(system.name, labels, dependent, phi_fn, A_fn, q_init, p0, t0)
-        warnings.warn(f"system {system.name!r}: dropping redundant constraints "
-                      f"{', '.join(redundant_labels)} (implied by the others near the initial "
-                      f"configuration, and satisfied){hint}", stacklevel=3)
-        keep = [i for i in range(len(rows)) if i not in set(dependent)]
-        labels, rows = [labels[i] for i in keep], [rows[i] for i in keep]
+    labels, rows, redundant_labels = _redundant_constraints(system.name, ctx, labels, rows, plan, redundant,
+                                                            (q_init, p0, t0))
 
     phi = ca.vertcat(*rows) if rows else ca.SX(0, 1)
     if not factor.regular:        # a flat body: M must be positive definite on null(A)
@@ -174,6 +140,68 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
         model = model_with(consistent_state(functions, layout, labels, q, v, p0, t0, tolerance, M, fixed=fixed))
     raise_if_interrupted()               # a Ctrl-C that CasADi swallowed while the functions were built
     return model
+
+
+def _check_build_options(system, contacts: str, redundant: str) -> None:
+    """Refuse a system without members and an unknown ``contacts`` or ``redundant`` mode."""
+    if not system.members:
+        raise ModelError(f"system {system.name!r} has no members; add bodies, bars or points first")
+    if contacts not in CONTACT_MODELS:
+        raise ModelError(f"contacts: expected one of {', '.join(CONTACT_MODELS)}, got {contacts!r}")
+    if redundant not in REDUNDANT_MODES:
+        raise ModelError(f"redundant: expected one of {', '.join(REDUNDANT_MODES)}, got {redundant!r}")
+
+
+def _shared_coordinates(system, options: dict):
+    """``(system, plan, unshared)``: the system with the joints that shared coordinates express
+    eliminated (:func:`ncgen.model.sharing.share_coordinates`), its plan, and the recipe of the
+    ``share=False`` form when sharing changed anything (else None; ``options``: the build's)."""
+    nq_before = make_layout(system.dim, list(system.members.values())).nq
+    shared, plan = share_coordinates(system)
+    plan.nq_before = nq_before
+    unshared = UnsharedForm(system, options, build_model) if plan.eliminated or plan.partial else None
+    return shared, plan, unshared
+
+
+def _applied_forces(system, ctx, actuation, contacts: str):
+    """``(F, V, passive, terms)``: the applied forces ``F`` (actuators included) and their
+    potential ``V``, the passive part of ``F`` (without the actuators), and the contact terms,
+    whose forces join ``F`` and ``V`` when contacts are ``"smooth"``."""
+    F, V = force_terms(system, ctx)
+    passive = F
+    if actuation[2]:
+        F = F + ca.mtimes(actuation[0], actuation[1])
+    terms = contact_terms(ctx, system.contacts)
+    if terms and contacts == "smooth":
+        _, _, Q, Vc = smooth_forces(ctx, terms)
+        F, V, passive = F + Q, ca.vertcat(V, Vc), passive + Q
+    return F, V, passive, terms
+
+
+def _redundant_constraints(name: str, ctx, labels: list, rows: list, plan, redundant: str, at: tuple):
+    """``(labels, rows, redundant labels)``: the constraint rows linearly dependent at ``at`` =
+    ``(q, p, t0)`` found, then refused (``"error"``), dropped once shown implied and satisfied
+    (``"drop"``, with a warning naming them) or kept (``"keep"``)."""
+    q, p, t0 = at
+    A_fn = ca.Function("A", [ctx.t, ctx.q, ctx.p], [ca.jacobian(ca.vertcat(*rows), ctx.q)]) if rows else None
+    dependent = dependent_rows(np.array(A_fn(t0, q, p)) if A_fn else np.zeros((0, ctx.layout.nq)))
+    redundant_labels = [labels[i] for i in dependent]
+    hint = ""
+    if dependent and plan is not None and plan.eliminated:
+        hint = (f" (coordinate sharing replaced the joints {', '.join(plan.eliminated)} by shared coordinates; "
+                "build(share=False) keeps their equations, so the redundant ones are named)")
+    if dependent and redundant == "error":
+        raise ModelError(f"system {name!r}: redundant constraints at the initial configuration: "
+                         f"{', '.join(redundant_labels)}{hint}; remove them or build(redundant='drop')")
+    if dependent and redundant == "drop":
+        phi_fn = ca.Function("phi", [ctx.t, ctx.q, ctx.p], [ca.vertcat(*rows)])
+        _check_droppable(name, labels, dependent, phi_fn, A_fn, q, p, t0)
+        warnings.warn(f"system {name!r}: dropping redundant constraints "
+                      f"{', '.join(redundant_labels)} (implied by the others near the initial "
+                      f"configuration, and satisfied){hint}", stacklevel=4)
+        keep = [i for i in range(len(rows)) if i not in set(dependent)]
+        labels, rows = [labels[i] for i in keep], [rows[i] for i in keep]
+    return labels, rows, redundant_labels
 
 
 def _initial_coordinates(model, system) -> tuple[np.ndarray, np.ndarray]:

@@ -41,32 +41,26 @@ class CheckReport:
         s, m = self.system, self.model
         where = f" ({source})" if source else ""
         lines = [f"model {s.name!r}{where}: {'planar' if s.dim == 2 else '3D'}, gravity "
-                 f"{_fmt(s.gravity)} m/s²"]
-        lines += _members(s)
-        if s.joints:
-            lines.append(f"joints ({len(s.joints)}):")
-            lines += [f"  {j.name:<16} {j.kind:<16} {' – '.join(_mname(x) for x in j.members())}"
-                      + (" (driven)" if j.options.get("drive") is not None or j.kind == "CoordinateDriver" else "")
-                      for j in s.joints]
-        if s.forces:
-            lines.append(f"forces ({len(s.forces)}): " + ", ".join(f"{f.name} ({f.kind})" for f in s.forces))
-        if getattr(s, "contacts", None):
-            lines.append(f"contacts ({len(s.contacts)}):")
-            lines += [f"  {c.name:<16} {c.kind:<16} {' – '.join(_mname(x) for x in c.members())}  "
-                      f"mu = {c.mu:g}, e = {c.restitution:g}" for c in s.contacts]
-        if s.parameters:
-            lines.append("parameters: " + ", ".join(f"{n} = {_fmt(v)}" for n, (_, v) in s.parameters.items()))
-        if s.inputs:
-            lines.append("inputs: " + ", ".join(f"{n} ({u.numel()})" for n, u in s.inputs.items()))
+                 f"{_fmt(s.gravity)} m/s²", *_system_lines(s)]
         if m is None:
             lines.append(f"error: {self.error}")
             lines.append("consistent: no (the model cannot be built)")
             return "\n".join(lines) + "\n"
-        lines.append(f"coordinates (nq = {m.nq}):")
-        lines += _wrap(m.coordinate_names)
-        lines.append(f"constraints (nc = {m.nc + len(self.dof.dropped)}):")
-        lines += _wrap([*m.constraint_names, *self.dof.dropped])
-        d = self.dof
+        lines += self._model_lines()
+        for w in self.warnings:
+            lines.append(f"warning: {w}")
+        if self.inconsistency:
+            lines.append(f"consistent: no: {self.inconsistency}")
+        else:
+            lines.append("consistent: yes")
+        return "\n".join(lines) + "\n"
+
+    def _model_lines(self) -> list[str]:
+        """The built model: its coordinates, constraints, sharing, rank and DOF, mass matrix,
+        redundant constraints, the initial state's residuals and corrections, initial gaps."""
+        m, d = self.model, self.dof
+        lines = [f"coordinates (nq = {m.nq}):", *_wrap(m.coordinate_names),
+                 f"constraints (nc = {m.nc + len(d.dropped)}):", *_wrap([*m.constraint_names, *d.dropped])]
         lines += _sharing(m, m.nc + len(d.dropped))
         lines.append(f"rank A = {d.rank}, DOF = {d.dof}")
         if d.rolling_summary():
@@ -85,13 +79,28 @@ class CheckReport:
             gaps = np.array(m.functions["gap"](m.q0, m.p0), float).reshape(-1)
             lines.append("initial gaps (m, < 0 penetrating): " + ", ".join(
                 f"{c['name']} {g:.6g}" for c, g in zip(m.contacts, gaps)))
-        for w in self.warnings:
-            lines.append(f"warning: {w}")
-        if self.inconsistency:
-            lines.append(f"consistent: no: {self.inconsistency}")
-        else:
-            lines.append("consistent: yes")
-        return "\n".join(lines) + "\n"
+        return lines
+
+
+def _system_lines(s) -> list[str]:
+    """The system as written: its members, joints, forces, contacts, parameters and inputs."""
+    lines = _members(s)
+    if s.joints:
+        lines.append(f"joints ({len(s.joints)}):")
+        lines += [f"  {j.name:<16} {j.kind:<16} {' – '.join(_mname(x) for x in j.members())}"
+                  + (" (driven)" if j.options.get("drive") is not None or j.kind == "CoordinateDriver" else "")
+                  for j in s.joints]
+    if s.forces:
+        lines.append(f"forces ({len(s.forces)}): " + ", ".join(f"{f.name} ({f.kind})" for f in s.forces))
+    if getattr(s, "contacts", None):
+        lines.append(f"contacts ({len(s.contacts)}):")
+        lines += [f"  {c.name:<16} {c.kind:<16} {' – '.join(_mname(x) for x in c.members())}  "
+                  f"mu = {c.mu:g}, e = {c.restitution:g}" for c in s.contacts]
+    if s.parameters:
+        lines.append("parameters: " + ", ".join(f"{n} = {_fmt(v)}" for n, (_, v) in s.parameters.items()))
+    if s.inputs:
+        lines.append("inputs: " + ", ".join(f"{n} ({u.numel()})" for n, u in s.inputs.items()))
+    return lines
 
 
 def check_system(system, *, tolerance: float = DEFAULT_TOLERANCE, share: bool = True) -> CheckReport:

@@ -47,8 +47,6 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     arguments=_arguments,
 )
 def mpc(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
-    import numpy as np
-
     from ncgen.control.export import MAX_T_END, export_mpc
     from ncgen.optim.problem_file import model_path, problem_from_data, read_problem_file
 
@@ -66,40 +64,51 @@ def mpc(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         raise missing_model(origin, data, "mpc")
     model = load_model(str(model_file), args.param, mjcf_contacts=args.mjcf_contacts)
     ocp, _ = problem_from_data(data, model, origin)
-    x0 = None
-    if args.x0:
-        from ncgen.assembly.kinematics import assemble
-        from ncgen.errors import NcgenError
-        values = {}
-        for item in args.x0.split(","):
-            key, _, value = item.partition("=")
-            try:
-                model.coordinate(key)
-            except NcgenError as exc:
-                parser.error(f"--x0: {exc}")
-            try:
-                values[key] = float(value)
-            except ValueError:
-                values[key] = np.nan
-            if not np.isfinite(values[key]):
-                parser.error(f"--x0: {item!r}: expected coordinate=number (a finite number)")
-        try:
-            x0 = np.concatenate([assemble(model, model.q0, values=values), np.zeros(model.nq)])
-        except NcgenError as exc:
-            parser.error(f"--x0 {args.x0}: no consistent state has these coordinates: {exc}")
-    pulses = []
-    for item in args.disturbance:
-        parts = item.split(":")
-        try:
-            t_on, t_off, values = float(parts[0]), float(parts[1]), [float(v) for v in parts[2].split(",")]
-        except (ValueError, IndexError):
-            parser.error(f"--disturbance {item!r}: expected T_ON:T_OFF:U1,U2,... (numbers)")
-        if not (np.isfinite(t_on) and np.isfinite(t_off) and t_on < t_off and np.all(np.isfinite(values))):
-            parser.error(f"--disturbance {item!r}: expected finite numbers with T_ON < T_OFF")
-        pulses.append((t_on, t_off, values))
+    x0 = _start_state(model, args.x0, parser) if args.x0 else None
+    pulses = [_pulse(item, parser) for item in args.disturbance]
     pkg = export_mpc(ocp, args.output, name=args.name, iterations=args.iterations,
                      terminal_weight=args.terminal_weight, x0=x0, t_end=args.t_end, substeps=args.substeps,
                      disturbance=pulses)
     print(f"wrote the MPC package {pkg.name!r} to {pkg.path}: build it with `make -C {pkg.path}`, "
           f"run `{pkg.path}/demo`")
     return 0
+
+
+def _start_state(model, text: str, parser: argparse.ArgumentParser):
+    """``--x0 coordinate=value,...``: the consistent state at rest with those coordinates
+    (the others assembled from the model's), or the parser's error naming the bad item."""
+    import numpy as np
+
+    from ncgen.assembly.kinematics import assemble
+    from ncgen.errors import NcgenError
+    values = {}
+    for item in text.split(","):
+        key, _, value = item.partition("=")
+        try:
+            model.coordinate(key)
+        except NcgenError as exc:
+            parser.error(f"--x0: {exc}")
+        try:
+            values[key] = float(value)
+        except ValueError:
+            values[key] = np.nan
+        if not np.isfinite(values[key]):
+            parser.error(f"--x0: {item!r}: expected coordinate=number (a finite number)")
+    try:
+        return np.concatenate([assemble(model, model.q0, values=values), np.zeros(model.nq)])
+    except NcgenError as exc:
+        parser.error(f"--x0 {text}: no consistent state has these coordinates: {exc}")
+
+
+def _pulse(item: str, parser: argparse.ArgumentParser) -> tuple:
+    """``--disturbance T_ON:T_OFF:U1,U2,...``: ``(t_on, t_off, values)``, or the parser's error."""
+    import numpy as np
+
+    parts = item.split(":")
+    try:
+        t_on, t_off, values = float(parts[0]), float(parts[1]), [float(v) for v in parts[2].split(",")]
+    except (ValueError, IndexError):
+        parser.error(f"--disturbance {item!r}: expected T_ON:T_OFF:U1,U2,... (numbers)")
+    if not (np.isfinite(t_on) and np.isfinite(t_off) and t_on < t_off and np.all(np.isfinite(values))):
+        parser.error(f"--disturbance {item!r}: expected finite numbers with T_ON < T_OFF")
+    return t_on, t_off, values

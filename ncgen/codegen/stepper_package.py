@@ -138,6 +138,22 @@ def pair_docs(functions) -> dict:
     return out
 
 
+def _bounding_data(side) -> list[str]:
+    """The bounding data of one side of a contact element, as C literals: a member's centre,
+    axes, extents, radius and gap-gradient norm; a fixed point and its radius; a half-space's
+    point and normal; nothing for an unbounded side."""
+    if side.kind == "member":
+        values = [side.centre.ravel(order="F")] + [a.ravel(order="F") for a in side.axes] + \
+            [side.extents, [side.radius, side.gnorm]]
+    elif side.kind == "fixed":
+        values = [side.fixed, [side.radius]]
+    elif side.kind == "halfspace":
+        values = [side.fixed, side.normal]
+    else:
+        values = []
+    return [c_real(x) for v in values for x in np.asarray(v, float).ravel()]
+
+
 def pair_context(model, pairs) -> dict:
     """The template context of the element table (``runtime/ncgen_contact_pairs.h``): the
     pattern of W (per contact row the coordinates of its element's members; none for the
@@ -170,16 +186,7 @@ def pair_context(model, pairs) -> dict:
                 wpos.append(start + cols.index(c) if c >= 0 and stop > start else -1)
         for which, (side, const) in enumerate(zip(e.sides, (e.const_a, e.const_b))):
             sides += [kinds[side.kind], len(side.extents), len(bdata)]
-            if side.kind == "member":
-                values = [side.centre.ravel(order="F")] + [a.ravel(order="F") for a in side.axes] + \
-                    [side.extents, [side.radius, side.gnorm]]
-            elif side.kind == "fixed":
-                values = [side.fixed, [side.radius]]
-            elif side.kind == "halfspace":
-                values = [side.fixed, side.normal]
-            else:
-                values = []
-            numbers = [c_real(x) for v in values for x in np.asarray(v, float).ravel()]
+            numbers = _bounding_data(side)
             if side.kind == "member":
                 key = (tuple(side.idx), tuple(c_real(x) for x in const), tuple(numbers))
                 if key not in distinct:

@@ -53,6 +53,7 @@ import scipy.sparse.linalg as spla
 from ncgen.control.contact_active import ActiveContactEquations
 from ncgen.control.contact_equations import IMPACT_STEPS, NGLOBAL, NSEL, contact_residual, contact_system, layout
 from ncgen.assembly.stepper_equations import contact_function
+from ncgen.blas_threads import one_blas_thread
 from ncgen.codegen.stepper_package import PENETRATION_TOL
 from ncgen.control.discrete import residual_scale
 from ncgen.errors import NcgenError
@@ -195,8 +196,11 @@ class ContactStepFunction:
             x = X[k] = self.step(x, U[k], p, t0 + k * self.h).x1
         return X
 
+    @one_blas_thread
     def step(self, x, u=None, p=None, t=None) -> ContactStep:
-        """The step from ``x`` with its Jacobians, modes and switch flag (module docstring)."""
+        """The step from ``x`` with its Jacobians, modes and switch flag (module docstring); its
+        factorisations and solves on one BLAS thread (:mod:`ncgen.blas_threads`), as are
+        :meth:`jacobians` and :meth:`rollout`, which call it."""
         from ncgen.control.step_support import StepDidNotConverge
 
         x, u, p, t = self._args(x, u, p, t)

@@ -357,12 +357,9 @@ def _parts(body, geoms, T, cls, compiler, defaults, unsupported) -> list:
     return [(m, R @ c + p, R @ I @ R.T) for m, c, I in parts]
 
 
-def _members(s, ground, groups, compiler, defaults, unsupported):
-    """Bodies and joints of the groups; returns ``(member of group, {MJCF joint name: (joint,
-    kind)}, the joints driven by tau in its order)``."""
-    from ncgen.model.forces import TorsionalSpring
-    from ncgen.model.joints import Free, Prismatic, Revolute, Spherical
-
+def _bodies(s, ground, groups) -> dict:
+    """``{id(group): member}``: one body per group of welded MJCF bodies (their lumped mass and
+    inertia), the world the ground."""
     member_of = {id(ground): s.ground}
     for g in groups:
         mass, com, inertia = lump(g.parts)
@@ -375,6 +372,16 @@ def _members(s, ground, groups, compiler, defaults, unsupported):
         I_body = R.T @ inertia @ R
         _check_inertia(I_body, g.body)
         member_of[id(g)] = s.add_body(bname, mass=mass, inertia=I_body, position=com, rotation=R)
+    return member_of
+
+
+def _members(s, ground, groups, compiler, defaults, unsupported):
+    """Bodies and joints of the groups; returns ``(member of group, {MJCF joint name: (joint,
+    kind)}, the joints driven by tau in its order)``."""
+    from ncgen.model.forces import TorsionalSpring
+    from ncgen.model.joints import Free, Prismatic, Revolute, Spherical
+
+    member_of = _bodies(s, ground, groups)
     actuated = [j for g in groups for j, a in g.joints if a.get("type", "hinge") in ("hinge", "slide")]
     tau = s.add_input("tau", len(actuated)) if actuated else None
     effort = {id(j): k for k, j in enumerate(actuated)}
@@ -601,21 +608,14 @@ def _actuators(s, root, joints, driven, tendons, defaults, unsupported) -> None:
     elements = [el for section in root.findall("actuator") for el in section]
     for k, el in enumerate(elements):
         a = defaults.attributes(el, None)
-        target = [key for key in ("joint", "tendon", "site", "body", "jointinparent") if key in a]
+        target = _transmission(el, a, joints, tendons)
         name = a.get("name") or f"actuator{k}"
-        if len(target) != 1:
-            raise ModelError(f"MJCF {where(el)}: <{el.tag}> needs exactly one transmission (joint, tendon, site, "
-                             f"body), found {target or 'none'}")
-        if target[0] in ("joint", "jointinparent") and a[target[0]] not in joints:
-            raise ModelError(f"MJCF {where(el)}: <{el.tag} {target[0]}={a[target[0]]!r}>: no joint of that name")
-        if target[0] == "tendon" and a["tendon"] not in tendons:
-            raise ModelError(f"MJCF {where(el)}: <{el.tag} tendon={a['tendon']!r}>: no tendon of that name")
         law, why = actuator_law(el, a, name)
-        on_tendon = target[0] == "tendon" and tendons[a["tendon"]] is not None
-        if law is not None and target[0] == "tendon" and not on_tendon:
+        on_tendon = target == "tendon" and tendons[a["tendon"]] is not None
+        if law is not None and target == "tendon" and not on_tendon:
             why = f"actuator {name!r} on tendon {a['tendon']!r}, which is not imported"
-        elif law is not None and not (on_tendon or (target[0] == "joint" and a["joint"] in index)):
-            why = f"actuator {name!r} on a {target[0]} (only hinges, slides and fixed tendons are imported)"
+        elif law is not None and not (on_tendon or (target == "joint" and a["joint"] in index)):
+            why = f"actuator {name!r} on a {target} (only hinges, slides and fixed tendons are imported)"
         if why:
             unsupported.add(el, why)
             continue
@@ -648,6 +648,20 @@ def _actuators(s, root, joints, driven, tendons, defaults, unsupported) -> None:
         if getattr(obj, "mjcf_actuatorfrcrange", None) is not None:
             ranges[driven.index(d)] = obj.mjcf_actuatorfrcrange
     s.actuation = Actuation(laws, s.actuator_gear, ref, driven, ranges)
+
+
+def _transmission(el, a: dict, joints: dict, tendons: dict) -> str:
+    """The actuator ``el``'s one transmission (``joint``, ``tendon``, ``site``, ``body`` or
+    ``jointinparent``), checked to name a joint or tendon of the model where it is one."""
+    target = [key for key in ("joint", "tendon", "site", "body", "jointinparent") if key in a]
+    if len(target) != 1:
+        raise ModelError(f"MJCF {where(el)}: <{el.tag}> needs exactly one transmission (joint, tendon, site, "
+                         f"body), found {target or 'none'}")
+    if target[0] in ("joint", "jointinparent") and a[target[0]] not in joints:
+        raise ModelError(f"MJCF {where(el)}: <{el.tag} {target[0]}={a[target[0]]!r}>: no joint of that name")
+    if target[0] == "tendon" and a["tendon"] not in tendons:
+        raise ModelError(f"MJCF {where(el)}: <{el.tag} tendon={a['tendon']!r}>: no tendon of that name")
+    return target[0]
 
 
 def _coordinate(joints, mjcf_name, driven_name):

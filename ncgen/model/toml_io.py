@@ -174,6 +174,12 @@ JOINT_ARGUMENT_KINDS = {"drive": "value of t and parameters", "rotation": "rotat
                         "steps": "joint steps", "names": "names"}
 #: Keys of one step of a JointSequence (``steps = [{kind, at, axis}, ...]``).
 STEP_KEYS = ("kind", "at", "axis")
+#: Field kinds that name elements of the system (read by ``_Loader._reference``).
+REFERENCE_KINDS = frozenset({"share", "point or node", "ends", "member", "member, not the ground", "two members",
+                             "member or members, not the ground", "joint", "cable path"})
+#: Field kinds that are expressions of t, parameters and inputs (``_Loader._expression``; and ``value[n]``).
+EXPRESSION_KINDS = frozenset({"value or values", "values of parameters", "value", "value of t and parameters",
+                              "force", "torque", "generalized force"})
 #: Components of a joint's actuator effort (``effort``), where not one.
 EFFORT_SIZE = {"Cylindrical": 2, "Universal": 2, "Planar": 3, "Spherical": 3}
 
@@ -292,6 +298,13 @@ def _string(v, path) -> str:
 def _bool(v, path) -> bool:
     if not isinstance(v, bool):
         raise ModelError(f"{path}: expected true or false, got {_describe(v)}")
+    return v
+
+
+def _pair(v, path, expected: str) -> list:
+    """``v``, checked to be a list of two (``expected`` says of what, for the error)."""
+    if not isinstance(v, list) or len(v) != 2:
+        raise ModelError(f"{path}: expected {expected}, got {_describe(v)}")
     return v
 
 
@@ -446,7 +459,17 @@ class _Loader:
         return kw
 
     def value(self, kind: str, v, path):
-        """Value ``v`` at key ``path`` read as ``kind`` (see :data:`KINDS`)."""
+        """Value ``v`` at key ``path`` read as ``kind``: a reference to an element of the system
+        (:data:`REFERENCE_KINDS`), an expression of t, parameters and inputs
+        (:data:`EXPRESSION_KINDS`, ``value[n]``), else a plain value (:meth:`_plain_value`)."""
+        if kind in REFERENCE_KINDS:
+            return self._reference(kind, v, path)
+        if kind in EXPRESSION_KINDS or kind.startswith("value["):
+            return self._expression(kind, v, path)
+        return self._plain_value(kind, v, path)
+
+    def _plain_value(self, kind: str, v, path):
+        """A number, string, vector, matrix, shape or index at ``path``, of the system's dimension."""
         d = self.dim
         if kind == "number":
             return _number(v, path)
@@ -459,9 +482,8 @@ class _Loader:
         if kind == "number or vector":
             return _vector(v, d, path) if isinstance(v, list) else _number(v, path)
         if kind == "two points":
-            if not isinstance(v, list) or len(v) != 2:
-                raise ModelError(f"{path}: expected two points (one on each member), got {_describe(v)}")
-            return [_vector(x, d, f"{path}[{i}]") for i, x in enumerate(v)]
+            pair = _pair(v, path, "two points (one on each member)")
+            return [_vector(x, d, f"{path}[{i}]") for i, x in enumerate(pair)]
         if kind == "inertia":
             return _matrix(v, 3, path) if d == 3 else _number(v, path)
         if kind == "rotation":
@@ -472,52 +494,10 @@ class _Loader:
             if not isinstance(v, list):
                 raise ModelError(f"{path}: expected a list of vectors, got {_describe(v)}")
             return [_vector(b, d, f"{path}[{i}]") for i, b in enumerate(v)]
-        if kind == "share":
-            st = _Table(v, path, "a table of slot = node")
-            return {k: self._node(x, st.at(k)) for k, x in st.data.items()}
-        if kind == "point or node":
-            return self._point_or_node(v, path)
         if kind == "shape":
             return shape_from_table(v, path, self.base)
-        if kind == "ends":
-            if not isinstance(v, list) or len(v) != 2:
-                raise ModelError(f"{path}: expected two points or nodes, got {_describe(v)}")
-            return [self._point_or_node(e, f"{path}[{i}]") for i, e in enumerate(v)]
-        if kind == "member":
-            return self._member_ref(v, path)
-        if kind == "member, not the ground":
-            return self._member_ref(v, path, ground=False)
-        if kind == "two members":
-            if not isinstance(v, list) or len(v) != 2:
-                raise ModelError(f"{path}: expected two member names (\"ground\" for the ground), "
-                                 f"got {_describe(v)}")
-            return [self._member_ref(m, f"{path}[{i}]") for i, m in enumerate(v)]
-        if kind == "joint":
-            return self._joint_ref(v, path)
-        if kind == "cable path":
-            if not isinstance(v, list) or len(v) < 2:
-                raise ModelError(f"{path}: expected a list of [member, [local point]] pairs (two or more), "
-                                 f"got {_describe(v)}")
-            out = []
-            for i, item in enumerate(v):
-                if not isinstance(item, list) or len(item) != 2:
-                    raise ModelError(f"{path}[{i}]: expected [member, [local point]], got {_describe(item)}")
-                out.append((self._member_ref(item[0], f"{path}[{i}][0]"), _vector(item[1], d, f"{path}[{i}][1]")))
-            return out
         if kind == "joint steps":
-            if not isinstance(v, list) or not all(isinstance(x, dict) for x in v):
-                raise ModelError(f"{path}: expected a list of tables {{kind = \"hinge\" or \"slide\", at = [x, y, z], "
-                                 f"axis = [x, y, z]}}, got {_describe(v)}")
-            out = []
-            for i, step in enumerate(v):
-                st = _Table(step, f"{path}[{i}]")
-                kind_ = _string(st.get("kind", required=True), st.at("kind"))
-                if kind_ not in ("hinge", "slide"):
-                    raise ModelError(f"{st.at('kind')}: expected \"hinge\" or \"slide\", got {kind_!r}")
-                out.append((kind_, _vector(st.get("at", required=True), d, st.at("at")),
-                            _vector(st.get("axis", required=True), d, st.at("axis"))))
-                st.finish(STEP_KEYS)
-            return out
+            return self._joint_steps(v, path)
         if kind == "names":
             if not isinstance(v, list):
                 raise ModelError(f"{path}: expected a list of names, got {_describe(v)}")
@@ -529,9 +509,39 @@ class _Loader:
         if kind == "index or indices":
             return [self.value("index", x, f"{path}[{i}]") for i, x in enumerate(v)] if isinstance(v, list) \
                 else self.value("index", v, path)
+        if kind == "slot or axis":
+            if not isinstance(v, (str, int)) or isinstance(v, bool):
+                raise ModelError(f"{path}: expected a name or an index, got {_describe(v)}")
+            return v
+        raise AssertionError(f"unknown field kind {kind!r}")
+
+    def _reference(self, kind: str, v, path):
+        """Members, joints, nodes or points of the system named at ``path`` (:data:`REFERENCE_KINDS`)."""
+        if kind == "share":
+            st = _Table(v, path, "a table of slot = node")
+            return {k: self._node(x, st.at(k)) for k, x in st.data.items()}
+        if kind == "point or node":
+            return self._point_or_node(v, path)
+        if kind == "ends":
+            return [self._point_or_node(e, f"{path}[{i}]") for i, e in enumerate(_pair(v, path, "two points or nodes"))]
+        if kind == "member":
+            return self._member_ref(v, path)
+        if kind == "member, not the ground":
+            return self._member_ref(v, path, ground=False)
+        if kind == "two members":
+            pair = _pair(v, path, "two member names (\"ground\" for the ground)")
+            return [self._member_ref(m, f"{path}[{i}]") for i, m in enumerate(pair)]
         if kind == "member or members, not the ground":
             return [self._member_ref(x, f"{path}[{i}]", ground=False) for i, x in enumerate(v)] \
                 if isinstance(v, list) else self._member_ref(v, path, ground=False)
+        if kind == "joint":
+            return self._joint_ref(v, path)
+        return self._cable_path(v, path)                     # "cable path"
+
+    def _expression(self, kind: str, v, path):
+        """An expression (or a list of them) of t, parameters and, unless ``kind`` says otherwise,
+        inputs, with the components ``kind`` asks for (:data:`EXPRESSION_KINDS`, ``value[n]``)."""
+        d = self.dim
         if kind == "value or values":                # one value, or a list of them (one each)
             return [self._expr(x, f"{path}[{i}]") for i, x in enumerate(v)] if isinstance(v, list) \
                 else self._expr(v, path)
@@ -539,10 +549,6 @@ class _Loader:
             if not isinstance(v, list) or not v:
                 raise ModelError(f"{path}: expected a list of numbers or expression strings, got {_describe(v)}")
             return [self._expr(x, f"{path}[{i}]", inputs=False) for i, x in enumerate(v)]
-        if kind == "slot or axis":
-            if not isinstance(v, (str, int)) or isinstance(v, bool):
-                raise ModelError(f"{path}: expected a name or an index, got {_describe(v)}")
-            return v
         if kind == "value":                     # of t, parameters and inputs
             return self._expr(v, path)
         if kind.startswith("value["):           # value[n]: n components
@@ -553,10 +559,36 @@ class _Loader:
             return self._expr(v, path, d)
         if kind == "torque":
             return self._expr(v, path, 3 if d == 3 else 1)
-        if kind == "generalized force":
-            nq = self._scope(state=True).names["q"].numel()
-            return self._expr(v, path, nq, state=True)
-        raise AssertionError(f"unknown field kind {kind!r}")
+        nq = self._scope(state=True).names["q"].numel()     # "generalized force"
+        return self._expr(v, path, nq, state=True)
+
+    def _cable_path(self, v, path) -> list:
+        """``[(member, local point), …]``: a cable's path over two or more members."""
+        if not isinstance(v, list) or len(v) < 2:
+            raise ModelError(f"{path}: expected a list of [member, [local point]] pairs (two or more), "
+                             f"got {_describe(v)}")
+        out = []
+        for i, item in enumerate(v):
+            if not isinstance(item, list) or len(item) != 2:
+                raise ModelError(f"{path}[{i}]: expected [member, [local point]], got {_describe(item)}")
+            out.append((self._member_ref(item[0], f"{path}[{i}][0]"), _vector(item[1], self.dim, f"{path}[{i}][1]")))
+        return out
+
+    def _joint_steps(self, v, path) -> list:
+        """``[(kind, at, axis), …]``: the hinge and slide steps of a JointSequence."""
+        if not isinstance(v, list) or not all(isinstance(x, dict) for x in v):
+            raise ModelError(f"{path}: expected a list of tables {{kind = \"hinge\" or \"slide\", at = [x, y, z], "
+                             f"axis = [x, y, z]}}, got {_describe(v)}")
+        out = []
+        for i, step in enumerate(v):
+            st = _Table(step, f"{path}[{i}]")
+            kind = _string(st.get("kind", required=True), st.at("kind"))
+            if kind not in ("hinge", "slide"):
+                raise ModelError(f"{st.at('kind')}: expected \"hinge\" or \"slide\", got {kind!r}")
+            out.append((kind, _vector(st.get("at", required=True), self.dim, st.at("at")),
+                        _vector(st.get("axis", required=True), self.dim, st.at("axis"))))
+            st.finish(STEP_KEYS)
+        return out
 
     def _joint_ref(self, name, path):
         name = _string(name, path)

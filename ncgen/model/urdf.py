@@ -118,39 +118,14 @@ def system_from_urdf(source, system_class, *, floating_base: bool = False, gravi
                      collisions=False):
     """A system (an instance of ``system_class``, :class:`~ncgen.model.system.System`) from a
     URDF file or text; see the module docstring."""
-    from ncgen.model.joints import Free, Mimic, Prismatic, Revolute
+    from ncgen.model.joints import Free
 
     robot, where = load_urdf(source)
     links = {ln.name: ln for ln in robot.links}
     joints = list(robot.joints)
     parent_of = {j.child: j for j in joints}
-    for j in joints:
-        for role, ln in (("parent", j.parent), ("child", j.child)):
-            if ln not in links:
-                raise ModelError(f"URDF {where}: joint {j.name!r}: {role} link {ln!r} is not defined")
-        if j.type not in MOVABLE + ("fixed",):
-            raise ModelError(f"URDF {where}: joint {j.name!r}: type {j.type!r} is not supported "
-                             f"(supported: {', '.join(MOVABLE)}, fixed)")
-    roots = [ln for ln in links if ln not in parent_of]
-    if len(roots) != 1:
-        raise ModelError(f"URDF {where}: expected one root link (a tree), found {roots}")
-    root = roots[0]
-    children: dict[str, list] = {}
-    for j in joints:
-        children.setdefault(j.parent, []).append(j)
-
-    # zero-configuration world poses, depth first in file order
-    pose = {root: np.eye(4)}
-    order = []
-    group_of = {root: root}
-    stack = [root]
-    while stack:
-        here = stack.pop()
-        order.append(here)
-        for j in reversed(children.get(here, [])):
-            pose[j.child] = pose[here] @ _origin(j.origin)
-            group_of[j.child] = group_of[here] if j.type == "fixed" else j.child
-            stack.append(j.child)
+    root = _check_tree(links, joints, parent_of, where)
+    pose, order, group_of = _zero_poses(root, joints)
     order_index = {ln: k for k, ln in enumerate(order)}
     movable = sorted((j for j in joints if j.type != "fixed"), key=lambda j: order_index[j.child])
 
@@ -162,22 +137,7 @@ def system_from_urdf(source, system_class, *, floating_base: bool = False, gravi
         _lump(g, links, pose)
 
     s = system_class(name if name is not None else as_system_name(robot.name or "", "robot"), gravity=gravity)
-    member_of: dict[str, object] = {}
-    grounded = not floating_base
-    for gname, g in groups.items():
-        if gname == root and grounded:
-            member_of[gname] = s.ground
-            continue
-        moved_by = "the floating base" if gname == root else f"joint {parent_of[gname].name!r}"
-        if g.mass <= 0:
-            raise ModelError(f"URDF {where}: link(s) {', '.join(g.links)} (moved by {moved_by}) have no mass "
-                             "(no <inertial>); ncgen needs mass on every moving body: add an <inertial>, "
-                             "or make the joint fixed so the link is merged into its parent")
-        R = pose[gname][:3, :3]
-        I_body = R.T @ g.inertia @ R
-        _check_inertia(I_body, g, where, moved_by)
-        member_of[gname] = s.add_body(identifier(gname), mass=g.mass, inertia=I_body, position=g.com,
-                                      rotation=R)
+    member_of = _add_bodies(s, groups, root if not floating_base else None, parent_of, pose, where)
 
     tau = s.add_input("tau", len([j for j in movable if j.mimic is None])) if movable else None
     s.frames = {}
@@ -192,12 +152,83 @@ def system_from_urdf(source, system_class, *, floating_base: bool = False, gravi
     if floating_base:
         s.add_joint(Free(s.ground, member_of[root], at=pose[root][:3, 3], rotation=pose[root][:3, :3],
                          name="root"))
+    _add_joints(s, movable, [member_of[group_of[j.parent]] for j in movable],
+                [member_of[group_of[j.child]] for j in movable], pose, tau, where)
+    s.skipped_collisions = []
+    if collisions is not False and collisions is not None:
+        _add_collisions(s, collisions, order, links, member_of, group_of, pose, where, parent_of)
+    return s
+
+
+def _check_tree(links: dict, joints: list, parent_of: dict, where: str) -> str:
+    """The root link of the robot's tree, after checking that every joint joins defined links
+    and is of a supported type, and that one link has no parent."""
+    for j in joints:
+        for role, ln in (("parent", j.parent), ("child", j.child)):
+            if ln not in links:
+                raise ModelError(f"URDF {where}: joint {j.name!r}: {role} link {ln!r} is not defined")
+        if j.type not in MOVABLE + ("fixed",):
+            raise ModelError(f"URDF {where}: joint {j.name!r}: type {j.type!r} is not supported "
+                             f"(supported: {', '.join(MOVABLE)}, fixed)")
+    roots = [ln for ln in links if ln not in parent_of]
+    if len(roots) != 1:
+        raise ModelError(f"URDF {where}: expected one root link (a tree), found {roots}")
+    return roots[0]
+
+
+def _zero_poses(root: str, joints: list) -> tuple[dict, list, dict]:
+    """``(pose, order, group_of)``: every link's world pose (4×4) at the zero configuration, the
+    links depth first in file order, and the link each is welded to by fixed joints (its group)."""
+    children: dict[str, list] = {}
+    for j in joints:
+        children.setdefault(j.parent, []).append(j)
+    pose = {root: np.eye(4)}
+    order = []
+    group_of = {root: root}
+    stack = [root]
+    while stack:
+        here = stack.pop()
+        order.append(here)
+        for j in reversed(children.get(here, [])):
+            pose[j.child] = pose[here] @ _origin(j.origin)
+            group_of[j.child] = group_of[here] if j.type == "fixed" else j.child
+            stack.append(j.child)
+    return pose, order, group_of
+
+
+def _add_bodies(s, groups: dict, grounded: str | None, parent_of: dict, pose: dict, where: str) -> dict:
+    """``{group: member}``: one body per group of welded links (its lumped mass and inertia),
+    the group ``grounded`` (the root of a fixed-base robot) the ground."""
+    member_of: dict[str, object] = {}
+    for gname, g in groups.items():
+        if gname == grounded:
+            member_of[gname] = s.ground
+            continue
+        moved_by = f"joint {parent_of[gname].name!r}" if gname in parent_of else "the floating base"
+        if g.mass <= 0:
+            raise ModelError(f"URDF {where}: link(s) {', '.join(g.links)} (moved by {moved_by}) have no mass "
+                             "(no <inertial>); ncgen needs mass on every moving body: add an <inertial>, "
+                             "or make the joint fixed so the link is merged into its parent")
+        R = pose[gname][:3, :3]
+        I_body = R.T @ g.inertia @ R
+        _check_inertia(I_body, g, where, moved_by)
+        member_of[gname] = s.add_body(identifier(gname), mass=g.mass, inertia=I_body, position=g.com,
+                                      rotation=R)
+    return member_of
+
+
+def _add_joints(s, movable: list, parents: list, children: list, pose: dict, tau, where: str) -> None:
+    """The movable joints (revolute, continuous, prismatic) between the members ``parents[i]``
+    and ``children[i]`` at their zero-configuration poses, with their limits, damping and
+    friction, each driven by its component of the input ``tau`` unless it mimics another
+    (those as :class:`~ncgen.model.joints.Mimic` constraints, added last)."""
+    from ncgen.model.joints import Mimic, Prismatic, Revolute
+
     made = {}
     k = 0
-    for j in movable:
+    for j, A, B in zip(movable, parents, children):
         T = pose[j.child]
         axis = T[:3, :3] @ (np.asarray(j.axis, float) if j.axis is not None else np.array([1.0, 0, 0]))
-        A, B = member_of[group_of[j.parent]], member_of[group_of[j.child]]
         effort = None
         if j.mimic is None:
             effort, k = tau[k], k + 1
@@ -219,10 +250,6 @@ def system_from_urdf(source, system_class, *, floating_base: bool = False, gravi
                                  "movable joint of this robot")
             s.add_joint(Mimic(leader, made[j.name], multiplier=j.mimic.multiplier or 1.0,
                               offset=j.mimic.offset or 0.0, name=identifier(f"{j.name}_mimic")))
-    s.skipped_collisions = []
-    if collisions is not False and collisions is not None:
-        _add_collisions(s, collisions, order, links, member_of, group_of, pose, where, parent_of)
-    return s
 
 
 def _add_collisions(s, collisions, order, links, member_of, group_of, pose, where, parent_of) -> None:

@@ -38,8 +38,8 @@ from ncgen.runtime.inputs import input_samples, parameter_values, time_grid
 from ncgen.runtime.library import compiled_functions
 from ncgen.runtime.run_start import initial_multipliers, initial_state, point_bytes
 from ncgen.runtime.options import SimulationOptions
-from ncgen.runtime.stepper import (COMPOSITION_STAGES, ESTIMATE_MODES, ESTIMATE_NAMES, _trajectory, fixed_scheme,
-                                   step_inputs)
+from ncgen.runtime.stepper import (COMPOSITION_STAGES, ESTIMATE_MODES, ESTIMATE_NAMES, StepperRows, StepperStart,
+                                   _trajectory, fixed_scheme, step_inputs)
 from ncgen.runtime.stepper_checks import is_conservative, row_flags, untrusted_row
 from ncgen.codegen.stepper_abi import RunOptions
 from ncgen.runtime.stepper_library import step_options
@@ -435,8 +435,8 @@ class _Runs:
         info = {"method": "stepper", "h": self.h, "substeps": self.substeps, "stats": {},
                 "stages": COMPOSITION_STAGES if self.rattle4 else 1, "order": 4 if self.rattle4 else 2,
                 "estimate": ESTIMATE_NAMES[self.mode]}
-        traj = _trajectory(model, self.stepper, self.t, Q[0], V[0], LAM[0], Q[1:], V[1:], LAM[1:], S, rows,
-                           self.U[i], self.P[i], info, self.conservative, time.perf_counter(),
+        traj = _trajectory(model, self.stepper, StepperStart(self.t, self.U[i], self.P[i], Q[0], V[0], LAM[0]),
+                           StepperRows(Q[1:], V[1:], LAM[1:], S, rows), info, self.conservative, time.perf_counter(),
                            accel=self._accel())
         LAM[:rows + 1] = traj.lam
         self.Y[i, :rows + 1, 0], self.Y[i, :rows + 1, 1] = traj.kinetic, traj.potential

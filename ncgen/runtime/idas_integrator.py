@@ -112,31 +112,23 @@ class IdasIntegrator:
     def run(self, run: Run) -> Trajectory:
         if self.model.rolling:
             return simulate_rolling_idas(self.model, run, self.opts)
-        return _simulate_idas(self.model, run.t, run.U, run.columns, run.p, run.q, run.v, self.opts,
-                              controller=run.controller, feedback=run.feedback, why_not=run.why_not)
+        return _simulate_idas(self.model, run, self.opts)
 
 
-def _simulate_idas(model, t, U, columns, pv, q, v, opts: IdasOptions, *, controller=None, feedback=None,
-                   why_not=None) -> Trajectory:
-    """IDAS over the grid ``t`` from the consistent state ``(q, v)`` (see :func:`simulate`);
-    a compiled ``controller`` and the joint dynamics enter its DAE, a Python ``feedback`` is
-    called at the start of every output interval."""
+def _simulate_idas(model, run: Run, opts: IdasOptions) -> Trajectory:
+    """IDAS over the grid ``run.t`` from the consistent state ``(run.q, run.v)`` (see
+    :func:`simulate`); a compiled ``run.controller`` and the joint dynamics enter its DAE, a
+    Python ``run.feedback`` is called at the start of every output interval."""
+    t, U, columns, pv, q, v, feedback = run.t, run.U, run.columns, run.p, run.q, run.v, run.feedback
     t0, hold, project = float(t[0]), opts.hold, opts.project
     rtol, atol = 1e-8 if opts.rtol is None else opts.rtol, 1e-10 if opts.atol is None else opts.atol
     choice = choose_backend(model, len(t) - 1, opts.backend)
     dae, used = load_dae(model, "auto" if opts.backend == "auto" and choice.backend == "compiled" else choice.backend)
-    extra = _natural_inputs(model, controller, opts.joint_dynamics)
+    extra = _natural_inputs(model, run.controller, opts.joint_dynamics)
     if extra is not None:
         dae = dae_with_inputs(model, dae, extra)
     if feedback is not None:
-        try:
-            U[0] = natural_feedback(model, feedback, t0, q, v, pv)
-        except FeedbackFailed as e:
-            lam = initial_multipliers(model, t0, q, v, np.zeros(model.nu), pv, dae)
-            raise failed_at_start(model, e, t0, q, v, pv, lam, {"method": "idas", "backend": used,
-                                                                "feedback": feedback[0], "complete": False}) \
-                from e.__cause__
-        columns = hold_columns(U, t, hold)
+        columns = _feedback_at_start(model, run, opts, dae, used)
     u0 = U[0] + _extra_value(model, extra, t0, q, v, pv)
     lam = initial_multipliers(model, t0, q, v, u0, pv, dae)
     a = np.array(model.functions["ode"](t0, q, v, lam, u0, pv)[1]).reshape(-1)
@@ -150,11 +142,9 @@ def _simulate_idas(model, t, U, columns, pv, q, v, opts: IdasOptions, *, control
                          algebraic=lambda tk, x, uk: _algebraic(
                              model, tk, x, uk + _extra_value(model, extra, tk, x[:model.nq], x[model.nq:], pv), pv))
     if feedback is not None:
-        if hold != "zoh":
-            raise NcgenError("hold='linear' with a feedback u(t, q, v): the feedback is held over each output "
-                             "interval (zoh); use hold='zoh'")
-        return _idas_feedback(model, runner, t, q, v, a, lam, U, pv, feedback, opts.progress, "idas", used, rtol,
-                              atol, opts.linear_solver, dae)
+        info = {"method": "idas", "backend": used, "rtol": rtol, "atol": atol, "hold": "zoh",
+                "feedback": feedback[0], "linear_solver": opts.linear_solver}
+        return _idas_feedback(model, runner, run, np.concatenate([a, lam]), opts.progress, info, dae)
     if projector is not None:
         projector.start(t0, np.concatenate([q, v]))
     bridge = _bridge(model, runner, pv, rtol, atol) if projector is not None else None
@@ -186,8 +176,8 @@ def _simulate_idas(model, t, U, columns, pv, q, v, opts: IdasOptions, *, control
         stats.update(projector.counts, rattle_intervals=bridge.count, branch_departure=departure)
     info = {"method": "idas", "backend": used, "backend_reason": choice.reason if used == choice.backend
             else "no C compiler", "rtol": rtol, "atol": atol, "hold": hold,
-            "auto": why_not, "joint_dynamics": bool(opts.joint_dynamics),
-            "controller": None if controller is None else controller.describe(),
+            "auto": run.why_not, "joint_dynamics": bool(opts.joint_dynamics),
+            "controller": None if run.controller is None else run.controller.describe(),
             "linear_solver": opts.linear_solver, "stats": stats, "project": project,
             "projected_from": None if projected_from is None else float(grid[projected_from]),
             "watched_interval": float(grid[1] - grid[0]) if projector is not None else None,
@@ -234,13 +224,31 @@ def _extra_value(model, extra, t: float, q, v, p) -> np.ndarray:
 
 
 
-def _idas_feedback(model, runner, t, q, v, a, lam, U, p, feedback, progress, method, used, rtol, atol,
-                   linear_solver, dae) -> Trajectory:
-    """IDAS one output interval at a time, the feedback evaluated at the start of each."""
-    nq = model.nq
+def _feedback_at_start(model, run: Run, opts: IdasOptions, dae, used: str) -> np.ndarray:
+    """``run.U[0]`` set to the feedback at the start (a failure there raised with the state it
+    failed at) and the input columns held zoh, the only hold a feedback takes."""
+    t0, q, v, pv = float(run.t[0]), run.q, run.v, run.p
+    if opts.hold != "zoh":
+        raise NcgenError("hold='linear' with a feedback u(t, q, v): the feedback is held over each output "
+                         "interval (zoh); use hold='zoh'")
+    try:
+        run.U[0] = natural_feedback(model, run.feedback, t0, q, v, pv)
+    except FeedbackFailed as e:
+        lam = initial_multipliers(model, t0, q, v, np.zeros(model.nu), pv, dae)
+        raise failed_at_start(model, e, t0, q, v, pv, lam, {"method": "idas", "backend": used,
+                                                            "feedback": run.feedback[0], "complete": False}) \
+            from e.__cause__
+    return hold_columns(run.U, run.t, opts.hold)
+
+
+def _idas_feedback(model, runner, run: Run, z0: np.ndarray, progress, info: dict, dae) -> Trajectory:
+    """IDAS one output interval at a time from ``(run.q, run.v)`` and ``z0 = [a; λ]``, the
+    feedback evaluated at the start of each; ``info``: the trajectory's, without the counts
+    and times of the run."""
+    t, U, p, feedback, nq = run.t, run.U, run.p, run.feedback, model.nq
     X = np.empty((len(t), 2 * nq))
     Z = np.empty((len(t), nq + model.nc))
-    X[0], Z[0] = np.concatenate([q, v]), np.concatenate([a, lam])
+    X[0], Z[0] = np.concatenate([run.q, run.v]), z0
     bar = Progress(t[0], t[-1], progress, label=f"simulating {model.name}: ")
     start, cpu_start, failure, k = time.perf_counter(), time.process_time(), None, 0
     try:
@@ -261,10 +269,8 @@ def _idas_feedback(model, runner, t, q, v, a, lam, U, p, feedback, progress, met
     finally:
         bar.close()
     U[k] = U[k - 1] if k else U[0]
-    info = {"method": method, "backend": used, "rtol": rtol, "atol": atol, "hold": "zoh",
-            "feedback": feedback[0], "linear_solver": linear_solver, "stats": dict(runner.stats),
-            "wall_time": time.perf_counter() - start, "cpu_time": time.process_time() - cpu_start,
-            "complete": failure is None}
+    info = {**info, "stats": dict(runner.stats), "wall_time": time.perf_counter() - start,
+            "cpu_time": time.process_time() - cpu_start, "complete": failure is None}
     traj = Trajectory.from_states(model, t[:k + 1], X[:k + 1, :nq], X[:k + 1, nq:], Z[:k + 1, nq:], U[:k + 1], p,
                                   info)
     if isinstance(failure, FeedbackFailed):

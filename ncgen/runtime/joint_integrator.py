@@ -23,7 +23,4 @@ class JointIntegrator:
         self.loop_options = self.opts.loop_options()
 
     def run(self, run: Run) -> Trajectory:
-        o = self.opts
-        return simulate_joint(self.model, run.t, run.U, o.hold, run.p, run.q, run.v, options=self.loop_options,
-                              feedback=run.feedback, controller=run.controller, joint_dynamics=o.joint_dynamics,
-                              progress=o.progress, kernels=o.kernels)
+        return simulate_joint(self.model, run, self.opts, self.loop_options)

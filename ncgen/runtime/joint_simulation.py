@@ -33,6 +33,8 @@ import numpy as np
 from ncgen.codegen.joint_loop import INTERRUPTED, JointOptions, integrator_name, joint_options, run_options
 from ncgen.errors import CompilerNotFound, ModelError, NcgenError, SimulationError, SimulationInterrupted, option
 from ncgen.runtime.feedback import FeedbackFailed, call_feedback, with_partial
+from ncgen.runtime.integrator import Run
+from ncgen.runtime.joint_loop_options import JointLoopOptions
 from ncgen.interrupts import call_interruptibly
 from ncgen.runtime.simulation_progress import Progress
 from ncgen.runtime.trajectory import Trajectory, once
@@ -268,66 +270,34 @@ def joint_loop(model, controller=None, joint_dynamics: bool = False, cflags=None
     return loop
 
 
-def simulate_joint(model, t: np.ndarray, U: np.ndarray, hold: str, p: np.ndarray, q0, v0, *,
-                   options: JointOptions, feedback=None, controller=None, joint_dynamics: bool = False,
-                   progress: bool | None = None, kernels: str = "auto") -> Trajectory:
-    """Integrate in joint space on the grid ``t`` from the natural state ``(q0, v0)``
-    (module docstring) with the loop's options ``options`` (checked by
-    :func:`~ncgen.codegen.joint_loop.joint_options`; ``stop_at_outputs`` is set here, where
-    the inputs vary).  ``U``: input samples on the grid (the open-loop part);
-    ``feedback``: ``(kind, u)`` with ``kind`` ``"natural"`` (``u(t, q, v)``) or ``"joint"``
+def simulate_joint(model, run: Run, opts: JointLoopOptions, options: JointOptions) -> Trajectory:
+    """Integrate in joint space on the grid ``run.t`` from the natural state ``(run.q,
+    run.v)`` (module docstring) with the group ``opts`` and the loop's options ``options``
+    (checked by :func:`~ncgen.codegen.joint_loop.joint_options`; ``stop_at_outputs`` is set
+    here, where the inputs vary).  ``run.U``: input samples on the grid (the open-loop part);
+    ``run.feedback``: ``(kind, u)`` with ``kind`` ``"natural"`` (``u(t, q, v)``) or ``"joint"``
     (``u(t, qj, vj)``), called at the start of every output interval."""
+    t, p, hold, feedback, controller = run.t, run.p, opts.hold, run.feedback, run.controller
     if hold == "linear" and feedback is not None:
         raise NcgenError("hold='linear' with a feedback u(t, q, v): the feedback is held over each output "
                          "interval (zoh); use hold='zoh'")
     js = model.joint_space
-    build_start = time.perf_counter()
-    choice = choose_kernels(model, len(t) - 1, controller, joint_dynamics, kernels)
-    loop = joint_loop(model, controller, joint_dynamics, kernels=choice.backend)
-    build_time = time.perf_counter() - build_start
-    qj0, vj0 = model.to_joint_space(q0, v0)
+    loop, choice, build_time = _run_loop(model, controller, opts, len(t) - 1)
     n = len(t)
     X = np.zeros((n, js.nq + js.nv))
-    X[0] = np.concatenate([qj0, vj0])
-    U = np.ascontiguousarray(U, dtype=float)
-    W = U.copy()
-    S = None
-    if hold == "linear" and model.nu:
-        S = np.zeros_like(U)
-        S[:-1] = np.diff(U, axis=0) / np.diff(t)[:, None]
+    X[0] = np.concatenate(model.to_joint_space(run.q, run.v))
+    U = np.ascontiguousarray(run.U, dtype=float)
+    W, S = U.copy(), _input_slopes(U, t) if hold == "linear" and model.nu else None
     varying = model.nu > 0 and (feedback is not None or bool(np.any(U != U[:1])))
     options = run_options(options, varying)
     integrator = integrator_name(options)
-    stats = np.zeros(5)
-    bar = Progress(float(t[0]), float(t[-1]), progress, label=f"simulating {model.name} (joint space): ")
     start = time.perf_counter()
-    status, k = 0, 0
-    chunk = 1 if feedback is not None else max(1, math.ceil((n - 1) / CHUNKS))
-    failed = None
-    try:
-        while k < n - 1 and status == 0:
-            m = min(chunk, n - 1 - k)
-            if feedback is not None:
-                try:
-                    W[k] = _feedback(model, feedback, float(t[k]), X[k], p)
-                except FeedbackFailed as e:
-                    failed, W[k] = e, W[k - 1] if k else W[k]
-                    break
-            sl = slice(k, k + m + 1)
-            Xs = X[sl]
-            status, done = loop.run(options, np.ascontiguousarray(t[sl]), Xs, np.ascontiguousarray(W[k:k + m]),
-                                    None if S is None else np.ascontiguousarray(S[k:k + m]), p, stats)
-            k += done
-            bar.update(float(t[k]))
-    except KeyboardInterrupt:             # between chunks (in a feedback u(t, q, v))
-        status = INTERRUPTED
-    finally:
-        bar.close()
+    status, k, failed, stats = _integrate(model, loop, options, run, X, W, S, opts.progress)
     steps = {"rtol": options.rtol, "atol": options.atol} if integrator == "dopri5" else \
         {"h": float(t[1] - t[0]) / options.substeps, "substeps": options.substeps}
     info = {"method": "joint", "integrator": integrator, **steps, "hold": hold,
             "controller": None if controller is None else controller.describe(),
-            "feedback": None if feedback is None else feedback[0], "joint_dynamics": bool(joint_dynamics),
+            "feedback": None if feedback is None else feedback[0], "joint_dynamics": bool(opts.joint_dynamics),
             "kernels": loop.kernels, "kernels_reason": choice.reason,
             "stats": {"nsteps": int(stats[0]), "rejected_steps": int(stats[1]), "evaluations": int(stats[2])},
             "build_time": build_time, "wall_time": time.perf_counter() - start, "complete": status == 0}
@@ -368,6 +338,56 @@ def _controller_cause(model, loop: JointLoop, times: tuple, x: np.ndarray, p) ->
             return (f"the compiled controller's inputs are not finite: at the state reached at t = {times[0]:.6g} s, "
                     f"taken at t = {t:.6g} s, its law gives {applied.tolist()}")
     return None
+
+
+def _run_loop(model, controller, opts: JointLoopOptions, n_out: int):
+    """``(loop, choice, build time in s)``: the joint loop of a run of ``n_out`` output
+    intervals on the kernels :func:`choose_kernels` chooses (found, or built now)."""
+    build_start = time.perf_counter()
+    choice = choose_kernels(model, n_out, controller, opts.joint_dynamics, opts.kernels)
+    loop = joint_loop(model, controller, opts.joint_dynamics, kernels=choice.backend)
+    return loop, choice, time.perf_counter() - build_start
+
+
+def _input_slopes(U: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """The slopes (per s) of the inputs ``U`` held linearly between the output times ``t``, one
+    row per interval (the last row, after the end, zero)."""
+    S = np.zeros_like(U)
+    S[:-1] = np.diff(U, axis=0) / np.diff(t)[:, None]
+    return S
+
+
+def _integrate(model, loop, options: JointOptions, run: Run, X: np.ndarray, W: np.ndarray, S, progress):
+    """``(status, k, failed, stats)``: the loop run over the grid in chunks (one output interval
+    each under a feedback, which sets that interval's inputs ``W[k]``) until the end or a
+    failure, the states into ``X``; ``k``: the last output reached; ``failed``: the
+    :class:`~ncgen.runtime.feedback.FeedbackFailed` of a feedback or None; ``stats``: the loop's
+    counts (steps, rejected steps, evaluations, …, the time reached)."""
+    t, p, feedback, n = run.t, run.p, run.feedback, len(run.t)
+    stats = np.zeros(5)
+    bar = Progress(float(t[0]), float(t[-1]), progress, label=f"simulating {model.name} (joint space): ")
+    status, k, failed = 0, 0, None
+    chunk = 1 if feedback is not None else max(1, math.ceil((n - 1) / CHUNKS))
+    try:
+        while k < n - 1 and status == 0:
+            m = min(chunk, n - 1 - k)
+            if feedback is not None:
+                try:
+                    W[k] = _feedback(model, feedback, float(t[k]), X[k], p)
+                except FeedbackFailed as e:
+                    failed, W[k] = e, W[k - 1] if k else W[k]
+                    break
+            sl = slice(k, k + m + 1)
+            Xs = X[sl]
+            status, done = loop.run(options, np.ascontiguousarray(t[sl]), Xs, np.ascontiguousarray(W[k:k + m]),
+                                    None if S is None else np.ascontiguousarray(S[k:k + m]), p, stats)
+            k += done
+            bar.update(float(t[k]))
+    except KeyboardInterrupt:             # between chunks (in a feedback u(t, q, v))
+        status = INTERRUPTED
+    finally:
+        bar.close()
+    return status, k, failed, stats
 
 
 def _trusted_rk4_rows(model, loop: JointLoop, t, X, W, S, p, options: JointOptions) -> tuple[int, str]:

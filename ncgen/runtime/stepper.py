@@ -52,6 +52,7 @@ solve the KKT system.
 from __future__ import annotations
 
 import time
+from typing import NamedTuple
 
 import numpy as np
 
@@ -102,11 +103,35 @@ def simulate_stepper(model, t: np.ndarray, U: np.ndarray, p: np.ndarray, q0: np.
                          f"keep their own scheme (first order at impacts): use scheme='rattle' or build it with "
                          f"contacts='smooth'")
     run = _fixed if opts.rtol is None else _adaptive
-    return run(model, stepper, t, U, p, q0, v0, lam0, opts, conservative)
+    return run(model, stepper, StepperStart(t, U, p, q0, v0, lam0), opts, conservative)
 
 
-def _fixed(model, stepper, t, U, p, q0, v0, lam0, opts: StepperOptions, conservative: bool) -> Trajectory:
+class StepperStart(NamedTuple):
+    """A stepper run's data: the output grid ``t`` (s), the input samples ``U`` on it, the
+    parameter values ``p``, the consistent state ``(q0, v0)`` and multipliers ``lam0`` at ``t[0]``."""
+
+    t: np.ndarray
+    U: np.ndarray
+    p: np.ndarray
+    q0: np.ndarray
+    v0: np.ndarray
+    lam0: np.ndarray
+
+
+class StepperRows(NamedTuple):
+    """What a run of the C loops returns per output row after the start: the states ``Q``,
+    ``V``, the multipliers ``LAM``, the statistics ``S`` (``STATS``), and the rows done."""
+
+    Q: np.ndarray
+    V: np.ndarray
+    LAM: np.ndarray
+    S: np.ndarray
+    rows: int
+
+
+def _fixed(model, stepper, data: StepperStart, opts: StepperOptions, conservative: bool) -> Trajectory:
     """Fixed steps (module docstring)."""
+    t, U, p, q0, v0, lam0 = data
     hold, substeps, tol, max_iter, max_halvings = opts.hold, opts.substeps, opts.newton_tol, opts.max_newton, \
         opts.max_halvings
     check, estimate = opts.check, opts.estimate
@@ -132,7 +157,7 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, opts: StepperOptions, conserva
             "max_halvings": max_halvings, "estimate": ESTIMATE_NAMES[mode], "stepping_time": stepping,
             "stepping_cpu_time": stepping_cpu, "complete": status == 0,
             "stats": _stats(S[:rows], splits)}
-    traj = _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info, conservative, start,
+    traj = _trajectory(model, stepper, data, StepperRows(Q, V, LAM, S, rows), info, conservative, start,
                        None if IMP is None else IMP[:rows])
     if contacts:
         traj.info["contacts"] = contact_report(S[:rows])
@@ -156,8 +181,9 @@ def _fixed(model, stepper, t, U, p, q0, v0, lam0, opts: StepperOptions, conserva
     return traj
 
 
-def _adaptive(model, stepper, t, U, p, q0, v0, lam0, opts: StepperOptions, conservative: bool) -> Trajectory:
+def _adaptive(model, stepper, data: StepperStart, opts: StepperOptions, conservative: bool) -> Trajectory:
     """Error control (module docstring)."""
+    t, U, p, q0, v0, lam0 = data
     hold, tol, max_iter, order, max_steps = opts.hold, opts.newton_tol, opts.max_newton, opts.order, opts.max_steps
     check, estimate = opts.check, opts.estimate
     rattle4 = opts.scheme == "rattle4"            # "auto" keeps RATTLE's error control
@@ -178,15 +204,8 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, opts: StepperOptions, conse
         shadow = run(SHADOW_FACTOR * rtol, SHADOW_FACTOR * atol) if estimate and status == 0 else None
     if shadow is not None and shadow[4] == STEP_INTERRUPTED:   # stopped in the shadow run: no estimate
         status, shadow = STEP_INTERRUPTED, None
-    stepping = time.perf_counter() - start
-    info = {"method": "stepper", "backend": "compiled", "kernels": stepper.kernels,
-            "scheme": "RATTLE, Suzuki's fourth-order composition" if rattle4 else "RATTLE" if order == 2 else "RATTLE, Richardson-extrapolated and projected",
-            "order": 4 if rattle4 else order, "rtol": rtol, "atol": atol,
-            "hold": hold, "tol": newton_tolerance(rtol, atol, tol), "max_iter": max_iter, "max_steps": max_steps,
-            "estimate": bool(estimate), "stepping_time": stepping, "complete": status == 0,
-            "stats": _stats(S[:rows], int(S[:rows, 2].sum()))}
-    info["stats"]["rejected_steps"] = info["stats"].pop("step_splits")
-    traj = _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info, conservative, start)
+    info = _adaptive_info(stepper, opts, atol, time.perf_counter() - start, status == 0, S[:rows])
+    traj = _trajectory(model, stepper, data, StepperRows(Q, V, LAM, S, rows), info, conservative, start)
     if status == STEP_INTERRUPTED:
         _interrupted(model, traj, float(t[rows]))
     if status != 0:
@@ -209,6 +228,20 @@ def _adaptive(model, stepper, t, U, p, q0, v0, lam0, opts: StepperOptions, conse
         if check:
             check_global(model, traj, eq, rtol, atol)
     return traj
+
+
+def _adaptive_info(stepper, opts: StepperOptions, atol: float, stepping: float, complete: bool, S) -> dict:
+    """The trajectory's ``info`` of an error-controlled run: its scheme, tolerances and options,
+    the time stepping took (s), whether it is complete, and the counts of the statistics ``S``."""
+    rattle4, order, rtol = opts.scheme == "rattle4", opts.order, opts.rtol
+    info = {"method": "stepper", "backend": "compiled", "kernels": stepper.kernels,
+            "scheme": "RATTLE, Suzuki's fourth-order composition" if rattle4 else "RATTLE" if order == 2 else "RATTLE, Richardson-extrapolated and projected",
+            "order": 4 if rattle4 else order, "rtol": rtol, "atol": atol, "hold": opts.hold,
+            "tol": newton_tolerance(rtol, atol, opts.newton_tol), "max_iter": opts.max_newton,
+            "max_steps": opts.max_steps, "estimate": bool(opts.estimate), "stepping_time": stepping,
+            "complete": complete, "stats": _stats(S, int(S[:, 2].sum()))}
+    info["stats"]["rejected_steps"] = info["stats"].pop("step_splits")
+    return info
 
 
 #: ``estimate`` of a fixed-step run → the C loop's mode (``ESTIMATE_*`` of ncgen_fixed.h).
@@ -245,15 +278,16 @@ def _stats(S: np.ndarray, splits: int) -> dict:
     return {"nsteps": int(S[:, 0].sum()), "newton_iterations": int(S[:, 1].sum()), "step_splits": int(splits)}
 
 
-def _trajectory(model, stepper, t, q0, v0, lam0, Q, V, LAM, S, rows, U, p, info, conservative, start,
+def _trajectory(model, stepper, data: StepperStart, out: StepperRows, info: dict, conservative: bool, start: float,
                 impulses=None, accel=None):
-    """The trajectory of the first ``rows`` output rows, derived quantities from the
+    """The trajectory of the run ``data`` up to the first ``out.rows`` output rows, derived quantities from the
     compiled ``<model>_outputs`` (joint states and contact outputs from
     :func:`~ncgen.runtime.trajectory.derived_outputs`; ``impulses``: the nonsmooth contact
     impulses per output interval); the multipliers of the output states
     (:func:`~ncgen.runtime.dynamics_at_state.multipliers_at_samples` with ``accel``), or with
     nonsmooth contacts the stepper's ``LAM``; sets the error estimate, the energy report and
     the wall time (from ``start``) in ``info``."""
+    (t, U, p, q0, v0, lam0), (Q, V, LAM, S, rows) = data, out
     q = np.vstack([q0, Q[:rows]])
     v = np.vstack([v0, V[:rows]])
     tt, u = t[:rows + 1], U[:rows + 1]

@@ -119,23 +119,9 @@ def sweep(model, params, *, t_end: float, dt: float, method: str = "stepper", ou
       (:meth:`SweepResult.report`: runs, failures, runs/s); None: when stderr is a terminal.
     """
     start = time.perf_counter()
-    if method not in METHODS:
-        raise NcgenError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
-    if method == "stepper":
-        refuse_rolling(model, "sweep(method='stepper')", "give method='idas' (nc.simulate per run, which keeps them)")
-    outputs = list(outputs)
-    unknown = [o for o in outputs if o not in OUTPUTS]
-    if unknown:
-        raise NcgenError(f"outputs: unknown {', '.join(map(repr, unknown))}; expected some of {', '.join(OUTPUTS)}")
+    outputs = _check_method_and_outputs(model, method, outputs)
     t = time_grid(model.t0, t_end, dt)
-    if params is None:                     # only initial states or inputs vary
-        runs = {len(a) for a, k in ((u, 3), (q0, 2), (v0, 2)) if a is not None and np.ndim(a) == k}
-        if len(runs) != 1:
-            raise NcgenError("params=None: give per-run u (runs, len(t), nu), q0 or v0 (runs, nq) arrays of one "
-                             f"number of runs (found {sorted(runs) or 'none'})")
-        samples = Samples([], np.zeros((runs.pop(), 0)))
-    else:
-        samples = as_samples(params)
+    samples = as_samples(params) if params is not None else _state_samples(u, q0, v0)
     P = _parameter_rows(model, samples)
     n = len(samples)
     per_run = _per_run(model, n, u=u, q0=q0, v0=v0)
@@ -322,6 +308,30 @@ def _per_run(model, n: int, **given) -> dict:
         out[name] = (a, each)
     return out
 
+
+
+def _check_method_and_outputs(model, method: str, outputs) -> list:
+    """``outputs`` as a list, after refusing an unknown method or output (and the stepper for a
+    model with rolling elements)."""
+    if method not in METHODS:
+        raise NcgenError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+    if method == "stepper":
+        refuse_rolling(model, "sweep(method='stepper')", "give method='idas' (nc.simulate per run, which keeps them)")
+    outputs = list(outputs)
+    unknown = [o for o in outputs if o not in OUTPUTS]
+    if unknown:
+        raise NcgenError(f"outputs: unknown {', '.join(map(repr, unknown))}; expected some of {', '.join(OUTPUTS)}")
+    return outputs
+
+
+def _state_samples(u, q0, v0) -> Samples:
+    """The samples of a sweep where only initial states or inputs vary (``params=None``): no
+    parameter, one run per row of the per-run ``u``, ``q0`` or ``v0``."""
+    runs = {len(a) for a, k in ((u, 3), (q0, 2), (v0, 2)) if a is not None and np.ndim(a) == k}
+    if len(runs) != 1:
+        raise NcgenError("params=None: give per-run u (runs, len(t), nu), q0 or v0 (runs, nq) arrays of one "
+                         f"number of runs (found {sorted(runs) or 'none'})")
+    return Samples([], np.zeros((runs.pop(), 0)))
 
 
 def _parameter_rows(model, samples: Samples) -> np.ndarray:

@@ -50,18 +50,7 @@ def animate(traj, path, *, max_frames: int = 150, fps: float | None = None, size
     frame count is lowered to fit, down to ``MIN_FRAMES``); returns the path."""
     path = Path(path)
     suffix = path.suffix.lower()
-    if suffix not in (".gif", ".mp4"):
-        raise NcgenError(f"animate: {path}: expected a .gif or .mp4 file name")
-    if fps is not None and not (as_scalar(fps, "animate: fps") > 0):
-        raise NcgenError(f"animate: fps: expected a positive number of frames per second, got {fps!r}")
-    if isinstance(max_frames, bool) or not isinstance(max_frames, (int, np.integer)) or max_frames < 2:
-        raise NcgenError(f"animate: max_frames: expected an integer >= 2 (frames of the animation), got {max_frames!r}")
-    for value, what, unit in ((size, "size", "the figure's width in inches"), (dpi, "dpi", "dots per inch")) + \
-            (() if budget is None else ((budget, "budget", "seconds of drawing, or None"),)):
-        if not as_scalar(value, f"animate: {what}") > 0:
-            raise NcgenError(f"animate: {what}: expected a positive number ({unit}), got {value!r}")
-    if not len(traj.t):
-        raise NcgenError(f"animate: {path}: the trajectory is empty (no samples): nothing to show")
+    _check_arguments(traj, path, max_frames, fps, size, dpi, budget)
     ffmpeg = ffmpeg_executable(path) if suffix == ".mp4" else None
     began = time.monotonic()
     sc = scene(traj)
@@ -107,6 +96,23 @@ def animate(traj, path, *, max_frames: int = 150, fps: float | None = None, size
         else:
             _write_mp4(images, tmp, fps, ffmpeg)
     return path
+
+
+def _check_arguments(traj, path: Path, max_frames, fps, size, dpi, budget) -> None:
+    """Refuse, naming it, a file type other than GIF or MP4, an option out of its range, or
+    an empty trajectory (:func:`animate`'s arguments)."""
+    if path.suffix.lower() not in (".gif", ".mp4"):
+        raise NcgenError(f"animate: {path}: expected a .gif or .mp4 file name")
+    if fps is not None and not (as_scalar(fps, "animate: fps") > 0):
+        raise NcgenError(f"animate: fps: expected a positive number of frames per second, got {fps!r}")
+    if isinstance(max_frames, bool) or not isinstance(max_frames, (int, np.integer)) or max_frames < 2:
+        raise NcgenError(f"animate: max_frames: expected an integer >= 2 (frames of the animation), got {max_frames!r}")
+    for value, what, unit in ((size, "size", "the figure's width in inches"), (dpi, "dpi", "dots per inch")) + \
+            (() if budget is None else ((budget, "budget", "seconds of drawing, or None"),)):
+        if not as_scalar(value, f"animate: {what}") > 0:
+            raise NcgenError(f"animate: {what}: expected a positive number ({unit}), got {value!r}")
+    if not len(traj.t):
+        raise NcgenError(f"animate: {path}: the trajectory is empty (no samples): nothing to show")
 
 
 def ffmpeg_executable(path) -> str:

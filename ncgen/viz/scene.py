@@ -238,22 +238,11 @@ def contact_scene(traj, model) -> dict:
     translated: dict = {}
     for k, c in enumerate(model.contacts):
         if "plane" in c:                                       # a sphere (or a shape's point) on a plane
-            centre = traj.point(c["sphere"], c["at"])
+            centre, push, contact = _on_plane(traj, model, c)
             centres.append(centre)
             radii.append(c["radius"])
             if c["plane"] == "ground":
                 planes.append([c["point"], c["normal"]])
-            if c["plane"] == "ground":
-                normal = np.asarray(c["normal"], float)
-            else:
-                R = traj.poses()[0][:, model.member_names.index(c["plane"])]
-                normal = np.einsum("tij,j->ti", R, model.member(c["plane"]).direction_to_local(c["normal"]))
-            push = np.broadcast_to(normal, (n, d))             # the plane pushes the sphere along its normal
-            if c.get("rim_radius", 0) > 0:                     # a cylinder rim's lowest point
-                axis = traj.point(c["sphere"], np.add(c["at"], c["axis"])) - centre
-                w = push - np.sum(push * axis, axis=1, keepdims=True) * axis
-                centre = centre - c["rim_radius"] * w / np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-12)
-            contact = centre - c["radius"] * push
         elif "box" in c or "capsule" in c or "cylinder" in c:  # a sphere or a corner against a box, capsule, cylinder
             at, radius, other = (c["at"], c["radius"], c["box"]) if "box" in c else \
                 (c["sphere_at"], c["sphere_radius"], c.get("capsule", c.get("cylinder")))
@@ -281,6 +270,25 @@ def contact_scene(traj, model) -> dict:
     return {"sphere_centres": np.stack(centres, axis=1), "sphere_radii": np.asarray(radii, float),
             "planes": np.asarray(list(unique.values()), float).reshape(-1, 2, d),
             "contact_points": np.stack(points, axis=1), "contact_forces": np.stack(forces, axis=1)}
+
+
+def _on_plane(traj, model, c: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(centre, push, contact point)`` over time of contact ``c``, a sphere (or a shape's
+    point) on a plane: the plane pushes the sphere along its normal; a cylinder rim touches at
+    its lowest point."""
+    centre = traj.point(c["sphere"], c["at"])
+    if c["plane"] == "ground":
+        normal = np.asarray(c["normal"], float)
+    else:
+        R = traj.poses()[0][:, model.member_names.index(c["plane"])]
+        normal = np.einsum("tij,j->ti", R, model.member(c["plane"]).direction_to_local(c["normal"]))
+    push = np.broadcast_to(normal, (len(traj), traj.dim))
+    touch = centre
+    if c.get("rim_radius", 0) > 0:                     # a cylinder rim's lowest point
+        axis = traj.point(c["sphere"], np.add(c["at"], c["axis"])) - centre
+        w = push - np.sum(push * axis, axis=1, keepdims=True) * axis
+        touch = centre - c["rim_radius"] * w / np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-12)
+    return centre, push, touch - c["radius"] * push
 
 
 def _gap_normals(model, traj, k: int, member: str, other: str, cache: dict, eps: float = 1e-7) -> np.ndarray:

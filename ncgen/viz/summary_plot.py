@@ -39,7 +39,8 @@ def plot(traj, path, points=None, *, dpi: int = 100) -> Path:
 
 
 def summary_figure(traj, points=None):
-    """The figure :func:`plot` writes."""
+    """The figure :func:`plot` writes: the energy, constraint drift, points (or joints) and
+    paths panels, and the contact panels of a run with contacts."""
     curves = _point_curves(traj, points)
     rows = 3 if traj.contact_names else 2
     joint_panel = not curves and bool(traj.joint_position_names)
@@ -47,9 +48,28 @@ def summary_figure(traj, points=None):
         last = traj.model.member_names[-1]
         curves = [(f"{last} (centre of mass)", traj.poses()[1][:, -1])]
     fig = figure(11, 4 * rows)
-    t = traj.t
-    ax = fig.add_subplot(rows, 2, 1)
-    scale = traj.energy_scale
+    _energy_panel(fig.add_subplot(rows, 2, 1), traj)
+    _drift_panel(fig.add_subplot(rows, 2, 2), traj)
+    if joint_panel:
+        ax = fig.add_subplot(rows, 2, 3)
+        _joint_panel(ax, traj)
+        ax.ticklabel_format(axis="y", useOffset=False)
+        ax.grid(True, alpha=0.3)
+    else:
+        _points_panel(fig.add_subplot(rows, 2, 3), traj, curves)
+    _paths_panel(fig.add_subplot(rows, 2, 4, projection="3d" if traj.dim == 3 else None), traj, curves, joint_panel)
+    if traj.contact_names:
+        _contact_panels(fig, traj, rows)
+    fig.suptitle(f"{traj.model_name}: t = {traj.t[0]:g} ... {traj.t[-1]:g} s"
+                 + ("" if traj.complete else "  (INCOMPLETE: the integration failed)"))
+    fig.tight_layout()
+    return fig
+
+
+def _energy_panel(ax, traj) -> None:
+    """``E − E(t0)`` in a stated unit; for a dissipative run, the work of each class and the
+    balance's residual ``E − E(t0) − W``."""
+    t, scale = traj.t, traj.energy_scale
     drift = traj.energy - traj.energy[0]
     factor, unit = unit_scale(drift, "J")
     ax.plot(t, drift / factor, color="tab:red", label="E - E(t0)")
@@ -71,33 +91,36 @@ def summary_figure(traj, points=None):
     ax.ticklabel_format(axis="y", useOffset=False)
     ax.grid(True, alpha=0.3)
 
-    ax = fig.add_subplot(rows, 2, 2)
+
+def _drift_panel(ax, traj) -> None:
+    """The constraint drift ``|Φ|∞`` and ``|A v + Φ_t|∞`` on a log scale (exact zeros left out)."""
     for values, label in ((traj.constraint_residual, "|phi|_inf (m^2)"),
                           (traj.velocity_residual, "|A v + phi_t|_inf (m^2/s)")):
-        ax.semilogy(t, np.where(values > 0, values, np.nan), label=label)     # exact zeros left out
+        ax.semilogy(traj.t, np.where(values > 0, values, np.nan), label=label)
     ax.set_title("constraint drift")
     ax.set_xlabel("t (s)")
     ax.set_ylabel("residual (m², m²/s)")
     ax.legend(loc="best", fontsize="small")
     ax.grid(True, which="both", alpha=0.3)
 
-    ax = fig.add_subplot(rows, 2, 3)
-    if joint_panel:
-        _joint_panel(ax, traj)
-    else:
-        for label, xyz in curves:
-            for j, line_style in zip(range(traj.dim), ("-", "--", ":")):
-                ax.plot(t, xyz[:, j], line_style, label=f"{label} {'xyz'[j]}")
-        ax.set_title("points")
-        ax.set_xlabel("t (s)")
-        ax.set_ylabel("position (m)")
-        if curves:
-            ax.legend(loc="best", fontsize="x-small", ncol=traj.dim)
-            _least_span(ax, np.concatenate([xyz.ravel() for _, xyz in curves]))
+
+def _points_panel(ax, traj, curves: list) -> None:
+    """Each point's coordinates over time (m)."""
+    for label, xyz in curves:
+        for j, line_style in zip(range(traj.dim), ("-", "--", ":")):
+            ax.plot(traj.t, xyz[:, j], line_style, label=f"{label} {'xyz'[j]}")
+    ax.set_title("points")
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("position (m)")
+    if curves:
+        ax.legend(loc="best", fontsize="x-small", ncol=traj.dim)
+        _least_span(ax, np.concatenate([xyz.ravel() for _, xyz in curves]))
     ax.ticklabel_format(axis="y", useOffset=False)
     ax.grid(True, alpha=0.3)
 
-    ax = fig.add_subplot(rows, 2, 4, projection="3d" if traj.dim == 3 else None)
+
+def _paths_panel(ax, traj, curves: list, joint_panel: bool) -> None:
+    """The points' paths (the x–y plane in 2D, a 3D view in 3D) at equal scales, starts marked."""
     for label, xyz in curves:
         ax.plot(*xyz.T, label=label)
         ax.scatter(*xyz[0], marker="o", s=15)
@@ -111,13 +134,6 @@ def summary_figure(traj, points=None):
     else:
         ax.set_aspect("equal", adjustable="datalim")
         ax.grid(True, alpha=0.3)
-
-    if traj.contact_names:
-        _contact_panels(fig, traj, rows)
-    fig.suptitle(f"{traj.model_name}: t = {t[0]:g} ... {t[-1]:g} s"
-                 + ("" if traj.complete else "  (INCOMPLETE: the integration failed)"))
-    fig.tight_layout()
-    return fig
 
 
 def _contact_panels(fig, traj, rows: int) -> None:

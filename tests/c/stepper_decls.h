@@ -45,6 +45,11 @@ typedef struct {
   ((run_options){.rtol = (rtol_), .atol = (atol_), .h0 = (h0_), .extrapolate = (extrapolate_), \
                  .max_steps = (max_steps_), .hold_linear = 0, .track_work = (track_work_), .estimate = 0})
 
+/* run_options of a fixed-step run (run_fixed()): its error estimate (ESTIMATE_*) and whether it tracks the work. */
+#define FIXED_RUN(estimate_, track_work_) \
+  ((run_options){.rtol = 0, .atol = 0, .h0 = 0, .extrapolate = 0, .max_steps = 0, .hold_linear = 0, \
+                 .track_work = (track_work_), .estimate = (estimate_)})
+
 /* The default step_options: Newton to 1e-10 in at most 12 iterations, at most 4 halvings of
  * a step, plain RATTLE, no stop flag. */
 #define DEFAULT_OPTIONS() \

@@ -305,7 +305,7 @@ static void test_contact_steps(void) {
   int status;
   mu[0] = 0.5, mu[1] = 0;
   restitution[0] = 0, restitution[1] = 0.5;
-  status = run_fixed(q0, vel0, 0, 0, h, N, 1, 0, 0, 0, q, v, 0, 0, stats, &o, 0, 1, &done, &splits, imp);
+  status = run_fixed(q0, vel0, 0, 0, h, N, 1, 0, 0, 0, q, v, 0, 0, stats, &o, &FIXED_RUN(0, 1), &done, &splits, imp);
   CHECK(status == STEP_OK && done == N && splits == 0, "status %d, %ld steps, %ld splits", status, done, splits);
   k = (long) (t_slide / h + 0.5) - 1; /* row k: the state at (k + 1) h */
   CHECK(fabs(v[k * NQ] - (v0 - mu[0] * G_P * t_slide)) < 1e-9, "x' = %.12g at t = %g", v[k * NQ], t_slide);

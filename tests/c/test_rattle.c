@@ -218,7 +218,8 @@ static void test_fixed_order_work_estimate(void) {
     long n = k ? 400 : 200;
     casadi_real h = T / n, *qe = q + 2 * (n - 1), *ve = v + 2 * (n - 1), *s = stats + NSTATS * (n - 1);
     casadi_real e0 = -M_P * G_P * L_P * cos(theta0), e1, est;
-    status = run_fixed(q0, v0, 0, 0, h, n, 1, &u, 0, 0, q, v, lam, 0, stats, &o, ESTIMATE_SHADOW, 1, &done, &splits, 0);
+    status = run_fixed(q0, v0, 0, 0, h, n, 1, &u, 0, 0, q, v, lam, 0, stats, &o, &FIXED_RUN(ESTIMATE_SHADOW, 1), &done,
+                       &splits, 0);
     CHECK(status == STEP_OK && done == n && splits == 0, "status %d, %ld steps, %ld splits", status, done, splits);
     err[k] = position_error(qe, theta0, u, T);
     e1 = M_P * (ve[0] * ve[0] + ve[1] * ve[1]) / 2 + M_P * G_P * qe[1];
@@ -246,13 +247,15 @@ static void test_rattle4_order_estimate(void) {
   for (k = 0; k < 2; ++k) {
     long n = k ? 50 : 25;
     casadi_real h = T / n, *qe = q + 2 * (n - 1), *ve = v + 2 * (n - 1), est;
-    status = run_fixed(q0, v0, 0, 0, h, n, 1, &u, 0, 0, q, v, 0, 0, stats, &o, ESTIMATE_SHADOW, 0, &done, 0, 0);
+    status = run_fixed(q0, v0, 0, 0, h, n, 1, &u, 0, 0, q, v, 0, 0, stats, &o, &FIXED_RUN(ESTIMATE_SHADOW, 0), &done,
+                       0, 0);
     CHECK(status == STEP_OK && done == n, "status %d, %ld steps", status, done);
     err[k] = position_error(qe, theta0, u, T);
     est = stats[NSTATS * (n - 1) + 3];
     CHECK(fabs(phi(qe)) <= 1e-10 && fabs(qe[0] * ve[0] + qe[1] * ve[1]) <= 1e-10, "constraints");
     CHECK(est > 0.3 * err[k] && est < 3 * err[k], "estimate %g for an error %g", est, err[k]);
-    status = run_fixed(q0, v0, 0, 0, h, n, 1, &u, 0, 0, q, v, 0, 0, stats, &o, ESTIMATE_LOCAL, 0, &done, 0, 0);
+    status = run_fixed(q0, v0, 0, 0, h, n, 1, &u, 0, 0, q, v, 0, 0, stats, &o, &FIXED_RUN(ESTIMATE_LOCAL, 0), &done,
+                       0, 0);
     est = stats[NSTATS * (n - 1) + 3];
     CHECK(status == STEP_OK && est > 0.1 * err[k] && est < 30 * err[k], "local estimate %g for an error %g", est,
           err[k]);
@@ -298,8 +301,10 @@ static void test_split_and_bad_input(void) {
   o = DEFAULT_OPTIONS();
   o.tol = 0;
   CHECK(stepper_step(q, v, 0, &u, 0, 1e-3, q1, v1, 0, 0, &o, block, 0) == STEP_BAD_INPUT, "tol = 0");
-  CHECK(run_fixed(q, v, 0, 0, 1e-3, 10, 3, 0, 0, 0, 0, 0, 0, 0, 0, &o, 0, 0, 0, 0, 0) == STEP_BAD_INPUT,
+  CHECK(run_fixed(q, v, 0, 0, 1e-3, 10, 3, 0, 0, 0, 0, 0, 0, 0, 0, &o, 0, 0, 0, 0) == STEP_BAD_INPUT,
         "n_steps not a multiple of every");
+  CHECK(run_fixed(q, v, 0, 0, 1e-3, 10, 5, 0, 0, 0, 0, 0, 0, 0, 0, &o, &FIXED_RUN(ESTIMATE_SHADOW + 1, 0), 0, 0, 0)
+        == STEP_BAD_INPUT, "estimate out of range");
   free(block);
 }
 
@@ -413,13 +418,13 @@ static void test_stop_request(void) {
   long done = -1, rows = -1;
   int status;
   o.stop = &stop;
-  status = run_fixed(q0, v0, 0, 0, 1e-3, 4, 2, 0, 0, 0, q, v, 0, 0, 0, &o, 1, 0, &done, 0, 0);
+  status = run_fixed(q0, v0, 0, 0, 1e-3, 4, 2, 0, 0, 0, q, v, 0, 0, 0, &o, &FIXED_RUN(ESTIMATE_LOCAL, 0), &done, 0, 0);
   CHECK(status == STEP_INTERRUPTED && done == 0, "fixed: status %d, %ld steps", status, done);
   status = simulate_adaptive(q0, v0, 0, 0, 0.1, 2, 0, 0, 0, &RUN_OPTIONS(1e-6, 1e-6, 0, 1, 100, 0),
                              q, v, 0, 0, &o, &rows, 0);
   CHECK(status == STEP_INTERRUPTED && rows == 0, "adaptive: status %d, %ld rows", status, rows);
   stop = 0;
-  status = run_fixed(q0, v0, 0, 0, 1e-3, 4, 2, 0, 0, 0, q, v, 0, 0, 0, &o, 1, 0, &done, 0, 0);
+  status = run_fixed(q0, v0, 0, 0, 1e-3, 4, 2, 0, 0, 0, q, v, 0, 0, 0, &o, &FIXED_RUN(ESTIMATE_LOCAL, 0), &done, 0, 0);
   CHECK(status == STEP_OK && done == 4, "fixed, not stopped: status %d, %ld steps", status, done);
 }
 

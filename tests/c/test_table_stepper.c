@@ -240,7 +240,8 @@ static void run(double c) {
   int status;
   make_tables(30.0, 0.4, c, par);
   CHECK(!tab_begin(&S), "run started");
-  status = run_fixed(q0, v0, lam0, 0, 1e-3, 2000, 200, 0, 0, 0, q, v, lam, 0, stats, &o, 0, 1, &done, &splits, 0);
+  status = run_fixed(q0, v0, lam0, 0, 1e-3, 2000, 200, 0, 0, 0, q, v, lam, 0, stats, &o, &FIXED_RUN(0, 1), &done,
+                     &splits, 0);
   CHECK(status == STEP_OK && done == 2000, "c = %g: status %d after %ld steps", c, status, done);
   qq[0] = q0[0]; qq[1] = q0[1]; qq[2] = q[18]; qq[3] = q[19];
   vv[0] = v0[0]; vv[1] = v0[1]; vv[2] = v[18]; vv[3] = v[19];
@@ -275,7 +276,7 @@ static void test_lu_against_qr(void) {
     with_lu = k;
     make_tables(30.0, 0.4, 0.8, par);
     CHECK(!tab_begin(&S), "run started");
-    status = run_fixed(q0, v0, lam0, 0, 1e-3, 300, 100, 0, 0, 0, q[k], v[k], lam[k], 0, stats[k], &o, 0, 0, &done,
+    status = run_fixed(q0, v0, lam0, 0, 1e-3, 300, 100, 0, 0, 0, q[k], v[k], lam[k], 0, stats[k], &o, 0, &done,
                        &splits, 0);
     CHECK(status == STEP_OK && done == 300, "%s: status %d", k ? "LU" : "QR", status);
     tab_end();
