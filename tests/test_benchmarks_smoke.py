@@ -90,6 +90,12 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800),   # each benchmark sc
     ("joint_step_jacobians.py", ["AGREE to 1e-06", "RATIO ncgen JointStep.jacobians / mujoco mjd_transitionFD centred",
                                  "aba_derivatives is", "load average at end"]),
     ("joint_ilqr_reach.py", ["Panda reach over 0.2 s", "GAP (iLQR − IPOPT) / IPOPT", "converged True"]),
+    ("contact_implicit.py", ["=== block push, T = 0.6 s", "RATIO contact-implicit / fixed sequence",
+                             "=== hopper (examples/hopper_gait.py, N = 30) from standing"]),
+    ("contact_implicit_pusher_box.py --scene hopper", ["=== hopper (examples/hopper_gait.py), N = 30",
+                                                      "RATIO naive / fixed sequence, IPOPT CPU", "Solve_Succeeded"]),
+    ("contact_implicit_pusher_box.py", ["=== pusher_box (examples/pusher_box.py), N = 10",
+                                        "RATIO naive / fixed sequence, IPOPT CPU", "Solve_Succeeded"]),
     ("mjcf_import_time.py", ["first    parse wall", "later 1  parse wall", "n =   10:", "CPU per element",
                              "load average at the end"]),
 ])

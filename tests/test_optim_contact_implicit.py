@@ -276,6 +276,27 @@ def test_hopper_finds_a_hop_from_standing(hopper):
     assert sol.stats.objective < 0.75 * _standing_cost(ex)
 
 
+@pytest.mark.slow      # fast: test_block_push_cost_agrees_with_nosnoc (the same comparison on the push)
+def test_hopper_standing_optimum_agrees_with_closed_form_and_nosnoc(hopper):
+    """The standing local optimum (the homotopy from σ₀ = 0.3 keeps the foot down; nosnoc's
+    time-freezing hopper of benchmarks/contact_implicit.py ends there from standing): ncgen's
+    cost equals the least-squares closed form, and nosnoc's (a continuous-time integral, FESD)
+    agrees with both within 1e-5."""
+    ex, model, _ = hopper
+    import sys
+    from pathlib import Path
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
+    from contact_implicit import STANDING_SIGMA0, nosnoc_hopper
+    sol = ex.problem(model, contacts={"sigma0": STANDING_SIGMA0}).solve("rest")
+    reference = _standing_cost(ex)
+    assert sol.marker("foot.centre")[:, 1].max() - ex.RADIUS < 1e-9
+    assert sol.stats.objective == pytest.approx(reference, rel=1e-9)
+    pytest.importorskip("nosnoc")
+    cost, *_, lift = nosnoc_hopper(ex)
+    assert lift < 1e-6
+    assert abs(cost - reference) < 1e-5
+
+
 def _standing_cost(ex):
     """The cost of the best motion that keeps the foot on the floor: the body then follows
     ``ÿ = leg/m − g`` alone, a linear least-squares problem in the N leg forces (the foot's
