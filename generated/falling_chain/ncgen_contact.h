@@ -354,7 +354,7 @@ static int delassus(workspace *ws, const int *rows, int n) {
   casadi_int *env = ws->cni + 2 * ND, *zlo = env + NC, *zhi = zlo + ND, *cp = zhi + ND, *cr = cp + NQ + 1,
              *ck = cr + NNZ_W, *tlo = ck + NNZ_W, *thi = tlo + NC, *acp = thi + NC, *ak = acp + NQ + 1,
              *bfirst = ak + NNZ_A, *blast = bfirst + ND, *emin = blast + ND;
-  int a, b, i, j, k;
+  int a, b, i, j, k, finite = 1;
   if (ws->tl_zero) /* the rows of T and L the last call wrote (A's pattern does not change) */
     for (i = 0; i < NC; ++i) {
       for (j = (int) tlo[i]; j <= thi[i]; ++j) T[i * NQ + j] = 0;
@@ -480,23 +480,24 @@ static int delassus(workspace *ws, const int *rows, int n) {
     }
   for (i = NQ; i > 0; --i) cp[i] = cp[i - 1];
   cp[0] = 0;
-  memset(ws->G, 0, (size_t) n * n * sizeof(casadi_real));
   for (b = 0; b < n; ++b) { /* G_ab = W_a B_b for a <= b, by B_b's nonzeros */
     const casadi_real *bb = B + b * NQ;
     casadi_real *gb = ws->G + b * n;
+    memset(gb, 0, (size_t) (b + 1) * sizeof(casadi_real)); /* the lower triangle is written below */
     for (i = (int) bfirst[b]; i <= blast[b]; ++i)
       if (bb[i] != 0)
         for (k = (int) cp[i]; k < cp[i + 1] && cr[k] <= b; ++k) gb[cr[k]] += ws->W[ck[k]] * bb[i];
   }
-  for (a = 0; a < n; ++a) /* - Z_a . Z_b where they overlap; G symmetric */
+  for (a = 0; a < n; ++a) /* - Z_a . Z_b where they overlap; G symmetric (every entry checked here) */
     for (b = a; b < n; ++b) {
       const int lo = zlo[a] > zlo[b] ? (int) zlo[a] : (int) zlo[b], hi = zhi[a] < zhi[b] ? (int) zhi[a] : (int) zhi[b];
       const casadi_real *za = Z + a * NC, *zb = Z + b * NC;
       casadi_real s = ws->G[a + b * n];
       for (i = lo; i <= hi; ++i) s -= za[i] * zb[i];
       ws->G[a + b * n] = ws->G[b + a * n] = s;
+      if (!isfinite(s)) finite = 0;
     }
-  return all_finite(ws->G, n * n) ? STEP_OK : STEP_NOT_FINITE;
+  return finite ? STEP_OK : STEP_NOT_FINITE;
 }
 
 /* out += s X c for the columns X_a (a < n) of the last delassus(): X c = B c - T^T (Y c),
