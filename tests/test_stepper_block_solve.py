@@ -44,3 +44,41 @@ def test_one_block_keeps_the_library_qr(monkeypatch):
     assert not any(f.name().startswith("step_solve_block") for f in solve.find_functions())
     r = rng.standard_normal(12)
     np.testing.assert_allclose(np.array(solve(K, r)).ravel(), np.linalg.solve(np.array(K), r), atol=1e-13)
+
+
+def _free_bodies_kkt(rng, masses, nb=4, nc=2):
+    """K = [[M, A0^T], [A1, 0]] of free bodies (nb coordinates and nc constraint rows each, a
+    dense positive definite mass block per body), rows ordered coordinates then constraints as
+    in the stepper, and M."""
+    nq, n = nb * len(masses), (nb + nc) * len(masses)
+    K, M = np.zeros((n, n)), np.zeros((nq, nq))
+    for k, m in enumerate(masses):
+        q, c = slice(k * nb, (k + 1) * nb), slice(nq + k * nc, nq + (k + 1) * nc)
+        X = rng.standard_normal((nb, nb))
+        M[q, q] = m * (X @ X.T + nb * np.eye(nb))
+        A0 = rng.standard_normal((nc, nb))
+        K[q, q], K[q, c], K[c, q] = M[q, q], A0.T, A0 + 1e-3 * rng.standard_normal((nc, nb))
+    return ca.sparsify(ca.DM(K)), M
+
+
+def test_free_body_blocks_are_solved_by_their_schur_complement(monkeypatch):
+    """A body's KKT block [[M_b, A0^T], [A1, 0]] (M_b regular, undamped) by its Schur complement,
+    S = A1 M_b^-1 A0^T, with H = M_b read from K: against numpy's dense solve of the whole K to
+    round-off, for mass blocks from 1e-4 to 1e2 (the complement's scale); a damped body and
+    one whose mass block is ill conditioned keep the block's QR."""
+    rng = np.random.default_rng(5)
+    K, M = _free_bodies_kkt(rng, [1e-4, 1.0, 1e2, 1.0, 1.0])
+    monkeypatch.setattr(kernels, "SX_QR_MAX_NNZ", 50)
+    solve = kernels.solve_function(K.sparsity(), M, {4})              # body 1 (coordinates 4-7) damped
+    schur = [f for f in solve.find_functions() if f.name().startswith("step_solve_block")]
+    assert len(schur) == 2, [f.name() for f in schur]                   # one Schur, one QR pattern
+    assert solve.find_function("step_solve_block0").n_instructions() < \
+        solve.find_function("step_solve_block1").n_instructions()       # the complement is cheaper
+    for _ in range(3):
+        r = rng.standard_normal(K.size1())
+        x = np.array(solve(K, r)).ravel()
+        exact = np.linalg.solve(np.array(K), r)
+        np.testing.assert_allclose(x, exact, rtol=1e-11, atol=1e-13 * np.abs(exact).max())
+    M[:4, :4] = np.diag([1.0, 1.0, 1.0, 1e-9])                          # cond 1e9 > SCHUR_MAX_COND
+    assert kernels._schur_blocks(K.sparsity(), kernels._components(K.sparsity()), M, set())[:2] == [0, 4]
+    assert kernels._schur_blocks(K.sparsity(), kernels._components(K.sparsity()), None, set()) == [0] * 5

@@ -17,7 +17,9 @@
  *   pair_qidx, pair_qconst     per local coordinate: its index in q (-1: fixed) and value
  *   pair_wpos                  per entry of the element kernel's dense W (column-major,
  *                              rows: per point contact its DC rows): where it goes in the
- *                              nonzeros of W (-1: nowhere, a frictionless tangent row)
+ *                              nonzeros of W (-1: nowhere, a frictionless tangent row);
+ *                              with wt_colind (ncgen_contact.h): an element's rows' nonzeros
+ *                              are contiguous in W, and each is a position of its map
  *   pair_side[NE * 6]          per element and side: kind (PAIR_*), affine columns k,
  *                              offset of its data in pair_bdata
  *   pair_bdata                 a member side: centre (DC x n), axes (k of DC x n), extents
@@ -229,13 +231,13 @@ static int contact_rows(workspace *ws, const casadi_real *q, const casadi_real *
   for (e = 0; e < NE; ++e) {
     const int *pi = pair_int + 8 * e, nrow = pi[2] * DC, nloc = pi[3] + pi[4];
     const int *wpos = pair_wpos + pi[6];
+    /* the element's rows' nonzeros of W, contiguous (every one a position of wpos) */
+    const int w0 = wt_colind[pi[1] * DC], nw = wt_colind[pi[1] * DC + nrow] - w0;
     if (ws->pon[e] < which) {
       if (which != 1) continue;
       if (g)
         for (i = 0; i < pi[2]; ++i) g[pi[1] + i] = ws->plb[e];
-      if (W)
-        for (i = 0; i < nrow * nloc; ++i)
-          if (wpos[i] >= 0) W[wpos[i]] = 0;
+      if (W) memset(W + w0, 0, nw * sizeof(casadi_real));
       if (U)
         for (r = 0; r < nrow; ++r) U[pi[1] * DC + r] = 0;
       continue;
@@ -250,8 +252,7 @@ static int contact_rows(workspace *ws, const casadi_real *q, const casadi_real *
     if (pair_rows_fn[pi[0]](ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
     if (g) memcpy(g + pi[1], ws->pg, pi[2] * sizeof(casadi_real));
     if (W) {
-      for (i = 0; i < nrow * nloc; ++i)
-        if (wpos[i] >= 0) W[wpos[i]] = 0;
+      memset(W + w0, 0, nw * sizeof(casadi_real));
       for (i = 0; i < nrow * nloc; ++i) /* shared coordinates: both sides' columns add */
         if (wpos[i] >= 0) W[wpos[i]] += ws->pw[i];
     }

@@ -205,7 +205,9 @@ def stepper_functions(model, primitives: dict[str, ca.Function] | None = None, p
                           ["t", "q", "v", "p"], ["K", "phi", "phidot"])
     check = check_function(model, primitives)
     power = power_function(model)
-    out = [newton, velocity, check, solve_function(K.sparsity()), project, power,
+    damped = ca.jacobian(f["F"](t, q, w, u, p), w).sparsity().get_triplet()
+    solve = solve_function(K.sparsity(), np.asarray(model.M, dtype=float), set(damped[0]) | set(damped[1]))
+    out = [newton, velocity, check, solve, project, power,
            outputs_function(model, check, power)]
     if contact:
         out += list(pairs.functions) if pairs is not None else [contact_function(model), gap_function(model)]
@@ -314,7 +316,7 @@ def check_function(model, primitives: dict[str, ca.Function] | None = None) -> c
                        ["t", "q", "v", "p"], ["phi_max", "phidot_max"])
 
 
-def solve_function(pattern: ca.Sparsity) -> ca.Function:
+def solve_function(pattern: ca.Sparsity, mass: np.ndarray | None = None, damped=frozenset()) -> ca.Function:
     """``step_solve: (K, r) -> K⁻¹ r`` by sparse Householder QR with an approximate-minimum-
     degree column order (stable without pivoting, so the order depends on the pattern only).
 
@@ -325,15 +327,45 @@ def solve_function(pattern: ca.Sparsity) -> ca.Function:
     limit).  Beyond, where K is block diagonal (the connected components of its pattern:
     free bodies, which only contacts couple), each block is solved alone by
     :func:`_block_solves`; else it is an MX function calling CasADi's ``qr`` linear solver,
-    generated as loops over the factors' patterns."""
+    generated as loops over the factors' patterns.
+
+    ``mass``: the constant mass matrix M (nq × nq), the upper-left block of every K solved
+    except in the coordinates ``damped`` (where ``∂F/∂v`` enters it); given, a block whose
+    coordinates are undamped and whose block of M is well conditioned
+    (:data:`SCHUR_MAX_COND`) is solved through its Schur complement (:func:`_schur_solve`)."""
     n = pattern.size1()
     V, R, *_ = ca.qr_sparse(ca.DM(pattern, 1.0), True)
     if V.nnz() + R.nnz() <= SX_QR_MAX_NNZ:
         return _sx_solve(pattern, "step_solve")
     K, r = ca.MX.sym("K", pattern), ca.MX.sym("r", n)
     blocks = _components(pattern)
-    x = _block_solves(pattern, blocks, K, r) if len(blocks) > 1 else ca.solve(K, r, "qr")
+    schur = _schur_blocks(pattern, blocks, mass, damped)
+    x = _block_solves(pattern, blocks, K, r, schur) if len(blocks) > 1 else ca.solve(K, r, "qr")
     return ca.Function("step_solve", [K, r], [x], ["K", "r"], ["x"])
+
+
+#: Largest condition number of a block of M for which its KKT block is solved through the
+#: Schur complement (the complement's round-off grows with it; beyond, the block's QR).
+SCHUR_MAX_COND = 1e6
+
+
+def _schur_blocks(pattern: ca.Sparsity, blocks: list[np.ndarray], mass: np.ndarray | None, damped) -> list[int]:
+    """Per block of ``blocks`` (in ``pattern``): the number ``nb`` of its leading indices that
+    are coordinates (< nq) if it is solved through its Schur complement (constraint rows after
+    them with no nonzero among themselves, its coordinates undamped, their block of ``mass``
+    regular to :data:`SCHUR_MAX_COND`), else 0."""
+    out = []
+    for idx in blocks:
+        nb = int(np.sum(idx < mass.shape[0])) if mass is not None else 0
+        rows = idx[nb:].tolist()
+        if (0 < nb < len(idx) and not damped.intersection(idx[:nb].tolist())
+                and pattern.sub(rows, rows)[0].nnz() == 0):
+            Mb = mass[np.ix_(idx[:nb], idx[:nb])]
+            nb = nb if np.all(np.isfinite(Mb)) and np.linalg.cond(Mb) <= SCHUR_MAX_COND else 0
+        else:
+            nb = 0
+        out.append(nb)
+    return out
 
 
 def _sx_solve(pattern: ca.Sparsity, name: str) -> ca.Function:
@@ -356,23 +388,26 @@ def _components(pattern: ca.Sparsity) -> list[np.ndarray]:
     return [np.flatnonzero(label == k) for k in range(count)]
 
 
-def _block_solves(pattern: ca.Sparsity, blocks: list[np.ndarray], K: ca.MX, r: ca.MX) -> ca.MX:
+def _block_solves(pattern: ca.Sparsity, blocks: list[np.ndarray], K: ca.MX, r: ca.MX, schur: list[int]) -> ca.MX:
     """K⁻¹ r for a block-diagonal K (``blocks``: the indices of each diagonal block, which
     together cover every row once): x_b = K_bb⁻¹ r_b per block, the blocks grouped by their
-    pattern, one solve function per pattern (SX-unrolled QR where its factors are small
-    enough, else CasADi's ``qr``) mapped over its group's blocks (one copy of the code).  The
-    same QR per block as of the whole matrix, in a column order found per block."""
+    pattern, one solve function per pattern (:func:`_schur_solve` where ``schur`` gives the
+    block's number of coordinates, else the SX-unrolled QR where its factors are small enough,
+    else CasADi's ``qr``) mapped over its group's blocks (one copy of the code).  The QR per
+    block is the same as of the whole matrix, in a column order found per block."""
     groups: dict[tuple, list[np.ndarray]] = {}
-    for idx in blocks:
+    for idx, nb in zip(blocks, schur):
         sub, _ = pattern.sub(idx.tolist(), idx.tolist())
-        key = (sub.size1(), tuple(sub.colind()), tuple(sub.row()))
+        key = (sub.size1(), tuple(sub.colind()), tuple(sub.row()), nb)
         groups.setdefault(key, []).append(idx)
     parts, order = [], []
-    for g, members in enumerate(groups.values()):
+    for g, (key, members) in enumerate(groups.items()):
         idx0 = members[0].tolist()
         sub, _ = pattern.sub(idx0, idx0)
         V, R, *_ = ca.qr_sparse(ca.DM(sub, 1.0), True)
-        if V.nnz() + R.nnz() <= SX_QR_MAX_NNZ:
+        if key[-1]:
+            f = _schur_solve(sub, key[-1], f"step_solve_block{g}")
+        elif V.nnz() + R.nnz() <= SX_QR_MAX_NNZ:
             f = _sx_solve(sub, f"step_solve_block{g}")
         else:
             Kb, rb = ca.MX.sym("K", sub), ca.MX.sym("r", sub.size1())
@@ -384,6 +419,22 @@ def _block_solves(pattern: ca.Sparsity, blocks: list[np.ndarray], K: ca.MX, r: c
     inverse = np.empty(len(order), dtype=int)
     inverse[order] = np.arange(len(order))
     return ca.vertcat(*parts)[inverse.tolist()]
+
+
+def _schur_solve(pattern: ca.Sparsity, nb: int, name: str) -> ca.Function:
+    """``name: (K, r) -> K⁻¹ r`` for a KKT block ``K = [[H, B], [C, 0]]`` of ``pattern`` with
+    H (nb × nb) regular: ``S = C H⁻¹ B``, ``S y = C H⁻¹ r₁ − r₂``, ``x = H⁻¹ (r₁ − B y)``, H
+    and S each by its sparse QR unrolled into SX (a free body's 15×15 block: 900 instructions
+    instead of the whole block's QR's 2 100).  S is regular where K is; H is read from K."""
+    K, r = ca.SX.sym("K", pattern), ca.SX.sym("r", pattern.size1())
+    H, B, C = K[:nb, :nb], K[:nb, nb:], K[nb:, :nb]
+    V, R, beta, prinv, pc = ca.qr_sparse(H, True)
+    HB = ca.horzcat(*[ca.qr_solve(B[:, j], V, R, beta, prinv, pc) for j in range(B.shape[1])])
+    Hr = ca.qr_solve(r[:nb], V, R, beta, prinv, pc)
+    S = ca.mtimes(C, HB)
+    V2, R2, beta2, prinv2, pc2 = ca.qr_sparse(S, True)
+    y = ca.qr_solve(ca.mtimes(C, Hr) - r[nb:], V2, R2, beta2, prinv2, pc2)
+    return ca.Function(name, [K, r], [ca.vertcat(Hr - ca.mtimes(HB, y), y)], ["K", "r"], ["x"])
 
 
 def mass_scale(model) -> float:

@@ -346,11 +346,12 @@ static int delassus(workspace *ws, const int *rows, int n) {
    * last nonzero of each Z_a (2 ND), W's active nonzeros by columns (NQ + 1 starts, then
    * row and position per nonzero), the first and last nonzero of each row of T (2 NC, read
    * by x_add()), A's nonzeros by columns (NQ + 1 starts, NNZ_A positions), the first and
-   * last nonzero of each B_a (2 ND, read by x_add()) */
+   * last nonzero of each B_a (2 ND, read by x_add()), the smallest envelope start of rows
+   * i .. NC - 1 (NC) */
   casadi_int *env = ws->cni + 2 * ND, *zlo = env + NC, *zhi = zlo + ND, *cp = zhi + ND, *cr = cp + NQ + 1,
              *ck = cr + NNZ_W, *tlo = ck + NNZ_W, *thi = tlo + NC, *acp = thi + NC, *ak = acp + NQ + 1,
-             *bfirst = ak + NNZ_A, *blast = bfirst + ND;
-  int a, b, i, j, k;
+             *bfirst = ak + NNZ_A, *blast = bfirst + ND, *emin = blast + ND;
+  int a, b, i, j, k, finite = 1;
   if (ws->tl_zero) /* the rows of T and L the last call wrote (A's pattern does not change) */
     for (i = 0; i < NC; ++i) {
       for (j = (int) tlo[i]; j <= thi[i]; ++j) T[i * NQ + j] = 0;
@@ -361,7 +362,7 @@ static int delassus(workspace *ws, const int *rows, int n) {
     memset(L, 0, NC * NC * sizeof(casadi_real));
   }
   ws->tl_zero = 0;
-  for (i = 0; i < NC; ++i) tlo[i] = NQ, thi[i] = -1;
+  for (i = 0; i < NC; ++i) tlo[i] = NQ, thi[i] = -1, env[i] = i; /* env: S's first column per row, so far */
   memset(acp, 0, (NQ + 1) * sizeof(casadi_int));
 #if NNZ_A > 0
   for (k = 0; k < NNZ_A; ++k) { /* T = A M^-1 (row a_row[k] += A_k * row a_col[k] of M^-1) */
@@ -384,12 +385,15 @@ static int delassus(workspace *ws, const int *rows, int n) {
       const casadi_real tij = T[i * NQ + j];
       if (tij != 0)
         for (k = (int) acp[j]; k < acp[j + 1]; ++k)
-          if (a_row[ak[k]] <= i) L[i + a_row[ak[k]] * NC] += tij * ws->K[a_nz[ak[k]]]; /* lower triangle */
+          if (a_row[ak[k]] <= i) { /* lower triangle */
+            L[i + a_row[ak[k]] * NC] += tij * ws->K[a_nz[ak[k]]];
+            if (a_row[ak[k]] < env[i]) env[i] = a_row[ak[k]];
+          }
     }
 #endif
   for (i = 0; i < NC; ++i) { /* Cholesky by rows, lower triangle of L in place, in S's envelope */
     casadi_real d, s0 = L[i + i * NC];
-    int f = 0;
+    int f = (int) env[i]; /* S's structural first column: its first nonzero is at or after it */
     while (f < i && L[i + f * NC] == 0) ++f;
     env[i] = f;
     for (j = f; j < i; ++j) {
@@ -407,9 +411,11 @@ static int delassus(workspace *ws, const int *rows, int n) {
   }
   ws->schur = 1;
   ws->tl_zero = 1;
+  for (i = NC - 1; i >= 0; --i) /* the smallest envelope start of rows i .. NC - 1 */
+    emin[i] = i + 1 < NC && emin[i + 1] < env[i] ? emin[i + 1] : env[i];
   for (a = 0; a < n; ++a) {
     casadi_real *ba = B + a * NQ, *za = Z + a * NC, *ya = Y + a * NC;
-    int blo = NQ, bhi = -1;
+    int blo = NQ, bhi = -1, zmax = -1, ylo;
     memset(ba, 0, NQ * sizeof(casadi_real));
     for (k = wt_colind[rows[a]]; k < wt_colind[rows[a] + 1]; ++k) { /* B_a = M^-1 W_r^T */
       const casadi_real w = ws->W[k], *m = minv + wt_row[k] * NQ;
@@ -429,25 +435,34 @@ static int delassus(workspace *ws, const int *rows, int n) {
           const casadi_int r = a_row[ak[k]];
           za[r] += ws->K[a_nz[ak[k]]] * ba[j];
           if (r < zlo[a]) zlo[a] = r;
+          if (r > zmax) zmax = (int) r;
         }
 #else
     (void) acp, (void) ak;
 #endif
     /* Z_a = L^-1 A B_a from its first nonzero; row i stays zero where A B_a's is and its
-     * envelope starts after the last nonzero so far (free bodies: Z_a within their blocks) */
+     * envelope starts after the last nonzero so far (free bodies: Z_a within their blocks),
+     * and so does every row after i once A B_a's are all zero there and no envelope from i
+     * on starts at or before that nonzero (emin) */
     for (i = (int) zlo[a]; i < NC; ++i) {
-      if (za[i] == 0 && env[i] > zhi[a]) continue;
+      if (za[i] == 0 && env[i] > zhi[a]) {
+        if (i > zmax && emin[i] > zhi[a]) break;
+        continue;
+      }
       for (k = (int) env[i]; k < i; ++k) za[i] -= L[i + k * NC] * za[k];
       za[i] /= L[i + i * NC];
       if (za[i] != 0) zhi[a] = i;
     }
     if (zhi[a] < 0) zlo[a] = NC;
     memcpy(ya, za, NC * sizeof(casadi_real));
-    for (i = (int) zhi[a]; i >= 0; --i) { /* Y_a = L^-T Z_a, by columns of L^T, from Z_a's last nonzero */
-      ya[i] /= L[i + i * NC];
-      if (ya[i] != 0)
+    /* Y_a = L^-T Z_a, by columns of L^T, from Z_a's last nonzero down to the first row a
+     * nonzero reached (ylo: rows below it stay zero) */
+    for (ylo = (int) zlo[a], i = (int) zhi[a]; i >= ylo; --i)
+      if (ya[i] != 0) {
+        ya[i] /= L[i + i * NC];
         for (k = (int) env[i]; k < i; ++k) ya[k] -= L[i + k * NC] * ya[i];
-    }
+        if (env[i] < ylo) ylo = (int) env[i];
+      }
   }
   /* W's nonzeros of the active rows by columns: column i has rows cr[cp[i] .. cp[i + 1] - 1],
    * at positions ck[...] of ws->W */
@@ -462,23 +477,24 @@ static int delassus(workspace *ws, const int *rows, int n) {
     }
   for (i = NQ; i > 0; --i) cp[i] = cp[i - 1];
   cp[0] = 0;
-  memset(ws->G, 0, (size_t) n * n * sizeof(casadi_real));
   for (b = 0; b < n; ++b) { /* G_ab = W_a B_b for a <= b, by B_b's nonzeros */
     const casadi_real *bb = B + b * NQ;
     casadi_real *gb = ws->G + b * n;
+    memset(gb, 0, (size_t) (b + 1) * sizeof(casadi_real)); /* the lower triangle is written below */
     for (i = (int) bfirst[b]; i <= blast[b]; ++i)
       if (bb[i] != 0)
         for (k = (int) cp[i]; k < cp[i + 1] && cr[k] <= b; ++k) gb[cr[k]] += ws->W[ck[k]] * bb[i];
   }
-  for (a = 0; a < n; ++a) /* - Z_a . Z_b where they overlap; G symmetric */
+  for (a = 0; a < n; ++a) /* - Z_a . Z_b where they overlap; G symmetric (every entry checked here) */
     for (b = a; b < n; ++b) {
       const int lo = zlo[a] > zlo[b] ? (int) zlo[a] : (int) zlo[b], hi = zhi[a] < zhi[b] ? (int) zhi[a] : (int) zhi[b];
       const casadi_real *za = Z + a * NC, *zb = Z + b * NC;
       casadi_real s = ws->G[a + b * n];
       for (i = lo; i <= hi; ++i) s -= za[i] * zb[i];
       ws->G[a + b * n] = ws->G[b + a * n] = s;
+      if (!isfinite(s)) finite = 0;
     }
-  return all_finite(ws->G, n * n) ? STEP_OK : STEP_NOT_FINITE;
+  return finite ? STEP_OK : STEP_NOT_FINITE;
 }
 
 /* out += s X c for the columns X_a (a < n) of the last delassus(): X c = B c - T^T (Y c),
