@@ -32,9 +32,9 @@ Measured (issue 39, AMD EPYC, load 14–22): from rest every variant stalled in 
 stage; the largest violation at the stall was the joint-limit path constraint of joint 6
 (2.59 rad): its range reaches 3.75 rad and the natural coordinates measured the angle by
 ``atan2`` in (−π, π], so the limit jumped by 2π when the iterates passed π (fixed in
-``ncgen.optim.nlp.continuous_angle``).  The active rows' Jacobian at that stall
-(``benchmarks/contact_implicit_panda_rank.py``, rows within 1e-6 of their bound) has full
-rank (2 001 rows, 3 120 variables): no LICQ failure.  After the fix, ``--guess point``: the
+``ncgen.optim.nlp.continuous_angle``).  The active rows' Jacobian after 60 iterations from
+rest, before the fix (``benchmarks/contact_implicit_panda_rank.py``, rows within 1e-6 of
+their bound) has full rank (2 001 rows, 3 120 variables): no LICQ failure there.  After the fix, ``--guess point``: the
 first stage (σ = 1e-3) solved to IPOPT's acceptable level in 188 iterations (46 s CPU), the
 second (σ = 1e-5) stopped at 1 000 iterations (161 s CPU; dynamics defects 1.7e-3,
 complementarity residual 5.7e-3): the push is not delivered yet.
