@@ -34,7 +34,9 @@ stage; the largest violation at the stall was the joint-limit path constraint of
 ``atan2`` in (−π, π], so the limit jumped by 2π when the iterates passed π (fixed in
 ``ncgen.optim.nlp.continuous_angle``).  The active rows' Jacobian after 60 iterations from
 rest, before the fix (``benchmarks/contact_implicit_panda_rank.py``, rows within 1e-6 of
-their bound) has full rank (2 001 rows, 3 120 variables): no LICQ failure there.  After the fix, ``--guess point``: the
+their bound) has full rank (2 001 rows, 3 120 variables): no LICQ failure there.  After the
+fix, from rest: still stalled (600 iterations of σ = 1e-3, 1 100 s CPU, inertia
+regularisation 5e11, dual infeasibility 1e9).  After the fix, ``--guess point``: the
 first stage (σ = 1e-3) solved to IPOPT's acceptable level in 188 iterations (46 s CPU), the
 second (σ = 1e-5) stopped at 1 000 iterations (161 s CPU; dynamics defects 1.7e-3,
 complementarity residual 5.7e-3): the push is not delivered yet.
