@@ -28,9 +28,22 @@ size, IPOPT's iterations and CPU per iteration, the status of each stage and, ov
 stage, the largest inertia regularisation and the last primal and dual infeasibilities (what
 shows the push stalling where the reach and the point's push converge).
 
+Measured (issue 39, AMD EPYC, load 14–22): from rest every variant stalled in the first σ
+stage; the largest violation at the stall was the joint-limit path constraint of joint 6
+(2.59 rad): its range reaches 3.75 rad and the natural coordinates measured the angle by
+``atan2`` in (−π, π], so the limit jumped by 2π when the iterates passed π (fixed in
+``ncgen.optim.nlp.continuous_angle``).  The active rows' Jacobian after 60 iterations from
+rest, before the fix (``benchmarks/contact_implicit_panda_rank.py``, rows within 1e-6 of
+their bound) has full rank (2 001 rows, 3 120 variables): no LICQ failure there.  After the
+fix, from rest: still stalled (600 iterations of σ = 1e-3, 1 100 s CPU, inertia
+regularisation 5e11, dual infeasibility 1e9).  After the fix, ``--guess point``: the
+first stage (σ = 1e-3) solved to IPOPT's acceptable level in 188 iterations (46 s CPU), the
+second (σ = 1e-5) stopped at 1 000 iterations (161 s CPU; dynamics defects 1.7e-3,
+complementarity residual 5.7e-3): the push is not delivered yet.
+
 Run:  python benchmarks/contact_implicit_panda.py [--N 20] [--iterations 3 10]
       python benchmarks/contact_implicit_panda.py --locked [--task push|reach] [--feet corners|tripod]
-             [--pusher arm|point] [--N 10] [--weight 0.01] [--max-iter 300]
+             [--pusher arm|point] [--guess rest|point] [--N 10] [--weight 0.01] [--max-iter 300]
 """
 from __future__ import annotations
 
@@ -160,11 +173,39 @@ def locked_problem(N: int, task: str, feet: str, weight: float, pusher: str = "a
     return ocp, model
 
 
+def guess_from_point(model, N: int, feet: str, max_iter: int):
+    """A warm start for the arm's push: the point pusher's optimum (``--pusher point``,
+    ``weight`` 1) with the arm's joints put by :func:`planar_posture` under the point at each
+    node (rates by finite differences) and the box's coordinates copied."""
+    from types import SimpleNamespace
+    ocp, point_model = locked_problem(N, "push", feet, 1.0, "point")
+    try:
+        sol = ocp.solve("rest", max_iter=max_iter, diagnose=False)
+    except OptimizationError as exc:
+        sol = exc.result
+    print(f"  guess: the point pusher's solve, {sol.stats.status}, {sol.stats.iterations} iterations", flush=True)
+    names = list(point_model.coordinate_names)
+    x = sol.q[:, names.index("pusher.r_i.x")]
+    alone = _planar_arm().build()
+    qj = np.array([planar_posture(alone, xk) for xk in x])
+    rates = np.gradient(qj, sol.t, axis=0)
+    q, v = np.zeros((sol.t.size, model.nq)), np.zeros((sol.t.size, model.nq))
+    for k in range(sol.t.size):
+        q[k, :alone.nq], v[k, :alone.nq] = alone.from_joint_space(qj[k], rates[k])
+    for i, name in enumerate(model.coordinate_names):
+        if name.startswith("box."):
+            q[:, i], v[:, i] = sol.q[:, names.index(name)], sol.v[:, names.index(name)]
+    return SimpleNamespace(t=sol.t, q=q, v=v)
+
+
 def locked(args):
     ocp, model = locked_problem(args.N, args.task, args.feet, args.weight, args.pusher)
+    guess = "rest"
+    if args.guess == "point":
+        guess = guess_from_point(model, args.N, args.feet, args.max_iter)
     cpu = time.process_time()
     try:
-        result = ocp.solve("rest", max_iter=args.max_iter, diagnose=False)
+        result = ocp.solve(guess, max_iter=args.max_iter, diagnose=False)
     except OptimizationError as exc:
         result = exc.result
     cpu = time.process_time() - cpu
@@ -191,6 +232,8 @@ def main(argv=None):
     ap.add_argument("--task", choices=("push", "reach"), default="push")
     ap.add_argument("--feet", choices=("corners", "tripod"), default="corners")
     ap.add_argument("--pusher", choices=("arm", "point"), default="arm", help="--locked: the arm or a point on a guide")
+    ap.add_argument("--guess", choices=("rest", "point"), default="rest",
+                    help="--locked arm push: start at rest, or from the point pusher's optimum (guess_from_point)")
     ap.add_argument("--weight", type=float, default=0.01, help="weight of ∫ |τ|² dt (--locked)")
     ap.add_argument("--max-iter", type=int, default=300, help="IPOPT iterations per stage (--locked)")
     args = ap.parse_args(argv)

@@ -49,3 +49,30 @@ def test_bound_joint_errors():
         ocp.bound_joint("elbow", 0, 1)
     with pytest.raises(nc.NcgenError, match="rate"):
         ocp.bound_joint("pivot", rate=-1.0)
+
+
+def test_a_joint_range_beyond_pi_is_bounded_continuously():
+    """Bounds 2.0 ≤ θ ≤ 3.6 rad (the Panda's joint 6 reaches 3.75 rad): the hinge turns from 2.5
+    to 3.4 rad, through π where ``atan2`` jumps by 2π (the natural-coordinate forms measure θ so:
+    GGL collocation, the contact-implicit transcription); the bound is measured about the range's
+    middle, so the motion is feasible and stays within it (the angle unwrapped from the
+    solution's natural coordinates)."""
+    from ncgen.optim.nlp import continuous_angle
+    for true in np.linspace(2.0, 3.6, 9):                  # the continuous angle is the true one
+        wrapped = np.arctan2(np.sin(true), np.cos(true))
+        assert float(continuous_angle(wrapped, 2.0, 3.6)) == pytest.approx(true, abs=1e-12)
+    model = hinge()
+    model.joint_limits["pivot"].update(lower=2.0, upper=3.6)
+    q0, _ = model.from_joint_space([2.5])
+    q1, _ = model.from_joint_space([3.4])
+    ocp = nc.OptimalControl(model, N=20, t_final=1.0, form="ggl")   # angles measured by atan2 of q
+    ocp.initial(q=q0, v=0)
+    ocp.final(q=q1, v=0)
+    ocp.minimize_effort(1.0)
+    ocp.bound_joint("pivot", 2.0, 3.6)
+    sol = ocp.solve()
+    assert sol.stats.success
+    th = np.unwrap([model.to_joint_space(q, np.zeros(model.nq))[0][0] for q in sol.q])
+    th += 2 * np.pi * np.round((2.5 - th[0]) / (2 * np.pi))
+    assert th[0] == pytest.approx(2.5, abs=1e-9) and th[-1] == pytest.approx(3.4, abs=1e-6)
+    assert th.min() >= 2.0 - 1e-6 and th.max() <= 3.6 + 1e-6 and th.max() > np.pi

@@ -340,9 +340,11 @@ class NLP:
                 vj = js.rates.map(npts)(disc.path_q, disc.path_v)
             rows = {"position": js.slices(), "rate": js.slices(rates=True)}
             for name, kind, lo, hi in ocp.joint_bounds:
-                x = qj if kind == "position" else vj
-                self.constrain(f"path constraint on joint {name!r} ({kind})", "path",
-                               x[rows[kind][name].start, :], lo, hi)
+                i = rows[kind][name].start
+                x = (qj if kind == "position" else vj)[i, :]
+                if kind == "position" and disc.path_qj is None and js.angles[i]:
+                    x = continuous_angle(x, lo, hi)
+                self.constrain(f"path constraint on joint {name!r} ({kind})", "path", x, lo, hi)
         if ocp.cable_min_tension is not None:
             self._taut_cables()
         if not ocp.marker_bounds:
@@ -529,3 +531,14 @@ def _reference(ref, times, dim: int, name: str):
         raise OptimizationError(f"track_marker {name!r}: with a free final time the reference is called with "
                                 f"CasADi symbols and failed ({exc}); use casadi functions in it") from None
     return ca.horzcat(*cols)
+
+
+def continuous_angle(theta, lower: float, upper: float):
+    """A joint angle ``θ`` (rad, measured by ``atan2`` in (−π, π]) taken to the turn centred on
+    the middle ``c`` of its bounds, ``c + atan2(sin(θ − c), cos(θ − c))``: continuous over
+    ``[lower, upper]`` when that range is shorter than a turn (the Panda's joint 6 reaches
+    3.75 rad, where ``θ`` itself jumps by 2π at π); ``θ`` unchanged otherwise."""
+    if not (np.isfinite(lower) and np.isfinite(upper) and upper - lower < 2 * np.pi):
+        return theta
+    c = (lower + upper) / 2
+    return c + ca.atan2(ca.sin(theta - c), ca.cos(theta - c))

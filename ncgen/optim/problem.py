@@ -195,7 +195,9 @@ class OptimalControl:
 
     def bound_joint(self, name: str, lower=-np.inf, upper=np.inf, *, rate=None) -> "OptimalControl":
         """Path constraints on a joint with one coordinate: ``lower ≤ θ ≤ upper`` (rad or m)
-        and, with ``rate``, ``|θ̇| ≤ rate`` (rad/s or m/s)."""
+        and, with ``rate``, ``|θ̇| ≤ rate`` (rad/s or m/s).  An angle bounded on both sides
+        within a turn is measured on the turn centred on the bounds' middle (continuous over
+        a range beyond ±π, as the Panda's joint 6: :func:`ncgen.optim.nlp.continuous_angle`)."""
         js = self.model.joint_space
         if name not in js.joint_names:
             raise OptimizationError(f"bound_joint: no joint with coordinates named {name!r}; joints: "
