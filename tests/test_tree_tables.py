@@ -701,3 +701,30 @@ def test_member_twist_map_at_identity_equals_the_symbolic_map():
         assert got.shape == expected.shape == (expected.shape[0], 6), kind
         np.testing.assert_allclose(got, expected, rtol=0, atol=1e-14 * max(1.0, np.max(np.abs(expected))),
                                    err_msg=kind)
+
+
+def test_sources_key_follows_an_edited_source(tmp_path, monkeypatch):
+    """The library's content key is cached per process but read again when a source changes on
+    disk: a copy of the templates gives the shipped key, an edited template another, the original
+    text back the shipped key again (hashes of the files' bytes, not of their dates)."""
+    import os
+    import shutil
+
+    from ncgen.codegen.render import shipped_templates_dir
+    from ncgen.codegen.tree_kernels import SOURCES
+    from ncgen.runtime import tree_library
+
+    shipped = tree_library.sources_key()
+    for rel in SOURCES:
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(shipped_templates_dir() / rel, tmp_path / rel)
+    monkeypatch.setattr(tree_library, "shipped_templates_dir", lambda: tmp_path)
+    assert tree_library.sources_key() == shipped
+    first = tmp_path / SOURCES[0]
+    text = first.read_bytes()
+    first.write_bytes(text + b"\n")
+    edited = tree_library.sources_key()
+    assert edited != shipped
+    first.write_bytes(text)
+    os.utime(first, ns=(1, 1))
+    assert tree_library.sources_key() == shipped

@@ -46,10 +46,11 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
+import os
 import platform
 import sys
 import threading
-from functools import partial
+from functools import lru_cache, partial
 from pathlib import Path
 
 import casadi as ca
@@ -108,19 +109,38 @@ class _Tree(ctypes.Structure):
 
 def sources_key() -> str:
     """sha256 of what the library is made of: ncgen's and CasADi's versions, its templates,
-    the kernel generator and the formulas it reads."""
+    the kernel generator and the formulas it reads.  The files are read again only when one of
+    them changed on disk (size or modification time): a run's kernel choice asks for the key on
+    every call."""
     import ncgen.assembly.joint_space as js
     import ncgen.assembly.joint_tree as jt
     import ncgen.assembly.tree_dynamics as td
     import ncgen.codegen.tree_kernels as tk
     import ncgen.rigid_motion.casadi_forms as crm
 
-    templates = shipped_templates_dir()
-    files = [templates / rel for rel in SOURCES] + [Path(m.__file__) for m in (tk, js, jt, td, crm)]
+    files = _source_files(shipped_templates_dir(), (tk, js, jt, td, crm))
+    return _hash_of(tuple((f, *_stamp(os.stat(f))) for f in files))
+
+
+@lru_cache(maxsize=4)
+def _source_files(templates: Path, modules: tuple) -> tuple[str, ...]:
+    """The paths :func:`sources_key` hashes: the library's templates under ``templates`` and the
+    files of ``modules``."""
+    return tuple(str(templates / rel) for rel in SOURCES) + tuple(m.__file__ for m in modules)
+
+
+def _stamp(st: os.stat_result) -> tuple[int, int]:
+    """A file's size (bytes) and modification time (ns): what tells an edited source."""
+    return st.st_size, st.st_mtime_ns
+
+
+@lru_cache(maxsize=4)
+def _hash_of(stamped: tuple[tuple[str, int, int], ...]) -> str:
+    """:func:`sources_key` of files given with their sizes and modification times (the cache key)."""
     h = hashlib.sha256(f"{__version__}\n{ca.__version__}\n{BUILD_SCHEME}\n{sys.platform}\n"
                        f"{platform.machine()}\n".encode())
-    for f in files:
-        h.update(f.name.encode() + b"\0" + f.read_bytes() + b"\0")
+    for f, _, _ in stamped:
+        h.update(Path(f).name.encode() + b"\0" + Path(f).read_bytes() + b"\0")
     return h.hexdigest()
 
 
