@@ -45,9 +45,10 @@ from ncgen.errors import CompilerNotFound, ModelError, NcgenError, ShapeError
 from ncgen.model.data import cached, model_data
 from ncgen.codegen.tree_check import (ALGORITHMS, PIVOT_TOL, check_tree, compile_tree_function, quaternion_offsets,
                                       unit_quaternions)
+from ncgen.runtime.kernel_time_parameters import TimeAndParameters
 from ncgen.validation import MAX_MAGNITUDE, as_numbers, as_vector, write_out
 
-class AlgorithmKernel:
+class AlgorithmKernel(TimeAndParameters):
     """``k(*args) -> outputs``: one compiled algorithm of a tree (:data:`ALGORITHMS`: ``args``
     are its inputs, ``qj`` with unit quaternions).  Time and parameters are ``model.t0``,
     ``model.p0`` until :meth:`set`.  Returns the output buffers (one array, or a tuple;
@@ -98,21 +99,6 @@ class AlgorithmKernel:
         k = AlgorithmKernel(self.model, self.name, self.direct.copy())
         k.set(t=float(self.direct.inputs[0][0]), p=self._p)
         return k
-
-    def set(self, *, t=None, p=None) -> None:
-        """Time ``t`` (s) and parameters ``p`` (``model.parameter_names`` order) of later calls."""
-        if t is not None:
-            self.direct.inputs[0][...] = self._t = float(t)
-        if p is not None:
-            self._p[...] = as_vector(p, self.model.np, "p")
-            self._default_p = p is self.model.p0
-
-    def _at(self, t: float, p) -> None:
-        """:meth:`set`, skipped when ``t`` and the default parameters (``p`` None) are those of the last call."""
-        if p is not None or not self._default_p:
-            self.set(t=t, p=self.model.p0 if p is None else p)
-        elif t != self._t:
-            self.set(t=t)
 
     def __call__(self, *args):
         fast = self._fast

@@ -30,12 +30,13 @@ from ncgen.model.data import cached, model_data
 from ncgen.runtime.dynamics_at_state import forward_dynamics
 from ncgen.codegen.tree_check import (PIVOT_TOL, check_tree, compile_tree_function, quaternion_offsets,
                                       unit_quaternions)
+from ncgen.runtime.kernel_time_parameters import TimeAndParameters
 from ncgen.validation import MAX_MAGNITUDE, as_numbers, as_vector, write_out
 
 METHODS = ("auto", "recursive", "projection")
 
 
-class JointDynamicsKernel:
+class JointDynamicsKernel(TimeAndParameters):
     """``k(qj, vj, u=None) -> a_j``: the compiled joint-space forward dynamics of a tree.
 
     ``qj``, ``vj``: joint positions and rates (``model.joint_names`` order, a free base's
@@ -67,21 +68,6 @@ class JointDynamicsKernel:
         k = JointDynamicsKernel(self.model, self.direct.copy(), self.method)
         k.set(t=float(self.direct.inputs[0][0]), p=self._p)
         return k
-
-    def set(self, *, t=None, p=None) -> None:
-        """Time ``t`` (s) and parameters ``p`` (``model.parameter_names`` order) of later calls."""
-        if t is not None:
-            self.direct.inputs[0][...] = self._t = float(t)
-        if p is not None:
-            self._p[...] = as_vector(p, self.model.np, "p")
-            self._default_p = p is self.model.p0
-
-    def _at(self, t: float, p) -> None:
-        """:meth:`set`, skipped when ``t`` and the default parameters (``p`` None) are those of the last call."""
-        if p is not None or not self._default_p:
-            self.set(t=t, p=self.model.p0 if p is None else p)
-        elif t != self._t:
-            self.set(t=t)
 
     def __call__(self, qj, vj, u=None) -> np.ndarray:
         fast = self._fast
