@@ -13,14 +13,19 @@ remedies, both active only in the main thread while SIGINT has Python's default 
   stop cleanly (IPOPT's iteration callback); leaving the block with the flag set raises
   ``KeyboardInterrupt``.
 
-A long call into our own C loops (ctypes, which releases the GIL) runs in a worker thread
-instead (:func:`call_interruptibly`): Ctrl-C in the waiting main thread sets the loop's stop
-flag, which the loop reads before every step.
+A call into our own C loops (ctypes, which releases the GIL) is stopped by Ctrl-C through the
+loop's stop flag, which the loop reads before every step (:func:`call_interruptibly`): the
+main thread calls the loop itself while SIGINT, written to a pipe by Python's C-level signal
+handler (``signal.set_wakeup_fd``), wakes a watcher thread (started once per process) that
+sets the flag; no thread is started per call, so a short run costs microseconds more than
+its loop.
 """
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
+import sys
 import threading
 
 
@@ -43,6 +48,7 @@ def sticky_interrupt():
         _remembered[1] = True
         raise KeyboardInterrupt
 
+    handler.sticky = True                  # call_interruptibly: a handler that raises KeyboardInterrupt
     previous = signal.signal(signal.SIGINT, handler) if _remembered[0] == 0 else None
     _remembered[0] += 1
     try:
@@ -98,20 +104,100 @@ def deferred_interrupt():
         raise KeyboardInterrupt
 
 
-#: Seconds the main thread waits at a time in :func:`call_interruptibly` (the delay before
+#: Seconds the main thread waits at a time in :func:`_call_in_thread` (the delay before
 #: Ctrl-C is seen).
 WAIT_SLICE = 0.05
 
 
 def call_interruptibly(fn, *args, stop):
     """``(fn(*args), interrupted)``: ``fn`` (a C loop called through ctypes, which releases
-    the GIL) run in a worker thread while the main thread waits; a ``KeyboardInterrupt``
-    meanwhile sets ``stop.value = 1`` (``stop``: the ``ctypes.c_int`` the loop reads before
-    every step) and the wait goes on until the loop returns.  ``interrupted``: whether that
-    happened (also when the loop had just finished).  Off the main thread, where no
-    ``KeyboardInterrupt`` arrives, a direct call.  Exceptions of ``fn`` are raised here."""
+    the GIL, reading ``stop``, a ``ctypes.c_int``, before every step) called while Ctrl-C sets
+    ``stop.value = 1``; ``interrupted``: whether SIGINT arrived meanwhile (also when the loop
+    had just finished).  The SIGINT handler in place (Python's, or :func:`sticky_interrupt`'s)
+    then runs as it would have, its ``KeyboardInterrupt`` caught.  In the main thread under
+    such a handler: a direct call watched by the :class:`_Watcher`; under another handler, in
+    a worker thread while the main thread waits (the handler decides what Ctrl-C does); off
+    the main thread, where no SIGINT arrives, a direct call.  Exceptions of ``fn`` are raised
+    here."""
     if threading.current_thread() is not threading.main_thread():
         return fn(*args), False
+    previous = signal.getsignal(signal.SIGINT)
+    if not (previous is signal.default_int_handler or getattr(previous, "sticky", False)) or sys.platform == "win32":
+        return _call_in_thread(fn, *args, stop=stop)
+    flag = InterruptFlag()
+
+    def record(signum, frame):
+        flag.hit = True
+
+    signal.signal(signal.SIGINT, record)        # from here SIGINT only records: no KeyboardInterrupt mid-setup
+    try:
+        with _watcher().watching(stop):
+            if flag.hit:
+                stop.value = 1
+            result = _in_c(fn, args)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if flag.hit:
+        try:                                      # what the handler does on Ctrl-C (sticky: remember it)
+            previous(signal.SIGINT, None)
+        except KeyboardInterrupt:
+            pass
+    return result, flag.hit
+
+
+def _in_c(fn, args):
+    """``fn(*args)``: the frame the main thread is in while a C loop runs (tests find it)."""
+    return fn(*args)
+
+
+class _Watcher:
+    """A thread reading the pipe that Python's C-level signal handler writes signal numbers to
+    (``signal.set_wakeup_fd``) while a C loop runs: SIGINT sets the loop's stop flag; other
+    signals' bytes go on to the descriptor that was set before (an event loop's)."""
+
+    def __init__(self):
+        self.read, self.write = os.pipe()
+        os.set_blocking(self.write, False)
+        self.stop, self.forward = None, -1
+        threading.Thread(target=self._watch, name="ncgen-interrupt-watcher", daemon=True).start()
+
+    def _watch(self) -> None:
+        while True:
+            data = os.read(self.read, 64)
+            stop = self.stop
+            if int(signal.SIGINT) in data and stop is not None:
+                stop.value = 1
+            other = bytes(b for b in data if b != int(signal.SIGINT))
+            if other and self.forward >= 0:
+                with contextlib.suppress(OSError):
+                    os.write(self.forward, other)
+
+    @contextlib.contextmanager
+    def watching(self, stop):
+        """SIGINT sets ``stop.value = 1`` inside the block (main thread)."""
+        self.stop = stop
+        self.forward = signal.set_wakeup_fd(self.write, warn_on_full_buffer=False)
+        try:
+            yield
+        finally:
+            signal.set_wakeup_fd(self.forward)
+            self.stop, self.forward = None, -1
+
+
+_WATCHER: list = []
+
+
+def _watcher() -> _Watcher:
+    """The process's :class:`_Watcher`, started on first use."""
+    if not _WATCHER:
+        _WATCHER.append(_Watcher())
+    return _WATCHER[0]
+
+
+def _call_in_thread(fn, *args, stop):
+    """:func:`call_interruptibly` under a SIGINT handler of the application's: ``fn`` in a
+    worker thread while the main thread waits; a ``KeyboardInterrupt`` meanwhile sets
+    ``stop.value = 1`` and the wait goes on until the loop returns."""
     result, finished = [], threading.Event()
 
     def work():

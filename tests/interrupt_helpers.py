@@ -37,9 +37,9 @@ def running_signal(caller: str, callee: str) -> str:
         """)
 
 
-#: :func:`running_signal` for the C loops (:func:`ncgen.interrupts.call_interruptibly` waiting
-#: for its worker thread) and for IDAS (a chunk advanced in ``idas_integrator._run``).
-IN_C_LOOP, IN_IDAS = running_signal("call_interruptibly", "wait"), running_signal("_run", "advance")
+#: :func:`running_signal` for the C loops (:func:`ncgen.interrupts.call_interruptibly` calling
+#: the loop, ``_in_c``) and for IDAS (a chunk advanced in ``idas_integrator._run``).
+IN_C_LOOP, IN_IDAS = running_signal("call_interruptibly", "_in_c"), running_signal("_run", "advance")
 
 
 def cli(watcher: str, *args) -> list[str]:

@@ -1,5 +1,5 @@
 """Ctrl-C stops a compiled stepper (or joint-space) run within seconds (the C loops check a
-stop flag before every step; Python waits for them in a worker thread): exit 130 from the CLI, the previous
+stop flag before every step, set by a watcher thread woken by SIGINT): exit 130 from the CLI, the previous
 result file untouched, the partial trajectory written as ``*.incomplete.*``; from Python a
 :class:`~ncgen.errors.SimulationInterrupted` carrying the trajectory so far."""
 from __future__ import annotations

@@ -29,6 +29,7 @@ from ncgen.assembly.joint_tree import (
     Edge, carry, edge_of, quaternion_matrix, quaternion_rate, relative_pose, rotation_2d,
 )
 from ncgen.assembly.manifold import NEWTON_TOL as TOL, newton, solve_linear, system_size
+from ncgen.model.buffered_call import buffered
 from ncgen.model.data import model_data
 from ncgen.symbolic.coordinates import component_names, matrix_names
 from ncgen.errors import ModelError
@@ -38,6 +39,16 @@ from ncgen.validation import as_vector
 #: of a state whose joint coordinates :meth:`JointSpace.to_joint_space` returns: loose enough
 #: for any integrator's drift, far below a state that is not on the constraints at all.
 OFF_MANIFOLD_TOL = 1e-4
+
+
+def residual_function(model) -> ca.Function:
+    """``(t, q, v, p) -> (Φ, A v + Φ_t)``: both constraint levels' residuals in one function,
+    composed of ``model.functions`` ``phi``, ``A`` and ``phi_t`` (SX when they are)."""
+    f = model.functions
+    sym = ca.SX if all(f[k].is_a("SXFunction") for k in ("phi", "A", "phi_t")) else ca.MX
+    t, q, v, p = sym.sym("t"), sym.sym("q", model.nq), sym.sym("v", model.nq), sym.sym("p", model.np)
+    return ca.Function("state_residuals", [t, q, v, p], [f["phi"](t, q, p), ca.mtimes(f["A"](t, q, p), v) +
+                                                          f["phi_t"](t, q, p)], ["t", "q", "v", "p"], ["phi", "vel"])
 
 
 def build_joint_coordinates(system, ctx) -> tuple[list[JointCoordinates], dict[str, str]]:
@@ -141,30 +152,29 @@ class JointSpace:
         Refuses a state off the constraints at time ``t`` (default ``model.t0``) by more than
         :data:`OFF_MANIFOLD_TOL` (relative; joint angles of such a state mean nothing)."""
         q = as_vector(q, model.nq, "q")
+        v = None if v is None else as_vector(v, model.nq, "v")
+        if a is not None and v is None:
+            raise ModelError("to_joint_space: a: accelerations need the rates v too")
+        t, p = (model.t0 if t is None else t), (model.p0 if p is None else as_vector(p, model.np, "p"))
+        phi, vel = self._residuals(model, q, np.zeros(model.nq) if v is None else v, t, p)
         s = max(1.0, float(np.abs(q).max(initial=0.0)))
-        off = float(np.abs(model.phi(q, t=t, p=p)).max(initial=0.0))
+        off = float(np.abs(phi).max(initial=0.0))
         if off > OFF_MANIFOLD_TOL * s * s:
             raise ModelError(f"to_joint_space: q is off the constraints: max |Φ(q)| = {off:.3g} m² (accepted up "
                              f"to {OFF_MANIFOLD_TOL * s * s:.3g} m²); joint coordinates of such a state are "
                              "meaningless: project it onto the constraints first (nc.simulate and "
                              "model.from_joint_space give consistent states)")
-        out = [np.array(self.positions(q)).reshape(-1)]
-        if v is not None:
-            v = as_vector(v, model.nq, "v")
-            w = max(1.0, float(np.abs(v).max(initial=0.0)))
-            phi_t = np.array(model.functions["phi_t"](model.t0 if t is None else t, q,
-                                                      model.p0 if p is None else p)).reshape(-1)
-            off = float(np.abs(model.A(q, t=t, p=p) @ v + phi_t).max(initial=0.0))
-            if off > OFF_MANIFOLD_TOL * s * w:
-                raise ModelError(f"to_joint_space: v is off the constraints: max |A v + Φ_t| = {off:.3g} m²/s "
-                                 f"(accepted up to {OFF_MANIFOLD_TOL * s * w:.3g} m²/s); project it first")
-            out.append(np.array(self.rates(q, v)).reshape(-1))
-            if a is not None:
-                a = as_vector(a, model.nq, "a")
-                out.append(np.array(self.accelerations(q, v, a)).reshape(-1))
-        elif a is not None:
-            raise ModelError("to_joint_space: a: accelerations need the rates v too")
-        return out[0] if len(out) == 1 else tuple(out)
+        if v is None:
+            return buffered(model, "joint_positions", lambda: self.positions).call(q)[0].ravel()
+        w = max(1.0, float(np.abs(v).max(initial=0.0)))
+        off = float(np.abs(vel).max(initial=0.0))
+        if off > OFF_MANIFOLD_TOL * s * w:
+            raise ModelError(f"to_joint_space: v is off the constraints: max |A v + Φ_t| = {off:.3g} m²/s "
+                             f"(accepted up to {OFF_MANIFOLD_TOL * s * w:.3g} m²/s); project it first")
+        qj, vj = self.state(model, q, v)
+        if a is None:
+            return qj, vj
+        return qj, vj, np.array(self.accelerations(q, v, as_vector(a, model.nq, "a"))).reshape(-1)
 
     # ------------------------------------------------------------ in
     def _given(self, x, rates: bool, what: str) -> dict[str, np.ndarray]:
@@ -221,12 +231,28 @@ class JointSpace:
         return data.joint_tree_function[0]
 
     @staticmethod
+    def _residuals(model, q, v, t, p) -> tuple[np.ndarray, np.ndarray]:
+        """``(Φ, A v + Φ_t)`` at ``t``: the residuals of both constraint levels (one call of
+        :func:`residual_function`)."""
+        phi, vel = buffered(model, "state_residuals", lambda: residual_function(model)).call(t, q, v, p)
+        return phi.ravel(), vel.ravel()
+
+    def state(self, model, q, v) -> tuple[np.ndarray, np.ndarray]:
+        """``(q_j, v_j)`` of a state ``(q, v)`` known to be consistent (unchecked, one call of
+        :meth:`positions` and :meth:`rates` together; :meth:`to_joint_space` checks)."""
+        qj, vj = buffered(model, "joint_state", lambda: self._state_function(model.nq)).call(q, v)
+        return qj.ravel(), vj.ravel()
+
+    def _state_function(self, nq: int) -> ca.Function:
+        """``(q, v) -> (q_j, v_j)``: :meth:`positions` and :meth:`rates` in one function."""
+        x, w = ca.SX.sym("q", nq), ca.SX.sym("v", nq)
+        return ca.Function("joint_state", [x, w], [self.positions(x), self.rates(x, w)], ["q", "v"], ["qj", "vj"])
+
+    @staticmethod
     def _holds(model, q, v, t, p) -> bool:
         """Whether ``(q, v)`` satisfies both constraint levels (drives included) to round-off."""
-        f = model.functions
         size = system_size(q)
-        phi = np.array(f["phi"](t, q, p)).reshape(-1)
-        vel = np.array(f["A"](t, q, p)) @ v + np.array(f["phi_t"](t, q, p)).reshape(-1)
+        phi, vel = JointSpace._residuals(model, q, v, t, p)
         return bool(np.all(np.abs(phi) <= TOL * size**2)
                     and np.all(np.abs(vel) <= 1e-10 * size * (1.0 + np.max(np.abs(v), initial=0.0))))
 

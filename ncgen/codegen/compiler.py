@@ -27,21 +27,27 @@ class Compiler:
 
 
 def find_compiler(cc: str | None = None) -> Compiler:
-    """The compiler to use (see module docstring); raises :class:`CompilerNotFound`."""
-    explicit = cc if cc is not None else os.environ.get("CC")
+    """The compiler to use (see module docstring); raises :class:`CompilerNotFound`.  Found
+    once per ``cc``, ``$CC`` and ``$PATH`` (a run's kernel choice asks on every call)."""
+    return _find(cc, os.environ.get("CC"), os.environ.get("PATH"))
+
+
+@lru_cache(maxsize=16)
+def _find(cc: str | None, env_cc: str | None, path: str | None) -> Compiler:
+    explicit = cc if cc is not None else env_cc
     if explicit:
         argv = shlex.split(explicit)
-        path = shutil.which(argv[0]) if argv else None
-        if path is None:
+        found = shutil.which(argv[0], path=path) if argv else None
+        if found is None:
             source = "the cc argument" if cc is not None else "$CC"
             raise CompilerNotFound(f"C compiler {explicit!r} from {source} was not found on PATH; "
                                    f"install it, fix {source}, or unset it to use one of "
                                    f"{', '.join(CANDIDATES)}")
-        return _identify((path, *argv[1:]))
+        return _identify((found, *argv[1:]))
     for name in CANDIDATES:
-        path = shutil.which(name)
-        if path is not None:
-            return _identify((path,))
+        found = shutil.which(name, path=path)
+        if found is not None:
+            return _identify((found,))
     raise CompilerNotFound(f"no C compiler found (looked for $CC, {', '.join(CANDIDATES)} on PATH)")
 
 

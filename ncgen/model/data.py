@@ -90,6 +90,11 @@ class ModelData:
     #: The model's constraints and accelerations with its nonholonomic elements
     #: (:func:`ncgen.assembly.nonholonomic.rolling_system`), or None.
     rolling_system: object = None
+    #: ``(kinds,)``: the joint kinds of the tree tables' loop (None: the tables do not cover the
+    #: model), and ``(reason,)``: why the model's own loop was found compiled earlier (None: it was
+    #: not), looked up once per process (:func:`ncgen.runtime.joint_simulation.choose_kernels`).
+    table_kinds: tuple | None = None
+    flat_loop_stored: tuple | None = None
     #: ``(reason,)``: why ``simulate`` cannot run the model in joint space (reason None: it can)
     #: (:func:`ncgen.runtime.joint_simulation.joint_space_applies`).
     joint_simulation_reason: tuple | None = None
@@ -111,6 +116,9 @@ class ModelData:
     #: ``{id(joint): (joint, ActuatorElement or None)}``: each actuated joint's table element,
     #: checked symbolically once (:func:`ncgen.codegen.stepper_tables.actuator_element`).
     actuator_elements: dict = field(default_factory=dict)
+    #: ``{name: BufferedFunction}``: functions called through preallocated buffers
+    #: (:func:`ncgen.model.buffered_call.buffered`).
+    buffered: dict = field(default_factory=dict)
     #: The model's key in the store of built models (:mod:`ncgen.codegen.model_cache`) when it
     #: was read from or written to it; functions derived from it are stored under it too.
     store_key: str | None = None

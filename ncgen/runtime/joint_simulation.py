@@ -39,7 +39,8 @@ from ncgen.interrupts import call_interruptibly
 from ncgen.runtime.simulation_progress import Progress
 from ncgen.runtime.trajectory import Trajectory, once
 
-#: The run is cut into at most this many calls of the C loop (progress updates).
+#: The run is cut into at most this many calls of the C loop when a progress bar may be drawn
+#: (its updates; else one call).
 CHUNKS = 20
 _STATUS = {1: "the joint-space mass matrix is singular or the accelerations are not finite",
            2: "the integrator needed more than max_steps steps for one output interval (a stiff motion: "
@@ -176,41 +177,57 @@ def choose_kernels(model, outputs: int, controller=None, joint_dynamics: bool = 
     kinds = _table_kinds(model)
     if ready is None and kinds is None:
         return Choice("flat", "the tree tables do not cover the model")
-    from ncgen.runtime.tree_library import missing_units
-    return choose_joint_kernels(model.joint_space.nv, outputs, ready,
-                                () if kinds is None else tuple(missing_units(kinds, "forward")))
+    return choose_joint_kernels(model.joint_space.nv, outputs, ready, _missing_units(model, kinds))
 
 
-def _table_kinds(model) -> list[str] | None:
+def _table_kinds(model) -> tuple[str, ...] | None:
     """The joint kinds of ``model``'s tree tables when the tables' loop covers it (its tables
-    and constant input efforts; nothing loaded or compiled), else None."""
-    from ncgen.codegen.tree_kernels import JOINT_KINDS
-    from ncgen.codegen.tree_tables import UnsupportedTree, tree_tables
-    from ncgen.runtime.tree_library import input_efforts
+    and constant input efforts; nothing loaded or compiled), else None; found once per model."""
+    from ncgen.model.data import model_data
 
-    try:
-        kinds = tree_tables(model).arrays["kind"]
-        input_efforts(model)
-    except UnsupportedTree:
-        return None
-    return sorted({JOINT_KINDS[int(k)].name for k in kinds})
+    data = model_data(model)
+    if data.table_kinds is None:
+        from ncgen.codegen.tree_kernels import JOINT_KINDS
+        from ncgen.codegen.tree_tables import UnsupportedTree, tree_tables
+        from ncgen.runtime.tree_library import input_efforts
+
+        try:
+            kinds = tree_tables(model).arrays["kind"]
+            input_efforts(model)
+            data.table_kinds = (tuple(sorted({JOINT_KINDS[int(k)].name for k in kinds})),)
+        except UnsupportedTree:
+            data.table_kinds = (None,)
+    return data.table_kinds[0]
+
+
+def _missing_units(model, kinds) -> tuple[str, ...]:
+    """The tree library's units the tables' loop of ``model`` (joint kinds ``kinds``, or None)
+    needs that are not compiled yet: none once that loop is loaded in this process."""
+    from ncgen.model.data import model_data
+    from ncgen.runtime.tree_library import missing_units
+
+    if kinds is None or model_data(model).joint_loops.get("tables") is not None:
+        return ()
+    return tuple(missing_units(kinds, "forward"))
 
 
 def _flat_ready(model) -> str | None:
     """Why the model's own loop (no controller, no joint dynamics) is ready without a compile
     — loaded in this process, or its ODE stored beside the model and its library in the
-    compile cache — or None."""
+    compile cache (looked up once per model and process) — or None."""
     from ncgen.codegen.joint_loop import cached_joint_loop
     from ncgen.codegen.model_cache import stored_function
     from ncgen.model.data import model_data
     from ncgen.runtime.tree_kernel import PIVOT_TOL
 
-    if (id(None), False, None) in model_data(model).joint_loops:
+    data = model_data(model)
+    if (id(None), False, None) in data.joint_loops:
         return "loaded in this process"
-    ode = stored_function(model, "joint-ode")
-    if ode is not None and cached_joint_loop(f"{model.name}_jsim", ode, PIVOT_TOL) is not None:
-        return "compiled earlier, in the compile cache"
-    return None
+    if data.flat_loop_stored is None:
+        ode = stored_function(model, "joint-ode")
+        data.flat_loop_stored = ("compiled earlier, in the compile cache" if ode is not None and cached_joint_loop(
+            f"{model.name}_jsim", ode, PIVOT_TOL) is not None else None,)
+    return data.flat_loop_stored[0]
 
 
 def joint_loop(model, controller=None, joint_dynamics: bool = False, cflags=None, kernels: str = "auto"):
@@ -285,7 +302,7 @@ def simulate_joint(model, run: Run, opts: JointLoopOptions, options: JointOption
     loop, choice, build_time = _run_loop(model, controller, opts, len(t) - 1)
     n = len(t)
     X = np.zeros((n, js.nq + js.nv))
-    X[0] = np.concatenate(model.to_joint_space(run.q, run.v))
+    X[0, :js.nq], X[0, js.nq:] = js.state(model, run.q, run.v)      # consistent: initial_state made it so
     U = np.ascontiguousarray(run.U, dtype=float)
     W, S = U.copy(), _input_slopes(U, t) if hold == "linear" and model.nu else None
     varying = model.nu > 0 and (feedback is not None or bool(np.any(U != U[:1])))
@@ -358,8 +375,9 @@ def _input_slopes(U: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 def _integrate(model, loop, options: JointOptions, run: Run, X: np.ndarray, W: np.ndarray, S, progress):
-    """``(status, k, failed, stats)``: the loop run over the grid in chunks (one output interval
-    each under a feedback, which sets that interval's inputs ``W[k]``) until the end or a
+    """``(status, k, failed, stats)``: the loop run over the grid in one call, or in chunks (one
+    output interval each under a feedback, which sets that interval's inputs ``W[k]``; at most
+    :data:`CHUNKS` under a progress bar) until the end or a
     failure, the states into ``X``; ``k``: the last output reached; ``failed``: the
     :class:`~ncgen.runtime.feedback.FeedbackFailed` of a feedback or None; ``stats``: the loop's
     counts (steps, rejected steps, evaluations, …, the time reached)."""
@@ -367,7 +385,7 @@ def _integrate(model, loop, options: JointOptions, run: Run, X: np.ndarray, W: n
     stats = np.zeros(5)
     bar = Progress(float(t[0]), float(t[-1]), progress, label=f"simulating {model.name} (joint space): ")
     status, k, failed = 0, 0, None
-    chunk = 1 if feedback is not None else max(1, math.ceil((n - 1) / CHUNKS))
+    chunk = 1 if feedback is not None else max(1, math.ceil((n - 1) / CHUNKS)) if bar.shown else n - 1
     try:
         while k < n - 1 and status == 0:
             m = min(chunk, n - 1 - k)
