@@ -28,13 +28,17 @@ import signal
 import sys
 import threading
 
+try:                                       # signal's functions without its enum conversions (8 µs a call)
+    import _signal as _raw
+except ImportError:                        # pragma: no cover - not CPython
+    _raw = signal
 
 _remembered = [0, False]          # [depth of sticky_interrupt blocks, an interrupt not yet raised again]
 
 
 def _usable() -> bool:
     return (threading.current_thread() is threading.main_thread()
-            and signal.getsignal(signal.SIGINT) is signal.default_int_handler)
+            and _raw.getsignal(signal.SIGINT) is signal.default_int_handler)
 
 
 @contextlib.contextmanager
@@ -49,14 +53,14 @@ def sticky_interrupt():
         raise KeyboardInterrupt
 
     handler.sticky = True                  # call_interruptibly: a handler that raises KeyboardInterrupt
-    previous = signal.signal(signal.SIGINT, handler) if _remembered[0] == 0 else None
+    previous = _raw.signal(signal.SIGINT, handler) if _remembered[0] == 0 else None
     _remembered[0] += 1
     try:
         yield
     finally:
         _remembered[0] -= 1
         if previous is not None:
-            signal.signal(signal.SIGINT, previous)
+            _raw.signal(signal.SIGINT, previous)
             _remembered[1] = False
 
 
@@ -91,7 +95,7 @@ def deferred_interrupt():
     def handler(signum, frame):
         flag.hit = True
 
-    previous = signal.signal(signal.SIGINT, handler)
+    previous = _raw.signal(signal.SIGINT, handler)
     try:
         yield flag
     except Exception:
@@ -99,7 +103,7 @@ def deferred_interrupt():
             raise KeyboardInterrupt from None
         raise
     finally:
-        signal.signal(signal.SIGINT, previous)
+        _raw.signal(signal.SIGINT, previous)
     if flag.hit:
         raise KeyboardInterrupt
 
@@ -121,7 +125,7 @@ def call_interruptibly(fn, *args, stop):
     here."""
     if threading.current_thread() is not threading.main_thread():
         return fn(*args), False
-    previous = signal.getsignal(signal.SIGINT)
+    previous = _raw.getsignal(signal.SIGINT)
     if not (previous is signal.default_int_handler or getattr(previous, "sticky", False)) or sys.platform == "win32":
         return _call_in_thread(fn, *args, stop=stop)
     flag = InterruptFlag()
@@ -129,14 +133,14 @@ def call_interruptibly(fn, *args, stop):
     def record(signum, frame):
         flag.hit = True
 
-    signal.signal(signal.SIGINT, record)        # from here SIGINT only records: no KeyboardInterrupt mid-setup
+    _raw.signal(signal.SIGINT, record)        # from here SIGINT only records: no KeyboardInterrupt mid-setup
     try:
         with _watcher().watching(stop):
             if flag.hit:
                 stop.value = 1
             result = _in_c(fn, args)
     finally:
-        signal.signal(signal.SIGINT, previous)
+        _raw.signal(signal.SIGINT, previous)
     if flag.hit:
         try:                                      # what the handler does on Ctrl-C (sticky: remember it)
             previous(signal.SIGINT, None)

@@ -165,7 +165,7 @@ class JointSpace:
                              "meaningless: project it onto the constraints first (nc.simulate and "
                              "model.from_joint_space give consistent states)")
         if v is None:
-            return buffered(model, "joint_positions", lambda: self.positions).call(q)[0].ravel()
+            return buffered(model, "joint_positions", lambda: self.positions).call(q)[0]
         w = max(1.0, float(np.abs(v).max(initial=0.0)))
         off = float(np.abs(vel).max(initial=0.0))
         if off > OFF_MANIFOLD_TOL * s * w:
@@ -234,14 +234,12 @@ class JointSpace:
     def _residuals(model, q, v, t, p) -> tuple[np.ndarray, np.ndarray]:
         """``(Φ, A v + Φ_t)`` at ``t``: the residuals of both constraint levels (one call of
         :func:`residual_function`)."""
-        phi, vel = buffered(model, "state_residuals", lambda: residual_function(model)).call(t, q, v, p)
-        return phi.ravel(), vel.ravel()
+        return buffered(model, "state_residuals", lambda: residual_function(model)).call(t, q, v, p)
 
     def state(self, model, q, v) -> tuple[np.ndarray, np.ndarray]:
         """``(q_j, v_j)`` of a state ``(q, v)`` known to be consistent (unchecked, one call of
         :meth:`positions` and :meth:`rates` together; :meth:`to_joint_space` checks)."""
-        qj, vj = buffered(model, "joint_state", lambda: self._state_function(model.nq)).call(q, v)
-        return qj.ravel(), vj.ravel()
+        return buffered(model, "joint_state", lambda: self._state_function(model.nq)).call(q, v)
 
     def _state_function(self, nq: int) -> ca.Function:
         """``(q, v) -> (q_j, v_j)``: :meth:`positions` and :meth:`rates` in one function."""

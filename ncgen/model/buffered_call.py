@@ -4,7 +4,7 @@ arguments costs 50–150 µs (the conversions to and from ``DM``).  For the per-
 front of the compiled loops (a run's initial-state checks and joint coordinates).
 
 Buffers are per thread (one evaluation at a time each); outputs are returned as fresh dense
-2-D arrays, so callers may keep them."""
+arrays, so callers may keep them."""
 from __future__ import annotations
 
 import threading
@@ -15,27 +15,28 @@ import numpy as np
 
 
 class BufferedFunction:
-    """``f`` (dense inputs) evaluated into NumPy arrays: ``call(*args)`` → the outputs."""
+    """``f`` (dense column-vector or scalar inputs) evaluated into NumPy arrays:
+    ``call(*args)`` → the outputs."""
 
     def __init__(self, f: ca.Function):
         for i in range(f.n_in()):
-            if not f.sparsity_in(i).is_dense():
-                raise ValueError(f"BufferedFunction: input {f.name_in(i)!r} of {f.name()} is sparse")
+            if not (f.sparsity_in(i).is_dense() and f.size2_in(i) == 1):
+                raise ValueError(f"BufferedFunction: input {f.name_in(i)!r} of {f.name()} is not a dense vector")
         self.f = f
-        self._sizes = [f.nnz_in(i) for i in range(f.n_in())]
         self._outputs = []
         for i in range(f.n_out()):
             sp = f.sparsity_out(i)
             rows, cols = sp.get_triplet()
-            self._outputs.append(((sp.size1(), sp.size2()), (np.array(rows, dtype=np.intp),
-                                                               np.array(cols, dtype=np.intp)), sp.is_dense()))
+            self._outputs.append(((sp.size1(),) if sp.size2() == 1 else (sp.size1(), sp.size2()), sp.is_dense(),
+                                  (np.array(rows, dtype=np.intp),) if sp.size2() == 1 else
+                                  (np.array(rows, dtype=np.intp), np.array(cols, dtype=np.intp))))
         self._local = threading.local()
 
     def _buffers(self):
         b = getattr(self._local, "buffers", None)
         if b is None:
             buf, evaluate = self.f.buffer()
-            ins = [np.zeros(n) for n in self._sizes]
+            ins = [np.zeros(self.f.nnz_in(i)) for i in range(self.f.n_in())]
             outs = [np.zeros(self.f.nnz_out(i)) for i in range(self.f.n_out())]
             for i, x in enumerate(ins):
                 buf.set_arg(i, memoryview(x))
@@ -45,18 +46,18 @@ class BufferedFunction:
         return b
 
     def call(self, *args) -> tuple[np.ndarray, ...]:
-        """The outputs of ``f(*args)``, dense, shaped ``(rows, columns)`` (each argument a scalar
-        or an array of the input's size, read as floats in column-major order)."""
+        """The outputs of ``f(*args)`` (each argument a scalar or a 1-D array of the input's
+        size), dense: an output of one column 1-D, others 2-D."""
         buf, evaluate, ins, outs = self._buffers()
         for x, a in zip(ins, args):
-            x[...] = np.ravel(a, order="F")
+            x[...] = a
         evaluate()
         if buf.ret():
             raise RuntimeError(f"{self.f.name()}: evaluation failed (status {buf.ret()})")
         result = []
-        for (shape, index, dense), nz in zip(self._outputs, outs):
+        for (shape, dense, index), nz in zip(self._outputs, outs):
             if dense:
-                result.append(nz.reshape(shape, order="F").copy())
+                result.append(nz.copy() if len(shape) == 1 else nz.reshape(shape, order="F").copy())
             else:
                 y = np.zeros(shape)
                 y[index] = nz

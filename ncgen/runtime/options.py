@@ -25,6 +25,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -174,14 +175,29 @@ class SimulationOptions:
     @classmethod
     def resolve(cls, options: "SimulationOptions | None" = None, **shortcuts) -> "SimulationOptions":
         """``options`` (default: the defaults) with the fields in ``shortcuts`` replaced, validated;
-        an unknown name is an error naming the known ones."""
-        if options is not None and not isinstance(options, cls):
-            raise NcgenError(f"options: expected an nc.SimulationOptions, got {type(options).__name__}")
-        fields = [f.name for f in dataclasses.fields(cls)]
-        for name in shortcuts:
-            if name not in fields:
-                raise NcgenError(f"simulate: no option named {name!r}{did_you_mean(name, fields)}; options: "
-                                 f"{', '.join(fields)}")
-        if options is None:
-            return cls(**shortcuts)
-        return dataclasses.replace(options, **shortcuts) if shortcuts else options
+        an unknown name is an error naming the known ones.  Options of hashable values are
+        resolved once (a short run's fixed cost; values keyed with their types, so that ``1``
+        and ``True`` stay apart)."""
+        try:
+            return _resolved(cls, options, tuple((k, type(x), x) for k, x in shortcuts.items()))
+        except TypeError:                   # an unhashable value: checked as given, once more
+            return _resolve(cls, options, shortcuts)
+
+
+def _resolve(cls, options, shortcuts: dict) -> SimulationOptions:
+    if options is not None and not isinstance(options, cls):
+        raise NcgenError(f"options: expected an nc.SimulationOptions, got {type(options).__name__}")
+    fields = [f.name for f in dataclasses.fields(cls)]
+    for name in shortcuts:
+        if name not in fields:
+            raise NcgenError(f"simulate: no option named {name!r}{did_you_mean(name, fields)}; options: "
+                             f"{', '.join(fields)}")
+    if options is None:
+        return cls(**shortcuts)
+    return dataclasses.replace(options, **shortcuts) if shortcuts else options
+
+
+@lru_cache(maxsize=64)
+def _resolved(cls, options, shortcuts: tuple) -> SimulationOptions:
+    """:func:`_resolve` of hashable options (``shortcuts``: ``(name, type, value)`` triples)."""
+    return _resolve(cls, options, {k: x for k, _, x in shortcuts})
