@@ -160,6 +160,9 @@ def _shape_of(x) -> str:
 
 def as_array(x, shape: tuple, what: str) -> np.ndarray:
     """``x`` as a finite float array of exactly ``shape``."""
+    if type(x) is np.ndarray and x.dtype == np.float64 and x.shape == tuple(shape) and \
+            (not x.size or float(np.abs(x).max()) <= MAX_MAGNITUDE):
+        return x                    # the common case, at one reduction's cost (NaN fails the bound)
     a = as_numbers(x, what, f"numbers of shape {shape}")
     if a.shape != tuple(shape):
         if len(shape) == 1:
@@ -216,6 +219,8 @@ def write_out(out, result, what: str):
 
 
 def as_scalar(x, what: str) -> float:
+    if type(x) is float and abs(x) <= MAX_MAGNITUDE:
+        return x                    # the common case (NaN fails the bound)
     try:
         v = float(_float_array(x, what).reshape(()))
     except ShapeError:

@@ -7,7 +7,8 @@
 * :func:`kkt_qr_function` — the same from the KKT system by sparse QR: the model's
   ``accel`` with the Baumgarte terms at zero (the path of a singular ``M``);
 * :func:`joint_kkt_function` — joint space in and out for a tree;
-* :func:`residual_function` — the constraint drift ``|Φ|∞``, ``|A v + Φ_t|∞`` of a state;
+* :func:`constraint_residuals_function` — ``Φ``, ``A v + Φ_t`` of a state, and
+  :func:`residual_function` — their drift ``|Φ|∞``, ``|A v + Φ_t|∞``;
 * :func:`slip_function` — the contacts' tangential velocities ``W_T v``;
 * :func:`potential_force_residual_function` — ``F + ∇V``, zero for conservative forces
   (with :func:`depends_on_time`: the stepper's energy check).
@@ -83,13 +84,21 @@ def joint_kkt_function(model) -> ca.Function:
                        ["t", "qj", "vj", "u", "p"], ["aj", "a", "lam"])
 
 
+def constraint_residuals_function(model) -> ca.Function:
+    """``(t, q, v, p) -> (Φ, A v + Φ_t)``: both constraint levels' residuals of a state,
+    composed of ``model.functions`` ``phi``, ``A`` and ``phi_t`` (SX when they are)."""
+    f = model.functions
+    sym = ca.SX if all(f[k].is_a("SXFunction") for k in ("phi", "A", "phi_t")) else ca.MX
+    t, q, v, p = sym.sym("t"), sym.sym("q", model.nq), sym.sym("v", model.nq), sym.sym("p", model.np)
+    return ca.Function("constraint_residuals", [t, q, v, p], [f["phi"](t, q, p), ca.mtimes(f["A"](t, q, p), v) +
+                       f["phi_t"](t, q, p)], ["t", "q", "v", "p"], ["phi", "phi_dot"])
+
+
 def residual_function(model) -> ca.Function:
     """``(t, q, v, p) -> (|Φ|∞, |A v + Φ_t|∞)``: position and velocity constraint drift."""
-    f = model.functions
     t, q, v = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq)
     p = ca.SX.sym("p", model.np)
-    phi = f["phi"](t, q, p)
-    phidot = ca.mtimes(f["A"](t, q, p), v) + f["phi_t"](t, q, p)
+    phi, phidot = constraint_residuals_function(model)(t, q, v, p)
     return ca.Function("residuals", [t, q, v, p], [ca.norm_inf(phi), ca.norm_inf(phidot)])
 
 

@@ -28,6 +28,7 @@ from ncgen.assembly.joint_coordinates import JointCoordinates, joint_coordinates
 from ncgen.assembly.joint_tree import (
     Edge, carry, edge_of, quaternion_matrix, quaternion_rate, relative_pose, rotation_2d,
 )
+from ncgen.assembly.derived import constraint_residuals_function
 from ncgen.assembly.manifold import NEWTON_TOL as TOL, newton, solve_linear, system_size
 from ncgen.model.buffered_call import buffered
 from ncgen.model.data import model_data
@@ -39,16 +40,6 @@ from ncgen.validation import as_vector
 #: of a state whose joint coordinates :meth:`JointSpace.to_joint_space` returns: loose enough
 #: for any integrator's drift, far below a state that is not on the constraints at all.
 OFF_MANIFOLD_TOL = 1e-4
-
-
-def residual_function(model) -> ca.Function:
-    """``(t, q, v, p) -> (Φ, A v + Φ_t)``: both constraint levels' residuals in one function,
-    composed of ``model.functions`` ``phi``, ``A`` and ``phi_t`` (SX when they are)."""
-    f = model.functions
-    sym = ca.SX if all(f[k].is_a("SXFunction") for k in ("phi", "A", "phi_t")) else ca.MX
-    t, q, v, p = sym.sym("t"), sym.sym("q", model.nq), sym.sym("v", model.nq), sym.sym("p", model.np)
-    return ca.Function("state_residuals", [t, q, v, p], [f["phi"](t, q, p), ca.mtimes(f["A"](t, q, p), v) +
-                                                          f["phi_t"](t, q, p)], ["t", "q", "v", "p"], ["phi", "vel"])
 
 
 def build_joint_coordinates(system, ctx) -> tuple[list[JointCoordinates], dict[str, str]]:
@@ -233,8 +224,8 @@ class JointSpace:
     @staticmethod
     def _residuals(model, q, v, t, p) -> tuple[np.ndarray, np.ndarray]:
         """``(Φ, A v + Φ_t)`` at ``t``: the residuals of both constraint levels (one call of
-        :func:`residual_function`)."""
-        return buffered(model, "state_residuals", lambda: residual_function(model)).call(t, q, v, p)
+        :func:`~ncgen.assembly.derived.constraint_residuals_function`)."""
+        return buffered(model, "constraint_residuals", lambda: constraint_residuals_function(model)).call(t, q, v, p)
 
     def state(self, model, q, v) -> tuple[np.ndarray, np.ndarray]:
         """``(q_j, v_j)`` of a state ``(q, v)`` known to be consistent (unchecked, one call of
@@ -251,8 +242,8 @@ class JointSpace:
         """Whether ``(q, v)`` satisfies both constraint levels (drives included) to round-off."""
         size = system_size(q)
         phi, vel = JointSpace._residuals(model, q, v, t, p)
-        return bool(np.all(np.abs(phi) <= TOL * size**2)
-                    and np.all(np.abs(vel) <= 1e-10 * size * (1.0 + np.max(np.abs(v), initial=0.0))))
+        return bool(np.abs(phi).max(initial=0.0) <= TOL * size**2          # NaN fails both bounds
+                    and np.abs(vel).max(initial=0.0) <= 1e-10 * size * (1.0 + np.abs(v).max(initial=0.0)))
 
     def initial_state(self, model, positions: dict, rates: dict):
         """``(q, v)`` of a joint-space initial state: the named joints' positions and rates,

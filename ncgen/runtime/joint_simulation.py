@@ -30,14 +30,21 @@ import time
 import casadi as ca
 import numpy as np
 
+from ncgen.codegen.compiler import compiler_present, find_compiler
+from ncgen.codegen.tree_check import PIVOT_TOL
+from ncgen.codegen.tree_kernels import JOINT_KINDS
+from ncgen.codegen.tree_tables import UnsupportedTree, tree_tables
 from ncgen.codegen.joint_loop import INTERRUPTED, JointOptions, integrator_name, joint_options, run_options
 from ncgen.errors import CompilerNotFound, ModelError, NcgenError, SimulationError, SimulationInterrupted, option
 from ncgen.runtime.feedback import FeedbackFailed, call_feedback, with_partial
 from ncgen.runtime.integrator import Run
 from ncgen.runtime.joint_loop_options import JointLoopOptions
 from ncgen.interrupts import call_interruptibly
+from ncgen.model.data import model_data
+from ncgen.runtime.backend_policy import Choice, choose_joint_kernels
 from ncgen.runtime.simulation_progress import Progress
 from ncgen.runtime.trajectory import Trajectory, once
+from ncgen.runtime.tree_library import TableJointLoop, input_efforts, missing_units
 
 #: The run is cut into at most this many calls of the C loop when a progress bar may be drawn
 #: (its updates; else one call).
@@ -53,12 +60,9 @@ def joint_space_applies(model) -> str | None:
     """Why ``model`` cannot be simulated in joint space, or None when it can: a tree of joints
     with coordinates and no other constraints (:func:`~ncgen.runtime.tree_kernel.check_tree`),
     no contacts, and a C compiler."""
-    from ncgen.model.data import model_data
-
     data = model_data(model)
     if data.joint_simulation_reason is not None:
         return data.joint_simulation_reason[0]
-    from ncgen.codegen.compiler import find_compiler
     from ncgen.runtime.tree_kernel import check_tree
 
     reason = ""
@@ -82,10 +86,6 @@ def _table_loop(model):
     """The joint-space loop of ``model`` on the tree tables
     (:class:`~ncgen.runtime.tree_library.TableJointLoop`, built once per model), or None when
     the tables do not cover it or there is no tree library and no compiler."""
-    from ncgen.codegen.tree_tables import UnsupportedTree
-    from ncgen.model.data import model_data
-    from ncgen.runtime.tree_library import TableJointLoop
-
     loops = model_data(model).joint_loops
     if "tables" not in loops:
         try:
@@ -159,8 +159,6 @@ def choose_kernels(model, outputs: int, controller=None, joint_dynamics: bool = 
     model's own ODE compiled with the loop; ``kernels="auto"`` as
     :func:`~ncgen.runtime.backend_policy.choose_joint_kernels` rules (the tables where no C
     compiler is present), else the user's choice."""
-    from ncgen.codegen.compiler import compiler_present
-    from ncgen.runtime.backend_policy import Choice, choose_joint_kernels
 
     if kernels not in ("auto", "tables", "flat"):
         raise NcgenError(f"kernels: expected one of 'auto', 'tables', 'flat', got {kernels!r}")
@@ -183,14 +181,8 @@ def choose_kernels(model, outputs: int, controller=None, joint_dynamics: bool = 
 def _table_kinds(model) -> tuple[str, ...] | None:
     """The joint kinds of ``model``'s tree tables when the tables' loop covers it (its tables
     and constant input efforts; nothing loaded or compiled), else None; found once per model."""
-    from ncgen.model.data import model_data
-
     data = model_data(model)
     if data.table_kinds is None:
-        from ncgen.codegen.tree_kernels import JOINT_KINDS
-        from ncgen.codegen.tree_tables import UnsupportedTree, tree_tables
-        from ncgen.runtime.tree_library import input_efforts
-
         try:
             kinds = tree_tables(model).arrays["kind"]
             input_efforts(model)
@@ -203,9 +195,6 @@ def _table_kinds(model) -> tuple[str, ...] | None:
 def _missing_units(model, kinds) -> tuple[str, ...]:
     """The tree library's units the tables' loop of ``model`` (joint kinds ``kinds``, or None)
     needs that are not compiled yet: none once that loop is loaded in this process."""
-    from ncgen.model.data import model_data
-    from ncgen.runtime.tree_library import missing_units
-
     if kinds is None or model_data(model).joint_loops.get("tables") is not None:
         return ()
     return tuple(missing_units(kinds, "forward"))
@@ -217,8 +206,6 @@ def _flat_ready(model) -> str | None:
     compile cache (looked up once per model and process) — or None."""
     from ncgen.codegen.joint_loop import cached_joint_loop
     from ncgen.codegen.model_cache import stored_function
-    from ncgen.model.data import model_data
-    from ncgen.runtime.tree_kernel import PIVOT_TOL
 
     data = model_data(model)
     if (id(None), False, None) in data.joint_loops:
@@ -243,9 +230,6 @@ def joint_loop(model, controller=None, joint_dynamics: bool = False, cflags=None
         if table is not None:
             return table
     if kernels == "tables":
-        from ncgen.codegen.tree_tables import tree_tables
-        from ncgen.runtime.tree_library import TableJointLoop
-
         if controller is not None or joint_dynamics:
             raise NcgenError("kernels='tables': the joint-space loop on the tree tables takes no compiled "
                              "controller and no joint dynamics (use kernels='flat' or 'auto')")
@@ -254,9 +238,6 @@ def joint_loop(model, controller=None, joint_dynamics: bool = False, cflags=None
     from ncgen.assembly.joint_ode import joint_ode_function
     from ncgen.codegen.joint_loop import build_joint_loop
     from ncgen.model.controllers import ComputedTorque
-    from ncgen.runtime.tree_kernel import PIVOT_TOL
-
-    from ncgen.model.data import model_data
 
     loops = model_data(model).joint_loops
     key = (id(controller), bool(joint_dynamics), cflags)
