@@ -1,0 +1,177 @@
+"""``nc.simulate``'s fixed cost on a tree (issue 37): what depends only on the model and the
+options is done once per model (a second run redoes none of it: calls counted), the run's
+start calls no CasADi virtual machine and starts no thread, the derived outputs are computed
+on first access and equal the model's functions evaluated row by row, and a failing run still
+fails at ``simulate``.  Ctrl-C through the watcher thread (:func:`ncgen.interrupts.call_interruptibly`):
+in-process here, in a child process stopped in a long C loop in tests/test_stepper_interrupt.py."""
+from __future__ import annotations
+
+import os
+import pickle
+import signal
+import threading
+import time
+
+import casadi as ca
+import numpy as np
+import pytest
+
+import ncgen as nc
+import ncgen.codegen.compiler as compiler
+import ncgen.codegen.joint_loop as joint_loop_module
+import ncgen.codegen.model_cache as model_cache
+import ncgen.model.buffered_call as buffered_call
+import ncgen.runtime.joint_loop_options as joint_loop_options
+import ncgen.runtime.joint_simulation as js_module
+from ncgen.errors import SimulationError
+from ncgen.interrupts import call_interruptibly, raise_if_interrupted, sticky_interrupt
+
+DERIVED = ("q", "v", "lam", "u", "kinetic", "potential", "constraint_residual", "velocity_residual", "markers")
+
+
+def spatial_chain() -> nc.Model:
+    """Three rigid links on revolute joints about three different axes (a 3D tree the tree
+    tables cover), with a marker on the last link."""
+    s = nc.System("chain3", gravity=(0.0, 0.0, -9.81))
+    parent, at = s.ground, np.zeros(3)
+    for k, axis in enumerate(((0, 0, 1), (0, 1, 0), (1, 0, 0))):
+        b = s.add_body(f"l{k}", mass=1.0 + 0.3 * k, inertia=np.diag([0.02, 0.03, 0.025 + 0.01 * k]),
+                       position=at + (0.25, 0.05 * k, 0.0))
+        s.add_joint(nc.Revolute(parent, b, at=tuple(at), axis=axis, name=f"j{k}"))
+        parent, at = b, at + (0.5, 0.1 * k, 0.0)
+    parent.add_marker("tip", (0.25, 0.0, 0.0))
+    return s.build()
+
+
+@pytest.fixture(scope="module")
+def chain():
+    model = spatial_chain()
+    q0, v0 = model.from_joint_space(np.array([0.3, -0.7, 1.1]), np.array([1.5, -0.4, 2.0]))
+    return model, q0, v0
+
+
+def test_derived_outputs_are_lazy_and_equal_eager_and_the_model_functions_row_by_row(chain):
+    """A joint-space run computes no derived output before it is read; read one by one (lazy)
+    they equal the arrays a pickle computes all at once (eager), bit for bit, and each equals
+    the model's own functions called row by row on the joint states: the natural state from
+    ``from_joint_space``, the multipliers from ``accel``, ``T = ½ vᵀ M v``, the drift from
+    ``phi`` and ``A``, the energy constant (no forces but gravity) to the run's tolerance."""
+    model, q0, v0 = chain
+    run = lambda: nc.simulate(model, 0.5, 0.05, q0=q0, v0=v0, method="joint", rtol=1e-10, atol=1e-12)  # noqa: E731
+    lazy, eager = run(), pickle.loads(pickle.dumps(run()))
+    assert all(callable(lazy._arrays[k]) for k in DERIVED)
+    for key in reversed(DERIVED):
+        np.testing.assert_array_equal(getattr(lazy, key), getattr(eager, key), err_msg=key)
+    np.testing.assert_array_equal(lazy.qj, eager.qj)
+    for k in range(len(lazy)):
+        q, v = model.from_joint_space(lazy.qj[k], lazy.vj[k])
+        np.testing.assert_allclose(lazy.q[k], q, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(lazy.v[k], v, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(lazy.lam[k], model.accel(q, v, t=lazy.t[k])[1], rtol=1e-10, atol=1e-9)
+        assert lazy.kinetic[k] == pytest.approx(0.5 * v @ np.asarray(model.M) @ v, rel=1e-12, abs=1e-12)
+        assert lazy.constraint_residual[k] == pytest.approx(np.abs(model.phi(q)).max(), abs=1e-15)
+        assert lazy.velocity_residual[k] == pytest.approx(np.abs(model.A(q) @ v).max(), abs=1e-14)
+    assert lazy.energy_drift <= 1e-8 * lazy.energy_scale
+
+
+def _count(monkeypatch, module, name: str, calls: dict) -> None:
+    f = getattr(module, name)
+
+    def counted(*args, **kwargs):
+        calls[name] = calls.get(name, 0) + 1
+        return f(*args, **kwargs)
+    monkeypatch.setattr(module, name, counted)
+
+
+def test_a_second_run_redoes_nothing_that_depends_on_the_model_alone(chain, monkeypatch):
+    """The kernel choice's inputs (the tree tables' kinds and input map, the tree library's units
+    on disk, the model's own loop on disk, the compiler), the buffered functions of the start
+    and the C options are found at the first run; a second run calls none of them, calls
+    CasADi's virtual machine zero times and starts no thread (Ctrl-C is watched by one thread
+    per process)."""
+    model, q0, v0 = chain
+    calls: dict = {}
+    for module, name in ((js_module, "input_efforts"), (js_module, "tree_tables"), (js_module, "missing_units"),
+                         (model_cache, "stored_function"),
+                         (joint_loop_module, "cached_joint_loop"), (buffered_call, "BufferedFunction"),
+                         (compiler.shutil, "which"), (joint_loop_options, "joint_options")):
+        _count(monkeypatch, module, name, calls)
+    fresh = spatial_chain()                      # nothing cached for it yet
+    first = nc.simulate(fresh, 1e-3, 1e-3, q0=q0, v0=v0, method="joint", rtol=1e-6, atol=1e-6)
+    assert first.info["kernels"] == "tables"
+    assert calls.get("input_efforts", 0) >= 1 and calls.get("BufferedFunction", 0) >= 2
+    calls.clear()
+    vm, threads = [0], [0]
+    call, start = ca.Function.call, threading.Thread.start
+
+    def vm_call(self, *args, **kwargs):
+        vm[0] += 1
+        return call(self, *args, **kwargs)
+
+    def thread_start(self):
+        threads[0] += 1
+        return start(self)
+    monkeypatch.setattr(ca.Function, "call", vm_call)
+    monkeypatch.setattr(threading.Thread, "start", thread_start)
+    second = nc.simulate(fresh, 1e-3, 1e-3, q0=q0, v0=v0, method="joint", rtol=1e-6, atol=1e-6)
+    assert calls == {} and vm[0] == 0 and threads[0] == 0
+    np.testing.assert_array_equal(second.qj, first.qj)
+    assert second.info["kernels"] == "tables"
+    second.q                                     # the outputs, on first access, are the VM's
+    assert vm[0] >= 1
+
+
+def test_a_run_that_fails_still_fails_at_simulate(chain):
+    """The loop's failures are raised by ``simulate`` itself (the outputs are lazy, the checks
+    are not): too few steps allowed raises :class:`SimulationError` with the rows reached, whose
+    derived outputs then compute."""
+    model, q0, v0 = chain
+    with pytest.raises(SimulationError, match="more than max_steps") as e:
+        nc.simulate(model, 0.5, 0.25, q0=q0, v0=v0, method="joint", rtol=1e-12, atol=1e-12, max_steps=2)
+    part = e.value.trajectory
+    assert not part.complete and len(part) >= 1 and part.q.shape == (len(part), model.nq)
+
+
+def _raise_sigint_and_wait(stop, after: float = 0.0, seconds: float = 5.0) -> int:
+    """SIGINT to this process ``after`` s, then wait (GIL released) until ``stop`` is set: 7 if
+    it was."""
+    time.sleep(after)
+    os.kill(os.getpid(), signal.SIGINT)
+    end = time.monotonic() + seconds
+    while stop.value == 0 and time.monotonic() < end:
+        time.sleep(0.001)
+    return 7 if stop.value else 0
+
+
+@pytest.mark.skipif(threading.current_thread() is not threading.main_thread(), reason="signals: main thread only")
+def test_ctrl_c_during_a_call_sets_the_stop_flag_and_the_handler_runs_after():
+    """Under Python's handler and under ``sticky_interrupt``, SIGINT while the call runs sets
+    its stop flag (through the watcher thread), the call returns its result, ``interrupted`` is
+    True, no ``KeyboardInterrupt`` escapes, the sticky handler remembers it, and the wakeup
+    descriptor is restored; under an application's handler (a worker thread) the same."""
+    import ctypes
+
+    if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        pytest.skip("SIGINT is not Python's default handler here")
+    before = signal.set_wakeup_fd(-1)
+    signal.set_wakeup_fd(before)
+    stop = ctypes.c_int(0)
+    assert call_interruptibly(_raise_sigint_and_wait, stop, stop=stop) == (7, True)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert signal.set_wakeup_fd(before) == before
+    stop = ctypes.c_int(0)
+    with sticky_interrupt():
+        assert call_interruptibly(_raise_sigint_and_wait, stop, stop=stop) == (7, True)
+        with pytest.raises(KeyboardInterrupt):
+            raise_if_interrupted()
+
+    def application(signum, frame):
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGINT, application)
+    try:
+        stop = ctypes.c_int(0)                  # (SIGINT once the main thread waits for the worker)
+        assert call_interruptibly(_raise_sigint_and_wait, stop, 0.2, stop=stop) == (7, True)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert call_interruptibly(lambda: 3, stop=ctypes.c_int(0)) == (3, False)
