@@ -21,7 +21,8 @@ Per target accuracy (``--targets``, default 1e-6 and 1e-3 rad):
   error-controlled Dormand–Prince 5(4) loop within the target, and for comparison the
   fewest RK4 ``substeps`` (``dt`` = 1 s) within it.
 
-Timed, interleaved, ``--repeat`` times each (seconds, min and median):
+Timed, interleaved, ``--repeat`` times each (seconds, min and median, wall clock and this
+process's CPU time):
 
 * "end to end": ncgen ``from_urdf → build → simulate`` (compile cache warm: the library is
   found by content) vs MuJoCo ``MjModel.from_xml_string → MjData → steps``;
@@ -251,17 +252,25 @@ def ncgen_best(robot: Robot, targets, model) -> dict:
     return out
 
 
-def timed(fn) -> float:
-    t = time.perf_counter()
+def timed(fn) -> tuple[float, float]:
+    """``(wall, CPU)`` seconds of ``fn()`` (CPU: this process, ``time.process_time``)."""
+    t, c = time.perf_counter(), time.process_time()
     fn()
-    return time.perf_counter() - t
+    return time.perf_counter() - t, time.process_time() - c
 
 
-def ratio_line(label: str, a: list[float], b: list[float]) -> str:
-    ratios = [x / y for x, y in zip(a, b)]
-    return (f"  {label:<34} ncgen {min(a):8.4f} / {statistics.median(a):8.4f} s   MuJoCo {min(b):8.4f} / "
-            f"{statistics.median(b):8.4f} s (min / median)\n"
-            f"  RATIO ncgen / MuJoCo RK4, {label}: min {min(ratios):.2f}, median {statistics.median(ratios):.2f}")
+def ratio_line(label: str, a: list[tuple[float, float]], b: list[tuple[float, float]]) -> str:
+    """Wall and CPU times (min / median) of the interleaved rounds ``a`` (ncgen) and ``b``
+    (MuJoCo) and the ratios of their rounds."""
+    lines = []
+    for i, clock in enumerate(("wall", "CPU")):
+        x, y = [r[i] for r in a], [r[i] for r in b]
+        ratios = [u / w for u, w in zip(x, y)]
+        lines.append(f"  {label:<34} {clock:>4}: ncgen {min(x):8.4f} / {statistics.median(x):8.4f} s   MuJoCo "
+                     f"{min(y):8.4f} / {statistics.median(y):8.4f} s (min / median)\n"
+                     f"  RATIO ncgen / MuJoCo RK4, {label}, {clock}: min {min(ratios):.2f}, median "
+                     f"{statistics.median(ratios):.2f}")
+    return "\n".join(lines)
 
 
 def bench(name: str, targets, repeat: int, n_steps: int) -> None:
@@ -272,7 +281,7 @@ def bench(name: str, targets, repeat: int, n_steps: int) -> None:
     mj = mujoco_best_steps(robot, targets, n_steps)
     with tempfile.TemporaryDirectory() as cache:
         os.environ["NCGEN_CACHE_DIR"] = cache
-        first = timed(lambda: robot.ncgen_run({"rtol": 1e-8, "atol": 1e-8}))
+        first = timed(lambda: robot.ncgen_run({"rtol": 1e-8, "atol": 1e-8}))[0]
         print(f"  ncgen first run with an empty compile cache (from_urdf, build, generate + compile, simulate): "
               f"{first:.2f} s")
         model, _ = robot.ncgen_run({})
@@ -301,7 +310,8 @@ def bench(name: str, targets, repeat: int, n_steps: int) -> None:
             print(ratio_line("end to end, DOPRI5 (cache warm)", e2e_n, e2e_m))
             if opts_rk4:
                 print(ratio_line("end to end, RK4 (cache warm)", e2e_r, e2e_m))
-            print(f"  {'first run (empty cache) / MuJoCo median':<34} {first / statistics.median(e2e_m):8.1f}x")
+            print(f"  {'first run (empty cache) / MuJoCo median':<34} "
+                  f"{first / statistics.median(r[0] for r in e2e_m):8.1f}x (wall)")
             print(ratio_line("simulate only, DOPRI5", sim_n, sim_m))
         os.environ.pop("NCGEN_CACHE_DIR")
 
