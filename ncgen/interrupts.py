@@ -134,11 +134,17 @@ def call_interruptibly(fn, *args, stop):
         flag.hit = True
 
     _raw.signal(signal.SIGINT, record)        # from here SIGINT only records: no KeyboardInterrupt mid-setup
+    watcher = _watcher()
     try:
-        with _watcher().watching(stop):
+        watcher.stop = stop
+        watcher.forward = _raw.set_wakeup_fd(watcher.write, warn_on_full_buffer=False)
+        try:
             if flag.hit:
                 stop.value = 1
             result = _in_c(fn, args)
+        finally:
+            _raw.set_wakeup_fd(watcher.forward)
+            watcher.stop, watcher.forward = None, -1
     finally:
         _raw.signal(signal.SIGINT, previous)
     if flag.hit:
@@ -156,8 +162,9 @@ def _in_c(fn, args):
 
 class _Watcher:
     """A thread reading the pipe that Python's C-level signal handler writes signal numbers to
-    (``signal.set_wakeup_fd``) while a C loop runs: SIGINT sets the loop's stop flag; other
-    signals' bytes go on to the descriptor that was set before (an event loop's)."""
+    (``signal.set_wakeup_fd``, set by :func:`call_interruptibly` around a C loop): SIGINT sets
+    the loop's stop flag ``stop``; other signals' bytes go on to the descriptor that was set
+    before (``forward``, an event loop's)."""
 
     def __init__(self):
         self.read, self.write = os.pipe()
@@ -176,19 +183,10 @@ class _Watcher:
                 with contextlib.suppress(OSError):
                     os.write(self.forward, other)
 
-    @contextlib.contextmanager
-    def watching(self, stop):
-        """SIGINT sets ``stop.value = 1`` inside the block (main thread)."""
-        self.stop = stop
-        self.forward = signal.set_wakeup_fd(self.write, warn_on_full_buffer=False)
-        try:
-            yield
-        finally:
-            signal.set_wakeup_fd(self.forward)
-            self.stop, self.forward = None, -1
-
 
 _WATCHER: list = []
+if hasattr(os, "register_at_fork"):          # a forked child has no watcher thread: it starts its own
+    os.register_at_fork(after_in_child=_WATCHER.clear)
 
 
 def _watcher() -> _Watcher:

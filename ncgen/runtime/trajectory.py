@@ -107,25 +107,26 @@ class Trajectory:
     given as a function computing it (evaluated on first access)."""
 
     def __init__(self, *, model_name: str, names: dict, info: dict, model=None, **arrays):
-        self._arrays = {}
+        a = self._arrays = {}                 # the arrays of the _Array attributes, set directly
         self.model = model
         self.model_name = model_name
         for key in NAME_KEYS:
             setattr(self, key, list(names[key]))
         for key in ARRAY_KEYS:
-            setattr(self, key, _float(arrays[key]))
+            a[key] = _float(arrays[key])
         for key in JOINT_NAME_KEYS:
             setattr(self, key, list(names.get(key, [])))
+        n = len(self.t)
         for key in JOINT_ARRAY_KEYS:
             x = arrays.get(key)
-            setattr(self, key, np.zeros((len(self.t), 0)) if x is None else _float(x))
+            a[key] = np.zeros((n, 0)) if x is None else _float(x)
         self.contact_names = list(names.get("contact_names", []))
-        n, nk = len(self.t), len(self.contact_names)
+        nk = len(self.contact_names)
         for key in contact_outputs.KEYS:
             value = arrays.get(key)
             shape = (n, nk, self.dim - 1) if key == "contact_tangent" else (n, nk)
-            setattr(self, key, np.zeros(shape) if value is None else _float(value))
-        state = self._arrays["contact_state"]
+            a[key] = np.zeros(shape) if value is None else _float(value)
+        state = a["contact_state"]
         self.contact_state = (lambda: _float(state)().astype(int)) if callable(state) else state.astype(int)
         self.info = dict(info)
 
