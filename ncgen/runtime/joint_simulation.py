@@ -440,15 +440,15 @@ def _trajectory(model, loop: JointLoop, t, X, W, p, info) -> Trajectory:
     """The natural-coordinate trajectory of the joint states ``X`` (module docstring)."""
     js = model.joint_space
     n = len(t)
-    X, W = X.copy(), W[:n].copy()
-    P = np.repeat(np.asarray(p, float)[:, None], n, axis=1)
+    X, W = X.copy(), W[:n].copy()           # the lazy outputs' own copies (traj.qj may be edited)
+    P = once(lambda: np.repeat(np.asarray(p, float)[:, None], n, axis=1))
     natural = once(lambda: [np.array(y).T for y in loop.mapped("tree", n)(X[:, :js.nq].T, X[:, js.nq:].T)])
     applied = once(lambda: np.array(loop.mapped("ode", n)(t[None, :], X.T, W.T if model.nu else np.zeros((0, n)),
-                                                            P)[2]).T.reshape(n, model.nu))
+                                                            P())[2]).T.reshape(n, model.nu))
     traj = Trajectory.from_states(
         model, t, lambda: natural()[0], lambda: natural()[1],
         lambda: np.array(loop.mapped("accel", n)(t[None, :], natural()[0].T, natural()[1].T, applied().T,
-                                                 P)[1]).T.reshape(n, model.nc),
+                                                 P())[1]).T.reshape(n, model.nc),
         applied, p, info)
     traj.qj, traj.vj = X[:, :js.nq].copy(), X[:, js.nq:].copy()
     return traj
