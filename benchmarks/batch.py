@@ -11,7 +11,9 @@ ncgen's kernels: ``--kernels`` (default flat, the faster for this small model).
    a single run is (``check=True``: shadow run and energy check), states trusted
    (``project=False``), on 1 and on 2 threads, run alternately ``--repeat`` times; RATIO
    one thread / two threads (target ≥ 1.8), and the CPU time per run (process time: the
-   threads' C and all Python) and the wall time per run outside the threads.  Also the per-run
+   threads' C and all Python), the CPU / wall time of each call (about 2 when the two threads
+   were each given a core, 1 when the process got one core's worth: then the ratio says
+   nothing) and the wall time per run outside the threads.  Also the per-run
    overhead: a batch of one-step runs, split into the preparation (Python, and the KKT
    solves of λ0 in one compiled call) and the compiled loop.
 2. **mujoco.rollout**: ``--rollout-runs`` runs, equal accuracy.  The tip error after
@@ -104,10 +106,10 @@ def mujoco_tips(model, qpos: np.ndarray) -> np.ndarray:
 def ncgen_batch(model, V0, t_end, h, threads, check, kernels="flat"):
     import ncgen as nc
     substeps = int(round(OUTPUT_DT / h))
-    cpu = time.process_time()
+    cpu, wall = time.process_time(), time.perf_counter()
     r = nc.simulate_batch(model, t_end, OUTPUT_DT, v0=V0, substeps=substeps, project=False, check=check,
                           outputs=check, workers=threads, kernels=kernels)
-    r.info["cpu_time"] = time.process_time() - cpu
+    r.info["cpu_time"], r.info["call_wall_time"] = time.process_time() - cpu, time.perf_counter() - wall
     return r
 
 
@@ -116,12 +118,13 @@ def scaling(model, args) -> None:
     print(f"\n=== scaling: {args.runs} runs of the {N_BARS}-bar chain, {args.t_end:g} s each, stepper h = {args.h:g} s, "
           f"checked (check=True), states trusted (project=False) ===")
     ncgen_batch(model, V0[:2], args.t_end, args.h, 1, True, args.kernels)          # load, warm up
-    times, cpu, checking = {1: [], 2: []}, {1: [], 2: []}, {1: [], 2: []}
+    times, cpu, checking, cores = {1: [], 2: []}, {1: [], 2: []}, {1: [], 2: []}, {1: [], 2: []}
     for _ in range(args.repeat):
         for threads in (1, 2):
             r = ncgen_batch(model, V0, args.t_end, args.h, threads, True, args.kernels)
             times[threads].append(r.info["wall_time"])
             cpu[threads].append(r.info["cpu_time"] / args.runs)
+            cores[threads].append(r.info["cpu_time"] / r.info["call_wall_time"])
             checking[threads].append((r.info["wall_time"] - r.info["stepping_time"]) / args.runs)
     failed = int(np.sum(~r.ok))
     print(f"kernels: {r.info['kernels']}; runs checked on their own (failed or flagged by the screen): "
@@ -131,7 +134,8 @@ def scaling(model, args) -> None:
               f"({args.runs / min(ts):.0f} runs/s); {failed} run(s) failed their checks; CPU time per run "
               f"best {1e3 * min(cpu[threads]):.2f} ms, median {1e3 * np.median(cpu[threads]):.2f} ms; "
               f"wall time per run outside the threads (preparation and the batch's checks, the main thread) "
-              f"{1e3 * np.median(checking[threads]):.3f} ms")
+              f"{1e3 * np.median(checking[threads]):.3f} ms; CPU / wall of the call (cores this process was "
+              f"given) min {min(cores[threads]):.2f}, median {np.median(cores[threads]):.2f}")
     ratios = np.array(times[1]) / np.array(times[2])
     print(f"RATIO one thread / two threads: min {ratios.min():.2f}, median {np.median(ratios):.2f} "
           f"(paired runs; target >= 1.8)")

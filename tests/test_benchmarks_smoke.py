@@ -69,6 +69,8 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800),   # each benchmark sc
     ("animation.py", ["=== slider_crank", "RATIO PillowWriter / ncgen animate", "to_html:"]),
     ("joint_simulation.py", ["=== panda: 1 s fall", "RATIO ncgen / MuJoCo RK4, end to end, DOPRI5",
                              "RATIO ncgen / MuJoCo RK4, simulate only, DOPRI5", "agrees with Pinocchio"]),
+    ("simulate_fixed_cost.py", ["=== panda: nc.simulate of one 1 ms output step",
+                                "this tree: FIXED COST (simulate - loop), CPU", "load average at the end"]),
     ("batch.py", ["=== scaling: 8 runs", "RATIO one thread / two threads", "per-run cost of one-step runs",
                   "RATIO ncgen / mujoco.rollout, 1 thread(s)", "RATIO ncgen / mujoco.rollout, 2 thread(s)"]),
     ("sharing_chain.py", ["=== chain of N = 3 bars", "RATIO explicit (shared by build) / shared-point chain"]),

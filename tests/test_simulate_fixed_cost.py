@@ -23,6 +23,7 @@ import ncgen.codegen.model_cache as model_cache
 import ncgen.model.buffered_call as buffered_call
 import ncgen.runtime.joint_loop_options as joint_loop_options
 import ncgen.runtime.joint_simulation as js_module
+import ncgen.runtime.tree_library as tree_library
 from ncgen.errors import SimulationError
 from ncgen.interrupts import call_interruptibly, raise_if_interrupted, sticky_interrupt
 
@@ -91,7 +92,7 @@ def test_a_second_run_redoes_nothing_that_depends_on_the_model_alone(chain, monk
     per process)."""
     model, q0, v0 = chain
     calls: dict = {}
-    for module, name in ((js_module, "input_efforts"), (js_module, "tree_tables"), (js_module, "missing_units"),
+    for module, name in ((js_module, "input_efforts"), (js_module, "tree_tables"), (tree_library, "missing_units"),
                          (model_cache, "stored_function"),
                          (joint_loop_module, "cached_joint_loop"), (buffered_call, "BufferedFunction"),
                          (compiler.shutil, "which"), (joint_loop_options, "joint_options")):

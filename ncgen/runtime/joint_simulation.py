@@ -44,7 +44,7 @@ from ncgen.model.data import model_data
 from ncgen.runtime.backend_policy import Choice, choose_joint_kernels
 from ncgen.runtime.simulation_progress import Progress
 from ncgen.runtime.trajectory import Trajectory, once
-from ncgen.runtime.tree_library import TableJointLoop, input_efforts, missing_units
+from ncgen.runtime.tree_library import TableJointLoop, input_efforts
 
 #: The run is cut into at most this many calls of the C loop when a progress bar may be drawn
 #: (its updates; else one call).
@@ -197,7 +197,9 @@ def _missing_units(model, kinds) -> tuple[str, ...]:
     needs that are not compiled yet: none once that loop is loaded in this process."""
     if kinds is None or model_data(model).joint_loops.get("tables") is not None:
         return ()
-    return tuple(missing_units(kinds, "forward"))
+    from ncgen.runtime import tree_library          # (its attribute: tests replace it)
+
+    return tuple(tree_library.missing_units(kinds, "forward"))
 
 
 def _flat_ready(model) -> str | None:
