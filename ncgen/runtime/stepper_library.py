@@ -1,9 +1,8 @@
 """The compiled stepper loaded with ctypes: the loops of the model's compiled package (its C:
 :mod:`ncgen.codegen.stepper_package`) called on NumPy arrays.
 
-Ctrl-C: a loop runs in a worker thread (:func:`~ncgen.interrupts.call_interruptibly`); a
-KeyboardInterrupt in the waiting main thread sets the loop's stop flag (``options->stop``),
-the loop ends before its next step with status
+Ctrl-C: a loop is called by :func:`~ncgen.interrupts.call_interruptibly`; SIGINT sets the
+loop's stop flag (``options->stop``), the loop ends before its next step with status
 :data:`~ncgen.codegen.stepper_package.STEP_INTERRUPTED` and the rows done so far."""
 from __future__ import annotations
 
