@@ -75,12 +75,14 @@ def as_system_name(text: str, fallback: str) -> str:
     return s if s[0].isalpha() else f"{fallback}_{s}"[:MAX_NAME].rstrip("_")
 
 
-def allocation(n_bytes: float, what: str, hint: str) -> None:
+def allocation(n_bytes: float, what, hint: str) -> None:
     """Refuse an allocation of ``n_bytes`` above :data:`MAX_ALLOCATION` (or
-    ``$NCGEN_MAX_BYTES``), saying how much it would need and ``hint`` (what to change)."""
+    ``$NCGEN_MAX_BYTES``), saying how much it would need (``what``: the text, or a function
+    making it only then) and ``hint`` (what to change)."""
     import os
     limit = float(os.environ.get("NCGEN_MAX_BYTES", MAX_ALLOCATION))
     if n_bytes > limit:
+        what = what() if callable(what) else what
         raise NcgenError(f"{what} would need {_bytes(n_bytes)} of memory, more than the limit of "
                          f"{_bytes(limit)} (NCGEN_MAX_BYTES); {hint}")
 

@@ -40,7 +40,7 @@ def time_grid(t0: float, t_end: float, dt: float, bytes_per_point: float = 8.0) 
     if not math.isfinite(steps) or steps > 2**53:
         raise NcgenError(f"dt: {dt:g} s is too small for the span {t_end - t0:g} s ({steps:.3g} steps)")
     n = max(1, math.ceil(steps - 1e-9))
-    allocation((n + 1) * bytes_per_point, f"the output grid t0 = {t0:g} ... t_end = {t_end:g} s with "
+    allocation((n + 1) * bytes_per_point, lambda: f"the output grid t0 = {t0:g} ... t_end = {t_end:g} s with "
                f"dt = {dt:g} s ({n + 1:,} points)", "use a larger dt (the output step; the integrator "
                "chooses its own internal steps) or a shorter run")
     return t0 + (t_end - t0) * np.arange(n + 1) / n

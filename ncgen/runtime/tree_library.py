@@ -546,6 +546,8 @@ class TableJointLoop:
         self._fn = self.tree_bound.unit("forward").fn["joint_run"]
         self.E = input_efforts(model)
         self.quat = np.array(quaternion_offsets(model.joint_space), dtype=np.int32)
+        ptr = (lambda a: None if a.size == 0 else a.ctypes.data)
+        self._constants = (ptr(self.E), model.nu, ptr(self.quat))        # addresses taken once (µs each)
         self.tree = tree_function(model)
         self._maps: dict = {}
 
@@ -567,12 +569,12 @@ class TableJointLoop:
         ptr = (lambda a: None if a is None or a.size == 0 else a.ctypes.data)
         done = ctypes.c_int(0)
         start = (X.copy(), stats.copy())
+        E, nu, quat = self._constants
 
         def once():
             return call_interruptibly(
-                self._fn, self.tree_bound.ref, ptr(self.E), self.model.nu, ctypes.addressof(options), len(t) - 1,
-                ptr(t), ptr(X), ptr(W), ptr(S), len(self.quat), ptr(self.quat), ptr(stats), ctypes.addressof(done),
-                stop=options.stop.contents)
+                self._fn, self.tree_bound.ref, E, nu, ctypes.addressof(options), len(t) - 1, ptr(t), ptr(X), ptr(W),
+                ptr(S), len(self.quat), quat, ptr(stats), ctypes.addressof(done), stop=options.stop.contents)
 
         status, interrupted = once()
         if not interrupted and status == RUN_NO_FALLBACK:
