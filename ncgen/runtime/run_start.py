@@ -39,11 +39,12 @@ def point_bytes(model) -> float:
 
 def initial_state(model, q0, v0, t0: float, p: np.ndarray, tolerance: float | None):
     """Consistent ``(q, v)`` at ``t0`` (see :func:`~ncgen.runtime.simulation.simulate`)."""
-    if q0 is None and v0 is None and t0 == model.t0 and np.array_equal(p, model.p0):
+    at_model = t0 == model.t0 and np.array_equal(p, model.p0)
+    if q0 is None and v0 is None and at_model:
         return model.q0.copy(), model.v0.copy()
     q = model.q0 if q0 is None else as_vector(q0, model.nq, "q0")
     v = model.v0 if v0 is None else as_vector(v0, model.nq, "v0")
-    if t0 == model.t0 and np.array_equal(p, model.p0) and model.joint_space._holds(model, q, v, t0, p):
+    if at_model and model.joint_space._holds(model, q, v, t0, p):
         return q.copy(), v.copy()          # consistent to round-off already (e.g. from from_joint_space)
     try:
         state = consistent_state(model.functions, model.layout, model.constraint_names, q.copy(), v.copy(),
