@@ -12,7 +12,6 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,29 +21,20 @@ from ncgen.cli import main
 from ncgen.control.export import closed_loop
 from ncgen.control.reference import solve_discrete
 from ncgen.errors import OptimizationError
-from ncgen.optim.problem_file import load_problem
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+from cartpole_mpc import EXAMPLES, PUSH, cartpole, cartpole_problem, tilted
+
 CC = os.environ.get("CC") or shutil.which("gcc") or shutil.which("cc")
 SAN = "-fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer"
 ENV = {**os.environ, "ASAN_OPTIONS": "detect_leaks=0", "UBSAN_OPTIONS": "halt_on_error=1"}
-PUSH = [(1.0, 1.1, [8.0])]                # an 8 N push on the cart for 0.1 s
 # nc.MPC compiles the horizon's step derivatives (400 s at load 10 on 2 cores, cold cache),
 # the exported package is built under the sanitizers
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800)]
 
 
-def tilted(model, angle, cart=0.0):
-    """The cart-pole at rest with the pole ``angle`` rad off the upright (cart at ``cart`` m)."""
-    q = np.array([cart, 0, 1, 0, 0, 1, cart + 0.5 * np.sin(angle), 0.5 * np.cos(angle)])
-    assert np.max(np.abs(np.array(model.functions["phi"](model.t0, q, model.p0)))) < 1e-12
-    return np.concatenate([q, np.zeros(model.nq)])
-
-
 @pytest.fixture(scope="module")
 def setup():
-    model = nc.System.from_toml(EXAMPLES / "cartpole.toml").build()
-    ocp = load_problem(EXAMPLES / "cartpole_mpc.toml", model)[0]
+    ocp = cartpole_problem()
     return ocp, nc.MPC(ocp, terminal_weight=100.0)
 
 
@@ -55,7 +45,7 @@ def upright(x, tol):
 @pytest.mark.parametrize("angle, cart", [(0.2, 0.0), (-0.3, 0.5)])
 def test_python_mpc_stabilises_the_cartpole(setup, angle, cart):
     ocp, mpc = setup
-    T, U, X = closed_loop(mpc, tilted(ocp.model, angle, cart), 4.0, disturbance=PUSH)
+    T, U, X = closed_loop(mpc, tilted(angle, cart, model=ocp.model), 4.0, disturbance=PUSH)
     assert np.all(np.abs(U) <= 20.0) and np.max(np.abs(U)) > 1.0
     assert np.all(np.abs(X[:, 0]) <= 1.5 + 1e-6)
     assert upright(X[-1], 2e-3), X[-1]
@@ -96,7 +86,7 @@ def test_a_nan_or_wild_qp_answer_is_never_kept_nor_answered(setup):
     on the exported demo): the NaN step is not taken (the guess is kept, α = 0), the wild one is
     clipped into the bounds and taken only if the filter accepts it."""
     ocp, mpc = setup
-    x = tilted(ocp.model, 0.2)
+    x = tilted(0.2, model=ocp.model)
     mpc.reset(x, 0.0, iterations=3)
     X0, U0 = mpc.X.copy(), mpc.U.copy()
     qp = mpc._qp
@@ -130,7 +120,7 @@ def test_converged_sqp_is_the_ipopt_solution_of_the_horizon_problem(setup):
     """Thirty SQP iterations at one state against IPOPT on the same discrete problem (the
     step equations as constraints: :func:`ncgen.control.reference.solve_discrete`)."""
     ocp, mpc = setup
-    x = tilted(ocp.model, 0.1)
+    x = tilted(0.1, model=ocp.model)
     mpc.reset(x, iterations=30)
     X, U = mpc.X, mpc.U
     st = nc.step_function(ocp.model, mpc.h)
@@ -156,7 +146,7 @@ def test_unsupported_problems_and_solvers_are_named(setup):
 def test_exported_package_builds_under_sanitizers_and_matches_python(setup, tmp_path):
     ocp, mpc = setup
     out = tmp_path / "cartpole_mpc"
-    x0 = tilted(ocp.model, 0.2)
+    x0 = tilted(0.2, model=ocp.model)
     assert main(["mpc", str(EXAMPLES / "cartpole_mpc.toml"), "-o", str(out), "--terminal-weight", "100",
                  "--x0", f"pole.r_j.x={float(x0[6])!r},pole.r_j.y={float(x0[7])!r}", "--t-end", "3",
                  "--disturbance", "1.0:1.1:8"]) == 0
@@ -169,7 +159,7 @@ def test_exported_package_builds_under_sanitizers_and_matches_python(setup, tmp_
     assert "-Wall -Wextra" in build.stdout
     runs = {}
     for angle in (0.2, -0.25):
-        x = tilted(ocp.model, angle)
+        x = tilted(angle, model=ocp.model)
         run = subprocess.run(["./demo", "3"] + [repr(float(v)) for v in x], cwd=out, capture_output=True, text=True,
                              env=ENV, timeout=300)
         assert run.returncode == 0 and not run.stderr, run.stderr[-3000:]
@@ -200,7 +190,7 @@ def test_documented_command_works_from_the_documented_start(tmp_path):
     error), `./demo`: the closed loop from the model's initial state (the pole hanging 0.3 rad
     off the downward vertical: it used to stop at t = 0.35 s after inputs of -70 N) runs its 5 s,
     every input within ±20 N, the cart within ±1.5 m, and ends upright at rest (a swing-up)."""
-    model = nc.System.from_toml(EXAMPLES / "cartpole.toml").build()
+    model = cartpole()
     out = _documented_package(tmp_path)
     build = subprocess.run(["make", f"CC={CC}", "WARNINGS=-std=c99 -Wall -Wextra -pedantic -Werror", "demo"],
                            cwd=out, capture_output=True, text=True, timeout=3600)

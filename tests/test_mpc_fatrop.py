@@ -6,32 +6,22 @@ iterations than a cold one, a failed solve keeps the guess, and bad solver names
 options are refused by name."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 import ncgen as nc
 from ncgen.control.export import closed_loop
 from ncgen.errors import OptimizationError
-from ncgen.optim.problem_file import load_problem
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
-PUSH = [(1.0, 1.1, [8.0])]                # an 8 N push on the cart for 0.1 s
+from cartpole_mpc import PUSH, cartpole_problem, tilted
+
 # the tests that compare with the SQP are slow: its MPC compiles the horizon's step derivatives
 # (minutes on a cold cache)
 
 
-def tilted(angle, cart=0.0):
-    """The cart-pole at rest with the pole ``angle`` rad off the upright."""
-    q = np.array([cart, 0, 1, 0, 0, 1, cart + 0.5 * np.sin(angle), 0.5 * np.cos(angle)])
-    return np.concatenate([q, np.zeros(8)])
-
-
 @pytest.fixture(scope="module")
 def ocp():
-    model = nc.System.from_toml(EXAMPLES / "cartpole.toml").build()
-    return load_problem(EXAMPLES / "cartpole_mpc.toml", model)[0]
+    return cartpole_problem()
 
 
 @pytest.fixture(scope="module")

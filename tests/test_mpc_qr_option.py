@@ -4,8 +4,6 @@ compile in reasonable time); both give the same Jacobians, which agree with cent
 differences of the step; a bad value is refused by name before anything is generated."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import casadi as ca
 import numpy as np
 import pytest
@@ -13,9 +11,8 @@ import pytest
 import ncgen as nc
 from ncgen.control.discrete import qr_solve_columns, step_functions, step_jacobian_function
 from ncgen.errors import OptimizationError
-from ncgen.optim.problem_file import load_problem
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+from cartpole_mpc import cartpole, cartpole_problem, tilted
 
 
 def test_both_qr_paths_solve_the_system():
@@ -33,10 +30,9 @@ def test_both_qr_paths_solve_the_system():
 
 
 def test_looped_step_jacobians_match_unrolled_and_finite_differences():
-    model = nc.System.from_toml(EXAMPLES / "cartpole.toml").build()
+    model = cartpole()
     h = 0.02
-    q = np.array([0.1, 0, 1, 0, 0, 1, 0.1 + 0.5 * np.sin(0.3), 0.5 * np.cos(0.3)])
-    x = np.concatenate([q, 0.1 * np.ones(model.nq)])
+    x = tilted(0.3, cart=0.1) + np.concatenate([np.zeros(model.nq), 0.1 * np.ones(model.nq)])
     u = np.array([1.5])
     looped = [np.array(o) for o in step_jacobian_function(model, h, sx_qr_max_nnz=0)(x, u, model.p0, 0.0)]
     unrolled = [np.array(o) for o in step_jacobian_function(model, h)(x, u, model.p0, 0.0)]
@@ -54,7 +50,6 @@ def test_looped_step_jacobians_match_unrolled_and_finite_differences():
 
 @pytest.mark.parametrize("bad", [-1, 1.5, True, "0"])
 def test_bad_sx_qr_max_nnz_is_named(bad):
-    model = nc.System.from_toml(EXAMPLES / "cartpole.toml").build()
-    ocp = load_problem(EXAMPLES / "cartpole_mpc.toml", model)[0]
+    ocp = cartpole_problem()
     with pytest.raises(OptimizationError, match="sx_qr_max_nnz: expected an integer >= 0 or None"):
         nc.MPC(ocp, sx_qr_max_nnz=bad)

@@ -38,9 +38,7 @@ def tensegrity_system(nodes, struts, cables, rest_lengths, stiffness, loads=None
     nodes its segments share, with the sum of its segments' rest lengths and their stiffness
     in series ``1 / Σ 1/k`` (so that segment values from ``InverseStatics.rest_lengths`` give
     the same tension).  Build it with ``.build()``."""
-    from ncgen.model.cables import ClusteredCable
-    from ncgen.model.forces import PointForce, Spring
-    from ncgen.model.joints import Distance, PointOnLine, PointOnPlane
+    from ncgen.model.joints import Distance
     from ncgen.model.system import System
 
     who = "tensegrity_system"
@@ -52,6 +50,24 @@ def tensegrity_system(nodes, struts, cables, rest_lengths, stiffness, loads=None
     if f.shape != (n, d) or not np.all(np.isfinite(f)):
         raise NcgenError(f"{who}: loads: expected finite nodal forces of shape ({n}, {d}), got shape {f.shape}")
     s = System(name, gravity=tuple([0.0] * d))
+    end = _node_ends(s, fw, f, node_mass)
+    for e, (a, b) in enumerate(fw.struts):
+        (ma, _), (mb, _) = end[a], end[b]
+        if ma.is_ground and mb.is_ground:
+            raise NcgenError(f"{who}: struts[{e}]: both nodes {a} and {b} are fully supported")
+        s.add_joint(Distance(ma, mb, at=[fw.nodes[a], fw.nodes[b]], name=f"s{e}"))
+    _add_cables(s, fw, end, k, l0, actuated, damping)
+    return s
+
+
+def _node_ends(s, fw, f: np.ndarray, node_mass: float) -> dict:
+    """Node index -> ``(member, local point)``: the rigid bodies' nodes, the ground's points
+    (nodes held along every axis) and the point masses (supported on a plane or a line
+    where held along some axes), with the loads ``f`` on them."""
+    from ncgen.model.forces import PointForce
+    from ncgen.model.joints import PointOnLine, PointOnPlane
+
+    n, d = fw.nodes.shape
     end = {}
     for j, body in enumerate(fw.bodies):
         member, centre = _body(s, f"b{j}", fw.nodes[body], node_mass)
@@ -76,11 +92,16 @@ def tensegrity_system(nodes, struts, cables, rest_lengths, stiffness, loads=None
             s.add_joint(PointOnLine(s.ground, p, at=fw.nodes[i], axis=axis, name=f"support{i}"))
         if np.any(f[i] != 0):
             s.add_force(PointForce(p, np.zeros(d), force=tuple(f[i]), name=f"load{i}"))
-    for e, (a, b) in enumerate(fw.struts):
-        (ma, _), (mb, _) = end[a], end[b]
-        if ma.is_ground and mb.is_ground:
-            raise NcgenError(f"{who}: struts[{e}]: both nodes {a} and {b} are fully supported")
-        s.add_joint(Distance(ma, mb, at=[fw.nodes[a], fw.nodes[b]], name=f"s{e}"))
+    return end
+
+
+def _add_cables(s, fw, end: dict, k: np.ndarray, l0: np.ndarray, actuated: bool, damping: float) -> None:
+    """The clustered cables ``k<j>`` (stiffness in series, summed rest lengths) and the other
+    cables ``c<e>`` not between two ground points; with ``actuated``, their rest lengths the
+    input ``l0`` (clusters first)."""
+    from ncgen.model.cables import ClusteredCable
+    from ncgen.model.forces import Spring
+
     clustered = {e for cl in fw.clusters for e in cl}
     alone = [e for e, (a, b) in enumerate(fw.cables)
              if not (end[a][0].is_ground and end[b][0].is_ground) and e not in clustered]
@@ -94,7 +115,6 @@ def tensegrity_system(nodes, struts, cables, rest_lengths, stiffness, loads=None
         (ma, pa), (mb, pb) = end[fw.cables[e][0]], end[fw.cables[e][1]]
         s.add_force(Spring(ma, pa, mb, pb, k=float(k[e]), damping=damping, cable=True, name=f"c{e}",
                            rest_length=u[len(fw.clusters) + i] if actuated else float(l0[e])))
-    return s
 
 
 def rest_length_inputs(model, rest_lengths, clusters=None) -> np.ndarray:

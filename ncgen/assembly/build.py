@@ -66,7 +66,7 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     ``model.sharing`` says which); ``share=False`` keeps every joint's equations, and so
     does ``fix`` (it names coordinates as written).
     """
-    from ncgen.model.model import Model
+    from ncgen.model.model import Constraints, Contacts, Dynamics, Model, Origin, Parameters
 
     system = copy.deepcopy(system)       # the model's own description: later edits of the caller's system do not reach it
     _check_build_options(system, contacts, redundant)
@@ -117,14 +117,14 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     if not assemble:
         check_fixed_points_at_rest(moving, v_init, q_init, tolerance)
     joint_space = JointSpace(ctx, coords, skipped, actuation, passive)
+    dynamics = Dynamics(functions, M, factor, potential, springs=spring_table(system, ctx), joint_space=joint_space)
+    constrained = Constraints(labels, (alpha, beta), redundant_labels, dropped=(redundant == "drop"))
 
     def model_with(state):
-        return Model(description=system, layout=layout, labels=labels, functions=functions, M=M, factor=factor,
-                     potential=potential, state=state, p0=p0, baumgarte=(alpha, beta),
-                     redundant=redundant_labels, dropped=(redundant == "drop"), t0=t0,
-                     springs=spring_table(system, ctx), limits=limits, joint_space=joint_space,
-                     contacts=contact_specs(system.contacts), contact_model=contacts, sharing=plan,
-                     unshared=unshared, recipe=recipe)
+        return Model(description=system, layout=layout, dynamics=dynamics, constraints=constrained,
+                     parameters=Parameters(p0, limits), state=state, t0=t0,
+                     contacts=Contacts(contact_specs(system.contacts), contacts),
+                     origin=Origin(sharing=plan, unshared=unshared, recipe=recipe))
 
     model = model_with(state)
     if system.initial_joints or system.initial_joint_rates:

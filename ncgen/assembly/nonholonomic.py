@@ -44,6 +44,39 @@ def coordinate_function(y, nq: int) -> ca.Function:
     return ca.Function("y", [q, v], [yq, Y, ca.jacobian(ca.vertcat(yq, yd), ca.vertcat(q, v))])
 
 
+def _checked_elements(model, elements) -> list:
+    """``elements`` as a list, each a nonholonomic element on a member of a 3D ``model``."""
+    if model.dim != 3:
+        raise ModelError(f"RollingSystem: model {model.name!r}: nonholonomic elements need a 3D model, "
+                         f"found dim = {model.dim}")
+    elements = list(elements)
+    for element in elements:
+        if not isinstance(element, (RollingDisc, RollingSphere, KnifeEdge)):
+            raise ModelError(f"RollingSystem: elements: expected RollingDisc, RollingSphere or KnifeEdge "
+                             f"elements, found {element!r}")
+        if element.body not in model.member_names:
+            raise ModelError(f"RollingSystem: {element!r}: body {element.body!r} is not a member of "
+                             f"model {model.name!r} (members: {', '.join(model.member_names)})")
+    return elements
+
+
+def _element_equations(model, elements, q, t):
+    """Each element's rows at its body's pose (SX of ``q`` and ``t``): ``(heights,
+    nonholonomic rows, their planes' rates, height row names, nonholonomic row names)``."""
+    R_all, p_all = model.functions["poses"](q)
+    heights, rows, rates, height_names, row_names = [], [], [], [], []
+    for element in elements:
+        k = model.member_names.index(element.body)
+        h, B = element.equations(R_all[:, 3 * k:3 * k + 3], p_all[:, k], q)
+        heights.append(h)
+        rows.append(B)
+        rates.append(element.rate(R_all[:, 3 * k:3 * k + 3], t))
+        height_names += [f"{element.name}.height"] * int(h.shape[0])
+        row_names += [f"{element.name}.{axis}" for axis in
+                      (("lateral",) if isinstance(element, KnifeEdge) else ("x", "y"))]
+    return heights, rows, rates, height_names, row_names
+
+
 class RollingSystem:
     """A model with nonholonomic elements: the CasADi functions of all its constraints and
     its accelerations.
@@ -60,17 +93,7 @@ class RollingSystem:
     motion's manifold)."""
 
     def __init__(self, model, elements):
-        if model.dim != 3:
-            raise ModelError(f"RollingSystem: model {model.name!r}: nonholonomic elements need a 3D model, "
-                             f"found dim = {model.dim}")
-        elements = list(elements)
-        for element in elements:
-            if not isinstance(element, (RollingDisc, RollingSphere, KnifeEdge)):
-                raise ModelError(f"RollingSystem: elements: expected RollingDisc, RollingSphere or KnifeEdge "
-                                 f"elements, found {element!r}")
-            if element.body not in model.member_names:
-                raise ModelError(f"RollingSystem: {element!r}: body {element.body!r} is not a member of "
-                                 f"model {model.name!r} (members: {', '.join(model.member_names)})")
+        elements = _checked_elements(model, elements)
         self.model, self.elements = model, elements
         #: ``{method: DirectFunction}``: its compiled steps, made on first use by
         #: :func:`ncgen.runtime.rolling_integrator.compiled_step`.
@@ -78,49 +101,38 @@ class RollingSystem:
         nq = model.nq
         self.nq = nq
         q, v = ca.SX.sym("q", nq), ca.SX.sym("v", nq)
-        t0, u0, p0 = 0.0, ca.DM.zeros(model.nu), ca.DM(model.p0)
         t = ca.SX.sym("t")
-        phi_model = model.functions["phi"](t, q, p0)
+        phi_model = model.functions["phi"](t, q, ca.DM(model.p0))
         #: Whether the model's own constraints depend on time (drives): then ``phi``, ``A``,
         #: ``gamma``, ``accel``, ``accel_t``, ``tangent`` and the compiled steps, written at
         #: ``t = 0``, do not describe the motion, and only ``phi_at``, ``A_at``, ``rate`` and
         #: ``gamma_t`` (IDAS, the RATTLE stepper) do.
         self.driven = bool(ca.depends_on(phi_model, t))
-        R_all, p_all = model.functions["poses"](q)
-        heights, rows, rates, height_names, row_names = [], [], [], [], []
-        for element in elements:
-            k = model.member_names.index(element.body)
-            h, B = element.equations(R_all[:, 3 * k:3 * k + 3], p_all[:, k], q)
-            heights.append(h)
-            rows.append(B)
-            rates.append(element.rate(R_all[:, 3 * k:3 * k + 3], t))
-            height_names += [f"{element.name}.height"] * int(h.shape[0])
-            row_names += [f"{element.name}.{axis}" for axis in
-                          (("lateral",) if isinstance(element, KnifeEdge) else ("x", "y"))]
+        heights, rows, rates, height_names, row_names = _element_equations(model, elements, q, t)
         #: Names of the rows of ``A`` (and of the multipliers ``lam``): the model's constraints,
         #: then the elements' heights and their nonholonomic rows (``<element>.x``/``.y``: the
         #: contact point's material velocity along the plane; ``.lateral``: across a blade).
         self.row_names = list(model.constraint_names) + height_names + row_names
-        phi_t = ca.vertcat(phi_model, *heights)
-        phi = ca.substitute(phi_t, t, t0)
-        B = ca.vertcat(*rows) if rows else ca.SX(0, nq)
+        #: Whether an element's plane moves (``ĉ`` depends on time or is not zero).
+        self.rheonomic = any(e.rheonomic for e in elements)
+        self._constraint_functions(q, v, t, ca.vertcat(phi_model, *heights), rows, rates)
+        self._force_functions(q, v, t)
+        self._kkt_functions()
+
+    def _constraint_functions(self, q, v, t, phi_t, rows, rates) -> None:
+        """``phi``, ``phi_at``, ``A_at``, ``B``, ``A``, ``gamma``, ``rate``, ``gamma_t`` and
+        ``tangent`` from ``Φ̂(q, t)`` (``phi_t``), the nonholonomic ``rows`` and their planes'
+        ``rates`` (SX of ``q``, ``v``, ``t``)."""
+        phi = ca.substitute(phi_t, t, 0.0)
+        B = ca.vertcat(*rows) if rows else ca.SX(0, self.nq)
         A = ca.vertcat(ca.jacobian(phi, q), B)
         A_t = ca.vertcat(ca.jacobian(phi_t, q), B)
         Av = ca.mtimes(A, v)
         gamma = -ca.jtimes(Av, q, v)
         # ĉ: −∂Φ̂/∂t for the holonomic rows (drives), the planes' rates for the rolling rows
         c = ca.vertcat(-ca.jacobian(phi_t, t), *rates)
-        #: Whether an element's plane moves (``ĉ`` depends on time or is not zero).
-        self.rheonomic = any(e.rheonomic for e in elements)
         level = ca.mtimes(A_t, v) - c
         gamma_t = -ca.jtimes(level, q, v) - ca.jacobian(level, t)
-        F = model.functions["F"](t0, q, v, u0, p0)
-        #: Whether the model's forces depend on time, and its constraints on the parameters
-        #: (the equations here hold ``t = 0``, ``u = 0`` and ``model.p0``).
-        self.timed_forces = bool(ca.depends_on(model.functions["F"](t, q, v, u0, p0), t))
-        p_sym = ca.SX.sym("p", len(model.p0))
-        self.parametric_constraints = bool(len(model.p0)) and bool(ca.depends_on(model.functions["phi"](t0, q, p_sym),
-                                                                                  p_sym))
         self.n_holonomic, self.n_nonholonomic = int(phi.shape[0]), int(B.shape[0])
         self.phi = ca.Function("phi", [q], [phi], ["q"], ["phi"])
         self.phi_at = ca.Function("phi_at", [q, t], [phi_t], ["q", "t"], ["phi"])
@@ -130,13 +142,29 @@ class RollingSystem:
         self.gamma = ca.Function("gamma", [q, v], [gamma], ["q", "v"], ["gamma"])
         self.rate = ca.Function("rate", [q, t], [c], ["q", "t"], ["c"])
         self.gamma_t = ca.Function("gamma_t", [q, v, t], [gamma_t], ["q", "v", "t"], ["gamma"])
-        self.F = ca.Function("F", [q, v], [F], ["q", "v"], ["F"])
         self.tangent = ca.Function("tangent", [q, v], [ca.jacobian(ca.vertcat(phi, Av), ca.vertcat(q, v))],
                                    ["q", "v"], ["G"])
+
+    def _force_functions(self, q, v, t) -> None:
+        """``F(q, v)``, the model's applied forces at ``t = 0``, ``u = 0`` and ``model.p0``, and
+        whether the forces depend on time (``timed_forces``) and the constraints on the
+        parameters (``parametric_constraints``): the equations here hold those values."""
+        model = self.model
+        u0, p0 = ca.DM.zeros(model.nu), ca.DM(model.p0)
+        self.F = ca.Function("F", [q, v], [model.functions["F"](0.0, q, v, u0, p0)], ["q", "v"], ["F"])
+        self.timed_forces = bool(ca.depends_on(model.functions["F"](t, q, v, u0, p0), t))
+        p_sym = ca.SX.sym("p", len(model.p0))
+        self.parametric_constraints = bool(len(model.p0)) and bool(ca.depends_on(model.functions["phi"](0.0, q, p_sym),
+                                                                                  p_sym))
+
+    def _kkt_functions(self) -> None:
+        """``accel``, ``accel_t`` (the KKT system's solution, module docstring) and
+        ``jacobians`` (of the state's rate ``[v; a]`` by ``[q; v]`` and of ``a`` by ``f``)."""
+        nq = self.nq
         qm, vm, fm = ca.MX.sym("q", nq), ca.MX.sym("v", nq), ca.MX.sym("f", nq)
         Am = self.A(qm)
         m = Am.shape[0]
-        K = ca.blockcat([[ca.MX(ca.DM(model.M)), Am.T], [Am, ca.MX(m, m)]])
+        K = ca.blockcat([[ca.MX(ca.DM(self.model.M)), Am.T], [Am, ca.MX(m, m)]])
         z = ca.solve(K, ca.vertcat(self.F(qm, vm) + fm, self.gamma(qm, vm)))
         self.accel = ca.Function("accel", [qm, vm, fm], [z[:nq], z[nq:]], ["q", "v", "f"], ["a", "lam"])
         tm = ca.MX.sym("t")

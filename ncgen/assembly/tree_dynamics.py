@@ -349,15 +349,39 @@ class _Recursion:
         self.mimic = mimic = MimicMap(model)
         qj, vj = mimic.positions(self.qj), mimic.rates(self.vj)
         aj = None if aj is None else mimic.rates(aj)
-        sq = js.slices()
-        self.sv = sv = js.slices(rates=True)
+        self.sv = js.slices(rates=True)
         owned = _owned(model, tree)
         g = uniform_gravity(model, owned)
+        pose, T_g, dT_g = self._outwards(qj, vj, aj, g)
+        Qs = {name: member_twist_map(js, name)(*pose[name]) for _, name, _, _ in tree}
+        q, v = [None] * model.nq, [None] * model.nq
+        for _, name, _, _ in tree:
+            local_q = js.member_coordinates(name, *pose[name])
+            local_v = ca.mtimes(Qs[name], T_g[name])
+            for k, i in owned[name]:
+                q[i], v[i] = local_q[k], local_v[k]
+        self.q = q = ca.vertcat(*[ca.SX(0) if x is None else x for x in q])
+        v = ca.vertcat(*[ca.SX(0) if x is None else x for x in v])
+        F = js.passive_force(t, q, v, u, p)
+        W_ext = {}                                        # the passive forces as wrenches
+        for _, name, _, _ in tree:
+            W_ext[name] = ca.SX.zeros(6)
+            if owned[name] and g is None:
+                ks, idx = [k for k, _ in owned[name]], [i for _, i in owned[name]]
+                W_ext[name] = ca.mtimes(Qs[name][ks, :].T, F[idx])
+        self.wrench = self._inwards(pose, T_g, dT_g, W_ext)
+
+    def _outwards(self, qj, vj, aj, g):
+        """Poses, twists ``T_c = T_p + S_g w`` and accelerations ``dT_c = dT_p + Ṡ_g w (+ S_g
+        a_j)`` of every member from the ground outwards (the ground's ``[0; −g]`` with a
+        uniform gravity ``g``); records each member's joint motion ``(joint, S_g)`` and parent."""
+        js = self.js
+        sq, sv = js.slices(), self.sv
         pose = {"ground": (ca.SX.eye(3), ca.SX.zeros(3))}
         T_g = {"ground": ca.SX.zeros(6)}
         dT_g = {"ground": ca.SX.zeros(6) if g is None else ca.vertcat(ca.SX.zeros(3), -ca.DM(g))}
         self.motion, self.parent = {}, {}
-        for here, there, e, forward in tree:
+        for here, there, e, forward in self.tree:
             x = qj[sq[e.name]] if e.name in sq else ca.SX(0, 1)
             w = vj[sv[e.name]] if e.name in sv else ca.SX(0, 1)
             Rc, pc, S_g, c_g = _edge_function(js, e, forward)(*pose[here], T_g[here][:3], T_g[here][3:], x, w)
@@ -367,32 +391,23 @@ class _Recursion:
             if aj is not None and e.name in sv:
                 dT_g[there] = dT_g[there] + ca.mtimes(S_g, aj[sv[e.name]])
             self.motion[there], self.parent[there] = (e.name, S_g), here
-        q, v, Qs = [None] * model.nq, [None] * model.nq, {}
-        for _, name, _, _ in tree:
-            Qs[name] = member_twist_map(js, name)(*pose[name])
-            local_q = js.member_coordinates(name, *pose[name])
-            local_v = ca.mtimes(Qs[name], T_g[name])
-            for k, i in owned[name]:
-                q[i], v[i] = local_q[k], local_v[k]
-        self.q = q = ca.vertcat(*[ca.SX(0) if x is None else x for x in q])
-        v = ca.vertcat(*[ca.SX(0) if x is None else x for x in v])
-        F = js.passive_force(t, q, v, u, p)
+        return pose, T_g, dT_g
+
+    def _inwards(self, pose, T_g, dT_g, W_ext) -> dict:
+        """Each member's wrench ``W_g = M_g dT − ad(T)ᵀ M_g T − W_ext`` (its mass matrix about
+        g in ``inertia``), summed from the leaves inwards."""
         self.inertia, wrench = {}, {}
-        for _, name, _, _ in tree:
-            mass, c, I_c = member_inertia(js, name)
+        for _, name, _, _ in self.tree:
+            mass, c, I_c = member_inertia(self.js, name)
             R, pos = pose[name]
             M_g = _mass_matrix_g(mass, pos + ca.mtimes(R, ca.DM(c)), R, I_c)
-            W_ext = ca.SX.zeros(6)
-            if owned[name] and g is None:
-                ks, idx = [k for k, _ in owned[name]], [i for _, i in owned[name]]
-                W_ext = ca.mtimes(Qs[name][ks, :].T, F[idx])
             self.inertia[name] = M_g
             h_g = ca.mtimes(M_g, T_g[name])                 # momentum; −ad(T)ᵀ h is the velocity bias
-            wrench[name] = ca.mtimes(M_g, dT_g[name]) - ca.mtimes(crm.ad(T_g[name]).T, h_g) - W_ext
-        for here, there, _, _ in reversed(tree):
+            wrench[name] = ca.mtimes(M_g, dT_g[name]) - ca.mtimes(crm.ad(T_g[name]).T, h_g) - W_ext[name]
+        for here, there, _, _ in reversed(self.tree):
             if here != "ground":
                 wrench[here] = wrench[here] + wrench[there]
-        self.wrench = wrench
+        return wrench
 
     def efforts(self) -> ca.SX:
         """``τ`` of the actuated joints placed at their joint rates (:func:`joint_efforts`)."""

@@ -309,26 +309,13 @@ def _pack(model, ctx: _Recorder | None, members: list[dict], joints: list[_Joint
     dim, nq, nc = model.dim, model.layout.nq, len(model.constraint_names)
     ids, features = _features(ctx, joints + extra) if joints or extra else ([], [])
     ids, point_ids = ids[:len(joints)], ids[len(joints):]
-    a_rows, a_cols, m_rows, m_cols = [], [], [], []
-    for m in members:                       # the loop order of ncgen_tables_jacobian / _mass
-        free = [c for c in m["cols"] if c >= 0]
-        for r in m["rows"]:
-            if r >= 0:
-                a_rows += [r] * len(free)
-                a_cols += free
-        for c in free:
-            m_rows += free
-            m_cols += [c] * len(free)
+    a_rows, a_cols, m_rows, m_cols = _member_entries(members)
     n_member_a = len(a_rows)
     el_rows = [[rows.get(label, -1) if label is not None else -1 for label in j.labels] for j in joints]
-    for j, mine, rr in zip(joints, ids, el_rows):
-        for r in rr:
-            if r < 0:
-                continue
-            for f in mine:
-                entries = features[f][0]
-                a_rows += [r] * len(entries)
-                a_cols += [c for _, c, _ in entries]
+    for mine, rr in zip(ids, el_rows):
+        rows_j, cols_j = _joint_entries(rr, mine, features)
+        a_rows += rows_j
+        a_cols += cols_j
     a_indptr, a_indices, a_pos = _csc(nc, nq, _ints(a_rows), _ints(a_cols))
     m_indptr, m_indices, m_pos = _csc(nq, nq, _ints(m_rows), _ints(m_cols))
     member_a = [sum(1 for r in m["rows"] if r >= 0) * sum(1 for c in m["cols"] if c >= 0) for m in members]
@@ -354,12 +341,45 @@ def _pack(model, ctx: _Recorder | None, members: list[dict], joints: list[_Joint
         "mem_apos_ptr": _ptr(member_a), "mem_apos": a_pos[:n_member_a],
         "mem_mpos_ptr": _ptr(member_m), "mem_mpos": m_pos,
     }
-    used: dict[str, int] = {}
-    for j in joints:
-        name = joint_kind_name(*JOINT_KINDS[j.kind])
-        used[name] = used.get(name, 0) + 1
+    return ModelTables(model.name, dim, nq, nc, arrays, a_indptr, a_indices, m_indptr, m_indices,
+                       _kinds_used(joints, members), [i[0] for i in point_ids])
+
+
+def _member_entries(members: list[dict]) -> tuple[list, list, list, list]:
+    """``(rows, columns)`` of the entries of A and then of M that the members add, in the loop
+    order of ``ncgen_tables_jacobian`` / ``_mass``: each of a member's constraint rows against
+    its free coordinates, each free coordinate against the others."""
+    a_rows, a_cols, m_rows, m_cols = [], [], [], []
     for m in members:
-        name = member_kind_name(*MEMBER_KINDS[m["kind"]])
+        free = [c for c in m["cols"] if c >= 0]
+        for r in m["rows"]:
+            if r >= 0:
+                a_rows += [r] * len(free)
+                a_cols += free
+        for c in free:
+            m_rows += free
+            m_cols += [c] * len(free)
+    return a_rows, a_cols, m_rows, m_cols
+
+
+def _joint_entries(rows: list[int], feature_ids, features) -> tuple[list, list]:
+    """``(rows, columns)`` of the entries of A a joint element adds: each of its constraint
+    ``rows`` (-1: dropped) against the coordinates of each of its features, in the loops' order."""
+    a_rows, a_cols = [], []
+    for r in rows:
+        if r < 0:
+            continue
+        for f in feature_ids:
+            entries = features[f][0]
+            a_rows += [r] * len(entries)
+            a_cols += [c for _, c, _ in entries]
+    return a_rows, a_cols
+
+
+def _kinds_used(joints: list[_Joint], members: list[dict]) -> dict[str, int]:
+    """How many joint elements and members of each kind (the kernels' names) the tables hold."""
+    used: dict[str, int] = {}
+    for name in [joint_kind_name(*JOINT_KINDS[j.kind]) for j in joints] + \
+            [member_kind_name(*MEMBER_KINDS[m["kind"]]) for m in members]:
         used[name] = used.get(name, 0) + 1
-    return ModelTables(model.name, dim, nq, nc, arrays, a_indptr, a_indices, m_indptr, m_indices, used,
-                       [i[0] for i in point_ids])
+    return used

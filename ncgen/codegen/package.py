@@ -163,6 +163,37 @@ def write_package(name: str, functions: Sequence[ca.Function], out_dir: str | os
 def _render_files(name: str, functions: list[ca.Function], doc: PackageDoc, options: dict,
                   extra_sources: Sequence[ExtraSource], template_dirs) -> dict[str, bytes]:
     """Every file of the package, relative name -> bytes, manifest last."""
+    c_funcs, kernel_funcs, kernels = _kernels(name, functions, options)
+    with_jac = set(options.get("jacobians", ()))
+    file_of = {c: k.stem + ".c" for k in kernels for c in k.functions}
+    header = f"{name}.h"
+    fn_info = [_function_info(name, f, c, file_of[c.name()], doc, f.name() in with_jac)
+               for f, c in zip(functions, c_funcs)]
+    qp_sources = sorted({file_of[c.name()] for f, c in zip(functions, c_funcs) if f.class_name() == "Qrqp"})
+    build = _build_section(name, kernels, kernel_funcs, qp_sources, bool(doc.data), extra_sources)
+    context = {
+        "name": name, "NAME": name.upper(), "header": header, "summary": cnames.c_comment(doc.summary),
+        "casadi_version": ca.__version__, "functions": fn_info, "build": build,
+        "metadata": _metadata_info(name, doc), "main_function": doc.main_function or functions[0].name(),
+        "included_headers": [s.output for s in extra_sources if s.included],
+    }
+    cnames.unique_macros([m["macro"] + suffix for m in context["metadata"]
+                          for suffix in (("", "_LEN") if "len" in m else ("",))]
+                         + [a["macro"] for f in fn_info for a in f["inputs"] + f["outputs"]])
+    files = _rendered(kernels, context, extra_sources, template_dirs)
+    data = {rel: text.encode() for rel, text in files.items()}
+    data[manifest.FILENAME] = manifest.manifest_text(
+        name=name, content_hash=manifest.content_hash(name, data, doc.to_json(), options),
+        functions=[_manifest_entry(f) for f in fn_info], build=build, metadata=dict(doc.metadata),
+        files=data).encode()
+    return data
+
+
+def _kernels(name: str, functions: list[ca.Function], options: dict):
+    """``(C functions, kernel functions, kernel files)``: each function as the C function
+    ``<name>_<f>`` (rerolled beyond ``reroll_instructions``), with its Jacobian
+    ``jac_<name>_<f>`` where ``options["jacobians"]`` names it, grouped into files of at most
+    ``max_file_instructions``."""
     limit = options["reroll_instructions"]
     c_funcs = [c_function(f, f"{name}_{f.name()}", limit) for f in functions]
     with_jac = set(options.get("jacobians", ()))
@@ -174,22 +205,24 @@ def _render_files(name: str, functions: list[ca.Function], doc: PackageDoc, opti
     kernels = generate_kernels(name, kernel_funcs,
                                group_functions(kernel_funcs, options["max_file_instructions"]),
                                options["casadi_options"])
-    file_of = {c: k.stem + ".c" for k in kernels for c in k.functions}
-    header = f"{name}.h"
-    meta_c = f"{name}_meta.c"
-    data_c = f"{name}_data.c" if doc.data else None
-    fn_info = [_function_info(name, f, c, file_of[c.name()], doc, f.name() in with_jac)
-               for f, c in zip(functions, c_funcs)]
-    build = {"sources": [k.stem + ".c" for k in kernels] + [meta_c] + ([data_c] if data_c else [])
+    return c_funcs, kernel_funcs, kernels
+
+
+def _build_section(name: str, kernels, kernel_funcs, qp_sources: list[str], with_data: bool,
+                   extra_sources: Sequence[ExtraSource]) -> dict:
+    """The manifest's ``build`` table: sources, headers, main, library and executable names,
+    the large sources (compiled at a lower optimisation), the files holding CasADi's qrqp,
+    the data source and the extra programs."""
+    data_c = f"{name}_data.c" if with_data else None
+    build = {"sources": [k.stem + ".c" for k in kernels] + [f"{name}_meta.c"] + ([data_c] if data_c else [])
              + [s.output for s in extra_sources if s.output.endswith(".c") and not s.program],
-             "headers": [header] + [k.stem + ".h" for k in kernels]
+             "headers": [f"{name}.h"] + [k.stem + ".h" for k in kernels]
              + [s.output for s in extra_sources if s.output.endswith(".h")],
              "main": "main.c", "library": f"lib{name}.so", "executable": f"{name}_main"}
     largest = {k.stem + ".c": max(max_function_size(f) for f in kernel_funcs if f.name() in k.functions)
                for k in kernels}
     huge = sum(f.n_instructions() for f in kernel_funcs) > LARGE_PACKAGE_INSTRUCTIONS
     build["large_sources"] = [src for src, n in largest.items() if huge or n > LARGE_FUNCTION_INSTRUCTIONS]
-    qp_sources = sorted({file_of[c.name()] for f, c in zip(functions, c_funcs) if f.class_name() == "Qrqp"})
     if qp_sources:                  # files holding CasADi's qrqp: a gcc warning off (templates/c/Makefile.j2)
         build["qp_sources"] = qp_sources
     if data_c:
@@ -197,16 +230,13 @@ def _render_files(name: str, functions: list[ca.Function], doc: PackageDoc, opti
     programs = [s.output for s in extra_sources if s.program]
     if programs:
         build["programs"] = programs
-    context = {
-        "name": name, "NAME": name.upper(), "header": header, "summary": cnames.c_comment(doc.summary),
-        "casadi_version": ca.__version__, "functions": fn_info, "build": build,
-        "metadata": _metadata_info(name, doc), "main_function": doc.main_function or functions[0].name(),
-        "included_headers": [s.output for s in extra_sources if s.included],
-    }
-    cnames.unique_macros([m["macro"] + suffix for m in context["metadata"]
-                          for suffix in (("", "_LEN") if "len" in m else ("",))]
-                         + [a["macro"] for f in fn_info for a in f["inputs"] + f["outputs"]])
+    return build
 
+
+def _rendered(kernels, context: dict, extra_sources: Sequence[ExtraSource], template_dirs) -> dict[str, str]:
+    """The package's text files from their templates: the kernel files, the metadata (and
+    data) sources, the extra sources, the header and the fixed files."""
+    name, header = context["name"], context["header"]
     files: dict[str, str] = {}
     for k in kernels:
         files[k.stem + ".c"] = render("kernels.c.j2", k.stem + ".c",
@@ -214,9 +244,11 @@ def _render_files(name: str, functions: list[ca.Function], doc: PackageDoc, opti
         files[k.stem + ".h"] = render("kernels.h.j2", k.stem + ".h",
                                       {**context, "code": k.h_code, "guard": k.stem.upper() + "_H"})
     entries = context["metadata"]
+    meta_c = f"{name}_meta.c"
     files[meta_c] = render("meta.c.j2", meta_c, {**context, "metadata": [m for m in entries if not m["data"]],
                                                  "data": False})
-    if data_c:
+    if "data" in context["build"]:
+        data_c = f"{name}_data.c"
         files[data_c] = render("meta.c.j2", data_c, {**context, "metadata": [m for m in entries if m["data"]],
                                                      "data": True})
     for s in extra_sources:
@@ -225,13 +257,7 @@ def _render_files(name: str, functions: list[ca.Function], doc: PackageDoc, opti
     files[header] = render("header.h.j2", header, context)
     for fixed in _FIXED_FILES:
         files[fixed] = render(fixed + ".j2", fixed, context)
-
-    data = {rel: text.encode() for rel, text in files.items()}
-    data[manifest.FILENAME] = manifest.manifest_text(
-        name=name, content_hash=manifest.content_hash(name, data, doc.to_json(), options),
-        functions=[_manifest_entry(f) for f in fn_info], build=build, metadata=dict(doc.metadata),
-        files=data).encode()
-    return data
+    return files
 
 
 def _check_extra_sources(name: str, extra_sources: Sequence[ExtraSource]) -> None:

@@ -264,87 +264,104 @@ def stepper_tables(model) -> StepperTables:
         raise UnsupportedElements(model.name, missing)
     springs = [f for f in model.forces if type(f) is Spring and not f.cable]
     elements = force_elements(model)
-    B_u = sum((B for _, B in input_forces(model)), np.zeros((model.nq, model.nu)))
-    acts = [actuator_element(model, j) for j in model.joints if j.options.get("effort") is not None]
-    bu_rows = [np.flatnonzero(B_u[:, j]) for j in range(model.nu)]
-    bu_row = _ints(np.concatenate(bu_rows)) if bu_rows else _ints([])
-    bu_val = _reals(np.concatenate([B_u[r, j] for j, r in enumerate(bu_rows)])) if bu_rows else _reals([])
+    ff, tq = elements["ff"], elements["torque"]
     points = [(s.a, s.at_a) for s in springs] + [(s.b, s.at_b) for s in springs]
     points += [(m, local) for m in model.members.values() for local in m.markers.values()]
     n_points = len(points)
-    points += [v for e in elements["ff"] for v in e["vectors"]]
+    points += [v for e in ff for v in e["vectors"]]
     T = model_tables(model, points)
     ns = len(springs)
     ends, markers = T.point_features[:2 * ns], T.point_features[2 * ns:n_points]
     ff_feat = T.point_features[n_points:]
     spr_feat = [f for s in range(ns) for f in (ends[s], ends[ns + s])]
     f_gravity, v_gravity = _gravity(model)
-    nq, nc = T.nq, T.nc
-    n = nq + nc
-    a = T.arrays
-    # the entries of K, in the loops' order: M (its nonzero entries), A (lower block), Aᵀ (upper
-    # block), dampers
     M = np.asarray(model.M, dtype=float)
+    K, k_arrays = _kkt_pattern(model.name, M, T, spr_feat, ff_feat, _ptr([len(e["vectors"]) for e in ff]))
+    arrays = {
+        "f_gravity": _reals(f_gravity),
+        "spr_feat": _ints(spr_feat),
+        "spr_par": _reals([x for s in springs for x in (s.k, s.rest_length, s.damping)]),
+        "marker_feat": _ints(markers),
+        **_input_arrays(model), **k_arrays,
+        "f_const": _reals(elements["f_const"]),
+        "ff_kind": _ints([e["kind"] for e in ff]), "ff_feat": _ints(ff_feat),
+        "ff_par_ptr": _ptr([len(e["par"]) for e in ff]), "ff_par": _reals([x for e in ff for x in e["par"]]),
+        "tq_member": _ints([e["member"] for e in tq]), "tq_c_ptr": _ptr([len(e["c"]) for e in tq]),
+        "tq_c": _reals([x for e in tq for x in e["c"]]), "tq_val": _reals([x for e in tq for x in e["tau"]]),
+    }
+    conservative = not any(s.damping for s in springs) and not any(e["damping"] for e in ff) \
+        and not np.any(elements["f_const"]) and not any(np.any(e["tau"]) for e in tq)
+    return StepperTables(model.name, T, model.nu, model.np, len(markers), ns, len(ff), len(tq),
+                         float(np.max(np.abs(M))) if T.nq else 1.0, v_gravity, int(K.indices.size),
+                         int(K.qr["v_row"].size), int(K.qr["r_row"].size), arrays, conservative,
+                         int(K.lu["l_row"].size), K.m_nnz, mass_is_regular(model))
+
+
+def _input_arrays(model) -> dict[str, np.ndarray]:
+    """The input map ``B_u`` of the input forces (``bu_*``, CSC) and the actuated joints'
+    efforts (``act_*``, :func:`actuator_element`)."""
+    B_u = sum((B for _, B in input_forces(model)), np.zeros((model.nq, model.nu)))
+    acts = [actuator_element(model, j) for j in model.joints if j.options.get("effort") is not None]
+    bu_rows = [np.flatnonzero(B_u[:, j]) for j in range(model.nu)]
+    return {
+        "bu_colind": _ptr([len(r) for r in bu_rows]),
+        "bu_row": _ints(np.concatenate(bu_rows)) if bu_rows else _ints([]),
+        "bu_val": _reals(np.concatenate([B_u[r, j] for j, r in enumerate(bu_rows)])) if bu_rows else _reals([]),
+        "act_kind": _ints([a.kind for a in acts]), "act_ptr": _ptr([a.cols.size for a in acts]),
+        "act_col": _ints(np.concatenate([a.cols for a in acts]) if acts else []),
+        "act_form_ptr": _ptr([a.forms.size for a in acts]),
+        "act_form": _reals(np.concatenate([a.forms for a in acts]) if acts else []),
+        "act_tau": _reals(np.concatenate([a.tau for a in acts]) if acts else []),
+    }
+
+
+def _kkt_pattern(name: str, M: np.ndarray, T: ModelTables, spr_feat, ff_feat, ff_ptr):
+    """The pattern of ``K = [[M − h/2 ∂F/∂w, Aᵀ], [A, 0]]`` (``M``'s nonzero entries only)
+    and where each product of the loops adds into it: the entries of M, A (lower block), Aᵀ
+    (upper block), then the springs' and the force elements' dampers (:func:`_velocity_entries`;
+    ``spr_feat``: two features per spring, ``ff_feat`` the force elements' at ``ff_ptr``),
+    with the symbolic LU and QR analyses.  Returns ``(K, arrays)``: ``K`` with ``indices``,
+    ``m_nnz``, ``qr``, ``lu``; ``arrays`` the tables' ``m_*``, ``k_*``, ``spr_k*``, ``ff_k*``,
+    ``ff_feat_ptr``, ``a_*`` and the analyses'."""
+    nq, a = T.nq, T.arrays
+    n = nq + T.nc
     m_cols = np.repeat(np.arange(nq), np.diff(T.m_indptr))
     nonzero = M[T.m_indices, m_cols] != 0
     m_rows, m_cols = T.m_indices[nonzero], m_cols[nonzero]
     a_cols = np.repeat(np.arange(nq), np.diff(T.a_indptr))
     rows = [m_rows, nq + T.a_indices, a_cols]
     cols = [m_cols, a_cols, nq + T.a_indices]
-    counts, spr_coef, spr_j = [], [], []
-    for s in range(ns):
-        r_s, c_s, g_s, j_s = _velocity_entries(a, spr_feat[2 * s:2 * s + 2], T.dim, spring=True)
-        rows.append(r_s)
-        cols.append(c_s)
-        counts.append(len(r_s))
-        spr_coef.append(g_s)
-        spr_j.append(j_s)
-    ff_counts, ff_coef, ff_j, ff_ptr = [], [], [], _ptr([len(e["vectors"]) for e in elements["ff"]])
-    for k in range(len(elements["ff"])):
-        r_s, c_s, g_s, j_s = _velocity_entries(a, ff_feat[ff_ptr[k]:ff_ptr[k + 1]], T.dim, spring=False)
-        rows.append(r_s)
-        cols.append(c_s)
-        ff_counts.append(len(r_s))
-        ff_coef.append(g_s)
-        ff_j.append(j_s)
+    dampers = {}
+    for kind, feats, spring in (("spr", [spr_feat[2 * s:2 * s + 2] for s in range(len(spr_feat) // 2)], True),
+                                ("ff", [ff_feat[ff_ptr[k]:ff_ptr[k + 1]] for k in range(len(ff_ptr) - 1)], False)):
+        counts, coef, index = [], [], []
+        for f in feats:
+            r_s, c_s, g_s, j_s = _velocity_entries(a, f, T.dim, spring=spring)
+            rows.append(r_s)
+            cols.append(c_s)
+            counts.append(len(r_s))
+            coef.append(g_s)
+            index.append(j_s)
+        dampers[kind] = counts, coef, index
     k_indptr, k_indices, pos = _csc(n, n, np.concatenate(rows), np.concatenate(cols))
     m_nnz, a_nnz = int(m_rows.size), T.a_nnz
-    n_spr = m_nnz + 2 * a_nnz + sum(counts)
-    qr = _qr_analysis(model.name, n, k_indptr, k_indices)
+    n_spr = m_nnz + 2 * a_nnz + sum(dampers["spr"][0])
+    qr = _qr_analysis(name, n, k_indptr, k_indices)
     lu = lu_analysis(nq, k_indptr, k_indices)
-    ff, tq = elements["ff"], elements["torque"]
+    (spr_counts, spr_coef, spr_j), (ff_counts, ff_coef, ff_j) = dampers["spr"], dampers["ff"]
     arrays = {
         "a_colind": T.a_indptr, "a_row": T.a_indices,
         "m_colind": _ptr(np.bincount(m_cols, minlength=nq)), "m_row": _ints(m_rows), "m_val": _reals(M[m_rows, m_cols]),
-        "f_gravity": _reals(f_gravity),
-        "spr_feat": _ints(spr_feat),
-        "spr_par": _reals([x for s in springs for x in (s.k, s.rest_length, s.damping)]),
-        "spr_kpos_ptr": _ptr(counts), "spr_kpos": pos[m_nnz + 2 * a_nnz:n_spr],
-        "spr_kcoef": _reals(np.concatenate(spr_coef) if ns else []),
-        "spr_kj": _ints(np.concatenate(spr_j) if ns else []),
-        "marker_feat": _ints(markers),
+        "spr_kpos_ptr": _ptr(spr_counts), "spr_kpos": pos[m_nnz + 2 * a_nnz:n_spr],
+        "spr_kcoef": _reals(np.concatenate(spr_coef) if spr_coef else []),
+        "spr_kj": _ints(np.concatenate(spr_j) if spr_j else []),
         "k_mpos": pos[:m_nnz], "k_apos": pos[m_nnz:m_nnz + a_nnz], "k_atpos": pos[m_nnz + a_nnz:m_nnz + 2 * a_nnz],
-        "bu_colind": _ptr([len(r) for r in bu_rows]), "bu_row": bu_row, "bu_val": bu_val,
-        "act_kind": _ints([a.kind for a in acts]), "act_ptr": _ptr([a.cols.size for a in acts]),
-        "act_col": _ints(np.concatenate([a.cols for a in acts]) if acts else []),
-        "act_form_ptr": _ptr([a.forms.size for a in acts]),
-        "act_form": _reals(np.concatenate([a.forms for a in acts]) if acts else []),
-        "act_tau": _reals(np.concatenate([a.tau for a in acts]) if acts else []),
-        "f_const": _reals(elements["f_const"]),
-        "ff_kind": _ints([e["kind"] for e in ff]), "ff_feat_ptr": ff_ptr, "ff_feat": _ints(ff_feat),
-        "ff_par_ptr": _ptr([len(e["par"]) for e in ff]), "ff_par": _reals([x for e in ff for x in e["par"]]),
-        "ff_kpos_ptr": _ptr(ff_counts), "ff_kpos": pos[n_spr:],
-        "ff_kcoef": _reals(np.concatenate(ff_coef) if ff else []), "ff_kj": _ints(np.concatenate(ff_j) if ff else []),
-        "tq_member": _ints([e["member"] for e in tq]), "tq_c_ptr": _ptr([len(e["c"]) for e in tq]),
-        "tq_c": _reals([x for e in tq for x in e["c"]]), "tq_val": _reals([x for e in tq for x in e["tau"]]),
+        "ff_feat_ptr": ff_ptr, "ff_kpos_ptr": _ptr(ff_counts), "ff_kpos": pos[n_spr:],
+        "ff_kcoef": _reals(np.concatenate(ff_coef) if ff_coef else []),
+        "ff_kj": _ints(np.concatenate(ff_j) if ff_j else []),
         "k_colind": k_indptr, "k_row": k_indices, **qr, **lu,
     }
-    conservative = not any(s.damping for s in springs) and not any(e["damping"] for e in ff) \
-        and not np.any(elements["f_const"]) and not any(np.any(e["tau"]) for e in tq)
-    return StepperTables(model.name, T, model.nu, model.np, len(markers), ns, len(ff), len(tq),
-                         float(np.max(np.abs(M))) if nq else 1.0, v_gravity, int(k_indices.size),
-                         int(qr["v_row"].size), int(qr["r_row"].size), arrays, conservative,
-                         int(lu["l_row"].size), m_nnz, mass_is_regular(model))
+    return SimpleNamespace(indices=k_indices, m_nnz=m_nnz, qr=qr, lu=lu), arrays
 
 
 def _velocity_entries(a: dict, feats, dim: int, spring: bool) -> tuple[np.ndarray, ...]:

@@ -107,7 +107,7 @@ def tree_tables(model) -> TreeTables:
 
 
 def _pack(model) -> TreeTables:
-    from ncgen.assembly.tree_dynamics import MimicMap, _owned, member_inertia, uniform_gravity
+    from ncgen.assembly.tree_dynamics import MimicMap, _owned, uniform_gravity
     from ncgen.codegen.tree_check import check_tree
 
     js = model.joint_space
@@ -122,49 +122,9 @@ def _pack(model) -> TreeTables:
     g = uniform_gravity(model, _owned(model, tree))
     if g is None:
         reasons.append("passive forces other than a uniform gravity (springs, dampers, joint friction)")
-    index = {"ground": -1}
-    parent, kind, q_at, v_at, num_ptr, num, body, xin, inertia = [], [], [], [], [0], [], [], [], []
-    to_member = {"ground": (np.eye(3), np.zeros(3))}      # member frame c in f_b
-    sq, sv = js.slices(), js.slices(rates=True)
+    bodies = _Bodies(js, reasons)
     for here, there, e, forward in tree:
-        index[there] = len(parent)
-        parent.append(index[here])
-        k = _KIND.get(e.kind)
-        if k is None:
-            reasons.append(f"joint {e.name!r}: its kind {e.kind} (tree tables: "
-                           f"{', '.join(j.kind for j in JOINT_KINDS)})")
-            k = 0
-        elif not forward:
-            reasons.append(f"joint {e.name!r}: traversed from its B side")
-        kind.append(k)
-        q_at.append(sq[e.name].start if e.name in sq else 0)
-        v_at.append(sv[e.name].start if e.name in sv else 0)
-        nq = sq[e.name].stop - sq[e.name].start if e.name in sq else 0
-        if nq != JOINT_KINDS[k].nq and not reasons:
-            reasons.append(f"joint {e.name!r}: {nq} positions, expected {JOINT_KINDS[k].nq} for a {e.kind} joint")
-        a1, b1, a2, b2 = edge_placements(e, True, js.members, 3)
-        numbers = joint_numbers(a1, b1, a2, b2, e.axes[:JOINT_KINDS[k].n_axes])
-        if numbers.size != JOINT_KINDS[k].n_num and not reasons:
-            reasons.append(f"joint {e.name!r}: {numbers.size} numbers, expected {JOINT_KINDS[k].n_num}")
-        num.extend(numbers)
-        num_ptr.append(len(num))
-        Q = np.eye(3)
-        if JOINT_KINDS[k].name in ("revolute", "prismatic") and not reasons:
-            axis = np.asarray(e.axes[0], float)
-            if abs(np.linalg.norm(axis) - 1.0) > 1e-12:
-                reasons.append(f"joint {e.name!r}: its axis {axis.tolist()} is not a unit vector")
-            else:
-                Q = axis_frame(axis)
-        H_in = _compose(_compose(to_member[here], (a1, b1)), (Q, np.zeros(3)))
-        to_member[there] = (Q.T @ a2, Q.T @ b2)
-        xin.extend([*H_in[0].reshape(-1, order="F"), *H_in[1]])
-        try:
-            m, c, I_c = member_inertia(js, there)
-        except ModelError as err:
-            reasons.append(str(err))
-            m, c, I_c = 0.0, np.zeros(3), np.zeros((3, 3))
-        body.extend([m, *c, *np.asarray(I_c, float).reshape(-1, order="F")])
-        inertia.extend(_local_inertia(m, c, I_c, *to_member[there]))
+        bodies.add(here, there, e, forward)
     if reasons:
         raise UnsupportedTree(model.name, reasons)
     mimic = MimicMap(model)
@@ -177,9 +137,78 @@ def _pack(model) -> TreeTables:
     q_off = [mimic.position[i][2] if i in mimic.position else 0.0 for i in range(js.nq)]
     i32 = (lambda x: np.asarray(x, dtype=np.int32))
     f64 = (lambda x: np.asarray(x, dtype=np.float64))
-    arrays = {"parent": i32(parent), "kind": i32(kind), "q_at": i32(q_at), "v_at": i32(v_at),
-              "num_ptr": i32(num_ptr), "num": f64(num), "body": f64(body), "gravity": f64(g),
+    b = bodies
+    arrays = {"parent": i32(b.parent), "kind": i32(b.kind), "q_at": i32(b.q_at), "v_at": i32(b.v_at),
+              "num_ptr": i32(b.num_ptr), "num": f64(b.num), "body": f64(b.body), "gravity": f64(g),
               "rate_src": i32(rate_src), "rate_col": i32(rate_col), "rate_coef": f64(rate_coef),
               "q_src": i32(q_src), "q_coef": f64(q_coef), "q_off": f64(q_off),
-              "xin": f64(xin), "inertia": f64(inertia)}
+              "xin": f64(b.xin), "inertia": f64(b.inertia)}
     return TreeTables(model.name, js.nq, js.nv, len(mimic.independent), arrays)
+
+
+class _Bodies:
+    """The tables' rows of the bodies, one per joint of the spanning tree in its order:
+    parent, joint kind, where its positions and rates start, its numbers, the body's mass,
+    centre and inertia, the joint's placement in the parent's member frame (``xin``) and the
+    inertia in the joint frame; what the tables cannot take goes to ``reasons``."""
+
+    def __init__(self, js, reasons: list):
+        self.js, self.reasons = js, reasons
+        self.index = {"ground": -1}
+        self.parent, self.kind, self.q_at, self.v_at, self.num_ptr, self.num = [], [], [], [], [0], []
+        self.body, self.xin, self.inertia = [], [], []
+        self.to_member = {"ground": (np.eye(3), np.zeros(3))}      # member frame c in f_b
+        self.sq, self.sv = js.slices(), js.slices(rates=True)
+
+    def add(self, here: str, there: str, e, forward: bool) -> None:
+        """The row of member ``there``, joined to ``here`` by the tree's edge ``e``."""
+        from ncgen.assembly.tree_dynamics import member_inertia
+
+        js, reasons, sq, sv = self.js, self.reasons, self.sq, self.sv
+        self.index[there] = len(self.parent)
+        self.parent.append(self.index[here])
+        k = self._kind(e, forward)
+        self.q_at.append(sq[e.name].start if e.name in sq else 0)
+        self.v_at.append(sv[e.name].start if e.name in sv else 0)
+        nq = sq[e.name].stop - sq[e.name].start if e.name in sq else 0
+        if nq != JOINT_KINDS[k].nq and not reasons:
+            reasons.append(f"joint {e.name!r}: {nq} positions, expected {JOINT_KINDS[k].nq} for a {e.kind} joint")
+        a1, b1, a2, b2 = edge_placements(e, True, js.members, 3)
+        numbers = joint_numbers(a1, b1, a2, b2, e.axes[:JOINT_KINDS[k].n_axes])
+        if numbers.size != JOINT_KINDS[k].n_num and not reasons:
+            reasons.append(f"joint {e.name!r}: {numbers.size} numbers, expected {JOINT_KINDS[k].n_num}")
+        self.num.extend(numbers)
+        self.num_ptr.append(len(self.num))
+        Q = self._axis_frame(e, k)
+        H_in = _compose(_compose(self.to_member[here], (a1, b1)), (Q, np.zeros(3)))
+        self.to_member[there] = (Q.T @ a2, Q.T @ b2)
+        self.xin.extend([*H_in[0].reshape(-1, order="F"), *H_in[1]])
+        try:
+            m, c, I_c = member_inertia(js, there)
+        except ModelError as err:
+            reasons.append(str(err))
+            m, c, I_c = 0.0, np.zeros(3), np.zeros((3, 3))
+        self.body.extend([m, *c, *np.asarray(I_c, float).reshape(-1, order="F")])
+        self.inertia.extend(_local_inertia(m, c, I_c, *self.to_member[there]))
+
+    def _kind(self, e, forward: bool) -> int:
+        """The tables' kind of joint ``e`` (0 where it has none, with the reason)."""
+        k = _KIND.get(e.kind)
+        if k is None:
+            self.reasons.append(f"joint {e.name!r}: its kind {e.kind} (tree tables: "
+                                f"{', '.join(j.kind for j in JOINT_KINDS)})")
+            k = 0
+        elif not forward:
+            self.reasons.append(f"joint {e.name!r}: traversed from its B side")
+        self.kind.append(k)
+        return k
+
+    def _axis_frame(self, e, k: int) -> np.ndarray:
+        """The joint frame of a revolute or prismatic joint (its axis the frame's z), else I."""
+        if JOINT_KINDS[k].name in ("revolute", "prismatic") and not self.reasons:
+            axis = np.asarray(e.axes[0], float)
+            if abs(np.linalg.norm(axis) - 1.0) > 1e-12:
+                self.reasons.append(f"joint {e.name!r}: its axis {axis.tolist()} is not a unit vector")
+            else:
+                return axis_frame(axis)
+        return np.eye(3)

@@ -17,6 +17,7 @@ from __future__ import annotations
 import hashlib
 import weakref
 from collections import OrderedDict
+from dataclasses import dataclass
 from types import MappingProxyType
 
 import numpy as np
@@ -54,76 +55,138 @@ def component_names(names, sizes) -> list[str]:
     return [n if s == 1 else f"{n}[{i}]" for n, s in zip(names, sizes) for i in range(s)]
 
 
+@dataclass(frozen=True)
+class Dynamics:
+    """What a model computes, as the builder makes it: the whole-system ``functions`` (name ->
+    CasADi function, or a :class:`~ncgen.model.function_set.FunctionSet` making each on first
+    use), the constant mass matrix ``M`` and its ``factor``, the ``potential`` terms, the
+    springs and cables as plain data (:class:`ncgen.assembly.springs.SpringTable`) and the
+    joint-space form (:class:`ncgen.assembly.joint_space.JointSpace`)."""
+
+    functions: object
+    M: np.ndarray
+    factor: object
+    potential: object
+    springs: object = None
+    joint_space: object = None
+
+
+@dataclass(frozen=True)
+class Constraints:
+    """The constraints Φ as built: ``labels`` of its rows, the Baumgarte coefficients
+    ``(α, β)`` (1/s), the ``redundant`` rows found at the initial configuration and whether
+    they were ``dropped``."""
+
+    labels: list
+    baumgarte: tuple
+    redundant: list = ()
+    dropped: bool = False
+
+
+@dataclass(frozen=True)
+class Parameters:
+    """The default parameter vector ``p0`` and the ``limits``: values that must stay >= 0 for
+    any parameter vector (:class:`ncgen.assembly.limits.Limits`, or None)."""
+
+    p0: np.ndarray
+    limits: object = None
+
+
+@dataclass(frozen=True)
+class Contacts:
+    """The point contacts as plain data (:mod:`ncgen.model.contacts`), in order, and the
+    contact ``law``: ``"smooth"`` (compliant forces in F) or ``"nonsmooth"`` (the compiled
+    stepper's impacts)."""
+
+    specs: tuple = ()
+    law: str = "smooth"
+
+
+@dataclass(frozen=True)
+class Origin:
+    """How a model was built: the ``sharing`` plan of ``build(share=True)``, the ``unshared``
+    form and the ``recipe`` (see :class:`Model`'s attributes of those names)."""
+
+    sharing: object = None
+    unshared: object = None
+    recipe: object = None
+
+
 class Model:
     """A validated, assembled, constant system (create it with ``System.build()``)."""
 
-    def __init__(self, *, description, layout, labels, functions, M, factor, potential, state, p0, baumgarte,
-                 redundant, dropped, t0, springs=None, limits=None, joint_space=None,
-                 contacts=(), contact_model="smooth", sharing=None, unshared=None, recipe=None):
+    def __init__(self, *, description, layout, dynamics: Dynamics, constraints: Constraints, parameters: Parameters,
+                 state, t0, contacts: Contacts = Contacts(), origin: Origin = Origin()):
         system = description
+        self.layout = layout
+        self._describe(system)
+        #: name -> CasADi function, each made on first access (:class:`~ncgen.model.function_set.FunctionSet`)
+        self.functions = dynamics.functions if isinstance(dynamics.functions, FunctionSet) \
+            else MappingProxyType(dict(dynamics.functions))
+        self.M = dynamics.M
+        self.mass_factor = dynamics.factor
+        self.potential_terms = dynamics.potential
+        self.constraint_names = list(constraints.labels)
+        self.p0 = np.asarray(parameters.p0, dtype=float)
+        self.q0, self.v0 = state.q0, state.v0
+        self.lam0, self.a0 = state.lam0, state.a0
+        self.initial_correction = (state.dq, state.dv)
+        self.initial_residual = (state.phi_given, state.velocity_given)
+        self.baumgarte = constraints.baumgarte
+        self.redundant = list(constraints.redundant)
+        self.redundant_dropped = constraints.dropped and bool(constraints.redundant)
+        self.t0 = t0
+        #: the springs and cables as plain data (:class:`ncgen.assembly.springs.SpringTable`)
+        self.springs = dynamics.springs
+        #: values that must stay >= 0 for any parameter vector (ncgen.assembly.limits.Limits)
+        self.limits = parameters.limits
+        self.joint_space = dynamics.joint_space
+        #: Plain-data descriptions of the contacts (:mod:`ncgen.model.contacts`), in order.
+        self.contacts = [dict(c) for c in contacts.specs]
+        self.contact_names = [c["name"] for c in self.contacts]
+        #: "smooth" (compliant forces in F) or "nonsmooth" (the compiled stepper's impacts).
+        self.contact_model = contacts.law
+        #: :class:`~ncgen.model.sharing.SharingPlan` of ``build(share=True)`` (None with share=False).
+        self.sharing = origin.sharing
+        #: how to build the same system with ``share=False`` (reactions of the eliminated joints;
+        #: :class:`ncgen.assembly.unshared.UnsharedForm`; the built model is kept in ``data``), or None
+        self.unshared = origin.unshared
+        #: ``(system as written, build options)`` it was built from: what a pickled model sends
+        #: (see :meth:`__reduce__`); None for a model made otherwise, which cannot be pickled.
+        #: Its members are not the built ones (coordinate sharing re-bases bodies): read those
+        #: from ``members``, ``joints``, ``forces``, ``contact_elements``
+        self.recipe = origin.recipe
+        for key, value in vars(self).items():
+            object.__setattr__(self, key, _frozen(value))
+        object.__setattr__(self, "_frozen", True)
+
+    def _describe(self, system) -> None:
+        """The model's own copy of the system's description: members, joints, forces, names,
+        frames, visuals, controller, contact and rolling elements."""
         self.members = MappingProxyType(dict(system.members))
         self.joints = tuple(system.joints)
         self.forces = tuple(system.forces)
         self.name = system.name
         self.dim = system.dim
-        self.layout = layout
-        #: name -> CasADi function, each made on first access (:class:`~ncgen.model.function_set.FunctionSet`)
-        self.functions = functions if isinstance(functions, FunctionSet) else MappingProxyType(dict(functions))
-        self.M = M
-        self.mass_factor = factor
-        self.potential_terms = potential
-        self.constraint_names = list(labels)
-        self.coordinate_names = layout.coordinate_names
+        self.coordinate_names = self.layout.coordinate_names
         self.input_names = list(system.inputs)
         self.input_sizes = [int(s.shape[0]) for s in system.inputs.values()]
         self.parameter_names = list(system.parameters)
         self.parameter_sizes = [int(v.size) for _, v in system.parameters.values()]
         self.member_names = list(system.members)
         self.marker_names = [f"{m.name}.{k}" for m in system.members.values() for k in m.markers]
-        self.p0 = np.asarray(p0, dtype=float)
-        self.q0, self.v0 = state.q0, state.v0
-        self.lam0, self.a0 = state.lam0, state.a0
-        self.initial_correction = (state.dq, state.dv)
-        self.initial_residual = (state.phi_given, state.velocity_given)
-        self.baumgarte = baumgarte
-        self.redundant = list(redundant)
-        self.redundant_dropped = dropped and bool(redundant)
-        self.t0 = t0
         self.gravity = system.gravity.copy()
-        #: the springs and cables as plain data (:class:`ncgen.assembly.springs.SpringTable`)
-        self.springs = springs
-        #: values that must stay >= 0 for any parameter vector (ncgen.assembly.limits.Limits)
-        self.limits = limits
-        self.joint_space = joint_space
         self.frames = MappingProxyType({k: (mem, np.array(R), np.array(pos)) for k, (mem, R, pos) in system.frames.items()})
         self.visuals = [dict(v) for v in system.visuals]
         #: the system's compiled controller (TOML ``[controller]``) or None
         self.controller = getattr(system, "controller", None)
-        #: Plain-data descriptions of the contacts (:mod:`ncgen.model.contacts`), in order.
-        self.contacts = [dict(c) for c in contacts]
-        self.contact_names = [c["name"] for c in self.contacts]
         #: The contact elements as built (:mod:`ncgen.model.contacts`), in order: their members
         #: are ``model.members`` (re-based by coordinate sharing, as the layout indexes them),
         #: what the element kernels and their broad phase read (:mod:`ncgen.assembly.pair_kernels`).
         self.contact_elements = tuple(getattr(system, "contacts", ()))
-        #: "smooth" (compliant forces in F) or "nonsmooth" (the compiled stepper's impacts).
-        self.contact_model = contact_model
         #: The nonholonomic elements (:mod:`ncgen.model.rolling`), in order: velocity
         #: constraints beside ``phi``, kept by ``nc.simulate(method="rolling")``.
         self.rolling = tuple(getattr(system, "rolling", ()))
-        #: :class:`~ncgen.model.sharing.SharingPlan` of ``build(share=True)`` (None with share=False).
-        self.sharing = sharing
-        #: how to build the same system with ``share=False`` (reactions of the eliminated joints;
-        #: :class:`ncgen.assembly.unshared.UnsharedForm`; the built model is kept in ``data``), or None
-        self.unshared = unshared
-        #: ``(system as written, build options)`` it was built from: what a pickled model sends
-        #: (see :meth:`__reduce__`); None for a model made otherwise, which cannot be pickled.
-        #: Its members are not the built ones (coordinate sharing re-bases bodies): read those
-        #: from ``members``, ``joints``, ``forces``, ``contact_elements``
-        self.recipe = recipe
-        for key, value in vars(self).items():
-            object.__setattr__(self, key, _frozen(value))
-        object.__setattr__(self, "_frozen", True)
 
     def __setattr__(self, key, value):
         if getattr(self, "_frozen", False):

@@ -67,22 +67,8 @@ def _walk(e, values, memo):
 def _convert(e, values, memo):
     import sympy as sp
 
-    if e.is_Symbol:
-        if e not in values:
-            raise NcgenError(f"to_casadi: no value given for symbol {e}")
-        return values[e]
-    if e.is_Integer:
-        return int(e)
-    if e.is_Number:
-        return float(e)
-    if e is sp.pi:
-        return ca.pi
-    if e is sp.E:
-        return ca.exp(1)
-    if e is sp.true:
-        return 1
-    if e is sp.false:
-        return 0
+    if e.is_Atom:
+        return _atom(e, values)
     if isinstance(e, sp.Piecewise):
         return _piecewise(e, values, memo)
     args = [_walk(a, values, memo) for a in e.args]
@@ -91,14 +77,46 @@ def _convert(e, values, memo):
     if e.is_Mul:
         return reduce(lambda a, b: a * b, args)
     if e.is_Pow:
-        base, expo = args
-        if e.exp == sp.Rational(1, 2):
-            return ca.sqrt(base)
-        if e.exp == -1:
-            return 1 / base
-        if e.exp.is_Integer and e.exp > 0:
-            return ca.constpow(base, int(e.exp))
-        return base ** expo
+        return _power(e.exp, *args)
+    return _function(e, args)
+
+
+def _atom(e, values):
+    """A symbol's value, or a number or constant as CasADi takes it."""
+    import sympy as sp
+
+    if e.is_Symbol:
+        if e not in values:
+            raise NcgenError(f"to_casadi: no value given for symbol {e}")
+        return values[e]
+    if e.is_Integer:
+        return int(e)
+    if e.is_Number:
+        return float(e)
+    constants = {sp.pi: ca.pi, sp.E: ca.exp(1), sp.true: 1, sp.false: 0}
+    if e in constants:
+        return constants[e]
+    raise NcgenError(f"to_casadi: no CasADi form for {type(e).__name__} in {e}")
+
+
+def _power(exponent, base, expo):
+    """``base ** expo`` (``exponent`` the SymPy exponent): a square root, a reciprocal and a
+    positive integer power in their own CasADi forms."""
+    import sympy as sp
+
+    if exponent == sp.Rational(1, 2):
+        return ca.sqrt(base)
+    if exponent == -1:
+        return 1 / base
+    if exponent.is_Integer and exponent > 0:
+        return ca.constpow(base, int(exponent))
+    return base ** expo
+
+
+def _function(e, args):
+    """A function, relation or logical operation ``e`` of the converted ``args``."""
+    import sympy as sp
+
     unary, relations = _tables()
     f = unary.get(type(e))
     if f is not None:

@@ -203,6 +203,191 @@ def _directions(nt: int, nd: int) -> np.ndarray:
     return np.vstack([np.cos(ang), np.sin(ang)])
 
 
+
+@dataclass
+class _Unknowns:
+    """The decision variables (module docstring's names) and the time grid: ``q``, ``v``, ``w``
+    the nodes' positions and velocities before and after their impulse (``q_0``, ``v_0 = w_0``
+    from the horizon), ``h`` the 1 × N step lengths (s), ``t`` the node times."""
+
+    Q: object
+    V: object
+    W: object
+    U: object
+    Mid: object
+    fN: object
+    beta: object
+    gam: object
+    PN: object
+    Pbeta: object
+    Pgam: object
+    slack: object
+    scale: object
+    h: object
+    t: object
+    q: object
+    v: object
+    w: object
+
+
+def _unknowns(opti: ca.Opti, model, hz: Horizon, nk: int, s: dict) -> _Unknowns:
+    """The transcription's variables, with the step scales' bounds (free steps) and the
+    forces', impulses' and slacks' ``≥ 0``."""
+    N, nq, nu = hz.N, model.nq, model.nu
+    nd = _directions(model.dim - 1, s["directions"]).shape[1]
+    Q, V, W, U = opti.variable(nq, N), opti.variable(nq, N), opti.variable(nq, N - 1), opti.variable(nu, N)
+    Mid = opti.variable(nq, N)
+    fN = opti.variable(nk, N)                      # interval contact forces (N)
+    beta = opti.variable(nk * nd, N)
+    gam = opti.variable(nk, N)
+    PN = opti.variable(nk, N - 1)                  # node impulses (N·s), nodes 1..N−1
+    Pbeta = opti.variable(nk * nd, N - 1)
+    Pgam = opti.variable(nk, N - 1)
+    slack = opti.variable(nk, N - 1)
+    if s["step_lengths"] == "free":
+        scale = opti.variable(N)
+        opti.subject_to(opti.bounded(*s["step_bounds"][:1], scale, s["step_bounds"][1]))
+        opti.subject_to(ca.sum1(scale) == N)
+    else:
+        scale = ca.DM.ones(N)
+    h = hz.T / N * scale.T
+    for x in (fN, beta, gam, PN, Pbeta, Pgam, slack):
+        if x.numel():
+            opti.subject_to(ca.vec(x) >= 0)
+    return _Unknowns(Q=Q, V=V, W=W, U=U, Mid=Mid, fN=fN, beta=beta, gam=gam, PN=PN, Pbeta=Pbeta, Pgam=Pgam,
+                     slack=slack, scale=scale, h=h, t=hz.t0 + ca.horzcat(ca.DM(0), ca.cumsum(h.T).T),
+                     q=ca.horzcat(hz.q0, Q), v=ca.horzcat(hz.v0, V), w=ca.horzcat(hz.v0, W))
+
+
+class _Laws:
+    """The transcription's equations, gathered in ``defects`` (``(label, expression = 0)``) and
+    ``pairs`` (:class:`Pair`): the RATTLE half-steps with their contact forces over each
+    interval, the impacts at the inner nodes, Signorini's and Coulomb's laws on both."""
+
+    def __init__(self, model, p, contacts, D: np.ndarray):
+        self.f, self.p, self.contacts = model.functions, p, contacts
+        self.nq, self.nc, self.nk, self.nt = model.nq, model.nc, len(contacts), model.dim - 1
+        self.D, self.nd = D, D.shape[1]
+        self.mu = np.array([c["mu"] for c in contacts])
+        self.e = np.array([c["restitution"] for c in contacts])
+        self.M = ca.DM(self.f["mass"]()["M"])
+        self.pairs: list[Pair] = []
+        self.defects = []
+
+    def contact_rows(self, qk):
+        """``(g, W_N, W_T)`` at configuration ``qk``."""
+        g = self.f["gap"](qk, self.p)
+        WN, WT = self.f["contact_jacobian"](qk, self.p)
+        return g, WN, WT
+
+    def tangential(self, WT, beta_k):
+        """Generalised force of the friction components ``β`` (nk·nd) along W_T."""
+        nd = self.nd
+        if self.nt == 0 or self.nk == 0:
+            return ca.MX.zeros(self.nq, 1)
+        fT = ca.vertcat(*[ca.mtimes(ca.DM(self.D), beta_k[i * nd:(i + 1) * nd]) for i in range(self.nk)])
+        return ca.mtimes(WT.T, fT)
+
+    def friction(self, label, normal, UT, beta_k, gam_k):
+        """Maximum dissipation on the tangential velocity ``UT`` and the polyhedral Coulomb
+        cone of ``normal`` (a force or an impulse); a frictionless contact's ``β``, ``γ`` = 0."""
+        nd, nt, D = self.nd, self.nt, ca.DM(self.D)
+        for i in range(self.nk):
+            name = self.contacts[i]["name"]
+            if self.mu[i] == 0:
+                self.defects.append((f"{label} (frictionless contact {name!r})",
+                                     ca.vertcat(beta_k[i * nd:(i + 1) * nd], gam_k[i])))
+                continue
+            ut = UT[i * nt:(i + 1) * nt]
+            for j in range(nd):
+                self.pairs.append(Pair(f"{label}: maximum dissipation, contact {name!r}",
+                                       gam_k[i] + ca.dot(D[:, j], ut), beta_k[i * nd + j]))
+            self.pairs.append(Pair(f"{label}: Coulomb cone, contact {name!r}",
+                                   self.mu[i] * normal[i] - ca.sum1(beta_k[i * nd:(i + 1) * nd]), gam_k[i],
+                                   penalised=False))
+
+    def interval(self, opti: ca.Opti, x: _Unknowns, k: int, rows, free: bool):
+        """Interval k's RATTLE step with its contact force and the force's laws (``free``:
+        free step lengths, a force only while in contact at both ends); returns the
+        half-steps' multipliers ``(ν₁, ν₂)`` (None without constraints)."""
+        f, p, nk = self.f, self.p, self.nk
+        tk, tk1, hk = x.t[k], x.t[k + 1], x.h[k]
+        qk, wk, qk1, vk1, mk = x.q[:, k], x.w[:, k], x.q[:, k + 1], x.v[:, k + 1], x.Mid[:, k]
+        uk = x.U[:, k]
+        force = ca.MX.zeros(self.nq, 1)
+        force1 = ca.MX.zeros(self.nq, 1)
+        if nk:
+            g0, WN0, WT0 = rows[k]
+            g1, WN1, WT1 = rows[k + 1]
+            force = ca.mtimes(WN0.T, x.fN[:, k]) + self.tangential(WT0, x.beta[:, k])
+            force1 = ca.mtimes(WN1.T, x.fN[:, k]) + self.tangential(WT1, x.beta[:, k])
+        r1 = ca.mtimes(self.M, mk - wk) - hk / 2 * (f["F"](tk, qk, wk, uk, p) + force)
+        r2 = ca.mtimes(self.M, vk1 - mk) - hk / 2 * (f["F"](tk1, qk1, vk1, uk, p) + force1)
+        half_step = None
+        if self.nc:
+            nu1, nu2 = opti.variable(self.nc), opti.variable(self.nc)
+            half_step = (nu1, nu2)                     # λ at node k+1: the second half-step's ν₂ = h/2 λ
+            r1 += ca.mtimes(f["A"](tk, qk, p).T, nu1)
+            r2 += ca.mtimes(f["A"](tk1, qk1, p).T, nu2)
+            self.defects.append((f"position constraints Φ at node {k + 1}", f["phi"](tk1, qk1, p)))
+            self.defects.append((f"velocity constraints at node {k + 1}",
+                                 ca.mtimes(f["A"](tk1, qk1, p), vk1) + f["phi_t"](tk1, qk1, p)))
+        self.defects.append((f"dynamics (first half-step, interval {k})", r1))
+        self.defects.append((f"dynamics (positions, interval {k})", qk1 - qk - hk * mk))
+        self.defects.append((f"dynamics (second half-step, interval {k})", r2))
+        if nk:
+            opti.subject_to(g1 >= 0)
+            if k == 0 and ca.symvar(g0):
+                opti.subject_to(g0 >= 0)
+            if free:
+                self.pairs.append(Pair(f"interval {k}: gap at its start ⊥ contact force", g0, x.fN[:, k], True))
+            self.pairs.append(Pair(f"interval {k}: gap at its end ⊥ contact force", g1, x.fN[:, k], True))
+            self.friction(f"interval {k}", x.fN[:, k], ca.mtimes(WT1, mk), x.beta[:, k], x.gam[:, k])
+        return half_step
+
+    def impact(self, opti: ca.Opti, x: _Unknowns, k: int, rows):
+        """The impulse at inner node k from ``v_k`` to ``w_k`` and its laws (Signorini,
+        Newton's impact law with its approach slack, Coulomb)."""
+        f, p, nk, e = self.f, self.p, self.nk, self.e
+        qk, vk, wk, t = x.q[:, k], x.v[:, k], x.w[:, k], x.t
+        jump = ca.mtimes(self.M, wk - vk)
+        if nk:
+            g, WN, WT = rows[k]
+            jump -= ca.mtimes(WN.T, x.PN[:, k - 1]) + self.tangential(WT, x.Pbeta[:, k - 1])
+        if self.nc:
+            nu3 = opti.variable(self.nc)
+            jump += ca.mtimes(f["A"](t[k], qk, p).T, nu3)
+            self.defects.append((f"velocity constraints after the impulse at node {k}",
+                                 ca.mtimes(f["A"](t[k], qk, p), wk) + f["phi_t"](t[k], qk, p)))
+        self.defects.append((f"impact at node {k}", jump))
+        if nk:
+            r = ca.mtimes(WN, wk) + e * ca.mtimes(WN, vk)
+            PN, slack, fN = x.PN, x.slack, x.fN
+            self.pairs += [
+                Pair(f"node {k}: gap ⊥ impulse", g, PN[:, k - 1], True),
+                Pair(f"node {k}: Newton's impact law (U⁺ + e U⁻) ⊥ impulse", r + slack[:, k - 1], PN[:, k - 1]),
+                Pair(f"node {k}: approach without impulse ⊥ impulse", slack[:, k - 1], PN[:, k - 1], True),
+                Pair(f"node {k}: contact force before the node ⊥ impulse", fN[:, k - 1], PN[:, k - 1], True),
+                Pair(f"node {k}: approach without impulse ⊥ contact force after the node", slack[:, k - 1],
+                     fN[:, k], True)]
+            self.friction(f"node {k}", PN[:, k - 1], ca.mtimes(WT, wk) + np.repeat(e, self.nt) * ca.mtimes(WT, vk),
+                          x.Pbeta[:, k - 1], x.Pgam[:, k - 1])
+
+
+def _relax(opti: ca.Opti, pairs: list[Pair], sigma) -> None:
+    """Scholtes' relaxation ``a c ≤ σ`` of every pair, with ``a ≥ 0`` where not imposed
+    elsewhere (every ``c`` is a variable bounded below by 0), in one ``subject_to``."""
+    rows = []
+    for pair in pairs:
+        product = pair.a * pair.c
+        if ca.symvar(product):                     # (a gap fixed at 0 by the initial state leaves c free)
+            rows.append(product - sigma)
+        if not pair.a_imposed:
+            rows.append(-pair.a)
+    if rows:                                       # one call: Opti's subject_to costs ~2 ms a call
+        opti.subject_to(ca.vertcat(*rows) <= 0)
+
+
 class ContactImplicit(Transcription):
     """The contact-implicit transcription (module docstring); ``settings`` as in :data:`DEFAULTS`."""
 
@@ -227,179 +412,69 @@ class ContactImplicit(Transcription):
     # ------------------------------------------------------------------ build
     def build(self, opti: ca.Opti, model, hz: Horizon) -> Discretisation:
         s = self.settings
-        N, nq, nu, nc, dim = hz.N, model.nq, model.nu, model.nc, model.dim
-        f = model.functions
-        nk = len(self.contacts)
-        nt = dim - 1
-        D = _directions(nt, s["directions"])
-        nd = D.shape[1]
-        mu = np.array([c["mu"] for c in self.contacts])
-        e = np.array([c["restitution"] for c in self.contacts])
-        M = ca.DM(f["mass"]()["M"])
-        p = hz.p
-        p_num = np.array(p, float).reshape(-1) if isinstance(p, ca.DM) else np.array(model.p0, float)
+        N, nc = hz.N, model.nc
         self.sigma = opti.parameter()
         opti.set_value(self.sigma, s["sigma0"])
-        Q, V, W, U = opti.variable(nq, N), opti.variable(nq, N), opti.variable(nq, N - 1), opti.variable(nu, N)
-        Mid = opti.variable(nq, N)
-        q = ca.horzcat(hz.q0, Q)
-        v = ca.horzcat(hz.v0, V)                       # velocities before each node's impulse
-        w = ca.horzcat(hz.v0, W)                       # after it (w_0 = v_0)
-        fN = opti.variable(nk, N)                      # interval contact forces (N)
-        beta = opti.variable(nk * nd, N)
-        gam = opti.variable(nk, N)
-        PN = opti.variable(nk, N - 1)                  # node impulses (N·s), nodes 1..N−1
-        Pbeta = opti.variable(nk * nd, N - 1)
-        Pgam = opti.variable(nk, N - 1)
-        slack = opti.variable(nk, N - 1)
-        if s["step_lengths"] == "free":
-            scale = opti.variable(N)
-            opti.subject_to(opti.bounded(*s["step_bounds"][:1], scale, s["step_bounds"][1]))
-            opti.subject_to(ca.sum1(scale) == N)
-        else:
-            scale = ca.DM.ones(N)
-        h = hz.T / N * scale.T                         # 1 × N step lengths (s)
-        t = hz.t0 + ca.horzcat(ca.DM(0), ca.cumsum(h.T).T)
-        for x in (fN, beta, gam, PN, Pbeta, Pgam, slack):
-            if x.numel():
-                opti.subject_to(ca.vec(x) >= 0)
-        pairs: list[Pair] = []
-        defects = []
-        D_dm = ca.DM(D)
-
-        def contact_rows(qk):
-            g = f["gap"](qk, p)
-            WN, WT = f["contact_jacobian"](qk, p)
-            return g, WN, WT
-
-        def tangential(WT, beta_k):
-            """Generalised force of the friction components ``β`` (nk·nd) along W_T."""
-            if nt == 0 or nk == 0:
-                return ca.MX.zeros(nq, 1)
-            fT = ca.vertcat(*[ca.mtimes(D_dm, beta_k[i * nd:(i + 1) * nd]) for i in range(nk)])
-            return ca.mtimes(WT.T, fT)
-
-        def friction(label, normal, UT, beta_k, gam_k):
-            for i in range(nk):
-                if mu[i] == 0:
-                    defects.append((f"{label} (frictionless contact {self.contacts[i]['name']!r})",
-                                    ca.vertcat(beta_k[i * nd:(i + 1) * nd], gam_k[i])))
-                    continue
-                ut = UT[i * nt:(i + 1) * nt]
-                for j in range(nd):
-                    pairs.append(Pair(f"{label}: maximum dissipation, contact {self.contacts[i]['name']!r}",
-                                      gam_k[i] + ca.dot(D_dm[:, j], ut), beta_k[i * nd + j]))
-                pairs.append(Pair(f"{label}: Coulomb cone, contact {self.contacts[i]['name']!r}",
-                                  mu[i] * normal[i] - ca.sum1(beta_k[i * nd:(i + 1) * nd]), gam_k[i], penalised=False))
-
-        rows = [contact_rows(q[:, k]) for k in range(N + 1)] if nk else None
-        lam_nodes, half_steps = [], []
-        for k in range(N):
-            tk, tk1, hk = t[k], t[k + 1], h[k]
-            qk, wk, qk1, vk1, mk = q[:, k], w[:, k], q[:, k + 1], v[:, k + 1], Mid[:, k]
-            uk = U[:, k]
-            force = ca.MX.zeros(nq, 1)
-            force1 = ca.MX.zeros(nq, 1)
-            if nk:
-                g0, WN0, WT0 = rows[k]
-                g1, WN1, WT1 = rows[k + 1]
-                force = ca.mtimes(WN0.T, fN[:, k]) + tangential(WT0, beta[:, k])
-                force1 = ca.mtimes(WN1.T, fN[:, k]) + tangential(WT1, beta[:, k])
-            r1 = ca.mtimes(M, mk - wk) - hk / 2 * (f["F"](tk, qk, wk, uk, p) + force)
-            r2 = ca.mtimes(M, vk1 - mk) - hk / 2 * (f["F"](tk1, qk1, vk1, uk, p) + force1)
-            if nc:
-                nu1, nu2 = opti.variable(nc), opti.variable(nc)
-                half_steps.append((nu1, nu2))
-                lam_nodes.append(2 * nu2 / hk)          # λ at node k+1 (the second half-step's ν₂ = h/2 λ)
-                r1 += ca.mtimes(f["A"](tk, qk, p).T, nu1)
-                r2 += ca.mtimes(f["A"](tk1, qk1, p).T, nu2)
-                defects.append((f"position constraints Φ at node {k + 1}", f["phi"](tk1, qk1, p)))
-                defects.append((f"velocity constraints at node {k + 1}",
-                                ca.mtimes(f["A"](tk1, qk1, p), vk1) + f["phi_t"](tk1, qk1, p)))
-            defects.append((f"dynamics (first half-step, interval {k})", r1))
-            defects.append((f"dynamics (positions, interval {k})", qk1 - qk - hk * mk))
-            defects.append((f"dynamics (second half-step, interval {k})", r2))
-            if nk:
-                opti.subject_to(g1 >= 0)
-                if k == 0 and ca.symvar(g0):
-                    opti.subject_to(g0 >= 0)
-                if s["step_lengths"] == "free":
-                    pairs.append(Pair(f"interval {k}: gap at its start ⊥ contact force", g0, fN[:, k], True))
-                pairs.append(Pair(f"interval {k}: gap at its end ⊥ contact force", g1, fN[:, k], True))
-                friction(f"interval {k}", fN[:, k], ca.mtimes(WT1, mk), beta[:, k], gam[:, k])
+        x = _unknowns(opti, model, hz, len(self.contacts), s)
+        laws = _Laws(model, hz.p, self.contacts, _directions(model.dim - 1, s["directions"]))
+        rows = [laws.contact_rows(x.q[:, k]) for k in range(N + 1)] if laws.nk else None
+        half_steps = [laws.interval(opti, x, k, rows, s["step_lengths"] == "free") for k in range(N)]
         for k in range(1, N):
-            qk, vk, wk = q[:, k], v[:, k], w[:, k]
-            jump = ca.mtimes(M, wk - vk)
-            if nk:
-                g, WN, WT = rows[k]
-                jump -= ca.mtimes(WN.T, PN[:, k - 1]) + tangential(WT, Pbeta[:, k - 1])
-            if nc:
-                nu3 = opti.variable(nc)
-                jump += ca.mtimes(f["A"](t[k], qk, p).T, nu3)
-                defects.append((f"velocity constraints after the impulse at node {k}",
-                                ca.mtimes(f["A"](t[k], qk, p), wk) + f["phi_t"](t[k], qk, p)))
-            defects.append((f"impact at node {k}", jump))
-            if nk:
-                r = ca.mtimes(WN, wk) + e * ca.mtimes(WN, vk)
-                pairs += [Pair(f"node {k}: gap ⊥ impulse", g, PN[:, k - 1], True),
-                          Pair(f"node {k}: Newton's impact law (U⁺ + e U⁻) ⊥ impulse", r + slack[:, k - 1],
-                               PN[:, k - 1]),
-                          Pair(f"node {k}: approach without impulse ⊥ impulse", slack[:, k - 1], PN[:, k - 1], True),
-                          Pair(f"node {k}: contact force before the node ⊥ impulse", fN[:, k - 1], PN[:, k - 1],
-                               True),
-                          Pair(f"node {k}: approach without impulse ⊥ contact force after the node",
-                               slack[:, k - 1], fN[:, k], True)]
-                friction(f"node {k}", PN[:, k - 1], ca.mtimes(WT, wk) + np.repeat(e, nt) * ca.mtimes(WT, vk),
-                         Pbeta[:, k - 1], Pgam[:, k - 1])
-        rows = []                                      # every ``c`` is a variable bounded below by 0
-        for pair in pairs:
-            product = pair.a * pair.c
-            if ca.symvar(product):                     # (a gap fixed at 0 by the initial state leaves c free)
-                rows.append(product - self.sigma)
-            if not pair.a_imposed:
-                rows.append(-pair.a)
-        if rows:                                       # one call: Opti's subject_to costs ~2 ms a call
-            opti.subject_to(ca.vertcat(*rows) <= 0)
-        self.pairs = Pairs(pairs)
-        self.vars = dict(Q=Q, V=V, W=W, Mid=Mid, scale=scale, slack=slack, fN=fN, beta=beta, PN=PN, Pbeta=Pbeta,
-                         t=t, h=h, D=D)
+            laws.impact(opti, x, k, rows)
+        _relax(opti, laws.pairs, self.sigma)
+        self.pairs = Pairs(laws.pairs)
+        self.vars = dict(Q=x.Q, V=x.V, W=x.W, Mid=x.Mid, scale=x.scale, slack=x.slack, fN=x.fN, beta=x.beta,
+                         PN=x.PN, Pbeta=x.Pbeta, t=x.t, h=x.h, D=laws.D)
+        h = x.h
+        quad_w = ca.horzcat(h[0] / 2, (h[:, :-1] + h[:, 1:]) / 2, h[-1] / 2) if N > 1 else ca.horzcat(h / 2, h / 2)
+        lam = ca.horzcat(*[2 * nu2 / x.h[k] for k, (_, nu2) in enumerate(half_steps)]) if nc else None
+        return Discretisation(q=x.q, v=x.v, lam=lam, U=x.U, path_t=x.t[:, 1:], path_q=x.Q, path_v=x.V,
+                              quad_t=x.t, quad_q=x.q, quad_v=x.v, quad_w=quad_w, defects=laws.defects,
+                              set_guess=functools.partial(self._set_guess, model, hz, x, half_steps), t_nodes=x.t,
+                              interval_w=h, extra_cost=self._extra_cost(hz, x.scale, laws.pairs))
+
+    def _extra_cost(self, hz: Horizon, scale, pairs):
+        """The cost's terms of the transcription: the free steps' spread ``Σ (h_k − T/N)² / (T/N)``
+        and the pairs' penalty ``ρ Σ a·c``."""
+        s = self.settings
         extra = ca.MX(0)
         if s["step_lengths"] == "free":
-            extra += s["step_weight"] * hz.T / N * ca.sumsqr(scale - 1)
+            extra += s["step_weight"] * hz.T / hz.N * ca.sumsqr(scale - 1)
         if s["penalty"] and pairs:
             extra += s["penalty"] * sum(ca.dot(pair.a, pair.c) for pair in pairs if pair.penalised)
-        quad_w = ca.horzcat(h[0] / 2, (h[:, :-1] + h[:, 1:]) / 2, h[-1] / 2) if N > 1 else ca.horzcat(h / 2, h / 2)
+        return extra
 
-        def set_guess(o: ca.Opti, g):
-            tg = guess_times(hz, g.T, np.array([1.0]))
-            qg, vg = g.q(tg).T, g.v(tg).T
-            o.set_initial(Q, qg)
-            o.set_initial(V, vg)
-            if N > 1:
-                o.set_initial(W, vg[:, :-1])
-            q_all = np.hstack([g.q(np.array([hz.t0])).T, qg])
-            o.set_initial(Mid, np.diff(q_all, axis=1) / (g.T / N))
-            if nu:
-                o.set_initial(U, g.u(guess_times(hz, g.T, [0.0])).T)
-            if s["step_lengths"] == "free":
-                o.set_initial(scale, np.ones(N))
-            if s["reaction_guess"] and nc:
-                lam_g = g.lam(guess_times(hz, g.T, np.array([0.0, 1.0]))).T     # λ at the start and end of each step
-                for k, (nu1, nu2) in enumerate(half_steps):
-                    o.set_initial(nu1, g.T / N / 2 * lam_g[:, 2 * k])
-                    o.set_initial(nu2, g.T / N / 2 * lam_g[:, 2 * k + 1])
-            if nk and N > 1:
-                v_all = np.hstack([g.v(np.array([hz.t0])).T, vg])
-                u_all = g.u(guess_times(hz, g.T, [0.0])).T if nu else np.zeros((0, N))
-                PN0, fN0, W0, slack0 = self._guess_impulses(model, q_all, v_all, u_all, g.T / N, hz.t0, p_num)
-                o.set_initial(PN, PN0)
-                o.set_initial(fN, fN0)
-                o.set_initial(W, W0)
-                o.set_initial(slack, slack0)
-
-        return Discretisation(q=q, v=v, lam=ca.horzcat(*lam_nodes) if nc else None, U=U, path_t=t[:, 1:], path_q=Q, path_v=V, quad_t=t, quad_q=q,
-                              quad_v=v, quad_w=quad_w, defects=defects, set_guess=set_guess, t_nodes=t,
-                              interval_w=h, extra_cost=extra)
+    def _set_guess(self, model, hz: Horizon, x: _Unknowns, half_steps, o: ca.Opti, g):
+        """Initial values from the guess ``g``: nodes, mean velocities, inputs, step scales,
+        (``reaction_guess``) the half-steps' ``ν = h/2 λ``, and the impulses and forces it implies."""
+        s, N, nu, nc, nk = self.settings, hz.N, model.nu, model.nc, len(self.contacts)
+        p = hz.p
+        p_num = np.array(p, float).reshape(-1) if isinstance(p, ca.DM) else np.array(model.p0, float)
+        tg = guess_times(hz, g.T, np.array([1.0]))
+        qg, vg = g.q(tg).T, g.v(tg).T
+        o.set_initial(x.Q, qg)
+        o.set_initial(x.V, vg)
+        if N > 1:
+            o.set_initial(x.W, vg[:, :-1])
+        q_all = np.hstack([g.q(np.array([hz.t0])).T, qg])
+        o.set_initial(x.Mid, np.diff(q_all, axis=1) / (g.T / N))
+        if nu:
+            o.set_initial(x.U, g.u(guess_times(hz, g.T, [0.0])).T)
+        if s["step_lengths"] == "free":
+            o.set_initial(x.scale, np.ones(N))
+        if s["reaction_guess"] and nc:
+            lam_g = g.lam(guess_times(hz, g.T, np.array([0.0, 1.0]))).T     # λ at the start and end of each step
+            for k, (nu1, nu2) in enumerate(half_steps):
+                o.set_initial(nu1, g.T / N / 2 * lam_g[:, 2 * k])
+                o.set_initial(nu2, g.T / N / 2 * lam_g[:, 2 * k + 1])
+        if nk and N > 1:
+            v_all = np.hstack([g.v(np.array([hz.t0])).T, vg])
+            u_all = g.u(guess_times(hz, g.T, [0.0])).T if nu else np.zeros((0, N))
+            PN0, fN0, W0, slack0 = self._guess_impulses(model, q_all, v_all, u_all, g.T / N, hz.t0, p_num)
+            o.set_initial(x.PN, PN0)
+            o.set_initial(x.fN, fN0)
+            o.set_initial(x.W, W0)
+            o.set_initial(x.slack, slack0)
 
     def _guess_impulses(self, model, q, v, u, h, t0, p):
         """Node impulses (nk × N−1), interval forces (nk × N), velocities after the impulses

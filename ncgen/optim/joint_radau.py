@@ -30,6 +30,8 @@ quaternions) are not handled; such models use the natural-coordinate GGL form.
 """
 from __future__ import annotations
 
+import functools
+
 import casadi as ca
 import numpy as np
 
@@ -138,26 +140,18 @@ class JointRadauCollocation(Transcription):
         js = model.joint_space
         nj = js.nq
         tau, C, b = radau_coefficients(d)
-        Cm = ca.DM(C)
         h = hz.T / N
         t = node_times(hz, tau[1:])
         Qj = opti.variable(nj, N * d)
         U = opti.variable(nu, N)
         Urep = ca.reshape(ca.repmat(U, d, 1), nu, N * d)
-        Vj, Aj, q_start, v_start = [], [], hz.q0, hz.v0
-        for k in range(N):
-            cols = slice(k * d, (k + 1) * d)
-            Vk = ca.mtimes(ca.horzcat(q_start, Qj[:, cols]), Cm) / h
-            Aj.append(ca.mtimes(ca.horzcat(v_start, Vk), Cm) / h)
-            Vj.append(Vk)
-            q_start, v_start = Qj[:, k * d + d - 1], Vk[:, d - 1]
-        Vj, Aj = ca.horzcat(*Vj), ca.horzcat(*Aj)
-        rates = []
+        Vj, Aj = _collocated_rates(hz, Qj, ca.DM(C), h, d)
+        rates, points = [], None
         if POINT_RATES:
-            Vv, Av = opti.variable(nj, N * d), opti.variable(nj, N * d)
-            rates = [("joint rates at the collocation points", ca.vec(Vv - Vj)),
-                     ("joint accelerations at the collocation points", ca.vec(Av - Aj))]
-            Vj, Aj = Vv, Av
+            points = opti.variable(nj, N * d), opti.variable(nj, N * d)
+            rates = [("joint rates at the collocation points", ca.vec(points[0] - Vj)),
+                     ("joint accelerations at the collocation points", ca.vec(points[1] - Aj))]
+            Vj, Aj = points
         res, Q, V = joint_dynamics_residual(model).map(N * d)(t, Qj, Vj, Aj, Urep, hz.p)
         tree = js.tree_function(model.layout)
         q0, v0 = tree(hz.q0, hz.v0)
@@ -166,33 +160,53 @@ class JointRadauCollocation(Transcription):
         q_scale = np.array(hz.q0).reshape(-1) if isinstance(hz.q0, ca.DM) else js.positions(model.q0)
         res = res / ca.DM(joint_inertias(model, q_scale))
         defects = [("dynamics (joint-space equations of motion M_j⁻¹ Jᵀ(M q̈ − F) = 0)", ca.vec(res))] + rates
-
-        def set_guess(o: ca.Opti, g):
-            tg = np.concatenate([[hz.t0], guess_times(hz, g.T, tau[1:])])
-            qg, vg = g.q(tg), g.v(tg)
-            qjg = np.array(js.positions.map(tg.size)(qg.T)).reshape(nj, -1)
-            qjg[js.angles] = np.unwrap(qjg[js.angles], axis=1)
-            start = hz.q0 if isinstance(hz.q0, ca.DM) else None
-            if start is not None and nj:               # the winding of the fixed start
-                turns = np.round((np.array(start).reshape(-1) - qjg[:, 0]) / (2 * np.pi)) * js.angles
-                qjg += 2 * np.pi * turns[:, None]
-            o.set_initial(Qj, qjg[:, 1:])
-            vj0 = np.array(js.rates(qg[0], vg[0])).reshape(-1)
-            if POINT_RATES:
-                vs, acc, v_prev = [], [], vj0
-                for k in range(N):
-                    Vk = np.column_stack([qjg[:, k * d], qjg[:, k * d + 1:(k + 1) * d + 1]]) @ C / (g.T / N)
-                    acc.append(np.column_stack([v_prev, Vk]) @ C / (g.T / N))
-                    vs.append(Vk)
-                    v_prev = Vk[:, -1]
-                o.set_initial(Vv, np.hstack(vs))
-                o.set_initial(Av, np.hstack(acc))
-            if nu:
-                o.set_initial(U, g.u(guess_times(hz, g.T, [0.0])).T)
-            return qjg[:, 0], vj0
-
         return Discretisation(q=ca.horzcat(q0, Q[:, last]), v=ca.horzcat(v0, V[:, last]), lam=None, U=U,
                               path_t=t, path_q=Q, path_v=V, quad_t=t, quad_q=Q, quad_v=V, quad_w=w,
-                              defects=defects, set_guess=set_guess, expandable=True,
+                              defects=defects, expandable=True,
+                              set_guess=functools.partial(self._set_guess, model, hz, Qj, U, points),
                               qj=ca.horzcat(hz.q0, Qj[:, last]), vj=ca.horzcat(hz.v0, Vj[:, last]),
                               path_qj=Qj, path_vj=Vj)
+
+    def _set_guess(self, model, hz: Horizon, Qj, U, points, o: ca.Opti, g):
+        """Initial values from the guess ``g``: its joint coordinates at the collocation points
+        (angles unwound, in the fixed start's winding), with ``points`` (the rates and
+        accelerations at the points, or None) their collocation rates; returns the guess's
+        initial joint coordinates and rates."""
+        d, N, js = self.degree, hz.N, model.joint_space
+        tau, C, _ = radau_coefficients(d)
+        tg = np.concatenate([[hz.t0], guess_times(hz, g.T, tau[1:])])
+        qg, vg = g.q(tg), g.v(tg)
+        qjg = np.array(js.positions.map(tg.size)(qg.T)).reshape(js.nq, -1)
+        qjg[js.angles] = np.unwrap(qjg[js.angles], axis=1)
+        start = hz.q0 if isinstance(hz.q0, ca.DM) else None
+        if start is not None and js.nq:            # the winding of the fixed start
+            turns = np.round((np.array(start).reshape(-1) - qjg[:, 0]) / (2 * np.pi)) * js.angles
+            qjg += 2 * np.pi * turns[:, None]
+        o.set_initial(Qj, qjg[:, 1:])
+        vj0 = np.array(js.rates(qg[0], vg[0])).reshape(-1)
+        if points is not None:
+            vs, acc, v_prev = [], [], vj0
+            for k in range(N):
+                Vk = np.column_stack([qjg[:, k * d], qjg[:, k * d + 1:(k + 1) * d + 1]]) @ C / (g.T / N)
+                acc.append(np.column_stack([v_prev, Vk]) @ C / (g.T / N))
+                vs.append(Vk)
+                v_prev = Vk[:, -1]
+            o.set_initial(points[0], np.hstack(vs))
+            o.set_initial(points[1], np.hstack(acc))
+        if model.nu:
+            o.set_initial(U, g.u(guess_times(hz, g.T, [0.0])).T)
+        return qjg[:, 0], vj0
+
+
+def _collocated_rates(hz: Horizon, Qj, Cm, h, d: int):
+    """The joint rates and accelerations at the collocation points that the collocated
+    joint coordinates ``Qj`` imply: ``V = (1/h) Σ_r C_rj q_{k,r}``, ``A = (1/h) Σ_r C_rj
+    v_{k,r}``, each interval from the last point of the one before (the initial node first)."""
+    Vj, Aj, q_start, v_start = [], [], hz.q0, hz.v0
+    for k in range(hz.N):
+        cols = slice(k * d, (k + 1) * d)
+        Vk = ca.mtimes(ca.horzcat(q_start, Qj[:, cols]), Cm) / h
+        Aj.append(ca.mtimes(ca.horzcat(v_start, Vk), Cm) / h)
+        Vj.append(Vk)
+        q_start, v_start = Qj[:, k * d + d - 1], Vk[:, d - 1]
+    return ca.horzcat(*Vj), ca.horzcat(*Aj)

@@ -115,10 +115,36 @@ class NLP:
 
     # ------------------------------------------------------------------ build
     def build(self, warm_start):
+        ocp, opti = self.ocp, self.opti
+        p_num = self._time_and_parameters()
+        q_init, v_init = self._initial_state(p_num)
+        tN = ocp.t0 + guess_duration(ocp, warm_start)
+        q_start = self.model.q0 if q_init is None else q_init
+        self._final_targets(q_start, tN, p_num)
+        guess, p_guess = make_guess(ocp, warm_start, q_start,
+                                    np.zeros(self.model.nq) if v_init is None else v_init, self.q_final, p_num)
+        self.guess = guess
+        joint = getattr(ocp.transcription, "joint_space", False)
+        hz = self._initial_node(joint, q_init, v_init, q_start, p_num)
+        self.disc = disc = ocp.transcription.build(opti, self.model, hz)
+        for label, e in disc.defects:
+            self.constrain(label, "dynamics", e)
+        if not joint:
+            self._initial_invariants(q_init, v_init)
+        self._markers_at("initial", 0, ocp.initial_spec["markers"])
+        self._final_conditions(guess, q_init, p_num)
+        self._bounds(q_init, v_init)
+        self._path()
+        if self.elastic:
+            opti.minimize(sum(ca.sum1(v) for v in self.slacks.values()) if self.slacks else ca.MX(0))
+        else:
+            opti.minimize(self._objective())
+        self._initial_values(joint, q_init, v_init, p_guess)
+
+    def _time_and_parameters(self) -> np.ndarray:
+        """The final time ``T`` and parameters ``p`` (variables where free, with their bounds);
+        returns the parameters' values (the free ones at their given values)."""
         ocp, model, opti = self.ocp, self.model, self.opti
-        f = model.functions
-        t0 = ocp.t0
-        # final time and parameters
         if ocp.t_final_bounds is None:
             self.T = ocp.t_final
         else:
@@ -137,10 +163,13 @@ class NLP:
         else:
             self.p_var = None
             self.p = ca.DM(p_num)
-        # initial node
-        q_init, v_init = self._initial_state(p_num)
-        tN = t0 + guess_duration(ocp, warm_start)
-        q_start = model.q0 if q_init is None else q_init
+        return p_num
+
+    def _final_targets(self, q_start, tN: float, p_num) -> None:
+        """``q_final`` (a configuration, or the reference of a pose or joint target),
+        ``pose_target`` and ``joint_target`` of the final conditions, resolved at ``tN`` from
+        ``q_start``."""
+        ocp, model = self.ocp, self.model
         self.q_final = None if ocp.final_spec["q"] is None else resolve_configuration(
             model, ocp.final_spec["q"], q_start, t=tN, p=p_num, what="final q")
         self.pose_target = self.joint_target = None
@@ -150,48 +179,44 @@ class NLP:
         if ocp.final_spec.get("joints"):
             self.joint_target = joint_target(model, ocp.final_spec["joints"], q_start, t=tN, p=p_num)
             self.q_final = self.joint_target.q_ref
-        guess, p_guess = make_guess(ocp, warm_start,
-                                    model.q0 if q_init is None else q_init,
-                                    np.zeros(model.nq) if v_init is None else v_init, self.q_final, p_num)
-        self.guess = guess
-        joint = getattr(ocp.transcription, "joint_space", False)
-        if joint:                   # the initial node in joint coordinates; q₀ = q(q_j0) holds Φ = 0
-            js = model.joint_space
-            self._check_joint_space(q_start, p_num)
-            self.x0 = opti.variable(js.nq) if q_init is None else ca.DM(js.positions(q_init))
-            if v_init is None:
-                self.w0 = opti.variable(js.nv)
-            elif q_init is not None or not np.any(v_init):
-                self.w0 = ca.DM(js.rates(q_start, v_init))
-            else:
-                raise OptimizationError("initial v: a nonzero velocity with a free initial q cannot be given in the "
-                                        "joint-space form; fix the initial q, or use form='ggl'")
-            self.q0, self.v0 = js.tree_function(model.layout)(self.x0, self.w0)
-            hz = Horizon(t0=t0, T=self.T, p=self.p, q0=self.x0, v0=self.w0, N=ocp.N)
-        else:
+
+    def _initial_node(self, joint: bool, q_init, v_init, q_start, p_num) -> Horizon:
+        """The initial node (``x0, w0`` in joint coordinates, or ``q0, v0``: variables where
+        free) and the :class:`Horizon` the transcription builds on."""
+        ocp, model, opti = self.ocp, self.model, self.opti
+        if not joint:
             self.q0 = opti.variable(model.nq) if q_init is None else ca.DM(q_init)
             self.v0 = opti.variable(model.nq) if v_init is None else ca.DM(v_init)
-            hz = Horizon(t0=t0, T=self.T, p=self.p, q0=self.q0, v0=self.v0, N=ocp.N)
-        self.disc = disc = ocp.transcription.build(opti, model, hz)
-        for label, e in disc.defects:
-            self.constrain(label, "dynamics", e)
-        if not joint and q_init is None:
+            return Horizon(t0=ocp.t0, T=self.T, p=self.p, q0=self.q0, v0=self.v0, N=ocp.N)
+        js = model.joint_space        # the initial node in joint coordinates; q₀ = q(q_j0) holds Φ = 0
+        self._check_joint_space(q_start, p_num)
+        self.x0 = opti.variable(js.nq) if q_init is None else ca.DM(js.positions(q_init))
+        if v_init is None:
+            self.w0 = opti.variable(js.nv)
+        elif q_init is not None or not np.any(v_init):
+            self.w0 = ca.DM(js.rates(q_start, v_init))
+        else:
+            raise OptimizationError("initial v: a nonzero velocity with a free initial q cannot be given in the "
+                                    "joint-space form; fix the initial q, or use form='ggl'")
+        self.q0, self.v0 = js.tree_function(model.layout)(self.x0, self.w0)
+        return Horizon(t0=ocp.t0, T=self.T, p=self.p, q0=self.x0, v0=self.w0, N=ocp.N)
+
+    def _initial_invariants(self, q_init, v_init) -> None:
+        """``Φ(q₀) = 0`` where the initial q is free, ``A(q₀) v₀ + Φ_t = 0`` where either is."""
+        f, t0 = self.model.functions, self.ocp.t0
+        if q_init is None:
             self.constrain("initial position invariant Φ(q₀) = 0", "invariant", f["phi"](t0, self.q0, self.p))
-        if not joint and (q_init is None or v_init is None):
+        if q_init is None or v_init is None:
             vel = ca.mtimes(f["A"](t0, self.q0, self.p), self.v0) + f["phi_t"](t0, self.q0, self.p)
             if ca.symvar(vel):
                 self.constrain("initial velocity invariant A(q₀) v₀ + Φ_t = 0", "invariant", vel)
-        self._markers_at("initial", 0, ocp.initial_spec["markers"])
-        self._final_conditions(guess, q_init, p_num)
-        self._bounds(q_init, v_init)
-        self._path()
-        if self.elastic:
-            opti.minimize(sum(ca.sum1(v) for v in self.slacks.values()) if self.slacks else ca.MX(0))
-        else:
-            opti.minimize(self._objective())
-        # initial values
-        start = disc.set_guess(opti, guess)
-        g0 = np.array([t0])
+
+    def _initial_values(self, joint: bool, q_init, v_init, p_guess) -> None:
+        """IPOPT's starting point: the transcription's from the guess, then the free initial
+        node, final time and parameters."""
+        ocp, opti, guess = self.ocp, self.opti, self.guess
+        start = self.disc.set_guess(opti, guess)
+        g0 = np.array([ocp.t0])
         x0, w0 = (self.x0, self.w0) if joint else (self.q0, self.v0)
         if q_init is None:
             opti.set_initial(x0, start[0] if joint else guess.q(g0)[0])

@@ -38,6 +38,26 @@ METHODS = ("collocation", "shooting", "contact_implicit")
 LINEAR_SOLVERS = ("mumps", "spral", "ma27", "ma57", "ma77", "ma86", "ma97", "pardiso", "pardisomkl")
 
 
+def _method(model, method: str | None, contacts) -> str:
+    """The transcription method: ``method``, or by default ``"contact_implicit"`` for a model
+    with nonsmooth contacts and ``"collocation"`` otherwise; refused where it does not fit
+    the model's contacts or the ``contacts`` settings."""
+    from ncgen.optim.contact_implicit import nonsmooth_contacts, refuse_unsupported
+
+    if method is None:
+        method = "contact_implicit" if nonsmooth_contacts(model) else "collocation"
+    if method not in METHODS:
+        raise OptimizationError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+    refuse_unsupported(model, method)
+    if method == "contact_implicit" and not nonsmooth_contacts(model):
+        raise OptimizationError(f"method='contact_implicit': model {model.name!r} has no nonsmooth contacts "
+                                "(build it with contacts='nonsmooth'); use method='collocation'")
+    if contacts is not None and method != "contact_implicit":
+        raise OptimizationError("contacts: settings of the contact-implicit transcription, given with "
+                                f"method={method!r}; the model has no nonsmooth contacts")
+    return method
+
+
 class OptimalControl:
     """An optimal-control problem on ``model`` over ``N`` intervals.
 
@@ -57,21 +77,10 @@ class OptimalControl:
     def __init__(self, model, N: int = 50, t_final=1.0, method: str | None = None, *, degree: int = 3,
                  form: str = "auto", integrator: str = "idas", integrator_options: dict | None = None,
                  parameters: dict | None = None, contacts: dict | None = None):
-        from ncgen.optim.contact_implicit import ContactImplicit, nonsmooth_contacts, refuse_unsupported
         refuse_rolling(model, "OptimalControl", "optimal control with rolling elements is not supported yet")
         if not isinstance(N, (int, np.integer)) or isinstance(N, bool) or N < 1:
             raise OptimizationError(f"N: expected a positive integer number of intervals, got {N!r}")
-        if method is None:
-            method = "contact_implicit" if nonsmooth_contacts(model) else "collocation"
-        if method not in METHODS:
-            raise OptimizationError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
-        refuse_unsupported(model, method)
-        if method == "contact_implicit" and not nonsmooth_contacts(model):
-            raise OptimizationError(f"method='contact_implicit': model {model.name!r} has no nonsmooth contacts "
-                                    "(build it with contacts='nonsmooth'); use method='collocation'")
-        if contacts is not None and method != "contact_implicit":
-            raise OptimizationError("contacts: settings of the contact-implicit transcription, given with "
-                                    f"method={method!r}; the model has no nonsmooth contacts")
+        method = _method(model, method, contacts)
         self.model = model
         self.N = int(N)
         self.method = method
@@ -80,11 +89,19 @@ class OptimalControl:
         if method == "collocation":
             self.transcription = _collocation(model, degree, form)
         elif method == "contact_implicit":
+            from ncgen.optim.contact_implicit import ContactImplicit
             self.transcription = ContactImplicit(model, contacts)
         else:
             from ncgen.optim.shooting import MultipleShooting
             self.transcription = MultipleShooting(integrator, **(integrator_options or {}))
-        nq, nu = model.nq, model.nu
+        self._unconstrained()
+        for name, value in (parameters or {}).items():
+            self.set_parameter(name, value)
+
+    def _unconstrained(self) -> None:
+        """No bounds, boundary conditions, free parameters or costs yet; the model's state at
+        the start and its parameter values."""
+        nq, nu = self.model.nq, self.model.nu
         inf = np.inf
         self.u_bounds = np.array([[-inf] * nu, [inf] * nu]).reshape(2, nu)
         self.q_bounds = np.array([[-inf] * nq, [inf] * nq]).reshape(2, nq)
@@ -92,7 +109,7 @@ class OptimalControl:
         #: Bounds on coordinates as written that sharing re-based: ``(kind, name, s, c, lower,
         #: upper)``, ``kind`` "coordinate" (``s · q + c``) or "velocity of" (``s · v``).
         self.row_bounds: list[tuple[str, str, np.ndarray, float, float, float]] = []
-        self.p_values = model.p0.copy()
+        self.p_values = self.model.p0.copy()
         self.p_free: dict[int, tuple[float, float]] = {}
         self.marker_bounds: list[tuple[str, np.ndarray, np.ndarray]] = []
         #: Joint-space path constraints: (joint, "position" or "rate", lower, upper).
@@ -107,8 +124,6 @@ class OptimalControl:
         self.terminal: list[tuple[str, object]] = []
         self.time_weight = 0.0
         self.guess_turns: dict[str, object] = {}
-        for name, value in (parameters or {}).items():
-            self.set_parameter(name, value)
 
     # ------------------------------------------------------------------ names
     def input_indices(self, name: str) -> list[int]:

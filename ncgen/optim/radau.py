@@ -34,6 +34,8 @@ collocation unknowns.  Inputs piecewise constant per interval, as in multiple sh
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import casadi as ca
 import numpy as np
 
@@ -79,49 +81,17 @@ class RadauCollocation(Transcription):
     def build(self, opti: ca.Opti, model, hz: Horizon) -> Discretisation:
         d, N, nq, nc, nu = self.degree, hz.N, model.nq, model.nc, model.nu
         tau, C, b = radau_coefficients(d)
-        Cm = ca.DM(C)
         h = hz.T / N
         t = node_times(hz, tau[1:])
         Q = opti.variable(nq, N * d)
         L = opti.variable(nc, N * d)
         U = opti.variable(nu, N)
         Urep = ca.reshape(ca.repmat(U, d, 1), nu, N * d)   # column k·d + j holds u_k
-        Acc = Mu = None
+        points = _Points(t=t, Q=Q, L=L, Urep=Urep, C=ca.DM(C), h=h, d=d)
         if self.form in ("index3", "ggl"):
-            if self.form == "ggl":
-                Mu = opti.variable(nc, N * d)
-            Qdot = []                                  # (1/h) Σ_r C_rj q_{k,r}
-            q_start = hz.q0
-            for k in range(N):
-                Qdot.append(ca.mtimes(ca.horzcat(q_start, Q[:, k * d:(k + 1) * d]), Cm) / h)
-                q_start = Q[:, k * d + d - 1]
-            Qdot = ca.horzcat(*Qdot)
-            V = Qdot if Mu is None else ggl_velocity(model).map(N * d)(t, Q, Qdot, Mu, hz.p)
-            Vdot, v_start = [], hz.v0                  # Σ_r C_rj v_{k,r} = h q̈_{k,j}
-            for k in range(N):
-                Vk = V[:, k * d:(k + 1) * d]
-                Vdot.append(ca.mtimes(ca.horzcat(v_start, Vk), Cm))
-                v_start = Vk[:, d - 1]
-            eom, con = kkt_residuals(model, "index3").map(N * d)(t, Q, V, ca.horzcat(*Vdot), L, Urep, hz.p, h)
-            defects = [("dynamics (equations of motion M q̈ + Aᵀλ = F)", ca.vec(eom)),
-                       ("dynamics (joints Φ(q) = 0 at the collocation points)", ca.vec(con))]
-            if Mu is not None:
-                vel = velocity_constraint(model).map(N * d)(t, Q, V, hz.p)
-                defects.append(("dynamics (joint velocities A v + Φ_t = 0 at the collocation points)", ca.vec(vel)))
+            (V, Mu, defects), Acc = self._second_order(opti, model, hz, points), None
         else:
-            V = opti.variable(nq, N * d)
-            Acc = opti.variable(nq, N * d)
-            eom, con = kkt_residuals(model, "index1").map(N * d)(t, Q, V, Acc, L, Urep, hz.p, h)
-            X, Xdot = ca.vertcat(Q, V), ca.vertcat(V, Acc)
-            x_start = ca.vertcat(hz.q0, hz.v0)
-            defects = []
-            for k in range(N):
-                cols = slice(k * d, (k + 1) * d)
-                res = ca.mtimes(ca.horzcat(x_start, X[:, cols]), Cm) - h * Xdot[:, cols]
-                defects.append((f"dynamics (collocation, interval {k})", ca.vec(res)))
-                x_start = X[:, k * d + d - 1]
-            defects.append(("dynamics (equations of motion M a + Aᵀλ = F)", ca.vec(eom)))
-            defects.append(("dynamics (acceleration constraints, Baumgarte)", ca.vec(con)))
+            (V, Acc, defects), Mu = self._first_order(opti, model, hz, points), None
         last = list(range(d - 1, N * d, d))
         q_nodes = ca.horzcat(hz.q0, Q[:, last])
         v_nodes = ca.horzcat(hz.v0, V[:, last])
@@ -143,6 +113,66 @@ class RadauCollocation(Transcription):
         return Discretisation(q=q_nodes, v=v_nodes, lam=L[:, last], U=U, path_t=t, path_q=Q, path_v=V,
                               quad_t=t, quad_q=Q, quad_v=V, quad_w=w, defects=defects,
                               set_guess=set_guess, expandable=True)
+
+    def _second_order(self, opti: ca.Opti, model, hz: Horizon, x: "_Points"):
+        """The index-3 and GGL forms: positions collocated, ``v = q̇`` (GGL: ``q̇ − Aᵀμ``, with
+        multipliers ``μ``), ``M q̈ + Aᵀλ = F`` and ``Φ = 0`` (GGL: also ``A v + Φ_t = 0``) at
+        the collocation points; ``(V, μ or None, defects)``."""
+        N, d, Cm, h = hz.N, x.d, x.C, x.h
+        Mu = opti.variable(model.nc, N * d) if self.form == "ggl" else None
+        Qdot = []                                  # (1/h) Σ_r C_rj q_{k,r}
+        q_start = hz.q0
+        for k in range(N):
+            Qdot.append(ca.mtimes(ca.horzcat(q_start, x.Q[:, k * d:(k + 1) * d]), Cm) / h)
+            q_start = x.Q[:, k * d + d - 1]
+        Qdot = ca.horzcat(*Qdot)
+        V = Qdot if Mu is None else ggl_velocity(model).map(N * d)(x.t, x.Q, Qdot, Mu, hz.p)
+        Vdot, v_start = [], hz.v0                  # Σ_r C_rj v_{k,r} = h q̈_{k,j}
+        for k in range(N):
+            Vk = V[:, k * d:(k + 1) * d]
+            Vdot.append(ca.mtimes(ca.horzcat(v_start, Vk), Cm))
+            v_start = Vk[:, d - 1]
+        eom, con = kkt_residuals(model, "index3").map(N * d)(x.t, x.Q, V, ca.horzcat(*Vdot), x.L, x.Urep, hz.p, h)
+        defects = [("dynamics (equations of motion M q̈ + Aᵀλ = F)", ca.vec(eom)),
+                   ("dynamics (joints Φ(q) = 0 at the collocation points)", ca.vec(con))]
+        if Mu is not None:
+            vel = velocity_constraint(model).map(N * d)(x.t, x.Q, V, hz.p)
+            defects.append(("dynamics (joint velocities A v + Φ_t = 0 at the collocation points)", ca.vec(vel)))
+        return V, Mu, defects
+
+    @staticmethod
+    def _first_order(opti: ca.Opti, model, hz: Horizon, x: "_Points"):
+        """The index-1 form: ``[q; v]`` collocated with the accelerations as unknowns, ``M a +
+        Aᵀλ = F`` and the Baumgarte-stabilised acceleration constraints; ``(V, Acc, defects)``."""
+        N, d, h = hz.N, x.d, x.h
+        V = opti.variable(model.nq, N * d)
+        Acc = opti.variable(model.nq, N * d)
+        eom, con = kkt_residuals(model, "index1").map(N * d)(x.t, x.Q, V, Acc, x.L, x.Urep, hz.p, h)
+        X, Xdot = ca.vertcat(x.Q, V), ca.vertcat(V, Acc)
+        x_start = ca.vertcat(hz.q0, hz.v0)
+        defects = []
+        for k in range(N):
+            cols = slice(k * d, (k + 1) * d)
+            res = ca.mtimes(ca.horzcat(x_start, X[:, cols]), x.C) - h * Xdot[:, cols]
+            defects.append((f"dynamics (collocation, interval {k})", ca.vec(res)))
+            x_start = X[:, k * d + d - 1]
+        defects.append(("dynamics (equations of motion M a + Aᵀλ = F)", ca.vec(eom)))
+        defects.append(("dynamics (acceleration constraints, Baumgarte)", ca.vec(con)))
+        return V, Acc, defects
+
+
+class _Points(NamedTuple):
+    """The collocation points' times ``t``, positions ``Q``, multipliers ``L``, inputs
+    ``Urep`` (column k·d + j holds u_k), the collocation matrix ``C`` (DM), the step ``h``
+    and the degree ``d``."""
+
+    t: object
+    Q: object
+    L: object
+    Urep: object
+    C: object
+    h: object
+    d: int
 
 
 def kkt_residuals(model, form: str = "index1") -> ca.Function:

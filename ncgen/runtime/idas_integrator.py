@@ -153,9 +153,9 @@ def _simulate_idas(model, run: Run, opts: IdasOptions) -> Trajectory:
     grid = t if m == 1 else t[0] + (t[-1] - t[0]) * np.arange(m * (len(t) - 1) + 1) / (m * (len(t) - 1))
     W = np.full((len(grid), 5), np.nan) if balance else None      # each interval's work by class (quadratures)
     try:
-        X, Z, failure, projected_from = _run(runner, grid, np.concatenate([q, v]), np.concatenate([a, lam]),
-                                             np.repeat(columns, m, axis=1), pv, bar, projector, bridge, auto=watch,
-                                             work=W)
+        watched = (projector, bridge) if projector is not None else None
+        X, Z, failure, projected_from = _run(_GridRun(runner, grid, np.concatenate([q, v]), np.concatenate([a, lam]),
+                                                      np.repeat(columns, m, axis=1), pv, watched, watch, W), bar)
     finally:
         bar.close()
     reached = float(grid[len(X) - 1])        # the last good time, on the watched grid
@@ -349,15 +349,136 @@ class _bridge:
         return x1, _algebraic(self.model, t1, x1, u1, self.p)
 
 
-def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=None, bridge=None, auto=False,
-         work=None):
+class _GridRun:
+    """The states of one IDAS run on the grid ``t`` (the watched grid, see
+    :data:`WATCHED_SAMPLE`): rows of ``X`` (``[q; v]``) and ``Z`` (``[a; λ]``) filled up to
+    ``top``; ``watch``: ``(projector, bridge)`` (the near-singular watch, see :func:`_run`) or
+    None; ``work`` (an array of a row per grid time, or None): row ``k + 1`` receives the work
+    of each class over interval ``k`` from IDAS's quadratures (``runner.last_work``), a bridged
+    interval's stays as it was.  Watching, it remembers ``σ_min/σ_max`` of A and its rate at
+    the outputs (``R``), the ratio's last second difference seen by IDAS (``bend``), where IDAS
+    resumed after the last bridge and its stretches between bridges, and ``since``: the first
+    output from which the run was bridged or projected."""
+
+    def __init__(self, runner: ChunkedIDAS, t, x0, z0, columns, p, watch=None, auto=False, work=None):
+        self.runner, self.t, self.columns, self.p, self.auto, self.work = runner, t, columns, p, auto, work
+        self.projector, self.bridge = watch if watch is not None else (None, None)
+        self.watching = watch is not None
+        self.n_int = len(t) - 1
+        self.full = 1 if self.watching and not auto else max(1, math.ceil(self.n_int / CHUNKS))
+        self.X = np.empty((len(t), len(x0)))
+        self.Z = np.empty((len(t), len(z0)))
+        self.R = np.full((len(t), 2), np.nan)     # σ_min/σ_max of A and its rate at the grid times (watching)
+        self.h = float(t[1] - t[0])
+        self.X[0], self.Z[0] = x0, z0
+        self.since = None if auto or not self.watching else 0
+        self.max_steps = WATCHED_MAX_STEPS if self.watching else None
+        self.top = 0                              # the last output with a state
+        self.bend = np.nan                        # the last second difference of that ratio seen by IDAS
+        self.resumed, self.stretches = None, []   # where IDAS resumed after the last bridge; its stretches between
+
+    def advance(self, k, n, max_steps=None):
+        """IDAS over intervals k ... k + n − 1."""
+        X, Z, t = self.X, self.Z, self.t
+        X[k + 1:k + n + 1], Z[k + 1:k + n + 1] = self.runner.advance(t[k], X[k], Z[k], self.columns[:, k:k + n],
+                                                                     self.p, max_steps)
+        if self.work is not None:
+            self.work[k + 1:k + n + 1] = self.runner.last_work
+        self.R[k + 1:k + n + 1] = np.nan
+        self.top = k + n
+
+    def ratio(self, i) -> float:
+        """``σ_min/σ_max`` of A at output i, with those of the outputs after it up to
+        :data:`~ncgen.assembly.manifold.RATE_BLOCK` (evaluated together)."""
+        R = self.R
+        if np.isnan(R[i, 0]):
+            j = max(i + 1, min(self.top + 1, i + RATE_BLOCK))
+            R[i:j] = self.projector.ratio_rates(self.t[i:j], self.X[i:j])
+            raise_if_interrupted()
+        return R[i, 0]
+
+    def near(self, i, limit=NEAR_SINGULAR) -> bool:
+        return self.ratio(i) < limit * self.projector.scale
+
+    def hidden(self, i) -> bool:
+        """Whether the ratio could have dipped below the near-singular limit between grid
+        times i − 1 and i, both above it: going down to the limit and back takes a travel of
+        ``(r_{i−1} − limit) + (r_i − limit)``, which the ratio, moving at the larger of its two
+        end rates, covers within the interval."""
+        limit = NEAR_SINGULAR * self.projector.scale
+        room = self.ratio(i - 1) + self.ratio(i) - 2.0 * limit
+        return room < max(abs(self.R[i - 1, 1]), abs(self.R[i, 1])) * self.h
+
+    def chunk(self, k) -> int:
+        """Intervals of the next IDAS call from output k (see :func:`_run`)."""
+        if not self.watching:
+            return self.full
+        if not np.isfinite(self.bend) or k == 0:
+            return min(self.full, WATCHED_CHUNK)
+        limit = NEAR_SINGULAR * self.projector.scale
+        n = _chunk_to_limit(self.ratio(k) - limit, self.ratio(k) - self.ratio(k - 1), self.bend, self.full)
+        if k == self.resumed and self.stretches:    # just after a bridge: no longer than the last stretches
+            n = min(n, max(1, min(self.stretches[-2:]) - 1))
+        return n
+
+    def observe(self, k0, k):
+        """Update ``bend`` from the ratios at outputs k0 − 1 ... k (IDAS's, away from the flat
+        position, where the ratio is smooth)."""
+        r = np.array([self.ratio(i) for i in range(max(0, k0 - 1), k + 1)])
+        if len(r) > 2:
+            self.bend = float(np.diff(r, 2)[-1])
+
+    def bridged(self, k) -> int:
+        """Interval k crossed by the bridge from the projected state."""
+        self.since = k if self.since is None else self.since
+        if self.resumed is not None and k > self.resumed:
+            self.stretches.append(k - self.resumed)
+        self.resumed = k + 1
+        X, Z, t = self.X, self.Z, self.t
+        X[k] = self.projector(t[k], X[k])
+        X[k + 1], Z[k + 1] = self.bridge(t[k], t[k + 1], X[k], self.columns[:, k])
+        self.R[k:k + 2] = np.nan
+        self.top = k + 1
+        return k + 1
+
+    def single(self, k) -> int:
+        """Interval k by IDAS (first with the watched step limit), else, watching and not far
+        from a singular configuration (:data:`FAILING_NEAR_SINGULAR`), bridged.  An interval
+        that needs more steps than the limit away from one lifts the limit for the run."""
+        try:
+            self.advance(k, 1, self.max_steps)
+            return k + 1
+        except ChunkFailure:
+            if self.watching and self.near(k, FAILING_NEAR_SINGULAR):
+                return self.bridged(k)
+            if self.max_steps is None:
+                raise
+        self.advance(k, 1)
+        self.max_steps = None
+        return k + 1
+
+    def cut(self, k0, k) -> int:
+        """Watching, after IDAS from output k0 to k: the chunk cut at the last output before
+        the first that is near-singular or could hide a near-singular configuration, crossed
+        by the bridge; the output to go on from."""
+        first = next((i for i in range(k0 + 1, k + 1) if self.near(i) or self.hidden(i)), None)
+        self.observe(k0, k if first is None else first)
+        return k if first is None else self.bridged(first - 1)
+
+    def project(self, k):
+        """The state at output k projected onto the constraints."""
+        self.X[k] = self.projector(self.t[k], self.X[k])
+        self.R[k] = np.nan
+
+
+def _run(run: _GridRun, bar: Progress):
     """States on the grid up to the end or the first failure: ``(X, Z, failure or None,
     index of the first output time from which the run was bridged or projected, or None)``.
 
     IDAS over chunks of several output intervals (one with ``project=True``); a failed
     chunk is retried one interval at a time, to keep every state before the failure
     (watching: shorter, ending before where IDAS gave up, then chunks again).
-    With a ``projector`` (``project`` True or ``"auto"``, see :func:`simulate`) every output
+    Watching (``run.watch``: ``project`` True or ``"auto"``, see :func:`simulate`) every output
     configuration is watched (``σ_min/σ_max`` of A): the first chunk is at most
     :data:`WATCHED_CHUNK` intervals, later ones end at the first output past where that
     ratio would reach the near-singular limit by its slope and bend at the last outputs
@@ -368,139 +489,44 @@ def _run(runner: ChunkedIDAS, t, x0, z0, columns, p, bar: Progress, projector=No
     reaches the limit, or has an interval across which the ratio could dip below it unseen
     (``hidden``: its rate at both ends), is cut at the last output before it; every interval
     that starts or ends at a near-singular configuration, that could hide one, or that IDAS
-    fails on not far from one (:data:`FAILING_NEAR_SINGULAR`), is crossed by ``bridge``
-    instead, from the projected state.  ``t`` is the watched grid (see :data:`WATCHED_SAMPLE`).
-    ``auto=False``: the state is also projected after every interval.  ``work`` (an array of
-    a row per grid time, or None): row ``k + 1`` receives the work of each class over interval
-    ``k`` from IDAS's quadratures (``runner.last_work``); a bridged interval's stays as it was."""
-    n_int = len(t) - 1
-    watching = projector is not None
-    full = 1 if watching and not auto else max(1, math.ceil(n_int / CHUNKS))
-    X = np.empty((len(t), len(x0)))
-    Z = np.empty((len(t), len(z0)))
-    R = np.full((len(t), 2), np.nan)     # σ_min/σ_max of A and its rate at the grid times (watching)
-    h = float(t[1] - t[0])
-    X[0], Z[0] = x0, z0
-    since = None if auto or not watching else 0
-    steps = [WATCHED_MAX_STEPS if watching else None]
-
-    top = [0]                             # the last output with a state
-
-    def advance(k, n, max_steps=None):
-        X[k + 1:k + n + 1], Z[k + 1:k + n + 1] = runner.advance(t[k], X[k], Z[k], columns[:, k:k + n], p, max_steps)
-        if work is not None:
-            work[k + 1:k + n + 1] = runner.last_work
-        R[k + 1:k + n + 1] = np.nan
-        top[0] = k + n
-
-    def ratio(i) -> float:
-        """``σ_min/σ_max`` of A at output i, with those of the outputs after it up to
-        :data:`~ncgen.assembly.manifold.RATE_BLOCK` (evaluated together)."""
-        if np.isnan(R[i, 0]):
-            j = max(i + 1, min(top[0] + 1, i + RATE_BLOCK))
-            R[i:j] = projector.ratio_rates(t[i:j], X[i:j])
-            raise_if_interrupted()
-        return R[i, 0]
-
-    def near(i, limit=NEAR_SINGULAR) -> bool:
-        return ratio(i) < limit * projector.scale
-
-    def hidden(i) -> bool:
-        """Whether the ratio could have dipped below the near-singular limit between grid
-        times i − 1 and i, both above it: going down to the limit and back takes a travel of
-        ``(r_{i−1} − limit) + (r_i − limit)``, which the ratio, moving at the larger of its two
-        end rates, covers within the interval."""
-        limit = NEAR_SINGULAR * projector.scale
-        room = ratio(i - 1) + ratio(i) - 2.0 * limit
-        return room < max(abs(R[i - 1, 1]), abs(R[i, 1])) * h
-
-    bend = [np.nan]                       # the last second difference of that ratio seen by IDAS
-    resumed, stretches = [None], []       # where IDAS resumed after the last bridge; its stretches between
-
-    def chunk(k) -> int:
-        """Intervals of the next IDAS call from output k (see above)."""
-        if not watching:
-            return full
-        if not np.isfinite(bend[0]) or k == 0:
-            return min(full, WATCHED_CHUNK)
-        n = _chunk_to_limit(ratio(k) - NEAR_SINGULAR * projector.scale, ratio(k) - ratio(k - 1), bend[0], full)
-        if k == resumed[0] and stretches:    # just after a bridge: no longer than the last stretches
-            n = min(n, max(1, min(stretches[-2:]) - 1))
-        return n
-
-    def observe(k0, k):
-        """Update ``bend`` from the ratios at outputs k0 − 1 ... k (IDAS's, away from the flat
-        position, where the ratio is smooth)."""
-        r = np.array([ratio(i) for i in range(max(0, k0 - 1), k + 1)])
-        if len(r) > 2:
-            bend[0] = float(np.diff(r, 2)[-1])
-
-    def bridged(k) -> int:
-        nonlocal since
-        since = k if since is None else since
-        if resumed[0] is not None and k > resumed[0]:
-            stretches.append(k - resumed[0])
-        resumed[0] = k + 1
-        X[k] = projector(t[k], X[k])
-        X[k + 1], Z[k + 1] = bridge(t[k], t[k + 1], X[k], columns[:, k])
-        R[k:k + 2] = np.nan
-        top[0] = k + 1
-        return k + 1
-
-    def single(k) -> int:
-        """Interval k by IDAS (first with the watched step limit), else, watching and not far
-        from a singular configuration (:data:`FAILING_NEAR_SINGULAR`), bridged.  An interval
-        that needs more steps than the limit away from one lifts the limit for the run."""
-        try:
-            advance(k, 1, steps[0])
-            return k + 1
-        except ChunkFailure:
-            if watching and near(k, FAILING_NEAR_SINGULAR):
-                return bridged(k)
-            if steps[0] is None:
-                raise
-        advance(k, 1)
-        steps[0] = None
-        return k + 1
-
-    k, cap = 0, n_int
+    fails on not far from one (:data:`FAILING_NEAR_SINGULAR`), is crossed by the bridge
+    instead, from the projected state.  ``run.auto=False``: the state is also projected after
+    every interval."""
+    k, n_int = 0, run.n_int
+    cap = n_int
     while k < n_int:
         try:
             raise_if_interrupted()
-            if watching and near(k):
-                k = bridged(k)
+            if run.watching and run.near(k):
+                k = run.bridged(k)
             else:
-                k0, n = k, min(chunk(k), n_int - k, cap)
+                k0, n = k, min(run.chunk(k), n_int - k, cap)
                 try:
-                    advance(k, n, steps[0])
+                    run.advance(k, n, run.max_steps)
                     k, cap = k + n, n_int
                 except ChunkFailure as e:
-                    if watching and n > 1:           # again from k, ending before where IDAS gave up
-                        cap = _retry_length(e, float(t[k]), float(t[1] - t[0]), n)
+                    if run.watching and n > 1:           # again from k, ending before where IDAS gave up
+                        cap = _retry_length(e, float(run.t[k]), run.h, n)
                         continue
-                    k = single(k)
-                    while not watching and k < k0 + n:
-                        k = single(k)
-                if watching:
-                    first = next((i for i in range(k0 + 1, k + 1) if near(i) or hidden(i)), None)
-                    observe(k0, k if first is None else first)
-                    if first is not None:            # cut before it, cross it by the bridge
-                        k = bridged(first - 1)
+                    k = run.single(k)
+                    while not run.watching and k < k0 + n:
+                        k = run.single(k)
+                if run.watching:
+                    k = run.cut(k0, k)
         except ChunkFailure as last:
-            return X[:k + 1], Z[:k + 1], last, since
+            return run.X[:k + 1], run.Z[:k + 1], last, run.since
         except KeyboardInterrupt:
-            return X[:k + 1], Z[:k + 1], INTERRUPTED, since
+            return run.X[:k + 1], run.Z[:k + 1], INTERRUPTED, run.since
         except SystemError:                  # Ctrl-C inside a C call that then returned a value
             try:
                 raise_if_interrupted()
             except KeyboardInterrupt:
-                return X[:k + 1], Z[:k + 1], INTERRUPTED, since
+                return run.X[:k + 1], run.Z[:k + 1], INTERRUPTED, run.since
             raise
-        if watching and not auto:
-            X[k] = projector(t[k], X[k])
-            R[k] = np.nan
-        bar.update(t[k])
-    return X, Z, None, since
+        if run.watching and not run.auto:
+            run.project(k)
+        bar.update(run.t[k])
+    return run.X, run.Z, None, run.since
 
 
 def _branch_changes(model, projector: ManifoldProjector, bridge: _bridge, grid, X) -> tuple[list, float]:

@@ -227,19 +227,9 @@ def joint_loop(model, controller=None, joint_dynamics: bool = False, cflags=None
         kernels = choose_kernels(model, 1, controller, joint_dynamics).backend
     if kernels not in ("tables", "flat"):
         raise NcgenError(f"kernels: expected one of 'auto', 'tables', 'flat', got {kernels!r}")
-    if kernels == "tables" and controller is None and not joint_dynamics:
-        table = _table_loop(model)
-        if table is not None:
-            return table
     if kernels == "tables":
-        if controller is not None or joint_dynamics:
-            raise NcgenError("kernels='tables': the joint-space loop on the tree tables takes no compiled "
-                             "controller and no joint dynamics (use kernels='flat' or 'auto')")
-        tree_tables(model)                  # raises UnsupportedTree naming what is not covered
-        return TableJointLoop(model)        # or the reason it cannot be built
-    from ncgen.assembly.joint_ode import joint_ode_function
+        return _loop_on_tables(model, controller, joint_dynamics)
     from ncgen.codegen.joint_loop import build_joint_loop
-    from ncgen.model.controllers import ComputedTorque
 
     loops = model_data(model).joint_loops
     key = (id(controller), bool(joint_dynamics), cflags)
@@ -249,25 +239,46 @@ def joint_loop(model, controller=None, joint_dynamics: bool = False, cflags=None
     why = joint_space_applies(model)
     if why is not None:
         raise ModelError(f"simulate(method='joint'): model {model.name!r} cannot be simulated in joint space: {why}")
-    from ncgen.assembly.joint_ode import armature_dynamics_function, armature_vector
     from ncgen.codegen.model_cache import derived_function
 
-    def derive_ode():
-        arm = armature_vector(model) if joint_dynamics else np.zeros(0)
-        inverse = None
-        if isinstance(controller, ComputedTorque) or np.any(arm):
-            from ncgen.assembly.tree_dynamics import recursive_inverse_dynamics_function
-            inverse = recursive_inverse_dynamics_function(model)
-        dynamics = armature_dynamics_function(model, inverse, arm) if np.any(arm) else dynamics_function(model)
-        return joint_ode_function(model, dynamics, inverse, controller=controller, joint_dynamics=joint_dynamics)
-
     # without a controller the ODE is the model's alone: stored beside a stored model
-    ode = derive_ode() if controller is not None else \
-        derived_function(model, "joint-ode-armature" if joint_dynamics else "joint-ode", derive_ode)
+    ode = _joint_ode(model, controller, joint_dynamics) if controller is not None else \
+        derived_function(model, "joint-ode-armature" if joint_dynamics else "joint-ode",
+                         lambda: _joint_ode(model, controller, joint_dynamics))
     name = f"{model.name}_jsim"
     loop = JointLoop(model, build_joint_loop(name, ode, PIVOT_TOL, cflags), ode, name)
     loops[key] = (controller, loop)
     return loop
+
+
+def _loop_on_tables(model, controller, joint_dynamics: bool):
+    """``kernels="tables"``: the element tables' loop where the model has one, else the tree
+    tables' (neither takes a compiled controller or the joint dynamics)."""
+    if controller is None and not joint_dynamics:
+        table = _table_loop(model)
+        if table is not None:
+            return table
+    if controller is not None or joint_dynamics:
+        raise NcgenError("kernels='tables': the joint-space loop on the tree tables takes no compiled "
+                         "controller and no joint dynamics (use kernels='flat' or 'auto')")
+    tree_tables(model)                  # raises UnsupportedTree naming what is not covered
+    return TableJointLoop(model)        # or the reason it cannot be built
+
+
+def _joint_ode(model, controller, joint_dynamics: bool):
+    """The joint-space ODE of the loop: the model's dynamics (with the joints' armature where
+    ``joint_dynamics`` gives one; the recursive inverse dynamics for it and for a
+    computed-torque ``controller``) closed by the controller and the joint dynamics."""
+    from ncgen.assembly.joint_ode import armature_dynamics_function, armature_vector, joint_ode_function
+    from ncgen.model.controllers import ComputedTorque
+
+    arm = armature_vector(model) if joint_dynamics else np.zeros(0)
+    inverse = None
+    if isinstance(controller, ComputedTorque) or np.any(arm):
+        from ncgen.assembly.tree_dynamics import recursive_inverse_dynamics_function
+        inverse = recursive_inverse_dynamics_function(model)
+    dynamics = armature_dynamics_function(model, inverse, arm) if np.any(arm) else dynamics_function(model)
+    return joint_ode_function(model, dynamics, inverse, controller=controller, joint_dynamics=joint_dynamics)
 
 
 def simulate_joint(model, run: Run, opts: JointLoopOptions, options: JointOptions) -> Trajectory:

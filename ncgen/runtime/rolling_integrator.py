@@ -137,7 +137,6 @@ def integrate(system, grid, q0, v0, *, method: str = "dopri5", substeps: int = 1
     cache, and continued; without a compiler, continued in Python).  The compiled step has
     no extra force and no moving plane: with ``force`` or ``system.rheonomic``,
     ``compiled=True`` is refused and ``None`` runs in Python."""
-    model = system.model
     if force is not None or system.rheonomic:
         if compiled:
             raise NcgenError("simulate_rolling: compiled=True: the compiled step takes no extra force "
@@ -146,34 +145,63 @@ def integrate(system, grid, q0, v0, *, method: str = "dopri5", substeps: int = 1
         compiled = False
     grid = np.asarray(grid, float)
     q, v = project(system, q0, v0, t=float(grid[0]))
-    step = system.compiled_steps.get(method) if compiled is None else \
-        compiled_step(system, method) if compiled else None
-    started, span = time.perf_counter(), float(grid[-1] - grid[0])
-    zero = np.zeros(system.nq)
+    step = _Step(system, method, compiled, force, grid)
+    energy = system.model.functions["energy"]
+    rows = []
 
-    def switch(t_now: float) -> None:
+    def record(y, t):
+        q, v = np.split(y, 2)
+        T, V = energy(0.0, q, v, system.model.p0)
+        rows.append((q, v, float(T) + float(V), max(system.residuals(q, v, t))))
+
+    record(np.concatenate([q, v]), grid[0])
+    if method == "rk4":
+        steps, rejected = _fixed_steps(step, grid, np.concatenate([q, v]), substeps, record), 0
+    else:
+        steps, rejected = _controlled_steps(step, grid, np.concatenate([q, v]), rtol, atol, record)
+    q_out, v_out, e_out, r_out = (np.array(x) for x in zip(*rows))
+    return RollingTrajectory(t=grid, q=q_out, v=v_out, energy=e_out, residual=r_out, steps=steps,
+                             rejected=rejected, method=method, compiled=step.compiled_step is not None)
+
+
+class _Step:
+    """One step of ``method`` (``(y⁺ projected, error estimate or None)`` from ``y = [q; v]``):
+    the compiled step when there is one, else Python-driven CasADi calls with the extra
+    ``force`` (:func:`integrate`); :meth:`switch` compiles it once the Python pace projects
+    the run over ``grid`` beyond :data:`COMPILE_PAYS`."""
+
+    def __init__(self, system, method: str, compiled, force, grid):
+        self.system, self.method, self.compiled, self.force = system, method, compiled, force
+        self.compiled_step = system.compiled_steps.get(method) if compiled is None else \
+            compiled_step(system, method) if compiled else None
+        self.started, self.start, self.span = time.perf_counter(), float(grid[0]), float(grid[-1] - grid[0])
+        self.zero = np.zeros(system.nq)
+
+    def switch(self, t_now: float) -> None:
         """Compile the step when the Python pace projects the run beyond COMPILE_PAYS."""
-        nonlocal step, compiled
-        elapsed = time.perf_counter() - started
-        if compiled is None and step is None and elapsed > PACE_AFTER and t_now > grid[0] and \
-                elapsed * span / (t_now - grid[0]) > COMPILE_PAYS:
-            compiled = False                          # decided: asked once per run
+        elapsed = time.perf_counter() - self.started
+        if self.compiled is None and self.compiled_step is None and elapsed > PACE_AFTER and \
+                t_now > self.start and elapsed * self.span / (t_now - self.start) > COMPILE_PAYS:
+            self.compiled = False                     # decided: asked once per run
             try:
-                step = compiled_step(system, method)
+                self.compiled_step = compiled_step(self.system, self.method)
             except CompilerNotFound:
                 pass
 
-    def rhs(y, t=0.0, t_step=0.0):
+    def rhs(self, y, t=0.0, t_step=0.0):
+        """``[v; a]`` at ``y`` and stage time ``t`` of a step that began at ``t_step``."""
+        system = self.system
         q_, v_ = y[:system.nq], y[system.nq:]
-        f = zero if force is None else force(t, q_, v_, t_step)
+        f = self.zero if self.force is None else self.force(t, q_, v_, t_step)
         return np.concatenate([v_, np.asarray(system.accel_t(q_, v_, f, t)[0]).ravel()])
 
-    def rk_step(y, h, t=0.0):
+    def __call__(self, y, h, t=0.0):
         """``(y⁺ projected, error estimate)`` of one step of ``method`` from time ``t``."""
-        if step is not None:
-            y_next, err = step(y, (h,))        # a sized step: the direct call's fast copy
+        if self.compiled_step is not None:
+            y_next, err = self.compiled_step(y, (h,))        # a sized step: the direct call's fast copy
             return y_next.copy(), err.copy()
-        if method == "rk4":
+        rhs, system = self.rhs, self.system
+        if self.method == "rk4":
             k1 = rhs(y, t, t)
             k2 = rhs(y + h / 2 * k1, t + h / 2, t)
             k3 = rhs(y + h / 2 * k2, t + h / 2, t)
@@ -186,48 +214,47 @@ def integrate(system, grid, q0, v0, *, method: str = "dopri5", substeps: int = 1
         y5 = y + h * sum(b * kj for b, kj in zip(_B5, k))
         return np.concatenate(project(system, *np.split(y5, 2), t=t + h)), h * sum(e * kj for e, kj in zip(_E, k))
 
-    energy = model.functions["energy"]
-    rows = []
 
-    def record(q, v, t):
-        T, V = energy(0.0, q, v, model.p0)
-        rows.append((q, v, float(T) + float(V), max(system.residuals(q, v, t))))
+def _fixed_steps(step: _Step, grid, y, substeps: int, record) -> int:
+    """``substeps`` equal steps per output interval from ``y``, ``record(y, t)`` at each
+    output; the number of steps."""
+    steps = 0
+    for t_a, t_b in zip(grid[:-1], grid[1:]):
+        h = (t_b - t_a) / substeps
+        for j in range(substeps):
+            y = step(y, h, t_a + j * h)[0]
+            steps += 1
+        record(y, t_b)
+        step.switch(t_b)
+    return steps
 
-    record(q, v, grid[0])
-    y, steps, rejected = np.concatenate([q, v]), 0, 0
-    if method == "rk4":
-        for t_a, t_b in zip(grid[:-1], grid[1:]):
-            h = (t_b - t_a) / substeps
-            for j in range(substeps):
-                y = rk_step(y, h, t_a + j * h)[0]
+
+def _controlled_steps(step: _Step, grid, y, rtol: float, atol: float, record) -> tuple[int, int]:
+    """Steps controlled by the error estimate (``rtol``, ``atol`` on ``[q; v]``), ending on
+    the outputs, from ``y``, ``record(y, t)`` at each output; ``(steps, rejected)``."""
+    steps = rejected = 0
+    t, h = grid[0], min(grid[1] - grid[0], 1e-3) if len(grid) > 1 else 1e-3
+    for target in grid[1:]:
+        while t < target - 1e-14 * max(1.0, abs(target)):
+            h_now = min(h, target - t)
+            y_next, err = step(y, h_now, t)
+            # the unprojected step's error estimate against the start and the (projected) end
+            scale = atol + rtol * np.maximum(np.abs(y), np.abs(y_next))
+            ratio = float(np.sqrt(np.mean((err / scale) ** 2)))
+            if ratio <= 1.0:
+                y = y_next
+                t += h_now
                 steps += 1
-            record(*np.split(y, 2), t_b)
-            switch(t_b)
-    else:
-        t, h = grid[0], min(grid[1] - grid[0], 1e-3) if len(grid) > 1 else 1e-3
-        for target in grid[1:]:
-            while t < target - 1e-14 * max(1.0, abs(target)):
-                h_now = min(h, target - t)
-                y_next, err = rk_step(y, h_now, t)
-                # the unprojected step's error estimate against the start and the (projected) end
-                scale = atol + rtol * np.maximum(np.abs(y), np.abs(y_next))
-                ratio = float(np.sqrt(np.mean((err / scale) ** 2)))
-                if ratio <= 1.0:
-                    y = y_next
-                    t += h_now
-                    steps += 1
-                    switch(t)
-                else:
-                    rejected += 1
-                proposed = h_now * min(5.0, max(0.2, 0.9 * ratio ** -0.2 if ratio > 0 else 5.0))
-                # a step cut short to land on an output does not shrink the next one
-                h = max(h, proposed) if ratio <= 1.0 and h_now < h else proposed
-                if h < 1e-12 * max(1.0, abs(target)):
-                    raise NcgenError(f"simulate_rolling: the step fell below {h:.3g} s at t = {t:.6g} s")
-            record(*np.split(y, 2), target)
-    q_out, v_out, e_out, r_out = (np.array(x) for x in zip(*rows))
-    return RollingTrajectory(t=grid, q=q_out, v=v_out, energy=e_out, residual=r_out, steps=steps,
-                             rejected=rejected, method=method, compiled=step is not None)
+                step.switch(t)
+            else:
+                rejected += 1
+            proposed = h_now * min(5.0, max(0.2, 0.9 * ratio ** -0.2 if ratio > 0 else 5.0))
+            # a step cut short to land on an output does not shrink the next one
+            h = max(h, proposed) if ratio <= 1.0 and h_now < h else proposed
+            if h < 1e-12 * max(1.0, abs(target)):
+                raise NcgenError(f"simulate_rolling: the step fell below {h:.3g} s at t = {t:.6g} s")
+        record(y, target)
+    return steps, rejected
 
 
 class RollingIntegrator:
