@@ -152,12 +152,13 @@ def choose_form(model, form) -> str:
     ``"joint"`` where the model allows it (a tree of hinges and slides:
     :func:`~ncgen.control.mpc_fatrop_joint.joint_form_refusal`), else ``"natural"``."""
     from ncgen.control.mpc_fatrop_joint import joint_form_refusal
-    if form is None:
-        return "natural" if joint_form_refusal(model) else "joint"
-    if not isinstance(form, str) or form not in FORMS:
+    if form is not None and (not isinstance(form, str) or form not in FORMS):
         raise OptimizationError(f"MPC: fatrop_form: expected one of {', '.join(FORMS)} or None (the joint form "
                                 f"where the model allows it), got {form!r}")
-    return form
+    why = joint_form_refusal(model) if form != "natural" else None
+    if form == "joint" and why is not None:
+        raise OptimizationError(f"MPC: fatrop_form='joint': model {model.name!r}: {why}; use fatrop_form='natural'")
+    return form or ("natural" if why else "joint")
 
 
 class FatropSolver:

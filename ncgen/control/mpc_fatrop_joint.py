@@ -4,13 +4,18 @@
 The state is ``x = [q_j; v_j]`` (joint positions and rates, ``model.joint_space`` order; rad or
 m, rad/s or m/s), the control the OCP's input ``u``; the natural coordinates are functions of
 them, ``[q; v] = T(x)`` (the tree map, :meth:`~ncgen.assembly.joint_space.JointSpace.tree_function`),
-so the model's constraints hold identically.  One step of length ``h`` is semi-implicit
-(symplectic) Euler on the joint accelerations ``a = a(t, q_j, v_j, u, p)`` of the tree's
-forward dynamics (:func:`ncgen.runtime.joint_simulation.dynamics_function`: the projected
-equations ``Jᵀ M J a = Jᵀ (F − M J̇ v_j)``, recursive in 3D), the scheme of
-:class:`~ncgen.control.joint_step.JointStep`::
+so the model's constraints hold identically.  One step of length ``h`` is the explicit
+midpoint rule (second order, as the SQP's RATTLE step) on the tree's joint-space ODE
+``ẋ = φ(t, x, u) = [v_j; a(t, q_j, v_j, u, p)]`` (:func:`ncgen.runtime.joint_simulation.dynamics_function`:
+the projected equations ``Jᵀ M J a = Jᵀ (F − M J̇ v_j)``, recursive in 3D)::
 
-    v⁺ = v_j + h a(t_k, q_j, v_j, u, p),        q⁺ = q_j + h v⁺          (explicit)
+    x_{k+1} = f(x_k, u_k, t_k) = x_k + h φ(t_k + h/2, x_k + h/2 φ(t_k, x_k, u_k), u_k)
+
+Measured on the cart-pole (``h`` = 0.05 s, closed loops on the natural-coordinate plant):
+semi-implicit Euler (the scheme of :class:`~ncgen.control.joint_step.JointStep`) predicts so
+poorly that the loop from the documented start did not swing the pole up (cost 2.7 times the
+SQP's); the midpoint rule's closed-loop costs are 0.2 % (tilt and push) and 0.8 % (swing-up)
+below the SQP's, RK4's 0.2 % and 0.2 % at twice the Hessian's size (82 k instructions against 36 k).
 
 Stage ``k < N`` has the state ``x_k`` and the controls ``u_k``, stage ``N`` the state only;
 the constraints in stage order: the gap ``x_{k+1} − f(x_k, u_k, t_k) = 0``, at stage 0
@@ -39,7 +44,8 @@ def joint_form_refusal(model) -> str | None:
 
 
 def joint_step_function(model, h: float) -> ca.Function:
-    """``joint_step: (x, u, p, t) -> x⁺`` (SX; module docstring)."""
+    """``joint_step: (x, u, p, t) -> x⁺``: one explicit midpoint step of length ``h`` (SX;
+    module docstring)."""
     from ncgen.runtime.joint_simulation import dynamics_function
     js = model.joint_space
     n = js.nv
@@ -49,8 +55,12 @@ def joint_step_function(model, h: float) -> ca.Function:
         raise OptimizationError(f"MPC: fatrop_form='joint': model {model.name!r}: {exc}") from None
     x, u = ca.SX.sym("x", 2 * n), ca.SX.sym("u", model.nu)
     p, t = ca.SX.sym("p", model.np), ca.SX.sym("t")
-    v1 = x[n:] + h * accelerations(t, x[:n], x[n:], u, p)[0]
-    return ca.Function("joint_step", [x, u, p, t], [ca.vertcat(x[:n] + h * v1, v1)], ["x", "u", "p", "t"], ["x1"])
+
+    def rate(tk, y):
+        return ca.vertcat(y[n:], accelerations(tk, y[:n], y[n:], u, p)[0])
+
+    x1 = x + h * rate(t + h / 2, x + h / 2 * rate(t, x))
+    return ca.Function("joint_step", [x, u, p, t], [x1], ["x", "u", "p", "t"], ["x1"])
 
 
 def natural_state_function(model) -> ca.Function:
@@ -63,11 +73,9 @@ def natural_state_function(model) -> ca.Function:
 
 def joint_nlp(model, problem) -> dict:
     """``{"nlp", "state", "input", "lbx", "ubx", "lbg", "ubg", "equality"}``: the stage-wise
-    NLP of ``problem`` in joint space (module docstring) and its layout (index arrays of each
+    NLP of ``problem`` in joint space (module docstring; ``model`` a tree,
+    :func:`joint_form_refusal`) and its layout (index arrays of each
     ``x_k``, ``u_k`` in the variable vector; bounds; which constraints are equalities)."""
-    why = joint_form_refusal(model)
-    if why is not None:
-        raise OptimizationError(f"MPC: fatrop_form='joint': model {model.name!r}: {why}; use fatrop_form='natural'")
     h, N, p = problem.h, problem.N, ca.DM(problem.p)
     nx, nu = 2 * model.joint_space.nv, model.nu
     f, T = joint_step_function(model, h), natural_state_function(model)
