@@ -176,7 +176,8 @@ class FatropSolver:
             self.nlp = fatrop_problem(model, problem, self.form, options=options)
         except RuntimeError as exc:
             raise OptimizationError(f"MPC: Fatrop refused the problem or fatrop_options {options!r}: {exc}") from None
-        self._bounds = [ca.DM(b) for b in (self.nlp.lbx, self.nlp.ubx, self.nlp.lbg, self.nlp.ubg)]
+        # the solver's arguments after x0 and p: the bounds, no initial multipliers (as CasADi matrices once)
+        self._fixed = [ca.DM(b) for b in (self.nlp.lbx, self.nlp.ubx, self.nlp.lbg, self.nlp.ubg)] + [ca.DM()] * 2
         if self.form == "joint":
             from ncgen.control.mpc_fatrop_joint import joint_maps
             from ncgen.control.step_support import compile_functions
@@ -227,11 +228,11 @@ class FatropSolver:
         else:
             w0 = pack(nlp, X, U, Z)
         try:
-            r = nlp.solver.call([ca.DM(w0), ca.DM(np.append(x, t)), *self._bounds, ca.DM(), ca.DM()])
+            r = nlp.solver.call([ca.DM(w0), ca.DM(np.append(x, t)), *self._fixed])
             stats = nlp.solver.stats()
             status, success, count = str(stats.get("return_status")), bool(stats.get("success")), \
                 int(stats.get("iter_count", -1))
-            w = r[0].full().ravel()
+            w = np.array(r[0].nonzeros())
         except RuntimeError as exc:                 # an evaluation error inside Fatrop
             status, success, count, w = f"error: {exc}", False, -1, None
         self.iteration_counts.append(count)
@@ -240,5 +241,5 @@ class FatropSolver:
             return X, U, Z
         Xs, U, Zs = unpack(nlp, w)
         if nlp.form == "joint":
-            Xs, Zs = self._natural(Xs.T)[0].reshape(Xs.shape[0], -1), Xs
+            Xs, Zs = self._natural(Xs.ravel())[0].reshape(Xs.shape[0], -1).copy(), Xs
         return Xs, np.clip(U, *self.problem.u_bounds), Zs
