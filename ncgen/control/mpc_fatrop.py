@@ -45,7 +45,8 @@ class FatropProblem:
     ``form``: one of :data:`FORMS`; ``state[k]``, ``input[k]``, ``unknowns[k]``: index arrays
     of ``x_k``, ``u_k``, ``z_k`` (natural form only; empty otherwise) in the variable vector;
     ``lbx``, ``ubx``, ``lbg``, ``ubg``: the variables' and constraints' bounds; ``nlp``: the
-    NLP (``{"x", "f", "g", "p"}``), for another solver of the same problem."""
+    NLP (``{"x", "f", "g", "p"}``), for another solver of the same problem; ``options``: the
+    solver's (``nlpsol``'s)."""
 
     solver: ca.Function
     form: str
@@ -57,6 +58,7 @@ class FatropProblem:
     lbg: np.ndarray
     ubg: np.ndarray
     nlp: dict
+    options: dict
 
 
 def natural_nlp(model, problem) -> dict:
@@ -111,13 +113,14 @@ def fatrop_problem(model, problem, form: str = "natural", *, options: dict | Non
         from ncgen.control.compiled_nlp import compiled_nlpsol
         from ncgen.control.mpc_fatrop_joint import joint_nlp
         parts = joint_nlp(model, problem)
-        solver = compiled_nlpsol(f"{model.name}_fatrop_joint", "fatrop", parts["nlp"],
-                                 {**opts, "equality": parts["equality"]})
+        opts["equality"] = parts["equality"]
+        solver = compiled_nlpsol(f"{model.name}_fatrop_joint", "fatrop", parts["nlp"], opts)
     else:
         parts = natural_nlp(model, problem)
-        solver = ca.nlpsol("mpc_fatrop_natural", "fatrop", parts["nlp"], {**opts, "equality": parts["equality"]})
+        opts["equality"] = parts["equality"]
+        solver = ca.nlpsol("mpc_fatrop_natural", "fatrop", parts["nlp"], opts)
     return FatropProblem(solver, form, parts["state"], parts["input"], parts.get("unknowns", []), parts["lbx"],
-                         parts["ubx"], parts["lbg"], parts["ubg"], parts["nlp"])
+                         parts["ubx"], parts["lbg"], parts["ubg"], parts["nlp"], opts)
 
 
 def pack(fp: FatropProblem, X: np.ndarray, U: np.ndarray, Z: np.ndarray | None = None) -> np.ndarray:
@@ -185,8 +188,14 @@ class FatropSolver:
                                                                  joint_maps(model, problem.N)).values()
         self.status: list[str] = []
         self.iteration_counts: list[int] = []
+        #: the joint form's whole solver as compiled C (:func:`~ncgen.control.compiled_nlp.compiled_fatrop`)
+        self._compiled = None
         if options:                                # Fatrop reads its options at the first solve only
             self.check_options(options)
+        if self.form == "joint":
+            from ncgen.control.compiled_nlp import compiled_fatrop
+            self._compiled = compiled_fatrop(f"{model.name}_fatrop_solver", self.nlp.nlp, self.nlp.options)
+            self._zeros = (np.zeros(self.nlp.lbx.size), np.zeros(self.nlp.lbg.size))
 
     def guess(self, X: np.ndarray) -> np.ndarray:
         """The solver's own part of the guess from the natural states ``X`` ((N + 1) × nx): the
@@ -227,14 +236,12 @@ class FatropSolver:
             w0, x = pack(nlp, Z, U), self._joint_state(x, Z[0])[0]
         else:
             w0 = pack(nlp, X, U, Z)
-        try:
-            r = nlp.solver.call([ca.DM(w0), ca.DM(np.append(x, t)), *self._fixed])
-            stats = nlp.solver.stats()
-            status, success, count = str(stats.get("return_status")), bool(stats.get("success")), \
-                int(stats.get("iter_count", -1))
-            w = np.array(r[0].nonzeros())
-        except RuntimeError as exc:                 # an evaluation error inside Fatrop
-            status, success, count, w = f"error: {exc}", False, -1, None
+        if self._compiled is not None:
+            code = self._compiled.status_call(w0, np.append(x, t), nlp.lbx, nlp.ubx, nlp.lbg, nlp.ubg, *self._zeros)
+            success, count = code <= 0, -code if code <= 0 else -1
+            status, w = ("0", self._compiled.outputs[0].copy()) if success else ("failed (the compiled solver)", None)
+        else:
+            status, success, count, w = self._plugin_solve(w0, x, t)
         self.iteration_counts.append(count)
         self.status.append(status if w is None or np.all(np.isfinite(w)) else f"{status}, not finite")
         if not success or not np.all(np.isfinite(w)):
@@ -243,3 +250,15 @@ class FatropSolver:
         if nlp.form == "joint":
             Xs, Zs = self._natural(Xs.ravel())[0].reshape(Xs.shape[0], -1).copy(), Xs
         return Xs, np.clip(U, *self.problem.u_bounds), Zs
+
+    def _plugin_solve(self, w0: np.ndarray, x: np.ndarray, t: float):
+        """``(status, success, iterations, w)`` of CasADi's Fatrop plugin from ``w0`` at the
+        parameters ``(x, t)``; ``w`` None after an evaluation error inside Fatrop."""
+        solver = self.nlp.solver
+        try:
+            r = solver.call([ca.DM(w0), ca.DM(np.append(x, t)), *self._fixed])
+        except RuntimeError as exc:
+            return f"error: {exc}", False, -1, None
+        stats = solver.stats()
+        return (str(stats.get("return_status")), bool(stats.get("success")), int(stats.get("iter_count", -1)),
+                np.array(r[0].nonzeros()))
