@@ -1,8 +1,11 @@
 """The MPC's horizon problem (:mod:`ncgen.control.mpc_problem`) posed stage-wise for Fatrop
 (Vanroye et al., 2023: an interior-point method exploiting the optimal-control structure),
-CasADi's ``nlpsol("fatrop")`` with ``structure_detection="auto"``.
+CasADi's ``nlpsol("fatrop")`` with ``structure_detection="auto"``, in one of two forms
+(:data:`FORMS`, :func:`choose_form`): ``"joint"`` for a tree of hinges and slides
+(:mod:`ncgen.control.mpc_fatrop_joint`: joint states, an explicit step; its whole solver
+compiled, :mod:`ncgen.control.compiled_nlp`), or ``"natural"``, this module's, described here.
 
-Stage ``k < N`` has the state ``x_k`` (nx) and the controls ``[u_k; z_k]`` (nu inputs, then the
+In the natural form stage ``k < N`` has the state ``x_k`` (nx) and the controls ``[u_k; z_k]`` (nu inputs, then the
 RATTLE step's unknowns ``z = [w; ν; v⁺; μ']`` of :mod:`ncgen.control.discrete`), stage ``N``
 the state only.  Decision variables in stage order ``x_0, u_0, z_0, x_1, …, x_N``; constraints
 in stage order, all equalities:
