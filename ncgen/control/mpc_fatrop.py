@@ -108,20 +108,17 @@ def natural_nlp(model, problem) -> dict:
 
 def fatrop_problem(model, problem, form: str = "natural", *, options: dict | None = None) -> FatropProblem:
     """The stage-wise NLP of ``problem`` (an :class:`~ncgen.control.mpc_problem.MPCProblem`)
-    in ``form`` (:data:`FORMS`) and its Fatrop solver (the joint form's problem functions
-    compiled, :mod:`ncgen.control.compiled_nlp`; the natural form's, larger, in CasADi's
-    virtual machine); ``options``: Fatrop's own, over :data:`FATROP_OPTIONS`."""
+    in ``form`` (:data:`FORMS`) and CasADi's Fatrop plugin on it (its functions in CasADi's
+    virtual machine: the natural form's solver; the joint form solves with its generated C,
+    :class:`FatropSolver`); ``options``: Fatrop's own, over :data:`FATROP_OPTIONS`."""
     opts = {"structure_detection": "auto", "print_time": False, "fatrop": {**FATROP_OPTIONS, **(options or {})}}
     if form == "joint":
-        from ncgen.control.compiled_nlp import compiled_nlpsol
         from ncgen.control.mpc_fatrop_joint import joint_nlp
         parts = joint_nlp(model, problem)
-        opts["equality"] = parts["equality"]
-        solver = compiled_nlpsol(f"{model.name}_fatrop_joint", "fatrop", parts["nlp"], opts)
     else:
         parts = natural_nlp(model, problem)
-        opts["equality"] = parts["equality"]
-        solver = ca.nlpsol("mpc_fatrop_natural", "fatrop", parts["nlp"], opts)
+    opts["equality"] = parts["equality"]
+    solver = ca.nlpsol(f"mpc_fatrop_{form}", "fatrop", parts["nlp"], opts)
     return FatropProblem(solver, form, parts["state"], parts["input"], parts.get("unknowns", []), parts["lbx"],
                          parts["ubx"], parts["lbg"], parts["ubg"], parts["nlp"], opts)
 
