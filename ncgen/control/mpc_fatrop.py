@@ -5,10 +5,10 @@ CasADi's ``nlpsol("fatrop")`` with ``structure_detection="auto"``, in one of two
 (:mod:`ncgen.control.mpc_fatrop_joint`: joint states, an explicit step; its whole solver
 compiled, :mod:`ncgen.control.compiled_nlp`), or ``"natural"``, this module's, described here.
 
-In the natural form stage ``k < N`` has the state ``x_k`` (nx) and the controls ``[u_k; z_k]`` (nu inputs, then the
-RATTLE step's unknowns ``z = [w; ν; v⁺; μ']`` of :mod:`ncgen.control.discrete`), stage ``N``
-the state only.  Decision variables in stage order ``x_0, u_0, z_0, x_1, …, x_N``; constraints
-in stage order, all equalities:
+In the natural form stage ``k < N`` has the state ``x_k`` (nx) and the controls
+``[u_k; z_k]`` (nu inputs, then the RATTLE step's unknowns ``z = [w; ν; v⁺; μ']`` of
+:mod:`ncgen.control.discrete`), stage ``N`` the state only.  Decision variables in stage
+order ``x_0, u_0, z_0, x_1, …, x_N``; constraints in stage order, all equalities:
 
 * the gap ``x_{k+1} − [q_k + h w_k; v⁺_k] = 0`` (Fatrop's dynamics: explicit in the stage's
   state and controls),
