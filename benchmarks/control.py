@@ -218,8 +218,9 @@ def cartpole_mpc(steps: int, repeat: int, export: bool = False) -> None:
           f"(target ≤ 1 ms)")
     for form, fatrop in fatrops.items():
         t = np.array(t_fat[form])
+        controls = len(fatrop.fatrop.nlp.input[0]) + len((fatrop.fatrop.nlp.unknowns or [[]])[0])
         print(f"  nc.MPC 'fatrop' step, {form} form ({len(fatrop.fatrop.nlp.state[0])} states, "
-              f"{len(fatrop.fatrop.nlp.input[0]) + len((fatrop.fatrop.nlp.unknowns or [[]])[0])} controls a stage) "
+              f"{controls} control{'s' * (controls > 1)} a stage) "
               f"min {1e3 * t.min():.3f} ms   median {1e3 * np.median(t):.3f} ms (target ≤ 1 ms; "
               f"{min(iters[form])}–{max(iters[form])} interior-point iterations, median {np.median(iters[form]):g}"
               + (f"; the NLP's functions (Fatrop's stats, t_proc_nlp_*) median {1e3 * np.median(t_fun[form]):.3f} ms)"
