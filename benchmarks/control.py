@@ -23,8 +23,9 @@ MPC step against re-solving the same horizon problem with IPOPT.
    no step that decreases the cost beyond round-off and tries all its step lengths, so the
    step of the closed loop itself (a new state and the shifted guess at every call: what a
    controller does) is timed too, with the SQP loop in Python and in C (``nc.MPC(ocp,
-   loop="c")``: the whole control step one compiled call), the two loops' runs interleaved,
-   each step the minimum over ``--repeat`` runs.  The controller's quality: the closed-loop
+   loop="c")``: the whole control step one compiled call) and Fatrop's joint form (one solve a
+   step from the shifted solution), the three loops' runs interleaved, each step the minimum
+   over ``--repeat`` runs.  The controller's quality: the closed-loop
    cost ``Σ ℓ(x_k, u_k)`` of the real-time iteration against the converged MPC's (10 SQP
    iterations a step, checked against 20).  All times are CPU times (``time.process_time``;
    the C driver's ``CLOCK_PROCESS_CPUTIME_ID``).  ``--export``: the same closed loop in the
@@ -178,56 +179,74 @@ def cartpole_mpc(steps: int, repeat: int, export: bool = False) -> None:
     _, _, X = closed_loop(mpc, x0, steps * mpc.h, disturbance=[(1.0, 1.1, [8.0])])
     st = nc.step_function(model, mpc.h)
     ipopt = DiscreteOCP(st, mpc.N, (mpc.problem.stage, mpc.problem.terminal), tol=1e-8)
-    fatrop = nc.MPC(ocp, "fatrop", terminal_weight=100.0)
-    t_mpc, t_ip, t_fat, iters, t_fun = [], [], [], [], []
+    fatrops = {form: nc.MPC(ocp, "fatrop", terminal_weight=100.0, fatrop_form=form) for form in ("joint", "natural")}
+    t_mpc, t_ip = [], []
+    t_fat, iters, t_fun = ({form: [] for form in fatrops} for _ in range(3))
     for x in X[::max(1, len(X) // 10)]:
         mpc.reset(x, iterations=10)
         guess = mpc.U.copy()
-        fatrop.reset(x, iterations=1)
-        converged = fatrop.X, fatrop.U, fatrop.Z
-        runs, runs_f = [], []
+        converged = {}
+        for form, fatrop in fatrops.items():
+            fatrop.reset(x, iterations=1)
+            converged[form] = fatrop.X, fatrop.U, fatrop.Z
+        runs, runs_f = [], {form: [] for form in fatrops}
         for _ in range(repeat):
             mpc.X, mpc.U = mpc.initial_guess(x)
             mpc.reset(x, iterations=10)
             start = time.process_time()
             mpc(x, 0.0)
             runs.append(time.process_time() - start)
-            fatrop.X, fatrop.U, fatrop.Z = converged
-            start = time.process_time()
-            fatrop(x, 0.0)
-            runs_f.append(time.process_time() - start)
-            iters += fatrop.fatrop.iteration_counts
-            stats = fatrop.fatrop.nlp.solver.stats()
-            t_fun.append(sum(v for k, v in stats.items() if k.startswith("t_proc_nlp")))
+            for form, fatrop in fatrops.items():
+                fatrop.X, fatrop.U, fatrop.Z = converged[form]
+                start = time.process_time()
+                fatrop(x, 0.0)
+                runs_f[form].append(time.process_time() - start)
+                iters[form] += fatrop.fatrop.iteration_counts
+                if form == "natural":           # the joint form's compiled solver keeps no stats
+                    stats = fatrop.fatrop.nlp.solver.stats()
+                    t_fun[form].append(sum(v for k, v in stats.items() if k.startswith("t_proc_nlp")))
         t_mpc.append(min(runs))
-        t_fat.append(min(runs_f))
+        for form in fatrops:
+            t_fat[form].append(min(runs_f[form]))
         start = time.process_time()
         ipopt.solve(x, guess)
         t_ip.append(time.process_time() - start)
-    t_mpc, t_ip, t_fat = np.array(t_mpc), np.array(t_ip), np.array(t_fat)
+    t_mpc, t_ip = np.array(t_mpc), np.array(t_ip)
     print(f"\n=== cart-pole MPC (N = {mpc.N}, h = {mpc.h} s, 1 SQP iteration, qrqp), {len(t_mpc)} states "
           "of a closed loop:")
     print(f"  nc.MPC control step       min {1e3 * t_mpc.min():.3f} ms   median {1e3 * np.median(t_mpc):.3f} ms "
           f"(target ≤ 1 ms)")
-    print(f"  nc.MPC 'fatrop' step      min {1e3 * t_fat.min():.3f} ms   median {1e3 * np.median(t_fat):.3f} ms "
-          f"(target ≤ 1 ms; {min(iters)}–{max(iters)} interior-point iterations, median {np.median(iters):g})")
-    print(f"      of which CasADi's evaluations of the NLP's functions (Fatrop's stats, t_proc_nlp_*): median "
-          f"{1e3 * np.median(t_fun):.3f} ms; the rest is Fatrop's own work and the call")
+    for form, fatrop in fatrops.items():
+        t = np.array(t_fat[form])
+        controls = len(fatrop.fatrop.nlp.input[0]) + len((fatrop.fatrop.nlp.unknowns or [[]])[0])
+        print(f"  nc.MPC 'fatrop' step, {form} form ({len(fatrop.fatrop.nlp.state[0])} states, "
+              f"{controls} control{'s' * (controls > 1)} a stage) "
+              f"min {1e3 * t.min():.3f} ms   median {1e3 * np.median(t):.3f} ms (target ≤ 1 ms; "
+              f"{min(iters[form])}–{max(iters[form])} interior-point iterations, median {np.median(iters[form]):g}"
+              + (f"; the NLP's functions (Fatrop's stats, t_proc_nlp_*) median {1e3 * np.median(t_fun[form]):.3f} ms)"
+                 if t_fun[form] else "; the whole solver compiled C)"))
     print(f"  IPOPT re-solve (warm)     min {1e3 * t_ip.min():.1f} ms   median {1e3 * np.median(t_ip):.1f} ms")
     r = t_ip / t_mpc
     print(f"  RATIO IPOPT re-solve / MPC step: min {r.min():.0f}, median {np.median(r):.0f} (target ≥ 50)")
-    loops = {"python": _TimedCalls(mpc), "c": _TimedCalls(nc.MPC(ocp, terminal_weight=100.0, loop="c"))}
+    loops = {"python": _TimedCalls(mpc), "c": _TimedCalls(nc.MPC(ocp, terminal_weight=100.0, loop="c")),
+             "fatrop": _TimedCalls(fatrops["joint"])}
     for _ in range(repeat):                     # interleaved: a run of each loop per round
         runs = {k: closed_loop(m, x0, steps * mpc.h, disturbance=[(1.0, 1.1, [8.0])]) for k, m in loops.items()}
     U_py, X_py = runs["python"][1], runs["python"][2]
-    t_py, t_cl = (np.array(loops[k].times).reshape(repeat, -1).min(axis=0) for k in ("python", "c"))
+    t_py, t_cl, t_fj = (np.array(loops[k].times).reshape(repeat, -1).min(axis=0) for k in ("python", "c", "fatrop"))
     print(f"  closed loop, CPU time of each step the minimum of {repeat} interleaved runs ({len(t_py)} steps):")
-    for what, t_loop in (("nc.MPC (SQP loop in Python)", t_py), ("nc.MPC(loop='c')", t_cl)):
+    for what, t_loop in (("nc.MPC (SQP loop in Python)", t_py), ("nc.MPC(loop='c')", t_cl),
+                         ("nc.MPC('fatrop'), joint form", t_fj)):
         print(f"  {what:28s} min {1e3 * t_loop.min():.3f} ms   median {1e3 * np.median(t_loop):.3f} ms   "
               f"max {1e3 * t_loop.max():.3f} ms (target ≤ 1 ms)")
     r = t_cl / t_py
     print(f"  RATIO loop='c' / Python loop: min {r.min():.2f}, median {np.median(r):.2f}; inputs max |ΔU| "
           f"{np.max(np.abs(runs['c'][1] - U_py)):.1e} N")
+    r = t_fj / t_cl
+    print(f"  RATIO Fatrop joint form / loop='c': min {r.min():.2f}, median {np.median(r):.2f}; its closed-loop cost "
+          f"{closed_loop_cost(mpc.problem, runs['fatrop'][2], runs['fatrop'][1]):.6f} (a converged MPC on the "
+          f"midpoint step in joint space; inputs vs the real-time SQP's: max |ΔU| "
+          f"{np.max(np.abs(runs['fatrop'][1] - U_py)):.2f} N)")
     # the controller's quality: the real-time iteration against the converged MPC (10 SQP
     # iterations per step; 20 as its own convergence check), same start, push and plant
     J_rti = closed_loop_cost(mpc.problem, X_py, U_py)

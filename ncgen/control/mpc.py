@@ -218,6 +218,11 @@ class MPC:
     generated C; see the module docstring) or ``"fatrop"`` (CasADi's Fatrop, an interior-point
     method, solving the stage-wise problem of :mod:`ncgen.control.mpc_fatrop` to its tolerance
     from the previous solution shifted; Python only: ``nc.export_mpc`` writes the SQP);
+    ``fatrop_form``: that problem's form, ``"joint"`` (a tree's joint space with a
+    semi-implicit Euler step, :mod:`ncgen.control.mpc_fatrop_joint`: 2 n_j states and nu
+    controls a stage, not the SQP's RATTLE step), ``"natural"`` (the SQP's own discrete
+    problem, the step's unknowns as controls) or ``None`` (the joint form where the model
+    allows it; ``mpc.fatrop.form`` says which);
     ``iterations``: SQP iterations (Fatrop: solves) per control step (1: real-time iteration);
     ``fatrop_options``: Fatrop's own options by name (``{"tolerance": 1e-8, "max_iter": 50}``,
     over :data:`ncgen.control.mpc_fatrop.FATROP_OPTIONS`), checked by a first solve;
@@ -253,7 +258,7 @@ class MPC:
                  regularization: float = REGULARIZATION, qp_max_iter: int = 100,
                  sx_qr_max_nnz: int | None = None, fatrop_options: dict | None = None,
                  reference=None, state_weight=None, input_weight=None, min_tension=None,
-                 qp_solver: str = "qrqp", loop: str = "python"):
+                 qp_solver: str = "qrqp", loop: str = "python", fatrop_form: str | None = None):
         if not isinstance(solver, str) or solver not in SOLVERS:
             raise OptimizationError(f"MPC: solver: expected one of {', '.join(SOLVERS)}, got {solver!r}")
         if not isinstance(iterations, int) or iterations < 1:
@@ -262,6 +267,9 @@ class MPC:
         self.problem = mpc_problem(ocp, terminal_weight, reference, state_weight, input_weight, min_tension)
         if self.problem.min_tension is not None and solver == "fatrop":
             raise OptimizationError("MPC: min_tension: supported by solver='sqp' only, got solver='fatrop'")
+        if fatrop_form is not None and solver != "fatrop":
+            raise OptimizationError(f"MPC: fatrop_form: the stage-wise form of solver='fatrop', got fatrop_form="
+                                    f"{fatrop_form!r} with solver={solver!r}")
         self.qp_solver = check_qp_solver(qp_solver)
         from ncgen.control.mpc_c_loop import check_loop, loop_refusal
         self.loop, refusal = check_loop(loop), loop_refusal(solver, qp_solver, self.problem)
@@ -275,14 +283,14 @@ class MPC:
                                           or sx_qr_max_nnz < 0):
             raise OptimizationError(f"MPC: sx_qr_max_nnz: expected an integer >= 0 or None, got {sx_qr_max_nnz!r}")
         self.solver = solver
-        #: Fatrop's stage-wise problem (``solver="fatrop"``), else ``None``; ``mpc.Z``: the guess of
-        #: the steps' unknowns.
+        #: Fatrop's stage-wise problem (``solver="fatrop"``), else ``None``; ``mpc.Z``: Fatrop's own
+        #: part of the guess (the steps' unknowns, or the joint states: ``mpc.fatrop.form``).
         self.fatrop = self.Z = None
         #: the compiled control step (:class:`~ncgen.control.mpc_c_loop.CompiledLoop`) where it applies
         self._c = None
         if solver == "fatrop":
             from ncgen.control.mpc_fatrop import FatropSolver
-            self.fatrop = FatropSolver(self.model, self.problem, fatrop_options)
+            self.fatrop = FatropSolver(self.model, self.problem, fatrop_options, fatrop_form)
         else:
             self.functions = mpc_functions(self.model, self.problem, regularization=regularization,
                                            qp_max_iter=qp_max_iter, sx_qr_max_nnz=sx_qr_max_nnz, qp_solver=qp_solver)
@@ -313,7 +321,7 @@ class MPC:
     def __repr__(self) -> str:
         if self.fatrop is not None:
             return (f"<MPC of {self.model.name!r}: N={self.N}, h={self.h} s, {self.iterations} Fatrop "
-                    f"solve(s) per step>")
+                    f"solve(s) per step, {self.fatrop.form} form>")
         return (f"<MPC of {self.model.name!r}: N={self.N}, h={self.h} s, {self.iterations} SQP "
                 f"iteration(s) per step, {self.qp_solver}>")
 
@@ -408,8 +416,7 @@ class MPC:
             return
         X, U = self.initial_guess(x, t)
         if self.fatrop is not None:
-            from ncgen.control.mpc_fatrop import unknowns_guess
-            self.Z = unknowns_guess(self.model, self.h, X)
+            self.Z = self.fatrop.guess(X)
         for _ in range(iterations):
             X, U = self._solve(x, t, X, U)
         self.X, self.U = X, U
