@@ -133,6 +133,85 @@ def test_a_run_that_fails_still_fails_at_simulate(chain):
     assert not part.complete and len(part) >= 1 and part.q.shape == (len(part), model.nq)
 
 
+def _holds_by_numpy(model, q, v) -> bool:
+    """The start's acceptance rule written again from the model's own ``phi`` and ``A`` (no
+    drives, no time dependence: ``Φ_t = 0``) in NumPy: finite, of magnitude at most
+    ``MAX_MAGNITUDE``, ``|Φ|∞ ≤ TOL s²`` and ``|A v|∞ ≤ 1e-10 s (1 + |v|∞)``, ``s = max(1, |q|∞)``."""
+    from ncgen.assembly.manifold import NEWTON_TOL
+    from ncgen.validation import MAX_MAGNITUDE
+
+    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
+        return False
+    if max(np.abs(q).max(), np.abs(v).max()) > MAX_MAGNITUDE:
+        return False
+    s = max(1.0, np.abs(q).max())
+    phi = np.abs(np.asarray(model.phi(q), float)).max()
+    vel = np.abs(np.asarray(model.A(q), float) @ v).max()
+    return bool(phi <= NEWTON_TOL * s**2 and vel <= 1e-10 * s * (1.0 + np.abs(v).max()))
+
+
+def test_the_start_check_decides_as_the_model_functions_do(chain):
+    """``JointSpace._holds`` (one call of ``state_check_function``) accepts exactly the states
+    the rule written again in NumPy on ``model.phi`` and ``model.A`` accepts: consistent states,
+    states moved off either constraint level, a NaN or an infinity in any entry of q or v (which
+    CasADi's ``norm_inf`` alone would skip), a magnitude above the limit."""
+    model, q0, v0 = chain
+    js = model.joint_space
+    rng = np.random.default_rng(37)
+    states = [(q0, v0), (q0, np.zeros(model.nq))]
+    for k in range(4):
+        q, v = model.from_joint_space(rng.uniform(-2, 2, 3), rng.uniform(-3, 3, 3))
+        states += [(q, v), (q + 1e-6 * rng.standard_normal(model.nq), v), (q, v + 1e-6 * rng.standard_normal(model.nq))]
+        for bad in (np.nan, np.inf, -np.inf, 1e101):
+            for which in ("q", "v"):
+                x = (q if which == "q" else v).copy()
+                x[rng.integers(model.nq)] = bad
+                states.append((x, v) if which == "q" else (q, x))
+    verdicts = [js._holds(model, q, v, model.t0, model.p0) for q, v in states]
+    assert verdicts == [_holds_by_numpy(model, q, v) for q, v in states]
+    assert sum(verdicts) == 6                    # the six consistent states, none of the others
+
+
+def test_a_non_finite_q0_or_v0_is_refused_naming_it_and_the_fast_start_runs_as_the_checked_one(chain, monkeypatch):
+    """q0 or v0 given as float64 arrays take the fast start (one C call decides, no Python check
+    called: counted); a NaN, an infinity or a huge entry is still refused with the argument
+    named, as through the checked path (q0 given as a list); a consistent start gives bit-equal
+    trajectories both ways, and so does a start off the constraints (both project it the same way)."""
+    import ncgen.runtime.run_start as run_start
+
+    model, q0, v0 = chain
+    calls: dict = {}
+    _count(monkeypatch, run_start, "as_vector", calls)
+    nc.simulate(model, 1e-3, 1e-3, q0=q0, v0=v0, method="joint")
+    assert calls == {}
+    nc.simulate(model, 1e-3, 1e-3, q0=list(q0), v0=v0, method="joint")
+    assert calls == {"as_vector": 2}
+    for name, bad in (("q0", np.nan), ("v0", np.inf), ("q0", 1e200)):
+        for form in (np.array, list):
+            q, v = q0.copy(), v0.copy()
+            (q if name == "q0" else v)[1] = bad
+            with pytest.raises(nc.NcgenError, match=f"^{name}: expected") as e:
+                nc.simulate(model, 1e-3, 1e-3, q0=form(q), v0=form(v), method="joint")
+            assert name in str(e.value)
+    for q in (q0, q0 + 1e-7):                    # consistent; off Φ = 0 (projected)
+        fast = nc.simulate(model, 0.1, 0.05, q0=q, v0=v0, method="joint", rtol=1e-8, atol=1e-10)
+        checked = nc.simulate(model, 0.1, 0.05, q0=list(q), v0=list(v0), method="joint", rtol=1e-8, atol=1e-10)
+        for key in ("t", "qj", "vj", "q", "v", "lam", "kinetic", "markers"):
+            np.testing.assert_array_equal(getattr(fast, key), getattr(checked, key), err_msg=key)
+
+
+def test_the_time_grid_is_fresh_per_run_and_the_formula_of_the_docs():
+    """The grid is computed once per ``(t0, t_end, n)`` but every call returns its own array
+    (editing a run's ``t`` changes no later grid), ``t0 + k (t_end − t0) / n``."""
+    from ncgen.runtime.inputs import time_grid
+
+    a = time_grid(0.5, 1.25, 0.1)
+    a[3] = -1.0
+    b = time_grid(0.5, 1.25, 0.1)
+    np.testing.assert_array_equal(b, 0.5 + 0.75 * np.arange(9) / 8)
+    assert b is not time_grid(0.5, 1.25, 0.1)
+
+
 def _raise_sigint_and_wait(stop, after: float = 0.0, seconds: float = 5.0) -> int:
     """SIGINT to this process ``after`` s, then wait (GIL released) until ``stop`` is set: 7 if
     it was."""

@@ -94,6 +94,18 @@ def constraint_residuals_function(model) -> ca.Function:
                        f["phi_t"](t, q, p)], ["t", "q", "v", "p"], ["phi", "phi_dot"])
 
 
+def state_check_function(model) -> ca.Function:
+    """``(t, q, v, p) -> [|Φ|∞, |A v + Φ_t|∞, |q|∞, |v|∞, s]`` (one vector): what deciding that
+    a state holds both constraint levels needs, in one call; ``s`` is the sum of every entry of
+    ``q``, ``v`` and both residuals, finite only if they all are (CasADi's ``norm_inf`` skips NaN)."""
+    t, q, v = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq)
+    p = ca.SX.sym("p", model.np)
+    phi, phidot = constraint_residuals_function(model)(t, q, v, p)
+    probe = ca.sum1(q) + ca.sum1(v) + ca.sum1(phi) + ca.sum1(phidot)
+    return ca.Function("state_check", [t, q, v, p], [ca.vertcat(ca.norm_inf(phi), ca.norm_inf(phidot), ca.norm_inf(q),
+                                                                ca.norm_inf(v), probe)], ["t", "q", "v", "p"], ["check"])
+
+
 def residual_function(model) -> ca.Function:
     """``(t, q, v, p) -> (|Φ|∞, |A v + Φ_t|∞)``: position and velocity constraint drift."""
     t, q, v = ca.SX.sym("t"), ca.SX.sym("q", model.nq), ca.SX.sym("v", model.nq)

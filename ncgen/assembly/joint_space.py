@@ -19,6 +19,7 @@ its axis, forces in N along it, ``[f, τ]`` in B's frame for a free joint.
 """
 from __future__ import annotations
 
+import math
 from collections import deque
 
 import casadi as ca
@@ -28,13 +29,13 @@ from ncgen.assembly.joint_coordinates import JointCoordinates, joint_coordinates
 from ncgen.assembly.joint_tree import (
     Edge, carry, edge_of, quaternion_matrix, quaternion_rate, relative_pose, rotation_2d,
 )
-from ncgen.assembly.derived import constraint_residuals_function
+from ncgen.assembly.derived import constraint_residuals_function, state_check_function
 from ncgen.assembly.manifold import NEWTON_TOL as TOL, newton, solve_linear, system_size
 from ncgen.model.buffered_call import buffered
 from ncgen.model.data import model_data
 from ncgen.symbolic.coordinates import component_names, matrix_names
 from ncgen.errors import ModelError
-from ncgen.validation import as_vector
+from ncgen.validation import MAX_MAGNITUDE, as_vector
 
 #: Largest constraint residual (relative to the squared size of q, or to |q| |v| for rates)
 #: of a state whose joint coordinates :meth:`JointSpace.to_joint_space` returns: loose enough
@@ -239,11 +240,14 @@ class JointSpace:
 
     @staticmethod
     def _holds(model, q, v, t, p) -> bool:
-        """Whether ``(q, v)`` satisfies both constraint levels (drives included) to round-off."""
-        size = system_size(q)
-        phi, vel = JointSpace._residuals(model, q, v, t, p)
-        return bool(np.abs(phi).max(initial=0.0) <= TOL * size**2          # NaN fails both bounds
-                    and np.abs(vel).max(initial=0.0) <= 1e-10 * size * (1.0 + np.abs(v).max(initial=0.0)))
+        """Whether ``(q, v)`` is finite, of magnitudes at most
+        :data:`~ncgen.validation.MAX_MAGNITUDE`, and satisfies both constraint levels (drives
+        included) to round-off; one call of :func:`~ncgen.assembly.derived.state_check_function`."""
+        phi, vel, q_max, v_max, probe = buffered(model, "state_check",
+                                                 lambda: state_check_function(model)).call(t, q, v, p)[0].tolist()
+        size = max(1.0, q_max)
+        return (math.isfinite(probe) and q_max <= MAX_MAGNITUDE and v_max <= MAX_MAGNITUDE
+                and phi <= TOL * size**2 and vel <= 1e-10 * size * (1.0 + v_max))
 
     def initial_state(self, model, positions: dict, rates: dict):
         """``(q, v)`` of a joint-space initial state: the named joints' positions and rates,

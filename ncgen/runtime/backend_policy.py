@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from functools import lru_cache
 
 from ncgen.errors import NcgenError
 
@@ -111,6 +112,7 @@ def choose_backend(model, outputs: int, backend: str = "auto", method: str = "id
     return Choice("vm", f"compiling (~{cost:.0f} s) would save ~{saving:.1f} s on this run")
 
 
+@lru_cache(maxsize=256)
 def choose_joint_kernels(nv: int, outputs: int, flat_ready: str | None, missing: tuple[str, ...] = ()) -> Choice:
     """The kernels (``"tables"`` or ``"flat"``) of a joint-space run of a tree with ``nv``
     joint rates over ``outputs`` output intervals that the tree tables cover and a compiler

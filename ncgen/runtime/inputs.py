@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import inspect
 import math
+from functools import lru_cache
 
 import numpy as np
 
@@ -43,6 +44,12 @@ def time_grid(t0: float, t_end: float, dt: float, bytes_per_point: float = 8.0) 
     allocation((n + 1) * bytes_per_point, lambda: f"the output grid t0 = {t0:g} ... t_end = {t_end:g} s with "
                f"dt = {dt:g} s ({n + 1:,} points)", "use a larger dt (the output step; the integrator "
                "chooses its own internal steps) or a shorter run")
+    return _grid(t0, t_end, n).copy()
+
+
+@lru_cache(maxsize=64)
+def _grid(t0: float, t_end: float, n: int) -> np.ndarray:
+    """``t0, ..., t_end`` in ``n`` equal steps, computed once per ``(t0, t_end, n)`` (callers copy it)."""
     return t0 + (t_end - t0) * np.arange(n + 1) / n
 
 

@@ -299,7 +299,7 @@ def simulate_joint(model, run: Run, opts: JointLoopOptions, options: JointOption
     X[0, :js.nq], X[0, js.nq:] = js.state(model, run.q, run.v)      # consistent: initial_state made it so
     U = np.ascontiguousarray(run.U, dtype=float)
     W, S = U.copy(), _input_slopes(U, t) if hold == "linear" and model.nu else None
-    varying = model.nu > 0 and (feedback is not None or bool(np.any(U != U[:1])))
+    varying = model.nu > 0 and (feedback is not None or U[1:].tobytes() != U[:1].tobytes() * (n - 1))  # bit-equal rows
     options = run_options(options, varying)
     integrator = integrator_name(options)
     start = time.perf_counter()
@@ -450,10 +450,12 @@ def _feedback(model, feedback, t: float, x: np.ndarray, p) -> np.ndarray:
 
 
 def _trajectory(model, loop: JointLoop, t, X, W, p, info) -> Trajectory:
-    """The natural-coordinate trajectory of the joint states ``X`` (module docstring)."""
+    """The natural-coordinate trajectory of the joint states ``X`` (module docstring); ``X``
+    and ``W`` are the run's own arrays, which the lazy outputs keep (``traj.qj``, ``traj.vj``
+    are copies: editing them changes nothing else)."""
     js = model.joint_space
     n = len(t)
-    X, W = X.copy(), W[:n].copy()           # the lazy outputs' own copies (traj.qj may be edited)
+    W = W[:n]
     P = once(lambda: np.repeat(np.asarray(p, float)[:, None], n, axis=1))
     natural = once(lambda: [np.array(y).T for y in loop.mapped("tree", n)(X[:, :js.nq].T, X[:, js.nq:].T)])
     applied = once(lambda: np.array(loop.mapped("ode", n)(t[None, :], X.T, W.T if model.nu else np.zeros((0, n)),

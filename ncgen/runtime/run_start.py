@@ -39,9 +39,13 @@ def point_bytes(model) -> float:
 
 def initial_state(model, q0, v0, t0: float, p: np.ndarray, tolerance: float | None):
     """Consistent ``(q, v)`` at ``t0`` (see :func:`~ncgen.runtime.simulation.simulate`)."""
-    at_model = t0 == model.t0 and np.array_equal(p, model.p0)
+    at_model = t0 == model.t0 and (model.np == 0 or np.array_equal(p, model.p0))
     if q0 is None and v0 is None and at_model:
         return model.q0.copy(), model.v0.copy()
+    if at_model and _plain(q0, model.nq) and _plain(v0, model.nq):
+        q, v = (model.q0 if q0 is None else q0), (model.v0 if v0 is None else v0)
+        if model.joint_space._holds(model, q, v, t0, p):  # finite, in range, consistent: one C call
+            return q.copy(), v.copy()
     q = model.q0 if q0 is None else as_vector(q0, model.nq, "q0")
     v = model.v0 if v0 is None else as_vector(v0, model.nq, "v0")
     if at_model and model.joint_space._holds(model, q, v, t0, p):
@@ -54,6 +58,13 @@ def initial_state(model, q0, v0, t0: float, p: np.ndarray, tolerance: float | No
         raise ModelError(f"simulate: initial state of {model.name!r} at t0 = {t0:g} s: {e}. In simulate: give "
                          f"q0/v0 consistent at t0, or ic_tolerance=None to accept any correction") from None
     return state.q0, state.v0
+
+
+def _plain(x, n: int) -> bool:
+    """Whether ``x`` is None or a float64 array of shape ``(n,)`` (whose values
+    :meth:`~ncgen.assembly.joint_space.JointSpace._holds` checks; anything else goes through
+    :func:`~ncgen.validation.as_vector`, whose messages name the argument)."""
+    return x is None or (type(x) is np.ndarray and x.dtype == np.float64 and x.shape == (n,))
 
 
 def initial_multipliers(model, t0: float, q, v, u, p, dae) -> np.ndarray:

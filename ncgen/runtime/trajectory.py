@@ -98,6 +98,8 @@ def _float(value, shape=None):
     """``value`` (an array or a function computing one) as floats (of ``shape``), lazily."""
     if callable(value):
         return lambda: _float(value(), shape)
+    if shape is None and type(value) is np.ndarray and value.dtype == np.float64:
+        return value
     a = np.asarray(value, dtype=float)
     return a if shape is None else a.reshape(shape)
 
@@ -122,10 +124,10 @@ class Trajectory:
             a[key] = np.zeros((n, 0)) if x is None else _float(x)
         self.contact_names = list(names.get("contact_names", []))
         nk = len(self.contact_names)
-        for key in contact_outputs.KEYS:
+        for key in contact_outputs.KEYS:         # none given: zeros, made when first read
             value = arrays.get(key)
             shape = (n, nk, self.dim - 1) if key == "contact_tangent" else (n, nk)
-            a[key] = np.zeros(shape) if value is None else _float(value)
+            a[key] = (lambda shape=shape: np.zeros(shape)) if value is None else _float(value)
         state = a["contact_state"]
         self.contact_state = (lambda: _float(state)().astype(int)) if callable(state) else state.astype(int)
         self.info = dict(info)
