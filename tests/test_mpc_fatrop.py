@@ -18,7 +18,7 @@ import ncgen as nc
 from ncgen.control.export import closed_loop
 from ncgen.errors import OptimizationError
 
-from cartpole_mpc import PUSH, cartpole_problem, tilted
+from cartpole_mpc import EXAMPLES, PUSH, cartpole_problem, tilted
 
 # the tests that compare with the SQP are slow: its MPC compiles the horizon's step derivatives
 # (minutes on a cold cache)
