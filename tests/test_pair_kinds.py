@@ -1,13 +1,16 @@
 """Contact pair kinds (``ncgen/assembly/pair_kinds.py``): one kernel per kind of point
-contact with the pair's numbers as arguments, equal to the per-model element kernels
-(``ncgen/assembly/pair_kernels.py``, numbers built in) at random configurations, and their
-normal rows the gap's derivative along the constraint manifold (central differences)."""
+contact with the pair's numbers as arguments, equal to the per-model element kernels with
+the numbers built in (the rows of the model's flat ``gap`` and ``contact_jacobian``,
+``ncgen/assembly/pair_kernels.py`` with ``KIND_CALLS`` off) at random configurations, their
+normal rows the gap's derivative along the constraint manifold (central differences), and
+the element kernels that call them (the default) equal to those with the numbers built in."""
 from functools import lru_cache
 
 import numpy as np
 import pytest
 
 import ncgen as nc
+import ncgen.assembly.pair_kernels as pair_kernels_module
 from ncgen.assembly.pair_kernels import pair_kernels
 from ncgen.assembly.pair_kinds import KINDS, pair_kind, point_call
 from test_contact_pairs import R_z, box_inertia, random_rotation, shapes_system
@@ -63,12 +66,21 @@ def _local(q, idx, const):
     return np.array([q[i] if i >= 0 else c for i, c in zip(idx, const)])
 
 
+def flat_pair_kernels(model):
+    """The per-model element kernels with the numbers built in (the model's flat rows)."""
+    pair_kernels_module.KIND_CALLS = False
+    try:
+        return pair_kernels(model)
+    finally:
+        pair_kernels_module.KIND_CALLS = True
+
+
 @lru_cache(maxsize=None)
 def prepared(which):
     """The system ``which`` built with nonsmooth contacts, its per-model element kernels (by
     name) and table, and each point contact's call of its kind."""
     model = SYSTEMS[which]().build(contacts="nonsmooth")
-    pairs = pair_kernels(model)
+    pairs = flat_pair_kernels(model)
     calls = {id(pc): point_call(pc, model.dim) for el in model.contact_elements for pc in el.point_contacts()}
     return model, pairs, {f.name(): f for f in pairs.functions}, calls
 
@@ -184,3 +196,27 @@ def test_one_kernel_per_kind_and_side_types():
     assert len(calls) == 32 and {c.kind.name for c in calls} == {"pk_box_corner_ruvw_ruvw_3d"}
     assert len({c.numbers.tobytes() for c in calls}) == 32
     assert pair_kind("box_corner", "ruvw", "ruvw", 3) is calls[0].kind
+
+
+@pytest.mark.parametrize("which", sorted(SYSTEMS))
+def test_element_kernels_calling_the_kinds_equal_the_flat_ones(which):
+    """The per-model element kernels as calls of the pair kinds (``KIND_CALLS``, the default:
+    the C has one function per kind) give the gaps and rows of those with the numbers built in,
+    to 1e-12 relative, at 10 random configurations; equal elements still share a kernel."""
+    model, flat, flat_rows, _ = prepared(which)
+    kinds = pair_kernels(model)
+    assert all(f.name().startswith("step_pair") for f in kinds.functions)
+    called = {g.name() for f in kinds.functions for g in f.find_functions()}
+    assert called and all(n.startswith("pk_") for n in called)
+    rows = {f.name(): f for f in kinds.functions}
+    rng = np.random.default_rng(5)
+    for trial in range(10):
+        q = random_state(model, rng, [0.1, 0.3, 1.0][trial % 3])
+        for e, ef in zip(kinds.elements, flat.elements, strict=True):
+            args = (_local(q, e.idx_a, e.const_a), _local(q, e.idx_b, e.const_b), model.p0)
+            g, W = (np.array(x) for x in rows[f"step_pair{e.kernel}_rows"](*args))
+            g_ref, W_ref = (np.array(x) for x in flat_rows[f"step_pair{ef.kernel}_rows"](*args))
+            gap = np.array(rows[f"step_pair{e.kernel}_gap"](*args))
+            scale = max(1.0, np.abs(g_ref).max(), np.abs(W_ref).max())
+            assert np.abs(g - g_ref).max() <= 1e-12 * scale and np.abs(gap - g_ref).max() <= 1e-12 * scale, e.name
+            assert np.abs(W - W_ref).max() <= 1e-12 * scale, e.name

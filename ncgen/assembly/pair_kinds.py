@@ -205,6 +205,8 @@ class PairKind:
     n_b: int
     n_c: int
     function: ca.Function
+    #: The gap alone: ``pk_..._gap: q, c -> g``.
+    gap: ca.Function
 
 
 #: The contact class of each kind (:func:`point_kind`).
@@ -252,8 +254,10 @@ def pair_kind(kind: str, type_a: str, type_b: str, dim: int) -> PairKind:
     c = ca.vertcat(sides[0].numbers, sides[1].numbers, *symbols)
     W = ca.densify(ca.vertcat(term.WN, term.WT))
     name = kind_name(kind, type_a, type_b, dim)
-    fn = ca.Function(name, [q, c], [ca.densify(term.g), W], ["q", "c"], ["g", "W"])
-    return PairKind(name, kind, int(sides[0].q.numel()), int(sides[1].q.numel()), int(c.numel()), fn)
+    called = {"never_inline": True}       # a call in the expressions that use it, one C function
+    fn = ca.Function(name, [q, c], [ca.densify(term.g), W], ["q", "c"], ["g", "W"], called)
+    gap = ca.Function(f"{name}_gap", [q, c], [ca.densify(term.g)], ["q", "c"], ["g"], called)
+    return PairKind(name, kind, int(sides[0].q.numel()), int(sides[1].q.numel()), int(c.numel()), fn, gap)
 
 
 def side_numbers(member, dim: int) -> np.ndarray:
