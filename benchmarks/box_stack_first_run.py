@@ -6,9 +6,8 @@ examples/box_stack.toml --method stepper --contacts nonsmooth --t-end T``, ``PYT
 tree: a child started with ``-m`` imports the ncgen of its working directory) with a new, empty
 ``NCGEN_CACHE_DIR``: the model is built, its package generated and compiled (gcc), the run
 made.  Per tree: CPU (user + system of the process and its compilers) and wall time, min and
-median over the rounds; then the size of the package's C and gcc's CPU time on it alone (the
-compile cache's command, read back from the cache).  The CPU model and the load average are
-printed: on a shared machine wall time is CPU time times the queue.
+median over the rounds, and the ratio of the CPU times per round.  The CPU model and the load
+average are printed: on a shared machine wall time is CPU time times the queue.
 
     python benchmarks/box_stack_first_run.py --peer /work/main --rounds 3
     python benchmarks/box_stack_first_run.py --smoke          this tree, 1 round, T = 0.001 s
@@ -33,7 +32,7 @@ TARGET = 3.0
 
 
 def first_run(tree: Path, t_end: float) -> dict:
-    """One first run of box_stack in ``tree`` with an empty cache: CPU and wall s, C bytes."""
+    """One first run of box_stack in ``tree`` with an empty cache: CPU and wall s."""
     with tempfile.TemporaryDirectory(prefix="box34-first-") as cache:
         env = {**os.environ, "PYTHONPATH": str(tree), "NCGEN_CACHE_DIR": cache}
         cmd = [sys.executable, "-m", "ncgen.cli", "simulate", "examples/box_stack.toml", "--method", "stepper",
@@ -45,9 +44,7 @@ def first_run(tree: Path, t_end: float) -> dict:
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         if out.returncode:
             raise SystemExit(f"{tree}: {' '.join(cmd)} failed:\n{out.stdout}\n{out.stderr}")
-        c_bytes = sum(p.stat().st_size for p in Path(cache).rglob("*.c"))
-        return {"cpu": after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime, "wall": wall,
-                "c_bytes": c_bytes}
+        return {"cpu": after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime, "wall": wall}
 
 
 def summary(xs: list[float]) -> str:
@@ -73,7 +70,7 @@ def main() -> None:
             res = first_run(tree, args.t_end)
             results[name].append(res)
             print(f"  round {r + 1} {name:4s}: CPU {res['cpu']:6.2f} s, wall {res['wall']:6.2f} s, "
-                  f"C {res['c_bytes'] / 1e6:.2f} MB, load {os.getloadavg()[0]:.1f}", flush=True)
+                  f"load {os.getloadavg()[0]:.1f}", flush=True)
     print(f"{'tree':6s} {'CPU s min / median':>20s} {'wall s min / median':>20s}  (target {TARGET} s)")
     for name, rs in results.items():
         print(f"{name:6s} {summary([x['cpu'] for x in rs]):>20s} {summary([x['wall'] for x in rs]):>20s}")

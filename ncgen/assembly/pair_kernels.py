@@ -9,8 +9,11 @@ of one flat function of every contact.  The formulas are those of
 system's symbols (the expressions of the model's ``gap`` and ``contact_jacobian``) and made a function of its members' local coordinates ``q_a``, ``q_b``
 (the coordinates each member uses are index tables in the C).  Elements whose kernels are
 equal (the same kinds, shapes, coordinate types and numbers: equal spheres of a heap, equal
-boxes of a stack) share one kernel, so the C grows with the kinds and sizes of elements, not
-with their number.  Kernels (``k``: the kernel's number):
+boxes of a stack) share one kernel.  An element whose point contacts all have a pair kind
+(:mod:`ncgen.assembly.pair_kinds`; :data:`KIND_CALLS`) is an MX function calling one C
+function per kind with its numbers as constant arrays, so the C grows with the kinds of
+elements, not with their sizes or number; the others (a plane carried by a member) are the
+flat rows with the numbers built in.  Kernels (``k``: the kernel's number):
 
 * ``step_pair<k>_gap``: q_a, q_b, p -> g (m gaps of the element's point contacts)
 * ``step_pair<k>_rows``: q_a, q_b, p -> g, W (m dim × (n_a + n_b), dense: per point contact
