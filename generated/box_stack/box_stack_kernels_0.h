@@ -473,7 +473,7 @@ int box_stack_step_pair1_gap_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, 
 #define box_stack_step_pair1_gap_SZ_ARG 5
 #define box_stack_step_pair1_gap_SZ_RES 2
 #define box_stack_step_pair1_gap_SZ_IW 0
-#define box_stack_step_pair1_gap_SZ_W 109
+#define box_stack_step_pair1_gap_SZ_W 110
 int box_stack_step_pair1_rows(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int box_stack_step_pair1_rows_checkout(void);
 void box_stack_step_pair1_rows_release(int mem);
@@ -491,7 +491,7 @@ int box_stack_step_pair1_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res,
 #define box_stack_step_pair1_rows_SZ_ARG 19
 #define box_stack_step_pair1_rows_SZ_RES 4
 #define box_stack_step_pair1_rows_SZ_IW 0
-#define box_stack_step_pair1_rows_SZ_W 3719
+#define box_stack_step_pair1_rows_SZ_W 3716
 int box_stack_step_pair2_gap(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int box_stack_step_pair2_gap_checkout(void);
 void box_stack_step_pair2_gap_release(int mem);
@@ -527,7 +527,7 @@ int box_stack_step_pair2_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res,
 #define box_stack_step_pair2_rows_SZ_ARG 5
 #define box_stack_step_pair2_rows_SZ_RES 4
 #define box_stack_step_pair2_rows_SZ_IW 0
-#define box_stack_step_pair2_rows_SZ_W 81
+#define box_stack_step_pair2_rows_SZ_W 97
 int box_stack_step_pair3_gap(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int box_stack_step_pair3_gap_checkout(void);
 void box_stack_step_pair3_gap_release(int mem);
@@ -563,7 +563,7 @@ int box_stack_step_pair3_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res,
 #define box_stack_step_pair3_rows_SZ_ARG 5
 #define box_stack_step_pair3_rows_SZ_RES 4
 #define box_stack_step_pair3_rows_SZ_IW 0
-#define box_stack_step_pair3_rows_SZ_W 80
+#define box_stack_step_pair3_rows_SZ_W 97
 int box_stack_step_factor(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int box_stack_step_factor_checkout(void);
 void box_stack_step_factor_release(int mem);

@@ -455,7 +455,7 @@ int boxes_step_pair0_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, cas
 #define boxes_step_pair0_rows_SZ_ARG 11
 #define boxes_step_pair0_rows_SZ_RES 4
 #define boxes_step_pair0_rows_SZ_IW 0
-#define boxes_step_pair0_rows_SZ_W 944
+#define boxes_step_pair0_rows_SZ_W 961
 int boxes_step_pair1_gap(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int boxes_step_pair1_gap_checkout(void);
 void boxes_step_pair1_gap_release(int mem);
@@ -491,7 +491,7 @@ int boxes_step_pair1_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, cas
 #define boxes_step_pair1_rows_SZ_ARG 5
 #define boxes_step_pair1_rows_SZ_RES 4
 #define boxes_step_pair1_rows_SZ_IW 0
-#define boxes_step_pair1_rows_SZ_W 296
+#define boxes_step_pair1_rows_SZ_W 313
 int boxes_step_factor(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int boxes_step_factor_checkout(void);
 void boxes_step_factor_release(int mem);

@@ -455,7 +455,7 @@ int falling_chain_step_pair0_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_
 #define falling_chain_step_pair0_rows_SZ_ARG 5
 #define falling_chain_step_pair0_rows_SZ_RES 4
 #define falling_chain_step_pair0_rows_SZ_IW 0
-#define falling_chain_step_pair0_rows_SZ_W 51
+#define falling_chain_step_pair0_rows_SZ_W 55
 int falling_chain_step_pair1_gap(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int falling_chain_step_pair1_gap_checkout(void);
 void falling_chain_step_pair1_gap_release(int mem);
@@ -491,7 +491,7 @@ int falling_chain_step_pair1_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_
 #define falling_chain_step_pair1_rows_SZ_ARG 5
 #define falling_chain_step_pair1_rows_SZ_RES 4
 #define falling_chain_step_pair1_rows_SZ_IW 0
-#define falling_chain_step_pair1_rows_SZ_W 51
+#define falling_chain_step_pair1_rows_SZ_W 55
 int falling_chain_step_pair2_gap(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int falling_chain_step_pair2_gap_checkout(void);
 void falling_chain_step_pair2_gap_release(int mem);

@@ -252,11 +252,11 @@ def pair_kind(kind: str, type_a: str, type_b: str, dim: int) -> PairKind:
     term = contact_terms(KindContext(dim, sides, getattr(pc, "tangents", None)), [pc])[0]
     q = ca.vertcat(sides[0].q, sides[1].q)
     c = ca.vertcat(sides[0].numbers, sides[1].numbers, *symbols)
-    W = ca.densify(ca.vertcat(term.WN, term.WT))
+    g, W = ca.cse([ca.densify(term.g), ca.densify(ca.vertcat(term.WN, term.WT))])
     name = kind_name(kind, type_a, type_b, dim)
     called = {"never_inline": True}       # a call in the expressions that use it, one C function
-    fn = ca.Function(name, [q, c], [ca.densify(term.g), W], ["q", "c"], ["g", "W"], called)
-    gap = ca.Function(f"{name}_gap", [q, c], [ca.densify(term.g)], ["q", "c"], ["g"], called)
+    fn = ca.Function(name, [q, c], [g, W], ["q", "c"], ["g", "W"], called)
+    gap = ca.Function(f"{name}_gap", [q, c], [ca.cse(ca.densify(term.g))], ["q", "c"], ["g"], called)
     return PairKind(name, kind, int(sides[0].q.numel()), int(sides[1].q.numel()), int(c.numel()), fn, gap)
 
 
