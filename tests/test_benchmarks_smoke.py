@@ -98,6 +98,8 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800),   # each benchmark sc
                                                       "RATIO naive / fixed sequence, IPOPT CPU", "Solve_Succeeded"]),
     ("contact_implicit_pusher_box.py", ["=== pusher_box (examples/pusher_box.py), N = 10",
                                         "RATIO naive / fixed sequence, IPOPT CPU", "Solve_Succeeded"]),
+    ("box_stack_first_run.py", ["box_stack first run (empty cache)", "round 1 this", "CPU s min / median"]),
+    ("pair_kind_calls.py", ["heap20: stepping CPU s", "calls / built-in min", "max |Δq|"]),
     ("mjcf_import_time.py", ["first    parse wall", "later 1  parse wall", "n =   10:", "CPU per element",
                              "load average at the end"]),
 ])

@@ -166,14 +166,15 @@ def run_both(build, t_end, dt=0.01, substeps=10):
     return out[True], out[False], out[None]
 
 
-def assert_same(a, b, c, rtol=1e-12):
+def assert_same(a, b, c, rtol=1e-12, floor=0.0):
     """``a`` equals ``b`` to ``rtol`` or, where impacts amplify round-off, at most ten times
-    as far as the run ``c`` from rates one unit in the last place away (and to 1e-8)."""
+    as far as the run ``c`` from rates one unit in the last place away, or to ``floor`` (all
+    relative to the largest value; and to 1e-8)."""
     for what in ("q", "v", "contact_normal"):
         x, y, z = getattr(a, what), getattr(b, what), getattr(c, what)
         scale = max(np.abs(y).max(), 1.0)
         off, roundoff = np.abs(x - y).max(), np.abs(z - y).max()
-        assert off <= max(rtol * scale, 10 * roundoff) and off <= 1e-8 * scale, (what, off, roundoff)
+        assert off <= max(rtol * scale, 10 * roundoff, floor * scale) and off <= 1e-8 * scale, (what, off, roundoff)
 
 
 def projectile_scene(edges=False):
@@ -241,5 +242,9 @@ def test_shipped_examples_run_as_with_the_flat_kernels(example):
     def build():
         return nc.System.from_toml(ROOT / "examples" / f"{example}.toml").build(contacts="nonsmooth")
     a, b, c = run_both(build, 0.5)
-    assert_same(a, b, c)
+    # the element kernels call the pair kinds (their numbers arguments, not folded in): equal to
+    # round-off, and a resting stack's redundant contacts take impulses found only to the contact
+    # solve's tolerance, so the runs part by up to ~2e-11 m over 0.5 s (boxes, box_stack) where
+    # a scene starting at rest gives the one-ulp run no spread; issue 34's bound: 1e-10 m
+    assert_same(a, b, c, floor=1e-10)
     assert math.isfinite(a.q.sum())

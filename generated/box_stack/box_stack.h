@@ -19,7 +19,6 @@
 
 #include "box_stack_kernels_0.h"
 #include "box_stack_kernels_1.h"
-#include "box_stack_kernels_2.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -476,7 +475,7 @@ extern const char box_stack_model_hash[];
 
 /* ---- box_stack_step_pair0_gap ----------------------------------------------------
  * Stepper: the gaps of one contact element
- * In box_stack_kernels_0.c; 1708 instructions.
+ * In box_stack_kernels_0.c; 49 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
@@ -491,7 +490,7 @@ extern const char box_stack_model_hash[];
 
 /* ---- box_stack_step_pair0_rows ----------------------------------------------------
  * Stepper: gaps and contact Jacobian rows of one contact element
- * In box_stack_kernels_1.c; 4397 instructions.
+ * In box_stack_kernels_0.c; 68 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
@@ -508,7 +507,7 @@ extern const char box_stack_model_hash[];
 
 /* ---- box_stack_step_pair1_gap ----------------------------------------------------
  * Stepper: the gaps of one contact element
- * In box_stack_kernels_1.c; 2918 instructions.
+ * In box_stack_kernels_0.c; 66 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 12x1, nnz 12 [m] local coordinates of its second member. Default: zeros.
@@ -523,7 +522,7 @@ extern const char box_stack_model_hash[];
 
 /* ---- box_stack_step_pair1_rows ----------------------------------------------------
  * Stepper: gaps and contact Jacobian rows of one contact element
- * In box_stack_kernels_1.c; 7389 instructions.
+ * In box_stack_kernels_0.c; 133 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 12x1, nnz 12 [m] local coordinates of its second member. Default: zeros.
@@ -540,7 +539,7 @@ extern const char box_stack_model_hash[];
 
 /* ---- box_stack_step_pair2_gap ----------------------------------------------------
  * Stepper: the gaps of one contact element
- * In box_stack_kernels_1.c; 68 instructions.
+ * In box_stack_kernels_0.c; 4 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
@@ -555,7 +554,7 @@ extern const char box_stack_model_hash[];
 
 /* ---- box_stack_step_pair2_rows ----------------------------------------------------
  * Stepper: gaps and contact Jacobian rows of one contact element
- * In box_stack_kernels_1.c; 298 instructions.
+ * In box_stack_kernels_0.c; 5 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
@@ -572,7 +571,7 @@ extern const char box_stack_model_hash[];
 
 /* ---- box_stack_step_pair3_gap ----------------------------------------------------
  * Stepper: the gaps of one contact element
- * In box_stack_kernels_1.c; 4 instructions.
+ * In box_stack_kernels_0.c; 4 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
@@ -587,7 +586,7 @@ extern const char box_stack_model_hash[];
 
 /* ---- box_stack_step_pair3_rows ----------------------------------------------------
  * Stepper: gaps and contact Jacobian rows of one contact element
- * In box_stack_kernels_1.c; 91 instructions.
+ * In box_stack_kernels_0.c; 5 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
@@ -604,7 +603,7 @@ extern const char box_stack_model_hash[];
 
 /* ---- box_stack_step_factor ----------------------------------------------------
  * Stepper: sparse Householder QR of the KKT matrix (for the contact Delassus matrix)
- * In box_stack_kernels_2.c; 5586 instructions.
+ * In box_stack_kernels_0.c; 5586 instructions.
  * Inputs:
  *   arg[0] K: 54x54, nnz 198 (sparse) KKT matrix in the stepper's pattern. Default: zeros.
  * Outputs:
@@ -619,7 +618,7 @@ extern const char box_stack_model_hash[];
 
 /* ---- box_stack_step_backsolve ----------------------------------------------------
  * Stepper: x = K^-1 b from the factors of step_factor
- * In box_stack_kernels_2.c; 1887 instructions.
+ * In box_stack_kernels_1.c; 1887 instructions.
  * Inputs:
  *   arg[0] V: 54x54, nnz 183 (sparse) Householder vectors. Default: zeros.
  *   arg[1] R: 54x54, nnz 288 (sparse) triangular factor. Default: zeros.

@@ -434,10 +434,154 @@ const casadi_int* box_stack_step_pair0_gap_sparsity_in(casadi_int i);
 const casadi_int* box_stack_step_pair0_gap_sparsity_out(casadi_int i);
 int box_stack_step_pair0_gap_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int box_stack_step_pair0_gap_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define box_stack_step_pair0_gap_SZ_ARG 3
-#define box_stack_step_pair0_gap_SZ_RES 1
+#define box_stack_step_pair0_gap_SZ_ARG 5
+#define box_stack_step_pair0_gap_SZ_RES 2
 #define box_stack_step_pair0_gap_SZ_IW 0
-#define box_stack_step_pair0_gap_SZ_W 0
+#define box_stack_step_pair0_gap_SZ_W 74
+int box_stack_step_pair0_rows(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int box_stack_step_pair0_rows_checkout(void);
+void box_stack_step_pair0_rows_release(int mem);
+void box_stack_step_pair0_rows_incref(void);
+void box_stack_step_pair0_rows_decref(void);
+casadi_int box_stack_step_pair0_rows_n_in(void);
+casadi_int box_stack_step_pair0_rows_n_out(void);
+casadi_real box_stack_step_pair0_rows_default_in(casadi_int i);
+const char* box_stack_step_pair0_rows_name_in(casadi_int i);
+const char* box_stack_step_pair0_rows_name_out(casadi_int i);
+const casadi_int* box_stack_step_pair0_rows_sparsity_in(casadi_int i);
+const casadi_int* box_stack_step_pair0_rows_sparsity_out(casadi_int i);
+int box_stack_step_pair0_rows_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int box_stack_step_pair0_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define box_stack_step_pair0_rows_SZ_ARG 19
+#define box_stack_step_pair0_rows_SZ_RES 4
+#define box_stack_step_pair0_rows_SZ_IW 0
+#define box_stack_step_pair0_rows_SZ_W 1841
+int box_stack_step_pair1_gap(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int box_stack_step_pair1_gap_checkout(void);
+void box_stack_step_pair1_gap_release(int mem);
+void box_stack_step_pair1_gap_incref(void);
+void box_stack_step_pair1_gap_decref(void);
+casadi_int box_stack_step_pair1_gap_n_in(void);
+casadi_int box_stack_step_pair1_gap_n_out(void);
+casadi_real box_stack_step_pair1_gap_default_in(casadi_int i);
+const char* box_stack_step_pair1_gap_name_in(casadi_int i);
+const char* box_stack_step_pair1_gap_name_out(casadi_int i);
+const casadi_int* box_stack_step_pair1_gap_sparsity_in(casadi_int i);
+const casadi_int* box_stack_step_pair1_gap_sparsity_out(casadi_int i);
+int box_stack_step_pair1_gap_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int box_stack_step_pair1_gap_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define box_stack_step_pair1_gap_SZ_ARG 5
+#define box_stack_step_pair1_gap_SZ_RES 2
+#define box_stack_step_pair1_gap_SZ_IW 0
+#define box_stack_step_pair1_gap_SZ_W 110
+int box_stack_step_pair1_rows(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int box_stack_step_pair1_rows_checkout(void);
+void box_stack_step_pair1_rows_release(int mem);
+void box_stack_step_pair1_rows_incref(void);
+void box_stack_step_pair1_rows_decref(void);
+casadi_int box_stack_step_pair1_rows_n_in(void);
+casadi_int box_stack_step_pair1_rows_n_out(void);
+casadi_real box_stack_step_pair1_rows_default_in(casadi_int i);
+const char* box_stack_step_pair1_rows_name_in(casadi_int i);
+const char* box_stack_step_pair1_rows_name_out(casadi_int i);
+const casadi_int* box_stack_step_pair1_rows_sparsity_in(casadi_int i);
+const casadi_int* box_stack_step_pair1_rows_sparsity_out(casadi_int i);
+int box_stack_step_pair1_rows_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int box_stack_step_pair1_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define box_stack_step_pair1_rows_SZ_ARG 19
+#define box_stack_step_pair1_rows_SZ_RES 4
+#define box_stack_step_pair1_rows_SZ_IW 0
+#define box_stack_step_pair1_rows_SZ_W 3716
+int box_stack_step_pair2_gap(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int box_stack_step_pair2_gap_checkout(void);
+void box_stack_step_pair2_gap_release(int mem);
+void box_stack_step_pair2_gap_incref(void);
+void box_stack_step_pair2_gap_decref(void);
+casadi_int box_stack_step_pair2_gap_n_in(void);
+casadi_int box_stack_step_pair2_gap_n_out(void);
+casadi_real box_stack_step_pair2_gap_default_in(casadi_int i);
+const char* box_stack_step_pair2_gap_name_in(casadi_int i);
+const char* box_stack_step_pair2_gap_name_out(casadi_int i);
+const casadi_int* box_stack_step_pair2_gap_sparsity_in(casadi_int i);
+const casadi_int* box_stack_step_pair2_gap_sparsity_out(casadi_int i);
+int box_stack_step_pair2_gap_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int box_stack_step_pair2_gap_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define box_stack_step_pair2_gap_SZ_ARG 5
+#define box_stack_step_pair2_gap_SZ_RES 2
+#define box_stack_step_pair2_gap_SZ_IW 0
+#define box_stack_step_pair2_gap_SZ_W 14
+int box_stack_step_pair2_rows(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int box_stack_step_pair2_rows_checkout(void);
+void box_stack_step_pair2_rows_release(int mem);
+void box_stack_step_pair2_rows_incref(void);
+void box_stack_step_pair2_rows_decref(void);
+casadi_int box_stack_step_pair2_rows_n_in(void);
+casadi_int box_stack_step_pair2_rows_n_out(void);
+casadi_real box_stack_step_pair2_rows_default_in(casadi_int i);
+const char* box_stack_step_pair2_rows_name_in(casadi_int i);
+const char* box_stack_step_pair2_rows_name_out(casadi_int i);
+const casadi_int* box_stack_step_pair2_rows_sparsity_in(casadi_int i);
+const casadi_int* box_stack_step_pair2_rows_sparsity_out(casadi_int i);
+int box_stack_step_pair2_rows_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int box_stack_step_pair2_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define box_stack_step_pair2_rows_SZ_ARG 5
+#define box_stack_step_pair2_rows_SZ_RES 4
+#define box_stack_step_pair2_rows_SZ_IW 0
+#define box_stack_step_pair2_rows_SZ_W 97
+int box_stack_step_pair3_gap(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int box_stack_step_pair3_gap_checkout(void);
+void box_stack_step_pair3_gap_release(int mem);
+void box_stack_step_pair3_gap_incref(void);
+void box_stack_step_pair3_gap_decref(void);
+casadi_int box_stack_step_pair3_gap_n_in(void);
+casadi_int box_stack_step_pair3_gap_n_out(void);
+casadi_real box_stack_step_pair3_gap_default_in(casadi_int i);
+const char* box_stack_step_pair3_gap_name_in(casadi_int i);
+const char* box_stack_step_pair3_gap_name_out(casadi_int i);
+const casadi_int* box_stack_step_pair3_gap_sparsity_in(casadi_int i);
+const casadi_int* box_stack_step_pair3_gap_sparsity_out(casadi_int i);
+int box_stack_step_pair3_gap_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int box_stack_step_pair3_gap_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define box_stack_step_pair3_gap_SZ_ARG 5
+#define box_stack_step_pair3_gap_SZ_RES 2
+#define box_stack_step_pair3_gap_SZ_IW 0
+#define box_stack_step_pair3_gap_SZ_W 8
+int box_stack_step_pair3_rows(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int box_stack_step_pair3_rows_checkout(void);
+void box_stack_step_pair3_rows_release(int mem);
+void box_stack_step_pair3_rows_incref(void);
+void box_stack_step_pair3_rows_decref(void);
+casadi_int box_stack_step_pair3_rows_n_in(void);
+casadi_int box_stack_step_pair3_rows_n_out(void);
+casadi_real box_stack_step_pair3_rows_default_in(casadi_int i);
+const char* box_stack_step_pair3_rows_name_in(casadi_int i);
+const char* box_stack_step_pair3_rows_name_out(casadi_int i);
+const casadi_int* box_stack_step_pair3_rows_sparsity_in(casadi_int i);
+const casadi_int* box_stack_step_pair3_rows_sparsity_out(casadi_int i);
+int box_stack_step_pair3_rows_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int box_stack_step_pair3_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define box_stack_step_pair3_rows_SZ_ARG 5
+#define box_stack_step_pair3_rows_SZ_RES 4
+#define box_stack_step_pair3_rows_SZ_IW 0
+#define box_stack_step_pair3_rows_SZ_W 97
+int box_stack_step_factor(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int box_stack_step_factor_checkout(void);
+void box_stack_step_factor_release(int mem);
+void box_stack_step_factor_incref(void);
+void box_stack_step_factor_decref(void);
+casadi_int box_stack_step_factor_n_in(void);
+casadi_int box_stack_step_factor_n_out(void);
+casadi_real box_stack_step_factor_default_in(casadi_int i);
+const char* box_stack_step_factor_name_in(casadi_int i);
+const char* box_stack_step_factor_name_out(casadi_int i);
+const casadi_int* box_stack_step_factor_sparsity_in(casadi_int i);
+const casadi_int* box_stack_step_factor_sparsity_out(casadi_int i);
+int box_stack_step_factor_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int box_stack_step_factor_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define box_stack_step_factor_SZ_ARG 1
+#define box_stack_step_factor_SZ_RES 3
+#define box_stack_step_factor_SZ_IW 0
+#define box_stack_step_factor_SZ_W 0
 void box_stack_kernels_0_casadi_version(int* major, int* minor, int* patch);
 int box_stack_kernels_0_casadi_int_size(void);
 int box_stack_kernels_0_casadi_real_size(void);

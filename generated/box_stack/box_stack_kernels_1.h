@@ -24,132 +24,24 @@ extern "C" {
 #define casadi_int long long int
 #endif
 
-int box_stack_step_pair0_rows(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
-int box_stack_step_pair0_rows_checkout(void);
-void box_stack_step_pair0_rows_release(int mem);
-void box_stack_step_pair0_rows_incref(void);
-void box_stack_step_pair0_rows_decref(void);
-casadi_int box_stack_step_pair0_rows_n_in(void);
-casadi_int box_stack_step_pair0_rows_n_out(void);
-casadi_real box_stack_step_pair0_rows_default_in(casadi_int i);
-const char* box_stack_step_pair0_rows_name_in(casadi_int i);
-const char* box_stack_step_pair0_rows_name_out(casadi_int i);
-const casadi_int* box_stack_step_pair0_rows_sparsity_in(casadi_int i);
-const casadi_int* box_stack_step_pair0_rows_sparsity_out(casadi_int i);
-int box_stack_step_pair0_rows_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-int box_stack_step_pair0_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define box_stack_step_pair0_rows_SZ_ARG 3
-#define box_stack_step_pair0_rows_SZ_RES 2
-#define box_stack_step_pair0_rows_SZ_IW 0
-#define box_stack_step_pair0_rows_SZ_W 0
-int box_stack_step_pair1_gap(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
-int box_stack_step_pair1_gap_checkout(void);
-void box_stack_step_pair1_gap_release(int mem);
-void box_stack_step_pair1_gap_incref(void);
-void box_stack_step_pair1_gap_decref(void);
-casadi_int box_stack_step_pair1_gap_n_in(void);
-casadi_int box_stack_step_pair1_gap_n_out(void);
-casadi_real box_stack_step_pair1_gap_default_in(casadi_int i);
-const char* box_stack_step_pair1_gap_name_in(casadi_int i);
-const char* box_stack_step_pair1_gap_name_out(casadi_int i);
-const casadi_int* box_stack_step_pair1_gap_sparsity_in(casadi_int i);
-const casadi_int* box_stack_step_pair1_gap_sparsity_out(casadi_int i);
-int box_stack_step_pair1_gap_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-int box_stack_step_pair1_gap_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define box_stack_step_pair1_gap_SZ_ARG 3
-#define box_stack_step_pair1_gap_SZ_RES 1
-#define box_stack_step_pair1_gap_SZ_IW 0
-#define box_stack_step_pair1_gap_SZ_W 0
-int box_stack_step_pair1_rows(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
-int box_stack_step_pair1_rows_checkout(void);
-void box_stack_step_pair1_rows_release(int mem);
-void box_stack_step_pair1_rows_incref(void);
-void box_stack_step_pair1_rows_decref(void);
-casadi_int box_stack_step_pair1_rows_n_in(void);
-casadi_int box_stack_step_pair1_rows_n_out(void);
-casadi_real box_stack_step_pair1_rows_default_in(casadi_int i);
-const char* box_stack_step_pair1_rows_name_in(casadi_int i);
-const char* box_stack_step_pair1_rows_name_out(casadi_int i);
-const casadi_int* box_stack_step_pair1_rows_sparsity_in(casadi_int i);
-const casadi_int* box_stack_step_pair1_rows_sparsity_out(casadi_int i);
-int box_stack_step_pair1_rows_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-int box_stack_step_pair1_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define box_stack_step_pair1_rows_SZ_ARG 3
-#define box_stack_step_pair1_rows_SZ_RES 2
-#define box_stack_step_pair1_rows_SZ_IW 0
-#define box_stack_step_pair1_rows_SZ_W 0
-int box_stack_step_pair2_gap(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
-int box_stack_step_pair2_gap_checkout(void);
-void box_stack_step_pair2_gap_release(int mem);
-void box_stack_step_pair2_gap_incref(void);
-void box_stack_step_pair2_gap_decref(void);
-casadi_int box_stack_step_pair2_gap_n_in(void);
-casadi_int box_stack_step_pair2_gap_n_out(void);
-casadi_real box_stack_step_pair2_gap_default_in(casadi_int i);
-const char* box_stack_step_pair2_gap_name_in(casadi_int i);
-const char* box_stack_step_pair2_gap_name_out(casadi_int i);
-const casadi_int* box_stack_step_pair2_gap_sparsity_in(casadi_int i);
-const casadi_int* box_stack_step_pair2_gap_sparsity_out(casadi_int i);
-int box_stack_step_pair2_gap_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-int box_stack_step_pair2_gap_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define box_stack_step_pair2_gap_SZ_ARG 3
-#define box_stack_step_pair2_gap_SZ_RES 1
-#define box_stack_step_pair2_gap_SZ_IW 0
-#define box_stack_step_pair2_gap_SZ_W 0
-int box_stack_step_pair2_rows(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
-int box_stack_step_pair2_rows_checkout(void);
-void box_stack_step_pair2_rows_release(int mem);
-void box_stack_step_pair2_rows_incref(void);
-void box_stack_step_pair2_rows_decref(void);
-casadi_int box_stack_step_pair2_rows_n_in(void);
-casadi_int box_stack_step_pair2_rows_n_out(void);
-casadi_real box_stack_step_pair2_rows_default_in(casadi_int i);
-const char* box_stack_step_pair2_rows_name_in(casadi_int i);
-const char* box_stack_step_pair2_rows_name_out(casadi_int i);
-const casadi_int* box_stack_step_pair2_rows_sparsity_in(casadi_int i);
-const casadi_int* box_stack_step_pair2_rows_sparsity_out(casadi_int i);
-int box_stack_step_pair2_rows_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-int box_stack_step_pair2_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define box_stack_step_pair2_rows_SZ_ARG 3
-#define box_stack_step_pair2_rows_SZ_RES 2
-#define box_stack_step_pair2_rows_SZ_IW 0
-#define box_stack_step_pair2_rows_SZ_W 0
-int box_stack_step_pair3_gap(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
-int box_stack_step_pair3_gap_checkout(void);
-void box_stack_step_pair3_gap_release(int mem);
-void box_stack_step_pair3_gap_incref(void);
-void box_stack_step_pair3_gap_decref(void);
-casadi_int box_stack_step_pair3_gap_n_in(void);
-casadi_int box_stack_step_pair3_gap_n_out(void);
-casadi_real box_stack_step_pair3_gap_default_in(casadi_int i);
-const char* box_stack_step_pair3_gap_name_in(casadi_int i);
-const char* box_stack_step_pair3_gap_name_out(casadi_int i);
-const casadi_int* box_stack_step_pair3_gap_sparsity_in(casadi_int i);
-const casadi_int* box_stack_step_pair3_gap_sparsity_out(casadi_int i);
-int box_stack_step_pair3_gap_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-int box_stack_step_pair3_gap_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define box_stack_step_pair3_gap_SZ_ARG 3
-#define box_stack_step_pair3_gap_SZ_RES 1
-#define box_stack_step_pair3_gap_SZ_IW 0
-#define box_stack_step_pair3_gap_SZ_W 0
-int box_stack_step_pair3_rows(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
-int box_stack_step_pair3_rows_checkout(void);
-void box_stack_step_pair3_rows_release(int mem);
-void box_stack_step_pair3_rows_incref(void);
-void box_stack_step_pair3_rows_decref(void);
-casadi_int box_stack_step_pair3_rows_n_in(void);
-casadi_int box_stack_step_pair3_rows_n_out(void);
-casadi_real box_stack_step_pair3_rows_default_in(casadi_int i);
-const char* box_stack_step_pair3_rows_name_in(casadi_int i);
-const char* box_stack_step_pair3_rows_name_out(casadi_int i);
-const casadi_int* box_stack_step_pair3_rows_sparsity_in(casadi_int i);
-const casadi_int* box_stack_step_pair3_rows_sparsity_out(casadi_int i);
-int box_stack_step_pair3_rows_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-int box_stack_step_pair3_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define box_stack_step_pair3_rows_SZ_ARG 3
-#define box_stack_step_pair3_rows_SZ_RES 2
-#define box_stack_step_pair3_rows_SZ_IW 0
-#define box_stack_step_pair3_rows_SZ_W 0
+int box_stack_step_backsolve(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int box_stack_step_backsolve_checkout(void);
+void box_stack_step_backsolve_release(int mem);
+void box_stack_step_backsolve_incref(void);
+void box_stack_step_backsolve_decref(void);
+casadi_int box_stack_step_backsolve_n_in(void);
+casadi_int box_stack_step_backsolve_n_out(void);
+casadi_real box_stack_step_backsolve_default_in(casadi_int i);
+const char* box_stack_step_backsolve_name_in(casadi_int i);
+const char* box_stack_step_backsolve_name_out(casadi_int i);
+const casadi_int* box_stack_step_backsolve_sparsity_in(casadi_int i);
+const casadi_int* box_stack_step_backsolve_sparsity_out(casadi_int i);
+int box_stack_step_backsolve_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int box_stack_step_backsolve_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define box_stack_step_backsolve_SZ_ARG 4
+#define box_stack_step_backsolve_SZ_RES 1
+#define box_stack_step_backsolve_SZ_IW 0
+#define box_stack_step_backsolve_SZ_W 0
 void box_stack_kernels_1_casadi_version(int* major, int* minor, int* patch);
 int box_stack_kernels_1_casadi_int_size(void);
 int box_stack_kernels_1_casadi_real_size(void);

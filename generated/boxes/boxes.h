@@ -474,7 +474,7 @@ extern const char boxes_model_hash[];
 
 /* ---- boxes_step_pair0_gap ----------------------------------------------------
  * Stepper: the gaps of one contact element
- * In boxes_kernels_0.c; 88 instructions.
+ * In boxes_kernels_0.c; 25 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
@@ -489,7 +489,7 @@ extern const char boxes_model_hash[];
 
 /* ---- boxes_step_pair0_rows ----------------------------------------------------
  * Stepper: gaps and contact Jacobian rows of one contact element
- * In boxes_kernels_0.c; 391 instructions.
+ * In boxes_kernels_0.c; 36 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
@@ -506,7 +506,7 @@ extern const char boxes_model_hash[];
 
 /* ---- boxes_step_pair1_gap ----------------------------------------------------
  * Stepper: the gaps of one contact element
- * In boxes_kernels_0.c; 27 instructions.
+ * In boxes_kernels_0.c; 7 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
@@ -521,7 +521,7 @@ extern const char boxes_model_hash[];
 
 /* ---- boxes_step_pair1_rows ----------------------------------------------------
  * Stepper: gaps and contact Jacobian rows of one contact element
- * In boxes_kernels_0.c; 226 instructions.
+ * In boxes_kernels_0.c; 12 instructions.
  * Inputs:
  *   arg[0] q_a: 12x1, nnz 12 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.

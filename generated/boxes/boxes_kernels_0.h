@@ -434,10 +434,10 @@ const casadi_int* boxes_step_pair0_gap_sparsity_in(casadi_int i);
 const casadi_int* boxes_step_pair0_gap_sparsity_out(casadi_int i);
 int boxes_step_pair0_gap_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int boxes_step_pair0_gap_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define boxes_step_pair0_gap_SZ_ARG 3
-#define boxes_step_pair0_gap_SZ_RES 1
+#define boxes_step_pair0_gap_SZ_ARG 5
+#define boxes_step_pair0_gap_SZ_RES 2
 #define boxes_step_pair0_gap_SZ_IW 0
-#define boxes_step_pair0_gap_SZ_W 0
+#define boxes_step_pair0_gap_SZ_W 8
 int boxes_step_pair0_rows(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int boxes_step_pair0_rows_checkout(void);
 void boxes_step_pair0_rows_release(int mem);
@@ -452,10 +452,10 @@ const casadi_int* boxes_step_pair0_rows_sparsity_in(casadi_int i);
 const casadi_int* boxes_step_pair0_rows_sparsity_out(casadi_int i);
 int boxes_step_pair0_rows_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int boxes_step_pair0_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define boxes_step_pair0_rows_SZ_ARG 3
-#define boxes_step_pair0_rows_SZ_RES 2
+#define boxes_step_pair0_rows_SZ_ARG 11
+#define boxes_step_pair0_rows_SZ_RES 4
 #define boxes_step_pair0_rows_SZ_IW 0
-#define boxes_step_pair0_rows_SZ_W 0
+#define boxes_step_pair0_rows_SZ_W 961
 int boxes_step_pair1_gap(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int boxes_step_pair1_gap_checkout(void);
 void boxes_step_pair1_gap_release(int mem);
@@ -470,10 +470,10 @@ const casadi_int* boxes_step_pair1_gap_sparsity_in(casadi_int i);
 const casadi_int* boxes_step_pair1_gap_sparsity_out(casadi_int i);
 int boxes_step_pair1_gap_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int boxes_step_pair1_gap_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define boxes_step_pair1_gap_SZ_ARG 3
-#define boxes_step_pair1_gap_SZ_RES 1
+#define boxes_step_pair1_gap_SZ_ARG 5
+#define boxes_step_pair1_gap_SZ_RES 2
 #define boxes_step_pair1_gap_SZ_IW 0
-#define boxes_step_pair1_gap_SZ_W 0
+#define boxes_step_pair1_gap_SZ_W 8
 int boxes_step_pair1_rows(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int boxes_step_pair1_rows_checkout(void);
 void boxes_step_pair1_rows_release(int mem);
@@ -488,10 +488,10 @@ const casadi_int* boxes_step_pair1_rows_sparsity_in(casadi_int i);
 const casadi_int* boxes_step_pair1_rows_sparsity_out(casadi_int i);
 int boxes_step_pair1_rows_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int boxes_step_pair1_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define boxes_step_pair1_rows_SZ_ARG 3
-#define boxes_step_pair1_rows_SZ_RES 2
+#define boxes_step_pair1_rows_SZ_ARG 5
+#define boxes_step_pair1_rows_SZ_RES 4
 #define boxes_step_pair1_rows_SZ_IW 0
-#define boxes_step_pair1_rows_SZ_W 0
+#define boxes_step_pair1_rows_SZ_W 313
 int boxes_step_factor(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int boxes_step_factor_checkout(void);
 void boxes_step_factor_release(int mem);

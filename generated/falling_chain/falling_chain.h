@@ -489,7 +489,7 @@ extern const char falling_chain_model_hash[];
 
 /* ---- falling_chain_step_pair0_rows ----------------------------------------------------
  * Stepper: gaps and contact Jacobian rows of one contact element
- * In falling_chain_kernels_0.c; 58 instructions.
+ * In falling_chain_kernels_0.c; 5 instructions.
  * Inputs:
  *   arg[0] q_a: 6x1, nnz 6 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
@@ -521,7 +521,7 @@ extern const char falling_chain_model_hash[];
 
 /* ---- falling_chain_step_pair1_rows ----------------------------------------------------
  * Stepper: gaps and contact Jacobian rows of one contact element
- * In falling_chain_kernels_0.c; 58 instructions.
+ * In falling_chain_kernels_0.c; 5 instructions.
  * Inputs:
  *   arg[0] q_a: 6x1, nnz 6 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.
@@ -553,7 +553,7 @@ extern const char falling_chain_model_hash[];
 
 /* ---- falling_chain_step_pair2_rows ----------------------------------------------------
  * Stepper: gaps and contact Jacobian rows of one contact element
- * In falling_chain_kernels_0.c; 16 instructions.
+ * In falling_chain_kernels_0.c; 5 instructions.
  * Inputs:
  *   arg[0] q_a: 3x1, nnz 3 [m] local coordinates of the element's first member (fixed ones as in q). Default: zeros.
  *   arg[1] q_b: 0x1, nnz 0 [m] local coordinates of its second member. Default: zeros.

@@ -41,6 +41,9 @@ extern "C" {
 
 /* Add prefix to internal symbols */
 #define casadi_c0 CASADI_PREFIX(c0)
+#define casadi_c1 CASADI_PREFIX(c1)
+#define casadi_c2 CASADI_PREFIX(c2)
+#define casadi_c3 CASADI_PREFIX(c3)
 #define casadi_clear CASADI_PREFIX(clear)
 #define casadi_copy CASADI_PREFIX(copy)
 #define casadi_dot CASADI_PREFIX(dot)
@@ -72,6 +75,10 @@ extern "C" {
 #define casadi_f31 CASADI_PREFIX(f31)
 #define casadi_f32 CASADI_PREFIX(f32)
 #define casadi_f33 CASADI_PREFIX(f33)
+#define casadi_f34 CASADI_PREFIX(f34)
+#define casadi_f35 CASADI_PREFIX(f35)
+#define casadi_f36 CASADI_PREFIX(f36)
+#define casadi_f37 CASADI_PREFIX(f37)
 #define casadi_f4 CASADI_PREFIX(f4)
 #define casadi_f5 CASADI_PREFIX(f5)
 #define casadi_f6 CASADI_PREFIX(f6)
@@ -588,6 +595,20 @@ static const casadi_real casadi_c0[33] =
   6.6666666666666680e-02, 1.6666666666666663e-02, 1.6666666666666663e-02, 6.6666666666666680e-02, 1.6666666666666663e-02, 1.6666666666666663e-02, 6.6666666666666680e-02, 1.6666666666666663e-02,
   1.6666666666666663e-02, 3.3333333333333340e-02, 1.6666666666666663e-02, 3.3333333333333340e-02, 1.6666666666666663e-02, 3.3333333333333340e-02, 5.0000000000000003e-02, 5.0000000000000003e-02,
   5.0000000000000003e-02};
+static const casadi_real casadi_c1[31] = 
+  {4.9937616943892227e+00, 0., 0., -1.0012492197250394e-01, 0., 0., 3.3333333333333340e-02, 5.0000000000000000e-01,
+  1.0000000000000001e-01, -1.0012492197250394e-01, 0., 0., 2.0024984394500789e-01, 0., 0., -1.0012492197250394e-01,
+  0., 0., 2.0000000000000000e-02, 0., 0., 0., 0., 0.,
+  1., 0., 1., 0., -1., 0., 0.};
+static const casadi_real casadi_c2[31] = 
+  {4.9937616943892227e+00, 0., 0., -1.0012492197250394e-01, 0., 0., 3.3333333333333340e-02, 5.0000000000000000e-01,
+  1.0000000000000001e-01, -1.0012492197250394e-01, 0., 0., 2.0024984394500789e-01, 0., 0., 1.0012492197250394e-01,
+  0., 0., 2.0000000000000000e-02, 0., 0., 0., 0., 0.,
+  1., 0., 1., 0., -1., 0., 0.};
+static const casadi_real casadi_c3[19] = 
+  {0., 0., 0., 0., 0., 0., 2.9999999999999999e-02, 0.,
+  0., 0., 0., 0., 1., 0., 1., 0.,
+  -1., 0., 0.};
 
 static const casadi_real casadi_zeros[15] = 
   {0.};
@@ -8437,13 +8458,74 @@ CASADI_SYMBOL_EXPORT int falling_chain_step_outputs_work_bytes(casadi_int *sz_ar
   return 0;
 }
 
+/* pk_sphere_plane_rr_ground_3d_gap:(q[6],c[31])->(g) */
+static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real a0, a1, a2, a3, a4, a5;
+  a0=arg[1]? arg[1][22] : 0;
+  a1=1.;
+  a2=arg[1]? arg[1][0] : 0;
+  a3=arg[1]? arg[1][15] : 0;
+  a4=arg[1]? arg[1][3] : 0;
+  a3=(a3-a4);
+  a2=(a2*a3);
+  a3=arg[1]? arg[1][1] : 0;
+  a4=arg[1]? arg[1][16] : 0;
+  a5=arg[1]? arg[1][4] : 0;
+  a4=(a4-a5);
+  a3=(a3*a4);
+  a2=(a2+a3);
+  a3=arg[1]? arg[1][2] : 0;
+  a4=arg[1]? arg[1][17] : 0;
+  a5=arg[1]? arg[1][5] : 0;
+  a4=(a4-a5);
+  a3=(a3*a4);
+  a2=(a2+a3);
+  a1=(a1-a2);
+  a3=arg[0]? arg[0][0] : 0;
+  a3=(a1*a3);
+  a4=arg[0]? arg[0][3] : 0;
+  a4=(a2*a4);
+  a3=(a3+a4);
+  a4=arg[1]? arg[1][19] : 0;
+  a3=(a3-a4);
+  a0=(a0*a3);
+  a3=arg[1]? arg[1][23] : 0;
+  a4=arg[0]? arg[0][1] : 0;
+  a4=(a1*a4);
+  a5=arg[0]? arg[0][4] : 0;
+  a5=(a2*a5);
+  a4=(a4+a5);
+  a5=arg[1]? arg[1][20] : 0;
+  a4=(a4-a5);
+  a3=(a3*a4);
+  a0=(a0+a3);
+  a3=arg[1]? arg[1][24] : 0;
+  a4=arg[0]? arg[0][2] : 0;
+  a1=(a1*a4);
+  a4=arg[0]? arg[0][5] : 0;
+  a2=(a2*a4);
+  a1=(a1+a2);
+  a2=arg[1]? arg[1][21] : 0;
+  a1=(a1-a2);
+  a3=(a3*a1);
+  a0=(a0+a3);
+  a3=arg[1]? arg[1][18] : 0;
+  a0=(a0-a3);
+  if (res[0]!=0) res[0][0]=a0;
+  return 0;
+}
+
 /* falling_chain_step_pair0_gap:(q_a[6],q_b[0],p[0])->(g) */
 static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real a0, a1;
-  a0=arg[0]? arg[0][2] : 0;
-  a1=2.0000000000000000e-02;
-  a0=(a0-a1);
-  if (res[0]!=0) res[0][0]=a0;
+  casadi_real **res1=res+1, *w0=w+6, w2;
+  const casadi_real **arg1=arg+3, *wr1;
+  casadi_copy(arg[0], 6, w0);
+  wr1 = casadi_c1;
+  arg1[0]=w0;
+  arg1[1]=wr1;
+  res1[0]=(&w2);
+  if (casadi_f27(arg1, res1, iw, w, 0)) return 1;
+  if (res[0]) res[0][0] = w2;
   return 0;
 }
 
@@ -8507,87 +8589,271 @@ CASADI_SYMBOL_EXPORT const casadi_int* falling_chain_step_pair0_gap_sparsity_out
 }
 
 CASADI_SYMBOL_EXPORT int falling_chain_step_pair0_gap_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 3;
-  if (sz_res) *sz_res = 1;
+  if (sz_arg) *sz_arg = 5;
+  if (sz_res) *sz_res = 2;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 0;
+  if (sz_w) *sz_w = 12;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int falling_chain_step_pair0_gap_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 3*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 1*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 5*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 2*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 0*sizeof(casadi_real);
+  if (sz_w) *sz_w = 12*sizeof(casadi_real);
+  return 0;
+}
+
+/* pk_sphere_plane_rr_ground_3d:(q[6],c[31])->(g,W[3x6]) */
+static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
+  casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
+  casadi_real a24, a25, a26, a27, a28, a29, a30;
+  a00=arg[1]? arg[1][22] : 0;
+  a01=1.;
+  a02=arg[1]? arg[1][0] : 0;
+  a03=arg[1]? arg[1][15] : 0;
+  a04=arg[1]? arg[1][3] : 0;
+  a03=(a03-a04);
+  a02=(a02*a03);
+  a03=arg[1]? arg[1][1] : 0;
+  a04=arg[1]? arg[1][16] : 0;
+  a05=arg[1]? arg[1][4] : 0;
+  a04=(a04-a05);
+  a03=(a03*a04);
+  a02=(a02+a03);
+  a03=arg[1]? arg[1][2] : 0;
+  a04=arg[1]? arg[1][17] : 0;
+  a05=arg[1]? arg[1][5] : 0;
+  a04=(a04-a05);
+  a03=(a03*a04);
+  a02=(a02+a03);
+  a01=(a01-a02);
+  a03=arg[0]? arg[0][0] : 0;
+  a04=(a01*a03);
+  a05=arg[0]? arg[0][3] : 0;
+  a06=(a02*a05);
+  a04=(a04+a06);
+  a06=arg[1]? arg[1][19] : 0;
+  a06=(a04-a06);
+  a06=(a00*a06);
+  a07=arg[1]? arg[1][23] : 0;
+  a08=arg[0]? arg[0][1] : 0;
+  a09=(a01*a08);
+  a10=arg[0]? arg[0][4] : 0;
+  a11=(a02*a10);
+  a09=(a09+a11);
+  a11=arg[1]? arg[1][20] : 0;
+  a11=(a09-a11);
+  a11=(a07*a11);
+  a06=(a06+a11);
+  a11=arg[1]? arg[1][24] : 0;
+  a12=arg[0]? arg[0][2] : 0;
+  a13=(a01*a12);
+  a14=arg[0]? arg[0][5] : 0;
+  a15=(a02*a14);
+  a13=(a13+a15);
+  a15=arg[1]? arg[1][21] : 0;
+  a15=(a13-a15);
+  a15=(a11*a15);
+  a06=(a06+a15);
+  a15=arg[1]? arg[1][18] : 0;
+  a06=(a06-a15);
+  if (res[0]!=0) res[0][0]=a06;
+  a06=(a15*a11);
+  a06=(a13-a06);
+  a06=(a06-a13);
+  a13=arg[1]? arg[1][12] : 0;
+  a13=casadi_sq(a13);
+  a16=arg[1]? arg[1][13] : 0;
+  a16=casadi_sq(a16);
+  a13=(a13+a16);
+  a16=arg[1]? arg[1][14] : 0;
+  a16=casadi_sq(a16);
+  a13=(a13+a16);
+  a12=(a12/a13);
+  a14=(a14/a13);
+  a16=(a12-a14);
+  a17=(a06*a16);
+  a18=(a15*a07);
+  a18=(a09-a18);
+  a18=(a18-a09);
+  a10=(a10/a13);
+  a08=(a08/a13);
+  a09=(a10-a08);
+  a19=(a18*a09);
+  a20=(a17-a19);
+  a20=(a01+a20);
+  a21=(a00*a20);
+  a15=(a15*a00);
+  a15=(a04-a15);
+  a15=(a15-a04);
+  a04=(a15*a09);
+  a22=(a07*a04);
+  a21=(a21+a22);
+  a22=(a15*a16);
+  a23=(a11*a22);
+  a21=(a21-a23);
+  if (res[1]!=0) res[1][0]=a21;
+  a21=arg[1]? arg[1][25] : 0;
+  a23=(a21*a20);
+  a24=arg[1]? arg[1][26] : 0;
+  a25=(a24*a04);
+  a23=(a23+a25);
+  a25=arg[1]? arg[1][27] : 0;
+  a26=(a25*a22);
+  a23=(a23-a26);
+  if (res[1]!=0) res[1][1]=a23;
+  a23=arg[1]? arg[1][28] : 0;
+  a20=(a23*a20);
+  a26=arg[1]? arg[1][29] : 0;
+  a04=(a26*a04);
+  a20=(a20+a04);
+  a04=arg[1]? arg[1][30] : 0;
+  a22=(a04*a22);
+  a20=(a20-a22);
+  if (res[1]!=0) res[1][2]=a20;
+  a03=(a03/a13);
+  a05=(a05/a13);
+  a13=(a03-a05);
+  a20=(a15*a13);
+  a14=(a14-a12);
+  a12=(a06*a14);
+  a22=(a20-a12);
+  a22=(a01+a22);
+  a27=(a07*a22);
+  a28=(a18*a13);
+  a29=(a00*a28);
+  a27=(a27-a29);
+  a29=(a18*a14);
+  a30=(a11*a29);
+  a27=(a27+a30);
+  if (res[1]!=0) res[1][3]=a27;
+  a27=(a24*a22);
+  a30=(a21*a28);
+  a27=(a27-a30);
+  a30=(a25*a29);
+  a27=(a27+a30);
+  if (res[1]!=0) res[1][4]=a27;
+  a22=(a26*a22);
+  a28=(a23*a28);
+  a22=(a22-a28);
+  a29=(a04*a29);
+  a22=(a22+a29);
+  if (res[1]!=0) res[1][5]=a22;
+  a05=(a05-a03);
+  a03=(a06*a05);
+  a22=(a00*a03);
+  a08=(a08-a10);
+  a10=(a06*a08);
+  a29=(a07*a10);
+  a22=(a22-a29);
+  a29=(a18*a08);
+  a28=(a15*a05);
+  a27=(a29-a28);
+  a01=(a01+a27);
+  a27=(a11*a01);
+  a22=(a22+a27);
+  if (res[1]!=0) res[1][6]=a22;
+  a22=(a21*a03);
+  a27=(a24*a10);
+  a22=(a22-a27);
+  a27=(a25*a01);
+  a22=(a22+a27);
+  if (res[1]!=0) res[1][7]=a22;
+  a03=(a23*a03);
+  a10=(a26*a10);
+  a03=(a03-a10);
+  a01=(a04*a01);
+  a03=(a03+a01);
+  if (res[1]!=0) res[1][8]=a03;
+  a12=(a12-a29);
+  a12=(a02+a12);
+  a29=(a00*a12);
+  a08=(a15*a08);
+  a03=(a07*a08);
+  a29=(a29+a03);
+  a15=(a15*a14);
+  a14=(a11*a15);
+  a29=(a29-a14);
+  if (res[1]!=0) res[1][9]=a29;
+  a29=(a21*a12);
+  a14=(a24*a08);
+  a29=(a29+a14);
+  a14=(a25*a15);
+  a29=(a29-a14);
+  if (res[1]!=0) res[1][10]=a29;
+  a12=(a23*a12);
+  a08=(a26*a08);
+  a12=(a12+a08);
+  a15=(a04*a15);
+  a12=(a12-a15);
+  if (res[1]!=0) res[1][11]=a12;
+  a28=(a28-a17);
+  a28=(a02+a28);
+  a17=(a07*a28);
+  a05=(a18*a05);
+  a12=(a00*a05);
+  a17=(a17-a12);
+  a18=(a18*a16);
+  a16=(a11*a18);
+  a17=(a17+a16);
+  if (res[1]!=0) res[1][12]=a17;
+  a17=(a24*a28);
+  a16=(a21*a05);
+  a17=(a17-a16);
+  a16=(a25*a18);
+  a17=(a17+a16);
+  if (res[1]!=0) res[1][13]=a17;
+  a28=(a26*a28);
+  a05=(a23*a05);
+  a28=(a28-a05);
+  a18=(a04*a18);
+  a28=(a28+a18);
+  if (res[1]!=0) res[1][14]=a28;
+  a13=(a06*a13);
+  a00=(a00*a13);
+  a06=(a06*a09);
+  a07=(a07*a06);
+  a00=(a00-a07);
+  a19=(a19-a20);
+  a02=(a02+a19);
+  a11=(a11*a02);
+  a00=(a00+a11);
+  if (res[1]!=0) res[1][15]=a00;
+  a21=(a21*a13);
+  a24=(a24*a06);
+  a21=(a21-a24);
+  a25=(a25*a02);
+  a21=(a21+a25);
+  if (res[1]!=0) res[1][16]=a21;
+  a23=(a23*a13);
+  a26=(a26*a06);
+  a23=(a23-a26);
+  a04=(a04*a02);
+  a23=(a23+a04);
+  if (res[1]!=0) res[1][17]=a23;
   return 0;
 }
 
 /* falling_chain_step_pair0_rows:(q_a[6],q_b[0],p[0])->(g,W[3x6]) */
-static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real a0, a1, a2, a3, a4, a5, a6, a7, a8;
-  a0=arg[0]? arg[0][2] : 0;
-  a1=2.0000000000000000e-02;
-  a1=(a0-a1);
-  if (res[0]!=0) res[0][0]=a1;
-  a2=0.;
-  if (res[1]!=0) res[1][0]=a2;
-  if (res[1]!=0) res[1][1]=a2;
-  a3=1.;
-  a1=(a1-a0);
-  a4=2.4937655860349121e+01;
-  a0=(a4*a0);
-  a5=arg[0]? arg[0][5] : 0;
-  a5=(a4*a5);
-  a6=(a0-a5);
-  a6=(a1*a6);
-  a7=(a3+a6);
-  a7=(-a7);
-  if (res[1]!=0) res[1][2]=a7;
-  if (res[1]!=0) res[1][3]=a2;
-  a5=(a5-a0);
-  a5=(a1*a5);
-  a0=(a3-a5);
-  if (res[1]!=0) res[1][4]=a0;
-  if (res[1]!=0) res[1][5]=a2;
-  if (res[1]!=0) res[1][6]=a3;
-  a3=arg[0]? arg[0][1] : 0;
-  a3=(a4*a3);
-  a0=arg[0]? arg[0][4] : 0;
-  a0=(a4*a0);
-  a7=(a3-a0);
-  a7=(a1*a7);
-  a7=(-a7);
-  if (res[1]!=0) res[1][7]=a7;
-  a7=arg[0]? arg[0][3] : 0;
-  a7=(a4*a7);
-  a8=arg[0]? arg[0][0] : 0;
-  a4=(a4*a8);
-  a8=(a7-a4);
-  a8=(a1*a8);
-  a8=(-a8);
-  if (res[1]!=0) res[1][8]=a8;
-  if (res[1]!=0) res[1][9]=a2;
-  if (res[1]!=0) res[1][10]=a2;
-  a5=(-a5);
-  if (res[1]!=0) res[1][11]=a5;
-  if (res[1]!=0) res[1][12]=a2;
-  a6=(-a6);
-  if (res[1]!=0) res[1][13]=a6;
-  if (res[1]!=0) res[1][14]=a2;
-  if (res[1]!=0) res[1][15]=a2;
-  a0=(a0-a3);
-  a0=(a1*a0);
-  a0=(-a0);
-  if (res[1]!=0) res[1][16]=a0;
-  a4=(a4-a7);
-  a1=(a1*a4);
-  a1=(-a1);
-  if (res[1]!=0) res[1][17]=a1;
+static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+2, *w0=w+31, w2, *w3=w+37;
+  const casadi_real **arg1=arg+3, *wr1;
+  casadi_copy(arg[0], 6, w0);
+  wr1 = casadi_c1;
+  arg1[0]=w0;
+  arg1[1]=wr1;
+  res1[0]=(&w2);
+  res1[1]=w3;
+  if (casadi_f29(arg1, res1, iw, w, 0)) return 1;
+  if (res[0]) res[0][0] = w2;
+  casadi_copy(w3, 18, res[1]);
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int falling_chain_step_pair0_rows(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f27(arg, res, iw, w, mem);
+  return casadi_f28(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int falling_chain_step_pair0_rows_checkout(void) {
@@ -8648,33 +8914,37 @@ CASADI_SYMBOL_EXPORT const casadi_int* falling_chain_step_pair0_rows_sparsity_ou
 }
 
 CASADI_SYMBOL_EXPORT int falling_chain_step_pair0_rows_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 3;
-  if (sz_res) *sz_res = 2;
+  if (sz_arg) *sz_arg = 5;
+  if (sz_res) *sz_res = 4;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 0;
+  if (sz_w) *sz_w = 55;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int falling_chain_step_pair0_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 3*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 2*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 5*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 0*sizeof(casadi_real);
+  if (sz_w) *sz_w = 55*sizeof(casadi_real);
   return 0;
 }
 
 /* falling_chain_step_pair1_gap:(q_a[6],q_b[0],p[0])->(g) */
-static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real a0, a1;
-  a0=arg[0]? arg[0][5] : 0;
-  a1=2.0000000000000000e-02;
-  a0=(a0-a1);
-  if (res[0]!=0) res[0][0]=a0;
+static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+1, *w0=w+6, w2;
+  const casadi_real **arg1=arg+3, *wr1;
+  casadi_copy(arg[0], 6, w0);
+  wr1 = casadi_c2;
+  arg1[0]=w0;
+  arg1[1]=wr1;
+  res1[0]=(&w2);
+  if (casadi_f27(arg1, res1, iw, w, 0)) return 1;
+  if (res[0]) res[0][0] = w2;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int falling_chain_step_pair1_gap(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f28(arg, res, iw, w, mem);
+  return casadi_f30(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int falling_chain_step_pair1_gap_checkout(void) {
@@ -8733,87 +9003,39 @@ CASADI_SYMBOL_EXPORT const casadi_int* falling_chain_step_pair1_gap_sparsity_out
 }
 
 CASADI_SYMBOL_EXPORT int falling_chain_step_pair1_gap_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 3;
-  if (sz_res) *sz_res = 1;
+  if (sz_arg) *sz_arg = 5;
+  if (sz_res) *sz_res = 2;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 0;
+  if (sz_w) *sz_w = 12;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int falling_chain_step_pair1_gap_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 3*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 1*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 5*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 2*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 0*sizeof(casadi_real);
+  if (sz_w) *sz_w = 12*sizeof(casadi_real);
   return 0;
 }
 
 /* falling_chain_step_pair1_rows:(q_a[6],q_b[0],p[0])->(g,W[3x6]) */
-static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real a0, a1, a2, a3, a4, a5, a6, a7, a8;
-  a0=arg[0]? arg[0][5] : 0;
-  a1=2.0000000000000000e-02;
-  a1=(a0-a1);
-  if (res[0]!=0) res[0][0]=a1;
-  a2=0.;
-  if (res[1]!=0) res[1][0]=a2;
-  if (res[1]!=0) res[1][1]=a2;
-  a1=(a1-a0);
-  a3=2.4937655860349121e+01;
-  a4=arg[0]? arg[0][2] : 0;
-  a4=(a3*a4);
-  a0=(a3*a0);
-  a5=(a4-a0);
-  a5=(a1*a5);
-  a6=(-a5);
-  if (res[1]!=0) res[1][2]=a6;
-  if (res[1]!=0) res[1][3]=a2;
-  a0=(a0-a4);
-  a0=(a1*a0);
-  a4=(-a0);
-  if (res[1]!=0) res[1][4]=a4;
-  if (res[1]!=0) res[1][5]=a2;
-  if (res[1]!=0) res[1][6]=a2;
-  a4=arg[0]? arg[0][1] : 0;
-  a4=(a3*a4);
-  a6=arg[0]? arg[0][4] : 0;
-  a6=(a3*a6);
-  a7=(a4-a6);
-  a7=(a1*a7);
-  a7=(-a7);
-  if (res[1]!=0) res[1][7]=a7;
-  a7=arg[0]? arg[0][3] : 0;
-  a7=(a3*a7);
-  a8=arg[0]? arg[0][0] : 0;
-  a3=(a3*a8);
-  a8=(a7-a3);
-  a8=(a1*a8);
-  a8=(-a8);
-  if (res[1]!=0) res[1][8]=a8;
-  if (res[1]!=0) res[1][9]=a2;
-  if (res[1]!=0) res[1][10]=a2;
-  a8=1.;
-  a0=(a8+a0);
-  a0=(-a0);
-  if (res[1]!=0) res[1][11]=a0;
-  if (res[1]!=0) res[1][12]=a2;
-  a5=(a8-a5);
-  if (res[1]!=0) res[1][13]=a5;
-  if (res[1]!=0) res[1][14]=a2;
-  if (res[1]!=0) res[1][15]=a8;
-  a6=(a6-a4);
-  a6=(a1*a6);
-  a6=(-a6);
-  if (res[1]!=0) res[1][16]=a6;
-  a3=(a3-a7);
-  a1=(a1*a3);
-  a1=(-a1);
-  if (res[1]!=0) res[1][17]=a1;
+static int casadi_f31(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+2, *w0=w+31, w2, *w3=w+37;
+  const casadi_real **arg1=arg+3, *wr1;
+  casadi_copy(arg[0], 6, w0);
+  wr1 = casadi_c2;
+  arg1[0]=w0;
+  arg1[1]=wr1;
+  res1[0]=(&w2);
+  res1[1]=w3;
+  if (casadi_f29(arg1, res1, iw, w, 0)) return 1;
+  if (res[0]) res[0][0] = w2;
+  casadi_copy(w3, 18, res[1]);
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int falling_chain_step_pair1_rows(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f29(arg, res, iw, w, mem);
+  return casadi_f31(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int falling_chain_step_pair1_rows_checkout(void) {
@@ -8874,33 +9096,63 @@ CASADI_SYMBOL_EXPORT const casadi_int* falling_chain_step_pair1_rows_sparsity_ou
 }
 
 CASADI_SYMBOL_EXPORT int falling_chain_step_pair1_rows_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 3;
-  if (sz_res) *sz_res = 2;
+  if (sz_arg) *sz_arg = 5;
+  if (sz_res) *sz_res = 4;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 0;
+  if (sz_w) *sz_w = 55;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int falling_chain_step_pair1_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 3*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 2*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 5*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 0*sizeof(casadi_real);
+  if (sz_w) *sz_w = 55*sizeof(casadi_real);
   return 0;
 }
 
-/* falling_chain_step_pair2_gap:(q_a[3],q_b[0],p[0])->(g) */
-static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real a0, a1;
-  a0=arg[0]? arg[0][2] : 0;
-  a1=2.9999999999999999e-02;
+/* pk_sphere_plane_r_ground_3d_gap:(q[3],c[19])->(g) */
+static int casadi_f33(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real a0, a1, a2, a3;
+  a0=arg[1]? arg[1][10] : 0;
+  a1=arg[0]? arg[0][0] : 0;
+  a2=arg[1]? arg[1][7] : 0;
+  a1=(a1-a2);
+  a0=(a0*a1);
+  a1=arg[1]? arg[1][11] : 0;
+  a2=arg[0]? arg[0][1] : 0;
+  a3=arg[1]? arg[1][8] : 0;
+  a2=(a2-a3);
+  a1=(a1*a2);
+  a0=(a0+a1);
+  a1=arg[1]? arg[1][12] : 0;
+  a2=arg[0]? arg[0][2] : 0;
+  a3=arg[1]? arg[1][9] : 0;
+  a2=(a2-a3);
+  a1=(a1*a2);
+  a0=(a0+a1);
+  a1=arg[1]? arg[1][6] : 0;
   a0=(a0-a1);
   if (res[0]!=0) res[0][0]=a0;
   return 0;
 }
 
+/* falling_chain_step_pair2_gap:(q_a[3],q_b[0],p[0])->(g) */
+static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+1, *w0=w+4, w2;
+  const casadi_real **arg1=arg+3, *wr1;
+  casadi_copy(arg[0], 3, w0);
+  wr1 = casadi_c3;
+  arg1[0]=w0;
+  arg1[1]=wr1;
+  res1[0]=(&w2);
+  if (casadi_f33(arg1, res1, iw, w, 0)) return 1;
+  if (res[0]) res[0][0] = w2;
+  return 0;
+}
+
 CASADI_SYMBOL_EXPORT int falling_chain_step_pair2_gap(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f30(arg, res, iw, w, mem);
+  return casadi_f32(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int falling_chain_step_pair2_gap_checkout(void) {
@@ -8959,45 +9211,80 @@ CASADI_SYMBOL_EXPORT const casadi_int* falling_chain_step_pair2_gap_sparsity_out
 }
 
 CASADI_SYMBOL_EXPORT int falling_chain_step_pair2_gap_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 3;
-  if (sz_res) *sz_res = 1;
+  if (sz_arg) *sz_arg = 5;
+  if (sz_res) *sz_res = 2;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 0;
+  if (sz_w) *sz_w = 7;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int falling_chain_step_pair2_gap_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 3*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 1*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 5*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 2*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 0*sizeof(casadi_real);
+  if (sz_w) *sz_w = 7*sizeof(casadi_real);
+  return 0;
+}
+
+/* pk_sphere_plane_r_ground_3d:(q[3],c[19])->(g,W[3x3]) */
+static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real a0, a1, a2, a3, a4, a5;
+  a0=arg[1]? arg[1][10] : 0;
+  a1=arg[0]? arg[0][0] : 0;
+  a2=arg[1]? arg[1][7] : 0;
+  a1=(a1-a2);
+  a1=(a0*a1);
+  a2=arg[1]? arg[1][11] : 0;
+  a3=arg[0]? arg[0][1] : 0;
+  a4=arg[1]? arg[1][8] : 0;
+  a3=(a3-a4);
+  a3=(a2*a3);
+  a1=(a1+a3);
+  a3=arg[1]? arg[1][12] : 0;
+  a4=arg[0]? arg[0][2] : 0;
+  a5=arg[1]? arg[1][9] : 0;
+  a4=(a4-a5);
+  a4=(a3*a4);
+  a1=(a1+a4);
+  a4=arg[1]? arg[1][6] : 0;
+  a1=(a1-a4);
+  if (res[0]!=0) res[0][0]=a1;
+  if (res[1]!=0) res[1][0]=a0;
+  a0=arg[1]? arg[1][13] : 0;
+  if (res[1]!=0) res[1][1]=a0;
+  a0=arg[1]? arg[1][16] : 0;
+  if (res[1]!=0) res[1][2]=a0;
+  if (res[1]!=0) res[1][3]=a2;
+  a2=arg[1]? arg[1][14] : 0;
+  if (res[1]!=0) res[1][4]=a2;
+  a2=arg[1]? arg[1][17] : 0;
+  if (res[1]!=0) res[1][5]=a2;
+  if (res[1]!=0) res[1][6]=a3;
+  a3=arg[1]? arg[1][15] : 0;
+  if (res[1]!=0) res[1][7]=a3;
+  a3=arg[1]? arg[1][18] : 0;
+  if (res[1]!=0) res[1][8]=a3;
   return 0;
 }
 
 /* falling_chain_step_pair2_rows:(q_a[3],q_b[0],p[0])->(g,W[3x3]) */
-static int casadi_f31(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real a0, a1;
-  a0=arg[0]? arg[0][2] : 0;
-  a1=2.9999999999999999e-02;
-  a0=(a0-a1);
-  if (res[0]!=0) res[0][0]=a0;
-  a0=0.;
-  if (res[1]!=0) res[1][0]=a0;
-  if (res[1]!=0) res[1][1]=a0;
-  a1=-1.;
-  if (res[1]!=0) res[1][2]=a1;
-  if (res[1]!=0) res[1][3]=a0;
-  a1=1.;
-  if (res[1]!=0) res[1][4]=a1;
-  if (res[1]!=0) res[1][5]=a0;
-  if (res[1]!=0) res[1][6]=a1;
-  if (res[1]!=0) res[1][7]=a0;
-  if (res[1]!=0) res[1][8]=a0;
+static int casadi_f34(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+2, *w0=w+6, w2, *w3=w+9;
+  const casadi_real **arg1=arg+3, *wr1;
+  casadi_copy(arg[0], 3, w0);
+  wr1 = casadi_c3;
+  arg1[0]=w0;
+  arg1[1]=wr1;
+  res1[0]=(&w2);
+  res1[1]=w3;
+  if (casadi_f35(arg1, res1, iw, w, 0)) return 1;
+  if (res[0]) res[0][0] = w2;
+  casadi_copy(w3, 9, res[1]);
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int falling_chain_step_pair2_rows(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f31(arg, res, iw, w, mem);
+  return casadi_f34(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int falling_chain_step_pair2_rows_checkout(void) {
@@ -9058,23 +9345,23 @@ CASADI_SYMBOL_EXPORT const casadi_int* falling_chain_step_pair2_rows_sparsity_ou
 }
 
 CASADI_SYMBOL_EXPORT int falling_chain_step_pair2_rows_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 3;
-  if (sz_res) *sz_res = 2;
+  if (sz_arg) *sz_arg = 5;
+  if (sz_res) *sz_res = 4;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 0;
+  if (sz_w) *sz_w = 18;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int falling_chain_step_pair2_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 3*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 2*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 5*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 4*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 0*sizeof(casadi_real);
+  if (sz_w) *sz_w = 18*sizeof(casadi_real);
   return 0;
 }
 
 /* falling_chain_step_factor:(K[18x18,69nz])->(V[18x18,67nz],R[18x18,101nz],beta[18]) */
-static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f36(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -11139,7 +11426,7 @@ static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int falling_chain_step_factor(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f32(arg, res, iw, w, mem);
+  return casadi_f36(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int falling_chain_step_factor_checkout(void) {
@@ -11214,7 +11501,7 @@ CASADI_SYMBOL_EXPORT int falling_chain_step_factor_work_bytes(casadi_int *sz_arg
 }
 
 /* falling_chain_step_backsolve:(V[18x18,67nz],R[18x18,101nz],beta[18],b[18])->(x[18]) */
-static int casadi_f33(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f37(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
   casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
@@ -11897,7 +12184,7 @@ static int casadi_f33(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int falling_chain_step_backsolve(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f33(arg, res, iw, w, mem);
+  return casadi_f37(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int falling_chain_step_backsolve_checkout(void) {

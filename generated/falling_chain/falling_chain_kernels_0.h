@@ -434,10 +434,10 @@ const casadi_int* falling_chain_step_pair0_gap_sparsity_in(casadi_int i);
 const casadi_int* falling_chain_step_pair0_gap_sparsity_out(casadi_int i);
 int falling_chain_step_pair0_gap_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int falling_chain_step_pair0_gap_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define falling_chain_step_pair0_gap_SZ_ARG 3
-#define falling_chain_step_pair0_gap_SZ_RES 1
+#define falling_chain_step_pair0_gap_SZ_ARG 5
+#define falling_chain_step_pair0_gap_SZ_RES 2
 #define falling_chain_step_pair0_gap_SZ_IW 0
-#define falling_chain_step_pair0_gap_SZ_W 0
+#define falling_chain_step_pair0_gap_SZ_W 12
 int falling_chain_step_pair0_rows(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int falling_chain_step_pair0_rows_checkout(void);
 void falling_chain_step_pair0_rows_release(int mem);
@@ -452,10 +452,10 @@ const casadi_int* falling_chain_step_pair0_rows_sparsity_in(casadi_int i);
 const casadi_int* falling_chain_step_pair0_rows_sparsity_out(casadi_int i);
 int falling_chain_step_pair0_rows_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int falling_chain_step_pair0_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define falling_chain_step_pair0_rows_SZ_ARG 3
-#define falling_chain_step_pair0_rows_SZ_RES 2
+#define falling_chain_step_pair0_rows_SZ_ARG 5
+#define falling_chain_step_pair0_rows_SZ_RES 4
 #define falling_chain_step_pair0_rows_SZ_IW 0
-#define falling_chain_step_pair0_rows_SZ_W 0
+#define falling_chain_step_pair0_rows_SZ_W 55
 int falling_chain_step_pair1_gap(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int falling_chain_step_pair1_gap_checkout(void);
 void falling_chain_step_pair1_gap_release(int mem);
@@ -470,10 +470,10 @@ const casadi_int* falling_chain_step_pair1_gap_sparsity_in(casadi_int i);
 const casadi_int* falling_chain_step_pair1_gap_sparsity_out(casadi_int i);
 int falling_chain_step_pair1_gap_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int falling_chain_step_pair1_gap_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define falling_chain_step_pair1_gap_SZ_ARG 3
-#define falling_chain_step_pair1_gap_SZ_RES 1
+#define falling_chain_step_pair1_gap_SZ_ARG 5
+#define falling_chain_step_pair1_gap_SZ_RES 2
 #define falling_chain_step_pair1_gap_SZ_IW 0
-#define falling_chain_step_pair1_gap_SZ_W 0
+#define falling_chain_step_pair1_gap_SZ_W 12
 int falling_chain_step_pair1_rows(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int falling_chain_step_pair1_rows_checkout(void);
 void falling_chain_step_pair1_rows_release(int mem);
@@ -488,10 +488,10 @@ const casadi_int* falling_chain_step_pair1_rows_sparsity_in(casadi_int i);
 const casadi_int* falling_chain_step_pair1_rows_sparsity_out(casadi_int i);
 int falling_chain_step_pair1_rows_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int falling_chain_step_pair1_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define falling_chain_step_pair1_rows_SZ_ARG 3
-#define falling_chain_step_pair1_rows_SZ_RES 2
+#define falling_chain_step_pair1_rows_SZ_ARG 5
+#define falling_chain_step_pair1_rows_SZ_RES 4
 #define falling_chain_step_pair1_rows_SZ_IW 0
-#define falling_chain_step_pair1_rows_SZ_W 0
+#define falling_chain_step_pair1_rows_SZ_W 55
 int falling_chain_step_pair2_gap(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int falling_chain_step_pair2_gap_checkout(void);
 void falling_chain_step_pair2_gap_release(int mem);
@@ -506,10 +506,10 @@ const casadi_int* falling_chain_step_pair2_gap_sparsity_in(casadi_int i);
 const casadi_int* falling_chain_step_pair2_gap_sparsity_out(casadi_int i);
 int falling_chain_step_pair2_gap_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int falling_chain_step_pair2_gap_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define falling_chain_step_pair2_gap_SZ_ARG 3
-#define falling_chain_step_pair2_gap_SZ_RES 1
+#define falling_chain_step_pair2_gap_SZ_ARG 5
+#define falling_chain_step_pair2_gap_SZ_RES 2
 #define falling_chain_step_pair2_gap_SZ_IW 0
-#define falling_chain_step_pair2_gap_SZ_W 0
+#define falling_chain_step_pair2_gap_SZ_W 7
 int falling_chain_step_pair2_rows(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int falling_chain_step_pair2_rows_checkout(void);
 void falling_chain_step_pair2_rows_release(int mem);
@@ -524,10 +524,10 @@ const casadi_int* falling_chain_step_pair2_rows_sparsity_in(casadi_int i);
 const casadi_int* falling_chain_step_pair2_rows_sparsity_out(casadi_int i);
 int falling_chain_step_pair2_rows_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int falling_chain_step_pair2_rows_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define falling_chain_step_pair2_rows_SZ_ARG 3
-#define falling_chain_step_pair2_rows_SZ_RES 2
+#define falling_chain_step_pair2_rows_SZ_ARG 5
+#define falling_chain_step_pair2_rows_SZ_RES 4
 #define falling_chain_step_pair2_rows_SZ_IW 0
-#define falling_chain_step_pair2_rows_SZ_W 0
+#define falling_chain_step_pair2_rows_SZ_W 18
 int falling_chain_step_factor(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int falling_chain_step_factor_checkout(void);
 void falling_chain_step_factor_release(int mem);

@@ -31,7 +31,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.errors import ModelError
-from ncgen.model.context import Context, perpendicular_basis
+from ncgen.model.context import Context
 from ncgen.model.contacts import PARALLEL_SIN, BoxCorner, EdgeContact, SphereBox, SphereSphere, point_contacts
 from ncgen.model.capsule_contacts import CapsuleSphere, CylinderSphere
 from ncgen.rigid_motion import casadi_forms as crm
@@ -110,8 +110,8 @@ def _sphere_plane(ctx: Context, c) -> ContactTerms:
     P = c.plane
     what = c.label
     if P.is_ground:
-        n, x_p = ca.DM(c.normal), ca.DM(c.point)
-        tangents = [ca.DM(t) for t in perpendicular_basis(c.normal)]
+        n, x_p = _const(c.normal), _const(c.point)
+        tangents = ctx.plane_tangents(c.normal)
         vel_plane = lambda x: ca.SX.zeros(ctx.dim)  # noqa: E731
     else:
         n = ctx.direction(P, c.normal, what)[0]
@@ -119,8 +119,8 @@ def _sphere_plane(ctx: Context, c) -> ContactTerms:
         tangents = ctx.perpendiculars(P, c.normal, what)
         vel_plane = lambda x: _material_velocity(ctx, P, x_p, xd_p, x)  # noqa: E731
     rho = getattr(c, "rim_radius", 0.0)
-    if rho > 0:
-        axis = ctx.local_point(c.sphere, np.asarray(c.at) + c.axis)[0] - r_s
+    if isinstance(rho, ca.SX) or rho > 0:
+        axis = ctx.local_point(c.sphere, _num(c.at) + _num(c.axis))[0] - r_s
         w = n - ca.dot(n, axis) * axis
         centre = r_s - rho * w / ca.sqrt(ca.sumsqr(w) + RIM_EPS ** 2)
     else:
@@ -148,16 +148,16 @@ def _sphere_sphere(ctx: Context, c: SphereSphere) -> ContactTerms:
 def _fixed_point(ctx: Context, member, at):
     """World position and velocity of the point at local ``at`` of ``member`` (world for the ground)."""
     if member.is_ground:
-        return ca.DM(np.asarray(at, float)), ca.SX.zeros(ctx.dim)
+        return _const(at), ca.SX.zeros(ctx.dim)
     return ctx.local_point(member, at)
 
 
 def _axes(ctx: Context, member, at, rotation) -> list:
     """World directions of the columns of ``rotation`` (in ``member``'s frame) at ``at``."""
     if member.is_ground:
-        return [ca.DM(rotation[:, k]) for k in range(ctx.dim)]
+        return [_const(_num(rotation)[:, k]) for k in range(ctx.dim)]
     r = ctx.local_point(member, at)[0]
-    return [ctx.local_point(member, np.asarray(at) + rotation[:, k])[0] - r for k in range(ctx.dim)]
+    return [ctx.local_point(member, _num(at) + _num(rotation)[:, k])[0] - r for k in range(ctx.dim)]
 
 
 def _sphere_box(ctx: Context, c) -> ContactTerms:
@@ -189,8 +189,8 @@ def _sphere_box(ctx: Context, c) -> ContactTerms:
     corner = isinstance(c, BoxCorner)
     if corner:
         a = _axes(ctx, c.sphere, c.at, c.corner_rotation)
-        scale = min(np.min(c.size), np.min(c.corner_size))
-        band = 10 * (float(np.sum(c.size)) + float(np.sum(c.corner_size)))    # above any distance
+        scale = _min(_num(c.size), _num(c.corner_size))
+        band = 10 * (_sum(_num(c.size)) + _sum(_num(c.corner_size)))    # above any distance
     best_key = best_g = best_n = None
     for k in range(ctx.dim):
         s = ca.if_else(p[k] >= 0, 1, -1)
@@ -198,7 +198,7 @@ def _sphere_box(ctx: Context, c) -> ContactTerms:
         key = gk
         if corner:
             over = _all([ca.fabs(p[l]) <= h[l] + EDGE_TOL * scale for l in range(ctx.dim) if l != k])
-            flat = _max([-s * sig * ca.dot(b[k], al) for sig, al in zip(c.corner_signs, a)])
+            flat = _max([-s * _num(c.corner_signs)[j] * ca.dot(b[k], al) for j, al in enumerate(a)])
             key = ca.if_else(over, gk + FACE_TIE * scale * flat + band, gk)
         nk = s * b[k]
         if best_key is None:
@@ -227,10 +227,10 @@ def _facing_edge(ctx: Context, member, side: dict, n):
     ``σ_k = sign(n·a_k)`` for the one more aligned with n and ``2·choice − 1`` for the other
     (where n lies along a face normal both edges of the face face it).  Returns the box's
     centre, the edge's centre and its unit direction."""
-    rotation = np.asarray(side["rotation"], float)
+    rotation = _num(side["rotation"])
     centre = _fixed_point(ctx, member, side["at"])[0]
     axes = _axes(ctx, member, side["at"], rotation)
-    i, h = side["axis"], np.asarray(side["size"]) / 2
+    i, h = side["axis"], _num(side["size"]) / 2
     k1, k2 = [k for k in range(3) if k != i]
     d1, d2 = ca.dot(n, axes[k1]), ca.dot(n, axes[k2])
     first = ca.fabs(d1) >= ca.fabs(d2)
@@ -258,8 +258,8 @@ def _edge_edge(ctx: Context, c: EdgeContact) -> ContactTerms:
     other's faces also cross); elsewhere it is ``g + band`` (> 0: no contact).
     ``W_N = ∂g/∂q`` (n ⊥ u, w and the closest points differ along n)."""
     ea, eb = c.edge_a, c.edge_b
-    axis_a = _axes(ctx, c.a, ea["at"], np.asarray(ea["rotation"], float))[ea["axis"]]
-    axis_b = _axes(ctx, c.b, eb["at"], np.asarray(eb["rotation"], float))[eb["axis"]]
+    axis_a = _axes(ctx, c.a, ea["at"], _num(ea["rotation"]))[ea["axis"]]
+    axis_b = _axes(ctx, c.b, eb["at"], _num(eb["rotation"]))[eb["axis"]]
     d = _fixed_point(ctx, c.b, eb["at"])[0] - _fixed_point(ctx, c.a, ea["at"])[0]
     n0 = ca.cross(axis_a, axis_b)
     sine = ca.sqrt(ca.sumsqr(n0))
@@ -273,8 +273,8 @@ def _edge_edge(ctx: Context, c: EdgeContact) -> ContactTerms:
     s = (ca.dot(u, delta) - beta * ca.dot(w, delta)) / det
     t = (beta * ca.dot(u, delta) - ca.dot(w, delta)) / det
     g = ca.dot(n, delta) - c.radius
-    inside = _all([sine > PARALLEL_SIN, g > -c.margin, ca.fabs(s) <= ea["size"][ea["axis"]] / 2 - c.margin,
-                   ca.fabs(t) <= eb["size"][eb["axis"]] / 2 - c.margin])
+    inside = _all([sine > PARALLEL_SIN, g > -c.margin, ca.fabs(s) <= _num(ea["size"])[ea["axis"]] / 2 - c.margin,
+                   ca.fabs(t) <= _num(eb["size"])[eb["axis"]] / 2 - c.margin])
     x = 0.5 * (e_a + s * u + ea["radius"] * n + e_b + t * w - eb["radius"] * n)
     rel = (_material_velocity(ctx, c.b, cb_, _fixed_point(ctx, c.b, eb["at"])[1], x)
            - _material_velocity(ctx, c.a, ca_, _fixed_point(ctx, c.a, ea["at"])[1], x))
@@ -325,6 +325,28 @@ def _cylinder_sphere(ctx: Context, c: CylinderSphere) -> ContactTerms:
     rel = _material_velocity(ctx, c.sphere, x, xd, point) - _material_velocity(ctx, c.capsule, m, md, point)
     WN, WT = _jacobians(ctx, n, tangent_basis(n), rel)
     return ContactTerms(c, g, WN, WT)
+
+
+def _num(x):
+    """A contact's number or array of numbers as a float array; an SX (a pair kind's
+    argument, :mod:`ncgen.assembly.pair_kinds`) as it is."""
+    return x if isinstance(x, ca.SX) else np.asarray(x, float)
+
+
+def _const(x):
+    """:func:`_num` as a CasADi constant (a DM), an SX as it is."""
+    return x if isinstance(x, ca.SX) else ca.DM(np.asarray(x, float))
+
+
+def _min(*xs):
+    """The smallest entry of the arrays ``xs`` (floats, or SX)."""
+    if any(isinstance(x, ca.SX) for x in xs):
+        return ca.mmin(ca.vertcat(*xs))
+    return min(float(np.min(x)) for x in xs)
+
+
+def _sum(x):
+    return ca.sum1(x) if isinstance(x, ca.SX) else float(np.sum(x))
 
 
 def _all(conditions):

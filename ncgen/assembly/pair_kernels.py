@@ -9,8 +9,11 @@ of one flat function of every contact.  The formulas are those of
 system's symbols (the expressions of the model's ``gap`` and ``contact_jacobian``) and made a function of its members' local coordinates ``q_a``, ``q_b``
 (the coordinates each member uses are index tables in the C).  Elements whose kernels are
 equal (the same kinds, shapes, coordinate types and numbers: equal spheres of a heap, equal
-boxes of a stack) share one kernel, so the C grows with the kinds and sizes of elements, not
-with their number.  Kernels (``k``: the kernel's number):
+boxes of a stack) share one kernel.  An element whose point contacts all have a pair kind
+(:mod:`ncgen.assembly.pair_kinds`; :data:`KIND_CALLS`) is an MX function calling one C
+function per kind with its numbers as constant arrays, so the C grows with the kinds of
+elements, not with their sizes or number; the others (a plane carried by a member) are the
+flat rows with the numbers built in.  Kernels (``k``: the kernel's number):
 
 * ``step_pair<k>_gap``: q_a, q_b, p -> g (m gaps of the element's point contacts)
 * ``step_pair<k>_rows``: q_a, q_b, p -> g, W (m dim × (n_a + n_b), dense: per point contact
@@ -56,11 +59,16 @@ import casadi as ca
 import numpy as np
 
 from ncgen.assembly.contact_kinematics import EDGE_TOL
+from ncgen.assembly.pair_kinds import point_call
 from ncgen.model.capsule_contacts import CapsuleSphere
 from ncgen.model.contacts import BoxCorner, EdgeContact, SphereBox, SpherePlane, SphereSphere
 
 #: Relative slack of the lower bounds (see the module docstring).
 BOUND_SLACK = 1e-6
+#: Whether an element whose point contacts all have a pair kind calls the kinds' kernels
+#: (:mod:`ncgen.assembly.pair_kinds`: one C function per kind, the numbers constants of the
+#: calls) instead of the flat rows with the numbers built in.
+KIND_CALLS = True
 
 
 @dataclass
@@ -222,51 +230,100 @@ def pair_contacts(model) -> tuple | None:
     return tuple(model.contact_elements) or None
 
 
+def _flat(model, memo: dict) -> tuple:
+    """``(q, p, WN, WT, g)``: the flat rows' expressions (not derived again), made once."""
+    if not memo:
+        jac = model.functions["contact_jacobian"]
+        q, p = jac.sx_in(0), jac.sx_in(1)
+        memo["flat"] = (q, p, *jac(q, p), model.functions["gap"](q, p))
+    return memo["flat"]
+
+
+def _flat_rows(model, element, first, qa, qb, p, memo: dict):
+    """``(g, W)`` of ``element`` (its point contacts from ``first``) in its local coordinates
+    ``qa``, ``qb``: the rows of the model's flat ``gap`` and ``contact_jacobian`` (numbers
+    built in)."""
+    dim, layout = model.dim, model.layout
+    q, pf, WN, WT, gaps = _flat(model, memo)
+    nt = dim - 1
+    (idx_a, _), (idx_b, _) = (_local(m, layout) for m in element.members())
+    qfull = ca.SX.zeros(model.nq)
+    for sym, idx in ((qa, idx_a), (qb, idx_b)):
+        for k, i in enumerate(idx):
+            if i >= 0:
+                qfull[i] = sym[k]
+    pcs = element.point_contacts()
+    rows = []
+    for k, pc in enumerate(pcs, start=first):
+        rows += [WN[k, :], WT[k * nt:(k + 1) * nt, :] if pc.mu > 0 else ca.SX(nt, model.nq)]
+    W = ca.vertcat(*rows)
+    Wloc = ca.horzcat(*[W[:, i] if i >= 0 else ca.SX(W.shape[0], 1) for i in idx_a + idx_b])
+    full = ca.Function("pair", [q, pf], [gaps[first:first + len(pcs)], Wloc])
+    # common subexpressions merged: the kernel is then the same expression whether the
+    # model's functions were made in this process (g and W sharing nodes) or read back
+    # from the store of built models (two separate graphs), so the C is too
+    g_loc, W_loc = ca.cse([*full(qfull, p)])
+    return ca.densify(g_loc), ca.densify(W_loc)
+
+
+def _kind_rows(model, element, n_a: int, n_b: int) -> tuple | None:
+    """``(gap, rows)``: ``element``'s kernels as MX functions of ``(q_a, q_b, p)`` that call
+    its point contacts' pair kinds (:mod:`ncgen.assembly.pair_kinds`: one C function per kind,
+    its numbers a constant array of the call), or None when a point contact has no kind."""
+    calls = [point_call(pc, model.dim) for pc in element.point_contacts()]
+    if not KIND_CALLS or any(c is None for c in calls):
+        return None
+    dim = model.dim
+    qa, qb, p = ca.MX.sym("q_a", n_a), ca.MX.sym("q_b", n_b), ca.MX.sym("p", model.np)
+    names = [m.name for m in element.members()]
+    local = {names[0]: (qa, 0), names[1]: (qb, n_a)}
+    g, g_only, blocks = [], [], []
+    for pc, call in zip(element.point_contacts(), calls):
+        sides = [local[m.name] for m in call.members if not m.is_ground]
+        args = [ca.vertcat(*(s for s, _ in sides)), ca.DM(call.numbers)]
+        gk, Wk = call.kind.function(*args)
+        g.append(gk)
+        g_only.append(call.kind.gap(*args))
+        cols, at = [ca.MX(dim, n_a), ca.MX(dim, n_b)], 0
+        for s, off in sides:
+            cols[0 if off == 0 else 1] = Wk[:, at:at + s.numel()]
+            at += s.numel()
+        block = ca.horzcat(*cols)
+        blocks.append(block if pc.mu > 0 else ca.vertcat(block[0, :], ca.MX(dim - 1, n_a + n_b)))
+    names_in = ["q_a", "q_b", "p"]
+    gap = ca.Function("gap", [qa, qb, p], [ca.vertcat(*g_only)], names_in, ["g"])
+    rows = ca.Function("rows", [qa, qb, p], [ca.vertcat(*g), ca.densify(ca.vertcat(*blocks))], names_in, ["g", "W"])
+    return gap, rows
+
+
+def _renamed(f: ca.Function, name: str) -> ca.Function:
+    args = f.mx_in() if f.is_a("MXFunction") else f.sx_in()
+    return ca.Function(name, args, f.call(args), f.name_in(), f.name_out())
+
+
 def pair_kernels(model) -> PairKernels:
     """The element kernels and table of ``model`` (nonsmooth contacts; module docstring);
     ``model`` must have :func:`pair_contacts`."""
     contacts, layout, dim = pair_contacts(model), model.layout, model.dim
-    jac = model.functions["contact_jacobian"]
-    q, p = jac.sx_in(0), jac.sx_in(1)
-    WN, WT = jac(q, p)                        # the flat rows' expressions (not derived again)
-    gaps = model.functions["gap"](q, p)
-    nt = dim - 1
+    p = ca.SX.sym("p", model.np)
     kernels: dict[str, int] = {}
-    functions, elements = [], []
+    functions, elements, memo = [], [], {}
     first = 0
     for element in contacts:
         pcs = element.point_contacts()
         members = element.members()
         (idx_a, const_a), (idx_b, const_b) = (_local(m, layout) for m in members)
-        qa, qb = ca.SX.sym("q_a", len(idx_a)), ca.SX.sym("q_b", len(idx_b))
-        qfull = ca.SX.zeros(model.nq)
-        for sym, idx in ((qa, idx_a), (qb, idx_b)):
-            for k, i in enumerate(idx):
-                if i >= 0:
-                    qfull[i] = sym[k]
-        cols = [i for i in idx_a + idx_b]
-        rows = []
-        for k, pc in enumerate(pcs, start=first):
-            rows += [WN[k, :], WT[k * nt:(k + 1) * nt, :] if pc.mu > 0 else ca.SX(nt, model.nq)]
-        W = ca.vertcat(*rows)
-        Wloc = ca.horzcat(*[W[:, i] if i >= 0 else ca.SX(W.shape[0], 1) for i in cols])
-        g = gaps[first:first + len(pcs)]
-        full = ca.Function("pair", [q, p], [g, Wloc])
-        # common subexpressions merged: the kernel is then the same expression whether the
-        # model's functions were made in this process (g and W sharing nodes) or read back
-        # from the store of built models (two separate graphs), so the C is too
-        g_loc, W_loc = ca.cse([*full(qfull, p)])
-        gap = ca.Function("gap", [qa, qb, p], [ca.densify(g_loc)], ["q_a", "q_b", "p"], ["g"])
-        rowf = ca.Function("rows", [qa, qb, p], [ca.densify(g_loc), ca.densify(W_loc)],
-                           ["q_a", "q_b", "p"], ["g", "W"])
-        key = hashlib.sha256(rowf.serialize().encode()).hexdigest()
+        kind = _kind_rows(model, element, len(idx_a), len(idx_b))
+        if kind is None:
+            qa, qb = ca.SX.sym("q_a", len(idx_a)), ca.SX.sym("q_b", len(idx_b))
+            g_loc, W_loc = _flat_rows(model, element, first, qa, qb, p, memo)
+            gap = ca.Function("gap", [qa, qb, p], [g_loc], ["q_a", "q_b", "p"], ["g"])
+            kind = gap, ca.Function("rows", [qa, qb, p], [g_loc, W_loc], ["q_a", "q_b", "p"], ["g", "W"])
+        key = hashlib.sha256(kind[1].serialize().encode()).hexdigest()
         if key not in kernels:
             kernels[key] = len(kernels)
             k = kernels[key]
-            functions += [ca.Function(f"step_pair{k}_gap", gap.sx_in(), gap.call(gap.sx_in()), ["q_a", "q_b", "p"],
-                                      ["g"]),
-                          ca.Function(f"step_pair{k}_rows", rowf.sx_in(), rowf.call(rowf.sx_in()),
-                                      ["q_a", "q_b", "p"], ["g", "W"])]
+            functions += [_renamed(kind[0], f"step_pair{k}_gap"), _renamed(kind[1], f"step_pair{k}_rows")]
         sides, kappa, dmin, cap, rate_bounded = _element_sides(element, pcs, layout, dim)
         elements.append(Element(element.name, first, len(pcs), kernels[key], idx_a, idx_b, const_a, const_b,
                                 tuple(sides), kappa, dmin, cap, rate_bounded, [pc.mu > 0 for pc in pcs]))

@@ -22,6 +22,10 @@ from ncgen.errors import CodegenError
 
 #: CodeGenerator options ncgen relies on; callers may add others but not change these.
 FIXED_CASADI_OPTIONS = {"with_header": True, "main": False, "mex": False, "cpp": False}
+#: Functions named so are C functions of their own, called (never inlined) by the MX
+#: functions that use them, whose constant arguments stay arrays: the contact pair kinds
+#: (:mod:`ncgen.assembly.pair_kinds`).
+CALLED_PREFIXES = ("pk_",)
 #: Defaults the caller may override.
 DEFAULT_CASADI_OPTIONS = {"casadi_real": "double", "verbose": False}
 
@@ -44,11 +48,14 @@ def c_function(f: ca.Function, c_name: str, reroll_instructions: int | None = No
     (:func:`ncgen.codegen.reroll.reroll`: loops over short kernels instead of straight-line
     code) and an MX function stays MX (a wrapper calling ``f``: its calls, rerolled
     functions say, are generated as they are).  An MX function with nodes SX cannot
-    evaluate (a linear solver such as ``solve(K, b, "qr")``) stays MX too."""
+    evaluate (a linear solver such as ``solve(K, b, "qr")``) stays MX too, and so does one that
+    calls a function of :data:`CALLED_PREFIXES`."""
     if f.has_free():
         free = f.free_sx() if f.is_a("SXFunction") else f.free_mx()
         raise CodegenError(f"function {f.name()!r} has free symbols {[str(s) for s in free]}; "
                            f"make them inputs before generating C")
+    if f.is_a("MXFunction") and any(g.name().startswith(CALLED_PREFIXES) for g in f.find_functions()):
+        return _wrapper(f, c_name)
     try:
         e = f.expand(c_name)
     except RuntimeError as err:

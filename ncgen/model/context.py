@@ -173,6 +173,11 @@ class Context:
         one in 2D), each a unit vector initially."""
         return [self.direction(member, n, what)[0] for n in perpendicular_basis(world_axis)]
 
+    def plane_tangents(self, normal) -> list:
+        """Unit tangents (constants) of a ground plane with world ``normal``, completing it to
+        a right-handed basis (:func:`ncgen.reproducible.perpendicular_basis`)."""
+        return [ca.DM(t) for t in perpendicular_basis(normal)]
+
     def nearest_point(self, member, world) -> np.ndarray:
         """The world point of ``member`` nearest to ``world`` in the initial configuration:
         ``world`` itself for the ground and bodies, its projection onto a bar's axis, a

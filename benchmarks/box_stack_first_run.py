@@ -1,0 +1,83 @@
+"""``examples/box_stack.toml``'s first stepper run from an empty cache, this tree against a peer
+checkout, interleaved (issue 34: first run ≤ 3 s).
+
+Each run is a fresh process in the tree's own directory (``python -m ncgen.cli simulate
+examples/box_stack.toml --method stepper --contacts nonsmooth --t-end T``, ``PYTHONPATH`` the
+tree: a child started with ``-m`` imports the ncgen of its working directory) with a new, empty
+``NCGEN_CACHE_DIR``: the model is built, its package generated and compiled (gcc), the run
+made.  Per tree: CPU (user + system of the process and its compilers) and wall time, min and
+median over the rounds, and the ratio of the CPU times per round.  The CPU model and the load
+average are printed: on a shared machine wall time is CPU time times the queue.
+
+    python benchmarks/box_stack_first_run.py --peer /work/main --rounds 3
+    python benchmarks/box_stack_first_run.py --smoke          this tree, 1 round, T = 0.001 s
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from common import machine
+
+ROOT = Path(__file__).resolve().parent.parent
+#: Issue 34's target for the first run (s).
+TARGET = 3.0
+
+
+def first_run(tree: Path, t_end: float) -> dict:
+    """One first run of box_stack in ``tree`` with an empty cache: CPU and wall s."""
+    with tempfile.TemporaryDirectory(prefix="box34-first-") as cache:
+        env = {**os.environ, "PYTHONPATH": str(tree), "NCGEN_CACHE_DIR": cache}
+        cmd = [sys.executable, "-m", "ncgen.cli", "simulate", "examples/box_stack.toml", "--method", "stepper",
+               "--contacts", "nonsmooth", "--t-end", str(t_end), "-o", str(Path(cache) / "out.npz")]
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        start = time.perf_counter()
+        out = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=tree)
+        wall = time.perf_counter() - start
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        if out.returncode:
+            raise SystemExit(f"{tree}: {' '.join(cmd)} failed:\n{out.stdout}\n{out.stderr}")
+        return {"cpu": after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime, "wall": wall}
+
+
+def summary(xs: list[float]) -> str:
+    return f"{min(xs):7.2f} / {statistics.median(xs):7.2f}"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--peer", type=Path, help="another checkout to compare with (e.g. /work/main)")
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--t-end", type=float, default=0.01, help="simulated time (s)")
+    ap.add_argument("--smoke", action="store_true", help="this tree only, 1 round, T = 0.001 s")
+    args = ap.parse_args()
+    if args.smoke:
+        args.peer, args.rounds, args.t_end = None, 1, 0.001
+    trees = {"this": ROOT} | ({"peer": args.peer.resolve()} if args.peer else {})
+    print(machine())
+    print(f"box_stack first run (empty cache), --t-end {args.t_end}, {args.rounds} rounds, interleaved")
+    results = {k: [] for k in trees}
+    for r in range(args.rounds):
+        order = list(trees.items()) if r % 2 == 0 else list(reversed(trees.items()))
+        for name, tree in order:
+            res = first_run(tree, args.t_end)
+            results[name].append(res)
+            print(f"  round {r + 1} {name:4s}: CPU {res['cpu']:6.2f} s, wall {res['wall']:6.2f} s, "
+                  f"load {os.getloadavg()[0]:.1f}", flush=True)
+    print(f"{'tree':6s} {'CPU s min / median':>20s} {'wall s min / median':>20s}  (target {TARGET} s)")
+    for name, rs in results.items():
+        print(f"{name:6s} {summary([x['cpu'] for x in rs]):>20s} {summary([x['wall'] for x in rs]):>20s}")
+    if args.peer:
+        ratio = [a["cpu"] / b["cpu"] for a, b in zip(results["this"], results["peer"])]
+        print(f"CPU this / peer per round: min {min(ratio):.3f}, median {statistics.median(ratio):.3f}")
+
+
+if __name__ == "__main__":
+    main()
