@@ -21,6 +21,8 @@ from ncgen.optim.problem_file import load_problem
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 PUSH = [(1.0, 1.1, [8.0])]                # an 8 N push on the cart for 0.1 s
+QUICK_COMPILE = True             # the cart-pole MPC's packages at -O0 in both tiers, as in the other MPC modules and
+#                                 benchmarks/control.py's smoke, which share them through the compile cache (tests/conftest.py)
 
 
 def tilted(angle, cart=0.0):
