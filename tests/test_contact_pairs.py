@@ -16,7 +16,6 @@ import ncgen.codegen.stepper_package as stepper_package
 from ncgen.assembly.pair_kernels import element_bounds, pair_kernels
 
 ROOT = Path(__file__).resolve().parents[1]
-QUICK_COMPILE = True             # its time is gcc compiling its scenes' flat kernels: -O0 (tests/conftest.py)
 
 
 def R_z(b):
