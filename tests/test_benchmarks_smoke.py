@@ -1,7 +1,9 @@
 """The benchmarks run (``--smoke``: tiny models, seconds) and print their comparisons.
 Nothing here is timed: the figures are the benchmarks' business, not CI's.  The scripts share
 the run's compile cache (the element and tree libraries, the chains and robots several of them
-build are compiled once); those that measure a first run make their own empty cache."""
+build are compiled once); those that measure a first run make their own empty cache.  The scripts
+compile at -O0 here (``QUICK_COMPILE``, tests/conftest.py: their runs are tiny, their time is gcc),
+as the test modules that build the same packages do (the cart-pole MPC's, the contact pyramid's)."""
 from __future__ import annotations
 
 import os
@@ -16,6 +18,7 @@ import pytest
 pytest.importorskip("mujoco")
 
 BENCHMARKS = Path(__file__).resolve().parent.parent / "benchmarks"
+QUICK_COMPILE = True
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800),   # each benchmark script end to end: minutes
               pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc") is None,
                                  reason="no C compiler")]

@@ -22,6 +22,8 @@ from ncgen.errors import SimulationError
 from ncgen.runtime import stepper, stepper_checks
 
 ROOT = Path(__file__).resolve().parents[1]
+QUICK_COMPILE = True             # its time is gcc compiling its scenes (the pyramid's as in benchmarks/contact.py's
+#                                 smoke, which shares it through the compile cache): -O0 (tests/conftest.py)
 G, MASS, RADIUS, H = 9.81, 2.0, 0.1, 0.005
 
 

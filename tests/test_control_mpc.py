@@ -27,6 +27,8 @@ from cartpole_mpc import EXAMPLES, PUSH, cartpole, cartpole_problem, tilted
 CC = os.environ.get("CC") or shutil.which("gcc") or shutil.which("cc")
 SAN = "-fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer"
 ENV = {**os.environ, "ASAN_OPTIONS": "detect_leaks=0", "UBSAN_OPTIONS": "halt_on_error=1"}
+QUICK_COMPILE = True             # the cart-pole MPC's packages at -O0 in both tiers, as in the other MPC modules and
+#                                 benchmarks/control.py's smoke, which share them through the compile cache (tests/conftest.py)
 # nc.MPC compiles the horizon's step derivatives (400 s at load 10 on 2 cores, cold cache),
 # the exported package is built under the sanitizers
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800)]

@@ -18,6 +18,9 @@ from ncgen.errors import OptimizationError
 
 from cartpole_mpc import PUSH, cartpole_problem, tilted
 
+QUICK_COMPILE = True             # the cart-pole MPC's packages at -O0 in both tiers, as in the other MPC modules and
+#                                 benchmarks/control.py's smoke, which share them through the compile cache (tests/conftest.py)
+
 
 @pytest.fixture(scope="module")
 def ocp():

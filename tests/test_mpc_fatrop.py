@@ -20,6 +20,8 @@ from ncgen.errors import OptimizationError
 
 from cartpole_mpc import EXAMPLES, PUSH, cartpole_problem, tilted
 
+QUICK_COMPILE = True             # the cart-pole MPC's packages at -O0 in both tiers, as in the other MPC modules and
+#                                 benchmarks/control.py's smoke, which share them through the compile cache (tests/conftest.py)
 # the tests that compare with the SQP are slow: its MPC compiles the horizon's step derivatives
 # (minutes on a cold cache)
 
