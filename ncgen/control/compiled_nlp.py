@@ -6,7 +6,8 @@ of the CasADi wheel, it is called through ctypes (:class:`~ncgen.codegen.direct.
 without CasADi's Python call, its conversions and ``stats()`` (0.2–0.3 ms a solve on the
 cart-pole).  ncgen's packages prefix every symbol with the package's name and link no C++
 library, so this one file is compiled here, cached in ``$NCGEN_CACHE_DIR`` under the hash of
-its C, the compiler and the flags (``-O1``: straight-line code, as the step packages).  The
+its C, the compiler and the flags (those of the step packages: ``$NCGEN_CFLAGS`` if set, else ``-O1``,
+straight-line code).  The
 generated entry point returns 0 whatever Fatrop answered, so two lines are added to the
 generated C (each anchor checked to occur once): a failed solve returns 1, a successful one
 ``−(its interior-point iterations)``.
@@ -21,8 +22,9 @@ from pathlib import Path
 import casadi as ca
 
 from ncgen.codegen import fsutil
-from ncgen.codegen.compile_cache import LARGE_CFLAGS
+from ncgen.codegen.compile_cache import resolve_cflags
 from ncgen.codegen.compiler import find_compiler
+from ncgen.control.step_support import compile_flags
 from ncgen.errors import CodegenError
 from ncgen.files import cache_dir
 
@@ -56,9 +58,9 @@ def compiled_fatrop(name: str, nlp: dict, options: dict):
 def _library(name: str, source: Path, include: tuple = (), link: tuple = ()) -> Path:
     """The cached shared library of the C file ``source`` (built when missing), compiled with
     the ``include`` flags and linked with the ``link`` ones."""
-    compiler = find_compiler()
+    compiler, flags = find_compiler(), resolve_cflags(compile_flags())
     key = fsutil.sha256_bytes(source.read_bytes() + "\0".join((*compiler.argv, compiler.version,
-                                                                *LARGE_CFLAGS, *include, *link)).encode())
+                                                                *flags, *include, *link)).encode())
     root = cache_dir()
     entry = root / f"{name}-{key[:24]}"
     library = entry / f"lib{name}.so"
@@ -69,7 +71,7 @@ def _library(name: str, source: Path, include: tuple = (), link: tuple = ()) -> 
         if library.is_file():                   # another process built it while we waited
             return library
         with fsutil.temporary_sibling(entry) as tmp:
-            cmd = [*compiler.argv, *LARGE_CFLAGS, *include, "-fPIC", "-shared", str(source), "-o",
+            cmd = [*compiler.argv, *flags, *include, "-fPIC", "-shared", str(source), "-o",
                    str(tmp / library.name), *link, "-lm"]
             out = subprocess.run(cmd, capture_output=True, text=True)
             if out.returncode != 0:
