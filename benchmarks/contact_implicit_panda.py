@@ -130,7 +130,7 @@ def planar_posture(model, x):
     raise RuntimeError(f"inverse kinematics of the tool at x = {x} m did not converge ({np.max(np.abs(r)):.1e})")
 
 
-def locked_problem(N: int, task: str, feet: str, weight: float, pusher: str = "arm"):
+def locked_problem(N: int, task: str, feet: str, weight: float, pusher: str = "arm", contacts=None):
     """``(ocp, model)``: the planar Panda's push or reach (module docstring); ``pusher="point"``:
     the arm replaced by a 0.5 kg point on a guide along x carrying the same sphere at the same
     place, driven by a force (N) — the same box, contacts and target."""
@@ -165,7 +165,8 @@ def locked_problem(N: int, task: str, feet: str, weight: float, pusher: str = "a
         q[:alone.nq] = alone.from_joint_space(planar_posture(alone, x), np.zeros(3))[0]   # the arm comes first
     if task == "push":
         q1[model.coordinate_names.index("box.r_i.x")] += DISTANCE
-    ocp = nc.OptimalControl(model, N=N, t_final=1.0, contacts={"sigma0": 1e-3, "reaction_guess": True})
+    ocp = nc.OptimalControl(model, N=N, t_final=1.0,
+                            contacts={"sigma0": 1e-3, "reaction_guess": True, **(contacts or {})})
     ocp.initial(q=q0, v=np.zeros(model.nq))
     ocp.final(q=q1, v=0)
     ocp.joint_limits()
@@ -198,14 +199,45 @@ def guess_from_point(model, N: int, feet: str, max_iter: int):
     return SimpleNamespace(t=sol.t, q=q, v=v)
 
 
+def smoothstep(x):
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3 - 2 * x)
+
+
+def guess_from_path(model, N: int, approach: float = 0.2, samples: int = 201):
+    """A kinematic warm start for the arm's push: the tool closes the gap ``GAP`` over the
+    first ``approach`` of the horizon (the box at rest), then tool and box move together along
+    x by ``DISTANCE`` (both on smoothsteps, so at rest at both ends of each phase); the arm's
+    joints by :func:`planar_posture` under the tool at each sample, rates by finite differences."""
+    from types import SimpleNamespace
+    t = np.linspace(0.0, 1.0, samples)
+    s1, s2 = smoothstep(t / approach), smoothstep((t - approach) / (1 - approach))
+    box_dx, tool_x = DISTANCE * s2, START + GAP * s1 + DISTANCE * s2
+    alone = _planar_arm().build()
+    qj = np.array([planar_posture(alone, x) for x in tool_x])
+    rates = np.gradient(qj, t, axis=0)
+    q = np.tile(np.array(model.q0, float), (t.size, 1))
+    v = np.zeros_like(q)
+    for k in range(t.size):
+        q[k, :alone.nq], v[k, :alone.nq] = alone.from_joint_space(qj[k], rates[k])
+    i = model.coordinate_names.index("box.r_i.x")
+    q[:, i] += box_dx
+    v[:, i] = np.gradient(box_dx, t)
+    return SimpleNamespace(t=t, q=q, v=v)
+
+
 def locked(args):
-    ocp, model = locked_problem(args.N, args.task, args.feet, args.weight, args.pusher)
+    settings = {k: v for k, v in (("sigma0", args.sigma0), ("sigma_final", args.sigma_final),
+                                  ("sigma_factor", args.sigma_factor)) if v is not None}
+    ocp, model = locked_problem(args.N, args.task, args.feet, args.weight, args.pusher, settings)
     guess = "rest"
     if args.guess == "point":
         guess = guess_from_point(model, args.N, args.feet, args.max_iter)
+    elif args.guess in ("path", "interpolate"):
+        guess = guess_from_path(model, args.N) if args.guess == "path" else "interpolate"
     cpu = time.process_time()
     try:
-        result = ocp.solve(guess, max_iter=args.max_iter, diagnose=False)
+        result = ocp.solve(guess, max_iter=args.max_iter, diagnose=False, verbose=args.verbose)
     except OptimizationError as exc:
         result = exc.result
     cpu = time.process_time() - cpu
@@ -232,10 +264,14 @@ def main(argv=None):
     ap.add_argument("--task", choices=("push", "reach"), default="push")
     ap.add_argument("--feet", choices=("corners", "tripod"), default="corners")
     ap.add_argument("--pusher", choices=("arm", "point"), default="arm", help="--locked: the arm or a point on a guide")
-    ap.add_argument("--guess", choices=("rest", "point"), default="rest",
+    ap.add_argument("--guess", choices=("rest", "point", "path", "interpolate"), default="rest",
                     help="--locked arm push: start at rest, or from the point pusher's optimum (guess_from_point)")
     ap.add_argument("--weight", type=float, default=0.01, help="weight of ∫ |τ|² dt (--locked)")
     ap.add_argument("--max-iter", type=int, default=300, help="IPOPT iterations per stage (--locked)")
+    ap.add_argument("--sigma0", type=float, help="--locked arm: contacts.sigma0 (default 1e-3)")
+    ap.add_argument("--sigma-final", type=float, help="--locked arm: contacts.sigma_final")
+    ap.add_argument("--sigma-factor", type=float, help="--locked arm: contacts.sigma_factor")
+    ap.add_argument("--verbose", action="store_true", help="--locked: IPOPT's iteration log")
     args = ap.parse_args(argv)
     if args.locked:
         args.N = args.N or 10
