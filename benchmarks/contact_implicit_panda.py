@@ -130,7 +130,8 @@ def planar_posture(model, x):
     raise RuntimeError(f"inverse kinematics of the tool at x = {x} m did not converge ({np.max(np.abs(r)):.1e})")
 
 
-def locked_problem(N: int, task: str, feet: str, weight: float, pusher: str = "arm", contacts=None):
+def locked_problem(N: int, task: str, feet: str, weight: float, pusher: str = "arm", contacts=None,
+                   final: str = "q"):
     """``(ocp, model)``: the planar Panda's push or reach (module docstring); ``pusher="point"``:
     the arm replaced by a 0.5 kg point on a guide along x carrying the same sphere at the same
     place, driven by a force (N) — the same box, contacts and target."""
@@ -168,23 +169,32 @@ def locked_problem(N: int, task: str, feet: str, weight: float, pusher: str = "a
     ocp = nc.OptimalControl(model, N=N, t_final=1.0,
                             contacts={"sigma0": 1e-3, "reaction_guess": True, **(contacts or {})})
     ocp.initial(q=q0, v=np.zeros(model.nq))
-    ocp.final(q=q1, v=0)
+    if final == "q":
+        ocp.final(q=q1, v=0)
+    else:
+        box_at = q1[model.coordinate_names.index("box.r_i.x")]
+        ocp.final(pose={"box": (np.eye(3), (box_at, 0.0, EDGE / 2))}, v=0)
     ocp.joint_limits()
     ocp.minimize_effort(weight)
     return ocp, model
 
 
-def guess_from_point(model, N: int, feet: str, max_iter: int):
-    """A warm start for the arm's push: the point pusher's optimum (``--pusher point``,
-    ``weight`` 1) with the arm's joints put by :func:`planar_posture` under the point at each
-    node (rates by finite differences) and the box's coordinates copied."""
-    from types import SimpleNamespace
+def point_solution(N: int, feet: str, max_iter: int):
+    """``(solution, model)``: the point pusher's push (``--pusher point``, ``weight`` 1)."""
     ocp, point_model = locked_problem(N, "push", feet, 1.0, "point")
     try:
         sol = ocp.solve("rest", max_iter=max_iter, diagnose=False)
     except OptimizationError as exc:
         sol = exc.result
     print(f"  guess: the point pusher's solve, {sol.stats.status}, {sol.stats.iterations} iterations", flush=True)
+    return sol, point_model
+
+
+def guess_from_point(model, sol, point_model):
+    """A warm start for the arm's push: the point pusher's optimum with the arm's joints put
+    by :func:`planar_posture` under the point at each node (rates by finite differences) and
+    the box's coordinates copied."""
+    from types import SimpleNamespace
     names = list(point_model.coordinate_names)
     x = sol.q[:, names.index("pusher.r_i.x")]
     alone = _planar_arm().build()
@@ -197,6 +207,61 @@ def guess_from_point(model, N: int, feet: str, max_iter: int):
         if name.startswith("box."):
             q[:, i], v[:, i] = sol.q[:, names.index(name)], sol.v[:, names.index(name)]
     return SimpleNamespace(t=sol.t, q=q, v=v)
+
+
+def contact_sequence(sol):
+    """``sequence[i][j]``: in the solution ``sol``, pair i's element j has its first side
+    (``a``) at 0 (else its second, ``c``)."""
+    from ncgen.optim.contact_implicit import pair_values
+    return [a <= c for a, c in pair_values(sol.nlp.ocp.transcription.pairs, sol.nlp.value)]
+
+
+def fixed_sequence_solve(ocp, guess, sequence, max_iter: int, verbose: bool, ipopt=None):
+    """The NLP of ``ocp`` built from ``guess`` with ``sequence`` imposed (the zero side of every
+    complementarity pair an equality) and solved once: ``(nlp, value, cpu)``."""
+    import casadi as ca
+    from ncgen.optim.contact_implicit import FIRST_SOLVE
+    from ncgen.optim.nlp import NLP
+    nlp = NLP(ocp)
+    nlp.build(guess)
+    tr = ocp.transcription
+    if [ca.MX(p.a).numel() for p in tr.pairs] != [len(z) for z in sequence]:
+        raise ValueError("the sequence's pairs are not the problem's")
+    nlp.opti.set_value(tr.sigma, tr.settings["sigma_final"])
+    sides = {}
+    for pair, a_zero in zip(tr.pairs, sequence):
+        for i, zero in enumerate(a_zero):
+            side = pair.a[i] if zero else pair.c[i]
+            if ca.symvar(side):
+                sides.setdefault(str(side), side)
+    nlp.opti.subject_to(ca.vertcat(*sides.values()) == 0)
+    cpu = time.process_time()
+    value = nlp.solve(max_iter=max_iter, tol=1e-8, verbose=verbose, ipopt={**FIRST_SOLVE, **(ipopt or {})})
+    return nlp, value, time.process_time() - cpu
+
+
+def released_solve(ocp, guess, fixed, max_iter: int, verbose: bool):
+    """The NLP of ``ocp`` (no sequence imposed) started from the fixed-sequence solve ``fixed``
+    (``(nlp, value)``: its variables and the multipliers of the rows both NLPs share) and
+    solved by the transcription's homotopy from ``contacts.sigma0``, every solve warm started
+    (``WARM_START``), then polished: the result or the exception's result."""
+    from ncgen.optim.contact_implicit import WARM_START
+    from ncgen.optim.nlp import NLP, extract
+    nlp0, value0 = fixed
+    nlp = NLP(ocp)
+    nlp.build(guess)
+    ng = nlp.opti.ng
+    nlp.opti.set_initial(nlp.opti.x, value0(nlp0.opti.x))
+    nlp.opti.set_initial(nlp.opti.lam_g, np.array(value0(nlp0.opti.lam_g)).reshape(-1)[:ng])
+    tr = ocp.transcription
+    value = tr.solve(nlp, lambda **extra: nlp.solve(max_iter=max_iter, tol=1e-8, verbose=verbose,
+                                                     ipopt=dict(WARM_START)), 1e-8)
+    result = extract(nlp, value, 0.0)
+    try:
+        tr.finish(value, result)
+    except OptimizationError as exc:
+        result = exc.result
+    return result
 
 
 def smoothstep(x):
@@ -229,10 +294,32 @@ def guess_from_path(model, N: int, approach: float = 0.2, samples: int = 201):
 def locked(args):
     settings = {k: v for k, v in (("sigma0", args.sigma0), ("sigma_final", args.sigma_final),
                                   ("sigma_factor", args.sigma_factor)) if v is not None}
-    ocp, model = locked_problem(args.N, args.task, args.feet, args.weight, args.pusher, settings)
+    ocp, model = locked_problem(args.N, args.task, args.feet, args.weight, args.pusher, settings, args.final)
     guess = "rest"
     if args.guess == "point":
-        guess = guess_from_point(model, args.N, args.feet, args.max_iter)
+        point, point_model = point_solution(args.N, args.feet, args.max_iter)
+        guess = guess_from_point(model, point, point_model)
+        if args.sequence == "point":
+            from ncgen.optim.contact_implicit import complementarity_residual
+            nlp, value, cpu = fixed_sequence_solve(ocp, guess, contact_sequence(point), args.max_iter, args.verbose,
+                                                   {"hessian_approximation": "limited-memory"} if args.lbfgs else None)
+            st = nlp.opti.stats()
+            print(f"  the point pusher's contact sequence imposed: {st['return_status']}, {st['iter_count']} "
+                  f"iterations, {cpu:.1f} s CPU, cost {float(value(nlp.opti.f)):.6g}, complementarity residual "
+                  f"{complementarity_residual(ocp.transcription.pairs, value):.1e}", flush=True)
+            from ncgen.optim.diagnostics import violation_of
+            worst = sorted(((violation_of(value, g), g.label) for g in nlp.groups), reverse=True)[:5]
+            print("  largest violations: " + "; ".join(f"{label} {v:.1e}" for v, label in worst), flush=True)
+            if args.sigma0 is None:
+                return
+            cpu = time.process_time()
+            result = released_solve(ocp, guess, (nlp, value), args.max_iter, args.verbose)
+            print(f"  released from σ = {args.sigma0:g}: {result.stats.status}, cost {result.stats.objective:.6g}, "
+                  f"{time.process_time() - cpu:.1f} s CPU")
+            for stage in result.homotopy:
+                print(f"  σ = {stage['sigma']}: {stage['status']}, {stage['iterations']} iterations, "
+                      f"{stage['cpu_time']:.1f} s CPU, complementarity residual {stage['residual']:.1e}")
+            return
     elif args.guess in ("path", "interpolate"):
         guess = guess_from_path(model, args.N) if args.guess == "path" else "interpolate"
     cpu = time.process_time()
@@ -271,6 +358,11 @@ def main(argv=None):
     ap.add_argument("--sigma0", type=float, help="--locked arm: contacts.sigma0 (default 1e-3)")
     ap.add_argument("--sigma-final", type=float, help="--locked arm: contacts.sigma_final")
     ap.add_argument("--sigma-factor", type=float, help="--locked arm: contacts.sigma_factor")
+    ap.add_argument("--sequence", choices=("free", "point"), default="free",
+                    help="--guess point: solve once with the point pusher's contact sequence imposed")
+    ap.add_argument("--lbfgs", action="store_true", help="--sequence point: IPOPT's L-BFGS Hessian")
+    ap.add_argument("--final", choices=("q", "pose"), default="q",
+                    help="--locked arm: the final configuration, or only the box's pose (both at rest)")
     ap.add_argument("--verbose", action="store_true", help="--locked: IPOPT's iteration log")
     args = ap.parse_args(argv)
     if args.locked:
