@@ -131,7 +131,7 @@ def planar_posture(model, x):
 
 
 def locked_problem(N: int, task: str, feet: str, weight: float, pusher: str = "arm", contacts=None,
-                   final: str = "q"):
+                   final: str = "q", limits: bool = True):
     """``(ocp, model)``: the planar Panda's push or reach (module docstring); ``pusher="point"``:
     the arm replaced by a 0.5 kg point on a guide along x carrying the same sphere at the same
     place, driven by a force (N) — the same box, contacts and target."""
@@ -174,19 +174,36 @@ def locked_problem(N: int, task: str, feet: str, weight: float, pusher: str = "a
     else:
         box_at = q1[model.coordinate_names.index("box.r_i.x")]
         ocp.final(pose={"box": (np.eye(3), (box_at, 0.0, EDGE / 2))}, v=0)
-    ocp.joint_limits()
+    if limits:
+        ocp.joint_limits()
     ocp.minimize_effort(weight)
     return ocp, model
 
 
-def point_solution(N: int, feet: str, max_iter: int):
-    """``(solution, model)``: the point pusher's push (``--pusher point``, ``weight`` 1)."""
+def point_solution(N: int, feet: str, max_iter: int, cache=None):
+    """``(solution, model)``: the point pusher's push (``--pusher point``, ``weight`` 1);
+    ``cache``: an ``.npz`` file holding its ``t``, ``q``, ``v`` and contact sequence, read if
+    it exists, else written (the solve's result moves with the BLAS's round-off)."""
+    from pathlib import Path
+    from types import SimpleNamespace
     ocp, point_model = locked_problem(N, "push", feet, 1.0, "point")
+    if cache and Path(cache).exists():
+        data = np.load(cache)
+        sizes = np.cumsum(data["sizes"])[:-1]
+        sol = SimpleNamespace(t=data["t"], q=data["q"], v=data["v"], sequence=np.split(data["sequence"], sizes))
+        print(f"  guess: the point pusher's solution read from {cache}", flush=True)
+        return sol, point_model
     try:
         sol = ocp.solve("rest", max_iter=max_iter, diagnose=False)
     except OptimizationError as exc:
         sol = exc.result
-    print(f"  guess: the point pusher's solve, {sol.stats.status}, {sol.stats.iterations} iterations", flush=True)
+    sol.sequence = contact_sequence(sol)
+    x = sol.q[:, point_model.coordinate_names.index("pusher.r_i.x")]
+    print(f"  guess: the point pusher's solve, {sol.stats.status}, {sol.stats.iterations} iterations, "
+          f"pusher x from {x.min():.4f} to {x.max():.4f} m", flush=True)
+    if cache:
+        np.savez(cache, t=sol.t, q=sol.q, v=sol.v, sequence=np.concatenate(sol.sequence),
+                 sizes=[len(z) for z in sol.sequence])
     return sol, point_model
 
 
@@ -294,14 +311,14 @@ def guess_from_path(model, N: int, approach: float = 0.2, samples: int = 201):
 def locked(args):
     settings = {k: v for k, v in (("sigma0", args.sigma0), ("sigma_final", args.sigma_final),
                                   ("sigma_factor", args.sigma_factor)) if v is not None}
-    ocp, model = locked_problem(args.N, args.task, args.feet, args.weight, args.pusher, settings, args.final)
+    ocp, model = locked_problem(args.N, args.task, args.feet, args.weight, args.pusher, settings, args.final, bool(args.joint_limits))
     guess = "rest"
     if args.guess == "point":
-        point, point_model = point_solution(args.N, args.feet, args.max_iter)
+        point, point_model = point_solution(args.N, args.feet, args.max_iter, args.point_cache)
         guess = guess_from_point(model, point, point_model)
         if args.sequence == "point":
             from ncgen.optim.contact_implicit import complementarity_residual
-            nlp, value, cpu = fixed_sequence_solve(ocp, guess, contact_sequence(point), args.max_iter, args.verbose,
+            nlp, value, cpu = fixed_sequence_solve(ocp, guess, point.sequence, args.max_iter, args.verbose,
                                                    {"hessian_approximation": "limited-memory"} if args.lbfgs else None)
             st = nlp.opti.stats()
             print(f"  the point pusher's contact sequence imposed: {st['return_status']}, {st['iter_count']} "
@@ -363,6 +380,8 @@ def main(argv=None):
     ap.add_argument("--lbfgs", action="store_true", help="--sequence point: IPOPT's L-BFGS Hessian")
     ap.add_argument("--final", choices=("q", "pose"), default="q",
                     help="--locked arm: the final configuration, or only the box's pose (both at rest)")
+    ap.add_argument("--point-cache", help="--guess point: an .npz file for the point pusher's solution")
+    ap.add_argument("--joint-limits", type=int, default=1, help="--locked arm: 0 drops the URDF's joint limits")
     ap.add_argument("--verbose", action="store_true", help="--locked: IPOPT's iteration log")
     args = ap.parse_args(argv)
     if args.locked:

@@ -11,7 +11,8 @@ transposed rows, each dependent row with the rows that span it (weights above 1 
 by kind.
 
 Run:  python benchmarks/contact_implicit_panda_rank.py [--task push] [--pusher arm|point]
-             [--feet corners|tripod] [--max-iter 60] [--active 1e-6]
+             [--feet corners|tripod] [--max-iter 60] [--active 1e-6] [--guess rest|point]
+             [--point-cache FILE.npz]
 """
 from __future__ import annotations
 
@@ -119,10 +120,19 @@ def main(argv=None):
     ap.add_argument("--weight", type=float, default=0.01)
     ap.add_argument("--max-iter", type=int, default=60)
     ap.add_argument("--active", type=float, nargs="+", default=[1e-6])
+    ap.add_argument("--guess", choices=("rest", "point"), default="rest",
+                    help="the arm's push from rest or from the point pusher's optimum (contact_implicit_panda.py)")
+    ap.add_argument("--point-cache", help="--guess point: an .npz file for the point pusher's solution")
     args = ap.parse_args(argv)
-    ocp, model = _benchmark().locked_problem(args.N, args.task, args.feet, args.weight, args.pusher)
+    bench = _benchmark()
+    ocp, model = bench.locked_problem(args.N, args.task, args.feet, args.weight, args.pusher,
+                                      {"sigma_final": 1e-3, "polish": False})      # the first σ stage only
+    guess = "rest"
+    if args.guess == "point":
+        point, point_model = bench.point_solution(args.N, args.feet, 1000, args.point_cache)
+        guess = bench.guess_from_point(model, point, point_model)
     try:
-        result = ocp.solve("rest", max_iter=args.max_iter, diagnose=False)
+        result = ocp.solve(guess, max_iter=args.max_iter, diagnose=False)
     except OptimizationError as exc:
         result = exc.result
     it = result.nlp.opti.stats().get("iterations", {})
