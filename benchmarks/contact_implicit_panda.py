@@ -41,9 +41,31 @@ first stage (σ = 1e-3) solved to IPOPT's acceptable level in 188 iterations (46
 second (σ = 1e-5) stopped at 1 000 iterations (161 s CPU; dynamics defects 1.7e-3,
 complementarity residual 5.7e-3): the push is not delivered yet.
 
+Measured next (AMD EPYC, load 11–17; N = 10; the arm's NLP 3 120 variables, 5 607
+constraints):
+
+* ``--guess point`` under OpenBLAS's own threads: the point pusher solves in 573 iterations;
+  the arm's σ = 1e-3 stage ends ``Restoration_Failed`` after 406 iterations (347 s CPU;
+  inertia regularisation up to 4.4e17).  The same under ``OPENBLAS_NUM_THREADS=1``: the point
+  pusher takes 619 iterations, the arm's first stage ends "acceptable" in 188 (46.9 s CPU) —
+  the solves move with the BLAS's round-off.  That "acceptable" point is feasible (violation
+  2.8e-13) but not stationary: its dual infeasibility is 13.0 (IPOPT's
+  ``acceptable_dual_inf_tol`` is 1e10), μ 1e-8, the regularisation 1e15 over its last
+  iterations.  With ``--sigma-factor 0.1`` the σ = 1e-4 stage stops at 300 iterations (52.7 s
+  CPU; complementarity residual 9.2e-3, primal / dual infeasibility 1.2e-3 / 1.1e2).
+* ``--feet tripod --guess path`` (the box's straight path, the arm by inverse kinematics): after
+  44 iterations primal 0.13, dual 1.9e10, the adaptive barrier raised to μ = 2.5e3 (stopped).
+* ``--sequence point`` (the point pusher's contact sequence imposed, a smooth NLP, from its
+  guess): IPOPT converges to a point of local infeasibility (219 iterations, 40.8 s CPU,
+  violation 1.5e-4); with ``--final pose`` the same (314 iterations, 71.3 s CPU; the largest
+  violations Φ at node 2 1.3e-4, the positions of interval 0 6.3e-5, Φ at node 3 4.6e-5): the
+  arm cannot follow the point's contact sequence over the first intervals.
+
 Run:  python benchmarks/contact_implicit_panda.py [--N 20] [--iterations 3 10]
       python benchmarks/contact_implicit_panda.py --locked [--task push|reach] [--feet corners|tripod]
-             [--pusher arm|point] [--guess rest|point] [--N 10] [--weight 0.01] [--max-iter 300]
+             [--pusher arm|point] [--guess rest|point|path|interpolate] [--N 10] [--weight 0.01]
+             [--max-iter 300] [--sigma0 S] [--sigma-final S] [--sigma-factor K] [--sequence free|point]
+             [--final q|pose] [--joint-limits 0|1] [--point-cache FILE.npz] [--lbfgs] [--verbose]
 """
 from __future__ import annotations
 
