@@ -60,6 +60,14 @@ constraints):
   violation 1.5e-4); with ``--final pose`` the same (314 iterations, 71.3 s CPU; the largest
   violations Φ at node 2 1.3e-4, the positions of interval 0 6.3e-5, Φ at node 3 4.6e-5): the
   arm cannot follow the point's contact sequence over the first intervals.
+* The active rows at the σ = 1e-3 stage's "acceptable" point from the point guess
+  (``contact_implicit_panda_rank.py --guess point``, within 1e-6 of their bound): 2 011 rows,
+  3 120 variables, **rank 2 006**; the 5 dependent rows are all at the last node: the push's
+  gap at node N (the final configuration puts the tool on the box's face, so ``g(q_N) ≥ 0``
+  is a function of the imposed final q and Φ at node N), three bottom corners' gaps at node N
+  (a flat face's corners, and the box's pose fixed) and one final-q row.  LICQ fails there by
+  the problem's statement; ``--final pose`` (the box's pose only, the arm at rest anywhere)
+  leaves the push's gap free.
 
 Run:  python benchmarks/contact_implicit_panda.py [--N 20] [--iterations 3 10]
       python benchmarks/contact_implicit_panda.py --locked [--task push|reach] [--feet corners|tripod]
