@@ -67,7 +67,9 @@ constraints):
   is a function of the imposed final q and Φ at node N), three bottom corners' gaps at node N
   (a flat face's corners, and the box's pose fixed) and one final-q row.  LICQ fails there by
   the problem's statement; ``--final pose`` (the box's pose only, the arm at rest anywhere)
-  leaves the push's gap free.
+  leaves the push's gap free — but from the point guess with ``--final pose --sigma-factor
+  0.1`` the first stage stalls the same way: feasible after 99 iterations (violation 3.6e-12)
+  with dual infeasibility 3.8e8 and inertia regularisation 4e12, still so at 111 (stopped).
 
 Run:  python benchmarks/contact_implicit_panda.py [--N 20] [--iterations 3 10]
       python benchmarks/contact_implicit_panda.py --locked [--task push|reach] [--feet corners|tripod]
