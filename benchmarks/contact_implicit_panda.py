@@ -70,6 +70,14 @@ constraints):
   leaves the push's gap free — but from the point guess with ``--final pose --sigma-factor
   0.1`` the first stage stalls the same way: feasible after 99 iterations (violation 3.6e-12)
   with dual infeasibility 3.8e8 and inertia regularisation 4e12, still so at 111 (stopped).
+  Its active rows at 100 iterations: 2 003, rank 1 999, the 4 dependent ones the bottom
+  corners' gaps (as on the point pusher, which solves), the next singular values 1.0e-3 and
+  9.2e-4: no rank defect of the arm's own.  The multipliers diverge on those rows
+  (``contact_implicit_panda_rank.py --final pose``, median |λ| 45): 1e13 on the box's final
+  pose (its 6 independent rows) and on the bottom corners' ``g(q_N) ≥ 0``, 1e12 on the box's
+  Φ rows at node N: with the box's pose imposed at the last node, its corners' gaps there are
+  functions of the imposed rows, so an active ``g ≥ 0`` combines with the equalities to 0 —
+  MFCQ fails and the multiplier set is unbounded.
 
 Run:  python benchmarks/contact_implicit_panda.py [--N 20] [--iterations 3 10]
       python benchmarks/contact_implicit_panda.py --locked [--task push|reach] [--feet corners|tripod]
