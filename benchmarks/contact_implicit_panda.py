@@ -419,7 +419,8 @@ def main(argv=None):
     ap.add_argument("--sigma-final", type=float, help="--locked arm: contacts.sigma_final")
     ap.add_argument("--sigma-factor", type=float, help="--locked arm: contacts.sigma_factor")
     ap.add_argument("--sequence", choices=("free", "point"), default="free",
-                    help="--guess point: solve once with the point pusher's contact sequence imposed")
+                    help="--guess point: solve once with the point pusher's contact sequence imposed "
+                         "(with --sigma0: then released by the homotopy from that point)")
     ap.add_argument("--lbfgs", action="store_true", help="IPOPT's L-BFGS Hessian (the homotopy's solves, or --sequence point's)")
     ap.add_argument("--final", choices=("q", "pose"), default="q",
                     help="--locked arm: the final configuration, or only the box's pose (both at rest)")
