@@ -12,7 +12,7 @@ by kind.
 
 Run:  python benchmarks/contact_implicit_panda_rank.py [--task push] [--pusher arm|point]
              [--feet corners|tripod] [--max-iter 60] [--active 1e-6] [--guess rest|point]
-             [--point-cache FILE.npz] [--final q|pose]
+             [--point-cache FILE.npz] [--final q|pose|soft]
 """
 from __future__ import annotations
 
@@ -134,7 +134,7 @@ def main(argv=None):
     ap.add_argument("--active", type=float, nargs="+", default=[1e-6])
     ap.add_argument("--guess", choices=("rest", "point"), default="rest",
                     help="the arm's push from rest or from the point pusher's optimum (contact_implicit_panda.py)")
-    ap.add_argument("--final", choices=("q", "pose"), default="q",
+    ap.add_argument("--final", choices=("q", "pose", "soft"), default="q",
                     help="the arm's final configuration, or only the box's pose (contact_implicit_panda.py)")
     ap.add_argument("--point-cache", help="--guess point: an .npz file for the point pusher's solution")
     args = ap.parse_args(argv)
