@@ -83,6 +83,10 @@ constraints):
   ``--final soft`` (at rest, the box's x, y and yaw in the cost, its height and tilt free: no
   final row meets a gap) the first stage is at primal 1.2, dual 1.4e10 after 180 iterations
   (stopped); with ``--final pose --lbfgs`` at primal 1.1, dual 1.2e10 after 300 (34.9 s CPU).
+  ``--final soft`` after 100 iterations (rank script): primal 1.9, dual 2.2e10, the active rows
+  of full rank (1 993), the largest multipliers 2e10 on a complementarity product and 1e9 on
+  the box's dynamics and Φ rows and on interior nodes' floor gaps: IPOPT heads for an
+  infeasible point with the multipliers growing, not a rank defect.
 
 Run:  python benchmarks/contact_implicit_panda.py [--N 20] [--iterations 3 10]
       python benchmarks/contact_implicit_panda.py --locked [--task push|reach] [--feet corners|tripod]
