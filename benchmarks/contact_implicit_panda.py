@@ -41,9 +41,58 @@ first stage (σ = 1e-3) solved to IPOPT's acceptable level in 188 iterations (46
 second (σ = 1e-5) stopped at 1 000 iterations (161 s CPU; dynamics defects 1.7e-3,
 complementarity residual 5.7e-3): the push is not delivered yet.
 
+Measured next (AMD EPYC, load 11–17; N = 10; the arm's NLP 3 120 variables, 5 607
+constraints):
+
+* ``--guess point`` under OpenBLAS's own threads: the point pusher solves in 573 iterations;
+  the arm's σ = 1e-3 stage ends ``Restoration_Failed`` after 406 iterations (347 s CPU;
+  inertia regularisation up to 4.4e17).  The same under ``OPENBLAS_NUM_THREADS=1``: the point
+  pusher takes 619 iterations, the arm's first stage ends "acceptable" in 188 (46.9 s CPU) —
+  the solves move with the BLAS's round-off.  That "acceptable" point is feasible (violation
+  2.8e-13) but not stationary: its dual infeasibility is 13.0 (IPOPT's
+  ``acceptable_dual_inf_tol`` is 1e10), μ 1e-8, the regularisation 1e15 over its last
+  iterations.  With ``--sigma-factor 0.1`` the σ = 1e-4 stage stops at 300 iterations (52.7 s
+  CPU; complementarity residual 9.2e-3, primal / dual infeasibility 1.2e-3 / 1.1e2).
+* ``--feet tripod --guess path`` (the box's straight path, the arm by inverse kinematics): after
+  44 iterations primal 0.13, dual 1.9e10, the adaptive barrier raised to μ = 2.5e3 (stopped).
+* ``--sequence point`` (the point pusher's contact sequence imposed, a smooth NLP, from its
+  guess): IPOPT converges to a point of local infeasibility (219 iterations, 40.8 s CPU,
+  violation 1.5e-4); with ``--final pose`` the same (314 iterations, 71.3 s CPU; the largest
+  violations Φ at node 2 1.3e-4, the positions of interval 0 6.3e-5, Φ at node 3 4.6e-5): the
+  arm cannot follow the point's contact sequence over the first intervals.
+* The active rows at the σ = 1e-3 stage's "acceptable" point from the point guess
+  (``contact_implicit_panda_rank.py --guess point``, within 1e-6 of their bound): 2 011 rows,
+  3 120 variables, **rank 2 006**; the 5 dependent rows are all at the last node: the push's
+  gap at node N (the final configuration puts the tool on the box's face, so ``g(q_N) ≥ 0``
+  is a function of the imposed final q and Φ at node N), three bottom corners' gaps at node N
+  (a flat face's corners, and the box's pose fixed) and one final-q row.  LICQ fails there by
+  the problem's statement; ``--final pose`` (the box's pose only, the arm at rest anywhere)
+  leaves the push's gap free — but from the point guess with ``--final pose --sigma-factor
+  0.1`` the first stage stalls the same way: feasible after 99 iterations (violation 3.6e-12)
+  with dual infeasibility 3.8e8 and inertia regularisation 4e12, still so at 111 (stopped).
+  Its active rows at 100 iterations: 2 003, rank 1 999, the 4 dependent ones the bottom
+  corners' gaps (as on the point pusher, which solves), the next singular values 1.0e-3 and
+  9.2e-4: no rank defect of the arm's own.  The multipliers diverge on those rows
+  (``contact_implicit_panda_rank.py --final pose``, median |λ| 45): 1e13 on the box's final
+  pose (its 6 independent rows) and on the bottom corners' ``g(q_N) ≥ 0``, 1e12 on the box's
+  Φ rows at node N: with the box's pose imposed at the last node, its corners' gaps there are
+  functions of the imposed rows, so an active ``g ≥ 0`` combines with the equalities to 0 —
+  MFCQ fails and the multiplier set is unbounded.  Not the only cause: without the bottom
+  corners' ``g(q_N) ≥ 0`` (a local experiment, not kept) the same first stage stops at 300
+  iterations further from feasibility (primal 0.27, dual 1.9e8, 158 s CPU); with
+  ``--final soft`` (at rest, the box's x, y and yaw in the cost, its height and tilt free: no
+  final row meets a gap) the first stage is at primal 1.2, dual 1.4e10 after 180 iterations
+  (stopped); with ``--final pose --lbfgs`` at primal 1.1, dual 1.2e10 after 300 (34.9 s CPU).
+  ``--final soft`` after 100 iterations (rank script): primal 1.9, dual 2.2e10, the active rows
+  of full rank (1 993), the largest multipliers 2e10 on a complementarity product and 1e9 on
+  the box's dynamics and Φ rows and on interior nodes' floor gaps: IPOPT heads for an
+  infeasible point with the multipliers growing, not a rank defect.
+
 Run:  python benchmarks/contact_implicit_panda.py [--N 20] [--iterations 3 10]
       python benchmarks/contact_implicit_panda.py --locked [--task push|reach] [--feet corners|tripod]
-             [--pusher arm|point] [--guess rest|point] [--N 10] [--weight 0.01] [--max-iter 300]
+             [--pusher arm|point] [--guess rest|point|path|interpolate] [--N 10] [--weight 0.01]
+             [--max-iter 300] [--sigma0 S] [--sigma-final S] [--sigma-factor K] [--sequence free|point]
+             [--final q|pose] [--joint-limits 0|1] [--point-cache FILE.npz] [--lbfgs] [--verbose]
 """
 from __future__ import annotations
 
@@ -130,7 +179,8 @@ def planar_posture(model, x):
     raise RuntimeError(f"inverse kinematics of the tool at x = {x} m did not converge ({np.max(np.abs(r)):.1e})")
 
 
-def locked_problem(N: int, task: str, feet: str, weight: float, pusher: str = "arm"):
+def locked_problem(N: int, task: str, feet: str, weight: float, pusher: str = "arm", contacts=None,
+                   final: str = "q", limits: bool = True):
     """``(ocp, model)``: the planar Panda's push or reach (module docstring); ``pusher="point"``:
     the arm replaced by a 0.5 kg point on a guide along x carrying the same sphere at the same
     place, driven by a force (N) — the same box, contacts and target."""
@@ -165,25 +215,58 @@ def locked_problem(N: int, task: str, feet: str, weight: float, pusher: str = "a
         q[:alone.nq] = alone.from_joint_space(planar_posture(alone, x), np.zeros(3))[0]   # the arm comes first
     if task == "push":
         q1[model.coordinate_names.index("box.r_i.x")] += DISTANCE
-    ocp = nc.OptimalControl(model, N=N, t_final=1.0, contacts={"sigma0": 1e-3, "reaction_guess": True})
+    ocp = nc.OptimalControl(model, N=N, t_final=1.0,
+                            contacts={"sigma0": 1e-3, "reaction_guess": True, **(contacts or {})})
     ocp.initial(q=q0, v=np.zeros(model.nq))
-    ocp.final(q=q1, v=0)
-    ocp.joint_limits()
+    if final == "q":
+        ocp.final(q=q1, v=0)
+    elif final == "pose":
+        box_at = q1[model.coordinate_names.index("box.r_i.x")]
+        ocp.final(pose={"box": (np.eye(3), (box_at, 0.0, EDGE / 2))}, v=0)
+    else:                                  # "soft": the box's x, y and yaw in the cost, its height and tilt free
+        names = model.coordinate_names
+        ix, iy, iu = (names.index(n) for n in ("box.r_i.x", "box.r_i.y", "box.u.y"))
+        box_at = q1[ix]
+        ocp.final(v=0)
+        ocp.minimize_terminal(lambda q, v, p: (q[ix] - box_at) ** 2 + q[iy] ** 2 + q[iu] ** 2, weight=1e4)
+    if limits:
+        ocp.joint_limits()
     ocp.minimize_effort(weight)
     return ocp, model
 
 
-def guess_from_point(model, N: int, feet: str, max_iter: int):
-    """A warm start for the arm's push: the point pusher's optimum (``--pusher point``,
-    ``weight`` 1) with the arm's joints put by :func:`planar_posture` under the point at each
-    node (rates by finite differences) and the box's coordinates copied."""
+def point_solution(N: int, feet: str, max_iter: int, cache=None):
+    """``(solution, model)``: the point pusher's push (``--pusher point``, ``weight`` 1);
+    ``cache``: an ``.npz`` file holding its ``t``, ``q``, ``v`` and contact sequence, read if
+    it exists, else written (the solve's result moves with the BLAS's round-off)."""
+    from pathlib import Path
     from types import SimpleNamespace
     ocp, point_model = locked_problem(N, "push", feet, 1.0, "point")
+    if cache and Path(cache).exists():
+        data = np.load(cache)
+        sizes = np.cumsum(data["sizes"])[:-1]
+        sol = SimpleNamespace(t=data["t"], q=data["q"], v=data["v"], sequence=np.split(data["sequence"], sizes))
+        print(f"  guess: the point pusher's solution read from {cache}", flush=True)
+        return sol, point_model
     try:
         sol = ocp.solve("rest", max_iter=max_iter, diagnose=False)
     except OptimizationError as exc:
         sol = exc.result
-    print(f"  guess: the point pusher's solve, {sol.stats.status}, {sol.stats.iterations} iterations", flush=True)
+    sol.sequence = contact_sequence(sol)
+    x = sol.q[:, point_model.coordinate_names.index("pusher.r_i.x")]
+    print(f"  guess: the point pusher's solve, {sol.stats.status}, {sol.stats.iterations} iterations, "
+          f"pusher x from {x.min():.4f} to {x.max():.4f} m", flush=True)
+    if cache:
+        np.savez(cache, t=sol.t, q=sol.q, v=sol.v, sequence=np.concatenate(sol.sequence),
+                 sizes=[len(z) for z in sol.sequence])
+    return sol, point_model
+
+
+def guess_from_point(model, sol, point_model):
+    """A warm start for the arm's push: the point pusher's optimum with the arm's joints put
+    by :func:`planar_posture` under the point at each node (rates by finite differences) and
+    the box's coordinates copied."""
+    from types import SimpleNamespace
     names = list(point_model.coordinate_names)
     x = sol.q[:, names.index("pusher.r_i.x")]
     alone = _planar_arm().build()
@@ -198,14 +281,123 @@ def guess_from_point(model, N: int, feet: str, max_iter: int):
     return SimpleNamespace(t=sol.t, q=q, v=v)
 
 
+def contact_sequence(sol):
+    """``sequence[i][j]``: in the solution ``sol``, pair i's element j has its first side
+    (``a``) at 0 (else its second, ``c``)."""
+    from ncgen.optim.contact_implicit import pair_values
+    return [a <= c for a, c in pair_values(sol.nlp.ocp.transcription.pairs, sol.nlp.value)]
+
+
+def fixed_sequence_solve(ocp, guess, sequence, max_iter: int, verbose: bool, ipopt=None):
+    """The NLP of ``ocp`` built from ``guess`` with ``sequence`` imposed (the zero side of every
+    complementarity pair an equality) and solved once: ``(nlp, value, cpu)``."""
+    import casadi as ca
+    from ncgen.optim.contact_implicit import FIRST_SOLVE
+    from ncgen.optim.nlp import NLP
+    nlp = NLP(ocp)
+    nlp.build(guess)
+    tr = ocp.transcription
+    if [ca.MX(p.a).numel() for p in tr.pairs] != [len(z) for z in sequence]:
+        raise ValueError("the sequence's pairs are not the problem's")
+    nlp.opti.set_value(tr.sigma, tr.settings["sigma_final"])
+    sides = {}
+    for pair, a_zero in zip(tr.pairs, sequence):
+        for i, zero in enumerate(a_zero):
+            side = pair.a[i] if zero else pair.c[i]
+            if ca.symvar(side):
+                sides.setdefault(str(side), side)
+    nlp.opti.subject_to(ca.vertcat(*sides.values()) == 0)
+    cpu = time.process_time()
+    value = nlp.solve(max_iter=max_iter, tol=1e-8, verbose=verbose, ipopt={**FIRST_SOLVE, **(ipopt or {})})
+    return nlp, value, time.process_time() - cpu
+
+
+def released_solve(ocp, guess, fixed, max_iter: int, verbose: bool):
+    """The NLP of ``ocp`` (no sequence imposed) started from the fixed-sequence solve ``fixed``
+    (``(nlp, value)``: its variables and the multipliers of the rows both NLPs share) and
+    solved by the transcription's homotopy from ``contacts.sigma0``, every solve warm started
+    (``WARM_START``), then polished: the result or the exception's result."""
+    from ncgen.optim.contact_implicit import WARM_START
+    from ncgen.optim.nlp import NLP, extract
+    nlp0, value0 = fixed
+    nlp = NLP(ocp)
+    nlp.build(guess)
+    ng = nlp.opti.ng
+    nlp.opti.set_initial(nlp.opti.x, value0(nlp0.opti.x))
+    nlp.opti.set_initial(nlp.opti.lam_g, np.array(value0(nlp0.opti.lam_g)).reshape(-1)[:ng])
+    tr = ocp.transcription
+    value = tr.solve(nlp, lambda **extra: nlp.solve(max_iter=max_iter, tol=1e-8, verbose=verbose,
+                                                     ipopt=dict(WARM_START)), 1e-8)
+    result = extract(nlp, value, 0.0)
+    try:
+        tr.finish(value, result)
+    except OptimizationError as exc:
+        result = exc.result
+    return result
+
+
+def smoothstep(x):
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3 - 2 * x)
+
+
+def guess_from_path(model, N: int, approach: float = 0.2, samples: int = 201):
+    """A kinematic warm start for the arm's push: the tool closes the gap ``GAP`` over the
+    first ``approach`` of the horizon (the box at rest), then tool and box move together along
+    x by ``DISTANCE`` (both on smoothsteps, so at rest at both ends of each phase); the arm's
+    joints by :func:`planar_posture` under the tool at each sample, rates by finite differences."""
+    from types import SimpleNamespace
+    t = np.linspace(0.0, 1.0, samples)
+    s1, s2 = smoothstep(t / approach), smoothstep((t - approach) / (1 - approach))
+    box_dx, tool_x = DISTANCE * s2, START + GAP * s1 + DISTANCE * s2
+    alone = _planar_arm().build()
+    qj = np.array([planar_posture(alone, x) for x in tool_x])
+    rates = np.gradient(qj, t, axis=0)
+    q = np.tile(np.array(model.q0, float), (t.size, 1))
+    v = np.zeros_like(q)
+    for k in range(t.size):
+        q[k, :alone.nq], v[k, :alone.nq] = alone.from_joint_space(qj[k], rates[k])
+    i = model.coordinate_names.index("box.r_i.x")
+    q[:, i] += box_dx
+    v[:, i] = np.gradient(box_dx, t)
+    return SimpleNamespace(t=t, q=q, v=v)
+
+
 def locked(args):
-    ocp, model = locked_problem(args.N, args.task, args.feet, args.weight, args.pusher)
+    settings = {k: v for k, v in (("sigma0", args.sigma0), ("sigma_final", args.sigma_final),
+                                  ("sigma_factor", args.sigma_factor)) if v is not None}
+    ocp, model = locked_problem(args.N, args.task, args.feet, args.weight, args.pusher, settings, args.final, bool(args.joint_limits))
     guess = "rest"
     if args.guess == "point":
-        guess = guess_from_point(model, args.N, args.feet, args.max_iter)
+        point, point_model = point_solution(args.N, args.feet, args.max_iter, args.point_cache)
+        guess = guess_from_point(model, point, point_model)
+        if args.sequence == "point":
+            from ncgen.optim.contact_implicit import complementarity_residual
+            nlp, value, cpu = fixed_sequence_solve(ocp, guess, point.sequence, args.max_iter, args.verbose,
+                                                   {"hessian_approximation": "limited-memory"} if args.lbfgs else None)
+            st = nlp.opti.stats()
+            print(f"  the point pusher's contact sequence imposed: {st['return_status']}, {st['iter_count']} "
+                  f"iterations, {cpu:.1f} s CPU, cost {float(value(nlp.opti.f)):.6g}, complementarity residual "
+                  f"{complementarity_residual(ocp.transcription.pairs, value):.1e}", flush=True)
+            from ncgen.optim.diagnostics import violation_of
+            worst = sorted(((violation_of(value, g), g.label) for g in nlp.groups), reverse=True)[:5]
+            print("  largest violations: " + "; ".join(f"{label} {v:.1e}" for v, label in worst), flush=True)
+            if args.sigma0 is None:
+                return
+            cpu = time.process_time()
+            result = released_solve(ocp, guess, (nlp, value), args.max_iter, args.verbose)
+            print(f"  released from σ = {args.sigma0:g}: {result.stats.status}, cost {result.stats.objective:.6g}, "
+                  f"{time.process_time() - cpu:.1f} s CPU")
+            for stage in result.homotopy:
+                print(f"  σ = {stage['sigma']}: {stage['status']}, {stage['iterations']} iterations, "
+                      f"{stage['cpu_time']:.1f} s CPU, complementarity residual {stage['residual']:.1e}")
+            return
+    elif args.guess in ("path", "interpolate"):
+        guess = guess_from_path(model, args.N) if args.guess == "path" else "interpolate"
     cpu = time.process_time()
     try:
-        result = ocp.solve(guess, max_iter=args.max_iter, diagnose=False)
+        result = ocp.solve(guess, max_iter=args.max_iter, diagnose=False, verbose=args.verbose,
+                           ipopt={"hessian_approximation": "limited-memory"} if args.lbfgs else None)
     except OptimizationError as exc:
         result = exc.result
     cpu = time.process_time() - cpu
@@ -232,10 +424,23 @@ def main(argv=None):
     ap.add_argument("--task", choices=("push", "reach"), default="push")
     ap.add_argument("--feet", choices=("corners", "tripod"), default="corners")
     ap.add_argument("--pusher", choices=("arm", "point"), default="arm", help="--locked: the arm or a point on a guide")
-    ap.add_argument("--guess", choices=("rest", "point"), default="rest",
+    ap.add_argument("--guess", choices=("rest", "point", "path", "interpolate"), default="rest",
                     help="--locked arm push: start at rest, or from the point pusher's optimum (guess_from_point)")
     ap.add_argument("--weight", type=float, default=0.01, help="weight of ∫ |τ|² dt (--locked)")
     ap.add_argument("--max-iter", type=int, default=300, help="IPOPT iterations per stage (--locked)")
+    ap.add_argument("--sigma0", type=float, help="--locked arm: contacts.sigma0 (default 1e-3)")
+    ap.add_argument("--sigma-final", type=float, help="--locked arm: contacts.sigma_final")
+    ap.add_argument("--sigma-factor", type=float, help="--locked arm: contacts.sigma_factor")
+    ap.add_argument("--sequence", choices=("free", "point"), default="free",
+                    help="--guess point: solve once with the point pusher's contact sequence imposed "
+                         "(with --sigma0: then released by the homotopy from that point)")
+    ap.add_argument("--lbfgs", action="store_true", help="IPOPT's L-BFGS Hessian (the homotopy's solves, or --sequence point's)")
+    ap.add_argument("--final", choices=("q", "pose", "soft"), default="q",
+                    help="--locked arm: the final configuration, or only the box's pose (both at rest); soft: "
+                         "at rest, the box's x, y and yaw in the cost (weight 1e4)")
+    ap.add_argument("--point-cache", help="--guess point: an .npz file for the point pusher's solution")
+    ap.add_argument("--joint-limits", type=int, default=1, help="--locked arm: 0 drops the URDF's joint limits")
+    ap.add_argument("--verbose", action="store_true", help="--locked: IPOPT's iteration log")
     args = ap.parse_args(argv)
     if args.locked:
         args.N = args.N or 10

@@ -11,7 +11,8 @@ transposed rows, each dependent row with the rows that span it (weights above 1 
 by kind.
 
 Run:  python benchmarks/contact_implicit_panda_rank.py [--task push] [--pusher arm|point]
-             [--feet corners|tripod] [--max-iter 60] [--active 1e-6]
+             [--feet corners|tripod] [--max-iter 60] [--active 1e-6] [--guess rest|point]
+             [--point-cache FILE.npz] [--final q|pose|soft]
 """
 from __future__ import annotations
 
@@ -110,6 +111,18 @@ def report(J, labels, rtol=1e-9, shown=12):
     return rank
 
 
+def largest_multipliers(result, shown=10):
+    """The constraint rows with the largest multipliers at the solver's last iterate (CasADi's
+    description of each: the source line that imposed it and its expression, shortened)."""
+    opti = result.nlp.opti
+    lam = np.abs(np.array(result.nlp.value(opti.lam_g), float).reshape(-1))
+    order = np.argsort(-lam)[:shown]
+    print(f"  largest multipliers (of {lam.size} rows; median {np.median(lam):.1e}):")
+    for i in order:
+        text = " ".join(opti.debug.g_describe(int(i)).split())
+        print(f"    {lam[i]:.2e}  row {i}: {text[:160]}")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--task", choices=("push", "reach"), default="push")
@@ -119,16 +132,28 @@ def main(argv=None):
     ap.add_argument("--weight", type=float, default=0.01)
     ap.add_argument("--max-iter", type=int, default=60)
     ap.add_argument("--active", type=float, nargs="+", default=[1e-6])
+    ap.add_argument("--guess", choices=("rest", "point"), default="rest",
+                    help="the arm's push from rest or from the point pusher's optimum (contact_implicit_panda.py)")
+    ap.add_argument("--final", choices=("q", "pose", "soft"), default="q",
+                    help="the arm's final configuration, or only the box's pose (contact_implicit_panda.py)")
+    ap.add_argument("--point-cache", help="--guess point: an .npz file for the point pusher's solution")
     args = ap.parse_args(argv)
-    ocp, model = _benchmark().locked_problem(args.N, args.task, args.feet, args.weight, args.pusher)
+    bench = _benchmark()
+    ocp, model = bench.locked_problem(args.N, args.task, args.feet, args.weight, args.pusher,
+                                      {"sigma_final": 1e-3, "polish": False}, args.final)  # the first σ stage only
+    guess = "rest"
+    if args.guess == "point":
+        point, point_model = bench.point_solution(args.N, args.feet, 1000, args.point_cache)
+        guess = bench.guess_from_point(model, point, point_model)
     try:
-        result = ocp.solve("rest", max_iter=args.max_iter, diagnose=False)
+        result = ocp.solve(guess, max_iter=args.max_iter, diagnose=False)
     except OptimizationError as exc:
         result = exc.result
     it = result.nlp.opti.stats().get("iterations", {})
     print(f"{args.pusher} pusher, {args.task}, box on {args.feet}, N = {args.N}: stopped after "
           f"{result.stats.iterations} iterations ({result.stats.status}); last primal / dual infeasibility "
           f"{it['inf_pr'][-1]:.1e} / {it['inf_du'][-1]:.1e}")
+    largest_multipliers(result)
     for tol in args.active:
         J, labels, empty = active_jacobian(result, tol)
         print(f"rows within {tol:g} of their bound ({empty} rows with a zero gradient left out):")
