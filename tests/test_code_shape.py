@@ -18,7 +18,7 @@ ROOT = Path(__file__).resolve().parents[1] / "ncgen"
 MAX_BODY = 50
 MANY_PARAMETERS = 10
 #: The committed counts: lower them when a function is split or takes its option group.
-LONG_FUNCTIONS = 7
+LONG_FUNCTIONS = 0
 MANY_PARAMETER_FUNCTIONS = 37
 
 

@@ -81,39 +81,26 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
     members = list(system.members.values())
     layout = make_layout(system.dim, members)
     ctx = Context(system, layout)
-
     fixed = resolve_fix(layout, system.members, fix)
     labels, rows = constraint_rows(system, ctx, plan)
     limits = model_limits(system, ctx)
     coords, skipped = build_joint_coordinates(system, ctx)
     actuation = actuator_forces(ctx, coords)
     F, V, passive, terms = _applied_forces(system, ctx, actuation, contacts)
-    M = assemble_mass(layout, members)
-    flat = flat_members(members, layout)
-    factor = mass_factor(M, layout.coordinate_names, flat, flat_support(members, layout, flat))
+    M, factor = _mass(layout, members)
     q_init, v_init, moving = initial_guess(layout, members)
-    p0 = np.concatenate([v for _, v in system.parameters.values()]) if system.parameters else np.zeros(0)
-    limits.check(p0, where=f"system {system.name!r}: ")
-
+    p0 = _parameter_values(system, limits)
     if assemble:                    # drives move the mechanism first: the checks below see where they put it
         q_init = assemble_drives(system, ctx, lambda c: constraint_rows(system, c, plan)[1], q_init, p0, t0, fixed)
     labels, rows, redundant_labels = _redundant_constraints(system.name, ctx, labels, rows, plan, redundant,
                                                             (q_init, p0, t0))
-
     phi = ca.vertcat(*rows) if rows else ca.SX(0, 1)
     if not factor.regular:        # a flat body: M must be positive definite on null(A)
-        A0 = np.array(ca.Function("A", [ctx.t, ctx.q, ctx.p], [ca.jacobian(phi, ctx.q)])(t0, q_init, p0))
-        check_tangent_inertia(M, A0, layout, members, f"system {system.name!r}")
+        _check_flat_inertia(system.name, ctx, phi, M, members, (t0, q_init, p0))
     makers, potential = system_functions(ctx, phi, F, V, M, factor, alpha, beta, system)
     functions = FunctionSet(makers, contact_functions(ctx, terms) if terms else None)   # each made on first use
-    weight = sum(m.rigid.mass for m in members) * float(np.linalg.norm(system.gravity))
-    coordinates_later = bool(system.initial_coordinates or system.initial_coordinate_rates)
-    posture_later = coordinates_later or bool(system.initial_joints or system.initial_joint_rates)
-    if terms:                      # before the consistent state, whose contact forces need a defined normal;
-        check_initial_gaps(system.name, system.contacts, functions, q_init, p0, contacts, weight,
-                           depth=not posture_later)      # depths where the run starts, after the posture
-    state = consistent_state(functions, layout, labels, q_init, v_init, p0, t0, tolerance, M,
-                             fixed=fixed, assemble=assemble)
+    start = _InitialState(system, functions, layout, labels, M, (p0, t0), fixed, tolerance, contacts if terms else None)
+    state = start(q_init, v_init, depth=not _posture_given(system), assemble=assemble)   # depths after the posture
     if not assemble:
         check_fixed_points_at_rest(moving, v_init, q_init, tolerance)
     joint_space = JointSpace(ctx, coords, skipped, actuation, passive)
@@ -126,20 +113,74 @@ def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", toleran
                      contacts=Contacts(contact_specs(system.contacts), contacts),
                      origin=Origin(sharing=plan, unshared=unshared, recipe=recipe))
 
-    model = model_with(state)
-    if system.initial_joints or system.initial_joint_rates:
-        q, v = joint_space.initial_state(model, system.initial_joints, system.initial_joint_rates)
-        if terms:
-            check_initial_gaps(system.name, system.contacts, functions, q, p0, contacts, weight,
-                               depth=not coordinates_later)
-        model = model_with(consistent_state(functions, layout, labels, q, v, p0, t0, tolerance, M, fixed=fixed))
-    if system.initial_coordinates or system.initial_coordinate_rates:
-        q, v = _initial_coordinates(model, system)
-        if terms:
-            check_initial_gaps(system.name, system.contacts, functions, q, p0, contacts, weight)
-        model = model_with(consistent_state(functions, layout, labels, q, v, p0, t0, tolerance, M, fixed=fixed))
+    model = _posture(model_with(state), model_with, start, joint_space, system)
     raise_if_interrupted()               # a Ctrl-C that CasADi swallowed while the functions were built
     return model
+
+
+class _InitialState:
+    """A consistent initial state of the model being built at ``(q, v)``: the contacts' gaps
+    checked first (:func:`check_initial_gaps`; ``contacts``: the contact model, None without
+    contact terms), since the consistent state's contact forces need a defined normal, then
+    ``(q, v)`` projected onto the constraints (:func:`consistent_state`) within ``tolerance``
+    of the system's size, the coordinates ``fixed`` kept as given; ``at``: ``(p0, t0)``."""
+
+    def __init__(self, system, functions, layout, labels, M, at: tuple, fixed, tolerance: float, contacts):
+        self.system, self.functions, self.layout, self.labels, self.M = system, functions, layout, labels, M
+        (self.p0, self.t0), self.fixed, self.tolerance, self.contacts = at, fixed, tolerance, contacts
+        self.weight = sum(m.rigid.mass for m in system.members.values()) * float(np.linalg.norm(system.gravity))
+
+    def __call__(self, q, v, depth: bool = True, assemble: bool = False):
+        """The state from ``(q, v)``; ``depth=False``: the gaps' depths not checked (a
+        configuration the run does not start from); ``assemble``: no limit on the corrections."""
+        if self.contacts is not None:
+            check_initial_gaps(self.system.name, self.system.contacts, self.functions, q, self.p0, self.contacts,
+                               self.weight, depth=depth)
+        return consistent_state(self.functions, self.layout, self.labels, q, v, self.p0, self.t0, self.tolerance,
+                                self.M, fixed=self.fixed, assemble=assemble)
+
+
+def _posture_given(system) -> bool:
+    """Whether the system gives an initial posture (joints or coordinates, or their rates)."""
+    return bool(system.initial_coordinates or system.initial_coordinate_rates or system.initial_joints
+                or system.initial_joint_rates)
+
+
+def _posture(model, model_with, initial: _InitialState, joint_space, system):
+    """``model`` moved to the system's initial posture: its initial joints and rates (through
+    the joint space), then its initial coordinates and rates by name, each state made
+    consistent by ``initial`` and the model remade by ``model_with(state)``; the depths of the
+    contacts' gaps checked at the last."""
+    coordinates_later = bool(system.initial_coordinates or system.initial_coordinate_rates)
+    if system.initial_joints or system.initial_joint_rates:
+        q, v = joint_space.initial_state(model, system.initial_joints, system.initial_joint_rates)
+        model = model_with(initial(q, v, depth=not coordinates_later))
+    if coordinates_later:
+        q, v = _initial_coordinates(model, system)
+        model = model_with(initial(q, v))
+    return model
+
+
+def _mass(layout, members):
+    """``(M, factor)``: the constant mass matrix and its factor (:func:`mass_factor`, flat
+    members with their supports)."""
+    M = assemble_mass(layout, members)
+    flat = flat_members(members, layout)
+    return M, mass_factor(M, layout.coordinate_names, flat, flat_support(members, layout, flat))
+
+
+def _parameter_values(system, limits) -> np.ndarray:
+    """``p0``: the parameters' values in declaration order, checked against their limits."""
+    p0 = np.concatenate([v for _, v in system.parameters.values()]) if system.parameters else np.zeros(0)
+    limits.check(p0, where=f"system {system.name!r}: ")
+    return p0
+
+
+def _check_flat_inertia(name: str, ctx, phi, M, members, at: tuple) -> None:
+    """A model with flat members: ``M`` positive definite on ``null(A)`` at ``at = (t0, q, p)``
+    (:func:`check_tangent_inertia`)."""
+    A0 = np.array(ca.Function("A", [ctx.t, ctx.q, ctx.p], [ca.jacobian(phi, ctx.q)])(*at))
+    check_tangent_inertia(M, A0, ctx.layout, members, f"system {name!r}")
 
 
 def _check_build_options(system, contacts: str, redundant: str) -> None:

@@ -31,6 +31,7 @@ is taken too, with its own checks of ``x0`` (``st.ilqr_start``), Gauss–Newton 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 
@@ -83,8 +84,7 @@ def ilqr(st, x0, U0, costs, *, p=None, t0=None, max_iter: int = 200, tol: float 
     of every iteration."""
     if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
         raise NcgenError(f"ilqr: max_iter: expected a positive integer, got {max_iter!r}")
-    tol = nonnegative(tol, "ilqr: tol")
-    mu = nonnegative(mu, "ilqr: mu")
+    tol, mu = nonnegative(tol, "ilqr: tol"), nonnegative(mu, "ilqr: mu")
     stage_d, terminal_d = cost_functions(costs, st.nx, st.nu)
     x0, U, pv, t0 = _start(st, x0, U0, p, t0)
     N = U.shape[0]
@@ -107,12 +107,7 @@ def ilqr(st, x0, U0, costs, *, p=None, t0=None, max_iter: int = 200, tol: float 
     full_step, alpha = False, np.nan
     while True:
         A, B = _linearisation(st, X, U, p, t0)
-        second = None
-        if curvature is not None and full_step:
-            Z = st._rollout(x0, U, pv, t0)[1]
-
-            def second(k, lam, X=X, U=U, Z=Z):
-                return curvature(Z[k], X[k], U[k], pv, t0 + k * st.h, lam)
+        second = _second_derivatives(curvature, st, x0, X, U, pv, t0) if curvature is not None and full_step else None
         _, lx, lu, lxx, luu, lux = (np.array(a) for a in stage_map(X[:-1].T, U.T))
         _, Vx_N, Vxx_N = (np.array(a) for a in terminal_d(X[-1]))
         gnorm = float(np.max(np.abs(gradient(A, B, lx, lu, Vx_N.ravel()))))
@@ -127,31 +122,55 @@ def ilqr(st, x0, U0, costs, *, p=None, t0=None, max_iter: int = 200, tol: float 
             message = f"stopped after {max_iter} iterations with |dJ/dU|_inf = {gnorm:.2e} > tol = {tol:g}"
             break
         it += 1
-        step, undefined = None, None
-        while step is None:
-            ok, kff, K, dV = _backward(A, B, lx, lu, lxx, luu, lux, Vx_N.ravel(), Vxx_N, mu, second)
-            if ok:
-                step = _line_search(st, x0, X, U, kff, K, dV, J, total, p, t0)
-                if step[0] is None:
-                    undefined, step = step[1], None
-            if step is None:
-                mu = max(mu * MU_FACTOR, MU_MIN)
-                if mu > MU_MAX:
-                    break
+        search = partial(_line_search, st, x0, X, U, J=J, total=total, p=p, t0=t0)    # search(kff, K, dV)
+        step, K, mu, ok, undefined = _descent(search, A, B, (lx, lu, lxx, luu, lux, Vx_N.ravel(), Vxx_N), mu, second)
         if step is None:
-            message = (f"no descent: the line search failed with mu at its limit; |dJ/dU|_inf = {gnorm:.2e} > "
-                       f"tol = {tol:g}")
-            if ok and undefined is not None:
-                message += (f"; the cost was NaN at trial steps (alpha = {undefined:g}): the stage or terminal "
-                            "cost is not defined there")
-            elif not ok:
-                message = f"Q_uu stayed indefinite (mu above its limit); |dJ/dU|_inf = {gnorm:.2e}"
+            message = _no_descent(gnorm, tol, ok, undefined)
             break
         X, U, J, alpha = step
         full_step = alpha == 1.0
         history.append(J)
         mu = max(mu / MU_FACTOR, MU_MIN)
     return ILQRResult(X, U, K, J, it, converged, gnorm, history, gradients, message)
+
+
+def _second_derivatives(curvature, st, x0, X, U, pv, t0):
+    """DDP's term of the backward pass along ``(X, U)``: ``(k, λ) ↦`` the step's second
+    derivatives at node ``k`` contracted with ``λ`` (:class:`StepCurvature`, at the step's
+    own unknowns ``Z`` of the rollout)."""
+    Z = st._rollout(x0, U, pv, t0)[1]
+    return lambda k, lam: curvature(Z[k], X[k], U[k], pv, t0 + k * st.h, lam)
+
+
+def _descent(search, A, B, quadratic, mu: float, second):
+    """Levenberg–Marquardt: the backward pass (on the costs' ``quadratic`` model
+    ``(lx, lu, lxx, luu, lux, Vx_N, Vxx_N)``) and the line search ``search(kff, K, dV)``, with
+    ``μ`` raised tenfold until a step is found or ``μ`` passes :data:`MU_MAX`:
+    ``(step, K, μ, ok, undefined)``; ``step``: ``(X, U, J, α)`` or None; ``ok``: the last
+    ``Q_uu + μ I`` was positive definite; ``undefined``: the largest ``α`` whose cost was NaN."""
+    step, undefined = None, None
+    while step is None:
+        ok, kff, K, dV = _backward(A, B, *quadratic, mu, second)
+        if ok:
+            step = search(kff, K, dV)
+            if step[0] is None:
+                undefined, step = step[1], None
+        if step is None:
+            mu = max(mu * MU_FACTOR, MU_MIN)
+            if mu > MU_MAX:
+                break
+    return step, K, mu, ok, undefined
+
+
+def _no_descent(gnorm: float, tol: float, ok: bool, undefined) -> str:
+    """The message of a run stopped with no step found (:func:`_descent`)."""
+    if not ok:
+        return f"Q_uu stayed indefinite (mu above its limit); |dJ/dU|_inf = {gnorm:.2e}"
+    message = f"no descent: the line search failed with mu at its limit; |dJ/dU|_inf = {gnorm:.2e} > tol = {tol:g}"
+    if undefined is not None:
+        message += (f"; the cost was NaN at trial steps (alpha = {undefined:g}): the stage or terminal "
+                    "cost is not defined there")
+    return message
 
 
 def _start(st, x0, U0, p, t0):

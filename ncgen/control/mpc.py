@@ -292,18 +292,7 @@ class MPC:
             from ncgen.control.mpc_fatrop import FatropSolver
             self.fatrop = FatropSolver(self.model, self.problem, fatrop_options, fatrop_form)
         else:
-            self.functions = mpc_functions(self.model, self.problem, regularization=regularization,
-                                           qp_max_iter=qp_max_iter, sx_qr_max_nnz=sx_qr_max_nnz, qp_solver=qp_solver)
-            from ncgen.control.step_support import compile_functions
-            compiled = [f for f in self.functions if f.name() != "mpc_qp" or qp_solver in GENERATED]
-            name = f"{self.model.name}_mpc"
-            lib = compile_functions(name, compiled, extra_sources=() if refusal else controller_sources(
-                self.model, self.problem, self.functions, name))
-            lib.setdefault("mpc_qp", InProcessQP(self.functions[1]))
-            self._data, self._qp, self._update, self._merit_fn = (lib[f.name()] for f in self.functions)
-            if refusal is None:
-                from ncgen.control.mpc_c_loop import CompiledLoop
-                self._c = CompiledLoop(self._data.library, name, self.nx, self.nu, self.N)
+            self._sqp_package(regularization, qp_max_iter, sx_qr_max_nnz, refusal)
         self._residual_tol = residual_tolerance(self.model)
         #: the QP solver's status of each QP of the last control step (0: converged).
         self.qp_status: list[int] = []
@@ -317,6 +306,23 @@ class MPC:
         self.u_rest = np.clip(np.zeros(self.nu), *self.u_bounds)
         self._u_lo, self._u_hi = (np.tile(b, self.N) for b in self.u_bounds)   # the inputs' bounds along the horizon
         self.X = self.U = self.solution = None
+
+    def _sqp_package(self, regularization: float, qp_max_iter: int, sx_qr_max_nnz: int | None, refusal) -> None:
+        """The SQP's functions (:func:`mpc_functions`) compiled into one package, with the
+        controller's C (the compiled control step) unless ``refusal`` says why it does not apply;
+        an in-process QP where ``qp_solver`` is not generated."""
+        self.functions = mpc_functions(self.model, self.problem, regularization=regularization,
+                                       qp_max_iter=qp_max_iter, sx_qr_max_nnz=sx_qr_max_nnz, qp_solver=self.qp_solver)
+        from ncgen.control.step_support import compile_functions
+        compiled = [f for f in self.functions if f.name() != "mpc_qp" or self.qp_solver in GENERATED]
+        name = f"{self.model.name}_mpc"
+        lib = compile_functions(name, compiled, extra_sources=() if refusal else controller_sources(
+            self.model, self.problem, self.functions, name))
+        lib.setdefault("mpc_qp", InProcessQP(self.functions[1]))
+        self._data, self._qp, self._update, self._merit_fn = (lib[f.name()] for f in self.functions)
+        if refusal is None:
+            from ncgen.control.mpc_c_loop import CompiledLoop
+            self._c = CompiledLoop(self._data.library, name, self.nx, self.nu, self.N)
 
     def __repr__(self) -> str:
         if self.fatrop is not None:

@@ -84,44 +84,13 @@ def mpc_problem(ocp, terminal_weight: float, reference=None, state_weight=None, 
     its weights, refused without a reference; ``min_tension``: ``T_min`` (N, finite), refused
     on a model without cables; without it, the OCP's own floor (``ocp.min_tension(T_min)``)."""
     model = ocp.model
-    if nonsmooth(model):
-        names = ", ".join(repr(c["name"]) for c in model.contacts)
-        raise OptimizationError(f"MPC of {model.name!r}: the model has nonsmooth contacts ({names}); the "
-                                "receding-horizon controller's step has no contacts (they would be ignored), so it "
-                                "is not supported: use nc.ilqr on nc.step_function(model, h), whose Jacobians "
-                                "go through the contacts, or build the model with contacts='smooth'")
-    unsupported = [what for what, bad in (
-        ("a free final time", ocp.t_final_bounds is not None),
-        ("free parameters", bool(ocp.p_free)),
-        ("periodic conditions", any(ocp.periodic_spec.values())),
-        ("marker path constraints (bound_marker)", bool(ocp.marker_bounds)),
-        ("joint path constraints (bound_joint, joint_limits)", bool(ocp.joint_bounds)),
-        ("bounds on coordinates as written that coordinate sharing re-based (not a box on the state)",
-         bool(ocp.row_bounds)),
-        ("final markers, poses or joints", bool(ocp.final_spec["markers"] or ocp.final_spec.get("pose")
-                                                 or ocp.final_spec.get("joints"))),
-        ("minimize_time", ocp.time_weight > 0),
-        ("a time-varying track_marker reference", any(callable(ref) for _, ref, _ in ocp.tracking)),
-    ) if bad]
-    if unsupported:
-        raise OptimizationError(f"MPC of {model.name!r}: the problem has {', '.join(unsupported)}, which the "
-                                "receding-horizon controller does not support; see ncgen.control.mpc_problem")
+    check_supported(ocp)
     W = float(terminal_weight)
     if not np.isfinite(W) or W < 0:
         raise OptimizationError(f"MPC: terminal_weight: expected a non-negative number, got {terminal_weight!r}")
     h, N, p = ocp.t_final / ocp.N, ocp.N, ocp.p_values.copy()
     nq = model.nq
-    R = np.zeros((model.nu, model.nu)) if ocp.effort_R is None else ocp.effort_R
-    plan = Q = None
-    for what, w in (("state_weight", state_weight), ("input_weight", input_weight)):
-        if reference is None and w is not None:
-            raise OptimizationError(f"MPC: {what}: a weight of the tracking cost, given without a reference "
-                                    "(reference=plan)")
-    if reference is not None:
-        from ncgen.control.mpc_reference import reference_arrays, reference_function
-        plan = reference_function(*reference_arrays(reference, 2 * nq, model.nu))
-        Q = weights(1.0 if state_weight is None else state_weight, 2 * nq, "state_weight")
-        R = R + np.diag(weights(0.0 if input_weight is None else input_weight, model.nu, "input_weight"))
+    plan, Q, R = tracking(ocp, reference, state_weight, input_weight)
     markers = model.functions["markers"] if model.marker_names else None
 
     def marker(q, name):
@@ -137,14 +106,7 @@ def mpc_problem(ocp, terminal_weight: float, reference=None, state_weight=None, 
             out += w * ca.sumsqr(marker(x[:nq], name) - ca.DM(ref))
         return h * out
 
-    t_end = ocp.t0 + ocp.t_final
-    q_f = v_f = None
-    if ocp.final_spec["q"] is not None:
-        from ncgen.optim.conditions import resolve_configuration
-        q_f = resolve_configuration(model, ocp.final_spec["q"], model.q0, t=t_end, p=p, what="final q")
-    if ocp.final_spec["v"] is not None:
-        from ncgen.optim.conditions import resolve_velocity
-        v_f = resolve_velocity(model, ocp.final_spec["v"], model.q0 if q_f is None else q_f, t=t_end, p=p)
+    q_f, v_f = final_target(ocp, p)
 
     def terminal(x, t=None):
         q, v = x[:nq], x[nq:]
@@ -170,6 +132,66 @@ def mpc_problem(ocp, terminal_weight: float, reference=None, state_weight=None, 
                                    else min_tension)
     return MPCProblem(h, N, p, stage, terminal, ocp.u_bounds.copy(), x_bounds, x_final, initial_state(ocp, p), plan,
                       T_min, pull)
+
+
+def check_supported(ocp) -> None:
+    """Refuse, naming them, the parts of ``ocp`` MPC does not take (module docstring)."""
+    model = ocp.model
+    if nonsmooth(model):
+        names = ", ".join(repr(c["name"]) for c in model.contacts)
+        raise OptimizationError(f"MPC of {model.name!r}: the model has nonsmooth contacts ({names}); the "
+                                "receding-horizon controller's step has no contacts (they would be ignored), so it "
+                                "is not supported: use nc.ilqr on nc.step_function(model, h), whose Jacobians "
+                                "go through the contacts, or build the model with contacts='smooth'")
+    unsupported = [what for what, bad in (
+        ("a free final time", ocp.t_final_bounds is not None),
+        ("free parameters", bool(ocp.p_free)),
+        ("periodic conditions", any(ocp.periodic_spec.values())),
+        ("marker path constraints (bound_marker)", bool(ocp.marker_bounds)),
+        ("joint path constraints (bound_joint, joint_limits)", bool(ocp.joint_bounds)),
+        ("bounds on coordinates as written that coordinate sharing re-based (not a box on the state)",
+         bool(ocp.row_bounds)),
+        ("final markers, poses or joints", bool(ocp.final_spec["markers"] or ocp.final_spec.get("pose")
+                                                 or ocp.final_spec.get("joints"))),
+        ("minimize_time", ocp.time_weight > 0),
+        ("a time-varying track_marker reference", any(callable(ref) for _, ref, _ in ocp.tracking)),
+    ) if bad]
+    if unsupported:
+        raise OptimizationError(f"MPC of {model.name!r}: the problem has {', '.join(unsupported)}, which the "
+                                "receding-horizon controller does not support; see ncgen.control.mpc_problem")
+
+
+def tracking(ocp, reference, state_weight, input_weight):
+    """``(plan, Q, R)`` of the stage cost: the reference ``plan: t -> (x_ref, u_ref)``
+    (:mod:`ncgen.control.mpc_reference`) and the state weights ``Q`` (nx), or ``(None, None,
+    R)`` without a reference; ``R`` (nu × nu): the OCP's effort weight, plus ``diag r`` with a
+    reference.  The weights are refused without a reference."""
+    model = ocp.model
+    R = np.zeros((model.nu, model.nu)) if ocp.effort_R is None else ocp.effort_R
+    for what, w in (("state_weight", state_weight), ("input_weight", input_weight)):
+        if reference is None and w is not None:
+            raise OptimizationError(f"MPC: {what}: a weight of the tracking cost, given without a reference "
+                                    "(reference=plan)")
+    if reference is None:
+        return None, None, R
+    from ncgen.control.mpc_reference import reference_arrays, reference_function
+    plan = reference_function(*reference_arrays(reference, 2 * model.nq, model.nu))
+    Q = weights(1.0 if state_weight is None else state_weight, 2 * model.nq, "state_weight")
+    return plan, Q, R + np.diag(weights(0.0 if input_weight is None else input_weight, model.nu, "input_weight"))
+
+
+def final_target(ocp, p) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """``(q_f, v_f)`` of the OCP's ``final(q=…, v=…)`` (each None where not given), resolved at
+    the final time: the soft terminal cost's target."""
+    model, t_end = ocp.model, ocp.t0 + ocp.t_final
+    q_f = v_f = None
+    if ocp.final_spec["q"] is not None:
+        from ncgen.optim.conditions import resolve_configuration
+        q_f = resolve_configuration(model, ocp.final_spec["q"], model.q0, t=t_end, p=p, what="final q")
+    if ocp.final_spec["v"] is not None:
+        from ncgen.optim.conditions import resolve_velocity
+        v_f = resolve_velocity(model, ocp.final_spec["v"], model.q0 if q_f is None else q_f, t=t_end, p=p)
+    return q_f, v_f
 
 
 def cable_constraint(model, h: float, p, min_tension) -> tuple[float | None, ca.Function | None]:

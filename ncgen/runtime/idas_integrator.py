@@ -122,29 +122,18 @@ def _simulate_idas(model, run: Run, opts: IdasOptions) -> Trajectory:
     t, U, columns, pv, q, v, feedback = run.t, run.U, run.columns, run.p, run.q, run.v, run.feedback
     t0, hold, project = float(t[0]), opts.hold, opts.project
     rtol, atol = 1e-8 if opts.rtol is None else opts.rtol, 1e-10 if opts.atol is None else opts.atol
-    choice = choose_backend(model, len(t) - 1, opts.backend)
-    dae, used = load_dae(model, "auto" if opts.backend == "auto" and choice.backend == "compiled" else choice.backend)
-    extra = _natural_inputs(model, run.controller, opts.joint_dynamics)
-    if extra is not None:
-        dae = dae_with_inputs(model, dae, extra)
+    dae, used, choice, extra = _idas_dae(model, run, opts)
     if feedback is not None:
         columns = _feedback_at_start(model, run, opts, dae, used)
-    u0 = U[0] + _extra_value(model, extra, t0, q, v, pv)
-    lam = initial_multipliers(model, t0, q, v, u0, pv, dae)
-    a = np.array(model.functions["ode"](t0, q, v, lam, u0, pv)[1]).reshape(-1)
+    z0 = _start_rates(model, run, dae, extra)
     watch = project == "auto" and model.nq * model.nc <= AUTO_MAX_SIZE and model.nc > 0
     projector = ManifoldProjector(model, pv, atol) if (project is True or watch) and feedback is None else None
     m = 1 if projector is None else math.ceil((t[1] - t[0]) / WATCHED_SAMPLE - 1e-9)
     balance = feedback is None and not is_conservative(model, inputs=bool(np.any(U != 0)) or extra is not None)
-    runner = ChunkedIDAS(dae, h=float(t[1] - t[0]) / m, nu=model.nu, hold=hold, rtol=rtol, atol=atol,
-                         max_steps=opts.max_steps, linear_solver=opts.linear_solver, expand=(used == "vm"),
-                         power=power_parts_function(model) if balance else None, extra=extra,
-                         algebraic=lambda tk, x, uk: _algebraic(
-                             model, tk, x, uk + _extra_value(model, extra, tk, x[:model.nq], x[model.nq:], pv), pv))
+    runner = _chunked_idas(model, dae, used, extra, opts, float(t[1] - t[0]) / m, balance, (rtol, atol), pv)
     if feedback is not None:
-        info = {"method": "idas", "backend": used, "rtol": rtol, "atol": atol, "hold": "zoh",
-                "feedback": feedback[0], "linear_solver": opts.linear_solver}
-        return _idas_feedback(model, runner, run, np.concatenate([a, lam]), opts.progress, info, dae)
+        return _idas_feedback(model, runner, run, z0, opts, {"method": "idas", "backend": used, "rtol": rtol,
+                                                             "atol": atol}, dae)
     if projector is not None:
         projector.start(t0, np.concatenate([q, v]))
     bridge = _bridge(model, runner, pv, rtol, atol) if projector is not None else None
@@ -153,49 +142,107 @@ def _simulate_idas(model, run: Run, opts: IdasOptions) -> Trajectory:
     grid = t if m == 1 else t[0] + (t[-1] - t[0]) * np.arange(m * (len(t) - 1) + 1) / (m * (len(t) - 1))
     W = np.full((len(grid), 5), np.nan) if balance else None      # each interval's work by class (quadratures)
     try:
-        watched = (projector, bridge) if projector is not None else None
-        X, Z, failure, projected_from = _run(_GridRun(runner, grid, np.concatenate([q, v]), np.concatenate([a, lam]),
-                                                      np.repeat(columns, m, axis=1), pv, watched, watch, W), bar)
+        X, Z, failure, projected_from = _run(_GridRun(runner, grid, np.concatenate([q, v]), z0, np.repeat(
+            columns, m, axis=1), pv, None if projector is None else (projector, bridge), watch, W), bar)
     finally:
         bar.close()
-    reached = float(grid[len(X) - 1])        # the last good time, on the watched grid
-    if failure is INTERRUPTED:
-        message = f"simulation of {model.name!r} interrupted (Ctrl-C) at t = {reached:.6g} s"
-    elif failure is not None:
-        message = _failure_message(model, failure, grid, len(X) - 1, X[-1], Z[-1, model.nq:], U[(len(X) - 1) // m],
-                                   pv, dae)
-    changes, departure = _branch_changes(model, projector, bridge, grid, X) if projector is not None else ([], 0.0)
-    work = None
-    if W is not None:
-        u_grid = U[np.minimum(np.arange(len(X)) // m, len(U) - 1)]
-        work = interval_works(model, grid[:len(X)], X, Z, u_grid, pv, W[:len(X)])[::m]
-    X, Z = X[::m], Z[::m]
-    nq, k = model.nq, len(X) - 1
-    stats = dict(runner.stats)
-    if projector is not None:
-        stats.update(projector.counts, rattle_intervals=bridge.count, branch_departure=departure)
+    k, reached = (len(X) - 1) // m, float(grid[len(X) - 1])    # the last output reached; the last good time
+    message = _stop_message(model, failure, grid, X, Z, U[k], pv, dae, t[k])
+    watch_stats, watch_info = _watch_report(model, projector, bridge, grid, X)
+    work = None if W is None else _output_works(model, grid, X, Z, U, m, pv, W)
+    X, Z, nq = X[::m], Z[::m], model.nq
     info = {"method": "idas", "backend": used, "backend_reason": choice.reason if used == choice.backend
             else "no C compiler", "rtol": rtol, "atol": atol, "hold": hold,
             "auto": run.why_not, "joint_dynamics": bool(opts.joint_dynamics),
             "controller": None if run.controller is None else run.controller.describe(),
-            "linear_solver": opts.linear_solver, "stats": stats, "project": project,
-            "projected_from": None if projected_from is None else float(grid[projected_from]),
-            "watched_interval": float(grid[1] - grid[0]) if projector is not None else None,
-            "branch_changes": changes, "wall_time": time.perf_counter() - start,
-            "cpu_time": time.process_time() - cpu_start, "complete": failure is None}
-    if failure is not None:
-        if t[k] < reached:
-            message += f" On the output grid it ends at t = {t[k]:.6g} s."
+            "linear_solver": opts.linear_solver, "stats": dict(runner.stats, **watch_stats), "project": project,
+            "projected_from": None if projected_from is None else float(grid[projected_from]), **watch_info,
+            "wall_time": time.perf_counter() - start, "cpu_time": time.process_time() - cpu_start,
+            "complete": failure is None}
+    if message is not None:
         info["message"] = message
-    U_applied = U[:k + 1] + np.array([_extra_value(model, extra, t[i], X[i, :nq], X[i, nq:], pv)
-                                       for i in range(k + 1)]) if extra is not None else U[:k + 1]
+    U_applied = _applied_inputs(model, extra, t[:k + 1], U[:k + 1], X, pv)
     traj = Trajectory.from_states(model, t[:k + 1], X[:, :nq], X[:, nq:], Z[:, nq:], U_applied, pv, info)
     traj.info["energy"] = idas_report(model, traj, is_conservative(model, inputs=bool(np.any(U_applied != 0))), work)
-    if failure is INTERRUPTED:
-        raise SimulationInterrupted(message, time=reached, trajectory=traj)
     if failure is not None:
-        raise SimulationError(message, time=reached, trajectory=traj)
+        error = SimulationInterrupted if failure is INTERRUPTED else SimulationError
+        raise error(message, time=reached, trajectory=traj)
     return traj
+
+
+def _applied_inputs(model, extra, t, U, X, p) -> np.ndarray:
+    """The inputs applied at the output times ``t``: ``U`` plus ``extra``'s (a compiled
+    controller's and the joint dynamics') at the states ``X``."""
+    if extra is None:
+        return U
+    nq = model.nq
+    return U + np.array([_extra_value(model, extra, t[i], X[i, :nq], X[i, nq:], p) for i in range(len(t))])
+
+
+def _idas_dae(model, run: Run, opts: IdasOptions):
+    """``(dae, used, choice, extra)``: the index-1 DAE on the backend chosen (``used``: the
+    one loaded, ``choice``: :func:`choose_backend`'s), with the inputs ``extra`` of a compiled
+    controller and the joint dynamics in it (None without them)."""
+    choice = choose_backend(model, len(run.t) - 1, opts.backend)
+    dae, used = load_dae(model, "auto" if opts.backend == "auto" and choice.backend == "compiled" else choice.backend)
+    extra = _natural_inputs(model, run.controller, opts.joint_dynamics)
+    if extra is not None:
+        dae = dae_with_inputs(model, dae, extra)
+    return dae, used, choice, extra
+
+
+def _start_rates(model, run: Run, dae, extra) -> np.ndarray:
+    """``z0 = [a; λ]`` at the start: the KKT multipliers and accelerations of ``(run.q, run.v)``
+    with the first input (``extra``'s included)."""
+    t0, q, v, pv = float(run.t[0]), run.q, run.v, run.p
+    u0 = run.U[0] + _extra_value(model, extra, t0, q, v, pv)
+    lam = initial_multipliers(model, t0, q, v, u0, pv, dae)
+    a = np.array(model.functions["ode"](t0, q, v, lam, u0, pv)[1]).reshape(-1)
+    return np.concatenate([a, lam])
+
+
+def _chunked_idas(model, dae, used: str, extra, opts: IdasOptions, h: float, balance: bool, tols: tuple, pv):
+    """IDAS in chunks over intervals of ``h`` s (:class:`ChunkedIDAS`), ``tols = (rtol, atol)``;
+    ``balance``: the work of each class integrated as quadratures; the algebraic state of a
+    (re)start solved with ``extra``'s inputs added."""
+    rtol, atol = tols
+    return ChunkedIDAS(dae, h=h, nu=model.nu, hold=opts.hold, rtol=rtol, atol=atol,
+                       max_steps=opts.max_steps, linear_solver=opts.linear_solver, expand=(used == "vm"),
+                       power=power_parts_function(model) if balance else None, extra=extra,
+                       algebraic=lambda tk, x, uk: _algebraic(
+                           model, tk, x, uk + _extra_value(model, extra, tk, x[:model.nq], x[model.nq:], pv), pv))
+
+
+def _stop_message(model, failure, grid, X, Z, u, p, dae, t_out: float) -> str | None:
+    """The message of a run on ``grid`` that stopped at its last state ``X[-1], Z[-1]`` (input
+    ``u``; ``t_out``: the last output time reached) by Ctrl-C or IDAS's failure; None when it
+    did not stop."""
+    if failure is None:
+        return None
+    reached = float(grid[len(X) - 1])
+    if failure is INTERRUPTED:
+        message = f"simulation of {model.name!r} interrupted (Ctrl-C) at t = {reached:.6g} s"
+    else:
+        message = _failure_message(model, failure, grid, len(X) - 1, X[-1], Z[-1, model.nq:], u, p, dae)
+    return message + f" On the output grid it ends at t = {t_out:.6g} s." if t_out < reached else message
+
+
+def _watch_report(model, projector, bridge, grid, X) -> tuple[dict, dict]:
+    """``(stats, info)`` the watch for singular configurations adds to a run's: the projector's
+    counts, the bridged intervals and the largest branch departure (:func:`_branch_changes`);
+    the watched grid's spacing and the branch changes (None and none without a watch)."""
+    if projector is None:
+        return {}, {"watched_interval": None, "branch_changes": []}
+    changes, departure = _branch_changes(model, projector, bridge, grid, X)
+    return (dict(projector.counts, rattle_intervals=bridge.count, branch_departure=departure),
+            {"watched_interval": float(grid[1] - grid[0]), "branch_changes": changes})
+
+
+def _output_works(model, grid, X, Z, U, m: int, p, W) -> np.ndarray:
+    """The work of each class over each output interval (rows at the output times) from the
+    quadratures ``W`` on the watched ``grid`` (``m`` intervals an output interval)."""
+    u_grid = U[np.minimum(np.arange(len(X)) // m, len(U) - 1)]
+    return interval_works(model, grid[:len(X)], X, Z, u_grid, p, W[:len(X)])[::m]
 
 
 def _natural_inputs(model, controller, joint_dynamics: bool):
@@ -241,15 +288,15 @@ def _feedback_at_start(model, run: Run, opts: IdasOptions, dae, used: str) -> np
     return hold_columns(run.U, run.t, opts.hold)
 
 
-def _idas_feedback(model, runner, run: Run, z0: np.ndarray, progress, info: dict, dae) -> Trajectory:
+def _idas_feedback(model, runner, run: Run, z0: np.ndarray, opts: IdasOptions, info: dict, dae) -> Trajectory:
     """IDAS one output interval at a time from ``(run.q, run.v)`` and ``z0 = [a; λ]``, the
-    feedback evaluated at the start of each; ``info``: the trajectory's, without the counts
-    and times of the run."""
+    feedback evaluated at the start of each (held zoh); ``info``: the trajectory's method,
+    backend and tolerances."""
     t, U, p, feedback, nq = run.t, run.U, run.p, run.feedback, model.nq
     X = np.empty((len(t), 2 * nq))
     Z = np.empty((len(t), nq + model.nc))
     X[0], Z[0] = np.concatenate([run.q, run.v]), z0
-    bar = Progress(t[0], t[-1], progress, label=f"simulating {model.name}: ")
+    bar = Progress(t[0], t[-1], opts.progress, label=f"simulating {model.name}: ")
     start, cpu_start, failure, k = time.perf_counter(), time.process_time(), None, 0
     try:
         while k < len(t) - 1:
@@ -269,7 +316,8 @@ def _idas_feedback(model, runner, run: Run, z0: np.ndarray, progress, info: dict
     finally:
         bar.close()
     U[k] = U[k - 1] if k else U[0]
-    info = {**info, "stats": dict(runner.stats), "wall_time": time.perf_counter() - start,
+    info = {**info, "hold": "zoh", "feedback": feedback[0], "linear_solver": opts.linear_solver,
+            "stats": dict(runner.stats), "wall_time": time.perf_counter() - start,
             "cpu_time": time.process_time() - cpu_start, "complete": failure is None}
     traj = Trajectory.from_states(model, t[:k + 1], X[:k + 1, :nq], X[:k + 1, nq:], Z[:k + 1, nq:], U[:k + 1], p,
                                   info)

@@ -90,32 +90,11 @@ def simulate_rolling_idas(model, run: Run, opts) -> Trajectory:
     runner = ChunkedIDAS(dae, h=float(t[1] - t[0]), nu=model.nu, hold=opts.hold, rtol=rtol, atol=atol,
                          max_steps=opts.max_steps, linear_solver=opts.linear_solver, expand=True,
                          algebraic=multipliers, power=None if conservative else power_function(system))
-    W = np.zeros((len(t), 5))                   # work of each power over each output interval (row: its end)
-    columns = run.columns
-    X = np.empty((len(t), 2 * nq))
-    X[0] = np.concatenate(project(system, run.q, run.v, t=float(t[0])))
-    n_int, full = len(t) - 1, max(1, math.ceil((len(t) - 1) / CHUNKS))
-    drift, failure, k = 0.0, None, 0
-    bar = Progress(t[0], t[-1], opts.progress, label=f"simulating {model.name}: ")
+    X0 = np.concatenate(project(system, run.q, run.v, t=float(t[0])))
     start = time.perf_counter()
-    try:
-        while k < n_int:
-            n = min(full, n_int - k)
-            try:
-                states, _ = runner.advance(float(t[k]), X[k], None, columns[:, k:k + n], p)
-            except ChunkFailure as e:
-                failure = e
-                break
-            if not conservative:
-                W[k + 1:k + 1 + n] = runner.last_work
-            for i, x in enumerate(states, start=k + 1):
-                drift = max(drift, *system.residuals(x[:nq], x[nq:], float(t[i])))
-                X[i] = np.concatenate(project(system, x[:nq], x[nq:], t=float(t[i])))
-            k += n
-            bar.update(t[k])
-    finally:
-        bar.close()
-    X, tk = X[:k + 1], t[:k + 1]
+    X, W, drift, failure = _march(model, system, runner, run, p, X0, conservative, opts.progress)
+    k = len(X) - 1
+    tk = t[:k + 1]
     U = run.U[:k + 1]
     lam = np.array([multipliers(ti, x, U[i])[nq:] for i, (ti, x) in enumerate(zip(tk, X))])
     stats = dict(runner.stats, drift=drift)
@@ -126,12 +105,46 @@ def simulate_rolling_idas(model, run: Run, opts) -> Trajectory:
     traj.constraint_names = list(system.row_names)
     levels = np.array([system.residuals(x[:nq], x[nq:], ti) for ti, x in zip(tk, X)])
     traj.constraint_residual, traj.velocity_residual = levels[:, 0], levels[:, 1]
-    work = None if conservative else np.cumsum(W[:k + 1], axis=0)
+    work = None if conservative else np.cumsum(W, axis=0)
     traj.info["energy"] = idas_report(model, traj, conservative, work)
     if failure is not None:
+        error, end = failure
         message = (f"simulation of {model.name!r} (rolling elements, IDAS) failed between t = {t[k]:.6g} s and "
-                   f"t = {t[min(k + full, n_int)]:.6g} s: IDAS said: {failure.message or failure.error}. The "
+                   f"t = {t[end]:.6g} s: IDAS said: {error.message or error.error}. The "
                    f"trajectory up to t = {t[k]:.6g} s is attached to this error as .trajectory.")
         traj.info["message"] = message
         raise SimulationError(message, time=float(t[k]), trajectory=traj)
     return traj
+
+
+def _march(model, system, runner, run: Run, p: np.ndarray, X0: np.ndarray, conservative: bool, progress):
+    """IDAS from output to output in at most :data:`CHUNKS` calls, each started from the last
+    projected output: ``(X, W, drift, failure)``, the projected outputs reached, the work of
+    each power over each output interval (row: its end; zero on a conservative run), the
+    largest residual of IDAS's own states, and ``(error, end)`` of a failed call (None: none
+    failed; ``end``: the output index the failed call was to reach)."""
+    t, columns, nq = run.t, run.columns, model.nq
+    W = np.zeros((len(t), 5))
+    X = np.empty((len(t), 2 * nq))
+    X[0] = X0
+    n_int, full = len(t) - 1, max(1, math.ceil((len(t) - 1) / CHUNKS))
+    drift, failure, k = 0.0, None, 0
+    bar = Progress(t[0], t[-1], progress, label=f"simulating {model.name}: ")
+    try:
+        while k < n_int:
+            n = min(full, n_int - k)
+            try:
+                states, _ = runner.advance(float(t[k]), X[k], None, columns[:, k:k + n], p)
+            except ChunkFailure as e:
+                failure = e, k + n
+                break
+            if not conservative:
+                W[k + 1:k + 1 + n] = runner.last_work
+            for i, x in enumerate(states, start=k + 1):
+                drift = max(drift, *system.residuals(x[:nq], x[nq:], float(t[i])))
+                X[i] = np.concatenate(project(system, x[:nq], x[nq:], t=float(t[i])))
+            k += n
+            bar.update(t[k])
+    finally:
+        bar.close()
+    return X[:k + 1], W[:k + 1], drift, failure

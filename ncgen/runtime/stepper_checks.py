@@ -531,15 +531,7 @@ def untrusted_row(model, traj, S: np.ndarray, h: float, contacts: bool = False) 
     stages = traj.info.get("stages", 1)                 # RATTLE steps per step
     gq, _ = global_estimates(S, traj.info.get("substeps"))
     size = max(float(np.max(np.abs(model.q0), initial=0.0)), 1e-9)
-    if contacts:
-        E = traj.energy                                 # a gain only: contacts dissipate
-        gain = (E - E[0] - created_work(S))[1:]         # E - E0 less the work of all but the contacts
-        e_rel = gain / energy_denominator(model, traj, work, S, np.maximum(gain, 0.0))
-        residual = S[:, len(STATS) + CONTACT_STATS.index("pgs_residual")]
-    else:
-        e_rel = relative_energy_error(model, traj, work, conservative, S)
-        residual = None
-    e_rel = np.where(np.isnan(e_rel), np.inf, e_rel)    # overflowed or NaN states: diverged
+    e_rel, residual = _energy_errors(model, traj, S, work, contacts, conservative)
     dt = h * traj.info.get("substeps", 1)
     flags = row_flags(splits, iters, steps, stages, e_rel, gq, size, residual)
     if contacts and not conservative:           # a conservative run's contact work is not tracked: E - E0 tells
@@ -552,43 +544,81 @@ def untrusted_row(model, traj, S: np.ndarray, h: float, contacts: bool = False) 
     t_row = float(traj.t[row + 1])
     suggest = _suggestion(h, dt, gq[row], size, kind, adaptive=not getattr(model, "rolling", ()))
     if kind == "splits":
-        reason = (f"{int(splits.sum())} step(s) had to be split, the first by t = {t_row:.6g} s: Newton's method "
-                  f"does not converge at this step, which is far beyond the step the motion needs")
+        reason = _splits_reason(int(splits.sum()), t_row)
     elif kind == "newton":
-        per_step = iters[row] / max(steps[row] * stages, 1)
-        reason = (f"Newton's method needed {per_step:.3g} iterations per RATTLE step by "
-                  f"t = {t_row:.6g} s (more than {NEWTON_LIMIT}): the step is too large for this motion")
+        reason = _newton_reason(iters[row] / max(steps[row] * stages, 1), t_row)
     elif kind == "energy":
-        if contacts:
-            what = ("energy of this model rose through its contacts" if conservative else
-                    "energy balance E - E0 - W (W: work of its non-conservative forces and drives) rose through "
-                    "its contacts")
-        else:
-            what = ("energy of this conservative model changed" if conservative else
-                    "energy balance E - E0 - W (W: work of its non-conservative forces and drives) is off")
-        reason = (f"the {what} by {e_rel[row]:.3g} of its energy scale by t = {t_row:.6g} s (more than "
-                  f"{ENERGY_FRACTION:g})" if np.isfinite(e_rel[row]) else
-                  f"the motion diverged: the energy is no longer finite by t = {t_row:.6g} s")
+        reason = _energy_reason(e_rel[row], t_row, contacts, conservative)
     elif kind == "created":
-        parts = ", ".join(f"{name} {w:+.3g} J" for name, w in zip(("normal", "friction", "push-out"), rise[row]))
-        scale = float(_energy_scale(traj, work)[row + 1])
-        reason = (f"its contacts created energy: their work (normal + friction + push-out) rose by "
-                  f"{rise[row].sum():.3g} J ({rise[row].sum() / scale:.3g} of its energy scale {scale:.3g} J) over "
-                  f"the output interval to t = {t_row:.6g} s ({parts}), above its floor {floor[row]:.3g} J "
-                  f"({CREATED_FRACTION:g} of the scale and round-off); contacts with restitution <= 1 and "
-                  f"Coulomb friction only take energy, and the push-out only removes what the step sank "
-                  f"(deepest penetration left so far "
-                  f"{S[:row + 1, len(STATS) + CONTACT_STATS.index('penetration')].max():.3g} m): the step is too "
-                  f"large for this motion")
+        depth = S[:row + 1, len(STATS) + CONTACT_STATS.index("penetration")].max()
+        reason = _created_reason(rise[row], floor[row], float(_energy_scale(traj, work)[row + 1]), depth, t_row)
     elif kind == "contacts":
-        reason = (f"the contact impulses did not converge by t = {t_row:.6g} s: projected Gauss-Seidel stopped "
-                  f"at {PGS_MAX_ITER} sweeps with a last sweep still changing a contact velocity by "
-                  f"{residual[row]:.3g} (1 + max|U|) m/s (more than {PGS_TRUST:g}; redundant contacts make "
-                  f"it crawl, and friction can make it cycle)")
+        reason = _contacts_reason(residual[row], t_row)
     else:
-        reason = (f"the estimated error in q reached {gq[row]:.3g} m by t = {t_row:.6g} s, more than "
-                  f"{ERROR_FRACTION:g} of the model's size {size:.3g} m")
+        reason = _error_reason(gq[row], size, t_row)
     return row, f"{reason}. {suggest}"
+
+
+def _energy_errors(model, traj, S: np.ndarray, work: np.ndarray, contacts: bool, conservative: bool):
+    """Per output row, the energy error over its scale (inf where the state overflowed or is
+    NaN) and the contact solves' last sweep change (None without contacts); a run with
+    contacts counts only a gain, as contacts dissipate."""
+    if contacts:
+        E = traj.energy
+        gain = (E - E[0] - created_work(S))[1:]         # E - E0 less the work of all but the contacts
+        e_rel = gain / energy_denominator(model, traj, work, S, np.maximum(gain, 0.0))
+        residual = S[:, len(STATS) + CONTACT_STATS.index("pgs_residual")]
+    else:
+        e_rel = relative_energy_error(model, traj, work, conservative, S)
+        residual = None
+    return np.where(np.isnan(e_rel), np.inf, e_rel), residual
+
+
+def _splits_reason(count: int, t_row: float) -> str:
+    return (f"{count} step(s) had to be split, the first by t = {t_row:.6g} s: Newton's method "
+            f"does not converge at this step, which is far beyond the step the motion needs")
+
+
+def _newton_reason(per_step: float, t_row: float) -> str:
+    return (f"Newton's method needed {per_step:.3g} iterations per RATTLE step by "
+            f"t = {t_row:.6g} s (more than {NEWTON_LIMIT}): the step is too large for this motion")
+
+
+def _energy_reason(e_rel: float, t_row: float, contacts: bool, conservative: bool) -> str:
+    if contacts:
+        what = ("energy of this model rose through its contacts" if conservative else
+                "energy balance E - E0 - W (W: work of its non-conservative forces and drives) rose through "
+                "its contacts")
+    else:
+        what = ("energy of this conservative model changed" if conservative else
+                "energy balance E - E0 - W (W: work of its non-conservative forces and drives) is off")
+    return (f"the {what} by {e_rel:.3g} of its energy scale by t = {t_row:.6g} s (more than "
+            f"{ENERGY_FRACTION:g})" if np.isfinite(e_rel) else
+            f"the motion diverged: the energy is no longer finite by t = {t_row:.6g} s")
+
+
+def _created_reason(rise: np.ndarray, floor: float, scale: float, depth: float, t_row: float) -> str:
+    """``rise``: the contacts' normal, friction and push-out work gained over the interval (J);
+    ``depth``: the deepest penetration left so far (m)."""
+    parts = ", ".join(f"{name} {w:+.3g} J" for name, w in zip(("normal", "friction", "push-out"), rise))
+    return (f"its contacts created energy: their work (normal + friction + push-out) rose by "
+            f"{rise.sum():.3g} J ({rise.sum() / scale:.3g} of its energy scale {scale:.3g} J) over "
+            f"the output interval to t = {t_row:.6g} s ({parts}), above its floor {floor:.3g} J "
+            f"({CREATED_FRACTION:g} of the scale and round-off); contacts with restitution <= 1 and "
+            f"Coulomb friction only take energy, and the push-out only removes what the step sank "
+            f"(deepest penetration left so far {depth:.3g} m): the step is too large for this motion")
+
+
+def _contacts_reason(residual: float, t_row: float) -> str:
+    return (f"the contact impulses did not converge by t = {t_row:.6g} s: projected Gauss-Seidel stopped "
+            f"at {PGS_MAX_ITER} sweeps with a last sweep still changing a contact velocity by "
+            f"{residual:.3g} (1 + max|U|) m/s (more than {PGS_TRUST:g}; redundant contacts make "
+            f"it crawl, and friction can make it cycle)")
+
+
+def _error_reason(gq: float, size: float, t_row: float) -> str:
+    return (f"the estimated error in q reached {gq:.3g} m by t = {t_row:.6g} s, more than "
+            f"{ERROR_FRACTION:g} of the model's size {size:.3g} m")
 
 
 def _suggestion(h: float, dt: float, err: float, size: float, kind: str, adaptive: bool = True) -> str:
