@@ -262,3 +262,23 @@ def time_at(errors, times, target: float) -> float:
             w = np.log(target / e1) / np.log(e2 / e1) if e2 > e1 else 0.0
             return float(np.exp(np.log(t1) + w * (np.log(t2) - np.log(t1))))
     return float("nan")
+
+
+def impose_contact_sequence(nlp, sequence) -> None:
+    """Fix a contact-implicit NLP's contact sequence: for every complementarity pair of its
+    transcription, the side that ``sequence`` says is zero (``True``: the first, else the
+    second) set to zero, and the relaxation at its final value (the fixed-sequence problem
+    the homotopy's optimum is compared with)."""
+    import casadi as ca
+
+    tr = nlp.ocp.transcription
+    if [ca.MX(p.a).numel() for p in tr.pairs] != [len(z) for z in sequence]:
+        raise ValueError("the sequence's pairs are not the problem's")
+    nlp.opti.set_value(tr.sigma, tr.settings["sigma_final"])
+    sides = {}
+    for pair, a_zero in zip(tr.pairs, sequence):
+        for i, zero in enumerate(a_zero):
+            side = pair.a[i] if zero else pair.c[i]
+            if ca.symvar(side):
+                sides.setdefault(str(side), side)
+    nlp.opti.subject_to(ca.vertcat(*sides.values()) == 0)

@@ -102,6 +102,7 @@ import time
 import numpy as np
 
 import ncgen as nc
+from common import impose_contact_sequence
 from ncgen.errors import OptimizationError
 
 RADIUS, EDGE, REACH = 0.02, 0.1, 0.15
@@ -291,22 +292,11 @@ def contact_sequence(sol):
 def fixed_sequence_solve(ocp, guess, sequence, max_iter: int, verbose: bool, ipopt=None):
     """The NLP of ``ocp`` built from ``guess`` with ``sequence`` imposed (the zero side of every
     complementarity pair an equality) and solved once: ``(nlp, value, cpu)``."""
-    import casadi as ca
     from ncgen.optim.contact_implicit import FIRST_SOLVE
     from ncgen.optim.nlp import NLP
     nlp = NLP(ocp)
     nlp.build(guess)
-    tr = ocp.transcription
-    if [ca.MX(p.a).numel() for p in tr.pairs] != [len(z) for z in sequence]:
-        raise ValueError("the sequence's pairs are not the problem's")
-    nlp.opti.set_value(tr.sigma, tr.settings["sigma_final"])
-    sides = {}
-    for pair, a_zero in zip(tr.pairs, sequence):
-        for i, zero in enumerate(a_zero):
-            side = pair.a[i] if zero else pair.c[i]
-            if ca.symvar(side):
-                sides.setdefault(str(side), side)
-    nlp.opti.subject_to(ca.vertcat(*sides.values()) == 0)
+    impose_contact_sequence(nlp, sequence)
     cpu = time.process_time()
     value = nlp.solve(max_iter=max_iter, tol=1e-8, verbose=verbose, ipopt={**FIRST_SOLVE, **(ipopt or {})})
     return nlp, value, time.process_time() - cpu

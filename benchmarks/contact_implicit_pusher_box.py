@@ -28,10 +28,9 @@ import os
 import time
 from pathlib import Path
 
-import casadi as ca
 import numpy as np
 
-from common import machine
+from common import impose_contact_sequence, machine
 from ncgen.optim.contact_implicit import FIRST_SOLVE, pair_values
 from ncgen.optim.nlp import NLP
 
@@ -63,15 +62,7 @@ def fixed_sequence(ex, model, sequence):
     ocp = ex.problem(model)
     nlp = NLP(ocp)
     nlp.build("rest")
-    tr = ocp.transcription
-    nlp.opti.set_value(tr.sigma, tr.settings["sigma_final"])
-    sides = {}
-    for pair, a_zero in zip(tr.pairs, sequence):
-        for i, zero in enumerate(a_zero):
-            side = pair.a[i] if zero else pair.c[i]
-            if ca.symvar(side):
-                sides.setdefault(str(side), side)
-    nlp.opti.subject_to(ca.vertcat(*sides.values()) == 0)
+    impose_contact_sequence(nlp, sequence)
     cpu = time.process_time()
     value = nlp.solve(max_iter=3000, tol=1e-8, verbose=False, ipopt=dict(FIRST_SOLVE))
     cpu = time.process_time() - cpu
