@@ -81,21 +81,17 @@ KINDS: dict[str, tuple[tuple[str, str], tuple]] = {
 
 def point_kind(pc) -> str | None:
     """The kind of point contact ``pc`` (module docstring), None for a plane carried by a member."""
-    if isinstance(pc, EdgeContact):
-        return "edge"
-    if isinstance(pc, CylinderSphere):
-        return "cylinder_sphere"
-    if isinstance(pc, CapsuleSphere):
-        return "capsule_sphere"
-    if isinstance(pc, BoxCorner):
-        return "box_corner"
-    if isinstance(pc, SphereBox):
-        return "sphere_box"
-    if isinstance(pc, SphereSphere):
-        return "sphere_sphere"
+    for cls, kind in _KIND_OF_CLASS:            # in this order: the first class ``pc`` is an instance of
+        if isinstance(pc, cls):
+            return kind
     if isinstance(pc, SpherePlane) and pc.plane.is_ground:
         return "sphere_plane_rim" if getattr(pc, "rim_radius", 0.0) > 0 else "sphere_plane"
     return None
+
+
+#: ``(class, kind)`` of the point contacts whose kind their class alone decides.
+_KIND_OF_CLASS = ((EdgeContact, "edge"), (CylinderSphere, "cylinder_sphere"), (CapsuleSphere, "capsule_sphere"),
+                  (BoxCorner, "box_corner"), (SphereBox, "sphere_box"), (SphereSphere, "sphere_sphere"))
 
 
 def side_type(member) -> str:
