@@ -100,8 +100,9 @@ def pyramid_module(monkeypatch):
 def test_unstable_pyramid_fails_on_the_energy_its_push_out_creates(monkeypatch):
     """The 10-box pyramid of benchmarks/contact.py (μ = 0.5, e = 0, 224 contact points) at
     h = 40 ms: unstable (its tipping mode doubles each step from round-off, 1e-14 m/s), it
-    collapses at t = 0.8, 0.88 or 0.92 s (which row follows round-off: the warm starts of
-    contacts about to close moved it from 0.92 to 0.88 s, the least-norm move by QR to 0.8 s),
+    collapses at t = 0.8, 0.84, 0.88 or 0.92 s (which row follows round-off: the warm starts of
+    contacts about to close moved it from 0.92 to 0.88 s, the least-norm move by QR to 0.8 s,
+    compiling at -O0 — this module's QUICK_COMPILE, no fused multiply-adds — to 0.84 s),
     where the push-out adds 0.06–0.1 J in one step (0.3–1.5 % of its 14.7 J scale: the
     collapse's details follow round-off): the run fails there on the energy its contacts
     created (this check below 1 %, the balance's own check above).  At 30 ms it rests for 2 s
@@ -111,8 +112,8 @@ def test_unstable_pyramid_fails_on_the_energy_its_push_out_creates(monkeypatch):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")              # the penetration warning of the collapse
         with pytest.raises(SimulationError, match=r"its contacts created energy: .* over the output interval to "
-                                                  r"t = 0.(8|88|92) s \(normal .*, friction .*, push-out \+0\.(0[6-9]|1)|"
-                                                  r"rose through its contacts by .* by t = 0.(8|88|92) s") as err:
+                                                  r"t = 0.(8|84|88|92) s \(normal .*, friction .*, push-out \+0\.(0[6-9]|1)|"
+                                                  r"rose through its contacts by .* by t = 0.(8|84|88|92) s") as err:
             nc.simulate(model, 2.0, 0.04, method="stepper")
     collapse = float(re.search(r"t = (0\.\d+) s", str(err.value)).group(1))
     assert err.value.trajectory.t[-1] == pytest.approx(collapse - 0.04)   # the rows before it
