@@ -8,8 +8,10 @@ once per ncgen version; issues 34 and 37).
    (``common.chain_mjcf``, ball joints) and the Panda (its URDF with ``<mimic>`` removed — the
    fingers then move independently, as in benchmarks/joint_simulation.py — visuals and
    collisions dropped for MuJoCo).  ``--flat`` adds the flat step function (the model's own
-   generated package, compiled first).  Interleaved batches, min and median per call.
-   Not the same coordinates nor the same step: the same job (one step's linearisation).
+   generated package, compiled first).  Interleaved batches, CPU time (``time.process_time``),
+   min and median per call.  ncgen's A is first checked against central differences of its own
+   step (printed, relative to max |A|).  Not the same coordinates nor the same step: the same
+   job (one step's linearisation).  ``--chain-only``: this part on the chain alone.
 2. Time to the first Jacobian of a new robot, each in a fresh process: ``from_urdf`` →
    ``build`` → ``step_function`` → ``jacobians`` (CPU and wall seconds; the number of
    compiler runs, which must be 0 once the element library is cached): z1, Panda (mimic
@@ -17,7 +19,8 @@ once per ncgen version; issues 34 and 37).
 3. The table stepper's Newton iterations per step on the z1 and the UR10 (100 steps of
    1 ms with random torques).
 
-    python benchmarks/table_step_jacobians.py [--calls 50] [--repeat 5] [--flat] [--talos] [--smoke]
+    python benchmarks/table_step_jacobians.py [--calls 50] [--repeat 5] [--bars 20] [--flat] [--talos]
+                                              [--chain-only] [--smoke]
 """
 from __future__ import annotations
 
@@ -27,6 +30,7 @@ import os
 import re
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -62,6 +66,11 @@ def compare(title: str, model, mj, nu_mj: int, calls: int, repeat: int, flat: bo
     mujoco.mj_step(mj, d, nstep=20)
     nxm = 2 * mj.nv + mj.na
     A, B = np.zeros((nxm, nxm)), np.zeros((nxm, nu_mj))
+    _, Aj, _ = st.jacobians(x, u)
+    eps = 1e-6
+    D = np.column_stack([(st(x + e, u) - st(x - e, u)) / (2 * eps) for e in np.eye(x.size) * eps])
+    print(f"\n{title}: ncgen's A against central differences of its step (eps {eps:g}): "
+          f"{np.max(np.abs(Aj - D)) / np.max(np.abs(Aj)):.1e} relative to max |A|")
     fns = {"ncgen tables st.jacobians": lambda: st.jacobians(x, u)}
     if flat:
         fl = nc.step_function(model, H, kernels="flat")
@@ -69,7 +78,8 @@ def compare(title: str, model, mj, nu_mj: int, calls: int, repeat: int, flat: bo
     fns["mujoco mjd_transitionFD forward"] = lambda: mujoco.mjd_transitionFD(mj, d, 1e-6, False, A, B, None, None)
     fns["mujoco mjd_transitionFD centred"] = lambda: mujoco.mjd_transitionFD(mj, d, 1e-6, True, A, B, None, None)
     report_ratios(f"{title}: ncgen A {2 * model.nq}×{2 * model.nq}, B {2 * model.nq}×{model.nu} ({st.kernels}); "
-                  f"MuJoCo A {nxm}×{nxm}", batches(fns, calls, repeat), "ncgen tables st.jacobians", "target ≤ 0.5")
+                  f"MuJoCo A {nxm}×{nxm}; CPU time", batches(fns, calls, repeat, clock=time.process_time),
+                  "ncgen tables st.jacobians", "target ≤ 0.5")
 
 
 def panda_twin():
@@ -145,6 +155,7 @@ def main(argv=None) -> int:
     ap.add_argument("--bars", type=int, default=20)
     ap.add_argument("--flat", action="store_true", help="also the flat step function (compiled first)")
     ap.add_argument("--talos", action="store_true", help="also Talos's time to the first Jacobian")
+    ap.add_argument("--chain-only", action="store_true", help="the chain's Jacobians alone (part 1)")
     ap.add_argument("--smoke", action="store_true", help="tiny sizes: check that the script runs")
     args = ap.parse_args(argv)
     if args.smoke:
@@ -154,7 +165,7 @@ def main(argv=None) -> int:
     chain = mujoco.MjModel.from_xml_string(chain_mjcf(args.bars, integrator="Euler", timestep=H))
     compare(f"chain of N = {args.bars} bars, h = {H} s", chain_system(args.bars).build(), chain, chain.nu,
             args.calls, args.repeat, args.flat)
-    if not args.smoke:
+    if not (args.smoke or args.chain_only):
         model, m = panda_twin()
         compare(f"Panda (mimic removed), h = {H} s", model, m, m.nu, args.calls, args.repeat, args.flat)
         print("\n=== time to the first step Jacobians of a new robot (fresh process, element library cached)")

@@ -2,7 +2,8 @@
 issues 34 and 37): the implicit function theorem on the table stepper's own Newton systems,
 with no compiler call.  Checked against the flat step function (the same equations through
 CasADi's generated code: steps and Jacobians equal to 1e-10) and against central differences
-of the step itself (1e-6), on a chain, a spatial four-bar, a controlled cart-pole (an input
+of the step itself (1e-6), on a chain, a chain of 25 bars (its 150 columns in three blocks), a
+spatial four-bar, a controlled cart-pole (an input
 force), a chain of spring-dampers pushed by inputs (the dampers' ∂F/∂w in both stages), a
 planar arm on two actuated hinges, a URDF arm of three hinges and a slider (actuated:
 their efforts' Hessians) and a URDF gripper whose second finger mimics the first (two
@@ -99,8 +100,21 @@ def planar_arm():
     return s.build()
 
 
+def long_chain(n: int = 25):
+    """``n`` bars sharing their ends in a staircase from a ground point (as
+    benchmarks/common.py's chain): 3n coordinates, so that the step Jacobians' 6n columns are
+    taken in several blocks of TAB_JAC_BLOCK (ncgen_table_jacobians.h) and the last one partial."""
+    s = nc.System(f"tab_chain{n}", gravity=(0.0, 0.0, -9.81))
+    start, at = s.ground.point((0.0, 0.0, 0.0)), np.zeros(3)
+    for k in range(1, n + 1):
+        at = at + (0.3 * (k % 2), 0.3 * (1 - k % 2), 0.0)
+        start = s.add_bar(f"bar{k}", coords="rr", mass=0.2, ends=[start, tuple(at)]).end(1)
+    return s.build()
+
+
 def models():
     yield "chain", nc.System.from_toml(EXAMPLES / "chain.toml").build(), 0.01
+    yield "long_chain", long_chain(), 1e-3
     yield "planar_arm", planar_arm(), 0.01
     yield "fourbar_3d", nc.System.from_toml(EXAMPLES / "fourbar_3d.toml").build(), 0.01
     yield "cartpole", nc.System.from_toml(EXAMPLES / "cartpole.toml").build(), 0.02
@@ -157,8 +171,8 @@ def check_against_differences(st, x, u, tag, u_eps=1e-5):
 FAST_FLAT = ("chain", "cartpole")
 
 
-@pytest.mark.parametrize("name", ["chain", "fourbar_3d", "cartpole", "pushed_springs", "planar_arm", "arm",
-                                  "gripper"])
+@pytest.mark.parametrize("name", ["chain", "long_chain", "fourbar_3d", "cartpole", "pushed_springs", "planar_arm",
+                                  "arm", "gripper"])
 def test_table_jacobians_equal_central_differences(cases, name):
     if name not in cases:
         pytest.skip("yourdfpy not installed")

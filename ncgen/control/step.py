@@ -33,6 +33,7 @@ Not thread-safe: one object per thread.
 """
 from __future__ import annotations
 
+import math
 
 import numpy as np
 
@@ -53,6 +54,7 @@ COMPILED = ("step_solution", "step_G_z", "step_G_y", "step_jacobian", "step_adjo
 #: A step whose residual ‖G‖∞ exceeds this (relative to the largest mass-matrix entry plus
 #: one), or whose state or unknowns are not finite, did not converge and is refused.
 RESIDUAL_TOL = 1e-8
+_NO_INPUTS = np.zeros(0)
 
 
 def step_function(model, h: float, method: str = "rattle", *, max_iter: int = MAX_ITER,
@@ -169,6 +171,12 @@ class StepFunction:
 
     # ----------------------------------------------------------------- arguments
     def _args(self, x, u, p, t) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        if u is None and self.nu == 0:
+            u = _NO_INPUTS
+        if (p is None and t is None and type(x) is np.ndarray and x.dtype == np.float64 and x.shape == (self.nx,)
+                and type(u) is np.ndarray and u.dtype == np.float64 and u.shape == (self.nu,)
+                and math.isfinite(x.dot(x) + u.dot(u))):
+            return x, u, self.model.p0, self.model.t0   # float64 vectors of the right sizes, finite: as they are
         x = state_vector(x, self.nx, "x", "the state [q; v]")
         u = np.zeros(0) if u is None and self.nu == 0 else state_vector(u, self.nu, "u", "the inputs")
         p = self.model.p0 if p is None else state_vector(p, self.np, "p", "the parameters")
@@ -202,8 +210,8 @@ class StepFunction:
                                      f"ended without a residual below the tolerance ({what} after {iterations} "
                                      "iterations); take a smaller h, raise max_iter, or start from a state closer "
                                      "to the constraints")
-        self._check(res, x1, x1, where)
-        if jacobians and not (np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
+        self._check(res, x1, np.zeros(0), where)
+        if jacobians and not (math.isfinite(A.sum() + B.sum()) or (np.all(np.isfinite(A)) and np.all(np.isfinite(B)))):
             raise StepDidNotConverge(f"step of {self.model.name!r} (h = {self.h:g} s): its Jacobians are not "
                                      "finite: the Newton matrix is singular there (redundant constraints or a "
                                      "singular configuration)")

@@ -80,20 +80,21 @@ class TableStep:
         self._res, self._it = np.zeros(1), np.zeros(1, dtype=np.intc)
         self._p = np.zeros(1)
         self._D = constraint_hessians(stepper)
+        # the addresses of the fixed arrays, looked up once (the calls pass only x's and u's)
+        self._fixed = (*(a.ctypes.data for a in self._D), self._q1.ctypes.data, self._v1.ctypes.data)
+        self._jac = (self._Jx.ctypes.data, self._Ju.ctypes.data if self.nu else None)
+        self._out = (self._res.ctypes.data, self._it.ctypes.data)
+        self._p_at = self._p.ctypes.data
 
     def __call__(self, x: np.ndarray, u: np.ndarray, t: float, jacobians: bool):
         """``(status, x1, res, iterations, A, B)`` (``A``, ``B`` None unless ``jacobians``;
         fresh arrays).  ``status``: the stepper's code (0 when the step converged)."""
-        nq = self.nq
         x = np.ascontiguousarray(x, dtype=float)
         u = np.ascontiguousarray(u, dtype=float) if self.nu else self._p
-        Jx = self._Jx.ctypes.data if jacobians else None
-        status = self._fn(self._S, x.ctypes.data, x[nq:].ctypes.data, float(t), u.ctypes.data, self._p.ctypes.data,
-                          self.h, self._opt, *(a.ctypes.data for a in self._D), self._q1.ctypes.data,
-                          self._v1.ctypes.data, Jx,
-                          self._Ju.ctypes.data if jacobians and self.nu else None, self._res.ctypes.data,
-                          self._it.ctypes.data)
-        x1 = np.concatenate([self._q1, self._v1])
+        at = x.ctypes.data
+        status = self._fn(self._S, at, at + 8 * self.nq, float(t), u.ctypes.data, self._p_at, self.h, self._opt,
+                          *self._fixed, *(self._jac if jacobians else (None, None)), *self._out)
+        x1 = np.concatenate((self._q1, self._v1))
         A = self._Jx.copy() if jacobians else None
         B = self._Ju.copy() if jacobians else None
         return int(status), x1, float(self._res[0]), int(self._it[0]), A, B

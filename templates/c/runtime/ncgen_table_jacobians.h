@@ -27,10 +27,11 @@
  * columns of ∂x⁺/∂x (2nq x 2nq) and ∂x⁺/∂u (2nq x nu) are these δx⁺ for unit perturbations;
  * since every δx⁺ lies in the 2 dof-dimensional tangent space of the state manifold at x⁺,
  * tab_jac_rows computes them as Q (Qᵀ [Jx Ju]) from 2 dof reverse passes instead (6 dof solves
- * and one more factorisation against 2 (2nq + nu) solves), and the columns one by one are
- * the fallback where that does not apply, where it takes more solves, or where its result
- * disagrees with one forward column (TAB_JAC_COLUMNS and TAB_JAC_ROWS force either path for
- * their unit tests).
+ * and one more factorisation against 2 (2nq + nu) solves), and the columns (tab_jac_columns:
+ * in blocks, each stage's solves over a whole block in one sweep of the factors) are taken
+ * where that does not apply, where it takes more solves, or where its result disagrees with
+ * one forward column (TAB_JAC_COLUMNS and TAB_JAC_ROWS force either path for their unit
+ * tests).
  * L is given as the constant matrix D (tab_jac_hessian), computed once per model by the
  * caller from A(e_i) − A(0).
  *
@@ -320,7 +321,7 @@ static double tab_jac_tdot(const tab_jac_csc *C, int j, const double *x) {
  * with K1's own factors; where K1 has QR factors, K1ᵀ is QR-factored in K's own pattern (its
  * values moved by the pattern's transpose).  Returns 0, 1 when this path does not apply (K's
  * pattern not structurally symmetric on the QR's path, a basis vector lost in the orthonormalisation: the
- * caller then takes the columns one by one) or 2 when out of memory. */
+ * caller then takes the columns, tab_jac_columns) or 2 when out of memory. */
 static int tab_jac_rows(const double *q, const double *u, double h, const tab_jac_hessian *D, const double *q_next,
                         tab_jac_work *b, double *Jx, double *Ju) {
   const ncgen_stepper_tables *S = tab_cur;
@@ -480,45 +481,144 @@ done:
 }
 
 /* The relative agreement below which the rows' [Jx Ju] d (tab_jac_rows) must meet the
- * forward column of a pseudo-random d, else the columns are taken one by one: the reverse
+ * forward column of a pseudo-random d, else the columns are taken (tab_jac_columns): the reverse
  * passes lose digits where K2's solves are not accurate enough (their forward error, amplified
  * in the basis of T(x⁺) and in α: with K2's solves unrefined, Talos with its floating base
  * 9e-8 by the LU and 1e-5 by the QR, the Panda 4e-8 by the LU; refined, Talos 6e-10, the
  * Panda 5e-12). */
 #define TAB_JAC_ROWS_TOL 1e-9
 
-/* col = δx⁺ (2nq) for the perturbation b->dy = [δq; δv; δu] (the top of the file). */
-static void tab_jac_column(const double *q, const double *u, double h, const tab_jac_hessian *D,
-                           const double *q_next, tab_jac_work *b, double *col) {
-  const ncgen_stepper_tables *S = tab_cur;
-  const int nq = S->T->nq, nc = S->T->nc, n = nq + nc;
-  const double *dq = b->dy, *dv = b->dy + nq, *du = S->nu ? b->dy + 2 * nq : 0;
-  int i;
-  /* first stage: δz1 = −K1⁻¹ δr1 */
-  tab_jac_forces(q, u, b->sj1, dq, b->zero, du, b);
-  memset(b->dr, 0, sizeof(double) * (size_t)n);
-  tab_mass_times(dv, b->dr);
-  for (i = 0; i < nq; ++i) b->dr[i] = -b->dr[i] - h / 2 * b->dF[i];
-  tab_jac_dA(D, dq, b);
-  tab_a_times(b->La, b->z1 + nq, b->dr, 1);
-  tab_a_times(b->A1, dq, b->dr + nq, 0);
-  for (i = 0; i < nc; ++i) b->dr[nq + i] /= h;
-  tab_jac_solve(&b->f1, 0, b->dr, b->dz1, b->y);
-  for (i = 0; i < n; ++i) b->dz1[i] = -b->dz1[i];
-  /* second stage: δq⁺ = δq + h δw, δz2 = −K2⁻¹ δr2 */
-  for (i = 0; i < nq; ++i) b->dq1[i] = dq[i] + h * b->dz1[i];
-  tab_jac_dA(D, b->dq1, b);
-  tab_jac_forces(q_next, u, b->sj2, b->dq1, b->dz1, du, b);
-  memset(b->dr, 0, sizeof(double) * (size_t)n);
-  tab_mass_times(b->dz1, b->dr);
-  for (i = 0; i < nq; ++i) b->dr[i] = -b->dr[i] - h / 2 * b->dF[i];
-  tab_a_times(b->La, b->z2 + nq, b->dr, 1);
-  tab_a_times(b->La, b->z2, b->dr + nq, 0);
-  tab_jac_solve(&b->f2, 0, b->dr, b->dz2, b->y);
-  for (i = 0; i < nq; ++i) {
-    col[i] = b->dq1[i];
-    col[nq + i] = -b->dz2[i];
+/* y −= a x over m entries (unrolled by four: gcc's -O2 pairs them into vector operations). */
+static void tab_jac_sub_scaled(int m, double a, const double *restrict x, double *restrict y) {
+  int r = 0;
+  for (; r + 4 <= m; r += 4) {
+    y[r] -= a * x[r];
+    y[r + 1] -= a * x[r + 1];
+    y[r + 2] -= a * x[r + 2];
+    y[r + 3] -= a * x[r + 3];
   }
+  for (; r < m; ++r) y[r] -= a * x[r];
+}
+
+/* X = K⁻¹ B for m right-hand sides at once from the factors f of K (with f->refine, refined
+ * once as tab_jac_solve does).  B and X are n x m row by row (row i of every right-hand side
+ * contiguous, B + i m), so that the sweeps over the factors' nonzeros run over the m values
+ * (one index read per m multiply-adds instead of one each); Y: 3 n m doubles of scratch,
+ * y: 3n (the QR's solves, column by column). */
+static void tab_jac_solve_many(const tab_jac_factors *f, const double *B, double *X, int m, double *Y, double *y) {
+  const ncgen_qr_pattern *P = &tab_cur->qr;
+  const ncgen_lu_pattern *U = &tab_cur->lu;
+  const int n = P->n;
+  double *res = Y + (size_t)n * m, *dx = res + (size_t)n * m;
+  int i, j, k, r, pass;
+  if (!f->lu) {
+    for (j = 0; j < m; ++j) {
+      for (i = 0; i < n; ++i) res[i] = B[(size_t)i * m + j];
+      ncgen_qr_solve(P, f->V, f->R, f->beta, res, dx, y);
+      for (i = 0; i < n; ++i) X[(size_t)i * m + j] = dx[i];
+    }
+    return;
+  }
+  for (pass = 0; pass < 1 + f->refine; ++pass) {
+    const double *rhs = pass ? res : B;
+    double *sol = pass ? dx : X;
+    if (pass) {                          /* res = B − K X */
+      memcpy(res, B, sizeof(double) * (size_t)n * m);
+      for (j = 0; j < n; ++j)
+        for (k = P->k_colind[j]; k < P->k_colind[j + 1]; ++k)
+          tab_jac_sub_scaled(m, f->K[k], X + (size_t)j * m, res + (size_t)P->k_row[k] * m);
+    }
+    for (i = 0; i < n; ++i) memcpy(Y + (size_t)U->pinv[i] * m, rhs + (size_t)i * m, sizeof(double) * (size_t)m);
+    for (j = 0; j < n; ++j)              /* L z = y, column by column */
+      for (k = U->l_colind[j]; k < U->l_colind[j + 1]; ++k)
+        tab_jac_sub_scaled(m, f->lo[k], Y + (size_t)j * m, Y + (size_t)U->l_row[k] * m);
+    for (j = n - 1; j >= 0; --j) {       /* (D U) x = z, column by column */
+      double *yc = Y + (size_t)j * m;
+      const double d = f->dinv[j];
+      for (r = 0; r < m; ++r) yc[r] *= d;
+      for (k = U->u_colind[j]; k < U->u_colind[j + 1]; ++k)
+        tab_jac_sub_scaled(m, f->up[k], yc, Y + (size_t)U->u_row[k] * m);
+    }
+    for (j = 0; j < n; ++j) memcpy(sol + (size_t)U->p[j] * m, Y + (size_t)j * m, sizeof(double) * (size_t)m);
+  }
+  if (f->refine)
+    for (i = 0; i < n * m; ++i) X[i] += dx[i];
+}
+
+/* The right-hand sides taken at once by tab_jac_columns (its scratch: 6 n of them). */
+#define TAB_JAC_BLOCK 64
+
+/* Column j of row-by-row storage (n rows, m columns) from or into the vector x. */
+static void tab_jac_put(double *M, int n, int m, int j, const double *x) {
+  int i;
+  for (i = 0; i < n; ++i) M[(size_t)i * m + j] = x[i];
+}
+
+static void tab_jac_get(const double *M, int n, int m, int j, double *x) {
+  int i;
+  for (i = 0; i < n; ++i) x[i] = M[(size_t)i * m + j];
+}
+
+/* out = [δx⁺ for each perturbation] (2nq x m, column-major): the perturbations [δq; δv; δu]
+ * the columns of dY ((2nq + nu) x m, column-major), or the unit vectors e_first, ...,
+ * e_(first + m − 1) when dY is NULL (the top of the file gives the equations).  Taken in
+ * blocks of TAB_JAC_BLOCK, each stage's solves for a whole block in one sweep
+ * (tab_jac_solve_many).  Returns 0, or 1 when out of memory. */
+static int tab_jac_columns(const double *q, const double *u, double h, const tab_jac_hessian *D,
+                           const double *q_next, tab_jac_work *b, const double *dY, int first, int m, double *out) {
+  const ncgen_stepper_tables *S = tab_cur;
+  const int nq = S->T->nq, nc = S->T->nc, n = nq + nc, ny = 2 * nq + S->nu;
+  const double *dq = b->dy, *dv = b->dy + nq, *du = S->nu ? b->dy + 2 * nq : 0;
+  double *mem = malloc(sizeof(double) * (size_t)6 * n * TAB_JAC_BLOCK + 1), *R = mem, *Z = R + (size_t)n * TAB_JAC_BLOCK,
+         *Y = Z + (size_t)n * TAB_JAC_BLOCK;
+  int lo, mb, j, i;
+  if (!mem) return 1;
+  for (lo = 0; lo < m; lo += mb) {
+    mb = m - lo < TAB_JAC_BLOCK ? m - lo : TAB_JAC_BLOCK;
+    for (j = 0; j < mb; ++j) {           /* first stage: δr1, solved for δz1 = −K1⁻¹ δr1 */
+      if (dY) memcpy(b->dy, dY + (size_t)(lo + j) * ny, sizeof(double) * (size_t)ny);
+      else {
+        memset(b->dy, 0, sizeof(double) * (size_t)ny);
+        b->dy[first + lo + j] = 1;
+      }
+      tab_jac_forces(q, u, b->sj1, dq, b->zero, du, b);
+      memset(b->dr, 0, sizeof(double) * (size_t)n);
+      if (dY || (first + lo + j >= nq && first + lo + j < 2 * nq)) tab_mass_times(dv, b->dr);   /* δv ≠ 0 */
+      for (i = 0; i < nq; ++i) b->dr[i] = -b->dr[i] - h / 2 * b->dF[i];
+      if (dY || first + lo + j < nq) {    /* δq ≠ 0 */
+        tab_jac_dA(D, dq, b);
+        tab_a_times(b->La, b->z1 + nq, b->dr, 1);
+        tab_a_times(b->A1, dq, b->dr + nq, 0);
+        for (i = 0; i < nc; ++i) b->dr[nq + i] /= h;
+      }
+      tab_jac_put(R, n, mb, j, b->dr);
+    }
+    tab_jac_solve_many(&b->f1, R, Z, mb, Y, b->y);
+    for (j = 0; j < mb; ++j) {           /* second stage: δq⁺ = δq + h δw, δr2 */
+      double *col = out + (size_t)(lo + j) * 2 * nq;
+      if (dY) memcpy(b->dy, dY + (size_t)(lo + j) * ny, sizeof(double) * (size_t)ny);
+      else {
+        memset(b->dy, 0, sizeof(double) * (size_t)ny);
+        b->dy[first + lo + j] = 1;
+      }
+      tab_jac_get(Z, n, mb, j, b->dz1);
+      for (i = 0; i < n; ++i) b->dz1[i] = -b->dz1[i];
+      for (i = 0; i < nq; ++i) col[i] = b->dq1[i] = dq[i] + h * b->dz1[i];
+      tab_jac_dA(D, b->dq1, b);
+      tab_jac_forces(q_next, u, b->sj2, b->dq1, b->dz1, du, b);
+      memset(b->dr, 0, sizeof(double) * (size_t)n);
+      tab_mass_times(b->dz1, b->dr);
+      for (i = 0; i < nq; ++i) b->dr[i] = -b->dr[i] - h / 2 * b->dF[i];
+      tab_a_times(b->La, b->z2 + nq, b->dr, 1);
+      tab_a_times(b->La, b->z2, b->dr + nq, 0);
+      tab_jac_put(R, n, mb, j, b->dr);
+    }
+    tab_jac_solve_many(&b->f2, R, Z, mb, Y, b->y);   /* δz2 = −K2⁻¹ δr2 */
+    for (j = 0; j < mb; ++j)
+      for (i = 0; i < nq; ++i) out[(size_t)(lo + j) * 2 * nq + nq + i] = -Z[(size_t)i * mb + j];
+  }
+  free(mem);
+  return 0;
 }
 
 /* The step and, when Jx is not NULL, its Jacobians Jx = ∂x⁺/∂x (2nq x 2nq) and Ju = ∂x⁺/∂u
@@ -583,17 +683,20 @@ static int tab_step_jacobians(const double *q, const double *v, double t, const 
   status = STEP_BAD_INPUT;
   if (i == 2) goto done;
   if (i == 0) {                          /* the rows checked on one forward column */
-    double *want = malloc(sizeof(double) * (size_t)(2 * nq) + 1), scale = 1, err = 0;
+    double *want = malloc(sizeof(double) * (size_t)(4 * nq + nu) + 1), *dir = want + 2 * nq, scale = 1, err = 0;
     unsigned long long seed = 0x2545F4914F6CDD1DULL;
     if (!want) goto done;
     for (j = 0; j < 2 * nq + nu; ++j) {
       seed = seed * 6364136223846793005ULL + 1442695040888963407ULL;
-      b.dy[j] = (double)(seed >> 11) / 9007199254740992.0 - 0.5;
+      dir[j] = (double)(seed >> 11) / 9007199254740992.0 - 0.5;
     }
-    tab_jac_column(q, u, h, D, q_next, &b, want);
+    if (tab_jac_columns(q, u, h, D, q_next, &b, dir, 0, 1, want)) {
+      free(want);
+      goto done;
+    }
     for (i = 0; i < 2 * nq; ++i) {
       double got = 0;
-      for (j = 0; j < 2 * nq + nu; ++j) got += (j < 2 * nq ? Jx[i + (size_t)j * 2 * nq] : Ju[i + (size_t)(j - 2 * nq) * 2 * nq]) * b.dy[j];
+      for (j = 0; j < 2 * nq + nu; ++j) got += (j < 2 * nq ? Jx[i + (size_t)j * 2 * nq] : Ju[i + (size_t)(j - 2 * nq) * 2 * nq]) * dir[j];
       scale = fabs(want[i]) > scale ? fabs(want[i]) : scale;
       err = fabs(got - want[i]) > err || isnan(got) ? fabs(got - want[i]) : err;
     }
@@ -606,11 +709,9 @@ static int tab_step_jacobians(const double *q, const double *v, double t, const 
 #endif
   status = STEP_OK;
   if (i != 1) goto done;
-  for (j = 0; j < 2 * nq + nu; ++j) {
-    memset(b.dy, 0, sizeof(double) * (size_t)(2 * nq + nu));
-    b.dy[j] = 1;
-    tab_jac_column(q, u, h, D, q_next, &b, j < 2 * nq ? Jx + (size_t)j * 2 * nq : Ju + (size_t)(j - 2 * nq) * 2 * nq);
-  }
+  status = STEP_BAD_INPUT;                /* the columns, unit perturbations of x then of u */
+  if (tab_jac_columns(q, u, h, D, q_next, &b, 0, 0, 2 * nq, Jx) || (nu && tab_jac_columns(q, u, h, D, q_next, &b, 0, 2 * nq, nu, Ju)))
+    goto done;
   status = STEP_OK;
 done:
   free(block);
