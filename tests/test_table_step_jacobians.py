@@ -8,7 +8,7 @@ force), a chain of spring-dampers pushed by inputs (the dampers' ∂F/∂w in bo
 planar arm on two actuated hinges, a URDF arm of three hinges and a slider (actuated:
 their efforts' Hessians) and a URDF gripper whose second finger mimics the first (two
 sliders in a fixed ratio); the z1 and the UR10 from their
-URDFs (slow); a new model's Jacobians in a process with no compiler on PATH; the automatic
+URDFs (slow); Talos against Richardson-extrapolated differences (slow); a new model's Jacobians in a process with no compiler on PATH; the automatic
 choice, the override and the refusal."""
 from __future__ import annotations
 
@@ -366,6 +366,51 @@ def test_stock_panda_table_jacobians_equal_central_differences():
     assert st.kernels == "tables"
     x, u = moving_state(model, st, seed=4)
     check_against_differences(st, x, u, "panda", u_eps=1e-3)
+
+
+def richardson(f, z, eps):
+    """``(R, error)``: central differences of ``f`` at ``z`` (absolute steps) extrapolated by
+    Richardson from the steps ``eps`` and ``eps / 2`` (the ``eps²`` term removed), and the
+    reference's own error estimated as its distance to the extrapolation from ``eps / 2`` and
+    ``eps / 4``."""
+    def central_at(e):
+        return np.column_stack([(f(z + d) - f(z - d)) / (2 * e) for d in np.eye(z.size) * e])
+
+    D = [central_at(eps / 2 ** k) for k in range(3)]
+    R1, R2 = (4 * D[1] - D[0]) / 3, (4 * D[2] - D[1]) / 3
+    return R2, np.max(np.abs(R2 - R1))
+
+
+@pytest.mark.slow
+def test_talos_table_jacobians_equal_extrapolated_differences():
+    """Talos (floating base, 32 actuated joints, 450 state entries): its step Jacobians from
+    the tables equal Richardson-extrapolated central differences of the step to 1e-6 relative
+    to max |J|, with the reference's own error estimate below 1e-7.  Plain central differences
+    cannot show this: their error is the truncation ∝ eps² (A's columns off the constraint
+    manifold, corrected within one step, are strongly curved: 7.3e-6 at eps = 1e-5, 1.8e-6 at
+    5e-6, 4.6e-7 at 2.5e-6) plus the step's round-off (≈ 4e-11 in x⁺, divided by eps: B's
+    2.8e-6 at 1e-5, 4e-5 at 1e-6; the 4.4e-6 of stop 47), and no single eps brings both below
+    1e-6 for A; extrapolated, both agree to ≈ 5e-9."""
+    pytest.importorskip("yourdfpy")
+    try:
+        urdf = nc.robots.urdf_path("talos_reduced")
+    except nc.ModelError as exc:             # example-robot-data not installed
+        pytest.skip(str(exc))
+    model = nc.System.from_urdf(urdf, floating_base=True).build()
+    st = nc.step_function(model, 1e-3)
+    assert st.kernels == "tables"
+    rng = np.random.default_rng(4)
+    x = np.concatenate([model.q0, nc.project_velocity(model, model.q0, 0.5 * rng.normal(size=model.nq))])
+    for _ in range(3):
+        x = st(x, rng.normal(size=model.nu))
+    u = rng.normal(size=model.nu)
+    x1, A, B = st.jacobians(x, u)
+    assert np.array_equal(x1, st(x, u))
+    for name, J, f, z, eps in (("A", A, lambda y: st(y, u), x, 4e-6), ("B", B, lambda w: st(x, w), u, 2e-2)):
+        R, error = richardson(f, z, eps)
+        scale = max(1.0, np.max(np.abs(J)))
+        assert error / scale < 1e-7, (name, error / scale)
+        assert np.max(np.abs(J - R)) / scale < FD, (name, np.max(np.abs(J - R)) / scale, error / scale)
 
 
 def test_stepper_tables_struct_matches_its_python_mirror():
