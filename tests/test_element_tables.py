@@ -8,6 +8,7 @@ with no compiler on PATH once the library is cached."""
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -70,7 +71,8 @@ def test_examples_equal_the_flat_functions_or_are_refused_by_kind(path, library)
         with pytest.raises(UnsupportedElements) as info:
             model_tables(model)
         assert info.value.kinds == REFUSED[path.stem]
-        assert "driven Revolute (joint 'motor')" in str(info.value)
+        assert ("driven Revolute (joint 'motor') (a driven joint's rows depend on time through its drive"
+                in str(info.value))
         return
     assert_equal_to_flat(model, library)
 
@@ -321,30 +323,96 @@ def test_element_package_is_deterministic_and_warning_free(tmp_path):
         assert out.returncode == 0, out.stderr[-3000:]
 
 
-#: URDFs of the test extras (example-robot-data): floating base, and the kinds refused (none: the
-#: Panda's finger mimic is of two Prismatic joints, the slider_ratio primitive).
-URDFS = {"ur_description/urdf/ur5_robot.urdf": (False, None), "so_arm_description/urdf/so101.urdf": (False, None),
-         "solo_description/robots/solo12.urdf": (True, None),
-         "panda_description/urdf/panda.urdf": (False, None)}
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("rel", list(URDFS), ids=[Path(r).stem for r in URDFS])
-def test_urdf_robots_equal_the_flat_functions_or_are_refused(rel, library):
+def urdfs_of_the_test_extras() -> list:
+    """``(id, path)`` of every URDF the test extras ship: example-robot-data's robots (ids their
+    paths under ``robots/``) and MuJoCo's test model; ``(package, None)`` for a package not
+    installed."""
     import importlib.metadata as md
+    import importlib.util
 
     try:
-        found = [f for f in md.files("example-robot-data") or [] if str(f).endswith(rel)]
+        files = md.files("example-robot-data") or []
     except md.PackageNotFoundError:
+        files = None
+    out = [("example-robot-data", None)] if files is None else sorted(
+        (str(f).split("/robots/", 1)[1], f.locate()) for f in files
+        if str(f).endswith(".urdf") and "/robots/" in str(f))
+    spec = importlib.util.find_spec("mujoco")
+    mujoco = spec and Path(spec.origin).parent / "testdata" / "model.urdf"
+    return out + [("mujoco/testdata/model.urdf", mujoco) if mujoco and mujoco.exists() else ("mujoco", None)]
+
+
+#: URDFs built with a floating base (the others' root link fixed to the world): quadrotors and Solo-12.
+FLOATING = {"hector_description/robots/quadrotor_base.urdf", "iris_description/robots/iris.urdf",
+            "iris_description/robots/iris_simple.urdf", "solo_description/robots/solo12.urdf"}
+_MIMIC_REVOLUTE = "Mimic of a Revolute joint (its angle, an atan2, is not a quadratic form of q)"
+#: URDFs whose element kinds the tables refuse (the Panda's finger mimic is of two Prismatic
+#: joints, the slider_ratio primitive, and is covered).
+TABLES_REFUSE = {"pr2_description/urdf/pr2.urdf": _MIMIC_REVOLUTE,
+                 "talos_data/robots/talos_full_v2.urdf": _MIMIC_REVOLUTE,
+                 "talos_data/robots/talos_full_v2_box.urdf": _MIMIC_REVOLUTE,
+                 "tiago_pro_description/robots/tiago_pro.urdf": _MIMIC_REVOLUTE}
+_INERTIA = "the inertia tensor is not physical"
+#: URDFs ncgen refuses to import, and what the refusal must say (the files' own defects, or a
+#: model ncgen cannot build: the G1's waist joints are dependent at the URDF's zero pose).
+IMPORT_REFUSES = {
+    "alex_description/urdf/alex_psyonic_hands.urdf": "joint 'Left_index_q2': mimics 'index_q1', which is not a movable",
+    "g1_description/urdf/g1_29dof_rev_1_0.urdf": "the initial configuration is singular",
+    "g1_description/urdf/g1_29dof_with_hand_rev_1_0.urdf": "the initial configuration is singular",
+    "human_description/robots/human.urdf": "link(s) left_upperleg_virtual (moved by joint 'left_hip_Z') have no mass",
+    "icub_description/robots/icub.urdf": f"link 'head': {_INERTIA}",
+    "icub_description/robots/icub_reduced.urdf": f"link 'head': {_INERTIA}",
+    "romeo_description/urdf/romeo.urdf": "link(s) LFinger11Link (moved by joint 'LHand') have no mass",
+    "romeo_description/urdf/romeo_laas_small.urdf": f"link 'body': {_INERTIA}",
+    "romeo_description/urdf/romeo_small.urdf": f"link 'RShoulderYawLink': {_INERTIA}",
+    "tiago_description/robots/tiago.urdf": f"link 'base_antenna_left_link': {_INERTIA}",
+    "tiago_description/robots/tiago_dual.urdf": f"link 'base_antenna_left_link': {_INERTIA}",
+    "tiago_description/robots/tiago_no_hand.urdf": f"link 'base_antenna_left_link': {_INERTIA}",
+    "ur_description/urdf/ur3.urdf": "expected one root link (a tree), found []",      # the file has no links
+    "mujoco/testdata/model.urdf": "system 'tool' has no members",                      # one link, fixed
+}
+#: The URDFs checked in the fast tier (a few coordinates, or refused while reading the file);
+#: every other one in the slow tier.
+FAST_URDFS = {"asr_twodof_description/urdf/TwoDofs.urdf", "borinot_description/urdf/borinot_flying_arm_2.urdf",
+              "double_pendulum_description/urdf/double_pendulum.urdf",
+              "double_pendulum_description/urdf/double_pendulum_continuous.urdf",
+              "double_pendulum_description/urdf/double_pendulum_simple.urdf",
+              "finger_edu_description/robots/finger_edu.urdf", *FLOATING - {"solo_description/robots/solo12.urdf"},
+              *(k for k in IMPORT_REFUSES if not k.startswith(("g1_", "alex_")))}
+EXTRA_URDFS = urdfs_of_the_test_extras()
+
+
+def test_the_urdf_expectations_name_shipped_files():
+    """Every URDF named in :data:`FLOATING`, :data:`TABLES_REFUSE`, :data:`IMPORT_REFUSES`
+    and :data:`FAST_URDFS` is one the installed extras ship (a misspelt name would leave a
+    robot checked against the wrong expectation)."""
+    found = {r for r, p in EXTRA_URDFS if p is not None}
+    if "a1_description/urdf/a1.urdf" not in found:
         pytest.skip("example-robot-data is not installed")
-    if not found:
-        pytest.skip(f"example-robot-data has no {rel}")
-    floating, refused = URDFS[rel]
-    model = nc.System.from_urdf(str(found[0].locate()), floating_base=floating).build()
-    if refused is not None:
+    missing = (FLOATING | set(TABLES_REFUSE) | set(IMPORT_REFUSES) | FAST_URDFS) - found
+    if ("mujoco", None) in EXTRA_URDFS:
+        missing.discard("mujoco/testdata/model.urdf")
+    assert not missing, missing
+
+
+@pytest.mark.parametrize("rel, path", [pytest.param(r, p, marks=() if r in FAST_URDFS else pytest.mark.slow)
+                                       for r, p in EXTRA_URDFS], ids=[r for r, _ in EXTRA_URDFS])
+def test_urdf_robots_equal_the_flat_functions_or_are_refused(rel, path, library):
+    """Every URDF of the test extras: its element tables' Φ, A, Φ_t, γ and M equal the flat
+    CasADi functions to 1e-12 (relative to the largest entry, or 1), or the tables refuse it
+    by kind (:data:`TABLES_REFUSE`), or ncgen refuses to import it saying why
+    (:data:`IMPORT_REFUSES`)."""
+    if path is None:
+        pytest.skip(f"{rel} is not installed")
+    if rel in IMPORT_REFUSES:
+        with pytest.raises(nc.ModelError, match=re.escape(IMPORT_REFUSES[rel])):
+            nc.System.from_urdf(str(path), floating_base=rel in FLOATING).build()
+        return
+    model = nc.System.from_urdf(str(path), floating_base=rel in FLOATING).build()
+    if rel in TABLES_REFUSE:
         with pytest.raises(UnsupportedElements) as info:
             model_tables(model)
-        assert info.value.kinds == refused
+        assert set(info.value.kinds) == {TABLES_REFUSE[rel]}
         return
     tf = table_functions(model, library)
     rng = np.random.default_rng(2)

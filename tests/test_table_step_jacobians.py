@@ -7,9 +7,9 @@ spatial four-bar, a controlled cart-pole (an input
 force), a chain of spring-dampers pushed by inputs (the dampers' ∂F/∂w in both stages), a
 planar arm on two actuated hinges, a URDF arm of three hinges and a slider (actuated:
 their efforts' Hessians) and a URDF gripper whose second finger mimics the first (two
-sliders in a fixed ratio); the z1 and the UR10 from their
-URDFs (slow); Talos against Richardson-extrapolated differences (slow); a new model's Jacobians in a process with no compiler on PATH; the automatic
-choice, the override and the refusal."""
+sliders in a fixed ratio); the z1 and the UR10 from their URDFs (slow); Talos against
+Richardson-extrapolated differences (slow); a new model's Jacobians in a process with no
+compiler on PATH; the automatic choice, the override and the refusal."""
 from __future__ import annotations
 
 import json

@@ -42,6 +42,13 @@ COVERED_JOINTS = ("Spherical", "Revolute", "Prismatic", "Cylindrical", "Universa
 VECTOR_NAMES = "uvw"
 
 
+#: Why the tables refuse a kind, by the kind name's first word (added to the refusal).
+WHY = {"driven": "a driven joint's rows depend on time through its drive, an expression of t and the model's "
+                 "parameters (e.g. 'omega*t'), which enters Φ, Φ_t and γ; the tables hold numbers only, and the "
+                 "element library, compiled once for every model, cannot evaluate a model's own expressions "
+                 "(that needs the model's flat code, compiled for it)"}
+
+
 class UnsupportedElements(CodegenError):
     """The model has elements of kinds the tables do not cover; ``kinds`` maps each kind to
     the elements of it."""
@@ -49,7 +56,8 @@ class UnsupportedElements(CodegenError):
     def __init__(self, model_name: str, kinds: dict[str, list[str]]):
         self.kinds = kinds
         listed = "; ".join(f"{k} ({', '.join(v)})" for k, v in sorted(kinds.items()))
-        super().__init__(f"model {model_name!r}: the element tables do not cover these element kinds: {listed}; "
+        why = "".join(f" ({WHY[w]})" for w in sorted({k.split()[0] for k in kinds} & set(WHY)))
+        super().__init__(f"model {model_name!r}: the element tables do not cover these element kinds: {listed}{why}; "
                          "use the model's flat functions (model.functions) for it")
 
 

@@ -569,8 +569,8 @@ static int tab_jac_columns(const double *q, const double *u, double h, const tab
   const ncgen_stepper_tables *S = tab_cur;
   const int nq = S->T->nq, nc = S->T->nc, n = nq + nc, ny = 2 * nq + S->nu;
   const double *dq = b->dy, *dv = b->dy + nq, *du = S->nu ? b->dy + 2 * nq : 0;
-  double *mem = malloc(sizeof(double) * (size_t)6 * n * TAB_JAC_BLOCK + 1), *R = mem, *Z = R + (size_t)n * TAB_JAC_BLOCK,
-         *Y = Z + (size_t)n * TAB_JAC_BLOCK;
+  double *mem = malloc(sizeof(double) * (size_t)6 * n * TAB_JAC_BLOCK + 1), *R = mem,
+         *Z = R + (size_t)n * TAB_JAC_BLOCK, *Y = Z + (size_t)n * TAB_JAC_BLOCK;
   int lo, mb, j, i;
   if (!mem) return 1;
   for (lo = 0; lo < m; lo += mb) {
@@ -696,7 +696,8 @@ static int tab_step_jacobians(const double *q, const double *v, double t, const 
     }
     for (i = 0; i < 2 * nq; ++i) {
       double got = 0;
-      for (j = 0; j < 2 * nq + nu; ++j) got += (j < 2 * nq ? Jx[i + (size_t)j * 2 * nq] : Ju[i + (size_t)(j - 2 * nq) * 2 * nq]) * dir[j];
+      for (j = 0; j < 2 * nq + nu; ++j)
+        got += (j < 2 * nq ? Jx[i + (size_t)j * 2 * nq] : Ju[i + (size_t)(j - 2 * nq) * 2 * nq]) * dir[j];
       scale = fabs(want[i]) > scale ? fabs(want[i]) : scale;
       err = fabs(got - want[i]) > err || isnan(got) ? fabs(got - want[i]) : err;
     }
@@ -710,7 +711,8 @@ static int tab_step_jacobians(const double *q, const double *v, double t, const 
   status = STEP_OK;
   if (i != 1) goto done;
   status = STEP_BAD_INPUT;                /* the columns, unit perturbations of x then of u */
-  if (tab_jac_columns(q, u, h, D, q_next, &b, 0, 0, 2 * nq, Jx) || (nu && tab_jac_columns(q, u, h, D, q_next, &b, 0, 2 * nq, nu, Ju)))
+  if (tab_jac_columns(q, u, h, D, q_next, &b, 0, 0, 2 * nq, Jx) ||
+      (nu && tab_jac_columns(q, u, h, D, q_next, &b, 0, 2 * nq, nu, Ju)))
     goto done;
   status = STEP_OK;
 done:
