@@ -545,8 +545,11 @@ static void tab_jac_solve_many(const tab_jac_factors *f, const double *B, double
     for (i = 0; i < n * m; ++i) X[i] += dx[i];
 }
 
-/* The right-hand sides taken at once by tab_jac_columns (its scratch: 6 n of them). */
+/* The right-hand sides taken at once by tab_jac_columns (its scratch: 6 n of them; smaller
+ * in a unit test, so that a tiny model's columns span several blocks). */
+#ifndef TAB_JAC_BLOCK
 #define TAB_JAC_BLOCK 64
+#endif
 
 /* Column j of row-by-row storage (n rows, m columns) from or into the vector x. */
 static void tab_jac_put(double *M, int n, int m, int j, const double *x) {
