@@ -572,8 +572,9 @@ static int tab_jac_columns(const double *q, const double *u, double h, const tab
   const ncgen_stepper_tables *S = tab_cur;
   const int nq = S->T->nq, nc = S->T->nc, n = nq + nc, ny = 2 * nq + S->nu;
   const double *dq = b->dy, *dv = b->dy + nq, *du = S->nu ? b->dy + 2 * nq : 0;
-  double *mem = malloc(sizeof(double) * (size_t)6 * n * TAB_JAC_BLOCK + 1), *R = mem,
-         *Z = R + (size_t)n * TAB_JAC_BLOCK, *Y = Z + (size_t)n * TAB_JAC_BLOCK;
+  const int most = m < TAB_JAC_BLOCK ? m : TAB_JAC_BLOCK;
+  double *mem = malloc(sizeof(double) * (size_t)6 * n * most + 1), *R = mem, *Z = R + (size_t)n * most,
+         *Y = Z + (size_t)n * most;
   int lo, mb, j, i;
   if (!mem) return 1;
   for (lo = 0; lo < m; lo += mb) {
