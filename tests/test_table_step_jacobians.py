@@ -226,6 +226,21 @@ def test_parameters_and_rollouts(cases):
     assert rel(dx0, g) < FD
 
 
+def test_non_finite_arguments_are_named(cases):
+    """float64 vectors of the right sizes pass to the C step as they are (their finiteness by
+    one dot product); NaN or inf in x or u still ends in the argument check's error naming
+    it, through the step and its Jacobians."""
+    model, h = cases["cartpole"]
+    st = nc.step_function(model, h)
+    x, u = moving_state(model, st)
+    for bad_x, bad_u, name in ((np.where(np.arange(x.size) == 3, np.nan, x), u, "x"),
+                               (x, np.full(model.nu, np.inf), "u")):
+        for call in (st, st.jacobians):
+            with pytest.raises(NcgenError, match=rf"^{name}: expected {bad_x.size if name == 'x' else model.nu} "
+                                                 r"finite number\(s\).*with NaN or inf"):
+                call(bad_x, bad_u)
+
+
 def test_auto_choice_override_and_refusal(cases):
     """"auto" takes the tables for a covered model and flat for one with a parameter;
     "tables" on that one names it; a bad value is refused; a step that cannot converge is
