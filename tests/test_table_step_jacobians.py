@@ -400,12 +400,13 @@ def richardson(f, z, eps):
 def test_talos_table_jacobians_equal_extrapolated_differences():
     """Talos (floating base, 32 actuated joints, 450 state entries): its step Jacobians from
     the tables equal Richardson-extrapolated central differences of the step to 1e-6 relative
-    to max |J|, with the reference's own error estimate below 1e-7.  Plain central differences
-    cannot show this: their error is the truncation ∝ eps² (A's columns off the constraint
-    manifold, corrected within one step, are strongly curved: 7.3e-6 at eps = 1e-5, 1.8e-6 at
-    5e-6, 4.6e-7 at 2.5e-6) plus the step's round-off (≈ 4e-11 in x⁺, divided by eps: B's
-    2.8e-6 at 1e-5, 4e-5 at 1e-6; the 4.4e-6 of stop 47), and no single eps brings both below
-    1e-6 for A; extrapolated, A and B agree to 6.5e-9 and 6.7e-9 (estimates 8.7e-9, 7.8e-9)."""
+    to max |J|, with the reference's own error estimate below 1e-7.  Central differences at one
+    step carry two errors of opposite trends, which the 4.4e-6 of stop 47 was: the truncation ∝
+    eps² (A's columns off the constraint manifold, corrected within one step, are strongly
+    curved: 7.3e-6 at eps = 1e-5, 1.8e-6 at 5e-6, 4.6e-7 at 2.5e-6) and the step's round-off
+    (≈ 4e-11 in x⁺, divided by eps: B's 2.8e-6 at 1e-5, 4e-5 at 1e-6).  Extrapolation removes the
+    eps² term, so that each is taken where its round-off is small: A and B agree with it to
+    6.5e-9 and 6.7e-9 (the estimates 8.7e-9 and 7.8e-9)."""
     pytest.importorskip("yourdfpy")
     try:
         urdf = nc.robots.urdf_path("talos_reduced")
