@@ -86,6 +86,9 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800),   # each benchmark sc
                     "=== cart-pole MPC", "RATIO IPOPT re-solve / MPC step"]),
     ("tensegrity_clustered.py", ["=== deploying tower", "RATIO clustered / independent, IDAS",
                                  "RATIO clustered / independent, stepper"]),
+    ("table_step_jacobians.py", ["ncgen's A against central differences of its step",
+                                 "=== chain of N = 3 bars", "RATIO ncgen tables st.jacobians / mujoco mjd_transitionFD "
+                                 "centred"]),
     ("step_jacobians.py", ["=== twodofs: nq = ", "C: ", "compiler peak RSS", "st.jacobians(x, u)",
                            "central differences: A", "TARGET twodofs"]),
     ("tree_tables_callgrind.py", ["=== ur5: instructions per state", "ur5 aba: tables",
