@@ -178,7 +178,7 @@ class StepFunction:
                 and math.isfinite(x.dot(x) + u.dot(u))):
             return x, u, self.model.p0, self.model.t0   # float64 vectors of the right sizes, finite: as they are
         x = state_vector(x, self.nx, "x", "the state [q; v]")
-        u = np.zeros(0) if u is None and self.nu == 0 else state_vector(u, self.nu, "u", "the inputs")
+        u = state_vector(u, self.nu, "u", "the inputs")
         p = self.model.p0 if p is None else state_vector(p, self.np, "p", "the parameters")
         t = self.model.t0 if t is None else as_scalar(t, "t")
         return x, u, p, t

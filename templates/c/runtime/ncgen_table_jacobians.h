@@ -562,6 +562,16 @@ static void tab_jac_get(const double *M, int n, int m, int j, double *x) {
   for (i = 0; i < n; ++i) x[i] = M[(size_t)i * m + j];
 }
 
+/* dy = column k of dY ((ny x ·), column-major), or the unit vector e_i when dY is NULL. */
+static void tab_jac_perturbation(double *dy, const double *dY, int ny, int i, int k) {
+  if (dY) {
+    memcpy(dy, dY + (size_t)k * ny, sizeof(double) * (size_t)ny);
+    return;
+  }
+  memset(dy, 0, sizeof(double) * (size_t)ny);
+  dy[i] = 1;
+}
+
 /* out = [δx⁺ for each perturbation] (2nq x m, column-major): the perturbations [δq; δv; δu]
  * the columns of dY ((2nq + nu) x m, column-major), or the unit vectors e_first, ...,
  * e_(first + m − 1) when dY is NULL (the top of the file gives the equations).  Taken in
@@ -580,11 +590,7 @@ static int tab_jac_columns(const double *q, const double *u, double h, const tab
   for (lo = 0; lo < m; lo += mb) {
     mb = m - lo < TAB_JAC_BLOCK ? m - lo : TAB_JAC_BLOCK;
     for (j = 0; j < mb; ++j) {           /* first stage: δr1, solved for δz1 = −K1⁻¹ δr1 */
-      if (dY) memcpy(b->dy, dY + (size_t)(lo + j) * ny, sizeof(double) * (size_t)ny);
-      else {
-        memset(b->dy, 0, sizeof(double) * (size_t)ny);
-        b->dy[first + lo + j] = 1;
-      }
+      tab_jac_perturbation(b->dy, dY, ny, first + lo + j, lo + j);
       tab_jac_forces(q, u, b->sj1, dq, b->zero, du, b);
       memset(b->dr, 0, sizeof(double) * (size_t)n);
       if (dY || (first + lo + j >= nq && first + lo + j < 2 * nq)) tab_mass_times(dv, b->dr);   /* δv ≠ 0 */
@@ -600,11 +606,7 @@ static int tab_jac_columns(const double *q, const double *u, double h, const tab
     tab_jac_solve_many(&b->f1, R, Z, mb, Y, b->y);
     for (j = 0; j < mb; ++j) {           /* second stage: δq⁺ = δq + h δw, δr2 */
       double *col = out + (size_t)(lo + j) * 2 * nq;
-      if (dY) memcpy(b->dy, dY + (size_t)(lo + j) * ny, sizeof(double) * (size_t)ny);
-      else {
-        memset(b->dy, 0, sizeof(double) * (size_t)ny);
-        b->dy[first + lo + j] = 1;
-      }
+      tab_jac_perturbation(b->dy, dY, ny, first + lo + j, lo + j);
       tab_jac_get(Z, n, mb, j, b->dz1);
       for (i = 0; i < n; ++i) b->dz1[i] = -b->dz1[i];
       for (i = 0; i < nq; ++i) col[i] = b->dq1[i] = dq[i] + h * b->dz1[i];
