@@ -15,6 +15,7 @@ import pytest
 
 import ncgen as nc
 from ncgen.errors import ModelError, NcgenError, ShapeError
+from ncgen.model.data import model_data
 from ncgen.runtime import tree_algorithm_kernels as rta
 
 URDF = """<robot name="door_tree">
@@ -102,6 +103,35 @@ def test_every_door_equals_pinocchio(tree):
         for got, ref in zip(CALLS["aba_derivatives"](tree, x), (a_ref, P.T @ adq @ P, P.T @ adv @ P,
                                                                  P.T @ (np.triu(aM) + np.triu(aM, 1).T) @ P)):
             close(got, ref)
+
+
+def test_auto_rnea_takes_the_tables_and_both_kernels_equal_pinocchio(tree):
+    """``kernels="auto"`` runs RNEA (and ``inverse_dynamics``) on the tree tables, which measure
+    faster than the flat kernel (:data:`~ncgen.runtime.tree_algorithm_kernels.TABLES_FIRST`),
+    says why, and keeps the flat CRBA; the tables and the flat kernel, one state and rows of
+    states, equal Pinocchio's ``rnea`` to 1e-10."""
+    pin = pytest.importorskip("pinocchio")
+    from pinocchio_robots import JointMap
+
+    assert rta.algorithm_kernels(tree, "rnea") == "tables"
+    assert "measures faster" in rta.kernels_reason(tree, "rnea")
+    nc.inverse_dynamics(tree, *state(tree)[:3], joints="all")
+    assert rta.door(tree, "rnea").tables and rta.door(tree, "rnea") is model_data(tree).rnea_efforts["all"]
+    assert rta.algorithm_kernels(tree, "crba") == "flat" and rta.kernels_reason(tree, "rnea", "flat") == "chosen (kernels=)"
+    pm = pin.buildModelFromXML(URDF, pin.JointModelFreeFlyer())
+    d, jm = pm.createData(), JointMap(tree, pm)
+    s = tree.joint_space.slices()["root"]
+    xs = [state(tree, seed) for seed in range(4)]
+    refs = []
+    for qj, vj, aj, _ in xs:
+        qu = qj.copy()
+        qu[s.stop - 4:s.stop] /= np.linalg.norm(qu[s.stop - 4:s.stop])
+        refs.append(jm.P.T @ pin.rnea(pm, d, jm.q_to_pin(qu, pm.nq), jm.P @ vj, jm.P @ aj))
+    Q, V, A = (np.array([x[i] for x in xs]) for i in range(3))
+    for kernels in ("tables", "flat"):
+        for x, ref in zip(xs, refs):
+            close(nc.rnea(tree, *x[:3], kernels=kernels), ref)
+        close(nc.rnea(tree, Q, V, A, kernels=kernels), np.array(refs))
 
 
 @pytest.mark.parametrize("name", list(CALLS))
@@ -204,4 +234,5 @@ def test_a_good_call_takes_the_c_door_only(tree, monkeypatch):
         CALLS[name](tree, x)
         CALLS[name](tree, [list(v) for v in x])                                  # lists of floats too
     with pytest.raises(AssertionError, match="checked path"):
-        nc.rnea(tree, *x[:3], t=1.0)                                             # a new time: the checked path
+        nc.aba(tree, x[0], x[1], x[3], t=1.0)                                    # a new time: the checked path
+    nc.rnea(tree, *x[:3], t=1.0)                        # the tables' RNEA depends on no time: the C door still

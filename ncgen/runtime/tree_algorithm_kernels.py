@@ -17,13 +17,14 @@ cached on disk by content, called through :class:`~ncgen.codegen.direct.DirectFu
 Kernels (``kernels=``, as the stepper's ``SimulationOptions(kernels=...)``): ``"tables"`` —
 the tree library's loops over the model's data tables (:mod:`ncgen.runtime.tree_library`,
 compiled once per ncgen version: no compiler call for a new robot), ``"flat"`` — the model's
-own SX functions compiled per model, ``"auto"`` (default) — flat wherever a C compiler is
-present or the flat kernel is already built in this process (per state in C the tables cost
-0.7–1.4× the flat RNEA, 1.4–2.1× the flat ABA and 1.2–1.9× the flat CRBA on the Panda, UR5,
-UR10 and Talos: :mod:`ncgen.runtime.tree_library`, benchmarks/tree_tables.py),
-else the tables when they cover the model
-(:func:`~ncgen.codegen.tree_tables.tree_tables`: a uniform gravity the only passive force).
-:func:`algorithm_kernels` says which one a call uses.
+own SX functions compiled per model, ``"auto"`` (default) — the tables for RNEA wherever they
+cover a model without parameters (:data:`TABLES_FIRST`: one call or a batch, they cost
+0.64–1.0× the flat RNEA on the Panda, UR5, UR10, xArm7, Solo12 and Talos), for the other
+algorithms flat wherever a C compiler is present or the flat kernel is already built in this
+process (the tables cost 1.4–2.1× the flat ABA and 1.2–1.9× the flat CRBA:
+:mod:`ncgen.runtime.tree_library`, benchmarks/tree_tables.py), else the tables when they
+cover the model (:func:`~ncgen.codegen.tree_tables.tree_tables`: a uniform gravity the only
+passive force).  :func:`algorithm_kernels` says which one a call uses, :func:`kernels_reason` why.
 
 Conventions are Pinocchio's (``pinocchio.rnea``, ``crba``, ``aba``,
 ``computeRNEADerivatives``, ``computeABADerivatives``): joint positions ``qj`` and rates
@@ -187,27 +188,54 @@ _WHAT = {"qj": "qj (joint positions, joint_names order)", "vj": "vj (joint rates
 KERNELS = ("auto", "tables", "flat")
 
 
+#: The algorithms whose tree-table kernels ``kernels="auto"`` takes wherever they cover a model
+#: without parameters: per state they measure at least as fast as the flat ones (RNEA: 0.64–1.0×
+#: the flat kernel on the Panda, UR5, UR10, xArm7, Solo12 and Talos, one call or 1000 states in
+#: one call; the flat CRBA, ABA and derivatives are the faster ones: benchmarks/call_overhead.py
+#: ``--kernels``).
+TABLES_FIRST = frozenset({"rnea"})
+
+
 def algorithm_kernels(model, name: str, kernels: str = "auto") -> str:
     """``"tables"`` or ``"flat"``: the kernels the algorithm ``name`` of ``model`` uses for the
-    option ``kernels`` (module docstring).  ``"tables"`` on a model the tables do not cover
-    raises :class:`~ncgen.codegen.tree_tables.UnsupportedTree` naming why."""
+    option ``kernels`` (module docstring; why: :func:`kernels_reason`).  ``"tables"`` on a
+    model the tables do not cover raises :class:`~ncgen.codegen.tree_tables.UnsupportedTree`
+    naming why."""
+    return _choice(model, name, kernels)[0]
+
+
+def kernels_reason(model, name: str, kernels: str = "auto") -> str:
+    """Why the algorithm ``name`` of ``model`` runs on the kernels :func:`algorithm_kernels` says."""
+    return _choice(model, name, kernels)[1]
+
+
+def _choice(model, name: str, kernels: str) -> tuple[str, str]:
     from ncgen.codegen.tree_tables import UnsupportedTree
     from ncgen.runtime.tree_library import table_algorithm
 
     if kernels not in KERNELS:
         raise NcgenError(f"kernels: expected one of {', '.join(map(repr, KERNELS))} (the tree algorithms' "
                          f"kernels: from the tree tables or the model's own), got {kernels!r}")
+    if kernels != "auto":
+        if kernels == "tables":
+            table_algorithm(model, name)
+        return kernels, "chosen (kernels=)"
+    if name in TABLES_FIRST and not model.np:
+        try:
+            table_algorithm(model, name)
+            return "tables", f"the tables' {name} measures faster than the flat kernel"
+        except (UnsupportedTree, CompilerNotFound):
+            pass
     data = model_data(model)
-    if kernels == "flat" or (kernels == "auto" and (isinstance(data.algorithm_kernels.get((name, None)),
-                                                               AlgorithmKernel) or compiler_present())):
-        return "flat"
+    if isinstance(data.algorithm_kernels.get((name, None)), AlgorithmKernel):
+        return "flat", "the flat kernel is built (faster than the tables')"
+    if compiler_present():
+        return "flat", "a C compiler builds the flat kernel (faster than the tables')"
     try:
         table_algorithm(model, name)
-    except (UnsupportedTree, CompilerNotFound):
-        if kernels == "tables":
-            raise
-        return "flat"
-    return "tables"
+    except (UnsupportedTree, CompilerNotFound) as e:
+        return "flat", f"the tables do not cover the model ({e})"
+    return "tables", "no C compiler"
 
 
 def kernel_of(model, name: str, kernels: str):
