@@ -280,7 +280,7 @@ class Door:
     def checked(self, args: tuple, p, t: float, out):
         """The call with every argument checked in Python (one state or rows of states)."""
         model, k = self.model, self.kernel
-        result = batch(model, k, args, p, t) if np.ndim(args[0]) == 2 else call(model, k, args, p, t)
+        result = batch(model, k, args, p, t, self.fast) if np.ndim(args[0]) == 2 else call(model, k, args, p, t)
         return result if out is None else write_out(out, result, k.name)
 
 
@@ -294,11 +294,13 @@ def door(model, name: str, kernels: str = "auto") -> Door:
     return d
 
 
-def batch(model, k: AlgorithmKernel, args: tuple, p, t: float):
-    """The algorithm of ``k`` at ``n`` states at once: each argument ``(n, size)``, outputs
-    with a first axis of ``n`` (vectors ``(n, size)``, matrices ``(n, rows, columns)``), in
-    one C loop (:func:`~ncgen.codegen.fast_call.fast_caller`'s ``batch``; a Python loop
-    without the extension).  A bad row is named in the error."""
+def batch(model, k, args: tuple, p, t: float, fast=None):
+    """The algorithm of ``k`` (an :class:`AlgorithmKernel` or a tables' algorithm) at ``n``
+    states at once: each argument ``(n, size)``, outputs with a first axis of ``n`` (vectors
+    ``(n, size)``, matrices ``(n, rows, columns)``), in one C loop through ``fast``, the door's
+    caller (:func:`~ncgen.codegen.fast_call.fast_caller`'s ``batch``: bounds checked and
+    quaternions normalised in C, row by row), else checked and normalised in NumPy (a Python
+    loop without the extension).  A bad row is named in the error."""
     js = model.joint_space
     sizes = {"qj": js.nq, "vj": js.nv, "aj": js.nv, "tau": k._sizes[-1]}
     if len(args) != len(k.input_names):
@@ -310,44 +312,68 @@ def batch(model, k: AlgorithmKernel, args: tuple, p, t: float):
         if x.shape != (n, sizes[a]):
             raise ShapeError(f"{k.name}: {_WHAT[a]}: expected {n} rows (the rows of qj) of {sizes[a]} values, "
                              f"got shape {x.shape}")
-    if k.input_names[0] == "qj":
-        arrays[0] = unit_quaternions(js, arrays[0])
-    if not isinstance(k, AlgorithmKernel):
-        for a, x in zip(k.input_names, arrays):
-            if not np.all(np.abs(x) <= MAX_MAGNITUDE):
-                row = int(np.argmin(np.all(np.abs(x) <= MAX_MAGNITUDE, axis=1)))
-                raise ShapeError(f"{k.name}: {_WHAT[a]}: row {row}: expected finite numbers of "
-                                 f"magnitude at most {MAX_MAGNITUDE:g}")
+    tables = not isinstance(k, AlgorithmKernel)
+    if tables:
         if p is not None:                   # the tables' algorithms do not depend on p: check it only
             as_vector(p, model.np, "p")
-        return k.batch(*arrays)
-    k._at(t, p)
-    shapes = [np.shape(o) for o in (k._outputs if type(k._outputs) is tuple else (k._outputs,))]
-    outs = [np.empty((n, int(np.prod(s)))) for s in shapes]
-    fast = k._fast
-    if fast is not None:
-        try:
-            bad = fast.batch(n, outs, *arrays)
-        except ValueError:                  # a value out of bound: name the first one
-            arg = next(i for i, x in enumerate(arrays) if not np.all(np.abs(x) <= MAX_MAGNITUDE))
-            row = int(np.argmin(np.all(np.abs(arrays[arg]) <= MAX_MAGNITUDE, axis=1)))
-            raise ShapeError(f"{k.name}: {_WHAT[k.input_names[arg]]}: row {row}: expected finite numbers of "
-                             f"magnitude at most {MAX_MAGNITUDE:g}") from None
-        if bad is not None:
-            try:
-                k._singular()
-            except ModelError as e:
-                raise ModelError(f"{e} (row {bad})") from None
+        shapes = [k._shape(o) for o in k.output_names]
     else:
-        for i in range(n):
-            try:
-                out = k(*(x[i] for x in arrays))
-            except ModelError as e:
-                raise ModelError(f"{e} (row {i})") from None
-            for o, r in zip(outs, out if type(out) is tuple else (out,)):
-                o[i] = np.asarray(r).reshape(-1, order="F")
+        k._at(t, p)
+        shapes = [np.shape(o) for o in (k._outputs if type(k._outputs) is tuple else (k._outputs,))]
+    outs = [np.empty((n, int(np.prod(s)))) for s in shapes]
+    bad = None
+    try:
+        if fast is None:
+            return _batch_checked(js, k, arrays, outs, shapes)
+        bad = fast.batch(n, outs, *arrays)
+    except ValueError:                      # a value out of bound or a zero quaternion: name the first one
+        _name_bad_rows(js, k, arrays)
+        raise
+    except RuntimeError:                    # a kernel failed, or the tables' fallback is wanted: the NumPy path
+        return _batch_checked(js, k, arrays, outs, shapes)
+    if bad is not None:
+        try:
+            k.singular() if tables else k._singular()
+        except ModelError as e:
+            raise ModelError(f"{e} (row {bad})") from None
+    return _rows(outs, shapes)
+
+
+def _rows(outs: list, shapes: list):
+    """The outputs of :func:`batch` from the rows ``outs`` (matrices stored column-major)."""
+    n = len(outs[0])
     result = [o if len(s) == 1 else o.reshape(n, s[1], s[0]).transpose(0, 2, 1) for o, s in zip(outs, shapes)]
     return tuple(result) if len(result) > 1 else result[0]
+
+
+def _name_bad_rows(js, k, arrays: list) -> None:
+    """Raise the error naming the first zero quaternion (in ``qj``) or value out of bound of
+    ``arrays`` (rows of states), if any."""
+    if k.input_names[0] == "qj":
+        unit_quaternions(js, arrays[0])
+    for a, x in zip(k.input_names, arrays):
+        if not np.all(np.abs(x) <= MAX_MAGNITUDE):
+            row = int(np.argmin(np.all(np.abs(x) <= MAX_MAGNITUDE, axis=1)))
+            raise ShapeError(f"{k.name}: {_WHAT[a]}: row {row}: expected finite numbers of "
+                             f"magnitude at most {MAX_MAGNITUDE:g}")
+
+
+def _batch_checked(js, k, arrays: list, outs: list, shapes: list):
+    """:func:`batch` without the extension's loop: the rows checked and normalised in NumPy,
+    then the tables' own loop or the kernel row by row (into ``outs``, outputs of ``shapes``)."""
+    _name_bad_rows(js, k, arrays)
+    if k.input_names[0] == "qj":
+        arrays = [unit_quaternions(js, arrays[0]), *arrays[1:]]
+    if not isinstance(k, AlgorithmKernel):
+        return k.batch(*arrays)
+    for i in range(len(arrays[0])):
+        try:
+            out = k(*(x[i] for x in arrays))
+        except ModelError as e:
+            raise ModelError(f"{e} (row {i})") from None
+        for o, r in zip(outs, out if type(out) is tuple else (out,)):
+            o[i] = np.asarray(r).reshape(-1, order="F")
+    return _rows(outs, shapes)
 
 
 def call(model, k: AlgorithmKernel, args: tuple, p, t: float):
