@@ -168,6 +168,28 @@ def test_rows_of_states_write_out_too(tree):
         np.testing.assert_array_equal(fresh[i], nc.rnea(tree, X[0][i], X[1][i], X[2][i]))
 
 
+@pytest.mark.parametrize("name", ["rnea", "crba", "aba"])
+def test_rows_are_normalised_and_checked_in_c_and_a_bad_row_is_named(tree, name):
+    """Rows of states through the door's C loop (quaternions of norm 1.7 with ``qw < 0``
+    normalised row by row in C) equal the one-state doors bit for bit, on the tables (RNEA) and
+    the flat kernels (CRBA, ABA); a zero quaternion or a value out of bound in row 2 is named
+    with its row, as the NumPy check names it."""
+    X = [np.array([state(tree, s)[i] for s in range(4)]) for i in range(4)]
+    args = {"rnea": X[:3], "crba": X[:1], "aba": [X[0], X[1], X[3]]}[name]
+    rows = getattr(nc, name)(tree, *args)
+    for i in range(4):
+        np.testing.assert_array_equal(rows[i], getattr(nc, name)(tree, *(x[i] for x in args)))
+    s = tree.joint_space.slices()["root"]
+    zero = [x.copy() for x in args]
+    zero[0][2, s.stop - 4:s.stop] = 0.0
+    with pytest.raises(ModelError, match=r"qj\['root'\]: the quaternion \[qx, qy, qz, qw\] is zero in row 2"):
+        getattr(nc, name)(tree, *zero)
+    huge = [x.copy() for x in args]
+    huge[-1][2, 0] = np.inf
+    with pytest.raises(ShapeError, match=r"row 2: expected finite numbers"):
+        getattr(nc, name)(tree, *huge)
+
+
 BAD_OUTS = {
     "float32": (lambda r: r.astype(np.float32), r"got float32 array"),
     "shape": (lambda r: np.zeros(r.size + 1), r"got float64 array of shape \(10,\)"),
