@@ -19,7 +19,8 @@ the tree library's loops over the model's data tables (:mod:`ncgen.runtime.tree_
 compiled once per ncgen version: no compiler call for a new robot), ``"flat"`` — the model's
 own SX functions compiled per model, ``"auto"`` (default) — the tables for RNEA wherever they
 cover a model without parameters (:data:`TABLES_FIRST`: one call or a batch, they cost
-0.64–1.0× the flat RNEA on the Panda, UR5, UR10, xArm7, Solo12 and Talos), for the other
+0.55–0.9× the flat RNEA on the Panda, xArm7, Solo12 and Talos, about as much, 0.8–1.2×, on
+the UR5 and UR10), for the other
 algorithms flat wherever a C compiler is present or the flat kernel is already built in this
 process (the tables cost 1.4–2.1× the flat ABA and 1.2–1.9× the flat CRBA:
 :mod:`ncgen.runtime.tree_library`, benchmarks/tree_tables.py), else the tables when they
@@ -189,10 +190,10 @@ KERNELS = ("auto", "tables", "flat")
 
 
 #: The algorithms whose tree-table kernels ``kernels="auto"`` takes wherever they cover a model
-#: without parameters: per state they measure at least as fast as the flat ones (RNEA: 0.64–1.0×
-#: the flat kernel on the Panda, UR5, UR10, xArm7, Solo12 and Talos, one call or 1000 states in
-#: one call; the flat CRBA, ABA and derivatives are the faster ones: benchmarks/call_overhead.py
-#: ``--kernels``).
+#: without parameters: per state they measure faster than the flat ones (RNEA: 0.55–0.9× the flat
+#: kernel on the Panda, xArm7, Solo12 and Talos, 0.8–1.2× on the UR5 and UR10, one call or 1000
+#: states in one call, AMD EPYC at load 2–15; the flat CRBA, ABA and derivatives are the faster
+#: ones: benchmarks/call_overhead.py ``--kernels``).
 TABLES_FIRST = frozenset({"rnea"})
 
 
