@@ -23,12 +23,13 @@ load average are printed before and after: on a shared machine the medians move 
 Agreement with Pinocchio (max |difference|) is printed for each pair that has the same rates.
 
 ``--alone``: each door's best time per call against its kernel alone in a C loop (the door's
-overhead; ``benchmarks/kernel_alone.py``).  ``--cpp``: ncgen's RNEA, ABA and CRBA kernels alone
+overhead; ``benchmarks/kernel_alone.py``).  ``--kernels``: ``nc.rnea`` on the tree tables against
+the flat kernel, one state and 1000 (what ``kernels="auto"`` rests on).  ``--cpp``: ncgen's RNEA, ABA and CRBA kernels alone
 against Pinocchio's C++ ones alone, a C++ program written from Pinocchio's model (its results
 compared with Pinocchio's Python ones first).
 
     python benchmarks/call_overhead.py [--robots panda ur10 xarm7 talos] [--calls 2000] [--rounds 9]
-                                       [--alone] [--cpp] [--smoke]
+                                       [--alone] [--kernels] [--cpp] [--smoke]
 """
 from __future__ import annotations
 
@@ -59,10 +60,12 @@ ROBOTS = {"panda": "panda_description/urdf/panda.urdf", "ur10": "ur_description/
 FLOATING = {"talos"}
 
 
-def robot_pairs(name: str, calls: int, rounds: int, alone: bool = False, cpp: bool = False) -> dict:
+def robot_pairs(name: str, calls: int, rounds: int, alone: bool = False, cpp: bool = False,
+                kernels: bool = False) -> dict:
     import pinocchio as pin
 
     import ncgen as nc
+    from ncgen.runtime.tree_algorithm_kernels import algorithm_kernels, kernels_reason
     from ncgen.assembly.tree_dynamics import MimicMap
     from pinocchio_robots import JointMap, random_configuration, robot_file
     from test_tree_algorithms_pinocchio import _mimic_q, _mimic_rates
@@ -118,6 +121,15 @@ def robot_pairs(name: str, calls: int, rounds: int, alone: bool = False, cpp: bo
         out["aba_note"] = out["fd_note"] = "Pinocchio's ABA refuses mimic joints: its model without them"
     out["aba"] = interleaved(lambda: nc.aba(model, qj, vj, tau_i), pin_aba, calls, rounds)
     out["fd"] = interleaved(lambda: nc.joint_forward_dynamics(model, qj, vj, u), pin_aba, calls, rounds)
+    out["chosen"] = {name: (algorithm_kernels(model, name), kernels_reason(model, name))
+                     for name in ("rnea", "crba", "aba")}
+    if kernels:
+        out["kernels"] = {
+            "rnea": interleaved(lambda: nc.rnea(model, qj, vj, aj, kernels="tables"),
+                                lambda: nc.rnea(model, qj, vj, aj, kernels="flat"), calls, rounds),
+            "rnea_batch": interleaved(lambda: nc.rnea(model, QJ, VJ, AJ, kernels="tables"),
+                                      lambda: nc.rnea(model, QJ, VJ, AJ, kernels="flat"), max(1, calls // BATCH),
+                                      rounds)}
     if alone:
         out["alone"] = doors_alone(model, (qj, vj, aj, tau_i, u), calls, rounds, out)
     if cpp:
@@ -173,7 +185,8 @@ def cpp_alone(model, pm, qp, vp, ap, tau_p, state, calls: int, rounds: int) -> d
                              float(np.max(np.abs(ref["aba_result"] - pin.aba(pm, d, qp, vp, tau_p)))))}
     nc.rnea(model, qj, vj, aj), nc.aba(model, qj, vj, tau), nc.crba(model, qj)
     for name in ("rnea", "aba", "crba"):
-        ours = kernel_ns(door(model, name).kernel.direct, max(calls, 2000) * 5, rounds)
+        k = door(model, name).kernel
+        ours = kernel_ns(getattr(k, "direct", None) or k._shim, max(calls, 2000) * 5, rounds)
         res[name] = {"ncgen_ns": ours, "pinocchio_ns": ref[name], "ratio_min": ours[0] / ref[name][0],
                      "ratio_median": ours[1] / ref[name][1]}
     return res
@@ -195,6 +208,8 @@ def main(argv=None) -> int:
     ap.add_argument("--smoke", action="store_true", help="tiny run (UR10, few calls) to check the script works")
     ap.add_argument("--alone", action="store_true",
                     help="each door's overhead over its kernel timed alone in a C loop (benchmarks/kernel_alone.py)")
+    ap.add_argument("--kernels", action="store_true",
+                    help="nc.rnea on the tree tables against the flat kernel (one state, 1000 states)")
     ap.add_argument("--cpp", action="store_true",
                     help="ncgen's kernels alone against Pinocchio's C++ rnea/aba/crba alone (compiles a C++ program)")
     args = ap.parse_args(argv)
@@ -203,8 +218,10 @@ def main(argv=None) -> int:
     print(machine())
     print(f"load average: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     for name in args.robots:
-        res = robot_pairs(name, args.calls, args.rounds, args.alone, args.cpp)
+        res = robot_pairs(name, args.calls, args.rounds, args.alone, args.cpp, args.kernels)
         print(f"\n=== {name} ({res['nv']} independent rates)")
+        for alg, (kernels, why) in res["chosen"].items():
+            print(f"  kernels of {alg}: {kernels} ({why})")
         for key, label in LABELS:
             r = res[key]
             print(f"  {label}: ncgen {r['ncgen_us']:.2f} µs, pinocchio {r['pinocchio_us']:.2f} µs per call"
@@ -214,6 +231,9 @@ def main(argv=None) -> int:
         for key in ("rnea_agreement", "aba_agreement", "fd_agreement"):
             if key in res:
                 print(f"  {key} (max |ncgen - pinocchio|): {res[key]:.2e}")
+        for key, r in res.get("kernels", {}).items():
+            print(f"KERNELS {name} {key} tables / flat: min {r['ratio_min']:.2f}  median {r['ratio_median']:.2f}  "
+                  f"(tables {r['ncgen_us']:.2f} µs, flat {r['pinocchio_us']:.2f} µs per call)")
         for key, r in res.get("alone", {}).items():
             print(f"ALONE {name} {key}: door {r['door_us']:.2f} µs, kernel alone in C {r['kernel_us']:.2f} µs "
                   f"(median {r['kernel_median_us']:.2f}): door overhead {r['overhead_us']:.2f} µs")

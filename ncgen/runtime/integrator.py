@@ -44,7 +44,8 @@ class Run:
     Python feedback (``kind`` ``"natural"`` or ``"joint"``) or None; ``why_not``: why
     ``method="auto"`` did not choose the joint loop (None otherwise); ``multipliers(t, q, v,
     u)``: ``λ`` solving the KKT system there; ``feedback_input(t, q, v)``: the feedback's
-    inputs at a natural state."""
+    inputs at a natural state; ``joint_state``: ``(q_j, v_j)`` of ``(q, v)`` when the start
+    check gave it (else None)."""
 
     t: np.ndarray
     U: np.ndarray
@@ -57,6 +58,7 @@ class Run:
     why_not: str | None
     multipliers: Callable[..., np.ndarray]
     feedback_input: Callable[..., np.ndarray]
+    joint_state: tuple | None = None
 
 
 class Integrator(Protocol):

@@ -39,17 +39,28 @@ def point_bytes(model) -> float:
 
 def initial_state(model, q0, v0, t0: float, p: np.ndarray, tolerance: float | None):
     """Consistent ``(q, v)`` at ``t0`` (see :func:`~ncgen.runtime.simulation.simulate`)."""
+    return start_state(model, q0, v0, t0, p, tolerance)[:2]
+
+
+def start_state(model, q0, v0, t0: float, p: np.ndarray, tolerance: float | None, joint: bool = False):
+    """``(q, v, joint state)``: :func:`initial_state` and, when ``joint`` and the given state
+    holds as it is (one C call checks it and maps it), its ``(q_j, v_j)``, else None."""
+    js = model.joint_space
     at_model = t0 == model.t0 and (model.np == 0 or np.array_equal(p, model.p0))
     if q0 is None and v0 is None and at_model:
-        return model.q0.copy(), model.v0.copy()
+        return model.q0.copy(), model.v0.copy(), None
     if at_model and _plain(q0, model.nq) and _plain(v0, model.nq):
         q, v = (model.q0 if q0 is None else q0), (model.v0 if v0 is None else v0)
-        if model.joint_space._holds(model, q, v, t0, p):  # finite, in range, consistent: one C call
-            return q.copy(), v.copy()
+        if joint:                           # finite, in range, consistent, and its joint state: one C call
+            state = js._checked_state(model, q, v, t0, p)
+            if state is not None:
+                return q.copy(), v.copy(), state
+        elif js._holds(model, q, v, t0, p):  # finite, in range, consistent: one C call
+            return q.copy(), v.copy(), None
     q = model.q0 if q0 is None else as_vector(q0, model.nq, "q0")
     v = model.v0 if v0 is None else as_vector(v0, model.nq, "v0")
-    if at_model and model.joint_space._holds(model, q, v, t0, p):
-        return q.copy(), v.copy()          # consistent to round-off already (e.g. from from_joint_space)
+    if at_model and js._holds(model, q, v, t0, p):
+        return q.copy(), v.copy(), None    # consistent to round-off already (e.g. from from_joint_space)
     try:
         state = consistent_state(model.functions, model.layout, model.constraint_names, q.copy(), v.copy(),
                                  p, t0, 1.0 if tolerance is None else tolerance, model.M,
@@ -57,7 +68,7 @@ def initial_state(model, q0, v0, t0: float, p: np.ndarray, tolerance: float | No
     except ModelError as e:
         raise ModelError(f"simulate: initial state of {model.name!r} at t0 = {t0:g} s: {e}. In simulate: give "
                          f"q0/v0 consistent at t0, or ic_tolerance=None to accept any correction") from None
-    return state.q0, state.v0
+    return state.q0, state.v0, None
 
 
 def _plain(x, n: int) -> bool:

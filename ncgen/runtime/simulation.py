@@ -18,7 +18,7 @@ from ncgen.runtime.joint_integrator import JointIntegrator
 from ncgen.runtime.joint_simulation import joint_space_applies
 from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.rolling_integrator import RollingIntegrator
-from ncgen.runtime.run_start import initial_multipliers, initial_state, natural_feedback, point_bytes
+from ncgen.runtime.run_start import initial_multipliers, natural_feedback, point_bytes, start_state
 from ncgen.runtime.stepper_integrator import StepperIntegrator
 from ncgen.runtime.trajectory import Trajectory
 from ncgen.validation import as_scalar
@@ -190,11 +190,11 @@ def simulate(model, t_end: float, dt: float, *, u=None, p=None, q0=None, v0=None
     kind = feedback_kind(u) if controller is None else None
     feedback = (kind, u) if kind in ("natural", "joint") else None
     U = input_samples(None if controller is not None else u, model, t)
-    q, v = initial_state(model, q0, v0, t0, pv, opts.ic_tolerance)
+    q, v, joint = start_state(model, q0, v0, t0, pv, opts.ic_tolerance, joint=method == "joint")
     run = Run(t, U, hold_columns(U, t, opts.hold), pv, q, v, controller, feedback, why_not,
               multipliers=lambda tk, qk, vk, uk: initial_multipliers(model, tk, qk, vk, uk, pv,
                                                                      load_dae(model, "vm")[0]),
-              feedback_input=lambda tk, qk, vk: natural_feedback(model, feedback, tk, qk, vk, pv))
+              feedback_input=lambda tk, qk, vk: natural_feedback(model, feedback, tk, qk, vk, pv), joint_state=joint)
     with sticky_interrupt():               # a Ctrl-C that CasADi swallows is raised again between chunks
         raise_if_interrupted()
         return integrator.run(run)

@@ -17,13 +17,15 @@ cached on disk by content, called through :class:`~ncgen.codegen.direct.DirectFu
 Kernels (``kernels=``, as the stepper's ``SimulationOptions(kernels=...)``): ``"tables"`` —
 the tree library's loops over the model's data tables (:mod:`ncgen.runtime.tree_library`,
 compiled once per ncgen version: no compiler call for a new robot), ``"flat"`` — the model's
-own SX functions compiled per model, ``"auto"`` (default) — flat wherever a C compiler is
-present or the flat kernel is already built in this process (per state in C the tables cost
-0.7–1.4× the flat RNEA, 1.4–2.1× the flat ABA and 1.2–1.9× the flat CRBA on the Panda, UR5,
-UR10 and Talos: :mod:`ncgen.runtime.tree_library`, benchmarks/tree_tables.py),
-else the tables when they cover the model
-(:func:`~ncgen.codegen.tree_tables.tree_tables`: a uniform gravity the only passive force).
-:func:`algorithm_kernels` says which one a call uses.
+own SX functions compiled per model, ``"auto"`` (default) — the tables for RNEA wherever they
+cover a model without parameters (:data:`TABLES_FIRST`: one call or a batch, they cost
+0.55–0.9× the flat RNEA on the Panda, xArm7, Solo12 and Talos, about as much, 0.8–1.2×, on
+the UR5 and UR10), for the other
+algorithms flat wherever a C compiler is present or the flat kernel is already built in this
+process (the tables cost 1.4–2.1× the flat ABA and 1.2–1.9× the flat CRBA:
+:mod:`ncgen.runtime.tree_library`, benchmarks/tree_tables.py), else the tables when they
+cover the model (:func:`~ncgen.codegen.tree_tables.tree_tables`: a uniform gravity the only
+passive force).  :func:`algorithm_kernels` says which one a call uses, :func:`kernels_reason` why.
 
 Conventions are Pinocchio's (``pinocchio.rnea``, ``crba``, ``aba``,
 ``computeRNEADerivatives``, ``computeABADerivatives``): joint positions ``qj`` and rates
@@ -187,27 +189,54 @@ _WHAT = {"qj": "qj (joint positions, joint_names order)", "vj": "vj (joint rates
 KERNELS = ("auto", "tables", "flat")
 
 
+#: The algorithms whose tree-table kernels ``kernels="auto"`` takes wherever they cover a model
+#: without parameters: per state they measure faster than the flat ones (RNEA: 0.55–0.9× the flat
+#: kernel on the Panda, xArm7, Solo12 and Talos, 0.8–1.2× on the UR5 and UR10, one call or 1000
+#: states in one call, AMD EPYC at load 2–15; the flat CRBA, ABA and derivatives are the faster
+#: ones: benchmarks/call_overhead.py ``--kernels``).
+TABLES_FIRST = frozenset({"rnea"})
+
+
 def algorithm_kernels(model, name: str, kernels: str = "auto") -> str:
     """``"tables"`` or ``"flat"``: the kernels the algorithm ``name`` of ``model`` uses for the
-    option ``kernels`` (module docstring).  ``"tables"`` on a model the tables do not cover
-    raises :class:`~ncgen.codegen.tree_tables.UnsupportedTree` naming why."""
+    option ``kernels`` (module docstring; why: :func:`kernels_reason`).  ``"tables"`` on a
+    model the tables do not cover raises :class:`~ncgen.codegen.tree_tables.UnsupportedTree`
+    naming why."""
+    return _choice(model, name, kernels)[0]
+
+
+def kernels_reason(model, name: str, kernels: str = "auto") -> str:
+    """Why the algorithm ``name`` of ``model`` runs on the kernels :func:`algorithm_kernels` says."""
+    return _choice(model, name, kernels)[1]
+
+
+def _choice(model, name: str, kernels: str) -> tuple[str, str]:
     from ncgen.codegen.tree_tables import UnsupportedTree
     from ncgen.runtime.tree_library import table_algorithm
 
     if kernels not in KERNELS:
         raise NcgenError(f"kernels: expected one of {', '.join(map(repr, KERNELS))} (the tree algorithms' "
                          f"kernels: from the tree tables or the model's own), got {kernels!r}")
+    if kernels != "auto":
+        if kernels == "tables":
+            table_algorithm(model, name)
+        return kernels, "chosen (kernels=)"
+    if name in TABLES_FIRST and not model.np:
+        try:
+            table_algorithm(model, name)
+            return "tables", f"the tables' {name} measures faster than the flat kernel"
+        except (UnsupportedTree, CompilerNotFound):
+            pass
     data = model_data(model)
-    if kernels == "flat" or (kernels == "auto" and (isinstance(data.algorithm_kernels.get((name, None)),
-                                                               AlgorithmKernel) or compiler_present())):
-        return "flat"
+    if isinstance(data.algorithm_kernels.get((name, None)), AlgorithmKernel):
+        return "flat", "the flat kernel is built (faster than the tables')"
+    if compiler_present():
+        return "flat", "a C compiler builds the flat kernel (faster than the tables')"
     try:
         table_algorithm(model, name)
-    except (UnsupportedTree, CompilerNotFound):
-        if kernels == "tables":
-            raise
-        return "flat"
-    return "tables"
+    except (UnsupportedTree, CompilerNotFound) as e:
+        return "flat", f"the tables do not cover the model ({e})"
+    return "tables", "no C compiler"
 
 
 def kernel_of(model, name: str, kernels: str):
@@ -252,7 +281,7 @@ class Door:
     def checked(self, args: tuple, p, t: float, out):
         """The call with every argument checked in Python (one state or rows of states)."""
         model, k = self.model, self.kernel
-        result = batch(model, k, args, p, t) if np.ndim(args[0]) == 2 else call(model, k, args, p, t)
+        result = batch(model, k, args, p, t, self.fast) if np.ndim(args[0]) == 2 else call(model, k, args, p, t)
         return result if out is None else write_out(out, result, k.name)
 
 
@@ -266,11 +295,13 @@ def door(model, name: str, kernels: str = "auto") -> Door:
     return d
 
 
-def batch(model, k: AlgorithmKernel, args: tuple, p, t: float):
-    """The algorithm of ``k`` at ``n`` states at once: each argument ``(n, size)``, outputs
-    with a first axis of ``n`` (vectors ``(n, size)``, matrices ``(n, rows, columns)``), in
-    one C loop (:func:`~ncgen.codegen.fast_call.fast_caller`'s ``batch``; a Python loop
-    without the extension).  A bad row is named in the error."""
+def batch(model, k, args: tuple, p, t: float, fast=None):
+    """The algorithm of ``k`` (an :class:`AlgorithmKernel` or a tables' algorithm) at ``n``
+    states at once: each argument ``(n, size)``, outputs with a first axis of ``n`` (vectors
+    ``(n, size)``, matrices ``(n, rows, columns)``), in one C loop through ``fast``, the door's
+    caller (:func:`~ncgen.codegen.fast_call.fast_caller`'s ``batch``: bounds checked and
+    quaternions normalised in C, row by row), else checked and normalised in NumPy (a Python
+    loop without the extension).  A bad row is named in the error."""
     js = model.joint_space
     sizes = {"qj": js.nq, "vj": js.nv, "aj": js.nv, "tau": k._sizes[-1]}
     if len(args) != len(k.input_names):
@@ -282,44 +313,68 @@ def batch(model, k: AlgorithmKernel, args: tuple, p, t: float):
         if x.shape != (n, sizes[a]):
             raise ShapeError(f"{k.name}: {_WHAT[a]}: expected {n} rows (the rows of qj) of {sizes[a]} values, "
                              f"got shape {x.shape}")
-    if k.input_names[0] == "qj":
-        arrays[0] = unit_quaternions(js, arrays[0])
-    if not isinstance(k, AlgorithmKernel):
-        for a, x in zip(k.input_names, arrays):
-            if not np.all(np.abs(x) <= MAX_MAGNITUDE):
-                row = int(np.argmin(np.all(np.abs(x) <= MAX_MAGNITUDE, axis=1)))
-                raise ShapeError(f"{k.name}: {_WHAT[a]}: row {row}: expected finite numbers of "
-                                 f"magnitude at most {MAX_MAGNITUDE:g}")
+    tables = not isinstance(k, AlgorithmKernel)
+    if tables:
         if p is not None:                   # the tables' algorithms do not depend on p: check it only
             as_vector(p, model.np, "p")
-        return k.batch(*arrays)
-    k._at(t, p)
-    shapes = [np.shape(o) for o in (k._outputs if type(k._outputs) is tuple else (k._outputs,))]
-    outs = [np.empty((n, int(np.prod(s)))) for s in shapes]
-    fast = k._fast
-    if fast is not None:
-        try:
-            bad = fast.batch(n, outs, *arrays)
-        except ValueError:                  # a value out of bound: name the first one
-            arg = next(i for i, x in enumerate(arrays) if not np.all(np.abs(x) <= MAX_MAGNITUDE))
-            row = int(np.argmin(np.all(np.abs(arrays[arg]) <= MAX_MAGNITUDE, axis=1)))
-            raise ShapeError(f"{k.name}: {_WHAT[k.input_names[arg]]}: row {row}: expected finite numbers of "
-                             f"magnitude at most {MAX_MAGNITUDE:g}") from None
-        if bad is not None:
-            try:
-                k._singular()
-            except ModelError as e:
-                raise ModelError(f"{e} (row {bad})") from None
+        shapes = [k._shape(o) for o in k.output_names]
     else:
-        for i in range(n):
-            try:
-                out = k(*(x[i] for x in arrays))
-            except ModelError as e:
-                raise ModelError(f"{e} (row {i})") from None
-            for o, r in zip(outs, out if type(out) is tuple else (out,)):
-                o[i] = np.asarray(r).reshape(-1, order="F")
+        k._at(t, p)
+        shapes = [np.shape(o) for o in (k._outputs if type(k._outputs) is tuple else (k._outputs,))]
+    outs = [np.empty((n, int(np.prod(s)))) for s in shapes]
+    bad = None
+    try:
+        if fast is None:
+            return _batch_checked(js, k, arrays, outs, shapes)
+        bad = fast.batch(n, outs, *arrays)
+    except ValueError:                      # a value out of bound or a zero quaternion: name the first one
+        _name_bad_rows(js, k, arrays)
+        raise
+    except RuntimeError:                    # a kernel failed, or the tables' fallback is wanted: the NumPy path
+        return _batch_checked(js, k, arrays, outs, shapes)
+    if bad is not None:
+        try:
+            k.singular() if tables else k._singular()
+        except ModelError as e:
+            raise ModelError(f"{e} (row {bad})") from None
+    return _rows(outs, shapes)
+
+
+def _rows(outs: list, shapes: list):
+    """The outputs of :func:`batch` from the rows ``outs`` (matrices stored column-major)."""
+    n = len(outs[0])
     result = [o if len(s) == 1 else o.reshape(n, s[1], s[0]).transpose(0, 2, 1) for o, s in zip(outs, shapes)]
     return tuple(result) if len(result) > 1 else result[0]
+
+
+def _name_bad_rows(js, k, arrays: list) -> None:
+    """Raise the error naming the first zero quaternion (in ``qj``) or value out of bound of
+    ``arrays`` (rows of states), if any."""
+    if k.input_names[0] == "qj":
+        unit_quaternions(js, arrays[0])
+    for a, x in zip(k.input_names, arrays):
+        if not np.all(np.abs(x) <= MAX_MAGNITUDE):
+            row = int(np.argmin(np.all(np.abs(x) <= MAX_MAGNITUDE, axis=1)))
+            raise ShapeError(f"{k.name}: {_WHAT[a]}: row {row}: expected finite numbers of "
+                             f"magnitude at most {MAX_MAGNITUDE:g}")
+
+
+def _batch_checked(js, k, arrays: list, outs: list, shapes: list):
+    """:func:`batch` without the extension's loop: the rows checked and normalised in NumPy,
+    then the tables' own loop or the kernel row by row (into ``outs``, outputs of ``shapes``)."""
+    _name_bad_rows(js, k, arrays)
+    if k.input_names[0] == "qj":
+        arrays = [unit_quaternions(js, arrays[0]), *arrays[1:]]
+    if not isinstance(k, AlgorithmKernel):
+        return k.batch(*arrays)
+    for i in range(len(arrays[0])):
+        try:
+            out = k(*(x[i] for x in arrays))
+        except ModelError as e:
+            raise ModelError(f"{e} (row {i})") from None
+        for o, r in zip(outs, out if type(out) is tuple else (out,)):
+            o[i] = np.asarray(r).reshape(-1, order="F")
+    return _rows(outs, shapes)
 
 
 def call(model, k: AlgorithmKernel, args: tuple, p, t: float):

@@ -64,6 +64,7 @@ from ncgen.codegen.tree_kernels import (ALGORITHM_UNITS, JOINT_KINDS, PACKAGE, S
                                         units_of, write_tree_unit)
 from ncgen.codegen.tree_tables import TreeTables
 from ncgen.errors import CodegenError, ModelError
+from ncgen.interrupts import call_interruptibly
 from ncgen.runtime.table_library import cached_library, library_ready
 from ncgen.codegen.tree_check import ALGORITHMS, PIVOT_TOL
 from ncgen.validation import MAX_MAGNITUDE
@@ -564,21 +565,15 @@ class TableJointLoop:
     def run(self, options: JointOptions, t: np.ndarray, X: np.ndarray, W: np.ndarray, S, p: np.ndarray,
             stats: np.ndarray) -> tuple[int, int]:
         """As ``JointLoop.run`` (``p`` does not enter: the tables' dynamics take none)."""
-        from ncgen.interrupts import call_interruptibly
-
-        ptr = (lambda a: None if a is None or a.size == 0 else a.ctypes.data)
         done = ctypes.c_int(0)
-        start = (X.copy(), stats.copy())
+        start = (X[0].copy(), stats.copy())           # X's other rows are outputs
         E, nu, quat = self._constants
-
-        def once():
-            return call_interruptibly(
-                self._fn, self.tree_bound.ref, E, nu, ctypes.addressof(options), len(t) - 1, ptr(t), ptr(X), ptr(W),
-                ptr(S), len(self.quat), quat, ptr(stats), ctypes.addressof(done), stop=options.stop.contents)
-
-        status, interrupted = once()
+        args = (self._fn, self.tree_bound.ref, E, nu, ctypes.addressof(options), len(t) - 1, t.ctypes.data,
+                X.ctypes.data, None if W.size == 0 else W.ctypes.data, None if S is None or S.size == 0 else S.ctypes.data,
+                len(self.quat), quat, stats.ctypes.data, ctypes.addressof(done))
+        status, interrupted = call_interruptibly(*args, stop=options.stop.contents)
         if not interrupted and status == RUN_NO_FALLBACK:
             self.tree_bound.library.set_fallback()
-            X[...], stats[...] = start                 # the same run again from its start, with the fallback
-            status, interrupted = once()
+            X[0], stats[...] = start                    # the same run again from its start, with the fallback
+            status, interrupted = call_interruptibly(*args, stop=options.stop.contents)
         return INTERRUPTED if interrupted else int(status), int(done.value)
