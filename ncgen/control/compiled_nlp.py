@@ -28,6 +28,9 @@ from ncgen.control.step_support import compile_flags
 from ncgen.errors import CodegenError
 from ncgen.files import cache_dir
 
+#: Memory slots of a compiled solver (CasADi's generated code has one by default): solvers of
+#: the same problem alive at a time in one process (a slot is given back when its solver goes).
+SLOTS = 8
 #: The generated Fatrop solver's lines after which the status is returned, and its last lines.
 SOLVED, END = "  casadi_fatrop_solve(d);\n", "  return 0;\n  return 0;\n}\n"
 
@@ -59,7 +62,7 @@ def compiled_fatrop(name: str, nlp: dict, options: dict):
     with tempfile.TemporaryDirectory() as tmp:
         source = Path(tmp) / f"{name}.c"
         source.write_text(text)
-        library = _library(name, source, (f"-I{casadi / 'include'}",),
+        library = _library(name, source, (f"-I{casadi / 'include'}", f"-DCASADI_MAX_NUM_THREADS={SLOTS}"),
                            (f"-L{casadi}", "-lfatrop", "-lblasfeo", f"-Wl,-rpath,{casadi}"))
     return DirectFunction(library, name, solver)
 

@@ -24,7 +24,7 @@ def fatrop_controller(model, problem, name: str, iterations: int, options: dict 
     solver as an extra source, and the context of the controller's templates;
     ``options``: Fatrop's own (as ``nc.MPC``'s ``fatrop_options``), checked by one solve."""
     from ncgen.codegen.package import ExtraSource
-    from ncgen.control.compiled_nlp import fatrop_c
+    from ncgen.control.compiled_nlp import SLOTS, fatrop_c
     from ncgen.control.mpc_fatrop import FatropSolver
     from ncgen.control.mpc_fatrop_joint import joint_form_refusal, joint_maps
     why = joint_form_refusal(model)
@@ -48,7 +48,7 @@ def fatrop_controller(model, problem, name: str, iterations: int, options: dict 
     context = {
         "model_name": model.name, "N": N, "h": f"{problem.h:g}", "h_c": c_double(problem.h), "iterations": iterations,
         "in_process": False, "nx": 2 * model.nq, "nxj": nxj, "nu": nu, "np": model.np, "nw": nw, "ng": ng,
-        "solver": solver_name, "fatrop_options": ", ".join(f"{k} = {v!r}" for k, v in sorted(fp.options["fatrop"].items())),
+        "solver": solver_name, "max_controllers": SLOTS, "fatrop_options": ", ".join(f"{k} = {v!r}" for k, v in sorted(fp.options["fatrop"].items())),
         "sz_arg": max(f.sz_arg() for f in fns), "sz_res": max(f.sz_res() for f in fns),
         "sz_iw": max(f.sz_iw() for f in fns), "sz_w": max(f.sz_w() for f in fns),
         "u_rest": ", ".join(c_double(v) for v in u_rest) or "0",
@@ -56,6 +56,6 @@ def fatrop_controller(model, problem, name: str, iterations: int, options: dict 
         "u_hi": ", ".join(c_bound(v) for v in problem.u_bounds[1]) or "0",
         **{key: ", ".join(c_bound(v) for v in getattr(fp, key)) for key in ("lbx", "ubx", "lbg", "ubg")},
     }
-    source = ExtraSource("mpc/fatrop_solver.c.j2", f"{solver_name}.c", {"code": code, "solver": solver_name},
+    source = ExtraSource("mpc/fatrop_solver.c.j2", f"{solver_name}.c", {"code": code, "solver": solver_name, "max_controllers": SLOTS},
                          fatrop=True)
     return [joint_state], [source], context
