@@ -8,8 +8,7 @@ per input and output, their nonzeros column-major), integer and real work arrays
 ``<fn>_work(&sz_arg, &sz_res, &sz_iw, &sz_w)``; ``<fn>_checkout()`` gives a memory slot
 (``-1`` when all ``CASADI_MAX_NUM_THREADS`` are taken), ``<fn>_release(mem)`` gives it back,
 ``<fn>_incref()`` initialises (optional: CasADi writes them only when needed).  ``<fn>_decref()``
-is not bound: when it frees the slots' memory it leaves the released slots' numbers for the next
-checkout to hand out (CasADi 3.8.2's generated code), so ncgen never calls it.
+is not bound: a loaded function's memory stays for the process's life, its slots reused.
 """
 from __future__ import annotations
 
