@@ -132,6 +132,32 @@ def test_a_failed_solve_keeps_the_guess(ocp, form):
     assert np.array_equal(u, U[0]) and np.array_equal(mpc.solution[0], X) and np.array_equal(mpc.solution[1], U)
 
 
+def test_controllers_of_one_problem_solve_side_by_side_and_give_their_solver_memory_back(ocp, joint):
+    """A second joint-form MPC of the same problem in the process (its compiled solver's one
+    memory slot was taken: the first solve segfaulted) answers as the first; the solver has
+    :data:`~ncgen.control.compiled_nlp.SLOTS` slots, one more caller is refused by name, and a
+    slot comes back when its holder goes."""
+    import gc
+
+    from ncgen.control.compiled_nlp import SLOTS
+    from ncgen.errors import CodegenError
+    other = nc.MPC(ocp, "fatrop", terminal_weight=100.0)
+    x = tilted(0.2)
+    joint.reset(x, 0.0)
+    other.reset(x, 0.0)
+    assert np.array_equal(other(x, 0.0), joint(x, 0.0)) and other.fatrop.status == joint.fatrop.status == ["0"]
+    held = [joint.fatrop._compiled.copy() for _ in range(SLOTS - 2)]
+    with pytest.raises(CodegenError, match=r"cartpole_fatrop_solver: no free memory slot in "
+                                           r"libcartpole_fatrop_solver.so \(its C has CASADI_MAX_NUM_THREADS"):
+        joint.fatrop._compiled.copy()
+    del other
+    gc.collect()
+    held.append(joint.fatrop._compiled.copy())
+    x1 = tilted(0.1)
+    joint.reset(x1, 0.0)
+    assert np.all(np.isfinite(joint(x1, 0.0))) and joint.fatrop.status == ["0"]
+
+
 def test_the_joint_form_is_the_default_on_a_tree(joint):
     """4 states (the cart's slide and the hinge's angle, their rates) and 1 control a stage."""
     fp = joint.fatrop.nlp

@@ -14,8 +14,12 @@ def _arguments(p: argparse.ArgumentParser) -> None:
                    help="an optimal-control problem file naming its model (docs/optimal-control.md)")
     p.add_argument("-o", "--output", metavar="DIR", required=True, help="directory of the C package")
     p.add_argument("--name", default=None, help="package and C prefix (default: the model's name)")
+    p.add_argument("--solver", choices=("sqp", "fatrop"), default="sqp",
+                   help="the controller's solver: sqp (default; the real-time-iteration SQP, no library needed) "
+                        "or fatrop (Fatrop's interior-point method on the joint-space problem of a tree; the "
+                        "package links libfatrop and libblasfeo from the CasADi wheel, the Makefile's FATROP_DIR)")
     p.add_argument("--iterations", type=int, default=1,
-                   help="SQP iterations per control step (default 1: the real-time iteration)")
+                   help="SQP iterations (fatrop: solves) per control step (default 1: the real-time iteration)")
     p.add_argument("--terminal-weight", type=float, default=1e3,
                    help="weight of the problem's final conditions, soft in MPC (default 1000)")
     p.add_argument("--x0", default=None, metavar="Q=V,...",
@@ -43,6 +47,7 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     examples=(
         "ncgen mpc examples/cartpole_mpc.toml -o cartpole_mpc\n"
         "ncgen mpc examples/cartpole_mpc.toml -o cp --x0 pole.r_j.x=0.1,pole.r_j.y=0.49 --disturbance 1.0:1.1:8\n"
+        "ncgen mpc examples/cartpole_mpc.toml -o cp_fatrop --solver fatrop\n"
         "cd cartpole_mpc && make && ./demo 5 > run.txt"),
     arguments=_arguments,
 )
@@ -66,7 +71,7 @@ def mpc(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     ocp, _ = problem_from_data(data, model, origin)
     x0 = _start_state(model, args.x0, parser) if args.x0 else None
     pulses = [_pulse(item, parser) for item in args.disturbance]
-    pkg = export_mpc(ocp, args.output, name=args.name, iterations=args.iterations,
+    pkg = export_mpc(ocp, args.output, name=args.name, solver=args.solver, iterations=args.iterations,
                      terminal_weight=args.terminal_weight, x0=x0, t_end=args.t_end, substeps=args.substeps,
                      disturbance=pulses)
     print(f"wrote the MPC package {pkg.name!r} to {pkg.path}: build it with `make -C {pkg.path}`, "

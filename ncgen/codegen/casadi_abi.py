@@ -5,8 +5,10 @@ against a committed package's header.
 
 ``<fn>(arg, res, iw, w, mem)`` evaluates with the pointer tables ``arg``/``res`` (one pointer
 per input and output, their nonzeros column-major), integer and real work arrays sized by
-``<fn>_work(&sz_arg, &sz_res, &sz_iw, &sz_w)``; ``<fn>_checkout()`` gives a memory slot,
-``<fn>_incref()`` initialises (both optional: CasADi writes them only when needed).
+``<fn>_work(&sz_arg, &sz_res, &sz_iw, &sz_w)``; ``<fn>_checkout()`` gives a memory slot
+(``-1`` when all ``CASADI_MAX_NUM_THREADS`` are taken), ``<fn>_release(mem)`` gives it back,
+``<fn>_incref()`` initialises (optional: CasADi writes them only when needed).  ``<fn>_decref()``
+is not bound: a loaded function's memory stays for the process's life, its slots reused.
 """
 from __future__ import annotations
 
@@ -25,15 +27,16 @@ FUNCTIONS = {
     "_work": Signature("int", (("casadi_int *", "sz_arg"), ("casadi_int *", "sz_res"), ("casadi_int *", "sz_iw"),
                                ("casadi_int *", "sz_w"))),
     "_checkout": Signature("int", ()),
+    "_release": Signature("void", (("int", "mem"),)),
     "_incref": Signature("void", ()),
 }
 #: Entry points CasADi writes only when the function needs them.
-OPTIONAL = ("_checkout", "_incref")
+OPTIONAL = ("_checkout", "_release", "_incref")
 
 
 def bind_casadi(lib: ctypes.CDLL, c_name: str):
     """The entry points of the generated function ``c_name`` in ``lib`` as a namespace
-    (``eval``, ``work``, ``checkout``, ``incref``; the optional ones None when absent), the
+    (``eval``, ``work``, ``checkout``, ``release``, ``incref``; the optional ones None when absent), the
     evaluation's pointers bound as addresses."""
     bound = {}
     for suffix, sig in FUNCTIONS.items():
@@ -42,7 +45,7 @@ def bind_casadi(lib: ctypes.CDLL, c_name: str):
         else:
             bound[suffix] = bind(lib, c_name + suffix, sig, addresses=suffix == "")
     return SimpleNamespace(eval=bound[""], work=bound["_work"], checkout=bound["_checkout"],
-                           incref=bound["_incref"])
+                           release=bound["_release"], incref=bound["_incref"])
 
 
 def work_sizes(fn, c_name: str) -> tuple[int, int, int, int]:

@@ -15,6 +15,7 @@ per thread.
 from __future__ import annotations
 
 import ctypes
+import weakref
 from pathlib import Path
 
 import casadi as ca
@@ -50,6 +51,11 @@ class DirectFunction:
         if abi.incref is not None:
             abi.incref()
         self._mem = 0 if abi.checkout is None else int(abi.checkout())
+        if self._mem < 0:
+            raise CodegenError(f"{c_name}: no free memory slot in {self.library.name} (its C has "
+                               "CASADI_MAX_NUM_THREADS of them, each held by a live caller)")
+        if abi.checkout is not None and abi.release is not None:     # the slot back when this object goes
+            weakref.finalize(self, abi.release, self._mem).atexit = False
         self._fn = abi.eval
         self._args = (ctypes.addressof(self._arg), ctypes.addressof(self._res), self._iw.ctypes.data,
                       self._w.ctypes.data, self._mem)

@@ -67,13 +67,18 @@ class ExtraSource:
     With ``included=True`` the template is a plain C file (no Jinja, e.g. the stepper's
     ``runtime/ncgen_rattle.h``), copied as it is under the banner: a ``.h`` output that
     another source of the package includes, listed among the build's headers (so the
-    Makefile and the compile cache depend on it) but not included by ``<name>.h``."""
+    Makefile and the compile cache depend on it) but not included by ``<name>.h``.
+    With ``fatrop=True`` a ``.c`` output of the library includes Fatrop's and BLASFEO's
+    headers: the Makefile and CMakeLists.txt compile it with ``-I$FATROP_DIR/include`` and
+    link the package with ``libfatrop`` and ``libblasfeo`` from ``FATROP_DIR`` (default: the
+    installed CasADi wheel's directory, which ships both)."""
 
     template: str
     output: str
     context: Mapping = field(default_factory=dict)
     program: bool = False
     included: bool = False
+    fatrop: bool = False
 
 
 @dataclass(frozen=True)
@@ -147,7 +152,8 @@ def write_package(name: str, functions: Sequence[ca.Function], out_dir: str | os
     options = {"max_file_instructions": max_file_instructions, "reroll_instructions": reroll_instructions,
                "casadi_options": casadi_options(codegen_options),
                "extra_sources": [[s.template, s.output, dict(s.context)] + (["program"] if s.program else [])
-                                 + (["included"] if s.included else []) for s in extra_sources]}
+                                 + (["included"] if s.included else []) + (["fatrop"] if s.fatrop else [])
+                                 for s in extra_sources]}
     if jacobians:
         options["jacobians"] = _checked_jacobians(jacobians, functions)
     files = _render_files(name, functions, doc, options, extra_sources, template_dirs)
@@ -225,6 +231,9 @@ def _build_section(name: str, kernels, kernel_funcs, qp_sources: list[str], with
     build["large_sources"] = [src for src, n in largest.items() if huge or n > LARGE_FUNCTION_INSTRUCTIONS]
     if qp_sources:                  # files holding CasADi's qrqp: a gcc warning off (templates/c/Makefile.j2)
         build["qp_sources"] = qp_sources
+    fatrop = [s.output for s in extra_sources if s.fatrop]
+    if fatrop:                      # files including Fatrop's headers, the package linked to it (templates/c/Makefile.j2)
+        build["fatrop_sources"] = fatrop
     if data_c:
         build["data"] = [data_c]
     programs = [s.output for s in extra_sources if s.program]
@@ -271,6 +280,9 @@ def _check_extra_sources(name: str, extra_sources: Sequence[ExtraSource]) -> Non
         if s.included and (s.program or not s.output.endswith(".h") or s.context):
             raise CodegenError(f"extra source {s.output!r} is included by another source: its output must "
                                f"be a .h file, not a program, and it takes no context (it is copied as it is)")
+        if s.fatrop and (s.program or s.included or not s.output.endswith(".c")):
+            raise CodegenError(f"extra source {s.output!r} includes Fatrop's headers: its output must be a .c "
+                               f"file of the library, not a program nor an included file")
         if s.program and (not s.output.endswith(".c") or s.output[:-2] in (f"{name}_main", "main")):
             raise CodegenError(f"extra source {s.output!r} is a program: its output must be a .c file "
                                f"whose stem names the executable (not {name}_main)")

@@ -28,29 +28,41 @@ from ncgen.control.step_support import compile_flags
 from ncgen.errors import CodegenError
 from ncgen.files import cache_dir
 
+#: Memory slots of a compiled solver (CasADi's generated code has one by default): solvers of
+#: the same problem alive at a time in one process (a slot is given back when its solver goes).
+SLOTS = 8
 #: The generated Fatrop solver's lines after which the status is returned, and its last lines.
 SOLVED, END = "  casadi_fatrop_solve(d);\n", "  return 0;\n  return 0;\n}\n"
 
 
-def compiled_fatrop(name: str, nlp: dict, options: dict):
-    """``casadi.nlpsol(name, "fatrop", nlp, options)`` as generated C, compiled (cached) and
-    loaded: a :class:`~ncgen.codegen.direct.DirectFunction` whose :meth:`status_call` returns
-    1 for a failed solve, else ``−(interior-point iterations)`` (module docstring)."""
-    from ncgen.codegen.direct import DirectFunction
+def fatrop_c(name: str, nlp: dict, options: dict) -> tuple[ca.Function, str]:
+    """``(solver, C)``: ``casadi.nlpsol(name, "fatrop", nlp, options)`` and its generated C
+    (entry point ``name``; no header), with the two lines that return the status added
+    (module docstring), each anchor checked to occur once, else :class:`CodegenError`."""
     solver = ca.nlpsol(name, "fatrop", nlp, options)
-    casadi = Path(ca.__file__).parent
     with tempfile.TemporaryDirectory() as tmp:
         cg = ca.CodeGenerator(f"{name}.c", {"with_header": False})
         cg.add(solver)
         cg.generate(tmp + os.sep)
+        text = (Path(tmp) / f"{name}.c").read_text()
+    if text.count(SOLVED) != 1 or text.count(END) != 1:
+        raise CodegenError(f"{name}: CasADi {ca.__version__}'s generated Fatrop solver has not the expected "
+                           f"shape (once each: {SOLVED!r}, {END!r}); its status cannot be returned")
+    return solver, (text.replace(SOLVED, SOLVED + "  if (!d->success) return 1;\n")
+                    .replace(END, "  return -(int) d->stats.iterations_count;\n}\n"))
+
+
+def compiled_fatrop(name: str, nlp: dict, options: dict):
+    """``casadi.nlpsol(name, "fatrop", nlp, options)`` as generated C (:func:`fatrop_c`),
+    compiled (cached) and loaded: a :class:`~ncgen.codegen.direct.DirectFunction` whose
+    :meth:`status_call` returns 1 for a failed solve, else ``−(interior-point iterations)``."""
+    from ncgen.codegen.direct import DirectFunction
+    solver, text = fatrop_c(name, nlp, options)
+    casadi = Path(ca.__file__).parent
+    with tempfile.TemporaryDirectory() as tmp:
         source = Path(tmp) / f"{name}.c"
-        text = source.read_text()
-        if text.count(SOLVED) != 1 or text.count(END) != 1:
-            raise CodegenError(f"{name}: CasADi {ca.__version__}'s generated Fatrop solver has not the expected "
-                               f"shape (once each: {SOLVED!r}, {END!r}); its status cannot be returned")
-        source.write_text(text.replace(SOLVED, SOLVED + "  if (!d->success) return 1;\n")
-                          .replace(END, "  return -(int) d->stats.iterations_count;\n}\n"))
-        library = _library(name, source, (f"-I{casadi / 'include'}",),
+        source.write_text(text)
+        library = _library(name, source, (f"-I{casadi / 'include'}", f"-DCASADI_MAX_NUM_THREADS={SLOTS}"),
                            (f"-L{casadi}", "-lfatrop", "-lblasfeo", f"-Wl,-rpath,{casadi}"))
     return DirectFunction(library, name, solver)
 

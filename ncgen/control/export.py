@@ -18,6 +18,11 @@ written in a temporary sibling and renamed into place, with a manifest) holds:
   substeps, input disturbances — printing ``t u x`` per control step;
 * ``Makefile`` (``make``; ``CFLAGS``, ``LDFLAGS`` as usual), ``CMakeLists.txt``, ``main.c``.
 
+With ``solver="fatrop"`` the controller is Fatrop's instead (:mod:`ncgen.control.export_fatrop`:
+CasADi's generated Fatrop solver of the joint-space horizon problem, ``<name>_fatrop_solver.c``,
+``<name>_joint_state``; the same API), linked to ``libfatrop`` and ``libblasfeo`` (the Makefile's
+``FATROP_DIR``: by default the CasADi wheel's directory, which ships them and their headers).
+
 :func:`closed_loop` runs the same loop in Python (``nc.MPC`` and ``nc.step_function``: the
 same generated code), for checking the package against Python.
 """
@@ -30,7 +35,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.control.discrete import default_abstol, step_functions
-from ncgen.control.mpc import REGULARIZATION, line_search_rules, mpc_functions, residual_tolerance
+from ncgen.control.mpc import REGULARIZATION, SOLVERS, line_search_rules, mpc_functions, residual_tolerance
 from ncgen.control.mpc_context import c_double as _c, controller_context
 from ncgen.control.mpc_problem import mpc_problem
 from ncgen.control.initial import check_consistent
@@ -76,9 +81,12 @@ def plant_function(model, h: float) -> ca.Function:
     return ca.Function("plant_step", args, step(*args), step.name_in(), step.name_out())
 
 
-def export_mpc(ocp, path, *, name: str | None = None, iterations: int = 1, terminal_weight: float = 1e3,
-               x0=None, t_end: float = 5.0, substeps: int = 5, disturbance=(), warmup: int = 10):
-    """Write the controller of ``ocp`` (options as in :class:`ncgen.control.mpc.MPC`) as the C
+def export_mpc(ocp, path, *, name: str | None = None, solver: str = "sqp", iterations: int = 1,
+               terminal_weight: float = 1e3, fatrop_options: dict | None = None, x0=None, t_end: float = 5.0,
+               substeps: int = 5, disturbance=(), warmup: int = 10):
+    """Write the controller of ``ocp`` (options as in :class:`ncgen.control.mpc.MPC`: ``solver``
+    ``"sqp"`` or ``"fatrop"`` — the joint form, on a tree of hinges and slides —,
+    ``iterations`` per control step, ``terminal_weight``, ``fatrop_options``) as the C
     package ``name`` (default: the model's name) in directory ``path``; returns the
     :class:`~ncgen.codegen.package.Package`.  ``x0`` (default: the problem's initial state,
     ``initial(q=…, v=…)``, else the model's),
@@ -92,6 +100,10 @@ def export_mpc(ocp, path, *, name: str | None = None, iterations: int = 1, termi
         raise NcgenError(f"export_mpc: substeps: expected a positive integer, got {substeps!r}")
     if not isinstance(warmup, int) or warmup < 0:
         raise NcgenError(f"export_mpc: warmup: expected an integer ≥ 0, got {warmup!r}")
+    if not isinstance(solver, str) or solver not in SOLVERS:
+        raise NcgenError(f"export_mpc: solver: expected one of {', '.join(SOLVERS)}, got {solver!r}")
+    if fatrop_options is not None and solver != "fatrop":
+        raise NcgenError(f"export_mpc: fatrop_options: options of solver='fatrop', got solver={solver!r}")
     if not isinstance(iterations, int) or iterations < 1:
         raise NcgenError(f"export_mpc: iterations: expected a positive integer, got {iterations!r}")
     if ocp.cable_min_tension is not None:
@@ -111,11 +123,17 @@ def export_mpc(ocp, path, *, name: str | None = None, iterations: int = 1, termi
     else:
         x0 = as_vector(x0, nx, "export_mpc: x0 (the state [q; v])")
         check_consistent(model, x0, problem.p, 0.0, "export_mpc: x0")             # the demo starts at t = 0
-    fns = mpc_functions(model, problem, regularization=REGULARIZATION)
     plant = plant_function(model, problem.h / substeps)
     pl = pulses(disturbance, nu)
+    if solver == "fatrop":                  # the controller's templates: mpc/fatrop.{h,c}.j2, else mpc/mpc.{h,c}.j2
+        from ncgen.control.export_fatrop import fatrop_controller
+        fns, own, controller = fatrop_controller(model, problem, name, iterations, fatrop_options)
+    else:
+        fns, own = mpc_functions(model, problem, regularization=REGULARIZATION), []
+        controller = controller_context(model, problem, fns, iterations, line_search_rules(model))
+    kind = "fatrop" if solver == "fatrop" else "mpc"
     context = {
-        **controller_context(model, problem, fns, iterations, line_search_rules(model)), "substeps": substeps,
+        **controller, "substeps": substeps,
         "plant_sz_arg": plant.sz_arg(), "plant_sz_res": plant.sz_res(), "plant_sz_iw": plant.sz_iw(),
         "plant_sz_w": plant.sz_w(), "plant_tol": _c(residual_tolerance(model)),
         "params": ", ".join(_c(v) for v in problem.p) or "0",
@@ -125,9 +143,9 @@ def export_mpc(ocp, path, *, name: str | None = None, iterations: int = 1, termi
         "disturbance_text": "; ".join(f"{list(p.values)} for {p.t_on:g} <= t < {p.t_off:g} s" for p in pl)
                             or "none",
     }
-    extra = [ExtraSource("runtime/ncgen_mpc.h", "ncgen_mpc.h", included=True),
-             ExtraSource("mpc/mpc.h.j2", f"{name}_mpc.h", context),
-             ExtraSource("mpc/mpc.c.j2", f"{name}_mpc.c", context),
+    extra = [*own, ExtraSource("runtime/ncgen_mpc.h", "ncgen_mpc.h", included=True),
+             ExtraSource(f"mpc/{kind}.h.j2", f"{name}_mpc.h", context),
+             ExtraSource(f"mpc/{kind}.c.j2", f"{name}_mpc.c", context),
              ExtraSource("mpc/demo.c.j2", "demo.c", context, program=True)]
     return write_package(name, [*fns, plant], Path(path), extra_sources=extra, reroll_instructions=None)
 

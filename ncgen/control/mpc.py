@@ -217,9 +217,10 @@ class MPC:
     ``solver``: ``"sqp"`` (Gauss–Newton SQP with CasADi's ``qrqp`` and a filter line search,
     generated C; see the module docstring) or ``"fatrop"`` (CasADi's Fatrop, an interior-point
     method, solving the stage-wise problem of :mod:`ncgen.control.mpc_fatrop` to its tolerance
-    from the previous solution shifted; Python only: ``nc.export_mpc`` writes the SQP);
-    ``fatrop_form``: that problem's form, ``"joint"`` (a tree's joint space with a
-    semi-implicit Euler step, :mod:`ncgen.control.mpc_fatrop_joint`: 2 n_j states and nu
+    from the previous solution shifted; ``nc.export_mpc(..., solver="fatrop")`` writes the
+    joint form's as C, :mod:`ncgen.control.export_fatrop`);
+    ``fatrop_form``: that problem's form, ``"joint"`` (a tree's joint space with an
+    explicit midpoint step, :mod:`ncgen.control.mpc_fatrop_joint`: 2 n_j states and nu
     controls a stage, not the SQP's RATTLE step), ``"natural"`` (the SQP's own discrete
     problem, the step's unknowns as controls) or ``None`` (the joint form where the model
     allows it; ``mpc.fatrop.form`` says which);

@@ -168,9 +168,12 @@ class FatropSolver:
     """Fatrop on the stage-wise problem in ``form`` (:func:`choose_form`), one solve per call
     of :meth:`solve` from the guess given (the MPC's previous solution shifted: a primal warm
     start).  ``status`` and ``iteration_counts``: Fatrop's return status and interior-point
-    iterations of each solve since :meth:`clear`."""
+    iterations of each solve since :meth:`clear`.  ``compiled=False``: the joint form solves
+    with CasADi's plugin too (its solver not compiled: the problem and its options checked
+    for :func:`ncgen.control.export.export_mpc`, which writes the solver's C itself)."""
 
-    def __init__(self, model, problem, options: dict | None = None, form: str | None = None):
+    def __init__(self, model, problem, options: dict | None = None, form: str | None = None, *,
+                 compiled: bool = True):
         if options is not None and not (isinstance(options, dict) and all(isinstance(k, str) for k in options)):
             raise OptimizationError(f"MPC: fatrop_options: expected a dict of Fatrop's options by name, got {options!r}")
         self.model, self.problem = model, problem
@@ -192,7 +195,7 @@ class FatropSolver:
         self._compiled = None
         if options:                                # Fatrop reads its options at the first solve only
             self.check_options(options)
-        if self.form == "joint":
+        if self.form == "joint" and compiled:
             from ncgen.control.compiled_nlp import compiled_fatrop
             self._compiled = compiled_fatrop(f"{model.name}_fatrop_solver", self.nlp.nlp, self.nlp.options)
             self._zeros = (np.zeros(self.nlp.lbx.size), np.zeros(self.nlp.lbg.size))
