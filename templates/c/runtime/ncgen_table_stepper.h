@@ -43,6 +43,10 @@
  * or, where that LU finds an unsafe pivot (K singular or too ill-conditioned for its order),
  * by the sparse QR of ncgen_sparse_qr.h (stable in any order).
  *
+ * Nonsmooth contacts (the contact library, built with NCGEN_CONTACTS defined): the contact
+ * impulse j of ncgen_contact.h in step_newton (−j/2) and step_velocity (+j/2), the contact rows
+ * from the run's contact tables S->ct (ncgen_table_contacts.h lists what it reads).
+ *
  * What the including file defines first: casadi_real, casadi_int; TAB_KINDS (a const
  * ncgen_kinds *), TAB_SPRING_2D and TAB_SPRING_3D (kernels); TAB_FEATURE_FORCES (a const
  * ncgen_feature_force_kind *), TAB_TORQUES (a const ncgen_torque_kind * indexed by member kind),
@@ -58,6 +62,21 @@
 #include "ncgen_element_tables.h"
 #include "ncgen_sparse_lu.h"
 #include "ncgen_sparse_qr.h"
+
+/* Nonsmooth contacts (ncgen_table_contacts.h; packed by ncgen/codegen/contact_tables.py): nk
+ * point contacts in ne elements (ns distinct member sides), the element table of
+ * ncgen_contact_pairs.h (pair_*, its largest element max_q, max_g, max_w), W's pattern by rows
+ * (wt_colind, wt_row: nnz_w), per point contact μ, e, its kind (pk_kind, an index of the
+ * library's pair kinds), whether the kind's first side is the element's second (pk_swap) and
+ * its numbers (pk_c from pk_c_ptr), per element side the map of its local coordinates to its
+ * kind's canonical ones (cm_n rows, dense column-major at cm_ptr in cm); |g| (m/s²). */
+struct ncgen_contact_tables {
+  int nk, ne, ns, max_q, max_g, max_w, nnz_w;
+  double gravity_norm;
+  const int *wt_colind, *wt_row, *pair_int, *pair_qidx, *pair_wpos, *pair_side, *pair_sid, *pair_srep, *pk_kind,
+      *pk_swap, *pk_c_ptr, *cm_ptr, *cm_n;
+  const double *mu, *restitution, *pair_qconst, *pair_bdata, *pair_bound, *pk_c, *cm;
+};
 
 typedef struct {
   const ncgen_tables *T;            /* Φ, A and M: the element tables */
@@ -94,6 +113,8 @@ typedef struct {
   const double *tq_c, *tq_val;
   ncgen_qr_pattern qr;              /* n = nq + nc, the pattern of K and its analysis */
   ncgen_lu_pattern lu;              /* n = nq + nc (or 0: QR only), the LU's analysis of that pattern */
+  const struct ncgen_contact_tables *ct; /* nonsmooth contacts (NULL: none; the library built with
+                                            NCGEN_CONTACTS needs them) */
 } ncgen_stepper_tables;
 
 #if defined(__STDC_VERSION__) && __STDC_VERSION__ >= 201112L
@@ -140,6 +161,13 @@ static void tab_end(void) {
 #define TAB_SPRING_IN (4 * 3 + 3)
 #define TAB_SPRING_OUT (3 + 2 + 3 * 12)
 
+#ifdef NCGEN_CONTACTS
+/* The work of tab_pair_eval (ncgen_table_contacts.h, doubles): the kind's kernel work, the
+ * canonical coordinates of both sides, a kind's input, its gap and its rows (dim x 2 TAB_PAIR_QC
+ * at most). */
+#define TAB_PAIR_WORK (TAB_PAIR_W + 4 * TAB_PAIR_QC + 1 + 6 * TAB_PAIR_QC)
+#endif
+
 /* The kernel work (doubles) of the tables S: element work, q + h w, F, the features
  * at q and their rates, the spring kernel's input and outputs, the QR factors and scratch,
  * the LU factors. */
@@ -147,7 +175,11 @@ static long tab_work_size(const ncgen_stepper_tables *S) {
   const ncgen_tables *T = S->T;
   long n = T->nq + T->nc;
   return tab_ew_size + 2L * T->nq + 2L * T->nf * T->dim + TAB_SPRING_IN + TAB_SPRING_OUT + S->nnz_v + S->nnz_r +
-         3 * n + TAB_FF_IN + TAB_FF_OUT + (S->lu.n ? 2L * S->lu.nnz_l + n : 0);
+         3 * n + TAB_FF_IN + TAB_FF_OUT + (S->lu.n ? 2L * S->lu.nnz_l + n : 0)
+#ifdef NCGEN_CONTACTS
+         + TAB_PAIR_WORK
+#endif
+      ;
 }
 
 typedef struct {
@@ -475,6 +507,9 @@ static int tab_newton(const casadi_real **arg, casadi_real **res, casadi_int *iw
     tab_mass_times(b.x, r);
     for (i = 0; i < nq; ++i) r[i] -= h / 2 * b.F[i];
     tab_a_times(Aq, nu, r, 1);
+#ifdef NCGEN_CONTACTS
+    for (i = 0; i < nq; ++i) r[i] -= arg[8][i] / 2;   /* half the contact impulse j = Wᵀ P */
+#endif
     for (i = 0; i < T->nc; ++i) r[nq + i] = phi[i] / h;
   }
   return 0;
@@ -496,6 +531,9 @@ static int tab_velocity(const casadi_real **arg, casadi_real **res, casadi_int *
     memset(res[0], 0, sizeof(double) * (size_t)(T->nq + T->nc));
     tab_mass_times(wm, res[0]);
     for (i = 0; i < T->nq; ++i) res[0][i] += h / 2 * b.F[i];
+#ifdef NCGEN_CONTACTS
+    for (i = 0; i < T->nq; ++i) res[0][i] += arg[6][i] / 2;
+#endif
   }
   return 0;
 }
@@ -599,7 +637,11 @@ static int tab_outputs(const casadi_real **arg, casadi_real **res, casadi_int *i
 
 /* The kernels' sizes, as CasADi's <f>_work gives them. */
 static int tab_work_sizes(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+#ifdef NCGEN_CONTACTS
+  *sz_arg = 9;                       /* step_newton's contact impulse */
+#else
   *sz_arg = 8;
+#endif
   *sz_res = 3;
   *sz_iw = 0;
   *sz_w = tab_work_size(tab_cur);
@@ -621,7 +663,15 @@ static int tab_work_sizes(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz
 #define KERNEL_OUTPUTS tab_outputs
 #define KERNEL_WORKS tab_work_sizes
 
+#ifdef NCGEN_CONTACTS
+#include "ncgen_table_contacts.h"
+#endif
 #include "ncgen_rattle.h"
+#ifdef NCGEN_CONTACTS
+#include "ncgen_cone_newton.h"
+#include "ncgen_contact_pairs.h"
+#include "ncgen_contact.h"
+#endif
 #include "ncgen_fixed.h"
 #include "ncgen_adaptive.h"
 
