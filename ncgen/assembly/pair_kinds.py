@@ -256,6 +256,8 @@ class PairKind:
     function: ca.Function
     #: The gap alone: ``pk_..._gap: q, c -> g``.
     gap: ca.Function
+    #: ``function`` as a function of its own (no call options): the contact library's kernel.
+    plain: ca.Function
 
 
 #: The contact class of each kind (:func:`point_kind`).
@@ -306,7 +308,8 @@ def pair_kind(kind: str, type_a: str, type_b: str, dim: int) -> PairKind:
     called = {"never_inline": True}       # a call in the expressions that use it, one C function
     fn = ca.Function(name, [q, c], [g, W], ["q", "c"], ["g", "W"], called)
     gap = ca.Function(f"{name}_gap", [q, c], [ca.cse(ca.densify(term.g))], ["q", "c"], ["g"], called)
-    return PairKind(name, kind, int(sides[0].q.numel()), int(sides[1].q.numel()), int(c.numel()), fn, gap)
+    plain = ca.Function(name, [q, c], [g, W], ["q", "c"], ["g", "W"])
+    return PairKind(name, kind, int(sides[0].q.numel()), int(sides[1].q.numel()), int(c.numel()), fn, gap, plain)
 
 
 def side_numbers(member, dim: int) -> np.ndarray:

@@ -330,7 +330,7 @@ def _contact_context() -> tuple[list, dict]:
                                                PGS_MAX_ITER, PGS_TOL, REPEAT_TOL)
 
     kinds = [(pair_kind(*k), k[3]) for k in table_kinds()]
-    fns = [k.function for k, _ in kinds]
+    fns = [k.plain for k, _ in kinds]
     qc = max(max(k.n_a, k.n_b) for k, _ in kinds)
     return fns, {"kinds": [{"name": k.name, "dim": d, "n_a": k.n_a, "n_b": k.n_b, "n_c": k.n_c} for k, d in kinds],
                  "pair_w": max(f.sz_w() for f in fns), "pair_qc": qc, "pgs_max_iter": PGS_MAX_ITER,

@@ -494,9 +494,9 @@ static int tab_newton(const casadi_real **arg, casadi_real **res, casadi_int *iw
   tab_work b = tab_layout(w);
   int i, nq = T->nq;
   (void)iw; (void)mem;
-  for (i = 0; i < nq; ++i) {
-    b.qh[i] = q[i] + h * wm[i];
-    b.x[i] = wm[i] - v[i];
+  for (i = 0; i < nq; ++i) {             /* NULL inputs are zeros (CasADi's convention) */
+    b.qh[i] = q[i] + h * (wm ? wm[i] : 0);
+    b.x[i] = (wm ? wm[i] : 0) - (v ? v[i] : 0);
   }
   if (tab_phi_jacobian(q, &phi_q, &Aq, b.ew) || tab_phi_jacobian(b.qh, &phi, &Ah, b.ew)) return 1;
   if (K) tab_kkt(K, Ah, Aq);
@@ -508,7 +508,8 @@ static int tab_newton(const casadi_real **arg, casadi_real **res, casadi_int *iw
     for (i = 0; i < nq; ++i) r[i] -= h / 2 * b.F[i];
     tab_a_times(Aq, nu, r, 1);
 #ifdef NCGEN_CONTACTS
-    for (i = 0; i < nq; ++i) r[i] -= arg[8][i] / 2;   /* half the contact impulse j = Wᵀ P */
+    if (arg[8])                          /* half the contact impulse j = Wᵀ P */
+      for (i = 0; i < nq; ++i) r[i] -= arg[8][i] / 2;
 #endif
     for (i = 0; i < T->nc; ++i) r[nq + i] = phi[i] / h;
   }
@@ -529,10 +530,11 @@ static int tab_velocity(const casadi_real **arg, casadi_real **res, casadi_int *
   tab_input_forces(q, arg[3], b.F);
   if (res[0]) {
     memset(res[0], 0, sizeof(double) * (size_t)(T->nq + T->nc));
-    tab_mass_times(wm, res[0]);
+    if (wm) tab_mass_times(wm, res[0]);
     for (i = 0; i < T->nq; ++i) res[0][i] += h / 2 * b.F[i];
 #ifdef NCGEN_CONTACTS
-    for (i = 0; i < T->nq; ++i) res[0][i] += arg[6][i] / 2;
+    if (arg[6])
+      for (i = 0; i < T->nq; ++i) res[0][i] += arg[6][i] / 2;
 #endif
   }
   return 0;
