@@ -135,17 +135,24 @@ static TAB_THREAD int tab_valid[2], tab_recent;
  * torques' generalised force (nq), at tab_qcache; tab_qvalid whether it holds them. */
 static TAB_THREAD double *tab_qcache;
 static TAB_THREAD int tab_qvalid;
+/* The sparse LU of the last K that step_solve factored (tab_lu: K's nonzeros, then L, U and
+ * the diagonal), reused while K is the same (the contact solve's one KKT solve per active row,
+ * ncgen_contact.h: delassus_kkt); tab_lu_valid whether it holds one. */
+static TAB_THREAD double *tab_lu;
+static TAB_THREAD int tab_lu_valid;
 
 /* Starts a run on the tables S in this thread: 0, or 1 when out of memory. */
 static int tab_begin(const ncgen_stepper_tables *S) {
   size_t n = (size_t)S->T->nq + (size_t)S->T->nc + (size_t)S->T->a_nnz;
   size_t nqc = 2 * (size_t)S->T->nq + (size_t)S->T->nf * (size_t)S->T->dim;
+  size_t nlu = S->lu.n ? (size_t)S->nnz_k + 2 * (size_t)S->lu.nnz_l + (size_t)S->lu.n : 0;
   tab_cur = S;
   tab_ew_size = ncgen_tables_work_size(TAB_KINDS, S->T);
-  tab_cache[0] = malloc((2 * n + nqc) * sizeof(double) + 1);
+  tab_cache[0] = malloc((2 * n + nqc + nlu) * sizeof(double) + 1);
   tab_cache[1] = tab_cache[0] ? tab_cache[0] + n : 0;
   tab_qcache = tab_cache[0] ? tab_cache[0] + 2 * n : 0;
-  tab_valid[0] = tab_valid[1] = tab_qvalid = 0;
+  tab_lu = tab_cache[0] ? tab_qcache + nqc : 0;
+  tab_valid[0] = tab_valid[1] = tab_qvalid = tab_lu_valid = 0;
   tab_recent = 0;
   return tab_cache[0] == 0;
 }
@@ -153,8 +160,8 @@ static int tab_begin(const ncgen_stepper_tables *S) {
 /* Ends the run of tab_begin. */
 static void tab_end(void) {
   free(tab_cache[0]);
-  tab_cache[0] = tab_cache[1] = tab_qcache = 0;
-  tab_valid[0] = tab_valid[1] = tab_qvalid = 0;
+  tab_cache[0] = tab_cache[1] = tab_qcache = tab_lu = 0;
+  tab_valid[0] = tab_valid[1] = tab_qvalid = tab_lu_valid = 0;
 }
 
 /* The spring kernel's input and outputs at most (3D): x, then y = [f; V; P] and J. */
@@ -169,13 +176,13 @@ static void tab_end(void) {
 #endif
 
 /* The kernel work (doubles) of the tables S: element work, q + h w, F, the features
- * at q and their rates, the spring kernel's input and outputs, the QR factors and scratch,
- * the LU factors. */
+ * at q and their rates, the spring kernel's input and outputs, the QR factors and scratch
+ * (the LU's factors are the run's, tab_lu). */
 static long tab_work_size(const ncgen_stepper_tables *S) {
   const ncgen_tables *T = S->T;
   long n = T->nq + T->nc;
   return tab_ew_size + 2L * T->nq + 2L * T->nf * T->dim + TAB_SPRING_IN + TAB_SPRING_OUT + S->nnz_v + S->nnz_r +
-         3 * n + TAB_FF_IN + TAB_FF_OUT + (S->lu.n ? 2L * S->lu.nnz_l + n : 0)
+         3 * n + TAB_FF_IN + TAB_FF_OUT
 #ifdef NCGEN_CONTACTS
          + TAB_PAIR_WORK
 #endif
@@ -183,7 +190,7 @@ static long tab_work_size(const ncgen_stepper_tables *S) {
 }
 
 typedef struct {
-  double *ew, *qh, *F, *fq, *fv, *sx, *sy, *V, *R, *beta, *x, *y, *fx, *fy, *lu_l, *lu_u, *lu_d;
+  double *ew, *qh, *F, *fq, *fv, *sx, *sy, *V, *R, *beta, *x, *y, *fx, *fy;
 } tab_work;
 
 static tab_work tab_layout(double *w) {
@@ -204,9 +211,6 @@ static tab_work tab_layout(double *w) {
   b.y = b.x + T->nq + T->nc;
   b.fx = b.y + T->nq + T->nc;
   b.fy = b.fx + TAB_FF_IN;
-  b.lu_l = b.fy + TAB_FF_OUT;
-  b.lu_u = b.lu_l + S->lu.nnz_l;
-  b.lu_d = b.lu_u + S->lu.nnz_l;
   return b;
 }
 
@@ -570,13 +574,26 @@ static int tab_project(const casadi_real **arg, casadi_real **res, casadi_int *i
   return 0;
 }
 
-/* step_solve: K, r -> K⁻¹ r: by the LU, or by the QR where the LU's pivots are unsafe. */
+/* step_solve: K, r -> K⁻¹ r: by the LU (kept for the next solve with the same K), or by the QR
+ * where the LU's pivots are unsafe. */
 static int tab_solve(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  const ncgen_stepper_tables *S = tab_cur;
   tab_work b = tab_layout(w);
   (void)iw; (void)mem;
-  if (tab_cur->lu.n && !ncgen_lu_factor(&tab_cur->lu, arg[0], b.lu_l, b.lu_u, b.lu_d, b.x)) {
-    ncgen_lu_solve(&tab_cur->lu, b.lu_l, b.lu_u, b.lu_d, arg[1], res[0], b.y);
-    return 0;
+  if (S->lu.n) {
+    size_t nk = (size_t)S->nnz_k;
+    double *l = tab_lu + nk, *u = l + S->lu.nnz_l, *d = u + S->lu.nnz_l;
+    if (!tab_lu_valid || memcmp(tab_lu, arg[0], nk * sizeof(double))) {
+      tab_lu_valid = 0;
+      if (!ncgen_lu_factor(&S->lu, arg[0], l, u, d, b.x)) {
+        memcpy(tab_lu, arg[0], nk * sizeof(double));
+        tab_lu_valid = 1;
+      }
+    }
+    if (tab_lu_valid) {
+      ncgen_lu_solve(&S->lu, l, u, d, arg[1], res[0], b.y);
+      return 0;
+    }
   }
   if (ncgen_qr_factor(&tab_cur->qr, arg[0], b.V, b.R, b.beta, b.x)) {
     int i;                           /* singular: NaN, which the stepper reports as not finite */
