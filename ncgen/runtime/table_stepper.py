@@ -36,6 +36,7 @@ from ncgen.codegen.stepper_tables import StepperTables, stepper_tables
 from ncgen.errors import CodegenError, NcgenError
 from ncgen.model.data import model_data
 from ncgen.runtime.options import KERNELS
+from ncgen.runtime.stepper_checks import dissipative_contacts
 from ncgen.runtime.stepper_library import CompiledStepper, load_stepper
 from ncgen.runtime.table_library import (TABLE_FIELDS, ElementLibrary, _Tables, load_contact_library,
                                          load_element_library)
@@ -243,14 +244,15 @@ class TableStepper(CompiledStepper):
 def table_stepper(model, library: ElementLibrary | None = None) -> TableStepper:
     """The table-driven stepper of ``model`` (raises
     :class:`~ncgen.codegen.model_tables.UnsupportedElements` naming the elements not covered).
-    Whether the model is conservative is recorded in its data from the tables (the stepper's
-    checks then need no flat function)."""
+    Whether the model is conservative is recorded in its data from the tables and its contacts'
+    parameters (the stepper's checks then need no flat function)."""
     st = stepper_tables(model)
     data = model_data(model)
+    conservative = st.conservative and not dissipative_contacts(model)
     if data.conservative_idle is None:
-        data.conservative_idle = st.conservative
+        data.conservative_idle = conservative
     if data.conservative is None and not model.nu:
-        data.conservative = st.conservative
+        data.conservative = conservative
     return TableStepper(st, library)
 
 
