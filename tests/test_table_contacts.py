@@ -192,25 +192,3 @@ def test_contact_scenes_step_as_their_packages(scene):
     assert worst["q"] < 1e-12, worst
     assert worst["v"] < 1e-9 and worst["P"] < 1e-9, worst
 
-
-@pytest.mark.slow       # gcc on the contact library's C (≈ 10 CPU-s)
-@pytest.mark.skipif(not HAVE_CC, reason="no C compiler")
-def test_contact_package_is_deterministic_and_warning_free(tmp_path):
-    """The contact library's package: the same bytes when written twice; its glue and the
-    contact runtime (element_tables.c) compile with -std=c99 -Wall -Wextra -Werror at -O1, its
-    kernels without a warning."""
-    import subprocess
-
-    from ncgen.codegen.element_kernels import write_element_package
-
-    a, b = (write_element_package(tmp_path / k, contacts=True) for k in "ab")
-    files = sorted(p.name for p in a.path.iterdir())
-    assert files == sorted(p.name for p in b.path.iterdir())
-    for name in files:
-        assert (a.path / name).read_bytes() == (b.path / name).read_bytes(), name
-    cc = os.environ.get("CC") or next(shutil.which(c) for c in CANDIDATES if shutil.which(c))
-    for src in a.manifest["build"]["sources"]:
-        mode = ["-O1", "-c", "-o", str(tmp_path / f"{src}.o")] if src == "element_tables.c" else ["-fsyntax-only"]
-        out = subprocess.run([*cc.split(), "-std=c99", "-Wall", "-Wextra", "-Werror", "-I.", src, *mode],
-                             cwd=a.path, capture_output=True, text=True, timeout=600)
-        assert out.returncode == 0, out.stderr[-3000:]
