@@ -167,10 +167,11 @@ def _one_step(stepper, model, q, v, t, h):
 @pytest.mark.parametrize("scene", ["falling_chain", "boxes", "box_stack", "heap20"])
 def test_contact_scenes_step_as_their_packages(scene):
     """One step from each state of the package's 0.5 s run (h = 1 ms), by the tables and by the
-    package: equal to 1e-12 relative in q; in v and the impulses to 1e-12 where the contact set
-    is determined, and to the contact solve's own tolerance (PGS_TOL relative: where redundant
-    contacts make the impulses non-unique, each solve stops at its tolerance, ≈ 1e-10 relative
-    measured) elsewhere."""
+    package: equal to 1e-12 relative in q, 1e-9 in v (measured ≤ 1.7e-12) and in each element's
+    summed impulse; where the support is statically indeterminate (a box's four corners on a
+    slope) the shares of its point contacts differ (4e-3 relative measured on boxes: the
+    least-norm distribution is found to the solve's tolerance from Delassus matrices that
+    differ at round-off, KKT solves here, M⁻¹ there), not what moves the bodies."""
     from ncgen.runtime.stepper_library import load_stepper
     from ncgen.runtime.table_stepper import table_stepper
 
@@ -182,11 +183,18 @@ def test_contact_scenes_step_as_their_packages(scene):
     else:
         model = nc.System.from_toml(ROOT / "examples" / f"{scene}.toml").build(contacts="nonsmooth")
     tables, flat = table_stepper(model), load_stepper(model)
+    first = contact_arrays(model)["arrays"]["pair_int"].reshape(-1, 8)[:, 1]   # each element's first contact
+
+    def per_element(P):
+        """The impulses summed over each element's point contacts."""
+        return np.add.reduceat(P.reshape(-1, model.dim), first, axis=0).ravel()
+
     h, n = 1e-3, 500
     Q, V, *_ = flat.simulate(model.q0, model.v0, 0.0, h, n, 1, None, model.p0, 1e-10, 12, 4)
     worst = {"q": 0.0, "v": 0.0, "P": 0.0}
     for k in range(0, n - 1, 5):
         a, b = (_one_step(s, model, Q[k], V[k], (k + 1) * h, h) for s in (tables, flat))
+        a, b = (*a[:2], per_element(a[2])), (*b[:2], per_element(b[2]))
         for name, x, y in zip("qvP", a, b):
             worst[name] = max(worst[name], float(np.max(np.abs(x - y)) / (1 + np.max(np.abs(y)))))
     assert worst["q"] < 1e-12, worst
