@@ -76,6 +76,7 @@ static const ncgen_pair_kind PAIR_KINDS[1] = {{k_floor, 2, 2, 0, 1}};
 #define REPEAT_TOL 1e-12
 
 #include "ncgen_table_stepper.h"
+#include "ncgen_table_contacts.h"  /* (already in, through ncgen_table_stepper.h with NCGEN_CONTACTS) */
 /* The runtime is compiled: the contact tables' field names, which ncgen_table_contacts.h defines
  * as macros for it, are plain names again here. */
 #undef wt_colind
