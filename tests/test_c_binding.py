@@ -135,6 +135,24 @@ def template(relative: str, **values) -> str:
     return text
 
 
+def element_library_definitions(package: str, contacts: dict | None) -> dict:
+    """:func:`definitions` of templates/c/element_tables.c.j2 rendered for the library
+    ``package`` (with ``contacts``: the contact library's variant), the structs by full name."""
+    import jinja2
+
+    from ncgen.codegen.render import environment
+
+    env = environment()
+    env.undefined = jinja2.ChainableUndefined      # the numbers of the kinds do not matter here
+    text = env.get_template("element_tables.c.j2").render(name=package, contacts=contacts, joint_kinds=[],
+                                                          member_kinds=[], feature_force_kinds=[], torque_kinds=[])
+    for struct in ("step_options", "run_options"):           # the template's short names of the structs
+        alias = f"typedef {package}_{struct} {struct};"
+        assert alias in text
+        text = text.replace(alias, "").replace(f" {struct} *", f" {package}_{struct} *")
+    return definitions(text, f"{package}_")
+
+
 def test_the_element_library_tables_match_element_tables_template():
     """The element library's entry points (table_library.SIGNATURES), its stepper's
     (table_stepper.SIGNATURES) and its step Jacobians (table_step.SIGNATURE), as
@@ -142,15 +160,23 @@ def test_the_element_library_tables_match_element_tables_template():
     from ncgen.codegen.element_kernels import PACKAGE
     from ncgen.runtime import table_library, table_step, table_stepper
 
-    text = template("element_tables.c.j2", name=PACKAGE)
-    for struct in ("step_options", "run_options"):           # the template's short names of the structs
-        alias = f"typedef {PACKAGE}_{struct} {struct};"
-        assert alias in text
-        text = text.replace(alias, "").replace(f" {struct} *", f" {PACKAGE}_{struct} *")
-    declared = definitions(text, f"{PACKAGE}_")
+    declared = element_library_definitions(PACKAGE, None)
     assert_table_matches(table_library.SIGNATURES, declared, name=PACKAGE)
     assert_table_matches(table_stepper.SIGNATURES, declared, name=PACKAGE)
     assert_table_matches({"step_jacobians": table_step.SIGNATURE}, declared, name=PACKAGE)
+
+
+def test_the_contact_library_tables_match_element_tables_template():
+    """The contact library's entry points: the element library's, its stepper's loops with the
+    trailing impulse arguments of a contact stepper (table_stepper._signatures(True)), no step
+    Jacobians."""
+    from ncgen.codegen.element_kernels import CONTACT_PACKAGE
+    from ncgen.runtime import table_library, table_stepper
+
+    declared = element_library_definitions(CONTACT_PACKAGE, {"kinds": []})
+    assert_table_matches(table_library.SIGNATURES, declared, name=CONTACT_PACKAGE)
+    assert_table_matches(table_stepper._signatures(True), declared, name=CONTACT_PACKAGE)
+    assert "step_jacobians" not in declared
 
 
 def test_the_tree_library_table_matches_tree_tables_template():

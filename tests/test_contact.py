@@ -633,12 +633,12 @@ def test_unconverged_contact_solves_are_reported(monkeypatch):
     p = s.add_point("p", mass=1.0, position=(0, 0, 0.05))
     s.add_contact(nc.SpherePlane(p, radius=0.0, name="floor"))
     s.add_contact(nc.SpherePlane(p, radius=0.0, point=(0, 0, 0), normal=(0, 0.6, 0.8), name="slope"))
-    monkeypatch.setattr(package, "PGS_MAX_ITER", 1)
-    model = s.build(contacts="nonsmooth")
+    monkeypatch.setattr(package, "PGS_MAX_ITER", 1)     # a constant of the model's own package (the
+    model = s.build(contacts="nonsmooth")                # contact library's is compiled in): kernels="flat"
     with pytest.raises(SimulationError, match="contact impulses did not converge"):
-        nc.simulate(model, 0.2, 0.01, method="stepper", substeps=10)
+        nc.simulate(model, 0.2, 0.01, method="stepper", substeps=10, kernels="flat")
     with pytest.warns(UserWarning, match="stopped at"):
-        tr = nc.simulate(model, 0.2, 0.01, method="stepper", substeps=10, check=False)
+        tr = nc.simulate(model, 0.2, 0.01, method="stepper", substeps=10, check=False, kernels="flat")
     report = tr.info["contacts"]
     assert report["pgs_unconverged"] >= 1 and report["pgs_residual"] > 1e-3
     # with the default limit the same drop converges: nothing to report, and it comes to rest

@@ -306,12 +306,14 @@ def test_benchmark_smoke(tmp_path):
 @pytest.mark.slow      # writes the package twice, compiles it at -Werror; fast:
 #                       test_examples_equal_the_flat_functions_or_are_refused_by_kind (the library compiled and
 #                       checked), tests/test_c_binding.py (its tables against the template)
-def test_element_package_is_deterministic_and_warning_free(tmp_path):
-    """The element library's package: the same bytes when written twice, and its C compiles
-    with -Wall -Wextra -Werror."""
+@pytest.mark.parametrize("contacts", [False, pytest.param(True, marks=pytest.mark.slow)],
+                         ids=["elements", "contacts"])
+def test_element_package_is_deterministic_and_warning_free(tmp_path, contacts):
+    """The element library's package (and the contact library's, slow: ≈ 20 CPU-s of gcc): the
+    same bytes when written twice, and its C compiles with -Wall -Wextra -Werror."""
     from ncgen.codegen.element_kernels import write_element_package
 
-    a, b = write_element_package(tmp_path / "a"), write_element_package(tmp_path / "b")
+    a, b = (write_element_package(tmp_path / k, contacts=contacts) for k in "ab")
     files = sorted(p.name for p in a.path.iterdir())
     assert files == sorted(p.name for p in b.path.iterdir())
     for name in files:

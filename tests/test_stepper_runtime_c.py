@@ -13,7 +13,9 @@ QR and LU of the table-driven stepper (``ncgen_sparse_qr.h``, ``ncgen_sparse_lu.
 singular and ill-conditioned matrices refused) on hand-analysed patterns, and that
 stepper (``ncgen_table_stepper.h``) on the hand-made tables of a planar pendulum with a spring, and
 its step Jacobians (``ncgen_table_jacobians.h``) on the same with inputs and actuators (the
-columns also in blocks of three, so that they span several); the
+columns also in blocks of three, so that they span several), and
+its nonsmooth contacts (``ncgen_table_contacts.h``: an element's rows from a pair kind on canonical
+coordinates, a frictional drop to rest) on the tables of a planar point over the floor; the
 tree loops (``ncgen_tree_tables.h``: RNEA, CRBA, forward dynamics, derivatives) on hand-written
 kernels of a tree of sliders with a mimic joint (through their kernels and as the loops' own
 z sliders; the articulated-body algorithm without the mimic map), and the spatial algebra of
@@ -51,6 +53,7 @@ PROGRAMS = [("test_rattle.c", []), pytest.param("test_contact.c", [], marks=SLOW
             ("test_cone_newton.c", []), ("test_mpc.c", []), ("test_joint_loop.c", []),
             ("test_element_tables.c", []), ("test_sparse_qr.c", []), ("test_sparse_lu.c", []),
             pytest.param("test_table_stepper.c", [], marks=SLOW_BUILD),
+            pytest.param("test_table_contacts.c", [], marks=SLOW_BUILD),
             pytest.param("test_table_jacobians.c", ["-DTAB_JAC_ROWS"], marks=SLOW_BUILD),
             pytest.param("test_table_jacobians.c", ["-DTAB_JAC_COLUMNS", "-DTAB_JAC_BLOCK=3"], marks=SLOW_BUILD),
             pytest.param("test_tree_tables.c", [], marks=SLOW_BUILD),
@@ -71,7 +74,8 @@ def sanitizers(tmp_path_factory) -> Path:
 
 @pytest.mark.parametrize("source, defines", PROGRAMS, ids=["rattle", "contact-kkt", "contact-schur", "contact-pairs",
                                                           "cone-newton", "mpc", "joint-loop", "element-tables",
-                                                          "sparse-qr", "sparse-lu", "table-stepper", "table-jacobians",
+                                                          "sparse-qr", "sparse-lu", "table-stepper", "table-contacts",
+                                                          "table-jacobians",
                                                           "table-jacobians-columns", "tree-tables", "spatial",
                                                           "lu-columns"])
 def test_runtime_c_unit_tests_pass_under_sanitizers(sanitizers, source, defines):

@@ -431,26 +431,30 @@ def test_talos_table_jacobians_equal_extrapolated_differences():
 
 def test_stepper_tables_struct_matches_its_python_mirror():
     """The fields of ``ncgen_stepper_tables`` (templates/c/runtime/ncgen_table_stepper.h), in
-    order, are those of ``STEPPER_FIELDS`` (ncgen/runtime/table_stepper.py) and then ``qr`` and
-    ``lu``, and those of ``ncgen_lu_pattern`` (ncgen_sparse_lu.h) those of ``_LU_FIELDS``:
-    ctypes lays the structs out from these lists, so a field added on one side only would shift
-    every field after it."""
+    order, are those of ``STEPPER_FIELDS`` (ncgen/runtime/table_stepper.py) and then ``qr``,
+    ``lu`` and ``ct``, those of ``struct ncgen_contact_tables`` the contact tables' sizes,
+    ``gravity_norm`` and arrays (ncgen/codegen/contact_tables.py), and those of
+    ``ncgen_lu_pattern`` (ncgen_sparse_lu.h) those of ``_LU_FIELDS``: ctypes lays the structs out
+    from these lists, so a field added on one side only would shift every field after it."""
     import re
 
+    from ncgen.codegen.contact_tables import INT_ARRAYS, REAL_ARRAYS, SIZES
     from ncgen.runtime.table_stepper import _LU_FIELDS, STEPPER_FIELDS
 
-    def fields(header: str, struct: str) -> list[str]:
+    def fields(header: str, pattern: str) -> list[str]:
         text = (ROOT / "templates" / "c" / "runtime" / header).read_text()
-        body = re.search(r"typedef struct \{(.*?)\} " + struct + ";", text, re.S).group(1)
-        body = re.sub(r"/\*.*?\*/", "", body, flags=re.S)
-        names = []
-        for decl in filter(None, (d.strip() for d in body.split(";"))):
-            words = decl.split(None, 2) if decl.startswith("const") else decl.split(None, 1)
-            names += [n.strip().lstrip("*").strip() for n in words[-1].split(",")]
-        return names
+        body = re.sub(r"/\*.*?\*/", "", re.search(pattern, text, re.S).group(1), flags=re.S)
+        return [re.split(r"[\s*]+", part.strip())[-1] for decl in filter(None, (d.strip() for d in body.split(";")))
+                for part in decl.split(",")]
 
-    assert fields("ncgen_table_stepper.h", "ncgen_stepper_tables") == [f for _, f in STEPPER_FIELDS] + ["qr", "lu"]
-    assert fields("ncgen_sparse_lu.h", "ncgen_lu_pattern") == [f for _, f, _ in _LU_FIELDS]
+    def typedef(struct: str) -> str:
+        return r"typedef struct \{(.*?)\} " + struct + ";"
+
+    assert fields("ncgen_table_stepper.h", typedef("ncgen_stepper_tables")) == \
+        [f for _, f in STEPPER_FIELDS] + ["qr", "lu", "ct"]
+    assert fields("ncgen_table_stepper.h", r"struct ncgen_contact_tables \{(.*?)\};") == \
+        [*SIZES, "gravity_norm", *INT_ARRAYS, *REAL_ARRAYS]
+    assert fields("ncgen_sparse_lu.h", typedef("ncgen_lu_pattern")) == [f for _, f, _ in _LU_FIELDS]
 
 
 def test_forces_without_table_jacobians_take_the_flat_path():

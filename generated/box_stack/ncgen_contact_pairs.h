@@ -30,7 +30,7 @@
  *                              same bounding data: a sphere of a heap is one side of all its
  *                              elements) and per element side its number (-1: not a member)
  *   pair_srep[PAIR_NS * 2]     per distinct member side an element and side that has it
- *   pair_gap_fn, pair_rows_fn  the kernels by number; PAIR_MAX_Q, PAIR_MAX_G, PAIR_MAX_W:
+ *   pair_gap_fn, pair_rows_fn  the kernels by number (or PAIR_KERNEL, below); PAIR_MAX_Q, PAIR_MAX_G, PAIR_MAX_W:
  *                              the largest na + nb, point contacts and dense W of an element
  *
  * Which elements are evaluated (ws->pon): pairs_bounds() computes, at a configuration q,
@@ -52,6 +52,11 @@
 #define PAIR_SLACK 1e-6
 
 typedef int (*pair_kernel)(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem);
+/* Element e's kernel fn (pair_gap_fn or pair_rows_fn) on ws->arg, ws->res (the table stepper
+ * defines its own: ncgen_table_contacts.h). */
+#ifndef PAIR_KERNEL
+#define PAIR_KERNEL(fn, e, ws) fn[pair_int[8 * (e)]]((ws)->arg, (ws)->res, (ws)->iw, (ws)->w, 0)
+#endif
 
 /* Element e's local coordinates (rates: fixed ones 0) from the system's x into out. */
 static void pair_gather(int e, const casadi_real *x, int rates, casadi_real *out) {
@@ -216,7 +221,7 @@ static int contact_gap(workspace *ws, const casadi_real *q, const casadi_real *p
     ws->arg[1] = ws->pq + pi[3];
     ws->arg[2] = p;
     ws->res[0] = g + pi[1];
-    if (pair_gap_fn[pi[0]](ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+    if (PAIR_KERNEL(pair_gap_fn, e, ws)) return STEP_KERNEL;
   }
   return STEP_OK;
 }
@@ -249,7 +254,7 @@ static int contact_rows(workspace *ws, const casadi_real *q, const casadi_real *
     ws->arg[2] = p;
     ws->res[0] = ws->pg;
     ws->res[1] = ws->pw;
-    if (pair_rows_fn[pi[0]](ws->arg, ws->res, ws->iw, ws->w, 0)) return STEP_KERNEL;
+    if (PAIR_KERNEL(pair_rows_fn, e, ws)) return STEP_KERNEL;
     if (g) memcpy(g + pi[1], ws->pg, pi[2] * sizeof(casadi_real));
     if (W) {
       memset(W + w0, 0, nw * sizeof(casadi_real));

@@ -304,18 +304,14 @@ def _renamed(f: ca.Function, name: str) -> ca.Function:
 def pair_kernels(model) -> PairKernels:
     """The element kernels and table of ``model`` (nonsmooth contacts; module docstring);
     ``model`` must have :func:`pair_contacts`."""
-    contacts, layout, dim = pair_contacts(model), model.layout, model.dim
     p = ca.SX.sym("p", model.np)
     kernels: dict[str, int] = {}
-    functions, elements, memo = [], [], {}
-    first = 0
-    for element in contacts:
-        pcs = element.point_contacts()
-        members = element.members()
-        (idx_a, const_a), (idx_b, const_b) = (_local(m, layout) for m in members)
-        kind = _kind_rows(model, element, len(idx_a), len(idx_b))
+    functions, memo = [], {}
+
+    def kernel(element, first, n_a, n_b) -> int:
+        kind = _kind_rows(model, element, n_a, n_b)
         if kind is None:
-            qa, qb = ca.SX.sym("q_a", len(idx_a)), ca.SX.sym("q_b", len(idx_b))
+            qa, qb = ca.SX.sym("q_a", n_a), ca.SX.sym("q_b", n_b)
             g_loc, W_loc = _flat_rows(model, element, first, qa, qb, p, memo)
             gap = ca.Function("gap", [qa, qb, p], [g_loc], ["q_a", "q_b", "p"], ["g"])
             kind = gap, ca.Function("rows", [qa, qb, p], [g_loc, W_loc], ["q_a", "q_b", "p"], ["g", "W"])
@@ -323,12 +319,26 @@ def pair_kernels(model) -> PairKernels:
         if key not in kernels:
             kernels[key] = len(kernels)
             k = kernels[key]
-            functions += [_renamed(kind[0], f"step_pair{k}_gap"), _renamed(kind[1], f"step_pair{k}_rows")]
+            functions.extend([_renamed(kind[0], f"step_pair{k}_gap"), _renamed(kind[1], f"step_pair{k}_rows")])
+        return kernels[key]
+
+    return PairKernels(functions, pair_elements(model, kernel))
+
+
+def pair_elements(model, kernel=None) -> list:
+    """The :class:`Element` table of ``model`` (:func:`pair_contacts`), each element's kernel
+    number ``kernel(element, first point contact, n_a, n_b)`` (None: −1, no kernel)."""
+    layout, dim = model.layout, model.dim
+    elements, first = [], 0
+    for element in pair_contacts(model):
+        pcs = element.point_contacts()
+        (idx_a, const_a), (idx_b, const_b) = (_local(m, layout) for m in element.members())
+        number = kernel(element, first, len(idx_a), len(idx_b)) if kernel is not None else -1
         sides, kappa, dmin, cap, rate_bounded = _element_sides(element, pcs, layout, dim)
-        elements.append(Element(element.name, first, len(pcs), kernels[key], idx_a, idx_b, const_a, const_b,
+        elements.append(Element(element.name, first, len(pcs), number, idx_a, idx_b, const_a, const_b,
                                 tuple(sides), kappa, dmin, cap, rate_bounded, [pc.mu > 0 for pc in pcs]))
         first += len(pcs)
-    return PairKernels(functions, elements)
+    return elements
 
 
 def _side_numbers(side: Side, ql, vl):

@@ -99,6 +99,59 @@ def side_type(member) -> str:
     return GROUND if member.is_ground else member.ctype.name
 
 
+#: The canonical coordinate type of a side with ``k`` axes, by dimension: a member of any type
+#: with ``k`` axes is this type's member with the coordinates ``[x_i; X_1; …; X_k]``
+#: (:func:`canonical_map`) and its own numbers: every type with ``k`` axes has the same
+#: ``X̄⁺``, ``r̄_i`` and ``omega`` constants (:func:`side_constants`).
+CANONICAL = {3: {0: "r", 1: "ru", 3: "ruvw"}, 2: {0: "r", 1: "ru", 2: "ruv"}}
+
+
+def canonical_type(member, dim: int) -> str | None:
+    """The canonical side type of ``member`` (``ground`` for the ground), None for a type of
+    another number of axes."""
+    return GROUND if member.is_ground else CANONICAL[dim].get(member.ctype.k)
+
+
+@lru_cache(maxsize=None)
+def canonical_map(ctype: str, dim: int) -> np.ndarray:
+    """``B`` (dim (k + 1) × nq): a member's canonical coordinates ``[x_i; X_1; …; X_k] = B q_I``,
+    ``x_i = C(0) q_I`` and ``X_j = (C(e_j) − C(0)) q_I`` (``C`` affine in ``c``, so that
+    ``C(c) q_I = x_i + Σ_j c_j X_j``, the canonical type's ``C``); the identity for a canonical type."""
+    ct = coordinate_type(ctype, dim)
+    C = shipped_function(ctype, dim, "C")[0]
+    C0 = np.asarray(C(np.zeros(ct.k), []), float).reshape(dim, ct.nq)
+    rows = [C0] + [np.asarray(C(np.eye(ct.k)[j], []), float).reshape(dim, ct.nq) - C0 for j in range(ct.k)]
+    return np.vstack(rows)
+
+
+#: Which canonical sides each kind takes (``"any"``: any member or the ground, ``"plane"``: the
+#: ground's plane, ``"box"``: a body or the ground, ``"axis"``: a bar, a body or the ground).
+_SLOTS = {"sphere_plane": ("member", "plane"), "sphere_plane_rim": ("member", "plane"),
+          "sphere_sphere": ("member", "member"), "sphere_box": ("any", "box"), "box_corner": ("box", "box"),
+          "edge": ("box", "box"), "capsule_sphere": ("any", "axis"), "cylinder_sphere": ("any", "axis")}
+#: Kinds of the planar models.
+_PLANAR = ("sphere_plane", "sphere_plane_rim", "sphere_sphere", "sphere_box", "box_corner")
+
+
+def _slot_types(slot: str, dim: int) -> list[str]:
+    body = CANONICAL[dim][dim]
+    return {"any": [GROUND, "r", "ru", body], "member": ["r", "ru", body], "plane": [GROUND],
+            "box": [GROUND, body], "axis": [GROUND, "ru", body]}[slot]
+
+
+def table_kinds() -> tuple[tuple[str, str, str, int], ...]:
+    """The pair kinds of the contact tables' library, in its order: ``(kind, side a, side b,
+    dim)`` over the canonical sides each kind takes (:data:`CANONICAL`), not both the ground."""
+    out = []
+    for dim in (3, 2):
+        for kind, (sa, sb) in _SLOTS.items():
+            if dim == 2 and kind not in _PLANAR:
+                continue
+            out += [(kind, a, b, dim) for a in _slot_types(sa, dim) for b in _slot_types(sb, dim)
+                    if GROUND not in (a, b) or a != b]
+    return tuple(out)
+
+
 def kind_name(kind: str, type_a: str, type_b: str, dim: int) -> str:
     return f"pk_{kind}_{type_a}_{type_b}_{dim}d"
 
@@ -203,6 +256,8 @@ class PairKind:
     function: ca.Function
     #: The gap alone: ``pk_..._gap: q, c -> g``.
     gap: ca.Function
+    #: ``function`` as a function of its own (no call options): the contact library's kernel.
+    plain: ca.Function
 
 
 #: The contact class of each kind (:func:`point_kind`).
@@ -253,7 +308,8 @@ def pair_kind(kind: str, type_a: str, type_b: str, dim: int) -> PairKind:
     called = {"never_inline": True}       # a call in the expressions that use it, one C function
     fn = ca.Function(name, [q, c], [g, W], ["q", "c"], ["g", "W"], called)
     gap = ca.Function(f"{name}_gap", [q, c], [ca.cse(ca.densify(term.g))], ["q", "c"], ["g"], called)
-    return PairKind(name, kind, int(sides[0].q.numel()), int(sides[1].q.numel()), int(c.numel()), fn, gap)
+    plain = ca.Function(name, [q, c], [g, W], ["q", "c"], ["g", "W"])
+    return PairKind(name, kind, int(sides[0].q.numel()), int(sides[1].q.numel()), int(c.numel()), fn, gap, plain)
 
 
 def side_numbers(member, dim: int) -> np.ndarray:
@@ -278,14 +334,25 @@ class PointCall:
     numbers: np.ndarray
 
 
-def point_call(pc, dim: int) -> PointCall | None:
-    """Point contact ``pc`` as a call of its kind (None: no kind, :func:`point_kind`)."""
+def point_call(pc, dim: int, canonical: bool = False) -> PointCall | None:
+    """Point contact ``pc`` as a call of its kind (None: no kind, :func:`point_kind`), between
+    its sides' own coordinate types or (``canonical``) their canonical types
+    (:func:`canonical_type`; None where a side has none or the kind is not one of
+    :func:`table_kinds`)."""
     kind = point_kind(pc)
     if kind is None:
         return None
     (first, second), numbers = KINDS[kind]
     a, b = getattr(pc, first), getattr(pc, second)
+    types = (side_type(a), side_type(b)) if not canonical else (canonical_type(a, dim), canonical_type(b, dim))
+    if canonical and (kind, *types, dim) not in _table_kind_set():
+        return None
     norm = _normalised(pc)
     own = [np.asarray(_get(norm, name), float).ravel(order="C" if shape == "t" else "F") for name, shape in numbers]
     c = np.concatenate([side_numbers(a, dim), side_numbers(b, dim), *own])
-    return PointCall(pair_kind(kind, side_type(a), side_type(b), dim), (a, b), c)
+    return PointCall(pair_kind(kind, *types, dim), (a, b), c)
+
+
+@lru_cache(maxsize=None)
+def _table_kind_set() -> frozenset:
+    return frozenset(table_kinds())

@@ -312,22 +312,51 @@ SOURCES = ("runtime/ncgen_element_tables.h", "element_tables.c.j2", "runtime/ncg
            "runtime/ncgen_adaptive.h", "runtime/ncgen_table_jacobians.h")
 #: The runtime headers the library's C includes (copied into its package as they are).
 HEADERS = SOURCES[2:]
+#: The contact library (:func:`write_element_package` with ``contacts``): the element library's
+#: kernels and stepper with nonsmooth contacts and the pair kinds
+#: (:func:`ncgen.assembly.pair_kinds.table_kinds`), in a library of its own so that models
+#: without contacts do not compile its ≈ 36 k instructions of pair kinds.
+CONTACT_PACKAGE = "ncgen_contacts"
+#: The files the contact library is made of besides :data:`SOURCES`.
+CONTACT_SOURCES = ("runtime/ncgen_table_contacts.h", "runtime/ncgen_cone_newton.h", "runtime/ncgen_contact_pairs.h",
+                   "runtime/ncgen_contact.h")
 
 
-def write_element_package(out_dir):
+def _contact_context() -> tuple[list, dict]:
+    """The pair kinds' kernels and the template context of the contact library."""
+    from ncgen.assembly.pair_kinds import pair_kind, table_kinds
+    from ncgen.codegen.cnames import c_real
+    from ncgen.codegen.stepper_package import (CONTACT_REFINE_MAX, CONTACT_REFINE_TOL, GAP_REACH, PENETRATION_TOL,
+                                               PGS_MAX_ITER, PGS_TOL, REPEAT_TOL)
+
+    kinds = [(pair_kind(*k), k[3]) for k in table_kinds()]
+    fns = [k.plain for k, _ in kinds]
+    qc = max(max(k.n_a, k.n_b) for k, _ in kinds)
+    return fns, {"kinds": [{"name": k.name, "dim": d, "n_a": k.n_a, "n_b": k.n_b, "n_c": k.n_c} for k, d in kinds],
+                 "pair_w": max(f.sz_w() for f in fns), "pair_qc": qc, "pgs_max_iter": PGS_MAX_ITER,
+                 "pgs_tol": c_real(PGS_TOL), "refine_max": CONTACT_REFINE_MAX, "refine_tol": c_real(CONTACT_REFINE_TOL),
+                 "penetration_tol": c_real(PENETRATION_TOL), "gap_reach": c_real(GAP_REACH),
+                 "repeat_tol": c_real(REPEAT_TOL)}
+
+
+def write_element_package(out_dir, contacts: bool = False):
     """The C package of every shipped kind's kernels and the table loops (``PACKAGE``) in
     ``out_dir``: the kernels, ``ncgen_element_tables.h`` and ``element_tables.c``, whose
-    functions are documented in ``templates/c/element_tables.c.j2``."""
+    functions are documented in ``templates/c/element_tables.c.j2``; with ``contacts``, the
+    contact library (``CONTACT_PACKAGE``: also the pair kinds, its stepper with nonsmooth
+    contacts and without step Jacobians)."""
     from ncgen.codegen.package import ExtraSource, PackageDoc, write_package
 
     joints = [joint_kind(p, d) for p, d in JOINT_KINDS]
     members = [member_kind(d, t) for d, t in MEMBER_KINDS]
     fns = kernels()
+    pair_fns, contact = _contact_context() if contacts else ([], None)
+    fns = fns + pair_fns
     if any(f.sz_iw() for f in fns) or any(f.sz_arg() > 2 or f.sz_res() > 2 for f in fns):
         raise CodegenError("element kernels: the table loops expect kernels with no integer work and at most "
                            "two arguments and results")
     names = [k.name for k in joints] + [k.name for k in members]
-    from ncgen.codegen.stepper_package import HALVINGS_LIMIT, MAX_HALVINGS, MAX_ITER, STATS, TOL
+    from ncgen.codegen.stepper_package import CONTACT_STATS, HALVINGS_LIMIT, MAX_HALVINGS, MAX_ITER, STATS, TOL
 
     ffs = [feature_force_kind(f, d) for f, d in FEATURE_FORCE_KINDS]
     torques = [torque_kind(d, t) if (d, t) in TORQUE_KINDS else None for d, t in MEMBER_KINDS]
@@ -335,7 +364,8 @@ def write_element_package(out_dir):
     ff_out = [f.function.nnz_out(0) + f.function.nnz_out(1) for f in ffs] + [
         f.nnz_out(0) for f in torques if f is not None]
     context = {"stepper": {"tol": TOL, "max_iter": MAX_ITER, "max_halvings": MAX_HALVINGS,
-                           "halvings_limit": HALVINGS_LIMIT, "nstats": len(STATS)},
+                           "halvings_limit": HALVINGS_LIMIT,
+                           "nstats": len(STATS) + (len(CONTACT_STATS) if contacts else 0)},
                "joint_kinds": [{"name": k.name, "dim": k.dim, "n_vec": k.n_vec, "n_scalar": k.n_scalar,
                                 "n_out": k.n_out} for k in joints],
                "member_kinds": [{"name": k.name, "phi": k.phi is not None, "n_q": k.n_q, "n_c": k.n_c,
@@ -346,14 +376,17 @@ def write_element_package(out_dir):
                                  "n_c": len(torque_constants(d, t)) if f is not None else 0}
                                 for f, (d, t) in zip(torques, MEMBER_KINDS)],
                "ff_in": max(ff_in), "ff_out": max(ff_out),
-               "max_w": max(f.sz_w() for f in fns), "kind_names": ",".join(names)}
+               "max_w": max(f.sz_w() for f in kernels()), "kind_names": ",".join(names), "contacts": contact}
     doc = PackageDoc(summary="Element kernels of the shipped kinds and the table-driven loops (ncgen "
                              "element tables): Φ, A, Φ_t and M of any model of these kinds from its tables, "
-                             "and its compiled RATTLE stepper")
-    return write_package(PACKAGE, fns, out_dir, doc=doc, max_file_instructions=None, reroll_instructions=None,
+                             "and its compiled RATTLE stepper" + (" with nonsmooth contacts and the contact pair "
+                                                                  "kinds" if contacts else ""))
+    headers = HEADERS + (CONTACT_SOURCES if contacts else ())
+    return write_package(CONTACT_PACKAGE if contacts else PACKAGE, fns, out_dir, doc=doc, max_file_instructions=None,
+                         reroll_instructions=None,
                          extra_sources=[ExtraSource("runtime/ncgen_element_tables.h", "ncgen_element_tables.h",
                                                     included=True),
-                                        *(ExtraSource(h, h.split("/")[-1], included=True) for h in HEADERS),
+                                        *(ExtraSource(h, h.split("/")[-1], included=True) for h in headers),
                                         ExtraSource("element_tables.c.j2", "element_tables.c", context)])
 
 

@@ -138,10 +138,10 @@ def pair_docs(functions) -> dict:
     return out
 
 
-def _bounding_data(side) -> list[str]:
-    """The bounding data of one side of a contact element, as C literals: a member's centre,
-    axes, extents, radius and gap-gradient norm; a fixed point and its radius; a half-space's
-    point and normal; nothing for an unbounded side."""
+def _bounding_data(side) -> list[float]:
+    """The bounding data of one side of a contact element: a member's centre, axes, extents,
+    radius and gap-gradient norm; a fixed point and its radius; a half-space's point and
+    normal; nothing for an unbounded side."""
     if side.kind == "member":
         values = [side.centre.ravel(order="F")] + [a.ravel(order="F") for a in side.axes] + \
             [side.extents, [side.radius, side.gnorm]]
@@ -151,22 +151,26 @@ def _bounding_data(side) -> list[str]:
         values = [side.fixed, side.normal]
     else:
         values = []
-    return [c_real(x) for v in values for x in np.asarray(v, float).ravel()]
+    return [float(x) for v in values for x in np.asarray(v, float).ravel()]
 
 
-def pair_context(model, pairs) -> dict:
-    """The template context of the element table (``runtime/ncgen_contact_pairs.h``): the
-    pattern of W (per contact row the coordinates of its element's members; none for the
-    tangent rows of a frictionless contact) and the tables the header lists, with the distinct
-    member sides (``pair_sid``, ``pair_srep``: equal coordinates and bounding data, so a sphere
-    in twenty elements has its bounds computed once per broad phase)."""
-    dim = model.dim
+#: The real-valued arrays of :func:`pair_arrays`.
+PAIR_REALS = ("pair_qconst", "pair_bdata", "pair_bound")
+
+
+def pair_arrays(dim: int, elements) -> dict:
+    """The element table of ``runtime/ncgen_contact_pairs.h`` for the contact ``elements``
+    (:func:`ncgen.assembly.pair_kernels.pair_elements`): the pattern of W (per contact row the
+    coordinates of its element's members; none for the tangent rows of a frictionless contact)
+    and the tables the header lists (reals: :data:`PAIR_REALS`, the bound's cap at most 1e300),
+    with the distinct member sides (``pair_sid``, ``pair_srep``: equal coordinates and bounding
+    data, so a sphere in twenty elements has its bounds computed once per broad phase)."""
     kinds = {"unbounded": 0, "member": 1, "fixed": 2, "halfspace": 3}
     colind, wrow = [0], []
     ints, qidx, qconst, wpos, sides, bdata, bound = [], [], [], [], [], [], []
     sid, srep, distinct = [], [], {}      # the distinct member sides: bounds computed once per member
     max_q = max_g = max_w = 1
-    for e in pairs.elements:
+    for e in elements:
         loc = e.idx_a + e.idx_b
         cols = sorted({i for i in loc if i >= 0})
         first_row = len(colind) - 1
@@ -178,7 +182,7 @@ def pair_context(model, pairs) -> dict:
         nrow = e.count * dim
         ints += [e.kernel, e.first, e.count, len(e.idx_a), len(e.idx_b), len(qidx), len(wpos), int(e.rate_bounded)]
         qidx += loc
-        qconst += [c_real(x) for x in np.concatenate([e.const_a, e.const_b])]
+        qconst += [float(x) for x in np.concatenate([e.const_a, e.const_b])]
         for i, c in enumerate(loc):
             for r in range(nrow):
                 row = first_row + r
@@ -188,7 +192,7 @@ def pair_context(model, pairs) -> dict:
             sides += [kinds[side.kind], len(side.extents), len(bdata)]
             numbers = _bounding_data(side)
             if side.kind == "member":
-                key = (tuple(side.idx), tuple(c_real(x) for x in const), tuple(numbers))
+                key = (tuple(side.idx), tuple(c_real(x) for x in const), tuple(map(c_real, numbers)))
                 if key not in distinct:
                     distinct[key] = len(srep) // 2
                     srep += [len(ints) // 8 - 1, which]
@@ -196,16 +200,23 @@ def pair_context(model, pairs) -> dict:
             else:
                 sid.append(-1)
             bdata += numbers
-        bound += [c_real(e.kappa), c_real(e.dmin), c_real(min(e.cap, 1e300))]
+        bound += [float(e.kappa), float(e.dmin), float(min(e.cap, 1e300))]
         max_q, max_g, max_w = max(max_q, len(loc)), max(max_g, e.count), max(max_w, nrow * len(loc))
+    return {"ne": len(elements), "pair_int": ints, "pair_qidx": qidx, "pair_qconst": qconst or [0.0],
+            "pair_wpos": wpos, "pair_side": sides, "pair_bdata": bdata or [0.0], "pair_bound": bound,
+            "pair_ns": len(srep) // 2, "pair_sid": sid, "pair_srep": srep or [0, 0],
+            "pair_max_q": max_q, "pair_max_g": max_g, "pair_max_w": max_w, "wt_colind": colind, "wt_row": wrow}
+
+
+def pair_context(model, pairs) -> dict:
+    """The template context of the element table (``runtime/ncgen_contact_pairs.h``):
+    :func:`pair_arrays` of ``pairs``' elements, reals as C literals, and the kernels by number."""
+    out = pair_arrays(model.dim, pairs.elements)
+    out.update({k: [c_real(x) for x in out[k]] for k in PAIR_REALS})
     nkernels = 1 + max(e.kernel for e in pairs.elements)
-    return {"pairs": True, "ne": len(pairs.elements), "pair_int": ints, "pair_qidx": qidx,
-            "pair_qconst": qconst or ["0"], "pair_wpos": wpos, "pair_side": sides, "pair_bdata": bdata or ["0"],
-            "pair_bound": bound, "pair_ns": len(srep) // 2, "pair_sid": sid, "pair_srep": srep or [0, 0],
-            "pair_max_q": max_q, "pair_max_g": max_g, "pair_max_w": max_w,
+    return {"pairs": True, **out,
             "pair_gap_fn": [f"{model.name}_step_pair{k}_gap" for k in range(nkernels)],
-            "pair_rows_fn": [f"{model.name}_step_pair{k}_rows" for k in range(nkernels)],
-            "wt_colind": colind, "wt_row": wrow}
+            "pair_rows_fn": [f"{model.name}_step_pair{k}_rows" for k in range(nkernels)]}
 
 
 def extra_sources(model, functions, pairs=None) -> list[ExtraSource]:

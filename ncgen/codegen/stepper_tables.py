@@ -28,9 +28,13 @@ The other forces of numbers (:func:`force_elements`): constant
 or the gauge's directions ``b, m1, m2``); constant :class:`~ncgen.model.forces.Torque` as
 torque elements on their member (``tq_*``).
 
+Nonsmooth contacts (``contacts="nonsmooth"``) whose point contacts all have a pair kind of the
+contact library are packed by :func:`ncgen.codegen.contact_tables.contact_arrays`
+(``StepperTables.contacts``); such a model runs on the contact library's stepper.
+
 A model is *table-covered* when every element is: joints as :mod:`ncgen.codegen.model_tables`
-says, forces and actuated joints as above, no contacts, controller or parameters, inputs
-only through input forces and efforts.  :class:`UnsupportedElements`
+says, forces and actuated joints as above, contacts as just said, no controller or parameters,
+inputs only through input forces and efforts.  :class:`UnsupportedElements`
 names every element that is not.  Nothing here reads ``model.functions``.
 """
 from __future__ import annotations
@@ -42,6 +46,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.assembly.mass import mass_is_regular
+from ncgen.codegen.contact_tables import contact_arrays, uncovered_contacts
 from ncgen.codegen.element_kernels import FEATURE_FORCE_KINDS, torque_constant_names
 from ncgen.codegen.model_tables import ModelTables, UnsupportedElements, _csc, _ints, _ptr, _reals, model_tables
 from ncgen.errors import CodegenError, NcgenError
@@ -80,6 +85,8 @@ class StepperTables:
     #: Whether the stepper solves K by the sparse LU (M regular: every coordinate's pivot before
     #: its constraints' multipliers is a mass); a flat body's singular M leaves it to the QR.
     use_lu: bool = True
+    #: The nonsmooth contacts (:func:`ncgen.codegen.contact_tables.contact_arrays`), None without.
+    contacts: dict | None = None
 
 
 def _number(value) -> bool:
@@ -242,9 +249,9 @@ def uncovered_elements(model) -> dict[str, list[str]]:
         kind = _uncovered_force(f, model.dim, model.nq)
         if kind is not None and input_force_map(model, f) is None:
             out.setdefault(kind, []).append(f"force {f.name!r}")
-    if model.contacts:
-        names = [f"contact {n!r}" for n in model.contact_names]
-        out["contact"] = names[:4] + ([f"{len(names) - 4} more"] if len(names) > 4 else [])
+    contacts = uncovered_contacts(model)
+    if contacts:
+        out["contact"] = contacts[:4] + ([f"{len(contacts) - 4} more"] if len(contacts) > 4 else [])
     actuated = [f"joint {j.name!r}" for j in model.joints
                 if j.options.get("effort") is not None and actuator_element(model, j) is None]
     if actuated:
@@ -294,7 +301,8 @@ def stepper_tables(model) -> StepperTables:
     return StepperTables(model.name, T, model.nu, model.np, len(markers), ns, len(ff), len(tq),
                          float(np.max(np.abs(M))) if T.nq else 1.0, v_gravity, int(K.indices.size),
                          int(K.qr["v_row"].size), int(K.qr["r_row"].size), arrays, conservative,
-                         int(K.lu["l_row"].size), K.m_nnz, mass_is_regular(model))
+                         int(K.lu["l_row"].size), K.m_nnz, mass_is_regular(model),
+                         contact_arrays(model) if model.contacts else None)
 
 
 def _input_arrays(model) -> dict[str, np.ndarray]:

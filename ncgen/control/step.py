@@ -88,7 +88,7 @@ def _jacobian_uncovered(model) -> dict[str, list[str]]:
     """Forces the table stepper may cover but whose derivatives its step Jacobians
     (``templates/c/runtime/ncgen_table_jacobians.h``: gravity, spring-dampers, input forces,
     actuated joints, constant point and generalised forces) do not have yet (cables, torsional
-    springs, torques), by kind."""
+    springs, torques; contacts), by kind."""
     from ncgen.codegen.stepper_tables import input_forces
     from ncgen.model.forces import GeneralizedForce, PointForce, Spring
 
@@ -98,6 +98,8 @@ def _jacobian_uncovered(model) -> dict[str, list[str]]:
         if (type(f) is Spring and not f.cable) or type(f) in (PointForce, GeneralizedForce) or id(f) in inputs:
             continue
         out.setdefault(f"{f.kind} (no step Jacobian from the tables)", []).append(f"force {f.name!r}")
+    if model.contacts:              # the contact library has no step Jacobians
+        out["contact (no step Jacobian from the tables)"] = [f"contact {n!r}" for n in model.contact_names]
     return out
 
 

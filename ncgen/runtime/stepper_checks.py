@@ -281,7 +281,7 @@ def is_conservative(model, inputs: bool = True) -> bool:
 
 
 def _is_conservative(model, samples: int = 3, seed: int = 0, inputs: bool = True) -> bool:
-    if _dissipative_contacts(model) or depends_on_time(model):
+    if dissipative_contacts(model) or depends_on_time(model):
         return False
     if np.any(np.asarray(model.functions["phi_t"](model.t0, model.q0, model.p0)) != 0):
         return False
@@ -296,7 +296,7 @@ def _is_conservative(model, samples: int = 3, seed: int = 0, inputs: bool = True
     return True
 
 
-def _dissipative_contacts(model) -> bool:
+def dissipative_contacts(model) -> bool:
     """Whether a contact can dissipate: friction, smooth damping, or an impact with e < 1
     (random states near q0 rarely touch, so contacts are judged by their parameters)."""
     smooth = getattr(model, "contact_model", "smooth") == "smooth"

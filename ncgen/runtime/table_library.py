@@ -35,7 +35,8 @@ import numpy as np
 from ncgen.codegen import c_binding
 from ncgen.codegen.compile_cache import BUILD_SCHEME, cache_dir, entry_problem
 from ncgen.codegen.compiler import CANDIDATES
-from ncgen.codegen.element_kernels import PACKAGE, SOURCES, kind_names, write_element_package
+from ncgen.codegen.element_kernels import (CONTACT_PACKAGE, CONTACT_SOURCES, PACKAGE, SOURCES, kind_names,
+                                           write_element_package)
 from ncgen.codegen.model_tables import ModelTables
 from ncgen.codegen.render import shipped_templates_dir
 from ncgen.errors import CodegenError, CompilerNotFound, ShapeError
@@ -72,21 +73,31 @@ SIGNATURES = {
     "mass": c_binding.Signature("int", (("const ncgen_tables *", "T"), ("double *", "M"), ("double *", "work"))),
 }
 INDEX_PREFIX = "element-tables"
+CONTACT_INDEX_PREFIX = "contact-tables"
 
 
 class _Tables(ctypes.Structure):
     _fields_ = [(name, ctypes.c_void_p if "*" in t else ctypes.c_int) for t, name in TABLE_FIELDS]
 
 
-def sources_key() -> str:
-    """sha256 of what the library is made of (see module docstring)."""
+def sources_key(contacts: bool = False) -> str:
+    """sha256 of what the library is made of (see module docstring); ``contacts``: the contact
+    library's (also the contact C and the pair kinds' formulas)."""
     import ncgen.codegen.element_kernels as ek
     import ncgen.model.sym2casadi as s2c
     import ncgen.symbolic.coordinates as coords
     import ncgen.symbolic.joint_primitives as joints
 
     templates = shipped_templates_dir()
-    files = [templates / rel for rel in SOURCES] + [Path(m.__file__) for m in (ek, s2c, coords, joints)]
+    modules = [ek, s2c, coords, joints]
+    if contacts:
+        import ncgen.assembly.contact_kinematics as kinematics
+        import ncgen.assembly.pair_kinds as pair_kinds
+        import ncgen.codegen.stepper_package as stepper_package
+
+        modules += [kinematics, pair_kinds, stepper_package]
+    files = [templates / rel for rel in SOURCES + (CONTACT_SOURCES if contacts else ())] + \
+        [Path(m.__file__) for m in modules]
     h = hashlib.sha256(f"{__version__}\n{ca.__version__}\n{BUILD_SCHEME}\n{sys.platform}\n"
                        f"{platform.machine()}\n".encode())
     for f in files:
@@ -122,6 +133,14 @@ def _indexed(index: Path) -> Path | None:
 def element_library(cflags: str | None = None) -> tuple[Path, bool]:
     """``(path of the element library, whether it was compiled now)``."""
     return cached_library(INDEX_PREFIX, sources_key(), write_element_package, PACKAGE, cflags)
+
+
+def contact_library(cflags: str | None = None) -> tuple[Path, bool]:
+    """``(path of the contact library, whether it was compiled now)``: the element library's
+    kernels and stepper with nonsmooth contacts and the pair kinds (``CONTACT_PACKAGE``),
+    compiled once per ncgen version and compiler as the element library is."""
+    return cached_library(CONTACT_INDEX_PREFIX, sources_key(contacts=True),
+                          lambda out: write_element_package(out, contacts=True), CONTACT_PACKAGE, cflags)
 
 
 def library_ready(prefix: str, source: str) -> bool:
@@ -162,13 +181,14 @@ def cached_library(prefix: str, source: str, write, package: str, cflags: str | 
 
 
 class ElementLibrary:
-    """The loaded element library: its entry points bound (:data:`SIGNATURES`)."""
+    """The loaded element library (or the contact library, ``package``): its entry points
+    bound (:data:`SIGNATURES`)."""
 
-    def __init__(self, path: Path):
-        self.path = path
+    def __init__(self, path: Path, package: str = PACKAGE):
+        self.path, self.package = path, package
         self._lib = c_binding.open_library(path)
         structs = {"ncgen_tables": _Tables}
-        self.fn = {k: c_binding.bind(self._lib, f"{PACKAGE}_{k}", s, structs=structs, addresses=True)
+        self.fn = {k: c_binding.bind(self._lib, f"{package}_{k}", s, structs=structs, addresses=True)
                    for k, s in SIGNATURES.items()}
         found = self.fn["kind_names"]().decode()
         if found != kind_names():
@@ -184,6 +204,14 @@ def load_element_library(cflags: str | None = None) -> ElementLibrary:
     path, _ = element_library(cflags)
     if path not in _LOADED:
         _LOADED[path] = ElementLibrary(path)
+    return _LOADED[path]
+
+
+def load_contact_library(cflags: str | None = None) -> ElementLibrary:
+    """The contact library, compiled at first use (:func:`contact_library`) and loaded once per process."""
+    path, _ = contact_library(cflags)
+    if path not in _LOADED:
+        _LOADED[path] = ElementLibrary(path, CONTACT_PACKAGE)
     return _LOADED[path]
 
 

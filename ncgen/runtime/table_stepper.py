@@ -29,15 +29,17 @@ from types import SimpleNamespace
 import numpy as np
 
 from ncgen.codegen import c_binding
-from ncgen.codegen.element_kernels import PACKAGE
+from ncgen.codegen.contact_tables import INT_ARRAYS, REAL_ARRAYS, SIZES
 from ncgen.codegen.model_tables import UnsupportedElements
 from ncgen.codegen.stepper_abi import LOOPS, signature, structs as stepper_structs
 from ncgen.codegen.stepper_tables import StepperTables, stepper_tables
 from ncgen.errors import CodegenError, NcgenError
 from ncgen.model.data import model_data
 from ncgen.runtime.options import KERNELS
+from ncgen.runtime.stepper_checks import dissipative_contacts
 from ncgen.runtime.stepper_library import CompiledStepper, load_stepper
-from ncgen.runtime.table_library import TABLE_FIELDS, ElementLibrary, _Tables, load_element_library
+from ncgen.runtime.table_library import (TABLE_FIELDS, ElementLibrary, _Tables, load_contact_library,
+                                         load_element_library)
 
 
 _QR_FIELDS = (("int", "n"), *(("const int *", f) for f in ("k_colind", "k_row", "v_colind", "v_row", "r_colind",
@@ -107,9 +109,24 @@ SIGNATURES = {
 }
 
 
+def _signatures(contacts: bool) -> dict:
+    """:data:`SIGNATURES` of the element library, or of the contact library (``contacts``: the
+    loops' trailing impulse arguments)."""
+    if not contacts:
+        return SIGNATURES
+    return {**SIGNATURES, **{loop: _after_tables(signature(loop, True)) for loop in LOOPS}}
+
+
 class _StepperTables(ctypes.Structure):
     _fields_ = [(f, ctypes.c_void_p if "*" in t else ctypes.c_double if t == "double" else ctypes.c_int)
-                for t, f in STEPPER_FIELDS] + [("qr", _QrPattern), ("lu", _LuPattern)]
+                for t, f in STEPPER_FIELDS] + [("qr", _QrPattern), ("lu", _LuPattern), ("ct", ctypes.c_void_p)]
+
+
+class _ContactTables(ctypes.Structure):
+    """``struct ncgen_contact_tables`` (``ncgen_table_stepper.h``)."""
+
+    _fields_ = [(f, ctypes.c_int) for f in SIZES] + [("gravity_norm", ctypes.c_double)] + \
+        [(f, ctypes.c_void_p) for f in INT_ARRAYS + REAL_ARRAYS]
 
 
 def _array(values, t: str) -> np.ndarray:
@@ -124,12 +141,13 @@ class TableStepper(CompiledStepper):
     kernels = "tables"
 
     def __init__(self, st: StepperTables, library: ElementLibrary | None = None):
-        lib = library or load_element_library()
+        lib = library or (load_contact_library() if st.contacts else load_element_library())
+        PACKAGE = lib.package       # the element library's or the contact library's prefix
         self.library_object = lib
         T = st.tables
         self.library, self.name = str(lib.path), st.name
         self.nq, self.nc, self.nu, self.np = T.nq, T.nc, st.nu, st.np
-        self.nout, self.nd = 5 + T.dim * st.n_markers, 0
+        self.nout, self.nd = 5 + T.dim * st.n_markers, st.contacts["nk"] * T.dim if st.contacts else 0
         self.tables = st
         self._keep = {f: _array(T.arrays[f], t) for t, f in TABLE_FIELDS if "*" in t}
         sizes = {"nq": T.nq, "nc": T.nc, "dim": T.dim, "a_nnz": T.a_nnz, "m_nnz": T.m_nnz,
@@ -150,27 +168,41 @@ class TableStepper(CompiledStepper):
                                  v_gravity=st.v_gravity,
                                  nnz_k=st.nnz_k, nnz_v=st.nnz_v, nnz_r=st.nnz_r, n_ff=st.n_ff,
                                  n_torque=st.n_torque,
-                                 **{f: ptr[f] for t, f in STEPPER_FIELDS if "*" in t and f != "T"}, qr=qr, lu=lu)
+                                 **{f: ptr[f] for t, f in STEPPER_FIELDS if "*" in t and f != "T"}, qr=qr, lu=lu,
+                                 ct=self._contact_tables(st.contacts))
         self._lib = lib._lib
         structs = {**stepper_structs(PACKAGE), "ncgen_stepper_tables": _StepperTables}
         check = c_binding.bind(self._lib, f"{PACKAGE}_stepper_check", SIGNATURES["stepper_check"], structs=structs)
         if check(ctypes.byref(self._S)):
-            raise CodegenError(f"model {st.name!r}: its stepper tables are inconsistent (ncgen_elements_stepper_check)")
+            raise CodegenError(f"model {st.name!r}: its stepper tables are inconsistent ({PACKAGE}_stepper_check)")
+        self._signatures = _signatures(bool(self.nd))
         for loop in LOOPS:
-            fn = c_binding.bind(self._lib, f"{PACKAGE}_{loop}", SIGNATURES[loop], name=PACKAGE, structs=structs)
+            fn = c_binding.bind(self._lib, f"{PACKAGE}_{loop}", self._signatures[loop], name=PACKAGE, structs=structs)
             setattr(self, f"_{loop}", partial(fn, ctypes.byref(self._S)))
         self._forces = c_binding.bind(self._lib, f"{PACKAGE}_forces", SIGNATURES["forces"], addresses=True)
         self._multipliers = c_binding.bind(self._lib, f"{PACKAGE}_multipliers", SIGNATURES["multipliers"],
                                            addresses=True)
         self._raw = None
 
+    def _contact_tables(self, contacts: dict | None):
+        """The address of the ``ncgen_contact_tables`` of ``contacts`` (None without), kept alive."""
+        if not contacts:
+            return None
+        for f in INT_ARRAYS + REAL_ARRAYS:
+            self._keep[f"c.{f}"] = contacts["arrays"][f]
+        self._C = _ContactTables(**{f: contacts[f] for f in SIZES}, gravity_norm=contacts["gravity_norm"],
+                                 **{f: self._keep[f"c.{f}"].ctypes.data for f in INT_ARRAYS + REAL_ARRAYS})
+        return ctypes.addressof(self._C)
+
     def raw_loops(self) -> SimpleNamespace:
         """``simulate`` and ``simulate_stats`` of the element library bound to these tables with
         address arguments (as :func:`ncgen.runtime.batch._raw_loops` binds a model's own)."""
         if self._raw is None:
             loops = {}
+            package = self.library_object.package
             for loop in ("simulate", "simulate_stats"):
-                fn = c_binding.bind(self._lib, f"{PACKAGE}_{loop}", SIGNATURES[loop], name=PACKAGE, addresses=True)
+                fn = c_binding.bind(self._lib, f"{package}_{loop}", self._signatures[loop], name=package,
+                                    addresses=True)
                 loops[loop] = partial(fn, ctypes.addressof(self._S))
             self._raw = SimpleNamespace(**loops, lib=self._lib)
         return self._raw
@@ -212,14 +244,15 @@ class TableStepper(CompiledStepper):
 def table_stepper(model, library: ElementLibrary | None = None) -> TableStepper:
     """The table-driven stepper of ``model`` (raises
     :class:`~ncgen.codegen.model_tables.UnsupportedElements` naming the elements not covered).
-    Whether the model is conservative is recorded in its data from the tables (the stepper's
-    checks then need no flat function)."""
+    Whether the model is conservative is recorded in its data from the tables and its contacts'
+    parameters (the stepper's checks then need no flat function)."""
     st = stepper_tables(model)
     data = model_data(model)
+    conservative = st.conservative and not dissipative_contacts(model)
     if data.conservative_idle is None:
-        data.conservative_idle = st.conservative
+        data.conservative_idle = conservative
     if data.conservative is None and not model.nu:
-        data.conservative = st.conservative
+        data.conservative = conservative
     return TableStepper(st, library)
 
 

@@ -806,9 +806,10 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
                         casadi_real *lam, int *iterations, const step_options *o, int warm,
                         workspace *ws) {
   int i, a, k, na = 0, nr, it = 0, status, refine, impact = 0, converged = 1, kept, first[NK + 1];
-  int rows[ND] = {0}; /* rows[0..nr) are set below; zeroed because gcc -O2 cannot see that */
+  int rows[ND]; /* rows[0..nr) are set below; zeroed because gcc -O2 cannot see that */
   int near = 0; /* whether contacts about to close take part */
   casadi_real change = 0, residual = 0, law = 0, bias[NK];
+  memset(rows, 0, sizeof rows);
   status = repeat_step(q, v, t, u, p, h, q_next, v_next, lam, &it, o, warm, ws, &kept);
   if (status != STEP_OK) return status;
   if (kept) {

@@ -59,6 +59,14 @@ typedef struct {
   int n_c;
 } ncgen_torque_kind;
 
+/* A contact pair kind (the contact library's stepper, ncgen_table_contacts.h;
+ * ncgen/assembly/pair_kinds.py): its kernel q = [q_a; q_b], c -> g, W (dim x (n_a + n_b)) and the
+ * sizes of its sides' canonical coordinates and of its numbers c. */
+typedef struct {
+  ncgen_kernel eval;
+  int dim, n_a, n_b, n_c;
+} ncgen_pair_kind;
+
 typedef struct {
   const ncgen_joint_kind *joint;
   int n_joint;

@@ -43,6 +43,10 @@
  * or, where that LU finds an unsafe pivot (K singular or too ill-conditioned for its order),
  * by the sparse QR of ncgen_sparse_qr.h (stable in any order).
  *
+ * Nonsmooth contacts (the contact library, built with NCGEN_CONTACTS defined): the contact
+ * impulse j of ncgen_contact.h in step_newton (−j/2) and step_velocity (+j/2), the contact rows
+ * from the run's contact tables S->ct (ncgen_table_contacts.h lists what it reads).
+ *
  * What the including file defines first: casadi_real, casadi_int; TAB_KINDS (a const
  * ncgen_kinds *), TAB_SPRING_2D and TAB_SPRING_3D (kernels); TAB_FEATURE_FORCES (a const
  * ncgen_feature_force_kind *), TAB_TORQUES (a const ncgen_torque_kind * indexed by member kind),
@@ -58,6 +62,21 @@
 #include "ncgen_element_tables.h"
 #include "ncgen_sparse_lu.h"
 #include "ncgen_sparse_qr.h"
+
+/* Nonsmooth contacts (ncgen_table_contacts.h; packed by ncgen/codegen/contact_tables.py): nk
+ * point contacts in ne elements (ns distinct member sides), the element table of
+ * ncgen_contact_pairs.h (pair_*, its largest element max_q, max_g, max_w), W's pattern by rows
+ * (wt_colind, wt_row: nnz_w), per point contact μ, e, its kind (pk_kind, an index of the
+ * library's pair kinds), whether the kind's first side is the element's second (pk_swap) and
+ * its numbers (pk_c from pk_c_ptr), per element side the map of its local coordinates to its
+ * kind's canonical ones (cm_n rows, dense column-major at cm_ptr in cm); |g| (m/s²). */
+struct ncgen_contact_tables {
+  int nk, ne, ns, max_q, max_g, max_w, nnz_w;
+  double gravity_norm;
+  const int *wt_colind, *wt_row, *pair_int, *pair_qidx, *pair_wpos, *pair_side, *pair_sid, *pair_srep, *pk_kind,
+      *pk_swap, *pk_c_ptr, *cm_ptr, *cm_n;
+  const double *mu, *restitution, *pair_qconst, *pair_bdata, *pair_bound, *pk_c, *cm;
+};
 
 typedef struct {
   const ncgen_tables *T;            /* Φ, A and M: the element tables */
@@ -94,6 +113,8 @@ typedef struct {
   const double *tq_c, *tq_val;
   ncgen_qr_pattern qr;              /* n = nq + nc, the pattern of K and its analysis */
   ncgen_lu_pattern lu;              /* n = nq + nc (or 0: QR only), the LU's analysis of that pattern */
+  const struct ncgen_contact_tables *ct; /* nonsmooth contacts (NULL: none; the library built with
+                                            NCGEN_CONTACTS needs them) */
 } ncgen_stepper_tables;
 
 #if defined(__STDC_VERSION__) && __STDC_VERSION__ >= 201112L
@@ -114,17 +135,24 @@ static TAB_THREAD int tab_valid[2], tab_recent;
  * torques' generalised force (nq), at tab_qcache; tab_qvalid whether it holds them. */
 static TAB_THREAD double *tab_qcache;
 static TAB_THREAD int tab_qvalid;
+/* The sparse LU of the last K that step_solve factored (tab_lu: K's nonzeros, then L, U and
+ * the diagonal), reused while K is the same (the contact solve's one KKT solve per active row,
+ * ncgen_contact.h: delassus_kkt); tab_lu_valid whether it holds one. */
+static TAB_THREAD double *tab_lu;
+static TAB_THREAD int tab_lu_valid;
 
 /* Starts a run on the tables S in this thread: 0, or 1 when out of memory. */
 static int tab_begin(const ncgen_stepper_tables *S) {
   size_t n = (size_t)S->T->nq + (size_t)S->T->nc + (size_t)S->T->a_nnz;
   size_t nqc = 2 * (size_t)S->T->nq + (size_t)S->T->nf * (size_t)S->T->dim;
+  size_t nlu = S->lu.n ? (size_t)S->nnz_k + 2 * (size_t)S->lu.nnz_l + (size_t)S->lu.n : 0;
   tab_cur = S;
   tab_ew_size = ncgen_tables_work_size(TAB_KINDS, S->T);
-  tab_cache[0] = malloc((2 * n + nqc) * sizeof(double) + 1);
+  tab_cache[0] = malloc((2 * n + nqc + nlu) * sizeof(double) + 1);
   tab_cache[1] = tab_cache[0] ? tab_cache[0] + n : 0;
   tab_qcache = tab_cache[0] ? tab_cache[0] + 2 * n : 0;
-  tab_valid[0] = tab_valid[1] = tab_qvalid = 0;
+  tab_lu = tab_cache[0] ? tab_qcache + nqc : 0;
+  tab_valid[0] = tab_valid[1] = tab_qvalid = tab_lu_valid = 0;
   tab_recent = 0;
   return tab_cache[0] == 0;
 }
@@ -132,26 +160,37 @@ static int tab_begin(const ncgen_stepper_tables *S) {
 /* Ends the run of tab_begin. */
 static void tab_end(void) {
   free(tab_cache[0]);
-  tab_cache[0] = tab_cache[1] = tab_qcache = 0;
-  tab_valid[0] = tab_valid[1] = tab_qvalid = 0;
+  tab_cache[0] = tab_cache[1] = tab_qcache = tab_lu = 0;
+  tab_valid[0] = tab_valid[1] = tab_qvalid = tab_lu_valid = 0;
 }
 
 /* The spring kernel's input and outputs at most (3D): x, then y = [f; V; P] and J. */
 #define TAB_SPRING_IN (4 * 3 + 3)
 #define TAB_SPRING_OUT (3 + 2 + 3 * 12)
 
+#ifdef NCGEN_CONTACTS
+/* The work of tab_pair_eval (ncgen_table_contacts.h, doubles): the kind's kernel work, the
+ * canonical coordinates of both sides, a kind's input, its gap and its rows (dim x 2 TAB_PAIR_QC
+ * at most). */
+#define TAB_PAIR_WORK (TAB_PAIR_W + 4 * TAB_PAIR_QC + 1 + 6 * TAB_PAIR_QC)
+#endif
+
 /* The kernel work (doubles) of the tables S: element work, q + h w, F, the features
- * at q and their rates, the spring kernel's input and outputs, the QR factors and scratch,
- * the LU factors. */
+ * at q and their rates, the spring kernel's input and outputs, the QR factors and scratch
+ * (the LU's factors are the run's, tab_lu). */
 static long tab_work_size(const ncgen_stepper_tables *S) {
   const ncgen_tables *T = S->T;
   long n = T->nq + T->nc;
   return tab_ew_size + 2L * T->nq + 2L * T->nf * T->dim + TAB_SPRING_IN + TAB_SPRING_OUT + S->nnz_v + S->nnz_r +
-         3 * n + TAB_FF_IN + TAB_FF_OUT + (S->lu.n ? 2L * S->lu.nnz_l + n : 0);
+         3 * n + TAB_FF_IN + TAB_FF_OUT
+#ifdef NCGEN_CONTACTS
+         + TAB_PAIR_WORK
+#endif
+      ;
 }
 
 typedef struct {
-  double *ew, *qh, *F, *fq, *fv, *sx, *sy, *V, *R, *beta, *x, *y, *fx, *fy, *lu_l, *lu_u, *lu_d;
+  double *ew, *qh, *F, *fq, *fv, *sx, *sy, *V, *R, *beta, *x, *y, *fx, *fy;
 } tab_work;
 
 static tab_work tab_layout(double *w) {
@@ -172,9 +211,6 @@ static tab_work tab_layout(double *w) {
   b.y = b.x + T->nq + T->nc;
   b.fx = b.y + T->nq + T->nc;
   b.fy = b.fx + TAB_FF_IN;
-  b.lu_l = b.fy + TAB_FF_OUT;
-  b.lu_u = b.lu_l + S->lu.nnz_l;
-  b.lu_d = b.lu_u + S->lu.nnz_l;
   return b;
 }
 
@@ -462,9 +498,9 @@ static int tab_newton(const casadi_real **arg, casadi_real **res, casadi_int *iw
   tab_work b = tab_layout(w);
   int i, nq = T->nq;
   (void)iw; (void)mem;
-  for (i = 0; i < nq; ++i) {
-    b.qh[i] = q[i] + h * wm[i];
-    b.x[i] = wm[i] - v[i];
+  for (i = 0; i < nq; ++i) {             /* NULL inputs are zeros (CasADi's convention) */
+    b.qh[i] = q[i] + h * (wm ? wm[i] : 0);
+    b.x[i] = (wm ? wm[i] : 0) - (v ? v[i] : 0);
   }
   if (tab_phi_jacobian(q, &phi_q, &Aq, b.ew) || tab_phi_jacobian(b.qh, &phi, &Ah, b.ew)) return 1;
   if (K) tab_kkt(K, Ah, Aq);
@@ -475,6 +511,10 @@ static int tab_newton(const casadi_real **arg, casadi_real **res, casadi_int *iw
     tab_mass_times(b.x, r);
     for (i = 0; i < nq; ++i) r[i] -= h / 2 * b.F[i];
     tab_a_times(Aq, nu, r, 1);
+#ifdef NCGEN_CONTACTS
+    if (arg[8])                          /* half the contact impulse j = Wᵀ P */
+      for (i = 0; i < nq; ++i) r[i] -= arg[8][i] / 2;
+#endif
     for (i = 0; i < T->nc; ++i) r[nq + i] = phi[i] / h;
   }
   return 0;
@@ -494,8 +534,12 @@ static int tab_velocity(const casadi_real **arg, casadi_real **res, casadi_int *
   tab_input_forces(q, arg[3], b.F);
   if (res[0]) {
     memset(res[0], 0, sizeof(double) * (size_t)(T->nq + T->nc));
-    tab_mass_times(wm, res[0]);
+    if (wm) tab_mass_times(wm, res[0]);
     for (i = 0; i < T->nq; ++i) res[0][i] += h / 2 * b.F[i];
+#ifdef NCGEN_CONTACTS
+    if (arg[6])
+      for (i = 0; i < T->nq; ++i) res[0][i] += arg[6][i] / 2;
+#endif
   }
   return 0;
 }
@@ -530,13 +574,26 @@ static int tab_project(const casadi_real **arg, casadi_real **res, casadi_int *i
   return 0;
 }
 
-/* step_solve: K, r -> K⁻¹ r: by the LU, or by the QR where the LU's pivots are unsafe. */
+/* step_solve: K, r -> K⁻¹ r: by the LU (kept for the next solve with the same K), or by the QR
+ * where the LU's pivots are unsafe. */
 static int tab_solve(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
+  const ncgen_stepper_tables *S = tab_cur;
   tab_work b = tab_layout(w);
   (void)iw; (void)mem;
-  if (tab_cur->lu.n && !ncgen_lu_factor(&tab_cur->lu, arg[0], b.lu_l, b.lu_u, b.lu_d, b.x)) {
-    ncgen_lu_solve(&tab_cur->lu, b.lu_l, b.lu_u, b.lu_d, arg[1], res[0], b.y);
-    return 0;
+  if (S->lu.n) {
+    size_t nk = (size_t)S->nnz_k;
+    double *l = tab_lu + nk, *u = l + S->lu.nnz_l, *d = u + S->lu.nnz_l;
+    if (!tab_lu_valid || memcmp(tab_lu, arg[0], nk * sizeof(double))) {
+      tab_lu_valid = 0;
+      if (!ncgen_lu_factor(&S->lu, arg[0], l, u, d, b.x)) {
+        memcpy(tab_lu, arg[0], nk * sizeof(double));
+        tab_lu_valid = 1;
+      }
+    }
+    if (tab_lu_valid) {
+      ncgen_lu_solve(&S->lu, l, u, d, arg[1], res[0], b.y);
+      return 0;
+    }
   }
   if (ncgen_qr_factor(&tab_cur->qr, arg[0], b.V, b.R, b.beta, b.x)) {
     int i;                           /* singular: NaN, which the stepper reports as not finite */
@@ -599,7 +656,11 @@ static int tab_outputs(const casadi_real **arg, casadi_real **res, casadi_int *i
 
 /* The kernels' sizes, as CasADi's <f>_work gives them. */
 static int tab_work_sizes(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+#ifdef NCGEN_CONTACTS
+  *sz_arg = 9;                       /* step_newton's contact impulse */
+#else
   *sz_arg = 8;
+#endif
   *sz_res = 3;
   *sz_iw = 0;
   *sz_w = tab_work_size(tab_cur);
@@ -621,7 +682,15 @@ static int tab_work_sizes(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz
 #define KERNEL_OUTPUTS tab_outputs
 #define KERNEL_WORKS tab_work_sizes
 
+#ifdef NCGEN_CONTACTS
+#include "ncgen_table_contacts.h"
+#endif
 #include "ncgen_rattle.h"
+#ifdef NCGEN_CONTACTS
+#include "ncgen_cone_newton.h"
+#include "ncgen_contact_pairs.h"
+#include "ncgen_contact.h"
+#endif
 #include "ncgen_fixed.h"
 #include "ncgen_adaptive.h"
 
