@@ -96,11 +96,11 @@ def main(argv=None) -> int:
                                   project=False, check=True, estimate=estimate, workers=1)
             cpu = time.process_time() - cpu
             flagged = ~r.ok
-            by_estimate = np.array(["estimated error" in m for m in r.message])
             kinds = {k: sum(w in m for m in r.message) for k, w in REASONS.items()}
             missed, extra = np.flatnonzero(bad & ~flagged), np.flatnonzero(~bad & flagged)
             name = "shadow" if estimate is True else "local"
-            print(f"  estimate={name!r}: flagged {int(flagged.sum())} ({int(by_estimate.sum())} by the estimate); "
+            print(f"  estimate={name!r}: flagged {int(flagged.sum())} (reasons: "
+                  f"{', '.join(f'{k} {c}' for k, c in kinds.items() if c) or 'none'}); "
                   f"bad runs missed {len(missed)} {[f'{sigma[i]:g} rad/s, {err[i]:.2g} m' for i in missed]}; "
                   f"good runs flagged {len(extra)} {[f'{sigma[i]:g} rad/s, {err[i]:.2g} m' for i in extra]}; "
                   f"CPU {cpu:.2f} s")

@@ -29,7 +29,8 @@ Kernels (name: inputs -> outputs; ``t`` in s, ``h`` in s):
 * ``step_newton``: t, q, v, u, p, h, w, lam_h -> r (nq + nc), K (sparse)
 * ``step_velocity``: t (= t + h), q (= q⁺), w, u, p, h -> b (nq + nc), K (same pattern)
 * ``step_check``: t, q, v, p -> phi_max = ‖Φ‖∞ (m²), phidot_max = ‖A v + Φ_t‖∞ (m²/s)
-* ``step_solve``: K, r -> x = K⁻¹ r (sparse QR, generated as C; see :func:`solve_function`)
+* ``step_solve``: K, r -> x = K⁻¹ r (sparse QR, or the Schur complement with the constant
+  mass matrix, generated as C; see :func:`solve_function`)
 * ``step_project``: t, q, v, p -> K = [[M, Aᵀ], [A, 0]] (same pattern), Φ, A v + Φ_t: the
   mass-metric projection onto both constraint levels after an extrapolated step
   (``K [Δq; μ] = [0; Φ]``, ``q ← q − Δq`` until ``|Φ|∞ ≤ tol``, then the same for ``v``)
@@ -72,6 +73,7 @@ import casadi as ca
 import numpy as np
 
 from ncgen.assembly.mass import sparse_dm
+from ncgen.reproducible import cholesky
 
 #: Largest nnz(V) + nnz(R) of the QR factors for which the solve is unrolled into SX.
 SX_QR_MAX_NNZ = 3_000
@@ -105,7 +107,8 @@ DOCS = {
         "outputs": {"phi_max": ("max |Phi(t, q)|", "m^2"),
                     "phidot_max": ("max |A(t, q) v + Phi_t(t, q)|", "m^2/s")}},
     "step_solve": {
-        "purpose": "Stepper: x = K^-1 r by sparse Householder QR (AMD column order)",
+        "purpose": "Stepper: x = K^-1 r (sparse Householder QR in AMD column order, or the Schur "
+                   "complement with the constant mass matrix's Cholesky factor)",
         "inputs": {"K": ("KKT matrix in the stepper's pattern", ""), "r": ("right-hand side", "")},
         "outputs": {"x": ("solution", "")}},
     "step_project": {
@@ -345,7 +348,8 @@ def solve_function(pattern: ca.Sparsity, mass: np.ndarray | None = None, damped=
     V, R, *_ = ca.qr_sparse(ca.DM(pattern, 1.0), True)
     if V.nnz() + R.nnz() <= SX_QR_MAX_NNZ:
         qr = _sx_solve(pattern, "step_solve")
-        schur = _mass_schur_solve(pattern, mass, "step_solve") if constant_mass and not damped else None
+        schur = _mass_schur_solve(pattern, mass, V.nnz() + R.nnz(), "step_solve") if constant_mass and not damped \
+            else None
         return schur if schur is not None and schur.n_instructions() < qr.n_instructions() else qr
     K, r = ca.MX.sym("K", pattern), ca.MX.sym("r", n)
     blocks = _components(pattern)
@@ -447,23 +451,26 @@ def _schur_solve(pattern: ca.Sparsity, nb: int, name: str) -> ca.Function:
     return ca.Function(name, [K, r], [ca.vertcat(Hr - ca.mtimes(HB, y), y)], ["K", "r"], ["x"])
 
 
-def _mass_schur_solve(pattern: ca.Sparsity, mass: np.ndarray | None, name: str) -> ca.Function | None:
+def _mass_schur_solve(pattern: ca.Sparsity, mass: np.ndarray | None, qr_size: int, name: str) -> ca.Function | None:
     """``name: (K, r) -> K⁻¹ r`` for ``K = [[M, B], [C, 0]]`` of ``pattern`` whose upper-left
     block is the constant ``mass`` M (nq × nq, the first nq rows; B and C read from K):
     ``S = C M⁻¹ B``, ``S y = C M⁻¹ r₁ − r₂``, ``x = [M⁻¹ (r₁ − B y); y]``, M⁻¹ applied by the
     triangular solves of its Cholesky factor L (constants, its zeros skipped: a chain's M is
     banded and so is L) and S by its sparse QR unrolled into SX.  None where it does not
     apply: no mass, M not positive definite or worse conditioned than
-    :data:`SCHUR_MAX_COND`, or nonzeros in K's lower-right block."""
+    :data:`SCHUR_MAX_COND`, nonzeros in K's lower-right block, or more than ``qr_size``
+    (the nonzeros of K's QR factors) cubed constraints, as the dense complement's QR alone
+    takes about nc³ instructions (K's QR about 15 per nonzero).  L is computed without
+    BLAS (:func:`ncgen.reproducible.cholesky`: the constants are the same on every CPU)."""
     nq = 0 if mass is None else mass.shape[0]
     n = pattern.size1()
-    if not 0 < nq < n or pattern.sub(list(range(nq, n)), list(range(nq, n)))[0].nnz():
+    if not 0 < nq < n or (n - nq) ** 3 > qr_size or pattern.sub(list(range(nq, n)), list(range(nq, n)))[0].nnz():
         return None
     if not np.all(np.isfinite(mass)) or np.linalg.cond(mass) > SCHUR_MAX_COND:
         return None
     try:
-        L = np.linalg.cholesky(mass)
-    except np.linalg.LinAlgError:
+        L = cholesky(mass)
+    except ValueError:
         return None
     K, r = ca.SX.sym("K", pattern), ca.SX.sym("r", n)
     B, C = K[:nq, nq:], K[nq:, :nq]
