@@ -107,24 +107,3 @@ def test_two_threads_decide_as_one_on_good_and_bad_runs(chain):
         else:
             assert one.status[i] == 0
             assert_same_run(one, i, single)
-
-
-def test_a_run_whose_shadow_run_fails_is_rejected(chain):
-    """The 5-bar chain released at 15 rad/s per axis, h = 2 ms: the shadow run (steps of 4 ms)
-    fails by t = 0.2 s while the run goes on with an energy drift of 0.3 %; against IDAS
-    (rtol 1e-10) its error passes 1 % of the chain's size by t = 0.4 s (3.5 cm, later 0.5 m).
-    The run is rejected from there, in the batch and alone alike, with the reason; a slow run
-    of the same batch is trusted."""
-    from batch_estimates import rates
-    from ncgen.runtime.stepper_checks import ERROR_FRACTION
-    v0 = rates([0.5, 2.0, 5.0, 10.0, 15.0, 20.0], 8)[0][[0, 37]]
-    batch = nc.simulate_batch(chain, 0.5, 0.1, v0=v0, substeps=50, workers=1, kernels="tables")
-    assert batch.status[0] == 0 and batch.status[1] == STATUS_UNTRUSTED
-    assert "shadow run with steps of 2h failed by t = 0.2 s" in batch.message[1]
-    with pytest.raises(SimulationError, match="shadow run with steps of 2h failed by t = 0.2 s"):
-        nc.simulate(chain, 0.5, 0.1, method="stepper", v0=v0[1], substeps=50, kernels="tables")
-    run = nc.simulate(chain, 0.5, 0.1, method="stepper", v0=v0[1], substeps=50, kernels="tables", check=False)
-    ref = nc.simulate(chain, 0.5, 0.1, v0=v0[1], rtol=1e-10, atol=1e-10)
-    error = np.max(np.abs(run.q - ref.q), axis=1)
-    size = np.max(np.abs(chain.q0))
-    assert error[4] > ERROR_FRACTION * size and run.info["energy"]["relative"] < 0.01   # the energy check passes

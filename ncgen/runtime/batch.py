@@ -428,8 +428,7 @@ class _Runs:
         e_rel = np.where(np.isnan(e_rel), np.inf, e_rel)
         size = max(float(np.max(np.abs(self.model.q0), initial=0.0)), 1e-9)
         flags = row_flags(S[:, :, col("splits")], S[:, :, col("newton_iterations")], S[:, :, col("steps")],
-                          COMPOSITION_STAGES if self.rattle4 else 1, e_rel, S[:, :, col("error_q")], size,
-                          error_q=S[:, :, col("error_q")])
+                          COMPOSITION_STAGES if self.rattle4 else 1, e_rel, S[:, :, col("error_q")], size)
         return np.logical_or.reduce(list(flags.values())).any(axis=1)
 
     def _checked(self, i: int, rows: int, S: np.ndarray) -> None:

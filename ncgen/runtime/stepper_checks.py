@@ -18,9 +18,6 @@ A fixed-step run (:func:`ncgen.runtime.stepper.simulate_stepper` without ``rtol`
   the origin under a reversing push of 1e-12 N, is no alarm);
 * the estimated global error in q exceeds :data:`ERROR_FRACTION` of the model's size
   ``max |q0|`` (m);
-* the shadow run of the error estimate (steps of 2h) failed: Newton's method does not
-  converge at 2h, so the step is near its limit for the motion and the run has no
-  estimate from there on;
 * nonsmooth contacts: a contact solve stopped at its sweep limit with a last sweep that
   still changed a contact velocity by more than :data:`PGS_TRUST` (1 + max |U|) m/s;
 * nonsmooth contacts: the contacts created energy, their work (normal + friction +
@@ -506,24 +503,17 @@ def contact_report(S: np.ndarray) -> dict:
             "penetration_tol": PENETRATION_TOL, "cone_residual": float(law.max(initial=0.0))}
 
 
-def row_flags(splits, iters, steps, stages: int, e_rel, gq, size: float, residual=None,
-              error_q=None) -> dict[str, np.ndarray]:
+def row_flags(splits, iters, steps, stages: int, e_rel, gq, size: float, residual=None) -> dict[str, np.ndarray]:
     """The checks of :func:`untrusted_row`, per output row of the statistics (arrays of any
     shape, e.g. runs × rows): which rows each check flags.  ``e_rel``: the energy error over
     its scale; ``gq``: the global error estimate in q (m); ``size``: the largest |q0| (m);
-    ``residual``: the contact solves' last sweep change (None: no contacts); ``error_q``:
-    the statistics' column of that name (−2 from where the shadow run failed: flagged, as
-    the run has no estimate from there on and its step is within a factor 2 of where
-    Newton's method fails for the motion; measured on the 5-bar chain at 15 rad/s, h = 2 ms,
-    error 0.74 m against IDAS with an energy drift of 0.27 %, benchmarks/batch_estimates.py)."""
+    ``residual``: the contact solves' last sweep change (None: no contacts)."""
     flags = {
         "splits": splits > 0,
         "newton": iters / np.maximum(steps * stages, 1) > NEWTON_LIMIT,
         "energy": e_rel > ENERGY_FRACTION,
         "error": np.nan_to_num(np.maximum(gq, 0.0)) > ERROR_FRACTION * size,
     }
-    if error_q is not None:
-        flags["shadow"] = error_q == -2
     if residual is not None:
         flags["contacts"] = residual > PGS_TRUST
     return flags
@@ -543,7 +533,7 @@ def untrusted_row(model, traj, S: np.ndarray, h: float, contacts: bool = False) 
     size = max(float(np.max(np.abs(model.q0), initial=0.0)), 1e-9)
     e_rel, residual = _energy_errors(model, traj, S, work, contacts, conservative)
     dt = h * traj.info.get("substeps", 1)
-    flags = row_flags(splits, iters, steps, stages, e_rel, gq, size, residual, S[:, STATS.index("error_q")])
+    flags = row_flags(splits, iters, steps, stages, e_rel, gq, size, residual)
     if contacts and not conservative:           # a conservative run's contact work is not tracked: E - E0 tells
         flags["created"], rise, floor = created_rows(model, traj, S, work)
     first = {k: int(np.argmax(f)) for k, f in flags.items() if f.any()}
@@ -564,8 +554,6 @@ def untrusted_row(model, traj, S: np.ndarray, h: float, contacts: bool = False) 
         reason = _created_reason(rise[row], floor[row], float(_energy_scale(traj, work)[row + 1]), depth, t_row)
     elif kind == "contacts":
         reason = _contacts_reason(residual[row], t_row)
-    elif kind == "shadow":
-        reason = _shadow_reason(t_row)
     else:
         reason = _error_reason(gq[row], size, t_row)
     return row, f"{reason}. {suggest}"
@@ -628,12 +616,6 @@ def _contacts_reason(residual: float, t_row: float) -> str:
             f"it crawl, and friction can make it cycle)")
 
 
-def _shadow_reason(t_row: float) -> str:
-    return (f"its shadow run with steps of 2h failed by t = {t_row:.6g} s (Newton's method did not converge at "
-            f"2h): the step is within a factor 2 of where Newton fails for this motion, and the run has no error "
-            f"estimate from there on")
-
-
 def _error_reason(gq: float, size: float, t_row: float) -> str:
     return (f"the estimated error in q reached {gq:.3g} m by t = {t_row:.6g} s, more than "
             f"{ERROR_FRACTION:g} of the model's size {size:.3g} m")
@@ -648,11 +630,10 @@ def _suggestion(h: float, dt: float, err: float, size: float, kind: str, adaptiv
 
 def _step_suggestion(h: float, dt: float, err: float, size: float, kind: str, adaptive: bool = True) -> str:
     """Which step to use instead: a quarter of ``h`` after split steps, exploding Newton
-    iterations or an energy error, half of it after a large error estimate or a failed
-    shadow run, and in every
+    iterations or an energy error, half of it after a large error estimate, and in every
     case no more than the step at which the estimate (∝ h²) would be 1 % of the size;
     ``adaptive``: error control (``rtol``) is offered too (not for rolling elements)."""
-    h_new = h / 2 if kind in ("error", "shadow") else h / 4
+    h_new = h / 2 if kind == "error" else h / 4
     if err > 0 and math.isfinite(err):
         h_new = min(h_new, h * math.sqrt(0.1 * ERROR_FRACTION * size / err))
     substeps = max(1, math.ceil(dt / h_new - 1e-9))
