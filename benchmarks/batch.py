@@ -22,9 +22,10 @@ ncgen's kernels: ``--kernels`` (default flat, the faster for this small model).
    ncgen's, refined by bisection on its number of steps (the largest step ``t_end / n`` as
    accurate as ncgen's).  Both then run the whole batch unchecked (``check=False``: MuJoCo
    checks nothing either; ncgen checked is timed beside them) on 1 and 2 threads
-   (``Rollout(nthread=...)``), alternately; RATIO ncgen time /
-   MuJoCo time (< 1: ncgen faster); where no step of STEPS brackets it, the same with
-   MuJoCo's time scaled to the step at which its error equals ncgen's (log-log
+   (``Rollout(nthread=...)``), alternately; RATIO ncgen time / MuJoCo time (< 1: ncgen
+   faster; wall time, and CPU RATIO of the process times, which at one thread says what the
+   work costs however loaded the machine is); where no step of STEPS brackets it, the same
+   with MuJoCo's time scaled to the step at which its error equals ncgen's (log-log
    interpolation).  ``mujoco.rollout`` records the state after every step (its only mode);
    ``simulate_batch`` records every output time, here every 0.1 s.
 
@@ -79,16 +80,19 @@ def mujoco_setup(timestep: float, QVEL: np.ndarray):
     return model, states
 
 
-def mujoco_rollout(model, states, t_end: float, threads: int):
-    """``(seconds, final qpos per run)``: the batch through ``mujoco.rollout``."""
+def mujoco_rollout(model, states, t_end: float, threads: int, cpu: list | None = None):
+    """``(seconds, final qpos per run)``: the batch through ``mujoco.rollout`` (wall time; its
+    process time appended to ``cpu`` if given)."""
     import mujoco
     from mujoco import rollout
     nstep = int(round(t_end / model.opt.timestep))
     datas = [mujoco.MjData(model) for _ in range(threads)]
     with rollout.Rollout(nthread=threads) as pool:
-        start = time.perf_counter()
+        start, process = time.perf_counter(), time.process_time()
         out, _ = pool.rollout(model, datas, states, nstep=nstep)
         seconds = time.perf_counter() - start
+        if cpu is not None:
+            cpu.append(time.process_time() - process)
     return seconds, out[:, -1, 1:1 + model.nq]
 
 
@@ -184,12 +188,24 @@ def against_rollout(model, args) -> None:
           f"{args.h:g} s ({int(round(args.t_end / args.h))} steps per run)")
     ncgen_batch(model, V0[:2], args.t_end, args.h, 1, False, args.kernels)
     for threads in (1, 2):
-        t_nc, t_mj, t_checked = [], [], []
+        t_nc, t_mj, t_checked, cpu = [], [], [], {"nc": [], "mj": [], "checked": []}
         for _ in range(args.repeat):
-            t_nc.append(ncgen_batch(model, V0, args.t_end, args.h, threads, False, args.kernels).info["wall_time"])
-            t_mj.append(mujoco_rollout(mj, states, args.t_end, threads)[0])
-            t_checked.append(ncgen_batch(model, V0, args.t_end, args.h, threads, True, args.kernels).info["wall_time"])
+            r = ncgen_batch(model, V0, args.t_end, args.h, threads, False, args.kernels)
+            t_nc.append(r.info["wall_time"])
+            cpu["nc"].append(r.info["cpu_time"])
+            t_mj.append(mujoco_rollout(mj, states, args.t_end, threads, cpu["mj"])[0])
+            r = ncgen_batch(model, V0, args.t_end, args.h, threads, True, args.kernels)
+            t_checked.append(r.info["wall_time"])
+            cpu["checked"].append(r.info["cpu_time"])
         ratio, checked = np.array(t_nc) / np.array(t_mj), np.array(t_checked) / np.array(t_mj)
+        cores = {k: np.array(v) / np.array(w) for (k, v), w in zip(cpu.items(), (t_nc, t_mj, t_checked))}
+        print(f"{threads} thread(s): CPU / wall of the calls (cores given; about {threads} when each thread had "
+              f"a core) median: ncgen {np.median(cores['nc']):.2f}, MuJoCo {np.median(cores['mj']):.2f}, "
+              f"ncgen checked {np.median(cores['checked']):.2f}")
+        for name, key in (("ncgen", "nc"), ("ncgen checked", "checked")):
+            c = np.array(cpu[key]) / np.array(cpu["mj"])
+            print(f"CPU RATIO {name} / mujoco.rollout, {threads} thread(s): min {c.min():.2f}, median "
+                  f"{np.median(c):.2f} (process time: the work, whatever share of the cores the process got)")
         print(f"{threads} thread(s): ncgen simulate_batch best {min(t_nc):.3f} s ({n / min(t_nc):.0f} runs/s), "
               f"checked {min(t_checked):.3f} s; mujoco.rollout best {min(t_mj):.3f} s ({n / min(t_mj):.0f} runs/s)")
         print(f"RATIO ncgen / mujoco.rollout, {threads} thread(s): min {ratio.min():.2f}, median {np.median(ratio):.2f}"

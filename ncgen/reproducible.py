@@ -65,6 +65,25 @@ def inv(A) -> np.ndarray:
     return np.array([row[n:] for row in aug], dtype=float).reshape(n, n)
 
 
+def cholesky(A) -> np.ndarray:
+    """The lower triangular ``L`` with ``L Lᵀ = A`` of a symmetric positive definite matrix
+    (in Python floats, correctly rounded sums: an entry that a banded ``A`` leaves zero is
+    exactly 0).  Raises ``ValueError`` where ``A`` is not positive definite."""
+    A = np.asarray(A, dtype=float)
+    n = A.shape[0]
+    if A.shape != (n, n):
+        raise ValueError(f"cholesky: expected a square matrix, got shape {A.shape}")
+    L = np.zeros((n, n))
+    for j in range(n):
+        d = float(A[j, j]) - math.fsum(float(x) * float(x) for x in L[j, :j])
+        if not d > 0:
+            raise ValueError("cholesky: the matrix is not positive definite")
+        L[j, j] = math.sqrt(d)
+        for i in range(j + 1, n):
+            L[i, j] = (float(A[i, j]) - math.fsum(float(x) * float(y) for x, y in zip(L[i, :j], L[j, :j]))) / L[j, j]
+    return L
+
+
 def snap(c, tol: float = SNAP_TOL) -> np.ndarray:
     """``c`` with every entry within ``tol`` of an integer replaced by that integer.
 

@@ -84,3 +84,26 @@ def test_table_multipliers_agree_with_the_flat_accel(chain):
     np.testing.assert_allclose(lam, ref, rtol=0, atol=1e-13 * np.abs(ref).max())
     assert np.array_equal(stepper.multipliers(traj.q[4], traj.v[4]), lam[4])
     assert np.isnan(stepper.multipliers(np.zeros(chain.nq), np.zeros(chain.nq))).all()   # A = 0: singular
+
+
+def test_two_threads_decide_as_one_on_good_and_bad_runs(chain):
+    """Runs from slow (trusted) to fast (rejected for energy drift or split steps; the fastest
+    fails in the stepper): two threads give the very bits, statuses and reasons of one thread,
+    and each run's decision is the single run's (``nc.simulate`` raises exactly for the
+    rejected ones, with the reason the batch gives)."""
+    V0 = initial_rates(12, seed=4)[0] * np.repeat([1, 3, 5, 8, 30, 60], 2)[:, None]
+    runs = {w: nc.simulate_batch(chain, 0.5, 0.05, v0=V0, substeps=2, workers=w, kernels="tables") for w in (1, 2)}
+    one, two = runs[1], runs[2]
+    for key in KEYS + ("status",):
+        assert np.array_equal(getattr(one, key), getattr(two, key), equal_nan=True), key
+    assert one.message == two.message
+    reasons = " ".join(one.message)
+    assert one.ok.sum() >= 3 and "energy" in reasons and "had to be split" in reasons and (one.status > 0).any()
+    for i in range(len(V0)):
+        try:
+            single = nc.simulate(chain, 0.5, 0.05, method="stepper", v0=V0[i], substeps=2, kernels="tables")
+        except SimulationError as e:
+            assert one.status[i] != 0 and one.message[i].split(": ", 1)[1].split(". Later,")[0] in str(e)
+        else:
+            assert one.status[i] == 0
+            assert_same_run(one, i, single)

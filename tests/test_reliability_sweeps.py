@@ -191,19 +191,21 @@ def test_sampler_seeds_are_checked(seed):
 
 # ------------------------------------------------------------------ blown-up runs
 def test_a_blown_up_batch_run_keeps_only_its_trusted_rows(repelled):
-    """Unchecked, the run goes on to |q| ~ 1e11 m before Newton fails; checked, only the rows
-    before the error estimate passes 1 % of the size remain, they follow the closed form
+    """Unchecked, the run goes on to |q| ~ 1e15 m before its Newton update is not finite (the
+    round-off of q swamps the unit distance: Newton fails or the KKT solve meets a zero
+    constraint gradient, status 1 or 2, wherever the last bits take it); checked, only the
+    rows before the error estimate passes 1 % of the size remain, they follow the closed form
     ``c_x = 1.5 cosh(20 t)``, ``c_y = (g/k)(1 − cosh(20 t))``, and the message names the
     estimate first, the failed step after it."""
     bare = nc.simulate_batch(repelled, 40.0, 0.01, p={"k": [K]}, check=False)
-    assert bare.status[0] == 1 and np.nanmax(np.abs(bare.q[0])) > 1e6          # what used to be kept
+    assert bare.status[0] in (1, 2) and np.nanmax(np.abs(bare.q[0])) > 1e6     # what used to be kept
     run = nc.simulate_batch(repelled, 40.0, 0.01, p={"k": [K, 0.0]})
-    assert run.status[0] == 1 and run.status[1] == 0                            # k = 0: free fall, kept whole
+    assert run.status[0] == bare.status[0] and run.status[1] == 0               # k = 0: free fall, kept whole
     fall = run.q[1]
     assert np.allclose(0.5 * (fall[:, 1] + fall[:, 3]), -9.81 * run.t**2 / 2, rtol=1e-9, atol=1e-9)
     message = run.message[0]
     assert message.startswith("not trustworthy: the estimated error in q reached")     # the cause first
-    assert ". Later, the stepper failed in the step from t = 1.29 s" in message
+    assert ". Later, the stepper failed in the step from t = " in message
     kept = int(np.sum(~np.isnan(run.q[0, :, 0])))
     assert 10 < kept < 100 and np.isnan(run.q[0, kept:]).all() and np.isnan(run.v[0, kept:]).all()
     t, q = run.t[:kept], run.q[0, :kept]
@@ -213,7 +215,7 @@ def test_a_blown_up_batch_run_keeps_only_its_trusted_rows(repelled):
     assert np.max(np.abs(cx - scale) / scale) < 1e-4
     assert np.max(np.abs(cy - g / K * (1 - np.cosh(w * t)))) < 1e-3
     with pytest.raises(SimulationError, match="not trustworthy: the estimated error .* The stepper then failed at "
-                                              "t = 1.29 s") as err:
+                                              "t = ") as err:
         nc.simulate(repelled, 40.0, 0.01, method="stepper", p={"k": K})
     single = err.value.trajectory
     assert np.array_equal(single.q, run.q[0, :len(single.t)]) and len(single.t) == kept

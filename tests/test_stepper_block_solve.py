@@ -3,6 +3,7 @@ each diagonal block alone: its result against a dense LU solve (numpy) of the wh
 with the blocks' rows interleaved (each block's in order, as a body's coordinates), blocks of several patterns (1×1, equal
 5×5 ones sharing one mapped solve, 7×7, 8×8), and the block functions present."""
 import casadi as ca
+import pytest
 import numpy as np
 
 import ncgen.assembly.stepper_equations as kernels
@@ -82,3 +83,57 @@ def test_free_body_blocks_are_solved_by_their_schur_complement(monkeypatch):
     M[:4, :4] = np.diag([1.0, 1.0, 1.0, 1e-9])                          # cond 1e9 > SCHUR_MAX_COND
     assert kernels._schur_blocks(K.sparsity(), kernels._components(K.sparsity()), M, set())[:2] == [0, 4]
     assert kernels._schur_blocks(K.sparsity(), kernels._components(K.sparsity()), None, set()) == [0] * 5
+
+
+def _chain_kkt(rng, n_points=5, nc=5):
+    """K = [[M, A0^T], [A1, 0]] of a chain of points in 3-D: M the banded mass matrix of bars
+    sharing ends (m/3 on the diagonal, m/6 between neighbours, per axis), each constraint row
+    on two neighbouring points (the first on one), A1 = A0 plus a small change (the end of
+    the step), and M."""
+    nq = 3 * n_points
+    T = np.diag(np.full(n_points, 2 * 0.2 / 3)) + np.diag(np.full(n_points - 1, 0.2 / 6), 1) \
+        + np.diag(np.full(n_points - 1, 0.2 / 6), -1)
+    T[-1, -1] = 0.2 / 3
+    M = np.kron(T, np.eye(3))
+    A0 = np.zeros((nc, nq))
+    for k in range(nc):
+        A0[k, 3 * k:3 * k + 3] = rng.standard_normal(3)
+        if k:
+            A0[k, 3 * k - 3:3 * k] = -A0[k, 3 * k:3 * k + 3]
+    A1 = A0 + 1e-3 * rng.standard_normal((nc, nq)) * (A0 != 0)
+    return ca.sparsify(ca.DM(np.block([[M, A0.T], [A1, np.zeros((nc, nc))]]))), M
+
+
+def test_a_constant_mass_is_solved_through_its_cholesky_factor():
+    """The 5-bar chain's KKT pattern with its constant banded M: the Schur complement with M's
+    Cholesky factor as constants (fewer instructions than K's unrolled QR) against numpy's
+    dense solve of K to round-off; without ``constant_mass``, with a damped coordinate, or
+    with M ill conditioned the QR stays."""
+    rng = np.random.default_rng(6)
+    K, M = _chain_kkt(rng)
+    qr = kernels.solve_function(K.sparsity())
+    solve = kernels.solve_function(K.sparsity(), M, set(), constant_mass=True)
+    assert solve.n_instructions() < 0.5 * qr.n_instructions(), (solve.n_instructions(), qr.n_instructions())
+    for _ in range(3):
+        r = rng.standard_normal(K.size1())
+        exact = np.linalg.solve(np.array(K), r)
+        np.testing.assert_allclose(np.array(solve(K, r)).ravel(), exact, rtol=0, atol=1e-13 * np.abs(exact).max())
+    assert kernels.solve_function(K.sparsity(), M, {3}, constant_mass=True).n_instructions() == qr.n_instructions()
+    assert kernels.solve_function(K.sparsity(), M, set()).n_instructions() == qr.n_instructions()
+    bad = M.copy()
+    bad[0, 0] = bad[1, 1] = bad[2, 2] = 1e-9                  # nearly singular: cond far above SCHUR_MAX_COND
+    bad[0, 3] = bad[3, 0] = bad[1, 4] = bad[4, 1] = bad[2, 5] = bad[5, 2] = 0
+    assert kernels._mass_schur_solve(K.sparsity(), bad, 10**6, "s") is None
+    assert kernels._mass_schur_solve(K.sparsity(), M, 124, "s") is None     # 5 constraints: 125 > 124
+
+
+def test_reproducible_cholesky_keeps_a_band_and_refuses_an_indefinite_matrix():
+    from ncgen.reproducible import cholesky
+    rng = np.random.default_rng(7)
+    _, M = _chain_kkt(rng)
+    L = cholesky(M)
+    np.testing.assert_allclose(L @ L.T, M, rtol=0, atol=1e-16)
+    np.testing.assert_allclose(L, np.linalg.cholesky(M), rtol=0, atol=1e-16)
+    assert np.all(L[np.abs(np.subtract.outer(np.arange(15), np.arange(15))) > 3] == 0)   # exact zeros off the band
+    with pytest.raises(ValueError, match="not positive definite"):
+        cholesky(np.array([[1.0, 2.0], [2.0, 1.0]]))

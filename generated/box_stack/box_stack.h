@@ -398,7 +398,7 @@ extern const char box_stack_model_hash[];
 #define BOX_STACK_STEP_CHECK_OUT_PHIDOT_MAX_NNZ 1
 
 /* ---- box_stack_step_solve ----------------------------------------------------
- * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
+ * Stepper: x = K^-1 r (sparse Householder QR in AMD column order, or the Schur complement with the constant mass matrix's Cholesky factor)
  * In box_stack_kernels_0.c; 6270 instructions.
  * Inputs:
  *   arg[0] K: 54x54, nnz 198 (sparse) KKT matrix in the stepper's pattern. Default: zeros.

@@ -397,7 +397,7 @@ extern const char boxes_model_hash[];
 #define BOXES_STEP_CHECK_OUT_PHIDOT_MAX_NNZ 1
 
 /* ---- boxes_step_solve ----------------------------------------------------
- * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
+ * Stepper: x = K^-1 r (sparse Householder QR in AMD column order, or the Schur complement with the constant mass matrix's Cholesky factor)
  * In boxes_kernels_0.c; 4181 instructions.
  * Inputs:
  *   arg[0] K: 36x36, nnz 132 (sparse) KKT matrix in the stepper's pattern. Default: zeros.

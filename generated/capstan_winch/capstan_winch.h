@@ -393,7 +393,7 @@ extern const char capstan_winch_model_hash[];
 #define CAPSTAN_WINCH_STEP_CHECK_OUT_PHIDOT_MAX_NNZ 1
 
 /* ---- capstan_winch_step_solve ----------------------------------------------------
- * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
+ * Stepper: x = K^-1 r (sparse Householder QR in AMD column order, or the Schur complement with the constant mass matrix's Cholesky factor)
  * In capstan_winch_kernels_0.c; 694 instructions.
  * Inputs:
  *   arg[0] K: 15x15, nnz 35 (sparse) KKT matrix in the stepper's pattern. Default: zeros.

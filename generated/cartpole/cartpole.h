@@ -395,7 +395,7 @@ extern const char cartpole_model_hash[];
 #define CARTPOLE_STEP_CHECK_OUT_PHIDOT_MAX_NNZ 1
 
 /* ---- cartpole_step_solve ----------------------------------------------------
- * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
+ * Stepper: x = K^-1 r (sparse Householder QR in AMD column order, or the Schur complement with the constant mass matrix's Cholesky factor)
  * In cartpole_kernels_0.c; 716 instructions.
  * Inputs:
  *   arg[0] K: 14x14, nnz 40 (sparse) KKT matrix in the stepper's pattern. Default: zeros.

@@ -394,7 +394,7 @@ extern const char double_pendulum_model_hash[];
 #define DOUBLE_PENDULUM_STEP_CHECK_OUT_PHIDOT_MAX_NNZ 1
 
 /* ---- double_pendulum_step_solve ----------------------------------------------------
- * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
+ * Stepper: x = K^-1 r (sparse Householder QR in AMD column order, or the Schur complement with the constant mass matrix's Cholesky factor)
  * In double_pendulum_kernels_0.c; 2554 instructions.
  * Inputs:
  *   arg[0] K: 22x22, nnz 88 (sparse) KKT matrix in the stepper's pattern. Default: zeros.

@@ -397,7 +397,7 @@ extern const char falling_chain_model_hash[];
 #define FALLING_CHAIN_STEP_CHECK_OUT_PHIDOT_MAX_NNZ 1
 
 /* ---- falling_chain_step_solve ----------------------------------------------------
- * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
+ * Stepper: x = K^-1 r (sparse Householder QR in AMD column order, or the Schur complement with the constant mass matrix's Cholesky factor)
  * In falling_chain_kernels_0.c; 2297 instructions.
  * Inputs:
  *   arg[0] K: 18x18, nnz 69 (sparse) KKT matrix in the stepper's pattern. Default: zeros.

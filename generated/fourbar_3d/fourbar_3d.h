@@ -394,7 +394,7 @@ extern const char fourbar_3d_model_hash[];
 #define FOURBAR_3D_STEP_CHECK_OUT_PHIDOT_MAX_NNZ 1
 
 /* ---- fourbar_3d_step_solve ----------------------------------------------------
- * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
+ * Stepper: x = K^-1 r (sparse Householder QR in AMD column order, or the Schur complement with the constant mass matrix's Cholesky factor)
  * In fourbar_3d_kernels_0.c; 2565 instructions.
  * Inputs:
  *   arg[0] K: 23x23, nnz 92 (sparse) KKT matrix in the stepper's pattern. Default: zeros.

@@ -396,7 +396,7 @@ extern const char fourbar_planar_model_hash[];
 #define FOURBAR_PLANAR_STEP_CHECK_OUT_PHIDOT_MAX_NNZ 1
 
 /* ---- fourbar_planar_step_solve ----------------------------------------------------
- * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
+ * Stepper: x = K^-1 r (sparse Householder QR in AMD column order, or the Schur complement with the constant mass matrix's Cholesky factor)
  * In fourbar_planar_kernels_0.c; 500 instructions.
  * Inputs:
  *   arg[0] K: 7x7, nnz 26 (sparse) KKT matrix in the stepper's pattern. Default: zeros.

@@ -394,7 +394,7 @@ extern const char heavy_top_model_hash[];
 #define HEAVY_TOP_STEP_CHECK_OUT_PHIDOT_MAX_NNZ 1
 
 /* ---- heavy_top_step_solve ----------------------------------------------------
- * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
+ * Stepper: x = K^-1 r (sparse Householder QR in AMD column order, or the Schur complement with the constant mass matrix's Cholesky factor)
  * In heavy_top_kernels_0.c; 2707 instructions.
  * Inputs:
  *   arg[0] K: 15x15, nnz 69 (sparse) KKT matrix in the stepper's pattern. Default: zeros.

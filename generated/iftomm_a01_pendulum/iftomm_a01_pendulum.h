@@ -393,8 +393,8 @@ extern const char iftomm_a01_pendulum_model_hash[];
 #define IFTOMM_A01_PENDULUM_STEP_CHECK_OUT_PHIDOT_MAX_NNZ 1
 
 /* ---- iftomm_a01_pendulum_step_solve ----------------------------------------------------
- * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
- * In iftomm_a01_pendulum_kernels_0.c; 113 instructions.
+ * Stepper: x = K^-1 r (sparse Householder QR in AMD column order, or the Schur complement with the constant mass matrix's Cholesky factor)
+ * In iftomm_a01_pendulum_kernels_0.c; 28 instructions.
  * Inputs:
  *   arg[0] K: 3x3, nnz 6 (sparse) KKT matrix in the stepper's pattern. Default: zeros.
  *   arg[1] r: 3x1, nnz 3 right-hand side. Default: zeros.

@@ -396,7 +396,7 @@ extern const char slider_crank_model_hash[];
 #define SLIDER_CRANK_STEP_CHECK_OUT_PHIDOT_MAX_NNZ 1
 
 /* ---- slider_crank_step_solve ----------------------------------------------------
- * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
+ * Stepper: x = K^-1 r (sparse Householder QR in AMD column order, or the Schur complement with the constant mass matrix's Cholesky factor)
  * In slider_crank_kernels_0.c; 1065 instructions.
  * Inputs:
  *   arg[0] K: 16x16, nnz 50 (sparse) KKT matrix in the stepper's pattern. Default: zeros.

@@ -397,7 +397,7 @@ extern const char tensegrity_model_hash[];
 #define TENSEGRITY_STEP_CHECK_OUT_PHIDOT_MAX_NNZ 1
 
 /* ---- tensegrity_step_solve ----------------------------------------------------
- * Stepper: x = K^-1 r by sparse Householder QR (AMD column order)
+ * Stepper: x = K^-1 r (sparse Householder QR in AMD column order, or the Schur complement with the constant mass matrix's Cholesky factor)
  * In tensegrity_kernels_1.c; 11848 instructions.
  * Inputs:
  *   arg[0] K: 24x24, nnz 276 (sparse) KKT matrix in the stepper's pattern. Default: zeros.
