@@ -81,6 +81,36 @@ def plant_function(model, h: float) -> ca.Function:
     return ca.Function("plant_step", args, step(*args), step.name_in(), step.name_out())
 
 
+def _check_options(solver, fatrop_options, iterations, substeps, warmup) -> None:
+    """:func:`export_mpc`'s controller and demo options, each named when it is refused."""
+    if not isinstance(substeps, int) or substeps < 1:
+        raise NcgenError(f"export_mpc: substeps: expected a positive integer, got {substeps!r}")
+    if not isinstance(warmup, int) or warmup < 0:
+        raise NcgenError(f"export_mpc: warmup: expected an integer ≥ 0, got {warmup!r}")
+    if not isinstance(solver, str) or solver not in SOLVERS:
+        raise NcgenError(f"export_mpc: solver: expected one of {', '.join(SOLVERS)}, got {solver!r}")
+    if fatrop_options is not None and solver != "fatrop":
+        raise NcgenError(f"export_mpc: fatrop_options: options of solver='fatrop', got solver={solver!r}")
+    if not isinstance(iterations, int) or iterations < 1:
+        raise NcgenError(f"export_mpc: iterations: expected a positive integer, got {iterations!r}")
+
+
+def _demo_context(model, problem, plant, x0, t_end: float, substeps: int, warmup: int, pl) -> dict:
+    """The template values of the plant (``plant_step``'s work sizes, its Newton tolerance)
+    and of the demo program (parameters, ``x0``, ``t_end`` in s, the disturbance pulses)."""
+    return {
+        "substeps": substeps,
+        "plant_sz_arg": plant.sz_arg(), "plant_sz_res": plant.sz_res(), "plant_sz_iw": plant.sz_iw(),
+        "plant_sz_w": plant.sz_w(), "plant_tol": _c(residual_tolerance(model)),
+        "params": ", ".join(_c(v) for v in problem.p) or "0",
+        "x0": ", ".join(_c(v) for v in x0), "t_end": _c(t_end), "warmup": warmup,
+        "disturbance": [{"t_on": _c(p.t_on), "t_off": _c(p.t_off), "amounts": [_c(v) for v in p.values]}
+                        for p in pl],
+        "disturbance_text": "; ".join(f"{list(p.values)} for {p.t_on:g} <= t < {p.t_off:g} s" for p in pl)
+                            or "none",
+    }
+
+
 def export_mpc(ocp, path, *, name: str | None = None, solver: str = "sqp", iterations: int = 1,
                terminal_weight: float = 1e3, fatrop_options: dict | None = None, x0=None, t_end: float = 5.0,
                substeps: int = 5, disturbance=(), warmup: int = 10):
@@ -96,16 +126,7 @@ def export_mpc(ocp, path, *, name: str | None = None, solver: str = "sqp", itera
 
     model = ocp.model
     name = name or model.name
-    if not isinstance(substeps, int) or substeps < 1:
-        raise NcgenError(f"export_mpc: substeps: expected a positive integer, got {substeps!r}")
-    if not isinstance(warmup, int) or warmup < 0:
-        raise NcgenError(f"export_mpc: warmup: expected an integer ≥ 0, got {warmup!r}")
-    if not isinstance(solver, str) or solver not in SOLVERS:
-        raise NcgenError(f"export_mpc: solver: expected one of {', '.join(SOLVERS)}, got {solver!r}")
-    if fatrop_options is not None and solver != "fatrop":
-        raise NcgenError(f"export_mpc: fatrop_options: options of solver='fatrop', got solver={solver!r}")
-    if not isinstance(iterations, int) or iterations < 1:
-        raise NcgenError(f"export_mpc: iterations: expected a positive integer, got {iterations!r}")
+    _check_options(solver, fatrop_options, iterations, substeps, warmup)
     if ocp.cable_min_tension is not None:
         raise NcgenError(f"export_mpc: the problem's min_tension ({ocp.cable_min_tension:g} N, the cables' pull floor) "
                          "is not exported: the exported controller has no cable rows; use nc.MPC in Python")
@@ -132,17 +153,7 @@ def export_mpc(ocp, path, *, name: str | None = None, solver: str = "sqp", itera
         fns, own = mpc_functions(model, problem, regularization=REGULARIZATION), []
         controller = controller_context(model, problem, fns, iterations, line_search_rules(model))
     kind = "fatrop" if solver == "fatrop" else "mpc"
-    context = {
-        **controller, "substeps": substeps,
-        "plant_sz_arg": plant.sz_arg(), "plant_sz_res": plant.sz_res(), "plant_sz_iw": plant.sz_iw(),
-        "plant_sz_w": plant.sz_w(), "plant_tol": _c(residual_tolerance(model)),
-        "params": ", ".join(_c(v) for v in problem.p) or "0",
-        "x0": ", ".join(_c(v) for v in x0), "t_end": _c(t_end), "warmup": warmup,
-        "disturbance": [{"t_on": _c(p.t_on), "t_off": _c(p.t_off), "amounts": [_c(v) for v in p.values]}
-                        for p in pl],
-        "disturbance_text": "; ".join(f"{list(p.values)} for {p.t_on:g} <= t < {p.t_off:g} s" for p in pl)
-                            or "none",
-    }
+    context = {**controller, **_demo_context(model, problem, plant, x0, t_end, substeps, warmup, pl)}
     extra = [*own, ExtraSource("runtime/ncgen_mpc.h", "ncgen_mpc.h", included=True),
              ExtraSource(f"mpc/{kind}.h.j2", f"{name}_mpc.h", context),
              ExtraSource(f"mpc/{kind}.c.j2", f"{name}_mpc.c", context),
