@@ -204,7 +204,8 @@ static size_t layout(workspace *ws, char *block) {
 #endif
   sizes[24] = 8 * ND * sizeof(casadi_real);
 #ifdef CONTACT_SCHUR
-  sizes[25] = (2 * ND + NC + 2 * ND + NQ + 1 + 2 * NNZ_W + 2 * NC + NQ + 1 + NNZ_A + 2 * ND + NC) * sizeof(casadi_int);
+  sizes[25] = (2 * ND + NC + 2 * ND + NQ + 1 + 2 * NNZ_W + 2 * NC + NQ + 1 + NNZ_A + 2 * ND + NC + NC + 1 + (size_t) NC * ND) *
+              sizeof(casadi_int);
 #else
   sizes[25] = 2 * ND * sizeof(casadi_int);
 #endif
