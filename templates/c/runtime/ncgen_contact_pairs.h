@@ -152,8 +152,8 @@ static casadi_real pair_lower(workspace *ws, int e, casadi_real *speed) {
 
 /* Every element's lower bound at q (ws->plb) and, given rates (or NULL), its speed bound
  * (ws->pspd; 0 without rates).  The bounds depend on q alone: a call without rates at the q
- * of the last call (the same bits) only clears the speeds (a step calls it up to five times,
- * two or three of them at the configuration the last call had). */
+ * of the last call (the same bits) only clears the speeds (repeat_step() at the start of a
+ * step after the push-out's call at its end; the push-out after a repeated step). */
 static void pairs_bounds(workspace *ws, const casadi_real *q, const casadi_real *rates) {
   int e, k;
   if (!rates && ws->pb_rates >= 0 && !memcmp(q, ws->pbq, NQ * sizeof(casadi_real))) {
