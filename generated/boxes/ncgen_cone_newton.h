@@ -214,49 +214,59 @@ static int cone_solve(casadi_real *J, casadi_real *b, casadi_real *x, int m, cas
 /* The Levenberg-Marquardt step (J^T J + lambda I) dP = -J^T phi, lambda = |phi| (Yamashita and
  * Fukushima: quadratic convergence also where the solutions are not isolated, as with
  * redundant contacts), with J in J (m x m, row-major) and its Gram matrix formed in H (m x m,
- * destroyed) and factored by Cholesky; g gets J^T phi.  A descent direction of |phi|^2 / 2
- * wherever Newton's step J^-1 is not one (J singular or nearly so).  Returns 0 if a result
- * is not finite. */
-static int cone_lm(const casadi_real *J, const casadi_real *phi, casadi_real *H, casadi_real *g, casadi_real *dP, int m) {
+ * destroyed) and factored by Cholesky within its envelope (J has the sparsity of G, and so
+ * has H that of G^2; the terms skipped are zeros); g gets J^T phi; cols and start: scratch (m
+ * each).  A descent direction of |phi|^2 / 2 wherever Newton's step J^-1 is not one (J
+ * singular or nearly so).  Returns 0 if a result is not finite. */
+static int cone_lm(const casadi_real *J, const casadi_real *phi, casadi_real *H, casadi_real *g, casadi_real *dP, int m,
+                   casadi_int *cols, casadi_int *start) {
   casadi_real lambda = 0;
-  int i, j, k;
+  int i, j, k, n;
   for (i = 0; i < m; ++i) lambda += phi[i] * phi[i];
   lambda = sqrt(lambda);
   for (i = 0; i < m * m; ++i) H[i] = 0;
   for (i = 0; i < m; ++i) g[i] = 0;
-  for (k = 0; k < m; ++k) { /* H += J_k^T J_k row by row, lower triangle, skipping zeros */
+  for (i = 0; i < m; ++i) start[i] = i; /* the first nonzero column of row i of H */
+  for (k = 0; k < m; ++k) { /* H += J_k^T J_k row by row, lower triangle, over J_k's nonzeros */
     const casadi_real *jk = J + (size_t) k * m;
-    for (i = 0; i < m; ++i)
-      if (jk[i] != 0) {
-        g[i] += jk[i] * phi[k];
-        for (j = 0; j <= i; ++j) H[(size_t) i * m + j] += jk[i] * jk[j];
-      }
+    for (n = i = 0; i < m; ++i)
+      if (jk[i] != 0) cols[n++] = i;
+    for (i = 0; i < n; ++i) {
+      const int a = (int) cols[i];
+      casadi_real *ha = H + (size_t) a * m;
+      g[a] += jk[a] * phi[k];
+      if (cols[0] < start[a]) start[a] = cols[0];
+      for (j = 0; j <= i; ++j) ha[cols[j]] += jk[a] * jk[cols[j]];
+    }
   }
-  for (i = 0; i < m; ++i) { /* Cholesky, lower triangle in place */
+  /* Cholesky, lower triangle in place; row i of the factor is zero left of row i of H's
+   * first nonzero, and the products skip those zeros */
+  for (i = 0; i < m; ++i) {
     casadi_real *hi = H + (size_t) i * m, d;
+    const int f = (int) start[i];
     hi[i] += lambda;
-    for (j = 0; j < i; ++j) {
+    for (j = f; j < i; ++j) {
       const casadi_real *hj = H + (size_t) j * m;
       casadi_real v = hi[j];
-      for (k = 0; k < j; ++k) v -= hi[k] * hj[k];
+      for (k = f > start[j] ? f : (int) start[j]; k < j; ++k) v -= hi[k] * hj[k];
       hi[j] = v / hj[j];
     }
     d = hi[i];
-    for (k = 0; k < i; ++k) d -= hi[k] * hi[k];
+    for (k = f; k < i; ++k) d -= hi[k] * hi[k];
     if (!(d > 0)) return 0;
     hi[i] = sqrt(d);
   }
   for (i = 0; i < m; ++i) { /* L y = -g */
     const casadi_real *hi = H + (size_t) i * m;
     casadi_real v = -g[i];
-    for (k = 0; k < i; ++k) v -= hi[k] * dP[k];
+    for (k = (int) start[i]; k < i; ++k) v -= hi[k] * dP[k];
     dP[i] = v / hi[i];
   }
   for (i = m - 1; i >= 0; --i) { /* L^T dP = y */
     const casadi_real *hi = H + (size_t) i * m;
     dP[i] /= hi[i];
     if (!isfinite(dP[i])) return 0;
-    for (k = 0; k < i; ++k) dP[k] -= hi[k] * dP[i];
+    for (k = (int) start[i]; k < i; ++k) dP[k] -= hi[k] * dP[i];
   }
   return 1;
 }
@@ -299,7 +309,7 @@ static int cone_newton(workspace *ws, int na, const int *first, const casadi_rea
         if (!cone_solve(J, phi, dP, nr, cols, dropped)) continue;
       } else {
         theta = cone_phi(ws, na, first, bias, rho, ws->P, ws->U, phi, J);
-        if (!cone_lm(J, phi, J + (size_t) ND * ND, gdp, dP, nr)) {
+        if (!cone_lm(J, phi, J + (size_t) ND * ND, gdp, dP, nr, cols, dropped)) {
           lm = 2;
           break;
         }
@@ -384,9 +394,37 @@ static casadi_real cone_residual_of(workspace *ws, int nr, const int *first, con
   return res / (1 + size);
 }
 
+/* Columns k .. k + 3 of the m x r matrix C (column-major) -= b v (v . column) for
+ * v = (0, ..., 0, 1, C[j + 1 .. m - 1, j]) (its 1 at j): the four dot products side by side,
+ * each summed in the order of the one-column loop of cone_qr() (the same bits), so that
+ * they do not wait on one another's additions. */
+static void cone_reflect4(casadi_real *C, int m, int j, int k, casadi_real b) {
+  const casadi_real *cj = C + (size_t) j * m;
+  casadi_real *c0 = C + (size_t) k * m, *c1 = c0 + m, *c2 = c1 + m, *c3 = c2 + m;
+  casadi_real w0 = c0[j], w1 = c1[j], w2 = c2[j], w3 = c3[j];
+  int i;
+  for (i = j + 1; i < m; ++i) {
+    const casadi_real v = cj[i];
+    w0 += v * c0[i];
+    w1 += v * c1[i];
+    w2 += v * c2[i];
+    w3 += v * c3[i];
+  }
+  w0 *= b, w1 *= b, w2 *= b, w3 *= b;
+  c0[j] -= w0, c1[j] -= w1, c2[j] -= w2, c3[j] -= w3;
+  for (i = j + 1; i < m; ++i) {
+    const casadi_real v = cj[i];
+    c0[i] -= w0 * v;
+    c1[i] -= w1 * v;
+    c2[i] -= w2 * v;
+    c3[i] -= w3 * v;
+  }
+}
+
 /* Householder QR of the m x r matrix C (column-major, full column rank, r <= m) in place:
  * reflection j is H_j = I - beta[j] v_j v_j^T with v_j = (0, ..., 0, 1, C[j + 1 .. m - 1, j])
- * (its 1 at j), and R on and above the diagonal; Q = H_0 H_1 ... H_{r-1}. */
+ * (its 1 at j), and R on and above the diagonal; Q = H_0 H_1 ... H_{r-1}.  The columns after
+ * j take reflection j four at a time (cone_reflect4()). */
 static void cone_qr(casadi_real *C, int m, int r, casadi_real *beta) {
   int i, j, k;
   for (j = 0; j < r; ++j) {
@@ -401,7 +439,8 @@ static void cone_qr(casadi_real *C, int m, int r, casadi_real *beta) {
     beta[j] = 2 * v0 * v0 / (sigma + v0 * v0);
     for (i = j + 1; i < m; ++i) cj[i] /= v0;
     cj[j] = norm;
-    for (k = j + 1; k < r; ++k) { /* column k -= beta v (v . column k) */
+    for (k = j + 1; k + 4 <= r; k += 4) cone_reflect4(C, m, j, k, beta[j]);
+    for (; k < r; ++k) { /* column k -= beta v (v . column k) */
       casadi_real *ck = C + (size_t) k * m, w = ck[j];
       for (i = j + 1; i < m; ++i) w += cj[i] * ck[i];
       w *= beta[j];

@@ -159,9 +159,18 @@ static casadi_real pair_lower(workspace *ws, int e, casadi_real *speed) {
 }
 
 /* Every element's lower bound at q (ws->plb) and, given rates (or NULL), its speed bound
- * (ws->pspd). */
+ * (ws->pspd; 0 without rates).  The bounds depend on q alone: a call without rates at the q
+ * of the last call (the same bits) only clears the speeds (repeat_step() at the start of a
+ * step after the push-out's call at its end; the push-out after a repeated step). */
 static void pairs_bounds(workspace *ws, const casadi_real *q, const casadi_real *rates) {
   int e, k;
+  if (!rates && ws->pb_rates >= 0 && !memcmp(q, ws->pbq, NQ * sizeof(casadi_real))) {
+    if (ws->pb_rates) memset(ws->pspd, 0, NE * sizeof(casadi_real));
+    ws->pb_rates = 0;
+    return;
+  }
+  memcpy(ws->pbq, q, NQ * sizeof(casadi_real));
+  ws->pb_rates = rates != 0;
   for (k = 0; k < PAIR_NS; ++k) { /* each member side once, however many elements it is in */
     const int se = pair_srep[2 * k], s = pair_srep[2 * k + 1], *pi = pair_int + 8 * se;
     const int o = pi[5] + (s ? pi[3] : 0), n = pi[3 + s];

@@ -134,6 +134,8 @@ typedef struct {
   casadi_real *plb;  /* per element: the lower bound of its gaps at the last pairs_bounds() */
   casadi_real *pspd; /* ... and the bound of its rows' velocities */
   casadi_real *psb;  /* per distinct member side (PAIR_NS): x0 (DC), R, lin, rot at the last pairs_bounds() */
+  casadi_real *pbq;  /* the q (NQ) of the last pairs_bounds() */
+  int pb_rates;      /* whether it was given rates (1) or not (0); -1: none since layout() */
   int *pon;          /* per element: 0 skipped, 1 evaluated, 2 to be evaluated (ncgen_contact_pairs.h) */
 #endif
 #endif
@@ -205,12 +207,13 @@ static size_t layout(workspace *ws, char *block) {
 #endif
   sizes[24] = 8 * ND * sizeof(casadi_real);
 #ifdef CONTACT_SCHUR
-  sizes[25] = (2 * ND + NC + 2 * ND + NQ + 1 + 2 * NNZ_W + 2 * NC + NQ + 1 + NNZ_A + 2 * ND + NC) * sizeof(casadi_int);
+  sizes[25] = (2 * ND + NC + 2 * ND + NQ + 1 + 2 * NNZ_W + 2 * NC + NQ + 1 + NNZ_A + 2 * ND + NC + NC + 1 + (size_t) NC * ND) *
+              sizeof(casadi_int);
 #else
   sizes[25] = 2 * ND * sizeof(casadi_int);
 #endif
 #ifdef CONTACT_PAIRS
-  sizes[26] = (2 * PAIR_MAX_Q + PAIR_MAX_G + PAIR_MAX_W + 2 * NE + PAIR_NS * (DC + 3)) * sizeof(casadi_real) +
+  sizes[26] = (2 * PAIR_MAX_Q + PAIR_MAX_G + PAIR_MAX_W + 2 * NE + PAIR_NS * (DC + 3) + NQ) * sizeof(casadi_real) +
               NE * sizeof(int);
 #endif
 #endif
@@ -266,7 +269,9 @@ static size_t layout(workspace *ws, char *block) {
     ws->plb = ws->pw + PAIR_MAX_W;
     ws->pspd = ws->plb + NE;
     ws->psb = ws->pspd + NE;
-    ws->pon = (int *) (void *) (ws->psb + PAIR_NS * (DC + 3));
+    ws->pbq = ws->psb + PAIR_NS * (DC + 3);
+    ws->pb_rates = -1;
+    ws->pon = (int *) (void *) (ws->pbq + NQ);
 #endif
 #ifdef CONTACT_SCHUR
     ws->T = (casadi_real *) (void *) (block + off[23]);

@@ -309,6 +309,61 @@ static void test_min_norm_rank_deficient(void) {
   for (i = 0; i < ND; ++i) CHECK(fabs(ws.U[i]) < 1e-13, "U[%d] = %g", i, ws.U[i]);
 }
 
+/* cone_qr() on a 9 x 7 lower-trapezoidal matrix (the kept columns of a Cholesky factor: column
+ * j zero above row j + j/3) takes its columns four at a time and then one by one: Q R gives
+ * the matrix back (Q applied as the product of its reflections), R is upper triangular and
+ * Q keeps lengths (orthogonal), to round-off. */
+static void test_qr(void) {
+  enum { M = 9, R = 7 };
+  casadi_real C[M * R], C0[M * R], beta[R], x[M], y[M], nx = 0, ny = 0;
+  int i, j;
+  for (j = 0; j < R; ++j)
+    for (i = 0; i < M; ++i) C0[i + j * M] = i < j + j / 3 ? 0 : 1 + sin(3.0 * i + 7.0 * j) / (1 + i - j);
+  memcpy(C, C0, sizeof C);
+  cone_qr(C, M, R, beta);
+  for (j = 0; j < R; ++j) {
+    for (i = 0; i < M; ++i) x[i] = i <= j ? C[i + j * M] : 0; /* column j of R */
+    for (i = R - 1; i >= 0; --i) cone_reflect(C, M, i, beta[i], x); /* Q R_j = H_0 ... H_{R-1} R_j */
+    for (i = 0; i < M; ++i)
+      CHECK(fabs(x[i] - C0[i + j * M]) < 1e-14, "(Q R)[%d][%d] = %.17g, expected %.17g", i, j, x[i], C0[i + j * M]);
+  }
+  for (i = 0; i < M; ++i) {
+    y[i] = x[i] = cos(1.0 + i);
+    nx += x[i] * x[i];
+  }
+  for (i = R - 1; i >= 0; --i) cone_reflect(C, M, i, beta[i], y);
+  for (i = 0; i < M; ++i) ny += y[i] * y[i];
+  CHECK(fabs(sqrt(ny) - sqrt(nx)) < 1e-14 * sqrt(nx), "|Q x| = %.17g, |x| = %.17g", sqrt(ny), sqrt(nx));
+}
+
+/* cone_lm() with a J of two decoupled blocks (rows and columns 0-3 and 4-8: H = J^T J is
+ * block diagonal, and its Cholesky factor's rows start at their block) against the equations
+ * it solves, (J^T J + |phi| I) dP = -J^T phi, formed densely here. */
+static void test_lm(void) {
+  enum { M = 9 };
+  casadi_real J[M * M], H[M * M], g[M], dP[M], phi[M], lambda = 0;
+  casadi_int cols[M], start[M];
+  int i, j, k;
+  for (i = 0; i < M; ++i) {
+    phi[i] = 0.3 - 0.1 * i;
+    lambda += phi[i] * phi[i];
+    for (j = 0; j < M; ++j)
+      J[i * M + j] = (i < 4) == (j < 4) && (i == j || (i + j) % 3 == 0) ? 1 + 0.25 * sin(1.0 + i + 2.0 * j) : 0;
+  }
+  lambda = sqrt(lambda);
+  CHECK(cone_lm(J, phi, H, g, dP, M, cols, start), "no step");
+  for (i = 4; i < M; ++i) CHECK(start[i] >= 4, "row %d of the factor starts at %d, in the other block", i, (int) start[i]);
+  for (i = 0; i < M; ++i) {
+    casadi_real r = lambda * dP[i];
+    for (k = 0; k < M; ++k) { /* (J^T J dP)_i + (J^T phi)_i */
+      casadi_real jdp = 0;
+      for (j = 0; j < M; ++j) jdp += J[k * M + j] * dP[j];
+      r += J[k * M + i] * (jdp + phi[k]);
+    }
+    CHECK(fabs(r) < 1e-14, "residual of row %d: %g", i, r);
+  }
+}
+
 int main(void) {
   test_jacobian();
   test_solution();
@@ -318,5 +373,7 @@ int main(void) {
   test_min_norm_touching_pulled();
   test_min_norm_per_group();
   test_min_norm_rank_deficient();
+  test_qr();
+  test_lm();
   return report("test_cone_newton");
 }

@@ -347,10 +347,11 @@ static int delassus(workspace *ws, const int *rows, int n) {
    * row and position per nonzero), the first and last nonzero of each row of T (2 NC, read
    * by x_add()), A's nonzeros by columns (NQ + 1 starts, NNZ_A positions), the first and
    * last nonzero of each B_a (2 ND, read by x_add()), the smallest envelope start of rows
-   * i .. NC - 1 (NC) */
+   * i .. NC - 1 (NC), Z's nonzeros by rows of L (NC + 1 starts, then the active rows a,
+   * ascending: NC ND) */
   casadi_int *env = ws->cni + 2 * ND, *zlo = env + NC, *zhi = zlo + ND, *cp = zhi + ND, *cr = cp + NQ + 1,
              *ck = cr + NNZ_W, *tlo = ck + NNZ_W, *thi = tlo + NC, *acp = thi + NC, *ak = acp + NQ + 1,
-             *bfirst = ak + NNZ_A, *blast = bfirst + ND, *emin = blast + ND;
+             *bfirst = ak + NNZ_A, *blast = bfirst + ND, *emin = blast + ND, *zp = emin + NC, *zr = zp + NC + 1;
   int a, b, i, j, k, finite = 1;
   if (ws->tl_zero) /* the rows of T and L the last call wrote (A's pattern does not change) */
     for (i = 0; i < NC; ++i) {
@@ -477,21 +478,34 @@ static int delassus(workspace *ws, const int *rows, int n) {
     }
   for (i = NQ; i > 0; --i) cp[i] = cp[i - 1];
   cp[0] = 0;
-  for (b = 0; b < n; ++b) { /* G_ab = W_a B_b for a <= b, by B_b's nonzeros */
-    const casadi_real *bb = B + b * NQ;
+  /* Z's nonzeros by rows of L: row i has the active rows zr[zp[i] .. zp[i + 1] - 1] */
+  memset(zp, 0, (NC + 1) * sizeof(casadi_int));
+  for (a = 0; a < n; ++a)
+    for (i = (int) zlo[a]; i <= zhi[a]; ++i)
+      if (Z[a * NC + i] != 0) ++zp[i + 1];
+  for (i = 0; i < NC; ++i) zp[i + 1] += zp[i];
+  for (a = 0; a < n; ++a)
+    for (i = (int) zlo[a]; i <= zhi[a]; ++i)
+      if (Z[a * NC + i] != 0) zr[zp[i]++] = a;
+  for (i = NC; i > 0; --i) zp[i] = zp[i - 1];
+  zp[0] = 0;
+  /* G_ab = W_a B_b - Z_a . Z_b for a <= b: by B_b's nonzeros, then by Z_b's (the terms of the
+   * dot product in ascending order, those with a zero factor left out) */
+  for (b = 0; b < n; ++b) {
+    const casadi_real *bb = B + b * NQ, *zb = Z + b * NC;
     casadi_real *gb = ws->G + b * n;
     memset(gb, 0, (size_t) (b + 1) * sizeof(casadi_real)); /* the lower triangle is written below */
     for (i = (int) bfirst[b]; i <= blast[b]; ++i)
       if (bb[i] != 0)
         for (k = (int) cp[i]; k < cp[i + 1] && cr[k] <= b; ++k) gb[cr[k]] += ws->W[ck[k]] * bb[i];
+    for (i = (int) zlo[b]; i <= zhi[b]; ++i)
+      if (zb[i] != 0)
+        for (k = (int) zp[i]; k < zp[i + 1] && zr[k] <= b; ++k) gb[zr[k]] -= Z[zr[k] * NC + i] * zb[i];
   }
-  for (a = 0; a < n; ++a) /* - Z_a . Z_b where they overlap; G symmetric (every entry checked here) */
+  for (a = 0; a < n; ++a) /* G symmetric (every entry checked here) */
     for (b = a; b < n; ++b) {
-      const int lo = zlo[a] > zlo[b] ? (int) zlo[a] : (int) zlo[b], hi = zhi[a] < zhi[b] ? (int) zhi[a] : (int) zhi[b];
-      const casadi_real *za = Z + a * NC, *zb = Z + b * NC;
-      casadi_real s = ws->G[a + b * n];
-      for (i = lo; i <= hi; ++i) s -= za[i] * zb[i];
-      ws->G[a + b * n] = ws->G[b + a * n] = s;
+      const casadi_real s = ws->G[a + b * n];
+      ws->G[b + a * n] = s;
       if (!isfinite(s)) finite = 0;
     }
   return finite ? STEP_OK : STEP_NOT_FINITE;
