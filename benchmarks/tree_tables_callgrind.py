@@ -36,7 +36,7 @@ sys.path.insert(0, str(HERE))
 from common import machine  # noqa: E402
 
 ROBOTS = {"panda": ("panda_description/urdf/panda.urdf", False), "ur5": ("ur_description/urdf/ur5_robot.urdf", False),
-          "ur10": ("ur_description/urdf/ur10_robot.urdf", False),
+          "ur10": ("ur_description/urdf/ur10_robot.urdf", False), "xarm7": ("xarm_description/urdf/xarm7.urdf", False),
           "talos": ("talos_data/robots/talos_reduced.urdf", True)}
 ALGORITHMS = ("rnea", "aba", "crba")
 
