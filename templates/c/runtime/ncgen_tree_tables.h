@@ -512,24 +512,6 @@ static inline void ncgen_tree_sym6_apply(const double *A, const double *x, doubl
 #undef NCGEN_TREE_SYM
 }
 
-/* y = A x and z = A u at once, each of A's 21 entries read once (A as ncgen_tree_sym6_apply; y, z
- * not x, u) */
-static inline void ncgen_tree_sym6_apply2(const double *A, const double *x, const double *u, double *y, double *z) {
-  double y0, y1, y2, y3, y4, y5, z0, z1, z2, z3, z4, z5, t;
-#define NCGEN_TREE_D(r) (t = A[7 * (r)], y##r = t * x[r], z##r = t * u[r])
-#define NCGEN_TREE_P(r, c) (t = A[(r) + 6 * (c)], y##r += t * x[c], y##c += t * x[r], z##r += t * u[c], z##c += t * u[r])
-  NCGEN_TREE_D(0); NCGEN_TREE_D(1); NCGEN_TREE_D(2); NCGEN_TREE_D(3); NCGEN_TREE_D(4); NCGEN_TREE_D(5);
-  NCGEN_TREE_P(1, 0); NCGEN_TREE_P(2, 0); NCGEN_TREE_P(3, 0); NCGEN_TREE_P(4, 0); NCGEN_TREE_P(5, 0);
-  NCGEN_TREE_P(2, 1); NCGEN_TREE_P(3, 1); NCGEN_TREE_P(4, 1); NCGEN_TREE_P(5, 1);
-  NCGEN_TREE_P(3, 2); NCGEN_TREE_P(4, 2); NCGEN_TREE_P(5, 2);
-  NCGEN_TREE_P(4, 3); NCGEN_TREE_P(5, 3);
-  NCGEN_TREE_P(5, 4);
-#undef NCGEN_TREE_P
-#undef NCGEN_TREE_D
-  y[0] = y0; y[1] = y1; y[2] = y2; y[3] = y3; y[4] = y4; y[5] = y5;
-  z[0] = z0; z[1] = z1; z[2] = z2; z[3] = z3; z[4] = z4; z[5] = z5;
-}
-
 /* The ground frame, outwards after ncgen_tree_local_poses: each body's pose (s->R, s->p), its
  * motion subspace S_g = Ad(H_gb) S (s->S) and, for kinds by kernel, Ad(H_gb) c_J (s->cl; the
  * other kinds' c_J is 0).  A revolute joint's S_g is [z_b; p_b × z_b], a prismatic one's
@@ -781,7 +763,7 @@ static int ncgen_tree_articulated(const ncgen_tree_kinds *K, const ncgen_tree *T
     }
     if (nv == 1) {                              /* one rate: D = d, L[0] = 1 / d, I^a = I^A − Z Uᵀ, Z = U / d */
       double d, x, m, q, g, e, *IAp, *pAp, Z[6], y[6];
-      ncgen_tree_sym6_apply2(IA, S, cb, U, y);  /* U = I^A S, y = I^A c */
+      ncgen_tree_sym6_apply(IA, S, U);
       d = ncgen_tree_dot6(S, U);
       u[0] = x = tau[va] - ncgen_tree_dot6(S, pA);
       m = ncgen_tree_inertia_quad(IC, S);       /* M_kk = Sᵀ I^C S */
@@ -793,6 +775,7 @@ static int ncgen_tree_articulated(const ncgen_tree_kinds *K, const ncgen_tree *T
       IAp = s->IA + 36 * par;
       pAp = s->fl + 6 * par;
       e = (x - ncgen_tree_dot6(U, cb)) * g;     /* p^A_p += p^A + I^A c + U (u − Uᵀ c) / d */
+      ncgen_tree_sym6_apply(IA, cb, y);
       for (r = 0; r < 6; ++r) {
         Z[r] = U[r] * g;
         pAp[r] += pA[r] + y[r] + U[r] * e;
