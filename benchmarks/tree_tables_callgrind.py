@@ -12,7 +12,7 @@ instructions of that function alone (``--toggle-collect``), printed per state wi
 tables / flat.  The program's outputs of both sides are compared (the sum of every result:
 the same to 1e-12 relative; the script fails when they differ).
 
-    python benchmarks/tree_tables_callgrind.py [--robots panda ur5 ur10 talos] [--states 200]
+    python benchmarks/tree_tables_callgrind.py [--robots panda ur5 ur10 xarm7 talos] [--states 200]
     python benchmarks/tree_tables_callgrind.py --smoke        the UR5, 5 states
     python benchmarks/tree_tables_callgrind.py --robots panda ur5 --loops-cflags=-O1   the loops at -O1
     python benchmarks/tree_tables_callgrind.py --robots panda --time-rounds 7   also CPU time per state
