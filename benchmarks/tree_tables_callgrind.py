@@ -12,9 +12,14 @@ instructions of that function alone (``--toggle-collect``), printed per state wi
 tables / flat.  The program's outputs of both sides are compared (the sum of every result:
 the same to 1e-12 relative; the script fails when they differ).
 
-    python benchmarks/tree_tables_callgrind.py [--robots panda ur5 ur10 talos] [--states 200]
+    python benchmarks/tree_tables_callgrind.py [--robots panda ur5 ur10 xarm7 talos] [--states 200]
     python benchmarks/tree_tables_callgrind.py --smoke        the UR5, 5 states
     python benchmarks/tree_tables_callgrind.py --robots panda ur5 --loops-cflags=-O1   the loops at -O1
+    python benchmarks/tree_tables_callgrind.py --robots panda --time-rounds 7   also CPU time per state
+
+``--time-rounds N``: the same programs timed without valgrind (CPU time per state, ``clock()``,
+``--time-reps`` repetitions of the batch), tables and flat in turn in each of N rounds (the order
+alternating), min and median over the rounds and their ratios.
 """
 from __future__ import annotations
 
@@ -22,6 +27,7 @@ import argparse
 import importlib.metadata as md
 import os
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -36,12 +42,13 @@ sys.path.insert(0, str(HERE))
 from common import machine  # noqa: E402
 
 ROBOTS = {"panda": ("panda_description/urdf/panda.urdf", False), "ur5": ("ur_description/urdf/ur5_robot.urdf", False),
-          "ur10": ("ur_description/urdf/ur10_robot.urdf", False),
+          "ur10": ("ur_description/urdf/ur10_robot.urdf", False), "xarm7": ("xarm_description/urdf/xarm7.urdf", False),
           "talos": ("talos_data/robots/talos_reduced.urdf", True)}
 ALGORITHMS = ("rnea", "aba", "crba")
 
 MAIN = r"""#include <stdio.h>
 #include <stdlib.h>
+#include <time.h>
 #include "data.h"
 int ncgen_trees_rnea(const ncgen_tree *T, int n, const double *q, const double *v, const double *a, double *tau,
                      double *w);
@@ -87,11 +94,19 @@ __attribute__((noinline)) int bench(int alg, int tables, double *w) {
 int main(int argc, char **argv) {
   int alg, tables, i, n;
   double s = 0.0, *w;
-  if (argc != 3) return 2;
+  if (argc != 3 && argc != 4) return 2;
   alg = atoi(argv[1]);
   tables = atoi(argv[2]);
   w = (double *)calloc((size_t)ncgen_trees_work_size(&TREE), sizeof(double));
   if (!w || bench(alg, tables, w)) return 1;
+  if (argc == 4) {                              /* CPU ns per state over reps repetitions */
+    int r, reps = atoi(argv[3]);
+    clock_t c0 = clock();
+    for (r = 0; r < reps; ++r) bench(alg, tables, w);
+    printf("%.6g\n", 1e9 * (double)(clock() - c0) / CLOCKS_PER_SEC / ((double)reps * NS));
+    free(w);
+    return 0;
+  }
   n = NS * (alg == 0 ? NI : alg == 1 ? NV : NI * NI);
   for (i = 0; i < n; ++i) s += out[i];
   printf("%.17g\n", s);
@@ -181,6 +196,17 @@ def instructions(exe: Path, alg: int, tables: int, n_states: int) -> tuple[float
     return total / n_states, float(run.stdout)
 
 
+def cpu_times(exe: Path, alg: int, rounds: int, reps: int) -> dict[int, list[float]]:
+    """CPU ns per state of the tables (1) and the flat kernel (0), interleaved over ``rounds``."""
+    times: dict[int, list[float]] = {1: [], 0: []}
+    for r in range(rounds):
+        for tables in ((1, 0) if r % 2 == 0 else (0, 1)):
+            run = subprocess.run([str(exe), str(alg), str(tables), str(reps)], capture_output=True, text=True,
+                                 check=True)
+            times[tables].append(float(run.stdout))
+    return times
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--robots", nargs="+", default=list(ROBOTS), choices=list(ROBOTS))
@@ -188,6 +214,8 @@ def main() -> None:
     ap.add_argument("--smoke", action="store_true")
     ap.add_argument("--loops-cflags", default="-O2", help="flags of the tables' loops (tree_tables.c; the tree "
                     "library's units use -O1: ncgen/runtime/tree_library.py UNIT_CFLAGS)")
+    ap.add_argument("--time-rounds", type=int, default=0, help="also time each side (CPU, interleaved rounds)")
+    ap.add_argument("--time-reps", type=int, default=50, help="batches per timed run")
     a = ap.parse_args()
     if a.smoke:
         a.robots, a.states = ["ur5"], 5
@@ -218,6 +246,13 @@ def main() -> None:
                 print(f"RATIO {name} {alg} instructions: tables / flat = {t / f:.2f}")
                 if not agree:
                     differ.append(f"{name} {alg}: tables {yt!r}, flat {yf!r}")
+                if a.time_rounds:
+                    c = cpu_times(exe, i, a.time_rounds, a.time_reps)
+                    lo = {k: min(v) for k, v in c.items()}
+                    med = {k: statistics.median(v) for k, v in c.items()}
+                    print(f"{name} {alg}: CPU ns per state min / median: tables {lo[1]:.0f} / {med[1]:.0f}, "
+                          f"flat {lo[0]:.0f} / {med[0]:.0f}; RATIO min {lo[1] / lo[0]:.2f}, median {med[1] / med[0]:.2f}")
+    print(f"load average at end: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
     if differ:
         raise SystemExit(f"the tables and the flat kernels differ: {'; '.join(differ)}")
 

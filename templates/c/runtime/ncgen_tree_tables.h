@@ -480,6 +480,16 @@ static inline double ncgen_tree_dot6(const double *a, const double *b) {
   return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] + a[4] * b[4] + a[5] * b[5];
 }
 
+/* Sᵀ M S of the rigid inertia I = [m; h; I_o] (M = [[I_o, ĥ], [ĥᵀ, m 1]]) and S = [ω; v]:
+ * ωᵀ I_o ω + 2 ω · (h × v) + m v · v */
+static inline double ncgen_tree_inertia_quad(const double *I, const double *S) {
+  const double *w = S, *v = S + 3, *h = I + 1, *Io = I + 4;
+  double hv0 = h[1] * v[2] - h[2] * v[1], hv1 = h[2] * v[0] - h[0] * v[2], hv2 = h[0] * v[1] - h[1] * v[0];
+  return Io[0] * w[0] * w[0] + Io[4] * w[1] * w[1] + Io[8] * w[2] * w[2] +
+         2.0 * (Io[1] * w[0] * w[1] + Io[2] * w[0] * w[2] + Io[5] * w[1] * w[2] + w[0] * hv0 + w[1] * hv1 + w[2] * hv2) +
+         I[0] * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+}
+
 /* y = A x (A 6 × 6, column-major; y not x) */
 static inline void ncgen_tree_mat6_apply(const double *A, const double *x, double *y) {
   int r;
@@ -673,11 +683,12 @@ static int ncgen_tree_crba(const ncgen_tree_kinds *K, const ncgen_tree *T, const
   return ncgen_tree_crba_at(K, T, &s, q, Mi);
 }
 
-/* x = D⁻¹ y of one joint (nv rates) from the Cholesky factor L (lower, column stride 6) of D. */
+/* x = D⁻¹ y of one joint (nv rates) from the Cholesky factor L (lower, column stride 6) of D;
+ * one rate: L[0] = 1 / d. */
 static void ncgen_tree_joint_solve(int nv, const double *L, const double *y, double *x) {
   int j, c;
   if (nv == 1) {
-    x[0] = y[0] / L[0] / L[0];
+    x[0] = y[0] * L[0];
     return;
   }
   for (j = 0; j < nv; ++j) {
@@ -750,28 +761,27 @@ static int ncgen_tree_articulated(const ncgen_tree_kinds *K, const ncgen_tree *T
       NCGEN_TREE_IC(12);
 #undef NCGEN_TREE_IC
     }
-    if (nv == 1) {                              /* one rate: D = d = l², I^a = I^A − Z Zᵀ, Z = U / l */
-      double d, x, m, q, l, e, *IAp, *pAp, Z[6], y[6];
+    if (nv == 1) {                              /* one rate: D = d, L[0] = 1 / d, I^a = I^A − Z Uᵀ, Z = U / d */
+      double d, x, m, q, g, e, *IAp, *pAp, Z[6], y[6];
       ncgen_tree_sym6_apply(IA, S, U);
       d = ncgen_tree_dot6(S, U);
       u[0] = x = tau[va] - ncgen_tree_dot6(S, pA);
-      sp_inertia_apply(IC, S, F);               /* M_kk = Sᵀ I^C S */
-      m = ncgen_tree_dot6(S, F);
+      m = ncgen_tree_inertia_quad(IC, S);       /* M_kk = Sᵀ I^C S */
       q = d / m;
       if (first || q < ratio || !(q == q)) ratio = q;
       first = 0;
-      L[0] = l = sqrt(d > 0.0 ? d : 0.0);
+      L[0] = g = 1.0 / (d > 0.0 ? d : 0.0);     /* inf where d <= 0 (the pivot says so) */
       if (par < 0) continue;
       IAp = s->IA + 36 * par;
       pAp = s->fl + 6 * par;
-      e = (x - ncgen_tree_dot6(U, cb)) / l;     /* p^A_p += p^A + I^A c + Z (u − Uᵀ c) / l */
+      e = (x - ncgen_tree_dot6(U, cb)) * g;     /* p^A_p += p^A + I^A c + U (u − Uᵀ c) / d */
       ncgen_tree_sym6_apply(IA, cb, y);
       for (r = 0; r < 6; ++r) {
-        Z[r] = U[r] / l;
-        pAp[r] += pA[r] + y[r] + Z[r] * e;
+        Z[r] = U[r] * g;
+        pAp[r] += pA[r] + y[r] + U[r] * e;
       }
-      /* I^A_p += I^A − Z Zᵀ (lower triangle) */
-#define NCGEN_TREE_UPD(r, c) IAp[(r) + 6 * (c)] += IA[(r) + 6 * (c)] - Z[r] * Z[c]
+      /* I^A_p += I^A − Z Uᵀ (lower triangle) */
+#define NCGEN_TREE_UPD(r, c) IAp[(r) + 6 * (c)] += IA[(r) + 6 * (c)] - Z[r] * U[c]
       NCGEN_TREE_UPD(0, 0); NCGEN_TREE_UPD(1, 0); NCGEN_TREE_UPD(2, 0); NCGEN_TREE_UPD(3, 0); NCGEN_TREE_UPD(4, 0);
       NCGEN_TREE_UPD(5, 0); NCGEN_TREE_UPD(1, 1); NCGEN_TREE_UPD(2, 1); NCGEN_TREE_UPD(3, 1); NCGEN_TREE_UPD(4, 1);
       NCGEN_TREE_UPD(5, 1); NCGEN_TREE_UPD(2, 2); NCGEN_TREE_UPD(3, 2); NCGEN_TREE_UPD(4, 2); NCGEN_TREE_UPD(5, 2);
@@ -852,8 +862,7 @@ static int ncgen_tree_articulated(const ncgen_tree_kinds *K, const ncgen_tree *T
     a[4] = ap[4] + cb[4];
     a[5] = ap[5] + cb[5];
     if (nv == 1) {                              /* written out (gcc -O2 keeps short loops) */
-      double l = s->Dl[36 * b];
-      x[0] = aj[va] = (s->ul[va] - ncgen_tree_dot6(U, a)) / l / l;
+      x[0] = aj[va] = (s->ul[va] - ncgen_tree_dot6(U, a)) * s->Dl[36 * b];
 #define NCGEN_TREE_ACC(r) a[r] += S[r] * x[0]
       NCGEN_TREE_ACC(0); NCGEN_TREE_ACC(1); NCGEN_TREE_ACC(2); NCGEN_TREE_ACC(3); NCGEN_TREE_ACC(4); NCGEN_TREE_ACC(5);
 #undef NCGEN_TREE_ACC
@@ -884,6 +893,13 @@ static void ncgen_tree_articulated_solve(const ncgen_tree_kinds *K, const ncgen_
     double *u = s->ur + va, x[6];
     for (j = 0; j < nv; ++j) u[j] = e[va + j] - ncgen_tree_dot6(S + 6 * j, pA);  /* u = e − Sᵀ p^A */
     if (par < 0) continue;
+    if (nv == 1) {                              /* written out (gcc -O2 keeps short loops) */
+      double *pp = s->pr + 6 * par, g = u[0] * s->Dl[36 * b];
+#define NCGEN_TREE_PR(r) pp[r] += pA[r] + U[r] * g
+      NCGEN_TREE_PR(0); NCGEN_TREE_PR(1); NCGEN_TREE_PR(2); NCGEN_TREE_PR(3); NCGEN_TREE_PR(4); NCGEN_TREE_PR(5);
+#undef NCGEN_TREE_PR
+      continue;
+    }
     ncgen_tree_joint_solve(nv, s->Dl + 36 * b, u, x);  /* p^A_p += p^A + U D⁻¹ u */
     for (r = 0; r < 6; ++r) {
       double t = pA[r];
@@ -897,6 +913,13 @@ static void ncgen_tree_articulated_solve(const ncgen_tree_kinds *K, const ncgen_
     const double *S = s->S + 6 * va, *U = s->U + 6 * va, *ap = par < 0 ? zero : s->ar + 6 * par;
     double *a = s->ar + 6 * b, z[6], x[6];
     memcpy(a, ap, 6 * sizeof(double));
+    if (nv == 1) {                              /* written out */
+      double g = y[va] = (s->ur[va] - ncgen_tree_dot6(U, a)) * s->Dl[36 * b];
+#define NCGEN_TREE_AR(r) a[r] += S[r] * g
+      NCGEN_TREE_AR(0); NCGEN_TREE_AR(1); NCGEN_TREE_AR(2); NCGEN_TREE_AR(3); NCGEN_TREE_AR(4); NCGEN_TREE_AR(5);
+#undef NCGEN_TREE_AR
+      continue;
+    }
     for (j = 0; j < nv; ++j) z[j] = s->ur[va + j] - ncgen_tree_dot6(U + 6 * j, a);
     ncgen_tree_joint_solve(nv, s->Dl + 36 * b, z, x);
     for (j = 0; j < nv; ++j) {
