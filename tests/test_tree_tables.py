@@ -654,12 +654,13 @@ def test_cli_kernels_option_and_stored_tables(library, tmp_path, monkeypatch, ca
 def test_panda_joint_run_tables_equal_flat(library):
     """The Panda of example-robot-data (its mimic finger), 0.1 s under gravity in joint space:
     ``kernels="auto"`` runs the tables while the flat loop is not built, the flat loop once it
-    is loaded; the tables' run equals the flat loop's to 1e-9 (the same steps)."""
+    is loaded; the tables' run equals the flat loop's to 1e-9 (the same steps).  The model is
+    named for this process, so that no other test's Panda flat loop is in the compile cache."""
     try:
         path = nc.robots.urdf_path("panda")
     except Exception as e:  # noqa: BLE001 - example-robot-data not installed
         pytest.skip(f"no Panda URDF: {e}")
-    model = nc.System.from_urdf(path).build()
+    model = nc.System.from_urdf(path, name=f"panda_tables_{os.getpid()}").build()
     auto = nc.simulate(model, 0.1, 0.01, method="joint")
     assert auto.info["kernels"] == "tables", auto.info["kernels_reason"]
     flat_run = nc.simulate(model, 0.1, 0.01, method="joint", kernels="flat")
