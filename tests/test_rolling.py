@@ -59,9 +59,10 @@ def test_steady_precession_rate_and_tilt():
 
 def test_energy_conserved_and_constraints_kept_at_the_tolerance():
     """A wobbling, precessing disc (not a steady motion): no dissipation, so the energy
-    stays; both constraint levels hold to round-off after every step."""
+    stays (over 1 s, 0.07 rad of wobble: measured 1.7e-8 of itself; 3.3e-8 over 2 s; 10 s in
+    the slow test below); both constraint levels hold to round-off after every step."""
     rs = disc(0.3, 25.0, 0.0, wobble=1.0)
-    tr = simulate_rolling(rs, 2.0, 0.02, rtol=1e-8, atol=1e-10)
+    tr = simulate_rolling(rs, 1.0, 0.02, rtol=1e-8, atol=1e-10)
     k = axle(rs, tr.q)
     assert np.ptp(np.arcsin(k[:, 2])) > 0.01            # it does wobble
     assert np.max(tr.residual) <= 1e-10
