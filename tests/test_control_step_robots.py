@@ -10,7 +10,6 @@ import pytest
 
 import ncgen as nc
 
-pytest.importorskip("yourdfpy")
 pytestmark = pytest.mark.slow
 
 REL = 1e-6

@@ -31,7 +31,6 @@ def link(axis=(0, 1, 0), *, mass=2.0, length=0.8, gravity=(0, 0, -G), with_input
 
 # --------------------------------------------------------------------------- against Pinocchio
 pin = pytest.importorskip("pinocchio")
-pytest.importorskip("yourdfpy")
 from test_urdf_pinocchio import robot, to_ncgen  # noqa: E402
 
 

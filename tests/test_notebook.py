@@ -15,17 +15,16 @@ import ncgen as nc
 
 from test_viz_html import chromium, needs_chromium
 
-nbformat = pytest.importorskip("nbformat")
-nbclient = pytest.importorskip("nbclient")
-pytest.importorskip("ipykernel")
-
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = ROOT / "examples" / "double_pendulum.toml"
 
 
 @pytest.fixture(scope="module")
 def executed():
-    """The two display cells' outputs of an executed notebook."""
+    """The two display cells' outputs of an executed notebook (nbformat, nbclient and ipykernel
+    imported here, not at collection: every worker would import them)."""
+    nbformat, nbclient = pytest.importorskip("nbformat"), pytest.importorskip("nbclient")
+    pytest.importorskip("ipykernel")
     nb = nbformat.v4.new_notebook()
     nb.cells = [nbformat.v4.new_code_cell(f"import ncgen as nc\nmodel = nc.System.from_toml({str(MODEL)!r}).build()\n"
                                           "model"),

@@ -8,7 +8,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-pytest.importorskip("yourdfpy")
 
 import ncgen as nc  # noqa: E402
 from ncgen.assembly.tree_dynamics import recursive_inverse_dynamics_function  # noqa: E402

@@ -17,11 +17,11 @@ from interrupt_helpers import IN_IDAS, ROOT, cli, interrupt, start, wait_until_r
 
 
 def interrupt_running(cmd, cwd):
-    """SIGINT 3 s into ``cmd``'s IDAS run (started with :data:`IN_IDAS`), whose end is hours away;
+    """SIGINT 1 s into ``cmd``'s IDAS run (started with :data:`IN_IDAS`), whose end is hours away;
     ``(returncode, out, err, seconds to exit)``."""
     p = start(cmd, cwd)
     wait_until_running(p)
-    return interrupt(p, 3.0)
+    return interrupt(p)
 
 
 def test_ctrl_c_stops_an_idas_run_keeps_the_old_result_and_writes_the_partial_one(tmp_path):

@@ -3,15 +3,17 @@
 a directory output, a file), a directory that takes no new file.  The message names the
 path as given (never a temporary file), the exit status is 2 (usage), nothing is written.
 
-The commands run for real in a subprocess.  "Before any work" is shown by giving a model
-file that does not exist: a command that loaded it first would complain about the model."""
+The commands run for real, through the ``ncgen`` command's ``main``, in one subprocess (one
+interpreter start for every case; each case in its own directory, its exit status what ``python
+-m ncgen.cli`` would exit with).  "Before any work" is shown by giving a model file that does not
+exist: a command that loaded it first would complain about the model."""
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
 import tempfile
-import time
 from argparse import Namespace
 from pathlib import Path
 
@@ -24,11 +26,10 @@ from ncgen.files import atomic_path
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.fixture
-def read_only(tmp_path):
-    """A directory in which no file can be created (a chmod 555 directory; as root, which
-    ignores the mode, /sys when it refuses new files)."""
-    d = tmp_path / "ro"
+def read_only_directory(base: Path):
+    """A directory in which no file can be created (a chmod 555 directory ``base/ro``; as root,
+    which ignores the mode, /sys when it refuses new files), yielded (a generator fixture's body)."""
+    d = base / "ro"
     d.mkdir()
     d.chmod(0o555)
     candidates = [d, Path("/sys")]
@@ -44,12 +45,42 @@ def read_only(tmp_path):
     d.chmod(0o755)
 
 
-def ncgen(args, cwd):
-    t0 = time.perf_counter()
+@pytest.fixture
+def read_only(tmp_path):
+    yield from read_only_directory(tmp_path)
+
+
+#: Runs ``ncgen`` for each ``[directory, arguments]`` of ``argv[1]`` (JSON) as ``python -m
+#: ncgen.cli`` would (exit status: ``main``'s return or its ``SystemExit``'s code); prints the
+#: JSON list of ``[status, standard error, seconds]``.
+RUN_EACH = """
+import contextlib, io, json, os, sys, time, traceback
+from ncgen.cli import main
+done = []
+for cwd, args in json.loads(sys.argv[1]):
+    os.chdir(cwd)
+    err, t0 = io.StringIO(), time.perf_counter()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        try:
+            status = main(args)
+        except SystemExit as e:
+            status = e.code
+        except BaseException:
+            traceback.print_exc()
+            status = 1
+    done.append([status, err.getvalue(), time.perf_counter() - t0])
+print(json.dumps(done))
+"""
+
+
+def ncgen_each(runs: list[tuple[Path, list[str]]]) -> list[tuple[int, str, float]]:
+    """``(exit status, standard error, seconds)`` of ``ncgen args`` run in ``directory`` for
+    each ``(directory, args)`` of ``runs``, in one subprocess (:data:`RUN_EACH`)."""
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    r = subprocess.run([sys.executable, "-m", "ncgen.cli", *args], cwd=cwd, env=env, capture_output=True,
-                       text=True, timeout=120)
-    return r, time.perf_counter() - t0
+    r = subprocess.run([sys.executable, "-c", RUN_EACH, json.dumps([[str(d), a] for d, a in runs])], cwd=ROOT,
+                       env=env, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    return [tuple(x) for x in json.loads(r.stdout.splitlines()[-1])]
 
 
 #: (subcommand arguments with {bad} for the unwritable path, the option, which kind of bad path)
@@ -87,18 +118,34 @@ def bad_path(kind: str, name: str, tmp_path: Path, read_only: Path) -> tuple[str
     return str(read_only / name), "is not writable"
 
 
+@pytest.fixture(scope="module")
+def refusals(tmp_path_factory):
+    """``{case: (path, what the message says, files before, exit status, standard error,
+    seconds, files after)}`` of every case of :data:`CASES`, each run in its own directory."""
+    ro = read_only_directory(tmp_path_factory.mktemp("read_only"))
+    read_only = next(ro)
+    prepared = {}
+    for case, (args, _, kind, name) in CASES.items():
+        d = tmp_path_factory.mktemp("case")
+        path, says = bad_path(kind, name, d, read_only)
+        prepared[case] = d, path, says, sorted(p.name for p in d.rglob("*"))
+    ran = ncgen_each([(d, [a.replace("{bad}", path) for a in CASES[case][0]])
+                      for case, (d, path, _, _) in prepared.items()])
+    yield {case: (path, says, before, *r, sorted(p.name for p in d.rglob("*")))
+           for (case, (d, path, says, before)), r in zip(prepared.items(), ran)}
+    next(ro, None)
+
+
 @pytest.mark.parametrize("case", list(CASES))
-def test_every_subcommand_refuses_an_unwritable_output_before_working(case, tmp_path, read_only):
-    args, option, kind, name = CASES[case]
-    path, says = bad_path(kind, name, tmp_path, read_only)
-    before = sorted(p.name for p in tmp_path.rglob("*"))
-    r, seconds = ncgen([a.replace("{bad}", path) for a in args], tmp_path)
-    assert r.returncode == 2, r.stderr
-    assert f"error: {option} {path!r}: " in r.stderr and says in r.stderr, r.stderr
-    assert "missing.toml" not in r.stderr.split("error:")[-1]          # refused before the model is read
-    assert ".tmp" not in r.stderr and "Traceback" not in r.stderr
-    assert sorted(p.name for p in tmp_path.rglob("*")) == before        # nothing written
-    # wall: the refusal comes before any build (an interpreter start, ~1 s unloaded, ~4 s at load 8
+def test_every_subcommand_refuses_an_unwritable_output_before_working(case, refusals):
+    option = CASES[case][1]
+    path, says, before, status, stderr, seconds, after = refusals[case]
+    assert status == 2, stderr
+    assert f"error: {option} {path!r}: " in stderr and says in stderr, stderr
+    assert "missing.toml" not in stderr.split("error:")[-1]          # refused before the model is read
+    assert ".tmp" not in stderr and "Traceback" not in stderr
+    assert after == before                                           # nothing written
+    # wall: the refusal comes before any build (the command's imports, < 1 s unloaded, ~4 s at load 8
     # on 2 cores) while the demo it would run takes minutes; 60 s separates the two at any load
     assert seconds < 60
 

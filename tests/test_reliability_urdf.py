@@ -9,7 +9,6 @@ import sys
 import numpy as np
 import pytest
 
-pytest.importorskip("yourdfpy")
 
 import ncgen as nc  # noqa: E402
 

@@ -172,11 +172,11 @@ def test_steady_upright_rolling():
 
 
 def test_a_wobbling_torus_conserves_energy_on_both_levels():
-    """Not a steady motion (it wobbles by more than 0.01 rad): energy kept to 1e-9 of itself on
-    the projected DOPRI5 and falling with the stepper's h² (4 ± 0.5 per halving), both levels
-    at round-off."""
+    """Not a steady motion (it wobbles by more than 0.01 rad; 0.055 rad in these 0.4 s): energy
+    kept to 1e-9 of itself on the projected DOPRI5 (measured 8.6e-11; 2.2e-10 over 1 s) and
+    falling with the stepper's h² (4 ± 0.5 per halving), both levels at round-off."""
     model = torus_wheel(0.3, 25.0, 0.0, wobble=1.0).build()
-    tr = nc.simulate(model, 1.0, 0.02, method="rolling", rtol=1e-10, atol=1e-12, backend="vm")
+    tr = nc.simulate(model, 0.4, 0.02, method="rolling", rtol=1e-10, atol=1e-12, backend="vm")
     assert np.ptp(np.arcsin(axle(model, tr.q)[:, 2])) > 0.01
     assert np.ptp(tr.energy) <= 1e-9 * np.max(np.abs(tr.energy))
     assert max(tr.constraint_residual.max(), tr.velocity_residual.max()) <= 1e-12

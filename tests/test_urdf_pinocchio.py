@@ -23,7 +23,6 @@ import numpy as np
 import pytest
 
 pin = pytest.importorskip("pinocchio")
-pytest.importorskip("yourdfpy")
 
 import ncgen as nc  # noqa: E402
 from pinocchio_robots import random_configuration  # noqa: E402

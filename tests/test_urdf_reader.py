@@ -6,8 +6,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-yourdfpy = pytest.importorskip("yourdfpy")
-
 
 def _urdfs():
     import ncgen as nc
@@ -67,6 +65,7 @@ def differences(theirs, ours) -> list[str]:
 
 
 def test_reader_equals_yourdfpy_on_every_example_robot():
+    yourdfpy = pytest.importorskip("yourdfpy")      # here, not at collection: every worker would import it
     from ncgen.model.urdf_reader import read_urdf
 
     paths = _urdfs()
