@@ -21,6 +21,10 @@ elements whose bounding volumes are near, ncgen/assembly/pair_kernels.py).  The 
 
 What is compared, in one run:
 
+ncgen runs the model's own compiled package (``kernels="flat"``, the fastest per step; ``--kernels
+auto`` times the contact library's tables that ``nc.simulate`` takes by default: no compile, slower
+per step).
+
 * wall time per simulated second, best of ``--repeat`` runs (ncgen: the compiled stepper,
   one C call, ``info["stepping_time"]``; MuJoCo: ``mj_step`` with ``nstep``, no Python in
   the loop; both outside compile/build time); "with sampling" adds the output every 10 ms
@@ -77,6 +81,9 @@ from common import GRAVITY, L, MASS, AXIAL_INERTIA, best_time, ends, machine
 
 RADIUS, MU, HEIGHT, TILT = 0.02, 0.5, 0.3, 0.02
 SAMPLE = 0.01
+#: ncgen's stepper kernels (``--kernels``): "flat" (default; the model's own compiled package, the
+#: fastest per step for long runs) or "auto"/"tables" (the contact library's tables: no compile).
+KERNELS = ["flat"]
 #: The pile: sphere radius (m) and mass (kg), box inner half-width (m), simulated time (s).
 BALL_R, BALL_M, BOX, PILE_T = 0.03, 0.1, 0.08, 1.0
 WALLS = (((0, 0, 0), (0, 0, 1)), ((-BOX, 0, 0), (1, 0, 0)), ((BOX, 0, 0), (-1, 0, 0)),
@@ -284,11 +291,11 @@ def run_ncgen(model, t_end: float, h: float, repeat: int, centres: list[str] | N
     import ncgen as nc
 
     substeps = int(round(SAMPLE / h))
-    nc.simulate(model, SAMPLE, SAMPLE, method="stepper", substeps=substeps)        # compile outside timings
+    nc.simulate(model, SAMPLE, SAMPLE, method="stepper", substeps=substeps, kernels=KERNELS[0])        # compile outside timings
     with warnings.catch_warnings(record=True) as caught:     # unconverged contact solves: reported once below
         warnings.simplefilter("always")
-        runs = [nc.simulate(model, t_end, SAMPLE, method="stepper", substeps=substeps) for _ in range(repeat)]
-        wall, _ = best_time(lambda: nc.simulate(model, t_end, SAMPLE, method="stepper", substeps=substeps), 1)
+        runs = [nc.simulate(model, t_end, SAMPLE, method="stepper", substeps=substeps, kernels=KERNELS[0]) for _ in range(repeat)]
+        wall, _ = best_time(lambda: nc.simulate(model, t_end, SAMPLE, method="stepper", substeps=substeps, kernels=KERNELS[0]), 1)
     for w in {str(w.message) for w in caught}:
         print(f"ncgen warning: {w}")
     traj = runs[-1]
@@ -355,7 +362,7 @@ def pyramid_ncgen(model, h: float, t_end: float) -> dict:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:
-            tr = nc.simulate(model, t_end, h * substeps, method="stepper", substeps=substeps)
+            tr = nc.simulate(model, t_end, h * substeps, method="stepper", substeps=substeps, kernels=KERNELS[0])
         except SimulationError as err:   # the run's checks refused it (e.g. energy created): not at rest
             return {"rests": False, "refused": str(err).split(": ", 1)[-1][:120]}
     start = [c for _, c in cube_centres()]
@@ -436,7 +443,7 @@ def first_run_cold() -> float:
 
     here = os.path.dirname(os.path.abspath(__file__))
     code = ("import sys; sys.path.insert(0, %r); import contact, ncgen as nc; "
-            "nc.simulate(contact.pyramid(), contact.SAMPLE, contact.SAMPLE, method='stepper', substeps=1)" % here)
+            "nc.simulate(contact.pyramid(), contact.SAMPLE, contact.SAMPLE, method='stepper', substeps=1, kernels=%r)" % (here, KERNELS[0]))
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
         subprocess.run([sys.executable, "-c", code], check=True, env={**os.environ, "NCGEN_CACHE_DIR": tmp},
@@ -455,7 +462,7 @@ def pyramid_bench(t_end: float, rounds: int, ncgen_steps: list[float], mj_coarse
     print(f"ncgen first run, fresh process and empty cache (import, build, C generation, compile, one step): "
           f"{cold:.1f} s wall; load average {os.getloadavg()[0]:.2f}")
     model = pyramid()
-    nc.simulate(model, SAMPLE, SAMPLE, method="stepper", substeps=1)        # compile outside the timings
+    nc.simulate(model, SAMPLE, SAMPLE, method="stepper", substeps=1, kernels=KERNELS[0])        # compile outside the timings
     ours = {}
     h_nc, log = largest_resting_step(lambda h: ours.setdefault(h, pyramid_ncgen(model, h, t_end))["rests"],
                                      ncgen_steps, 0)
@@ -514,8 +521,11 @@ def main(argv=None) -> int:
     parser.add_argument("--repeat", type=int, default=3, help="runs per timing, the best kept (default 3)")
     parser.add_argument("--pyramid", action="store_true", help="the 10-box pyramid against its MuJoCo twin only "
                         "(see the module docstring)")
+    parser.add_argument("--kernels", default="flat", choices=["flat", "auto", "tables"],
+                        help="ncgen's stepper kernels (default flat: the model's package, compiled outside the timings)")
     parser.add_argument("--smoke", action="store_true", help="N = 3, 0.3 s, one run (CI)")
     args = parser.parse_args(argv)
+    KERNELS[0] = args.kernels
     if args.smoke:
         args.sizes, args.pile, args.heap, args.t_end, args.repeat = [3], 4, 4, 0.3, 1
     print(machine())
@@ -585,7 +595,7 @@ def interleaved_ratios(model, xml: str, t_end: float, h: float, rounds: int) -> 
     for _ in range(rounds):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            ours = nc.simulate(model, t_end, SAMPLE, method="stepper", substeps=substeps).info["stepping_cpu_time"]
+            ours = nc.simulate(model, t_end, SAMPLE, method="stepper", substeps=substeps, kernels=KERNELS[0]).info["stepping_cpu_time"]
         data = mujoco.MjData(mj)
         start = time.process_time()
         mujoco.mj_step(mj, data, nstep=steps)
