@@ -13,8 +13,8 @@ test that takes the same code path.
 Compile flags: a run that selects no slow test (the fast tier, or some of its files) compiles
 its models' packages with :data:`QUICK_CFLAGS` (``$NCGEN_CFLAGS`` for the session, unless the
 environment sets it): most of the fast tier's time is gcc compiling small models' packages, and
-a test's run of them is short.  ncgen's model-independent libraries (element and tree tables)
-keep their own flags (``$NCGEN_CFLAGS`` does not apply to them).  No check depends on the
+a test's run of them is short.  ncgen's model-independent libraries (element, contact and tree
+tables) take ``$NCGEN_CFLAGS`` too, keyed by it in the compile cache.  No check depends on the
 optimisation level: neither level reorders floating-point arithmetic (no ``-ffast-math``; on
 x86-64 no fused multiply-adds without ``-mfma``), so results differ at most at round-off (a
 library call such as ``pow(x, 2)`` folded into ``x*x``), below every tolerance.  The

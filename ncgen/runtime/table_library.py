@@ -116,8 +116,11 @@ def compiler_path() -> str | None:
     return next((p for p in (shutil.which(n) for n in CANDIDATES) if p is not None), None)
 
 
-def _index(prefix: str, source: str, compiler: str) -> Path:
-    ckey = hashlib.sha256(compiler.encode()).hexdigest()[:12]
+def _index(prefix: str, source: str, compiler: str, env_cflags: str | None = None) -> Path:
+    """The index file of a library of ``source`` built by ``compiler`` (with ``$NCGEN_CFLAGS``
+    ``env_cflags``, if set, part of its name: builds of other flags are other libraries)."""
+    tag = compiler if env_cflags is None else f"{compiler}\0{env_cflags}"
+    ckey = hashlib.sha256(tag.encode()).hexdigest()[:12]
     return cache_dir() / f"{prefix}-{source[:20]}-{ckey}.json"
 
 
@@ -148,15 +151,18 @@ def library_ready(prefix: str, source: str) -> bool:
     compiler = compiler_path()
     if compiler is None:
         return any(_indexed(index) is not None for index in cache_dir().glob(f"{prefix}-{source[:20]}-*.json"))
-    return _indexed(_index(prefix, source, compiler)) is not None
+    return _indexed(_index(prefix, source, compiler, os.environ.get("NCGEN_CFLAGS"))) is not None
 
 
 def cached_library(prefix: str, source: str, write, package: str, cflags: str | None = None) -> tuple[Path, bool]:
     """``(path, compiled now)`` of the library ``package`` written by ``write(out_dir)`` and
     compiled once per ``source`` key and compiler, found through the index files
     ``<prefix>-<source>-<compiler>.json`` of the compile cache (module docstring), with the
-    flags ``cflags``, else ncgen's defaults: ``$NCGEN_CFLAGS`` does not apply (the index
-    records no flags, so the first build's would hold for every later run)."""
+    flags ``cflags``, else ``$NCGEN_CFLAGS`` if set (then part of the index's name: the test
+    suite's fast tier builds the libraries at -O0 beside the default ones), else ncgen's
+    defaults."""
+    env_cflags = os.environ.get("NCGEN_CFLAGS") if cflags is None else None
+    cflags = cflags if env_cflags is None else env_cflags
     compiler = compiler_path()
     if compiler is None:            # no compiler: any library of these sources will do
         for index in sorted(cache_dir().glob(f"{prefix}-{source[:20]}-*.json")):
@@ -165,7 +171,7 @@ def cached_library(prefix: str, source: str, write, package: str, cflags: str | 
                 return library, False
         raise CompilerNotFound(f"no C compiler found (looked for $CC, {', '.join(CANDIDATES)} on PATH) and no "
                                f"{package} library of ncgen {__version__} in the compile cache {cache_dir()}")
-    index = _index(prefix, source, compiler)
+    index = _index(prefix, source, compiler, env_cflags)
     library = _indexed(index)
     if library is not None:
         return library, False

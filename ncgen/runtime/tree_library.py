@@ -178,8 +178,8 @@ def tree_library_ready() -> bool:
 
 def unit_library(unit: str, cflags: str | None = None) -> tuple[Path, bool]:
     """``(path of the unit's library, whether it was compiled now)``: compiled at first use
-    (algorithm units with :data:`UNIT_CFLAGS` unless ``cflags`` is given)."""
-    if cflags is None and unit in ALGORITHM_UNITS:      # $NCGEN_CFLAGS does not reach ncgen's libraries
+    (algorithm units with :data:`UNIT_CFLAGS` unless ``cflags`` or ``$NCGEN_CFLAGS`` is given)."""
+    if cflags is None and unit in ALGORITHM_UNITS and "NCGEN_CFLAGS" not in os.environ:
         cflags = UNIT_CFLAGS
     return cached_library(_index_prefix(unit), sources_key(), partial(write_tree_unit, unit), f"{PACKAGE}_{unit}",
                           cflags)
