@@ -87,19 +87,29 @@ def test_key_depends_on_flags_and_sources(tmp_path, pkg, monkeypatch):
     assert compile_package(pkg).cached
 
 
-def test_model_independent_libraries_keep_their_own_flags(tmp_path, pkg, monkeypatch):
-    """``$NCGEN_CFLAGS`` applies to model packages, not to ncgen's per-version libraries
-    (``env_flags=False``; :func:`ncgen.runtime.table_library.cached_library`, whose index
-    records no flags): those are built at the defaults; flags passed by name still apply."""
+def test_model_independent_libraries_are_keyed_by_the_environment_s_flags(tmp_path, pkg, monkeypatch):
+    """``$NCGEN_CFLAGS`` reaches ncgen's per-version libraries too
+    (:func:`ncgen.runtime.table_library.cached_library`), keyed by it: a library built with it
+    is another library than the default one (-O2), each found again without a compile; flags
+    passed by name still apply to packages whatever the environment (``env_flags=False``)."""
     from ncgen.runtime.table_library import cached_library
+
+    def library():
+        path, compiled = cached_library("test-library", "0" * 64, lambda out: write_package(
+            "chain", chain_functions()[:1], out), "chain")
+        return path, compiled, json.loads((path.parent / "build.json").read_text())["commands"]
+
     monkeypatch.setenv("NCGEN_CFLAGS", "-O0")
     assert compile_package(pkg).cflags == ("-O0",)
     assert compile_package(pkg, env_flags=False).cflags == ("-O2",)
     assert compile_package(pkg, cflags="-O1", env_flags=False).cflags == ("-O1",)
-    path, compiled = cached_library("test-library", "0" * 64, lambda out: write_package(
-        "chain", chain_functions()[:1], out), "chain")
-    commands = json.loads((path.parent / "build.json").read_text())["commands"]
-    assert compiled and all("-O2" in cmd and "-O0" not in cmd for cmd in commands)
+    quick, compiled, commands = library()
+    assert compiled and all("-O0" in cmd and "-O2" not in cmd for cmd in commands)
+    assert library()[:2] == (quick, False)
+    monkeypatch.delenv("NCGEN_CFLAGS")
+    default, compiled, commands = library()
+    assert compiled and default != quick and all("-O2" in cmd and "-O0" not in cmd for cmd in commands)
+    assert library()[:2] == (default, False)
 
 
 def test_very_long_functions_compile_at_O1_never_O0(tmp_path, monkeypatch):
