@@ -95,8 +95,8 @@ def _after_tables(sig: c_binding.Signature) -> c_binding.Signature:
     return c_binding.Signature(sig.returns, (_S, *sig.args))
 
 
-#: The element library's stepper entry points (``PACKAGE`` prefix) as element_tables.c.j2
-#: spells them: a model stepper's loops (:data:`~ncgen.codegen.stepper_abi.LOOPS`, without
+#: The element library's stepper entry points (prefixed by ``ElementLibrary.package``) as
+#: element_tables.c.j2 spells them: a model stepper's loops (:data:`~ncgen.codegen.stepper_abi.LOOPS`, without
 #: contacts) after the tables ``S``, and its own.
 SIGNATURES = {
     "stepper_check": c_binding.Signature("int", (_S,)),
@@ -142,7 +142,7 @@ class TableStepper(CompiledStepper):
 
     def __init__(self, st: StepperTables, library: ElementLibrary | None = None):
         lib = library or (load_contact_library() if st.contacts else load_element_library())
-        PACKAGE = lib.package       # the element library's or the contact library's prefix
+        package = lib.package       # the element library's or the contact library's prefix
         self.library_object = lib
         T = st.tables
         self.library, self.name = str(lib.path), st.name
@@ -171,16 +171,16 @@ class TableStepper(CompiledStepper):
                                  **{f: ptr[f] for t, f in STEPPER_FIELDS if "*" in t and f != "T"}, qr=qr, lu=lu,
                                  ct=self._contact_tables(st.contacts))
         self._lib = lib._lib
-        structs = {**stepper_structs(PACKAGE), "ncgen_stepper_tables": _StepperTables}
-        check = c_binding.bind(self._lib, f"{PACKAGE}_stepper_check", SIGNATURES["stepper_check"], structs=structs)
+        structs = {**stepper_structs(package), "ncgen_stepper_tables": _StepperTables}
+        check = c_binding.bind(self._lib, f"{package}_stepper_check", SIGNATURES["stepper_check"], structs=structs)
         if check(ctypes.byref(self._S)):
-            raise CodegenError(f"model {st.name!r}: its stepper tables are inconsistent ({PACKAGE}_stepper_check)")
+            raise CodegenError(f"model {st.name!r}: its stepper tables are inconsistent ({package}_stepper_check)")
         self._signatures = _signatures(bool(self.nd))
         for loop in LOOPS:
-            fn = c_binding.bind(self._lib, f"{PACKAGE}_{loop}", self._signatures[loop], name=PACKAGE, structs=structs)
+            fn = c_binding.bind(self._lib, f"{package}_{loop}", self._signatures[loop], name=package, structs=structs)
             setattr(self, f"_{loop}", partial(fn, ctypes.byref(self._S)))
-        self._forces = c_binding.bind(self._lib, f"{PACKAGE}_forces", SIGNATURES["forces"], addresses=True)
-        self._multipliers = c_binding.bind(self._lib, f"{PACKAGE}_multipliers", SIGNATURES["multipliers"],
+        self._forces = c_binding.bind(self._lib, f"{package}_forces", SIGNATURES["forces"], addresses=True)
+        self._multipliers = c_binding.bind(self._lib, f"{package}_multipliers", SIGNATURES["multipliers"],
                                            addresses=True)
         self._raw = None
 
