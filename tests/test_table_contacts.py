@@ -48,8 +48,10 @@ def canonical_rows(model, element, arrays, e, ql):
     pi = a["pair_int"][8 * e:8 * e + 8]
     n = (pi[3], pi[4])
     qs = (ql[:n[0]], ql[n[0]:])
-    maps = [a["cm"][a["cm_ptr"][2 * e + s]:a["cm_ptr"][2 * e + s + 1]].reshape(a["cm_n"][2 * e + s], n[s], order="F")
-            for s in range(2)]
+    maps = [np.zeros((a["cm_n"][2 * e + s], n[s])) for s in range(2)]
+    for s in range(2):
+        nz = slice(a["cm_ptr"][2 * e + s], a["cm_ptr"][2 * e + s + 1])
+        np.add.at(maps[s], (a["cm_row"][nz], a["cm_col"][nz]), a["cm"][nz])
     qc = [maps[s] @ qs[s] for s in range(2)]
     g, W = np.zeros(element.count), np.zeros((element.count * dim, n[0] + n[1]))
     for j in range(element.count):

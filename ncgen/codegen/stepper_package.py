@@ -273,13 +273,11 @@ def schur_context(model, K) -> dict:
     zero blocks) and
     where A's nonzeros sit in the nonzeros of the KKT matrix pattern ``K`` (``a_nz``,
     ``a_row``, ``a_col``)."""
-    M = np.asarray(model.M, dtype=float)
-    nq = model.nq
-    if (nq > MINV_MAX_NQ or not mass_is_regular(model) or not np.all(np.isfinite(M))
-            or np.linalg.cond(M) > MINV_MAX_COND):
+    inverse = mass_inverse(model)
+    if inverse is None:
         return {"schur": False}
-    minv = np.linalg.inv(M)
-    minv = (minv + minv.T) / 2
+    minv, minv_colind, minv_row = inverse
+    nq = model.nq
     colind, row = K.colind(), K.row()
     a_nz, a_row, a_col = [], [], []
     for j in range(nq):
@@ -288,12 +286,27 @@ def schur_context(model, K) -> dict:
                 a_nz.append(k)
                 a_row.append(row[k] - nq)
                 a_col.append(j)
-    minv_colind, minv_row = [0], []                     # M⁻¹'s nonzeros by columns (members apart: 0)
-    for j in range(nq):
-        minv_row += [int(i) for i in np.flatnonzero(minv[:, j])]
-        minv_colind.append(len(minv_row))
     return {"schur": True, "minv": [c_real(x) for x in minv.ravel(order="F")], "minv_colind": minv_colind,
             "minv_row": minv_row, "a_nz": a_nz, "a_row": a_row, "a_col": a_col}
+
+
+def mass_inverse(model) -> tuple[np.ndarray, list[int], list[int]] | None:
+    """``(M⁻¹, minv_colind, minv_row)`` of the Delassus matrix by the Schur complement (see
+    :data:`MINV_MAX_NQ`): ``M⁻¹`` (nq × nq, symmetrised) and its nonzeros by columns (members
+    that share no coordinate give zero blocks); None where it does not apply (M singular or too
+    ill-conditioned, nq above MINV_MAX_NQ)."""
+    M = np.asarray(model.M, dtype=float)
+    nq = model.nq
+    if (nq > MINV_MAX_NQ or not mass_is_regular(model) or not np.all(np.isfinite(M))
+            or np.linalg.cond(M) > MINV_MAX_COND):
+        return None
+    minv = np.linalg.inv(M)
+    minv = (minv + minv.T) / 2
+    colind, row = [0], []
+    for j in range(nq):
+        row += [int(i) for i in np.flatnonzero(minv[:, j])]
+        colind.append(len(row))
+    return minv, colind, row
 
 
 def n_impulses(model) -> int:

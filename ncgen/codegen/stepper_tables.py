@@ -302,7 +302,7 @@ def stepper_tables(model) -> StepperTables:
                          float(np.max(np.abs(M))) if T.nq else 1.0, v_gravity, int(K.indices.size),
                          int(K.qr["v_row"].size), int(K.qr["r_row"].size), arrays, conservative,
                          int(K.lu["l_row"].size), K.m_nnz, mass_is_regular(model),
-                         contact_arrays(model) if model.contacts else None)
+                         contact_arrays(model, k_arrays["a_colind"]) if model.contacts else None)
 
 
 def _input_arrays(model) -> dict[str, np.ndarray]:

@@ -17,23 +17,20 @@
  * contact its normal row, then its tangent rows, zero without friction; columns: the local
  * coordinates arg[0] of its first side, then arg[1] of its second), as its per-model kernel
  * step_pair<k>_rows gives them: each point contact's kind on the canonical coordinates of the
- * two sides (cm: q_c = B q_local), its W mapped back, W_local = W_c B.  w: TAB_PAIR_WORK
- * doubles (ncgen_table_stepper.h).  Returns 0, or 1 when a kernel failed. */
+ * two sides (q_c = B q_local, B's nonzeros cm_*), its W mapped back, W_local = W_c B.  w:
+ * TAB_PAIR_WORK doubles (ncgen_table_stepper.h).  Returns 0, or 1 when a kernel failed. */
 static int tab_pair_eval(const casadi_real **arg, casadi_real **res, casadi_real *w, int e, int rows) {
   const struct ncgen_contact_tables *C = tab_cur->ct;
   const int *pi = C->pair_int + 8 * e, dim = tab_cur->T->dim;
   const int count = pi[2], nrow = pi[2] * dim, n[2] = {pi[3], pi[4]};
   casadi_real *qc = w + TAB_PAIR_W, *x = qc + 2 * TAB_PAIR_QC, *g = x + 2 * TAB_PAIR_QC, *Wc = g + 1;
-  const double *map[2];
-  int ncs[2], s, i, j, d, k, c;
+  int ncs[2], lo[2], hi[2], s, j, d, k, t;
   for (s = 0; s < 2; ++s) {
     ncs[s] = C->cm_n[2 * e + s];
-    map[s] = C->cm + C->cm_ptr[2 * e + s];
-    for (i = 0; i < ncs[s]; ++i) {
-      casadi_real v = 0;
-      for (j = 0; j < n[s]; ++j) v += map[s][i + ncs[s] * j] * arg[s][j];
-      qc[s * TAB_PAIR_QC + i] = v;
-    }
+    lo[s] = C->cm_ptr[2 * e + s];
+    hi[s] = C->cm_ptr[2 * e + s + 1];
+    memset(qc + s * TAB_PAIR_QC, 0, sizeof(casadi_real) * (size_t)ncs[s]);
+    for (t = lo[s]; t < hi[s]; ++t) qc[s * TAB_PAIR_QC + C->cm_row[t]] += C->cm[t] * arg[s][C->cm_col[t]];
   }
   if (rows) memset(res[1], 0, sizeof(casadi_real) * (size_t)nrow * (size_t)(n[0] + n[1]));
   for (j = 0; j < count; ++j) {
@@ -50,15 +47,14 @@ static int tab_pair_eval(const casadi_real **arg, casadi_real **res, casadi_real
     if (K->eval(karg, kres, 0, w, 0)) return 1;
     res[0][j] = *g;
     if (!rows) continue;
-    for (d = 0; d < (C->mu[pc] > 0 ? dim : 1); ++d)   /* a frictionless contact's tangent rows: 0 */
-      for (k = 0; k < 2; ++k) {                       /* the kind's sides: its columns off .. */
-        const int side = k ? 1 - sa : sa, off = k ? ncs[sa] : 0, base = side ? n[0] : 0;
-        for (i = 0; i < n[side]; ++i) {
-          casadi_real v = 0;
-          for (c = 0; c < ncs[side]; ++c) v += Wc[d + dim * (off + c)] * map[side][c + ncs[side] * i];
-          res[1][j * dim + d + nrow * (base + i)] += v;
-        }
+    for (k = 0; k < 2; ++k) {                         /* the kind's sides: its columns off .. */
+      const int side = k ? 1 - sa : sa, off = k ? ncs[sa] : 0, base = side ? n[0] : 0;
+      for (t = lo[side]; t < hi[side]; ++t) {         /* W_local[:, i] += W_c[:, off + c] B[c, i] */
+        const casadi_real b = C->cm[t], *wc = Wc + dim * (off + C->cm_row[t]);
+        casadi_real *out = res[1] + j * dim + (size_t)nrow * (size_t)(base + C->cm_col[t]);
+        for (d = 0; d < (C->mu[pc] > 0 ? dim : 1); ++d) out[d] += wc[d] * b;  /* frictionless: tangents 0 */
       }
+    }
   }
   return 0;
 }
@@ -84,6 +80,15 @@ static int tab_contacts_check(const ncgen_stepper_tables *S) {
     return 1;
   for (j = 0; j < nd; ++j)
     if (C->wt_colind[j + 1] < C->wt_colind[j]) return 1;
+  if (C->schur) {                       /* M⁻¹'s nonzeros by columns, A's columns */
+    if (C->minv_colind[0] != 0 || !tab_in_range(C->a_col, T->a_nnz, 0, T->nq)) return 1;
+    for (j = 0; j < T->nq; ++j)
+      if (C->minv_colind[j + 1] < C->minv_colind[j] ||
+          !tab_in_range(C->minv_row + C->minv_colind[j], C->minv_colind[j + 1] - C->minv_colind[j], 0, T->nq))
+        return 1;
+    for (j = 0; j < T->a_nnz; ++j)
+      if (j && C->a_col[j] < C->a_col[j - 1]) return 1;
+  }
   for (e = 0, j = 0; e < C->ne; ++e) {
     const int *pi = C->pair_int + 8 * e, nloc = pi[3] + pi[4];
     if (pi[1] != j || pi[2] < 1 || pi[2] > C->max_g || nloc > C->max_q || pi[2] * dim * nloc > C->max_w ||
@@ -91,9 +96,9 @@ static int tab_contacts_check(const ncgen_stepper_tables *S) {
         !tab_in_range(C->pair_wpos + pi[6], pi[2] * dim * nloc, -1, C->nnz_w))
       return 1;
     for (s = 0; s < 2; ++s) {
-      const int nc = C->cm_n[2 * e + s];
-      if (nc < 0 || nc > TAB_PAIR_QC || C->cm_ptr[2 * e + s + 1] - C->cm_ptr[2 * e + s] != nc * pi[3 + s] ||
-          !tab_in_range(C->pair_side + 6 * e + 3 * s, 1, 0, 4))
+      const int nc = C->cm_n[2 * e + s], lo = C->cm_ptr[2 * e + s], hi = C->cm_ptr[2 * e + s + 1];
+      if (nc < 0 || nc > TAB_PAIR_QC || hi < lo || !tab_in_range(C->cm_row + lo, hi - lo, 0, nc) ||
+          !tab_in_range(C->cm_col + lo, hi - lo, 0, pi[3 + s]) || !tab_in_range(C->pair_side + 6 * e + 3 * s, 1, 0, 4))
         return 1;
     }
     for (; j < pi[1] + pi[2]; ++j) {
@@ -139,4 +144,18 @@ static int tab_contacts_check(const ncgen_stepper_tables *S) {
 #define pair_gap_fn 0
 #define pair_rows_fn 1
 #define PAIR_KERNEL(rows, e, ws) tab_pair_eval((ws)->arg, (ws)->res, (ws)->w, (e), (rows))
+/* The Delassus matrix by the Schur complement of ncgen_contact.h where M is regular (schur):
+ * M⁻¹ from the contact tables, A's nonzeros from the stepper tables (their positions k_apos in
+ * the KKT matrix's lower block, rows a_row) and A's columns a_col; ncgen_table_stepper.h
+ * undefines a_nz, a_row, a_col after the runtime. */
+#define CONTACT_SCHUR
+#define CONTACT_A_RUNTIME
+#define SCHUR_READY (tab_ct->schur)
+#define minv (tab_ct->minv)
+#define minv_colind (tab_ct->minv_colind)
+#define minv_row (tab_ct->minv_row)
+#define NNZ_A (tab_cur->T->a_nnz)
+#define a_nz (tab_cur->k_apos)
+#define a_row (tab_cur->a_row)
+#define a_col (tab_ct->a_col)
 #endif

@@ -68,14 +68,18 @@
  * ncgen_contact_pairs.h (pair_*, its largest element max_q, max_g, max_w), W's pattern by rows
  * (wt_colind, wt_row: nnz_w), per point contact μ, e, its kind (pk_kind, an index of the
  * library's pair kinds), whether the kind's first side is the element's second (pk_swap) and
- * its numbers (pk_c from pk_c_ptr), per element side the map of its local coordinates to its
- * kind's canonical ones (cm_n rows, dense column-major at cm_ptr in cm); |g| (m/s²). */
+ * its numbers (pk_c from pk_c_ptr), per element side the map B of its local coordinates to its
+ * kind's canonical ones (cm_n rows; its nonzeros cm_ptr[s] .. cm_ptr[s + 1] − 1 of side s = 2 e
+ * + k, B[cm_row, cm_col] = cm); |g| (m/s²); schur 1 when the constant M is regular, then
+ * minv = M⁻¹ (nq x nq, column-major) and its nonzeros by columns (minv_colind, minv_row), and
+ * a_col, the column of each nonzero of A (the Delassus matrix by the Schur complement of
+ * ncgen_contact.h; schur 0: by KKT solves). */
 struct ncgen_contact_tables {
-  int nk, ne, ns, max_q, max_g, max_w, nnz_w;
+  int nk, ne, ns, max_q, max_g, max_w, nnz_w, schur;
   double gravity_norm;
   const int *wt_colind, *wt_row, *pair_int, *pair_qidx, *pair_wpos, *pair_side, *pair_sid, *pair_srep, *pk_kind,
-      *pk_swap, *pk_c_ptr, *cm_ptr, *cm_n;
-  const double *mu, *restitution, *pair_qconst, *pair_bdata, *pair_bound, *pk_c, *cm;
+      *pk_swap, *pk_c_ptr, *cm_ptr, *cm_n, *cm_row, *cm_col, *minv_colind, *minv_row, *a_col;
+  const double *mu, *restitution, *pair_qconst, *pair_bdata, *pair_bound, *pk_c, *cm, *minv;
 };
 
 typedef struct {
@@ -693,5 +697,11 @@ static int tab_work_sizes(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz
 #endif
 #include "ncgen_fixed.h"
 #include "ncgen_adaptive.h"
+#ifdef NCGEN_CONTACTS
+/* the Schur complement's names of ncgen_table_contacts.h: fields of the stepper tables again */
+#undef a_nz
+#undef a_row
+#undef a_col
+#endif
 
 #endif
