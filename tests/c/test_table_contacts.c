@@ -5,12 +5,13 @@
  * over the ground line y = 0, g = q1 − RADIUS, W = [[0, 1], [1, 0]]).
  *
  * Checked: tab_pair_eval against the hand-made rows for a non-identity canonical map B
- * (g = (B q)_1 − RADIUS, W_local = W_c B); tab_contacts_check refuses a bad kind and a map of the
- * wrong size; a drop from y0 with a sideways speed u0 (e = 0, μ): it lands at
+ * (g = (B q)_1 − RADIUS, W_local = W_c B); tab_contacts_check refuses a bad kind, a map entry
+ * out of range and M⁻¹'s nonzeros out of range; a drop from y0 with a sideways speed u0 (e = 0, μ): it lands at
  * t = √(2 (y0 − RADIUS)/g), where the impact's friction impulse (≤ μ m v_land) stops the slide
  * (μ v_land ≥ u0 here), and rests on the floor (gap within 1e-8 m, velocity below 1e-9 m/s) at
  * x = u0 t_land (to u0 h, the landing step), each resting step's impulse m g h; energy only
- * lost; the QR and the sparse LU (kept per K) runs equal.
+ * lost; the QR, the sparse LU (kept per K) and the Schur complement of M⁻¹ (schur = 1: the
+ * Delassus matrix from M⁻¹ = I / MASS instead of KKT solves) runs equal.
  * Built and run by tests/test_stepper_runtime_c.py under AddressSanitizer and
  * UndefinedBehaviorSanitizer. */
 #include "check.h"
@@ -92,6 +93,9 @@ static const ncgen_pair_kind PAIR_KINDS[1] = {{k_floor, 2, 2, 0, 1}};
 #undef pair_srep
 #undef mu
 #undef restitution
+#undef minv
+#undef minv_colind
+#undef minv_row
 
 /* The model's tables: no feature, no joint element, the member's M = MASS I (its two nonzero
  * entries), K = M (2 x 2 diagonal: V, RADIUS, L and U trivial). */
@@ -106,14 +110,16 @@ static const int wt_colind[] = {0, 2, 4}, wt_row[] = {0, 1, 0, 1};
 static const int pair_int[] = {0, 0, 1, 2, 0, 0, 0, 1}, pair_wpos[] = {0, 2, 1, 3};
 static const int pair_side[] = {1, 0, 0, 3, 0, 6}, pair_sid[] = {0, -1}, pair_srep[] = {0, 0};
 static const double pair_bdata[] = {1, 0, 0, 1, RADIUS, 0, 0, 0, 0, 1}, pair_bound[] = {1, 0, 1e300};
-static const int pk_kind[] = {0}, pk_swap[] = {0}, pk_c_ptr[] = {0, 1}, cm_ptr[] = {0, 4, 4}, cm_n[] = {2, 0};
-static const double mu_[] = {FRICTION}, e_[] = {0}, pk_c[] = {RADIUS}, cm_identity[] = {1, 0, 0, 1};
+static const int pk_kind[] = {0}, pk_swap[] = {0}, pk_c_ptr[] = {0, 1}, cm_ptr[] = {0, 2, 2}, cm_n[] = {2, 0};
+static const double mu_[] = {FRICTION}, e_[] = {0}, pk_c[] = {RADIUS}, cm_identity[] = {1, 1};
+/* M⁻¹ = I / MASS (column-major) and its nonzeros by columns */
+static const double minv_[] = {1 / MASS, 0, 0, 1 / MASS};
 
 static ncgen_tables T;
 static ncgen_stepper_tables S;
 static struct ncgen_contact_tables C;
 
-static void make_tables(int with_lu) {
+static void make_tables(int with_lu, int schur) {
   T.nq = 2; T.nc = 0; T.dim = 2; T.a_nnz = 0; T.m_nnz = 4; T.nf = 0;
   T.feat_ptr = zero; T.feat_row = zero; T.feat_col = zero; T.feat_coef = nothing; T.feat_const = nothing;
   T.ne = 0; T.el_kind = zero; T.el_arg_ptr = zero; T.el_arg = zero; T.el_sc_ptr = zero; T.el_sc = nothing;
@@ -137,18 +143,24 @@ static void make_tables(int with_lu) {
   C.pair_side = pair_side; C.pair_sid = pair_sid; C.pair_srep = pair_srep; C.pk_kind = pk_kind; C.pk_swap = pk_swap;
   C.pk_c_ptr = pk_c_ptr; C.cm_ptr = cm_ptr; C.cm_n = cm_n; C.mu = mu_; C.restitution = e_;
   C.pair_qconst = nothing; C.pair_bdata = pair_bdata; C.pair_bound = pair_bound; C.pk_c = pk_c; C.cm = cm_identity;
+  C.cm_row = ident; C.cm_col = ident;
+  C.schur = schur; C.minv = minv_; C.minv_colind = one_two; C.minv_row = ident; C.a_col = zero;
   S.ct = &C;
 }
 
-/* tab_pair_eval with the map B = [[2, 1], [0.5, 3]] (column-major 2, 0.5, 1, 3): g = (B q)_1 − RADIUS,
- * W_local = W_c B (normal row (0, 1) B, tangent row (1, 0) B); the check's refusals. */
+/* tab_pair_eval with the map B = [[2, 1], [0.5, 3]] (nonzeros by columns 2, 0.5, 1, 3): g = (B q)_1 −
+ * RADIUS, W_local = W_c B (normal row (0, 1) B, tangent row (1, 0) B); the check's refusals. */
 static void test_pair_eval(void) {
   static const double B[] = {2, 0.5, 1, 3};
+  static const int b_ptr[] = {0, 4, 4}, b_row[] = {0, 1, 0, 1}, b_col[] = {0, 0, 1, 1};
   double q[2] = {0.3, 0.2}, g, W[4], w[64];
   const double *arg[2];
   double *res[2];
-  make_tables(0);
+  make_tables(0, 1);
   C.cm = B;
+  C.cm_ptr = b_ptr;
+  C.cm_row = b_row;
+  C.cm_col = b_col;
   tab_cur = &S;
   arg[0] = q; arg[1] = q + 2;
   res[0] = &g; res[1] = W;
@@ -162,18 +174,24 @@ static void test_pair_eval(void) {
   C.mu = mu_;
   C.pk_kind = pk_swap + 0;           /* kind 0 still; then a bad kind */
   {
-    static const int bad[] = {1}, short_map[] = {0, 3, 3};
+    static const int bad[] = {1}, bad_row[] = {0, 2, 0, 1}, bad_minv_row[] = {0, 2};
     C.pk_kind = bad;
     CHECK(tab_contacts_check(&S) != 0, "a kind out of range refused");
     C.pk_kind = pk_kind;
-    C.cm_ptr = short_map;
-    CHECK(tab_contacts_check(&S) != 0, "a map of the wrong size refused");
+    C.cm_row = bad_row;
+    CHECK(tab_contacts_check(&S) != 0, "a map entry out of range refused");
+    C.cm_row = b_row;
+    C.minv_row = bad_minv_row;
+    CHECK(tab_contacts_check(&S) != 0, "M⁻¹'s nonzero out of range refused");
+    C.schur = 0;
+    CHECK(tab_contacts_check(&S) == 0, "M⁻¹ not read without the Schur complement");
   }
   tab_cur = 0;
 }
 
-/* The drop (top of the file), with the QR alone or the LU; returns the final x. */
-static double drop(int with_lu, double *impulse_last) {
+/* The drop (top of the file), with the QR alone or the LU, the Delassus matrix by KKT solves or
+ * (schur) from M⁻¹; returns the final x. */
+static double drop(int with_lu, int schur, double *impulse_last) {
   enum { N = 600, EVERY = 1 };
   const double h = 1e-3, y0 = 0.3, u0 = 0.2;
   static double q[2 * N], v[2 * N], lam[1], P[2 * N];
@@ -186,7 +204,7 @@ static double drop(int with_lu, double *impulse_last) {
   double slide = FRICTION * v_land >= u0 ? 0 : (u0 - FRICTION * v_land) / (FRICTION * GRAV);
   double t_stop = t_land + slide, x_end = u0 * t_land + (u0 - FRICTION * v_land) * slide / 2;
   int status, k, resting = 0;
-  make_tables(with_lu);
+  make_tables(with_lu, schur);
   CHECK(tab_contacts_check(&S) == 0, "tables");
   CHECK(!tab_begin(&S), "run started");
   status = run_fixed(q0, v0, 0, 0, h, N, EVERY, 0, 0, 0, q, v, lam, iters, 0, &o, 0, &done, &splits, P);
@@ -214,10 +232,12 @@ static double drop(int with_lu, double *impulse_last) {
 }
 
 int main(void) {
-  double p_qr, p_lu, x_qr, x_lu;
+  double p_qr, p_lu, p_schur, x_qr, x_lu, x_schur;
   test_pair_eval();
-  x_qr = drop(0, &p_qr);
-  x_lu = drop(1, &p_lu);
+  x_qr = drop(0, 0, &p_qr);
+  x_lu = drop(1, 0, &p_lu);
+  x_schur = drop(1, 1, &p_schur);
   CHECK(fabs(x_qr - x_lu) < 1e-14 && fabs(p_qr - p_lu) < 1e-15, "QR and LU runs: x %g, %g", x_qr, x_lu);
+  CHECK(fabs(x_schur - x_lu) < 1e-14 && fabs(p_schur - p_lu) < 1e-15, "Schur and KKT runs: x %g, %g", x_schur, x_lu);
   return report("test_table_contacts");
 }
