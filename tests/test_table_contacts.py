@@ -202,3 +202,54 @@ def test_contact_scenes_step_as_their_packages(scene):
     assert worst["q"] < 1e-12, worst
     assert worst["v"] < 1e-9 and worst["P"] < 1e-9, worst
 
+
+
+def _pile(name: str, inertia=(0.01, 0.012, 0.015)):
+    """A box (a 'ruvw' body: its six rigid-body constraints) on the floor with three balls on
+    it and beside it, friction everywhere (``inertia``: the box's principal moments)."""
+    s = nc.System(name)
+    box = s.add_body("box", mass=1.1, inertia=np.diag(inertia), position=(0.0, 0.0, 0.06))
+    s.add_contact(nc.BoxPlane(box, size=(0.3, 0.2, 0.1), mu=0.4, name="box_floor"))
+    for k in range(3):
+        b = s.add_point(f"ball{k}", mass=0.2, position=(0.1 * k - 0.05, 0.01 * k, 0.16 + 0.05 * k))
+        s.add_contact(nc.SphereBox(b, None, 0.03, box=box, size=(0.3, 0.2, 0.1), mu=0.3, name=f"ball{k}_box"))
+        s.add_contact(nc.SpherePlane(b, None, 0.03, mu=0.5, name=f"ball{k}_floor"))
+    return s.build(contacts="nonsmooth")
+
+
+@pytest.mark.skipif(not HAVE_CC, reason="no C compiler to build the contact library")
+def test_the_delassus_matrix_from_minv_equals_the_kkt_solves(monkeypatch):
+    """On the tables the Delassus matrix comes from the constant M⁻¹ and the Schur complement of
+    A M⁻¹ Aᵀ where M is regular (``schur``), as in the per-model package; forced off
+    (``MINV_MAX_NQ = 0``) it comes from one KKT solve per active row.  The two give the same
+    step from every state of a 0.3 s run of a pile (box with its constraints, balls landing on it,
+    friction): q to 1e-12, v and the impulses to 1e-9 relative.  A flat body (I1 + I2 = I3: M
+    singular) gets no M⁻¹ (``schur`` 0: the KKT solves) and its drop onto the floor creates no
+    energy and ends at rest on it."""
+    import ncgen.codegen.stepper_package as package
+    from ncgen.runtime.table_stepper import table_stepper
+
+    model = _pile("pile_schur")
+    assert contact_arrays(model)["schur"] == 1
+    schur = table_stepper(model)
+    monkeypatch.setattr(package, "MINV_MAX_NQ", 0)
+    plain_model = _pile("pile_kkt")
+    assert contact_arrays(plain_model)["schur"] == 0
+    kkt = table_stepper(plain_model)
+    h, n = 1e-3, 300
+    Q, V, *_ = schur.simulate(model.q0, model.v0, 0.0, h, n, 1, None, model.p0, 1e-10, 12, 4)
+    worst, loaded = {"q": 0.0, "v": 0.0, "P": 0.0}, 0
+    for k in range(0, n - 1, 3):
+        a, b = (_one_step(s, model, Q[k], V[k], (k + 1) * h, h) for s in (schur, kkt))
+        loaded += bool(np.any(a[2]))
+        for name, x, y in zip("qvP", a, b):
+            worst[name] = max(worst[name], float(np.max(np.abs(x - y)) / (1 + np.max(np.abs(y)))))
+    assert loaded > 50, loaded                  # contacts loaded in most of the compared steps
+    assert worst["q"] < 1e-12 and worst["v"] < 1e-9 and worst["P"] < 1e-9, worst
+    monkeypatch.undo()
+    flat = _pile("pile_flat", inertia=(0.01, 0.02, 0.03))
+    assert contact_arrays(flat)["schur"] == 0
+    traj = nc.simulate(flat, 0.5, 0.01, method="stepper", substeps=10, kernels="tables")
+    e, z = traj.energy, traj.q[:, flat.layout.member_indices("box")[2]]
+    assert traj.info["complete"] and np.max(e - e[0]) <= 1e-9 * abs(e[0]), np.max(e - e[0])
+    assert abs(z[-1] - 0.05) < 1e-6 and np.max(np.abs(traj.v[-1])) < 1e-6, (z[-1], traj.v[-1])
