@@ -35,7 +35,10 @@
  *   CONTACT_SCHUR              defined if the Delassus matrix comes from the constant M^-1:
  *                              then minv (NQ x NQ, column-major), its nonzeros by columns
  *                              minv_colind, minv_row, and where A sits in the KKT matrix,
- *                              NNZ_A and (if NNZ_A > 0) a_nz, a_row, a_col
+ *                              NNZ_A and (if NNZ_A > 0) a_nz, a_row, a_col; or, sizes and
+ *                              arrays known at run time (the table stepper), CONTACT_A_RUNTIME
+ *                              (a_nz, a_row, a_col always there) and SCHUR_READY (whether
+ *                              minv exists: else the KKT solves)
  */
 
 /* Impulses that change a contact velocity by more than CONTACT_IMPACT_STEPS steps of gravity
@@ -332,6 +335,14 @@ static int delassus_kkt(workspace *ws, const int *rows, int n) {
   return all_finite(ws->G, n * n) ? STEP_OK : STEP_NOT_FINITE;
 }
 #ifdef CONTACT_SCHUR
+#ifdef CONTACT_A_RUNTIME
+#define CONTACT_HAS_A
+#elif NNZ_A > 0
+#define CONTACT_HAS_A
+#endif
+#ifndef SCHUR_READY
+#define SCHUR_READY 1
+#endif
 
 /* The Delassus matrix of delassus_kkt() from the constant M^-1 and the Schur complement of
  * the KKT matrix: with B = M^-1 W_r^T (in ws->Xc), T = A M^-1, S = A M^-1 A^T = L L^T,
@@ -356,6 +367,10 @@ static int delassus(workspace *ws, const int *rows, int n) {
              *ck = cr + NNZ_W, *tlo = ck + NNZ_W, *thi = tlo + NC, *acp = thi + NC, *ak = acp + NQ + 1,
              *bfirst = ak + NNZ_A, *blast = bfirst + ND, *emin = blast + ND, *zp = emin + NC, *zr = zp + NC + 1;
   int a, b, i, j, k, finite = 1;
+  if (!SCHUR_READY) {
+    ws->schur = 0;
+    return delassus_kkt(ws, rows, n);
+  }
   if (ws->tl_zero) /* the rows of T and L the last call wrote (A's pattern does not change) */
     for (i = 0; i < NC; ++i) {
       for (j = (int) tlo[i]; j <= thi[i]; ++j) T[i * NQ + j] = 0;
@@ -368,7 +383,7 @@ static int delassus(workspace *ws, const int *rows, int n) {
   ws->tl_zero = 0;
   for (i = 0; i < NC; ++i) tlo[i] = NQ, thi[i] = -1, env[i] = i; /* env: S's first column per row, so far */
   memset(acp, 0, (NQ + 1) * sizeof(casadi_int));
-#if NNZ_A > 0
+#ifdef CONTACT_HAS_A
   for (k = 0; k < NNZ_A; ++k) { /* T = A M^-1 (row a_row[k] += A_k * row a_col[k] of M^-1) */
     const casadi_real aij = ws->K[a_nz[k]], *m = minv + a_col[k] * NQ;
     casadi_real *t = T + a_row[k] * NQ;
@@ -432,7 +447,7 @@ static int delassus(workspace *ws, const int *rows, int n) {
     bfirst[a] = blo, blast[a] = bhi;
     memset(za, 0, NC * sizeof(casadi_real));
     zlo[a] = NC, zhi[a] = -1;
-#if NNZ_A > 0
+#ifdef CONTACT_HAS_A
     for (j = blo; j <= bhi; ++j) /* A B_a, by A's columns */
       if (ba[j] != 0)
         for (k = (int) acp[j]; k < acp[j + 1]; ++k) {
