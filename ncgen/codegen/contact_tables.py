@@ -75,7 +75,8 @@ def contact_arrays(model, a_colind=None) -> dict:
     """The contact tables of ``model`` (module docstring): sizes :data:`SIZES`,
     ``gravity_norm`` and the arrays :data:`INT_ARRAYS`, :data:`REAL_ARRAYS` (NumPy); the model
     must be covered (:func:`uncovered_contacts` empty).  ``a_colind``: the column starts of A's
-    nonzeros in the stepper tables (None: A without nonzeros)."""
+    nonzeros in the stepper tables, from which ``a_col`` is packed (None: none packed; the tables
+    the C reads need them: :func:`ncgen.codegen.stepper_tables.stepper_tables` passes them)."""
     dim = model.dim
     elements = pair_elements(model)
     out = pair_arrays(dim, elements)
