@@ -735,19 +735,28 @@ static int contact_laws_hold(int k, const casadi_real *P, const casadi_real *U, 
  * solve are not needed.  contact_step() would close the contacts whose gap is <= 0 at the
  * end of the free step; that gap is estimated, linearised, as g - h/2 W_N X j (the impulse
  * j = W^T P moves the midpoint rates by X j / 2, X j = [M A^T; A 0]^-1 [j; 0]: one solve).
+ * The contact laws are checked to tol = REPEAT_TOL (1 + max |U|) (U the end velocities).  A
+ * loaded contact counts as closed up to a free gap of h/2 tol: closing that gap within the
+ * step takes an end velocity of at most tol, the laws' tolerance, so contact_step()'s laws for
+ * an open contact about to close cannot be told from a closed one's there (a resting face's
+ * loaded corners end the free step at gaps of +-1e-16 m, round-off of coordinates of 0.1 m;
+ * h/2 tol is 5e-16 m at h = 1 ms, 1.5e-14 m at 30 ms).
  * The step is kept (*kept = 1) if every contact with an impulse is closed in that sense and
- * has Jacobian rows that moved by at most REPEAT_TOL (1 + max |W|) over the step (so the
- * impulses act as contact_step() would apply them), and every closed contact satisfies the
- * contact laws on the measured end velocities (contact_laws_hold() to REPEAT_TOL
- * (1 + max |U|)); else the caller takes contact_step()'s way from the Newton start saved
- * here.  Tried only while it pays (ws->repeat): after a step it kept, or whose contact
- * solve found its warm start (the last forces) already converged. */
+ * every closed contact satisfies the contact laws on the measured end velocities
+ * (contact_laws_hold() to tol); else the caller takes contact_step()'s way from the Newton
+ * start saved here.  The impulses act along the rows at q in both halves;
+ * if a loaded contact's rows moved by more than REPEAT_TOL (1 + max |W|) over the step
+ * (rolling spheres: by omega h), the second half is taken again along the rows at q_next, as
+ * contact_step() takes it along those at the free step's end (q_next does not change: the
+ * first half's impulse is the same), before the laws are checked.  Tried only while it pays
+ * (ws->repeat): after a step it kept, or whose contact solve found its warm start (the last
+ * forces) already converged. */
 static int repeat_step(const casadi_real *q, const casadi_real *v, casadi_real t, const casadi_real *u,
                        const casadi_real *p, casadi_real h, casadi_real *q_next, casadi_real *v_next,
                        casadi_real *lam, int *iterations, const step_options *o, int warm,
                        workspace *ws, int *kept) {
-  casadi_real *W0 = ws->Xc, *P = ws->P, scale = 1;
-  int i, k, r, status, any = 0;
+  casadi_real *W0 = ws->Xc, *P = ws->P, scale = 1, gap_tol = 0;
+  int i, k, r, status, any = 0, moved = 0, closed[NK];
   *kept = 0;
   if (iterations) *iterations = 0;
   for (r = 0; r < ND; ++r) {
@@ -778,31 +787,46 @@ static int repeat_step(const casadi_real *q, const casadi_real *v, casadi_real t
     if (contact_rows(ws, q, v, p, 0, W0, ws->Um, 1)) return STEP_KERNEL;
 #endif
     scale += norm_inf(ws->U, ND); /* the elements evaluated (with CONTACT_PAIRS) */
+    gap_tol = fabs(h) / 2 * REPEAT_TOL * scale;
     *kept = all_finite(ws->rhs + NX, NQ);
     for (k = 0; k < NK && *kept; ++k) {
       casadi_real g_free = ws->g[k];
       int loaded = 0, d;
       for (i = wt_colind[k * DC]; i < wt_colind[k * DC + 1]; ++i) g_free -= h / 2 * ws->W[i] * ws->rhs[NX + wt_row[i]];
       for (d = 0; d < DC; ++d) loaded = loaded || P[k * DC + d] != 0;
-      if (g_free > 0) {
+      closed[k] = !(g_free > (loaded ? gap_tol : 0));
+      if (!closed[k]) {
         if (loaded) *kept = 0; /* contact_step() would leave it open */
         continue;
       }
-      if (loaded) {
+      if (loaded && !moved) {
         casadi_real wmax = 0, dw = 0;
         for (i = wt_colind[k * DC]; i < wt_colind[(k + 1) * DC]; ++i) { /* the contact's rows */
           casadi_real w = fabs(W0[i]), e = fabs(ws->W[i] - W0[i]);
           if (w > wmax) wmax = w;
           dw = nan_max(dw, e);
         }
-        if (dw > REPEAT_TOL * (1 + wmax)) *kept = 0;
+        moved = dw > REPEAT_TOL * (1 + wmax);
       }
-      if (*kept && !contact_laws_hold(k, P, ws->U, ws->Um, REPEAT_TOL * scale)) *kept = 0;
     }
+    if (*kept && moved) { /* the second half again along the rows at q_next (q_next stays) */
+      int it = 0;
+      for (i = 0; i < NQ; ++i) ws->j[i] = 0;
+      for (r = 0; r < ND; ++r)
+        if (P[r] != 0)
+          for (i = wt_colind[r]; i < wt_colind[r + 1]; ++i) ws->j[wt_row[i]] += ws->W[i] * P[r];
+      status = step(q, v, t, u, p, h, q_next, v_next, lam, &it, o, 1, ws);
+      if (iterations) *iterations += it;
+      if (status != STEP_OK) *kept = 0;
+      else if (contact_rows(ws, q_next, v_next, p, 0, 0, ws->U, 1)) return STEP_KERNEL;
+      scale = 1 + norm_inf(ws->U, ND);
+    }
+    for (k = 0; k < NK && *kept; ++k)
+      if (closed[k] && !contact_laws_hold(k, P, ws->U, ws->Um, REPEAT_TOL * scale)) *kept = 0;
   }
   if (*kept) {
     for (r = 0; r < ND; ++r) ws->Pacc[r] += P[r];
-    if (ws->track_work) impulse_work(ws, W0, W0, 0, ND, P, v, v_next);
+    if (ws->track_work) impulse_work(ws, W0, moved ? ws->W : W0, 0, ND, P, v, v_next);
     return STEP_OK;
   }
   ws->repeat = 0;

@@ -92,8 +92,8 @@ GAP_REACH = 2.0
 CONTACT_REFINE_MAX, CONTACT_REFINE_TOL = 10, 1e-8
 #: Nonsmooth contact stepper: a step first tries the last step's impulses again and keeps
 #: them if the contact laws hold on the measured end velocities to REPEAT_TOL (1 + max |U|)
-#: m/s and the loaded contacts' Jacobian rows did not move by more than REPEAT_TOL
-#: (``repeat_step`` in ``runtime/ncgen_contact.h``): at rest that is every step.
+#: m/s (``repeat_step`` in ``runtime/ncgen_contact.h``; rows that moved, rolling spheres, take
+#: the second half-step again along the rows at its end): at rest that is every step.
 REPEAT_TOL = 1e-12
 #: Nonsmooth contact stepper: the Delassus matrix comes from the constant M⁻¹ (stored dense
 #: in the C) and the Schur complement A M⁻¹ Aᵀ when M is regular (``mass_is_regular``: no

@@ -362,6 +362,34 @@ static void test_step_at_rest(void) {
         "potential energy %g", y[1]);
 }
 
+/* repeat_step() on a loaded contact whose linearised free gap is +delta: mass 1 held by the
+ * impulse m g h at height R_P + g h^2 / 2 + delta (the free step would end delta above the
+ * floor, the repeated step keeps it there at rest).  A delta of round-off (below the tolerance
+ * h/2 REPEAT_TOL (1 + max |U|) = 1.5e-14 m at h = 30 ms) counts as closed: the step is kept,
+ * at rest with the impulse m g h; a real gap (1e-9 m: closing it takes 6.7e-8 m/s) is not. */
+static void test_repeat_round_off_gap(void) {
+  const casadi_real h = 0.03, deltas[2] = {5e-15, 1e-9};
+  casadi_real q[NQ], v[NQ] = {0, 0, 0, 0}, q1[NQ], v1[NQ];
+  step_options o = DEFAULT_OPTIONS();
+  workspace ws;
+  char *block = malloc(step_work_bytes());
+  int i, kept, status;
+  mu[0] = mu[1] = 0.5;
+  restitution[0] = restitution[1] = 0;
+  layout(&ws, block);
+  for (i = 0; i < 2; ++i) {
+    q[0] = 0, q[1] = R_P + G_P * h * h / 2 + deltas[i], q[2] = 1, q[3] = 1; /* mass 2 far above */
+    contact_clear(&ws);
+    ws.F[0] = M_P * G_P;
+    status = repeat_step(q, v, 0, 0, 0, h, q1, v1, 0, 0, &o, 0, &ws, &kept);
+    CHECK(status == STEP_OK && kept == (i == 0), "delta %g m: status %d, kept %d", deltas[i], status, kept);
+    if (i == 0)
+      CHECK(fabs(q1[1] - q[1]) < 1e-15 && fabs(v1[1]) < 1e-12 && fabs(ws.Pacc[0] - M_P * G_P * h) < 1e-15,
+            "y %.17g -> %.17g, y' %g, impulse %.17g", q[1], q1[1], v1[1], ws.Pacc[0]);
+  }
+  free(block);
+}
+
 #ifdef PAIRS
 /* The broad phase: mass 1 0.3 m above the floor, mass 2 on it.  Its lower bound is the gap
  * (less the slack); skipped at a limit below it, evaluated above; the speed bound of a point
@@ -404,6 +432,7 @@ int main(void) {
   test_pgs_frictionless_redundant();
   test_contact_steps();
   test_step_at_rest();
+  test_repeat_round_off_gap();
 #ifdef PAIRS
   test_broad_phase();
   return report("test_contact (element kernels, broad phase)");
