@@ -56,6 +56,8 @@ class BdistWheel(bdist_wheel):
         self.run_command("build")
         build_lib = self.get_finalized_command("build_py").build_lib
         self.root_is_pure = not (Path(build_lib) / "ncgen" / "_libraries" / "index.json").is_file()
+        if not self.root_is_pure:           # the package installed to platlib, whole
+            self.distribution.has_ext_modules = lambda: True
         super().run()
 
     def get_tag(self):
