@@ -16,6 +16,7 @@ libraries are loaded with ctypes, not as Python extensions); one without stays
 from __future__ import annotations
 
 import os
+import shutil
 import sys
 from pathlib import Path
 
@@ -32,16 +33,18 @@ class BuildPy(build_py):
         super().run()
         if self.editable_mode:
             return
+        target = Path(self.build_lib) / "ncgen" / "_libraries"
+        shutil.rmtree(target, ignore_errors=True)      # never a former build's (pip builds in the tree)
         if os.environ.get("NCGEN_BUILD_LIBRARIES", "1") == "0":
             print("ncgen: NCGEN_BUILD_LIBRARIES=0: ncgen's libraries are not compiled at install; they are "
                   "compiled at first use", file=sys.stderr)
             return
         sys.path.insert(0, str(ROOT))          # ncgen from this source tree
         from ncgen.errors import CodegenError, CompilerNotFound
-        from ncgen.runtime.installed_libraries import FOLDER, build_installed
+        from ncgen.runtime.installed_libraries import build_installed
 
         try:
-            build_installed(Path(self.build_lib) / "ncgen" / FOLDER,
+            build_installed(target,
                             log=lambda msg: print(msg, file=sys.stderr))
         except (CompilerNotFound, CodegenError) as e:
             print(f"ncgen: warning: ncgen's libraries were not compiled at install ({e}); ncgen works without "
