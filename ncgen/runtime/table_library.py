@@ -9,7 +9,9 @@ sources key hashes ncgen's version, CasADi's and the files the library is made o
 formulas it reads); the compiler key the compiler's path (found as
 :func:`ncgen.codegen.compiler.find_compiler` does, without running it).  A hit loads the
 library with no call of the compiler, and so does a process with no compiler at all when a
-library of the same sources is cached.  A miss writes the package
+library of the same sources is cached.  Before the cache, the library ``pip install .``
+compiled into the package is taken when its keys, flags and sha256 match
+(:mod:`ncgen.runtime.installed_libraries`).  A miss writes the package
 (:func:`~ncgen.codegen.element_kernels.write_element_package`) and compiles it with
 :func:`ncgen.codegen.compile_cache.compile_package` (cached by content, atomic).
 
