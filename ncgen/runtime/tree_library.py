@@ -4,7 +4,8 @@ once per ncgen version and compiler and shared by every model — in units, each
 first run that needs it and found through an index file of the compile cache like the element
 library (:func:`~ncgen.runtime.table_library.cached_library`, index
 ``tree-tables-<unit>-<sources key>-<compiler key>.json``): a tree of the shipped joint kinds
-whose units are compiled reaches compiled RNEA/ABA with no call of the C compiler.
+whose units are compiled reaches compiled RNEA/ABA with no call of the C compiler.  ``pip
+install .`` compiles every unit into the package (:mod:`ncgen.runtime.installed_libraries`).
 
 Units (:mod:`ncgen.codegen.tree_kernels`): the algorithm units ``forward`` (ABA, the joint
 loop), ``inverse`` (RNEA, CRBA) and ``derivatives``, each with the rate kernels of the spherical
@@ -160,7 +161,7 @@ def index_prefix(unit: str) -> str:
 
 
 def unit_ready(unit: str) -> bool:
-    """Whether the unit ``unit`` of the tree library is compiled (in the compile cache)."""
+    """Whether the unit ``unit`` of the tree library is compiled (installed, or in the compile cache)."""
     return library_ready(index_prefix(unit), sources_key(), unit_cflags(unit))
 
 
