@@ -15,6 +15,9 @@ average are printed: on a shared machine wall time is CPU time times the queue.
                           (compiled once per ncgen version: their compile is timed apart), the
                           model never seen
     python benchmarks/box_stack_first_run.py --smoke          this tree, 1 round, T = 0.001 s
+    python benchmarks/box_stack_first_run.py --python /tmp/v/bin/python --rounds 3
+                          the ncgen installed in that interpreter's environment (``pip install .``:
+                          its libraries compiled at install), run outside the tree, no PYTHONPATH
 """
 from __future__ import annotations
 
@@ -60,18 +63,21 @@ def library_cache(tree: Path, into: Path) -> float:
     return children_cpu() - before
 
 
-def first_run(tree: Path, t_end: float, base: Path | None = None) -> dict:
+def first_run(tree: Path, t_end: float, base: Path | None = None, python: str | None = None) -> dict:
     """One first run of box_stack in ``tree`` with an empty cache (or a copy of ``base``): CPU
-    and wall s."""
+    and wall s; with ``python``, that interpreter's installed ncgen, run in the cache folder."""
     with tempfile.TemporaryDirectory(prefix="box34-first-") as cache:
         if base is not None:
             shutil.copytree(base, cache, dirs_exist_ok=True)
         env = {**os.environ, "PYTHONPATH": str(tree), "NCGEN_CACHE_DIR": cache}
-        cmd = [sys.executable, "-m", "ncgen.cli", "simulate", "examples/box_stack.toml", "--method", "stepper",
-               "--contacts", "nonsmooth", "--t-end", str(t_end), "-o", str(Path(cache) / "out.npz")]
+        if python is not None:
+            env.pop("PYTHONPATH")
+        cmd = [python or sys.executable, "-m", "ncgen.cli", "simulate", str(tree / "examples/box_stack.toml"),
+               "--method", "stepper", "--contacts", "nonsmooth", "--t-end", str(t_end), "-o",
+               str(Path(cache) / "out.npz")]
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         start = time.perf_counter()
-        out = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=tree)
+        out = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=cache if python else tree)
         wall = time.perf_counter() - start
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         if out.returncode:
@@ -91,7 +97,11 @@ def main() -> None:
     ap.add_argument("--smoke", action="store_true", help="this tree only, 1 round, T = 0.001 s")
     ap.add_argument("--libraries", action="store_true",
                     help="start each cache with the tree's element (and contact) libraries compiled")
+    ap.add_argument("--python", help="time the ncgen installed for this interpreter (no PYTHONPATH; the "
+                    "peer and --libraries do not apply)")
     args = ap.parse_args()
+    if args.python:
+        args.peer, args.libraries = None, False
     if args.smoke:
         args.peer, args.rounds, args.t_end = None, 1, 0.001
     trees = {"this": ROOT} | ({"peer": args.peer.resolve()} if args.peer else {})
@@ -108,7 +118,7 @@ def main() -> None:
     for r in range(args.rounds):
         order = list(trees.items()) if r % 2 == 0 else list(reversed(trees.items()))
         for name, tree in order:
-            res = first_run(tree, args.t_end, bases.get(name))
+            res = first_run(tree, args.t_end, bases.get(name), args.python)
             results[name].append(res)
             print(f"  round {r + 1} {name:4s}: CPU {res['cpu']:6.2f} s, wall {res['wall']:6.2f} s, "
                   f"load {os.getloadavg()[0]:.1f}", flush=True)

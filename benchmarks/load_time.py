@@ -41,6 +41,9 @@ followed by a MuJoCo and a Pinocchio load of the same robot in fresh processes (
     python benchmarks/load_time.py --rounds 3
     python benchmarks/load_time.py --smoke         slider_crank, 1 round (CI)
     python benchmarks/load_time.py --panda-only --rounds 3 --empty     first-ever runs
+    python benchmarks/load_time.py --panda-only --rounds 3 --empty --python /tmp/v/bin/python
+                       the same with the ncgen installed for that interpreter (``pip install .``: its
+                       libraries compiled at install; no PYTHONPATH)
 """
 from __future__ import annotations
 
@@ -64,6 +67,8 @@ ROOT = HERE.parent
 EXAMPLES = ROOT / "examples"
 #: Targets of issue 34 (seconds, wall, end to end).
 TARGET_FIRST, TARGET_LATER = 3.0, 1.0
+#: The interpreter of the ncgen runs (``--python``).
+PYTHON = [sys.executable]
 
 
 def panda_urdf() -> Path:
@@ -96,7 +101,7 @@ def ncgen_runs(model: Path, t_end: float, rounds: int, base_env: dict, per_versi
     """First, later and store-off runs of ``ncgen simulate model --kernels kernels`` (see the
     module docstring); each fresh cache starts with the per-version libraries of ``per_version``
     (None: empty)."""
-    cmd = [sys.executable, "-m", "ncgen.cli", "simulate", str(model), "--t-end", str(t_end), "--kernels", kernels]
+    cmd = [PYTHON[0], "-m", "ncgen.cli", "simulate", str(model), "--t-end", str(t_end), "--kernels", kernels]
     out: dict[str, list[tuple[float, float]]] = {"first run (empty cache)": [], "later runs (model stored)": [],
                                                  "later runs, store off": [], FIRST_DERIVED: []}
     with tempfile.TemporaryDirectory(prefix="ncgen-load-") as tmp:
@@ -157,8 +162,8 @@ def later_imports(model: Path, t_end: float, base_env: dict) -> list[str]:
     args = ["simulate", str(model), "--t-end", str(t_end)]
     with tempfile.TemporaryDirectory(prefix="ncgen-load-") as tmp:
         env = {**base_env, "NCGEN_CACHE_DIR": f"{tmp}/cache"}
-        run([sys.executable, "-c", LATER_IMPORTS, *args], env, tmp)
-        text = run([sys.executable, "-c", LATER_IMPORTS, *args], env, tmp)[2]
+        run([PYTHON[0], "-c", LATER_IMPORTS, *args], env, tmp)
+        text = run([PYTHON[0], "-c", LATER_IMPORTS, *args], env, tmp)[2]
     return json.loads(text.strip().splitlines()[-1])
 
 
@@ -255,7 +260,11 @@ def main() -> None:
                     "no Python or reference loads)")
     ap.add_argument("--empty", action="store_true", help="first runs from a completely empty cache (no "
                     "per-version library compiled before)")
+    ap.add_argument("--python", help="run ncgen with this interpreter's installed ncgen (no PYTHONPATH; with "
+                    "--panda-only)")
     args = ap.parse_args()
+    if args.python:
+        PYTHON[0] = args.python
     print(machine())
     rounds = 1 if args.smoke else args.rounds
     urdf = panda_urdf()
@@ -264,13 +273,16 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="ncgen-pyc-") as pyc:
         env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
         env.update(PYTHONPATH=str(ROOT), PYTHONPYCACHEPREFIX=pyc)
-        run([sys.executable, "-c", "import ncgen, ncgen.cli, ncgen.codegen.model_cache, mujoco, pinocchio"], env, pyc)
+        if args.python:
+            env.pop("PYTHONPATH")
+        run([PYTHON[0], "-c", "import ncgen, ncgen.cli, ncgen.codegen.model_cache"
+             + ("" if args.python else ", mujoco, pinocchio")], env, pyc)
         per_version = Path(pyc, "per-version")
         if args.empty:
             per_version = None
         elif not args.smoke:        # slider_crank needs none of them
             run([sys.executable, "-c", PER_VERSION_BUILD], {**env, "NCGEN_CACHE_DIR": str(per_version)}, pyc)
-        startup = [run([sys.executable, "-c", "pass"], env, pyc)[:2] for _ in range(rounds)]
+        startup = [run([PYTHON[0], "-c", "pass"], env, pyc)[:2] for _ in range(rounds)]
         print(summary("python -c pass (start-up alone)", startup))
         for model in models:
             print(f"\n=== {model.stem}: ncgen simulate {model.name} --t-end {args.t_end:g}"

@@ -9,7 +9,9 @@ sources key hashes ncgen's version, CasADi's and the files the library is made o
 formulas it reads); the compiler key the compiler's path (found as
 :func:`ncgen.codegen.compiler.find_compiler` does, without running it).  A hit loads the
 library with no call of the compiler, and so does a process with no compiler at all when a
-library of the same sources is cached.  A miss writes the package
+library of the same sources is cached.  Before the cache, the library ``pip install .``
+compiled into the package is taken when its keys, flags and sha256 match
+(:mod:`ncgen.runtime.installed_libraries`).  A miss writes the package
 (:func:`~ncgen.codegen.element_kernels.write_element_package`) and compiles it with
 :func:`ncgen.codegen.compile_cache.compile_package` (cached by content, atomic).
 
@@ -41,6 +43,7 @@ from ncgen.codegen.model_tables import ModelTables
 from ncgen.codegen.render import shipped_templates_dir
 from ncgen.errors import CodegenError, CompilerNotFound, ShapeError
 from ncgen.files import atomic_path
+from ncgen.runtime.installed_libraries import installed_library
 from ncgen.version import __version__
 
 #: Fields of ``ncgen_tables`` (templates/c/runtime/ncgen_element_tables.h), in order.
@@ -146,12 +149,20 @@ def contact_library(cflags: str | None = None) -> tuple[Path, bool]:
                           lambda out: write_element_package(out, contacts=True), CONTACT_PACKAGE, cflags)
 
 
-def library_ready(prefix: str, source: str) -> bool:
-    """Whether :func:`cached_library` would find the library in the compile cache (no compile)."""
+def library_ready(prefix: str, source: str, cflags: str | None = None) -> bool:
+    """Whether :func:`cached_library` would find the library (``cflags`` as it takes them)
+    installed or in the compile cache (no compile)."""
     compiler = compiler_path()
+    if installed_library(prefix, source, compiler, effective_cflags(cflags)) is not None:
+        return True
     if compiler is None:
         return any(_indexed(index) is not None for index in cache_dir().glob(f"{prefix}-{source[:20]}-*.json"))
     return _indexed(_index(prefix, source, compiler, os.environ.get("NCGEN_CFLAGS"))) is not None
+
+
+def effective_cflags(cflags: str | None) -> str | None:
+    """The flags a library is built with: ``cflags``, else ``$NCGEN_CFLAGS``, else None (ncgen's defaults)."""
+    return os.environ.get("NCGEN_CFLAGS") if cflags is None else cflags
 
 
 def cached_library(prefix: str, source: str, write, package: str, cflags: str | None = None) -> tuple[Path, bool]:
@@ -160,10 +171,14 @@ def cached_library(prefix: str, source: str, write, package: str, cflags: str | 
     ``<prefix>-<source>-<compiler>.json`` of the compile cache (module docstring), with the
     flags ``cflags``, else ``$NCGEN_CFLAGS`` if set (then part of the index's name: the test
     suite's fast tier builds the libraries at -O0 beside the default ones), else ncgen's
-    defaults."""
+    defaults.  A library the install built with the same keys and flags comes first
+    (:func:`~ncgen.runtime.installed_libraries.installed_library`, verified by its sha256)."""
     env_cflags = os.environ.get("NCGEN_CFLAGS") if cflags is None else None
-    cflags = cflags if env_cflags is None else env_cflags
+    cflags = effective_cflags(cflags)
     compiler = compiler_path()
+    installed = installed_library(prefix, source, compiler, cflags)
+    if installed is not None:       # built by the install (ncgen/runtime/installed_libraries.py)
+        return installed, False
     if compiler is None:            # no compiler: any library of these sources will do
         for index in sorted(cache_dir().glob(f"{prefix}-{source[:20]}-*.json")):
             library = _indexed(index)

@@ -4,7 +4,8 @@ once per ncgen version and compiler and shared by every model — in units, each
 first run that needs it and found through an index file of the compile cache like the element
 library (:func:`~ncgen.runtime.table_library.cached_library`, index
 ``tree-tables-<unit>-<sources key>-<compiler key>.json``): a tree of the shipped joint kinds
-whose units are compiled reaches compiled RNEA/ABA with no call of the C compiler.
+whose units are compiled reaches compiled RNEA/ABA with no call of the C compiler.  ``pip
+install .`` compiles every unit into the package (:mod:`ncgen.runtime.installed_libraries`).
 
 Units (:mod:`ncgen.codegen.tree_kernels`): the algorithm units ``forward`` (ABA, the joint
 loop), ``inverse`` (RNEA, CRBA) and ``derivatives``, each with the rate kernels of the spherical
@@ -155,20 +156,20 @@ NO_FALLBACK, RUN_NO_FALLBACK = 4, 6
 UNIT_CFLAGS = "-O1"
 
 
-def _index_prefix(unit: str) -> str:
+def index_prefix(unit: str) -> str:
     return f"{INDEX_PREFIX}-{unit}"
 
 
 def unit_ready(unit: str) -> bool:
-    """Whether the unit ``unit`` of the tree library is compiled (in the compile cache)."""
-    return library_ready(_index_prefix(unit), sources_key())
+    """Whether the unit ``unit`` of the tree library is compiled (installed, or in the compile cache)."""
+    return library_ready(index_prefix(unit), sources_key(), unit_cflags(unit))
 
 
 def missing_units(kinds, unit: str = "forward") -> list[str]:
     """The units the algorithm unit ``unit`` needs for the joint kinds ``kinds`` (names,
     :func:`~ncgen.codegen.tree_kernels.units_of`) that are not compiled yet."""
     key = sources_key()
-    return [u for u in units_of(unit, kinds) if not library_ready(_index_prefix(u), key)]
+    return [u for u in units_of(unit, kinds) if not library_ready(index_prefix(u), key, unit_cflags(u))]
 
 
 def tree_library_ready() -> bool:
@@ -179,10 +180,15 @@ def tree_library_ready() -> bool:
 def unit_library(unit: str, cflags: str | None = None) -> tuple[Path, bool]:
     """``(path of the unit's library, whether it was compiled now)``: compiled at first use
     (algorithm units with :data:`UNIT_CFLAGS` unless ``cflags`` or ``$NCGEN_CFLAGS`` is given)."""
+    return cached_library(index_prefix(unit), sources_key(), partial(write_tree_unit, unit), f"{PACKAGE}_{unit}",
+                          unit_cflags(unit, cflags))
+
+
+def unit_cflags(unit: str, cflags: str | None = None) -> str | None:
+    """``cflags``, else :data:`UNIT_CFLAGS` for an algorithm unit when ``$NCGEN_CFLAGS`` is not set."""
     if cflags is None and unit in ALGORITHM_UNITS and "NCGEN_CFLAGS" not in os.environ:
-        cflags = UNIT_CFLAGS
-    return cached_library(_index_prefix(unit), sources_key(), partial(write_tree_unit, unit), f"{PACKAGE}_{unit}",
-                          cflags)
+        return UNIT_CFLAGS
+    return cflags
 
 
 def build_tree_library(cflags: str | None = None) -> dict[str, Path]:
