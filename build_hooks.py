@@ -41,7 +41,7 @@ class BuildPy(build_py):
             return
         sys.path.insert(0, str(ROOT))          # ncgen from this source tree
         from ncgen.errors import CodegenError, CompilerNotFound
-        from ncgen.runtime.installed_libraries import build_installed
+        from ncgen.runtime.install_build import build_installed
 
         try:
             build_installed(target,

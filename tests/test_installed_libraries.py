@@ -18,7 +18,7 @@ import ncgen.codegen.compile_cache as compile_cache
 from ncgen.codegen import c_binding, compile_package, write_package
 from ncgen.codegen.fsutil import sha256_file
 from ncgen.errors import CompilerNotFound
-from ncgen.runtime import installed_libraries as il, table_library as tl, tree_library as tr
+from ncgen.runtime import install_build as ib, installed_libraries as il, table_library as tl, tree_library as tr
 from ncgen.version import __version__
 from test_codegen_samples import chain_functions
 
@@ -103,7 +103,7 @@ def test_a_stale_foreign_or_damaged_installed_library_is_ignored(tmp_path, monke
 
 
 def test_the_install_builds_what_the_runtime_asks_for(monkeypatch):
-    """:func:`~ncgen.runtime.installed_libraries.library_specs` names each library as the
+    """:func:`~ncgen.runtime.install_build.library_specs` names each library as the
     element, contact and tree libraries look it up (prefix, sources key, package, flags), with
     and without ``$NCGEN_CFLAGS``."""
     asked = []
@@ -121,16 +121,16 @@ def test_the_install_builds_what_the_runtime_asks_for(monkeypatch):
         tl.element_library(), tl.contact_library()
         for unit in (*tr.ALGORITHM_UNITS, *tr.kernel_units()):
             tr.unit_library(unit)
-        assert [(s.prefix, s.source, s.package, s.cflags) for s in il.library_specs()] == \
+        assert [(s.prefix, s.source, s.package, s.cflags) for s in ib.library_specs()] == \
             [asked[1], asked[0], *asked[2:]]
-        assert {s.cflags for s in il.library_specs()} == ({None, tr.UNIT_CFLAGS} if flags is None else {flags})
+        assert {s.cflags for s in ib.library_specs()} == ({None, tr.UNIT_CFLAGS} if flags is None else {flags})
 
 
 CHILD = """
 import json, sys
 from pathlib import Path
 import ncgen
-from ncgen.runtime import installed_libraries as il, table_library as tl, tree_library as tr
+from ncgen.runtime import install_build as ib, installed_libraries as il, table_library as tl, tree_library as tr
 folder = il.installed_dir()
 assert folder.parent == Path(ncgen.__file__).parent and Path(sys.argv[1]) in folder.parents, folder
 paths = [tl.element_library()[0], tl.contact_library()[0]] + [tr.unit_library(u)[0] for u in ("forward", "body")]
