@@ -300,7 +300,8 @@ def batch(model, k, args: tuple, p, t: float, fast=None):
     states at once: each argument ``(n, size)``, outputs with a first axis of ``n`` (vectors
     ``(n, size)``, matrices ``(n, rows, columns)``), in one C loop through ``fast``, the door's
     caller (:func:`~ncgen.codegen.fast_call.fast_caller`'s ``batch``: bounds checked and
-    quaternions normalised in C, row by row), else checked and normalised in NumPy (a Python
+    quaternions normalised in C, row by row; the tables' RNEA does both in its own loop,
+    :meth:`~ncgen.runtime.tree_library.TableAlgorithm.rows`), else checked and normalised in NumPy (a Python
     loop without the extension).  A bad row is named in the error."""
     js = model.joint_space
     sizes = {"qj": js.nq, "vj": js.nv, "aj": js.nv, "tau": k._sizes[-1]}
@@ -322,6 +323,11 @@ def batch(model, k, args: tuple, p, t: float, fast=None):
         k._at(t, p)
         shapes = [np.shape(o) for o in (k._outputs if type(k._outputs) is tuple else (k._outputs,))]
     outs = [np.empty((n, int(np.prod(s)))) for s in shapes]
+    if tables and k.name == "rnea":
+        if k.rows(arrays, outs[0], quaternion_offsets(js)) is not None:
+            _name_bad_rows(js, k, arrays)
+            raise NcgenError(f"{k.name}: the C check of the rows refused a row that NumPy's check accepts")
+        return outs[0]
     bad = None
     try:
         if fast is None:
