@@ -107,3 +107,27 @@ def test_two_threads_decide_as_one_on_good_and_bad_runs(chain):
         else:
             assert one.status[i] == 0
             assert_same_run(one, i, single)
+
+
+def test_a_run_whose_shadow_run_fails_takes_its_estimate_from_a_run_at_half_the_step(chain):
+    """The 5-bar chain released at 15 rad/s per axis, h = 2 ms: the shadow run (steps of 4 ms)
+    fails by t = 0.2 s while the run goes on with an energy drift of 0.3 %, its error against
+    IDAS (rtol 1e-10) past 1 % of the chain's size by t = 0.4 s.  The estimate from there comes
+    from a run with steps of h/2 (within 0.5–2× of that error at the end) and rejects the run by
+    t = 0.4 s, in the batch and alone alike; a slow run of the same batch is trusted."""
+    from batch_estimates import rates
+    from ncgen.runtime.stepper_checks import ERROR_FRACTION
+    v0 = rates([0.5, 2.0, 5.0, 10.0, 15.0, 20.0], 8)[0][[0, 37]]
+    batch = nc.simulate_batch(chain, 0.5, 0.1, v0=v0, substeps=50, workers=1, kernels="tables")
+    assert batch.status[0] == 0 and batch.status[1] == STATUS_UNTRUSTED
+    assert "estimated error in q reached" in batch.message[1] and "by t = 0.4 s" in batch.message[1]
+    with pytest.raises(SimulationError, match="estimated error in q reached .* by t = 0.4 s"):
+        nc.simulate(chain, 0.5, 0.1, method="stepper", v0=v0[1], substeps=50, kernels="tables")
+    run = nc.simulate(chain, 0.5, 0.1, method="stepper", v0=v0[1], substeps=50, kernels="tables", check=False)
+    ref = nc.simulate(chain, 0.5, 0.1, v0=v0[1], rtol=1e-10, atol=1e-10)
+    error = np.max(np.abs(run.q - ref.q), axis=1)[1:]
+    size = np.max(np.abs(chain.q0))
+    assert error[3] > ERROR_FRACTION * size and run.info["energy"]["relative"] < 0.01   # the energy check passes
+    assert "h/2" in run.info["error_estimate"]["how"]
+    estimate = run.info["error_estimate"]["q"]
+    assert 0.5 < estimate / error[-1] < 2.0
