@@ -131,3 +131,31 @@ def test_a_run_whose_shadow_run_fails_takes_its_estimate_from_a_run_at_half_the_
     assert "h/2" in run.info["error_estimate"]["how"]
     estimate = run.info["error_estimate"]["q"]
     assert 0.5 < estimate / error[-1] < 2.0
+
+
+def test_fine_estimates_replace_a_failed_shadow_and_rows_without_any_are_flagged():
+    """:func:`fine_estimates` on rows whose shadow failed (−2): Richardson from a run at h/2
+    (here a stand-in stepper whose run is off by 0.03 and fails after 3 of 5 rows, order 2:
+    0.04 = 0.03 · 4/3), rows it did not reach get NO_ESTIMATE, which :func:`row_flags` flags;
+    rows whose shadow held are left alone and the run is made with steps of h/2."""
+    from ncgen.codegen.stepper_package import STATS
+    from ncgen.runtime.stepper import StepperRows, StepperStart, fine_estimates
+    from ncgen.runtime.stepper_checks import NO_ESTIMATE, row_flags
+
+    class Half:
+        def simulate_stats(self, q0, v0, lam0, t0, h, n_steps, every, U, p, step, run):
+            self.h, self.every = h, every
+            return Q - 0.03, V + 0.03, None, None, 3, 3 * every, 0
+
+    t, Q, V = np.linspace(0.0, 0.5, 6), np.zeros((5, 2)), np.zeros((5, 2))
+    S = np.zeros((5, len(STATS)))
+    S[:, STATS.index("error_q")] = S[:, STATS.index("error_v")] = [1e-3, -2, -2, -2, -2]
+    stepper = Half()
+    status = fine_estimates(stepper, StepperStart(t, np.zeros((6, 0)), None, None, None, None),
+                            StepperRows(Q, V, None, S, 5), "zoh", 10, None, 2)
+    assert status == 3 and stepper.h == pytest.approx(0.005) and stepper.every == 20
+    np.testing.assert_allclose(S[:, STATS.index("error_q")], [1e-3, 0.04, 0.04, NO_ESTIMATE, NO_ESTIMATE])
+    np.testing.assert_allclose(S[:, STATS.index("error_v")], [1e-3, 0.04, 0.04, NO_ESTIMATE, NO_ESTIMATE])
+    zero = np.zeros(5)
+    flags = row_flags(zero, zero, zero + 1, 1, zero, zero, 1.0, error_q=S[:, STATS.index("error_q")])
+    assert flags["shadow"].tolist() == [False, False, False, True, True]
