@@ -148,7 +148,8 @@ def _fixed(model, stepper, data: StepperStart, opts: StepperOptions, conservativ
             step_options(tol, max_iter, max_halvings, int(rattle4)),
             RunOptions(estimate=mode, track_work=int(not conservative)), impulse_out=IMP)
     rows = done // substeps
-    if mode == ESTIMATE_MODES["shadow"] and status != STEP_INTERRUPTED:
+    shadow_failed = mode == ESTIMATE_MODES["shadow"] and np.any(S[:rows, STATS.index("error_q")] == -2)
+    if shadow_failed and status != STEP_INTERRUPTED:
         with Ticker(f"stepper: {model.name}, its shadow run failed: a run with steps of h/2 for the estimate"):
             fine = fine_estimates(stepper, data, StepperRows(Q, V, LAM, S, rows), hold, substeps,
                                   step_options(tol, max_iter, max_halvings, int(rattle4)), 4 if rattle4 else 2)
