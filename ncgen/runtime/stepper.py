@@ -165,6 +165,9 @@ def _fixed(model, stepper, data: StepperStart, opts: StepperOptions, conservativ
             "stats": _stats(S[:rows], splits)}
     traj = _trajectory(model, stepper, data, StepperRows(Q, V, LAM, S, rows), info, conservative, start,
                        None if IMP is None else IMP[:rows])
+    if shadow_failed and traj.info["error_estimate"].get("how", "").startswith("Richardson"):
+        traj.info["error_estimate"]["how"] += (", from where Newton failed at 2h |y_h - y_h/2| 2^p / (2^p - 1) "
+                                               "against a run with steps of h/2")
     if contacts:
         traj.info["contacts"] = contact_report(S[:rows])
         warn_unconverged(model, traj.info["contacts"])
