@@ -38,6 +38,7 @@ coordinates, mimic joints allowed (:func:`~ncgen.codegen.tree_check.check_tree`)
 from __future__ import annotations
 
 import ctypes
+import math
 
 import numpy as np
 
@@ -322,9 +323,9 @@ def batch(model, k, args: tuple, p, t: float, fast=None):
     else:
         k._at(t, p)
         shapes = [np.shape(o) for o in (k._outputs if type(k._outputs) is tuple else (k._outputs,))]
-    outs = [np.empty((n, int(np.prod(s)))) for s in shapes]
+    outs = [np.empty((n, math.prod(s))) for s in shapes]
     if tables and k.name == "rnea":
-        if k.rows(arrays, outs[0], quaternion_offsets(js)) is not None:
+        if k.rows(arrays, outs[0], js) is not None:
             _name_bad_rows(js, k, arrays)
             raise NcgenError(f"{k.name}: the C check of the rows refused a row that NumPy's check accepts")
         return outs[0]

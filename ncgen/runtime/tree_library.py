@@ -66,7 +66,7 @@ from ncgen.codegen.tree_tables import TreeTables
 from ncgen.errors import CodegenError, ModelError
 from ncgen.interrupts import call_interruptibly
 from ncgen.runtime.table_library import cached_library, library_ready
-from ncgen.codegen.tree_check import ALGORITHMS, PIVOT_TOL
+from ncgen.codegen.tree_check import ALGORITHMS, PIVOT_TOL, quaternion_offsets
 from ncgen.validation import MAX_MAGNITUDE
 from ncgen.version import __version__
 
@@ -470,16 +470,17 @@ class TableAlgorithm:
                                  f"(smallest relative Cholesky pivot {check[row, 0]:.3g}){where}")
             raise ModelError(f"{self.name}: the result is not finite (non-finite qj, vj or tau?){where}")
 
-    def rows(self, arrays: list, out: np.ndarray, quaternions) -> tuple[int, int] | None:
+    def rows(self, arrays: list, out: np.ndarray, js) -> tuple[int, int] | None:
         """RNEA at the ``n`` states of ``arrays`` (``qj``, ``vj``, ``aj``: C-contiguous float64, one
         row per state) into ``out`` (``(n, ni)``) through the library's ``rnea_rows``: each row
-        checked against :data:`~ncgen.validation.MAX_MAGNITUDE` and its quaternions (offsets
-        ``quaternions`` in ``qj``) normalised in the algorithm's own loop.  Returns None, or
+        checked against :data:`~ncgen.validation.MAX_MAGNITUDE` and its quaternions (those of
+        the joint space ``js``, :func:`~ncgen.codegen.tree_check.quaternion_offsets`)
+        normalised in the algorithm's own loop.  Returns None, or
         ``(row, what)`` for the first bad row (``what``: 0, 1, 2 a value of ``qj``, ``vj``,
         ``aj``; 3 a zero quaternion), the caller naming it."""
         if self._rows is None:
             T = self.tree.tables
-            self._rows = (self.unit.fn["rnea_rows"], np.array(quaternions, dtype=np.int32), np.empty(T.nq),
+            self._rows = (self.unit.fn["rnea_rows"], np.array(quaternion_offsets(js), dtype=np.int32), np.empty(T.nq),
                           np.zeros(2, dtype=np.int32))
         fn, quat, qn, bad = self._rows
         q, v, a = arrays
