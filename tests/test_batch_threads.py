@@ -107,3 +107,55 @@ def test_two_threads_decide_as_one_on_good_and_bad_runs(chain):
         else:
             assert one.status[i] == 0
             assert_same_run(one, i, single)
+
+
+def test_a_run_whose_shadow_run_fails_takes_its_estimate_from_a_run_at_half_the_step(chain):
+    """The 5-bar chain released at 15 rad/s per axis, h = 2 ms: the shadow run (steps of 4 ms)
+    fails by t = 0.2 s while the run goes on with an energy drift of 0.3 %, its error against
+    IDAS (rtol 1e-10) past 1 % of the chain's size by t = 0.4 s.  The estimate from there comes
+    from a run with steps of h/2 (within 0.5–2× of that error at the end) and rejects the run by
+    t = 0.4 s, in the batch and alone alike; a slow run of the same batch is trusted."""
+    from batch_estimates import rates
+    from ncgen.runtime.stepper_checks import ERROR_FRACTION
+    v0 = rates([0.5, 2.0, 5.0, 10.0, 15.0, 20.0], 8)[0][[0, 37]]
+    batch = nc.simulate_batch(chain, 0.5, 0.1, v0=v0, substeps=50, workers=1, kernels="tables")
+    assert batch.status[0] == 0 and batch.status[1] == STATUS_UNTRUSTED
+    assert "estimated error in q reached" in batch.message[1] and "by t = 0.4 s" in batch.message[1]
+    with pytest.raises(SimulationError, match="estimated error in q reached .* by t = 0.4 s"):
+        nc.simulate(chain, 0.5, 0.1, method="stepper", v0=v0[1], substeps=50, kernels="tables")
+    run = nc.simulate(chain, 0.5, 0.1, method="stepper", v0=v0[1], substeps=50, kernels="tables", check=False)
+    ref = nc.simulate(chain, 0.5, 0.1, v0=v0[1], rtol=1e-10, atol=1e-10)
+    error = np.max(np.abs(run.q - ref.q), axis=1)[1:]
+    size = np.max(np.abs(chain.q0))
+    assert error[3] > ERROR_FRACTION * size and run.info["energy"]["relative"] < 0.01   # the energy check passes
+    assert "h/2" in run.info["error_estimate"]["how"]
+    estimate = run.info["error_estimate"]["q"]
+    assert 0.5 < estimate / error[-1] < 2.0
+
+
+def test_fine_estimates_replace_a_failed_shadow_and_rows_without_any_are_flagged():
+    """:func:`fine_estimates` on rows whose shadow failed (−2): Richardson from a run at h/2
+    (here a stand-in stepper whose run is off by 0.03 and fails after 3 of 5 rows, order 2:
+    0.04 = 0.03 · 4/3), rows it did not reach get NO_ESTIMATE, which :func:`row_flags` flags;
+    rows whose shadow held are left alone and the run is made with steps of h/2."""
+    from ncgen.codegen.stepper_package import STATS
+    from ncgen.runtime.stepper import StepperRows, StepperStart, fine_estimates
+    from ncgen.runtime.stepper_checks import NO_ESTIMATE, row_flags
+
+    class Half:
+        def simulate_stats(self, q0, v0, lam0, t0, h, n_steps, every, U, p, step, run):
+            self.h, self.every = h, every
+            return Q - 0.03, V + 0.03, None, None, 3, 3 * every, 0
+
+    t, Q, V = np.linspace(0.0, 0.5, 6), np.zeros((5, 2)), np.zeros((5, 2))
+    S = np.zeros((5, len(STATS)))
+    S[:, STATS.index("error_q")] = S[:, STATS.index("error_v")] = [1e-3, -2, -2, -2, -2]
+    stepper = Half()
+    status = fine_estimates(stepper, StepperStart(t, np.zeros((6, 0)), None, None, None, None),
+                            StepperRows(Q, V, None, S, 5), "zoh", 10, None, 2)
+    assert status == 3 and stepper.h == pytest.approx(0.005) and stepper.every == 20
+    np.testing.assert_allclose(S[:, STATS.index("error_q")], [1e-3, 0.04, 0.04, NO_ESTIMATE, NO_ESTIMATE])
+    np.testing.assert_allclose(S[:, STATS.index("error_v")], [1e-3, 0.04, 0.04, NO_ESTIMATE, NO_ESTIMATE])
+    zero = np.zeros(5)
+    flags = row_flags(zero, zero, zero + 1, 1, zero, zero, 1.0, error_q=S[:, STATS.index("error_q")])
+    assert flags["shadow"].tolist() == [False, False, False, True, True]

@@ -127,6 +127,10 @@ def test_an_input_winch_moves_as_the_expression_and_the_stepper_agrees(tmp_path,
     ref = nc.simulate(winch(smooth, **soft).build(), t_end=0.3, dt=0.005, backend="vm", rtol=1e-9,
                       atol=1e-11)
     np.testing.assert_allclose(weight_z(step), weight_z(ref), atol=2e-5)
+    # its shadow run (62.5 µs steps) fails Newton: the estimate comes from a run at h/2 and measures the error
+    estimate = step.info["error_estimate"]
+    assert "h/2" in estimate["how"]
+    assert 0.3 < estimate["q"] / np.max(np.abs(step.q - ref.q)) < 3.0
 
 
 def test_toml_round_trip_and_bad_reels():

@@ -173,10 +173,12 @@ def test_rows_are_normalised_and_checked_in_c_and_a_bad_row_is_named(tree, name)
     """Rows of states through the door's C loop (quaternions of norm 1.7 with ``qw < 0``
     normalised row by row in C) equal the one-state doors bit for bit, on the tables (RNEA) and
     the flat kernels (CRBA, ABA); a zero quaternion or a value out of bound in row 2 is named
-    with its row, as the NumPy check names it."""
+    with its row, as the NumPy check names it.  The tables' RNEA checks and normalises the rows in
+    its own loop (the library's ``rnea_rows``), the others in the door's caller."""
     X = [np.array([state(tree, s)[i] for s in range(4)]) for i in range(4)]
     args = {"rnea": X[:3], "crba": X[:1], "aba": [X[0], X[1], X[3]]}[name]
     rows = getattr(nc, name)(tree, *args)
+    assert (getattr(rta.door(tree, name).kernel, "_rows", None) is not None) == (name == "rnea")
     for i in range(4):
         np.testing.assert_array_equal(rows[i], getattr(nc, name)(tree, *(x[i] for x in args)))
     s = tree.joint_space.slices()["root"]

@@ -207,7 +207,7 @@ SOURCES = ("runtime/ncgen_tree_tables.h", "runtime/ncgen_spatial.h", "tree_table
 #: The algorithm units of the tree library and their entry points (besides ``work_size``,
 #: ``check``, ``kind_names``, ``set_kernel``); each unit also holds the rate kernels
 #: (:func:`rate_kernel_kinds`).
-ALGORITHM_UNITS = {"inverse": ("rnea", "crba"), "forward": ("aba", "joint_run"),
+ALGORITHM_UNITS = {"inverse": ("rnea", "crba", "rnea_rows"), "forward": ("aba", "joint_run"),
                    "derivatives": ("rnea_derivatives", "aba_derivatives")}
 #: Doubles of work each kernel may take in the units (the kernels are checked against it).
 KERNEL_WORK = 1024

@@ -39,7 +39,7 @@ from ncgen.runtime.library import compiled_functions
 from ncgen.runtime.run_start import initial_multipliers, initial_state, point_bytes
 from ncgen.runtime.options import SimulationOptions
 from ncgen.runtime.stepper import (COMPOSITION_STAGES, ESTIMATE_MODES, ESTIMATE_NAMES, StepperRows, StepperStart,
-                                   _trajectory, fixed_scheme, step_inputs)
+                                   _trajectory, fine_estimates, fixed_scheme, step_inputs)
 from ncgen.runtime.stepper_checks import is_conservative, row_flags, untrusted_row
 from ncgen.codegen.stepper_abi import RunOptions
 from ncgen.runtime.stepper_library import step_options
@@ -123,10 +123,12 @@ def simulate_batch(model, t_end: float, dt: float, *, q0=None, v0=None, p=None, 
     model's size: see :mod:`ncgen.runtime.stepper_checks`); an untrustworthy run gets
     ``STATUS_UNTRUSTED``, its rows from the problem on NaN, and the reason.  ``estimate``: the
     error estimate of the checks, as ``nc.simulate``'s (``True`` or ``"shadow"``: a shadow run
-    with steps of 2h, about half the work again; ``"local"``: a fifth, but it misses the growth
+    with steps of 2h, about half the work again, and where Newton fails at 2h a run with steps of
+    h/2 for that run; ``"local"``: a fifth, but it misses the growth
     of errors along a chaotic motion: on 48 runs of the 5-bar chain, 20 of them with errors
-    above 1 % at h = 1 ms, the shadow run flagged exactly those 20 and the local estimate none,
-    benchmarks/batch_estimates.py; ``False``: none, the other checks stay).  ``check=False``: the bare compiled loop (fastest; choose ``dt`` with
+    above 1 % at h = 1 ms, the shadow run flagged exactly those 20 and the local estimate none;
+    at 2 ms and 5 ms the shadow missed 1 of 22 and 0 of 30 bad runs, the local estimate 21 and
+    17, benchmarks/batch_estimates.py; ``False``: none, the other checks stay).  ``check=False``: the bare compiled loop (fastest; choose ``dt`` with
     a checked run first).  ``outputs``: also the multipliers of the output states, the
     energies, constraint residuals and markers (compiled calls per run; always with ``check``).
     ``kernels``: the stepper's kernels, as ``SimulationOptions(kernels=...)`` chooses them
@@ -413,7 +415,8 @@ class _Runs:
         energy error is measured against the energy scale without the round-off floor, which
         only raises the scale, so every run the single-run check flags is flagged here too
         (and a run flagged here only for round-off passes its own check).  Every run with
-        nonsmooth contacts is flagged (their checks are the contact stepper's)."""
+        nonsmooth contacts is flagged (their checks are the contact stepper's), and every run
+        whose shadow run failed (its estimate then comes from a run with steps of h/2)."""
         if self.stepper.nd:
             return np.ones(self.n, dtype=bool)
         S, Y, col = self.STATS, self.Y, STATS.index
@@ -428,18 +431,24 @@ class _Runs:
         e_rel = np.where(np.isnan(e_rel), np.inf, e_rel)
         size = max(float(np.max(np.abs(self.model.q0), initial=0.0)), 1e-9)
         flags = row_flags(S[:, :, col("splits")], S[:, :, col("newton_iterations")], S[:, :, col("steps")],
-                          COMPOSITION_STAGES if self.rattle4 else 1, e_rel, S[:, :, col("error_q")], size)
+                          COMPOSITION_STAGES if self.rattle4 else 1, e_rel, S[:, :, col("error_q")], size,
+                          error_q=S[:, :, col("error_q")])
+        flags["shadow_failed"] = S[:, :, col("error_q")] == -2   # its estimate from a run at h/2: checked alone
         return np.logical_or.reduce(list(flags.values())).any(axis=1)
 
     def _checked(self, i: int, rows: int, S: np.ndarray) -> None:
-        """Outputs of run ``i`` and the checks of a single run (:func:`untrusted_row`)."""
+        """Outputs of run ``i`` and the checks of a single run (:func:`untrusted_row`), the
+        estimate from a run at h/2 where its shadow run failed (:func:`fine_estimates`)."""
         model, Q, V, LAM = self.model, self.Q[i], self.V[i], self.LAM[i]
+        start = StepperStart(self.t, self.U[i], self.P[i], Q[0], V[0], LAM[0])
+        if self.mode == ESTIMATE_MODES["shadow"]:
+            fine_estimates(self.stepper, start, StepperRows(Q[1:], V[1:], LAM[1:], S, rows), self.hold, self.substeps,
+                           self._options, 4 if self.rattle4 else 2)
         info = {"method": "stepper", "h": self.h, "substeps": self.substeps, "stats": {},
                 "stages": COMPOSITION_STAGES if self.rattle4 else 1, "order": 4 if self.rattle4 else 2,
                 "estimate": ESTIMATE_NAMES[self.mode]}
-        traj = _trajectory(model, self.stepper, StepperStart(self.t, self.U[i], self.P[i], Q[0], V[0], LAM[0]),
-                           StepperRows(Q[1:], V[1:], LAM[1:], S, rows), info, self.conservative, time.perf_counter(),
-                           accel=self._accel())
+        traj = _trajectory(model, self.stepper, start, StepperRows(Q[1:], V[1:], LAM[1:], S, rows), info,
+                           self.conservative, time.perf_counter(), accel=self._accel())
         LAM[:rows + 1] = traj.lam
         self.Y[i, :rows + 1, 0], self.Y[i, :rows + 1, 1] = traj.kinetic, traj.potential
         self.Y[i, :rows + 1, 2] = traj.constraint_residual

@@ -63,8 +63,8 @@ from ncgen.progress import Ticker
 from ncgen.runtime.energy_balance import balance_report, nonsmooth_contacts, stepper_works
 from ncgen.runtime.dynamics_at_state import multipliers_at_samples
 from ncgen.runtime.options import SimulationOptions
-from ncgen.runtime.stepper_checks import (SHADOW_FACTOR, check_fixed, check_global, contact_report, energy_report,
-                                          error_estimate, is_conservative, shadow_estimates,
+from ncgen.runtime.stepper_checks import (NO_ESTIMATE, SHADOW_FACTOR, check_fixed, check_global, contact_report,
+                                          energy_report, error_estimate, is_conservative, shadow_estimates,
                                           shadow_report, trusted_before_failure, warn_unconverged)
 from ncgen.runtime.stepper_library import step_options
 from ncgen.runtime.stepper_options import StepperOptions
@@ -147,8 +147,14 @@ def _fixed(model, stepper, data: StepperStart, opts: StepperOptions, conservativ
             q0, v0, lam0, float(t[0]), h, n_out * substeps, substeps, step_inputs(U, t, hold, substeps), p,
             step_options(tol, max_iter, max_halvings, int(rattle4)),
             RunOptions(estimate=mode, track_work=int(not conservative)), impulse_out=IMP)
-    stepping, stepping_cpu = time.perf_counter() - start, time.process_time() - cpu_start
     rows = done // substeps
+    shadow_failed = mode == ESTIMATE_MODES["shadow"] and np.any(S[:rows, STATS.index("error_q")] == -2)
+    if shadow_failed and status != STEP_INTERRUPTED:
+        with Ticker(f"stepper: {model.name}, its shadow run failed: a run with steps of h/2 for the estimate"):
+            fine = fine_estimates(stepper, data, StepperRows(Q, V, LAM, S, rows), hold, substeps,
+                                  step_options(tol, max_iter, max_halvings, int(rattle4)), 4 if rattle4 else 2)
+        status = STEP_INTERRUPTED if fine == STEP_INTERRUPTED else status
+    stepping, stepping_cpu = time.perf_counter() - start, time.process_time() - cpu_start
     info = {"method": "stepper", "backend": "compiled", "kernels": stepper.kernels,
             "scheme": "RATTLE, nonsmooth contacts" if contacts else
             "RATTLE, Suzuki's fourth-order composition" if rattle4 else "RATTLE", "order": 4 if rattle4 else 2,
@@ -159,6 +165,9 @@ def _fixed(model, stepper, data: StepperStart, opts: StepperOptions, conservativ
             "stats": _stats(S[:rows], splits)}
     traj = _trajectory(model, stepper, data, StepperRows(Q, V, LAM, S, rows), info, conservative, start,
                        None if IMP is None else IMP[:rows])
+    if shadow_failed and traj.info["error_estimate"].get("how", "").startswith("Richardson"):
+        traj.info["error_estimate"]["how"] += (", from where Newton failed at 2h |y_h - y_h/2| 2^p / (2^p - 1) "
+                                               "against a run with steps of h/2")
     if contacts:
         traj.info["contacts"] = contact_report(S[:rows])
         warn_unconverged(model, traj.info["contacts"])
@@ -258,6 +267,39 @@ def fixed_scheme(model, scheme: str) -> str:
     if scheme != "auto":
         return scheme
     return "rattle" if getattr(model, "contacts", None) else "rattle4"
+
+
+def fine_estimates(stepper, data: StepperStart, rows: StepperRows, hold: str, substeps: int, step, order: int) -> int:
+    """Where the shadow run of a fixed-step run (steps of 2h) failed — the error columns of
+    ``rows.S`` at −2 from some output row on — the global estimate from a run with steps of
+    h/2 from the same start instead, written into those rows of ``rows.S`` in place:
+    ``|y_h − y_h/2| 2^p / (2^p − 1)`` (Richardson from the finer side, ``p`` the scheme's
+    ``order``).  Newton failing at 2h only says the step
+    is within a factor 2 of its limit: a run verified against a closed form can be there (a stiff
+    winch), and so can one far off (the 5-bar chain at 15 rad/s, h = 2 ms: 0.74 m off IDAS,
+    benchmarks/batch_estimates.py); the run at h/2 tells them apart, at twice the run's work,
+    only where the shadow failed.  ``step``: the run's step options.  Rows where that run failed
+    too get :data:`~ncgen.runtime.stepper_checks.NO_ESTIMATE` (the checks flag them).  Returns
+    that run's status (0 when none was needed)."""
+    S, n = rows.S, rows.rows
+    col_q, col_v = STATS.index("error_q"), STATS.index("error_v")
+    failed = S[:n, col_q] == -2
+    if not failed.any():
+        return 0
+    t, U, p, q0, v0, lam0 = data
+    fine = 2 * substeps
+    h = float(t[1] - t[0]) / fine
+    Qf, Vf, _, _, status, done, _ = stepper.simulate_stats(q0, v0, lam0, float(t[0]), h, n * fine, fine,
+                                                           step_inputs(U[:n + 1], t[:n + 1], hold, fine), p, step,
+                                                           RunOptions(estimate=0, track_work=0))
+    k = done // fine
+    factor = 2.0 ** order / (2.0 ** order - 1.0)
+    use = np.flatnonzero(failed[:k])
+    S[use, col_q] = factor * np.max(np.abs(rows.Q[use] - Qf[use]), axis=1)
+    S[use, col_v] = factor * np.max(np.abs(rows.V[use] - Vf[use]), axis=1)
+    none = k + np.flatnonzero(failed[k:])
+    S[none, col_q] = S[none, col_v] = NO_ESTIMATE
+    return status
 
 
 def _interrupted(model, traj: Trajectory, t_stop: float):

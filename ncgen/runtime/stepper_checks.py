@@ -18,6 +18,9 @@ A fixed-step run (:func:`ncgen.runtime.stepper.simulate_stepper` without ``rtol`
   the origin under a reversing push of 1e-12 N, is no alarm);
 * the estimated global error in q exceeds :data:`ERROR_FRACTION` of the model's size
   ``max |q0|`` (m);
+* the shadow run of the error estimate (steps of 2h) failed and so did the run with steps
+  of h/2 that then gives the estimate (:func:`~ncgen.runtime.stepper.fine_estimates`): the
+  run has no estimate from there on;
 * nonsmooth contacts: a contact solve stopped at its sweep limit with a last sweep that
   still changed a contact velocity by more than :data:`PGS_TRUST` (1 + max |U|) m/s;
 * nonsmooth contacts: the contacts created energy, their work (normal + friction +
@@ -77,6 +80,9 @@ from ncgen.codegen.stepper_package import (CONTACT_STATS, PENETRATION_TOL, PGS_M
 from ncgen.errors import AccuracyWarning, SimulationError, option, user_stacklevel
 from ncgen.model.data import model_data
 
+#: The error columns of the statistics from where the shadow run (steps of 2h) failed and so did
+#: the run with steps of h/2 that then gives the estimate (the C loops write −2 where the shadow failed).
+NO_ESTIMATE = -3.0
 #: Largest allowed change of a conservative model's energy, and error of the energy balance
 #: of a non-conservative one, as a fraction of the energy scale ``max(|E|, T, |V − V0|, |W|)``
 #: seen so far.
@@ -379,6 +385,8 @@ def error_estimate(S: np.ndarray, substeps: int | None, mode: str | bool = "shad
         how = "sum of the local error estimates of the accepted steps (Richardson, halves against whole steps)"
     elif np.isnan(gq[-1]) and np.any(S[:, STATS.index("error_q")] == -2):
         how = "none: the shadow run with steps of 2h failed (Newton), the step is near its limit"
+    elif np.isnan(gq[-1]) and np.any(S[:, STATS.index("error_q")] == NO_ESTIMATE):
+        how = "none: the shadow run with steps of 2h failed (Newton), and so did the run with steps of h/2"
     elif np.isnan(gq[-1]):
         how = "none (estimate=False, or a single step)"
     elif mode == "local":
@@ -503,17 +511,23 @@ def contact_report(S: np.ndarray) -> dict:
             "penetration_tol": PENETRATION_TOL, "cone_residual": float(law.max(initial=0.0))}
 
 
-def row_flags(splits, iters, steps, stages: int, e_rel, gq, size: float, residual=None) -> dict[str, np.ndarray]:
+def row_flags(splits, iters, steps, stages: int, e_rel, gq, size: float, residual=None,
+              error_q=None) -> dict[str, np.ndarray]:
     """The checks of :func:`untrusted_row`, per output row of the statistics (arrays of any
     shape, e.g. runs × rows): which rows each check flags.  ``e_rel``: the energy error over
     its scale; ``gq``: the global error estimate in q (m); ``size``: the largest |q0| (m);
-    ``residual``: the contact solves' last sweep change (None: no contacts)."""
+    ``residual``: the contact solves' last sweep change (None: no contacts); ``error_q``:
+    the statistics' column of that name (:data:`NO_ESTIMATE` flagged: from where the shadow
+    run failed and so did the run with steps of h/2 that replaces its estimate,
+    :func:`~ncgen.runtime.stepper.fine_estimates`)."""
     flags = {
         "splits": splits > 0,
         "newton": iters / np.maximum(steps * stages, 1) > NEWTON_LIMIT,
         "energy": e_rel > ENERGY_FRACTION,
         "error": np.nan_to_num(np.maximum(gq, 0.0)) > ERROR_FRACTION * size,
     }
+    if error_q is not None:
+        flags["shadow"] = error_q == NO_ESTIMATE
     if residual is not None:
         flags["contacts"] = residual > PGS_TRUST
     return flags
@@ -533,7 +547,7 @@ def untrusted_row(model, traj, S: np.ndarray, h: float, contacts: bool = False) 
     size = max(float(np.max(np.abs(model.q0), initial=0.0)), 1e-9)
     e_rel, residual = _energy_errors(model, traj, S, work, contacts, conservative)
     dt = h * traj.info.get("substeps", 1)
-    flags = row_flags(splits, iters, steps, stages, e_rel, gq, size, residual)
+    flags = row_flags(splits, iters, steps, stages, e_rel, gq, size, residual, S[:, STATS.index("error_q")])
     if contacts and not conservative:           # a conservative run's contact work is not tracked: E - E0 tells
         flags["created"], rise, floor = created_rows(model, traj, S, work)
     first = {k: int(np.argmax(f)) for k, f in flags.items() if f.any()}
@@ -554,6 +568,8 @@ def untrusted_row(model, traj, S: np.ndarray, h: float, contacts: bool = False) 
         reason = _created_reason(rise[row], floor[row], float(_energy_scale(traj, work)[row + 1]), depth, t_row)
     elif kind == "contacts":
         reason = _contacts_reason(residual[row], t_row)
+    elif kind == "shadow":
+        reason = _shadow_reason(t_row)
     else:
         reason = _error_reason(gq[row], size, t_row)
     return row, f"{reason}. {suggest}"
@@ -616,6 +632,12 @@ def _contacts_reason(residual: float, t_row: float) -> str:
             f"it crawl, and friction can make it cycle)")
 
 
+def _shadow_reason(t_row: float) -> str:
+    return (f"its shadow run with steps of 2h failed by t = {t_row:.6g} s (Newton's method did not converge at "
+            f"2h), and so did the run with steps of h/2 that then gives the estimate: the run has no error "
+            f"estimate from there on")
+
+
 def _error_reason(gq: float, size: float, t_row: float) -> str:
     return (f"the estimated error in q reached {gq:.3g} m by t = {t_row:.6g} s, more than "
             f"{ERROR_FRACTION:g} of the model's size {size:.3g} m")
@@ -630,10 +652,11 @@ def _suggestion(h: float, dt: float, err: float, size: float, kind: str, adaptiv
 
 def _step_suggestion(h: float, dt: float, err: float, size: float, kind: str, adaptive: bool = True) -> str:
     """Which step to use instead: a quarter of ``h`` after split steps, exploding Newton
-    iterations or an energy error, half of it after a large error estimate, and in every
+    iterations or an energy error, half of it after a large error estimate or a failed
+    shadow run, and in every
     case no more than the step at which the estimate (∝ h²) would be 1 % of the size;
     ``adaptive``: error control (``rtol``) is offered too (not for rolling elements)."""
-    h_new = h / 2 if kind == "error" else h / 4
+    h_new = h / 2 if kind in ("error", "shadow") else h / 4
     if err > 0 and math.isfinite(err):
         h_new = min(h_new, h * math.sqrt(0.1 * ERROR_FRACTION * size / err))
     substeps = max(1, math.ceil(dt / h_new - 1e-9))

@@ -38,6 +38,7 @@ coordinates, mimic joints allowed (:func:`~ncgen.codegen.tree_check.check_tree`)
 from __future__ import annotations
 
 import ctypes
+import math
 
 import numpy as np
 
@@ -300,7 +301,8 @@ def batch(model, k, args: tuple, p, t: float, fast=None):
     states at once: each argument ``(n, size)``, outputs with a first axis of ``n`` (vectors
     ``(n, size)``, matrices ``(n, rows, columns)``), in one C loop through ``fast``, the door's
     caller (:func:`~ncgen.codegen.fast_call.fast_caller`'s ``batch``: bounds checked and
-    quaternions normalised in C, row by row), else checked and normalised in NumPy (a Python
+    quaternions normalised in C, row by row; the tables' RNEA does both in its own loop,
+    :meth:`~ncgen.runtime.tree_library.TableAlgorithm.rows`), else checked and normalised in NumPy (a Python
     loop without the extension).  A bad row is named in the error."""
     js = model.joint_space
     sizes = {"qj": js.nq, "vj": js.nv, "aj": js.nv, "tau": k._sizes[-1]}
@@ -321,7 +323,12 @@ def batch(model, k, args: tuple, p, t: float, fast=None):
     else:
         k._at(t, p)
         shapes = [np.shape(o) for o in (k._outputs if type(k._outputs) is tuple else (k._outputs,))]
-    outs = [np.empty((n, int(np.prod(s)))) for s in shapes]
+    outs = [np.empty((n, math.prod(s))) for s in shapes]
+    if tables and k.name == "rnea":
+        if k.rows(arrays, outs[0], js) is not None:
+            _name_bad_rows(js, k, arrays)
+            raise NcgenError(f"{k.name}: the C check of the rows refused a row that NumPy's check accepts")
+        return outs[0]
     bad = None
     try:
         if fast is None:

@@ -67,7 +67,7 @@ from ncgen.codegen.tree_tables import TreeTables
 from ncgen.errors import CodegenError, ModelError
 from ncgen.interrupts import call_interruptibly
 from ncgen.runtime.table_library import cached_library, library_ready
-from ncgen.codegen.tree_check import ALGORITHMS, PIVOT_TOL
+from ncgen.codegen.tree_check import ALGORITHMS, PIVOT_TOL, quaternion_offsets
 from ncgen.validation import MAX_MAGNITUDE
 from ncgen.version import __version__
 
@@ -91,6 +91,10 @@ SIGNATURES = {
     "rnea": c_binding.Signature("int", ((_T, "T"), ("int", "n"), (_D, "q"), (_D, "v"), (_D, "a"),
                                         ("double *", "tau"), ("double *", "w"))),
     "crba": c_binding.Signature("int", ((_T, "T"), ("int", "n"), (_D, "q"), ("double *", "M"), ("double *", "w"))),
+    "rnea_rows": c_binding.Signature("int", ((_T, "T"), ("int", "n"), (_D, "q"), (_D, "v"), (_D, "a"),
+                                             ("double *", "tau"), ("double *", "w"), ("double", "bound"),
+                                             ("int", "nquat"), ("const int *", "quat"), ("double *", "qn"),
+                                             ("int *", "bad"))),
     "aba": c_binding.Signature("int", ((_T, "T"), ("int", "n"), (_D, "q"), (_D, "v"), (_D, "tau"),
                                        ("double *", "a"), ("double *", "check"), ("double *", "w"))),
     "rnea_derivatives": c_binding.Signature("int", ((_T, "T"), ("int", "n"), (_D, "q"), (_D, "v"), (_D, "a"),
@@ -152,6 +156,8 @@ UNIT_OF = {fn: unit for unit, fns in ALGORITHM_UNITS.items() for fn in fns}
 #: with mimic joints needs the Cholesky fallback (M or C Y not positive definite) and it is not set
 #: (``templates/c/tree_tables.c.j2``): the caller sets it (:meth:`TreeLibrary.set_fallback`) and calls again.
 NO_FALLBACK, RUN_NO_FALLBACK = 4, 6
+#: What ``rnea_rows`` returns for a row out of bound or with a zero quaternion (``templates/c/tree_tables.c.j2``).
+ROW = 5
 #: Flags of the algorithm units' loops (``-O1``: …); the kernel units take the compile cache's defaults.
 UNIT_CFLAGS = "-O1"
 
@@ -363,7 +369,7 @@ class TableAlgorithm:
         self._out_sizes = {"tau": (T.ni,), "aj": (T.nv,), "M": (T.ni, T.ni)}
         self.unit = tree.unit(UNIT_OF[name])
         self._fn = self.unit.fn[name]
-        self._single = None
+        self._single = self._rows = None
         self._quaternions = bool(np.any(np.isin(np.asarray(JOINT_KINDS_NQ)[T.arrays["kind"]], (4, 7))))
         self._fast = self._fast_caller()
 
@@ -469,6 +475,29 @@ class TableAlgorithm:
                 raise ModelError(f"{self.name}: the joint-space mass matrix is singular at this state "
                                  f"(smallest relative Cholesky pivot {check[row, 0]:.3g}){where}")
             raise ModelError(f"{self.name}: the result is not finite (non-finite qj, vj or tau?){where}")
+
+    def rows(self, arrays: list, out: np.ndarray, js) -> tuple[int, int] | None:
+        """RNEA at the ``n`` states of ``arrays`` (``qj``, ``vj``, ``aj``: C-contiguous float64, one
+        row per state) into ``out`` (``(n, ni)``) through the library's ``rnea_rows``: each row
+        checked against :data:`~ncgen.validation.MAX_MAGNITUDE` and its quaternions (those of
+        the joint space ``js``, :func:`~ncgen.codegen.tree_check.quaternion_offsets`)
+        normalised in the algorithm's own loop.  Returns None, or
+        ``(row, what)`` for the first bad row (``what``: 0, 1, 2 a value of ``qj``, ``vj``,
+        ``aj``; 3 a zero quaternion), the caller naming it."""
+        if self._rows is None:
+            T = self.tree.tables
+            self._rows = (self.unit.fn["rnea_rows"], np.array(quaternion_offsets(js), dtype=np.int32), np.empty(T.nq),
+                          np.zeros(2, dtype=np.int32))
+        fn, quat, qn, bad = self._rows
+        q, v, a = arrays
+        status = fn(self.tree.ref, len(q), q.ctypes.data, v.ctypes.data, a.ctypes.data, out.ctypes.data,
+                    self.tree.work.ctypes.data, MAX_MAGNITUDE, len(quat), quat.ctypes.data, qn.ctypes.data,
+                    bad.ctypes.data)
+        if status == ROW:
+            return int(bad[0]), int(bad[1])
+        if status:
+            raise ModelError(f"{self.name}: a kernel of the tree library failed")
+        return None
 
     def batch(self, *args):
         """The algorithm at ``n`` states: each argument ``(n, size)`` (C-contiguous floats);
