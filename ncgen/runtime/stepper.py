@@ -134,14 +134,13 @@ def _fixed(model, stepper, data: StepperStart, opts: StepperOptions, conservativ
     t, U, p, q0, v0, lam0 = data
     hold, substeps, tol, max_iter, max_halvings = opts.hold, opts.substeps, opts.newton_tol, opts.max_newton, \
         opts.max_halvings
-    check, estimate = opts.check, opts.estimate
     n_out = len(t) - 1
     h = float(t[1] - t[0]) / substeps
     contacts = stepper.nd > 0          # nonsmooth contacts: no shadow run, one-sided energy check
     IMP = np.zeros((n_out, stepper.nd)) if contacts else None      # contact impulses per output interval
     start, cpu_start = time.perf_counter(), time.process_time()
     rattle4 = fixed_scheme(model, opts.scheme) == "rattle4"
-    mode = ESTIMATE_MODES[opts.estimate] if estimate and not contacts else 0
+    mode = ESTIMATE_MODES[opts.estimate] if opts.estimate and not contacts else 0
     with Ticker(f"stepper: {model.name}, {n_out * substeps:,} steps"):
         Q, V, LAM, S, status, done, splits = stepper.simulate_stats(
             q0, v0, lam0, float(t[0]), h, n_out * substeps, substeps, step_inputs(U, t, hold, substeps), p,
@@ -150,24 +149,18 @@ def _fixed(model, stepper, data: StepperStart, opts: StepperOptions, conservativ
     rows = done // substeps
     shadow_failed = mode == ESTIMATE_MODES["shadow"] and np.any(S[:rows, STATS.index("error_q")] == -2)
     if shadow_failed and status != STEP_INTERRUPTED:
-        with Ticker(f"stepper: {model.name}, its shadow run failed: a run with steps of h/2 for the estimate"):
-            fine = fine_estimates(stepper, data, StepperRows(Q, V, LAM, S, rows), hold, substeps,
-                                  step_options(tol, max_iter, max_halvings, int(rattle4)), 4 if rattle4 else 2)
-        status = STEP_INTERRUPTED if fine == STEP_INTERRUPTED else status
+        status = _estimate_at_half_step(model, stepper, data, StepperRows(Q, V, LAM, S, rows), opts, rattle4, status)
     stepping, stepping_cpu = time.perf_counter() - start, time.process_time() - cpu_start
     info = {"method": "stepper", "backend": "compiled", "kernels": stepper.kernels,
-            "scheme": "RATTLE, nonsmooth contacts" if contacts else
-            "RATTLE, Suzuki's fourth-order composition" if rattle4 else "RATTLE", "order": 4 if rattle4 else 2,
-            "stages": COMPOSITION_STAGES if rattle4 else 1, "h": h,
+            **_fixed_scheme_info(contacts, rattle4), "h": h,
             "substeps": substeps, "hold": hold, "tol": tol, "max_iter": max_iter,
             "max_halvings": max_halvings, "estimate": ESTIMATE_NAMES[mode], "stepping_time": stepping,
             "stepping_cpu_time": stepping_cpu, "complete": status == 0,
             "stats": _stats(S[:rows], splits)}
     traj = _trajectory(model, stepper, data, StepperRows(Q, V, LAM, S, rows), info, conservative, start,
                        None if IMP is None else IMP[:rows])
-    if shadow_failed and traj.info["error_estimate"].get("how", "").startswith("Richardson"):
-        traj.info["error_estimate"]["how"] += (", from where Newton failed at 2h |y_h - y_h/2| 2^p / (2^p - 1) "
-                                               "against a run with steps of h/2")
+    if shadow_failed:
+        _say_half_step(traj)
     if contacts:
         traj.info["contacts"] = contact_report(S[:rows])
         warn_unconverged(model, traj.info["contacts"])
@@ -179,15 +172,41 @@ def _fixed(model, stepper, data: StepperStart, opts: StepperOptions, conservativ
                    f"t = {t_fail:.6g} s to {t_fail + h:.6g} s (h = {h:.3g} s, halved up to "
                    f"{max_halvings} times): {STATUS.get(status, f'status {status}')}. The trajectory up to "
                    f"t = {t[rows]:.6g} s is attached to this error as .trajectory.")
-        if check:                      # rows before the failure kept only as far as they are trusted
+        if opts.check:                 # rows before the failure kept only as far as they are trusted
             failed = STATUS.get(status, f"status {status}")
             check_fixed(model, traj, S[:rows], h, substeps, contacts, conservative,
                         after=f" The stepper then failed at t = {t_fail:.6g} s: {failed}.")
         traj.info["message"] = message
         raise SimulationError(message, time=float(t[rows]), trajectory=traj)
-    if check:
+    if opts.check:
         check_fixed(model, traj, S[:rows], h, substeps, contacts, conservative)
     return traj
+
+
+def _fixed_scheme_info(contacts: bool, rattle4: bool) -> dict:
+    """The ``scheme``, ``order`` and ``stages`` entries of a fixed-step run's ``info``."""
+    return {"scheme": "RATTLE, nonsmooth contacts" if contacts else
+            "RATTLE, Suzuki's fourth-order composition" if rattle4 else "RATTLE", "order": 4 if rattle4 else 2,
+            "stages": COMPOSITION_STAGES if rattle4 else 1}
+
+
+def _estimate_at_half_step(model, stepper, data: StepperStart, run: StepperRows, opts: StepperOptions,
+                           rattle4: bool, status: int) -> int:
+    """Where the shadow run (steps of 2h) failed Newton, the error estimate of ``run``'s rows from
+    a run with steps of h/2 (:func:`fine_estimates`, written into ``run.S``); the run's status,
+    interrupted if that run was."""
+    with Ticker(f"stepper: {model.name}, its shadow run failed: a run with steps of h/2 for the estimate"):
+        fine = fine_estimates(stepper, data, run, opts.hold, opts.substeps,
+                              step_options(opts.newton_tol, opts.max_newton, opts.max_halvings, int(rattle4)),
+                              4 if rattle4 else 2)
+    return STEP_INTERRUPTED if fine == STEP_INTERRUPTED else status
+
+
+def _say_half_step(traj: Trajectory) -> None:
+    """The error report of a run whose shadow failed names the estimate of :func:`_estimate_at_half_step`."""
+    if traj.info["error_estimate"].get("how", "").startswith("Richardson"):
+        traj.info["error_estimate"]["how"] += (", from where Newton failed at 2h |y_h - y_h/2| 2^p / (2^p - 1) "
+                                               "against a run with steps of h/2")
 
 
 def _adaptive(model, stepper, data: StepperStart, opts: StepperOptions, conservative: bool) -> Trajectory:
