@@ -45,6 +45,9 @@
 #define NCGEN_TREE_KERNEL 1
 #define NCGEN_TREE_BAD 2
 #define NCGEN_TREE_BODY 13
+#ifndef NCGEN_TREE_DENSE_NV
+#define NCGEN_TREE_DENSE_NV 12       /* forward dynamics by Cholesky of M_i up to this many rates (O(n³)), else ABA (O(n)) */
+#endif
 #ifndef NCGEN_TREE_PIVOT_TOL
 #define NCGEN_TREE_PIVOT_TOL 1e-12   /* ncgen/codegen/tree_check.py: PIVOT_TOL */
 #endif
@@ -693,15 +696,16 @@ static inline void ncgen_tree_mass_add(const ncgen_tree *T, int r, int c, double
   Mi[i > j ? i + T->ni * j : j + T->ni * i] += x;
 }
 
-/* The bias b = τ(q, v, a = 0) per joint rate (nv) and the joint-space mass matrix M (nv × nv,
- * column-major, both triangles) of one pass out and one in, every quantity in the ground frame
- * about the ground's origin (poses of ncgen_tree_ground_poses): outwards each body's twist,
- * bias acceleration (the ground's [0; −g]) and wrench f = I a + v ×* I v with its rigid inertia I
- * in the ground frame (s->IC); inwards b_j = S_jᵀ f and f summed into the parent, the composite
- * inertia I^C summed into the parent (about the same origin: a sum), and M_rc = S_rᵀ I^C_b S_c
- * for a rate c of body b and a rate r of b or an ancestor (no force moved: one origin). */
+/* The bias b = τ(q, v, a = 0) per joint rate (nv) and M_i = Gᵀ M G (ni × ni, column-major, its
+ * lower triangle; G = 1 where direct) of one pass out and one in, every quantity in the ground
+ * frame about the ground's origin (after ncgen_tree_ground_poses), as the articulated-body
+ * algorithm's: outwards each body's twist, bias acceleration (the ground's [0; −g]) and wrench
+ * f = I a − ad(v)ᵀ I v with its rigid inertia I in the ground frame (s->IC); inwards b_j = S_jᵀ f
+ * and f summed into the parent, the composite inertia I^C summed into the parent (about the same
+ * origin: a sum), and M_rc = S_rᵀ I^C_b S_c for a rate c of body b and a rate r of b or an
+ * ancestor (no force moved: one origin). */
 static void ncgen_tree_mass_bias(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, int direct,
-                                 double *bias, double *Mi) {
+                                 double *SP_RESTRICT bias, double *SP_RESTRICT Mi) {
   int b, i, j;
   const double zero[6] = {0, 0, 0, 0, 0, 0};
   const double a0[6] = {0, 0, 0, -T->gravity[0], -T->gravity[1], -T->gravity[2]};
@@ -785,10 +789,13 @@ static void ncgen_tree_mass_bias(const ncgen_tree_kinds *K, const ncgen_tree *T,
 }
 
 /* aj (nv) = G M_i⁻¹ (τ_i − b_i) in the work s by the mass matrix and the bias of one pass out and
- * in (ncgen_tree_mass_bias) and a dense Cholesky of M_i = Gᵀ M G; check = [smallest relative pivot
- * of the Cholesky (NaN stays), Σ aj]. */
-static int ncgen_tree_mass_fd(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, const double *q,
-                              const double *v, const double *tau_i, double *aj, double *check) {
+ * in (ncgen_tree_mass_bias) and a dense Cholesky of M_i = Gᵀ M G (its factor left in s->L):
+ * forward dynamics of the trees of at most NCGEN_TREE_DENSE_NV rates, the fallback of the larger
+ * ones with mimic joints, the first step of the derivatives; check = [smallest relative pivot of
+ * the Cholesky (NaN stays), Σ aj]. */
+static int ncgen_tree_factored_aba(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s,
+                                   const double *q, const double *v, const double *tau_i, double *aj,
+                                   double *check) {
   int i, ni = T->ni, direct = ncgen_tree_unmapped(T);
   double sum = 0.0;
   ncgen_tree_expand(T, s, q, v, 0);
@@ -1107,39 +1114,6 @@ static int ncgen_tree_constrained(const ncgen_tree_kinds *K, const ncgen_tree *T
   return 0;
 }
 
-/* M_i and the bias b_i = τ_i(q, v, a = 0) (in s->rhs) of one local pass; the Cholesky
- * factor of M_i in s->L; returns the smallest relative pivot in *pivot. */
-static int ncgen_tree_factored(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, const double *q,
-                               const double *v, double *pivot) {
-  ncgen_tree_expand(T, s, q, v, 0);
-  if (ncgen_tree_local_poses(K, T, s)) return NCGEN_TREE_KERNEL;
-  ncgen_tree_local_motion(K, T, s, 1);
-  ncgen_tree_local_backward(K, T, s);
-  ncgen_tree_project(T, s->tau, s->rhs);
-  ncgen_tree_ground_poses(K, T, s);
-  ncgen_tree_ground_mass(K, T, s, s->Mi);
-  *pivot = ncgen_tree_cholesky(T->ni, s->Mi, s->L);
-  return 0;
-}
-
-/* aj (nv) = G M_i⁻¹ (τ_i − b_i) by Cholesky of M_i (the fallback of forward dynamics with mimic
- * joints when M or C Y is not positive definite); check = [smallest relative pivot, Σ aj]. */
-static int ncgen_tree_factored_aba(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s,
-                                   const double *q, const double *v, const double *tau_i, double *aj,
-                                   double *check) {
-  int i;
-  double sum = 0.0;
-  if (ncgen_tree_factored(K, T, s, q, v, &check[0])) return NCGEN_TREE_KERNEL;
-  for (i = 0; i < T->ni; ++i) s->rhs[i] = tau_i[i] - s->rhs[i];
-  ncgen_tree_solve(T->ni, s->L, s->rhs, 1);
-  for (i = 0; i < T->nv; ++i) {
-    aj[i] = T->rate_coef[i] * s->rhs[T->rate_col[i]];
-    sum += aj[i];
-  }
-  check[1] = sum;
-  return 0;
-}
-
 #ifdef NCGEN_TREE_EXTERNAL_FALLBACK
 /* Defined by the includer (a unit of the tree library without the Cholesky path): the
  * fallback of ncgen_tree_aba_at, the same contract as ncgen_tree_factored_aba. */
@@ -1147,15 +1121,17 @@ static int ncgen_tree_fallback(const ncgen_tree *T, ncgen_tree_work *s, const do
                                const double *tau_i, double *aj, double *check);
 #endif
 
-/* aj (nv) = G M_i⁻¹ (τ_i − b_i) in the work s: forward dynamics, by the articulated-body
- * algorithm (with mimic joints: their followers held by constraints), else (M or C Y not
- * positive definite) by Cholesky of M_i (ncgen_tree_factored_aba, or the includer's
- * ncgen_tree_fallback where NCGEN_TREE_EXTERNAL_FALLBACK is defined); check = [smallest
- * relative pivot, Σ aj]. */
+/* aj (nv) = G M_i⁻¹ (τ_i − b_i) in the work s: forward dynamics, by Cholesky of M_i
+ * (ncgen_tree_factored_aba) for trees of at most NCGEN_TREE_DENSE_NV rates, else by the
+ * articulated-body algorithm (with mimic joints: their followers held by constraints, and where
+ * M or C Y is not positive definite by Cholesky of M_i: ncgen_tree_factored_aba, or the
+ * includer's ncgen_tree_fallback where NCGEN_TREE_EXTERNAL_FALLBACK is defined); check =
+ * [smallest relative pivot, Σ aj]. */
 static int ncgen_tree_aba_at(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, const double *q,
                              const double *v, const double *tau_i, double *aj, double *check) {
   int i;
   double sum = 0.0;
+  if (T->nv <= NCGEN_TREE_DENSE_NV) return ncgen_tree_factored_aba(K, T, s, q, v, tau_i, aj, check);
   ncgen_tree_expand(T, s, q, v, 0);
   if (ncgen_tree_unmapped(T)) {
     if (ncgen_tree_articulated(K, T, s, tau_i, aj, &check[0])) return NCGEN_TREE_KERNEL;
