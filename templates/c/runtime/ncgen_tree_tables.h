@@ -757,16 +757,17 @@ static void ncgen_tree_mass_bias(const ncgen_tree_kinds *K, const ncgen_tree *T,
       double F[6];
       bias[col] = ncgen_tree_dot6(s->S + 6 * col, f);
       sp_inertia_apply(IC, s->S + 6 * col, F);
+      /* each pair of rates once: b's own up to col, then every rate of each ancestor */
       if (direct)                               /* M_rc in M_i's lower triangle */
         do {
-          int row = T->v_at[up], end = row + K->joint[T->kind[up]].nv;
+          int row = T->v_at[up], end = up == b ? col + 1 : row + K->joint[T->kind[up]].nv;
           for (; row < end; ++row)
             Mi[row > col ? row + T->ni * col : col + T->ni * row] = ncgen_tree_dot6(s->S + 6 * row, F);
           up = T->parent[up];
         } while (up >= 0);
       else
         do {
-          int row = T->v_at[up], end = row + K->joint[T->kind[up]].nv;
+          int row = T->v_at[up], end = up == b ? col + 1 : row + K->joint[T->kind[up]].nv;
           for (; row < end; ++row) ncgen_tree_mass_add(T, row, col, ncgen_tree_dot6(s->S + 6 * row, F), Mi);
           up = T->parent[up];
         } while (up >= 0);
