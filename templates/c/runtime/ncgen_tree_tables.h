@@ -1,6 +1,7 @@
 /* Joint-space algorithms of a tree over data tables: inverse dynamics (RNEA), the joint-space
- * mass matrix (CRBA), forward dynamics (the articulated-body algorithm; with mimic joints the
- * followers held by their constraints, M_i a_i = τ − bias by Cholesky the fallback, which an includer
+ * mass matrix (CRBA), forward dynamics (up to NCGEN_TREE_DENSE_NV rates M_i a_i = τ_i − b_i by
+ * Cholesky, M_i and b_i of one pass out and in; above, the articulated-body algorithm, with mimic
+ * joints the followers held by their constraints and the Cholesky the fallback, which an includer
  * may supply instead: NCGEN_TREE_EXTERNAL_FALLBACK) and the derivatives of RNEA and forward dynamics, as plain
  * loops over the bodies that call one small kernel per kind of joint and one per rigid body
  * (ncgen/codegen/tree_kernels.py generates them, ncgen/codegen/tree_tables.py packs the
@@ -12,9 +13,10 @@
  * are had: 1 a rotation about z (S = [e_z; 0]), 2 a translation along z (S = [0; e_z]), 3 none
  * (fixed), 0 its kernel local.  RNEA runs in the local frames f_b (Featherstone's recursion);
  * CRBA in the ground's axes about each body's origin (composite inertias and forces carried up
- * by translations alone); ABA in the ground frame (articulated inertias summed into the parent
- * with no change of frame, as Pinocchio's).  The derivatives run the tangent recursion in the
- * ground frame.
+ * by translations alone); forward dynamics in the ground frame about its origin (ABA's
+ * articulated inertias, and the Cholesky path's composite inertias, summed into the parent with
+ * no change of frame, as Pinocchio's).  The derivatives run the tangent recursion in the ground
+ * frame.
  *
  * Notation (docs/architecture.md, "Element tables"): poses H = [[R, p], [0, 1]] of member
  * frames in the ground frame g, twists [ω; v] and wrenches [τ; f] expressed in g; R column-major.
