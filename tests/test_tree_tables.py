@@ -128,8 +128,8 @@ def test_tables_equal_the_flat_functions(tree, library):
 
 
 def test_articulated_body_algorithm_equals_the_flat_function_and_the_kkt_solve(free_tree, library):
-    """Without mimic joints forward dynamics is the articulated-body algorithm alone: equal to the
-    flat function (1e-12) and to the constrained equations in natural coordinates."""
+    """Without mimic joints forward dynamics (20 rates) is the articulated-body algorithm alone:
+    equal to the flat function (1e-12) and to the constrained equations in natural coordinates."""
     assert_equal_to_flat(free_tree, ("aba", "rnea"), seed=3, states=2)
     rng = np.random.default_rng(4)
     qj, vj, _, tau = random_state(free_tree, rng)
@@ -139,6 +139,36 @@ def test_articulated_body_algorithm_equals_the_flat_function_and_the_kkt_solve(f
     np.testing.assert_allclose(aj, free_tree.to_joint_space(q, v, a)[2], rtol=0, atol=1e-9)
     tau_back = nc.rnea(free_tree, qj, vj, nc.aba(free_tree, qj, vj, tau, kernels="tables"), kernels="tables")
     np.testing.assert_allclose(tau_back, tau, rtol=0, atol=1e-10 * max(1.0, np.abs(tau).max()))
+
+
+@pytest.mark.parametrize("mimic", [False, True])
+def test_small_trees_forward_dynamics_by_cholesky(mimic, library):
+    """A tree of 11 rates (a free root, a ball, two hinges; with or without a mimic pair), at most
+    the 12 up to which forward dynamics is M_i a_i = τ_i − b_i by Cholesky (M_i, b_i of one pass
+    in the ground frame): equal to the constrained equations in natural coordinates (1e-9, as
+    above) and to the derivatives' own forward dynamics (M_i by the composite-rigid-body
+    algorithm about each body's origin, b_i by the local recursion: 1e-12)."""
+    s = nc.System(f"small_tree_{int(mimic)}", gravity=(0.3, 0, -G))
+    R = quaternion_matrix(np.array([0.2, -0.4, 0.3, 0.8]) / np.linalg.norm([0.2, -0.4, 0.3, 0.8]))
+    b = [s.add_body(f"b{k}", mass=1.0 + 0.2 * k, inertia=np.diag([0.1, 0.2, 0.25]) * (1 + 0.1 * k),
+                    position=(0.3 * k + 0.2, 0.1 * k, 0), rotation=R if k == 1 else np.eye(3)) for k in range(4)]
+    s.add_joint(nc.Free(s.ground, b[0], at=(0.2, 0, 0), rotation=np.eye(3), name="root"))
+    s.add_joint(nc.Spherical(b[0], b[1], at=(0.4, 0.05, 0), name="ball"))
+    j1 = s.add_joint(nc.Revolute(b[1], b[2], at=(0.7, 0.15, 0), axis=(0, 0.6, 0.8), name="f1"))
+    j2 = s.add_joint(nc.Revolute(b[1], b[3], at=(1.0, 0.25, 0), axis=(1, 0, 0), name="f2"))
+    if mimic:
+        s.add_joint(nc.Mimic(j1, j2, multiplier=-2.0, offset=0.1, name="link"))
+    model = s.build(assemble=True)
+    assert model.joint_space.nv == 11
+    qj, vj, _, tau = random_state(model, np.random.default_rng(5))
+    aj = nc.aba(model, qj, vj, tau, kernels="tables")
+    scale = max(1.0, np.abs(aj).max())
+    np.testing.assert_allclose(aj, nc.aba_derivatives(model, qj, vj, tau, kernels="tables")[0], rtol=0,
+                               atol=1e-12 * scale)
+    a0 = nc.aba(model, qj, vj, np.zeros(len(tau)), kernels="tables")
+    q, v = model.from_joint_space(qj, vj)
+    a, _ = nc.forward_dynamics(model, q, v)
+    np.testing.assert_allclose(a0, model.to_joint_space(q, v, a)[2], rtol=0, atol=1e-9)
 
 
 @pytest.mark.slow

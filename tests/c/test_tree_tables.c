@@ -10,7 +10,7 @@
  *   τ_i = M_i a_i + bias, a_i = M_i⁻¹ (τ_i − bias), ∂τ/∂q = ∂τ/∂v = 0, ∂a/∂τ = M_i⁻¹.
  *
  * Checked: RNEA, CRBA, forward dynamics (both ways: the articulated-body algorithm, which
- * NCGEN_TREE_DENSE_NV 0 makes ncgen_tree_aba's, and Cholesky of M_i, ncgen_tree_factored_aba),
+ * NCGEN_TREE_DENSE_NV 0 makes ncgen_tree_aba's, and Cholesky of M_i, ncgen_tree_dense_aba),
  * both derivatives and the joint-space ODE against these closed forms, the mimic map, the pivot
  * check, the checks of inconsistent tables, a failing kernel.  Built and run by
  * tests/test_stepper_runtime_c.py under AddressSanitizer and UndefinedBehaviorSanitizer. */
@@ -202,7 +202,7 @@ static int factored_aba(const ncgen_tree *T, const double *q, const double *v, c
                         double *check, double *work) {
   ncgen_tree_work s;
   ncgen_tree_layout(&KINDS, T, work, &s);
-  return ncgen_tree_factored_aba(&KINDS, T, &s, q, v, t_in, aj, check);
+  return ncgen_tree_dense_aba(&KINDS, T, &s, q, v, t_in, aj, check);
 }
 
 /* The tree without its mimic map (three independent sliders): M = [[m0 + m1 + m2, 0, m2],

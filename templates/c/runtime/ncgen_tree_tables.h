@@ -792,13 +792,12 @@ static void ncgen_tree_mass_bias(const ncgen_tree_kinds *K, const ncgen_tree *T,
 }
 
 /* aj (nv) = G M_i⁻¹ (τ_i − b_i) in the work s by the mass matrix and the bias of one pass out and
- * in (ncgen_tree_mass_bias) and a dense Cholesky of M_i = Gᵀ M G (its factor left in s->L):
- * forward dynamics of the trees of at most NCGEN_TREE_DENSE_NV rates, the fallback of the larger
- * ones with mimic joints, the first step of the derivatives; check = [smallest relative pivot of
- * the Cholesky (NaN stays), Σ aj]. */
-static int ncgen_tree_factored_aba(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s,
-                                   const double *q, const double *v, const double *tau_i, double *aj,
-                                   double *check) {
+ * in (ncgen_tree_mass_bias) and a dense Cholesky of M_i = Gᵀ M G: forward dynamics of the trees of
+ * at most NCGEN_TREE_DENSE_NV rates (about the ground's origin: a tree far from it loses digits,
+ * as the articulated-body algorithm's quantities do, somewhat more); check = [smallest relative
+ * pivot of the Cholesky (NaN stays), Σ aj]. */
+static int ncgen_tree_dense_aba(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, const double *q,
+                                const double *v, const double *tau_i, double *aj, double *check) {
   int i, ni = T->ni, direct = ncgen_tree_unmapped(T);
   double sum = 0.0;
   ncgen_tree_expand(T, s, q, v, 0);
@@ -1117,6 +1116,39 @@ static int ncgen_tree_constrained(const ncgen_tree_kinds *K, const ncgen_tree *T
   return 0;
 }
 
+/* M_i and the bias b_i = τ_i(q, v, a = 0) (in s->rhs) of one local pass; the Cholesky
+ * factor of M_i in s->L; returns the smallest relative pivot in *pivot. */
+static int ncgen_tree_factored(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, const double *q,
+                               const double *v, double *pivot) {
+  ncgen_tree_expand(T, s, q, v, 0);
+  if (ncgen_tree_local_poses(K, T, s)) return NCGEN_TREE_KERNEL;
+  ncgen_tree_local_motion(K, T, s, 1);
+  ncgen_tree_local_backward(K, T, s);
+  ncgen_tree_project(T, s->tau, s->rhs);
+  ncgen_tree_ground_poses(K, T, s);
+  ncgen_tree_ground_mass(K, T, s, s->Mi);
+  *pivot = ncgen_tree_cholesky(T->ni, s->Mi, s->L);
+  return 0;
+}
+
+/* aj (nv) = G M_i⁻¹ (τ_i − b_i) by Cholesky of M_i (the fallback of forward dynamics with mimic
+ * joints when M or C Y is not positive definite); check = [smallest relative pivot, Σ aj]. */
+static int ncgen_tree_factored_aba(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s,
+                                   const double *q, const double *v, const double *tau_i, double *aj,
+                                   double *check) {
+  int i;
+  double sum = 0.0;
+  if (ncgen_tree_factored(K, T, s, q, v, &check[0])) return NCGEN_TREE_KERNEL;
+  for (i = 0; i < T->ni; ++i) s->rhs[i] = tau_i[i] - s->rhs[i];
+  ncgen_tree_solve(T->ni, s->L, s->rhs, 1);
+  for (i = 0; i < T->nv; ++i) {
+    aj[i] = T->rate_coef[i] * s->rhs[T->rate_col[i]];
+    sum += aj[i];
+  }
+  check[1] = sum;
+  return 0;
+}
+
 #ifdef NCGEN_TREE_EXTERNAL_FALLBACK
 /* Defined by the includer (a unit of the tree library without the Cholesky path): the
  * fallback of ncgen_tree_aba_at, the same contract as ncgen_tree_factored_aba. */
@@ -1125,7 +1157,7 @@ static int ncgen_tree_fallback(const ncgen_tree *T, ncgen_tree_work *s, const do
 #endif
 
 /* aj (nv) = G M_i⁻¹ (τ_i − b_i) in the work s: forward dynamics, by Cholesky of M_i
- * (ncgen_tree_factored_aba) for trees of at most NCGEN_TREE_DENSE_NV rates, else by the
+ * (ncgen_tree_dense_aba) for trees of at most NCGEN_TREE_DENSE_NV rates, else by the
  * articulated-body algorithm (with mimic joints: their followers held by constraints, and where
  * M or C Y is not positive definite by Cholesky of M_i: ncgen_tree_factored_aba, or the
  * includer's ncgen_tree_fallback where NCGEN_TREE_EXTERNAL_FALLBACK is defined); check =
@@ -1134,7 +1166,7 @@ static int ncgen_tree_aba_at(const ncgen_tree_kinds *K, const ncgen_tree *T, ncg
                              const double *v, const double *tau_i, double *aj, double *check) {
   int i;
   double sum = 0.0;
-  if (T->nv <= NCGEN_TREE_DENSE_NV) return ncgen_tree_factored_aba(K, T, s, q, v, tau_i, aj, check);
+  if (T->nv <= NCGEN_TREE_DENSE_NV) return ncgen_tree_dense_aba(K, T, s, q, v, tau_i, aj, check);
   ncgen_tree_expand(T, s, q, v, 0);
   if (ncgen_tree_unmapped(T)) {
     if (ncgen_tree_articulated(K, T, s, tau_i, aj, &check[0])) return NCGEN_TREE_KERNEL;
