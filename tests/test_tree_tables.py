@@ -128,8 +128,8 @@ def test_tables_equal_the_flat_functions(tree, library):
 
 
 def test_articulated_body_algorithm_equals_the_flat_function_and_the_kkt_solve(free_tree, library):
-    """Without mimic joints forward dynamics is the articulated-body algorithm alone: equal to the
-    flat function (1e-12) and to the constrained equations in natural coordinates."""
+    """Without mimic joints forward dynamics (20 rates) is the articulated-body algorithm alone:
+    equal to the flat function (1e-12) and to the constrained equations in natural coordinates."""
     assert_equal_to_flat(free_tree, ("aba", "rnea"), seed=3, states=2)
     rng = np.random.default_rng(4)
     qj, vj, _, tau = random_state(free_tree, rng)
@@ -139,6 +139,36 @@ def test_articulated_body_algorithm_equals_the_flat_function_and_the_kkt_solve(f
     np.testing.assert_allclose(aj, free_tree.to_joint_space(q, v, a)[2], rtol=0, atol=1e-9)
     tau_back = nc.rnea(free_tree, qj, vj, nc.aba(free_tree, qj, vj, tau, kernels="tables"), kernels="tables")
     np.testing.assert_allclose(tau_back, tau, rtol=0, atol=1e-10 * max(1.0, np.abs(tau).max()))
+
+
+@pytest.mark.parametrize("mimic", [False, True])
+def test_small_trees_forward_dynamics_by_cholesky(mimic, library):
+    """A tree of 11 rates (a free root, a ball, two hinges; with or without a mimic pair), at most
+    the 12 up to which forward dynamics is M_i a_i = τ_i − b_i by Cholesky (M_i, b_i of one pass
+    in the ground frame): equal to the constrained equations in natural coordinates (1e-9, as
+    above) and to the derivatives' own forward dynamics (M_i by the composite-rigid-body
+    algorithm about each body's origin, b_i by the local recursion: 1e-12)."""
+    s = nc.System(f"small_tree_{int(mimic)}", gravity=(0.3, 0, -G))
+    R = quaternion_matrix(np.array([0.2, -0.4, 0.3, 0.8]) / np.linalg.norm([0.2, -0.4, 0.3, 0.8]))
+    b = [s.add_body(f"b{k}", mass=1.0 + 0.2 * k, inertia=np.diag([0.1, 0.2, 0.25]) * (1 + 0.1 * k),
+                    position=(0.3 * k + 0.2, 0.1 * k, 0), rotation=R if k == 1 else np.eye(3)) for k in range(4)]
+    s.add_joint(nc.Free(s.ground, b[0], at=(0.2, 0, 0), rotation=np.eye(3), name="root"))
+    s.add_joint(nc.Spherical(b[0], b[1], at=(0.4, 0.05, 0), name="ball"))
+    j1 = s.add_joint(nc.Revolute(b[1], b[2], at=(0.7, 0.15, 0), axis=(0, 0.6, 0.8), name="f1"))
+    j2 = s.add_joint(nc.Revolute(b[1], b[3], at=(1.0, 0.25, 0), axis=(1, 0, 0), name="f2"))
+    if mimic:
+        s.add_joint(nc.Mimic(j1, j2, multiplier=-2.0, offset=0.1, name="link"))
+    model = s.build(assemble=True)
+    assert model.joint_space.nv == 11
+    qj, vj, _, tau = random_state(model, np.random.default_rng(5))
+    aj = nc.aba(model, qj, vj, tau, kernels="tables")
+    scale = max(1.0, np.abs(aj).max())
+    np.testing.assert_allclose(aj, nc.aba_derivatives(model, qj, vj, tau, kernels="tables")[0], rtol=0,
+                               atol=1e-12 * scale)
+    a0 = nc.aba(model, qj, vj, np.zeros(len(tau)), kernels="tables")
+    q, v = model.from_joint_space(qj, vj)
+    a, _ = nc.forward_dynamics(model, q, v)
+    np.testing.assert_allclose(a0, model.to_joint_space(q, v, a)[2], rtol=0, atol=1e-9)
 
 
 @pytest.mark.slow
@@ -478,12 +508,24 @@ def test_units_are_compiled_as_trees_need_them(tmp_path, monkeypatch):
     assert compiled[3:] == ["derivatives", "edge_spherical", "body"]
 
 
+#: Bodies of mass 1 sliding freely along z on the ground (a = τ − g each) beside a small mimic tree:
+#: with them it has more than 12 rates (NCGEN_TREE_DENSE_NV of ncgen_tree_tables.h, up to which
+#: forward dynamics is a Cholesky of M_i), so its forward dynamics runs the articulated-body algorithm.
+FREE_SLIDERS = 11
+
+
+def add_free_sliders(s) -> None:
+    for k in range(FREE_SLIDERS):
+        b = s.add_body(f"s{k}", mass=1.0, inertia=np.diag([0.1, 0.2, 0.25]), position=(2.0 + k, 0.0, 0.0))
+        s.add_joint(nc.Prismatic(s.ground, b, at=(2.0 + k, 0.0, 0.0), axis=(0, 0, 1), name=f"s{k}"))
+
+
 def fallback_tree(name: str):
     """Where forward dynamics needs the Cholesky fallback: b2 (mass 1e-13) slides along z on the
     ground, a mimic follower of b1 (z2 = −2 z1), and carries b3 sliding along z; the tree with every
     rate free has a relative ABA pivot of 1e-13 at b2's joint, while M_i (rates z1, z3) is well
     conditioned.  Lagrangian in (z1, z3), b3 at height z2 + z3: M_i = [[m1 + 4 ε + 4 m3, −2 m3],
-    [−2 m3, m3]], gravity forces −g (m1 − 2 ε − 2 m3, m3)."""
+    [−2 m3, m3]], gravity forces −g (m1 − 2 ε − 2 m3, m3); then the free sliders (rates after z3)."""
     s = nc.System(name, gravity=(0.0, 0.0, -G))
     bodies = [s.add_body(f"b{k}", mass=m, inertia=np.diag([0.1, 0.2, 0.25]) * m, position=(0.5, y, 0.0))
               for k, (m, y) in enumerate(((1.0, 0.0), (1e-13, 1.0), (1.0, 1.0)), start=1)]
@@ -491,14 +533,15 @@ def fallback_tree(name: str):
     j2 = s.add_joint(nc.Prismatic(s.ground, bodies[1], at=(0.5, 1.0, 0.0), axis=(0, 0, 1), name="f2"))
     s.add_joint(nc.Prismatic(bodies[1], bodies[2], at=(0.5, 1.0, 0.0), axis=(0, 0, 1), name="f3"))
     s.add_joint(nc.Mimic(j1, j2, multiplier=-2.0, name="link"))
+    add_free_sliders(s)
     return s.build()
 
 
 @pytest.mark.slow      # a fallback unit compiled into an empty cache; fast:
 #                       test_articulated_body_algorithm_equals_the_flat_function_and_the_kkt_solve
 def test_the_cholesky_fallback_is_compiled_when_a_tree_first_needs_it(tmp_path, monkeypatch):
-    """A fresh compile cache: a mimic tree whose constrained ABA succeeds (the gripper) compiles
-    the forward unit alone; a tree whose constrained ABA fails its pivot check
+    """A fresh compile cache: a mimic tree whose constrained ABA succeeds (the gripper, beside
+    the free sliders) compiles the forward unit alone; a tree whose constrained ABA fails its pivot check
     (:func:`fallback_tree`) then gets the Cholesky fallback, the inverse unit's: its joint-space
     run (restarted once the fallback is set) and its forward dynamics equal the closed form of
     the Lagrangian in the independent rates and the flat function (1e-12), and its energy holds."""
@@ -515,6 +558,7 @@ def test_the_cholesky_fallback_is_compiled_when_a_tree_first_needs_it(tmp_path, 
     j1 = s.add_joint(nc.Prismatic(s.ground, b1, at=(0.5, 0, 0), axis=(0, 0, 1), name="f1"))
     j2 = s.add_joint(nc.Prismatic(s.ground, b2, at=(0.5, 1, 0), axis=(0, 0, 1), name="f2"))
     s.add_joint(nc.Mimic(j1, j2, multiplier=-2.0, name="link"))
+    add_free_sliders(s)
     gripper = s.build()
     traj = nc.simulate(gripper, 0.2, 0.05, method="joint", kernels="tables")
     np.testing.assert_allclose(traj.qj[-1, 0] - traj.qj[0, 0], G / 5 * 0.2 ** 2 / 2, rtol=1e-9)
@@ -529,15 +573,16 @@ def test_the_cholesky_fallback_is_compiled_when_a_tree_first_needs_it(tmp_path, 
     assert compiled == ["forward", "inverse"] and tl.load_tree_library().fallback
     assert traj.info["kernels"] == "tables"
     t = traj.t - traj.t[0]
-    expected = traj.qj[0][None, :] + np.outer(t ** 2 / 2, [a_i[0], -2 * a_i[0], a_i[1]])
+    free = np.full(FREE_SLIDERS, -G)
+    expected = traj.qj[0][None, :] + np.outer(t ** 2 / 2, [a_i[0], -2 * a_i[0], a_i[1], *free])
     np.testing.assert_allclose(traj.qj, expected, rtol=0, atol=1e-9)
     assert traj.energy_drift <= 1e-9 * max(1.0, traj.energy_scale)
-    qj, vj = np.array([0.1, -0.2 + 0.0, 0.3]), np.array([0.4, -0.8, -0.1])
-    qj[1] = -2 * qj[0]
-    for tau in (np.zeros(2), np.array([0.7, -0.3])):
+    qj = np.r_[0.1, -0.2, 0.3, np.linspace(-0.5, 0.5, FREE_SLIDERS)]
+    vj = np.r_[0.4, -0.8, -0.1, np.linspace(1.0, -1.0, FREE_SLIDERS)]
+    for tau in (np.zeros(2 + FREE_SLIDERS), np.r_[0.7, -0.3, np.linspace(-2.0, 2.0, FREE_SLIDERS)]):
         got = nc.aba(model, qj, vj, tau, kernels="tables")
-        want = np.linalg.solve(Mi, tau - G * np.array([m - 2 * eps - 2 * m, m]))
-        np.testing.assert_allclose(got, [want[0], -2 * want[0], want[1]], rtol=0, atol=1e-12)
+        want = np.linalg.solve(Mi, tau[:2] - G * np.array([m - 2 * eps - 2 * m, m]))
+        np.testing.assert_allclose(got, [want[0], -2 * want[0], want[1], *(tau[2:] - G)], rtol=0, atol=1e-12)
         np.testing.assert_allclose(got, nc.aba(model, qj, vj, tau, kernels="flat"), rtol=0, atol=1e-12)
     assert compiled == ["forward", "inverse"]
 

@@ -9,10 +9,13 @@
  *   M_i = diag(m0 + m1 + 9 m2, m1 + m2), the bias is (0, (m1 + m2) g) at every (q, v), and
  *   τ_i = M_i a_i + bias, a_i = M_i⁻¹ (τ_i − bias), ∂τ/∂q = ∂τ/∂v = 0, ∂a/∂τ = M_i⁻¹.
  *
- * Checked: RNEA, CRBA, forward dynamics, both derivatives and the joint-space ODE against these closed forms, the
- * mimic map, the pivot check, the checks of inconsistent tables, a failing kernel.  Built and
- * run by tests/test_stepper_runtime_c.py under AddressSanitizer and UndefinedBehaviorSanitizer. */
+ * Checked: RNEA, CRBA, forward dynamics (both ways: the articulated-body algorithm, which
+ * NCGEN_TREE_DENSE_NV 0 makes ncgen_tree_aba's, and Cholesky of M_i, ncgen_tree_dense_aba),
+ * both derivatives and the joint-space ODE against these closed forms, the mimic map, the pivot
+ * check, the checks of inconsistent tables, a failing kernel.  Built and run by
+ * tests/test_stepper_runtime_c.py under AddressSanitizer and UndefinedBehaviorSanitizer. */
 #include "check.h"
+#define NCGEN_TREE_DENSE_NV 0
 #include "ncgen_tree_tables.h"
 
 #define GRAV 9.81
@@ -194,6 +197,14 @@ static void make_inertias(void) {
   }
 }
 
+/* Forward dynamics by Cholesky of M_i (ncgen_tree_aba's way for trees of at most NCGEN_TREE_DENSE_NV rates). */
+static int factored_aba(const ncgen_tree *T, const double *q, const double *v, const double *t_in, double *aj,
+                        double *check, double *work) {
+  ncgen_tree_work s;
+  ncgen_tree_layout(&KINDS, T, work, &s);
+  return ncgen_tree_dense_aba(&KINDS, T, &s, q, v, t_in, aj, check);
+}
+
 /* The tree without its mimic map (three independent sliders): M = [[m0 + m1 + m2, 0, m2],
  * [0, m1 + m2, 0], [m2, 0, m2]], bias (0, (m1 + m2) g, 0): the articulated-body algorithm. */
 static void check_articulated(ncgen_tree *T) {
@@ -203,20 +214,24 @@ static void check_articulated(ncgen_tree *T) {
   double q[3] = {0.3, -0.2, 0.4}, v[3] = {0.7, -1.1, 0.2}, t_in[3] = {1.2, -0.4, 0.5}, aj[3], check[2], tau[3];
   double m0 = MASS[0], m1 = MASS[1], m2 = MASS[2], a0, a2, det;
   double *work;
+  int way;
   U.ni = 3; U.rate_src = src; U.rate_col = src; U.rate_coef = one; U.q_src = no_q; U.q_coef = one; U.q_off = zero;
   work = (double *)malloc((size_t)ncgen_tree_work_size(&KINDS, &U) * sizeof(double));
   if (!work) return;
   det = (m0 + m1 + m2) * m2 - m2 * m2;
   a0 = (m2 * t_in[0] - m2 * t_in[2]) / det;
   a2 = (-m2 * t_in[0] + (m0 + m1 + m2) * t_in[2]) / det;
-  CHECK(ncgen_tree_aba(&KINDS, &U, q, v, t_in, aj, check, work) == 0, "aba (articulated) failed");
-  CHECK(close_to(aj[0], a0) && close_to(aj[1], (t_in[1] - (m1 + m2) * GRAV) / (m1 + m2)) && close_to(aj[2], a2),
-        "articulated aj = (%g, %g, %g), expected (%g, %g, %g)", aj[0], aj[1], aj[2], a0,
-        (t_in[1] - (m1 + m2) * GRAV) / (m1 + m2), a2);
-  CHECK(check[0] > 0.0 && check[0] <= 1.0 && close_to(check[1], aj[0] + aj[1] + aj[2]), "articulated check (%g, %g)",
-        check[0], check[1]);
-  CHECK(ncgen_tree_rnea(&KINDS, &U, q, v, aj, tau, work) == 0 && close_to(tau[0], t_in[0]) &&
-        close_to(tau[1], t_in[1]) && close_to(tau[2], t_in[2]), "rnea(aba(τ)) = (%g, %g, %g)", tau[0], tau[1], tau[2]);
+  for (way = 0; way < 2; ++way) {               /* the articulated-body algorithm, Cholesky of M */
+    CHECK((way ? factored_aba(&U, q, v, t_in, aj, check, work) : ncgen_tree_aba(&KINDS, &U, q, v, t_in, aj, check,
+                                                                                 work)) == 0, "aba %d failed", way);
+    CHECK(close_to(aj[0], a0) && close_to(aj[1], (t_in[1] - (m1 + m2) * GRAV) / (m1 + m2)) && close_to(aj[2], a2),
+          "unmapped %d: aj = (%g, %g, %g), expected (%g, %g, %g)", way, aj[0], aj[1], aj[2], a0,
+          (t_in[1] - (m1 + m2) * GRAV) / (m1 + m2), a2);
+    CHECK(check[0] > 0.0 && check[0] <= 1.0 && close_to(check[1], aj[0] + aj[1] + aj[2]), "unmapped %d: check (%g, %g)",
+          way, check[0], check[1]);
+    CHECK(ncgen_tree_rnea(&KINDS, &U, q, v, aj, tau, work) == 0 && close_to(tau[0], t_in[0]) &&
+          close_to(tau[1], t_in[1]) && close_to(tau[2], t_in[2]), "rnea(aba(τ)) = (%g, %g, %g)", tau[0], tau[1], tau[2]);
+  }
   free(work);
 }
 
@@ -235,7 +250,7 @@ int main(void) {
 
   {
     static int kind_z[3] = {1, 1, 1};
-    int pass;
+    int pass, way;
     for (pass = 0; pass < 2; ++pass) {          /* kind 0 (kernels), then kind 1 (z sliders turned) */
       if (pass) {
         T.kind = kind_z;
@@ -251,11 +266,14 @@ int main(void) {
       CHECK(close_to(M[0], M0) && close_to(M[3], M1) && fabs(M[1]) < 1e-14 && fabs(M[2]) < 1e-14,
             "pass %d: M = [%g %g; %g %g]", pass, M[0], M[2], M[1], M[3]);
 
-      CHECK(ncgen_tree_aba(&KINDS, &T, q, v, t_in, aj, check, work) == 0, "aba failed");
-      CHECK(close_to(aj[0], t_in[0] / M0) && close_to(aj[1], (t_in[1] - bias1) / M1) && close_to(aj[2], 2 * aj[0]),
-            "pass %d: aj = (%g, %g, %g)", pass, aj[0], aj[1], aj[2]);
-      CHECK(check[0] > 0.0 && check[0] <= 1.0 && close_to(check[1], aj[0] + aj[1] + aj[2]), "check = (%g, %g)",
-            check[0], check[1]);
+      for (way = 0; way < 2; ++way) {           /* the constrained articulated-body algorithm, Cholesky of M_i */
+        CHECK((way ? factored_aba(&T, q, v, t_in, aj, check, work) : ncgen_tree_aba(&KINDS, &T, q, v, t_in, aj, check,
+                                                                                     work)) == 0, "aba %d failed", way);
+        CHECK(close_to(aj[0], t_in[0] / M0) && close_to(aj[1], (t_in[1] - bias1) / M1) && close_to(aj[2], 2 * aj[0]),
+              "pass %d, way %d: aj = (%g, %g, %g)", pass, way, aj[0], aj[1], aj[2]);
+        CHECK(check[0] > 0.0 && check[0] <= 1.0 && close_to(check[1], aj[0] + aj[1] + aj[2]), "check = (%g, %g)",
+              check[0], check[1]);
+      }
       check_articulated(&T);
     }
     T.kind = kind;
@@ -296,6 +314,8 @@ int main(void) {
     T.inertia = massless;
     CHECK(ncgen_tree_aba(&KINDS, &T, q, v, t_in, aj, check, work) == 0 && !(check[0] > 1e-12),
           "pivot %g of a singular M", check[0]);
+    CHECK(factored_aba(&T, q, v, t_in, aj, check, work) == 0 && !(check[0] > 1e-12),
+          "Cholesky pivot %g of a singular M", check[0]);
     T.inertia = inertia;
   }
 

@@ -11,29 +11,36 @@
 #ifndef NCGEN_SPATIAL_H
 #define NCGEN_SPATIAL_H
 
+/* an output no other argument overlaps (lets the compiler keep the inputs in registers) */
+#if defined(__STDC_VERSION__) && __STDC_VERSION__ >= 199901L
+#define SP_RESTRICT restrict
+#else
+#define SP_RESTRICT
+#endif
+
 /* c = a × b (c not a or b) */
-static inline void sp_cross(const double *a, const double *b, double *c) {
+static inline void sp_cross(const double *a, const double *b, double *SP_RESTRICT c) {
   c[0] = a[1] * b[2] - a[2] * b[1];
   c[1] = a[2] * b[0] - a[0] * b[2];
   c[2] = a[0] * b[1] - a[1] * b[0];
 }
 
 /* y = R x (y not x; written out: gcc -O2 keeps 3-step loops) */
-static inline void sp_rot(const double *R, const double *x, double *y) {
+static inline void sp_rot(const double *R, const double *x, double *SP_RESTRICT y) {
   y[0] = R[0] * x[0] + R[3] * x[1] + R[6] * x[2];
   y[1] = R[1] * x[0] + R[4] * x[1] + R[7] * x[2];
   y[2] = R[2] * x[0] + R[5] * x[1] + R[8] * x[2];
 }
 
 /* y = Rᵀ x (y not x) */
-static inline void sp_rot_t(const double *R, const double *x, double *y) {
+static inline void sp_rot_t(const double *R, const double *x, double *SP_RESTRICT y) {
   y[0] = R[0] * x[0] + R[1] * x[1] + R[2] * x[2];
   y[1] = R[3] * x[0] + R[4] * x[1] + R[5] * x[2];
   y[2] = R[6] * x[0] + R[7] * x[1] + R[8] * x[2];
 }
 
 /* T_b = Ad(H_ab)⁻¹ T_a: ω_b = Rᵀ ω_a, v_b = Rᵀ (v_a + ω_a × p) (T_b not T_a) */
-static inline void sp_twist_in(const double *R, const double *p, const double *Ta, double *Tb) {
+static inline void sp_twist_in(const double *R, const double *p, const double *Ta, double *SP_RESTRICT Tb) {
   double t[3];
   sp_cross(Ta, p, t);
   t[0] += Ta[3];
@@ -44,7 +51,7 @@ static inline void sp_twist_in(const double *R, const double *p, const double *T
 }
 
 /* W_a += Ad(H_ab)⁻ᵀ W_b: f_a = R f_b, τ_a = R τ_b + p × f_a */
-static inline void sp_wrench_out_add(const double *R, const double *p, const double *Wb, double *Wa) {
+static inline void sp_wrench_out_add(const double *R, const double *p, const double *Wb, double *SP_RESTRICT Wa) {
   double n[3], f[3], t[3];
   int i;
   sp_rot(R, Wb, n);
@@ -57,7 +64,7 @@ static inline void sp_wrench_out_add(const double *R, const double *p, const dou
 }
 
 /* Y = ad(T) X = [ω × X_ω; v × X_ω + ω × X_v] (Y not T or X) */
-static inline void sp_ad(const double *T, const double *X, double *Y) {
+static inline void sp_ad(const double *T, const double *X, double *SP_RESTRICT Y) {
   double t[3];
   sp_cross(T, X, Y);
   sp_cross(T + 3, X, Y + 3);
@@ -68,7 +75,7 @@ static inline void sp_ad(const double *T, const double *X, double *Y) {
 }
 
 /* Y = −ad(T)ᵀ W = [ω × τ + v × f; ω × f] (Y not T or W) */
-static inline void sp_ad_star(const double *T, const double *W, double *Y) {
+static inline void sp_ad_star(const double *T, const double *W, double *SP_RESTRICT Y) {
   double t[3];
   sp_cross(T, W, Y);
   sp_cross(T + 3, W + 3, t);
@@ -79,7 +86,7 @@ static inline void sp_ad_star(const double *T, const double *W, double *Y) {
 }
 
 /* W = M T of the rigid inertia I: τ = I_o ω + h × v, f = m v − h × ω */
-static inline void sp_inertia_apply(const double *I, const double *T, double *W) {
+static inline void sp_inertia_apply(const double *I, const double *T, double *SP_RESTRICT W) {
   double t[3];
   sp_rot(I + 4, T, W);
   sp_cross(I + 1, T + 3, t);
@@ -95,7 +102,7 @@ static inline void sp_inertia_apply(const double *I, const double *T, double *W)
 /* Ia (in a) += the rigid inertia Ib (in b), b at (R, p) in a: M_a = Ad(H_ab)⁻ᵀ M_b Ad(H_ab)⁻¹,
  * h_a = R h + m p, I_o,a = R I_o Rᵀ + 2 (g·p) 1 − p gᵀ − g pᵀ with g = R h + (m / 2) p
  * (Ia not Ib; I_o symmetric: its upper triangle read, both written). */
-static inline void sp_inertia_out_add(const double *R, const double *p, const double *Ib, double *Ia) {
+static inline void sp_inertia_out_add(const double *R, const double *p, const double *Ib, double *SP_RESTRICT Ia) {
   const double m = Ib[0], *I = Ib + 4;
   double h[3], g[3], A[9], gp, d;
   sp_rot(R, Ib + 1, h);
@@ -133,7 +140,7 @@ static inline void sp_inertia_out_add(const double *R, const double *p, const do
 /* Ia = the rigid inertia Ib (in b) in the axes of a, about the same origin (b turned by R in
  * a): h_a = R h, I_o,a = R I_o Rᵀ (Ia not Ib; I_o symmetric: its lower triangle read, both
  * written). */
-static inline void sp_inertia_rotate(const double *R, const double *Ib, double *Ia) {
+static inline void sp_inertia_rotate(const double *R, const double *Ib, double *SP_RESTRICT Ia) {
   const double *I = Ib + 4;
   double A[9];
   sp_rot(R, Ib + 1, Ia + 1);
@@ -159,7 +166,7 @@ static inline void sp_inertia_rotate(const double *R, const double *Ib, double *
 /* Ia += the rigid inertia Ib, both in the same axes, Ib about a point b and Ia about a point a
  * with b − a = d (the move of sp_inertia_out_add with R = 1): h_a = h + m d, I_o,a = I_o + 2 (g·d) 1 − d gᵀ − g dᵀ with
  * g = h + (m / 2) d (Ia not Ib). */
-static inline void sp_inertia_shift_add(const double *d, const double *Ib, double *Ia) {
+static inline void sp_inertia_shift_add(const double *d, const double *Ib, double *SP_RESTRICT Ia) {
   const double m = Ib[0];
   double g[3], gd, x;
   g[0] = Ib[1] + 0.5 * m * d[0];
@@ -194,7 +201,7 @@ static inline void sp_wrench_shift(const double *d, double *W) {
 }
 
 /* T_a = Ad(H_ab) T_b: ω_a = R ω_b, v_a = R v_b + p × ω_a (T_a not T_b) */
-static inline void sp_twist_out(const double *R, const double *p, const double *Tb, double *Ta) {
+static inline void sp_twist_out(const double *R, const double *p, const double *Tb, double *SP_RESTRICT Ta) {
   double t[3];
   sp_rot(R, Tb, Ta);
   sp_rot(R, Tb + 3, Ta + 3);
@@ -205,7 +212,7 @@ static inline void sp_twist_out(const double *R, const double *p, const double *
 }
 
 /* M (6 × 6, column-major) of the rigid inertia I: [[I_o, ĥ], [ĥᵀ, m 1]] */
-static inline void sp_inertia_matrix(const double *I, double *M) {
+static inline void sp_inertia_matrix(const double *I, double *SP_RESTRICT M) {
   const double m = I[0], h0 = I[1], h1 = I[2], h2 = I[3];
   M[0] = I[4];   M[1] = I[5];   M[2] = I[6];   M[3] = 0.0;   M[4] = -h2;  M[5] = h1;
   M[6] = I[7];   M[7] = I[8];   M[8] = I[9];   M[9] = h2;    M[10] = 0.0; M[11] = -h0;

@@ -1,6 +1,7 @@
 /* Joint-space algorithms of a tree over data tables: inverse dynamics (RNEA), the joint-space
- * mass matrix (CRBA), forward dynamics (the articulated-body algorithm; with mimic joints the
- * followers held by their constraints, M_i a_i = τ − bias by Cholesky the fallback, which an includer
+ * mass matrix (CRBA), forward dynamics (up to NCGEN_TREE_DENSE_NV rates M_i a_i = τ_i − b_i by
+ * Cholesky, M_i and b_i of one pass out and in; above, the articulated-body algorithm, with mimic
+ * joints the followers held by their constraints and the Cholesky the fallback, which an includer
  * may supply instead: NCGEN_TREE_EXTERNAL_FALLBACK) and the derivatives of RNEA and forward dynamics, as plain
  * loops over the bodies that call one small kernel per kind of joint and one per rigid body
  * (ncgen/codegen/tree_kernels.py generates them, ncgen/codegen/tree_tables.py packs the
@@ -12,9 +13,10 @@
  * are had: 1 a rotation about z (S = [e_z; 0]), 2 a translation along z (S = [0; e_z]), 3 none
  * (fixed), 0 its kernel local.  RNEA runs in the local frames f_b (Featherstone's recursion);
  * CRBA in the ground's axes about each body's origin (composite inertias and forces carried up
- * by translations alone); ABA in the ground frame (articulated inertias summed into the parent
- * with no change of frame, as Pinocchio's).  The derivatives run the tangent recursion in the
- * ground frame.
+ * by translations alone); forward dynamics in the ground frame about its origin (ABA's
+ * articulated inertias, and the Cholesky path's composite inertias, summed into the parent with
+ * no change of frame, as Pinocchio's).  The derivatives run the tangent recursion in the ground
+ * frame.
  *
  * Notation (docs/architecture.md, "Element tables"): poses H = [[R, p], [0, 1]] of member
  * frames in the ground frame g, twists [ω; v] and wrenches [τ; f] expressed in g; R column-major.
@@ -45,6 +47,9 @@
 #define NCGEN_TREE_KERNEL 1
 #define NCGEN_TREE_BAD 2
 #define NCGEN_TREE_BODY 13
+#ifndef NCGEN_TREE_DENSE_NV
+#define NCGEN_TREE_DENSE_NV 12       /* forward dynamics by Cholesky of M_i up to this many rates (O(n³)), else ABA (O(n)) */
+#endif
 #ifndef NCGEN_TREE_PIVOT_TOL
 #define NCGEN_TREE_PIVOT_TOL 1e-12   /* ncgen/codegen/tree_check.py: PIVOT_TOL */
 #endif
@@ -320,7 +325,8 @@ static void ncgen_tree_composite(const ncgen_tree_kinds *K, const ncgen_tree *T,
       Mi[T->rate_col[r] + ni * T->rate_col[c]] += T->rate_coef[r] * T->rate_coef[c] * s->M[r + nv * c];
 }
 
-/* L Lᵀ = A (n × n, column-major, lower triangle read) into L; returns min_k d_k / A_kk (the
+/* L Lᵀ = A (n × n, column-major, lower triangle read) into L's lower triangle (its upper one
+ * not written); returns min_k d_k / A_kk (the
  * smallest relative pivot, NaN when a pivot is 0/0). */
 static double ncgen_tree_cholesky(int n, const double *A, double *L) {
   int i, j, k;
@@ -328,15 +334,15 @@ static double ncgen_tree_cholesky(int n, const double *A, double *L) {
   for (k = 0; k < n; ++k) {
     double d = A[k + n * k];
     for (j = 0; j < k; ++j) d -= L[k + n * j] * L[k + n * j];
-    double r = d / A[k + n * k];
+    double r = d / A[k + n * k], g;
     if (k == 0 || r < ratio || !(r == r)) ratio = r;          /* NaN (0/0) stays */
     L[k + n * k] = sqrt(d > 0.0 ? d : 0.0);
+    g = 1.0 / L[k + n * k];
     for (i = k + 1; i < n; ++i) {
       double t = A[i + n * k];
       for (j = 0; j < k; ++j) t -= L[i + n * j] * L[k + n * j];
-      L[i + n * k] = t / L[k + n * k];
+      L[i + n * k] = t * g;
     }
-    for (i = 0; i < k; ++i) L[i + n * k] = 0.0;
   }
   return ratio;
 }
@@ -683,6 +689,137 @@ static int ncgen_tree_crba(const ncgen_tree_kinds *K, const ncgen_tree *T, const
   return ncgen_tree_crba_at(K, T, &s, q, Mi);
 }
 
+/* M_i = Gᵀ M G: M_i += the entries (r, c) and (c, r) of M (rates r, c; r = c: one entry) worth x,
+ * in M_i's lower triangle */
+static inline void ncgen_tree_mass_add(const ncgen_tree *T, int r, int c, double x, double *Mi) {
+  int i = T->rate_col[r], j = T->rate_col[c];
+  x *= T->rate_coef[r] * T->rate_coef[c];
+  if (i == j && r != c) x *= 2.0;
+  Mi[i > j ? i + T->ni * j : j + T->ni * i] += x;
+}
+
+/* The bias b = τ(q, v, a = 0) per joint rate (nv) and M_i = Gᵀ M G (ni × ni, column-major, its
+ * lower triangle; G = 1 where direct) of one pass out and one in, every quantity in the ground
+ * frame about the ground's origin (after ncgen_tree_ground_poses), as the articulated-body
+ * algorithm's: outwards each body's twist, bias acceleration (the ground's [0; −g]) and wrench
+ * f = I a − ad(v)ᵀ I v with its rigid inertia I in the ground frame (s->IC); inwards b_j = S_jᵀ f
+ * and f summed into the parent, the composite inertia I^C summed into the parent (about the same
+ * origin: a sum), and M_rc = S_rᵀ I^C_b S_c for a rate c of body b and a rate r of b or an
+ * ancestor (no force moved: one origin). */
+static void ncgen_tree_mass_bias(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, int direct,
+                                 double *SP_RESTRICT bias, double *SP_RESTRICT Mi) {
+  int b, i, j;
+  const double zero[6] = {0, 0, 0, 0, 0, 0};
+  const double a0[6] = {0, 0, 0, -T->gravity[0], -T->gravity[1], -T->gravity[2]};
+  ncgen_tree_ground_inertias(T, s);
+  for (b = 0; b < T->nb; ++b) {
+    const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
+    int par = T->parent[b], va = T->v_at[b];
+    const double *S = s->S + 6 * va, *vp = par < 0 ? zero : s->vl + 6 * par, *ap = par < 0 ? a0 : s->al + 6 * par;
+    const double *I = s->IC + NCGEN_TREE_BODY * b;
+    double *v = s->vl + 6 * b, *a = s->al + 6 * b, *f = s->fl + 6 * b, vJ[6], t[6], h[6];
+    if (k->nv == 1) {                           /* written out (gcc -O2 keeps short loops) */
+      double w = s->v[va];
+#define NCGEN_TREE_VJ(i) vJ[i] = S[i] * w, v[i] = vp[i] + vJ[i]
+      NCGEN_TREE_VJ(0); NCGEN_TREE_VJ(1); NCGEN_TREE_VJ(2); NCGEN_TREE_VJ(3); NCGEN_TREE_VJ(4); NCGEN_TREE_VJ(5);
+#undef NCGEN_TREE_VJ
+    } else
+      for (i = 0; i < 6; ++i) {
+        double x = 0.0;
+        for (j = 0; j < k->nv; ++j) x += S[6 * j + i] * s->v[va + j];
+        vJ[i] = x;
+        v[i] = vp[i] + x;
+      }
+    sp_ad(v, vJ, t);                            /* a = a_p + c_J + v × S w */
+    if (k->mode == 0)
+      for (i = 0; i < 6; ++i) t[i] += s->cl[6 * b + i];
+    a[0] = ap[0] + t[0];
+    a[1] = ap[1] + t[1];
+    a[2] = ap[2] + t[2];
+    a[3] = ap[3] + t[3];
+    a[4] = ap[4] + t[4];
+    a[5] = ap[5] + t[5];
+    sp_inertia_apply(I, v, h);
+    sp_ad_star(v, h, f);
+    sp_inertia_apply(I, a, t);
+    f[0] += t[0];
+    f[1] += t[1];
+    f[2] += t[2];
+    f[3] += t[3];
+    f[4] += t[4];
+    f[5] += t[5];
+  }
+  memset(Mi, 0, (size_t)T->ni * T->ni * sizeof(double));
+  for (b = T->nb - 1; b >= 0; --b) {
+    const ncgen_tree_joint_kind *k = &K->joint[T->kind[b]];
+    int par = T->parent[b], va = T->v_at[b];
+    const double *IC = s->IC + NCGEN_TREE_BODY * b, *f = s->fl + 6 * b;
+    for (j = 0; j < k->nv; ++j) {
+      int col = va + j, up = b;
+      double F[6];
+      bias[col] = ncgen_tree_dot6(s->S + 6 * col, f);
+      sp_inertia_apply(IC, s->S + 6 * col, F);
+      /* each pair of rates once: b's own up to col, then every rate of each ancestor */
+      if (direct)                               /* M_rc in M_i's lower triangle */
+        do {
+          int row = T->v_at[up], end = up == b ? col + 1 : row + K->joint[T->kind[up]].nv;
+          for (; row < end; ++row)
+            Mi[row > col ? row + T->ni * col : col + T->ni * row] = ncgen_tree_dot6(s->S + 6 * row, F);
+          up = T->parent[up];
+        } while (up >= 0);
+      else
+        do {
+          int row = T->v_at[up], end = up == b ? col + 1 : row + K->joint[T->kind[up]].nv;
+          for (; row < end; ++row) ncgen_tree_mass_add(T, row, col, ncgen_tree_dot6(s->S + 6 * row, F), Mi);
+          up = T->parent[up];
+        } while (up >= 0);
+    }
+    if (par >= 0) {                             /* f_p += f, I^C_p += I^C (written out) */
+      double *fp = s->fl + 6 * par, *ICp = s->IC + NCGEN_TREE_BODY * par;
+      fp[0] += f[0];
+      fp[1] += f[1];
+      fp[2] += f[2];
+      fp[3] += f[3];
+      fp[4] += f[4];
+      fp[5] += f[5];
+#define NCGEN_TREE_IC(i) ICp[i] += IC[i]
+      NCGEN_TREE_IC(0); NCGEN_TREE_IC(1); NCGEN_TREE_IC(2); NCGEN_TREE_IC(3); NCGEN_TREE_IC(4); NCGEN_TREE_IC(5);
+      NCGEN_TREE_IC(6); NCGEN_TREE_IC(7); NCGEN_TREE_IC(8); NCGEN_TREE_IC(9); NCGEN_TREE_IC(10); NCGEN_TREE_IC(11);
+      NCGEN_TREE_IC(12);
+#undef NCGEN_TREE_IC
+    }
+  }
+}
+
+/* aj (nv) = G M_i⁻¹ (τ_i − b_i) in the work s by the mass matrix and the bias of one pass out and
+ * in (ncgen_tree_mass_bias) and a dense Cholesky of M_i = Gᵀ M G: forward dynamics of the trees of
+ * at most NCGEN_TREE_DENSE_NV rates (about the ground's origin: a tree far from it loses digits,
+ * as the articulated-body algorithm's quantities do, somewhat more); check = [smallest relative
+ * pivot of the Cholesky (NaN stays), Σ aj]. */
+static int ncgen_tree_dense_aba(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, const double *q,
+                                const double *v, const double *tau_i, double *aj, double *check) {
+  int i, ni = T->ni, direct = ncgen_tree_unmapped(T);
+  double sum = 0.0;
+  ncgen_tree_expand(T, s, q, v, 0);
+  if (ncgen_tree_local_poses(K, T, s)) return NCGEN_TREE_KERNEL;
+  ncgen_tree_ground_poses(K, T, s);
+  ncgen_tree_mass_bias(K, T, s, direct, s->tau, s->Mi);
+  if (direct)
+    for (i = 0; i < ni; ++i) s->rhs[i] = tau_i[i] - s->tau[i];
+  else {
+    ncgen_tree_project(T, s->tau, s->rhs);
+    for (i = 0; i < ni; ++i) s->rhs[i] = tau_i[i] - s->rhs[i];
+  }
+  check[0] = ncgen_tree_cholesky(ni, s->Mi, s->L);
+  ncgen_tree_solve(ni, s->L, s->rhs, 1);
+  for (i = 0; i < T->nv; ++i) {
+    aj[i] = T->rate_coef[i] * s->rhs[T->rate_col[i]];
+    sum += aj[i];
+  }
+  check[1] = sum;
+  return 0;
+}
+
 /* x = D⁻¹ y of one joint (nv rates) from the Cholesky factor L (lower, column stride 6) of D;
  * one rate: L[0] = 1 / d. */
 static void ncgen_tree_joint_solve(int nv, const double *L, const double *y, double *x) {
@@ -1019,15 +1156,17 @@ static int ncgen_tree_fallback(const ncgen_tree *T, ncgen_tree_work *s, const do
                                const double *tau_i, double *aj, double *check);
 #endif
 
-/* aj (nv) = G M_i⁻¹ (τ_i − b_i) in the work s: forward dynamics, by the articulated-body
- * algorithm (with mimic joints: their followers held by constraints), else (M or C Y not
- * positive definite) by Cholesky of M_i (ncgen_tree_factored_aba, or the includer's
- * ncgen_tree_fallback where NCGEN_TREE_EXTERNAL_FALLBACK is defined); check = [smallest
- * relative pivot, Σ aj]. */
+/* aj (nv) = G M_i⁻¹ (τ_i − b_i) in the work s: forward dynamics, by Cholesky of M_i
+ * (ncgen_tree_dense_aba) for trees of at most NCGEN_TREE_DENSE_NV rates, else by the
+ * articulated-body algorithm (with mimic joints: their followers held by constraints, and where
+ * M or C Y is not positive definite by Cholesky of M_i: ncgen_tree_factored_aba, or the
+ * includer's ncgen_tree_fallback where NCGEN_TREE_EXTERNAL_FALLBACK is defined); check =
+ * [smallest relative pivot, Σ aj]. */
 static int ncgen_tree_aba_at(const ncgen_tree_kinds *K, const ncgen_tree *T, ncgen_tree_work *s, const double *q,
                              const double *v, const double *tau_i, double *aj, double *check) {
   int i;
   double sum = 0.0;
+  if (T->nv <= NCGEN_TREE_DENSE_NV) return ncgen_tree_dense_aba(K, T, s, q, v, tau_i, aj, check);
   ncgen_tree_expand(T, s, q, v, 0);
   if (ncgen_tree_unmapped(T)) {
     if (ncgen_tree_articulated(K, T, s, tau_i, aj, &check[0])) return NCGEN_TREE_KERNEL;
