@@ -19,6 +19,9 @@ ROOT = Path(__file__).resolve().parent.parent
 #: rows ::test_a03_andrews_initial_accelerations_as_published, ::test_a03_andrews_at_t_0_03_against_the_test_set.
 #: The full ladder runs them in their smoke mode (each row's code and tolerance, shorter runs).
 FULL_RUNS_ELSEWHERE = ("iftomm_a02", "iftomm_a02_larger", "iftomm_a01_a03_a04", "iftomm_a05")
+#: The script's packages at -O0 (tests/conftest.py: it inherits ``$NCGEN_CFLAGS``): every row is a
+#: comparison within a tolerance, which the level moves at round-off only.
+QUICK_COMPILE = True
 
 
 def ladder(tmp_path, *args, timeout):
