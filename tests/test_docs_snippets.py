@@ -18,6 +18,9 @@ CASES = [(page, title, snippets) for page in ALL for title, snippets in sections
 #: Pages in the slow tier: docs/control.md compiles its step functions and rollouts from the
 #: test's empty cache (575 s at load 11 on 2 cores).
 SLOW_PAGES = {"control"}
+#: Every page's packages at -O0, the slow page's too (tests/conftest.py): the fast tier runs the
+#: other pages so, and what a page prints does not depend on the level (round-off only).
+QUICK_COMPILE = True
 
 
 @pytest.fixture(autouse=True)

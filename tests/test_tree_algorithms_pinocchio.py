@@ -23,6 +23,8 @@ import ncgen as nc  # noqa: E402
 from ncgen.assembly.tree_dynamics import MimicMap  # noqa: E402
 from ncgen.runtime import tree_algorithm_kernels as rta  # noqa: E402
 
+QUICK_COMPILE = True             # its time is gcc compiling the robots' kernels (Solo12's derivatives: 115 CPU-s at
+#                                 their default -O1/-O2, a correctness check on 5 states): -O0 (tests/conftest.py)
 TOL = 1e-9
 N_STATES = 5
 
