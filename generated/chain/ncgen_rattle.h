@@ -191,7 +191,7 @@ static size_t layout(workspace *ws, char *block) {
   sizes[15] = (ND * NQ > NNZ_W ? ND * NQ : NNZ_W) * sizeof(casadi_real);
   sizes[13] = sizes[17] = sizes[19] = ND * sizeof(casadi_real);
   sizes[14] = 4 * ND * sizeof(casadi_real); /* Um, the end-of-step velocities, Pold, its change */
-  sizes[16] = 3 * ND * ND * sizeof(casadi_real); /* G, then S (2 ND x ND) */
+  sizes[16] = (size_t) 3 * ND * ND * sizeof(casadi_real); /* G, then S (2 ND x ND) */
   sizes[18] = 3 * NX * sizeof(casadi_real); /* rhs, solution, saved Newton start */
   sizes[20] = (NK + ND + NK + ND + 1 + (size_t) ND * ND) * sizeof(casadi_int); /* act, fset (and the factor's row starts), gp, gi */
   sizes[21] = ND * sizeof(casadi_real);
@@ -248,7 +248,7 @@ static size_t layout(workspace *ws, char *block) {
     ws->Pold = ws->Um + 2 * ND;
     ws->Xc = (casadi_real *) (void *) (block + off[15]);
     ws->G = (casadi_real *) (void *) (block + off[16]);
-    ws->S = ws->G + ND * ND;
+    ws->S = ws->G + (size_t) ND * ND;
     ws->P = (casadi_real *) (void *) (block + off[17]);
     ws->rhs = (casadi_real *) (void *) (block + off[18]);
     ws->Pacc = (casadi_real *) (void *) (block + off[19]);
