@@ -25,9 +25,10 @@ QUICK_COMPILE = True
 
 @pytest.fixture(autouse=True)
 def scratch(tmp_path, monkeypatch):
+    """The scratch directory; the compile cache is the run's (no page's output depends on what
+    it holds): the contact and element libraries are compiled once for all the tests."""
     (tmp_path / "examples").symlink_to(ROOT / "examples")
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setenv("NCGEN_CACHE_DIR", str(tmp_path / "cache"))
 
 
 @pytest.mark.parametrize("page", [pytest.param(p, marks=[pytest.mark.slow, pytest.mark.timeout(1800)])

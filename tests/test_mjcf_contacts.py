@@ -160,6 +160,13 @@ def test_contact_points_share_their_nodes_without_changing_a_number():
     model = s.build()
     points = point_contacts(model.contact_elements)
     assert len(points) == model.nk > 50
+    alone_functions = []                 # each point contact alone, in a context of its own
+    for point in points:
+        ctx = Context(s, model.layout)
+        (alone,) = contact_terms(ctx, [point])
+        fn_alone = smooth_forces(ctx, [alone])[0]
+        alone_functions.append(ca.Function("one", [ctx.t, ctx.q, ctx.v, ctx.p],
+                                           [alone.g, alone.WN, alone.WT, fn_alone]))
     rng = np.random.default_rng(5)
     f = model.functions
     for _ in range(3):
@@ -169,11 +176,7 @@ def test_contact_points_share_their_nodes_without_changing_a_number():
         WN, WT = (np.array(x) for x in f["contact_jacobian"](q, model.p0))
         fN = np.array(f["contact_force"](0.0, q, v, model.p0)[0]).ravel()
         per = WT.shape[0] // len(points)
-        for k, point in enumerate(points):
-            ctx = Context(s, model.layout)
-            (alone,) = contact_terms(ctx, [point])
-            fn_alone = smooth_forces(ctx, [alone])[0]
-            one = ca.Function("one", [ctx.t, ctx.q, ctx.v, ctx.p], [alone.g, alone.WN, alone.WT, fn_alone])
+        for k, (point, one) in enumerate(zip(points, alone_functions)):
             gk, WNk, WTk, fNk = (np.array(x) for x in one(0.0, q, v, model.p0))
             assert gk.item() == g[k] and fNk.item() == fN[k], point.name
             assert np.array_equal(WNk, WN[k:k + 1]) and np.array_equal(WTk, WT[k * per:(k + 1) * per]), point.name

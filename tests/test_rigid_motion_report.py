@@ -34,6 +34,8 @@ def test_latex_compiles(report, tmp_path):
     assert (tmp_path / "se3.pdf").stat().st_size > 0
 
 
+@pytest.mark.slow      # SE(3)'s derivation a second time; fast: test_report_content (the same derivation) and
+#                       tests/test_cli_derive.py::test_derive_every_type_and_format (`ncgen derive`)
 def test_cli_derive_se3(capsys):
     assert main(["derive", "se3"]) == 0
     assert "Newton-Euler" in capsys.readouterr().out

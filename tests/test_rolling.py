@@ -46,6 +46,8 @@ def axle(system, q):
     return np.atleast_2d(q)[:, idx[6:9]]
 
 
+@pytest.mark.slow      # fast: tests/test_rolling_torus.py::test_steady_precession_on_the_rolling_integrator (the same
+#                       integrator and checks on a torus wheel, whose closed form at r = 0 is this disc's)
 def test_steady_precession_rate_and_tilt():
     beta, w3 = 0.2, 30.0
     omega = steady_precession(beta, w3)

@@ -50,6 +50,9 @@ def test_energy_error_falls_as_h_squared(wobbly):
     assert 3.5 < spread[0] / spread[1] < 4.5
 
 
+@pytest.mark.slow      # 1 000 steps; fast: test_second_order_on_the_rolling_disc (RATTLE on the same disc),
+#                       test_a_ball_on_an_accelerating_plane (the rolling multipliers, to 1e-9), and
+#                       tests/test_rolling_torus.py::test_steady_precession_on_the_rolling_integrator
 def test_steady_precession_and_the_normal_force():
     """The precessing disc at h = 1 ms: the rate within 1e-4 of the closed form (measured
     1.7e-5), the tilt within 1e-5 rad, the normal force m g within 1e-4 of itself."""

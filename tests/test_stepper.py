@@ -120,9 +120,16 @@ def test_step_inputs_hold():
 STEP = {"heavy_top": 1e-4, "capstan_winch": 5e-6}
 
 
-@pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.slow) if p.stem == "capstan_winch" else p
-                                  for p in example_models()], ids=lambda p: p.stem)   # capstan_winch: 60 000 steps
-def test_agrees_with_idas_on_shipped_examples(path):   # of 5 µs; fast: the other examples, tests/test_capstan_winch.py
+#: Examples of the slow tier: capstan_winch (60 000 steps of 5 µs; fast: the other examples,
+#: tests/test_capstan_winch.py), tensegrity (the largest model, its package compiled; fast: the other
+#: examples, the cables' compiled stepper against closed forms in tests/test_clustered_cable.py and
+#: tests/test_capstan_cable.py).
+SLOW_EXAMPLES = {"capstan_winch", "tensegrity"}
+
+
+@pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.slow) if p.stem in SLOW_EXAMPLES else p
+                                  for p in example_models()], ids=lambda p: p.stem)
+def test_agrees_with_idas_on_shipped_examples(path):
     if "[[contacts]]" in path.read_text():
         pytest.skip("a contact scene: its smooth law (what IDAS integrates) is stiff at impact; the contact "
                     "examples are checked against closed forms in test_contact*.py and run by the sanitizer test")

@@ -10,11 +10,6 @@ import pytest
 import ncgen as nc
 
 
-@pytest.fixture(autouse=True)
-def cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("NCGEN_CACHE_DIR", str(tmp_path / "cache"))
-
-
 def ball(contacts="smooth"):
     s = nc.System("ball", gravity=(0, 0, -9.81))
     b = s.add_point("ball", mass=1.0, position=(0, 0, 0.3))

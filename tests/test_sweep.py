@@ -97,18 +97,20 @@ def test_interrupted_sweep_resumes_without_repeating_runs(slider_crank, tmp_path
         nc.sweep(slider_crank, {"omega": omegas + 1}, t_end=T_END, dt=DT, path=path, workers=1, chunk=1)
 
 
-def test_monte_carlo_on_initial_states_and_inputs_equals_the_serial_loop():
+# idas: two spawned processes more; fast: the stepper's runs (the same arrays of states and inputs) and
+# test_idas_sweep_in_spawned_processes_equals_the_serial_loop (IDAS runs in spawned processes)
+@pytest.mark.parametrize("method", ["stepper", pytest.param("idas", marks=pytest.mark.slow)])
+def test_monte_carlo_on_initial_states_and_inputs_equals_the_serial_loop(method):
     cartpole = nc.System.from_toml(EXAMPLES / "cartpole.toml").build()
     pushed = nc.simulate(cartpole, 0.3, 0.01, method="stepper", u=lambda t: [2.0])
     q0, v0 = pushed.q[::10], pushed.v[::10]                   # 4 consistent states
     U = np.random.default_rng(2).uniform(-1, 1, size=(4, 21, 1))
-    for method in ("stepper", "idas"):
-        result = nc.sweep(cartpole, None, t_end=0.2, dt=0.01, q0=q0, v0=v0, u=U, method=method, workers=2, chunk=1,
-                          outputs=["q", "v"], progress=False)
-        assert result.info["failed"] == 0 and list(result.summary["run"]) == [0, 1, 2, 3]
-        for i in range(4):
-            traj = nc.simulate(cartpole, 0.2, 0.01, method=method, q0=q0[i], v0=v0[i], u=U[i])
-            assert np.array_equal(result["q"][i], traj.q) and np.array_equal(result["v"][i], traj.v)
+    result = nc.sweep(cartpole, None, t_end=0.2, dt=0.01, q0=q0, v0=v0, u=U, method=method, workers=2, chunk=1,
+                      outputs=["q", "v"], progress=False)
+    assert result.info["failed"] == 0 and list(result.summary["run"]) == [0, 1, 2, 3]
+    for i in range(4):
+        traj = nc.simulate(cartpole, 0.2, 0.01, method=method, q0=q0[i], v0=v0[i], u=U[i])
+        assert np.array_equal(result["q"][i], traj.q) and np.array_equal(result["v"][i], traj.v)
     with pytest.raises(NcgenError, match=r"arrays of one number of runs \(found \[2, 4\]\)"):
         nc.sweep(cartpole, None, t_end=0.2, dt=0.01, q0=q0, u=U[:2])
     with pytest.raises(NcgenError, match=r"u: expected an array of shape \(len\(t\), nu\) or .* with 4 runs"):

@@ -32,6 +32,8 @@ def test_prisms_example(tmp_path):
     assert out.count("of the design; stable") == 2
 
 
+@pytest.mark.slow       # a fresh process building two models; fast: test_prisms_example (an example script of the same
+#                         steps), test_prestress.py's two-stage tower (its stiffest prestress, loaded equilibrium balanced)
 @pytest.mark.timeout(900)
 def test_tower_example(tmp_path):
     out = run("tensegrity_tower.py", tmp_path)
