@@ -51,6 +51,7 @@ solve the KKT system.
 """
 from __future__ import annotations
 
+import os
 import time
 from typing import NamedTuple
 
@@ -102,8 +103,26 @@ def simulate_stepper(model, t: np.ndarray, U: np.ndarray, p: np.ndarray, q0: np.
         raise NcgenError(f"scheme: 'rattle4' needs a smooth model; {model.name!r} has nonsmooth contacts, which "
                          f"keep their own scheme (first order at impacts): use scheme='rattle' or build it with "
                          f"contacts='smooth'")
+    check_contact_workspace(model, stepper.nd)
     run = _fixed if opts.rtol is None else _adaptive
     return run(model, stepper, StepperStart(t, U, p, q0, v0, lam0), opts, conservative)
+
+
+def physical_memory() -> int:
+    """This machine's physical memory, bytes."""
+    return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+
+
+def check_contact_workspace(model, nd: int) -> None:
+    """Refuse, naming the model and the sizes, a nonsmooth contact stepper whose dense contact
+    blocks (3 nd² doubles: the Delassus matrix G, then S; ``nd`` impulse components) need more
+    bytes than this machine's physical memory: the C would fail to allocate them."""
+    need, have = 3 * nd * nd * 8, physical_memory()
+    if need > have:
+        raise NcgenError(f"model {model.name!r}: its nonsmooth contact stepper needs {need / 2**30:.1f} GiB for its "
+                         f"dense contact blocks (3 nd² doubles, nd = {nd:,} impulse components), more than this "
+                         f"machine's {have / 2**30:.1f} GiB of memory; use fewer contact elements (pairs that can "
+                         f"meet), or contacts='smooth' with method='idas'")
 
 
 class StepperStart(NamedTuple):
