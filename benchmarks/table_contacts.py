@@ -21,13 +21,12 @@ from __future__ import annotations
 
 import argparse
 import os
-import statistics
 import sys
 import time
 from pathlib import Path
 
 from common import in_turn, machine
-from table_stepper import one_step
+from table_stepper import compare_per_step, one_step
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
@@ -46,13 +45,6 @@ def scene(name: str):
 SCENES = ("box_stack", "boxes", "falling_chain", "heap20p", "heap20r")
 
 
-def per_step(stepper, model, steps: int) -> float:
-    """CPU seconds per step of ``steps`` steps from the initial state."""
-    c = time.process_time()
-    one_step(stepper, model, steps)
-    return (time.process_time() - c) / steps
-
-
 def compare(name: str, steps: int, rounds: int) -> tuple[float, float]:
     """The interleaved times of scene ``name`` printed; returns the ratios (min, median)."""
     from ncgen.runtime.stepper_library import load_stepper
@@ -66,18 +58,7 @@ def compare(name: str, steps: int, rounds: int) -> tuple[float, float]:
           f"{time.process_time() - c:.1f} CPU-s", flush=True)
     for stepper in (tables, package):       # warm-up: caches, pages
         one_step(stepper, model, min(steps, 20))
-    times = {"tables": [], "package": []}
-    for r in range(rounds):
-        done = in_turn(r, {"tables": lambda: per_step(tables, model, steps),
-                           "package": lambda: per_step(package, model, steps)})
-        for k, v in done.items():
-            times[k].append(v)
-    t, p = times["tables"], times["package"]
-    ratios = (min(t) / min(p), statistics.median(t) / statistics.median(p))
-    print(f"  CPU us per step, {steps} steps x {rounds} rounds: tables min {min(t) * 1e6:.1f} median "
-          f"{statistics.median(t) * 1e6:.1f}; package min {min(p) * 1e6:.1f} median {statistics.median(p) * 1e6:.1f}")
-    print(f"  RATIO tables / package, {name}: min {ratios[0]:.2f}, median {ratios[1]:.2f}", flush=True)
-    return ratios
+    return compare_per_step(tables, package, model, steps, rounds, name, peer_name="package")
 
 
 def main() -> None:

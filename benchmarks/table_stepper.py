@@ -98,23 +98,28 @@ def forces_chain(n: int):
     return s
 
 
-def compare_per_step(tables, flat, model, steps: int, rounds: int, label: str) -> None:
-    """Interleaved CPU time per step of the two forms, min and median, and their ratios."""
-    times = {"tables": [], "flat": []}
+def compare_per_step(tables, peer, model, steps: int, rounds: int, label: str,
+                     peer_name: str = "flat") -> tuple[float, float]:
+    """Interleaved CPU time per step of the tables and ``peer`` (named ``peer_name``), min and
+    median, printed with their ratios; returns the ratios tables / peer (min, median)."""
+    times = {"tables": [], peer_name: []}
     for r in range(rounds):
         done = in_turn(r, {"tables": lambda: per_step(tables, model, steps),
-                           "flat": lambda: per_step(flat, model, steps)})
+                           peer_name: lambda: per_step(peer, model, steps)})
         for name, seconds in done.items():
             times[name].append(seconds)
-    t, f = times["tables"], times["flat"]
+    t, f = times["tables"], times[peer_name]
+    ratios = (min(t) / min(f), statistics.median(t) / statistics.median(f))
     print(f"  time per step, {steps} steps x {rounds} rounds (CPU us): tables min {min(t) * 1e6:.1f} "
-          f"median {statistics.median(t) * 1e6:.1f}; flat min {min(f) * 1e6:.1f} "
+          f"median {statistics.median(t) * 1e6:.1f}; {peer_name} min {min(f) * 1e6:.1f} "
           f"median {statistics.median(f) * 1e6:.1f}")
-    print(f"  RATIO tables / flat, time per step, {label}: min {min(t) / min(f):.2f}, "
-          f"median {statistics.median(t) / statistics.median(f):.2f}", flush=True)
+    print(f"  RATIO tables / {peer_name}, time per step, {label}: min {ratios[0]:.2f}, median {ratios[1]:.2f}",
+          flush=True)
+    return ratios
 
 
 def per_step(stepper, model, n_steps: int) -> float:
+    """CPU seconds per step of ``n_steps`` steps from the initial state."""
     c = time.process_time()
     one_step(stepper, model, n_steps)
     return (time.process_time() - c) / n_steps
