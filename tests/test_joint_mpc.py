@@ -65,6 +65,32 @@ def test_joint_step_jacobians_match_central_differences(two_link):
         assert np.allclose(x1[:2], x[:2] + 0.01 * x1[2:], rtol=0, atol=1e-15)
 
 
+@pytest.mark.parametrize("kernels", ["auto", "tables"])
+def test_joint_step_results_are_its_own_and_equal_the_formula_of_aba_derivatives(two_link, kernels):
+    """The step assembles x⁺, A, B from the kernel's output buffers without copying them first
+    (issue 37's ≤ 0.5× ``mjd_transitionFD``): a later call must not change earlier results, and
+    each equals the module's formula on ``nc.aba_derivatives`` (the flat kernel; Pinocchio's
+    conventions, checked against Pinocchio in tests/test_tree_algorithms_pinocchio.py) and central
+    differences of the step."""
+    from ncgen.runtime.tree_algorithm_kernels import aba_derivatives, kernel_of
+    step, h = JointStep(two_link, 0.01), 0.01
+    step._derivatives = kernel_of(two_link, "aba_derivatives", kernels)
+    rng = np.random.default_rng(5)
+    states = [(rng.normal(size=4), 3 * rng.normal(size=2)) for _ in range(3)]
+    results = [step.jacobians(x, u) for x, u in states]
+    for (x, u), (x1, A, B) in zip(states, results):
+        a, da_dq, da_dv, Minv = aba_derivatives(two_link, x[:2], x[2:], u)
+        v1 = x[2:] + h * a
+        dv = h * np.hstack((da_dq, da_dv)) + np.hstack((np.zeros((2, 2)), np.eye(2)))
+        close = dict(rtol=1e-12, atol=1e-12)        # the tables' and the flat kernel's round-off
+        assert np.allclose(x1, np.concatenate([x[:2] + h * v1, v1]), **close)
+        assert np.allclose(A, np.vstack((np.hstack((np.eye(2), np.zeros((2, 2)))) + h * dv, dv)), **close)
+        assert np.allclose(B, np.vstack((h * h * Minv, h * Minv)), **close)
+        An, Bn = central_jacobians(step, x, u)
+        assert np.max(np.abs(A - An)) < 1e-7 * (1 + np.max(np.abs(A)))
+        assert np.max(np.abs(B - Bn)) < 1e-7 * (1 + np.max(np.abs(B)))
+
+
 def test_joint_step_is_mujocos_euler_step(two_link):
     """The same discrete map as MuJoCo's (semi-)implicit Euler on the same URDF: x⁺ to round-off,
     A and B to the accuracy of MuJoCo's centred differences."""

@@ -26,7 +26,7 @@ import numpy as np
 
 from ncgen.control.step import StepFunction
 from ncgen.errors import NcgenError
-from ncgen.runtime.tree_algorithm_kernels import aba, aba_derivatives, call, kernel_of
+from ncgen.runtime.tree_algorithm_kernels import aba, aba_derivatives, buffers, kernel_of
 from ncgen.validation import as_vector, positive
 
 
@@ -117,11 +117,17 @@ class JointStep:
         """:meth:`jacobians` of a float vector ``x`` and ``tau`` of the right sizes, unchecked
         (the MPC's rollout; the kernel still refuses values that are not finite)."""
         h, n = self.h, self.n
-        v = x[n:]
-        a, da_dq, da_dv, Minv = call(self.model, self._derivatives, (x[:n], v, tau), self.p, 0.0)
-        dv = np.hstack((da_dq, da_dv))
-        dv *= h                             # ∂v⁺/∂x − [0, I]
-        Bv = h * Minv
-        v1 = v + h * a
-        return (np.concatenate([x[:n] + h * v1, v1]), self._A0 + np.vstack((h * dv, dv)),
-                np.vstack((h * Bv, Bv)))
+        a, da_dq, da_dv, Minv = buffers(self.model, self._derivatives, (x[:n], x[n:], tau), self.p, 0.0)
+        x1, A, B = np.empty(2 * n), np.empty((2 * n, 2 * n)), np.empty((2 * n, n))
+        np.multiply(a, h, out=x1[n:])       # the kernel's buffers read once, written into the results
+        x1[n:] += x[n:]                     # v⁺
+        np.multiply(x1[n:], h, out=x1[:n])
+        x1[:n] += x[:n]                     # q⁺
+        Av, Bv = A[n:], B[n:]
+        np.multiply(da_dq, h, out=Av[:, :n])
+        np.multiply(da_dv, h, out=Av[:, n:])    # ∂v⁺/∂x − [0, I]
+        np.multiply(Av, h, out=A[:n])
+        A += self._A0
+        np.multiply(Minv, h, out=Bv)
+        np.multiply(Bv, h, out=B[:n])
+        return x1, A, B

@@ -386,10 +386,18 @@ def _batch_checked(js, k, arrays: list, outs: list, shapes: list):
 
 def call(model, k: AlgorithmKernel, args: tuple, p, t: float):
     """The outputs (copies) of the kernel ``k`` of ``model`` at one state ``args`` (in
-    :data:`ALGORITHMS` order).  Without quaternion joints the arguments go straight to the
-    kernel's caller, which checks their lengths, kinds and magnitudes in C
-    (:func:`~ncgen.codegen.fast_call.fast_caller`'s ``bound``); the detailed message is built
-    only when that fails (:func:`_checked`)."""
+    :data:`ALGORITHMS` order): those of :func:`buffers`, copied."""
+    out = buffers(model, k, args, p, t)
+    return tuple(o.copy() for o in out) if type(out) is tuple else out.copy()
+
+
+def buffers(model, k: AlgorithmKernel, args: tuple, p, t: float):
+    """The outputs of the kernel ``k`` of ``model`` at one state ``args`` (in
+    :data:`ALGORITHMS` order) in the kernel's own buffers, overwritten by its next call
+    (matrices may be column-major views): for a caller that reads them at once.  Without
+    quaternion joints the arguments go straight to the kernel's caller, which checks their
+    lengths, kinds and magnitudes in C (:func:`~ncgen.codegen.fast_call.fast_caller`'s
+    ``bound``); the detailed message is built only when that fails (:func:`_checked`)."""
     if not isinstance(k, AlgorithmKernel):
         if p is not None:                   # the tables' algorithms do not depend on p: check it only
             as_vector(p, model.np, "p")
@@ -406,7 +414,7 @@ def call(model, k: AlgorithmKernel, args: tuple, p, t: float):
                 out = fast(*_checked(model, k, args))
         if out is None:
             k.singular()
-        return tuple(o.copy() for o in out) if type(out) is tuple else out.copy()
+        return out
     k._at(t, p)
     fast = k._fast
     if fast is not None and not k._quaternions:
@@ -418,7 +426,7 @@ def call(model, k: AlgorithmKernel, args: tuple, p, t: float):
             k._singular()
     else:
         out = k(*_checked(model, k, args))
-    return tuple(o.copy() for o in out) if type(out) is tuple else out.copy()
+    return out
 
 
 def _checked(model, k: AlgorithmKernel, args: tuple) -> list:
