@@ -146,7 +146,7 @@ def stage_function(model, problem, regularization: float, sx_qr_max_nnz: int | N
     xs, us, ts = ca.SX.sym("x", nx), ca.SX.sym("u", nu), ca.SX.sym("t")
     H, g = ca.hessian(problem.stage(xs, us, ts), ca.vertcat(xs, us))
     H = H + regularization * ca.SX.eye(nx + nu)
-    cost = ca.Function("mpc_stage_cost", [xs, us, ts], [H[:nx, :nx], H[:nx, nx:], H[nx:, nx:], g[:nx], g[nx:]])
+    cost = ca.Function("stage_cost_blocks", [xs, us, ts], [H[:nx, :nx], H[:nx, nx:], H[nx:, nx:], g[:nx], g[nx:]])
     f = ca.Function("mpc_stage", [x, u, t], [x1, A, B, res, *cost(x, u, t)],
                     ["x", "u", "t"], ["x1", "A", "B", "res", "Q", "M", "R", "g_x", "g_u"])
     return c_function(f, "mpc_stage")
