@@ -96,8 +96,9 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
     H_UU = ca.diagcat(*ca.horzsplit(R, nu))
     g = ca.vertcat(ca.vec(g_x), g_N, ca.vec(g_u))
     S, s = condense(A, B, x - X[:, 0], x1 - X[:, 1:], N)
-    Hc = ca.mtimes(S.T, ca.mtimes(H_XX, S) + H_XU) + ca.mtimes(H_XU.T, S) + H_UU
-    gc = ca.mtimes(S.T, ca.mtimes(H_XX, s) + g[:nX]) + ca.mtimes(H_XU.T, s) + g[nX:]
+    St = S.T
+    G = ca.mtimes(St, ca.mtimes(H_XX, S) + 2 * H_XU)         # Hc = sym(G) + H_UU: Sᵀ H_XU's transpose is H_XUᵀ S
+    gc = ca.mtimes(St, ca.mtimes(H_XX, s) + g[:nX]) + ca.mtimes(H_XU.T, s) + g[nX:]
     Xn = ca.vec(X) + s
     A_rows, lb_rows = S[rows, :], ca.DM(np.tile(lo_x[bounded], N)) - Xn[rows]
     ub_rows = ca.DM(np.tile(hi_x[bounded], N)) - Xn[rows]
@@ -107,7 +108,7 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
         ub_rows = ca.vertcat(ub_rows, ca.DM.inf(n_taut))
     data = ca.Function(
         "mpc_qp_data", [x, t, X, U],
-        [ca.densify(e) for e in (0.5 * (Hc + Hc.T), gc, A_rows, lb_rows, ub_rows, ca.vec(ca.repmat(lo_u, 1, N) - U),
+        [ca.densify(e) for e in (0.5 * (G + G.T) + H_UU, gc, A_rows, lb_rows, ub_rows, ca.vec(ca.repmat(lo_u, 1, N) - U),
                                  ca.vec(ca.repmat(hi_u, 1, N) - U), Xn, S,
                                  total_cost_function(problem, nx, nu)(X, U, t),
                                  infeasibility(problem, x, X, U, x1, times), ca.mmax(res))],
