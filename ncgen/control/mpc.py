@@ -27,7 +27,9 @@ inputs on the ``N`` intervals; multiple shooting):
 
 An iteration is four generated functions (:func:`mpc_functions`): the QP's data (with the
 guess's cost and infeasibility, from the same steps), ``qrqp``, the full step and the merit
-of a trial.  ``mpc(x, t)`` calls them through :class:`ncgen.codegen.direct.DirectFunction`;
+of a trial.  The QP's data call one interval's kernel (:func:`stage_function`) at every
+interval through a serial ``map`` and condense in MX, so their C is one interval's, whatever
+the horizon.  ``mpc(x, t)`` calls them through :class:`ncgen.codegen.direct.DirectFunction`;
 :func:`ncgen.control.export.export_mpc` writes the same functions and the same loop in C, so
 Python and C compute the same numbers.
 """
