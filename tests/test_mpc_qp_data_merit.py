@@ -4,7 +4,9 @@ every SQP iteration (issue 37): its values equal the merit function's, whose ste
 by another Newton scheme (the staged RATTLE solve of :func:`ncgen.control.discrete.step_functions`
 against the whole-residual rootfinder of the step Jacobians), to round-off, at a guess with
 shooting gaps, a state bound violated and (with ``min_tension``) a slack cable; and ``c`` is
-the sum of its terms evaluated by hand from the merit's own steps."""
+the sum of its terms evaluated by hand from the merit's own steps.  Its QP (built from one
+interval's kernel per interval) equals the horizon's Gauss–Newton QP condensed densely from
+finite-difference step Jacobians and the whole horizon's cost Hessian."""
 from __future__ import annotations
 
 import numpy as np
@@ -69,3 +71,52 @@ def test_qp_data_returns_the_merit_of_its_guess(model, min_tension):
                        for k in range(N) for j in (k, k + 1))
     assert np.max(X[1:, 2]) > -0.99 and (min_tension is None or by_hand > np.abs(X1 - X[1:]).sum() + 1e-3)
     assert abs(float(out["c"]) - by_hand) <= 1e-12 * by_hand
+
+
+def test_qp_data_by_intervals_equal_the_horizon_condensed_densely(model):
+    """The QP data, built from one interval's kernel called per interval (a serial map) and
+    condensed in MX, equal the Gauss–Newton QP of the whole horizon condensed densely here: the
+    cost's Hessian and gradient of the whole horizon (one SX expression in all the nodes and
+    inputs), the step Jacobians by central differences of the merit's own step (another Newton
+    scheme than the QP data's), ``S`` and ``s`` by the linearised recursion in NumPy; at a guess
+    with shooting gaps and a state bound violated, to the differences' accuracy."""
+    import casadi as ca
+    from ncgen.control.mpc import REGULARIZATION, total_cost
+    problem = problem_of(model, None)
+    nx, nu, t = 6, 1, 0.1
+    rng = np.random.default_rng(5)
+    x = np.array([0.01, -0.02, -0.97, 0.1, 0.0, 0.4])
+    X = x + 0.02 * rng.normal(size=(N + 1, nx))
+    U = 0.9 + 0.05 * rng.normal(size=(N, nu))
+    data = mpc_functions(model, problem)[0]
+    out = {k: np.array(v) for k, v in zip(data.name_out(), data(x, t, X.T, U.T))}
+    step = step_functions(model, H)["step"]
+
+    def f(k, xk, uk):
+        return np.array(step(xk, uk, problem.p, t + k * H)[0]).ravel()
+
+    eps = 1e-6
+    A = [np.column_stack([(f(k, X[k] + eps * e, U[k]) - f(k, X[k] - eps * e, U[k])) / (2 * eps) for e in np.eye(nx)])
+         for k in range(N)]
+    B = [np.column_stack([(f(k, X[k], U[k] + eps * e) - f(k, X[k], U[k] - eps * e)) / (2 * eps) for e in np.eye(nu)])
+         for k in range(N)]
+    S, s = np.zeros((N + 1, nx, N * nu)), np.zeros((N + 1, nx))
+    s[0] = x - X[0]
+    for k in range(N):
+        S[k + 1] = A[k] @ S[k]
+        S[k + 1][:, k * nu:(k + 1) * nu] = B[k]
+        s[k + 1] = A[k] @ s[k] + f(k, X[k], U[k]) - X[k + 1]
+    S, s = S.reshape(-1, N * nu), s.reshape(-1)
+    Xs, Us, ts = ca.SX.sym("X", nx, N + 1), ca.SX.sym("U", nu, N), ca.SX.sym("t")
+    y = ca.vertcat(ca.vec(Xs), ca.vec(Us))
+    Hy, gy = ca.hessian(total_cost(problem, Xs, Us, ts), y)
+    Hy, gy = (np.array(ca.Function("hg", [Xs, Us, ts], [Hy, gy])(X.T, U.T, t)[i]) for i in (0, 1))
+    Hy += REGULARIZATION * np.eye(len(Hy))
+    E = np.vstack([S, np.eye(N * nu)])                   # [δX; δU] = E δU + [s; 0]
+    Hc, gc = E.T @ Hy @ E, E.T @ (Hy @ np.concatenate([s, np.zeros(N * nu)]) + gy.ravel())
+    # measured: 1.1e-10, 1.0e-11, 1.6e-10, 9.9e-11 (relative; the central differences' accuracy)
+    assert np.max(np.abs(out["S"] - S)) <= 1e-8 * np.max(np.abs(S))
+    assert np.max(np.abs(out["Xs"].ravel() - (X.ravel() + s))) <= 1e-8 * np.max(np.abs(s))
+    assert np.max(np.abs(out["H"] - Hc)) <= 1e-8 * np.max(np.abs(Hc))
+    assert np.max(np.abs(out["g"].ravel() - gc)) <= 1e-8 * np.max(np.abs(gc))
+    assert np.array_equal(out["H"], out["H"].T)

@@ -37,8 +37,7 @@ def upright_at_rest(angle: float) -> np.ndarray:
 def cartpole():
     """The cart-pole and examples/cartpole_mpc.toml's problem cut to 4 of its 20 intervals
     (0.2 s ahead): what these tests check (input checks, a refused call changing nothing) does
-    not depend on the horizon, and ``nc.MPC`` compiles a 9 times smaller package (the full
-    horizon: tests/test_control_mpc.py, slow tier)."""
+    not depend on the horizon (the full horizon: tests/test_control_mpc.py, slow tier)."""
     model = nc.System.from_toml(EXAMPLES / "cartpole.toml").build()
     data, origin = read_problem_file(EXAMPLES / "cartpole_mpc.toml")
     data["horizon"].update(N=4, t_final=0.2)
@@ -53,8 +52,8 @@ def test_exported_mpc_c_api_refuses_non_finite_input_from_c(cartpole, tmp_path):
     <NAME>_MPC_BAD_INPUT and change nothing; good calls between them answer bit-identically to
     a controller that never saw bad input.  The API's C (and the test) under ASan and UBSan; the
     solver's generated kernels (CasADi's, not ncgen's API) without, for build time.  The package
-    of the 4-interval horizon (:func:`cartpole`): the API's code is the documented package's,
-    its kernels ~9 times smaller (the full horizon's took 9 min at -O0 at a load of 11 on 2 cores)."""
+    of the 4-interval horizon (:func:`cartpole`): the API's code is the documented package's (its
+    kernels too: the QP data call one interval's kernel per interval, whatever the horizon)."""
     out = tmp_path / "cp"
     nc.export_mpc(cartpole[1], out, terminal_weight=100.0)
     header = (out / "cartpole_mpc.h").read_text()

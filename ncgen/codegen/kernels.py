@@ -24,8 +24,9 @@ from ncgen.errors import CodegenError
 FIXED_CASADI_OPTIONS = {"with_header": True, "main": False, "mex": False, "cpp": False}
 #: Functions named so are C functions of their own, called (never inlined) by the MX
 #: functions that use them, whose constant arguments stay arrays: the contact pair kinds
-#: (:mod:`ncgen.assembly.pair_kinds`).
-CALLED_PREFIXES = ("pk_",)
+#: (:mod:`ncgen.assembly.pair_kinds`), and the MPC's stage kernels, which its QP data call at
+#: every interval of the horizon (:func:`ncgen.control.mpc.stage_function`).
+CALLED_PREFIXES = ("pk_", "mpc_stage")
 #: Defaults the caller may override.
 DEFAULT_CASADI_OPTIONS = {"casadi_real": "double", "verbose": False}
 

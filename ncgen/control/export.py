@@ -39,6 +39,7 @@ from ncgen.control.mpc import REGULARIZATION, SOLVERS, line_search_rules, mpc_fu
 from ncgen.control.mpc_context import c_double as _c, controller_context
 from ncgen.control.mpc_problem import mpc_problem
 from ncgen.control.initial import check_consistent
+from ncgen.control.step_support import PACKAGE_OPTIONS
 from ncgen.errors import NcgenError
 from ncgen.validation import as_scalar, as_vector
 
@@ -158,7 +159,7 @@ def export_mpc(ocp, path, *, name: str | None = None, solver: str = "sqp", itera
              ExtraSource(f"mpc/{kind}.h.j2", f"{name}_mpc.h", context),
              ExtraSource(f"mpc/{kind}.c.j2", f"{name}_mpc.c", context),
              ExtraSource("mpc/demo.c.j2", "demo.c", context, program=True)]
-    return write_package(name, [*fns, plant], Path(path), extra_sources=extra, reroll_instructions=None)
+    return write_package(name, [*fns, plant], Path(path), extra_sources=extra, **PACKAGE_OPTIONS)
 
 
 def closed_loop(mpc, x0, t_end: float, *, substeps: int = 5, disturbance=(), warmup: int = 10, plant=None):

@@ -27,7 +27,9 @@ inputs on the ``N`` intervals; multiple shooting):
 
 An iteration is four generated functions (:func:`mpc_functions`): the QP's data (with the
 guess's cost and infeasibility, from the same steps), ``qrqp``, the full step and the merit
-of a trial.  ``mpc(x, t)`` calls them through :class:`ncgen.codegen.direct.DirectFunction`;
+of a trial.  The QP's data call one interval's kernel (:func:`stage_function`) at every
+interval through a serial ``map`` and condense in MX, so their C is one interval's, whatever
+the horizon.  ``mpc(x, t)`` calls them through :class:`ncgen.codegen.direct.DirectFunction`;
 :func:`ncgen.control.export.export_mpc` writes the same functions and the same loop in C, so
 Python and C compute the same numbers.
 """
@@ -74,16 +76,8 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
     ``sx_qr_max_nnz``: the step Jacobians' QR is unrolled into straight-line C up to this size
     (:func:`ncgen.control.discrete.qr_solve_columns`), else generated as loops.
     """
-    h, N, p = problem.h, problem.N, problem.p
+    h, N = problem.h, problem.N
     nx, nu = 2 * model.nq, model.nu
-    jac = step_jacobian_function(model, h, sx_qr_max_nnz=sx_qr_max_nnz).map(N)
-
-    # cost, its gradient and (Gauss–Newton) Hessian in y = [vec X; vec U] (SX)
-    Xs, Us, ts = ca.SX.sym("X", nx, N + 1), ca.SX.sym("U", nu, N), ca.SX.sym("t")
-    y = ca.vertcat(ca.vec(Xs), ca.vec(Us))
-    H_sx, g_sx = ca.hessian(total_cost(problem, Xs, Us, ts), y)
-    H_sx = H_sx + regularization * ca.SX.eye(y.numel())
-    cost = ca.Function("mpc_cost", [Xs, Us, ts], [H_sx, g_sx])
     nX, nU = nx * (N + 1), nu * N
     # the condensed QP's general rows: the bounded state components at nodes 1..N
     lo_x, hi_x = problem.x_bounds
@@ -96,12 +90,17 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
     X, U = ca.MX.sym("X", nx, N + 1), ca.MX.sym("U", nu, N)
     lo_u, hi_u = (ca.DM(b) for b in problem.u_bounds)
     times = t + h * ca.DM(np.arange(N)).T
-    x1, A, B, _, res = jac(X[:, :N], U, ca.repmat(ca.DM(p), 1, N), times)
-    H, g = cost(X, U, t)
+    stages = stage_function(model, problem, regularization, sx_qr_max_nnz).map("mpc_stages", "serial", int(N), [], [])
+    x1, A, B, res, Q, M, R, g_x, g_u = stages(X[:, :N], U, times)
+    Q_N, g_N = terminal_function(problem, nx, regularization)(X[:, N], t + N * h)
+    H_XX = ca.diagcat(*ca.horzsplit(Q, nx), Q_N)
+    H_XU = ca.vertcat(ca.diagcat(*ca.horzsplit(M, nu)), ca.MX(nx, nU))
+    H_UU = ca.diagcat(*ca.horzsplit(R, nu))
+    g = ca.vertcat(ca.vec(g_x), g_N, ca.vec(g_u))
     S, s = condense(A, B, x - X[:, 0], x1 - X[:, 1:], N)
-    H_XX, H_XU, H_UU = H[:nX, :nX], H[:nX, nX:], H[nX:, nX:]
-    Hc = ca.mtimes(S.T, ca.mtimes(H_XX, S) + H_XU) + ca.mtimes(H_XU.T, S) + H_UU
-    gc = ca.mtimes(S.T, ca.mtimes(H_XX, s) + g[:nX]) + ca.mtimes(H_XU.T, s) + g[nX:]
+    St = S.T
+    G = ca.mtimes(St, ca.mtimes(H_XX, S) + 2 * H_XU)         # Hc = sym(G) + H_UU: Sᵀ H_XU's transpose is H_XUᵀ S
+    gc = ca.mtimes(St, ca.mtimes(H_XX, s) + g[:nX]) + ca.mtimes(H_XU.T, s) + g[nX:]
     Xn = ca.vec(X) + s
     A_rows, lb_rows = S[rows, :], ca.DM(np.tile(lo_x[bounded], N)) - Xn[rows]
     ub_rows = ca.DM(np.tile(hi_x[bounded], N)) - Xn[rows]
@@ -111,17 +110,57 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
         ub_rows = ca.vertcat(ub_rows, ca.DM.inf(n_taut))
     data = ca.Function(
         "mpc_qp_data", [x, t, X, U],
-        [ca.densify(e) for e in (0.5 * (Hc + Hc.T), gc, A_rows, lb_rows, ub_rows, ca.vec(ca.repmat(lo_u, 1, N) - U),
+        [ca.densify(e) for e in (0.5 * (G + G.T) + H_UU, gc, A_rows, lb_rows, ub_rows, ca.vec(ca.repmat(lo_u, 1, N) - U),
                                  ca.vec(ca.repmat(hi_u, 1, N) - U), Xn, S,
                                  total_cost_function(problem, nx, nu)(X, U, t),
                                  infeasibility(problem, x, X, U, x1, times), ca.mmax(res))],
         ["x", "t", "X_guess", "U_guess"], ["H", "g", "A", "lba", "uba", "lbx", "ubx", "Xs", "S", "J", "c", "res"])
-    Xs_, S_, U_, dU = ca.MX.sym("Xs", nX), ca.MX.sym("S", nX, nU), ca.MX.sym("U", nu, N), ca.MX.sym("dU", nU)
-    update = ca.Function("mpc_update", [Xs_, S_, U_, dU],
-                         [ca.densify(ca.reshape(Xs_ + ca.mtimes(S_, dU), nx, N + 1)),
-                          ca.densify(U_ + ca.reshape(dU, nu, N))],
-                         ["Xs", "S", "U_guess", "dU"], ["X_sol", "U_sol"])
-    return [data, qp, update, merit_function(model, problem)]
+    return [data, qp, update_function(nx, nu, N), merit_function(model, problem)]
+
+
+def update_function(nx: int, nu: int, N: int) -> ca.Function:
+    """``mpc_update: (Xs, S, Ū, δU) -> (X⁺, U⁺)``: the full step, ``vec X⁺ = Xs + S δU =
+    Xs + Σ_k S_k δu_k`` (``S_k``: the columns of interval ``k``'s inputs, one call of the SX kernel
+    ``mpc_stage_input`` each, through a serial ``map`` summing them) and ``U⁺ = Ū + δU``."""
+    nX = nx * (N + 1)
+    S_k, du = ca.SX.sym("S", nX, nu), ca.SX.sym("du", nu)
+    column = ca.Function("mpc_stage_input", [S_k, du], [ca.mtimes(S_k, du)], ["S", "du"], ["dX"])
+    Xs, S, U, dU = ca.MX.sym("Xs", nX), ca.MX.sym("S", nX, nu * N), ca.MX.sym("U", nu, N), ca.MX.sym("dU", nu * N)
+    dX = column.map("mpc_stage_inputs", "serial", int(N), [], [0])(S, ca.reshape(dU, nu, N))
+    return ca.Function("mpc_update", [Xs, S, U, dU],
+                       [ca.densify(ca.reshape(Xs + dX, nx, N + 1)), ca.densify(U + ca.reshape(dU, nu, N))],
+                       ["Xs", "S", "U_guess", "dU"], ["X_sol", "U_sol"])
+
+
+def stage_function(model, problem, regularization: float, sx_qr_max_nnz: int | None) -> ca.Function:
+    """``mpc_stage: (x, u, t) -> (x1, A, B, res, Q, M, R, g_x, g_u)``: one interval of the QP
+    data, the step from node ``x`` with ``u`` at ``t`` and its Jacobians
+    (:func:`~ncgen.control.discrete.step_jacobian_function`, the parameters closed over), and
+    the stage cost's Gauss–Newton Hessian blocks ``[Q M; Mᵀ R]`` (``regularization`` on the
+    diagonal) and gradient ``(g_x, g_u)`` in ``(x, u)``.  Expanded to SX where the step allows
+    it; called by :func:`mpc_functions` at every interval through a serial ``map``, so the
+    generated C holds one interval, not the horizon (a C function of its own,
+    :data:`ncgen.codegen.kernels.CALLED_PREFIXES`)."""
+    from ncgen.codegen.kernels import c_function
+    nx, nu = 2 * model.nq, model.nu
+    jac = step_jacobian_function(model, problem.h, sx_qr_max_nnz=sx_qr_max_nnz)
+    x, u, t = ca.MX.sym("x", nx), ca.MX.sym("u", nu), ca.MX.sym("t")
+    x1, A, B, _, res = jac(x, u, ca.DM(problem.p), t)
+    xs, us, ts = ca.SX.sym("x", nx), ca.SX.sym("u", nu), ca.SX.sym("t")
+    H, g = ca.hessian(problem.stage(xs, us, ts), ca.vertcat(xs, us))
+    H = H + regularization * ca.SX.eye(nx + nu)
+    cost = ca.Function("stage_cost_blocks", [xs, us, ts], [H[:nx, :nx], H[:nx, nx:], H[nx:, nx:], g[:nx], g[nx:]])
+    f = ca.Function("mpc_stage", [x, u, t], [x1, A, B, res, *cost(x, u, t)],
+                    ["x", "u", "t"], ["x1", "A", "B", "res", "Q", "M", "R", "g_x", "g_u"])
+    return c_function(f, "mpc_stage")
+
+
+def terminal_function(problem, nx: int, regularization: float) -> ca.Function:
+    """``mpc_stage_terminal: (x, t) -> (Q, g)``: the terminal cost's Hessian
+    (``regularization`` on the diagonal) and gradient at the last node ``x`` at its time ``t`` (SX)."""
+    xs, ts = ca.SX.sym("x", nx), ca.SX.sym("t")
+    H, g = ca.hessian(problem.terminal(xs, ts), xs)
+    return ca.Function("mpc_stage_terminal", [xs, ts], [H + regularization * ca.SX.eye(nx), g], ["x", "t"], ["Q", "g"])
 
 
 def taut_rows(problem, X, U, times, S, s):

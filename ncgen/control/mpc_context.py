@@ -16,14 +16,18 @@ def controller_context(model, problem, fns, iterations: int | None, rules: dict)
     for the controller inside ``nc.MPC(..., loop="c")`` (``in_process``: iterations set at run
     time, no plant); ``rules``: :func:`~ncgen.control.mpc.line_search_rules` (step lengths,
     Armijo fraction, filter margin, feasibility and stationarity thresholds, the step's
-    residual tolerance)."""
+    residual tolerance).  The work sizes are those of the C functions generated for ``fns``
+    (:func:`~ncgen.codegen.kernels.c_function`: an MX wrapper asks for more than what it calls;
+    ``init`` refuses work arrays its functions do not fit in)."""
+    from ncgen.codegen.kernels import c_function
     nx, nu = 2 * model.nq, model.nu
     u_rest = np.clip(np.zeros(nu), *problem.u_bounds)
+    generated = [c_function(f, f.name()) for f in fns]     # the work the C functions ask for (a wrapper's, say)
     return {
         "model_name": model.name, "N": problem.N, "h": f"{problem.h:g}", "h_c": c_double(problem.h),
         "iterations": iterations or 0, "in_process": iterations is None, "nx": nx, "nu": nu, "np": model.np,
-        "sz_arg": max(f.sz_arg() for f in fns), "sz_res": max(f.sz_res() for f in fns),
-        "sz_iw": max(f.sz_iw() for f in fns), "sz_w": max(f.sz_w() for f in fns),
+        "sz_arg": max(f.sz_arg() for f in generated), "sz_res": max(f.sz_res() for f in generated),
+        "sz_iw": max(f.sz_iw() for f in generated), "sz_w": max(f.sz_w() for f in generated),
         "nnz": {f"{f.name()}_{io}{i}": (f.nnz_in(i) if io == "in" else f.nnz_out(i))
                 for f in fns for io in ("in", "out") for i in range(f.n_in() if io == "in" else f.n_out())},
         "u_rest": ", ".join(c_double(v) for v in u_rest) or "0",
