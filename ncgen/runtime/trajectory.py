@@ -41,11 +41,14 @@ ARRAY_KEYS = ("t", "q", "v", "lam", "u", "p", "kinetic", "potential", "constrain
 #: Joint space (optional in files written before it existed).
 JOINT_NAME_KEYS = ("joint_names", "joint_position_names", "joint_rate_names")
 JOINT_ARRAY_KEYS = ("qj", "vj")
+#: Arrays a trajectory may be given (else :meth:`Trajectory._default`): joint states, contact outputs.
+OPTIONAL_ARRAY_KEYS = JOINT_ARRAY_KEYS + contact_outputs.KEYS
 
 
-def derived_outputs(model, t, q, v, p, impulses=None) -> tuple[dict, dict]:
+def derived_outputs(model, t, q, v, p, impulses=None, joint=None) -> tuple[dict, dict]:
     """``(names, arrays)`` of the outputs beyond the states, energies and markers: the joint
-    states (``model.joint_names``) and, for a model with contacts, the contact outputs —
+    states (``model.joint_names``; ``joint``: ``(qj, vj)`` when the run has them, else
+    computed from the states) and, for a model with contacts, the contact outputs —
     from the nonsmooth stepper's ``impulses`` per output interval, or from the compliant law.
     ``q`` and ``v``: the states, or functions giving them; the arrays are functions computing
     them (see :class:`Trajectory`)."""
@@ -53,8 +56,11 @@ def derived_outputs(model, t, q, v, p, impulses=None) -> tuple[dict, dict]:
     js = model.joint_space
     names = dict(joint_names=js.joint_names, joint_position_names=js.position_names,
                  joint_rate_names=js.rate_names)
-    joint = once(lambda: outputs.joint_states(model, q(), v()))
-    arrays = {"qj": lambda: joint()[0], "vj": lambda: joint()[1]}
+    if joint is None:
+        states = once(lambda: outputs.joint_states(model, q(), v()))
+        arrays = {"qj": lambda: states()[0], "vj": lambda: states()[1]}
+    else:
+        arrays = {"qj": joint[0], "vj": joint[1]}
     if getattr(model, "nk", 0):
         names["contact_names"] = model.contact_names
         contact = once(lambda: contact_outputs.impulse_outputs(model, t, q(), p, impulses) if impulses is not None
@@ -74,7 +80,11 @@ class _Array:
     def __get__(self, obj, owner=None):
         if obj is None:
             return self
-        value = obj._arrays[self.name]
+        try:
+            value = obj._arrays[self.name]
+        except KeyError:                    # an optional array not given: its default
+            value = obj._arrays[self.name] = obj._default(self.name)
+            return value
         if callable(value):
             value = obj._arrays[self.name] = value()
         return value
@@ -94,11 +104,14 @@ def once(f):
     return value
 
 
+_FLOAT64 = np.dtype(np.float64)
+
+
 def _float(value, shape=None):
     """``value`` (an array or a function computing one) as floats (of ``shape``), lazily."""
     if callable(value):
         return lambda: _float(value(), shape)
-    if shape is None and type(value) is np.ndarray and value.dtype == np.float64:
+    if shape is None and type(value) is np.ndarray and value.dtype is _FLOAT64:
         return value
     a = np.asarray(value, dtype=float)
     return a if shape is None else a.reshape(shape)
@@ -109,47 +122,53 @@ class Trajectory:
     given as a function computing it (evaluated on first access)."""
 
     def __init__(self, *, model_name: str, names: dict, info: dict, model=None, **arrays):
-        a = self._arrays = {}                 # the arrays of the _Array attributes, set directly
         self.model = model
         self.model_name = model_name
         for key in NAME_KEYS:
             setattr(self, key, list(names[key]))
-        for key in ARRAY_KEYS:
-            a[key] = _float(arrays[key])
         for key in JOINT_NAME_KEYS:
-            setattr(self, key, list(names.get(key, [])))
-        n = len(self.t)
-        for key in JOINT_ARRAY_KEYS:
-            x = arrays.get(key)
-            a[key] = np.zeros((n, 0)) if x is None else _float(x)
-        self.contact_names = list(names.get("contact_names", []))
-        nk = len(self.contact_names)
-        for key in contact_outputs.KEYS:         # none given: zeros, made when first read
+            setattr(self, key, list(names.get(key, ())))
+        self.contact_names = list(names.get("contact_names", ()))
+        a = self._arrays = {key: _float(arrays[key]) for key in ARRAY_KEYS}   # the _Array attributes' values
+        for key in OPTIONAL_ARRAY_KEYS:          # none given: the default (:meth:`_default`), made when first read
             value = arrays.get(key)
-            shape = (n, nk, self.dim - 1) if key == "contact_tangent" else (n, nk)
-            a[key] = (lambda shape=shape: np.zeros(shape)) if value is None else _float(value)
-        state = a["contact_state"]
-        self.contact_state = (lambda: _float(state)().astype(int)) if callable(state) else state.astype(int)
+            if value is not None:
+                a[key] = _float(value)
+        state = a.get("contact_state")
+        if state is not None:
+            a["contact_state"] = (lambda: _float(state)().astype(int)) if callable(state) else state.astype(int)
         self.info = dict(info)
+
+    def _default(self, key: str) -> np.ndarray:
+        """The value of the optional array ``key`` when none was given: no joint coordinates,
+        no contacts (zeros of ``(n_t, 0)``, ``(n_t, nk)``, ``(n_t, nk, dim − 1)``; states as int)."""
+        n = len(self.t)
+        if key in JOINT_ARRAY_KEYS:
+            return np.zeros((n, 0))
+        nk = len(self.contact_names)
+        if key == "contact_tangent":
+            return np.zeros((n, nk, self.dim - 1))
+        return np.zeros((n, nk), dtype=int if key == "contact_state" else float)
 
     def __getstate__(self) -> dict:
         """Pickled with every array computed (functions do not pickle)."""
         state = dict(self.__dict__)
-        state["_arrays"] = {key: getattr(self, key) for key in self._arrays}
+        state["_arrays"] = {key: getattr(self, key) for key in ARRAY_KEYS + OPTIONAL_ARRAY_KEYS}
         return state
 
     @classmethod
-    def from_states(cls, model, t, q, v, lam, u, p, info: dict, impulses=None) -> "Trajectory":
+    def from_states(cls, model, t, q, v, lam, u, p, info: dict, impulses=None, joint=None) -> "Trajectory":
         """The trajectory of the states ``(t, q, v, lam)`` of ``model`` (each an array or a
         function computing it), its derived quantities computed on first access;
-        ``impulses``: the nonsmooth stepper's contact impulse sums per output interval."""
+        ``impulses``: the nonsmooth stepper's contact impulse sums per output interval;
+        ``joint``: the joint states ``(qj, vj)`` when the run has them (else derived)."""
         t = np.asarray(t, float)
         q, v = (once(_float(x)) if callable(x) else _float(x) for x in (q, v))
         Q, V = (x if callable(x) else (lambda x=x: x) for x in (q, v))
         energy = once(lambda: outputs.energies(model, t, Q(), V(), p))
         residual = once(lambda: outputs.residuals(model, t, Q(), V(), p))
         names = {key: getattr(model, key) for key in NAME_KEYS}
-        extra_names, extra = derived_outputs(model, t, Q, V, p, impulses)
+        extra_names, extra = derived_outputs(model, t, Q, V, p, impulses, joint)
         return cls(model_name=model.name, names={**names, **extra_names}, info=info, model=model, t=t, q=q, v=v,
                    lam=lam, u=u, p=p, kinetic=lambda: energy()[0], potential=lambda: energy()[1],
                    constraint_residual=lambda: residual()[0], velocity_residual=lambda: residual()[1],
