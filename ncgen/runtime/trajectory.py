@@ -70,9 +70,12 @@ def derived_outputs(model, t, q, v, p, impulses=None, joint=None) -> tuple[dict,
 
 
 class _Array:
-    """An array attribute of :class:`Trajectory`, given either as an array or as a function of
-    no arguments that computes it, called on first access (the derived outputs of a run cost
-    nothing until read); the result is kept."""
+    """An array attribute of :class:`Trajectory` (of floats, or of ints when ``integer``),
+    given either as an array or as a function of no arguments that computes it, called on
+    first access (the derived outputs of a run cost nothing until read); the result is kept."""
+
+    def __init__(self, integer: bool = False):
+        self.integer = integer
 
     def __set_name__(self, owner, name: str):
         self.name = name
@@ -86,7 +89,7 @@ class _Array:
             value = obj._arrays[self.name] = obj._default(self.name)
             return value
         if callable(value):
-            value = obj._arrays[self.name] = value()
+            value = obj._arrays[self.name] = _integers(value()) if self.integer else _float(value())
         return value
 
     def __set__(self, obj, value):
@@ -107,14 +110,18 @@ def once(f):
 _FLOAT64 = np.dtype(np.float64)
 
 
-def _float(value, shape=None):
-    """``value`` (an array or a function computing one) as floats (of ``shape``), lazily."""
+def _float(value):
+    """``value`` (an array or a function computing one) as floats, lazily."""
     if callable(value):
-        return lambda: _float(value(), shape)
-    if shape is None and type(value) is np.ndarray and value.dtype is _FLOAT64:
+        return lambda: _float(value())
+    if type(value) is np.ndarray and value.dtype is _FLOAT64:
         return value
-    a = np.asarray(value, dtype=float)
-    return a if shape is None else a.reshape(shape)
+    return np.asarray(value, dtype=float)
+
+
+def _integers(value) -> np.ndarray:
+    """``value`` as floats, then ints (contact states)."""
+    return np.asarray(value, dtype=float).astype(int)
 
 
 class Trajectory:
@@ -129,14 +136,14 @@ class Trajectory:
         for key in JOINT_NAME_KEYS:
             setattr(self, key, list(names.get(key, ())))
         self.contact_names = list(names.get("contact_names", ()))
-        a = self._arrays = {key: _float(arrays[key]) for key in ARRAY_KEYS}   # the _Array attributes' values
+        a = self._arrays = {}                    # the _Array attributes' values (functions: converted when read)
+        for key in ARRAY_KEYS:
+            value = arrays[key]
+            a[key] = value if callable(value) else _float(value)
         for key in OPTIONAL_ARRAY_KEYS:          # none given: the default (:meth:`_default`), made when first read
             value = arrays.get(key)
             if value is not None:
-                a[key] = _float(value)
-        state = a.get("contact_state")
-        if state is not None:
-            a["contact_state"] = (lambda: _float(state)().astype(int)) if callable(state) else state.astype(int)
+                a[key] = value if callable(value) else _integers(value) if key == "contact_state" else _float(value)
         self.info = dict(info)
 
     def _default(self, key: str) -> np.ndarray:
@@ -163,13 +170,16 @@ class Trajectory:
         ``impulses``: the nonsmooth stepper's contact impulse sums per output interval;
         ``joint``: the joint states ``(qj, vj)`` when the run has them (else derived)."""
         t = np.asarray(t, float)
-        q, v = (once(_float(x)) if callable(x) else _float(x) for x in (q, v))
-        Q, V = (x if callable(x) else (lambda x=x: x) for x in (q, v))
+        q = once(_float(q)) if callable(q) else _float(q)
+        v = once(_float(v)) if callable(v) else _float(v)
+        Q = q if callable(q) else (lambda: q)
+        V = v if callable(v) else (lambda: v)
         energy = once(lambda: outputs.energies(model, t, Q(), V(), p))
         residual = once(lambda: outputs.residuals(model, t, Q(), V(), p))
-        names = {key: getattr(model, key) for key in NAME_KEYS}
-        extra_names, extra = derived_outputs(model, t, Q, V, p, impulses, joint)
-        return cls(model_name=model.name, names={**names, **extra_names}, info=info, model=model, t=t, q=q, v=v,
+        names, extra = derived_outputs(model, t, Q, V, p, impulses, joint)
+        for key in NAME_KEYS:
+            names[key] = getattr(model, key)
+        return cls(model_name=model.name, names=names, info=info, model=model, t=t, q=q, v=v,
                    lam=lam, u=u, p=p, kinetic=lambda: energy()[0], potential=lambda: energy()[1],
                    constraint_residual=lambda: residual()[0], velocity_residual=lambda: residual()[1],
                    markers=lambda: outputs.markers(model, Q(), V()), **extra)
@@ -189,7 +199,7 @@ class Trajectory:
 
     t, q, v, lam, u, p, kinetic, potential = (_Array() for _ in range(8))
     constraint_residual, velocity_residual, markers, qj, vj = (_Array() for _ in range(5))
-    gap, contact_normal, contact_tangent, contact_state = (_Array() for _ in contact_outputs.KEYS)
+    gap, contact_normal, contact_tangent, contact_state = _Array(), _Array(), _Array(), _Array(integer=True)
 
     @property
     def dim(self) -> int:
