@@ -208,13 +208,13 @@ def _flat_ready(model) -> str | None:
     """Why the model's own loop (no controller, no joint dynamics) is ready without a compile
     — loaded in this process, or its ODE stored beside the model and its library in the
     compile cache (looked up once per model and process) — or None."""
-    from ncgen.codegen.joint_loop import cached_joint_loop
-    from ncgen.codegen.model_cache import stored_function
-
     data = model_data(model)
     if (id(None), False, None) in data.joint_loops:
         return "loaded in this process"
     if data.flat_loop_stored is None:
+        from ncgen.codegen.joint_loop import cached_joint_loop
+        from ncgen.codegen.model_cache import stored_function
+
         ode = stored_function(model, "joint-ode")
         data.flat_loop_stored = ("compiled earlier, in the compile cache" if ode is not None and cached_joint_loop(
             f"{model.name}_jsim", ode, PIVOT_TOL) is not None else None,)

@@ -41,6 +41,7 @@ ARRAY_KEYS = ("t", "q", "v", "lam", "u", "p", "kinetic", "potential", "constrain
 #: Joint space (optional in files written before it existed).
 JOINT_NAME_KEYS = ("joint_names", "joint_position_names", "joint_rate_names")
 JOINT_ARRAY_KEYS = ("qj", "vj")
+ALL_NAME_KEYS = NAME_KEYS + JOINT_NAME_KEYS + ("contact_names",)
 #: Arrays a trajectory may be given (else :meth:`Trajectory._default`): joint states, contact outputs.
 OPTIONAL_ARRAY_KEYS = JOINT_ARRAY_KEYS + contact_outputs.KEYS
 
@@ -96,6 +97,20 @@ class _Array:
         obj._arrays[self.name] = value
 
 
+class _Names:
+    """A list of names of :class:`Trajectory` (``coordinate_names``, ...): the run's own copy
+    of the names it was given, made on first access (then an ordinary attribute)."""
+
+    def __set_name__(self, owner, name: str):
+        self.name = name
+
+    def __get__(self, obj, owner=None):
+        if obj is None:
+            return self
+        value = obj.__dict__[self.name] = list(obj._names.get(self.name, ()))
+        return value
+
+
 def once(f):
     """``f()`` computed at the first call and kept (several arrays from one evaluation)."""
     kept = []
@@ -131,11 +146,10 @@ class Trajectory:
     def __init__(self, *, model_name: str, names: dict, info: dict, model=None, **arrays):
         self.model = model
         self.model_name = model_name
-        for key in NAME_KEYS:
-            setattr(self, key, list(names[key]))
-        for key in JOINT_NAME_KEYS:
-            setattr(self, key, list(names.get(key, ())))
-        self.contact_names = list(names.get("contact_names", ()))
+        missing = [key for key in NAME_KEYS if key not in names]
+        if missing:
+            raise KeyError(missing[0])
+        self._names = names                      # copied into lists when read (_Names)
         a = self._arrays = {}                    # the _Array attributes' values (functions: converted when read)
         for key in ARRAY_KEYS:
             value = arrays[key]
@@ -158,9 +172,11 @@ class Trajectory:
         return np.zeros((n, nk), dtype=int if key == "contact_state" else float)
 
     def __getstate__(self) -> dict:
-        """Pickled with every array computed (functions do not pickle)."""
+        """Pickled with every array computed (functions do not pickle) and every list of names."""
         state = dict(self.__dict__)
         state["_arrays"] = {key: getattr(self, key) for key in ARRAY_KEYS + OPTIONAL_ARRAY_KEYS}
+        state.update({key: getattr(self, key) for key in ALL_NAME_KEYS})
+        state["_names"] = {}
         return state
 
     @classmethod
@@ -197,6 +213,9 @@ class Trajectory:
     def __len__(self) -> int:
         return len(self.t)
 
+    coordinate_names, constraint_names, input_names, parameter_names, member_names, marker_names = \
+        (_Names() for _ in NAME_KEYS)
+    joint_names, joint_position_names, joint_rate_names, contact_names = (_Names() for _ in range(4))
     t, q, v, lam, u, p, kinetic, potential = (_Array() for _ in range(8))
     constraint_residual, velocity_residual, markers, qj, vj = (_Array() for _ in range(5))
     gap, contact_normal, contact_tangent, contact_state = _Array(), _Array(), _Array(), _Array(integer=True)
