@@ -296,9 +296,9 @@ def simulate_joint(model, run: Run, opts: JointLoopOptions, options: JointOption
                          "interval (zoh); use hold='zoh'")
     js = model.joint_space
     loop, choice, build_time = _run_loop(model, controller, opts, len(t) - 1)
-    n = len(t)
-    X = np.zeros((n, js.nq + js.nv))
-    X[0, :js.nq], X[0, js.nq:] = run.joint_state or js.state(model, run.q, run.v)  # consistent: start_state made it so
+    n, nqj = len(t), js.nq
+    X = np.zeros((n, nqj + js.nv))
+    X[0, :nqj], X[0, nqj:] = run.joint_state or js.state(model, run.q, run.v)  # consistent: start_state made it so
     U = np.ascontiguousarray(run.U, dtype=float)
     W, S = U.copy(), _input_slopes(U, t) if hold == "linear" and model.nu else None
     varying = model.nu > 0 and (feedback is not None or U[1:].tobytes() != U[:1].tobytes() * (n - 1))  # bit-equal rows
