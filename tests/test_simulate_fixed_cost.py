@@ -208,6 +208,62 @@ def test_a_non_finite_q0_or_v0_is_refused_naming_it_and_the_fast_start_runs_as_t
             np.testing.assert_array_equal(getattr(fast, key), getattr(checked, key), err_msg=key)
 
 
+def test_a_start_that_held_is_kept_by_its_bytes_and_a_changed_or_bad_start_is_checked_again(chain, monkeypatch):
+    """The joint run's start check: a start that held is answered from the kept starts (no
+    VM call: counted) with the values the call gave (copies: editing them changes nothing
+    kept); the same array edited in place (other bytes) is checked again — off the
+    constraints by 0.5 m it is refused by ``simulate`` naming the initial state — and so is
+    a NaN, every time (never kept); at most ``KEPT_STARTS`` starts are kept per model."""
+    from ncgen.assembly.joint_space import KEPT_STARTS
+
+    model = spatial_chain()
+    js = model.joint_space
+    q0, v0 = model.from_joint_space(np.array([0.2, 0.4, -0.9]), np.array([0.3, 1.1, -0.5]))
+    calls = [0]
+    call = buffered_call.BufferedFunction.call
+
+    def counted(self, *args):
+        calls[0] += self.f.name() == "start_check"
+        return call(self, *args)
+    monkeypatch.setattr(buffered_call.BufferedFunction, "call", counted)
+    first = js._checked_state(model, q0, v0, model.t0, model.p0)
+    assert calls[0] == 1
+    first[0][:] = 99.0                            # the caller's copy
+    again = js._checked_state(model, q0.copy(), v0.copy(), model.t0, model.p0)
+    assert calls[0] == 1
+    for got, want in zip(again, js.state(model, q0, v0)):
+        np.testing.assert_array_equal(got, want)
+    run = nc.simulate(model, 0.1, 0.05, q0=q0, v0=v0, method="joint")
+    assert calls[0] == 1 and run.complete
+    q0[1] += 0.5                                  # the same array, now off Φ = 0
+    with pytest.raises(nc.NcgenError, match="initial state of 'chain3'"):
+        nc.simulate(model, 0.1, 0.05, q0=q0, v0=v0, method="joint")
+    assert calls[0] == 2
+    q0[1] = np.nan
+    for _ in range(2):
+        with pytest.raises(nc.NcgenError, match="^q0: expected"):
+            nc.simulate(model, 0.1, 0.05, q0=q0, v0=v0, method="joint")
+    assert calls[0] == 4
+    starts = js_module.model_data(model).checked_starts
+    for k in range(KEPT_STARTS + 3):
+        q, v = model.from_joint_space(np.array([0.01 * k, 0.0, 0.0]), np.zeros(3))
+        assert js._checked_state(model, q, v, model.t0, model.p0) is not None
+        assert 1 <= len(starts) <= KEPT_STARTS
+
+
+def test_the_trajectory_names_are_its_own_lists_also_after_a_pickle(chain):
+    """A run's lists of names (copied on first read) equal the model's and are each run's own:
+    editing one run's list changes no other run's, nor a pickled copy's."""
+    model, q0, v0 = chain
+    a, b = (nc.simulate(model, 0.01, 0.01, q0=q0, v0=v0, method="joint") for _ in range(2))
+    assert a.coordinate_names == list(model.coordinate_names) and a.joint_names == list(model.joint_space.joint_names)
+    assert a.contact_names == [] and a.gap.shape == (2, 0) and a.contact_state.dtype.kind == "i"
+    copy = pickle.loads(pickle.dumps(b))
+    a.coordinate_names.append("extra")
+    assert b.coordinate_names == copy.coordinate_names == list(model.coordinate_names)
+    assert copy.joint_position_names == list(model.joint_space.position_names)
+
+
 def test_the_time_grid_is_fresh_per_run_and_the_formula_of_the_docs():
     """The grid is computed once per ``(t0, t_end, n)`` but every call returns its own array
     (editing a run's ``t`` changes no later grid), ``t0 + k (t_end − t0) / n``."""
