@@ -6,6 +6,7 @@ fails at ``simulate``.  Ctrl-C through the watcher thread (:func:`ncgen.interrup
 in-process here, in a child process stopped in a long C loop in tests/test_stepper_interrupt.py."""
 from __future__ import annotations
 
+import ctypes
 import os
 import pickle
 import signal
@@ -264,6 +265,32 @@ def test_the_trajectory_names_are_its_own_lists_also_after_a_pickle(chain):
     assert copy.joint_position_names == list(model.joint_space.position_names)
 
 
+@pytest.mark.skipif(threading.current_thread() is not threading.main_thread(), reason="signals: main thread only")
+@pytest.mark.parametrize("action", [signal.SIG_IGN, signal.SIG_DFL])
+def test_where_sigint_is_ignored_or_default_the_loop_is_called_directly(chain, monkeypatch, action):
+    """A process whose SIGINT is ignored (a shell's background job, ``nohup``) or has its
+    default action starts no thread per run (there is no Ctrl-C for one to catch: a thread
+    per call cost ~50 µs); the run equals the one under Python's handler, bit for bit."""
+    model, q0, v0 = chain
+    run = lambda: nc.simulate(model, 0.05, 0.01, q0=q0, v0=v0, method="joint")  # noqa: E731
+    reference = run()
+    threads = [0]
+    start = threading.Thread.start
+
+    def thread_start(self):
+        threads[0] += 1
+        return start(self)
+    monkeypatch.setattr(threading.Thread, "start", thread_start)
+    previous = signal.signal(signal.SIGINT, action)
+    try:
+        got = run()
+        assert call_interruptibly(lambda: 3, stop=ctypes.c_int(0)) == (3, False)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert threads[0] == 0
+    np.testing.assert_array_equal(got.qj, reference.qj)
+
+
 def test_the_time_grid_is_fresh_per_run_and_the_formula_of_the_docs():
     """The grid is computed once per ``(t0, t_end, n)`` but every call returns its own array
     (editing a run's ``t`` changes no later grid), ``t0 + k (t_end − t0) / n``."""
@@ -293,8 +320,6 @@ def test_ctrl_c_during_a_call_sets_the_stop_flag_and_the_handler_runs_after():
     its stop flag (through the watcher thread), the call returns its result, ``interrupted`` is
     True, no ``KeyboardInterrupt`` escapes, the sticky handler remembers it, and the wakeup
     descriptor is restored; under an application's handler (a worker thread) the same."""
-    import ctypes
-
     if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
         pytest.skip("SIGINT is not Python's default handler here")
     before = signal.set_wakeup_fd(-1)
