@@ -26,6 +26,7 @@ written to a temporary sibling and renamed, so a reader never sees a partial fil
 from __future__ import annotations
 
 import json
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -46,28 +47,74 @@ ALL_NAME_KEYS = NAME_KEYS + JOINT_NAME_KEYS + ("contact_names",)
 OPTIONAL_ARRAY_KEYS = JOINT_ARRAY_KEYS + contact_outputs.KEYS
 
 
-def derived_outputs(model, t, q, v, p, impulses=None, joint=None) -> tuple[dict, dict]:
-    """``(names, arrays)`` of the outputs beyond the states, energies and markers: the joint
-    states (``model.joint_names``; ``joint``: ``(qj, vj)`` when the run has them, else
-    computed from the states) and, for a model with contacts, the contact outputs —
-    from the nonsmooth stepper's ``impulses`` per output interval, or from the compliant law.
-    ``q`` and ``v``: the states, or functions giving them; the arrays are functions computing
-    them (see :class:`Trajectory`)."""
-    q, v = (x if callable(x) else (lambda x=x: x) for x in (q, v))
+def output_names(model) -> dict:
+    """The lists of names of a trajectory of ``model``: :data:`NAME_KEYS`, the joint names and,
+    for a model with contacts, the contact names."""
     js = model.joint_space
-    names = dict(joint_names=js.joint_names, joint_position_names=js.position_names,
-                 joint_rate_names=js.rate_names)
-    if joint is None:
-        states = once(lambda: outputs.joint_states(model, q(), v()))
-        arrays = {"qj": lambda: states()[0], "vj": lambda: states()[1]}
-    else:
-        arrays = {"qj": joint[0], "vj": joint[1]}
+    names = {key: getattr(model, key) for key in NAME_KEYS}
+    names.update(joint_names=js.joint_names, joint_position_names=js.position_names, joint_rate_names=js.rate_names)
     if getattr(model, "nk", 0):
         names["contact_names"] = model.contact_names
-        contact = once(lambda: contact_outputs.impulse_outputs(model, t, q(), p, impulses) if impulses is not None
-                       else contact_outputs.smooth_outputs(model, t, q(), v(), p))
-        arrays.update({key: (lambda key=key: contact()[key]) for key in contact_outputs.KEYS})
-    return names, arrays
+    return names
+
+
+#: What :class:`Derived` computes, by key: the group computed at once and the item of it.
+_GROUPS = {"kinetic": ("energy", 0), "potential": ("energy", 1), "constraint_residual": ("residual", 0),
+           "velocity_residual": ("residual", 1), "markers": ("markers", None), "qj": ("joint", 0),
+           "vj": ("joint", 1), **{key: ("contact", key) for key in contact_outputs.KEYS}}
+
+
+class Derived:
+    """The outputs of a run derived from its states ``(t, q, v)`` (``q``, ``v``: arrays or
+    functions computing them): the states themselves, energies, residuals, markers, joint
+    states and, for a model with contacts, the contact outputs (from the nonsmooth stepper's
+    ``impulses`` per output interval, or the compliant law); each group computed when first
+    asked for (``derived(key)``) and kept — one object per run, where a function per output
+    would cost a closure each."""
+
+    def __init__(self, model, t, q, v, p, impulses=None):
+        self.model, self.t, self.p, self.impulses = model, t, p, impulses
+        self._states = [x if callable(x) else _float(x) for x in (q, v)]
+        self._kept: dict = {}
+        self.keys = {"q", "v", *(k for k, (g, _) in _GROUPS.items() if g != "contact" or getattr(model, "nk", 0))}
+
+    def state(self, i: int) -> np.ndarray:
+        """q (``i = 0``) or v (1), as floats."""
+        x = self._states[i]
+        if callable(x):
+            x = self._states[i] = _float(x())
+        return x
+
+    def __call__(self, key: str):
+        if key == "q" or key == "v":
+            return self.state(key == "v")
+        group, item = _GROUPS[key]
+        kept = self._kept.get(group)
+        if kept is None:
+            m, t, p, q = self.model, self.t, self.p, self.state(0)
+            if group == "energy":
+                kept = outputs.energies(m, t, q, self.state(1), p)
+            elif group == "residual":
+                kept = outputs.residuals(m, t, q, self.state(1), p)
+            elif group == "markers":
+                kept = outputs.markers(m, q, self.state(1))
+            elif group == "joint":
+                kept = outputs.joint_states(m, q, self.state(1))
+            else:
+                kept = contact_outputs.impulse_outputs(m, t, q, p, self.impulses) if self.impulses is not None \
+                    else contact_outputs.smooth_outputs(m, t, q, self.state(1), p)
+            self._kept[group] = kept
+        return kept if item is None else kept[item]
+
+
+def derived_outputs(model, t, q, v, p, impulses=None) -> tuple[dict, dict]:
+    """``(names, arrays)`` of the outputs beyond the states, energies and markers: the joint
+    states (``model.joint_names``) and, for a model with contacts, the contact outputs
+    (:class:`Derived`); ``q`` and ``v``: the states, or functions giving them; the arrays are
+    functions computing them (see :class:`Trajectory`)."""
+    names = {key: x for key, x in output_names(model).items() if key not in NAME_KEYS}
+    derived = Derived(model, t, q, v, p, impulses)
+    return names, {key: partial(derived, key) for key in derived.keys if key in OPTIONAL_ARRAY_KEYS}
 
 
 class _Array:
@@ -143,16 +190,22 @@ class Trajectory:
     """Simulated states and derived quantities (see the module docstring).  Any array may be
     given as a function computing it (evaluated on first access)."""
 
-    def __init__(self, *, model_name: str, names: dict, info: dict, model=None, **arrays):
+    def __init__(self, *, model_name: str, names: dict, info: dict, model=None, derived: Derived | None = None,
+                 **arrays):
         self.model = model
         self.model_name = model_name
         missing = [key for key in NAME_KEYS if key not in names]
         if missing:
             raise KeyError(missing[0])
         self._names = names                      # copied into lists when read (_Names)
+        self._derived = derived                  # the arrays not given, when first read (_default)
         a = self._arrays = {}                    # the _Array attributes' values (functions: converted when read)
         for key in ARRAY_KEYS:
-            value = arrays[key]
+            value = arrays.get(key)
+            if value is None:
+                if derived is None or key not in derived.keys:
+                    raise KeyError(key)
+                continue
             a[key] = value if callable(value) else _float(value)
         for key in OPTIONAL_ARRAY_KEYS:          # none given: the default (:meth:`_default`), made when first read
             value = arrays.get(key)
@@ -161,8 +214,13 @@ class Trajectory:
         self.info = dict(info)
 
     def _default(self, key: str) -> np.ndarray:
-        """The value of the optional array ``key`` when none was given: no joint coordinates,
-        no contacts (zeros of ``(n_t, 0)``, ``(n_t, nk)``, ``(n_t, nk, dim − 1)``; states as int)."""
+        """The value of the array ``key`` when none was given: derived from the states (the
+        run's :class:`Derived`), else no joint coordinates, no contacts (zeros of ``(n_t, 0)``,
+        ``(n_t, nk)``, ``(n_t, nk, dim − 1)``; states as int)."""
+        derived = self.__dict__.get("_derived")     # (none in a trajectory pickled before it existed)
+        if derived is not None and key in derived.keys:
+            value = derived(key)
+            return _integers(value) if key == "contact_state" else _float(value)
         n = len(self.t)
         if key in JOINT_ARRAY_KEYS:
             return np.zeros((n, 0))
@@ -176,7 +234,7 @@ class Trajectory:
         state = dict(self.__dict__)
         state["_arrays"] = {key: getattr(self, key) for key in ARRAY_KEYS + OPTIONAL_ARRAY_KEYS}
         state.update({key: getattr(self, key) for key in ALL_NAME_KEYS})
-        state["_names"] = {}
+        state["_names"], state["_derived"] = {}, None
         return state
 
     @classmethod
@@ -186,19 +244,10 @@ class Trajectory:
         ``impulses``: the nonsmooth stepper's contact impulse sums per output interval;
         ``joint``: the joint states ``(qj, vj)`` when the run has them (else derived)."""
         t = np.asarray(t, float)
-        q = once(_float(q)) if callable(q) else _float(q)
-        v = once(_float(v)) if callable(v) else _float(v)
-        Q = q if callable(q) else (lambda: q)
-        V = v if callable(v) else (lambda: v)
-        energy = once(lambda: outputs.energies(model, t, Q(), V(), p))
-        residual = once(lambda: outputs.residuals(model, t, Q(), V(), p))
-        names, extra = derived_outputs(model, t, Q, V, p, impulses, joint)
-        for key in NAME_KEYS:
-            names[key] = getattr(model, key)
-        return cls(model_name=model.name, names=names, info=info, model=model, t=t, q=q, v=v,
-                   lam=lam, u=u, p=p, kinetic=lambda: energy()[0], potential=lambda: energy()[1],
-                   constraint_residual=lambda: residual()[0], velocity_residual=lambda: residual()[1],
-                   markers=lambda: outputs.markers(model, Q(), V()), **extra)
+        joint = {} if joint is None else {"qj": joint[0], "vj": joint[1]}
+        return cls(model_name=model.name, names=output_names(model), info=info, model=model,
+                   derived=Derived(model, t, q, v, p, impulses), t=t, q=None if callable(q) else q,
+                   v=None if callable(v) else v, lam=lam, u=u, p=p, **joint)
 
     def head(self, n: int) -> "Trajectory":
         """The first ``n`` samples (every per-sample array cut, names and ``info`` copied)."""
