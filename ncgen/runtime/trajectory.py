@@ -63,6 +63,10 @@ _GROUPS = {"kinetic": ("energy", 0), "potential": ("energy", 1), "constraint_res
            "velocity_residual": ("residual", 1), "markers": ("markers", None), "qj": ("joint", 0),
            "vj": ("joint", 1), **{key: ("contact", key) for key in contact_outputs.KEYS}}
 
+#: The keys :class:`Derived` gives, for a model with contacts and without.
+_KEYS_CONTACTS = frozenset(("q", "v", *_GROUPS))
+_KEYS = _KEYS_CONTACTS - set(contact_outputs.KEYS)
+
 
 class Derived:
     """The outputs of a run derived from its states ``(t, q, v)`` (``q``, ``v``: arrays or
@@ -76,7 +80,7 @@ class Derived:
         self.model, self.t, self.p, self.impulses = model, t, p, impulses
         self._states = [x if callable(x) else _float(x) for x in (q, v)]
         self._kept: dict = {}
-        self.keys = {"q", "v", *(k for k, (g, _) in _GROUPS.items() if g != "contact" or getattr(model, "nk", 0))}
+        self.keys = _KEYS_CONTACTS if getattr(model, "nk", 0) else _KEYS
 
     def state(self, i: int) -> np.ndarray:
         """q (``i = 0``) or v (1), as floats."""
