@@ -5,7 +5,8 @@ alone); the fixed cost is the difference.  With ``--before DIR`` (a checkout of 
 e.g. ``git archive`` of an older commit) the same run of both trees is timed in child
 processes started in alternation, ``--rounds`` each (interleaved: the load falls on both),
 each child timing ``--calls`` calls after a warm-up; min and median of the rounds and of their
-ratios (this tree / before) are printed.
+ratios (this tree / before) are printed.  The same calls from a new start each (``q0`` moved by
+1e-3 rad per joint and call) time the start check that a repeated start skips.
 
     python benchmarks/simulate_fixed_cost.py [--before DIR] [--rounds 7] [--calls 200]
 """
@@ -45,6 +46,11 @@ for _ in range(calls):
     run()
 out = {"cpu": (time.process_time() - c) / calls, "wall": (time.perf_counter() - w) / calls,
        "kernels": tr.info["kernels"], "stats": tr.info["stats"], "file": nc.__file__}
+starts = [model.from_joint_space(np.linspace(-0.8, 0.9, js.nq) + 1e-3 * k, np.zeros(js.nv)) for k in range(calls)]
+c = time.process_time()
+for q, v in starts:                     # a new start each call: its start check is not kept from an earlier run
+    nc.simulate(model, 1e-3, 1e-3, q0=q, v0=v, method="joint", rtol=1e-3, atol=1e-3)
+out["cpu_new_start"] = (time.process_time() - c) / calls
 try:                                    # the C loop alone on the same grid (this tree's interface)
     from ncgen.codegen.joint_loop import run_options
     from ncgen.runtime.joint_integrator import JointIntegrator
@@ -97,13 +103,16 @@ def main(argv=None) -> None:
         print(f"  {name}: {rs[0]['file']} (kernels {rs[0]['kernels']}, {rs[0]['stats']})")
         print(line(f"{name}: simulate, CPU per call", [r["cpu"] for r in rs]))
         print(line(f"{name}: simulate, wall per call", [r["wall"] for r in rs]))
+        print(line(f"{name}: simulate from a new start, CPU per call", [r["cpu_new_start"] for r in rs]))
         if "loop_cpu" in rs[0]:
             print(line(f"{name}: the C loop alone, CPU per call", [r["loop_cpu"] for r in rs]))
             print(line(f"{name}: FIXED COST (simulate - loop), CPU", [r["cpu"] - r["loop_cpu"] for r in rs]))
+            print(line(f"{name}: FIXED COST, a new start each call, CPU", [r["cpu_new_start"] - r["loop_cpu"]
+                                                                          for r in rs]))
     if a.before:
-        for clock in ("cpu", "wall"):
+        for clock, label in (("cpu", "CPU"), ("wall", "WALL"), ("cpu_new_start", "CPU, a new start each call")):
             ratios = [x[clock] / y[clock] for x, y in zip(results["this tree"], results["before"])]
-            print(f"  RATIO this tree / before, simulate {clock.upper()}: min {min(ratios):.3f}, "
+            print(f"  RATIO this tree / before, simulate {label}: min {min(ratios):.3f}, "
                   f"median {statistics.median(ratios):.3f}")
     print(f"load average at the end: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
 

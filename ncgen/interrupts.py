@@ -121,11 +121,14 @@ def call_interruptibly(fn, *args, stop):
     then runs as it would have, its ``KeyboardInterrupt`` caught.  In the main thread under
     such a handler: a direct call watched by the :class:`_Watcher`; under another handler, in
     a worker thread while the main thread waits (the handler decides what Ctrl-C does); off
-    the main thread, where no SIGINT arrives, a direct call.  Exceptions of ``fn`` are raised
-    here."""
+    the main thread, where no SIGINT arrives, and where SIGINT is ignored (a job started in
+    the background by a shell, ``nohup``) or has its default action (the process ends), a
+    direct call.  Exceptions of ``fn`` are raised here."""
     if threading.current_thread() is not threading.main_thread():
         return fn(*args), False
     previous = _raw.getsignal(signal.SIGINT)
+    if previous == _raw.SIG_IGN or previous == _raw.SIG_DFL:
+        return fn(*args), False
     if not (previous is signal.default_int_handler or getattr(previous, "sticky", False)) or sys.platform == "win32":
         return _call_in_thread(fn, *args, stop=stop)
     flag = InterruptFlag()

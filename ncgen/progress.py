@@ -16,12 +16,13 @@ DELAY = 2.0
 
 def enabled(mode: bool | None = None) -> bool:
     """Whether a bar with ``mode`` is drawn at all (see module docstring)."""
-    if os.environ.get("NCGEN_PROGRESS", "") == "0" or mode is False:
+    if mode is False:
         return False
-    if mode:
-        return True
-    isatty = getattr(sys.stderr, "isatty", None)
-    return bool(isatty and isatty())
+    if not mode:                            # auto: a terminal
+        isatty = getattr(sys.stderr, "isatty", None)
+        if not (isatty and isatty()):
+            return False
+    return os.environ.get("NCGEN_PROGRESS", "") != "0"
 
 
 def bar(total: float | None, desc: str, unit: str = "it", mode: bool | None = None, **kw):

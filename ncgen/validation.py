@@ -18,6 +18,7 @@ TOML loader and the command line all go through these, so one input is judged by
 from __future__ import annotations
 
 import math
+import os
 import re
 import warnings
 
@@ -79,7 +80,6 @@ def allocation(n_bytes: float, what, hint: str) -> None:
     """Refuse an allocation of ``n_bytes`` above :data:`MAX_ALLOCATION` (or
     ``$NCGEN_MAX_BYTES``), saying how much it would need (``what``: the text, or a function
     making it only then) and ``hint`` (what to change)."""
-    import os
     limit = float(os.environ.get("NCGEN_MAX_BYTES", MAX_ALLOCATION))
     if n_bytes > limit:
         what = what() if callable(what) else what

@@ -6,6 +6,7 @@ fails at ``simulate``.  Ctrl-C through the watcher thread (:func:`ncgen.interrup
 in-process here, in a child process stopped in a long C loop in tests/test_stepper_interrupt.py."""
 from __future__ import annotations
 
+import ctypes
 import os
 import pickle
 import signal
@@ -60,7 +61,7 @@ def test_derived_outputs_are_lazy_and_equal_eager_and_the_model_functions_row_by
     model, q0, v0 = chain
     run = lambda: nc.simulate(model, 0.5, 0.05, q0=q0, v0=v0, method="joint", rtol=1e-10, atol=1e-12)  # noqa: E731
     lazy, eager = run(), pickle.loads(pickle.dumps(run()))
-    assert all(callable(lazy._arrays[k]) for k in DERIVED)
+    assert not any(isinstance(lazy._arrays.get(k), np.ndarray) for k in DERIVED)     # none computed yet
     for key in reversed(DERIVED):
         np.testing.assert_array_equal(getattr(lazy, key), getattr(eager, key), err_msg=key)
     np.testing.assert_array_equal(lazy.qj, eager.qj)
@@ -208,6 +209,88 @@ def test_a_non_finite_q0_or_v0_is_refused_naming_it_and_the_fast_start_runs_as_t
             np.testing.assert_array_equal(getattr(fast, key), getattr(checked, key), err_msg=key)
 
 
+def test_a_start_that_held_is_kept_by_its_bytes_and_a_changed_or_bad_start_is_checked_again(chain, monkeypatch):
+    """The joint run's start check: a start that held is answered from the kept starts (no
+    VM call: counted) with the values the call gave (copies: editing them changes nothing
+    kept); the same array edited in place (other bytes) is checked again — off the
+    constraints by 0.5 m it is refused by ``simulate`` naming the initial state — and so is
+    a NaN, every time (never kept); at most ``KEPT_STARTS`` starts are kept per model."""
+    from ncgen.assembly.joint_space import KEPT_STARTS
+
+    model = spatial_chain()
+    js = model.joint_space
+    q0, v0 = model.from_joint_space(np.array([0.2, 0.4, -0.9]), np.array([0.3, 1.1, -0.5]))
+    calls = [0]
+    call = buffered_call.BufferedFunction.call
+
+    def counted(self, *args):
+        calls[0] += self.f.name() == "start_check"
+        return call(self, *args)
+    monkeypatch.setattr(buffered_call.BufferedFunction, "call", counted)
+    first = js._checked_state(model, q0, v0, model.t0, model.p0)
+    assert calls[0] == 1
+    first[0][:] = 99.0                            # the caller's copy
+    again = js._checked_state(model, q0.copy(), v0.copy(), model.t0, model.p0)
+    assert calls[0] == 1
+    for got, want in zip(again, js.state(model, q0, v0)):
+        np.testing.assert_array_equal(got, want)
+    run = nc.simulate(model, 0.1, 0.05, q0=q0, v0=v0, method="joint")
+    assert calls[0] == 1 and run.complete
+    q0[1] += 0.5                                  # the same array, now off Φ = 0
+    with pytest.raises(nc.NcgenError, match="initial state of 'chain3'"):
+        nc.simulate(model, 0.1, 0.05, q0=q0, v0=v0, method="joint")
+    assert calls[0] == 2
+    q0[1] = np.nan
+    for _ in range(2):
+        with pytest.raises(nc.NcgenError, match="^q0: expected"):
+            nc.simulate(model, 0.1, 0.05, q0=q0, v0=v0, method="joint")
+    assert calls[0] == 4
+    starts = js_module.model_data(model).checked_starts
+    for k in range(KEPT_STARTS + 3):
+        q, v = model.from_joint_space(np.array([0.01 * k, 0.0, 0.0]), np.zeros(3))
+        assert js._checked_state(model, q, v, model.t0, model.p0) is not None
+        assert 1 <= len(starts) <= KEPT_STARTS
+
+
+def test_the_trajectory_names_are_its_own_lists_also_after_a_pickle(chain):
+    """A run's lists of names (copied on first read) equal the model's and are each run's own:
+    editing one run's list changes no other run's, nor a pickled copy's."""
+    model, q0, v0 = chain
+    a, b = (nc.simulate(model, 0.01, 0.01, q0=q0, v0=v0, method="joint") for _ in range(2))
+    assert a.coordinate_names == list(model.coordinate_names) and a.joint_names == list(model.joint_space.joint_names)
+    assert a.contact_names == [] and a.gap.shape == (2, 0) and a.contact_state.dtype.kind == "i"
+    copy = pickle.loads(pickle.dumps(b))
+    a.coordinate_names.append("extra")
+    assert b.coordinate_names == copy.coordinate_names == list(model.coordinate_names)
+    assert copy.joint_position_names == list(model.joint_space.position_names)
+
+
+@pytest.mark.skipif(threading.current_thread() is not threading.main_thread(), reason="signals: main thread only")
+@pytest.mark.parametrize("action", [signal.SIG_IGN, signal.SIG_DFL])
+def test_where_sigint_is_ignored_or_default_the_loop_is_called_directly(chain, monkeypatch, action):
+    """A process whose SIGINT is ignored (a shell's background job, ``nohup``) or has its
+    default action starts no thread per run (there is no Ctrl-C for one to catch: a thread
+    per call cost ~50 µs); the run equals the one under Python's handler, bit for bit."""
+    model, q0, v0 = chain
+    run = lambda: nc.simulate(model, 0.05, 0.01, q0=q0, v0=v0, method="joint")  # noqa: E731
+    reference = run()
+    threads = [0]
+    start = threading.Thread.start
+
+    def thread_start(self):
+        threads[0] += 1
+        return start(self)
+    monkeypatch.setattr(threading.Thread, "start", thread_start)
+    previous = signal.signal(signal.SIGINT, action)
+    try:
+        got = run()
+        assert call_interruptibly(lambda: 3, stop=ctypes.c_int(0)) == (3, False)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert threads[0] == 0
+    np.testing.assert_array_equal(got.qj, reference.qj)
+
+
 def test_the_time_grid_is_fresh_per_run_and_the_formula_of_the_docs():
     """The grid is computed once per ``(t0, t_end, n)`` but every call returns its own array
     (editing a run's ``t`` changes no later grid), ``t0 + k (t_end − t0) / n``."""
@@ -237,8 +320,6 @@ def test_ctrl_c_during_a_call_sets_the_stop_flag_and_the_handler_runs_after():
     its stop flag (through the watcher thread), the call returns its result, ``interrupted`` is
     True, no ``KeyboardInterrupt`` escapes, the sticky handler remembers it, and the wakeup
     descriptor is restored; under an application's handler (a worker thread) the same."""
-    import ctypes
-
     if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
         pytest.skip("SIGINT is not Python's default handler here")
     before = signal.set_wakeup_fd(-1)

@@ -71,6 +71,22 @@ def ctypes_of(spelling: str, structs: dict[str, type], addresses: bool):
                        f"to void or to {sorted(structs) or 'no struct'}")
 
 
+_BYTE = ctypes.c_char
+
+
+def address(a) -> int | None:
+    """The address of the data of the C-contiguous NumPy array ``a`` for an argument bound
+    as an address (``c_void_p``), None for an empty one (NULL): through a ``c_char`` over its
+    buffer where ``a`` is writable (0.5 µs, a third of ``a.ctypes.data``), else
+    ``a.ctypes.data``."""
+    if a.size == 0:
+        return None
+    try:
+        return ctypes.addressof(_BYTE.from_buffer(a))
+    except TypeError:                       # read-only
+        return a.ctypes.data
+
+
 def open_library(path: str | Path) -> ctypes.CDLL:
     """The shared library at ``path``, or a :class:`CodegenError` naming it."""
     try:

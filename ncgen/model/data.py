@@ -95,6 +95,9 @@ class ModelData:
     #: not), looked up once per process (:func:`ncgen.runtime.joint_simulation.choose_kernels`).
     table_kinds: tuple | None = None
     flat_loop_stored: tuple | None = None
+    #: ``{(t, q, v, p) as bytes: (q_j, v_j)}``: starts that passed the joint run's start check,
+    #: up to :data:`ncgen.assembly.joint_space.KEPT_STARTS` (``JointSpace._checked_state``).
+    checked_starts: dict = field(default_factory=dict)
     #: ``(reason,)``: why ``simulate`` cannot run the model in joint space (reason None: it can)
     #: (:func:`ncgen.runtime.joint_simulation.joint_space_applies`).
     joint_simulation_reason: tuple | None = None

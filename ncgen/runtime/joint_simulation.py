@@ -30,6 +30,7 @@ import time
 import casadi as ca
 import numpy as np
 
+from ncgen.codegen.c_binding import address
 from ncgen.codegen.compiler import compiler_present, find_compiler
 from ncgen.codegen.tree_check import PIVOT_TOL
 from ncgen.codegen.tree_kernels import JOINT_KINDS
@@ -42,6 +43,7 @@ from ncgen.runtime.joint_loop_options import JointLoopOptions
 from ncgen.interrupts import call_interruptibly
 from ncgen.model.data import model_data
 from ncgen.runtime.backend_policy import Choice, choose_joint_kernels
+from ncgen.progress import enabled as progress_enabled
 from ncgen.runtime.simulation_progress import Progress
 from ncgen.runtime.trajectory import Trajectory, once
 from ncgen.runtime.tree_library import TableJointLoop, input_efforts
@@ -108,8 +110,10 @@ class JointLoop:
 
         self.model, self.ode, self.library = model, ode, library
         self._lib = open_library(library)
-        self._fn = bind(self._lib, f"{name}_joint_run", JOINT_RUN, structs={"ncgen_joint_options": JointOptions})
+        self._fn = bind(self._lib, f"{name}_joint_run", JOINT_RUN, structs={"ncgen_joint_options": JointOptions},
+                        addresses=True)
         self.quat = np.array(quaternion_offsets(model.joint_space), dtype=np.int32)
+        self._quat = address(self.quat)                 # taken once
         self.tree = tree_function(model)
         self._maps: dict = {}
 
@@ -127,13 +131,11 @@ class JointLoop:
         ``options`` (:class:`~ncgen.codegen.joint_loop.JointOptions`, passed to C whole);
         ``(status, k_done)``, status :data:`INTERRUPTED` after Ctrl-C (its stop flag set,
         :func:`~ncgen.interrupts.call_interruptibly`)."""
-        D = ctypes.POINTER(ctypes.c_double)
         done = ctypes.c_int(0)
-        ptr = (lambda a: None if a is None or a.size == 0 else a.ctypes.data_as(D))
         status, interrupted = call_interruptibly(
-            self._fn, ctypes.byref(options), len(t) - 1, ptr(t), ptr(X), ptr(W), ptr(S), ptr(p), len(self.quat),
-            self.quat.ctypes.data_as(ctypes.POINTER(ctypes.c_int)) if len(self.quat) else None, ptr(stats),
-            ctypes.byref(done), stop=options.stop.contents)
+            self._fn, ctypes.addressof(options), len(t) - 1, address(t), address(X), address(W),
+            None if S is None else address(S), address(p), len(self.quat), self._quat, address(stats),
+            ctypes.addressof(done), stop=options.stop.contents)
         return INTERRUPTED if interrupted else int(status), int(done.value)
 
 
@@ -206,13 +208,13 @@ def _flat_ready(model) -> str | None:
     """Why the model's own loop (no controller, no joint dynamics) is ready without a compile
     — loaded in this process, or its ODE stored beside the model and its library in the
     compile cache (looked up once per model and process) — or None."""
-    from ncgen.codegen.joint_loop import cached_joint_loop
-    from ncgen.codegen.model_cache import stored_function
-
     data = model_data(model)
     if (id(None), False, None) in data.joint_loops:
         return "loaded in this process"
     if data.flat_loop_stored is None:
+        from ncgen.codegen.joint_loop import cached_joint_loop
+        from ncgen.codegen.model_cache import stored_function
+
         ode = stored_function(model, "joint-ode")
         data.flat_loop_stored = ("compiled earlier, in the compile cache" if ode is not None and cached_joint_loop(
             f"{model.name}_jsim", ode, PIVOT_TOL) is not None else None,)
@@ -294,9 +296,9 @@ def simulate_joint(model, run: Run, opts: JointLoopOptions, options: JointOption
                          "interval (zoh); use hold='zoh'")
     js = model.joint_space
     loop, choice, build_time = _run_loop(model, controller, opts, len(t) - 1)
-    n = len(t)
-    X = np.zeros((n, js.nq + js.nv))
-    X[0, :js.nq], X[0, js.nq:] = run.joint_state or js.state(model, run.q, run.v)  # consistent: start_state made it so
+    n, nqj = len(t), js.nq
+    X = np.zeros((n, nqj + js.nv))
+    X[0, :nqj], X[0, nqj:] = run.joint_state or js.state(model, run.q, run.v)  # consistent: start_state made it so
     U = np.ascontiguousarray(run.U, dtype=float)
     W, S = U.copy(), _input_slopes(U, t) if hold == "linear" and model.nu else None
     varying = model.nu > 0 and (feedback is not None or U[1:].tobytes() != U[:1].tobytes() * (n - 1))  # bit-equal rows
@@ -377,9 +379,11 @@ def _integrate(model, loop, options: JointOptions, run: Run, X: np.ndarray, W: n
     counts (steps, rejected steps, evaluations, …, the time reached)."""
     t, p, feedback, n = run.t, run.p, run.feedback, len(run.t)
     stats = np.zeros(5)
-    bar = Progress(float(t[0]), float(t[-1]), progress, label=f"simulating {model.name} (joint space): ")
+    shown = progress_enabled(progress)
+    bar = Progress(float(t[0]), float(t[-1]), progress, label=f"simulating {model.name} (joint space): ") \
+        if shown else None
     status, k, failed = 0, 0, None
-    chunk = 1 if feedback is not None else max(1, math.ceil((n - 1) / CHUNKS)) if bar.shown else n - 1
+    chunk = 1 if feedback is not None else max(1, math.ceil((n - 1) / CHUNKS)) if shown else n - 1
     try:
         while k < n - 1 and status == 0:
             m = min(chunk, n - 1 - k)
@@ -394,11 +398,13 @@ def _integrate(model, loop, options: JointOptions, run: Run, X: np.ndarray, W: n
             status, done = loop.run(options, np.ascontiguousarray(t[sl]), Xs, np.ascontiguousarray(W[k:k + m]),
                                     None if S is None else np.ascontiguousarray(S[k:k + m]), p, stats)
             k += done
-            bar.update(float(t[k]))
+            if bar is not None:
+                bar.update(float(t[k]))
     except KeyboardInterrupt:             # between chunks (in a feedback u(t, q, v))
         status = INTERRUPTED
     finally:
-        bar.close()
+        if bar is not None:
+            bar.close()
     return status, k, failed, stats
 
 
@@ -464,6 +470,5 @@ def _trajectory(model, loop: JointLoop, t, X, W, p, info) -> Trajectory:
         model, t, lambda: natural()[0], lambda: natural()[1],
         lambda: np.array(loop.mapped("accel", n)(t[None, :], natural()[0].T, natural()[1].T, applied().T,
                                                  P())[1]).T.reshape(n, model.nc),
-        applied, p, info)
-    traj.qj, traj.vj = X[:, :js.nq].copy(), X[:, js.nq:].copy()
+        applied, p, info, joint=(X[:, :js.nq].copy(), X[:, js.nq:].copy()))
     return traj

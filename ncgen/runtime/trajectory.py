@@ -26,6 +26,7 @@ written to a temporary sibling and renamed, so a reader never sees a partial fil
 from __future__ import annotations
 
 import json
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -41,32 +42,92 @@ ARRAY_KEYS = ("t", "q", "v", "lam", "u", "p", "kinetic", "potential", "constrain
 #: Joint space (optional in files written before it existed).
 JOINT_NAME_KEYS = ("joint_names", "joint_position_names", "joint_rate_names")
 JOINT_ARRAY_KEYS = ("qj", "vj")
+ALL_NAME_KEYS = NAME_KEYS + JOINT_NAME_KEYS + ("contact_names",)
+#: Arrays a trajectory may be given (else :meth:`Trajectory._default`): joint states, contact outputs.
+OPTIONAL_ARRAY_KEYS = JOINT_ARRAY_KEYS + contact_outputs.KEYS
+
+
+def output_names(model) -> dict:
+    """The lists of names of a trajectory of ``model``: :data:`NAME_KEYS`, the joint names and,
+    for a model with contacts, the contact names."""
+    js = model.joint_space
+    names = {key: getattr(model, key) for key in NAME_KEYS}
+    names.update(joint_names=js.joint_names, joint_position_names=js.position_names, joint_rate_names=js.rate_names)
+    if getattr(model, "nk", 0):
+        names["contact_names"] = model.contact_names
+    return names
+
+
+#: What :class:`Derived` computes, by key: the group computed at once and the item of it.
+_GROUPS = {"kinetic": ("energy", 0), "potential": ("energy", 1), "constraint_residual": ("residual", 0),
+           "velocity_residual": ("residual", 1), "markers": ("markers", None), "qj": ("joint", 0),
+           "vj": ("joint", 1), **{key: ("contact", key) for key in contact_outputs.KEYS}}
+
+#: The keys :class:`Derived` gives, for a model with contacts and without.
+_KEYS_CONTACTS = frozenset(("q", "v", *_GROUPS))
+_KEYS = _KEYS_CONTACTS - set(contact_outputs.KEYS)
+
+
+class Derived:
+    """The outputs of a run derived from its states ``(t, q, v)`` (``q``, ``v``: arrays or
+    functions computing them): the states themselves, energies, residuals, markers, joint
+    states and, for a model with contacts, the contact outputs (from the nonsmooth stepper's
+    ``impulses`` per output interval, or the compliant law); each group computed when first
+    asked for (``derived(key)``) and kept — one object per run, where a function per output
+    would cost a closure each."""
+
+    def __init__(self, model, t, q, v, p, impulses=None):
+        self.model, self.t, self.p, self.impulses = model, t, p, impulses
+        self._states = [x if callable(x) else _float(x) for x in (q, v)]
+        self._kept: dict = {}
+        self.keys = _KEYS_CONTACTS if getattr(model, "nk", 0) else _KEYS
+
+    def state(self, i: int) -> np.ndarray:
+        """q (``i = 0``) or v (1), as floats."""
+        x = self._states[i]
+        if callable(x):
+            x = self._states[i] = _float(x())
+        return x
+
+    def __call__(self, key: str):
+        if key == "q" or key == "v":
+            return self.state(key == "v")
+        group, item = _GROUPS[key]
+        kept = self._kept.get(group)
+        if kept is None:
+            m, t, p, q = self.model, self.t, self.p, self.state(0)
+            if group == "energy":
+                kept = outputs.energies(m, t, q, self.state(1), p)
+            elif group == "residual":
+                kept = outputs.residuals(m, t, q, self.state(1), p)
+            elif group == "markers":
+                kept = outputs.markers(m, q, self.state(1))
+            elif group == "joint":
+                kept = outputs.joint_states(m, q, self.state(1))
+            else:
+                kept = contact_outputs.impulse_outputs(m, t, q, p, self.impulses) if self.impulses is not None \
+                    else contact_outputs.smooth_outputs(m, t, q, self.state(1), p)
+            self._kept[group] = kept
+        return kept if item is None else kept[item]
 
 
 def derived_outputs(model, t, q, v, p, impulses=None) -> tuple[dict, dict]:
     """``(names, arrays)`` of the outputs beyond the states, energies and markers: the joint
-    states (``model.joint_names``) and, for a model with contacts, the contact outputs —
-    from the nonsmooth stepper's ``impulses`` per output interval, or from the compliant law.
-    ``q`` and ``v``: the states, or functions giving them; the arrays are functions computing
-    them (see :class:`Trajectory`)."""
-    q, v = (x if callable(x) else (lambda x=x: x) for x in (q, v))
-    js = model.joint_space
-    names = dict(joint_names=js.joint_names, joint_position_names=js.position_names,
-                 joint_rate_names=js.rate_names)
-    joint = once(lambda: outputs.joint_states(model, q(), v()))
-    arrays = {"qj": lambda: joint()[0], "vj": lambda: joint()[1]}
-    if getattr(model, "nk", 0):
-        names["contact_names"] = model.contact_names
-        contact = once(lambda: contact_outputs.impulse_outputs(model, t, q(), p, impulses) if impulses is not None
-                       else contact_outputs.smooth_outputs(model, t, q(), v(), p))
-        arrays.update({key: (lambda key=key: contact()[key]) for key in contact_outputs.KEYS})
-    return names, arrays
+    states (``model.joint_names``) and, for a model with contacts, the contact outputs
+    (:class:`Derived`); ``q`` and ``v``: the states, or functions giving them; the arrays are
+    functions computing them (see :class:`Trajectory`)."""
+    names = {key: x for key, x in output_names(model).items() if key not in NAME_KEYS}
+    derived = Derived(model, t, q, v, p, impulses)
+    return names, {key: partial(derived, key) for key in derived.keys if key in OPTIONAL_ARRAY_KEYS}
 
 
 class _Array:
-    """An array attribute of :class:`Trajectory`, given either as an array or as a function of
-    no arguments that computes it, called on first access (the derived outputs of a run cost
-    nothing until read); the result is kept."""
+    """An array attribute of :class:`Trajectory` (of floats, or of ints when ``integer``),
+    given either as an array or as a function of no arguments that computes it, called on
+    first access (the derived outputs of a run cost nothing until read); the result is kept."""
+
+    def __init__(self, integer: bool = False):
+        self.integer = integer
 
     def __set_name__(self, owner, name: str):
         self.name = name
@@ -74,13 +135,31 @@ class _Array:
     def __get__(self, obj, owner=None):
         if obj is None:
             return self
-        value = obj._arrays[self.name]
+        try:
+            value = obj._arrays[self.name]
+        except KeyError:                    # an optional array not given: its default
+            value = obj._arrays[self.name] = obj._default(self.name)
+            return value
         if callable(value):
-            value = obj._arrays[self.name] = value()
+            value = obj._arrays[self.name] = _integers(value()) if self.integer else _float(value())
         return value
 
     def __set__(self, obj, value):
         obj._arrays[self.name] = value
+
+
+class _Names:
+    """A list of names of :class:`Trajectory` (``coordinate_names``, ...): the run's own copy
+    of the names it was given, made on first access (then an ordinary attribute)."""
+
+    def __set_name__(self, owner, name: str):
+        self.name = name
+
+    def __get__(self, obj, owner=None):
+        if obj is None:
+            return self
+        value = obj.__dict__[self.name] = list(obj._names.get(self.name, ()))
+        return value
 
 
 def once(f):
@@ -94,66 +173,85 @@ def once(f):
     return value
 
 
-def _float(value, shape=None):
-    """``value`` (an array or a function computing one) as floats (of ``shape``), lazily."""
+_FLOAT64 = np.dtype(np.float64)
+
+
+def _float(value):
+    """``value`` (an array or a function computing one) as floats, lazily."""
     if callable(value):
-        return lambda: _float(value(), shape)
-    if shape is None and type(value) is np.ndarray and value.dtype == np.float64:
+        return lambda: _float(value())
+    if type(value) is np.ndarray and value.dtype is _FLOAT64:
         return value
-    a = np.asarray(value, dtype=float)
-    return a if shape is None else a.reshape(shape)
+    return np.asarray(value, dtype=float)
+
+
+def _integers(value) -> np.ndarray:
+    """``value`` as floats, then ints (contact states)."""
+    return np.asarray(value, dtype=float).astype(int)
 
 
 class Trajectory:
     """Simulated states and derived quantities (see the module docstring).  Any array may be
     given as a function computing it (evaluated on first access)."""
 
-    def __init__(self, *, model_name: str, names: dict, info: dict, model=None, **arrays):
-        a = self._arrays = {}                 # the arrays of the _Array attributes, set directly
+    def __init__(self, *, model_name: str, names: dict, info: dict, model=None, derived: Derived | None = None,
+                 **arrays):
         self.model = model
         self.model_name = model_name
-        for key in NAME_KEYS:
-            setattr(self, key, list(names[key]))
+        missing = [key for key in NAME_KEYS if key not in names]
+        if missing:
+            raise KeyError(missing[0])
+        self._names = names                      # copied into lists when read (_Names)
+        self._derived = derived                  # the arrays not given, when first read (_default)
+        a = self._arrays = {}                    # the _Array attributes' values (functions: converted when read)
         for key in ARRAY_KEYS:
-            a[key] = _float(arrays[key])
-        for key in JOINT_NAME_KEYS:
-            setattr(self, key, list(names.get(key, [])))
-        n = len(self.t)
-        for key in JOINT_ARRAY_KEYS:
-            x = arrays.get(key)
-            a[key] = np.zeros((n, 0)) if x is None else _float(x)
-        self.contact_names = list(names.get("contact_names", []))
-        nk = len(self.contact_names)
-        for key in contact_outputs.KEYS:         # none given: zeros, made when first read
             value = arrays.get(key)
-            shape = (n, nk, self.dim - 1) if key == "contact_tangent" else (n, nk)
-            a[key] = (lambda shape=shape: np.zeros(shape)) if value is None else _float(value)
-        state = a["contact_state"]
-        self.contact_state = (lambda: _float(state)().astype(int)) if callable(state) else state.astype(int)
+            if value is None:
+                if derived is None or key not in derived.keys:
+                    raise KeyError(key)
+                continue
+            a[key] = value if callable(value) else _float(value)
+        for key in OPTIONAL_ARRAY_KEYS:          # none given: the default (:meth:`_default`), made when first read
+            value = arrays.get(key)
+            if value is not None:
+                a[key] = value if callable(value) else _integers(value) if key == "contact_state" else _float(value)
         self.info = dict(info)
 
+    def _default(self, key: str) -> np.ndarray:
+        """The value of the array ``key`` when none was given: derived from the states (the
+        run's :class:`Derived`), else no joint coordinates, no contacts (zeros of ``(n_t, 0)``,
+        ``(n_t, nk)``, ``(n_t, nk, dim − 1)``; states as int)."""
+        derived = self.__dict__.get("_derived")     # (none in a trajectory pickled before it existed)
+        if derived is not None and key in derived.keys:
+            value = derived(key)
+            return _integers(value) if key == "contact_state" else _float(value)
+        n = len(self.t)
+        if key in JOINT_ARRAY_KEYS:
+            return np.zeros((n, 0))
+        nk = len(self.contact_names)
+        if key == "contact_tangent":
+            return np.zeros((n, nk, self.dim - 1))
+        return np.zeros((n, nk), dtype=int if key == "contact_state" else float)
+
     def __getstate__(self) -> dict:
-        """Pickled with every array computed (functions do not pickle)."""
+        """Pickled with every array computed (functions do not pickle) and every list of names."""
         state = dict(self.__dict__)
-        state["_arrays"] = {key: getattr(self, key) for key in self._arrays}
+        state["_arrays"] = {key: getattr(self, key) for key in ARRAY_KEYS + OPTIONAL_ARRAY_KEYS}
+        state.update({key: getattr(self, key) for key in ALL_NAME_KEYS})
+        state["_names"], state["_derived"] = {}, None
         return state
 
     @classmethod
-    def from_states(cls, model, t, q, v, lam, u, p, info: dict, impulses=None) -> "Trajectory":
+    def from_states(cls, model, t, q, v, lam, u, p, info: dict, impulses=None, joint=None) -> "Trajectory":
         """The trajectory of the states ``(t, q, v, lam)`` of ``model`` (each an array or a
         function computing it), its derived quantities computed on first access;
-        ``impulses``: the nonsmooth stepper's contact impulse sums per output interval."""
+        ``impulses``: the nonsmooth stepper's contact impulse sums per output interval;
+        ``joint``: the joint states ``(qj, vj)`` when the run has them (else derived)."""
         t = np.asarray(t, float)
-        q, v = (once(_float(x)) if callable(x) else _float(x) for x in (q, v))
-        Q, V = (x if callable(x) else (lambda x=x: x) for x in (q, v))
-        energy = once(lambda: outputs.energies(model, t, Q(), V(), p))
-        residual = once(lambda: outputs.residuals(model, t, Q(), V(), p))
-        names = {key: getattr(model, key) for key in NAME_KEYS}
-        extra_names, extra = derived_outputs(model, t, Q, V, p, impulses)
-        return cls(model_name=model.name, names={**names, **extra_names}, info=info, model=model, t=t, q=q, v=v,
-                   lam=lam, u=u, p=p, kinetic=lambda: energy()[0], potential=lambda: energy()[1],
-                   constraint_residual=lambda: residual()[0], velocity_residual=lambda: residual()[1],
-                   markers=lambda: outputs.markers(model, Q(), V()), **extra)
+        joint = {} if joint is None else {"qj": joint[0], "vj": joint[1]}
+        return cls(model_name=model.name, names=output_names(model), info=info, model=model,
+                   derived=Derived(model, t, q, v, p, impulses), t=t, q=None if callable(q) else q,
+                   v=None if callable(v) else v, lam=lam, u=u, p=p, **joint)
 
     def head(self, n: int) -> "Trajectory":
         """The first ``n`` samples (every per-sample array cut, names and ``info`` copied)."""
@@ -168,9 +266,12 @@ class Trajectory:
     def __len__(self) -> int:
         return len(self.t)
 
+    coordinate_names, constraint_names, input_names, parameter_names, member_names, marker_names = \
+        (_Names() for _ in NAME_KEYS)
+    joint_names, joint_position_names, joint_rate_names, contact_names = (_Names() for _ in range(4))
     t, q, v, lam, u, p, kinetic, potential = (_Array() for _ in range(8))
     constraint_residual, velocity_residual, markers, qj, vj = (_Array() for _ in range(5))
-    gap, contact_normal, contact_tangent, contact_state = (_Array() for _ in contact_outputs.KEYS)
+    gap, contact_normal, contact_tangent, contact_state = _Array(), _Array(), _Array(), _Array(integer=True)
 
     @property
     def dim(self) -> int:

@@ -603,9 +603,10 @@ class TableJointLoop:
         done = ctypes.c_int(0)
         start = (X[0].copy(), stats.copy())           # X's other rows are outputs
         E, nu, quat = self._constants
-        args = (self._fn, self.tree_bound.ref, E, nu, ctypes.addressof(options), len(t) - 1, t.ctypes.data,
-                X.ctypes.data, None if W.size == 0 else W.ctypes.data, None if S is None or S.size == 0 else S.ctypes.data,
-                len(self.quat), quat, stats.ctypes.data, ctypes.addressof(done))
+        address = c_binding.address
+        args = (self._fn, self.tree_bound.ref, E, nu, ctypes.addressof(options), len(t) - 1, address(t), address(X),
+                address(W), None if S is None else address(S), len(self.quat), quat, address(stats),
+                ctypes.addressof(done))
         status, interrupted = call_interruptibly(*args, stop=options.stop.contents)
         if not interrupted and status == RUN_NO_FALLBACK:
             self.tree_bound.library.set_fallback()
