@@ -260,3 +260,31 @@ def test_a_good_call_takes_the_c_door_only(tree, monkeypatch):
     with pytest.raises(AssertionError, match="checked path"):
         nc.aba(tree, x[0], x[1], x[3], t=1.0)                                    # a new time: the checked path
     nc.rnea(tree, *x[:3], t=1.0)                        # the tables' RNEA depends on no time: the C door still
+
+
+def _recorded_flags(kernel) -> list[str]:
+    """The -O flags in the compile cache's record of ``kernel``'s library (what gcc was given)."""
+    import json
+
+    from ncgen.codegen.compile_cache import BUILD_RECORD, recorded_flags
+    return recorded_flags(json.loads((kernel.direct.library.parent / BUILD_RECORD).read_text()))
+
+
+def test_a_kernel_compiled_at_O0_is_never_the_choice_of_a_default_run(monkeypatch):
+    """A flat kernel compiled at -O0 (``$NCGEN_CFLAGS``, the test suite's fast tier) in this
+    process is not "the flat kernel is built" once the flags are ncgen's defaults: the door
+    is bound again to a kernel compiled with optimisation (the compile cache's record of its
+    build), whose accelerations equal the -O0 kernel's."""
+    model = nc.System.from_urdf(URDF, floating_base=True).build()
+    x = state(model, 7)
+    monkeypatch.setenv("NCGEN_CFLAGS", "-O0")
+    slow = nc.aba(model, x[0], x[1], x[3])
+    assert _recorded_flags(rta.door(model, "aba").kernel) == ["-O0"]
+    assert not rta.door(model, "aba").kernel.optimised
+    monkeypatch.delenv("NCGEN_CFLAGS")
+    assert rta.kernels_reason(model, "aba") != "the flat kernel is built (faster than the tables')"
+    fast = nc.aba(model, x[0], x[1], x[3])
+    k = rta.door(model, "aba").kernel
+    assert k.optimised and _recorded_flags(k) and "-O0" not in _recorded_flags(k)
+    assert rta.kernels_reason(model, "aba") == "the flat kernel is built (faster than the tables')"
+    close(fast, slow)
