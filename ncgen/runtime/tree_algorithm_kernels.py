@@ -267,15 +267,18 @@ class Door:
     runs the kernel, checks its pivot and returns fresh outputs or writes them into ``out``, all
     in C.  Whatever it refuses, other times or parameters, and
     rows of states take the checked path (:func:`call`, :func:`batch`), whose error names the
-    argument.  ``flags``: the ``$NCGEN_CFLAGS`` it was bound under (None: ncgen's defaults)."""
+    argument.  ``flags``: the ``$NCGEN_CFLAGS`` it was bound under (None: ncgen's defaults).
+    ``free``: the door caller itself where any time goes to it (the tables' algorithms, which
+    depend on no time; else None), for callers that skip this object's frame (:func:`rnea`)."""
 
-    __slots__ = ("model", "kernel", "fast", "tables", "flags")
+    __slots__ = ("model", "kernel", "fast", "tables", "flags", "free")
 
     def __init__(self, model, name: str, kernels: str):
         self.flags = _flags(None)
         k = self.kernel = kernel_of(model, name, kernels)
         self.model, self.tables = model, not isinstance(k, AlgorithmKernel)
         self.fast = k.door_caller(quaternion_offsets(model.joint_space))
+        self.free = self.fast if self.tables else None
 
     def __call__(self, args: tuple, p, t: float, out):
         k, fast = self.kernel, self.fast
@@ -451,7 +454,21 @@ def _checked(model, k: AlgorithmKernel, args: tuple) -> list:
 def rnea(model, qj, vj, aj, *, p=None, t: float = 0.0, kernels: str = "auto", out=None) -> np.ndarray:
     """``τ``: the efforts of the independent joint rates giving accelerations ``aj`` at
     ``(qj, vj)`` (module docstring; Pinocchio's ``rnea``)."""
-    return door(model, "rnea", kernels)((qj, vj, aj,), p, t, out)
+    return through(door(model, "rnea", kernels), qj, vj, aj, p, t, out)
+
+
+def through(d: Door, x, y, z, p, t: float, out):
+    """``d((x, y, z), p, t, out)``, straight to its C caller when it takes any time (``Door.free``)
+    and ``p`` is None; whatever that refuses takes the door (whose checked path names it)."""
+    free = d.free
+    if free is not None and p is None:
+        try:
+            result = free(x, y, z, out)
+            if result is not None:
+                return result
+        except (TypeError, ValueError, OverflowError, RuntimeError):
+            pass
+    return d((x, y, z), p, t, out)
 
 
 def crba(model, qj, *, p=None, t: float = 0.0, kernels: str = "auto", out=None) -> np.ndarray:
