@@ -288,3 +288,21 @@ def test_a_kernel_compiled_at_O0_is_never_the_choice_of_a_default_run(monkeypatc
     assert k.optimised and _recorded_flags(k) and "-O0" not in _recorded_flags(k)
     assert rta.kernels_reason(model, "aba") == "the flat kernel is built (faster than the tables')"
     close(fast, slow)
+
+
+def test_the_tables_rnea_goes_straight_to_its_c_caller(tree, monkeypatch):
+    """``nc.rnea`` and ``nc.inverse_dynamics`` on the tables' RNEA (which depends on no time)
+    call the door's C caller without the :class:`Door` frame, at any ``t``; an argument it
+    refuses still reaches the door, whose checked path names it."""
+    assert rta.algorithm_kernels(tree, "rnea") == "tables"
+    x = state(tree, 8)
+    ref = nc.rnea(tree, *x[:3])
+    entered = []
+    door_call = rta.Door.__call__
+    monkeypatch.setattr(rta.Door, "__call__", lambda self, *a: entered.append(1) or door_call(self, *a))
+    np.testing.assert_array_equal(nc.rnea(tree, *x[:3], t=2.0), ref)
+    np.testing.assert_array_equal(nc.inverse_dynamics(tree, *x[:3], joints="all"), ref)
+    assert entered == []
+    with pytest.raises(ShapeError, match="vj"):
+        nc.rnea(tree, x[0], x[1][:-1], x[2])
+    assert entered == [1]
