@@ -213,7 +213,7 @@ def main() -> None:
     ap.add_argument("--states", type=int, default=200)
     ap.add_argument("--smoke", action="store_true")
     ap.add_argument("--loops-cflags", default="-O2", help="flags of the tables' loops (tree_tables.c; the tree "
-                    "library's units use -O1: ncgen/runtime/tree_library.py UNIT_CFLAGS)")
+                    "library's units: -O1, the inverse unit -O3: ncgen/runtime/tree_library.py UNIT_CFLAGS)")
     ap.add_argument("--time-rounds", type=int, default=0, help="also time each side (CPU, interleaved rounds)")
     ap.add_argument("--time-reps", type=int, default=50, help="batches per timed run")
     a = ap.parse_args()

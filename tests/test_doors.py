@@ -260,3 +260,49 @@ def test_a_good_call_takes_the_c_door_only(tree, monkeypatch):
     with pytest.raises(AssertionError, match="checked path"):
         nc.aba(tree, x[0], x[1], x[3], t=1.0)                                    # a new time: the checked path
     nc.rnea(tree, *x[:3], t=1.0)                        # the tables' RNEA depends on no time: the C door still
+
+
+def _recorded_flags(kernel) -> list[str]:
+    """The -O flags in the compile cache's record of ``kernel``'s library (what gcc was given)."""
+    import json
+
+    from ncgen.codegen.compile_cache import BUILD_RECORD, recorded_flags
+    return recorded_flags(json.loads((kernel.direct.library.parent / BUILD_RECORD).read_text()))
+
+
+def test_a_kernel_compiled_at_O0_is_never_the_choice_of_a_default_run(monkeypatch):
+    """A flat kernel compiled at -O0 (``$NCGEN_CFLAGS``, the test suite's fast tier) in this
+    process is not "the flat kernel is built" once the flags are ncgen's defaults: the door
+    is bound again to a kernel compiled with optimisation (the compile cache's record of its
+    build), whose accelerations equal the -O0 kernel's."""
+    model = nc.System.from_urdf(URDF, floating_base=True).build()
+    x = state(model, 7)
+    monkeypatch.setenv("NCGEN_CFLAGS", "-O0")
+    slow = nc.aba(model, x[0], x[1], x[3])
+    assert _recorded_flags(rta.door(model, "aba").kernel) == ["-O0"]
+    assert not rta.door(model, "aba").kernel.optimised
+    monkeypatch.delenv("NCGEN_CFLAGS")
+    assert rta.kernels_reason(model, "aba") != "the flat kernel is built (faster than the tables')"
+    fast = nc.aba(model, x[0], x[1], x[3])
+    k = rta.door(model, "aba").kernel
+    assert k.optimised and _recorded_flags(k) and "-O0" not in _recorded_flags(k)
+    assert rta.kernels_reason(model, "aba") == "the flat kernel is built (faster than the tables')"
+    close(fast, slow)
+
+
+def test_the_tables_rnea_goes_straight_to_its_c_caller(tree, monkeypatch):
+    """``nc.rnea`` and ``nc.inverse_dynamics`` on the tables' RNEA (which depends on no time)
+    call the door's C caller without the :class:`Door` frame, at any ``t``; an argument it
+    refuses still reaches the door, whose checked path names it."""
+    assert rta.algorithm_kernels(tree, "rnea") == "tables"
+    x = state(tree, 8)
+    ref = nc.rnea(tree, *x[:3])
+    entered = []
+    door_call = rta.Door.__call__
+    monkeypatch.setattr(rta.Door, "__call__", lambda self, *a: entered.append(1) or door_call(self, *a))
+    np.testing.assert_array_equal(nc.rnea(tree, *x[:3], t=2.0), ref)
+    np.testing.assert_array_equal(nc.inverse_dynamics(tree, *x[:3], joints="all"), ref)
+    assert entered == []
+    with pytest.raises(ShapeError, match="vj"):
+        nc.rnea(tree, x[0], x[1][:-1], x[2])
+    assert entered == [1]

@@ -123,7 +123,7 @@ def test_the_install_builds_what_the_runtime_asks_for(monkeypatch):
             tr.unit_library(unit)
         assert [(s.prefix, s.source, s.package, s.cflags) for s in ib.library_specs()] == \
             [asked[1], asked[0], *asked[2:]]
-        assert {s.cflags for s in ib.library_specs()} == ({None, tr.UNIT_CFLAGS} if flags is None else {flags})
+        assert {s.cflags for s in ib.library_specs()} == ({None, *tr.UNIT_CFLAGS.values()} if flags is None else {flags})
 
 
 CHILD = """

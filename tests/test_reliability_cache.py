@@ -17,7 +17,7 @@ import pytest
 
 from ncgen import files
 from ncgen.codegen import compile_package, write_package
-from ncgen.codegen.compile_cache import entry_problem
+from ncgen.codegen.compile_cache import build_key, entry_problem, recorded_flags, source_cflags
 from test_codegen_samples import chain_doc, chain_functions
 
 pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc not installed")
@@ -140,3 +140,17 @@ def test_cli_stepper_heals_a_truncated_cache(tmp_path, cache):
     assert "is damaged" in second.stderr and "Traceback" not in second.stderr
     a, b = np.load(tmp_path / "a.npz"), np.load(tmp_path / "b.npz")
     np.testing.assert_array_equal(a["q"], b["q"])
+
+
+def test_an_entry_recording_other_flags_is_rebuilt_never_loaded(built_pkg, cache):
+    """A build at -O0 put under the default build's name (copied by hand, or by a tool that
+    keys entries differently) is never taken for the default build: its record's key differs,
+    so the entry is rebuilt with ncgen's flags."""
+    slow = compile_package(built_pkg, cflags="-O0")
+    default_entry = cache / f"chain-{build_key(built_pkg, slow.compiler, source_cflags(built_pkg, None))[:24]}"
+    shutil.copytree(slow.path.parent, default_entry)
+    assert entry_problem(default_entry, default_entry / slow.path.name) is None        # intact, but of -O0
+    built = compile_package(built_pkg)
+    assert built.path.parent == default_entry and not built.cached
+    record = json.loads((default_entry / "build.json").read_text())
+    assert record["key"] == built.key and recorded_flags(record) == ["-O2"]

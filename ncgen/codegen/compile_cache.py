@@ -12,8 +12,10 @@ Entries are built in a temporary sibling directory, flushed to disk (fsync) and 
 into place under an exclusive lock, so concurrent builds of the same package are safe,
 yield one library, and a crash or a kill leaves either no entry or a complete one.
 
-Before a cached library is used its sha256 is checked against ``library_sha256``: a
-truncated, zeroed, garbage or empty file (or a missing/unreadable ``build.json``) is never
+Before a cached library is used its record's ``key`` is checked against the one asked for (an
+entry holding a build of other flags or sources under this name, copied or left by hand, is
+rebuilt: a library compiled at -O0 never passes for a default build) and its sha256 against
+``library_sha256``: a truncated, zeroed, garbage or empty file (or a missing/unreadable ``build.json``) is never
 loaded (``dlopen`` of such a file crashes the process with SIGBUS/SIGSEGV or fails with a
 raw OSError); the damaged entry is removed and rebuilt, with a note on stderr.  Temporary
 build folders left by killed builds are removed once their process is gone
@@ -120,12 +122,12 @@ def compile_package(pkg: Package | str | os.PathLike, cc: str | None = None,
     library = entry / f"lib{pkg.name}.so"
     result = BuildResult(path=library, cached=True, key=key, compiler=compiler, cflags=flags)
     fsutil.sweep_stale(root)          # build folders of killed builds (owner gone)
-    if entry_problem(entry, library) is None:
+    if entry_problem(entry, library, key) is None:
         return result
     try:
         root.mkdir(parents=True, exist_ok=True)
         with fsutil.locked(root / f".{entry.name}.lock"):
-            problem = entry_problem(entry, library)
+            problem = entry_problem(entry, library, key)
             if problem is None:  # another process built it while we waited
                 return result
             if entry.exists():
@@ -153,9 +155,10 @@ def compile_package(pkg: Package | str | os.PathLike, cc: str | None = None,
 BUILD_RECORD = "build.json"
 
 
-def entry_problem(entry: Path, library: Path) -> str | None:
-    """Why the cache entry ``entry`` may not be used (missing, no record, library hash
-    differing from the one recorded at publication), or ``None`` when it is intact."""
+def entry_problem(entry: Path, library: Path, key: str | None = None) -> str | None:
+    """Why the cache entry ``entry`` may not be used (missing, no record, a record of another
+    build than ``key`` when given, library hash differing from the one recorded at
+    publication), or ``None`` when it is intact."""
     if not entry.exists():
         return "missing"
     try:
@@ -163,6 +166,8 @@ def entry_problem(entry: Path, library: Path) -> str | None:
         expected = record["library_sha256"]
     except (OSError, ValueError, KeyError, TypeError):
         return f"no readable {BUILD_RECORD} with the library's hash"
+    if key is not None and record.get("key") != key:
+        return f"its {BUILD_RECORD} records another build (flags {recorded_flags(record)})"
     try:
         actual = fsutil.sha256_file(library)
     except OSError as e:
@@ -170,6 +175,23 @@ def entry_problem(entry: Path, library: Path) -> str | None:
     if actual != expected:
         return f"library sha256 {actual[:12]}... differs from the {expected[:12]}... recorded when it was built"
     return None
+
+
+def recorded_flags(record: Mapping) -> list[str]:
+    """The optimisation flags (``-O…``) of the commands a build record lists, in order, once each."""
+    flags = [a for cmd in record.get("commands", ()) for a in cmd if isinstance(a, str) and a.startswith("-O")]
+    return list(dict.fromkeys(flags))
+
+
+def optimised(library: Path) -> bool:
+    """Whether the cached ``library`` was compiled with optimisation: its entry's record lists
+    ``-O`` flags and none is ``-O0`` (False when the record cannot be read)."""
+    try:
+        record = json.loads((Path(library).parent / BUILD_RECORD).read_text())
+    except (OSError, ValueError):
+        return False
+    flags = recorded_flags(record) if isinstance(record, dict) else []
+    return bool(flags) and "-O0" not in flags
 
 
 def build_key(pkg: Package, compiler: Compiler, per_source: dict[str, tuple[str, ...]]) -> str:

@@ -22,7 +22,7 @@ cover a model without parameters (:data:`TABLES_FIRST`: one call or a batch, the
 0.55–0.9× the flat RNEA on the Panda, xArm7, Solo12 and Talos, about as much, 0.8–1.2×, on
 the UR5 and UR10), for the other
 algorithms flat wherever a C compiler is present or the flat kernel is already built in this
-process (the tables cost 1.4–2.1× the flat ABA and 1.2–1.9× the flat CRBA:
+process with optimisation (never one compiled at -O0 for another ``$NCGEN_CFLAGS``; the tables cost 1.4–2.1× the flat ABA and 1.2–1.9× the flat CRBA:
 :mod:`ncgen.runtime.tree_library`, benchmarks/tree_tables.py), else the tables when they
 cover the model (:func:`~ncgen.codegen.tree_tables.tree_tables`: a uniform gravity the only
 passive force).  :func:`algorithm_kernels` says which one a call uses, :func:`kernels_reason` why.
@@ -39,9 +39,11 @@ from __future__ import annotations
 
 import ctypes
 import math
+import os
 
 import numpy as np
 
+from ncgen.codegen.compile_cache import optimised
 from ncgen.codegen.compiler import compiler_present
 from ncgen.codegen.fast_call import fast_caller
 from ncgen.errors import CompilerNotFound, ModelError, NcgenError, ShapeError
@@ -78,6 +80,8 @@ class AlgorithmKernel(TimeAndParameters):
             check = direct.outputs[-1]
             self._check = (ctypes.c_double * 2).from_address(check.ctypes.data)
         self._fn, self._args = direct._fn, direct._args
+        #: Whether the library was compiled with optimisation (its cache record: no -O0).
+        self.optimised = optimised(direct.library)
         js = model.joint_space
         self._quaternions = js.dim == 3 and any(n in (4, 7) for n in js.nq_joint.values())
         self._fast = fast_caller(direct, len(self._inputs), first=1, result=self._outputs,
@@ -148,7 +152,8 @@ class AlgorithmKernel(TimeAndParameters):
 
 def algorithm_kernel(model, name: str, *, cflags=None) -> AlgorithmKernel:
     """The compiled algorithm ``name`` (a key of :data:`ALGORITHMS`) of the tree ``model``,
-    built once per model (the library is cached by content).  Raises :class:`ModelError` for a
+    built once per model and flags (``cflags``, else ``$NCGEN_CFLAGS``, else ncgen's defaults;
+    the library is cached by content).  Raises :class:`ModelError` for a
     model that is not a tree (:func:`~ncgen.codegen.tree_check.check_tree`) or not 3D."""
     from ncgen.assembly import tree_algorithms
 
@@ -162,7 +167,13 @@ def algorithm_kernel(model, name: str, *, cflags=None) -> AlgorithmKernel:
         f = getattr(tree_algorithms, f"{name}_function")(model)
         return AlgorithmKernel(model, name, compile_tree_function(model, f, cflags, name))
 
-    return cached(model_data(model).algorithm_kernels, (name, cflags), build)
+    return cached(model_data(model).algorithm_kernels, (name, _flags(cflags)), build)
+
+
+def _flags(cflags: str | None) -> str | None:
+    """The flags a kernel asked for with ``cflags`` is compiled with: ``cflags``, else
+    ``$NCGEN_CFLAGS``, else None (ncgen's defaults)."""
+    return os.environ.get("NCGEN_CFLAGS") if cflags is None else cflags
 
 
 def rnea_applies(model) -> list[int] | None:
@@ -228,8 +239,8 @@ def _choice(model, name: str, kernels: str) -> tuple[str, str]:
             return "tables", f"the tables' {name} measures faster than the flat kernel"
         except (UnsupportedTree, CompilerNotFound):
             pass
-    data = model_data(model)
-    if isinstance(data.algorithm_kernels.get((name, None)), AlgorithmKernel):
+    built = model_data(model).algorithm_kernels.get((name, _flags(None)))
+    if isinstance(built, AlgorithmKernel) and built.optimised:
         return "flat", "the flat kernel is built (faster than the tables')"
     if compiler_present():
         return "flat", "a C compiler builds the flat kernel (faster than the tables')"
@@ -245,8 +256,7 @@ def kernel_of(model, name: str, kernels: str):
     :class:`~ncgen.runtime.tree_library.TableAlgorithm`."""
     if algorithm_kernels(model, name, kernels) == "tables":
         return model_data(model).table_algorithms[name]
-    k = model_data(model).algorithm_kernels.get((name, None))
-    return k if isinstance(k, AlgorithmKernel) else algorithm_kernel(model, name)
+    return algorithm_kernel(model, name)
 
 
 class Door:
@@ -257,14 +267,18 @@ class Door:
     runs the kernel, checks its pivot and returns fresh outputs or writes them into ``out``, all
     in C.  Whatever it refuses, other times or parameters, and
     rows of states take the checked path (:func:`call`, :func:`batch`), whose error names the
-    argument."""
+    argument.  ``flags``: the ``$NCGEN_CFLAGS`` it was bound under (None: ncgen's defaults).
+    ``free``: the door caller itself where any time goes to it (the tables' algorithms, which
+    depend on no time; else None), for callers that skip this object's frame (:func:`rnea`)."""
 
-    __slots__ = ("model", "kernel", "fast", "tables")
+    __slots__ = ("model", "kernel", "fast", "tables", "flags", "free")
 
     def __init__(self, model, name: str, kernels: str):
+        self.flags = _flags(None)
         k = self.kernel = kernel_of(model, name, kernels)
         self.model, self.tables = model, not isinstance(k, AlgorithmKernel)
         self.fast = k.door_caller(quaternion_offsets(model.joint_space))
+        self.free = self.fast if self.tables else None
 
     def __call__(self, args: tuple, p, t: float, out):
         k, fast = self.kernel, self.fast
@@ -288,10 +302,12 @@ class Door:
 
 def door(model, name: str, kernels: str = "auto") -> Door:
     """The :class:`Door` of the algorithm ``name`` of ``model`` with the kernels ``kernels``
-    (:func:`algorithm_kernels`), bound once per model."""
+    (:func:`algorithm_kernels`), bound once per model; a door bound under ``$NCGEN_CFLAGS``
+    (-O0 in the test suite's fast tier) is bound again once they change, so that its kernel
+    is never kept for a run at ncgen's default flags."""
     doors = model_data(model).doors
     d = doors.get((name, kernels))
-    if d is None:
+    if d is None or (d.flags is not None and d.flags != os.environ.get("NCGEN_CFLAGS")):
         d = doors[name, kernels] = Door(model, name, kernels)
     return d
 
@@ -446,7 +462,21 @@ def _checked(model, k: AlgorithmKernel, args: tuple) -> list:
 def rnea(model, qj, vj, aj, *, p=None, t: float = 0.0, kernels: str = "auto", out=None) -> np.ndarray:
     """``τ``: the efforts of the independent joint rates giving accelerations ``aj`` at
     ``(qj, vj)`` (module docstring; Pinocchio's ``rnea``)."""
-    return door(model, "rnea", kernels)((qj, vj, aj,), p, t, out)
+    return through(door(model, "rnea", kernels), qj, vj, aj, p, t, out)
+
+
+def through(d: Door, x, y, z, p, t: float, out):
+    """``d((x, y, z), p, t, out)``, straight to its C caller when it takes any time (``Door.free``)
+    and ``p`` is None; whatever that refuses takes the door (whose checked path names it)."""
+    free = d.free
+    if free is not None and p is None:
+        try:
+            result = free(x, y, z, out)
+            if result is not None:
+                return result
+        except (TypeError, ValueError, OverflowError, RuntimeError):
+            pass
+    return d((x, y, z), p, t, out)
 
 
 def crba(model, qj, *, p=None, t: float = 0.0, kernels: str = "auto", out=None) -> np.ndarray:
