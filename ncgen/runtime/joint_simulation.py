@@ -470,5 +470,6 @@ def _trajectory(model, loop: JointLoop, t, X, W, p, info) -> Trajectory:
         model, t, lambda: natural()[0], lambda: natural()[1],
         lambda: np.array(loop.mapped("accel", n)(t[None, :], natural()[0].T, natural()[1].T, applied().T,
                                                  P())[1]).T.reshape(n, model.nc),
-        applied, p, info, joint=(X[:, :js.nq].copy(), X[:, js.nq:].copy()))
+        applied, p, info)
+    traj.qj, traj.vj = X[:, :js.nq].copy(), X[:, js.nq:].copy()
     return traj

@@ -242,16 +242,15 @@ class Trajectory:
         return state
 
     @classmethod
-    def from_states(cls, model, t, q, v, lam, u, p, info: dict, impulses=None, joint=None) -> "Trajectory":
+    def from_states(cls, model, t, q, v, lam, u, p, info: dict, impulses=None) -> "Trajectory":
         """The trajectory of the states ``(t, q, v, lam)`` of ``model`` (each an array or a
         function computing it), its derived quantities computed on first access;
-        ``impulses``: the nonsmooth stepper's contact impulse sums per output interval;
-        ``joint``: the joint states ``(qj, vj)`` when the run has them (else derived)."""
+        ``impulses``: the nonsmooth stepper's contact impulse sums per output interval.  A run
+        that has its joint states sets ``qj`` and ``vj`` afterwards (else they are derived)."""
         t = np.asarray(t, float)
-        joint = {} if joint is None else {"qj": joint[0], "vj": joint[1]}
         return cls(model_name=model.name, names=output_names(model), info=info, model=model,
                    derived=Derived(model, t, q, v, p, impulses), t=t, q=None if callable(q) else q,
-                   v=None if callable(v) else v, lam=lam, u=u, p=p, **joint)
+                   v=None if callable(v) else v, lam=lam, u=u, p=p)
 
     def head(self, n: int) -> "Trajectory":
         """The first ``n`` samples (every per-sample array cut, names and ``info`` copied)."""
