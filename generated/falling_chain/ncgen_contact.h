@@ -757,9 +757,6 @@ static int repeat_step(const casadi_real *q, const casadi_real *v, casadi_real t
                        workspace *ws, int *kept) {
   casadi_real *W0 = ws->Xc, *P = ws->P, scale = 1, gap_tol = 0;
   int i, k, r, status, any = 0, moved = 0, closed[NK];
-#ifdef CONTACT_PAIRS
-  casadi_int *at_q = ws->cni; /* per element (NE <= ND): cone_newton()'s scratch, free between solves */
-#endif
   *kept = 0;
   if (iterations) *iterations = 0;
   for (r = 0; r < ND; ++r) {
@@ -771,9 +768,6 @@ static int repeat_step(const casadi_real *q, const casadi_real *v, casadi_real t
   pairs_bounds(ws, q, 0);
   pairs_select(ws, -INFINITY, 0, 1); /* the elements with a force */
   if (contact_rows(ws, q, v, p, 0, W0, ws->Um, 1)) return STEP_KERNEL;
-#ifdef CONTACT_PAIRS
-  for (i = 0; i < NE; ++i) at_q[i] = ws->pon[i]; /* whose rows at q are in W0 and Um now */
-#endif
   for (i = 0; i < NQ; ++i) ws->j[i] = 0;
   for (r = 0; r < ND; ++r)
     if (P[r] != 0)
@@ -790,10 +784,7 @@ static int repeat_step(const casadi_real *q, const casadi_real *v, casadi_real t
     pairs_select(ws, 0, h / 2, 1);
     if (contact_rows(ws, q_next, v_next, p, ws->g, ws->W, ws->U, 1)) return STEP_KERNEL;
 #ifdef CONTACT_PAIRS
-    /* at q too, the elements turned on since (those with a force have their rows there) */
-    for (i = 0; i < NE; ++i)
-      if (ws->pon[i] && !at_q[i]) ws->pon[i] = 2;
-    if (contact_rows(ws, q, v, p, 0, W0, ws->Um, 2)) return STEP_KERNEL;
+    if (contact_rows(ws, q, v, p, 0, W0, ws->Um, 1)) return STEP_KERNEL;
 #endif
     scale += norm_inf(ws->U, ND); /* the elements evaluated (with CONTACT_PAIRS) */
     gap_tol = fabs(h) / 2 * REPEAT_TOL * scale;

@@ -72,11 +72,8 @@ static int k_pair_gap(const casadi_real **arg, casadi_real **res, casadi_int *iw
   res[0][0] = arg[0][1] - R_P;
   return 0;
 }
-/* calls of k_pair_rows() per element (told apart by x: mass 1 at x < 0.5, mass 2 beyond) */
-static int rows_calls[NE];
 static int k_pair_rows(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
   (void) iw, (void) w, (void) mem;
-  ++rows_calls[arg[0][0] > 0.5];
   res[0][0] = arg[0][1] - R_P;
   res[1][0] = 0, res[1][1] = 1, res[1][2] = 1, res[1][3] = 0;
   return 0;
@@ -427,35 +424,6 @@ static void test_broad_phase(void) {
   CHECK(ws.pon[0] == 1, "loaded element off");
   free(block);
 }
-
-/* A kept repeat evaluates each element's rows once at the start of the step and once at its
- * end: mass 1 resting on the floor under its weight (its element loaded: evaluated at q, then
- * at q_next), mass 2 falling freely from rest to 2e-8 m above the floor at the end (within
- * the broad phase's slack there, so evaluated at q_next and then at q, where it slides at
- * 0.7 m/s: its start-of-step tangent velocity must be in Um); before, the loaded element's
- * rows at q were evaluated twice. */
-static void test_repeat_rows_once(void) {
-  const casadi_real h = 0.03;
-  casadi_real q[NQ] = {0, R_P + G_P * h * h / 2 + 5e-15, 1, R_P + G_P * h * h / 2 + 2e-8}, v[NQ] = {0, 0, 0.7, 0};
-  casadi_real q1[NQ], v1[NQ];
-  step_options o = DEFAULT_OPTIONS();
-  workspace ws;
-  char *block = malloc(step_work_bytes());
-  int kept, status;
-  mu[0] = mu[1] = 0.5;
-  restitution[0] = restitution[1] = 0;
-  layout(&ws, block);
-  contact_clear(&ws);
-  ws.F[0] = M_P * G_P;
-  rows_calls[0] = rows_calls[1] = 0;
-  status = repeat_step(q, v, 0, 0, 0, h, q1, v1, 0, 0, &o, 0, &ws, &kept);
-  CHECK(status == STEP_OK && kept, "status %d, kept %d", status, kept);
-  CHECK(rows_calls[0] == 2 && rows_calls[1] == 2, "rows evaluated %d times (mass 1), %d (mass 2); expected 2, 2",
-        rows_calls[0], rows_calls[1]);
-  CHECK(ws.Um[DC] == 0 && ws.Um[DC + 1] == 0.7, "mass 2's start velocities %g %g", ws.Um[DC], ws.Um[DC + 1]);
-  CHECK(fabs(q1[3] - R_P - 2e-8) < 1e-15 && ws.g[1] > 0, "mass 2 ends %g m above the floor", q1[3] - R_P);
-  free(block);
-}
 #endif
 
 int main(void) {
@@ -467,7 +435,6 @@ int main(void) {
   test_repeat_round_off_gap();
 #ifdef PAIRS
   test_broad_phase();
-  test_repeat_rows_once();
   return report("test_contact (element kernels, broad phase)");
 #elif defined(SCHUR_FACTORED)
   return report("test_contact (Schur complement, factored KKT matrix)");
