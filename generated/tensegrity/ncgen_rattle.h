@@ -137,6 +137,15 @@ typedef struct {
   casadi_real *pbq;  /* the q (NQ) of the last pairs_bounds() */
   int pb_rates;      /* whether it was given rates (1) or not (0); -1: none since layout() */
   int *pon;          /* per element: 0 skipped, 1 evaluated, 2 to be evaluated (ncgen_contact_pairs.h) */
+  casadi_real *pint; /* the sweep (ncgen_contact_pairs.h): per distinct member side its interval (lo, hi) */
+  int *pord;         /* ... the sides by lo, kept from the last sweep (PAIR_NS) */
+  int *pover;        /* ... the sides an interval overlaps (PAIR_NS) */
+  int *padj;         /* ... per side the elements it is the first side of: CSR pointers (PAIR_NS + 1), then
+                        (other side, element) by other side (2 NE) */
+  int *palw;         /* ... the elements always bounded one by one (NE), their number in nalw */
+  int nalw;          /* ... (-1: the tables not made since layout()) */
+  casadi_real pkmin, pdmax; /* ... the least kappa and the largest d_min of the elements swept */
+  casadi_real plim;  /* the level below which ws->plb is every element's lower bound (pairs_select()) */
 #endif
 #endif
 } workspace;
@@ -213,8 +222,8 @@ static size_t layout(workspace *ws, char *block) {
   sizes[25] = 2 * ND * sizeof(casadi_int);
 #endif
 #ifdef CONTACT_PAIRS
-  sizes[26] = (2 * PAIR_MAX_Q + PAIR_MAX_G + PAIR_MAX_W + 2 * NE + PAIR_NS * (DC + 3) + NQ) * sizeof(casadi_real) +
-              NE * sizeof(int);
+  sizes[26] = (2 * PAIR_MAX_Q + PAIR_MAX_G + PAIR_MAX_W + 2 * NE + PAIR_NS * (DC + 5) + NQ) * sizeof(casadi_real) +
+              (4 * NE + 3 * PAIR_NS + 1) * sizeof(int);
 #endif
 #endif
   off[0] = 0;
@@ -271,7 +280,14 @@ static size_t layout(workspace *ws, char *block) {
     ws->psb = ws->pspd + NE;
     ws->pbq = ws->psb + PAIR_NS * (DC + 3);
     ws->pb_rates = -1;
-    ws->pon = (int *) (void *) (ws->pbq + NQ);
+    ws->pint = ws->pbq + NQ;
+    ws->pon = (int *) (void *) (ws->pint + 2 * PAIR_NS);
+    ws->pord = ws->pon + NE;
+    ws->pover = ws->pord + PAIR_NS;
+    ws->padj = ws->pover + PAIR_NS;
+    ws->palw = ws->padj + PAIR_NS + 1 + 2 * NE;
+    ws->nalw = -1;
+    ws->plim = -INFINITY;
 #endif
 #ifdef CONTACT_SCHUR
     ws->T = (casadi_real *) (void *) (block + off[23]);
