@@ -64,7 +64,21 @@
  * (<= 0: closed; < GAP_REACH h/2 max |U_N|: about to close; < PENETRATION_TOL + twice the
  * deepest: pushed out with the others; g - h/2 W X j <= 0: closed in repeat_step()); an
  * element is skipped only where b_e exceeds the threshold, so its flat gaps (>= b_e) would
- * have taken the same decision, and its rows would not have entered any solve. */
+ * have taken the same decision, and its rows would not have entered any solve.
+ *
+ * The candidates (ws->pcand, ascending; ws->pcm marks them): the elements whose bound the
+ * sweep took one by one, and those turned on.  Every other element is off, its bound L =
+ * ws->plim, its speed bound 0: what the sweep gave it, without writing it.  Only candidates are
+ * walked after the sweep (pairs_select(), pairs_extend(), contact_gap(), contact_rows()), and
+ * only the contacts of the elements on (ws->kon, ascending, contacts_on()) by ncgen_contact.h:
+ * an element off is neither evaluated nor written (its gaps >= its bound exceed every
+ * threshold it is compared with, so no loop over the contacts would have used its rows: the
+ * gaps against 0, the reach, the push-out's range, the repeat's free gaps g - h/2 W X j with
+ * W = 0 on its rows, max |U| with U = 0 on its rows, its force 0).  The loops walk the same
+ * contacts in the same (ascending) order as a loop over all contacts that skips those off, so
+ * every sum and every solve is the same to the bit.  The elements with a force of the last step
+ * (ws->pld, a superset, ws->pld_ok) are kept by the contact step, and rebuilt from ws->F after
+ * contact_clear(). */
 
 #ifdef CONTACT_PAIRS
 #define PAIR_UNBOUNDED 0
@@ -257,6 +271,25 @@ static void pairs_init(workspace *ws) {
     }
 }
 
+/* Every candidate off and no longer a candidate (before a sweep). */
+static void pairs_uncandidate(workspace *ws) {
+  int i;
+  for (i = 0; i < ws->ncand; ++i) ws->pcm[ws->pcand[i]] = ws->pon[ws->pcand[i]] = 0;
+  ws->ncand = 0;
+}
+
+/* Element e a candidate, with its bound taken one by one. */
+static void pair_candidate(workspace *ws, int e) {
+  ws->pcm[e] = 1;
+  ws->pcand[ws->ncand++] = e;
+  ws->plb[e] = pair_lower(ws, e, ws->pspd + e);
+}
+
+static int int_ascending(const void *a, const void *b) {
+  const int x = *(const int *) a, y = *(const int *) b;
+  return (x > y) - (x < y);
+}
+
 /* The interval iv = (lo, hi) on axis `axis` of a side (sb: x0 (DC), R, lin, rot) at level L,
  * hs, with the largest radius rmax, kmin and dmax (the header's comment): x -/+ (R + a), the
  * whole axis where rho = hs rot > kmin / 4 or a number is not finite. */
@@ -298,7 +331,7 @@ static int pairs_overlaps(const casadi_real *iv, const int *ord, int n, int at, 
  * others (the header's comment); ws->plim = L. */
 static void pairs_sweep(workspace *ws, casadi_real level, casadi_real hs) {
   casadi_real rmax = 0, spread = -1, L;
-  int e, i, k, d, axis = 0;
+  int i, k, d, axis = 0;
   const int *ptr = ws->padj, *ent = ws->padj + PAIR_NS + 1;
   if (ws->nalw < 0) pairs_init(ws);
   for (k = 0; k < PAIR_NS; ++k) rmax = fmax(rmax, ws->psb[(DC + 3) * k + DC]);
@@ -314,11 +347,8 @@ static void pairs_sweep(workspace *ws, casadi_real level, casadi_real hs) {
     }
   }
   L = level + rmax + 1e-6;
-  for (e = 0; e < NE; ++e) {
-    ws->plb[e] = L;
-    ws->pspd[e] = 0;
-  }
-  for (i = 0; i < ws->nalw; ++i) ws->plb[ws->palw[i]] = pair_lower(ws, ws->palw[i], ws->pspd + ws->palw[i]);
+  pairs_uncandidate(ws);
+  for (i = 0; i < ws->nalw; ++i) pair_candidate(ws, ws->palw[i]);
   for (k = 0; k < PAIR_NS; ++k)
     pair_interval(ws->psb + (DC + 3) * k, axis, L, hs, rmax, ws->pkmin, ws->pdmax, ws->pint + 2 * k);
   pairs_sort(ws->pint, ws->pord, PAIR_NS);
@@ -333,11 +363,22 @@ static void pairs_sweep(workspace *ws, casadi_real level, casadi_real hs) {
         if (ent[2 * mid] < t) lo = mid + 1;
         else hi = mid;
       }
-      for (; lo < ptr[s + 1] && ent[2 * lo] == t; ++lo)
-        ws->plb[ent[2 * lo + 1]] = pair_lower(ws, ent[2 * lo + 1], ws->pspd + ent[2 * lo + 1]);
+      for (; lo < ptr[s + 1] && ent[2 * lo] == t; ++lo) pair_candidate(ws, ent[2 * lo + 1]);
     }
   }
+  qsort(ws->pcand, (size_t) ws->ncand, sizeof(int), int_ascending);
   ws->plim = L;
+}
+
+/* The contacts of the elements on, ascending (ws->kon). */
+static void contacts_on(workspace *ws) {
+  int i, j;
+  ws->nkon = 0;
+  for (i = 0; i < ws->ncand; ++i) {
+    const int *pi = pair_int + 8 * ws->pcand[i];
+    if (ws->pon[ws->pcand[i]])
+      for (j = 0; j < pi[2]; ++j) ws->kon[ws->nkon++] = pi[1] + j;
+  }
 }
 
 /* Whether a contact row of element e carries a force of the last step. */
@@ -348,43 +389,80 @@ static int pair_loaded(workspace *ws, int e) {
   return 0;
 }
 
+/* The elements that may carry a force (ws->pld), from ws->F if not known. */
+static void pairs_forces_known(workspace *ws) {
+  int e;
+  if (ws->pld_ok) return;
+  for (ws->npld = e = 0; e < NE; ++e)
+    if (pair_loaded(ws, e)) ws->pld[ws->npld++] = e;
+  ws->pld_ok = 1;
+}
+
+/* After the contact step set ws->F (a force only on the rows of elements on): the elements on
+ * with a force. */
+static void pairs_forces_set(workspace *ws) {
+  int i;
+  for (ws->npld = i = 0; i < ws->ncand; ++i)
+    if (ws->pon[ws->pcand[i]] && pair_loaded(ws, ws->pcand[i])) ws->pld[ws->npld++] = ws->pcand[i];
+  ws->pld_ok = 1;
+}
+
 /* Turns on (ws->pon = 1) the elements whose gaps may be below limit + hs S_e (every element
  * whose rows' velocities are not bounded, if hs > 0), and, if loaded, those with a force;
  * the others off.  Takes the bounds (pairs_sweep(); after pairs_bounds()). */
 static void pairs_select(workspace *ws, casadi_real limit, casadi_real hs, int loaded) {
-  int e;
+  int e, i;
   pairs_sweep(ws, fmax(limit, 0), hs);
-  for (e = 0; e < NE; ++e) {
-    int on = !(ws->plb[e] > limit + hs * ws->pspd[e]) || (hs > 0 && !pair_int[8 * e + 7]);
-    ws->pon[e] = on || (loaded && pair_loaded(ws, e));
+  for (i = 0; i < ws->ncand; ++i) {
+    e = ws->pcand[i];
+    ws->pon[e] = !(ws->plb[e] > limit + hs * ws->pspd[e]) || (hs > 0 && !pair_int[8 * e + 7]);
   }
+  if (loaded) {
+    pairs_forces_known(ws);
+    for (i = 0; i < ws->npld; ++i)
+      if (!ws->pon[e = ws->pld[i]] && pair_loaded(ws, e)) {
+        if (!ws->pcm[e]) { /* off by the sweep (bound L > limit): a candidate, in its place */
+          int at = ws->ncand++;
+          for (; at > 0 && ws->pcand[at - 1] > e; --at) ws->pcand[at] = ws->pcand[at - 1];
+          ws->pcand[at] = e;
+          ws->pcm[e] = 1;
+          ws->plb[e] = ws->plim;
+          ws->pspd[e] = 0;
+        }
+        ws->pon[e] = 1;
+      }
+  }
+  contacts_on(ws);
 }
 
 /* Turns on (ws->pon = 2: to be evaluated) the elements off whose gaps may be below limit;
  * returns their number. */
 static int pairs_extend(workspace *ws, casadi_real limit) {
-  int e, n = 0;
-  if (!(limit < ws->plim)) { /* beyond the sweep's level: every bound one by one */
-    for (e = 0; e < NE; ++e) ws->plb[e] = pair_lower(ws, e, ws->pspd + e);
+  int e, i, n = 0;
+  if (!(limit < ws->plim)) { /* beyond the sweep's level: every bound one by one, every element a candidate */
+    for (e = 0; e < NE; ++e) {
+      ws->plb[e] = pair_lower(ws, e, ws->pspd + e);
+      ws->pcm[e] = 1;
+      ws->pcand[e] = e;
+    }
+    ws->ncand = NE;
     ws->plim = INFINITY;
   }
-  for (e = 0; e < NE; ++e)
-    if (!ws->pon[e] && !(ws->plb[e] > limit)) {
+  for (i = 0; i < ws->ncand; ++i)
+    if (!ws->pon[e = ws->pcand[i]] && !(ws->plb[e] > limit)) {
       ws->pon[e] = 2;
       ++n;
     }
+  if (n) contacts_on(ws);
   return n;
 }
 
-/* The gaps at q of the elements on (the lower bounds of those off) into g. */
+/* The gaps at q of the elements on into g (those of the elements off are not written). */
 static int contact_gap(workspace *ws, const casadi_real *q, const casadi_real *p, casadi_real *g) {
   int e, i;
-  for (e = 0; e < NE; ++e) {
-    const int *pi = pair_int + 8 * e;
-    if (!ws->pon[e]) {
-      for (i = 0; i < pi[2]; ++i) g[pi[1] + i] = ws->plb[e];
-      continue;
-    }
+  for (i = 0; i < ws->ncand; ++i) {
+    const int *pi = pair_int + 8 * (e = ws->pcand[i]);
+    if (!ws->pon[e]) continue;
     pair_gather(e, q, 0, ws->pq);
     ws->arg[0] = ws->pq;
     ws->arg[1] = ws->pq + pi[3];
@@ -397,33 +475,16 @@ static int contact_gap(workspace *ws, const casadi_real *q, const casadi_real *p
 
 /* The contact rows at (q, v) of the elements with ws->pon >= which (which = 2: only those
  * pairs_extend() turned on, then marked 1): gaps into g, the nonzeros of W, U = W v (each
- * may be NULL).  With which = 1 the elements off get their lower bound as gaps and zero
- * rows (one memset per run of them). */
-/* Zeroes the rows of elements e0 .. e1 - 1 in W and U (each may be NULL): their rows, and
- * their rows' nonzeros of W, are contiguous. */
-static void pairs_zero(int e0, int e1, casadi_real *W, casadi_real *U) {
-  const int r0 = pair_int[8 * e0 + 1] * DC, r1 = e1 < NE ? pair_int[8 * e1 + 1] * DC : NK * DC;
-  if (W) memset(W + wt_colind[r0], 0, (size_t) (wt_colind[r1] - wt_colind[r0]) * sizeof(casadi_real));
-  if (U) memset(U + r0, 0, (size_t) (r1 - r0) * sizeof(casadi_real));
-}
-
+ * may be NULL).  The rows of the elements off are not written. */
 static int contact_rows(workspace *ws, const casadi_real *q, const casadi_real *v, const casadi_real *p,
                         casadi_real *g, casadi_real *W, casadi_real *U, int which) {
-  int e, i, r, off = -1; /* off: the first of the elements off since the last one on (-1: none) */
-  for (e = 0; e < NE; ++e) {
-    const int *pi = pair_int + 8 * e, nrow = pi[2] * DC, nloc = pi[3] + pi[4];
+  int c, e, i, r;
+  for (c = 0; c < ws->ncand; ++c) {
+    const int *pi = pair_int + 8 * (e = ws->pcand[c]), nrow = pi[2] * DC, nloc = pi[3] + pi[4];
     const int *wpos = pair_wpos + pi[6];
     /* the element's rows' nonzeros of W, contiguous (every one a position of wpos) */
     const int w0 = wt_colind[pi[1] * DC], nw = wt_colind[pi[1] * DC + nrow] - w0;
-    if (ws->pon[e] < which) {
-      if (which != 1) continue;
-      if (g)
-        for (i = 0; i < pi[2]; ++i) g[pi[1] + i] = ws->plb[e];
-      if (off < 0) off = e;
-      continue;
-    }
-    if (off >= 0) pairs_zero(off, e, W, U);
-    off = -1;
+    if (ws->pon[e] < which) continue;
     if (which == 2) ws->pon[e] = 1;
     pair_gather(e, q, 0, ws->pq);
     ws->arg[0] = ws->pq;
@@ -448,7 +509,6 @@ static int contact_rows(workspace *ws, const casadi_real *q, const casadi_real *
       }
     }
   }
-  if (off >= 0) pairs_zero(off, NE, W, U);
   return STEP_OK;
 }
 #endif

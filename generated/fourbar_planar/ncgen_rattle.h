@@ -108,6 +108,10 @@ typedef struct {
   casadi_int *cni;   /* cone_newton(): the elimination's column list and dropped columns (ND
                         each); then delassus()'s scratch (Schur complement form) */
   casadi_int *gp, *gi; /* the nonzeros of G by columns: column r has rows gi[gp[r] .. gp[r + 1] - 1] */
+  int *kon;          /* the contacts evaluated (ascending; nkon of them): all, or with CONTACT_PAIRS those of
+                        the elements on (ncgen_contact_pairs.h); the loops over contacts and rows walk them */
+  int nkon;
+  int *rowbuf;       /* contact_step()'s active rows (ND) */
 #ifdef CONTACT_SCHUR
   casadi_real *T;    /* A M^-1, NC x NQ, row-major */
   casadi_real *L;    /* Cholesky factor of A M^-1 A^T, NC x NC, column-major */
@@ -144,6 +148,12 @@ typedef struct {
                         (other side, element) by other side (2 NE) */
   int *palw;         /* ... the elements always bounded one by one (NE), their number in nalw */
   int nalw;          /* ... (-1: the tables not made since layout()) */
+  int *pcand;        /* the candidates: the elements whose bound ws->plb was taken at the last sweep or that
+                        are on, ascending (ncand); every other element is off with bound ws->plim */
+  int ncand;
+  int *pcm;          /* ... per element 1 if a candidate, else 0 */
+  int *pld;          /* the elements that may carry a force (a superset: npld), known if pld_ok */
+  int npld, pld_ok;
   casadi_real pkmin, pdmax; /* ... the least kappa and the largest d_min of the elements swept */
   casadi_real plim;  /* the level below which ws->plb is every element's lower bound (pairs_select()) */
 #endif
@@ -202,7 +212,8 @@ static size_t layout(workspace *ws, char *block) {
   sizes[14] = 4 * ND * sizeof(casadi_real); /* Um, the end-of-step velocities, Pold, its change */
   sizes[16] = (size_t) 3 * ND * ND * sizeof(casadi_real); /* G, then S (2 ND x ND) */
   sizes[18] = 3 * NX * sizeof(casadi_real); /* rhs, solution, saved Newton start */
-  sizes[20] = (NK + ND + NK + ND + 1 + (size_t) ND * ND) * sizeof(casadi_int); /* act, fset (and the factor's row starts), gp, gi */
+  sizes[20] = (NK + ND + NK + ND + 1 + (size_t) ND * ND) * sizeof(casadi_int) + /* act, fset (and the factor's row starts), gp, gi */
+              (NK + ND) * sizeof(int); /* kon, rowbuf */
   sizes[21] = ND * sizeof(casadi_real);
 #ifdef CONTACT_FACTORED
   sizes[22] = (NNZ_V + NNZ_R + N_BETA) * sizeof(casadi_real);
@@ -223,7 +234,7 @@ static size_t layout(workspace *ws, char *block) {
 #endif
 #ifdef CONTACT_PAIRS
   sizes[26] = (2 * PAIR_MAX_Q + PAIR_MAX_G + PAIR_MAX_W + 2 * NE + PAIR_NS * (DC + 5) + NQ) * sizeof(casadi_real) +
-              (4 * NE + 3 * PAIR_NS + 1) * sizeof(int);
+              (7 * NE + 3 * PAIR_NS + 1) * sizeof(int);
 #endif
 #endif
   off[0] = 0;
@@ -265,6 +276,9 @@ static size_t layout(workspace *ws, char *block) {
     ws->fset = ws->act + NK;
     ws->gp = ws->fset + ND + NK;
     ws->gi = ws->gp + ND + 1;
+    ws->kon = (int *) (void *) (ws->gi + (size_t) ND * ND);
+    ws->rowbuf = ws->kon + NK;
+    ws->nkon = 0;
     ws->fm = -1;
     ws->newton_once = 0;
     ws->F = (casadi_real *) (void *) (block + off[21]);
@@ -287,6 +301,12 @@ static size_t layout(workspace *ws, char *block) {
     ws->padj = ws->pover + PAIR_NS;
     ws->palw = ws->padj + PAIR_NS + 1 + 2 * NE;
     ws->nalw = -1;
+    ws->pcand = ws->palw + NE;
+    ws->pcm = ws->pcand + NE;
+    ws->pld = ws->pcm + NE;
+    ws->ncand = ws->npld = ws->pld_ok = 0;
+    memset(ws->pon, 0, NE * sizeof(int));
+    memset(ws->pcm, 0, NE * sizeof(int));
     ws->plim = -INFINITY;
 #endif
 #ifdef CONTACT_SCHUR

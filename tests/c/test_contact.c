@@ -393,12 +393,17 @@ static void test_repeat_round_off_gap(void) {
 #ifdef PAIRS
 /* The broad phase: mass 1 0.3 m above the floor, mass 2 on it.  Its lower bound is the gap
  * (less the slack); skipped at a limit below it, evaluated above; the speed bound of a point
- * is its speed. */
+ * is its speed.  The rows of an element off are not written (NaN left there), those on are;
+ * the contacts walked (ws->kon) are those of the elements on. */
 static void test_broad_phase(void) {
   const casadi_real q[NQ] = {0, R_P + 0.3, 1, R_P}, v[NQ] = {1, 2, 0, -3};
   casadi_real g[NK], W[NNZ_W], U[ND];
   workspace ws;
   char *block = malloc(step_work_bytes());
+  int i;
+  for (i = 0; i < NK; ++i) g[i] = NAN;
+  for (i = 0; i < NNZ_W; ++i) W[i] = NAN;
+  for (i = 0; i < ND; ++i) U[i] = NAN;
   layout(&ws, block);
   pairs_bounds(&ws, q, v);
   pairs_select(&ws, 0.1, 0, 0);
@@ -406,22 +411,25 @@ static void test_broad_phase(void) {
         "bounds %g %g", ws.plb[0], ws.plb[1]);
   CHECK(fabs(ws.pspd[0] - sqrt(5.0)) < 1e-15 && fabs(ws.pspd[1] - 3) < 1e-15, "speeds %g %g", ws.pspd[0], ws.pspd[1]);
   CHECK(ws.pon[0] == 0 && ws.pon[1] == 1, "on: %d %d", ws.pon[0], ws.pon[1]);
-  CHECK(contact_gap(&ws, q, 0, g) == STEP_OK && g[0] == ws.plb[0] && g[1] == 0, "gaps %g %g", g[0], g[1]);
+  CHECK(ws.nkon == 1 && ws.kon[0] == 1, "contacts walked: %d", ws.nkon);
+  CHECK(contact_gap(&ws, q, 0, g) == STEP_OK && isnan(g[0]) && g[1] == 0, "gaps %g %g", g[0], g[1]);
   CHECK(contact_rows(&ws, q, v, 0, g, W, U, 1) == STEP_OK, "rows");
-  CHECK(W[0] == 0 && W[1] == 0 && W[4] == 0 && W[5] == 1 && W[6] == 1 && W[7] == 0, "W of the contacts");
-  CHECK(U[0] == 0 && U[1] == 0 && U[2] == -3 && U[3] == 0, "U = %g %g %g %g", U[0], U[1], U[2], U[3]);
+  CHECK(isnan(W[0]) && isnan(W[3]) && W[4] == 0 && W[5] == 1 && W[6] == 1 && W[7] == 0, "W of the contacts");
+  CHECK(isnan(U[0]) && isnan(U[1]) && U[2] == -3 && U[3] == 0, "U = %g %g %g %g", U[0], U[1], U[2], U[3]);
   pairs_select(&ws, 0.1, 0.05, 0); /* 0.3 - slack <= 0.1 + 0.05 sqrt(5)? no; within reach at 0.1 s */
   CHECK(ws.pon[0] == 0, "on at hs = 0.05");
   pairs_select(&ws, 0.1, 0.1, 0);
   CHECK(ws.pon[0] == 1, "off at hs = 0.1");
   pairs_select(&ws, 0, 0, 0);
   CHECK(pairs_extend(&ws, 0.2) == 0 && pairs_extend(&ws, 0.4) == 1 && ws.pon[0] == 2, "extend");
+  CHECK(ws.nkon == 2 && ws.kon[0] == 0 && ws.kon[1] == 1, "contacts walked after the extension: %d", ws.nkon);
   CHECK(contact_rows(&ws, q, v, 0, g, W, U, 2) == STEP_OK && ws.pon[0] == 1, "rows of the extended");
   CHECK(fabs(g[0] - 0.3) < 1e-15 && W[1] == 1 && W[2] == 1 && U[0] == 2 && U[1] == 1, "g %g U %g %g", g[0], U[0],
         U[1]);
+  contact_clear(&ws);
   ws.F[1] = 1; /* a force on mass 1's tangent row: turned on whatever its bound */
   pairs_select(&ws, 0, 0, 1);
-  CHECK(ws.pon[0] == 1, "loaded element off");
+  CHECK(ws.pon[0] == 1 && ws.nkon == 2, "loaded element off");
   free(block);
 }
 
