@@ -233,6 +233,7 @@ static int k_backsolve(const casadi_real **arg, casadi_real **res, casadi_int *i
  * matrix G (column-major) and the free contact velocities U0. */
 static void pgs_problem(workspace *ws, int nr, const casadi_real *G, const casadi_real *U0) {
   int a;
+  CHECK(contact_reserve(ws, nr) == 0 && ws->ncap >= nr, "room for %d rows", nr);
   memcpy(ws->G, G, (size_t) (nr * nr) * sizeof(casadi_real));
   memcpy(ws->U, U0, (size_t) nr * sizeof(casadi_real));
   memset(ws->Um, 0, ND * sizeof(casadi_real));
@@ -264,6 +265,7 @@ static void test_pgs_friction(void) {
     CHECK(fabs(ws.P[a] - P[a]) < 1e-10, "P[%d] = %.15g, expected %.15g", a, ws.P[a], P[a]);
     CHECK(fabs(ws.U[a] - U[a]) < 1e-10, "U[%d] = %.15g, expected %.15g", a, ws.U[a], U[a]);
   }
+  workspace_free(&ws);
   free(block);
 }
 
@@ -286,6 +288,7 @@ static void test_pgs_frictionless_redundant(void) {
   CHECK(pgs(&ws, 2, first, bias), "%d sweeps", ws.pgs_sweeps);
   CHECK(fabs(ws.P[0] - 0.5) < 1e-12 && ws.P[1] == 0, "P = (%g, %g)", ws.P[0], ws.P[1]);
   CHECK(fabs(ws.U[0]) < 1e-12 && fabs(ws.U[1] - 3.5) < 1e-12, "U = (%g, %g)", ws.U[0], ws.U[1]);
+  workspace_free(&ws);
   free(block);
 }
 
@@ -387,6 +390,7 @@ static void test_repeat_round_off_gap(void) {
       CHECK(fabs(q1[1] - q[1]) < 1e-15 && fabs(v1[1]) < 1e-12 && fabs(ws.Pacc[0] - M_P * G_P * h) < 1e-15,
             "y %.17g -> %.17g, y' %g, impulse %.17g", q[1], q1[1], v1[1], ws.Pacc[0]);
   }
+  workspace_free(&ws);
   free(block);
 }
 
@@ -430,6 +434,7 @@ static void test_broad_phase(void) {
   ws.F[1] = 1; /* a force on mass 1's tangent row: turned on whatever its bound */
   pairs_select(&ws, 0, 0, 1);
   CHECK(ws.pon[0] == 1 && ws.nkon == 2, "loaded element off");
+  workspace_free(&ws);
   free(block);
 }
 

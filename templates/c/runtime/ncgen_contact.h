@@ -205,7 +205,7 @@ static void g_pattern(workspace *ws, int n) {
 }
 
 /* S = the Cholesky factor of G_AA, A = the m rows idx of the n x n matrix ws->G, by rows
- * (row i at S + i NK, lower triangle; NK >= m as only normal rows take part); a pivot below
+ * (row i at S + i n, lower triangle; m <= n); a pivot below
  * NEWTON_PIVOT of its diagonal is dropped (its column zero).  Row i of the factor depends
  * on rows 0..i of G_AA only, so the rows that idx shares, as a prefix, with the last factor's
  * rows (ws->fset) are kept.  G_AA is sparse (contacts couple only through the members they
@@ -218,14 +218,14 @@ static void factor_rows(workspace *ws, int n, const int *idx, int m) {
   if (ws->fm > 0)
     while (p < m && p < ws->fm && fset[p] == idx[p]) ++p;
   for (i = p; i < m; ++i) {
-    casadi_real *li = S + i * NK, d, d0;
+    casadi_real *li = S + i * n, d, d0;
     int f = 0;
     for (j = 0; j <= i; ++j) li[j] = ws->G[idx[i] + idx[j] * n];
     while (f < i && li[f] == 0) ++f;
     start[i] = f;
     fset[i] = idx[i];
     for (j = f; j < i; ++j) {
-      const casadi_real *lj = S + j * NK;
+      const casadi_real *lj = S + j * n;
       casadi_real v = li[j];
       if (lj[j] == 0) { /* a dropped pivot: its column is zero */
         li[j] = 0;
@@ -274,13 +274,13 @@ static void lcp_newton(workspace *ws, int n, const casadi_real *b) {
     for (i = 0; i < m; ++i) x[i] = -(ws->U[idx[i]] + (b ? b[idx[i]] : 0));
     factor_rows(ws, n, idx, m);
     for (i = 0; i < m; ++i) { /* L y = x, y_i = 0 on a dropped pivot */
-      const casadi_real *li = S + i * NK;
+      const casadi_real *li = S + i * n;
       if (li[i] == 0) { x[i] = 0; continue; }
       for (k = (int) ws->fset[NK + i]; k < i; ++k) x[i] -= li[k] * x[k];
       x[i] /= li[i];
     }
     for (i = m - 1; i >= 0; --i) { /* L^T dP = y, by columns of L^T: x_i done, then subtracted */
-      const casadi_real *li = S + i * NK;
+      const casadi_real *li = S + i * n;
       if (li[i] == 0) x[i] = 0;
       else x[i] /= li[i];
       for (k = (int) ws->fset[NK + i]; k < i; ++k) x[k] -= li[k] * x[i];
@@ -424,11 +424,11 @@ static int delassus(workspace *ws, const int *rows, int n) {
    * row and position per nonzero), the first and last nonzero of each row of T (2 NC, read
    * by x_add()), A's nonzeros by columns (NQ + 1 starts, NNZ_A positions), the first and
    * last nonzero of each B_a (2 ND, read by x_add()), the smallest envelope start of rows
-   * i .. NC - 1 (NC), Z's nonzeros by rows of L (NC + 1 starts, then the active rows a,
-   * ascending: NC ND) */
+   * i .. NC - 1 (NC), Z's nonzeros by rows of L (NC + 1 starts; the active rows a,
+   * ascending, in ws->zr) */
   casadi_int *env = ws->cni + 2 * ND, *zlo = env + NC, *zhi = zlo + ND, *cp = zhi + ND, *cr = cp + NQ + 1,
              *ck = cr + NNZ_W, *tlo = ck + NNZ_W, *thi = tlo + NC, *acp = thi + NC, *ak = acp + NQ + 1,
-             *bfirst = ak + NNZ_A, *blast = bfirst + ND, *emin = blast + ND, *zp = emin + NC, *zr = zp + NC + 1;
+             *bfirst = ak + NNZ_A, *blast = bfirst + ND, *emin = blast + ND, *zp = emin + NC, *zr = ws->zr;
   int a, b, i, j, k, finite = 1;
   if (!SCHUR_READY) {
     ws->schur = 0;
@@ -705,6 +705,7 @@ static int push_out(const casadi_real *p, casadi_real t1, casadi_real *q_next, c
     if (ws->g[k = ws->kon[i]] < PENETRATION_TOL + 2 * deepest) rows[n++] = k * DC;
   /* ws->K holds [M A^T; A 0] at q_next (the last second half-step). */
   ws->fm = -1;
+  if (contact_reserve(ws, n)) return STEP_BAD_INPUT; /* no memory for the solve */
   if ((k = delassus(ws, rows, n)) != STEP_OK) return k;
   g_pattern(ws, n);
   for (a = 0; a < n; ++a) {
@@ -837,7 +838,7 @@ static int repeat_step(const casadi_real *q, const casadi_real *v, casadi_real t
                        const casadi_real *p, casadi_real h, casadi_real *q_next, casadi_real *v_next,
                        casadi_real *lam, int *iterations, const step_options *o, int warm,
                        workspace *ws, int *kept) {
-  casadi_real *W0 = ws->Xc, *P = ws->P, scale = 1, gap_tol = 0;
+  casadi_real *W0 = ws->Wr, *P = ws->P, scale = 1, gap_tol = 0;
   int c, i, k, r, status, moved = 0, closed[NK];
   *kept = 0;
   if (iterations) *iterations = 0;
@@ -1020,6 +1021,7 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
   for (a = 0; a < nr; ++a) ws->U[a] = ws->U[rows[a]]; /* compacted: row `a` <- contact row rows[a] >= a */
   /* ws->K holds [M A^T; A 0] at q_next (the free step's second half). */
   ws->fm = -1;
+  if (contact_reserve(ws, nr)) return STEP_BAD_INPUT; /* no memory for the solve */
   if ((status = delassus(ws, rows, nr)) != STEP_OK) return status;
   g_pattern(ws, nr);
   for (a = 0; a < nr; ++a) {
