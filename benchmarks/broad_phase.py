@@ -1,9 +1,9 @@
 """The contact broad phase: time per step against the number of sphere pairs and of close pairs.
 
-Scenes (those of benchmarks/contact.py): the sparse scene of N = 20, 50, 100 frictional
+Scenes (those of benchmarks/contact.py): the sparse scene of N = 20, 50, 100, 200 frictional
 spheres at rest on the ground 0.2 m apart (N floor contacts, N (N − 1) / 2 sphere pairs, none
-close; N = 200 does not run: the stepper's dense Delassus workspace, 3 ND² doubles with ND = 3 × 20 100
-rows, overflows an int) and the heap of 20 spheres with friction dropped onto the ground (190 pairs, the close
+close; N = 200 runs only where the contact solves' blocks are sized by the active rows: before,
+3 ND² doubles with ND = 3 × 20 100 rows, 87 GB, refused) and the heap of 20 spheres with friction dropped onto the ground (190 pairs, the close
 ones touching or about to); h = 1 ms, ``--t-end`` s (default 0.2), ncgen's nonsmooth stepper on
 the contact library's tables (``kernels="tables"``, what ``kernels="auto"`` takes; ``--kernels
 flat`` times the models' own packages instead, compiled first).
@@ -13,7 +13,8 @@ phase before) runs in its own worker process with its own compile cache; the run
 this tree's then the peer's, ``--rounds`` times, the stepping CPU time of each
 (``info["stepping_cpu_time"]``) kept; printed: per scene the pairs, the close pairs (sphere
 pairs whose bounding spheres are within one radius at any sample of the run), the CPU time per
-step (min / median), the ratio this / peer (min / median of the per-round ratios), and whether
+step (min / median), the contacts with an impulse (mean and max over the samples: the active
+rows are 3 per contact), the ratio this / peer (min / median of the per-round ratios), and whether
 the two trees' trajectories (q and v at every 10 ms sample, and the contact forces: the
 impulses summed over each sample interval) are bit-identical.  Then a least-squares fit of this tree's time per step, t = c0 + c1 N + c2 pairs
 + c3 close pairs, over the scenes: c2 is what a far pair still costs per step.
@@ -58,7 +59,9 @@ for line in sys.stdin:
     d = np.linalg.norm(pos[:, :, None, :] - pos[:, None, :, :], axis=-1)
     iu = np.triu_indices(pos.shape[1], 1)
     close = int(np.sum((d[:, iu[0], iu[1]] < 3 * B.HEAP_R).any(axis=0)))
-    print(json.dumps({{"cpu": tr.info["stepping_cpu_time"], "digest": digest, "close": close}}), flush=True)
+    loaded = np.count_nonzero(tr.contact_normal[1:], axis=1)
+    print(json.dumps({{"cpu": tr.info["stepping_cpu_time"], "digest": digest, "close": close,
+                      "active": float(loaded.mean()), "active_max": int(loaded.max())}}), flush=True)
 """
 
 
@@ -104,8 +107,9 @@ def main(argv=None) -> int:
                 res[name].append(ask(proc, scene=scene, n=n, t_end=args.t_end, kernels=args.kernels))
         pairs = n * (n - 1) // 2
         t = {name: np.array([r["cpu"] for r in rs]) / steps * 1e3 for name, rs in res.items()}
-        close = res["this"][0]["close"]
-        line = (f"{scene} N = {n:4d}: pairs {pairs:6d}, close pairs {close:4d}; this: ms/step min {t['this'].min():.4f} "
+        close, active, amax = (res["this"][0][k] for k in ("close", "active", "active_max"))
+        line = (f"{scene} N = {n:4d}: pairs {pairs:6d}, close pairs {close:4d}, contacts with an impulse per sample "
+                f"{active:.1f} (max {amax}, rows x 3); this: ms/step min {t['this'].min():.4f} "
                 f"median {np.median(t['this']):.4f}")
         if "peer" in t:
             ratio = t["this"] / t["peer"]
