@@ -156,7 +156,7 @@ typedef struct {
   int *palw;         /* ... the elements always bounded one by one (NE), their number in nalw */
   int nalw;          /* ... (-1: the tables not made since layout()) */
   int *pcand;        /* the candidates: the elements whose bound ws->plb was taken at the last sweep or that
-                        are on, ascending (ncand); every other element is off with bound ws->plim */
+                        are on, in the sweep's order (ncand); every other element is off with bound ws->plim */
   int ncand;
   int *pcm;          /* ... per element 1 if a candidate, else 0 */
   int *pld;          /* the elements that may carry a force (a superset: npld), known if pld_ok */

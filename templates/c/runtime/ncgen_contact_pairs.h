@@ -63,11 +63,12 @@
  * element is skipped only where b_e exceeds the threshold, so its flat gaps (>= b_e) would
  * have taken the same decision, and its rows would not have entered any solve.
  *
- * The candidates (ws->pcand, ascending; ws->pcm marks them): the elements whose bound the
+ * The candidates (ws->pcand, in the sweep's order; ws->pcm marks them): the elements whose bound the
  * sweep took one by one, and those turned on.  Every other element is off, its bound L =
  * ws->plim, its speed bound 0: what the sweep gave it, without writing it.  Only candidates are
- * walked after the sweep (pairs_select(), pairs_extend(), contact_gap(), contact_rows()), and
- * only the contacts of the elements on (ws->kon, ascending, contacts_on()) by ncgen_contact.h:
+ * walked after the sweep (pairs_select(), pairs_extend(), contact_gap(), contact_rows(): each
+ * element's work its own, in any order), and only the contacts of the elements on (ws->kon,
+ * sorted ascending, contacts_on()) by ncgen_contact.h:
  * an element off is neither evaluated nor written (its gaps >= its bound exceed every
  * threshold it is compared with, so no loop over the contacts would have used its rows: the
  * gaps against 0, the reach, the push-out's range, the repeat's free gaps g - h/2 W X j with
@@ -363,11 +364,10 @@ static void pairs_sweep(workspace *ws, casadi_real level, casadi_real hs) {
       for (; lo < ptr[s + 1] && ent[2 * lo] == t; ++lo) pair_candidate(ws, ent[2 * lo + 1]);
     }
   }
-  qsort(ws->pcand, (size_t) ws->ncand, sizeof(int), int_ascending);
   ws->plim = L;
 }
 
-/* The contacts of the elements on, ascending (ws->kon). */
+/* The contacts of the elements on, ascending (ws->kon: the order of a loop over all contacts). */
 static void contacts_on(workspace *ws) {
   int i, j;
   ws->nkon = 0;
@@ -376,6 +376,7 @@ static void contacts_on(workspace *ws) {
     if (ws->pon[ws->pcand[i]])
       for (j = 0; j < pi[2]; ++j) ws->kon[ws->nkon++] = pi[1] + j;
   }
+  qsort(ws->kon, (size_t) ws->nkon, sizeof(int), int_ascending);
 }
 
 /* Whether a contact row of element e carries a force of the last step. */
@@ -418,10 +419,8 @@ static void pairs_select(workspace *ws, casadi_real limit, casadi_real hs, int l
     pairs_forces_known(ws);
     for (i = 0; i < ws->npld; ++i)
       if (!ws->pon[e = ws->pld[i]] && pair_loaded(ws, e)) {
-        if (!ws->pcm[e]) { /* off by the sweep (bound L > limit): a candidate, in its place */
-          int at = ws->ncand++;
-          for (; at > 0 && ws->pcand[at - 1] > e; --at) ws->pcand[at] = ws->pcand[at - 1];
-          ws->pcand[at] = e;
+        if (!ws->pcm[e]) { /* off by the sweep (bound L > limit): a candidate */
+          ws->pcand[ws->ncand++] = e;
           ws->pcm[e] = 1;
           ws->plb[e] = ws->plim;
           ws->pspd[e] = 0;
