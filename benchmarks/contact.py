@@ -46,8 +46,9 @@ solref/solimp.  The heap's times are taken interleaved (ncgen, MuJoCo, ncgen, ..
 
 Sparse scene (``--sparse N``, default 0: none): N frictional spheres of the heap resting on the
 ground on a square grid 0.2 m apart (no two touch), with a SphereSphere contact per pair as in the
-heap, 1 s: the time per step with N (N − 1) / 2 far pairs, against the heap's (the broad
-phase makes it grow with the close pairs, not with all pairs); ncgen only.
+heap, 1 s: the time per step with N (N − 1) / 2 far pairs, against the heap's; ncgen only (the
+broad phase takes bounds only for the close pairs, but the step's loops over every contact
+still grow with all pairs: benchmarks/broad_phase.py).
 
 Pyramid (``--pyramid``: this scene alone): 10 cubes (edge 0.1 m, 1 kg, μ = 0.5 everywhere, e = 0)
 in rows of 4, 3, 2, 1 in the x-z plane, 1 cm apart within a row, each above the first row

@@ -248,3 +248,67 @@ def test_shipped_examples_run_as_with_the_flat_kernels(example):
     # a scene starting at rest gives the one-ulp run no spread; issue 34's bound: 1e-10 m
     assert_same(a, b, c, floor=1e-10)
     assert math.isfinite(a.q.sum())
+
+
+SWEEP_SCENE = r"""
+import sys
+import numpy as np
+import ncgen as nc
+seed, kernels, out = int(sys.argv[1]), sys.argv[2], sys.argv[3]
+rng = np.random.default_rng(seed)
+s = nc.System(f"sweep{seed}")
+r, m = 0.03, 0.2
+balls, centres = [], []
+for k in range(9):
+    at = rng.uniform([-0.1, -0.1, 0.04], [0.1, 0.1, 0.25])
+    while any(np.linalg.norm(at - c) < 2 * r + 1e-3 for c in centres):   # apart at the start
+        at = rng.uniform([-0.1, -0.1, 0.04], [0.1, 0.1, 0.25])
+    centres.append(at)
+    at = tuple(at)
+    balls.append(s.add_point(f"b{k}", mass=m, position=at) if k < 5 else
+                 s.add_body(f"b{k}", mass=m, inertia=0.4 * m * r * r * np.eye(3), position=at))
+for k, b in enumerate(balls):
+    s.add_contact(nc.SpherePlane(b, None, r, mu=0.5, name=f"floor{k}"))
+for i in range(9):
+    for j in range(i + 1, 9):
+        s.add_contact(nc.SphereSphere(balls[i], None, r, balls[j], None, r, mu=0.5, name=f"p{i}_{j}"))
+model = s.build(contacts="nonsmooth")
+v0 = np.zeros(model.nq)
+for k in range(5):                     # the points thrown (the bodies spin up in the collisions)
+    v0[[i for i in model.layout.member_indices(f"b{k}")]] = rng.normal(scale=3.0, size=3)
+tr = nc.simulate(model, 0.3, 0.01, method="stepper", substeps=2, kernels=kernels, v0=v0)
+pairs = [i for i, n in enumerate(tr.contact_names) if n.startswith("p")]
+np.savez(out, q=tr.q, v=tr.v, fn=tr.contact_normal, ft=tr.contact_tangent,
+         hits=(tr.contact_normal[:, pairs] > 0).any(axis=0).sum())
+"""
+
+
+@pytest.mark.slow      # fast: tests/c/test_contact.c -DPAIRS::test_sweep_random (the sweep against all pairs)
+@pytest.mark.parametrize("kernels", ["tables", "flat"])
+def test_the_sweep_runs_as_every_bound_one_by_one(kernels, tmp_path):
+    """The broad phase's sweep (ncgen_contact_pairs.h: bounds taken only for the elements
+    whose sides' intervals overlap) gives, bit for bit, the run of the same C built with
+    NCGEN_PAIRS_ALL (every element's bound taken one by one, the sweep's reference), on the
+    contact library's tables and on the model's package: 9 spheres (5 points, 4 rotating
+    bodies) thrown at random (3 m/s) onto the ground and each other, h = 5 ms (up to about a
+    radius per step: the bounds' speed terms decide), every pair a contact, 3 seeds."""
+    import os
+    import subprocess
+    import sys
+
+    flags = os.environ.get("NCGEN_CFLAGS", "-O1")
+    hits = 0
+    for seed in range(3):
+        runs = []
+        for extra in ("", " -DNCGEN_PAIRS_ALL"):
+            out = tmp_path / f"{seed}{'all' if extra else 'sweep'}.npz"
+            env = {**os.environ, "NCGEN_CFLAGS": flags + extra}
+            done = subprocess.run([sys.executable, "-c", SWEEP_SCENE, str(seed), kernels, str(out)], env=env,
+                                  capture_output=True, text=True, timeout=900)
+            assert done.returncode == 0, done.stderr[-3000:]
+            runs.append(np.load(out))
+        for key in ("q", "v", "fn", "ft"):
+            assert np.array_equal(runs[0][key], runs[1][key]), (seed, key)
+        assert np.isfinite(runs[0]["q"]).all()
+        hits += int(runs[0]["hits"])
+    assert hits >= 3, hits                # spheres did hit each other

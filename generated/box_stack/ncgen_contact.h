@@ -60,8 +60,15 @@
 /* Without element kernels (ncgen_contact_pairs.h) every contact is evaluated, by the flat
  * kernels. */
 #define pairs_bounds(ws, q, rates) ((void) 0)
-#define pairs_select(ws, limit, hs, loaded) ((void) 0)
+#define pairs_select(ws, limit, hs, loaded) contacts_all(ws)
 #define pairs_extend(ws, limit) 0
+
+/* Every contact evaluated (ws->kon). */
+static void contacts_all(workspace *ws) {
+  int k;
+  for (k = 0; k < NK; ++k) ws->kon[k] = k;
+  ws->nkon = NK;
+}
 
 static int contact_gap(workspace *ws, const casadi_real *q, const casadi_real *p, casadi_real *g) {
   ws->arg[0] = q;
@@ -83,10 +90,69 @@ static int contact_rows(workspace *ws, const casadi_real *q, const casadi_real *
 }
 #endif
 
+/* max |x_r| over the rows of the contacts evaluated (ws->kon; NaN if some is). */
+static casadi_real rows_norm_inf(const workspace *ws, const casadi_real *x) {
+  casadi_real m = 0;
+  int i, r;
+  for (i = 0; i < ws->nkon; ++i)
+    for (r = ws->kon[i] * DC; r < (ws->kon[i] + 1) * DC; ++r) m = nan_max(m, fabs(x[r]));
+  return m;
+}
+
+/* Whether the last step's impulses h F are not all zero. */
+static int forces_any(workspace *ws, casadi_real h) {
+  int r;
+#ifdef CONTACT_PAIRS
+  int i;
+  pairs_forces_known(ws);
+  for (i = 0; i < ws->npld; ++i) {
+    const int *pi = pair_int + 8 * ws->pld[i];
+    for (r = pi[1] * DC; r < (pi[1] + pi[2]) * DC; ++r)
+      if (h * ws->F[r] != 0) return 1;
+  }
+#else
+  for (r = 0; r < ND; ++r)
+    if (h * ws->F[r] != 0) return 1;
+#endif
+  return 0;
+}
+
+/* No contact force (the step's contacts all open). */
+static void forces_clear(workspace *ws) {
+#ifdef CONTACT_PAIRS
+  int i;
+  pairs_forces_known(ws);
+  for (i = 0; i < ws->npld; ++i) {
+    const int *pi = pair_int + 8 * ws->pld[i];
+    memset(ws->F + pi[1] * DC, 0, (size_t) (pi[2] * DC) * sizeof(casadi_real));
+  }
+  ws->npld = 0;
+#else
+  memset(ws->F, 0, ND * sizeof(casadi_real));
+#endif
+}
+
+/* No force on the contacts not evaluated (with CONTACT_PAIRS: the elements off are open). */
+static void forces_clear_off(workspace *ws) {
+#ifdef CONTACT_PAIRS
+  int i;
+  pairs_forces_known(ws);
+  for (i = 0; i < ws->npld; ++i) {
+    const int *pi = pair_int + 8 * ws->pld[i];
+    if (!ws->pon[ws->pld[i]]) memset(ws->F + pi[1] * DC, 0, (size_t) (pi[2] * DC) * sizeof(casadi_real));
+  }
+#else
+  (void) ws;
+#endif
+}
+
 /* Clears what the contact steps accumulate and their warm start (before a run). */
 static void contact_clear(workspace *ws) {
   memset(ws->Pacc, 0, ND * sizeof(casadi_real));
   memset(ws->F, 0, ND * sizeof(casadi_real));
+#ifdef CONTACT_PAIRS
+  ws->pld_ok = 0; /* rebuilt from F at the next use (a caller may set F) */
+#endif
   ws->pgs_unconverged = 0;
   ws->pgs_residual = 0;
   ws->cone_residual = 0;
@@ -142,7 +208,7 @@ static void g_pattern(workspace *ws, int n) {
 }
 
 /* S = the Cholesky factor of G_AA, A = the m rows idx of the n x n matrix ws->G, by rows
- * (row i at S + i NK, lower triangle; NK >= m as only normal rows take part); a pivot below
+ * (row i at S + i n, lower triangle; m <= n); a pivot below
  * NEWTON_PIVOT of its diagonal is dropped (its column zero).  Row i of the factor depends
  * on rows 0..i of G_AA only, so the rows that idx shares, as a prefix, with the last factor's
  * rows (ws->fset) are kept.  G_AA is sparse (contacts couple only through the members they
@@ -155,14 +221,14 @@ static void factor_rows(workspace *ws, int n, const int *idx, int m) {
   if (ws->fm > 0)
     while (p < m && p < ws->fm && fset[p] == idx[p]) ++p;
   for (i = p; i < m; ++i) {
-    casadi_real *li = S + i * NK, d, d0;
+    casadi_real *li = S + i * n, d, d0;
     int f = 0;
     for (j = 0; j <= i; ++j) li[j] = ws->G[idx[i] + idx[j] * n];
     while (f < i && li[f] == 0) ++f;
     start[i] = f;
     fset[i] = idx[i];
     for (j = f; j < i; ++j) {
-      const casadi_real *lj = S + j * NK;
+      const casadi_real *lj = S + j * n;
       casadi_real v = li[j];
       if (lj[j] == 0) { /* a dropped pivot: its column is zero */
         li[j] = 0;
@@ -211,13 +277,13 @@ static void lcp_newton(workspace *ws, int n, const casadi_real *b) {
     for (i = 0; i < m; ++i) x[i] = -(ws->U[idx[i]] + (b ? b[idx[i]] : 0));
     factor_rows(ws, n, idx, m);
     for (i = 0; i < m; ++i) { /* L y = x, y_i = 0 on a dropped pivot */
-      const casadi_real *li = S + i * NK;
+      const casadi_real *li = S + i * n;
       if (li[i] == 0) { x[i] = 0; continue; }
       for (k = (int) ws->fset[NK + i]; k < i; ++k) x[i] -= li[k] * x[k];
       x[i] /= li[i];
     }
     for (i = m - 1; i >= 0; --i) { /* L^T dP = y, by columns of L^T: x_i done, then subtracted */
-      const casadi_real *li = S + i * NK;
+      const casadi_real *li = S + i * n;
       if (li[i] == 0) x[i] = 0;
       else x[i] /= li[i];
       for (k = (int) ws->fset[NK + i]; k < i; ++k) x[k] -= li[k] * x[i];
@@ -361,11 +427,11 @@ static int delassus(workspace *ws, const int *rows, int n) {
    * row and position per nonzero), the first and last nonzero of each row of T (2 NC, read
    * by x_add()), A's nonzeros by columns (NQ + 1 starts, NNZ_A positions), the first and
    * last nonzero of each B_a (2 ND, read by x_add()), the smallest envelope start of rows
-   * i .. NC - 1 (NC), Z's nonzeros by rows of L (NC + 1 starts, then the active rows a,
-   * ascending: NC ND) */
+   * i .. NC - 1 (NC), Z's nonzeros by rows of L (NC + 1 starts; the active rows a,
+   * ascending, in ws->zr) */
   casadi_int *env = ws->cni + 2 * ND, *zlo = env + NC, *zhi = zlo + ND, *cp = zhi + ND, *cr = cp + NQ + 1,
              *ck = cr + NNZ_W, *tlo = ck + NNZ_W, *thi = tlo + NC, *acp = thi + NC, *ak = acp + NQ + 1,
-             *bfirst = ak + NNZ_A, *blast = bfirst + ND, *emin = blast + ND, *zp = emin + NC, *zr = zp + NC + 1;
+             *bfirst = ak + NNZ_A, *blast = bfirst + ND, *emin = blast + ND, *zp = emin + NC, *zr = ws->zr;
   int a, b, i, j, k, finite = 1;
   if (!SCHUR_READY) {
     ws->schur = 0;
@@ -571,17 +637,17 @@ static void x_add(workspace *ws, int n, const casadi_real *c, casadi_real s, cas
 #endif
 
 /* The work of the impulses of a step that took W0^T P in its first half and W^T P in its
- * second (rows by wt_colind, wt_row; P[a] acts on row rows[a], or on row a if rows is NULL):
+ * second (rows by wt_colind, wt_row; P[a] acts on row rows[a], or on row r0 + a if rows is NULL):
  * the kinetic energy they add to RATTLE's step, exactly.  The first half's momentum balance
  * M (w - v) = ... + W0^T P / 2 adds W0^T P / 2 . (w + v) / 2 to 1/2 w^T M w - 1/2 v^T M v,
  * the second's W^T P / 2 . (v+ + w) / 2 (for an impact with fixed rows, 1/2 P . (U- + U+)
  * with w the mean of v and v+).  Normal rows into WORK_CONTACTS, tangent rows into
  * WORK_FRICTION, both into WORK_TOTAL. */
-static void impulse_work(workspace *ws, const casadi_real *W0, const casadi_real *W, const int *rows, int n,
+static void impulse_work(workspace *ws, const casadi_real *W0, const casadi_real *W, const int *rows, int r0, int n,
                          const casadi_real *P, const casadi_real *v, const casadi_real *v_next) {
   int a, i;
   for (a = 0; a < n; ++a) {
-    int r = rows ? rows[a] : a;
+    int r = rows ? rows[a] : r0 + a;
     casadi_real s = 0, dw;
     if (P[a] == 0) continue;
     for (i = wt_colind[r]; i < wt_colind[r + 1]; ++i) {
@@ -625,8 +691,8 @@ static int push_out(const casadi_real *p, casadi_real t1, casadi_real *q_next, c
   pairs_bounds(ws, q_next, 0);
   pairs_select(ws, 0, 0, 0);
   if (contact_gap(ws, q_next, p, ws->g)) return STEP_KERNEL;
-  for (k = 0; k < NK; ++k)
-    if (ws->g[k] < -PENETRATION_TOL) {
+  for (i = 0; i < ws->nkon; ++i)
+    if (ws->g[k = ws->kon[i]] < -PENETRATION_TOL) {
       ++n;
       deepest = fmax(deepest, -ws->g[k]);
     }
@@ -638,10 +704,11 @@ static int push_out(const casadi_real *p, casadi_real t1, casadi_real *q_next, c
    * per sphere) */
   (void) pairs_extend(ws, PENETRATION_TOL + 2 * deepest);
   if (contact_rows(ws, q_next, v_next, p, ws->g, ws->W, 0, 1)) return STEP_KERNEL;
-  for (n = k = 0; k < NK; ++k)
-    if (ws->g[k] < PENETRATION_TOL + 2 * deepest) rows[n++] = k * DC;
+  for (n = i = 0; i < ws->nkon; ++i)
+    if (ws->g[k = ws->kon[i]] < PENETRATION_TOL + 2 * deepest) rows[n++] = k * DC;
   /* ws->K holds [M A^T; A 0] at q_next (the last second half-step). */
   ws->fm = -1;
+  if (contact_reserve(ws, n)) return STEP_BAD_INPUT; /* no memory for the solve */
   if ((k = delassus(ws, rows, n)) != STEP_OK) return k;
   g_pattern(ws, n);
   for (a = 0; a < n; ++a) {
@@ -729,6 +796,25 @@ static int contact_laws_hold(int k, const casadi_real *P, const casadi_real *U, 
   return sqrt(dir) <= tol;
 }
 
+/* repeat_step()'s impulses P = h F on the rows of the contacts evaluated (every contact with
+ * a force is: pairs_select(..., loaded = 1)). */
+static void repeat_impulses(workspace *ws, casadi_real h) {
+  int c, r;
+  for (c = 0; c < ws->nkon; ++c)
+    for (r = ws->kon[c] * DC; r < (ws->kon[c] + 1) * DC; ++r) ws->P[r] = h * ws->F[r];
+}
+
+/* j = W^T P over the rows of the contacts evaluated with an impulse (W: the nonzeros of the
+ * contact Jacobian by rows, ws->P by contact rows), ascending. */
+static void repeat_j(workspace *ws, const casadi_real *W) {
+  int c, i, r;
+  for (i = 0; i < NQ; ++i) ws->j[i] = 0;
+  for (c = 0; c < ws->nkon; ++c)
+    for (r = ws->kon[c] * DC; r < (ws->kon[c] + 1) * DC; ++r)
+      if (ws->P[r] != 0)
+        for (i = wt_colind[r]; i < wt_colind[r + 1]; ++i) ws->j[wt_row[i]] += W[i] * ws->P[r];
+}
+
 /* The last step's impulses h F again, with the contact Jacobian at the start of the step:
  * where the contact forces do not change (bodies at rest, sliding or rolling at constant
  * forces) they solve this step's contact problem, and contact_step()'s Delassus matrix and
@@ -755,23 +841,17 @@ static int repeat_step(const casadi_real *q, const casadi_real *v, casadi_real t
                        const casadi_real *p, casadi_real h, casadi_real *q_next, casadi_real *v_next,
                        casadi_real *lam, int *iterations, const step_options *o, int warm,
                        workspace *ws, int *kept) {
-  casadi_real *W0 = ws->Xc, *P = ws->P, scale = 1, gap_tol = 0;
-  int i, k, r, status, any = 0, moved = 0, closed[NK];
+  casadi_real *W0 = ws->Wr, *P = ws->P, scale = 1, gap_tol = 0;
+  int c, i, k, r, status, moved = 0, closed[NK];
   *kept = 0;
   if (iterations) *iterations = 0;
-  for (r = 0; r < ND; ++r) {
-    P[r] = h * ws->F[r];
-    any = any || P[r] != 0;
-  }
-  if (!any || !ws->repeat) return STEP_OK;
+  if (!ws->repeat || !forces_any(ws, h)) return STEP_OK;
   memcpy(ws->rhs + 2 * NX, ws->x, NX * sizeof(casadi_real));
   pairs_bounds(ws, q, 0);
   pairs_select(ws, -INFINITY, 0, 1); /* the elements with a force */
+  repeat_impulses(ws, h);
   if (contact_rows(ws, q, v, p, 0, W0, ws->Um, 1)) return STEP_KERNEL;
-  for (i = 0; i < NQ; ++i) ws->j[i] = 0;
-  for (r = 0; r < ND; ++r)
-    if (P[r] != 0)
-      for (i = wt_colind[r]; i < wt_colind[r + 1]; ++i) ws->j[wt_row[i]] += W0[i] * P[r];
+  repeat_j(ws, W0);
   memcpy(ws->j0, ws->j, NQ * sizeof(casadi_real)); /* the rows hardly move: kept only if so */
   status = step(q, v, t, u, p, h, q_next, v_next, lam, iterations, o, warm, ws);
   if (status == STEP_OK) {
@@ -782,15 +862,16 @@ static int repeat_step(const casadi_real *q, const casadi_real *v, casadi_real t
      * (the start-of-step velocities of the contacts that close) */
     pairs_bounds(ws, q_next, ws->rhs + NX);
     pairs_select(ws, 0, h / 2, 1);
+    repeat_impulses(ws, h); /* on the contacts evaluated now */
     if (contact_rows(ws, q_next, v_next, p, ws->g, ws->W, ws->U, 1)) return STEP_KERNEL;
 #ifdef CONTACT_PAIRS
     if (contact_rows(ws, q, v, p, 0, W0, ws->Um, 1)) return STEP_KERNEL;
 #endif
-    scale += norm_inf(ws->U, ND); /* the elements evaluated (with CONTACT_PAIRS) */
+    scale += rows_norm_inf(ws, ws->U); /* the elements evaluated (with CONTACT_PAIRS) */
     gap_tol = fabs(h) / 2 * REPEAT_TOL * scale;
     *kept = all_finite(ws->rhs + NX, NQ);
-    for (k = 0; k < NK && *kept; ++k) {
-      casadi_real g_free = ws->g[k];
+    for (c = 0; c < ws->nkon && *kept; ++c) {
+      casadi_real g_free = ws->g[k = ws->kon[c]];
       int loaded = 0, d;
       for (i = wt_colind[k * DC]; i < wt_colind[k * DC + 1]; ++i) g_free -= h / 2 * ws->W[i] * ws->rhs[NX + wt_row[i]];
       for (d = 0; d < DC; ++d) loaded = loaded || P[k * DC + d] != 0;
@@ -811,22 +892,21 @@ static int repeat_step(const casadi_real *q, const casadi_real *v, casadi_real t
     }
     if (*kept && moved) { /* the second half again along the rows at q_next (q_next stays) */
       int it = 0;
-      for (i = 0; i < NQ; ++i) ws->j[i] = 0;
-      for (r = 0; r < ND; ++r)
-        if (P[r] != 0)
-          for (i = wt_colind[r]; i < wt_colind[r + 1]; ++i) ws->j[wt_row[i]] += ws->W[i] * P[r];
+      repeat_j(ws, ws->W);
       status = step(q, v, t, u, p, h, q_next, v_next, lam, &it, o, 1, ws);
       if (iterations) *iterations += it;
       if (status != STEP_OK) *kept = 0;
       else if (contact_rows(ws, q_next, v_next, p, 0, 0, ws->U, 1)) return STEP_KERNEL;
-      scale = 1 + norm_inf(ws->U, ND);
+      scale = 1 + rows_norm_inf(ws, ws->U);
     }
-    for (k = 0; k < NK && *kept; ++k)
-      if (closed[k] && !contact_laws_hold(k, P, ws->U, ws->Um, REPEAT_TOL * scale)) *kept = 0;
+    for (c = 0; c < ws->nkon && *kept; ++c)
+      if (closed[k = ws->kon[c]] && !contact_laws_hold(k, P, ws->U, ws->Um, REPEAT_TOL * scale)) *kept = 0;
   }
   if (*kept) {
-    for (r = 0; r < ND; ++r) ws->Pacc[r] += P[r];
-    if (ws->track_work) impulse_work(ws, W0, moved ? ws->W : W0, 0, ND, P, v, v_next);
+    for (c = 0; c < ws->nkon; ++c) {
+      for (r = (k = ws->kon[c]) * DC; r < (k + 1) * DC; ++r) ws->Pacc[r] += P[r];
+      if (ws->track_work) impulse_work(ws, W0, moved ? ws->W : W0, 0, k * DC, DC, P + k * DC, v, v_next);
+    }
     return STEP_OK;
   }
   ws->repeat = 0;
@@ -839,7 +919,7 @@ static int repeat_step(const casadi_real *q, const casadi_real *v, casadi_real t
  * The deepest penetration left goes into ws->penetration (the largest since cleared). */
 static int push_out_all(const casadi_real *p, casadi_real t1, casadi_real *q_next, casadi_real *v_next,
                         const step_options *o, workspace *ws) {
-  int status = STEP_OK, n, pushed = 1, k;
+  int status = STEP_OK, n, pushed = 1, i, k;
   for (n = 0; n < PUSH_OUT_MAX && pushed; ++n)
     if ((status = push_out(p, t1, q_next, v_next, o, ws, &pushed)) != STEP_OK) return status;
   if (pushed) { /* the last pass pushed: the gaps it left */
@@ -847,8 +927,8 @@ static int push_out_all(const casadi_real *p, casadi_real t1, casadi_real *q_nex
     pairs_select(ws, 0, 0, 0);
     if (contact_gap(ws, q_next, p, ws->g)) return STEP_KERNEL;
   }
-  for (k = 0; k < NK; ++k) /* ws->g: the gaps at q_next */
-    if (-ws->g[k] > ws->penetration) ws->penetration = -ws->g[k];
+  for (i = 0; i < ws->nkon; ++i) /* ws->g: the gaps at q_next (the contacts off: above 0) */
+    if (-ws->g[k = ws->kon[i]] > ws->penetration) ws->penetration = -ws->g[k];
   return status;
 }
 
@@ -861,11 +941,10 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
                         const casadi_real *p, casadi_real h, casadi_real *q_next, casadi_real *v_next,
                         casadi_real *lam, int *iterations, const step_options *o, int warm,
                         workspace *ws) {
-  int i, a, k, na = 0, nr, it = 0, status, refine, impact = 0, converged = 1, kept, first[NK + 1];
-  int rows[ND]; /* rows[0..nr) are set below; zeroed because gcc -O2 cannot see that */
+  int i, a, c, k, na = 0, nr, it = 0, status, refine, impact = 0, converged = 1, kept, first[NK + 1];
+  int *rows = ws->rowbuf; /* the active rows, rows[0..nr) */
   int near = 0; /* whether contacts about to close take part */
   casadi_real change = 0, residual = 0, law = 0, bias[NK];
-  memset(rows, 0, sizeof rows);
   status = repeat_step(q, v, t, u, p, h, q_next, v_next, lam, &it, o, warm, ws, &kept);
   if (status != STEP_OK) return status;
   if (kept) {
@@ -879,10 +958,10 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
   pairs_bounds(ws, q_next, 0);
   pairs_select(ws, 0, 0, 0);
   if (contact_gap(ws, q_next, p, ws->g)) return STEP_KERNEL;
-  for (k = 0; k < NK; ++k)
-    if (ws->g[k] <= 0) ws->act[na++] = k;
+  for (c = 0; c < ws->nkon; ++c)
+    if (ws->g[k = ws->kon[c]] <= 0) ws->act[na++] = k;
   if (!na) { /* no contact closed: the free step stands */
-    memset(ws->F, 0, ND * sizeof(casadi_real));
+    forces_clear(ws);
     return STEP_OK;
   }
   if (contact_rows(ws, q_next, v_next, p, 0, ws->W, ws->U, 1)) return STEP_KERNEL;
@@ -915,10 +994,11 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
 #else
     /* every restitution coefficient is 0: the start-of-step velocities are not needed */
     if (contact_rows(ws, q, v, p, 0, ws->W0, 0, 1)) return STEP_KERNEL;
-    memset(ws->Um, 0, ND * sizeof(casadi_real));
+    for (c = 0; c < ws->nkon; ++c)
+      memset(ws->Um + ws->kon[c] * DC, 0, DC * sizeof(casadi_real));
 #endif
-    for (na = k = 0; k < NK; ++k) {
-      const casadi_real g = ws->g[k];
+    for (na = c = 0; c < ws->nkon; ++c) {
+      const casadi_real g = ws->g[k = ws->kon[c]];
       if (g <= 0) bias[na] = restitution[k] * fmin(ws->Um[k * DC], 0);
       else if (restitution[k] == 0 && g < reach) {
         bias[na] = fmax(0, 2 * g / h - ws->U[k * DC]);
@@ -929,6 +1009,7 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
       }
       ws->act[na++] = k;
     }
+    forces_clear_off(ws); /* the contacts not evaluated are open */
   }
   /* the rows of the active contacts: each its normal row, then its tangent rows if it has
    * friction (contact c's rows start at first[c]) */
@@ -943,6 +1024,7 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
   for (a = 0; a < nr; ++a) ws->U[a] = ws->U[rows[a]]; /* compacted: row `a` <- contact row rows[a] >= a */
   /* ws->K holds [M A^T; A 0] at q_next (the free step's second half). */
   ws->fm = -1;
+  if (contact_reserve(ws, nr)) return STEP_BAD_INPUT; /* no memory for the solve */
   if ((status = delassus(ws, rows, nr)) != STEP_OK) return status;
   g_pattern(ws, nr);
   for (a = 0; a < nr; ++a) {
@@ -1023,7 +1105,10 @@ static int contact_step(const casadi_real *q, const casadi_real *v, casadi_real 
     ws->Pacc[rows[a]] += ws->P[a];
     ws->F[rows[a]] = ws->P[a] / h;
   }
-  if (ws->track_work) impulse_work(ws, ws->W0, ws->W, rows, nr, ws->P, v, v_next);
+#ifdef CONTACT_PAIRS
+  pairs_forces_set(ws);
+#endif
+  if (ws->track_work) impulse_work(ws, ws->W0, ws->W, rows, 0, nr, ws->P, v, v_next);
   if (!converged) {
     ++ws->pgs_unconverged;
     ws->pgs_residual = fmax(ws->pgs_residual, residual);

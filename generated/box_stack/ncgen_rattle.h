@@ -91,10 +91,16 @@ typedef struct {
   casadi_real *U;    /* contact velocities: at the end of the free step, then with the impulses */
   casadi_real *Um;   /* contact velocities at the start of the step (then ND more, scratch) */
   casadi_real *Pold; /* impulses of the previous refinement */
+  casadi_real *Wr;   /* repeat_step()'s contact Jacobian at the start of the step (NNZ_W) */
+  /* The contact solves' blocks, sized by the active rows: in ws->dyn, room for ws->ncap rows
+   * (contact_reserve(); freed by workspace_free()) */
+  char *dyn;
+  int ncap;
   casadi_real *Xc;   /* [M A^T; A 0]^-1 [W_r^T; 0], first NQ rows, per active row r */
   casadi_real *G;    /* Delassus matrix of the active rows */
-  casadi_real *S;    /* Cholesky factor of lcp_newton()'s submatrix of G (2 ND x ND room:
-                        cone_newton()'s Jacobian and its Levenberg-Marquardt matrix) */
+  casadi_real *S;    /* Cholesky factor of lcp_newton()'s submatrix of G (rows of n), or cone_newton()'s
+                        Jacobian; S2 its Levenberg-Marquardt matrix (ncap^2 each) */
+  casadi_real *S2;
   casadi_real *P;    /* impulses of the active rows */
   casadi_real *rhs;  /* right-hand side and solution of one solve, then a saved Newton start */
   casadi_real *Pacc; /* impulses per contact summed over the steps since last cleared */
@@ -107,12 +113,17 @@ typedef struct {
   casadi_real *cn;   /* cone_newton(): rho, phi, dP, G dP, trial P and U, P and U it started from (ND each) */
   casadi_int *cni;   /* cone_newton(): the elimination's column list and dropped columns (ND
                         each); then delassus()'s scratch (Schur complement form) */
-  casadi_int *gp, *gi; /* the nonzeros of G by columns: column r has rows gi[gp[r] .. gp[r + 1] - 1] */
+  casadi_int *gp, *gi; /* the nonzeros of G by columns: column r has rows gi[gp[r] .. gp[r + 1] - 1] (gi in ws->dyn) */
+  casadi_int *zr;    /* delassus()'s Z by rows of L: the active rows (NC ncap, in ws->dyn) */
+  int *kon;          /* the contacts evaluated (ascending; nkon of them): all, or with CONTACT_PAIRS those of
+                        the elements on (ncgen_contact_pairs.h); the loops over contacts and rows walk them */
+  int nkon;
+  int *rowbuf;       /* contact_step()'s active rows (ND) */
 #ifdef CONTACT_SCHUR
   casadi_real *T;    /* A M^-1, NC x NQ, row-major */
   casadi_real *L;    /* Cholesky factor of A M^-1 A^T, NC x NC, column-major */
-  casadi_real *Z;    /* L^-1 A M^-1 W_r^T, NC per active row r */
-  casadi_real *Y;    /* L^-T Z, NC per active row r */
+  casadi_real *Z;    /* L^-1 A M^-1 W_r^T, NC per active row r (in ws->dyn) */
+  casadi_real *Y;    /* L^-T Z, NC per active row r (in ws->dyn) */
   int schur;         /* whether the last delassus() took the Schur complement (Xc holds M^-1 W_r^T) */
   int tl_zero;       /* whether T and L are zero but in the ranges the last delassus() recorded */
 #endif
@@ -137,6 +148,21 @@ typedef struct {
   casadi_real *pbq;  /* the q (NQ) of the last pairs_bounds() */
   int pb_rates;      /* whether it was given rates (1) or not (0); -1: none since layout() */
   int *pon;          /* per element: 0 skipped, 1 evaluated, 2 to be evaluated (ncgen_contact_pairs.h) */
+  casadi_real *pint; /* the sweep (ncgen_contact_pairs.h): per distinct member side its interval (lo, hi) */
+  int *pord;         /* ... the sides by lo, kept from the last sweep (PAIR_NS) */
+  int *pover;        /* ... the sides an interval overlaps (PAIR_NS) */
+  int *padj;         /* ... per side the elements it is the first side of: CSR pointers (PAIR_NS + 1), then
+                        (other side, element) by other side (2 NE) */
+  int *palw;         /* ... the elements always bounded one by one (NE), their number in nalw */
+  int nalw;          /* ... (-1: the tables not made since layout()) */
+  int *pcand;        /* the candidates: the elements whose bound ws->plb was taken at the last sweep or that
+                        are on, in the sweep's order (ncand); every other element is off with bound ws->plim */
+  int ncand;
+  int *pcm;          /* ... per element 1 if a candidate, else 0 */
+  int *pld;          /* the elements that may carry a force (a superset: npld), known if pld_ok */
+  int npld, pld_ok;
+  casadi_real pkmin, pdmax; /* ... the least kappa and the largest d_min of the elements swept */
+  casadi_real plim;  /* the level below which ws->plb is every element's lower bound (pairs_select()) */
 #endif
 #endif
 } workspace;
@@ -188,12 +214,13 @@ static size_t layout(workspace *ws, char *block) {
   sizes[10] = 2 * NQ * sizeof(casadi_real);
   sizes[11] = NK * sizeof(casadi_real);
   sizes[12] = 2 * NNZ_W * sizeof(casadi_real);
-  sizes[15] = (ND * NQ > NNZ_W ? ND * NQ : NNZ_W) * sizeof(casadi_real);
+  sizes[15] = NNZ_W * sizeof(casadi_real);
   sizes[13] = sizes[17] = sizes[19] = ND * sizeof(casadi_real);
   sizes[14] = 4 * ND * sizeof(casadi_real); /* Um, the end-of-step velocities, Pold, its change */
-  sizes[16] = (size_t) 3 * ND * ND * sizeof(casadi_real); /* G, then S (2 ND x ND) */
+  sizes[16] = 0; /* G, S, X, Z, Y: ws->dyn, by the active rows (contact_reserve()) */
   sizes[18] = 3 * NX * sizeof(casadi_real); /* rhs, solution, saved Newton start */
-  sizes[20] = (NK + ND + NK + ND + 1 + (size_t) ND * ND) * sizeof(casadi_int); /* act, fset (and the factor's row starts), gp, gi */
+  sizes[20] = (NK + ND + NK + ND + 1) * sizeof(casadi_int) + /* act, fset (and the factor's row starts), gp */
+              (NK + ND) * sizeof(int); /* kon, rowbuf */
   sizes[21] = ND * sizeof(casadi_real);
 #ifdef CONTACT_FACTORED
   sizes[22] = (NNZ_V + NNZ_R + N_BETA) * sizeof(casadi_real);
@@ -201,20 +228,20 @@ static size_t layout(workspace *ws, char *block) {
   sizes[22] = 0;
 #endif
 #ifdef CONTACT_SCHUR
-  sizes[23] = (NC * NQ + NC * NC + 2 * NC * ND) * sizeof(casadi_real);
+  sizes[23] = (NC * NQ + NC * NC) * sizeof(casadi_real);
 #else
   sizes[23] = 0;
 #endif
   sizes[24] = 8 * ND * sizeof(casadi_real);
 #ifdef CONTACT_SCHUR
-  sizes[25] = (2 * ND + NC + 2 * ND + NQ + 1 + 2 * NNZ_W + 2 * NC + NQ + 1 + NNZ_A + 2 * ND + NC + NC + 1 + (size_t) NC * ND) *
+  sizes[25] = (2 * ND + NC + 2 * ND + NQ + 1 + 2 * NNZ_W + 2 * NC + NQ + 1 + NNZ_A + 2 * ND + NC + NC + 1) *
               sizeof(casadi_int);
 #else
   sizes[25] = 2 * ND * sizeof(casadi_int);
 #endif
 #ifdef CONTACT_PAIRS
-  sizes[26] = (2 * PAIR_MAX_Q + PAIR_MAX_G + PAIR_MAX_W + 2 * NE + PAIR_NS * (DC + 3) + NQ) * sizeof(casadi_real) +
-              NE * sizeof(int);
+  sizes[26] = (2 * PAIR_MAX_Q + PAIR_MAX_G + PAIR_MAX_W + 2 * NE + PAIR_NS * (DC + 5) + NQ) * sizeof(casadi_real) +
+              (7 * NE + 3 * PAIR_NS + 1) * sizeof(int);
 #endif
 #endif
   off[0] = 0;
@@ -246,16 +273,20 @@ static size_t layout(workspace *ws, char *block) {
     ws->U = (casadi_real *) (void *) (block + off[13]);
     ws->Um = (casadi_real *) (void *) (block + off[14]);
     ws->Pold = ws->Um + 2 * ND;
-    ws->Xc = (casadi_real *) (void *) (block + off[15]);
-    ws->G = (casadi_real *) (void *) (block + off[16]);
-    ws->S = ws->G + (size_t) ND * ND;
+    ws->Wr = (casadi_real *) (void *) (block + off[15]);
+    ws->dyn = 0;
+    ws->ncap = 0;
+    ws->Xc = ws->G = ws->S = ws->S2 = 0; /* contact_reserve() */
+    ws->gi = ws->zr = 0;
     ws->P = (casadi_real *) (void *) (block + off[17]);
     ws->rhs = (casadi_real *) (void *) (block + off[18]);
     ws->Pacc = (casadi_real *) (void *) (block + off[19]);
     ws->act = (casadi_int *) (void *) (block + off[20]);
     ws->fset = ws->act + NK;
     ws->gp = ws->fset + ND + NK;
-    ws->gi = ws->gp + ND + 1;
+    ws->kon = (int *) (void *) (ws->gp + ND + 1);
+    ws->rowbuf = ws->kon + NK;
+    ws->nkon = 0;
     ws->fm = -1;
     ws->newton_once = 0;
     ws->F = (casadi_real *) (void *) (block + off[21]);
@@ -271,13 +302,25 @@ static size_t layout(workspace *ws, char *block) {
     ws->psb = ws->pspd + NE;
     ws->pbq = ws->psb + PAIR_NS * (DC + 3);
     ws->pb_rates = -1;
-    ws->pon = (int *) (void *) (ws->pbq + NQ);
+    ws->pint = ws->pbq + NQ;
+    ws->pon = (int *) (void *) (ws->pint + 2 * PAIR_NS);
+    ws->pord = ws->pon + NE;
+    ws->pover = ws->pord + PAIR_NS;
+    ws->padj = ws->pover + PAIR_NS;
+    ws->palw = ws->padj + PAIR_NS + 1 + 2 * NE;
+    ws->nalw = -1;
+    ws->pcand = ws->palw + NE;
+    ws->pcm = ws->pcand + NE;
+    ws->pld = ws->pcm + NE;
+    ws->ncand = ws->npld = ws->pld_ok = 0;
+    memset(ws->pon, 0, NE * sizeof(int));
+    memset(ws->pcm, 0, NE * sizeof(int));
+    ws->plim = -INFINITY;
 #endif
 #ifdef CONTACT_SCHUR
     ws->T = (casadi_real *) (void *) (block + off[23]);
     ws->L = ws->T + NC * NQ;
-    ws->Z = ws->L + NC * NC;
-    ws->Y = ws->Z + NC * ND;
+    ws->Z = ws->Y = 0; /* contact_reserve() */
     ws->tl_zero = 0;
 #endif
 #endif
@@ -285,9 +328,59 @@ static size_t layout(workspace *ws, char *block) {
   return off[N_BLOCKS];
 }
 
-/* Bytes of workspace one step needs. */
+/* Bytes of workspace one step needs (with contacts, the blocks of the contact solves are
+ * allocated as the active rows need them: contact_reserve()). */
 static size_t step_work_bytes(void) {
   return layout(0, 0);
+}
+
+#ifdef NCGEN_CONTACTS
+/* Room in ws->dyn for the contact solves of n active rows (n <= ND): G (n x n), S and S2 (n x n
+ * each), X (NQ per row), the pattern of G (n x n), with the Schur complement Z and Y (NC per
+ * row) and Z's rows (NC per row).  Grown to twice its rows (at most ND) when short; its content
+ * is not kept (each solve writes it after this).  Returns 0, or 1 if it cannot be allocated. */
+static int contact_reserve(workspace *ws, int n) {
+  size_t c, bytes;
+  char *b;
+  if (n <= ws->ncap) return 0;
+  c = (size_t) (2 * ws->ncap < ND ? 2 * ws->ncap : ND);
+  if (c < (size_t) n) c = (size_t) n;
+  bytes = align_up(3 * c * c * sizeof(casadi_real)) + align_up(c * NQ * sizeof(casadi_real)) +
+          align_up(c * c * sizeof(casadi_int));
+#ifdef CONTACT_SCHUR
+  bytes += align_up(2 * NC * c * sizeof(casadi_real)) + align_up(NC * c * sizeof(casadi_int));
+#endif
+  free(ws->dyn);
+  ws->ncap = 0;
+  if (!(ws->dyn = b = malloc(bytes))) return 1;
+  ws->ncap = (int) c;
+  ws->G = (casadi_real *) (void *) b;
+  ws->S = ws->G + c * c;
+  ws->S2 = ws->S + c * c;
+  b += align_up(3 * c * c * sizeof(casadi_real));
+  ws->Xc = (casadi_real *) (void *) b;
+  b += align_up(c * NQ * sizeof(casadi_real));
+  ws->gi = (casadi_int *) (void *) b;
+#ifdef CONTACT_SCHUR
+  b += align_up(c * c * sizeof(casadi_int));
+  ws->Z = (casadi_real *) (void *) b;
+  ws->Y = ws->Z + NC * c;
+  b += align_up(2 * NC * c * sizeof(casadi_real));
+  ws->zr = (casadi_int *) (void *) b;
+#endif
+  return 0;
+}
+#endif
+
+/* Frees what the steps allocated beyond the workspace block (the contact solves' blocks). */
+static void workspace_free(workspace *ws) {
+#ifdef NCGEN_CONTACTS
+  free(ws->dyn);
+  ws->dyn = 0;
+  ws->ncap = 0;
+#else
+  (void) ws;
+#endif
 }
 
 /* The larger of m and a, NaN if either is: a maximum taken over components with it is NaN

@@ -309,7 +309,7 @@ static int cone_newton(workspace *ws, int na, const int *first, const casadi_rea
         if (!cone_solve(J, phi, dP, nr, cols, dropped)) continue;
       } else {
         theta = cone_phi(ws, na, first, bias, rho, ws->P, ws->U, phi, J);
-        if (!cone_lm(J, phi, J + (size_t) ND * ND, gdp, dP, nr, cols, dropped)) {
+        if (!cone_lm(J, phi, ws->S2, gdp, dP, nr, cols, dropped)) {
           lm = 2;
           break;
         }
@@ -490,7 +490,7 @@ static void cone_reflect(const casadi_real *C, int m, int j, casadi_real beta, c
  * ND and ws->cn after its first 2 ND. */
 static int cone_min_norm_over(workspace *ws, int nr, const int *first, const casadi_real *bias, casadi_real tol,
                               const int *mem, int nm, const int *rows, int nr_g, casadi_real size, int touching) {
-  casadi_real *L = ws->S, *C = ws->S + (size_t) ND * ND, *dP = ws->cn + 2 * ND, *gdp = ws->cn + 3 * ND;
+  casadi_real *L = ws->S, *C = ws->S2, *dP = ws->cn + 2 * ND, *gdp = ws->cn + 3 * ND;
   casadi_real *beta = ws->cn + 4 * ND, *z = ws->cn + 5 * ND, *P0 = ws->cn + 6 * ND, *U0 = ws->cn + 7 * ND;
   casadi_int *dropped = ws->cni + ND, *start = ws->cni;
   casadi_real before, after, t = 1;

@@ -224,6 +224,7 @@ static int simulate_adaptive(const casadi_real *q0, const casadi_real *v0, const
 done:
   if (rows_done) *rows_done = row;
   if (h_next) *h_next = H;
+  workspace_free(&ws);
   free(block);
   return status;
 }

@@ -34,14 +34,52 @@
  *                              the largest na + nb, point contacts and dense W of an element
  *
  * Which elements are evaluated (ws->pon): pairs_bounds() computes, at a configuration q,
- * each element's lower bound b_e of its gaps (ws->plb; -INFINITY where none) and, given a
- * velocity field, a bound S_e of its rows' velocities (ws->pspd); pairs_select(limit, hs)
+ * each distinct member side's bounding sphere (centre x, radius R) and, given a velocity
+ * field, its speed terms; pairs_select(limit, hs) takes each element's lower bound b_e of its
+ * gaps (ws->plb; -INFINITY where none) and bound S_e of its rows' velocities (ws->pspd) and
  * turns on the elements with b_e <= limit + hs S_e (and, if asked, those with a force), and
- * pairs_extend() more of them later.  Exactness: the step compares a gap with a threshold
+ * pairs_extend() more of them later.
+ *
+ * The sweep (pairs_sweep()): b_e and S_e are taken one by one only for the elements that may
+ * be below the level L = max(limit, 0) + sk (sk: the largest side radius + 1e-6 m, a skin
+ * that keeps pairs_extend()'s usual limits below L): the elements with a side that is not a
+ * member, a finite cap or unbounded rates (ws->palw), and the member-member elements whose
+ * sides' intervals on one axis (the one along which the centres spread most) overlap: side i
+ * spans x_i -/+ (R_i + a_i) with
+ *   a_i = (2 / kmin) (L / 2 + s R_i + hs lin_i + 3 rho_i (R_i + Rmax)) + dmax / 2,
+ *   rho_i = hs rot_i <= kmin / 4 (else the side spans the whole axis),
+ * kmin the least kappa and dmax the largest d_min of those elements, s = PAIR_SLACK, Rmax the
+ * largest R.  Every other element gets b_e = L, S_e = 0, which is exact by construction:
+ * disjoint intervals give |x_j - x_i| > R_i + R_j + a_i + a_j, so D > a_i + a_j >= dmax >= d_min,
+ * and with rho_i + rho_j <= kmin / 2 and (rho_i + rho_j)(R_i + R_j) <= sum_i rho_i (R_i + Rmax)
+ *   kappa D - s (R_i + R_j) - L - hs S_e
+ *     >= (kmin - hs (rot_i + rot_j)) D - [L + s (R_i + R_j) + hs (lin_i + lin_j) + 3 (rho_i + rho_j)(R_i + R_j)]
+ *     >= kmin / 2 D - kmin / 2 (a_i + a_j) > 0,
+ * so its true bound exceeds L + hs S_e >= L > limit: it is off as it would be with b_e taken
+ * one by one, L is a lower bound of its gaps, and every later decision (a gap against 0, the
+ * reach, the push-out's range, all below L or else pairs_extend() takes every b_e one by one)
+ * is the same.  The sides are sorted by their intervals' lower ends from the order of the last
+ * sweep (insertion: nearly sorted from step to step), so a step costs O(NS log NS + the
+ * overlapping pairs) bound computations instead of one per element.  Exactness: the step compares a gap with a threshold
  * (<= 0: closed; < GAP_REACH h/2 max |U_N|: about to close; < PENETRATION_TOL + twice the
  * deepest: pushed out with the others; g - h/2 W X j <= 0: closed in repeat_step()); an
  * element is skipped only where b_e exceeds the threshold, so its flat gaps (>= b_e) would
- * have taken the same decision, and its rows would not have entered any solve. */
+ * have taken the same decision, and its rows would not have entered any solve.
+ *
+ * The candidates (ws->pcand, in the sweep's order; ws->pcm marks them): the elements whose bound the
+ * sweep took one by one, and those turned on.  Every other element is off, its bound L =
+ * ws->plim, its speed bound 0: what the sweep gave it, without writing it.  Only candidates are
+ * walked after the sweep (pairs_select(), pairs_extend(), contact_gap(), contact_rows(): each
+ * element's work its own, in any order), and only the contacts of the elements on (ws->kon,
+ * sorted ascending, contacts_on()) by ncgen_contact.h:
+ * an element off is neither evaluated nor written (its gaps >= its bound exceed every
+ * threshold it is compared with, so no loop over the contacts would have used its rows: the
+ * gaps against 0, the reach, the push-out's range, the repeat's free gaps g - h/2 W X j with
+ * W = 0 on its rows, max |U| with U = 0 on its rows, its force 0).  The loops walk the same
+ * contacts in the same (ascending) order as a loop over all contacts that skips those off, so
+ * every sum and every solve is the same to the bit.  The elements with a force of the last step
+ * (ws->pld, a superset, ws->pld_ok) are kept by the contact step, and rebuilt from ws->F after
+ * contact_clear(). */
 
 #ifdef CONTACT_PAIRS
 #define PAIR_UNBOUNDED 0
@@ -158,14 +196,17 @@ static casadi_real pair_lower(workspace *ws, int e, casadi_real *speed) {
   return fmin(lb, pair_bound[3 * e + 2]);
 }
 
-/* Every element's lower bound at q (ws->plb) and, given rates (or NULL), its speed bound
- * (ws->pspd; 0 without rates).  The bounds depend on q alone: a call without rates at the q
- * of the last call (the same bits) only clears the speeds (repeat_step() at the start of a
- * step after the push-out's call at its end; the push-out after a repeated step). */
+/* Each distinct member side's bounding sphere at q and, given rates (or NULL), its speed terms
+ * (ws->psb: x0, R, lin, rot; lin = rot = 0 without rates).  They depend on q alone: a call
+ * without rates at the q of the last call (the same bits) only clears the speed terms
+ * (repeat_step() at the start of a step after the push-out's call at its end; the push-out
+ * after a repeated step).  The elements' bounds are taken by pairs_select(). */
 static void pairs_bounds(workspace *ws, const casadi_real *q, const casadi_real *rates) {
-  int e, k;
+  int k;
+  ws->plim = -INFINITY;
   if (!rates && ws->pb_rates >= 0 && !memcmp(q, ws->pbq, NQ * sizeof(casadi_real))) {
-    if (ws->pb_rates) memset(ws->pspd, 0, NE * sizeof(casadi_real));
+    if (ws->pb_rates)
+      for (k = 0; k < PAIR_NS; ++k) ws->psb[(DC + 3) * k + DC + 1] = ws->psb[(DC + 3) * k + DC + 2] = 0;
     ws->pb_rates = 0;
     return;
   }
@@ -182,7 +223,163 @@ static void pairs_bounds(workspace *ws, const casadi_real *q, const casadi_real 
     }
     pair_member_bound(se, s, ws->pq, rates ? ws->pq + PAIR_MAX_Q : 0, ws->psb + (DC + 3) * k);
   }
-  for (e = 0; e < NE; ++e) ws->plb[e] = pair_lower(ws, e, ws->pspd + e);
+}
+
+/* Whether element e is swept (its bound taken only if its sides' intervals overlap): two
+ * different member sides, rates bounded, no cap (the header's comment); none with
+ * NCGEN_PAIRS_ALL defined. */
+static int pair_swept(int e) {
+#ifdef NCGEN_PAIRS_ALL /* every bound one by one (the tests' reference) */
+  (void) e;
+  return 0;
+#else
+  const int a = pair_sid[2 * e], b = pair_sid[2 * e + 1];
+  return a >= 0 && b >= 0 && a != b && pair_int[8 * e + 7] && pair_bound[3 * e + 2] >= 1e300;
+#endif
+}
+
+/* The sweep's tables, once after layout(): the elements not swept (ws->palw), per side the
+ * swept elements it is the lower-numbered side of, by the other side (ws->padj), kmin, dmax. */
+static void pairs_init(workspace *ws) {
+  int e, k, *ptr = ws->padj, *ent = ws->padj + PAIR_NS + 1, *at = ws->pover;
+  ws->nalw = 0;
+  ws->pkmin = 1;
+  ws->pdmax = 0;
+  for (k = 0; k <= PAIR_NS; ++k) ptr[k] = 0;
+  for (e = 0; e < NE; ++e)
+    if (pair_swept(e)) {
+      ++ptr[1 + (pair_sid[2 * e] < pair_sid[2 * e + 1] ? pair_sid[2 * e] : pair_sid[2 * e + 1])];
+      ws->pkmin = fmin(ws->pkmin, pair_bound[3 * e]);
+      ws->pdmax = fmax(ws->pdmax, pair_bound[3 * e + 1]);
+    } else {
+      ws->palw[ws->nalw++] = e;
+    }
+  for (k = 0; k < PAIR_NS; ++k) {
+    ptr[k + 1] += ptr[k];
+    at[k] = ptr[k];
+    ws->pord[k] = k;
+  }
+  for (e = 0; e < NE; ++e)
+    if (pair_swept(e)) {
+      const int a = pair_sid[2 * e], b = pair_sid[2 * e + 1], lo = a < b ? a : b;
+      int i = at[lo]++;
+      for (; i > ptr[lo] && ent[2 * (i - 1)] > a + b - lo; --i) { /* insertion by the other side */
+        ent[2 * i] = ent[2 * (i - 1)];
+        ent[2 * i + 1] = ent[2 * (i - 1) + 1];
+      }
+      ent[2 * i] = a + b - lo;
+      ent[2 * i + 1] = e;
+    }
+}
+
+/* Every candidate off and no longer a candidate (before a sweep). */
+static void pairs_uncandidate(workspace *ws) {
+  int i;
+  for (i = 0; i < ws->ncand; ++i) ws->pcm[ws->pcand[i]] = ws->pon[ws->pcand[i]] = 0;
+  ws->ncand = 0;
+}
+
+/* Element e a candidate, with its bound taken one by one. */
+static void pair_candidate(workspace *ws, int e) {
+  ws->pcm[e] = 1;
+  ws->pcand[ws->ncand++] = e;
+  ws->plb[e] = pair_lower(ws, e, ws->pspd + e);
+}
+
+static int int_ascending(const void *a, const void *b) {
+  const int x = *(const int *) a, y = *(const int *) b;
+  return (x > y) - (x < y);
+}
+
+/* The interval iv = (lo, hi) on axis `axis` of a side (sb: x0 (DC), R, lin, rot) at level L,
+ * hs, with the largest radius rmax, kmin and dmax (the header's comment): x -/+ (R + a), the
+ * whole axis where rho = hs rot > kmin / 4 or a number is not finite. */
+static void pair_interval(const casadi_real *sb, int axis, casadi_real L, casadi_real hs, casadi_real rmax,
+                          casadi_real kmin, casadi_real dmax, casadi_real *iv) {
+  const casadi_real R = sb[DC], rho = hs * sb[DC + 2];
+  casadi_real w = R + 2 / kmin * (L / 2 + PAIR_SLACK * R + hs * sb[DC + 1] + 3 * rho * (R + rmax)) + dmax / 2;
+  w += 1e-9 * (fabs(sb[axis]) + w); /* round-off of the ends */
+  iv[0] = sb[axis] - w;
+  iv[1] = sb[axis] + w;
+  if (!(rho <= kmin / 4) || !(fabs(iv[0]) < INFINITY) || !(fabs(iv[1]) < INFINITY)) {
+    iv[0] = -INFINITY;
+    iv[1] = INFINITY;
+  }
+}
+
+/* Sorts ord[0..n) by lo = iv[2 ord[i]] (intervals iv: lo, hi per side), by insertion from the
+ * order it holds: O(n + the pairs out of order). */
+static void pairs_sort(const casadi_real *iv, int *ord, int n) {
+  int i, j;
+  for (i = 1; i < n; ++i) {
+    const int k = ord[i];
+    for (j = i; j > 0 && iv[2 * ord[j - 1]] > iv[2 * k]; --j) ord[j] = ord[j - 1];
+    ord[j] = k;
+  }
+}
+
+/* The sides after position at of ord (sorted by lo) whose intervals overlap ord[at]'s into
+ * out; returns their number.  Over at = 0 .. n - 1 each overlapping pair comes once. */
+static int pairs_overlaps(const casadi_real *iv, const int *ord, int n, int at, int *out) {
+  const casadi_real hi = iv[2 * ord[at] + 1];
+  int j, m = 0;
+  for (j = at + 1; j < n && iv[2 * ord[j]] <= hi; ++j) out[m++] = ord[j];
+  return m;
+}
+
+/* Every element's lower bound and speed bound (ws->plb, ws->pspd) at the last pairs_bounds(),
+ * exact for those that may be below level + sk + hs S_e, the level L = level + sk for the
+ * others (the header's comment); ws->plim = L. */
+static void pairs_sweep(workspace *ws, casadi_real level, casadi_real hs) {
+  casadi_real rmax = 0, spread = -1, L;
+  int i, k, d, axis = 0;
+  const int *ptr = ws->padj, *ent = ws->padj + PAIR_NS + 1;
+  if (ws->nalw < 0) pairs_init(ws);
+  for (k = 0; k < PAIR_NS; ++k) rmax = fmax(rmax, ws->psb[(DC + 3) * k + DC]);
+  for (d = 0; d < DC && PAIR_NS; ++d) { /* the axis along which the centres spread most */
+    casadi_real lo = ws->psb[d], hi = lo;
+    for (k = 1; k < PAIR_NS; ++k) {
+      lo = fmin(lo, ws->psb[(DC + 3) * k + d]);
+      hi = fmax(hi, ws->psb[(DC + 3) * k + d]);
+    }
+    if (hi - lo > spread) {
+      spread = hi - lo;
+      axis = d;
+    }
+  }
+  L = level + rmax + 1e-6;
+  pairs_uncandidate(ws);
+  for (i = 0; i < ws->nalw; ++i) pair_candidate(ws, ws->palw[i]);
+  for (k = 0; k < PAIR_NS; ++k)
+    pair_interval(ws->psb + (DC + 3) * k, axis, L, hs, rmax, ws->pkmin, ws->pdmax, ws->pint + 2 * k);
+  pairs_sort(ws->pint, ws->pord, PAIR_NS);
+  for (i = 0; i < PAIR_NS; ++i) {
+    const int a = ws->pord[i], m = pairs_overlaps(ws->pint, ws->pord, PAIR_NS, i, ws->pover);
+    int j;
+    for (j = 0; j < m; ++j) { /* the swept elements of sides a and b */
+      const int b = ws->pover[j], s = a < b ? a : b, t = a + b - s;
+      int lo = ptr[s], hi = ptr[s + 1];
+      while (lo < hi) { /* the first entry of side s whose other side is >= t */
+        const int mid = (lo + hi) / 2;
+        if (ent[2 * mid] < t) lo = mid + 1;
+        else hi = mid;
+      }
+      for (; lo < ptr[s + 1] && ent[2 * lo] == t; ++lo) pair_candidate(ws, ent[2 * lo + 1]);
+    }
+  }
+  ws->plim = L;
+}
+
+/* The contacts of the elements on, ascending (ws->kon: the order of a loop over all contacts). */
+static void contacts_on(workspace *ws) {
+  int i, j;
+  ws->nkon = 0;
+  for (i = 0; i < ws->ncand; ++i) {
+    const int *pi = pair_int + 8 * ws->pcand[i];
+    if (ws->pon[ws->pcand[i]])
+      for (j = 0; j < pi[2]; ++j) ws->kon[ws->nkon++] = pi[1] + j;
+  }
+  qsort(ws->kon, (size_t) ws->nkon, sizeof(int), int_ascending);
 }
 
 /* Whether a contact row of element e carries a force of the last step. */
@@ -193,38 +390,78 @@ static int pair_loaded(workspace *ws, int e) {
   return 0;
 }
 
+/* The elements that may carry a force (ws->pld), from ws->F if not known. */
+static void pairs_forces_known(workspace *ws) {
+  int e;
+  if (ws->pld_ok) return;
+  for (ws->npld = e = 0; e < NE; ++e)
+    if (pair_loaded(ws, e)) ws->pld[ws->npld++] = e;
+  ws->pld_ok = 1;
+}
+
+/* After the contact step set ws->F (a force only on the rows of elements on): the elements on
+ * with a force. */
+static void pairs_forces_set(workspace *ws) {
+  int i;
+  for (ws->npld = i = 0; i < ws->ncand; ++i)
+    if (ws->pon[ws->pcand[i]] && pair_loaded(ws, ws->pcand[i])) ws->pld[ws->npld++] = ws->pcand[i];
+  ws->pld_ok = 1;
+}
+
 /* Turns on (ws->pon = 1) the elements whose gaps may be below limit + hs S_e (every element
  * whose rows' velocities are not bounded, if hs > 0), and, if loaded, those with a force;
- * the others off. */
+ * the others off.  Takes the bounds (pairs_sweep(); after pairs_bounds()). */
 static void pairs_select(workspace *ws, casadi_real limit, casadi_real hs, int loaded) {
-  int e;
-  for (e = 0; e < NE; ++e) {
-    int on = !(ws->plb[e] > limit + hs * ws->pspd[e]) || (hs > 0 && !pair_int[8 * e + 7]);
-    ws->pon[e] = on || (loaded && pair_loaded(ws, e));
+  int e, i;
+  pairs_sweep(ws, fmax(limit, 0), hs);
+  for (i = 0; i < ws->ncand; ++i) {
+    e = ws->pcand[i];
+    ws->pon[e] = !(ws->plb[e] > limit + hs * ws->pspd[e]) || (hs > 0 && !pair_int[8 * e + 7]);
   }
+  if (loaded) {
+    pairs_forces_known(ws);
+    for (i = 0; i < ws->npld; ++i)
+      if (!ws->pon[e = ws->pld[i]] && pair_loaded(ws, e)) {
+        if (!ws->pcm[e]) { /* off by the sweep (bound L > limit): a candidate */
+          ws->pcand[ws->ncand++] = e;
+          ws->pcm[e] = 1;
+          ws->plb[e] = ws->plim;
+          ws->pspd[e] = 0;
+        }
+        ws->pon[e] = 1;
+      }
+  }
+  contacts_on(ws);
 }
 
 /* Turns on (ws->pon = 2: to be evaluated) the elements off whose gaps may be below limit;
  * returns their number. */
 static int pairs_extend(workspace *ws, casadi_real limit) {
-  int e, n = 0;
-  for (e = 0; e < NE; ++e)
-    if (!ws->pon[e] && !(ws->plb[e] > limit)) {
+  int e, i, n = 0;
+  if (!(limit < ws->plim)) { /* beyond the sweep's level: every bound one by one, every element a candidate */
+    for (e = 0; e < NE; ++e) {
+      ws->plb[e] = pair_lower(ws, e, ws->pspd + e);
+      ws->pcm[e] = 1;
+      ws->pcand[e] = e;
+    }
+    ws->ncand = NE;
+    ws->plim = INFINITY;
+  }
+  for (i = 0; i < ws->ncand; ++i)
+    if (!ws->pon[e = ws->pcand[i]] && !(ws->plb[e] > limit)) {
       ws->pon[e] = 2;
       ++n;
     }
+  if (n) contacts_on(ws);
   return n;
 }
 
-/* The gaps at q of the elements on (the lower bounds of those off) into g. */
+/* The gaps at q of the elements on into g (those of the elements off are not written). */
 static int contact_gap(workspace *ws, const casadi_real *q, const casadi_real *p, casadi_real *g) {
   int e, i;
-  for (e = 0; e < NE; ++e) {
-    const int *pi = pair_int + 8 * e;
-    if (!ws->pon[e]) {
-      for (i = 0; i < pi[2]; ++i) g[pi[1] + i] = ws->plb[e];
-      continue;
-    }
+  for (i = 0; i < ws->ncand; ++i) {
+    const int *pi = pair_int + 8 * (e = ws->pcand[i]);
+    if (!ws->pon[e]) continue;
     pair_gather(e, q, 0, ws->pq);
     ws->arg[0] = ws->pq;
     ws->arg[1] = ws->pq + pi[3];
@@ -237,25 +474,16 @@ static int contact_gap(workspace *ws, const casadi_real *q, const casadi_real *p
 
 /* The contact rows at (q, v) of the elements with ws->pon >= which (which = 2: only those
  * pairs_extend() turned on, then marked 1): gaps into g, the nonzeros of W, U = W v (each
- * may be NULL).  With which = 1 the elements off get their lower bound as gaps and zero
- * rows. */
+ * may be NULL).  The rows of the elements off are not written. */
 static int contact_rows(workspace *ws, const casadi_real *q, const casadi_real *v, const casadi_real *p,
                         casadi_real *g, casadi_real *W, casadi_real *U, int which) {
-  int e, i, r;
-  for (e = 0; e < NE; ++e) {
-    const int *pi = pair_int + 8 * e, nrow = pi[2] * DC, nloc = pi[3] + pi[4];
+  int c, e, i, r;
+  for (c = 0; c < ws->ncand; ++c) {
+    const int *pi = pair_int + 8 * (e = ws->pcand[c]), nrow = pi[2] * DC, nloc = pi[3] + pi[4];
     const int *wpos = pair_wpos + pi[6];
     /* the element's rows' nonzeros of W, contiguous (every one a position of wpos) */
     const int w0 = wt_colind[pi[1] * DC], nw = wt_colind[pi[1] * DC + nrow] - w0;
-    if (ws->pon[e] < which) {
-      if (which != 1) continue;
-      if (g)
-        for (i = 0; i < pi[2]; ++i) g[pi[1] + i] = ws->plb[e];
-      if (W) memset(W + w0, 0, nw * sizeof(casadi_real));
-      if (U)
-        for (r = 0; r < nrow; ++r) U[pi[1] * DC + r] = 0;
-      continue;
-    }
+    if (ws->pon[e] < which) continue;
     if (which == 2) ws->pon[e] = 1;
     pair_gather(e, q, 0, ws->pq);
     ws->arg[0] = ws->pq;

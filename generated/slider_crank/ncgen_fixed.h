@@ -117,6 +117,7 @@ static int stepper_step(const casadi_real *q, const casadi_real *v, casadi_real 
 #else
   (void) impulse;
 #endif
+  workspace_free(&ws);
   if (!work) free(block);
   return status;
 }
@@ -379,6 +380,7 @@ static int run_fixed(const casadi_real *q0, const casadi_real *v0, const casadi_
   }
   if (steps_done) *steps_done = k;
   if (splits) *splits = n_splits;
+  workspace_free(&ws);
   free(block);
   return status;
 }

@@ -48,6 +48,24 @@ Edge crossings that are no contact compute their rows at points off the edges, s
 bound holds there only for crossings (``rate_bounded`` is false).  The C uses these to skip
 an element exactly where the flat kernel's gaps would not change a decision of the step
 (``ncgen_contact_pairs.h``).
+
+Sweep (``pairs_sweep`` there): the bounds are taken once per distinct member side, and the
+element bounds only for the pairs of sides whose intervals on one axis overlap (sorted by
+their lower ends from the last sweep's order); every other element gets the level
+``L = max(limit, 0) + R_max + 10⁻⁶ m`` as its bound, which is exact by construction.  Side
+``i`` (centre ``x_i``, radius ``R_i``, speed terms ``lin_i``, ``rot_i``) spans
+``x_i ∓ (R_i + a_i)`` with ``a_i = (2/κ_min)(L/2 + s R_i + h_s lin_i + 3 ρ_i (R_i + R_max)) +
+d_max/2``, ``ρ_i = h_s rot_i ≤ κ_min/4`` (else the whole axis).  Disjoint intervals give
+``|x_j − x_i| > R_i + R_j + a_i + a_j``, so ``D > a_i + a_j ≥ d_max``, and with
+``(ρ_i + ρ_j)(R_i + R_j) ≤ Σ ρ_i (R_i + R_max)``:
+
+    κ D − s (R_i + R_j) − L − h_s S ≥ (κ_min − ρ_i − ρ_j) D − [L + s (R_i + R_j) + h_s (lin_i + lin_j)
+        + 3 (ρ_i + ρ_j)(R_i + R_j)] ≥ κ_min/2 (D − a_i − a_j) > 0,
+
+so the element's own bound exceeds ``L + h_s S ≥ L > limit``: no element within the level is
+missed, and the step's decisions are those of every bound taken one by one (a later limit at
+or above ``L`` takes them one by one).  Elements with a side that is not a member, a cap, or
+unbounded rates are always bounded one by one.
 """
 from __future__ import annotations
 

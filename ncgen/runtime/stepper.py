@@ -113,16 +113,24 @@ def physical_memory() -> int:
     return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
 
 
+#: Bytes per impulse component of the contact stepper's workspace before a run (its per-row
+#: arrays, ncgen_rattle.h's layout(): about 32 doubles or indices each; the Delassus blocks are
+#: allocated during the run, by the active rows: contact_reserve()).
+CONTACT_BYTES_PER_ROW = 32 * 8
+
+
 def check_contact_workspace(model, nd: int) -> None:
-    """Refuse, naming the model and the sizes, a nonsmooth contact stepper whose dense contact
-    blocks (3 nd² doubles: the Delassus matrix G, then S; ``nd`` impulse components) need more
-    bytes than this machine's physical memory: the C would fail to allocate them."""
-    need, have = 3 * nd * nd * 8, physical_memory()
+    """Refuse, naming the model and the sizes, a nonsmooth contact stepper whose per-row arrays
+    (``nd`` impulse components) need more bytes than this machine's physical memory: the C
+    would fail to allocate them.  The dense blocks of a contact solve (3 n² doubles for n
+    active rows) are allocated as the run needs them; if that fails the run stops with status
+    5 ("bad input or out of memory")."""
+    need, have = CONTACT_BYTES_PER_ROW * nd, physical_memory()
     if need > have:
         raise NcgenError(f"model {model.name!r}: its nonsmooth contact stepper needs {need / 2**30:.1f} GiB for its "
-                         f"dense contact blocks (3 nd² doubles, nd = {nd:,} impulse components), more than this "
-                         f"machine's {have / 2**30:.1f} GiB of memory; use fewer contact elements (pairs that can "
-                         f"meet), or contacts='smooth' with method='idas'")
+                         f"per-row arrays ({CONTACT_BYTES_PER_ROW} bytes for each of nd = {nd:,} impulse components), "
+                         f"more than this machine's {have / 2**30:.1f} GiB of memory; use fewer contact elements "
+                         f"(pairs that can meet), or contacts='smooth' with method='idas'")
 
 
 class StepperStart(NamedTuple):

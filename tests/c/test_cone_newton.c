@@ -13,7 +13,7 @@
 #define ND (NK * DC)
 
 typedef struct {
-  casadi_real *G, *U, *P, *Um, *S, *cn;
+  casadi_real *G, *U, *P, *Um, *S, *S2, *cn;
   casadi_int *act, *gp, *gi, *cni;
   int fm;
 } workspace;
@@ -35,7 +35,7 @@ static const casadi_real bias[NK] = {0, 0, 0};
 static workspace make(const casadi_real *G, const casadi_real *U0) {
   workspace ws;
   int a, r, k = 0;
-  ws.G = G_, ws.U = U_, ws.P = P_, ws.Um = Um_, ws.S = S_, ws.cn = cn_;
+  ws.G = G_, ws.U = U_, ws.P = P_, ws.Um = Um_, ws.S = S_, ws.S2 = S_ + ND * ND, ws.cn = cn_;
   ws.act = act_, ws.gp = gp_, ws.gi = gi_, ws.cni = cni_, ws.fm = 0;
   memcpy(G_, G, sizeof G_);
   memcpy(U_, U0, sizeof U_);

@@ -233,6 +233,7 @@ static int k_backsolve(const casadi_real **arg, casadi_real **res, casadi_int *i
  * matrix G (column-major) and the free contact velocities U0. */
 static void pgs_problem(workspace *ws, int nr, const casadi_real *G, const casadi_real *U0) {
   int a;
+  CHECK(contact_reserve(ws, nr) == 0 && ws->ncap >= nr, "room for %d rows", nr);
   memcpy(ws->G, G, (size_t) (nr * nr) * sizeof(casadi_real));
   memcpy(ws->U, U0, (size_t) nr * sizeof(casadi_real));
   memset(ws->Um, 0, ND * sizeof(casadi_real));
@@ -264,6 +265,7 @@ static void test_pgs_friction(void) {
     CHECK(fabs(ws.P[a] - P[a]) < 1e-10, "P[%d] = %.15g, expected %.15g", a, ws.P[a], P[a]);
     CHECK(fabs(ws.U[a] - U[a]) < 1e-10, "U[%d] = %.15g, expected %.15g", a, ws.U[a], U[a]);
   }
+  workspace_free(&ws);
   free(block);
 }
 
@@ -286,6 +288,7 @@ static void test_pgs_frictionless_redundant(void) {
   CHECK(pgs(&ws, 2, first, bias), "%d sweeps", ws.pgs_sweeps);
   CHECK(fabs(ws.P[0] - 0.5) < 1e-12 && ws.P[1] == 0, "P = (%g, %g)", ws.P[0], ws.P[1]);
   CHECK(fabs(ws.U[0]) < 1e-12 && fabs(ws.U[1] - 3.5) < 1e-12, "U = (%g, %g)", ws.U[0], ws.U[1]);
+  workspace_free(&ws);
   free(block);
 }
 
@@ -387,42 +390,120 @@ static void test_repeat_round_off_gap(void) {
       CHECK(fabs(q1[1] - q[1]) < 1e-15 && fabs(v1[1]) < 1e-12 && fabs(ws.Pacc[0] - M_P * G_P * h) < 1e-15,
             "y %.17g -> %.17g, y' %g, impulse %.17g", q[1], q1[1], v1[1], ws.Pacc[0]);
   }
+  workspace_free(&ws);
   free(block);
 }
 
 #ifdef PAIRS
 /* The broad phase: mass 1 0.3 m above the floor, mass 2 on it.  Its lower bound is the gap
  * (less the slack); skipped at a limit below it, evaluated above; the speed bound of a point
- * is its speed. */
+ * is its speed.  The rows of an element off are not written (NaN left there), those on are;
+ * the contacts walked (ws->kon) are those of the elements on. */
 static void test_broad_phase(void) {
   const casadi_real q[NQ] = {0, R_P + 0.3, 1, R_P}, v[NQ] = {1, 2, 0, -3};
   casadi_real g[NK], W[NNZ_W], U[ND];
   workspace ws;
   char *block = malloc(step_work_bytes());
+  int i;
+  for (i = 0; i < NK; ++i) g[i] = NAN;
+  for (i = 0; i < NNZ_W; ++i) W[i] = NAN;
+  for (i = 0; i < ND; ++i) U[i] = NAN;
   layout(&ws, block);
   pairs_bounds(&ws, q, v);
+  pairs_select(&ws, 0.1, 0, 0);
   CHECK(fabs(ws.plb[0] - (0.3 - PAIR_SLACK * R_P)) < 1e-15 && fabs(ws.plb[1] + PAIR_SLACK * R_P) < 1e-15,
         "bounds %g %g", ws.plb[0], ws.plb[1]);
   CHECK(fabs(ws.pspd[0] - sqrt(5.0)) < 1e-15 && fabs(ws.pspd[1] - 3) < 1e-15, "speeds %g %g", ws.pspd[0], ws.pspd[1]);
-  pairs_select(&ws, 0.1, 0, 0);
   CHECK(ws.pon[0] == 0 && ws.pon[1] == 1, "on: %d %d", ws.pon[0], ws.pon[1]);
-  CHECK(contact_gap(&ws, q, 0, g) == STEP_OK && g[0] == ws.plb[0] && g[1] == 0, "gaps %g %g", g[0], g[1]);
+  CHECK(ws.nkon == 1 && ws.kon[0] == 1, "contacts walked: %d", ws.nkon);
+  CHECK(contact_gap(&ws, q, 0, g) == STEP_OK && isnan(g[0]) && g[1] == 0, "gaps %g %g", g[0], g[1]);
   CHECK(contact_rows(&ws, q, v, 0, g, W, U, 1) == STEP_OK, "rows");
-  CHECK(W[0] == 0 && W[1] == 0 && W[4] == 0 && W[5] == 1 && W[6] == 1 && W[7] == 0, "W of the contacts");
-  CHECK(U[0] == 0 && U[1] == 0 && U[2] == -3 && U[3] == 0, "U = %g %g %g %g", U[0], U[1], U[2], U[3]);
+  CHECK(isnan(W[0]) && isnan(W[3]) && W[4] == 0 && W[5] == 1 && W[6] == 1 && W[7] == 0, "W of the contacts");
+  CHECK(isnan(U[0]) && isnan(U[1]) && U[2] == -3 && U[3] == 0, "U = %g %g %g %g", U[0], U[1], U[2], U[3]);
   pairs_select(&ws, 0.1, 0.05, 0); /* 0.3 - slack <= 0.1 + 0.05 sqrt(5)? no; within reach at 0.1 s */
   CHECK(ws.pon[0] == 0, "on at hs = 0.05");
   pairs_select(&ws, 0.1, 0.1, 0);
   CHECK(ws.pon[0] == 1, "off at hs = 0.1");
   pairs_select(&ws, 0, 0, 0);
   CHECK(pairs_extend(&ws, 0.2) == 0 && pairs_extend(&ws, 0.4) == 1 && ws.pon[0] == 2, "extend");
+  CHECK(ws.nkon == 2 && ws.kon[0] == 0 && ws.kon[1] == 1, "contacts walked after the extension: %d", ws.nkon);
   CHECK(contact_rows(&ws, q, v, 0, g, W, U, 2) == STEP_OK && ws.pon[0] == 1, "rows of the extended");
   CHECK(fabs(g[0] - 0.3) < 1e-15 && W[1] == 1 && W[2] == 1 && U[0] == 2 && U[1] == 1, "g %g U %g %g", g[0], U[0],
         U[1]);
+  contact_clear(&ws);
   ws.F[1] = 1; /* a force on mass 1's tangent row: turned on whatever its bound */
   pairs_select(&ws, 0, 0, 1);
-  CHECK(ws.pon[0] == 1, "loaded element off");
+  CHECK(ws.pon[0] == 1 && ws.nkon == 2, "loaded element off");
+  workspace_free(&ws);
   free(block);
+}
+
+/* The sweep on random scenes (200 seeds, up to 60 sides, spread or crowded, moving and
+ * turning, the order kept from one configuration to the next): the pairs it gives are those
+ * whose intervals overlap (all pairs tested), and every pair it leaves out has
+ * kmin D - s (R_i + R_j) > L + hs S_e and D >= dmax, the element's bound and speed bound
+ * (pair_lower()'s formulas for two member spheres) written out here: none within the level
+ * is missed. */
+static void test_sweep_random(void) {
+  enum { NMAX = 60 };
+  casadi_real sb[NMAX * (DC + 3)], iv[2 * NMAX];
+  int ord[NMAX], over[NMAX], seed, moves, missed = 0, wrong = 0, swept = 0, near = 0;
+  unsigned long long state = 12345;
+#define RAND01() ((state = state * 6364136223846793005ULL + 1442695040888963407ULL), (double) (state >> 11) / 9007199254740992.0)
+  for (seed = 0; seed < 200; ++seed) {
+    const int n = 2 + (int) (RAND01() * (NMAX - 1)), axis = (int) (RAND01() * DC);
+    const casadi_real box = RAND01() < 0.3 ? 0.2 : 5.0, hs = RAND01() < 0.5 ? 0 : 0.02 * RAND01();
+    const casadi_real kmin = RAND01() < 0.5 ? 1 : 1 / sqrt(3.0), dmax = RAND01() < 0.5 ? 0 : 1e-3 * RAND01();
+    casadi_real rmax = 0;
+    int i, j, k;
+    for (k = 0; k < n; ++k) {
+      for (i = 0; i < DC; ++i) sb[(DC + 3) * k + i] = box * RAND01();
+      sb[(DC + 3) * k + DC] = 0.01 + 0.1 * RAND01();
+      sb[(DC + 3) * k + DC + 1] = RAND01() < 0.5 ? 0 : 3 * RAND01();
+      sb[(DC + 3) * k + DC + 2] = RAND01() < 0.7 ? 0 : 20 * RAND01();
+      ord[k] = n - 1 - k; /* reversed: the worst order to start from */
+    }
+    for (moves = 0; moves < 3; ++moves) {
+      const casadi_real L = 0.05 * RAND01() + 0.03;
+      int found[NMAX * NMAX] = {0};
+      rmax = 0;
+      for (k = 0; k < n; ++k) { /* a small move: the kept order is nearly sorted */
+        if (moves)
+          for (i = 0; i < DC; ++i) sb[(DC + 3) * k + i] += 0.01 * (RAND01() - 0.5);
+        rmax = fmax(rmax, sb[(DC + 3) * k + DC]);
+      }
+      for (k = 0; k < n; ++k) pair_interval(sb + (DC + 3) * k, axis, L, hs, rmax, kmin, dmax, iv + 2 * k);
+      pairs_sort(iv, ord, n);
+      for (k = 1; k < n; ++k) wrong += iv[2 * ord[k - 1]] > iv[2 * ord[k]];
+      for (k = 0; k < n; ++k) {
+        const int m = pairs_overlaps(iv, ord, n, k, over);
+        for (j = 0; j < m; ++j) {
+          const int a = ord[k], b = over[j];
+          wrong += found[a * NMAX + b] || found[b * NMAX + a]; /* each pair once */
+          found[a * NMAX + b] = found[b * NMAX + a] = 1;
+          ++swept;
+        }
+      }
+      for (i = 0; i < n; ++i)
+        for (j = i + 1; j < n; ++j) {
+          const casadi_real *x = sb + (DC + 3) * i, *y = sb + (DC + 3) * j;
+          const int overlap = !(iv[2 * i] > iv[2 * j + 1] || iv[2 * j] > iv[2 * i + 1]);
+          casadi_real d2 = 0, D, S, lb;
+          int c;
+          for (c = 0; c < DC; ++c) d2 += (y[c] - x[c]) * (y[c] - x[c]);
+          D = sqrt(d2) - x[DC] - y[DC];
+          S = x[DC + 1] + y[DC + 1] + (x[DC + 2] + y[DC + 2]) * (D + 3 * (x[DC] + y[DC]));
+          lb = kmin * D - PAIR_SLACK * (x[DC] + y[DC]);
+          wrong += overlap != found[i * NMAX + j]; /* the sweep = all pairs' interval test */
+          if (!found[i * NMAX + j] && !(lb > L + hs * S && D >= dmax)) ++missed;
+          near += lb <= L + hs * S;
+        }
+    }
+  }
+#undef RAND01
+  CHECK(wrong == 0 && missed == 0, "sweep: %d pairs differ from all pairs' test, %d within the level missed", wrong,
+        missed);
+  CHECK(near > 100 && swept > near, "the scenes have near pairs (%d) and the sweep found them (%d)", near, swept);
 }
 #endif
 
@@ -435,6 +516,7 @@ int main(void) {
   test_repeat_round_off_gap();
 #ifdef PAIRS
   test_broad_phase();
+  test_sweep_random();
   return report("test_contact (element kernels, broad phase)");
 #elif defined(SCHUR_FACTORED)
   return report("test_contact (Schur complement, factored KKT matrix)");
