@@ -1,7 +1,10 @@
 """Which constraints depend linearly on the others, by name order."""
 from __future__ import annotations
 
+import casadi as ca
 import numpy as np
+
+from ncgen.assembly.mass import dense_dm, sparse_dm
 
 #: Relative size of a row's component outside the span of the earlier rows below which it
 #: counts as linearly dependent.
@@ -16,7 +19,8 @@ def dependent_rows(A: np.ndarray, tol: float = DEPENDENT_TOL) -> list[int]:
     norms = np.linalg.norm(A, axis=1)
     zero = [i for i in range(A.shape[0]) if norms[i] == 0]
     An = A / np.where(norms > 0, norms, 1)[:, None]
-    G = An @ An.T
+    S = sparse_dm(An)                     # the Gram matrix from the nonzeros: O(nnz), not O(nc² nq)
+    G = dense_dm(ca.mtimes(S, S.T))
     try:
         L = np.linalg.cholesky(G)
         if np.min(np.diag(L)) > np.sqrt(tol) and not zero:

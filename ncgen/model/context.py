@@ -54,16 +54,11 @@ class Context:
         self.v = ca.SX.sym("v", layout.nq)
         self.u = ca.vertcat(*system.inputs.values()) if system.inputs else ca.SX(0, 1)
         self.p = ca.vertcat(*(s for s, _ in system.parameters.values())) if system.parameters else ca.SX(0, 1)
-        self._q_local: dict[str, ca.SX] = {}
-        self._v_local: dict[str, ca.SX] = {}
+        self._local: dict[str, tuple[ca.SX, ca.SX]] = {}
+        self._entries: tuple[list, list] | None = None
         self._points: dict[tuple, tuple[ca.SX, ca.SX]] = {}
         #: joint name -> f(drive expression) replacing it (assembly by continuation of the drives)
         self.drive_blend: dict = {}
-        for name in layout.slots:                        # the layout's members: all, or those of a check
-            idx = layout.member_indices(name)
-            b = layout.member_constant(name)
-            self._q_local[name] = ca.vertcat(*[self.q[i] if i is not None else b[k] for k, i in enumerate(idx)])
-            self._v_local[name] = ca.vertcat(*[self.v[i] if i is not None else 0 for i in idx])
 
     @classmethod
     def of_members(cls, system, members) -> "Context":
@@ -83,10 +78,24 @@ class Context:
 
     # -------------------------------------------------------------- members
     def q_of(self, member: Member) -> ca.SX:
-        return self._q_local[member.name]
+        return self._member_symbols(member.name)[0]
 
     def v_of(self, member: Member) -> ca.SX:
-        return self._v_local[member.name]
+        return self._member_symbols(member.name)[1]
+
+    def _member_symbols(self, name: str) -> tuple[ca.SX, ca.SX]:
+        """``(q_I, v_I)`` of the layout's member ``name`` (its fixed coordinates constants),
+        made on first use: a context over all members pays only for those it is asked about."""
+        found = self._local.get(name)
+        if found is None:
+            if self._entries is None:                      # q and v split once, not per entry
+                self._entries = (ca.vertsplit(self.q), ca.vertsplit(self.v))
+            q, v = self._entries
+            idx = self.layout.member_indices(name)         # KeyError: not a member of the layout
+            b = self.layout.member_constant(name)
+            found = self._local[name] = (ca.vertcat(*[q[i] if i is not None else b[k] for k, i in enumerate(idx)]),
+                                         ca.vertcat(*[v[i] if i is not None else 0 for i in idx]))
+        return found
 
     def instantiate(self, member: Member, formula: str):
         """A formula of ``member``'s derivation (``"Phi"``, ``"p"``, ``"R"``, ``"omega"``,
