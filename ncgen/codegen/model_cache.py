@@ -211,10 +211,12 @@ STORED_FUNCTIONS = ("markers", "poses")
 
 def save(key: str, model, said=(), complete: bool = False) -> bool:
     """Store ``model`` under ``key`` with the warnings ``said`` by its build (``[(category,
-    message)]``); False (and nothing written) if its state cannot be pickled, a made
-    function cannot be read back from its serialisation, or the store cannot be written.  The functions already made and :data:`STORED_FUNCTIONS` are stored
-    made (all of them with ``complete``); the others keep their makers, which a later
-    process runs on first use from the stored ones (composites, ``Minv``: no SymPy)."""
+    message)]``); False (and nothing written) if its state cannot be pickled, a made MX
+    function cannot be read back from its serialisation (an SX function, a list of scalar
+    instructions, always can), or the store cannot be written.  The functions already made
+    and :data:`STORED_FUNCTIONS` are stored made (all of them with ``complete``); the others
+    keep their makers, which a later process runs on first use from the stored ones
+    (composites, ``Minv``: no SymPy)."""
     import casadi
 
     from ncgen.model.model import model_state
@@ -224,8 +226,9 @@ def save(key: str, model, said=(), complete: bool = False) -> bool:
             if name in model.functions:
                 model.functions[name]
         texts = {name: model.functions[name].serialize() for name in model.functions.made()}
-        for text in texts.values():              # CasADi 3.8 writes some solves it cannot read back
-            casadi.Function.deserialize(text)
+        for name, text in texts.items():         # CasADi 3.8 writes some solves (MX) it cannot read back
+            if model.functions[name].class_name() != "SXFunction":
+                casadi.Function.deserialize(text)
         payload = _pickle({"state": model_state(model), "warnings": list(said)}, (model.functions, texts))
     except Exception:                      # noqa: BLE001 — e.g. a Python function inside a force
         return False
