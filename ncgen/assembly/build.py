@@ -24,7 +24,6 @@ from ncgen.assembly.rank import dependent_rows
 from ncgen.assembly.redundancy import classify
 from ncgen.assembly.springs import spring_table
 from ncgen.assembly.unshared import UnsharedForm
-from ncgen.blas_threads import one_blas_thread
 from ncgen.errors import ModelError
 from ncgen.interrupts import raise_if_interrupted
 from ncgen.model.context import Context
@@ -43,7 +42,6 @@ REDUNDANT_MODES = ("drop", "error", "keep")
 CONTACT_MODELS = ("smooth", "nonsmooth")
 
 
-@one_blas_thread          # the dense checks on nc × nq arrays: OpenBLAS's idle threads cost CPU, not time saved
 def build_model(system, *, baumgarte=BAUMGARTE, redundant: str = "drop", tolerance: float = 1e-6,
                 t0: float = 0.0, assemble: bool = False, fix=(), contacts: str = "smooth",
                 share: bool = True):
