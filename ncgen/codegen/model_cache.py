@@ -42,7 +42,7 @@ from ncgen.files import MODEL_CACHE_ENV, model_cache_enabled, read_entry, write_
 from ncgen.version import __version__
 
 #: Bump when the layout of an entry or of the pickled state changes.
-FORMAT = 2
+FORMAT = 3          # 3: large mostly zero arrays pickled by their nonzeros
 #: The environment variable that turns the store off.
 ENV = MODEL_CACHE_ENV
 SUFFIX = ".model"
