@@ -1,7 +1,7 @@
-"""ncgen's libraries built at install (``ncgen/runtime/installed_libraries.py``, ``build_hooks.py``):
-the runtime takes an installed library only when its keys, flags and sha256 match, with no
-call of the compiler; any other falls back to the compile cache.  The slow test builds the
-wheel and runs from it with no compiler on ``PATH``."""
+"""ncgen's libraries built at install (``ncgen/runtime/installed_libraries.py``,
+``ncgen/runtime/install_commands.py``): the runtime takes an installed library only when its
+keys, flags and sha256 match, with no call of the compiler; any other falls back to the
+compile cache.  The slow test builds the wheel and runs from it with no compiler on ``PATH``."""
 from __future__ import annotations
 
 import json

@@ -184,6 +184,27 @@ def test_sparse_matrices_keep_their_entries_in_place():
     np.testing.assert_array_equal(np.array(sparse_dm(B).full()), B)
 
 
+@pytest.mark.parametrize("shape", [(5, 7), (7, 5), (0, 4), (4, 0), (1, 1)])
+def test_dense_and_sparse_forms_are_each_others_inverse(shape):
+    """``dense_dm`` (a CasADi matrix scattered from its nonzeros) gives the entries NumPy's own
+    conversion gives, bit for bit (a ``-0.0`` nonzero kept), and ``sparse_dm`` keeps exactly
+    the nonzero entries of a non-contiguous array."""
+    import casadi as ca
+
+    from ncgen.assembly.mass import dense_dm, sparse_dm
+
+    rng = np.random.default_rng(5)
+    B = rng.normal(size=shape) * (rng.random(shape) < 0.4)
+    X = ca.DM(ca.Sparsity.dense(*shape), B.ravel(order="F"))
+    if B.size:
+        X[0, 0] = -0.0
+    D = dense_dm(X)
+    assert D.shape == shape and np.array_equal(D.view(np.uint64), np.array(X).view(np.uint64))
+    T = np.asfortranarray(B.T)[:, ::-1]                 # neither C-ordered nor contiguous
+    S = sparse_dm(T)
+    assert S.nnz() == np.count_nonzero(T) and np.array_equal(dense_dm(S), T)
+
+
 def test_velocity_projection_is_the_kinetic_energy_nearest_solution():
     """At the slider-crank's dead centre with the motor at ω, the projection of v = 0 is the
     unique velocity of the driven mechanism: crank tip ω r upwards, slider at rest."""

@@ -19,7 +19,7 @@ from ncgen.assembly.kinematics import resolve_fix
 from ncgen.assembly.manifold import system_size
 from ncgen.assembly.limits import model_limits
 from ncgen.assembly.manifold import check_tangent_inertia
-from ncgen.assembly.mass import assemble_mass, flat_members, flat_support, mass_factor
+from ncgen.assembly.mass import assemble_mass, dense_dm, flat_members, flat_support, mass_factor
 from ncgen.assembly.rank import dependent_rows
 from ncgen.assembly.redundancy import classify
 from ncgen.assembly.springs import spring_table
@@ -179,7 +179,7 @@ def _parameter_values(system, limits) -> np.ndarray:
 def _check_flat_inertia(name: str, ctx, phi, M, members, at: tuple) -> None:
     """A model with flat members: ``M`` positive definite on ``null(A)`` at ``at = (t0, q, p)``
     (:func:`check_tangent_inertia`)."""
-    A0 = np.array(ca.Function("A", [ctx.t, ctx.q, ctx.p], [ca.jacobian(phi, ctx.q)])(*at))
+    A0 = dense_dm(ca.Function("A", [ctx.t, ctx.q, ctx.p], [ca.jacobian(phi, ctx.q)])(*at))
     check_tangent_inertia(M, A0, ctx.layout, members, f"system {name!r}")
 
 
@@ -225,7 +225,7 @@ def _redundant_constraints(name: str, ctx, labels: list, rows: list, plan, redun
     (``"drop"``, with a warning naming them) or kept (``"keep"``)."""
     q, p, t0 = at
     A_fn = ca.Function("A", [ctx.t, ctx.q, ctx.p], [ca.jacobian(ca.vertcat(*rows), ctx.q)]) if rows else None
-    dependent = dependent_rows(np.array(A_fn(t0, q, p)) if A_fn else np.zeros((0, ctx.layout.nq)))
+    dependent = dependent_rows(dense_dm(A_fn(t0, q, p)) if A_fn else np.zeros((0, ctx.layout.nq)))
     redundant_labels = [labels[i] for i in dependent]
     hint = ""
     if dependent and plan is not None and plan.eliminated:
@@ -262,7 +262,7 @@ def _check_droppable(name, labels, dependent, phi_fn, A_fn, q, p, t0) -> None:
     """Raise unless every ``dependent`` row is implied by the others near ``q`` and satisfied
     (:mod:`ncgen.assembly.redundancy`), naming the constraints that are not."""
     found = classify(lambda t, x: np.array(phi_fn(t, x, p)).reshape(-1),
-                     lambda t, x: np.array(A_fn(t, x, p)), q, t0, dependent)
+                     lambda t, x: dense_dm(A_fn(t, x, p)), q, t0, dependent)
     named = lambda rows: ", ".join(labels[i] for i in rows)   # noqa: E731
     if found.violated:
         items = ", ".join(f"{labels[i]} (Φ = {r:.3g})" for i, r in found.violated.items())

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ncgen.assembly.manifold import NEWTON_TOL as TOL, kkt_least_squares, newton, project, system_size
+from ncgen.assembly.mass import dense_dm
 from ncgen.errors import ModelError
 
 @dataclass
@@ -41,7 +42,7 @@ def consistent_state(f, layout, labels, q, v, p, t0, tolerance, M, *, fixed=(), 
         return np.array(f["phi"](t0, x, p)).reshape(-1)
 
     def A(x):
-        return np.array(f["A"](t0, x, p))
+        return dense_dm(f["A"](t0, x, p))
 
     def phi_t(x):
         return np.array(f["phi_t"](t0, x, p)).reshape(-1)
@@ -100,7 +101,7 @@ def _multipliers(f, M, q, v, p, t0):
             return a, lam
     except RuntimeError:
         pass
-    A = np.array(f["A"](t0, q, p), dtype=float)
+    A = dense_dm(f["A"](t0, q, p))
     rhs = np.concatenate([np.array(f["F"](t0, q, v, u, p), dtype=float).reshape(-1),
                           np.array(f["gamma"](t0, q, v, p), dtype=float).reshape(-1)])
     sol = kkt_least_squares(M, A, rhs)

@@ -208,7 +208,8 @@ def project(A: np.ndarray, b: np.ndarray, v: np.ndarray, M: np.ndarray, free) ->
     if A.shape[0] == 0:
         return w
     free = np.asarray(free, dtype=int)
-    Af, Mf = A[:, free], M[np.ix_(free, free)]
+    every = free.size == w.size and np.array_equal(free, np.arange(w.size))     # no copies of A and M then
+    Af, Mf = (A, M) if every else (A[:, free], M[np.ix_(free, free)])
     r = b - A @ w
     step = _kkt_step(Mf, Af, r)
     if step is None:

@@ -57,9 +57,22 @@ def assemble_mass(layout: Layout, members) -> np.ndarray:
 def sparse_dm(M: np.ndarray) -> ca.DM:
     """``M`` as a sparse CasADi matrix, built from its nonzeros (``ca.DM(M)`` first copies
     every entry of the dense array: O(nq²)).  A DM's nonzeros are stored column by column,
-    so they are gathered in that order (``np.nonzero(M)`` lists them row by row)."""
-    cols, rows = np.nonzero(np.asarray(M).T)
+    so the nonzeros, found in memory order (row by row: one pass over ``M``, twice as fast as
+    over its transpose), are sorted by column, rows ascending within each."""
+    M = np.asarray(M)
+    rows, cols = np.divmod(np.flatnonzero(M), M.shape[1])
+    order = np.argsort(cols, kind="stable")
+    rows, cols = rows[order], cols[order]
     return ca.DM(ca.Sparsity.triplet(M.shape[0], M.shape[1], rows.tolist(), cols.tolist()), M[rows, cols])
+
+
+def dense_dm(X: ca.DM) -> np.ndarray:
+    """``X`` as a dense NumPy array, scattered from its nonzeros (``np.array(X)`` goes through a
+    Python list of every entry: O(rows × cols) Python floats, 0.4 s for a 1000-bar chain's ``A``)."""
+    out = np.zeros(X.shape)
+    rows, cols = X.sparsity().get_triplet()
+    out[rows, cols] = X.nonzeros()
+    return out
 
 
 def flat_members(members, layout: Layout) -> list[str]:

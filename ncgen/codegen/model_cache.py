@@ -36,11 +36,13 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Callable
 
+import numpy as np
+
 from ncgen.files import MODEL_CACHE_ENV, model_cache_enabled, read_entry, write_entry
 from ncgen.version import __version__
 
 #: Bump when the layout of an entry or of the pickled state changes.
-FORMAT = 2
+FORMAT = 3          # 3: large mostly zero arrays pickled by their nonzeros
 #: The environment variable that turns the store off.
 ENV = MODEL_CACHE_ENV
 SUFFIX = ".model"
@@ -73,9 +75,8 @@ def code_identity() -> str:
     """sha256 of ncgen's version, its Python sources and the versions of what the pickled
     state depends on (CasADi, NumPy, Python)."""
     import casadi
-    import numpy
 
-    h = hashlib.sha256(f"{FORMAT} {__version__} {casadi.__version__} {numpy.__version__} "
+    h = hashlib.sha256(f"{FORMAT} {__version__} {casadi.__version__} {np.__version__} "
                        f"{sys.version_info[:3]}".encode())
     root = Path(__file__).resolve().parent.parent
     for path in sorted(root.rglob("*.py")):
@@ -210,10 +211,12 @@ STORED_FUNCTIONS = ("markers", "poses")
 
 def save(key: str, model, said=(), complete: bool = False) -> bool:
     """Store ``model`` under ``key`` with the warnings ``said`` by its build (``[(category,
-    message)]``); False (and nothing written) if its state cannot be pickled, a made
-    function cannot be read back from its serialisation, or the store cannot be written.  The functions already made and :data:`STORED_FUNCTIONS` are stored
-    made (all of them with ``complete``); the others keep their makers, which a later
-    process runs on first use from the stored ones (composites, ``Minv``: no SymPy)."""
+    message)]``); False (and nothing written) if its state cannot be pickled, a made MX
+    function cannot be read back from its serialisation (an SX function, a list of scalar
+    instructions, always can), or the store cannot be written.  The functions already made
+    and :data:`STORED_FUNCTIONS` are stored made (all of them with ``complete``); the others
+    keep their makers, which a later process runs on first use from the stored ones
+    (composites, ``Minv``: no SymPy)."""
     import casadi
 
     from ncgen.model.model import model_state
@@ -223,8 +226,9 @@ def save(key: str, model, said=(), complete: bool = False) -> bool:
             if name in model.functions:
                 model.functions[name]
         texts = {name: model.functions[name].serialize() for name in model.functions.made()}
-        for text in texts.values():              # CasADi 3.8 writes some solves it cannot read back
-            casadi.Function.deserialize(text)
+        for name, text in texts.items():         # CasADi 3.8 writes some solves (MX) it cannot read back
+            if model.functions[name].class_name() != "SXFunction":
+                casadi.Function.deserialize(text)
         payload = _pickle({"state": model_state(model), "warnings": list(said)}, (model.functions, texts))
     except Exception:                      # noqa: BLE001 — e.g. a Python function inside a force
         return False
@@ -318,8 +322,31 @@ def _mapping_proxy(items: dict) -> types.MappingProxyType:
     return types.MappingProxyType(items)
 
 
+#: A C-ordered float64 array of at least this many entries, at most a quarter of them nonzero,
+#: is pickled by its nonzeros (:func:`_scattered`): a chain of 1000 bars' dense ``M`` is 72 MB,
+#: of which 0.2 MB nonzero.
+SPARSE_MIN_SIZE = 1 << 16
+
+
+def _nonzero_bits(a) -> "tuple | None":
+    """``(flat indices, values)`` of the entries of ``a`` whose bits are not all zero (a
+    ``-0.0`` is kept), when ``a`` is a large, mostly zero, C-ordered float64 array; else None."""
+    if not (a.dtype == np.float64 and a.size >= SPARSE_MIN_SIZE and a.flags.c_contiguous):
+        return None
+    index = np.flatnonzero(a.reshape(-1).view(np.uint64))
+    return (index, a.reshape(-1)[index]) if 4 * index.size <= a.size else None
+
+
+def _scattered(shape: tuple, index, values):
+    """The float64 array of ``shape`` holding ``values`` at the flat ``index``, zero elsewhere."""
+    out = np.zeros(shape)
+    out.reshape(-1)[index] = values
+    return out
+
+
 class _Pickler(pickle.Pickler):
-    """Pickles a model's state as it is: read-only views by their contents, a
+    """Pickles a model's state as it is: read-only views by their contents, large mostly zero
+    arrays (a dense ``M``) by their nonzeros, a
     :class:`~ncgen.model.system.System` by its attributes (its own pickling goes by description,
     which would rebuild it through SymPy when read), and the function set of ``made``,
     ``(functions, {name: text})``, with the serialisations of its made functions (a function
@@ -332,21 +359,31 @@ class _Pickler(pickle.Pickler):
     def reducer_override(self, obj):
         from ncgen.model.model import ReadOnlyList
 
+        kind = type(obj)
+        if kind is np.ndarray:
+            nonzero = _nonzero_bits(obj)
+            return (_scattered, (obj.shape, *nonzero)) if nonzero is not None else NotImplemented
         if self.made is not None and obj is self.made[0]:
             return obj.reduced(self.made[1])
-        if type(obj) is types.MappingProxyType:
+        if kind is types.MappingProxyType:
             return _mapping_proxy, (dict(obj),)
-        if type(obj) is ReadOnlyList:
+        if kind is ReadOnlyList:
             return ReadOnlyList, (list(obj),)
-        if _is_system(obj):
-            return object.__new__, (type(obj),), dict(vars(obj))
+        if _is_system_type(kind):
+            return object.__new__, (kind,), dict(vars(obj))
         return NotImplemented
 
 
 def _is_system(obj) -> bool:
-    """Whether ``obj`` is a :class:`~ncgen.model.system.System` (by its classes' names:
-    ``System.build`` imports this module, which must not import it back)."""
-    return any(c.__name__ == "System" and c.__module__ == "ncgen.model.system" for c in type(obj).__mro__)
+    """Whether ``obj`` is a :class:`~ncgen.model.system.System`."""
+    return _is_system_type(type(obj))
+
+
+@lru_cache(maxsize=None)
+def _is_system_type(kind: type) -> bool:
+    """Whether ``kind`` is :class:`~ncgen.model.system.System` or a subclass (by its classes'
+    names: ``System.build`` imports this module, which must not import it back)."""
+    return any(c.__name__ == "System" and c.__module__ == "ncgen.model.system" for c in kind.__mro__)
 
 
 def _pickle(stored: dict, made: tuple | None = None) -> bytes:

@@ -42,6 +42,25 @@ def instance_form(name: str, dim: int, formula: str) -> tuple[tuple[str, ...], c
     return tuple(entry["constants"]), ca.Function.deserialize(entry[formula])
 
 
+def _gather(x: ca.SX, idx: list, fill: np.ndarray) -> ca.SX:
+    """The column ``[x[i] if i is not None else fill[k] for k, i in enumerate(idx)]``, made of
+    slices of ``x`` over runs of consecutive indices and constant blocks (a member's
+    coordinates are whole nodes: one or a few slices instead of an entry each)."""
+    parts, k = [], 0
+    while k < len(idx):
+        j = k + 1
+        if idx[k] is None:
+            while j < len(idx) and idx[j] is None:
+                j += 1
+            parts.append(ca.DM(fill[k:j]))
+        else:
+            while j < len(idx) and idx[j] is not None and idx[j] == idx[k] + j - k:
+                j += 1
+            parts.append(x[idx[k]:idx[k] + j - k])
+        k = j
+    return parts[0] if len(parts) == 1 else ca.vertcat(*parts)
+
+
 class Context:
     """Symbols and member expressions of one system being assembled."""
 
@@ -54,16 +73,10 @@ class Context:
         self.v = ca.SX.sym("v", layout.nq)
         self.u = ca.vertcat(*system.inputs.values()) if system.inputs else ca.SX(0, 1)
         self.p = ca.vertcat(*(s for s, _ in system.parameters.values())) if system.parameters else ca.SX(0, 1)
-        self._q_local: dict[str, ca.SX] = {}
-        self._v_local: dict[str, ca.SX] = {}
+        self._local: dict[str, tuple[ca.SX, ca.SX]] = {}
         self._points: dict[tuple, tuple[ca.SX, ca.SX]] = {}
         #: joint name -> f(drive expression) replacing it (assembly by continuation of the drives)
         self.drive_blend: dict = {}
-        for name in layout.slots:                        # the layout's members: all, or those of a check
-            idx = layout.member_indices(name)
-            b = layout.member_constant(name)
-            self._q_local[name] = ca.vertcat(*[self.q[i] if i is not None else b[k] for k, i in enumerate(idx)])
-            self._v_local[name] = ca.vertcat(*[self.v[i] if i is not None else 0 for i in idx])
 
     @classmethod
     def of_members(cls, system, members) -> "Context":
@@ -83,10 +96,20 @@ class Context:
 
     # -------------------------------------------------------------- members
     def q_of(self, member: Member) -> ca.SX:
-        return self._q_local[member.name]
+        return self._member_symbols(member.name)[0]
 
     def v_of(self, member: Member) -> ca.SX:
-        return self._v_local[member.name]
+        return self._member_symbols(member.name)[1]
+
+    def _member_symbols(self, name: str) -> tuple[ca.SX, ca.SX]:
+        """``(q_I, v_I)`` of the layout's member ``name`` (its fixed coordinates constants),
+        made on first use: a context over all members pays only for those it is asked about."""
+        found = self._local.get(name)
+        if found is None:
+            idx = self.layout.member_indices(name)         # KeyError: not a member of the layout
+            b = self.layout.member_constant(name)
+            found = self._local[name] = (_gather(self.q, idx, b), _gather(self.v, idx, np.zeros(len(idx))))
+        return found
 
     def instantiate(self, member: Member, formula: str):
         """A formula of ``member``'s derivation (``"Phi"``, ``"p"``, ``"R"``, ``"omega"``,
@@ -94,7 +117,7 @@ class Context:
         member's constants) called on the member (:func:`instance_form`; no SymPy)."""
         names, f = instance_form(member.ctype.name, member.ctype.dim, formula)
         constants = member.rigid.constant_values
-        return f(self.q_of(member), self.v_of(member), ca.DM([float(constants[n]) for n in names]))
+        return f.call([self.q_of(member), self.v_of(member), ca.DM([float(constants[n]) for n in names])])[0]
 
     def scatter(self, member: Member, Q_local) -> ca.SX:
         """``S_Iᵀ Q_I``: a member's generalised force as a system vector."""

@@ -1,5 +1,5 @@
-"""ncgen's model-independent libraries compiled for an install (``build_hooks.py`` at the
-repository's root calls :func:`build_installed`): every library as the runtime asks for it
+"""ncgen's model-independent libraries compiled for an install (the setuptools command of
+:mod:`ncgen.runtime.install_commands` calls :func:`build_installed`): every library as the runtime asks for it
 (:func:`library_specs`), written and compiled in a temporary compile cache (in parallel, one
 compiler per core), copied to the target folder, the index written last
 (:mod:`ncgen.runtime.installed_libraries` reads it).

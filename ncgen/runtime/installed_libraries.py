@@ -1,7 +1,7 @@
 """ncgen's model-independent libraries built at install: the element library, the contact
 library and every unit of the tree library, compiled by ``pip install .`` (a non-editable
-install, ``build_hooks.py`` at the repository's root) into the installed package's
-``_libraries/`` folder, so that the first run of any model finds them.
+install, the setuptools command of :mod:`ncgen.runtime.install_commands`) into the installed
+package's ``_libraries/`` folder, so that the first run of any model finds them.
 
 The folder holds the libraries and ``index.json``: per library its index prefix (as the
 compile cache's index files name it: ``element-tables``, ``contact-tables``,
