@@ -137,6 +137,7 @@ typedef struct {
   casadi_real *pbq;  /* the q (NQ) of the last pairs_bounds() */
   int pb_rates;      /* whether it was given rates (1) or not (0); -1: none since layout() */
   int *pon;          /* per element: 0 skipped, 1 evaluated, 2 to be evaluated (ncgen_contact_pairs.h) */
+  casadi_real *pcache; /* per element: its last kernel results (PAIR_SLOT, ncgen_contact_pairs.h) */
 #endif
 #endif
 } workspace;
@@ -169,6 +170,12 @@ static void kernel_sizes(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz_
 }
 
 /* Lays out the workspace in `block` (if not NULL) and returns its size in bytes. */
+#ifdef CONTACT_PAIRS
+/* Doubles per contact element of ws->pcache (ncgen_contact_pairs.h: pair_eval()): which of its
+ * two entries goes next, then the two. */
+#define PAIR_SLOT (3 + 2 * ((size_t) PAIR_MAX_Q + (size_t) PAIR_MAX_G + (size_t) PAIR_MAX_W))
+#endif
+
 static size_t layout(workspace *ws, char *block) {
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
   size_t off[N_BLOCKS + 1], sizes[N_BLOCKS], k;
@@ -213,8 +220,8 @@ static size_t layout(workspace *ws, char *block) {
   sizes[25] = 2 * ND * sizeof(casadi_int);
 #endif
 #ifdef CONTACT_PAIRS
-  sizes[26] = (2 * PAIR_MAX_Q + PAIR_MAX_G + PAIR_MAX_W + 2 * NE + PAIR_NS * (DC + 3) + NQ) * sizeof(casadi_real) +
-              NE * sizeof(int);
+  sizes[26] = (2 * PAIR_MAX_Q + PAIR_MAX_G + PAIR_MAX_W + 2 * NE + PAIR_NS * (DC + 3) + NQ +
+               (size_t) NE * PAIR_SLOT) * sizeof(casadi_real) + NE * sizeof(int);
 #endif
 #endif
   off[0] = 0;
@@ -271,7 +278,11 @@ static size_t layout(workspace *ws, char *block) {
     ws->psb = ws->pspd + NE;
     ws->pbq = ws->psb + PAIR_NS * (DC + 3);
     ws->pb_rates = -1;
-    ws->pon = (int *) (void *) (ws->pbq + NQ);
+    ws->pcache = ws->pbq + NQ;
+    for (k = 0; k < (size_t) NE; ++k) /* every entry empty */
+      ws->pcache[k * PAIR_SLOT] = ws->pcache[k * PAIR_SLOT + 1] =
+          ws->pcache[k * PAIR_SLOT + 2 + PAIR_MAX_Q + PAIR_MAX_G + PAIR_MAX_W] = 0;
+    ws->pon = (int *) (void *) (ws->pcache + (size_t) NE * PAIR_SLOT);
 #endif
 #ifdef CONTACT_SCHUR
     ws->T = (casadi_real *) (void *) (block + off[23]);
