@@ -85,6 +85,33 @@ def test_free_body_blocks_are_solved_by_their_schur_complement(monkeypatch):
     assert kernels._schur_blocks(K.sparsity(), kernels._components(K.sparsity()), None, set()) == [0] * 5
 
 
+def test_constant_mass_blocks_are_solved_with_their_cholesky_factor(monkeypatch):
+    """With ``constant_mass`` each Schur block takes its own block M_b of the constant M as
+    constants (its Cholesky factor, not H = M_b read from K and factored): one block function
+    per distinct M_b (three masses, the three bodies of mass 1 sharing one), each shorter than
+    the complement with H read from K, the damped body keeping its QR; against numpy's dense
+    solve of K to round-off."""
+    rng = np.random.default_rng(8)
+    K, M = _free_bodies_kkt(rng, [1e-4, 1.0, 1e2, 1.0, 1.0])
+    for k in (3, 4):                                                    # bodies 3, 4: body 1's M_b
+        M[4 * k:4 * k + 4, 4 * k:4 * k + 4] = M[4:8, 4:8]
+    K = ca.DM(K)
+    K[:20, :20] = M
+    K = ca.sparsify(K)
+    monkeypatch.setattr(kernels, "SX_QR_MAX_NNZ", 50)
+    read = kernels.solve_function(K.sparsity(), M, {0})                 # body 0 damped
+    solve = kernels.solve_function(K.sparsity(), M, {0}, constant_mass=True)
+    blocks = {f.name(): f for f in solve.find_functions() if f.name().startswith("step_solve_block")}
+    assert len(blocks) == 3, sorted(blocks)                             # QR (body 0), M_b of 1, of 1e2
+    assert "map3_step_solve_block1" in {f.name() for f in solve.find_functions()}
+    schur_read = read.find_function("step_solve_block1").n_instructions()
+    assert all(blocks[f"step_solve_block{g}"].n_instructions() < schur_read for g in (1, 2))
+    for _ in range(3):
+        r = rng.standard_normal(K.size1())
+        exact = np.linalg.solve(np.array(K), r)
+        np.testing.assert_allclose(np.array(solve(K, r)).ravel(), exact, rtol=1e-11, atol=1e-13 * np.abs(exact).max())
+
+
 def _chain_kkt(rng, n_points=5, nc=5):
     """K = [[M, A0^T], [A1, 0]] of a chain of points in 3-D: M the banded mass matrix of bars
     sharing ends (m/3 on the diagonal, m/6 between neighbours, per axis), each constraint row

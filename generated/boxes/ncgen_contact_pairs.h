@@ -96,6 +96,53 @@ typedef int (*pair_kernel)(const casadi_real **arg, casadi_real **res, casadi_in
 #define PAIR_KERNEL(fn, e, ws) fn[pair_int[8 * (e)]]((ws)->arg, (ws)->res, (ws)->iw, (ws)->w, 0)
 #endif
 
+/* Per element e, its last kernel results at two configurations, at ws->pcache + e PAIR_SLOT:
+ * the slot to be replaced next (0 or 1), then two slots, each whether it holds the gaps (1) or
+ * also the rows (2), the local coordinates (PAIR_MAX_Q), gaps (PAIR_MAX_G) and dense W
+ * (PAIR_MAX_W) at them.  A step evaluates an element several times at its start and its end
+ * (the repeat at q, at q_next, at q again; the contact step at q; the push-out at the end),
+ * and the results depend on the coordinates alone (p is fixed while a workspace is laid out:
+ * layout() empties the slots; PAIR_SLOT in ncgen_rattle.h). */
+#define PAIR_ENTRY (1 + PAIR_MAX_Q + PAIR_MAX_G + PAIR_MAX_W)
+
+/* Element e's gaps into g and, if rows, its dense W into ws->pw, at its local coordinates in
+ * ws->pq (pair_gather()): the kernel's results, or those kept where the coordinates are the
+ * same bits (kept in the older of the two slots, or in the one with the gaps alone there). */
+static int pair_eval(workspace *ws, int e, int rows, const casadi_real *p, casadi_real *g) {
+  const int *pi = pair_int + 8 * e, n = pi[3] + pi[4];
+  const size_t nw = (size_t) pi[2] * DC * n;
+  casadi_real *cache = ws->pcache + (size_t) e * PAIR_SLOT, *slot, *sq, *sg, *sw;
+  int k, same = -1;
+  for (k = 0; k < 2; ++k) {
+    slot = cache + 1 + k * PAIR_ENTRY, sq = slot + 1, sg = sq + PAIR_MAX_Q, sw = sg + PAIR_MAX_G;
+    if (slot[0] > 0 && !memcmp(sq, ws->pq, n * sizeof(casadi_real))) {
+      if (slot[0] < (rows ? 2 : 1)) { /* its gaps only: the rows go there */
+        same = k;
+        continue;
+      }
+      memcpy(g, sg, pi[2] * sizeof(casadi_real));
+      if (rows) memcpy(ws->pw, sw, nw * sizeof(casadi_real));
+      cache[0] = 1 - k;
+      return STEP_OK;
+    }
+  }
+  k = same >= 0 ? same : cache[0] != 0;
+  slot = cache + 1 + k * PAIR_ENTRY, sq = slot + 1, sg = sq + PAIR_MAX_Q, sw = sg + PAIR_MAX_G;
+  slot[0] = 0;
+  ws->arg[0] = ws->pq;
+  ws->arg[1] = ws->pq + pi[3];
+  ws->arg[2] = p;
+  ws->res[0] = g;
+  ws->res[1] = ws->pw;
+  if (rows ? PAIR_KERNEL(pair_rows_fn, e, ws) : PAIR_KERNEL(pair_gap_fn, e, ws)) return STEP_KERNEL;
+  memcpy(sq, ws->pq, n * sizeof(casadi_real));
+  memcpy(sg, g, pi[2] * sizeof(casadi_real));
+  if (rows) memcpy(sw, ws->pw, nw * sizeof(casadi_real));
+  slot[0] = rows ? 2 : 1;
+  cache[0] = 1 - k;
+  return STEP_OK;
+}
+
 /* Element e's local coordinates (rates: fixed ones 0) from the system's x into out. */
 static void pair_gather(int e, const casadi_real *x, int rates, casadi_real *out) {
   const int *pi = pair_int + 8 * e;
@@ -463,11 +510,7 @@ static int contact_gap(workspace *ws, const casadi_real *q, const casadi_real *p
     const int *pi = pair_int + 8 * (e = ws->pcand[i]);
     if (!ws->pon[e]) continue;
     pair_gather(e, q, 0, ws->pq);
-    ws->arg[0] = ws->pq;
-    ws->arg[1] = ws->pq + pi[3];
-    ws->arg[2] = p;
-    ws->res[0] = g + pi[1];
-    if (PAIR_KERNEL(pair_gap_fn, e, ws)) return STEP_KERNEL;
+    if (pair_eval(ws, e, 0, p, g + pi[1])) return STEP_KERNEL;
   }
   return STEP_OK;
 }
@@ -486,12 +529,7 @@ static int contact_rows(workspace *ws, const casadi_real *q, const casadi_real *
     if (ws->pon[e] < which) continue;
     if (which == 2) ws->pon[e] = 1;
     pair_gather(e, q, 0, ws->pq);
-    ws->arg[0] = ws->pq;
-    ws->arg[1] = ws->pq + pi[3];
-    ws->arg[2] = p;
-    ws->res[0] = ws->pg;
-    ws->res[1] = ws->pw;
-    if (PAIR_KERNEL(pair_rows_fn, e, ws)) return STEP_KERNEL;
+    if (pair_eval(ws, e, 1, p, ws->pg)) return STEP_KERNEL;
     if (g) memcpy(g + pi[1], ws->pg, pi[2] * sizeof(casadi_real));
     if (W) {
       memset(W + w0, 0, nw * sizeof(casadi_real));

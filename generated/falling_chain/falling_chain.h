@@ -398,7 +398,7 @@ extern const char falling_chain_model_hash[];
 
 /* ---- falling_chain_step_solve ----------------------------------------------------
  * Stepper: x = K^-1 r (sparse Householder QR in AMD column order, or the Schur complement with the constant mass matrix's Cholesky factor)
- * In falling_chain_kernels_0.c; 2297 instructions.
+ * In falling_chain_kernels_0.c; 586 instructions.
  * Inputs:
  *   arg[0] K: 18x18, nnz 69 (sparse) KKT matrix in the stepper's pattern. Default: zeros.
  *   arg[1] r: 18x1, nnz 18 right-hand side. Default: zeros.

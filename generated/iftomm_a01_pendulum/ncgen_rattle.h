@@ -163,6 +163,7 @@ typedef struct {
   int npld, pld_ok;
   casadi_real pkmin, pdmax; /* ... the least kappa and the largest d_min of the elements swept */
   casadi_real plim;  /* the level below which ws->plb is every element's lower bound (pairs_select()) */
+  casadi_real *pcache; /* per element: its last kernel results (PAIR_SLOT, ncgen_contact_pairs.h) */
 #endif
 #endif
 } workspace;
@@ -195,6 +196,12 @@ static void kernel_sizes(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz_
 }
 
 /* Lays out the workspace in `block` (if not NULL) and returns its size in bytes. */
+#ifdef CONTACT_PAIRS
+/* Doubles per contact element of ws->pcache (ncgen_contact_pairs.h: pair_eval()): which of its
+ * two entries goes next, then the two. */
+#define PAIR_SLOT (3 + 2 * ((size_t) PAIR_MAX_Q + (size_t) PAIR_MAX_G + (size_t) PAIR_MAX_W))
+#endif
+
 static size_t layout(workspace *ws, char *block) {
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
   size_t off[N_BLOCKS + 1], sizes[N_BLOCKS], k;
@@ -240,8 +247,8 @@ static size_t layout(workspace *ws, char *block) {
   sizes[25] = 2 * ND * sizeof(casadi_int);
 #endif
 #ifdef CONTACT_PAIRS
-  sizes[26] = (2 * PAIR_MAX_Q + PAIR_MAX_G + PAIR_MAX_W + 2 * NE + PAIR_NS * (DC + 5) + NQ) * sizeof(casadi_real) +
-              (7 * NE + 3 * PAIR_NS + 1) * sizeof(int);
+  sizes[26] = (2 * PAIR_MAX_Q + PAIR_MAX_G + PAIR_MAX_W + 2 * NE + PAIR_NS * (DC + 5) + NQ +
+               (size_t) NE * PAIR_SLOT) * sizeof(casadi_real) + (7 * NE + 3 * PAIR_NS + 1) * sizeof(int);
 #endif
 #endif
   off[0] = 0;
@@ -303,7 +310,11 @@ static size_t layout(workspace *ws, char *block) {
     ws->pbq = ws->psb + PAIR_NS * (DC + 3);
     ws->pb_rates = -1;
     ws->pint = ws->pbq + NQ;
-    ws->pon = (int *) (void *) (ws->pint + 2 * PAIR_NS);
+    ws->pcache = ws->pint + 2 * PAIR_NS;
+    for (k = 0; k < (size_t) NE; ++k) /* every entry empty */
+      ws->pcache[k * PAIR_SLOT] = ws->pcache[k * PAIR_SLOT + 1] =
+          ws->pcache[k * PAIR_SLOT + 2 + PAIR_MAX_Q + PAIR_MAX_G + PAIR_MAX_W] = 0;
+    ws->pon = (int *) (void *) (ws->pcache + (size_t) NE * PAIR_SLOT);
     ws->pord = ws->pon + NE;
     ws->pover = ws->pord + PAIR_NS;
     ws->padj = ws->pover + PAIR_NS;

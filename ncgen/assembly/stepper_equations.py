@@ -210,7 +210,7 @@ def stepper_functions(model, primitives: dict[str, ca.Function] | None = None, p
     power = power_function(model)
     damped = ca.jacobian(f["F"](t, q, w, u, p), w).sparsity().get_triplet()
     solve = solve_function(K.sparsity(), np.asarray(model.M, dtype=float), set(damped[0]) | set(damped[1]),
-                           constant_mass=not contact)
+                           constant_mass=True)
     out = [newton, velocity, check, solve, project, power,
            outputs_function(model, check, power)]
     if contact:
@@ -343,7 +343,9 @@ def solve_function(pattern: ca.Sparsity, mass: np.ndarray | None = None, damped=
     unroll, the whole K undamped and ``mass`` well conditioned, the Schur complement with
     ``mass``'s Cholesky factor as constants in the code (:func:`_mass_schur_solve`) is used
     if it takes fewer instructions than the QR (the 5-bar chain: 1 279 instead of 3 277; not
-    the 20-bar chain, whose dense 20×20 complement costs more than K's sparse QR)."""
+    the 20-bar chain, whose dense 20×20 complement costs more than K's sparse QR); and per
+    diagonal block, its block of ``mass`` in place of H read from K (a rotating sphere's
+    15×15 block of u, v, w: 797 instead of 899 instructions)."""
     n = pattern.size1()
     V, R, *_ = ca.qr_sparse(ca.DM(pattern, 1.0), True)
     if V.nnz() + R.nnz() <= SX_QR_MAX_NNZ:
@@ -354,7 +356,8 @@ def solve_function(pattern: ca.Sparsity, mass: np.ndarray | None = None, damped=
     K, r = ca.MX.sym("K", pattern), ca.MX.sym("r", n)
     blocks = _components(pattern)
     schur = _schur_blocks(pattern, blocks, mass, damped)
-    x = _block_solves(pattern, blocks, K, r, schur) if len(blocks) > 1 else ca.solve(K, r, "qr")
+    x = _block_solves(pattern, blocks, K, r, schur, mass if constant_mass else None) if len(blocks) > 1 \
+        else ca.solve(K, r, "qr")
     return ca.Function("step_solve", [K, r], [x], ["K", "r"], ["x"])
 
 
@@ -402,17 +405,22 @@ def _components(pattern: ca.Sparsity) -> list[np.ndarray]:
     return [np.flatnonzero(label == k) for k in range(count)]
 
 
-def _block_solves(pattern: ca.Sparsity, blocks: list[np.ndarray], K: ca.MX, r: ca.MX, schur: list[int]) -> ca.MX:
+def _block_solves(pattern: ca.Sparsity, blocks: list[np.ndarray], K: ca.MX, r: ca.MX, schur: list[int],
+                  mass: np.ndarray | None = None) -> ca.MX:
     """K⁻¹ r for a block-diagonal K (``blocks``: the indices of each diagonal block, which
     together cover every row once): x_b = K_bb⁻¹ r_b per block, the blocks grouped by their
     pattern, one solve function per pattern (:func:`_schur_solve` where ``schur`` gives the
     block's number of coordinates, else the SX-unrolled QR where its factors are small enough,
     else CasADi's ``qr``) mapped over its group's blocks (one copy of the code).  The QR per
-    block is the same as of the whole matrix, in a column order found per block."""
+    block is the same as of the whole matrix, in a column order found per block.  Given the
+    constant ``mass`` (the upper-left block of every K solved), a Schur block's group is also
+    keyed by its block M_b, and solved with M_b's Cholesky factor as constants
+    (:func:`_mass_schur_solve`) where that takes fewer instructions."""
     groups: dict[tuple, list[np.ndarray]] = {}
     for idx, nb in zip(blocks, schur):
         sub, _ = pattern.sub(idx.tolist(), idx.tolist())
-        key = (sub.size1(), tuple(sub.colind()), tuple(sub.row()), nb)
+        Mb = mass[np.ix_(idx[:nb], idx[:nb])].tobytes() if nb and mass is not None else None
+        key = (sub.size1(), tuple(sub.colind()), tuple(sub.row()), Mb, nb)
         groups.setdefault(key, []).append(idx)
     parts, order = [], []
     for g, (key, members) in enumerate(groups.items()):
@@ -421,6 +429,10 @@ def _block_solves(pattern: ca.Sparsity, blocks: list[np.ndarray], K: ca.MX, r: c
         V, R, *_ = ca.qr_sparse(ca.DM(sub, 1.0), True)
         if key[-1]:
             f = _schur_solve(sub, key[-1], f"step_solve_block{g}")
+            nb = key[-1]
+            fm = _mass_schur_solve(sub, mass[np.ix_(members[0][:nb], members[0][:nb])], None,
+                                   f"step_solve_block{g}") if key[-2] is not None else None
+            f = fm if fm is not None and fm.n_instructions() < f.n_instructions() else f
         elif V.nnz() + R.nnz() <= SX_QR_MAX_NNZ:
             f = _sx_solve(sub, f"step_solve_block{g}")
         else:
@@ -451,7 +463,8 @@ def _schur_solve(pattern: ca.Sparsity, nb: int, name: str) -> ca.Function:
     return ca.Function(name, [K, r], [ca.vertcat(Hr - ca.mtimes(HB, y), y)], ["K", "r"], ["x"])
 
 
-def _mass_schur_solve(pattern: ca.Sparsity, mass: np.ndarray | None, qr_size: int, name: str) -> ca.Function | None:
+def _mass_schur_solve(pattern: ca.Sparsity, mass: np.ndarray | None, qr_size: int | None, name: str) \
+        -> ca.Function | None:
     """``name: (K, r) -> K⁻¹ r`` for ``K = [[M, B], [C, 0]]`` of ``pattern`` whose upper-left
     block is the constant ``mass`` M (nq × nq, the first nq rows; B and C read from K):
     ``S = C M⁻¹ B``, ``S y = C M⁻¹ r₁ − r₂``, ``x = [M⁻¹ (r₁ − B y); y]``, M⁻¹ applied by the
@@ -459,12 +472,13 @@ def _mass_schur_solve(pattern: ca.Sparsity, mass: np.ndarray | None, qr_size: in
     banded and so is L) and S by its sparse QR unrolled into SX.  None where it does not
     apply: no mass, M not positive definite or worse conditioned than
     :data:`SCHUR_MAX_COND`, nonzeros in K's lower-right block, or more than ``qr_size``
-    (the nonzeros of K's QR factors) cubed constraints, as the dense complement's QR alone
-    takes about nc³ instructions (K's QR about 15 per nonzero).  L is computed without
+    (the nonzeros of K's QR factors; ``None``: no such bound, for a small block) cubed
+    constraints, as the dense complement's QR alone takes about nc³ instructions (K's QR
+    about 15 per nonzero).  L is computed without
     BLAS (:func:`ncgen.reproducible.cholesky`: the constants are the same on every CPU)."""
     nq = 0 if mass is None else mass.shape[0]
     n = pattern.size1()
-    if not 0 < nq < n or (n - nq) ** 3 > qr_size or pattern.sub(list(range(nq, n)), list(range(nq, n)))[0].nnz():
+    if not 0 < nq < n or (qr_size is not None and (n - nq) ** 3 > qr_size) or pattern.sub(list(range(nq, n)), list(range(nq, n)))[0].nnz():
         return None
     if not np.all(np.isfinite(mass)) or np.linalg.cond(mass) > SCHUR_MAX_COND:
         return None

@@ -66,14 +66,18 @@ static const casadi_real pair_bound[NE * 3] = {1, 0, 1e300, 1, 0, 1e300};
 #define PAIR_NS 2
 static const int pair_sid[NE * 2] = {0, -1, 1, -1};
 static const int pair_srep[PAIR_NS * 2] = {0, 0, 1, 0};
-/* gap y - R_P; W rows dy (normal) and dx (tangent), column-major over (x, y) */
+/* gap y - R_P; W rows dy (normal) and dx (tangent), column-major over (x, y); the calls
+ * counted (test_pair_cache) */
+static int n_pair_gap, n_pair_rows;
 static int k_pair_gap(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
   (void) iw, (void) w, (void) mem;
+  ++n_pair_gap;
   res[0][0] = arg[0][1] - R_P;
   return 0;
 }
 static int k_pair_rows(const casadi_real **arg, casadi_real **res, casadi_int *iw, casadi_real *w, int mem) {
   (void) iw, (void) w, (void) mem;
+  ++n_pair_rows;
   res[0][0] = arg[0][1] - R_P;
   res[1][0] = 0, res[1][1] = 1, res[1][2] = 1, res[1][3] = 0;
   return 0;
@@ -505,6 +509,40 @@ static void test_sweep_random(void) {
         missed);
   CHECK(near > 100 && swept > near, "the scenes have near pairs (%d) and the sweep found them (%d)", near, swept);
 }
+
+/* The elements' last results (pair_eval()): the rows again at the same coordinates without a
+ * kernel call and equal to the first ones, gaps from kept rows, rows after kept gaps and at
+ * moved coordinates from the kernel, two configurations kept (a third replaces the less
+ * recently used); a new layout() starts empty. */
+static void test_pair_cache(void) {
+  casadi_real q[NQ] = {0, R_P + 0.3, 1, R_P}, v[NQ] = {1, 2, 0, -3};
+  casadi_real g[NK], W[NNZ_W], U[ND], g2[NK], W2[NNZ_W], U2[ND];
+  workspace ws;
+  char *block = malloc(step_work_bytes());
+  layout(&ws, block);
+  ws.pon[0] = ws.pon[1] = 1;
+  n_pair_gap = n_pair_rows = 0;
+  CHECK(contact_gap(&ws, q, 0, g) == STEP_OK && n_pair_gap == 2, "gaps evaluated: %d", n_pair_gap);
+  CHECK(contact_rows(&ws, q, v, 0, g, W, U, 1) == STEP_OK && n_pair_rows == 2, "rows after gaps: %d", n_pair_rows);
+  CHECK(contact_rows(&ws, q, v, 0, g2, W2, U2, 1) == STEP_OK && n_pair_rows == 2, "rows kept: %d", n_pair_rows);
+  CHECK(!memcmp(g, g2, sizeof g) && !memcmp(W, W2, sizeof W) && !memcmp(U, U2, sizeof U), "kept rows differ");
+  CHECK(contact_gap(&ws, q, 0, g2) == STEP_OK && n_pair_gap == 2 && !memcmp(g, g2, sizeof g), "gaps from rows");
+  const casadi_real yb = q[3];
+  q[3] = yb + 1e-3; /* element 1 moved, element 0 not */
+  CHECK(contact_rows(&ws, q, v, 0, g2, W2, U2, 1) == STEP_OK && n_pair_rows == 3, "moved: %d", n_pair_rows);
+  CHECK(fabs(g2[1] - 1e-3) < 1e-15 && g2[0] == g[0], "gaps %g %g", g2[0], g2[1]);
+  q[3] = yb; /* back: both configurations kept */
+  CHECK(contact_rows(&ws, q, v, 0, g2, W2, U2, 1) == STEP_OK && n_pair_rows == 3 && !memcmp(W, W2, sizeof W),
+        "the first configuration again: %d", n_pair_rows);
+  q[3] = yb + 2e-3; /* a third: replaces the less recently used (the moved one), q is kept */
+  CHECK(contact_rows(&ws, q, v, 0, g2, W2, U2, 1) == STEP_OK && n_pair_rows == 4, "third: %d", n_pair_rows);
+  q[3] = yb;
+  CHECK(contact_rows(&ws, q, v, 0, g2, W2, U2, 1) == STEP_OK && n_pair_rows == 4, "q kept: %d", n_pair_rows);
+  layout(&ws, block);
+  ws.pon[0] = ws.pon[1] = 1;
+  CHECK(contact_gap(&ws, q, 0, g2) == STEP_OK && n_pair_gap == 4, "emptied by layout: %d", n_pair_gap);
+  free(block);
+}
 #endif
 
 int main(void) {
@@ -517,6 +555,7 @@ int main(void) {
 #ifdef PAIRS
   test_broad_phase();
   test_sweep_random();
+  test_pair_cache();
   return report("test_contact (element kernels, broad phase)");
 #elif defined(SCHUR_FACTORED)
   return report("test_contact (Schur complement, factored KKT matrix)");

@@ -17,25 +17,16 @@
  * contact its normal row, then its tangent rows, zero without friction; columns: the local
  * coordinates arg[0] of its first side, then arg[1] of its second), as its per-model kernel
  * step_pair<k>_rows gives them: each point contact's kind on the canonical coordinates of the
- * two sides (q_c = B q_local, B's nonzeros cm_*), its W mapped back, W_local = W_c B; the
- * element's last results again where its coordinates are the same (tab_pairs).  w:
- * TAB_PAIR_WORK doubles (ncgen_table_stepper.h).  Returns 0, or 1 when a kernel failed. */
+ * two sides (q_c = B q_local, B's nonzeros cm_*), its W mapped back, W_local = W_c B (an
+ * element's last results are kept by ncgen_contact_pairs.h's pair_eval()).  w: TAB_PAIR_WORK
+ * doubles (ncgen_table_stepper.h).  Returns 0, or 1 when a kernel failed. */
 static int tab_pair_eval(const casadi_real **arg, casadi_real **res, casadi_real *w, int e, int rows) {
   const struct ncgen_contact_tables *C = tab_cur->ct;
   const int *pi = C->pair_int + 8 * e, dim = tab_cur->T->dim;
   const int count = pi[2], nrow = pi[2] * dim, n[2] = {pi[3], pi[4]};
   const size_t nw = (size_t)nrow * (size_t)(n[0] + n[1]);
   casadi_real *qc = w + TAB_PAIR_W, *x = qc + 2 * TAB_PAIR_QC, *g = x + 2 * TAB_PAIR_QC, *Wc = g + 1;
-  double *slot = tab_pairs ? tab_pairs + (size_t)e * TAB_PAIR_SLOT(C) : 0;   /* NULL: outside a run */
-  double *sq = slot ? slot + 1 : 0, *sg = slot ? sq + C->max_q : 0, *sw = slot ? sg + C->max_g : 0;
   int ncs[2], lo[2], hi[2], s, j, d, k, t;
-  if (slot && slot[0] >= (rows ? 2 : 1) && !memcmp(sq, arg[0], sizeof(casadi_real) * (size_t)n[0]) &&
-      !memcmp(sq + n[0], arg[1], sizeof(casadi_real) * (size_t)n[1])) {
-    memcpy(res[0], sg, sizeof(casadi_real) * (size_t)count);
-    if (rows) memcpy(res[1], sw, sizeof(casadi_real) * nw);
-    return 0;
-  }
-  if (slot) slot[0] = 0;
   for (s = 0; s < 2; ++s) {
     ncs[s] = C->cm_n[2 * e + s];
     lo[s] = C->cm_ptr[2 * e + s];
@@ -43,7 +34,7 @@ static int tab_pair_eval(const casadi_real **arg, casadi_real **res, casadi_real
     memset(qc + s * TAB_PAIR_QC, 0, sizeof(casadi_real) * (size_t)ncs[s]);
     for (t = lo[s]; t < hi[s]; ++t) qc[s * TAB_PAIR_QC + C->cm_row[t]] += C->cm[t] * arg[s][C->cm_col[t]];
   }
-  if (rows) memset(res[1], 0, sizeof(casadi_real) * (size_t)nrow * (size_t)(n[0] + n[1]));
+  if (rows) memset(res[1], 0, sizeof(casadi_real) * nw);
   for (j = 0; j < count; ++j) {
     const int pc = pi[1] + j, sa = C->pk_swap[pc];
     const ncgen_pair_kind *K = &TAB_PAIR_KINDS[C->pk_kind[pc]];
@@ -67,12 +58,6 @@ static int tab_pair_eval(const casadi_real **arg, casadi_real **res, casadi_real
       }
     }
   }
-  if (!slot) return 0;
-  memcpy(sq, arg[0], sizeof(casadi_real) * (size_t)n[0]);
-  memcpy(sq + n[0], arg[1], sizeof(casadi_real) * (size_t)n[1]);
-  memcpy(sg, res[0], sizeof(casadi_real) * (size_t)count);
-  if (rows) memcpy(sw, res[1], sizeof(casadi_real) * nw);
-  slot[0] = rows ? 2 : 1;
   return 0;
 }
 

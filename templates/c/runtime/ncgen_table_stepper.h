@@ -144,27 +144,18 @@ static TAB_THREAD int tab_qvalid;
  * ncgen_contact.h: delassus_kkt); tab_lu_valid whether it holds one. */
 static TAB_THREAD double *tab_lu;
 static TAB_THREAD int tab_lu_valid;
-/* The contact elements' last rows (ncgen_table_contacts.h: tab_pair_eval): per element e, at
- * tab_pairs + e TAB_PAIR_SLOT(ct), whether it holds its gaps (1) or also its rows (2), then
- * its local coordinates (max_q), gaps (max_g) and dense W (max_w) at them: a step evaluates an
- * element's rows several times at the same coordinates (its contact solve, its refinements). */
-static TAB_THREAD double *tab_pairs;
-#define TAB_PAIR_SLOT(C) (1 + (size_t)(C)->max_q + (size_t)(C)->max_g + (size_t)(C)->max_w)
 
 /* Starts a run on the tables S in this thread: 0, or 1 when out of memory. */
 static int tab_begin(const ncgen_stepper_tables *S) {
   size_t n = (size_t)S->T->nq + (size_t)S->T->nc + (size_t)S->T->a_nnz;
   size_t nqc = 2 * (size_t)S->T->nq + (size_t)S->T->nf * (size_t)S->T->dim;
   size_t nlu = S->lu.n ? (size_t)S->nnz_k + 2 * (size_t)S->lu.nnz_l + (size_t)S->lu.n : 0;
-  size_t npairs = S->ct ? (size_t)S->ct->ne * TAB_PAIR_SLOT(S->ct) : 0, e;
   tab_cur = S;
   tab_ew_size = ncgen_tables_work_size(TAB_KINDS, S->T);
-  tab_cache[0] = malloc((2 * n + nqc + nlu + npairs) * sizeof(double) + 1);
+  tab_cache[0] = malloc((2 * n + nqc + nlu) * sizeof(double) + 1);
   tab_cache[1] = tab_cache[0] ? tab_cache[0] + n : 0;
   tab_qcache = tab_cache[0] ? tab_cache[0] + 2 * n : 0;
   tab_lu = tab_cache[0] ? tab_qcache + nqc : 0;
-  tab_pairs = tab_cache[0] ? tab_lu + nlu : 0;
-  for (e = 0; tab_pairs && e < npairs; e += TAB_PAIR_SLOT(S->ct)) tab_pairs[e] = 0;
   tab_valid[0] = tab_valid[1] = tab_qvalid = tab_lu_valid = 0;
   tab_recent = 0;
   return tab_cache[0] == 0;
@@ -173,7 +164,7 @@ static int tab_begin(const ncgen_stepper_tables *S) {
 /* Ends the run of tab_begin. */
 static void tab_end(void) {
   free(tab_cache[0]);
-  tab_cache[0] = tab_cache[1] = tab_qcache = tab_lu = tab_pairs = 0;
+  tab_cache[0] = tab_cache[1] = tab_qcache = tab_lu = 0;
   tab_valid[0] = tab_valid[1] = tab_qvalid = tab_lu_valid = 0;
 }
 
