@@ -213,35 +213,6 @@ def test_large_models_reroll_shorter_functions(monkeypatch):
     assert looped.reroll_limit(model, 500) == 500
 
 
-def _heap(law: str):
-    """Three spheres with friction on the ground and against each other (contacts ``law``)."""
-    s = nc.System(f"heap3{law[0]}", gravity=(0, 0, -9.81))
-    balls = [s.add_body(f"b{k}", mass=0.2, inertia=7.2e-5 * np.eye(3), position=(0.07 * k, 0, 0.03 + 0.07 * k))
-             for k in range(3)]
-    for k, b in enumerate(balls):
-        s.add_contact(nc.SpherePlane(b, None, 0.03, mu=0.5, name=f"floor{k}"))
-        for j in range(k):
-            s.add_contact(nc.SphereSphere(balls[j], None, 0.03, b, None, 0.03, mu=0.5, name=f"pair{j}{k}"))
-    return s.build(contacts=law)
-
-
-def test_nonsmooth_contact_functions_do_not_make_a_model_large(monkeypatch):
-    """Under nonsmooth contacts the model's flat contact functions (all pairs at once: 165 k of a
-    20-sphere heap's 190 k instructions) never enter its package flat, so they do not lower the
-    reroll limit; under the smooth law they enter F and count."""
-    from ncgen.codegen import looped
-
-    nonsmooth, smooth = _heap("nonsmooth"), _heap("smooth")
-    rest = sum(f.n_instructions() for n, f in nonsmooth.functions.items() if n not in looped.CONTACT_FUNCTIONS)
-    contacts = sum(nonsmooth.functions[n].n_instructions() for n in looped.CONTACT_FUNCTIONS)
-    assert contacts > 1000
-    monkeypatch.setattr(looped, "LARGE_MODEL_INSTRUCTIONS", rest + contacts // 2)   # large only with them
-    assert looped.reroll_limit(nonsmooth) == REROLL_INSTRUCTIONS
-    assert looped.reroll_limit(smooth) == looped.LARGE_MODEL_REROLL
-    monkeypatch.setattr(looped, "LARGE_MODEL_INSTRUCTIONS", rest - 1)               # large without them
-    assert looped.reroll_limit(nonsmooth) == looped.LARGE_MODEL_REROLL
-
-
 def test_composites_in_mx_match_the_model_and_only_the_named_ones_are_built():
     from ncgen.assembly.functions import composite_functions
     from ncgen.assembly.mass import sparse_dm

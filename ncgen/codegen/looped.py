@@ -35,22 +35,12 @@ LARGE_MODEL_INSTRUCTIONS = 40_000
 LARGE_MODEL_REROLL = 1_000
 
 
-#: The model's contact functions: under nonsmooth contacts the package evaluates them only
-#: through the stepper's contact kernels (per element, or ``step_contact``, each rerolled by
-#: its own length), so they do not make the model large.
-CONTACT_FUNCTIONS = ("gap", "contact_jacobian", "contact_force")
-
-
 def reroll_limit(model, reroll_instructions: int | None = REROLL_INSTRUCTIONS) -> int | None:
     """The reroll threshold of ``model``'s package: ``reroll_instructions``, lowered to
-    :data:`LARGE_MODEL_REROLL` for a model larger than :data:`LARGE_MODEL_INSTRUCTIONS`
-    (its functions' total, less :data:`CONTACT_FUNCTIONS` under nonsmooth contacts: a heap
-    of 20 spheres has 165 k instructions of all-pairs contact functions that its package
-    never generates flat, and rerolled its 6 k-instruction Newton kernel 12× slower)."""
+    :data:`LARGE_MODEL_REROLL` for a model larger than :data:`LARGE_MODEL_INSTRUCTIONS`."""
     if reroll_instructions is None:
         return None
-    skip = CONTACT_FUNCTIONS if getattr(model, "contact_model", "smooth") == "nonsmooth" else ()
-    total = sum(f.n_instructions() for name, f in model.functions.items() if name not in skip)
+    total = sum(f.n_instructions() for f in model.functions.values())
     return min(reroll_instructions, LARGE_MODEL_REROLL) if total > LARGE_MODEL_INSTRUCTIONS else reroll_instructions
 
 
