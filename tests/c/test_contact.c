@@ -514,13 +514,19 @@ static void test_sweep_random(void) {
  * kernel call and equal to the first ones, gaps from kept rows, rows after kept gaps and at
  * moved coordinates from the kernel, two configurations kept (a third replaces the less
  * recently used); a new layout() starts empty. */
+/* Both elements candidates and on (what a sweep and a selection would leave). */
+static void both_on(workspace *ws) {
+  ws->pcand[0] = 0, ws->pcand[1] = 1, ws->ncand = 2;
+  ws->pcm[0] = ws->pcm[1] = ws->pon[0] = ws->pon[1] = 1;
+}
+
 static void test_pair_cache(void) {
   casadi_real q[NQ] = {0, R_P + 0.3, 1, R_P}, v[NQ] = {1, 2, 0, -3};
   casadi_real g[NK], W[NNZ_W], U[ND], g2[NK], W2[NNZ_W], U2[ND];
   workspace ws;
   char *block = malloc(step_work_bytes());
   layout(&ws, block);
-  ws.pon[0] = ws.pon[1] = 1;
+  both_on(&ws);
   n_pair_gap = n_pair_rows = 0;
   CHECK(contact_gap(&ws, q, 0, g) == STEP_OK && n_pair_gap == 2, "gaps evaluated: %d", n_pair_gap);
   CHECK(contact_rows(&ws, q, v, 0, g, W, U, 1) == STEP_OK && n_pair_rows == 2, "rows after gaps: %d", n_pair_rows);
@@ -539,7 +545,7 @@ static void test_pair_cache(void) {
   q[3] = yb;
   CHECK(contact_rows(&ws, q, v, 0, g2, W2, U2, 1) == STEP_OK && n_pair_rows == 4, "q kept: %d", n_pair_rows);
   layout(&ws, block);
-  ws.pon[0] = ws.pon[1] = 1;
+  both_on(&ws);
   CHECK(contact_gap(&ws, q, 0, g2) == STEP_OK && n_pair_gap == 4, "emptied by layout: %d", n_pair_gap);
   free(block);
 }
