@@ -126,6 +126,16 @@ def test_the_install_builds_what_the_runtime_asks_for(monkeypatch):
         assert {s.cflags for s in ib.library_specs()} == ({None, *tr.UNIT_CFLAGS.values()} if flags is None else {flags})
 
 
+
+def test_the_install_commands_import_without_setuptools():
+    """An installed ncgen's every module imports (CI's base install checks it): without
+    setuptools (no run-time dependency) the install's command classes are inert (that they are
+    setuptools' commands in a build: ``test_the_wheel_carries_the_libraries_...``)."""
+    blocked = ("import sys; sys.modules['setuptools'] = None; "
+               "import ncgen.runtime.install_commands as m; print(m.BuildPy.__mro__[1].__name__)")
+    out = subprocess.run([sys.executable, "-c", blocked], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "object"
+
 CHILD = """
 import json, sys
 from pathlib import Path

@@ -16,8 +16,10 @@ libraries are loaded with ctypes, not as Python extensions); one without stays
 
 setuptools loads this file by its path while it reads pyproject.toml, before ncgen is
 importable (nothing of ncgen is imported at its top: only the standard library and
-setuptools); the commands import ncgen from the source tree when they run.  Only the build
-imports it: setuptools is no dependency of ncgen at run time.
+setuptools); the commands import ncgen from the source tree when they run.  setuptools is no
+dependency of ncgen at run time: without it (or with one older than the build requirement)
+the module imports with inert command classes, so that every module of an installed ncgen
+imports.
 """
 from __future__ import annotations
 
@@ -26,8 +28,11 @@ import shutil
 import sys
 from pathlib import Path
 
-from setuptools.command.bdist_wheel import bdist_wheel
-from setuptools.command.build_py import build_py
+try:                                    # a build: setuptools >= 77, the build requirement
+    from setuptools.command.bdist_wheel import bdist_wheel
+    from setuptools.command.build_py import build_py
+except ImportError:                     # run time (no setuptools, or an old one): the module still imports
+    bdist_wheel = build_py = object
 
 ROOT = Path(__file__).resolve().parents[2]          # the source tree: ncgen/runtime/ -> its root
 
