@@ -41,7 +41,9 @@ import time
 
 import numpy as np
 
-from common import L, chain_mjcf, chain_system, ends, machine, mujoco_tip
+from common import L, chain_mjcf, chain_system, ends, machine, mujoco_tip, terminal_sigint
+
+terminal_sigint()
 
 N_BARS = 5
 OUTPUT_DT = 0.1

@@ -46,8 +46,10 @@ sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent / "tests"))
 
-from common import machine  # noqa: E402
+from common import machine, terminal_sigint  # noqa: E402
 from tree_algorithms import batch_time, interleaved as interleaved_wall  # noqa: E402
+
+terminal_sigint()
 
 
 def interleaved(ours, theirs, calls: int, rounds: int) -> dict:

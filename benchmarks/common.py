@@ -25,6 +25,7 @@ import platform
 import re
 import resource
 import shutil
+import signal
 import subprocess
 import time
 from typing import Callable
@@ -34,6 +35,17 @@ import numpy as np
 L, MASS = 0.3, 0.2
 AXIAL_INERTIA = 1e-6
 GRAVITY = (0.0, 0.0, -9.81)
+
+
+# ---------------------------------------------------------------- SIGINT
+def terminal_sigint() -> None:
+    """Give SIGINT Python's own handler (``KeyboardInterrupt``), as in a run started from a
+    terminal.  A background job (``cmd &`` in a non-interactive shell, ``nohup``) starts with
+    SIGINT ignored, and ncgen then takes another path into its C loops
+    (:func:`ncgen.interrupts.call_interruptibly`: no stop watcher), so a benchmark run so
+    would time what a user at a terminal does not get.  Called at the start of the scripts
+    that time ``simulate``, control or the doors; child processes inherit the default."""
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 # ---------------------------------------------------------------- machine

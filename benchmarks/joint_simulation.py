@@ -52,7 +52,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import ncgen as nc  # noqa: E402
-from common import machine  # noqa: E402
+from common import machine, terminal_sigint  # noqa: E402
+
+terminal_sigint()
 
 ROBOTS = {"panda": ("panda_description/urdf/panda.urdf", False),
           "talos": ("talos_data/robots/talos_reduced.urdf", True)}

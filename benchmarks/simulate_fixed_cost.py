@@ -23,7 +23,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import machine  # noqa: E402
+from common import machine, terminal_sigint  # noqa: E402
+
+terminal_sigint()
 
 CHILD = r"""
 import json, re, sys, time
