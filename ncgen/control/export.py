@@ -4,10 +4,10 @@ problem as a standalone C package that builds with ``make`` and runs without Pyt
 The package (written by :func:`ncgen.codegen.package.write_package`, so it is reproducible,
 written in a temporary sibling and renamed into place, with a manifest) holds:
 
-* ``<name>_mpc_qp_data``, ``<name>_mpc_qp``, ``<name>_mpc_update``, ``<name>_mpc_merit``:
-  one SQP iteration of :mod:`ncgen.control.mpc` (the condensed QP, CasADi's ``qrqp``, the
-  full step, cost and infeasibility of a trial of the line search), generated C,
-  self-contained;
+* ``<name>_mpc_qp_blocks``, ``<name>_mpc_qp``, ``<name>_mpc_update``, ``<name>_mpc_merit``:
+  one SQP iteration of :mod:`ncgen.control.mpc` (the QP's blocks interval by interval,
+  CasADi's ``qrqp``, the full step, cost and infeasibility of a trial of the line search),
+  generated C, self-contained; the blocks are condensed by ``ncgen_condense.h`` (plain C);
 * ``<name>_plant_step``: one RATTLE step of ``h / substeps`` (:mod:`ncgen.control.discrete`),
   the plant of the demo;
 * ``<name>_mpc.h``/``.c``: the API ``<name>_mpc_init``, ``<name>_mpc_step(m, x, t, u_out)``,
@@ -151,11 +151,12 @@ def export_mpc(ocp, path, *, name: str | None = None, solver: str = "sqp", itera
         from ncgen.control.export_fatrop import fatrop_controller
         fns, own, controller = fatrop_controller(model, problem, name, iterations, fatrop_options)
     else:
-        fns, own = mpc_functions(model, problem, regularization=REGULARIZATION), []
+        fns, own = mpc_functions(model, problem, regularization=REGULARIZATION)[1:], []      # C condenses the blocks
         controller = controller_context(model, problem, fns, iterations, line_search_rules(model))
     kind = "fatrop" if solver == "fatrop" else "mpc"
     context = {**controller, **_demo_context(model, problem, plant, x0, t_end, substeps, warmup, pl)}
     extra = [*own, ExtraSource("runtime/ncgen_mpc.h", "ncgen_mpc.h", included=True),
+             *([ExtraSource("runtime/ncgen_condense.h", "ncgen_condense.h", included=True)] if kind == "mpc" else []),
              ExtraSource(f"mpc/{kind}.h.j2", f"{name}_mpc.h", context),
              ExtraSource(f"mpc/{kind}.c.j2", f"{name}_mpc.c", context),
              ExtraSource("mpc/demo.c.j2", "demo.c", context, program=True)]

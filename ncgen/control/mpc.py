@@ -63,7 +63,7 @@ STATIONARY = 1e-12
 def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
                   qp_max_iter: int = 100, sx_qr_max_nnz: int | None = None,
                   qp_solver: str = "qrqp") -> list[ca.Function]:
-    """The four CasADi functions of one SQP iteration (see the module docstring):
+    """The CasADi functions of one SQP iteration (see the module docstring):
 
     * ``mpc_qp_data: (x, t, X̄, Ū) -> (H, g, A, lba, uba, lbx, ubx, Xs, S, J, c, res)``: the
       condensed QP in ``δU`` (``vec δX = S δU + (Xs − vec X̄)``) and the guess's merit
@@ -71,7 +71,12 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
     * ``mpc_qp``: CasADi's ``qrqp`` on it (returns its last iterate also when it reports a
       failure: the caller checks it), or the ``qp_solver`` of :mod:`ncgen.control.mpc_qp`;
     * ``mpc_update: (Xs, S, Ū, δU) -> (X⁺, U⁺)``: the full step;
-    * ``mpc_merit`` (:func:`merit_function`): cost and infeasibility of a trial.
+    * ``mpc_merit`` (:func:`merit_function`): cost and infeasibility of a trial;
+    * ``mpc_qp_blocks: (x, t, X̄, Ū) -> (A, B, d, Q, M, R, g_x, g_u, J, c, res)``: the QP before
+      condensing, the intervals' blocks side by side (dense; ``d``: ``x − x̄_0`` and the shooting
+      gaps ``x̄⁺_k − x̄_{k+1}``, ``Q``, ``g_x`` with the terminal node's last) and the guess's
+      merit: the compiled controller's input, which condenses in C (``templates/c/runtime/
+      ncgen_condense.h``: the same QP as ``mpc_qp_data``, dense loops over the blocks).
 
     ``sx_qr_max_nnz``: the step Jacobians' QR is unrolled into straight-line C up to this size
     (:func:`ncgen.control.discrete.qr_solve_columns`), else generated as loops.
@@ -108,14 +113,18 @@ def mpc_functions(model, problem, *, regularization: float = REGULARIZATION,
         A_taut, lb_taut = taut_rows(problem, X, U, times, S, s)
         A_rows, lb_rows = ca.vertcat(A_rows, A_taut), ca.vertcat(lb_rows, lb_taut)
         ub_rows = ca.vertcat(ub_rows, ca.DM.inf(n_taut))
+    merit = (total_cost_function(problem, nx, nu)(X, U, t), infeasibility(problem, x, X, U, x1, times), ca.mmax(res))
     data = ca.Function(
         "mpc_qp_data", [x, t, X, U],
         [ca.densify(e) for e in (0.5 * (G + G.T) + H_UU, gc, A_rows, lb_rows, ub_rows, ca.vec(ca.repmat(lo_u, 1, N) - U),
-                                 ca.vec(ca.repmat(hi_u, 1, N) - U), Xn, S,
-                                 total_cost_function(problem, nx, nu)(X, U, t),
-                                 infeasibility(problem, x, X, U, x1, times), ca.mmax(res))],
+                                 ca.vec(ca.repmat(hi_u, 1, N) - U), Xn, S, *merit)],
         ["x", "t", "X_guess", "U_guess"], ["H", "g", "A", "lba", "uba", "lbx", "ubx", "Xs", "S", "J", "c", "res"])
-    return [data, qp, update_function(nx, nu, N), merit_function(model, problem)]
+    blocks = ca.Function(
+        "mpc_qp_blocks", [x, t, X, U],
+        [ca.densify(e) for e in (A, B, ca.horzcat(x - X[:, 0], x1 - X[:, 1:]), ca.horzcat(Q, Q_N), M, R,
+                                 ca.horzcat(g_x, g_N), g_u, *merit)],
+        ["x", "t", "X_guess", "U_guess"], ["A", "B", "d", "Q", "M", "R", "g_x", "g_u", "J", "c", "res"])
+    return [data, qp, update_function(nx, nu, N), merit_function(model, problem), blocks]
 
 
 def update_function(nx: int, nu: int, N: int) -> ca.Function:
@@ -354,15 +363,21 @@ class MPC:
         self.functions = mpc_functions(self.model, self.problem, regularization=regularization,
                                        qp_max_iter=qp_max_iter, sx_qr_max_nnz=sx_qr_max_nnz, qp_solver=self.qp_solver)
         from ncgen.control.step_support import compile_functions
-        compiled = [f for f in self.functions if f.name() != "mpc_qp" or self.qp_solver in GENERATED]
+        unused = ("mpc_qp_data",) if refusal is None else ("mpc_qp_blocks",)   # the controller's C condenses
+        compiled = [f for f in self.functions if (f.name() != "mpc_qp" or self.qp_solver in GENERATED)
+                    and f.name() not in unused]
         name = f"{self.model.name}_mpc"
         lib = compile_functions(name, compiled, extra_sources=() if refusal else controller_sources(
-            self.model, self.problem, self.functions, name))
+            self.model, self.problem, self.functions[1:], name))
         lib.setdefault("mpc_qp", InProcessQP(self.functions[1]))
-        self._data, self._qp, self._update, self._merit_fn = (lib[f.name()] for f in self.functions)
-        if refusal is None:
+        self._qp, self._update, self._merit_fn = (lib[f.name()] for f in self.functions[1:4])
+        if refusal is None:               # the QP condensed by the controller's C, in both loops (the same numbers)
             from ncgen.control.mpc_c_loop import CompiledLoop
-            self._c = CompiledLoop(self._data.library, name, self.nx, self.nu, self.N)
+            self._c = CompiledLoop(self._update.library, name, self.nx, self.nu, self.N,
+                                   self.functions[0].nnz_out("lba"))
+            self._data = self._c.condensed_qp
+        else:
+            self._data = lib["mpc_qp_data"]
 
     def __repr__(self) -> str:
         if self.fatrop is not None:
@@ -529,6 +544,7 @@ def controller_sources(model, problem, functions, name: str) -> list:
     from ncgen.control.mpc_context import controller_context
     context = controller_context(model, problem, functions, None, line_search_rules(model))
     return [ExtraSource("runtime/ncgen_mpc.h", "ncgen_mpc.h", included=True),
+            ExtraSource("runtime/ncgen_condense.h", "ncgen_condense.h", included=True),
             ExtraSource("mpc/mpc.h.j2", f"{name}_mpc.h", context),
             ExtraSource("mpc/mpc.c.j2", f"{name}_mpc.c", context)]
 

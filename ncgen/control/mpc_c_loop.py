@@ -29,6 +29,9 @@ SIGNATURES = {
     "mpc_set_iterations": Signature("void", (("{name}_mpc *", "m"), ("int", "iterations"))),
     "mpc_report": Signature("void", (("const {name}_mpc *", "m"), ("int *", "qp_status"),
                                      ("casadi_real *", "alpha"))),
+    "mpc_condensed_qp": Signature("int", (("{name}_mpc *", "m"), ("const casadi_real *", "x"), ("casadi_real", "t"),
+                                         ("const casadi_real *", "X"), ("const casadi_real *", "U"),
+                                         ("casadi_real * const *", "out"))),
 }
 #: Return codes of ``mpc_init`` and ``mpc_step`` (``templates/c/runtime/ncgen_mpc.h``).
 OK, FAILED, BAD_INPUT = 0, 1, 2
@@ -40,7 +43,7 @@ class CompiledLoop:
     step); ``X``, ``U``: the guess, ``X_sol``, ``U_sol``: the last solution (views of the
     struct, (N + 1) × nx and N × nu)."""
 
-    def __init__(self, library, name: str, nx: int, nu: int, N: int):
+    def __init__(self, library, name: str, nx: int, nu: int, N: int, n_rows: int = 0):
         self._lib = open_library(library)
         self._fn = {k: bind(self._lib, f"{name}_{k}", s, name=name, addresses=True) for k, s in SIGNATURES.items()}
         size = int(self._fn["mpc_sizeof"]())
@@ -52,6 +55,22 @@ class CompiledLoop:
         self._u = np.zeros(max(nu, 1))
         self._status, self._alpha = ctypes.c_int(0), ctypes.c_double(0.0)
         self._started = False
+        nU = nu * N
+        self._qp = [np.zeros(max(n, 1)) for n in (nU * nU, nU, n_rows * nU, n_rows, n_rows, nU, nU, nxs, nxs * nU,
+                                                    1, 1, 1)]
+        self._qp_out = (ctypes.c_void_p * len(self._qp))(*(a.ctypes.data for a in self._qp))
+        self._qp_arrays = [a[:n] for a, n in zip(self._qp, (nU * nU, nU, n_rows * nU, n_rows, n_rows, nU, nU, nxs,
+                                                             nxs * nU, 1, 1, 1))]
+
+    def condensed_qp(self, x: np.ndarray, t: np.ndarray, X: np.ndarray, U: np.ndarray) -> list[np.ndarray]:
+        """The condensed QP at the guess ``(X, U)`` (float64, contiguous, node by node) from the
+        controller's C (``ncgen_condense.h``): ``mpc_qp_data``'s outputs ``H, g, A, lba, uba, lbx,
+        ubx, Xs, S, J, c, res`` as flat arrays (column-major), overwritten by the next call;
+        :class:`OptimizationError` when a step along the guess fails.  ``t``: a 1-array."""
+        if self._fn["mpc_condensed_qp"](self._m, x.ctypes.data, float(t[0]), X.ctypes.data, U.ctypes.data,
+                                        ctypes.addressof(self._qp_out)):
+            raise OptimizationError("the compiled controller's QP data: a step along the guess failed")
+        return self._qp_arrays
 
     def start(self, x: np.ndarray, t: float, iterations: int, per_step: int) -> int:
         """The guess set to ``x`` held with the inputs at rest, then ``iterations`` solves at

@@ -12,7 +12,8 @@ from ncgen.errors import NcgenError
 
 def controller_context(model, problem, fns, iterations: int | None, rules: dict) -> dict:
     """The templates' context of the controller for the SQP functions ``fns``
-    (:func:`~ncgen.control.mpc.mpc_functions`); ``iterations``: per control step, or ``None``
+    (:func:`~ncgen.control.mpc.mpc_functions` but ``mpc_qp_data``: the controller condenses
+    ``mpc_qp_blocks`` itself, the QP's rows being the bounded state components); ``iterations``: per control step, or ``None``
     for the controller inside ``nc.MPC(..., loop="c")`` (``in_process``: iterations set at run
     time, no plant); ``rules``: :func:`~ncgen.control.mpc.line_search_rules` (step lengths,
     Armijo fraction, filter margin, feasibility and stationarity thresholds, the step's
@@ -22,6 +23,8 @@ def controller_context(model, problem, fns, iterations: int | None, rules: dict)
     from ncgen.codegen.kernels import c_function
     nx, nu = 2 * model.nq, model.nu
     u_rest = np.clip(np.zeros(nu), *problem.u_bounds)
+    lo_x, hi_x = problem.x_bounds
+    bounded = np.flatnonzero(np.isfinite(lo_x) | np.isfinite(hi_x))      # the QP's rows (mpc_functions')
     generated = [c_function(f, f.name()) for f in fns]     # the work the C functions ask for (a wrapper's, say)
     return {
         "model_name": model.name, "N": problem.N, "h": f"{problem.h:g}", "h_c": c_double(problem.h),
@@ -33,6 +36,9 @@ def controller_context(model, problem, fns, iterations: int | None, rules: dict)
         "u_rest": ", ".join(c_double(v) for v in u_rest) or "0",
         "u_lo": ", ".join(c_bound(v) for v in problem.u_bounds[0]) or "0",
         "u_hi": ", ".join(c_bound(v) for v in problem.u_bounds[1]) or "0",
+        "nb": len(bounded), "x_bounded": ", ".join(str(int(i)) for i in bounded) or "0",
+        "x_lo": ", ".join(c_bound(lo_x[i]) for i in bounded) or "0",
+        "x_hi": ", ".join(c_bound(hi_x[i]) for i in bounded) or "0",
         "alphas": rules["alphas"], **{k: c_double(rules[k]) for k in ("armijo", "gamma", "c_min", "stationary",
                                                                      "step_tol")},
     }
