@@ -5,7 +5,8 @@ by another Newton scheme (the staged RATTLE solve of :func:`ncgen.control.discre
 against the whole-residual rootfinder of the step Jacobians), to round-off, at a guess with
 shooting gaps, a state bound violated and (with ``min_tension``) a slack cable; and ``c`` is
 the sum of its terms evaluated by hand from the merit's own steps.  Its QP (built from one
-interval's kernel per interval) equals the horizon's Gauss–Newton QP condensed densely from
+interval's kernel per interval), and the same QP condensed by the compiled controller's C from
+the intervals' blocks, equal the horizon's Gauss–Newton QP condensed densely from
 finite-difference step Jacobians and the whole horizon's cost Hessian."""
 from __future__ import annotations
 
@@ -36,13 +37,17 @@ def model():
     return hanging()
 
 
-def problem_of(model, min_tension):
+def ocp_of(model):
     ocp = nc.OptimalControl(model, N=N, t_final=N * H)
     ocp.bound_input("l0", 0.5, 1.5)
     ocp.bound_coordinate(model.coordinate_names[2], -1.2, -0.99)      # the height: violated by the guess below
     ocp.minimize_effort(1e-3)
     ocp.final(q=[0, 0, -0.95], v=[0, 0, 0])
-    return mpc_problem(ocp, 1e3, min_tension=min_tension)
+    return ocp
+
+
+def problem_of(model, min_tension):
+    return mpc_problem(ocp_of(model), 1e3, min_tension=min_tension)
 
 
 @pytest.mark.parametrize("min_tension", [None, 50.0])
@@ -73,23 +78,14 @@ def test_qp_data_returns_the_merit_of_its_guess(model, min_tension):
     assert abs(float(out["c"]) - by_hand) <= 1e-12 * by_hand
 
 
-def test_qp_data_by_intervals_equal_the_horizon_condensed_densely(model):
-    """The QP data, built from one interval's kernel called per interval (a serial map) and
-    condensed in MX, equal the Gauss–Newton QP of the whole horizon condensed densely here: the
+def horizon_condensed_densely(model, problem, x, t, X, U):
+    """``(S, s, Hc, gc)``: the Gauss–Newton QP of the whole horizon condensed densely: the
     cost's Hessian and gradient of the whole horizon (one SX expression in all the nodes and
     inputs), the step Jacobians by central differences of the merit's own step (another Newton
-    scheme than the QP data's), ``S`` and ``s`` by the linearised recursion in NumPy; at a guess
-    with shooting gaps and a state bound violated, to the differences' accuracy."""
+    scheme than the QP data's), ``S`` and ``s`` by the linearised recursion in NumPy."""
     import casadi as ca
     from ncgen.control.mpc import REGULARIZATION, total_cost
-    problem = problem_of(model, None)
-    nx, nu, t = 6, 1, 0.1
-    rng = np.random.default_rng(5)
-    x = np.array([0.01, -0.02, -0.97, 0.1, 0.0, 0.4])
-    X = x + 0.02 * rng.normal(size=(N + 1, nx))
-    U = 0.9 + 0.05 * rng.normal(size=(N, nu))
-    data = mpc_functions(model, problem)[0]
-    out = {k: np.array(v) for k, v in zip(data.name_out(), data(x, t, X.T, U.T))}
+    nx, nu = X.shape[1], U.shape[1]
     step = step_functions(model, H)["step"]
 
     def f(k, xk, uk):
@@ -113,10 +109,57 @@ def test_qp_data_by_intervals_equal_the_horizon_condensed_densely(model):
     Hy, gy = (np.array(ca.Function("hg", [Xs, Us, ts], [Hy, gy])(X.T, U.T, t)[i]) for i in (0, 1))
     Hy += REGULARIZATION * np.eye(len(Hy))
     E = np.vstack([S, np.eye(N * nu)])                   # [δX; δU] = E δU + [s; 0]
-    Hc, gc = E.T @ Hy @ E, E.T @ (Hy @ np.concatenate([s, np.zeros(N * nu)]) + gy.ravel())
+    return S, s, E.T @ Hy @ E, E.T @ (Hy @ np.concatenate([s, np.zeros(N * nu)]) + gy.ravel())
+
+
+def guess(nx=6, nu=1):
+    """A guess with shooting gaps and the height's upper bound violated."""
+    rng = np.random.default_rng(5)
+    x = np.array([0.01, -0.02, -0.97, 0.1, 0.0, 0.4])
+    return x, x + 0.02 * rng.normal(size=(N + 1, nx)), 0.9 + 0.05 * rng.normal(size=(N, nu))
+
+
+def check_condensed(out, reference, x, X, U):
+    """``out`` (the QP data by name, flat or shaped) against the dense reference: ``S``, ``Xs``,
+    ``H``, ``g`` to the central differences' accuracy, the height's rows and the bounds."""
+    S, s, Hc, gc = reference
+    out = {k: np.asarray(v).reshape(-1, order="F") for k, v in out.items()}
+    nU = S.shape[1]
     # measured: 1.1e-10, 1.0e-11, 1.6e-10, 9.9e-11 (relative; the central differences' accuracy)
-    assert np.max(np.abs(out["S"] - S)) <= 1e-8 * np.max(np.abs(S))
-    assert np.max(np.abs(out["Xs"].ravel() - (X.ravel() + s))) <= 1e-8 * np.max(np.abs(s))
-    assert np.max(np.abs(out["H"] - Hc)) <= 1e-8 * np.max(np.abs(Hc))
-    assert np.max(np.abs(out["g"].ravel() - gc)) <= 1e-8 * np.max(np.abs(gc))
-    assert np.array_equal(out["H"], out["H"].T)
+    assert np.max(np.abs(out["S"].reshape(-1, nU, order="F") - S)) <= 1e-8 * np.max(np.abs(S))
+    assert np.max(np.abs(out["Xs"] - (X.ravel() + s))) <= 1e-8 * np.max(np.abs(s))
+    assert np.max(np.abs(out["H"].reshape(nU, nU, order="F") - Hc)) <= 1e-8 * np.max(np.abs(Hc))
+    assert np.max(np.abs(out["g"] - gc)) <= 1e-8 * np.max(np.abs(gc))
+    rows = [6 * k + 2 for k in range(1, N + 1)]                     # the height at nodes 1..N
+    Xn = X.ravel() + s
+    assert np.max(np.abs(out["A"].reshape(-1, nU, order="F") - S[rows])) <= 1e-8 * np.max(np.abs(S))
+    assert np.max(np.abs(out["lba"] - (-1.2 - Xn[rows]))) <= 1e-9 and np.max(np.abs(out["uba"] - (-0.99 - Xn[rows]))) <= 1e-9
+    assert np.array_equal(out["lbx"], 0.5 - U.ravel()) and np.array_equal(out["ubx"], 1.5 - U.ravel())
+
+
+def test_qp_data_by_intervals_equal_the_horizon_condensed_densely(model):
+    """The QP data, built from one interval's kernel called per interval (a serial map) and
+    condensed in MX, equal the Gauss–Newton QP of the whole horizon condensed densely here
+    (:func:`horizon_condensed_densely`), at a guess with shooting gaps and a state bound
+    violated, to the differences' accuracy."""
+    problem = problem_of(model, None)
+    t = 0.1
+    x, X, U = guess()
+    data = mpc_functions(model, problem)[0]
+    out = dict(zip(data.name_out(), data(x, t, X.T, U.T)))
+    check_condensed(out, horizon_condensed_densely(model, problem, x, t, X, U), x, X, U)
+
+
+@pytest.mark.slow                # compiles the controller's package
+def test_qp_condensed_by_the_controllers_c_equals_the_horizon_condensed_densely(model):
+    """The same QP condensed by the compiled controller's C (``ncgen_condense.h`` on the blocks
+    of ``mpc_qp_blocks``: the exported package's and ``loop="c"``'s, and the Python loop's where
+    the controller is compiled) against the same dense reference."""
+    mpc = nc.MPC(ocp_of(model), terminal_weight=1e3, loop="c")
+    t = 0.1
+    x, X, U = guess()
+    names = ["H", "g", "A", "lba", "uba", "lbx", "ubx", "Xs", "S", "J", "c", "res"]
+    out = dict(zip(names, mpc._c.condensed_qp(x, np.array([t]), X.ravel(), U.ravel())))
+    check_condensed(out, horizon_condensed_densely(model, mpc.problem, x, t, X, U), x, X, U)
+    J, c, res = (float(o) for o in merit_function(model, mpc.problem)(x, t, X.T, U.T))
+    assert out["res"][0] < 1e-10 and abs(out["J"][0] - J) <= 1e-12 * abs(J) and abs(out["c"][0] - c) <= 1e-12 * c
