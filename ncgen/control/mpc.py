@@ -28,10 +28,14 @@ inputs on the ``N`` intervals; multiple shooting):
 An iteration is four generated functions (:func:`mpc_functions`): the QP's data (with the
 guess's cost and infeasibility, from the same steps), ``qrqp``, the full step and the merit
 of a trial.  The QP's data call one interval's kernel (:func:`stage_function`) at every
-interval through a serial ``map`` and condense in MX, so their C is one interval's, whatever
-the horizon.  ``mpc(x, t)`` calls them through :class:`ncgen.codegen.direct.DirectFunction`;
-:func:`ncgen.control.export.export_mpc` writes the same functions and the same loop in C, so
-Python and C compute the same numbers.
+interval through a serial ``map``, so their C is one interval's, whatever the horizon; the
+compiled controller (:func:`ncgen.control.export.export_mpc`'s, also compiled into the MPC's
+own package where it applies, :mod:`ncgen.control.mpc_c_loop`) condenses the intervals' blocks
+(``mpc_qp_blocks``) in plain C (``templates/c/runtime/ncgen_condense.h``), and ``mpc(x, t)``
+takes its QP data from that C in both loops, so Python and C compute the same numbers; the
+controllers it does not cover (a reference, ``min_tension``, an in-process QP solver)
+condense in MX (``mpc_qp_data``, also the reference the C is tested against).  The other
+functions are called through :class:`ncgen.codegen.direct.DirectFunction`.
 """
 from __future__ import annotations
 
